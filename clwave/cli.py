@@ -1,0 +1,230 @@
+"""The ``clwave`` command line (never interactive).
+
+Every user mistake ends with one line ``clwave: error: ...`` on stderr and exit
+code 2; an existing output file is never replaced without ``--force``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ClwaveError, InputError, OutputExistsError
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (its default prints the whole usage first)."""
+
+    def error(self, message):
+        raise InputError(f"{message} (see `{self.prog} --help`)")
+
+
+def _numbers(text, name, counts, kind=float) -> tuple:
+    """Comma-separated numbers, e.g. ``--spacing 2,1,1``; ``counts`` lists the lengths allowed."""
+    try:
+        values = tuple(kind(v) for v in str(text).split(","))
+    except ValueError:
+        values = ()
+    if len(values) not in counts:
+        allowed = " or ".join(str(c) for c in counts)
+        raise InputError(f"{name} {text!r} must be {allowed} comma-separated numbers")
+    return values
+
+
+def _add_input_options(p):
+    p.add_argument("input", help="volume file, DICOM folder, .clw file, or phantom:NAME[:N]")
+    g = p.add_argument_group("reading the input")
+    g.add_argument("--shape", help=".raw only: Z,Y,X or Z,Y,X,C")
+    g.add_argument("--dtype", help=".raw only: numpy dtype, e.g. uint16")
+    g.add_argument("--byte-order", choices=["<", ">"], help=".raw only: little (<) or big (>) endian")
+    g.add_argument("--spacing", help="voxel spacing DZ,DY,DX (or one number); overrides the file")
+    g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
+    g.add_argument("--background", type=float, default=0.0, help="value subtracted so outside is ~0")
+    g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
+
+
+def _add_model_options(p, default_tf=None):
+    g = p.add_argument_group("wavelet model")
+    g.add_argument("--wavelet", default="cubic",
+                   help="haar, linear, quadratic or cubic; or one per channel, comma-separated")
+    g.add_argument("--levels", type=int, default=3, help="decomposition levels (default 3)")
+    k = g.add_mutually_exclusive_group()
+    k.add_argument("--keep", type=float, help="fraction of voxels kept as coefficients, (0, 1]")
+    k.add_argument("--threshold", type=float, help="keep coefficients above this importance")
+    g.add_argument("--focus", help="local level of detail: world centre X,Y,Z (needs --sigma)")
+    g.add_argument("--sigma", type=float, help="local level of detail: Gaussian width (world units)")
+    g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
+    g.add_argument("--tf", default=default_tf, help="classify with a transfer-function preset first")
+    g.add_argument("--window", default=None, help="transfer-function window: auto or LO,HI")
+
+
+def read_volume(args):
+    """The Volume named by ``args.input`` (a file, a folder or ``phantom:NAME[:N]``)."""
+    from .loaders import load
+    from .phantoms import phantom
+    from .volume import Volume
+
+    spec = args.input
+    spacing = None if args.spacing is None else _numbers(args.spacing, "--spacing", (1, 3))
+    if spec.startswith("phantom:"):
+        parts = spec.split(":")
+        if len(parts) > 3 or (len(parts) == 3 and not parts[2].isdigit()):
+            raise InputError(f"{spec!r}: write phantom:NAME or phantom:NAME:N (N voxels per axis)")
+        vol = phantom(parts[1], n=int(parts[2]) if len(parts) == 3 else 128)
+        return vol if spacing is None else Volume(vol.data, spacing=spacing)
+    shape = None if args.shape is None else _numbers(args.shape, "--shape", (3, 4), int)
+    series = args.series
+    if series is not None and series.isdigit():
+        series = int(series)
+    return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
+                series=series, background=args.background, hu_to_mu=args.hu_to_mu)
+
+
+def build_model(args, log=print):
+    """Read, classify (``--tf``), decompose and threshold as the options say.
+
+    Returns ``(wavelet_volume, reference_volume)``; the reference is the volume the
+    model approximates (None when the input was already a ``.clw`` file).
+    """
+    from .transfer import TransferFunction
+    from .wavelet import WaveletVolume
+
+    focus = None
+    if args.focus is not None or args.sigma is not None:
+        if args.focus is None or args.sigma is None:
+            raise InputError("--focus X,Y,Z and --sigma S go together")
+        focus = (_numbers(args.focus, "--focus", (3,)), args.sigma)
+    if args.input.lower().endswith(".clw"):
+        wv, reference = WaveletVolume.open(args.input), None
+    else:
+        vol = read_volume(args)
+        tf = None
+        if args.tf:
+            window = args.window
+            if window not in (None, "auto"):
+                window = _numbers(window, "--window", (2,))
+            tf = TransferFunction.preset(args.tf, window=window).resolved(vol)  # records an "auto" window
+            vol = tf.classify(vol)
+        wavelet = args.wavelet.split(",") if "," in args.wavelet else args.wavelet
+        start = time.perf_counter()
+        wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=args.levels,
+                                       interpolate=args.interpolate, transfer_function=tf)
+        log(f"decomposed {vol.shape} x {vol.channels} channel(s) in {time.perf_counter() - start:.2f} s")
+        reference = vol
+    if args.keep is not None or args.threshold is not None:
+        wv = wv.threshold(keep=args.keep, threshold=args.threshold, focus=focus)
+    elif focus is not None:
+        raise InputError("--focus selects where detail is kept: give --keep or --threshold too")
+    return wv, reference
+
+
+def _check_output(path, force):
+    path = Path(path)
+    if path.exists() and not force:
+        raise OutputExistsError(f"{path} exists; pass --force to replace it")
+    if not path.parent.exists():
+        raise InputError(f"the folder of {path} does not exist; create it first")
+    return path
+
+
+# ------------------------------------------------------------------ commands
+
+
+def cmd_info(args):
+    from .device import list_devices, requested_device, select_device
+    from .programs import selftest
+
+    devices = list_devices()
+    chosen = select_device(args.device, devices)
+    if args.json:
+        print(json.dumps(dict(devices=[d.describe() for d in devices], auto=chosen.id,
+                              request=requested_device(args.device)), indent=2))
+    else:
+        mib = 1024 ** 2
+        platform = None
+        for d in devices:
+            if d.platform != platform:
+                platform = d.platform
+                print(f"platform {d.platform_index}: {d.platform}")
+            mark = "  <- chosen" if d == chosen else ""
+            print(f"  {d.id}  {d.name} [{d.kind}]{mark}\n"
+                  f"        global memory {d.global_mem / mib:,.0f} MiB, max allocation "
+                  f"{d.max_alloc / mib:,.0f} MiB, local memory {d.local_mem / 1024:,.0f} KiB, "
+                  f"{d.compute_units} compute units, {d.version}")
+        print(f"device request {requested_device(args.device)!r} -> {chosen.id} {chosen.name}")
+    if args.check:
+        from .device import ComputeContext
+        seconds = selftest(ComputeContext.get(chosen.id))
+        print(f"self-test kernel built in {seconds:.2f} s and ran correctly on {chosen.name}")
+    return 0
+
+
+def cmd_compress(args):
+    out = _check_output(args.output, args.force)
+    if out.suffix.lower() != ".clw":
+        raise InputError(f"output {out} must end in .clw")
+    wv, reference = build_model(args)
+    start = time.perf_counter()
+    wv.save(out, overwrite=args.force)
+    saved = time.perf_counter() - start
+    size = out.stat().st_size
+    raw = int(np.prod(wv.shape)) * wv.channels * 4
+    print(f"shape (z, y, x)       {wv.shape} x {wv.channels} channel(s), spacing {wv.spacing}")
+    print(f"wavelet, levels       {', '.join(dict.fromkeys(wv.wavelets))}, {wv.levels}")
+    print(f"coefficients kept     {wv.kept:,} of {int(np.prod(wv.shape)):,} voxels")
+    print(f"compression           {100 * wv.compression:.2f} %")
+    print(f"file size             {size:,} bytes ({100 * size / raw:.2f} % of raw float32), "
+          f"written in {saved:.2f} s to {out}")
+    if reference is not None:
+        rec = wv.reconstruct().data
+        error = np.linalg.norm(rec - reference.data) / max(np.linalg.norm(reference.data), 1e-30)
+        print(f"relative L2 error     {error:.3e}")
+    return 0
+
+
+def make_parser():
+    parser = _Parser(prog="clwave", description="Wavelet-domain volume rendering (OpenCL).")
+    parser.add_argument("--version", action="version", version=_version())
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("info", help="list OpenCL platforms and devices, and the one chosen")
+    p.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
+    p.add_argument("--check", action="store_true", help="also build and run a self-test kernel")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(run=cmd_info)
+
+    p = sub.add_parser("compress", help="write a thresholded wavelet volume (.clw)")
+    _add_input_options(p)
+    _add_model_options(p)
+    p.add_argument("-o", "--output", required=True, help="output .clw file")
+    p.add_argument("--force", action="store_true", help="replace an existing output file")
+    p.set_defaults(run=cmd_compress)
+    return parser
+
+
+def _version():
+    from . import __version__
+    return f"clwave {__version__}"
+
+
+def main(argv=None) -> int:
+    try:
+        args = make_parser().parse_args(argv)
+        return args.run(args)
+    except ClwaveError as exc:
+        print(f"clwave: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("clwave: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,37 @@
+"""Typed errors: each carries one line saying what is wrong and what to do.
+
+The command line prints ``clwave: error: <message>`` and exits with code 2 for
+any :class:`ClwaveError`; library users can catch the specific subclasses.
+"""
+
+
+class ClwaveError(Exception):
+    """Base class: a user-facing problem with a one-line, actionable message."""
+
+
+class InputError(ClwaveError, ValueError):
+    """A bad argument or a bad volume (NaN voxels, wrong shape, bad levels...)."""
+
+
+class FileFormatError(ClwaveError):
+    """A file that cannot be read: unknown extension, truncated or corrupt."""
+
+
+class OutputExistsError(ClwaveError, FileExistsError):
+    """Refusing to overwrite an existing file without ``force``/``overwrite``."""
+
+
+class DeviceNotFoundError(ClwaveError):
+    """No OpenCL platform, or no device matching the ``device`` request."""
+
+
+class KernelBuildError(ClwaveError):
+    """An OpenCL program failed to build; ``log`` holds the full build log."""
+
+    def __init__(self, message, log=""):
+        super().__init__(message)
+        self.log = log
+
+
+class DeviceMemoryError(ClwaveError, MemoryError):
+    """The device has too little memory for the requested work."""

@@ -1,0 +1,94 @@
+"""The command line: info, compress, and one-line errors with exit code 2."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from clwave.cli import main
+from clwave.wavelet import WaveletVolume
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_info_lists_devices_and_checks(capsys):
+    code, out, err = run(capsys, "info", "--check")
+    assert code == 0 and "<- chosen" in out and "ran correctly" in out and "global memory" in out
+
+
+def test_compress_phantom_report_and_file(tmp_path, capsys):
+    target = tmp_path / "h.clw"
+    code, out, err = run(capsys, "compress", "phantom:hydrogen:32", "--tf", "hydrogen", "--levels", "2",
+                         "--keep", "0.05", "-o", str(target))
+    assert code == 0, err
+    for label in ("shape", "levels", "coefficients kept", "compression", "file size", "relative L2 error"):
+        assert label in out
+    wv = WaveletVolume.open(target)
+    assert wv.channels == 4 and wv.kept == round(0.05 * 32 ** 3) and wv.transfer_function["name"] == "hydrogen"
+    error = float(out.split("relative L2 error")[1].split()[0])
+    assert 0 < error < 1
+
+
+def test_existing_output_is_not_replaced(tmp_path, capsys):
+    target = tmp_path / "keep.clw"
+    target.write_bytes(b"precious")
+    code, out, err = run(capsys, "compress", "phantom:hydrogen:16", "--levels", "1", "-o", str(target))
+    assert code == 2 and "--force" in err and target.read_bytes() == b"precious"
+    code, out, err = run(capsys, "compress", "phantom:hydrogen:16", "--levels", "1", "-o", str(target), "--force")
+    assert code == 0 and WaveletVolume.open(target).levels == 1
+
+
+def test_compress_a_clw_again(tmp_path, capsys):
+    first, second = tmp_path / "a.clw", tmp_path / "b.clw"
+    assert run(capsys, "compress", "phantom:shepp-logan:16", "--levels", "1", "-o", str(first))[0] == 0
+    code, out, err = run(capsys, "compress", str(first), "--keep", "0.1", "-o", str(second))
+    assert code == 0 and WaveletVolume.open(second).kept == round(0.1 * 16 ** 3)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["compress", "phantom:hydrogen:16", "--levels", "9"], "levels"),
+    (["compress", "phantom:hydrogen:16", "--keep", "0"], "keep"),
+    (["compress", "phantom:hydrogen:16", "--keep", "1.5"], "keep"),
+    (["compress", "phantom:hydrogen:16", "--wavelet", "db4"], "unknown wavelet"),
+    (["compress", "phantom:hydrogen:16", "--tf", "nope"], "nope"),
+    (["compress", "phantom:nothing:16"], "nothing"),
+    (["compress", "volume.xyz"], "xyz"),
+    (["compress", "phantom:hydrogen:16", "--focus", "1,2,3"], "--sigma"),
+    (["compress", "phantom:hydrogen:16", "--spacing", "1,2"], "--spacing"),
+    (["frobnicate"], "invalid choice"),
+])
+def test_user_mistakes_give_one_line_and_exit_2(tmp_path, capsys, argv, needle):
+    target = tmp_path / "out.clw"
+    if argv[0] == "compress":
+        argv = argv + ["-o", str(target)]
+    code, out, err = run(capsys, *argv)
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("clwave: error:") and needle in err
+    assert not target.exists() and not list(tmp_path.iterdir())  # no partial output
+
+
+def test_bad_files_give_one_line(tmp_path, capsys):
+    nan = tmp_path / "nan.npy"
+    np.save(nan, np.full((4, 4, 4), np.nan, np.float32))
+    flat = tmp_path / "flat.npy"
+    np.save(flat, np.zeros((4, 4), np.float32))
+    empty = tmp_path / "empty.npy"
+    np.save(empty, np.zeros((0, 4, 4), np.float32))
+    cut = tmp_path / "cut.npy"
+    np.save(cut, np.ones((8, 8, 8), np.float32))
+    cut.write_bytes(cut.read_bytes()[:200])
+    for path, needle in ((nan, "NaN"), (flat, "3-D"), (empty, "2 voxels"), (cut, "cut.npy")):
+        code, out, err = run(capsys, "compress", str(path), "--levels", "1", "-o", str(tmp_path / "o.clw"))
+        assert code == 2 and err.count("\n") == 1 and needle in err, err
+    assert not (tmp_path / "o.clw").exists()
+
+
+def test_console_entry_point_has_no_traceback(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "clwave", "compress", str(tmp_path / "missing.nii.gz"),
+                           "-o", str(tmp_path / "x.clw")], capture_output=True, text=True)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1

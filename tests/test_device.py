@@ -1,0 +1,96 @@
+"""Device choice (no hardware needed) and the kernel build path (on the real device)."""
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+import pytest
+
+from clwave import programs
+from clwave.device import ComputeContext, DeviceInfo, select_device
+from clwave.errors import DeviceNotFoundError, KernelBuildError
+
+FAKE = [
+    DeviceInfo(0, 0, "Portable Computing Language", "pthread-cpu", "CPU", 8 << 30, 2 << 30, 1 << 20, 2, "OpenCL 3.0"),
+    DeviceInfo(1, 0, "NVIDIA CUDA", "NVIDIA H100", "GPU", 80 << 30, 20 << 30, 48 << 10, 132, "OpenCL 3.0"),
+    DeviceInfo(1, 1, "NVIDIA CUDA", "NVIDIA T4", "GPU", 16 << 30, 4 << 30, 48 << 10, 40, "OpenCL 3.0"),
+]
+
+
+@pytest.fixture(autouse=True)
+def clean_env(monkeypatch):
+    monkeypatch.delenv("CLWAVE_DEVICE", raising=False)
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+
+
+@pytest.mark.parametrize("request_, expected", [
+    ("auto", "1:0"), (None, "1:0"), ("gpu", "1:0"), ("cpu", "0:0"), ("1:1", "1:1"), ("1", "1:0"),
+    ("0:0", "0:0"), ("t4", "1:1"), ("portable", "0:0"), ("NVIDIA", "1:0"),
+])
+def test_device_requests(request_, expected):
+    assert select_device(request_, FAKE).id == expected
+
+
+def test_environment_is_honoured_and_argument_wins(monkeypatch):
+    monkeypatch.setenv("PYOPENCL_CTX", "0:0")
+    assert select_device(None, FAKE).id == "0:0"
+    monkeypatch.setenv("CLWAVE_DEVICE", "t4")
+    assert select_device("auto", FAKE).id == "1:1"
+    assert select_device("cpu", FAKE).id == "0:0"
+
+
+@pytest.mark.parametrize("bad", ["2:0", "gpu-that-is-not-there", "0:5"])
+def test_unknown_device_is_one_line(bad):
+    with pytest.raises(DeviceNotFoundError) as err:
+        select_device(bad, FAKE)
+    assert "\n" not in str(err.value) and "available" in str(err.value)
+    with pytest.raises(DeviceNotFoundError):
+        select_device("gpu", FAKE[:1])
+
+
+def test_context_is_shared(cc):
+    assert ComputeContext.get(cc.info.id) is cc
+    assert ComputeContext.get(cc) is cc
+    assert cc.describe()["global_mem_bytes"] > 0
+
+
+@pytest.mark.parametrize("local", [None, (1,)])
+def test_selftest_kernel_matches_numpy(cc, local):
+    ks = programs.build(cc, ["selftest.cl"])
+    assert programs.build(cc, ["selftest.cl"]) is ks  # built once
+    assert ks.selftest_axpy is ks["selftest_axpy"]  # and each kernel fetched once
+    assert any(opt.startswith("-DCLW_SRC_HASH=") for opt in ks.options) and "-I" in ks.options
+    rng = np.random.default_rng(0)
+    a, b = rng.random(37, dtype=np.float32), rng.random(37, dtype=np.float32)
+    d_a, d_b = cla.to_device(cc.queue, a), cla.to_device(cc.queue, b)
+    out = cla.empty_like(d_a)
+    ks.selftest_axpy(cc.queue, (37,), local, np.float32(-1.5), d_a.data, d_b.data, out.data)
+    assert np.allclose(out.get(), -1.5 * a + b, rtol=1e-6, atol=1e-7)
+    assert programs.selftest(cc) >= 0
+
+
+def test_source_hash_follows_the_sources(tmp_path):
+    (tmp_path / "a.cl").write_text("__kernel void k(){}")
+    first = programs.source_hash(tmp_path)
+    other = tmp_path / "b"
+    other.mkdir()
+    (other / "a.cl").write_text("__kernel void k(){ }")
+    assert programs.source_hash(other) != first
+
+
+def test_build_failure_is_one_line_with_log(cc, tmp_path, monkeypatch):
+    (tmp_path / "broken.cl").write_text("__kernel void broken(__global float *x) { x[0] = y; }\n")
+    monkeypatch.setattr(programs, "cl_dir", lambda: tmp_path)
+    with pytest.raises(KernelBuildError) as err:
+        programs.build(cc, ["broken.cl"])
+    assert "\n" not in str(err.value) and "broken.cl" in str(err.value)
+    assert "y" in err.value.log
+
+
+def test_cl_sources_ship_with_the_package():
+    folder = programs.cl_dir()
+    assert (folder / "clw_common.h").is_file() and (folder / "selftest.cl").is_file()
+    import tomllib
+    from pathlib import Path
+    project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    assert project["tool"]["hatch"]["build"]["targets"]["wheel"]["force-include"]["cl"] == "clwave/cl"
+    assert cl.get_platforms()  # the loader finds a platform

@@ -1,0 +1,383 @@
+"""clwave.load: every format round-trips a small file written here, in RAS+ (z, y, x).
+
+Expected arrays are built from the array written and its geometry by hand (flips
+and transposes worked out per case) or by `place_in_ras`, which scatters each
+voxel to the grid position of its world coordinate: neither uses the loader's
+orientation code.
+"""
+
+import nibabel as nib
+import nrrd
+import numpy as np
+import pytest
+import tifffile
+from pydicom.dataset import Dataset, FileMetaDataset
+from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
+
+from clwave.errors import ClwaveError, FileFormatError, InputError
+from clwave.loaders import load
+
+SHAPE_IJK = (5, 6, 7)
+
+
+def place_in_ras(data_ijk, affine_ras):
+    """Scatter voxels of an axis-aligned (i, j, k) array onto a (z, y, x) RAS grid.
+
+    Each voxel goes to ``(world - world.min) / spacing`` along x, y, z, so the
+    result is the array a RAS+ viewer shows, with no orientation library involved.
+    """
+    ijk = np.indices(data_ijk.shape[:3]).reshape(3, -1)
+    xyz = affine_ras[:3, :3] @ ijk + affine_ras[:3, 3:]
+    spacing_xyz = np.abs(affine_ras[:3, :3]).sum(axis=1)  # one non-zero per row
+    index = np.rint((xyz - xyz.min(axis=1, keepdims=True)) / spacing_xyz[:, None]).astype(int)
+    dims_zyx = tuple(index.max(axis=1)[::-1] + 1)
+    out = np.zeros(dims_zyx + data_ijk.shape[3:], data_ijk.dtype)
+    out[index[2], index[1], index[0]] = data_ijk.reshape((ijk.shape[1],) + data_ijk.shape[3:])
+    return out
+
+
+def assert_one_line_error(excinfo):
+    assert isinstance(excinfo.value, ClwaveError)
+    message = str(excinfo.value)
+    assert message and "\n" not in message
+
+
+@pytest.fixture
+def data_ijk(rng):
+    return rng.integers(0, 1000, SHAPE_IJK).astype(np.int16)
+
+
+# --------------------------------------------------------------------------- .npy and .raw
+
+def test_npy_round_trip_with_spacing(tmp_path, rng):
+    arr = rng.random((5, 6, 7)).astype(np.float32)
+    np.save(tmp_path / "v.npy", arr)
+    vol = load(tmp_path / "v.npy", spacing=(2.0, 1.0, 0.5))
+    np.testing.assert_array_equal(vol.data, arr)
+    assert vol.spacing == (2.0, 1.0, 0.5)
+    assert vol.origin == (0.0, 0.0, 0.0)
+    assert load(str(tmp_path / "v.npy")).spacing == (1.0, 1.0, 1.0)
+
+
+@pytest.mark.parametrize("shape", [(5, 6, 7), (5, 6, 7, 3)])
+def test_raw_big_endian_round_trip(tmp_path, rng, shape):
+    arr = rng.integers(0, 60000, shape).astype(np.uint16)
+    arr.astype(">u2").tofile(tmp_path / "v.raw")
+    vol = load(tmp_path / "v.raw", shape=shape, dtype="uint16", byte_order=">",
+               spacing=(0.5, 0.25, 0.25))
+    np.testing.assert_array_equal(vol.data, arr.astype(np.float32))
+    assert vol.spacing == (0.5, 0.25, 0.25)
+
+
+def test_raw_truncated_reports_byte_counts(tmp_path):
+    np.zeros((5, 6, 7), np.uint16)[:2].tofile(tmp_path / "v.raw")
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path / "v.raw", shape=(5, 6, 7), dtype="uint16")
+    assert_one_line_error(excinfo)
+    assert "420 bytes" in str(excinfo.value) and "168 bytes" in str(excinfo.value)
+
+
+def test_raw_needs_shape_and_dtype(tmp_path):
+    np.zeros(10, np.uint8).tofile(tmp_path / "v.raw")
+    with pytest.raises(InputError) as excinfo:
+        load(tmp_path / "v.raw")
+    assert_one_line_error(excinfo)
+    assert "shape=" in str(excinfo.value)
+
+
+def test_raw_options_refused_for_other_formats(tmp_path):
+    np.save(tmp_path / "v.npy", np.zeros((3, 3, 3)))
+    with pytest.raises(InputError, match="shape"):
+        load(tmp_path / "v.npy", shape=(3, 3, 3))
+
+
+# --------------------------------------------------------------------------- NIfTI
+
+@pytest.mark.parametrize("name", ["v.nii", "v.nii.gz"])
+def test_nifti_las_affine_lands_in_ras(tmp_path, data_ijk, name):
+    # i runs to the Left (2 mm), j Anterior (3 mm), k Superior (0.5 mm): LAS
+    affine = np.array([[-2.0, 0, 0, 10], [0, 3, 0, -4], [0, 0, 0.5, 7], [0, 0, 0, 1]])
+    nib.save(nib.Nifti1Image(data_ijk, affine), tmp_path / name)
+    vol = load(tmp_path / name)
+    expected = data_ijk[::-1, :, :].transpose(2, 1, 0)  # flip i to point Right, then (z, y, x)
+    np.testing.assert_array_equal(vol.data, expected)
+    np.testing.assert_array_equal(vol.data, place_in_ras(data_ijk, affine))
+    # voxel (0, 0, 0) sits at x = 10, the right-most x: last column, first row, first slice
+    assert vol.data[0, 0, -1] == data_ijk[0, 0, 0]
+    assert vol.spacing == (0.5, 3.0, 2.0)
+    # centre = affine @ (2, 2.5, 3)
+    np.testing.assert_allclose(vol.origin, (6.0, 3.5, 8.5))
+
+
+def test_nifti_permuted_affine_lands_in_ras(tmp_path, data_ijk):
+    # i -> Superior (2 mm), j -> Left (3 mm), k -> Anterior (0.5 mm)
+    affine = np.array([[0, -3.0, 0, 0], [0, 0, 0.5, 0], [2.0, 0, 0, 0], [0, 0, 0, 1]])
+    nib.save(nib.Nifti1Image(data_ijk, affine), tmp_path / "p.nii.gz")
+    vol = load(tmp_path / "p.nii.gz")
+    # z = i, y = k, x = flipped j
+    np.testing.assert_array_equal(vol.data, data_ijk[:, ::-1, :].transpose(0, 2, 1))
+    np.testing.assert_array_equal(vol.data, place_in_ras(data_ijk, affine))
+    assert vol.spacing == (2.0, 0.5, 3.0)
+
+
+def test_nifti_rgb24_gives_three_channels(tmp_path, rng):
+    rgb = rng.integers(0, 256, SHAPE_IJK + (3,)).astype(np.uint8)
+    structured = np.zeros(SHAPE_IJK, dtype=[("R", "u1"), ("G", "u1"), ("B", "u1")])
+    for c, name in enumerate("RGB"):
+        structured[name] = rgb[..., c]
+    nib.save(nib.Nifti1Image(structured, np.eye(4)), tmp_path / "rgb.nii")
+    vol = load(tmp_path / "rgb.nii")
+    assert vol.channels == 3
+    np.testing.assert_array_equal(vol.data, rgb.transpose(2, 1, 0, 3))
+
+
+def test_spacing_argument_overrides_file(tmp_path, data_ijk):
+    nib.save(nib.Nifti1Image(data_ijk, np.diag([2.0, 3.0, 4.0, 1.0])), tmp_path / "v.nii")
+    assert load(tmp_path / "v.nii", spacing=1.5).spacing == (1.5, 1.5, 1.5)
+
+
+# --------------------------------------------------------------------------- NRRD
+
+def test_nrrd_lps_space_directions_land_in_ras(tmp_path, data_ijk):
+    # LPS: i -> Left (1.5 mm), j -> Inferior (2 mm), k -> Posterior (0.8 mm)
+    directions = np.array([[1.5, 0, 0], [0, 0, -2.0], [0, 0.8, 0]])
+    header = {"space": "left-posterior-superior", "space directions": directions,
+              "space origin": np.array([5.0, 6.0, 7.0])}
+    nrrd.write(str(tmp_path / "v.nrrd"), data_ijk, header)
+    vol = load(tmp_path / "v.nrrd")
+    # in RAS every axis is reversed: x = flipped i, y = flipped k, z = flipped j
+    expected = data_ijk[::-1, ::-1, ::-1].transpose(1, 2, 0)
+    np.testing.assert_array_equal(vol.data, expected)
+    affine_ras = np.eye(4)
+    affine_ras[:3, :3] = np.diag([-1, -1, 1]) @ directions.T
+    affine_ras[:3, 3] = [-5.0, -6.0, 7.0]
+    np.testing.assert_array_equal(vol.data, place_in_ras(data_ijk, affine_ras))
+    assert vol.spacing == pytest.approx((2.0, 0.8, 1.5))
+    np.testing.assert_allclose(vol.origin, affine_ras[:3, :3] @ [2, 2.5, 3] + affine_ras[:3, 3])
+
+
+def test_nrrd_rgb_axis_becomes_channels(tmp_path, rng):
+    rgb_cijk = rng.integers(0, 256, (3,) + SHAPE_IJK).astype(np.uint8)
+    header = {"space": "right-anterior-superior",
+              "kinds": ["RGB-color", "domain", "domain", "domain"],
+              "space directions": np.array([[np.nan] * 3, [1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]])}
+    nrrd.write(str(tmp_path / "rgb.nrrd"), rgb_cijk, header)
+    vol = load(tmp_path / "rgb.nrrd")
+    np.testing.assert_array_equal(vol.data, rgb_cijk.transpose(3, 2, 1, 0))
+
+
+# --------------------------------------------------------------------------- TIFF
+
+def test_tiff_stack_round_trip(tmp_path, rng):
+    arr = rng.integers(0, 60000, (5, 6, 7)).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "v.tif", arr, photometric="minisblack")
+    vol = load(tmp_path / "v.tif")
+    np.testing.assert_array_equal(vol.data, arr)
+    assert vol.spacing == (1.0, 1.0, 1.0)
+
+
+def test_rgb_tiff_stack_is_4d(tmp_path, rng):
+    arr = rng.integers(0, 256, (5, 6, 7, 3)).astype(np.uint8)
+    tifffile.imwrite(tmp_path / "rgb.tiff", arr, photometric="rgb")
+    vol = load(tmp_path / "rgb.tiff")
+    assert vol.channels == 3
+    np.testing.assert_array_equal(vol.data, arr)
+
+
+def test_tiff_folder_stacks_in_natural_order(tmp_path, rng):
+    slices = {n: rng.integers(0, 255, (6, 7)).astype(np.uint8) for n in range(1, 13)}
+    for n in rng.permutation(list(slices)):  # creation order must not matter either
+        tifffile.imwrite(tmp_path / f"slice{n}.tif", slices[n])
+    (tmp_path / "notes.txt").write_text("not a slice")
+    vol = load(tmp_path, spacing=(3.0, 1.0, 1.0))
+    np.testing.assert_array_equal(vol.data, np.stack([slices[n] for n in range(1, 13)]))
+    assert vol.spacing == (3.0, 1.0, 1.0)
+
+
+# --------------------------------------------------------------------------- DICOM
+
+def write_dicom_slice(path, pixels, position, series_uid, *, orientation=(1, 0, 0, 0, 1, 0),
+                      pixel_spacing=(0.7, 0.9), description="", number=1):
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID = CTImageStorage
+    meta.MediaStorageSOPInstanceUID = generate_uid()
+    meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds = Dataset()
+    ds.file_meta = meta
+    ds.SOPClassUID, ds.SOPInstanceUID = CTImageStorage, meta.MediaStorageSOPInstanceUID
+    ds.Modality = "CT"
+    ds.SeriesInstanceUID, ds.SeriesDescription, ds.SeriesNumber = series_uid, description, number
+    ds.ImagePositionPatient = [float(p) for p in position]
+    ds.ImageOrientationPatient = [float(c) for c in orientation]
+    ds.PixelSpacing = list(pixel_spacing)
+    ds.RescaleSlope, ds.RescaleIntercept = 2, -1024
+    ds.Rows, ds.Columns = pixels.shape
+    ds.SamplesPerPixel, ds.PhotometricInterpretation = 1, "MONOCHROME2"
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 0
+    ds.PixelData = pixels.astype(np.uint16).tobytes()
+    ds.save_as(path, enforce_file_format=True)
+
+
+def write_series(folder, rng, positions, series_uid, names, **kwargs):
+    """Write one 6 x 5 slice per ImagePositionPatient; returns the stored pixels in file order."""
+    stored = rng.integers(0, 2000, (len(positions), 6, 5))
+    for pixels, position, name in zip(stored, positions, names):
+        write_dicom_slice(folder / name, pixels, position, series_uid, **kwargs)
+    return stored
+
+
+def axial(*z_positions):
+    return [(-20.0, 30.0, z) for z in z_positions]
+
+
+def test_dicom_series_sorted_rescaled_in_ras(tmp_path, rng):
+    z_positions = [15.0, 10.0, 17.5, 12.5]  # written out of order, under shuffled names
+    stored = write_series(tmp_path, rng, axial(*z_positions), generate_uid(),
+                          ["b7", "a3", "IMG0001", "z"])
+    (tmp_path / "README.txt").write_text("not DICOM")
+    vol = load(tmp_path, progress_bar=False)
+
+    hu = stored[np.argsort(z_positions)] * 2.0 - 1024  # slope 2, intercept -1024
+    # the row index grows Posterior, the column index Left (LPS +y, +x): RAS flips both
+    np.testing.assert_array_equal(vol.data, hu[:, ::-1, ::-1])
+    assert vol.spacing == pytest.approx((2.5, 0.7, 0.9))  # slice gap, row, column spacing
+    # centre in RAS: x = -(-20 + 0.9 * 2), y = -(30 + 0.7 * 2.5), z = (10 + 17.5) / 2
+    np.testing.assert_allclose(vol.origin, (18.2, -31.75, 13.75))
+
+
+def test_dicom_sagittal_series_lands_in_ras(tmp_path, rng):
+    # the column index grows Posterior (+y in LPS), the row index Inferior (-z): the
+    # normal is (0, 1, 0) x (0, 0, -1) = (-1, 0, 0), to the patient's Right
+    x_positions = [1.0, 5.0, -1.0, 3.0]
+    stored = write_series(tmp_path, rng, [(x, -10.0, 50.0) for x in x_positions], generate_uid(),
+                          ["s1", "s2", "s3", "s4"], orientation=(0, 1, 0, 0, 0, -1),
+                          pixel_spacing=(0.5, 0.25))
+    vol = load(tmp_path)
+    # slices sorted Left to Right (x = 5, 3, 1, -1 in LPS) become RAS x; flipped rows
+    # (Inferior -> Superior) become z, flipped columns (Posterior -> Anterior) become y
+    hu = stored[np.argsort(-np.array(x_positions))] * 2.0 - 1024
+    np.testing.assert_array_equal(vol.data, hu[:, ::-1, ::-1].transpose(1, 2, 0))
+    assert vol.spacing == pytest.approx((0.5, 0.25, 2.0))
+
+
+def test_dicom_two_series_need_series_argument(tmp_path, rng):
+    uid_a, uid_b = generate_uid(), generate_uid()
+    stored_a = write_series(tmp_path, rng, axial(0.0, 1.0, 2.0, 3.0), uid_a,
+                            ["a1", "a2", "a3", "a4"], description="soft tissue", number=1)
+    stored_b = write_series(tmp_path, rng, axial(0.0, 2.0, 4.0), uid_b, ["b1", "b2", "b3"],
+                            description="bone", number=2)
+    with pytest.raises(InputError) as excinfo:
+        load(tmp_path)
+    assert_one_line_error(excinfo)
+    message = str(excinfo.value)
+    assert uid_a in message and uid_b in message and "series=" in message
+    assert "4 slices" in message and "3 slices" in message and "bone" in message
+
+    by_index = load(tmp_path, series=1)
+    np.testing.assert_array_equal(by_index.data, (stored_b * 2.0 - 1024)[:, ::-1, ::-1])
+    assert by_index.spacing[0] == pytest.approx(2.0)
+    by_uid = load(tmp_path, series=uid_a)
+    np.testing.assert_array_equal(by_uid.data, (stored_a * 2.0 - 1024)[:, ::-1, ::-1])
+    with pytest.raises(InputError):
+        load(tmp_path, series=2)
+
+
+def test_dicom_duplicate_positions_refused(tmp_path, rng):
+    write_series(tmp_path, rng, axial(0.0, 1.0, 1.0), generate_uid(), ["s1", "s2", "s3"])
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path)
+    assert_one_line_error(excinfo)
+    assert "position" in str(excinfo.value)
+
+
+# --------------------------------------------------------------------------- bad input
+
+def _truncate(path):
+    raw = path.read_bytes()
+    path.write_bytes(raw[: len(raw) // 2])
+    return path
+
+
+def _unknown(tmp_path):
+    (tmp_path / "v.xyz").write_bytes(b"1234")
+    return tmp_path / "v.xyz"
+
+
+def _empty_folder(tmp_path):
+    (tmp_path / "empty").mkdir()
+    return tmp_path / "empty"
+
+
+def _cut_nifti(tmp_path):
+    data = np.arange(40 * 40 * 40, dtype=np.float32).reshape(40, 40, 40)
+    nib.save(nib.Nifti1Image(data, np.eye(4)), tmp_path / "v.nii.gz")
+    return _truncate(tmp_path / "v.nii.gz")
+
+
+def _cut_nrrd(tmp_path):
+    data = np.arange(20 * 20 * 20, dtype=np.int32).reshape(20, 20, 20)
+    nrrd.write(str(tmp_path / "v.nrrd"), data)
+    return _truncate(tmp_path / "v.nrrd")
+
+
+def _cut_tiff(tmp_path):
+    tifffile.imwrite(tmp_path / "v.tif", np.ones((5, 30, 30), np.uint16), photometric="minisblack")
+    return _truncate(tmp_path / "v.tif")
+
+
+def _cut_dicom(tmp_path):
+    write_series(tmp_path, np.random.default_rng(1), axial(0.0, 1.0, 2.0), generate_uid(),
+                 ["s1", "s2", "s3"])
+    _truncate(tmp_path / "s2")
+    return tmp_path
+
+
+def _nan_npy(tmp_path):
+    arr = np.zeros((5, 6, 7), np.float32)
+    arr[2, 3, 4] = np.nan
+    np.save(tmp_path / "nan.npy", arr)
+    return tmp_path / "nan.npy"
+
+
+@pytest.mark.parametrize("make, error", [
+    (_unknown, FileFormatError),
+    (lambda tmp_path: tmp_path / "missing.nii", FileFormatError),
+    (_empty_folder, FileFormatError),
+    (_cut_nifti, FileFormatError),
+    (_cut_nrrd, FileFormatError),
+    (_cut_tiff, FileFormatError),
+    (_cut_dicom, FileFormatError),
+    (_nan_npy, InputError),
+], ids=["unknown-extension", "missing", "empty-folder", "cut-nii.gz", "cut-nrrd", "cut-tif",
+        "cut-dicom", "nan-npy"])
+def test_bad_input_gives_one_line_error(tmp_path, make, error):
+    with pytest.raises(error) as excinfo:
+        load(make(tmp_path))
+    assert_one_line_error(excinfo)
+
+
+def test_unknown_extension_names_supported_formats(tmp_path):
+    with pytest.raises(FileFormatError, match=r"\.nii\.gz.*\.nrrd.*DICOM"):
+        load(_unknown(tmp_path))
+
+
+# --------------------------------------------------------------------------- CT units
+
+def test_hu_to_mu_and_background(tmp_path):
+    hu = np.full((3, 3, 3), -1000.0, np.float32)
+    hu[1, 1, 1], hu[0, 0, 0], hu[2, 2, 2] = 0.0, 1000.0, -3024.0
+    np.save(tmp_path / "ct.npy", hu)
+    mu_water = 0.02
+    vol = load(tmp_path / "ct.npy", hu_to_mu=True, mu_water=mu_water)
+    assert vol.data[0, 1, 0] == 0.0  # air
+    assert vol.data[2, 2, 2] == 0.0  # below air: clipped
+    assert vol.data[1, 1, 1] == pytest.approx(mu_water, rel=1e-6)
+    assert vol.data[0, 0, 0] == pytest.approx(2 * mu_water, rel=1e-6)
+
+    expected_mu = np.maximum(mu_water * (1 + hu / 1000), 0)
+    np.testing.assert_allclose(vol.data, expected_mu, rtol=1e-6, atol=0)
+    shifted = load(tmp_path / "ct.npy", hu_to_mu=True, mu_water=mu_water, background=0.005)
+    np.testing.assert_allclose(shifted.data, expected_mu - 0.005, rtol=0, atol=1e-7)
+    raw = load(tmp_path / "ct.npy", background=-1000)
+    np.testing.assert_array_equal(raw.data, hu + 1000)
+

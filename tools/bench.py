@@ -1,0 +1,99 @@
+#!/usr/bin/env python3
+"""clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
+
+    python tools/bench.py decompose [--size 256] [--repeats 3] [--json out.json]
+
+``decompose``: classification (hydrogen preset, RGBA) + cubic decomposition (3 levels,
+approximating model) + thresholding to 5 % of a hydrogen phantom; the phantom itself
+is made once, outside the timing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
+
+import clwave  # noqa: E402
+from clwave.phantoms import phantom  # noqa: E402
+from clwave.transfer import TransferFunction  # noqa: E402
+from clwave.wavelet import WaveletVolume  # noqa: E402
+
+
+def machine() -> dict:
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            cpu = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return dict(cpu=cpu, cores=os.cpu_count(), python=platform.python_version(),
+                numpy=np.__version__, clwave=clwave.__version__, system=platform.platform())
+
+
+def device(request) -> dict:
+    try:
+        return clwave.ComputeContext.get(request).describe()
+    except clwave.ClwaveError as exc:
+        return dict(error=str(exc))
+
+
+def summary(samples) -> dict:
+    return dict(median=statistics.median(samples), min=min(samples), max=max(samples), runs=len(samples))
+
+
+def bench_decompose(args) -> dict:
+    vol = phantom("hydrogen", n=args.size)
+    tf = TransferFunction.preset("hydrogen")
+    stages = {"classify": [], "decompose": [], "threshold": [], "total": []}
+    result = None
+    for run in range(args.repeats + 1):  # run 0 is the warm-up
+        t0 = time.perf_counter()
+        rgba = tf.classify(vol)
+        t1 = time.perf_counter()
+        wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3, transfer_function=tf)
+        t2 = time.perf_counter()
+        result = wv.threshold(keep=0.05)
+        t3 = time.perf_counter()
+        if run:
+            for name, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t3 - t0)):
+                stages[name].append(dt)
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3", channels=4, wavelet="cubic", levels=3,
+                             keep=0.05, model="approximating"),
+                seconds={k: summary(v) for k, v in stages.items()},
+                kept=result.kept, compression=result.compression,
+                voxels_per_second=args.size ** 3 / statistics.median(stages["total"]),
+                target_seconds=4.0)
+
+
+BENCHMARKS = {"decompose": bench_decompose}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("benchmark", choices=list(BENCHMARKS) + ["all"])
+    parser.add_argument("--size", type=int, default=256, help="phantom voxels per axis")
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs after one warm-up")
+    parser.add_argument("--device", default="auto")
+    parser.add_argument("--json", type=Path, help="also write the JSON here")
+    args = parser.parse_args(argv)
+    names = list(BENCHMARKS) if args.benchmark == "all" else [args.benchmark]
+    report = dict(machine=machine(), device=device(args.device),
+                  benchmarks={name: BENCHMARKS[name](args) for name in names})
+    text = json.dumps(report, indent=2)
+    print(text)
+    if args.json:
+        args.json.write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# clwave set-up: idempotent, works on a bare Debian machine as root.
+#
+#   bash tools/setup.sh            install only
+#   bash tools/setup.sh --demo     install, then render/compress the built-in hydrogen phantom
+#   bash tools/setup.sh --test     install, then run the test suite
+#
+# Steps: Python 3 with venv (apt-get if missing) -> virtual environment .venv (CLWAVE_VENV
+# overrides) -> `pip install .[test]` -> an OpenCL self-test kernel; when no working OpenCL
+# platform exists, Debian's pocl-opencl-icd is installed (after apt-get update) and the
+# self-test runs again.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VENV="${CLWAVE_VENV:-.venv}"
+mode="${1:-}"
+case "$mode" in ""|--demo|--test) ;; *) echo "usage: bash tools/setup.sh [--demo|--test]" >&2; exit 2 ;; esac
+
+say() { printf '\n==> %s\n' "$*"; }
+
+apt_updated=""
+apt_install() {
+    if ! command -v apt-get >/dev/null || [ "$(id -u)" != 0 ]; then
+        echo "clwave setup: please install these system packages (as root): $*" >&2
+        return 1
+    fi
+    if [ -z "$apt_updated" ]; then apt-get update -qq; apt_updated=1; fi
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@"
+}
+
+if ! command -v python3 >/dev/null || ! python3 -c 'import venv, ensurepip' 2>/dev/null; then
+    say "installing Python 3 with venv"
+    apt_install python3 python3-venv python3-pip ca-certificates
+fi
+
+if [ ! -x "$VENV/bin/python" ]; then
+    say "creating the virtual environment $VENV"
+    python3 -m venv "$VENV"
+fi
+say "installing clwave and its test dependencies into $VENV"
+"$VENV/bin/python" -m pip install --quiet --disable-pip-version-check ".[test]"
+
+if ! "$VENV/bin/clwave" info --check >/dev/null 2>&1; then
+    say "no working OpenCL platform: installing Debian's pocl-opencl-icd"
+    apt_install pocl-opencl-icd ocl-icd-libopencl1
+fi
+say "OpenCL devices"
+"$VENV/bin/clwave" info --check
+
+case "$mode" in
+    --demo)
+        mkdir -p out
+        say "demo: the hydrogen phantom, classified, cubic wavelets, 3 levels, 5 % kept"
+        "$VENV/bin/clwave" compress phantom:hydrogen:128 --tf hydrogen --keep 0.05 -o out/hydrogen.clw --force
+        ;;
+    --test)
+        say "running the tests"
+        "$VENV/bin/python" -m pytest -q
+        ;;
+esac
