@@ -12,11 +12,16 @@ from .loaders import load
 from .phantoms import phantom
 from .transfer import TransferFunction
 from .wavelet import WaveletVolume
+from .camera import Camera
+from .result import RenderResult
+from .splat import SplatRenderer, splat
+from .progressive import progressive
 
 __version__ = "0.1.0"
 
 __all__ = [
     "ClwaveError", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
     "KernelBuildError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
-    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "__version__",
+    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult", "SplatRenderer", "splat",
+    "progressive", "__version__",
 ]

@@ -62,7 +62,7 @@ def _add_model_options(p, default_tf=None):
     g.add_argument("--sigma", type=float, help="local level of detail: Gaussian width (world units)")
     g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
     g.add_argument("--tf", default=default_tf, help="classify with a transfer-function preset first")
-    g.add_argument("--window", default=None, help="transfer-function window: auto or LO,HI")
+    g.add_argument("--tf-window", default=None, help="transfer-function window: auto or LO,HI")
 
 
 def read_volume(args):
@@ -107,9 +107,9 @@ def build_model(args, log=print):
         vol = read_volume(args)
         tf = None
         if args.tf:
-            window = args.window
+            window = args.tf_window
             if window not in (None, "auto"):
-                window = _numbers(window, "--window", (2,))
+                window = _numbers(window, "--tf-window", (2,))
             tf = TransferFunction.preset(args.tf, window=window).resolved(vol)  # records an "auto" window
             vol = tf.classify(vol)
         wavelet = args.wavelet.split(",") if "," in args.wavelet else args.wavelet
@@ -189,6 +189,117 @@ def cmd_compress(args):
     return 0
 
 
+def _camera_options(p):
+    g = p.add_argument_group("view")
+    g.add_argument("--azimuth", type=float, default=30.0, help="degrees (default 30)")
+    g.add_argument("--elevation", type=float, default=20.0, help="degrees (default 20)")
+    g.add_argument("--size", default="512", help="image size: N or HxW (default 512)")
+    g.add_argument("--extent", type=float, help="world width of the image (default: fits every view)")
+    g.add_argument("--window", dest="display_window", default="auto", help="PNG window: auto or LO,HI")
+    g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
+    g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
+
+
+def make_camera(args):
+    from .camera import Camera
+
+    size = _numbers(args.size.replace("x", ","), "--size", (1, 2), int)
+    return Camera(args.azimuth, args.elevation, size if len(size) == 2 else size[0], extent=args.extent)
+
+
+def _display_window(args):
+    return "auto" if args.display_window == "auto" else _numbers(args.display_window, "--window", (2,))
+
+
+def _write_gif(path, pictures, seconds_per_frame, force):
+    import imageio.v3 as iio
+
+    from .files import write_atomic
+    write_atomic(path, lambda fh: iio.imwrite(fh, np.stack(pictures), extension=".gif",
+                                              is_batch=True, duration=int(1000 * seconds_per_frame), loop=0),
+                 force)
+
+
+def cmd_render(args):
+    from .result import resolve_window
+    from .splat import SplatRenderer, splat
+
+    out = _check_output(args.output, args.force)
+    extras = [Path(p) for p in (args.raw, args.stats) if p]
+    for extra in extras:
+        _check_output(extra, args.force)
+    if args.turntable is not None and (args.turntable < 1 or out.suffix.lower() != ".gif"):
+        raise InputError("--turntable N needs N >= 1 and an output ending in .gif")
+    if args.turntable is None and out.suffix.lower() != ".png":
+        raise InputError(f"output {out} must end in .png (or .gif with --turntable N)")
+    camera = make_camera(args)
+    wv, _ = build_model(args)
+    renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s)
+    if args.turntable is None:
+        result = splat(wv, camera, renderer=renderer)
+        result.save(out, window=_display_window(args), overwrite=args.force)
+    else:
+        results = [splat(wv, camera.rotated(360.0 * i / args.turntable), renderer=renderer)
+                   for i in range(args.turntable)]
+        window = _display_window(args)
+        if window == "auto":  # one window for the whole turn, so brightness does not flicker
+            window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
+        _write_gif(out, [r.to_uint8(window) for r in results], 0.1, args.force)
+        result = results[0]
+        result.meta["turntable_seconds"] = [r.meta["seconds"]["total"] for r in results]
+    if args.raw:
+        result.save(args.raw, overwrite=args.force)
+    if args.stats:
+        result.save(args.stats, overwrite=args.force)
+    s = result.meta["seconds"]
+    print(f"splatted {result.meta['coefficients']:,} coefficients at {camera.size[0]}x{camera.size[1]} in "
+          f"{s['total']:.3f} s (footprints {s['footprints']:.3f}, binning {s['binning']:.3f}, "
+          f"accumulation {s['accumulation']:.3f}; kernel build {s['compile']:.2f} s apart) -> {out}")
+    return 0
+
+
+def cmd_progressive(args):
+    from .progressive import progressive
+    from .result import RenderResult, resolve_window
+
+    out = Path(args.output)
+    as_folder = out.suffix == ""
+    if not as_folder and out.suffix.lower() != ".gif":
+        raise InputError(f"output {out} must end in .gif, or be a folder name for PNG frames")
+    if as_folder:
+        if out.exists() and any(out.iterdir()) and not args.force:
+            raise InputError(f"folder {out} is not empty; pass --force to write into it")
+    else:
+        _check_output(out, args.force)
+    if args.stats:
+        _check_output(args.stats, args.force)
+    camera = make_camera(args)
+    wv, _ = build_model(args)
+    steps = 8 if args.steps is None and args.budget is None else args.steps
+    frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device,
+                              omega_s=args.omega_s))
+    window = _display_window(args)
+    if window == "auto":  # the final image's window for every frame: refinement stays visible
+        window = resolve_window(frames[0]._final.get()[..., :3], "auto")
+    pictures = [RenderResult(f.image, f.meta).to_uint8(window) for f in frames]
+    if as_folder:
+        out.mkdir(parents=True, exist_ok=True)
+        for f, picture in zip(frames, pictures):
+            RenderResult(f.image, f.meta).save(out / f"frame_{f.index:03d}.png", window=window, overwrite=True)
+    else:
+        _write_gif(out, pictures, 0.5, args.force)
+    figures = [f.figures() for f in frames]
+    if args.stats:
+        from .files import write_atomic
+        text = json.dumps(dict(frames=figures, meta=frames[-1].meta), indent=2, default=str).encode()
+        write_atomic(args.stats, lambda fh: fh.write(text), args.force)
+    for f in figures:
+        print(f"frame {f['index']}: {f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} %), "
+              f"energy {100 * f['energy']:6.2f} %, {f['seconds']:.3f} s, RMS error {f['rms_error']:.3e}, "
+              f"max error {f['max_error']:.3e}")
+    return 0
+
+
 def make_parser():
     parser = _Parser(prog="clwave", description="Wavelet-domain volume rendering (OpenCL).")
     parser.add_argument("--version", action="version", version=_version())
@@ -206,6 +317,30 @@ def make_parser():
     p.add_argument("-o", "--output", required=True, help="output .clw file")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
     p.set_defaults(run=cmd_compress)
+
+    p = sub.add_parser("render", help="render an image (wavelet splatting: X-ray line integrals)")
+    _add_input_options(p)
+    _add_model_options(p)
+    _camera_options(p)
+    p.add_argument("-o", "--output", required=True, help="output .png (or .gif with --turntable)")
+    p.add_argument("--method", choices=["splat"], default="splat", help="rendering method")
+    p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
+    p.add_argument("--raw", help="also write the float32 image as .npy")
+    p.add_argument("--stats", help="also write the figures as .json")
+    p.add_argument("--force", action="store_true", help="replace existing output files")
+    p.set_defaults(run=cmd_render)
+
+    p = sub.add_parser("progressive", help="progressive splatting frames as a GIF or a folder of PNGs")
+    _add_input_options(p)
+    _add_model_options(p)
+    _camera_options(p)
+    p.add_argument("-o", "--output", required=True, help="output .gif, or a folder for PNG frames")
+    k = p.add_mutually_exclusive_group()
+    k.add_argument("--steps", type=int, help="number of frames (default 8)")
+    k.add_argument("--budget", type=float, help="seconds: stop when the next step would not fit")
+    p.add_argument("--stats", help="per-frame figures as .json")
+    p.add_argument("--force", action="store_true", help="replace existing output files")
+    p.set_defaults(run=cmd_progressive)
     return parser
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+import warnings
 from functools import lru_cache
 from pathlib import Path
 
@@ -71,7 +72,9 @@ def build(cc: ComputeContext, files, defines=None) -> KernelSet:
     options += [f"-D{k}" if v is None else f"-D{k}={v}" for k, v in defines]
     start = time.perf_counter()
     try:
-        program = cl.Program(cc.ctx, source).build(options=options)
+        with warnings.catch_warnings():  # non-empty logs of successful builds (PoCL ABI notes) are kept, not shown
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+            program = cl.Program(cc.ctx, source).build(options=options)
     except cl.Error as exc:
         log = str(exc)
         first = next((ln.strip() for ln in log.splitlines() if "error" in ln.lower()), log.strip()[:200])

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import warnings
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
@@ -39,7 +38,8 @@ from scipy.ndimage import correlate1d
 from scipy.signal import upfirdn
 
 from .bspline import SplineWavelet, max_levels, wavelet_for
-from .errors import FileFormatError, InputError, OutputExistsError
+from .errors import FileFormatError, InputError
+from .files import write_atomic
 from .progress import progress
 from .volume import Volume
 
@@ -394,9 +394,6 @@ class WaveletVolume:
 
         Refuses to replace an existing file unless ``overwrite``; writes atomically.
         """
-        path = Path(path)
-        if path.exists() and not overwrite:
-            raise OutputExistsError(f"{path} exists; pass overwrite=True (--force) to replace it")
         header = dict(format=FILE_FORMAT, version=FILE_VERSION, shape=self.shape,
                       spacing=self.spacing, origin=self.origin, levels=self.levels,
                       channels=self.channels, interpolate=self.interpolate,
@@ -410,15 +407,7 @@ class WaveletVolume:
             mask[g.all_positions()] = True
             arrays[f"mask{gi}"] = np.packbits(mask)
             arrays[f"values{gi}"] = np.ascontiguousarray(g.values, dtype=np.float32)
-        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".clw.tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez_compressed(fh, **arrays)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-        return path
+        return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays), overwrite)
 
     @classmethod
     def open(cls, path) -> "WaveletVolume":

@@ -92,3 +92,51 @@ def test_console_entry_point_has_no_traceback(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "clwave", "compress", str(tmp_path / "missing.nii.gz"),
                            "-o", str(tmp_path / "x.clw")], capture_output=True, text=True)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
+
+
+def test_render_png_raw_stats_and_turntable(tmp_path, capsys):
+    png, raw, stats = tmp_path / "h.png", tmp_path / "h.npy", tmp_path / "h.json"
+    code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "2", "--keep", "0.2", "--size", "24x32",
+                         "-o", str(png), "--raw", str(raw), "--stats", str(stats))
+    assert code == 0, err
+    import imageio.v3 as iio
+    import json
+    picture = iio.imread(png)
+    image = np.load(raw)
+    assert picture.shape == (24, 32) and image.shape == (24, 32, 1) and picture.max() == 255
+    meta = json.loads(stats.read_text())
+    assert meta["method"] == "splat" and meta["coefficients"] == round(0.2 * 16 ** 3)
+    gif = tmp_path / "turn.gif"
+    code, out, err = run(capsys, "render", "phantom:shepp-logan:16", "--levels", "1", "--size", "16",
+                         "--turntable", "4", "-o", str(gif))
+    assert code == 0, err
+    assert iio.imread(gif, index=None).shape[:3] == (4, 16, 16)
+
+
+def test_progressive_gif_folder_and_stats(tmp_path, capsys):
+    gif, stats = tmp_path / "p.gif", tmp_path / "p.json"
+    code, out, err = run(capsys, "progressive", "phantom:shepp-logan:32", "--levels", "2", "--size", "32",
+                         "--steps", "3", "-o", str(gif), "--stats", str(stats))
+    assert code == 0, err
+    import imageio.v3 as iio
+    import json
+    assert 2 <= iio.imread(gif, index=None).shape[0] <= 3  # GIF writers merge identical frames
+    frames = json.loads(stats.read_text())["frames"]
+    assert [f["index"] for f in frames] == [0, 1, 2] and frames[-1]["rms_error"] == 0 and frames[-1]["fraction"] == 1
+    folder = tmp_path / "frames"
+    code, out, err = run(capsys, "progressive", "phantom:hydrogen:16", "--levels", "1", "--size", "16", "--steps", "2",
+                         "-o", str(folder))
+    assert code == 0 and sorted(p.name for p in folder.iterdir()) == ["frame_000.png", "frame_001.png"]
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["render", "phantom:hydrogen:16", "--azimuth", "nan"], "azimuth"),
+    (["render", "phantom:hydrogen:16", "--size", "0"], "size"),
+    (["render", "phantom:hydrogen:16", "--size", "-4"], "size"),
+    (["progressive", "phantom:hydrogen:16", "--steps", "0"], "steps"),
+    (["progressive", "phantom:hydrogen:16", "--budget", "0"], "budget"),
+])
+def test_render_mistakes(tmp_path, capsys, argv, needle):
+    target = tmp_path / ("o.png" if argv[0] == "render" else "o.gif")
+    code, out, err = run(capsys, *argv, "-o", str(target))
+    assert code == 2 and err.count("\n") == 1 and needle in err and not target.exists()

@@ -1,11 +1,14 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose [--size 256] [--repeats 3] [--json out.json]
+    python tools/bench.py decompose|splat|all [--size 256] [--repeats 3] [--views 8] [--json out.json]
 
 ``decompose``: classification (hydrogen preset, RGBA) + cubic decomposition (3 levels,
 approximating model) + thresholding to 5 % of a hydrogen phantom; the phantom itself
 is made once, outside the timing.
+``splat``: hydrogen scalar, cubic, 3 levels, 1 %, 5 % and all coefficients at 512² and
+256², each render at a new view with its footprints; median over ``--views`` views after
+one warm-up; throughput = footprint-pixel updates per second of accumulation.
 """
 
 from __future__ import annotations
@@ -75,7 +78,39 @@ def bench_decompose(args) -> dict:
                 target_seconds=4.0)
 
 
-BENCHMARKS = {"decompose": bench_decompose}
+def views(count):
+    """Distinct views: a golden-angle spiral of azimuths and elevations."""
+    return [(137.508 * i % 360.0, -60.0 + 120.0 * (i + 0.5) / count) for i in range(count)]
+
+
+def bench_splat(args) -> dict:
+    vol = phantom("hydrogen", n=args.size)
+    full = WaveletVolume.from_volume(vol, wavelet="cubic", levels=3)
+    cases = {}
+    for keep in (0.01, 0.05, 1.0):
+        wv = full if keep == 1.0 else full.threshold(keep=keep)
+        renderer = clwave.SplatRenderer(wv, device=args.device)
+        for size in (512, 256):
+            clwave.splat(wv, clwave.Camera(10.0, 5.0, size=size), renderer=renderer)  # warm-up
+            runs = [clwave.splat(wv, clwave.Camera(az, el, size=size), renderer=renderer).meta
+                    for az, el in views(args.views)]
+            seconds = {k: summary([m["seconds"][k] for m in runs])
+                       for k in ("total", "footprints", "binning", "accumulation")}
+            updates = statistics.median(m["pixel_updates"] for m in runs)
+            cases[f"keep {keep:g} at {size}x{size}"] = dict(
+                coefficients=wv.kept, seconds=seconds, pixel_updates=updates, tile_pairs=statistics.median(
+                    m["tile_pairs"] for m in runs),
+                updates_per_second=updates / seconds["accumulation"]["median"],
+                texture_path=runs[0]["texture_path"], omega_s=runs[0]["omega_s"])
+        cases[f"keep {keep:g}"] = dict(compile_seconds=renderer.compile_seconds)
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", wavelet="cubic", levels=3,
+                             views=args.views, note="each render at a new view, footprints included"),
+                targets=dict(keep_0_01_seconds=0.1, keep_0_05_seconds=0.4, full_seconds=8.0,
+                             updates_per_second=0.8e9),
+                cases=cases)
+
+
+BENCHMARKS = {"decompose": bench_decompose, "splat": bench_splat}
 
 
 def main(argv=None):
@@ -83,6 +118,7 @@ def main(argv=None):
     parser.add_argument("benchmark", choices=list(BENCHMARKS) + ["all"])
     parser.add_argument("--size", type=int, default=256, help="phantom voxels per axis")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs after one warm-up")
+    parser.add_argument("--views", type=int, default=8, help="distinct views per case (splat)")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="also write the JSON here")
     args = parser.parse_args(argv)

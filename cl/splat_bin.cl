@@ -1,0 +1,96 @@
+/* splat_bin.cl: project splats and bin them into image tiles (paper §4, MATH.md §6).
+ *
+ * Pipeline (host: clwave/splat.py): splat_project -> exclusive scan of counts ->
+ * splat_write_keys -> stable radix sort by tile -> tile_ranges.  Writing keys in splat
+ * order and sorting stably keeps each tile's splats in importance order, so the
+ * accumulated sum is deterministic. */
+#include "clw_common.h"
+
+/* splat_project: centre, pixel box and tile count of each splat.
+ *
+ * Parameters
+ *   n            number of splats in this chunk
+ *   first        index of the chunk's first coefficient
+ *   coef         in  (K,) int4: (k_x, k_y, k_z, band), band = level * 8 + subband code
+ *   band_tex     in  (64,) int: texture of each band, -1 when its footprint vanishes
+ *   band_origin  in  (64,) float2: pixel (col, row) of the centre of coefficient k = 0
+ *   step_col     in  (8,) float4: d col / d (k_x, k_y, k_z) per level
+ *   step_row     in  (8,) float4: d row / d (k_x, k_y, k_z) per level
+ *   tex_box      in  (T,) float4: texture box in pixels around the centre (a_min, a_max, b_min, b_max)
+ *   centre       out (n,) float2: pixel (col, row) of the support centre
+ *   bbox         out (n,) int4: covered pixels (x0, y0, x1, y1), inclusive; x1 < x0 when empty
+ *   stex         out (n,) int: texture id
+ *   count        out (n,) uint: number of tiles the box touches
+ * Grid: global (n,), any local size. */
+__kernel void splat_project(const uint n, const uint first, __global const int4 *coef,
+                            __global const int *band_tex, __global const float2 *band_origin,
+                            __global const float4 *step_col, __global const float4 *step_row,
+                            __global const float4 *tex_box, const int width, const int height,
+                            __global float2 *centre, __global int4 *bbox, __global int *stex,
+                            __global uint *count)
+{
+    const uint i = get_global_id(0);
+    if (i >= n)
+        return;
+    const int4 c = coef[first + i];
+    const int level = c.w >> 3;
+    const int tex = band_tex[c.w];
+    const float4 sc = step_col[level], sr = step_row[level];
+    const float2 o = band_origin[c.w];
+    const float col = ((o.x + (float)c.x * sc.x) + (float)c.y * sc.y) + (float)c.z * sc.z;
+    const float row = ((o.y + (float)c.x * sr.x) + (float)c.y * sr.y) + (float)c.z * sr.z;
+    int4 box = (int4)(0, 0, -1, -1);
+    uint cnt = 0;
+    if (tex >= 0) {
+        const float4 b = tex_box[tex];
+        /* pixel centres inside the texture box; rows grow downwards while v points up */
+        const float x0 = fmax(ceil(col + b.x), 0.0f), x1 = fmin(floor(col + b.y), (float)(width - 1));
+        const float y0 = fmax(ceil(row - b.w), 0.0f), y1 = fmin(floor(row - b.z), (float)(height - 1));
+        if (x0 <= x1 && y0 <= y1) {
+            box = (int4)((int)x0, (int)y0, (int)x1, (int)y1);
+            cnt = (uint)((box.z / CLW_TILE - box.x / CLW_TILE + 1) * (box.w / CLW_TILE - box.y / CLW_TILE + 1));
+        }
+    }
+    centre[i] = (float2)(col, row);
+    bbox[i] = box;
+    stex[i] = tex;
+    count[i] = cnt;
+}
+
+/* splat_write_keys: one (tile, splat) pair per tile a splat touches, at its scanned offset.
+ *   bbox   in  (n,) int4     offset in (n,) uint (exclusive scan of count)
+ *   keys   out (total,) uint tile id = tile_y * tiles_x + tile_x
+ *   vals   out (total,) uint splat index
+ * Grid: global (n,). */
+__kernel void splat_write_keys(const uint n, __global const int4 *bbox, __global const uint *offset,
+                               const int tiles_x, __global uint *keys, __global uint *vals)
+{
+    const uint i = get_global_id(0);
+    if (i >= n)
+        return;
+    const int4 b = bbox[i];
+    if (b.z < b.x)
+        return;
+    uint o = offset[i];
+    for (int ty = b.y / CLW_TILE; ty <= b.w / CLW_TILE; ++ty)
+        for (int tx = b.x / CLW_TILE; tx <= b.z / CLW_TILE; ++tx) {
+            keys[o] = (uint)(ty * tiles_x + tx);
+            vals[o] = i;
+            ++o;
+        }
+}
+
+/* tile_ranges: [start, end) of each tile's run in the sorted keys; ranges start zeroed.
+ *   keys   in  (total,) uint, sorted     ranges out (tiles,) uint2
+ * Grid: global (total,). */
+__kernel void tile_ranges(const uint total, __global const uint *keys, __global uint2 *ranges)
+{
+    const uint i = get_global_id(0);
+    if (i >= total)
+        return;
+    const uint k = keys[i];
+    if (i == 0 || keys[i - 1] != k)
+        ranges[k].x = i;
+    if (i == total - 1 || keys[i + 1] != k)
+        ranges[k].y = i + 1;
+}

@@ -1,0 +1,138 @@
+"""NumPy references of the splatting kernels, one function per stage (tiny inputs only).
+
+Integer stages mirror the kernels' float32 arithmetic step by step (no fused
+multiply-add: ``FP_CONTRACT OFF`` in ``cl/clw_common.h``), so tests can demand
+exact equality; the accumulation is a float64 sum.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+TILE = 16
+
+
+def project(coef, first, band_tex, band_origin, step_col, step_row, tex_box, width, height, n):
+    """Reference of ``splat_project``: centre, bbox, texture id and tile count per splat."""
+    f32 = np.float32
+    c = np.asarray(coef[first:first + n])
+    level, band = c[:, 3] >> 3, c[:, 3]
+    sc, sr, o = step_col[level], step_row[level], band_origin[band]
+    k = c[:, :3].astype(f32)
+    col = ((o[:, 0] + k[:, 0] * sc[:, 0]) + k[:, 1] * sc[:, 1]) + k[:, 2] * sc[:, 2]
+    row = ((o[:, 1] + k[:, 0] * sr[:, 0]) + k[:, 1] * sr[:, 1]) + k[:, 2] * sr[:, 2]
+    tex = band_tex[band]
+    b = tex_box[np.maximum(tex, 0)]
+    x0 = np.maximum(np.ceil(col + b[:, 0]), f32(0))
+    x1 = np.minimum(np.floor(col + b[:, 1]), f32(width - 1))
+    y0 = np.maximum(np.ceil(row - b[:, 3]), f32(0))
+    y1 = np.minimum(np.floor(row - b[:, 2]), f32(height - 1))
+    hit = (tex >= 0) & (x0 <= x1) & (y0 <= y1)
+    bbox = np.where(hit[:, None], np.stack([x0, y0, x1, y1], 1).astype(np.int32), [0, 0, -1, -1]).astype(np.int32)
+    count = np.where(hit, (bbox[:, 2] // TILE - bbox[:, 0] // TILE + 1) * (bbox[:, 3] // TILE - bbox[:, 1] // TILE + 1),
+                     0).astype(np.uint32)
+    return np.stack([col, row], 1).astype(np.float32), bbox, tex.astype(np.int32), count
+
+
+def write_keys(bbox, tiles_x):
+    """Reference of scan + ``splat_write_keys``: (tile, splat) pairs in splat order."""
+    keys, vals = [], []
+    for i, (x0, y0, x1, y1) in enumerate(bbox):
+        if x1 < x0:
+            continue
+        for ty in range(y0 // TILE, y1 // TILE + 1):
+            for tx in range(x0 // TILE, x1 // TILE + 1):
+                keys.append(ty * tiles_x + tx)
+                vals.append(i)
+    return np.array(keys, np.uint32), np.array(vals, np.uint32)
+
+
+def sort_pairs(keys, vals):
+    """Reference of the stable sort by tile."""
+    order = np.argsort(keys, kind="stable")
+    return keys[order], vals[order]
+
+
+def tile_ranges(keys, tiles):
+    """Reference of ``tile_ranges``: [start, end) per tile, zero for empty tiles."""
+    ranges = np.zeros((tiles, 2), np.uint32)
+    for t in np.unique(keys):
+        idx = np.flatnonzero(keys == t)
+        ranges[t] = idx[0], idx[-1] + 1
+    return ranges
+
+
+def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width, height):
+    """Reference of ``splat_accumulate`` (float64): bilinear footprint samples times c.
+
+    ``textures`` are ``(data (nv, nu), centre_u, centre_v, P)``: unpacked, P texels per pixel.
+    """
+    fb = np.zeros((height, width, 4))
+    tiles_x = -(-width // TILE)
+    for tile, (start, end) in enumerate(ranges):
+        tx, ty = tile % tiles_x, tile // tiles_x
+        for s in vals[start:end]:
+            x0, y0, x1, y1 = bbox[s]
+            xs = np.arange(max(x0, tx * TILE), min(x1, tx * TILE + TILE - 1) + 1)
+            ys = np.arange(max(y0, ty * TILE), min(y1, ty * TILE + TILE - 1) + 1)
+            if not len(xs) or not len(ys):
+                continue
+            data, cu, cv, P = textures[stex[s]]
+            nv, nu = data.shape
+            tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
+            tex[1:-1, 1:-1] = data
+            tu = cu + (xs - np.float64(centre[s, 0])) * P
+            tv = cv + (np.float64(centre[s, 1]) - ys) * P
+            iu, iv = np.floor(tu).astype(int), np.floor(tv).astype(int)
+            fu, fv = tu - iu, tv - iv
+            iu, iv = np.clip(iu + 1, 0, nu + 1), np.clip(iv + 1, 0, nv + 1)
+            iu1, iv1 = np.clip(iu + 1, 0, nu + 1), np.clip(iv + 1, 0, nv + 1)
+            top = tex[iv[:, None], iu[None, :]] * (1 - fu) + tex[iv[:, None], iu1[None, :]] * fu
+            bot = tex[iv1[:, None], iu[None, :]] * (1 - fu) + tex[iv1[:, None], iu1[None, :]] * fu
+            sample = top * (1 - fv[:, None]) + bot * fv[:, None]
+            fb[ys[:, None], xs[None, :]] += sample[..., None] * values[first + s]
+    return fb
+
+
+def line_integrals(coeffs, order, spacing, origin, view):
+    """Exact X-ray image of the fine-level spline ``sum_i c_i N_j(x - i)`` (float64).
+
+    ``coeffs`` (nz, ny, nx[, C]) are the fine B-spline coefficients (``reconstruct()``
+    for the approximating model), ``view`` a resolved camera.  Each pixel's line is cut
+    at every knot plane of the three axes; between knots the integrand is a polynomial
+    of degree 3(j - 1), integrated exactly by Gauss-Legendre.  An oracle for small
+    volumes: it visits every segment of every ray in NumPy.
+    """
+    from .bspline import bspline
+
+    c = np.asarray(coeffs, np.float64)
+    c = c[..., None] if c.ndim == 3 else c
+    shape = np.array(c.shape[:3][::-1], float)  # (nx, ny, nz)
+    d = np.array(spacing[::-1], float)
+    H, W = view.size
+    starts = view.pixel_centres().reshape(-1, 3)
+    # fine coordinates x_a = (p_a - origin_a)/d_a + (n_a - 1)/2 + j/2 along p = start + t n
+    x0 = (starts - np.asarray(origin)) / d + (shape - 1) / 2 + order / 2
+    w = np.asarray(view.n) / d
+    g = (3 * (order - 1)) // 2 + 1
+    nodes, weights = np.polynomial.legendre.leggauss(g)
+    knots = []  # t where x_a crosses each integer of the support [0, n_a + j], all pixels at once
+    for a in range(3):
+        planes = np.arange(0, shape[a] + order + 1)
+        if abs(w[a]) > 1e-14:
+            knots.append((planes[None, :] - x0[:, a, None]) / w[a])
+    knots = np.sort(np.concatenate(knots, axis=1), axis=1)  # (P, K); f = 0 outside [first, last]
+    mid, half = (knots[:, 1:] + knots[:, :-1]) / 2, (knots[:, 1:] - knots[:, :-1]) / 2
+    t = mid[..., None] + half[..., None] * nodes  # (P, K - 1, g)
+    x = x0[:, None, None, :] + t[..., None] * w  # fine coordinates of every Gauss point
+    base = np.floor(x).astype(int) - order + 1  # first coefficient whose support holds x
+    n_int = shape.astype(int)
+    # per axis and offset: the B-spline weight, zero where the coefficient lies off the grid
+    wts = [[bspline(order, x[..., a] - base[..., a] - o) * ((base[..., a] + o >= 0) & (base[..., a] + o < n_int[a]))
+            for o in range(order)] for a in range(3)]
+    idx = [[np.clip(base[..., a] + o, 0, n_int[a] - 1) for o in range(order)] for a in range(3)]
+    total = np.zeros(x.shape[:3] + (c.shape[3],))
+    for i, j, k in np.ndindex(order, order, order):
+        total += (wts[0][i] * wts[1][j] * wts[2][k])[..., None] * c[idx[2][k], idx[1][j], idx[0][i]]
+    image = np.einsum("pkgc,g,pk->pc", total, weights, half)
+    return image.reshape(H, W, -1)

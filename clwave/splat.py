@@ -1,0 +1,304 @@
+"""Wavelet splatting (paper §4): X-ray images as sums of basis-function footprints.
+
+Every kept coefficient c of band (m, key) adds ``c * T_{m,key}(mu - mu_c, nu - nu_c)``
+to the image (paper eq. 29, MATH.md §6), where T is the footprint texture of the
+prototype (:mod:`clwave.footprint`, Fourier projection slicing) and (mu_c, nu_c) the
+projection of the centre of the basis support.  On the device
+(``cl/splat_bin.cl``, ``cl/splat_raster.cl``): project -> count tiles -> scan ->
+keys -> stable sort -> per-tile ranges -> accumulate per tile from local-memory
+batches.  The result is the line integral ``∫ f(p - t n) dt`` of each channel in
+world units (CONVENTIONS.md "Outputs").
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pyopencl.array as cla
+from pyopencl.algorithm import RadixSort
+from pyopencl.reduction import ReductionKernel
+from pyopencl.scan import ExclusiveScanKernel
+
+from . import programs
+from .camera import Camera
+from .device import ComputeContext
+from .errors import DeviceMemoryError, InputError
+from .footprint import DEFAULT_OMEGA_MIN, footprints
+from .result import RenderResult
+from .wavelet import WaveletVolume
+
+TILE = 16
+MAX_LEVELS = 8  # band id = level * 8 + subband code must fit the 64-entry table
+BYTES_PER_PAIR = 16  # keys + values, and their sorted copies (uint32 each)
+KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
+POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pixel rows
+
+
+class ViewTables:
+    """Host-side per-view tables of one channel group: footprints and band placement."""
+
+    def __init__(self, wv: WaveletVolume, group: int, view, omega_s=None, path="auto"):
+        g = wv.groups[group]
+        wav = g.wavelet
+        spacing = np.array(wv.spacing[::-1], float)  # (dx, dy, dz)
+        shape = np.array(wv.shape[::-1], float)      # (nx, ny, nz)
+        omega = omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
+        # Haar and linear footprints have kinks (and Haar jumps): bilinear resampling needs finer texels
+        omega_min = DEFAULT_OMEGA_MIN.get(wav.order, 0.0) if wav.order >= 3 else KINKED_OMEGA_MIN
+        self.omega_s, self.textures, self.texels_per_pixel = omega, {}, {}
+        start = time.perf_counter()
+        for m in sorted({b.level for b in g.bands}):
+            # texels of exactly 1/P pixel (cl/splat_raster.cl), at least the band of eq. 36 and
+            # omega_min for the level's own prototype (clwave.footprint)
+            band = max(omega, omega_min if wav.order < 3 else omega_min / 2.0 ** m)
+            P = max(2, int(np.ceil(band * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
+            self.texels_per_pixel[m] = P
+            self.textures.update(footprints(wav, wv.spacing, view.n, view.u, view.v,
+                                            [(b.level, b.key) for b in g.bands if b.level == m],
+                                            omega_s=omega, path=path, texel=view.pixel / P))
+        self.footprint_seconds = time.perf_counter() - start
+        self.paths = sorted({t.path for t in self.textures.values() if t is not None})
+
+        self.band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
+        self.band_origin = np.zeros((8 * MAX_LEVELS, 2), np.float32)
+        self.step_col = np.zeros((MAX_LEVELS, 4), np.float32)
+        self.step_row = np.zeros((MAX_LEVELS, 4), np.float32)
+        boxes, ints, maps, pool, offset = [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
+        for band in g.bands:
+            m = band.level
+            key_xyz = band.key[::-1]
+            code = sum(1 << a for a, letter in enumerate(key_xyz) if letter == "d")
+            scale = 2.0 ** m
+            # world centre of coefficient k = 0 (MATH.md §6: X = o + 2^m (k + c0)), in (x, y, z)
+            fine = np.array([wav.offset(letter, m) + scale * wav.support(letter) / 2.0 for letter in key_xyz])
+            world = np.asarray(wv.origin) + (fine - wav.order / 2.0 - (shape - 1) / 2.0) * spacing
+            self.band_origin[m * 8 + code] = view.to_pixels(world)
+            self.step_col[m, :3] = scale * spacing * view.u / view.pixel
+            self.step_row[m, :3] = -scale * spacing * view.v / view.pixel
+            tex = self.textures[(m, band.key)]
+            if tex is None:  # psi along the view direction: its footprint vanishes
+                continue
+            self.band_tex[m * 8 + code] = len(ints)
+            nv, nu = tex.data.shape
+            P = self.texels_per_pixel[m]
+            planes = pack_texture(tex.data, P)
+            boxes.append((-tex.centre_u / P, (nu - 1 - tex.centre_u) / P,
+                          -tex.centre_v / P, (nv - 1 - tex.centre_v) / P))
+            ints.append((offset, planes.shape[2], planes.shape[1], P))
+            maps.append((tex.centre_u, tex.centre_v, 0.0, 0.0))
+            pool.append(planes.ravel())
+            offset += planes.size
+        self.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
+        self.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
+        self.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
+        self.texels = np.concatenate(pool + [np.zeros(2 * POOL_GUARD)]).astype(np.float32)
+        self.size = view.size
+
+
+def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
+    """Phase planes of a texture sampled at 1/P pixel: (P, nv + 2, ceil(nu / P) + 2), zero margins.
+
+    Plane p, column q + 1 holds texel p + P q (``cl/splat_raster.cl``), so a row of pixels
+    reads contiguous memory.
+    """
+    nv, nu = data.shape
+    cols = -(-nu // P) + 2
+    rows = np.zeros((nv + 2, cols * P), np.float32)
+    rows[1:nv + 1, P:P + nu] = data  # texel iu at P + iu: column (iu // P) + 1 of plane iu % P
+    return np.ascontiguousarray(rows.reshape(nv + 2, cols, P).transpose(2, 0, 1))
+
+
+def default_omega_s(pixel, min_spacing) -> float:
+    """Texture band: the paper's 14, finer when pixels are small (texel <= pixel / 4)."""
+    return max(14.0, 4.0 * np.pi * min_spacing / pixel)
+
+
+class SplatRenderer:
+    """Uploads a wavelet volume's ranked coefficients once and splats any view.
+
+    Parameters
+    ----------
+    wv : WaveletVolume
+    device : str or ComputeContext
+    omega_s : float, optional
+        Footprint band (paper eq. 35/36); default from the pixel size.
+    path : "auto", "fft" or "spatial"
+        How footprint textures are made (:func:`clwave.footprint.footprints`).
+    """
+
+    def __init__(self, wv: WaveletVolume, device=None, omega_s=None, path="auto"):
+        if not isinstance(wv, WaveletVolume):
+            raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
+        if wv.levels >= MAX_LEVELS:
+            raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
+        self.wv, self.omega_s, self.path = wv, omega_s, path
+        self.cc = ComputeContext.get(device)
+        start = time.perf_counter()
+        px = 1 if self.cc.info.kind == "GPU" else TILE
+        self.kernels = programs.build(self.cc, ["splat_bin.cl", "splat_raster.cl"], {"CLW_PX": px})
+        self.local_size = TILE * TILE // px
+        ctx = self.cc.ctx
+        self.scan = ExclusiveScanKernel(ctx, np.uint32, "a+b", neutral="0")
+        self.sort = RadixSort(ctx, "uint *keys, uint *vals", key_expr="keys[i]",
+                              sort_arg_names=["keys", "vals"], key_dtype=np.uint32)
+        self.pixel_updates = ReductionKernel(
+            ctx, np.int64, neutral="0", reduce_expr="a+b", arguments="__global const int4 *bbox",
+            map_expr="bbox[i].z < bbox[i].x ? 0 : (long)(bbox[i].z - bbox[i].x + 1) * (bbox[i].w - bbox[i].y + 1)")
+        self.compile_seconds = time.perf_counter() - start
+        self.groups = []
+        q = self.cc.queue
+        for gi, g in enumerate(wv.groups):
+            table = wv.ranked(gi)
+            coef = np.zeros((len(table.level), 4), np.int32)
+            coef[:, :3] = table.index[:, ::-1]  # (k_x, k_y, k_z)
+            coef[:, 3] = table.level.astype(np.int32) * 8 + table.key_code  # bit 0: psi along x
+            values = np.zeros((len(table.level), 4), np.float32)
+            values[:, : table.values.shape[1]] = table.values
+            self.groups.append(dict(coef=cla.to_device(q, coef), values=cla.to_device(q, values),
+                                    count=len(coef), energy=_energy_prefix(table.values)))
+
+    @property
+    def count(self) -> int:
+        return self.groups[0]["count"] if self.groups else 0
+
+    # -------------------------------------------------------------- drawing
+    def begin(self, camera: Camera):
+        """Start a frame: resolve the view, make footprints, zero the framebuffer."""
+        if not isinstance(camera, Camera):
+            raise InputError("camera must be a clwave.Camera")
+        view = camera.view(self.wv)
+        H, W = view.size
+        fb_bytes = H * W * 16
+        if fb_bytes > self.cc.info.max_alloc:
+            raise DeviceMemoryError(
+                f"a {H}x{W} framebuffer needs {fb_bytes / 2**20:.0f} MiB but {self.cc.info.name} allows "
+                f"{self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
+        frame = Frame(self, view)
+        for gi in range(len(self.groups)):
+            frame.tables.append(ViewTables(self.wv, gi, view, self.omega_s, self.path))
+        frame.upload()
+        return frame
+
+
+class Frame:
+    """One image being accumulated: splat coefficient ranges in importance order."""
+
+    def __init__(self, renderer: SplatRenderer, view):
+        self.r, self.view = renderer, view
+        self.tables = []
+        self.device_tables = []
+        H, W = view.size
+        q = renderer.cc.queue
+        self.fbs = [cla.zeros(q, (H * W * 4,), np.float32) for _ in renderer.groups]
+        self.stats = dict(splats=0, pairs=0, pixel_updates=0, bin_seconds=0.0, accumulate_seconds=0.0)
+
+    @property
+    def footprint_seconds(self) -> float:
+        return sum(t.footprint_seconds for t in self.tables)
+
+    def upload(self):
+        q = self.r.cc.queue
+        for t in self.tables:
+            self.device_tables.append({name: cla.to_device(q, getattr(t, name)) for name in
+                                       ("band_tex", "band_origin", "step_col", "step_row", "tex_box",
+                                        "tex_int", "tex_map", "texels")})
+
+    def splat(self, first: int, count: int):
+        """Add coefficients ``first .. first + count`` (importance order) of every group."""
+        for gi in range(len(self.r.groups)):
+            n = max(0, min(count, self.r.groups[gi]["count"] - first))
+            if n:
+                self._splat_group(gi, first, n)
+
+    def _splat_group(self, gi, first, n):
+        r, q, k = self.r, self.r.cc.queue, self.r.kernels
+        g, t = r.groups[gi], self.device_tables[gi]
+        H, W = self.view.size
+        tiles_x, tiles_y = -(-W // TILE), -(-H // TILE)
+        start = time.perf_counter()
+        centre = cla.empty(q, (n, 2), np.float32)
+        bbox = cla.empty(q, (n, 4), np.int32)
+        stex = cla.empty(q, (n,), np.int32)
+        counts = cla.empty(q, (n,), np.uint32)
+        k.splat_project(q, (n,), None, np.uint32(n), np.uint32(first), g["coef"].data, t["band_tex"].data,
+                        t["band_origin"].data, t["step_col"].data, t["step_row"].data, t["tex_box"].data,
+                        np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
+        total = int(cla.sum(counts, dtype=np.uint64).get())
+        budget = min(r.cc.info.max_alloc // 4, r.cc.info.global_mem // 4) // BYTES_PER_PAIR * 4
+        if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
+            half = n // 2
+            self.stats["bin_seconds"] += time.perf_counter() - start
+            self._splat_group(gi, first, half)
+            self._splat_group(gi, first + half, n - half)
+            return
+        if total > budget:
+            raise DeviceMemoryError(f"one splat needs {total * BYTES_PER_PAIR} bytes of tile lists, more "
+                                    f"than {r.cc.info.name} can hold; render a smaller image")
+        ranges = cla.zeros(q, (tiles_x * tiles_y, 2), np.uint32)
+        if total:
+            offsets = cla.empty_like(counts)
+            r.scan(counts, offsets)
+            keys = cla.empty(q, (total,), np.uint32)
+            vals = cla.empty(q, (total,), np.uint32)
+            k.splat_write_keys(q, (n,), None, np.uint32(n), bbox.data, offsets.data, np.int32(tiles_x),
+                               keys.data, vals.data)
+            bits = max(1, int(tiles_x * tiles_y - 1).bit_length())
+            (keys, vals), _ = r.sort(keys, vals, key_bits=bits, queue=q)
+            k.tile_ranges(q, (total,), None, np.uint32(total), keys.data, ranges.data)
+        else:
+            vals = cla.zeros(q, (1,), np.uint32)
+        q.finish()
+        mid = time.perf_counter()
+        k.splat_accumulate(q, (tiles_x * tiles_y * r.local_size,), (r.local_size,), np.int32(W), np.int32(H),
+                           np.int32(tiles_x), ranges.data, vals.data, np.uint32(first), centre.data, bbox.data,
+                           stex.data, g["values"].data, t["tex_int"].data, t["tex_map"].data,
+                           t["texels"].data, self.fbs[gi].data)
+        q.finish()
+        self.stats["splats"] += n
+        self.stats["pairs"] += total
+        self.stats["pixel_updates"] += int(r.pixel_updates(bbox, range=slice(0, n), queue=q).get())
+        self.stats["bin_seconds"] += mid - start
+        self.stats["accumulate_seconds"] += time.perf_counter() - mid
+
+    def image(self) -> np.ndarray:
+        """The framebuffer so far as (H, W, C) float32."""
+        H, W = self.view.size
+        out = np.zeros((H, W, self.r.wv.channels), np.float32)
+        for g, fb in zip(self.r.wv.groups, self.fbs):
+            out[..., list(g.channels)] = fb.get().reshape(H, W, 4)[..., : len(g.channels)]
+        return out
+
+
+def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, path="auto",
+          renderer: SplatRenderer | None = None) -> RenderResult:
+    """X-ray image of a wavelet volume by wavelet splatting.
+
+    Returns a :class:`RenderResult` whose ``image`` (H, W, C) holds the line integral of
+    each channel in world units and whose ``meta`` reports the coefficients splatted,
+    footprint, binning and accumulation times (kernel compile time apart) and the
+    footprint texture path.
+    """
+    r = renderer or SplatRenderer(wv, device=device, omega_s=omega_s, path=path)
+    start = time.perf_counter()
+    frame = r.begin(camera)
+    frame.splat(0, r.count)
+    image = frame.image()
+    return RenderResult(image, _meta(r, frame, time.perf_counter() - start))
+
+
+def _meta(r: SplatRenderer, frame: Frame, seconds: float) -> dict:
+    tables = frame.tables
+    return dict(method="splat", device=r.cc.describe(), coefficients=frame.stats["splats"],
+                coefficients_total=r.count, tile_pairs=frame.stats["pairs"],
+                pixel_updates=frame.stats["pixel_updates"],
+                texture_path=sorted({p for t in tables for p in t.paths}),
+                omega_s=tables[0].omega_s if tables else None,
+                seconds=dict(total=seconds, footprints=frame.footprint_seconds,
+                             binning=frame.stats["bin_seconds"], accumulation=frame.stats["accumulate_seconds"],
+                             compile=r.compile_seconds))
+
+
+def _energy_prefix(values) -> np.ndarray:
+    """Cumulative coefficient energy sum c^2 over channels, in importance order."""
+    return np.cumsum(np.sum(np.asarray(values, np.float64) ** 2, axis=1))

@@ -1,0 +1,95 @@
+"""Each splatting kernel against its NumPy reference (clwave.reference) on small random inputs.
+
+Integer stages must be exactly equal; the accumulation to float32 rounding."""
+
+import numpy as np
+import pyopencl.array as cla
+import pytest
+from pyopencl.algorithm import RadixSort
+from pyopencl.scan import ExclusiveScanKernel
+
+from clwave import programs, reference
+from clwave.splat import pack_texture
+
+W, H = 45, 37  # not multiples of the 16-pixel tile
+TILES_X, TILES_Y = 3, 3
+
+
+def random_scene(rng, n=400, n_tex=5):
+    coef = np.zeros((n + 7, 4), np.int32)
+    coef[:, :3] = rng.integers(-3, 12, (n + 7, 3))
+    coef[:, 3] = rng.integers(0, 3, n + 7) * 8 + rng.integers(0, 8, n + 7)
+    band_tex = rng.integers(-1, n_tex, 64).astype(np.int32)
+    band_origin = rng.uniform(-10, 50, (64, 2)).astype(np.float32)
+    step_col = rng.uniform(-3, 3, (8, 4)).astype(np.float32)
+    step_row = rng.uniform(-3, 3, (8, 4)).astype(np.float32)
+    ints, maps, boxes, pool, textures, off = [], [], [], [np.zeros(16)], [], 16
+    for _ in range(n_tex):
+        nu, nv = rng.integers(2, 30, 2)
+        P = int(rng.integers(1, 6))  # texels per pixel
+        cu, cv = rng.uniform(0, nu - 1), rng.uniform(0, nv - 1)
+        data = rng.standard_normal((nv, nu)).astype(np.float32)
+        planes = pack_texture(data, P)
+        ints.append((off, planes.shape[2], planes.shape[1], P))
+        maps.append((cu, cv, 0, 0))
+        boxes.append((-cu / P, (nu - 1 - cu) / P, -cv / P, (nv - 1 - cv) / P))
+        pool.append(planes.ravel())
+        textures.append((data, cu, cv, P))
+        off += planes.size
+    values = rng.standard_normal((n + 7, 4)).astype(np.float32)
+    return dict(coef=coef, band_tex=band_tex, band_origin=band_origin, step_col=step_col, step_row=step_row,
+                tex_box=np.array(boxes, np.float32), tex_int=np.array(ints, np.int32),
+                tex_map=np.array(maps, np.float32), texels=np.concatenate(pool + [np.zeros(32)]).astype(np.float32),
+                values=values, n=n, first=7, textures=textures)
+
+
+@pytest.mark.parametrize("px", [16, 1])
+def test_every_stage_equals_its_reference(cc, rng, px):
+    s = random_scene(rng)
+    q, n, first = cc.queue, s["n"], s["first"]
+    ks = programs.build(cc, ["splat_bin.cl", "splat_raster.cl"], {"CLW_PX": px})
+    d = {k: cla.to_device(q, v) for k, v in s.items() if isinstance(v, np.ndarray)}
+    centre, bbox = cla.empty(q, (n, 2), np.float32), cla.empty(q, (n, 4), np.int32)
+    stex, counts = cla.empty(q, (n,), np.int32), cla.empty(q, (n,), np.uint32)
+    ks.splat_project(q, (n,), None, np.uint32(n), np.uint32(first), d["coef"].data, d["band_tex"].data,
+                     d["band_origin"].data, d["step_col"].data, d["step_row"].data, d["tex_box"].data,
+                     np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
+    r_centre, r_bbox, r_tex, r_count = reference.project(
+        s["coef"], first, s["band_tex"], s["band_origin"], s["step_col"], s["step_row"], s["tex_box"], W, H, n)
+    assert np.array_equal(centre.get(), r_centre)
+    assert np.array_equal(bbox.get(), r_bbox) and np.array_equal(stex.get(), r_tex)
+    assert np.array_equal(counts.get(), r_count)
+    assert 0 < np.count_nonzero(r_count) < n  # the scene has both visible and culled splats
+
+    offsets = cla.empty_like(counts)
+    ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")(counts, offsets)
+    assert np.array_equal(offsets.get(), np.concatenate([[0], np.cumsum(r_count)[:-1]]).astype(np.uint32))
+    total = int(r_count.sum())
+    keys, vals = cla.empty(q, (total,), np.uint32), cla.empty(q, (total,), np.uint32)
+    ks.splat_write_keys(q, (n,), None, np.uint32(n), bbox.data, offsets.data, np.int32(TILES_X),
+                        keys.data, vals.data)
+    r_keys, r_vals = reference.write_keys(r_bbox, TILES_X)
+    assert np.array_equal(keys.get(), r_keys) and np.array_equal(vals.get(), r_vals)
+
+    sort = RadixSort(cc.ctx, "uint *keys, uint *vals", key_expr="keys[i]", sort_arg_names=["keys", "vals"],
+                     key_dtype=np.uint32)
+    (keys, vals), _ = sort(keys, vals, key_bits=4, queue=q)
+    r_keys, r_vals = reference.sort_pairs(r_keys, r_vals)
+    assert np.array_equal(keys.get(), r_keys) and np.array_equal(vals.get(), r_vals)
+
+    ranges = cla.zeros(q, (TILES_X * TILES_Y, 2), np.uint32)
+    ks.tile_ranges(q, (total,), None, np.uint32(total), keys.data, ranges.data)
+    r_ranges = reference.tile_ranges(r_keys, TILES_X * TILES_Y)
+    assert np.array_equal(ranges.get(), r_ranges)
+
+    fb = cla.to_device(q, np.full((H * W, 4), 0.5, np.float32))  # accumulates onto what is there
+    local = 16 * 16 // px
+    ks.splat_accumulate(q, (TILES_X * TILES_Y * local,), (local,), np.int32(W), np.int32(H), np.int32(TILES_X),
+                        ranges.data, vals.data, np.uint32(first), centre.data, bbox.data, stex.data,
+                        d["values"].data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
+    expected = 0.5 + reference.accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"],
+                                          s["textures"], W, H)
+    got = fb.get().reshape(H, W, 4)
+    assert np.abs(expected - 0.5).max() > 1  # splats did land
+    # float32 sums of float32 texel coordinates: rounding at 1e-5 of the image's magnitude
+    assert np.abs(got - expected).max() <= 1e-5 * np.abs(expected).max()
