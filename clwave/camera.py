@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, finite_number
 
 
 @dataclass(frozen=True)
@@ -74,8 +74,8 @@ class Camera:
 
     def __init__(self, azimuth=30.0, elevation=20.0, size=512, *, target=None, extent=None,
                  perspective=False, distance=None, fov=30.0):
-        self.azimuth = _finite(azimuth, "azimuth")
-        self.elevation = _finite(elevation, "elevation")
+        self.azimuth = finite_number(azimuth, "azimuth")
+        self.elevation = finite_number(elevation, "elevation")
         self.size = _size(size)
         self.target = None if target is None else _vector(target, "target")
         if extent is not None and not (np.isfinite(extent) and extent > 0):
@@ -119,16 +119,6 @@ class Camera:
     def __repr__(self):
         kind = f", perspective fov={self.fov}" if self.perspective else ""
         return f"Camera(azimuth={self.azimuth}, elevation={self.elevation}, size={self.size}{kind})"
-
-
-def _finite(value, name) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name}={value!r} must be a number of degrees") from None
-    if not np.isfinite(out):
-        raise InputError(f"{name}={value!r} must be finite")
-    return out
 
 
 def _size(size) -> tuple:

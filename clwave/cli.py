@@ -295,9 +295,22 @@ def cmd_progressive(args):
         write_atomic(args.stats, lambda fh: fh.write(text), args.force)
     for f in figures:
         print(f"frame {f['index']}: {f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} %), "
-              f"energy {100 * f['energy']:6.2f} %, {f['seconds']:.3f} s, RMS error {f['rms_error']:.3e}, "
+              f"energy missing {1 - f['energy']:.2e}, {f['seconds']:.3f} s, RMS error {f['rms_error']:.3e}, "
               f"max error {f['max_error']:.3e}")
     return 0
+
+
+def _command(sub, name, help, run, output_help, view=False):
+    """A subcommand reading a volume into a wavelet model and writing ``-o`` (``--force`` to replace)."""
+    p = sub.add_parser(name, help=help)
+    _add_input_options(p)
+    _add_model_options(p)
+    if view:
+        _camera_options(p)
+    p.add_argument("-o", "--output", required=True, help=output_help)
+    p.add_argument("--force", action="store_true", help="replace existing output files")
+    p.set_defaults(run=run)
+    return p
 
 
 def make_parser():
@@ -311,36 +324,19 @@ def make_parser():
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=cmd_info)
 
-    p = sub.add_parser("compress", help="write a thresholded wavelet volume (.clw)")
-    _add_input_options(p)
-    _add_model_options(p)
-    p.add_argument("-o", "--output", required=True, help="output .clw file")
-    p.add_argument("--force", action="store_true", help="replace an existing output file")
-    p.set_defaults(run=cmd_compress)
-
-    p = sub.add_parser("render", help="render an image (wavelet splatting: X-ray line integrals)")
-    _add_input_options(p)
-    _add_model_options(p)
-    _camera_options(p)
-    p.add_argument("-o", "--output", required=True, help="output .png (or .gif with --turntable)")
+    _command(sub, "compress", "write a thresholded wavelet volume (.clw)", cmd_compress, "output .clw file")
+    p = _command(sub, "render", "render an image (wavelet splatting: X-ray line integrals)", cmd_render,
+                 "output .png (or .gif with --turntable)", view=True)
     p.add_argument("--method", choices=["splat"], default="splat", help="rendering method")
     p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
     p.add_argument("--raw", help="also write the float32 image as .npy")
     p.add_argument("--stats", help="also write the figures as .json")
-    p.add_argument("--force", action="store_true", help="replace existing output files")
-    p.set_defaults(run=cmd_render)
-
-    p = sub.add_parser("progressive", help="progressive splatting frames as a GIF or a folder of PNGs")
-    _add_input_options(p)
-    _add_model_options(p)
-    _camera_options(p)
-    p.add_argument("-o", "--output", required=True, help="output .gif, or a folder for PNG frames")
+    p = _command(sub, "progressive", "progressive splatting frames as a GIF or a folder of PNGs", cmd_progressive,
+                 "output .gif, or a folder for PNG frames", view=True)
     k = p.add_mutually_exclusive_group()
     k.add_argument("--steps", type=int, help="number of frames (default 8)")
     k.add_argument("--budget", type=float, help="seconds: stop when the next step would not fit")
     p.add_argument("--stats", help="per-frame figures as .json")
-    p.add_argument("--force", action="store_true", help="replace existing output files")
-    p.set_defaults(run=cmd_progressive)
     return parser
 
 

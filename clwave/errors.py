@@ -35,3 +35,14 @@ class KernelBuildError(ClwaveError):
 
 class DeviceMemoryError(ClwaveError, MemoryError):
     """The device has too little memory for the requested work."""
+
+
+def finite_number(value, name) -> float:
+    """``float(value)``, or an :class:`InputError` naming ``name`` when it is not a finite number."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number, got {value!r}") from None
+    if number != number or number in (float("inf"), float("-inf")):
+        raise InputError(f"{name}={number} must be finite")
+    return number

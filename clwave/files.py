@@ -24,6 +24,9 @@ def write_atomic(path, writer, overwrite=False) -> Path:
     try:
         with os.fdopen(fd, "wb") as fh:
             writer(fh)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -264,11 +264,11 @@ def _poly(coeffs, z):
     return out
 
 
-def _small_positions(x, alpha, beta, k, l, shape):
-    """Indices where ``|alpha k + beta l| < 1e-4`` on the (l, k) grid (there sin(x)/x needs care)."""
-    if len(shape) == 2 and shape[0] > 1 and shape[1] > 1 and abs(alpha) >= 1e-3:
-        # at most two k per row l lie that close to the root k* = -beta l / alpha
-        kc = np.floor(-beta * l / alpha)[:, None] + np.array([0.0, 1.0])
+def _small_positions(x, a_, b_, k, l):
+    """Indices where ``|x| = |a_ k + b_ l| < 1e-4`` on an (l, k) block (sin(x)/x needs care there)."""
+    if x.shape[0] > 1 and x.shape[1] > 1 and abs(a_) >= 1e-3:
+        # at most two k per row l lie that close to the root k* = -b_ l / a_
+        kc = np.floor(-b_ * l / a_)[:, None] + np.array([0.0, 1.0])
         ok = (kc >= 0) & (kc < len(k))
         kc = np.clip(kc, 0, len(k) - 1).astype(np.intp)
         rows = np.broadcast_to(np.arange(len(l))[:, None], kc.shape)
@@ -277,45 +277,62 @@ def _small_positions(x, alpha, beta, k, l, shape):
     return np.nonzero(np.abs(x) < 1e-4)
 
 
-def _axis_factor(wav: SplineWavelet, letter: str, alpha, beta, k, l):
-    """One axis of the slice ``G(2^m d_a (U u_a + V v_a))`` with ``U = k du``, ``V = l dv``.
+class _Axis:
+    """One axis of the slice ``G(2^m d_a (U u_a + V v_a))`` at ``U = k du``, ``V = l dv``.
 
-    Returns ``(num, den, poly, imaginary, weight)`` with ::
+    With ``x = a_ k + b_ l`` (x = w/2 for phi, w/4 for psi) ::
 
-        G = weight (-i)^imaginary (num / den)^j poly
+        G = weight (-i)^imaginary (num / x)^j poly,
+        phi: num = sin x, poly = 1;   psi: num = sin^2 x, poly = P(sin^2 x)  (:func:`_psi_poly`)
 
-    phi: ``(sin x / x)^j`` at x = w/2; psi: ``1/2 (sin^2 x / x)^j P(sin^2 x)`` at x = w/4
-    (:func:`_psi_poly`).  Arrays broadcast to (len(l), len(k)); an axis whose alpha or beta
-    is 0 stays 1-D.  ``alpha`` and ``beta`` are the factor's w per unit k and l.
+    Sines come from the 1-D tables by the addition theorem: no transcendental per grid point.
     """
-    rate = 2.0 if letter == "a" else 4.0
-    a_, b_ = alpha / rate, beta / rate
-    if b_ == 0.0:
-        ak = a_ * k
-        x, s = ak[None, :], np.sin(ak)[None, :]
-    elif a_ == 0.0:
-        bl = b_ * l
-        x, s = bl[:, None], np.sin(bl)[:, None]
-    else:  # sin(ak + bl) from 1-D sines and cosines: no transcendental per grid point
-        ak, bl = a_ * k, b_ * l
-        x = np.add.outer(bl, ak)
-        s = np.multiply.outer(np.sin(bl), np.cos(ak))
-        s += np.multiply.outer(np.cos(bl), np.sin(ak))
-    if letter == "a":
-        num, poly, imaginary, weight = s, 1.0, False, 1.0
-    else:
-        coeffs, imaginary = _psi_poly(wav.order)
-        num = s * s
-        poly = _poly(coeffs, num)
-        weight = 0.5
-    small = _small_positions(x, a_, b_, k, l, x.shape)
-    if len(small[0]):
-        xs = x[small]
-        x = x.copy() if x.base is not None else x  # a view of a 1-D temporary in the 1-D cases
-        sinc = 1.0 - xs * xs / 6.0  # sin(x)/x to 1e-17 for |x| < 1e-4
-        num[small] = sinc if letter == "a" else sinc * s[small]
-        x[small] = 1.0
-    return num, x, poly, imaginary, weight
+
+    def __init__(self, order, letter, alpha, beta, k, l):
+        self.order, self.letter = order, letter
+        rate = 2.0 if letter == "a" else 4.0
+        self.a_, self.b_ = alpha / rate, beta / rate
+        self.kind = "row" if self.b_ == 0.0 else "col" if self.a_ == 0.0 else "full"
+        self.k, self.l = k, l
+        self.ak, self.bl = self.a_ * k, self.b_ * l
+        self.sa, self.ca = np.sin(self.ak), np.cos(self.ak)
+        self.sb, self.cb = np.sin(self.bl), np.cos(self.bl)
+        if letter == "a":
+            self.imaginary, self.weight, self.coeffs = False, 1.0, None
+        else:
+            self.coeffs, self.imaginary = _psi_poly(order)
+            self.weight = 0.5
+
+    def block(self, r0, r1):
+        """``(num, x, poly)`` on rows r0:r1 (arrays of their own; 1-D kinds stay 1-D)."""
+        if self.kind == "row":
+            x, s = self.ak[None, :].copy(), self.sa[None, :].copy()
+        elif self.kind == "col":
+            x, s = self.bl[r0:r1, None].copy(), self.sb[r0:r1, None].copy()
+        else:
+            x = np.add.outer(self.bl[r0:r1], self.ak)
+            s = np.multiply.outer(self.sb[r0:r1], self.ca)
+            s += np.multiply.outer(self.cb[r0:r1], self.sa)
+        if self.letter == "a":
+            num, poly = s, None
+        else:
+            num = s * s
+            poly = _poly(self.coeffs, num)
+        small = _small_positions(x, self.a_, self.b_, self.k, self.l[r0:r1])
+        if len(small[0]):
+            xs = x[small]
+            sinc = 1.0 - xs * xs / 6.0  # sin(x)/x to 1e-17 for |x| < 1e-4
+            num[small] = sinc if self.letter == "a" else sinc * s[small]
+            x[small] = 1.0
+        return num, x, poly
+
+    def values(self):
+        """The complex factor G on the whole (l, k) grid, broadcastable."""
+        num, x, poly = self.block(0, len(self.l))
+        g = self.weight * _ipow(num / x, self.order)
+        if poly is not None:
+            g = g * poly
+        return g * (-1j) ** self.imaginary
 
 
 def centred_fourier(wavelet, letter: str, w) -> np.ndarray:
@@ -329,33 +346,26 @@ def centred_fourier(wavelet, letter: str, w) -> np.ndarray:
     """
     wav = wavelet_for(wavelet)
     w = np.asarray(w, float)
-    num, den, poly, imaginary, weight = _axis_factor(wav, letter, 1.0, 0.0, w.reshape(-1), np.zeros(1))
-    g = weight * (num / den) ** wav.order * poly
-    g = np.broadcast_to(g, (1, w.size)).reshape(w.shape)
-    return -1j * g if imaginary else g + 0j
+    g = _Axis(wav.order, letter, 1.0, 0.0, w.reshape(-1), np.zeros(1)).values()
+    return np.broadcast_to(g, (1, w.size)).reshape(w.shape)
 
 
 def _ipow(x, j: int):
-    """``x**j`` for a small positive integer j by squaring (numpy's float pow is slow)."""
-    out, sq = None, x
+    """``x**j`` for a positive integer j by squaring, reusing x (numpy's float pow is slow)."""
+    out = None
     while True:
         if j & 1:
-            out = sq.copy() if out is None else out * sq
+            if out is None:
+                out = x.copy() if j > 1 else x
+            else:
+                out *= x
         j >>= 1
         if not j:
             return out
-        sq = sq * sq
+        x *= x
 
 
-def _multiply(arrays):
-    """Broadcast product of arrays (a new array)."""
-    out = arrays[0]
-    for a in arrays[1:]:
-        out = out * a
-    return out.copy() if out is arrays[0] else out
-
-
-def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1) -> np.ndarray:
+def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1, block=16384) -> np.ndarray:
     """Period-(W_u, W_v) samples of T at ``a = p h_u``, ``b = q h_v`` in FFT order, (nv, nu)."""
     du, dv = 2.0 * np.pi / wu, 2.0 * np.pi / wv
     k = np.arange(nu // 2 + 1, dtype=float)          # U = k du, the rfft half
@@ -363,7 +373,7 @@ def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1) -> np.nda
     # det(D) 2^(3m/2) from F; 1/(W_u W_v) from the Fourier series of the periodised T,
     # times N_u N_v to undo the inverse transform's 1/N
     const = float(np.prod(d_xyz)) * 2.0 ** (1.5 * m) / (wu * wv) * nu * nv
-    parts = {"row": [], "col": [], "full": []}
+    axes = []
     key_xyz = key[::-1]
     for a in range(3):
         scale = 2.0 ** m * d_xyz[a]
@@ -371,30 +381,41 @@ def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1) -> np.nda
         if alpha == 0.0 and beta == 0.0:  # axis parallel to n: the factor is G(0), 1 for phi
             const *= 1.0 if key_xyz[a] == "a" else 0.0
             continue
-        num, den, poly, imaginary, weight = _axis_factor(wav, key_xyz[a], alpha, beta, k, l)
-        const *= weight
-        kind = "row" if beta == 0.0 else "col" if alpha == 0.0 else "full"
-        parts[kind].append((num, den, poly, imaginary))
-    j = wav.order
-    if not parts["full"] and parts["row"] and parts["col"]:
+        axes.append(_Axis(wav.order, key_xyz[a], alpha, beta, k, l))
+    const *= float(np.prod([ax.weight for ax in axes]))
+    phase = (-1j) ** sum(ax.imaginary for ax in axes) * const
+    if all(ax.kind != "full" for ax in axes):
         # separable (axis-aligned views): T = t_v(b) t_u(a), each 1-D spectrum Hermitian
-        def spectrum(items):
-            g = _ipow(_multiply([p[0] for p in items]) / _multiply([p[1] for p in items]), j)
-            for p in items:
-                g = g * p[2]
-            return g.reshape(-1) * (-1j) ** sum(p[3] for p in items)
-        tu = scipy.fft.irfft(spectrum(parts["row"]), n=nu)
-        tv = scipy.fft.ifft(spectrum(parts["col"])).real
+        def spectrum(kind):
+            g = 1.0
+            for ax in axes:
+                if ax.kind == kind:
+                    num, x, poly = ax.block(0, len(l))
+                    g = g * _ipow(num / x, wav.order) * (1.0 if poly is None else poly)
+                    g = g * (-1j) ** ax.imaginary
+            return np.reshape(g, -1)
+        tu = scipy.fft.irfft(spectrum("row"), n=nu)
+        tv = scipy.fft.ifft(spectrum("col")).real
         return np.multiply.outer(tv * const, tu)
-    items = parts["full"] + parts["row"] + parts["col"]
-    ratio = _multiply([p[0] for p in items])
-    ratio /= _multiply([p[1] for p in items])
-    spec = _ipow(ratio, j)
-    for p in items:
-        if not np.isscalar(p[2]):
-            spec *= p[2]
-    spec = spec * ((-1j) ** sum(p[3] for p in items) * const)
-    return scipy.fft.irfft2(spec, s=(nv, nu), workers=workers)
+    # general view: the spectrum in blocks of rows that stay in cache
+    axes.sort(key=lambda ax: ("full", "col", "row").index(ax.kind))  # the first product is 2-D
+    spec = np.empty((nv, len(k)), complex)
+    rows = max(1, block // len(k))
+    for r0 in range(0, nv, rows):
+        r1 = min(nv, r0 + rows)
+        parts = [ax.block(r0, r1) for ax in axes]
+        ratio = parts[0][0] * parts[1][0]
+        den = parts[0][1] * parts[1][1]
+        for num, x, _ in parts[2:]:
+            ratio *= num
+            den *= x
+        ratio /= den
+        ratio = _ipow(ratio, wav.order)
+        for _, _, poly in parts:
+            if poly is not None:
+                ratio *= poly
+        np.multiply(ratio, phase, out=spec[r0:r1])
+    return scipy.fft.irfft2(spec, s=(nv, nu), workers=workers, overwrite_x=True)
 
 
 # ----------------------------------------------------------------------------- exact line integral
@@ -437,66 +458,68 @@ def _gauss_points(order: int) -> int:
     return max(1, ceil((3 * (order - 1) + 1) / 2))
 
 
-def _line_integral_flat(wav, key, m, d_xyz, n, u, v, a, b, chunk=16384) -> np.ndarray:
+def _line_integral_flat(wav, key, m, d_xyz, n, u, v, a, b, chunk=4096) -> np.ndarray:
     """Exact T at the offsets a, b (1-D float64 arrays of one length)."""
     j = wav.order
     key_xyz = key[::-1]
     x_g, w_g = np.polynomial.legendre.leggauss(_gauss_points(j))
-    out = np.empty(a.size)
+    out = np.zeros(a.size)
     scale = 2.0 ** (-m)
     for start in range(0, a.size, chunk):
         aa, bb = a[start:start + chunk], b[start:start + chunk]
-        size = aa.size
-        total = np.full(size, 2.0 ** (-1.5 * m))
+        total = np.full(aa.size, 2.0 ** (-1.5 * m))
+        lo = np.full(aa.size, -np.inf)
+        hi = np.full(aa.size, np.inf)
         moving = []
         for ax in range(3):
             letter, support = key_xyz[ax], wav.support(key_xyz[ax])
             c = scale * (aa * u[ax] + bb * v[ax]) / d_xyz[ax] + support / 2.0  # prototype coordinate at t = 0
             g = scale * n[ax] / d_xyz[ax]                                       # ... and its rate along t
-            if g == 0.0:  # the line runs in a knot plane's direction: a constant factor
+            if g == 0.0:  # the line runs along the axis' knot planes: a constant factor
                 total *= _eval_pieces(j, letter, c)
-            else:
-                moving.append((letter, support, c, g))
-        # knot crossings t = (knot - c)/g; the support interval is where every axis is inside
-        lo = np.full(size, -np.inf)
-        hi = np.full(size, np.inf)
-        crossings = []
-        for letter, support, c, g in moving:
-            rate = 1 if letter == "a" else 2
-            knots = np.arange(support * rate + 1) / rate
-            t = np.subtract.outer(c / -g, knots / -g)  # (knot - c) / g, ascending or descending in knot
-            lo = np.maximum(lo, np.minimum(t[:, 0], t[:, -1]))
-            hi = np.minimum(hi, np.maximum(t[:, 0], t[:, -1]))
-            crossings.append(t)
-        live = np.flatnonzero(hi > lo)  # lines that meet the support box
+                continue
+            # the line is inside the axis' support for t between (0 - c)/g and (S - c)/g
+            t0, t1 = -c / g, (support - c) / g
+            np.maximum(lo, np.minimum(t0, t1), out=lo)
+            np.minimum(hi, np.maximum(t0, t1), out=hi)
+            moving.append((letter, support, c, g))
+        live = np.flatnonzero((hi > lo) & (total != 0.0))  # lines that meet the support box
         if not live.size:
-            out[start:start + chunk] = 0.0
             continue
-        t = np.concatenate([c_[live] for c_ in crossings], axis=1)
-        np.clip(t, lo[live, None], hi[live, None], out=t)
+        lo, hi = lo[live, None], hi[live, None]
+        # every knot crossing t = (knot - c)/g, clipped to the support interval and sorted
+        cols = [(np.arange(support * (1 if letter == "a" else 2) + 1) / (1 if letter == "a" else 2)) / g
+                for letter, support, c, g in moving]
+        t = np.empty((live.size, sum(len(k_) for k_ in cols)))
+        off = 0
+        for (letter, support, c, g), knots in zip(moving, cols):
+            np.subtract.outer(c[live] / -g, -knots, out=t[:, off:off + len(knots)])
+            off += len(knots)
+        np.clip(t, lo, hi, out=t)
         t.sort(axis=1)
-        half = 0.5 * np.diff(t, axis=1)                # (L, K-1) segment half-widths
-        seg_line, seg = np.nonzero(half > 0.0)        # keep the segments of positive length
-        half = half[seg_line, seg]
-        mid = t[seg_line, seg] + half
-        line = live[seg_line]
+        width = t[:, 1:] - t[:, :-1]
+        flat = np.flatnonzero(width > 0.0)           # the segments of positive length
+        nseg = width.shape[1]
+        seg_line = flat // nseg
+        half = 0.5 * width.reshape(-1)[flat]
+        mid = t.reshape(-1)[flat + seg_line] + half   # left end + half width (t has nseg + 1 columns)
         prod = None
         for letter, support, c, g in moving:
             rate, coeffs = _pieces(j, letter)
-            # one polynomial piece per segment: the piece holding its midpoint
-            xm = (c[line] + g * mid) * rate
-            piece = np.clip(np.floor(xm), 0, len(coeffs) - 1)
-            y0 = xm - piece
-            cols = np.take(coeffs.T, piece.astype(np.intp), axis=1)   # (deg+1, S)
-            y = y0[:, None] + (rate * g) * half[:, None] * x_g        # (S, G) local coordinates
-            val = cols[-1][:, None] * np.ones_like(y) if cols.shape[0] > 1 else np.broadcast_to(cols[0][:, None], y.shape)
-            for cc in cols[-2::-1]:
-                val = val * y
-                val += cc[:, None]
-            prod = val if prod is None else prod * val
+            # one polynomial piece per segment: the one holding its midpoint
+            xm = (c[live][seg_line] + g * mid) * rate
+            piece = np.floor(xm)
+            np.clip(piece, 0, len(coeffs) - 1, out=piece)
+            pidx = piece.astype(np.intp)
+            y = (xm - piece)[:, None] + np.multiply.outer((rate * g) * half, x_g)  # (S, G) local coordinates
+            val = np.take(coeffs[:, -1], pidx)[:, None] * np.ones(len(x_g))
+            for cc in range(coeffs.shape[1] - 2, -1, -1):
+                val *= y
+                val += np.take(coeffs[:, cc], pidx)[:, None]
+            prod = val if prod is None else np.multiply(prod, val, out=prod)
         seg_integral = (prod @ w_g) * half
-        res = np.bincount(line, weights=seg_integral, minlength=size)
-        out[start:start + chunk] = total * res
+        res = np.bincount(seg_line, weights=seg_integral, minlength=live.size)
+        out[start + live] = total[live] * res
     return out
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ClwaveError, FileFormatError, InputError
+from .errors import ClwaveError, FileFormatError, InputError, finite_number
 from .progress import progress
 from .volume import Volume
 
@@ -107,8 +107,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     Volume(shape=(4, 5, 6), channels=1, spacing=(2.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0))
     """
     path = Path(path)
-    background = _finite_number(background, "background")
-    mu_water = _finite_number(mu_water, "mu_water")
+    background = finite_number(background, "background")
+    mu_water = finite_number(mu_water, "mu_water")
     if hu_to_mu and mu_water <= 0:
         raise InputError(f"mu_water={mu_water} must be positive (attenuation of water per "
                          "world unit)")
@@ -192,16 +192,6 @@ def _corrupt(path, exc) -> str:
     lines = str(exc).strip().splitlines()
     reason = type(exc).__name__ + (f": {lines[0][:200]}" if lines else "")
     return f"cannot read {path}: {reason}; the file may be truncated or corrupt"
-
-
-def _finite_number(value, name) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number, got {value!r}") from None
-    if not np.isfinite(number):
-        raise InputError(f"{name}={number} must be finite")
-    return number
 
 
 def _hu_to_mu(data, mu_water):

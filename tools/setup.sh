@@ -2,7 +2,7 @@
 # clwave set-up: idempotent, works on a bare Debian machine as root.
 #
 #   bash tools/setup.sh            install only
-#   bash tools/setup.sh --demo     install, then render/compress the built-in hydrogen phantom
+#   bash tools/setup.sh --demo     install, then compress and render the built-in hydrogen phantom
 #   bash tools/setup.sh --test     install, then run the test suite
 #
 # Steps: Python 3 with venv (apt-get if missing) -> virtual environment .venv (CLWAVE_VENV
@@ -51,6 +51,11 @@ case "$mode" in
         mkdir -p out
         say "demo: the hydrogen phantom, classified, cubic wavelets, 3 levels, 5 % kept"
         "$VENV/bin/clwave" compress phantom:hydrogen:128 --tf hydrogen --keep 0.05 -o out/hydrogen.clw --force
+        say "demo: X-ray image by wavelet splatting -> out/hydrogen_splat.png"
+        "$VENV/bin/clwave" render phantom:hydrogen:128 --keep 0.05 --size 512 -o out/hydrogen_splat.png --force
+        say "demo: progressive refinement -> out/hydrogen_progressive.gif (figures in .json)"
+        "$VENV/bin/clwave" progressive phantom:hydrogen:128 --keep 0.05 --steps 8 --size 256 \
+            -o out/hydrogen_progressive.gif --stats out/hydrogen_progressive.json --force
         ;;
     --test)
         say "running the tests"
