@@ -22,6 +22,6 @@ __version__ = "0.1.0"
 __all__ = [
     "ClwaveError", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
     "KernelBuildError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
-    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult", "SplatRenderer", "splat",
-    "progressive", "__version__",
+    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult",
+    "SplatRenderer", "splat", "progressive", "__version__",
 ]

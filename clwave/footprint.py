@@ -23,16 +23,21 @@ Two ways to sample T:
 
       F(w) = det(D) 2^(3m/2) prod_a G_a(2^m d_a w_a),   G(w) = P^(w) e^(i w S/2)
 
-  Centring the 1-D factors on their supports makes each one real (phi, and psi of even
-  order: symmetric) or purely imaginary (psi of odd order: antisymmetric), and a function
-  of ``s = sin(w/2)`` (phi) or ``s = sin(w/4)`` (psi) alone: ``G_phi = sinc(w/2)^j`` and
-  ``G_psi = 1/2 sinc(w/4)^j * poly(s)`` with the symmetric taps q as a Chebyshev series
-  (``cos(n t) = (-1)^(n/2) T_n(sin t)``, ``sin(n t) = (-1)^((n-1)/2) T_n(sin t)``).  One
-  real inverse FFT (``irfft2``) of the half-spectrum gives the period-W samples.
-* ``"spatial"`` -- the exact line integral at the same samples: piecewise Gauss-Legendre
-  between the sorted crossings of the line with every moving axis' knot planes (integers
-  of the phi coordinate, half-integers of the psi coordinate), with enough nodes for the
-  degree 3(j - 1) of the product.  Exact up to rounding (:func:`line_integral`).
+  Centring each 1-D factor on its support makes it real (phi, and psi of even order:
+  symmetric) or purely imaginary (psi of odd order: antisymmetric), and a function of
+  ``x`` and ``sin x`` alone: ``G_phi = (sin x / x)^j`` at ``x = w/2`` and
+  ``G_psi = 1/2 (sin^2 x / x)^j P(sin^2 x)`` at ``x = w/4``, where the taps q become a
+  Chebyshev series in ``sin x`` (``cos(n x) = (-1)^(n/2) T_n(sin x)``,
+  ``sin(n x) = (-1)^((n-1)/2) T_n(sin x)``) that psi's j vanishing moments divide by
+  ``sin^j x``.  On the grid ``x = alpha k + beta l`` is linear in the frequency indices, so
+  ``sin x`` comes from 1-D tables by the addition theorem: no complex exponential and no
+  transcendental per grid point.  One real inverse FFT (``irfft2``) of the half-spectrum
+  gives the samples of the period-W footprint.
+* ``"spatial"`` -- the exact line integral at the same samples: the sorted crossings of
+  the line with every moving axis' knot planes (integers of the phi coordinate,
+  half-integers of the psi coordinate) cut it into segments where the integrand is one
+  polynomial of degree <= 3(j - 1), integrated exactly (closed form for j <= 2,
+  Gauss-Legendre otherwise).  Exact up to rounding (:func:`line_integral`).
 
 ``"auto"`` uses FFT for order >= 3 and the spatial path for Haar and linear, whose
 footprints have jumps or kinks at axis-aligned views where the band-limited FFT footprint
@@ -57,8 +62,8 @@ Examples
 >>> tex = footprints(SplineWavelet(4), (1.0, 1.0, 1.0), n, u, v, [(1, "aad")])[(1, "aad")]
 >>> tex.path, tex.data.dtype, tex.data.shape == (tex.data.shape[0], 2 * tex.centre_u + 1)
 ('fft', dtype('float32'), True)
->>> round(float(tex.data.sum()) * tex.h_u * tex.h_v, 6)  # the integral of a psi type is 0
-0.0
+>>> abs(float(tex.data[:-1, :-1].sum()) * tex.h_u * tex.h_v) < 1e-6  # one period: ∫psi = 0
+True
 """
 
 from __future__ import annotations
@@ -75,15 +80,18 @@ import scipy.fft
 from .bspline import SplineWavelet, wavelet_for
 from .errors import InputError
 
-#: Default ``omega_min`` per B-spline order: the smallest prototype-unit band (multiple of 8)
-#: that keeps every FFT footprint within 1e-3 of the level's phi-phi-phi peak at oblique and
-#: axis-aligned views (MATH.md §5 measures 3e-2 at the paper's 14 for cubic at the axis view).
-#: Orders 1 and 2 use the exact spatial path by default, where the band only sets the texel
-#: spacing, so they keep the paper's omega_s alone.
+#: Default ``omega_min`` per B-spline order: the band, in prototype units, that keeps every
+#: FFT footprint within 1e-3 of its level's phi-phi-phi peak at oblique and axis-aligned views
+#: (worst case: an axis view, unit spacing, where the slice runs along the slowest-decaying
+#: direction of the spectrum).  Measured worst errors / aaa peak, m = 0 and 1, unit and
+#: (2, 1, 0.5) spacing: cubic 2.6e-2 at the paper's 14 (MATH.md §5: 3.0e-2), 1.4e-3 at 32,
+#: 1.06e-3 at 40, 8.3e-4 at 44, 6.0e-4 at 48; quadratic (C^1, slower) 1.5e-3 at 64, 7.3e-4 at
+#: 72, 8.2e-4 at 80 (not monotone), 3.8e-4 at 96.  Oblique views are at float32 rounding
+#: (~1e-7) for both.  Orders 1 and 2 take the exact spatial path by default, where the band
+#: only sets the texel spacing, so they keep the paper's omega_s alone.
 DEFAULT_OMEGA_MIN = {1: 0.0, 2: 0.0, 3: 96.0, 4: 48.0}
 
 _PATHS = ("auto", "fft", "spatial")
-_AXIS = "xyz"
 
 
 @dataclass
@@ -264,23 +272,24 @@ def _poly(coeffs, z):
     return out
 
 
-def _small_positions(x, a_, b_, k, l):
-    """Indices where ``|x| = |a_ k + b_ l| < 1e-4`` on an (l, k) block (sin(x)/x needs care there)."""
+def _small_positions(x, a_, b_, ku, kv):
+    """Indices where ``|x| = |a_ ku + b_ kv| < 1e-4`` on a (kv, ku) block (sin(x)/x needs care there)."""
     if x.shape[0] > 1 and x.shape[1] > 1 and abs(a_) >= 1e-3:
-        # at most two k per row l lie that close to the root k* = -b_ l / a_
-        kc = np.floor(-b_ * l / a_)[:, None] + np.array([0.0, 1.0])
-        ok = (kc >= 0) & (kc < len(k))
-        kc = np.clip(kc, 0, len(k) - 1).astype(np.intp)
-        rows = np.broadcast_to(np.arange(len(l))[:, None], kc.shape)
+        # at most two ku per row kv lie that close to the root ku* = -b_ kv / a_
+        kc = np.floor(-b_ * kv / a_)[:, None] + np.array([0.0, 1.0])
+        ok = (kc >= 0) & (kc < len(ku))
+        kc = np.clip(kc, 0, len(ku) - 1).astype(np.intp)
+        rows = np.broadcast_to(np.arange(len(kv))[:, None], kc.shape)
         ok &= np.abs(x[rows, kc]) < 1e-4
         return rows[ok], kc[ok]
     return np.nonzero(np.abs(x) < 1e-4)
 
 
 class _Axis:
-    """One axis of the slice ``G(2^m d_a (U u_a + V v_a))`` at ``U = k du``, ``V = l dv``.
+    """One axis of the slice ``G(2^m d_a (U u_a + V v_a))`` at ``U = ku du``, ``V = kv dv``.
 
-    With ``x = a_ k + b_ l`` (x = w/2 for phi, w/4 for psi) ::
+    With ``x = a_ ku + b_ kv`` (x = w/2 for phi, w/4 for psi; ``alpha``, ``beta`` are w per
+    unit ku and kv) ::
 
         G = weight (-i)^imaginary (num / x)^j poly,
         phi: num = sin x, poly = 1;   psi: num = sin^2 x, poly = P(sin^2 x)  (:func:`_psi_poly`)
@@ -288,13 +297,13 @@ class _Axis:
     Sines come from the 1-D tables by the addition theorem: no transcendental per grid point.
     """
 
-    def __init__(self, order, letter, alpha, beta, k, l):
+    def __init__(self, order, letter, alpha, beta, ku, kv):
         self.order, self.letter = order, letter
         rate = 2.0 if letter == "a" else 4.0
         self.a_, self.b_ = alpha / rate, beta / rate
         self.kind = "row" if self.b_ == 0.0 else "col" if self.a_ == 0.0 else "full"
-        self.k, self.l = k, l
-        self.ak, self.bl = self.a_ * k, self.b_ * l
+        self.ku, self.kv = ku, kv
+        self.ak, self.bl = self.a_ * ku, self.b_ * kv
         self.sa, self.ca = np.sin(self.ak), np.cos(self.ak)
         self.sb, self.cb = np.sin(self.bl), np.cos(self.bl)
         if letter == "a":
@@ -318,7 +327,7 @@ class _Axis:
         else:
             num = s * s
             poly = _poly(self.coeffs, num)
-        small = _small_positions(x, self.a_, self.b_, self.k, self.l[r0:r1])
+        small = _small_positions(x, self.a_, self.b_, self.ku, self.kv[r0:r1])
         if len(small[0]):
             xs = x[small]
             sinc = 1.0 - xs * xs / 6.0  # sin(x)/x to 1e-17 for |x| < 1e-4
@@ -327,8 +336,8 @@ class _Axis:
         return num, x, poly
 
     def values(self):
-        """The complex factor G on the whole (l, k) grid, broadcastable."""
-        num, x, poly = self.block(0, len(self.l))
+        """The complex factor G on the whole (kv, ku) grid, broadcastable."""
+        num, x, poly = self.block(0, len(self.kv))
         g = self.weight * _ipow(num / x, self.order)
         if poly is not None:
             g = g * poly
@@ -368,8 +377,8 @@ def _ipow(x, j: int):
 def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1, block=16384) -> np.ndarray:
     """Period-(W_u, W_v) samples of T at ``a = p h_u``, ``b = q h_v`` in FFT order, (nv, nu)."""
     du, dv = 2.0 * np.pi / wu, 2.0 * np.pi / wv
-    k = np.arange(nu // 2 + 1, dtype=float)          # U = k du, the rfft half
-    l = np.fft.fftfreq(nv, 1.0 / nv)                 # V = l dv, FFT order
+    ku = np.arange(nu // 2 + 1, dtype=float)         # U = ku du, the rfft half
+    kv = np.fft.fftfreq(nv, 1.0 / nv)                # V = kv dv, FFT order
     # det(D) 2^(3m/2) from F; 1/(W_u W_v) from the Fourier series of the periodised T,
     # times N_u N_v to undo the inverse transform's 1/N
     const = float(np.prod(d_xyz)) * 2.0 ** (1.5 * m) / (wu * wv) * nu * nv
@@ -381,7 +390,7 @@ def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1, block=163
         if alpha == 0.0 and beta == 0.0:  # axis parallel to n: the factor is G(0), 1 for phi
             const *= 1.0 if key_xyz[a] == "a" else 0.0
             continue
-        axes.append(_Axis(wav.order, key_xyz[a], alpha, beta, k, l))
+        axes.append(_Axis(wav.order, key_xyz[a], alpha, beta, ku, kv))
     const *= float(np.prod([ax.weight for ax in axes]))
     phase = (-1j) ** sum(ax.imaginary for ax in axes) * const
     if all(ax.kind != "full" for ax in axes):
@@ -390,7 +399,7 @@ def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1, block=163
             g = 1.0
             for ax in axes:
                 if ax.kind == kind:
-                    num, x, poly = ax.block(0, len(l))
+                    num, x, poly = ax.block(0, len(kv))
                     g = g * _ipow(num / x, wav.order) * (1.0 if poly is None else poly)
                     g = g * (-1j) ** ax.imaginary
             return np.reshape(g, -1)
@@ -399,8 +408,8 @@ def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1, block=163
         return np.multiply.outer(tv * const, tu)
     # general view: the spectrum in blocks of rows that stay in cache
     axes.sort(key=lambda ax: ("full", "col", "row").index(ax.kind))  # the first product is 2-D
-    spec = np.empty((nv, len(k)), complex)
-    rows = max(1, block // len(k))
+    spec = np.empty((nv, len(ku)), complex)
+    rows = max(1, block // len(ku))
     for r0 in range(0, nv, rows):
         r1 = min(nv, r0 + rows)
         parts = [ax.block(r0, r1) for ax in axes]
@@ -458,11 +467,68 @@ def _gauss_points(order: int) -> int:
     return max(1, ceil((3 * (order - 1) + 1) / 2))
 
 
+@lru_cache(maxsize=None)
+def _knots(order: int, letter: str) -> np.ndarray:
+    """Knots of a prototype: integers 0..j for phi, half-integers 0..2j-1 for psi."""
+    rate = 1 if letter == "a" else 2
+    return np.arange(SplineWavelet(order).support(letter) * rate + 1) / rate
+
+
+def _local_poly(coeffs, pidx, y, slope) -> list:
+    """Taylor coefficients in tau of ``piece(y + slope tau)`` (``coeffs`` rows in y powers)."""
+    deg = coeffs.shape[1] - 1
+    cols = [np.take(coeffs[:, c], pidx) for c in range(deg + 1)]
+    if deg == 1:  # linear pieces
+        slope_col = cols[1] * slope
+        cols[1] *= y
+        cols[1] += cols[0]
+        return [cols[1], slope_col]
+    out = []
+    for r in range(deg + 1):  # r-th derivative / r! at y, times slope^r
+        acc = cols[deg] * comb(deg, r)
+        for c in range(deg - 1, r - 1, -1):
+            acc *= y
+            acc += cols[c] * comb(c, r)
+        out.append(acc * slope ** r if r else acc)
+    return out
+
+
+def _segment_integrals(taylor, half, order) -> np.ndarray:
+    """``∫_{-h}^{h} prod_a sum_c taylor[a][c] tau^c dtau`` per segment (h = half)."""
+    if order == 1:  # piecewise constants
+        val = 2.0 * half
+        for (p0,) in taylor:
+            val = val * p0
+        return val
+    if order == 2 and len(taylor) <= 3:  # products of linears: only even powers survive
+        A = [p[0] for p in taylor]
+        B = [p[1] for p in taylor]
+        if len(taylor) == 1:
+            return 2.0 * half * A[0]
+        h2 = half * half / 3.0
+        if len(taylor) == 2:
+            return 2.0 * half * (A[0] * A[1] + h2 * B[0] * B[1])
+        even = A[0] * A[1] * A[2] + h2 * (A[0] * B[1] * B[2] + B[0] * A[1] * B[2] + B[0] * B[1] * A[2])
+        return 2.0 * half * even
+    x_g, w_g = np.polynomial.legendre.leggauss(_gauss_points(order))
+    total = 0.0
+    for xg, wg in zip(x_g, w_g):  # Gauss-Legendre, exact for the degree-3(j-1) product
+        tau = half * xg
+        prod = None
+        for p in taylor:
+            val = p[-1].copy()
+            for c in p[-2::-1]:
+                val *= tau
+                val += c
+            prod = val if prod is None else np.multiply(prod, val, out=prod)
+        total = total + wg * prod
+    return total * half
+
+
 def _line_integral_flat(wav, key, m, d_xyz, n, u, v, a, b, chunk=4096) -> np.ndarray:
     """Exact T at the offsets a, b (1-D float64 arrays of one length)."""
     j = wav.order
     key_xyz = key[::-1]
-    x_g, w_g = np.polynomial.legendre.leggauss(_gauss_points(j))
     out = np.zeros(a.size)
     scale = 2.0 ** (-m)
     for start in range(0, a.size, chunk):
@@ -482,42 +548,32 @@ def _line_integral_flat(wav, key, m, d_xyz, n, u, v, a, b, chunk=4096) -> np.nda
             t0, t1 = -c / g, (support - c) / g
             np.maximum(lo, np.minimum(t0, t1), out=lo)
             np.minimum(hi, np.maximum(t0, t1), out=hi)
-            moving.append((letter, support, c, g))
+            moving.append((letter, c, g))
         live = np.flatnonzero((hi > lo) & (total != 0.0))  # lines that meet the support box
         if not live.size:
             continue
-        lo, hi = lo[live, None], hi[live, None]
         # every knot crossing t = (knot - c)/g, clipped to the support interval and sorted
-        cols = [(np.arange(support * (1 if letter == "a" else 2) + 1) / (1 if letter == "a" else 2)) / g
-                for letter, support, c, g in moving]
-        t = np.empty((live.size, sum(len(k_) for k_ in cols)))
-        off = 0
-        for (letter, support, c, g), knots in zip(moving, cols):
-            np.subtract.outer(c[live] / -g, -knots, out=t[:, off:off + len(knots)])
-            off += len(knots)
-        np.clip(t, lo, hi, out=t)
+        lo, hi = lo[live, None], hi[live, None]
+        moving = [(letter, c[live], g) for letter, c, g in moving]
+        t = np.concatenate([np.subtract.outer(c / -g, _knots(j, letter) / -g) for letter, c, g in moving], axis=1)
+        np.maximum(t, lo, out=t)
+        np.minimum(t, hi, out=t)
         t.sort(axis=1)
-        width = t[:, 1:] - t[:, :-1]
+        width = np.diff(t, axis=1)
         flat = np.flatnonzero(width > 0.0)           # the segments of positive length
-        nseg = width.shape[1]
-        seg_line = flat // nseg
+        seg_line = flat // width.shape[1]
         half = 0.5 * width.reshape(-1)[flat]
-        mid = t.reshape(-1)[flat + seg_line] + half   # left end + half width (t has nseg + 1 columns)
-        prod = None
-        for letter, support, c, g in moving:
+        mid = t.reshape(-1)[flat + seg_line] + half   # left end + half width (t has one column more)
+        # each factor on each segment: one polynomial piece, the one holding the midpoint, as a
+        # polynomial in tau = t - mid: sum_c coef_c tau^c
+        taylor = []
+        for letter, c, g in moving:
             rate, coeffs = _pieces(j, letter)
-            # one polynomial piece per segment: the one holding its midpoint
-            xm = (c[live][seg_line] + g * mid) * rate
+            xm = (c[seg_line] + g * mid) * rate
             piece = np.floor(xm)
             np.clip(piece, 0, len(coeffs) - 1, out=piece)
-            pidx = piece.astype(np.intp)
-            y = (xm - piece)[:, None] + np.multiply.outer((rate * g) * half, x_g)  # (S, G) local coordinates
-            val = np.take(coeffs[:, -1], pidx)[:, None] * np.ones(len(x_g))
-            for cc in range(coeffs.shape[1] - 2, -1, -1):
-                val *= y
-                val += np.take(coeffs[:, cc], pidx)[:, None]
-            prod = val if prod is None else np.multiply(prod, val, out=prod)
-        seg_integral = (prod @ w_g) * half
+            taylor.append(_local_poly(coeffs, piece.astype(np.intp), xm - piece, rate * g))
+        seg_integral = _segment_integrals(taylor, half, j)
         res = np.bincount(seg_line, weights=seg_integral, minlength=live.size)
         out[start + live] = total[live] * res
     return out
@@ -527,8 +583,9 @@ def line_integral(wavelet, key: str, m: int, spacing_zyx, n, u, v, a, b) -> np.n
     """Exact footprint ``T_{m,key}(a, b) = ∫ B(X + a u + b v + t n) dt`` at any offsets.
 
     ``a``, ``b`` (world units, broadcast together) are offsets from the projected support
-    centre along u and v.  Piecewise Gauss-Legendre between the knot-plane crossings is
-    exact for the piecewise-polynomial integrand, up to rounding (float64).
+    centre along u and v.  Between consecutive knot-plane crossings the integrand is one
+    polynomial of degree <= 3(j - 1), integrated exactly (closed form for j <= 2,
+    Gauss-Legendre otherwise), so the result is exact up to float64 rounding.
 
     >>> from clwave.bspline import SplineWavelet
     >>> n, u, v = view_vectors(0.0, 0.0)   # look along x: T = ∫phi · phi(b + 1/2) phi(a + 1/2)
@@ -575,6 +632,13 @@ def _trim(data, centre_u, centre_v, tol):
     return data[r0:r1, c0:c1], centre_u - c0, centre_v - r0
 
 
+def _cpu_count() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
 def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omega_min=None,
                path: str = "auto", tol: float = 0.0, texel=None) -> dict:
     """Footprint textures of the (level, key) pairs in ``bands`` for one view.
@@ -616,6 +680,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         raise InputError(f"omega_s must be a positive number, got {omega_s!r}")
     if omega_min is None:
         omega_min = DEFAULT_OMEGA_MIN.get(wav.order, 64.0)
+    if not (np.isfinite(omega_min) and omega_min >= 0):
+        raise InputError(f"omega_min must be a number >= 0, got {omega_min!r}")
+    if texel is not None and not (np.isfinite(texel) and texel > 0):
+        raise InputError(f"texel must be a positive world length, got {texel!r}")
     if path == "auto":
         path = "fft" if wav.order >= 3 else "spatial"
     d_min = float(d_xyz.min())
@@ -657,9 +725,12 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         data, cu, cv = _trim(data, float(nu // 2), float(nv // 2), float(tol))
         return Texture(np.ascontiguousarray(data), h_u, h_v, cu, cv, path, m, key)
 
-    threads = min(len(jobs), os.cpu_count() or 1)
-    if threads > 1:  # numpy and pocketfft release the GIL: textures in parallel
+    # numpy and pocketfft release the GIL: textures in parallel, largest first, where the
+    # work outweighs the threads' overhead (measured on 2 cores: a gain from ~1e5 texels)
+    threads = min(len(jobs), _cpu_count()) if sum(job[2] * job[3] for job in jobs) >= 1 << 17 else 1
+    if threads > 1:
         workers = 1
+        jobs.sort(key=lambda job: -job[2] * job[3])
         with ThreadPoolExecutor(threads) as pool:
             textures = list(pool.map(make, jobs))
     else:

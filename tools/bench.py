@@ -87,7 +87,7 @@ def bench_splat(args) -> dict:
     vol = phantom("hydrogen", n=args.size)
     full = WaveletVolume.from_volume(vol, wavelet="cubic", levels=3)
     cases = {}
-    for keep in (0.01, 0.05, 1.0):
+    for keep in args.keep:
         wv = full if keep == 1.0 else full.threshold(keep=keep)
         renderer = clwave.SplatRenderer(wv, device=args.device)
         for size in (512, 256):
@@ -119,6 +119,8 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=256, help="phantom voxels per axis")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs after one warm-up")
     parser.add_argument("--views", type=int, default=8, help="distinct views per case (splat)")
+    parser.add_argument("--keep", type=float, nargs="+", default=[0.01, 0.05, 1.0],
+                        help="kept fractions to splat (1 = the full coefficient set)")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="also write the JSON here")
     args = parser.parse_args(argv)
