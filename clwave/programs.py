@@ -68,7 +68,8 @@ def build(cc: ComputeContext, files, defines=None) -> KernelSet:
         return cc.programs[key]
     folder = cl_dir()
     source = "\n".join(f'#include "{name}"' for name in files) + "\n"
-    options = ["-I", str(folder), f"-DCLW_SRC_HASH={source_hash(folder)}"]
+    # -w: PoCL prints ABI notes about float16 vectors straight to stderr otherwise
+    options = ["-I", str(folder), f"-DCLW_SRC_HASH={source_hash(folder)}", "-w"]
     options += [f"-D{k}" if v is None else f"-D{k}={v}" for k, v in defines]
     start = time.perf_counter()
     try:
