@@ -44,14 +44,13 @@ class ViewTables:
         spacing = np.array(wv.spacing[::-1], float)  # (dx, dy, dz)
         shape = np.array(wv.shape[::-1], float)      # (nx, ny, nz)
         omega = omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
-        # Haar and linear footprints have kinks (and Haar jumps): bilinear resampling needs finer texels
-        omega_min = DEFAULT_OMEGA_MIN.get(wav.order, 0.0) if wav.order >= 3 else KINKED_OMEGA_MIN
         self.omega_s, self.textures, self.texels_per_pixel = omega, {}, {}
         start = time.perf_counter()
         for m in sorted({b.level for b in g.bands}):
-            # texels of exactly 1/P pixel (cl/splat_raster.cl), at least the band of eq. 36 and
-            # omega_min for the level's own prototype (clwave.footprint)
-            band = max(omega, omega_min if wav.order < 3 else omega_min / 2.0 ** m)
+            # texels of exactly 1/P pixel (cl/splat_raster.cl), at least the band of eq. 36 and the
+            # least band of the level's own prototype (clwave.footprint); Haar and linear footprints
+            # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
+            band = max(omega, DEFAULT_OMEGA_MIN[wav.order] / 2.0 ** m if wav.order >= 3 else KINKED_OMEGA_MIN)
             P = max(2, int(np.ceil(band * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
             self.texels_per_pixel[m] = P
             self.textures.update(footprints(wav, wv.spacing, view.n, view.u, view.v,
