@@ -16,8 +16,7 @@ import numpy as np
 
 from .errors import InputError
 from .files import write_atomic
-
-AUTO_PERCENTILES = (0.5, 99.5)
+from .transfer import AUTO_PERCENTILES, check_window
 
 
 @dataclass
@@ -61,23 +60,16 @@ class RenderResult:
 
 def resolve_window(values, window="auto") -> tuple:
     """``(lo, hi)`` of a display window: "auto" (percentiles of the finite values) or given."""
-    if isinstance(window, str):
-        if window != "auto":
-            raise InputError(f"window {window!r} must be 'auto' or LO,HI")
-        finite = np.asarray(values)[np.isfinite(values)]
-        lo, hi = np.percentile(finite, AUTO_PERCENTILES) if finite.size else (0.0, 1.0)
-    else:
-        try:
-            lo, hi = (float(w) for w in window)
-        except (TypeError, ValueError):
-            raise InputError(f"window {window!r} must be 'auto' or two numbers LO,HI") from None
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        raise InputError(f"window ({lo}, {hi}) must be finite")
+    checked = check_window(window)
+    if checked is None:
+        raise InputError("a display window must be 'auto' or (lo, hi)")
+    if checked != "auto":
+        return checked
+    finite = np.asarray(values)[np.isfinite(values)]
+    lo, hi = (float(p) for p in np.percentile(finite, AUTO_PERCENTILES)) if finite.size else (0.0, 1.0)
     if hi <= lo:
-        hi = lo + 1.0 if window == "auto" else hi
-        if hi <= lo:
-            raise InputError(f"window ({lo}, {hi}) needs LO < HI")
-    return float(lo), float(hi)
+        hi = lo + 1.0  # a flat image (a view that misses the volume) shows black
+    return lo, hi
 
 
 def _jsonable(obj):

@@ -131,7 +131,7 @@ class TransferFunction:
 
     def __init__(self, points, window=None, name=None):
         self._points = _check_points(points)
-        self._window = _check_window(window)
+        self._window = check_window(window)
         if name is not None and not isinstance(name, str):
             raise InputError(f"transfer function name must be a string or None, got {name!r}")
         self.name = name
@@ -183,7 +183,7 @@ class TransferFunction:
 
     def data_points(self, window=...) -> np.ndarray:
         """Point values in data units under ``window`` (default: this function's own)."""
-        win = self._window if window is ... else _check_window(window)
+        win = self._window if window is ... else check_window(window)
         if win == "auto":
             raise InputError('window "auto" needs data; call resolve_window(values) first')
         t = self._points[:, 0]
@@ -293,7 +293,7 @@ class TransferFunction:
         return TransferFunction(self._points, window=win, name=self.name)
 
     def _window_for(self, vol, window, scale):
-        win = self._window if window is ... else _check_window(window)
+        win = self._window if window is ... else check_window(window)
         if win != "auto":
             return win
         if vol.channels == 1:
@@ -303,7 +303,7 @@ class TransferFunction:
         return auto_window(_luminance(data[::step, :3].astype(np.float64) / scale))
 
     def _xp(self, values, window):
-        win = self._window if window is ... else _check_window(window)
+        win = self._window if window is ... else check_window(window)
         if win == "auto":
             win = auto_window(values)
         return self.data_points(win)
@@ -505,7 +505,8 @@ def _check_points(points) -> np.ndarray:
     return p
 
 
-def _check_window(window):
+def check_window(window):
+    """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError."""
     if window is None:
         return None
     if isinstance(window, str):
