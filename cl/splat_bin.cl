@@ -1,9 +1,10 @@
 /* splat_bin.cl: project splats and bin them into image tiles (paper §4, MATH.md §6).
  *
- * Pipeline (host: clwave/splat.py): splat_project -> exclusive scan of counts ->
- * splat_write_keys -> stable radix sort by tile -> tile_ranges.  Writing keys in splat
- * order and sorting stably keeps each tile's splats in importance order, so the
- * accumulated sum is deterministic. */
+ * Pipeline (host: clwave/splat.py): splat_project -> splat_count_tiles (per chunk of
+ * consecutive splats, a count per tile) -> exclusive scan of the counts in (tile, chunk)
+ * order -> tile_ranges -> splat_place.  This is a counting sort by tile: each chunk writes
+ * its splats, in splat order, at its own offsets within each tile's run, so a tile's splats
+ * come in importance order and the accumulated sum is deterministic, with no atomics. */
 #include "clw_common.h"
 
 /* splat_project: centre, pixel box and tile count of each splat.
@@ -57,40 +58,62 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
     count[i] = cnt;
 }
 
-/* splat_write_keys: one (tile, splat) pair per tile a splat touches, at its scanned offset.
- *   bbox   in  (n,) int4     offset in (n,) uint (exclusive scan of count)
- *   keys   out (total,) uint tile id = tile_y * tiles_x + tile_x
- *   vals   out (total,) uint splat index
- * Grid: global (n,). */
-__kernel void splat_write_keys(const uint n, __global const int4 *bbox, __global const uint *offset,
-                               const int tiles_x, __global uint *keys, __global uint *vals)
+/* splat_count_tiles: how many splats of each chunk touch each tile.
+ *   n            number of splats; chunk c holds splats c * chunk .. c * chunk + chunk - 1
+ *   bbox         in  (n,) int4 from splat_project
+ *   hist         out (tiles, chunks) uint, tile-major: hist[tile * chunks + c]
+ * Grid: global (chunks,), any local size; work-item c owns column c of hist. */
+__kernel void splat_count_tiles(const uint n, const uint chunk, const uint chunks, const uint tiles,
+                                const int tiles_x, __global const int4 *bbox, __global uint *hist)
 {
-    const uint i = get_global_id(0);
-    if (i >= n)
+    const uint c = get_global_id(0);
+    if (c >= chunks)
         return;
-    const int4 b = bbox[i];
-    if (b.z < b.x)
-        return;
-    uint o = offset[i];
-    for (int ty = b.y / CLW_TILE; ty <= b.w / CLW_TILE; ++ty)
-        for (int tx = b.x / CLW_TILE; tx <= b.z / CLW_TILE; ++tx) {
-            keys[o] = (uint)(ty * tiles_x + tx);
-            vals[o] = i;
-            ++o;
-        }
+    for (uint t = 0; t < tiles; ++t)
+        hist[t * chunks + c] = 0;
+    const uint end = min(n, (c + 1) * chunk);
+    for (uint i = c * chunk; i < end; ++i) {
+        const int4 b = bbox[i];
+        if (b.z < b.x)
+            continue;
+        for (int ty = b.y / CLW_TILE; ty <= b.w / CLW_TILE; ++ty)
+            for (int tx = b.x / CLW_TILE; tx <= b.z / CLW_TILE; ++tx)
+                ++hist[(uint)(ty * tiles_x + tx) * chunks + c];
+    }
 }
 
-/* tile_ranges: [start, end) of each tile's run in the sorted keys; ranges start zeroed.
- *   keys   in  (total,) uint, sorted     ranges out (tiles,) uint2
- * Grid: global (total,). */
-__kernel void tile_ranges(const uint total, __global const uint *keys, __global uint2 *ranges)
+/* tile_ranges: [start, end) of each tile's run from the scanned counts.
+ *   offset  in  (tiles, chunks) uint: exclusive scan of hist in tile-major order
+ *   total   number of (tile, splat) pairs
+ *   ranges  out (tiles,) uint2
+ * Grid: global (tiles,). */
+__kernel void tile_ranges(const uint tiles, const uint chunks, const uint total, __global const uint *offset,
+                          __global uint2 *ranges)
 {
-    const uint i = get_global_id(0);
-    if (i >= total)
+    const uint t = get_global_id(0);
+    if (t >= tiles)
         return;
-    const uint k = keys[i];
-    if (i == 0 || keys[i - 1] != k)
-        ranges[k].x = i;
-    if (i == total - 1 || keys[i + 1] != k)
-        ranges[k].y = i + 1;
+    ranges[t] = (uint2)(offset[t * chunks], t + 1 < tiles ? offset[(t + 1) * chunks] : total);
+}
+
+/* splat_place: write each splat's index into the runs of the tiles it touches.
+ *   bbox    in  (n,) int4
+ *   offset  in/out (tiles, chunks) uint: where chunk c writes next in each tile (consumed)
+ *   vals    out (total,) uint: splat indices by tile, in splat order within a tile
+ * Grid: global (chunks,), any local size; chunks as in splat_count_tiles. */
+__kernel void splat_place(const uint n, const uint chunk, const uint chunks, const int tiles_x,
+                          __global const int4 *bbox, __global uint *offset, __global uint *vals)
+{
+    const uint c = get_global_id(0);
+    if (c >= chunks)
+        return;
+    const uint end = min(n, (c + 1) * chunk);
+    for (uint i = c * chunk; i < end; ++i) {
+        const int4 b = bbox[i];
+        if (b.z < b.x)
+            continue;
+        for (int ty = b.y / CLW_TILE; ty <= b.w / CLW_TILE; ++ty)
+            for (int tx = b.x / CLW_TILE; tx <= b.z / CLW_TILE; ++tx)
+                vals[offset[(uint)(ty * tiles_x + tx) * chunks + c]++] = i;
+    }
 }

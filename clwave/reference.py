@@ -34,32 +34,39 @@ def project(coef, first, band_tex, band_origin, step_col, step_row, tex_box, wid
     return np.stack([col, row], 1).astype(np.float32), bbox, tex.astype(np.int32), count
 
 
-def write_keys(bbox, tiles_x):
-    """Reference of scan + ``splat_write_keys``: (tile, splat) pairs in splat order."""
-    keys, vals = [], []
-    for i, (x0, y0, x1, y1) in enumerate(bbox):
-        if x1 < x0:
-            continue
-        for ty in range(y0 // TILE, y1 // TILE + 1):
-            for tx in range(x0 // TILE, x1 // TILE + 1):
-                keys.append(ty * tiles_x + tx)
-                vals.append(i)
-    return np.array(keys, np.uint32), np.array(vals, np.uint32)
+def _tiles(box, tiles_x):
+    """Tile ids a pixel box (x0, y0, x1, y1) touches, row by row."""
+    x0, y0, x1, y1 = (int(v) for v in box)
+    if x1 < x0:
+        return []
+    return [ty * tiles_x + tx for ty in range(y0 // TILE, y1 // TILE + 1) for tx in range(x0 // TILE, x1 // TILE + 1)]
 
 
-def sort_pairs(keys, vals):
-    """Reference of the stable sort by tile."""
+def count_tiles(bbox, chunk, chunks, tiles, tiles_x):
+    """Reference of ``splat_count_tiles``: (tiles * chunks,) uint32, ``[tile * chunks + c]`` counts the
+    splats of chunk c (splats ``c * chunk ..``) that touch the tile."""
+    hist = np.zeros((tiles, chunks), np.uint32)
+    for i, box in enumerate(bbox):
+        for t in _tiles(box, tiles_x):
+            hist[t, i // chunk] += 1
+    return hist.reshape(-1)
+
+
+def bin_by_tile(bbox, tiles_x, tiles):
+    """Reference of scan + ``tile_ranges`` + ``splat_place``: ``(ranges, vals)``.
+
+    A stable sort of the (tile, splat) pairs by tile: ``vals[ranges[t, 0]:ranges[t, 1]]`` are
+    the splats touching tile t in increasing order (importance order).
+    """
+    pairs = [(t, i) for i, box in enumerate(bbox) for t in _tiles(box, tiles_x)]
+    keys = np.array([t for t, _ in pairs], np.int64)
+    vals = np.array([i for _, i in pairs], np.uint32)
     order = np.argsort(keys, kind="stable")
-    return keys[order], vals[order]
-
-
-def tile_ranges(keys, tiles):
-    """Reference of ``tile_ranges``: [start, end) per tile, zero for empty tiles."""
+    keys, vals = keys[order], vals[order]
     ranges = np.zeros((tiles, 2), np.uint32)
-    for t in np.unique(keys):
-        idx = np.flatnonzero(keys == t)
-        ranges[t] = idx[0], idx[-1] + 1
-    return ranges
+    edges = np.searchsorted(keys, np.arange(tiles + 1))
+    ranges[:, 0], ranges[:, 1] = edges[:-1], edges[1:]
+    return ranges, vals
 
 
 def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width, height):

@@ -4,9 +4,9 @@ Every kept coefficient c of band (m, key) adds ``c * T_{m,key}(mu - mu_c, nu - n
 to the image (paper eq. 29, MATH.md §6), where T is the footprint texture of the
 prototype (:mod:`clwave.footprint`, Fourier projection slicing) and (mu_c, nu_c) the
 projection of the centre of the basis support.  On the device
-(``cl/splat_bin.cl``, ``cl/splat_raster.cl``): project -> count tiles -> scan ->
-keys -> stable sort -> per-tile ranges -> accumulate per tile from local-memory
-batches.  The result is the line integral ``∫ f(p - t n) dt`` of each channel in
+(``cl/splat_bin.cl``, ``cl/splat_raster.cl``): project -> per-chunk tile counts ->
+scan -> per-tile ranges -> placement (a deterministic counting sort by tile) ->
+accumulate per tile from local-memory batches.  The result is the line integral ``∫ f(p - t n) dt`` of each channel in
 world units (CONVENTIONS.md "Outputs").
 """
 
@@ -16,7 +16,6 @@ import time
 
 import numpy as np
 import pyopencl.array as cla
-from pyopencl.algorithm import RadixSort
 from pyopencl.reduction import ReductionKernel
 from pyopencl.scan import ExclusiveScanKernel
 
@@ -30,7 +29,9 @@ from .wavelet import WaveletVolume
 
 TILE = 16
 MAX_LEVELS = 8  # band id = level * 8 + subband code must fit the 64-entry table
-BYTES_PER_PAIR = 16  # keys + values, and their sorted copies (uint32 each)
+BYTES_PER_PAIR = 4  # one uint32 splat index per (tile, splat) pair
+CHUNKS_PER_UNIT = 64  # binning work-items per compute unit (chunks of consecutive splats)
+MAX_HIST = 1 << 22  # entries of the (tile, chunk) count table
 KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
 POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pixel rows
 
@@ -108,6 +109,15 @@ def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
     return np.ascontiguousarray(rows.reshape(nv + 2, cols, P).transpose(2, 0, 1))
 
 
+def bin_chunks(n: int, tiles: int, compute_units: int) -> int:
+    """Number of chunks of consecutive splats the binning works in (one work-item each).
+
+    Enough for every compute unit, bounded by the splats and by the size of the
+    (tile, chunk) count table.
+    """
+    return max(1, min(n, CHUNKS_PER_UNIT * compute_units, MAX_HIST // tiles))
+
+
 def default_omega_s(pixel, min_spacing) -> float:
     """Texture band: the paper's 14, finer when pixels are small (texel <= pixel / 4)."""
     return max(14.0, 4.0 * np.pi * min_spacing / pixel)
@@ -139,8 +149,6 @@ class SplatRenderer:
         self.local_size = TILE * TILE // px
         ctx = self.cc.ctx
         self.scan = ExclusiveScanKernel(ctx, np.uint32, "a+b", neutral="0")
-        self.sort = RadixSort(ctx, "uint *keys, uint *vals", key_expr="keys[i]",
-                              sort_arg_names=["keys", "vals"], key_dtype=np.uint32)
         self.pixel_updates = ReductionKernel(
             ctx, np.int64, neutral="0", reduce_expr="a+b", arguments="__global const int4 *bbox",
             map_expr="bbox[i].z < bbox[i].x ? 0 : (long)(bbox[i].z - bbox[i].x + 1) * (bbox[i].w - bbox[i].y + 1)")
@@ -224,7 +232,7 @@ class Frame:
                         t["band_origin"].data, t["step_col"].data, t["step_row"].data, t["tex_box"].data,
                         np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
         total = int(cla.sum(counts, dtype=np.uint64).get())
-        budget = min(r.cc.info.max_alloc // 4, r.cc.info.global_mem // 4) // BYTES_PER_PAIR * 4
+        budget = min(r.cc.info.max_alloc, r.cc.info.global_mem // 4) // BYTES_PER_PAIR
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
             half = n // 2
             self.stats["bin_seconds"] += time.perf_counter() - start
@@ -234,17 +242,21 @@ class Frame:
         if total > budget:
             raise DeviceMemoryError(f"one splat needs {total * BYTES_PER_PAIR} bytes of tile lists, more "
                                     f"than {r.cc.info.name} can hold; render a smaller image")
-        ranges = cla.zeros(q, (tiles_x * tiles_y, 2), np.uint32)
+        tiles = tiles_x * tiles_y
+        ranges = cla.zeros(q, (tiles, 2), np.uint32)
         if total:
-            offsets = cla.empty_like(counts)
-            r.scan(counts, offsets)
-            keys = cla.empty(q, (total,), np.uint32)
+            chunks = bin_chunks(n, tiles, r.cc.info.compute_units)
+            chunk = -(-n // chunks)
+            hist = cla.empty(q, (tiles * chunks,), np.uint32)
+            offsets = cla.empty_like(hist)
+            k.splat_count_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
+                                np.uint32(tiles), np.int32(tiles_x), bbox.data, hist.data)
+            r.scan(hist, offsets)
+            k.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(chunks), np.uint32(total), offsets.data,
+                          ranges.data)
             vals = cla.empty(q, (total,), np.uint32)
-            k.splat_write_keys(q, (n,), None, np.uint32(n), bbox.data, offsets.data, np.int32(tiles_x),
-                               keys.data, vals.data)
-            bits = max(1, int(tiles_x * tiles_y - 1).bit_length())
-            (keys, vals), _ = r.sort(keys, vals, key_bits=bits, queue=q)
-            k.tile_ranges(q, (total,), None, np.uint32(total), keys.data, ranges.data)
+            k.splat_place(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.int32(tiles_x),
+                          bbox.data, offsets.data, vals.data)
         else:
             vals = cla.zeros(q, (1,), np.uint32)
         q.finish()
@@ -254,11 +266,11 @@ class Frame:
                            stex.data, g["values"].data, t["tex_int"].data, t["tex_map"].data,
                            t["texels"].data, self.fbs[gi].data)
         q.finish()
+        self.stats["bin_seconds"] += mid - start
+        self.stats["accumulate_seconds"] += time.perf_counter() - mid
         self.stats["splats"] += n
         self.stats["pairs"] += total
         self.stats["pixel_updates"] += int(r.pixel_updates(bbox, range=slice(0, n), queue=q).get())
-        self.stats["bin_seconds"] += mid - start
-        self.stats["accumulate_seconds"] += time.perf_counter() - mid
 
     def image(self) -> np.ndarray:
         """The framebuffer so far as (H, W, C) float32."""

@@ -5,11 +5,10 @@ Integer stages must be exactly equal; the accumulation to float32 rounding."""
 import numpy as np
 import pyopencl.array as cla
 import pytest
-from pyopencl.algorithm import RadixSort
 from pyopencl.scan import ExclusiveScanKernel
 
 from clwave import programs, reference
-from clwave.splat import pack_texture
+from clwave.splat import bin_chunks, pack_texture
 
 W, H = 45, 37  # not multiples of the 16-pixel tile
 TILES_X, TILES_Y = 3, 3
@@ -61,26 +60,27 @@ def test_every_stage_equals_its_reference(cc, rng, px):
     assert np.array_equal(counts.get(), r_count)
     assert 0 < np.count_nonzero(r_count) < n  # the scene has both visible and culled splats
 
-    offsets = cla.empty_like(counts)
-    ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")(counts, offsets)
-    assert np.array_equal(offsets.get(), np.concatenate([[0], np.cumsum(r_count)[:-1]]).astype(np.uint32))
+    tiles = TILES_X * TILES_Y
     total = int(r_count.sum())
-    keys, vals = cla.empty(q, (total,), np.uint32), cla.empty(q, (total,), np.uint32)
-    ks.splat_write_keys(q, (n,), None, np.uint32(n), bbox.data, offsets.data, np.int32(TILES_X),
-                        keys.data, vals.data)
-    r_keys, r_vals = reference.write_keys(r_bbox, TILES_X)
-    assert np.array_equal(keys.get(), r_keys) and np.array_equal(vals.get(), r_vals)
-
-    sort = RadixSort(cc.ctx, "uint *keys, uint *vals", key_expr="keys[i]", sort_arg_names=["keys", "vals"],
-                     key_dtype=np.uint32)
-    (keys, vals), _ = sort(keys, vals, key_bits=4, queue=q)
-    r_keys, r_vals = reference.sort_pairs(r_keys, r_vals)
-    assert np.array_equal(keys.get(), r_keys) and np.array_equal(vals.get(), r_vals)
-
-    ranges = cla.zeros(q, (TILES_X * TILES_Y, 2), np.uint32)
-    ks.tile_ranges(q, (total,), None, np.uint32(total), keys.data, ranges.data)
-    r_ranges = reference.tile_ranges(r_keys, TILES_X * TILES_Y)
-    assert np.array_equal(ranges.get(), r_ranges)
+    r_ranges, r_vals = reference.bin_by_tile(r_bbox, TILES_X, tiles)
+    for chunks in (1, 7, bin_chunks(n, tiles, cc.info.compute_units)):  # one, a few uneven, the renderer's
+        chunk = -(-n // chunks)
+        hist = cla.empty(q, (tiles * chunks,), np.uint32)
+        ks.splat_count_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
+                             np.uint32(tiles), np.int32(TILES_X), bbox.data, hist.data)
+        r_hist = reference.count_tiles(r_bbox, chunk, chunks, tiles, TILES_X)
+        assert np.array_equal(hist.get(), r_hist)
+        offsets = cla.empty_like(hist)
+        ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")(hist, offsets)
+        assert np.array_equal(offsets.get(), np.concatenate([[0], np.cumsum(r_hist)[:-1]]).astype(np.uint32))
+        ranges = cla.empty(q, (tiles, 2), np.uint32)
+        ks.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(chunks), np.uint32(total), offsets.data,
+                       ranges.data)
+        assert np.array_equal(ranges.get(), r_ranges)
+        vals = cla.empty(q, (total,), np.uint32)
+        ks.splat_place(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.int32(TILES_X),
+                       bbox.data, offsets.data, vals.data)
+        assert np.array_equal(vals.get(), r_vals)
 
     fb = cla.to_device(q, np.full((H * W, 4), 0.5, np.float32))  # accumulates onto what is there
     local = 16 * 16 // px
