@@ -1,19 +1,32 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|splat|all [--size 256] [--repeats 3] [--views 8] [--json out.json]
+    python tools/bench.py decompose|footprints|splat|progressive|all [--size 128 256] [--repeats 3]
+                          [--views 8] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
+
+Every benchmark runs once per ``--size`` (hydrogen phantom of that many voxels per axis, made
+once outside the timing); times are medians (with min, max and the number of runs) after one
+warm-up, each render at a new view (a golden-angle spiral).
 
 ``decompose``: classification (hydrogen preset, RGBA) + cubic decomposition (3 levels,
-approximating model) + thresholding to 5 % of a hydrogen phantom; the phantom itself
-is made once, outside the timing.
+approximating model) + thresholding to 5 %.
+``footprints``: the footprint textures of every level and subband for one view at 512²
+(Haar, linear, cubic; 3 levels), as the splat renderer makes them; throughput in texels/s.
 ``splat``: hydrogen scalar, cubic, 3 levels, 1 %, 5 % and all coefficients at 512² and
-256², each render at a new view with its footprints; median over ``--views`` views after
-one warm-up; throughput = footprint-pixel updates per second of accumulation.
+256², each render at a new view with its footprints; throughput = footprint-pixel updates
+per second of accumulation.
+``progressive``: frames of 1, 2, 4 and 8 % of the voxels (``--progressive-keep`` 0.08 in 4
+doubling steps) at 512²; per frame the time since the start of the view, energy, and RMS
+error against the final image.
+
+A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) and an
+entry in ``BENCHMARKS``.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import os
 import platform
@@ -28,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 
 import clwave  # noqa: E402
 from clwave.phantoms import phantom  # noqa: E402
+from clwave.splat import ViewTables  # noqa: E402
 from clwave.transfer import TransferFunction  # noqa: E402
 from clwave.wavelet import WaveletVolume  # noqa: E402
 
@@ -110,27 +124,77 @@ def bench_splat(args) -> dict:
                 cases=cases)
 
 
-BENCHMARKS = {"decompose": bench_decompose, "splat": bench_splat}
+def bench_footprints(args) -> dict:
+    vol = phantom("hydrogen", n=args.size)
+    cases = {}
+    for wavelet in ("haar", "linear", "cubic"):
+        wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=3)
+        ViewTables(wv, 0, clwave.Camera(10.0, 5.0, size=512).view(wv))  # warm-up (FFT plans, imports)
+        seconds, texels = [], []
+        for az, el in views(args.views):
+            start = time.perf_counter()
+            tables = ViewTables(wv, 0, clwave.Camera(az, el, size=512).view(wv))
+            seconds.append(time.perf_counter() - start)
+            texels.append(sum(t.data.size for t in tables.textures.values() if t is not None))
+        cases[wavelet] = dict(seconds=summary(seconds), textures=sum(t is not None for t in tables.textures.values()),
+                              texels=statistics.median(texels), paths=tables.paths,
+                              texels_per_second=statistics.median(texels) / statistics.median(seconds))
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", levels=3, image="512x512",
+                             views=args.views, note="all levels and subbands of one view, packed for upload"),
+                cases=cases)
+
+
+def bench_progressive(args) -> dict:
+    vol = phantom("hydrogen", n=args.size)
+    wv = WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=args.progressive_keep)
+    renderer = clwave.SplatRenderer(wv, device=args.device)
+    steps = 4
+    list(clwave.progressive(wv, clwave.Camera(10.0, 5.0, size=512), steps=steps, renderer=renderer))  # warm-up
+    runs = []
+    for az, el in views(args.views):
+        runs.append([f.figures() for f in clwave.progressive(wv, clwave.Camera(az, el, size=512), steps=steps,
+                                                               renderer=renderer)])
+    frames = []
+    for i, first in enumerate(runs[0]):
+        frames.append(dict(kept_of_voxels=first["coefficients"] / wv.n_voxels, coefficients=first["coefficients"],
+                           seconds=summary([run[i]["seconds"] for run in runs]),
+                           energy=statistics.median(run[i]["energy"] for run in runs),
+                           rms_error_vs_final=statistics.median(run[i]["rms_error"] for run in runs)))
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", wavelet="cubic", levels=3, image="512x512",
+                             keep=args.progressive_keep, steps=steps, views=args.views,
+                             note="seconds since the start of the view, footprints included"),
+                compile_seconds=renderer.compile_seconds, frames=frames)
+
+
+BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
+              "progressive": bench_progressive}
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("benchmark", choices=list(BENCHMARKS) + ["all"])
-    parser.add_argument("--size", type=int, default=256, help="phantom voxels per axis")
-    parser.add_argument("--repeats", type=int, default=3, help="timed runs after one warm-up")
-    parser.add_argument("--views", type=int, default=8, help="distinct views per case (splat)")
+    parser.add_argument("--size", type=int, nargs="+", default=[128, 256], help="phantom voxels per axis")
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs after one warm-up (decompose)")
+    parser.add_argument("--views", type=int, default=8, help="distinct views per case")
     parser.add_argument("--keep", type=float, nargs="+", default=[0.01, 0.05, 1.0],
                         help="kept fractions to splat (1 = the full coefficient set)")
+    parser.add_argument("--progressive-keep", type=float, default=0.08,
+                        help="kept fraction refined progressively in 4 doubling frames")
     parser.add_argument("--device", default="auto")
-    parser.add_argument("--json", type=Path, help="also write the JSON here")
+    parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
     names = list(BENCHMARKS) if args.benchmark == "all" else [args.benchmark]
-    report = dict(machine=machine(), device=device(args.device),
-                  benchmarks={name: BENCHMARKS[name](args) for name in names})
-    text = json.dumps(report, indent=2)
-    print(text)
+    results = {}
+    for name in names:
+        for size in args.size:
+            one = copy.copy(args)
+            one.size = size
+            results.setdefault(name, {})[f"{size}^3"] = BENCHMARKS[name](one)
+    text = json.dumps(dict(machine=machine(), device=device(args.device), benchmarks=results), indent=2)
     if args.json:
         args.json.write_text(text + "\n")
+    else:
+        print(text)
 
 
 if __name__ == "__main__":
