@@ -17,6 +17,8 @@
  *   texels   in  phase planes, (P, rows, columns) per texture; 16 zeros before the first
  *                and 32 after the last, so whole 16-pixel rows may be read
  *   fb       in/out (H * W,) float4: the sum is added, so chunks accumulate
+ * Build: -DCLW_CHANNELS=C (1..4) accumulates channels 0..C-1 only (the others of fb keep
+ *   their values).
  * Grid: one work-group per tile, local size CLW_TILE * CLW_TILE / CLW_PX; work-item l
  *   owns CLW_PX consecutive pixels of row l / (CLW_TILE / CLW_PX).  CLW_PX = CLW_TILE
  *   (a whole row per item) suits PoCL; CLW_PX = 1 (one pixel per item) suits GPUs.
@@ -30,6 +32,9 @@
 #ifndef CLW_BATCH
 #define CLW_BATCH 64
 #endif
+#ifndef CLW_CHANNELS
+#define CLW_CHANNELS 4
+#endif
 #define CLW_ITEMS_PER_ROW (CLW_TILE / CLW_PX)
 
 __kernel void splat_accumulate(const int width, const int height, const int tiles_x,
@@ -39,9 +44,13 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
                                __global const int4 *tex_int, __global const float4 *tex_map,
                                __global const float *texels, __global float4 *fb)
 {
-    __local float2 l_centre[CLW_BATCH];
+    /* per splat of the batch, everything that does not depend on the row: its pixel box, the
+     * texel offsets of pixel 0 in the two phase planes (a.x, a.y; row 0 of the padded plane),
+     * the row stride a.z, the column weight f.x, and f.y, f.z, f.w = centre row, texture
+     * centre row, P, from which each row finds its texel row */
     __local int4 l_box[CLW_BATCH];
-    __local int l_tex[CLW_BATCH];
+    __local int4 l_addr[CLW_BATCH];
+    __local float4 l_f[CLW_BATCH];
     __local float4 l_w[CLW_BATCH];
 
     const int tile = get_group_id(0);
@@ -52,7 +61,16 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
 #if CLW_PX == 16
     /* a row of 16 pixels as float16 vectors, one per channel (PoCL vectorises these) */
     const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    float16 acc0 = 0.0f, acc1 = 0.0f, acc2 = 0.0f, acc3 = 0.0f;
+    float16 acc0 = 0.0f;
+#if CLW_CHANNELS > 1
+    float16 acc1 = 0.0f;
+#endif
+#if CLW_CHANNELS > 2
+    float16 acc2 = 0.0f;
+#endif
+#if CLW_CHANNELS > 3
+    float16 acc3 = 0.0f;
+#endif
 #else
     float4 acc[CLW_PX];
     for (int p = 0; p < CLW_PX; ++p)
@@ -64,9 +82,21 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
         const uint nb = min((uint)CLW_BATCH, r.y - b0);
         for (uint k = lid; k < nb; k += nitems) {
             const uint s = vals[b0 + k];
-            l_centre[k] = centre[s];
+            const int4 t = tex_int[stex[s]];
+            const float2 m = tex_map[stex[s]].xy;
+            const float2 c = centre[s];
+            const int P = t.w;
+            const float base = m.x - c.x * (float)P;  /* texel of pixel x: base + P x */
+            const float fib = floor(base);
+            const int ib = (int)fib;
+            const int p0 = ((ib % P) + P) % P;       /* phase plane and column of texel ib */
+            const int q0 = (ib - p0) / P;
+            const int p1 = (p0 + 1 == P) ? 0 : p0 + 1;
+            const int q1 = (p0 + 1 == P) ? q0 + 1 : q0;
+            /* +1: the zero margin of the columns; the row margin is added per row */
+            l_addr[k] = (int4)(t.x + p0 * t.z * t.y + q0 + 1, t.x + p1 * t.z * t.y + q1 + 1, t.y, 0);
+            l_f[k] = (float4)(base - fib, c.y, m.y, (float)P);
             l_box[k] = bbox[s];
-            l_tex[k] = stex[s];
             l_w[k] = values[first + s];
         }
         barrier(CLK_LOCAL_MEM_FENCE);
@@ -75,39 +105,37 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
             const int x0 = max(bx.x, xbase), x1 = min(bx.z, xbase + CLW_PX - 1);
             if (y < bx.y || y > bx.w || x0 > x1)
                 continue;
-            const int4 t = tex_int[l_tex[k]];
-            const float2 m = tex_map[l_tex[k]].xy;
-            const float2 c = l_centre[k];
-            const int P = t.w;
-            const float tv = m.y + (c.y - (float)y) * (float)P;  /* image rows go down, v goes up */
-            const float base = m.x - c.x * (float)P;             /* texel of pixel x: base + P x */
-            const float fiv = floor(tv), fib = floor(base);
-            const float fv = tv - fiv, fu = base - fib;
-            const int iv = (int)fiv, ib = (int)fib;
-            const int p0 = ((ib % P) + P) % P;
-            const int q0 = (ib - p0) / P;
-            const int p1 = (p0 + 1 == P) ? 0 : p0 + 1;
-            const int q1 = (p0 + 1 == P) ? q0 + 1 : q0;
-            /* +1: the zero margin; rows iv and iv + 1, planes p0 and p1 */
-            __global const float *r00 = texels + t.x + (p0 * t.z + iv + 1) * t.y + q0 + 1;
-            __global const float *r01 = texels + t.x + (p1 * t.z + iv + 1) * t.y + q1 + 1;
+            const int4 a = l_addr[k];
+            const float4 f = l_f[k];
+            const float tv = f.z + (f.y - (float)y) * f.w;  /* image rows go down, v goes up */
+            const float fiv = floor(tv);
+            const float fu = f.x, fv = tv - fiv;
+            const int row = ((int)fiv + 1) * a.z;          /* +1: the zero margin; rows iv, iv + 1 */
+            __global const float *r00 = texels + a.x + row;
+            __global const float *r01 = texels + a.y + row;
             const float w00 = (1.0f - fu) * (1.0f - fv), w01 = fu * (1.0f - fv);
             const float w10 = (1.0f - fu) * fv, w11 = fu * fv;
             const float4 w = l_w[k];
 #if CLW_PX == 16
             /* all 16 lanes read (the pool has 16 zeros before and 32 after it), masked lanes drop */
             const float16 sample = w00 * vload16(0, r00 + xbase) + w01 * vload16(0, r01 + xbase)
-                                 + w10 * vload16(0, r00 + xbase + t.y) + w11 * vload16(0, r01 + xbase + t.y);
+                                 + w10 * vload16(0, r00 + xbase + a.z) + w11 * vload16(0, r01 + xbase + a.z);
             const float16 masked = select((float16)(0.0f), sample,
                                           isgreaterequal(lane, (float16)(x0 - xbase)) &
                                           islessequal(lane, (float16)(x1 - xbase)));
             acc0 += w.x * masked;
+#if CLW_CHANNELS > 1
             acc1 += w.y * masked;
+#endif
+#if CLW_CHANNELS > 2
             acc2 += w.z * masked;
+#endif
+#if CLW_CHANNELS > 3
             acc3 += w.w * masked;
+#endif
 #else
             for (int x = x0; x <= x1; ++x) {
-                const float sample = w00 * r00[x] + w01 * r01[x] + w10 * r00[x + t.y] + w11 * r01[x + t.y];
+                const float sample = w00 * r00[x] + w01 * r01[x] + w10 * r00[x + a.z] + w11 * r01[x + a.z];
                 acc[x - xbase] += w * sample;
             }
 #endif
@@ -117,11 +145,17 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
     if (y >= height)
         return;
 #if CLW_PX == 16
-    float a0[16], a1[16], a2[16], a3[16];
+    float a0[16], a1[16] = {0}, a2[16] = {0}, a3[16] = {0};
     vstore16(acc0, 0, a0);
+#if CLW_CHANNELS > 1
     vstore16(acc1, 0, a1);
+#endif
+#if CLW_CHANNELS > 2
     vstore16(acc2, 0, a2);
+#endif
+#if CLW_CHANNELS > 3
     vstore16(acc3, 0, a3);
+#endif
     for (int p = 0; p < 16; ++p)
         if (xbase + p < width)
             fb[y * width + xbase + p] += (float4)(a0[p], a1[p], a2[p], a3[p]);

@@ -145,7 +145,10 @@ class SplatRenderer:
         self.cc = ComputeContext.get(device)
         start = time.perf_counter()
         px = 1 if self.cc.info.kind == "GPU" else TILE
-        self.kernels = programs.build(self.cc, ["splat_bin.cl", "splat_raster.cl"], {"CLW_PX": px})
+        # one build per channel count of the groups: a scalar volume accumulates one channel
+        self.kernels = {c: programs.build(self.cc, ["splat_bin.cl", "splat_raster.cl"],
+                                          {"CLW_PX": px, "CLW_CHANNELS": c})
+                        for c in sorted({len(g.channels) for g in wv.groups})}
         self.local_size = TILE * TILE // px
         ctx = self.cc.ctx
         self.scan = ExclusiveScanKernel(ctx, np.uint32, "a+b", neutral="0")
@@ -163,7 +166,8 @@ class SplatRenderer:
             values = np.zeros((len(table.level), 4), np.float32)
             values[:, : table.values.shape[1]] = table.values
             self.groups.append(dict(coef=cla.to_device(q, coef), values=cla.to_device(q, values),
-                                    count=len(coef), energy=_energy_prefix(table.values)))
+                                    count=len(coef), channels=len(g.channels),
+                                    energy=_energy_prefix(table.values)))
 
     @property
     def count(self) -> int:
@@ -219,8 +223,9 @@ class Frame:
                 self._splat_group(gi, first, n)
 
     def _splat_group(self, gi, first, n):
-        r, q, k = self.r, self.r.cc.queue, self.r.kernels
+        r, q = self.r, self.r.cc.queue
         g, t = r.groups[gi], self.device_tables[gi]
+        k = r.kernels[g["channels"]]
         H, W = self.view.size
         tiles_x, tiles_y = -(-W // TILE), -(-H // TILE)
         start = time.perf_counter()

@@ -42,11 +42,11 @@ def random_scene(rng, n=400, n_tex=5):
                 values=values, n=n, first=7, textures=textures)
 
 
-@pytest.mark.parametrize("px", [16, 1])
-def test_every_stage_equals_its_reference(cc, rng, px):
+@pytest.mark.parametrize("px, channels", [(16, 4), (16, 1), (1, 4)])
+def test_every_stage_equals_its_reference(cc, rng, px, channels):
     s = random_scene(rng)
     q, n, first = cc.queue, s["n"], s["first"]
-    ks = programs.build(cc, ["splat_bin.cl", "splat_raster.cl"], {"CLW_PX": px})
+    ks = programs.build(cc, ["splat_bin.cl", "splat_raster.cl"], {"CLW_PX": px, "CLW_CHANNELS": channels})
     d = {k: cla.to_device(q, v) for k, v in s.items() if isinstance(v, np.ndarray)}
     centre, bbox = cla.empty(q, (n, 2), np.float32), cla.empty(q, (n, 4), np.int32)
     stex, counts = cla.empty(q, (n,), np.int32), cla.empty(q, (n,), np.uint32)
@@ -89,6 +89,7 @@ def test_every_stage_equals_its_reference(cc, rng, px):
                         d["values"].data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
     expected = 0.5 + reference.accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"],
                                           s["textures"], W, H)
+    expected[..., channels:] = 0.5  # channels beyond CLW_CHANNELS are left as they are
     got = fb.get().reshape(H, W, 4)
     assert np.abs(expected - 0.5).max() > 1  # splats did land
     # float32 sums of float32 texel coordinates: rounding at 1e-5 of the image's magnitude
