@@ -12,8 +12,12 @@
  *   centre, bbox, stex in: from splat_project
  *   values   in  (K,) float4: coefficient per channel (c; the 2^{-m/2} is in the texture)
  *   tex_int  in  (T,) int4: (offset, columns per plane, rows per plane, P); planes carry a
- *                margin of one zero texel on every side
- *   tex_map  in  (T,) float4: (centre_u, centre_v) in texels of the unpadded texture, unused, unused
+ *                margin of one zero texel on every side.  P = -1 marks a cell texture (one
+ *                plane, nearest-sample lookup at any texel step, clwave.footprint "cells"):
+ *                exact for Haar footprints at axis-aligned views, whose jumps lie on the cell
+ *                edges, where bilinear samples would smear each jump over a texel
+ *   tex_map  in  (T,) float4: (centre_u, centre_v) in texels of the unpadded texture, and for
+ *                cell textures the texel steps per pixel (s_u, s_v)
  *   texels   in  phase planes, (P, rows, columns) per texture; 16 zeros before the first
  *                and 32 after the last, so whole 16-pixel rows may be read
  *   fb       in/out (H * W,) float4: the sum is added, so chunks accumulate
@@ -46,12 +50,15 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
 {
     /* per splat of the batch, everything that does not depend on the row: its pixel box, the
      * texel offsets of pixel 0 in the two phase planes (a.x, a.y; row 0 of the padded plane),
-     * the row stride a.z, the column weight f.x, and f.y, f.z, f.w = centre row, texture
-     * centre row, P, from which each row finds its texel row */
+     * the row stride a.z and P in a.w, the column weight f.x, and f.y, f.z, f.w = centre
+     * row, texture centre row, P, from which each row finds its texel row.  Cell textures
+     * (a.w = 0): a.x the start of row 0, a.y the last column, f = (centre_u + 1/2, centre
+     * row, centre_v + 1/2, s_v) and l_cell = (centre column, s_u) */
     __local int4 l_box[CLW_BATCH];
     __local int4 l_addr[CLW_BATCH];
     __local float4 l_f[CLW_BATCH];
     __local float4 l_w[CLW_BATCH];
+    __local float2 l_cell[CLW_BATCH];
 
     const int tile = get_group_id(0);
     const int lid = get_local_id(0);
@@ -83,19 +90,25 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
         for (uint k = lid; k < nb; k += nitems) {
             const uint s = vals[b0 + k];
             const int4 t = tex_int[stex[s]];
-            const float2 m = tex_map[stex[s]].xy;
+            const float4 m = tex_map[stex[s]];
             const float2 c = centre[s];
             const int P = t.w;
-            const float base = m.x - c.x * (float)P;  /* texel of pixel x: base + P x */
-            const float fib = floor(base);
-            const int ib = (int)fib;
-            const int p0 = ((ib % P) + P) % P;       /* phase plane and column of texel ib */
-            const int q0 = (ib - p0) / P;
-            const int p1 = (p0 + 1 == P) ? 0 : p0 + 1;
-            const int q1 = (p0 + 1 == P) ? q0 + 1 : q0;
-            /* +1: the zero margin of the columns; the row margin is added per row */
-            l_addr[k] = (int4)(t.x + p0 * t.z * t.y + q0 + 1, t.x + p1 * t.z * t.y + q1 + 1, t.y, 0);
-            l_f[k] = (float4)(base - fib, c.y, m.y, (float)P);
+            if (P > 0) {
+                const float base = m.x - c.x * (float)P;  /* texel of pixel x: base + P x */
+                const float fib = floor(base);
+                const int ib = (int)fib;
+                const int p0 = ((ib % P) + P) % P;       /* phase plane and column of texel ib */
+                const int q0 = (ib - p0) / P;
+                const int p1 = (p0 + 1 == P) ? 0 : p0 + 1;
+                const int q1 = (p0 + 1 == P) ? q0 + 1 : q0;
+                /* +1: the zero margin of the columns; the row margin is added per row */
+                l_addr[k] = (int4)(t.x + p0 * t.z * t.y + q0 + 1, t.x + p1 * t.z * t.y + q1 + 1, t.y, P);
+                l_f[k] = (float4)(base - fib, c.y, m.y, (float)P);
+            } else {  /* +1/2: floor gives the nearest texel */
+                l_addr[k] = (int4)(t.x + 1, t.y - 2, t.y, 0);
+                l_f[k] = (float4)(m.x + 0.5f, c.y, m.y + 0.5f, m.w);
+                l_cell[k] = (float2)(c.x, m.z);
+            }
             l_box[k] = bbox[s];
             l_w[k] = values[first + s];
         }
@@ -107,19 +120,31 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
                 continue;
             const int4 a = l_addr[k];
             const float4 f = l_f[k];
+            const float4 w = l_w[k];
             const float tv = f.z + (f.y - (float)y) * f.w;  /* image rows go down, v goes up */
             const float fiv = floor(tv);
-            const float fu = f.x, fv = tv - fiv;
             const int row = ((int)fiv + 1) * a.z;          /* +1: the zero margin; rows iv, iv + 1 */
             __global const float *r00 = texels + a.x + row;
             __global const float *r01 = texels + a.y + row;
+            const float fu = f.x, fv = tv - fiv;
             const float w00 = (1.0f - fu) * (1.0f - fv), w01 = fu * (1.0f - fv);
             const float w10 = (1.0f - fu) * fv, w11 = fu * fv;
-            const float4 w = l_w[k];
+            const float2 cs = l_cell[k];
 #if CLW_PX == 16
-            /* all 16 lanes read (the pool has 16 zeros before and 32 after it), masked lanes drop */
-            const float16 sample = w00 * vload16(0, r00 + xbase) + w01 * vload16(0, r01 + xbase)
-                                 + w10 * vload16(0, r00 + xbase + a.z) + w11 * vload16(0, r01 + xbase + a.z);
+            float16 sample;
+            if (a.w) {
+                /* all 16 lanes read (the pool has 16 zeros before and 32 after it), masked lanes drop */
+                sample = w00 * vload16(0, r00 + xbase) + w01 * vload16(0, r01 + xbase)
+                       + w10 * vload16(0, r00 + xbase + a.z) + w11 * vload16(0, r01 + xbase + a.z);
+            } else {  /* cell texture: nearest texel, lanes outside the box clamped to the margin */
+                const float16 tu = f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y;
+                int col[16];
+                float cell[16];
+                vstore16(clamp(convert_int16(floor(tu)), -1, a.y), 0, col);
+                for (int p = 0; p < 16; ++p)
+                    cell[p] = r00[col[p]];
+                sample = vload16(0, cell);
+            }
             const float16 masked = select((float16)(0.0f), sample,
                                           isgreaterequal(lane, (float16)(x0 - xbase)) &
                                           islessequal(lane, (float16)(x1 - xbase)));
@@ -135,7 +160,8 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
 #endif
 #else
             for (int x = x0; x <= x1; ++x) {
-                const float sample = w00 * r00[x] + w01 * r01[x] + w10 * r00[x + a.z] + w11 * r01[x + a.z];
+                const float sample = a.w ? w00 * r00[x] + w01 * r01[x] + w10 * r00[x + a.z] + w11 * r01[x + a.z]
+                                         : r00[clamp((int)floor(f.x + ((float)x - cs.x) * cs.y), -1, a.y)];
                 acc[x - xbase] += w * sample;
             }
 #endif

@@ -39,6 +39,12 @@ Two ways to sample T:
   polynomial of degree <= 3(j - 1), integrated exactly (closed form for j <= 2,
   Gauss-Legendre otherwise).  Exact up to rounding (:func:`line_integral`).
 
+* ``"cells"`` -- Haar at axis-aligned views (u and v along world axes) only: there the
+  footprint is piecewise constant on the knot grid of the projected support (its edges and
+  psi's midpoint: 2 x 2 cells), so the exact values at the cell centres, looked up by
+  nearest sample, give it exactly everywhere.  Sampled at any finer spacing, its jumps fall
+  between samples and interpolation misplaces them by up to a texel.
+
 ``"auto"`` uses FFT for order >= 3 and the spatial path for Haar and linear, whose
 footprints have jumps or kinks at axis-aligned views where the band-limited FFT footprint
 rings (MATH.md §5).
@@ -91,7 +97,7 @@ from .errors import InputError
 #: only sets the texel spacing, so they keep the paper's omega_s alone.
 DEFAULT_OMEGA_MIN = {1: 0.0, 2: 0.0, 3: 96.0, 4: 48.0}
 
-_PATHS = ("auto", "fft", "spatial")
+_PATHS = ("auto", "fft", "spatial", "cells")
 
 
 @dataclass
@@ -219,6 +225,17 @@ def _extent(wav: SplineWavelet, key: str, m: int, d_xyz) -> np.ndarray:
     """World edge lengths of the support box, (x, y, z): ``2^m S_a d_a``."""
     key_xyz = key[::-1]
     return np.array([2.0 ** m * wav.support(key_xyz[a]) * d_xyz[a] for a in range(3)])
+
+
+def cells_are_exact(wavelet, u, v) -> bool:
+    """Whether the ``"cells"`` path is exact: Haar footprints at a view with u and v along world axes.
+
+    >>> n, u, v = view_vectors(90.0, 0.0)
+    >>> cells_are_exact("haar", u, v), cells_are_exact("linear", u, v)
+    (True, False)
+    """
+    axis = [np.max(np.abs(np.asarray(w, float))) > 1.0 - 1e-12 for w in (u, v)]
+    return wavelet_for(wavelet).order == 1 and all(axis)
 
 
 def _vanishes(key: str, n) -> bool:
@@ -656,15 +673,18 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         Band of eq. 35/36: texel spacing about ``pi d_min / omega_s`` at every level.
     omega_min : float, optional
         Least band of any texture in prototype units; default :data:`DEFAULT_OMEGA_MIN`.
-    path : "auto", "fft" or "spatial"
-        "auto": FFT for order >= 3, exact spatial sampling for Haar and linear.
+    path : "auto", "fft", "spatial" or "cells"
+        "auto": FFT for order >= 3, exact spatial sampling for Haar and linear; "cells"
+        (Haar at axis-aligned views only, :func:`cells_are_exact`): the exact value of
+        each of the 2 x 2 cells between the knots, for nearest-sample lookup.
     tol : float
         Trim each texture to the bounding box of samples above ``tol`` times its peak
         magnitude (0: keep the tight projected support box).
     texel : float, optional
         Sample spacing in world units for every texture, overriding the counts of
         eq. 36 (the splat renderer asks for an exact fraction of its pixel); the FFT
-        period is then the smallest multiple of it that covers the support.
+        period is then the smallest multiple of it that covers the support.  Not used
+        by "cells".
 
     Returns
     -------
@@ -686,6 +706,8 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         raise InputError(f"texel must be a positive world length, got {texel!r}")
     if path == "auto":
         path = "fft" if wav.order >= 3 else "spatial"
+    if path == "cells" and not cells_are_exact(wav, u, v):
+        raise InputError("footprint path 'cells' needs Haar at a view with u and v along world axes")
     d_min = float(d_xyz.min())
     out, jobs = {}, []
     for band in bands:
@@ -700,7 +722,9 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         wu, wv = float(np.abs(u) @ extent), float(np.abs(v) @ extent)
         omega = max(float(omega_s), float(omega_min) / 2.0 ** m)
         # eq. 36 with the per-type period: 2^(m+1) omega / dw, dw = 2 pi d_min / W(m=0)
-        if texel is None:
+        if path == "cells":
+            nu = nv = 2
+        elif texel is None:
             nu = _fast_even(ceil(2.0 * omega * wu / (2.0 * np.pi * d_min) + 1.0))
             nv = _fast_even(ceil(2.0 * omega * wv / (2.0 * np.pi * d_min) + 1.0))
         else:
@@ -712,6 +736,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
     def make(job):
         m, key, nu, nv, wu, wv = job
         h_u, h_v = wu / nu, wv / nv
+        if path == "cells":  # cell centres, a quarter of the support from its centre
+            aa, bb = np.array([-0.25, 0.25]) * wu, np.array([-0.25, 0.25]) * wv
+            data = _line_integral_flat(wav, key, m, d_xyz, n, u, v, np.tile(aa, 2), np.repeat(bb, 2))
+            return Texture(data.reshape(2, 2).astype(np.float32), h_u, h_v, 0.5, 0.5, path, m, key)
         if path == "fft":
             data = _centred(_fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers), np.float32)
         else:

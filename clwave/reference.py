@@ -69,11 +69,15 @@ def bin_by_tile(bbox, tiles_x, tiles):
     return ranges, vals
 
 
-def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width, height):
-    """Reference of ``splat_accumulate`` (float64): bilinear footprint samples times c.
+def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width, height, channels=4):
+    """Reference of ``splat_accumulate`` (float64): footprint samples times c, channels < ``channels``.
 
-    ``textures`` are ``(data (nv, nu), centre_u, centre_v, P)``: unpacked, P texels per pixel.
+    ``textures`` are ``(data (nv, nu), centre_u, centre_v, P, s_u, s_v)``: P texels per pixel
+    with bilinear lookup, or P = -1 for a cell texture with nearest-sample lookup at s_u, s_v
+    texels per pixel.  The nearest texel is chosen from the kernel's float32 texel coordinate,
+    so a pixel centre within rounding of a cell edge picks the same cell.
     """
+    f32 = np.float32
     fb = np.zeros((height, width, 4))
     tiles_x = -(-width // TILE)
     for tile, (start, end) in enumerate(ranges):
@@ -84,20 +88,27 @@ def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width,
             ys = np.arange(max(y0, ty * TILE), min(y1, ty * TILE + TILE - 1) + 1)
             if not len(xs) or not len(ys):
                 continue
-            data, cu, cv, P = textures[stex[s]]
+            data, cu, cv, P, su, sv = textures[stex[s]]
             nv, nu = data.shape
             tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
             tex[1:-1, 1:-1] = data
-            tu = cu + (xs - np.float64(centre[s, 0])) * P
-            tv = cv + (np.float64(centre[s, 1]) - ys) * P
-            iu, iv = np.floor(tu).astype(int), np.floor(tv).astype(int)
-            fu, fv = tu - iu, tv - iv
-            iu, iv = np.clip(iu + 1, 0, nu + 1), np.clip(iv + 1, 0, nv + 1)
-            iu1, iv1 = np.clip(iu + 1, 0, nu + 1), np.clip(iv + 1, 0, nv + 1)
-            top = tex[iv[:, None], iu[None, :]] * (1 - fu) + tex[iv[:, None], iu1[None, :]] * fu
-            bot = tex[iv1[:, None], iu[None, :]] * (1 - fu) + tex[iv1[:, None], iu1[None, :]] * fu
-            sample = top * (1 - fv[:, None]) + bot * fv[:, None]
-            fb[ys[:, None], xs[None, :]] += sample[..., None] * values[first + s]
+            if P == -1:
+                tu = (f32(cu) + f32(0.5)) + (xs.astype(f32) - centre[s, 0]) * f32(su)
+                tv = (f32(cv) + f32(0.5)) + (centre[s, 1] - ys.astype(f32)) * f32(sv)
+                iu = np.clip(np.floor(tu).astype(int), -1, nu) + 1
+                iv = np.clip(np.floor(tv).astype(int), -1, nv) + 1
+                sample = tex[iv[:, None], iu[None, :]]
+            else:
+                tu = cu + (xs - np.float64(centre[s, 0])) * P
+                tv = cv + (np.float64(centre[s, 1]) - ys) * P
+                iu, iv = np.floor(tu).astype(int), np.floor(tv).astype(int)
+                fu, fv = tu - iu, tv - iv
+                iu, iv = np.clip(iu + 1, 0, nu + 1), np.clip(iv + 1, 0, nv + 1)
+                iu1, iv1 = np.clip(iu + 1, 0, nu + 1), np.clip(iv + 1, 0, nv + 1)
+                top = tex[iv[:, None], iu[None, :]] * (1 - fu) + tex[iv[:, None], iu1[None, :]] * fu
+                bot = tex[iv1[:, None], iu[None, :]] * (1 - fu) + tex[iv1[:, None], iu1[None, :]] * fu
+                sample = top * (1 - fv[:, None]) + bot * fv[:, None]
+            fb[ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
     return fb
 
 

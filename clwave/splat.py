@@ -23,7 +23,7 @@ from . import programs
 from .camera import Camera
 from .device import ComputeContext
 from .errors import DeviceMemoryError, InputError
-from .footprint import DEFAULT_OMEGA_MIN, footprints
+from .footprint import DEFAULT_OMEGA_MIN, cells_are_exact, footprints
 from .result import RenderResult
 from .wavelet import WaveletVolume
 
@@ -46,6 +46,8 @@ class ViewTables:
         shape = np.array(wv.shape[::-1], float)      # (nx, ny, nz)
         omega = omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
         self.omega_s, self.textures, self.texels_per_pixel = omega, {}, {}
+        if path == "auto" and cells_are_exact(wav, view.u, view.v):
+            path = "cells"  # Haar at an axis-aligned view: exact piecewise-constant footprints
         start = time.perf_counter()
         for m in sorted({b.level for b in g.bands}):
             # texels of exactly 1/P pixel (cl/splat_raster.cl), at least the band of eq. 36 and the
@@ -81,12 +83,20 @@ class ViewTables:
                 continue
             self.band_tex[m * 8 + code] = len(ints)
             nv, nu = tex.data.shape
-            P = self.texels_per_pixel[m]
-            planes = pack_texture(tex.data, P)
-            boxes.append((-tex.centre_u / P, (nu - 1 - tex.centre_u) / P,
-                          -tex.centre_v / P, (nv - 1 - tex.centre_v) / P))
-            ints.append((offset, planes.shape[2], planes.shape[1], P))
-            maps.append((tex.centre_u, tex.centre_v, 0.0, 0.0))
+            if tex.path == "cells":  # nearest-sample lookup (P = -1) at s texels per pixel
+                su, sv = view.pixel / tex.h_u, view.pixel / tex.h_v
+                planes = pack_texture(tex.data, 1)
+                boxes.append((-(tex.centre_u + 0.5) / su, (nu - 0.5 - tex.centre_u) / su,
+                              -(tex.centre_v + 0.5) / sv, (nv - 0.5 - tex.centre_v) / sv))
+                ints.append((offset, planes.shape[2], planes.shape[1], -1))
+                maps.append((tex.centre_u, tex.centre_v, su, sv))
+            else:
+                P = self.texels_per_pixel[m]
+                planes = pack_texture(tex.data, P)
+                boxes.append((-tex.centre_u / P, (nu - 1 - tex.centre_u) / P,
+                              -tex.centre_v / P, (nv - 1 - tex.centre_v) / P))
+                ints.append((offset, planes.shape[2], planes.shape[1], P))
+                maps.append((tex.centre_u, tex.centre_v, 0.0, 0.0))
             pool.append(planes.ravel())
             offset += planes.size
         self.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
@@ -132,8 +142,9 @@ class SplatRenderer:
     device : str or ComputeContext
     omega_s : float, optional
         Footprint band (paper eq. 35/36); default from the pixel size.
-    path : "auto", "fft" or "spatial"
-        How footprint textures are made (:func:`clwave.footprint.footprints`).
+    path : "auto", "fft", "spatial" or "cells"
+        How footprint textures are made (:func:`clwave.footprint.footprints`); "auto" takes
+        "cells" (exact, nearest-sample lookup) for Haar at axis-aligned views.
     """
 
     def __init__(self, wv: WaveletVolume, device=None, omega_s=None, path="auto"):

@@ -15,8 +15,8 @@ from scipy.integrate import quad
 
 from clwave.bspline import SplineWavelet
 from clwave.errors import InputError
-from clwave.footprint import (DEFAULT_OMEGA_MIN, Texture, centred_fourier, footprints, line_integral,
-                              projected_halfwidths, sample_count, view_vectors)
+from clwave.footprint import (DEFAULT_OMEGA_MIN, Texture, cells_are_exact, centred_fourier, footprints,
+                              line_integral, projected_halfwidths, sample_count, view_vectors)
 
 KEYS = [z + y + x for z in "ad" for y in "ad" for x in "ad"]  # array order (z, y, x)
 OBLIQUE = [(30.0, 20.0), (-70.0, -15.0), (45.0, 35.26)]
@@ -197,6 +197,45 @@ def test_haar_and_linear_spatial_textures_are_exact(order, view):
             errs, tex = max_errors(order, view, m, spacing, count=16)
             assert {t.path for t in tex.values() if t is not None} == {"spatial"}
             assert max(errs.values()) <= 1e-6, errs  # float32 rounding; float64 is line_integral
+
+
+@pytest.mark.parametrize("view", AXIS + [(180.0, 0.0), (-90.0, -90.0)])
+@pytest.mark.parametrize("spacing", SPACINGS)
+def test_haar_cells_at_axis_views_are_exact_everywhere(view, spacing):
+    """Nearest-sample lookup of the 2 x 2 cells gives the exact footprint at any point of the
+    support box, not only at the samples: the jumps lie on the cell edges."""
+    w = SplineWavelet(1)
+    n, u, v = frame(*view)
+    assert cells_are_exact(w, u, v)
+    rng = np.random.default_rng(3)
+    for m in (0, 2):
+        tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], path="cells")
+        peak = aaa_peak(w, m, spacing, n, u, v)
+        assert sum(t is not None for t in tex.values()) == 4  # psi along n vanishes
+        for (_, key), t in tex.items():
+            if t is None:
+                continue
+            hu, hv = projected_halfwidths(w, key, m, spacing, u, v)
+            assert t.data.shape == (2, 2) and (t.h_u, t.h_v) == pytest.approx((hu, hv))
+            a, b = rng.uniform(-hu, hu, 200), rng.uniform(-hv, hv, 200)
+            a, b = a[np.abs(a) > 1e-6 * hu], b[np.abs(b) > 1e-6 * hv]  # off the middle knots
+            k = min(len(a), len(b))
+            a, b = a[:k], b[:k]
+            iu = np.floor(a / t.h_u + t.centre_u + 0.5).astype(int)
+            iv = np.floor(b / t.h_v + t.centre_v + 0.5).astype(int)
+            want = oracle(w, key, m, spacing, n, u, v, a, b)
+            assert np.max(np.abs(t.data[iv, iu] - want)) <= 1e-6 * peak
+
+
+def test_cells_need_haar_at_an_axis_view():
+    n, u, v = frame(30.0, 20.0)
+    assert not cells_are_exact(1, u, v)
+    with pytest.raises(InputError, match="cells"):
+        footprints(1, (1, 1, 1), n, u, v, [(0, "aaa")], path="cells")
+    n, u, v = frame(0.0, 0.0)
+    assert not cells_are_exact(2, u, v)
+    with pytest.raises(InputError, match="cells"):
+        footprints(2, (1, 1, 1), n, u, v, [(0, "aaa")], path="cells")
 
 
 @pytest.mark.parametrize("order, bound", [(1, 0.1), (2, 0.2)])

@@ -14,7 +14,7 @@ W, H = 45, 37  # not multiples of the 16-pixel tile
 TILES_X, TILES_Y = 3, 3
 
 
-def random_scene(rng, n=400, n_tex=5):
+def random_scene(rng, n=400, n_tex=7):
     coef = np.zeros((n + 7, 4), np.int32)
     coef[:, :3] = rng.integers(-3, 12, (n + 7, 3))
     coef[:, 3] = rng.integers(0, 3, n + 7) * 8 + rng.integers(0, 8, n + 7)
@@ -23,17 +23,22 @@ def random_scene(rng, n=400, n_tex=5):
     step_col = rng.uniform(-3, 3, (8, 4)).astype(np.float32)
     step_row = rng.uniform(-3, 3, (8, 4)).astype(np.float32)
     ints, maps, boxes, pool, textures, off = [], [], [], [np.zeros(16)], [], 16
-    for _ in range(n_tex):
+    for i in range(n_tex):
         nu, nv = rng.integers(2, 30, 2)
-        P = int(rng.integers(1, 6))  # texels per pixel
         cu, cv = rng.uniform(0, nu - 1), rng.uniform(0, nv - 1)
         data = rng.standard_normal((nv, nu)).astype(np.float32)
-        planes = pack_texture(data, P)
+        if i < 2:  # cell textures: nearest sample at s texels per pixel, the box reaches half a texel out
+            P, su, sv = -1, rng.uniform(0.2, 3.0), rng.uniform(0.2, 3.0)
+            planes = pack_texture(data, 1)
+            boxes.append((-(cu + 0.5) / su, (nu - 0.5 - cu) / su, -(cv + 0.5) / sv, (nv - 0.5 - cv) / sv))
+        else:
+            P, su, sv = int(rng.integers(1, 6)), 0.0, 0.0  # texels per pixel, bilinear
+            planes = pack_texture(data, P)
+            boxes.append((-cu / P, (nu - 1 - cu) / P, -cv / P, (nv - 1 - cv) / P))
         ints.append((off, planes.shape[2], planes.shape[1], P))
-        maps.append((cu, cv, 0, 0))
-        boxes.append((-cu / P, (nu - 1 - cu) / P, -cv / P, (nv - 1 - cv) / P))
+        maps.append((cu, cv, su, sv))
         pool.append(planes.ravel())
-        textures.append((data, cu, cv, P))
+        textures.append((data, cu, cv, P, su, sv))
         off += planes.size
     values = rng.standard_normal((n + 7, 4)).astype(np.float32)
     return dict(coef=coef, band_tex=band_tex, band_origin=band_origin, step_col=step_col, step_row=step_row,
@@ -88,9 +93,10 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
                         ranges.data, vals.data, np.uint32(first), centre.data, bbox.data, stex.data,
                         d["values"].data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
     expected = 0.5 + reference.accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"],
-                                          s["textures"], W, H)
-    expected[..., channels:] = 0.5  # channels beyond CLW_CHANNELS are left as they are
+                                          s["textures"], W, H, channels)
     got = fb.get().reshape(H, W, 4)
     assert np.abs(expected - 0.5).max() > 1  # splats did land
+    cells = np.isin(r_tex, [0, 1]) & (r_count > 0)
+    assert cells.sum() > 10 and (~cells & (r_count > 0)).sum() > 10  # both lookups ran
     # float32 sums of float32 texel coordinates: rounding at 1e-5 of the image's magnitude
     assert np.abs(got - expected).max() <= 1e-5 * np.abs(expected).max()
