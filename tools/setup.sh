@@ -4,6 +4,9 @@
 #   bash tools/setup.sh            install only
 #   bash tools/setup.sh --demo     install, then compress and render the built-in hydrogen phantom
 #   bash tools/setup.sh --test     install, then run the test suite
+#   bash tools/setup.sh --peers    also install the peers and figures extras (VTK, matplotlib, nilearn)
+#                                  and the Mesa EGL libraries VTK renders offscreen with, for
+#                                  tools/compare_peers.py and tools/figures.py
 #
 # Steps: Python 3 with venv (apt-get if missing) -> virtual environment .venv (CLWAVE_VENV
 # overrides) -> `pip install .[test]` -> an OpenCL self-test kernel; when no working OpenCL
@@ -13,7 +16,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV="${CLWAVE_VENV:-.venv}"
 mode="${1:-}"
-case "$mode" in ""|--demo|--test) ;; *) echo "usage: bash tools/setup.sh [--demo|--test]" >&2; exit 2 ;; esac
+case "$mode" in ""|--demo|--test|--peers) ;; *) echo "usage: bash tools/setup.sh [--demo|--test|--peers]" >&2; exit 2 ;; esac
 
 say() { printf '\n==> %s\n' "$*"; }
 
@@ -60,5 +63,22 @@ case "$mode" in
     --test)
         say "running the tests"
         "$VENV/bin/python" -m pytest -q
+        ;;
+    --peers)
+        say "installing the peers and figures extras (VTK, matplotlib, nilearn) into $VENV"
+        "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check ".[test,peers,figures]"
+        vtk_egl() {  # VTK's offscreen window on Mesa's EGL (llvmpipe); no display needed
+            VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow "$VENV/bin/python" -c '
+import vtkmodules.vtkRenderingOpenGL2
+from vtkmodules.vtkRenderingCore import vtkRenderWindow
+w = vtkRenderWindow(); w.SetOffScreenRendering(1); w.SetSize(8, 8); w.Render()
+assert type(w).__name__ == "vtkEGLRenderWindow" and w.SupportsOpenGL()' >/dev/null 2>&1
+        }
+        if ! vtk_egl; then
+            say "VTK cannot render offscreen: installing Mesa's EGL (libegl1 libegl-mesa0 libgl1-mesa-dri)"
+            apt_install libegl1 libegl-mesa0 libgl1-mesa-dri
+            vtk_egl || { echo "clwave setup: VTK still cannot open an EGL window" >&2; exit 1; }
+        fi
+        say "VTK renders offscreen through EGL; run python tools/compare_peers.py and python tools/figures.py"
         ;;
 esac
