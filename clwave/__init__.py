@@ -16,6 +16,7 @@ from .camera import Camera
 from .result import RenderResult
 from .splat import SplatRenderer, splat
 from .progressive import progressive
+from .raytrace import Phong, RayTracer, raytrace
 
 __version__ = "0.1.0"
 
@@ -23,5 +24,5 @@ __all__ = [
     "ClwaveError", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
     "KernelBuildError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult",
-    "SplatRenderer", "splat", "progressive", "__version__",
+    "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
 ]

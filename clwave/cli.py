@@ -46,7 +46,7 @@ def _add_input_options(p):
     g.add_argument("--byte-order", choices=["<", ">"], help=".raw only: little (<) or big (>) endian")
     g.add_argument("--spacing", help="voxel spacing DZ,DY,DX (or one number); overrides the file")
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
-    g.add_argument("--background", type=float, default=0.0, help="value subtracted so outside is ~0")
+    g.add_argument("--subtract", type=float, default=0.0, help="value subtracted so outside is ~0 (air, water)")
     g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
 
 
@@ -84,7 +84,7 @@ def read_volume(args):
     if series is not None and series.isdigit():
         series = int(series)
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
-                series=series, background=args.background, hu_to_mu=args.hu_to_mu)
+                series=series, background=args.subtract, hu_to_mu=args.hu_to_mu)
 
 
 def build_model(args, log=print):
@@ -200,11 +200,35 @@ def _camera_options(p):
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
 
 
+def _raytrace_options(p):
+    g = p.add_argument_group("ray tracing (--method raytrace)")
+    g.add_argument("--perspective", action="store_true", help="perspective camera (default orthographic)")
+    g.add_argument("--fov", type=float, default=30.0, help="perspective: vertical field of view, degrees")
+    g.add_argument("--distance", type=float, help="perspective: eye distance from the target (world units)")
+    g.add_argument("--tolerance", type=float, default=1e-3, help="absolute error per output value (1e-3)")
+    g.add_argument("--light", action="append", help="directional light AZ,EL in degrees; repeat for more; "
+                   "'none' for ambient only (default: a headlight)")
+    g.add_argument("--no-shading", action="store_true", help="unlit emission")
+    g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
+    g.add_argument("--background", default="0,0,0", help="PNG: colour R,G,B in 0..1 behind the volume")
+
+
 def make_camera(args):
     from .camera import Camera
 
     size = _numbers(args.size.replace("x", ","), "--size", (1, 2), int)
-    return Camera(args.azimuth, args.elevation, size if len(size) == 2 else size[0], extent=args.extent)
+    perspective = dict(perspective=True, distance=args.distance, fov=args.fov) \
+        if getattr(args, "perspective", False) else {}
+    return Camera(args.azimuth, args.elevation, size if len(size) == 2 else size[0], extent=args.extent,
+                  **perspective)
+
+
+def _lights(args):
+    if args.light is None:
+        return None
+    if args.light == ["none"]:
+        return []
+    return [tuple(_numbers(spec, "--light", (2,))) for spec in args.light]
 
 
 def _display_window(args):
@@ -221,6 +245,7 @@ def _write_gif(path, pictures, seconds_per_frame, force):
 
 
 def cmd_render(args):
+    from .raytrace import RayTracer, raytrace
     from .result import resolve_window
     from .splat import SplatRenderer, splat
 
@@ -232,30 +257,55 @@ def cmd_render(args):
         raise InputError("--turntable N needs N >= 1 and an output ending in .gif")
     if args.turntable is None and out.suffix.lower() != ".png":
         raise InputError(f"output {out} must end in .png (or .gif with --turntable N)")
+    background = _numbers(args.background, "--background", (3,))
     camera = make_camera(args)
+    if args.method == "splat" and camera.perspective:
+        raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
     wv, _ = build_model(args)
-    renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s)
-    if args.turntable is None:
-        result = splat(wv, camera, renderer=renderer)
-        result.save(out, window=_display_window(args), overwrite=args.force)
+    if args.method == "raytrace":
+        tracer = RayTracer(wv, device=args.device)
+        options = dict(tolerance=args.tolerance, lights=_lights(args), shading=not args.no_shading,
+                       absorption=not args.xray)
+
+        def render(cam):
+            return raytrace(wv, cam, tracer=tracer, **options)
     else:
-        results = [splat(wv, camera.rotated(360.0 * i / args.turntable), renderer=renderer)
-                   for i in range(args.turntable)]
+        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s)
+
+        def render(cam):
+            return splat(wv, cam, renderer=renderer)
+    if args.turntable is None:
+        result = render(camera)
+        result.save(out, window=_display_window(args), background=background, overwrite=args.force)
+    else:
+        results = [render(camera.rotated(360.0 * i / args.turntable)) for i in range(args.turntable)]
         window = _display_window(args)
-        if window == "auto":  # one window for the whole turn, so brightness does not flicker
+        if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
             window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
-        _write_gif(out, [r.to_uint8(window) for r in results], 0.1, args.force)
+        _write_gif(out, [r.to_uint8(window, background) for r in results], 0.1, args.force)
         result = results[0]
-        result.meta["turntable_seconds"] = [r.meta["seconds"]["total"] for r in results]
+        result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
     if args.raw:
         result.save(args.raw, overwrite=args.force)
     if args.stats:
         result.save(args.stats, overwrite=args.force)
-    s = result.meta["seconds"]
-    print(f"splatted {result.meta['coefficients']:,} coefficients at {camera.size[0]}x{camera.size[1]} in "
-          f"{s['total']:.3f} s (footprints {s['footprints']:.3f}, binning {s['binning']:.3f}, "
-          f"accumulation {s['accumulation']:.3f}; kernel build {s['compile']:.2f} s apart) -> {out}")
+    size = f"{camera.size[0]}x{camera.size[1]}"
+    m = result.meta
+    if args.method == "raytrace":
+        print(f"ray traced {size} ({m['mode']}, tolerance {m['tolerance']:g}, shading {m['shading']}) in "
+              f"{m['render_seconds']:.3f} s: {m['segments']:,} segments, {m['rays_terminated_early']:,} rays "
+              f"terminated early (B-spline expansion {m['expand_seconds']:.2f} s and kernel build "
+              f"{m['compile_seconds']:.2f} s apart) -> {out}")
+    else:
+        s = m["seconds"]
+        print(f"splatted {m['coefficients']:,} coefficients at {size} in {s['total']:.3f} s (footprints "
+              f"{s['footprints']:.3f}, binning {s['binning']:.3f}, accumulation {s['accumulation']:.3f}; "
+              f"kernel build {s['compile']:.2f} s apart) -> {out}")
     return 0
+
+
+def _total_seconds(meta) -> float:
+    return meta["render_seconds"] if meta["method"] == "raytrace" else meta["seconds"]["total"]
 
 
 def cmd_progressive(args):
@@ -325,9 +375,11 @@ def make_parser():
     p.set_defaults(run=cmd_info)
 
     _command(sub, "compress", "write a thresholded wavelet volume (.clw)", cmd_compress, "output .clw file")
-    p = _command(sub, "render", "render an image (wavelet splatting: X-ray line integrals)", cmd_render,
+    p = _command(sub, "render", "render an image: wavelet splatting (X-ray) or ray tracing (shaded)", cmd_render,
                  "output .png (or .gif with --turntable)", view=True)
-    p.add_argument("--method", choices=["splat"], default="splat", help="rendering method")
+    p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
+                   help="splat: X-ray line integrals; raytrace: emission-absorption, shaded (needs --tf)")
+    _raytrace_options(p)
     p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
     p.add_argument("--raw", help="also write the float32 image as .npy")
     p.add_argument("--stats", help="also write the figures as .json")

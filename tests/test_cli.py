@@ -113,6 +113,27 @@ def test_render_png_raw_stats_and_turntable(tmp_path, capsys):
     assert iio.imread(gif, index=None).shape[:3] == (4, 16, 16)
 
 
+def test_raytrace_png_stats_perspective_and_turntable(tmp_path, capsys):
+    png, stats = tmp_path / "r.png", tmp_path / "r.json"
+    code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--tf", "hydrogen", "--levels", "1",
+                         "--method", "raytrace", "--size", "12x16", "--tolerance", "1e-2", "--light", "30,40",
+                         "--light", "200,0", "--background", "1,1,1", "-o", str(png), "--stats", str(stats))
+    assert code == 0, err
+    import imageio.v3 as iio
+    import json
+    picture = iio.imread(png)
+    assert picture.shape == (12, 16, 3) and "ray traced 12x16" in out
+    assert picture[0, 0].tolist() == [255, 255, 255]  # the corner misses the orbital: background
+    meta = json.loads(stats.read_text())
+    assert meta["method"] == "raytrace" and meta["shading"] == "phong" and len(meta["lights"]) == 2
+    gif = tmp_path / "turn.gif"
+    code, out, err = run(capsys, "render", "phantom:shepp-logan:16", "--tf", "grey", "--levels", "1",
+                         "--method", "raytrace", "--perspective", "--fov", "40", "--size", "8", "--turntable", "2",
+                         "-o", str(gif))
+    assert code == 0, err
+    assert iio.imread(gif, index=None).shape[:3] == (2, 8, 8)
+
+
 def test_progressive_gif_folder_and_stats(tmp_path, capsys):
     gif, stats = tmp_path / "p.gif", tmp_path / "p.json"
     code, out, err = run(capsys, "progressive", "phantom:shepp-logan:32", "--levels", "2", "--size", "32",
@@ -135,6 +156,11 @@ def test_progressive_gif_folder_and_stats(tmp_path, capsys):
     (["render", "phantom:hydrogen:16", "--size", "-4"], "size"),
     (["progressive", "phantom:hydrogen:16", "--steps", "0"], "steps"),
     (["progressive", "phantom:hydrogen:16", "--budget", "0"], "budget"),
+    (["render", "phantom:hydrogen:16", "--levels", "1", "--method", "raytrace"], "classify it first"),
+    (["render", "phantom:hydrogen:16", "--levels", "1", "--method", "raytrace", "--tf", "hydrogen",
+      "--tolerance", "0"], "tolerance"),
+    (["render", "phantom:hydrogen:16", "--perspective"], "--method raytrace"),
+    (["render", "phantom:hydrogen:16", "--method", "raytrace", "--light", "10"], "--light"),
 ])
 def test_render_mistakes(tmp_path, capsys, argv, needle):
     target = tmp_path / ("o.png" if argv[0] == "render" else "o.gif")

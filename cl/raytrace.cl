@@ -1,0 +1,385 @@
+/* raytrace.cl: the emission-absorption integral per pixel (paper §3, eq. 5 and 17, MATH.md §7).
+ *
+ * One work-item per ray.  The ray is cut at every knot plane of every channel group's
+ * fine B-spline lattice (clwave/finegrid.py); inside a segment the field (q_R, q_G, q_B, alpha)
+ * and the gradient of alpha are polynomials in t, of degree <= 3(j - 1).  They are recovered
+ * exactly from CLW_NCHEB samples at Chebyshev points (a Chebyshev series), so that
+ *   - A(a, t) = int_a^t alpha is exact (the antiderivative of the series),
+ *   - int_a^b q e^{-A} comes from adaptive Simpson on the series (>= 2 initial panels,
+ *     accept |S2 - S1| <= 15 tol, return S2 + (S2 - S1)/15), with the shaded q of eq. 4,
+ *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (Clenshaw-Curtis weights of the series).
+ * The budget tol per output value is split: half for the quadrature, spread along the ray in
+ * proportion to segment length and relaxed by 1/T (MATH.md §7), and half for early ray
+ * termination, which stops once T * max(1, q_bound * remaining length) <= tol/2.
+ * Blocks of CLW_BLOCK^3 fine cells without any kept coefficient support are skipped.
+ *
+ * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
+ * CLW_NCHEB samples per segment; CLW_LATTICE 1 or 0.5 (orders of both parities);
+ * CLW_SHADE for Phong shading; CLW_XRAY for line integrals; CLW_DOUBLE for a float64 build. */
+#include "clw_common.h"
+
+#ifdef CLW_DOUBLE
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double real;
+typedef double3 real3;
+typedef double4 real4;
+#define REAL_EPSILON DBL_EPSILON
+#define to_real4(v) convert_double4(v)
+#define to_real3(v) convert_double3(v)
+#else
+typedef float real;
+typedef float3 real3;
+typedef float4 real4;
+#define REAL_EPSILON FLT_EPSILON
+#define to_real4(v) (v)
+#define to_real3(v) (v)
+#endif
+
+#define N CLW_NCHEB
+#ifndef CLW_MAX_DEPTH
+#define CLW_MAX_DEPTH 16
+#endif
+
+constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
+
+/* w[r] = N_j(u + r) and dw[r] = N_j'(u + r), r = 0..j-1: the weight of coefficient c - r in
+ * cell c at u = x - c (MATH.md §1).  Polynomials, so they hold a little outside [0, 1) too. */
+inline void bspline_pieces(const int j, const real u, real *w, real *dw)
+{
+    const real s = 1 - u;
+    if (j == 1) {
+        w[0] = 1; dw[0] = 0;
+    } else if (j == 2) {
+        w[0] = u; w[1] = s;
+        dw[0] = 1; dw[1] = -1;
+    } else if (j == 3) {
+        w[0] = u * u / 2; w[1] = (-2 * u * u + 2 * u + 1) / 2; w[2] = s * s / 2;
+        dw[0] = u; dw[1] = 1 - 2 * u; dw[2] = -s;
+    } else {
+        w[0] = u * u * u / 6; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) / 6;
+        w[2] = ((3 * u - 6) * u * u + 4) / 6; w[3] = s * s * s / 6;
+        dw[0] = u * u / 2; dw[1] = (-3 * u * u + 2 * u + 1) / 2; dw[2] = (3 * u - 4) * u / 2; dw[3] = -s * s / 2;
+    }
+}
+
+typedef struct {
+    __global const float4 *coef;
+    __constant const int4 *start, *shape;
+    __constant const int *offset;
+} Grids;
+
+/* The field and the fine-coordinate gradient of alpha at x (grid-0 fine coordinates), using the
+ * segment's cells `cell[g]` so that every sample of a segment comes from the same polynomial. */
+inline real4 field(const Grids G, const int4 *cell, const real3 x, real3 *grad)
+{
+    real4 v = (real4)(0);
+    real3 gr = (real3)(0);
+    for (int g = 0; g < CLW_GROUPS; g++) {
+        const int j = ORDER[g];
+        const real shift = (real)(ORDER[g] - ORDER[0]) / 2;
+        real wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
+        bspline_pieces(j, x.x + shift - cell[g].x, wx, dx);
+        bspline_pieces(j, x.y + shift - cell[g].y, wy, dy);
+        bspline_pieces(j, x.z + shift - cell[g].z, wz, dz);
+        const int4 s = G.shape[g];
+        const int4 p = cell[g] - G.start[g];
+        __global const float4 *base = G.coef + G.offset[g];
+        for (int rz = 0; rz < j; rz++) {
+            for (int ry = 0; ry < j; ry++) {
+                __global const float4 *row = base + ((size_t)(p.z - rz) * s.y + (p.y - ry)) * s.x + p.x;
+                const real wyz = wy[ry] * wz[rz];
+                for (int rx = 0; rx < j; rx++) {
+                    const real4 c = to_real4(row[-rx]);
+                    v += c * (wx[rx] * wyz);
+#ifdef CLW_SHADE
+                    if (g == CLW_ALPHA)
+                        gr += c.w * (real3)(dx[rx] * wyz, wx[rx] * dy[ry] * wz[rz], wx[rx] * wy[ry] * dz[rz]);
+#endif
+                }
+            }
+        }
+    }
+    *grad = gr;
+    return v;
+}
+
+/* Clenshaw sums of Chebyshev series sum_m a[m] T_m(x), m < n */
+#define CLENSHAW(TYPE, NAME)                                          \
+    inline TYPE NAME(const TYPE *a, const int n, const real x)        \
+    {                                                                 \
+        TYPE b1 = (TYPE)(0), b2 = (TYPE)(0);                          \
+        for (int m = n - 1; m >= 1; m--) {                            \
+            const TYPE b0 = 2 * x * b1 - b2 + a[m];                   \
+            b2 = b1;                                                  \
+            b1 = b0;                                                  \
+        }                                                             \
+        return x * b1 - b2 + a[0];                                    \
+    }
+CLENSHAW(real, cheb1)
+CLENSHAW(real3, cheb3)
+CLENSHAW(real4, cheb4)
+
+typedef struct {
+    real4 q[N];      /* field series (q_R, q_G, q_B, alpha) in xi in [-1, 1] */
+    real3 g[N];      /* gradient-of-alpha series (fine units) */
+    real A[N + 1];   /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
+    real radius;     /* half the segment length in world units */
+} Segment;
+
+typedef struct {
+    real ka, kd, ks, shininess;
+    int nlights;
+    real3 light[8], halfway[8];
+    real3 scale;     /* fine units per world unit, per axis: world gradient = fine gradient * scale */
+} Shading;
+
+/* q e^{-A} at xi: the shaded emission of eq. 4 attenuated inside the segment */
+inline real3 integrand(const Segment *S, const Shading *P, const real xi)
+{
+    const real4 f = cheb4(S->q, N, xi);
+    real3 q = fmax(f.xyz, (real3)(0));
+#ifdef CLW_SHADE
+    const real3 gw = cheb3(S->g, N, xi) * P->scale;
+    const real len = length(gw);
+    real diffuse = 0, specular = 0;
+    if (len > 0) {
+        const real3 n = -gw / len; /* outward: alpha decreases along n (MATH.md §4) */
+        for (int i = 0; i < P->nlights; i++) {
+            diffuse += fmax(dot(n, P->light[i]), (real)0);
+            specular += pow(fmax(dot(n, P->halfway[i]), (real)0), P->shininess);
+        }
+    }
+    q = q * (P->ka + P->kd * diffuse) + P->ks * fmax(f.w, (real)0) * specular;
+#endif
+    return q * exp(-S->radius * cheb1(S->A, N + 1, xi));
+}
+
+typedef struct {
+    real l, r, tol;
+    real3 fl, fm, fr;
+} Panel;
+
+/* int_{-1}^{1} q e^{-A} dxi by adaptive Simpson from 2 panels; counts evaluations, flags depth */
+inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *evals, int *flags)
+{
+    Panel stack[CLW_MAX_DEPTH + 2];
+    int top = 0;
+    const real3 f0 = integrand(S, P, -1), f1 = integrand(S, P, -0.5), f2 = integrand(S, P, 0);
+    const real3 f3 = integrand(S, P, 0.5), f4 = integrand(S, P, 1);
+    *evals += 5;
+    stack[0].l = 0; stack[0].r = 1; stack[0].fl = f2; stack[0].fm = f3; stack[0].fr = f4;
+    stack[1].l = -1; stack[1].r = 0; stack[1].fl = f0; stack[1].fm = f1; stack[1].fr = f2;
+    stack[0].tol = stack[1].tol = tol / 2;
+    top = 2;
+    real3 total = (real3)(0);
+    while (top > 0) {
+        const Panel p = stack[--top];
+        const real m = (p.l + p.r) / 2, w = p.r - p.l;
+        const real3 flm = integrand(S, P, (p.l + m) / 2), fmr = integrand(S, P, (m + p.r) / 2);
+        *evals += 2;
+        const real3 s1 = w / 6 * (p.fl + 4 * p.fm + p.fr);
+        const real3 s2 = w / 12 * (p.fl + 4 * flm + 2 * p.fm + 4 * fmr + p.fr);
+        const real3 d = fabs(s2 - s1);
+        const real err = fmax(d.x, fmax(d.y, d.z));
+        /* below the rounding floor of the arithmetic, halving the panel cannot help */
+        const real floor_err = 16 * REAL_EPSILON * fmax(fabs(s2.x), fmax(fabs(s2.y), fabs(s2.z)));
+        if (err <= fmax(15 * p.tol, floor_err) || top >= CLW_MAX_DEPTH) {
+            if (err > fmax(15 * p.tol, floor_err))
+                *flags |= 2;
+            total += s2 + (s2 - s1) / 15;
+        } else {
+            Panel *right = &stack[top++], *left = &stack[top++];
+            right->l = m; right->r = p.r; right->fl = p.fm; right->fm = fmr; right->fr = p.fr;
+            left->l = p.l; left->r = m; left->fl = p.fl; left->fm = flm; left->fr = p.fm;
+            right->tol = left->tol = p.tol / 2;
+        }
+    }
+    return total;
+}
+
+/* raytrace: one ray per pixel.
+ *
+ * Parameters
+ *   image        out (H, W) float4: premultiplied (R, G, B, 1 - T), or line integrals (CLW_XRAY)
+ *   stats        out (H, W) int4: segments, field samples, integrand evaluations, flags
+ *                    (bit 0 terminated early, bit 1 Simpson depth limit reached)
+ *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
+ *   occ, occ_origin, occ_shape   occupancy of CLW_BLOCK^3 blocks (grid-0 fine coordinates / block)
+ *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates
+ *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;
+ *                                perspective p = base (the eye), w = normalize(dir + c du + r dv),
+ *                                with c, r the pixel centre's offsets from the image centre
+ *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset
+ *   cheb         (N + 1, N) cos(pi m (k + 1/2) / N); row 1 holds the sample points
+ *   tol, q_bound absolute tolerance per output value; an upper bound of the shaded emission
+ *   lights       (nlights,) unit directions towards the lights; phong (ka, kd, ks, shininess)
+ * Grid: global (W, H). */
+__kernel void raytrace(__global float4 *image, __global int4 *stats, const int width, const int height,
+                       __global const float4 *coef, __constant const int4 *start, __constant const int4 *shape,
+                       __constant const int *offset,
+                       __global const uchar *occ, const int4 occ_origin, const int4 occ_shape,
+                       const float4 box_lo, const float4 box_hi,
+                       const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
+                       const float4 to_fine_scale, const float4 to_fine_offset,
+                       __constant const real *cheb, const real tol, const real q_bound,
+                       __constant const float4 *lights, const int nlights, const float4 phong)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    if (col >= width || row >= height)
+        return;
+    const Grids G = {coef, start, shape, offset};
+    const real pc = (real)col + (real)0.5 - (real)width / 2, pr = (real)height / 2 - (real)row - (real)0.5;
+    real3 p, w;
+    if (perspective) {
+        p = to_real3(base.xyz);
+        w = normalize(to_real3(dir.xyz) + pc * to_real3(du.xyz) + pr * to_real3(dv.xyz));
+    } else {
+        p = to_real3(base.xyz) + pc * to_real3(du.xyz) + pr * to_real3(dv.xyz);
+        w = to_real3(dir.xyz);
+    }
+    const real3 scale = to_real3(to_fine_scale.xyz);
+    const real3 X0 = p * scale + to_real3(to_fine_offset.xyz);
+    const real3 D = w * scale; /* fine units per world unit of t */
+
+    /* clip to the support box (slabs) */
+    real t0 = perspective ? 0 : -INFINITY, t1 = INFINITY;
+    const real lo[3] = {box_lo.x, box_lo.y, box_lo.z}, hi[3] = {box_hi.x, box_hi.y, box_hi.z};
+    const real x0[3] = {X0.x, X0.y, X0.z}, dd[3] = {D.x, D.y, D.z};
+    for (int a = 0; a < 3; a++) {
+        if (dd[a] == 0) {
+            if (x0[a] < lo[a] || x0[a] > hi[a])
+                t1 = -INFINITY;
+        } else {
+            const real ta = (lo[a] - x0[a]) / dd[a], tb = (hi[a] - x0[a]) / dd[a];
+            t0 = fmax(t0, fmin(ta, tb));
+            t1 = fmin(t1, fmax(ta, tb));
+        }
+    }
+    const size_t pix = (size_t)row * width + col;
+    int segments = 0, samples = 0, evals = 0, flags = 0;
+    if (!(t1 > t0)) {
+        image[pix] = (float4)(0.0f);
+        stats[pix] = (int4)(0);
+        return;
+    }
+
+#ifndef CLW_XRAY
+    Shading P;
+    P.ka = phong.x; P.kd = phong.y; P.ks = phong.z; P.shininess = phong.w;
+    P.nlights = min(nlights, 8);
+    P.scale = scale;
+    for (int i = 0; i < P.nlights; i++) {
+        P.light[i] = to_real3(lights[i].xyz);
+        P.halfway[i] = normalize(P.light[i] - w); /* halfway between the light and the viewer */
+    }
+    real T = 1;
+    real3 I = (real3)(0);
+#else
+    real4 I = (real4)(0);
+#endif
+    const real total = t1 - t0;
+    const real h = CLW_LATTICE;
+    real tp[3];
+    int plane[3];
+    real t = t0;
+    bool replan = true;
+    while (t < t1) {
+        if (replan) { /* the next knot plane per axis, from the position at t */
+            for (int a = 0; a < 3; a++) {
+                const real x = x0[a] + t * dd[a];
+                plane[a] = dd[a] > 0 ? (int)floor(x / h) + 1 : (int)ceil(x / h) - 1;
+                tp[a] = dd[a] == 0 ? INFINITY : (plane[a] * h - x0[a]) / dd[a];
+                while (tp[a] <= t) { /* x sat on a plane but rounded to its near side */
+                    plane[a] += dd[a] > 0 ? 1 : -1;
+                    tp[a] = (plane[a] * h - x0[a]) / dd[a];
+                }
+            }
+            replan = false;
+        }
+        const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
+        const real3 xm = X0 + (t + tn) / 2 * D;
+        const int4 blk = convert_int4((real4)(floor(xm / CLW_BLOCK), 0)) - occ_origin;
+        const bool inside = blk.x >= 0 && blk.y >= 0 && blk.z >= 0 &&
+                            blk.x < occ_shape.x && blk.y < occ_shape.y && blk.z < occ_shape.z;
+        if (!inside || !occ[((size_t)blk.z * occ_shape.y + blk.y) * occ_shape.x + blk.x]) {
+            /* empty block: jump to where the ray leaves it */
+            const real b[3] = {(real)(blk.x + occ_origin.x), (real)(blk.y + occ_origin.y),
+                               (real)(blk.z + occ_origin.z)};
+            real texit = t1;
+            for (int a = 0; a < 3; a++)
+                if (dd[a] != 0)
+                    texit = fmin(texit, ((b[a] + (dd[a] > 0)) * CLW_BLOCK - x0[a]) / dd[a]);
+            t = fmax(texit, tn);
+            replan = true;
+            continue;
+        }
+        if (tn > t) {
+            Segment S;
+            S.radius = (tn - t) / 2;
+            int4 cell[CLW_GROUPS];
+            for (int g = 0; g < CLW_GROUPS; g++) {
+                const real shift = (real)(ORDER[g] - ORDER[0]) / 2;
+                const int4 c = convert_int4((real4)(floor(xm + shift), 0));
+                cell[g] = (int4)(clamp(c.xyz, start[g].xyz + ORDER[g] - 1, start[g].xyz + shape[g].xyz - 1), 0);
+            }
+            real4 fq[N];
+            real3 fg[N];
+            for (int k = 0; k < N; k++)
+                fq[k] = field(G, cell, xm + S.radius * cheb[N + k] * D, &fg[k]);
+            segments += 1;
+            samples += N;
+            for (int m = 0; m < N; m++) {
+                real4 aq = (real4)(0);
+                real3 ag = (real3)(0);
+                for (int k = 0; k < N; k++) {
+#ifdef CLW_XRAY
+                    aq += fq[k] * cheb[m * N + k];
+#else
+                    aq += fmax(fq[k], (real4)(0)) * cheb[m * N + k]; /* clamp alpha, q >= 0 */
+                    ag += fg[k] * cheb[m * N + k];
+#endif
+                }
+                const real norm = (m == 0 ? (real)1 : (real)2) / N;
+                S.q[m] = aq * norm;
+                S.g[m] = ag * norm;
+            }
+#ifdef CLW_XRAY
+            real4 integral = (real4)(0);
+            for (int m = 0; m < N; m += 2)
+                integral += S.q[m] * (2 / (real)(1 - m * m));
+            I += S.radius * integral;
+#else
+            /* antiderivative of the alpha series: C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 */
+            real c0 = 0, sign = -1;
+            for (int k = 1; k <= N; k++) {
+                const real prev = S.q[k - 1].w * (k == 1 ? 2 : 1);
+                const real next = k + 1 < N ? S.q[k + 1].w : 0;
+                S.A[k] = (prev - next) / (2 * k);
+                c0 -= sign * S.A[k];
+                sign = -sign;
+            }
+            S.A[0] = c0;
+            const real seg_tol = (tol / 2) * (tn - t) / total / T;
+            const real3 part = simpson(&S, &P, seg_tol / S.radius, &evals, &flags);
+            I += T * S.radius * part;
+            T *= exp(-S.radius * cheb1(S.A, N + 1, 1));
+            if (T * fmax((real)1, q_bound * (t1 - tn)) <= tol / 2) {
+                flags |= 1;
+                break;
+            }
+#endif
+        }
+        t = tn;
+        for (int a = 0; a < 3; a++)
+            if (tp[a] <= tn) {
+                plane[a] += dd[a] > 0 ? 1 : -1;
+                tp[a] = (plane[a] * h - x0[a]) / dd[a];
+            }
+    }
+#ifdef CLW_XRAY
+    image[pix] = convert_float4(I);
+#else
+    image[pix] = (float4)(convert_float3(I), (float)(1 - T));
+#endif
+    stats[pix] = (int4)(segments, samples, evals, flags);
+}

@@ -1,0 +1,163 @@
+"""NumPy float64 reference of the ray tracer's quadrature (``cl/raytrace.cl``), for tests.
+
+The same algorithm, written independently of the kernel: the field comes from
+:meth:`WaveletVolume.evaluate` / :meth:`~WaveletVolume.gradient` (closed-form wavelet
+bases) instead of the device's fine B-spline grids; segments are the knot planes of
+the lattice; alpha's exact Chebyshev series gives ``A``; ``∫ q e^{-A}`` comes from
+recursive adaptive Simpson with two initial panels (MATH.md §7); early termination as
+in the kernel.  Slow (Python per segment): tiny volumes and images only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.polynomial import chebyshev
+
+from .raytrace import Phong, RayTracer, light_direction
+
+
+def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
+                       tracer: RayTracer | None = None) -> np.ndarray:
+    """(H, W, 4) float64 image as :func:`clwave.raytrace` computes it, or (H, W, C) line integrals.
+
+    ``tracer`` supplies the clip box, occupancy lattice and emission bound the kernel used.
+    """
+    tr = tracer or RayTracer(wv)
+    view = camera.view(wv)
+    H, W = view.size
+    orders = tr.orders
+    h = 0.5 if len({o % 2 for o in orders}) > 1 else 1.0
+    n_cheb = 3 * (max(orders) - 1) + 1
+    phong = (shading if isinstance(shading, Phong) else Phong()) if shading else None
+    if tr.orders[tr.alpha_group] == 1 or not absorption:
+        phong = None
+    light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
+    bound = tr.q_bound * ((phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0)
+    scale = 1.0 / np.array(wv.spacing[::-1], float)
+    offset = -np.asarray(wv.origin) * scale + (np.array(wv.shape[::-1], float) - 1) / 2 + orders[0] / 2
+    xi = np.cos(np.pi * (np.arange(n_cheb) + 0.5) / n_cheb)
+    out = np.zeros((H, W, 4 if absorption else wv.channels))
+    rays = []
+    for r, c in np.ndindex(H, W):
+        p, w = _ray(view, r, c)
+        t0, t1 = _clip(p * scale + offset, w * scale, tr.box, view.perspective)
+        if t1 > t0:
+            knots = _knots(p * scale + offset, w * scale, t0, t1, h)
+            lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
+            rays.append((r, c, w, (lo + hi) / 2, (hi - lo) / 2, hi, t0, t1,
+                         p + ((lo + hi)[:, None] / 2 + (hi - lo)[:, None] / 2 * xi).reshape(-1, 1) * w))
+    if not rays:
+        return out
+    points = np.concatenate([ray[-1] for ray in rays])  # one evaluation for every sample of every ray
+    fields = np.split(wv.evaluate(points), np.cumsum([len(ray[-1]) for ray in rays])[:-1])
+    grads = np.split(wv.gradient(points)[:, 3, :], len(fields) and np.cumsum([len(f) for f in fields])[:-1]) \
+        if phong else [None] * len(rays)
+    for (r, c, w, mid, rad, hi, t0, t1, _), field, grad in zip(rays, fields, grads):
+        field = field.reshape(len(mid), n_cheb, -1)
+        if not absorption:
+            out[r, c] = np.einsum("s,sc->c", rad, _integral(_fit(field, xi)))
+            continue
+        grad = None if grad is None else grad.reshape(len(mid), n_cheb, 3)
+        out[r, c] = _emission_absorption(np.maximum(field, 0), grad, xi, rad, hi, t1, t1 - t0,
+                                         tolerance, bound, phong, light_dirs, w)
+    return out
+
+
+def _ray(view, r, c):
+    H, W = view.size
+    pc, pr = c + 0.5 - W / 2, H / 2 - r - 0.5
+    if view.perspective:
+        s = 2 * np.tan(np.radians(view.fov) / 2) / H
+        w = -view.n + pc * s * view.u + pr * s * view.v
+        return view.eye, w / np.linalg.norm(w)
+    return view.target + pc * view.pixel * view.u + pr * view.pixel * view.v, -view.n
+
+
+def _clip(x0, d, box, perspective):
+    t0, t1 = (0.0 if perspective else -np.inf), np.inf
+    for a in range(3):
+        if d[a] == 0:
+            if not box[0][a] <= x0[a] <= box[1][a]:
+                return 0.0, -np.inf
+            continue
+        ta, tb = (box[0][a] - x0[a]) / d[a], (box[1][a] - x0[a]) / d[a]
+        t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
+    return t0, t1
+
+
+def _knots(x0, d, t0, t1, h):
+    ts = [np.array([t0, t1])]
+    for a in range(3):
+        if d[a] != 0:
+            ends = sorted([(x0[a] + t0 * d[a]) / h, (x0[a] + t1 * d[a]) / h])
+            planes = np.arange(np.floor(ends[0]), np.ceil(ends[1]) + 1) * h
+            t = (planes - x0[a]) / d[a]
+            ts.append(t[(t > t0) & (t < t1)])
+    return np.unique(np.concatenate(ts))
+
+
+def _fit(samples, xi):
+    """Chebyshev series (S, N, C) of polynomials sampled at the N Chebyshev points xi."""
+    n = len(xi)
+    m = np.arange(n)[:, None]
+    basis = np.cos(m * np.arccos(xi)[None, :])  # T_m(xi_k)
+    coef = np.einsum("mk,skc->smc", basis, samples) * (2.0 / n)
+    coef[:, 0] /= 2
+    return coef
+
+
+def _integral(series):
+    """∫_{-1}^{1} of each series: sum over even m of a_m 2/(1 - m^2)."""
+    m = np.arange(series.shape[1])
+    weights = np.where(m % 2 == 0, 2.0 / (1.0 - m ** 2.0 + (m % 2)), 0.0)
+    return np.einsum("smc,m->sc", series, weights)
+
+
+def _emission_absorption(field, grad, xi, rad, ends, t1, total, tol, bound, phong, lights, w):
+    series = _fit(field, xi)
+    grad_series = _fit(grad, xi) if grad is not None else None
+    T, color = 1.0, np.zeros(3)
+    for s in range(len(rad)):
+        A = chebyshev.chebint(series[s, :, 3], lbnd=-1)
+
+        def integrand(x, s=s, A=A):
+            f = chebyshev.chebval(x, series[s])
+            q = np.maximum(f[:3], 0.0)
+            if phong is not None:
+                q = _shade(q, max(f[3], 0.0), chebyshev.chebval(x, grad_series[s]), phong, lights, w)
+            return q * np.exp(-rad[s] * chebyshev.chebval(x, A))
+
+        seg_tol = tol / 2 * (2 * rad[s]) / total / T
+        color += T * rad[s] * _simpson(integrand, seg_tol / rad[s])
+        T *= np.exp(-rad[s] * chebyshev.chebval(1.0, A))
+        if T * max(1.0, bound * (t1 - ends[s])) <= tol / 2:
+            break
+    return np.append(color, 1.0 - T)
+
+
+def _shade(q, alpha, grad, phong, lights, w):
+    """Phong's eq. 4 with the outward normal -grad/|grad| (world gradient of alpha)."""
+    length = np.linalg.norm(grad)
+    diffuse = specular = 0.0
+    if length > 0:
+        n = -grad / length
+        for light in lights:
+            halfway = (light - w) / np.linalg.norm(light - w)
+            diffuse += max(n @ light, 0.0)
+            specular += max(n @ halfway, 0.0) ** phong.shininess
+    return q * (phong.ambient + phong.diffuse * diffuse) + phong.specular * alpha * specular
+
+
+def _simpson(f, tol):
+    """∫_{-1}^{1} f by recursive adaptive Simpson from the panels [-1, 0] and [0, 1]."""
+    def panel(a, b, fa, fm, fb, tol, depth):
+        m = (a + b) / 2
+        flm, fmr = f((a + m) / 2), f((m + b) / 2)
+        s1 = (b - a) / 6 * (fa + 4 * fm + fb)
+        s2 = (b - a) / 12 * (fa + 4 * flm + 2 * fm + 4 * fmr + fb)
+        if np.max(np.abs(s2 - s1)) <= 15 * tol or depth >= 40:
+            return s2 + (s2 - s1) / 15
+        return panel(a, m, fa, flm, fm, tol / 2, depth + 1) + panel(m, b, fm, fmr, fb, tol / 2, depth + 1)
+
+    f0, f1, f2, f3, f4 = (f(x) for x in (-1.0, -0.5, 0.0, 0.5, 1.0))
+    return panel(-1.0, 0.0, f0, f1, f2, tol / 2, 1) + panel(0.0, 1.0, f2, f3, f4, tol / 2, 1)

@@ -1,0 +1,180 @@
+"""Ray tracing (paper §3): analytic integrals, the NumPy reference, X-ray vs splatting, bad input."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.special import erf
+
+import clwave
+from clwave.quadrature import raytrace_reference
+from clwave.raytrace import Phong, RayTracer, occupancy
+from clwave.reference import line_integrals
+
+TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
+
+
+def rgba_volume(q, alpha, spacing=(1.0, 1.0, 1.0)):
+    """A 4-channel volume with q in R, G, B and alpha in A."""
+    return clwave.Volume(np.stack([q, q, q, alpha], axis=-1).astype(np.float32), spacing=spacing)
+
+
+def errors_over_tolerances(tracer, camera, exact, **kw):
+    errs = []
+    for tol in TOLERANCES:
+        image = tracer.render(camera, tolerance=tol, shading=False, **kw).image
+        err = float(np.max(np.abs(image - exact)))
+        assert err <= tol, f"error {err:.2e} above tolerance {tol:.0e}"
+        errs.append(err)
+    return errs
+
+
+def test_constant_slab_matches_closed_form():
+    """Haar box of q = 2, alpha = 0.7, length L = 6 * 3 along x: I = q/alpha (1 - e^{-alpha L})."""
+    n, q, alpha, dx = 6, 2.0, 0.7, 3.0
+    vol = rgba_volume(np.full((4, 4, n), q), np.full((4, 4, n), alpha), spacing=(1.0, 1.0, dx))
+    tracer = RayTracer(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=1))
+    L = n * dx
+    exact = np.array([q / alpha * (1 - np.exp(-alpha * L))] * 3 + [1 - np.exp(-alpha * L)])
+    errs = errors_over_tolerances(tracer, clwave.Camera(0, 0, size=1), exact)
+    assert errs[-1] < errs[0]  # the error falls over the decade
+
+
+def test_linear_opacity_matches_erf_form():
+    """Linear B-splines with alpha = a x, q = 1.5 (ramping in over the first voxel), along +x."""
+    n, a, q = 10, 0.8, 1.5
+    x = np.arange(n) + 1.0  # voxel i sits at fine x = i + j/2 = i + 1 for j = 2
+    alpha = np.broadcast_to(a * x, (4, 4, n))
+    vol = rgba_volume(np.full((4, 4, n), q), alpha)
+    tracer = RayTracer(clwave.WaveletVolume.from_volume(vol, wavelet="linear", levels=1))
+    # alpha(x) = a x on [0, n]; q ramps as q x on [0, 1]; what lies beyond x = n is below e^{-a n^2 / 2}
+    ramp = q * (1 - np.exp(-a / 2)) / a
+    body = q * np.sqrt(np.pi / (2 * a)) * (erf(n * np.sqrt(a / 2)) - erf(np.sqrt(a / 2)))
+    exact = np.array([ramp + body] * 3 + [1.0])
+    errs = errors_over_tolerances(tracer, clwave.Camera(180, 0, size=1), exact)
+    assert errs[-1] < errs[0]
+
+
+def test_emission_proportional_to_opacity_gives_one_minus_transmittance():
+    """q = c alpha through a random cubic-spline volume: I = c (1 - e^{-A}) for any alpha, A exact."""
+    rng = np.random.default_rng(7)
+    alpha = rng.random((8, 9, 10)) * 0.6
+    c = 3.0
+    wv = clwave.WaveletVolume.from_volume(rgba_volume(c * alpha, alpha, spacing=(1.0, 0.9, 1.1)),
+                                          wavelet="cubic", levels=1)
+    cam = clwave.Camera(30, 20, size=(6, 7))
+    A = line_integrals(wv.reconstruct().data[..., 3], 4, wv.spacing, wv.origin, cam.view(wv))[..., 0]
+    exact = np.concatenate([np.repeat((c * (1 - np.exp(-A)))[..., None], 3, -1), (1 - np.exp(-A))[..., None]], -1)
+    errs = errors_over_tolerances(RayTracer(wv), cam, exact)
+    assert max(errs) > 0 and errs[-1] <= errs[0]
+
+
+@pytest.fixture(scope="module")
+def small_rgba():
+    rng = np.random.default_rng(3)
+    data = rng.random((5, 6, 7, 4)) * np.array([1.0, 0.8, 0.6, 0.5])
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data.astype(np.float32), spacing=(1.0, 0.8, 1.2)),
+                                          wavelet="cubic", levels=1)
+    return wv, RayTracer(wv)
+
+
+@pytest.mark.parametrize("kw", [dict(absorption=False), dict(shading=False), dict(),
+                                dict(lights=[(0, 90), (120, -10)], shading=Phong(0.2, 0.6, 0.5, 8))])
+def test_kernel_equals_numpy_reference(small_rgba, kw):
+    wv, tracer = small_rgba
+    cam = clwave.Camera(30, 20, size=(3, 4))
+    ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer, **kw)
+    got = tracer.render(cam, tolerance=1e-3, **kw).image
+    assert np.max(np.abs(got - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
+
+
+def test_perspective_kernel_equals_reference_and_eye_inside_integrates_from_eye(small_rgba):
+    wv, tracer = small_rgba
+    cam = clwave.Camera(-40, 10, size=(3, 3), perspective=True, distance=4.0, fov=40)
+    ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer)
+    assert np.max(np.abs(tracer.render(cam, tolerance=1e-3).image - ref)) <= 1e-5
+    # an eye in the middle of a constant Haar box sees q/alpha (1 - e^{-alpha d}), d = distance to the wall
+    vol = rgba_volume(np.full((6, 6, 6), 1.0), np.full((6, 6, 6), 0.5))
+    box = RayTracer(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=0))
+    inside = clwave.Camera(0, 0, size=1, perspective=True, distance=1.0, fov=10)  # eye at x = 1, looks along -x
+    img = box.render(inside, tolerance=1e-4, shading=False).image[0, 0]
+    d = 1.0 + 3.0
+    assert np.allclose(img[:3], 2.0 * (1 - np.exp(-0.5 * d)), atol=1e-4)
+    assert np.isclose(img[3], 1 - np.exp(-0.5 * d), atol=1e-4)
+
+
+def test_xray_mode_matches_splatting():
+    vol = clwave.phantom("hydrogen", n=16)
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=2)
+    for cam in (clwave.Camera(30, 20, size=32), clwave.Camera(0, 0, size=32)):
+        ray = clwave.raytrace(wv, cam, absorption=False)
+        spl = clwave.splat(wv, cam)
+        assert ray.meta["mode"] == "xray" and ray.image.shape == spl.image.shape
+        assert np.max(np.abs(ray.image - spl.image)) <= 5e-3 * spl.image.max()
+
+
+def test_occupancy_covers_every_nonzero_value():
+    rng = np.random.default_rng(1)
+    data = np.zeros((20, 24, 28), np.float32)
+    data[3:7, 15:20, 4:9] = rng.random((4, 5, 5))
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet="cubic", levels=2).threshold(keep=0.05)
+    occ, origin, (lo, hi) = occupancy(wv)
+    pts = np.stack(np.meshgrid(*[np.linspace(-16, 16, 25)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    vals = np.abs(wv.evaluate(pts)[:, 0])
+    fine = wv._world_to_fine(pts, 4)  # (z, y, x)
+    blk = np.floor(fine / 8).astype(int) - origin
+    inside = np.all((blk >= 0) & (blk < occ.shape), axis=1)
+    covered = np.zeros(len(pts), bool)
+    covered[inside] = occ[tuple(blk[inside].T)] > 0
+    assert vals[~covered].max(initial=0.0) == 0.0
+    assert 0 < occ.mean() < 0.6  # it does skip something
+
+
+def test_repeat_renders_are_bit_identical(small_rgba):
+    _, tracer = small_rgba
+    cam = clwave.Camera(10, 50, size=8)
+    assert np.array_equal(tracer.render(cam).image, tracer.render(cam).image)
+
+
+def test_shading_meta_and_haar_unshaded():
+    vol = rgba_volume(np.full((4, 4, 4), 1.0), np.full((4, 4, 4), 0.5))
+    res = clwave.raytrace(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=1),
+                          clwave.Camera(20, 10, size=4))
+    assert res.meta["shading"].startswith("off: the Haar basis")
+    assert res.meta["path"] == "bspline" and res.image.shape == (4, 4, 4)
+
+
+def test_zero_lights_leave_the_ambient_term(small_rgba):
+    _, tracer = small_rgba
+    cam = clwave.Camera(30, 20, size=4)
+    ambient_only = tracer.render(cam, lights=[]).image
+    dark = tracer.render(cam, shading=Phong(ambient=0.3, diffuse=0.0, specular=0.0)).image
+    assert np.allclose(ambient_only, dark, atol=1e-6)
+    assert not np.allclose(ambient_only, tracer.render(cam).image)
+
+
+def test_view_that_misses_gives_an_empty_image(small_rgba):
+    _, tracer = small_rgba
+    res = tracer.render(clwave.Camera(0, 0, size=6, target=(0.0, 500.0, 0.0), extent=5.0))
+    assert np.all(res.image == 0) and res.meta["segments"] == 0
+
+
+@pytest.mark.parametrize("tol", [0, -1e-3, float("nan")])
+def test_bad_tolerance(small_rgba, tol):
+    with pytest.raises(clwave.InputError, match="tolerance"):
+        small_rgba[1].render(clwave.Camera(size=4), tolerance=tol)
+
+
+def test_scalar_volume_needs_classification():
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=8), wavelet="linear", levels=1)
+    with pytest.raises(clwave.InputError, match="classify it first"):
+        clwave.raytrace(wv, clwave.Camera(size=4))
+    assert clwave.raytrace(wv, clwave.Camera(size=4), absorption=False).image.shape == (4, 4, 1)
+
+
+def test_too_little_device_memory_is_reported(monkeypatch):
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=8), wavelet="linear", levels=1)
+    cc = clwave.ComputeContext.get()
+    monkeypatch.setattr(cc, "info", dataclasses.replace(cc.info, global_mem=1000))
+    with pytest.raises(clwave.DeviceMemoryError, match="MiB"):
+        RayTracer(wv)
