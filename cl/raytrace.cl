@@ -9,9 +9,11 @@
  *     accept |S2 - S1| <= 15 tol, return S2 + (S2 - S1)/15), with the shaded q of eq. 4,
  *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (Clenshaw-Curtis weights of the series).
  * The budget tol per output value is split: half for the quadrature, spread along the ray in
- * proportion to segment length and relaxed by 1/T (MATH.md §7), and half for early ray
- * termination, which stops once T * max(1, q_bound * remaining length) <= tol/2.
- * Blocks of CLW_BLOCK^3 fine cells without any kept coefficient support are skipped.
+ * proportion to segment length and relaxed by 1/T (MATH.md §7); a quarter for early ray
+ * termination, which stops once T * max(1, q_bound * remaining length) <= tol/4; a quarter for
+ * empty space: blocks of CLW_BLOCK^3 fine cells whose bound on |field| (cl/blocks.cl) is at most
+ * eps are skipped, with eps such that what they could add to the emission, to the optical depth
+ * and, through it, to the rest of the ray stays within tol/4 over the whole ray.
  *
  * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
  * CLW_NCHEB samples per segment; CLW_LATTICE 1 or 0.5 (orders of both parities);
@@ -204,7 +206,7 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
  *   stats        out (H, W) int4: segments, field samples, integrand evaluations, flags
  *                    (bit 0 terminated early, bit 1 Simpson depth limit reached)
  *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
- *   occ, occ_origin, occ_shape   occupancy of CLW_BLOCK^3 blocks (grid-0 fine coordinates / block)
+ *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
  *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates
  *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;
  *                                perspective p = base (the eye), w = normalize(dir + c du + r dv),
@@ -212,16 +214,17 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
  *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset
  *   cheb         (N + 1, N) cos(pi m (k + 1/2) / N); row 1 holds the sample points
  *   tol, q_bound absolute tolerance per output value; an upper bound of the shaded emission
+ *   shade_gain   q_bound / max |coefficient|: how much shading can scale the emission
  *   lights       (nlights,) unit directions towards the lights; phong (ka, kd, ks, shininess)
  * Grid: global (W, H). */
 __kernel void raytrace(__global float4 *image, __global int4 *stats, const int width, const int height,
                        __global const float4 *coef, __constant const int4 *start, __constant const int4 *shape,
                        __constant const int *offset,
-                       __global const uchar *occ, const int4 occ_origin, const int4 occ_shape,
+                       __global const float *bound, const int4 occ_origin, const int4 occ_shape,
                        const float4 box_lo, const float4 box_hi,
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
                        const float4 to_fine_scale, const float4 to_fine_offset,
-                       __constant const real *cheb, const real tol, const real q_bound,
+                       __constant const real *cheb, const real tol, const real q_bound, const real shade_gain,
                        __constant const float4 *lights, const int nlights, const float4 phong)
 {
     const int col = get_global_id(0), row = get_global_id(1);
@@ -278,6 +281,11 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     real4 I = (real4)(0);
 #endif
     const real total = t1 - t0;
+#ifdef CLW_XRAY
+    const real eps = tol / 2 / total;
+#else
+    const real eps = tol / 4 / (total * (shade_gain + 1 + q_bound * total));
+#endif
     const real h = CLW_LATTICE;
     real tp[3];
     int plane[3];
@@ -301,8 +309,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         const int4 blk = convert_int4((real4)(floor(xm / CLW_BLOCK), 0)) - occ_origin;
         const bool inside = blk.x >= 0 && blk.y >= 0 && blk.z >= 0 &&
                             blk.x < occ_shape.x && blk.y < occ_shape.y && blk.z < occ_shape.z;
-        if (!inside || !occ[((size_t)blk.z * occ_shape.y + blk.y) * occ_shape.x + blk.x]) {
-            /* empty block: jump to where the ray leaves it */
+        if (!inside || bound[((size_t)blk.z * occ_shape.y + blk.y) * occ_shape.x + blk.x] <= eps) {
+            /* (nearly) empty block: jump to where the ray leaves it */
             const real b[3] = {(real)(blk.x + occ_origin.x), (real)(blk.y + occ_origin.y),
                                (real)(blk.z + occ_origin.z)};
             real texit = t1;
@@ -363,7 +371,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             const real3 part = simpson(&S, &P, seg_tol / S.radius, &evals, &flags);
             I += T * S.radius * part;
             T *= exp(-S.radius * cheb1(S.A, N + 1, 1));
-            if (T * fmax((real)1, q_bound * (t1 - tn)) <= tol / 2) {
+            if (T * fmax((real)1, q_bound * (t1 - tn)) <= tol / 4) {
                 flags |= 1;
                 break;
             }

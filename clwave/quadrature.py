@@ -4,8 +4,8 @@ The same algorithm, written independently of the kernel: the field comes from
 :meth:`WaveletVolume.evaluate` / :meth:`~WaveletVolume.gradient` (closed-form wavelet
 bases) instead of the device's fine B-spline grids; segments are the knot planes of
 the lattice; alpha's exact Chebyshev series gives ``A``; ``∫ q e^{-A}`` comes from
-recursive adaptive Simpson with two initial panels (MATH.md §7); early termination as
-in the kernel.  Slow (Python per segment): tiny volumes and images only.
+recursive adaptive Simpson with two initial panels (MATH.md §7); early termination and
+the skipping of nearly empty blocks as in the kernel.  Slow (Python per segment): tiny volumes and images only.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.polynomial import chebyshev
 
-from .raytrace import Phong, RayTracer, light_direction
+from .raytrace import BLOCK, Phong, RayTracer, light_direction
 
 
 def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
@@ -32,7 +32,9 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     if tr.orders[tr.alpha_group] == 1 or not absorption:
         phong = None
     light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
-    bound = tr.q_bound * ((phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0)
+    gain = (phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0
+    bound = tr.q_bound * gain
+    block_bound = tr.block_bound.get()
     scale = 1.0 / np.array(wv.spacing[::-1], float)
     offset = -np.asarray(wv.origin) * scale + (np.array(wv.shape[::-1], float) - 1) / 2 + orders[0] / 2
     xi = np.cos(np.pi * (np.arange(n_cheb) + 0.5) / n_cheb)
@@ -44,6 +46,14 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
         if t1 > t0:
             knots = _knots(p * scale + offset, w * scale, t0, t1, h)
             lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
+            total = t1 - t0
+            eps = tolerance / 4 / (total * (gain + 1 + bound * total)) if absorption else tolerance / 2 / total
+            fine_mid = p * scale + offset + ((lo + hi) / 2)[:, None] * (w * scale)  # (x, y, z)
+            blk = np.floor(fine_mid[:, ::-1] / BLOCK).astype(int) - tr.occ_origin
+            inside = np.all((blk >= 0) & (blk < block_bound.shape), axis=1)
+            dense = np.zeros(len(lo), bool)
+            dense[inside] = block_bound[tuple(blk[inside].T)] > eps
+            lo, hi = lo[dense], hi[dense]
             rays.append((r, c, w, (lo + hi) / 2, (hi - lo) / 2, hi, t0, t1,
                          p + ((lo + hi)[:, None] / 2 + (hi - lo)[:, None] / 2 * xi).reshape(-1, 1) * w))
     if not rays:
@@ -130,7 +140,7 @@ def _emission_absorption(field, grad, xi, rad, ends, t1, total, tol, bound, phon
         seg_tol = tol / 2 * (2 * rad[s]) / total / T
         color += T * rad[s] * _simpson(integrand, seg_tol / rad[s])
         T *= np.exp(-rad[s] * chebyshev.chebval(1.0, A))
-        if T * max(1.0, bound * (t1 - ends[s])) <= tol / 2:
+        if T * max(1.0, bound * (t1 - ends[s])) <= tol / 4:
             break
     return np.append(color, 1.0 - T)
 

@@ -86,10 +86,15 @@ class RayTracer:
             shape=cla.to_device(q, np.array([_int4(g.shape) for g in self.grids])),
             offset=cla.to_device(q, np.array(offsets, np.int32)))
         self.q_bound = float(sum(cla.max(abs(g.data)).get() for g in self.grids))
-        occ, self.occ_origin, self.box = occupancy(wv)
-        self.occ = cla.to_device(q, occ)
-        self.occupied_fraction = float(occ.mean()) if occ.size else 0.0
         self.orders = orders
+        occ, self.occ_origin, self.box = occupancy(wv)
+        self.block_bound = cla.empty(q, occ.shape, np.float32)
+        blocks = programs.build(self.cc, ["blocks.cl"], dict(CLW_GROUPS=len(orders), CLW_BLOCK=BLOCK,
+                                                             CLW_ORDERS=",".join(map(str, orders))))
+        blocks.block_max(q, occ.shape[::-1], None, self.block_bound.data, cla.to_device(q, occ).data,
+                         _int4(self.occ_origin), _int4(occ.shape), self.coef.data, self.tables["start"].data,
+                         self.tables["shape"].data, self.tables["offset"].data)
+        self.occupied_fraction = float(occ.mean())
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
 
     def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
@@ -151,16 +156,16 @@ class RayTracer:
         if light_dirs:
             light_buf[: len(light_dirs), :3] = light_dirs
         p = phong or Phong()
-        emission_bound = self.q_bound * ((p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0)
+        shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
         image = cla.empty(q, (H, W, 4), np.float32)
         stats = cla.empty(q, (H, W, 4), np.int32)
         start = time.perf_counter()
         kernels.raytrace(q, (W, H), None, image.data, stats.data, np.int32(W), np.int32(H),
                          self.coef.data, self.tables["start"].data, self.tables["shape"].data,
-                         self.tables["offset"].data, self.occ.data, _int4(self.occ_origin),
-                         _int4(self.occ.shape), _float4(self.box[0]), _float4(self.box[1]),
+                         self.tables["offset"].data, self.block_bound.data, _int4(self.occ_origin),
+                         _int4(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
-                         _float4(scale), _float4(offset), cheb.data, real(tol), real(emission_bound),
+                         _float4(scale), _float4(offset), cheb.data, real(tol), real(self.q_bound * shade_gain), real(shade_gain),
                          cla.to_device(q, light_buf).data, np.int32(len(light_dirs)),
                          _float4([p.ambient, p.diffuse, p.specular, p.shininess]))
         q.finish()

@@ -178,3 +178,16 @@ def test_too_little_device_memory_is_reported(monkeypatch):
     monkeypatch.setattr(cc, "info", dataclasses.replace(cc.info, global_mem=1000))
     with pytest.raises(clwave.DeviceMemoryError, match="MiB"):
         RayTracer(wv)
+
+
+def test_budget_holds_on_a_sparse_thresholded_volume():
+    """Quadrature, early termination and skipped near-empty blocks together stay within tolerance."""
+    rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", n=24))
+    wv = clwave.WaveletVolume.from_volume(rgba, wavelet="cubic", levels=2).threshold(keep=0.05)
+    tracer = RayTracer(wv)
+    cam = clwave.Camera(30, 20, size=12)
+    converged = tracer.render(cam, tolerance=1e-7, precision="double").image
+    for tol in (1e-2, 1e-3):
+        res = tracer.render(cam, tolerance=tol)
+        assert np.max(np.abs(res.image - converged)) <= tol
+    assert res.meta["segments"] < tracer.render(cam, tolerance=1e-7).meta["segments"]  # blocks were skipped
