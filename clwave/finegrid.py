@@ -64,8 +64,8 @@ def fine_grids(wv, cc: ComputeContext, pad: int = 0) -> tuple[list, float]:
             f"{cc.info.name}, which has {cc.info.global_mem / 2**20:.0f} MiB "
             f"({cc.info.max_alloc / 2**20:.0f} MiB per buffer); use fewer levels, crop the volume or pick "
             f"another --device")
+    kernels = [programs.build(cc, ["expand.cl"], dict(CLW_AXIS=a)) for a in range(3)]  # compile apart
     start = time.perf_counter()
-    kernels = programs.build(cc, ["expand.cl"])
     grids = [_expand_group(wv, g, cc, kernels, pad) for g in wv.groups]
     cc.queue.finish()
     return grids, time.perf_counter() - start
@@ -98,13 +98,15 @@ def _expand_group(wv, g, cc, kernels, pad) -> FineGrid:
             by_level.setdefault(band.level, {})[band.key] = part
         else:
             by_level.setdefault(band.level, {})
+    crop = _nonzero_box(wav, g.bands, dense, pad)
     for m in range(wv.levels, 0, -1):
         parts = {"aaa": approx, **by_level.get(m, {})}
         for axis in range(3):  # array axis z, y, x; keys lose their leading letter per axis done
             merged = {}
             for rest in sorted({key[1:] for key in parts}):
                 pair = [(letter, parts[letter + rest]) for letter in "ad" if letter + rest in parts]
-                merged[rest] = _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, pad if m == 1 else 0)
+                merged[rest] = _synth_axis(cc, kernels[2 - axis], pair, axis, d_taps, taps, shifts,
+                                           crop[:, axis] if m == 1 else None)
             parts = merged
         approx = parts[""]
     if wv.levels == 0 and pad:
@@ -113,13 +115,37 @@ def _expand_group(wv, g, cc, kernels, pad) -> FineGrid:
                     wav.order, g.channels)
 
 
-def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, pad) -> _Part:
-    """One synthesis step along array ``axis`` of an ('a', part) / ('d', part) pair."""
+def _nonzero_box(wav, bands, dense, pad) -> np.ndarray:
+    """(2, 3) first and last fine index, per array axis, that can hold a non-zero coefficient, widened by pad.
+
+    A basis function refines into fine B-splines lying inside its support, so only indices i
+    with [i, i + j] inside the union of the kept non-zero supports can be non-zero.
+    """
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for band, arr in zip(bands, dense):
+        nz = np.argwhere(np.any(arr != 0, axis=3))
+        if len(nz) == 0:
+            continue
+        for axis, letter in enumerate(band.key):
+            o, s = wav.offset(letter, band.level), 2 ** band.level
+            lo[axis] = min(lo[axis], o + s * nz[:, axis].min())
+            hi[axis] = max(hi[axis], o + s * (nz[:, axis].max() + wav.support(letter)))
+    if not np.isfinite(lo).all():
+        return np.zeros((2, 3), np.int64)
+    return np.array([lo - pad, hi - wav.order + pad], np.int64)
+
+
+def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, crop) -> _Part:
+    """One synthesis step along array ``axis`` of an ('a', part) / ('d', part) pair.
+
+    ``crop`` (first, last) bounds the output along ``axis`` (the last level: fine indices).
+    """
     ends = [p.box(axis, taps[letter], shifts[letter]) for letter, p in pair]
     lo = np.min([p.start for _, p in pair], axis=0)
     hi = np.max([p.start + p.shape for _, p in pair], axis=0)
-    lo[axis] = min(e[0] for e in ends) - pad
-    hi[axis] = max(e[1] for e in ends) + 1 + pad
+    lo[axis], hi[axis] = min(e[0] for e in ends), max(e[1] for e in ends) + 1
+    if crop is not None:
+        lo[axis], hi[axis] = crop[0], crop[1] + 1
     shape = hi - lo
     out = cla.empty(cc.queue, tuple(int(s) for s in shape) + (4,), np.float32)
     args = []
@@ -127,7 +153,7 @@ def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, pad) -> _Part:
         args += [p.data.data, _int4(p.start), _int4(p.shape), d_taps[letter].data,
                  np.int32(len(taps[letter])), np.int32(shifts[letter])]
     kernels.synth_axis(cc.queue, tuple(int(s) for s in shape[::-1]), None, out.data, _int4(lo), _int4(shape),
-                       np.int32(2 - axis), *args, np.int32(len(pair) == 2))
+                       *args, np.int32(len(pair) == 2))
     return _Part(out, lo, shape)
 
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|footprints|splat|progressive|all [--size 128 256] [--repeats 3]
+    python tools/bench.py decompose|footprints|splat|progressive|raytrace|all [--size 128 256] [--repeats 3]
                           [--views 8] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
 
 Every benchmark runs once per ``--size`` (hydrogen phantom of that many voxels per axis, made
@@ -15,6 +15,9 @@ approximating model) + thresholding to 5 %.
 ``splat``: hydrogen scalar, cubic, 3 levels, 1 %, 5 % and all coefficients at 512² and
 256², each render at a new view with its footprints; throughput = footprint-pixel updates
 per second of accumulation.
+``raytrace``: hydrogen RGBA (preset), cubic, 3 levels, 5 %, shaded, at ``--raytrace-image``
+(512²) for tolerances 1e-2 and 1e-3 over ``--raytrace-views`` views; error against a float64
+render at tolerance 1e-5 of the 64x64 centre crop; set-up (fine-grid expansion) apart.
 ``progressive``: frames of 1, 2, 4 and 8 % of the voxels (``--progressive-keep`` 0.08 in 4
 doubling steps) at 512²; per frame the time since the start of the view, energy, and RMS
 error against the final image.
@@ -166,8 +169,38 @@ def bench_progressive(args) -> dict:
                 compile_seconds=renderer.compile_seconds, frames=frames)
 
 
+def bench_raytrace(args) -> dict:
+    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+    wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05)
+    start = time.perf_counter()
+    tracer = clwave.RayTracer(wv, device=args.device)
+    setup = time.perf_counter() - start
+    size = args.raytrace_image
+    compile_seconds = tracer.render(clwave.Camera(10.0, 5.0, size=8), tolerance=1e-2).meta["compile_seconds"]
+    az0, el0 = views(args.raytrace_views)[0]
+    full = clwave.Camera(az0, el0, size=size).view(wv)
+    crop = clwave.Camera(az0, el0, size=64, extent=full.pixel * 64)  # the 64x64 pixels at the image centre
+    reference = tracer.render(crop, tolerance=1e-5, precision="double").image
+    cases = {}
+    for tol in (1e-2, 1e-3):
+        runs = [tracer.render(clwave.Camera(az, el, size=size), tolerance=tol).meta
+                for az, el in views(args.raytrace_views)]
+        seconds = summary([m["render_seconds"] for m in runs])
+        cases[f"tolerance {tol:g} at {size}x{size}"] = dict(
+            seconds=seconds, segments=statistics.median(m["segments"] for m in runs),
+            segments_per_second=statistics.median(m["segments_per_second"] for m in runs),
+            integrand_evaluations=statistics.median(m["integrand_evaluations"] for m in runs),
+            max_error_vs_float64_crop=float(np.abs(tracer.render(crop, tolerance=tol).image - reference).max()))
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3, keep=0.05,
+                             image=f"{size}x{size}", shading="phong, headlight", views=args.raytrace_views,
+                             path=runs[0]["path"], error_reference="float64 kernel at tolerance 1e-5, 64x64 centre crop"),
+                targets=dict(tolerance_1e_2_seconds=3.0, tolerance_1e_3_seconds=10.0),
+                setup_seconds=dict(total=setup, fine_grid_expansion=tracer.expand_seconds),
+                compile_seconds=compile_seconds, cases=cases)
+
+
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
-              "progressive": bench_progressive}
+              "progressive": bench_progressive, "raytrace": bench_raytrace}
 
 
 def main(argv=None):
@@ -180,6 +213,8 @@ def main(argv=None):
                         help="kept fractions to splat (1 = the full coefficient set)")
     parser.add_argument("--progressive-keep", type=float, default=0.08,
                         help="kept fraction refined progressively in 4 doubling frames")
+    parser.add_argument("--raytrace-views", type=int, default=2, help="distinct views per ray-tracing case")
+    parser.add_argument("--raytrace-image", type=int, default=512, help="ray-traced image size")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
