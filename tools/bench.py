@@ -193,7 +193,8 @@ def bench_raytrace(args) -> dict:
             max_error_vs_float64_crop=float(np.abs(tracer.render(crop, tolerance=tol).image - reference).max()))
     return dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3, keep=0.05,
                              image=f"{size}x{size}", shading="phong, headlight", views=args.raytrace_views,
-                             path=runs[0]["path"], error_reference="float64 kernel at tolerance 1e-5, 64x64 centre crop"),
+                             path=runs[0]["path"],
+                             error_reference="float64 kernel at tolerance 1e-5, 64x64 centre crop"),
                 targets=dict(tolerance_1e_2_seconds=3.0, tolerance_1e_3_seconds=10.0),
                 setup_seconds=dict(total=setup, fine_grid_expansion=tracer.expand_seconds),
                 compile_seconds=compile_seconds, cases=cases)
