@@ -11,9 +11,11 @@
  * The budget tol per output value is split: half for the quadrature, spread along the ray in
  * proportion to segment length and relaxed by 1/T (MATH.md §7); a quarter for early ray
  * termination, which stops once T * max(1, q_bound * remaining length) <= tol/4; a quarter for
- * empty space: blocks of CLW_BLOCK^3 fine cells whose bound on |field| (cl/blocks.cl) is at most
- * eps are skipped, with eps such that what they could add to the emission, to the optical depth
- * and, through it, to the rest of the ray stays within tol/4 over the whole ray.
+ * empty space: a block of CLW_BLOCK^3 fine cells with bound b on |field| (cl/blocks.cl) is skipped
+ * while what it could change stays within what is left of that quarter: over a length l at
+ * transmittance T it could add T b l gain of emission, T b l of opacity, and by its optical depth
+ * b l dim the rest of the ray by at most T b l q_bound (remaining length).  X-ray mode spends half
+ * of tol on skipping (its segment integrals are exact).
  *
  * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
  * CLW_NCHEB samples per segment; CLW_LATTICE 1 or 0.5 (orders of both parities);
@@ -282,9 +284,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
 #endif
     const real total = t1 - t0;
 #ifdef CLW_XRAY
-    const real eps = tol / 2 / total;
+    real skip_budget = tol / 2;
 #else
-    const real eps = tol / 4 / (total * (shade_gain + 1 + q_bound * total));
+    real skip_budget = tol / 4;
 #endif
     const real h = CLW_LATTICE;
     real tp[3];
@@ -309,15 +311,21 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         const int4 blk = convert_int4((real4)(floor(xm / CLW_BLOCK), 0)) - occ_origin;
         const bool inside = blk.x >= 0 && blk.y >= 0 && blk.z >= 0 &&
                             blk.x < occ_shape.x && blk.y < occ_shape.y && blk.z < occ_shape.z;
-        if (!inside || bound[((size_t)blk.z * occ_shape.y + blk.y) * occ_shape.x + blk.x] <= eps) {
-            /* (nearly) empty block: jump to where the ray leaves it */
-            const real b[3] = {(real)(blk.x + occ_origin.x), (real)(blk.y + occ_origin.y),
-                               (real)(blk.z + occ_origin.z)};
-            real texit = t1;
-            for (int a = 0; a < 3; a++)
-                if (dd[a] != 0)
-                    texit = fmin(texit, ((b[a] + (dd[a] > 0)) * CLW_BLOCK - x0[a]) / dd[a]);
-            t = fmax(texit, tn);
+        const real b[3] = {(real)(blk.x + occ_origin.x), (real)(blk.y + occ_origin.y), (real)(blk.z + occ_origin.z)};
+        real texit = t1;
+        for (int a = 0; a < 3; a++)
+            if (dd[a] != 0)
+                texit = fmin(texit, ((b[a] + (dd[a] > 0)) * CLW_BLOCK - x0[a]) / dd[a]);
+        texit = fmax(texit, tn);
+        const real bnd = inside ? bound[((size_t)blk.z * occ_shape.y + blk.y) * occ_shape.x + blk.x] : 0;
+#ifdef CLW_XRAY
+        const real cost = bnd * (texit - t);
+#else
+        const real cost = T * bnd * (texit - t) * (shade_gain + 1 + q_bound * (t1 - texit));
+#endif
+        if (cost <= skip_budget) { /* (nearly) empty block: jump to where the ray leaves it */
+            skip_budget -= cost;
+            t = texit;
             replan = true;
             continue;
         }

@@ -46,14 +46,6 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
         if t1 > t0:
             knots = _knots(p * scale + offset, w * scale, t0, t1, h)
             lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
-            total = t1 - t0
-            eps = tolerance / 4 / (total * (gain + 1 + bound * total)) if absorption else tolerance / 2 / total
-            fine_mid = p * scale + offset + ((lo + hi) / 2)[:, None] * (w * scale)  # (x, y, z)
-            blk = np.floor(fine_mid[:, ::-1] / BLOCK).astype(int) - tr.occ_origin
-            inside = np.all((blk >= 0) & (blk < block_bound.shape), axis=1)
-            dense = np.zeros(len(lo), bool)
-            dense[inside] = block_bound[tuple(blk[inside].T)] > eps
-            lo, hi = lo[dense], hi[dense]
             rays.append((r, c, w, (lo + hi) / 2, (hi - lo) / 2, hi, t0, t1,
                          p + ((lo + hi)[:, None] / 2 + (hi - lo)[:, None] / 2 * xi).reshape(-1, 1) * w))
     if not rays:
@@ -64,13 +56,50 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
         if phong else [None] * len(rays)
     for (r, c, w, mid, rad, hi, t0, t1, _), field, grad in zip(rays, fields, grads):
         field = field.reshape(len(mid), n_cheb, -1)
-        if not absorption:
-            out[r, c] = np.einsum("s,sc->c", rad, _integral(_fit(field, xi)))
-            continue
         grad = None if grad is None else grad.reshape(len(mid), n_cheb, 3)
-        out[r, c] = _emission_absorption(np.maximum(field, 0), grad, xi, rad, hi, t1, t1 - t0,
-                                         tolerance, bound, phong, light_dirs, w)
+        x0, d = _ray_fine(view, r, c, scale, offset)
+        blocks = _BlockSkip(block_bound, tr.occ_origin, x0, d, t1, absorption, tolerance, gain, bound)
+        if not absorption:
+            keep = [s for s in range(len(mid)) if not blocks.skip(mid[s] - rad[s], mid[s] + rad[s], 1.0)]
+            out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(field[keep], xi)))
+            continue
+        out[r, c] = _emission_absorption(np.maximum(field, 0), grad, xi, mid, rad, t1, t1 - t0,
+                                         tolerance, bound, phong, light_dirs, w, blocks)
     return out
+
+
+class _BlockSkip:
+    """The kernel's empty-space rule along one ray: skip a block while its worst case fits the budget."""
+
+    def __init__(self, block_bound, origin, x0, d, t1, absorption, tol, gain, bound):
+        self.bb, self.origin, self.x0, self.d, self.t1 = block_bound, origin, x0, d, t1
+        self.absorption, self.budget = absorption, tol / 4 if absorption else tol / 2
+        self.gain, self.bound, self.until = gain, bound, -np.inf
+
+    def skip(self, a, b, T) -> bool:
+        """Whether segment [a, b] is skipped (it lies in a block skipped from an earlier point, or its own)."""
+        if b <= self.until + 1e-9 * max(1.0, abs(self.until)):
+            return True
+        blk = np.floor((self.x0 + (a + b) / 2 * self.d) / BLOCK).astype(int)  # (x, y, z)
+        idx = blk[::-1] - self.origin
+        inside = np.all((idx >= 0) & (idx < self.bb.shape))
+        value = self.bb[tuple(idx)] if inside else 0.0
+        nz = self.d != 0
+        texit = min(self.t1, np.min(((blk[nz] + (self.d[nz] > 0)) * BLOCK - self.x0[nz]) / self.d[nz]))
+        texit = max(texit, b)
+        cost = value * (texit - a)
+        if self.absorption:
+            cost *= T * (self.gain + 1 + self.bound * (self.t1 - texit))
+        if cost <= self.budget:
+            self.budget -= cost
+            self.until = texit
+            return True
+        return False
+
+
+def _ray_fine(view, r, c, scale, offset):
+    p, w = _ray(view, r, c)
+    return p * scale + offset, w * scale
 
 
 def _ray(view, r, c):
@@ -123,11 +152,14 @@ def _integral(series):
     return np.einsum("smc,m->sc", series, weights)
 
 
-def _emission_absorption(field, grad, xi, rad, ends, t1, total, tol, bound, phong, lights, w):
+def _emission_absorption(field, grad, xi, mid, rad, t1, total, tol, bound, phong, lights, w, blocks):
     series = _fit(field, xi)
     grad_series = _fit(grad, xi) if grad is not None else None
     T, color = 1.0, np.zeros(3)
+    ends = mid + rad
     for s in range(len(rad)):
+        if blocks.skip(mid[s] - rad[s], ends[s], T):
+            continue
         A = chebyshev.chebint(series[s, :, 3], lbnd=-1)
 
         def integrand(x, s=s, A=A):
