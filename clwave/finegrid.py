@@ -150,9 +150,9 @@ def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, crop) -> _Part:
     out = cla.empty(cc.queue, tuple(int(s) for s in shape) + (4,), np.float32)
     args = []
     for letter, p in pair + pair[:1] * (2 - len(pair)):  # a lone part is passed twice, the second ignored
-        args += [p.data.data, _int4(p.start), _int4(p.shape), d_taps[letter].data,
+        args += [p.data.data, int4_xyz(p.start), int4_xyz(p.shape), d_taps[letter].data,
                  np.int32(len(taps[letter])), np.int32(shifts[letter])]
-    kernels.synth_axis(cc.queue, tuple(int(s) for s in shape[::-1]), None, out.data, _int4(lo), _int4(shape),
+    kernels.synth_axis(cc.queue, tuple(int(s) for s in shape[::-1]), None, out.data, int4_xyz(lo), int4_xyz(shape),
                        *args, np.int32(len(pair) == 2))
     return _Part(out, lo, shape)
 
@@ -162,7 +162,7 @@ def _padded(cc, part: _Part, pad: int) -> _Part:
     return _Part(cla.to_device(cc.queue, host), part.start - pad, np.array(host.shape[:3]))
 
 
-def _int4(zyx):
+def int4_xyz(zyx):
     """(z, y, x) -> OpenCL int4 (x, y, z, 0)."""
     z, y, x = (int(v) for v in zyx)
     return cltypes.make_int4(x, y, z, 0)

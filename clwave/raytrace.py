@@ -24,7 +24,7 @@ from . import programs
 from .camera import Camera
 from .device import ComputeContext
 from .errors import DeviceMemoryError, InputError, finite_number
-from .finegrid import fine_grids
+from .finegrid import fine_grids, int4_xyz
 from .result import RenderResult
 from .wavelet import WaveletVolume
 
@@ -82,8 +82,8 @@ class RayTracer:
             for g, off in zip(self.grids, offsets):
                 cl.enqueue_copy(q, self.coef.data, g.data.data, dst_offset=off * 16, byte_count=g.nbytes)
         self.tables = dict(
-            start=cla.to_device(q, np.array([_int4(g.start) for g in self.grids])),
-            shape=cla.to_device(q, np.array([_int4(g.shape) for g in self.grids])),
+            start=cla.to_device(q, np.array([int4_xyz(g.start) for g in self.grids])),
+            shape=cla.to_device(q, np.array([int4_xyz(g.shape) for g in self.grids])),
             offset=cla.to_device(q, np.array(offsets, np.int32)))
         self.q_bound = float(sum(cla.max(abs(g.data)).get() for g in self.grids))
         self.orders = orders
@@ -92,7 +92,7 @@ class RayTracer:
         blocks = programs.build(self.cc, ["blocks.cl"], dict(CLW_GROUPS=len(orders), CLW_BLOCK=BLOCK,
                                                              CLW_ORDERS=",".join(map(str, orders))))
         blocks.block_max(q, occ.shape[::-1], None, self.block_bound.data, cla.to_device(q, occ).data,
-                         _int4(self.occ_origin), _int4(occ.shape), self.coef.data, self.tables["start"].data,
+                         int4_xyz(self.occ_origin), int4_xyz(occ.shape), self.coef.data, self.tables["start"].data,
                          self.tables["shape"].data, self.tables["offset"].data)
         self.occupied_fraction = float(occ.mean())
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
@@ -162,8 +162,8 @@ class RayTracer:
         start = time.perf_counter()
         kernels.raytrace(q, (W, H), None, image.data, stats.data, np.int32(W), np.int32(H),
                          self.coef.data, self.tables["start"].data, self.tables["shape"].data,
-                         self.tables["offset"].data, self.block_bound.data, _int4(self.occ_origin),
-                         _int4(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
+                         self.tables["offset"].data, self.block_bound.data, int4_xyz(self.occ_origin),
+                         int4_xyz(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
                          _float4(scale), _float4(offset), cheb.data, real(tol), real(self.q_bound * shade_gain),
                          real(shade_gain),
@@ -283,11 +283,6 @@ def _broadcast(flags, axis):
     shape = [1, 1, 1]
     shape[axis] = len(flags)
     return flags.reshape(shape)
-
-
-def _int4(zyx):
-    z, y, x = (int(v) for v in zyx)
-    return cltypes.make_int4(x, y, z, 0)
 
 
 def _float4(values):

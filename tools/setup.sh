@@ -56,6 +56,9 @@ case "$mode" in
         "$VENV/bin/clwave" compress phantom:hydrogen:128 --tf hydrogen --keep 0.05 -o out/hydrogen.clw --force
         say "demo: X-ray image by wavelet splatting -> out/hydrogen_splat.png"
         "$VENV/bin/clwave" render phantom:hydrogen:128 --keep 0.05 --size 512 -o out/hydrogen_splat.png --force
+        say "demo: shaded emission-absorption image by ray tracing -> out/hydrogen_raytrace.png"
+        "$VENV/bin/clwave" render phantom:hydrogen:96 --tf hydrogen --keep 0.05 --method raytrace --size 256 \
+            --tolerance 1e-2 -o out/hydrogen_raytrace.png --force
         say "demo: progressive refinement -> out/hydrogen_progressive.gif (figures in .json)"
         "$VENV/bin/clwave" progressive phantom:hydrogen:128 --keep 0.05 --steps 8 --size 256 \
             -o out/hydrogen_progressive.gif --stats out/hydrogen_progressive.json --force
