@@ -72,7 +72,7 @@ def schedule(total: int, steps: int) -> list:
 
 
 def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, device=None, *,
-                omega_s=None, path="auto", renderer: SplatRenderer | None = None):
+                omega_s=None, path="auto", coarse=None, renderer: SplatRenderer | None = None):
     """Yield :class:`ProgressiveFrame` s, coarse to fine, into one framebuffer.
 
     Parameters
@@ -84,6 +84,8 @@ def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, devi
         Seconds: keep doubling while the next step is expected to finish within the
         budget (estimated from the throughput so far); the last frame yielded is the
         last one completed.  The first frame is always made.
+    omega_s, path, coarse :
+        As for :class:`clwave.SplatRenderer`.
     """
     if (steps is None) == (budget is None):
         raise InputError("give exactly one of steps= (number of frames) or budget= (seconds)")
@@ -91,7 +93,7 @@ def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, devi
         raise InputError(f"steps={steps!r} must be a whole number >= 1")
     if budget is not None and not (np.isfinite(budget) and budget > 0):
         raise InputError(f"budget={budget!r} must be a positive number of seconds")
-    r = renderer or SplatRenderer(wv, device=device, omega_s=omega_s, path=path)
+    r = renderer or SplatRenderer(wv, device=device, omega_s=omega_s, path=path, coarse=coarse)
     return _frames(r, camera, steps, budget)
 
 

@@ -12,9 +12,12 @@ world units (CONVENTIONS.md "Outputs").
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from functools import lru_cache
 
 import numpy as np
+import scipy.ndimage
 import pyopencl.array as cla
 from pyopencl.reduction import ReductionKernel
 from pyopencl.scan import ExclusiveScanKernel
@@ -39,9 +42,11 @@ POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pi
 class ViewTables:
     """Host-side per-view tables of one channel group: footprints and band placement."""
 
-    def __init__(self, wv: WaveletVolume, group: int, view, omega_s=None, path="auto"):
+    def __init__(self, wv: WaveletVolume, group: int, view, omega_s=None, path="auto", bands=None):
         g = wv.groups[group]
         wav = g.wavelet
+        # the bands this framebuffer draws (all by default); the others are culled (band_tex = -1)
+        drawn = [b for b in g.bands if bands is None or (b.level, b.key) in bands]
         spacing = np.array(wv.spacing[::-1], float)  # (dx, dy, dz)
         shape = np.array(wv.shape[::-1], float)      # (nx, ny, nz)
         omega = omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
@@ -49,7 +54,7 @@ class ViewTables:
         if path == "auto" and cells_are_exact(wav, view.u, view.v):
             path = "cells"  # Haar at an axis-aligned view: exact piecewise-constant footprints
         start = time.perf_counter()
-        for m in sorted({b.level for b in g.bands}):
+        for m in sorted({b.level for b in drawn}):
             # texels of exactly 1/P pixel (cl/splat_raster.cl), at least the band of eq. 36 and the
             # least band of the level's own prototype (clwave.footprint); Haar and linear footprints
             # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
@@ -57,7 +62,7 @@ class ViewTables:
             P = max(2, int(np.ceil(band * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
             self.texels_per_pixel[m] = P
             self.textures.update(footprints(wav, wv.spacing, view.n, view.u, view.v,
-                                            [(b.level, b.key) for b in g.bands if b.level == m],
+                                            [(b.level, b.key) for b in drawn if b.level == m],
                                             omega_s=omega, path=path, texel=view.pixel / P))
         self.footprint_seconds = time.perf_counter() - start
         self.paths = sorted({t.path for t in self.textures.values() if t is not None})
@@ -78,8 +83,8 @@ class ViewTables:
             self.band_origin[m * 8 + code] = view.to_pixels(world)
             self.step_col[m, :3] = scale * spacing * view.u / view.pixel
             self.step_row[m, :3] = -scale * spacing * view.v / view.pixel
-            tex = self.textures[(m, band.key)]
-            if tex is None:  # psi along the view direction: its footprint vanishes
+            tex = self.textures.get((m, band.key))
+            if tex is None:  # psi along the view direction (its footprint vanishes), or drawn elsewhere
                 continue
             self.band_tex[m * 8 + code] = len(ints)
             nv, nu = tex.data.shape
@@ -145,14 +150,20 @@ class SplatRenderer:
     path : "auto", "fft", "spatial" or "cells"
         How footprint textures are made (:func:`clwave.footprint.footprints`); "auto" takes
         "cells" (exact, nearest-sample lookup) for Haar at axis-aligned views.
+    coarse : float, optional
+        Tolerance, relative to the image maximum, for drawing coarse cubic bands into
+        coarser framebuffers that are upsampled with the cubic B-spline (issue §2; see
+        :func:`coarse_factor`).  None (default): every band at the image's pixel.
     """
 
-    def __init__(self, wv: WaveletVolume, device=None, omega_s=None, path="auto"):
+    def __init__(self, wv: WaveletVolume, device=None, omega_s=None, path="auto", coarse=None):
         if not isinstance(wv, WaveletVolume):
             raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
         if wv.levels >= MAX_LEVELS:
             raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
-        self.wv, self.omega_s, self.path = wv, omega_s, path
+        if coarse is not None and not (isinstance(coarse, (int, float)) and 0 < coarse < 1):
+            raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
+        self.wv, self.omega_s, self.path, self.coarse = wv, omega_s, path, coarse
         self.cc = ComputeContext.get(device)
         start = time.perf_counter()
         px = 1 if self.cc.info.kind == "GPU" else TILE
@@ -186,7 +197,7 @@ class SplatRenderer:
 
     # -------------------------------------------------------------- drawing
     def begin(self, camera: Camera):
-        """Start a frame: resolve the view, make footprints, zero the framebuffer."""
+        """Start a frame: resolve the view, make footprints, zero the framebuffers."""
         if not isinstance(camera, Camera):
             raise InputError("camera must be a clwave.Camera")
         view = camera.view(self.wv)
@@ -196,28 +207,79 @@ class SplatRenderer:
             raise DeviceMemoryError(
                 f"a {H}x{W} framebuffer needs {fb_bytes / 2**20:.0f} MiB but {self.cc.info.name} allows "
                 f"{self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
+        # framebuffer factor of each band of each group: 1 unless drawn coarse
+        factors = [{(b.level, b.key): coarse_factor(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa",
+                                                      view.pixel, min(self.wv.spacing), self.coarse)
+                    if self.coarse else 1 for b in g.bands} for g in self.wv.groups]
         frame = Frame(self, view)
-        for gi in range(len(self.groups)):
-            frame.tables.append(ViewTables(self.wv, gi, view, self.omega_s, self.path))
-        frame.upload()
+        for F in sorted({f for fg in factors for f in fg.values()} | {1}):
+            layer = Layer(self, view, F)
+            for gi, fg in enumerate(factors):
+                layer.tables.append(ViewTables(self.wv, gi, layer.view, self.omega_s, self.path,
+                                               bands={band for band, f in fg.items() if f == F}))
+            layer.upload()
+            frame.layers.append(layer)
         return frame
 
 
-class Frame:
-    """One image being accumulated: splat coefficient ranges in importance order."""
+#: Coarse framebuffers (issue §2): worst error, relative to the image maximum, of one band kind
+#: drawn at coarse pixels of ``ratio * 2^m d_min`` (level m) and upsampled with the prefiltered
+#: cubic B-spline, over three views of random 32^3, Shepp-Logan 64^3 and hydrogen 64^3 volumes
+#: (cubic, 3 levels, all coefficients, pixel 0.866 voxel): the approximation band 9.9e-3 at
+#: ratio 0.433 (8.7e-4 at 0.217); level-3 wavelets 5.0e-3 at 0.217 (0.16 at 0.433); level-2
+#: wavelets 5.2e-2 at 0.433.  The error grows like ratio^4 (x11-32 per doubling).
+COARSE_REFERENCE = dict(approximation=(np.sqrt(3) / 4, 1.0e-2), wavelet=(np.sqrt(3) / 8, 5.0e-3))
+COARSE_MARGIN = 8  # coarse pixels around the image: the prefilter's mirror ends decay by 0.268^8
 
-    def __init__(self, renderer: SplatRenderer, view):
-        self.r, self.view = renderer, view
-        self.tables = []
-        self.device_tables = []
+
+def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixel: float, d_min: float,
+                  tolerance: float) -> int:
+    """Framebuffer coarsening (a power of 2) of one band for a tolerance.
+
+    The tolerance is shared out: half to the approximation band, a quarter to the coarsest
+    wavelet level, an eighth to the next, and so on, so the errors sum to less than it.  A
+    band's share e allows coarse pixels up to ``ratio (e / e_ref)^(1/4) 2^m d_min`` from
+    :data:`COARSE_REFERENCE` (cubic B-spline interpolation errs like the fourth power of
+    the spacing).  Only cubic bands are coarsened (the others have kinks).
+
+    >>> pixel = 3 ** 0.5 / 2  # 256^3 at 512^2 (the default extent)
+    >>> [coarse_factor(4, 3, 3, a, pixel, 1.0, 2e-2) for a in (True, False)]
+    [4, 2]
+    >>> [coarse_factor(4, 3, 3, a, pixel, 1.0, 1e-2) for a in (True, False)]
+    [2, 1]
+    >>> coarse_factor(2, 3, 3, True, pixel, 1.0, 1e-2)
+    1
+    """
+    if order != 4:
+        return 1
+    ratio, error = COARSE_REFERENCE["approximation" if approximation else "wavelet"]
+    share = tolerance / 2.0 if approximation else tolerance / 2.0 ** (levels - level + 2)
+    limit = ratio * (share / error) ** 0.25 * 2.0 ** level * d_min
+    factor = 1
+    while 2 * factor * pixel <= limit * (1 + 1e-9):
+        factor *= 2
+    return factor
+
+
+def _bspline3(t) -> np.ndarray:
+    """The centred cubic B-spline."""
+    t = np.abs(t)
+    return np.where(t < 1, 2 / 3 - t * t + t ** 3 / 2, np.where(t < 2, (2 - t) ** 3 / 6, 0.0))
+
+
+class Layer:
+    """One framebuffer: the image's pixel times ``factor``, with the bands drawn at that pixel."""
+
+    def __init__(self, renderer: SplatRenderer, view, factor: int):
+        self.r, self.factor = renderer, factor
         H, W = view.size
-        q = renderer.cc.queue
-        self.fbs = [cla.zeros(q, (H * W * 4,), np.float32) for _ in renderer.groups]
-        self.stats = dict(splats=0, pairs=0, pixel_updates=0, bin_seconds=0.0, accumulate_seconds=0.0)
-
-    @property
-    def footprint_seconds(self) -> float:
-        return sum(t.footprint_seconds for t in self.tables)
+        if factor > 1:  # same centre, pixel x factor, a margin around the image
+            size = (-(-H // factor) + 2 * COARSE_MARGIN, -(-W // factor) + 2 * COARSE_MARGIN)
+            view = dataclasses.replace(view, size=size, pixel=view.pixel * factor)
+        self.view, self.fine = view, (H, W)
+        self.tables, self.device_tables = [], []
+        h, w = self.view.size
+        self.fbs = [cla.zeros(renderer.cc.queue, (h * w * 4,), np.float32) for _ in renderer.groups]
 
     def upload(self):
         q = self.r.cc.queue
@@ -226,18 +288,62 @@ class Frame:
                                        ("band_tex", "band_origin", "step_col", "step_row", "tex_box",
                                         "tex_int", "tex_map", "texels")})
 
+    def image(self, gi) -> np.ndarray:
+        """Group gi's framebuffer at the image's pixels, (H, W, C) float32 (C its channels)."""
+        h, w = self.view.size
+        img = self.fbs[gi].get().reshape(h, w, 4)[..., : self.r.groups[gi]["channels"]]
+        if self.factor == 1:
+            return img
+        ay, ax = _upsampling(self.fine[0], h, self.factor), _upsampling(self.fine[1], w, self.factor)
+        return np.stack([ay @ img[..., c] @ ax.T for c in range(img.shape[2])], axis=-1)
+
+
+@lru_cache(maxsize=16)
+def _upsampling(n: int, coarse: int, factor: int) -> np.ndarray:
+    """(n, coarse) float32 matrix: samples at coarse pixels -> their prefiltered cubic B-spline
+    interpolant at the n fine pixel centres (same centre, ``factor`` fine pixels per coarse one).
+
+    Fine pixel c lies at coarse index ``(c + 1/2 - n/2) / factor + coarse/2 - 1/2``; the
+    B-spline coefficients are the samples times the inverse of the B-spline's sampling matrix
+    (1/6, 4/6, 1/6, mirrored at the ends, as scipy.ndimage.spline_filter1d).
+    """
+    at = (np.arange(n) + 0.5 - n / 2) / factor + coarse / 2 - 0.5
+    weights = _bspline3(at[:, None] - np.arange(coarse)[None, :])
+    sampling = scipy.ndimage.spline_filter1d(np.eye(coarse), order=3, axis=0, mode="mirror")  # its inverse
+    return (weights @ sampling).astype(np.float32)
+
+
+class Frame:
+    """One image being accumulated: splat coefficient ranges in importance order."""
+
+    def __init__(self, renderer: SplatRenderer, view):
+        self.r, self.view = renderer, view
+        self.layers = []
+        self.stats = dict(splats=0, pairs=0, pixel_updates=0, bin_seconds=0.0, accumulate_seconds=0.0,
+                          upsample_seconds=0.0)
+
+    @property
+    def tables(self) -> list:
+        return [t for layer in self.layers for t in layer.tables]
+
+    @property
+    def footprint_seconds(self) -> float:
+        return sum(t.footprint_seconds for t in self.tables)
+
     def splat(self, first: int, count: int):
         """Add coefficients ``first .. first + count`` (importance order) of every group."""
         for gi in range(len(self.r.groups)):
             n = max(0, min(count, self.r.groups[gi]["count"] - first))
             if n:
-                self._splat_group(gi, first, n)
+                for layer in self.layers:
+                    self._splat_layer(layer, gi, first, n)
+                self.stats["splats"] += n
 
-    def _splat_group(self, gi, first, n):
+    def _splat_layer(self, layer, gi, first, n):
         r, q = self.r, self.r.cc.queue
-        g, t = r.groups[gi], self.device_tables[gi]
+        g, t = r.groups[gi], layer.device_tables[gi]
         k = r.kernels[g["channels"]]
-        H, W = self.view.size
+        H, W = layer.view.size
         tiles_x, tiles_y = -(-W // TILE), -(-H // TILE)
         start = time.perf_counter()
         centre = cla.empty(q, (n, 2), np.float32)
@@ -252,8 +358,8 @@ class Frame:
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
             half = n // 2
             self.stats["bin_seconds"] += time.perf_counter() - start
-            self._splat_group(gi, first, half)
-            self._splat_group(gi, first + half, n - half)
+            self._splat_layer(layer, gi, first, half)
+            self._splat_layer(layer, gi, first + half, n - half)
             return
         if total > budget:
             raise DeviceMemoryError(f"one splat needs {total * BYTES_PER_PAIR} bytes of tile lists, more "
@@ -280,33 +386,36 @@ class Frame:
         k.splat_accumulate(q, (tiles_x * tiles_y * r.local_size,), (r.local_size,), np.int32(W), np.int32(H),
                            np.int32(tiles_x), ranges.data, vals.data, np.uint32(first), centre.data, bbox.data,
                            stex.data, g["values"].data, t["tex_int"].data, t["tex_map"].data,
-                           t["texels"].data, self.fbs[gi].data)
+                           t["texels"].data, layer.fbs[gi].data)
         q.finish()
         self.stats["bin_seconds"] += mid - start
         self.stats["accumulate_seconds"] += time.perf_counter() - mid
-        self.stats["splats"] += n
         self.stats["pairs"] += total
         self.stats["pixel_updates"] += int(r.pixel_updates(bbox, range=slice(0, n), queue=q).get())
 
     def image(self) -> np.ndarray:
-        """The framebuffer so far as (H, W, C) float32."""
+        """The image so far as (H, W, C) float32: the framebuffers summed at the image's pixels."""
         H, W = self.view.size
+        start = time.perf_counter()
         out = np.zeros((H, W, self.r.wv.channels), np.float32)
-        for g, fb in zip(self.r.wv.groups, self.fbs):
-            out[..., list(g.channels)] = fb.get().reshape(H, W, 4)[..., : len(g.channels)]
+        for gi, g in enumerate(self.r.wv.groups):
+            out[..., list(g.channels)] = sum(layer.image(gi) for layer in self.layers)
+        if len(self.layers) > 1:
+            self.stats["upsample_seconds"] += time.perf_counter() - start
         return out
 
 
-def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, path="auto",
+def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, path="auto", coarse=None,
           renderer: SplatRenderer | None = None) -> RenderResult:
     """X-ray image of a wavelet volume by wavelet splatting.
 
     Returns a :class:`RenderResult` whose ``image`` (H, W, C) holds the line integral of
     each channel in world units and whose ``meta`` reports the coefficients splatted,
-    footprint, binning and accumulation times (kernel compile time apart) and the
-    footprint texture path.
+    footprint, binning, accumulation and upsampling times (kernel compile time apart), the
+    footprint texture path and the framebuffer factors.  ``omega_s``, ``path`` and
+    ``coarse`` are those of :class:`SplatRenderer`.
     """
-    r = renderer or SplatRenderer(wv, device=device, omega_s=omega_s, path=path)
+    r = renderer or SplatRenderer(wv, device=device, omega_s=omega_s, path=path, coarse=coarse)
     start = time.perf_counter()
     frame = r.begin(camera)
     frame.splat(0, r.count)
@@ -321,9 +430,10 @@ def _meta(r: SplatRenderer, frame: Frame, seconds: float) -> dict:
                 pixel_updates=frame.stats["pixel_updates"],
                 texture_path=sorted({p for t in tables for p in t.paths}),
                 omega_s=tables[0].omega_s if tables else None,
+                coarse=r.coarse, framebuffers=[layer.factor for layer in frame.layers],
                 seconds=dict(total=seconds, footprints=frame.footprint_seconds,
                              binning=frame.stats["bin_seconds"], accumulation=frame.stats["accumulate_seconds"],
-                             compile=r.compile_seconds))
+                             upsampling=frame.stats["upsample_seconds"], compile=r.compile_seconds))
 
 
 def _energy_prefix(values) -> np.ndarray:

@@ -121,3 +121,41 @@ def test_splat_needs_a_wavelet_volume_and_a_camera(cc, data):
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "haar", levels=1)
     with pytest.raises(InputError):
         clwave.splat(wv, "front", device=cc)
+
+
+@pytest.mark.parametrize("tolerance", [2e-2, 1e-2])
+@pytest.mark.parametrize("volume", ["random", "shepp-logan"])
+def test_coarse_framebuffers_stay_within_their_tolerance(cc, data, tolerance, volume):
+    vol = clwave.Volume(data) if volume == "random" else clwave.phantom("shepp-logan", n=32)
+    wv = clwave.WaveletVolume.from_volume(vol, "cubic", levels=3)
+    single = clwave.SplatRenderer(wv, device=cc)
+    coarse = clwave.SplatRenderer(wv, device=cc, coarse=tolerance)
+    for angles in ((30, 20), (0, 0), (-70, -15)):
+        cam = clwave.Camera(*angles, size=2 * vol.shape[0])
+        want, got = clwave.splat(wv, cam, renderer=single), clwave.splat(wv, cam, renderer=coarse)
+        assert want.meta["framebuffers"] == [1] and got.meta["framebuffers"][-1] > 1
+        error = np.abs(got.image - want.image).max()
+        assert 0 < error <= tolerance * np.abs(want.image).max()  # coarse bands drawn, within the tolerance
+
+
+def test_coarse_framebuffers_only_for_cubic_and_checked(cc, data):
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "linear", levels=3)
+    cam = clwave.Camera(30, 20, size=32)
+    assert clwave.splat(wv, cam, device=cc, coarse=0.5 - 1e-9).meta["framebuffers"] == [1]
+    for bad in (0, 1.0, -1e-2, float("nan"), "1e-2"):
+        with pytest.raises(InputError, match="coarse") as err:
+            clwave.SplatRenderer(wv, device=cc, coarse=bad)
+        assert "\n" not in str(err.value)
+
+
+def test_upsampling_is_the_prefiltered_cubic_bspline():
+    from scipy.ndimage import map_coordinates, spline_filter1d
+
+    samples = np.random.default_rng(2).random(64)
+    for n, factor in ((64, 2), (61, 4)):
+        coarse = -(-n // factor) + 2 * splat_module.COARSE_MARGIN
+        at = (np.arange(n) + 0.5 - n / 2) / factor + coarse / 2 - 0.5  # fine pixel centres, coarse index
+        assert at.min() > 4 and at.max() < coarse - 5  # inside the margin: the ends' extension plays no part
+        want = map_coordinates(spline_filter1d(samples[:coarse], mode="mirror"), [at], order=3, prefilter=False,
+                               mode="mirror")
+        assert np.allclose(splat_module._upsampling(n, coarse, factor) @ samples[:coarse], want, rtol=1e-6, atol=1e-6)

@@ -106,19 +106,23 @@ def bench_splat(args) -> dict:
     cases = {}
     for keep in args.keep:
         wv = full if keep == 1.0 else full.threshold(keep=keep)
-        renderer = clwave.SplatRenderer(wv, device=args.device)
-        for size in (512, 256):
-            clwave.splat(wv, clwave.Camera(10.0, 5.0, size=size), renderer=renderer)  # warm-up
-            runs = [clwave.splat(wv, clwave.Camera(az, el, size=size), renderer=renderer).meta
-                    for az, el in views(args.views)]
-            seconds = {k: summary([m["seconds"][k] for m in runs])
-                       for k in ("total", "footprints", "binning", "accumulation")}
-            updates = statistics.median(m["pixel_updates"] for m in runs)
-            cases[f"keep {keep:g} at {size}x{size}"] = dict(
-                coefficients=wv.kept, seconds=seconds, pixel_updates=updates, tile_pairs=statistics.median(
-                    m["tile_pairs"] for m in runs),
-                updates_per_second=updates / seconds["accumulation"]["median"],
-                texture_path=runs[0]["texture_path"], omega_s=runs[0]["omega_s"])
+        # single-resolution, and for the thresholded sets coarse bands in coarser framebuffers (issue §2)
+        for coarse in (None, 2e-2) if keep < 1.0 else (None,):
+            renderer = clwave.SplatRenderer(wv, device=args.device, coarse=coarse)
+            for size in (512, 256):
+                clwave.splat(wv, clwave.Camera(10.0, 5.0, size=size), renderer=renderer)  # warm-up
+                runs = [clwave.splat(wv, clwave.Camera(az, el, size=size), renderer=renderer).meta
+                        for az, el in views(args.views)]
+                seconds = {k: summary([m["seconds"][k] for m in runs])
+                           for k in ("total", "footprints", "binning", "accumulation", "upsampling")}
+                updates = statistics.median(m["pixel_updates"] for m in runs)
+                name = f"keep {keep:g} at {size}x{size}" + (f", coarse {coarse:g}" if coarse else "")
+                cases[name] = dict(
+                    coefficients=wv.kept, seconds=seconds, pixel_updates=updates, tile_pairs=statistics.median(
+                        m["tile_pairs"] for m in runs),
+                    updates_per_second=updates / seconds["accumulation"]["median"],
+                    texture_path=runs[0]["texture_path"], omega_s=runs[0]["omega_s"],
+                    framebuffers=runs[0]["framebuffers"])
         cases[f"keep {keep:g}"] = dict(compile_seconds=renderer.compile_seconds)
     return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", wavelet="cubic", levels=3,
                              views=args.views, note="each render at a new view, footprints included"),
