@@ -1,8 +1,8 @@
 /* splat_bin.cl: project splats and bin them into image tiles (paper §4, MATH.md §6).
  *
- * Pipeline (host: clwave/splat.py): splat_project -> splat_count_tiles (per chunk of
- * consecutive splats, a count per tile) -> exclusive scan of the counts in (tile, chunk)
- * order -> tile_ranges -> splat_place.  This is a counting sort by tile: each chunk writes
+ * Pipeline (host: clwave/splat.py): splat_project -> splat_chunk_tiles counting (per chunk
+ * of consecutive splats, a count per tile) -> exclusive scan of the counts in (tile, chunk)
+ * order -> tile_ranges -> splat_chunk_tiles placing.  This is a counting sort by tile: each chunk writes
  * its splats, in splat order, at its own offsets within each tile's run, so a tile's splats
  * come in importance order and the accumulated sum is deterministic, with no atomics. */
 #include "clw_common.h"
@@ -58,27 +58,38 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
     count[i] = cnt;
 }
 
-/* splat_count_tiles: how many splats of each chunk touch each tile.
+/* splat_chunk_tiles: walk the tiles each splat of a chunk touches, to count or to place them.
  *   n            number of splats; chunk c holds splats c * chunk .. c * chunk + chunk - 1
+ *   place        0: count, 1: place
  *   bbox         in  (n,) int4 from splat_project
- *   hist         out (tiles, chunks) uint, tile-major: hist[tile * chunks + c]
- * Grid: global (chunks,), any local size; work-item c owns column c of hist. */
-__kernel void splat_count_tiles(const uint n, const uint chunk, const uint chunks, const uint tiles,
-                                const int tiles_x, __global const int4 *bbox, __global uint *hist)
+ *   table        counting: out (tiles, chunks) uint, tile-major, [tile * chunks + c] = how many
+ *                splats of chunk c touch the tile;  placing: in/out, the exclusive scan of the
+ *                counts in that order, i.e. where chunk c writes next in each tile (consumed)
+ *   vals         placing: out (total,) uint, splat indices by tile, in splat order within a tile
+ * Grid: global (chunks,), any local size; work-item c owns column c of table. */
+__kernel void splat_chunk_tiles(const uint n, const uint chunk, const uint chunks, const uint tiles,
+                                const int tiles_x, const int place, __global const int4 *bbox,
+                                __global uint *table, __global uint *vals)
 {
     const uint c = get_global_id(0);
     if (c >= chunks)
         return;
-    for (uint t = 0; t < tiles; ++t)
-        hist[t * chunks + c] = 0;
+    if (!place)
+        for (uint t = 0; t < tiles; ++t)
+            table[t * chunks + c] = 0;
     const uint end = min(n, (c + 1) * chunk);
     for (uint i = c * chunk; i < end; ++i) {
         const int4 b = bbox[i];
         if (b.z < b.x)
             continue;
         for (int ty = b.y / CLW_TILE; ty <= b.w / CLW_TILE; ++ty)
-            for (int tx = b.x / CLW_TILE; tx <= b.z / CLW_TILE; ++tx)
-                ++hist[(uint)(ty * tiles_x + tx) * chunks + c];
+            for (int tx = b.x / CLW_TILE; tx <= b.z / CLW_TILE; ++tx) {
+                __global uint *slot = table + (uint)(ty * tiles_x + tx) * chunks + c;
+                if (place)
+                    vals[(*slot)++] = i;
+                else
+                    ++*slot;
+            }
     }
 }
 
@@ -94,26 +105,4 @@ __kernel void tile_ranges(const uint tiles, const uint chunks, const uint total,
     if (t >= tiles)
         return;
     ranges[t] = (uint2)(offset[t * chunks], t + 1 < tiles ? offset[(t + 1) * chunks] : total);
-}
-
-/* splat_place: write each splat's index into the runs of the tiles it touches.
- *   bbox    in  (n,) int4
- *   offset  in/out (tiles, chunks) uint: where chunk c writes next in each tile (consumed)
- *   vals    out (total,) uint: splat indices by tile, in splat order within a tile
- * Grid: global (chunks,), any local size; chunks as in splat_count_tiles. */
-__kernel void splat_place(const uint n, const uint chunk, const uint chunks, const int tiles_x,
-                          __global const int4 *bbox, __global uint *offset, __global uint *vals)
-{
-    const uint c = get_global_id(0);
-    if (c >= chunks)
-        return;
-    const uint end = min(n, (c + 1) * chunk);
-    for (uint i = c * chunk; i < end; ++i) {
-        const int4 b = bbox[i];
-        if (b.z < b.x)
-            continue;
-        for (int ty = b.y / CLW_TILE; ty <= b.w / CLW_TILE; ++ty)
-            for (int tx = b.x / CLW_TILE; tx <= b.z / CLW_TILE; ++tx)
-                vals[offset[(uint)(ty * tiles_x + tx) * chunks + c]++] = i;
-    }
 }

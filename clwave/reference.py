@@ -43,7 +43,7 @@ def _tiles(box, tiles_x):
 
 
 def count_tiles(bbox, chunk, chunks, tiles, tiles_x):
-    """Reference of ``splat_count_tiles``: (tiles * chunks,) uint32, ``[tile * chunks + c]`` counts the
+    """Reference of ``splat_chunk_tiles`` counting: (tiles * chunks,) uint32, ``[tile * chunks + c]`` counts the
     splats of chunk c (splats ``c * chunk ..``) that touch the tile."""
     hist = np.zeros((tiles, chunks), np.uint32)
     for i, box in enumerate(bbox):
@@ -53,7 +53,7 @@ def count_tiles(bbox, chunk, chunks, tiles, tiles_x):
 
 
 def bin_by_tile(bbox, tiles_x, tiles):
-    """Reference of scan + ``tile_ranges`` + ``splat_place``: ``(ranges, vals)``.
+    """Reference of scan + ``tile_ranges`` + ``splat_chunk_tiles`` placing: ``(ranges, vals)``.
 
     A stable sort of the (tile, splat) pairs by tile: ``vals[ranges[t, 0]:ranges[t, 1]]`` are
     the splats touching tile t in increasing order (importance order).

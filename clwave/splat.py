@@ -371,14 +371,14 @@ class Frame:
             chunk = -(-n // chunks)
             hist = cla.empty(q, (tiles * chunks,), np.uint32)
             offsets = cla.empty_like(hist)
-            k.splat_count_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
-                                np.uint32(tiles), np.int32(tiles_x), bbox.data, hist.data)
+            k.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
+                                np.uint32(tiles), np.int32(tiles_x), np.int32(0), bbox.data, hist.data, hist.data)
             r.scan(hist, offsets)
             k.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(chunks), np.uint32(total), offsets.data,
                           ranges.data)
             vals = cla.empty(q, (total,), np.uint32)
-            k.splat_place(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.int32(tiles_x),
-                          bbox.data, offsets.data, vals.data)
+            k.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
+                                np.uint32(tiles), np.int32(tiles_x), np.int32(1), bbox.data, offsets.data, vals.data)
         else:
             vals = cla.zeros(q, (1,), np.uint32)
         q.finish()

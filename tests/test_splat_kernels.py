@@ -71,8 +71,8 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
     for chunks in (1, 7, bin_chunks(n, tiles, cc.info.compute_units)):  # one, a few uneven, the renderer's
         chunk = -(-n // chunks)
         hist = cla.empty(q, (tiles * chunks,), np.uint32)
-        ks.splat_count_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
-                             np.uint32(tiles), np.int32(TILES_X), bbox.data, hist.data)
+        ks.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
+                             np.uint32(tiles), np.int32(TILES_X), np.int32(0), bbox.data, hist.data, hist.data)
         r_hist = reference.count_tiles(r_bbox, chunk, chunks, tiles, TILES_X)
         assert np.array_equal(hist.get(), r_hist)
         offsets = cla.empty_like(hist)
@@ -83,8 +83,8 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
                        ranges.data)
         assert np.array_equal(ranges.get(), r_ranges)
         vals = cla.empty(q, (total,), np.uint32)
-        ks.splat_place(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.int32(TILES_X),
-                       bbox.data, offsets.data, vals.data)
+        ks.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
+                             np.uint32(tiles), np.int32(TILES_X), np.int32(1), bbox.data, offsets.data, vals.data)
         assert np.array_equal(vals.get(), r_vals)
 
     fb = cla.to_device(q, np.full((H * W, 4), 0.5, np.float32))  # accumulates onto what is there
