@@ -2,7 +2,7 @@
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
     python tools/bench.py decompose|footprints|splat|progressive|raytrace|all [--size 128 256] [--repeats 3]
-                          [--views 8] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
+                          [--views 4] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
 
 Every benchmark runs once per ``--size`` (hydrogen phantom of that many voxels per axis, made
 once outside the timing); times are medians (with min, max and the number of runs) after one
@@ -213,7 +213,7 @@ def main(argv=None):
     parser.add_argument("benchmark", choices=list(BENCHMARKS) + ["all"])
     parser.add_argument("--size", type=int, nargs="+", default=[128, 256], help="phantom voxels per axis")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs after one warm-up (decompose)")
-    parser.add_argument("--views", type=int, default=8, help="distinct views per case")
+    parser.add_argument("--views", type=int, default=4, help="distinct views per case")
     parser.add_argument("--keep", type=float, nargs="+", default=[0.01, 0.05, 1.0],
                         help="kept fractions to splat (1 = the full coefficient set)")
     parser.add_argument("--progressive-keep", type=float, default=0.08,
@@ -229,7 +229,9 @@ def main(argv=None):
         for size in args.size:
             one = copy.copy(args)
             one.size = size
+            start = time.perf_counter()
             results.setdefault(name, {})[f"{size}^3"] = BENCHMARKS[name](one)
+            print(f"bench {name} {size}^3: {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
     text = json.dumps(dict(machine=machine(), device=device(args.device), benchmarks=results), indent=2)
     if args.json:
         args.json.write_text(text + "\n")

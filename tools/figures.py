@@ -2,7 +2,7 @@
 """The paper's evidence on our own data, by wavelet splatting, into docs/figures/.
 
     python tools/figures.py [--out docs/figures] [--size 128] [--image 256] [--scan FILE]
-                            [--scan-step 2] [--only table1 fig07 fig10 fig11 fig15 fig16 fig17]
+                            [--scan-step 1] [--only table1 fig07 fig10 fig11 fig15 fig16 fig17]
 
 - ``table1``: Table I, texture samples per axis N(m) (eq. 36, omega_s = 14) for Haar, linear
   and cubic B-splines, ours against the paper's (printed and saved as ``table1.md``);
@@ -92,7 +92,7 @@ def grid(panels, title, path):
     """panels: rows of (image, caption, window or None for the auto window, signed: a diverging map)."""
     plt = _plt()
     rows, cols = len(panels), max(len(r) for r in panels)
-    fig, axes = plt.subplots(rows, cols, figsize=(2.5 * cols, 2.75 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.5 * cols, 2.6 * rows + 0.5), squeeze=False)
     for ax in axes.ravel():
         ax.axis("off")
     for r, row in enumerate(panels):
@@ -101,7 +101,7 @@ def grid(panels, title, path):
             axes[r, c].imshow(image, cmap="RdBu_r" if signed else "gray", vmin=lo, vmax=hi, interpolation="nearest")
             axes[r, c].set_title(caption, fontsize=7)
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.45 / fig.get_figheight()))  # room for the two-line title
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
@@ -162,7 +162,7 @@ def fig10(out: Path, data, args, log):
                 row.append((image, f"{wavelet}, M = {levels}, {compression_text(wv)}", None, False))
                 log(f"  fig10 {d.key} {wavelet} M={levels}: {wv.kept} coefficients, {secs:.2f} s")
             rows.append(row)
-        grid(rows, f"Fig. 10: linear (top) vs cubic (bottom) B-splines, scaling functions only — {d.label}",
+        grid(rows, f"Fig. 10: linear (top) vs cubic (bottom) B-splines, scaling functions only\n{d.label}",
              out / f"fig10_{d.key}.png")
 
 
@@ -175,7 +175,7 @@ def fig11(out: Path, data, args, log):
             image, secs = render(wv, d.camera)
             row.append((image, compression_text(wv), None, False))
             log(f"  fig11 {d.key} {100 * rate:.1f} %: {secs:.2f} s")
-        grid([row], f"Fig. 11: thresholding linear B-spline wavelets at M = {full.levels} — {d.label}",
+        grid([row], f"Fig. 11: thresholding linear B-spline wavelets at M = {full.levels}\n{d.label}",
              out / f"fig11_{d.key}.png")
 
 
@@ -195,7 +195,7 @@ def fig15(out: Path, data, args, log):
             log(f"  fig15 {d.key} frame {f.index}: {f.coefficients} coefficients, {f.seconds:.2f} s, "
                 f"energy {f.energy:.4f}, rms {f.rms_error:.3g}")
         grid([images, residual], f"Fig. 15: progressive refinement, Haar, M = {wv.levels}, "
-             f"{compression_text(wv)} at the end; error = final - frame — {d.label}", out / f"fig15_{d.key}.png")
+             f"{compression_text(wv)} at the end; error = final - frame\n{d.label}", out / f"fig15_{d.key}.png")
 
 
 def fig16(out: Path, data, args, log):
@@ -213,7 +213,7 @@ def fig16(out: Path, data, args, log):
             log(f"  fig16 {d.key} {wavelet}: {local.kept} coefficients")
         (x, y, z), sigma = d.focus
         grid(rows, f"Fig. 16: local level of detail (focus ({x:.0f}, {y:.0f}, {z:.0f}), σ = {sigma:.0f}), "
-             f"M = 3 — {d.label}", out / f"fig16_{d.key}.png")
+             f"M = 3\n{d.label}", out / f"fig16_{d.key}.png")
 
 
 def fig17(out: Path, data, args, log):
@@ -228,7 +228,7 @@ def fig17(out: Path, data, args, log):
                 row.append((image, f"{wavelet}, {100 * keep:.0f} % of the M = 0 scaling functions", None, False))
                 log(f"  fig17 {d.key} {wavelet} {keep}: {secs:.2f} s")
             rows.append(row)
-        grid(rows, f"Fig. 17: Haar (top) vs cubic (bottom), 30 / 60 / 90 % of the M = 0 scaling functions — "
+        grid(rows, f"Fig. 17: Haar (top) vs cubic (bottom), 30 / 60 / 90 % of the M = 0 scaling functions\n"
              f"{d.label}", out / f"fig17_{d.key}.png")
 
 
@@ -242,7 +242,7 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=128, help="hydrogen phantom voxels per axis")
     parser.add_argument("--image", type=int, default=256, help="image width and height in pixels")
     parser.add_argument("--scan", type=Path, help="a real scan for clwave.load (default: nilearn's MNI152 T1)")
-    parser.add_argument("--scan-step", type=int, default=2, help="block-average the scan by this factor")
+    parser.add_argument("--scan-step", type=int, default=1, help="block-average the scan by this factor")
     parser.add_argument("--only", nargs="+", choices=list(FIGURES), default=list(FIGURES))
     args = parser.parse_args(argv)
     if importlib.util.find_spec("matplotlib") is None:
@@ -259,7 +259,8 @@ def main(argv=None):
     data = [Data("hydrogen", f"hydrogen {args.size}³", h, clwave.Camera(30, 20, size=args.image),
                  ((0.0, 0.0, args.size / 6.0), args.size / 8.0)),
             Data("scan", f"{scan_path.name}, {'x'.join(map(str, scan.shape[::-1]))}", scan,
-                 clwave.Camera(0, 10, size=args.image), ((ox, oy + 0.3 * ey, oz), 0.15 * max(ex, ey, ez)))]
+                 clwave.Camera(20, 10, size=args.image, extent=1.1 * max(ex, ey, ez)),
+                 ((ox, oy + 0.3 * ey, oz), 0.15 * max(ex, ey, ez)))]
     log(f"hydrogen {h.shape}, scan {scan_path} -> {scan.shape} spacing {scan.spacing}")
     started = time.perf_counter()
     for name in args.only:
