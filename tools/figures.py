@@ -92,7 +92,9 @@ def grid(panels, title, path):
     """panels: rows of (image, caption, window or None for the auto window, signed: a diverging map)."""
     plt = _plt()
     rows, cols = len(panels), max(len(r) for r in panels)
-    fig, axes = plt.subplots(rows, cols, figsize=(2.5 * cols, 2.6 * rows + 0.5), squeeze=False)
+    height = 2.75 * rows + 0.55
+    fig, axes = plt.subplots(rows, cols, figsize=(2.5 * cols, height), squeeze=False)
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=1.0 - 0.55 / height, wspace=0.04, hspace=0.12)
     for ax in axes.ravel():
         ax.axis("off")
     for r, row in enumerate(panels):
@@ -101,7 +103,6 @@ def grid(panels, title, path):
             axes[r, c].imshow(image, cmap="RdBu_r" if signed else "gray", vmin=lo, vmax=hi, interpolation="nearest")
             axes[r, c].set_title(caption, fontsize=7)
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0.0, 0.0, 1.0, 1.0 - 0.45 / fig.get_figheight()))  # room for the two-line title
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
@@ -203,7 +204,8 @@ def fig16(out: Path, data, args, log):
         rows = []
         for wavelet in ("haar", "cubic"):
             full = clwave.WaveletVolume.from_volume(d.vol, wavelet=wavelet, levels=min(3, d.max_levels))
-            keep = 0.02
+            # the approximation band and 0.5 % of the voxels in details: scarce enough to show where they go
+            keep = full.groups[0].band_slices()[0].stop / full.n_voxels + 0.005
             uniform = full.threshold(keep=keep)
             local = full.threshold(keep=keep, focus=d.focus)
             row = [(render(full, d.camera)[0], f"{wavelet}, all coefficients", None, False)]
