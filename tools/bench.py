@@ -159,8 +159,9 @@ def bench_progressive(args) -> dict:
     list(clwave.progressive(wv, clwave.Camera(10.0, 5.0, size=512), steps=steps, renderer=renderer))  # warm-up
     runs = []
     for az, el in views(args.views):
-        runs.append([f.figures() for f in clwave.progressive(wv, clwave.Camera(az, el, size=512), steps=steps,
-                                                               renderer=renderer)])
+        # all frames first: figures() of an early frame would render the final image inside the timing
+        frames = list(clwave.progressive(wv, clwave.Camera(az, el, size=512), steps=steps, renderer=renderer))
+        runs.append([f.figures() for f in frames])
     frames = []
     for i, first in enumerate(runs[0]):
         frames.append(dict(kept_of_voxels=first["coefficients"] / wv.n_voxels, coefficients=first["coefficients"],
