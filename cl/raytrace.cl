@@ -352,7 +352,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                     aq += fq[k] * cheb[m * N + k];
 #else
                     aq += fmax(fq[k], (real4)(0)) * cheb[m * N + k]; /* clamp alpha, q >= 0 */
-                    ag += fg[k] * cheb[m * N + k];
+#endif
+#ifdef CLW_SHADE
+                    ag += fg[k] * cheb[m * N + k]; /* only shading reads the gradient series */
 #endif
                 }
                 const real norm = (m == 0 ? (real)1 : (real)2) / N;

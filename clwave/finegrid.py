@@ -50,8 +50,10 @@ class _Part:
         return lo, 2 * (self.start[axis] + self.shape[axis] - 1) + shift + len(taps) - 1
 
 
-def fine_grids(wv, cc: ComputeContext, pad: int = 0) -> tuple[list, float]:
+def fine_grids(wv, cc: ComputeContext, pad: int = 0, dense=None) -> tuple[list, float]:
     """Every group's fine grid, with ``pad`` zero points around it; returns ``(grids, seconds)``.
+
+    ``dense``: each group's :meth:`ChannelGroup.dense_bands`, when the caller has them already.
 
     Raises :class:`DeviceMemoryError` before allocating when the device cannot hold them.
     """
@@ -66,7 +68,8 @@ def fine_grids(wv, cc: ComputeContext, pad: int = 0) -> tuple[list, float]:
             f"another --device")
     kernels = [programs.build(cc, ["expand.cl"], dict(CLW_AXIS=a)) for a in range(3)]  # compile apart
     start = time.perf_counter()
-    grids = [_expand_group(wv, g, cc, kernels, pad) for g in wv.groups]
+    dense = dense if dense is not None else [g.dense_bands() for g in wv.groups]
+    grids = [_expand_group(wv, g, bands, cc, kernels, pad) for g, bands in zip(wv.groups, dense)]
     cc.queue.finish()
     return grids, time.perf_counter() - start
 
@@ -84,9 +87,8 @@ def _upload(cc, arr, channels) -> cla.Array:
     return cla.to_device(cc.queue, out)
 
 
-def _expand_group(wv, g, cc, kernels, pad) -> FineGrid:
+def _expand_group(wv, g, dense, cc, kernels, pad) -> FineGrid:
     wav = g.wavelet
-    dense = g.dense_bands()
     taps = {"a": (wav.p / np.sqrt(2.0)).astype(np.float32), "d": (wav.q / np.sqrt(2.0)).astype(np.float32)}
     d_taps = {k: cla.to_device(cc.queue, v) for k, v in taps.items()}
     shifts = {k: wav.synthesis_shift(k) for k in "ad"}

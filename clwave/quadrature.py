@@ -46,7 +46,7 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
         if t1 > t0:
             knots = _knots(p * scale + offset, w * scale, t0, t1, h)
             lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
-            rays.append((r, c, w, (lo + hi) / 2, (hi - lo) / 2, hi, t0, t1,
+            rays.append((r, c, w, p * scale + offset, (lo + hi) / 2, (hi - lo) / 2, t0, t1,
                          p + ((lo + hi)[:, None] / 2 + (hi - lo)[:, None] / 2 * xi).reshape(-1, 1) * w))
     if not rays:
         return out
@@ -54,11 +54,10 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     fields = np.split(wv.evaluate(points), np.cumsum([len(ray[-1]) for ray in rays])[:-1])
     grads = np.split(wv.gradient(points)[:, 3, :], len(fields) and np.cumsum([len(f) for f in fields])[:-1]) \
         if phong else [None] * len(rays)
-    for (r, c, w, mid, rad, hi, t0, t1, _), field, grad in zip(rays, fields, grads):
+    for (r, c, w, x0, mid, rad, t0, t1, _), field, grad in zip(rays, fields, grads):
         field = field.reshape(len(mid), n_cheb, -1)
         grad = None if grad is None else grad.reshape(len(mid), n_cheb, 3)
-        x0, d = _ray_fine(view, r, c, scale, offset)
-        blocks = _BlockSkip(block_bound, tr.occ_origin, x0, d, t1, absorption, tolerance, gain, bound)
+        blocks = _BlockSkip(block_bound, tr.occ_origin, x0, w * scale, t1, absorption, tolerance, gain, bound)
         if not absorption:
             keep = [s for s in range(len(mid)) if not blocks.skip(mid[s] - rad[s], mid[s] + rad[s], 1.0)]
             out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(field[keep], xi)))
@@ -95,11 +94,6 @@ class _BlockSkip:
             self.until = texit
             return True
         return False
-
-
-def _ray_fine(view, r, c, scale, offset):
-    p, w = _ray(view, r, c)
-    return p * scale + offset, w * scale
 
 
 def _ray(view, r, c):

@@ -69,7 +69,8 @@ class RayTracer:
         self.cc = ComputeContext.get(device)
         orders = [g.wavelet.order for g in wv.groups]
         pad = max(orders)
-        self.grids, self.expand_seconds = fine_grids(wv, self.cc, pad=pad)
+        dense = [g.dense_bands() for g in wv.groups]  # expansion and occupancy share them
+        self.grids, self.expand_seconds = fine_grids(wv, self.cc, pad=pad, dense=dense)
         q = self.cc.queue
         offsets, total = [], 0
         for g in self.grids:
@@ -87,7 +88,7 @@ class RayTracer:
             offset=cla.to_device(q, np.array(offsets, np.int32)))
         self.q_bound = float(sum(cla.max(abs(g.data)).get() for g in self.grids))
         self.orders = orders
-        occ, self.occ_origin, self.box = occupancy(wv)
+        occ, self.occ_origin, self.box = occupancy(wv, dense)
         self.block_bound = cla.empty(q, occ.shape, np.float32)
         blocks = programs.build(self.cc, ["blocks.cl"], dict(CLW_GROUPS=len(orders), CLW_BLOCK=BLOCK,
                                                              CLW_ORDERS=",".join(map(str, orders))))
@@ -234,8 +235,10 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
                     precision=precision)
 
 
-def occupancy(wv: WaveletVolume):
+def occupancy(wv: WaveletVolume, dense=None):
     """Blocks of BLOCK^3 fine cells (grid-0 coordinates) touched by a kept non-zero coefficient.
+
+    ``dense``: each group's :meth:`ChannelGroup.dense_bands`, when the caller has them already.
 
     Returns ``(occ, origin, box)``: ``occ`` (Z, Y, X) uint8 over blocks ``origin + index``
     (z, y, x), and the clip box ``(lo, hi)`` (x, y, z) in grid-0 fine coordinates around the
@@ -244,11 +247,12 @@ def occupancy(wv: WaveletVolume):
     the test is separable (prefix sums of the non-zero mask).
     """
     j0 = wv.groups[0].wavelet.order
+    dense = dense if dense is not None else [g.dense_bands() for g in wv.groups]
     bands = []
-    for g in wv.groups:
+    for g, group_dense in zip(wv.groups, dense):
         wav, shift = g.wavelet, (j0 - g.wavelet.order) / 2.0
-        for band, dense in zip(g.bands, g.dense_bands()):
-            mask = np.any(dense != 0, axis=3)
+        for band, arr in zip(g.bands, group_dense):
+            mask = np.any(arr != 0, axis=3)
             if mask.any():
                 off = np.array([wav.offset(letter, band.level) + shift for letter in band.key])
                 sup = np.array([wav.support(letter) for letter in band.key])
