@@ -66,15 +66,23 @@ inline void bspline_pieces(const int j, const real u, real *w, real *dw)
     }
 }
 
+#ifndef CLW_WAVELET
+/* ---- B-spline path: the fine grids the kept coefficients expand to (clwave/finegrid.py) ---- */
+#define FIELD_PARAMS __global const float4 *coef, __constant const int4 *start, __constant const int4 *shape, \
+                     __constant const int *offset
 typedef struct {
     __global const float4 *coef;
     __constant const int4 *start, *shape;
     __constant const int *offset;
-} Grids;
+} Field;
+#define FIELD_INIT {coef, start, shape, offset}
+typedef int Active; /* no per-ray state */
+inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = 0; }
+inline int active_flags(const Active *A) { return 0; }
 
 /* The field and the fine-coordinate gradient of alpha at x (grid-0 fine coordinates), using the
  * segment's cells `cell[g]` so that every sample of a segment comes from the same polynomial. */
-inline real4 field(const Grids G, const int4 *cell, const real3 x, real3 *grad)
+inline real4 grid_field(const Field G, const int4 *cell, const real3 x, real3 *grad)
 {
     real4 v = (real4)(0);
     real3 gr = (real3)(0);
@@ -106,6 +114,23 @@ inline real4 field(const Grids G, const int4 *cell, const real3 x, real3 *grad)
     *grad = gr;
     return v;
 }
+
+/* the field and alpha's gradient at the segment's N Chebyshev points xm + radius cheb[N + k] D */
+inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
+                           const real3 D, __constant const real *cheb, real4 *fq, real3 *fg)
+{
+    int4 cell[CLW_GROUPS];
+    for (int g = 0; g < CLW_GROUPS; g++) {
+        const real shift = (real)(ORDER[g] - ORDER[0]) / 2;
+        const int4 c = convert_int4((real4)(floor(xm + shift), 0));
+        cell[g] = (int4)(clamp(c.xyz, G.start[g].xyz + ORDER[g] - 1, G.start[g].xyz + G.shape[g].xyz - 1), 0);
+    }
+    for (int k = 0; k < N; k++)
+        fq[k] = grid_field(G, cell, xm + radius * cheb[N + k] * D, &fg[k]);
+}
+#else
+#include "raytrace_wavelet.h"
+#endif
 
 /* Clenshaw sums of Chebyshev series sum_m a[m] T_m(x), m < n */
 #define CLENSHAW(TYPE, NAME)                                          \
@@ -220,8 +245,7 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
  *   lights       (nlights,) unit directions towards the lights; phong (ka, kd, ks, shininess)
  * Grid: global (W, H). */
 __kernel void raytrace(__global float4 *image, __global int4 *stats, const int width, const int height,
-                       __global const float4 *coef, __constant const int4 *start, __constant const int4 *shape,
-                       __constant const int *offset,
+                       FIELD_PARAMS,
                        __global const float *bound, const int4 occ_origin, const int4 occ_shape,
                        const float4 box_lo, const float4 box_hi,
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
@@ -232,7 +256,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     const int col = get_global_id(0), row = get_global_id(1);
     if (col >= width || row >= height)
         return;
-    const Grids G = {coef, start, shape, offset};
+    const Field G = FIELD_INIT;
     const real pc = (real)col + (real)0.5 - (real)width / 2, pr = (real)height / 2 - (real)row - (real)0.5;
     real3 p, w;
     if (perspective) {
@@ -261,6 +285,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         }
     }
     const size_t pix = (size_t)row * width + col;
+    Active active;
+    active_init(&active, G, pix, X0, D);
     int segments = 0, samples = 0, evals = 0, flags = 0;
     if (!(t1 > t0)) {
         image[pix] = (float4)(0.0f);
@@ -332,16 +358,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         if (tn > t) {
             Segment S;
             S.radius = (tn - t) / 2;
-            int4 cell[CLW_GROUPS];
-            for (int g = 0; g < CLW_GROUPS; g++) {
-                const real shift = (real)(ORDER[g] - ORDER[0]) / 2;
-                const int4 c = convert_int4((real4)(floor(xm + shift), 0));
-                cell[g] = (int4)(clamp(c.xyz, start[g].xyz + ORDER[g] - 1, start[g].xyz + shape[g].xyz - 1), 0);
-            }
             real4 fq[N];
             real3 fg[N];
-            for (int k = 0; k < N; k++)
-                fq[k] = field(G, cell, xm + S.radius * cheb[N + k] * D, &fg[k]);
+            sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, cheb, fq, fg);
             segments += 1;
             samples += N;
             for (int m = 0; m < N; m++) {
@@ -399,5 +418,5 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
 #else
     image[pix] = (float4)(convert_float3(I), (float)(1 - T));
 #endif
-    stats[pix] = (int4)(segments, samples, evals, flags);
+    stats[pix] = (int4)(segments, samples, evals, flags | active_flags(&active));
 }

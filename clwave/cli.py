@@ -211,6 +211,9 @@ def _raytrace_options(p):
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
     g.add_argument("--background", default="0,0,0", help="PNG: colour R,G,B in 0..1 behind the volume")
+    g.add_argument("--path", choices=("bspline", "wavelet"), default="bspline",
+                   help="evaluate the field from fine B-spline grids (fast) or from the wavelet coefficients "
+                        "with per-ray active lists (the paper's reference)")
 
 
 def make_camera(args):
@@ -263,7 +266,7 @@ def cmd_render(args):
         raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
     wv, _ = build_model(args)
     if args.method == "raytrace":
-        tracer = RayTracer(wv, device=args.device)
+        tracer = RayTracer(wv, device=args.device, path=args.path)
         options = dict(tolerance=args.tolerance, lights=_lights(args), shading=not args.no_shading,
                        absorption=not args.xray)
 
@@ -292,10 +295,10 @@ def cmd_render(args):
     size = f"{camera.size[0]}x{camera.size[1]}"
     m = result.meta
     if args.method == "raytrace":
-        print(f"ray traced {size} ({m['mode']}, tolerance {m['tolerance']:g}, shading {m['shading']}) in "
-              f"{m['render_seconds']:.3f} s: {m['segments']:,} segments, {m['rays_terminated_early']:,} rays "
-              f"terminated early (B-spline expansion {m['expand_seconds']:.2f} s and kernel build "
-              f"{m['compile_seconds']:.2f} s apart) -> {out}")
+        print(f"ray traced {size} ({m['mode']}, {m['path']} path, tolerance {m['tolerance']:g}, shading "
+              f"{m['shading']}) in {m['render_seconds']:.3f} s: {m['segments']:,} segments, "
+              f"{m['rays_terminated_early']:,} rays terminated early (set-up {m['setup_seconds']:.2f} s and "
+              f"kernel build {m['compile_seconds']:.2f} s apart) -> {out}")
     else:
         s = m["seconds"]
         print(f"splatted {m['coefficients']:,} coefficients at {size} in {s['total']:.3f} s (footprints "

@@ -5,9 +5,14 @@ computed by ``cl/raytrace.cl``: the ray is cut at the knot planes of the B-splin
 lattices, alpha is integrated exactly per segment, ``∫ q e^{-A}`` by adaptive Simpson
 so that each output value is within ``tolerance`` (early termination included), and
 q is lit by Phong's model (eq. 4) with normals from the analytic gradient of alpha
-(eq. 14-16).  The field is evaluated from the fine-level B-spline grids that the kept
-wavelet coefficients expand to on the device (:mod:`clwave.finegrid`): the same
-function as the wavelet sum, in another basis.
+(eq. 14-16).  Two paths evaluate the same field:
+
+* ``"bspline"`` (default, fast): the kept wavelet coefficients are expanded on the device
+  into fine-level B-spline grids (:mod:`clwave.finegrid`), the same function in another
+  basis, and each sample reads j^3 of them per group;
+* ``"wavelet"`` (the paper's reference, §3.3): no inverse transform; each ray keeps an
+  active list of the basis functions whose supports it is in, ordered by the parameter
+  where it leaves them (``cl/raytrace_wavelet.h``), and sums them directly.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import pyopencl.array as cla
 from pyopencl import cltypes
 
 from . import programs
+from .bspline import wavelet_for
 from .camera import Camera
 from .device import ComputeContext
 from .errors import DeviceMemoryError, InputError, finite_number
@@ -59,18 +65,42 @@ def light_direction(azimuth, elevation) -> np.ndarray:
     return np.array([np.cos(a) * np.cos(b), np.sin(a) * np.cos(b), np.sin(b)])
 
 
-class RayTracer:
-    """A wavelet volume prepared for ray tracing on one device; render many views with it."""
+PATHS = ("bspline", "wavelet")
+ACTIVE = 1024    # entries of a ray's active list (wavelet path); more fall back to visiting every index
+WAVELET_GROUP = 8  # rays per work-group on the wavelet path
 
-    def __init__(self, wv: WaveletVolume, device=None):
+
+class RayTracer:
+    """A wavelet volume prepared for ray tracing on one device; render many views with it.
+
+    ``path`` chooses how the field is evaluated: ``"bspline"`` (expanded fine grids, fast)
+    or ``"wavelet"`` (active lists over the kept coefficients, the reference); see the
+    module docstring.  ``active`` bounds the wavelet path's per-ray list.
+    """
+
+    def __init__(self, wv: WaveletVolume, device=None, path="bspline", active=ACTIVE):
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
-        self.wv = wv
+        if path not in PATHS:
+            raise InputError(f"ray tracing path must be one of {', '.join(PATHS)}, got {path!r}")
+        if wv.channels > 4:
+            raise InputError(f"ray tracing takes at most 4 channels, the volume has {wv.channels}")
+        if int(active) != active or active < 1:
+            raise InputError(f"active={active!r} must be a positive whole number of list entries")
+        self.wv, self.path, self.active = wv, path, int(active)
         self.cc = ComputeContext.get(device)
-        orders = [g.wavelet.order for g in wv.groups]
-        pad = max(orders)
-        dense = [g.dense_bands() for g in wv.groups]  # expansion and occupancy share them
-        self.grids, self.expand_seconds = fine_grids(wv, self.cc, pad=pad, dense=dense)
+        self.orders = [g.wavelet.order for g in wv.groups]
+        self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
+        dense = [g.dense_bands() for g in wv.groups]  # expansion, tables and block bounds share them
+        if path == "bspline":
+            self._expand(dense)
+        else:
+            self._bands(dense)
+
+    def _expand(self, dense):
+        """B-spline path: fine grids on the device, and their per-block maxima as bounds."""
+        wv, orders = self.wv, self.orders
+        self.grids, self.setup_seconds = fine_grids(wv, self.cc, pad=max(orders), dense=dense)
         q = self.cc.queue
         offsets, total = [], 0
         for g in self.grids:
@@ -87,7 +117,6 @@ class RayTracer:
             shape=cla.to_device(q, np.array([int4_xyz(g.shape) for g in self.grids])),
             offset=cla.to_device(q, np.array(offsets, np.int32)))
         self.q_bound = float(sum(cla.max(abs(g.data)).get() for g in self.grids))
-        self.orders = orders
         occ, self.occ_origin, self.box = occupancy(wv, dense)
         self.block_bound = cla.empty(q, occ.shape, np.float32)
         blocks = programs.build(self.cc, ["blocks.cl"], dict(CLW_GROUPS=len(orders), CLW_BLOCK=BLOCK,
@@ -96,11 +125,69 @@ class RayTracer:
                          int4_xyz(self.occ_origin), int4_xyz(occ.shape), self.coef.data, self.tables["start"].data,
                          self.tables["shape"].data, self.tables["offset"].data)
         self.occupied_fraction = float(occ.mean())
-        self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
+        self.field_args = [self.coef.data, self.tables["start"].data, self.tables["shape"].data,
+                           self.tables["offset"].data]
+        self.local_size = None
+        self.defines = dict(CLW_GROUPS=len(orders), CLW_ORDERS=",".join(map(str, orders)))
+
+    def _bands(self, dense):
+        """Wavelet path: the dense bands and their tables (cl/raytrace_wavelet.h), bounds from the coefficients.
+
+        A block's bound is the sum over the coefficients whose supports meet it of
+        |c| 2^{-3m/2} times the product of the prototypes' maxima along the axes (N_j
+        peaks at j/2; |psi| <= max |q_k| by the partition of unity), so it bounds every
+        channel of the field there.
+        """
+        wv, q, start = self.wv, self.cc.queue, time.perf_counter()
+        j0 = self.orders[0]
+        values, info, shape, lo, weights, offset = [], [], [], [], [], 0
+        for g, group_dense in zip(wv.groups, dense):
+            wav = g.wavelet
+            shift = (j0 - wav.order) / 2.0  # grid-0 fine coordinates (MATH.md §7: lattices of both parities)
+            peak = {"a": float(wav.phi(wav.order / 2.0)), "d": float(np.max(np.abs(wav.q)))}
+            for band, arr in zip(g.bands, group_dense):
+                key_xyz = band.key[::-1]
+                flat = np.zeros(arr.shape[:3] + (4,), np.float32)
+                flat[..., list(g.channels)] = arr * 2.0 ** (-1.5 * band.level)
+                values.append(flat.reshape(-1, 4))
+                psi_bits = sum(1 << a for a, letter in enumerate(key_xyz) if letter == "d")
+                info.append((band.level, psi_bits, wav.order, offset))
+                shape.append((*arr.shape[2::-1], 0))
+                lo.append([wav.offset(letter, band.level) + shift for letter in key_xyz] + [2.0 ** band.level])
+                weights.append(np.abs(flat).max(axis=3) * np.prod([peak[letter] for letter in band.key]))
+                offset += arr[..., 0].size
+        if offset >= 2 ** 31:
+            raise DeviceMemoryError(f"{offset} wavelet coefficients are more than the wavelet path indexes "
+                                    f"(2^31); use path='bspline'")
+        coef = np.concatenate(values)
+        room = min(self.cc.info.max_alloc, self.cc.info.global_mem // 2)
+        if coef.nbytes > room:
+            raise DeviceMemoryError(f"the dense bands need {coef.nbytes / 2**20:.0f} MiB but {self.cc.info.name} "
+                                    f"has room for {room / 2**20:.0f} MiB; use path='bspline' or a smaller volume")
+        self.coef = cla.to_device(q, coef)
+        bound, self.occ_origin, self.box = block_sums(wv, weights)
+        self.block_bound = cla.to_device(q, bound.astype(np.float32))
+        self.q_bound = float(bound.max())
+        self.occupied_fraction = float(np.mean(bound > 0))
+        self.poly = piece_polynomials()
+        self.tables = dict(info=cla.to_device(q, np.array(info, np.int32)),
+                           shape=cla.to_device(q, np.array(shape, np.int32)),
+                           lo=cla.to_device(q, np.array(lo, np.float32)))
+        self.field_args = [self.coef.data, self.tables["info"].data, self.tables["shape"].data,
+                           self.tables["lo"].data]
+        self.defines = dict(CLW_WAVELET=None, CLW_BANDS=len(info), CLW_ACTIVE=self.active,
+                            CLW_GROUPS=len(self.orders), CLW_ORDERS=",".join(map(str, self.orders)))
+        # PoCL keeps a work-group's private active lists on one thread's stack: small groups
+        self.local_size = (WAVELET_GROUP, 1)
+        self.setup_seconds = time.perf_counter() - start
 
     def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
-               precision="single") -> RenderResult:
-        """One image; see :func:`raytrace` for the parameters."""
+               precision="single", trace=0) -> RenderResult:
+        """One image; see :func:`raytrace` for the parameters.
+
+        ``trace`` (wavelet path, tests): record each ray's active set on its first ``trace``
+        segments in ``meta["active_trace"]`` (see ``cl/raytrace_wavelet.h``).
+        """
         wv, cc = self.wv, self.cc
         if not isinstance(camera, Camera):
             raise InputError("camera must be a clwave.Camera")
@@ -126,8 +213,7 @@ class RayTracer:
             raise InputError(f"at most {MAX_LIGHTS} lights, got {len(light_dirs)}")
 
         n_cheb = 3 * (max(self.orders) - 1) + 1
-        defines = dict(CLW_GROUPS=len(self.grids), CLW_ORDERS=",".join(map(str, self.orders)),
-                       CLW_ALPHA=self.alpha_group, CLW_NCHEB=n_cheb, CLW_BLOCK=BLOCK,
+        defines = dict(self.defines, CLW_ALPHA=self.alpha_group, CLW_NCHEB=n_cheb, CLW_BLOCK=BLOCK,
                        CLW_LATTICE="0.5" if len({o % 2 for o in self.orders}) > 1 else "1.0")
         if not absorption:
             defines["CLW_XRAY"] = None
@@ -135,6 +221,8 @@ class RayTracer:
             defines["CLW_SHADE"] = None
         if precision == "double":
             defines["CLW_DOUBLE"] = None
+        if trace and self.path == "wavelet":
+            defines["CLW_TRACE"] = int(trace)
         real = np.float64 if precision == "double" else np.float32
         start = time.perf_counter()
         kernels = programs.build(cc, ["raytrace.cl"], defines)
@@ -160,10 +248,14 @@ class RayTracer:
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
         image = cla.empty(q, (H, W, 4), np.float32)
         stats = cla.empty(q, (H, W, 4), np.int32)
+        field_args = list(self.field_args)
+        if self.path == "wavelet":
+            traced = cla.zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
+            field_args += [cla.to_device(q, self.poly.astype(real)).data, traced.data]
         start = time.perf_counter()
-        kernels.raytrace(q, (W, H), None, image.data, stats.data, np.int32(W), np.int32(H),
-                         self.coef.data, self.tables["start"].data, self.tables["shape"].data,
-                         self.tables["offset"].data, self.block_bound.data, int4_xyz(self.occ_origin),
+        columns = W if self.local_size is None else -(-W // self.local_size[0]) * self.local_size[0]
+        kernels.raytrace(q, (columns, H), self.local_size, image.data, stats.data, np.int32(W), np.int32(H),
+                         *field_args, self.block_bound.data, int4_xyz(self.occ_origin),
                          int4_xyz(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
                          _float4(scale), _float4(offset), cheb.data, real(tol), real(self.q_bound * shade_gain),
@@ -177,16 +269,19 @@ class RayTracer:
         if not absorption:
             img = img[..., : wv.channels]
         meta = dict(
-            method="raytrace", mode="emission-absorption" if absorption else "xray", path="bspline",
+            method="raytrace", mode="emission-absorption" if absorption else "xray", path=self.path,
             device=cc.describe(), coefficients=wv.kept, tolerance=tol, precision=precision,
             shading=shading_note, lights=[np.round(d, 6).tolist() for d in light_dirs] if phong else [],
             segments=int(counts[:, 0].sum()), field_samples=int(counts[:, 1].sum()),
             integrand_evaluations=int(counts[:, 2].sum()),
             rays_terminated_early=int(np.count_nonzero(counts[:, 3] & 1)),
             rays_at_simpson_depth_limit=int(np.count_nonzero(counts[:, 3] & 2)),
+            rays_active_list_overflowed=int(np.count_nonzero(counts[:, 3] & 4)),
             occupied_blocks=round(self.occupied_fraction, 4),
-            expand_seconds=self.expand_seconds, compile_seconds=compile_seconds, render_seconds=seconds,
+            setup_seconds=self.setup_seconds, compile_seconds=compile_seconds, render_seconds=seconds,
             segments_per_second=float(counts[:, 0].sum() / seconds) if seconds > 0 else 0.0)
+        if trace and self.path == "wavelet":
+            meta["active_trace"] = traced.get()
         return RenderResult(img, meta)
 
     def _phong(self, shading, absorption):
@@ -204,7 +299,7 @@ class RayTracer:
 
 
 def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
-             device=None, *, precision="single", tracer: RayTracer | None = None) -> RenderResult:
+             device=None, *, path="bspline", precision="single", tracer: RayTracer | None = None) -> RenderResult:
     """Ray trace a wavelet volume (paper §3).
 
     Parameters
@@ -223,6 +318,10 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         Phong shading with normals from the analytic gradient of alpha.
     absorption : bool
         ``False`` returns the line integral of every channel (X-ray mode), as splatting does.
+    path : "bspline" or "wavelet"
+        Evaluate the field from fine B-spline grids expanded on the device (fast), or sum
+        the kept wavelet coefficients along each ray with active lists (paper §3.3, the
+        reference); both give the same image within the tolerance.
     precision : "single" or "double"
         Kernel arithmetic; "double" gives converged references (float64 devices only).
 
@@ -230,7 +329,7 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     the line integrals; ``meta`` holds the path, segment and evaluation counts, shading,
     and timings (B-spline expansion and kernel compile apart).
     """
-    r = tracer or RayTracer(wv, device=device)
+    r = tracer or RayTracer(wv, device=device, path=path)
     return r.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                     precision=precision)
 
@@ -239,48 +338,73 @@ def occupancy(wv: WaveletVolume, dense=None):
     """Blocks of BLOCK^3 fine cells (grid-0 coordinates) touched by a kept non-zero coefficient.
 
     ``dense``: each group's :meth:`ChannelGroup.dense_bands`, when the caller has them already.
+    Returns ``(occ, origin, box)`` as :func:`block_sums`, with ``occ`` (Z, Y, X) uint8.
+    """
+    dense = dense if dense is not None else [g.dense_bands() for g in wv.groups]
+    counts, origin, box = block_sums(wv, [np.any(arr != 0, axis=3) for group in dense for arr in group])
+    return (counts > 0).astype(np.uint8), origin, box
 
-    Returns ``(occ, origin, box)``: ``occ`` (Z, Y, X) uint8 over blocks ``origin + index``
-    (z, y, x), and the clip box ``(lo, hi)`` (x, y, z) in grid-0 fine coordinates around the
-    occupied blocks.  Per band and axis, block b is touched by the coefficients k whose support
-    ``[o + 2^m k, o + 2^m (k + S))`` meets ``[b B, (b + 1) B)``: a contiguous range of k, so
-    the test is separable (prefix sums of the non-zero mask).
+
+def block_sums(wv: WaveletVolume, weights):
+    """Per block of BLOCK^3 fine cells, the sum of ``weights`` over the coefficients whose supports meet it.
+
+    ``weights``: one (nz, ny, nx) array >= 0 per band, the groups' bands in order.  Returns
+    ``(sums, origin, box)``: ``sums`` (Z, Y, X) over blocks ``origin + index`` (z, y, x), and the
+    clip box ``(lo, hi)`` (x, y, z) in grid-0 fine coordinates around the blocks with a non-zero
+    sum.  Per band and axis, block b is met by the coefficients k whose support
+    ``[o + 2^m k, o + 2^m (k + S))`` meets ``[b B, (b + 1) B)``: a contiguous range of k, so the
+    sum is separable (prefix sums along each axis in turn).
     """
     j0 = wv.groups[0].wavelet.order
-    dense = dense if dense is not None else [g.dense_bands() for g in wv.groups]
     bands = []
-    for g, group_dense in zip(wv.groups, dense):
-        wav, shift = g.wavelet, (j0 - g.wavelet.order) / 2.0
-        for band, arr in zip(g.bands, group_dense):
-            mask = np.any(arr != 0, axis=3)
-            if mask.any():
-                off = np.array([wav.offset(letter, band.level) + shift for letter in band.key])
-                sup = np.array([wav.support(letter) for letter in band.key])
-                bands.append((mask, off, sup, 2.0 ** band.level))
+    layout = [(g.wavelet, band) for g in wv.groups for band in g.bands]
+    for (wav, band), weight in zip(layout, weights):
+        if np.any(weight):
+            off = np.array([wav.offset(letter, band.level) + (j0 - wav.order) / 2.0 for letter in band.key])
+            sup = np.array([wav.support(letter) for letter in band.key])
+            bands.append((np.asarray(weight, np.float64), off, sup, 2.0 ** band.level))
     if not bands:
-        return np.zeros((1, 1, 1), np.uint8), np.zeros(3, np.int64), (np.zeros(3), np.zeros(3))
+        return np.zeros((1, 1, 1)), np.zeros(3, np.int64), (np.zeros(3), np.zeros(3))
     lo = np.min([off for _, off, _, _ in bands], axis=0)
-    hi = np.max([off + s * (np.array(mask.shape) + sup) for mask, off, sup, s in bands], axis=0)
+    hi = np.max([off + s * (np.array(w.shape) + sup) for w, off, sup, s in bands], axis=0)
     origin = np.floor(lo / BLOCK).astype(np.int64)
     count = np.ceil(hi / BLOCK).astype(np.int64) - origin
-    occ = np.zeros(tuple(count), bool)
-    for mask, off, sup, s in bands:
-        touched = mask
+    sums = np.zeros(tuple(count))
+    for weight, off, sup, s in bands:
+        part = weight
         for axis in range(3):
             b = origin[axis] + np.arange(count[axis])
             k_lo = np.clip(np.floor((b * BLOCK - off[axis]) / s - sup[axis]).astype(np.int64) + 1, 0, None)
             k_hi = np.minimum(np.ceil(((b + 1) * BLOCK - off[axis]) / s).astype(np.int64) - 1,
-                              mask.shape[axis] - 1)
-            prefix = np.concatenate([np.zeros_like(np.take(touched, [0], axis=axis), dtype=np.int64),
-                                     np.cumsum(touched, axis=axis, dtype=np.int64)], axis=axis)
+                              weight.shape[axis] - 1)
+            prefix = np.concatenate([np.zeros_like(np.take(part, [0], axis=axis)), np.cumsum(part, axis=axis)],
+                                    axis=axis)
             upper = np.take(prefix, np.clip(k_hi + 1, 0, None), axis=axis)
-            lower = np.take(prefix, np.minimum(k_lo, mask.shape[axis]), axis=axis)
-            touched = (upper - lower > 0) & _broadcast(k_hi >= k_lo, axis)
-        occ |= touched
-    idx = np.argwhere(occ)
+            lower = np.take(prefix, np.minimum(k_lo, weight.shape[axis]), axis=axis)
+            # prefix differences of sums >= 0; rounding can leave them a hair below zero
+            part = np.maximum(upper - lower, 0.0) * _broadcast(k_hi >= k_lo, axis)
+        sums += part
+    idx = np.argwhere(sums > 0)
     box_lo = (origin + idx.min(axis=0)) * BLOCK
     box_hi = (origin + idx.max(axis=0) + 1) * BLOCK
-    return occ.astype(np.uint8), origin, (box_lo[::-1].astype(float), box_hi[::-1].astype(float))
+    return sums, origin, (box_lo[::-1].astype(float), box_hi[::-1].astype(float))
+
+
+def piece_polynomials() -> np.ndarray:
+    """(42, 4) monomial coefficients of the prototypes' pieces for orders 1-4 (cl/raytrace_wavelet.h).
+
+    Rows ``j (j - 1) / 2 + r``: ``N_j(s + r)``, r < j; rows ``10 + 2 (j - 1)^2 + c``:
+    ``psi((s + c) / 2)``, c < 2 (2j - 1); each a polynomial in s on [0, 1), recovered
+    exactly from 4 samples of the closed forms (degree j - 1 <= 3).
+    """
+    s = np.array([0.125, 0.375, 0.625, 0.875])
+    vander = np.vander(s, 4, increasing=True)
+    phi, psi = [], []
+    for j in range(1, 5):
+        wav = wavelet_for(j)
+        phi += [wav.phi(s + r) for r in range(j)]
+        psi += [wav.psi((s + c) / 2.0) for c in range(2 * (2 * j - 1))]
+    return np.ascontiguousarray(np.linalg.solve(vander, np.array(phi + psi).T).T)
 
 
 def _broadcast(flags, axis):

@@ -78,24 +78,35 @@ def small_rgba():
     return wv, RayTracer(wv)
 
 
+@pytest.fixture(scope="module")
+def small_wavelet_tracer(small_rgba):
+    return RayTracer(small_rgba[0], path="wavelet")
+
+
+@pytest.mark.parametrize("path", ["bspline", "wavelet"])
 @pytest.mark.parametrize("kw", [dict(absorption=False), dict(shading=False), dict(),
                                 dict(lights=[(0, 90), (120, -10)], shading=Phong(0.2, 0.6, 0.5, 8))])
-def test_kernel_equals_numpy_reference(small_rgba, kw):
+def test_kernel_equals_numpy_reference(small_rgba, small_wavelet_tracer, kw, path):
     wv, tracer = small_rgba
+    tracer = small_wavelet_tracer if path == "wavelet" else tracer
     cam = clwave.Camera(30, 20, size=(3, 4))
     ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer, **kw)
-    got = tracer.render(cam, tolerance=1e-3, **kw).image
-    assert np.max(np.abs(got - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
+    got = tracer.render(cam, tolerance=1e-3, **kw)
+    assert got.meta["path"] == path
+    assert np.max(np.abs(got.image - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
 
 
-def test_perspective_kernel_equals_reference_and_eye_inside_integrates_from_eye(small_rgba):
+@pytest.mark.parametrize("path", ["bspline", "wavelet"])
+def test_perspective_kernel_equals_reference_and_eye_inside_integrates_from_eye(small_rgba, small_wavelet_tracer,
+                                                                                 path):
     wv, tracer = small_rgba
+    tracer = small_wavelet_tracer if path == "wavelet" else tracer
     cam = clwave.Camera(-40, 10, size=(3, 3), perspective=True, distance=4.0, fov=40)
     ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer)
     assert np.max(np.abs(tracer.render(cam, tolerance=1e-3).image - ref)) <= 1e-5
     # an eye in the middle of a constant Haar box sees q/alpha (1 - e^{-alpha d}), d = distance to the wall
     vol = rgba_volume(np.full((6, 6, 6), 1.0), np.full((6, 6, 6), 0.5))
-    box = RayTracer(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=0))
+    box = RayTracer(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=0), path=path)
     inside = clwave.Camera(0, 0, size=1, perspective=True, distance=1.0, fov=10)  # eye at x = 1, looks along -x
     img = box.render(inside, tolerance=1e-4, shading=False).image[0, 0]
     d = 1.0 + 3.0
@@ -172,12 +183,13 @@ def test_scalar_volume_needs_classification():
     assert clwave.raytrace(wv, clwave.Camera(size=4), absorption=False).image.shape == (4, 4, 1)
 
 
-def test_too_little_device_memory_is_reported(monkeypatch):
+@pytest.mark.parametrize("path", ["bspline", "wavelet"])
+def test_too_little_device_memory_is_reported(monkeypatch, path):
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=8), wavelet="linear", levels=1)
     cc = clwave.ComputeContext.get()
     monkeypatch.setattr(cc, "info", dataclasses.replace(cc.info, global_mem=1000))
     with pytest.raises(clwave.DeviceMemoryError, match="MiB"):
-        RayTracer(wv)
+        RayTracer(wv, path=path)
 
 
 def test_budget_holds_on_a_sparse_thresholded_volume():
@@ -191,3 +203,103 @@ def test_budget_holds_on_a_sparse_thresholded_volume():
         res = tracer.render(cam, tolerance=tol)
         assert np.max(np.abs(res.image - converged)) <= tol
     assert res.meta["segments"] < tracer.render(cam, tolerance=1e-7).meta["segments"]  # blocks were skipped
+
+
+def sparse_rgba(wavelet, levels=2, keep=0.3, seed=5):
+    rng = np.random.default_rng(seed)
+    data = rng.random((9, 10, 11, 4)) * np.array([1.0, 0.8, 0.6, 0.4])
+    data[:, :, :3] = 0  # an empty slab to skip
+    vol = clwave.Volume(data.astype(np.float32), spacing=(1.0, 0.8, 1.2))
+    return clwave.WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels).threshold(keep=keep)
+
+
+@pytest.mark.parametrize("wavelet", ["cubic", "linear", "haar", ["cubic", "cubic", "cubic", "haar"]])
+def test_wavelet_path_equals_bspline_path(wavelet):
+    """Active lists over the kept coefficients and the expanded fine grids: one function, one image."""
+    wv = sparse_rgba(wavelet)
+    fast, reference = RayTracer(wv), RayTracer(wv, path="wavelet")
+    for cam, kw in ((clwave.Camera(30, 20, size=10), {}), (clwave.Camera(0, 0, size=10), dict(absorption=False)),
+                    (clwave.Camera(-60, 35, size=8, perspective=True, distance=12.0), dict(shading=False))):
+        a = fast.render(cam, tolerance=1e-6, precision="double", **kw)
+        b = reference.render(cam, tolerance=1e-6, precision="double", **kw)
+        assert (a.meta["path"], b.meta["path"]) == ("bspline", "wavelet")
+        assert b.meta["rays_active_list_overflowed"] == 0
+        assert np.abs(a.image).max() > 0.1
+        assert np.max(np.abs(a.image - b.image)) <= 1e-5
+
+
+def brute_force_census(wv, x_fine):
+    """(count, sum of id + 1, sum of (id + 1)^2 mod 2^32) of the kept coefficients whose supports contain x.
+
+    ``x_fine``: grid-0 fine coordinates (x, y, z); ids index the concatenated dense bands.
+    """
+    j0 = wv.groups[0].wavelet.order
+    count, total, total2, offset = 0, np.uint32(0), np.uint32(0), 0
+    for g in wv.groups:
+        wav = g.wavelet
+        for band, arr in zip(g.bands, g.dense_bands()):
+            corner = np.array([wav.offset(letter, band.level) + (j0 - wav.order) / 2.0 for letter in band.key])
+            length = 2.0 ** band.level * np.array([wav.support(letter) for letter in band.key])
+            k = np.argwhere(np.any(arr != 0, axis=3))  # (z, y, x)
+            lo = corner + 2.0 ** band.level * k
+            inside = np.all((lo <= x_fine[::-1]) & (x_fine[::-1] < lo + length), axis=1)
+            ids = (offset + np.ravel_multi_index(k[inside].T, arr.shape[:3]) + 1).astype(np.uint64)
+            count += len(ids)
+            total += np.uint32(ids.sum() % 2**32)
+            total2 += np.uint32((ids * ids).sum() % 2**32)
+            offset += arr[..., 0].size
+    return count, int(total), int(total2)
+
+
+def test_active_list_equals_the_brute_force_set_of_supports():
+    """On each traced segment, the kernel's active list is every kept coefficient whose support holds the midpoint."""
+    wv = sparse_rgba("cubic", keep=0.2)
+    cam = clwave.Camera(25, 15, size=6)
+    tracer = RayTracer(wv, path="wavelet")
+    res = tracer.render(cam, tolerance=1e-4, trace=40)
+    census = res.meta["active_trace"].view(np.uint32)  # (H, W, 40, 4)
+    t_mids = res.meta["active_trace"][..., 3].view(np.float32)
+    view = cam.view(wv)
+    scale = 1.0 / np.array(wv.spacing[::-1])
+    offset = -np.asarray(wv.origin) * scale + (np.array(wv.shape[::-1]) - 1) / 2.0 + 2.0
+    checked = nonempty = 0
+    for r, c in np.ndindex(*view.size):
+        p = view.target + (c + 0.5 - view.size[1] / 2) * view.pixel * view.u + \
+            (view.size[0] / 2 - r - 0.5) * view.pixel * view.v
+        for (count, total, total2, t_bits), t_mid in zip(census[r, c], t_mids[r, c]):
+            if (count, total, total2, t_bits) == (0, 0, 0, 0):
+                continue
+            x = (p - float(t_mid) * view.n) * scale + offset
+            assert (count, total, total2) == brute_force_census(wv, x), (r, c, t_mid)
+            checked += 1
+            nonempty += count > 0
+    assert checked > 200 and nonempty > 100
+
+
+def test_active_list_overflow_falls_back_to_every_index():
+    wv = sparse_rgba("cubic")
+    cam = clwave.Camera(30, 20, size=8)
+    full = RayTracer(wv, path="wavelet").render(cam, tolerance=1e-4)
+    tiny = RayTracer(wv, path="wavelet", active=4).render(cam, tolerance=1e-4)
+    assert full.meta["rays_active_list_overflowed"] == 0 < tiny.meta["rays_active_list_overflowed"]
+    assert np.max(np.abs(full.image - tiny.image)) <= 1e-6
+
+
+def test_wavelet_block_bounds_hold_the_field():
+    """The wavelet path's per-block bound, summed from |c| and the prototypes' maxima, bounds |f| there."""
+    wv = sparse_rgba("cubic", keep=0.1)
+    tracer = RayTracer(wv, path="wavelet")
+    bound = tracer.block_bound.get()
+    rng = np.random.default_rng(0)
+    pts = (rng.random((4000, 3)) - 0.5) * np.array([16.0, 12.0, 12.0])
+    vals = np.abs(wv.evaluate(pts)).max(axis=1)
+    blk = np.floor(wv._world_to_fine(pts, 4) / 8).astype(int) - tracer.occ_origin
+    inside = np.all((blk >= 0) & (blk < bound.shape), axis=1)
+    assert vals[~inside].max(initial=0.0) == 0.0
+    assert np.all(vals[inside] <= bound[tuple(blk[inside].T)] * (1 + 1e-6))
+    assert vals.max() > 0.1
+
+
+def test_unknown_path_is_refused():
+    with pytest.raises(clwave.InputError, match="path"):
+        RayTracer(sparse_rgba("linear", levels=1), path="octree")

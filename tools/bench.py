@@ -201,7 +201,7 @@ def bench_raytrace(args) -> dict:
                              path=runs[0]["path"],
                              error_reference="float64 kernel at tolerance 1e-5, 64x64 centre crop"),
                 targets=dict(tolerance_1e_2_seconds=3.0, tolerance_1e_3_seconds=10.0),
-                setup_seconds=dict(total=setup, fine_grid_expansion=tracer.expand_seconds),
+                setup_seconds=dict(total=setup, fine_grid_expansion=tracer.setup_seconds),
                 compile_seconds=compile_seconds, cases=cases)
 
 
