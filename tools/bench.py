@@ -15,9 +15,12 @@ approximating model) + thresholding to 5 %.
 ``splat``: hydrogen scalar, cubic, 3 levels, 1 %, 5 % and all coefficients at 512² and
 256², each render at a new view with its footprints; throughput = footprint-pixel updates
 per second of accumulation.
-``raytrace``: hydrogen RGBA (preset), cubic, 3 levels, 5 %, shaded, at ``--raytrace-image``
-(512²) for tolerances 1e-2 and 1e-3 over ``--raytrace-views`` views; error against a float64
-render at tolerance 1e-5 of the 64x64 centre crop; set-up (fine-grid expansion) apart.
+``raytrace``: hydrogen RGBA (preset), cubic, 3 levels, 5 %, shaded, for tolerances 1e-2 and
+1e-3 over ``--raytrace-views`` views, per path: the B-spline path at ``--raytrace-image``
+(512²); the wavelet-space path (active lists, the paper's reference) for volumes up to
+``--wavelet-max-size`` (128³) at ``--wavelet-image`` (256²), timed on its
+``--wavelet-crop`` (64²) centre crop, with an estimate for the whole image; error against a
+float64 render at tolerance 1e-5 of the 64x64 centre crop; set-up (expansion) apart.
 ``progressive``: frames of 1, 2, 4 and 8 % of the voxels (``--progressive-keep`` 0.08 in 4
 doubling steps) at 512²; per frame the time since the start of the view, energy, and RMS
 error against the final image.
@@ -177,32 +180,52 @@ def bench_progressive(args) -> dict:
 def bench_raytrace(args) -> dict:
     rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
     wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05)
-    start = time.perf_counter()
-    tracer = clwave.RayTracer(wv, device=args.device)
-    setup = time.perf_counter() - start
-    size = args.raytrace_image
+    out = dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3, keep=0.05,
+                            shading="phong, headlight", views=args.raytrace_views,
+                            error_reference="B-spline path, float64 kernel at tolerance 1e-5, 64x64 centre crop"),
+               targets=dict(tolerance_1e_2_seconds=3.0, tolerance_1e_3_seconds=10.0), paths={})
+    fast = None
+    for path, size, crop in (("bspline", args.raytrace_image, None),
+                             ("wavelet", args.wavelet_image, args.wavelet_crop)):
+        if path == "wavelet" and args.size > args.wavelet_max_size:
+            continue
+        start = time.perf_counter()
+        tracer = clwave.RayTracer(wv, device=args.device, path=path)
+        setup = time.perf_counter() - start
+        fast = fast or tracer
+        out["paths"][path] = _raytrace_cases(tracer, fast, wv, size, crop, args.raytrace_views)
+        out["paths"][path]["setup_seconds"] = setup
+    return out
+
+
+def _raytrace_cases(tracer, fast, wv, size, crop, n_views) -> dict:
+    """Tolerances 1e-2 and 1e-3 at ``size``² (or its ``crop``² centre), error on the 64² centre crop.
+
+    ``fast``: the B-spline-path tracer that renders the float64 reference.
+    """
     compile_seconds = tracer.render(clwave.Camera(10.0, 5.0, size=8), tolerance=1e-2).meta["compile_seconds"]
-    az0, el0 = views(args.raytrace_views)[0]
-    full = clwave.Camera(az0, el0, size=size).view(wv)
-    crop = clwave.Camera(az0, el0, size=64, extent=full.pixel * 64)  # the 64x64 pixels at the image centre
-    reference = tracer.render(crop, tolerance=1e-5, precision="double").image
+
+    def camera(az, el, pixels):  # the pixels x pixels centre of the size x size view
+        full = clwave.Camera(az, el, size=size).view(wv)
+        return clwave.Camera(az, el, size=pixels, extent=full.pixel * pixels)
+
+    az0, el0 = views(n_views)[0]
+    reference = fast.render(camera(az0, el0, 64), tolerance=1e-5, precision="double").image
     cases = {}
     for tol in (1e-2, 1e-3):
-        runs = [tracer.render(clwave.Camera(az, el, size=size), tolerance=tol).meta
-                for az, el in views(args.raytrace_views)]
+        runs = [tracer.render(camera(az, el, crop or size), tolerance=tol).meta for az, el in views(n_views)]
         seconds = summary([m["render_seconds"] for m in runs])
-        cases[f"tolerance {tol:g} at {size}x{size}"] = dict(
+        name = f"tolerance {tol:g} at {size}x{size}" + (f", {crop}x{crop} centre crop" if crop else "")
+        cases[name] = dict(
             seconds=seconds, segments=statistics.median(m["segments"] for m in runs),
             segments_per_second=statistics.median(m["segments_per_second"] for m in runs),
             integrand_evaluations=statistics.median(m["integrand_evaluations"] for m in runs),
-            max_error_vs_float64_crop=float(np.abs(tracer.render(crop, tolerance=tol).image - reference).max()))
-    return dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3, keep=0.05,
-                             image=f"{size}x{size}", shading="phong, headlight", views=args.raytrace_views,
-                             path=runs[0]["path"],
-                             error_reference="float64 kernel at tolerance 1e-5, 64x64 centre crop"),
-                targets=dict(tolerance_1e_2_seconds=3.0, tolerance_1e_3_seconds=10.0),
-                setup_seconds=dict(total=setup, fine_grid_expansion=tracer.setup_seconds),
-                compile_seconds=compile_seconds, cases=cases)
+            rays_active_list_overflowed=statistics.median(m["rays_active_list_overflowed"] for m in runs),
+            max_error_vs_float64_crop=float(np.abs(tracer.render(camera(az0, el0, 64), tolerance=tol).image
+                                                   - reference).max()))
+        if crop:  # the centre is the densest part of the view: an upper estimate
+            cases[name]["full_image_seconds_estimate"] = seconds["median"] * (size / crop) ** 2
+    return dict(image=f"{size}x{size}", compile_seconds=compile_seconds, cases=cases)
 
 
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
@@ -221,6 +244,11 @@ def main(argv=None):
                         help="kept fraction refined progressively in 4 doubling frames")
     parser.add_argument("--raytrace-views", type=int, default=2, help="distinct views per ray-tracing case")
     parser.add_argument("--raytrace-image", type=int, default=512, help="ray-traced image size")
+    parser.add_argument("--wavelet-image", type=int, default=256, help="image size of the wavelet-space path")
+    parser.add_argument("--wavelet-crop", type=int, default=64,
+                        help="wavelet-space path: time this many pixels square at the view's centre (0: all)")
+    parser.add_argument("--wavelet-max-size", type=int, default=128,
+                        help="bench the wavelet-space path for volumes up to this size")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
