@@ -39,15 +39,23 @@ Two ways to sample T:
   polynomial of degree <= 3(j - 1), integrated exactly (closed form for j <= 2,
   Gauss-Legendre otherwise).  Exact up to rounding (:func:`line_integral`).
 
-* ``"cells"`` -- Haar at axis-aligned views (u and v along world axes) only: there the
-  footprint is piecewise constant on the knot grid of the projected support (its edges and
-  psi's midpoint: 2 x 2 cells), so the exact values at the cell centres, looked up by
-  nearest sample, give it exactly everywhere.  Sampled at any finer spacing, its jumps fall
-  between samples and interpolation misplaces them by up to a texel.
+* ``"cells"`` -- Haar, along each image axis that is a world axis (:func:`cell_axes`).  If
+  u = ±e_a, then v_a = n_a = 0 and the footprint factorises as
+  ``T(a, b) = P_a(±a / (2^m d_a) + 1/2) T2(b)`` (Haar supports are 1 long): along u it is piecewise constant with its
+  jumps on the knots of the projected support (its edges and, for psi, its midpoint), i.e.
+  2 cells, whose exact values at the cell centres, looked up by nearest sample, give it
+  exactly everywhere.  Sampled at any finer spacing, its jumps fall between samples and
+  interpolation misplaces them by up to a texel (at pixels about a voxel wide the pixel
+  centres walk slowly across the voxel faces, and the misplaced jumps leave dark stripes).
+  The other axis, if it is not a world axis too, is sampled like ``"spatial"`` (T2 has kinks
+  there, no jumps).  The texture's path says which axes are cells: ``"cells"`` (both,
+  2 x 2 values), ``"cells-u"`` (2 columns, sampled rows) or ``"cells-v"`` (2 rows, sampled
+  columns).
 
 ``"auto"`` uses FFT for order >= 3 and the spatial path for Haar and linear, whose
 footprints have jumps or kinks at axis-aligned views where the band-limited FFT footprint
-rings (MATH.md §5).
+rings (MATH.md §5).  (The splat renderer's "auto" takes ``"cells"`` for Haar wherever
+:func:`cell_axes` allows it.)
 
 Sampling (paper eq. 33-38, MATH.md §5 "per-type rectangular texture"): along u the period
 is the tight projected width of the support box, ``W_u = 2^m sum_a |u_a| S_a d_a`` (so the
@@ -115,7 +123,9 @@ class Texture:
     centre_u, centre_v : float
         Sample coordinates of the support centre (the basis function's projected centre).
     path : str
-        ``"fft"`` or ``"spatial"``.
+        ``"fft"``, ``"spatial"``, or ``"cells"``, ``"cells-u"``, ``"cells-v"`` (cells along
+        both axes, u only, v only: there the samples are the 2 cell centres of the support,
+        for nearest-sample lookup; see :attr:`cells`).
     level : int
     key : str
         Subband key in array-axis order (z, y, x).
@@ -133,6 +143,11 @@ class Texture:
     @property
     def shape(self) -> tuple:
         return self.data.shape
+
+    @property
+    def cells(self) -> tuple:
+        """``(along u, along v)``: whether the samples of that axis are cells (nearest lookup)."""
+        return self.path in ("cells", "cells-u"), self.path in ("cells", "cells-v")
 
     def coordinates(self) -> tuple:
         """World offsets ``(a, b)`` of the columns and rows from the support centre."""
@@ -227,15 +242,16 @@ def _extent(wav: SplineWavelet, key: str, m: int, d_xyz) -> np.ndarray:
     return np.array([2.0 ** m * wav.support(key_xyz[a]) * d_xyz[a] for a in range(3)])
 
 
-def cells_are_exact(wavelet, u, v) -> bool:
-    """Whether the ``"cells"`` path is exact: Haar footprints at a view with u and v along world axes.
+def cell_axes(wavelet, u, v) -> tuple:
+    """``(along u, along v)``: where the ``"cells"`` lookup is exact, i.e. Haar and the image
+    axis along a world axis (the footprint is piecewise constant along it, 2 cells).
 
     >>> n, u, v = view_vectors(90.0, 0.0)
-    >>> cells_are_exact("haar", u, v), cells_are_exact("linear", u, v)
-    (True, False)
+    >>> cell_axes("haar", u, v), cell_axes("linear", u, v), cell_axes("haar", *view_vectors(0.0, 10.0)[1:])
+    ((True, True), (False, False), (True, False))
     """
-    axis = [np.max(np.abs(np.asarray(w, float))) > 1.0 - 1e-12 for w in (u, v)]
-    return wavelet_for(wavelet).order == 1 and all(axis)
+    haar = wavelet_for(wavelet).order == 1
+    return tuple(bool(haar and np.max(np.abs(np.asarray(w, float))) > 1.0 - 1e-12) for w in (u, v))
 
 
 def _vanishes(key: str, n) -> bool:
@@ -656,6 +672,29 @@ def _cpu_count() -> int:
         return os.cpu_count() or 1
 
 
+def _axis_sampling(width, cell, omega, d_min, texel) -> tuple:
+    """``(N, h, cell)`` of one texture axis whose support is ``width`` wide (world units).
+
+    Cells: the 2 halves of the support, ``h = width / 2``.  Otherwise eq. 36 with the
+    per-type period, ``N = 2^(m+1) omega / dw``, ``dw = 2 pi d_min / W(m=0)``, ``h = width / N``;
+    or, with ``texel``, ``h = texel`` and the period ``N h`` a little beyond the support.
+    """
+    if cell:
+        return 2, width / 2.0, True
+    if texel is None:
+        count = _fast_even(ceil(2.0 * omega * width / (2.0 * np.pi * d_min) + 1.0))
+        return count, width / count, False
+    return _fast_even(ceil(width / texel)), float(texel), False
+
+
+def _axis_points(count, h, cell) -> tuple:
+    """Sample offsets from the support centre along one axis, and the centre's sample coordinate:
+    the 2 cell centres (a quarter of the support out), or the ``count + 1`` samples of the
+    closed box ``[-count h / 2, count h / 2]``."""
+    centre = 0.5 if cell else float(count // 2)
+    return (np.arange(2 if cell else count + 1) - centre) * h, centre
+
+
 def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omega_min=None,
                path: str = "auto", tol: float = 0.0, texel=None) -> dict:
     """Footprint textures of the (level, key) pairs in ``bands`` for one view.
@@ -675,8 +714,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         Least band of any texture in prototype units; default :data:`DEFAULT_OMEGA_MIN`.
     path : "auto", "fft", "spatial" or "cells"
         "auto": FFT for order >= 3, exact spatial sampling for Haar and linear; "cells"
-        (Haar at axis-aligned views only, :func:`cells_are_exact`): the exact value of
-        each of the 2 x 2 cells between the knots, for nearest-sample lookup.
+        (Haar with u or v along a world axis, :func:`cell_axes`): along each such axis
+        the exact values of the 2 cells between the knots, for nearest-sample lookup, and
+        spatial samples along the other; the textures' path is then "cells", "cells-u"
+        or "cells-v" (which axes are cells).
     tol : float
         Trim each texture to the bounding box of samples above ``tol`` times its peak
         magnitude (0: keep the tight projected support box).
@@ -684,7 +725,7 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         Sample spacing in world units for every texture, overriding the counts of
         eq. 36 (the splat renderer asks for an exact fraction of its pixel); the FFT
         period is then the smallest multiple of it that covers the support.  Not used
-        by "cells".
+        along cell axes.
 
     Returns
     -------
@@ -706,8 +747,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         raise InputError(f"texel must be a positive world length, got {texel!r}")
     if path == "auto":
         path = "fft" if wav.order >= 3 else "spatial"
-    if path == "cells" and not cells_are_exact(wav, u, v):
-        raise InputError("footprint path 'cells' needs Haar at a view with u and v along world axes")
+    cells = cell_axes(wav, u, v) if path == "cells" else (False, False)
+    if path == "cells" and not any(cells):
+        raise InputError("footprint path 'cells' needs Haar at a view with u or v along a world axis")
+    name = {(True, True): "cells", (True, False): "cells-u", (False, True): "cells-v"}.get(cells, path)
     d_min = float(d_xyz.min())
     out, jobs = {}, []
     for band in bands:
@@ -719,46 +762,32 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
             out[(m, key)] = None
             continue
         extent = _extent(wav, key, m, d_xyz)
-        wu, wv = float(np.abs(u) @ extent), float(np.abs(v) @ extent)
         omega = max(float(omega_s), float(omega_min) / 2.0 ** m)
-        # eq. 36 with the per-type period: 2^(m+1) omega / dw, dw = 2 pi d_min / W(m=0)
-        if path == "cells":
-            nu = nv = 2
-        elif texel is None:
-            nu = _fast_even(ceil(2.0 * omega * wu / (2.0 * np.pi * d_min) + 1.0))
-            nv = _fast_even(ceil(2.0 * omega * wv / (2.0 * np.pi * d_min) + 1.0))
-        else:
-            nu, nv = _fast_even(ceil(wu / texel)), _fast_even(ceil(wv / texel))
-            wu, wv = nu * texel, nv * texel  # period a little beyond the support
         out[(m, key)] = None
-        jobs.append((m, key, nu, nv, wu, wv))
+        jobs.append((m, key) + tuple(_axis_sampling(float(np.abs(w) @ extent), cell, omega, d_min, texel)
+                                     for w, cell in ((u, cells[0]), (v, cells[1]))))
 
     def make(job):
-        m, key, nu, nv, wu, wv = job
-        h_u, h_v = wu / nu, wv / nv
-        if path == "cells":  # cell centres, a quarter of the support from its centre
-            aa, bb = np.array([-0.25, 0.25]) * wu, np.array([-0.25, 0.25]) * wv
-            data = _line_integral_flat(wav, key, m, d_xyz, n, u, v, np.tile(aa, 2), np.repeat(bb, 2))
-            return Texture(data.reshape(2, 2).astype(np.float32), h_u, h_v, 0.5, 0.5, path, m, key)
+        m, key, (nu, h_u, cell_u), (nv, h_v, cell_v) = job
         if path == "fft":
-            data = _centred(_fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers), np.float32)
+            data = _centred(_fft_texture(wav, key, m, d_xyz, u, v, nu, nv, nu * h_u, nv * h_v, workers), np.float32)
+            cu, cv = float(nu // 2), float(nv // 2)
         else:
-            aa = (np.arange(nu + 1) - nu // 2) * h_u
-            bb = (np.arange(nv + 1) - nv // 2) * h_v
-            shape = (nv + 1, nu + 1)
+            (aa, cu), (bb, cv) = _axis_points(nu, h_u, cell_u), _axis_points(nv, h_v, cell_v)
+            shape = (len(bb), len(aa))
             data = _line_integral_flat(wav, key, m, d_xyz, n, u, v,
                                        np.broadcast_to(aa, shape).reshape(-1),
                                        np.broadcast_to(bb[:, None], shape).reshape(-1))
             data = data.reshape(shape).astype(np.float32)
-        data, cu, cv = _trim(data, float(nu // 2), float(nv // 2), float(tol))
-        return Texture(np.ascontiguousarray(data), h_u, h_v, cu, cv, path, m, key)
+        data, cu, cv = _trim(data, cu, cv, float(tol))
+        return Texture(np.ascontiguousarray(data), h_u, h_v, cu, cv, name, m, key)
 
     # numpy and pocketfft release the GIL: textures in parallel, largest first, where the
     # work outweighs the threads' overhead (measured on 2 cores: a gain from ~1e5 texels)
-    threads = min(len(jobs), _cpu_count()) if sum(job[2] * job[3] for job in jobs) >= 1 << 17 else 1
+    threads = min(len(jobs), _cpu_count()) if sum(job[2][0] * job[3][0] for job in jobs) >= 1 << 17 else 1
     if threads > 1:
         workers = 1
-        jobs.sort(key=lambda job: -job[2] * job[3])
+        jobs.sort(key=lambda job: -job[2][0] * job[3][0])
         with ThreadPoolExecutor(threads) as pool:
             textures = list(pool.map(make, jobs))
     else:

@@ -26,7 +26,7 @@ from . import programs
 from .camera import Camera
 from .device import ComputeContext
 from .errors import DeviceMemoryError, InputError
-from .footprint import DEFAULT_OMEGA_MIN, cells_are_exact, footprints
+from .footprint import DEFAULT_OMEGA_MIN, cell_axes, footprints
 from .result import RenderResult
 from .wavelet import WaveletVolume
 
@@ -37,6 +37,12 @@ CHUNKS_PER_UNIT = 64  # binning work-items per compute unit (chunks of consecuti
 MAX_HIST = 1 << 22  # entries of the (tile, chunk) count table
 KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
 POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pixel rows
+#: Haar textures with a cell axis are sampled CELL_REFINE times finer (texels of 1/(CELL_REFINE P)
+#: pixel) along their other axis: they are one column or row of samples (2 x N texels), so this is
+#: cheap, and it takes the bilinear error at the kinks along that axis from 1e-3..3.4e-3 to <= 2.1e-4
+#: of the line length (box of ones, pixel 1.0012 voxel, azimuth / elevation 0 / 10, 90 / 25, 30 / 0)
+CELL_REFINE = 8
+LINEAR_U, LINEAR_V = 1, 2  # lookup bits of a texture (cl/splat_raster.cl); clear: cells, nearest sample
 
 
 class ViewTables:
@@ -51,8 +57,8 @@ class ViewTables:
         shape = np.array(wv.shape[::-1], float)      # (nx, ny, nz)
         omega = omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
         self.omega_s, self.textures, self.texels_per_pixel = omega, {}, {}
-        if path == "auto" and cells_are_exact(wav, view.u, view.v):
-            path = "cells"  # Haar at an axis-aligned view: exact piecewise-constant footprints
+        if path == "auto" and any(cell_axes(wav, view.u, view.v)):
+            path = "cells"  # Haar with u or v along a world axis: exact cells along that axis
         start = time.perf_counter()
         for m in sorted({b.level for b in drawn}):
             # texels of exactly 1/P pixel (cl/splat_raster.cl), at least the band of eq. 36 and the
@@ -60,6 +66,7 @@ class ViewTables:
             # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
             band = max(omega, DEFAULT_OMEGA_MIN[wav.order] / 2.0 ** m if wav.order >= 3 else KINKED_OMEGA_MIN)
             P = max(2, int(np.ceil(band * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
+            P *= CELL_REFINE if path == "cells" else 1
             self.texels_per_pixel[m] = P
             self.textures.update(footprints(wav, wv.spacing, view.n, view.u, view.v,
                                             [(b.level, b.key) for b in drawn if b.level == m],
@@ -87,21 +94,17 @@ class ViewTables:
             if tex is None:  # psi along the view direction (its footprint vanishes), or drawn elsewhere
                 continue
             self.band_tex[m * 8 + code] = len(ints)
+            # per axis: texels at 1/P pixel, bilinear (u from P phase planes), or cells at s texels
+            # per pixel, nearest sample (u gathered per pixel from one plane); cl/splat_raster.cl
+            P = self.texels_per_pixel[m]
+            cell_u, cell_v = tex.cells
+            su, sv = (view.pixel / h if cell else float(P) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
+            planes = pack_texture(tex.data, 1 if cell_u else P)
             nv, nu = tex.data.shape
-            if tex.path == "cells":  # nearest-sample lookup (P = -1) at s texels per pixel
-                su, sv = view.pixel / tex.h_u, view.pixel / tex.h_v
-                planes = pack_texture(tex.data, 1)
-                boxes.append((-(tex.centre_u + 0.5) / su, (nu - 0.5 - tex.centre_u) / su,
-                              -(tex.centre_v + 0.5) / sv, (nv - 0.5 - tex.centre_v) / sv))
-                ints.append((offset, planes.shape[2], planes.shape[1], -1))
-                maps.append((tex.centre_u, tex.centre_v, su, sv))
-            else:
-                P = self.texels_per_pixel[m]
-                planes = pack_texture(tex.data, P)
-                boxes.append((-tex.centre_u / P, (nu - 1 - tex.centre_u) / P,
-                              -tex.centre_v / P, (nv - 1 - tex.centre_v) / P))
-                ints.append((offset, planes.shape[2], planes.shape[1], P))
-                maps.append((tex.centre_u, tex.centre_v, 0.0, 0.0))
+            boxes.append(_axis_box(nu, tex.centre_u, su, cell_u) + _axis_box(nv, tex.centre_v, sv, cell_v))
+            lookup = (0 if cell_u else LINEAR_U) | (0 if cell_v else LINEAR_V)
+            ints.append((offset, planes.shape[2], planes.shape[1], lookup))
+            maps.append((tex.centre_u, tex.centre_v, su, sv))
             pool.append(planes.ravel())
             offset += planes.size
         self.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
@@ -111,17 +114,24 @@ class ViewTables:
         self.size = view.size
 
 
+def _axis_box(count, centre, steps, cell) -> tuple:
+    """Pixel offsets from the splat centre of the first and last sample along one texture axis
+    (``steps`` texels per pixel); a cell reaches half a texel beyond its centre."""
+    reach = 0.5 if cell else 0.0
+    return -(centre + reach) / steps, (count - 1 + reach - centre) / steps
+
+
 def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
-    """Phase planes of a texture sampled at 1/P pixel: (P, nv + 2, ceil(nu / P) + 2), zero margins.
+    """Phase planes of a texture sampled at 1/P pixel along u: (P, nv + 3, ceil(nu / P) + 2).
 
     Plane p, column q + 1 holds texel p + P q (``cl/splat_raster.cl``), so a row of pixels
-    reads contiguous memory.
+    reads contiguous memory.  Zero margins: a column either side, a row above and two below.
     """
     nv, nu = data.shape
     cols = -(-nu // P) + 2
-    rows = np.zeros((nv + 2, cols * P), np.float32)
+    rows = np.zeros((nv + 3, cols * P), np.float32)
     rows[1:nv + 1, P:P + nu] = data  # texel iu at P + iu: column (iu // P) + 1 of plane iu % P
-    return np.ascontiguousarray(rows.reshape(nv + 2, cols, P).transpose(2, 0, 1))
+    return np.ascontiguousarray(rows.reshape(nv + 3, cols, P).transpose(2, 0, 1))
 
 
 def bin_chunks(n: int, tiles: int, compute_units: int) -> int:
@@ -149,7 +159,10 @@ class SplatRenderer:
         Footprint band (paper eq. 35/36); default from the pixel size.
     path : "auto", "fft", "spatial" or "cells"
         How footprint textures are made (:func:`clwave.footprint.footprints`); "auto" takes
-        "cells" (exact, nearest-sample lookup) for Haar at axis-aligned views.
+        "cells" for Haar when u or v is a world axis: along that axis (or both) the footprint
+        is its 2 exact cells, looked up by nearest sample, and along the other it is sampled
+        at 1/(8 P) pixel (:data:`CELL_REFINE`).  ``meta["texture_path"]`` says what ran:
+        "fft", "spatial", "cells" (both axes), "cells-u" or "cells-v" (that axis only).
     coarse : float, optional
         Tolerance, relative to the image maximum, for drawing coarse cubic bands into
         coarser framebuffers that are upsampled with the cubic B-spline (issue §2; see

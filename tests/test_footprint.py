@@ -15,7 +15,7 @@ from scipy.integrate import quad
 
 from clwave.bspline import SplineWavelet
 from clwave.errors import InputError
-from clwave.footprint import (DEFAULT_OMEGA_MIN, Texture, cells_are_exact, centred_fourier, footprints,
+from clwave.footprint import (DEFAULT_OMEGA_MIN, Texture, cell_axes, centred_fourier, footprints,
                               line_integral, projected_halfwidths, sample_count, view_vectors)
 
 KEYS = [z + y + x for z in "ad" for y in "ad" for x in "ad"]  # array order (z, y, x)
@@ -206,7 +206,7 @@ def test_haar_cells_at_axis_views_are_exact_everywhere(view, spacing):
     support box, not only at the samples: the jumps lie on the cell edges."""
     w = SplineWavelet(1)
     n, u, v = frame(*view)
-    assert cells_are_exact(w, u, v)
+    assert cell_axes(w, u, v) == (True, True)
     rng = np.random.default_rng(3)
     for m in (0, 2):
         tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], path="cells")
@@ -227,13 +227,51 @@ def test_haar_cells_at_axis_views_are_exact_everywhere(view, spacing):
             assert np.max(np.abs(t.data[iv, iu] - want)) <= 1e-6 * peak
 
 
-def test_cells_need_haar_at_an_axis_view():
+MIXED = [(0.0, 10.0), (90.0, 25.0), (-180.0, -40.0), (30.0, 0.0), (-70.0, 0.0)]  # u or v a world axis
+
+
+@pytest.mark.parametrize("view", MIXED)
+@pytest.mark.parametrize("spacing", SPACINGS)
+def test_haar_cells_along_the_one_world_axis_are_exact(view, spacing):
+    """With only u (azimuth a multiple of 90 deg) or only v (elevation 0) along a world axis, the
+    texture is the 2 cells along that axis and samples along the other: exact at any point
+    along the cell axis (nearest cell), at the sample offsets along the other."""
+    w = SplineWavelet(1)
+    n, u, v = frame(*view)
+    cells = (view[0] % 90 == 0, view[1] == 0)
+    assert cell_axes(w, u, v) == cells
+    rng = np.random.default_rng(5)
+    for m in (0, 2):
+        tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], path="cells", texel=0.07)
+        peak = aaa_peak(w, m, spacing, n, u, v)
+        assert all(t is not None for t in tex.values())  # no world axis along n
+        for (_, key), t in tex.items():
+            if t is None:
+                continue
+            assert t.path == ("cells-u" if cells[0] else "cells-v") and t.cells == cells
+            hu, hv = projected_halfwidths(w, key, m, spacing, u, v)
+            cell_h, cell_axis = (t.h_u, 1) if cells[0] else (t.h_v, 0)
+            assert t.data.shape[cell_axis] == 2 and cell_h == pytest.approx(hu if cells[0] else hv)
+            assert (t.h_v if cells[0] else t.h_u) == 0.07  # the other axis keeps the asked texel
+            x = rng.uniform(-1.0, 1.0, 300) * (hu if cells[0] else hv)
+            x = x[np.abs(x) > 1e-6 * cell_h]  # off the middle knot
+            i_cell = np.floor(x / cell_h + 0.5 + 0.5).astype(int)  # nearest of the 2 cells
+            a_s, b_s = t.coordinates()
+            i_s = rng.integers(0, t.data.shape[1 - cell_axis], x.size)
+            if cells[0]:
+                got, want = t.data[i_s, i_cell], oracle(w, key, m, spacing, n, u, v, x, b_s[i_s])
+            else:
+                got, want = t.data[i_cell, i_s], oracle(w, key, m, spacing, n, u, v, a_s[i_s], x)
+            assert np.max(np.abs(got - want)) <= 1e-6 * peak
+
+
+def test_cells_need_haar_with_a_world_axis_in_the_image():
     n, u, v = frame(30.0, 20.0)
-    assert not cells_are_exact(1, u, v)
+    assert cell_axes(1, u, v) == (False, False)
     with pytest.raises(InputError, match="cells"):
         footprints(1, (1, 1, 1), n, u, v, [(0, "aaa")], path="cells")
     n, u, v = frame(0.0, 0.0)
-    assert not cells_are_exact(2, u, v)
+    assert cell_axes(2, u, v) == (False, False)
     with pytest.raises(InputError, match="cells"):
         footprints(2, (1, 1, 1), n, u, v, [(0, "aaa")], path="cells")
 

@@ -1,4 +1,5 @@
-"""Each splatting kernel against its NumPy reference (clwave.reference) on small random inputs.
+"""Each splatting kernel against its NumPy reference on small random inputs (clwave.reference;
+the accumulation's, with every texture lookup, is :func:`accumulate` here).
 
 Integer stages must be exactly equal; the accumulation to float32 rounding."""
 
@@ -8,13 +9,16 @@ import pytest
 from pyopencl.scan import ExclusiveScanKernel
 
 from clwave import programs, reference
-from clwave.splat import bin_chunks, pack_texture
+from clwave.splat import LINEAR_U, LINEAR_V, bin_chunks, pack_texture
 
 W, H = 45, 37  # not multiples of the 16-pixel tile
 TILES_X, TILES_Y = 3, 3
 
 
-def random_scene(rng, n=400, n_tex=7):
+LOOKUPS = (0, LINEAR_U, LINEAR_V, LINEAR_U | LINEAR_V)  # cells, u linear / v cells, u cells / v linear, bilinear
+
+
+def random_scene(rng, n=400, n_tex=8):
     coef = np.zeros((n + 7, 4), np.int32)
     coef[:, :3] = rng.integers(-3, 12, (n + 7, 3))
     coef[:, 3] = rng.integers(0, 3, n + 7) * 8 + rng.integers(0, 8, n + 7)
@@ -27,24 +31,72 @@ def random_scene(rng, n=400, n_tex=7):
         nu, nv = rng.integers(2, 30, 2)
         cu, cv = rng.uniform(0, nu - 1), rng.uniform(0, nv - 1)
         data = rng.standard_normal((nv, nu)).astype(np.float32)
-        if i < 2:  # cell textures: nearest sample at s texels per pixel, the box reaches half a texel out
-            P, su, sv = -1, rng.uniform(0.2, 3.0), rng.uniform(0.2, 3.0)
-            planes = pack_texture(data, 1)
-            boxes.append((-(cu + 0.5) / su, (nu - 0.5 - cu) / su, -(cv + 0.5) / sv, (nv - 0.5 - cv) / sv))
-        else:
-            P, su, sv = int(rng.integers(1, 6)), 0.0, 0.0  # texels per pixel, bilinear
-            planes = pack_texture(data, P)
-            boxes.append((-cu / P, (nu - 1 - cu) / P, -cv / P, (nv - 1 - cv) / P))
-        ints.append((off, planes.shape[2], planes.shape[1], P))
+        lookup = LOOKUPS[i % 4]
+        # along a linear axis texels are 1/P pixel (u: P phase planes), along a cell axis any step
+        # with nearest lookup, the box reaching half a texel beyond the first and last
+        P = int(rng.integers(1, 6))
+        su = float(P) if lookup & LINEAR_U else rng.uniform(0.2, 3.0)
+        sv = float(P) if lookup == LINEAR_U | LINEAR_V else rng.uniform(0.2, 3.0)
+        planes = pack_texture(data, P if lookup & LINEAR_U else 1)
+        ru, rv = (0.0 if lookup & LINEAR_U else 0.5), (0.0 if lookup & LINEAR_V else 0.5)
+        boxes.append((-(cu + ru) / su, (nu - 1 + ru - cu) / su, -(cv + rv) / sv, (nv - 1 + rv - cv) / sv))
+        ints.append((off, planes.shape[2], planes.shape[1], lookup))
         maps.append((cu, cv, su, sv))
         pool.append(planes.ravel())
-        textures.append((data, cu, cv, P, su, sv))
+        textures.append((data, cu, cv, lookup, su, sv))
         off += planes.size
     values = rng.standard_normal((n + 7, 4)).astype(np.float32)
     return dict(coef=coef, band_tex=band_tex, band_origin=band_origin, step_col=step_col, step_row=step_row,
                 tex_box=np.array(boxes, np.float32), tex_int=np.array(ints, np.int32),
                 tex_map=np.array(maps, np.float32), texels=np.concatenate(pool + [np.zeros(32)]).astype(np.float32),
                 values=values, n=n, first=7, textures=textures)
+
+
+def _axis_lookup(pixels, centre_px, centre_tex, steps, count, linear):
+    """Texel indices (into the texture with one ring of zeros) and the weight of the second, per pixel.
+
+    Linear: ``t = centre_tex + offset * steps`` in float64, texels floor(t) and floor(t) + 1.
+    Nearest: the kernel's float32 ``(centre_tex + 1/2) + offset * steps``, floored, so a pixel
+    within rounding of a cell edge picks the same cell; weight 0 on the second."""
+    f32 = np.float32
+    if linear:
+        t = centre_tex + (pixels - np.float64(centre_px)) * steps
+        i = np.floor(t).astype(int)
+        return np.clip(i + 1, 0, count + 1), np.clip(i + 2, 0, count + 1), t - i
+    t = (f32(centre_tex) + f32(0.5)) + (pixels.astype(f32) - f32(centre_px)) * f32(steps)
+    i = np.clip(np.floor(t).astype(int), -1, count) + 1
+    return i, i, np.zeros(len(pixels))
+
+
+def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width, height, channels=4):
+    """Reference of ``splat_accumulate`` (float64): footprint samples times c, channels < ``channels``.
+
+    ``textures`` are ``(data (nv, nu), centre_u, centre_v, lookup, s_u, s_v)``: per axis, s
+    texels per pixel; linear interpolation where the axis' lookup bit is set, nearest sample
+    where it is clear.  Image rows go down while v goes up.
+    """
+    fb = np.zeros((height, width, 4))
+    tiles_x = -(-width // 16)
+    for tile, (start, end) in enumerate(ranges):
+        tx, ty = tile % tiles_x, tile // tiles_x
+        for s in vals[start:end]:
+            x0, y0, x1, y1 = bbox[s]
+            xs = np.arange(max(x0, tx * 16), min(x1, tx * 16 + 15) + 1)
+            ys = np.arange(max(y0, ty * 16), min(y1, ty * 16 + 15) + 1)
+            if not len(xs) or not len(ys):
+                continue
+            data, cu, cv, lookup, su, sv = textures[stex[s]]
+            nv, nu = data.shape
+            tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
+            tex[1:-1, 1:-1] = data
+            iu0, iu1, fu = _axis_lookup(xs, centre[s, 0], cu, su, nu, lookup & LINEAR_U)
+            # rows: offset (centre - y) along v, i.e. the same lookup of -y about -centre
+            iv0, iv1, fv = _axis_lookup(-ys, -centre[s, 1], cv, sv, nv, lookup & LINEAR_V)
+            top = tex[iv0[:, None], iu0] * (1 - fu) + tex[iv0[:, None], iu1] * fu
+            bot = tex[iv1[:, None], iu0] * (1 - fu) + tex[iv1[:, None], iu1] * fu
+            sample = top * (1 - fv[:, None]) + bot * fv[:, None]
+            fb[ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
+    return fb
 
 
 @pytest.mark.parametrize("px, channels", [(16, 4), (16, 1), (1, 4)])
@@ -87,16 +139,20 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
                              np.uint32(tiles), np.int32(TILES_X), np.int32(1), bbox.data, offsets.data, vals.data)
         assert np.array_equal(vals.get(), r_vals)
 
-    fb = cla.to_device(q, np.full((H * W, 4), 0.5, np.float32))  # accumulates onto what is there
     local = 16 * 16 // px
-    ks.splat_accumulate(q, (TILES_X * TILES_Y * local,), (local,), np.int32(W), np.int32(H), np.int32(TILES_X),
-                        ranges.data, vals.data, np.uint32(first), centre.data, bbox.data, stex.data,
-                        d["values"].data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
-    expected = 0.5 + reference.accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"],
-                                          s["textures"], W, H, channels)
-    got = fb.get().reshape(H, W, 4)
+    images = []
+    for _ in range(2):  # accumulates onto what is there; a second run repeats the first bit for bit
+        fb = cla.to_device(q, np.full((H * W, 4), 0.5, np.float32))
+        ks.splat_accumulate(q, (TILES_X * TILES_Y * local,), (local,), np.int32(W), np.int32(H), np.int32(TILES_X),
+                            ranges.data, vals.data, np.uint32(first), centre.data, bbox.data, stex.data,
+                            d["values"].data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
+        images.append(fb.get().reshape(H, W, 4))
+    assert np.array_equal(images[0], images[1])
+    expected = 0.5 + accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"], s["textures"], W, H,
+                                channels)
+    got = images[0]
     assert np.abs(expected - 0.5).max() > 1  # splats did land
-    cells = np.isin(r_tex, [0, 1]) & (r_count > 0)
-    assert cells.sum() > 10 and (~cells & (r_count > 0)).sum() > 10  # both lookups ran
+    drawn = r_tex[r_count > 0]
+    assert all(np.isin(drawn, np.flatnonzero(s["tex_int"][:, 3] == lookup)).sum() > 10 for lookup in LOOKUPS)
     # float32 sums of float32 texel coordinates: rounding at 1e-5 of the image's magnitude
     assert np.abs(got - expected).max() <= 1e-5 * np.abs(expected).max()
