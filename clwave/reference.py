@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .splat import LINEAR_U, LINEAR_V
+
 TILE = 16
 
 
@@ -69,15 +71,29 @@ def bin_by_tile(bbox, tiles_x, tiles):
     return ranges, vals
 
 
+def _axis_lookup(pixels, centre_px, centre_tex, steps, count, linear):
+    """Texel indices (into the texture with one ring of zeros) and the weight of the second, per pixel.
+
+    Linear: ``t = centre_tex + offset * steps`` in float64, texels floor(t) and floor(t) + 1.
+    Nearest: the kernel's float32 ``(centre_tex + 1/2) + offset * steps``, floored, so a pixel
+    within rounding of a cell edge picks the same cell; weight 0 on the second."""
+    f32 = np.float32
+    if linear:
+        t = centre_tex + (pixels - np.float64(centre_px)) * steps
+        i = np.floor(t).astype(int)
+        return np.clip(i + 1, 0, count + 1), np.clip(i + 2, 0, count + 1), t - i
+    t = (f32(centre_tex) + f32(0.5)) + (pixels.astype(f32) - f32(centre_px)) * f32(steps)
+    i = np.clip(np.floor(t).astype(int), -1, count) + 1
+    return i, i, np.zeros(len(pixels))
+
+
 def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width, height, channels=4):
     """Reference of ``splat_accumulate`` (float64): footprint samples times c, channels < ``channels``.
 
-    ``textures`` are ``(data (nv, nu), centre_u, centre_v, P, s_u, s_v)``: P texels per pixel
-    with bilinear lookup, or P = -1 for a cell texture with nearest-sample lookup at s_u, s_v
-    texels per pixel.  The nearest texel is chosen from the kernel's float32 texel coordinate,
-    so a pixel centre within rounding of a cell edge picks the same cell.
+    ``textures`` are ``(data (nv, nu), centre_u, centre_v, lookup, s_u, s_v)``: per axis, s
+    texels per pixel; linear interpolation where the axis' lookup bit is set, nearest sample
+    where it is clear.  Image rows go down while v goes up.
     """
-    f32 = np.float32
     fb = np.zeros((height, width, 4))
     tiles_x = -(-width // TILE)
     for tile, (start, end) in enumerate(ranges):
@@ -88,26 +104,16 @@ def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width,
             ys = np.arange(max(y0, ty * TILE), min(y1, ty * TILE + TILE - 1) + 1)
             if not len(xs) or not len(ys):
                 continue
-            data, cu, cv, P, su, sv = textures[stex[s]]
+            data, cu, cv, lookup, su, sv = textures[stex[s]]
             nv, nu = data.shape
             tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
             tex[1:-1, 1:-1] = data
-            if P == -1:
-                tu = (f32(cu) + f32(0.5)) + (xs.astype(f32) - centre[s, 0]) * f32(su)
-                tv = (f32(cv) + f32(0.5)) + (centre[s, 1] - ys.astype(f32)) * f32(sv)
-                iu = np.clip(np.floor(tu).astype(int), -1, nu) + 1
-                iv = np.clip(np.floor(tv).astype(int), -1, nv) + 1
-                sample = tex[iv[:, None], iu[None, :]]
-            else:
-                tu = cu + (xs - np.float64(centre[s, 0])) * P
-                tv = cv + (np.float64(centre[s, 1]) - ys) * P
-                iu, iv = np.floor(tu).astype(int), np.floor(tv).astype(int)
-                fu, fv = tu - iu, tv - iv
-                iu, iv = np.clip(iu + 1, 0, nu + 1), np.clip(iv + 1, 0, nv + 1)
-                iu1, iv1 = np.clip(iu + 1, 0, nu + 1), np.clip(iv + 1, 0, nv + 1)
-                top = tex[iv[:, None], iu[None, :]] * (1 - fu) + tex[iv[:, None], iu1[None, :]] * fu
-                bot = tex[iv1[:, None], iu[None, :]] * (1 - fu) + tex[iv1[:, None], iu1[None, :]] * fu
-                sample = top * (1 - fv[:, None]) + bot * fv[:, None]
+            iu0, iu1, fu = _axis_lookup(xs, centre[s, 0], cu, su, nu, lookup & LINEAR_U)
+            # rows: offset (centre - y) along v, i.e. the same lookup of -y about -centre
+            iv0, iv1, fv = _axis_lookup(-ys, -centre[s, 1], cv, sv, nv, lookup & LINEAR_V)
+            top = tex[iv0[:, None], iu0] * (1 - fu) + tex[iv0[:, None], iu1] * fu
+            bot = tex[iv1[:, None], iu0] * (1 - fu) + tex[iv1[:, None], iu1] * fu
+            sample = top * (1 - fv[:, None]) + bot * fv[:, None]
             fb[ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
     return fb
 

@@ -1,5 +1,4 @@
-"""Each splatting kernel against its NumPy reference on small random inputs (clwave.reference;
-the accumulation's, with every texture lookup, is :func:`accumulate` here).
+"""Each splatting kernel against its NumPy reference on small random inputs (clwave.reference).
 
 Integer stages must be exactly equal; the accumulation to float32 rounding."""
 
@@ -52,53 +51,6 @@ def random_scene(rng, n=400, n_tex=8):
                 values=values, n=n, first=7, textures=textures)
 
 
-def _axis_lookup(pixels, centre_px, centre_tex, steps, count, linear):
-    """Texel indices (into the texture with one ring of zeros) and the weight of the second, per pixel.
-
-    Linear: ``t = centre_tex + offset * steps`` in float64, texels floor(t) and floor(t) + 1.
-    Nearest: the kernel's float32 ``(centre_tex + 1/2) + offset * steps``, floored, so a pixel
-    within rounding of a cell edge picks the same cell; weight 0 on the second."""
-    f32 = np.float32
-    if linear:
-        t = centre_tex + (pixels - np.float64(centre_px)) * steps
-        i = np.floor(t).astype(int)
-        return np.clip(i + 1, 0, count + 1), np.clip(i + 2, 0, count + 1), t - i
-    t = (f32(centre_tex) + f32(0.5)) + (pixels.astype(f32) - f32(centre_px)) * f32(steps)
-    i = np.clip(np.floor(t).astype(int), -1, count) + 1
-    return i, i, np.zeros(len(pixels))
-
-
-def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width, height, channels=4):
-    """Reference of ``splat_accumulate`` (float64): footprint samples times c, channels < ``channels``.
-
-    ``textures`` are ``(data (nv, nu), centre_u, centre_v, lookup, s_u, s_v)``: per axis, s
-    texels per pixel; linear interpolation where the axis' lookup bit is set, nearest sample
-    where it is clear.  Image rows go down while v goes up.
-    """
-    fb = np.zeros((height, width, 4))
-    tiles_x = -(-width // 16)
-    for tile, (start, end) in enumerate(ranges):
-        tx, ty = tile % tiles_x, tile // tiles_x
-        for s in vals[start:end]:
-            x0, y0, x1, y1 = bbox[s]
-            xs = np.arange(max(x0, tx * 16), min(x1, tx * 16 + 15) + 1)
-            ys = np.arange(max(y0, ty * 16), min(y1, ty * 16 + 15) + 1)
-            if not len(xs) or not len(ys):
-                continue
-            data, cu, cv, lookup, su, sv = textures[stex[s]]
-            nv, nu = data.shape
-            tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
-            tex[1:-1, 1:-1] = data
-            iu0, iu1, fu = _axis_lookup(xs, centre[s, 0], cu, su, nu, lookup & LINEAR_U)
-            # rows: offset (centre - y) along v, i.e. the same lookup of -y about -centre
-            iv0, iv1, fv = _axis_lookup(-ys, -centre[s, 1], cv, sv, nv, lookup & LINEAR_V)
-            top = tex[iv0[:, None], iu0] * (1 - fu) + tex[iv0[:, None], iu1] * fu
-            bot = tex[iv1[:, None], iu0] * (1 - fu) + tex[iv1[:, None], iu1] * fu
-            sample = top * (1 - fv[:, None]) + bot * fv[:, None]
-            fb[ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
-    return fb
-
-
 @pytest.mark.parametrize("px, channels", [(16, 4), (16, 1), (1, 4)])
 def test_every_stage_equals_its_reference(cc, rng, px, channels):
     s = random_scene(rng)
@@ -148,8 +100,8 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
                             d["values"].data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
         images.append(fb.get().reshape(H, W, 4))
     assert np.array_equal(images[0], images[1])
-    expected = 0.5 + accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"], s["textures"], W, H,
-                                channels)
+    expected = 0.5 + reference.accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"],
+                                          s["textures"], W, H, channels)
     got = images[0]
     assert np.abs(expected - 0.5).max() > 1  # splats did land
     drawn = r_tex[r_count > 0]
