@@ -40,9 +40,6 @@ typedef float4 real4;
 #endif
 
 #define N CLW_NCHEB
-#ifndef CLW_MAX_DEPTH
-#define CLW_MAX_DEPTH 16
-#endif
 
 constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
 
@@ -157,6 +154,7 @@ typedef struct {
 
 typedef struct {
     real ka, kd, ks, shininess;
+    real grad_floor; /* world gradients of alpha this short are flat: no normal, ambient light only */
     int nlights;
     real3 light[8], halfway[8];
     real3 scale;     /* fine units per world unit, per axis: world gradient = fine gradient * scale */
@@ -171,7 +169,7 @@ inline real3 integrand(const Segment *S, const Shading *P, const real xi)
     const real3 gw = cheb3(S->g, N, xi) * P->scale;
     const real len = length(gw);
     real diffuse = 0, specular = 0;
-    if (len > 0) {
+    if (len > P->grad_floor) {
         const real3 n = -gw / len; /* outward: alpha decreases along n (MATH.md §4) */
         for (int i = 0; i < P->nlights; i++) {
             diffuse += fmax(dot(n, P->light[i]), (real)0);
@@ -186,12 +184,14 @@ inline real3 integrand(const Segment *S, const Shading *P, const real xi)
 typedef struct {
     real l, r, tol;
     real3 fl, fm, fr;
+    int depth; /* halvings from the whole segment */
 } Panel;
 
-/* int_{-1}^{1} q e^{-A} dxi by adaptive Simpson from 2 panels; counts evaluations, flags depth */
+/* int_{-1}^{1} q e^{-A} dxi by adaptive Simpson from 2 panels; counts evaluations, flags depth.
+ * Depth first, right half pushed first: the stack holds at most one panel per depth. */
 inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *evals, int *flags)
 {
-    Panel stack[CLW_MAX_DEPTH + 2];
+    Panel stack[CLW_MAX_DEPTH + 1];
     int top = 0;
     const real3 f0 = integrand(S, P, -1), f1 = integrand(S, P, -0.5), f2 = integrand(S, P, 0);
     const real3 f3 = integrand(S, P, 0.5), f4 = integrand(S, P, 1);
@@ -199,6 +199,7 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
     stack[0].l = 0; stack[0].r = 1; stack[0].fl = f2; stack[0].fm = f3; stack[0].fr = f4;
     stack[1].l = -1; stack[1].r = 0; stack[1].fl = f0; stack[1].fm = f1; stack[1].fr = f2;
     stack[0].tol = stack[1].tol = tol / 2;
+    stack[0].depth = stack[1].depth = 1;
     top = 2;
     real3 total = (real3)(0);
     while (top > 0) {
@@ -212,7 +213,7 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
         const real err = fmax(d.x, fmax(d.y, d.z));
         /* below the rounding floor of the arithmetic, halving the panel cannot help */
         const real floor_err = 16 * REAL_EPSILON * fmax(fabs(s2.x), fmax(fabs(s2.y), fabs(s2.z)));
-        if (err <= fmax(15 * p.tol, floor_err) || top >= CLW_MAX_DEPTH) {
+        if (err <= fmax(15 * p.tol, floor_err) || p.depth >= CLW_MAX_DEPTH) {
             if (err > fmax(15 * p.tol, floor_err))
                 *flags |= 2;
             total += s2 + (s2 - s1) / 15;
@@ -221,6 +222,7 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
             right->l = m; right->r = p.r; right->fl = p.fm; right->fm = fmr; right->fr = p.fr;
             left->l = p.l; left->r = m; left->fl = p.fl; left->fm = flm; left->fr = p.fm;
             right->tol = left->tol = p.tol / 2;
+            right->depth = left->depth = p.depth + 1;
         }
     }
     return total;
@@ -242,6 +244,9 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
  *   cheb         (N + 1, N) cos(pi m (k + 1/2) / N); row 1 holds the sample points
  *   tol, q_bound absolute tolerance per output value; an upper bound of the shaded emission
  *   shade_gain   q_bound / max |coefficient|: how much shading can scale the emission
+ *   grad_floor   shorter world gradients of alpha get no diffuse or specular light: on a plateau
+ *                of alpha they are rounding noise, whose random normals would make the integrand
+ *                jump everywhere
  *   lights       (nlights,) unit directions towards the lights; phong (ka, kd, ks, shininess)
  * Grid: global (W, H). */
 __kernel void raytrace(__global float4 *image, __global int4 *stats, const int width, const int height,
@@ -251,6 +256,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
                        const float4 to_fine_scale, const float4 to_fine_offset,
                        __constant const real *cheb, const real tol, const real q_bound, const real shade_gain,
+                       const real grad_floor,
                        __constant const float4 *lights, const int nlights, const float4 phong)
 {
     const int col = get_global_id(0), row = get_global_id(1);
@@ -297,6 +303,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
 #ifndef CLW_XRAY
     Shading P;
     P.ka = phong.x; P.kd = phong.y; P.ks = phong.z; P.shininess = phong.w;
+    P.grad_floor = grad_floor;
     P.nlights = min(nlights, 8);
     P.scale = scale;
     for (int i = 0; i < P.nlights; i++) {

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.polynomial import chebyshev
 
-from .raytrace import BLOCK, Phong, RayTracer, light_direction
+from .raytrace import BLOCK, SIMPSON_DEPTH, Phong, RayTracer, light_direction
 
 
 def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
@@ -63,7 +63,7 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
             out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(field[keep], xi)))
             continue
         out[r, c] = _emission_absorption(np.maximum(field, 0), grad, xi, mid, rad, t1, t1 - t0,
-                                         tolerance, bound, phong, light_dirs, w, blocks)
+                                         tolerance, bound, phong, light_dirs, w, blocks, tr.grad_floor())
     return out
 
 
@@ -146,7 +146,7 @@ def _integral(series):
     return np.einsum("smc,m->sc", series, weights)
 
 
-def _emission_absorption(field, grad, xi, mid, rad, t1, total, tol, bound, phong, lights, w, blocks):
+def _emission_absorption(field, grad, xi, mid, rad, t1, total, tol, bound, phong, lights, w, blocks, floor):
     series = _fit(field, xi)
     grad_series = _fit(grad, xi) if grad is not None else None
     T, color = 1.0, np.zeros(3)
@@ -160,7 +160,7 @@ def _emission_absorption(field, grad, xi, mid, rad, t1, total, tol, bound, phong
             f = chebyshev.chebval(x, series[s])
             q = np.maximum(f[:3], 0.0)
             if phong is not None:
-                q = _shade(q, max(f[3], 0.0), chebyshev.chebval(x, grad_series[s]), phong, lights, w)
+                q = _shade(q, max(f[3], 0.0), chebyshev.chebval(x, grad_series[s]), phong, lights, w, floor)
             return q * np.exp(-rad[s] * chebyshev.chebval(x, A))
 
         seg_tol = tol / 2 * (2 * rad[s]) / total / T
@@ -171,11 +171,11 @@ def _emission_absorption(field, grad, xi, mid, rad, t1, total, tol, bound, phong
     return np.append(color, 1.0 - T)
 
 
-def _shade(q, alpha, grad, phong, lights, w):
-    """Phong's eq. 4 with the outward normal -grad/|grad| (world gradient of alpha)."""
+def _shade(q, alpha, grad, phong, lights, w, floor):
+    """Phong's eq. 4 with the outward normal -grad/|grad| (world gradient of alpha); unlit at |grad| <= floor."""
     length = np.linalg.norm(grad)
     diffuse = specular = 0.0
-    if length > 0:
+    if length > floor:
         n = -grad / length
         for light in lights:
             halfway = (light - w) / np.linalg.norm(light - w)
@@ -191,7 +191,7 @@ def _simpson(f, tol):
         flm, fmr = f((a + m) / 2), f((m + b) / 2)
         s1 = (b - a) / 6 * (fa + 4 * fm + fb)
         s2 = (b - a) / 12 * (fa + 4 * flm + 2 * fm + 4 * fmr + fb)
-        if np.max(np.abs(s2 - s1)) <= 15 * tol or depth >= 40:
+        if np.max(np.abs(s2 - s1)) <= 15 * tol or depth >= SIMPSON_DEPTH:
             return s2 + (s2 - s1) / 15
         return panel(a, m, fa, flm, fm, tol / 2, depth + 1) + panel(m, b, fm, fmr, fb, tol / 2, depth + 1)
 

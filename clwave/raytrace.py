@@ -66,6 +66,8 @@ def light_direction(azimuth, elevation) -> np.ndarray:
 
 
 PATHS = ("bspline", "wavelet")
+GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
+SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
 ACTIVE = 1024    # entries of a ray's active list (wavelet path); more fall back to visiting every index
 WAVELET_GROUP = 8  # rays per work-group on the wavelet path
 
@@ -181,6 +183,12 @@ class RayTracer:
         self.local_size = (WAVELET_GROUP, 1)
         self.setup_seconds = time.perf_counter() - start
 
+    def grad_floor(self, precision="single") -> float:
+        """World gradients of alpha at most this long count as flat when shading (``cl/raytrace.cl``):
+        on a plateau of alpha the summed gradient is rounding noise of this size."""
+        eps = np.finfo(np.float64 if precision == "double" else np.float32).eps
+        return GRAD_NOISE * eps * self.q_bound / min(self.wv.spacing)
+
     def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
                precision="single", trace=0) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.
@@ -214,6 +222,7 @@ class RayTracer:
 
         n_cheb = 3 * (max(self.orders) - 1) + 1
         defines = dict(self.defines, CLW_ALPHA=self.alpha_group, CLW_NCHEB=n_cheb, CLW_BLOCK=BLOCK,
+                       CLW_MAX_DEPTH=SIMPSON_DEPTH,
                        CLW_LATTICE="0.5" if len({o % 2 for o in self.orders}) > 1 else "1.0")
         if not absorption:
             defines["CLW_XRAY"] = None
@@ -259,7 +268,7 @@ class RayTracer:
                          int4_xyz(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
                          _float4(scale), _float4(offset), cheb.data, real(tol), real(self.q_bound * shade_gain),
-                         real(shade_gain),
+                         real(shade_gain), real(self.grad_floor(precision)),
                          cla.to_device(q, light_buf).data, np.int32(len(light_dirs)),
                          _float4([p.ambient, p.diffuse, p.specular, p.shininess]))
         q.finish()

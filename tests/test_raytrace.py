@@ -164,6 +164,24 @@ def test_zero_lights_leave_the_ambient_term(small_rgba):
     assert not np.allclose(ambient_only, tracer.render(cam).image)
 
 
+def test_simpson_stops_at_its_depth_limit_on_a_shading_jump():
+    """Along +x through a ridge of alpha, the headlight's diffuse term drops from lit to dark where the
+    gradient turns (mid-segment): no panel size meets 1e-6 there, so refinement must stop at
+    SIMPSON_DEPTH halvings (it once refined without end) and still agree with the reference."""
+    profile = np.zeros(12)
+    profile[4:9] = [0.15, 0.5, 0.4, 0.15, 0.025]
+    vol = rgba_volume(np.ones((6, 6, 12)), np.broadcast_to(profile, (6, 6, 12)))
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=1)
+    tracer, cam = RayTracer(wv), clwave.Camera(180, 0, size=1)
+    for tol in (1e-4, 1e-6):
+        got = tracer.render(cam, tolerance=tol)
+        assert got.meta["rays_at_simpson_depth_limit"] == 1
+        # 5 per segment, 2 per halving: the jump costs about 4 SIMPSON_DEPTH, smooth panels a few each
+        assert got.meta["integrand_evaluations"] <= 40 * got.meta["segments"]
+        ref = raytrace_reference(wv, cam, tolerance=tol, tracer=tracer)
+        assert np.max(np.abs(got.image - ref)) <= 1e-5 * np.abs(ref).max()
+
+
 def test_view_that_misses_gives_an_empty_image(small_rgba):
     _, tracer = small_rgba
     res = tracer.render(clwave.Camera(0, 0, size=6, target=(0.0, 500.0, 0.0), extent=5.0))

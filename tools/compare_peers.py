@@ -3,7 +3,8 @@
 
     python tools/compare_peers.py [--phantom hydrogen marschner-lobb] [--size 128 256]
                                   [--image 512] [--views 3] [--keep 0.01 0.05]
-                                  [--progressive-keep 0.08] [--steps 4] [--out out/peers]
+                                  [--progressive-keep 0.08] [--steps 4] [--raytrace-keep 0.05]
+                                  [--raytrace-tolerance 1e-3] [--raytrace-views 1] [--out out/peers]
 
 Every method renders the same phantom (sampled at the cell centres of an n³ grid, spacing 1)
 from the same orthographic views (``clwave.Camera``: golden-angle spiral, image ``--image``²,
@@ -14,6 +15,13 @@ extent the volume diagonal):
 - ``clwave progressive``: the ``--progressive-keep`` model refined in ``--steps`` doubling
   frames into one framebuffer (the first frame holds keep / 2^(steps-1) of the voxels); the
   time of a frame counts from the start of its view;
+- ``clwave raytrace K (X-ray, tol T)``: ray tracing in wavelet space (``clwave.RayTracer``,
+  ``absorption=False``: the line integral of the same cubic model, knot segment by knot
+  segment, within the absolute tolerance T) of the model thresholded to K; prepare =
+  decomposition + thresholding + B-spline expansion on the device; a 1-pixel warm-up builds
+  the kernel, whose time is reported apart.  At 256³ and 512² a view takes 20-30 s on 2 CPU
+  cores, so this row renders only the first ``--raytrace-views`` views (default 1: the row's
+  first and median times are that one view; 0 leaves the row out);
 - ``NumPy/SciPy``: trilinear ``scipy.ndimage.map_coordinates`` at one sample per voxel
   length along every ray across the whole image extent, summed (what a user would write);
 - ``Fourier volume rendering`` (Malzbender 1993; Totsuka & Levoy 1993): one 3-D FFT of the
@@ -155,6 +163,25 @@ def run_progressive(case, keep, steps):
         frames.append([(f.seconds, f.image[..., 0], f.coefficients / wv.n_voxels)
                        for f in clwave.progressive(wv, cam, steps=steps, renderer=renderer)])
     return dict(prepare=prepare, frames=frames, compile=renderer.compile_seconds)
+
+
+def run_raytrace(case, keep, tolerance, count):
+    vol = clwave.phantom(case["phantom"], case["n"])
+    start = time.perf_counter()
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=keep)
+    tracer = clwave.RayTracer(wv, device=case["device"])
+    prepare = time.perf_counter() - start
+    # warm-up on one pixel: builds the X-ray kernel, so the views are timed without it
+    warm = tracer.render(clwave.Camera(size=1), tolerance=tolerance, absorption=False)
+    seconds, images, segments = [], [], []
+    for az, el in case["views"][:count]:
+        t = time.perf_counter()
+        res = tracer.render(clwave.Camera(az, el, size=case["image"]), tolerance=tolerance, absorption=False)
+        seconds.append(time.perf_counter() - t)
+        images.append(res.image[..., 0])
+        segments.append(res.meta["segments"])
+    return dict(prepare=prepare, seconds=seconds, images=images, compile=warm.meta["compile_seconds"],
+                expand=tracer.setup_seconds, coefficients=wv.kept, segments=segments, tolerance=tolerance)
 
 
 def run_numpy(case):
@@ -341,6 +368,7 @@ def run_vtk(case, blend):
 METHODS = {
     "splat": (run_splat, None, True),
     "progressive": (run_progressive, None, True),
+    "raytrace": (run_raytrace, None, True),
     "numpy": (run_numpy, None, True),
     "fourier": (run_fourier, None, True),
     "vtk": (run_vtk, "vtk", False),
@@ -373,8 +401,11 @@ def compare(case, args, log) -> tuple:
     log(f"  ground truth: {case_info['truth_seconds']:.1f} s a view, "
         f"accuracy {case_info['truth_accuracy']:.1e} (against twice the segments)")
     jobs = [(f"clwave splat {k:g}", "splat", (k,)) for k in args.keep]
-    jobs += [("clwave progressive", "progressive", (args.progressive_keep, args.steps)),
-             ("NumPy/SciPy map_coordinates", "numpy", ()), ("Fourier volume rendering", "fourier", ())]
+    jobs += [("clwave progressive", "progressive", (args.progressive_keep, args.steps))]
+    if args.raytrace_views:
+        jobs.append((f"clwave raytrace {args.raytrace_keep:g} (X-ray, tol {args.raytrace_tolerance:g})", "raytrace",
+                     (args.raytrace_keep, args.raytrace_tolerance, args.raytrace_views)))
+    jobs += [("NumPy/SciPy map_coordinates", "numpy", ()), ("Fourier volume rendering", "fourier", ())]
     jobs += [(f"VTK {blend}", "vtk", (blend,)) for blend in ("additive", "composite")]
     rows, images = [], {"ground truth": truths[0]}
     for label, method, params in jobs:
@@ -506,6 +537,8 @@ def plot(report, path) -> bool:
         if splats:
             ax.plot([r["median"] for r in splats], [r["error"] for r in splats], "s--", color="C1",
                     label="clwave splat " + ", ".join(r["method"].split()[-1] for r in splats))
+        for r in [r for r in rows if r["method"].startswith("clwave raytrace")]:
+            ax.plot([r["median"]], [r["error"]], "*", color="C5", markersize=11, label=r["method"])
         for r, style in zip([r for r in rows if r["method"] in ("NumPy/SciPy map_coordinates",
                                                                "Fourier volume rendering")], ("^", "D")):
             ax.plot([r["median"]], [r["error"]], style, markersize=8, label=r["method"])
@@ -557,11 +590,18 @@ def main(argv=None):
     parser.add_argument("--progressive-keep", type=float, default=0.08,
                         help="kept fraction refined progressively (the last frame)")
     parser.add_argument("--steps", type=int, default=4, help="progressive frames, doubling")
+    parser.add_argument("--raytrace-keep", type=float, default=0.05, help="kept fraction to ray trace (X-ray mode)")
+    parser.add_argument("--raytrace-tolerance", type=float, default=1e-3,
+                        help="absolute error allowed on each ray-traced line integral")
+    parser.add_argument("--raytrace-views", type=int, default=1,
+                        help="views ray traced (the first ones; 20-30 s each at 256^3, 512^2; 0: no ray tracing)")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--out", type=Path, default=Path("out/peers"), help="folder for the outputs")
     args = parser.parse_args(argv)
     if args.views < 1 or args.image < 8 or args.steps < 1:
         parser.error("--views and --steps must be >= 1 and --image >= 8")
+    if not 0 <= args.raytrace_views <= args.views:
+        parser.error("--raytrace-views must be between 0 and --views")
     args.out.mkdir(parents=True, exist_ok=True)
     log = lambda text: print(text, flush=True)  # noqa: E731
     report = dict(machine=dict(cpu=_cpu(), cores=os.cpu_count(), load_average=os.getloadavg(),

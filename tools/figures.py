@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
-"""The paper's evidence on our own data, by wavelet splatting, into docs/figures/.
+"""The paper's evidence on our own data, by wavelet splatting and ray tracing, into docs/figures/.
 
     python tools/figures.py [--out docs/figures] [--size 128] [--image 256] [--scan FILE]
-                            [--scan-step 1] [--only table1 fig07 fig10 fig11 fig15 fig16 fig17]
+                            [--scan-step 1] [--raytrace-image 128] [--tolerance 1e-2]
+                            [--only table1 fig07 fig10 fig11 fig12 fig14 fig15 fig16 fig17]
 
 - ``table1``: Table I, texture samples per axis N(m) (eq. 36, omega_s = 14) for Haar, linear
   and cubic B-splines, ours against the paper's (printed and saved as ``table1.md``);
@@ -11,25 +12,37 @@
 - ``fig10``: linear against cubic, scaling functions only, levels 0 (all and 12 %), 2, 3, 4,
   with compression rates;
 - ``fig11``: thresholding linear wavelets at M = 2 to the paper's four compression rates;
+- ``fig12``: local level of detail ray traced and shaded (the paper's Fig. 12/13): the set-up
+  of ``fig16`` (the paper's Fig. 16 is "the same setup as in fig. 13"), i.e. its ray-traced half;
+- ``fig14``: Haar, linear and cubic B-splines: the scaling functions of M = 2 (4 voxels wide, so
+  each basis shows) ray traced at 2x zoom; Haar has no gradient, so it renders unshaded, as in
+  the paper;
 - ``fig15``: progressive refinement (Haar, as the paper) with the error image after each
   step, time and energy;
-- ``fig16``: local level of detail (Gaussian focus in wavelet space), Haar and cubic, M = 3;
+- ``fig16``: local level of detail (Gaussian focus in wavelet space), Haar and cubic, M = 3:
+  all coefficients, the approximation band and 0.5 % of the voxels in details chosen uniformly,
+  and the same count with the focus;
 - ``fig17``: 30, 60 and 90 % of the level-0 scaling functions, Haar against cubic.
 
 Every figure is made for the hydrogen phantom (``--size``³) and for a real scan (``--scan``,
 read with ``clwave.load``; default the ICBM 2009a MNI152 T1 MRI template, 197 x 233 x 189 at
 1 mm, that the nilearn wheel ships: ``pip install .[figures]``, nothing is downloaded at run
-time), block-averaged by ``--scan-step``.  Images are X-ray line integrals (``clwave.splat``),
-each panel windowed to its own 0.5-99.5 percentiles unless said otherwise.  Ray-traced figures
-(12/13, 14 and the ray-traced half of 16) are not made here.
+time), block-averaged by ``--scan-step``.  Splatted images are X-ray line integrals
+(``clwave.splat``) at ``--image``², each panel windowed to its own 0.5-99.5 percentiles unless
+said otherwise.  Ray-traced images (``clwave.raytrace``, emission-absorption, Phong shading with
+a headlight, absolute ``--tolerance``) are ``--raytrace-image``², of the volume pre-classified
+by a transfer function preset (``hydrogen`` for the phantom; ``mri`` for the scan, windowed from
+its 0.5th percentile to its maximum), in sRGB over black.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.util
 import sys
 import time
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +56,7 @@ from clwave.result import resolve_window  # noqa: E402
 NILEARN_T1 = "datasets/data/mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz"
 PAPER_TABLE1 = {1: [9, 17, 32, 63], 2: [25, 48, 94, 187], 4: [56, 110, 218, 434]}
 NAMES = {1: "Haar", 2: "linear", 3: "quadratic", 4: "cubic"}
+ZOOM14, LEVELS14 = 2.0, 2  # Fig. 14: this much closer to the volume centre, scaling functions of this level
 
 
 def default_scan() -> Path:
@@ -63,17 +77,46 @@ def load_scan(path, step) -> clwave.Volume:
 
 
 class Data:
-    """One data set: its volume, the view used for it, a focus point and a label."""
+    """One data set: its volume, transfer function, view (angles, world extent), a focus point and a label."""
 
-    def __init__(self, key, label, vol, camera, focus):
-        self.key, self.label, self.vol, self.camera, self.focus = key, label, vol, camera, focus
+    def __init__(self, key, label, vol, tf, angles, extent, focus, image):
+        self.key, self.label, self.vol, self.tf, self.focus = key, label, vol, tf, focus
+        self.angles, self.extent = angles, extent
+        self.camera = self.view(image)
         self.max_levels = int(np.floor(np.log2(min(vol.shape)))) - 1
+
+    def view(self, size, zoom=1.0) -> clwave.Camera:
+        """The data set's camera at ``size`` pixels, ``zoom`` times closer to the volume centre."""
+        return clwave.Camera(*self.angles, size=size, extent=self.extent / zoom)
+
+    @cached_property
+    def rgba(self) -> clwave.Volume:
+        """The volume pre-classified by its transfer function (q_R, q_G, q_B, alpha), for ray tracing."""
+        return self.tf.classify(self.vol)
 
 
 def render(wv, camera) -> tuple:
     start = time.perf_counter()
     res = clwave.splat(wv, camera)
     return res.image[..., 0], time.perf_counter() - start
+
+
+def trace(wv, camera, tolerance) -> tuple:
+    """Shaded ray tracing: the picture (8-bit sRGB over black), seconds, and ", unshaded" where it is."""
+    start = time.perf_counter()
+    res = clwave.raytrace(wv, camera, tolerance=tolerance)
+    return res.to_uint8(), time.perf_counter() - start, "" if res.meta["shading"] == "phong" else ", unshaded"
+
+
+def approx_fraction(wv) -> float:
+    """The size of the approximation band (the coarsest scaling functions) as a fraction of the voxels."""
+    return wv.groups[0].band_slices()[0].stop / wv.n_voxels
+
+
+def lod_keep(full) -> float:
+    """Local level of detail budget: the approximation band and 0.5 % of the voxels in details,
+    scarce enough to show where the details go."""
+    return approx_fraction(full) + 0.005
 
 
 def compression_text(wv) -> str:
@@ -89,7 +132,8 @@ def _plt():
 
 
 def grid(panels, title, path):
-    """panels: rows of (image, caption, window or None for the auto window, signed: a diverging map)."""
+    """panels: rows of (image, caption, window or None for the auto window, signed: a diverging map);
+    an (H, W, 3) image is a picture, shown as it is."""
     plt = _plt()
     rows, cols = len(panels), max(len(r) for r in panels)
     height = 2.75 * rows + 0.55
@@ -99,8 +143,12 @@ def grid(panels, title, path):
         ax.axis("off")
     for r, row in enumerate(panels):
         for c, (image, caption, window, signed) in enumerate(row):
-            lo, hi = window if window is not None else resolve_window(image)
-            axes[r, c].imshow(image, cmap="RdBu_r" if signed else "gray", vmin=lo, vmax=hi, interpolation="nearest")
+            if image.ndim == 3:
+                axes[r, c].imshow(image, interpolation="nearest")
+            else:
+                lo, hi = window if window is not None else resolve_window(image)
+                axes[r, c].imshow(image, cmap="RdBu_r" if signed else "gray", vmin=lo, vmax=hi,
+                                  interpolation="nearest")
             axes[r, c].set_title(caption, fontsize=7)
     fig.suptitle(title, fontsize=9)
     fig.savefig(path, dpi=100)
@@ -156,9 +204,8 @@ def fig10(out: Path, data, args, log):
                 if levels > d.max_levels:
                     continue
                 wv = clwave.WaveletVolume.from_volume(d.vol, wavelet=wavelet, levels=levels)
-                approx = wv.groups[0].band_slices()[0].stop
                 # scaling functions only: the approximation band, or its largest `keep` of the voxels
-                wv = wv.threshold(keep=min(1.0, keep if keep is not None else approx / wv.n_voxels))
+                wv = wv.threshold(keep=min(1.0, keep if keep is not None else approx_fraction(wv)))
                 image, secs = render(wv, d.camera)
                 row.append((image, f"{wavelet}, M = {levels}, {compression_text(wv)}", None, False))
                 log(f"  fig10 {d.key} {wavelet} M={levels}: {wv.kept} coefficients, {secs:.2f} s")
@@ -180,6 +227,22 @@ def fig11(out: Path, data, args, log):
              out / f"fig11_{d.key}.png")
 
 
+def fig14(out: Path, data, args, log):
+    for d in data:
+        camera = d.view(args.raytrace_image, zoom=ZOOM14)
+        row = []
+        for wavelet in ("haar", "linear", "cubic"):
+            wv = clwave.WaveletVolume.from_volume(d.rgba, wavelet=wavelet, levels=LEVELS14)
+            wv = wv.threshold(keep=approx_fraction(wv))  # scaling functions only, 2^M voxels wide
+            image, secs, note = trace(wv, camera, args.tolerance)
+            row.append((image, f"{wavelet} (order {wv.groups[0].wavelet.order}), {compression_text(wv)}{note}",
+                        None, False))
+            log(f"  fig14 {d.key} {wavelet}: {secs:.2f} s")
+        grid([row], f"Fig. 14: Haar, linear and cubic scaling functions of M = {LEVELS14} ray traced, {ZOOM14:g}x "
+             f"zoom; Haar has no gradient:\nit renders unshaded. {d.label}, tolerance {args.tolerance:g}",
+             out / f"fig14_{d.key}.png")
+
+
 def fig15(out: Path, data, args, log):
     for d in data:
         wv = clwave.WaveletVolume.from_volume(d.vol, wavelet="haar", levels=min(3, d.max_levels))
@@ -199,23 +262,31 @@ def fig15(out: Path, data, args, log):
              f"{compression_text(wv)} at the end; error = final - frame\n{d.label}", out / f"fig15_{d.key}.png")
 
 
-def fig16(out: Path, data, args, log):
+def local_lod(out: Path, data, args, log, raytraced):
+    """Fig. 16 (splatted) and Fig. 12/13 (ray traced, the same set-up as the paper says): local level of detail."""
+    name = "fig12" if raytraced else "fig16"
     for d in data:
+        camera = d.view(args.raytrace_image) if raytraced else d.camera
         rows = []
         for wavelet in ("haar", "cubic"):
-            full = clwave.WaveletVolume.from_volume(d.vol, wavelet=wavelet, levels=min(3, d.max_levels))
-            # the approximation band and 0.5 % of the voxels in details: scarce enough to show where they go
-            keep = full.groups[0].band_slices()[0].stop / full.n_voxels + 0.005
-            uniform = full.threshold(keep=keep)
-            local = full.threshold(keep=keep, focus=d.focus)
-            row = [(render(full, d.camera)[0], f"{wavelet}, all coefficients", None, False)]
-            row.append((render(uniform, d.camera)[0], f"{wavelet}, uniform, {compression_text(uniform)}", None, False))
-            row.append((render(local, d.camera)[0], f"{wavelet}, focus, {compression_text(local)}", None, False))
+            full = clwave.WaveletVolume.from_volume(d.rgba if raytraced else d.vol, wavelet=wavelet,
+                                                    levels=min(3, d.max_levels))
+            uniform = full.threshold(keep=lod_keep(full))
+            local = full.threshold(keep=lod_keep(full), focus=d.focus)
+            row = []
+            for wv, caption in ((full, "all coefficients"), (uniform, f"uniform, {compression_text(uniform)}"),
+                                (local, f"focus, {compression_text(local)}")):
+                if raytraced:
+                    image, secs, note = trace(wv, camera, args.tolerance)
+                else:
+                    (image, secs), note = render(wv, camera), ""
+                row.append((image, f"{wavelet}, {caption}{note}", None, False))
+                log(f"  {name} {d.key} {wavelet}, {caption}: {wv.kept} coefficients, {secs:.2f} s")
             rows.append(row)
-            log(f"  fig16 {d.key} {wavelet}: {local.kept} coefficients")
         (x, y, z), sigma = d.focus
-        grid(rows, f"Fig. 16: local level of detail (focus ({x:.0f}, {y:.0f}, {z:.0f}), σ = {sigma:.0f}), "
-             f"M = 3\n{d.label}", out / f"fig16_{d.key}.png")
+        how = f"Fig. 12/13: ray traced (tolerance {args.tolerance:g})" if raytraced else "Fig. 16: splatted"
+        grid(rows, f"{how}, local level of detail (focus ({x:.0f}, {y:.0f}, {z:.0f}), σ = {sigma:.0f}), "
+             f"M = 3\n{d.label}", out / f"{name}_{d.key}.png")
 
 
 def fig17(out: Path, data, args, log):
@@ -234,8 +305,9 @@ def fig17(out: Path, data, args, log):
              f"{d.label}", out / f"fig17_{d.key}.png")
 
 
-FIGURES = {"table1": table1, "fig07": fig07, "fig10": fig10, "fig11": fig11, "fig15": fig15, "fig16": fig16,
-           "fig17": fig17}
+FIGURES = {"table1": table1, "fig07": fig07, "fig10": fig10, "fig11": fig11,
+           "fig12": functools.partial(local_lod, raytraced=True), "fig14": fig14, "fig15": fig15,
+           "fig16": functools.partial(local_lod, raytraced=False), "fig17": fig17}
 
 
 def main(argv=None):
@@ -245,12 +317,14 @@ def main(argv=None):
     parser.add_argument("--image", type=int, default=256, help="image width and height in pixels")
     parser.add_argument("--scan", type=Path, help="a real scan for clwave.load (default: nilearn's MNI152 T1)")
     parser.add_argument("--scan-step", type=int, default=1, help="block-average the scan by this factor")
+    parser.add_argument("--raytrace-image", type=int, default=128, help="ray-traced image width and height")
+    parser.add_argument("--tolerance", type=float, default=1e-2, help="ray tracing: absolute error per value")
     parser.add_argument("--only", nargs="+", choices=list(FIGURES), default=list(FIGURES))
     args = parser.parse_args(argv)
     if importlib.util.find_spec("matplotlib") is None:
         raise SystemExit("figures.py needs matplotlib: pip install .[figures]")
-    if args.scan_step < 1:
-        parser.error("--scan-step must be >= 1")
+    if args.scan_step < 1 or args.raytrace_image < 1 or not args.tolerance > 0:
+        parser.error("--scan-step and --raytrace-image must be >= 1 and --tolerance > 0")
     args.out.mkdir(parents=True, exist_ok=True)
     log = lambda text: print(text, flush=True)  # noqa: E731
     scan_path = args.scan or default_scan()
@@ -258,11 +332,15 @@ def main(argv=None):
     h = clwave.phantom("hydrogen", args.size)
     # hydrogen: focus on the upper lobe (on the z axis, 6 of 18 Bohr radii up); scan: the front of the head
     (ex, ey, ez), (ox, oy, oz) = scan.extent, scan.origin
-    data = [Data("hydrogen", f"hydrogen {args.size}³", h, clwave.Camera(30, 20, size=args.image),
-                 ((0.0, 0.0, args.size / 6.0), args.size / 8.0)),
+    # hydrogen: the image is as wide as the phantom's cube (what falls outside is < 2 % of the X-ray maximum)
+    data = [Data("hydrogen", f"hydrogen {args.size}³", h, clwave.TransferFunction.preset("hydrogen"), (30, 20),
+                 float(args.size), ((0.0, 0.0, args.size / 6.0), args.size / 8.0), args.image),
+            # the scan's window runs up to its maximum: a plateau of constant opacity above the window has a
+            # zero gradient whose rounding noise makes shaded ray tracing of linear B-splines crawl
             Data("scan", f"{scan_path.name}, {'x'.join(map(str, scan.shape[::-1]))}", scan,
-                 clwave.Camera(20, 10, size=args.image, extent=1.1 * max(ex, ey, ez)),
-                 ((ox, oy + 0.3 * ey, oz), 0.15 * max(ex, ey, ez)))]
+                 clwave.TransferFunction.preset("mri", window=(resolve_window(scan.data)[0], scan.data.max())),
+                 (20, 10), 1.1 * max(ex, ey, ez),
+                 ((ox, oy + 0.3 * ey, oz), 0.15 * max(ex, ey, ez)), args.image)]
     log(f"hydrogen {h.shape}, scan {scan_path} -> {scan.shape} spacing {scan.spacing}")
     started = time.perf_counter()
     for name in args.only:
