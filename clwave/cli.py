@@ -198,6 +198,8 @@ def _camera_options(p):
     g.add_argument("--window", dest="display_window", default="auto", help="PNG window: auto or LO,HI")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
+    g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic bands into coarser framebuffers "
+                   "within this error relative to the image maximum (e.g. 1e-2; default: off)")
 
 
 def _raytrace_options(p):
@@ -264,6 +266,8 @@ def cmd_render(args):
     camera = make_camera(args)
     if args.method == "splat" and camera.perspective:
         raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
+    if args.method == "raytrace" and args.coarse is not None:
+        raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
     wv, _ = build_model(args)
     if args.method == "raytrace":
         tracer = RayTracer(wv, device=args.device, path=args.path)
@@ -273,7 +277,7 @@ def cmd_render(args):
         def render(cam):
             return raytrace(wv, cam, tracer=tracer, **options)
     else:
-        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s)
+        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse)
 
         def render(cam):
             return splat(wv, cam, renderer=renderer)
@@ -330,7 +334,7 @@ def cmd_progressive(args):
     wv, _ = build_model(args)
     steps = 8 if args.steps is None and args.budget is None else args.steps
     frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device,
-                              omega_s=args.omega_s))
+                              omega_s=args.omega_s, coarse=args.coarse))
     window = _display_window(args)
     if window == "auto":  # the final image's window for every frame: refinement stays visible
         window = resolve_window(frames[0]._final.get()[..., :3], "auto")

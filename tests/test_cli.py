@@ -113,6 +113,29 @@ def test_render_png_raw_stats_and_turntable(tmp_path, capsys):
     assert iio.imread(gif, index=None).shape[:3] == (4, 16, 16)
 
 
+def test_render_and_progressive_with_coarse_framebuffers(tmp_path, capsys):
+    """--coarse draws the coarse cubic bands into coarser framebuffers: the API's image, within its tolerance."""
+    import json
+
+    import clwave
+    raw, stats = tmp_path / "c.npy", tmp_path / "c.json"
+    argv = ["phantom:hydrogen:32", "--levels", "3", "--keep", "0.1", "--size", "48", "--azimuth", "40"]
+    code, out, err = run(capsys, "render", *argv, "--coarse", "2e-2", "-o", str(tmp_path / "c.png"),
+                         "--raw", str(raw), "--stats", str(stats))
+    assert code == 0, err
+    assert max(json.loads(stats.read_text())["framebuffers"]) > 1
+    wv = WaveletVolume.from_volume(clwave.phantom("hydrogen", 32), levels=3).threshold(keep=0.1)
+    camera = clwave.Camera(40, 20, size=48)
+    assert np.array_equal(np.load(raw), clwave.splat(wv, camera, coarse=2e-2).image)
+    exact = clwave.splat(wv, camera).image
+    assert np.max(np.abs(np.load(raw) - exact)) <= 2e-2 * exact.max()
+    frames = tmp_path / "p.json"
+    code, out, err = run(capsys, "progressive", *argv, "--coarse", "2e-2", "--steps", "2", "-o",
+                         str(tmp_path / "p.gif"), "--stats", str(frames))
+    assert code == 0, err
+    assert max(json.loads(frames.read_text())["meta"]["framebuffers"]) > 1
+
+
 def test_raytrace_png_stats_perspective_and_turntable(tmp_path, capsys):
     png, stats = tmp_path / "r.png", tmp_path / "r.json"
     code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--tf", "hydrogen", "--levels", "1",
@@ -160,6 +183,8 @@ def test_progressive_gif_folder_and_stats(tmp_path, capsys):
     (["render", "phantom:hydrogen:16", "--levels", "1", "--method", "raytrace", "--tf", "hydrogen",
       "--tolerance", "0"], "tolerance"),
     (["render", "phantom:hydrogen:16", "--perspective"], "--method raytrace"),
+    (["render", "phantom:hydrogen:16", "--coarse", "2"], "coarse"),
+    (["render", "phantom:hydrogen:16", "--tf", "hydrogen", "--method", "raytrace", "--coarse", "1e-2"], "--tolerance"),
     (["render", "phantom:hydrogen:16", "--method", "raytrace", "--light", "10"], "--light"),
 ])
 def test_render_mistakes(tmp_path, capsys, argv, needle):
