@@ -179,7 +179,7 @@ class SplatRenderer:
         self.wv, self.omega_s, self.path, self.coarse = wv, omega_s, path, coarse
         self.cc = ComputeContext.get(device)
         start = time.perf_counter()
-        px = 1 if self.cc.info.kind == "GPU" else TILE
+        px = 1 if self.cc.info.kind == "GPU" else TILE * TILE
         # one build per channel count of the groups: a scalar volume accumulates one channel
         self.kernels = {c: programs.build(self.cc, ["splat_bin.cl", "splat_raster.cl"],
                                           {"CLW_PX": px, "CLW_CHANNELS": c})
