@@ -82,6 +82,12 @@ inline void splat_lookup(const int4 t, const float4 m, const float2 c, int4 *a, 
     *cell = (float2)(c.x, m.z);
 }
 
+/* the arguments of both layouts of splat_accumulate (see the top of the file) */
+#define ACCUMULATE_PARAMS const int width, const int height, const int tiles_x, __global const uint2 *ranges, \
+    __global const uint *vals, const uint first, __global const float2 *centre, __global const int4 *bbox, \
+    __global const int *stex, __global const float4 *values, __global const int4 *tex_int,                \
+    __global const float4 *tex_map, __global const float *texels, __global float4 *fb
+
 /* Image row y of a splat: its texel row (+1: the zero margin; rows iv, iv + 1) and v weight */
 inline int splat_row(const int4 a, const float4 f, const int y, float *fv)
 {
@@ -96,12 +102,7 @@ inline int splat_row(const int4 a, const float4 f, const int y, float *fv)
 #if CLW_TILE != 16
 #error "the per-tile kernel works in rows of 16 pixels"
 #endif
-__kernel void splat_accumulate(const int width, const int height, const int tiles_x,
-                               __global const uint2 *ranges, __global const uint *vals, const uint first,
-                               __global const float2 *centre, __global const int4 *bbox,
-                               __global const int *stex, __global const float4 *values,
-                               __global const int4 *tex_int, __global const float4 *tex_map,
-                               __global const float *texels, __global float4 *fb)
+__kernel void splat_accumulate(ACCUMULATE_PARAMS)
 {
     const int tile = get_global_id(0);
     const int ybase = (tile / tiles_x) * CLW_TILE, xbase = (tile % tiles_x) * CLW_TILE;
@@ -177,12 +178,7 @@ __kernel void splat_accumulate(const int width, const int height, const int tile
 /* GPUs: CLW_PX consecutive pixels of a row per work-item (1: one pixel each), a work-group per
  * tile, the tile's splats in batches through local memory */
 #define CLW_ITEMS_PER_ROW (CLW_TILE / CLW_PX)
-__kernel void splat_accumulate(const int width, const int height, const int tiles_x,
-                               __global const uint2 *ranges, __global const uint *vals, const uint first,
-                               __global const float2 *centre, __global const int4 *bbox,
-                               __global const int *stex, __global const float4 *values,
-                               __global const int4 *tex_int, __global const float4 *tex_map,
-                               __global const float *texels, __global float4 *fb)
+__kernel void splat_accumulate(ACCUMULATE_PARAMS)
 {
     __local int4 l_box[CLW_BATCH];
     __local int4 l_addr[CLW_BATCH];
