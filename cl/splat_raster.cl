@@ -36,7 +36,7 @@
  * Grid: one work-group per tile, local size CLW_TILE * CLW_TILE / CLW_PX.  CLW_PX = CLW_TILE^2
  *   (the default) suits PoCL: one work-item owns the tile and walks each splat's rows in it,
  *   16 pixels a vector, with the splat's set-up done once per tile rather than once per row
- *   (2x faster than a work-item per row on 2 EPYC cores).  CLW_PX = 1 (one pixel per item,
+ *   (2.1x faster than a work-item per row on 2 EPYC cores).  CLW_PX = 1 (one pixel per item,
  *   the splats in batches through local memory) suits GPUs; work-item l owns CLW_PX
  *   consecutive pixels of row l / (CLW_TILE / CLW_PX).
  * Assumes: each pixel is owned by one work-item and splats are visited in sorted order,
