@@ -120,7 +120,8 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
         float2 cs;
         splat_lookup(tex_int[stex[s]], tex_map[stex[s]], centre[s], &a, &f, &cs);
         const int4 bx = bbox[s];
-        const float c[4] = {values[first + s].x, values[first + s].y, values[first + s].z, values[first + s].w};
+        const float4 w = values[first + s];
+        const float c[4] = {w.x, w.y, w.z, w.w};  /* per channel, indexed in the channel loops */
         const int y0 = max(bx.y, ybase), y1 = min(bx.w, ybase + CLW_TILE - 1);
         /* all 16 lanes read (the pool has 16 zeros before and 32 after it), masked lanes drop */
         const float16 mask = select((float16)(0.0f), (float16)(1.0f),
