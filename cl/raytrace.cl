@@ -30,6 +30,9 @@ typedef double4 real4;
 #define REAL_EPSILON DBL_EPSILON
 #define to_real4(v) convert_double4(v)
 #define to_real3(v) convert_double3(v)
+#define fast_exp exp
+#define fast_exp2 exp2
+#define fast_log2 log2
 #else
 typedef float real;
 typedef float3 real3;
@@ -37,6 +40,9 @@ typedef float4 real4;
 #define REAL_EPSILON FLT_EPSILON
 #define to_real4(v) (v)
 #define to_real3(v) (v)
+#define fast_exp native_exp
+#define fast_exp2 native_exp2
+#define fast_log2 native_log2
 #endif
 
 #define N CLW_NCHEB
@@ -93,19 +99,28 @@ inline real4 grid_field(const Field G, const int4 *cell, const real3 x, real3 *g
         const int4 s = G.shape[g];
         const int4 p = cell[g] - G.start[g];
         __global const float4 *base = G.coef + G.offset[g];
+        /* separably: sums along x per (y, z) row, then along y per z plane, then along z */
         for (int rz = 0; rz < j; rz++) {
+            real4 plane = (real4)(0);
+            real plane_dx = 0, plane_dy = 0;
             for (int ry = 0; ry < j; ry++) {
                 __global const float4 *row = base + ((size_t)(p.z - rz) * s.y + (p.y - ry)) * s.x + p.x;
-                const real wyz = wy[ry] * wz[rz];
+                real4 line = (real4)(0);
+                real line_dx = 0;
                 for (int rx = 0; rx < j; rx++) {
                     const real4 c = to_real4(row[-rx]);
-                    v += c * (wx[rx] * wyz);
-#ifdef CLW_SHADE
-                    if (g == CLW_ALPHA)
-                        gr += c.w * (real3)(dx[rx] * wyz, wx[rx] * dy[ry] * wz[rz], wx[rx] * wy[ry] * dz[rz]);
-#endif
+                    line += c * wx[rx];
+                    line_dx += c.w * dx[rx];
                 }
+                plane += line * wy[ry];
+                plane_dx += line_dx * wy[ry];
+                plane_dy += line.w * dy[ry];
             }
+            v += plane * wz[rz];
+#ifdef CLW_SHADE
+            if (g == CLW_ALPHA)
+                gr += (real3)(plane_dx * wz[rz], plane_dy * wz[rz], plane.w * dz[rz]);
+#endif
         }
     }
     *grad = gr;
@@ -173,12 +188,15 @@ inline real3 integrand(const Segment *S, const Shading *P, const real xi)
         const real3 n = -gw / len; /* outward: alpha decreases along n (MATH.md §4) */
         for (int i = 0; i < P->nlights; i++) {
             diffuse += fmax(dot(n, P->light[i]), (real)0);
-            specular += pow(fmax(dot(n, P->halfway[i]), (real)0), P->shininess);
+            /* c^shininess as exp2(shininess log2 c): PoCL's pow goes through extended-precision
+             * logarithms and took a quarter of the render time */
+            const real c = dot(n, P->halfway[i]);
+            specular += c > 0 ? fast_exp2(P->shininess * fast_log2(c)) : 0;
         }
     }
     q = q * (P->ka + P->kd * diffuse) + P->ks * fmax(f.w, (real)0) * specular;
 #endif
-    return q * exp(-S->radius * cheb1(S->A, N + 1, xi));
+    return q * fast_exp(-S->radius * cheb1(S->A, N + 1, xi));
 }
 
 typedef struct {
