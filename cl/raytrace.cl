@@ -3,11 +3,13 @@
  * One work-item per ray.  The ray is cut at every knot plane of every channel group's
  * fine B-spline lattice (clwave/finegrid.py); inside a segment the field (q_R, q_G, q_B, alpha)
  * and the gradient of alpha are polynomials in t, of degree <= 3(j - 1).  They are recovered
- * exactly from CLW_NCHEB samples at Chebyshev points (a Chebyshev series), so that
- *   - A(a, t) = int_a^t alpha is exact (the antiderivative of the series),
- *   - int_a^b q e^{-A} comes from adaptive Simpson on the series (>= 2 initial panels,
+ * exactly from CLW_NCHEB samples at Chebyshev points, so that
+ *   - A(a, t) = int_a^t alpha is exact (integration weights of the interpolating polynomial at
+ *     the 9 points of Simpson's first 2 panels and their halves; the antiderivative of its
+ *     Chebyshev series, made only when a panel must be halved further),
+ *   - int_a^b q e^{-A} comes from adaptive Simpson on that polynomial (>= 2 initial panels,
  *     accept |S2 - S1| <= 15 tol, return S2 + (S2 - S1)/15), with the shaded q of eq. 4,
- *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (Clenshaw-Curtis weights of the series).
+ *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (Fejer's weights on the samples).
  * The budget tol per output value is split: half for the quadrature, spread along the ray in
  * proportion to segment length and relaxed by 1/T (MATH.md §7); a quarter for early ray
  * termination, which stops once T * max(1, q_bound * remaining length) <= tol/4; a quarter for
@@ -161,11 +163,41 @@ CLENSHAW(real3, cheb3)
 CLENSHAW(real4, cheb4)
 
 typedef struct {
+    real4 fq[N];     /* the field at the N Chebyshev points, alpha and q clamped to >= 0 */
+    real3 fg[N];     /* the gradient of alpha there (fine units) */
+    real radius;     /* half the segment length in world units */
+    bool series;     /* q, g, A below are made (only panels finer than quarters need them) */
     real4 q[N];      /* field series (q_R, q_G, q_B, alpha) in xi in [-1, 1] */
     real3 g[N];      /* gradient-of-alpha series (fine units) */
     real A[N + 1];   /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
-    real radius;     /* half the segment length in world units */
 } Segment;
+
+/* the Chebyshev series of the segment's samples, and the antiderivative of alpha's */
+inline void segment_series(Segment *S, __constant const real *cheb)
+{
+    for (int m = 0; m < N; m++) {
+        real4 aq = (real4)(0);
+        real3 ag = (real3)(0);
+        for (int k = 0; k < N; k++) {
+            aq += S->fq[k] * cheb[m * N + k];
+            ag += S->fg[k] * cheb[m * N + k];
+        }
+        const real norm = (m == 0 ? (real)1 : (real)2) / N;
+        S->q[m] = aq * norm;
+        S->g[m] = ag * norm;
+    }
+    /* C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0, and C_0 so that A(-1) = 0 */
+    real c0 = 0, sign = -1;
+    for (int k = 1; k <= N; k++) {
+        const real prev = S->q[k - 1].w * (k == 1 ? 2 : 1);
+        const real next = k + 1 < N ? S->q[k + 1].w : 0;
+        S->A[k] = (prev - next) / (2 * k);
+        c0 -= sign * S->A[k];
+        sign = -sign;
+    }
+    S->A[0] = c0;
+    S->series = true;
+}
 
 typedef struct {
     real ka, kd, ks, shininess;
@@ -175,13 +207,12 @@ typedef struct {
     real3 scale;     /* fine units per world unit, per axis: world gradient = fine gradient * scale */
 } Shading;
 
-/* q e^{-A} at xi: the shaded emission of eq. 4 attenuated inside the segment */
-inline real3 integrand(const Segment *S, const Shading *P, const real xi)
+/* the shaded emission of eq. 4 from the field f and the fine gradient of alpha g */
+inline real3 shade(const real4 f, const real3 g, const Shading *P)
 {
-    const real4 f = cheb4(S->q, N, xi);
     real3 q = fmax(f.xyz, (real3)(0));
 #ifdef CLW_SHADE
-    const real3 gw = cheb3(S->g, N, xi) * P->scale;
+    const real3 gw = g * P->scale;
     const real len = length(gw);
     real diffuse = 0, specular = 0;
     if (len > P->grad_floor) {
@@ -196,7 +227,13 @@ inline real3 integrand(const Segment *S, const Shading *P, const real xi)
     }
     q = q * (P->ka + P->kd * diffuse) + P->ks * fmax(f.w, (real)0) * specular;
 #endif
-    return q * fast_exp(-S->radius * cheb1(S->A, N + 1, xi));
+    return q;
+}
+
+/* q e^{-A} at xi from the series: the shaded emission attenuated inside the segment */
+inline real3 integrand(const Segment *S, const Shading *P, const real xi)
+{
+    return shade(cheb4(S->q, N, xi), cheb3(S->g, N, xi), P) * fast_exp(-S->radius * cheb1(S->A, N + 1, xi));
 }
 
 typedef struct {
@@ -206,16 +243,16 @@ typedef struct {
 } Panel;
 
 /* int_{-1}^{1} q e^{-A} dxi by adaptive Simpson from 2 panels; counts evaluations, flags depth.
+ * f9 holds the integrand at xi = -1 + p/4, p = 0..8: the 2 panels and their halves.
  * Depth first, right half pushed first: the stack holds at most one panel per depth. */
-inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *evals, int *flags)
+inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant const real *cheb, const real tol,
+                     int *evals, int *flags)
 {
     Panel stack[CLW_MAX_DEPTH + 1];
     int top = 0;
-    const real3 f0 = integrand(S, P, -1), f1 = integrand(S, P, -0.5), f2 = integrand(S, P, 0);
-    const real3 f3 = integrand(S, P, 0.5), f4 = integrand(S, P, 1);
-    *evals += 5;
-    stack[0].l = 0; stack[0].r = 1; stack[0].fl = f2; stack[0].fm = f3; stack[0].fr = f4;
-    stack[1].l = -1; stack[1].r = 0; stack[1].fl = f0; stack[1].fm = f1; stack[1].fr = f2;
+    *evals += 9;
+    stack[0].l = 0; stack[0].r = 1; stack[0].fl = f9[4]; stack[0].fm = f9[6]; stack[0].fr = f9[8];
+    stack[1].l = -1; stack[1].r = 0; stack[1].fl = f9[0]; stack[1].fm = f9[2]; stack[1].fr = f9[4];
     stack[0].tol = stack[1].tol = tol / 2;
     stack[0].depth = stack[1].depth = 1;
     top = 2;
@@ -223,8 +260,17 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
     while (top > 0) {
         const Panel p = stack[--top];
         const real m = (p.l + p.r) / 2, w = p.r - p.l;
-        const real3 flm = integrand(S, P, (p.l + m) / 2), fmr = integrand(S, P, (m + p.r) / 2);
-        *evals += 2;
+        real3 flm, fmr;
+        if (p.depth == 1) {
+            flm = f9[p.l < 0 ? 1 : 5];
+            fmr = f9[p.l < 0 ? 3 : 7];
+        } else {
+            if (!S->series)
+                segment_series(S, cheb);
+            flm = integrand(S, P, (p.l + m) / 2);
+            fmr = integrand(S, P, (m + p.r) / 2);
+            *evals += 2;
+        }
         const real3 s1 = w / 6 * (p.fl + 4 * p.fm + p.fr);
         const real3 s2 = w / 12 * (p.fl + 4 * flm + 2 * p.fm + 4 * fmr + p.fr);
         const real3 d = fabs(s2 - s1);
@@ -260,6 +306,9 @@ inline real3 simpson(const Segment *S, const Shading *P, const real tol, int *ev
  *                                with c, r the pixel centre's offsets from the image centre
  *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset
  *   cheb         (N + 1, N) cos(pi m (k + 1/2) / N); row 1 holds the sample points
+ *   quarters     (18, N) from the N samples of a segment: row p the value at xi = -1 + p/4 (the
+ *                points of Simpson's first 2 panels and their halves), row 9 + p the integral
+ *                from -1 to that point; row 17 integrates over the segment
  *   tol, q_bound absolute tolerance per output value; an upper bound of the shaded emission
  *   shade_gain   q_bound / max |coefficient|: how much shading can scale the emission
  *   grad_floor   shorter world gradients of alpha get no diffuse or specular light: on a plateau
@@ -273,7 +322,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                        const float4 box_lo, const float4 box_hi,
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
                        const float4 to_fine_scale, const float4 to_fine_offset,
-                       __constant const real *cheb, const real tol, const real q_bound, const real shade_gain,
+                       __constant const real *cheb, __constant const real *quarters, const real tol,
+                       const real q_bound, const real shade_gain,
                        const real grad_floor,
                        __constant const float4 *lights, const int nlights, const float4 phong)
 {
@@ -383,48 +433,40 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         if (tn > t) {
             Segment S;
             S.radius = (tn - t) / 2;
-            real4 fq[N];
-            real3 fg[N];
-            sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, cheb, fq, fg);
+            S.series = false;
+            sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, cheb, S.fq, S.fg);
             segments += 1;
             samples += N;
-            for (int m = 0; m < N; m++) {
-                real4 aq = (real4)(0);
-                real3 ag = (real3)(0);
-                for (int k = 0; k < N; k++) {
-#ifdef CLW_XRAY
-                    aq += fq[k] * cheb[m * N + k];
-#else
-                    aq += fmax(fq[k], (real4)(0)) * cheb[m * N + k]; /* clamp alpha, q >= 0 */
-#endif
-#ifdef CLW_SHADE
-                    ag += fg[k] * cheb[m * N + k]; /* only shading reads the gradient series */
-#endif
-                }
-                const real norm = (m == 0 ? (real)1 : (real)2) / N;
-                S.q[m] = aq * norm;
-                S.g[m] = ag * norm;
-            }
+            /* row p of `quarters` gives the value at xi = -1 + p/4 from the N samples, row 9 + p
+             * the integral from -1 to there (row 17: over the segment, Fejer's weights) */
 #ifdef CLW_XRAY
             real4 integral = (real4)(0);
-            for (int m = 0; m < N; m += 2)
-                integral += S.q[m] * (2 / (real)(1 - m * m));
+            for (int k = 0; k < N; k++)
+                integral += S.fq[k] * quarters[17 * N + k];
             I += S.radius * integral;
 #else
-            /* antiderivative of the alpha series: C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 */
-            real c0 = 0, sign = -1;
-            for (int k = 1; k <= N; k++) {
-                const real prev = S.q[k - 1].w * (k == 1 ? 2 : 1);
-                const real next = k + 1 < N ? S.q[k + 1].w : 0;
-                S.A[k] = (prev - next) / (2 * k);
-                c0 -= sign * S.A[k];
-                sign = -sign;
+            for (int k = 0; k < N; k++)
+                S.fq[k] = fmax(S.fq[k], (real4)(0)); /* clamp alpha, q >= 0 */
+            real3 f9[9];
+            real depth = 0; /* int alpha dxi over the segment */
+            for (int p = 0; p < 9; p++) {
+                real4 f = (real4)(0);
+                real3 g = (real3)(0);
+                real A = 0;
+                for (int k = 0; k < N; k++) {
+                    f += S.fq[k] * quarters[p * N + k];
+#ifdef CLW_SHADE
+                    g += S.fg[k] * quarters[p * N + k]; /* only shading reads the gradient */
+#endif
+                    A += S.fq[k].w * quarters[(9 + p) * N + k];
+                }
+                f9[p] = shade(f, g, &P) * fast_exp(-S.radius * A);
+                depth = A;
             }
-            S.A[0] = c0;
             const real seg_tol = (tol / 2) * (tn - t) / total / T;
-            const real3 part = simpson(&S, &P, seg_tol / S.radius, &evals, &flags);
+            const real3 part = simpson(&S, &P, f9, cheb, seg_tol / S.radius, &evals, &flags);
             I += T * S.radius * part;
-            T *= exp(-S.radius * cheb1(S.A, N + 1, 1));
+            T *= exp(-S.radius * depth);
             if (T * fmax((real)1, q_bound * (t1 - tn)) <= tol / 4) {
                 flags |= 1;
                 break;

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
+from numpy.polynomial import chebyshev
 import pyopencl.array as cla
 from pyopencl import cltypes
 
@@ -241,6 +242,7 @@ class RayTracer:
         m = np.arange(n_cheb + 1)[:, None]
         k = np.arange(n_cheb)[None, :]
         cheb = cla.to_device(q, np.cos(np.pi * m * (k + 0.5) / n_cheb).astype(real))
+        quarters = cla.to_device(q, quarter_weights(n_cheb).astype(real))
         spacing_xyz = np.array(wv.spacing[::-1], float)
         shape_xyz = np.array(wv.shape[::-1], float)
         scale = 1.0 / spacing_xyz
@@ -267,7 +269,7 @@ class RayTracer:
                          *field_args, self.block_bound.data, int4_xyz(self.occ_origin),
                          int4_xyz(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
-                         _float4(scale), _float4(offset), cheb.data, real(tol), real(self.q_bound * shade_gain),
+                         _float4(scale), _float4(offset), cheb.data, quarters.data, real(tol), real(self.q_bound * shade_gain),
                          real(shade_gain), real(self.grad_floor(precision)),
                          cla.to_device(q, light_buf).data, np.int32(len(light_dirs)),
                          _float4([p.ambient, p.diffuse, p.specular, p.shininess]))
@@ -341,6 +343,24 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     r = tracer or RayTracer(wv, device=device, path=path)
     return r.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                     precision=precision)
+
+
+def quarter_weights(n: int) -> np.ndarray:
+    """(18, n) float64: from samples at the n Chebyshev points cos(pi (k + 1/2) / n), row p the
+    value at xi = -1 + p/4 (p = 0..8) of the polynomial through them, row 9 + p its integral
+    from -1 to there (row 17: Fejer's quadrature weights on [-1, 1]); ``cl/raytrace.cl``.
+
+    Simpson's first two panels of a segment and their halves need only these nine points, so the
+    kernel makes the Chebyshev series only for finer panels.
+    """
+    k = np.arange(n)
+    # the Lagrange polynomial of sample k as a Chebyshev series (discrete orthogonality)
+    series = np.cos(np.pi * np.arange(n)[:, None] * (k[None, :] + 0.5) / n) * 2.0 / n
+    series[0] /= 2.0
+    xi = -1.0 + np.arange(9) / 4.0
+    values = chebyshev.chebval(xi, series).T
+    integrals = chebyshev.chebval(xi, chebyshev.chebint(series, lbnd=-1)).T
+    return np.ascontiguousarray(np.vstack([values, integrals]))
 
 
 def occupancy(wv: WaveletVolume, dense=None):

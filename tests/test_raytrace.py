@@ -8,7 +8,7 @@ from scipy.special import erf
 
 import clwave
 from clwave.quadrature import raytrace_reference
-from clwave.raytrace import Phong, RayTracer, occupancy
+from clwave.raytrace import Phong, RayTracer, occupancy, quarter_weights
 from clwave.reference import line_integrals
 
 TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
@@ -27,6 +27,19 @@ def errors_over_tolerances(tracer, camera, exact, **kw):
         assert err <= tol, f"error {err:.2e} above tolerance {tol:.0e}"
         errs.append(err)
     return errs
+
+
+@pytest.mark.parametrize("n", [1, 4, 7, 10])
+def test_quarter_weights_are_exact_for_polynomials_of_the_segment_degree(n):
+    """Values and integrals from -1 at xi = -1 + p/4 of a random degree n - 1 polynomial from its
+    samples at the n Chebyshev points, against numpy's polynomial arithmetic."""
+    poly = np.polynomial.Polynomial(np.random.default_rng(n).normal(size=n))
+    samples = poly(np.cos(np.pi * (np.arange(n) + 0.5) / n))
+    xi = -1.0 + np.arange(9) / 4.0
+    weights = quarter_weights(n)
+    assert weights.flags.c_contiguous  # the kernel reads it row by row
+    np.testing.assert_allclose(weights[:9] @ samples, poly(xi), atol=1e-12)
+    np.testing.assert_allclose(weights[9:] @ samples, poly.integ(lbnd=-1)(xi), atol=1e-12)
 
 
 def test_constant_slab_matches_closed_form():
