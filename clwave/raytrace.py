@@ -119,7 +119,6 @@ class RayTracer:
             start=cla.to_device(q, np.array([int4_xyz(g.start) for g in self.grids])),
             shape=cla.to_device(q, np.array([int4_xyz(g.shape) for g in self.grids])),
             offset=cla.to_device(q, np.array(offsets, np.int32)))
-        self.q_bound = float(sum(cla.max(abs(g.data)).get() for g in self.grids))
         occ, self.occ_origin, self.box = occupancy(wv, dense)
         self.block_bound = cla.empty(q, occ.shape, np.float32)
         blocks = programs.build(self.cc, ["blocks.cl"], dict(CLW_GROUPS=len(orders), CLW_BLOCK=BLOCK,
@@ -127,6 +126,8 @@ class RayTracer:
         blocks.block_max(q, occ.shape[::-1], None, self.block_bound.data, cla.to_device(q, occ).data,
                          int4_xyz(self.occ_origin), int4_xyz(occ.shape), self.coef.data, self.tables["start"].data,
                          self.tables["shape"].data, self.tables["offset"].data)
+        # the largest |coefficient| of any grid bounds every channel (partition of unity)
+        self.q_bound = float(cla.max(self.block_bound).get())
         self.occupied_fraction = float(occ.mean())
         self.field_args = [self.coef.data, self.tables["start"].data, self.tables["shape"].data,
                            self.tables["offset"].data]
