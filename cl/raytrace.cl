@@ -85,6 +85,47 @@ typedef int Active; /* no per-ray state */
 inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = 0; }
 inline int active_flags(const Active *A) { return 0; }
 
+/* One group's part of the field at x and, for the alpha group, of alpha's fine gradient: the
+ * j^3 coefficients around `cell`, summed separably (along x per (y, z) row, then along y per z
+ * plane, then along z).  Always inlined with a literal order j, so the loops unroll. */
+__attribute__((always_inline)) inline void group_field(const Field G, const int g, const int j, const int4 cell,
+                                                       const real3 x, real4 *v, real3 *gr)
+{
+    const real shift = (real)(j - ORDER[0]) / 2;
+    real wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
+    bspline_pieces(j, x.x + shift - cell.x, wx, dx);
+    bspline_pieces(j, x.y + shift - cell.y, wy, dy);
+    bspline_pieces(j, x.z + shift - cell.z, wz, dz);
+    const int4 s = G.shape[g];
+    const int4 p = cell - G.start[g];
+    __global const float4 *base = G.coef + G.offset[g];
+#pragma unroll
+    for (int rz = 0; rz < j; rz++) {
+        real4 plane = (real4)(0);
+        real plane_dx = 0, plane_dy = 0;
+#pragma unroll
+        for (int ry = 0; ry < j; ry++) {
+            __global const float4 *row = base + ((size_t)(p.z - rz) * s.y + (p.y - ry)) * s.x + p.x;
+            real4 line = (real4)(0);
+            real line_dx = 0;
+#pragma unroll
+            for (int rx = 0; rx < j; rx++) {
+                const real4 c = to_real4(row[-rx]);
+                line = fma(c, (real4)(wx[rx]), line);
+                line_dx = fma(c.w, dx[rx], line_dx);
+            }
+            plane = fma(line, (real4)(wy[ry]), plane);
+            plane_dx = fma(line_dx, wy[ry], plane_dx);
+            plane_dy = fma(line.w, dy[ry], plane_dy);
+        }
+        *v = fma(plane, (real4)(wz[rz]), *v);
+#ifdef CLW_SHADE
+        if (g == CLW_ALPHA)
+            *gr += (real3)(plane_dx * wz[rz], plane_dy * wz[rz], plane.w * dz[rz]);
+#endif
+    }
+}
+
 /* The field and the fine-coordinate gradient of alpha at x (grid-0 fine coordinates), using the
  * segment's cells `cell[g]` so that every sample of a segment comes from the same polynomial. */
 inline real4 grid_field(const Field G, const int4 *cell, const real3 x, real3 *grad)
@@ -92,37 +133,11 @@ inline real4 grid_field(const Field G, const int4 *cell, const real3 x, real3 *g
     real4 v = (real4)(0);
     real3 gr = (real3)(0);
     for (int g = 0; g < CLW_GROUPS; g++) {
-        const int j = ORDER[g];
-        const real shift = (real)(ORDER[g] - ORDER[0]) / 2;
-        real wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
-        bspline_pieces(j, x.x + shift - cell[g].x, wx, dx);
-        bspline_pieces(j, x.y + shift - cell[g].y, wy, dy);
-        bspline_pieces(j, x.z + shift - cell[g].z, wz, dz);
-        const int4 s = G.shape[g];
-        const int4 p = cell[g] - G.start[g];
-        __global const float4 *base = G.coef + G.offset[g];
-        /* separably: sums along x per (y, z) row, then along y per z plane, then along z */
-        for (int rz = 0; rz < j; rz++) {
-            real4 plane = (real4)(0);
-            real plane_dx = 0, plane_dy = 0;
-            for (int ry = 0; ry < j; ry++) {
-                __global const float4 *row = base + ((size_t)(p.z - rz) * s.y + (p.y - ry)) * s.x + p.x;
-                real4 line = (real4)(0);
-                real line_dx = 0;
-                for (int rx = 0; rx < j; rx++) {
-                    const real4 c = to_real4(row[-rx]);
-                    line += c * wx[rx];
-                    line_dx += c.w * dx[rx];
-                }
-                plane += line * wy[ry];
-                plane_dx += line_dx * wy[ry];
-                plane_dy += line.w * dy[ry];
-            }
-            v += plane * wz[rz];
-#ifdef CLW_SHADE
-            if (g == CLW_ALPHA)
-                gr += (real3)(plane_dx * wz[rz], plane_dy * wz[rz], plane.w * dz[rz]);
-#endif
+        switch (ORDER[g]) {
+        case 1: group_field(G, g, 1, cell[g], x, &v, &gr); break;
+        case 2: group_field(G, g, 2, cell[g], x, &v, &gr); break;
+        case 3: group_field(G, g, 3, cell[g], x, &v, &gr); break;
+        default: group_field(G, g, 4, cell[g], x, &v, &gr); break;
         }
     }
     *grad = gr;
@@ -219,10 +234,10 @@ inline real3 shade(const real4 f, const real3 g, const Shading *P)
         const real3 n = -gw / len; /* outward: alpha decreases along n (MATH.md §4) */
         for (int i = 0; i < P->nlights; i++) {
             diffuse += fmax(dot(n, P->light[i]), (real)0);
-            /* c^shininess as exp2(shininess log2 c): PoCL's pow goes through extended-precision
-             * logarithms and took a quarter of the render time */
+            /* max(c, 0)^shininess as exp2(shininess log2 c): PoCL's pow goes through
+             * extended-precision logarithms and took a quarter of the render time */
             const real c = dot(n, P->halfway[i]);
-            specular += c > 0 ? fast_exp2(P->shininess * fast_log2(c)) : 0;
+            specular += c > 0 ? fast_exp2(P->shininess * fast_log2(c)) : (real)(P->shininess == 0);
         }
     }
     q = q * (P->ka + P->kd * diffuse) + P->ks * fmax(f.w, (real)0) * specular;
