@@ -195,7 +195,9 @@ inline void segment_series(Segment *S, __constant const real *cheb)
         real3 ag = (real3)(0);
         for (int k = 0; k < N; k++) {
             aq += S->fq[k] * cheb[m * N + k];
-            ag += S->fg[k] * cheb[m * N + k];
+#ifdef CLW_SHADE
+            ag += S->fg[k] * cheb[m * N + k]; /* only shading reads the gradient series */
+#endif
         }
         const real norm = (m == 0 ? (real)1 : (real)2) / N;
         S->q[m] = aq * norm;

@@ -240,9 +240,7 @@ class RayTracer:
         compile_seconds = time.perf_counter() - start
 
         q = cc.queue
-        m = np.arange(n_cheb + 1)[:, None]
-        k = np.arange(n_cheb)[None, :]
-        cheb = cla.to_device(q, np.cos(np.pi * m * (k + 0.5) / n_cheb).astype(real))
+        cheb = cla.to_device(q, chebyshev_table(n_cheb).astype(real))
         quarters = cla.to_device(q, quarter_weights(n_cheb).astype(real))
         spacing_xyz = np.array(wv.spacing[::-1], float)
         shape_xyz = np.array(wv.shape[::-1], float)
@@ -270,8 +268,8 @@ class RayTracer:
                          *field_args, self.block_bound.data, int4_xyz(self.occ_origin),
                          int4_xyz(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
-                         _float4(scale), _float4(offset), cheb.data, quarters.data, real(tol), real(self.q_bound * shade_gain),
-                         real(shade_gain), real(self.grad_floor(precision)),
+                         _float4(scale), _float4(offset), cheb.data, quarters.data, real(tol),
+                         real(self.q_bound * shade_gain), real(shade_gain), real(self.grad_floor(precision)),
                          cla.to_device(q, light_buf).data, np.int32(len(light_dirs)),
                          _float4([p.ambient, p.diffuse, p.specular, p.shininess]))
         q.finish()
@@ -346,6 +344,12 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
                     precision=precision)
 
 
+def chebyshev_table(n: int) -> np.ndarray:
+    """(n + 1, n) float64 ``cos(pi m (k + 1/2) / n)``: T_m at the n Chebyshev points (row 1 holds
+    the points themselves); ``cl/raytrace.cl``'s ``cheb``."""
+    return np.cos(np.pi * np.arange(n + 1)[:, None] * (np.arange(n)[None, :] + 0.5) / n)
+
+
 def quarter_weights(n: int) -> np.ndarray:
     """(18, n) float64: from samples at the n Chebyshev points cos(pi (k + 1/2) / n), row p the
     value at xi = -1 + p/4 (p = 0..8) of the polynomial through them, row 9 + p its integral
@@ -354,9 +358,8 @@ def quarter_weights(n: int) -> np.ndarray:
     Simpson's first two panels of a segment and their halves need only these nine points, so the
     kernel makes the Chebyshev series only for finer panels.
     """
-    k = np.arange(n)
     # the Lagrange polynomial of sample k as a Chebyshev series (discrete orthogonality)
-    series = np.cos(np.pi * np.arange(n)[:, None] * (k[None, :] + 0.5) / n) * 2.0 / n
+    series = chebyshev_table(n)[:n] * 2.0 / n
     series[0] /= 2.0
     xi = -1.0 + np.arange(9) / 4.0
     values = chebyshev.chebval(xi, series).T
