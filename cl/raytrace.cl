@@ -12,12 +12,14 @@
  *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (Fejer's weights on the samples).
  * The budget tol per output value is split: half for the quadrature, spread along the ray in
  * proportion to segment length and relaxed by 1/T (MATH.md §7); a quarter for early ray
- * termination, which stops once T * max(1, q_bound * remaining length) <= tol/4; a quarter for
- * empty space: a block of CLW_BLOCK^3 fine cells with bound b on |field| (cl/blocks.cl) is skipped
- * while what it could change stays within what is left of that quarter: over a length l at
- * transmittance T it could add T b l gain of emission, T b l of opacity, and by its optical depth
- * b l dim the rest of the ray by at most T b l q_bound (remaining length).  X-ray mode spends half
- * of tol on skipping (its segment integrals are exact).
+ * termination; a quarter for empty space.  Both use the blocks of CLW_BLOCK^3 fine cells with a
+ * bound b on |field| (cl/blocks.cl) and R(t), the integral of b along the rest of the ray beyond t
+ * (summed block by block before the march): the rest can add at most T R gain of emission and
+ * T min(1, R) of opacity, so the ray stops once T max(min(1, R), R gain) <= tol/4.  A block is
+ * skipped while what it could change stays within what is left of the empty-space quarter: over a
+ * length l at transmittance T it could add T b l gain of emission, T b l of opacity, and by its
+ * optical depth b l dim the rest of the ray by at most T b l R gain.  X-ray mode spends half of tol
+ * on skipping (its segment integrals are exact).
  *
  * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
  * CLW_NCHEB samples per segment; CLW_LATTICE 1 or 0.5 (orders of both parities);
@@ -32,6 +34,7 @@ typedef double4 real4;
 #define REAL_EPSILON DBL_EPSILON
 #define to_real4(v) convert_double4(v)
 #define to_real3(v) convert_double3(v)
+#define convert_real3 convert_double3
 #define fast_exp exp
 #define fast_exp2 exp2
 #define fast_log2 log2
@@ -42,6 +45,7 @@ typedef float4 real4;
 #define REAL_EPSILON FLT_EPSILON
 #define to_real4(v) (v)
 #define to_real3(v) (v)
+#define convert_real3 convert_float3
 #define fast_exp native_exp
 #define fast_exp2 native_exp2
 #define fast_log2 native_log2
@@ -62,12 +66,14 @@ inline void bspline_pieces(const int j, const real u, real *w, real *dw)
         w[0] = u; w[1] = s;
         dw[0] = 1; dw[1] = -1;
     } else if (j == 3) {
-        w[0] = u * u / 2; w[1] = (-2 * u * u + 2 * u + 1) / 2; w[2] = s * s / 2;
+        w[0] = u * u * (real)0.5; w[1] = (-2 * u * u + 2 * u + 1) * (real)0.5; w[2] = s * s * (real)0.5;
         dw[0] = u; dw[1] = 1 - 2 * u; dw[2] = -s;
     } else {
-        w[0] = u * u * u / 6; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) / 6;
-        w[2] = ((3 * u - 6) * u * u + 4) / 6; w[3] = s * s * s / 6;
-        dw[0] = u * u / 2; dw[1] = (-3 * u * u + 2 * u + 1) / 2; dw[2] = (3 * u - 4) * u / 2; dw[3] = -s * s / 2;
+        const real sixth = (real)1 / 6; /* products: PoCL keeps divisions by constants as divisions */
+        w[0] = u * u * u * sixth; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) * sixth;
+        w[2] = ((3 * u - 6) * u * u + 4) * sixth; w[3] = s * s * s * sixth;
+        dw[0] = u * u * (real)0.5; dw[1] = (-3 * u * u + 2 * u + 1) * (real)0.5; dw[2] = (3 * u - 4) * u * (real)0.5;
+        dw[3] = -s * s * (real)0.5;
     }
 }
 
@@ -85,27 +91,24 @@ typedef int Active; /* no per-ray state */
 inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = 0; }
 inline int active_flags(const Active *A) { return 0; }
 
-/* One group's part of the field at x and, for the alpha group, of alpha's fine gradient: the
- * j^3 coefficients around `cell`, summed separably (along x per (y, z) row, then along y per z
- * plane, then along z).  Always inlined with a literal order j, so the loops unroll. */
-__attribute__((always_inline)) inline void group_field(const Field G, const int g, const int j, const int4 cell,
-                                                       const real3 x, real4 *v, real3 *gr)
+/* One group's part of the field and, for the alpha group, of alpha's fine gradient at u = x - cell
+ * within the segment's cell: the j^3 coefficients ending at `corner` (the cell's own), summed
+ * separably (along x per (y, z) row, then along y per z plane, then along z); rows are `sy`
+ * apart, planes `sz`.  Always inlined with a literal order j, so the loops unroll. */
+__attribute__((always_inline)) inline void group_field(__global const float4 *corner, const int sy, const int sz,
+                                                       const int g, const int j, const real3 u, real4 *v, real3 *gr)
 {
-    const real shift = (real)(j - ORDER[0]) / 2;
     real wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
-    bspline_pieces(j, x.x + shift - cell.x, wx, dx);
-    bspline_pieces(j, x.y + shift - cell.y, wy, dy);
-    bspline_pieces(j, x.z + shift - cell.z, wz, dz);
-    const int4 s = G.shape[g];
-    const int4 p = cell - G.start[g];
-    __global const float4 *base = G.coef + G.offset[g];
+    bspline_pieces(j, u.x, wx, dx);
+    bspline_pieces(j, u.y, wy, dy);
+    bspline_pieces(j, u.z, wz, dz);
 #pragma unroll
     for (int rz = 0; rz < j; rz++) {
         real4 plane = (real4)(0);
         real plane_dx = 0, plane_dy = 0;
 #pragma unroll
         for (int ry = 0; ry < j; ry++) {
-            __global const float4 *row = base + ((size_t)(p.z - rz) * s.y + (p.y - ry)) * s.x + p.x;
+            __global const float4 *row = corner - rz * sz - ry * sy;
             real4 line = (real4)(0);
             real line_dx = 0;
 #pragma unroll
@@ -126,36 +129,41 @@ __attribute__((always_inline)) inline void group_field(const Field G, const int 
     }
 }
 
-/* The field and the fine-coordinate gradient of alpha at x (grid-0 fine coordinates), using the
- * segment's cells `cell[g]` so that every sample of a segment comes from the same polynomial. */
-inline real4 grid_field(const Field G, const int4 *cell, const real3 x, real3 *grad)
-{
-    real4 v = (real4)(0);
-    real3 gr = (real3)(0);
-    for (int g = 0; g < CLW_GROUPS; g++) {
-        switch (ORDER[g]) {
-        case 1: group_field(G, g, 1, cell[g], x, &v, &gr); break;
-        case 2: group_field(G, g, 2, cell[g], x, &v, &gr); break;
-        case 3: group_field(G, g, 3, cell[g], x, &v, &gr); break;
-        default: group_field(G, g, 4, cell[g], x, &v, &gr); break;
-        }
-    }
-    *grad = gr;
-    return v;
-}
-
-/* the field and alpha's gradient at the segment's N Chebyshev points xm + radius cheb[N + k] D */
+/* the field and alpha's gradient at the segment's N Chebyshev points xm + radius cheb[N + k] D, all
+ * from the cells holding xm, so that every sample of a segment comes from the same polynomial */
 inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
                            const real3 D, __constant const real *cheb, real4 *fq, real3 *fg)
 {
-    int4 cell[CLW_GROUPS];
+    __global const float4 *corner[CLW_GROUPS];
+    int sy[CLW_GROUPS], sz[CLW_GROUPS];
+    real3 um[CLW_GROUPS]; /* xm in each group's cell coordinates */
     for (int g = 0; g < CLW_GROUPS; g++) {
-        const real shift = (real)(ORDER[g] - ORDER[0]) / 2;
-        const int4 c = convert_int4((real4)(floor(xm + shift), 0));
-        cell[g] = (int4)(clamp(c.xyz, G.start[g].xyz + ORDER[g] - 1, G.start[g].xyz + G.shape[g].xyz - 1), 0);
+        const real3 x = xm + (real)(ORDER[g] - ORDER[0]) / 2; /* grid g's lattice (MATH.md §7) */
+        const int4 s = G.shape[g], lo = G.start[g];
+        const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + ORDER[g] - 1,
+                                    lo.xyz + s.xyz - 1), 0);
+        const int4 p = c - lo;
+        corner[g] = G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
+        sy[g] = s.x;
+        sz[g] = s.x * s.y;
+        um[g] = x - convert_real3(c.xyz);
     }
-    for (int k = 0; k < N; k++)
-        fq[k] = grid_field(G, cell, xm + radius * cheb[N + k] * D, &fg[k]);
+    for (int k = 0; k < N; k++) {
+        const real3 step = radius * cheb[N + k] * D;
+        real4 v = (real4)(0);
+        real3 gr = (real3)(0);
+        for (int g = 0; g < CLW_GROUPS; g++) {
+            const real3 u = um[g] + step;
+            switch (ORDER[g]) {
+            case 1: group_field(corner[g], sy[g], sz[g], g, 1, u, &v, &gr); break;
+            case 2: group_field(corner[g], sy[g], sz[g], g, 2, u, &v, &gr); break;
+            case 3: group_field(corner[g], sy[g], sz[g], g, 3, u, &v, &gr); break;
+            default: group_field(corner[g], sy[g], sz[g], g, 4, u, &v, &gr); break;
+            }
+        }
+        fq[k] = v;
+        fg[k] = gr;
+    }
 }
 #else
 #include "raytrace_wavelet.h"
@@ -309,6 +317,46 @@ inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant c
     return total;
 }
 
+/* plane[a]: the next plane x_a = plane[a] h the ray x0 + t dd meets beyond t, tp[a] its t */
+inline void next_planes(const real *x0, const real *dd, const real t, const real h, int *plane, real *tp)
+{
+    for (int a = 0; a < 3; a++) {
+        const real x = x0[a] + t * dd[a];
+        plane[a] = dd[a] > 0 ? (int)floor(x / h) + 1 : (int)ceil(x / h) - 1;
+        tp[a] = dd[a] == 0 ? INFINITY : (plane[a] * h - x0[a]) / dd[a];
+        while (tp[a] <= t) { /* x sat on a plane but rounded to its near side */
+            plane[a] += dd[a] > 0 ? 1 : -1;
+            tp[a] = (plane[a] * h - x0[a]) / dd[a];
+        }
+    }
+}
+
+/* past the planes met at tn: the next ones along those axes */
+inline void step_planes(const real *x0, const real *dd, const real tn, const real h, int *plane, real *tp)
+{
+    for (int a = 0; a < 3; a++)
+        if (tp[a] <= tn) {
+            plane[a] += dd[a] > 0 ? 1 : -1;
+            tp[a] = (plane[a] * h - x0[a]) / dd[a];
+        }
+}
+
+/* the bound on |field| of the block holding x (0 outside the blocks); lowers *texit to where the
+ * ray leaves that block */
+inline real block_bound(__global const float *bound, const int4 origin, const int4 shape, const real *x0,
+                        const real *dd, const real3 x, real *texit)
+{
+    const int4 b = convert_int4((real4)(floor(x / CLW_BLOCK), 0));
+    const int bb[3] = {b.x, b.y, b.z};
+    for (int a = 0; a < 3; a++)
+        if (dd[a] != 0)
+            *texit = fmin(*texit, ((bb[a] + (dd[a] > 0)) * CLW_BLOCK - x0[a]) / dd[a]);
+    const int4 k = b - origin;
+    if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= shape.x || k.y >= shape.y || k.z >= shape.z)
+        return 0;
+    return bound[((size_t)k.z * shape.y + k.y) * shape.x + k.x];
+}
+
 /* raytrace: one ray per pixel.
  *
  * Parameters
@@ -326,8 +374,8 @@ inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant c
  *   quarters     (18, N) from the N samples of a segment: row p the value at xi = -1 + p/4 (the
  *                points of Simpson's first 2 panels and their halves), row 9 + p the integral
  *                from -1 to that point; row 17 integrates over the segment
- *   tol, q_bound absolute tolerance per output value; an upper bound of the shaded emission
- *   shade_gain   q_bound / max |coefficient|: how much shading can scale the emission
+ *   tol          absolute tolerance per output value
+ *   shade_gain   how much shading can scale the emission (the shaded q <= shade_gain |field|)
  *   grad_floor   shorter world gradients of alpha get no diffuse or specular light: on a plateau
  *                of alpha they are rounding noise, whose random normals would make the integrand
  *                jump everywhere
@@ -340,7 +388,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
                        const float4 to_fine_scale, const float4 to_fine_offset,
                        __constant const real *cheb, __constant const real *quarters, const real tol,
-                       const real q_bound, const real shade_gain,
+                       const real shade_gain,
                        const real grad_floor,
                        __constant const float4 *lights, const int nlights, const float4 phong)
 {
@@ -406,6 +454,26 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
 #else
     real skip_budget = tol / 4;
 #endif
+#ifndef CLW_XRAY
+    /* R(t0): the block bounds integrated along the whole ray, block by block */
+    real rest = 0;
+    {
+        real tp[3];
+        int plane[3];
+        next_planes(x0, dd, t0, CLW_BLOCK, plane, tp);
+        for (real t = t0; t < t1;) {
+            const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
+            real ignored = t1;
+            rest += block_bound(bound, occ_origin, occ_shape, x0, dd, X0 + (t + tn) / 2 * D, &ignored) * (tn - t);
+            t = tn;
+            step_planes(x0, dd, tn, CLW_BLOCK, plane, tp);
+        }
+    }
+    /* R(t) = rest - consumed, the part of the sum at t' < t subtracted as the march passes it;
+     * slack covers the rounding of the two sums (float32: ~1e-7 relative per term) */
+    const real slack = rest * (real)1e-4;
+    real consumed = 0;
+#endif
     const real h = CLW_LATTICE;
     real tp[3];
     int plane[3];
@@ -413,36 +481,25 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     bool replan = true;
     while (t < t1) {
         if (replan) { /* the next knot plane per axis, from the position at t */
-            for (int a = 0; a < 3; a++) {
-                const real x = x0[a] + t * dd[a];
-                plane[a] = dd[a] > 0 ? (int)floor(x / h) + 1 : (int)ceil(x / h) - 1;
-                tp[a] = dd[a] == 0 ? INFINITY : (plane[a] * h - x0[a]) / dd[a];
-                while (tp[a] <= t) { /* x sat on a plane but rounded to its near side */
-                    plane[a] += dd[a] > 0 ? 1 : -1;
-                    tp[a] = (plane[a] * h - x0[a]) / dd[a];
-                }
-            }
+            next_planes(x0, dd, t, h, plane, tp);
             replan = false;
         }
         const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
         const real3 xm = X0 + (t + tn) / 2 * D;
-        const int4 blk = convert_int4((real4)(floor(xm / CLW_BLOCK), 0)) - occ_origin;
-        const bool inside = blk.x >= 0 && blk.y >= 0 && blk.z >= 0 &&
-                            blk.x < occ_shape.x && blk.y < occ_shape.y && blk.z < occ_shape.z;
-        const real b[3] = {(real)(blk.x + occ_origin.x), (real)(blk.y + occ_origin.y), (real)(blk.z + occ_origin.z)};
-        real texit = t1;
-        for (int a = 0; a < 3; a++)
-            if (dd[a] != 0)
-                texit = fmin(texit, ((b[a] + (dd[a] > 0)) * CLW_BLOCK - x0[a]) / dd[a]);
+        real texit = t1; /* where the ray leaves xm's block */
+        const real bnd = block_bound(bound, occ_origin, occ_shape, x0, dd, xm, &texit);
         texit = fmax(texit, tn);
-        const real bnd = inside ? bound[((size_t)blk.z * occ_shape.y + blk.y) * occ_shape.x + blk.x] : 0;
 #ifdef CLW_XRAY
         const real cost = bnd * (texit - t);
 #else
-        const real cost = T * bnd * (texit - t) * (shade_gain + 1 + q_bound * (t1 - texit));
+        const real rest_after = fmax(rest - consumed - bnd * (texit - t), (real)0) + slack;
+        const real cost = T * bnd * (texit - t) * (shade_gain * (1 + rest_after) + 1);
 #endif
         if (cost <= skip_budget) { /* (nearly) empty block: jump to where the ray leaves it */
             skip_budget -= cost;
+#ifndef CLW_XRAY
+            consumed += bnd * (texit - t);
+#endif
             t = texit;
             replan = true;
             continue;
@@ -484,18 +541,16 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             const real3 part = simpson(&S, &P, f9, cheb, seg_tol / S.radius, &evals, &flags);
             I += T * S.radius * part;
             T *= exp(-S.radius * depth);
-            if (T * fmax((real)1, q_bound * (t1 - tn)) <= tol / 4) {
+            consumed += bnd * (tn - t);
+            const real left = fmax(rest - consumed, (real)0) + slack;
+            if (T * fmax(fmin((real)1, left), shade_gain * left) <= tol / 4) {
                 flags |= 1;
                 break;
             }
 #endif
         }
         t = tn;
-        for (int a = 0; a < 3; a++)
-            if (tp[a] <= tn) {
-                plane[a] += dd[a] > 0 ? 1 : -1;
-                tp[a] = (plane[a] * h - x0[a]) / dd[a];
-            }
+        step_planes(x0, dd, tn, h, plane, tp);
     }
 #ifdef CLW_XRAY
     image[pix] = convert_float4(I);

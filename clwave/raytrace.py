@@ -269,7 +269,7 @@ class RayTracer:
                          int4_xyz(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
                          _float4(scale), _float4(offset), cheb.data, quarters.data, real(tol),
-                         real(self.q_bound * shade_gain), real(shade_gain), real(self.grad_floor(precision)),
+                         real(shade_gain), real(self.grad_floor(precision)),
                          cla.to_device(q, light_buf).data, np.int32(len(light_dirs)),
                          _float4([p.ambient, p.diffuse, p.specular, p.shininess]))
         q.finish()
