@@ -31,6 +31,7 @@
 typedef double real;
 typedef double3 real3;
 typedef double4 real4;
+typedef double8 real8;
 #define REAL_EPSILON DBL_EPSILON
 #define to_real4(v) convert_double4(v)
 #define to_real3(v) convert_double3(v)
@@ -42,6 +43,7 @@ typedef double4 real4;
 typedef float real;
 typedef float3 real3;
 typedef float4 real4;
+typedef float8 real8;
 #define REAL_EPSILON FLT_EPSILON
 #define to_real4(v) (v)
 #define to_real3(v) (v)
@@ -232,33 +234,51 @@ typedef struct {
     real3 scale;     /* fine units per world unit, per axis: world gradient = fine gradient * scale */
 } Shading;
 
-/* the shaded emission of eq. 4 from the field f and the fine gradient of alpha g */
-inline real3 shade(const real4 f, const real3 g, const Shading *P)
-{
-    real3 q = fmax(f.xyz, (real3)(0));
 #ifdef CLW_SHADE
-    const real3 gw = g * P->scale;
-    const real len = length(gw);
-    real diffuse = 0, specular = 0;
-    if (len > P->grad_floor) {
-        const real3 n = -gw / len; /* outward: alpha decreases along n (MATH.md §4) */
-        for (int i = 0; i < P->nlights; i++) {
-            diffuse += fmax(dot(n, P->light[i]), (real)0);
-            /* max(c, 0)^shininess as exp2(shininess log2 c): PoCL's pow goes through
-             * extended-precision logarithms and took a quarter of the render time */
-            const real c = dot(n, P->halfway[i]);
-            specular += c > 0 ? fast_exp2(P->shininess * fast_log2(c)) : (real)(P->shininess == 0);
-        }
-    }
-    q = q * (P->ka + P->kd * diffuse) + P->ks * fmax(f.w, (real)0) * specular;
+#define SHADING 1
+#else
+#define SHADING 0
 #endif
-    return q;
-}
+/* The shaded emission of eq. 4, (r, g, b) in place, from the field (r, g, b, a) and the fine
+ * gradient of alpha (gx, gy, gz): one point (TYPE real) or eight at once (real8; the comparisons
+ * and ?: then act per lane, so the same text serves both). */
+#define SHADE(TYPE, NAME)                                                                            \
+    inline void NAME(TYPE *r, TYPE *g, TYPE *b, const TYPE a, const TYPE gx, const TYPE gy, const TYPE gz, \
+                     const Shading *P)                                                               \
+    {                                                                                                \
+        *r = fmax(*r, (TYPE)(0)); *g = fmax(*g, (TYPE)(0)); *b = fmax(*b, (TYPE)(0));                \
+        if (!SHADING)                                                                                \
+            return;                                                                                  \
+        const TYPE wx = gx * P->scale.x, wy = gy * P->scale.y, wz = gz * P->scale.z;                 \
+        const TYPE len = sqrt(wx * wx + wy * wy + wz * wz);                                          \
+        /* outward: alpha decreases along n (MATH.md §4); flat below grad_floor */                   \
+        const TYPE flat = len > P->grad_floor ? (TYPE)(0) : (TYPE)(1);                               \
+        const TYPE inv = -1 / (len + flat);                                                          \
+        const TYPE nx = wx * inv, ny = wy * inv, nz = wz * inv;                                      \
+        TYPE diffuse = (TYPE)(0), specular = (TYPE)(0);                                              \
+        for (int i = 0; i < P->nlights; i++) {                                                       \
+            diffuse += fmax(nx * P->light[i].x + ny * P->light[i].y + nz * P->light[i].z, (TYPE)(0)); \
+            /* max(c, 0)^shininess as exp2(shininess log2 c): PoCL's pow goes through           */   \
+            /* extended-precision logarithms and took a quarter of the render time             */   \
+            const TYPE c = nx * P->halfway[i].x + ny * P->halfway[i].y + nz * P->halfway[i].z;       \
+            specular += c > 0 ? fast_exp2(P->shininess * fast_log2(c)) : (TYPE)(P->shininess == 0);  \
+        }                                                                                            \
+        diffuse = flat > 0 ? (TYPE)(0) : diffuse;                                                    \
+        specular = flat > 0 ? (TYPE)(0) : P->ks * fmax(a, (TYPE)(0)) * specular;                     \
+        const TYPE lit = P->ka + P->kd * diffuse;                                                    \
+        *r = *r * lit + specular; *g = *g * lit + specular; *b = *b * lit + specular;                \
+    }
+SHADE(real, shade)
+SHADE(real8, shade8)
 
 /* q e^{-A} at xi from the series: the shaded emission attenuated inside the segment */
 inline real3 integrand(const Segment *S, const Shading *P, const real xi)
 {
-    return shade(cheb4(S->q, N, xi), cheb3(S->g, N, xi), P) * fast_exp(-S->radius * cheb1(S->A, N + 1, xi));
+    const real4 f = cheb4(S->q, N, xi);
+    const real3 g = cheb3(S->g, N, xi);
+    real r = f.x, gr = f.y, b = f.z;
+    shade(&r, &gr, &b, f.w, g.x, g.y, g.z, P);
+    return (real3)(r, gr, b) * fast_exp(-S->radius * cheb1(S->A, N + 1, xi));
 }
 
 typedef struct {
@@ -371,9 +391,9 @@ inline real block_bound(__global const float *bound, const int4 origin, const in
  *                                with c, r the pixel centre's offsets from the image centre
  *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset
  *   cheb         (N + 1, N) cos(pi m (k + 1/2) / N); row 1 holds the sample points
- *   quarters     (18, N) from the N samples of a segment: row p the value at xi = -1 + p/4 (the
- *                points of Simpson's first 2 panels and their halves), row 9 + p the integral
- *                from -1 to that point; row 17 integrates over the segment
+ *   quarters     (N, 18) sample k's weights: column p in the value at xi = -1 + p/4 (the points
+ *                of Simpson's first 2 panels and their halves), column 9 + p in the integral
+ *                from -1 to that point; column 17 integrates over the segment
  *   tol          absolute tolerance per output value
  *   shade_gain   how much shading can scale the emission (the shaded q <= shade_gain |field|)
  *   grad_floor   shorter world gradients of alpha get no diffuse or specular light: on a plateau
@@ -511,32 +531,47 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, cheb, S.fq, S.fg);
             segments += 1;
             samples += N;
-            /* row p of `quarters` gives the value at xi = -1 + p/4 from the N samples, row 9 + p
-             * the integral from -1 to there (row 17: over the segment, Fejer's weights) */
-#ifdef CLW_XRAY
+#ifdef CLW_XRAY /* the integral over the segment: Fejer's weights */
             real4 integral = (real4)(0);
             for (int k = 0; k < N; k++)
-                integral += S.fq[k] * quarters[17 * N + k];
+                integral += S.fq[k] * quarters[18 * k + 17];
             I += S.radius * integral;
 #else
             for (int k = 0; k < N; k++)
                 S.fq[k] = fmax(S.fq[k], (real4)(0)); /* clamp alpha, q >= 0 */
-            real3 f9[9];
+            /* Simpson's first 9 points xi = -1 + p/4 from the samples, with A exact there:
+             * p = 0..7 in the lanes of real8, p = 8 alone */
+            real8 r8 = 0, g8 = 0, b8 = 0, a8 = 0, gx8 = 0, gy8 = 0, gz8 = 0, A8 = 0;
+            real4 f = (real4)(0);
+            real3 g = (real3)(0);
             real depth = 0; /* int alpha dxi over the segment */
-            for (int p = 0; p < 9; p++) {
-                real4 f = (real4)(0);
-                real3 g = (real3)(0);
-                real A = 0;
-                for (int k = 0; k < N; k++) {
-                    f += S.fq[k] * quarters[p * N + k];
+            for (int k = 0; k < N; k++) {
+                __constant const real *q = quarters + 18 * k;
+                const real8 w = vload8(0, q), wa = vload8(0, q + 9);
+                const real4 v = S.fq[k];
+                r8 = fma((real8)(v.x), w, r8); g8 = fma((real8)(v.y), w, g8);
+                b8 = fma((real8)(v.z), w, b8); a8 = fma((real8)(v.w), w, a8);
+                f = fma(v, (real4)(q[8]), f);
+                A8 = fma((real8)(v.w), wa, A8);
+                depth = fma(v.w, q[17], depth);
 #ifdef CLW_SHADE
-                    g += S.fg[k] * quarters[p * N + k]; /* only shading reads the gradient */
+                const real3 d = S.fg[k]; /* only shading reads the gradient */
+                gx8 = fma((real8)(d.x), w, gx8); gy8 = fma((real8)(d.y), w, gy8); gz8 = fma((real8)(d.z), w, gz8);
+                g = fma(d, (real3)(q[8]), g);
 #endif
-                    A += S.fq[k].w * quarters[(9 + p) * N + k];
-                }
-                f9[p] = shade(f, g, &P) * fast_exp(-S.radius * A);
-                depth = A;
             }
+            shade8(&r8, &g8, &b8, a8, gx8, gy8, gz8, &P);
+            const real8 att = fast_exp(-S.radius * A8);
+            real fr[8], fg[8], fb[8];
+            vstore8(r8 * att, 0, fr);
+            vstore8(g8 * att, 0, fg);
+            vstore8(b8 * att, 0, fb);
+            real3 f9[9];
+            for (int p = 0; p < 8; p++)
+                f9[p] = (real3)(fr[p], fg[p], fb[p]);
+            real r = f.x, gr = f.y, b = f.z;
+            shade(&r, &gr, &b, f.w, g.x, g.y, g.z, &P);
+            f9[8] = (real3)(r, gr, b) * fast_exp(-S.radius * depth);
             const real seg_tol = (tol / 2) * (tn - t) / total / T;
             const real3 part = simpson(&S, &P, f9, cheb, seg_tol / S.radius, &evals, &flags);
             I += T * S.radius * part;

@@ -351,9 +351,10 @@ def chebyshev_table(n: int) -> np.ndarray:
 
 
 def quarter_weights(n: int) -> np.ndarray:
-    """(18, n) float64: from samples at the n Chebyshev points cos(pi (k + 1/2) / n), row p the
-    value at xi = -1 + p/4 (p = 0..8) of the polynomial through them, row 9 + p its integral
-    from -1 to there (row 17: Fejer's quadrature weights on [-1, 1]); ``cl/raytrace.cl``.
+    """(n, 18) float64: for the sample at the Chebyshev point cos(pi (k + 1/2) / n), row k holds
+    its weights in the value at xi = -1 + p/4 (column p = 0..8) of the polynomial through the n
+    samples, then in that polynomial's integral from -1 to there (column 9 + p; column 17:
+    Fejer's quadrature weights on [-1, 1]); ``cl/raytrace.cl``.
 
     Simpson's first two panels of a segment and their halves need only these nine points, so the
     kernel makes the Chebyshev series only for finer panels.
@@ -364,7 +365,7 @@ def quarter_weights(n: int) -> np.ndarray:
     xi = -1.0 + np.arange(9) / 4.0
     values = chebyshev.chebval(xi, series).T
     integrals = chebyshev.chebval(xi, chebyshev.chebint(series, lbnd=-1)).T
-    return np.ascontiguousarray(np.vstack([values, integrals]))
+    return np.ascontiguousarray(np.vstack([values, integrals]).T)
 
 
 def occupancy(wv: WaveletVolume, dense=None):

@@ -38,8 +38,8 @@ def test_quarter_weights_are_exact_for_polynomials_of_the_segment_degree(n):
     xi = -1.0 + np.arange(9) / 4.0
     weights = quarter_weights(n)
     assert weights.flags.c_contiguous  # the kernel reads it row by row
-    np.testing.assert_allclose(weights[:9] @ samples, poly(xi), atol=1e-12)
-    np.testing.assert_allclose(weights[9:] @ samples, poly.integ(lbnd=-1)(xi), atol=1e-12)
+    np.testing.assert_allclose(samples @ weights[:, :9], poly(xi), atol=1e-12)
+    np.testing.assert_allclose(samples @ weights[:, 9:], poly.integ(lbnd=-1)(xi), atol=1e-12)
 
 
 def test_constant_slab_matches_closed_form():
