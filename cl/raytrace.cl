@@ -32,6 +32,7 @@ typedef double real;
 typedef double3 real3;
 typedef double4 real4;
 typedef double8 real8;
+typedef double16 real16;
 #define REAL_EPSILON DBL_EPSILON
 #define to_real4(v) convert_double4(v)
 #define to_real3(v) convert_double3(v)
@@ -44,6 +45,7 @@ typedef float real;
 typedef float3 real3;
 typedef float4 real4;
 typedef float8 real8;
+typedef float16 real16;
 #define REAL_EPSILON FLT_EPSILON
 #define to_real4(v) (v)
 #define to_real3(v) (v)
@@ -58,26 +60,28 @@ typedef float8 real8;
 constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
 
 /* w[r] = N_j(u + r) and dw[r] = N_j'(u + r), r = 0..j-1: the weight of coefficient c - r in
- * cell c at u = x - c (MATH.md §1).  Polynomials, so they hold a little outside [0, 1) too. */
-inline void bspline_pieces(const int j, const real u, real *w, real *dw)
-{
-    const real s = 1 - u;
-    if (j == 1) {
-        w[0] = 1; dw[0] = 0;
-    } else if (j == 2) {
-        w[0] = u; w[1] = s;
-        dw[0] = 1; dw[1] = -1;
-    } else if (j == 3) {
-        w[0] = u * u * (real)0.5; w[1] = (-2 * u * u + 2 * u + 1) * (real)0.5; w[2] = s * s * (real)0.5;
-        dw[0] = u; dw[1] = 1 - 2 * u; dw[2] = -s;
-    } else {
-        const real sixth = (real)1 / 6; /* products: PoCL keeps divisions by constants as divisions */
-        w[0] = u * u * u * sixth; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) * sixth;
-        w[2] = ((3 * u - 6) * u * u + 4) * sixth; w[3] = s * s * s * sixth;
-        dw[0] = u * u * (real)0.5; dw[1] = (-3 * u * u + 2 * u + 1) * (real)0.5; dw[2] = (3 * u - 4) * u * (real)0.5;
-        dw[3] = -s * s * (real)0.5;
+ * cell c at u = x - c (MATH.md §1).  Polynomials, so they hold a little outside [0, 1) too.
+ * For one point (TYPE real) or for the lanes of a vector. */
+#define BSPLINE_PIECES(TYPE, NAME)                                                                     \
+    inline void NAME(const int j, const TYPE u, TYPE *w, TYPE *dw)                                     \
+    {                                                                                                  \
+        const TYPE s = 1 - u;                                                                          \
+        const real one_half = (real)0.5, sixth = (real)1 / 6; /* PoCL keeps divisions by constants */      \
+        if (j == 1) {                                                                                  \
+            w[0] = (TYPE)(1); dw[0] = (TYPE)(0);                                                       \
+        } else if (j == 2) {                                                                           \
+            w[0] = u; w[1] = s;                                                                        \
+            dw[0] = (TYPE)(1); dw[1] = (TYPE)(-1);                                                     \
+        } else if (j == 3) {                                                                           \
+            w[0] = u * u * one_half; w[1] = (-2 * u * u + 2 * u + 1) * one_half; w[2] = s * s * one_half;          \
+            dw[0] = u; dw[1] = 1 - 2 * u; dw[2] = -s;                                                  \
+        } else {                                                                                       \
+            w[0] = u * u * u * sixth; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) * sixth;               \
+            w[2] = ((3 * u - 6) * u * u + 4) * sixth; w[3] = s * s * s * sixth;                        \
+            dw[0] = u * u * one_half; dw[1] = (-3 * u * u + 2 * u + 1) * one_half; dw[2] = (3 * u - 4) * u * one_half; \
+            dw[3] = -s * s * one_half;                                                                     \
+        }                                                                                              \
     }
-}
 
 #ifndef CLW_WAVELET
 /* ---- B-spline path: the fine grids the kept coefficients expand to (clwave/finegrid.py) ---- */
@@ -93,41 +97,73 @@ typedef int Active; /* no per-ray state */
 inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = 0; }
 inline int active_flags(const Active *A) { return 0; }
 
-/* One group's part of the field and, for the alpha group, of alpha's fine gradient at u = x - cell
- * within the segment's cell: the j^3 coefficients ending at `corner` (the cell's own), summed
- * separably (along x per (y, z) row, then along y per z plane, then along z); rows are `sy`
- * apart, planes `sz`.  Always inlined with a literal order j, so the loops unroll. */
-__attribute__((always_inline)) inline void group_field(__global const float4 *corner, const int sy, const int sz,
-                                                       const int g, const int j, const real3 u, real4 *v, real3 *gr)
+/* The samples of a segment in the lanes of one vector (lanes N.. repeat the centre, unused) */
+#if N > 8
+#define NV 16
+typedef real16 realv;
+#define vloadv vload16
+#define vstorev vstore16
+#else
+#define NV 8
+typedef real8 realv;
+#define vloadv vload8
+#define vstorev vstore8
+#endif
+BSPLINE_PIECES(realv, bspline_pieces)
+
+/* One group's part of the field at sample k: the j^3 coefficients ending at `corner` (the
+ * segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
+ * along z) with sample k's weights w?[r * NV + k]; rows are `sy` apart, planes `sz`.  Always
+ * inlined with a literal order j, so the loops unroll. */
+__attribute__((always_inline)) inline real4 group_field(__global const float4 *corner, const int sy, const int sz,
+                                                        const int j, const real *wx, const real *wy, const real *wz,
+                                                        const int k)
 {
-    real wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
-    bspline_pieces(j, u.x, wx, dx);
-    bspline_pieces(j, u.y, wy, dy);
-    bspline_pieces(j, u.z, wz, dz);
+    real4 v = (real4)(0);
 #pragma unroll
     for (int rz = 0; rz < j; rz++) {
         real4 plane = (real4)(0);
-        real plane_dx = 0, plane_dy = 0;
 #pragma unroll
         for (int ry = 0; ry < j; ry++) {
             __global const float4 *row = corner - rz * sz - ry * sy;
             real4 line = (real4)(0);
-            real line_dx = 0;
+#pragma unroll
+            for (int rx = 0; rx < j; rx++)
+                line = fma(to_real4(row[-rx]), (real4)(wx[rx * NV + k]), line);
+            plane = fma(line, (real4)(wy[ry * NV + k]), plane);
+        }
+        v = fma(plane, (real4)(wz[rz * NV + k]), v);
+    }
+    return v;
+}
+
+/* The alpha group's part of alpha's fine gradient at all samples at once (one per lane): the
+ * same separable sum as group_field on the alpha channel, with the derivative weights d? */
+__attribute__((always_inline)) inline void group_gradient(__global const float4 *corner, const int sy, const int sz,
+                                                          const int j, const realv *wx, const realv *wy,
+                                                          const realv *wz, const realv *dx, const realv *dy,
+                                                          const realv *dz, realv *gx, realv *gy, realv *gz)
+{
+#pragma unroll
+    for (int rz = 0; rz < j; rz++) {
+        realv plane = 0, plane_dx = 0, plane_dy = 0;
+#pragma unroll
+        for (int ry = 0; ry < j; ry++) {
+            __global const float4 *row = corner - rz * sz - ry * sy;
+            realv line = 0, line_dx = 0;
 #pragma unroll
             for (int rx = 0; rx < j; rx++) {
-                const real4 c = to_real4(row[-rx]);
-                line = fma(c, (real4)(wx[rx]), line);
-                line_dx = fma(c.w, dx[rx], line_dx);
+                const realv a = (realv)(row[-rx].w);
+                line = fma(a, wx[rx], line);
+                line_dx = fma(a, dx[rx], line_dx);
             }
-            plane = fma(line, (real4)(wy[ry]), plane);
+            plane = fma(line, wy[ry], plane);
             plane_dx = fma(line_dx, wy[ry], plane_dx);
-            plane_dy = fma(line.w, dy[ry], plane_dy);
+            plane_dy = fma(line, dy[ry], plane_dy);
         }
-        *v = fma(plane, (real4)(wz[rz]), *v);
-#ifdef CLW_SHADE
-        if (g == CLW_ALPHA)
-            *gr += (real3)(plane_dx * wz[rz], plane_dy * wz[rz], plane.w * dz[rz]);
-#endif
+        *gx = fma(plane_dx, wz[rz], *gx);
+        *gy = fma(plane_dy, wz[rz], *gy);
+        *gz = fma(plane, dz[rz], *gz);
     }
 }
 
@@ -136,36 +172,57 @@ __attribute__((always_inline)) inline void group_field(__global const float4 *co
 inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
                            const real3 D, __constant const real *cheb, real4 *fq, real3 *fg)
 {
-    __global const float4 *corner[CLW_GROUPS];
-    int sy[CLW_GROUPS], sz[CLW_GROUPS];
-    real3 um[CLW_GROUPS]; /* xm in each group's cell coordinates */
+    real lane_xi[NV];
+    for (int k = 0; k < NV; k++)
+        lane_xi[k] = k < N ? cheb[N + k] : 0;
+    const realv xi = vloadv(0, lane_xi);
+    for (int k = 0; k < N; k++)
+        fq[k] = (real4)(0);
+    realv gx = 0, gy = 0, gz = 0;
     for (int g = 0; g < CLW_GROUPS; g++) {
-        const real3 x = xm + (real)(ORDER[g] - ORDER[0]) / 2; /* grid g's lattice (MATH.md §7) */
+        const int j = ORDER[g];
+        const real3 x = xm + (real)(j - ORDER[0]) / 2; /* grid g's lattice (MATH.md §7) */
         const int4 s = G.shape[g], lo = G.start[g];
-        const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + ORDER[g] - 1,
-                                    lo.xyz + s.xyz - 1), 0);
+        const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + j - 1, lo.xyz + s.xyz - 1), 0);
         const int4 p = c - lo;
-        corner[g] = G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
-        sy[g] = s.x;
-        sz[g] = s.x * s.y;
-        um[g] = x - convert_real3(c.xyz);
-    }
-    for (int k = 0; k < N; k++) {
-        const real3 step = radius * cheb[N + k] * D;
-        real4 v = (real4)(0);
-        real3 gr = (real3)(0);
-        for (int g = 0; g < CLW_GROUPS; g++) {
-            const real3 u = um[g] + step;
-            switch (ORDER[g]) {
-            case 1: group_field(corner[g], sy[g], sz[g], g, 1, u, &v, &gr); break;
-            case 2: group_field(corner[g], sy[g], sz[g], g, 2, u, &v, &gr); break;
-            case 3: group_field(corner[g], sy[g], sz[g], g, 3, u, &v, &gr); break;
-            default: group_field(corner[g], sy[g], sz[g], g, 4, u, &v, &gr); break;
+        __global const float4 *corner = G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
+        const real3 u = x - convert_real3(c.xyz), step = radius * D; /* u at xi = 0, and per unit xi */
+        realv wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
+        bspline_pieces(j, u.x + step.x * xi, wx, dx);
+        bspline_pieces(j, u.y + step.y * xi, wy, dy);
+        bspline_pieces(j, u.z + step.z * xi, wz, dz);
+        real lx[4 * NV], ly[4 * NV], lz[4 * NV]; /* the weights per sample, for the field's float4 sums */
+        for (int r = 0; r < j; r++) {
+            vstorev(wx[r], r, lx);
+            vstorev(wy[r], r, ly);
+            vstorev(wz[r], r, lz);
+        }
+        for (int k = 0; k < N; k++) {
+            switch (j) {
+            case 1: fq[k] += group_field(corner, s.x, s.x * s.y, 1, lx, ly, lz, k); break;
+            case 2: fq[k] += group_field(corner, s.x, s.x * s.y, 2, lx, ly, lz, k); break;
+            case 3: fq[k] += group_field(corner, s.x, s.x * s.y, 3, lx, ly, lz, k); break;
+            default: fq[k] += group_field(corner, s.x, s.x * s.y, 4, lx, ly, lz, k); break;
             }
         }
-        fq[k] = v;
-        fg[k] = gr;
+#ifdef CLW_SHADE
+        if (g == CLW_ALPHA) {
+            switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */
+            case 2: group_gradient(corner, s.x, s.x * s.y, 2, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
+            case 3: group_gradient(corner, s.x, s.x * s.y, 3, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
+            case 4: group_gradient(corner, s.x, s.x * s.y, 4, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
+            }
+        }
+#endif
     }
+#ifdef CLW_SHADE
+    real lgx[NV], lgy[NV], lgz[NV];
+    vstorev(gx, 0, lgx);
+    vstorev(gy, 0, lgy);
+    vstorev(gz, 0, lgz);
+    for (int k = 0; k < N; k++)
+        fg[k] = (real3)(lgx[k], lgy[k], lgz[k]);
+#endif
 }
 #else
 #include "raytrace_wavelet.h"
