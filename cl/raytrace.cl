@@ -12,7 +12,12 @@
  *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (Fejer's weights on the samples).
  * The budget tol per output value is split: half for the quadrature, spread along the ray in
  * proportion to segment length and relaxed by 1/T (MATH.md §7); a quarter for early ray
- * termination; a quarter for empty space.  Both use the blocks of CLW_BLOCK^3 fine cells with a
+ * termination; a quarter for empty space.  With shading, half of the quadrature's half goes to
+ * segments shaded at the midpoint of their shading range: shading makes q (ka + kd D) + ks alpha S
+ * of q with D, S in [0, nlights], so (ka + kd n/2) q + (ks n/2) alpha errs by at most the half
+ * width (kd q + ks alpha) n/2; a segment whose unshaded integrals (Simpson's 4 panels, |S4 - S2|
+ * added as their error) make that fit in what is left of the quarter needs no gradient, which is
+ * a third of the work.  Termination and skipping use the blocks of CLW_BLOCK^3 fine cells with a
  * bound b on |field| (cl/blocks.cl) and R(t), the integral of b along the rest of the ray beyond t
  * (summed block by block before the march): the rest can add at most T R gain of emission and
  * T min(1, R) of opacity, so the ray stops once T max(min(1, R), R gain) <= tol/4.  A block is
@@ -29,6 +34,7 @@
 #ifdef CLW_DOUBLE
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 typedef double real;
+typedef double2 real2;
 typedef double3 real3;
 typedef double4 real4;
 typedef double8 real8;
@@ -42,6 +48,7 @@ typedef double16 real16;
 #define fast_log2 log2
 #else
 typedef float real;
+typedef float2 real2;
 typedef float3 real3;
 typedef float4 real4;
 typedef float8 real8;
@@ -167,26 +174,40 @@ __attribute__((always_inline)) inline void group_gradient(__global const float4 
     }
 }
 
-/* the field and alpha's gradient at the segment's N Chebyshev points xm + radius cheb[N + k] D, all
- * from the cells holding xm, so that every sample of a segment comes from the same polynomial */
-inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
-                           const real3 D, __constant const real *cheb, real4 *fq, real3 *fg)
+/* The lanes' sample points xi = cheb[N + k] of the segment, and grid g's part of the segment: its
+ * cell's last coefficient, and u = x - cell at xi = 0.  Every sample of a segment comes from the
+ * cells holding the midpoint xm, so from the same polynomial. */
+inline realv sample_points(__constant const real *cheb)
 {
     real lane_xi[NV];
     for (int k = 0; k < NV; k++)
         lane_xi[k] = k < N ? cheb[N + k] : 0;
-    const realv xi = vloadv(0, lane_xi);
+    return vloadv(0, lane_xi);
+}
+
+inline __global const float4 *segment_cell(const Field G, const int g, const real3 xm, real3 *u)
+{
+    const int j = ORDER[g];
+    const real3 x = xm + (real)(j - ORDER[0]) / 2; /* grid g's lattice (MATH.md §7) */
+    const int4 s = G.shape[g], lo = G.start[g];
+    const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + j - 1, lo.xyz + s.xyz - 1), 0);
+    const int4 p = c - lo;
+    *u = x - convert_real3(c.xyz);
+    return G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
+}
+
+/* the field at the segment's N Chebyshev points xm + radius cheb[N + k] D (alpha's gradient: sample_gradient) */
+inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
+                           const real3 D, __constant const real *cheb, real4 *fq, real3 *fg)
+{
+    const realv xi = sample_points(cheb);
     for (int k = 0; k < N; k++)
         fq[k] = (real4)(0);
-    realv gx = 0, gy = 0, gz = 0;
     for (int g = 0; g < CLW_GROUPS; g++) {
-        const int j = ORDER[g];
-        const real3 x = xm + (real)(j - ORDER[0]) / 2; /* grid g's lattice (MATH.md §7) */
-        const int4 s = G.shape[g], lo = G.start[g];
-        const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + j - 1, lo.xyz + s.xyz - 1), 0);
-        const int4 p = c - lo;
-        __global const float4 *corner = G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
-        const real3 u = x - convert_real3(c.xyz), step = radius * D; /* u at xi = 0, and per unit xi */
+        const int j = ORDER[g], sy = G.shape[g].x, sz = G.shape[g].x * G.shape[g].y;
+        real3 u;
+        __global const float4 *corner = segment_cell(G, g, xm, &u);
+        const real3 step = radius * D;
         realv wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
         bspline_pieces(j, u.x + step.x * xi, wx, dx);
         bspline_pieces(j, u.y + step.y * xi, wy, dy);
@@ -199,30 +220,40 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
         }
         for (int k = 0; k < N; k++) {
             switch (j) {
-            case 1: fq[k] += group_field(corner, s.x, s.x * s.y, 1, lx, ly, lz, k); break;
-            case 2: fq[k] += group_field(corner, s.x, s.x * s.y, 2, lx, ly, lz, k); break;
-            case 3: fq[k] += group_field(corner, s.x, s.x * s.y, 3, lx, ly, lz, k); break;
-            default: fq[k] += group_field(corner, s.x, s.x * s.y, 4, lx, ly, lz, k); break;
+            case 1: fq[k] += group_field(corner, sy, sz, 1, lx, ly, lz, k); break;
+            case 2: fq[k] += group_field(corner, sy, sz, 2, lx, ly, lz, k); break;
+            case 3: fq[k] += group_field(corner, sy, sz, 3, lx, ly, lz, k); break;
+            default: fq[k] += group_field(corner, sy, sz, 4, lx, ly, lz, k); break;
             }
         }
-#ifdef CLW_SHADE
-        if (g == CLW_ALPHA) {
-            switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */
-            case 2: group_gradient(corner, s.x, s.x * s.y, 2, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
-            case 3: group_gradient(corner, s.x, s.x * s.y, 3, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
-            case 4: group_gradient(corner, s.x, s.x * s.y, 4, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
-            }
-        }
-#endif
     }
-#ifdef CLW_SHADE
+}
+
+/* alpha's fine gradient at the same points, only for segments that are shaded */
+inline void sample_gradient(const Field G, const real3 xm, const real radius, const real3 D,
+                            __constant const real *cheb, real3 *fg)
+{
+    const int j = ORDER[CLW_ALPHA], sy = G.shape[CLW_ALPHA].x, sz = G.shape[CLW_ALPHA].x * G.shape[CLW_ALPHA].y;
+    const realv xi = sample_points(cheb);
+    real3 u;
+    __global const float4 *corner = segment_cell(G, CLW_ALPHA, xm, &u);
+    const real3 step = radius * D;
+    realv wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
+    bspline_pieces(j, u.x + step.x * xi, wx, dx);
+    bspline_pieces(j, u.y + step.y * xi, wy, dy);
+    bspline_pieces(j, u.z + step.z * xi, wz, dz);
+    realv gx = 0, gy = 0, gz = 0;
+    switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */
+    case 2: group_gradient(corner, sy, sz, 2, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
+    case 3: group_gradient(corner, sy, sz, 3, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
+    case 4: group_gradient(corner, sy, sz, 4, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
+    }
     real lgx[NV], lgy[NV], lgz[NV];
     vstorev(gx, 0, lgx);
     vstorev(gy, 0, lgy);
     vstorev(gz, 0, lgz);
     for (int k = 0; k < N; k++)
         fg[k] = (real3)(lgx[k], lgy[k], lgz[k]);
-#endif
 }
 #else
 #include "raytrace_wavelet.h"
@@ -434,11 +465,20 @@ inline real block_bound(__global const float *bound, const int4 origin, const in
     return bound[((size_t)k.z * shape.y + k.y) * shape.x + k.x];
 }
 
+/* (S4, S2): Simpson's rule over [-1, 1] on 4 and on 2 panels, from the values at xi = -1 + p/4,
+ * p = 0..7 in the lanes of v and p = 8 in `last` */
+inline real2 simpson_pair(const real8 v, const real last)
+{
+    const real8 w4 = v * (real8)(1, 4, 2, 4, 2, 4, 2, 4), w2 = v * (real8)(1, 0, 4, 0, 2, 0, 4, 0);
+    return (real2)((dot(w4.lo + w4.hi, (real4)(1)) + last) / 12, (dot(w2.lo + w2.hi, (real4)(1)) + last) / 6);
+}
+
 /* raytrace: one ray per pixel.
  *
  * Parameters
  *   image        out (H, W) float4: premultiplied (R, G, B, 1 - T), or line integrals (CLW_XRAY)
- *   stats        out (H, W) int4: segments, field samples, integrand evaluations, flags
+ *   stats        out (H, W) int4: segments, segments shaded at the midpoint (no gradient), integrand
+ *                    evaluations, flags
  *                    (bit 0 terminated early, bit 1 Simpson depth limit reached)
  *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
  *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
@@ -503,7 +543,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     const size_t pix = (size_t)row * width + col;
     Active active;
     active_init(&active, G, pix, X0, D);
-    int segments = 0, samples = 0, evals = 0, flags = 0;
+    int segments = 0, midpoints = 0, evals = 0, flags = 0;
     if (!(t1 > t0)) {
         image[pix] = (float4)(0.0f);
         stats[pix] = (int4)(0);
@@ -530,6 +570,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     real skip_budget = tol / 2;
 #else
     real skip_budget = tol / 4;
+    real shade_budget = tol / 4; /* taken from the quadrature's half when shading */
+    const real quadrature_share = SHADING ? tol / 4 : tol / 2;
 #endif
 #ifndef CLW_XRAY
     /* R(t0): the block bounds integrated along the whole ray, block by block */
@@ -587,7 +629,6 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             S.series = false;
             sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, cheb, S.fq, S.fg);
             segments += 1;
-            samples += N;
 #ifdef CLW_XRAY /* the integral over the segment: Fejer's weights */
             real4 integral = (real4)(0);
             for (int k = 0; k < N; k++)
@@ -598,9 +639,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                 S.fq[k] = fmax(S.fq[k], (real4)(0)); /* clamp alpha, q >= 0 */
             /* Simpson's first 9 points xi = -1 + p/4 from the samples, with A exact there:
              * p = 0..7 in the lanes of real8, p = 8 alone */
-            real8 r8 = 0, g8 = 0, b8 = 0, a8 = 0, gx8 = 0, gy8 = 0, gz8 = 0, A8 = 0;
+            real8 r8 = 0, g8 = 0, b8 = 0, a8 = 0, A8 = 0;
             real4 f = (real4)(0);
-            real3 g = (real3)(0);
             real depth = 0; /* int alpha dxi over the segment */
             for (int k = 0; k < N; k++) {
                 __constant const real *q = quarters + 18 * k;
@@ -611,26 +651,63 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                 f = fma(v, (real4)(q[8]), f);
                 A8 = fma((real8)(v.w), wa, A8);
                 depth = fma(v.w, q[17], depth);
-#ifdef CLW_SHADE
-                const real3 d = S.fg[k]; /* only shading reads the gradient */
-                gx8 = fma((real8)(d.x), w, gx8); gy8 = fma((real8)(d.y), w, gy8); gz8 = fma((real8)(d.z), w, gz8);
-                g = fma(d, (real3)(q[8]), g);
-#endif
             }
-            shade8(&r8, &g8, &b8, a8, gx8, gy8, gz8, &P);
+            r8 = fmax(r8, 0); g8 = fmax(g8, 0); b8 = fmax(b8, 0); a8 = fmax(a8, 0);
+            f = fmax(f, (real4)(0));
             const real8 att = fast_exp(-S.radius * A8);
-            real fr[8], fg[8], fb[8];
-            vstore8(r8 * att, 0, fr);
-            vstore8(g8 * att, 0, fg);
-            vstore8(b8 * att, 0, fb);
-            real3 f9[9];
-            for (int p = 0; p < 8; p++)
-                f9[p] = (real3)(fr[p], fg[p], fb[p]);
-            real r = f.x, gr = f.y, b = f.z;
-            shade(&r, &gr, &b, f.w, g.x, g.y, g.z, &P);
-            f9[8] = (real3)(r, gr, b) * fast_exp(-S.radius * depth);
-            const real seg_tol = (tol / 2) * (tn - t) / total / T;
-            const real3 part = simpson(&S, &P, f9, cheb, seg_tol / S.radius, &evals, &flags);
+            const real att_end = fast_exp(-S.radius * depth);
+            bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
+            real3 part;
+#ifdef CLW_SHADE
+            {   /* Shading turns q into q (ka + kd D) + ks alpha S with D, S in [0, nlights]: the
+                 * midpoint of that range errs by at most half its width, times the unshaded
+                 * integrals (Simpson on 4 panels, plus |S4 - S2| for their error).  A segment whose
+                 * error that way fits in what is left of the shading budget takes the midpoint
+                 * and needs no gradient. */
+                const real2 sr = simpson_pair(r8 * att, f.x * att_end), sg = simpson_pair(g8 * att, f.y * att_end),
+                            sb = simpson_pair(b8 * att, f.z * att_end), sa = simpson_pair(a8 * att, f.w * att_end);
+                const real3 s4 = (real3)(sr.x, sg.x, sb.x), ds = fabs(s4 - (real3)(sr.y, sg.y, sb.y));
+                const real dsa = fabs(sa.x - sa.y);
+                const real n = P.nlights, diffuse_mid = P.ka + P.kd * n / 2, specular_mid = P.ks * n / 2;
+                const real3 err = P.kd * n / 2 * (s4 + ds) + specular_mid * (sa.x + dsa) /* the range */
+                                  + diffuse_mid * ds + specular_mid * dsa;            /* the quadrature */
+                const real cost = T * S.radius * fmax(err.x, fmax(err.y, err.z));
+                if (cost <= shade_budget) {
+                    shade_budget -= cost;
+                    part = diffuse_mid * s4 + specular_mid * sa.x;
+                    simpson_full = false;
+                    midpoints += 1;
+                    evals += 9;
+                }
+            }
+#endif
+            if (simpson_full) {
+                real8 gx8 = 0, gy8 = 0, gz8 = 0;
+                real3 g = (real3)(0);
+#ifdef CLW_SHADE
+                sample_gradient(G, xm, S.radius, D, cheb, S.fg);
+                for (int k = 0; k < N; k++) {
+                    __constant const real *q = quarters + 18 * k;
+                    const real8 w = vload8(0, q);
+                    const real3 d = S.fg[k];
+                    gx8 = fma((real8)(d.x), w, gx8); gy8 = fma((real8)(d.y), w, gy8); gz8 = fma((real8)(d.z), w, gz8);
+                    g = fma(d, (real3)(q[8]), g);
+                }
+#endif
+                shade8(&r8, &g8, &b8, a8, gx8, gy8, gz8, &P);
+                real fr[8], fg[8], fb[8];
+                vstore8(r8 * att, 0, fr);
+                vstore8(g8 * att, 0, fg);
+                vstore8(b8 * att, 0, fb);
+                real3 f9[9];
+                for (int p = 0; p < 8; p++)
+                    f9[p] = (real3)(fr[p], fg[p], fb[p]);
+                real r = f.x, gr = f.y, b = f.z;
+                shade(&r, &gr, &b, f.w, g.x, g.y, g.z, &P);
+                f9[8] = (real3)(r, gr, b) * att_end;
+                const real seg_tol = quadrature_share * (tn - t) / total / T;
+                part = simpson(&S, &P, f9, cheb, seg_tol / S.radius, &evals, &flags);
+            }
             I += T * S.radius * part;
             T *= exp(-S.radius * depth);
             consumed += bnd * (tn - t);
@@ -649,5 +726,5 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
 #else
     image[pix] = (float4)(convert_float3(I), (float)(1 - T));
 #endif
-    stats[pix] = (int4)(segments, samples, evals, flags | active_flags(&active));
+    stats[pix] = (int4)(segments, midpoints, evals, flags | active_flags(&active));
 }

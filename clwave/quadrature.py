@@ -33,7 +33,6 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
         phong = None
     light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
     gain = (phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0
-    bound = tr.q_bound * gain
     block_bound = tr.block_bound.get()
     scale = 1.0 / np.array(wv.spacing[::-1], float)
     offset = -np.asarray(wv.origin) * scale + (np.array(wv.shape[::-1], float) - 1) / 2 + orders[0] / 2
@@ -57,43 +56,61 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     for (r, c, w, x0, mid, rad, t0, t1, _), field, grad in zip(rays, fields, grads):
         field = field.reshape(len(mid), n_cheb, -1)
         grad = None if grad is None else grad.reshape(len(mid), n_cheb, 3)
-        blocks = _BlockSkip(block_bound, tr.occ_origin, x0, w * scale, t1, absorption, tolerance, gain, bound)
+        blocks = _BlockSkip(block_bound, tr.occ_origin, x0, w * scale, t0, t1, absorption, tolerance, gain)
         if not absorption:
             keep = [s for s in range(len(mid)) if not blocks.skip(mid[s] - rad[s], mid[s] + rad[s], 1.0)]
             out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(field[keep], xi)))
             continue
-        out[r, c] = _emission_absorption(np.maximum(field, 0), grad, xi, mid, rad, t1, t1 - t0,
-                                         tolerance, bound, phong, light_dirs, w, blocks, tr.grad_floor())
+        out[r, c] = _emission_absorption(np.maximum(field, 0), grad, xi, mid, rad, t1 - t0, tolerance, gain,
+                                         phong, light_dirs, w, blocks, tr.grad_floor())
     return out
 
 
 class _BlockSkip:
-    """The kernel's empty-space rule along one ray: skip a block while its worst case fits the budget."""
+    """The kernel's empty-space rule along one ray: skip a block while its worst case fits the budget.
 
-    def __init__(self, block_bound, origin, x0, d, t1, absorption, tol, gain, bound):
+    ``rest(t)`` is the block bounds integrated along the ray beyond t (the kernel's R), kept as
+    the whole ray's integral less what the march has passed.
+    """
+
+    def __init__(self, block_bound, origin, x0, d, t0, t1, absorption, tol, gain):
         self.bb, self.origin, self.x0, self.d, self.t1 = block_bound, origin, x0, d, t1
         self.absorption, self.budget = absorption, tol / 4 if absorption else tol / 2
-        self.gain, self.bound, self.until = gain, bound, -np.inf
+        self.gain, self.until, self.value = gain, -np.inf, 0.0
+        pieces = _knots(x0, d, t0, t1, BLOCK)
+        self.total = sum(self._lookup(a, b)[0] * (b - a) for a, b in zip(pieces[:-1], pieces[1:]))
+        self.slack, self.consumed = self.total * 1e-4, 0.0
+
+    def _lookup(self, a, b):
+        """(bound, where the ray leaves the block) of the block holding the midpoint of [a, b]."""
+        blk = np.floor((self.x0 + (a + b) / 2 * self.d) / BLOCK).astype(int)  # (x, y, z)
+        idx = blk[::-1] - self.origin
+        inside = np.all((idx >= 0) & (idx < self.bb.shape))
+        nz = self.d != 0
+        texit = min(self.t1, np.min(((blk[nz] + (self.d[nz] > 0)) * BLOCK - self.x0[nz]) / self.d[nz]))
+        return (float(self.bb[tuple(idx)]) if inside else 0.0), texit
 
     def skip(self, a, b, T) -> bool:
         """Whether segment [a, b] is skipped (it lies in a block skipped from an earlier point, or its own)."""
         if b <= self.until + 1e-9 * max(1.0, abs(self.until)):
             return True
-        blk = np.floor((self.x0 + (a + b) / 2 * self.d) / BLOCK).astype(int)  # (x, y, z)
-        idx = blk[::-1] - self.origin
-        inside = np.all((idx >= 0) & (idx < self.bb.shape))
-        value = self.bb[tuple(idx)] if inside else 0.0
-        nz = self.d != 0
-        texit = min(self.t1, np.min(((blk[nz] + (self.d[nz] > 0)) * BLOCK - self.x0[nz]) / self.d[nz]))
+        self.value, texit = self._lookup(a, b)
         texit = max(texit, b)
-        cost = value * (texit - a)
+        cost = self.value * (texit - a)
         if self.absorption:
-            cost *= T * (self.gain + 1 + self.bound * (self.t1 - texit))
+            rest_after = max(self.total - self.consumed - cost, 0.0) + self.slack
+            cost *= T * (self.gain * (1 + rest_after) + 1)
         if cost <= self.budget:
             self.budget -= cost
+            self.consumed += self.value * (texit - a)
             self.until = texit
             return True
         return False
+
+    def passed(self, a, b) -> float:
+        """Count the evaluated segment [a, b] as passed; the bound integral left beyond it."""
+        self.consumed += self.value * (b - a)
+        return max(self.total - self.consumed, 0.0) + self.slack
 
 
 def _ray(view, r, c):
@@ -146,15 +163,34 @@ def _integral(series):
     return np.einsum("smc,m->sc", series, weights)
 
 
-def _emission_absorption(field, grad, xi, mid, rad, t1, total, tol, bound, phong, lights, w, blocks, floor):
+def _emission_absorption(field, grad, xi, mid, rad, total, tol, gain, phong, lights, w, blocks, floor):
     series = _fit(field, xi)
     grad_series = _fit(grad, xi) if grad is not None else None
     T, color = 1.0, np.zeros(3)
-    ends = mid + rad
+    shade_budget = tol / 4  # when shading; the quadrature keeps the other quarter of its half
+    quadrature_share = tol / 4 if phong is not None else tol / 2
+    quarters = -1.0 + np.arange(9) / 4.0
     for s in range(len(rad)):
-        if blocks.skip(mid[s] - rad[s], ends[s], T):
+        if blocks.skip(mid[s] - rad[s], mid[s] + rad[s], T):
             continue
         A = chebyshev.chebint(series[s, :, 3], lbnd=-1)
+        if phong is not None:  # the midpoint of the shading range, when its error fits the shading budget
+            unshaded = np.maximum(chebyshev.chebval(quarters, series[s]).T, 0.0) \
+                * np.exp(-rad[s] * chebyshev.chebval(quarters, A))[:, None]  # (9, 4): q_RGB, alpha
+            s4 = (unshaded[0] + 4 * unshaded[1:8:2].sum(0) + 2 * unshaded[2:8:2].sum(0) + unshaded[8]) / 12
+            s2 = (unshaded[0] + 4 * unshaded[2] + 2 * unshaded[4] + 4 * unshaded[6] + unshaded[8]) / 6
+            ds, n = np.abs(s4 - s2), len(lights)
+            diffuse_mid, specular_mid = phong.ambient + phong.diffuse * n / 2, phong.specular * n / 2
+            err = (phong.diffuse * n / 2 * (s4[:3] + ds[:3]) + specular_mid * (s4[3] + ds[3])
+                   + diffuse_mid * ds[:3] + specular_mid * ds[3])
+            cost = T * rad[s] * err.max()
+            if cost <= shade_budget:
+                shade_budget -= cost
+                color += T * rad[s] * (diffuse_mid * s4[:3] + specular_mid * s4[3])
+                T, done = _passed(T, rad[s], A, blocks, mid[s], gain, tol)
+                if done:
+                    break
+                continue
 
         def integrand(x, s=s, A=A):
             f = chebyshev.chebval(x, series[s])
@@ -163,12 +199,19 @@ def _emission_absorption(field, grad, xi, mid, rad, t1, total, tol, bound, phong
                 q = _shade(q, max(f[3], 0.0), chebyshev.chebval(x, grad_series[s]), phong, lights, w, floor)
             return q * np.exp(-rad[s] * chebyshev.chebval(x, A))
 
-        seg_tol = tol / 2 * (2 * rad[s]) / total / T
+        seg_tol = quadrature_share * (2 * rad[s]) / total / T
         color += T * rad[s] * _simpson(integrand, seg_tol / rad[s])
-        T *= np.exp(-rad[s] * chebyshev.chebval(1.0, A))
-        if T * max(1.0, bound * (t1 - ends[s])) <= tol / 4:
+        T, done = _passed(T, rad[s], A, blocks, mid[s], gain, tol)
+        if done:
             break
     return np.append(color, 1.0 - T)
+
+
+def _passed(T, rad, A, blocks, mid, gain, tol):
+    """T past the segment, and whether the ray stops there: what is left can change no output by tol/4."""
+    T *= np.exp(-rad * chebyshev.chebval(1.0, A))
+    left = blocks.passed(mid - rad, mid + rad)
+    return T, T * max(min(1.0, left), gain * left) <= tol / 4
 
 
 def _shade(q, alpha, grad, phong, lights, w, floor):

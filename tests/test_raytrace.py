@@ -224,7 +224,8 @@ def test_too_little_device_memory_is_reported(monkeypatch, path):
 
 
 def test_budget_holds_on_a_sparse_thresholded_volume():
-    """Quadrature, early termination and skipped near-empty blocks together stay within tolerance."""
+    """Quadrature, early termination, skipped near-empty blocks and segments shaded at the midpoint of their
+    shading range together stay within tolerance."""
     rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", n=24))
     wv = clwave.WaveletVolume.from_volume(rgba, wavelet="cubic", levels=2).threshold(keep=0.05)
     tracer = RayTracer(wv)
@@ -233,6 +234,7 @@ def test_budget_holds_on_a_sparse_thresholded_volume():
     for tol in (1e-2, 1e-3):
         res = tracer.render(cam, tolerance=tol)
         assert np.max(np.abs(res.image - converged)) <= tol
+        assert 0 < res.meta["segments_shaded_at_midpoint"] < res.meta["segments"]  # both kinds of shaded segment
     assert res.meta["segments"] < tracer.render(cam, tolerance=1e-7).meta["segments"]  # blocks were skipped
 
 
