@@ -35,7 +35,7 @@ from .finegrid import fine_grids, int4_xyz
 from .result import RenderResult
 from .wavelet import WaveletVolume
 
-BLOCK = 8        # empty-space blocks are BLOCK^3 fine cells
+BLOCK = 4        # empty-space blocks are BLOCK^3 fine cells
 MAX_LIGHTS = 8   # cl/raytrace.cl keeps the lights in private memory
 
 
