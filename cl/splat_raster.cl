@@ -113,14 +113,29 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
             acc[ch][i] = 0.0f;
 
     const uint2 r = ranges[tile];
+    /* software pipelining: the next splat's records (random reads) are loaded while this one's
+     * rows are summed */
+    int4 next_tex_int = (int4)(0), next_bbox = (int4)(0);
+    float4 next_tex_map = (float4)(0.0f), next_w = (float4)(0.0f);
+    float2 next_centre = (float2)(0.0f);
+    if (r.x < r.y) {
+        const uint s = vals[r.x];
+        next_tex_int = tex_int[stex[s]]; next_tex_map = tex_map[stex[s]];
+        next_bbox = bbox[s]; next_w = values[first + s]; next_centre = centre[s];
+    }
     for (uint k = r.x; k < r.y; ++k) {
-        const uint s = vals[k];
+        const int4 t_int = next_tex_int, bx = next_bbox;
+        const float4 t_map = next_tex_map, w = next_w;
+        const float2 cen = next_centre;
+        if (k + 1 < r.y) {
+            const uint s = vals[k + 1];
+            next_tex_int = tex_int[stex[s]]; next_tex_map = tex_map[stex[s]];
+            next_bbox = bbox[s]; next_w = values[first + s]; next_centre = centre[s];
+        }
         int4 a;
         float4 f;
         float2 cs;
-        splat_lookup(tex_int[stex[s]], tex_map[stex[s]], centre[s], &a, &f, &cs);
-        const int4 bx = bbox[s];
-        const float4 w = values[first + s];
+        splat_lookup(t_int, t_map, cen, &a, &f, &cs);
         const float c[4] = {w.x, w.y, w.z, w.w};  /* per channel, indexed in the channel loops */
         const int y0 = max(bx.y, ybase), y1 = min(bx.w, ybase + CLW_TILE - 1);
         /* all 16 lanes read (the pool has 16 zeros before and 32 after it), masked lanes drop */
