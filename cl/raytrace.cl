@@ -66,30 +66,6 @@ typedef float16 real16;
 
 constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
 
-/* w[r] = N_j(u + r) and dw[r] = N_j'(u + r), r = 0..j-1: the weight of coefficient c - r in
- * cell c at u = x - c (MATH.md §1).  Polynomials, so they hold a little outside [0, 1) too.
- * For one point (TYPE real) or for the lanes of a vector. */
-#define BSPLINE_PIECES(TYPE, NAME)                                                                     \
-    inline void NAME(const int j, const TYPE u, TYPE *w, TYPE *dw)                                     \
-    {                                                                                                  \
-        const TYPE s = 1 - u;                                                                          \
-        const real one_half = (real)0.5, sixth = (real)1 / 6; /* PoCL keeps divisions by constants */      \
-        if (j == 1) {                                                                                  \
-            w[0] = (TYPE)(1); dw[0] = (TYPE)(0);                                                       \
-        } else if (j == 2) {                                                                           \
-            w[0] = u; w[1] = s;                                                                        \
-            dw[0] = (TYPE)(1); dw[1] = (TYPE)(-1);                                                     \
-        } else if (j == 3) {                                                                           \
-            w[0] = u * u * one_half; w[1] = (-2 * u * u + 2 * u + 1) * one_half; w[2] = s * s * one_half;          \
-            dw[0] = u; dw[1] = 1 - 2 * u; dw[2] = -s;                                                  \
-        } else {                                                                                       \
-            w[0] = u * u * u * sixth; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) * sixth;               \
-            w[2] = ((3 * u - 6) * u * u + 4) * sixth; w[3] = s * s * s * sixth;                        \
-            dw[0] = u * u * one_half; dw[1] = (-3 * u * u + 2 * u + 1) * one_half; dw[2] = (3 * u - 4) * u * one_half; \
-            dw[3] = -s * s * one_half;                                                                     \
-        }                                                                                              \
-    }
-
 #ifndef CLW_WAVELET
 /* ---- B-spline path: the fine grids the kept coefficients expand to (clwave/finegrid.py) ---- */
 #define FIELD_PARAMS __global const float4 *coef, __constant const int4 *start, __constant const int4 *shape, \
@@ -116,7 +92,29 @@ typedef real8 realv;
 #define vloadv vload8
 #define vstorev vstore8
 #endif
-BSPLINE_PIECES(realv, bspline_pieces)
+
+/* w[r] = N_j(u + r) and dw[r] = N_j'(u + r), r = 0..j-1: the weight of coefficient c - r in
+ * cell c at u = x - c (MATH.md §1), per lane.  Polynomials, so they hold a little outside [0, 1)
+ * too.  Products, not divisions by constants: PoCL keeps those as divisions. */
+inline void bspline_pieces(const int j, const realv u, realv *w, realv *dw)
+{
+    const realv s = 1 - u;
+    const real one_half = (real)0.5, sixth = (real)1 / 6;
+    if (j == 1) {
+        w[0] = 1; dw[0] = 0;
+    } else if (j == 2) {
+        w[0] = u; w[1] = s;
+        dw[0] = 1; dw[1] = -1;
+    } else if (j == 3) {
+        w[0] = u * u * one_half; w[1] = (-2 * u * u + 2 * u + 1) * one_half; w[2] = s * s * one_half;
+        dw[0] = u; dw[1] = 1 - 2 * u; dw[2] = -s;
+    } else {
+        w[0] = u * u * u * sixth; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) * sixth;
+        w[2] = ((3 * u - 6) * u * u + 4) * sixth; w[3] = s * s * s * sixth;
+        dw[0] = u * u * one_half; dw[1] = (-3 * u * u + 2 * u + 1) * one_half;
+        dw[2] = (3 * u - 4) * u * one_half; dw[3] = -s * s * one_half;
+    }
+}
 
 /* One group's part of the field at sample k: the j^3 coefficients ending at `corner` (the
  * segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
@@ -174,25 +172,27 @@ __attribute__((always_inline)) inline void group_gradient(__global const float4 
     }
 }
 
-/* The lanes' sample points xi = cheb[N + k] of the segment, and grid g's part of the segment: its
- * cell's last coefficient, and u = x - cell at xi = 0.  Every sample of a segment comes from the
- * cells holding the midpoint xm, so from the same polynomial. */
-inline realv sample_points(__constant const real *cheb)
+/* Grid g's part of the segment: its cell's last coefficient (returned) and the B-spline weights
+ * w? and their derivatives d? at the sample points xm + radius cheb[N + k] D, sample k in lane k
+ * (lanes N.. repeat the centre, unused).  Every sample comes from the cells holding the midpoint
+ * xm, so from the same polynomial. */
+inline __global const float4 *segment_basis(const Field G, const int g, const real3 xm, const real radius,
+                                            const real3 D, __constant const real *cheb, realv *wx, realv *wy,
+                                            realv *wz, realv *dx, realv *dy, realv *dz)
 {
     real lane_xi[NV];
     for (int k = 0; k < NV; k++)
         lane_xi[k] = k < N ? cheb[N + k] : 0;
-    return vloadv(0, lane_xi);
-}
-
-inline __global const float4 *segment_cell(const Field G, const int g, const real3 xm, real3 *u)
-{
+    const realv xi = vloadv(0, lane_xi);
     const int j = ORDER[g];
     const real3 x = xm + (real)(j - ORDER[0]) / 2; /* grid g's lattice (MATH.md §7) */
     const int4 s = G.shape[g], lo = G.start[g];
     const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + j - 1, lo.xyz + s.xyz - 1), 0);
     const int4 p = c - lo;
-    *u = x - convert_real3(c.xyz);
+    const real3 u = x - convert_real3(c.xyz), step = radius * D; /* x - cell at xi = 0, and per unit xi */
+    bspline_pieces(j, u.x + step.x * xi, wx, dx);
+    bspline_pieces(j, u.y + step.y * xi, wy, dy);
+    bspline_pieces(j, u.z + step.z * xi, wz, dz);
     return G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
 }
 
@@ -200,18 +200,12 @@ inline __global const float4 *segment_cell(const Field G, const int g, const rea
 inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
                            const real3 D, __constant const real *cheb, real4 *fq, real3 *fg)
 {
-    const realv xi = sample_points(cheb);
     for (int k = 0; k < N; k++)
         fq[k] = (real4)(0);
     for (int g = 0; g < CLW_GROUPS; g++) {
         const int j = ORDER[g], sy = G.shape[g].x, sz = G.shape[g].x * G.shape[g].y;
-        real3 u;
-        __global const float4 *corner = segment_cell(G, g, xm, &u);
-        const real3 step = radius * D;
         realv wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
-        bspline_pieces(j, u.x + step.x * xi, wx, dx);
-        bspline_pieces(j, u.y + step.y * xi, wy, dy);
-        bspline_pieces(j, u.z + step.z * xi, wz, dz);
+        __global const float4 *corner = segment_basis(G, g, xm, radius, D, cheb, wx, wy, wz, dx, dy, dz);
         real lx[4 * NV], ly[4 * NV], lz[4 * NV]; /* the weights per sample, for the field's float4 sums */
         for (int r = 0; r < j; r++) {
             vstorev(wx[r], r, lx);
@@ -234,14 +228,8 @@ inline void sample_gradient(const Field G, const real3 xm, const real radius, co
                             __constant const real *cheb, real3 *fg)
 {
     const int j = ORDER[CLW_ALPHA], sy = G.shape[CLW_ALPHA].x, sz = G.shape[CLW_ALPHA].x * G.shape[CLW_ALPHA].y;
-    const realv xi = sample_points(cheb);
-    real3 u;
-    __global const float4 *corner = segment_cell(G, CLW_ALPHA, xm, &u);
-    const real3 step = radius * D;
     realv wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
-    bspline_pieces(j, u.x + step.x * xi, wx, dx);
-    bspline_pieces(j, u.y + step.y * xi, wy, dy);
-    bspline_pieces(j, u.z + step.z * xi, wz, dz);
+    __global const float4 *corner = segment_basis(G, CLW_ALPHA, xm, radius, D, cheb, wx, wy, wz, dx, dy, dz);
     realv gx = 0, gy = 0, gz = 0;
     switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */
     case 2: group_gradient(corner, sy, sz, 2, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
