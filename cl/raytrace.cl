@@ -12,11 +12,12 @@
  *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (Fejer's weights on the samples).
  * The budget tol per output value is split: half for the quadrature, spread along the ray in
  * proportion to segment length and relaxed by 1/T (MATH.md §7); a quarter for early ray
- * termination; a quarter for empty space.  With shading, half of the quadrature's half goes to
- * segments shaded at the midpoint of their shading range: shading makes q (ka + kd D) + ks alpha S
+ * termination; a quarter for empty space.  With shading, three quarters of the quadrature's half
+ * go to segments shaded at the midpoint of their shading range (the quadrature's own errors are
+ * far below its share at the usual tolerances): shading makes q (ka + kd D) + ks alpha S
  * of q with D, S in [0, nlights], so (ka + kd n/2) q + (ks n/2) alpha errs by at most the half
  * width (kd q + ks alpha) n/2; a segment whose unshaded integrals (Simpson's 4 panels, |S4 - S2|
- * added as their error) make that fit in what is left of the quarter needs no gradient, which is
+ * added as their error) make that fit in what is left of that share needs no gradient, which is
  * a third of the work.  Termination and skipping use the blocks of CLW_BLOCK^3 fine cells with a
  * bound b on |field| (cl/blocks.cl) and R(t), the integral of b along the rest of the ray beyond t
  * (summed block by block before the march): the rest can add at most T R gain of emission and
@@ -566,8 +567,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     real skip_budget = tol / 2;
 #else
     real skip_budget = tol / 4;
-    real shade_budget = tol / 4; /* taken from the quadrature's half when shading */
-    const real quadrature_share = SHADING ? tol / 4 : tol / 2;
+    real shade_budget = tol * 3 / 8; /* three quarters of the quadrature's half, when shading */
+    const real quadrature_share = SHADING ? tol / 8 : tol / 2;
 #endif
 #ifndef CLW_XRAY
     /* R(t0): the block bounds integrated along the whole ray, block by block */

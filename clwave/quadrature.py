@@ -167,8 +167,8 @@ def _emission_absorption(field, grad, xi, mid, rad, total, tol, gain, phong, lig
     series = _fit(field, xi)
     grad_series = _fit(grad, xi) if grad is not None else None
     T, color = 1.0, np.zeros(3)
-    shade_budget = tol / 4  # when shading; the quadrature keeps the other quarter of its half
-    quadrature_share = tol / 4 if phong is not None else tol / 2
+    shade_budget = tol * 3 / 8  # when shading: three quarters of the quadrature's half
+    quadrature_share = tol / 8 if phong is not None else tol / 2
     quarters = -1.0 + np.arange(9) / 4.0
     for s in range(len(rad)):
         if blocks.skip(mid[s] - rad[s], mid[s] + rad[s], T):
