@@ -559,18 +559,10 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     }
     real T = 1;
     real3 I = (real3)(0);
-#else
-    real4 I = (real4)(0);
-#endif
     const real total = t1 - t0;
-#ifdef CLW_XRAY
-    real skip_budget = tol / 2;
-#else
     real skip_budget = tol / 4;
     real shade_budget = tol * 3 / 8; /* three quarters of the quadrature's half, when shading */
     const real quadrature_share = SHADING ? tol / 8 : tol / 2;
-#endif
-#ifndef CLW_XRAY
     /* R(t0): the block bounds integrated along the whole ray, block by block */
     real rest = 0;
     {
@@ -589,6 +581,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
      * slack covers the rounding of the two sums (float32: ~1e-7 relative per term) */
     const real slack = rest * (real)1e-4;
     real consumed = 0;
+#else
+    real4 I = (real4)(0);
+    real skip_budget = tol / 2;
 #endif
     const real h = CLW_LATTICE;
     real tp[3];
