@@ -2,14 +2,20 @@
  *
  * One work-item per ray.  The ray is cut at every knot plane of every channel group's
  * fine B-spline lattice (clwave/finegrid.py); inside a segment the field (q_R, q_G, q_B, alpha)
- * and the gradient of alpha are polynomials in t, of degree <= 3(j - 1).  They are recovered
- * exactly from CLW_NCHEB samples at Chebyshev points, so that
+ * and the gradient of alpha are polynomials in t, of degree <= 3(j - 1).  They are sampled at
+ * CLW_SAMPLES points xi of the segment [-1, 1]: the 9 points xi = -1 + p/4 of Simpson's first 2
+ * panels and their halves, plus xi = 15/16 when the degree is 9 (cubic), so that
  *   - A(a, t) = int_a^t alpha is exact (integration weights of the interpolating polynomial at
- *     the 9 points of Simpson's first 2 panels and their halves; the antiderivative of its
- *     Chebyshev series, made only when a panel must be halved further),
+ *     the 9 points; the antiderivative of its Chebyshev series, made only when a panel must be
+ *     halved further),
  *   - int_a^b q e^{-A} comes from adaptive Simpson on that polynomial (>= 2 initial panels,
  *     accept |S2 - S1| <= 15 tol, return S2 + (S2 - S1)/15), with the shaded q of eq. 4,
- *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (Fejer's weights on the samples).
+ *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (the same weights over the whole segment).
+ * Lanes 0..7 of a sample vector hold p = 1..8, lane 8 p = 0 and lane 9 the extra point.  Where
+ * the field is C^1 across knot planes (CLW_JOIN: every order >= 3), a segment that starts where
+ * the last evaluated one ended takes p = 0 (the field, and the shaded emission and the gradient of
+ * alpha when that segment was shaded point by point) from the last one's p = 8: alpha's gradient
+ * is then needed at 8 points, one real8.
  * The budget tol per output value is split: half for the quadrature, spread along the ray in
  * proportion to segment length and relaxed by 1/T (MATH.md §7); a quarter for early ray
  * termination; a quarter for empty space.  With shading, three quarters of the quadrature's half
@@ -28,8 +34,9 @@
  * on skipping (its segment integrals are exact).
  *
  * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
- * CLW_NCHEB samples per segment; CLW_LATTICE 1 or 0.5 (orders of both parities);
- * CLW_SHADE for Phong shading; CLW_XRAY for line integrals; CLW_DOUBLE for a float64 build. */
+ * CLW_SAMPLES samples per segment (9 or 10); CLW_JOIN when every order is >= 3; CLW_LATTICE 1 or
+ * 0.5 (orders of both parities); CLW_SHADE for Phong shading; CLW_XRAY for line integrals;
+ * CLW_DOUBLE for a float64 build. */
 #include "clw_common.h"
 
 #ifdef CLW_DOUBLE
@@ -63,7 +70,16 @@ typedef float16 real16;
 #define fast_log2 native_log2
 #endif
 
-#define N CLW_NCHEB
+#define NS CLW_SAMPLES
+#define P0 8 /* the lane of xi = -1 */
+#ifdef CLW_JOIN
+#define JOIN 1
+#else
+#define JOIN 0
+#endif
+
+/* The samples of a segment in the lanes of one vector (lanes NS.. repeat lane 0, unused) */
+typedef real16 realv;
 
 constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
 
@@ -80,19 +96,6 @@ typedef struct {
 typedef int Active; /* no per-ray state */
 inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = 0; }
 inline int active_flags(const Active *A) { return 0; }
-
-/* The samples of a segment in the lanes of one vector (lanes N.. repeat the centre, unused) */
-#if N > 8
-#define NV 16
-typedef real16 realv;
-#define vloadv vload16
-#define vstorev vstore16
-#else
-#define NV 8
-typedef real8 realv;
-#define vloadv vload8
-#define vstorev vstore8
-#endif
 
 /* w[r] = N_j(u + r) and dw[r] = N_j'(u + r), r = 0..j-1: the weight of coefficient c - r in
  * cell c at u = x - c (MATH.md §1), per lane.  Polynomials, so they hold a little outside [0, 1)
@@ -119,7 +122,7 @@ inline void bspline_pieces(const int j, const realv u, realv *w, realv *dw)
 
 /* One group's part of the field at sample k: the j^3 coefficients ending at `corner` (the
  * segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
- * along z) with sample k's weights w?[r * NV + k]; rows are `sy` apart, planes `sz`.  Always
+ * along z) with sample k's weights w?[r * 16 + k]; rows are `sy` apart, planes `sz`.  Always
  * inlined with a literal order j, so the loops unroll. */
 __attribute__((always_inline)) inline real4 group_field(__global const float4 *corner, const int sy, const int sz,
                                                         const int j, const real *wx, const real *wy, const real *wz,
@@ -135,114 +138,134 @@ __attribute__((always_inline)) inline real4 group_field(__global const float4 *c
             real4 line = (real4)(0);
 #pragma unroll
             for (int rx = 0; rx < j; rx++)
-                line = fma(to_real4(row[-rx]), (real4)(wx[rx * NV + k]), line);
-            plane = fma(line, (real4)(wy[ry * NV + k]), plane);
+                line = fma(to_real4(row[-rx]), (real4)(wx[rx * 16 + k]), line);
+            plane = fma(line, (real4)(wy[ry * 16 + k]), plane);
         }
-        v = fma(plane, (real4)(wz[rz * NV + k]), v);
+        v = fma(plane, (real4)(wz[rz * 16 + k]), v);
     }
     return v;
 }
 
-/* The alpha group's part of alpha's fine gradient at all samples at once (one per lane): the
- * same separable sum as group_field on the alpha channel, with the derivative weights d? */
-__attribute__((always_inline)) inline void group_gradient(__global const float4 *corner, const int sy, const int sz,
-                                                          const int j, const realv *wx, const realv *wy,
-                                                          const realv *wz, const realv *dx, const realv *dy,
-                                                          const realv *dz, realv *gx, realv *gy, realv *gz)
-{
-#pragma unroll
-    for (int rz = 0; rz < j; rz++) {
-        realv plane = 0, plane_dx = 0, plane_dy = 0;
-#pragma unroll
-        for (int ry = 0; ry < j; ry++) {
-            __global const float4 *row = corner - rz * sz - ry * sy;
-            realv line = 0, line_dx = 0;
-#pragma unroll
-            for (int rx = 0; rx < j; rx++) {
-                const realv a = (realv)(row[-rx].w);
-                line = fma(a, wx[rx], line);
-                line_dx = fma(a, dx[rx], line_dx);
-            }
-            plane = fma(line, wy[ry], plane);
-            plane_dx = fma(line_dx, wy[ry], plane_dx);
-            plane_dy = fma(line, dy[ry], plane_dy);
-        }
-        *gx = fma(plane_dx, wz[rz], *gx);
-        *gy = fma(plane_dy, wz[rz], *gy);
-        *gz = fma(plane, dz[rz], *gz);
+/* The alpha group's part of alpha's fine gradient at all lanes at once: the same separable sum
+ * as group_field on the alpha channel, with the derivative weights d?; TYPE real16 for lanes
+ * 0..8, real8 for lanes 0..7 (p = 1..8) only */
+#define GROUP_GRADIENT(TYPE, NAME)                                                                        \
+    __attribute__((always_inline)) inline void NAME(__global const float4 *corner, const int sy, const int sz, \
+                                                    const int j, const TYPE *wx, const TYPE *wy, const TYPE *wz, \
+                                                    const TYPE *dx, const TYPE *dy, const TYPE *dz, TYPE *gx,   \
+                                                    TYPE *gy, TYPE *gz)                                         \
+    {                                                                                                     \
+        _Pragma("unroll") for (int rz = 0; rz < j; rz++) {                                                \
+            TYPE plane = 0, plane_dx = 0, plane_dy = 0;                                                   \
+            _Pragma("unroll") for (int ry = 0; ry < j; ry++) {                                            \
+                __global const float4 *row = corner - rz * sz - ry * sy;                                  \
+                TYPE line = 0, line_dx = 0;                                                               \
+                _Pragma("unroll") for (int rx = 0; rx < j; rx++) {                                        \
+                    const TYPE a = (TYPE)(row[-rx].w);                                                    \
+                    line = fma(a, wx[rx], line);                                                          \
+                    line_dx = fma(a, dx[rx], line_dx);                                                    \
+                }                                                                                         \
+                plane = fma(line, wy[ry], plane);                                                         \
+                plane_dx = fma(line_dx, wy[ry], plane_dx);                                                \
+                plane_dy = fma(line, dy[ry], plane_dy);                                                   \
+            }                                                                                             \
+            *gx = fma(plane_dx, wz[rz], *gx);                                                             \
+            *gy = fma(plane_dy, wz[rz], *gy);                                                             \
+            *gz = fma(plane, dz[rz], *gz);                                                                \
+        }                                                                                                 \
     }
-}
+GROUP_GRADIENT(realv, group_gradient)
+GROUP_GRADIENT(real8, group_gradient8)
 
-/* Grid g's part of the segment: its cell's last coefficient (returned) and the B-spline weights
- * w? and their derivatives d? at the sample points xm + radius cheb[N + k] D, sample k in lane k
- * (lanes N.. repeat the centre, unused).  Every sample comes from the cells holding the midpoint
+/* What a grid's part of a segment needs besides its samples: the cell's last coefficient and the
+ * B-spline weights w? and their derivatives d? per lane */
+typedef struct {
+    __global const float4 *corner;
+    int sy, sz;
+    realv wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
+} Basis;
+
+/* Grid g's part of the segment at the sample points xm + radius xi_k D, sample k in lane k: its
+ * cell's last coefficient and the weights.  Every sample comes from the cells holding the midpoint
  * xm, so from the same polynomial. */
-inline __global const float4 *segment_basis(const Field G, const int g, const real3 xm, const real radius,
-                                            const real3 D, __constant const real *cheb, realv *wx, realv *wy,
-                                            realv *wz, realv *dx, realv *dy, realv *dz)
+inline void segment_basis(const Field G, const int g, const real3 xm, const real radius, const real3 D,
+                          __constant const real *nodes, Basis *B)
 {
-    real lane_xi[NV];
-    for (int k = 0; k < NV; k++)
-        lane_xi[k] = k < N ? cheb[N + k] : 0;
-    const realv xi = vloadv(0, lane_xi);
+    real lane_xi[16];
+    for (int k = 0; k < 16; k++)
+        lane_xi[k] = nodes[k < NS ? k : 0];
+    const realv xi = vload16(0, lane_xi);
     const int j = ORDER[g];
     const real3 x = xm + (real)(j - ORDER[0]) / 2; /* grid g's lattice (MATH.md §7) */
     const int4 s = G.shape[g], lo = G.start[g];
     const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + j - 1, lo.xyz + s.xyz - 1), 0);
     const int4 p = c - lo;
     const real3 u = x - convert_real3(c.xyz), step = radius * D; /* x - cell at xi = 0, and per unit xi */
-    bspline_pieces(j, u.x + step.x * xi, wx, dx);
-    bspline_pieces(j, u.y + step.y * xi, wy, dy);
-    bspline_pieces(j, u.z + step.z * xi, wz, dz);
-    return G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
+    bspline_pieces(j, u.x + step.x * xi, B->wx, B->dx);
+    bspline_pieces(j, u.y + step.y * xi, B->wy, B->dy);
+    bspline_pieces(j, u.z + step.z * xi, B->wz, B->dz);
+    B->sy = s.x;
+    B->sz = s.x * s.y;
+    B->corner = G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
 }
 
-/* the field at the segment's N Chebyshev points xm + radius cheb[N + k] D (alpha's gradient: sample_gradient) */
+/* The field at the segment's sample points (lane P0 only when `fresh`: else it is the last
+ * segment's end), and each grid's Basis for the gradient */
 inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
-                           const real3 D, __constant const real *cheb, real4 *fq, real3 *fg)
+                           const real3 D, __constant const real *nodes, const bool fresh, real4 *fq,
+                           Basis *basis)
 {
-    for (int k = 0; k < N; k++)
+    for (int k = 0; k < NS; k++)
         fq[k] = (real4)(0);
     for (int g = 0; g < CLW_GROUPS; g++) {
-        const int j = ORDER[g], sy = G.shape[g].x, sz = G.shape[g].x * G.shape[g].y;
-        realv wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
-        __global const float4 *corner = segment_basis(G, g, xm, radius, D, cheb, wx, wy, wz, dx, dy, dz);
-        real lx[4 * NV], ly[4 * NV], lz[4 * NV]; /* the weights per sample, for the field's float4 sums */
+        Basis *B = &basis[g];
+        segment_basis(G, g, xm, radius, D, nodes, B);
+        const int j = ORDER[g];
+        real lx[64], ly[64], lz[64]; /* the weights per sample, for the field's float4 sums */
         for (int r = 0; r < j; r++) {
-            vstorev(wx[r], r, lx);
-            vstorev(wy[r], r, ly);
-            vstorev(wz[r], r, lz);
+            vstore16(B->wx[r], r, lx);
+            vstore16(B->wy[r], r, ly);
+            vstore16(B->wz[r], r, lz);
         }
-        for (int k = 0; k < N; k++) {
+        for (int k = 0; k < NS; k++) {
+            if (k == P0 && !fresh)
+                continue;
             switch (j) {
-            case 1: fq[k] += group_field(corner, sy, sz, 1, lx, ly, lz, k); break;
-            case 2: fq[k] += group_field(corner, sy, sz, 2, lx, ly, lz, k); break;
-            case 3: fq[k] += group_field(corner, sy, sz, 3, lx, ly, lz, k); break;
-            default: fq[k] += group_field(corner, sy, sz, 4, lx, ly, lz, k); break;
+            case 1: fq[k] += group_field(B->corner, B->sy, B->sz, 1, lx, ly, lz, k); break;
+            case 2: fq[k] += group_field(B->corner, B->sy, B->sz, 2, lx, ly, lz, k); break;
+            case 3: fq[k] += group_field(B->corner, B->sy, B->sz, 3, lx, ly, lz, k); break;
+            default: fq[k] += group_field(B->corner, B->sy, B->sz, 4, lx, ly, lz, k); break;
             }
         }
     }
 }
 
-/* alpha's fine gradient at the same points, only for segments that are shaded */
-inline void sample_gradient(const Field G, const real3 xm, const real radius, const real3 D,
-                            __constant const real *cheb, real3 *fg)
+/* alpha's fine gradient in the lanes of (gx, gy, gz), only for segments shaded point by point:
+ * lanes 0..8, or lanes 0..7 (one real8) when lane P0 comes from the last segment */
+inline void sample_gradient(const Basis *basis, const bool all, realv *gx, realv *gy, realv *gz)
 {
-    const int j = ORDER[CLW_ALPHA], sy = G.shape[CLW_ALPHA].x, sz = G.shape[CLW_ALPHA].x * G.shape[CLW_ALPHA].y;
-    realv wx[4], wy[4], wz[4], dx[4], dy[4], dz[4];
-    __global const float4 *corner = segment_basis(G, CLW_ALPHA, xm, radius, D, cheb, wx, wy, wz, dx, dy, dz);
-    realv gx = 0, gy = 0, gz = 0;
-    switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */
-    case 2: group_gradient(corner, sy, sz, 2, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
-    case 3: group_gradient(corner, sy, sz, 3, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
-    case 4: group_gradient(corner, sy, sz, 4, wx, wy, wz, dx, dy, dz, &gx, &gy, &gz); break;
+    const Basis *B = &basis[CLW_ALPHA];
+    const int j = ORDER[CLW_ALPHA];
+    *gx = 0; *gy = 0; *gz = 0;
+    if (all) {
+        switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */
+        case 2: group_gradient(B->corner, B->sy, B->sz, 2, B->wx, B->wy, B->wz, B->dx, B->dy, B->dz, gx, gy, gz); break;
+        case 3: group_gradient(B->corner, B->sy, B->sz, 3, B->wx, B->wy, B->wz, B->dx, B->dy, B->dz, gx, gy, gz); break;
+        case 4: group_gradient(B->corner, B->sy, B->sz, 4, B->wx, B->wy, B->wz, B->dx, B->dy, B->dz, gx, gy, gz); break;
+        }
+        return;
     }
-    real lgx[NV], lgy[NV], lgz[NV];
-    vstorev(gx, 0, lgx);
-    vstorev(gy, 0, lgy);
-    vstorev(gz, 0, lgz);
-    for (int k = 0; k < N; k++)
-        fg[k] = (real3)(lgx[k], lgy[k], lgz[k]);
+    real8 wx[4], wy[4], wz[4], dx[4], dy[4], dz[4], hx = 0, hy = 0, hz = 0;
+    for (int r = 0; r < 4; r++) {
+        wx[r] = B->wx[r].lo; wy[r] = B->wy[r].lo; wz[r] = B->wz[r].lo;
+        dx[r] = B->dx[r].lo; dy[r] = B->dy[r].lo; dz[r] = B->dz[r].lo;
+    }
+    switch (j) {
+    case 2: group_gradient8(B->corner, B->sy, B->sz, 2, wx, wy, wz, dx, dy, dz, &hx, &hy, &hz); break;
+    case 3: group_gradient8(B->corner, B->sy, B->sz, 3, wx, wy, wz, dx, dy, dz, &hx, &hy, &hz); break;
+    case 4: group_gradient8(B->corner, B->sy, B->sz, 4, wx, wy, wz, dx, dy, dz, &hx, &hy, &hz); break;
+    }
+    gx->lo = hx; gy->lo = hy; gz->lo = hz;
 }
 #else
 #include "raytrace_wavelet.h"
@@ -265,36 +288,42 @@ CLENSHAW(real3, cheb3)
 CLENSHAW(real4, cheb4)
 
 typedef struct {
-    real4 fq[N];     /* the field at the N Chebyshev points, alpha and q clamped to >= 0 */
-    real3 fg[N];     /* the gradient of alpha there (fine units) */
+    real4 fq[NS];    /* the field at the sample points, alpha and q clamped to >= 0 */
+    realv gx, gy, gz; /* the gradient of alpha there (fine units), lanes 0..8 */
     real radius;     /* half the segment length in world units */
     bool series;     /* q, g, A below are made (only panels finer than quarters need them) */
-    real4 q[N];      /* field series (q_R, q_G, q_B, alpha) in xi in [-1, 1] */
-    real3 g[N];      /* gradient-of-alpha series (fine units) */
-    real A[N + 1];   /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
+    real4 q[NS];     /* field series (q_R, q_G, q_B, alpha) in xi in [-1, 1] */
+    real3 g[9];      /* gradient-of-alpha series (fine units), of degree <= 8 */
+    real A[NS + 1];  /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
 } Segment;
 
-/* the Chebyshev series of the segment's samples, and the antiderivative of alpha's */
-inline void segment_series(Segment *S, __constant const real *cheb)
+/* the Chebyshev series of the segment's samples (nodes: the points, then the field's and the
+ * gradient's sample-to-series matrices), and the antiderivative of alpha's */
+inline void segment_series(Segment *S, __constant const real *nodes)
 {
-    for (int m = 0; m < N; m++) {
+    for (int m = 0; m < NS; m++) {
         real4 aq = (real4)(0);
-        real3 ag = (real3)(0);
-        for (int k = 0; k < N; k++) {
-            aq += S->fq[k] * cheb[m * N + k];
-#ifdef CLW_SHADE
-            ag += S->fg[k] * cheb[m * N + k]; /* only shading reads the gradient series */
-#endif
-        }
-        const real norm = (m == 0 ? (real)1 : (real)2) / N;
-        S->q[m] = aq * norm;
-        S->g[m] = ag * norm;
+        for (int k = 0; k < NS; k++)
+            aq += S->fq[k] * nodes[NS + m * NS + k];
+        S->q[m] = aq;
     }
+#ifdef CLW_SHADE /* only shading reads the gradient series */
+    real gx[16], gy[16], gz[16];
+    vstore16(S->gx, 0, gx);
+    vstore16(S->gy, 0, gy);
+    vstore16(S->gz, 0, gz);
+    for (int m = 0; m < 9; m++) {
+        real3 ag = (real3)(0);
+        for (int k = 0; k < 9; k++)
+            ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * 9 + k];
+        S->g[m] = ag;
+    }
+#endif
     /* C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0, and C_0 so that A(-1) = 0 */
     real c0 = 0, sign = -1;
-    for (int k = 1; k <= N; k++) {
+    for (int k = 1; k <= NS; k++) {
         const real prev = S->q[k - 1].w * (k == 1 ? 2 : 1);
-        const real next = k + 1 < N ? S->q[k + 1].w : 0;
+        const real next = k + 1 < NS ? S->q[k + 1].w : 0;
         S->A[k] = (prev - next) / (2 * k);
         c0 -= sign * S->A[k];
         sign = -sign;
@@ -351,11 +380,11 @@ SHADE(real8, shade8)
 /* q e^{-A} at xi from the series: the shaded emission attenuated inside the segment */
 inline real3 integrand(const Segment *S, const Shading *P, const real xi)
 {
-    const real4 f = cheb4(S->q, N, xi);
-    const real3 g = cheb3(S->g, N, xi);
+    const real4 f = cheb4(S->q, NS, xi);
+    const real3 g = cheb3(S->g, 9, xi);
     real r = f.x, gr = f.y, b = f.z;
     shade(&r, &gr, &b, f.w, g.x, g.y, g.z, P);
-    return (real3)(r, gr, b) * fast_exp(-S->radius * cheb1(S->A, N + 1, xi));
+    return (real3)(r, gr, b) * fast_exp(-S->radius * cheb1(S->A, NS + 1, xi));
 }
 
 typedef struct {
@@ -367,7 +396,7 @@ typedef struct {
 /* int_{-1}^{1} q e^{-A} dxi by adaptive Simpson from 2 panels; counts evaluations, flags depth.
  * f9 holds the integrand at xi = -1 + p/4, p = 0..8: the 2 panels and their halves.
  * Depth first, right half pushed first: the stack holds at most one panel per depth. */
-inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant const real *cheb, const real tol,
+inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant const real *nodes, const real tol,
                      int *evals, int *flags)
 {
     Panel stack[CLW_MAX_DEPTH + 1];
@@ -388,7 +417,7 @@ inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant c
             fmr = f9[p.l < 0 ? 3 : 7];
         } else {
             if (!S->series)
-                segment_series(S, cheb);
+                segment_series(S, nodes);
             flm = integrand(S, P, (p.l + m) / 2);
             fmr = integrand(S, P, (m + p.r) / 2);
             *evals += 2;
@@ -463,11 +492,11 @@ inline real block_exit(const real *x0, const real *dd, const real *inv, const in
 }
 
 /* (S4, S2): Simpson's rule over [-1, 1] on 4 and on 2 panels, from the values at xi = -1 + p/4,
- * p = 0..7 in the lanes of v and p = 8 in `last` */
-inline real2 simpson_pair(const real8 v, const real last)
+ * p = 1..8 in the lanes of v and p = 0 in `first` */
+inline real2 simpson_pair(const real8 v, const real first)
 {
-    const real8 w4 = v * (real8)(1, 4, 2, 4, 2, 4, 2, 4), w2 = v * (real8)(1, 0, 4, 0, 2, 0, 4, 0);
-    return (real2)((dot(w4.lo + w4.hi, (real4)(1)) + last) / 12, (dot(w2.lo + w2.hi, (real4)(1)) + last) / 6);
+    const real8 w4 = v * (real8)(4, 2, 4, 2, 4, 2, 4, 1), w2 = v * (real8)(0, 4, 0, 2, 0, 4, 0, 1);
+    return (real2)((dot(w4.lo + w4.hi, (real4)(1)) + first) / 12, (dot(w2.lo + w2.hi, (real4)(1)) + first) / 6);
 }
 
 /* raytrace: one ray per pixel.
@@ -484,10 +513,11 @@ inline real2 simpson_pair(const real8 v, const real last)
  *                                perspective p = base (the eye), w = normalize(dir + c du + r dv),
  *                                with c, r the pixel centre's offsets from the image centre
  *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset
- *   cheb         (N + 1, N) cos(pi m (k + 1/2) / N); row 1 holds the sample points
- *   quarters     (N, 18) sample k's weights: column p in the value at xi = -1 + p/4 (the points
- *                of Simpson's first 2 panels and their halves), column 9 + p in the integral
- *                from -1 to that point; column 17 integrates over the segment
+ *   nodes        the sample points xi_k (CLW_SAMPLES), then the (CLW_SAMPLES, CLW_SAMPLES) matrix
+ *                from the samples to the field's Chebyshev series, then the (9, 9) one from lanes
+ *                0..8 to the gradient's
+ *   weights      (CLW_SAMPLES, 8) sample k's weights in the integral from -1 to xi = -1 + p/4,
+ *                p = 1..8, of the polynomial through the samples (p = 8: the whole segment)
  *   tol          absolute tolerance per output value
  *   shade_gain   how much shading can scale the emission (the shaded q <= shade_gain |field|)
  *   grad_floor   shorter world gradients of alpha get no diffuse or specular light: on a plateau
@@ -501,7 +531,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                        const float4 box_lo, const float4 box_hi,
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
                        const float4 to_fine_scale, const float4 to_fine_offset,
-                       __constant const real *cheb, __constant const real *quarters, const real tol,
+                       __constant const real *nodes, __constant const real *weights, const real tol,
                        const real shade_gain,
                        const real grad_floor,
                        __constant const float4 *lights, const int nlights, const float4 phong)
@@ -585,6 +615,14 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     real4 I = (real4)(0);
     real skip_budget = tol / 2;
 #endif
+    /* the last evaluated segment's end: where, the field, and (shaded point by point) the
+     * shaded emission and alpha's gradient */
+    real t_joined = -INFINITY;
+    real4 end_field = (real4)(0);
+#ifndef CLW_XRAY
+    bool end_shaded = false;
+    real3 end_emission = (real3)(0), end_gradient = (real3)(0);
+#endif
     const real h = CLW_LATTICE;
     real tp[3];
     int plane[3];
@@ -617,37 +655,39 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         }
         if (tn > t) {
             Segment S;
+            Basis basis[CLW_GROUPS];
             S.radius = (tn - t) / 2;
             S.series = false;
-            sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, cheb, S.fq, S.fg);
+            /* p = 0 from the last segment's p = 8 when it ended here (and the field is C^1) */
+            const bool joined = JOIN && t == t_joined;
+            sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, nodes, !joined, S.fq, basis);
+            if (joined)
+                S.fq[P0] = end_field;
+            end_field = S.fq[7];
+            t_joined = tn;
             segments += 1;
-#ifdef CLW_XRAY /* the integral over the segment: Fejer's weights */
+#ifdef CLW_XRAY /* the integral over the segment */
             real4 integral = (real4)(0);
-            for (int k = 0; k < N; k++)
-                integral += S.fq[k] * quarters[18 * k + 17];
+            for (int k = 0; k < NS; k++)
+                integral += S.fq[k] * weights[8 * k + 7];
             I += S.radius * integral;
 #else
-            for (int k = 0; k < N; k++)
-                S.fq[k] = fmax(S.fq[k], (real4)(0)); /* clamp alpha, q >= 0 */
-            /* Simpson's first 9 points xi = -1 + p/4 from the samples, with A exact there:
-             * p = 0..7 in the lanes of real8, p = 8 alone */
-            real8 r8 = 0, g8 = 0, b8 = 0, a8 = 0, A8 = 0;
-            real4 f = (real4)(0);
-            real depth = 0; /* int alpha dxi over the segment */
-            for (int k = 0; k < N; k++) {
-                __constant const real *q = quarters + 18 * k;
-                const real8 w = vload8(0, q), wa = vload8(0, q + 9);
-                const real4 v = S.fq[k];
-                r8 = fma((real8)(v.x), w, r8); g8 = fma((real8)(v.y), w, g8);
-                b8 = fma((real8)(v.z), w, b8); a8 = fma((real8)(v.w), w, a8);
-                f = fma(v, (real4)(q[8]), f);
-                A8 = fma((real8)(v.w), wa, A8);
-                depth = fma(v.w, q[17], depth);
+            /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
+            real lr[8], lg[8], lb[8], la[8];
+            real8 A8 = 0;
+            for (int k = 0; k < NS; k++) {
+                const real4 v = fmax(S.fq[k], (real4)(0)); /* clamp alpha, q >= 0 */
+                S.fq[k] = v;
+                if (k < 8) {
+                    lr[k] = v.x; lg[k] = v.y; lb[k] = v.z; la[k] = v.w;
+                }
+                A8 = fma((real8)(v.w), vload8(k, weights), A8);
             }
-            r8 = fmax(r8, 0); g8 = fmax(g8, 0); b8 = fmax(b8, 0); a8 = fmax(a8, 0);
-            f = fmax(f, (real4)(0));
+            real8 r8 = vload8(0, lr), g8 = vload8(0, lg), b8 = vload8(0, lb);
+            const real8 a8 = vload8(0, la);
+            const real4 f0 = S.fq[P0];
+            const real depth = A8.s7; /* int alpha dxi over the segment */
             const real8 att = fast_exp(-S.radius * A8);
-            const real att_end = fast_exp(-S.radius * depth);
             bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
             real3 part;
 #ifdef CLW_SHADE
@@ -656,8 +696,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                  * integrals (Simpson on 4 panels, plus |S4 - S2| for their error).  A segment whose
                  * error that way fits in what is left of the shading budget takes the midpoint
                  * and needs no gradient. */
-                const real2 sr = simpson_pair(r8 * att, f.x * att_end), sg = simpson_pair(g8 * att, f.y * att_end),
-                            sb = simpson_pair(b8 * att, f.z * att_end), sa = simpson_pair(a8 * att, f.w * att_end);
+                const real2 sr = simpson_pair(r8 * att, f0.x), sg = simpson_pair(g8 * att, f0.y),
+                            sb = simpson_pair(b8 * att, f0.z), sa = simpson_pair(a8 * att, f0.w);
                 const real3 s4 = (real3)(sr.x, sg.x, sb.x), ds = fabs(s4 - (real3)(sr.y, sg.y, sb.y));
                 const real dsa = fabs(sa.x - sa.y);
                 const real n = P.nlights, diffuse_mid = P.ka + P.kd * n / 2, specular_mid = P.ks * n / 2;
@@ -674,32 +714,38 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             }
 #endif
             if (simpson_full) {
-                real8 gx8 = 0, gy8 = 0, gz8 = 0;
-                real3 g = (real3)(0);
+                /* the shaded emission at p = 0 (and alpha's gradient there) from the last segment
+                 * when that was shaded point by point too */
+                const bool shaded_joined = joined && end_shaded;
+                real3 f9[9];
 #ifdef CLW_SHADE
-                sample_gradient(G, xm, S.radius, D, cheb, S.fg);
-                for (int k = 0; k < N; k++) {
-                    __constant const real *q = quarters + 18 * k;
-                    const real8 w = vload8(0, q);
-                    const real3 d = S.fg[k];
-                    gx8 = fma((real8)(d.x), w, gx8); gy8 = fma((real8)(d.y), w, gy8); gz8 = fma((real8)(d.z), w, gz8);
-                    g = fma(d, (real3)(q[8]), g);
+                sample_gradient(basis, !shaded_joined, &S.gx, &S.gy, &S.gz);
+                if (shaded_joined) {
+                    S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
                 }
+                end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
+#else
+                S.gx = 0; S.gy = 0; S.gz = 0; /* unshaded: shade8 and shade only clamp */
 #endif
-                shade8(&r8, &g8, &b8, a8, gx8, gy8, gz8, &P);
+                shade8(&r8, &g8, &b8, a8, S.gx.lo, S.gy.lo, S.gz.lo, &P);
+                if (shaded_joined) {
+                    f9[0] = end_emission;
+                } else {
+                    real r = f0.x, gr = f0.y, b = f0.z;
+                    shade(&r, &gr, &b, f0.w, S.gx.s8, S.gy.s8, S.gz.s8, &P);
+                    f9[0] = (real3)(r, gr, b);
+                }
+                end_emission = (real3)(r8.s7, g8.s7, b8.s7);
                 real fr[8], fg[8], fb[8];
                 vstore8(r8 * att, 0, fr);
                 vstore8(g8 * att, 0, fg);
                 vstore8(b8 * att, 0, fb);
-                real3 f9[9];
-                for (int p = 0; p < 8; p++)
-                    f9[p] = (real3)(fr[p], fg[p], fb[p]);
-                real r = f.x, gr = f.y, b = f.z;
-                shade(&r, &gr, &b, f.w, g.x, g.y, g.z, &P);
-                f9[8] = (real3)(r, gr, b) * att_end;
+                for (int p = 1; p <= 8; p++)
+                    f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
                 const real seg_tol = quadrature_share * (tn - t) / total / T;
-                part = simpson(&S, &P, f9, cheb, seg_tol / S.radius, &evals, &flags);
+                part = simpson(&S, &P, f9, nodes, seg_tol / S.radius, &evals, &flags);
             }
+            end_shaded = simpson_full;
             I += T * S.radius * part;
             T *= exp(-S.radius * depth);
             consumed += bnd * (tn - t);

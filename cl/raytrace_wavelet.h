@@ -145,7 +145,7 @@ typedef struct {
 
 /* add basis function `id` of band b (support corner of index k) to the segment's samples */
 inline void add_basis(const Field G, const int b, const int id, const int4 k, const real3 xm, const real radius,
-                      const real3 D, __constant const real *cheb, real4 *fq, real3 *fg, Census *census)
+                      const real3 D, __constant const real *nodes, real4 *fq, real3 *fg, Census *census)
 {
     const int4 inf = G.info[b];
     const real4 o = to_real4(G.lo[b]);
@@ -165,8 +165,8 @@ inline void add_basis(const Field G, const int b, const int id, const int4 k, co
         at[a] = u - piece;
         slope[a] = radius * ds[a] * chain[a];
     }
-    for (int s = 0; s < N; s++) {
-        const real xi = cheb[N + s];
+    for (int s = 0; s < NS; s++) {
+        const real xi = nodes[s];
         const real px = at[0] + slope[0] * xi, py = at[1] + slope[1] * xi, pz = at[2] + slope[2] * xi;
         const real vx = horner(rows[0], px), vy = horner(rows[1], py), vz = horner(rows[2], pz);
         fq[s] += c * (vx * vy * vz);
@@ -258,10 +258,18 @@ inline int4 index_of(const Field G, const int b, const int id)
     return (int4)(f % n.x, (f / n.x) % n.y, f / (n.x * n.y), 0);
 }
 
+/* What sample_gradient needs: alpha's gradient at the sample points, summed with the field */
+typedef struct {
+    real3 fg[NS];
+} Basis;
+
+/* The field at every sample point (`fresh` is for the B-spline path), and alpha's gradient */
 inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
-                           const real3 D, __constant const real *cheb, real4 *fq, real3 *fg)
+                           const real3 D, __constant const real *nodes, const bool fresh, real4 *fq,
+                           Basis *basis)
 {
-    for (int s = 0; s < N; s++) {
+    real3 *fg = basis[0].fg;
+    for (int s = 0; s < NS; s++) {
         fq[s] = (real4)(0);
         fg[s] = (real3)(0);
     }
@@ -271,7 +279,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
     if (!A->brute) {
         for (int i = 0; i < A->n; i++)
             add_basis(G, A->heap[i].band, A->heap[i].id, index_of(G, A->heap[i].band, A->heap[i].id), xm, radius,
-                      D, cheb, fq, fg, &census);
+                      D, nodes, fq, fg, &census);
     } else { /* overflow fallback: every relevant index of every band */
         for (int b = 0; b < CLW_BANDS; b++) {
             int4 lo, hi;
@@ -282,7 +290,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
                         const int4 k = (int4)(kx, ky, kz, 0);
                         const int id = flat_index(G, b, k);
                         if (nonzero(G.coef[id]))
-                            add_basis(G, b, id, k, xm, radius, D, cheb, fq, fg, &census);
+                            add_basis(G, b, id, k, xm, radius, D, nodes, fq, fg, &census);
                     }
         }
     }
@@ -295,8 +303,16 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
 #endif
 }
 
-/* alpha's gradient came with the field (add_basis sums both) */
-inline void sample_gradient(const Field G, const real3 xm, const real radius, const real3 D,
-                            __constant const real *cheb, real3 *fg)
+/* alpha's gradient came with the field: into lanes (all of them; `all` is for the B-spline path) */
+inline void sample_gradient(const Basis *basis, const bool all, realv *gx, realv *gy, realv *gz)
 {
+    real lx[16] = {0}, ly[16] = {0}, lz[16] = {0};
+    for (int s = 0; s < NS; s++) {
+        lx[s] = basis[0].fg[s].x;
+        ly[s] = basis[0].fg[s].y;
+        lz[s] = basis[0].fg[s].z;
+    }
+    *gx = vload16(0, lx);
+    *gy = vload16(0, ly);
+    *gz = vload16(0, lz);
 }

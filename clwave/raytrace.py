@@ -131,7 +131,9 @@ class RayTracer:
         self.occupied_fraction = float(occ.mean())
         self.field_args = [self.coef.data, self.tables["start"].data, self.tables["shape"].data,
                            self.tables["offset"].data]
-        self.local_size = None
+        # explicit groups: PoCL's default for a big image (up to 4096 rays) keeps every ray's private
+        # arrays at once, which overflowed its threads' stacks
+        self.local_size = (8, 8)
         self.defines = dict(CLW_GROUPS=len(orders), CLW_ORDERS=",".join(map(str, orders)))
 
     def _bands(self, dense):
@@ -222,10 +224,13 @@ class RayTracer:
         if len(light_dirs) > MAX_LIGHTS:
             raise InputError(f"at most {MAX_LIGHTS} lights, got {len(light_dirs)}")
 
-        n_cheb = 3 * (max(self.orders) - 1) + 1
-        defines = dict(self.defines, CLW_ALPHA=self.alpha_group, CLW_NCHEB=n_cheb, CLW_BLOCK=BLOCK,
+        nodes, weights = sample_tables(3 * (max(self.orders) - 1))
+        n_samples = len(weights)
+        defines = dict(self.defines, CLW_ALPHA=self.alpha_group, CLW_SAMPLES=n_samples, CLW_BLOCK=BLOCK,
                        CLW_MAX_DEPTH=SIMPSON_DEPTH,
                        CLW_LATTICE="0.5" if len({o % 2 for o in self.orders}) > 1 else "1.0")
+        if min(self.orders) >= 3:  # the field and its gradient are continuous across knot planes
+            defines["CLW_JOIN"] = None
         if not absorption:
             defines["CLW_XRAY"] = None
         elif phong is not None:
@@ -240,8 +245,7 @@ class RayTracer:
         compile_seconds = time.perf_counter() - start
 
         q = cc.queue
-        cheb = cla.to_device(q, chebyshev_table(n_cheb).astype(real))
-        quarters = cla.to_device(q, quarter_weights(n_cheb).astype(real))
+        nodes, weights = cla.to_device(q, nodes.astype(real)), cla.to_device(q, weights.astype(real))
         spacing_xyz = np.array(wv.spacing[::-1], float)
         shape_xyz = np.array(wv.shape[::-1], float)
         scale = 1.0 / spacing_xyz
@@ -263,12 +267,12 @@ class RayTracer:
             traced = cla.zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
             field_args += [cla.to_device(q, self.poly.astype(real)).data, traced.data]
         start = time.perf_counter()
-        columns = W if self.local_size is None else -(-W // self.local_size[0]) * self.local_size[0]
-        kernels.raytrace(q, (columns, H), self.local_size, image.data, stats.data, np.int32(W), np.int32(H),
+        rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
+        kernels.raytrace(q, rounded, self.local_size, image.data, stats.data, np.int32(W), np.int32(H),
                          *field_args, self.block_bound.data, int4_xyz(self.occ_origin),
                          int4_xyz(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
-                         _float4(scale), _float4(offset), cheb.data, quarters.data, real(tol),
+                         _float4(scale), _float4(offset), nodes.data, weights.data, real(tol),
                          real(shade_gain), real(self.grad_floor(precision)),
                          cla.to_device(q, light_buf).data, np.int32(len(light_dirs)),
                          _float4([p.ambient, p.diffuse, p.specular, p.shininess]))
@@ -282,7 +286,7 @@ class RayTracer:
             method="raytrace", mode="emission-absorption" if absorption else "xray", path=self.path,
             device=cc.describe(), coefficients=wv.kept, tolerance=tol, precision=precision,
             shading=shading_note, lights=[np.round(d, 6).tolist() for d in light_dirs] if phong else [],
-            segments=int(counts[:, 0].sum()), field_samples=int(counts[:, 0].sum()) * n_cheb,
+            segments=int(counts[:, 0].sum()), samples_per_segment=n_samples,
             segments_shaded_at_midpoint=int(counts[:, 1].sum()),
             integrand_evaluations=int(counts[:, 2].sum()),
             rays_terminated_early=int(np.count_nonzero(counts[:, 3] & 1)),
@@ -345,28 +349,30 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
                     precision=precision)
 
 
-def chebyshev_table(n: int) -> np.ndarray:
-    """(n + 1, n) float64 ``cos(pi m (k + 1/2) / n)``: T_m at the n Chebyshev points (row 1 holds
-    the points themselves); ``cl/raytrace.cl``'s ``cheb``."""
-    return np.cos(np.pi * np.arange(n + 1)[:, None] * (np.arange(n)[None, :] + 0.5) / n)
+def sample_points(degree: int) -> np.ndarray:
+    """Where ``cl/raytrace.cl`` samples a segment [-1, 1] whose polynomials have ``degree`` (at most 9):
+    xi = -1 + p/4 for p = 1..8 (lanes 0..7), p = 0 (lane 8), and 15/16 when the degree is 9."""
+    extra = [15 / 16] if degree == 9 else []
+    return np.array([-1.0 + p / 4.0 for p in range(1, 9)] + [-1.0] + extra)
 
 
-def quarter_weights(n: int) -> np.ndarray:
-    """(n, 18) float64: for the sample at the Chebyshev point cos(pi (k + 1/2) / n), row k holds
-    its weights in the value at xi = -1 + p/4 (column p = 0..8) of the polynomial through the n
-    samples, then in that polynomial's integral from -1 to there (column 9 + p; column 17:
-    Fejer's quadrature weights on [-1, 1]); ``cl/raytrace.cl``.
+def sample_tables(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(nodes, weights)`` float64 for ``cl/raytrace.cl``, from :func:`sample_points` xi_k.
 
-    Simpson's first two panels of a segment and their halves need only these nine points, so the
-    kernel makes the Chebyshev series only for finer panels.
+    ``nodes``: the points, then the matrix taking the samples of a polynomial of the degree to
+    its Chebyshev series (row m: coefficient m), then the (9, 9) one taking lanes 0..8 to the
+    series of the gradient, whose degree is one less.  ``weights`` (points, 8): row k holds
+    sample k's weight in the integral from -1 to xi = -1 + p/4, p = 1..8, of the polynomial
+    through the samples (Simpson's first 2 panels and their halves need only these points, so
+    the kernel makes the series only for finer panels).
     """
-    # the Lagrange polynomial of sample k as a Chebyshev series (discrete orthogonality)
-    series = chebyshev_table(n)[:n] * 2.0 / n
-    series[0] /= 2.0
-    xi = -1.0 + np.arange(9) / 4.0
-    values = chebyshev.chebval(xi, series).T
-    integrals = chebyshev.chebval(xi, chebyshev.chebint(series, lbnd=-1)).T
-    return np.ascontiguousarray(np.vstack([values, integrals]).T)
+    xi = sample_points(degree)
+    to_series = np.linalg.inv(chebyshev.chebvander(xi, len(xi) - 1))
+    gradient_series = np.linalg.inv(chebyshev.chebvander(xi[:9], 8))
+    ends = -1.0 + np.arange(1, 9) / 4.0
+    weights = chebyshev.chebval(ends, chebyshev.chebint(to_series, lbnd=-1))  # (points, 8)
+    nodes = np.concatenate([xi, to_series.ravel(), gradient_series.ravel()])
+    return nodes, np.ascontiguousarray(weights)
 
 
 def occupancy(wv: WaveletVolume, dense=None):

@@ -8,7 +8,7 @@ from scipy.special import erf
 
 import clwave
 from clwave.quadrature import raytrace_reference
-from clwave.raytrace import Phong, RayTracer, occupancy, quarter_weights
+from clwave.raytrace import Phong, RayTracer, occupancy, sample_points, sample_tables
 from clwave.reference import line_integrals
 
 TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
@@ -29,17 +29,25 @@ def errors_over_tolerances(tracer, camera, exact, **kw):
     return errs
 
 
-@pytest.mark.parametrize("n", [1, 4, 7, 10])
-def test_quarter_weights_are_exact_for_polynomials_of_the_segment_degree(n):
-    """Values and integrals from -1 at xi = -1 + p/4 of a random degree n - 1 polynomial from its
-    samples at the n Chebyshev points, against numpy's polynomial arithmetic."""
-    poly = np.polynomial.Polynomial(np.random.default_rng(n).normal(size=n))
-    samples = poly(np.cos(np.pi * (np.arange(n) + 0.5) / n))
-    xi = -1.0 + np.arange(9) / 4.0
-    weights = quarter_weights(n)
-    assert weights.flags.c_contiguous  # the kernel reads it row by row
-    np.testing.assert_allclose(samples @ weights[:, :9], poly(xi), atol=1e-12)
-    np.testing.assert_allclose(samples @ weights[:, 9:], poly.integ(lbnd=-1)(xi), atol=1e-12)
+@pytest.mark.parametrize("degree", [0, 3, 6, 9])
+def test_sample_tables_are_exact_for_polynomials_of_the_segment_degree(degree):
+    """From the samples of a random polynomial of the segment's degree: its integrals from -1 to
+    xi = -1 + p/4 (p = 1..8), its Chebyshev series, and from lanes 0..8 the series of a polynomial
+    one degree lower (the gradient), against numpy's polynomial arithmetic."""
+    rng = np.random.default_rng(degree)
+    poly, lower = (np.polynomial.Polynomial(rng.normal(size=n)) for n in (degree + 1, max(degree, 1)))
+    xi = sample_points(degree)
+    assert len(xi) == max(degree + 1, 9) and np.allclose(xi[:9], -1.0 + np.r_[np.arange(1, 9), 0] / 4.0)
+    nodes, weights = sample_tables(degree)
+    n = len(xi)
+    assert weights.flags.c_contiguous and weights.shape == (n, 8)  # the kernel reads rows of 8
+    np.testing.assert_allclose(nodes[:n], xi)
+    np.testing.assert_allclose(poly(xi) @ weights, poly.integ(lbnd=-1)(-1.0 + np.arange(1, 9) / 4.0), atol=1e-12)
+    field_series = nodes[n:n + n * n].reshape(n, n) @ poly(xi)
+    gradient_series = nodes[n + n * n:].reshape(9, 9) @ lower(xi[:9])
+    x = np.linspace(-1, 1, 7)
+    np.testing.assert_allclose(np.polynomial.chebyshev.chebval(x, field_series), poly(x), atol=1e-12)
+    np.testing.assert_allclose(np.polynomial.chebyshev.chebval(x, gradient_series), lower(x), atol=1e-12)
 
 
 def test_constant_slab_matches_closed_form():
