@@ -470,25 +470,50 @@ inline void step_planes(const real *x0, const real *dd, const real *inv, const r
         }
 }
 
-/* the block holding x, and the bound on |field| there (0 outside the blocks) */
-inline real block_bound(__global const float *bound, const int4 origin, const int4 shape, const real3 x, int4 *b)
+/* the block of `size` fine cells holding x, and the bound on |field| there (0 outside the blocks) */
+inline real block_bound(__global const float *bound, const int4 origin, const int4 shape, const real3 x,
+                        const int size, int4 *b)
 {
-    *b = convert_int4((real4)(floor(x / CLW_BLOCK), 0));
+    *b = convert_int4((real4)(floor(x / size), 0));
     const int4 k = *b - origin;
     if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= shape.x || k.y >= shape.y || k.z >= shape.z)
         return 0;
     return bound[((size_t)k.z * shape.y + k.y) * shape.x + k.x];
 }
 
-/* where the ray leaves block b (at most t1) */
-inline real block_exit(const real *x0, const real *dd, const real *inv, const int4 b, const real t1)
+/* where the ray leaves block b of `size` fine cells (at most t1) */
+inline real block_exit(const real *x0, const real *dd, const real *inv, const int4 b, const int size, const real t1)
 {
     const int bb[3] = {b.x, b.y, b.z};
     real texit = t1;
     for (int a = 0; a < 3; a++)
         if (dd[a] != 0)
-            texit = fmin(texit, ((bb[a] + (dd[a] > 0)) * CLW_BLOCK - x0[a]) * inv[a]);
+            texit = fmin(texit, ((bb[a] + (dd[a] > 0)) * size - x0[a]) * inv[a]);
     return texit;
+}
+
+/* The region of the ray around xm (segment [t, tn]) that one bound covers, and that bound: the
+ * superblock when its bound is at most coarse_bound (empty, or nearly: crossed in one step), else
+ * the block.  Returns the bound; *end is where the ray leaves the region.  *fine_end caches where
+ * the ray leaves the last superblock found above coarse_bound, whose blocks need no second look. */
+inline real region_bound(const real *x0, const real *dd, const real *inv, const real3 xm, const real tn,
+                         const real t1, __global const float *bound, const int4 origin, const int4 shape,
+                         __global const float *super_bound, const int4 super_origin, const int4 super_shape,
+                         const real coarse_bound, real *fine_end, real *end)
+{
+    int4 b;
+    if (!(tn <= *fine_end)) {
+        const real sb = block_bound(super_bound, super_origin, super_shape, xm, CLW_SUPER, &b);
+        const real sexit = fmax(block_exit(x0, dd, inv, b, CLW_SUPER, t1), tn);
+        if (sb <= coarse_bound) {
+            *end = sexit;
+            return sb;
+        }
+        *fine_end = sexit;
+    }
+    const real bb = block_bound(bound, origin, shape, xm, CLW_BLOCK, &b);
+    *end = fmax(block_exit(x0, dd, inv, b, CLW_BLOCK, t1), tn);
+    return bb;
 }
 
 /* (S4, S2): Simpson's rule over [-1, 1] on 4 and on 2 panels, from the values at xi = -1 + p/4,
@@ -508,6 +533,8 @@ inline real2 simpson_pair(const real8 v, const real first)
  *                    (bit 0 terminated early, bit 1 Simpson depth limit reached)
  *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
  *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
+ *   super_bound, super_origin, super_shape  the largest of those per superblock of CLW_SUPER^3 fine cells
+ *   coarse_bound superblocks bounded by at most this are one region for skipping and R
  *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates
  *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;
  *                                perspective p = base (the eye), w = normalize(dir + c du + r dv),
@@ -528,6 +555,8 @@ inline real2 simpson_pair(const real8 v, const real first)
 __kernel void raytrace(__global float4 *image, __global int4 *stats, const int width, const int height,
                        FIELD_PARAMS,
                        __global const float *bound, const int4 occ_origin, const int4 occ_shape,
+                       __global const float *super_bound, const int4 super_origin, const int4 super_shape,
+                       const real coarse_bound,
                        const float4 box_lo, const float4 box_hi,
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
                        const float4 to_fine_scale, const float4 to_fine_offset,
@@ -598,13 +627,20 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     {
         real tp[3];
         int plane[3];
+        real fine_end = -INFINITY;
         next_planes(x0, dd, inv, t0, CLW_BLOCK, plane, tp);
         for (real t = t0; t < t1;) {
             const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
-            int4 b;
-            rest += block_bound(bound, occ_origin, occ_shape, X0 + (t + tn) / 2 * D, &b) * (tn - t);
-            t = tn;
-            step_planes(x0, dd, inv, tn, CLW_BLOCK, plane, tp);
+            real end;
+            rest += region_bound(x0, dd, inv, X0 + (t + tn) / 2 * D, tn, t1, bound, occ_origin, occ_shape,
+                                 super_bound, super_origin, super_shape, coarse_bound, &fine_end, &end) * (end - t);
+            if (end > tn) { /* a coarse superblock: on past it */
+                t = end;
+                next_planes(x0, dd, inv, t, CLW_BLOCK, plane, tp);
+            } else {
+                t = tn;
+                step_planes(x0, dd, inv, tn, CLW_BLOCK, plane, tp);
+            }
         }
     }
     /* R(t) = rest - consumed, the part of the sum at t' < t subtracted as the march passes it;
@@ -623,6 +659,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     bool end_shaded = false;
     real3 end_emission = (real3)(0), end_gradient = (real3)(0);
 #endif
+    /* the block or coarse superblock the last segment lay in (its bound, where the ray leaves it),
+     * and where the ray leaves the last fine superblock */
+    real bnd = 0, texit = -INFINITY, fine_end = -INFINITY;
     const real h = CLW_LATTICE;
     real tp[3];
     int plane[3];
@@ -635,9 +674,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         }
         const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
         const real3 xm = X0 + (t + tn) / 2 * D;
-        int4 blk;
-        const real bnd = block_bound(bound, occ_origin, occ_shape, xm, &blk);
-        const real texit = fmax(block_exit(x0, dd, inv, blk, t1), tn); /* where the ray leaves xm's block */
+        if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
+            bnd = region_bound(x0, dd, inv, xm, tn, t1, bound, occ_origin, occ_shape, super_bound, super_origin,
+                               super_shape, coarse_bound, &fine_end, &texit);
 #ifdef CLW_XRAY
         const real cost = bnd * (texit - t);
 #else

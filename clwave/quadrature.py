@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.polynomial import chebyshev
 
-from .raytrace import BLOCK, SIMPSON_DEPTH, Phong, RayTracer, light_direction
+from .raytrace import BLOCK, SIMPSON_DEPTH, SUPER, Phong, RayTracer, light_direction
 
 
 def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
@@ -33,7 +33,8 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
         phong = None
     light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
     gain = (phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0
-    block_bound = tr.block_bound.get()
+    regions = _Regions(tr.block_bound.get(), tr.occ_origin, tr.super_bound_host, tr.super_origin,
+                       tr.coarse_bound(tolerance))
     scale = 1.0 / np.array(wv.spacing[::-1], float)
     offset = -np.asarray(wv.origin) * scale + (np.array(wv.shape[::-1], float) - 1) / 2 + orders[0] / 2
     xi = np.cos(np.pi * (np.arange(n_cheb) + 0.5) / n_cheb)
@@ -56,7 +57,7 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     for (r, c, w, x0, mid, rad, t0, t1, _), field, grad in zip(rays, fields, grads):
         field = field.reshape(len(mid), n_cheb, -1)
         grad = None if grad is None else grad.reshape(len(mid), n_cheb, 3)
-        blocks = _BlockSkip(block_bound, tr.occ_origin, x0, w * scale, t0, t1, absorption, tolerance, gain)
+        blocks = _BlockSkip(regions, x0, w * scale, t0, t1, absorption, tolerance, gain)
         if not absorption:
             keep = [s for s in range(len(mid)) if not blocks.skip(mid[s] - rad[s], mid[s] + rad[s], 1.0)]
             out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(field[keep], xi)))
@@ -66,15 +67,35 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     return out
 
 
-class _BlockSkip:
-    """The kernel's empty-space rule along one ray: skip a block while its worst case fits the budget.
+class _Regions:
+    """The kernel's bounds on |field|: a superblock of SUPER^3 blocks bounded by at most ``coarse`` is
+    one region, any other block its own."""
 
-    ``rest(t)`` is the block bounds integrated along the ray beyond t (the kernel's R), kept as
+    def __init__(self, block_bound, origin, super_bound, super_origin, coarse):
+        self.levels = [(block_bound, np.asarray(origin), BLOCK), (super_bound, np.asarray(super_origin), BLOCK * SUPER)]
+        self.coarse = coarse
+
+    def lookup(self, x0, d, a, b, t1):
+        """(bound, where the ray x0 + t d leaves the region) of the region holding the midpoint of [a, b]."""
+        x = x0 + (a + b) / 2 * d
+        for bound, origin, size in self.levels[::-1]:
+            cell = np.floor(x / size).astype(int)  # (x, y, z)
+            idx = cell[::-1] - origin
+            value = float(bound[tuple(idx)]) if np.all((idx >= 0) & (idx < bound.shape)) else 0.0
+            if size == BLOCK or value <= self.coarse:
+                nz = d != 0
+                return value, min(t1, np.min(((cell[nz] + (d[nz] > 0)) * size - x0[nz]) / d[nz]))
+
+
+class _BlockSkip:
+    """The kernel's empty-space rule along one ray: skip a region while its worst case fits the budget.
+
+    ``rest(t)`` is the region bounds integrated along the ray beyond t (the kernel's R), kept as
     the whole ray's integral less what the march has passed.
     """
 
-    def __init__(self, block_bound, origin, x0, d, t0, t1, absorption, tol, gain):
-        self.bb, self.origin, self.x0, self.d, self.t1 = block_bound, origin, x0, d, t1
+    def __init__(self, regions, x0, d, t0, t1, absorption, tol, gain):
+        self.regions, self.x0, self.d, self.t1 = regions, x0, d, t1
         self.absorption, self.budget = absorption, tol / 4 if absorption else tol / 2
         self.gain, self.until, self.value = gain, -np.inf, 0.0
         pieces = _knots(x0, d, t0, t1, BLOCK)
@@ -82,13 +103,7 @@ class _BlockSkip:
         self.slack, self.consumed = self.total * 1e-4, 0.0
 
     def _lookup(self, a, b):
-        """(bound, where the ray leaves the block) of the block holding the midpoint of [a, b]."""
-        blk = np.floor((self.x0 + (a + b) / 2 * self.d) / BLOCK).astype(int)  # (x, y, z)
-        idx = blk[::-1] - self.origin
-        inside = np.all((idx >= 0) & (idx < self.bb.shape))
-        nz = self.d != 0
-        texit = min(self.t1, np.min(((blk[nz] + (self.d[nz] > 0)) * BLOCK - self.x0[nz]) / self.d[nz]))
-        return (float(self.bb[tuple(idx)]) if inside else 0.0), texit
+        return self.regions.lookup(self.x0, self.d, a, b, self.t1)
 
     def skip(self, a, b, T) -> bool:
         """Whether segment [a, b] is skipped (it lies in a block skipped from an earlier point, or its own)."""

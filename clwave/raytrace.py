@@ -36,6 +36,7 @@ from .result import RenderResult
 from .wavelet import WaveletVolume
 
 BLOCK = 4        # empty-space blocks are BLOCK^3 fine cells
+SUPER = 4        # and superblocks SUPER^3 blocks, which rays cross in one step where they are all empty
 MAX_LIGHTS = 8   # cl/raytrace.cl keeps the lights in private memory
 
 
@@ -99,6 +100,8 @@ class RayTracer:
             self._expand(dense)
         else:
             self._bands(dense)
+        self.super_bound_host, self.super_origin = superblocks(self.block_bound.get(), self.occ_origin)
+        self.super_bound = cla.to_device(self.cc.queue, self.super_bound_host)
 
     def _expand(self, dense):
         """B-spline path: fine grids on the device, and their per-block maxima as bounds."""
@@ -187,6 +190,11 @@ class RayTracer:
         self.local_size = (WAVELET_GROUP, 1)
         self.setup_seconds = time.perf_counter() - start
 
+    def coarse_bound(self, tol) -> float:
+        """Superblocks bounded by at most this are one region for skipping (``cl/raytrace.cl``): what
+        the field could add along any chord through one is then at most tol / 4096."""
+        return tol / 4096 / (BLOCK * SUPER * np.sqrt(3) * max(self.wv.spacing))
+
     def grad_floor(self, precision="single") -> float:
         """World gradients of alpha at most this long count as flat when shading (``cl/raytrace.cl``):
         on a plateau of alpha the summed gradient is rounding noise of this size."""
@@ -227,6 +235,7 @@ class RayTracer:
         nodes, weights = sample_tables(3 * (max(self.orders) - 1))
         n_samples = len(weights)
         defines = dict(self.defines, CLW_ALPHA=self.alpha_group, CLW_SAMPLES=n_samples, CLW_BLOCK=BLOCK,
+                       CLW_SUPER=BLOCK * SUPER,
                        CLW_MAX_DEPTH=SIMPSON_DEPTH,
                        CLW_LATTICE="0.5" if len({o % 2 for o in self.orders}) > 1 else "1.0")
         if min(self.orders) >= 3:  # the field and its gradient are continuous across knot planes
@@ -270,7 +279,8 @@ class RayTracer:
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         kernels.raytrace(q, rounded, self.local_size, image.data, stats.data, np.int32(W), np.int32(H),
                          *field_args, self.block_bound.data, int4_xyz(self.occ_origin),
-                         int4_xyz(self.block_bound.shape), _float4(self.box[0]), _float4(self.box[1]),
+                         int4_xyz(self.block_bound.shape), self.super_bound.data, int4_xyz(self.super_origin),
+                         int4_xyz(self.super_bound.shape), real(self.coarse_bound(tol)), _float4(self.box[0]), _float4(self.box[1]),
                          _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
                          _float4(scale), _float4(offset), nodes.data, weights.data, real(tol),
                          real(shade_gain), real(self.grad_floor(precision)),
@@ -373,6 +383,21 @@ def sample_tables(degree: int) -> tuple[np.ndarray, np.ndarray]:
     weights = chebyshev.chebval(ends, chebyshev.chebint(to_series, lbnd=-1))  # (points, 8)
     nodes = np.concatenate([xi, to_series.ravel(), gradient_series.ravel()])
     return nodes, np.ascontiguousarray(weights)
+
+
+def superblocks(bound: np.ndarray, origin) -> tuple[np.ndarray, np.ndarray]:
+    """The largest block bound per superblock of SUPER^3 blocks, and the superblocks' origin.
+
+    ``bound`` (Z, Y, X) per block from block ``origin`` (z, y, x); superblock k holds blocks
+    SUPER (origin_s + k) .. SUPER (origin_s + k + 1) - 1, so it is SUPER^3 BLOCK^3 aligned cells.
+    """
+    origin = np.asarray(origin, np.int64)
+    s_origin = np.floor_divide(origin, SUPER)
+    lead = origin - s_origin * SUPER
+    count = -(-(np.array(bound.shape) + lead) // SUPER)
+    padded = np.zeros(count * SUPER, np.float32)
+    padded[tuple(slice(a, a + n) for a, n in zip(lead, bound.shape))] = bound
+    return padded.reshape(count[0], SUPER, count[1], SUPER, count[2], SUPER).max(axis=(1, 3, 5)), s_origin
 
 
 def occupancy(wv: WaveletVolume, dense=None):

@@ -8,7 +8,7 @@ from scipy.special import erf
 
 import clwave
 from clwave.quadrature import raytrace_reference
-from clwave.raytrace import Phong, RayTracer, occupancy, sample_points, sample_tables
+from clwave.raytrace import SUPER, Phong, RayTracer, occupancy, sample_points, sample_tables, superblocks
 from clwave.reference import line_integrals
 
 TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
@@ -117,6 +117,23 @@ def test_kernel_equals_numpy_reference(small_rgba, small_wavelet_tracer, kw, pat
     assert np.max(np.abs(got.image - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
 
 
+def test_kernel_equals_reference_through_nearly_empty_superblocks():
+    """A bright end and a faint one (1e-10): superblocks there are bounded by less than the coarse
+    bound, so kernel and reference each cross them as one region."""
+    rng = np.random.default_rng(4)
+    data = rng.random((8, 8, 40, 4)) * 1e-10
+    data[:, :, :8] = rng.random((8, 8, 8, 4)) * 0.5
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data.astype(np.float32)), wavelet="cubic", levels=1)
+    tracer = RayTracer(wv)
+    sup = tracer.super_bound_host
+    assert np.any((sup > 0) & (sup <= tracer.coarse_bound(1e-3)))
+    cam = clwave.Camera(80, 10, size=(3, 4))
+    ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer)
+    got = tracer.render(cam, tolerance=1e-3)
+    assert np.abs(ref).max() > 0.05
+    assert np.max(np.abs(got.image - ref)) <= 1e-5 * np.abs(ref).max()
+
+
 @pytest.mark.parametrize("path", ["bspline", "wavelet"])
 def test_perspective_kernel_equals_reference_and_eye_inside_integrates_from_eye(small_rgba, small_wavelet_tracer,
                                                                                  path):
@@ -160,6 +177,20 @@ def test_occupancy_covers_every_nonzero_value():
     covered[inside] = occ[tuple(blk[inside].T)] > 0
     assert vals[~covered].max(initial=0.0) == 0.0
     assert 0 < occ.mean() < 0.6  # it does skip something
+
+
+@pytest.mark.parametrize("origin", [(0, 0, 0), (-3, 5, -9)])
+def test_superblocks_hold_the_largest_block_bound(origin):
+    """Each superblock's bound against the largest bound of the blocks inside it, block by block."""
+    bound = np.random.default_rng(2).random((9, 6, 11)).astype(np.float32)
+    sup, s_origin = superblocks(bound, origin)
+    for idx in np.ndindex(bound.shape):
+        block = np.array(idx) + origin
+        assert sup[tuple(block // SUPER - s_origin)] >= bound[idx]
+    for sidx in np.ndindex(sup.shape):
+        first = (np.array(sidx) + s_origin) * SUPER - origin
+        inside = tuple(slice(max(f, 0), max(f + SUPER, 0)) for f in first)
+        assert sup[sidx] == bound[inside].max(initial=0.0)
 
 
 def test_repeat_renders_are_bit_identical(small_rgba):
