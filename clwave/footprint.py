@@ -672,6 +672,13 @@ def _cpu_count() -> int:
         return os.cpu_count() or 1
 
 
+@lru_cache(maxsize=1)
+def _pool() -> ThreadPoolExecutor:
+    """One thread per core for texture making, kept for the process (starting threads for every
+    view and level cost more than a small view's FFTs)."""
+    return ThreadPoolExecutor(_cpu_count(), thread_name_prefix="clwave-footprints")
+
+
 def _axis_sampling(width, cell, omega, d_min, texel) -> tuple:
     """``(N, h, cell)`` of one texture axis whose support is ``width`` wide (world units).
 
@@ -784,12 +791,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
 
     # numpy and pocketfft release the GIL: textures in parallel, largest first, where the
     # work outweighs the threads' overhead (measured on 2 cores: a gain from ~1e5 texels)
-    threads = min(len(jobs), _cpu_count()) if sum(job[2][0] * job[3][0] for job in jobs) >= 1 << 17 else 1
-    if threads > 1:
+    if len(jobs) > 1 and _cpu_count() > 1 and sum(job[2][0] * job[3][0] for job in jobs) >= 1 << 17:
         workers = 1
         jobs.sort(key=lambda job: -job[2][0] * job[3][0])
-        with ThreadPoolExecutor(threads) as pool:
-            textures = list(pool.map(make, jobs))
+        textures = list(_pool().map(make, jobs))
     else:
         workers = -1
         textures = [make(job) for job in jobs]

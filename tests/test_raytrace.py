@@ -199,6 +199,17 @@ def test_repeat_renders_are_bit_identical(small_rgba):
     assert np.array_equal(tracer.render(cam).image, tracer.render(cam).image)
 
 
+def test_big_image_equals_its_centre_crop(small_rgba):
+    """A 128^2 image (PoCL's default work-groups for it once overflowed the threads' stacks) against
+    a 4^2 render of its centre pixels: the same rays, the same values."""
+    wv, tracer = small_rgba
+    big = clwave.Camera(25, 15, size=128)
+    crop = clwave.Camera(25, 15, size=4, extent=big.view(wv).pixel * 4)
+    got = tracer.render(big, tolerance=1e-3).image
+    assert np.abs(got).max() > 0.05
+    np.testing.assert_allclose(got[62:66, 62:66], tracer.render(crop, tolerance=1e-3).image, rtol=0, atol=1e-6)
+
+
 def test_shading_meta_and_haar_unshaded():
     vol = rgba_volume(np.full((4, 4, 4), 1.0), np.full((4, 4, 4), 0.5))
     res = clwave.raytrace(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=1),
