@@ -304,7 +304,7 @@ CLENSHAW(real3, cheb3)
 CLENSHAW(real4, cheb4)
 
 typedef struct {
-    real4 fq[NS];    /* the field at the sample points, alpha and q clamped to >= 0 */
+    real4 fq[NS];    /* the field at the sample points, alpha clamped to >= 0 */
     realv gx, gy, gz; /* the gradient of alpha there (fine units), lanes 0..8 */
     real radius;     /* half the segment length in world units */
     bool series;     /* q, g, A below are made (only panels finer than quarters need them) */
@@ -731,8 +731,12 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             real lr[8], lg[8], lb[8], la[8];
             real8 A8 = 0;
             for (int k = 0; k < NS; k++) {
-                const real4 v = fmax(S.fq[k], (real4)(0)); /* clamp alpha, q >= 0 */
-                S.fq[k] = v;
+                /* alpha and q clamped at 0 (thresholding can make them dip below); q stays a
+                 * polynomial for the series (shade clamps it wherever it is evaluated): the
+                 * interpolant of clamped samples would oscillate by up to the points' Lebesgue
+                 * constant times the dip */
+                const real4 v = fmax(S.fq[k], (real4)(0));
+                S.fq[k].w = v.w;
                 if (k < 8) {
                     lr[k] = v.x; lg[k] = v.y; lb[k] = v.z; la[k] = v.w;
                 }
@@ -740,7 +744,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             }
             real8 r8 = vload8(0, lr), g8 = vload8(0, lg), b8 = vload8(0, lb);
             const real8 a8 = vload8(0, la);
-            const real4 f0 = S.fq[P0];
+            const real4 f0 = fmax(S.fq[P0], (real4)(0));
             const real depth = A8.s7; /* int alpha dxi over the segment */
             const real8 att = fast_exp(-S.radius * A8);
             bool simpson_full = true; /* adaptive Simpson on the shaded integrand */

@@ -679,6 +679,10 @@ def _pool() -> ThreadPoolExecutor:
     return ThreadPoolExecutor(_cpu_count(), thread_name_prefix="clwave-footprints")
 
 
+if hasattr(os, "register_at_fork"):  # a forked child has none of the parent's threads: a pool of its own
+    os.register_at_fork(after_in_child=_pool.cache_clear)
+
+
 def _axis_sampling(width, cell, omega, d_min, texel) -> tuple:
     """``(N, h, cell)`` of one texture axis whose support is ``width`` wide (world units).
 

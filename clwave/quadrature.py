@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.polynomial import chebyshev
 
-from .raytrace import BLOCK, SIMPSON_DEPTH, SUPER, Phong, RayTracer, light_direction
+from .raytrace import BLOCK, SIMPSON_DEPTH, SUPER, Phong, RayTracer, light_direction, sample_points
 
 
 def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
@@ -27,7 +27,6 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     H, W = view.size
     orders = tr.orders
     h = 0.5 if len({o % 2 for o in orders}) > 1 else 1.0
-    n_cheb = 3 * (max(orders) - 1) + 1
     phong = (shading if isinstance(shading, Phong) else Phong()) if shading else None
     if tr.orders[tr.alpha_group] == 1 or not absorption:
         phong = None
@@ -37,7 +36,8 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
                        tr.coarse_bound(tolerance))
     scale = 1.0 / np.array(wv.spacing[::-1], float)
     offset = -np.asarray(wv.origin) * scale + (np.array(wv.shape[::-1], float) - 1) / 2 + orders[0] / 2
-    xi = np.cos(np.pi * (np.arange(n_cheb) + 0.5) / n_cheb)
+    xi = sample_points(3 * (max(orders) - 1))  # the kernel's points (the field is the same polynomial)
+    n_samples = len(xi)
     out = np.zeros((H, W, 4 if absorption else wv.channels))
     rays = []
     for r, c in np.ndindex(H, W):
@@ -55,14 +55,15 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     grads = np.split(wv.gradient(points)[:, 3, :], len(fields) and np.cumsum([len(f) for f in fields])[:-1]) \
         if phong else [None] * len(rays)
     for (r, c, w, x0, mid, rad, t0, t1, _), field, grad in zip(rays, fields, grads):
-        field = field.reshape(len(mid), n_cheb, -1)
-        grad = None if grad is None else grad.reshape(len(mid), n_cheb, 3)
+        field = field.reshape(len(mid), n_samples, -1)
+        grad = None if grad is None else grad.reshape(len(mid), n_samples, 3)
         blocks = _BlockSkip(regions, x0, w * scale, t0, t1, absorption, tolerance, gain)
         if not absorption:
             keep = [s for s in range(len(mid)) if not blocks.skip(mid[s] - rad[s], mid[s] + rad[s], 1.0)]
             out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(field[keep], xi)))
             continue
-        out[r, c] = _emission_absorption(np.maximum(field, 0), grad, xi, mid, rad, t1 - t0, tolerance, gain,
+        field[..., 3] = np.maximum(field[..., 3], 0.0)  # alpha clamped at the samples, q where it is used
+        out[r, c] = _emission_absorption(field, grad, xi, mid, rad, t1 - t0, tolerance, gain,
                                          phong, light_dirs, w, blocks, tr.grad_floor())
     return out
 
@@ -162,13 +163,9 @@ def _knots(x0, d, t0, t1, h):
 
 
 def _fit(samples, xi):
-    """Chebyshev series (S, N, C) of polynomials sampled at the N Chebyshev points xi."""
-    n = len(xi)
-    m = np.arange(n)[:, None]
-    basis = np.cos(m * np.arccos(xi)[None, :])  # T_m(xi_k)
-    coef = np.einsum("mk,skc->smc", basis, samples) * (2.0 / n)
-    coef[:, 0] /= 2
-    return coef
+    """Chebyshev series (S, N, C) of the polynomials through samples (S, N, C) at the N points xi."""
+    to_series = np.linalg.inv(chebyshev.chebvander(xi, len(xi) - 1))
+    return np.einsum("mk,skc->smc", to_series, samples)
 
 
 def _integral(series):

@@ -117,9 +117,11 @@ def test_kernel_equals_numpy_reference(small_rgba, small_wavelet_tracer, kw, pat
     assert np.max(np.abs(got.image - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
 
 
-def test_kernel_equals_reference_through_nearly_empty_superblocks():
-    """A bright end and a faint one (1e-10): superblocks there are bounded by less than the coarse
-    bound, so kernel and reference each cross them as one region."""
+@pytest.mark.parametrize("kw", [dict(), dict(absorption=False)])
+def test_kernel_equals_reference_with_superblocks_as_regions(monkeypatch, kw):
+    """Kernel and reference cross superblocks as single regions alike: first the nearly empty ones
+    of a volume with a faint end, then (the coarse bound raised 1e9-fold) the ones that hold its
+    visible content too, where R and the skipping change the march."""
     rng = np.random.default_rng(4)
     data = rng.random((8, 8, 40, 4)) * 1e-10
     data[:, :, :8] = rng.random((8, 8, 8, 4)) * 0.5
@@ -128,10 +130,33 @@ def test_kernel_equals_reference_through_nearly_empty_superblocks():
     sup = tracer.super_bound_host
     assert np.any((sup > 0) & (sup <= tracer.coarse_bound(1e-3)))
     cam = clwave.Camera(80, 10, size=(3, 4))
-    ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer)
-    got = tracer.render(cam, tolerance=1e-3)
+    ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer, **kw)
+    got = tracer.render(cam, tolerance=1e-3, **kw)
     assert np.abs(ref).max() > 0.05
     assert np.max(np.abs(got.image - ref)) <= 1e-5 * np.abs(ref).max()
+
+    bound = tracer.coarse_bound
+    monkeypatch.setattr(tracer, "coarse_bound", lambda tol: bound(tol) * 1e9)
+    assert np.any((sup > bound(1e-3)) & (sup <= tracer.coarse_bound(1e-3)))
+    ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer, **kw)
+    coarse = tracer.render(cam, tolerance=1e-3, **kw)
+    assert coarse.meta["segments"] != got.meta["segments"]
+    assert np.max(np.abs(coarse.image - ref)) <= 1e-5 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("kw", [dict(shading=False), dict()])
+def test_kernel_equals_reference_where_the_field_dips_below_zero(kw):
+    """Interpolating prefilter: the spline overshoots below 0 between voxels.  Alpha is clamped at
+    the samples, q wherever it is evaluated (its series stays the polynomial)."""
+    rng = np.random.default_rng(3)
+    data = (rng.random((5, 6, 7, 4)) * np.array([1.0, 0.8, 0.6, 0.5])).astype(np.float32)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data, spacing=(1.0, 0.8, 1.2)), wavelet="cubic",
+                                          levels=1, interpolate=True)
+    assert wv.evaluate(np.random.default_rng(0).uniform(-2, 2, (4000, 3))).min() < -0.1
+    tracer, cam = RayTracer(wv), clwave.Camera(30, 20, size=(3, 4))
+    ref = raytrace_reference(wv, cam, tolerance=1e-4, tracer=tracer, **kw)
+    got = tracer.render(cam, tolerance=1e-4, **kw)
+    assert np.max(np.abs(got.image - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
 
 
 @pytest.mark.parametrize("path", ["bspline", "wavelet"])
