@@ -267,10 +267,12 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
         real##WIDTH d[3][4], hx = 0, hy = 0, hz = 0;                                                      \
         for (int a = 0; a < 3; a++)                                                                       \
             bspline_derivatives##WIDTH(j, B->U[a], d[a]);                                                 \
+        __global const float4 *c = B->corner;                                                             \
+        const real##WIDTH *wx = B->W[0], *wy = B->W[1], *wz = B->W[2];                                   \
         switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */                         \
-        case 2: group_gradient##WIDTH(B->corner, B->sy, B->sz, 2, B->W[0], B->W[1], B->W[2], d[0], d[1], d[2], &hx, &hy, &hz); break; \
-        case 3: group_gradient##WIDTH(B->corner, B->sy, B->sz, 3, B->W[0], B->W[1], B->W[2], d[0], d[1], d[2], &hx, &hy, &hz); break; \
-        case 4: group_gradient##WIDTH(B->corner, B->sy, B->sz, 4, B->W[0], B->W[1], B->W[2], d[0], d[1], d[2], &hx, &hy, &hz); break; \
+        case 2: group_gradient##WIDTH(c, B->sy, B->sz, 2, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
+        case 3: group_gradient##WIDTH(c, B->sy, B->sz, 3, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
+        case 4: group_gradient##WIDTH(c, B->sy, B->sz, 4, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
         }                                                                                                 \
         gx->OUT = hx; gy->OUT = hy; gz->OUT = hz;                                                         \
     }
