@@ -510,26 +510,32 @@ inline real block_exit(const real *x0, const real *dd, const real *inv, const in
     return texit;
 }
 
+/* The bounds on |field| for skipping and R: per CLW_BLOCK^3 block, and per superblock of CLW_SUPER^3
+ * fine cells the largest of those; a superblock bounded by at most `coarse` is one region */
+typedef struct {
+    __global const float *block, *super;
+    int4 block_origin, block_shape, super_origin, super_shape;
+    real coarse;
+} Regions;
+
 /* The region of the ray around xm (segment [t, tn]) that one bound covers, and that bound: the
- * superblock when its bound is at most coarse_bound (empty, or nearly: crossed in one step), else
- * the block.  Returns the bound; *end is where the ray leaves the region.  *fine_end caches where
- * the ray leaves the last superblock found above coarse_bound, whose blocks need no second look. */
+ * superblock when its bound is at most R->coarse (empty, or nearly: crossed in one step), else the
+ * block.  Returns the bound; *end is where the ray leaves the region.  *fine_end caches where the
+ * ray leaves the last superblock found above R->coarse, whose blocks need no second look. */
 inline real region_bound(const real *x0, const real *dd, const real *inv, const real3 xm, const real tn,
-                         const real t1, __global const float *bound, const int4 origin, const int4 shape,
-                         __global const float *super_bound, const int4 super_origin, const int4 super_shape,
-                         const real coarse_bound, real *fine_end, real *end)
+                         const real t1, const Regions *R, real *fine_end, real *end)
 {
     int4 b;
     if (!(tn <= *fine_end)) {
-        const real sb = block_bound(super_bound, super_origin, super_shape, xm, CLW_SUPER, &b);
+        const real sb = block_bound(R->super, R->super_origin, R->super_shape, xm, CLW_SUPER, &b);
         const real sexit = fmax(block_exit(x0, dd, inv, b, CLW_SUPER, t1), tn);
-        if (sb <= coarse_bound) {
+        if (sb <= R->coarse) {
             *end = sexit;
             return sb;
         }
         *fine_end = sexit;
     }
-    const real bb = block_bound(bound, origin, shape, xm, CLW_BLOCK, &b);
+    const real bb = block_bound(R->block, R->block_origin, R->block_shape, xm, CLW_BLOCK, &b);
     *end = fmax(block_exit(x0, dd, inv, b, CLW_BLOCK, t1), tn);
     return bb;
 }
@@ -614,6 +620,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             t1 = fmin(t1, fmax(ta, tb));
         }
     }
+    const Regions regions = {bound, super_bound, occ_origin, occ_shape, super_origin, super_shape, coarse_bound};
     const size_t pix = (size_t)row * width + col;
     Active active;
     active_init(&active, G, pix, X0, D);
@@ -640,7 +647,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     real skip_budget = tol / 4;
     real shade_budget = tol * 3 / 8; /* three quarters of the quadrature's half, when shading */
     const real quadrature_share = SHADING ? tol / 8 : tol / 2;
-    /* R(t0): the block bounds integrated along the whole ray, block by block */
+    /* R(t0): the region bounds integrated along the whole ray, region by region */
     real rest = 0;
     {
         real tp[3];
@@ -650,8 +657,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         for (real t = t0; t < t1;) {
             const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
             real end;
-            rest += region_bound(x0, dd, inv, X0 + (t + tn) / 2 * D, tn, t1, bound, occ_origin, occ_shape,
-                                 super_bound, super_origin, super_shape, coarse_bound, &fine_end, &end) * (end - t);
+            rest += region_bound(x0, dd, inv, X0 + (t + tn) / 2 * D, tn, t1, &regions, &fine_end, &end) * (end - t);
             if (end > tn) { /* a coarse superblock: on past it */
                 t = end;
                 next_planes(x0, dd, inv, t, CLW_BLOCK, plane, tp);
@@ -693,15 +699,14 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
         const real3 xm = X0 + (t + tn) / 2 * D;
         if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
-            bnd = region_bound(x0, dd, inv, xm, tn, t1, bound, occ_origin, occ_shape, super_bound, super_origin,
-                               super_shape, coarse_bound, &fine_end, &texit);
+            bnd = region_bound(x0, dd, inv, xm, tn, t1, &regions, &fine_end, &texit);
 #ifdef CLW_XRAY
         const real cost = bnd * (texit - t);
 #else
         const real rest_after = fmax(rest - consumed - bnd * (texit - t), (real)0) + slack;
         const real cost = T * bnd * (texit - t) * (shade_gain * (1 + rest_after) + 1);
 #endif
-        if (cost <= skip_budget) { /* (nearly) empty block: jump to where the ray leaves it */
+        if (cost <= skip_budget) { /* (nearly) empty region: jump to where the ray leaves it */
             skip_budget -= cost;
 #ifndef CLW_XRAY
             consumed += bnd * (texit - t);

@@ -73,13 +73,14 @@ class _Regions:
     one region, any other block its own."""
 
     def __init__(self, block_bound, origin, super_bound, super_origin, coarse):
-        self.levels = [(block_bound, np.asarray(origin), BLOCK), (super_bound, np.asarray(super_origin), BLOCK * SUPER)]
+        # looked up in this order: the superblock, then (unless it is coarse) the block
+        self.levels = [(super_bound, np.asarray(super_origin), BLOCK * SUPER), (block_bound, np.asarray(origin), BLOCK)]
         self.coarse = coarse
 
     def lookup(self, x0, d, a, b, t1):
         """(bound, where the ray x0 + t d leaves the region) of the region holding the midpoint of [a, b]."""
         x = x0 + (a + b) / 2 * d
-        for bound, origin, size in self.levels[::-1]:
+        for bound, origin, size in self.levels:
             cell = np.floor(x / size).astype(int)  # (x, y, z)
             idx = cell[::-1] - origin
             value = float(bound[tuple(idx)]) if np.all((idx >= 0) & (idx < bound.shape)) else 0.0
