@@ -9,11 +9,10 @@
  * one texel row (weight 0 on the next), cells along u give each pixel its nearest column.
  *
  * splat_accumulate
- *   ranges   in  (tiles,) uint2: [start, end) into vals
- *   vals     in  (total,) uint: splat indices, sorted by tile, importance order within a tile
- *   first    index of the chunk's first coefficient (values are indexed first + splat)
- *   centre, bbox, stex in: from splat_project
- *   values   in  (K,) float4: coefficient per channel (c; the 2^{-m/2} is in the texture)
+ *   ranges   in  (tiles,) uint2: [start, end) into records
+ *   records  in  (total, CLW_RECORD) uint4: splat records (splat_record.h: centre, texture, the
+ *                pixels in the tile, c per channel; the 2^{-m/2} is in the texture), sorted by
+ *                tile, importance order within a tile
  *   tex_int  in  (T,) int4: (offset, columns per plane, rows per plane, lookup); planes carry
  *                a margin of zero texels: one column on either side, one row above and two
  *                below (a nearest row that rounds onto the bottom margin still reads its
@@ -32,7 +31,7 @@
  *                and 32 after the last, so whole 16-pixel rows may be read
  *   fb       in/out (H * W,) float4: the sum is added, so chunks accumulate
  * Build: -DCLW_CHANNELS=C (1..4) accumulates channels 0..C-1 only (the others of fb keep
- *   their values).
+ *   their values); the records hold C values.
  * Grid: one work-group per tile, local size CLW_TILE * CLW_TILE / CLW_PX.  CLW_PX = CLW_TILE^2
  *   (the default) suits PoCL: one work-item owns the tile and walks each splat's rows in it,
  *   16 pixels a vector, with the splat's set-up done once per tile rather than once per row
@@ -41,16 +40,13 @@
  *   consecutive pixels of row l / (CLW_TILE / CLW_PX).
  * Assumes: each pixel is owned by one work-item and splats are visited in sorted order,
  *   so the image is bit-identical from run to run. */
-#include "clw_common.h"
+#include "splat_record.h"
 
 #ifndef CLW_PX
 #define CLW_PX (CLW_TILE * CLW_TILE)
 #endif
 #ifndef CLW_BATCH
 #define CLW_BATCH 64
-#endif
-#ifndef CLW_CHANNELS
-#define CLW_CHANNELS 4
 #endif
 
 /* Per splat, what does not depend on the pixel.  a: the lookup bits in a.w and the row stride
@@ -84,9 +80,8 @@ inline void splat_lookup(const int4 t, const float4 m, const float2 c, int4 *a, 
 
 /* the arguments of both layouts of splat_accumulate (see the top of the file) */
 #define ACCUMULATE_PARAMS const int width, const int height, const int tiles_x, __global const uint2 *ranges, \
-    __global const uint *vals, const uint first, __global const float2 *centre, __global const int4 *bbox, \
-    __global const int *stex, __global const float4 *values, __global const int4 *tex_int,                \
-    __global const float4 *tex_map, __global const float *texels, __global float4 *fb
+    __global const uint4 *records, __global const int4 *tex_int, __global const float4 *tex_map,             \
+    __global const float *texels, __global float4 *fb
 
 /* Image row y of a splat: its texel row (+1: the zero margin; rows iv, iv + 1) and v weight */
 inline int splat_row(const int4 a, const float4 f, const int y, float *fv)
@@ -113,35 +108,17 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
             acc[ch][i] = 0.0f;
 
     const uint2 r = ranges[tile];
-    /* software pipelining: the next splat's records (random reads) are loaded while this one's
-     * rows are summed */
-    int4 next_tex_int = (int4)(0), next_bbox = (int4)(0);
-    float4 next_tex_map = (float4)(0.0f), next_w = (float4)(0.0f);
-    float2 next_centre = (float2)(0.0f);
-    if (r.x < r.y) {
-        const uint s = vals[r.x];
-        next_tex_int = tex_int[stex[s]]; next_tex_map = tex_map[stex[s]];
-        next_bbox = bbox[s]; next_w = values[first + s]; next_centre = centre[s];
-    }
     for (uint k = r.x; k < r.y; ++k) {
-        const int4 t_int = next_tex_int, bx = next_bbox;
-        const float4 t_map = next_tex_map, w = next_w;
-        const float2 cen = next_centre;
-        if (k + 1 < r.y) {
-            const uint s = vals[k + 1];
-            next_tex_int = tex_int[stex[s]]; next_tex_map = tex_map[stex[s]];
-            next_bbox = bbox[s]; next_w = values[first + s]; next_centre = centre[s];
-        }
-        int4 a;
-        float4 f;
-        float2 cs;
-        splat_lookup(t_int, t_map, cen, &a, &f, &cs);
+        int4 bx, a;  /* bx: the splat's pixels in the tile */
+        float4 w, f;
+        float2 cen, cs;
+        const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &w);
+        splat_lookup(tex_int[tex], tex_map[tex], cen, &a, &f, &cs);
         const float c[4] = {w.x, w.y, w.z, w.w};  /* per channel, indexed in the channel loops */
-        const int y0 = max(bx.y, ybase), y1 = min(bx.w, ybase + CLW_TILE - 1);
+        const int y0 = ybase + bx.y, y1 = ybase + bx.w;
         /* all 16 lanes read (the pool has 16 zeros before and 32 after it), masked lanes drop */
         const float16 mask = select((float16)(0.0f), (float16)(1.0f),
-                                    isgreaterequal(lane, (float16)(max(bx.x, xbase) - xbase)) &
-                                    islessequal(lane, (float16)(min(bx.z, xbase + CLW_TILE - 1) - xbase)));
+                                    isgreaterequal(lane, (float16)(bx.x)) & islessequal(lane, (float16)(bx.z)));
         float fv;
         const int row0 = splat_row(a, f, y0, &fv);
         if (a.w == 3) {
@@ -205,8 +182,9 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
     const int tile = get_group_id(0);
     const int lid = get_local_id(0);
     const int nitems = get_local_size(0);
-    const int y = (tile / tiles_x) * CLW_TILE + lid / CLW_ITEMS_PER_ROW;
-    const int xbase = (tile % tiles_x) * CLW_TILE + (lid % CLW_ITEMS_PER_ROW) * CLW_PX;
+    const int4 corner = (int4)(tile % tiles_x, tile / tiles_x, tile % tiles_x, tile / tiles_x) * CLW_TILE;
+    const int y = corner.y + lid / CLW_ITEMS_PER_ROW;
+    const int xbase = corner.x + (lid % CLW_ITEMS_PER_ROW) * CLW_PX;
     float4 acc[CLW_PX];
     for (int p = 0; p < CLW_PX; ++p)
         acc[p] = (float4)(0.0f);
@@ -215,16 +193,16 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
     for (uint b0 = r.x; b0 < r.y; b0 += CLW_BATCH) {
         const uint nb = min((uint)CLW_BATCH, r.y - b0);
         for (uint k = lid; k < nb; k += nitems) {
-            const uint s = vals[b0 + k];
-            int4 a;
-            float4 f;
-            float2 cs;
-            splat_lookup(tex_int[stex[s]], tex_map[stex[s]], centre[s], &a, &f, &cs);
+            int4 a, bx;
+            float4 f, w;
+            float2 cen, cs;
+            const int tex = splat_unpack(records + (b0 + k) * CLW_RECORD, &cen, &bx, &w);
+            splat_lookup(tex_int[tex], tex_map[tex], cen, &a, &f, &cs);
             l_addr[k] = a;
             l_f[k] = f;
             l_cell[k] = cs;
-            l_box[k] = bbox[s];
-            l_w[k] = values[first + s];
+            l_box[k] = corner + bx;
+            l_w[k] = w;
         }
         barrier(CLK_LOCAL_MEM_FENCE);
         for (uint k = 0; k < nb; ++k) {

@@ -71,6 +71,28 @@ def bin_by_tile(bbox, tiles_x, tiles):
     return ranges, vals
 
 
+def records(ranges, vals, first, centre, bbox, stex, values, tiles_x, channels):
+    """Reference of the records ``splat_chunk_tiles`` places (``cl/splat_record.h``): (pairs, 4 * R) uint32.
+
+    Per pair: centre, the bits (texture id; the splat's pixels in the tile, 4 bits each) and
+    c_0, then, with more than one channel, c_1..c_3 and 0 (R = 2 uint4s); floats as their bits.
+    """
+    floats = np.zeros((len(vals), 4 if channels == 1 else 8), np.float32)
+    nc = 1 if channels == 1 else 4
+    bits = np.zeros(len(vals), np.uint32)
+    for tile, (start, end) in enumerate(ranges):
+        corner = np.array([tile % tiles_x, tile // tiles_x] * 2) * TILE
+        for k in range(start, end):
+            s = vals[k]
+            x0, y0, x1, y1 = (int(v) for v in np.clip(bbox[s] - corner, 0, TILE - 1))
+            bits[k] = int(stex[s]) | x0 << 16 | x1 << 20 | y0 << 24 | y1 << 28
+            floats[k, :2] = centre[s]
+            floats[k, 3:3 + nc] = values[first + s, :nc]
+    out = floats.view(np.uint32)
+    out[:, 2] = bits
+    return out
+
+
 def _axis_lookup(pixels, centre_px, centre_tex, steps, count, linear):
     """Texel indices (into the texture with one ring of zeros) and the weight of the second, per pixel.
 

@@ -32,7 +32,8 @@ from .wavelet import WaveletVolume
 
 TILE = 16
 MAX_LEVELS = 8  # band id = level * 8 + subband code must fit the 64-entry table
-BYTES_PER_PAIR = 4  # one uint32 splat index per (tile, splat) pair
+RECORD_BYTES = {1: 16, 2: 32, 3: 32, 4: 32}  # a (tile, splat) pair's record by channels (cl/splat_record.h)
+TILE_LIST_SHARE = 0.25  # of the device's memory, at most, for the tile lists of one chunk of splats
 CHUNKS_PER_UNIT = 64  # binning work-items per compute unit (chunks of consecutive splats)
 MAX_HIST = 1 << 22  # entries of the (tile, chunk) count table
 KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
@@ -367,7 +368,8 @@ class Frame:
                         t["band_origin"].data, t["step_col"].data, t["step_row"].data, t["tex_box"].data,
                         np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
         total = int(cla.sum(counts, dtype=np.uint64).get())
-        budget = min(r.cc.info.max_alloc, r.cc.info.global_mem // 4) // BYTES_PER_PAIR
+        pair_bytes = RECORD_BYTES[g["channels"]]
+        budget = int(min(r.cc.info.max_alloc, r.cc.info.global_mem * TILE_LIST_SHARE)) // pair_bytes
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
             half = n // 2
             self.stats["bin_seconds"] += time.perf_counter() - start
@@ -375,7 +377,7 @@ class Frame:
             self._splat_layer(layer, gi, first + half, n - half)
             return
         if total > budget:
-            raise DeviceMemoryError(f"one splat needs {total * BYTES_PER_PAIR} bytes of tile lists, more "
+            raise DeviceMemoryError(f"one splat needs {total * pair_bytes} bytes of tile lists, more "
                                     f"than {r.cc.info.name} can hold; render a smaller image")
         tiles = tiles_x * tiles_y
         ranges = cla.zeros(q, (tiles, 2), np.uint32)
@@ -385,20 +387,21 @@ class Frame:
             hist = cla.empty(q, (tiles * chunks,), np.uint32)
             offsets = cla.empty_like(hist)
             k.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
-                                np.uint32(tiles), np.int32(tiles_x), np.int32(0), bbox.data, hist.data, hist.data)
+                                np.uint32(tiles), np.int32(tiles_x), np.int32(0), np.uint32(first), bbox.data,
+                                centre.data, stex.data, g["values"].data, hist.data, hist.data)
             r.scan(hist, offsets)
             k.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(chunks), np.uint32(total), offsets.data,
                           ranges.data)
-            vals = cla.empty(q, (total,), np.uint32)
+            records = cla.empty(q, (total * pair_bytes // 4,), np.uint32)
             k.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
-                                np.uint32(tiles), np.int32(tiles_x), np.int32(1), bbox.data, offsets.data, vals.data)
+                                np.uint32(tiles), np.int32(tiles_x), np.int32(1), np.uint32(first), bbox.data,
+                                centre.data, stex.data, g["values"].data, offsets.data, records.data)
         else:
-            vals = cla.zeros(q, (1,), np.uint32)
+            records = cla.zeros(q, (pair_bytes // 4,), np.uint32)
         q.finish()
         mid = time.perf_counter()
         k.splat_accumulate(q, (tiles_x * tiles_y * r.local_size,), (r.local_size,), np.int32(W), np.int32(H),
-                           np.int32(tiles_x), ranges.data, vals.data, np.uint32(first), centre.data, bbox.data,
-                           stex.data, g["values"].data, t["tex_int"].data, t["tex_map"].data,
+                           np.int32(tiles_x), ranges.data, records.data, t["tex_int"].data, t["tex_map"].data,
                            t["texels"].data, layer.fbs[gi].data)
         q.finish()
         self.stats["bin_seconds"] += mid - start

@@ -72,11 +72,13 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
     tiles = TILES_X * TILES_Y
     total = int(r_count.sum())
     r_ranges, r_vals = reference.bin_by_tile(r_bbox, TILES_X, tiles)
+    r_records = reference.records(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"], TILES_X, channels)
     for chunks in (1, 7, bin_chunks(n, tiles, cc.info.compute_units)):  # one, a few uneven, the renderer's
         chunk = -(-n // chunks)
         hist = cla.empty(q, (tiles * chunks,), np.uint32)
-        ks.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
-                             np.uint32(tiles), np.int32(TILES_X), np.int32(0), bbox.data, hist.data, hist.data)
+        bin_args = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.int32(TILES_X))
+        inputs = (np.uint32(first), bbox.data, centre.data, stex.data, d["values"].data)
+        ks.splat_chunk_tiles(q, (chunks,), None, *bin_args, np.int32(0), *inputs, hist.data, hist.data)
         r_hist = reference.count_tiles(r_bbox, chunk, chunks, tiles, TILES_X)
         assert np.array_equal(hist.get(), r_hist)
         offsets = cla.empty_like(hist)
@@ -86,18 +88,16 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
         ks.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(chunks), np.uint32(total), offsets.data,
                        ranges.data)
         assert np.array_equal(ranges.get(), r_ranges)
-        vals = cla.empty(q, (total,), np.uint32)
-        ks.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
-                             np.uint32(tiles), np.int32(TILES_X), np.int32(1), bbox.data, offsets.data, vals.data)
-        assert np.array_equal(vals.get(), r_vals)
+        records = cla.empty(q, r_records.shape, np.uint32)
+        ks.splat_chunk_tiles(q, (chunks,), None, *bin_args, np.int32(1), *inputs, offsets.data, records.data)
+        assert np.array_equal(records.get(), r_records)
 
     local = 16 * 16 // px
     images = []
     for _ in range(2):  # accumulates onto what is there; a second run repeats the first bit for bit
         fb = cla.to_device(q, np.full((H * W, 4), 0.5, np.float32))
         ks.splat_accumulate(q, (TILES_X * TILES_Y * local,), (local,), np.int32(W), np.int32(H), np.int32(TILES_X),
-                            ranges.data, vals.data, np.uint32(first), centre.data, bbox.data, stex.data,
-                            d["values"].data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
+                            ranges.data, records.data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
         images.append(fb.get().reshape(H, W, 4))
     assert np.array_equal(images[0], images[1])
     expected = 0.5 + reference.accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"],
