@@ -63,8 +63,9 @@ inline void splat_lookup(const int4 t, const float4 m, const float2 c, int4 *a, 
         const float base = m.x - c.x * m.z;  /* texel of pixel x: base + P x */
         const float fib = floor(base);
         const int ib = (int)fib;
-        const int p0 = ((ib % P) + P) % P;   /* phase plane and column of texel ib */
-        const int q0 = (ib - p0) / P;
+        /* phase plane p0 and column q0 of texel ib = q0 P + p0, 0 <= p0 < P: one division */
+        const int qt = ib / P, rt = ib - qt * P;
+        const int p0 = rt < 0 ? rt + P : rt, q0 = rt < 0 ? qt - 1 : qt;
         const int p1 = (p0 + 1 == P) ? 0 : p0 + 1;
         const int q1 = (p0 + 1 == P) ? q0 + 1 : q0;
         /* +1: the zero margin of the columns; the row margin is added per row */

@@ -44,29 +44,30 @@ def _tiles(box, tiles_x):
     return [ty * tiles_x + tx for ty in range(y0 // TILE, y1 // TILE + 1) for tx in range(x0 // TILE, x1 // TILE + 1)]
 
 
-def count_tiles(bbox, chunk, chunks, tiles, tiles_x):
-    """Reference of ``splat_chunk_tiles`` counting: (tiles * chunks,) uint32, ``[tile * chunks + c]`` counts the
-    splats of chunk c (splats ``c * chunk ..``) that touch the tile."""
-    hist = np.zeros((tiles, chunks), np.uint32)
+def count_tiles(bbox, stex, textures, chunk, chunks, tiles, tiles_x):
+    """Reference of ``splat_chunk_tiles`` counting: (tiles * textures * chunks,) uint32,
+    ``[(tile * textures + tex) * chunks + c]`` counts the splats of chunk c (splats ``c * chunk ..``)
+    with texture tex that touch the tile."""
+    hist = np.zeros((tiles, textures, chunks), np.uint32)
     for i, box in enumerate(bbox):
         for t in _tiles(box, tiles_x):
-            hist[t, i // chunk] += 1
+            hist[t, stex[i], i // chunk] += 1
     return hist.reshape(-1)
 
 
-def bin_by_tile(bbox, tiles_x, tiles):
+def bin_by_tile(bbox, stex, tiles_x, tiles):
     """Reference of scan + ``tile_ranges`` + ``splat_chunk_tiles`` placing: ``(ranges, vals)``.
 
-    A stable sort of the (tile, splat) pairs by tile: ``vals[ranges[t, 0]:ranges[t, 1]]`` are
-    the splats touching tile t in increasing order (importance order).
+    A stable sort of the (tile, splat) pairs by tile and texture: ``vals[ranges[t, 0]:ranges[t, 1]]``
+    are the splats touching tile t, by texture, each texture's in increasing order (importance).
     """
     pairs = [(t, i) for i, box in enumerate(bbox) for t in _tiles(box, tiles_x)]
-    keys = np.array([t for t, _ in pairs], np.int64)
+    tiles_of = np.array([t for t, _ in pairs], np.int64)
     vals = np.array([i for _, i in pairs], np.uint32)
-    order = np.argsort(keys, kind="stable")
-    keys, vals = keys[order], vals[order]
+    order = np.lexsort((vals, stex[vals], tiles_of))
+    tiles_of, vals = tiles_of[order], vals[order]
     ranges = np.zeros((tiles, 2), np.uint32)
-    edges = np.searchsorted(keys, np.arange(tiles + 1))
+    edges = np.searchsorted(tiles_of, np.arange(tiles + 1))
     ranges[:, 0], ranges[:, 1] = edges[:-1], edges[1:]
     return ranges, vals
 

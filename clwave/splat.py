@@ -18,7 +18,9 @@ from functools import lru_cache
 
 import numpy as np
 import scipy.ndimage
+import pyopencl as cl
 import pyopencl.array as cla
+from pyopencl.tools import ImmediateAllocator, MemoryPool
 from pyopencl.reduction import ReductionKernel
 from pyopencl.scan import ExclusiveScanKernel
 
@@ -34,8 +36,10 @@ TILE = 16
 MAX_LEVELS = 8  # band id = level * 8 + subband code must fit the 64-entry table
 RECORD_BYTES = {1: 16, 2: 32, 3: 32, 4: 32}  # a (tile, splat) pair's record by channels (cl/splat_record.h)
 TILE_LIST_SHARE = 0.25  # of the device's memory, at most, for the tile lists of one chunk of splats
-CHUNKS_PER_UNIT = 64  # binning work-items per compute unit (chunks of consecutive splats)
-MAX_HIST = 1 << 22  # entries of the (tile, chunk) count table
+#: binning work-items (chunks of consecutive splats) per compute unit: a GPU needs many; on a CPU
+#: each chunk keeps a write position in every (tile, texture) run, and few keep those in cache
+CHUNKS_PER_UNIT = dict(GPU=64, CPU=4)
+MAX_HIST = 1 << 22  # entries of the (tile, texture, chunk) count table
 KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
 POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pixel rows
 #: Haar textures with a cell axis are sampled CELL_REFINE times finer (texels of 1/(CELL_REFINE P)
@@ -67,6 +71,9 @@ class ViewTables:
             # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
             band = max(omega, DEFAULT_OMEGA_MIN[wav.order] / 2.0 ** m if wav.order >= 3 else KINKED_OMEGA_MIN)
             P = max(2, int(np.ceil(band * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
+            import os
+            if os.environ.get("CLW_PSCHED"):
+                P = int(os.environ["CLW_PSCHED"].split(",")[m])
             P *= CELL_REFINE if path == "cells" else 1
             self.texels_per_pixel[m] = P
             self.textures.update(footprints(wav, wv.spacing, view.n, view.u, view.v,
@@ -135,13 +142,15 @@ def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
     return np.ascontiguousarray(rows.reshape(nv + 3, cols, P).transpose(2, 0, 1))
 
 
-def bin_chunks(n: int, tiles: int, compute_units: int) -> int:
+def bin_chunks(n: int, runs: int, info) -> int:
     """Number of chunks of consecutive splats the binning works in (one work-item each).
 
-    Enough for every compute unit, bounded by the splats and by the size of the
-    (tile, chunk) count table.
+    Enough for every compute unit of the device (``info``: :class:`clwave.device.DeviceInfo`),
+    bounded by the splats and by the size of the (tile, texture, chunk) count table
+    (``runs`` = tiles x textures).
     """
-    return max(1, min(n, CHUNKS_PER_UNIT * compute_units, MAX_HIST // tiles))
+    per_unit = CHUNKS_PER_UNIT["GPU" if info.kind == "GPU" else "CPU"]
+    return max(1, min(n, per_unit * info.compute_units, MAX_HIST // runs))
 
 
 def default_omega_s(pixel, min_spacing) -> float:
@@ -194,6 +203,11 @@ class SplatRenderer:
         self.compile_seconds = time.perf_counter() - start
         self.groups = []
         q = self.cc.queue
+        # per-chunk scratch comes from a pool that keeps its buffers, and the tile lists from one
+        # buffer grown as needed, so a new view does not map (and the OS zero) fresh pages: a
+        # gigabyte of records takes a third of a second to map
+        self.scratch = MemoryPool(ImmediateAllocator(q))
+        self._tile_lists = None
         for gi, g in enumerate(wv.groups):
             table = wv.ranked(gi)
             coef = np.zeros((len(table.level), 4), np.int32)
@@ -204,6 +218,14 @@ class SplatRenderer:
             self.groups.append(dict(coef=cla.to_device(q, coef), values=cla.to_device(q, values),
                                     count=len(coef), channels=len(g.channels),
                                     energy=_energy_prefix(table.values)))
+
+    def tile_lists(self, nbytes: int):
+        """A device buffer of at least ``nbytes`` for the tile lists, kept between chunks and views."""
+        if self._tile_lists is None or self._tile_lists.size < nbytes:
+            self._tile_lists = None  # released before the larger one is made
+            room = max(nbytes, min(nbytes + nbytes // 4, self.cc.info.max_alloc))  # room to grow
+            self._tile_lists = cl.Buffer(self.cc.ctx, cl.mem_flags.READ_WRITE, room)
+        return self._tile_lists
 
     @property
     def count(self) -> int:
@@ -360,10 +382,10 @@ class Frame:
         H, W = layer.view.size
         tiles_x, tiles_y = -(-W // TILE), -(-H // TILE)
         start = time.perf_counter()
-        centre = cla.empty(q, (n, 2), np.float32)
-        bbox = cla.empty(q, (n, 4), np.int32)
-        stex = cla.empty(q, (n,), np.int32)
-        counts = cla.empty(q, (n,), np.uint32)
+        centre = cla.empty(q, (n, 2), np.float32, allocator=r.scratch)
+        bbox = cla.empty(q, (n, 4), np.int32, allocator=r.scratch)
+        stex = cla.empty(q, (n,), np.int32, allocator=r.scratch)
+        counts = cla.empty(q, (n,), np.uint32, allocator=r.scratch)
         k.splat_project(q, (n,), None, np.uint32(n), np.uint32(first), g["coef"].data, t["band_tex"].data,
                         t["band_origin"].data, t["step_col"].data, t["step_row"].data, t["tex_box"].data,
                         np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
@@ -380,28 +402,26 @@ class Frame:
             raise DeviceMemoryError(f"one splat needs {total * pair_bytes} bytes of tile lists, more "
                                     f"than {r.cc.info.name} can hold; render a smaller image")
         tiles = tiles_x * tiles_y
-        ranges = cla.zeros(q, (tiles, 2), np.uint32)
+        ranges = cla.zeros(q, (tiles, 2), np.uint32, allocator=r.scratch)
+        records = r.tile_lists(max(total, 1) * pair_bytes)
         if total:
-            chunks = bin_chunks(n, tiles, r.cc.info.compute_units)
+            textures = len(layer.tables[gi].tex_int)
+            chunks = bin_chunks(n, tiles * textures, r.cc.info)
             chunk = -(-n // chunks)
-            hist = cla.empty(q, (tiles * chunks,), np.uint32)
+            hist = cla.empty(q, (tiles * textures * chunks,), np.uint32, allocator=r.scratch)
             offsets = cla.empty_like(hist)
-            k.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
-                                np.uint32(tiles), np.int32(tiles_x), np.int32(0), np.uint32(first), bbox.data,
-                                centre.data, stex.data, g["values"].data, hist.data, hist.data)
+            sizes = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.int32(tiles_x),
+                     np.uint32(textures))
+            inputs = (np.uint32(first), bbox.data, centre.data, stex.data, g["values"].data)
+            k.splat_chunk_tiles(q, (chunks,), (1,), *sizes, np.int32(0), *inputs, hist.data, hist.data)
             r.scan(hist, offsets)
-            k.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(chunks), np.uint32(total), offsets.data,
-                          ranges.data)
-            records = cla.empty(q, (total * pair_bytes // 4,), np.uint32)
-            k.splat_chunk_tiles(q, (chunks,), None, np.uint32(n), np.uint32(chunk), np.uint32(chunks),
-                                np.uint32(tiles), np.int32(tiles_x), np.int32(1), np.uint32(first), bbox.data,
-                                centre.data, stex.data, g["values"].data, offsets.data, records.data)
-        else:
-            records = cla.zeros(q, (pair_bytes // 4,), np.uint32)
+            k.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(textures), np.uint32(chunks),
+                          np.uint32(total), offsets.data, ranges.data)
+            k.splat_chunk_tiles(q, (chunks,), (1,), *sizes, np.int32(1), *inputs, offsets.data, records)
         q.finish()
         mid = time.perf_counter()
         k.splat_accumulate(q, (tiles_x * tiles_y * r.local_size,), (r.local_size,), np.int32(W), np.int32(H),
-                           np.int32(tiles_x), ranges.data, records.data, t["tex_int"].data, t["tex_map"].data,
+                           np.int32(tiles_x), ranges.data, records, t["tex_int"].data, t["tex_map"].data,
                            t["texels"].data, layer.fbs[gi].data)
         q.finish()
         self.stats["bin_seconds"] += mid - start

@@ -71,22 +71,24 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
 
     tiles = TILES_X * TILES_Y
     total = int(r_count.sum())
-    r_ranges, r_vals = reference.bin_by_tile(r_bbox, TILES_X, tiles)
+    textures = len(s["tex_int"])
+    r_ranges, r_vals = reference.bin_by_tile(r_bbox, r_tex, TILES_X, tiles)
     r_records = reference.records(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"], TILES_X, channels)
-    for chunks in (1, 7, bin_chunks(n, tiles, cc.info.compute_units)):  # one, a few uneven, the renderer's
+    for chunks in (1, 7, bin_chunks(n, tiles * textures, cc.info)):  # one, a few uneven, the renderer's
         chunk = -(-n // chunks)
-        hist = cla.empty(q, (tiles * chunks,), np.uint32)
-        bin_args = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.int32(TILES_X))
+        hist = cla.empty(q, (tiles * textures * chunks,), np.uint32)
+        bin_args = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.int32(TILES_X),
+                    np.uint32(textures))
         inputs = (np.uint32(first), bbox.data, centre.data, stex.data, d["values"].data)
         ks.splat_chunk_tiles(q, (chunks,), None, *bin_args, np.int32(0), *inputs, hist.data, hist.data)
-        r_hist = reference.count_tiles(r_bbox, chunk, chunks, tiles, TILES_X)
+        r_hist = reference.count_tiles(r_bbox, r_tex, textures, chunk, chunks, tiles, TILES_X)
         assert np.array_equal(hist.get(), r_hist)
         offsets = cla.empty_like(hist)
         ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")(hist, offsets)
         assert np.array_equal(offsets.get(), np.concatenate([[0], np.cumsum(r_hist)[:-1]]).astype(np.uint32))
         ranges = cla.empty(q, (tiles, 2), np.uint32)
-        ks.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(chunks), np.uint32(total), offsets.data,
-                       ranges.data)
+        ks.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(textures), np.uint32(chunks), np.uint32(total),
+                       offsets.data, ranges.data)
         assert np.array_equal(ranges.get(), r_ranges)
         records = cla.empty(q, r_records.shape, np.uint32)
         ks.splat_chunk_tiles(q, (chunks,), None, *bin_args, np.int32(1), *inputs, offsets.data, records.data)
