@@ -1,8 +1,10 @@
 /* splat_bin.cl: project splats and bin them into image tiles (paper §4, MATH.md §6).
  *
  * Pipeline (host: clwave/splat.py): splat_project -> splat_chunk_tiles counting (per chunk
- * of consecutive splats, a count per tile and texture) -> exclusive scan of the counts in
- * (tile, texture, chunk) order -> tile_ranges -> splat_chunk_tiles placing.  This is a counting
+ * of consecutive splats, a count per tile and texture) -> transpose_counts -> exclusive scan
+ * of the counts in (tile, texture, chunk) order -> tile_ranges -> transpose_counts ->
+ * splat_chunk_tiles placing.  Each chunk keeps its own counts together (chunk-major), so a
+ * CPU core finds them in its cache; the scan wants them run-major.  This is a counting
  * sort by tile and, within a tile, by texture: each chunk writes its splats, in splat order, at
  * its own offsets within each (tile, texture) run, so the sum is deterministic, with no
  * atomics.  Texture order within a tile keeps one footprint's texels in cache while they are
@@ -67,18 +69,18 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
  *   first        index of the chunk's first coefficient (values are indexed first + splat)
  *   bbox, stex   in  (n,) from splat_project; centre too (read when placing)
  *   values       in  (K,) float4: coefficient per channel
- *   table        counting: out (tiles, textures, chunks) uint, [(tile * textures + tex) * chunks + c]
+ *   table        (chunks, tiles, textures) uint.  counting: out, [(c * tiles + tile) * textures + tex]
  *                = how many splats of chunk c with texture tex touch the tile;  placing: in/out,
- *                the exclusive scan of the counts in that order, i.e. where chunk c writes next
- *                in each (tile, texture) run (consumed)
+ *                where chunk c writes next in each (tile, texture) run (consumed): the exclusive
+ *                scan of the counts in (tile, texture, chunk) order, back in this layout
  *   records      placing: out (total, CLW_RECORD) uint4, one splat record per (tile, splat) pair
- *                (splat_record.h), by tile, texture and splat.  Records rather than
- *                splat indices: the accumulation then reads each tile's list front to back instead
- *                of the splats' tables at random (those misses took 40 % of its time)
- * Grid: global (chunks,), any local size; work-item c owns column c of table. */
+ *                (splat_record.h), by tile, texture and splat.  Records rather than splat
+ *                indices: the accumulation then reads each tile's list front to back instead of
+ *                the splats' tables at random (those misses took 40 % of its time)
+ * Grid: global (chunks,), any local size; work-item c owns row c of table. */
 __kernel void splat_chunk_tiles(const uint n, const uint chunk, const uint chunks, const uint tiles,
-                                const int tiles_x, const uint textures, const int place, const uint first, __global const int4 *bbox,
-                                __global const float2 *centre, __global const int *stex,
+                                const int tiles_x, const uint textures, const int place, const uint first,
+                                __global const int4 *bbox, __global const float2 *centre, __global const int *stex,
                                 __global const float4 *values, __global uint *table, __global uint4 *records)
 {
     const uint c = get_global_id(0);
@@ -86,7 +88,7 @@ __kernel void splat_chunk_tiles(const uint n, const uint chunk, const uint chunk
         return;
     if (!place)
         for (uint t = 0; t < tiles * textures; ++t)
-            table[t * chunks + c] = 0;
+            table[c * tiles * textures + t] = 0;
     const uint end = min(n, (c + 1) * chunk);
     for (uint i = c * chunk; i < end; ++i) {
         const int4 b = bbox[i];
@@ -95,7 +97,7 @@ __kernel void splat_chunk_tiles(const uint n, const uint chunk, const uint chunk
         const int tex = stex[i];
         for (int ty = b.y / CLW_TILE; ty <= b.w / CLW_TILE; ++ty)
             for (int tx = b.x / CLW_TILE; tx <= b.z / CLW_TILE; ++tx) {
-                __global uint *slot = table + ((uint)(ty * tiles_x + tx) * textures + tex) * chunks + c;
+                __global uint *slot = table + (c * tiles + (uint)(ty * tiles_x + tx)) * textures + tex;
                 if (place)
                     splat_record(records + (*slot)++ * CLW_RECORD, b - (int4)(tx, ty, tx, ty) * CLW_TILE, centre[i],
                                  tex, values[first + i]);
@@ -118,4 +120,12 @@ __kernel void tile_ranges(const uint tiles, const uint textures, const uint chun
         return;
     const uint run = textures * chunks;  /* the counts of one tile */
     ranges[t] = (uint2)(offset[t * run], t + 1 < tiles ? offset[(t + 1) * run] : total);
+}
+
+/* transpose_counts: dst (cols, rows) = src (rows, cols) transposed, uint.  Grid: global (rows * cols,). */
+__kernel void transpose_counts(const uint rows, const uint cols, __global const uint *src, __global uint *dst)
+{
+    const uint i = get_global_id(0);
+    if (i < rows * cols)
+        dst[(i % cols) * rows + i / cols] = src[i];
 }

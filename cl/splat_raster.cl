@@ -12,7 +12,7 @@
  *   ranges   in  (tiles,) uint2: [start, end) into records
  *   records  in  (total, CLW_RECORD) uint4: splat records (splat_record.h: centre, texture, the
  *                pixels in the tile, c per channel; the 2^{-m/2} is in the texture), sorted by
- *                tile, importance order within a tile
+ *                tile, then texture, then importance
  *   tex_int  in  (T,) int4: (offset, columns per plane, rows per plane, lookup); planes carry
  *                a margin of zero texels: one column on either side, one row above and two
  *                below (a nearest row that rounds onto the bottom margin still reads its

@@ -2,8 +2,9 @@
  * (splat_bin.cl) and read by accumulation (splat_raster.cl).
  *
  * CLW_RECORD uint4s: (centre col, centre row, bits, c_0) and, with more than one channel,
- * (c_1, c_2, c_3, 0), floats as their bits (so the bits field never passes through a float).  bits: the texture id (bits 0-15) and the splat's pixels in the tile,
- * x0, x1, y0, y1 in 0..CLW_TILE - 1 (4 bits each from bit 16), inclusive.
+ * (c_1, c_2, c_3, 0), floats as their bits (so the bits field never passes through a float).
+ * bits: the texture id (bits 0-15) and the splat's pixels in the tile, x0, x1, y0, y1 in
+ * 0..CLW_TILE - 1 (4 bits each from bit 16), inclusive.
  * Build: -DCLW_CHANNELS=C (1..4), the channels accumulated. */
 #ifndef SPLAT_RECORD_H
 #define SPLAT_RECORD_H
@@ -25,7 +26,8 @@
 inline void splat_record(__global uint4 *rec, const int4 box, const float2 centre, const int tex, const float4 c)
 {
     const int4 clip = clamp(box, 0, CLW_TILE - 1);
-    const uint bits = (uint)tex | (uint)clip.x << 16 | (uint)clip.z << 20 | (uint)clip.y << 24 | (uint)clip.w << 28;
+    const uint bits = (uint)tex | (uint)clip.x << 16 | (uint)clip.z << 20 | (uint)clip.y << 24
+                      | (uint)clip.w << 28;
     rec[0] = (uint4)(as_uint(centre.x), as_uint(centre.y), bits, as_uint(c.x));
 #if CLW_CHANNELS > 1
     rec[1] = as_uint4((float4)(c.y, c.z, c.w, 0.0f));

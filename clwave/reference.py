@@ -45,14 +45,13 @@ def _tiles(box, tiles_x):
 
 
 def count_tiles(bbox, stex, textures, chunk, chunks, tiles, tiles_x):
-    """Reference of ``splat_chunk_tiles`` counting: (tiles * textures * chunks,) uint32,
-    ``[(tile * textures + tex) * chunks + c]`` counts the splats of chunk c (splats ``c * chunk ..``)
-    with texture tex that touch the tile."""
-    hist = np.zeros((tiles, textures, chunks), np.uint32)
+    """Reference of ``splat_chunk_tiles`` counting: (chunks, tiles * textures) uint32, ``[c, tile * textures + tex]``
+    counts the splats of chunk c (splats ``c * chunk ..``) with texture tex that touch the tile."""
+    hist = np.zeros((chunks, tiles, textures), np.uint32)
     for i, box in enumerate(bbox):
         for t in _tiles(box, tiles_x):
-            hist[t, stex[i], i // chunk] += 1
-    return hist.reshape(-1)
+            hist[i // chunk, t, stex[i]] += 1
+    return hist.reshape(chunks, -1)
 
 
 def bin_by_tile(bbox, stex, tiles_x, tiles):

@@ -195,6 +195,8 @@ class SplatRenderer:
                                           {"CLW_PX": px, "CLW_CHANNELS": c})
                         for c in sorted({len(g.channels) for g in wv.groups})}
         self.local_size = TILE * TILE // px
+        # binning chunks: on a CPU one work-item per group, so the few chunks spread over the cores
+        self.bin_local = None if self.cc.info.kind == "GPU" else (1,)
         ctx = self.cc.ctx
         self.scan = ExclusiveScanKernel(ctx, np.uint32, "a+b", neutral="0")
         self.pixel_updates = ReductionKernel(
@@ -408,16 +410,21 @@ class Frame:
             textures = len(layer.tables[gi].tex_int)
             chunks = bin_chunks(n, tiles * textures, r.cc.info)
             chunk = -(-n // chunks)
-            hist = cla.empty(q, (tiles * textures * chunks,), np.uint32, allocator=r.scratch)
-            offsets = cla.empty_like(hist)
+            # chunk-major counts (each chunk's together, cached by its core), scanned run-major,
+            # then back to chunk-major as each chunk's write cursors
+            table = cla.empty(q, (chunks * tiles * textures,), np.uint32, allocator=r.scratch)
+            by_run, starts = cla.empty_like(table), cla.empty_like(table)
             sizes = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.int32(tiles_x),
                      np.uint32(textures))
             inputs = (np.uint32(first), bbox.data, centre.data, stex.data, g["values"].data)
-            k.splat_chunk_tiles(q, (chunks,), (1,), *sizes, np.int32(0), *inputs, hist.data, hist.data)
-            r.scan(hist, offsets)
+            runs = np.uint32(tiles * textures)
+            k.splat_chunk_tiles(q, (chunks,), r.bin_local, *sizes, np.int32(0), *inputs, table.data, records)
+            k.transpose_counts(q, (table.size,), None, np.uint32(chunks), runs, table.data, by_run.data)
+            r.scan(by_run, starts)
             k.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(textures), np.uint32(chunks),
-                          np.uint32(total), offsets.data, ranges.data)
-            k.splat_chunk_tiles(q, (chunks,), (1,), *sizes, np.int32(1), *inputs, offsets.data, records)
+                          np.uint32(total), starts.data, ranges.data)
+            k.transpose_counts(q, (table.size,), None, runs, np.uint32(chunks), starts.data, table.data)
+            k.splat_chunk_tiles(q, (chunks,), r.bin_local, *sizes, np.int32(1), *inputs, table.data, records)
         q.finish()
         mid = time.perf_counter()
         k.splat_accumulate(q, (tiles_x * tiles_y * r.local_size,), (r.local_size,), np.int32(W), np.int32(H),
