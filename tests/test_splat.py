@@ -88,6 +88,29 @@ def test_box_of_ones_with_one_world_axis_in_the_image(cc, family, angles, shape,
     assert np.array_equal(clwave.splat(wv, cam, device=cc).image, result.image)  # bit-identical repeat
 
 
+@pytest.mark.parametrize("family", ["cubic", "linear"])
+def test_cubic_textures_are_trimmed_to_their_samples_above_the_tolerance(data, family):
+    """Paper Fig. 9: a cubic texture's outer rows and columns each hold a sample above TEXTURE_TOL
+    of its peak, and trimming removed samples; linear ones keep their whole support box."""
+    from clwave.footprint import footprints
+    from clwave.splat import TEXTURE_TOL, ViewTables
+
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), family, levels=2)
+    view = clwave.Camera(30, 20, size=32).view(wv)
+    tables = ViewTables(wv, 0, view)
+    for (m, key), tex in tables.textures.items():
+        if tex is None:
+            continue
+        full = footprints(family, wv.spacing, view.n, view.u, view.v, [(m, key)], omega_s=tables.omega_s,
+                          texel=tex.h_u)[(m, key)].data
+        if family == "linear":
+            assert tex.data.shape == full.shape
+            continue
+        assert tex.data.size < full.size
+        for border in (tex.data[0], tex.data[-1], tex.data[:, 0], tex.data[:, -1]):
+            assert np.abs(border).max() > TEXTURE_TOL * np.abs(tex.data).max()
+
+
 def test_rgba_channels_share_footprints_and_repeat_bit_identically(cc, data):
     rgba = np.stack([data, 2 * data, data ** 2, 0.5 * data], -1)
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(rgba), "cubic", levels=2).threshold(keep=0.2)
