@@ -111,6 +111,14 @@ def test_cubic_textures_are_trimmed_to_their_samples_above_the_tolerance(data, f
             assert np.abs(border).max() > TEXTURE_TOL * np.abs(tex.data).max()
 
 
+def test_only_bands_with_coefficients_get_textures(cc, data):
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2).threshold(keep=0.5)
+    present = {(band.level, band.key) for band, index, _ in wv.bands(0) if len(index)}
+    assert 1 < len(present) < len(wv.groups[0].bands)  # the threshold emptied some bands
+    frame = clwave.SplatRenderer(wv, device=cc).begin(clwave.Camera(30, 20, size=32))
+    assert set(frame.tables[0].textures) == present
+
+
 def test_rgba_channels_share_footprints_and_repeat_bit_identically(cc, data):
     rgba = np.stack([data, 2 * data, data ** 2, 0.5 * data], -1)
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(rgba), "cubic", levels=2).threshold(keep=0.2)
