@@ -55,10 +55,11 @@ def count_tiles(bbox, stex, textures, chunk, chunks, tiles, tiles_x):
 
 
 def bin_by_tile(bbox, stex, tiles_x, tiles):
-    """Reference of scan + ``tile_ranges`` + ``splat_chunk_tiles`` placing: ``(ranges, vals)``.
+    """Reference of scan + ``tile_ranges`` and of the order ``splat_chunk_tiles`` places in: ``(ranges, vals)``.
 
     A stable sort of the (tile, splat) pairs by tile and texture: ``vals[ranges[t, 0]:ranges[t, 1]]``
     are the splats touching tile t, by texture, each texture's in increasing order (importance).
+    :func:`records` turns them into the placed records.
     """
     pairs = [(t, i) for i, box in enumerate(bbox) for t in _tiles(box, tiles_x)]
     tiles_of = np.array([t for t, _ in pairs], np.int64)
@@ -76,6 +77,8 @@ def records(ranges, vals, first, centre, bbox, stex, values, tiles_x, channels):
 
     Per pair: centre, the bits (texture id; the splat's pixels in the tile, 4 bits each) and
     c_0, then, with more than one channel, c_1..c_3 and 0 (R = 2 uint4s); floats as their bits.
+    The packing restates ``cl/splat_record.h``; :func:`accumulate` works from ``vals`` and the
+    splats' own tables instead, so a wrong layout also shows in the accumulated image.
     """
     floats = np.zeros((len(vals), 4 if channels == 1 else 8), np.float32)
     nc = 1 if channels == 1 else 4

@@ -4,10 +4,10 @@ Every kept coefficient c of band (m, key) adds ``c * T_{m,key}(mu - mu_c, nu - n
 to the image (paper eq. 29, MATH.md §6), where T is the footprint texture of the
 prototype (:mod:`clwave.footprint`, Fourier projection slicing) and (mu_c, nu_c) the
 projection of the centre of the basis support.  On the device
-(``cl/splat_bin.cl``, ``cl/splat_raster.cl``): project -> per-chunk tile counts ->
-scan -> per-tile ranges -> placement (a deterministic counting sort by tile) ->
-accumulate per tile from local-memory batches.  The result is the line integral ``∫ f(p - t n) dt`` of each channel in
-world units (CONVENTIONS.md "Outputs").
+(``cl/splat_bin.cl``, ``cl/splat_raster.cl``): project -> per-chunk counts per (tile,
+texture) -> scan -> per-tile ranges -> placement of a record per (tile, splat) pair (a
+deterministic counting sort by tile and texture) -> accumulate per tile.  The result is the
+line integral ``∫ f(p - t n) dt`` of each channel in world units (CONVENTIONS.md "Outputs").
 """
 
 from __future__ import annotations
@@ -39,7 +39,6 @@ TILE_LIST_SHARE = 0.25  # of the device's memory, at most, for the tile lists of
 #: binning work-items (chunks of consecutive splats) per compute unit: a GPU needs many; on a CPU
 #: each chunk keeps a write position in every (tile, texture) run, and few keep those in cache
 CHUNKS_PER_UNIT = dict(GPU=64, CPU=4)
-MAX_HIST = 1 << 22  # entries of the (tile, texture, chunk) count table
 KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
 POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pixel rows
 #: Haar textures with a cell axis are sampled CELL_REFINE times finer (texels of 1/(CELL_REFINE P)
@@ -84,7 +83,7 @@ class ViewTables:
             self.textures.update(footprints(wav, wv.spacing, view.n, view.u, view.v,
                                             [(b.level, b.key) for b in drawn if b.level == m],
                                             omega_s=omega, path=path, texel=view.pixel / P,
-                                            tol=TEXTURE_TOL if wav.order >= 3 else 0.0))
+                                            tol=TEXTURE_TOL if wav.order == 4 else 0.0))
         self.footprint_seconds = time.perf_counter() - start
         self.paths = sorted({t.path for t in self.textures.values() if t is not None})
 
@@ -96,7 +95,7 @@ class ViewTables:
         for band in g.bands:
             m = band.level
             key_xyz = band.key[::-1]
-            code = sum(1 << a for a, letter in enumerate(key_xyz) if letter == "d")
+            code = band.code
             scale = 2.0 ** m
             # world centre of coefficient k = 0 (MATH.md §6: X = o + 2^m (k + c0)), in (x, y, z)
             fine = np.array([wav.offset(letter, m) + scale * wav.support(letter) / 2.0 for letter in key_xyz])
@@ -152,11 +151,12 @@ def bin_chunks(n: int, runs: int, info) -> int:
     """Number of chunks of consecutive splats the binning works in (one work-item each).
 
     Enough for every compute unit of the device (``info``: :class:`clwave.device.DeviceInfo`),
-    bounded by the splats and by the size of the (tile, texture, chunk) count table
-    (``runs`` = tiles x textures).
+    bounded by the splats and by the (tile, texture, chunk) count tables (``runs`` = tiles x
+    textures): three of them, uint32, in at most 1/32 of the device's memory.
     """
     per_unit = CHUNKS_PER_UNIT["GPU" if info.kind == "GPU" else "CPU"]
-    return max(1, min(n, per_unit * info.compute_units, MAX_HIST // runs))
+    entries = min(info.max_alloc // 4, info.global_mem // 32 // 12)
+    return max(1, min(n, per_unit * info.compute_units, entries // runs))
 
 
 def default_omega_s(pixel, min_spacing) -> float:
@@ -224,7 +224,8 @@ class SplatRenderer:
             values = np.zeros((len(table.level), 4), np.float32)
             values[:, : table.values.shape[1]] = table.values
             # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22)
-            present = {(band.level, band.key) for band, index, _ in wv.bands(gi) if len(index)}
+            kept = set(np.unique(table.level.astype(np.int32) * 8 + table.key_code).tolist())
+            present = {(b.level, b.key) for b in g.bands if b.level * 8 + b.code in kept}
             self.groups.append(dict(coef=cla.to_device(q, coef), values=cla.to_device(q, values),
                                     count=len(coef), channels=len(g.channels), present=present,
                                     energy=_energy_prefix(table.values)))
@@ -402,7 +403,9 @@ class Frame:
                         np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
         total = int(cla.sum(counts, dtype=np.uint64).get())
         pair_bytes = RECORD_BYTES[g["channels"]]
-        budget = int(min(r.cc.info.max_alloc, r.cc.info.global_mem * TILE_LIST_SHARE)) // pair_bytes
+        # pairs: uint32 offsets, and record indices (pairs x 2 uint4s) that stay within 32 bits
+        budget = min(int(min(r.cc.info.max_alloc, r.cc.info.global_mem * TILE_LIST_SHARE)) // pair_bytes,
+                     2**31 - 1)
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
             half = n // 2
             self.stats["bin_seconds"] += time.perf_counter() - start

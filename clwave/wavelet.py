@@ -61,13 +61,18 @@ class Band:
     def size(self) -> int:
         return int(np.prod(self.shape))
 
+    @property
+    def code(self) -> int:
+        """Subband code: bit 0 set for 'd' (psi) along x, bit 1 along y, bit 2 along z."""
+        return sum(1 << (2 - a) for a, ch in enumerate(self.key) if ch == "d")
+
 
 @dataclass
 class CoefficientTable:
     """Coefficients of one group in importance order, ready for upload.
 
-    ``index`` is the pywt index in array order ``(k_z, k_y, k_x)``; ``key_code``
-    has bit 0 set for 'd' along x, bit 1 along y, bit 2 along z.
+    ``index`` is the pywt index in array order ``(k_z, k_y, k_x)``; ``key_code`` is the
+    band's :attr:`Band.code`.
     """
 
     level: np.ndarray       # (K,) int8
@@ -313,8 +318,7 @@ class WaveletVolume:
             order = np.lexsort((positions, -imp, ~approx))  # approx first, then importance, ties by position
             band_no, index = g.locate(positions[order])
             levels = np.array([b.level for b in g.bands], dtype=np.int8)
-            codes = np.array([sum(1 << (2 - a) for a, ch in enumerate(b.key) if ch == "d")
-                              for b in g.bands], dtype=np.uint8)
+            codes = np.array([b.code for b in g.bands], dtype=np.uint8)
             tables.append(CoefficientTable(levels[band_no], codes[band_no], index.astype(np.int32),
                                            np.ascontiguousarray(g.values[:, order].T),
                                            imp[order].astype(np.float32)))
@@ -325,8 +329,7 @@ class WaveletVolume:
         table, g = self.ranked(group), self.groups[group]
         out = []
         for band in g.bands:
-            code = sum(1 << (2 - a) for a, ch in enumerate(band.key) if ch == "d")
-            sel = (table.level == band.level) & (table.key_code == code)
+            sel = (table.level == band.level) & (table.key_code == band.code)
             out.append((band, table.index[sel], table.values[sel]))
         return out
 

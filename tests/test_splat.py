@@ -134,8 +134,8 @@ def test_splitting_the_tile_lists_gives_the_same_image(cc, data, monkeypatch):
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2)
     cam = clwave.Camera(30, 20, size=32)
     whole = clwave.splat(wv, cam, device=cc)
-    # room for about 2000 pairs at once
-    monkeypatch.setattr(splat_module, "TILE_LIST_SHARE", 2000 * splat_module.RECORD_BYTES[4] / cc.info.global_mem)
+    # room for about 2000 pairs (scalar records) at once
+    monkeypatch.setattr(splat_module, "TILE_LIST_SHARE", 2000 * splat_module.RECORD_BYTES[1] / cc.info.global_mem)
     split = clwave.splat(wv, cam, device=cc)
     assert np.allclose(split.image, whole.image, rtol=1e-5, atol=1e-5)
 

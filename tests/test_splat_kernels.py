@@ -51,7 +51,7 @@ def random_scene(rng, n=400, n_tex=8):
                 values=values, n=n, first=7, textures=textures)
 
 
-@pytest.mark.parametrize("px, channels", [(256, 4), (256, 1), (1, 4)])
+@pytest.mark.parametrize("px, channels", [(256, 4), (256, 1), (1, 4), (1, 1)])
 def test_every_stage_equals_its_reference(cc, rng, px, channels):
     s = random_scene(rng)
     q, n, first = cc.queue, s["n"], s["first"]
