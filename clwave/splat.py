@@ -342,23 +342,33 @@ class Layer:
         img = self.fbs[gi].get().reshape(h, w, 4)[..., : self.r.groups[gi]["channels"]]
         if self.factor == 1:
             return img
-        ay, ax = _upsampling(self.fine[0], h, self.factor), _upsampling(self.fine[1], w, self.factor)
-        return np.stack([ay @ img[..., c] @ ax.T for c in range(img.shape[2])], axis=-1)
+        return np.stack([upsample(img[..., c], self.fine, self.factor) for c in range(img.shape[2])], axis=-1)
+
+
+def upsample(samples: np.ndarray, shape: tuple, factor: int) -> np.ndarray:
+    """(h, w) samples at coarse pixels -> their prefiltered cubic B-spline interpolant at the
+    fine pixel centres of ``shape`` (same centre, ``factor`` fine pixels per coarse one), float32.
+
+    The B-spline coefficients come from ``scipy.ndimage.spline_filter`` (mirrored ends); each
+    fine pixel then sums the 4 x 4 coefficients under it, one axis at a time.  (A dense
+    matrix product did the same through BLAS, whose idle threads then spun on the cores the
+    next view's kernels needed.)
+    """
+    coeffs = scipy.ndimage.spline_filter(samples, order=3, mode="mirror", output=np.float32)
+    (iy, wy), (ix, wx) = _taps(shape[0], samples.shape[0], factor), _taps(shape[1], samples.shape[1], factor)
+    rows = np.einsum("nk,nkx->nx", wy, coeffs[iy])
+    return np.einsum("mk,nmk->nm", wx, rows[:, ix])
 
 
 @lru_cache(maxsize=16)
-def _upsampling(n: int, coarse: int, factor: int) -> np.ndarray:
-    """(n, coarse) float32 matrix: samples at coarse pixels -> their prefiltered cubic B-spline
-    interpolant at the n fine pixel centres (same centre, ``factor`` fine pixels per coarse one).
-
-    Fine pixel c lies at coarse index ``(c + 1/2 - n/2) / factor + coarse/2 - 1/2``; the
-    B-spline coefficients are the samples times the inverse of the B-spline's sampling matrix
-    (1/6, 4/6, 1/6, mirrored at the ends, as scipy.ndimage.spline_filter1d).
-    """
+def _taps(n: int, coarse: int, factor: int) -> tuple:
+    """The 4 coarse coefficients under each of n fine pixel centres and their cubic B-spline
+    weights, (n, 4) each; fine pixel c lies at coarse index ``(c + 1/2 - n/2) / factor + coarse/2 - 1/2``
+    (weight 0 for taps off the coarse grid)."""
     at = (np.arange(n) + 0.5 - n / 2) / factor + coarse / 2 - 0.5
-    weights = _bspline3(at[:, None] - np.arange(coarse)[None, :])
-    sampling = scipy.ndimage.spline_filter1d(np.eye(coarse), order=3, axis=0, mode="mirror")  # its inverse
-    return (weights @ sampling).astype(np.float32)
+    index = np.floor(at).astype(np.intp)[:, None] + np.arange(-1, 3)
+    weights = _bspline3(at[:, None] - index) * ((index >= 0) & (index < coarse))
+    return np.clip(index, 0, coarse - 1), weights.astype(np.float32)
 
 
 class Frame:

@@ -223,13 +223,16 @@ def test_coarse_framebuffers_only_for_cubic_and_checked(cc, data):
 
 
 def test_upsampling_is_the_prefiltered_cubic_bspline():
-    from scipy.ndimage import map_coordinates, spline_filter1d
+    from scipy.ndimage import map_coordinates, spline_filter
 
-    samples = np.random.default_rng(2).random(64)
-    for n, factor in ((64, 2), (61, 4)):
-        coarse = -(-n // factor) + 2 * splat_module.COARSE_MARGIN
-        at = (np.arange(n) + 0.5 - n / 2) / factor + coarse / 2 - 0.5  # fine pixel centres, coarse index
-        assert at.min() > 4 and at.max() < coarse - 5  # inside the margin: the ends' extension plays no part
-        want = map_coordinates(spline_filter1d(samples[:coarse], mode="mirror"), [at], order=3, prefilter=False,
-                               mode="mirror")
-        assert np.allclose(splat_module._upsampling(n, coarse, factor) @ samples[:coarse], want, rtol=1e-6, atol=1e-6)
+    samples = np.random.default_rng(2).random((64, 64)).astype(np.float32)
+    for shape, factor in (((64, 61), 2), ((61, 64), 4)):
+        coarse = [-(-n // factor) + 2 * splat_module.COARSE_MARGIN for n in shape]
+        # fine pixel centres as coarse indices
+        at = [(np.arange(n) + 0.5 - n / 2) / factor + c / 2 - 0.5 for n, c in zip(shape, coarse)]
+        assert all(a.min() > 4 and a.max() < c - 5 for a, c in zip(at, coarse))  # the ends play no part
+        grid = samples[: coarse[0], : coarse[1]]
+        want = map_coordinates(spline_filter(grid.astype(float), mode="mirror"), np.meshgrid(*at, indexing="ij"),
+                               order=3, prefilter=False, mode="mirror")
+        got = splat_module.upsample(grid, shape, factor)
+        assert got.shape == shape and np.allclose(got, want, rtol=1e-6, atol=1e-6)
