@@ -18,6 +18,7 @@ from functools import lru_cache
 
 import numpy as np
 import scipy.ndimage
+import scipy.sparse
 import pyopencl as cl
 import pyopencl.array as cla
 from pyopencl.tools import ImmediateAllocator, MemoryPool
@@ -350,25 +351,25 @@ def upsample(samples: np.ndarray, shape: tuple, factor: int) -> np.ndarray:
     fine pixel centres of ``shape`` (same centre, ``factor`` fine pixels per coarse one), float32.
 
     The B-spline coefficients come from ``scipy.ndimage.spline_filter`` (mirrored ends); each
-    fine pixel then sums the 4 x 4 coefficients under it, one axis at a time.  (A dense
-    matrix product did the same through BLAS, whose idle threads then spun on the cores the
-    next view's kernels needed.)
+    fine pixel then sums the 4 x 4 coefficients under it, one axis at a time, as sparse products.
+    (Dense matrix products did the same through BLAS, whose idle threads then spun on the cores
+    the next view's kernels needed.)
     """
     coeffs = scipy.ndimage.spline_filter(samples, order=3, mode="mirror", output=np.float32)
-    (iy, wy), (ix, wx) = _taps(shape[0], samples.shape[0], factor), _taps(shape[1], samples.shape[1], factor)
-    rows = np.einsum("nk,nkx->nx", wy, coeffs[iy])
-    return np.einsum("mk,nmk->nm", wx, rows[:, ix])
+    rows = _taps(shape[0], samples.shape[0], factor) @ coeffs  # (H, w)
+    return np.ascontiguousarray((_taps(shape[1], samples.shape[1], factor) @ rows.T).T)
 
 
 @lru_cache(maxsize=16)
-def _taps(n: int, coarse: int, factor: int) -> tuple:
-    """The 4 coarse coefficients under each of n fine pixel centres and their cubic B-spline
-    weights, (n, 4) each; fine pixel c lies at coarse index ``(c + 1/2 - n/2) / factor + coarse/2 - 1/2``
-    (weight 0 for taps off the coarse grid)."""
+def _taps(n: int, coarse: int, factor: int) -> scipy.sparse.csr_matrix:
+    """(n, coarse) float32 sparse matrix: the cubic B-spline weights of the 4 coarse coefficients
+    under each of n fine pixel centres; fine pixel c lies at coarse index
+    ``(c + 1/2 - n/2) / factor + coarse/2 - 1/2`` (taps off the coarse grid are dropped)."""
     at = (np.arange(n) + 0.5 - n / 2) / factor + coarse / 2 - 0.5
     index = np.floor(at).astype(np.intp)[:, None] + np.arange(-1, 3)
     weights = _bspline3(at[:, None] - index) * ((index >= 0) & (index < coarse))
-    return np.clip(index, 0, coarse - 1), weights.astype(np.float32)
+    return scipy.sparse.csr_matrix((weights.astype(np.float32).ravel(), np.clip(index, 0, coarse - 1).ravel(),
+                                    np.arange(0, 4 * n + 1, 4)), shape=(n, coarse))
 
 
 class Frame:
