@@ -225,7 +225,7 @@ class SplatRenderer:
             values = np.zeros((len(table.level), 4), np.float32)
             values[:, : table.values.shape[1]] = table.values
             # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22)
-            kept = set(np.unique(table.level.astype(np.int32) * 8 + table.key_code).tolist())
+            kept = set(np.unique(coef[:, 3]).tolist())
             present = {(b.level, b.key) for b in g.bands if b.level * 8 + b.code in kept}
             self.groups.append(dict(coef=cla.to_device(q, coef), values=cla.to_device(q, values),
                                     count=len(coef), channels=len(g.channels), present=present,
