@@ -61,7 +61,7 @@ LINEAR_U, LINEAR_V = 1, 2  # lookup bits of a texture (cl/splat_raster.cl); clea
 class ViewTables:
     """Host-side per-view tables of one channel group: footprints and band placement."""
 
-    def __init__(self, wv: WaveletVolume, group: int, view, omega_s=None, path="auto", bands=None):
+    def __init__(self, wv: WaveletVolume, group: int, view, omega_s=None, path="auto", bands=None, device=None):
         g = wv.groups[group]
         wav = g.wavelet
         # the bands this framebuffer draws (all by default); the others are culled (band_tex = -1)
@@ -79,12 +79,11 @@ class ViewTables:
             # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
             band = max(omega, DEFAULT_OMEGA_MIN[wav.order] / 2.0 ** m if wav.order >= 3 else KINKED_OMEGA_MIN)
             P = max(2, int(np.ceil(band * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
-            P *= CELL_REFINE if path == "cells" else 1
-            self.texels_per_pixel[m] = P
-            self.textures.update(footprints(wav, wv.spacing, view.n, view.u, view.v,
-                                            [(b.level, b.key) for b in drawn if b.level == m],
-                                            omega_s=omega, path=path, texel=view.pixel / P,
-                                            tol=TEXTURE_TOL if wav.order == 4 else 0.0))
+            self.texels_per_pixel[m] = P * (CELL_REFINE if path == "cells" else 1)
+        self.textures = footprints(wav, wv.spacing, view.n, view.u, view.v, [(b.level, b.key) for b in drawn],
+                                   omega_s=omega, path=path, tol=TEXTURE_TOL if wav.order == 4 else 0.0,
+                                   texel={m: view.pixel / P for m, P in self.texels_per_pixel.items()},
+                                   device=device)
         self.footprint_seconds = time.perf_counter() - start
         self.paths = sorted({t.path for t in self.textures.values() if t is not None})
 
@@ -92,7 +91,7 @@ class ViewTables:
         self.band_origin = np.zeros((8 * MAX_LEVELS, 2), np.float32)
         self.step_col = np.zeros((MAX_LEVELS, 4), np.float32)
         self.step_row = np.zeros((MAX_LEVELS, 4), np.float32)
-        boxes, ints, maps, pool, offset = [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
+        boxes, ints, maps, pool, offset, origins = [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD, {}
         for band in g.bands:
             m = band.level
             key_xyz = band.key[::-1]
@@ -100,8 +99,7 @@ class ViewTables:
             scale = 2.0 ** m
             # world centre of coefficient k = 0 (MATH.md §6: X = o + 2^m (k + c0)), in (x, y, z)
             fine = np.array([wav.offset(letter, m) + scale * wav.support(letter) / 2.0 for letter in key_xyz])
-            world = np.asarray(wv.origin) + (fine - wav.order / 2.0 - (shape - 1) / 2.0) * spacing
-            self.band_origin[m * 8 + code] = view.to_pixels(world)
+            origins[m * 8 + code] = np.asarray(wv.origin) + (fine - wav.order / 2.0 - (shape - 1) / 2.0) * spacing
             self.step_col[m, :3] = scale * spacing * view.u / view.pixel
             self.step_row[m, :3] = -scale * spacing * view.v / view.pixel
             tex = self.textures.get((m, band.key))
@@ -121,6 +119,7 @@ class ViewTables:
             maps.append((tex.centre_u, tex.centre_v, su, sv))
             pool.append(planes.ravel())
             offset += planes.size
+        self.band_origin[list(origins)] = view.to_pixels(np.array(list(origins.values())))
         self.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
         self.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
         self.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
@@ -265,7 +264,7 @@ class SplatRenderer:
             layer = Layer(self, view, F)
             for gi, fg in enumerate(factors):
                 layer.tables.append(ViewTables(self.wv, gi, layer.view, self.omega_s, self.path,
-                                               bands={band for band, f in fg.items() if f == F}))
+                                               bands={band for band, f in fg.items() if f == F}, device=self.cc))
             layer.upload()
             frame.layers.append(layer)
         return frame
@@ -331,9 +330,8 @@ class Layer:
         self.fbs = [cla.zeros(renderer.cc.queue, (h * w * 4,), np.float32) for _ in renderer.groups]
 
     def upload(self):
-        q = self.r.cc.queue
         for t in self.tables:
-            self.device_tables.append({name: cla.to_device(q, getattr(t, name)) for name in
+            self.device_tables.append({name: self.r.cc.upload(getattr(t, name)) for name in
                                        ("band_tex", "band_origin", "step_col", "step_row", "tex_box",
                                         "tex_int", "tex_map", "texels")})
 
@@ -409,8 +407,8 @@ class Frame:
         bbox = cla.empty(q, (n, 4), np.int32, allocator=r.scratch)
         stex = cla.empty(q, (n,), np.int32, allocator=r.scratch)
         counts = cla.empty(q, (n,), np.uint32, allocator=r.scratch)
-        k.splat_project(q, (n,), None, np.uint32(n), np.uint32(first), g["coef"].data, t["band_tex"].data,
-                        t["band_origin"].data, t["step_col"].data, t["step_row"].data, t["tex_box"].data,
+        k.splat_project(q, (n,), None, np.uint32(n), np.uint32(first), g["coef"].data, t["band_tex"],
+                        t["band_origin"], t["step_col"], t["step_row"], t["tex_box"],
                         np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
         total = int(cla.sum(counts, dtype=np.uint64).get())
         pair_bytes = RECORD_BYTES[g["channels"]]
@@ -451,8 +449,8 @@ class Frame:
         q.finish()
         mid = time.perf_counter()
         k.splat_accumulate(q, (tiles_x * tiles_y * r.local_size,), (r.local_size,), np.int32(W), np.int32(H),
-                           np.int32(tiles_x), ranges.data, records, t["tex_int"].data, t["tex_map"].data,
-                           t["texels"].data, layer.fbs[gi].data)
+                           np.int32(tiles_x), ranges.data, records, t["tex_int"], t["tex_map"],
+                           t["texels"], layer.fbs[gi].data)
         q.finish()
         self.stats["bin_seconds"] += mid - start
         self.stats["accumulate_seconds"] += time.perf_counter() - mid

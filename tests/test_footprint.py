@@ -101,6 +101,31 @@ def max_errors(order, view, m, spacing, path="auto", count=24, **kw):
     return errs, tex
 
 
+# ----------------------------------------------------------------------------- device spectra
+@pytest.mark.parametrize("order", (1, 2, 3, 4))
+def test_device_spectra_give_the_numpy_textures(cc, order):
+    """cl/footprint.cl against its NumPy twin (float64 spectra, same inverse FFT): every type at
+    levels 0-2, oblique and axis-aligned views (those stay separable on the host), both spacings,
+    within float32 rounding of each texture's peak."""
+    bands = [(m, k) for m in (0, 1, 2) for k in KEYS]
+    for view in OBLIQUE + AXIS:
+        n, u, v = frame(*view)
+        for spacing in SPACINGS:
+            host = footprints(order, spacing, n, u, v, bands, path="fft")
+            dev = footprints(order, spacing, n, u, v, bands, path="fft", device=cc)
+            assert [band for band, t in host.items() if t is None] == [band for band, t in dev.items() if t is None]
+            for band, t in host.items():
+                if t is not None:
+                    assert dev[band].data.shape == t.data.shape
+                    assert np.max(np.abs(dev[band].data - t.data)) <= 2e-6 * np.max(np.abs(t.data)), (view, band)
+
+
+def test_device_textures_within_1e3_of_the_line_integrals(cc):
+    for view in OBLIQUE[1:]:
+        errs, tex = max_errors(4, view, 1, SPACINGS[1], device=cc)
+        assert len(errs) == 8 and max(errs.values()) <= 1e-3, errs
+
+
 # ----------------------------------------------------------------------------- sampling
 def test_table_one_sample_counts():
     table = {1: [9, 17, 32, 63], 2: [25, 48, 94, 187], 4: [56, 110, 218, 434]}
@@ -398,9 +423,10 @@ def test_tol_trims_to_the_samples_that_matter():
 def test_texel_override_keeps_accuracy_and_alignment():
     n, u, v = frame(-70.0, -15.0)
     w = SplineWavelet(4)
-    tex = footprints(w, (1.0, 1.0, 1.0), n, u, v, [(1, "ada"), (2, "aaa")], texel=0.04)
+    texel = {1: 0.04, 2: 0.05}  # per level
+    tex = footprints(w, (1.0, 1.0, 1.0), n, u, v, [(1, "ada"), (2, "aaa")], texel=texel)
     for (m, key), t in tex.items():
-        assert t.h_u == t.h_v == 0.04 and t.centre_u == int(t.centre_u)
+        assert t.h_u == t.h_v == texel[m] and t.centre_u == int(t.centre_u)
         iv, iu, a, b = sample_points(t, 20, seed=m)
         want = oracle(w, key, m, (1.0, 1.0, 1.0), n, u, v, a, b)
         assert np.max(np.abs(t.data[iv, iu] - want)) <= 1e-3 * aaa_peak(w, m, (1.0,) * 3, n, u, v)
@@ -418,3 +444,5 @@ def test_input_validation():
         footprints(4, (1, 1, 1), n, u, v, [(1, "aaa")], path="gpu")
     with pytest.raises(InputError, match="level"):
         footprints(4, (1, 1, 1), n, u, v, [(-1, "aaa")])
+    with pytest.raises(InputError, match="texel"):
+        footprints(4, (1, 1, 1), n, u, v, [(1, "aaa")], texel={1: 0.1, 2: -0.1})

@@ -46,6 +46,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
 import clwave  # noqa: E402
+from clwave.device import ComputeContext  # noqa: E402
 from clwave.phantoms import phantom  # noqa: E402
 from clwave.splat import ViewTables  # noqa: E402
 from clwave.transfer import TransferFunction  # noqa: E402
@@ -136,14 +137,15 @@ def bench_splat(args) -> dict:
 
 def bench_footprints(args) -> dict:
     vol = phantom("hydrogen", n=args.size)
+    cc = ComputeContext.get(args.device)  # FFT spectra there, as the splat renderer has them
     cases = {}
     for wavelet in ("haar", "linear", "cubic"):
         wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=3)
-        ViewTables(wv, 0, clwave.Camera(10.0, 5.0, size=512).view(wv))  # warm-up (FFT plans, imports)
+        ViewTables(wv, 0, clwave.Camera(10.0, 5.0, size=512).view(wv), device=cc)  # warm-up (FFT plans, build)
         seconds, texels = [], []
         for az, el in views(args.views):
             start = time.perf_counter()
-            tables = ViewTables(wv, 0, clwave.Camera(az, el, size=512).view(wv))
+            tables = ViewTables(wv, 0, clwave.Camera(az, el, size=512).view(wv), device=cc)
             seconds.append(time.perf_counter() - start)
             texels.append(sum(t.data.size for t in tables.textures.values() if t is not None))
         cases[wavelet] = dict(seconds=summary(seconds), textures=sum(t is not None for t in tables.textures.values()),
