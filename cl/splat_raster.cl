@@ -29,10 +29,13 @@
  *                row of a splat
  *   texels   in  phase planes, (P, rows, columns) per texture; 16 zeros before the first
  *                and 32 after the last, so whole 16-pixel rows may be read
- *   fb       in/out (H * W,) float4: the sum is added, so chunks accumulate
+ *   layers   in  (L,) int4: (width, height, first tile, first pixel) of each framebuffer (layer);
+ *                the tiles of layer l are first tile .. + tiles_x * tiles_y - 1, row by row
+ *   fb       in/out float4: layer l's (height, width) pixels from its first pixel; the sum is
+ *                added, so chunks accumulate
  * Build: -DCLW_CHANNELS=C (1..4) accumulates channels 0..C-1 only (the others of fb keep
  *   their values); the records hold C values.
- * Grid: one work-group per tile, local size CLW_TILE * CLW_TILE / CLW_PX.  CLW_PX = CLW_TILE^2
+ * Grid: one work-group per tile of all layers, local size CLW_TILE * CLW_TILE / CLW_PX.  CLW_PX = CLW_TILE^2
  *   (the default) suits PoCL: one work-item owns the tile and walks each splat's rows in it,
  *   16 pixels a vector, with the splat's set-up done once per tile rather than once per row
  *   (2.1x faster than a work-item per row on 2 EPYC cores).  CLW_PX = 1 (one pixel per item,
@@ -80,9 +83,24 @@ inline void splat_lookup(const int4 t, const float4 m, const float2 c, int4 *a, 
 }
 
 /* the arguments of both layouts of splat_accumulate (see the top of the file) */
-#define ACCUMULATE_PARAMS const int width, const int height, const int tiles_x, __global const uint2 *ranges, \
-    __global const uint4 *records, __global const int4 *tex_int, __global const float4 *tex_map,             \
+#define ACCUMULATE_PARAMS const int layer_count, __global const int4 *layers, __global const uint2 *ranges, \
+    __global const uint4 *records, __global const int4 *tex_int, __global const float4 *tex_map,                \
     __global const float *texels, __global float4 *fb
+
+/* The layer of a tile, its tile (tx, ty) within the layer as a pixel corner, and the layer's
+ * (width, height); fb is moved to the layer's first pixel */
+inline int4 tile_layer(const int tile, const int layer_count, __global const int4 *layers, int2 *corner,
+                       __global float4 **fb)
+{
+    int l = 0;
+    while (l + 1 < layer_count && layers[l + 1].z <= tile)
+        ++l;
+    const int4 layer = layers[l];
+    const int tiles_x = (layer.x + CLW_TILE - 1) / CLW_TILE, index = tile - layer.z;
+    *corner = (int2)(index % tiles_x, index / tiles_x) * CLW_TILE;
+    *fb += layer.w;
+    return layer;
+}
 
 /* Image row y of a splat: its texel row (+1: the zero margin; rows iv, iv + 1) and v weight */
 inline int splat_row(const int4 a, const float4 f, const int y, float *fv)
@@ -101,7 +119,9 @@ inline int splat_row(const int4 a, const float4 f, const int y, float *fv)
 __kernel void splat_accumulate(ACCUMULATE_PARAMS)
 {
     const int tile = get_global_id(0);
-    const int ybase = (tile / tiles_x) * CLW_TILE, xbase = (tile % tiles_x) * CLW_TILE;
+    int2 corner;
+    const int4 layer = tile_layer(tile, layer_count, layers, &corner, &fb);
+    const int width = layer.x, height = layer.y, xbase = corner.x, ybase = corner.y;
     const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     float16 acc[CLW_CHANNELS][CLW_TILE];
     for (int ch = 0; ch < CLW_CHANNELS; ++ch)
@@ -183,7 +203,10 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
     const int tile = get_group_id(0);
     const int lid = get_local_id(0);
     const int nitems = get_local_size(0);
-    const int4 corner = (int4)(tile % tiles_x, tile / tiles_x, tile % tiles_x, tile / tiles_x) * CLW_TILE;
+    int2 origin;
+    const int4 layer = tile_layer(tile, layer_count, layers, &origin, &fb);
+    const int width = layer.x, height = layer.y;
+    const int4 corner = (int4)(origin, origin);
     const int y = corner.y + lid / CLW_ITEMS_PER_ROW;
     const int xbase = corner.x + (lid % CLW_ITEMS_PER_ROW) * CLW_PX;
     float4 acc[CLW_PX];

@@ -790,7 +790,7 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         Trim each texture to the bounding box of samples above ``tol`` times its peak
         magnitude (0: keep the tight projected support box).
     texel : float or dict, optional
-        Sample spacing in world units, for every texture or per level (``{m: texel}``),
+        Sample spacing in world units, for every texture or per band (``{(m, key): texel}``),
         overriding the counts of eq. 36 (the splat renderer asks for an exact fraction of
         its pixel); the FFT period is then the smallest multiple of it that covers the
         support.  Not used along cell axes.
@@ -837,7 +837,7 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         extent = _extent(wav, key, m, d_xyz)
         omega = max(float(omega_s), float(omega_min) / 2.0 ** m)
         out[(m, key)] = None
-        h = texel.get(m) if isinstance(texel, dict) else texel
+        h = texel.get((m, key)) if isinstance(texel, dict) else texel
         jobs.append((m, key) + tuple(_axis_sampling(float(np.abs(w) @ extent), cell, omega, d_min, h)
                                      for w, cell in ((u, cells[0]), (v, cells[1]))))
     spectra = {}

@@ -14,21 +14,22 @@ from .splat import LINEAR_U, LINEAR_V
 TILE = 16
 
 
-def project(coef, first, band_tex, band_origin, step_col, step_row, tex_box, width, height, n):
-    """Reference of ``splat_project``: centre, bbox, texture id and tile count per splat."""
+def project(coef, first, band_tex, band_origin, step_col, step_row, tex_box, tex_layer, layers, n):
+    """Reference of ``splat_project``: centre, bbox (in the texture's layer), texture id and tile count per splat."""
     f32 = np.float32
     c = np.asarray(coef[first:first + n])
-    level, band = c[:, 3] >> 3, c[:, 3]
-    sc, sr, o = step_col[level], step_row[level], band_origin[band]
+    band = c[:, 3]
+    sc, sr, o = step_col[band], step_row[band], band_origin[band]
     k = c[:, :3].astype(f32)
     col = ((o[:, 0] + k[:, 0] * sc[:, 0]) + k[:, 1] * sc[:, 1]) + k[:, 2] * sc[:, 2]
     row = ((o[:, 1] + k[:, 0] * sr[:, 0]) + k[:, 1] * sr[:, 1]) + k[:, 2] * sr[:, 2]
     tex = band_tex[band]
     b = tex_box[np.maximum(tex, 0)]
+    width, height = layers[tex_layer[np.maximum(tex, 0), 0], :2].T
     x0 = np.maximum(np.ceil(col + b[:, 0]), f32(0))
-    x1 = np.minimum(np.floor(col + b[:, 1]), f32(width - 1))
+    x1 = np.minimum(np.floor(col + b[:, 1]), (width - 1).astype(f32))
     y0 = np.maximum(np.ceil(row - b[:, 3]), f32(0))
-    y1 = np.minimum(np.floor(row - b[:, 2]), f32(height - 1))
+    y1 = np.minimum(np.floor(row - b[:, 2]), (height - 1).astype(f32))
     hit = (tex >= 0) & (x0 <= x1) & (y0 <= y1)
     bbox = np.where(hit[:, None], np.stack([x0, y0, x1, y1], 1).astype(np.int32), [0, 0, -1, -1]).astype(np.int32)
     count = np.where(hit, (bbox[:, 2] // TILE - bbox[:, 0] // TILE + 1) * (bbox[:, 3] // TILE - bbox[:, 1] // TILE + 1),
@@ -36,32 +37,43 @@ def project(coef, first, band_tex, band_origin, step_col, step_row, tex_box, wid
     return np.stack([col, row], 1).astype(np.float32), bbox, tex.astype(np.int32), count
 
 
-def _tiles(box, tiles_x):
-    """Tile ids a pixel box (x0, y0, x1, y1) touches, row by row."""
+def _tiles(box, layer):
+    """Tile ids a pixel box (x0, y0, x1, y1) of a layer ``(width, height, first tile, first pixel)`` touches, row by row."""
     x0, y0, x1, y1 = (int(v) for v in box)
+    tiles_x = -(-int(layer[0]) // TILE)
     if x1 < x0:
         return []
-    return [ty * tiles_x + tx for ty in range(y0 // TILE, y1 // TILE + 1) for tx in range(x0 // TILE, x1 // TILE + 1)]
+    return [int(layer[2]) + ty * tiles_x + tx for ty in range(y0 // TILE, y1 // TILE + 1)
+            for tx in range(x0 // TILE, x1 // TILE + 1)]
 
 
-def count_tiles(bbox, stex, textures, chunk, chunks, tiles, tiles_x):
-    """Reference of ``splat_chunk_tiles`` counting: (chunks, tiles * textures) uint32, ``[c, tile * textures + tex]``
-    counts the splats of chunk c (splats ``c * chunk ..``) with texture tex that touch the tile."""
+def tile_corner(tile, layers) -> tuple:
+    """``(layer, x, y)``: the layer a tile id belongs to and the tile's corner pixel in it."""
+    layer = int(np.searchsorted(layers[:, 2], tile, side="right")) - 1
+    index, tiles_x = tile - int(layers[layer, 2]), -(-int(layers[layer, 0]) // TILE)
+    return layer, index % tiles_x * TILE, index // tiles_x * TILE
+
+
+def count_tiles(bbox, stex, tex_layer, layers, textures, chunk, chunks, tiles):
+    """Reference of ``splat_chunk_tiles`` counting: (chunks, tiles * textures) uint32, ``[c, tile * textures + j]``
+    counts the splats of chunk c (splats ``c * chunk ..``) with texture j of its layer that touch the tile."""
     hist = np.zeros((chunks, tiles, textures), np.uint32)
     for i, box in enumerate(bbox):
-        for t in _tiles(box, tiles_x):
-            hist[i // chunk, t, stex[i]] += 1
+        layer, j = tex_layer[stex[i]]
+        for t in _tiles(box, layers[layer]):
+            hist[i // chunk, t, j] += 1
     return hist.reshape(chunks, -1)
 
 
-def bin_by_tile(bbox, stex, tiles_x, tiles):
+def bin_by_tile(bbox, stex, tex_layer, layers, tiles):
     """Reference of scan + ``tile_ranges`` and of the order ``splat_chunk_tiles`` places in: ``(ranges, vals)``.
 
     A stable sort of the (tile, splat) pairs by tile and texture: ``vals[ranges[t, 0]:ranges[t, 1]]``
     are the splats touching tile t, by texture, each texture's in increasing order (importance).
-    :func:`records` turns them into the placed records.
+    (The kernels sort by the index within the layer, the same order where each layer's textures
+    are consecutive ids, as the renderer makes them.)  :func:`records` turns them into records.
     """
-    pairs = [(t, i) for i, box in enumerate(bbox) for t in _tiles(box, tiles_x)]
+    pairs = [(t, i) for i, box in enumerate(bbox) for t in _tiles(box, layers[tex_layer[stex[i], 0]])]
     tiles_of = np.array([t for t, _ in pairs], np.int64)
     vals = np.array([i for _, i in pairs], np.uint32)
     order = np.lexsort((vals, stex[vals], tiles_of))
@@ -72,7 +84,7 @@ def bin_by_tile(bbox, stex, tiles_x, tiles):
     return ranges, vals
 
 
-def records(ranges, vals, first, centre, bbox, stex, values, tiles_x, channels):
+def records(ranges, vals, first, centre, bbox, stex, values, layers, channels):
     """Reference of the records ``splat_chunk_tiles`` places (``cl/splat_record.h``): (pairs, 4 * R) uint32.
 
     Per pair: centre, the bits (texture id; the splat's pixels in the tile, 4 bits each) and
@@ -84,10 +96,10 @@ def records(ranges, vals, first, centre, bbox, stex, values, tiles_x, channels):
     nc = 1 if channels == 1 else 4
     bits = np.zeros(len(vals), np.uint32)
     for tile, (start, end) in enumerate(ranges):
-        corner = np.array([tile % tiles_x, tile // tiles_x] * 2) * TILE
+        _, x, y = tile_corner(tile, layers)
         for k in range(start, end):
             s = vals[k]
-            x0, y0, x1, y1 = (int(v) for v in np.clip(bbox[s] - corner, 0, TILE - 1))
+            x0, y0, x1, y1 = (int(v) for v in np.clip(bbox[s] - [x, y, x, y], 0, TILE - 1))
             bits[k] = int(stex[s]) | x0 << 16 | x1 << 20 | y0 << 24 | y1 << 28
             floats[k, :2] = centre[s]
             floats[k, 3:3 + nc] = values[first + s, :nc]
@@ -112,21 +124,21 @@ def _axis_lookup(pixels, centre_px, centre_tex, steps, count, linear):
     return i, i, np.zeros(len(pixels))
 
 
-def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width, height, channels=4):
-    """Reference of ``splat_accumulate`` (float64): footprint samples times c, channels < ``channels``.
+def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, layers, channels=4):
+    """Reference of ``splat_accumulate`` (float64): footprint samples times c, channels < ``channels``,
+    into the framebuffers of ``layers`` one after the other, (pixels, 4).
 
     ``textures`` are ``(data (nv, nu), centre_u, centre_v, lookup, s_u, s_v)``: per axis, s
     texels per pixel; linear interpolation where the axis' lookup bit is set, nearest sample
     where it is clear.  Image rows go down while v goes up.
     """
-    fb = np.zeros((height, width, 4))
-    tiles_x = -(-width // TILE)
+    fbs = [np.zeros((h, w, 4)) for w, h, _, _ in layers]
     for tile, (start, end) in enumerate(ranges):
-        tx, ty = tile % tiles_x, tile // tiles_x
+        layer, x, y = tile_corner(tile, layers)
         for s in vals[start:end]:
             x0, y0, x1, y1 = bbox[s]
-            xs = np.arange(max(x0, tx * TILE), min(x1, tx * TILE + TILE - 1) + 1)
-            ys = np.arange(max(y0, ty * TILE), min(y1, ty * TILE + TILE - 1) + 1)
+            xs = np.arange(max(x0, x), min(x1, x + TILE - 1) + 1)
+            ys = np.arange(max(y0, y), min(y1, y + TILE - 1) + 1)
             if not len(xs) or not len(ys):
                 continue
             data, cu, cv, lookup, su, sv = textures[stex[s]]
@@ -139,8 +151,8 @@ def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, width,
             top = tex[iv0[:, None], iu0] * (1 - fu) + tex[iv0[:, None], iu1] * fu
             bot = tex[iv1[:, None], iu0] * (1 - fu) + tex[iv1[:, None], iu1] * fu
             sample = top * (1 - fv[:, None]) + bot * fv[:, None]
-            fb[ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
-    return fb
+            fbs[layer][ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
+    return np.concatenate([fb.reshape(-1, 4) for fb in fbs])
 
 
 def line_integrals(coeffs, order, spacing, origin, view):

@@ -59,72 +59,94 @@ LINEAR_U, LINEAR_V = 1, 2  # lookup bits of a texture (cl/splat_raster.cl); clea
 
 
 class ViewTables:
-    """Host-side per-view tables of one channel group: footprints and band placement."""
+    """Host-side tables of one channel group for one view: footprints, band placement and the
+    framebuffers (layers) the bands are drawn into, every layer in one set of tables
+    (``cl/splat_bin.cl``: the tiles of all layers are binned in one pass).
 
-    def __init__(self, wv: WaveletVolume, group: int, view, omega_s=None, path="auto", bands=None, device=None):
+    ``layers`` is ``[(view, bands)]``, one per framebuffer: its resolved view (pixel and size;
+    the direction is the frame's) and the (level, key) bands drawn there, or None for every band
+    not drawn in an earlier layer.  Bands drawn nowhere are culled (``band_tex = -1``).
+    """
+
+    def __init__(self, wv: WaveletVolume, group: int, layers, omega_s=None, path="auto", device=None):
         g = wv.groups[group]
         wav = g.wavelet
-        # the bands this framebuffer draws (all by default); the others are culled (band_tex = -1)
-        drawn = [b for b in g.bands if bands is None or (b.level, b.key) in bands]
         spacing = np.array(wv.spacing[::-1], float)  # (dx, dy, dz)
         shape = np.array(wv.shape[::-1], float)      # (nx, ny, nz)
-        omega = omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
-        self.omega_s, self.textures, self.texels_per_pixel = omega, {}, {}
-        if path == "auto" and any(cell_axes(wav, view.u, view.v)):
+        frame = layers[0][0]  # the image's view: the layers share its direction
+        if path == "auto" and any(cell_axes(wav, frame.u, frame.v)):
             path = "cells"  # Haar with u or v along a world axis: exact cells along that axis
+        self.omega_s = omega_s if omega_s is not None else default_omega_s(frame.pixel, min(wv.spacing))
+        self.layer_of, self.texels_per_pixel, texel = {}, {}, {}
+        for li, (view, bands) in enumerate(layers):
+            omega = omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
+            for b in g.bands:
+                band = (b.level, b.key)
+                if band in self.layer_of or (bands is not None and band not in bands):
+                    continue
+                # texels of exactly 1/P pixel (cl/splat_raster.cl), at least the band of eq. 36 and the
+                # least band of the level's own prototype (clwave.footprint); Haar and linear footprints
+                # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
+                least = DEFAULT_OMEGA_MIN[wav.order] / 2.0 ** b.level if wav.order >= 3 else KINKED_OMEGA_MIN
+                P = max(2, int(np.ceil(max(omega, least) * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
+                self.layer_of[band] = li
+                self.texels_per_pixel[band] = P * (CELL_REFINE if path == "cells" else 1)
+                texel[band] = view.pixel / self.texels_per_pixel[band]
         start = time.perf_counter()
-        for m in sorted({b.level for b in drawn}):
-            # texels of exactly 1/P pixel (cl/splat_raster.cl), at least the band of eq. 36 and the
-            # least band of the level's own prototype (clwave.footprint); Haar and linear footprints
-            # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
-            band = max(omega, DEFAULT_OMEGA_MIN[wav.order] / 2.0 ** m if wav.order >= 3 else KINKED_OMEGA_MIN)
-            P = max(2, int(np.ceil(band * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
-            self.texels_per_pixel[m] = P * (CELL_REFINE if path == "cells" else 1)
-        self.textures = footprints(wav, wv.spacing, view.n, view.u, view.v, [(b.level, b.key) for b in drawn],
-                                   omega_s=omega, path=path, tol=TEXTURE_TOL if wav.order == 4 else 0.0,
-                                   texel={m: view.pixel / P for m, P in self.texels_per_pixel.items()},
-                                   device=device)
+        self.textures = footprints(wav, wv.spacing, frame.n, frame.u, frame.v, list(self.layer_of),
+                                   omega_s=self.omega_s, path=path, tol=TEXTURE_TOL if wav.order == 4 else 0.0,
+                                   texel=texel, device=device)
         self.footprint_seconds = time.perf_counter() - start
         self.paths = sorted({t.path for t in self.textures.values() if t is not None})
 
         self.band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
         self.band_origin = np.zeros((8 * MAX_LEVELS, 2), np.float32)
-        self.step_col = np.zeros((MAX_LEVELS, 4), np.float32)
-        self.step_row = np.zeros((MAX_LEVELS, 4), np.float32)
-        boxes, ints, maps, pool, offset, origins = [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD, {}
-        for band in g.bands:
-            m = band.level
-            key_xyz = band.key[::-1]
-            code = band.code
-            scale = 2.0 ** m
-            # world centre of coefficient k = 0 (MATH.md §6: X = o + 2^m (k + c0)), in (x, y, z)
-            fine = np.array([wav.offset(letter, m) + scale * wav.support(letter) / 2.0 for letter in key_xyz])
-            origins[m * 8 + code] = np.asarray(wv.origin) + (fine - wav.order / 2.0 - (shape - 1) / 2.0) * spacing
-            self.step_col[m, :3] = scale * spacing * view.u / view.pixel
-            self.step_row[m, :3] = -scale * spacing * view.v / view.pixel
-            tex = self.textures.get((m, band.key))
-            if tex is None:  # psi along the view direction (its footprint vanishes), or drawn elsewhere
-                continue
-            self.band_tex[m * 8 + code] = len(ints)
-            # per axis: texels at 1/P pixel, bilinear (u from P phase planes), or cells at s texels
-            # per pixel, nearest sample (u gathered per pixel from one plane); cl/splat_raster.cl
-            P = self.texels_per_pixel[m]
-            cell_u, cell_v = tex.cells
-            su, sv = (view.pixel / h if cell else float(P) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
-            planes = pack_texture(tex.data, 1 if cell_u else P)
-            nv, nu = tex.data.shape
-            boxes.append(_axis_box(nu, tex.centre_u, su, cell_u) + _axis_box(nv, tex.centre_v, sv, cell_v))
-            lookup = (0 if cell_u else LINEAR_U) | (0 if cell_v else LINEAR_V)
-            ints.append((offset, planes.shape[2], planes.shape[1], lookup))
-            maps.append((tex.centre_u, tex.centre_v, su, sv))
-            pool.append(planes.ravel())
-            offset += planes.size
-        self.band_origin[list(origins)] = view.to_pixels(np.array(list(origins.values())))
+        self.step_col = np.zeros((8 * MAX_LEVELS, 4), np.float32)
+        self.step_row = np.zeros((8 * MAX_LEVELS, 4), np.float32)
+        self.layers = np.zeros((len(layers), 4), np.int32)  # (width, height, first tile, first pixel)
+        boxes, ints, maps, tex_layer, pool, offset = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
+        self.tiles = self.pixels = self.textures_per_layer = 0
+        for li, (view, _) in enumerate(layers):
+            H, W = view.size
+            self.layers[li] = (W, H, self.tiles, self.pixels)
+            self.tiles += -(-W // TILE) * -(-H // TILE)
+            self.pixels += H * W
+            origins, first_tex = {}, len(ints)
+            for band in g.bands:
+                if self.layer_of.get((band.level, band.key)) != li:
+                    continue
+                m, key_xyz, bid, scale = band.level, band.key[::-1], band.level * 8 + band.code, 2.0 ** band.level
+                # world centre of coefficient k = 0 (MATH.md §6: X = o + 2^m (k + c0)), in (x, y, z)
+                fine = np.array([wav.offset(letter, m) + scale * wav.support(letter) / 2.0 for letter in key_xyz])
+                origins[bid] = np.asarray(wv.origin) + (fine - wav.order / 2.0 - (shape - 1) / 2.0) * spacing
+                self.step_col[bid, :3] = scale * spacing * view.u / view.pixel
+                self.step_row[bid, :3] = -scale * spacing * view.v / view.pixel
+                tex = self.textures[(m, band.key)]
+                if tex is None:  # psi along the view direction: its footprint vanishes
+                    continue
+                self.band_tex[bid] = len(ints)
+                tex_layer.append((li, len(ints) - first_tex))
+                # per axis: texels at 1/P pixel, bilinear (u from P phase planes), or cells at s texels
+                # per pixel, nearest sample (u gathered per pixel from one plane); cl/splat_raster.cl
+                P = self.texels_per_pixel[(m, band.key)]
+                cell_u, cell_v = tex.cells
+                su, sv = (view.pixel / h if cell else float(P) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
+                planes = pack_texture(tex.data, 1 if cell_u else P)
+                nv, nu = tex.data.shape
+                boxes.append(_axis_box(nu, tex.centre_u, su, cell_u) + _axis_box(nv, tex.centre_v, sv, cell_v))
+                lookup = (0 if cell_u else LINEAR_U) | (0 if cell_v else LINEAR_V)
+                ints.append((offset, planes.shape[2], planes.shape[1], lookup))
+                maps.append((tex.centre_u, tex.centre_v, su, sv))
+                pool.append(planes.ravel())
+                offset += planes.size
+            if origins:
+                self.band_origin[list(origins)] = view.to_pixels(np.array(list(origins.values())))
+            self.textures_per_layer = max(self.textures_per_layer, len(ints) - first_tex)
         self.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
         self.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
         self.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
+        self.tex_layer = np.array(tex_layer or [(0, 0)], np.int32).reshape(-1, 2)
         self.texels = np.concatenate(pool + [np.zeros(2 * POOL_GUARD)]).astype(np.float32)
-        self.size = view.size
 
 
 def _axis_box(count, centre, steps, cell) -> tuple:
@@ -248,26 +270,22 @@ class SplatRenderer:
         if not isinstance(camera, Camera):
             raise InputError("camera must be a clwave.Camera")
         view = camera.view(self.wv)
-        H, W = view.size
-        fb_bytes = H * W * 16
-        if fb_bytes > self.cc.info.max_alloc:
-            raise DeviceMemoryError(
-                f"a {H}x{W} framebuffer needs {fb_bytes / 2**20:.0f} MiB but {self.cc.info.name} allows "
-                f"{self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
         # framebuffer factor of each band that has coefficients, per group: 1 unless drawn coarse
         factors = [{(b.level, b.key): coarse_factor(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa",
                                                       view.pixel, min(self.wv.spacing), self.coarse)
                     if self.coarse else 1 for b in g.bands if (b.level, b.key) in gr["present"]}
                    for g, gr in zip(self.wv.groups, self.groups)]
-        frame = Frame(self, view)
-        for F in sorted({f for fg in factors for f in fg.values()} | {1}):
-            layer = Layer(self, view, F)
-            for gi, fg in enumerate(factors):
-                layer.tables.append(ViewTables(self.wv, gi, layer.view, self.omega_s, self.path,
-                                               bands={band for band, f in fg.items() if f == F}, device=self.cc))
-            layer.upload()
-            frame.layers.append(layer)
-        return frame
+        layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
+        fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * 16
+        if fb_bytes > self.cc.info.max_alloc:
+            H, W = view.size
+            raise DeviceMemoryError(
+                f"a {H}x{W} image needs {fb_bytes / 2**20:.0f} MiB of framebuffers but {self.cc.info.name} "
+                f"allows {self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
+        tables = [ViewTables(self.wv, gi, [(layer.view, {band for band, f in fg.items() if f == layer.factor})
+                                           for layer in layers], self.omega_s, self.path, device=self.cc)
+                  for gi, fg in enumerate(factors)]
+        return Frame(self, view, layers, tables)
 
 
 #: Coarse framebuffers (issue §2): worst error, relative to the image maximum, of one band kind
@@ -318,27 +336,16 @@ def _bspline3(t) -> np.ndarray:
 class Layer:
     """One framebuffer: the image's pixel times ``factor``, with the bands drawn at that pixel."""
 
-    def __init__(self, renderer: SplatRenderer, view, factor: int):
-        self.r, self.factor = renderer, factor
+    def __init__(self, view, factor: int):
         H, W = view.size
         if factor > 1:  # same centre, pixel x factor, a margin around the image
             size = (-(-H // factor) + 2 * COARSE_MARGIN, -(-W // factor) + 2 * COARSE_MARGIN)
             view = dataclasses.replace(view, size=size, pixel=view.pixel * factor)
-        self.view, self.fine = view, (H, W)
-        self.tables, self.device_tables = [], []
-        h, w = self.view.size
-        self.fbs = [cla.zeros(renderer.cc.queue, (h * w * 4,), np.float32) for _ in renderer.groups]
+        self.view, self.fine, self.factor = view, (H, W), factor
 
-    def upload(self):
-        for t in self.tables:
-            self.device_tables.append({name: self.r.cc.upload(getattr(t, name)) for name in
-                                       ("band_tex", "band_origin", "step_col", "step_row", "tex_box",
-                                        "tex_int", "tex_map", "texels")})
-
-    def image(self, gi) -> np.ndarray:
-        """Group gi's framebuffer at the image's pixels, (H, W, C) float32 (C its channels)."""
-        h, w = self.view.size
-        img = self.fbs[gi].get().reshape(h, w, 4)[..., : self.r.groups[gi]["channels"]]
+    def image(self, pixels: np.ndarray) -> np.ndarray:
+        """This framebuffer's (h * w, C) pixels at the image's pixels, (H, W, C) float32."""
+        img = pixels.reshape(self.view.size + pixels.shape[1:])
         if self.factor == 1:
             return img
         return np.stack([upsample(img[..., c], self.fine, self.factor) for c in range(img.shape[2])], axis=-1)
@@ -371,17 +378,18 @@ def _taps(n: int, coarse: int, factor: int) -> scipy.sparse.csr_matrix:
 
 
 class Frame:
-    """One image being accumulated: splat coefficient ranges in importance order."""
+    """One image being accumulated: splat coefficient ranges in importance order into the
+    framebuffers (layers) of each channel group, all layers in one pass."""
 
-    def __init__(self, renderer: SplatRenderer, view):
-        self.r, self.view = renderer, view
-        self.layers = []
+    def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list):
+        self.r, self.view, self.layers, self.tables = renderer, view, layers, tables
+        cc = renderer.cc
+        self.device_tables = [{name: cc.upload(getattr(t, name)) for name in
+                               ("band_tex", "band_origin", "step_col", "step_row", "tex_box", "tex_layer",
+                                "layers", "tex_int", "tex_map", "texels")} for t in tables]
+        self.fbs = [cla.zeros(cc.queue, (t.pixels * 4,), np.float32) for t in tables]
         self.stats = dict(splats=0, pairs=0, pixel_updates=0, bin_seconds=0.0, accumulate_seconds=0.0,
                           upsample_seconds=0.0)
-
-    @property
-    def tables(self) -> list:
-        return [t for layer in self.layers for t in layer.tables]
 
     @property
     def footprint_seconds(self) -> float:
@@ -392,24 +400,21 @@ class Frame:
         for gi in range(len(self.r.groups)):
             n = max(0, min(count, self.r.groups[gi]["count"] - first))
             if n:
-                for layer in self.layers:
-                    self._splat_layer(layer, gi, first, n)
+                self._splat_group(gi, first, n)
                 self.stats["splats"] += n
 
-    def _splat_layer(self, layer, gi, first, n):
+    def _splat_group(self, gi, first, n):
         r, q = self.r, self.r.cc.queue
-        g, t = r.groups[gi], layer.device_tables[gi]
+        g, t, tables = r.groups[gi], self.device_tables[gi], self.tables[gi]
         k = r.kernels[g["channels"]]
-        H, W = layer.view.size
-        tiles_x, tiles_y = -(-W // TILE), -(-H // TILE)
         start = time.perf_counter()
         centre = cla.empty(q, (n, 2), np.float32, allocator=r.scratch)
         bbox = cla.empty(q, (n, 4), np.int32, allocator=r.scratch)
         stex = cla.empty(q, (n,), np.int32, allocator=r.scratch)
         counts = cla.empty(q, (n,), np.uint32, allocator=r.scratch)
         k.splat_project(q, (n,), None, np.uint32(n), np.uint32(first), g["coef"].data, t["band_tex"],
-                        t["band_origin"], t["step_col"], t["step_row"], t["tex_box"],
-                        np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
+                        t["band_origin"], t["step_col"], t["step_row"], t["tex_box"], t["tex_layer"], t["layers"],
+                        centre.data, bbox.data, stex.data, counts.data)
         total = int(cla.sum(counts, dtype=np.uint64).get())
         pair_bytes = RECORD_BYTES[g["channels"]]
         # pairs: uint32 offsets, and record indices (pairs x 2 uint4s) that stay within 32 bits
@@ -418,26 +423,26 @@ class Frame:
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
             half = n // 2
             self.stats["bin_seconds"] += time.perf_counter() - start
-            self._splat_layer(layer, gi, first, half)
-            self._splat_layer(layer, gi, first + half, n - half)
+            self._splat_group(gi, first, half)
+            self._splat_group(gi, first + half, n - half)
             return
         if total > budget:
             raise DeviceMemoryError(f"one splat needs {total * pair_bytes} bytes of tile lists, more "
                                     f"than {r.cc.info.name} can hold; render a smaller image")
-        tiles = tiles_x * tiles_y
+        tiles = tables.tiles
         ranges = cla.zeros(q, (tiles, 2), np.uint32, allocator=r.scratch)
         records = r.tile_lists(max(total, 1) * pair_bytes)
         if total:
-            textures = len(layer.tables[gi].tex_int)
+            textures = tables.textures_per_layer
             chunks = bin_chunks(n, tiles * textures, r.cc.info)
             chunk = -(-n // chunks)
             # chunk-major counts (each chunk's together, cached by its core), scanned run-major,
             # then back to chunk-major as each chunk's write cursors
             table = cla.empty(q, (chunks * tiles * textures,), np.uint32, allocator=r.scratch)
             by_run, starts = cla.empty_like(table), cla.empty_like(table)
-            sizes = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.int32(tiles_x),
-                     np.uint32(textures))
-            inputs = (np.uint32(first), bbox.data, centre.data, stex.data, g["values"].data)
+            sizes = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.uint32(textures))
+            inputs = (np.uint32(first), bbox.data, centre.data, stex.data, g["values"].data, t["tex_layer"],
+                      t["layers"])
             runs = np.uint32(tiles * textures)
             k.splat_chunk_tiles(q, (chunks,), r.bin_local, *sizes, np.int32(0), *inputs, table.data, records)
             k.transpose_counts(q, (table.size,), None, np.uint32(chunks), runs, table.data, by_run.data)
@@ -448,9 +453,8 @@ class Frame:
             k.splat_chunk_tiles(q, (chunks,), r.bin_local, *sizes, np.int32(1), *inputs, table.data, records)
         q.finish()
         mid = time.perf_counter()
-        k.splat_accumulate(q, (tiles_x * tiles_y * r.local_size,), (r.local_size,), np.int32(W), np.int32(H),
-                           np.int32(tiles_x), ranges.data, records, t["tex_int"], t["tex_map"],
-                           t["texels"], layer.fbs[gi].data)
+        k.splat_accumulate(q, (tiles * r.local_size,), (r.local_size,), np.int32(len(tables.layers)), t["layers"],
+                           ranges.data, records, t["tex_int"], t["tex_map"], t["texels"], self.fbs[gi].data)
         q.finish()
         self.stats["bin_seconds"] += mid - start
         self.stats["accumulate_seconds"] += time.perf_counter() - mid
@@ -463,7 +467,9 @@ class Frame:
         start = time.perf_counter()
         out = np.zeros((H, W, self.r.wv.channels), np.float32)
         for gi, g in enumerate(self.r.wv.groups):
-            out[..., list(g.channels)] = sum(layer.image(gi) for layer in self.layers)
+            fb = self.fbs[gi].get().reshape(-1, 4)[:, : len(g.channels)]
+            out[..., list(g.channels)] = sum(layer.image(fb[first: first + w * h])
+                                             for layer, (w, h, _, first) in zip(self.layers, self.tables[gi].layers))
         if len(self.layers) > 1:
             self.stats["upsample_seconds"] += time.perf_counter() - start
         return out

@@ -423,10 +423,10 @@ def test_tol_trims_to_the_samples_that_matter():
 def test_texel_override_keeps_accuracy_and_alignment():
     n, u, v = frame(-70.0, -15.0)
     w = SplineWavelet(4)
-    texel = {1: 0.04, 2: 0.05}  # per level
-    tex = footprints(w, (1.0, 1.0, 1.0), n, u, v, [(1, "ada"), (2, "aaa")], texel=texel)
+    texel = {(1, "ada"): 0.04, (2, "aaa"): 0.05}  # per band
+    tex = footprints(w, (1.0, 1.0, 1.0), n, u, v, list(texel), texel=texel)
     for (m, key), t in tex.items():
-        assert t.h_u == t.h_v == texel[m] and t.centre_u == int(t.centre_u)
+        assert t.h_u == t.h_v == texel[(m, key)] and t.centre_u == int(t.centre_u)
         iv, iu, a, b = sample_points(t, 20, seed=m)
         want = oracle(w, key, m, (1.0, 1.0, 1.0), n, u, v, a, b)
         assert np.max(np.abs(t.data[iv, iu] - want)) <= 1e-3 * aaa_peak(w, m, (1.0,) * 3, n, u, v)
@@ -445,4 +445,4 @@ def test_input_validation():
     with pytest.raises(InputError, match="level"):
         footprints(4, (1, 1, 1), n, u, v, [(-1, "aaa")])
     with pytest.raises(InputError, match="texel"):
-        footprints(4, (1, 1, 1), n, u, v, [(1, "aaa")], texel={1: 0.1, 2: -0.1})
+        footprints(4, (1, 1, 1), n, u, v, [(1, "aaa")], texel={(1, "aaa"): 0.1, (2, "aaa"): -0.1})

@@ -97,7 +97,7 @@ def test_cubic_textures_are_trimmed_to_their_samples_above_the_tolerance(data, f
 
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), family, levels=2)
     view = clwave.Camera(30, 20, size=32).view(wv)
-    tables = ViewTables(wv, 0, view)
+    tables = ViewTables(wv, 0, [(view, None)])
     for (m, key), tex in tables.textures.items():
         if tex is None:
             continue

@@ -10,8 +10,11 @@ from pyopencl.scan import ExclusiveScanKernel
 from clwave import programs, reference
 from clwave.splat import LINEAR_U, LINEAR_V, bin_chunks, pack_texture
 
-W, H = 45, 37  # not multiples of the 16-pixel tile
-TILES_X, TILES_Y = 3, 3
+#: two framebuffers (width, height, first tile, first pixel), sizes not multiples of the 16-pixel
+#: tile: 3 x 3 tiles, then 2 x 2
+LAYERS = np.array([(45, 37, 0, 0), (29, 21, 9, 45 * 37)], np.int32)
+TILES, PIXELS = 13, 45 * 37 + 29 * 21
+TEX_LAYER = np.array([(0, 0), (0, 1), (0, 2), (0, 3), (0, 4), (1, 0), (1, 1), (1, 2)], np.int32)
 
 
 LOOKUPS = (0, LINEAR_U, LINEAR_V, LINEAR_U | LINEAR_V)  # cells, u linear / v cells, u cells / v linear, bilinear
@@ -23,8 +26,8 @@ def random_scene(rng, n=400, n_tex=8):
     coef[:, 3] = rng.integers(0, 3, n + 7) * 8 + rng.integers(0, 8, n + 7)
     band_tex = rng.integers(-1, n_tex, 64).astype(np.int32)
     band_origin = rng.uniform(-10, 50, (64, 2)).astype(np.float32)
-    step_col = rng.uniform(-3, 3, (8, 4)).astype(np.float32)
-    step_row = rng.uniform(-3, 3, (8, 4)).astype(np.float32)
+    step_col = rng.uniform(-3, 3, (64, 4)).astype(np.float32)
+    step_row = rng.uniform(-3, 3, (64, 4)).astype(np.float32)
     ints, maps, boxes, pool, textures, off = [], [], [], [np.zeros(16)], [], 16
     for i in range(n_tex):
         nu, nv = rng.integers(2, 30, 2)
@@ -46,6 +49,7 @@ def random_scene(rng, n=400, n_tex=8):
         off += planes.size
     values = rng.standard_normal((n + 7, 4)).astype(np.float32)
     return dict(coef=coef, band_tex=band_tex, band_origin=band_origin, step_col=step_col, step_row=step_row,
+                tex_layer=TEX_LAYER[:n_tex], layers=LAYERS,
                 tex_box=np.array(boxes, np.float32), tex_int=np.array(ints, np.int32),
                 tex_map=np.array(maps, np.float32), texels=np.concatenate(pool + [np.zeros(32)]).astype(np.float32),
                 values=values, n=n, first=7, textures=textures)
@@ -61,27 +65,30 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
     stex, counts = cla.empty(q, (n,), np.int32), cla.empty(q, (n,), np.uint32)
     ks.splat_project(q, (n,), None, np.uint32(n), np.uint32(first), d["coef"].data, d["band_tex"].data,
                      d["band_origin"].data, d["step_col"].data, d["step_row"].data, d["tex_box"].data,
-                     np.int32(W), np.int32(H), centre.data, bbox.data, stex.data, counts.data)
+                     d["tex_layer"].data, d["layers"].data, centre.data, bbox.data, stex.data, counts.data)
     r_centre, r_bbox, r_tex, r_count = reference.project(
-        s["coef"], first, s["band_tex"], s["band_origin"], s["step_col"], s["step_row"], s["tex_box"], W, H, n)
+        s["coef"], first, s["band_tex"], s["band_origin"], s["step_col"], s["step_row"], s["tex_box"],
+        s["tex_layer"], s["layers"], n)
     assert np.array_equal(centre.get(), r_centre)
     assert np.array_equal(bbox.get(), r_bbox) and np.array_equal(stex.get(), r_tex)
     assert np.array_equal(counts.get(), r_count)
     assert 0 < np.count_nonzero(r_count) < n  # the scene has both visible and culled splats
 
-    tiles = TILES_X * TILES_Y
+    assert set(s["tex_layer"][r_tex[r_count > 0], 0]) == {0, 1}  # both layers are drawn into
+    tiles = TILES
     total = int(r_count.sum())
-    textures = len(s["tex_int"])
-    r_ranges, r_vals = reference.bin_by_tile(r_bbox, r_tex, TILES_X, tiles)
-    r_records = reference.records(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"], TILES_X, channels)
+    textures = int(s["tex_layer"][:, 1].max()) + 1  # per layer
+    r_ranges, r_vals = reference.bin_by_tile(r_bbox, r_tex, s["tex_layer"], s["layers"], tiles)
+    r_records = reference.records(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"], s["layers"], channels)
     for chunks in (1, 7, bin_chunks(n, tiles * textures, cc.info)):  # one, a few uneven, the renderer's
         chunk = -(-n // chunks)
         hist = cla.empty(q, (tiles * textures * chunks,), np.uint32)
-        bin_args = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.int32(TILES_X),
-                    np.uint32(textures))
-        inputs = (np.uint32(first), bbox.data, centre.data, stex.data, d["values"].data)
+        bin_args = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.uint32(textures))
+        inputs = (np.uint32(first), bbox.data, centre.data, stex.data, d["values"].data, d["tex_layer"].data,
+                  d["layers"].data)
         ks.splat_chunk_tiles(q, (chunks,), None, *bin_args, np.int32(0), *inputs, hist.data, hist.data)
-        r_hist = reference.count_tiles(r_bbox, r_tex, textures, chunk, chunks, tiles, TILES_X)  # (chunks, runs)
+        r_hist = reference.count_tiles(r_bbox, r_tex, s["tex_layer"], s["layers"], textures, chunk, chunks,
+                                       tiles)  # (chunks, runs)
         assert np.array_equal(hist.get(), r_hist.ravel())
         by_run, offsets = cla.empty_like(hist), cla.empty_like(hist)
         runs = np.uint32(tiles * textures)
@@ -104,13 +111,13 @@ def test_every_stage_equals_its_reference(cc, rng, px, channels):
     local = 16 * 16 // px
     images = []
     for _ in range(2):  # accumulates onto what is there; a second run repeats the first bit for bit
-        fb = cla.to_device(q, np.full((H * W, 4), 0.5, np.float32))
-        ks.splat_accumulate(q, (TILES_X * TILES_Y * local,), (local,), np.int32(W), np.int32(H), np.int32(TILES_X),
+        fb = cla.to_device(q, np.full((PIXELS, 4), 0.5, np.float32))
+        ks.splat_accumulate(q, (TILES * local,), (local,), np.int32(len(LAYERS)), d["layers"].data,
                             ranges.data, records.data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
-        images.append(fb.get().reshape(H, W, 4))
+        images.append(fb.get())
     assert np.array_equal(images[0], images[1])
     expected = 0.5 + reference.accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"],
-                                          s["textures"], W, H, channels)
+                                          s["textures"], s["layers"], channels)
     got = images[0]
     assert np.abs(expected - 0.5).max() > 1  # splats did land
     drawn = r_tex[r_count > 0]

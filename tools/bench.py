@@ -141,11 +141,11 @@ def bench_footprints(args) -> dict:
     cases = {}
     for wavelet in ("haar", "linear", "cubic"):
         wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=3)
-        ViewTables(wv, 0, clwave.Camera(10.0, 5.0, size=512).view(wv), device=cc)  # warm-up (FFT plans, build)
+        ViewTables(wv, 0, [(clwave.Camera(10.0, 5.0, size=512).view(wv), None)], device=cc)  # warm-up (FFT plans, build)
         seconds, texels = [], []
         for az, el in views(args.views):
             start = time.perf_counter()
-            tables = ViewTables(wv, 0, clwave.Camera(az, el, size=512).view(wv), device=cc)
+            tables = ViewTables(wv, 0, [(clwave.Camera(az, el, size=512).view(wv), None)], device=cc)
             seconds.append(time.perf_counter() - start)
             texels.append(sum(t.data.size for t in tables.textures.values() if t is not None))
         cases[wavelet] = dict(seconds=summary(seconds), textures=sum(t is not None for t in tables.textures.values()),
