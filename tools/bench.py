@@ -22,8 +22,8 @@ per second of accumulation.
 ``--wavelet-crop`` (64²) centre crop, with an estimate for the whole image; error against a
 float64 render at tolerance 1e-5 of the 64x64 centre crop; set-up (expansion) apart.
 ``progressive``: frames of 1, 2, 4 and 8 % of the voxels (``--progressive-keep`` 0.08 in 4
-doubling steps) at 512²; per frame the time since the start of the view, energy, and RMS
-error against the final image.
+doubling steps) at 512², single resolution and with coarse framebuffers (``coarse=2e-2``); per
+frame the time since the start of the view, energy, and RMS error against the final image.
 
 A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) and an
 entry in ``BENCHMARKS``.
@@ -159,24 +159,27 @@ def bench_footprints(args) -> dict:
 def bench_progressive(args) -> dict:
     vol = phantom("hydrogen", n=args.size)
     wv = WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=args.progressive_keep)
-    renderer = clwave.SplatRenderer(wv, device=args.device)
-    steps = 4
-    list(clwave.progressive(wv, clwave.Camera(10.0, 5.0, size=512), steps=steps, renderer=renderer))  # warm-up
-    runs = []
-    for az, el in views(args.views):
-        # all frames first: figures() of an early frame would render the final image inside the timing
-        frames = list(clwave.progressive(wv, clwave.Camera(az, el, size=512), steps=steps, renderer=renderer))
-        runs.append([f.figures() for f in frames])
-    frames = []
-    for i, first in enumerate(runs[0]):
-        frames.append(dict(kept_of_voxels=first["coefficients"] / wv.n_voxels, coefficients=first["coefficients"],
-                           seconds=summary([run[i]["seconds"] for run in runs]),
-                           energy=statistics.median(run[i]["energy"] for run in runs),
-                           rms_error_vs_final=statistics.median(run[i]["rms_error"] for run in runs)))
+    steps, cases = 4, {}
+    for coarse in (None, 2e-2):
+        renderer = clwave.SplatRenderer(wv, device=args.device, coarse=coarse)
+        list(clwave.progressive(wv, clwave.Camera(10.0, 5.0, size=512), steps=steps, renderer=renderer))  # warm-up
+        runs = []
+        for az, el in views(args.views):
+            # all frames first: figures() of an early frame would render the final image inside the timing
+            frames = list(clwave.progressive(wv, clwave.Camera(az, el, size=512), steps=steps, renderer=renderer))
+            runs.append([f.figures() for f in frames])
+        frames = []
+        for i, first in enumerate(runs[0]):
+            frames.append(dict(kept_of_voxels=first["coefficients"] / wv.n_voxels, coefficients=first["coefficients"],
+                               seconds=summary([run[i]["seconds"] for run in runs]),
+                               energy=statistics.median(run[i]["energy"] for run in runs),
+                               rms_error_vs_final=statistics.median(run[i]["rms_error"] for run in runs)))
+        cases["single resolution" if coarse is None else f"coarse {coarse:g}"] = dict(
+            compile_seconds=renderer.compile_seconds, frames=frames)
     return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", wavelet="cubic", levels=3, image="512x512",
                              keep=args.progressive_keep, steps=steps, views=args.views,
                              note="seconds since the start of the view, footprints included"),
-                compile_seconds=renderer.compile_seconds, frames=frames)
+                cases=cases)
 
 
 def bench_raytrace(args) -> dict:
