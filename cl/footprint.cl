@@ -42,12 +42,13 @@ inline float16 axis_factor(const float16 x, const int psi, __constant const floa
  *   group_tex  in  (groups,) int: the texture of each work-group
  *   tex_size   in  (T,) int4: (first work-item, rows nv, blocks of 16 columns per row, psi bits:
  *                  bit a for axis a)
- *   tex_rate   in  (T,) float8: (rate_x, rate_y, rate_z, phase) as 4 float2
+ *   tex_rate   in  (T,) float8: (rate, rate, rate, phase) as 4 float2: the rates of the axes not
+ *                  parallel to n, in world order, then (0, 0) for each such axis
  *   poly       in  (CLW_TERMS,) float: P's coefficients, lowest power first
- *   out        out float2: texture t's (rows, 16 blocks) spectrum from 16 x its first work-item
+ *   out        out float2: texture t's (rows, 16 x blocks) spectrum from 16 x its first work-item
  *                  (columns past nu/2 are padding)
  * Grid: each texture's rows x blocks work-items rounded up to whole work-groups, one texture
- * per group (group_tex), any local size. */
+ * per group; the local size is the one group_tex was made for (footprint.SPECTRUM_GROUP). */
 __kernel void footprint_spectra(__global const int *group_tex, __global const int4 *tex_size,
                                 __global const float8 *tex_rate, __constant const float *poly,
                                 __global float *out)
@@ -58,8 +59,9 @@ __kernel void footprint_spectra(__global const int *group_tex, __global const in
     if (i >= size.y * size.z)
         return;
     const int row = i / size.z;
-    const float16 c = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15) + (float)(16 * (i - row * size.z));
-    const float kv = (float)(row < size.y / 2 ? row : row - size.y);
+    const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const float16 c = lane + (float)(16 * (i - row * size.z));
+    const float kv = (float)(row < (size.y + 1) / 2 ? row : row - size.y);  /* numpy.fft.fftfreq */
     const float8 r = tex_rate[t];
     const float16 value = axis_factor(r.s0 * c + r.s1 * kv, size.w & 1, poly)
                         * axis_factor(r.s2 * c + r.s3 * kv, (size.w >> 1) & 1, poly)

@@ -77,8 +77,8 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
  *   bbox, stex   in  (n,) from splat_project; centre too (read when placing)
  *   values       in  (K,) float4: coefficient per channel
  *   tex_layer, layers  in  as for splat_project
- *   table        (chunks, tiles, textures) uint.  counting: out, [(c * tiles + tile) * textures + tex]
- *                = how many splats of chunk c with texture tex touch the tile;  placing: in/out,
+ *   table        (chunks, tiles, textures) uint.  counting: out, [(c * tiles + tile) * textures + j]
+ *                = how many splats of chunk c with texture j of their layer touch the tile;  placing: in/out,
  *                where chunk c writes next in each (tile, texture) run (consumed): the exclusive
  *                scan of the counts in (tile, texture, chunk) order, back in this layout
  *   records      placing: out (total, CLW_RECORD) uint4, one splat record per (tile, splat) pair

@@ -87,10 +87,8 @@ inline void splat_lookup(const int4 t, const float4 m, const float2 c, int4 *a, 
     __global const uint4 *records, __global const int4 *tex_int, __global const float4 *tex_map,                \
     __global const float *texels, __global float4 *fb
 
-/* The layer of a tile, its tile (tx, ty) within the layer as a pixel corner, and the layer's
- * (width, height); fb is moved to the layer's first pixel */
-inline int4 tile_layer(const int tile, const int layer_count, __global const int4 *layers, int2 *corner,
-                       __global float4 **fb)
+/* The layer (width, height, first tile, first pixel) of a tile, and the tile's corner pixel in it */
+inline int4 tile_layer(const int tile, const int layer_count, __global const int4 *layers, int2 *corner)
 {
     int l = 0;
     while (l + 1 < layer_count && layers[l + 1].z <= tile)
@@ -98,7 +96,6 @@ inline int4 tile_layer(const int tile, const int layer_count, __global const int
     const int4 layer = layers[l];
     const int tiles_x = (layer.x + CLW_TILE - 1) / CLW_TILE, index = tile - layer.z;
     *corner = (int2)(index % tiles_x, index / tiles_x) * CLW_TILE;
-    *fb += layer.w;
     return layer;
 }
 
@@ -120,8 +117,9 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
 {
     const int tile = get_global_id(0);
     int2 corner;
-    const int4 layer = tile_layer(tile, layer_count, layers, &corner, &fb);
+    const int4 layer = tile_layer(tile, layer_count, layers, &corner);
     const int width = layer.x, height = layer.y, xbase = corner.x, ybase = corner.y;
+    fb += layer.w;
     const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     float16 acc[CLW_CHANNELS][CLW_TILE];
     for (int ch = 0; ch < CLW_CHANNELS; ++ch)
@@ -204,8 +202,9 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
     const int lid = get_local_id(0);
     const int nitems = get_local_size(0);
     int2 origin;
-    const int4 layer = tile_layer(tile, layer_count, layers, &origin, &fb);
+    const int4 layer = tile_layer(tile, layer_count, layers, &origin);
     const int width = layer.x, height = layer.y;
+    fb += layer.w;
     const int4 corner = (int4)(origin, origin);
     const int y = corner.y + lid / CLW_ITEMS_PER_ROW;
     const int xbase = corner.x + (lid % CLW_ITEMS_PER_ROW) * CLW_PX;

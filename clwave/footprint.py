@@ -479,7 +479,7 @@ def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1, block=163
 
 
 SPECTRUM_GROUP = 16  # work-items per work-group of cl/footprint.cl, each group within one texture
-SPECTRUM_BLOCK = 16  # columns per work-item (float16)
+SPECTRUM_BLOCK = 16  # columns per work-item: the kernel's float16
 
 
 def device_spectra(cc, order: int, plans) -> list:
@@ -487,7 +487,8 @@ def device_spectra(cc, order: int, plans) -> list:
 
     ``plans`` holds ``(scale, axes, nu, nv)`` per texture (:func:`_slice_plan`); each spectrum
     comes back as an ``(nv, nu // 2 + 1)`` complex64 view in FFT row order, scaled for
-    ``irfft2`` (float32 throughout: within 1e-6 of the peak of the float64 NumPy spectrum).
+    ``irfft2`` (float32 throughout: the textures are within ~1e-6 of their peak from those of
+    the float64 NumPy spectra).
     """
     coeffs, imaginary = _psi_poly(order)
     sizes, rates, group_tex, first = [], [], [], 0

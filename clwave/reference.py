@@ -38,7 +38,7 @@ def project(coef, first, band_tex, band_origin, step_col, step_row, tex_box, tex
 
 
 def _tiles(box, layer):
-    """Tile ids a pixel box (x0, y0, x1, y1) of a layer ``(width, height, first tile, first pixel)`` touches, row by row."""
+    """Tile ids a pixel box (x0, y0, x1, y1) touches, row by row, in layer (width, height, first tile, first pixel)."""
     x0, y0, x1, y1 = (int(v) for v in box)
     tiles_x = -(-int(layer[0]) // TILE)
     if x1 < x0:

@@ -105,7 +105,8 @@ class ViewTables:
         self.step_row = np.zeros((8 * MAX_LEVELS, 4), np.float32)
         self.layers = np.zeros((len(layers), 4), np.int32)  # (width, height, first tile, first pixel)
         boxes, ints, maps, tex_layer, pool, offset = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
-        self.tiles = self.pixels = self.textures_per_layer = 0
+        self.tiles = self.pixels = 0
+        self.layer_textures = []  # textures drawn in each layer
         for li, (view, _) in enumerate(layers):
             H, W = view.size
             self.layers[li] = (W, H, self.tiles, self.pixels)
@@ -141,7 +142,7 @@ class ViewTables:
                 offset += planes.size
             if origins:
                 self.band_origin[list(origins)] = view.to_pixels(np.array(list(origins.values())))
-            self.textures_per_layer = max(self.textures_per_layer, len(ints) - first_tex)
+            self.layer_textures.append(len(ints) - first_tex)
         self.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
         self.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
         self.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
@@ -334,7 +335,7 @@ def _bspline3(t) -> np.ndarray:
 
 
 class Layer:
-    """One framebuffer: the image's pixel times ``factor``, with the bands drawn at that pixel."""
+    """One framebuffer's view: the image's pixel times ``factor`` (coarse bands are drawn there)."""
 
     def __init__(self, view, factor: int):
         H, W = view.size
@@ -433,7 +434,7 @@ class Frame:
         ranges = cla.zeros(q, (tiles, 2), np.uint32, allocator=r.scratch)
         records = r.tile_lists(max(total, 1) * pair_bytes)
         if total:
-            textures = tables.textures_per_layer
+            textures = max(tables.layer_textures)
             chunks = bin_chunks(n, tiles * textures, r.cc.info)
             chunk = -(-n // chunks)
             # chunk-major counts (each chunk's together, cached by its core), scanned run-major,
@@ -468,8 +469,9 @@ class Frame:
         out = np.zeros((H, W, self.r.wv.channels), np.float32)
         for gi, g in enumerate(self.r.wv.groups):
             fb = self.fbs[gi].get().reshape(-1, 4)[:, : len(g.channels)]
-            out[..., list(g.channels)] = sum(layer.image(fb[first: first + w * h])
-                                             for layer, (w, h, _, first) in zip(self.layers, self.tables[gi].layers))
+            out[..., list(g.channels)] = sum(layer.image(fb[first: first + w * h]) for layer, (w, h, _, first), drawn
+                                             in zip(self.layers, self.tables[gi].layers, self.tables[gi].layer_textures)
+                                             if drawn)  # a layer may draw nothing of this group
         if len(self.layers) > 1:
             self.stats["upsample_seconds"] += time.perf_counter() - start
         return out

@@ -141,7 +141,8 @@ def bench_footprints(args) -> dict:
     cases = {}
     for wavelet in ("haar", "linear", "cubic"):
         wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=3)
-        ViewTables(wv, 0, [(clwave.Camera(10.0, 5.0, size=512).view(wv), None)], device=cc)  # warm-up (FFT plans, build)
+        warm = clwave.Camera(10.0, 5.0, size=512).view(wv)
+        ViewTables(wv, 0, [(warm, None)], device=cc)  # warm-up (FFT plans, kernel build)
         seconds, texels = [], []
         for az, el in views(args.views):
             start = time.perf_counter()
