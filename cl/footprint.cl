@@ -3,7 +3,7 @@
  * each with a real 2-D FFT; its NumPy twin is footprint._Axis.
  *
  * Texture t's spectrum is the slice F(U u + V v) at U = c du (column c = 0 .. nu/2) and
- * V = kv dv (row r, FFT order: kv = r for r < nv/2, r - nv after).  Per world axis a, with
+ * V = kv dv (row r in numpy.fft.fftfreq order: kv = r in the first half, r - nv after).  Per world axis a, with
  * x_a = rate_a.x c + rate_a.y kv (x = w/2 for phi, w/4 for psi),
  *     phi: (sin x / x)^J,      psi: (sin^2 x / x)^J P(sin^2 x),
  * and the texture's value is phase * prod_a (complex: the centred factors are real, or
