@@ -34,7 +34,8 @@ Two ways to sample T:
   transcendental per grid point.  One real inverse FFT (``irfft2``) of the half-spectrum
   gives the samples of the period-W footprint.  With ``device=`` the half-spectra of
   oblique views are sampled by an OpenCL kernel instead (``cl/footprint.cl``, float32, all
-  textures in one launch; :func:`device_spectra`), 5x faster than NumPy on 2 CPU cores.
+  textures in one launch; :func:`device_spectra`): on 2 CPU cores a view's footprints then
+  take half the time (hydrogen at 1 %, 512²: 0.030 -> 0.015 s).
 * ``"spatial"`` -- the exact line integral at the same samples: the sorted crossings of
   the line with every moving axis' knot planes (integers of the phi coordinate,
   half-integers of the psi coordinate) cut it into segments where the integrand is one
@@ -323,6 +324,7 @@ def _small_positions(x, a_, b_, ku, kv):
 
 
 _RATE = dict(a=2.0, d=4.0)  # x = w / rate: phi's factors are functions of w/2, psi's of w/4
+_WEIGHT = dict(a=1.0, d=0.5)  # the constant in front of each centred factor G
 
 
 class _Axis:
@@ -345,11 +347,8 @@ class _Axis:
         self.ak, self.bl = self.a_ * ku, self.b_ * kv
         self.sa, self.ca = np.sin(self.ak), np.cos(self.ak)
         self.sb, self.cb = np.sin(self.bl), np.cos(self.bl)
-        if letter == "a":
-            self.imaginary, self.weight, self.coeffs = False, 1.0, None
-        else:
-            self.coeffs, self.imaginary = _psi_poly(order)
-            self.weight = 0.5
+        self.weight = _WEIGHT[letter]
+        self.coeffs, self.imaginary = _psi_poly(order) if letter == "d" else (None, False)
 
     def block(self, r0, r1):
         """``(num, x, poly)`` on rows r0:r1 (arrays of their own; 1-D kinds stay 1-D)."""
@@ -433,7 +432,7 @@ def _slice_plan(wav, key, m, d_xyz, u, v, wu, wv) -> tuple:
             scale *= 1.0 if key_xyz[a] == "a" else 0.0
             continue
         axes.append((key_xyz[a], alpha, beta))
-    return scale * 0.5 ** sum(letter == "d" for letter, _, _ in axes), axes
+    return scale * float(np.prod([_WEIGHT[letter] for letter, _, _ in axes])), axes
 
 
 def _fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1, block=16384) -> np.ndarray:
@@ -490,6 +489,8 @@ def device_spectra(cc, order: int, plans) -> list:
     ``irfft2`` (float32 throughout: the textures are within ~1e-6 of their peak from those of
     the float64 NumPy spectra).
     """
+    if not plans:
+        return []
     coeffs, imaginary = _psi_poly(order)
     sizes, rates, group_tex, first = [], [], [], 0
     for t, (scale, axes, nu, nv) in enumerate(plans):
@@ -505,8 +506,6 @@ def device_spectra(cc, order: int, plans) -> list:
         groups = -(-nv * blocks // SPECTRUM_GROUP)
         group_tex += [t] * groups
         first += groups * SPECTRUM_GROUP
-    if not plans:
-        return []
     q = cc.queue
     out = cla.empty(q, (first * SPECTRUM_BLOCK,), np.complex64)
     kernels = programs.build(cc, ["footprint.cl"], {"CLW_ORDER": order, "CLW_TERMS": len(coeffs)})

@@ -76,10 +76,12 @@ class ViewTables:
         frame = layers[0][0]  # the image's view: the layers share its direction
         if path == "auto" and any(cell_axes(wav, frame.u, frame.v)):
             path = "cells"  # Haar with u or v along a world axis: exact cells along that axis
-        self.omega_s = omega_s if omega_s is not None else default_omega_s(frame.pixel, min(wv.spacing))
+        # the texture band of each layer (a layer's pixel sets its default), the image's reported
+        omegas = [omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
+                  for view, _ in layers]
+        self.omega_s = omegas[0]
         self.layer_of, self.texels_per_pixel, texel = {}, {}, {}
-        for li, (view, bands) in enumerate(layers):
-            omega = omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
+        for li, ((view, bands), omega) in enumerate(zip(layers, omegas)):
             for b in g.bands:
                 band = (b.level, b.key)
                 if band in self.layer_of or (bands is not None and band not in bands):
