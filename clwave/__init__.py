@@ -1,22 +1,22 @@
 """clwave: wavelet-domain volume rendering in Python and OpenCL.
 
-See README.md for the quick start; coordinates follow CONVENTIONS.md (host arrays
+See README.md for the quick start; coordinates follow docs/coordinates.md (host arrays
 (z, y, x[, c]), spacing (dz, dy, dx), world points (x, y, z)).
 """
 
 from .errors import (ClwaveError, DeviceMemoryError, DeviceNotFoundError, FileFormatError,
                      InputError, KernelBuildError, OutputExistsError)
-from .volume import Volume
-from .device import ComputeContext, list_devices, select_device
-from .loaders import load
-from .phantoms import phantom
-from .transfer import TransferFunction
-from .wavelet import WaveletVolume
-from .camera import Camera
-from .result import RenderResult
-from .splat import SplatRenderer, splat
-from .progressive import progressive
-from .raytrace import Phong, RayTracer, raytrace
+from .model.volume import Volume
+from .device.context import ComputeContext, list_devices, select_device
+from .io.loaders import load
+from .io.phantoms import phantom
+from .model.transfer import TransferFunction
+from .model.wavelet import WaveletVolume
+from .model.camera import Camera
+from .io.result import RenderResult
+from .splat.renderer import SplatRenderer, splat
+from .splat.progressive import progressive
+from .raytrace.tracer import Phong, RayTracer, raytrace
 
 __version__ = "0.1.0"
 

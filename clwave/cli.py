@@ -67,9 +67,9 @@ def _add_model_options(p, default_tf=None):
 
 def read_volume(args):
     """The Volume named by ``args.input`` (a file, a folder or ``phantom:NAME[:N]``)."""
-    from .loaders import load
-    from .phantoms import phantom
-    from .volume import Volume
+    from .io.loaders import load
+    from .io.phantoms import phantom
+    from .model.volume import Volume
 
     spec = args.input
     spacing = None if args.spacing is None else _numbers(args.spacing, "--spacing", (1, 3))
@@ -93,8 +93,8 @@ def build_model(args, log=print):
     Returns ``(wavelet_volume, reference_volume)``; the reference is the volume the
     model approximates (None when the input was already a ``.clw`` file).
     """
-    from .transfer import TransferFunction
-    from .wavelet import WaveletVolume
+    from .model.transfer import TransferFunction
+    from .model.wavelet import WaveletVolume
 
     focus = None
     if args.focus is not None or args.sigma is not None:
@@ -138,8 +138,8 @@ def _check_output(path, force):
 
 
 def cmd_info(args):
-    from .device import list_devices, requested_device, select_device
-    from .programs import selftest
+    from .device.context import list_devices, requested_device, select_device
+    from .device.programs import selftest
 
     devices = list_devices()
     chosen = select_device(args.device, devices)
@@ -160,7 +160,7 @@ def cmd_info(args):
                   f"{d.compute_units} compute units, {d.version}")
         print(f"device request {requested_device(args.device)!r} -> {chosen.id} {chosen.name}")
     if args.check:
-        from .device import ComputeContext
+        from .device.context import ComputeContext
         seconds = selftest(ComputeContext.get(chosen.id))
         print(f"self-test kernel built in {seconds:.2f} s and ran correctly on {chosen.name}")
     return 0
@@ -213,13 +213,13 @@ def _raytrace_options(p):
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
     g.add_argument("--background", default="0,0,0", help="PNG: colour R,G,B in 0..1 behind the volume")
-    g.add_argument("--path", choices=("bspline", "wavelet"), default="bspline",
+    g.add_argument("--field", choices=("bspline", "wavelet"), default="bspline",
                    help="evaluate the field from fine B-spline grids (fast) or from the wavelet coefficients "
                         "with per-ray active lists (the paper's reference)")
 
 
 def make_camera(args):
-    from .camera import Camera
+    from .model.camera import Camera
 
     size = _numbers(args.size.replace("x", ","), "--size", (1, 2), int)
     perspective = dict(perspective=True, distance=args.distance, fov=args.fov) \
@@ -243,16 +243,16 @@ def _display_window(args):
 def _write_gif(path, pictures, seconds_per_frame, force):
     import imageio.v3 as iio
 
-    from .files import write_atomic
+    from .io.files import write_atomic
     write_atomic(path, lambda fh: iio.imwrite(fh, np.stack(pictures), extension=".gif",
                                               is_batch=True, duration=int(1000 * seconds_per_frame), loop=0),
                  force)
 
 
 def cmd_render(args):
-    from .raytrace import RayTracer, raytrace
-    from .result import resolve_window
-    from .splat import SplatRenderer, splat
+    from .raytrace.tracer import RayTracer, raytrace
+    from .io.result import resolve_window
+    from .splat.renderer import SplatRenderer, splat
 
     out = _check_output(args.output, args.force)
     extras = [Path(p) for p in (args.raw, args.stats) if p]
@@ -270,7 +270,7 @@ def cmd_render(args):
         raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
     wv, _ = build_model(args)
     if args.method == "raytrace":
-        tracer = RayTracer(wv, device=args.device, path=args.path)
+        tracer = RayTracer(wv, device=args.device, field=args.field)
         options = dict(tolerance=args.tolerance, lights=_lights(args), shading=not args.no_shading,
                        absorption=not args.xray)
 
@@ -299,7 +299,7 @@ def cmd_render(args):
     size = f"{camera.size[0]}x{camera.size[1]}"
     m = result.meta
     if args.method == "raytrace":
-        print(f"ray traced {size} ({m['mode']}, {m['path']} path, tolerance {m['tolerance']:g}, shading "
+        print(f"ray traced {size} ({m['mode']}, {m['field']} field, tolerance {m['tolerance']:g}, shading "
               f"{m['shading']}) in {m['render_seconds']:.3f} s: {m['segments']:,} segments, "
               f"{m['rays_terminated_early']:,} rays terminated early (set-up {m['setup_seconds']:.2f} s and "
               f"kernel build {m['compile_seconds']:.2f} s apart) -> {out}")
@@ -316,8 +316,8 @@ def _total_seconds(meta) -> float:
 
 
 def cmd_progressive(args):
-    from .progressive import progressive
-    from .result import RenderResult, resolve_window
+    from .splat.progressive import progressive
+    from .io.result import RenderResult, resolve_window
 
     out = Path(args.output)
     as_folder = out.suffix == ""
@@ -337,7 +337,7 @@ def cmd_progressive(args):
                               omega_s=args.omega_s, coarse=args.coarse))
     window = _display_window(args)
     if window == "auto":  # the final image's window for every frame: refinement stays visible
-        window = resolve_window(frames[0]._final.get()[..., :3], "auto")
+        window = resolve_window(frames[0].final_image()[..., :3], "auto")
     pictures = [RenderResult(f.image, f.meta).to_uint8(window) for f in frames]
     if as_folder:
         out.mkdir(parents=True, exist_ok=True)
@@ -347,7 +347,7 @@ def cmd_progressive(args):
         _write_gif(out, pictures, 0.5, args.force)
     figures = [f.figures() for f in frames]
     if args.stats:
-        from .files import write_atomic
+        from .io.files import write_atomic
         text = json.dumps(dict(frames=figures, meta=frames[-1].meta), indent=2, default=str).encode()
         write_atomic(args.stats, lambda fh: fh.write(text), args.force)
     for f in figures:

@@ -7,7 +7,7 @@ import pytest
 
 @pytest.fixture(scope="session")
 def cc():
-    from clwave.device import ComputeContext
+    from clwave.device.context import ComputeContext
     return ComputeContext.get("auto")
 
 

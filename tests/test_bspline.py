@@ -1,9 +1,10 @@
-"""Closed-form B-splines, CDF(j, j) filters, offsets, norms and Fourier transforms (MATH.md §1-5)."""
+"""Closed-form B-splines, CDF(j, j) filters, offsets, norms and Fourier transforms
+(docs/model.md §1-4 and docs/splatting.md §1)."""
 
 import numpy as np
 import pytest
 
-from clwave.bspline import SplineWavelet, bspline, bspline_derivative, bspline_explicit, max_levels, wavelet_for
+from clwave.model.bspline import SplineWavelet, bspline, bspline_derivative, bspline_explicit, max_levels, wavelet_for
 from clwave.errors import InputError
 
 ORDERS = (1, 2, 3, 4)

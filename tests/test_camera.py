@@ -1,11 +1,11 @@
-"""Camera conventions (CONVENTIONS.md "Camera") and bad views."""
+"""Camera conventions (docs/coordinates.md §2) and bad views."""
 
 import numpy as np
 import pytest
 
-from clwave.camera import Camera
+from clwave.model.camera import Camera
 from clwave.errors import InputError
-from clwave.volume import Volume
+from clwave.model.volume import Volume
 
 
 @pytest.mark.parametrize("az, el", [(0, 0), (30, 20), (-70, -15), (90, 0), (0, 90), (123.4, -56.7)])

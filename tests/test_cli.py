@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from clwave.cli import main
-from clwave.wavelet import WaveletVolume
+from clwave.model.wavelet import WaveletVolume
 
 
 def run(capsys, *argv):
@@ -152,9 +152,9 @@ def test_raytrace_png_stats_perspective_and_turntable(tmp_path, capsys):
     gif = tmp_path / "turn.gif"
     code, out, err = run(capsys, "render", "phantom:shepp-logan:16", "--tf", "grey", "--levels", "1",
                          "--method", "raytrace", "--perspective", "--fov", "40", "--size", "8", "--turntable", "2",
-                         "--path", "wavelet", "-o", str(gif))
+                         "--field", "wavelet", "-o", str(gif))
     assert code == 0, err
-    assert iio.imread(gif, index=None).shape[:3] == (2, 8, 8) and "wavelet path" in out
+    assert iio.imread(gif, index=None).shape[:3] == (2, 8, 8) and "wavelet field" in out
 
 
 def test_progressive_gif_folder_and_stats(tmp_path, capsys):

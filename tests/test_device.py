@@ -5,8 +5,8 @@ import pyopencl as cl
 import pyopencl.array as cla
 import pytest
 
-from clwave import programs
-from clwave.device import ComputeContext, DeviceInfo, select_device
+from clwave.device import programs
+from clwave.device.context import ComputeContext, DeviceInfo, select_device
 from clwave.errors import DeviceNotFoundError, KernelBuildError
 
 FAKE = [
@@ -55,8 +55,8 @@ def test_context_is_shared(cc):
 
 @pytest.mark.parametrize("local", [None, (1,)])
 def test_selftest_kernel_matches_numpy(cc, local):
-    ks = programs.build(cc, ["selftest.cl"])
-    assert programs.build(cc, ["selftest.cl"]) is ks  # built once
+    ks = programs.build(cc, ["device/selftest.cl"])
+    assert programs.build(cc, ["device/selftest.cl"]) is ks  # built once
     assert ks.selftest_axpy is ks["selftest_axpy"]  # and each kernel fetched once
     assert any(opt.startswith("-DCLW_SRC_HASH=") for opt in ks.options) and "-I" in ks.options
     rng = np.random.default_rng(0)
@@ -88,7 +88,7 @@ def test_build_failure_is_one_line_with_log(cc, tmp_path, monkeypatch):
 
 def test_cl_sources_ship_with_the_package():
     folder = programs.cl_dir()
-    assert (folder / "clw_common.h").is_file() and (folder / "selftest.cl").is_file()
+    assert (folder / "common" / "clw_common.h").is_file() and (folder / "device" / "selftest.cl").is_file()
     import tomllib
     from pathlib import Path
     project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import clwave
-from clwave.device import ComputeContext
-from clwave.finegrid import fine_grids
+from clwave.device.context import ComputeContext
+from clwave.raytrace.finegrid import fine_grids
 
 
 def _on_box(arr, start, lo, shape):

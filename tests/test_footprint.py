@@ -1,4 +1,4 @@
-"""Footprint textures (paper §4, MATH.md §5-6) against independent line integrals.
+"""Footprint textures (paper §4, docs/splatting.md §1-2) against independent line integrals.
 
 The oracle integrates the closed-form 3-D prototype product (``SplineWavelet.prototype``,
 Cox-de Boor) along each line with composite Gauss-Legendre panels between the crossings of
@@ -13,10 +13,12 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from clwave.bspline import SplineWavelet
+from clwave.model.bspline import SplineWavelet
 from clwave.errors import InputError
-from clwave.footprint import (DEFAULT_OMEGA_MIN, Texture, cell_axes, centred_fourier, footprints,
-                              line_integral, projected_halfwidths, sample_count, view_vectors)
+from clwave.model.geometry import projected_halfwidths, view_frame
+from clwave.splat.spatial import line_integral
+from clwave.splat.spectral import centred_fourier
+from clwave.splat.textures import DEFAULT_OMEGA_MIN, Texture, cell_axes, footprints, sample_count
 
 KEYS = [z + y + x for z in "ad" for y in "ad" for x in "ad"]  # array order (z, y, x)
 OBLIQUE = [(30.0, 20.0), (-70.0, -15.0), (45.0, 35.26)]
@@ -81,11 +83,11 @@ def aaa_peak(w, m, spacing, n, u, v):
     return float(oracle(w, "aaa", m, spacing, n, u, v, 0.0, 0.0)[0])
 
 
-def max_errors(order, view, m, spacing, path="auto", count=24, **kw):
+def max_errors(order, view, m, spacing, sampling="auto", count=24, **kw):
     """{key: max |texture - oracle| / peak of 'aaa'} over sample points, and the textures."""
     w = SplineWavelet(order)
     n, u, v = frame(*view)
-    tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], path=path, **kw)
+    tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], sampling=sampling, **kw)
     peak = aaa_peak(w, m, spacing, n, u, v)
     errs = {}
     for (mm, key), t in tex.items():
@@ -104,15 +106,15 @@ def max_errors(order, view, m, spacing, path="auto", count=24, **kw):
 # ----------------------------------------------------------------------------- device spectra
 @pytest.mark.parametrize("order", (1, 2, 3, 4))
 def test_device_spectra_give_the_numpy_textures(cc, order):
-    """cl/footprint.cl against its NumPy twin (float64 spectra, same inverse FFT): every type at
+    """cl/splat/footprint.cl against its NumPy twin (float64 spectra, same inverse FFT): every type at
     levels 0-2, oblique and axis-aligned views (those stay separable on the host), both spacings,
     within float32 rounding of each texture's peak."""
     bands = [(m, k) for m in (0, 1, 2) for k in KEYS]
     for view in OBLIQUE + AXIS:
         n, u, v = frame(*view)
         for spacing in SPACINGS:
-            host = footprints(order, spacing, n, u, v, bands, path="fft")
-            dev = footprints(order, spacing, n, u, v, bands, path="fft", device=cc)
+            host = footprints(order, spacing, n, u, v, bands, sampling="fft")
+            dev = footprints(order, spacing, n, u, v, bands, sampling="fft", device=cc)
             assert [band for band, t in host.items() if t is None] == [band for band, t in dev.items() if t is None]
             for band, t in host.items():
                 if t is not None:
@@ -135,7 +137,7 @@ def test_table_one_sample_counts():
 
 def test_view_vectors_are_eq31_and_right_handed():
     for az, el in OBLIQUE + AXIS:
-        n, u, v = view_vectors(az, el)
+        n, u, v = view_frame(az, el)
         a, b = np.radians(az), np.radians(el)
         assert np.allclose(n, [np.cos(a) * np.cos(b), np.sin(a) * np.cos(b), np.sin(b)], atol=1e-15)
         assert np.allclose(np.cross(u, v), n, atol=1e-15)
@@ -208,7 +210,7 @@ def test_line_integral_shapes_and_scaling_relation():
 @pytest.mark.parametrize("view", OBLIQUE + AXIS)
 def test_cubic_fft_textures_within_1e3_of_the_aaa_peak(view, m, spacing):
     errs, tex = max_errors(4, view, m, spacing)
-    assert {t.path for t in tex.values() if t is not None} == {"fft"}
+    assert {t.sampling for t in tex.values() if t is not None} == {"fft"}
     assert len(errs) == (8 if view in OBLIQUE else 4)  # psi along n: 4 types vanish
     assert max(errs.values()) <= 1e-3, errs
 
@@ -220,7 +222,7 @@ def test_haar_and_linear_spatial_textures_are_exact(order, view):
     for m in (0, 1):
         for spacing in SPACINGS:
             errs, tex = max_errors(order, view, m, spacing, count=16)
-            assert {t.path for t in tex.values() if t is not None} == {"spatial"}
+            assert {t.sampling for t in tex.values() if t is not None} == {"spatial"}
             assert max(errs.values()) <= 1e-6, errs  # float32 rounding; float64 is line_integral
 
 
@@ -234,7 +236,7 @@ def test_haar_cells_at_axis_views_are_exact_everywhere(view, spacing):
     assert cell_axes(w, u, v) == (True, True)
     rng = np.random.default_rng(3)
     for m in (0, 2):
-        tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], path="cells")
+        tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], sampling="cells")
         peak = aaa_peak(w, m, spacing, n, u, v)
         assert sum(t is not None for t in tex.values()) == 4  # psi along n vanishes
         for (_, key), t in tex.items():
@@ -267,13 +269,13 @@ def test_haar_cells_along_the_one_world_axis_are_exact(view, spacing):
     assert cell_axes(w, u, v) == cells
     rng = np.random.default_rng(5)
     for m in (0, 2):
-        tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], path="cells", texel=0.07)
+        tex = footprints(w, spacing, n, u, v, [(m, k) for k in KEYS], sampling="cells", texel=0.07)
         peak = aaa_peak(w, m, spacing, n, u, v)
         assert all(t is not None for t in tex.values())  # no world axis along n
         for (_, key), t in tex.items():
             if t is None:
                 continue
-            assert t.path == ("cells-u" if cells[0] else "cells-v") and t.cells == cells
+            assert t.sampling == ("cells-u" if cells[0] else "cells-v") and t.cells == cells
             hu, hv = projected_halfwidths(w, key, m, spacing, u, v)
             cell_h, cell_axis = (t.h_u, 1) if cells[0] else (t.h_v, 0)
             assert t.data.shape[cell_axis] == 2 and cell_h == pytest.approx(hu if cells[0] else hv)
@@ -294,28 +296,28 @@ def test_cells_need_haar_with_a_world_axis_in_the_image():
     n, u, v = frame(30.0, 20.0)
     assert cell_axes(1, u, v) == (False, False)
     with pytest.raises(InputError, match="cells"):
-        footprints(1, (1, 1, 1), n, u, v, [(0, "aaa")], path="cells")
+        footprints(1, (1, 1, 1), n, u, v, [(0, "aaa")], sampling="cells")
     n, u, v = frame(0.0, 0.0)
     assert cell_axes(2, u, v) == (False, False)
     with pytest.raises(InputError, match="cells"):
-        footprints(2, (1, 1, 1), n, u, v, [(0, "aaa")], path="cells")
+        footprints(2, (1, 1, 1), n, u, v, [(0, "aaa")], sampling="cells")
 
 
 @pytest.mark.parametrize("order, bound", [(1, 0.1), (2, 0.2)])
 def test_fft_rings_for_haar_and_linear_at_axis_views(order, bound):
     """Why "auto" takes the spatial path for orders 1-2: the band-limited footprint rings at
-    the jumps (Haar) and kinks (linear) of axis-aligned views, far beyond 1e-2 (MATH.md §5:
+    the jumps (Haar) and kinks (linear) of axis-aligned views, far beyond 1e-2 (docs/splatting.md §1:
     1.0 and 0.53 at omega_s = 14; Haar here even with the jump samples themselves left out);
     oblique views are smoother but still above 1e-2."""
-    errs, tex = max_errors(order, (0.0, 0.0), 0, (1.0, 1.0, 1.0), path="fft")
-    assert {t.path for t in tex.values() if t is not None} == {"fft"}
+    errs, tex = max_errors(order, (0.0, 0.0), 0, (1.0, 1.0, 1.0), sampling="fft")
+    assert {t.sampling for t in tex.values() if t is not None} == {"fft"}
     assert max(errs.values()) > bound
-    errs, _ = max_errors(order, (30.0, 20.0), 0, (1.0, 1.0, 1.0), path="fft")
+    errs, _ = max_errors(order, (30.0, 20.0), 0, (1.0, 1.0, 1.0), sampling="fft")
     assert max(errs.values()) > 1e-2
 
 
 def test_paper_band_alone_is_not_enough_for_cubic_axis_views():
-    """omega_min exists because omega_s = 14 leaves ~3e-2 at the axis view (MATH.md §5)."""
+    """omega_min exists because omega_s = 14 leaves ~3e-2 at the axis view (docs/splatting.md §1)."""
     errs, _ = max_errors(4, (0.0, 0.0), 0, (1.0, 1.0, 1.0), omega_min=0.0)
     assert max(errs.values()) > 1e-2
     assert DEFAULT_OMEGA_MIN[4] <= 64
@@ -324,13 +326,13 @@ def test_paper_band_alone_is_not_enough_for_cubic_axis_views():
 def test_quadratic_fft_default_accuracy():
     for view in [(30.0, 20.0), (0.0, 0.0)]:
         errs, tex = max_errors(3, view, 0, (1.0, 1.0, 1.0))
-        assert {t.path for t in tex.values() if t is not None} == {"fft"}
+        assert {t.sampling for t in tex.values() if t is not None} == {"fft"}
         assert max(errs.values()) <= 1e-3, errs
 
 
 def test_spatial_path_for_cubic_is_exact_too():
-    errs, tex = max_errors(4, (0.0, 0.0), 1, (2.0, 1.0, 0.5), path="spatial", count=8)
-    assert {t.path for t in tex.values() if t is not None} == {"spatial"}
+    errs, tex = max_errors(4, (0.0, 0.0), 1, (2.0, 1.0, 0.5), sampling="spatial", count=8)
+    assert {t.sampling for t in tex.values() if t is not None} == {"spatial"}
     assert max(errs.values()) <= 1e-6
 
 
@@ -364,7 +366,7 @@ def test_texture_integral_is_the_basis_integral(order):
             total = float(t.data[:-1, :-1].astype(float).sum()) * t.h_u * t.h_v  # one period
             want = volume if key == "aaa" else 0.0
             # FFT: the DC term, exact; spatial: the trapezoid rule of a C^1 footprint
-            tol = 1e-6 if t.path == "fft" else 2e-3
+            tol = 1e-6 if t.sampling == "fft" else 2e-3
             assert abs(total - want) <= tol * volume, (key, total, want)
 
 
@@ -440,8 +442,8 @@ def test_input_validation():
         footprints(4, (1, 1, 1), n, u, 2 * v, [(1, "aaa")])
     with pytest.raises(InputError, match="spacing"):
         footprints(4, (1, 0, 1), n, u, v, [(1, "aaa")])
-    with pytest.raises(InputError, match="path"):
-        footprints(4, (1, 1, 1), n, u, v, [(1, "aaa")], path="gpu")
+    with pytest.raises(InputError, match="sampling"):
+        footprints(4, (1, 1, 1), n, u, v, [(1, "aaa")], sampling="gpu")
     with pytest.raises(InputError, match="level"):
         footprints(4, (1, 1, 1), n, u, v, [(-1, "aaa")])
     with pytest.raises(InputError, match="texel"):

@@ -15,7 +15,7 @@ from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
 
 from clwave.errors import ClwaveError, FileFormatError, InputError
-from clwave.loaders import load
+from clwave.io.loaders import load
 
 SHAPE_IJK = (5, 6, 7)
 

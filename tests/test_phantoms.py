@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from clwave.errors import InputError
-from clwave.phantoms import NAMES, analytic, phantom
-from clwave.volume import Volume
+from clwave.io.phantoms import NAMES, analytic, phantom
+from clwave.model.volume import Volume
 
 
 def centres(n):
@@ -140,7 +140,7 @@ def test_shepp_logan_regions():
 
 def test_shepp_logan_matches_phantom3d_algorithm():
     """A literal transcription of Schabel's phantom3d loop (rotate coords, test, add)."""
-    from clwave.phantoms import SHEPP_LOGAN
+    from clwave.io.phantoms import SHEPP_LOGAN
     n = 24
     u = (np.arange(n) - (n - 1) / 2) * (2 / n)
     z, y, x = np.meshgrid(u, u, u, indexing="ij")

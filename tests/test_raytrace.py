@@ -7,9 +7,13 @@ import pytest
 from scipy.special import erf
 
 import clwave
-from clwave.quadrature import raytrace_reference
-from clwave.raytrace import SUPER, Phong, RayTracer, occupancy, sample_points, sample_tables, superblocks
-from clwave.reference import line_integrals
+from clwave.raytrace.reference import raytrace_reference
+from clwave.device.constants import SUPER
+from clwave.model.geometry import world_to_fine
+from clwave.raytrace.bounds import occupancy, superblocks
+from clwave.raytrace.quadrature import sample_points, sample_tables
+from clwave.raytrace.tracer import Phong, RayTracer
+from clwave.splat.reference import line_integrals
 
 TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
 
@@ -101,19 +105,19 @@ def small_rgba():
 
 @pytest.fixture(scope="module")
 def small_wavelet_tracer(small_rgba):
-    return RayTracer(small_rgba[0], path="wavelet")
+    return RayTracer(small_rgba[0], field="wavelet")
 
 
-@pytest.mark.parametrize("path", ["bspline", "wavelet"])
+@pytest.mark.parametrize("field", ["bspline", "wavelet"])
 @pytest.mark.parametrize("kw", [dict(absorption=False), dict(shading=False), dict(),
                                 dict(lights=[(0, 90), (120, -10)], shading=Phong(0.2, 0.6, 0.5, 8))])
-def test_kernel_equals_numpy_reference(small_rgba, small_wavelet_tracer, kw, path):
+def test_kernel_equals_numpy_reference(small_rgba, small_wavelet_tracer, kw, field):
     wv, tracer = small_rgba
-    tracer = small_wavelet_tracer if path == "wavelet" else tracer
+    tracer = small_wavelet_tracer if field == "wavelet" else tracer
     cam = clwave.Camera(30, 20, size=(3, 4))
     ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer, **kw)
     got = tracer.render(cam, tolerance=1e-3, **kw)
-    assert got.meta["path"] == path
+    assert got.meta["field"] == field
     assert np.max(np.abs(got.image - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
 
 
@@ -159,17 +163,17 @@ def test_kernel_equals_reference_where_the_field_dips_below_zero(kw):
     assert np.max(np.abs(got.image - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
 
 
-@pytest.mark.parametrize("path", ["bspline", "wavelet"])
+@pytest.mark.parametrize("field", ["bspline", "wavelet"])
 def test_perspective_kernel_equals_reference_and_eye_inside_integrates_from_eye(small_rgba, small_wavelet_tracer,
-                                                                                 path):
+                                                                                 field):
     wv, tracer = small_rgba
-    tracer = small_wavelet_tracer if path == "wavelet" else tracer
+    tracer = small_wavelet_tracer if field == "wavelet" else tracer
     cam = clwave.Camera(-40, 10, size=(3, 3), perspective=True, distance=4.0, fov=40)
     ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer)
     assert np.max(np.abs(tracer.render(cam, tolerance=1e-3).image - ref)) <= 1e-5
     # an eye in the middle of a constant Haar box sees q/alpha (1 - e^{-alpha d}), d = distance to the wall
     vol = rgba_volume(np.full((6, 6, 6), 1.0), np.full((6, 6, 6), 0.5))
-    box = RayTracer(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=0), path=path)
+    box = RayTracer(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=0), field=field)
     inside = clwave.Camera(0, 0, size=1, perspective=True, distance=1.0, fov=10)  # eye at x = 1, looks along -x
     img = box.render(inside, tolerance=1e-4, shading=False).image[0, 0]
     d = 1.0 + 3.0
@@ -195,7 +199,7 @@ def test_occupancy_covers_every_nonzero_value():
     occ, origin, (lo, hi) = occupancy(wv)
     pts = np.stack(np.meshgrid(*[np.linspace(-16, 16, 25)] * 3, indexing="ij"), -1).reshape(-1, 3)
     vals = np.abs(wv.evaluate(pts)[:, 0])
-    fine = wv._world_to_fine(pts, 4)  # (z, y, x)
+    fine = world_to_fine(pts, 4, wv.shape, wv.spacing, wv.origin)  # (z, y, x)
     blk = np.floor(fine / 8).astype(int) - origin
     inside = np.all((blk >= 0) & (blk < occ.shape), axis=1)
     covered = np.zeros(len(pts), bool)
@@ -240,7 +244,7 @@ def test_shading_meta_and_haar_unshaded():
     res = clwave.raytrace(clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=1),
                           clwave.Camera(20, 10, size=4))
     assert res.meta["shading"].startswith("off: the Haar basis")
-    assert res.meta["path"] == "bspline" and res.image.shape == (4, 4, 4)
+    assert res.meta["field"] == "bspline" and res.image.shape == (4, 4, 4)
 
 
 def test_zero_lights_leave_the_ambient_term(small_rgba):
@@ -289,13 +293,13 @@ def test_scalar_volume_needs_classification():
     assert clwave.raytrace(wv, clwave.Camera(size=4), absorption=False).image.shape == (4, 4, 1)
 
 
-@pytest.mark.parametrize("path", ["bspline", "wavelet"])
-def test_too_little_device_memory_is_reported(monkeypatch, path):
+@pytest.mark.parametrize("field", ["bspline", "wavelet"])
+def test_too_little_device_memory_is_reported(monkeypatch, field):
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=8), wavelet="linear", levels=1)
     cc = clwave.ComputeContext.get()
     monkeypatch.setattr(cc, "info", dataclasses.replace(cc.info, global_mem=1000))
     with pytest.raises(clwave.DeviceMemoryError, match="MiB"):
-        RayTracer(wv, path=path)
+        RayTracer(wv, field=field)
 
 
 def test_budget_holds_on_a_sparse_thresholded_volume():
@@ -322,15 +326,15 @@ def sparse_rgba(wavelet, levels=2, keep=0.3, seed=5):
 
 
 @pytest.mark.parametrize("wavelet", ["cubic", "linear", "haar", ["cubic", "cubic", "cubic", "haar"]])
-def test_wavelet_path_equals_bspline_path(wavelet):
+def test_wavelet_field_equals_bspline_field(wavelet):
     """Active lists over the kept coefficients and the expanded fine grids: one function, one image."""
     wv = sparse_rgba(wavelet)
-    fast, reference = RayTracer(wv), RayTracer(wv, path="wavelet")
+    fast, reference = RayTracer(wv), RayTracer(wv, field="wavelet")
     for cam, kw in ((clwave.Camera(30, 20, size=10), {}), (clwave.Camera(0, 0, size=10), dict(absorption=False)),
                     (clwave.Camera(-60, 35, size=8, perspective=True, distance=12.0), dict(shading=False))):
         a = fast.render(cam, tolerance=1e-6, precision="double", **kw)
         b = reference.render(cam, tolerance=1e-6, precision="double", **kw)
-        assert (a.meta["path"], b.meta["path"]) == ("bspline", "wavelet")
+        assert (a.meta["field"], b.meta["field"]) == ("bspline", "wavelet")
         assert b.meta["rays_active_list_overflowed"] == 0
         assert np.abs(a.image).max() > 0.1
         assert np.max(np.abs(a.image - b.image)) <= 1e-5
@@ -363,7 +367,7 @@ def test_active_list_equals_the_brute_force_set_of_supports():
     """On each traced segment, the kernel's active list is every kept coefficient whose support holds the midpoint."""
     wv = sparse_rgba("cubic", keep=0.2)
     cam = clwave.Camera(25, 15, size=6)
-    tracer = RayTracer(wv, path="wavelet")
+    tracer = RayTracer(wv, field="wavelet")
     res = tracer.render(cam, tolerance=1e-4, trace=40)
     census = res.meta["active_trace"].view(np.uint32)  # (H, W, 40, 4)
     t_mids = res.meta["active_trace"][..., 3].view(np.float32)
@@ -387,37 +391,38 @@ def test_active_list_equals_the_brute_force_set_of_supports():
 def test_active_list_overflow_falls_back_to_every_index():
     wv = sparse_rgba("cubic")
     cam = clwave.Camera(30, 20, size=8)
-    full = RayTracer(wv, path="wavelet").render(cam, tolerance=1e-4)
-    tiny = RayTracer(wv, path="wavelet", active=4).render(cam, tolerance=1e-4)
+    full = RayTracer(wv, field="wavelet").render(cam, tolerance=1e-4)
+    tiny = RayTracer(wv, field="wavelet", active=4).render(cam, tolerance=1e-4)
     assert full.meta["rays_active_list_overflowed"] == 0 < tiny.meta["rays_active_list_overflowed"]
     assert np.max(np.abs(full.image - tiny.image)) <= 1e-6
 
 
 def test_wavelet_block_bounds_hold_the_field():
-    """The wavelet path's per-block bound, summed from |c| and the prototypes' maxima, bounds |f| there."""
+    """The wavelet field's per-block bound, summed from |c| and the prototypes' maxima, bounds |f| there."""
     wv = sparse_rgba("cubic", keep=0.1)
-    tracer = RayTracer(wv, path="wavelet")
+    tracer = RayTracer(wv, field="wavelet")
     bound = tracer.block_bound.get()
     rng = np.random.default_rng(0)
     pts = (rng.random((4000, 3)) - 0.5) * np.array([16.0, 12.0, 12.0])
     vals = np.abs(wv.evaluate(pts)).max(axis=1)
-    blk = np.floor(wv._world_to_fine(pts, 4) / 8).astype(int) - tracer.occ_origin
+    blk = np.floor(world_to_fine(pts, 4, wv.shape, wv.spacing, wv.origin) / 8).astype(int) - tracer.occ_origin
     inside = np.all((blk >= 0) & (blk < bound.shape), axis=1)
     assert vals[~inside].max(initial=0.0) == 0.0
     assert np.all(vals[inside] <= bound[tuple(blk[inside].T)] * (1 + 1e-6))
     assert vals.max() > 0.1
 
 
-def test_unknown_path_is_refused():
-    with pytest.raises(clwave.InputError, match="path"):
-        RayTracer(sparse_rgba("linear", levels=1), path="octree")
+def test_unknown_field_is_refused():
+    with pytest.raises(clwave.InputError, match="field"):
+        RayTracer(sparse_rgba("linear", levels=1), field="octree")
 
 
-@pytest.mark.parametrize("path", ["bspline", "wavelet"])
-def test_normals_equal_the_normalised_finite_difference_gradient(small_rgba, small_wavelet_tracer, monkeypatch, path):
+@pytest.mark.parametrize("field", ["bspline", "wavelet"])
+def test_normals_equal_the_normalised_finite_difference_gradient(small_rgba, small_wavelet_tracer, monkeypatch,
+                                                                 field):
     """Shaded kernel image == the NumPy reference whose normals come from central differences of alpha."""
     wv, tracer = small_rgba
-    tracer = small_wavelet_tracer if path == "wavelet" else tracer
+    tracer = small_wavelet_tracer if field == "wavelet" else tracer
     cam = clwave.Camera(30, 20, size=(3, 4))
     kw = dict(tolerance=1e-4, lights=[(10, 60), (200, 0)], shading=Phong(0.1, 0.8, 0.6, 12))
     got = tracer.render(cam, **kw).image

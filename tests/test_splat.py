@@ -1,15 +1,16 @@
 """Wavelet splatting end to end: against exact line integrals of the same continuous model."""
 
-import importlib
 
 import numpy as np
 import pytest
 
 import clwave
 from clwave.errors import DeviceMemoryError, InputError
-from clwave.reference import line_integrals
+from clwave.device.constants import record_uint4s
+from clwave.splat import coarse as coarse_module
+from clwave.splat import stages
+from clwave.splat.reference import line_integrals
 
-splat_module = importlib.import_module("clwave.splat")  # the module, not the function clwave.splat
 
 VIEWS = [((30, 20), (1.0, 1.0, 1.0)), ((0, 0), (1.0, 1.0, 1.0)), ((-70, -15), (2.0, 1.0, 0.5))]
 
@@ -37,7 +38,7 @@ def test_full_set_equals_exact_line_integrals(cc, data, family, tol, angles, spa
                            cam.view(vol))
     assert result.image.shape == (32, 32, 1)
     assert np.abs(result.image - exact).max() <= tol * np.abs(exact).max()
-    assert result.meta["coefficients"] == wv.kept and result.meta["texture_path"]
+    assert result.meta["coefficients"] == wv.kept and result.meta["texture_sampling"]
 
 
 def test_box_of_ones_integrates_to_its_length(cc):
@@ -73,7 +74,7 @@ def test_box_of_ones_with_one_world_axis_in_the_image(cc, family, angles, shape,
     interior = np.abs(exact - length) <= 1e-9 * length
     assert interior.sum() >= 200
     cells = "cells-u" if angles[0] % 90 == 0 else "cells-v"
-    assert result.meta["texture_path"] == ([cells] if family == "haar" else ["spatial"])
+    assert result.meta["texture_sampling"] == ([cells] if family == "haar" else ["spatial"])
     # Haar: exact along the cell axis, samples at 1/(8 P) pixel along the other; linear: bilinear
     # at 1/P pixel across kinks
     tol = 5e-4 if family == "haar" else 1e-3
@@ -92,8 +93,8 @@ def test_box_of_ones_with_one_world_axis_in_the_image(cc, family, angles, shape,
 def test_cubic_textures_are_trimmed_to_their_samples_above_the_tolerance(data, family):
     """Paper Fig. 9: a cubic texture's outer rows and columns each hold a sample above TEXTURE_TOL
     of its peak, and trimming removed samples; linear ones keep their whole support box."""
-    from clwave.footprint import footprints
-    from clwave.splat import TEXTURE_TOL, ViewTables
+    from clwave.splat.textures import footprints
+    from clwave.splat.tables import TEXTURE_TOL, ViewTables
 
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), family, levels=2)
     view = clwave.Camera(30, 20, size=32).view(wv)
@@ -115,8 +116,8 @@ def test_only_bands_with_coefficients_get_textures(cc, data):
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2).threshold(keep=0.5)
     present = {(band.level, band.key) for band, index, _ in wv.bands(0) if len(index)}
     assert 1 < len(present) < len(wv.groups[0].bands)  # the threshold emptied some bands
-    frame = clwave.SplatRenderer(wv, device=cc).begin(clwave.Camera(30, 20, size=32))
-    assert set(frame.tables[0].textures) == present
+    acc = clwave.SplatRenderer(wv, device=cc).begin(clwave.Camera(30, 20, size=32))
+    assert set(acc.tables[0].textures) == present
 
 
 def test_rgba_channels_share_footprints_and_repeat_bit_identically(cc, data):
@@ -135,7 +136,7 @@ def test_splitting_the_tile_lists_gives_the_same_image(cc, data, monkeypatch):
     cam = clwave.Camera(30, 20, size=32)
     whole = clwave.splat(wv, cam, device=cc)
     # room for about 2000 pairs (scalar records) at once
-    monkeypatch.setattr(splat_module, "TILE_LIST_SHARE", 2000 * splat_module.RECORD_BYTES[1] / cc.info.global_mem)
+    monkeypatch.setattr(stages, "TILE_LIST_SHARE", 2000 * 16 * record_uint4s(1) / cc.info.global_mem)
     split = clwave.splat(wv, cam, device=cc)
     assert np.allclose(split.image, whole.image, rtol=1e-5, atol=1e-5)
 
@@ -227,12 +228,12 @@ def test_upsampling_is_the_prefiltered_cubic_bspline():
 
     samples = np.random.default_rng(2).random((64, 64)).astype(np.float32)
     for shape, factor in (((64, 61), 2), ((61, 64), 4)):
-        coarse = [-(-n // factor) + 2 * splat_module.COARSE_MARGIN for n in shape]
+        coarse = [-(-n // factor) + 2 * coarse_module.COARSE_MARGIN for n in shape]
         # fine pixel centres as coarse indices
         at = [(np.arange(n) + 0.5 - n / 2) / factor + c / 2 - 0.5 for n, c in zip(shape, coarse)]
         assert all(a.min() > 4 and a.max() < c - 5 for a, c in zip(at, coarse))  # the ends play no part
         grid = samples[: coarse[0], : coarse[1]]
         want = map_coordinates(spline_filter(grid.astype(float), mode="mirror"), np.meshgrid(*at, indexing="ij"),
                                order=3, prefilter=False, mode="mirror")
-        got = splat_module.upsample(grid, shape, factor)
+        got = coarse_module.upsample(grid, shape, factor)
         assert got.shape == shape and np.allclose(got, want, rtol=1e-6, atol=1e-6)

@@ -1,14 +1,16 @@
-"""Each splatting kernel against its NumPy reference on small random inputs (clwave.reference).
+"""Each stage of the splatting pipeline (clwave.splat.stages) against its NumPy oracle
+(clwave.splat.reference) on small random inputs, one test per stage: each stage gets its inputs
+from the oracle of the stages before it, so a failure names the stage that broke.
 
 Integer stages must be exactly equal; the accumulation to float32 rounding."""
 
 import numpy as np
 import pyopencl.array as cla
 import pytest
-from pyopencl.scan import ExclusiveScanKernel
 
-from clwave import programs, reference
-from clwave.splat import LINEAR_U, LINEAR_V, bin_chunks, pack_texture
+from clwave.splat import reference
+from clwave.splat.stages import Stages, bin_chunks
+from clwave.splat.tables import LINEAR_U, LINEAR_V, pack_texture
 
 #: two framebuffers (width, height, first tile, first pixel), sizes not multiples of the 16-pixel
 #: tile: 3 x 3 tiles, then 2 x 2
@@ -55,72 +57,120 @@ def random_scene(rng, n=400, n_tex=8):
                 values=values, n=n, first=7, textures=textures)
 
 
-@pytest.mark.parametrize("px, channels", [(256, 4), (256, 1), (1, 4), (1, 1)])
-def test_every_stage_equals_its_reference(cc, rng, px, channels):
+VARIANTS = [("cpu", 4), ("cpu", 1), ("gpu", 4), ("gpu", 1)]  # accumulation kernel, channels
+
+
+@pytest.fixture
+def scene(rng):
+    """A random scene and every stage's oracle output, in pipeline order."""
     s = random_scene(rng)
-    q, n, first = cc.queue, s["n"], s["first"]
-    ks = programs.build(cc, ["splat_bin.cl", "splat_raster.cl"], {"CLW_PX": px, "CLW_CHANNELS": channels})
-    d = {k: cla.to_device(q, v) for k, v in s.items() if isinstance(v, np.ndarray)}
-    centre, bbox = cla.empty(q, (n, 2), np.float32), cla.empty(q, (n, 4), np.int32)
-    stex, counts = cla.empty(q, (n,), np.int32), cla.empty(q, (n,), np.uint32)
-    ks.splat_project(q, (n,), None, np.uint32(n), np.uint32(first), d["coef"].data, d["band_tex"].data,
-                     d["band_origin"].data, d["step_col"].data, d["step_row"].data, d["tex_box"].data,
-                     d["tex_layer"].data, d["layers"].data, centre.data, bbox.data, stex.data, counts.data)
-    r_centre, r_bbox, r_tex, r_count = reference.project(
+    n, first = s["n"], s["first"]
+    s["centre"], s["bbox"], s["stex"], s["count"] = reference.project(
         s["coef"], first, s["band_tex"], s["band_origin"], s["step_col"], s["step_row"], s["tex_box"],
         s["tex_layer"], s["layers"], n)
-    assert np.array_equal(centre.get(), r_centre)
-    assert np.array_equal(bbox.get(), r_bbox) and np.array_equal(stex.get(), r_tex)
-    assert np.array_equal(counts.get(), r_count)
-    assert 0 < np.count_nonzero(r_count) < n  # the scene has both visible and culled splats
+    assert 0 < np.count_nonzero(s["count"]) < n  # the scene has both visible and culled splats
+    assert set(s["tex_layer"][s["stex"][s["count"] > 0], 0]) == {0, 1}  # both layers are drawn into
+    s["total"] = int(s["count"].sum())
+    s["textures_per_layer"] = int(s["tex_layer"][:, 1].max()) + 1
+    s["ranges"], s["vals"] = reference.bin_by_tile(s["bbox"], s["stex"], s["tex_layer"], s["layers"], TILES)
+    return s
 
-    assert set(s["tex_layer"][r_tex[r_count > 0], 0]) == {0, 1}  # both layers are drawn into
-    tiles = TILES
-    total = int(r_count.sum())
-    textures = int(s["tex_layer"][:, 1].max()) + 1  # per layer
-    r_ranges, r_vals = reference.bin_by_tile(r_bbox, r_tex, s["tex_layer"], s["layers"], tiles)
-    r_records = reference.records(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"], s["layers"], channels)
-    for chunks in (1, 7, bin_chunks(n, tiles * textures, cc.info)):  # one, a few uneven, the renderer's
-        chunk = -(-n // chunks)
-        hist = cla.empty(q, (tiles * textures * chunks,), np.uint32)
-        bin_args = (np.uint32(n), np.uint32(chunk), np.uint32(chunks), np.uint32(tiles), np.uint32(textures))
-        inputs = (np.uint32(first), bbox.data, centre.data, stex.data, d["values"].data, d["tex_layer"].data,
-                  d["layers"].data)
-        ks.splat_chunk_tiles(q, (chunks,), None, *bin_args, np.int32(0), *inputs, hist.data, hist.data)
-        r_hist = reference.count_tiles(r_bbox, r_tex, s["tex_layer"], s["layers"], textures, chunk, chunks,
-                                       tiles)  # (chunks, runs)
-        assert np.array_equal(hist.get(), r_hist.ravel())
-        by_run, offsets = cla.empty_like(hist), cla.empty_like(hist)
-        runs = np.uint32(tiles * textures)
-        ks.transpose_counts(q, (hist.size,), None, np.uint32(chunks), runs, hist.data, by_run.data)
-        assert np.array_equal(by_run.get(), r_hist.T.ravel())
-        ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")(by_run, offsets)
-        r_offsets = np.concatenate([[0], np.cumsum(r_hist.T)[:-1]]).astype(np.uint32)
-        assert np.array_equal(offsets.get(), r_offsets)
-        ranges = cla.empty(q, (tiles, 2), np.uint32)
-        ks.tile_ranges(q, (tiles,), None, np.uint32(tiles), np.uint32(textures), np.uint32(chunks), np.uint32(total),
-                       offsets.data, ranges.data)
-        assert np.array_equal(ranges.get(), r_ranges)
-        cursors = cla.empty_like(hist)  # where each chunk writes next in each run, chunk-major
-        ks.transpose_counts(q, (hist.size,), None, runs, np.uint32(chunks), offsets.data, cursors.data)
-        assert np.array_equal(cursors.get(), r_offsets.reshape(-1, chunks).T.ravel())
-        records = cla.empty(q, r_records.shape, np.uint32)
-        ks.splat_chunk_tiles(q, (chunks,), None, *bin_args, np.int32(1), *inputs, cursors.data, records.data)
-        assert np.array_equal(records.get(), r_records)
 
-    local = 16 * 16 // px
+def upload(q, s):
+    return {k: cla.to_device(q, v) for k, v in s.items() if isinstance(v, np.ndarray)}
+
+
+def chunkings(n, runs, info):
+    return (1, 7, bin_chunks(n, runs, info))  # one chunk, a few uneven ones, the renderer's
+
+
+def counts(s, chunks):
+    """The oracle's per-chunk counts, (chunks, runs)."""
+    return reference.count_tiles(s["bbox"], s["stex"], s["tex_layer"], s["layers"], s["textures_per_layer"],
+                                 -(-s["n"] // chunks), chunks, TILES)
+
+
+def test_project(cc, scene):
+    st, q, n = Stages(cc, 4), cc.queue, scene["n"]
+    d = upload(q, scene)
+    centre, bbox = cla.empty(q, (n, 2), np.float32), cla.empty(q, (n, 4), np.int32)
+    stex, count = cla.empty(q, (n,), np.int32), cla.empty(q, (n,), np.uint32)
+    st.project(n, scene["first"], d["coef"], d, centre, bbox, stex, count)
+    assert np.array_equal(centre.get(), scene["centre"])
+    assert np.array_equal(bbox.get(), scene["bbox"]) and np.array_equal(stex.get(), scene["stex"])
+    assert np.array_equal(count.get(), scene["count"])
+
+
+def test_count(cc, scene):
+    st, q, n = Stages(cc, 4), cc.queue, scene["n"]
+    d, runs = upload(q, scene), TILES * scene["textures_per_layer"]
+    for chunks in chunkings(n, runs, cc.info):
+        table = cla.empty(q, (chunks * runs,), np.uint32)
+        st.count(n, chunks, TILES, scene["textures_per_layer"], scene["first"], d["bbox"], d["centre"], d["stex"],
+                 d["values"], d, table)
+        assert np.array_equal(table.get(), counts(scene, chunks).ravel())
+
+
+@pytest.mark.parametrize("rows, cols", [(1, 1), (7, 13), (13, 7), (40, 65)])
+def test_transpose(cc, rng, rows, cols):
+    src = rng.integers(0, 2**32, rows * cols, dtype=np.uint32)
+    d_src, d_dst = cla.to_device(cc.queue, src), cla.empty(cc.queue, (rows * cols,), np.uint32)
+    Stages(cc, 4).transpose(rows, cols, d_src, d_dst)
+    assert np.array_equal(d_dst.get(), src.reshape(rows, cols).T.ravel())
+
+
+def test_scan(cc, rng):
+    values = rng.integers(0, 50, 1000, dtype=np.uint32)
+    d_in, d_out = cla.to_device(cc.queue, values), cla.empty(cc.queue, (1000,), np.uint32)
+    Stages(cc, 4).scan(d_in, d_out)
+    assert np.array_equal(d_out.get(), np.concatenate([[0], np.cumsum(values)[:-1]]))
+
+
+def test_ranges(cc, scene):
+    st, q = Stages(cc, 4), cc.queue
+    runs = TILES * scene["textures_per_layer"]
+    for chunks in chunkings(scene["n"], runs, cc.info):
+        starts = np.concatenate([[0], np.cumsum(counts(scene, chunks).T)[:-1]]).astype(np.uint32)  # run-major
+        ranges = cla.empty(q, (TILES, 2), np.uint32)
+        st.ranges(TILES, scene["textures_per_layer"], chunks, scene["total"], cla.to_device(q, starts), ranges)
+        assert np.array_equal(ranges.get(), scene["ranges"])
+
+
+@pytest.mark.parametrize("channels", [4, 1])
+def test_place(cc, scene, channels):
+    st, q, n = Stages(cc, channels), cc.queue, scene["n"]
+    d, runs = upload(q, scene), TILES * scene["textures_per_layer"]
+    expected = reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"], scene["bbox"],
+                                 scene["stex"], scene["values"], scene["layers"], channels)
+    for chunks in chunkings(n, runs, cc.info):
+        starts = np.concatenate([[0], np.cumsum(counts(scene, chunks).T)[:-1]]).astype(np.uint32)
+        cursors = cla.to_device(q, np.ascontiguousarray(starts.reshape(-1, chunks).T).ravel())  # chunk-major
+        records = cla.empty(q, expected.shape, np.uint32)
+        st.place(n, chunks, TILES, scene["textures_per_layer"], scene["first"], d["bbox"], d["centre"], d["stex"],
+                 d["values"], d, cursors, records)
+        assert np.array_equal(records.get(), expected)
+
+
+@pytest.mark.parametrize("variant, channels", VARIANTS)
+def test_accumulate(cc, scene, variant, channels):
+    st, q = Stages(cc, channels, variant), cc.queue
+    d = upload(q, scene)
+    records = cla.to_device(q, reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"],
+                                                 scene["bbox"], scene["stex"], scene["values"], scene["layers"],
+                                                 channels))
     images = []
     for _ in range(2):  # accumulates onto what is there; a second run repeats the first bit for bit
         fb = cla.to_device(q, np.full((PIXELS, 4), 0.5, np.float32))
-        ks.splat_accumulate(q, (TILES * local,), (local,), np.int32(len(LAYERS)), d["layers"].data,
-                            ranges.data, records.data, d["tex_int"].data, d["tex_map"].data, d["texels"].data, fb.data)
+        st.accumulate(TILES, len(LAYERS), d, cla.to_device(q, scene["ranges"]), records, fb)
         images.append(fb.get())
     assert np.array_equal(images[0], images[1])
-    expected = 0.5 + reference.accumulate(r_ranges, r_vals, first, r_centre, r_bbox, r_tex, s["values"],
-                                          s["textures"], s["layers"], channels)
-    got = images[0]
+    expected = 0.5 + reference.accumulate(scene["ranges"], scene["vals"], scene["first"], scene["centre"],
+                                          scene["bbox"], scene["stex"], scene["values"], scene["textures"],
+                                          scene["layers"], channels)
     assert np.abs(expected - 0.5).max() > 1  # splats did land
-    drawn = r_tex[r_count > 0]
-    assert all(np.isin(drawn, np.flatnonzero(s["tex_int"][:, 3] == lookup)).sum() > 10 for lookup in LOOKUPS)
+    drawn = scene["stex"][scene["count"] > 0]
+    assert all(np.isin(drawn, np.flatnonzero(scene["tex_int"][:, 3] == lookup)).sum() > 10 for lookup in LOOKUPS)
     # float32 sums of float32 texel coordinates: rounding at 1e-5 of the image's magnitude
-    assert np.abs(got - expected).max() <= 1e-5 * np.abs(expected).max()
+    assert np.abs(images[0] - expected).max() <= 1e-5 * np.abs(expected).max()
+    if channels == 1:  # the other channels of the framebuffer keep their values
+        assert np.array_equal(images[0][:, 1:], np.full((PIXELS, 3), 0.5, np.float32))

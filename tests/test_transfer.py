@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from clwave.errors import InputError
-from clwave.phantoms import analytic
-from clwave.transfer import TransferFunction, auto_window
-from clwave.volume import Volume
+from clwave.io.phantoms import analytic
+from clwave.model.transfer import TransferFunction, auto_window
+from clwave.model.volume import Volume
 
 THREE = [(0.0, 0.0, 0.0, 1.0, 0.0),
          (10.0, 1.0, 0.0, 0.0, 1.0),

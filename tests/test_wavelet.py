@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import pywt
 
-from clwave.bspline import SplineWavelet, bspline
+from clwave.model.bspline import SplineWavelet, bspline
 from clwave.errors import FileFormatError, InputError, OutputExistsError
-from clwave.volume import Volume
-from clwave.wavelet import WaveletVolume
+from clwave.model.volume import Volume
+from clwave.model.wavelet import WaveletVolume
 
 FAMILIES = ("haar", "linear", "quadratic", "cubic")
 SHAPE = (13, 10, 11)  # odd and unequal sizes
@@ -61,7 +61,7 @@ def test_evaluate_equals_fine_level_spline(family, data, rng):
 def test_single_coefficient_matches_pywavelets_synthesis(key):
     """One level-2 detail coefficient: its closed-form basis equals the spline pywt synthesises.
 
-    Asymmetric keys catch an axis swap (MATH.md §4: letters are in array-axis order)."""
+    Asymmetric keys catch an axis swap (docs/model.md §4: letters are in array-axis order)."""
     shape = (40, 38, 44)  # larger than the level-2 psi support (28 voxels) on every axis
     wav = SplineWavelet(4)
     coeffs = pywt.wavedecn(np.zeros(shape), wav.pywt, mode="zero", level=2)
@@ -151,8 +151,8 @@ def test_threshold_keeps_exact_count_and_approximation_first(keep, rng):
     assert in_approx == min(n, n_approx)
     if n > n_approx:  # the kept details are the largest |c| ||psi|| ones
         full = wv.groups[0]
-        imp = wv._importance(full)[n_approx:]
-        kept_min = th._importance(g)[n_approx:].min()
+        imp = wv.importance(full)[n_approx:]
+        kept_min = th.importance(g)[n_approx:].min()
         assert np.count_nonzero(imp > kept_min) <= n - n_approx
 
 
@@ -160,10 +160,10 @@ def test_threshold_by_value_and_ranked_order(rng):
     vol = Volume(rng.random((16, 16, 16, 2)).astype(np.float32))
     wv = WaveletVolume.from_volume(vol, "linear", levels=2)
     th = wv.threshold(threshold=0.05)
-    imp = th._importance(th.groups[0])
+    imp = th.importance(th.groups[0])
     n_approx = th.groups[0].bands[0].size
     assert np.all(imp[n_approx:] > 0.05)
-    assert np.count_nonzero(wv._importance(wv.groups[0])[n_approx:] > 0.05) == th.kept - n_approx
+    assert np.count_nonzero(wv.importance(wv.groups[0])[n_approx:] > 0.05) == th.kept - n_approx
     table = th.ranked()
     assert np.all(table.level[:n_approx] == 2) and np.all(table.key_code[:n_approx] == 0)
     assert np.all(np.diff(table.importance[n_approx:]) <= 0)
@@ -180,7 +180,7 @@ def test_focus_keeps_more_detail_near_it(rng):
     g = lod.groups[0]
     n_approx = g.bands[0].size
     band_no, index = g.locate(g.positions[g.positions >= n_approx])
-    centres = lod._support_centres(g, band_no, index)
+    centres = lod.support_centres(g, band_no, index)
     near = np.linalg.norm(centres - centre, axis=1) < 8
     far = np.linalg.norm(centres - (8.0, -4.0, -6.0), axis=1) < 8  # a mirrored ball of equal size
     assert near.sum() > 5 * max(far.sum(), 1)

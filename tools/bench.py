@@ -46,11 +46,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
 import clwave  # noqa: E402
-from clwave.device import ComputeContext  # noqa: E402
-from clwave.phantoms import phantom  # noqa: E402
-from clwave.splat import ViewTables  # noqa: E402
-from clwave.transfer import TransferFunction  # noqa: E402
-from clwave.wavelet import WaveletVolume  # noqa: E402
+from clwave.device.context import ComputeContext  # noqa: E402
+from clwave.io.phantoms import phantom  # noqa: E402
+from clwave.splat.tables import ViewTables  # noqa: E402
+from clwave.model.transfer import TransferFunction  # noqa: E402
+from clwave.model.wavelet import WaveletVolume  # noqa: E402
 
 
 def machine() -> dict:
@@ -110,7 +110,7 @@ def bench_splat(args) -> dict:
     cases = {}
     for keep in args.keep:
         wv = full if keep == 1.0 else full.threshold(keep=keep)
-        # single-resolution, and for the thresholded sets coarse bands in coarser framebuffers (issue §2)
+        # single-resolution, and for the thresholded sets coarse bands in coarser framebuffers (docs/splatting.md §4)
         for coarse in (None, 2e-2) if keep < 1.0 else (None,):
             renderer = clwave.SplatRenderer(wv, device=args.device, coarse=coarse)
             for size in (512, 256):
@@ -125,7 +125,7 @@ def bench_splat(args) -> dict:
                     coefficients=wv.kept, seconds=seconds, pixel_updates=updates, tile_pairs=statistics.median(
                         m["tile_pairs"] for m in runs),
                     updates_per_second=updates / seconds["accumulation"]["median"],
-                    texture_path=runs[0]["texture_path"], omega_s=runs[0]["omega_s"],
+                    texture_sampling=runs[0]["texture_sampling"], omega_s=runs[0]["omega_s"],
                     framebuffers=runs[0]["framebuffers"])
         cases[f"keep {keep:g}"] = dict(compile_seconds=renderer.compile_seconds)
     return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", wavelet="cubic", levels=3,
@@ -150,7 +150,7 @@ def bench_footprints(args) -> dict:
             seconds.append(time.perf_counter() - start)
             texels.append(sum(t.data.size for t in tables.textures.values() if t is not None))
         cases[wavelet] = dict(seconds=summary(seconds), textures=sum(t is not None for t in tables.textures.values()),
-                              texels=statistics.median(texels), paths=tables.paths,
+                              texels=statistics.median(texels), samplings=tables.samplings,
                               texels_per_second=statistics.median(texels) / statistics.median(seconds))
     return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", levels=3, image="512x512",
                              views=args.views, note="all levels and subbands of one view, packed for upload"),
@@ -197,7 +197,7 @@ def bench_raytrace(args) -> dict:
         if path == "wavelet" and args.size > args.wavelet_max_size:
             continue
         start = time.perf_counter()
-        tracer = clwave.RayTracer(wv, device=args.device, path=path)
+        tracer = clwave.RayTracer(wv, device=args.device, field=path)
         setup = time.perf_counter() - start
         fast = fast or tracer
         out["paths"][path] = _raytrace_cases(tracer, fast, wv, size, crop, args.raytrace_views)

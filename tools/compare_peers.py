@@ -33,7 +33,7 @@ extent the volume diagonal):
   opacities as 1 - prod(1 - opacity) in 8 bits and composite shades an emission-absorption
   image: neither is a line integral, so their times are speed references only.
 
-Ground truth is the line integral of the phantom's *formula* (``clwave.phantoms.analytic``)
+Ground truth is the line integral of the phantom's *formula* (``clwave.io.phantoms.analytic``)
 over the chord of each ray through the phantom's cube: composite Gauss-Legendre (8 nodes per
 segment of at most 8 voxels); the same integral with twice the segments on every 8th row is
 reported as its own accuracy.  Error = relative RMS, ||image - truth|| / ||truth|| over the
@@ -68,7 +68,7 @@ from scipy import ndimage
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
 import clwave  # noqa: E402
-from clwave.phantoms import analytic  # noqa: E402
+from clwave.io.phantoms import analytic  # noqa: E402
 
 TARGET_ERROR = 0.01
 GL_NODES = 8        # Gauss-Legendre nodes per ray segment

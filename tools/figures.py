@@ -50,8 +50,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
 import clwave  # noqa: E402
-from clwave.footprint import footprints, sample_count, view_vectors  # noqa: E402
-from clwave.result import resolve_window  # noqa: E402
+from clwave.model.geometry import view_frame  # noqa: E402
+from clwave.splat.textures import footprints, sample_count  # noqa: E402
+from clwave.io.result import resolve_window  # noqa: E402
 
 NILEARN_T1 = "datasets/data/mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz"
 PAPER_TABLE1 = {1: [9, 17, 32, 63], 2: [25, 48, 94, 187], 4: [56, 110, 218, 434]}
@@ -171,7 +172,7 @@ def table1(out: Path, data, args, log):
 
 def fig07(out: Path, data, args, log):
     plt = _plt()
-    n, u, v = view_vectors(30.0, 20.0)
+    n, u, v = view_frame(30.0, 20.0)
     fig, axes = plt.subplots(2, 3, figsize=(8.4, 5.8))
     for col, order in enumerate((1, 2, 4)):
         tex = footprints(order, (1.0, 1.0, 1.0), n, u, v, [(0, "aaa"), (0, "add")], texel=0.02)

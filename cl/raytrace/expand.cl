@@ -1,0 +1,68 @@
+/* expand.cl: change of basis from kept wavelet coefficients to fine-level B-spline
+ * coefficients (the inverse transform on the whole real line, docs/model.md §1 and §4).
+ *
+ * One launch is one separable synthesis step along one axis for one pair of parts that
+ * differ only in that axis' letter: the 'a' part through the lowpass h = p/sqrt2 and the
+ * 'd' part through the highpass g = q/sqrt2 (docs/model.md §1 (the synthesis step)):
+ *
+ *     out[L] = sum_t h[t] A[(L - shift_a - t) / 2] + sum_t g[t] D[(L - shift_d - t) / 2]
+ *
+ * over the taps t with L - shift - t even.  Every array is a box of float4 in absolute
+ * index coordinates (the processed axis in child indices, the others in the level's own);
+ * a read outside an input's box is zero, so the output box may be larger than the inputs
+ * (the ray tracer pads its grids that way).  Host: clwave/raytrace/finegrid.py. */
+
+#include "common/clw_common.h"
+
+/* Compile-time CLW_AXIS (0 = x, 1 = y, 2 = z), and branch-free reads, so that PoCL can
+ * vectorise the work-item loop along x. */
+
+inline float4 filter_part(__global const float4 *a, const int4 start, const int4 shape,
+                          __constant const float *taps, const int ntaps, const int shift,
+                          const int4 at, const int child)
+{
+    float4 acc = (float4)(0.0f);
+    const int4 p = at - start;
+    const bool others_in = CLW_AXIS == 0 ? (p.y >= 0 && p.z >= 0 && p.y < shape.y && p.z < shape.z)
+                         : CLW_AXIS == 1 ? (p.x >= 0 && p.z >= 0 && p.x < shape.x && p.z < shape.z)
+                                         : (p.x >= 0 && p.y >= 0 && p.x < shape.x && p.y < shape.y);
+    const int len = CLW_AXIS == 0 ? shape.x : (CLW_AXIS == 1 ? shape.y : shape.z);
+    const int first = (child - shift) & 1; /* the taps of this output's parity */
+    const int top = ((child - shift - first) >> 1) - (CLW_AXIS == 0 ? start.x : (CLW_AXIS == 1 ? start.y : start.z));
+    const size_t stride = CLW_AXIS == 0 ? 1 : (CLW_AXIS == 1 ? (size_t)shape.x : (size_t)shape.x * shape.y);
+    const size_t row = CLW_AXIS == 0 ? ((size_t)p.z * shape.y + p.y) * shape.x
+                     : CLW_AXIS == 1 ? (size_t)p.z * shape.y * shape.x + p.x
+                                     : (size_t)p.y * shape.x + p.x;
+    for (int i = 0; 2 * i < ntaps; i++) {
+        const int t = first + 2 * i, k = top - i; /* parent index along the axis */
+        const bool ok = others_in && t < ntaps && k >= 0 && k < len;
+        const float4 v = a[ok ? row + (size_t)k * stride : 0];
+        acc += (ok ? taps[min(t, ntaps - 1)] : 0.0f) * v;
+    }
+    return acc;
+}
+
+/* synth_axis: one synthesis step along CLW_AXIS (int4 fields x, y, z).
+ *
+ * Parameters
+ *   out          out  box (out_start, out_shape) of float4
+ *   a            in   one part with its box, filter (na taps) and shift: the 'a' part with h
+ *                     and shift_a, or the 'd' part with g and shift_d
+ *   b            in   the other part, likewise; has_b = 0 when it is all zero
+ * Grid: global (out_shape.x, out_shape.y, out_shape.z). */
+__kernel void synth_axis(__global float4 *out, const int4 out_start, const int4 out_shape,
+                         __global const float4 *a, const int4 a_start, const int4 a_shape,
+                         __constant const float *a_taps, const int na, const int a_shift,
+                         __global const float4 *b, const int4 b_start, const int4 b_shape,
+                         __constant const float *b_taps, const int nb, const int b_shift, const int has_b)
+{
+    const int4 idx = (int4)(get_global_id(0), get_global_id(1), get_global_id(2), 0);
+    if (idx.x >= out_shape.x || idx.y >= out_shape.y || idx.z >= out_shape.z)
+        return;
+    const int4 at = out_start + idx;
+    const int child = CLW_AXIS == 0 ? at.x : (CLW_AXIS == 1 ? at.y : at.z);
+    float4 acc = filter_part(a, a_start, a_shape, a_taps, na, a_shift, at, child);
+    if (has_b)
+        acc += filter_part(b, b_start, b_shape, b_taps, nb, b_shift, at, child);
+    out[((size_t)idx.z * out_shape.y + idx.y) * out_shape.x + idx.x] = acc;
+}

@@ -1,0 +1,211 @@
+/* field_bspline.h: the field from the fine B-spline grids the kept coefficients expand to
+ * (clwave/raytrace/finegrid.py): each sample reads j^3 grid points per channel group.
+ * The interface every field backend provides to cl/raytrace/raytrace.cl: FIELD_PARAMS and
+ * FIELD_INIT (the kernel arguments and the Field struct made of them), Active with active_init and
+ * active_flags (per-ray state), Basis with segment_basis, sample_segment and sample_gradient. */
+#ifndef CLW_FIELD_H
+#define CLW_FIELD_H
+#include "raytrace/types.h"
+
+/* ---- B-spline path: the fine grids the kept coefficients expand to (clwave/raytrace/finegrid.py) ---- */
+#define FIELD_PARAMS __global const float4 *coef, __constant const int4 *start, __constant const int4 *shape, \
+                     __constant const int *offset
+typedef struct {
+    __global const float4 *coef;
+    __constant const int4 *start, *shape;
+    __constant const int *offset;
+} Field;
+#define FIELD_INIT {coef, start, shape, offset}
+typedef int Active; /* no per-ray state */
+inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = 0; }
+inline int active_flags(const Active *A) { return 0; }
+
+/* w[r] = N_j(u + r) (BSPLINE_WEIGHTS) and dw[r] = N_j'(u + r) (BSPLINE_DERIVATIVES), r = 0..j-1:
+ * the weight of coefficient c - r in cell c at u = x - c (docs/model.md §1), per lane of TYPE.
+ * Polynomials, so they hold a little outside [0, 1) too.  Products, not divisions by constants:
+ * PoCL keeps those as divisions. */
+#define BSPLINE_WEIGHTS(TYPE, NAME)                                                               \
+    inline void NAME(const int j, const TYPE u, TYPE *w)                                          \
+    {                                                                                             \
+        const TYPE s = 1 - u;                                                                     \
+        const real one_half = (real)0.5, sixth = (real)1 / 6;                                     \
+        if (j == 1) {                                                                             \
+            w[0] = 1;                                                                             \
+        } else if (j == 2) {                                                                      \
+            w[0] = u; w[1] = s;                                                                   \
+        } else if (j == 3) {                                                                      \
+            w[0] = u * u * one_half; w[1] = (-2 * u * u + 2 * u + 1) * one_half; w[2] = s * s * one_half; \
+        } else {                                                                                  \
+            w[0] = u * u * u * sixth; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) * sixth;          \
+            w[2] = ((3 * u - 6) * u * u + 4) * sixth; w[3] = s * s * s * sixth;                   \
+        }                                                                                         \
+    }
+#define BSPLINE_DERIVATIVES(TYPE, NAME)                                                           \
+    inline void NAME(const int j, const TYPE u, TYPE *dw)                                         \
+    {                                                                                             \
+        const real one_half = (real)0.5;                                                          \
+        if (j == 2) {                                                                             \
+            dw[0] = 1; dw[1] = -1;                                                                \
+        } else if (j == 3) {                                                                      \
+            dw[0] = u; dw[1] = 1 - 2 * u; dw[2] = u - 1;                                          \
+        } else if (j == 4) {                                                                      \
+            dw[0] = u * u * one_half; dw[1] = (-3 * u * u + 2 * u + 1) * one_half;                \
+            dw[2] = (3 * u - 4) * u * one_half; dw[3] = -(1 - u) * (1 - u) * one_half;            \
+        }                                                                                         \
+    }
+BSPLINE_WEIGHTS(real8, bspline_weights8)
+BSPLINE_WEIGHTS(real4, bspline_weights4)
+BSPLINE_DERIVATIVES(real8, bspline_derivatives8)
+BSPLINE_DERIVATIVES(real4, bspline_derivatives4)
+
+/* One group's part of the field at sample k: the j^3 coefficients ending at `corner` (the
+ * segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
+ * along z) with sample k's weights w?[r * 16 + k]; rows are `sy` apart, planes `sz`.  Always
+ * inlined with a literal order j, so the loops unroll. */
+__attribute__((always_inline)) inline real4 group_field(__global const float4 *corner, const int sy, const int sz,
+                                                        const int j, const real *wx, const real *wy, const real *wz,
+                                                        const int k)
+{
+    real4 v = (real4)(0);
+#pragma unroll
+    for (int rz = 0; rz < j; rz++) {
+        real4 plane = (real4)(0);
+#pragma unroll
+        for (int ry = 0; ry < j; ry++) {
+            __global const float4 *row = corner - rz * sz - ry * sy;
+            real4 line = (real4)(0);
+#pragma unroll
+            for (int rx = 0; rx < j; rx++)
+                line = fma(to_real4(row[-rx]), (real4)(wx[rx * 16 + k]), line);
+            plane = fma(line, (real4)(wy[ry * 16 + k]), plane);
+        }
+        v = fma(plane, (real4)(wz[rz * 16 + k]), v);
+    }
+    return v;
+}
+
+/* The alpha group's part of alpha's fine gradient at all lanes of TYPE at once: the same
+ * separable sum as group_field on the alpha channel, with the derivative weights d? */
+#define GROUP_GRADIENT(TYPE, NAME)                                                                        \
+    __attribute__((always_inline)) inline void NAME(__global const float4 *corner, const int sy, const int sz, \
+                                                    const int j, const TYPE *wx, const TYPE *wy, const TYPE *wz, \
+                                                    const TYPE *dx, const TYPE *dy, const TYPE *dz, TYPE *gx,   \
+                                                    TYPE *gy, TYPE *gz)                                         \
+    {                                                                                                     \
+        _Pragma("unroll") for (int rz = 0; rz < j; rz++) {                                                \
+            TYPE plane = 0, plane_dx = 0, plane_dy = 0;                                                   \
+            _Pragma("unroll") for (int ry = 0; ry < j; ry++) {                                            \
+                __global const float4 *row = corner - rz * sz - ry * sy;                                  \
+                TYPE line = 0, line_dx = 0;                                                               \
+                _Pragma("unroll") for (int rx = 0; rx < j; rx++) {                                        \
+                    const TYPE a = (TYPE)(row[-rx].w);                                                    \
+                    line = fma(a, wx[rx], line);                                                          \
+                    line_dx = fma(a, dx[rx], line_dx);                                                    \
+                }                                                                                         \
+                plane = fma(line, wy[ry], plane);                                                         \
+                plane_dx = fma(line_dx, wy[ry], plane_dx);                                                \
+                plane_dy = fma(line, dy[ry], plane_dy);                                                   \
+            }                                                                                             \
+            *gx = fma(plane_dx, wz[rz], *gx);                                                             \
+            *gy = fma(plane_dy, wz[rz], *gy);                                                             \
+            *gz = fma(plane, dz[rz], *gz);                                                                \
+        }                                                                                                 \
+    }
+GROUP_GRADIENT(real8, group_gradient8)
+GROUP_GRADIENT(real4, group_gradient4)
+
+/* What a grid's part of a segment needs besides its samples: the cell's last coefficient, and per
+ * axis the position u in the cell and the B-spline weights w at lanes 0..7 (real8) and 8..11
+ * (real4: the lanes past NS are unused) */
+typedef struct {
+    __global const float4 *corner;
+    int sy, sz;
+    real8 u[3], w[3][4];
+    real4 u4[3], w4[3][4];
+} Basis;
+
+/* Grid g's part of the segment at the sample points xm + radius xi_k D, sample k in lane k.  Every
+ * sample comes from the cells holding the midpoint xm, so from the same polynomial. */
+inline void segment_basis(const Field G, const int g, const real3 xm, const real radius, const real3 D,
+                          __constant const real *nodes, Basis *B)
+{
+    real lane_xi[12];
+    for (int k = 0; k < 12; k++)
+        lane_xi[k] = nodes[k < NS ? k : 0];
+    const real8 xi = vload8(0, lane_xi);
+    const real4 xi4 = vload4(2, lane_xi);
+    const int j = ORDER[g];
+    const real3 x = xm + (real)(j - ORDER[0]) / 2; /* grid g's lattice (docs/raytracing.md §2) */
+    const int4 s = G.shape[g], lo = G.start[g];
+    const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + j - 1, lo.xyz + s.xyz - 1), 0);
+    const int4 p = c - lo;
+    const real3 u = x - convert_real3(c.xyz), step = radius * D; /* x - cell at xi = 0, and per unit xi */
+    const real ua[3] = {u.x, u.y, u.z}, sa[3] = {step.x, step.y, step.z};
+    for (int a = 0; a < 3; a++) {
+        B->u[a] = ua[a] + sa[a] * xi;
+        B->u4[a] = ua[a] + sa[a] * xi4;
+        bspline_weights8(j, B->u[a], B->w[a]);
+        bspline_weights4(j, B->u4[a], B->w4[a]);
+    }
+    B->sy = s.x;
+    B->sz = s.x * s.y;
+    B->corner = G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
+}
+
+/* The field at the segment's sample points (lane P0 only when `fresh`: else it is the last
+ * segment's end), and each grid's Basis for the gradient */
+inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
+                           const real3 D, __constant const real *nodes, const bool fresh, real4 *fq,
+                           Basis *basis)
+{
+    for (int k = 0; k < NS; k++)
+        fq[k] = (real4)(0);
+    for (int g = 0; g < CLW_GROUPS; g++) {
+        Basis *B = &basis[g];
+        segment_basis(G, g, xm, radius, D, nodes, B);
+        const int j = ORDER[g];
+        real lw[3][64]; /* the weights per sample and axis, for the field's float4 sums */
+        for (int a = 0; a < 3; a++)
+            for (int r = 0; r < j; r++) {
+                vstore8(B->w[a][r], 2 * r, lw[a]);
+                vstore4(B->w4[a][r], 4 * r + 2, lw[a]);
+            }
+        for (int k = 0; k < NS; k++) {
+            if (k == P0 && !fresh)
+                continue;
+            switch (j) {
+            case 1: fq[k] += group_field(B->corner, B->sy, B->sz, 1, lw[0], lw[1], lw[2], k); break;
+            case 2: fq[k] += group_field(B->corner, B->sy, B->sz, 2, lw[0], lw[1], lw[2], k); break;
+            case 3: fq[k] += group_field(B->corner, B->sy, B->sz, 3, lw[0], lw[1], lw[2], k); break;
+            default: fq[k] += group_field(B->corner, B->sy, B->sz, 4, lw[0], lw[1], lw[2], k); break;
+            }
+        }
+    }
+}
+
+/* alpha's fine gradient in the lanes of (gx, gy, gz), only for segments shaded point by point:
+ * lanes 0..8, or lanes 0..7 (one real8) when lane P0 comes from the last segment */
+#define GRADIENT_LANES(W, WIDTH, U, OUT)                                                                  \
+    {                                                                                                     \
+        real##WIDTH d[3][4], hx = 0, hy = 0, hz = 0;                                                      \
+        for (int a = 0; a < 3; a++)                                                                       \
+            bspline_derivatives##WIDTH(j, B->U[a], d[a]);                                                 \
+        __global const float4 *c = B->corner;                                                             \
+        const real##WIDTH *wx = B->W[0], *wy = B->W[1], *wz = B->W[2];                                   \
+        switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */                         \
+        case 2: group_gradient##WIDTH(c, B->sy, B->sz, 2, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
+        case 3: group_gradient##WIDTH(c, B->sy, B->sz, 3, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
+        case 4: group_gradient##WIDTH(c, B->sy, B->sz, 4, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
+        }                                                                                                 \
+        gx->OUT = hx; gy->OUT = hy; gz->OUT = hz;                                                         \
+    }
+inline void sample_gradient(const Basis *basis, const bool all, realv *gx, realv *gy, realv *gz)
+{
+    const Basis *B = &basis[CLW_ALPHA];
+    const int j = ORDER[CLW_ALPHA];
+    *gx = 0; *gy = 0; *gz = 0;
+    GRADIENT_LANES(w, 8, u, lo)
+    if (all)
+        GRADIENT_LANES(w4, 4, u4, s89ab)
+}
+#endif

@@ -1,0 +1,178 @@
+/* quadrature.h: one segment's integrals (docs/raytracing.md §2): the Chebyshev series of the
+ * samples, Phong shading of the emission, and adaptive Simpson on the shaded integrand. */
+#ifndef CLW_QUADRATURE_H
+#define CLW_QUADRATURE_H
+#include "raytrace/types.h"
+
+/* Clenshaw sums of Chebyshev series sum_m a[m] T_m(x), m < n */
+#define CLENSHAW(TYPE, NAME)                                          \
+    inline TYPE NAME(const TYPE *a, const int n, const real x)        \
+    {                                                                 \
+        TYPE b1 = (TYPE)(0), b2 = (TYPE)(0);                          \
+        for (int m = n - 1; m >= 1; m--) {                            \
+            const TYPE b0 = 2 * x * b1 - b2 + a[m];                   \
+            b2 = b1;                                                  \
+            b1 = b0;                                                  \
+        }                                                             \
+        return x * b1 - b2 + a[0];                                    \
+    }
+CLENSHAW(real, cheb1)
+CLENSHAW(real3, cheb3)
+CLENSHAW(real4, cheb4)
+
+typedef struct {
+    real4 fq[NS];    /* the field at the sample points, alpha clamped to >= 0 */
+    realv gx, gy, gz; /* the gradient of alpha there (fine units), lanes 0..8 */
+    real radius;     /* half the segment length in world units */
+    bool series;     /* q, g, A below are made (only panels finer than quarters need them) */
+    real4 q[NS];     /* field series (q_R, q_G, q_B, alpha) in xi in [-1, 1] */
+    real3 g[9];      /* gradient-of-alpha series (fine units), of degree <= 8 */
+    real A[NS + 1];  /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
+} Segment;
+
+/* the Chebyshev series of the segment's samples (nodes: the points, then the field's and the
+ * gradient's sample-to-series matrices), and the antiderivative of alpha's */
+inline void segment_series(Segment *S, __constant const real *nodes)
+{
+    for (int m = 0; m < NS; m++) {
+        real4 aq = (real4)(0);
+        for (int k = 0; k < NS; k++)
+            aq += S->fq[k] * nodes[NS + m * NS + k];
+        S->q[m] = aq;
+    }
+#ifdef CLW_SHADE /* only shading reads the gradient series */
+    real gx[16], gy[16], gz[16];
+    vstore16(S->gx, 0, gx);
+    vstore16(S->gy, 0, gy);
+    vstore16(S->gz, 0, gz);
+    for (int m = 0; m < 9; m++) {
+        real3 ag = (real3)(0);
+        for (int k = 0; k < 9; k++)
+            ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * 9 + k];
+        S->g[m] = ag;
+    }
+#endif
+    /* C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0, and C_0 so that A(-1) = 0 */
+    real c0 = 0, sign = -1;
+    for (int k = 1; k <= NS; k++) {
+        const real prev = S->q[k - 1].w * (k == 1 ? 2 : 1);
+        const real next = k + 1 < NS ? S->q[k + 1].w : 0;
+        S->A[k] = (prev - next) / (2 * k);
+        c0 -= sign * S->A[k];
+        sign = -sign;
+    }
+    S->A[0] = c0;
+    S->series = true;
+}
+
+typedef struct {
+    real ka, kd, ks, shininess;
+    real grad_floor; /* world gradients of alpha this short are flat: no normal, ambient light only */
+    int nlights;
+    real3 light[CLW_MAX_LIGHTS], halfway[CLW_MAX_LIGHTS];
+    real3 scale;     /* fine units per world unit, per axis: world gradient = fine gradient * scale */
+} Shading;
+
+#ifdef CLW_SHADE
+#define SHADING 1
+#else
+#define SHADING 0
+#endif
+/* The shaded emission of eq. 4, (r, g, b) in place, from the field (r, g, b, a) and the fine
+ * gradient of alpha (gx, gy, gz): one point (TYPE real) or eight at once (real8; the comparisons
+ * and ?: then act per lane, so the same text serves both). */
+#define SHADE(TYPE, NAME)                                                                            \
+    inline void NAME(TYPE *r, TYPE *g, TYPE *b, const TYPE a, const TYPE gx, const TYPE gy, const TYPE gz, \
+                     const Shading *P)                                                               \
+    {                                                                                                \
+        *r = fmax(*r, (TYPE)(0)); *g = fmax(*g, (TYPE)(0)); *b = fmax(*b, (TYPE)(0));                \
+        if (!SHADING)                                                                                \
+            return;                                                                                  \
+        const TYPE wx = gx * P->scale.x, wy = gy * P->scale.y, wz = gz * P->scale.z;                 \
+        const TYPE len = sqrt(wx * wx + wy * wy + wz * wz);                                          \
+        /* outward: alpha decreases along n (docs/raytracing.md §5); flat below grad_floor */               \
+        const TYPE flat = len > P->grad_floor ? (TYPE)(0) : (TYPE)(1);                               \
+        const TYPE inv = -1 / (len + flat);                                                          \
+        const TYPE nx = wx * inv, ny = wy * inv, nz = wz * inv;                                      \
+        TYPE diffuse = (TYPE)(0), specular = (TYPE)(0);                                              \
+        for (int i = 0; i < P->nlights; i++) {                                                       \
+            diffuse += fmax(nx * P->light[i].x + ny * P->light[i].y + nz * P->light[i].z, (TYPE)(0)); \
+            /* max(c, 0)^shininess as exp2(shininess log2 c): PoCL's pow goes through           */   \
+            /* extended-precision logarithms and took a quarter of the render time             */   \
+            const TYPE c = nx * P->halfway[i].x + ny * P->halfway[i].y + nz * P->halfway[i].z;       \
+            specular += c > 0 ? fast_exp2(P->shininess * fast_log2(c)) : (TYPE)(P->shininess == 0);  \
+        }                                                                                            \
+        diffuse = flat > 0 ? (TYPE)(0) : diffuse;                                                    \
+        specular = flat > 0 ? (TYPE)(0) : P->ks * fmax(a, (TYPE)(0)) * specular;                     \
+        const TYPE lit = P->ka + P->kd * diffuse;                                                    \
+        *r = *r * lit + specular; *g = *g * lit + specular; *b = *b * lit + specular;                \
+    }
+SHADE(real, shade)
+SHADE(real8, shade8)
+
+/* q e^{-A} at xi from the series: the shaded emission attenuated inside the segment */
+inline real3 integrand(const Segment *S, const Shading *P, const real xi)
+{
+    const real4 f = cheb4(S->q, NS, xi);
+    const real3 g = cheb3(S->g, 9, xi);
+    real r = f.x, gr = f.y, b = f.z;
+    shade(&r, &gr, &b, f.w, g.x, g.y, g.z, P);
+    return (real3)(r, gr, b) * fast_exp(-S->radius * cheb1(S->A, NS + 1, xi));
+}
+
+typedef struct {
+    real l, r, tol;
+    real3 fl, fm, fr;
+    int depth; /* halvings from the whole segment */
+} Panel;
+
+/* int_{-1}^{1} q e^{-A} dxi by adaptive Simpson from 2 panels; counts evaluations, flags depth.
+ * f9 holds the integrand at xi = -1 + p/4, p = 0..8: the 2 panels and their halves.
+ * Depth first, right half pushed first: the stack holds at most one panel per depth. */
+inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant const real *nodes, const real tol,
+                     int *evals, int *flags)
+{
+    Panel stack[CLW_MAX_DEPTH + 1];
+    int top = 0;
+    *evals += 9;
+    stack[0].l = 0; stack[0].r = 1; stack[0].fl = f9[4]; stack[0].fm = f9[6]; stack[0].fr = f9[8];
+    stack[1].l = -1; stack[1].r = 0; stack[1].fl = f9[0]; stack[1].fm = f9[2]; stack[1].fr = f9[4];
+    stack[0].tol = stack[1].tol = tol / 2;
+    stack[0].depth = stack[1].depth = 1;
+    top = 2;
+    real3 total = (real3)(0);
+    while (top > 0) {
+        const Panel p = stack[--top];
+        const real m = (p.l + p.r) / 2, w = p.r - p.l;
+        real3 flm, fmr;
+        if (p.depth == 1) {
+            flm = f9[p.l < 0 ? 1 : 5];
+            fmr = f9[p.l < 0 ? 3 : 7];
+        } else {
+            if (!S->series)
+                segment_series(S, nodes);
+            flm = integrand(S, P, (p.l + m) / 2);
+            fmr = integrand(S, P, (m + p.r) / 2);
+            *evals += 2;
+        }
+        const real3 s1 = w / 6 * (p.fl + 4 * p.fm + p.fr);
+        const real3 s2 = w / 12 * (p.fl + 4 * flm + 2 * p.fm + 4 * fmr + p.fr);
+        const real3 d = fabs(s2 - s1);
+        const real err = fmax(d.x, fmax(d.y, d.z));
+        /* below the rounding floor of the arithmetic, halving the panel cannot help */
+        const real floor_err = 16 * REAL_EPSILON * fmax(fabs(s2.x), fmax(fabs(s2.y), fabs(s2.z)));
+        if (err <= fmax(15 * p.tol, floor_err) || p.depth >= CLW_MAX_DEPTH) {
+            if (err > fmax(15 * p.tol, floor_err))
+                *flags |= 2;
+            total += s2 + (s2 - s1) / 15;
+        } else {
+            Panel *right = &stack[top++], *left = &stack[top++];
+            right->l = m; right->r = p.r; right->fl = p.fm; right->fm = fmr; right->fr = p.fr;
+            left->l = p.l; left->r = m; left->fl = p.fl; left->fm = flm; left->fr = p.fm;
+            right->tol = left->tol = p.tol / 2;
+            right->depth = left->depth = p.depth + 1;
+        }
+    }
+    return total;
+}
+#endif

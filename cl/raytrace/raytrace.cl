@@ -1,0 +1,418 @@
+/* raytrace.cl: the emission-absorption integral per pixel (paper §3, eq. 5 and 17, docs/raytracing.md §2).
+ *
+ * One work-item per ray.  The ray is cut at every knot plane of every channel group's
+ * fine B-spline lattice (clwave/raytrace/finegrid.py); inside a segment the field (q_R, q_G, q_B, alpha)
+ * and the gradient of alpha are polynomials in t, of degree <= 3(j - 1).  They are sampled at
+ * CLW_SAMPLES points xi of the segment [-1, 1]: the 9 points xi = -1 + p/4 of Simpson's first 2
+ * panels and their halves, plus xi = 15/16 when the degree is 9 (cubic), so that
+ *   - A(a, t) = int_a^t alpha is exact (integration weights of the interpolating polynomial at
+ *     the 9 points; the antiderivative of its Chebyshev series, made only when a panel must be
+ *     halved further),
+ *   - int_a^b q e^{-A} comes from adaptive Simpson on that polynomial (>= 2 initial panels,
+ *     accept |S2 - S1| <= 15 tol, return S2 + (S2 - S1)/15), with the shaded q of eq. 4,
+ *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (the same weights over the whole segment).
+ * Lanes 0..7 of a sample vector hold p = 1..8, lane 8 p = 0 and lane 9 the extra point.  Where
+ * the field is C^1 across knot planes (CLW_JOIN: every order >= 3), a segment that starts where
+ * the last evaluated one ended takes p = 0 (the field, and the shaded emission and the gradient of
+ * alpha when that segment was shaded point by point) from the last one's p = 8: alpha's gradient
+ * is then needed at 8 points, one real8.
+ * The budget tol per output value is split: half for the quadrature, spread along the ray in
+ * proportion to segment length and relaxed by 1/T (docs/raytracing.md §2); a quarter for early ray
+ * termination; a quarter for empty space.  With shading, three quarters of the quadrature's half
+ * go to segments shaded at the midpoint of their shading range (the quadrature's own errors are
+ * far below its share at the usual tolerances): shading makes q (ka + kd D) + ks alpha S
+ * of q with D, S in [0, nlights], so (ka + kd n/2) q + (ks n/2) alpha errs by at most the half
+ * width (kd q + ks alpha) n/2; a segment whose unshaded integrals (Simpson's 4 panels, |S4 - S2|
+ * added as their error) make that fit in what is left of that share needs no gradient, which is
+ * a third of the work.  Termination and skipping use the blocks of CLW_BLOCK^3 fine cells with a
+ * bound b on |field| (cl/raytrace/blocks.cl) and R(t), the integral of b along the rest of the ray beyond t
+ * (summed block by block before the march): the rest can add at most T R gain of emission and
+ * T min(1, R) of opacity, so the ray stops once T max(min(1, R), R gain) <= tol/4.  A block is
+ * skipped while what it could change stays within what is left of the empty-space quarter: over a
+ * length l at transmittance T it could add T b l gain of emission, T b l of opacity, and by its
+ * optical depth b l dim the rest of the ray by at most T b l R gain.  X-ray mode spends half of tol
+ * on skipping (its segment integrals are exact).
+ *
+ * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
+ * CLW_SAMPLES samples per segment (9 or 10); CLW_JOIN when every order is >= 3; CLW_LATTICE 1 or
+ * 0.5 (orders of both parities); CLW_SHADE for Phong shading; CLW_XRAY for line integrals;
+ * CLW_DOUBLE for a float64 build. */
+#include "raytrace/types.h"
+#ifdef CLW_WAVELET
+#include "raytrace/field_wavelet.h"
+#else
+#include "raytrace/field_bspline.h"
+#endif
+#include "raytrace/quadrature.h"
+
+/* plane[a]: the next plane x_a = plane[a] h the ray x0 + t dd meets beyond t, tp[a] its t;
+ * inv = 1 / dd (products: divisions were a tenth of the march) */
+inline void next_planes(const real *x0, const real *dd, const real *inv, const real t, const real h, int *plane,
+                        real *tp)
+{
+    for (int a = 0; a < 3; a++) {
+        const real x = x0[a] + t * dd[a];
+        plane[a] = dd[a] > 0 ? (int)floor(x / h) + 1 : (int)ceil(x / h) - 1;
+        tp[a] = dd[a] == 0 ? INFINITY : (plane[a] * h - x0[a]) * inv[a];
+        while (tp[a] <= t) { /* x sat on a plane but rounded to its near side */
+            plane[a] += dd[a] > 0 ? 1 : -1;
+            tp[a] = (plane[a] * h - x0[a]) * inv[a];
+        }
+    }
+}
+
+/* past the planes met at tn: the next ones along those axes */
+inline void step_planes(const real *x0, const real *dd, const real *inv, const real tn, const real h, int *plane,
+                        real *tp)
+{
+    for (int a = 0; a < 3; a++)
+        if (tp[a] <= tn) {
+            plane[a] += dd[a] > 0 ? 1 : -1;
+            tp[a] = (plane[a] * h - x0[a]) * inv[a];
+        }
+}
+
+/* the block of `size` fine cells holding x, and the bound on |field| there (0 outside the blocks) */
+inline real block_bound(__global const float *bound, const int4 origin, const int4 shape, const real3 x,
+                        const int size, int4 *b)
+{
+    *b = convert_int4((real4)(floor(x / size), 0));
+    const int4 k = *b - origin;
+    if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= shape.x || k.y >= shape.y || k.z >= shape.z)
+        return 0;
+    return bound[((size_t)k.z * shape.y + k.y) * shape.x + k.x];
+}
+
+/* where the ray leaves block b of `size` fine cells (at most t1) */
+inline real block_exit(const real *x0, const real *dd, const real *inv, const int4 b, const int size, const real t1)
+{
+    const int bb[3] = {b.x, b.y, b.z};
+    real texit = t1;
+    for (int a = 0; a < 3; a++)
+        if (dd[a] != 0)
+            texit = fmin(texit, ((bb[a] + (dd[a] > 0)) * size - x0[a]) * inv[a]);
+    return texit;
+}
+
+/* The bounds on |field| for skipping and R: per CLW_BLOCK^3 block, and per superblock of CLW_SUPER^3
+ * fine cells the largest of those; a superblock bounded by at most `coarse` is one region */
+typedef struct {
+    __global const float *block, *super;
+    int4 block_origin, block_shape, super_origin, super_shape;
+    real coarse;
+} Regions;
+
+/* The region of the ray around xm (segment [t, tn]) that one bound covers, and that bound: the
+ * superblock when its bound is at most R->coarse (empty, or nearly: crossed in one step), else the
+ * block.  Returns the bound; *end is where the ray leaves the region.  *fine_end caches where the
+ * ray leaves the last superblock found above R->coarse, whose blocks need no second look. */
+inline real region_bound(const real *x0, const real *dd, const real *inv, const real3 xm, const real tn,
+                         const real t1, const Regions *R, real *fine_end, real *end)
+{
+    int4 b;
+    if (!(tn <= *fine_end)) {
+        const real sb = block_bound(R->super, R->super_origin, R->super_shape, xm, CLW_SUPER, &b);
+        const real sexit = fmax(block_exit(x0, dd, inv, b, CLW_SUPER, t1), tn);
+        if (sb <= R->coarse) {
+            *end = sexit;
+            return sb;
+        }
+        *fine_end = sexit;
+    }
+    const real bb = block_bound(R->block, R->block_origin, R->block_shape, xm, CLW_BLOCK, &b);
+    *end = fmax(block_exit(x0, dd, inv, b, CLW_BLOCK, t1), tn);
+    return bb;
+}
+
+/* (S4, S2): Simpson's rule over [-1, 1] on 4 and on 2 panels, from the values at xi = -1 + p/4,
+ * p = 1..8 in the lanes of v and p = 0 in `first` */
+inline real2 simpson_pair(const real8 v, const real first)
+{
+    const real8 w4 = v * (real8)(4, 2, 4, 2, 4, 2, 4, 1), w2 = v * (real8)(0, 4, 0, 2, 0, 4, 0, 1);
+    return (real2)((dot(w4.lo + w4.hi, (real4)(1)) + first) / 12, (dot(w2.lo + w2.hi, (real4)(1)) + first) / 6);
+}
+
+/* raytrace: one ray per pixel.
+ *
+ * Parameters
+ *   image        out (H, W) float4: premultiplied (R, G, B, 1 - T), or line integrals (CLW_XRAY)
+ *   stats        out (H, W) int4: segments, segments shaded at the midpoint (no gradient), integrand
+ *                    evaluations, flags
+ *                    (bit 0 terminated early, bit 1 Simpson depth limit reached)
+ *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
+ *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
+ *   super_bound, super_origin, super_shape  the largest of those per superblock of CLW_SUPER^3 fine cells
+ *   coarse_bound superblocks bounded by at most this are one region for skipping and R
+ *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates
+ *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;
+ *                                perspective p = base (the eye), w = normalize(dir + c du + r dv),
+ *                                with c, r the pixel centre's offsets from the image centre
+ *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset
+ *   nodes        the sample points xi_k (CLW_SAMPLES), then the (CLW_SAMPLES, CLW_SAMPLES) matrix
+ *                from the samples to the field's Chebyshev series, then the (9, 9) one from lanes
+ *                0..8 to the gradient's
+ *   weights      (CLW_SAMPLES, 8) sample k's weights in the integral from -1 to xi = -1 + p/4,
+ *                p = 1..8, of the polynomial through the samples (p = 8: the whole segment)
+ *   tol          absolute tolerance per output value
+ *   shade_gain   how much shading can scale the emission (the shaded q <= shade_gain |field|)
+ *   grad_floor   shorter world gradients of alpha get no diffuse or specular light: on a plateau
+ *                of alpha they are rounding noise, whose random normals would make the integrand
+ *                jump everywhere
+ *   lights       (nlights,) unit directions towards the lights; phong (ka, kd, ks, shininess)
+ * Grid: global (W, H). */
+__kernel void raytrace(__global float4 *image, __global int4 *stats, const int width, const int height,
+                       FIELD_PARAMS,
+                       __global const float *bound, const int4 occ_origin, const int4 occ_shape,
+                       __global const float *super_bound, const int4 super_origin, const int4 super_shape,
+                       const real coarse_bound,
+                       const float4 box_lo, const float4 box_hi,
+                       const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
+                       const float4 to_fine_scale, const float4 to_fine_offset,
+                       __constant const real *nodes, __constant const real *weights, const real tol,
+                       const real shade_gain,
+                       const real grad_floor,
+                       __constant const float4 *lights, const int nlights, const float4 phong)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    if (col >= width || row >= height)
+        return;
+    const Field G = FIELD_INIT;
+    const real pc = (real)col + (real)0.5 - (real)width / 2, pr = (real)height / 2 - (real)row - (real)0.5;
+    real3 p, w;
+    if (perspective) {
+        p = to_real3(base.xyz);
+        w = normalize(to_real3(dir.xyz) + pc * to_real3(du.xyz) + pr * to_real3(dv.xyz));
+    } else {
+        p = to_real3(base.xyz) + pc * to_real3(du.xyz) + pr * to_real3(dv.xyz);
+        w = to_real3(dir.xyz);
+    }
+    const real3 scale = to_real3(to_fine_scale.xyz);
+    const real3 X0 = p * scale + to_real3(to_fine_offset.xyz);
+    const real3 D = w * scale; /* fine units per world unit of t */
+
+    /* clip to the support box (slabs) */
+    real t0 = perspective ? 0 : -INFINITY, t1 = INFINITY;
+    const real lo[3] = {box_lo.x, box_lo.y, box_lo.z}, hi[3] = {box_hi.x, box_hi.y, box_hi.z};
+    const real x0[3] = {X0.x, X0.y, X0.z}, dd[3] = {D.x, D.y, D.z}, inv[3] = {1 / D.x, 1 / D.y, 1 / D.z};
+    for (int a = 0; a < 3; a++) {
+        if (dd[a] == 0) {
+            if (x0[a] < lo[a] || x0[a] > hi[a])
+                t1 = -INFINITY;
+        } else {
+            const real ta = (lo[a] - x0[a]) / dd[a], tb = (hi[a] - x0[a]) / dd[a];
+            t0 = fmax(t0, fmin(ta, tb));
+            t1 = fmin(t1, fmax(ta, tb));
+        }
+    }
+    const Regions regions = {bound, super_bound, occ_origin, occ_shape, super_origin, super_shape, coarse_bound};
+    const size_t pix = (size_t)row * width + col;
+    Active active;
+    active_init(&active, G, pix, X0, D);
+    int segments = 0, midpoints = 0, evals = 0, flags = 0;
+    if (!(t1 > t0)) {
+        image[pix] = (float4)(0.0f);
+        stats[pix] = (int4)(0);
+        return;
+    }
+
+#ifndef CLW_XRAY
+    Shading P;
+    P.ka = phong.x; P.kd = phong.y; P.ks = phong.z; P.shininess = phong.w;
+    P.grad_floor = grad_floor;
+    P.nlights = min(nlights, CLW_MAX_LIGHTS);
+    P.scale = scale;
+    for (int i = 0; i < P.nlights; i++) {
+        P.light[i] = to_real3(lights[i].xyz);
+        P.halfway[i] = normalize(P.light[i] - w); /* halfway between the light and the viewer */
+    }
+    real T = 1;
+    real3 I = (real3)(0);
+    const real total = t1 - t0;
+    real skip_budget = tol / 4;
+    real shade_budget = tol * 3 / 8; /* three quarters of the quadrature's half, when shading */
+    const real quadrature_share = SHADING ? tol / 8 : tol / 2;
+    /* R(t0): the region bounds integrated along the whole ray, region by region */
+    real rest = 0;
+    {
+        real tp[3];
+        int plane[3];
+        real fine_end = -INFINITY;
+        next_planes(x0, dd, inv, t0, CLW_BLOCK, plane, tp);
+        for (real t = t0; t < t1;) {
+            const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
+            real end;
+            rest += region_bound(x0, dd, inv, X0 + (t + tn) / 2 * D, tn, t1, &regions, &fine_end, &end) * (end - t);
+            if (end > tn) { /* a coarse superblock: on past it */
+                t = end;
+                next_planes(x0, dd, inv, t, CLW_BLOCK, plane, tp);
+            } else {
+                t = tn;
+                step_planes(x0, dd, inv, tn, CLW_BLOCK, plane, tp);
+            }
+        }
+    }
+    /* R(t) = rest - consumed, the part of the sum at t' < t subtracted as the march passes it;
+     * slack covers the rounding of the two sums (float32: ~1e-7 relative per term) */
+    const real slack = rest * (real)1e-4;
+    real consumed = 0;
+#else
+    real4 I = (real4)(0);
+    real skip_budget = tol / 2;
+#endif
+    /* the last evaluated segment's end: where, the field, and (shaded point by point) the
+     * shaded emission and alpha's gradient */
+    real t_joined = -INFINITY;
+    real4 end_field = (real4)(0);
+#ifndef CLW_XRAY
+    bool end_shaded = false;
+    real3 end_emission = (real3)(0), end_gradient = (real3)(0);
+#endif
+    /* the block or coarse superblock the last segment lay in (its bound, where the ray leaves it),
+     * and where the ray leaves the last fine superblock */
+    real bnd = 0, texit = -INFINITY, fine_end = -INFINITY;
+    const real h = CLW_LATTICE;
+    real tp[3];
+    int plane[3];
+    real t = t0;
+    bool replan = true;
+    while (t < t1) {
+        if (replan) { /* the next knot plane per axis, from the position at t */
+            next_planes(x0, dd, inv, t, h, plane, tp);
+            replan = false;
+        }
+        const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
+        const real3 xm = X0 + (t + tn) / 2 * D;
+        if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
+            bnd = region_bound(x0, dd, inv, xm, tn, t1, &regions, &fine_end, &texit);
+#ifdef CLW_XRAY
+        const real cost = bnd * (texit - t);
+#else
+        const real rest_after = fmax(rest - consumed - bnd * (texit - t), (real)0) + slack;
+        const real cost = T * bnd * (texit - t) * (shade_gain * (1 + rest_after) + 1);
+#endif
+        if (cost <= skip_budget) { /* (nearly) empty region: jump to where the ray leaves it */
+            skip_budget -= cost;
+#ifndef CLW_XRAY
+            consumed += bnd * (texit - t);
+#endif
+            t = texit;
+            replan = true;
+            continue;
+        }
+        if (tn > t) {
+            Segment S;
+            Basis basis[CLW_GROUPS];
+            S.radius = (tn - t) / 2;
+            S.series = false;
+            /* p = 0 from the last segment's p = 8 when it ended here (and the field is C^1) */
+            const bool joined = JOIN && t == t_joined;
+            sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, nodes, !joined, S.fq, basis);
+            if (joined)
+                S.fq[P0] = end_field;
+            end_field = S.fq[7];
+            t_joined = tn;
+            segments += 1;
+#ifdef CLW_XRAY /* the integral over the segment */
+            real4 integral = (real4)(0);
+            for (int k = 0; k < NS; k++)
+                integral += S.fq[k] * weights[8 * k + 7];
+            I += S.radius * integral;
+#else
+            /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
+            real lr[8], lg[8], lb[8], la[8];
+            real8 A8 = 0;
+            for (int k = 0; k < NS; k++) {
+                /* alpha and q clamped at 0 (thresholding can make them dip below); q stays a
+                 * polynomial for the series (shade clamps it wherever it is evaluated): the
+                 * interpolant of clamped samples would oscillate by up to the points' Lebesgue
+                 * constant times the dip */
+                const real4 v = fmax(S.fq[k], (real4)(0));
+                S.fq[k].w = v.w;
+                if (k < 8) {
+                    lr[k] = v.x; lg[k] = v.y; lb[k] = v.z; la[k] = v.w;
+                }
+                A8 = fma((real8)(v.w), vload8(k, weights), A8);
+            }
+            real8 r8 = vload8(0, lr), g8 = vload8(0, lg), b8 = vload8(0, lb);
+            const real8 a8 = vload8(0, la);
+            const real4 f0 = fmax(S.fq[P0], (real4)(0));
+            const real depth = A8.s7; /* int alpha dxi over the segment */
+            const real8 att = fast_exp(-S.radius * A8);
+            bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
+            real3 part;
+#ifdef CLW_SHADE
+            {   /* Shading turns q into q (ka + kd D) + ks alpha S with D, S in [0, nlights]: the
+                 * midpoint of that range errs by at most half its width, times the unshaded
+                 * integrals (Simpson on 4 panels, plus |S4 - S2| for their error).  A segment whose
+                 * error that way fits in what is left of the shading budget takes the midpoint
+                 * and needs no gradient. */
+                const real2 sr = simpson_pair(r8 * att, f0.x), sg = simpson_pair(g8 * att, f0.y),
+                            sb = simpson_pair(b8 * att, f0.z), sa = simpson_pair(a8 * att, f0.w);
+                const real3 s4 = (real3)(sr.x, sg.x, sb.x), ds = fabs(s4 - (real3)(sr.y, sg.y, sb.y));
+                const real dsa = fabs(sa.x - sa.y);
+                const real n = P.nlights, diffuse_mid = P.ka + P.kd * n / 2, specular_mid = P.ks * n / 2;
+                const real3 err = P.kd * n / 2 * (s4 + ds) + specular_mid * (sa.x + dsa) /* the range */
+                                  + diffuse_mid * ds + specular_mid * dsa;            /* the quadrature */
+                const real cost = T * S.radius * fmax(err.x, fmax(err.y, err.z));
+                if (cost <= shade_budget) {
+                    shade_budget -= cost;
+                    part = diffuse_mid * s4 + specular_mid * sa.x;
+                    simpson_full = false;
+                    midpoints += 1;
+                    evals += 9;
+                }
+            }
+#endif
+            if (simpson_full) {
+                /* the shaded emission at p = 0 (and alpha's gradient there) from the last segment
+                 * when that was shaded point by point too */
+                const bool shaded_joined = joined && end_shaded;
+                real3 f9[9];
+#ifdef CLW_SHADE
+                sample_gradient(basis, !shaded_joined, &S.gx, &S.gy, &S.gz);
+                if (shaded_joined) {
+                    S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
+                }
+                end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
+#else
+                S.gx = 0; S.gy = 0; S.gz = 0; /* unshaded: shade8 and shade only clamp */
+#endif
+                shade8(&r8, &g8, &b8, a8, S.gx.lo, S.gy.lo, S.gz.lo, &P);
+                if (shaded_joined) {
+                    f9[0] = end_emission;
+                } else {
+                    real r = f0.x, gr = f0.y, b = f0.z;
+                    shade(&r, &gr, &b, f0.w, S.gx.s8, S.gy.s8, S.gz.s8, &P);
+                    f9[0] = (real3)(r, gr, b);
+                }
+                end_emission = (real3)(r8.s7, g8.s7, b8.s7);
+                real fr[8], fg[8], fb[8];
+                vstore8(r8 * att, 0, fr);
+                vstore8(g8 * att, 0, fg);
+                vstore8(b8 * att, 0, fb);
+                for (int p = 1; p <= 8; p++)
+                    f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
+                const real seg_tol = quadrature_share * (tn - t) / total / T;
+                part = simpson(&S, &P, f9, nodes, seg_tol / S.radius, &evals, &flags);
+            }
+            end_shaded = simpson_full;
+            I += T * S.radius * part;
+            T *= exp(-S.radius * depth);
+            consumed += bnd * (tn - t);
+            const real left = fmax(rest - consumed, (real)0) + slack;
+            if (T * fmax(fmin((real)1, left), shade_gain * left) <= tol / 4) {
+                flags |= 1;
+                break;
+            }
+#endif
+        }
+        t = tn;
+        step_planes(x0, dd, inv, tn, h, plane, tp);
+    }
+#ifdef CLW_XRAY
+    image[pix] = convert_float4(I);
+#else
+    image[pix] = (float4)(convert_float3(I), (float)(1 - T));
+#endif
+    stats[pix] = (int4)(segments, midpoints, evals, flags | active_flags(&active));
+}

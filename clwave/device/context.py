@@ -1,0 +1,176 @@
+"""OpenCL device choice and the one context holder used everywhere.
+
+``device=`` (API) and ``--device`` (CLI) accept ``auto``, ``cpu``, ``gpu``,
+``P:D`` platform/device indices, ``P`` (first device of platform P) or a
+case-insensitive substring of "platform device" names.  When the request is
+``None`` or ``auto``, ``CLWAVE_DEVICE`` and then ``PYOPENCL_CTX`` are honoured;
+nothing ever prompts.  ``auto`` prefers a GPU, then any accelerator, then a CPU
+(PoCL first).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DeviceNotFoundError
+
+INSTALL_HINT = ("install an OpenCL driver, e.g. Debian's `apt-get install pocl-opencl-icd`, "
+                "or run tools/setup.sh")
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """One OpenCL device with the figures `clwave info` prints."""
+
+    platform_index: int
+    device_index: int
+    platform: str
+    name: str
+    kind: str  # "GPU", "CPU" or "ACCELERATOR"
+    global_mem: int
+    max_alloc: int
+    local_mem: int
+    compute_units: int
+    version: str
+
+    @property
+    def id(self) -> str:
+        return f"{self.platform_index}:{self.device_index}"
+
+    @property
+    def is_pocl(self) -> bool:
+        return "portable computing language" in self.platform.lower() or "pocl" in self.platform.lower()
+
+    def describe(self) -> dict:
+        return dict(id=self.id, platform=self.platform, device=self.name, type=self.kind,
+                    global_mem_bytes=self.global_mem, max_alloc_bytes=self.max_alloc,
+                    local_mem_bytes=self.local_mem, compute_units=self.compute_units,
+                    version=self.version, is_pocl=self.is_pocl)
+
+
+def _cl():
+    try:
+        import pyopencl
+    except ImportError as exc:  # the wheel bundles a loader, so this is a broken install
+        raise DeviceNotFoundError(f"pyopencl cannot be imported ({exc}); {INSTALL_HINT}") from None
+    return pyopencl
+
+
+def _platforms():
+    cl = _cl()
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        platforms = []
+    if not platforms:
+        raise DeviceNotFoundError(f"no OpenCL platform found; {INSTALL_HINT}")
+    return platforms
+
+
+def list_devices() -> list[DeviceInfo]:
+    """Every device of every platform, in platform/device index order."""
+    cl = _cl()
+    out = []
+    for p_idx, platform in enumerate(_platforms()):
+        try:
+            devices = platform.get_devices()
+        except cl.Error:
+            continue
+        for d_idx, dev in enumerate(devices):
+            kind = ("GPU" if dev.type & cl.device_type.GPU else
+                    "ACCELERATOR" if dev.type & cl.device_type.ACCELERATOR else "CPU")
+            out.append(DeviceInfo(p_idx, d_idx, platform.name.strip(), dev.name.strip(), kind,
+                                  int(dev.global_mem_size), int(dev.max_mem_alloc_size),
+                                  int(dev.local_mem_size), int(dev.max_compute_units),
+                                  dev.version.strip()))
+    if not out:
+        raise DeviceNotFoundError(f"OpenCL platforms exist but report no device; {INSTALL_HINT}")
+    return out
+
+
+def _auto_rank(info: DeviceInfo):
+    kind_rank = {"GPU": 0, "ACCELERATOR": 1, "CPU": 2}[info.kind]
+    return (kind_rank, not info.is_pocl, -info.compute_units, -info.global_mem,
+            info.platform_index, info.device_index)
+
+
+def requested_device(request=None) -> str:
+    """The effective request string after the environment variables."""
+    if request is None or str(request).strip().lower() in ("", "auto"):
+        for var in ("CLWAVE_DEVICE", "PYOPENCL_CTX"):
+            value = os.environ.get(var, "").strip()
+            if value:
+                return value
+        return "auto"
+    return str(request).strip()
+
+
+def select_device(request=None, devices=None) -> DeviceInfo:
+    """Resolve a device request (see module docstring) to one :class:`DeviceInfo`."""
+    devices = list_devices() if devices is None else devices
+    req = requested_device(request)
+    key = req.lower()
+    if key == "auto":
+        return min(devices, key=_auto_rank)
+    if key in ("cpu", "gpu"):
+        matches = [d for d in devices if d.kind == key.upper()]
+    elif _is_index(key):
+        parts = [int(p) if p else 0 for p in key.split(":")]
+        p_idx, d_idx = parts[0], (parts[1] if len(parts) > 1 else 0)
+        matches = [d for d in devices if (d.platform_index, d.device_index) == (p_idx, d_idx)]
+    else:
+        matches = [d for d in devices if key in f"{d.platform} {d.name}".lower()]
+    if not matches:
+        known = "; ".join(f"{d.id} {d.platform} / {d.name} ({d.kind})" for d in devices)
+        raise DeviceNotFoundError(f"no OpenCL device matches {req!r}; available: {known}")
+    return min(matches, key=_auto_rank)
+
+
+def _is_index(key: str) -> bool:
+    parts = key.split(":")
+    return 1 <= len(parts) <= 2 and all(p.isdigit() or p == "" for p in parts) and parts[0] != ""
+
+
+class ComputeContext:
+    """An OpenCL context and in-order queue on one device, plus its built programs.
+
+    Obtain one with :meth:`get`; equal requests share one holder, so kernels are
+    built once per process.  Pass a ``ComputeContext`` anywhere ``device=`` is
+    accepted.
+    """
+
+    _shared: dict = {}
+
+    def __init__(self, info: DeviceInfo):
+        cl = _cl()
+        platform = _platforms()[info.platform_index]
+        self.info = info
+        self.device = platform.get_devices()[info.device_index]
+        self.ctx = cl.Context([self.device])
+        self.queue = cl.CommandQueue(self.ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
+        self.programs: dict = {}
+
+    @classmethod
+    def get(cls, device=None) -> "ComputeContext":
+        if isinstance(device, ComputeContext):
+            return device
+        info = select_device(device)
+        if info not in cls._shared:
+            cls._shared[info] = cls(info)
+        return cls._shared[info]
+
+    def upload(self, host):
+        """A read-only device buffer holding a copy of a (non-empty) host array, in one call
+        (``pyopencl.array.to_device`` takes ~0.1 ms per small table on PoCL)."""
+        cl = _cl()
+        return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                         hostbuf=np.ascontiguousarray(host))
+
+    def describe(self) -> dict:
+        return self.info.describe()
+
+    def __repr__(self):
+        return f"ComputeContext({self.info.id} {self.info.platform} / {self.info.name})"

@@ -1,0 +1,108 @@
+"""Build OpenCL programs from ``cl/`` and hand out each kernel object once.
+
+Sources live in ``cl/`` by pipeline stage (``common/``, ``splat/``, ``raytrace/``,
+``device/``) and are named, and ``#include``-d, by their path below ``cl/``: they are
+compiled with ``-I <cl dir>`` and ``-DCLW_SRC_HASH=<sha1 of every cl/ file>``, so an
+edited header invalidates both pyopencl's and PoCL's binary caches.  ``prg.kernel_name``
+creates a new Kernel on every access (pyopencl#830); :class:`KernelSet`
+fetches each one once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+import warnings
+from functools import lru_cache
+from pathlib import Path
+
+from . import constants
+from .context import INSTALL_HINT, ComputeContext
+from ..errors import KernelBuildError
+
+
+def cl_dir() -> Path:
+    """The kernel source folder: inside the installed package, else the checkout's ``cl/``."""
+    package = Path(__file__).resolve().parents[1]
+    for candidate in (package / "cl", package.parent / "cl"):
+        if candidate.is_dir():
+            return candidate
+    raise KernelBuildError(f"kernel sources not found next to {package}; reinstall clwave")
+
+
+@lru_cache(maxsize=None)
+def source_hash(folder: Path) -> str:
+    digest = hashlib.sha1()
+    for path in sorted(folder.rglob("*")):
+        if path.suffix in (".cl", ".h"):
+            digest.update(path.relative_to(folder).as_posix().encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+class KernelSet:
+    """A built program and its kernels, each fetched once: ``ks["name"]`` or ``ks.name``."""
+
+    def __init__(self, program, build_seconds: float, options: list):
+        self.program = program
+        self.build_seconds = build_seconds
+        self.options = options
+        self.kernels = {k.function_name: k for k in program.all_kernels()}
+
+    def __getitem__(self, name):
+        return self.kernels[name]
+
+    def __getattr__(self, name):
+        try:
+            return self.__dict__["kernels"][name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+def build(cc: ComputeContext, files, defines=None) -> KernelSet:
+    """Build (or reuse) the program made of ``files`` (paths below ``cl/``) with ``-D`` ``defines``
+    and the shared constants (:func:`clwave.device.constants.defines`)."""
+    import pyopencl as cl
+
+    files = tuple(files)
+    defines = tuple(sorted({**constants.defines(), **(defines or {})}.items()))
+    key = (files, defines)
+    if key in cc.programs:
+        return cc.programs[key]
+    folder = cl_dir()
+    source = "\n".join(f'#include "{name}"' for name in files) + "\n"
+    # -w: PoCL prints ABI notes about float16 vectors straight to stderr otherwise
+    options = ["-I", str(folder), f"-DCLW_SRC_HASH={source_hash(folder)}", "-w"]
+    options += [f"-D{k}" if v is None else f"-D{k}={v}" for k, v in defines]
+    start = time.perf_counter()
+    try:
+        with warnings.catch_warnings():  # non-empty logs of successful builds (PoCL ABI notes) are kept, not shown
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+            program = cl.Program(cc.ctx, source).build(options=options)
+    except cl.Error as exc:
+        log = str(exc)
+        first = next((ln.strip() for ln in log.splitlines() if "error" in ln.lower()), log.strip()[:200])
+        raise KernelBuildError(
+            f"OpenCL build of {', '.join(files)} failed on {cc.info.name} ({first}); "
+            f"if the driver is broken, {INSTALL_HINT}", log=log) from None
+    ks = KernelSet(program, time.perf_counter() - start, options)
+    cc.programs[key] = ks
+    return ks
+
+
+def selftest(cc: ComputeContext, n: int = 1024) -> float:
+    """Build and run ``selftest_axpy``; returns the build time, raises on a wrong answer."""
+    import numpy as np
+    import pyopencl.array as cla
+
+    ks = build(cc, ["device/selftest.cl"])
+    rng = np.random.default_rng(0)
+    a, b = rng.random(n, dtype=np.float32), rng.random(n, dtype=np.float32)
+    d_a, d_b = cla.to_device(cc.queue, a), cla.to_device(cc.queue, b)
+    d_out = cla.empty_like(d_a)
+    ks.selftest_axpy(cc.queue, (n,), None, np.float32(2.5), d_a.data, d_b.data, d_out.data)
+    got = d_out.get()
+    if not np.allclose(got, 2.5 * a + b, rtol=1e-6, atol=1e-6):
+        raise KernelBuildError(f"the self-test kernel gave wrong results on {cc.info.name}; "
+                               f"{INSTALL_HINT}")
+    return ks.build_seconds

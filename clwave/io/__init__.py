@@ -1,0 +1,1 @@
+"""Reading and writing: volume loaders, phantoms, render results, atomic file output."""

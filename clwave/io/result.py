@@ -1,0 +1,80 @@
+"""RenderResult: the image a renderer returns, its figures, and how it is written.
+
+X-ray images (line integrals) are written to PNG through a linear window
+(``"auto"`` = the 0.5 and 99.5 percentiles, or ``(lo, hi)``); emission-absorption
+images (premultiplied RGBA) are composited over a background colour and encoded
+as 8-bit sRGB.  ``.npy`` keeps the raw float32 image.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .files import write_atomic
+from ..model.transfer import AUTO_PERCENTILES, check_window
+
+
+@dataclass
+class RenderResult:
+    """``image`` float32 (H, W, C); ``meta``: method, device, counts, timings in seconds."""
+
+    image: np.ndarray
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def is_xray(self) -> bool:
+        return self.meta.get("mode", "xray") == "xray"
+
+    def to_uint8(self, window="auto", background=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """8-bit (H, W) grey or (H, W, 3) colour picture of the image."""
+        if self.is_xray:
+            picture = self.image[..., :3] if self.image.shape[-1] >= 3 else self.image[..., 0]
+            lo, hi = resolve_window(picture, window)
+            scaled = np.clip((picture - lo) / (hi - lo), 0.0, 1.0)
+        else:
+            rgb, alpha = self.image[..., :3], self.image[..., 3:4]
+            scaled = np.clip(rgb + (1.0 - alpha) * np.asarray(background, np.float32), 0.0, 1.0)
+            scaled = np.where(scaled <= 0.0031308, 12.92 * scaled, 1.055 * scaled ** (1 / 2.4) - 0.055)
+        return np.round(255.0 * scaled).astype(np.uint8)
+
+    def save(self, path, *, window="auto", background=(0.0, 0.0, 0.0), overwrite=False) -> Path:
+        """Write ``.png`` (windowed or composited), ``.npy`` (raw float32) or ``.json`` (meta)."""
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix == ".png":
+            import imageio.v3 as iio
+            data = self.to_uint8(window, background)
+            return write_atomic(path, lambda fh: iio.imwrite(fh, data, extension=".png"), overwrite)
+        if suffix == ".npy":
+            return write_atomic(path, lambda fh: np.save(fh, self.image), overwrite)
+        if suffix == ".json":
+            text = json.dumps(self.meta, indent=2, default=_jsonable).encode()
+            return write_atomic(path, lambda fh: fh.write(text), overwrite)
+        raise InputError(f"cannot write {path}: use .png, .npy or .json")
+
+
+def resolve_window(values, window="auto") -> tuple:
+    """``(lo, hi)`` of a display window: "auto" (percentiles of the finite values) or given."""
+    checked = check_window(window)
+    if checked is None:
+        raise InputError("a display window must be 'auto' or (lo, hi)")
+    if checked != "auto":
+        return checked
+    finite = np.asarray(values)[np.isfinite(values)]
+    lo, hi = (float(p) for p in np.percentile(finite, AUTO_PERCENTILES)) if finite.size else (0.0, 1.0)
+    if hi <= lo:
+        hi = lo + 1.0  # a flat image (a view that misses the volume) shows black
+    return lo, hi
+
+
+def _jsonable(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)

@@ -1,0 +1,138 @@
+"""Camera: orthographic (default) or perspective views set by azimuth and elevation.
+
+Paper eq. 31, world (x, y, z), angles in degrees:
+``n = (cos a cos b, sin a cos b, sin b)``, ``u = (-sin a, cos a, 0)``,
+``v = (-cos a sin b, -sin a sin b, cos b)``; ``u x v = n``.  The camera sits on
+the ``+n`` side looking along ``-n``; u points right and v up in the image, so
+images are not mirrored.  Pixel ``(row r, col c)`` has its centre at
+``target + (c + 0.5 - W/2) p u + (H/2 - r - 0.5) p v`` with ``p = extent / W``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError, finite_number
+from .geometry import view_frame
+
+
+@dataclass(frozen=True)
+class View:
+    """A camera resolved against a volume: everything a renderer needs, float64."""
+
+    n: np.ndarray        # (3,) towards the camera
+    u: np.ndarray        # (3,) image right
+    v: np.ndarray        # (3,) image up
+    target: np.ndarray   # (3,) world point at the image centre
+    size: tuple          # (H, W)
+    pixel: float         # world width of a pixel
+    perspective: bool
+    eye: np.ndarray      # (3,) eye position (perspective only)
+    fov: float           # vertical field of view in degrees (perspective only)
+
+    def to_pixels(self, points_xyz) -> np.ndarray:
+        """Orthographic projection of world points to continuous (col, row) pixel coordinates."""
+        d = np.asarray(points_xyz, float) - self.target
+        H, W = self.size
+        col = d @ self.u / self.pixel + W / 2.0 - 0.5
+        row = H / 2.0 - 0.5 - d @ self.v / self.pixel
+        return np.stack([col, row], axis=-1)
+
+    def pixel_centres(self) -> np.ndarray:
+        """World centres of all pixels, (H, W, 3)."""
+        H, W = self.size
+        c = (np.arange(W) + 0.5 - W / 2.0) * self.pixel
+        r = (H / 2.0 - np.arange(H) - 0.5) * self.pixel
+        return self.target + r[:, None, None] * self.v + c[None, :, None] * self.u
+
+
+class Camera:
+    """A view of a volume (docs/coordinates.md §2).
+
+    Parameters
+    ----------
+    azimuth, elevation : float
+        Degrees; the direction from the target towards the camera (paper eq. 31).
+    size : int or (H, W)
+        Image size in pixels.
+    target : (x, y, z), optional
+        World point at the image centre; default the volume centre.
+    extent : float, optional
+        World width of the image; default the diameter of the sphere around the
+        volume's voxel box, so every view fits.
+    perspective, distance, fov :
+        Perspective projection (ray tracing): eye at ``target + distance * n``,
+        vertical field of view ``fov`` degrees.
+
+    Examples
+    --------
+    >>> cam = Camera(azimuth=0, elevation=0, size=4)
+    >>> cam.basis()[0].tolist()  # n
+    [1.0, 0.0, 0.0]
+    """
+
+    def __init__(self, azimuth=30.0, elevation=20.0, size=512, *, target=None, extent=None,
+                 perspective=False, distance=None, fov=30.0):
+        self.azimuth = finite_number(azimuth, "azimuth")
+        self.elevation = finite_number(elevation, "elevation")
+        self.size = _size(size)
+        self.target = None if target is None else _vector(target, "target")
+        if extent is not None and not (np.isfinite(extent) and extent > 0):
+            raise InputError(f"extent={extent!r} must be a positive world width")
+        self.extent = None if extent is None else float(extent)
+        self.perspective = bool(perspective)
+        if distance is not None and not (np.isfinite(distance) and distance > 0):
+            raise InputError(f"distance={distance!r} must be a positive world distance")
+        self.distance = None if distance is None else float(distance)
+        if not (np.isfinite(fov) and 0 < fov < 180):
+            raise InputError(f"fov={fov!r} must be between 0 and 180 degrees")
+        self.fov = float(fov)
+
+    def basis(self):
+        """``(n, u, v)`` of paper eq. 31 as float64 arrays."""
+        n, u, v = view_frame(self.azimuth, self.elevation)
+        # exact zeros keep axis-aligned views exact (cos 90 deg is 6e-17)
+        return tuple(np.where(np.abs(x) < 1e-15, 0.0, x) for x in (n, u, v))
+
+    def view(self, volume) -> View:
+        """Resolve against a volume-like object (``shape``, ``spacing``, ``origin``)."""
+        n, u, v = self.basis()
+        (nz, ny, nx), (dz, dy, dx) = volume.shape, volume.spacing
+        target = np.asarray(volume.origin, float) if self.target is None else np.asarray(self.target)
+        extent = self.extent or float(np.sqrt((nx * dx) ** 2 + (ny * dy) ** 2 + (nz * dz) ** 2))
+        H, W = self.size
+        distance = self.distance or 2.0 * extent
+        return View(n, u, v, target, (H, W), extent / W, self.perspective,
+                    target + distance * n, self.fov)
+
+    def rotated(self, degrees) -> "Camera":
+        """The same camera turned about the z axis (turntables)."""
+        cam = Camera.__new__(Camera)
+        cam.__dict__.update(self.__dict__)
+        cam.azimuth = self.azimuth + float(degrees)
+        return cam
+
+    def __repr__(self):
+        kind = f", perspective fov={self.fov}" if self.perspective else ""
+        return f"Camera(azimuth={self.azimuth}, elevation={self.elevation}, size={self.size}{kind})"
+
+
+def _size(size) -> tuple:
+    try:
+        hw = np.atleast_1d(np.asarray(size, dtype=float))
+    except (TypeError, ValueError):
+        hw = np.zeros(0)
+    if hw.shape == (1,):
+        hw = np.repeat(hw, 2)
+    if hw.shape != (2,) or not np.all(np.isfinite(hw)) or np.any(hw < 1) or np.any(hw != np.round(hw)):
+        raise InputError(f"image size {size!r} must be a positive whole number or (H, W)")
+    return int(hw[0]), int(hw[1])
+
+
+def _vector(value, name) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise InputError(f"{name}={value!r} must be three finite numbers (x, y, z)")
+    return arr

@@ -1,0 +1,124 @@
+"""The geometry every renderer shares (docs/coordinates.md, docs/model.md §4): the view frame of
+paper eq. 31, the maps between world points and fine-voxel coordinates, and the supports of the
+basis functions.  World vectors are (x, y, z); volume shapes, spacings and subband keys are in
+array-axis order (z, y, x)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from .bspline import SplineWavelet, wavelet_for
+
+
+# ----------------------------------------------------------------------------- the view frame
+def view_frame(azimuth: float, elevation: float) -> tuple:
+    """The view frame ``(n, u, v)`` of paper eq. 31 for angles in degrees: n towards the camera,
+    u right and v up in the image, ``u x v = n``.
+
+    >>> n, u, v = view_frame(0.0, 0.0)
+    >>> n.tolist(), u.tolist(), v.tolist()
+    ([1.0, 0.0, 0.0], [-0.0, 1.0, 0.0], [-0.0, -0.0, 1.0])
+    """
+    a, b = np.radians(azimuth), np.radians(elevation)
+    n = np.array([np.cos(a) * np.cos(b), np.sin(a) * np.cos(b), np.sin(b)])
+    u = np.array([-np.sin(a), np.cos(a), 0.0])
+    v = np.array([-np.cos(a) * np.sin(b), -np.sin(a) * np.sin(b), np.cos(b)])
+    return n, u, v
+
+
+def orthonormal_frame(n, u, v) -> tuple:
+    """Validate an orthonormal frame; components below 1e-13 (cos 90 deg) are snapped to 0."""
+    vecs = []
+    for name, vec in (("n", n), ("u", u), ("v", v)):
+        a = np.asarray(vec, float).reshape(-1)
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise InputError(f"view vector {name} must be 3 finite numbers (x, y, z), got {vec!r}")
+        vecs.append(np.where(np.abs(a) < 1e-13, 0.0, a))
+    gram = np.array(vecs) @ np.array(vecs).T
+    if np.max(np.abs(gram - np.eye(3))) > 1e-6:
+        raise InputError("n, u, v must be orthonormal (paper eq. 31; see clwave.model.geometry.view_frame)")
+    return tuple(vecs)
+
+
+# ----------------------------------------------------------------------------- world <-> fine voxels
+def fine_to_world(fine_zyx, order: int, shape, spacing, origin) -> np.ndarray:
+    """World points (..., 3) as (x, y, z) of fine-voxel coordinates (..., 3) in (z, y, x).
+
+    Fine-voxel coordinates of a model of B-spline order j: ``x_a = (p_a - origin_a) / d_a +
+    (n_a - 1) / 2 + j / 2``, so voxel centres sit at the peaks of their B-splines (docs/model.md §4).
+    """
+    world_zyx = (np.asarray(fine_zyx, float) - order / 2.0 - (np.array(shape, float) - 1) / 2.0) \
+        * np.array(spacing, float)
+    return world_zyx[..., ::-1] + np.asarray(origin)
+
+
+def world_to_fine(points_xyz, order: int, shape, spacing, origin) -> np.ndarray:
+    """Fine-voxel coordinates (..., 3) in (z, y, x) of world points (..., 3) as (x, y, z)."""
+    p = np.asarray(points_xyz, float)[..., ::-1] - np.asarray(origin)[::-1]
+    return p / np.array(spacing, float) + (np.array(shape, float) - 1) / 2.0 + order / 2.0
+
+
+def world_to_fine_affine(order: int, shape, spacing, origin) -> tuple:
+    """``(scale, offset)``, each (x, y, z): fine-voxel coordinates = world * scale + offset, per axis
+    (the form the kernels take; :func:`world_to_fine` as one affine map)."""
+    scale = 1.0 / np.array(spacing[::-1], float)
+    offset = -np.asarray(origin) * scale + (np.array(shape[::-1], float) - 1) / 2.0 + order / 2.0
+    return scale, offset
+
+
+# ----------------------------------------------------------------------------- supports of the bases
+def band_lattice(wav: SplineWavelet, key: str, level: int) -> tuple:
+    """``(offset, step, support)`` of the basis functions of band ``(level, key)``, per array axis.
+
+    Coefficient k's support is ``[offset + step k, offset + step (k + support))`` in fine-voxel
+    coordinates of the wavelet's own order (``offset``, ``support``: (3,) in the key's (z, y, x)
+    order; ``step = 2^level``); docs/model.md §4.
+    """
+    offset = np.array([wav.offset(letter, level) for letter in key], float)
+    support = np.array([wav.support(letter) for letter in key], float)
+    return offset, 2.0 ** level, support
+
+
+def support_centres(wav: SplineWavelet, key: str, level: int, index_zyx) -> np.ndarray:
+    """Fine-voxel (z, y, x) centres of the supports of coefficients ``index_zyx`` (..., 3) of a band."""
+    offset, step, support = band_lattice(wav, key, level)
+    return offset + step * (np.asarray(index_zyx, float) + support / 2.0)
+
+
+def support_extent(wav: SplineWavelet, key: str, m: int, d_xyz) -> np.ndarray:
+    """World edge lengths of the support box, (x, y, z): ``2^m S_a d_a``."""
+    key_xyz = key[::-1]
+    return np.array([2.0 ** m * wav.support(key_xyz[a]) * d_xyz[a] for a in range(3)])
+
+
+def projected_halfwidths(wavelet, key: str, m: int, spacing_zyx, u, v) -> tuple:
+    """Half-widths ``(W_u/2, W_v/2)`` of the tight projected support box, world units.
+
+    ``W_u = 2^m sum_a |u_a| S_a d_a``: the projection of the support box on u.
+    """
+    wav = wavelet_for(wavelet)
+    extent = support_extent(wav, check_key(key), int(m), spacing_xyz(spacing_zyx))
+    return 0.5 * float(np.abs(np.asarray(u, float)) @ extent), 0.5 * float(np.abs(np.asarray(v, float)) @ extent)
+
+
+def footprint_vanishes(key: str, n) -> bool:
+    """psi along an axis parallel to n integrates to 0 along every line: T == 0."""
+    key_xyz = key[::-1]
+    return any(key_xyz[a] == "d" and abs(n[a]) > 1.0 - 1e-12 for a in range(3))
+
+
+# ----------------------------------------------------------------------------- validation
+def spacing_xyz(spacing_zyx) -> np.ndarray:
+    """Checked voxel spacing ``(dz, dy, dx)`` as an (x, y, z) array."""
+    s = np.asarray(spacing_zyx, float).reshape(-1)
+    if s.shape != (3,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
+        raise InputError(f"spacing must be three positive numbers (dz, dy, dx), got {spacing_zyx!r}")
+    return s[::-1].copy()
+
+
+def check_key(key) -> str:
+    """A checked subband key: 3 letters of 'a' (phi) / 'd' (psi) in (z, y, x) order."""
+    if not isinstance(key, str) or len(key) != 3 or set(key) - {"a", "d"}:
+        raise InputError(f"subband key must be 3 letters of 'a'/'d' in (z, y, x) order, got {key!r}")
+    return key

@@ -1,0 +1,512 @@
+"""Transfer functions: pre-classification of scalar volumes (paper §2.2).
+
+As in Gross et al. (1996), colour and opacity are assigned to the voxels
+*before* the wavelet transform: :meth:`TransferFunction.classify` turns a scalar
+volume into a 4-channel volume ``(q_R, q_G, q_B, alpha)`` that is then
+transformed, thresholded and rendered.  **Changing the transfer function
+therefore means classifying again and computing a new wavelet transform**; it
+is not a render-time setting.
+
+Units (docs/coordinates.md §3): a control point ``(value, r, g, b, opacity)``
+gives the extinction ``alpha = opacity`` per unit world length (per mm for
+medical data) and the emission ``q = (r, g, b) · alpha``, colour per unit
+optical depth, so an opaque region shows its colour.
+
+>>> tf = TransferFunction([(0.0, 0, 0, 1, 0.0), (1.0, 1, 0, 0, 0.1)])
+>>> rgb, alpha = tf([0.5])
+>>> rgb.tolist(), alpha.tolist()
+([[0.5, 0.0, 0.5]], [0.05])
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import InputError
+from ..threads import cores, thread_map
+from .volume import Volume
+
+#: Percentiles of the finite values that ``window="auto"`` maps to 0 and 1.
+AUTO_PERCENTILES = (0.5, 99.5)
+#: ``window="auto"`` looks at a strided subsample of at most this many values.
+AUTO_SAMPLES = 1 << 21
+#: Rec. 601 luma weights used for the opacity of RGB(A) volumes.
+LUMA = (0.299, 0.587, 0.114)
+
+_FORMAT = "clwave-transfer-function"
+_CHUNK = 1 << 16          # voxels per work item (the float64 temporaries stay in cache)
+_THREADED_MIN = 1 << 20   # below this many voxels classify runs in one thread
+
+
+def _hu(points, lo, hi):
+    """Preset rows written in data units -> the normalised axis of window (lo, hi)."""
+    return tuple(((v - lo) / (hi - lo), r, g, b, a) for v, r, g, b, a in points)
+
+
+# Presets: points on the normalised axis [0, 1] plus a default window (lo, hi) in
+# data units mapping 0 -> lo and 1 -> hi ("auto": 0.5/99.5 percentiles).  Opacities
+# are per world unit (mm for CT and MRI, a voxel for the phantoms).
+_PRESETS = {
+    # CT bone, Hounsfield units: transparent below +150 HU, 0.5/mm from 700 HU.
+    "ct-bone": dict(window=(-1000.0, 2000.0), points=_hu([
+        (-1000.0, 0.85, 0.55, 0.40, 0.0),
+        (150.0, 0.85, 0.55, 0.40, 0.0),
+        (300.0, 0.95, 0.82, 0.65, 0.1),
+        (700.0, 1.00, 0.95, 0.85, 0.5),
+        (2000.0, 1.00, 1.00, 1.00, 0.5),
+    ], -1000.0, 2000.0)),
+    # CT soft tissue: fat (-100 HU) yellow and faint, muscle/organs (+40 HU) red,
+    # bone (> +300 HU) white and denser; air and lung transparent below -200 HU.
+    "ct-soft-tissue": dict(window=(-1000.0, 1000.0), points=_hu([
+        (-1000.0, 0.95, 0.80, 0.55, 0.0),
+        (-200.0, 0.95, 0.80, 0.55, 0.0),
+        (-100.0, 0.95, 0.80, 0.55, 0.01),
+        (40.0, 0.85, 0.35, 0.30, 0.03),
+        (300.0, 0.95, 0.90, 0.85, 0.05),
+        (1000.0, 1.00, 1.00, 1.00, 0.3),
+    ], -1000.0, 1000.0)),
+    # MRI (arbitrary units, auto window): background noise transparent, then a
+    # warm grey ramp up to 0.06/mm at the 99.5th percentile.
+    "mri": dict(window="auto", points=(
+        (0.0, 0.60, 0.45, 0.40, 0.0),
+        (0.1, 0.60, 0.45, 0.40, 0.0),
+        (0.3, 0.75, 0.60, 0.55, 0.01),
+        (0.6, 0.95, 0.85, 0.75, 0.03),
+        (1.0, 1.00, 1.00, 1.00, 0.06),
+    )),
+    # Hydrogen phantom (max 1): low density transparent, blue -> yellow -> red,
+    # up to 0.1 per world unit.  A ray through one lobe (n = 128 .. 256, spacing 1)
+    # collects A = ∫alpha ≈ 2 .. 4; the torus (value 0.25) shows light blue.
+    "hydrogen": dict(window=(0.0, 1.0), points=(
+        (0.00, 0.05, 0.10, 0.60, 0.0),
+        (0.05, 0.10, 0.25, 1.00, 0.0),
+        (0.25, 0.20, 0.60, 1.00, 0.02),
+        (0.55, 1.00, 0.90, 0.20, 0.05),
+        (1.00, 1.00, 0.20, 0.05, 0.1),
+    )),
+    # Linear grey ramp, auto window: colour and opacity (0 .. 0.05/unit) rise together.
+    "grey": dict(window="auto", points=(
+        (0.0, 0.0, 0.0, 0.0, 0.0),
+        (1.0, 1.0, 1.0, 1.0, 0.05),
+    )),
+}
+
+
+class TransferFunction:
+    """Piecewise-linear map from scalar value to emission colour and opacity.
+
+    Pre-classification (paper §2.2): apply it with :meth:`classify` *before*
+    ``WaveletVolume.from_volume``; a different transfer function needs a new
+    classification and a new wavelet transform.
+
+    Parameters
+    ----------
+    points : sequence of (value, r, g, b, opacity)
+        At least 2 rows; values finite and strictly increasing; r, g, b in
+        [0, 1]; opacity >= 0, the extinction per unit world length.  Between
+        points everything is interpolated linearly; outside, the end rows hold.
+    window : None, "auto" or (lo, hi)
+        ``None``: point values are data values.  Otherwise point values live on
+        a normalised axis that the window maps to data units, 0 -> lo and
+        1 -> hi; ``"auto"`` takes (lo, hi) from the 0.5 and 99.5 percentiles of
+        the finite values being classified.
+    name : str, optional
+        A label (presets carry their name); kept by :meth:`to_dict`.
+
+    Examples
+    --------
+    >>> tf = TransferFunction.preset("ct-bone")              # window (-1000, 2000) HU
+    >>> tf.window
+    (-1000.0, 2000.0)
+    >>> rgba = tf.classify(Volume(np.full((4, 4, 4), 1000.0)))   # (q_R, q_G, q_B, alpha)
+    >>> float(rgba.data[0, 0, 0, 3])
+    0.5
+    """
+
+    #: Names accepted by :meth:`preset`.
+    PRESETS = tuple(_PRESETS)
+
+    def __init__(self, points, window=None, name=None):
+        self._points = _check_points(points)
+        self._window = check_window(window)
+        if name is not None and not isinstance(name, str):
+            raise InputError(f"transfer function name must be a string or None, got {name!r}")
+        self.name = name
+
+    # ----------------------------------------------------------------- construction
+    @classmethod
+    def preset(cls, name, window=None) -> "TransferFunction":
+        """A named preset; ``window`` None keeps its default, else "auto" or (lo, hi).
+
+        ============== ================== ==========================================
+        name           default window     opacity (per world unit)
+        ============== ================== ==========================================
+        ct-bone        (-1000, 2000) HU   0 to +150 HU, 0.1 at +300, 0.5 from +700
+        ct-soft-tissue (-1000, 1000) HU   0 to -200 HU, 0.01 at -100 (fat), 0.03 at +40
+                                          (muscle), 0.05 at +300, 0.3 at +1000 (bone)
+        mri            auto               0 to 0.1, 0.01 / 0.03 / 0.06 at 0.3 / 0.6 / 1
+        hydrogen       (0, 1)             0 to 0.05, 0.02 / 0.05 / 0.1 at 0.25 / 0.55 / 1
+        grey           auto               linear 0 .. 0.05, colour black .. white
+        ============== ================== ==========================================
+        """
+        key = name.strip().lower().replace("_", "-") if isinstance(name, str) else None
+        if key == "gray":
+            key = "grey"
+        if key not in _PRESETS:
+            raise InputError(f"unknown transfer function preset {name!r}; "
+                             f"choose one of {', '.join(cls.PRESETS)}")
+        spec = _PRESETS[key]
+        return cls(spec["points"], window=spec["window"] if window is None else window, name=key)
+
+    # ----------------------------------------------------------------- properties
+    @property
+    def points(self) -> np.ndarray:
+        """Control points (K, 5) ``(value, r, g, b, opacity)``, read-only float64."""
+        return self._points
+
+    @property
+    def window(self):
+        """None, "auto" or (lo, hi)."""
+        return self._window
+
+    def resolve_window(self, values=None):
+        """The window in data units: None, (lo, hi), or for "auto" the percentiles of ``values``."""
+        if self._window != "auto":
+            return self._window
+        if values is None:
+            raise InputError('window "auto" needs the values to be classified; '
+                             "pass them, or give a window (lo, hi)")
+        return auto_window(values)
+
+    def data_points(self, window=...) -> np.ndarray:
+        """Point values in data units under ``window`` (default: this function's own)."""
+        win = self._window if window is ... else check_window(window)
+        if win == "auto":
+            raise InputError('window "auto" needs data; call resolve_window(values) first')
+        t = self._points[:, 0]
+        return t.copy() if win is None else win[0] + t * (win[1] - win[0])
+
+    # ----------------------------------------------------------------- evaluation
+    def __call__(self, values, window=...):
+        """Colour and opacity of scalar ``values``.
+
+        Parameters
+        ----------
+        values : array_like
+            Scalar data values, any shape.
+        window : optional
+            Overrides this function's window (None, "auto" or (lo, hi)); "auto"
+            is resolved against ``values`` themselves.
+
+        Returns
+        -------
+        rgb : ndarray (..., 3) float64, in [0, 1]
+        alpha : ndarray (...) float64, opacity per unit world length
+        """
+        v = np.asarray(values, dtype=np.float64)
+        pl = _PiecewiseLinear(self._xp(v, window), self._points[:, 1:5])
+        k, d = pl.segment(v.reshape(-1))
+        rgb = np.stack([pl.channel(k, d, c) for c in range(3)], axis=-1)
+        alpha = pl.channel(k, d, 3)
+        return rgb.reshape(v.shape + (3,)), alpha.reshape(v.shape)
+
+    def classify(self, vol: Volume, window=...) -> Volume:
+        """Pre-classify a volume into emission and opacity ``(q_R, q_G, q_B, alpha)``.
+
+        Scalar volume: ``alpha = opacity(v)``, ``q = rgb(v) · alpha``.  RGB or
+        RGBA volume (photographic stacks): the colour is the voxel's own RGB
+        scaled to [0, 1] (divided by 255 when the data exceed 1, by 65535 when
+        they exceed 255); the opacity is this function's opacity of the
+        luminance ``0.299 R + 0.587 G + 0.114 B`` on that [0, 1] scale, times
+        A for RGBA.  A 4-channel volume is always read as RGBA: an already
+        classified volume cannot be told apart, so do not classify twice.
+
+        Changing the transfer function means a new classification and a new
+        wavelet transform (pre-classification, paper §2.2).
+
+        Parameters
+        ----------
+        vol : Volume
+            1, 3 or 4 channels.
+        window : optional
+            Overrides this function's window: None (point values are data
+            values), "auto" (percentiles of this volume, of its luminance for
+            RGB) or (lo, hi).
+
+        Returns
+        -------
+        Volume
+            4 channels, float32, same spacing and origin.
+        """
+        if not isinstance(vol, Volume):
+            raise InputError(f"classify needs a clwave.Volume, got {type(vol).__name__}; "
+                             "wrap arrays with clwave.Volume(array, spacing=...)")
+        c = _channels(vol)
+        n = int(np.prod(vol.shape))
+        out = np.empty((n, 4), dtype=np.float32)
+        if c == 1:
+            flat = vol.data.reshape(-1)
+            pl = _PiecewiseLinear(self._xp(vol.data, window), self._points[:, 1:5])
+
+            def work(s, e):
+                k, d = pl.segment(flat[s:e].astype(np.float64))
+                o = out[s:e]
+                a = pl.channel(k, d, 3)
+                o[:, 3] = a
+                done = {}
+                for ch in range(3):          # q = rgb * alpha; equal colour columns share work
+                    key = pl.key(ch)
+                    if key not in done:
+                        done[key] = pl.channel(k, d, ch)
+                    o[:, ch] = done[key] * a
+        else:
+            data = vol.data.reshape(-1, c)
+            scale = _rgb_scale(vol.data)
+            pl = _PiecewiseLinear(self.data_points(self._window_for(vol, window, scale)),
+                                  self._points[:, 4:5])
+
+            def work(s, e):
+                rgb = data[s:e, :3].astype(np.float64)
+                rgb /= scale
+                a = pl.channel(*pl.segment(_luminance(rgb)), 0)
+                if c == 4:
+                    a *= data[s:e, 3].astype(np.float64) / scale
+                o = out[s:e]
+                o[:, 3] = a
+                rgb *= a[:, None]
+                o[:, :3] = rgb
+        _run_chunks(n, work)
+        return Volume(out.reshape(vol.shape + (4,)), spacing=vol.spacing, origin=vol.origin)
+
+    def resolved(self, vol: Volume, window=...) -> "TransferFunction":
+        """This function with the window :meth:`classify` would use on ``vol`` made concrete.
+
+        Use it to record exactly how a volume was classified (e.g. in a saved
+        file): an "auto" window becomes the (lo, hi) found in ``vol``.
+        """
+        if not isinstance(vol, Volume):
+            raise InputError(f"resolved needs a clwave.Volume, got {type(vol).__name__}")
+        win = self._window_for(vol, window, 1.0 if _channels(vol) == 1 else _rgb_scale(vol.data))
+        return TransferFunction(self._points, window=win, name=self.name)
+
+    def _window_for(self, vol, window, scale):
+        win = self._window if window is ... else check_window(window)
+        if win != "auto":
+            return win
+        if vol.channels == 1:
+            return auto_window(vol.data)
+        data = vol.data.reshape(-1, vol.channels)
+        step = max(1, math.ceil(len(data) / AUTO_SAMPLES))
+        return auto_window(_luminance(data[::step, :3].astype(np.float64) / scale))
+
+    def _xp(self, values, window):
+        win = self._window if window is ... else check_window(window)
+        if win == "auto":
+            win = auto_window(values)
+        return self.data_points(win)
+
+    # ----------------------------------------------------------------- serialisation
+    def to_dict(self) -> dict:
+        """JSON-safe description; ``from_dict(to_dict())`` rebuilds it exactly."""
+        win = self._window
+        return {
+            "format": _FORMAT,
+            "version": 1,
+            "name": self.name,
+            "window": list(win) if isinstance(win, tuple) else win,
+            "points": [[float(x) for x in row] for row in self._points],
+        }
+
+    @classmethod
+    def from_dict(cls, d) -> "TransferFunction":
+        """Inverse of :meth:`to_dict` (also accepts a dict with just ``points``)."""
+        if not isinstance(d, dict) or "points" not in d:
+            raise InputError("transfer function description must be a dict with 'points' "
+                             "(rows value, r, g, b, opacity), as written by to_dict()")
+        if d.get("format", _FORMAT) != _FORMAT or d.get("version", 1) != 1:
+            raise InputError(f"unsupported transfer function format {d.get('format')!r} "
+                             f"version {d.get('version')!r}; expected {_FORMAT!r} version 1")
+        return cls(d["points"], window=d.get("window"), name=d.get("name"))
+
+    def __eq__(self, other):
+        if not isinstance(other, TransferFunction):
+            return NotImplemented
+        return (self.name == other.name and self._window == other._window
+                and np.array_equal(self._points, other._points))
+
+    __hash__ = None
+
+    def __repr__(self):
+        label = f"{self.name!r}, " if self.name else ""
+        return (f"TransferFunction({label}{len(self._points)} points, "
+                f"window={self._window!r})")
+
+
+# --------------------------------------------------------------------------- helpers
+class _PiecewiseLinear:
+    """Vectorised np.interp for several channels sharing the same x points.
+
+    np.interp searches per element with branches (slow on noisy data, and once
+    per channel); here the segment k of every value is found once, branch-free
+    (a sum of comparisons for few points, searchsorted for many), and each
+    channel is ``f = fp[k] + slope[k] * (x - xp[k])`` with the distance clamped
+    at 0 below the first point and a zero slope past the last, so control points
+    and values outside the range give the end rows exactly.
+    """
+
+    _COMPARE_MAX = 8       # up to this many points, k = sum(x >= xp[j]) beats searchsorted
+
+    def __init__(self, xp, fp):
+        xp = np.asarray(xp, dtype=np.float64)
+        fp = np.asarray(fp, dtype=np.float64)
+        slope = np.zeros_like(fp)
+        dx = np.diff(xp)[:, None]
+        # a window can round two close points onto one value: that segment has no width
+        np.divide(np.diff(fp, axis=0), dx, out=slope[:-1], where=dx > 0)
+        self.xp = xp
+        self.f0 = [np.ascontiguousarray(fp[:, c]) for c in range(fp.shape[1])]
+        self.slope = [np.ascontiguousarray(slope[:, c]) for c in range(fp.shape[1])]
+
+    def segment(self, x):
+        """Segment index k (last point <= x, 0 below the first) and distance x - xp[k] >= 0."""
+        xp = self.xp
+        if len(xp) <= self._COMPARE_MAX:
+            k = np.zeros(x.shape, dtype=np.intp)
+            above = np.empty(x.shape, dtype=bool)
+            for j in range(1, len(xp)):
+                np.greater_equal(x, xp[j], out=above)
+                k += above
+        else:
+            k = np.searchsorted(xp, x, side="right")
+            k -= 1
+            np.maximum(k, 0, out=k)
+        d = x - xp.take(k)
+        np.maximum(d, 0.0, out=d)
+        return k, d
+
+    def channel(self, k, d, c):
+        f = self.slope[c].take(k)
+        f *= d
+        f += self.f0[c].take(k)
+        return f
+
+    def key(self, c):
+        return self.f0[c].tobytes()
+
+
+def auto_window(values) -> tuple:
+    """(lo, hi) = 0.5 and 99.5 percentiles of the finite values (strided subsample).
+
+    Falls back to (min, max) when those percentiles coincide, and to
+    (v - 0.5, v + 0.5) for a constant input.
+    """
+    v = np.asarray(values).reshape(-1)
+    if v.size > AUTO_SAMPLES:
+        v = v[::math.ceil(v.size / AUTO_SAMPLES)]
+    v = v[np.isfinite(v)].astype(np.float64)
+    if v.size == 0:
+        raise InputError('window "auto" found no finite values; give a window (lo, hi)')
+    lo, hi = (float(p) for p in np.percentile(v, AUTO_PERCENTILES))
+    if not hi > lo:
+        lo, hi = float(v.min()), float(v.max())
+    if not hi > lo:
+        lo, hi = lo - 0.5, lo + 0.5
+    return (lo, hi)
+
+
+def _channels(vol) -> int:
+    c = vol.channels
+    if c not in (1, 3, 4):
+        raise InputError(f"cannot classify a {c}-channel volume; give a scalar (1), "
+                         "RGB (3) or RGBA (4) volume")
+    return c
+
+
+def _luminance(rgb):
+    return rgb[:, 0] * LUMA[0] + rgb[:, 1] * LUMA[1] + rgb[:, 2] * LUMA[2]
+
+
+def _rgb_scale(data) -> float:
+    lo, hi = float(data.min()), float(data.max())
+    if lo < 0:
+        raise InputError(f"RGB(A) volume has negative values (min {lo:g}); colour channels "
+                         "must lie in [0, 1], [0, 255] or [0, 65535]")
+    if hi <= 1.0:
+        return 1.0
+    if hi <= 255.0:
+        return 255.0
+    if hi <= 65535.0:
+        return 65535.0
+    raise InputError(f"RGB(A) volume values reach {hi:g}; colour channels must lie in "
+                     "[0, 1], [0, 255] or [0, 65535]")
+
+
+def _run_chunks(n, work):
+    """work(start, stop) over chunks of _CHUNK voxels, in threads (numpy drops the GIL)."""
+    starts = range(0, n, _CHUNK)
+    if n < _THREADED_MIN:
+        for s in starts:
+            work(s, min(s + _CHUNK, n))
+        return
+    # contiguous runs of chunks per task keep the writes of one thread together
+    per = math.ceil(len(starts) / (4 * cores()))
+
+    def task(i):
+        for s in starts[i:i + per]:
+            work(s, min(s + _CHUNK, n))
+
+    thread_map(task, range(0, len(starts), per))
+
+
+def _check_points(points) -> np.ndarray:
+    try:
+        p = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError("transfer function points must be rows of 5 numbers "
+                         "(value, r, g, b, opacity)") from None
+    if p.ndim != 2 or p.shape[1] != 5:
+        raise InputError(f"transfer function points must be rows (value, r, g, b, opacity), "
+                         f"got an array of shape {p.shape}")
+    if p.shape[0] < 2:
+        raise InputError(f"transfer function needs at least 2 points, got {p.shape[0]}")
+    if not np.all(np.isfinite(p)):
+        row = int(np.nonzero(~np.all(np.isfinite(p), axis=1))[0][0])
+        raise InputError(f"transfer function point {row} {p[row].tolist()} is not finite "
+                         "(NaN or Inf); give finite numbers")
+    bad = np.nonzero(np.diff(p[:, 0]) <= 0)[0]
+    if bad.size:
+        i = int(bad[0])
+        raise InputError(f"transfer function values must be strictly increasing: point {i + 1} "
+                         f"({p[i + 1, 0]:g}) does not exceed point {i} ({p[i, 0]:g})")
+    col = p[:, 1:4]
+    if np.any((col < 0) | (col > 1)):
+        row = int(np.nonzero(np.any((col < 0) | (col > 1), axis=1))[0][0])
+        raise InputError(f"transfer function colour {col[row].tolist()} of point {row} is "
+                         "outside [0, 1]; give r, g, b in [0, 1]")
+    if np.any(p[:, 4] < 0):
+        row = int(np.nonzero(p[:, 4] < 0)[0][0])
+        raise InputError(f"transfer function opacity {p[row, 4]:g} of point {row} is negative; "
+                         "opacity is an extinction per unit length, >= 0")
+    p.flags.writeable = False
+    return p
+
+
+def check_window(window):
+    """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError."""
+    if window is None:
+        return None
+    if isinstance(window, str):
+        if window.strip().lower() == "auto":
+            return "auto"
+        raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}")
+    try:
+        lo, hi = (float(w) for w in window)
+    except (TypeError, ValueError):
+        raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise InputError(f"window ({lo:g}, {hi:g}) must be finite")
+    if not lo < hi:
+        raise InputError(f"window (lo, hi) needs lo < hi, got ({lo:g}, {hi:g})")
+    return (lo, hi)

@@ -1,0 +1,119 @@
+"""Volume: a (z, y, x[, c]) float32 array with physical voxel spacing.
+
+Conventions (docs/coordinates.md): host arrays are ``(z, y, x)`` or ``(z, y, x, c)``;
+``spacing = (dz, dy, dx)`` in world units; ``origin = (x, y, z)`` is the world
+position of the volume's centre.  Voxel ``(i, j, k)`` sits at world
+``origin + ((k - (nx-1)/2) dx, (j - (ny-1)/2) dy, (i - (nz-1)/2) dz)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+
+MAX_CHANNELS = 4
+
+
+class Volume:
+    """A scalar or multi-channel volume on a regular grid.
+
+    Parameters
+    ----------
+    data : array_like, shape (nz, ny, nx) or (nz, ny, nx, c)
+        Voxel values; converted to float32 once, here.  ``c`` is 1 to 4
+        (scalar, RGB, RGBA or classified ``(q_R, q_G, q_B, alpha)``).
+    spacing : float or 3 floats
+        Voxel size ``(dz, dy, dx)`` in world units (default 1.0).
+    origin : 3 floats
+        World position ``(x, y, z)`` of the volume centre (default 0).
+
+    Examples
+    --------
+    >>> v = Volume(np.ones((4, 5, 6)), spacing=(2.0, 1.0, 1.0))
+    >>> v.shape, v.channels, v.spacing
+    ((4, 5, 6), 1, (2.0, 1.0, 1.0))
+    """
+
+    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0)):
+        arr = np.asarray(data)
+        if arr.dtype.kind not in "biuf":
+            raise InputError(
+                f"volume dtype {arr.dtype} is not numeric; give integers or floats "
+                "(complex, object and string data cannot be rendered)")
+        if arr.ndim not in (3, 4):
+            raise InputError(
+                f"volume must be 3-D (z, y, x) or 4-D (z, y, x, c), got shape {arr.shape}")
+        if arr.ndim == 4 and not 1 <= arr.shape[3] <= MAX_CHANNELS:
+            raise InputError(
+                f"volume has {arr.shape[3]} channels in its last axis; 1 to {MAX_CHANNELS} "
+                "are supported (scalar, RGB, RGBA); axis order is (z, y, x, c)")
+        shape = arr.shape[:3]
+        if min(shape) < 2:
+            raise InputError(
+                f"volume shape {shape} (z, y, x) has an axis shorter than 2 voxels; "
+                "every axis needs at least 2 voxels")
+        arr = np.ascontiguousarray(arr, dtype=np.float32)
+        if arr.ndim == 4 and arr.shape[3] == 1:
+            arr = arr[..., 0]
+        finite = np.isfinite(arr)
+        if not finite.all():
+            bad = int(arr.size - np.count_nonzero(finite))
+            raise InputError(
+                f"volume has {bad} non-finite voxel value(s) (NaN/Inf); replace them first, "
+                "e.g. numpy.nan_to_num(data)")
+        self.data = arr
+        self.spacing = _triple(spacing, "spacing")
+        if min(self.spacing) <= 0:
+            raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
+        origin = tuple(float(o) for o in np.broadcast_to(np.asarray(origin, float), (3,)))
+        if not np.all(np.isfinite(origin)):
+            raise InputError(f"origin {origin} must be finite (x, y, z)")
+        self.origin = origin
+
+    @property
+    def shape(self) -> tuple:
+        """Grid shape ``(nz, ny, nx)`` without the channel axis."""
+        return tuple(int(s) for s in self.data.shape[:3])
+
+    @property
+    def channels(self) -> int:
+        return 1 if self.data.ndim == 3 else int(self.data.shape[3])
+
+    @property
+    def extent(self) -> tuple:
+        """World size of the voxel box ``(nx dx, ny dy, nz dz)``, x first."""
+        (nz, ny, nx), (dz, dy, dx) = self.shape, self.spacing
+        return (nx * dx, ny * dy, nz * dz)
+
+    def channel(self, c: int) -> np.ndarray:
+        """Channel ``c`` as a (nz, ny, nx) array (channel 0 of a scalar volume is its data)."""
+        return self.data if self.data.ndim == 3 else self.data[..., c]
+
+    def voxel_to_world(self, index_zyx) -> np.ndarray:
+        """World points (N, 3) as (x, y, z) of fractional voxel indices (N, 3) as (i, j, k)."""
+        idx = np.asarray(index_zyx, float)[..., ::-1]
+        n = np.array(self.shape[::-1], float)
+        d = np.array(self.spacing[::-1], float)
+        return np.asarray(self.origin) + (idx - (n - 1) / 2) * d
+
+    def world_to_voxel(self, points_xyz) -> np.ndarray:
+        """Fractional voxel indices (N, 3) as (i, j, k) of world points (N, 3) as (x, y, z)."""
+        p = np.asarray(points_xyz, float)
+        n = np.array(self.shape[::-1], float)
+        d = np.array(self.spacing[::-1], float)
+        return ((p - np.asarray(self.origin)) / d + (n - 1) / 2)[..., ::-1]
+
+    def __repr__(self):
+        return (f"Volume(shape={self.shape}, channels={self.channels}, "
+                f"spacing={self.spacing}, origin={self.origin})")
+
+
+def _triple(value, name) -> tuple:
+    try:
+        arr = np.broadcast_to(np.asarray(value, dtype=float), (3,))
+    except (ValueError, TypeError):
+        raise InputError(f"{name} must be one number or three (dz, dy, dx), got {value!r}") from None
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} {tuple(arr)} must be finite")
+    return tuple(float(a) for a in arr)

@@ -1,0 +1,408 @@
+"""WaveletVolume: the sparse B-spline wavelet model both renderers stand on.
+
+A volume's channels are decomposed with the CDF(j, j) spline wavelets
+(:mod:`clwave.model.bspline`) by ``pywt.wavedecn(mode="zero")``, whose coefficients
+are exactly the real-line transform of the zero-extended data (docs/model.md §3).
+The continuous model of one channel of order j (docs/model.md §4, paper eq. 12-13) is
+
+    f(x) = sum_bands sum_k c_k 2^{-3m/2} P_key(2^{-m}(x - o_m) - k)
+
+in fine-voxel coordinates ``x_a = (p_a - origin_a)/d_a + (n_a - 1)/2 + j/2``
+(docs/coordinates.md), zero outside its support.  It is evaluated directly from the
+closed-form bases, without any inverse transform.
+
+Channels that share a wavelet form one *group* with one index set
+(docs/model.md §2: thresholding keeps coefficient positions shared by all
+channels).  A group stores its coefficients sparsely as global *positions*
+into the concatenation of its bands (coarsest approximation first, then the
+details from coarse to fine) and a ``(K, channels)`` float32 value table, kept
+in ascending position order; importance order is derived on demand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .bspline import SplineWavelet, max_levels, wavelet_for
+from . import geometry
+from .geometry import fine_to_world, world_to_fine
+from .transform import (apply_sampling_filter, band_sum, crop_to_grid, decompose, reconstruct_channel,
+                        synthesize)
+from .volume import Volume
+
+
+
+
+@dataclass
+class CoefficientTable:
+    """Coefficients of one group in importance order, ready for upload.
+
+    ``index`` is the pywt index in array order ``(k_z, k_y, k_x)``; ``key_code`` is the
+    band's :attr:`Band.code`.
+    """
+
+    level: np.ndarray       # (K,) int8
+    key_code: np.ndarray    # (K,) uint8
+    index: np.ndarray       # (K, 3) int32
+    values: np.ndarray      # (K, C) float32
+    importance: np.ndarray  # (K,) float32
+
+
+class ChannelGroup:
+    """Channels sharing one wavelet, bands and index set."""
+
+    def __init__(self, wavelet: SplineWavelet, channels, bands, positions, values):
+        self.wavelet = wavelet
+        self.channels = tuple(channels)
+        self.bands = list(bands)
+        self.positions = positions  # (K,) int64 ascending, or None for every position
+        self.values = values        # (C, K) float32, channel-major for fast per-channel work
+
+    @property
+    def total(self) -> int:
+        return self.bands[-1].start + self.bands[-1].size
+
+    @property
+    def kept(self) -> int:
+        return self.total if self.positions is None else len(self.positions)
+
+    def band_slices(self) -> list:
+        """Per band, the slice of the kept (ascending) positions that fall in it."""
+        if self.positions is None:
+            return [slice(b.start, b.start + b.size) for b in self.bands]
+        edges = np.searchsorted(self.positions, [b.start for b in self.bands] + [self.total])
+        return [slice(int(lo), int(hi)) for lo, hi in zip(edges[:-1], edges[1:])]
+
+    def all_positions(self) -> np.ndarray:
+        return np.arange(self.total, dtype=np.int64) if self.positions is None else self.positions
+
+    def locate(self, positions):
+        """Band number and (k_z, k_y, k_x) index of global positions."""
+        starts = np.array([b.start for b in self.bands], dtype=np.int64)
+        band_no = np.searchsorted(starts, positions, side="right") - 1
+        index = np.empty((len(positions), 3), dtype=np.int64)
+        for b_no, band in enumerate(self.bands):
+            sel = band_no == b_no
+            if sel.any():
+                index[sel] = np.column_stack(np.unravel_index(positions[sel] - band.start, band.shape))
+        return band_no, index
+
+    def dense_bands(self) -> list:
+        """Each band as a dense (nz, ny, nx, C) float64 array (zeros where not kept)."""
+        flat = np.zeros((self.total, len(self.channels)), dtype=np.float64)
+        flat[self.all_positions()] = self.values.T
+        return [flat[b.start:b.start + b.size].reshape(*b.shape, -1) for b in self.bands]
+
+
+class WaveletVolume:
+    """Sparse B-spline wavelet coefficients of a volume and its continuous model.
+
+    Build with :meth:`from_volume`, reduce with :meth:`threshold`, store with
+    :meth:`save` / :meth:`open`.
+
+    Examples
+    --------
+    >>> import clwave
+    >>> vol = clwave.phantom("hydrogen", n=32)
+    >>> wv = WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.05)
+    >>> wv.kept, round(wv.compression, 3)
+    (1638, 0.95)
+    """
+
+    def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
+                 focus=None, transfer_function=None):
+        self.shape = tuple(int(s) for s in shape)
+        self.spacing = tuple(float(s) for s in spacing)
+        self.origin = tuple(float(o) for o in origin)
+        self.levels = int(levels)
+        self.groups = list(groups)
+        self.channels = int(channels)
+        self.interpolate = bool(interpolate)
+        self.focus = focus  # ((x, y, z), sigma) used by threshold, or None
+        self.transfer_function = transfer_function  # JSON-safe dict, or None
+
+    # ------------------------------------------------------------------ build
+    @classmethod
+    def from_volume(cls, volume: Volume, wavelet="cubic", levels=3, *, interpolate=False,
+                    transfer_function=None, progress_bar=None) -> "WaveletVolume":
+        """Decompose every channel of ``volume`` (paper Fig. 1).
+
+        Parameters
+        ----------
+        wavelet : str or sequence of str
+            'haar', 'linear', 'quadratic' or 'cubic'; one per channel to mix orders
+            (e.g. cubic RGB with Haar opacity, paper Fig. 14).
+        levels : int
+            0 (the voxels' own B-splines) up to ``floor(log2(min axis)) - 1``.
+        interpolate : bool
+            False (default): the samples are the B-spline coefficients (paper eq. 8,
+            approximating, mass preserving).  True: prefilter so the model passes
+            through the samples (docs/model.md §1).
+        transfer_function : TransferFunction or dict, optional
+            Stored with the volume (and in ``.clw`` files) to record how it was classified.
+        """
+        if not isinstance(volume, Volume):
+            volume = Volume(volume)
+        wavelets = _channel_wavelets(wavelet, volume.channels)
+        levels = _check_levels(levels, volume.shape)
+        tf = transfer_function.to_dict() if hasattr(transfer_function, "to_dict") else transfer_function
+        groups = []
+        for wav in dict.fromkeys(wavelets):
+            chans = [c for c, w in enumerate(wavelets) if w == wav]
+            bands, values = decompose(volume, wav, chans, levels, interpolate, progress_bar)
+            groups.append(ChannelGroup(wav, chans, bands, None, values))
+        return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
+                   interpolate=interpolate, transfer_function=tf)
+
+    # ------------------------------------------------------------- properties
+    @property
+    def wavelets(self) -> tuple:
+        """Wavelet name of each channel."""
+        names = [None] * self.channels
+        for g in self.groups:
+            for c in g.channels:
+                names[c] = g.wavelet.name
+        return tuple(names)
+
+    @property
+    def n_voxels(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def kept(self) -> int:
+        """Coefficient positions kept (per group; the largest group count)."""
+        return max(g.kept for g in self.groups)
+
+    @property
+    def compression(self) -> float:
+        """Fraction discarded, ``1 - kept / number_of_voxels`` (as the paper reports it).
+
+        An unthresholded transform has a few more positions than voxels (the zero
+        extension, docs/model.md §3), so its compression is slightly negative.
+        """
+        return 1.0 - float(np.mean([g.kept for g in self.groups])) / self.n_voxels
+
+    def __repr__(self):
+        return (f"WaveletVolume(shape={self.shape}, wavelets={self.wavelets}, levels={self.levels}, "
+                f"kept={self.kept}, compression={self.compression:.4f})")
+
+    # ----------------------------------------------------------- importance
+    def importance(self, group: ChannelGroup) -> np.ndarray:
+        """|c| * ||basis|| (max over the group's channels), times the focus weight.
+
+        One value per kept position of the group, in its (ascending) position order.
+        """
+        imp = np.abs(group.values).max(axis=0)
+        for band, sl in zip(group.bands, group.band_slices()):
+            imp[sl] *= np.prod([group.wavelet.norm(letter) for letter in band.key])
+        if self.focus is not None:
+            centre, sigma = self.focus
+            world = self.support_centres(group, *group.locate(group.all_positions()))
+            imp *= np.exp(-np.sum((world - np.asarray(centre)) ** 2, axis=1) / (2.0 * sigma ** 2))
+        return imp
+
+    def support_centres(self, group, band_no, index) -> np.ndarray:
+        """World (x, y, z) centres of the basis supports (docs/model.md §4: X = o + 2^m (k + c0))."""
+        wav = group.wavelet
+        fine = np.empty(index.shape, dtype=np.float64)
+        for b_no, band in enumerate(group.bands):
+            sel = band_no == b_no
+            if sel.any():
+                fine[sel] = geometry.support_centres(wav, band.key, band.level, index[sel])
+        return fine_to_world(fine, wav.order, self.shape, self.spacing, self.origin)
+
+    # ------------------------------------------------------------- threshold
+    def threshold(self, keep=None, threshold=None, focus=None) -> "WaveletVolume":
+        """Keep the most important coefficient positions (docs/model.md §2).
+
+        Parameters
+        ----------
+        keep : float in (0, 1]
+            Keep ``round(keep * number_of_voxels)`` positions: the coarsest
+            approximation band first (its largest coefficients if the budget is
+            smaller), then details by ``|c| * ||basis||`` (max over channels).
+        threshold : float >= 0
+            Keep the approximation band and every detail whose importance exceeds it.
+        focus : ((x, y, z), sigma), optional
+            Local level of detail (paper Fig. 12/13): importance is weighted by
+            ``exp(-d^2 / 2 sigma^2)``, d the world distance from the focus to the
+            centre of the basis support, so detail survives near the focus.
+        """
+        if (keep is None) == (threshold is None):
+            raise InputError("give exactly one of keep= (fraction of voxels) or threshold= (importance)")
+        if keep is not None and not (np.isfinite(keep) and 0 < keep <= 1):
+            raise InputError(f"keep={keep} must be a fraction in (0, 1]")
+        if threshold is not None and not (np.isfinite(threshold) and threshold >= 0):
+            raise InputError(f"threshold={threshold} must be a finite number >= 0")
+        out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
+                            interpolate=self.interpolate, focus=_check_focus(focus),
+                            transfer_function=self.transfer_function)
+        budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
+        for g in self.groups:
+            positions = g.all_positions()
+            imp = out.importance(g)
+            n_approx = g.band_slices()[0].stop  # the approximation band ranks first
+            if budget is None:
+                chosen = np.concatenate([np.arange(n_approx), n_approx + np.flatnonzero(imp[n_approx:] > threshold)])
+            elif budget <= n_approx:
+                chosen = _top(imp[:n_approx], budget)
+            else:
+                rest = min(budget - n_approx, len(positions) - n_approx)
+                chosen = np.concatenate([np.arange(n_approx), n_approx + _top(imp[n_approx:], rest)])
+            chosen.sort()
+            out.groups.append(ChannelGroup(g.wavelet, g.channels, g.bands, positions[chosen],
+                                           np.ascontiguousarray(g.values[:, chosen])))
+        return out
+
+    # ------------------------------------------------------- upload views
+    def ranked(self, group: int = 0) -> CoefficientTable:
+        """The group's coefficients sorted by importance (approximation band first)."""
+        return self._ranked[group]
+
+    @cached_property
+    def _ranked(self) -> list:
+        tables = []
+        for g in self.groups:
+            positions = g.all_positions()
+            imp = self.importance(g)
+            approx = positions < g.bands[0].size
+            order = np.lexsort((positions, -imp, ~approx))  # approx first, then importance, ties by position
+            band_no, index = g.locate(positions[order])
+            levels = np.array([b.level for b in g.bands], dtype=np.int8)
+            codes = np.array([b.code for b in g.bands], dtype=np.uint8)
+            tables.append(CoefficientTable(levels[band_no], codes[band_no], index.astype(np.int32),
+                                           np.ascontiguousarray(g.values[:, order].T),
+                                           imp[order].astype(np.float32)))
+        return tables
+
+    def bands(self, group: int = 0):
+        """Per level and subband: ``(Band, index (K, 3) int32, values (K, C))``, by importance."""
+        table, g = self.ranked(group), self.groups[group]
+        out = []
+        for band in g.bands:
+            sel = (table.level == band.level) & (table.key_code == band.code)
+            out.append((band, table.index[sel], table.values[sel]))
+        return out
+
+    # -------------------------------------------------------- evaluation
+    def evaluate(self, points) -> np.ndarray:
+        """The continuous model at world points (N, 3) as (x, y, z); returns (N, C)."""
+        return self._evaluate(points, derivative=False)
+
+    def gradient(self, points) -> np.ndarray:
+        """Analytic gradient (paper eq. 14-16, docs/model.md §4) at world points: (N, C, 3) as d/dx, d/dy, d/dz."""
+        return self._evaluate(points, derivative=True)
+
+    def _evaluate(self, points, derivative):
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise InputError(f"points must have shape (N, 3) as (x, y, z), got {np.shape(points)}")
+        n_pts = len(pts)
+        out = np.zeros((n_pts, self.channels, 3) if derivative else (n_pts, self.channels))
+        for g, bands in zip(self.groups, self._dense):
+            fine = world_to_fine(pts, g.wavelet.order, self.shape, self.spacing, self.origin)  # (z, y, x)
+            acc = np.zeros(out.shape[:1] + (len(g.channels),) + out.shape[2:])
+            for band, coeffs in zip(g.bands, bands):
+                acc += band_sum(g.wavelet, band, coeffs, fine, derivative)
+            if derivative:
+                acc = acc[..., ::-1] / np.asarray(self.spacing)[::-1]  # fine (z,y,x) -> world (x,y,z)
+            out[:, list(g.channels)] = acc
+        return out
+
+    @cached_property
+    def _dense(self) -> list:
+        return [g.dense_bands() for g in self.groups]
+
+    # ------------------------------------------------------ reconstruction
+    def fine_coefficients(self, group: int = 0):
+        """Real-line synthesis down to level 0: the fine-level B-spline coefficients.
+
+        Returns ``(coeffs, start)``: ``coeffs`` (Z, Y, X, C) float64 with
+        ``coeffs[i, j, k]`` the coefficient of ``N_j(x - (start + (i, j, k)))``.
+        ``start`` can be negative: after thresholding the model reaches beyond
+        the voxel grid, and nothing is cropped here.
+        """
+        g = self.groups[group]
+        return synthesize(g.wavelet, g.bands, self._dense[group])
+
+    def reconstruct(self) -> Volume:
+        """The voxel data the model represents, as a float32 :class:`Volume`.
+
+        For the approximating model these are the fine B-spline coefficients on the
+        voxel grid (``pywt.waverecn``, which equals the real-line synthesis there);
+        with ``interpolate=True`` the model's values at the voxel centres.
+        """
+        data = np.zeros(self.shape + (self.channels,), dtype=np.float32)
+        for gi, g in enumerate(self.groups):
+            if self.interpolate:  # needs the coefficients just beyond the grid too
+                coeffs, start = apply_sampling_filter(*self.fine_coefficients(gi), g.wavelet)
+                data[..., list(g.channels)] = crop_to_grid(coeffs, start, self.shape)
+                continue
+            for slot, channel in enumerate(g.channels):
+                data[..., channel] = reconstruct_channel(g, self._dense[gi], slot, self.shape, self.levels)
+        return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin)
+
+    # ------------------------------------------------------------- files
+    def save(self, path, overwrite=False) -> Path:
+        """Write a ``.clw`` file (docs/model.md §6, :mod:`clwave.io.clw`); refuses to replace an
+        existing file unless ``overwrite``; writes atomically."""
+        from ..io.clw import write_clw  # io builds on the model, not the other way round
+
+        return write_clw(self, path, overwrite)
+
+    @classmethod
+    def open(cls, path) -> "WaveletVolume":
+        """Read a ``.clw`` file written by :meth:`save`."""
+        from ..io.clw import read_clw
+
+        return read_clw(path)
+
+
+# ---------------------------------------------------------------- helpers
+
+
+def _channel_wavelets(wavelet, channels) -> list:
+    if isinstance(wavelet, (list, tuple)):
+        if len(wavelet) != channels:
+            raise InputError(f"{len(wavelet)} wavelets given for {channels} channel(s); give one, "
+                             "or one per channel")
+        return [wavelet_for(w) for w in wavelet]
+    return [wavelet_for(wavelet)] * channels
+
+
+def _check_levels(levels, shape) -> int:
+    top = max_levels(shape)
+    if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or not 0 <= levels <= top:
+        raise InputError(f"levels={levels!r} is not possible for shape {shape}: use an integer "
+                         f"from 0 to {top} (floor(log2(shortest axis)) - 1)")
+    return int(levels)
+
+
+def _check_focus(focus):
+    if focus is None:
+        return None
+    try:
+        centre, sigma = focus
+        centre = tuple(float(c) for c in centre)
+        sigma = float(sigma)
+    except (TypeError, ValueError):
+        raise InputError("focus must be ((x, y, z), sigma) in world units") from None
+    if len(centre) != 3 or not np.all(np.isfinite(centre)) or not (np.isfinite(sigma) and sigma > 0):
+        raise InputError(f"focus {focus!r} needs a finite (x, y, z) centre and sigma > 0")
+    return centre, sigma
+
+
+def _top(importance, count) -> np.ndarray:
+    """Indices of the ``count`` largest values (exact count)."""
+    if count >= len(importance):
+        return np.arange(len(importance))
+    if count <= 0:
+        return np.zeros(0, dtype=np.int64)
+    return np.argpartition(-importance, count - 1)[:count]
+
+

@@ -1,0 +1,87 @@
+"""Bounds on |field| per block of fine cells, for empty-space skipping and early termination
+(docs/raytracing.md §4): which blocks the kept supports reach, sums of coefficient bounds over
+them, and their maxima per superblock."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..device.constants import BLOCK, SUPER
+from ..model.geometry import band_lattice
+from ..model.wavelet import WaveletVolume
+
+
+def superblocks(bound: np.ndarray, origin) -> tuple[np.ndarray, np.ndarray]:
+    """The largest block bound per superblock of SUPER^3 blocks, and the superblocks' origin.
+
+    ``bound`` (Z, Y, X) per block from block ``origin`` (z, y, x); superblock k holds blocks
+    SUPER (origin_s + k) .. SUPER (origin_s + k + 1) - 1, so it is SUPER^3 BLOCK^3 aligned cells.
+    """
+    origin = np.asarray(origin, np.int64)
+    s_origin = np.floor_divide(origin, SUPER)
+    lead = origin - s_origin * SUPER
+    count = -(-(np.array(bound.shape) + lead) // SUPER)
+    padded = np.zeros(count * SUPER, np.float32)
+    padded[tuple(slice(a, a + n) for a, n in zip(lead, bound.shape))] = bound
+    return padded.reshape(count[0], SUPER, count[1], SUPER, count[2], SUPER).max(axis=(1, 3, 5)), s_origin
+
+
+def occupancy(wv: WaveletVolume, dense=None):
+    """Blocks of BLOCK^3 fine cells (grid-0 coordinates) touched by a kept non-zero coefficient.
+
+    ``dense``: each group's :meth:`ChannelGroup.dense_bands`, when the caller has them already.
+    Returns ``(occ, origin, box)`` as :func:`block_sums`, with ``occ`` (Z, Y, X) uint8.
+    """
+    dense = dense if dense is not None else [g.dense_bands() for g in wv.groups]
+    counts, origin, box = block_sums(wv, [np.any(arr != 0, axis=3) for group in dense for arr in group])
+    return (counts > 0).astype(np.uint8), origin, box
+
+
+def block_sums(wv: WaveletVolume, weights):
+    """Per block of BLOCK^3 fine cells, the sum of ``weights`` over the coefficients whose supports meet it.
+
+    ``weights``: one (nz, ny, nx) array >= 0 per band, the groups' bands in order.  Returns
+    ``(sums, origin, box)``: ``sums`` (Z, Y, X) over blocks ``origin + index`` (z, y, x), and the
+    clip box ``(lo, hi)`` (x, y, z) in grid-0 fine coordinates around the blocks with a non-zero
+    sum.  Per band and axis, block b is met by the coefficients k whose support
+    ``[o + 2^m k, o + 2^m (k + S))`` meets ``[b B, (b + 1) B)``: a contiguous range of k, so the
+    sum is separable (prefix sums along each axis in turn).
+    """
+    j0 = wv.groups[0].wavelet.order
+    bands = []
+    layout = [(g.wavelet, band) for g in wv.groups for band in g.bands]
+    for (wav, band), weight in zip(layout, weights):
+        if np.any(weight):
+            off, step, sup = band_lattice(wav, band.key, band.level)
+            bands.append((np.asarray(weight, np.float64), off + (j0 - wav.order) / 2.0, sup, step))
+    if not bands:
+        return np.zeros((1, 1, 1)), np.zeros(3, np.int64), (np.zeros(3), np.zeros(3))
+    lo = np.min([off for _, off, _, _ in bands], axis=0)
+    hi = np.max([off + s * (np.array(w.shape) + sup) for w, off, sup, s in bands], axis=0)
+    origin = np.floor(lo / BLOCK).astype(np.int64)
+    count = np.ceil(hi / BLOCK).astype(np.int64) - origin
+    sums = np.zeros(tuple(count))
+    for weight, off, sup, s in bands:
+        part = weight
+        for axis in range(3):
+            b = origin[axis] + np.arange(count[axis])
+            k_lo = np.clip(np.floor((b * BLOCK - off[axis]) / s - sup[axis]).astype(np.int64) + 1, 0, None)
+            k_hi = np.minimum(np.ceil(((b + 1) * BLOCK - off[axis]) / s).astype(np.int64) - 1,
+                              weight.shape[axis] - 1)
+            prefix = np.concatenate([np.zeros_like(np.take(part, [0], axis=axis)), np.cumsum(part, axis=axis)],
+                                    axis=axis)
+            upper = np.take(prefix, np.clip(k_hi + 1, 0, None), axis=axis)
+            lower = np.take(prefix, np.minimum(k_lo, weight.shape[axis]), axis=axis)
+            # prefix differences of sums >= 0; rounding can leave them a hair below zero
+            part = np.maximum(upper - lower, 0.0) * _broadcast(k_hi >= k_lo, axis)
+        sums += part
+    idx = np.argwhere(sums > 0)
+    box_lo = (origin + idx.min(axis=0)) * BLOCK
+    box_hi = (origin + idx.max(axis=0) + 1) * BLOCK
+    return sums, origin, (box_lo[::-1].astype(float), box_hi[::-1].astype(float))
+
+
+def _broadcast(flags, axis):
+    shape = [1, 1, 1]
+    shape[axis] = len(flags)
+    return flags.reshape(shape)

@@ -1,0 +1,257 @@
+"""NumPy float64 reference of the ray tracer's quadrature (``cl/raytrace/raytrace.cl``), for tests.
+
+The same algorithm, written independently of the kernel: the field comes from
+:meth:`WaveletVolume.evaluate` / :meth:`~WaveletVolume.gradient` (closed-form wavelet
+bases) instead of the device's fine B-spline grids; segments are the knot planes of
+the lattice; alpha's exact Chebyshev series gives ``A``; ``∫ q e^{-A}`` comes from
+recursive adaptive Simpson with two initial panels (docs/raytracing.md §2); early termination and
+the skipping of nearly empty blocks as in the kernel.  Slow (Python per segment): tiny volumes and images only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.polynomial import chebyshev
+
+from ..device.constants import BLOCK, SUPER
+from .quadrature import sample_points
+from .tracer import SIMPSON_DEPTH, Phong, RayTracer, light_direction
+
+
+def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
+                       tracer: RayTracer | None = None) -> np.ndarray:
+    """(H, W, 4) float64 image as :func:`clwave.raytrace` computes it, or (H, W, C) line integrals.
+
+    ``tracer`` supplies the clip box, occupancy lattice and emission bound the kernel used.
+    """
+    tr = tracer or RayTracer(wv)
+    view = camera.view(wv)
+    H, W = view.size
+    orders = tr.orders
+    h = 0.5 if len({o % 2 for o in orders}) > 1 else 1.0
+    phong = (shading if isinstance(shading, Phong) else Phong()) if shading else None
+    if tr.orders[tr.alpha_group] == 1 or not absorption:
+        phong = None
+    light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
+    gain = (phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0
+    regions = _Regions(tr.block_bound.get(), tr.occ_origin, tr.super_bound_host, tr.super_origin,
+                       tr.coarse_bound(tolerance))
+    scale = 1.0 / np.array(wv.spacing[::-1], float)
+    offset = -np.asarray(wv.origin) * scale + (np.array(wv.shape[::-1], float) - 1) / 2 + orders[0] / 2
+    xi = sample_points(3 * (max(orders) - 1))  # the kernel's points (the field is the same polynomial)
+    n_samples = len(xi)
+    out = np.zeros((H, W, 4 if absorption else wv.channels))
+    rays = []
+    for r, c in np.ndindex(H, W):
+        p, w = _ray(view, r, c)
+        t0, t1 = _clip(p * scale + offset, w * scale, tr.box, view.perspective)
+        if t1 > t0:
+            knots = _knots(p * scale + offset, w * scale, t0, t1, h)
+            lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
+            rays.append((r, c, w, p * scale + offset, (lo + hi) / 2, (hi - lo) / 2, t0, t1,
+                         p + ((lo + hi)[:, None] / 2 + (hi - lo)[:, None] / 2 * xi).reshape(-1, 1) * w))
+    if not rays:
+        return out
+    points = np.concatenate([ray[-1] for ray in rays])  # one evaluation for every sample of every ray
+    fields = np.split(wv.evaluate(points), np.cumsum([len(ray[-1]) for ray in rays])[:-1])
+    grads = np.split(wv.gradient(points)[:, 3, :], len(fields) and np.cumsum([len(f) for f in fields])[:-1]) \
+        if phong else [None] * len(rays)
+    for (r, c, w, x0, mid, rad, t0, t1, _), field, grad in zip(rays, fields, grads):
+        field = field.reshape(len(mid), n_samples, -1)
+        grad = None if grad is None else grad.reshape(len(mid), n_samples, 3)
+        blocks = _BlockSkip(regions, x0, w * scale, t0, t1, absorption, tolerance, gain)
+        if not absorption:
+            keep = [s for s in range(len(mid)) if not blocks.skip(mid[s] - rad[s], mid[s] + rad[s], 1.0)]
+            out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(field[keep], xi)))
+            continue
+        field[..., 3] = np.maximum(field[..., 3], 0.0)  # alpha clamped at the samples, q where it is used
+        out[r, c] = _emission_absorption(field, grad, xi, mid, rad, t1 - t0, tolerance, gain,
+                                         phong, light_dirs, w, blocks, tr.grad_floor())
+    return out
+
+
+class _Regions:
+    """The kernel's bounds on |field|: a superblock of SUPER^3 blocks bounded by at most ``coarse`` is
+    one region, any other block its own."""
+
+    def __init__(self, block_bound, origin, super_bound, super_origin, coarse):
+        # looked up in this order: the superblock, then (unless it is coarse) the block
+        self.levels = [(super_bound, np.asarray(super_origin), BLOCK * SUPER), (block_bound, np.asarray(origin), BLOCK)]
+        self.coarse = coarse
+
+    def lookup(self, x0, d, a, b, t1):
+        """(bound, where the ray x0 + t d leaves the region) of the region holding the midpoint of [a, b]."""
+        x = x0 + (a + b) / 2 * d
+        for bound, origin, size in self.levels:
+            cell = np.floor(x / size).astype(int)  # (x, y, z)
+            idx = cell[::-1] - origin
+            value = float(bound[tuple(idx)]) if np.all((idx >= 0) & (idx < bound.shape)) else 0.0
+            if size == BLOCK or value <= self.coarse:
+                nz = d != 0
+                return value, min(t1, np.min(((cell[nz] + (d[nz] > 0)) * size - x0[nz]) / d[nz]))
+
+
+class _BlockSkip:
+    """The kernel's empty-space rule along one ray: skip a region while its worst case fits the budget.
+
+    ``rest(t)`` is the region bounds integrated along the ray beyond t (the kernel's R), kept as
+    the whole ray's integral less what the march has passed.
+    """
+
+    def __init__(self, regions, x0, d, t0, t1, absorption, tol, gain):
+        self.regions, self.x0, self.d, self.t1 = regions, x0, d, t1
+        self.absorption, self.budget = absorption, tol / 4 if absorption else tol / 2
+        self.gain, self.until, self.value = gain, -np.inf, 0.0
+        pieces = _knots(x0, d, t0, t1, BLOCK)
+        self.total = sum(self._lookup(a, b)[0] * (b - a) for a, b in zip(pieces[:-1], pieces[1:]))
+        self.slack, self.consumed = self.total * 1e-4, 0.0
+
+    def _lookup(self, a, b):
+        return self.regions.lookup(self.x0, self.d, a, b, self.t1)
+
+    def skip(self, a, b, T) -> bool:
+        """Whether segment [a, b] is skipped (it lies in a block skipped from an earlier point, or its own)."""
+        if b <= self.until + 1e-9 * max(1.0, abs(self.until)):
+            return True
+        self.value, texit = self._lookup(a, b)
+        texit = max(texit, b)
+        cost = self.value * (texit - a)
+        if self.absorption:
+            rest_after = max(self.total - self.consumed - cost, 0.0) + self.slack
+            cost *= T * (self.gain * (1 + rest_after) + 1)
+        if cost <= self.budget:
+            self.budget -= cost
+            self.consumed += self.value * (texit - a)
+            self.until = texit
+            return True
+        return False
+
+    def passed(self, a, b) -> float:
+        """Count the evaluated segment [a, b] as passed; the bound integral left beyond it."""
+        self.consumed += self.value * (b - a)
+        return max(self.total - self.consumed, 0.0) + self.slack
+
+
+def _ray(view, r, c):
+    H, W = view.size
+    pc, pr = c + 0.5 - W / 2, H / 2 - r - 0.5
+    if view.perspective:
+        s = 2 * np.tan(np.radians(view.fov) / 2) / H
+        w = -view.n + pc * s * view.u + pr * s * view.v
+        return view.eye, w / np.linalg.norm(w)
+    return view.target + pc * view.pixel * view.u + pr * view.pixel * view.v, -view.n
+
+
+def _clip(x0, d, box, perspective):
+    t0, t1 = (0.0 if perspective else -np.inf), np.inf
+    for a in range(3):
+        if d[a] == 0:
+            if not box[0][a] <= x0[a] <= box[1][a]:
+                return 0.0, -np.inf
+            continue
+        ta, tb = (box[0][a] - x0[a]) / d[a], (box[1][a] - x0[a]) / d[a]
+        t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
+    return t0, t1
+
+
+def _knots(x0, d, t0, t1, h):
+    ts = [np.array([t0, t1])]
+    for a in range(3):
+        if d[a] != 0:
+            ends = sorted([(x0[a] + t0 * d[a]) / h, (x0[a] + t1 * d[a]) / h])
+            planes = np.arange(np.floor(ends[0]), np.ceil(ends[1]) + 1) * h
+            t = (planes - x0[a]) / d[a]
+            ts.append(t[(t > t0) & (t < t1)])
+    return np.unique(np.concatenate(ts))
+
+
+def _fit(samples, xi):
+    """Chebyshev series (S, N, C) of the polynomials through samples (S, N, C) at the N points xi."""
+    to_series = np.linalg.inv(chebyshev.chebvander(xi, len(xi) - 1))
+    return np.einsum("mk,skc->smc", to_series, samples)
+
+
+def _integral(series):
+    """∫_{-1}^{1} of each series: sum over even m of a_m 2/(1 - m^2)."""
+    m = np.arange(series.shape[1])
+    weights = np.where(m % 2 == 0, 2.0 / (1.0 - m ** 2.0 + (m % 2)), 0.0)
+    return np.einsum("smc,m->sc", series, weights)
+
+
+def _emission_absorption(field, grad, xi, mid, rad, total, tol, gain, phong, lights, w, blocks, floor):
+    series = _fit(field, xi)
+    grad_series = _fit(grad, xi) if grad is not None else None
+    T, color = 1.0, np.zeros(3)
+    shade_budget = tol * 3 / 8  # when shading: three quarters of the quadrature's half
+    quadrature_share = tol / 8 if phong is not None else tol / 2
+    quarters = -1.0 + np.arange(9) / 4.0
+    for s in range(len(rad)):
+        if blocks.skip(mid[s] - rad[s], mid[s] + rad[s], T):
+            continue
+        A = chebyshev.chebint(series[s, :, 3], lbnd=-1)
+        if phong is not None:  # the midpoint of the shading range, when its error fits the shading budget
+            unshaded = np.maximum(chebyshev.chebval(quarters, series[s]).T, 0.0) \
+                * np.exp(-rad[s] * chebyshev.chebval(quarters, A))[:, None]  # (9, 4): q_RGB, alpha
+            s4 = (unshaded[0] + 4 * unshaded[1:8:2].sum(0) + 2 * unshaded[2:8:2].sum(0) + unshaded[8]) / 12
+            s2 = (unshaded[0] + 4 * unshaded[2] + 2 * unshaded[4] + 4 * unshaded[6] + unshaded[8]) / 6
+            ds, n = np.abs(s4 - s2), len(lights)
+            diffuse_mid, specular_mid = phong.ambient + phong.diffuse * n / 2, phong.specular * n / 2
+            err = (phong.diffuse * n / 2 * (s4[:3] + ds[:3]) + specular_mid * (s4[3] + ds[3])
+                   + diffuse_mid * ds[:3] + specular_mid * ds[3])
+            cost = T * rad[s] * err.max()
+            if cost <= shade_budget:
+                shade_budget -= cost
+                color += T * rad[s] * (diffuse_mid * s4[:3] + specular_mid * s4[3])
+                T, done = _passed(T, rad[s], A, blocks, mid[s], gain, tol)
+                if done:
+                    break
+                continue
+
+        def integrand(x, s=s, A=A):
+            f = chebyshev.chebval(x, series[s])
+            q = np.maximum(f[:3], 0.0)
+            if phong is not None:
+                q = _shade(q, max(f[3], 0.0), chebyshev.chebval(x, grad_series[s]), phong, lights, w, floor)
+            return q * np.exp(-rad[s] * chebyshev.chebval(x, A))
+
+        seg_tol = quadrature_share * (2 * rad[s]) / total / T
+        color += T * rad[s] * _simpson(integrand, seg_tol / rad[s])
+        T, done = _passed(T, rad[s], A, blocks, mid[s], gain, tol)
+        if done:
+            break
+    return np.append(color, 1.0 - T)
+
+
+def _passed(T, rad, A, blocks, mid, gain, tol):
+    """T past the segment, and whether the ray stops there: what is left can change no output by tol/4."""
+    T *= np.exp(-rad * chebyshev.chebval(1.0, A))
+    left = blocks.passed(mid - rad, mid + rad)
+    return T, T * max(min(1.0, left), gain * left) <= tol / 4
+
+
+def _shade(q, alpha, grad, phong, lights, w, floor):
+    """Phong's eq. 4 with the outward normal -grad/|grad| (world gradient of alpha); unlit at |grad| <= floor."""
+    length = np.linalg.norm(grad)
+    diffuse = specular = 0.0
+    if length > floor:
+        n = -grad / length
+        for light in lights:
+            halfway = (light - w) / np.linalg.norm(light - w)
+            diffuse += max(n @ light, 0.0)
+            specular += max(n @ halfway, 0.0) ** phong.shininess
+    return q * (phong.ambient + phong.diffuse * diffuse) + phong.specular * alpha * specular
+
+
+def _simpson(f, tol):
+    """∫_{-1}^{1} f by recursive adaptive Simpson from the panels [-1, 0] and [0, 1]."""
+    def panel(a, b, fa, fm, fb, tol, depth):
+        m = (a + b) / 2
+        flm, fmr = f((a + m) / 2), f((m + b) / 2)
+        s1 = (b - a) / 6 * (fa + 4 * fm + fb)
+        s2 = (b - a) / 12 * (fa + 4 * flm + 2 * fm + 4 * fmr + fb)
+        if np.max(np.abs(s2 - s1)) <= 15 * tol or depth >= SIMPSON_DEPTH:
+            return s2 + (s2 - s1) / 15
+        return panel(a, m, fa, flm, fm, tol / 2, depth + 1) + panel(m, b, fm, fmr, fb, tol / 2, depth + 1)
+
+    f0, f1, f2, f3, f4 = (f(x) for x in (-1.0, -0.5, 0.0, 0.5, 1.0))
+    return panel(-1.0, 0.0, f0, f1, f2, tol / 2, 1) + panel(0.0, 1.0, f2, f3, f4, tol / 2, 1)

@@ -1,0 +1,198 @@
+"""NumPy references of the splatting kernels, one function per stage (tiny inputs only).
+
+Integer stages mirror the kernels' float32 arithmetic step by step (no fused
+multiply-add: ``FP_CONTRACT OFF`` in ``cl/common/clw_common.h``), so tests can demand
+exact equality; the accumulation is a float64 sum.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..device.constants import TILE
+from .tables import LINEAR_U, LINEAR_V
+
+
+def project(coef, first, band_tex, band_origin, step_col, step_row, tex_box, tex_layer, layers, n):
+    """Reference of ``splat_project``: centre, bbox (in the texture's layer), texture id and tile count per splat."""
+    f32 = np.float32
+    c = np.asarray(coef[first:first + n])
+    band = c[:, 3]
+    sc, sr, o = step_col[band], step_row[band], band_origin[band]
+    k = c[:, :3].astype(f32)
+    col = ((o[:, 0] + k[:, 0] * sc[:, 0]) + k[:, 1] * sc[:, 1]) + k[:, 2] * sc[:, 2]
+    row = ((o[:, 1] + k[:, 0] * sr[:, 0]) + k[:, 1] * sr[:, 1]) + k[:, 2] * sr[:, 2]
+    tex = band_tex[band]
+    b = tex_box[np.maximum(tex, 0)]
+    width, height = layers[tex_layer[np.maximum(tex, 0), 0], :2].T
+    x0 = np.maximum(np.ceil(col + b[:, 0]), f32(0))
+    x1 = np.minimum(np.floor(col + b[:, 1]), (width - 1).astype(f32))
+    y0 = np.maximum(np.ceil(row - b[:, 3]), f32(0))
+    y1 = np.minimum(np.floor(row - b[:, 2]), (height - 1).astype(f32))
+    hit = (tex >= 0) & (x0 <= x1) & (y0 <= y1)
+    bbox = np.where(hit[:, None], np.stack([x0, y0, x1, y1], 1).astype(np.int32), [0, 0, -1, -1]).astype(np.int32)
+    count = np.where(hit, (bbox[:, 2] // TILE - bbox[:, 0] // TILE + 1) * (bbox[:, 3] // TILE - bbox[:, 1] // TILE + 1),
+                     0).astype(np.uint32)
+    return np.stack([col, row], 1).astype(np.float32), bbox, tex.astype(np.int32), count
+
+
+def _tiles(box, layer):
+    """Tile ids a pixel box (x0, y0, x1, y1) touches, row by row, in layer (width, height, first tile, first pixel)."""
+    x0, y0, x1, y1 = (int(v) for v in box)
+    tiles_x = -(-int(layer[0]) // TILE)
+    if x1 < x0:
+        return []
+    return [int(layer[2]) + ty * tiles_x + tx for ty in range(y0 // TILE, y1 // TILE + 1)
+            for tx in range(x0 // TILE, x1 // TILE + 1)]
+
+
+def tile_corner(tile, layers) -> tuple:
+    """``(layer, x, y)``: the layer a tile id belongs to and the tile's corner pixel in it."""
+    layer = int(np.searchsorted(layers[:, 2], tile, side="right")) - 1
+    index, tiles_x = tile - int(layers[layer, 2]), -(-int(layers[layer, 0]) // TILE)
+    return layer, index % tiles_x * TILE, index // tiles_x * TILE
+
+
+def count_tiles(bbox, stex, tex_layer, layers, textures, chunk, chunks, tiles):
+    """Reference of ``splat_chunk_tiles`` counting: (chunks, tiles * textures) uint32, ``[c, tile * textures + j]``
+    counts the splats of chunk c (splats ``c * chunk ..``) with texture j of its layer that touch the tile."""
+    hist = np.zeros((chunks, tiles, textures), np.uint32)
+    for i, box in enumerate(bbox):
+        layer, j = tex_layer[stex[i]]
+        for t in _tiles(box, layers[layer]):
+            hist[i // chunk, t, j] += 1
+    return hist.reshape(chunks, -1)
+
+
+def bin_by_tile(bbox, stex, tex_layer, layers, tiles):
+    """Reference of scan + ``tile_ranges`` and of the order ``splat_chunk_tiles`` places in: ``(ranges, vals)``.
+
+    A stable sort of the (tile, splat) pairs by tile and texture: ``vals[ranges[t, 0]:ranges[t, 1]]``
+    are the splats touching tile t, by texture, each texture's in increasing order (importance).
+    (The kernels sort by the index within the layer, the same order where each layer's textures
+    are consecutive ids, as the renderer makes them.)  :func:`records` turns them into records.
+    """
+    pairs = [(t, i) for i, box in enumerate(bbox) for t in _tiles(box, layers[tex_layer[stex[i], 0]])]
+    tiles_of = np.array([t for t, _ in pairs], np.int64)
+    vals = np.array([i for _, i in pairs], np.uint32)
+    order = np.lexsort((vals, stex[vals], tiles_of))
+    tiles_of, vals = tiles_of[order], vals[order]
+    ranges = np.zeros((tiles, 2), np.uint32)
+    edges = np.searchsorted(tiles_of, np.arange(tiles + 1))
+    ranges[:, 0], ranges[:, 1] = edges[:-1], edges[1:]
+    return ranges, vals
+
+
+def records(ranges, vals, first, centre, bbox, stex, values, layers, channels):
+    """Reference of the records ``splat_chunk_tiles`` places (``cl/splat/record.h``): (pairs, 4 * R) uint32.
+
+    Per pair: centre, the bits (texture id; the splat's pixels in the tile, 4 bits each) and
+    c_0, then, with more than one channel, c_1..c_3 and 0 (R = 2 uint4s); floats as their bits.
+    The packing restates ``cl/splat/record.h``; :func:`accumulate` works from ``vals`` and the
+    splats' own tables instead, so a wrong layout also shows in the accumulated image.
+    """
+    floats = np.zeros((len(vals), 4 if channels == 1 else 8), np.float32)
+    nc = 1 if channels == 1 else 4
+    bits = np.zeros(len(vals), np.uint32)
+    for tile, (start, end) in enumerate(ranges):
+        _, x, y = tile_corner(tile, layers)
+        for k in range(start, end):
+            s = vals[k]
+            x0, y0, x1, y1 = (int(v) for v in np.clip(bbox[s] - [x, y, x, y], 0, TILE - 1))
+            bits[k] = int(stex[s]) | x0 << 16 | x1 << 20 | y0 << 24 | y1 << 28
+            floats[k, :2] = centre[s]
+            floats[k, 3:3 + nc] = values[first + s, :nc]
+    out = floats.view(np.uint32)
+    out[:, 2] = bits
+    return out
+
+
+def _axis_lookup(pixels, centre_px, centre_tex, steps, count, linear):
+    """Texel indices (into the texture with one ring of zeros) and the weight of the second, per pixel.
+
+    Linear: ``t = centre_tex + offset * steps`` in float64, texels floor(t) and floor(t) + 1.
+    Nearest: the kernel's float32 ``(centre_tex + 1/2) + offset * steps``, floored, so a pixel
+    within rounding of a cell edge picks the same cell; weight 0 on the second."""
+    f32 = np.float32
+    if linear:
+        t = centre_tex + (pixels - np.float64(centre_px)) * steps
+        i = np.floor(t).astype(int)
+        return np.clip(i + 1, 0, count + 1), np.clip(i + 2, 0, count + 1), t - i
+    t = (f32(centre_tex) + f32(0.5)) + (pixels.astype(f32) - f32(centre_px)) * f32(steps)
+    i = np.clip(np.floor(t).astype(int), -1, count) + 1
+    return i, i, np.zeros(len(pixels))
+
+
+def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, layers, channels=4):
+    """Reference of ``splat_accumulate`` (float64): footprint samples times c, channels < ``channels``,
+    into the framebuffers of ``layers`` one after the other, (pixels, 4).
+
+    ``textures`` are ``(data (nv, nu), centre_u, centre_v, lookup, s_u, s_v)``: per axis, s
+    texels per pixel; linear interpolation where the axis' lookup bit is set, nearest sample
+    where it is clear.  Image rows go down while v goes up.
+    """
+    fbs = [np.zeros((h, w, 4)) for w, h, _, _ in layers]
+    for tile, (start, end) in enumerate(ranges):
+        layer, x, y = tile_corner(tile, layers)
+        for s in vals[start:end]:
+            x0, y0, x1, y1 = bbox[s]
+            xs = np.arange(max(x0, x), min(x1, x + TILE - 1) + 1)
+            ys = np.arange(max(y0, y), min(y1, y + TILE - 1) + 1)
+            if not len(xs) or not len(ys):
+                continue
+            data, cu, cv, lookup, su, sv = textures[stex[s]]
+            nv, nu = data.shape
+            tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
+            tex[1:-1, 1:-1] = data
+            iu0, iu1, fu = _axis_lookup(xs, centre[s, 0], cu, su, nu, lookup & LINEAR_U)
+            # rows: offset (centre - y) along v, i.e. the same lookup of -y about -centre
+            iv0, iv1, fv = _axis_lookup(-ys, -centre[s, 1], cv, sv, nv, lookup & LINEAR_V)
+            top = tex[iv0[:, None], iu0] * (1 - fu) + tex[iv0[:, None], iu1] * fu
+            bot = tex[iv1[:, None], iu0] * (1 - fu) + tex[iv1[:, None], iu1] * fu
+            sample = top * (1 - fv[:, None]) + bot * fv[:, None]
+            fbs[layer][ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
+    return np.concatenate([fb.reshape(-1, 4) for fb in fbs])
+
+
+def line_integrals(coeffs, order, spacing, origin, view):
+    """Exact X-ray image of the fine-level spline ``sum_i c_i N_j(x - i)`` (float64).
+
+    ``coeffs`` (nz, ny, nx[, C]) are the fine B-spline coefficients (``reconstruct()``
+    for the approximating model), ``view`` a resolved camera.  Each pixel's line is cut
+    at every knot plane of the three axes; between knots the integrand is a polynomial
+    of degree 3(j - 1), integrated exactly by Gauss-Legendre.  An oracle for small
+    volumes: it visits every segment of every ray in NumPy.
+    """
+    from ..model.bspline import bspline
+
+    c = np.asarray(coeffs, np.float64)
+    c = c[..., None] if c.ndim == 3 else c
+    shape = np.array(c.shape[:3][::-1], float)  # (nx, ny, nz)
+    d = np.array(spacing[::-1], float)
+    H, W = view.size
+    starts = view.pixel_centres().reshape(-1, 3)
+    # fine coordinates x_a = (p_a - origin_a)/d_a + (n_a - 1)/2 + j/2 along p = start + t n
+    x0 = (starts - np.asarray(origin)) / d + (shape - 1) / 2 + order / 2
+    w = np.asarray(view.n) / d
+    g = (3 * (order - 1)) // 2 + 1
+    nodes, weights = np.polynomial.legendre.leggauss(g)
+    knots = []  # t where x_a crosses each integer of the support [0, n_a + j], all pixels at once
+    for a in range(3):
+        planes = np.arange(0, shape[a] + order + 1)
+        if abs(w[a]) > 1e-14:
+            knots.append((planes[None, :] - x0[:, a, None]) / w[a])
+    knots = np.sort(np.concatenate(knots, axis=1), axis=1)  # (P, K); f = 0 outside [first, last]
+    mid, half = (knots[:, 1:] + knots[:, :-1]) / 2, (knots[:, 1:] - knots[:, :-1]) / 2
+    t = mid[..., None] + half[..., None] * nodes  # (P, K - 1, g)
+    x = x0[:, None, None, :] + t[..., None] * w  # fine coordinates of every Gauss point
+    base = np.floor(x).astype(int) - order + 1  # first coefficient whose support holds x
+    n_int = shape.astype(int)
+    # per axis and offset: the B-spline weight, zero where the coefficient lies off the grid
+    wts = [[bspline(order, x[..., a] - base[..., a] - o) * ((base[..., a] + o >= 0) & (base[..., a] + o < n_int[a]))
+            for o in range(order)] for a in range(3)]
+    idx = [[np.clip(base[..., a] + o, 0, n_int[a] - 1) for o in range(order)] for a in range(3)]
+    total = np.zeros(x.shape[:3] + (c.shape[3],))
+    for i, j, k in np.ndindex(order, order, order):
+        total += (wts[0][i] * wts[1][j] * wts[2][k])[..., None] * c[idx[2][k], idx[1][j], idx[0][i]]
+    image = np.einsum("pkgc,g,pk->pc", total, weights, half)
+    return image.reshape(H, W, -1)

@@ -1,0 +1,252 @@
+"""Wavelet splatting (paper §4, docs/splatting.md): X-ray images as sums of basis-function footprints.
+
+:class:`SplatRenderer` uploads a model's ranked coefficients once; each view's :class:`Accumulator`
+makes the footprint textures and tables (:mod:`clwave.splat.tables`) and runs the device
+stages (:mod:`clwave.splat.stages`) over coefficient ranges in importance order.  The image is
+the line integral of each channel in world units (docs/coordinates.md).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+from pyopencl.reduction import ReductionKernel
+from pyopencl.tools import ImmediateAllocator, MemoryPool
+
+from ..device.context import ComputeContext
+from ..errors import DeviceMemoryError, InputError
+from ..io.result import RenderResult
+from ..model.camera import Camera
+from ..model.wavelet import WaveletVolume
+from .coarse import Layer, coarse_factor
+from .stages import Stages, bin_chunks
+from .tables import MAX_LEVELS, ViewTables
+
+
+class SplatRenderer:
+    """Uploads a wavelet volume's ranked coefficients once and splats any view.
+
+    Parameters
+    ----------
+    wv : WaveletVolume
+    device : str or ComputeContext
+    omega_s : float, optional
+        Footprint band (paper eq. 35/36); default from the pixel size.
+    sampling : "auto", "fft", "spatial" or "cells"
+        How footprint textures are made (:func:`clwave.splat.textures.footprints`); "auto" takes
+        "cells" for Haar when u or v is a world axis: along that axis (or both) the footprint
+        is its 2 exact cells, looked up by nearest sample, and along the other it is sampled
+        at 1/(8 P) pixel (:data:`clwave.splat.tables.CELL_REFINE`).  ``meta["texture_sampling"]`` says what ran:
+        "fft", "spatial", "cells" (both axes), "cells-u" or "cells-v" (that axis only).
+    coarse : float, optional
+        Tolerance, relative to the image maximum, for drawing coarse cubic bands into
+        coarser framebuffers that are upsampled with the cubic B-spline (docs/splatting.md §4;
+        see :func:`clwave.splat.coarse.coarse_factor`).  None (default): every band at the image's pixel.
+    """
+
+    def __init__(self, wv: WaveletVolume, device=None, omega_s=None, sampling="auto", coarse=None):
+        if not isinstance(wv, WaveletVolume):
+            raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
+        if wv.levels >= MAX_LEVELS:
+            raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
+        if coarse is not None and not (isinstance(coarse, (int, float)) and 0 < coarse < 1):
+            raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
+        self.wv, self.omega_s, self.sampling, self.coarse = wv, omega_s, sampling, coarse
+        self.cc = ComputeContext.get(device)
+        start = time.perf_counter()
+        # one build per channel count of the groups: a scalar volume accumulates one channel
+        self.stages = {c: Stages(self.cc, c) for c in sorted({len(g.channels) for g in wv.groups})}
+        self.pixel_updates = ReductionKernel(
+            self.cc.ctx, np.int64, neutral="0", reduce_expr="a+b", arguments="__global const int4 *bbox",
+            map_expr="bbox[i].z < bbox[i].x ? 0 : (long)(bbox[i].z - bbox[i].x + 1) * (bbox[i].w - bbox[i].y + 1)")
+        self.compile_seconds = time.perf_counter() - start
+        self.groups = []
+        q = self.cc.queue
+        # per-chunk scratch comes from a pool that keeps its buffers, and the tile lists from one
+        # buffer grown as needed, so a new view does not map (and the OS zero) fresh pages: a
+        # gigabyte of records takes a third of a second to map
+        self.scratch = MemoryPool(ImmediateAllocator(q))
+        self._tile_lists = None
+        for gi, g in enumerate(wv.groups):
+            table = wv.ranked(gi)
+            coef = np.zeros((len(table.level), 4), np.int32)
+            coef[:, :3] = table.index[:, ::-1]  # (k_x, k_y, k_z)
+            coef[:, 3] = table.level.astype(np.int32) * 8 + table.key_code  # bit 0: psi along x
+            values = np.zeros((len(table.level), 4), np.float32)
+            values[:, : table.values.shape[1]] = table.values
+            # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22)
+            kept = set(np.unique(coef[:, 3]).tolist())
+            present = {(b.level, b.key) for b in g.bands if b.level * 8 + b.code in kept}
+            self.groups.append(dict(coef=cla.to_device(q, coef), values=cla.to_device(q, values),
+                                    count=len(coef), channels=len(g.channels), present=present,
+                                    energy=_energy_prefix(table.values)))
+
+    def tile_lists(self, nbytes: int):
+        """A device buffer of at least ``nbytes`` for the tile lists, kept between chunks and views."""
+        if self._tile_lists is None or self._tile_lists.size < nbytes:
+            self._tile_lists = None  # released before the larger one is made
+            room = max(nbytes, min(nbytes + nbytes // 4, self.cc.info.max_alloc))  # room to grow
+            self._tile_lists = cl.Buffer(self.cc.ctx, cl.mem_flags.READ_WRITE, room)
+        return self._tile_lists
+
+    @property
+    def count(self) -> int:
+        """Coefficients per channel group (importance order: frames splat ranges of them)."""
+        return self.groups[0]["count"] if self.groups else 0
+
+    @property
+    def energy(self) -> np.ndarray:
+        """Cumulative coefficient energy (sum of c^2 over channels) of the first group, in importance order."""
+        return self.groups[0]["energy"] if self.groups else np.zeros(1)
+
+    # -------------------------------------------------------------- drawing
+    def begin(self, camera: Camera):
+        """Start an image: resolve the view, make footprints, zero the framebuffers (an :class:`Accumulator`)."""
+        if not isinstance(camera, Camera):
+            raise InputError("camera must be a clwave.Camera")
+        view = camera.view(self.wv)
+        # framebuffer factor of each band that has coefficients, per group: 1 unless drawn coarse
+        factors = [{(b.level, b.key): coarse_factor(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa",
+                                                      view.pixel, min(self.wv.spacing), self.coarse)
+                    if self.coarse else 1 for b in g.bands if (b.level, b.key) in gr["present"]}
+                   for g, gr in zip(self.wv.groups, self.groups)]
+        layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
+        fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * 16
+        if fb_bytes > self.cc.info.max_alloc:
+            H, W = view.size
+            raise DeviceMemoryError(
+                f"a {H}x{W} image needs {fb_bytes / 2**20:.0f} MiB of framebuffers but {self.cc.info.name} "
+                f"allows {self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
+        tables = [ViewTables(self.wv, gi, [(layer.view, {band for band, f in fg.items() if f == layer.factor})
+                                           for layer in layers], self.omega_s, self.sampling, device=self.cc)
+                  for gi, fg in enumerate(factors)]
+        return Accumulator(self, view, layers, tables)
+
+
+
+class Accumulator:
+    """One image being accumulated: splat coefficient ranges in importance order into the
+    framebuffers (layers) of each channel group, all layers in one pass."""
+
+    def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list):
+        self.r, self.view, self.layers, self.tables = renderer, view, layers, tables
+        cc = renderer.cc
+        self.device_tables = [{name: cc.upload(getattr(t, name)) for name in
+                               ("band_tex", "band_origin", "step_col", "step_row", "tex_box", "tex_layer",
+                                "layers", "tex_int", "tex_map", "texels")} for t in tables]
+        self.fbs = [cla.zeros(cc.queue, (t.pixels * 4,), np.float32) for t in tables]
+        self.stats = dict(splats=0, pairs=0, pixel_updates=0, bin_seconds=0.0, accumulate_seconds=0.0,
+                          upsample_seconds=0.0)
+
+    @property
+    def footprint_seconds(self) -> float:
+        return sum(t.footprint_seconds for t in self.tables)
+
+    def splat(self, first: int, count: int):
+        """Add coefficients ``first .. first + count`` (importance order) of every group."""
+        for gi in range(len(self.r.groups)):
+            n = max(0, min(count, self.r.groups[gi]["count"] - first))
+            if n:
+                self._splat_group(gi, first, n)
+                self.stats["splats"] += n
+
+    def _splat_group(self, gi, first, n):
+        r, q = self.r, self.r.cc.queue
+        g, t, tables = r.groups[gi], self.device_tables[gi], self.tables[gi]
+        st = r.stages[g["channels"]]
+        start = time.perf_counter()
+        centre = cla.empty(q, (n, 2), np.float32, allocator=r.scratch)
+        bbox = cla.empty(q, (n, 4), np.int32, allocator=r.scratch)
+        stex = cla.empty(q, (n,), np.int32, allocator=r.scratch)
+        counts = cla.empty(q, (n,), np.uint32, allocator=r.scratch)
+        st.project(n, first, g["coef"], t, centre, bbox, stex, counts)
+        total = int(cla.sum(counts, dtype=np.uint64).get())
+        budget = st.pair_budget()
+        if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
+            half = n // 2
+            self.stats["bin_seconds"] += time.perf_counter() - start
+            self._splat_group(gi, first, half)
+            self._splat_group(gi, first + half, n - half)
+            return
+        if total > budget:
+            raise DeviceMemoryError(f"one splat needs {total * st.record_bytes} bytes of tile lists, more "
+                                    f"than {r.cc.info.name} can hold; render a smaller image")
+        tiles = tables.tiles
+        ranges = cla.zeros(q, (tiles, 2), np.uint32, allocator=r.scratch)
+        records = r.tile_lists(max(total, 1) * st.record_bytes)
+        if total:
+            textures = max(tables.layer_textures)
+            chunks = bin_chunks(n, tiles * textures, r.cc.info)
+            runs = tiles * textures
+            # chunk-major counts (each chunk's together, cached by its core), scanned run-major,
+            # then back to chunk-major as each chunk's write cursors
+            table = cla.empty(q, (chunks * runs,), np.uint32, allocator=r.scratch)
+            by_run, starts = cla.empty_like(table), cla.empty_like(table)
+            splats = (n, chunks, tiles, textures, first, bbox, centre, stex, g["values"], t)
+            st.count(*splats, table)
+            st.transpose(chunks, runs, table, by_run)
+            st.scan(by_run, starts)
+            st.ranges(tiles, textures, chunks, total, starts, ranges)
+            st.transpose(runs, chunks, starts, table)
+            st.place(*splats, table, records)
+        q.finish()
+        mid = time.perf_counter()
+        st.accumulate(tiles, len(tables.layers), t, ranges, records, self.fbs[gi])
+        q.finish()
+        self.stats["bin_seconds"] += mid - start
+        self.stats["accumulate_seconds"] += time.perf_counter() - mid
+        self.stats["pairs"] += total
+        self.stats["pixel_updates"] += int(r.pixel_updates(bbox, range=slice(0, n), queue=q).get())
+
+    def meta(self, seconds: float) -> dict:
+        """What :class:`~clwave.RenderResult` reports of this image after ``seconds``."""
+        r, tables = self.r, self.tables
+        return dict(method="splat", device=r.cc.describe(), coefficients=self.stats["splats"],
+                    coefficients_total=r.count, tile_pairs=self.stats["pairs"],
+                    pixel_updates=self.stats["pixel_updates"],
+                    texture_sampling=sorted({s for t in tables for s in t.samplings}),
+                    omega_s=tables[0].omega_s if tables else None,
+                    coarse=r.coarse, framebuffers=[layer.factor for layer in self.layers],
+                    seconds=dict(total=seconds, footprints=self.footprint_seconds,
+                                 binning=self.stats["bin_seconds"], accumulation=self.stats["accumulate_seconds"],
+                                 upsampling=self.stats["upsample_seconds"], compile=r.compile_seconds))
+
+    def image(self) -> np.ndarray:
+        """The image so far as (H, W, C) float32: the framebuffers summed at the image's pixels."""
+        H, W = self.view.size
+        start = time.perf_counter()
+        out = np.zeros((H, W, self.r.wv.channels), np.float32)
+        for gi, g in enumerate(self.r.wv.groups):
+            fb = self.fbs[gi].get().reshape(-1, 4)[:, : len(g.channels)]
+            out[..., list(g.channels)] = sum(layer.image(fb[first: first + w * h]) for layer, (w, h, _, first), drawn
+                                             in zip(self.layers, self.tables[gi].layers, self.tables[gi].layer_textures)
+                                             if drawn)  # a layer may draw nothing of this group
+        if len(self.layers) > 1:
+            self.stats["upsample_seconds"] += time.perf_counter() - start
+        return out
+
+
+def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampling="auto", coarse=None,
+          renderer: SplatRenderer | None = None) -> RenderResult:
+    """X-ray image of a wavelet volume by wavelet splatting.
+
+    Returns a :class:`RenderResult` whose ``image`` (H, W, C) holds the line integral of
+    each channel in world units and whose ``meta`` reports the coefficients splatted,
+    footprint, binning, accumulation and upsampling times (kernel compile time apart), the
+    footprint texture sampling and the framebuffer factors.  ``omega_s``, ``sampling`` and
+    ``coarse`` are those of :class:`SplatRenderer`.
+    """
+    r = renderer or SplatRenderer(wv, device=device, omega_s=omega_s, sampling=sampling, coarse=coarse)
+    start = time.perf_counter()
+    acc = r.begin(camera)
+    acc.splat(0, r.count)
+    image = acc.image()
+    return RenderResult(image, acc.meta(time.perf_counter() - start))
+
+
+def _energy_prefix(values) -> np.ndarray:
+    """Cumulative coefficient energy sum c^2 over channels, in importance order."""
+    return np.cumsum(np.sum(np.asarray(values, np.float64) ** 2, axis=1))

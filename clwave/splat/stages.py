@@ -1,0 +1,116 @@
+"""The stages of the splatting pipeline on the device (docs/splatting.md §3), one wrapper each.
+
+project -> count -> transpose -> scan -> tile ranges -> transpose -> place -> accumulate.  Each
+wrapper launches one kernel of ``cl/splat/`` with its arguments by name; the renderer and the
+kernel tests call these same wrappers, and :mod:`clwave.splat.reference` is the NumPy oracle of
+each stage.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pyopencl.scan import ExclusiveScanKernel
+
+from ..device import programs
+from ..device.constants import TILE, record_uint4s
+from ..device.kernels import BUFFER, Kernel
+
+U32, I32 = np.uint32, np.int32
+_PROJECT = Kernel("splat_project", ("n", U32), ("first", U32), ("coef", BUFFER), ("band_tex", BUFFER),
+                  ("band_origin", BUFFER), ("step_col", BUFFER), ("step_row", BUFFER), ("tex_box", BUFFER),
+                  ("tex_layer", BUFFER), ("layers", BUFFER), ("centre", BUFFER), ("bbox", BUFFER),
+                  ("stex", BUFFER), ("count", BUFFER))
+_CHUNK_TILES = Kernel("splat_chunk_tiles", ("n", U32), ("chunk", U32), ("chunks", U32), ("tiles", U32),
+                      ("textures", U32), ("place", I32), ("first", U32), ("bbox", BUFFER), ("centre", BUFFER),
+                      ("stex", BUFFER), ("values", BUFFER), ("tex_layer", BUFFER), ("layers", BUFFER),
+                      ("table", BUFFER), ("records", BUFFER))
+_TRANSPOSE = Kernel("transpose_counts", ("rows", U32), ("cols", U32), ("src", BUFFER), ("dst", BUFFER))
+_TILE_RANGES = Kernel("tile_ranges", ("tiles", U32), ("textures", U32), ("chunks", U32), ("total", U32),
+                      ("offset", BUFFER), ("ranges", BUFFER))
+_ACCUMULATE = Kernel("splat_accumulate", ("layer_count", I32), ("layers", BUFFER), ("ranges", BUFFER),
+                     ("records", BUFFER), ("tex_int", BUFFER), ("tex_map", BUFFER), ("texels", BUFFER),
+                     ("fb", BUFFER))
+
+
+TILE_LIST_SHARE = 0.25  # of the device's memory, at most, for the tile lists of one chunk of splats
+
+
+#: binning work-items (chunks of consecutive splats) per compute unit: a GPU needs many; on a CPU
+#: each chunk keeps a write position in every (tile, texture) run, and few keep those in cache
+CHUNKS_PER_UNIT = dict(GPU=64, CPU=4)
+
+
+def bin_chunks(n: int, runs: int, info) -> int:
+    """Number of chunks of consecutive splats the binning works in (one work-item each).
+
+    Enough for every compute unit of the device (``info``: :class:`clwave.device.context.DeviceInfo`),
+    bounded by the splats and by the (tile, texture, chunk) count tables (``runs`` = tiles x
+    textures): three of them, uint32, in at most 1/32 of the device's memory.
+    """
+    per_unit = CHUNKS_PER_UNIT["GPU" if info.kind == "GPU" else "CPU"]
+    entries = min(info.max_alloc // 4, info.global_mem // 32 // 12)
+    return max(1, min(n, per_unit * info.compute_units, entries // runs))
+
+
+class Stages:
+    """The splatting kernels built for one device and channel count.
+
+    ``variant`` is the accumulation kernel: ``"cpu"`` (``cl/splat/raster_cpu.cl``, a work-item per
+    tile) or ``"gpu"`` (``cl/splat/raster_gpu.cl``, a work-item per pixel); default by the device.
+    ``tables`` arguments are a view's uploaded :class:`~clwave.splat.tables.ViewTables` by name.
+    """
+
+    def __init__(self, cc, channels: int, variant=None):
+        self.cc, self.channels = cc, channels
+        self.variant = variant or ("gpu" if cc.info.kind == "GPU" else "cpu")
+        self.kernels = programs.build(cc, ["splat/bin.cl", f"splat/raster_{self.variant}.cl"],
+                                      dict(CLW_CHANNELS=channels, CLW_RECORD=record_uint4s(channels)))
+        self.record_bytes = 16 * record_uint4s(channels)
+        self.accumulate_local = TILE * TILE if self.variant == "gpu" else 1
+        # binning chunks: on a CPU one work-item per group, so the few chunks spread over the cores
+        self.bin_local = None if cc.info.kind == "GPU" else (1,)
+        self._scan = ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")
+
+    def pair_budget(self) -> int:
+        """The most (tile, splat) pairs one pass may bin: their records within :data:`TILE_LIST_SHARE`
+        of the device, and record indices (pairs x 2 uint4s) within 32 bits."""
+        info = self.cc.info
+        return min(int(min(info.max_alloc, info.global_mem * TILE_LIST_SHARE)) // self.record_bytes, 2**31 - 1)
+
+    def project(self, n, first, coef, tables, centre, bbox, stex, count):
+        """Each splat's pixel centre, pixel box, texture and tile count (0: culled)."""
+        _PROJECT(self.kernels, self.cc.queue, (n,), None, tables, n=n, first=first, coef=coef,
+                 centre=centre, bbox=bbox, stex=stex, count=count)
+
+    def count(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts):
+        """Per chunk of consecutive splats, its splats per (tile, texture), chunk-major."""
+        self._chunk_tiles(0, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, counts)
+
+    def transpose(self, rows, cols, src, dst):
+        """``dst`` = the (rows, cols) table ``src`` transposed."""
+        _TRANSPOSE(self.kernels, self.cc.queue, (rows * cols,), None, rows=rows, cols=cols, src=src, dst=dst)
+
+    def scan(self, counts, starts):
+        """Exclusive prefix sums (arrays of uint32)."""
+        self._scan(counts, starts)
+
+    def ranges(self, tiles, textures, chunks, total, starts, ranges):
+        """Each tile's [start, end) in the records, from the scanned run-major counts."""
+        _TILE_RANGES(self.kernels, self.cc.queue, (tiles,), None, tiles=tiles, textures=textures, chunks=chunks,
+                     total=total, offset=starts, ranges=ranges)
+
+    def place(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records):
+        """A record per (tile, splat) pair at each chunk's write cursors (chunk-major)."""
+        self._chunk_tiles(1, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records)
+
+    def accumulate(self, tiles, layer_count, tables, ranges, records, fb):
+        """Add every tile's records to the framebuffers ``fb`` of the view's ``layer_count`` layers."""
+        local = self.accumulate_local
+        _ACCUMULATE(self.kernels, self.cc.queue, (tiles * local,), (local,), tables, layer_count=layer_count,
+                    ranges=ranges, records=records, fb=fb)
+
+    def _chunk_tiles(self, place, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, table,
+                     records):
+        _CHUNK_TILES(self.kernels, self.cc.queue, (chunks,), self.bin_local, tables, n=n, chunk=-(-n // chunks),
+                     chunks=chunks, tiles=tiles, textures=textures, place=place, first=first, bbox=bbox,
+                     centre=centre, stex=stex, values=values, table=table, records=records)

@@ -1,0 +1,162 @@
+"""One view's host tables for the splatting kernels (docs/splatting.md §2-3): the footprint
+textures packed into one texel pool, where each band's coefficients land in pixels, and the
+framebuffers (layers) the bands are drawn into."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..device.constants import TILE
+from ..model.geometry import fine_to_world, support_centres
+from ..model.wavelet import WaveletVolume
+from .textures import DEFAULT_OMEGA_MIN, cell_axes, footprints
+
+
+
+KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
+
+
+POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pixel rows
+
+
+#: Haar textures with a cell axis are sampled CELL_REFINE times finer (texels of 1/(CELL_REFINE P)
+#: pixel) along their other axis: they are one column or row of samples (2 x N texels), so this is
+#: cheap, and it takes the bilinear error at the kinks along that axis from 1e-3..3.4e-3 to <= 2.1e-4
+#: of the line length (box of ones, pixel 1.0012 voxel, azimuth / elevation 0 / 10, 90 / 25, 30 / 0)
+CELL_REFINE = 8
+
+
+#: Cubic textures keep the bounding box of their samples above this fraction of their peak
+#: (paper Fig. 9).  Near the edges of the projected support box, where only the support's corners
+#: project, a cubic footprint is vanishingly small (its B-spline tails meet there to high order):
+#: at 1e-4, hydrogen 256^3 at 512^2 (5 %) has 32 % fewer pixel updates and renders 1.6x faster,
+#: and 64^3 at 128^2 (every coefficient) stays 3.3e-4 of the image maximum from the exact line
+#: integrals, as untrimmed (1e-3 would double that).  Haar and linear footprints fall linearly
+#: to their box edges and are not trimmed.
+TEXTURE_TOL = 1e-4
+
+
+LINEAR_U, LINEAR_V = 1, 2  # lookup bits of a texture (cl/splat/raster.h); clear: cells, nearest sample
+
+
+class ViewTables:
+    """Host-side tables of one channel group for one view: footprints, band placement and the
+    framebuffers (layers) the bands are drawn into, every layer in one set of tables
+    (``cl/splat/bin.cl``: the tiles of all layers are binned in one pass).
+
+    ``layers`` is ``[(view, bands)]``, one per framebuffer: its resolved view (pixel and size;
+    the direction is the image's) and the (level, key) bands drawn there, or None for every band
+    not drawn in an earlier layer.  Bands drawn nowhere are culled (``band_tex = -1``).
+    """
+
+    def __init__(self, wv: WaveletVolume, group: int, layers, omega_s=None, sampling="auto", device=None):
+        g = wv.groups[group]
+        wav = g.wavelet
+        spacing = np.array(wv.spacing[::-1], float)  # (dx, dy, dz)
+        image_view = layers[0][0]  # the image's view: the layers share its direction
+        if sampling == "auto" and any(cell_axes(wav, image_view.u, image_view.v)):
+            sampling = "cells"  # Haar with u or v along a world axis: exact cells along that axis
+        # the texture band of each layer (a layer's pixel sets its default), the image's reported
+        omegas = [omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
+                  for view, _ in layers]
+        self.omega_s = omegas[0]
+        self.layer_of, self.texels_per_pixel, texel = {}, {}, {}
+        for li, ((view, bands), omega) in enumerate(zip(layers, omegas)):
+            for b in g.bands:
+                band = (b.level, b.key)
+                if band in self.layer_of or (bands is not None and band not in bands):
+                    continue
+                # texels of exactly 1/P pixel (cl/splat/raster.h), at least the band of eq. 36 and the
+                # least band of the level's own prototype (clwave.splat.textures); Haar and linear footprints
+                # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
+                least = DEFAULT_OMEGA_MIN[wav.order] / 2.0 ** b.level if wav.order >= 3 else KINKED_OMEGA_MIN
+                P = max(2, int(np.ceil(max(omega, least) * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
+                self.layer_of[band] = li
+                self.texels_per_pixel[band] = P * (CELL_REFINE if sampling == "cells" else 1)
+                texel[band] = view.pixel / self.texels_per_pixel[band]
+        start = time.perf_counter()
+        self.textures = footprints(wav, wv.spacing, image_view.n, image_view.u, image_view.v, list(self.layer_of),
+                                   omega_s=self.omega_s, sampling=sampling, tol=TEXTURE_TOL if wav.order == 4 else 0.0,
+                                   texel=texel, device=device)
+        self.footprint_seconds = time.perf_counter() - start
+        self.samplings = sorted({t.sampling for t in self.textures.values() if t is not None})
+
+        self.band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
+        self.band_origin = np.zeros((8 * MAX_LEVELS, 2), np.float32)
+        self.step_col = np.zeros((8 * MAX_LEVELS, 4), np.float32)
+        self.step_row = np.zeros((8 * MAX_LEVELS, 4), np.float32)
+        self.layers = np.zeros((len(layers), 4), np.int32)  # (width, height, first tile, first pixel)
+        boxes, ints, maps, tex_layer, pool, offset = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
+        self.tiles = self.pixels = 0
+        self.layer_textures = []  # textures drawn in each layer
+        for li, (view, _) in enumerate(layers):
+            H, W = view.size
+            self.layers[li] = (W, H, self.tiles, self.pixels)
+            self.tiles += -(-W // TILE) * -(-H // TILE)
+            self.pixels += H * W
+            origins, first_tex = {}, len(ints)
+            for band in g.bands:
+                if self.layer_of.get((band.level, band.key)) != li:
+                    continue
+                m, bid, scale = band.level, band.level * 8 + band.code, 2.0 ** band.level
+                # world centre of coefficient k = 0 (docs/model.md §4: X = o + 2^m (k + c0)), in (x, y, z)
+                origins[bid] = fine_to_world(support_centres(wav, band.key, m, (0, 0, 0)), wav.order, wv.shape,
+                                             wv.spacing, wv.origin)
+                self.step_col[bid, :3] = scale * spacing * view.u / view.pixel
+                self.step_row[bid, :3] = -scale * spacing * view.v / view.pixel
+                tex = self.textures[(m, band.key)]
+                if tex is None:  # psi along the view direction: its footprint vanishes
+                    continue
+                self.band_tex[bid] = len(ints)
+                tex_layer.append((li, len(ints) - first_tex))
+                # per axis: texels at 1/P pixel, bilinear (u from P phase planes), or cells at s texels
+                # per pixel, nearest sample (u gathered per pixel from one plane); cl/splat/raster.h
+                P = self.texels_per_pixel[(m, band.key)]
+                cell_u, cell_v = tex.cells
+                su, sv = (view.pixel / h if cell else float(P) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
+                planes = pack_texture(tex.data, 1 if cell_u else P)
+                nv, nu = tex.data.shape
+                boxes.append(_axis_box(nu, tex.centre_u, su, cell_u) + _axis_box(nv, tex.centre_v, sv, cell_v))
+                lookup = (0 if cell_u else LINEAR_U) | (0 if cell_v else LINEAR_V)
+                ints.append((offset, planes.shape[2], planes.shape[1], lookup))
+                maps.append((tex.centre_u, tex.centre_v, su, sv))
+                pool.append(planes.ravel())
+                offset += planes.size
+            if origins:
+                self.band_origin[list(origins)] = view.to_pixels(np.array(list(origins.values())))
+            self.layer_textures.append(len(ints) - first_tex)
+        self.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
+        self.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
+        self.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
+        self.tex_layer = np.array(tex_layer or [(0, 0)], np.int32).reshape(-1, 2)
+        self.texels = np.concatenate(pool + [np.zeros(2 * POOL_GUARD)]).astype(np.float32)
+
+
+def _axis_box(count, centre, steps, cell) -> tuple:
+    """Pixel offsets from the splat centre of the first and last sample along one texture axis
+    (``steps`` texels per pixel); a cell reaches half a texel beyond its centre."""
+    reach = 0.5 if cell else 0.0
+    return -(centre + reach) / steps, (count - 1 + reach - centre) / steps
+
+
+def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
+    """Phase planes of a texture sampled at 1/P pixel along u: (P, nv + 3, ceil(nu / P) + 2).
+
+    Plane p, column q + 1 holds texel p + P q (``cl/splat/raster.h``), so a row of pixels
+    reads contiguous memory.  Zero margins: a column either side, a row above and two below.
+    """
+    nv, nu = data.shape
+    cols = -(-nu // P) + 2
+    rows = np.zeros((nv + 3, cols * P), np.float32)
+    rows[1:nv + 1, P:P + nu] = data  # texel iu at P + iu: column (iu // P) + 1 of plane iu % P
+    return np.ascontiguousarray(rows.reshape(nv + 3, cols, P).transpose(2, 0, 1))
+
+
+def default_omega_s(pixel, min_spacing) -> float:
+    """Texture band: the paper's 14, finer when pixels are small (texel <= pixel / 4)."""
+    return max(14.0, 4.0 * np.pi * min_spacing / pixel)
+
+
+MAX_LEVELS = 8  # band id = level * 8 + subband code must fit the 64-entry table

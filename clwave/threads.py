@@ -1,0 +1,36 @@
+"""Host threads: one process-wide pool, one thread per core the process may use, for the NumPy and
+SciPy work that releases the GIL (per-channel transforms, classification chunks, footprint textures).
+Threads are started once, not per call (starting them cost more than a small view's FFTs)."""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from functools import lru_cache
+
+
+def cores() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
+@lru_cache(maxsize=1)
+def _pool() -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(cores(), thread_name_prefix="clwave")
+
+
+if hasattr(os, "register_at_fork"):  # a forked child has none of the parent's threads: a pool of its own
+    os.register_at_fork(after_in_child=_pool.cache_clear)
+
+
+def thread_map(work, items) -> list:
+    """``[work(item) for item in items]``, in the pool when there is more than one item and core.
+
+    ``work`` must not itself wait on the pool."""
+    items = list(items)
+    if len(items) < 2 or cores() < 2:
+        return [work(item) for item in items]
+    return list(_pool().map(work, items))
