@@ -47,10 +47,14 @@ def test_unknown_device_is_one_line(bad):
         select_device("gpu", FAKE[:1])
 
 
-def test_context_is_shared(cc):
+def test_context_is_shared_and_describes_its_device(cc):
     assert ComputeContext.get(cc.info.id) is cc
     assert ComputeContext.get(cc) is cc
-    assert cc.describe()["global_mem_bytes"] > 0
+    device, described = cc.queue.device, cc.describe()  # what the driver says, and what clwave reports
+    assert described["device"] == device.name.strip() and described["platform"] == device.platform.name.strip()
+    assert (described["global_mem_bytes"], described["max_alloc_bytes"], described["compute_units"]) == \
+        (device.global_mem_size, device.max_mem_alloc_size, device.max_compute_units)
+    assert described["type"] == ("GPU" if device.type & cl.device_type.GPU else "CPU")
 
 
 @pytest.mark.parametrize("local", [None, (1,)])
@@ -63,7 +67,7 @@ def test_selftest_kernel_matches_numpy(cc, local):
     a, b = rng.random(37, dtype=np.float32), rng.random(37, dtype=np.float32)
     d_a, d_b = cla.to_device(cc.queue, a), cla.to_device(cc.queue, b)
     out = cla.empty_like(d_a)
-    ks.selftest_axpy(cc.queue, (37,), local, np.float32(-1.5), d_a.data, d_b.data, out.data)
+    programs.SELFTEST(ks, cc.queue, (37,), local, alpha=-1.5, a=d_a, b=d_b, out=out)
     assert np.allclose(out.get(), -1.5 * a + b, rtol=1e-6, atol=1e-7)
     assert programs.selftest(cc) >= 0
 

@@ -1,7 +1,8 @@
 """The host side of the host-kernel boundary: each kernel's arguments declared once, by name.
 
 A :class:`Kernel` lists a kernel's arguments in the order of its OpenCL signature, each with
-its type: a NumPy scalar type, a ``pyopencl.cltypes`` vector type, or :data:`BUFFER`.
+its type: a NumPy scalar type, a ``pyopencl.cltypes`` vector type (given any sequence of up to
+its length, zero-padded), :data:`BUFFER`, or :data:`REAL` (the build's precision).
 Launches name every argument (``PROJECT(ks, queue, (n,), None, n=n, first=0, ...)``), so a
 renderer and the kernel's test call the same declaration and an argument cannot slip position.
 Constants that both sides use come from :mod:`clwave.device.constants` as build defines.
@@ -14,6 +15,7 @@ from collections.abc import Mapping
 import numpy as np
 
 BUFFER = "buffer"  #: a ``pyopencl`` buffer, or an array whose ``.data`` is one
+REAL = "real"      #: the kernel's ``real``: float32 or float64 by the build (``real_type=`` at launch)
 
 
 class Kernel:
@@ -29,7 +31,7 @@ class Kernel:
     def __repr__(self):
         return f"Kernel({self.name}: {', '.join(self.names)})"
 
-    def arguments(self, tables: Mapping | None = None, **values) -> list:
+    def arguments(self, tables: Mapping | None = None, real_type=np.float32, **values) -> list:
         """The positional arguments from ``values`` by name; missing names are taken from
         ``tables`` (a mapping that may hold more), so a view's uploaded tables pass as one."""
         unknown = set(values) - set(self.names)
@@ -45,12 +47,27 @@ class Kernel:
                 raise TypeError(f"{self.name}: argument {name} is missing")
             if kind == BUFFER:
                 out.append(getattr(value, "data", value))
+            elif kind == REAL:
+                out.append(np.dtype(real_type).type(value))
             elif isinstance(kind, np.dtype) and kind.fields:  # an OpenCL vector type (cltypes)
-                out.append(value)
+                out.append(_vector(kind, value))
             else:
                 out.append(np.dtype(kind).type(value))
         return out
 
-    def __call__(self, kernels, queue, global_size, local_size, tables: Mapping | None = None, **values):
+    def __call__(self, kernels, queue, global_size, local_size, tables: Mapping | None = None, real_type=np.float32,
+                 **values):
         """Launch the kernel of this name from ``kernels`` (a :class:`~clwave.device.programs.KernelSet`)."""
-        return kernels[self.name](queue, global_size, local_size, *self.arguments(tables, **values))
+        args = self.arguments(tables, real_type, **values)
+        return kernels[self.name](queue, global_size, local_size, *args)
+
+
+def _vector(kind: np.dtype, value):
+    """An OpenCL vector of ``kind`` from a sequence of at most its length (zero-padded), or as given."""
+    if getattr(value, "dtype", None) == kind:
+        return value
+    size, real = len(kind.names), kind.fields["s0"][0].kind == "f"
+    items = [float(v) if real else int(v) for v in value]
+    if len(items) > size:
+        raise TypeError(f"{len(items)} values do not fit a {size}-vector")
+    return np.array(tuple(items + [0] * (size - len(items))), dtype=kind)  # 0-d, as pyopencl.cltypes makes

@@ -17,6 +17,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from . import constants
+from .kernels import BUFFER, Kernel
 from .context import INSTALL_HINT, ComputeContext
 from ..errors import KernelBuildError
 
@@ -90,6 +91,9 @@ def build(cc: ComputeContext, files, defines=None) -> KernelSet:
     return ks
 
 
+SELFTEST = Kernel("selftest_axpy", ("alpha", "float32"), ("a", BUFFER), ("b", BUFFER), ("out", BUFFER))
+
+
 def selftest(cc: ComputeContext, n: int = 1024) -> float:
     """Build and run ``selftest_axpy``; returns the build time, raises on a wrong answer."""
     import numpy as np
@@ -100,7 +104,7 @@ def selftest(cc: ComputeContext, n: int = 1024) -> float:
     a, b = rng.random(n, dtype=np.float32), rng.random(n, dtype=np.float32)
     d_a, d_b = cla.to_device(cc.queue, a), cla.to_device(cc.queue, b)
     d_out = cla.empty_like(d_a)
-    ks.selftest_axpy(cc.queue, (n,), None, np.float32(2.5), d_a.data, d_b.data, d_out.data)
+    SELFTEST(ks, cc.queue, (n,), None, alpha=2.5, a=d_a, b=d_b, out=d_out)
     got = d_out.get()
     if not np.allclose(got, 2.5 * a + b, rtol=1e-6, atol=1e-6):
         raise KernelBuildError(f"the self-test kernel gave wrong results on {cc.info.name}; "

@@ -20,8 +20,19 @@ from pyopencl import cltypes
 
 from ..device import programs
 from ..device.context import ComputeContext
+from ..device.kernels import BUFFER, Kernel
 from ..errors import DeviceMemoryError, InputError
 from ..model.geometry import band_lattice
+
+
+def _part_args(name: str) -> tuple:
+    """The arguments of one input part of ``synth_axis`` (cl/raytrace/expand.cl)."""
+    return ((name, BUFFER), (f"{name}_start", cltypes.int4), (f"{name}_shape", cltypes.int4),
+            (f"{name}_taps", BUFFER), (f"n{name}", np.int32), (f"{name}_shift", np.int32))
+
+
+_SYNTH_AXIS = Kernel("synth_axis", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
+                     *_part_args("a"), *_part_args("b"), ("has_b", np.int32))
 
 
 @dataclass
@@ -150,12 +161,12 @@ def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, crop) -> _Part:
         lo[axis], hi[axis] = crop[0], crop[1] + 1
     shape = hi - lo
     out = cla.empty(cc.queue, tuple(int(s) for s in shape) + (4,), np.float32)
-    args = []
-    for letter, p in pair + pair[:1] * (2 - len(pair)):  # a lone part is passed twice, the second ignored
-        args += [p.data.data, int4_xyz(p.start), int4_xyz(p.shape), d_taps[letter].data,
-                 np.int32(len(taps[letter])), np.int32(shifts[letter])]
-    kernels.synth_axis(cc.queue, tuple(int(s) for s in shape[::-1]), None, out.data, int4_xyz(lo), int4_xyz(shape),
-                       *args, np.int32(len(pair) == 2))
+    parts = {}
+    for name, (letter, p) in zip("ab", pair + pair[:1] * (2 - len(pair))):  # a lone part twice, the second ignored
+        parts.update({name: p.data, f"{name}_start": p.start[::-1], f"{name}_shape": p.shape[::-1],
+                      f"{name}_taps": d_taps[letter], f"n{name}": len(taps[letter]), f"{name}_shift": shifts[letter]})
+    _SYNTH_AXIS(kernels, cc.queue, tuple(int(s) for s in shape[::-1]), None, parts, out=out, out_start=lo[::-1],
+                out_shape=shape[::-1], has_b=len(pair) == 2)
     return _Part(out, lo, shape)
 
 

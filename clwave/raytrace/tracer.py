@@ -27,6 +27,7 @@ from pyopencl import cltypes
 
 from ..device import programs
 from ..device.constants import BLOCK, MAX_LIGHTS, SUPER
+from ..device.kernels import BUFFER, REAL, Kernel
 from ..model.bspline import piece_polynomials
 from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
@@ -66,6 +67,23 @@ def light_direction(azimuth, elevation) -> np.ndarray:
 
 
 FIELDS = ("bspline", "wavelet")
+B, I32, INT4, FLOAT4 = BUFFER, np.int32, cltypes.int4, cltypes.float4
+#: the arguments of each field backend (FIELD_PARAMS of cl/raytrace/field_*.h)
+FIELD_ARGS = dict(bspline=(("coef", B), ("start", B), ("shape", B), ("offset", B)),
+                  wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
+_BLOCK_MAX = Kernel("block_max", ("out", B), ("occ", B), ("origin", INT4), ("nblocks", INT4),
+                    *FIELD_ARGS["bspline"])
+
+
+def raytrace_kernel(field: str) -> Kernel:
+    """The arguments of ``raytrace`` (cl/raytrace/raytrace.cl) with a field backend."""
+    return Kernel("raytrace", ("image", B), ("stats", B), ("width", I32), ("height", I32), *FIELD_ARGS[field],
+                  ("bound", B), ("occ_origin", INT4), ("occ_shape", INT4), ("super_bound", B),
+                  ("super_origin", INT4), ("super_shape", INT4), ("coarse_bound", REAL), ("box_lo", FLOAT4),
+                  ("box_hi", FLOAT4), ("base", FLOAT4), ("du", FLOAT4), ("dv", FLOAT4), ("dir", FLOAT4),
+                  ("perspective", I32), ("to_fine_scale", FLOAT4), ("to_fine_offset", FLOAT4), ("nodes", B),
+                  ("weights", B), ("tol", REAL), ("shade_gain", REAL), ("grad_floor", REAL), ("lights", B),
+                  ("nlights", I32), ("phong", FLOAT4))
 GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
 ACTIVE = 1024    # entries of a ray's active list (wavelet field); more fall back to visiting every index
@@ -124,14 +142,12 @@ class RayTracer:
         self.block_bound = cla.empty(q, occ.shape, np.float32)
         blocks = programs.build(self.cc, ["raytrace/blocks.cl"], dict(CLW_GROUPS=len(orders),
                                                                       CLW_ORDERS=",".join(map(str, orders))))
-        blocks.block_max(q, occ.shape[::-1], None, self.block_bound.data, cla.to_device(q, occ).data,
-                         int4_xyz(self.occ_origin), int4_xyz(occ.shape), self.coef.data, self.tables["start"].data,
-                         self.tables["shape"].data, self.tables["offset"].data)
+        self.field_tables = dict(coef=self.coef, **self.tables)
+        _BLOCK_MAX(blocks, q, occ.shape[::-1], None, self.field_tables, out=self.block_bound,
+                   occ=cla.to_device(q, occ), origin=self.occ_origin[::-1], nblocks=occ.shape[::-1])
         # the largest |coefficient| of any grid bounds every channel (partition of unity)
         self.q_bound = float(cla.max(self.block_bound).get())
         self.occupied_fraction = float(occ.mean())
-        self.field_args = [self.coef.data, self.tables["start"].data, self.tables["shape"].data,
-                           self.tables["offset"].data]
         # explicit groups: PoCL's default for a big image (up to 4096 rays) keeps every ray's private
         # arrays at once, which overflowed its threads' stacks
         self.local_size = (8, 8)
@@ -181,8 +197,8 @@ class RayTracer:
         self.tables = dict(info=cla.to_device(q, np.array(info, np.int32)),
                            shape=cla.to_device(q, np.array(shape, np.int32)),
                            lo=cla.to_device(q, np.array(lo, np.float32)))
-        self.field_args = [self.coef.data, self.tables["info"].data, self.tables["shape"].data,
-                           self.tables["lo"].data]
+        self.field_tables = dict(coef=self.coef, info=self.tables["info"], shape=self.tables["shape"],
+                                 band_lo=self.tables["lo"])
         self.defines = dict(CLW_WAVELET=None, CLW_BANDS=len(info), CLW_ACTIVE=self.active,
                             CLW_GROUPS=len(self.orders), CLW_ORDERS=",".join(map(str, self.orders)))
         # PoCL keeps a work-group's private active lists on one thread's stack: small groups
@@ -266,22 +282,21 @@ class RayTracer:
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
         image = cla.empty(q, (H, W, 4), np.float32)
         stats = cla.empty(q, (H, W, 4), np.int32)
-        field_args = list(self.field_args)
+        field_tables = dict(self.field_tables)
         if self.field == "wavelet":
             traced = cla.zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
-            field_args += [cla.to_device(q, self.poly.astype(real)).data, traced.data]
+            field_tables.update(poly=cla.to_device(q, self.poly.astype(real)), trace=traced)
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
-        kernels.raytrace(q, rounded, self.local_size, image.data, stats.data, np.int32(W), np.int32(H),
-                         *field_args, self.block_bound.data, int4_xyz(self.occ_origin),
-                         int4_xyz(self.block_bound.shape), self.super_bound.data, int4_xyz(self.super_origin),
-                         int4_xyz(self.super_bound.shape), real(self.coarse_bound(tol)),
-                         _float4(self.box[0]), _float4(self.box[1]),
-                         _float4(base), _float4(du), _float4(dv), _float4(direction), np.int32(view.perspective),
-                         _float4(scale), _float4(offset), nodes.data, weights.data, real(tol),
-                         real(shade_gain), real(self.grad_floor(precision)),
-                         cla.to_device(q, light_buf).data, np.int32(len(light_dirs)),
-                         _float4([p.ambient, p.diffuse, p.specular, p.shininess]))
+        raytrace_kernel(self.field)(
+            kernels, q, rounded, self.local_size, field_tables, real_type=real, image=image, stats=stats, width=W,
+            height=H, bound=self.block_bound, occ_origin=self.occ_origin[::-1], occ_shape=self.block_bound.shape[::-1],
+            super_bound=self.super_bound, super_origin=self.super_origin[::-1],
+            super_shape=self.super_bound.shape[::-1], coarse_bound=self.coarse_bound(tol), box_lo=self.box[0],
+            box_hi=self.box[1], base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
+            to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
+            grad_floor=self.grad_floor(precision), lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
+            phong=[p.ambient, p.diffuse, p.specular, p.shininess])
         q.finish()
         seconds = time.perf_counter() - start
         img = image.get()
@@ -353,9 +368,3 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     r = tracer or RayTracer(wv, device=device, field=field)
     return r.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                     precision=precision)
-
-
-
-
-def _float4(values):
-    return cltypes.make_float4(*(float(v) for v in values), *[0.0] * (4 - len(values)))

@@ -11,6 +11,7 @@ import pyopencl.array as cla
 import scipy.fft
 
 from ..device import programs
+from ..device.kernels import BUFFER, Kernel
 from ..errors import InputError
 from ..model.bspline import SplineWavelet, wavelet_for
 
@@ -229,6 +230,8 @@ def fft_texture(wav, key, m, d_xyz, u, v, nu, nv, wu, wv, workers=-1, block=1638
     return scipy.fft.irfft2(spec, s=(nv, nu), workers=workers, overwrite_x=True)
 
 
+_SPECTRA = Kernel("footprint_spectra", ("group_tex", BUFFER), ("tex_size", BUFFER), ("tex_rate", BUFFER),
+                  ("poly", BUFFER), ("out", BUFFER))
 SPECTRUM_GROUP = 16  # work-items per work-group of cl/splat/footprint.cl, each group within one texture
 
 
@@ -263,9 +266,9 @@ def device_spectra(cc, order: int, plans) -> list:
     q = cc.queue
     out = cla.empty(q, (first * SPECTRUM_BLOCK,), np.complex64)
     kernels = programs.build(cc, ["splat/footprint.cl"], {"CLW_ORDER": order, "CLW_TERMS": len(coeffs)})
-    kernels.footprint_spectra(q, (first,), (SPECTRUM_GROUP,), cc.upload(np.array(group_tex, np.int32)),
-                              cc.upload(np.array(sizes, np.int32)), cc.upload(np.array(rates, np.float32)),
-                              cc.upload(np.array(coeffs, np.float32)), out.data)
+    _SPECTRA(kernels, q, (first,), (SPECTRUM_GROUP,), group_tex=cc.upload(np.array(group_tex, np.int32)),
+             tex_size=cc.upload(np.array(sizes, np.int32)), tex_rate=cc.upload(np.array(rates, np.float32)),
+             poly=cc.upload(np.array(coeffs, np.float32)), out=out)
     spectra = out.get()
     return [spectra[f * SPECTRUM_BLOCK: (f + nv * blocks) * SPECTRUM_BLOCK].reshape(nv, -1)[:, : nu // 2 + 1]
             for (f, nv, blocks, _), (_, _, nu, _) in zip(sizes, plans)]
