@@ -1,37 +1,13 @@
-/* raytrace.cl: the emission-absorption integral per pixel (paper §3, eq. 5 and 17, docs/raytracing.md §2).
+/* raytrace.cl: the emission-absorption integral per pixel (paper §3, eq. 5 and 17).
  *
- * One work-item per ray.  The ray is cut at every knot plane of every channel group's
- * fine B-spline lattice (clwave/raytrace/finegrid.py); inside a segment the field (q_R, q_G, q_B, alpha)
- * and the gradient of alpha are polynomials in t, of degree <= 3(j - 1).  They are sampled at
- * CLW_SAMPLES points xi of the segment [-1, 1]: the 9 points xi = -1 + p/4 of Simpson's first 2
- * panels and their halves, plus xi = 15/16 when the degree is 9 (cubic), so that
- *   - A(a, t) = int_a^t alpha is exact (integration weights of the interpolating polynomial at
- *     the 9 points; the antiderivative of its Chebyshev series, made only when a panel must be
- *     halved further),
- *   - int_a^b q e^{-A} comes from adaptive Simpson on that polynomial (>= 2 initial panels,
- *     accept |S2 - S1| <= 15 tol, return S2 + (S2 - S1)/15), with the shaded q of eq. 4,
- *   - in X-ray mode (CLW_XRAY) int_a^b f is exact (the same weights over the whole segment).
- * Lanes 0..7 of a sample vector hold p = 1..8, lane 8 p = 0 and lane 9 the extra point.  Where
- * the field is C^1 across knot planes (CLW_JOIN: every order >= 3), a segment that starts where
- * the last evaluated one ended takes p = 0 (the field, and the shaded emission and the gradient of
- * alpha when that segment was shaded point by point) from the last one's p = 8: alpha's gradient
- * is then needed at 8 points, one real8.
- * The budget tol per output value is split: half for the quadrature, spread along the ray in
- * proportion to segment length and relaxed by 1/T (docs/raytracing.md §2); a quarter for early ray
- * termination; a quarter for empty space.  With shading, three quarters of the quadrature's half
- * go to segments shaded at the midpoint of their shading range (the quadrature's own errors are
- * far below its share at the usual tolerances): shading makes q (ka + kd D) + ks alpha S
- * of q with D, S in [0, nlights], so (ka + kd n/2) q + (ks n/2) alpha errs by at most the half
- * width (kd q + ks alpha) n/2; a segment whose unshaded integrals (Simpson's 4 panels, |S4 - S2|
- * added as their error) make that fit in what is left of that share needs no gradient, which is
- * a third of the work.  Termination and skipping use the blocks of CLW_BLOCK^3 fine cells with a
- * bound b on |field| (cl/raytrace/blocks.cl) and R(t), the integral of b along the rest of the ray beyond t
- * (summed block by block before the march): the rest can add at most T R gain of emission and
- * T min(1, R) of opacity, so the ray stops once T max(min(1, R), R gain) <= tol/4.  A block is
- * skipped while what it could change stays within what is left of the empty-space quarter: over a
- * length l at transmittance T it could add T b l gain of emission, T b l of opacity, and by its
- * optical depth b l dim the rest of the ray by at most T b l R gain.  X-ray mode spends half of tol
- * on skipping (its segment integrals are exact).
+ * One work-item per ray.  The ray is cut at every knot plane of the channel groups' lattices;
+ * inside a segment the field and the gradient of alpha are polynomials in t, sampled at
+ * CLW_SAMPLES points (lanes 0..7: xi = -1 + p/4 for p = 1..8, lane 8: p = 0, lane 9: 15/16 for
+ * cubics).  Optical depth and X-ray integrals are exact from those samples, the emission integral
+ * comes from adaptive Simpson with Phong-shaded q, and the tolerance is shared between quadrature,
+ * early termination and empty-space skipping: docs/raytracing.md §2 (the error budget), §4
+ * (blocks and superblocks), §5 (shading).  The field comes from the backend header
+ * (field_bspline.h or field_wavelet.h), the segment integrals from quadrature.h.
  *
  * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
  * CLW_SAMPLES samples per segment (9 or 10); CLW_JOIN when every order is >= 3; CLW_LATTICE 1 or

@@ -8,7 +8,7 @@
  * sort by tile and, within a tile, by texture: each chunk writes its splats, in splat order, at
  * its own offsets within each (tile, texture) run, so the sum is deterministic, with no
  * atomics.  Texture order within a tile keeps one footprint's texels in cache while they are
- * used (15 % faster accumulation than importance order at 5 %, 512^2).  The tiles of all of a
+ * used (docs/splatting.md §3).  The tiles of all of a
  * frame's framebuffers (layers) are numbered one after the other, so one pass bins them all. */
 #include "splat/record.h"
 

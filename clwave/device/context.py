@@ -164,7 +164,7 @@ class ComputeContext:
 
     def upload(self, host):
         """A read-only device buffer holding a copy of a (non-empty) host array, in one call
-        (``pyopencl.array.to_device`` takes ~0.1 ms per small table on PoCL)."""
+        (cheaper than ``pyopencl.array.to_device`` for the many small tables of a view)."""
         cl = _cl()
         return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                          hostbuf=np.ascontiguousarray(host))

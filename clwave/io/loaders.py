@@ -1,20 +1,8 @@
 """Read volumes from files: one :func:`load` for every supported format.
 
-Conventions (docs/coordinates.md): the returned :class:`~clwave.model.volume.Volume` holds a
-``(z, y, x)`` or ``(z, y, x, c)`` float32 array with ``spacing = (dz, dy, dx)``.
-
-Medical formats (NIfTI, NRRD, DICOM) are put in the canonical **RAS+** orientation:
-x (array axis 2) increases to the patient's Right, y (axis 1) to Anterior and
-z (axis 0) to Superior.  Each format's index -> world affine is converted to RAS
-and the array is permuted and flipped to the closest canonical orientation
-(nibabel's orientation tools, as ``nibabel.as_closest_canonical`` does); an
-oblique acquisition keeps its voxel grid and is shown axis-aligned (logged).
-Spacing is the length of the reoriented affine's columns and ``origin`` is the
-RAS position of the volume centre, so world coordinates are scanner millimetres.
-
-``.npy``, ``.raw`` and TIFF carry no orientation: array axes are taken as
-``(z, y, x)`` as stored (TIFF: page, row, column), spacing defaults to 1 and the
-origin to 0.
+The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
+(NIfTI, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
+millimetres, the others keep their array axes (docs/coordinates.md §1).
 """
 
 from __future__ import annotations

@@ -1,17 +1,6 @@
-"""Analytic test volumes: hydrogen 3d_z² orbital, Marschner–Lobb, 3-D Shepp–Logan.
-
-Each phantom is an analytic function ``g`` on its own domain cube ``[-D, D]³``
-(hydrogen: D = 18 Bohr radii; Marschner–Lobb and Shepp–Logan: D = 1), sampled
-at the *cell centres* of an ``n³`` grid, ``u_i = -D + 2D (i + 0.5) / n``.  The
-volume has voxel spacing 1.0 world unit and origin 0, so world point
-``p = (x, y, z)`` maps to domain point ``u = p · 2D/n`` and voxel ``(i, j, k)``
-(z = array axis 0) samples ``g`` at world ``(k - (n-1)/2, j - (n-1)/2, i - (n-1)/2)``.
-
-:func:`phantom` returns the sampled :class:`~clwave.model.volume.Volume`;
-:func:`analytic` returns the formula itself as ``f(points (N, 3) world x, y, z)
--> (N,) float64`` — the ground truth for line integrals.  Both evaluate the same
-float64 expressions in the same order, so ``phantom(name, n).data[i, j, k]`` is
-exactly ``analytic(name, n)(centre of voxel (i, j, k))`` rounded to float32.
+"""Analytic test volumes (hydrogen 3d_z² orbital, Marschner–Lobb, 3-D Shepp–Logan): :func:`phantom`
+samples one at the cell centres of an n³ grid of spacing 1; :func:`analytic` is the same formula
+at world points, the ground truth for line integrals (the same float64 expressions, in order).
 
 >>> vol = phantom("hydrogen", n=32)
 >>> vol.shape, vol.spacing, float(vol.data.max()) <= 1.0

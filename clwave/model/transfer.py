@@ -1,16 +1,5 @@
-"""Transfer functions: pre-classification of scalar volumes (paper §2.2).
-
-As in Gross et al. (1996), colour and opacity are assigned to the voxels
-*before* the wavelet transform: :meth:`TransferFunction.classify` turns a scalar
-volume into a 4-channel volume ``(q_R, q_G, q_B, alpha)`` that is then
-transformed, thresholded and rendered.  **Changing the transfer function
-therefore means classifying again and computing a new wavelet transform**; it
-is not a render-time setting.
-
-Units (docs/coordinates.md §3): a control point ``(value, r, g, b, opacity)``
-gives the extinction ``alpha = opacity`` per unit world length (per mm for
-medical data) and the emission ``q = (r, g, b) · alpha``, colour per unit
-optical depth, so an opaque region shows its colour.
+"""Transfer functions: pre-classification of scalar volumes to ``(q_R, q_G, q_B, alpha)`` before the
+wavelet transform (paper §2.2, docs/model.md §5), so a new transfer function means a new transform.
 
 >>> tf = TransferFunction([(0.0, 0, 0, 1, 0.0), (1.0, 1, 0, 0, 0.1)])
 >>> rgb, alpha = tf([0.5])

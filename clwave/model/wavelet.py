@@ -1,22 +1,8 @@
-"""WaveletVolume: the sparse B-spline wavelet model both renderers stand on.
+"""WaveletVolume: the sparse B-spline wavelet model both renderers stand on (docs/model.md).
 
-A volume's channels are decomposed with the CDF(j, j) spline wavelets
-(:mod:`clwave.model.bspline`) by ``pywt.wavedecn(mode="zero")``, whose coefficients
-are exactly the real-line transform of the zero-extended data (docs/model.md §3).
-The continuous model of one channel of order j (docs/model.md §4, paper eq. 12-13) is
-
-    f(x) = sum_bands sum_k c_k 2^{-3m/2} P_key(2^{-m}(x - o_m) - k)
-
-in fine-voxel coordinates ``x_a = (p_a - origin_a)/d_a + (n_a - 1)/2 + j/2``
-(docs/coordinates.md), zero outside its support.  It is evaluated directly from the
-closed-form bases, without any inverse transform.
-
-Channels that share a wavelet form one *group* with one index set
-(docs/model.md §2: thresholding keeps coefficient positions shared by all
-channels).  A group stores its coefficients sparsely as global *positions*
-into the concatenation of its bands (coarsest approximation first, then the
-details from coarse to fine) and a ``(K, channels)`` float32 value table, kept
-in ascending position order; importance order is derived on demand.
+Channels that share a wavelet form a :class:`ChannelGroup` with one index set; a group keeps its
+kept coefficients as ascending global positions into its bands (coarsest approximation first)
+and a (channels, K) float32 value table.  Importance order is derived on demand.
 """
 
 from __future__ import annotations

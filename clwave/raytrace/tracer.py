@@ -1,18 +1,9 @@
-"""Ray tracing in wavelet space (paper §3): shaded emission-absorption images under an error bound.
+"""Ray tracing in wavelet space (paper §3, docs/raytracing.md): shaded emission-absorption
+images, or line integrals, within an absolute error bound per pixel.
 
-Each pixel gets the low-albedo integral of eq. 5 in the recurrence form of eq. 17,
-computed by ``cl/raytrace/raytrace.cl``: the ray is cut at the knot planes of the B-spline
-lattices, alpha is integrated exactly per segment, ``∫ q e^{-A}`` by adaptive Simpson
-so that each output value is within ``tolerance`` (early termination included), and
-q is lit by Phong's model (eq. 4) with normals from the analytic gradient of alpha
-(eq. 14-16).  Two field backends evaluate the same field:
-
-* ``"bspline"`` (default, fast): the kept wavelet coefficients are expanded on the device
-  into fine-level B-spline grids (:mod:`clwave/raytrace/finegrid.py`), the same function in another
-  basis, and each sample reads j^3 of them per group;
-* ``"wavelet"`` (the paper's reference, §3.3): no inverse transform; each ray keeps an
-  active list of the basis functions whose supports it is in, ordered by the parameter
-  where it leaves them (``cl/raytrace/field_wavelet.h``), and sums them directly.
+:class:`RayTracer` prepares a model's field on the device with one of two backends (``"bspline"``:
+fine B-spline grids, :mod:`clwave.raytrace.finegrid`; ``"wavelet"``: per-ray active lists, the
+paper's reference) and its bounds for empty-space skipping; ``cl/raytrace/raytrace.cl`` marches.
 """
 
 from __future__ import annotations

@@ -66,8 +66,7 @@ class SplatRenderer:
         self.groups = []
         q = self.cc.queue
         # per-chunk scratch comes from a pool that keeps its buffers, and the tile lists from one
-        # buffer grown as needed, so a new view does not map (and the OS zero) fresh pages: a
-        # gigabyte of records takes a third of a second to map
+        # buffer grown as needed, so a new view does not map (and the OS zero) fresh pages
         self.scratch = MemoryPool(ImmediateAllocator(q))
         self._tile_lists = None
         for gi, g in enumerate(wv.groups):

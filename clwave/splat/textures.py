@@ -1,76 +1,9 @@
-"""Footprint textures of the B-spline wavelet prototypes (paper §4, docs/splatting.md §1-2).
+"""Footprint textures of the B-spline wavelet prototypes (paper §4, docs/splatting.md §1).
 
-The level-m basis function of subband ``key`` whose support box is centred on the world
-point X is ::
-
-    B(p) = 2^(-3m/2) prod_a P_a(2^(-m) (p_a - X_a) / d_a + S_a / 2),   a in {x, y, z}
-
-with ``P_a`` = phi = N_j (support [0, j]) or psi (support [0, 2j-1]) by the subband
-letter of axis a, ``S_a`` that support length and ``d_a`` the voxel spacing.  Its
-footprint is the X-ray of B along the view direction n, in world units::
-
-    T_{m,key}(a, b) = ∫ B(X + a u + b v + t n) dt,        T_m(a, b) = 2^(-m/2) T_0(a/2^m, b/2^m)
-
-so a coefficient c adds ``c T(mu - mu_c, nu - nu_c)`` to the X-ray image.  (n, u, v) is the
-orthonormal view frame of paper eq. 31 (docs/coordinates.md §2); world vectors are
-(x, y, z), spacings ``(dz, dy, dx)`` and subband keys are in array-axis order (z, y, x), so
-``key[2]`` is the letter of world axis x (docs/model.md §4).
-
-Two ways to sample T:
-
-* ``"fft"`` -- projection slicing (paper §4.3): the 2-D spectrum of T is the slice
-  ``F(U u + V v)`` of the 3-D spectrum ::
-
-      F(w) = det(D) 2^(3m/2) prod_a G_a(2^m d_a w_a),   G(w) = P^(w) e^(i w S/2)
-
-  Centring each 1-D factor on its support makes it real (phi, and psi of even order:
-  symmetric) or purely imaginary (psi of odd order: antisymmetric), and a function of
-  ``x`` and ``sin x`` alone: ``G_phi = (sin x / x)^j`` at ``x = w/2`` and
-  ``G_psi = 1/2 (sin^2 x / x)^j P(sin^2 x)`` at ``x = w/4``, where the taps q become a
-  Chebyshev series in ``sin x`` (``cos(n x) = (-1)^(n/2) T_n(sin x)``,
-  ``sin(n x) = (-1)^((n-1)/2) T_n(sin x)``) that psi's j vanishing moments divide by
-  ``sin^j x``.  On the grid ``x = alpha k + beta l`` is linear in the frequency indices, so
-  ``sin x`` comes from 1-D tables by the addition theorem: no complex exponential and no
-  transcendental per grid point.  One real inverse FFT (``irfft2``) of the half-spectrum
-  gives the samples of the period-W footprint.  With ``device=`` the half-spectra of
-  oblique views are sampled by an OpenCL kernel instead (``cl/splat/footprint.cl``, float32, all
-  textures in one launch; :func:`device_spectra`): on 2 CPU cores a view's footprints then
-  take half the time (hydrogen at 1 %, 512²: 0.030 -> 0.015 s).
-* ``"spatial"`` -- the exact line integral at the same samples: the sorted crossings of
-  the line with every moving axis' knot planes (integers of the phi coordinate,
-  half-integers of the psi coordinate) cut it into segments where the integrand is one
-  polynomial of degree <= 3(j - 1), integrated exactly (closed form for j <= 2,
-  Gauss-Legendre otherwise).  Exact up to rounding (:func:`line_integral`).
-
-* ``"cells"`` -- Haar, along each image axis that is a world axis (:func:`cell_axes`).  If
-  u = ±e_a, then v_a = n_a = 0 and the footprint factorises as
-  ``T(a, b) = P_a(±a / (2^m d_a) + 1/2) T2(b)`` (Haar supports are 1 long): along u it is piecewise constant with its
-  jumps on the knots of the projected support (its edges and, for psi, its midpoint), i.e.
-  2 cells, whose exact values at the cell centres, looked up by nearest sample, give it
-  exactly everywhere.  Sampled at any finer spacing, its jumps fall between samples and
-  interpolation misplaces them by up to a texel (at pixels about a voxel wide the pixel
-  centres walk slowly across the voxel faces, and the misplaced jumps leave dark stripes).
-  The other axis, if it is not a world axis too, is sampled like ``"spatial"`` (T2 has kinks
-  there, no jumps).  The texture's sampling says which axes are cells: ``"cells"`` (both,
-  2 x 2 values), ``"cells-u"`` (2 columns, sampled rows) or ``"cells-v"`` (2 rows, sampled
-  columns).
-
-``"auto"`` uses FFT for order >= 3 and the spatial sampling for Haar and linear, whose
-footprints have jumps or kinks at axis-aligned views where the band-limited FFT footprint
-rings (docs/splatting.md §1).  (The splat renderer's "auto" takes ``"cells"`` for Haar wherever
-:func:`cell_axes` allows it.)
-
-Sampling (paper eq. 33-38, docs/splatting.md §1, the per-type rectangular texture): along u the period
-is the tight projected width of the support box, ``W_u = 2^m sum_a |u_a| S_a d_a`` (so the
-periodic copies only touch where T = 0), likewise along v, and ::
-
-    N_u = ceil(2^(m+1) omega / dw_u + 1),   dw_u = 2 pi d_min / W_u(m=0),   omega = max(omega_s, omega_min / 2^m)
-
-rounded up to an even ``scipy.fft.next_fast_len``.  The texel spacing is then about
-``pi d_min / omega``: omega_s sets one world resolution for all levels (eq. 35/36), and
-omega_min keeps the band of every texture, in prototype units, at least omega_min (the
-FFT footprint's accuracy, see :data:`DEFAULT_OMEGA_MIN`).  A texture holds the ``N + 1``
-samples of the closed box ``[-W_u/2, W_u/2] x [-W_v/2, W_v/2]``.
+:func:`footprints` samples ``T_{m,key}(a, b)``, the X-ray of one basis function along the view
+direction, for every band of a view: by projection slicing (``"fft"``, :mod:`clwave.splat.spectral`),
+as exact line integrals (``"spatial"``, :mod:`clwave.splat.spatial`), or, for Haar along a world
+axis, as its exact cells (``"cells"``).
 
 Examples
 --------
@@ -367,7 +300,7 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         return Texture(np.ascontiguousarray(data), h_u, h_v, cu, cv, name, m, key)
 
     # numpy and pocketfft release the GIL: textures in parallel, largest first, where the
-    # work outweighs the threads' overhead (measured on 2 cores: a gain from ~1e5 texels)
+    # work outweighs the threads' overhead (from about 1e5 texels)
     if len(jobs) > 1 and cores() > 1 and sum(job[2][0] * job[3][0] for job in jobs) >= 1 << 17:
         workers = 1
         jobs.sort(key=lambda job: -job[2][0] * job[3][0])
