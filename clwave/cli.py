@@ -26,15 +26,20 @@ class _Parser(argparse.ArgumentParser):
         raise InputError(f"{message} (see `{self.prog} --help`)")
 
 
-def _numbers(text, name, counts, kind=float) -> tuple:
-    """Comma-separated numbers, e.g. ``--spacing 2,1,1``; ``counts`` lists the lengths allowed."""
+DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
+DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
+
+
+def _numbers(text, name, counts, kind=float, sep=",") -> tuple:
+    """Numbers separated by ``sep``, e.g. ``--spacing 2,1,1``; ``counts`` lists the lengths allowed."""
     try:
-        values = tuple(kind(v) for v in str(text).split(","))
+        values = tuple(kind(v) for v in str(text).split(sep))
     except ValueError:
         values = ()
     if len(values) not in counts:
         allowed = " or ".join(str(c) for c in counts)
-        raise InputError(f"{name} {text!r} must be {allowed} comma-separated numbers")
+        words = "comma-separated numbers" if sep == "," else f"numbers separated by {sep!r}"
+        raise InputError(f"{name} {text!r} must be {allowed} {words}")
     return values
 
 
@@ -46,23 +51,27 @@ def _add_input_options(p):
     g.add_argument("--byte-order", choices=["<", ">"], help=".raw only: little (<) or big (>) endian")
     g.add_argument("--spacing", help="voxel spacing DZ,DY,DX (or one number); overrides the file")
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
-    g.add_argument("--subtract", type=float, default=0.0, help="value subtracted so outside is ~0 (air, water)")
+    g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water)")
     g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
 
 
-def _add_model_options(p, default_tf=None):
-    g = p.add_argument_group("wavelet model")
-    g.add_argument("--wavelet", default="cubic",
-                   help="haar, linear, quadratic or cubic; or one per channel, comma-separated")
-    g.add_argument("--levels", type=int, default=3, help="decomposition levels (default 3)")
+def _add_model_options(p):
+    from .model.transfer import TransferFunction
+
+    g = p.add_argument_group("wavelet model (from a volume; a .clw input is a model already)")
+    g.add_argument("--wavelet", help=f"haar, linear, quadratic or cubic; or one per channel, comma-separated "
+                                     f"(default {DEFAULT_WAVELET})")
+    g.add_argument("--levels", type=int, help=f"decomposition levels (default {DEFAULT_LEVELS})")
     k = g.add_mutually_exclusive_group()
-    k.add_argument("--keep", type=float, help="fraction of voxels kept as coefficients, (0, 1]")
+    k.add_argument("--keep", type=float, help=f"fraction of voxels kept as coefficients, (0, 1] (default "
+                                              f"{DEFAULT_KEEP} for a volume; 1 keeps every coefficient)")
     k.add_argument("--threshold", type=float, help="keep coefficients above this importance")
     g.add_argument("--focus", help="local level of detail: world centre X,Y,Z (needs --sigma)")
     g.add_argument("--sigma", type=float, help="local level of detail: Gaussian width (world units)")
     g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
-    g.add_argument("--tf", default=default_tf, help="classify with a transfer-function preset first")
-    g.add_argument("--tf-window", default=None, help="transfer-function window: auto or LO,HI")
+    g.add_argument("--tf", help="classify with a transfer-function preset first: "
+                                + ", ".join(TransferFunction.PRESETS))
+    g.add_argument("--tf-window", help="transfer-function window: auto or LO,HI")
 
 
 def read_volume(args):
@@ -84,45 +93,86 @@ def read_volume(args):
     if series is not None and series.isdigit():
         series = int(series)
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
-                series=series, background=args.subtract, hu_to_mu=args.hu_to_mu)
+                series=series, background=args.subtract or 0.0, hu_to_mu=args.hu_to_mu)
 
 
-def build_model(args, log=print):
-    """Read, classify (``--tf``), decompose and threshold as the options say.
+#: options that make a model from a volume, and so cannot apply to a .clw input (a model already)
+VOLUME_ONLY = ("tf", "tf_window", "wavelet", "levels", "interpolate", "spacing", "shape", "dtype", "byte_order",
+               "series", "subtract", "hu_to_mu")
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _thresholding(args) -> dict:
+    """``threshold()`` arguments from ``--keep``, ``--threshold``, ``--focus``/``--sigma``, checked before any work."""
+    if args.keep is not None and not (np.isfinite(args.keep) and 0 < args.keep <= 1):
+        raise InputError(f"--keep {args.keep:g} must be a fraction of the voxels in (0, 1], e.g. 0.05 for 5 %")
+    if args.threshold is not None and not (np.isfinite(args.threshold) and args.threshold >= 0):
+        raise InputError(f"--threshold {args.threshold:g} must be a finite importance >= 0")
+    focus = None
+    if args.focus is not None or args.sigma is not None:
+        if args.focus is None or args.sigma is None:
+            raise InputError("--focus X,Y,Z and --sigma S go together")
+        if not (np.isfinite(args.sigma) and args.sigma > 0):
+            raise InputError(f"--sigma {args.sigma:g} must be a positive world length")
+        if args.keep is None and args.threshold is None and args.input.lower().endswith(".clw"):
+            raise InputError("--focus selects where detail is kept: give --keep or --threshold too")
+        focus = (_numbers(args.focus, "--focus", (3,)), args.sigma)
+    return dict(keep=args.keep, threshold=args.threshold, focus=focus)
+
+
+def build_model(args, log=print, rgba=False):
+    """Read, classify (``--tf``), decompose and threshold as the options say; every option is
+    checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
 
     Returns ``(wavelet_volume, reference_volume)``; the reference is the volume the
     model approximates (None when the input was already a ``.clw`` file).
     """
     from .model.transfer import TransferFunction
-    from .model.wavelet import WaveletVolume
+    from .model.wavelet import WaveletVolume, check_decomposition
 
-    focus = None
-    if args.focus is not None or args.sigma is not None:
-        if args.focus is None or args.sigma is None:
-            raise InputError("--focus X,Y,Z and --sigma S go together")
-        focus = (_numbers(args.focus, "--focus", (3,)), args.sigma)
+    thresholding = _thresholding(args)
     if args.input.lower().endswith(".clw"):
-        wv, reference = WaveletVolume.open(args.input), None
-    else:
-        vol = read_volume(args)
-        tf = None
-        if args.tf:
-            window = args.tf_window
-            if window not in (None, "auto"):
-                window = _numbers(window, "--tf-window", (2,))
-            tf = TransferFunction.preset(args.tf, window=window).resolved(vol)  # records an "auto" window
-            vol = tf.classify(vol)
-        wavelet = args.wavelet.split(",") if "," in args.wavelet else args.wavelet
-        start = time.perf_counter()
-        wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=args.levels,
-                                       interpolate=args.interpolate, transfer_function=tf)
-        log(f"decomposed {vol.shape} x {vol.channels} channel(s) in {time.perf_counter() - start:.2f} s")
-        reference = vol
-    if args.keep is not None or args.threshold is not None:
-        wv = wv.threshold(keep=args.keep, threshold=args.threshold, focus=focus)
-    elif focus is not None:
-        raise InputError("--focus selects where detail is kept: give --keep or --threshold too")
-    return wv, reference
+        given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)]
+        if given:
+            raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
+                             f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")
+        wv = WaveletVolume.open(args.input)
+        if rgba and wv.channels != 4:
+            raise InputError(f"shaded ray tracing needs a classified (RGBA) model, {args.input} has {wv.channels} "
+                             f"channel(s): compress the volume with --tf PRESET, or render line integrals with --xray")
+        if args.keep is not None or args.threshold is not None:
+            wv = wv.threshold(**thresholding)
+        return wv, None
+    vol = read_volume(args)
+    tf = None
+    if args.tf:
+        window = args.tf_window
+        if window not in (None, "auto"):
+            window = _numbers(window, "--tf-window", (2,))
+        tf = TransferFunction.preset(args.tf, window=window)
+    elif args.tf_window is not None:
+        raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
+    if rgba and tf is None and vol.channels != 4:
+        raise InputError(f"shaded ray tracing needs an RGBA volume (4 channels), {args.input} has {vol.channels}: "
+                         f"classify it with --tf PRESET ({', '.join(TransferFunction.PRESETS)}), or render line "
+                         f"integrals with --xray")
+    wavelet = args.wavelet or DEFAULT_WAVELET
+    wavelet = wavelet.split(",") if "," in wavelet else wavelet
+    wavelet, levels = check_decomposition(vol.shape, 4 if tf else vol.channels, wavelet,
+                                          DEFAULT_LEVELS if args.levels is None else args.levels)
+    if tf is not None:
+        tf = tf.resolved(vol)  # records an "auto" window
+        vol = tf.classify(vol)
+    start = time.perf_counter()
+    wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
+                                   transfer_function=tf)
+    log(f"decomposed {vol.shape} x {vol.channels} channel(s) in {time.perf_counter() - start:.2f} s")
+    if args.keep is None and args.threshold is None:
+        thresholding["keep"] = DEFAULT_KEEP
+    return wv.threshold(**thresholding), vol
 
 
 def _check_output(path, force):
@@ -174,27 +224,45 @@ def cmd_compress(args):
     start = time.perf_counter()
     wv.save(out, overwrite=args.force)
     saved = time.perf_counter() - start
-    size = out.stat().st_size
-    raw = int(np.prod(wv.shape)) * wv.channels * 4
-    print(f"shape (z, y, x)       {wv.shape} x {wv.channels} channel(s), spacing {wv.spacing}")
-    print(f"wavelet, levels       {', '.join(dict.fromkeys(wv.wavelets))}, {wv.levels}")
-    print(f"coefficients kept     {wv.kept:,} of {int(np.prod(wv.shape)):,} voxels")
-    print(f"compression           {100 * wv.compression:.2f} %")
-    print(f"file size             {size:,} bytes ({100 * size / raw:.2f} % of raw float32), "
-          f"written in {saved:.2f} s to {out}")
+    size, voxels = out.stat().st_size, wv.n_voxels
+    source, source_bytes = _input_size(args.input, wv)
+    print(f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z), "
+          f"{wv.channels} channel(s), {_bytes(source_bytes)} {source}")
+    print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} levels, "
+          f"{wv.kept:,} coefficients = {100 * wv.kept / voxels:.2f} % of the voxels")
+    print(f"file                  {out}: {_bytes(size)}, {source_bytes / size:.1f}:1 against the input "
+          f"({100 * size / source_bytes:.2f} % of it), written in {saved:.2f} s")
     if reference is not None:
-        rec = wv.reconstruct().data
-        error = np.linalg.norm(rec - reference.data) / max(np.linalg.norm(reference.data), 1e-30)
-        print(f"relative L2 error     {error:.3e}")
+        error = np.sqrt(np.mean((wv.reconstruct().data - reference.data) ** 2))
+        peak = max(float(np.max(np.abs(reference.data))), np.finfo(np.float32).tiny)
+        print(f"error                 RMS {error:.3g} over the voxels = {error / peak:.2e} of the largest value "
+              f"(PSNR {20 * np.log10(peak / max(error, 1e-30)):.1f} dB)")
     return 0
+
+
+def _input_size(spec, wv) -> tuple:
+    """``(what, bytes)`` of the input: its files on disk, or a phantom's raw float32 size."""
+    path = Path(spec)
+    if spec.startswith("phantom:") or not path.exists():
+        return "as raw float32", wv.n_voxels * wv.channels * 4
+    files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
+    return "on disk", sum(p.stat().st_size for p in files)
+
+
+def _bytes(n) -> str:
+    for unit in ("bytes", "KB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:,.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
 
 
 def _camera_options(p):
     g = p.add_argument_group("view")
     g.add_argument("--azimuth", type=float, default=30.0, help="degrees (default 30)")
     g.add_argument("--elevation", type=float, default=20.0, help="degrees (default 20)")
-    g.add_argument("--size", default="512", help="image size: N or HxW (default 512)")
-    g.add_argument("--extent", type=float, help="world width of the image (default: fits every view)")
+    g.add_argument("--size", default="512", help="image size: N or HxW, e.g. 512 or 300x400 (default 512)")
+    g.add_argument("--extent", type=float, help="world width of the image (default: the non-empty part of the "
+                                                 "volume fills the image, the same at every view)")
     g.add_argument("--window", dest="display_window", default="auto", help="PNG window: auto or LO,HI")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
@@ -221,7 +289,7 @@ def _raytrace_options(p):
 def make_camera(args):
     from .model.camera import Camera
 
-    size = _numbers(args.size.replace("x", ","), "--size", (1, 2), int)
+    size = _numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
     perspective = dict(perspective=True, distance=args.distance, fov=args.fov) \
         if getattr(args, "perspective", False) else {}
     return Camera(args.azimuth, args.elevation, size if len(size) == 2 else size[0], extent=args.extent,
@@ -268,10 +336,13 @@ def cmd_render(args):
         raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
     if args.method == "raytrace" and args.coarse is not None:
         raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
-    wv, _ = build_model(args)
+    if not (np.isfinite(args.tolerance) and args.tolerance > 0):
+        raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
+    lights, window = _lights(args), _display_window(args)
+    wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray)
     if args.method == "raytrace":
         tracer = RayTracer(wv, device=args.device, field=args.field)
-        options = dict(tolerance=args.tolerance, lights=_lights(args), shading=not args.no_shading,
+        options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
                        absorption=not args.xray)
 
         def render(cam):
@@ -283,15 +354,18 @@ def cmd_render(args):
             return splat(wv, cam, renderer=renderer)
     if args.turntable is None:
         result = render(camera)
-        result.save(out, window=_display_window(args), background=background, overwrite=args.force)
+        result.save(out, window=window, background=background, overwrite=args.force)
     else:
         results = [render(camera.rotated(360.0 * i / args.turntable)) for i in range(args.turntable)]
-        window = _display_window(args)
         if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
             window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
         _write_gif(out, [r.to_uint8(window, background) for r in results], 0.1, args.force)
         result = results[0]
         result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
+        size = f"{camera.size[0]}x{camera.size[1]}"
+        seconds = result.meta["turntable_seconds"]
+        print(f"turntable of {len(results)} views at {size} in {sum(seconds):.3f} s ({np.median(seconds):.3f} s a "
+              f"view, median); the first view:")
     if args.raw:
         result.save(args.raw, overwrite=args.force)
     if args.stats:
@@ -331,8 +405,12 @@ def cmd_progressive(args):
     if args.stats:
         _check_output(args.stats, args.force)
     camera = make_camera(args)
-    wv, _ = build_model(args)
     steps = 8 if args.steps is None and args.budget is None else args.steps
+    if steps is not None and steps < 1:
+        raise InputError(f"--steps {steps} must be a whole number of frames >= 1")
+    if args.budget is not None and not (np.isfinite(args.budget) and args.budget > 0):
+        raise InputError(f"--budget {args.budget:g} must be a positive number of seconds")
+    wv, _ = build_model(args)
     frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device,
                               omega_s=args.omega_s, coarse=args.coarse))
     window = _display_window(args)
@@ -351,9 +429,9 @@ def cmd_progressive(args):
         text = json.dumps(dict(frames=figures, meta=frames[-1].meta), indent=2, default=str).encode()
         write_atomic(args.stats, lambda fh: fh.write(text), args.force)
     for f in figures:
-        print(f"frame {f['index']}: {f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} %), "
-              f"energy missing {1 - f['energy']:.2e}, {f['seconds']:.3f} s, RMS error {f['rms_error']:.3e}, "
-              f"max error {f['max_error']:.3e}")
+        print(f"frame {f['index']}: {f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} % of those kept, "
+              f"{100 * f['voxel_fraction']:.3f} % of the voxels), {f['seconds']:.3f} s; error against the final image: "
+              f"RMS {f['relative_rms_error']:.2e}, max {f['relative_max_error']:.2e} of its largest value")
     return 0
 
 
@@ -409,7 +487,7 @@ def main(argv=None) -> int:
         args = make_parser().parse_args(argv)
         return args.run(args)
     except ClwaveError as exc:
-        print(f"clwave: error: {exc}", file=sys.stderr)
+        print(f"clwave: error: {exc.cli_message()}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("clwave: interrupted", file=sys.stderr)

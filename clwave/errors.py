@@ -6,7 +6,18 @@ any :class:`ClwaveError`; library users can catch the specific subclasses.
 
 
 class ClwaveError(Exception):
-    """Base class: a user-facing problem with a one-line, actionable message."""
+    """Base class: a user-facing problem with a one-line, actionable message.
+
+    A message that names an API argument (``series=``) can say it in the command line's words
+    too (``cli``: ``--series``), which the command line prints instead.
+    """
+
+    def __init__(self, message, *, cli=None):
+        super().__init__(message)
+        self.cli = cli
+
+    def cli_message(self) -> str:
+        return self.cli or str(self)
 
 
 class InputError(ClwaveError, ValueError):

@@ -24,8 +24,8 @@ def test_axis_view_is_not_mirrored():
 def test_pixel_centres_and_default_extent():
     vol = Volume(np.zeros((4, 6, 8)), spacing=(3.0, 2.0, 1.0), origin=(1.0, 2.0, 3.0))
     view = Camera(0, 0, (10, 20)).view(vol)
-    extent = np.sqrt(8 ** 2 + 12 ** 2 + 12 ** 2)
-    assert view.pixel == pytest.approx(extent / 20)
+    diameter = np.sqrt(8 ** 2 + 12 ** 2 + 12 ** 2)  # an empty volume: the sphere around its voxel box
+    assert view.pixel == pytest.approx(diameter / 10)  # fills the shorter side, 10 pixels
     centres = view.pixel_centres()
     assert centres.shape == (10, 20, 3)
     # top-left pixel centre: target + (0.5 - W/2) p u + (H/2 - 0.5) p v
@@ -41,3 +41,25 @@ def test_bad_views_are_one_line_errors(kwargs):
     with pytest.raises(InputError) as err:
         Camera(**kwargs)
     assert "\n" not in str(err.value)
+
+
+def test_default_view_frames_the_non_empty_region_at_every_azimuth():
+    data = np.zeros((32, 40, 48), np.float32)
+    data[4:12, 20:30, 2:10] = 1.0  # content in a corner: x 2..9, y 20..29, z 4..11 (voxel indices)
+    vol = Volume(data, spacing=(1.0, 2.0, 0.5), origin=(5.0, -3.0, 1.0))
+    lo, hi = vol.content_box()
+    corners = vol.voxel_to_world(np.array([[3.5, 19.5, 1.5], [11.5, 29.5, 9.5]]))  # voxel faces
+    assert np.allclose(lo, corners.min(axis=0)) and np.allclose(hi, corners.max(axis=0))
+    diameter = np.linalg.norm(hi - lo)
+    inside = vol.voxel_to_world(np.argwhere(data > 0))
+    for az in (0, 33, 90, 200):
+        view = Camera(az, 25, (60, 80)).view(vol)
+        assert np.allclose(view.target, (lo + hi) / 2)
+        assert view.pixel * 60 == pytest.approx(diameter)  # the bounding sphere across the shorter side
+        px = view.to_pixels(inside)  # every non-empty voxel lands in the image
+        assert px.min() >= -0.5 and px[:, 0].max() <= 79.5 and px[:, 1].max() <= 59.5
+    # the model remembers the content of the volume it was made from, and so does its .clw file
+    from clwave.model.wavelet import WaveletVolume
+    wv = WaveletVolume.from_volume(vol, levels=1).threshold(keep=0.2)
+    assert np.allclose(wv.content_box()[0], lo) and np.allclose(wv.content_box()[1], hi)
+    assert Camera(33, 25, 64).view(wv).pixel == pytest.approx(Camera(33, 25, 64).view(vol).pixel)

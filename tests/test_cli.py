@@ -26,12 +26,15 @@ def test_compress_phantom_report_and_file(tmp_path, capsys):
     code, out, err = run(capsys, "compress", "phantom:hydrogen:32", "--tf", "hydrogen", "--levels", "2",
                          "--keep", "0.05", "-o", str(target))
     assert code == 0, err
-    for label in ("shape", "levels", "coefficients kept", "compression", "file size", "relative L2 error"):
-        assert label in out
+    lines = {line.split()[0]: line for line in out.splitlines()}
+    assert {"input", "model", "file", "error"} <= set(lines)
     wv = WaveletVolume.open(target)
     assert wv.channels == 4 and wv.kept == round(0.05 * 32 ** 3) and wv.transfer_function["name"] == "hydrogen"
-    error = float(out.split("relative L2 error")[1].split()[0])
-    assert 0 < error < 1
+    assert "32 x 32 x 32 voxels" in lines["input"] and f"{wv.kept:,} coefficients = 5.00 %" in lines["model"]
+    raw, size = 32 ** 3 * 4 * 4, target.stat().st_size  # the phantom's classified float32 RGBA
+    assert f"{raw / size:.1f}:1 against the input" in lines["file"]
+    error = float(lines["error"].split(" = ")[1].split()[0])  # relative to the largest value
+    assert 0 < error < 0.1
 
 
 def test_existing_output_is_not_replaced(tmp_path, capsys):
@@ -46,8 +49,9 @@ def test_existing_output_is_not_replaced(tmp_path, capsys):
 def test_compress_a_clw_again(tmp_path, capsys):
     first, second = tmp_path / "a.clw", tmp_path / "b.clw"
     assert run(capsys, "compress", "phantom:shepp-logan:16", "--levels", "1", "-o", str(first))[0] == 0
-    code, out, err = run(capsys, "compress", str(first), "--keep", "0.1", "-o", str(second))
-    assert code == 0 and WaveletVolume.open(second).kept == round(0.1 * 16 ** 3)
+    assert WaveletVolume.open(first).kept == round(0.05 * 16 ** 3)  # the default keeps 5 % of the voxels
+    code, out, err = run(capsys, "compress", str(first), "--keep", "0.02", "-o", str(second))
+    assert code == 0 and WaveletVolume.open(second).kept == round(0.02 * 16 ** 3)
 
 
 @pytest.mark.parametrize("argv, needle", [
@@ -179,7 +183,7 @@ def test_progressive_gif_folder_and_stats(tmp_path, capsys):
     (["render", "phantom:hydrogen:16", "--size", "-4"], "size"),
     (["progressive", "phantom:hydrogen:16", "--steps", "0"], "steps"),
     (["progressive", "phantom:hydrogen:16", "--budget", "0"], "budget"),
-    (["render", "phantom:hydrogen:16", "--levels", "1", "--method", "raytrace"], "classify it first"),
+    (["render", "phantom:hydrogen:16", "--levels", "1", "--method", "raytrace"], "--tf PRESET"),
     (["render", "phantom:hydrogen:16", "--levels", "1", "--method", "raytrace", "--tf", "hydrogen",
       "--tolerance", "0"], "tolerance"),
     (["render", "phantom:hydrogen:16", "--perspective"], "--method raytrace"),
@@ -191,3 +195,50 @@ def test_render_mistakes(tmp_path, capsys, argv, needle):
     target = tmp_path / ("o.png" if argv[0] == "render" else "o.gif")
     code, out, err = run(capsys, *argv, "-o", str(target))
     assert code == 2 and err.count("\n") == 1 and needle in err and not target.exists()
+
+
+def test_model_options_on_a_clw_input_are_errors_that_name_them(tmp_path, capsys):
+    model = tmp_path / "m.clw"
+    assert run(capsys, "compress", "phantom:hydrogen:16", "--levels", "1", "-o", str(model))[0] == 0
+    for option in (["--tf", "mri"], ["--wavelet", "haar"], ["--levels", "2"], ["--spacing", "2"],
+                   ["--subtract", "1"], ["--tf", "mri", "--levels", "2"]):
+        code, out, err = run(capsys, "render", str(model), *option, "--size", "8", "-o", str(tmp_path / "x.png"))
+        named = [flag for flag in option if flag.startswith("--")]
+        assert code == 2 and all(flag in err for flag in named) and ".clw" in err and err.count("\n") == 1
+    assert not (tmp_path / "x.png").exists()
+    # a scalar model cannot be ray traced shaded: the message names the command line's way out
+    code, out, err = run(capsys, "render", str(model), "--method", "raytrace", "-o", str(tmp_path / "x.png"))
+    assert code == 2 and "--xray" in err and "absorption=" not in err
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--keep", "5"], "--keep"),
+    (["--levels", "9"], "--levels 9"),
+    (["--method", "raytrace"], "--tf PRESET"),
+    (["--method", "raytrace", "--tf", "hydrogen", "--light", "10"], "--light"),
+    (["--method", "raytrace", "--tf", "hydrogen", "--tolerance", "0"], "--tolerance"),
+    (["--size", "abc"], "separated by 'x'"),
+    (["--focus", "1,2,3", "--sigma", "-1"], "--sigma"),
+])
+def test_options_are_checked_before_any_work(tmp_path, capsys, monkeypatch, argv, needle):
+    def no_work(*args, **kwargs):
+        raise AssertionError("the model was built before the options were checked")
+
+    monkeypatch.setattr(WaveletVolume, "from_volume", no_work)
+    code, out, err = run(capsys, "render", "phantom:hydrogen:16", *argv, "-o", str(tmp_path / "x.png"))
+    assert code == 2 and needle in err and err.count("\n") == 1
+
+
+def test_defaults_compress_and_are_shown(capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "400")  # argparse would wrap "ct-bone" at its hyphen
+    with pytest.raises(SystemExit):
+        main(["compress", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "default 0.05" in text and "default cubic" in text and "default 3" in text
+    assert all(name in text for name in ("ct-bone", "mri", "hydrogen", "grey"))  # the presets
+
+
+def test_turntable_summary_gives_the_whole_job(tmp_path, capsys):
+    code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "--turntable", "3",
+                         "-o", str(tmp_path / "t.gif"))
+    assert code == 0 and "turntable of 3 views" in out and "a view, median" in out

@@ -24,7 +24,7 @@ def clean_env(monkeypatch):
 
 @pytest.mark.parametrize("request_, expected", [
     ("auto", "1:0"), (None, "1:0"), ("gpu", "1:0"), ("cpu", "0:0"), ("1:1", "1:1"), ("1", "1:0"),
-    ("0:0", "0:0"), ("t4", "1:1"), ("portable", "0:0"), ("NVIDIA", "1:0"),
+    ("0:0", "0:0"), ("t4", "1:1"), ("portable", "0:0"), ("NVIDIA", "1:0"), ("pocl", "0:0"), ("PoCL", "0:0"),
 ])
 def test_device_requests(request_, expected):
     assert select_device(request_, FAKE).id == expected

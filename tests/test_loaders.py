@@ -260,7 +260,7 @@ def test_dicom_sagittal_series_lands_in_ras(tmp_path, rng):
     assert vol.spacing == pytest.approx((0.5, 0.25, 2.0))
 
 
-def test_dicom_two_series_need_series_argument(tmp_path, rng):
+def test_dicom_two_series_need_series_argument(tmp_path, rng, capsys):
     uid_a, uid_b = generate_uid(), generate_uid()
     stored_a = write_series(tmp_path, rng, axial(0.0, 1.0, 2.0, 3.0), uid_a,
                             ["a1", "a2", "a3", "a4"], description="soft tissue", number=1)
@@ -280,6 +280,14 @@ def test_dicom_two_series_need_series_argument(tmp_path, rng):
     np.testing.assert_array_equal(by_uid.data, (stored_a * 2.0 - 1024)[:, ::-1, ::-1])
     with pytest.raises(InputError):
         load(tmp_path, series=2)
+    # the command line says it with its own flag, and one slice file points to the series' folder
+    from clwave.cli import main
+    assert main(["compress", str(tmp_path), "-o", str(tmp_path / "out.clw")]) == 2
+    err = capsys.readouterr().err
+    assert "--series INDEX" in err and "series=" not in err and err.count("\n") == 1
+    (tmp_path / "a1").rename(tmp_path / "a1.dcm")
+    assert main(["compress", str(tmp_path / "a1.dcm"), "-o", str(tmp_path / "out.clw")]) == 2
+    assert "pass the folder" in capsys.readouterr().err
 
 
 def test_dicom_duplicate_positions_refused(tmp_path, rng):

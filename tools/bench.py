@@ -19,7 +19,7 @@ per second of accumulation.
 1e-3 over ``--raytrace-views`` views, per path: the B-spline path at ``--raytrace-image``
 (512²); the wavelet-space path (active lists, the paper's reference) for volumes up to
 ``--wavelet-max-size`` (128³) at ``--wavelet-image`` (256²), timed on its
-``--wavelet-crop`` (64²) centre crop, with an estimate for the whole image; error against a
+``--wavelet-crop`` (32²) centre crop, with an estimate for the whole image; error against a
 float64 render at tolerance 1e-5 of the 64x64 centre crop; set-up (expansion) apart.
 ``progressive``: frames of 1, 2, 4 and 8 % of the voxels (``--progressive-keep`` 0.08 in 4
 doubling steps) at 512², single resolution and with coarse framebuffers (``coarse=2e-2``); per

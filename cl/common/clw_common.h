@@ -8,8 +8,9 @@
 #endif
 
 /* The constants shared with the host (clwave/device/constants.py) come as build defines:
- * CLW_TILE (splat image tiles), CLW_MAX_LIGHTS, CLW_BLOCK and CLW_SUPER (ray-tracer blocks). */
-#if !defined(CLW_TILE) || !defined(CLW_MAX_LIGHTS) || !defined(CLW_BLOCK) || !defined(CLW_SUPER)
+ * CLW_TILE (splat image tiles, pixels), CLW_MAX_LIGHTS, CLW_BLOCK and CLW_SUPER_CELLS (the edges of the
+ * ray tracer's blocks and superblocks, in fine cells). */
+#if !defined(CLW_TILE) || !defined(CLW_MAX_LIGHTS) || !defined(CLW_BLOCK) || !defined(CLW_SUPER_CELLS)
 #error "build with the shared constants of clwave/device/constants.py (clwave.device.programs.build)"
 #endif
 

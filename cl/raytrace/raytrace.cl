@@ -70,7 +70,7 @@ inline real block_exit(const real *x0, const real *dd, const real *inv, const in
     return texit;
 }
 
-/* The bounds on |field| for skipping and R: per CLW_BLOCK^3 block, and per superblock of CLW_SUPER^3
+/* The bounds on |field| for skipping and R: per CLW_BLOCK^3 block, and per superblock of CLW_SUPER_CELLS^3
  * fine cells the largest of those; a superblock bounded by at most `coarse` is one region */
 typedef struct {
     __global const float *block, *super;
@@ -87,8 +87,8 @@ inline real region_bound(const real *x0, const real *dd, const real *inv, const 
 {
     int4 b;
     if (!(tn <= *fine_end)) {
-        const real sb = block_bound(R->super, R->super_origin, R->super_shape, xm, CLW_SUPER, &b);
-        const real sexit = fmax(block_exit(x0, dd, inv, b, CLW_SUPER, t1), tn);
+        const real sb = block_bound(R->super, R->super_origin, R->super_shape, xm, CLW_SUPER_CELLS, &b);
+        const real sexit = fmax(block_exit(x0, dd, inv, b, CLW_SUPER_CELLS, t1), tn);
         if (sb <= R->coarse) {
             *end = sexit;
             return sb;
@@ -117,7 +117,7 @@ inline real2 simpson_pair(const real8 v, const real first)
  *                    (bit 0 terminated early, bit 1 Simpson depth limit reached)
  *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
  *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
- *   super_bound, super_origin, super_shape  the largest of those per superblock of CLW_SUPER^3 fine cells
+ *   super_bound, super_origin, super_shape  the largest of those per superblock of CLW_SUPER_CELLS^3 fine cells
  *   coarse_bound superblocks bounded by at most this are one region for skipping and R
  *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates
  *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;

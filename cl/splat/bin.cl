@@ -1,6 +1,6 @@
 /* cl/splat/bin.cl: project splats and bin them into image tiles (paper §4, docs/splatting.md §2).
  *
- * Pipeline (host: clwave/splat/renderer.py): splat_project -> splat_chunk_tiles counting (per chunk
+ * Pipeline (host: clwave/splat/stages.py): splat_project -> splat_chunk_tiles counting (per chunk
  * of consecutive splats, a count per tile and texture) -> transpose_counts -> exclusive scan
  * of the counts in (tile, texture, chunk) order -> tile_ranges -> transpose_counts ->
  * splat_chunk_tiles placing.  Each chunk keeps its own counts together (chunk-major), so a
@@ -15,7 +15,7 @@
 /* splat_project: centre, pixel box and tile count of each splat.
  *
  * The bands of one frame are drawn into one or more framebuffers (layers: the image's pixel, or
- * coarser ones, clwave.splat.Layer), each cut into its own tiles; a splat's texture says which.
+ * coarser ones, clwave.splat.coarse.Layer), each cut into its own tiles; a splat's texture says which.
  *
  * Parameters
  *   n            number of splats in this chunk

@@ -1,6 +1,6 @@
 /* footprint.cl: half-spectra of footprint textures by Fourier projection slicing (paper §4.3,
  * eq. 32; docs/splatting.md §1), many textures in one launch.  The host (clwave/splat/textures.py) inverts
- * each with a real 2-D FFT; its NumPy twin is footprint._Axis.
+ * each with a real 2-D FFT; its NumPy twin is clwave.splat.spectral._Axis.
  *
  * Texture t's spectrum is the slice F(U u + V v) at U = c du (column c = 0 .. nu/2) and
  * V = kv dv (row r in numpy.fft.fftfreq order: kv = r in the first half, r - nv after).  Per world axis a, with
@@ -48,7 +48,7 @@ inline float16 axis_factor(const float16 x, const int psi, __constant const floa
  *   out        out float2: texture t's (rows, 16 x blocks) spectrum from 16 x its first work-item
  *                  (columns past nu/2 are padding)
  * Grid: each texture's rows x blocks work-items rounded up to whole work-groups, one texture
- * per group; the local size is the one group_tex was made for (footprint.SPECTRUM_GROUP). */
+ * per group; the local size is the one group_tex was made for (clwave.splat.spectral.SPECTRUM_GROUP). */
 __kernel void footprint_spectra(__global const int *group_tex, __global const int4 *tex_size,
                                 __global const float8 *tex_rate, __constant const float *poly,
                                 __global float *out)

@@ -3,7 +3,7 @@
  * CLW_TILE^2 / CLW_PX items per tile, the tile's splats in batches of CLW_BATCH through local memory. */
 #include "splat/raster.h"
 #ifndef CLW_PX
-#define CLW_PX 1
+#error "build with CLW_PX, the pixels per work-item (clwave.splat.stages.GPU_PIXELS)"
 #endif
 #ifndef CLW_BATCH
 #define CLW_BATCH 64

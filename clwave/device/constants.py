@@ -12,7 +12,7 @@ SUPER = 4        #: and its superblocks SUPER^3 blocks, crossed in one step wher
 
 def defines() -> dict:
     """The ``CLW_*`` build defines of the shared constants."""
-    return dict(CLW_TILE=TILE, CLW_MAX_LIGHTS=MAX_LIGHTS, CLW_BLOCK=BLOCK, CLW_SUPER=BLOCK * SUPER)
+    return dict(CLW_TILE=TILE, CLW_MAX_LIGHTS=MAX_LIGHTS, CLW_BLOCK=BLOCK, CLW_SUPER_CELLS=BLOCK * SUPER)
 
 
 def record_uint4s(channels: int) -> int:

@@ -121,12 +121,16 @@ def select_device(request=None, devices=None) -> DeviceInfo:
         parts = [int(p) if p else 0 for p in key.split(":")]
         p_idx, d_idx = parts[0], (parts[1] if len(parts) > 1 else 0)
         matches = [d for d in devices if (d.platform_index, d.device_index) == (p_idx, d_idx)]
-    else:
+    else:  # a substring of the platform or device name; "pocl" names PoCL's platform
+        key = _ALIASES.get(key, key)
         matches = [d for d in devices if key in f"{d.platform} {d.name}".lower()]
     if not matches:
         known = "; ".join(f"{d.id} {d.platform} / {d.name} ({d.kind})" for d in devices)
         raise DeviceNotFoundError(f"no OpenCL device matches {req!r}; available: {known}")
     return min(matches, key=_auto_rank)
+
+
+_ALIASES = {"pocl": "portable computing language"}
 
 
 def _is_index(key: str) -> bool:

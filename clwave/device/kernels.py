@@ -3,7 +3,7 @@
 A :class:`Kernel` lists a kernel's arguments in the order of its OpenCL signature, each with
 its type: a NumPy scalar type, a ``pyopencl.cltypes`` vector type (given any sequence of up to
 its length, zero-padded), :data:`BUFFER`, or :data:`REAL` (the build's precision).
-Launches name every argument (``PROJECT(ks, queue, (n,), None, n=n, first=0, ...)``), so a
+Launches name every argument (``KERNEL(ks, queue, (n,), None, n=n, first=0, ...)``), so a
 renderer and the kernel's test call the same declaration and an argument cannot slip position.
 Constants that both sides use come from :mod:`clwave.device.constants` as build defines.
 """

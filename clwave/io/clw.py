@@ -25,15 +25,15 @@ def write_clw(wv: WaveletVolume, path, overwrite=False) -> Path:
                   spacing=wv.spacing, origin=wv.origin, levels=wv.levels,
                   channels=wv.channels, interpolate=wv.interpolate,
                   focus=None if wv.focus is None else [list(wv.focus[0]), wv.focus[1]],
-                  transfer_function=wv.transfer_function,
-                  groups=[dict(wavelet=g.wavelet.order, channels=list(g.channels), kept=g.kept)
-                          for g in wv.groups])
+                  transfer_function=wv.transfer_function, content=wv.content,
+                  groups=[dict(wavelet=g.wavelet.order, channels=list(g.channels)) for g in wv.groups])
     arrays = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)}
     for gi, g in enumerate(wv.groups):
+        stored = np.any(g.values != 0, axis=0)  # a zero coefficient adds nothing: it is not stored
         mask = np.zeros(g.total, dtype=bool)
-        mask[g.all_positions()] = True
+        mask[g.all_positions()[stored]] = True
         arrays[f"mask{gi}"] = np.packbits(mask)
-        arrays[f"values{gi}"] = np.ascontiguousarray(g.values, dtype=np.float32)
+        arrays[f"values{gi}"] = np.ascontiguousarray(g.values[:, stored], dtype=np.float32)
     return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays), overwrite)
 
 
@@ -69,6 +69,6 @@ def read_clw(path) -> WaveletVolume:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, header["channels"],
                    interpolate=header["interpolate"],
                    focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
-                   transfer_function=header["transfer_function"])
+                   transfer_function=header["transfer_function"], content=header.get("content"))
     except (KeyError, ValueError, TypeError, InputError) as exc:
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None

@@ -144,6 +144,9 @@ def _kind(path: Path) -> str:
     suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
     if not path.exists():
         raise FileFormatError(f"no file or folder at {path}; supported inputs: {SUPPORTED}")
+    if suffix in (".dcm", ".ima"):
+        raise FileFormatError(f"{path} is one DICOM slice; pass the folder that holds the whole series "
+                              f"({path.parent})")
     if suffix not in _FILE_KINDS:
         raise FileFormatError(f"unknown file type {suffix or '(no extension)'!r} of {path}; "
                               f"supported inputs: {SUPPORTED}")
@@ -155,8 +158,9 @@ def _reject_unused(kind, **options):
     given = [name for name, value in options.items() if value is not None]
     if given:
         needs = "DICOM folders" if "series" in given else ".raw files"
-        raise InputError(f"{'=, '.join(given)}= only apply to {needs}; leave them out for "
-                         f"a {kind} input")
+        raise InputError(f"{'=, '.join(given)}= only apply to {needs}; leave them out for a {kind} input",
+                         cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only apply to {needs}; "
+                             f"leave them out for a {kind} input")
 
 
 @contextmanager
@@ -455,16 +459,18 @@ def _pick_series(folder, groups, series):
     if series is None and len(uids) == 1:
         return uids[0], groups[uids[0]]
     listing = "; ".join(
-        f"[{i}] {u} '{getattr(groups[u][0][1], 'SeriesDescription', '')}' ({len(groups[u])} slices)"
-        for i, u in enumerate(uids))
+        f"[{i}] {u} '{getattr(groups[u][0][1], 'SeriesDescription', '')}' "
+        f"({len(groups[u])} slice{'s' if len(groups[u]) != 1 else ''})" for i, u in enumerate(uids))
     if series is None:
-        raise InputError(f"{folder} holds {len(uids)} DICOM series: {listing}; "
-                         "pick one with series=<index or SeriesInstanceUID>")
+        found = f"{folder} holds {len(uids)} DICOM series: {listing}; pick one with "
+        raise InputError(found + "series=<index or SeriesInstanceUID>",
+                         cli=found + "--series INDEX or --series SERIES_INSTANCE_UID")
     if isinstance(series, (int, np.integer)) and 0 <= series < len(uids):
         return uids[series], groups[uids[series]]
     if str(series) in groups:
         return str(series), groups[str(series)]
-    raise InputError(f"series={series!r} matches none of the DICOM series in {folder}: {listing}")
+    raise InputError(f"series={series!r} matches none of the DICOM series in {folder}: {listing}",
+                     cli=f"--series {series} matches none of the DICOM series in {folder}: {listing}")
 
 
 def _dicom_pixels(path):

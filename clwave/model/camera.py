@@ -11,6 +11,7 @@ images are not mirrored.  Pixel ``(row r, col c)`` has its centre at
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import product
 
 import numpy as np
 
@@ -58,10 +59,11 @@ class Camera:
     size : int or (H, W)
         Image size in pixels.
     target : (x, y, z), optional
-        World point at the image centre; default the volume centre.
+        World point at the image centre; default the centre of the content's bounding sphere.
     extent : float, optional
-        World width of the image; default the diameter of the sphere around the
-        volume's voxel box, so every view fits.
+        World width of the image; default the content's bounding sphere fills the image's
+        shorter side, the same at every view (a turntable keeps its framing).  The content is
+        where the model (or volume) is non-zero (``content_box()``), else its voxel box.
     perspective, distance, fov :
         Perspective projection (ray tracing): eye at ``target + distance * n``,
         vertical field of view ``fov`` degrees.
@@ -99,10 +101,13 @@ class Camera:
     def view(self, volume) -> View:
         """Resolve against a volume-like object (``shape``, ``spacing``, ``origin``)."""
         n, u, v = self.basis()
-        (nz, ny, nx), (dz, dy, dx) = volume.shape, volume.spacing
-        target = np.asarray(volume.origin, float) if self.target is None else np.asarray(self.target)
-        extent = self.extent or float(np.sqrt((nx * dx) ** 2 + (ny * dy) ** 2 + (nz * dz) ** 2))
         H, W = self.size
+        lo, hi = _content_box(volume)
+        target = (lo + hi) / 2.0 if self.target is None else np.asarray(self.target)
+        # the sphere about the target holding the content box, across the image's shorter side
+        corners = np.array(list(product(*zip(lo, hi))))
+        radius = float(np.max(np.linalg.norm(corners - target, axis=1)))
+        extent = self.extent or 2.0 * radius * W / min(H, W)
         distance = self.distance or 2.0 * extent
         return View(n, u, v, target, (H, W), extent / W, self.perspective,
                     target + distance * n, self.fov)
@@ -136,3 +141,12 @@ def _vector(value, name) -> np.ndarray:
     if arr.shape != (3,) or not np.all(np.isfinite(arr)):
         raise InputError(f"{name}={value!r} must be three finite numbers (x, y, z)")
     return arr
+
+
+def _content_box(volume) -> tuple:
+    """World ``(lo, hi)`` of a volume-like object's content, or of its voxel box."""
+    box = volume.content_box() if hasattr(volume, "content_box") else None
+    if box is not None:
+        return np.asarray(box[0], float), np.asarray(box[1], float)
+    half = np.array(volume.shape[::-1], float) * np.array(volume.spacing[::-1], float) / 2.0
+    return np.asarray(volume.origin, float) - half, np.asarray(volume.origin, float) + half

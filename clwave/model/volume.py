@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from .geometry import fine_to_world, world_to_fine
 
 MAX_CHANNELS = 4
 
@@ -92,17 +93,24 @@ class Volume:
 
     def voxel_to_world(self, index_zyx) -> np.ndarray:
         """World points (N, 3) as (x, y, z) of fractional voxel indices (N, 3) as (i, j, k)."""
-        idx = np.asarray(index_zyx, float)[..., ::-1]
-        n = np.array(self.shape[::-1], float)
-        d = np.array(self.spacing[::-1], float)
-        return np.asarray(self.origin) + (idx - (n - 1) / 2) * d
+        return fine_to_world(index_zyx, 0, self.shape, self.spacing, self.origin)
 
     def world_to_voxel(self, points_xyz) -> np.ndarray:
         """Fractional voxel indices (N, 3) as (i, j, k) of world points (N, 3) as (x, y, z)."""
-        p = np.asarray(points_xyz, float)
-        n = np.array(self.shape[::-1], float)
-        d = np.array(self.spacing[::-1], float)
-        return ((p - np.asarray(self.origin)) / d + (n - 1) / 2)[..., ::-1]
+        return world_to_fine(points_xyz, 0, self.shape, self.spacing, self.origin)
+
+    def content_box(self):
+        """World (x, y, z) corners ``(lo, hi)`` of the voxels with a non-zero value, each voxel a
+        box of its spacing (``None`` when every voxel is zero)."""
+        occupied = np.any(self.data != 0, axis=3) if self.data.ndim == 4 else self.data != 0
+        ends = []
+        for axis in range(3):
+            hit = np.flatnonzero(np.any(occupied, axis=tuple(a for a in range(3) if a != axis)))
+            if not len(hit):
+                return None
+            ends.append((hit[0] - 0.5, hit[-1] + 0.5))
+        corners = self.voxel_to_world(np.array(ends).T)  # (2, 3): the first and the last corner
+        return corners.min(axis=0), corners.max(axis=0)
 
     def __repr__(self):
         return (f"Volume(shape={self.shape}, channels={self.channels}, "

@@ -101,7 +101,7 @@ class WaveletVolume:
     """
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
-                 focus=None, transfer_function=None):
+                 focus=None, transfer_function=None, content=None):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
@@ -111,6 +111,8 @@ class WaveletVolume:
         self.interpolate = bool(interpolate)
         self.focus = focus  # ((x, y, z), sigma) used by threshold, or None
         self.transfer_function = transfer_function  # JSON-safe dict, or None
+        # world (lo, hi) of the source volume's non-zero voxels: the default framing (Camera)
+        self.content = None if content is None else tuple(tuple(float(c) for c in corner) for corner in content)
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -134,8 +136,7 @@ class WaveletVolume:
         """
         if not isinstance(volume, Volume):
             volume = Volume(volume)
-        wavelets = _channel_wavelets(wavelet, volume.channels)
-        levels = _check_levels(levels, volume.shape)
+        wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
         tf = transfer_function.to_dict() if hasattr(transfer_function, "to_dict") else transfer_function
         groups = []
         for wav in dict.fromkeys(wavelets):
@@ -143,7 +144,7 @@ class WaveletVolume:
             bands, values = decompose(volume, wav, chans, levels, interpolate, progress_bar)
             groups.append(ChannelGroup(wav, chans, bands, None, values))
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
-                   interpolate=interpolate, transfer_function=tf)
+                   interpolate=interpolate, transfer_function=tf, content=volume.content_box())
 
     # ------------------------------------------------------------- properties
     @property
@@ -176,6 +177,11 @@ class WaveletVolume:
     def __repr__(self):
         return (f"WaveletVolume(shape={self.shape}, wavelets={self.wavelets}, levels={self.levels}, "
                 f"kept={self.kept}, compression={self.compression:.4f})")
+
+    def content_box(self):
+        """World (x, y, z) corners ``(lo, hi)`` of the non-zero voxels of the volume the model was made
+        from (:meth:`Volume.content_box`), or None where that is not known."""
+        return None if self.content is None else (np.array(self.content[0]), np.array(self.content[1]))
 
     # ----------------------------------------------------------- importance
     def importance(self, group: ChannelGroup) -> np.ndarray:
@@ -227,19 +233,20 @@ class WaveletVolume:
             raise InputError(f"threshold={threshold} must be a finite number >= 0")
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
                             interpolate=self.interpolate, focus=_check_focus(focus),
-                            transfer_function=self.transfer_function)
+                            transfer_function=self.transfer_function, content=self.content)
         budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
         for g in self.groups:
             positions = g.all_positions()
             imp = out.importance(g)
-            n_approx = g.band_slices()[0].stop  # the approximation band ranks first
+            live = np.flatnonzero(np.any(g.values != 0, axis=0))  # a zero coefficient is never kept
+            in_approx = live < g.band_slices()[0].stop  # the approximation band ranks first
+            approx, detail = live[in_approx], live[~in_approx]
             if budget is None:
-                chosen = np.concatenate([np.arange(n_approx), n_approx + np.flatnonzero(imp[n_approx:] > threshold)])
-            elif budget <= n_approx:
-                chosen = _top(imp[:n_approx], budget)
+                chosen = np.concatenate([approx, detail[imp[detail] > threshold]])
+            elif budget <= len(approx):
+                chosen = approx[_top(imp[approx], budget)]
             else:
-                rest = min(budget - n_approx, len(positions) - n_approx)
-                chosen = np.concatenate([np.arange(n_approx), n_approx + _top(imp[n_approx:], rest)])
+                chosen = np.concatenate([approx, detail[_top(imp[detail], budget - len(approx))]])
             chosen.sort()
             out.groups.append(ChannelGroup(g.wavelet, g.channels, g.bands, positions[chosen],
                                            np.ascontiguousarray(g.values[:, chosen])))
@@ -247,7 +254,8 @@ class WaveletVolume:
 
     # ------------------------------------------------------- upload views
     def ranked(self, group: int = 0) -> CoefficientTable:
-        """The group's coefficients sorted by importance (approximation band first)."""
+        """The group's coefficients by decreasing importance across all bands, ties by position: the
+        order splatting draws them in and progressive refinement adds them."""
         return self._ranked[group]
 
     @cached_property
@@ -256,8 +264,7 @@ class WaveletVolume:
         for g in self.groups:
             positions = g.all_positions()
             imp = self.importance(g)
-            approx = positions < g.bands[0].size
-            order = np.lexsort((positions, -imp, ~approx))  # approx first, then importance, ties by position
+            order = np.lexsort((positions, -imp))
             band_no, index = g.locate(positions[order])
             levels = np.array([b.level for b in g.bands], dtype=np.int8)
             codes = np.array([b.code for b in g.bands], dtype=np.uint8)
@@ -352,6 +359,12 @@ class WaveletVolume:
 # ---------------------------------------------------------------- helpers
 
 
+def check_decomposition(shape, channels, wavelet, levels) -> tuple:
+    """``(wavelet of each channel, levels)``, checked for a volume of ``shape`` and ``channels``
+    before any work (:meth:`WaveletVolume.from_volume` takes the same arguments)."""
+    return _channel_wavelets(wavelet, channels), _check_levels(levels, shape)
+
+
 def _channel_wavelets(wavelet, channels) -> list:
     if isinstance(wavelet, (list, tuple)):
         if len(wavelet) != channels:
@@ -364,8 +377,8 @@ def _channel_wavelets(wavelet, channels) -> list:
 def _check_levels(levels, shape) -> int:
     top = max_levels(shape)
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or not 0 <= levels <= top:
-        raise InputError(f"levels={levels!r} is not possible for shape {shape}: use an integer "
-                         f"from 0 to {top} (floor(log2(shortest axis)) - 1)")
+        why = f"is not possible for shape {shape}: use an integer from 0 to {top} (floor(log2(shortest axis)) - 1)"
+        raise InputError(f"levels={levels!r} {why}", cli=f"--levels {levels} {why}")
     return int(levels)
 
 

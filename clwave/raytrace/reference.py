@@ -14,6 +14,7 @@ import numpy as np
 from numpy.polynomial import chebyshev
 
 from ..device.constants import BLOCK, SUPER
+from ..model.geometry import world_to_fine_affine
 from .quadrature import sample_points
 from .tracer import SIMPSON_DEPTH, Phong, RayTracer, light_direction
 
@@ -36,8 +37,7 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     gain = (phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0
     regions = _Regions(tr.block_bound.get(), tr.occ_origin, tr.super_bound_host, tr.super_origin,
                        tr.coarse_bound(tolerance))
-    scale = 1.0 / np.array(wv.spacing[::-1], float)
-    offset = -np.asarray(wv.origin) * scale + (np.array(wv.shape[::-1], float) - 1) / 2 + orders[0] / 2
+    scale, offset = world_to_fine_affine(orders[0], wv.shape, wv.spacing, wv.origin)
     xi = sample_points(3 * (max(orders) - 1))  # the kernel's points (the field is the same polynomial)
     n_samples = len(xi)
     out = np.zeros((H, W, 4 if absorption else wv.channels))

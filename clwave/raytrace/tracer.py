@@ -222,8 +222,8 @@ class RayTracer:
             raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
         if absorption and wv.channels != 4:
             raise InputError(f"emission-absorption ray tracing needs an RGBA volume (4 channels), this one has "
-                             f"{wv.channels}; classify it first (TransferFunction.classify, or --tf on the "
-                             f"command line), or pass absorption=False for line integrals")
+                             f"{wv.channels}; classify it first (TransferFunction.classify), or pass "
+                             f"absorption=False for line integrals")
         if precision not in ("single", "double"):
             raise InputError(f"precision={precision!r} must be 'single' or 'double'")
         if precision == "double" and not cc.queue.device.double_fp_config:

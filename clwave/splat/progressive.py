@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from ..model.camera import Camera
 from ..errors import InputError
+from ..io.result import RenderResult
 from .renderer import SplatRenderer
 from ..model.wavelet import WaveletVolume
 
@@ -35,12 +37,18 @@ class _FinalImage:
 
 @dataclass
 class ProgressiveFrame:
-    """One refinement step: ``image`` (H, W, C) after ``coefficients`` splats."""
+    """One refinement step: ``image`` (H, W, C) after ``coefficients`` splats, ``fraction`` of the
+    model's kept coefficients and ``voxel_fraction`` of its voxels.
+
+    Errors are against the final image (every kept coefficient): absolute, and relative to the
+    final image's largest magnitude.  :meth:`save` writes the frame as :meth:`RenderResult.save` does.
+    """
 
     index: int
     image: np.ndarray
     coefficients: int
     fraction: float
+    voxel_fraction: float
     energy: float
     seconds: float
     meta: dict = field(default_factory=dict)
@@ -62,11 +70,32 @@ class ProgressiveFrame:
     def max_error(self) -> float:
         return float(np.max(np.abs(self.error_image())))
 
+    @property
+    def relative_rms_error(self) -> float:
+        """RMS error over the final image's largest magnitude."""
+        return self.rms_error / self._final_peak()
+
+    @property
+    def relative_max_error(self) -> float:
+        return self.max_error / self._final_peak()
+
+    def _final_peak(self) -> float:
+        return max(float(np.max(np.abs(self.final_image()))), np.finfo(np.float32).tiny)
+
     def figures(self) -> dict:
         """The per-frame figures as plain numbers (JSON-ready)."""
         return dict(index=self.index, coefficients=self.coefficients, fraction=self.fraction,
-                    energy=self.energy, seconds=self.seconds, rms_error=self.rms_error,
-                    max_error=self.max_error)
+                    voxel_fraction=self.voxel_fraction, energy=self.energy, seconds=self.seconds,
+                    rms_error=self.rms_error, max_error=self.max_error, relative_rms_error=self.relative_rms_error,
+                    relative_max_error=self.relative_max_error)
+
+    def result(self) -> RenderResult:
+        """The frame as a :class:`~clwave.RenderResult` (its image and meta)."""
+        return RenderResult(self.image, self.meta)
+
+    def save(self, path, **options) -> Path:
+        """Write the frame: ``.png``, ``.npy`` or ``.json``, options as :meth:`RenderResult.save`."""
+        return self.result().save(path, **options)
 
 
 def schedule(total: int, steps: int) -> list:
@@ -120,7 +149,7 @@ def _frames(r: SplatRenderer, camera: Camera, steps, budget):
         image = acc.image()
         if done == total:
             final.image = image
-        yield ProgressiveFrame(index, image, done, done / max(total, 1),
+        yield ProgressiveFrame(index, image, done, done / max(total, 1), done / r.wv.n_voxels,
                                float(energy[done - 1] / energy[-1]) if done and energy[-1] > 0 else 0.0,
                                time.perf_counter() - start,
                                acc.meta(time.perf_counter() - start), final)

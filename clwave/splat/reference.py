@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..device.constants import TILE
+from ..model.geometry import world_to_fine
 from .tables import LINEAR_U, LINEAR_V
 
 
@@ -154,7 +155,7 @@ def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, layers
     return np.concatenate([fb.reshape(-1, 4) for fb in fbs])
 
 
-def line_integrals(coeffs, order, spacing, origin, view):
+def exact_xray(coeffs, order, spacing, origin, view):
     """Exact X-ray image of the fine-level spline ``sum_i c_i N_j(x - i)`` (float64).
 
     ``coeffs`` (nz, ny, nx[, C]) are the fine B-spline coefficients (``reconstruct()``
@@ -171,8 +172,7 @@ def line_integrals(coeffs, order, spacing, origin, view):
     d = np.array(spacing[::-1], float)
     H, W = view.size
     starts = view.pixel_centres().reshape(-1, 3)
-    # fine coordinates x_a = (p_a - origin_a)/d_a + (n_a - 1)/2 + j/2 along p = start + t n
-    x0 = (starts - np.asarray(origin)) / d + (shape - 1) / 2 + order / 2
+    x0 = world_to_fine(starts, order, c.shape[:3], spacing, origin)[:, ::-1]  # (x, y, z), along p = start + t n
     w = np.asarray(view.n) / d
     g = (3 * (order - 1)) // 2 + 1
     nodes, weights = np.polynomial.legendre.leggauss(g)

@@ -15,6 +15,7 @@ from ..device import programs
 from ..device.constants import TILE, record_uint4s
 from ..device.kernels import BUFFER, Kernel
 
+GPU_PIXELS = 1  # pixels per work-item of raster_gpu.cl (CLW_PX)
 U32, I32 = np.uint32, np.int32
 _PROJECT = Kernel("splat_project", ("n", U32), ("first", U32), ("coef", BUFFER), ("band_tex", BUFFER),
                   ("band_origin", BUFFER), ("step_col", BUFFER), ("step_row", BUFFER), ("tex_box", BUFFER),
@@ -63,10 +64,13 @@ class Stages:
     def __init__(self, cc, channels: int, variant=None):
         self.cc, self.channels = cc, channels
         self.variant = variant or ("gpu" if cc.info.kind == "GPU" else "cpu")
-        self.kernels = programs.build(cc, ["splat/bin.cl", f"splat/raster_{self.variant}.cl"],
-                                      dict(CLW_CHANNELS=channels, CLW_RECORD=record_uint4s(channels)))
+        defines = dict(CLW_CHANNELS=channels, CLW_RECORD=record_uint4s(channels))
+        if self.variant == "gpu":
+            defines["CLW_PX"] = GPU_PIXELS
+        self.kernels = programs.build(cc, ["splat/bin.cl", f"splat/raster_{self.variant}.cl"], defines)
         self.record_bytes = 16 * record_uint4s(channels)
-        self.accumulate_local = TILE * TILE if self.variant == "gpu" else 1
+        # work-items per tile: one on CPUs (raster_cpu.cl), TILE^2 / GPU_PIXELS on GPUs
+        self.accumulate_local = TILE * TILE // GPU_PIXELS if self.variant == "gpu" else 1
         # binning chunks: on a CPU one work-item per group, so the few chunks spread over the cores
         self.bin_local = None if cc.info.kind == "GPU" else (1,)
         self._scan = ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")

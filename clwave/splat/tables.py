@@ -31,7 +31,7 @@ CELL_REFINE = 8
 #: Cubic textures keep the bounding box of their samples above this fraction of their peak
 #: (paper Fig. 9).  Near the edges of the projected support box, where only the support's corners
 #: project, a cubic footprint is vanishingly small (its B-spline tails meet there to high order):
-#: at 1e-4 a third of the pixel updates go (docs/benchmarks.md §3) while 64^3 at 128^2 (every
+#: at 1e-4 a third of the pixel updates go (docs/splatting.md §1) while 64^3 at 128^2 (every
 #: coefficient) stays 3.3e-4 of the image maximum from the exact line integrals, as untrimmed
 #: (1e-3 would double that).  Haar and linear footprints fall linearly
 #: to their box edges and are not trimmed.
