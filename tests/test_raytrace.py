@@ -10,7 +10,7 @@ import clwave
 from clwave.raytrace.reference import raytrace_reference
 from clwave.device.constants import SUPER
 from clwave.model.geometry import world_to_fine
-from clwave.raytrace.bounds import occupancy, superblocks
+from clwave.raytrace.bounds import content_cells, occupancy, superblocks
 from clwave.raytrace.quadrature import sample_points, sample_tables
 from clwave.raytrace.tracer import Phong, RayTracer
 from clwave.splat.reference import exact_xray
@@ -404,8 +404,13 @@ def test_wavelet_block_bounds_hold_the_field():
     bound = tracer.block_bound.get()
     rng = np.random.default_rng(0)
     pts = (rng.random((4000, 3)) - 0.5) * np.array([16.0, 12.0, 12.0])
-    vals = np.abs(wv.evaluate(pts)).max(axis=1)
-    blk = np.floor(world_to_fine(pts, 4, wv.shape, wv.spacing, wv.origin) / 8).astype(int) - tracer.occ_origin
+    fine = world_to_fine(pts, 4, wv.shape, wv.spacing, wv.origin)  # (z, y, x)
+    # the field the tracer renders: the model where the volume's content reaches, else empty
+    cell = np.floor(fine).astype(int) - tracer.content_origin
+    reached = np.all((cell >= 0) & (cell < tracer.content_cells.shape), axis=1)
+    reached[reached] = tracer.content_cells[tuple(cell[reached].T)] > 0
+    vals = np.abs(wv.evaluate(pts)).max(axis=1) * reached
+    blk = np.floor(fine / 8).astype(int) - tracer.occ_origin
     inside = np.all((blk >= 0) & (blk < bound.shape), axis=1)
     assert vals[~inside].max(initial=0.0) == 0.0
     assert np.all(vals[inside] <= bound[tuple(blk[inside].T)] * (1 + 1e-6))
@@ -437,3 +442,49 @@ def test_normals_equal_the_normalised_finite_difference_gradient(small_rgba, sma
     ref = raytrace_reference(wv, cam, tracer=tracer, **kw)
     assert np.abs(ref[..., :3]).max() > 0.05
     assert np.max(np.abs(got - ref)) <= 1e-5  # the same algorithm: as close as the analytic-normal reference
+
+
+def classified_ball(n=32, radius=9.0):
+    """An RGBA ball with a sharp edge in an empty margin (a classified scan's shape)."""
+    z, y, x = np.mgrid[:n, :n, :n] - (n - 1) / 2
+    inside = (x ** 2 + 1.3 * y ** 2 + 0.8 * z ** 2) < radius ** 2
+    alpha = np.where(inside, 0.15 + 0.05 * np.sin(x / 3.0), 0.0)
+    return clwave.Volume(np.stack([alpha * 0.9, alpha * 0.6, alpha * 0.3, alpha], -1).astype(np.float32))
+
+
+def test_empty_space_stays_empty_and_is_skipped_with_a_thresholded_model():
+    """Truncated wavelets ring where the classified volume is zero; the tracer renders no haze there
+    (docs/raytracing.md §4) and skips it as fast as for the full model."""
+    vol = classified_ball()
+    full = clwave.WaveletVolume.from_volume(vol, "cubic", levels=2)
+    thin = full.threshold(keep=0.05)
+    points = vol.voxel_to_world(np.argwhere(vol.content_mask() == 0))
+    assert thin.evaluate(points)[:, 3].max() > 1e-3  # the model itself rings in the empty margin
+    cam = clwave.Camera(30, 20, size=48)
+    a, b = (RayTracer(wv).render(cam, tolerance=1e-4) for wv in (full, thin))
+    empty = np.all(a.image == 0, axis=2)  # rays that meet none of the content
+    assert 0.2 < empty.mean() < 0.9 and np.all(b.image[empty] == 0)
+    assert b.meta["segments"] <= 1.05 * a.meta["segments"]
+    # without the content known (an interpolating model, or an older file) the haze is there
+    thin.content_mask = None
+    assert RayTracer(thin).render(cam, tolerance=1e-4).image[empty].max() > 1e-3
+
+
+@pytest.mark.parametrize("wavelets", ["cubic", "linear", ["cubic", "cubic", "cubic", "haar"]])
+def test_content_cells_are_where_a_non_zero_voxel_reaches(wavelets):
+    rng = np.random.default_rng(2)
+    data = np.zeros((10, 11, 12, 4), np.float32)
+    data[rng.random((10, 11, 12)) < 0.01] = 1.0
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelets, levels=1)
+    origin, shape = np.array([-5, -3, -6]), np.array([20, 20, 24])
+    cells = content_cells(wv, origin, shape)
+    j0 = wv.groups[0].wavelet.order
+    voxels = np.argwhere(wv.content_mask)
+    expected = np.zeros(tuple(shape), bool)
+    for g in wv.groups:  # voxel k's B-spline covers grid-0 fine cells [k + s, k + j + s), s = (j0 - j) / 2
+        s, j = (j0 - g.wavelet.order) / 2, g.wavelet.order
+        for k in voxels:
+            lo = np.floor(k + s).astype(int) - origin
+            hi = np.ceil(k + j + s).astype(int) - origin
+            expected[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
+    assert np.array_equal(cells > 0, expected)

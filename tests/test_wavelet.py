@@ -264,3 +264,5 @@ def test_zero_coefficients_are_never_kept_or_stored(tmp_path, wavelet):
     assert np.all(np.any(back.groups[0].values != 0, axis=0))
     assert back.kept == np.count_nonzero(np.any(wv.groups[0].values != 0, axis=0))
     assert np.array_equal(back.reconstruct().data, wv.reconstruct().data)
+    # the source's content travels with the model: its non-zero voxels and their box
+    assert np.array_equal(back.content_mask, data != 0) and np.array_equal(back.content_box(), wv.content_box())

@@ -100,6 +100,16 @@ inline real region_bound(const real *x0, const real *dd, const real *inv, const 
     return bb;
 }
 
+/* whether the grid-0 fine cell holding x is reached by a non-zero voxel of the source volume
+ * (clwave.raytrace.bounds.content_cells); cells outside the table are not */
+inline bool reached(__global const uchar *content, const int4 origin, const int4 shape, const real3 x)
+{
+    const int4 k = convert_int4((real4)(floor(x), 0)) - origin;
+    if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= shape.x || k.y >= shape.y || k.z >= shape.z)
+        return false;
+    return content[((size_t)k.z * shape.y + k.y) * shape.x + k.x] != 0;
+}
+
 /* (S4, S2): Simpson's rule over [-1, 1] on 4 and on 2 panels, from the values at xi = -1 + p/4,
  * p = 1..8 in the lanes of v and p = 0 in `first` */
 inline real2 simpson_pair(const real8 v, const real first)
@@ -118,6 +128,8 @@ inline real2 simpson_pair(const real8 v, const real first)
  *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
  *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
  *   super_bound, super_origin, super_shape  the largest of those per superblock of CLW_SUPER_CELLS^3 fine cells
+ *   content, content_origin, content_shape  CLW_CONTENT builds: per grid-0 fine cell, 1 where the source
+ *                volume's content reaches; the segments of other cells are empty (docs/raytracing.md §4)
  *   coarse_bound superblocks bounded by at most this are one region for skipping and R
  *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates
  *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;
@@ -140,6 +152,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                        FIELD_PARAMS,
                        __global const float *bound, const int4 occ_origin, const int4 occ_shape,
                        __global const float *super_bound, const int4 super_origin, const int4 super_shape,
+                       __global const uchar *content, const int4 content_origin, const int4 content_shape,
                        const real coarse_bound,
                        const float4 box_lo, const float4 box_hi,
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
@@ -275,6 +288,13 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             replan = true;
             continue;
         }
+#ifdef CLW_CONTENT
+        if (tn > t && !reached(content, content_origin, content_shape, xm)) { /* no content reaches: empty */
+            t = tn;
+            step_planes(x0, dd, inv, tn, h, plane, tp);
+            continue;
+        }
+#endif
         if (tn > t) {
             Segment S;
             Basis basis[CLW_GROUPS];

@@ -28,6 +28,8 @@ def write_clw(wv: WaveletVolume, path, overwrite=False) -> Path:
                   transfer_function=wv.transfer_function, content=wv.content,
                   groups=[dict(wavelet=g.wavelet.order, channels=list(g.channels)) for g in wv.groups])
     arrays = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)}
+    if wv.content_mask is not None:
+        arrays["content_mask"] = np.packbits(wv.content_mask)
     for gi, g in enumerate(wv.groups):
         stored = np.any(g.values != 0, axis=0)  # a zero coefficient adds nothing: it is not stored
         mask = np.zeros(g.total, dtype=bool)
@@ -69,6 +71,14 @@ def read_clw(path) -> WaveletVolume:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, header["channels"],
                    interpolate=header["interpolate"],
                    focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
-                   transfer_function=header["transfer_function"], content=header.get("content"))
+                   transfer_function=header["transfer_function"], content=header.get("content"),
+                   content_mask=_content_mask(arrays, shape))
     except (KeyError, ValueError, TypeError, InputError) as exc:
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None
+
+
+def _content_mask(arrays, shape):
+    """The source volume's non-zero voxels (:attr:`WaveletVolume.content_mask`), where the file has them."""
+    if "content_mask" not in arrays:
+        return None
+    return np.unpackbits(arrays["content_mask"], count=int(np.prod(shape))).astype(bool).reshape(shape)

@@ -99,10 +99,14 @@ class Volume:
         """Fractional voxel indices (N, 3) as (i, j, k) of world points (N, 3) as (x, y, z)."""
         return world_to_fine(points_xyz, 0, self.shape, self.spacing, self.origin)
 
+    def content_mask(self) -> np.ndarray:
+        """(nz, ny, nx) bool: the voxels with a non-zero value in some channel."""
+        return np.any(self.data != 0, axis=3) if self.data.ndim == 4 else self.data != 0
+
     def content_box(self):
         """World (x, y, z) corners ``(lo, hi)`` of the voxels with a non-zero value, each voxel a
         box of its spacing (``None`` when every voxel is zero)."""
-        occupied = np.any(self.data != 0, axis=3) if self.data.ndim == 4 else self.data != 0
+        occupied = self.content_mask()
         ends = []
         for axis in range(3):
             hit = np.flatnonzero(np.any(occupied, axis=tuple(a for a in range(3) if a != axis)))

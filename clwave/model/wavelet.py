@@ -101,7 +101,7 @@ class WaveletVolume:
     """
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
-                 focus=None, transfer_function=None, content=None):
+                 focus=None, transfer_function=None, content=None, content_mask=None):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
@@ -113,6 +113,9 @@ class WaveletVolume:
         self.transfer_function = transfer_function  # JSON-safe dict, or None
         # world (lo, hi) of the source volume's non-zero voxels: the default framing (Camera)
         self.content = None if content is None else tuple(tuple(float(c) for c in corner) for corner in content)
+        # (nz, ny, nx) bool: the source volume's non-zero voxels, beyond whose B-splines the approximating
+        # model of every coefficient is zero (docs/raytracing.md §4); None where not known
+        self.content_mask = content_mask
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -144,7 +147,8 @@ class WaveletVolume:
             bands, values = decompose(volume, wav, chans, levels, interpolate, progress_bar)
             groups.append(ChannelGroup(wav, chans, bands, None, values))
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
-                   interpolate=interpolate, transfer_function=tf, content=volume.content_box())
+                   interpolate=interpolate, transfer_function=tf, content=volume.content_box(),
+                   content_mask=None if interpolate else volume.content_mask())
 
     # ------------------------------------------------------------- properties
     @property
@@ -233,7 +237,8 @@ class WaveletVolume:
             raise InputError(f"threshold={threshold} must be a finite number >= 0")
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
                             interpolate=self.interpolate, focus=_check_focus(focus),
-                            transfer_function=self.transfer_function, content=self.content)
+                            transfer_function=self.transfer_function, content=self.content,
+                            content_mask=self.content_mask)
         budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
         for g in self.groups:
             positions = g.all_positions()

@@ -5,6 +5,7 @@ them, and their maxima per superblock."""
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d
 
 from ..device.constants import BLOCK, SUPER
 from ..model.geometry import band_lattice
@@ -75,13 +76,54 @@ def block_sums(wv: WaveletVolume, weights):
             # prefix differences of sums >= 0; rounding can leave them a hair below zero
             part = np.maximum(upper - lower, 0.0) * _broadcast(k_hi >= k_lo, axis)
         sums += part
+    return sums, origin, clip_box(sums, origin)
+
+
+def clip_box(sums, origin) -> tuple:
+    """``(lo, hi)`` (x, y, z) in grid-0 fine coordinates around the blocks with a non-zero sum."""
     idx = np.argwhere(sums > 0)
+    if not len(idx):
+        return np.zeros(3), np.zeros(3)
     box_lo = (origin + idx.min(axis=0)) * BLOCK
     box_hi = (origin + idx.max(axis=0) + 1) * BLOCK
-    return sums, origin, (box_lo[::-1].astype(float), box_hi[::-1].astype(float))
+    return box_lo[::-1].astype(float), box_hi[::-1].astype(float)
 
 
 def _broadcast(flags, axis):
     shape = [1, 1, 1]
     shape[axis] = len(flags)
     return flags.reshape(shape)
+
+
+def content_cells(wv: WaveletVolume, origin, shape):
+    """(Z, Y, X) uint8 per grid-0 fine cell ``origin + index``: 1 where a non-zero voxel of the source
+    volume reaches, 0 where none does; None when the model does not know its content.
+
+    The approximating model of every coefficient, ``sum_k v_k N_j(x - k)`` over the voxels v, is zero
+    on a cell that no non-zero voxel's B-spline reaches; a thresholded model is not (truncated
+    wavelets ring there, docs/raytracing.md §4).  The ray tracer renders those cells as empty.
+    """
+    if wv.content_mask is None:
+        return None
+    j0 = wv.groups[0].wavelet.order
+    shifts = [((j0 - g.wavelet.order) / 2.0, g.wavelet.order) for g in wv.groups]  # grid-0 = own + shift
+    # voxel k reaches own cells [k, k + j), grid-0 cells [k + s, k + j + s): cell c from k = c + a .. c + b
+    a = int(np.floor(-max(s + j for s, j in shifts))) + 1
+    b = int(np.ceil(1 - min(s for s, _ in shifts))) - 1
+    origin, shape = np.asarray(origin, np.int64), np.asarray(shape, np.int64)
+    lo, size = origin + a, shape + b - a  # the voxels that reach the cells
+    window = np.zeros(tuple(size), np.uint8)
+    first, last = np.maximum(lo, 0), np.minimum(lo + size, wv.content_mask.shape)
+    if np.all(last > first):
+        window[tuple(slice(f - o, t - o) for f, t, o in zip(first, last, lo))] = \
+            wv.content_mask[tuple(slice(f, t) for f, t in zip(first, last))]
+    width = b - a + 1
+    for axis in range(3):  # any voxel of [c + a, c + b]: a running maximum, centred at offset width // 2
+        window = maximum_filter1d(window, width, axis=axis, mode="constant")
+    return np.ascontiguousarray(window[tuple(slice(width // 2, width // 2 + n) for n in shape)])
+
+
+def cell_blocks(cells) -> np.ndarray:
+    """Per block of BLOCK^3 cells (the cells' box a whole number of blocks), whether any cell is set."""
+    Z, Y, X = (n // BLOCK for n in cells.shape)
+    return cells.reshape(Z, BLOCK, Y, BLOCK, X, BLOCK).any(axis=(1, 3, 5))

@@ -59,6 +59,10 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     for (r, c, w, x0, mid, rad, t0, t1, _), field, grad in zip(rays, fields, grads):
         field = field.reshape(len(mid), n_samples, -1)
         grad = None if grad is None else grad.reshape(len(mid), n_samples, 3)
+        empty = ~_reached(tr, x0 + mid[:, None] * (w * scale))  # segments no content reaches: empty
+        field[empty] = 0.0
+        if grad is not None:
+            grad[empty] = 0.0
         blocks = _BlockSkip(regions, x0, w * scale, t0, t1, absorption, tolerance, gain)
         if not absorption:
             keep = [s for s in range(len(mid)) if not blocks.skip(mid[s] - rad[s], mid[s] + rad[s], 1.0)]
@@ -130,6 +134,17 @@ class _BlockSkip:
         """Count the evaluated segment [a, b] as passed; the bound integral left beyond it."""
         self.consumed += self.value * (b - a)
         return max(self.total - self.consumed, 0.0) + self.slack
+
+
+def _reached(tr, x) -> np.ndarray:
+    """Per grid-0 fine point (N, 3) as (x, y, z): whether the tracer's content cells reach its cell."""
+    if tr.content_cells is None:
+        return np.ones(len(x), bool)
+    k = np.floor(x[:, ::-1]).astype(np.int64) - tr.content_origin  # (z, y, x)
+    inside = np.all((k >= 0) & (k < tr.content_cells.shape), axis=1)
+    out = np.zeros(len(x), bool)
+    out[inside] = tr.content_cells[tuple(k[inside].T)] > 0
+    return out
 
 
 def _ray(view, r, c):

@@ -24,7 +24,7 @@ from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
-from .bounds import block_sums, occupancy, superblocks
+from .bounds import block_sums, cell_blocks, clip_box, content_cells, occupancy, superblocks
 from .finegrid import fine_grids, int4_xyz
 from .quadrature import sample_tables
 from ..io.result import RenderResult
@@ -70,7 +70,8 @@ def raytrace_kernel(field: str) -> Kernel:
     """The arguments of ``raytrace`` (cl/raytrace/raytrace.cl) with a field backend."""
     return Kernel("raytrace", ("image", B), ("stats", B), ("width", I32), ("height", I32), *FIELD_ARGS[field],
                   ("bound", B), ("occ_origin", INT4), ("occ_shape", INT4), ("super_bound", B),
-                  ("super_origin", INT4), ("super_shape", INT4), ("coarse_bound", REAL), ("box_lo", FLOAT4),
+                  ("super_origin", INT4), ("super_shape", INT4), ("content", B), ("content_origin", INT4),
+                  ("content_shape", INT4), ("coarse_bound", REAL), ("box_lo", FLOAT4),
                   ("box_hi", FLOAT4), ("base", FLOAT4), ("du", FLOAT4), ("dv", FLOAT4), ("dir", FLOAT4),
                   ("perspective", I32), ("to_fine_scale", FLOAT4), ("to_fine_offset", FLOAT4), ("nodes", B),
                   ("weights", B), ("tol", REAL), ("shade_gain", REAL), ("grad_floor", REAL), ("lights", B),
@@ -129,7 +130,8 @@ class RayTracer:
             start=cla.to_device(q, np.array([int4_xyz(g.start) for g in self.grids])),
             shape=cla.to_device(q, np.array([int4_xyz(g.shape) for g in self.grids])),
             offset=cla.to_device(q, np.array(offsets, np.int32)))
-        occ, self.occ_origin, self.box = occupancy(wv, dense)
+        occ, self.occ_origin, _ = occupancy(wv, dense)
+        occ = self._empty_space(occ)
         self.block_bound = cla.empty(q, occ.shape, np.float32)
         blocks = programs.build(self.cc, ["raytrace/blocks.cl"], dict(CLW_GROUPS=len(orders),
                                                                       CLW_ORDERS=",".join(map(str, orders))))
@@ -180,7 +182,8 @@ class RayTracer:
             raise DeviceMemoryError(f"the dense bands need {coef.nbytes / 2**20:.0f} MiB but {self.cc.info.name} "
                                     f"has room for {room / 2**20:.0f} MiB; use field='bspline' or a smaller volume")
         self.coef = cla.to_device(q, coef)
-        bound, self.occ_origin, self.box = block_sums(wv, weights)
+        bound, self.occ_origin, _ = block_sums(wv, weights)
+        bound = self._empty_space(bound)
         self.block_bound = cla.to_device(q, bound.astype(np.float32))
         self.q_bound = float(bound.max())
         self.occupied_fraction = float(np.mean(bound > 0))
@@ -195,6 +198,21 @@ class RayTracer:
         # PoCL keeps a work-group's private active lists on one thread's stack: small groups
         self.local_size = (WAVELET_GROUP, 1)
         self.setup_seconds = time.perf_counter() - start
+
+    def _empty_space(self, blocks):
+        """Clear the blocks (bounds or occupancy) that no content of the source volume reaches, keep the
+        reached cells for the march (``self.content``, per grid-0 cell of the blocks' box), and set the
+        clip box (docs/raytracing.md §4)."""
+        origin, shape = np.asarray(self.occ_origin) * BLOCK, np.array(blocks.shape) * BLOCK
+        cells = content_cells(self.wv, origin, shape)
+        if cells is not None:
+            blocks = blocks * cell_blocks(cells).astype(blocks.dtype)
+        self.box = clip_box(blocks, self.occ_origin)
+        self.content_origin = origin
+        self.content_cells = cells
+        self.content = cla.to_device(self.cc.queue, np.ones(1, np.uint8) if cells is None else cells)
+        self.content_shape = np.zeros(3, np.int64) if cells is None else shape  # 0: no content cells
+        return blocks
 
     def coarse_bound(self, tol) -> float:
         """Superblocks bounded by at most this are one region for skipping (``cl/raytrace/raytrace.cl``): what
@@ -249,6 +267,8 @@ class RayTracer:
             defines["CLW_XRAY"] = None
         elif phong is not None:
             defines["CLW_SHADE"] = None
+        if self.content_shape.any():
+            defines["CLW_CONTENT"] = None
         if precision == "double":
             defines["CLW_DOUBLE"] = None
         if trace and self.field == "wavelet":
@@ -282,7 +302,8 @@ class RayTracer:
         raytrace_kernel(self.field)(
             kernels, q, rounded, self.local_size, field_tables, real_type=real, image=image, stats=stats, width=W,
             height=H, bound=self.block_bound, occ_origin=self.occ_origin[::-1], occ_shape=self.block_bound.shape[::-1],
-            super_bound=self.super_bound, super_origin=self.super_origin[::-1],
+            super_bound=self.super_bound, super_origin=self.super_origin[::-1], content=self.content,
+            content_origin=self.content_origin[::-1], content_shape=self.content_shape[::-1],
             super_shape=self.super_bound.shape[::-1], coarse_bound=self.coarse_bound(tol), box_lo=self.box[0],
             box_hi=self.box[1], base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
             to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
