@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl.array as cla
+from pyopencl.elementwise import ElementwiseKernel
 from pyopencl import cltypes
 
 from ..device import programs
@@ -82,8 +83,30 @@ def fine_grids(wv, cc: ComputeContext, pad: int = 0, dense=None) -> tuple[list, 
     start = time.perf_counter()
     dense = dense if dense is not None else [g.dense_bands() for g in wv.groups]
     grids = [_expand_group(wv, g, bands, cc, kernels, pad) for g, bands in zip(wv.groups, dense)]
+    if wv.content_mask is not None:
+        clamp = ElementwiseKernel(cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f",
+                                  "clamp_to_content")
+        for grid in grids:  # docs/raytracing.md §4
+            clamp(grid.data.reshape(-1), cla.to_device(cc.queue, content_weights(wv.content_mask, grid.start,
+                                                                                 grid.shape).astype(np.uint8)))
     cc.queue.finish()
     return grids, time.perf_counter() - start
+
+
+def content_weights(mask: np.ndarray, start, shape) -> np.ndarray:
+    """Whether the fine coefficients ``start + index`` (a box of ``shape``) belong to non-zero voxels.
+
+    Fine coefficient i of the approximating model is voxel i, so where the source volume is zero
+    (and beyond it) the full model's are zero; a thresholded model's are not (truncated wavelets
+    ring), and that ringing is all they add there: the B-spline field zeroes them.
+    """
+    keep = np.zeros(tuple(shape), bool)
+    lo = np.maximum(start, 0)
+    hi = np.minimum(np.add(start, shape), mask.shape)
+    if np.all(hi > lo):
+        inside = tuple(slice(a, b) for a, b in zip(lo, hi))
+        keep[tuple(slice(a - s, b - s) for a, b, s in zip(lo, hi, start))] = mask[inside]
+    return keep
 
 
 def _bytes_needed(wv, pad) -> int:

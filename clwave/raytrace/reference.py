@@ -14,7 +14,9 @@ import numpy as np
 from numpy.polynomial import chebyshev
 
 from ..device.constants import BLOCK, SUPER
-from ..model.geometry import world_to_fine_affine
+from ..model.geometry import world_to_fine, world_to_fine_affine
+from ..model.transform import Band, band_sum
+from .finegrid import content_weights
 from .quadrature import sample_points
 from .tracer import SIMPSON_DEPTH, Phong, RayTracer, light_direction
 
@@ -53,8 +55,9 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     if not rays:
         return out
     points = np.concatenate([ray[-1] for ray in rays])  # one evaluation for every sample of every ray
-    fields = np.split(wv.evaluate(points), np.cumsum([len(ray[-1]) for ray in rays])[:-1])
-    grads = np.split(wv.gradient(points)[:, 3, :], len(fields) and np.cumsum([len(f) for f in fields])[:-1]) \
+    evaluate = _content_field(wv) if tr.field == "bspline" and wv.content_mask is not None else _model_field(wv)
+    fields = np.split(evaluate(points, False), np.cumsum([len(ray[-1]) for ray in rays])[:-1])
+    grads = np.split(evaluate(points, True)[:, 3, :], len(fields) and np.cumsum([len(f) for f in fields])[:-1]) \
         if phong else [None] * len(rays)
     for (r, c, w, x0, mid, rad, t0, t1, _), field, grad in zip(rays, fields, grads):
         field = field.reshape(len(mid), n_samples, -1)
@@ -134,6 +137,30 @@ class _BlockSkip:
         """Count the evaluated segment [a, b] as passed; the bound integral left beyond it."""
         self.consumed += self.value * (b - a)
         return max(self.total - self.consumed, 0.0) + self.slack
+
+
+def _model_field(wv):
+    """The field from the closed-form wavelet bases: ``f(points, derivative)``."""
+    return lambda points, derivative: wv.gradient(points) if derivative else wv.evaluate(points)
+
+
+def _content_field(wv):
+    """The B-spline backend's field for a model that knows its content: the fine B-spline coefficients
+    of the host's real-line synthesis, zero on empty voxels (docs/raytracing.md §4)."""
+    parts = []
+    for gi, g in enumerate(wv.groups):
+        coeffs, start = wv.fine_coefficients(gi)
+        coeffs = coeffs * content_weights(wv.content_mask, start, coeffs.shape[:3])[..., None]
+        parts.append((g, coeffs, np.array(start, float)))
+
+    def field(points, derivative):
+        out = np.zeros((len(points), wv.channels, 3) if derivative else (len(points), wv.channels))
+        for g, coeffs, start in parts:
+            fine = world_to_fine(points, g.wavelet.order, wv.shape, wv.spacing, wv.origin) - start
+            value = band_sum(g.wavelet, Band(0, "aaa", coeffs.shape[:3], 0), coeffs, fine, derivative)
+            out[:, list(g.channels)] = value[..., ::-1] / np.asarray(wv.spacing)[::-1] if derivative else value
+        return out
+    return field
 
 
 def _reached(tr, x) -> np.ndarray:
