@@ -169,7 +169,8 @@ def build_model(args, log=print, rgba=False):
     start = time.perf_counter()
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
                                    transfer_function=tf)
-    log(f"decomposed {vol.shape} x {vol.channels} channel(s) in {time.perf_counter() - start:.2f} s")
+    log(f"decomposed {' x '.join(map(str, vol.shape[::-1]))} voxels (x, y, z), {vol.channels} channel(s), in "
+        f"{time.perf_counter() - start:.2f} s")
     if args.keep is None and args.threshold is None:
         thresholding["keep"] = DEFAULT_KEEP
     return wv.threshold(**thresholding), vol
@@ -225,28 +226,29 @@ def cmd_compress(args):
     wv.save(out, overwrite=args.force)
     saved = time.perf_counter() - start
     size, voxels = out.stat().st_size, wv.n_voxels
-    source, source_bytes = _input_size(args.input, wv)
-    print(f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z), "
-          f"{wv.channels} channel(s), {_bytes(source_bytes)} {source}")
+    raw = voxels * wv.channels * 4  # the volume the model approximates, as float32
+    classified = f", classified to {wv.channels} channels (--tf {args.tf})" if args.tf else ""
+    print(f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z)"
+          f"{classified}{_on_disk(args.input)}")
     print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} levels, "
           f"{wv.kept:,} coefficients = {100 * wv.kept / voxels:.2f} % of the voxels")
-    print(f"file                  {out}: {_bytes(size)}, {source_bytes / size:.1f}:1 against the input "
-          f"({100 * size / source_bytes:.2f} % of it), written in {saved:.2f} s")
+    print(f"file                  {out}: {_bytes(size)}, {raw / size:.1f}:1 against the volume as raw float32 "
+          f"({_bytes(raw)}), written in {saved:.2f} s")
     if reference is not None:
         error = np.sqrt(np.mean((wv.reconstruct().data - reference.data) ** 2))
         peak = max(float(np.max(np.abs(reference.data))), np.finfo(np.float32).tiny)
-        print(f"error                 RMS {error:.3g} over the voxels = {error / peak:.2e} of the largest value "
+        print(f"error                 RMS over the voxels {error / peak:.2e} of the largest value "
               f"(PSNR {20 * np.log10(peak / max(error, 1e-30)):.1f} dB)")
     return 0
 
 
-def _input_size(spec, wv) -> tuple:
-    """``(what, bytes)`` of the input: its files on disk, or a phantom's raw float32 size."""
+def _on_disk(spec) -> str:
+    """", N MB on disk" for an input file or folder (nothing for a phantom)."""
     path = Path(spec)
     if spec.startswith("phantom:") or not path.exists():
-        return "as raw float32", wv.n_voxels * wv.channels * 4
+        return ""
     files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
-    return "on disk", sum(p.stat().st_size for p in files)
+    return f", {_bytes(sum(p.stat().st_size for p in files))} on disk"
 
 
 def _bytes(n) -> str:
@@ -261,8 +263,8 @@ def _camera_options(p):
     g.add_argument("--azimuth", type=float, default=30.0, help="degrees (default 30)")
     g.add_argument("--elevation", type=float, default=20.0, help="degrees (default 20)")
     g.add_argument("--size", default="512", help="image size: N or HxW, e.g. 512 or 300x400 (default 512)")
-    g.add_argument("--extent", type=float, help="world width of the image (default: the non-empty part of the "
-                                                 "volume fills the image, the same at every view)")
+    g.add_argument("--extent", type=float, help="world width of the image (default: the bounding sphere of the "
+                                                 "non-empty voxels spans the image, the same at every view)")
     g.add_argument("--window", dest="display_window", default="auto", help="PNG window: auto or LO,HI")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
@@ -275,7 +277,7 @@ def _raytrace_options(p):
     g.add_argument("--perspective", action="store_true", help="perspective camera (default orthographic)")
     g.add_argument("--fov", type=float, default=30.0, help="perspective: vertical field of view, degrees")
     g.add_argument("--distance", type=float, help="perspective: eye distance from the target (world units)")
-    g.add_argument("--tolerance", type=float, default=1e-3, help="absolute error per output value (1e-3)")
+    g.add_argument("--tolerance", type=float, default=1e-3, help="absolute error per output value (default 1e-3)")
     g.add_argument("--light", action="append", help="directional light AZ,EL in degrees; repeat for more; "
                    "'none' for ambient only (default: a headlight)")
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
@@ -430,7 +432,7 @@ def cmd_progressive(args):
         write_atomic(args.stats, lambda fh: fh.write(text), args.force)
     for f in figures:
         print(f"frame {f['index']}: {f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} % of those kept, "
-              f"{100 * f['voxel_fraction']:.3f} % of the voxels), {f['seconds']:.3f} s; error against the final image: "
+              f"{100 * f['voxel_fraction']:.3f} % of the voxels) at {f['seconds']:.3f} s; error against the final image: "
               f"RMS {f['relative_rms_error']:.2e}, max {f['relative_max_error']:.2e} of its largest value")
     return 0
 
@@ -463,7 +465,8 @@ def make_parser():
     p = _command(sub, "render", "render an image: wavelet splatting (X-ray) or ray tracing (shaded)", cmd_render,
                  "output .png (or .gif with --turntable)", view=True)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
-                   help="splat: X-ray line integrals; raytrace: emission-absorption, shaded (needs --tf)")
+                   help="splat (default): X-ray line integrals; raytrace: emission-absorption, shaded (needs a "
+                        "classified model: --tf, or a .clw compressed with it; or --xray)")
     _raytrace_options(p)
     p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
     p.add_argument("--raw", help="also write the float32 image as .npy")

@@ -32,8 +32,9 @@ def test_compress_phantom_report_and_file(tmp_path, capsys):
     assert wv.channels == 4 and wv.kept == round(0.05 * 32 ** 3) and wv.transfer_function["name"] == "hydrogen"
     assert "32 x 32 x 32 voxels" in lines["input"] and f"{wv.kept:,} coefficients = 5.00 %" in lines["model"]
     raw, size = 32 ** 3 * 4 * 4, target.stat().st_size  # the phantom's classified float32 RGBA
-    assert f"{raw / size:.1f}:1 against the input" in lines["file"]
-    error = float(lines["error"].split(" = ")[1].split()[0])  # relative to the largest value
+    assert f"{raw / size:.1f}:1 against the volume as raw float32" in lines["file"]
+    assert "classified to 4 channels (--tf hydrogen)" in lines["input"]
+    error = float(lines["error"].split("voxels ")[1].split()[0])  # relative to the largest value
     assert 0 < error < 0.1
 
 
