@@ -432,8 +432,8 @@ def cmd_progressive(args):
         write_atomic(args.stats, lambda fh: fh.write(text), args.force)
     for f in figures:
         print(f"frame {f['index']}: {f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} % of those kept, "
-              f"{100 * f['voxel_fraction']:.3f} % of the voxels) at {f['seconds']:.3f} s; error against the final image: "
-              f"RMS {f['relative_rms_error']:.2e}, max {f['relative_max_error']:.2e} of its largest value")
+              f"{100 * f['voxel_fraction']:.3f} % of the voxels) at {f['seconds']:.3f} s; error against the final "
+              f"image: RMS {f['relative_rms_error']:.2e}, max {f['relative_max_error']:.2e} of its largest value")
     return 0
 
 
