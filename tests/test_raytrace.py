@@ -492,3 +492,12 @@ def test_content_cells_are_where_a_non_zero_voxel_reaches(wavelets):
             hi = np.ceil(k + j + s).astype(int) - origin
             expected[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
     assert np.array_equal(cells > 0, expected)
+
+
+def test_repeated_one_shot_ray_traces_set_the_field_up_once(monkeypatch):
+    wv = sparse_rgba("cubic", levels=1)
+    cam = clwave.Camera(30, 20, size=8)
+    first = clwave.raytrace(wv, cam, tolerance=1e-3)
+    monkeypatch.setattr(RayTracer, "__init__", lambda *a, **k: (_ for _ in ()).throw(AssertionError("set up again")))
+    again = clwave.raytrace(wv, cam, tolerance=1e-3)
+    assert np.array_equal(first.image, again.image) and again.meta["setup_seconds"] == first.meta["setup_seconds"]

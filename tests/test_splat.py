@@ -264,3 +264,23 @@ def test_upsampling_is_the_prefiltered_cubic_bspline():
                                order=3, prefilter=False, mode="mirror")
         got = coarse_module.upsample(grid, shape, factor)
         assert got.shape == shape and np.allclose(got, want, rtol=1e-6, atol=1e-6)
+
+
+def test_one_shot_calls_share_their_renderer_until_released(cc, data, monkeypatch):
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2).threshold(keep=0.3)
+    cams = [clwave.Camera(30, 20, size=24), clwave.Camera(-50, 10, size=24)]
+    first = [clwave.splat(wv, cam, device=cc).image for cam in cams]
+    frames = list(clwave.progressive(wv, cams[0], steps=2, device=cc))
+
+    def no_new_renderer(*args, **kwargs):
+        raise AssertionError("a one-shot call built a second renderer")
+
+    monkeypatch.setattr(clwave.SplatRenderer, "__init__", no_new_renderer)
+    again = [clwave.splat(wv, cam, device=cc).image for cam in cams]  # the same renderer, no new set-up
+    assert all(np.array_equal(a, b) for a, b in zip(first, again))
+    assert np.allclose(frames[-1].image, first[0], rtol=1e-5, atol=1e-6)  # two chunks: another sum order
+    with pytest.raises(AssertionError, match="second renderer"):  # other options: another renderer
+        clwave.splat(wv, cams[0], device=cc, coarse=1e-2)
+    wv.release()
+    with pytest.raises(AssertionError, match="second renderer"):
+        clwave.splat(wv, cams[0], device=cc)

@@ -128,11 +128,35 @@ def bench_splat(args) -> dict:
                     texture_sampling=runs[0]["texture_sampling"], omega_s=runs[0]["omega_s"],
                     framebuffers=runs[0]["framebuffers"])
         cases[f"keep {keep:g}"] = dict(compile_seconds=renderer.compile_seconds)
+        if keep < 1.0:
+            cases[f"keep {keep:g} at 512x512, coarse 0.02: one-shot calls"] = one_shot_splat(wv, args)
     return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", wavelet="cubic", levels=3,
                              views=args.views, note="each render at a new view, footprints included"),
                 targets=dict(keep_0_01_seconds=0.1, keep_0_05_seconds=0.4, full_seconds=8.0,
                              updates_per_second=0.8e9),
                 cases=cases)
+
+
+def one_shot_splat(wv, args) -> dict:
+    """Wall seconds a call, ``clwave.splat(wv, camera)`` each view (the model keeps the renderer it makes)
+    against the same calls with an explicit renderer; the first one-shot call (set-up) apart."""
+    cams = [clwave.Camera(az, el, size=512) for az, el in views(args.views)]
+    wv.release()
+    start = time.perf_counter()
+    clwave.splat(wv, clwave.Camera(10.0, 5.0, size=512), device=args.device, coarse=2e-2)
+    first = time.perf_counter() - start
+    renderer = clwave.SplatRenderer(wv, device=args.device, coarse=2e-2)
+    clwave.splat(wv, cams[0], renderer=renderer)  # warm-up
+    out = dict(first_call_seconds=first)
+    for name, kw in (("one_shot", dict(device=args.device, coarse=2e-2)), ("reused_renderer", dict(renderer=renderer))):
+        walls = []
+        for cam in cams:
+            start = time.perf_counter()
+            clwave.splat(wv, cam, **kw)
+            walls.append(time.perf_counter() - start)
+        out[name] = summary(walls)
+    out["ratio"] = out["one_shot"]["median"] / out["reused_renderer"]["median"]
+    return out
 
 
 def bench_footprints(args) -> dict:
@@ -202,6 +226,27 @@ def bench_raytrace(args) -> dict:
         fast = fast or tracer
         out["paths"][path] = _raytrace_cases(tracer, fast, wv, size, crop, args.raytrace_views)
         out["paths"][path]["setup_seconds"] = setup
+    out["one_shot"] = one_shot_raytrace(wv, args)
+    return out
+
+
+def one_shot_raytrace(wv, args) -> dict:
+    """Wall seconds of repeated ``clwave.raytrace(wv, camera)`` calls at tolerance 1e-2 (the model keeps its
+    tracer: the field is set up by the first call only) against the same renders with an explicit tracer."""
+    cams = [clwave.Camera(az, el, size=args.raytrace_image) for az, el in views(args.raytrace_views)]
+    wv.release()
+    start = time.perf_counter()
+    clwave.raytrace(wv, cams[0], tolerance=1e-2, device=args.device)
+    out = dict(first_call_seconds=time.perf_counter() - start)
+    tracer = clwave.RayTracer(wv, device=args.device)
+    for name, kw in (("one_shot", dict(device=args.device)), ("reused_tracer", dict(tracer=tracer))):
+        walls = []
+        for cam in cams:
+            start = time.perf_counter()
+            clwave.raytrace(wv, cam, tolerance=1e-2, **kw)
+            walls.append(time.perf_counter() - start)
+        out[name] = summary(walls)
+    out["ratio"] = out["one_shot"]["median"] / out["reused_tracer"]["median"]
     return out
 
 

@@ -116,6 +116,7 @@ class WaveletVolume:
         # (nz, ny, nx) bool: the source volume's non-zero voxels, beyond whose B-splines the approximating
         # model of every coefficient is zero (docs/raytracing.md §4); None where not known
         self.content_mask = content_mask
+        self._shared = {}  # renderers of one-shot calls (shared)
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -344,6 +345,19 @@ class WaveletVolume:
             for slot, channel in enumerate(g.channels):
                 data[..., channel] = reconstruct_channel(g, self._dense[gi], slot, self.shape, self.levels)
         return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin)
+
+    # ----------------------------------------------------------- renderers
+    def shared(self, key, make):
+        """The object ``make()`` builds for ``key``, made once and kept with this model, so that one-shot
+        calls (``clwave.splat``, ``raytrace``, ``progressive``) on the same model and device reuse what a
+        renderer uploads and builds; released with the model (or by :meth:`release`)."""
+        if key not in self._shared:
+            self._shared[key] = make()
+        return self._shared[key]
+
+    def release(self):
+        """Drop the renderers one-shot calls have kept (their device memory goes with them)."""
+        self._shared.clear()
 
     # ------------------------------------------------------------- files
     def save(self, path, overwrite=False) -> Path:

@@ -372,11 +372,19 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         reference); both give the same image within the tolerance.
     precision : "single" or "double"
         Kernel arithmetic; "double" gives converged references (float64 devices only).
+    tracer : RayTracer, optional
+        Render with this one; without it, calls on the same model, device and field share one
+        (:meth:`WaveletVolume.shared`): the field is set up once.
 
     Returns a :class:`RenderResult`: premultiplied ``(R, G, B, A)`` with ``A = 1 - T``, or
     the line integrals; ``meta`` holds the field, segment and evaluation counts, shading,
     and timings (B-spline expansion and kernel compile apart).
     """
-    r = tracer or RayTracer(wv, device=device, field=field)
+    if tracer is None:
+        if not isinstance(wv, WaveletVolume):
+            raise InputError("ray tracing needs a clwave.WaveletVolume")
+        cc = ComputeContext.get(device)
+        tracer = wv.shared(("raytrace", cc.info.id, field), lambda: RayTracer(wv, device=cc, field=field))
+    r = tracer
     return r.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                     precision=precision)

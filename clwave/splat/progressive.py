@@ -17,7 +17,7 @@ import numpy as np
 from ..model.camera import Camera
 from ..errors import InputError
 from ..io.result import RenderResult
-from .renderer import SplatRenderer
+from .renderer import SplatRenderer, shared_renderer
 from ..model.wavelet import WaveletVolume
 
 
@@ -126,7 +126,7 @@ def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, devi
         raise InputError(f"steps={steps!r} must be a whole number >= 1")
     if budget is not None and not (np.isfinite(budget) and budget > 0):
         raise InputError(f"budget={budget!r} must be a positive number of seconds")
-    r = renderer or SplatRenderer(wv, device=device, omega_s=omega_s, sampling=sampling, coarse=coarse)
+    r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse)
     return _frames(r, camera, steps, budget)
 
 

@@ -236,14 +236,24 @@ def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampl
     each channel in world units and whose ``meta`` reports the coefficients splatted,
     footprint, binning, accumulation and upsampling times (kernel compile time apart), the
     footprint texture sampling and the framebuffer factors.  ``omega_s``, ``sampling`` and
-    ``coarse`` are those of :class:`SplatRenderer`.
+    ``coarse`` are those of :class:`SplatRenderer`; without ``renderer``, calls on the same model,
+    device and options share one (:meth:`WaveletVolume.shared`).
     """
-    r = renderer or SplatRenderer(wv, device=device, omega_s=omega_s, sampling=sampling, coarse=coarse)
+    r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse)
     start = time.perf_counter()
     acc = r.begin(camera)
     acc.splat(0, r.count)
     image = acc.image()
     return RenderResult(image, acc.meta(time.perf_counter() - start))
+
+
+def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse) -> SplatRenderer:
+    """The :class:`SplatRenderer` that one-shot calls on ``wv`` with these options share."""
+    if not isinstance(wv, WaveletVolume):
+        raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
+    cc = ComputeContext.get(device)
+    return wv.shared(("splat", cc.info.id, omega_s, sampling, coarse),
+                     lambda: SplatRenderer(wv, device=cc, omega_s=omega_s, sampling=sampling, coarse=coarse))
 
 
 def _energy_prefix(values) -> np.ndarray:
