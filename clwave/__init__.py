@@ -5,7 +5,7 @@ See README.md for the quick start; coordinates follow docs/coordinates.md (host 
 """
 
 from .errors import (ClwaveError, DeviceMemoryError, DeviceNotFoundError, FileFormatError,
-                     InputError, KernelBuildError, OutputExistsError)
+                     InputError, KernelBuildError, OutputError, OutputExistsError)
 from .model.volume import Volume
 from .device.context import ComputeContext, list_devices, select_device
 from .io.loaders import load
@@ -22,7 +22,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ClwaveError", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
-    "KernelBuildError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
+    "KernelBuildError", "OutputError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult",
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
 ]

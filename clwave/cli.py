@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -485,7 +487,17 @@ def _version():
     return f"clwave {__version__}"
 
 
+class Terminated(Exception):
+    """SIGTERM, raised where the program is, so that what it was writing is cleaned up on the way out."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
 def main(argv=None) -> int:
+    previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() \
+        else None
     try:
         args = make_parser().parse_args(argv)
         return args.run(args)
@@ -495,6 +507,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("clwave: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print("clwave: terminated", file=sys.stderr)
+        return 143
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

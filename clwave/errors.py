@@ -32,6 +32,10 @@ class OutputExistsError(ClwaveError, FileExistsError):
     """Refusing to overwrite an existing file without ``force``/``overwrite``."""
 
 
+class OutputError(ClwaveError, OSError):
+    """An output that cannot be written: permissions, a read-only or full filesystem."""
+
+
 class DeviceNotFoundError(ClwaveError):
     """No OpenCL platform, or no device matching the ``device`` request."""
 

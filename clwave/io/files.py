@@ -1,18 +1,26 @@
-"""Writing files without losing anything: refuse to overwrite, write atomically."""
+"""Writing files without losing anything: refuse to overwrite, publish atomically, leave nothing behind.
+
+A file is written under a temporary name in the target folder and published in one step: a hard
+link, which fails when the name exists (so of two writers racing for one new name, one wins and
+the other is told), or, with ``overwrite``, a rename over the old file.  The temporary name is
+removed on every way out Python sees (errors, Ctrl-C, SIGTERM through the command line).
+"""
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from pathlib import Path
 
-from ..errors import InputError, OutputExistsError
+from ..errors import InputError, OutputError, OutputExistsError
 
 
 def write_atomic(path, writer, overwrite=False) -> Path:
-    """Call ``writer(binary_file)`` on a temporary file in the same folder, then move it into place.
+    """Call ``writer(binary_file)`` on a temporary file beside ``path``, then publish it there.
 
-    An existing ``path`` is only replaced with ``overwrite``; a failed write leaves nothing behind.
+    An existing ``path`` is only replaced with ``overwrite``; a failed or interrupted write leaves
+    nothing behind.  Permission and disk errors are an :class:`OutputError`.
     """
     path = Path(path)
     if path.exists() and not overwrite:
@@ -20,15 +28,39 @@ def write_atomic(path, writer, overwrite=False) -> Path:
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise InputError(f"the folder of {path} does not exist; create it first")
-    fd, tmp = tempfile.mkstemp(dir=folder, suffix=path.suffix + ".tmp")
+    if path.is_dir():
+        raise InputError(f"{path} is a folder; name a file")
+    tmp = None
     try:
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=path.suffix + ".tmp")
         with os.fdopen(fd, "wb") as fh:
             writer(fh)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
-        os.replace(tmp, path)
+        _publish(tmp, path, overwrite)
+    except FileExistsError:
+        raise OutputExistsError(f"{path} appeared while it was being written (another writer?); pass "
+                                f"overwrite=True (--force) to replace it") from None
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}; check the folder's permissions and "
+                          f"free space") from None
     finally:
-        if os.path.exists(tmp):
+        if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def _publish(tmp, path, overwrite):
+    """Give the written file its name: a link that refuses an existing name, or a rename over it."""
+    if overwrite:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOSYS):
+            raise
+        if path.exists():  # a filesystem without hard links: check, then rename
+            raise FileExistsError(path) from None
+        os.replace(tmp, path)

@@ -43,9 +43,15 @@ class RenderResult:
         return np.round(255.0 * scaled).astype(np.uint8)
 
     def save(self, path, *, window="auto", background=(0.0, 0.0, 0.0), overwrite=False) -> Path:
-        """Write ``.png`` (windowed or composited), ``.npy`` (raw float32) or ``.json`` (meta)."""
+        """Write ``.png`` (windowed or composited), ``.npy`` (raw float32) or ``.json`` (meta).
+
+        An image with non-finite pixels is refused (nothing is written): it is never a picture."""
         path = Path(path)
         suffix = path.suffix.lower()
+        bad = int(np.size(self.image) - np.count_nonzero(np.isfinite(self.image)))
+        if bad and suffix in (".png", ".npy"):
+            raise InputError(f"the image has {bad} non-finite value(s) (NaN/Inf), so {path} was not written; "
+                             f"the input holds values too large for float32, or the view is degenerate")
         if suffix == ".png":
             import imageio.v3 as iio
             data = self.to_uint8(window, background)

@@ -1,0 +1,157 @@
+"""Untrusted files and outputs: crafted .clw headers, racing writers, full disks, signals."""
+
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clwave
+from clwave.errors import FileFormatError, InputError, OutputError, OutputExistsError
+from clwave.io.files import write_atomic
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("clw") / "m.clw"
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), "cubic", levels=1).threshold(keep=0.2)
+    wv.save(path)
+    return path
+
+
+def crafted(model_file, tmp_path, edit) -> Path:
+    """A copy of ``model_file`` whose header ``edit`` changed (the other members as they were)."""
+    with np.load(model_file) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    header = json.loads(bytes(arrays["header"]).decode())
+    edit(header)
+    arrays["header"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+    out = tmp_path / "crafted.clw"
+    with open(out, "wb") as fh:  # a path would get ".npz" appended
+        np.savez_compressed(fh, **arrays)
+    return out
+
+
+def setter(key, value):
+    return lambda header: header.__setitem__(key, value)
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (setter("shape", [2048, 2048, 2048]), "index mask has"),
+    (setter("shape", [100000, 100000, 100000]), "index mask has"),
+    (setter("shape", [-16, 16, 16]), "shape"),
+    (setter("shape", [16, 16]), "shape"),
+    (setter("groups", []), "no channel groups"),
+    (setter("channels", 3), "channels"),
+    (setter("spacing", [0, 1, 1]), "spacing"),
+    (setter("spacing", [float("nan"), 1, 1]), "spacing"),
+    (setter("origin", [float("inf"), 0, 0]), "origin"),
+    (setter("levels", 9), "levels"),
+    (setter("version", 99), "version 99"),
+    (lambda h: h["groups"][0].__setitem__("wavelet", 7), "wavelet order"),
+])
+def test_crafted_clw_headers_are_refused_before_anything_is_allocated(model_file, tmp_path, edit, needle):
+    path = crafted(model_file, tmp_path, edit)
+    start = time.perf_counter()
+    with pytest.raises(FileFormatError) as err:
+        clwave.WaveletVolume.open(path)
+    assert needle in str(err.value) and "\n" not in str(err.value)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_other_files_named_clw_are_refused(tmp_path):
+    npy = tmp_path / "x.clw"
+    np.save(tmp_path / "x.npy", np.zeros(8))
+    (tmp_path / "x.npy").rename(npy)
+    with pytest.raises(FileFormatError, match="cannot read"):
+        clwave.WaveletVolume.open(npy)
+
+
+def test_two_writers_racing_for_one_name_one_wins(tmp_path):
+    target, results = tmp_path / "out.bin", []
+    barrier = threading.Barrier(2)
+
+    def write(tag):
+        def writer(fh):
+            fh.write(tag * 1000)
+            barrier.wait()  # both are written, neither is published yet
+        try:
+            write_atomic(target, writer)
+            results.append(tag)
+        except OutputExistsError:
+            results.append(b"refused")
+
+    threads = [threading.Thread(target=write, args=(tag,)) for tag in (b"a", b"b")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(results)[-1] == b"refused" and len(results) == 2
+    winner = [r for r in results if r != b"refused"][0]
+    assert target.read_bytes() == winner * 1000 and sorted(p.name for p in tmp_path.iterdir()) == ["out.bin"]
+
+
+@pytest.mark.parametrize("failure", [OSError(errno.ENOSPC, "No space left on device"),
+                                     PermissionError(errno.EACCES, "Permission denied")])
+def test_disk_and_permission_errors_are_one_line_and_leave_nothing(tmp_path, failure):
+    def writer(fh):
+        fh.write(b"half")
+        raise failure
+    with pytest.raises(OutputError) as err:
+        write_atomic(tmp_path / "out.png", writer)
+    assert failure.strerror in str(err.value) and "\n" not in str(err.value)
+    assert not list(tmp_path.iterdir())
+
+
+def test_non_finite_images_are_never_written(tmp_path):
+    result = clwave.RenderResult(np.array([[[1.0], [np.nan]]], np.float32), {"method": "splat"})
+    for name in ("x.png", "x.npy"):
+        with pytest.raises(InputError, match="non-finite"):
+            result.save(tmp_path / name)
+    assert not list(tmp_path.iterdir())
+
+
+def test_sigterm_while_writing_leaves_nothing(tmp_path):
+    script = f"""
+import sys, time, numpy as np
+from clwave import cli
+def slow(fh, **arrays):
+    fh.write(b"partial")
+    fh.flush()
+    time.sleep(60)
+np.savez_compressed = slow
+sys.exit(cli.main(["compress", "phantom:hydrogen:16", "--levels", "1", "-o", {str(tmp_path / 'out.clw')!r}]))
+"""
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    deadline = time.time() + 60
+    while not list(tmp_path.iterdir()) and time.time() < deadline:  # the temporary file is being written
+        time.sleep(0.05)
+    assert list(tmp_path.iterdir())
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143 and b"terminated" in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_member_declaring_more_than_the_header_allows_is_not_decompressed(model_file, tmp_path):
+    with np.load(model_file) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["values0"] = np.zeros((1, 50_000_000), np.float32)  # 200 MB of zeros deflate to ~200 KB
+    bomb = tmp_path / "bomb.clw"
+    with open(bomb, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+    assert bomb.stat().st_size < 1_000_000
+    start = time.perf_counter()
+    with pytest.raises(FileFormatError, match="header allows"):
+        clwave.WaveletVolume.open(bomb)
+    assert time.perf_counter() - start < 1.0
