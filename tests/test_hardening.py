@@ -155,3 +155,20 @@ def test_a_member_declaring_more_than_the_header_allows_is_not_decompressed(mode
     with pytest.raises(FileFormatError, match="header allows"):
         clwave.WaveletVolume.open(bomb)
     assert time.perf_counter() - start < 1.0
+
+
+@pytest.mark.parametrize("suffix", [".nii", ".nii.gz"])
+def test_a_nifti_header_that_lies_about_its_size_is_refused_before_reading(tmp_path, suffix):
+    import gzip
+
+    import nibabel
+    small = tmp_path / "small.nii"
+    nibabel.save(nibabel.Nifti1Image(np.ones((2, 2, 2), np.float32), np.eye(4)), small)
+    raw = bytearray(small.read_bytes())
+    raw[42:48] = np.array([1200, 1200, 1200], "<i2").tobytes()  # dim[1..3] of the NIfTI-1 header
+    liar = tmp_path / ("liar" + suffix)
+    liar.write_bytes(gzip.compress(bytes(raw)) if suffix == ".nii.gz" else bytes(raw))
+    start = time.perf_counter()
+    with pytest.raises(FileFormatError, match="1200 x 1200 x 1200 voxels"):
+        clwave.load(liar)
+    assert time.perf_counter() - start < 1.0

@@ -295,6 +295,8 @@ def _read_nifti(path):
     import nibabel
 
     image = nibabel.load(path, mmap=False)
+    _check_declared_size(path, int(image.header["vox_offset"]),
+                         int(np.prod(image.shape)) * image.header.get_data_dtype().itemsize, image.shape)
     data = np.asanyarray(image.dataobj)  # applies scl_slope / scl_inter
     if data.ndim > 3:
         # NIfTI keeps time on the 4th axis and vector components on the 5th
@@ -307,6 +309,23 @@ def _read_nifti(path):
     if data.dtype.names:  # RGB24 / RGBA32 structured samples
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
     return _to_canonical(data, image.affine)
+
+
+def _check_declared_size(path, offset, nbytes, shape):
+    """Refuse a header that declares more data than the file holds, before anything is allocated
+    (gzip: its trailer's size of the uncompressed stream, modulo 2^32)."""
+    path = Path(path)
+    if path.name.lower().endswith(".gz"):
+        with open(path, "rb") as fh:
+            fh.seek(-4, os.SEEK_END)
+            present = int.from_bytes(fh.read(4), "little")
+        lies = (offset + nbytes) % 2 ** 32 > present  # the trailer counts the stream modulo 2^32
+    else:
+        present = path.stat().st_size
+        lies = offset + nbytes > present
+    if lies:
+        raise FileFormatError(f"{path}: its header declares {' x '.join(map(str, shape))} voxels ({nbytes:,} bytes) "
+                              f"but the file holds {present:,} bytes; it is truncated or its header is wrong")
 
 
 def _read_nrrd(path):
