@@ -85,6 +85,9 @@ def read_volume(args):
     spec = args.input
     spacing = None if args.spacing is None else _numbers(args.spacing, "--spacing", (1, 3))
     if spec.startswith("phantom:"):
+        given = [_flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu") if getattr(args, n, None)]
+        if given:
+            raise InputError(f"{', '.join(given)} cannot apply to {spec}: a phantom is not read from a file")
         parts = spec.split(":")
         if len(parts) > 3 or (len(parts) == 3 and not parts[2].isdigit()):
             raise InputError(f"{spec!r}: write phantom:NAME or phantom:NAME:N (N voxels per axis)")
@@ -455,6 +458,7 @@ def _command(sub, name, help, run, output_help, view=False):
 def make_parser():
     parser = _Parser(prog="clwave", description="Wavelet-domain volume rendering (OpenCL).")
     parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     p = sub.add_parser("info", help="list OpenCL platforms and devices, and the one chosen")
@@ -498,6 +502,7 @@ def _terminate(signum, frame):
 def main(argv=None) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() \
         else None
+    debug = "--debug" in (sys.argv[1:] if argv is None else argv)
     try:
         args = make_parser().parse_args(argv)
         return args.run(args)
@@ -510,6 +515,13 @@ def main(argv=None) -> int:
     except Terminated:
         print("clwave: terminated", file=sys.stderr)
         return 143
+    except Exception as exc:  # a bug: one line, the traceback only when asked for
+        if debug:
+            raise
+        print(f"clwave: internal error ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}); "
+              f"this is a bug in clwave: please report it with the command line, and run with --debug for the "
+              f"traceback", file=sys.stderr)
+        return 1
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

@@ -54,6 +54,8 @@ class DeviceMemoryError(ClwaveError, MemoryError):
 
 def finite_number(value, name) -> float:
     """``float(value)``, or an :class:`InputError` naming ``name`` when it is not a finite number."""
+    if isinstance(value, (str, bytes)):  # float("30") would pass: the API takes numbers
+        raise InputError(f"{name} must be a number, got the string {value!r}")
     try:
         number = float(value)
     except (TypeError, ValueError):

@@ -172,3 +172,41 @@ def test_a_nifti_header_that_lies_about_its_size_is_refused_before_reading(tmp_p
     with pytest.raises(FileFormatError, match="1200 x 1200 x 1200 voxels"):
         clwave.load(liar)
     assert time.perf_counter() - start < 1.0
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda: clwave.Camera(extent="wide"), "extent"),
+    (lambda: clwave.Camera(fov="30"), "fov"),
+    (lambda: clwave.Camera(distance=[1, 2]), "distance"),
+    (lambda: clwave.load(42), "path"),
+    (lambda: clwave.Volume([[[1.0, 2.0], [3.0]]]), "rectangular"),
+    (lambda: clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 8), levels=1).threshold(keep="5%"), "keep"),
+    (lambda: clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 8), levels=1).threshold(threshold=None,
+                                                                                                   keep=[0.1]), "keep"),
+])
+def test_api_misuse_raises_a_standard_exception_naming_the_argument(call, name):
+    with pytest.raises((TypeError, ValueError)) as err:
+        call()
+    assert name in str(err.value) and "\n" not in str(err.value)
+
+
+def test_an_unexpected_exception_is_one_line_that_says_it_is_a_bug(monkeypatch, capsys):
+    from clwave import cli
+
+    def broken(args):
+        raise RuntimeError("something nobody foresaw")
+
+    monkeypatch.setattr(cli, "cmd_info", broken)
+    assert cli.main(["info"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "bug" in err and "something nobody foresaw" in err and "--debug" in err
+    with pytest.raises(RuntimeError):
+        cli.main(["--debug", "info"])
+
+
+def test_options_that_do_not_apply_to_a_phantom_are_errors(tmp_path, capsys):
+    from clwave.cli import main
+    for option in (["--series", "3"], ["--dtype", "uint16"], ["--hu-to-mu"]):
+        assert main(["compress", "phantom:hydrogen:16", *option, "-o", str(tmp_path / "x.clw")]) == 2
+        assert option[0] in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

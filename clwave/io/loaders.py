@@ -94,6 +94,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     >>> load(f, spacing=(2.0, 1.0, 1.0))
     Volume(shape=(4, 5, 6), channels=1, spacing=(2.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0))
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputError(f"path must be a file or folder name (str or pathlib.Path), got {type(path).__name__}")
     path = Path(path)
     background = finite_number(background, "background")
     mu_water = finite_number(mu_water, "mu_water")

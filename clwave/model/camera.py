@@ -81,14 +81,14 @@ class Camera:
         self.elevation = finite_number(elevation, "elevation")
         self.size = _size(size)
         self.target = None if target is None else _vector(target, "target")
-        if extent is not None and not (np.isfinite(extent) and extent > 0):
+        if extent is not None and not finite_number(extent, "extent") > 0:
             raise InputError(f"extent={extent!r} must be a positive world width")
         self.extent = None if extent is None else float(extent)
         self.perspective = bool(perspective)
-        if distance is not None and not (np.isfinite(distance) and distance > 0):
+        if distance is not None and not finite_number(distance, "distance") > 0:
             raise InputError(f"distance={distance!r} must be a positive world distance")
         self.distance = None if distance is None else float(distance)
-        if not (np.isfinite(fov) and 0 < fov < 180):
+        if not 0 < finite_number(fov, "fov") < 180:
             raise InputError(f"fov={fov!r} must be between 0 and 180 degrees")
         self.fov = float(fov)
 

@@ -37,7 +37,10 @@ class Volume:
     """
 
     def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0)):
-        arr = np.asarray(data)
+        try:
+            arr = np.asarray(data)
+        except (ValueError, TypeError) as exc:  # e.g. a ragged nested list
+            raise InputError(f"volume data must be a rectangular array (z, y, x[, c]): {exc}") from None
         if arr.dtype.kind not in "biuf":
             raise InputError(
                 f"volume dtype {arr.dtype} is not numeric; give integers or floats "

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, finite_number
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from . import geometry
 from .geometry import fine_to_world, world_to_fine
@@ -232,6 +232,8 @@ class WaveletVolume:
         """
         if (keep is None) == (threshold is None):
             raise InputError("give exactly one of keep= (fraction of voxels) or threshold= (importance)")
+        keep = None if keep is None else finite_number(keep, "keep")
+        threshold = None if threshold is None else finite_number(threshold, "threshold")
         if keep is not None and not (np.isfinite(keep) and 0 < keep <= 1):
             raise InputError(f"keep={keep} must be a fraction in (0, 1]")
         if threshold is not None and not (np.isfinite(threshold) and threshold >= 0):
