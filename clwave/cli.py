@@ -343,6 +343,10 @@ def cmd_render(args):
         raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
     if args.method == "raytrace" and args.coarse is not None:
         raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
+    if args.omega_s is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
+        raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
+    if args.extent is not None and not (np.isfinite(args.extent) and args.extent > 0):
+        raise InputError(f"--extent {args.extent:g} must be a positive world width")
     if not (np.isfinite(args.tolerance) and args.tolerance > 0):
         raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
     lights, window = _lights(args), _display_window(args)
@@ -515,6 +519,10 @@ def main(argv=None) -> int:
     except Terminated:
         print("clwave: terminated", file=sys.stderr)
         return 143
+    except MemoryError as exc:
+        print(f"clwave: error: not enough memory for this work ({exc or 'an allocation failed'}); render fewer "
+              f"pixels, keep fewer coefficients or use a smaller volume", file=sys.stderr)
+        return EXIT_USAGE
     except Exception as exc:  # a bug: one line, the traceback only when asked for
         if debug:
             raise

@@ -210,3 +210,20 @@ def test_options_that_do_not_apply_to_a_phantom_are_errors(tmp_path, capsys):
         assert main(["compress", "phantom:hydrogen:16", *option, "-o", str(tmp_path / "x.clw")]) == 2
         assert option[0] in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("option, needle", [
+    (["--extent", "1e-6"], "footprint textures"),
+    (["--extent", "1e12"], "texel pool"),
+    (["--omega-s", "nan"], "--omega-s"),
+    (["--omega-s", "1e9"], "footprint textures"),
+    (["--spacing", "1e-6,1,1e6"], "footprint textures"),
+    (["--extent", "-1"], "--extent"),
+])
+def test_extreme_geometry_is_one_line_before_any_texture_is_made(tmp_path, capsys, option, needle):
+    from clwave.cli import main
+    start = time.perf_counter()
+    code = main(["render", "phantom:hydrogen:16", "--levels", "1", *option, "-o", str(tmp_path / "x.png")])
+    err = capsys.readouterr().err
+    assert code == 2 and needle in err and err.count("\n") == 1 and not list(tmp_path.iterdir())
+    assert time.perf_counter() - start < 10

@@ -82,14 +82,17 @@ class Camera:
         self.size = _size(size)
         self.target = None if target is None else _vector(target, "target")
         if extent is not None and not finite_number(extent, "extent") > 0:
-            raise InputError(f"extent={extent!r} must be a positive world width")
+            raise InputError(f"extent={extent!r} must be a positive world width",
+                             cli=f"--extent {extent} must be a positive world width")
         self.extent = None if extent is None else float(extent)
         self.perspective = bool(perspective)
         if distance is not None and not finite_number(distance, "distance") > 0:
-            raise InputError(f"distance={distance!r} must be a positive world distance")
+            raise InputError(f"distance={distance!r} must be a positive world distance",
+                             cli=f"--distance {distance} must be a positive world distance")
         self.distance = None if distance is None else float(distance)
         if not 0 < finite_number(fov, "fov") < 180:
-            raise InputError(f"fov={fov!r} must be between 0 and 180 degrees")
+            raise InputError(f"fov={fov!r} must be between 0 and 180 degrees",
+                             cli=f"--fov {fov} must be between 0 and 180 degrees")
         self.fov = float(fov)
 
     def basis(self):

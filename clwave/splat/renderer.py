@@ -17,7 +17,7 @@ from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
 from ..device.context import ComputeContext
-from ..errors import DeviceMemoryError, InputError
+from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.camera import Camera
 from ..model.wavelet import WaveletVolume
@@ -52,6 +52,8 @@ class SplatRenderer:
             raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
         if wv.levels >= MAX_LEVELS:
             raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
+        if omega_s is not None and not finite_number(omega_s, "omega_s") > 0:
+            raise InputError(f"omega_s={omega_s!r} must be a positive band (e.g. 14, paper eq. 35)")
         if coarse is not None and not (isinstance(coarse, (int, float)) and 0 < coarse < 1):
             raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
         self.wv, self.omega_s, self.sampling, self.coarse = wv, omega_s, sampling, coarse
@@ -120,7 +122,8 @@ class SplatRenderer:
                 f"a {H}x{W} image needs {fb_bytes / 2**20:.0f} MiB of framebuffers but {self.cc.info.name} "
                 f"allows {self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
         tables = [ViewTables(self.wv, gi, [(layer.view, {band for band, f in fg.items() if f == layer.factor})
-                                           for layer in layers], self.omega_s, self.sampling, device=self.cc)
+                                           for layer in layers], self.omega_s, self.sampling, device=self.cc,
+                             max_texels=self.cc.info.max_alloc // 4)
                   for gi, fg in enumerate(factors)]
         return Accumulator(self, view, layers, tables)
 

@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from ..device.constants import TILE
+from ..errors import DeviceMemoryError
 from ..model.geometry import fine_to_world, support_centres
 from ..model.wavelet import WaveletVolume
 from .textures import DEFAULT_OMEGA_MIN, cell_axes, footprints
@@ -51,7 +52,8 @@ class ViewTables:
     not drawn in an earlier layer.  Bands drawn nowhere are culled (``band_tex = -1``).
     """
 
-    def __init__(self, wv: WaveletVolume, group: int, layers, omega_s=None, sampling="auto", device=None):
+    def __init__(self, wv: WaveletVolume, group: int, layers, omega_s=None, sampling="auto", device=None,
+                 max_texels=None):
         g = wv.groups[group]
         wav = g.wavelet
         spacing = np.array(wv.spacing[::-1], float)  # (dx, dy, dz)
@@ -79,7 +81,7 @@ class ViewTables:
         start = time.perf_counter()
         self.textures = footprints(wav, wv.spacing, image_view.n, image_view.u, image_view.v, list(self.layer_of),
                                    omega_s=self.omega_s, sampling=sampling, tol=TEXTURE_TOL if wav.order == 4 else 0.0,
-                                   texel=texel, device=device)
+                                   texel=texel, device=device, max_texels=max_texels)
         self.footprint_seconds = time.perf_counter() - start
         self.samplings = sorted({t.sampling for t in self.textures.values() if t is not None})
 
@@ -116,6 +118,11 @@ class ViewTables:
                 P = self.texels_per_pixel[(m, band.key)]
                 cell_u, cell_v = tex.cells
                 su, sv = (view.pixel / h if cell else float(P) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
+                pool_texels = offset + (1 if cell_u else P) * (tex.data.shape[0] + 3) * (-(-tex.data.shape[1] // P) + 2)
+                if max_texels is not None and pool_texels > max_texels:
+                    raise DeviceMemoryError(
+                        f"the texel pool of this view needs more than {4 * max_texels / 2**20:,.0f} MiB: a pixel "
+                        f"({view.pixel:.3g} world units) spans {P:,} texels; render a smaller extent or more pixels")
                 planes = pack_texture(tex.data, 1 if cell_u else P)
                 nv, nu = tex.data.shape
                 boxes.append(_axis_box(nu, tex.centre_u, su, cell_u) + _axis_box(nv, tex.centre_v, sv, cell_v))

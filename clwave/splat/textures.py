@@ -25,7 +25,7 @@ from math import ceil
 import numpy as np
 import scipy.fft
 
-from ..errors import InputError
+from ..errors import DeviceMemoryError, InputError
 from ..threads import cores, thread_map
 from ..model.bspline import wavelet_for
 from ..model.geometry import check_key, footprint_vanishes, orthonormal_frame, spacing_xyz, support_extent
@@ -193,7 +193,7 @@ def _axis_points(count, h, cell) -> tuple:
 
 
 def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omega_min=None,
-               sampling: str = "auto", tol: float = 0.0, texel=None, device=None) -> dict:
+               sampling: str = "auto", tol: float = 0.0, texel=None, device=None, max_texels=None) -> dict:
     """Footprint textures of the (level, key) pairs in ``bands`` for one view.
 
     Parameters
@@ -223,6 +223,9 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         overriding the counts of eq. 36 (the splat renderer asks for an exact fraction of
         its pixel); the FFT period is then the smallest multiple of it that covers the
         support.  Not used along cell axes.
+    max_texels : int, optional
+        Refuse (:class:`DeviceMemoryError`) a view whose textures would hold more texels, before
+        any is made.
     device : ComputeContext, optional
         Sample the FFT sampling's spectra there (:func:`device_spectra`, float32), all
         textures in one launch, instead of with NumPy (float64); the inverse FFTs stay on
@@ -269,6 +272,12 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         h = texel.get((m, key)) if isinstance(texel, dict) else texel
         jobs.append((m, key) + tuple(_axis_sampling(float(np.abs(w) @ extent), cell, omega, d_min, h)
                                      for w, cell in ((u, cells[0]), (v, cells[1]))))
+    texels = sum(job[2][0] * job[3][0] for job in jobs)
+    if max_texels is not None and texels > max_texels:
+        raise DeviceMemoryError(
+            f"the footprint textures of this view need {texels:,} texels ({4 * texels / 2**20:,.0f} MiB), more than "
+            f"the {4 * max_texels / 2**20:,.0f} MiB allowed: the pixels are far smaller than the voxels (or the "
+            f"spacing is very uneven); render a wider extent, fewer pixels, or a lower omega_s")
     spectra = {}
     if sampling == "fft" and device is not None:
         # 2-D spectra on the device; at axis-aligned views (every axis along u or v) the texture
