@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ClwaveError, InputError, OutputExistsError
+from .memory import check_fits
 
 EXIT_USAGE = 2
 
@@ -30,6 +31,9 @@ class _Parser(argparse.ArgumentParser):
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
+#: host bytes per float32 value of the volume that decomposing and thresholding it takes at its peak
+#: (the in-memory model: about 9 times the volume, docs/benchmarks.md §2)
+MODEL_BYTES_PER_VALUE = 36
 
 
 def _numbers(text, name, counts, kind=float, sep=",") -> tuple:
@@ -91,7 +95,10 @@ def read_volume(args):
         parts = spec.split(":")
         if len(parts) > 3 or (len(parts) == 3 and not parts[2].isdigit()):
             raise InputError(f"{spec!r}: write phantom:NAME or phantom:NAME:N (N voxels per axis)")
-        vol = phantom(parts[1], n=int(parts[2]) if len(parts) == 3 else 128)
+        n = int(parts[2]) if len(parts) == 3 else 128
+        check_fits(MODEL_BYTES_PER_VALUE * n ** 3 * (4 if args.tf else 1), f"decomposing a {n}^3 phantom",
+                   "choose a smaller N")
+        vol = phantom(parts[1], n=n)
         return vol if spacing is None else Volume(vol.data, spacing=spacing)
     shape = None if args.shape is None else _numbers(args.shape, "--shape", (3, 4), int)
     series = args.series
@@ -171,6 +178,8 @@ def build_model(args, log=print, rgba=False):
     if tf is not None:
         tf = tf.resolved(vol)  # records an "auto" window
         vol = tf.classify(vol)
+    check_fits(MODEL_BYTES_PER_VALUE * vol.data.size * (4 if tf else 1), "decomposing this volume",
+               "crop or subsample it first")
     start = time.perf_counter()
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
                                    transfer_function=tf)
@@ -401,7 +410,7 @@ def _total_seconds(meta) -> float:
 
 
 def cmd_progressive(args):
-    from .splat.progressive import progressive
+    from .splat.progressive import MAX_STEPS, progressive
     from .io.result import RenderResult, resolve_window
 
     out = Path(args.output)
@@ -417,8 +426,8 @@ def cmd_progressive(args):
         _check_output(args.stats, args.force)
     camera = make_camera(args)
     steps = 8 if args.steps is None and args.budget is None else args.steps
-    if steps is not None and steps < 1:
-        raise InputError(f"--steps {steps} must be a whole number of frames >= 1")
+    if steps is not None and not 1 <= steps <= MAX_STEPS:
+        raise InputError(f"--steps {steps} must be a whole number of frames from 1 to {MAX_STEPS}")
     if args.budget is not None and not (np.isfinite(args.budget) and args.budget > 0):
         raise InputError(f"--budget {args.budget:g} must be a positive number of seconds")
     wv, _ = build_model(args)

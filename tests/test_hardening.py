@@ -227,3 +227,27 @@ def test_extreme_geometry_is_one_line_before_any_texture_is_made(tmp_path, capsy
     err = capsys.readouterr().err
     assert code == 2 and needle in err and err.count("\n") == 1 and not list(tmp_path.iterdir())
     assert time.perf_counter() - start < 10
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["compress", "phantom:hydrogen:100000"], "choose a smaller N"),
+    (["compress", "phantom:hydrogen:5000"], "GiB available"),
+    (["progressive", "phantom:hydrogen:16", "--steps", "100000"], "--steps 100000"),
+])
+def test_absurd_work_is_refused_up_front(tmp_path, capsys, argv, needle):
+    from clwave.cli import main
+    out = tmp_path / ("x.gif" if argv[0] == "progressive" else "x.clw")
+    start = time.perf_counter()
+    assert main([*argv, "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1 and time.perf_counter() - start < 5
+    with pytest.raises(MemoryError, match="choose a smaller n"):  # the API too, before allocating
+        clwave.phantom("hydrogen", 100000)
+
+
+def test_float64_values_beyond_float32_are_named_without_a_warning(tmp_path):
+    data = np.ones((4, 4, 4))
+    data[1, 2, 3] = 1e300
+    np.save(tmp_path / "big.npy", data)
+    with pytest.raises(InputError, match="beyond float32's range"):  # filterwarnings=error: no overflow warning
+        clwave.load(tmp_path / "big.npy")

@@ -125,6 +125,11 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
             data, file_spacing, origin = _read_dicom_folder(path, series, progress_bar)
 
     data = np.asarray(data)
+    if data.dtype.kind == "f" and data.dtype.itemsize > 4 and data.size:
+        top = float(np.nanmax(np.abs(np.where(np.isfinite(data), data, 0.0))))
+        if top > float(np.finfo(np.float32).max):
+            raise InputError(f"{path} holds values up to {top:.3g}, beyond float32's range (3.4e38); rescale "
+                             f"the data first")
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
         data = np.ascontiguousarray(data, dtype=np.float32)
         if hu_to_mu:

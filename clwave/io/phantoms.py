@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
+from ..memory import check_fits
 from ..model.volume import Volume
 
 NAMES = ("hydrogen", "marschner-lobb", "shepp-logan")
@@ -133,6 +134,7 @@ def _check(name, n):
         raise InputError(f"phantom size n must be an integer >= 2 (voxels per axis), got {n!r}")
     if n < 2:
         raise InputError(f"phantom size n must be an integer >= 2 (voxels per axis), got {n}")
+    check_fits(4 * int(n) ** 3, f"a {n}^3 phantom", "choose a smaller n")
     return key, int(n)
 
 
