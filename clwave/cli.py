@@ -31,9 +31,10 @@ class _Parser(argparse.ArgumentParser):
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
-#: host bytes per float32 value of the volume that decomposing and thresholding it takes at its peak
-#: (the in-memory model: about 9 times the volume, docs/benchmarks.md §2)
-MODEL_BYTES_PER_VALUE = 36
+#: host bytes per float32 value of the volume below which decomposing and thresholding it cannot run: the
+#: in-memory model peaks at 3 (RGBA) to 9 (scalar) times the volume; work beyond 4 times what is available
+#: is refused before it starts
+MODEL_BYTES_PER_VALUE = 16
 
 
 def _numbers(text, name, counts, kind=float, sep=",") -> tuple:

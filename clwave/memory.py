@@ -4,6 +4,12 @@ from __future__ import annotations
 
 import os
 
+from .errors import ClwaveError
+
+
+class HostMemoryError(ClwaveError, MemoryError):
+    """Work refused before it starts: it would not fit in the host's memory."""
+
 
 def available_bytes() -> int:
     """Memory the system could give this process now (Linux: MemAvailable), else the physical memory."""
@@ -23,10 +29,3 @@ def check_fits(nbytes: int, what: str, hint: str):
     if nbytes > free:
         raise HostMemoryError(f"{what} needs about {nbytes / 2**30:,.1f} GiB, and this machine has "
                               f"{free / 2**30:,.1f} GiB available; {hint}")
-
-
-from .errors import ClwaveError  # noqa: E402  (errors import nothing of clwave)
-
-
-class HostMemoryError(ClwaveError, MemoryError):
-    """Work refused before it starts: it would not fit in the host's memory."""
