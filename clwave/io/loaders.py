@@ -172,7 +172,11 @@ def _reject_unused(kind, **options):
 
 @contextmanager
 def _reading(path):
-    """Turn any library exception while reading ``path`` into a one-line FileFormatError."""
+    """Turn any library exception while reading ``path`` into a one-line FileFormatError; the readers'
+    own log lines (tifffile's on a cut file) are kept quiet, the error says what went wrong."""
+    quiet = logging.getLogger("tifffile")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)
     try:
         yield
     except ClwaveError:
@@ -185,6 +189,8 @@ def _reading(path):
                               "path and its permissions") from exc
     except Exception as exc:
         raise FileFormatError(_corrupt(path, exc)) from exc
+    finally:
+        quiet.setLevel(level)
 
 
 def _corrupt(path, exc) -> str:
