@@ -176,11 +176,11 @@ def build_model(args, log=print, rgba=False):
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
     wavelet, levels = check_decomposition(vol.shape, 4 if tf else vol.channels, wavelet,
                                           DEFAULT_LEVELS if args.levels is None else args.levels)
+    check_fits(MODEL_BYTES_PER_VALUE * vol.data.size * (4 if tf else 1), "decomposing this volume",
+               "crop or subsample it first")
     if tf is not None:
         tf = tf.resolved(vol)  # records an "auto" window
         vol = tf.classify(vol)
-    check_fits(MODEL_BYTES_PER_VALUE * vol.data.size * (4 if tf else 1), "decomposing this volume",
-               "crop or subsample it first")
     start = time.perf_counter()
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
                                    transfer_function=tf)
