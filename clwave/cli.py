@@ -176,7 +176,7 @@ def build_model(args, log=print, rgba=False):
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
     wavelet, levels = check_decomposition(vol.shape, 4 if tf else vol.channels, wavelet,
                                           DEFAULT_LEVELS if args.levels is None else args.levels)
-    check_fits(MODEL_BYTES_PER_VALUE * vol.data.size * (4 if tf else 1), "decomposing this volume",
+    check_fits(MODEL_BYTES_PER_VALUE * int(np.prod(vol.shape)) * (4 if tf else vol.channels), "decomposing this volume",
                "crop or subsample it first")
     if tf is not None:
         tf = tf.resolved(vol)  # records an "auto" window
@@ -355,8 +355,6 @@ def cmd_render(args):
         raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
     if args.omega_s is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
         raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
-    if args.extent is not None and not (np.isfinite(args.extent) and args.extent > 0):
-        raise InputError(f"--extent {args.extent:g} must be a positive world width")
     if not (np.isfinite(args.tolerance) and args.tolerance > 0):
         raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
     lights, window = _lights(args), _display_window(args)

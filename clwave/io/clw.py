@@ -81,7 +81,10 @@ def read_clw(path) -> WaveletVolume:
             mask = None
             if "content_mask" in npz.files:
                 _check_member(npz, "content_mask", -(-int(np.prod(shape)) // 8))
-                mask = np.unpackbits(npz["content_mask"], count=int(np.prod(shape))).astype(bool).reshape(shape)
+                packed = npz["content_mask"]
+                if len(packed) != -(-int(np.prod(shape)) // 8):
+                    raise ValueError(f"the content mask has {len(packed)} bytes for {int(np.prod(shape))} voxels")
+                mask = np.unpackbits(packed, count=int(np.prod(shape))).astype(bool).reshape(shape)
     except ClwaveError:
         raise
     except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, EOFError, json.JSONDecodeError) as exc:

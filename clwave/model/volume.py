@@ -106,10 +106,11 @@ class Volume:
         """(nz, ny, nx) bool: the voxels with a non-zero value in some channel."""
         return np.any(self.data != 0, axis=3) if self.data.ndim == 4 else self.data != 0
 
-    def content_box(self):
+    def content_box(self, mask=None):
         """World (x, y, z) corners ``(lo, hi)`` of the voxels with a non-zero value, each voxel a
-        box of its spacing (``None`` when every voxel is zero)."""
-        occupied = self.content_mask()
+        box of its spacing (``None`` when every voxel is zero); ``mask``: :meth:`content_mask`, when
+        the caller has it."""
+        occupied = self.content_mask() if mask is None else mask
         ends = []
         for axis in range(3):
             hit = np.flatnonzero(np.any(occupied, axis=tuple(a for a in range(3) if a != axis)))

@@ -142,14 +142,15 @@ class WaveletVolume:
             volume = Volume(volume)
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
         tf = transfer_function.to_dict() if hasattr(transfer_function, "to_dict") else transfer_function
+        mask = volume.content_mask()
         groups = []
         for wav in dict.fromkeys(wavelets):
             chans = [c for c, w in enumerate(wavelets) if w == wav]
             bands, values = decompose(volume, wav, chans, levels, interpolate, progress_bar)
             groups.append(ChannelGroup(wav, chans, bands, None, values))
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
-                   interpolate=interpolate, transfer_function=tf, content=volume.content_box(),
-                   content_mask=None if interpolate else volume.content_mask())
+                   interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask),
+                   content_mask=None if interpolate else mask)
 
     # ------------------------------------------------------------- properties
     @property

@@ -24,6 +24,7 @@ from ..device.context import ComputeContext
 from ..device.kernels import BUFFER, Kernel
 from ..errors import DeviceMemoryError, InputError
 from ..model.geometry import band_lattice
+from .bounds import content_weights
 
 
 def _part_args(name: str) -> tuple:
@@ -91,22 +92,6 @@ def fine_grids(wv, cc: ComputeContext, pad: int = 0, dense=None) -> tuple[list, 
                                                                                  grid.shape).astype(np.uint8)))
     cc.queue.finish()
     return grids, time.perf_counter() - start
-
-
-def content_weights(mask: np.ndarray, start, shape) -> np.ndarray:
-    """Whether the fine coefficients ``start + index`` (a box of ``shape``) belong to non-zero voxels.
-
-    Fine coefficient i of the approximating model is voxel i, so where the source volume is zero
-    (and beyond it) the full model's are zero; a thresholded model's are not (truncated wavelets
-    ring), and that ringing is all they add there: the B-spline field zeroes them.
-    """
-    keep = np.zeros(tuple(shape), bool)
-    lo = np.maximum(start, 0)
-    hi = np.minimum(np.add(start, shape), mask.shape)
-    if np.all(hi > lo):
-        inside = tuple(slice(a, b) for a, b in zip(lo, hi))
-        keep[tuple(slice(a - s, b - s) for a, b, s in zip(lo, hi, start))] = mask[inside]
-    return keep
 
 
 def _bytes_needed(wv, pad) -> int:

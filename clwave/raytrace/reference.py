@@ -16,7 +16,7 @@ from numpy.polynomial import chebyshev
 from ..device.constants import BLOCK, SUPER
 from ..model.geometry import world_to_fine, world_to_fine_affine
 from ..model.transform import Band, band_sum
-from .finegrid import content_weights
+from .bounds import content_weights
 from .quadrature import sample_points
 from .tracer import SIMPSON_DEPTH, Phong, RayTracer, light_direction
 

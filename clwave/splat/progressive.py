@@ -84,10 +84,11 @@ class ProgressiveFrame:
 
     def figures(self) -> dict:
         """The per-frame figures as plain numbers (JSON-ready)."""
+        error, peak = self.error_image(), self._final_peak()
+        rms, top = float(np.sqrt(np.mean(error ** 2))), float(np.max(np.abs(error)))
         return dict(index=self.index, coefficients=self.coefficients, fraction=self.fraction,
                     voxel_fraction=self.voxel_fraction, energy=self.energy, seconds=self.seconds,
-                    rms_error=self.rms_error, max_error=self.max_error, relative_rms_error=self.relative_rms_error,
-                    relative_max_error=self.relative_max_error)
+                    rms_error=rms, max_error=top, relative_rms_error=rms / peak, relative_max_error=top / peak)
 
     def result(self) -> RenderResult:
         """The frame as a :class:`~clwave.RenderResult` (its image and meta)."""
