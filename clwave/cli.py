@@ -120,20 +120,17 @@ def _flag(name: str) -> str:
 
 def _thresholding(args) -> dict:
     """``threshold()`` arguments from ``--keep``, ``--threshold``, ``--focus``/``--sigma``, checked before any work."""
-    if args.keep is not None and not (np.isfinite(args.keep) and 0 < args.keep <= 1):
-        raise InputError(f"--keep {args.keep:g} must be a fraction of the voxels in (0, 1], e.g. 0.05 for 5 %")
-    if args.threshold is not None and not (np.isfinite(args.threshold) and args.threshold >= 0):
-        raise InputError(f"--threshold {args.threshold:g} must be a finite importance >= 0")
+    from .model.wavelet import check_thresholding
+
     focus = None
     if args.focus is not None or args.sigma is not None:
         if args.focus is None or args.sigma is None:
             raise InputError("--focus X,Y,Z and --sigma S go together")
-        if not (np.isfinite(args.sigma) and args.sigma > 0):
-            raise InputError(f"--sigma {args.sigma:g} must be a positive world length")
         if args.keep is None and args.threshold is None and args.input.lower().endswith(".clw"):
             raise InputError("--focus selects where detail is kept: give --keep or --threshold too")
         focus = (_numbers(args.focus, "--focus", (3,)), args.sigma)
-    return dict(keep=args.keep, threshold=args.threshold, focus=focus)
+    keep, threshold, focus = check_thresholding(args.keep, args.threshold, focus)
+    return dict(keep=keep, threshold=threshold, focus=focus)
 
 
 def build_model(args, log=print, rgba=False):

@@ -233,14 +233,9 @@ class WaveletVolume:
         """
         if (keep is None) == (threshold is None):
             raise InputError("give exactly one of keep= (fraction of voxels) or threshold= (importance)")
-        keep = None if keep is None else finite_number(keep, "keep")
-        threshold = None if threshold is None else finite_number(threshold, "threshold")
-        if keep is not None and not (np.isfinite(keep) and 0 < keep <= 1):
-            raise InputError(f"keep={keep} must be a fraction in (0, 1]")
-        if threshold is not None and not (np.isfinite(threshold) and threshold >= 0):
-            raise InputError(f"threshold={threshold} must be a finite number >= 0")
+        keep, threshold, focus = check_thresholding(keep, threshold, focus)
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
-                            interpolate=self.interpolate, focus=_check_focus(focus),
+                            interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
                             content_mask=self.content_mask)
         budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
@@ -404,18 +399,31 @@ def _check_levels(levels, shape) -> int:
     return int(levels)
 
 
-def _check_focus(focus):
-    if focus is None:
-        return None
-    try:
-        centre, sigma = focus
-        centre = tuple(float(c) for c in centre)
-        sigma = float(sigma)
-    except (TypeError, ValueError):
-        raise InputError("focus must be ((x, y, z), sigma) in world units") from None
-    if len(centre) != 3 or not np.all(np.isfinite(centre)) or not (np.isfinite(sigma) and sigma > 0):
-        raise InputError(f"focus {focus!r} needs a finite (x, y, z) centre and sigma > 0")
-    return centre, sigma
+def check_thresholding(keep, threshold, focus) -> tuple:
+    """``(keep, threshold, focus)`` of :meth:`WaveletVolume.threshold`, checked before any work (each
+    message also in the command line's words)."""
+    if keep is not None:
+        keep = finite_number(keep, "keep")
+        if not 0 < keep <= 1:
+            raise InputError(f"keep={keep} must be a fraction of the voxels in (0, 1]",
+                             cli=f"--keep {keep:g} must be a fraction of the voxels in (0, 1], e.g. 0.05 for 5 %")
+    if threshold is not None:
+        threshold = finite_number(threshold, "threshold")
+        if threshold < 0:
+            raise InputError(f"threshold={threshold} must be an importance >= 0",
+                             cli=f"--threshold {threshold:g} must be an importance >= 0")
+    if focus is not None:
+        try:
+            centre, sigma = focus
+            centre = tuple(float(c) for c in centre)
+            sigma = float(sigma)
+        except (TypeError, ValueError):
+            raise InputError("focus must be ((x, y, z), sigma) in world units") from None
+        if len(centre) != 3 or not np.all(np.isfinite(centre)) or not (np.isfinite(sigma) and sigma > 0):
+            raise InputError(f"focus {focus!r} needs a finite (x, y, z) centre and sigma > 0",
+                             cli="--focus X,Y,Z needs a finite centre and --sigma a positive world length")
+        focus = (centre, sigma)
+    return keep, threshold, focus
 
 
 def _top(importance, count) -> np.ndarray:
