@@ -406,7 +406,7 @@ def _total_seconds(meta) -> float:
 
 
 def cmd_progressive(args):
-    from .splat.progressive import MAX_STEPS, progressive
+    from .splat.progressive import check_schedule, progressive
     from .io.result import RenderResult, resolve_window
 
     out = Path(args.output)
@@ -422,10 +422,7 @@ def cmd_progressive(args):
         _check_output(args.stats, args.force)
     camera = make_camera(args)
     steps = 8 if args.steps is None and args.budget is None else args.steps
-    if steps is not None and not 1 <= steps <= MAX_STEPS:
-        raise InputError(f"--steps {steps} must be a whole number of frames from 1 to {MAX_STEPS}")
-    if args.budget is not None and not (np.isfinite(args.budget) and args.budget > 0):
-        raise InputError(f"--budget {args.budget:g} must be a positive number of seconds")
+    check_schedule(steps, args.budget)
     wv, _ = build_model(args)
     frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device,
                               omega_s=args.omega_s, coarse=args.coarse))

@@ -102,6 +102,20 @@ class ProgressiveFrame:
 MAX_STEPS = 64  # frames double the coefficients: 2^63 are more than any model holds
 
 
+def check_schedule(steps, budget):
+    """Exactly one of ``steps`` (1 to :data:`MAX_STEPS` frames) and ``budget`` (seconds > 0), checked before
+    any work (each message also in the command line's words)."""
+    if (steps is None) == (budget is None):
+        raise InputError("give exactly one of steps= (number of frames) or budget= (seconds)",
+                         cli="give one of --steps N or --budget SECONDS")
+    if steps is not None and (isinstance(steps, bool) or int(steps) != steps or not 1 <= steps <= MAX_STEPS):
+        raise InputError(f"steps={steps!r} must be a whole number from 1 to {MAX_STEPS} (each frame doubles "
+                         f"the coefficients)", cli=f"--steps {steps} must be a whole number from 1 to {MAX_STEPS}")
+    if budget is not None and not (np.isfinite(budget) and budget > 0):
+        raise InputError(f"budget={budget!r} must be a positive number of seconds",
+                         cli=f"--budget {budget:g} must be a positive number of seconds")
+
+
 def schedule(total: int, steps: int) -> list:
     """Coefficient counts of ``steps`` frames, doubling up to ``total`` (the last frame has all)."""
     counts = [int(np.ceil(total / 2.0 ** (steps - 1 - i))) for i in range(steps)]
@@ -124,13 +138,7 @@ def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, devi
     omega_s, sampling, coarse :
         As for :class:`clwave.SplatRenderer`.
     """
-    if (steps is None) == (budget is None):
-        raise InputError("give exactly one of steps= (number of frames) or budget= (seconds)")
-    if steps is not None and (isinstance(steps, bool) or int(steps) != steps or not 1 <= steps <= MAX_STEPS):
-        raise InputError(f"steps={steps!r} must be a whole number from 1 to {MAX_STEPS} (each frame doubles "
-                         f"the coefficients)", cli=f"--steps {steps} must be a whole number from 1 to {MAX_STEPS}")
-    if budget is not None and not (np.isfinite(budget) and budget > 0):
-        raise InputError(f"budget={budget!r} must be a positive number of seconds")
+    check_schedule(steps, budget)
     r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse)
     return _frames(r, camera, steps, budget)
 
