@@ -133,6 +133,11 @@ def _thresholding(args) -> dict:
     return dict(keep=keep, threshold=threshold, focus=focus)
 
 
+def _needs_rgba(name, channels, fix) -> InputError:
+    return InputError(f"shaded ray tracing needs a classified (RGBA, 4 channels) model, {name} has {channels} "
+                      f"channel(s): {fix}, or render line integrals with --xray")
+
+
 def build_model(args, log=print, rgba=False):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
@@ -151,8 +156,7 @@ def build_model(args, log=print, rgba=False):
                              f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")
         wv = WaveletVolume.open(args.input)
         if rgba and wv.channels != 4:
-            raise InputError(f"shaded ray tracing needs a classified (RGBA) model, {args.input} has {wv.channels} "
-                             f"channel(s): compress the volume with --tf PRESET, or render line integrals with --xray")
+            raise _needs_rgba(args.input, wv.channels, "compress the volume with --tf PRESET")
         if args.keep is not None or args.threshold is not None:
             wv = wv.threshold(**thresholding)
         return wv, None
@@ -166,9 +170,8 @@ def build_model(args, log=print, rgba=False):
     elif args.tf_window is not None:
         raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
     if rgba and tf is None and vol.channels != 4:
-        raise InputError(f"shaded ray tracing needs an RGBA volume (4 channels), {args.input} has {vol.channels}: "
-                         f"classify it with --tf PRESET ({', '.join(TransferFunction.PRESETS)}), or render line "
-                         f"integrals with --xray")
+        presets = ", ".join(TransferFunction.PRESETS)
+        raise _needs_rgba(args.input, vol.channels, f"classify it with --tf PRESET ({presets})")
     wavelet = args.wavelet or DEFAULT_WAVELET
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
     wavelet, levels = check_decomposition(vol.shape, 4 if tf else vol.channels, wavelet,
@@ -378,10 +381,9 @@ def cmd_render(args):
         _write_gif(out, [r.to_uint8(window, background) for r in results], 0.1, args.force)
         result = results[0]
         result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
-        size = f"{camera.size[0]}x{camera.size[1]}"
         seconds = result.meta["turntable_seconds"]
-        print(f"turntable of {len(results)} views at {size} in {sum(seconds):.3f} s ({np.median(seconds):.3f} s a "
-              f"view, median); the first view:")
+        print(f"turntable of {len(results)} views at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
+              f"({np.median(seconds):.3f} s a view, median); the first view:")
     if args.raw:
         result.save(args.raw, overwrite=args.force)
     if args.stats:

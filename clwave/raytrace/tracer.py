@@ -385,6 +385,5 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
             raise InputError("ray tracing needs a clwave.WaveletVolume")
         cc = ComputeContext.get(device)
         tracer = wv.shared(("raytrace", cc.info.id, field), lambda: RayTracer(wv, device=cc, field=field))
-    r = tracer
-    return r.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
-                    precision=precision)
+    return tracer.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
+                         precision=precision)
