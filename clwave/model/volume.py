@@ -1,4 +1,5 @@
-"""Volume: a (z, y, x[, c]) float32 array with physical voxel spacing.
+"""Volume: a (z, y, x[, c]) float32 array with physical voxel spacing, in memory (numpy) or chunked
+(a Dask array, never read whole: docs/chunked.md).
 
 Conventions (docs/coordinates.md): host arrays are ``(z, y, x)`` or ``(z, y, x, c)``;
 ``spacing = (dz, dy, dx)`` in world units; ``origin = (x, y, z)`` is the world
@@ -37,8 +38,9 @@ class Volume:
     """
 
     def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0)):
+        lazy = is_dask(data)
         try:
-            arr = np.asarray(data)
+            arr = data if lazy else np.asarray(data)
         except (ValueError, TypeError) as exc:  # e.g. a ragged nested list
             raise InputError(f"volume data must be a rectangular array (z, y, x[, c]): {exc}") from None
         if arr.dtype.kind not in "biuf":
@@ -57,15 +59,12 @@ class Volume:
             raise InputError(
                 f"volume shape {shape} (z, y, x) has an axis shorter than 2 voxels; "
                 "every axis needs at least 2 voxels")
-        arr = np.ascontiguousarray(arr, dtype=np.float32)
         if arr.ndim == 4 and arr.shape[3] == 1:
             arr = arr[..., 0]
-        finite = np.isfinite(arr)
-        if not finite.all():
-            bad = int(arr.size - np.count_nonzero(finite))
-            raise InputError(
-                f"volume has {bad} non-finite voxel value(s) (NaN/Inf); replace them first, "
-                "e.g. numpy.nan_to_num(data)")
+        if lazy:  # each chunk is converted and checked when it is read (checked_block)
+            arr = arr.astype(np.float32) if arr.ndim == 3 else arr.rechunk({3: -1}).astype(np.float32)
+        else:
+            arr = checked_block(np.ascontiguousarray(arr, dtype=np.float32))
         self.data = arr
         self.spacing = _triple(spacing, "spacing")
         if min(self.spacing) <= 0:
@@ -79,6 +78,11 @@ class Volume:
     def shape(self) -> tuple:
         """Grid shape ``(nz, ny, nx)`` without the channel axis."""
         return tuple(int(s) for s in self.data.shape[:3])
+
+    @property
+    def chunked(self) -> bool:
+        """True when the data is a Dask array (read chunk by chunk, docs/chunked.md)."""
+        return is_dask(self.data)
 
     @property
     def channels(self) -> int:
@@ -102,9 +106,10 @@ class Volume:
         """Fractional voxel indices (N, 3) as (i, j, k) of world points (N, 3) as (x, y, z)."""
         return world_to_fine(points_xyz, 0, self.shape, self.spacing, self.origin)
 
-    def content_mask(self) -> np.ndarray:
-        """(nz, ny, nx) bool: the voxels with a non-zero value in some channel."""
-        return np.any(self.data != 0, axis=3) if self.data.ndim == 4 else self.data != 0
+    def content_mask(self):
+        """(nz, ny, nx) bool: the voxels with a non-zero value in some channel (a Dask array for a
+        chunked volume)."""
+        return content_of(self.data)
 
     def content_box(self, mask=None):
         """World (x, y, z) corners ``(lo, hi)`` of the voxels with a non-zero value, each voxel a
@@ -112,8 +117,13 @@ class Volume:
         the caller has it."""
         occupied = self.content_mask() if mask is None else mask
         ends = []
+        projections = [occupied.any(axis=tuple(a for a in range(3) if a != axis)) for axis in range(3)]
+        if is_dask(occupied):
+            import dask
+
+            projections = dask.compute(*projections)
         for axis in range(3):
-            hit = np.flatnonzero(np.any(occupied, axis=tuple(a for a in range(3) if a != axis)))
+            hit = np.flatnonzero(projections[axis])
             if not len(hit):
                 return None
             ends.append((hit[0] - 0.5, hit[-1] + 0.5))
@@ -123,6 +133,27 @@ class Volume:
     def __repr__(self):
         return (f"Volume(shape={self.shape}, channels={self.channels}, "
                 f"spacing={self.spacing}, origin={self.origin})")
+
+
+def is_dask(data) -> bool:
+    """True for a Dask array (without importing Dask when it is not in use)."""
+    return type(data).__module__.startswith("dask.")
+
+
+def checked_block(block: np.ndarray) -> np.ndarray:
+    """``block`` (float32) when all its values are finite; else the InputError of a volume with NaN/Inf."""
+    finite = np.isfinite(block)
+    if not finite.all():
+        bad = int(block.size - np.count_nonzero(finite))
+        raise InputError(
+            f"volume has {bad} non-finite voxel value(s) (NaN/Inf); replace them first, "
+            "e.g. numpy.nan_to_num(data)")
+    return block
+
+
+def content_of(data):
+    """(nz, ny, nx) bool of the voxels with a non-zero value in some channel of ``data`` (z, y, x[, c])."""
+    return (data != 0).any(axis=3) if data.ndim == 4 else data != 0
 
 
 def _triple(value, name) -> tuple:
