@@ -62,7 +62,7 @@ class Volume:
         if arr.ndim == 4 and arr.shape[3] == 1:
             arr = arr[..., 0]
         if lazy:  # each chunk is converted and checked when it is read (checked_block)
-            arr = arr.astype(np.float32) if arr.ndim == 3 else arr.rechunk({3: -1}).astype(np.float32)
+            arr = (arr if arr.ndim == 3 else arr.rechunk({3: -1})).astype(np.float32).map_blocks(checked_block)
         else:
             arr = checked_block(np.ascontiguousarray(arr, dtype=np.float32))
         self.data = arr
