@@ -3,6 +3,7 @@
 import errno
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -10,6 +11,7 @@ import threading
 import time
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
@@ -28,16 +30,19 @@ def model_file(tmp_path_factory):
     return path
 
 
-def crafted(model_file, tmp_path, edit) -> Path:
-    """A copy of ``model_file`` whose header ``edit`` changed (the other members as they were)."""
-    with np.load(model_file) as npz:
-        arrays = {k: npz[k] for k in npz.files}
-    header = json.loads(bytes(arrays["header"]).decode())
-    edit(header)
-    arrays["header"] = np.frombuffer(json.dumps(header).encode(), np.uint8)
+def crafted(model_file, tmp_path, edit=None, change=None) -> Path:
+    """A copy of ``model_file`` whose header ``edit`` changed, or that ``change(h5 file)`` changed."""
     out = tmp_path / "crafted.clw"
-    with open(out, "wb") as fh:  # a path would get ".npz" appended
-        np.savez_compressed(fh, **arrays)
+    shutil.copy(model_file, out)
+    with h5py.File(out, "r+") as h5:
+        if edit is not None:
+            header = json.loads(h5.attrs["header"])
+            edit(header)
+            if "version" in header:  # an attribute of its own
+                h5.attrs["version"] = header.pop("version")
+            h5.attrs["header"] = json.dumps(header)
+        if change is not None:
+            change(h5)
     return out
 
 
@@ -46,8 +51,8 @@ def setter(key, value):
 
 
 @pytest.mark.parametrize("edit, needle", [
-    (setter("shape", [2048, 2048, 2048]), "index mask has"),
-    (setter("shape", [100000, 100000, 100000]), "index mask has"),
+    (setter("shape", [2048, 2048, 2048]), "expected (2048, 2048, 2048)"),
+    (setter("shape", [100000, 100000, 100000]), "expected (100000, 100000, 100000)"),
     (setter("shape", [-16, 16, 16]), "shape"),
     (setter("shape", [16, 16]), "shape"),
     (setter("groups", []), "no channel groups"),
@@ -56,7 +61,7 @@ def setter(key, value):
     (setter("spacing", [float("nan"), 1, 1]), "spacing"),
     (setter("origin", [float("inf"), 0, 0]), "origin"),
     (setter("levels", 9), "levels"),
-    (setter("version", 99), "version 99"),
+    (setter("version", 99), "format version 99"),
     (lambda h: h["groups"][0].__setitem__("wavelet", 7), "wavelet order"),
 ])
 def test_crafted_clw_headers_are_refused_before_anything_is_allocated(model_file, tmp_path, edit, needle):
@@ -74,6 +79,43 @@ def test_other_files_named_clw_are_refused(tmp_path):
     (tmp_path / "x.npy").rename(npy)
     with pytest.raises(FileFormatError, match="cannot read"):
         clwave.WaveletVolume.open(npy)
+    other = tmp_path / "other.clw"
+    with h5py.File(other, "w") as h5:
+        h5["data"] = np.zeros(8)
+    with pytest.raises(FileFormatError, match="not a clwave wavelet volume"):
+        clwave.WaveletVolume.open(other)
+
+
+def test_a_version_1_file_is_named_as_such(tmp_path):
+    old = tmp_path / "old.clw"
+    with open(old, "wb") as fh:  # version 1 was a zip of .npy members
+        np.savez_compressed(fh, header=np.frombuffer(b'{"version": 1}', np.uint8))
+    with pytest.raises(FileFormatError, match="format version 1.*compress the volume again"):
+        clwave.WaveletVolume.open(old)
+
+
+@pytest.mark.parametrize("change, needle", [
+    (lambda h5: h5.__delitem__("g0/runs"), "missing"),
+    (lambda h5: h5["g0/runs"].__setitem__((0, 2), 10 ** 9), "do not tile"),
+    (lambda h5: h5["g0/positions"].__setitem__(0, -5), "outside its bands"),
+    (lambda h5: h5["g0/values"].__setitem__((0, 0), np.nan), "non-finite"),
+])
+def test_crafted_clw_members_are_refused(model_file, tmp_path, change, needle):
+    with pytest.raises(FileFormatError, match=needle) as err:
+        clwave.WaveletVolume.open(crafted(model_file, tmp_path, change=change))
+    assert "\n" not in str(err.value)
+
+
+def test_a_damaged_chunk_fails_its_checksum(model_file, tmp_path):
+    out = tmp_path / "damaged.clw"
+    shutil.copy(model_file, out)
+    with h5py.File(out, "r") as h5:
+        offset = h5["g0/values"].id.get_chunk_info(0).byte_offset
+    data = bytearray(out.read_bytes())
+    data[offset + 20] ^= 0xFF
+    out.write_bytes(bytes(data))
+    with pytest.raises(FileFormatError, match="cannot read .*corrupt"):
+        clwave.WaveletVolume.open(out)
 
 
 def test_two_writers_racing_for_one_name_one_wins(tmp_path):
@@ -122,13 +164,14 @@ def test_non_finite_images_are_never_written(tmp_path):
 
 def test_sigterm_while_writing_leaves_nothing(tmp_path):
     script = f"""
-import sys, time, numpy as np
+import sys, time
 from clwave import cli
-def slow(fh, **arrays):
+from clwave.io import clw
+def slow(model, fh):
     fh.write(b"partial")
     fh.flush()
     time.sleep(60)
-np.savez_compressed = slow
+clw._write = slow
 sys.exit(cli.main(["compress", "phantom:hydrogen:16", "--levels", "1", "-o", {str(tmp_path / 'out.clw')!r}]))
 """
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -144,16 +187,15 @@ sys.exit(cli.main(["compress", "phantom:hydrogen:16", "--levels", "1", "-o", {st
 
 
 def test_a_member_declaring_more_than_the_header_allows_is_not_decompressed(model_file, tmp_path):
-    with np.load(model_file) as npz:
-        arrays = {k: npz[k] for k in npz.files}
-    arrays["values0"] = np.zeros((1, 50_000_000), np.float32)  # 200 MB of zeros deflate to ~200 KB
-    bomb = tmp_path / "bomb.clw"
-    with open(bomb, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
-    assert bomb.stat().st_size < 1_000_000
+    def bomb(h5):  # 200 MB of zeros deflate to ~200 KB
+        del h5["g0/values"]
+        h5.create_dataset("g0/values", data=np.zeros((50_000_000, 1), np.float32), chunks=(1 << 20, 1),
+                          compression="gzip")
+    path = crafted(model_file, tmp_path, change=bomb)
+    assert path.stat().st_size < 1_000_000
     start = time.perf_counter()
-    with pytest.raises(FileFormatError, match="header allows"):
-        clwave.WaveletVolume.open(bomb)
+    with pytest.raises(FileFormatError, match="expected"):
+        clwave.WaveletVolume.open(path)
     assert time.perf_counter() - start < 1.0
 
 

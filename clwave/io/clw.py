@@ -1,5 +1,21 @@
-"""The ``.clw`` file of a wavelet model (docs/model.md §6): a zip of ``.npy`` arrays holding a JSON
-header, each channel group's kept positions as a bit mask (deflated) and its exact float32 values."""
+"""The ``.clw`` file of a wavelet model (docs/chunked.md §4): an HDF5 file whose coefficients are stored by
+importance tier, so that a reader can take the most important ones by reading a prefix, and that a
+chunked model can write a block at a time.
+
+Layout (version 2)::
+
+    attrs           format, version, header (JSON: shape, spacing, origin, levels, channels, groups, ...)
+    content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
+    g<i>/positions  int64 (N,): a channel group's stored coefficients, into its band layout, ascending
+                    within a run and stored as differences (the first of a run as it is)
+    g<i>/values     float32 (N, C)
+    g<i>/runs       int64 (R, 3): (tier, first row, rows) of each run of rows of one tier
+
+A tier is -1 for the coarsest approximation, else :func:`~clwave.model.chunked.tiers_of` of the
+details' importance; a reader takes the runs of the approximation, then of the tiers from the most
+important down, as far as it needs.  Zero coefficients are not stored.  Every dataset is chunked,
+deflated and checksummed (Fletcher-32), so a damaged file is told apart from a valid one.
+"""
 
 from __future__ import annotations
 
@@ -11,87 +27,164 @@ import numpy as np
 
 from ..errors import ClwaveError, FileFormatError, InputError
 from ..model.bspline import SplineWavelet, max_levels
+from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.transform import band_layout
-from ..model.wavelet import ChannelGroup, WaveletVolume
+from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from .files import write_atomic
 
 FILE_FORMAT = "clwave-wavelet-volume"
-FILE_VERSION = 1
+FILE_VERSION = 2
+ROWS = 1 << 14               # coefficients a dataset chunk holds, and a tier's buffer before it is written
+MASK_CHUNK = (64, 64, 64)
+MAX_HEADER = 1 << 20
+FILTERS = dict(compression="gzip", compression_opts=4, shuffle=True, fletcher32=True)
 
 
-def write_clw(wv: WaveletVolume, path, overwrite=False) -> Path:
-    """Write ``wv`` to ``path`` atomically; refuses to replace a file unless ``overwrite``."""
-    header = dict(format=FILE_FORMAT, version=FILE_VERSION, shape=wv.shape,
-                  spacing=wv.spacing, origin=wv.origin, levels=wv.levels,
-                  channels=wv.channels, interpolate=wv.interpolate,
-                  focus=None if wv.focus is None else [list(wv.focus[0]), wv.focus[1]],
-                  transfer_function=wv.transfer_function, content=wv.content,
-                  groups=[dict(wavelet=g.wavelet.order, channels=list(g.channels)) for g in wv.groups])
-    arrays = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)}
-    if wv.content_mask is not None:
-        arrays["content_mask"] = np.packbits(wv.content_mask)
-    for gi, g in enumerate(wv.groups):
-        stored = np.any(g.values != 0, axis=0)  # a zero coefficient adds nothing: it is not stored
-        mask = np.zeros(g.total, dtype=bool)
-        mask[g.all_positions()[stored]] = True
-        arrays[f"mask{gi}"] = np.packbits(mask)
-        arrays[f"values{gi}"] = np.ascontiguousarray(g.values[:, stored], dtype=np.float32)
-    return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays), overwrite)
+# ---------------------------------------------------------------- writing
 
 
-DEFLATE_MAX_RATIO = 1032  # deflate cannot expand a byte into more than this: bounds what a member may hold
-CHUNK = 1 << 24            # mask bytes unpacked at a time
+def write_clw(model, path, overwrite=False) -> Path:
+    """Write a :class:`WaveletVolume`, or stream a :class:`ChunkedWaveletVolume`, to ``path`` atomically;
+    refuses to replace a file unless ``overwrite``."""
+    return write_atomic(path, lambda fh: _write(model, fh), overwrite)
 
 
-def read_clw(path) -> WaveletVolume:
-    """Read a ``.clw`` file written by :func:`write_clw`.
+def _write(model, fh):
+    import h5py
 
-    The file is untrusted: its header is checked, and every member's declared size against the
-    header and against what its compressed bytes can hold, before anything is decompressed or
-    allocated; the positions come from the mask chunk by chunk (memory of the kept coefficients).
+    chunked = isinstance(model, ChunkedWaveletVolume)
+    groups = [(w, c) for w, c in model.groups()] if chunked else [(g.wavelet, g.channels) for g in model.groups]
+    header = dict(shape=model.shape, spacing=model.spacing, origin=model.origin, levels=model.levels,
+                  channels=model.channels, interpolate=not chunked and model.interpolate,
+                  focus=None if model.focus is None else [list(model.focus[0]), model.focus[1]],
+                  transfer_function=model.transfer_function, content=model.content,
+                  groups=[dict(wavelet=w.order, channels=list(c)) for w, c in groups])
+    with h5py.File(fh, "w", libver="latest", meta_block_size=512) as h5:  # small metadata blocks: small models
+        h5.attrs.update(format=FILE_FORMAT, version=FILE_VERSION, header=json.dumps(header))
+        tiers = _Tiers(h5, [band_layout(w, model.shape, model.levels)[0].size for w, _ in groups],
+                       [len(c) for _, c in groups])
+        if chunked:
+            _stream(model, h5, tiers)
+        else:
+            if model.content_mask is not None:
+                _mask_dataset(h5, model.shape)[...] = np.ascontiguousarray(model.content_mask).view(np.uint8)
+            for gi, g in enumerate(model.groups):
+                stored = np.any(g.values != 0, axis=0)  # a zero coefficient adds nothing: it is not stored
+                plain = importance_of(g, None, model.frame)  # tiers rank without the focus (docs/chunked.md §4)
+                tiers.append(gi, g.all_positions()[stored], g.values[:, stored], tiers_of(plain[stored]))
+        tiers.flush()
+
+
+def _stream(model: ChunkedWaveletVolume, h5, tiers):
+    from ..cluster import client_for, stream
+
+    mask = _mask_dataset(h5, model.shape)
+    with client_for(model.scheduler) as client:
+        for box, packed in stream(client, model.content_blocks(), desc="content mask",
+                                  progress_bar=model.progress_bar):
+            shape = tuple(s.stop - s.start for s in box)
+            mask[box] = np.unpackbits(packed, count=int(np.prod(shape))).reshape(shape)
+        for gi, positions, values, tier in model.selected(client, tiers=True):
+            stored = np.any(values != 0, axis=0)
+            tiers.append(gi, positions[stored], values[:, stored], tier[stored])
+
+
+def _mask_dataset(h5, shape):
+    return h5.create_dataset("content_mask", shape=shape, dtype=np.uint8,
+                             chunks=tuple(min(c, n) for c, n in zip(MASK_CHUNK, shape)), **FILTERS)
+
+
+class _Tiers:
+    """Appends coefficients to their group's datasets in runs of one tier, whole chunks of :data:`ROWS`
+    rows at a time (the rest waits in a buffer for more of its tier, or for :meth:`flush`)."""
+
+    def __init__(self, h5, approx_sizes, channels):
+        self.h5, self.approx_sizes = h5, approx_sizes
+        self.buffers, self.runs = {}, {gi: [] for gi in range(len(channels))}
+        for gi, c in enumerate(channels):
+            h5.create_dataset(f"g{gi}/positions", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(ROWS,),
+                              **FILTERS)
+            h5.create_dataset(f"g{gi}/values", shape=(0, c), maxshape=(None, c), dtype=np.float32,
+                              chunks=(ROWS, c), **FILTERS)
+
+    def append(self, gi, positions, values, tiers):
+        names = np.where(positions < self.approx_sizes[gi], -1, tiers)  # the approximation: band 0 of the layout
+        for tier in np.unique(names)[::-1]:
+            sel = names == tier
+            parts = self.buffers.setdefault((gi, int(tier)), [])
+            parts.append((positions[sel], values[:, sel]))
+            rows = sum(len(p) for p, _ in parts)
+            if rows >= ROWS:  # whole chunks now; the rest waits
+                positions = np.concatenate([p for p, _ in parts])
+                values = np.concatenate([v for _, v in parts], axis=1)
+                cut = rows - rows % ROWS
+                self._write(gi, [(int(tier), [(positions[:cut], values[:, :cut])])])
+                self.buffers[(gi, int(tier))] = [(positions[cut:], values[:, cut:])]
+
+    def flush(self):
+        """Write what the buffers hold, a group at a time in one write (rewriting a compressed chunk would
+        leave its old copy behind as a hole in the file), and each group's runs."""
+        for gi in self.runs:
+            tiers = sorted((t for g, t in self.buffers if g == gi), key=lambda t: (t != -1, -t))
+            self._write(gi, [(t, self.buffers.pop((gi, t))) for t in tiers])
+            self.h5.create_dataset(f"g{gi}/runs", data=np.array(self.runs[gi], dtype=np.int64).reshape(-1, 3),
+                                   **FILTERS)
+
+    def _write(self, gi, tier_parts):
+        """Append runs ``[(tier, [(positions, values (C, n)), ...]), ...]`` in one write."""
+        start = self.h5[f"g{gi}/positions"].shape[0]
+        deltas, rows_values = [], []
+        for tier, parts in tier_parts:
+            positions = np.concatenate([p for p, _ in parts])
+            order = np.argsort(positions, kind="stable")  # ascending within a run: small differences deflate well
+            deltas.append(np.diff(positions[order], prepend=0))
+            rows_values.append(np.concatenate([v for _, v in parts], axis=1).T[order])
+            self.runs[gi].append((tier, start + sum(len(d) for d in deltas[:-1]), len(positions)))
+        for name, data in (("positions", deltas), ("values", rows_values)):
+            dataset = self.h5[f"g{gi}/{name}"]
+            dataset.resize(start + sum(len(d) for d in deltas), axis=0)
+            dataset[start:] = np.concatenate(data)
+
+
+# ---------------------------------------------------------------- reading
+
+
+def read_clw(path, keep=None) -> WaveletVolume:
+    """Read a ``.clw`` file written by :func:`write_clw`; with ``keep``, its ``keep`` most important
+    coefficients (:meth:`WaveletVolume.open`), read tier by tier.
+
+    The file is untrusted: its header is checked, and every dataset's shape, type and chunking against
+    the header, before anything is read; the checksums are verified as the data is read.
     """
+    import h5py
+
     path = Path(path)
+    if keep is not None:
+        keep = check_thresholding(keep, None, None)[0]
     if not path.is_file():
         raise FileFormatError(f"{path} does not exist or is not a file")
+    if zipfile.is_zipfile(path):
+        raise FileFormatError(f"{path} is a .clw file of format version 1 (clwave 0.1), which this clwave no longer "
+                              f"reads; compress the volume again to make a version {FILE_VERSION} file")
     try:
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as npz:
-            if "header" not in npz.files:
-                raise ValueError("no header member")
-            _check_member(npz, "header", 1 << 20)
-            header = json.loads(bytes(npz["header"]).decode())
-            if header.get("format") != FILE_FORMAT or header.get("version") != FILE_VERSION:
-                raise FileFormatError(f"{path} is not a clwave v{FILE_VERSION} wavelet volume file (format "
-                                      f"{header.get('format')!r}, version {header.get('version')!r})")
+        with h5py.File(path, "r") as h5:
+            header = _header(h5, path)
             shape, levels, channels, groups_header = _checked_header(header)
-            groups = []
-            for gi, gh in enumerate(groups_header):
-                wav = SplineWavelet(gh["wavelet"])
-                bands = band_layout(wav, shape, levels)
-                total = bands[-1].start + bands[-1].size
-                _check_member(npz, f"mask{gi}", -(-total // 8))
-                positions = _positions(npz[f"mask{gi}"], total)
-                _check_member(npz, f"values{gi}", 4 * len(gh["channels"]) * len(positions))
-                values = npz[f"values{gi}"]
-                if values.shape != (len(gh["channels"]), len(positions)) or values.dtype != np.float32:
-                    raise ValueError(f"group {gi}: values {values.shape} do not match the index mask")
-                if not np.all(np.isfinite(values)):
-                    raise ValueError(f"group {gi} holds non-finite values")
-                groups.append(ChannelGroup(wav, gh["channels"], bands,
-                                           None if len(positions) == total else positions, values))
+            budget = None if keep is None else max(1, int(round(keep * int(np.prod(shape)))))
+            frame = (shape, tuple(header["spacing"]), tuple(header["origin"]))
+            groups = [_read_group(h5, gi, gh, shape, levels, budget, frame) for gi, gh in enumerate(groups_header)]
             mask = None
-            if "content_mask" in npz.files:
-                _check_member(npz, "content_mask", -(-int(np.prod(shape)) // 8))
-                packed = npz["content_mask"]
-                if len(packed) != -(-int(np.prod(shape)) // 8):
-                    raise ValueError(f"the content mask has {len(packed)} bytes for {int(np.prod(shape))} voxels")
-                mask = np.unpackbits(packed, count=int(np.prod(shape))).astype(bool).reshape(shape)
+            if "content_mask" in h5:
+                data = h5["content_mask"]
+                _check_dataset(data, shape, np.uint8)
+                mask = data[...].astype(bool)
     except ClwaveError:
         raise
-    except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile, EOFError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError) as exc:
         raise FileFormatError(f"cannot read {path} as a .clw file ({type(exc).__name__}: "
                               f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
                               "the file may be truncated or corrupt") from None
-    focus = header["focus"]
+    focus = header["focus"] if keep is None else None  # as threshold(keep=) without a focus
     try:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, channels,
                              interpolate=bool(header["interpolate"]),
@@ -100,6 +193,91 @@ def read_clw(path) -> WaveletVolume:
                              content_mask=mask)
     except (KeyError, ValueError, TypeError, InputError) as exc:
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None
+
+
+def _header(h5, path) -> dict:
+    fmt, version = h5.attrs.get("format"), h5.attrs.get("version")
+    version = version.item() if isinstance(version, np.generic) else version
+    if fmt != FILE_FORMAT:
+        raise FileFormatError(f"{path} is an HDF5 file but not a clwave wavelet volume (format {fmt!r})")
+    if version != FILE_VERSION:
+        raise FileFormatError(f"{path} is a .clw file of format version {version!r}; this clwave reads version "
+                              f"{FILE_VERSION}: use the clwave that wrote it, or compress the volume again")
+    text = h5.attrs.get("header")
+    if not isinstance(text, str) or len(text) > MAX_HEADER:
+        raise ValueError("the header is missing or too long")
+    return json.loads(text)
+
+
+def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
+    """One channel group: every stored coefficient, or the ``budget`` most important (approximation first,
+    then details tier by tier, the last tier cut by importance as :meth:`WaveletVolume.threshold` cuts)."""
+    wav = SplineWavelet(gh["wavelet"])
+    bands = band_layout(wav, shape, levels)
+    total, n_approx, c = bands[-1].start + bands[-1].size, bands[0].size, len(gh["channels"])
+    runs, stored, stored_values = (h5.get(f"g{gi}/{name}") for name in ("runs", "positions", "values"))
+    _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
+    n = stored.shape[0] if stored is not None else -1
+    _check_dataset(stored, (n,), np.int64)
+    _check_dataset(stored_values, (n, c), np.float32)  # one handle each: its chunk cache serves every run
+    runs = runs[...]
+    if n > total or runs.shape[0] > n + 1 or np.any(runs[:, 2] < 0) or np.any(runs[:, 0] < -1) or \
+            not np.array_equal(np.sort(runs[:, 1]), np.cumsum(np.append(0, runs[np.argsort(runs[:, 1]), 2]))[:-1]) or \
+            runs[:, 2].sum() != n:
+        raise ValueError(f"group {gi}: its runs do not tile its {n} rows (of {total} positions)")
+    tiers = sorted(set(runs[:, 0].tolist()), key=lambda t: (t != -1, -t))  # the approximation, then down
+    sizes = [int(runs[runs[:, 0] == t, 2].sum()) for t in tiers]
+    read, last_cut = _tiers_to_read(sizes, budget)
+    parts = []
+    for tier in tiers[:read]:
+        mine = sorted((int(start), int(start + count)) for _, start, count in runs[runs[:, 0] == tier])
+        positions = np.concatenate([np.cumsum(stored[a:b]) for a, b in mine])
+        values = np.concatenate([stored_values[a:b] for a, b in mine])
+        lo, hi = (0, n_approx) if tier == -1 else (n_approx, total)
+        if len(positions) and (positions.min() < lo or positions.max() >= hi):
+            raise ValueError(f"group {gi} tier {tier} holds positions outside its bands")
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"group {gi} holds non-finite values")
+        parts.append((positions, values.T))
+    if last_cut is not None:  # the last tier read gives only its most important ``last_cut``
+        positions, values = parts[-1]
+        order = np.argsort(positions, kind="stable")
+        part = ChannelGroup(wav, gh["channels"], bands, positions[order], values[:, order])
+        chosen = order[_top(importance_of(part, None, frame), last_cut)]
+        parts[-1] = (positions[chosen], values[:, chosen])
+    positions = np.concatenate([p for p, _ in parts]) if parts else np.zeros(0, np.int64)
+    values = np.concatenate([v for _, v in parts], axis=1) if parts else np.zeros((c, 0), np.float32)
+    order = np.argsort(positions, kind="stable")
+    positions, values = positions[order], np.ascontiguousarray(values[:, order])
+    if np.any(np.diff(positions) <= 0):
+        raise ValueError(f"group {gi} stores a position twice")
+    return ChannelGroup(wav, gh["channels"], bands, None if len(positions) == total else positions, values)
+
+
+def _tiers_to_read(sizes, budget) -> tuple:
+    """``(how many tiers, None or how many of the last one to keep)`` for a budget (None: all)."""
+    if budget is None:
+        return len(sizes), None
+    done = 0
+    for i, n in enumerate(sizes):
+        if done + n >= budget:
+            return i + 1, (None if done + n == budget else budget - done)
+        done += n
+    return len(sizes), None
+
+
+def _check_dataset(dataset, shape, dtype):
+    """Refuse a member that is missing, of another shape or type, or chunked oddly (a decompression bomb
+    cannot hide in a chunk larger than the file allows)."""
+    import h5py
+
+    if not isinstance(dataset, h5py.Dataset):
+        raise ValueError("a member is missing or not a dataset")
+    if dataset.shape != tuple(shape) or dataset.dtype != dtype:
+        raise ValueError(f"member {dataset.name} is {dataset.shape} {dataset.dtype}, expected {tuple(shape)} "
+                         f"{np.dtype(dtype)}")
+    if dataset.chunks is not None and int(np.prod(dataset.chunks)) * dataset.dtype.itemsize > 1 << 26:
+        raise ValueError(f"member {dataset.name} has chunks of {dataset.chunks}, larger than a .clw writes")
 
 
 def _checked_header(header) -> tuple:
@@ -130,23 +308,3 @@ def _checked_header(header) -> tuple:
     if sorted(seen) != list(range(channels)):
         raise ValueError(f"the groups hold channels {sorted(seen)}, not each of the {channels} once")
     return shape, levels, channels, groups
-
-
-def _check_member(npz, name, expected_bytes):
-    """Refuse a member that is missing, declares more than ``expected_bytes`` (plus the .npy header), or
-    more than its compressed bytes can hold: nothing is decompressed beyond what the header allows."""
-    try:
-        info = npz.zip.getinfo(name + ".npy")
-    except KeyError:
-        raise ValueError(f"member {name} is missing") from None
-    if info.file_size > expected_bytes + 4096 or info.file_size > DEFLATE_MAX_RATIO * info.compress_size + 4096:
-        raise ValueError(f"member {name} declares {info.file_size} bytes where the header allows {expected_bytes}")
-
-
-def _positions(packed, total) -> np.ndarray:
-    """The set positions of a packed bit mask of ``total`` bits, unpacked a chunk at a time."""
-    if len(packed) != -(-total // 8):
-        raise ValueError(f"the index mask has {len(packed)} bytes for {total} positions")
-    parts = [np.flatnonzero(np.unpackbits(packed[i:i + CHUNK], count=min(8 * CHUNK, total - 8 * i))) + 8 * i
-             for i in range(0, len(packed), CHUNK)]
-    return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, np.int64)

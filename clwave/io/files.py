@@ -33,7 +33,7 @@ def write_atomic(path, writer, overwrite=False) -> Path:
     tmp = None
     try:
         fd, tmp = tempfile.mkstemp(dir=folder, suffix=path.suffix + ".tmp")
-        with os.fdopen(fd, "wb") as fh:
+        with os.fdopen(fd, "w+b") as fh:  # readable too: HDF5 reads back what it writes
             writer(fh)
         umask = os.umask(0)
         os.umask(umask)

@@ -121,7 +121,7 @@ class WaveletVolume:
     # ------------------------------------------------------------------ build
     @classmethod
     def from_volume(cls, volume: Volume, wavelet="cubic", levels=3, *, interpolate=False,
-                    transfer_function=None, progress_bar=None) -> "WaveletVolume":
+                    transfer_function=None, scheduler=None, progress_bar=None):
         """Decompose every channel of ``volume`` (paper Fig. 1).
 
         Parameters
@@ -137,9 +137,23 @@ class WaveletVolume:
             through the samples (docs/model.md §1).
         transfer_function : TransferFunction or dict, optional
             Stored with the volume (and in ``.clw`` files) to record how it was classified.
+        scheduler : optional
+            Chunked volumes only: the Dask scheduler of the passes (:mod:`clwave.cluster`).
+
+        Returns
+        -------
+        WaveletVolume, or for a chunked volume (:attr:`Volume.chunked`) a
+        :class:`~clwave.model.chunked.ChunkedWaveletVolume` (docs/chunked.md), which never holds the
+        coefficients: threshold it, then ``compute()`` or ``save()``.
         """
         if not isinstance(volume, Volume):
             volume = Volume(volume)
+        if volume.chunked:
+            from .chunked import ChunkedWaveletVolume  # built on this module
+
+            return ChunkedWaveletVolume.from_volume(volume, wavelet, levels, interpolate=interpolate,
+                                                    transfer_function=transfer_function, scheduler=scheduler,
+                                                    progress_bar=progress_bar)
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
         tf = transfer_function.to_dict() if hasattr(transfer_function, "to_dict") else transfer_function
         mask = volume.content_mask()
@@ -190,19 +204,14 @@ class WaveletVolume:
         return None if self.content is None else (np.array(self.content[0]), np.array(self.content[1]))
 
     # ----------------------------------------------------------- importance
-    def importance(self, group: ChannelGroup) -> np.ndarray:
-        """|c| * ||basis|| (max over the group's channels), times the focus weight.
+    @property
+    def frame(self) -> tuple:
+        """``(shape, spacing, origin)``: where the fine lattice sits in the world (geometry.fine_to_world)."""
+        return self.shape, self.spacing, self.origin
 
-        One value per kept position of the group, in its (ascending) position order.
-        """
-        imp = np.abs(group.values).max(axis=0)
-        for band, sl in zip(group.bands, group.band_slices()):
-            imp[sl] *= np.prod([group.wavelet.norm(letter) for letter in band.key])
-        if self.focus is not None:
-            centre, sigma = self.focus
-            world = self.support_centres(group, *group.locate(group.all_positions()))
-            imp *= np.exp(-np.sum((world - np.asarray(centre)) ** 2, axis=1) / (2.0 * sigma ** 2))
-        return imp
+    def importance(self, group: ChannelGroup) -> np.ndarray:
+        """:func:`band_importance` of each kept position of the group (with this model's focus)."""
+        return importance_of(group, self.focus, self.frame)
 
     def support_centres(self, group, band_no, index) -> np.ndarray:
         """World (x, y, z) centres of the basis supports (docs/model.md §4: X = o + 2^m (k + c0))."""
@@ -366,11 +375,13 @@ class WaveletVolume:
         return write_clw(self, path, overwrite)
 
     @classmethod
-    def open(cls, path) -> "WaveletVolume":
-        """Read a ``.clw`` file written by :meth:`save`."""
+    def open(cls, path, keep=None) -> "WaveletVolume":
+        """Read a ``.clw`` file written by :meth:`save`; with ``keep``, only its most important coefficients,
+        reading about that fraction of the file: the same model as ``open(path).threshold(keep=keep)``
+        (docs/chunked.md §4)."""
         from ..io.clw import read_clw
 
-        return read_clw(path)
+        return read_clw(path, keep)
 
 
 # ---------------------------------------------------------------- helpers
@@ -424,6 +435,34 @@ def check_thresholding(keep, threshold, focus) -> tuple:
                              cli="--focus X,Y,Z needs a finite centre and --sigma a positive world length")
         focus = (centre, sigma)
     return keep, threshold, focus
+
+
+def importance_of(group: ChannelGroup, focus, frame) -> np.ndarray:
+    """:func:`band_importance` of each kept position of ``group``, in its (ascending) position order."""
+    imp = np.empty(group.kept, dtype=np.float32)
+    positions = group.all_positions()
+    for band, sl in zip(group.bands, group.band_slices()):
+        index = None if focus is None else np.column_stack(np.unravel_index(positions[sl] - band.start, band.shape))
+        imp[sl] = band_importance(group.wavelet, band, group.values[:, sl], index, focus, frame)
+    return imp
+
+
+def band_importance(wavelet, band, values, index, focus, frame) -> np.ndarray:
+    """Importance of coefficients of one band: ``|c| * ||basis||`` (max over channels), float32, times the
+    focus weight ``exp(-d^2 / 2 sigma^2)`` (d: world distance from the focus to the centre of the basis
+    support) when ``focus`` is given; ``values`` (C, n), ``index`` (n, 3) their (k_z, k_y, k_x) (used only
+    with focus), ``frame`` :attr:`WaveletVolume.frame`.  The one definition thresholding, ``.clw`` tiers
+    and chunked passes share (docs/model.md §2)."""
+    if values.shape[1] == 0:
+        return np.zeros(0, dtype=np.float32)
+    imp = np.abs(values).max(axis=0)
+    imp *= np.prod([wavelet.norm(letter) for letter in band.key])
+    if focus is not None:
+        centre, sigma = focus
+        fine = geometry.support_centres(wavelet, band.key, band.level, index)
+        world = fine_to_world(fine, wavelet.order, *frame)
+        imp *= np.exp(-np.sum((world - np.asarray(centre)) ** 2, axis=1) / (2.0 * sigma ** 2))
+    return imp
 
 
 def _top(importance, count) -> np.ndarray:

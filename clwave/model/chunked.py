@@ -1,0 +1,416 @@
+"""The wavelet model of a chunked volume, computed chunk by chunk on Dask (docs/chunked.md §2-4).
+
+A :class:`ChunkedWaveletVolume` holds no coefficients.  It holds, per channel group, the transform as
+a Dask graph (:func:`level_stacks`: level by level, each block of a level's input with the halo its
+filters need, transformed by PyWavelets exactly as the in-memory transform does) and a selection rule
+per class of coefficients (the coarsest approximation, the details: :class:`Rule`).  Each pass runs
+the graph and streams small per-block results back (:func:`clwave.cluster.stream`): importance
+histograms, from which ``keep=`` finds its exact cut, or the selected coefficients, gathered into a
+:class:`WaveletVolume` (:meth:`compute`) or written to a ``.clw`` file as they come (:meth:`save`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pywt
+
+from ..cluster import client_for, stream
+from ..errors import InputError
+from .bspline import SplineWavelet
+from .transform import KEYS, band_layout
+from .volume import Volume, content_of
+from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding
+
+MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
+MAX_BLOCKS = 4096           # and into at most this many blocks a level
+BIN_SHIFT = 16           # histogram bins: the top 16 bits of a float32 importance (monotone for x >= 0)
+TIER_SHIFT = 20          # .clw tiers: the top 12 bits (eight tiers an octave, docs/chunked.md §4)
+APPROX, DETAIL = 0, 1    # the two classes of coefficients, ranked in this order
+
+
+def importance_keys(importance: np.ndarray) -> np.ndarray:
+    """The bits of float32 importances >= 0 as uint32: the same order as the values."""
+    return np.ascontiguousarray(importance, dtype=np.float32).view(np.uint32)
+
+
+def tiers_of(importance: np.ndarray) -> np.ndarray:
+    """The ``.clw`` tier of each importance (eight a binary octave; higher is more important)."""
+    return (importance_keys(importance) >> TIER_SHIFT).astype(np.int16)
+
+
+@dataclass(frozen=True)
+class Rule:
+    """Which coefficients of one class a pass keeps: ``every`` position (zeros too: the unthresholded
+    model), the live ones (non-zero in some channel) whose importance exceeds ``above``, or, when
+    ``bin`` is set, the live ones in histogram bins above ``bin`` and the ``take`` most important of
+    bin ``bin`` itself (the exact cut of a budget)."""
+
+    every: bool = False
+    above: float | None = None   # None: no importance bound
+    bin: int | None = None
+    take: int = 0
+    none: bool = False
+
+    def kept(self, imp):
+        """(kept mask, candidate mask) over live coefficients of importance ``imp``."""
+        if self.none:
+            return np.zeros(len(imp), bool), np.zeros(len(imp), bool)
+        if self.bin is not None:
+            bins = importance_keys(imp) >> BIN_SHIFT
+            return bins > self.bin, bins == self.bin
+        if self.above is not None:
+            return imp > self.above, np.zeros(len(imp), bool)
+        return np.ones(len(imp), bool), np.zeros(len(imp), bool)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a block task needs to know (small, pickled to workers)."""
+
+    order: int
+    bands: tuple
+    levels: int
+    frame: tuple
+    focus: tuple | None
+    rules: tuple = (Rule(), Rule())
+
+    @property
+    def wavelet(self) -> SplineWavelet:
+        return SplineWavelet(self.order)
+
+    def band(self, level, key):
+        if level == self.levels and key == "aaa":
+            return self.bands[0]
+        m_index = self.levels - level  # details of level m follow the approximation, coarsest first
+        return self.bands[1 + 7 * m_index + KEYS.index(key) - 1]
+
+
+class ChunkedWaveletVolume:
+    """The wavelet model of a chunked :class:`Volume`, never held whole (docs/chunked.md).
+
+    Made by :meth:`WaveletVolume.from_volume` for a chunked volume.  :meth:`threshold` selects exactly
+    the coefficients the in-memory model would (ties aside); :meth:`compute` gathers the selection into
+    a :class:`WaveletVolume`; :meth:`save` streams it into a ``.clw`` file.  Every pass runs on
+    ``scheduler`` (:mod:`clwave.cluster`).
+    """
+
+    def __init__(self, volume: Volume, wavelets, levels, *, transfer_function=None, focus=None,
+                 rules=None, content=None, scheduler=None, progress_bar=None):
+        self.volume = volume
+        self.wavelets_ = tuple(wavelets)
+        self.levels = int(levels)
+        self.transfer_function = transfer_function
+        self.focus = focus
+        # per channel group, the (approximation, detail) rules; by default every position (no threshold)
+        self.rules = tuple(rules or [(Rule(every=True), Rule(every=True))] * len(self.groups()))
+        self.content = content
+        self.scheduler = scheduler
+        self.progress_bar = progress_bar
+
+    @classmethod
+    def from_volume(cls, volume: Volume, wavelet="cubic", levels=3, *, interpolate=False, transfer_function=None,
+                    scheduler=None, progress_bar=None) -> "ChunkedWaveletVolume":
+        """The model of a chunked volume; reads it once, for its content (the default framing), here."""
+        if interpolate:
+            raise InputError("interpolate=True needs the whole volume at once (its prefilter is global); a "
+                             "chunked volume takes the approximating model (interpolate=False)",
+                             cli="--interpolate needs the whole volume in memory; leave it out for a chunked input")
+        wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
+        tf = transfer_function.to_dict() if hasattr(transfer_function, "to_dict") else transfer_function
+        with client_for(scheduler) as client, client.as_current():
+            content = volume.content_box()
+        return cls(volume, wavelets, levels, transfer_function=tf, scheduler=scheduler, progress_bar=progress_bar,
+                   content=None if content is None else tuple(tuple(float(c) for c in corner) for corner in content))
+
+    # ------------------------------------------------------------- properties
+    shape = property(lambda self: self.volume.shape)
+    spacing = property(lambda self: self.volume.spacing)
+    origin = property(lambda self: self.volume.origin)
+    channels = property(lambda self: self.volume.channels)
+    n_voxels = property(lambda self: int(np.prod(self.shape)))
+    frame = property(lambda self: (self.shape, self.spacing, self.origin))
+
+    @property
+    def wavelets(self) -> tuple:
+        return tuple(w.name for w in self.wavelets_)
+
+    def groups(self) -> list:
+        """``(wavelet, channels)`` per channel group, in the in-memory model's order."""
+        return [(w, [c for c, x in enumerate(self.wavelets_) if x == w]) for w in dict.fromkeys(self.wavelets_)]
+
+    def __repr__(self):
+        return (f"ChunkedWaveletVolume(shape={self.shape}, wavelets={self.wavelets}, levels={self.levels}, "
+                f"chunks={self.volume.data.chunksize})")
+
+    def content_box(self):
+        return None if self.content is None else (np.array(self.content[0]), np.array(self.content[1]))
+
+    # ------------------------------------------------------------- passes
+    def _plan(self, wavelet, gi, focus=None):
+        return Plan(wavelet.order, tuple(band_layout(wavelet, self.shape, self.levels)), self.levels, self.frame,
+                    focus, self.rules[gi])
+
+    def _tasks(self, fn, wavelet, channels, plan):
+        """One delayed ``fn(stack block, level, band offsets, plan)`` per block of every level."""
+        import dask
+
+        source = self.volume.data if self.volume.data.ndim == 4 else self.volume.data[..., None]
+        tasks = []
+        for level, stack, starts in level_stacks(source[..., channels], wavelet, self.levels, plan.bands):
+            for index, block in np.ndenumerate(stack.to_delayed()[0, ..., 0]):
+                offsets = tuple(int(s[i]) for s, i in zip(starts, index))
+                tasks.append(dask.delayed(fn)(block, level, offsets, plan))
+        return tasks
+
+    def threshold(self, keep=None, threshold=None, focus=None) -> "ChunkedWaveletVolume":
+        """Select the coefficients :meth:`WaveletVolume.threshold` keeps (the same arguments), without
+        holding them: ``threshold=`` is a rule; ``keep=`` runs one pass of importance histograms here to
+        find its exact cut (docs/chunked.md §3).  Returns a new chunked model; nothing is gathered."""
+        if (keep is None) == (threshold is None):
+            raise InputError("give exactly one of keep= (fraction of voxels) or threshold= (importance)")
+        keep, threshold, focus = check_thresholding(keep, threshold, focus)
+        if keep is None:
+            rules = [(Rule(), Rule(above=threshold))] * len(self.groups())
+        else:
+            budget = max(1, int(round(keep * self.n_voxels)))
+            rules = [_cut(hist, budget) for hist in self._histograms(focus)]
+        return ChunkedWaveletVolume(self.volume, self.wavelets_, self.levels, transfer_function=self.transfer_function,
+                                    focus=focus, rules=rules, content=self.content, scheduler=self.scheduler,
+                                    progress_bar=self.progress_bar)
+
+    def _histograms(self, focus):
+        """Per group, the importance histograms (2, 2^16) of its live approximation and detail coefficients."""
+        out = []
+        with client_for(self.scheduler) as client:
+            for gi, (wavelet, channels) in enumerate(self.groups()):
+                hist = np.zeros((2, 1 << (32 - BIN_SHIFT)), dtype=np.int64)
+                tasks = self._tasks(_histogram_block, wavelet, channels, self._plan(wavelet, 0, focus))
+                for per_class in stream(client, tasks, desc=f"{wavelet.name} histograms",
+                                        progress_bar=self.progress_bar):
+                    for c, (bins, counts) in enumerate(per_class):
+                        np.add.at(hist[c], bins, counts)
+                out.append(hist)
+        return out
+
+    def selected(self, client, *, tiers=False):
+        """Yield ``(group, positions, values (C, n)[, tiers])`` of the selected coefficients, a block (or the
+        resolved candidates of a cut) at a time, in no order; ``tiers``: also the .clw tier of each."""
+        for gi, (wavelet, channels) in enumerate(self.groups()):
+            plan = self._plan(wavelet, gi, self.focus)
+            candidates = []
+            tasks = self._tasks(_select_block, wavelet, channels, plan)
+            for kept, cand in stream(client, tasks, desc=f"{wavelet.name} selection", progress_bar=self.progress_bar):
+                if len(kept[0]):
+                    yield (gi,) + (kept if tiers else kept[:2])
+                if cand is not None and len(cand[0]):
+                    candidates.append(cand)
+            for c, rule in enumerate(plan.rules):
+                if rule.bin is None:
+                    continue
+                mine = [x for x in candidates if x[4] == c]
+                if not mine:
+                    continue
+                pos, values, tier, imp = (np.concatenate([x[i] for x in mine], axis=-1) for i in range(4))
+                chosen = np.sort(_top(imp, rule.take))
+                out = (pos[chosen], values[:, chosen], tier[chosen])
+                yield (gi,) + (out if tiers else out[:2])
+
+    def content_blocks(self):
+        """Delayed ``(slices, packed bits)`` of the content mask, a source block at a time."""
+        import dask
+
+        mask = content_of(self.volume.data)
+        starts = [np.cumsum((0,) + c) for c in mask.chunks]
+        out = []
+        for index, block in np.ndenumerate(mask.to_delayed()):
+            box = tuple(slice(int(s[i]), int(s[i + 1])) for s, i in zip(starts, index))
+            out.append(dask.delayed(_pack)(block, box))
+        return out
+
+    def compute(self) -> WaveletVolume:
+        """Gather the selected coefficients into an in-memory :class:`WaveletVolume` (it must fit: threshold
+        first); equal to the in-memory model's (docs/chunked.md §2-3)."""
+        groups = self.groups()
+        parts = {gi: [] for gi in range(len(groups))}
+        mask = np.zeros(self.shape, dtype=bool)
+        with client_for(self.scheduler) as client:
+            for box, packed in stream(client, self.content_blocks(), desc="content mask",
+                                      progress_bar=self.progress_bar):
+                mask[box] = np.unpackbits(packed, count=_size(box)).reshape(_shape(box)).astype(bool)
+            for gi, positions, values in self.selected(client):
+                parts[gi].append((positions, values))
+        out = []
+        for gi, (wavelet, channels) in enumerate(groups):
+            bands = band_layout(wavelet, self.shape, self.levels)
+            pos = np.concatenate([p for p, _ in parts[gi]]) if parts[gi] else np.zeros(0, np.int64)
+            values = np.concatenate([v for _, v in parts[gi]], axis=1) if parts[gi] else \
+                np.zeros((len(channels), 0), np.float32)
+            order = np.argsort(pos, kind="stable")
+            pos, values = pos[order], np.ascontiguousarray(values[:, order])
+            every = self.rules[gi][0].every and self.rules[gi][1].every
+            out.append(ChannelGroup(wavelet, channels, bands, None if every else pos, values))
+        return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
+                             focus=self.focus, transfer_function=self.transfer_function, content=self.content,
+                             content_mask=mask)
+
+    def save(self, path, overwrite=False) -> Path:
+        """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory."""
+        from ..io.clw import write_clw
+
+        return write_clw(self, path, overwrite)
+
+
+# ---------------------------------------------------------------- the graph
+
+
+def level_stacks(source, wavelet: SplineWavelet, levels: int, bands):
+    """Yield ``(level, stack, starts)`` for the levels that hold coefficients: ``stack`` a Dask array
+    (8, nz, ny, nx, C) of the level's subbands in :data:`KEYS` order (1, ...) of the voxels for
+    ``levels = 0``), ``starts`` per axis the band index where each block begins.
+
+    Level m transforms level m-1's approximation (the volume for m = 1) block by block: a block with
+    input [a, b) per axis gives the coefficients k in [a/2, b/2) (to the band's end for the last block),
+    which depend on the input [a + 2 - L, b) (output k reads x[2k + 2 - L .. 2k + 1], L the filter
+    length), so each block takes L - 2 samples of halo from its neighbours and starts at an even a:
+    then PyWavelets (mode 'zero') on the block gives bit for bit the coefficients of the whole.
+    """
+    if levels == 0:
+        x = _even_chunks(source, 0)
+        yield 0, x[None], [np.cumsum((0,) + c)[:-1] for c in x.chunks[:3]]
+        return
+    import dask.array as da
+
+    halo = wavelet.pywt.dec_len - 2
+    x = source
+    for level in range(1, levels + 1):
+        x = _even_chunks(x, halo)
+        n_out = bands[1 + 7 * (levels - level)].shape  # every subband of a level has one shape
+        starts = [np.cumsum((0,) + c)[:-1] for c in x.chunks[:3]]
+        out_chunks = [tuple(np.diff(np.append(s // 2, n))) for s, n in zip(starts, n_out)]
+        overlapped = da.overlap.overlap(x, depth={0: halo, 1: halo, 2: halo, 3: 0}, boundary="none") \
+            if halo else x
+        stack = da.map_blocks(_transform_block, overlapped, starts=starts, sizes=x.shape[:3], halo=halo,
+                              n_out=n_out, order=wavelet.order, new_axis=0, dtype=np.float32,
+                              chunks=((8,),) + tuple(out_chunks) + (x.chunks[3],), meta=np.empty((0,) * 5, np.float32))
+        yield level, stack, [s // 2 for s in starts]
+        x = stack[0]
+
+
+def _transform_block(block, starts, sizes, halo, n_out, order, block_id=None):
+    """The 8 subbands (8, ...) of the block ``block_id`` of a level's input, ``block`` with its halo."""
+    index = block_id[1:4]  # the output's block: (subband, z, y, x, channel)
+    a = [int(s[i]) for s, i in zip(starts, index)]
+    lo_halo = [min(halo, ai) for ai in a]  # no halo before the first block (boundary 'none')
+    first = [(ai - h) // 2 for ai, h in zip(a, lo_halo)]  # the band index of the block's output 0
+    ends = [int(s[i + 1]) // 2 if i + 1 < len(s) else n for s, i, n in zip(starts, index, n_out)]
+    coeffs = pywt.dwtn(block, SplineWavelet(order).pywt, mode="zero", axes=(0, 1, 2))
+    box = tuple(slice(ai // 2 - f, e - f) for ai, f, e in zip(a, first, ends)) + (slice(None),)
+    return np.stack([coeffs[key][box] for key in KEYS])
+
+
+def _even_chunks(x, halo):
+    """``x`` rechunked so that every block but the last per axis has an even edge of at least ``halo``, the
+    last at least ``halo``, with at least :data:`MIN_BLOCK_VOXELS` voxels a block and at most
+    :data:`MAX_BLOCKS` blocks (docs/chunked.md §2)."""
+    shape = x.shape[:3]
+    edges = [min(n, max(halo, 2, e + e % 2)) for e, n in zip((max(c) for c in x.chunks[:3]), shape)]
+    while (np.prod(edges) < MIN_BLOCK_VOXELS or np.prod([-(-n // e) for e, n in zip(edges, shape)]) > MAX_BLOCKS) \
+            and any(e < n for e, n in zip(edges, shape)):
+        edges = [min(n, 2 * e) for e, n in zip(edges, shape)]
+    chunks = []
+    for e, n in zip(edges, shape):
+        e += e % 2
+        full, rest = divmod(n, e)
+        axis = [e] * full + ([rest] if rest else [])
+        if len(axis) > 1 and axis[-1] < halo:  # too short to lend its halo: joined with its neighbour
+            axis[-2:] = [axis[-2] + axis[-1]]
+        chunks.append(tuple(axis) if axis else (n,))
+    chunks = tuple(chunks) + (x.chunks[3],)
+    return x if chunks == x.chunks else x.rechunk(chunks)
+
+
+# ---------------------------------------------------------------- block tasks
+
+
+def _entries(stack, level, offsets, plan, *, live_only=True):
+    """Per subband present in a block: ``(class, positions, values (C, n), importance, tier)``."""
+    wav = plan.wavelet
+    keys = ["aaa"] if level == 0 else KEYS if level == plan.levels else KEYS[1:]
+    for key in keys:
+        band = plan.band(level, key)
+        coeffs = stack[KEYS.index(key) if level else 0]
+        values = np.moveaxis(coeffs, 3, 0).reshape(coeffs.shape[3], -1)
+        grid = np.indices(coeffs.shape[:3]).reshape(3, -1)
+        if live_only:
+            live = np.flatnonzero(np.any(values != 0, axis=0))
+            values, grid = values[:, live], grid[:, live]
+        index = (grid + np.array(offsets)[:, None]).T
+        positions = band.start + np.ravel_multi_index(index.T, band.shape).astype(np.int64)
+        imp = band_importance(wav, band, values, index, plan.focus, plan.frame)
+        plain = imp if plan.focus is None else band_importance(wav, band, values, None, None, plan.frame)
+        yield (APPROX if key == "aaa" and level == plan.levels else DETAIL), positions, values, imp, tiers_of(plain)
+
+
+def _histogram_block(stack, level, offsets, plan):
+    """Per class, the non-empty histogram bins ``(bins, counts)`` of the block's live importances."""
+    per_class = [[], []]
+    for cls, _, _, imp, _ in _entries(stack, level, offsets, plan):
+        per_class[cls].append(importance_keys(imp) >> BIN_SHIFT)
+    out = []
+    for keys in per_class:
+        counts = np.bincount(np.concatenate(keys), minlength=1) if keys else np.zeros(1, np.int64)
+        bins = np.flatnonzero(counts)
+        out.append((bins, counts[bins]))
+    return out
+
+
+def _select_block(stack, level, offsets, plan):
+    """``(kept (positions, values, tiers), candidates)`` of a block under the plan's rules; candidates
+    ``(positions, values, tiers, importance, class)`` of a cut's bin, or None."""
+    kept, cands = [], []
+    every = plan.rules[APPROX].every and plan.rules[DETAIL].every
+    for cls, positions, values, imp, tier in _entries(stack, level, offsets, plan, live_only=not every):
+        take, maybe = plan.rules[cls].kept(imp)
+        kept.append((positions[take], values[:, take], tier[take]))
+        if maybe.any():
+            cands.append((positions[maybe], values[:, maybe], tier[maybe], imp[maybe], cls))
+    joined = tuple(np.concatenate([k[i] for k in kept], axis=-1) for i in range(3))
+    if not cands:
+        return joined, None
+    classes = {c[4] for c in cands}
+    assert len(classes) == 1  # a cut lies in one class
+    return joined, tuple(np.concatenate([c[i] for c in cands], axis=-1) for i in range(4)) + (classes.pop(),)
+
+
+def _pack(block, box):
+    return box, np.packbits(np.asarray(block, dtype=bool).reshape(-1))
+
+
+def _size(box) -> int:
+    return int(np.prod(_shape(box)))
+
+
+def _shape(box) -> tuple:
+    return tuple(s.stop - s.start for s in box)
+
+
+def _cut(hist, budget) -> tuple:
+    """``(approximation rule, detail rule)`` keeping ``budget`` coefficients as :meth:`WaveletVolume.threshold`
+    does: the live approximation first, then details by importance; each cut at the bin the histogram
+    places it in."""
+    n_approx = int(hist[APPROX].sum())
+    if budget <= n_approx:
+        return _bin_rule(hist[APPROX], budget), Rule(none=True)
+    return Rule(), _bin_rule(hist[DETAIL], budget - n_approx)
+
+
+def _bin_rule(hist, count) -> Rule:
+    above = np.cumsum(hist[::-1])[::-1]  # above[b]: coefficients in bins >= b
+    if count >= above[0]:
+        return Rule()
+    b = int(np.flatnonzero(above >= count)[-1])
+    return Rule(bin=b, take=count - int(above[b] - hist[b]))
+
