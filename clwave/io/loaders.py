@@ -2,32 +2,55 @@
 
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
 (NIfTI, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
-millimetres, the others keep their array axes (docs/coordinates.md §1).
+millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
+stores, and large .npy, .raw and .nii files, are read chunk by chunk as Dask arrays (docs/chunked.md §1).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import os
 import re
 from collections import defaultdict
 from contextlib import contextmanager
+from fractions import Fraction
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import ClwaveError, FileFormatError, InputError, finite_number
 from .progress import progress
-from ..model.volume import Volume
+from ..model.volume import Volume, is_dask
 
 log = logging.getLogger(__name__)
 
 SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of "
-             "2-D slices), a folder of DICOM files, .raw (with shape= and dtype=)")
+             "2-D slices), a folder of DICOM files, .raw (with shape= and dtype=), a Zarr or OME-Zarr "
+             "store (folder), .h5/.hdf5 (file.h5:/dataset)")
+
+#: chunks=None reads .npy, .raw and .nii files whose volume takes at least this many bytes as float32 chunk
+#: by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
+CHUNKED_MIN_BYTES = 1 << 30
+#: chunks="auto": at most this many bytes of float32 per chunk, in multiples of the store's own chunks
+#: (of 64 voxels per axis for files without chunks: 256³ voxels), or the store's own when they are bigger.
+CHUNK_BYTES = 96 << 20
+#: More chunks than this make Dask's task graph itself too big to handle.
+MAX_CHUNKS = 100_000
 
 _TIFF_SUFFIXES = (".tif", ".tiff")
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".nrrd": "nrrd",
-               ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw"}
+               ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
+               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"}
+# The formats read chunk by chunk (not .nii.gz: gzip cannot seek)
+_CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti")
+_ZARR_METADATA = ("zarr.json", ".zarray", ".zgroup")  # v3, v2 array, v2 group
+# 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
+_INNER_PATH = re.compile(r"(.*\.(?:h5|hdf5|hdf|zarr)):(.*)", re.IGNORECASE | re.DOTALL)
+# Options that apply to one kind of input only
+_ONLY_FOR = {"shape": ".raw files", "dtype": ".raw files", "byte_order": ".raw files", "series": "DICOM folders",
+             "level": "OME-Zarr images"}
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -41,8 +64,8 @@ _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSp
                      "Rows", "Columns", "PixelData")
 
 
-def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None,
-         background=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None) -> Volume:
+def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
+         chunks=None, background=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None) -> Volume:
     """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
 
     Parameters
@@ -51,7 +74,10 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         ``.npy``, ``.nii``, ``.nii.gz``, ``.nrrd``, ``.nhdr``, a multi-page
         ``.tif``/``.tiff``, a folder of 2-D TIFF slices (stacked in natural name
         order: ``slice2`` before ``slice10``), a folder of DICOM files (other files
-        in it are ignored), or ``.raw``.
+        in it are ignored), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
+        or an HDF5 file ``.h5``/``.hdf5``/``.hdf``.  ``file.h5:/name`` and
+        ``store.zarr:/name`` name an array inside; without a name the store's only
+        3-D/4-D array is read (an OME-Zarr image: its ``level``).
     shape : tuple of int, optional
         ``.raw`` only: ``(Z, Y, X)`` or ``(Z, Y, X, C)``, C-ordered (x fastest).
     dtype : str or numpy.dtype, optional
@@ -63,6 +89,15 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     series : int or str, optional
         DICOM only: 0-based index or ``SeriesInstanceUID`` of the series to load
         when the folder holds several.
+    level : int, optional
+        OME-Zarr only: the resolution level (default 0, the finest).
+    chunks : None, False, "auto" or int
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw`` and
+        ``.nii`` too when their volume takes at least ``CHUNKED_MIN_BYTES`` (1 GiB)
+        as float32; everything else is read whole.  ``False``: read whole.
+        ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
+        of the store's own.  An int: chunk by chunk, cubes of that edge in voxels.
+        Chunked volumes hold a Dask array, read only when computed (docs/chunked.md).
     background : float
         Subtracted from every voxel (after ``hu_to_mu``), so that the data is ~0
         outside the object.
@@ -102,19 +137,27 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     if hu_to_mu and mu_water <= 0:
         raise InputError(f"mu_water={mu_water} must be positive (attenuation of water per "
                          "world unit)")
+    path, inner = _split_inner(path)
     kind = _kind(path)
     if kind != "raw":
         _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order)
     if kind != "dicom":
         _reject_unused(kind, series=series)
+    if kind != "zarr":
+        _reject_unused(kind, level=level)
+    chunks = _check_chunks(chunks, kind, path)
 
     with _reading(path):
-        if kind == "raw":
-            data, file_spacing, origin = _read_raw(path, shape, dtype, byte_order)
+        if kind == "zarr":
+            data, file_spacing, origin = _read_zarr(path, inner, level, chunks)
+        elif kind == "hdf5":
+            data, file_spacing, origin = _read_hdf5(path, inner, chunks)
+        elif kind == "raw":
+            data, file_spacing, origin = _read_raw(path, shape, dtype, byte_order, chunks)
         elif kind == "npy":
-            data, file_spacing, origin = np.load(path, allow_pickle=False), None, None
+            data, file_spacing, origin = _read_npy(path, chunks), None, None
         elif kind == "nifti":
-            data, file_spacing, origin = _read_nifti(path)
+            data, file_spacing, origin = _read_nifti(path, chunks)
         elif kind == "nrrd":
             data, file_spacing, origin = _read_nrrd(path)
         elif kind == "tiff":
@@ -124,18 +167,14 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         else:
             data, file_spacing, origin = _read_dicom_folder(path, series, progress_bar)
 
-    data = np.asarray(data)
-    if data.dtype.kind == "f" and data.dtype.itemsize > 4 and data.size:
-        top = float(np.nanmax(np.abs(np.where(np.isfinite(data), data, 0.0))))
-        if top > float(np.finfo(np.float32).max):
-            raise InputError(f"{path} holds values up to {top:.3g}, beyond float32's range (3.4e38); rescale "
-                             f"the data first")
+    if not is_dask(data):
+        data = np.asarray(data)
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
-        data = np.ascontiguousarray(data, dtype=np.float32)
-        if hu_to_mu:
-            _hu_to_mu(data, mu_water)
-        if background:
-            data -= np.float32(background)
+        if hu_to_mu and data.ndim != 3:
+            raise InputError(f"hu_to_mu converts scalar CT volumes, but this one has "
+                             f"{data.shape[3]} channels; leave hu_to_mu off")
+        convert = partial(_to_float32, path=path, mu_water=mu_water if hu_to_mu else None, background=background)
+        data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
                   origin=origin if origin is not None else (0.0, 0.0, 0.0))
@@ -143,14 +182,33 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
 
 # --------------------------------------------------------------------------- shared steps
 
+def _split_inner(path):
+    """``(file, name inside it or None)`` of ``file.h5:/name`` or ``store.zarr:/name`` (an existing path is
+    never split)."""
+    text = os.fspath(path)
+    match = _INNER_PATH.fullmatch(text)
+    if match and not os.path.exists(text):
+        return Path(match[1]), match[2].strip("/") or None
+    return Path(text), None
+
+
 def _kind(path: Path) -> str:
     """Format of ``path`` from its extension, or the content of a folder."""
+    zarr_named = path.suffix.lower() == ".zarr"
     if path.is_dir():
+        if any((path / name).is_file() for name in _ZARR_METADATA):
+            return "zarr"
+        if zarr_named:
+            raise FileFormatError(f"{path} is not a Zarr store: it has no {', '.join(_ZARR_METADATA)}; name the "
+                                  "store's top folder (or one array or group folder inside it)")
         return "tiff-folder" if _tiff_files(path) else "dicom"
     name = path.name.lower()
     suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
     if not path.exists():
         raise FileFormatError(f"no file or folder at {path}; supported inputs: {SUPPORTED}")
+    if zarr_named:
+        raise FileFormatError(f"{path} is a file, not a Zarr store; clwave reads Zarr stores that are folders "
+                              "(unzip a zipped store first)")
     if suffix in (".dcm", ".ima"):
         raise FileFormatError(f"{path} is one DICOM slice; pass the folder that holds the whole series "
                               f"({path.parent})")
@@ -164,7 +222,7 @@ def _reject_unused(kind, **options):
     """Refuse options the format ignores, so a mistaken call is not silently accepted."""
     given = [name for name, value in options.items() if value is not None]
     if given:
-        needs = "DICOM folders" if "series" in given else ".raw files"
+        needs = _ONLY_FOR[given[0]]
         raise InputError(f"{'=, '.join(given)}= only apply to {needs}; leave them out for a {kind} input",
                          cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only apply to {needs}; "
                              f"leave them out for a {kind} input")
@@ -199,14 +257,119 @@ def _corrupt(path, exc) -> str:
     return f"cannot read {path}: {reason}; the file may be truncated or corrupt"
 
 
-def _hu_to_mu(data, mu_water):
-    """In place: Hounsfield units -> attenuation, clipped at 0 (air, -1000 HU, is exactly 0)."""
-    if data.ndim != 3:
-        raise InputError(f"hu_to_mu converts scalar CT volumes, but this one has "
-                         f"{data.shape[3]} channels; leave hu_to_mu off")
-    data += 1000.0
-    data *= np.float32(mu_water / 1000.0)
-    np.maximum(data, 0.0, out=data)
+def _to_float32(block, path, mu_water, background, copy=True):
+    """``block`` (the whole volume, or one chunk as it is read) as float32: Hounsfield units -> attenuation
+    when ``mu_water`` is given (clipped at 0: air, -1000 HU, is exactly 0), minus ``background``; float64
+    values beyond float32's range are refused.  ``copy``: never write into ``block`` (a Dask chunk)."""
+    if block.dtype.kind == "f" and block.dtype.itemsize > 4 and block.size:
+        top = float(np.nanmax(np.abs(np.where(np.isfinite(block), block, 0.0))))
+        if top > float(np.finfo(np.float32).max):
+            raise InputError(f"{path} holds values up to {top:.3g}, beyond float32's range (3.4e38); rescale "
+                             f"the data first")
+    data = np.array(block, np.float32, order="C") if copy else np.ascontiguousarray(block, np.float32)
+    if mu_water is not None:
+        data += 1000.0
+        data *= np.float32(mu_water / 1000.0)
+        np.maximum(data, 0.0, out=data)
+    if background:
+        data -= np.float32(background)
+    return data
+
+
+def _check_chunks(chunks, kind, path):
+    """``chunks`` validated for a ``kind`` input: None (by size), False (whole), "auto" or a cube edge."""
+    edge = isinstance(chunks, (int, np.integer)) and not isinstance(chunks, (bool, np.bool_)) and chunks >= 1
+    if not (edge or chunks is None or chunks is False or chunks == "auto"):
+        raise InputError(f"chunks={chunks!r} must be None, False, 'auto' or a chunk edge in voxels (an int >= 1)",
+                         cli=f"--chunks {chunks} must be auto, off or a chunk edge in voxels (an int >= 1)")
+    if kind not in _CHUNKABLE or path.name.lower().endswith(".gz"):
+        if chunks not in (None, False):
+            found = "a .nii.gz file (gzip cannot seek: gunzip it first)" if kind == "nifti" else f"a {kind} input"
+            raise InputError(f"chunks= applies to Zarr, HDF5, .npy, .raw and .nii inputs, not to {found}; leave "
+                             "it out to read the volume whole",
+                             cli=f"--chunks applies to Zarr, HDF5, .npy, .raw and .nii inputs, not to {found}; "
+                                 "leave it out to read the volume whole")
+        return False
+    return "auto" if chunks is None and kind in ("zarr", "hdf5") else chunks
+
+
+class _OnDemand:
+    """A read-only array in a file that ``read(index)`` opens anew for each read: a Dask graph over it holds no
+    open file and pickles small (for process-based schedulers)."""
+
+    def __init__(self, read, shape, dtype, chunks=None):
+        self.read, self.shape, self.dtype, self.chunks = read, tuple(shape), np.dtype(dtype), chunks
+        self.ndim = len(self.shape)
+
+    def __getitem__(self, index):
+        return self.read(index)
+
+
+def _read_memmap(path, dtype, shape, offset, order, index):
+    return np.array(np.memmap(path, dtype, "r", offset, shape, order)[index])
+
+
+def _read_dataset(path, name, index):
+    import h5py
+
+    with h5py.File(path, "r") as fh:
+        return fh[name][index]
+
+
+def _array(source, chunks, roles=None):
+    """``source`` (an array read on demand: ``shape``, ``dtype``, ``source[index]``, maybe the store's ``chunks``)
+    read whole, or as a Dask array that reads each chunk when it is computed (docs/chunked.md §1).
+
+    ``chunks``: False, None (whole below ``CHUNKED_MIN_BYTES`` as float32), "auto" or a cube edge.  ``roles``
+    names each axis: 's' spatial (chunked), 't' time (one per chunk), 'c' channel (whole); default: 3
+    spatial axes, then channels.
+    """
+    shape = tuple(int(n) for n in source.shape)
+    roles = roles or "s" * min(len(shape), 3) + "c" * max(len(shape) - 3, 0)
+    if chunks is None:
+        chunks = "auto" if 4 * math.prod(shape) >= CHUNKED_MIN_BYTES else False
+    if chunks is False:
+        return np.asarray(source[...])
+    import dask.array as da
+    from dask.array.core import normalize_chunks
+
+    own = getattr(source, "chunks", None) or tuple(64 if r == "s" else 1 for r in roles)
+    edges = [chunks] * len(roles)
+    if chunks == "auto" and 4 * math.prod(n for n, r in zip(own, roles) if r == "s") >= CHUNK_BYTES:
+        edges = own  # the store's chunks are big already: one each (a Zarr chunk is decoded whole)
+    edges = tuple({"t": 1, "c": -1}.get(r, edge) for r, edge in zip(roles, edges))
+    blocks = normalize_chunks(edges, shape, limit=CHUNK_BYTES, dtype=np.float32, previous_chunks=own)
+    count = math.prod(len(b) for b in blocks)
+    if count > MAX_CHUNKS:
+        problem = (f"cut the {' x '.join(map(str, shape))} volume into {count:,} chunks; more than {MAX_CHUNKS:,} "
+                   "make Dask's task graph too big: give a bigger chunk edge")
+        raise InputError(f"chunks={chunks!r} {problem}", cli=f"--chunks {chunks} {problem}")
+    return da.from_array(source, chunks=blocks, meta=np.empty((0,) * len(shape), source.dtype))
+
+
+def _listing(arrays, most=8) -> str:
+    """'/a (5, 6, 7) int16, /b (4, 4) float32' for {name: array}, the first ``most`` of them."""
+    names = list(arrays)
+    text = ", ".join(f"/{n} {tuple(arrays[n].shape)} {arrays[n].dtype}" for n in names[:most])
+    return (text + (f" and {len(names) - most} more" if len(names) > most else "")) or "none"
+
+
+def _pick_array(arrays, name, store):
+    """The array ``name`` of ``arrays`` ({name: array} of a Zarr or HDF5 store), or without a name its only
+    3-D/4-D array."""
+    if name is None:
+        volumes = [n for n, a in arrays.items() if len(a.shape) in (3, 4)]
+        if len(volumes) != 1:
+            raise FileFormatError(f"{store} holds {len(volumes) or 'no'} 3-D/4-D arrays (its arrays: "
+                                  f"{_listing(arrays)}); name one as {store}:/NAME")
+        name = volumes[0]
+    if name not in arrays:
+        raise FileFormatError(f"{store} holds no array /{name}; its arrays: {_listing(arrays)}")
+    array = arrays[name]
+    if len(array.shape) not in (3, 4):
+        raise FileFormatError(f"{store}:/{name} has shape {tuple(array.shape)}; clwave reads a 3-D (z, y, x) or "
+                              f"4-D (z, y, x, c) array: name another one ({_listing(arrays)})")
+    return name, array
 
 
 def _to_canonical(array_ijk, affine_ras):
@@ -214,14 +377,14 @@ def _to_canonical(array_ijk, affine_ras):
 
     Parameters
     ----------
-    array_ijk : ndarray, shape (ni, nj, nk) or (ni, nj, nk, c)
+    array_ijk : ndarray or Dask array, shape (ni, nj, nk) or (ni, nj, nk, c)
         Voxels indexed like the affine's columns.
     affine_ras : ndarray, shape (4, 4)
         Maps ``(i, j, k, 1)`` to RAS world coordinates (mm).
 
     Returns
     -------
-    array_zyx : ndarray
+    array_zyx : ndarray or Dask array
         Permuted and flipped view: axis 0 -> superior, 1 -> anterior, 2 -> right.
     spacing_zyx : tuple of float
         ``(dz, dy, dx)``, the lengths of the reoriented affine's columns.
@@ -229,10 +392,12 @@ def _to_canonical(array_ijk, affine_ras):
         RAS position of the volume centre.
     """
     from nibabel.affines import obliquity
-    from nibabel.orientations import apply_orientation, inv_ornt_aff, io_orientation
+    from nibabel.orientations import inv_ornt_aff, io_orientation
 
     ornt = io_orientation(affine_ras)
-    array_xyz = apply_orientation(array_ijk, ornt)
+    # nibabel's apply_orientation by slicing and transposing, so a Dask array stays lazy
+    flips = tuple(slice(None, None, -1) if flip < 0 else slice(None) for flip in ornt[:, 1])
+    array_xyz = array_ijk[flips].transpose(tuple(np.argsort(ornt[:, 0])) + tuple(range(3, array_ijk.ndim)))
     affine_xyz = affine_ras @ inv_ornt_aff(ornt, array_ijk.shape[:3])
     tilt = np.degrees(np.abs(obliquity(affine_xyz)).max())
     if tilt > 0.01:
@@ -276,7 +441,7 @@ def _tiff_files(folder):
 
 # --------------------------------------------------------------------------- formats
 
-def _read_raw(path, shape, dtype, byte_order):
+def _read_raw(path, shape, dtype, byte_order, chunks):
     """Headerless samples, C order (x fastest); the file size must match exactly."""
     if shape is None or dtype is None:
         raise InputError(f"{path.name}: a .raw file has no header; give shape=(Z, Y, X) or "
@@ -300,25 +465,34 @@ def _read_raw(path, shape, dtype, byte_order):
         raise FileFormatError(
             f"{path} has {actual} bytes but shape {shape} of {dt.name} needs {expected} bytes; "
             "check shape= and dtype=, or the file is truncated")
-    return np.fromfile(path, dtype=dt).reshape(shape), None, None
+    return _array(_OnDemand(partial(_read_memmap, str(path), dt, shape, 0, "C"), shape, dt), chunks), None, None
 
 
-def _read_nifti(path):
+def _read_npy(path, chunks):
+    """A .npy file, memory-mapped (C or Fortran order)."""
+    mapped = np.load(path, mmap_mode="r", allow_pickle=False)  # reads the header only
+    order = "F" if mapped.flags.f_contiguous and not mapped.flags.c_contiguous else "C"
+    return _array(_OnDemand(partial(_read_memmap, str(path), mapped.dtype, mapped.shape, mapped.offset, order),
+                            mapped.shape, mapped.dtype), chunks)
+
+
+def _read_nifti(path, chunks):
     """NIfTI-1/2 through nibabel: RGB24/RGBA32 become channels; time series are refused."""
     import nibabel
 
     image = nibabel.load(path, mmap=False)
     _check_declared_size(path, int(image.header["vox_offset"]),
                          int(np.prod(image.shape)) * image.header.get_data_dtype().itemsize, image.shape)
-    data = np.asanyarray(image.dataobj)  # applies scl_slope / scl_inter
-    if data.ndim > 3:
+    proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
+    if proxy.ndim > 3:
         # NIfTI keeps time on the 4th axis and vector components on the 5th
-        if data.shape[3] != 1 or any(n != 1 for n in data.shape[5:]):
+        if proxy.shape[3] != 1 or any(n != 1 for n in proxy.shape[5:]):
             raise FileFormatError(
-                f"{path} holds a NIfTI image of shape {data.shape}; clwave reads one 3-D "
+                f"{path} holds a NIfTI image of shape {proxy.shape}; clwave reads one 3-D "
                 "volume (vector components on the 5th axis become channels): extract one "
                 "volume first, e.g. with nibabel.funcs.four_to_three")
-        data = data.reshape(data.shape[:3] + data.shape[4:5])
+        proxy = proxy.reshape(proxy.shape[:3] + proxy.shape[4:5])
+    data = _array(proxy, chunks)
     if data.dtype.names:  # RGB24 / RGBA32 structured samples
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
     return _to_canonical(data, image.affine)
@@ -405,6 +579,138 @@ def _read_tiff_folder(folder, progress_bar):
         return pages[0]
 
     return _read_slices(_tiff_files(folder), read_slice, "reading TIFF slices", progress_bar)
+
+
+def _read_hdf5(path, name, chunks):
+    """One dataset of an HDF5 file: the one named, or the file's only 3-D/4-D dataset; axes (z, y, x[, c])."""
+    import h5py
+
+    datasets = {}
+
+    def visit(found, node):
+        if isinstance(node, h5py.Dataset):
+            datasets[found] = node  # returns None: the visit goes on
+
+    with h5py.File(path, "r") as fh:
+        fh.visititems(visit)
+        name, dataset = _pick_array(datasets, name, path)
+        source = _OnDemand(partial(_read_dataset, str(path), name), dataset.shape, dataset.dtype, dataset.chunks)
+    return _array(source, chunks), None, None
+
+
+def _read_zarr(path, name, level, chunks):
+    """A Zarr array (v2 or v3), or one level of an OME-Zarr multiscale image with its spacing and origin."""
+    import zarr
+
+    def arrays(group, prefix=""):
+        """{name from the store's top: array} of the arrays in ``group`` (at ``prefix``), at any depth."""
+        return {prefix + n: a for n, a in group.members(max_depth=None) if isinstance(a, zarr.Array)}
+
+    node = zarr.open(str(path), mode="r")
+    if name is not None:
+        if not isinstance(node, zarr.Group):
+            raise FileFormatError(f"{path} is one Zarr array, with no array /{name} inside; leave out ':/{name}'")
+        if name not in node:
+            _pick_array(arrays(node), name, path)  # says which arrays there are
+        node = node[name]
+    where = f"{path}:/{name}" if name else str(path)
+    if isinstance(node, zarr.Group):
+        attrs = node.attrs.asdict()
+        ome = attrs.get("ome", attrs)  # NGFF 0.5 keeps its metadata under "ome"
+        if "multiscales" in ome:
+            return _read_ome_zarr(node, ome["multiscales"], where, level, chunks)
+        node = _pick_array(arrays(node, f"{name}/" if name else ""), None, path)[1]
+    elif len(node.shape) not in (3, 4):
+        raise FileFormatError(f"{where} holds an array of shape {node.shape}; clwave reads a 3-D (z, y, x) or "
+                              "4-D (z, y, x, c) array")
+    if level is not None:
+        raise InputError(f"level= applies to OME-Zarr multiscale images, and {where} is a plain Zarr array; leave "
+                         "it out", cli=f"--level applies to OME-Zarr multiscale images, and {where} is a plain "
+                                        "Zarr array; leave it out")
+    return _array(node, chunks), None, None
+
+
+# NGFF axis name -> its role in _array; units of length in metres (the NGFF list: UDUNITS-2 names)
+_NGFF_ROLES = {"z": "s", "y": "s", "x": "s", "c": "c", "t": "t"}
+_SI_PREFIXES = {"yocto": -24, "zepto": -21, "atto": -18, "femto": -15, "pico": -12, "nano": -9, "micro": -6,
+                "milli": -3, "centi": -2, "deci": -1, "": 0, "hecto": 2, "kilo": 3, "mega": 6, "giga": 9,
+                "tera": 12, "peta": 15, "exa": 18, "zetta": 21, "yotta": 24}
+_METRES = {prefix + "meter": Fraction(10) ** power for prefix, power in _SI_PREFIXES.items()} | {
+    "angstrom": Fraction(10) ** -10, "inch": Fraction("0.0254"), "foot": Fraction("0.3048"),
+    "mile": Fraction("1609.344"), "parsec": Fraction("3.0857e16")}  # exact: 1 micrometer is 1000.0 nanometer
+
+
+def _read_ome_zarr(group, multiscales, where, level, chunks):
+    """Level ``level`` (default 0) of the first OME-Zarr (NGFF 0.4/0.5) multiscale image in ``group``: axes named
+    z, y, x, an optional c (channels, moved last) and t (length 1, dropped); spacing and origin from the scale
+    and translation of the level and of the whole image (NGFF puts voxel centres at integer indices, so the
+    translation is the first voxel's centre)."""
+    def bad(problem):
+        return FileFormatError(f"{where}: its OME-Zarr metadata {problem}")
+
+    image = multiscales[0] if isinstance(multiscales, list) and multiscales else None
+    if not isinstance(image, dict):
+        raise bad(f"holds multiscales {multiscales!r}, not a list of images")
+    axes = [a if isinstance(a, dict) else {"name": a} for a in image.get("axes") or []]
+    names = [str(a.get("name", "")).lower() for a in axes]
+    if not {"z", "y", "x"} <= set(names) <= set(_NGFF_ROLES) or len(set(names)) < len(names):
+        raise bad(f"names axes {names}; clwave reads axes z, y, x, with an optional c (channels) and t (time)")
+    datasets = image.get("datasets")
+    if not isinstance(datasets, list) or not datasets or not all(isinstance(d, dict) and "path" in d
+                                                                 for d in datasets):
+        raise bad(f"lists datasets {datasets!r}, not the levels' paths")
+    if level is None:
+        level = 0
+    if isinstance(level, (bool, np.bool_)) or not isinstance(level, (int, np.integer)) \
+            or not 0 <= level < len(datasets):
+        shapes = [tuple(group[d["path"]].shape) if d["path"] in group else "missing" for d in datasets]
+        levels = ", ".join(f"{i} {s}" for i, s in enumerate(shapes))
+        raise InputError(f"level={level!r} does not exist in the OME-Zarr image {where}; its levels: {levels}",
+                         cli=f"--level {level} does not exist in the OME-Zarr image {where}; its levels: {levels}")
+    path = datasets[level]["path"]
+    if path not in group:
+        raise bad(f"names array {path!r} for level {level}, which the store does not hold")
+    array = group[path]
+    if len(array.shape) != len(names):
+        raise bad(f"names {len(names)} axes {names}, but level {level} ({path}) has shape {array.shape}")
+    if "t" in names and array.shape[names.index("t")] != 1:
+        raise FileFormatError(f"{where} holds {array.shape[names.index('t')]} time points (axis t); clwave reads "
+                              "one volume: write one time point to a store of its own")
+
+    scale, translation = np.ones(len(names)), np.zeros(len(names))
+    for transforms in (datasets[level].get("coordinateTransformations") or [],
+                       image.get("coordinateTransformations") or []):  # the level's, then the image's
+        for transform in transforms:
+            kind = transform.get("type") if isinstance(transform, dict) else None
+            if kind == "identity":
+                continue
+            values = np.asarray(transform.get(kind) if kind in ("scale", "translation") else [], float)
+            if values.shape != (len(names),) or not np.all(np.isfinite(values)):
+                raise bad(f"has the coordinate transformation {transform!r}; clwave reads a scale and a "
+                          f"translation of {len(names)} finite numbers each, one per axis {names}")
+            if kind == "scale":
+                scale, translation = scale * values, translation * values
+            else:
+                translation = translation + values
+    zyx = [names.index(a) for a in "zyx"]
+    if np.any(scale[zyx] <= 0):
+        raise bad(f"scales the axes {names} by {scale.tolist()}; the z, y, x scale must be positive")
+    units = [axes[i].get("unit") for i in zyx]
+    if len(set(units)) > 1:  # convert to the x axis's unit
+        if not all(u in _METRES for u in units):
+            raise bad(f"gives the z, y, x axes the units {units}; clwave converts different units of length "
+                      f"only ({', '.join(_METRES)})")
+        factor = np.array([float(_METRES[u] / _METRES[units[2]]) for u in units])
+        scale[zyx], translation[zyx] = scale[zyx] * factor, translation[zyx] * factor
+
+    data = _array(array, chunks, "".join(_NGFF_ROLES[n] for n in names))
+    data = data[tuple(0 if n == "t" else slice(None) for n in names)]
+    names = [n for n in names if n != "t"]
+    data = data.transpose([names.index(a) for a in "zyxc" if a in names])
+    shape = np.array(data.shape[:3])
+    spacing = tuple(float(d) for d in scale[zyx])
+    origin = translation[zyx] + scale[zyx] * (shape - 1) / 2  # the volume's centre, (z, y, x)
+    return data, spacing, tuple(float(o) for o in origin[::-1])
 
 
 def _read_dicom_folder(folder, series, progress_bar):

@@ -1,6 +1,8 @@
 """Analytic test volumes (hydrogen 3d_z² orbital, Marschner–Lobb, 3-D Shepp–Logan): :func:`phantom`
-samples one at the cell centres of an n³ grid of spacing 1; :func:`analytic` is the same formula
-at world points, the ground truth for line integrals (the same float64 expressions, in order).
+samples one at the cell centres of an n³ grid of spacing 1; :func:`phantom_block` samples one block
+of a grid of any shape (volumes bigger than memory, chunk by chunk: tools/make_zarr.py);
+:func:`analytic` is the same formula at world points, the ground truth for line integrals (the same
+float64 expressions, in order).
 
 >>> vol = phantom("hydrogen", n=32)
 >>> vol.shape, vol.spacing, float(vol.data.max()) <= 1.0
@@ -124,18 +126,21 @@ _FORMULAS = {"hydrogen": _hydrogen, "marschner-lobb": _marschner_lobb,
 
 
 # --------------------------------------------------------------------------- public API
-def _check(name, n):
+def _key(name) -> str:
     if not isinstance(name, str):
         raise InputError(f"phantom name must be a string, one of {', '.join(NAMES)}; got {name!r}")
     key = name.strip().lower().replace("_", "-")
     if key not in NAMES:
         raise InputError(f"unknown phantom {name!r}; choose one of {', '.join(NAMES)}")
+    return key
+
+
+def _check(name, n):
     if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)):
         raise InputError(f"phantom size n must be an integer >= 2 (voxels per axis), got {n!r}")
     if n < 2:
         raise InputError(f"phantom size n must be an integer >= 2 (voxels per axis), got {n}")
-    check_fits(4 * int(n) ** 3, f"a {n}^3 phantom", "choose a smaller n")
-    return key, int(n)
+    return _key(name), int(n)
 
 
 def _scale(key: str, n: int) -> float:
@@ -205,63 +210,110 @@ def phantom(name: str, n: int = 128) -> Volume:
     np.float32(1.0)
     """
     key, n = _check(name, n)
-    scale = _scale(key, n)
-    u = (np.arange(n, dtype=np.float64) - (n - 1) / 2.0) * scale   # domain coordinate per index
-    out = np.empty((n, n, n), dtype=np.float32)  # float64 formula, rounded once
+    check_fits(4 * n ** 3, f"a {n}^3 phantom", "choose a smaller n")
+    return Volume(_sample(key, (n, n, n), ((0, n),) * 3))
+
+
+def phantom_block(name: str, shape, box=None) -> np.ndarray:
+    """One block of a phantom sampled at the cell centres of a grid of any ``shape``.
+
+    The phantom's domain cube [-D, D]³ spans the grid, each axis with its own
+    scale 2D/n (a cube of voxels for a cubic shape).  Every block holds the
+    samples the whole grid has there, bit for bit, so a volume bigger than
+    memory can be written chunk by chunk; for ``shape = (n, n, n)`` the whole
+    grid is ``phantom(name, n).data``.
+
+    Parameters
+    ----------
+    name : {"hydrogen", "marschner-lobb", "shepp-logan"}
+    shape : 3 ints
+        Grid ``(nz, ny, nx)``, each >= 2.
+    box : 3 slices, optional
+        The block, ``(z, y, x)`` slices of the grid with step 1 (default: all of it).
+
+    Returns
+    -------
+    ndarray, float32, the block's shape
+
+    >>> whole = phantom("marschner-lobb", 8).data
+    >>> bool(np.array_equal(phantom_block("marschner-lobb", (8, 8, 8), np.s_[2:5, :, 6:]), whole[2:5, :, 6:]))
+    True
+    """
+    key = _key(name)
+    try:
+        shape = tuple(int(n) for n in shape)
+        box = tuple(range(n)[s] for n, s in zip(shape, box or (slice(None),) * 3, strict=True))
+    except (TypeError, ValueError):
+        raise InputError(f"shape {shape!r} and box {box!r} must be 3 integers (nz, ny, nx) and 3 slices") from None
+    if len(shape) != 3 or min(shape) < 2 or any(not isinstance(r, range) or r.step != 1 or not r for r in box):
+        raise InputError(f"shape {shape} needs 3 axes of >= 2 voxels and box {box} 3 non-empty slices of step 1")
+    check_fits(4 * math.prod(len(r) for r in box), f"a {' x '.join(str(len(r)) for r in box)} phantom block",
+               "choose a smaller block")
+    return _sample(key, shape, tuple((r.start, r.stop) for r in box))
+
+
+def _sample(key, shape, box) -> np.ndarray:
+    """float32 samples of phantom ``key`` on the grid ``shape`` in ``box`` ((start, stop) per axis z, y, x): the
+    float64 formula at each cell centre, rounded once."""
+    scales = [_scale(key, n) for n in shape]
+    # domain coordinate per index; the grid is exactly symmetric, u[n-1-i] == -u[i]
+    u = [(np.arange(n, dtype=np.float64) - (n - 1) / 2.0) * d for n, d in zip(shape, scales)]
+    uz, uy, ux = (ui[a:b] for ui, (a, b) in zip(u, box))
+    out = np.empty((len(uz), len(uy), len(ux)), dtype=np.float32)
     if key == "shepp-logan":
-        _fill_shepp_logan(out, u, scale)
-    elif key == "hydrogen":
-        _fill_mirrored(out, u, _hydrogen)
+        _fill_shepp_logan(out, ux, uy, uz, scales[::-1])
+    elif key == "hydrogen" and out.shape == tuple(shape):
+        _fill_mirrored(out, ux, uy, uz, _hydrogen)
     else:
-        _fill(out, u, u, _FORMULAS[key])
-    return Volume(out)
+        _fill(out, ux, uy, uz, _FORMULAS[key])
+    return out
 
 
-def _fill(out, u, uz, formula):
-    """out[i, j, k] = formula(u[k], u[j], uz[i]) in z chunks of bounded size."""
-    x, y = u[None, None, :], u[None, :, None]
-    step = max(1, _CHUNK_VOXELS // (len(u) ** 2))
+def _fill(out, ux, uy, uz, formula):
+    """out[i, j, k] = formula(ux[k], uy[j], uz[i]) in z chunks of bounded size."""
+    x, y = ux[None, None, :], uy[None, :, None]
+    step = max(1, _CHUNK_VOXELS // (len(uy) * len(ux)))
     for z0 in range(0, len(uz), step):
         out[z0:z0 + step] = formula(x, y, uz[z0:z0 + step, None, None])
 
 
-def _fill_mirrored(out, u, formula):
-    """For a formula of x², y², z² only: evaluate one octant, mirror it 8 ways.
+def _fill_mirrored(out, ux, uy, uz, formula):
+    """For a formula of x², y², z² only, on a whole grid: evaluate one octant, mirror it 8 ways.
 
-    The grid is exactly symmetric (u[n-1-i] == -u[i]) and the formula sees only
-    squares, so the mirrored samples are bit-identical to evaluating them.
+    The grid is exactly symmetric and the formula sees only squares, so the
+    mirrored samples are bit-identical to evaluating them.
     """
-    n = len(u)
-    h = n // 2                            # first index of the upper half (the centre if n is odd)
-    half = u[h:]
-    octant = np.empty((n - h,) * 3, dtype=out.dtype)
-    _fill(octant, half, half, formula)
-    # per axis: upper half <- octant as is; lower half <- octant reversed (without the centre)
-    lower = slice(n - 1 - h, n - 2 * h - 1 if n - 2 * h - 1 >= 0 else None, -1)
-    pairs = ((slice(h, n), slice(None)), (slice(0, h), lower))
-    for oz, sz in pairs:
-        for oy, sy in pairs:
-            for ox, sx in pairs:
+    halves, pairs = [], []
+    for u in (uz, uy, ux):
+        n = len(u)
+        h = n // 2                        # first index of the upper half (the centre if n is odd)
+        halves.append(u[h:])
+        # upper half <- octant as is; lower half <- octant reversed (without the centre)
+        lower = slice(n - 1 - h, n - 2 * h - 1 if n - 2 * h - 1 >= 0 else None, -1)
+        pairs.append(((slice(h, n), slice(None)), (slice(0, h), lower)))
+    octant = np.empty(tuple(len(half) for half in halves), dtype=out.dtype)
+    _fill(octant, halves[2], halves[1], halves[0], formula)
+    for oz, sz in pairs[0]:
+        for oy, sy in pairs[1]:
+            for ox, sx in pairs[2]:
                 out[oz, oy, ox] = octant[sz, sy, sx]
 
 
-def _fill_shepp_logan(out, u, scale):
+def _fill_shepp_logan(out, ux, uy, uz, scales_xyz):
     """Adds each ellipsoid's tenths inside its bounding box only (+1 voxel margin)."""
-    n = len(u)
     tenths = np.zeros(out.shape, dtype=np.int8)        # sums stay within -10..16
     for e in range(len(SHEPP_LOGAN)):
         lo, hi = _sl_box(e)
         # index ranges (x, y, z) whose centres can lie inside, one voxel of margin
-        first = np.maximum(np.floor(lo / scale + (n - 1) / 2.0).astype(int) - 1, 0)
-        last = np.minimum(np.ceil(hi / scale + (n - 1) / 2.0).astype(int) + 2, n)
-        if np.any(last <= first):
+        (x0, x1), (y0, y1), (z0, z1) = (np.searchsorted(u, (a - d, b + d)) for u, a, b, d in
+                                        zip((ux, uy, uz), lo, hi, scales_xyz))
+        if x1 <= x0 or y1 <= y0 or z1 <= z0:
             continue
-        (x0, y0, z0), (x1, y1, z1) = first, last
-        x, y = u[None, None, x0:x1], u[None, y0:y1, None]
+        x, y = ux[None, None, x0:x1], uy[None, y0:y1, None]
         step = max(1, _CHUNK_VOXELS // ((y1 - y0) * (x1 - x0)))
         for zs in range(z0, z1, step):
             ze = min(zs + step, z1)
-            inside = _sl_quadform(e, x, y, u[zs:ze, None, None]) <= 1.0
+            inside = _sl_quadform(e, x, y, uz[zs:ze, None, None]) <= 1.0
             block = tenths[zs:ze, y0:y1, x0:x1]
             np.add(block, np.int8(_SL_TENTHS[e]), out=block, where=inside)
     np.divide(tenths, 10.0, out=out, dtype=np.float64, casting="unsafe")

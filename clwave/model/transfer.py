@@ -9,13 +9,14 @@ wavelet transform (paper §2.2, docs/model.md §5), so a new transfer function m
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 
 from ..errors import InputError
 from ..threads import cores, thread_map
-from .volume import Volume
+from .volume import Volume, is_dask
 
 #: Percentiles of the finite values that ``window="auto"`` maps to 0 and 1.
 AUTO_PERCENTILES = (0.5, 99.5)
@@ -215,6 +216,10 @@ class TransferFunction:
         Changing the transfer function means a new classification and a new
         wavelet transform (pre-classification, paper §2.2).
 
+        A chunked volume (docs/chunked.md) gives a chunked result, each chunk
+        classified when it is read, bit for bit as in memory; an "auto" window
+        and the RGB scale first take one pass over the volume.
+
         Parameters
         ----------
         vol : Volume
@@ -232,42 +237,13 @@ class TransferFunction:
         if not isinstance(vol, Volume):
             raise InputError(f"classify needs a clwave.Volume, got {type(vol).__name__}; "
                              "wrap arrays with clwave.Volume(array, spacing=...)")
-        c = _channels(vol)
-        n = int(np.prod(vol.shape))
-        out = np.empty((n, 4), dtype=np.float32)
-        if c == 1:
-            flat = vol.data.reshape(-1)
-            pl = _PiecewiseLinear(self._xp(vol.data, window), self._points[:, 1:5])
-
-            def work(s, e):
-                k, d = pl.segment(flat[s:e].astype(np.float64))
-                o = out[s:e]
-                a = pl.channel(k, d, 3)
-                o[:, 3] = a
-                done = {}
-                for ch in range(3):          # q = rgb * alpha; equal colour columns share work
-                    key = pl.key(ch)
-                    if key not in done:
-                        done[key] = pl.channel(k, d, ch)
-                    o[:, ch] = done[key] * a
+        paint = self._painter(vol.channels, *self._statistics(vol, window))
+        if vol.chunked:  # each chunk classified when it is read: the values classify gives in memory
+            data = vol.data if vol.data.ndim == 4 else vol.data[..., None]
+            rgba = data.map_blocks(_classified, paint, False, chunks=data.chunks[:3] + ((4,),), dtype=np.float32)
         else:
-            data = vol.data.reshape(-1, c)
-            scale = _rgb_scale(vol.data)
-            pl = _PiecewiseLinear(self.data_points(self._window_for(vol, window, scale)),
-                                  self._points[:, 4:5])
-
-            def work(s, e):
-                rgb = data[s:e, :3].astype(np.float64)
-                rgb /= scale
-                a = pl.channel(*pl.segment(_luminance(rgb)), 0)
-                if c == 4:
-                    a *= data[s:e, 3].astype(np.float64) / scale
-                o = out[s:e]
-                o[:, 3] = a
-                rgb *= a[:, None]
-                o[:, :3] = rgb
-        _run_chunks(n, work)
-        return Volume(out.reshape(vol.shape + (4,)), spacing=vol.spacing, origin=vol.origin)
+            rgba = _classified(vol.data, paint, True)
+        return Volume(rgba, spacing=vol.spacing, origin=vol.origin)
 
     def resolved(self, vol: Volume, window=...) -> "TransferFunction":
         """This function with the window :meth:`classify` would use on ``vol`` made concrete.
@@ -277,18 +253,48 @@ class TransferFunction:
         """
         if not isinstance(vol, Volume):
             raise InputError(f"resolved needs a clwave.Volume, got {type(vol).__name__}")
-        win = self._window_for(vol, window, 1.0 if _channels(vol) == 1 else _rgb_scale(vol.data))
-        return TransferFunction(self._points, window=win, name=self.name)
+        return TransferFunction(self._points, window=self._statistics(vol, window)[0], name=self.name)
 
-    def _window_for(self, vol, window, scale):
+    def _statistics(self, vol, window):
+        """(window, RGB scale) that :meth:`classify` uses on ``vol``: an "auto" window needs the strided
+        subsample, RGB(A) the minimum and maximum, both found in one pass over a chunked volume."""
+        c = _channels(vol)
         win = self._window if window is ... else check_window(window)
-        if win != "auto":
-            return win
-        if vol.channels == 1:
-            return auto_window(vol.data)
-        data = vol.data.reshape(-1, vol.channels)
-        step = max(1, math.ceil(len(data) / AUTO_SAMPLES))
-        return auto_window(_luminance(data[::step, :3].astype(np.float64) / scale))
+        sample, lo, hi = _scan(vol.data, win == "auto", c > 1)
+        scale = 1.0 if c == 1 else _rgb_scale(lo, hi)
+        if win == "auto":
+            win = auto_window(sample if c == 1 else _luminance(sample[:, :3].astype(np.float64) / scale))
+        return win, scale
+
+    def _painter(self, channels, window, scale):
+        """``paint(values, out)``: the classification ``out`` (n, 4) float32 of voxels ``values`` (n, channels),
+        for whole and chunked volumes alike."""
+        if channels == 1:
+            pl = _PiecewiseLinear(self.data_points(window), self._points[:, 1:5])
+
+            def paint(values, out):
+                k, d = pl.segment(values[:, 0].astype(np.float64))
+                a = pl.channel(k, d, 3)
+                out[:, 3] = a
+                done = {}
+                for ch in range(3):          # q = rgb * alpha; equal colour columns share work
+                    key = pl.key(ch)
+                    if key not in done:
+                        done[key] = pl.channel(k, d, ch)
+                    out[:, ch] = done[key] * a
+        else:
+            pl = _PiecewiseLinear(self.data_points(window), self._points[:, 4:5])
+
+            def paint(values, out):
+                rgb = values[:, :3].astype(np.float64)
+                rgb /= scale
+                a = pl.channel(*pl.segment(_luminance(rgb)), 0)
+                if channels == 4:
+                    a *= values[:, 3].astype(np.float64) / scale
+                out[:, 3] = a
+                rgb *= a[:, None]
+                out[:, :3] = rgb
+        return paint
 
     def _xp(self, values, window):
         win = self._window if window is ... else check_window(window)
@@ -417,8 +423,9 @@ def _luminance(rgb):
     return rgb[:, 0] * LUMA[0] + rgb[:, 1] * LUMA[1] + rgb[:, 2] * LUMA[2]
 
 
-def _rgb_scale(data) -> float:
-    lo, hi = float(data.min()), float(data.max())
+def _rgb_scale(lo, hi) -> float:
+    """1, 255 or 65535: the range of colour channels whose values span (lo, hi)."""
+    lo, hi = float(lo), float(hi)
     if lo < 0:
         raise InputError(f"RGB(A) volume has negative values (min {lo:g}); colour channels "
                          "must lie in [0, 1], [0, 255] or [0, 65535]")
@@ -432,10 +439,58 @@ def _rgb_scale(data) -> float:
                      "[0, 1], [0, 255] or [0, 65535]")
 
 
-def _run_chunks(n, work):
-    """work(start, stop) over chunks of _CHUNK voxels, in threads (numpy drops the GIL)."""
+def _classified(data, paint, threads):
+    """(z, y, x, 4) float32: ``paint`` over the voxels of ``data`` (z, y, x[, c]), _CHUNK at a time."""
+    n = math.prod(data.shape[:3])
+    values = data.reshape(n, -1)
+    out = np.empty((n, 4), dtype=np.float32)
+    _run_chunks(n, lambda s, e: paint(values[s:e], out[s:e]), threads)
+    return out.reshape(data.shape[:3] + (4,))
+
+
+def _scan(data, sample, extrema):
+    """(strided subsample or None, minimum or None, maximum or None) of ``data`` (z, y, x[, c]): the subsample
+    is the voxels whose flat index is a multiple of ceil(voxels / AUTO_SAMPLES), as ``data.reshape(n, c)[::step]``
+    (in another order for a Dask array, which is read once, chunk by chunk)."""
+    if not (sample or extrema):
+        return None, None, None
+    shape = data.shape[:3]
+    step = math.ceil(math.prod(shape) / AUTO_SAMPLES)
+
+    def scan(block, start):
+        return (_sampled(block, start, shape, step) if sample else None,
+                block.min() if extrema else None, block.max() if extrema else None)
+
+    if is_dask(data):
+        import dask
+
+        starts = itertools.product(*(np.cumsum((0,) + c[:-1]) for c in data.chunks[:3]))
+        found = dask.compute(*(dask.delayed(scan)(block, start)
+                               for block, start in zip(data.to_delayed().ravel(), starts)))
+    else:
+        found = [scan(data, (0, 0, 0))]
+    samples, lows, highs = zip(*found)
+    return (np.concatenate(samples) if sample else None,
+            min(lows) if extrema else None, max(highs) if extrema else None)
+
+
+def _sampled(block, start, shape, step):
+    """The voxels of ``block`` (z, y, x[, c]), whose first voxel is ``start`` in a grid of ``shape``, with a flat
+    (C order) index in the grid that is a multiple of ``step``, in flat order."""
+    nz, ny, nx = block.shape[:3]
+    z = np.arange(start[0], start[0] + nz)[:, None, None]
+    y = np.arange(start[1], start[1] + ny)[None, :, None]
+    row = (z * shape[1] + y) * shape[2] + start[2]      # flat index of each row's first voxel
+    x = (-row) % step + np.arange(0, nx, step)          # the row's multiples of step, and some past its end
+    iz, iy, ix = np.nonzero(x < nx)
+    return block[iz, iy, x[iz, iy, ix]]
+
+
+def _run_chunks(n, work, threads=True):
+    """work(start, stop) over chunks of _CHUNK voxels, in threads (numpy drops the GIL) unless ``threads`` is
+    False (a Dask chunk: Dask runs chunks in threads of its own)."""
     starts = range(0, n, _CHUNK)
-    if n < _THREADED_MIN:
+    if n < _THREADED_MIN or not threads:
         for s in starts:
             work(s, min(s + _CHUNK, n))
         return
