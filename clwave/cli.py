@@ -60,6 +60,13 @@ def _add_input_options(p):
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
     g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water)")
     g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
+    g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
+    g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
+                                    "edge N (default: Zarr and HDF5 always, .npy/.raw/.nii from 1 GiB)")
+    c = p.add_argument_group("chunked work (a chunked input; docs/chunked.md)")
+    w = c.add_mutually_exclusive_group()
+    w.add_argument("--workers", type=int, help="a local Dask cluster of N worker processes (default: threads)")
+    w.add_argument("--scheduler", help="address tcp://HOST:PORT of a running Dask scheduler")
 
 
 def _add_model_options(p):
@@ -90,7 +97,8 @@ def read_volume(args):
     spec = args.input
     spacing = None if args.spacing is None else _numbers(args.spacing, "--spacing", (1, 3))
     if spec.startswith("phantom:"):
-        given = [_flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu") if getattr(args, n, None)]
+        given = [_flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu", "level", "chunks")
+                 if getattr(args, n, None) is not None and getattr(args, n) is not False]
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {spec}: a phantom is not read from a file")
         parts = spec.split(":")
@@ -106,12 +114,31 @@ def read_volume(args):
     if series is not None and series.isdigit():
         series = int(series)
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
-                series=series, background=args.subtract or 0.0, hu_to_mu=args.hu_to_mu)
+                series=series, level=args.level, chunks=_chunks(args.chunks), background=args.subtract or 0.0,
+                hu_to_mu=args.hu_to_mu)
+
+
+def _chunks(text):
+    """``load``'s ``chunks=`` from ``--chunks auto|off|N``."""
+    if text is None or text == "auto":
+        return text
+    if text == "off":
+        return False
+    if not text.isdigit() or int(text) < 2:
+        raise InputError(f"--chunks {text} must be auto, off or a chunk edge N >= 2 (voxels)")
+    return int(text)
+
+
+def _scheduler(args):
+    """The Dask scheduler of chunked work: ``--workers N``, ``--scheduler ADDRESS`` or threads (None)."""
+    from .cluster import check_scheduler
+
+    return check_scheduler(args.workers if args.workers is not None else args.scheduler)
 
 
 #: options that make a model from a volume, and so cannot apply to a .clw input (a model already)
 VOLUME_ONLY = ("tf", "tf_window", "wavelet", "levels", "interpolate", "spacing", "shape", "dtype", "byte_order",
-               "series", "subtract", "hu_to_mu")
+               "series", "subtract", "hu_to_mu", "level", "chunks", "workers", "scheduler")
 
 
 def _flag(name: str) -> str:
@@ -138,26 +165,29 @@ def _needs_rgba(name, channels, fix) -> InputError:
                       f"channel(s): {fix}, or render line integrals with --xray")
 
 
-def build_model(args, log=print, rgba=False):
+def build_model(args, log=print, rgba=False, gather=True):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
 
     Returns ``(wavelet_volume, reference_volume)``; the reference is the volume the
-    model approximates (None when the input was already a ``.clw`` file).
+    model approximates (None when the input was already a ``.clw`` file).  A chunked input gives no
+    reference, and with ``gather`` false a :class:`~clwave.model.chunked.ChunkedWaveletVolume`
+    (thresholded, not gathered).
     """
     from .model.transfer import TransferFunction
     from .model.wavelet import WaveletVolume, check_decomposition
 
     thresholding = _thresholding(args)
+    scheduler = _scheduler(args)
     if args.input.lower().endswith(".clw"):
         given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)]
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
                              f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")
-        wv = WaveletVolume.open(args.input)
+        wv = WaveletVolume.open(args.input, keep=args.keep if args.focus is None else None)
         if rgba and wv.channels != 4:
             raise _needs_rgba(args.input, wv.channels, "compress the volume with --tf PRESET")
-        if args.keep is not None or args.threshold is not None:
+        if args.threshold is not None or args.focus is not None:  # --keep alone: a prefix of the file
             wv = wv.threshold(**thresholding)
         return wv, None
     vol = read_volume(args)
@@ -176,19 +206,26 @@ def build_model(args, log=print, rgba=False):
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
     wavelet, levels = check_decomposition(vol.shape, 4 if tf else vol.channels, wavelet,
                                           DEFAULT_LEVELS if args.levels is None else args.levels)
-    check_fits(MODEL_BYTES_PER_VALUE * int(np.prod(vol.shape)) * (4 if tf else vol.channels), "decomposing this volume",
-               "crop or subsample it first")
+    if not vol.chunked:
+        check_fits(MODEL_BYTES_PER_VALUE * int(np.prod(vol.shape)) * (4 if tf else vol.channels),
+                   "decomposing this volume", "read it chunk by chunk (--chunks auto), or crop or subsample it")
+    elif args.interpolate:
+        raise InputError("--interpolate needs the whole volume in memory (its prefilter is global); leave it out "
+                         "for a chunked input, or read the input whole with --chunks off")
     if tf is not None:
         tf = tf.resolved(vol)  # records an "auto" window
         vol = tf.classify(vol)
     start = time.perf_counter()
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
-                                   transfer_function=tf)
-    log(f"decomposed {' x '.join(map(str, vol.shape[::-1]))} voxels (x, y, z), {vol.channels} channel(s), in "
-        f"{time.perf_counter() - start:.2f} s")
+                                   transfer_function=tf, scheduler=scheduler)
+    log(f"{'read (content) of' if vol.chunked else 'decomposed'} {' x '.join(map(str, vol.shape[::-1]))} voxels "
+        f"(x, y, z), {vol.channels} channel(s), in {time.perf_counter() - start:.2f} s")
     if args.keep is None and args.threshold is None:
         thresholding["keep"] = DEFAULT_KEEP
-    return wv.threshold(**thresholding), vol
+    wv = wv.threshold(**thresholding)
+    if not vol.chunked:
+        return wv, vol
+    return (wv.compute() if gather else wv), None
 
 
 def _check_output(path, force):
@@ -236,7 +273,7 @@ def cmd_compress(args):
     out = _check_output(args.output, args.force)
     if out.suffix.lower() != ".clw":
         raise InputError(f"output {out} must end in .clw")
-    wv, reference = build_model(args)
+    wv, reference = build_model(args, gather=False)
     start = time.perf_counter()
     wv.save(out, overwrite=args.force)
     saved = time.perf_counter() - start
@@ -254,6 +291,8 @@ def cmd_compress(args):
         peak = max(float(np.max(np.abs(reference.data))), np.finfo(np.float32).tiny)
         print(f"error                 RMS over the voxels {error / peak:.2e} of the largest value "
               f"(PSNR {20 * np.log10(peak / max(error, 1e-30)):.1f} dB)")
+    elif not args.input.lower().endswith(".clw"):
+        print("error                 not measured: the input was read chunk by chunk (the error needs it whole)")
     return 0
 
 

@@ -59,9 +59,9 @@ def client_for(scheduler=None):
         return
     if scheduler is None:
         cluster = LocalCluster(processes=False, n_workers=1, threads_per_worker=cores(),
-                               dashboard_address=None, memory_limit=0)
+                               dashboard_address=":0", memory_limit=0)
     else:
-        cluster = LocalCluster(n_workers=scheduler, threads_per_worker=1, dashboard_address=None)
+        cluster = LocalCluster(n_workers=scheduler, threads_per_worker=1, dashboard_address=":0")
     with cluster, Client(cluster) as client:
         yield client
 

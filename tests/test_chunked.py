@@ -1,0 +1,150 @@
+"""The chunked model (docs/chunked.md): its coefficients, thresholded sets and files against the in-memory
+model's, on odd shapes with chunkings that do not divide them."""
+
+import io
+import time
+
+import dask.array as da
+import h5py
+import numpy as np
+import pytest
+
+import clwave
+from clwave.errors import InputError
+from clwave.model import chunked
+from clwave.model.chunked import ChunkedWaveletVolume
+
+SHAPE, CHUNKS, SPACING = (29, 34, 23), (9, 11, 8), (1.5, 1.0, 0.75)
+
+
+@pytest.fixture(autouse=True)
+def small_blocks(monkeypatch):
+    monkeypatch.setattr(chunked, "MIN_BLOCK_VOXELS", 0)  # many blocks on small volumes
+
+
+def pair(rng, channels=1, zeros=0.3):
+    """The same random volume in memory and chunked (exact ties in importance are then unlikely)."""
+    shape = SHAPE + ((channels,) if channels > 1 else ())
+    data = rng.random(shape, dtype=np.float32)
+    data[rng.random(SHAPE) < zeros] = 0  # some empty voxels: zero coefficients and a content mask
+    chunks = CHUNKS + ((channels,) if channels > 1 else ())
+    return (clwave.Volume(data, spacing=SPACING, origin=(1, -2, 3)),
+            clwave.Volume(da.from_array(data, chunks=chunks), spacing=SPACING, origin=(1, -2, 3)))
+
+
+def assert_same(a: clwave.WaveletVolume, b: clwave.WaveletVolume):
+    assert (a.shape, a.spacing, a.origin, a.levels, a.wavelets) == (b.shape, b.spacing, b.origin, b.levels, b.wavelets)
+    for g, h in zip(a.groups, b.groups, strict=True):
+        assert g.channels == h.channels
+        assert (g.positions is None) == (h.positions is None)
+        if g.positions is not None:
+            assert np.array_equal(g.positions, h.positions)
+        assert g.values.dtype == h.values.dtype and np.array_equal(g.values, h.values)
+    assert np.array_equal(a.content_mask, b.content_mask)
+    assert np.allclose(a.content, b.content)
+
+
+@pytest.mark.parametrize("wavelet", ["haar", "linear", "quadratic", "cubic"])
+def test_chunked_transform_and_threshold_equal_the_in_memory_ones(rng, wavelet):
+    vol, dvol = pair(rng)
+    ref = clwave.WaveletVolume.from_volume(vol, wavelet, levels=2)
+    model = clwave.WaveletVolume.from_volume(dvol, wavelet, levels=2)
+    assert isinstance(model, ChunkedWaveletVolume)
+    assert_same(ref, model.compute())  # every coefficient, bit for bit
+    assert_same(ref.threshold(keep=0.07), model.threshold(keep=0.07).compute())
+
+
+def test_rgba_mixed_orders_focus_and_every_rule(rng):
+    vol, dvol = pair(rng, channels=4)
+    wavelets = ["cubic", "cubic", "cubic", "haar"]  # cubic colour, Haar opacity (paper Fig. 14)
+    ref = clwave.WaveletVolume.from_volume(vol, wavelets, levels=2)
+    model = clwave.WaveletVolume.from_volume(dvol, wavelets, levels=2)
+    assert_same(ref, model.compute())
+    n_approx = ref.groups[0].bands[0].size
+    for kwargs in [dict(keep=n_approx / 2 / vol.data[..., 0].size),  # a cut inside the approximation
+                   dict(keep=0.1, focus=((2.0, -1.0, 4.0), 6.0))]:
+        assert_same(ref.threshold(**kwargs), model.threshold(**kwargs).compute())
+
+
+def test_no_levels_and_one_block(rng, monkeypatch):
+    vol, dvol = pair(rng)
+    for levels in (0, 3):
+        assert_same(clwave.WaveletVolume.from_volume(vol, "linear", levels=levels).threshold(keep=0.1),
+                    clwave.WaveletVolume.from_volume(dvol, "linear", levels=levels).threshold(keep=0.1).compute())
+    monkeypatch.setattr(chunked, "MIN_BLOCK_VOXELS", 1 << 30)  # the whole volume one block
+    assert_same(clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(threshold=0.2),
+                clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2).threshold(threshold=0.2).compute())
+
+
+def test_on_a_local_cluster_of_two_worker_processes(rng):
+    vol, dvol = pair(rng)
+    model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=2)
+    assert model.scheduler == 2
+    assert_same(clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.05),
+                model.threshold(keep=0.05).compute())
+
+
+def test_streamed_file_equals_the_in_memory_file(rng, tmp_path):
+    vol, dvol = pair(rng, zeros=0.05)
+    ref = clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.4)
+    ref.save(tmp_path / "memory.clw")
+    clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2).threshold(keep=0.4).save(tmp_path / "chunked.clw")
+    whole = clwave.WaveletVolume.open(tmp_path / "chunked.clw")
+    assert_same(whole, clwave.WaveletVolume.open(tmp_path / "memory.clw"))
+    assert_same(whole, ref)
+    assert (tmp_path / "chunked.clw").read_bytes() == (tmp_path / "memory.clw").read_bytes()
+
+
+def test_prefix_reads_equal_thresholding_the_whole_file(rng, tmp_path, monkeypatch):
+    data = rng.random((64, 72, 60), dtype=np.float32)  # 0.4 of it kept: some 110 000 coefficients, 7 chunks
+    clwave.WaveletVolume.from_volume(data, "cubic", levels=2).threshold(keep=0.4).save(tmp_path / "m.clw")
+    whole = clwave.WaveletVolume.open(tmp_path / "m.clw")
+
+    read, handles = [], []
+    opened = h5py.File
+
+    class Counting(io.FileIO):
+        def readinto(self, buffer):
+            n = super().readinto(buffer)
+            read[-1] += n
+            return n
+
+    def counting_file(path, mode="r", **kw):
+        handles.append(Counting(path, "r"))
+        return opened(handles[-1], mode, **kw)
+
+    monkeypatch.setattr(h5py, "File", counting_file)
+    size = (tmp_path / "m.clw").stat().st_size
+    for keep in (0.01, 0.05, 0.2):
+        read.append(0)
+        prefix = clwave.WaveletVolume.open(tmp_path / "m.clw", keep=keep)
+        handles.pop().close()
+        assert_same(prefix, whole.threshold(keep=keep))
+        assert read[-1] < (keep / 0.4 + 0.15) * size  # about that fraction (a chunk of 16 384 rows, metadata aside)
+
+
+def test_bad_chunked_inputs(rng, monkeypatch):
+    _, dvol = pair(rng)
+    with pytest.raises(InputError, match="interpolate=True needs the whole volume"):
+        clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, interpolate=True)
+    data = dvol.data.copy()
+    data[20, 30, 5] = np.nan
+    with pytest.raises(InputError, match="non-finite"):  # found in the first pass, before any long work
+        clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2)
+    with pytest.raises(InputError, match="not a Dask scheduler"):
+        clwave.WaveletVolume.from_volume(dvol, scheduler="localhost")
+    monkeypatch.setattr(clwave.cluster, "CONNECT_TIMEOUT", "1s")
+    start = time.perf_counter()
+    with pytest.raises(InputError, match="no Dask scheduler answers at tcp://127.0.0.1:9"):
+        clwave.WaveletVolume.from_volume(dvol, scheduler="tcp://127.0.0.1:9")
+    assert time.perf_counter() - start < 10
+
+
+def test_tiny_chunks_are_merged_into_bounded_blocks(monkeypatch):
+    monkeypatch.setattr(chunked, "MAX_BLOCKS", 64)
+    x = da.zeros((200, 190, 180, 1), chunks=(3, 5, 7, 1), dtype=np.float32)
+    for halo in (0, 10):
+        merged = chunked._even_chunks(x, halo)
+        assert np.prod([len(c) for c in merged.chunks[:3]]) <= 64
+        for c in merged.chunks[:3]:
+            assert all(e % 2 == 0 for e in c[:-1]) and min(c) >= max(halo, 1)
