@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|footprints|splat|progressive|raytrace|all [--size 128 256] [--repeats 3]
+    python tools/bench.py decompose|footprints|splat|progressive|raytrace|scale|all [--size 128 256] [--repeats 3]
                           [--views 4] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
 
 Every benchmark runs once per ``--size`` (hydrogen phantom of that many voxels per axis, made
@@ -25,6 +25,13 @@ float64 render at tolerance 1e-5 of the 64x64 centre crop; set-up (expansion) ap
 doubling steps) at 512², single resolution and with coarse framebuffers (``coarse=2e-2``); per
 frame the time since the start of the view, energy, and RMS error against the final image.
 
+``scale`` (not in ``all``): volumes bigger than memory (docs/chunked.md).  A hydrogen phantom of
+``--size``³ float32 voxels (or ``--scale-shape Z,Y,X`` of ``--scale-dtype``) is written to a Zarr
+store in ``--scratch`` chunk by chunk (tools/make_zarr.py, timed apart, kept for the next run), then
+compressed to 5 % (``--scale-tf``: classified to RGBA first) chunk by chunk on the threads of one
+process, and its file splatted at 512² with 1 % read as a prefix and a reused renderer.  Each step
+runs in a process of its own, which reports its peak resident memory.
+
 A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) and an
 entry in ``BENCHMARKS``.
 """
@@ -37,6 +44,7 @@ import json
 import os
 import platform
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -283,11 +291,82 @@ def _raytrace_cases(tracer, fast, wv, size, crop, n_views) -> dict:
     return dict(image=f"{size}x{size}", compile_seconds=compile_seconds, cases=cases)
 
 
+def bench_scale(args) -> dict:
+    shape = args.scale_shape or (args.size,) * 3
+    name = f"hydrogen_{'x'.join(map(str, shape))}_{args.scale_dtype}"
+    store, model = args.scratch / f"{name}.zarr", args.scratch / f"{name}{'_rgba' if args.scale_tf else ''}.clw"
+    args.scratch.mkdir(parents=True, exist_ok=True)
+    out = dict(setting=dict(volume=f"hydrogen {' x '.join(map(str, shape[::-1]))} (x, y, z) {args.scale_dtype}, "
+                                   f"Zarr chunks 128^3", classified=bool(args.scale_tf), wavelet="cubic", levels=3,
+                            keep=0.05, scheduler="threads of one process"),
+               raw_bytes=int(np.prod(shape)) * np.dtype(args.scale_dtype).itemsize)
+    if not store.exists():
+        scale = 65535 if np.dtype(args.scale_dtype).kind in "iu" else 1
+        start = time.perf_counter()
+        subprocess.run([sys.executable, str(Path(__file__).with_name("make_zarr.py")), str(store), "--shape",
+                        ",".join(map(str, shape)), "--dtype", args.scale_dtype, "--scale", str(scale)], check=True)
+        out["make_zarr_seconds"] = time.perf_counter() - start
+    out["compress"] = _scale_step(dict(step="compress", store=str(store), model=str(model), tf=args.scale_tf))
+    out["splat"] = _scale_step(dict(step="splat", model=str(model), views=args.views, device=args.device))
+    return out
+
+
+def _scale_step(spec) -> dict:
+    """Run one step of ``scale`` in a process of its own; its figures, with its peak resident memory."""
+    proc = subprocess.run([sys.executable, __file__, "--scale-step", json.dumps(spec)], check=True,
+                          capture_output=True, text=True)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def scale_step(spec) -> dict:
+    import resource
+
+    times = {}
+    if spec["step"] == "compress":
+        start = time.perf_counter()
+        vol = clwave.load(spec["store"])
+        if spec["tf"]:
+            tf = TransferFunction.preset("hydrogen").resolved(vol)
+            vol = tf.classify(vol)
+        times["load_and_content"] = -start
+        chunked = WaveletVolume.from_volume(vol, "cubic", levels=3, progress_bar=False)
+        times["load_and_content"] += time.perf_counter()
+        start = time.perf_counter()
+        kept = chunked.threshold(keep=0.05)
+        times["histograms"] = time.perf_counter() - start
+        start = time.perf_counter()
+        kept.save(spec["model"], overwrite=True)
+        times["select_and_write"] = time.perf_counter() - start
+        figures = dict(kept=kept.kept, file_bytes=os.path.getsize(spec["model"]), blocks=vol.data.numblocks)
+    else:
+        start = time.perf_counter()
+        wv = WaveletVolume.open(spec["model"], keep=0.01)
+        times["open_keep_0.01"] = time.perf_counter() - start
+        start = time.perf_counter()
+        renderer = clwave.SplatRenderer(wv, device=spec["device"])
+        clwave.splat(wv, clwave.Camera(10.0, 5.0, size=512), renderer=renderer)
+        times["set_up_and_first_view"] = time.perf_counter() - start
+        walls = []
+        for az, el in views(spec["views"]):
+            start = time.perf_counter()
+            clwave.splat(wv, clwave.Camera(az, el, size=512), renderer=renderer)
+            walls.append(time.perf_counter() - start)
+        times["per_view"] = summary(walls)
+        figures = dict(coefficients=wv.kept, compile_seconds=renderer.compile_seconds)
+    times["total"] = sum(v for v in times.values() if isinstance(v, float))
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    return dict(seconds=times, peak_resident_bytes=peak, peak_resident_gib=peak / 2 ** 30, **figures)
+
+
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
-              "progressive": bench_progressive, "raytrace": bench_raytrace}
+              "progressive": bench_progressive, "raytrace": bench_raytrace, "scale": bench_scale}
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--scale-step"]:  # one step of ``scale``, in a process of its own
+        print(json.dumps(scale_step(json.loads(argv[1]))))
+        return
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("benchmark", choices=list(BENCHMARKS) + ["all"])
     parser.add_argument("--size", type=int, nargs="+", default=[128, 256], help="phantom voxels per axis")
@@ -304,10 +383,16 @@ def main(argv=None):
                         help="wavelet-space path: time this many pixels square at the view's centre (0: all)")
     parser.add_argument("--wavelet-max-size", type=int, default=128,
                         help="bench the wavelet-space path for volumes up to this size")
+    parser.add_argument("--scale-shape", type=lambda t: tuple(int(v) for v in t.split(",")),
+                        help="scale: Z,Y,X instead of --size cubed")
+    parser.add_argument("--scale-dtype", default="float32", help="scale: sample type of the store (e.g. uint16)")
+    parser.add_argument("--scale-tf", action="store_true", help="scale: classify to RGBA (hydrogen preset) first")
+    parser.add_argument("--scratch", type=Path, default=Path("/tmp/clwave-bench"),
+                        help="scale: folder of the Zarr stores and models (kept between runs)")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
-    names = list(BENCHMARKS) if args.benchmark == "all" else [args.benchmark]
+    names = [n for n in BENCHMARKS if n != "scale"] if args.benchmark == "all" else [args.benchmark]
     results = {}
     for name in names:
         for size in args.size:

@@ -115,11 +115,10 @@ class _Tiers:
             parts.append((positions[sel], values[:, sel]))
             rows = sum(len(p) for p, _ in parts)
             if rows >= ROWS:  # whole chunks now; the rest waits
-                positions = np.concatenate([p for p, _ in parts])
-                values = np.concatenate([v for _, v in parts], axis=1)
+                held = np.concatenate([p for p, _ in parts]), np.concatenate([v for _, v in parts], axis=1)
                 cut = rows - rows % ROWS
-                self._write(gi, [(int(tier), [(positions[:cut], values[:, :cut])])])
-                self.buffers[(gi, int(tier))] = [(positions[cut:], values[:, cut:])]
+                self._write(gi, [(int(tier), [(held[0][:cut], held[1][:, :cut])])])
+                self.buffers[(gi, int(tier))] = [(held[0][cut:], held[1][:, cut:])]
 
     def flush(self):
         """Write what the buffers hold, a group at a time in one write (rewriting a compressed chunk would

@@ -1,7 +1,7 @@
 """The wavelet model of a chunked volume, computed chunk by chunk on Dask (docs/chunked.md §2-4).
 
 A :class:`ChunkedWaveletVolume` holds no coefficients.  It holds, per channel group, the transform as
-a Dask graph (:func:`level_tasks`: level by level, each block of a level's input with the halo its
+a Dask graph (:func:`level_stacks`: level by level, each block of a level's input with the halo its
 filters need, transformed by PyWavelets exactly as the in-memory transform does) and a selection rule
 per class of coefficients (the coarsest approximation, the details: :class:`Rule`).  Each pass runs
 the graph and streams small per-block results back (:func:`clwave.cluster.stream`): importance
@@ -12,6 +12,7 @@ histograms, from which ``keep=`` finds its exact cut, or the selected coefficien
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import product
 from pathlib import Path
 
 import numpy as np
@@ -156,8 +157,15 @@ class ChunkedWaveletVolume:
 
     def _tasks(self, fn, wavelet, channels, plan):
         """One delayed ``fn(subbands, level, band offsets, plan)`` per block of every level."""
+        import dask
+
         source = self.volume.data if self.volume.data.ndim == 4 else self.volume.data[..., None]
-        return level_tasks(source[..., channels], wavelet, self.levels, plan, fn)
+        tasks = []
+        for level, stack, starts in level_stacks(source[..., channels], wavelet, self.levels, plan.bands):
+            for index, block in np.ndenumerate(stack.to_delayed()[0, ..., 0]):
+                offsets = tuple(int(s[i]) for s, i in zip(starts, index))
+                tasks.append(dask.delayed(fn)(block, level, offsets, plan))
+        return tasks
 
     def threshold(self, keep=None, threshold=None, focus=None) -> "ChunkedWaveletVolume":
         """Select the coefficients :meth:`WaveletVolume.threshold` keeps (the same arguments), without
@@ -265,56 +273,75 @@ class ChunkedWaveletVolume:
 # ---------------------------------------------------------------- the graph
 
 
-def level_tasks(source, wavelet: SplineWavelet, levels: int, plan, consume) -> list:
-    """Delayed ``consume(subbands, level, offsets, plan)`` for each block of each level that holds
-    coefficients: ``subbands`` (8, nz, ny, nx, C) in :data:`KEYS` order ((1, ...) the voxels for
-    ``levels = 0``), ``offsets`` the band index where the block begins.
+def level_stacks(source, wavelet: SplineWavelet, levels: int, bands):
+    """Yield ``(level, stack, starts)`` for the levels that hold coefficients: ``stack`` a Dask array
+    (8, nz, ny, nx, C) of the level's subbands in :data:`KEYS` order (1, ...) of the voxels for
+    ``levels = 0``), ``starts`` per axis the band index where each block begins.
 
     Level m transforms level m-1's approximation (the volume for m = 1) block by block: a block with
     input [a, b) per axis gives the coefficients k in [a/2, b/2) (to the band's end for the last block),
     which depend on the input [a + 2 - L, b) (output k reads x[2k + 2 - L .. 2k + 1], L the filter
-    length), so each block takes L - 2 samples of halo from its neighbours and starts at an even a:
-    then PyWavelets (mode 'zero') on the block gives bit for bit the coefficients of the whole.  One
-    task transforms a block and consumes its subbands, so that only the approximation outlives it.
+    length), so each block takes L - 2 samples of halo from its lower neighbours (:func:`_with_halo`)
+    and starts at an even a: then PyWavelets (mode 'zero') on the block gives bit for bit the
+    coefficients of the whole.
     """
+    if levels == 0:
+        x = _even_chunks(source, 0)
+        yield 0, x[None], [np.cumsum((0,) + c)[:-1] for c in x.chunks[:3]]
+        return
+    import dask.array as da
+
+    halo = wavelet.pywt.dec_len - 2
+    x = source
+    for level in range(1, levels + 1):
+        x = _even_chunks(x, halo)
+        n_out = bands[1 + 7 * (levels - level)].shape  # every subband of a level has one shape
+        starts = [np.cumsum((0,) + c)[:-1] for c in x.chunks[:3]]
+        out_chunks = [tuple(np.diff(np.append(s // 2, n))) for s, n in zip(starts, n_out)]
+        stack = da.map_blocks(_transform_block, _with_halo(x, halo) if halo else x, starts=starts, halo=halo,
+                              n_out=n_out, order=wavelet.order, new_axis=0, dtype=np.float32,
+                              chunks=((8,),) + tuple(out_chunks) + (x.chunks[3],), meta=np.empty((0,) * 5, np.float32))
+        yield level, stack, [s // 2 for s in starts]
+        x = stack[0]
+
+
+def _with_halo(x, halo):
+    """``x`` (z, y, x, C) with ``halo`` samples before each block along z, y and x, cut from the lower
+    neighbours as copies: a chunk is freed as soon as its own block and its halos are taken (Dask's
+    ``overlap`` slices are views, which keep every neighbour whole until its last user has run: a
+    wavefront of whole chunks across the volume)."""
     import dask
     import dask.array as da
 
-    if levels == 0:
-        x = _even_chunks(source, 0)
-        starts = [np.cumsum((0,) + c)[:-1] for c in x.chunks[:3]]
-        return [dask.delayed(consume)(block[None], 0, tuple(int(s[i]) for s, i in zip(starts, index)), plan)
-                for index, block in np.ndenumerate(x.to_delayed()[..., 0])]
-    halo = wavelet.pywt.dec_len - 2
-    x, tasks = source, []
-    for level in range(1, levels + 1):
-        x = _even_chunks(x, halo)
-        n_out = plan.bands[1 + 7 * (levels - level)].shape  # every subband of a level has one shape
-        starts = [np.cumsum((0,) + c)[:-1] for c in x.chunks[:3]]
-        ends = [np.append(s[1:] // 2, n) for s, n in zip(starts, n_out)]
-        overlapped = da.overlap.overlap(x, depth={0: halo, 1: halo, 2: halo, 3: 0}, boundary="none") \
-            if halo else x
-        approx = np.empty(overlapped.numblocks[:3], dtype=object)
-        for index, block in np.ndenumerate(overlapped.to_delayed()[..., 0]):
-            a = [int(s[i]) for s, i in zip(starts, index)]
-            e = [int(t[i]) for t, i in zip(ends, index)]
-            both = dask.delayed(_level_block, nout=2)(block, a, e, halo, wavelet.order, level, plan, consume)
-            tasks.append(both[1])
-            shape = tuple(ei - ai // 2 for ai, ei in zip(a, e)) + (x.shape[3],)
-            approx[index] = da.from_delayed(both[0], shape, dtype=np.float32)
-        x = da.block(approx[..., None].tolist())  # nested as deep as the array: (z, y, x, c)
-    return tasks
+    blocks = x.to_delayed(optimize_graph=False)[..., 0]
+    out = np.empty(blocks.shape + (1,), dtype=object)
+    for index in np.ndindex(blocks.shape):
+        lows = [(-1, 0) if i else (0,) for i in index]
+        pieces = {}
+        for offset in product(*lows):
+            neighbour = blocks[tuple(i + o for i, o in zip(index, offset))]
+            cut = tuple(slice(-halo, None) if o else slice(None) for o in offset)
+            pieces[offset] = neighbour if not any(offset) else dask.delayed(_copy)(neighbour, cut)
+        nested = [[[[pieces[(a, b, c)]] for c in lows[2]] for b in lows[1]] for a in lows[0]]  # as deep as (z, y, x, c)
+        shape = tuple(x.chunks[a][i] + (halo if i else 0) for a, i in enumerate(index)) + (x.shape[3],)
+        out[index + (0,)] = da.from_delayed(dask.delayed(np.block)(nested), shape, dtype=x.dtype)
+    return da.block(out.tolist())
 
 
-def _level_block(block, a, ends, halo, order, level, plan, consume):
-    """``(approximation, consume(subbands, ...))`` of a block of a level's input whose first sample is
-    ``a`` (per axis), ``block`` with its halo, giving the band indices [a/2, ends)."""
+def _copy(block, cut):
+    return block[cut].copy()
+
+
+def _transform_block(block, starts, halo, n_out, order, block_id=None):
+    """The 8 subbands (8, ...) of the block ``block_id`` of a level's input, ``block`` with its halo."""
+    index = block_id[1:4]  # the output's block: (subband, z, y, x, channel)
+    a = [int(s[i]) for s, i in zip(starts, index)]
     lo_halo = [min(halo, ai) for ai in a]  # no halo before the first block (boundary 'none')
     first = [(ai - h) // 2 for ai, h in zip(a, lo_halo)]  # the band index of the block's output 0
+    ends = [int(s[i + 1]) // 2 if i + 1 < len(s) else n for s, i, n in zip(starts, index, n_out)]
     coeffs = pywt.dwtn(block, SplineWavelet(order).pywt, mode="zero", axes=(0, 1, 2))
     box = tuple(slice(ai // 2 - f, e - f) for ai, f, e in zip(a, first, ends)) + (slice(None),)
-    subbands = np.stack([coeffs[key][box] for key in KEYS])
-    return subbands[0], consume(subbands, level, tuple(ai // 2 for ai in a), plan)
+    return np.stack([coeffs[key][box] for key in KEYS])
 
 
 def _even_chunks(x, halo):
