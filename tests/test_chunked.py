@@ -76,12 +76,30 @@ def test_no_levels_and_one_block(rng, monkeypatch):
                 clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2).threshold(threshold=0.2).compute())
 
 
-def test_on_a_local_cluster_of_two_worker_processes(rng):
+def test_on_a_local_cluster_of_two_worker_processes(rng, tmp_path):
+    from distributed import Client, LocalCluster
+
     vol, dvol = pair(rng)
-    model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=2)
-    assert model.scheduler == 2
-    assert_same(clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.05),
-                model.threshold(keep=0.05).compute())
+    ref = clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.05)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
+            Client(cluster) as client:
+        model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=client)
+        assert_same(ref, model.threshold(keep=0.05).compute())
+        model.threshold(keep=0.05).save(tmp_path / "m.clw")  # the client writes what the workers select
+        assert client.status == "running"  # a client the caller gave stays open
+    assert_same(ref, clwave.WaveletVolume.open(tmp_path / "m.clw"))
+
+
+def test_classified_chunk_by_chunk_then_decomposed(tmp_path):
+    import zarr
+
+    vol = clwave.phantom("hydrogen", 24)
+    zarr.create_array(tmp_path / "h.zarr", data=vol.data, chunks=(10, 7, 9))
+    tf = clwave.TransferFunction.preset("hydrogen")
+    chunked_rgba = tf.classify(clwave.load(tmp_path / "h.zarr"))
+    assert chunked_rgba.chunked
+    ref = clwave.WaveletVolume.from_volume(tf.classify(vol), "cubic", levels=2)  # (a symmetric phantom: ties)
+    assert_same(ref, clwave.WaveletVolume.from_volume(chunked_rgba, "cubic", levels=2).compute())
 
 
 def test_streamed_file_equals_the_in_memory_file(rng, tmp_path):
@@ -93,6 +111,21 @@ def test_streamed_file_equals_the_in_memory_file(rng, tmp_path):
     assert_same(whole, clwave.WaveletVolume.open(tmp_path / "memory.clw"))
     assert_same(whole, ref)
     assert (tmp_path / "chunked.clw").read_bytes() == (tmp_path / "memory.clw").read_bytes()
+
+
+def test_streamed_file_in_many_runs_of_whole_chunks(rng, tmp_path, monkeypatch):
+    from clwave.io import clw
+
+    monkeypatch.setattr(clw, "ROWS", 64)  # tiers outgrow a chunk many times while blocks stream in
+    vol, dvol = pair(rng, zeros=0.05)
+    clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2).threshold(keep=0.4).save(tmp_path / "chunked.clw")
+    back = clwave.WaveletVolume.open(tmp_path / "chunked.clw")
+    assert_same(back, clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.4))
+    with h5py.File(tmp_path / "chunked.clw") as h5:
+        runs = h5["g0/runs"][...]
+    whole = runs[:, 2] % 64 == 0
+    assert whole.sum() > 10 and (~whole).sum() <= len(np.unique(runs[:, 0]))  # one partial run a tier at most
+    assert_same(clwave.WaveletVolume.open(tmp_path / "chunked.clw", keep=0.05), back.threshold(keep=0.05))
 
 
 def test_prefix_reads_equal_thresholding_the_whole_file(rng, tmp_path, monkeypatch):
@@ -131,6 +164,8 @@ def test_bad_chunked_inputs(rng, monkeypatch):
     data[20, 30, 5] = np.nan
     with pytest.raises(InputError, match="non-finite"):  # found in the first pass, before any long work
         clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2)
+    with pytest.raises(InputError, match="thresholded already"):
+        clwave.WaveletVolume.from_volume(dvol, "haar", levels=1).threshold(threshold=0.5).threshold(keep=0.1)
     with pytest.raises(InputError, match="not a Dask scheduler"):
         clwave.WaveletVolume.from_volume(dvol, scheduler="localhost")
     monkeypatch.setattr(clwave.cluster, "CONNECT_TIMEOUT", "1s")

@@ -304,3 +304,17 @@ def test_a_cut_tiff_stack_is_one_line_on_the_command_line(tmp_path):
                            str(tmp_path / "c.clw")], cwd=ROOT, capture_output=True, text=True, timeout=120,
                           env=dict(os.environ, PYTHONPATH=str(ROOT)))  # a process of its own: no log capture
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "truncated or corrupt" in proc.stderr
+
+
+@pytest.mark.parametrize("encoding", ["raw", "gzip"])
+def test_a_nrrd_header_declaring_more_than_its_data_is_refused_before_reading(tmp_path, encoding):
+    import nrrd
+
+    path = tmp_path / "liar.nrrd"
+    nrrd.write(str(path), np.zeros((4, 4, 4), np.float32), {"encoding": encoding})
+    text = path.read_bytes()
+    path.write_bytes(text.replace(b"sizes: 4 4 4", b"sizes: 4000 4000 4000"))  # 256 GB declared
+    start = time.perf_counter()
+    with pytest.raises(FileFormatError, match="declares 4000 x 4000 x 4000 voxels"):
+        clwave.load(path)
+    assert time.perf_counter() - start < 1.0

@@ -395,12 +395,14 @@ def main(argv=None):
     names = [n for n in BENCHMARKS if n != "scale"] if args.benchmark == "all" else [args.benchmark]
     results = {}
     for name in names:
-        for size in args.size:
+        shaped = name == "scale" and args.scale_shape is not None  # one volume of that shape, not --size
+        for size in [None] if shaped else args.size:
             one = copy.copy(args)
             one.size = size
+            label = "x".join(map(str, args.scale_shape)) if shaped else f"{size}^3"
             start = time.perf_counter()
-            results.setdefault(name, {})[f"{size}^3"] = BENCHMARKS[name](one)
-            print(f"bench {name} {size}^3: {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
+            results.setdefault(name, {})[label] = BENCHMARKS[name](one)
+            print(f"bench {name} {label}: {time.perf_counter() - start:.0f} s", file=sys.stderr, flush=True)
     text = json.dumps(dict(machine=machine(), device=device(args.device), benchmarks=results), indent=2)
     if args.json:
         args.json.write_text(text + "\n")

@@ -176,7 +176,8 @@ def read_clw(path, keep=None) -> WaveletVolume:
             if "content_mask" in h5:
                 data = h5["content_mask"]
                 _check_dataset(data, shape, np.uint8)
-                mask = data[...].astype(bool)
+                mask = data[...]
+                mask = np.minimum(mask, 1, out=mask).view(bool)  # 0 or 1, in place: no second copy of a big mask
     except ClwaveError:
         raise
     except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError) as exc:

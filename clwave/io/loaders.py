@@ -498,11 +498,11 @@ def _read_nifti(path, chunks):
     return _to_canonical(data, image.affine)
 
 
-def _check_declared_size(path, offset, nbytes, shape):
+def _check_declared_size(path, offset, nbytes, shape, gzip=None):
     """Refuse a header that declares more data than the file holds, before anything is allocated
-    (gzip: its trailer's size of the uncompressed stream, modulo 2^32)."""
+    (gzip, by default for a ``.gz`` name: its trailer's size of the uncompressed stream, modulo 2^32)."""
     path = Path(path)
-    if path.name.lower().endswith(".gz"):
+    if gzip if gzip is not None else path.name.lower().endswith(".gz"):
         with open(path, "rb") as fh:
             fh.seek(-4, os.SEEK_END)
             present = int.from_bytes(fh.read(4), "little")
@@ -519,6 +519,7 @@ def _read_nrrd(path):
     """NRRD/NHDR through pynrrd: ``space directions`` and ``space`` give the RAS affine."""
     import nrrd
 
+    _check_nrrd_size(path)
     data, header = nrrd.read(str(path))  # index_order 'F': axes in file order, fastest first
     directions = header.get("space directions")
     if directions is not None:
@@ -547,6 +548,27 @@ def _read_nrrd(path):
     # other spaces (scanner-xyz, 3D-right-handed, none) are taken as RAS
     signs = _NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1))
     return _to_canonical(data, np.diag(signs + (1,)) @ affine)
+
+
+def _check_nrrd_size(path):
+    """A NRRD header that declares more voxels than its raw or gzip data holds is refused before pynrrd
+    allocates them (other encodings, and a missing detached data file, are left to pynrrd)."""
+    import nrrd
+
+    with open(path, "rb") as fh:
+        header = nrrd.read_header(fh)
+        offset = fh.tell()  # attached data start here
+    encoding = str(header.get("encoding", "raw")).lower()
+    if "data file" in header:  # a detached header: the data is a file of its own
+        path, offset = Path(Path(path).parent, str(header["data file"])), 0
+    if encoding not in ("raw", "gzip", "gz") or not Path(path).is_file():
+        return
+    if encoding != "raw":  # the gzip stream starts after the header; its trailer counts the stream alone
+        offset = 0
+    sizes = [int(n) for n in header["sizes"]]
+    nbytes = int(np.prod(sizes, dtype=np.float64)) * nrrd.reader._determine_datatype(header).itemsize
+    skip = max(int(header.get("byte skip", 0) or 0), 0)
+    _check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=encoding != "raw")
 
 
 def _read_tiff(path):

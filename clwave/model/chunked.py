@@ -101,7 +101,7 @@ class ChunkedWaveletVolume:
     def __init__(self, volume: Volume, wavelets, levels, *, transfer_function=None, focus=None,
                  rules=None, content=None, scheduler=None, progress_bar=None):
         self.volume = volume
-        self.wavelets_ = tuple(wavelets)
+        self._wavelets = tuple(wavelets)
         self.levels = int(levels)
         self.transfer_function = transfer_function
         self.focus = focus
@@ -137,11 +137,11 @@ class ChunkedWaveletVolume:
 
     @property
     def wavelets(self) -> tuple:
-        return tuple(w.name for w in self.wavelets_)
+        return tuple(w.name for w in self._wavelets)
 
     def groups(self) -> list:
         """``(wavelet, channels)`` per channel group, in the in-memory model's order."""
-        return [(w, [c for c, x in enumerate(self.wavelets_) if x == w]) for w in dict.fromkeys(self.wavelets_)]
+        return [(w, [c for c, x in enumerate(self._wavelets) if x == w]) for w in dict.fromkeys(self._wavelets)]
 
     def __repr__(self):
         return (f"ChunkedWaveletVolume(shape={self.shape}, wavelets={self.wavelets}, levels={self.levels}, "
@@ -174,12 +174,15 @@ class ChunkedWaveletVolume:
         if (keep is None) == (threshold is None):
             raise InputError("give exactly one of keep= (fraction of voxels) or threshold= (importance)")
         keep, threshold, focus = check_thresholding(keep, threshold, focus)
+        if not all(rule.every for rules in self.rules for rule in rules):
+            raise InputError("this chunked model is thresholded already: threshold the model from_volume gave, or "
+                             "compute() this one and threshold that")
         if keep is None:
             rules = [(Rule(), Rule(above=threshold))] * len(self.groups())
         else:
             budget = max(1, int(round(keep * self.n_voxels)))
             rules = [_cut(hist, budget) for hist in self._histograms(focus)]
-        return ChunkedWaveletVolume(self.volume, self.wavelets_, self.levels, transfer_function=self.transfer_function,
+        return ChunkedWaveletVolume(self.volume, self._wavelets, self.levels, transfer_function=self.transfer_function,
                                     focus=focus, rules=rules, content=self.content, scheduler=self.scheduler,
                                     progress_bar=self.progress_bar)
 
@@ -368,30 +371,48 @@ def _even_chunks(x, halo):
 # ---------------------------------------------------------------- block tasks
 
 
-def _entries(stack, level, offsets, plan, *, live_only=True):
-    """Per subband present in a block: ``(class, positions, values (C, n), importance, tier)``."""
-    wav = plan.wavelet
-    keys = ["aaa"] if level == 0 else KEYS if level == plan.levels else KEYS[1:]
-    for key in keys:
-        band = plan.band(level, key)
+class _Entries:
+    """The coefficients of one subband of a block: ``values`` (C, n) and ``importance`` (n,) of the live
+    ones (every one with ``live_only`` false), their class, and on demand their positions and tiers (the
+    arrays a pass needs only for the coefficients it keeps)."""
+
+    def __init__(self, stack, level, key, offsets, plan, live_only):
+        self.band, self.plan = plan.band(level, key), plan
+        self.cls = APPROX if key == "aaa" and level == plan.levels else DETAIL
         coeffs = stack[KEYS.index(key) if level else 0]
+        self.shape, self.offsets = coeffs.shape[:3], np.array(offsets)[:, None]
         values = np.moveaxis(coeffs, 3, 0).reshape(coeffs.shape[3], -1)
-        grid = np.indices(coeffs.shape[:3]).reshape(3, -1)
-        if live_only:
-            live = np.flatnonzero(np.any(values != 0, axis=0))
-            values, grid = values[:, live], grid[:, live]
-        index = (grid + np.array(offsets)[:, None]).T
-        positions = band.start + np.ravel_multi_index(index.T, band.shape).astype(np.int64)
-        imp = band_importance(wav, band, values, index, plan.focus, plan.frame)
-        plain = imp if plan.focus is None else band_importance(wav, band, values, None, None, plan.frame)
-        yield (APPROX if key == "aaa" and level == plan.levels else DETAIL), positions, values, imp, tiers_of(plain)
+        self.flat = np.flatnonzero(np.any(values != 0, axis=0)) if live_only else np.arange(values.shape[1])
+        self.values = values[:, self.flat] if live_only else values
+        index = None if plan.focus is None else self.index(slice(None))
+        self.importance = band_importance(plan.wavelet, self.band, self.values, index, plan.focus, plan.frame)
+
+    def index(self, sel):
+        """Band indices (n, 3) of the coefficients ``sel`` selects."""
+        return (np.array(np.unravel_index(self.flat[sel], self.shape)) + self.offsets).T
+
+    def positions(self, sel):
+        return self.band.start + np.ravel_multi_index(self.index(sel).T, self.band.shape).astype(np.int64)
+
+    def tiers(self, sel):
+        """The .clw tiers, by the importance without a focus (docs/chunked.md §4)."""
+        if self.plan.focus is None:
+            return tiers_of(self.importance[sel])
+        values = self.values[:, sel]
+        return tiers_of(band_importance(self.plan.wavelet, self.band, values, None, None, self.plan.frame))
+
+
+def _entries(stack, level, offsets, plan, live_only=True):
+    """:class:`_Entries` of each subband present in a block of ``level``."""
+    keys = ["aaa"] if level == 0 else KEYS if level == plan.levels else KEYS[1:]
+    return (_Entries(stack, level, key, offsets, plan, live_only) for key in keys)
 
 
 def _histogram_block(stack, level, offsets, plan):
     """Per class, the non-empty histogram bins ``(bins, counts)`` of the block's live importances."""
     per_class = [[], []]
-    for cls, _, _, imp, _ in _entries(stack, level, offsets, plan):
-        per_class[cls].append(importance_keys(imp) >> BIN_SHIFT)
+    for entries in _entries(stack, level, offsets, plan):
+        per_class[entries.cls].append(importance_keys(entries.importance) >> BIN_SHIFT)
     out = []
     for keys in per_class:
         counts = np.bincount(np.concatenate(keys), minlength=1) if keys else np.zeros(1, np.int64)
@@ -405,11 +426,12 @@ def _select_block(stack, level, offsets, plan):
     ``(positions, values, tiers, importance, class)`` of a cut's bin, or None."""
     kept, cands = [], []
     every = plan.rules[APPROX].every and plan.rules[DETAIL].every
-    for cls, positions, values, imp, tier in _entries(stack, level, offsets, plan, live_only=not every):
-        take, maybe = plan.rules[cls].kept(imp)
-        kept.append((positions[take], values[:, take], tier[take]))
-        if maybe.any():
-            cands.append((positions[maybe], values[:, maybe], tier[maybe], imp[maybe], cls))
+    for entries in _entries(stack, level, offsets, plan, live_only=not every):
+        take, maybe = (np.flatnonzero(m) for m in plan.rules[entries.cls].kept(entries.importance))
+        kept.append((entries.positions(take), entries.values[:, take], entries.tiers(take)))
+        if len(maybe):
+            cands.append((entries.positions(maybe), entries.values[:, maybe], entries.tiers(maybe),
+                          entries.importance[maybe], entries.cls))
     joined = tuple(np.concatenate([k[i] for k in kept], axis=-1) for i in range(3))
     if not cands:
         return joined, None
