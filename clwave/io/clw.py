@@ -4,7 +4,8 @@ chunked model can write a block at a time.
 
 Layout (version 2)::
 
-    attrs           format, version, header (JSON: shape, spacing, origin, levels, channels, groups, ...)
+    attrs           format, version, header (JSON: shape, spacing, origin, levels, channels, groups, ...),
+                    header_crc32 (zlib's CRC-32 of the header's UTF-8 bytes)
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
     g<i>/positions  int64 (N,): a channel group's stored coefficients, into its band layout, ascending
                     within a run and stored as differences (the first of a run as it is)
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -60,7 +62,8 @@ def _write(model, fh):
                   transfer_function=model.transfer_function, content=model.content,
                   groups=[dict(wavelet=w.order, channels=list(c)) for w, c in groups])
     with h5py.File(fh, "w", libver="latest", meta_block_size=512) as h5:  # small metadata blocks: small models
-        h5.attrs.update(format=FILE_FORMAT, version=FILE_VERSION, header=json.dumps(header))
+        text = json.dumps(header)
+        h5.attrs.update(format=FILE_FORMAT, version=FILE_VERSION, header=text, header_crc32=zlib.crc32(text.encode()))
         tiers = _Tiers(h5, [band_layout(w, model.shape, model.levels)[0].size for w, _ in groups],
                        [len(c) for _, c in groups])
         if chunked:
@@ -206,6 +209,8 @@ def _header(h5, path) -> dict:
     text = h5.attrs.get("header")
     if not isinstance(text, str) or len(text) > MAX_HEADER:
         raise ValueError("the header is missing or too long")
+    if h5.attrs.get("header_crc32") != zlib.crc32(text.encode()):  # HDF5 checksums datasets, not attributes
+        raise ValueError("the header does not match its checksum")
     return json.loads(text)
 
 

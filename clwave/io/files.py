@@ -1,9 +1,11 @@
 """Writing files without losing anything: refuse to overwrite, publish atomically, leave nothing behind.
 
-A file is written under a temporary name in the target folder and published in one step: a hard
-link, which fails when the name exists (so of two writers racing for one new name, one wins and
-the other is told), or, with ``overwrite``, a rename over the old file.  The temporary name is
-removed on every way out Python sees (errors, Ctrl-C, SIGTERM through the command line).
+A file is written as an unnamed file in the target folder (Linux ``O_TMPFILE``: a process killed
+while writing, even by SIGKILL, leaves nothing) and published in one step: a hard link, which fails
+when the name exists (so of two writers racing for one new name, one wins and the other is told),
+or, with ``overwrite``, a link to a temporary name renamed over the old file.  Where unnamed files
+are not available, the file is written under a temporary name, removed on every way out Python
+sees (errors, Ctrl-C, SIGTERM through the command line).
 """
 
 from __future__ import annotations
@@ -32,13 +34,14 @@ def write_atomic(path, writer, overwrite=False) -> Path:
         raise InputError(f"{path} is a folder; name a file")
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(dir=folder, suffix=path.suffix + ".tmp")
+        fd, tmp = _open_unnamed(folder, path.suffix)
         with os.fdopen(fd, "w+b") as fh:  # readable too: HDF5 reads back what it writes
             writer(fh)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
-        _publish(tmp, path, overwrite)
+            fh.flush()
+            if tmp is None:
+                _publish_unnamed(fh.fileno(), folder, path, overwrite)
+        if tmp is not None:
+            _publish(tmp, path, overwrite)
     except FileExistsError:
         raise OutputExistsError(f"{path} appeared while it was being written (another writer?); pass "
                                 f"overwrite=True (--force) to replace it") from None
@@ -49,6 +52,37 @@ def write_atomic(path, writer, overwrite=False) -> Path:
         if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def _open_unnamed(folder, suffix) -> tuple:
+    """``(fd, None)`` of an unnamed file in ``folder``, or ``(fd, name)`` of a temporary file where the
+    system has no unnamed files (or no /proc to link them from)."""
+    try:
+        fd = os.open(folder, os.O_TMPFILE | os.O_RDWR, 0o666)  # the umask applies, as to any new file
+        if os.path.exists(f"/proc/self/fd/{fd}"):
+            return fd, None
+        os.close(fd)
+    except (AttributeError, OSError):  # not Linux, or a filesystem without O_TMPFILE
+        pass
+    fd, tmp = tempfile.mkstemp(dir=folder, suffix=suffix + ".tmp")
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
+    return fd, tmp
+
+
+def _publish_unnamed(fd, folder, path, overwrite):
+    """Give an unnamed file a name: linkat(AT_SYMLINK_FOLLOW) of /proc/self/fd/N (os.link takes that path
+    only with a dir fd), which refuses an existing name; with ``overwrite``, a temporary name renamed over
+    the old file."""
+    root = os.open("/", os.O_RDONLY)
+    try:
+        target = path if not overwrite else Path(folder, f".{path.name}.{os.getpid()}.{fd}.tmp")
+        os.link(f"/proc/self/fd/{fd}", target, src_dir_fd=root, follow_symlinks=True)
+    finally:
+        os.close(root)
+    if overwrite:
+        os.replace(target, path)
 
 
 def _publish(tmp, path, overwrite):

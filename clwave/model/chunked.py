@@ -21,7 +21,7 @@ import pywt
 from ..cluster import client_for, stream
 from ..errors import InputError
 from .bspline import SplineWavelet
-from .transform import KEYS, band_layout
+from .transform import KEYS, band_layout, check_coefficients
 from .volume import Volume, content_of
 from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding
 
@@ -382,6 +382,7 @@ class _Entries:
         coeffs = stack[KEYS.index(key) if level else 0]
         self.shape, self.offsets = coeffs.shape[:3], np.array(offsets)[:, None]
         values = np.moveaxis(coeffs, 3, 0).reshape(coeffs.shape[3], -1)
+        check_coefficients(values)
         self.flat = np.flatnonzero(np.any(values != 0, axis=0)) if live_only else np.arange(values.shape[1])
         self.values = values[:, self.flat] if live_only else values
         index = None if plan.focus is None else self.index(slice(None))

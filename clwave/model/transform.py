@@ -14,6 +14,7 @@ from scipy.linalg import solve_banded
 from scipy.ndimage import correlate1d
 from scipy.signal import upfirdn
 
+from ..errors import InputError
 from ..io.progress import progress
 from ..threads import thread_map
 from .bspline import SplineWavelet
@@ -128,11 +129,20 @@ def decompose(volume, wavelet, channels, levels, interpolate, progress_bar) -> t
         parts = [coeffs[0]] + [detail[key] for detail in coeffs[1:] for key in KEYS[1:]]
         for band, part in zip(bands, parts):
             values[slot, band.start:band.start + band.size] = part.ravel()
+        check_coefficients(values[slot])
 
     jobs = list(enumerate(channels))
     with progress(total=len(jobs), desc=f"{wavelet.name} transform", enabled=progress_bar) as bar:
         thread_map(lambda job: (one(job), bar.update(1)), jobs)
     return bands, values
+
+
+def check_coefficients(values):
+    """Refuse coefficients that overflowed float32 (voxels near its largest value, 3.4e38): nothing
+    non-finite may reach a kernel or an image."""
+    if not np.all(np.isfinite(values)):
+        raise InputError("the wavelet transform of this volume overflows float32 (its values come too close to "
+                         "3.4e38); rescale the volume first, e.g. to [0, 1]")
 
 
 def reconstruct_channel(group, dense, slot, shape, levels) -> np.ndarray:
