@@ -1,6 +1,12 @@
 """Ray tracing (paper §3): analytic integrals, the NumPy reference, X-ray vs splatting, bad input."""
 
 import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +21,7 @@ from clwave.raytrace.quadrature import sample_points, sample_tables
 from clwave.raytrace.tracer import Phong, RayTracer
 from clwave.splat.reference import exact_xray
 
+ROOT = Path(__file__).resolve().parents[1]
 TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
 
 
@@ -501,3 +508,37 @@ def test_repeated_one_shot_ray_traces_set_the_field_up_once(monkeypatch):
     monkeypatch.setattr(RayTracer, "__init__", lambda *a, **k: (_ for _ in ()).throw(AssertionError("set up again")))
     again = clwave.raytrace(wv, cam, tolerance=1e-3)
     assert np.array_equal(first.image, again.image) and again.meta["setup_seconds"] == first.meta["setup_seconds"]
+
+
+def test_bands_of_rows_give_the_image_of_one_launch(small_rgba, monkeypatch):
+    from clwave.device import kernels
+
+    wv, tracer = small_rgba
+    cam = clwave.Camera(30, 20, size=(40, 24))
+    monkeypatch.setattr(kernels, "LAUNCH_SECONDS", 1e9)  # the first band, then all the rest at once
+    whole = tracer.render(cam, tolerance=1e-3).image
+    monkeypatch.setattr(kernels, "LAUNCH_SECONDS", 0.0)  # a band of one work-group row each launch
+    assert np.array_equal(tracer.render(cam, tolerance=1e-3).image, whole)
+
+
+def test_ctrl_c_stops_a_long_ray_trace_within_a_second():
+    script = """
+import clwave
+rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", 48))
+wv = clwave.WaveletVolume.from_volume(rgba, "cubic", levels=2).threshold(keep=0.2)
+tracer = clwave.RayTracer(wv)
+tracer.render(clwave.Camera(30, 20, size=16), tolerance=1e-2)  # set-up and kernel build before the signal
+print("tracing", flush=True)
+tracer.render(clwave.Camera(30, 20, size=1024), tolerance=1e-6)  # many seconds on a CPU
+print("finished", flush=True)
+"""
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    while b"tracing" not in proc.stdout.readline():
+        assert proc.poll() is None
+    time.sleep(0.5)
+    start = time.perf_counter()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert b"finished" not in out and b"KeyboardInterrupt" in err
+    assert time.perf_counter() - start < 1.5

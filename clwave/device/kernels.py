@@ -10,6 +10,7 @@ Constants that both sides use come from :mod:`clwave.device.constants` as build 
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 
 import numpy as np
@@ -56,10 +57,30 @@ class Kernel:
         return out
 
     def __call__(self, kernels, queue, global_size, local_size, tables: Mapping | None = None, real_type=np.float32,
-                 **values):
+                 global_offset=None, **values):
         """Launch the kernel of this name from ``kernels`` (a :class:`~clwave.device.programs.KernelSet`)."""
         args = self.arguments(tables, real_type, **values)
-        return kernels[self.name](queue, global_size, local_size, *args)
+        return kernels[self.name](queue, global_size, local_size, *args, global_offset=global_offset)
+
+
+LAUNCH_SECONDS = 0.2  #: what one launch of a long 2-D kernel aims at: Ctrl-C waits for the launch running
+
+
+def in_row_bands(queue, launch, global_size, local_size):
+    """``launch(global_size, global_offset)`` over bands of rows (axis 1) of a 2-D range, the queue finished
+    after each, so that Python takes a KeyboardInterrupt within about :data:`LAUNCH_SECONDS` however long
+    the whole is; each band sized from the rate of the last (whole work-groups of rows), at most twice
+    as tall as it (empty rows are fast, and say little of the next ones)."""
+    step, total = local_size[1], global_size[1]
+    row, rows = 0, step
+    while row < total:
+        band = min(rows, total - row)
+        start = time.perf_counter()
+        launch((global_size[0], band), (0, row))
+        queue.finish()
+        row += band
+        rate = band / max(time.perf_counter() - start, 1e-6)
+        rows = max(step, min(2 * band, int(rate * LAUNCH_SECONDS) // step * step))
 
 
 def _vector(kind: np.dtype, value):

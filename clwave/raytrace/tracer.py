@@ -18,7 +18,7 @@ from pyopencl import cltypes
 
 from ..device import programs
 from ..device.constants import BLOCK, MAX_LIGHTS, SUPER
-from ..device.kernels import BUFFER, REAL, Kernel
+from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
 from ..model.bspline import piece_polynomials
 from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
@@ -299,9 +299,9 @@ class RayTracer:
             field_tables.update(poly=cla.to_device(q, self.poly.astype(real)), trace=traced)
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
-        raytrace_kernel(self.field)(
-            kernels, q, rounded, self.local_size, field_tables, real_type=real, image=image, stats=stats, width=W,
-            height=H, bound=self.block_bound, occ_origin=self.occ_origin[::-1], occ_shape=self.block_bound.shape[::-1],
+        arguments = dict(
+            image=image, stats=stats, width=W, height=H, bound=self.block_bound, occ_origin=self.occ_origin[::-1],
+            occ_shape=self.block_bound.shape[::-1],
             super_bound=self.super_bound, super_origin=self.super_origin[::-1], content=self.content,
             content_origin=self.content_origin[::-1], content_shape=self.content_shape[::-1],
             super_shape=self.super_bound.shape[::-1], coarse_bound=self.coarse_bound(tol), box_lo=self.box[0],
@@ -309,7 +309,9 @@ class RayTracer:
             to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
             grad_floor=self.grad_floor(precision), lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
             phong=[p.ambient, p.diffuse, p.specular, p.shininess])
-        q.finish()
+        in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
+            kernels, q, size, self.local_size, field_tables, real_type=real, global_offset=first, **arguments),
+            rounded, self.local_size)  # bounded launches: Ctrl-C within a fraction of a second
         seconds = time.perf_counter() - start
         img = image.get()
         counts = stats.get().reshape(-1, 4).astype(np.int64)
