@@ -178,14 +178,18 @@ def test_bad_chunked_inputs(rng, monkeypatch):
     assert time.perf_counter() - start < 10
 
 
-def test_tiny_chunks_are_merged_into_bounded_blocks(monkeypatch):
+def test_chunks_are_merged_or_cut_into_bounded_blocks(monkeypatch):
     monkeypatch.setattr(chunked, "MAX_BLOCKS", 64)
-    x = da.zeros((200, 190, 180, 1), chunks=(3, 5, 7, 1), dtype=np.float32)
-    for halo in (0, 10):
-        merged = chunked._even_chunks(x, halo)
-        assert np.prod([len(c) for c in merged.chunks[:3]]) <= 64
-        for c in merged.chunks[:3]:
-            assert all(e % 2 == 0 for e in c[:-1]) and min(c) >= max(halo, 1)
+    tiny = da.zeros((200, 190, 180, 1), chunks=(3, 5, 7, 1), dtype=np.float32)
+    huge = da.zeros((300, 310, 290, 1), chunks=(300, 310, 290, 1), dtype=np.float32)
+    for x in (tiny, huge):
+        for halo in (0, 10):
+            blocks = chunked._even_chunks(x, halo)
+            assert np.prod(blocks.numblocks) <= 64
+            assert np.prod([max(c) for c in blocks.chunks[:3]]) <= 2 * chunked.MAX_BLOCK_VOXELS
+            for c in blocks.chunks[:3]:
+                assert all(e % 2 == 0 for e in c[:-1]) and min(c) >= max(halo, 1)
+    assert np.prod(chunked._even_chunks(huge, 10).numblocks) >= 8  # cut: a task's memory is bounded
 
 
 def test_command_line_compresses_a_zarr_store_as_the_in_memory_path_does(rng, tmp_path, capsys):

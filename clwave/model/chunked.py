@@ -26,6 +26,7 @@ from .volume import Volume, content_of
 from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
+MAX_BLOCK_VOXELS = 1 << 22  # larger ones are cut into blocks of at most this many (a task's memory)
 MAX_BLOCKS = 4096           # and into at most this many blocks a level
 BIN_SHIFT = 16           # histogram bins: the top 16 bits of a float32 importance (monotone for x >= 0)
 TIER_SHIFT = 20          # .clw tiers: the top 12 bits (eight tiers an octave, docs/chunked.md §4)
@@ -305,7 +306,7 @@ def level_stacks(source, wavelet: SplineWavelet, levels: int, bands):
                               n_out=n_out, order=wavelet.order, new_axis=0, dtype=np.float32,
                               chunks=((8,),) + tuple(out_chunks) + (x.chunks[3],), meta=np.empty((0,) * 5, np.float32))
         yield level, stack, [s // 2 for s in starts]
-        x = stack[0]
+        x = stack[0].map_blocks(np.copy)  # a copy: a view would keep the whole stack alive for the next level
 
 
 def _with_halo(x, halo):
@@ -349,13 +350,22 @@ def _transform_block(block, starts, halo, n_out, order, block_id=None):
 
 def _even_chunks(x, halo):
     """``x`` rechunked so that every block but the last per axis has an even edge of at least ``halo``, the
-    last at least ``halo``, with at least :data:`MIN_BLOCK_VOXELS` voxels a block and at most
-    :data:`MAX_BLOCKS` blocks (docs/chunked.md §2)."""
+    last at least ``halo``, with :data:`MIN_BLOCK_VOXELS` to :data:`MAX_BLOCK_VOXELS` voxels a block where the
+    volume allows, and at most :data:`MAX_BLOCKS` blocks (docs/chunked.md §2)."""
     shape = x.shape[:3]
     edges = [min(n, max(halo, 2, e + e % 2)) for e, n in zip((max(c) for c in x.chunks[:3]), shape)]
-    while (np.prod(edges) < MIN_BLOCK_VOXELS or np.prod([-(-n // e) for e, n in zip(edges, shape)]) > MAX_BLOCKS) \
-            and any(e < n for e, n in zip(edges, shape)):
+
+    def blocks(edges):
+        return np.prod([-(-n // e) for e, n in zip(edges, shape)])
+
+    while (np.prod(edges) < MIN_BLOCK_VOXELS or blocks(edges) > MAX_BLOCKS) and \
+            any(e < n for e, n in zip(edges, shape)):
         edges = [min(n, 2 * e) for e, n in zip(edges, shape)]
+    while np.prod(edges) > MAX_BLOCK_VOXELS and blocks(edges) * 2 <= MAX_BLOCKS:
+        a = int(np.argmax(edges))  # the longest edge halved, still even and able to lend its halo
+        if edges[a] // 2 < max(halo, 2):
+            break
+        edges[a] = edges[a] // 2 + edges[a] // 2 % 2
     chunks = []
     for e, n in zip(edges, shape):
         e += e % 2
