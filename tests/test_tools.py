@@ -51,21 +51,35 @@ def test_compare_peers_end_to_end(tmp_path):
     assert case["truth_accuracy"] < 1e-4  # Gauss-Legendre quadrature against twice the segments
     # every line-integral method is timed and close to the analytic truth at full resolution
     # ray tracing in X-ray mode integrates the same spline as splatting, within 1e-3 per value
-    for label, bound in (("clwave splat 1", 0.06), ("clwave raytrace 1 (X-ray, tol 0.001)", 0.06),
+    for label, bound in (("clwave splat 1, renderer reused", 0.06), ("clwave raytrace 1 (X-ray, tol 0.001)", 0.06),
                          ("NumPy/SciPy map_coordinates", 0.03), ("Fourier volume rendering", 0.005)):
         assert rows[label]["error"] < bound, (label, rows[label]["error"])
         assert rows[label]["median"] > 0 and rows[label]["peak_rss_mib"] > 0
+        memory = rows[label]["memory_mib"]
+        assert memory["baseline"] > 0 and memory["model"] >= 0 and memory["views"] >= 0
+    # the one-shot call renders what the reused renderer renders
+    assert rows["clwave splat 0.05, one-shot clwave.splat"]["error"] == pytest.approx(
+        rows["clwave splat 0.05, renderer reused"]["error"], rel=1e-4)
     progressive = [r for r in case["rows"] if r["method"].startswith("clwave progressive")]
     assert len(progressive) == 3 and [r["frame"] for r in progressive] == [0, 1, 2]
     assert progressive[-1]["error"] < progressive[0]["error"]
     assert progressive[-1]["kept"] == pytest.approx(0.5, abs=1e-3)
+    # shaded ray tracing against the float64 reference of the same classified model: converges with the model
+    shaded = {r["method"]: r for r in case["rows"] if r.get("kind") == "shaded" and "error" in r}
+    assert shaded["clwave raytrace 1 (shaded, tol 0.01)"]["error"] < 0.05
+    assert shaded["clwave raytrace 1 (shaded, tol 0.01)"]["error"] < shaded["clwave raytrace 0.05 (shaded, tol 0.01)"][
+        "error"]
     table = (tmp_path / "comparison.md").read_text()
     assert "| hydrogen | 32³ | Fourier volume rendering |" in table
+    assert report["headline"] and "clwave / FVR" in report["headline"][0]
     if not HAVE_VTK:
         assert "skipped" in rows["VTK additive"]
         pytest.skip("vtk is not installed (pip install .[peers]): the VTK rows were skipped")
-    for blend in ("additive", "composite"):
-        row = rows[f"VTK {blend}"]
-        assert "skipped" not in row and row["median"] > 0 and "error" not in row
+    for label in ("VTK additive", "VTK composite (shaded, hydrogen)"):
+        row = rows[label]
+        assert "skipped" not in row and row["median"] > 0 and len(row["extra"]["readback"]) == 2
         assert row["extra"]["window"] == "vtkEGLRenderWindow"
-    assert report["target"] and (tmp_path / "error_vs_time.png").exists()
+    assert "error" not in rows["VTK additive"]
+    # VTK's composite with clwave's transfer function, opacity units and Phong light: close to clwave's image
+    assert rows["VTK composite (shaded, hydrogen)"]["error"] < 0.15
+    assert (tmp_path / "error_vs_time.png").exists()

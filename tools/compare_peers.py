@@ -1,48 +1,60 @@
 #!/usr/bin/env python3
-"""clwave against its peers: X-ray images of analytic phantoms, time per view and error.
+"""clwave against its peers: X-ray images of analytic phantoms, and shaded images of the classified ones.
 
     python tools/compare_peers.py [--phantom hydrogen marschner-lobb] [--size 128 256]
-                                  [--image 512] [--views 3] [--keep 0.01 0.05]
+                                  [--image 512] [--views 3] [--keep 0.01 0.05] [--coarse 0.02]
                                   [--progressive-keep 0.08] [--steps 4] [--raytrace-keep 0.05]
-                                  [--raytrace-tolerance 1e-3] [--raytrace-views 1] [--out out/peers]
+                                  [--raytrace-tolerance 1e-3] [--raytrace-views 1] [--tf hydrogen]
+                                  [--shaded-keep 0.05 1] [--shaded-tolerance 1e-2]
+                                  [--shaded-reference-tolerance 1e-4] [--shaded-views 1] [--out out/peers]
 
 Every method renders the same phantom (sampled at the cell centres of an n³ grid, spacing 1)
 from the same orthographic views (``clwave.Camera``: golden-angle spiral, image ``--image``²,
-extent the volume diagonal):
+centred, extent the volume diagonal):
 
-- ``clwave splat K``: wavelet splatting of the cubic model (3 levels) thresholded to K of
-  the voxels; prepare = decomposition + thresholding + upload (kernel build included);
+- ``clwave splat K, renderer reused``: wavelet splatting of the cubic model (3 levels)
+  thresholded to K of the voxels, one ``SplatRenderer`` (``coarse=--coarse``) for all views;
+  prepare = decomposition + thresholding + upload (kernel build included);
+- ``clwave splat K, one-shot clwave.splat``: the call scripts make, ``clwave.splat(wv, camera)``
+  each view (the first K of ``--keep``, the same ``coarse``);
 - ``clwave progressive``: the ``--progressive-keep`` model refined in ``--steps`` doubling
   frames into one framebuffer (the first frame holds keep / 2^(steps-1) of the voxels); the
   time of a frame counts from the start of its view;
-- ``clwave raytrace K (X-ray, tol T)``: ray tracing in wavelet space (``clwave.RayTracer``,
-  ``absorption=False``: the line integral of the same cubic model, knot segment by knot
-  segment, within the absolute tolerance T) of the model thresholded to K; prepare =
-  decomposition + thresholding + B-spline expansion on the device; a 1-pixel warm-up builds
-  the kernel, whose time is reported apart.  At 256³ and 512² a view takes 20-30 s on 2 CPU
-  cores, so this row renders only the first ``--raytrace-views`` views (default 1: the row's
-  first and median times are that one view; 0 leaves the row out);
+- ``clwave raytrace K (X-ray, tol T)``: ray tracing in wavelet space (``absorption=False``: the
+  line integral of the same cubic model within the absolute tolerance T); a 1-pixel warm-up
+  builds the kernel; only the first ``--raytrace-views`` views (0 leaves the row out);
 - ``NumPy/SciPy``: trilinear ``scipy.ndimage.map_coordinates`` at one sample per voxel
   length along every ray across the whole image extent, summed (what a user would write);
-- ``Fourier volume rendering`` (Malzbender 1993; Totsuka & Levoy 1993): one 3-D FFT of the
-  volume zero-padded to twice its size and pre-divided by the kernel's transform, then per
-  view the central slice interpolated with a Kaiser–Bessel kernel (width 6, the accuracy of a
-  non-uniform FFT) and one inverse 2-D FFT;
-- ``VTK additive`` and ``VTK composite``: ``vtkFixedPointVolumeRayCastMapper`` offscreen
-  (EGL), linear interpolation, sample distance 1 voxel, all cores; additive blending sums
-  opacities as 1 - prod(1 - opacity) in 8 bits and composite shades an emission-absorption
-  image: neither is a line integral, so their times are speed references only.
+- ``Fourier volume rendering`` (``tools/fvr.py``): real-input FFT of the 2x zero-padded,
+  roll-off-compensated volume once, then per view the half-plane central slice by Kaiser-Bessel
+  interpolation (width 4, tabulated weights, threads) and one inverse 2-D FFT;
+- ``VTK additive``: ``vtkFixedPointVolumeRayCastMapper`` offscreen (EGL), linear interpolation,
+  sample distance 1 voxel, all cores; 1 - prod(1 - opacity) in 8 bits: a speed reference only.
+  Only ``Render()`` is timed; the read-back (``vtkWindowToImageFilter``, ``ShouldRerenderOff``)
+  is timed apart (``extra.readback``), and the first view (set-up) is reported apart.
 
-Ground truth is the line integral of the phantom's *formula* (``clwave.io.phantoms.analytic``)
+Shaded rows (``--shaded-views`` > 0): the phantom classified with the ``--tf`` preset,
+
+- ``clwave raytrace K (shaded, tol T)``: emission-absorption ray tracing with Phong shading
+  (one headlight) of the cubic model thresholded to each ``--shaded-keep``;
+- ``VTK composite``: the same mapper on the scalar volume with the preset's colours, its opacity
+  per unit length as VTK's opacity per unit distance (1 - exp(-alpha)), clwave's Phong weights
+  and light (one-sided headlight whose ambient colour is white).  VTK classifies after
+  interpolating (trilinear), clwave before (its approximating cubic model of the classified
+  voxels), and VTK samples at fixed steps in 15-bit fixed point and returns 8 bits;
+- both compared (RGB) with a float64 clwave ray trace of the full classified model at
+  ``--shaded-reference-tolerance``.
+
+X-ray ground truth is the line integral of the phantom's *formula* (``clwave.io.phantoms.analytic``)
 over the chord of each ray through the phantom's cube: composite Gauss-Legendre (8 nodes per
 segment of at most 8 voxels); the same integral with twice the segments on every 8th row is
-reported as its own accuracy.  Error = relative RMS, ||image - truth|| / ||truth|| over the
-image.  Each method runs in its own process, whose peak resident memory (Python and imports
-included) is reported.
+reported as its own accuracy.  Error = relative RMS, ||image - reference|| / ||reference|| over
+the image.  Each method runs in its own process, whose peak resident memory is reported, split
+into the Python baseline (interpreter and imports), the prepared model and renderer, and the views.
 
-Writes ``comparison.json``, ``comparison.md`` (the table) and ``error_vs_time.png`` into
-``--out``.  VTK and matplotlib come with the ``peers`` extra (``pip install .[peers]``); a
-missing one is named and its part skipped.
+Writes ``comparison.json``, ``comparison.md`` (the table and the headline ratios clwave / FVR
+and clwave / VTK) and ``error_vs_time.png`` into ``--out``.  VTK and matplotlib come with the
+``peers`` extra (``pip install .[peers]``); a missing one is named and its part skipped.
 """
 
 from __future__ import annotations
@@ -77,6 +89,12 @@ GL_SEGMENT = 8.0    # longest segment, voxels
 def views(count):
     """Distinct views: a golden-angle spiral of azimuths and elevations (as tools/bench.py)."""
     return [(137.508 * i % 360.0, -60.0 + 120.0 * (i + 0.5) / count) for i in range(count)]
+
+
+def camera(case, az, el):
+    """The view every method renders: centred on the volume, the image as wide as the volume's diagonal
+    (explicit, so that a classified model's smaller content does not zoom its views)."""
+    return clwave.Camera(az, el, size=case["image"], target=(0.0, 0.0, 0.0), extent=case["n"] * math.sqrt(3.0))
 
 
 def rays(vol, camera):
@@ -132,20 +150,22 @@ def relative_rms(image, truth) -> float:
 # dict(prepare=seconds, seconds=[per view], images=[per view (H, W)], plus extras);
 # progressive methods return frames=[per view: [(seconds, image), ...]].
 
-def run_splat(case, keep):
+def run_splat(case, keep, coarse, oneshot):
+    """``oneshot``: ``clwave.splat(wv, camera)`` each view (the call scripts make), else one SplatRenderer reused."""
     vol = clwave.phantom(case["phantom"], case["n"])
     start = time.perf_counter()
     wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=keep)
-    renderer = clwave.SplatRenderer(wv, device=case["device"])
+    renderer = None if oneshot else clwave.SplatRenderer(wv, device=case["device"], coarse=coarse)
     prepare = time.perf_counter() - start
+    model_peak = _peak_mib()
     seconds, images = [], []
     for az, el in case["views"]:
         t = time.perf_counter()
-        res = clwave.splat(wv, clwave.Camera(az, el, size=case["image"]), renderer=renderer)
+        res = clwave.splat(wv, camera(case, az, el), device=case["device"], coarse=coarse,
+                           renderer=renderer)
         seconds.append(time.perf_counter() - t)
         images.append(res.image[..., 0])
-    return dict(prepare=prepare, seconds=seconds, images=images, compile=renderer.compile_seconds,
-                coefficients=wv.kept)
+    return dict(prepare=prepare, seconds=seconds, images=images, coefficients=wv.kept, model_peak=model_peak)
 
 
 def run_progressive(case, keep, steps):
@@ -154,12 +174,13 @@ def run_progressive(case, keep, steps):
     wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=keep)
     renderer = clwave.SplatRenderer(wv, device=case["device"])
     prepare = time.perf_counter() - start
+    model_peak = _peak_mib()
     frames = []
     for az, el in case["views"]:
-        cam = clwave.Camera(az, el, size=case["image"])
+        cam = camera(case, az, el)
         frames.append([(f.seconds, f.image[..., 0], f.coefficients / wv.n_voxels)
                        for f in clwave.progressive(wv, cam, steps=steps, renderer=renderer)])
-    return dict(prepare=prepare, frames=frames, compile=renderer.compile_seconds)
+    return dict(prepare=prepare, frames=frames, compile=renderer.compile_seconds, model_peak=model_peak)
 
 
 def run_raytrace(case, keep, tolerance, count):
@@ -168,17 +189,19 @@ def run_raytrace(case, keep, tolerance, count):
     wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=keep)
     tracer = clwave.RayTracer(wv, device=case["device"])
     prepare = time.perf_counter() - start
+    model_peak = _peak_mib()
     # warm-up on one pixel: builds the X-ray kernel, so the views are timed without it
     warm = tracer.render(clwave.Camera(size=1), tolerance=tolerance, absorption=False)
     seconds, images, segments = [], [], []
     for az, el in case["views"][:count]:
         t = time.perf_counter()
-        res = tracer.render(clwave.Camera(az, el, size=case["image"]), tolerance=tolerance, absorption=False)
+        res = tracer.render(camera(case, az, el), tolerance=tolerance, absorption=False)
         seconds.append(time.perf_counter() - t)
         images.append(res.image[..., 0])
         segments.append(res.meta["segments"])
     return dict(prepare=prepare, seconds=seconds, images=images, compile=warm.meta["compile_seconds"],
-                expand=tracer.setup_seconds, coefficients=wv.kept, segments=segments, tolerance=tolerance)
+                expand=tracer.setup_seconds, coefficients=wv.kept, segments=segments, tolerance=tolerance,
+                model_peak=model_peak)
 
 
 def run_numpy(case):
@@ -188,7 +211,7 @@ def run_numpy(case):
     seconds, images = [], []
     for az, el in case["views"]:
         t = time.perf_counter()
-        centres, d = rays(vol, clwave.Camera(az, el, size=case["image"]))
+        centres, d = rays(vol, camera(case, az, el))
         radius = float(np.linalg.norm(shape)) / 2.0
         steps = np.arange(-radius, radius + 0.5, 1.0)                  # one sample per voxel length
         image = np.empty(centres.shape[:2], np.float32)
@@ -208,22 +231,52 @@ def run_fourier(case):
     start = time.perf_counter()
     renderer = FourierRenderer(vol)
     prepare = time.perf_counter() - start
+    model_peak = _peak_mib()
     seconds, images = [], []
     for az, el in case["views"]:
         t = time.perf_counter()
-        images.append(renderer.render(clwave.Camera(az, el, size=case["image"])))
+        images.append(renderer.render(camera(case, az, el)))
         seconds.append(time.perf_counter() - t)
-    return dict(prepare=prepare, seconds=seconds, images=images)
+    return dict(prepare=prepare, seconds=seconds, images=images, spectrum_mib=renderer.nbytes / 2**20,
+                model_peak=model_peak)
+
+
+def run_shaded(case, keep, tolerance, precision, count):
+    """Shaded emission-absorption ray tracing of the classified phantom (the ``--tf`` preset), first ``count`` views;
+    prepare = classification + decomposition + thresholding + expansion; a 1-pixel warm-up builds the kernel."""
+    vol = clwave.TransferFunction.preset(case["tf"]).classify(clwave.phantom(case["phantom"], case["n"]))
+    start = time.perf_counter()
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=3)
+    wv = wv.threshold(keep=keep) if keep < 1 else wv
+    tracer = clwave.RayTracer(wv, device=case["device"])
+    prepare = time.perf_counter() - start
+    model_peak = _peak_mib()
+    warm = tracer.render(clwave.Camera(size=1), tolerance=tolerance, precision=precision)
+    seconds, images = [], []
+    for az, el in case["views"][:count]:
+        t = time.perf_counter()
+        res = tracer.render(camera(case, az, el), tolerance=tolerance, precision=precision)
+        seconds.append(time.perf_counter() - t)
+        images.append(res.image[..., :3])
+    return dict(prepare=prepare, seconds=seconds, images=images, compile=warm.meta["compile_seconds"],
+                model_peak=model_peak, tolerance=tolerance, precision=precision, coefficients=wv.kept)
 
 
 def run_vtk(case, blend):
+    """``vtkFixedPointVolumeRayCastMapper`` offscreen: ``Render()`` alone timed, the read-back apart.
+
+    ``additive``: the scalar volume with a linear opacity ramp (a speed reference, not a line integral);
+    ``composite``: shaded emission-absorption of the scalar volume under the ``--tf`` preset, its opacity per unit
+    world length turned into VTK's opacity per unit distance (1 - exp(-alpha)) and the Phong weights of
+    ``clwave.Phong``, so its RGB image compares with clwave's shaded ray tracing.
+    """
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (registers the OpenGL render window)
     import vtkmodules.vtkRenderingVolumeOpenGL2  # noqa: F401  (the ray caster's display helper)
     from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
     from vtkmodules.vtkCommonDataModel import vtkImageData, vtkPiecewiseFunction
-    from vtkmodules.vtkRenderingCore import (vtkColorTransferFunction, vtkRenderer, vtkRenderWindow, vtkVolume,
-                                             vtkVolumeProperty, vtkWindowToImageFilter)
+    from vtkmodules.vtkRenderingCore import (vtkColorTransferFunction, vtkLight, vtkRenderer, vtkRenderWindow,
+                                             vtkVolume, vtkVolumeProperty, vtkWindowToImageFilter)
     from vtkmodules.vtkRenderingVolume import vtkFixedPointVolumeRayCastMapper
 
     vol = clwave.phantom(case["phantom"], case["n"])
@@ -234,13 +287,13 @@ def run_vtk(case, blend):
     image.SetSpacing(*vol.spacing[::-1])
     image.SetOrigin(*(np.array(vol.origin) - (np.array([nx, ny, nz]) - 1) / 2.0 * np.array(vol.spacing[::-1])))
     image.GetPointData().SetScalars(numpy_to_vtk(vol.data.ravel(), deep=True))
-    top = float(vol.data.max())
     mapper = vtkFixedPointVolumeRayCastMapper()
     mapper.SetInputData(image)
     mapper.AutoAdjustSampleDistancesOff()
     mapper.SetSampleDistance(1.0)
     opacity, colour, prop = vtkPiecewiseFunction(), vtkColorTransferFunction(), vtkVolumeProperty()
     if blend == "additive":
+        top = float(vol.data.max())
         mapper.SetBlendModeToAdditive()
         opacity.AddPoint(0.0, 0.0)
         opacity.AddPoint(top, 0.05)
@@ -248,12 +301,19 @@ def run_vtk(case, blend):
         colour.AddRGBPoint(top, 1.0, 1.0, 1.0)
     else:
         mapper.SetBlendModeToComposite()
-        opacity.AddPoint(0.0, 0.0)
-        opacity.AddPoint(0.1 * top, 0.0)
-        opacity.AddPoint(top, 0.3)
-        colour.AddRGBPoint(0.0, 0.2, 0.3, 1.0)
-        colour.AddRGBPoint(top, 1.0, 1.0, 0.9)
+        tf = clwave.TransferFunction.preset(case["tf"])
+        lo, hi = tf.window
+        for value, r, g, b, alpha in tf.points:
+            x = lo + value * (hi - lo)
+            colour.AddRGBPoint(x, r, g, b)
+            opacity.AddPoint(x, 1.0 - math.exp(-alpha))      # absorbed over one world unit
+        prop.SetScalarOpacityUnitDistance(1.0)
+        phong = clwave.Phong()
         prop.ShadeOn()
+        prop.SetAmbient(phong.ambient)
+        prop.SetDiffuse(phong.diffuse)
+        prop.SetSpecular(phong.specular)
+        prop.SetSpecularPower(phong.shininess)
     prop.SetScalarOpacity(opacity)
     prop.SetColor(colour)
     prop.SetInterpolationTypeToLinear()
@@ -262,50 +322,80 @@ def run_vtk(case, blend):
     volume.SetProperty(prop)
     renderer = vtkRenderer()
     renderer.AddVolume(volume)
+    if blend == "composite":  # clwave's light: one headlight, one-sided, ambient term = ka (VTK's default light: 0)
+        light = vtkLight()
+        light.SetLightTypeToHeadlight()
+        light.SetAmbientColor(1.0, 1.0, 1.0)
+        renderer.AddLight(light)
+        renderer.TwoSidedLightingOff()
     window = vtkRenderWindow()
     window.SetOffScreenRendering(1)
     window.AddRenderer(renderer)
     H, W = clwave.Camera(size=case["image"]).size
     window.SetSize(W, H)
+    grab = vtkWindowToImageFilter()
+    grab.SetInput(window)
+    grab.ReadFrontBufferOff()
+    grab.ShouldRerenderOff()                                  # read what Render() drew, without drawing again
     prepare = time.perf_counter() - start
-    seconds, images = [], []
+    model_peak = _peak_mib()
+    seconds, readback, images = [], [], []
     for az, el in case["views"]:
-        t = time.perf_counter()
-        view = clwave.Camera(az, el, size=case["image"]).view(vol)
-        camera = renderer.GetActiveCamera()
-        camera.ParallelProjectionOn()
-        camera.SetFocalPoint(*view.target)
-        camera.SetPosition(*(view.target + 2.0 * W * view.pixel * view.n))
-        camera.SetViewUp(*view.v)
-        camera.SetParallelScale(H * view.pixel / 2.0)
+        view = camera(case, az, el).view(vol)
+        eye = renderer.GetActiveCamera()
+        eye.ParallelProjectionOn()
+        eye.SetFocalPoint(*view.target)
+        eye.SetPosition(*(view.target + 2.0 * W * view.pixel * view.n))
+        eye.SetViewUp(*view.v)
+        eye.SetParallelScale(H * view.pixel / 2.0)
         renderer.ResetCameraClippingRange()
+        t = time.perf_counter()
         window.Render()
-        grab = vtkWindowToImageFilter()
-        grab.SetInput(window)
-        grab.ReadFrontBufferOff()
+        seconds.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        grab.Modified()
         grab.Update()
         rgb = vtk_to_numpy(grab.GetOutput().GetPointData().GetScalars()).reshape(H, W, -1)[::-1, :, :3]
-        seconds.append(time.perf_counter() - t)
-        images.append(rgb.mean(axis=-1).astype(np.float32) / 255.0)
-    return dict(prepare=prepare, seconds=seconds, images=images, threads=mapper.GetNumberOfThreads(),
-                window=type(window).__name__)
+        readback.append(time.perf_counter() - t)
+        rgb = rgb.astype(np.float32) / 255.0
+        images.append(rgb.mean(axis=-1) if blend == "additive" else rgb)
+    return dict(prepare=prepare, seconds=seconds, images=images, readback=readback, model_peak=model_peak,
+                threads=mapper.GetNumberOfThreads(), window=type(window).__name__)
 
 
-#: name -> (function, needs a peer package, computes the line integral)
+#: name -> (function, the peer package it needs, runs on OpenCL)
 METHODS = {
     "splat": (run_splat, None, True),
     "progressive": (run_progressive, None, True),
     "raytrace": (run_raytrace, None, True),
-    "numpy": (run_numpy, None, True),
-    "fourier": (run_fourier, None, True),
+    "numpy": (run_numpy, None, False),
+    "fourier": (run_fourier, None, False),
+    "shaded": (run_shaded, None, True),
     "vtk": (run_vtk, "vtk", False),
 }
 
 
+def _peak_mib() -> float:
+    """Peak resident memory of this process image (VmHWM: unlike ru_maxrss, not inherited across exec from the
+    parent that spawned it)."""
+    try:
+        with open("/proc/self/status") as fh:
+            return next(float(line.split()[1]) for line in fh if line.startswith("VmHWM:")) / 1024.0
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
 def _child(method, case, params):
-    """Run one method in this (fresh) process; add its peak resident memory."""
+    """Run one method in this (fresh) process; add its peak resident memory, and how much of it is the Python
+    baseline (interpreter, NumPy, SciPy, clwave; the OpenCL runtime for clwave's methods), the prepared model and
+    renderer, and the views."""
+    if METHODS[method][2]:
+        clwave.ComputeContext.get(case["device"])
+    base = _peak_mib()
     result = METHODS[method][0](case, *params)
-    result["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    result["peak_rss_mib"] = _peak_mib()
+    model = result.pop("model_peak", base)
+    result["memory_mib"] = dict(baseline=base, model=model - base, views=result["peak_rss_mib"] - model)
     return result
 
 
@@ -317,8 +407,11 @@ def in_process(method, case, params=()):
 
 # ----------------------------------------------------------------------------- comparison
 def compare(case, args, log) -> tuple:
-    """Rows of the table for one phantom and size, the case's figures, and each method's first image."""
-    cams = [clwave.Camera(az, el, size=case["image"]) for az, el in case["views"]]
+    """Rows of the table for one phantom and size, the case's figures, and each method's first image.
+
+    X-ray rows are compared with the analytic line integrals; shaded rows (clwave's ray tracing and VTK's
+    composite, the ``--tf`` classification) with a float64 clwave ray trace of the full classified model."""
+    cams = [camera(case, az, el) for az, el in case["views"]]
     start = time.perf_counter()
     truths = [ground_truth(case["phantom"], case["n"], cam) for cam in cams]
     check = slice(0, None, 8)
@@ -327,15 +420,25 @@ def compare(case, args, log) -> tuple:
                      truth_accuracy=relative_rms(truths[0][check], finer))
     log(f"  ground truth: {case_info['truth_seconds']:.1f} s a view, "
         f"accuracy {case_info['truth_accuracy']:.1e} (against twice the segments)")
-    jobs = [(f"clwave splat {k:g}", "splat", (k,)) for k in args.keep]
-    jobs += [("clwave progressive", "progressive", (args.progressive_keep, args.steps))]
+    references = {"truth": truths}
+    jobs = [(f"clwave splat {k:g}, renderer reused", "splat", (k, args.coarse, False), "truth") for k in args.keep]
+    jobs += [(f"clwave splat {args.keep[0]:g}, one-shot clwave.splat", "splat", (args.keep[0], args.coarse, True),
+              "truth")]
+    jobs += [("clwave progressive", "progressive", (args.progressive_keep, args.steps), "truth")]
     if args.raytrace_views:
         jobs.append((f"clwave raytrace {args.raytrace_keep:g} (X-ray, tol {args.raytrace_tolerance:g})", "raytrace",
-                     (args.raytrace_keep, args.raytrace_tolerance, args.raytrace_views)))
-    jobs += [("NumPy/SciPy map_coordinates", "numpy", ()), ("Fourier volume rendering", "fourier", ())]
-    jobs += [(f"VTK {blend}", "vtk", (blend,)) for blend in ("additive", "composite")]
+                     (args.raytrace_keep, args.raytrace_tolerance, args.raytrace_views), "truth"))
+    jobs += [("NumPy/SciPy map_coordinates", "numpy", (), "truth"),
+             ("Fourier volume rendering", "fourier", (), "truth")]
+    jobs += [("VTK additive", "vtk", ("additive",), None)]
+    if args.shaded_views:
+        jobs.append((f"shaded reference (clwave raytrace, float64, tol {args.shaded_reference_tolerance:g})", "shaded",
+                     (1.0, args.shaded_reference_tolerance, "double", args.shaded_views), "reference"))
+        jobs += [(f"clwave raytrace {k:g} (shaded, tol {args.shaded_tolerance:g})", "shaded",
+                  (k, args.shaded_tolerance, "single", args.shaded_views), "shaded") for k in args.shaded_keep]
+    jobs += [(f"VTK composite (shaded, {args.tf})", "vtk", ("composite",), "shaded" if args.shaded_views else None)]
     rows, images = [], {"ground truth": truths[0]}
-    for label, method, params in jobs:
+    for label, method, params, reference in jobs:
         package = METHODS[method][1]
         if package and not _have(package):
             rows.append(dict(method=label, skipped=f"{package} is not installed (pip install .[peers])"))
@@ -348,24 +451,29 @@ def compare(case, args, log) -> tuple:
             log(f"  {label}: skipped, {rows[-1]['skipped']}")
             continue
         if method == "progressive":
-            rows.extend(_progressive_rows(label, res, truths))
+            rows.extend(_progressive_rows(label, res, truths, res["memory_mib"]))
             images[rows[-1]["method"]] = res["frames"][0][-1][1]
-        else:
-            images[label] = res["images"][0]
-            row = dict(method=label, prepare=res["prepare"], first=res["seconds"][0],
-                       median=statistics.median(res["seconds"][1:] or res["seconds"]),
-                       peak_rss_mib=res["peak_rss_mib"], line_integral=METHODS[method][2],
-                       extra={k: v for k, v in res.items() if k not in ("images", "seconds", "prepare")})
-            if METHODS[method][2]:
-                row["error"] = statistics.median(relative_rms(im, gt) for im, gt in zip(res["images"], truths))
-                row["to_target"] = row["median"] if row["error"] <= TARGET_ERROR else None
-                row["target_text"] = _target_text(row["to_target"], row["error"])
-            rows.append(row)
+            log("  " + _row_text(rows[-1]))
+            continue
+        images[label] = res["images"][0] if res["images"][0].ndim == 2 else np.clip(res["images"][0], 0, 1)
+        row = dict(method=label, kind="shaded" if reference in ("shaded", "reference") else "xray",
+                   prepare=res["prepare"], first=res["seconds"][0],
+                   median=statistics.median(res["seconds"][1:] or res["seconds"]), peak_rss_mib=res["peak_rss_mib"],
+                   memory_mib=res["memory_mib"],
+                   extra={k: v for k, v in res.items() if k not in ("images", "seconds", "prepare", "memory_mib")})
+        if reference == "reference":
+            references["shaded"] = res["images"]
+        elif reference in references:
+            pairs = list(zip(res["images"], references[reference]))
+            row["error"] = statistics.median(relative_rms(im, ref) for im, ref in pairs)
+            row["to_target"] = row["median"] if row["error"] <= TARGET_ERROR else None
+            row["target_text"] = _target_text(row["to_target"], row["error"])
+        rows.append(row)
         log("  " + _row_text(rows[-1]))
     return rows, case_info, images
 
 
-def _progressive_rows(label, res, truths) -> list:
+def _progressive_rows(label, res, truths, memory) -> list:
     """One row per frame; the time to the target error is on the first frame that reaches it."""
     rows = []
     for i in range(len(res["frames"][0])):
@@ -374,7 +482,8 @@ def _progressive_rows(label, res, truths) -> list:
         median = statistics.median(secs[1:] or secs)
         rows.append(dict(method=f"{label} {100 * res['frames'][0][i][2]:.3g} %", prepare=res["prepare"] if i == 0
                          else None, first=secs[0], median=median, peak_rss_mib=res["peak_rss_mib"],
-                         line_integral=True, error=error, frame=i, kept=res["frames"][0][i][2], target_text=""))
+                         memory_mib=memory, kind="xray", error=error, frame=i, kept=res["frames"][0][i][2],
+                         target_text=""))
     reached = next((r for r in rows if r["error"] <= TARGET_ERROR), None)
     if reached:
         reached["target_text"] = _target_text(reached["median"], reached["error"])
@@ -397,15 +506,17 @@ def _have(package) -> bool:
 def _row_text(row) -> str:
     if "skipped" in row:
         return f"{row['method']}: skipped ({row['skipped']})"
-    err = f"error {row['error']:.2e}" if "error" in row else "error n/a (not a line integral)"
-    return f"{row['method']}: first {row['first']:.3f} s, median {row['median']:.3f} s, {err}, " \
-           f"peak {row['peak_rss_mib']:.0f} MiB"
+    err = f"error {row['error']:.2e}" if "error" in row else "error n/a"
+    m = row["memory_mib"]
+    return f"{row['method']}: first {row['first']:.3f} s, median {row['median']:.4f} s, {err}, " \
+           f"peak {row['peak_rss_mib']:.0f} MiB (baseline {m['baseline']:.0f} + model {m['model']:.0f} " \
+           f"+ views {m['views']:.0f})"
 
 
 # ----------------------------------------------------------------------------- outputs
 def markdown(report) -> str:
     lines = ["| phantom | size | method | prepare s | first view s | median view s | peak RSS MiB "
-             "| rel. RMS error | time to 1 % |", "|---|---|---|---|---|---|---|---|---|"]
+             "(baseline + model + views) | rel. RMS error | time to 1 % |", "|---|---|---|---|---|---|---|---|---|"]
     for case in report["cases"]:
         for row in case["rows"]:
             head = f"| {case['phantom']} | {case['n']}³ | {row['method']} "
@@ -413,30 +524,52 @@ def markdown(report) -> str:
                 lines.append(head + f"| skipped: {row['skipped']} | | | | | |")
                 continue
             prep = "" if row.get("prepare") is None else f"{row['prepare']:.2f}"
+            m = row["memory_mib"]
             error = f"{100 * row['error']:.3g} %" if "error" in row else "n/a"
-            target = row["target_text"] if "error" in row else "speed reference only"
+            error += " (shaded)" if "error" in row and row["kind"] == "shaded" else ""
+            target = row["target_text"] if "error" in row else ("the reference" if row["kind"] == "shaded"
+                                                                  else "speed reference only")
             lines.append(head + f"| {prep} | {row['first']:.3g} | {row['median']:.3g} | {row['peak_rss_mib']:.0f} "
-                         f"| {error} | {target} |")
+                         f"({m['baseline']:.0f} + {m['model']:.0f} + {m['views']:.0f}) | {error} | {target} |")
     return "\n".join(lines) + "\n"
 
 
-def target_lines(report) -> list:
-    """The issue's speed target: first progressive frame >= 2x faster than VTK additive."""
+def headline(report) -> list:
+    """clwave / FVR and clwave / VTK per case: X-ray (splat, reused and one-shot) and shaded (ray tracing)."""
     out = []
     for case in report["cases"]:
-        first = next((r for r in case["rows"] if r["method"].startswith("clwave progressive")
-                      and r.get("frame") == 0), None)
-        vtk = next((r for r in case["rows"] if r["method"] == "VTK additive" and "skipped" not in r), None)
-        if first and vtk:
-            ratio = vtk["median"] / first["median"]
-            out.append(f"{case['phantom']} {case['n']}³ at {report['image']}²: first progressive frame "
-                       f"({100 * first['kept']:.3g} % kept) {first['median']:.3g} s, "
-                       f"VTK additive {vtk['median']:.3g} s: "
-                       f"{ratio:.2f}x faster (target 2x: {'met' if ratio >= 2.0 else 'NOT met'})")
+        rows = [r for r in case["rows"] if "skipped" not in r]
+        find = lambda start: next((r for r in rows if r["method"].startswith(start)), None)  # noqa: E731
+        reused = min((r for r in rows if r["method"].endswith("renderer reused") and r.get("to_target")),
+                     key=lambda r: r["to_target"], default=None)
+        oneshot, fvr, vtk = find("clwave splat") and next(
+            (r for r in rows if "one-shot" in r["method"]), None), find("Fourier"), find("VTK additive")
+        where = f"{case['phantom']} {case['n']}³ at {report['image']}²"
+        for r in (reused, oneshot):
+            if r is None:
+                continue
+            text = f"{where}: {r['method']} {1e3 * r['median']:.1f} ms (error {100 * r['error']:.3g} %, " \
+                   f"peak {r['peak_rss_mib']:.0f} MiB)"
+            if fvr:
+                text += f"; FVR {1e3 * fvr['median']:.1f} ms ({100 * fvr['error']:.3g} %, peak " \
+                        f"{fvr['peak_rss_mib']:.0f} MiB, spectrum {fvr['extra']['spectrum_mib']:.0f} MiB): " \
+                        f"clwave / FVR = {r['median'] / fvr['median']:.2f}"
+            if vtk:
+                text += f"; VTK additive Render() {1e3 * vtk['median']:.1f} ms: " \
+                        f"clwave / VTK = {r['median'] / vtk['median']:.2f}"
+            out.append(text)
+        composite = find("VTK composite")
+        for r in (r for r in rows if r["kind"] == "shaded" and r["method"].startswith("clwave")):
+            text = f"{where}, shaded: {r['method']} {r['median']:.3g} s (error {100 * r['error']:.3g} %)"
+            if composite and "error" in composite:
+                text += f"; VTK composite Render() {composite['median']:.3g} s (error " \
+                        f"{100 * composite['error']:.3g} %): clwave / VTK = {r['median'] / composite['median']:.1f}"
+            out.append(text)
     return out
 
 
 def plot(report, path) -> bool:
+    """Error against time per case: X-ray methods (top) and shaded ones (bottom, where measured)."""
     if not _have("matplotlib"):
         return False
     import matplotlib
@@ -446,12 +579,10 @@ def plot(report, path) -> bool:
     from matplotlib.ticker import NullFormatter
 
     cases = report["cases"]
-    phantoms = list(dict.fromkeys(c["phantom"] for c in cases))
-    sizes = sorted({c["n"] for c in cases})
-    fig, axes = plt.subplots(len(phantoms), len(sizes), figsize=(5.6 * len(sizes), 4.4 * len(phantoms)),
-                             squeeze=False)
-    for case in cases:
-        ax = axes[phantoms.index(case["phantom"]), sizes.index(case["n"])]
+    shaded = any(r.get("kind") == "shaded" and "error" in r for c in cases for r in c["rows"])
+    fig, axes = plt.subplots(1 + shaded, len(cases), figsize=(5.6 * len(cases), 4.4 * (1 + shaded)), squeeze=False)
+    for col, case in enumerate(cases):
+        ax = axes[0, col]
         rows = [r for r in case["rows"] if "skipped" not in r]
         prog = [r for r in rows if r["method"].startswith("clwave progressive")]
         if prog:
@@ -460,31 +591,42 @@ def plot(report, path) -> bool:
             for r in prog:
                 ax.annotate(f"{100 * r['kept']:.3g}%", (r["median"], r["error"]), fontsize=7,
                             textcoords="offset points", xytext=(4, 4))
-        splats = [r for r in rows if r["method"].startswith("clwave splat")]
-        if splats:
-            ax.plot([r["median"] for r in splats], [r["error"] for r in splats], "s--", color="C1",
-                    label="clwave splat " + ", ".join(r["method"].split()[-1] for r in splats))
-        for r in [r for r in rows if r["method"].startswith("clwave raytrace")]:
+        for r, style in zip([r for r in rows if r["method"].startswith("clwave splat")], ("s", "p", "h", "8")):
+            ax.plot([r["median"]], [r["error"]], style, color="C1", markersize=8, label=r["method"])
+        for r in [r for r in rows if r["method"].startswith("clwave raytrace") and r["kind"] == "xray"]:
             ax.plot([r["median"]], [r["error"]], "*", color="C5", markersize=11, label=r["method"])
-        for r, style in zip([r for r in rows if r["method"] in ("NumPy/SciPy map_coordinates",
-                                                               "Fourier volume rendering")], ("^", "D")):
-            ax.plot([r["median"]], [r["error"]], style, markersize=8, label=r["method"])
-        for r, colour in zip([r for r in rows if r["method"].startswith("VTK")], ("C3", "C2")):
-            ax.axvline(r["median"], color=colour, ls=":", label=f"{r['method']} (time only)")
-        ax.axhline(TARGET_ERROR, color="grey", lw=0.8)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.yaxis.set_minor_formatter(NullFormatter())
-        ax.set_xlabel("seconds per view (median)")
-        ax.set_ylabel("relative RMS error vs analytic")
-        ax.set_title(f"{case['phantom']} {case['n']}³, {report['image']}²", fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        for r, style, colour in zip([r for r in rows if r["method"] in ("NumPy/SciPy map_coordinates",
+                                                                       "Fourier volume rendering")], ("^", "D"),
+                                    ("C4", "C2")):
+            ax.plot([r["median"]], [r["error"]], style, color=colour, markersize=8, label=r["method"])
+        for r in [r for r in rows if r["method"] == "VTK additive"]:
+            ax.axvline(r["median"], color="C3", ls=":", label="VTK additive Render() (time only)")
+        _axes(ax, f"{case['phantom']} {case['n']}³, {report['image']}², X-ray", "relative RMS error vs analytic",
+              NullFormatter)
+        if shaded:
+            ax = axes[1, col]
+            for r, style in zip([r for r in rows if r["kind"] == "shaded" and "error" in r], ("*", "P", "X", "o")):
+                ax.plot([r["median"]], [r["error"]], style, markersize=10, label=r["method"])
+            _axes(ax, f"{case['phantom']} {case['n']}³, shaded", "relative RMS error vs float64 ray trace",
+                  NullFormatter)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return True
+
+
+def _axes(ax, title, ylabel, null):
+    ax.axhline(TARGET_ERROR, color="grey", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.xaxis.set_minor_formatter(null())
+    ax.yaxis.set_minor_formatter(null())
+    ax.set_xlabel("seconds per view (median)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
 
 
 def montage(images, title, path) -> bool:
@@ -522,13 +664,25 @@ def main(argv=None):
                         help="absolute error allowed on each ray-traced line integral")
     parser.add_argument("--raytrace-views", type=int, default=1,
                         help="views ray traced (the first ones; 20-30 s each at 256^3, 512^2; 0: no ray tracing)")
+    parser.add_argument("--coarse", type=float, default=2e-2,
+                        help="splat rows: coarse framebuffers for bands this small (SplatRenderer coarse=)")
+    parser.add_argument("--tf", default="hydrogen", help="transfer-function preset of the shaded rows")
+    parser.add_argument("--shaded-keep", type=float, nargs="+", default=[0.05, 1.0],
+                        help="kept fractions ray traced shaded")
+    parser.add_argument("--shaded-tolerance", type=float, default=1e-2, help="tolerance of the shaded ray traces")
+    parser.add_argument("--shaded-reference-tolerance", type=float, default=1e-4,
+                        help="tolerance of the float64 reference ray trace (the full classified model)")
+    parser.add_argument("--shaded-views", type=int, default=1,
+                        help="views ray traced shaded, and the VTK composite views compared (0: no shaded errors)")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--out", type=Path, default=Path("out/peers"), help="folder for the outputs")
     args = parser.parse_args(argv)
     if args.views < 1 or args.image < 8 or args.steps < 1:
         parser.error("--views and --steps must be >= 1 and --image >= 8")
-    if not 0 <= args.raytrace_views <= args.views:
-        parser.error("--raytrace-views must be between 0 and --views")
+    if not (0 <= args.raytrace_views <= args.views and 0 <= args.shaded_views <= args.views):
+        parser.error("--raytrace-views and --shaded-views must be between 0 and --views")
+    if not isinstance(clwave.TransferFunction.preset(args.tf).window, tuple):
+        parser.error(f"--tf {args.tf}: VTK needs a preset with a fixed window")
     args.out.mkdir(parents=True, exist_ok=True)
     log = lambda text: print(text, flush=True)  # noqa: E731
     report = dict(machine=dict(cpu=_cpu(), cores=os.cpu_count(), load_average=os.getloadavg(),
@@ -539,17 +693,17 @@ def main(argv=None):
     for name in args.phantom:
         for n in args.size:
             log(f"{name} {n}^3 at {args.image}^2, {args.views} views")
-            case = dict(phantom=name, n=n, image=args.image, views=views(args.views), device=args.device)
+            case = dict(phantom=name, n=n, image=args.image, views=views(args.views), device=args.device, tf=args.tf)
             rows, info, images = compare(case, args, log)
             report["cases"].append(dict(phantom=name, n=n, rows=rows, **info))
             montage(images, f"{name} {n}³, first view", args.out / f"images_{name}_{n}.png")
     report["seconds"] = time.perf_counter() - started
-    report["target"] = target_lines(report)
+    report["headline"] = headline(report)
     (args.out / "comparison.json").write_text(json.dumps(report, indent=2) + "\n")
     table = markdown(report)
-    (args.out / "comparison.md").write_text(table + "\n" + "\n".join(f"- {t}" for t in report["target"]) + "\n")
+    (args.out / "comparison.md").write_text(table + "\n" + "\n".join(f"- {t}" for t in report["headline"]) + "\n")
     log("\n" + table)
-    for line in report["target"]:
+    for line in report["headline"]:
         log(line)
     if not plot(report, args.out / "error_vs_time.png"):
         log("matplotlib is not installed (pip install .[peers]): no plot or image montage")
