@@ -34,8 +34,10 @@ SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a fo
 #: by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
 CHUNKED_MIN_BYTES = 1 << 30
 #: chunks="auto": at most this many bytes of float32 per chunk, in multiples of the store's own chunks
-#: (of 64 voxels per axis for files without chunks: 256³ voxels), or the store's own when they are bigger.
-CHUNK_BYTES = 96 << 20
+#: (of 64 voxels per axis for files without chunks: 128³ voxels), or the store's own when they are bigger.
+#: Small, because the chunked transform holds some ten times a block a thread, and a slab of blocks for
+#: their halos (docs/chunked.md §2, §5).
+CHUNK_BYTES = 8 << 20
 #: More chunks than this make Dask's task graph itself too big to handle.
 MAX_CHUNKS = 100_000
 

@@ -26,7 +26,6 @@ from .volume import Volume, content_of
 from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
-MAX_BLOCK_VOXELS = 1 << 22  # larger ones are cut into blocks of at most this many (a task's memory)
 MAX_BLOCKS = 4096           # and into at most this many blocks a level
 BIN_SHIFT = 16           # histogram bins: the top 16 bits of a float32 importance (monotone for x >= 0)
 TIER_SHIFT = 20          # .clw tiers: the top 12 bits (eight tiers an octave, docs/chunked.md §4)
@@ -350,8 +349,9 @@ def _transform_block(block, starts, halo, n_out, order, block_id=None):
 
 def _even_chunks(x, halo):
     """``x`` rechunked so that every block but the last per axis has an even edge of at least ``halo``, the
-    last at least ``halo``, with :data:`MIN_BLOCK_VOXELS` to :data:`MAX_BLOCK_VOXELS` voxels a block where the
-    volume allows, and at most :data:`MAX_BLOCKS` blocks (docs/chunked.md §2)."""
+    last at least ``halo``, with at least :data:`MIN_BLOCK_VOXELS` voxels a block where the volume allows,
+    and at most :data:`MAX_BLOCKS` blocks (docs/chunked.md §2).  Larger chunks are kept: cutting them
+    (a rechunk) costs more memory than it saves."""
     shape = x.shape[:3]
     edges = [min(n, max(halo, 2, e + e % 2)) for e, n in zip((max(c) for c in x.chunks[:3]), shape)]
 
@@ -361,11 +361,6 @@ def _even_chunks(x, halo):
     while (np.prod(edges) < MIN_BLOCK_VOXELS or blocks(edges) > MAX_BLOCKS) and \
             any(e < n for e, n in zip(edges, shape)):
         edges = [min(n, 2 * e) for e, n in zip(edges, shape)]
-    while np.prod(edges) > MAX_BLOCK_VOXELS and blocks(edges) * 2 <= MAX_BLOCKS:
-        a = int(np.argmax(edges))  # the longest edge halved, still even and able to lend its halo
-        if edges[a] // 2 < max(halo, 2):
-            break
-        edges[a] = edges[a] // 2 + edges[a] // 2 % 2
     chunks = []
     for e, n in zip(edges, shape):
         e += e % 2
