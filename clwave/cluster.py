@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import warnings
 
 from .errors import InputError
 from .io.progress import progress
@@ -77,7 +78,9 @@ def stream(client, tasks, *, desc, progress_bar=None):
     queuing keeps the chunks in memory to a few per worker thread."""
     from distributed import as_completed
 
-    futures = client.compute(list(tasks))
+    with warnings.catch_warnings():  # a volume of thousands of blocks makes a graph of some MB: expected
+        warnings.filterwarnings("ignore", message="Sending large graph")
+        futures = client.compute(list(tasks))
     with progress(total=len(futures), desc=desc, enabled=progress_bar) as bar:
         for future, result in as_completed(futures, with_results=True):
             future.release()
