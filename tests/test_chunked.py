@@ -157,7 +157,9 @@ def test_prefix_reads_equal_thresholding_the_whole_file(rng, tmp_path, monkeypat
 
 
 def test_bad_chunked_inputs(rng, monkeypatch):
-    _, dvol = pair(rng)
+    vol, dvol = pair(rng)
+    with pytest.raises(InputError, match="scheduler= applies to a chunked volume"):
+        clwave.WaveletVolume.from_volume(vol, "cubic", levels=2, scheduler=2)
     with pytest.raises(InputError, match="interpolate=True needs the whole volume"):
         clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, interpolate=True)
     data = dvol.data.copy()
@@ -186,3 +188,40 @@ def test_tiny_chunks_are_merged_into_bounded_blocks(monkeypatch):
         assert np.prod(blocks.numblocks) <= 64
         for c in blocks.chunks[:3]:
             assert all(e % 2 == 0 for e in c[:-1]) and min(c) >= max(halo, 1)
+
+
+def test_command_line_compresses_a_zarr_store_as_the_in_memory_path_does(rng, tmp_path, capsys):
+    import zarr
+
+    from clwave.cli import main
+
+    data = rng.random((40, 36, 44), dtype=np.float32)
+    np.save(tmp_path / "v.npy", data)
+    zarr.create_array(tmp_path / "v.zarr", data=data, chunks=(16, 16, 16))
+    assert main(["compress", str(tmp_path / "v.npy"), "--keep", "0.1", "-o", str(tmp_path / "memory.clw")]) == 0
+    assert main(["compress", str(tmp_path / "v.zarr"), "--keep", "0.1", "-o", str(tmp_path / "chunked.clw")]) == 0
+    out = capsys.readouterr().out
+    assert "not measured: the input was read chunk by chunk" in out and "6,336 coefficients" in out
+    assert_same(clwave.WaveletVolume.open(tmp_path / "memory.clw"), clwave.WaveletVolume.open(tmp_path / "chunked.clw"))
+    assert main(["render", str(tmp_path / "chunked.clw"), "--keep", "0.02", "--size", "32",
+                 "-o", str(tmp_path / "x.png")]) == 0  # reads a prefix of the file
+    assert (tmp_path / "x.png").exists()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--workers", "0"], "--workers 0 must be from 1"),
+    (["--scheduler", "localhost"], "--scheduler localhost is not an address"),
+    (["--chunks", "x"], "--chunks x must be auto, off or a chunk edge"),
+    (["--interpolate"], "--interpolate needs the whole volume in memory"),
+    (["--workers", "2", "--chunks", "off"], "--workers and --scheduler apply to a chunked input"),
+])
+def test_command_line_refuses_bad_chunked_options(rng, tmp_path, capsys, argv, needle):
+    import zarr
+
+    from clwave.cli import main
+
+    zarr.create_array(tmp_path / "v.zarr", data=rng.random((20, 20, 20), dtype=np.float32), chunks=(8, 8, 8))
+    assert main(["compress", str(tmp_path / "v.zarr"), *argv, "-o", str(tmp_path / "x.clw")]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.clw").exists()

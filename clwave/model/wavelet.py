@@ -148,6 +148,10 @@ class WaveletVolume:
         """
         if not isinstance(volume, Volume):
             volume = Volume(volume)
+        if scheduler is not None and not volume.chunked:
+            raise InputError("scheduler= applies to a chunked volume (a Dask array, e.g. clwave.load of a Zarr or "
+                             "HDF5 store, or chunks='auto'); this one is in memory",
+                             cli="--workers and --scheduler apply to a chunked input (Zarr, HDF5, or --chunks auto)")
         if volume.chunked:
             from .chunked import ChunkedWaveletVolume  # built on this module
 
