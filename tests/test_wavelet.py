@@ -5,6 +5,7 @@ import pytest
 import pywt
 
 from clwave.model.bspline import SplineWavelet, bspline
+from clwave.model.geometry import fine_to_world, support_centres
 from clwave.errors import FileFormatError, InputError, OutputExistsError
 from clwave.model.volume import Volume
 from clwave.model.wavelet import WaveletVolume
@@ -179,7 +180,9 @@ def test_focus_keeps_more_detail_near_it(rng):
     g = lod.groups[0]
     n_approx = g.bands[0].size
     band_no, index = g.locate(g.positions[g.positions >= n_approx])
-    centres = lod.support_centres(g, band_no, index)
+    fine = np.concatenate([support_centres(g.wavelet, band.key, band.level, index[band_no == b])
+                           for b, band in enumerate(g.bands)])  # band by band: only the counts below matter
+    centres = fine_to_world(fine, g.wavelet.order, *lod.frame)
     near = np.linalg.norm(centres - centre, axis=1) < 8
     far = np.linalg.norm(centres - (8.0, -4.0, -6.0), axis=1) < 8  # a mirrored ball of equal size
     assert near.sum() > 5 * max(far.sum(), 1)

@@ -79,14 +79,12 @@ def _write(model, fh):
 
 
 def _stream(model: ChunkedWaveletVolume, h5, tiers):
-    from ..cluster import client_for, stream
+    from ..cluster import client_for
 
     mask = _mask_dataset(h5, model.shape)
     with client_for(model.scheduler) as client:
-        for box, packed in stream(client, model.content_blocks(), desc="content mask",
-                                  progress_bar=model.progress_bar):
-            shape = tuple(s.stop - s.start for s in box)
-            mask[box] = np.unpackbits(packed, count=int(np.prod(shape))).reshape(shape)
+        for box, block in model.content_blocks(client):
+            mask[box] = block.view(np.uint8)
         for gi, positions, values, tier in model.selected(client, tiers=True):
             stored = np.any(values != 0, axis=0)
             tiers.append(gi, positions[stored], values[:, stored], tier[stored])
@@ -250,13 +248,7 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
         part = ChannelGroup(wav, gh["channels"], bands, positions[order], values[:, order])
         chosen = order[_top(importance_of(part, None, frame), last_cut)]
         parts[-1] = (positions[chosen], values[:, chosen])
-    positions = np.concatenate([p for p, _ in parts]) if parts else np.zeros(0, np.int64)
-    values = np.concatenate([v for _, v in parts], axis=1) if parts else np.zeros((c, 0), np.float32)
-    order = np.argsort(positions, kind="stable")
-    positions, values = positions[order], np.ascontiguousarray(values[:, order])
-    if np.any(np.diff(positions) <= 0):
-        raise ValueError(f"group {gi} stores a position twice")
-    return ChannelGroup(wav, gh["channels"], bands, None if len(positions) == total else positions, values)
+    return ChannelGroup.gathered(wav, gh["channels"], bands, parts)
 
 
 def _tiers_to_read(sizes, budget) -> tuple:

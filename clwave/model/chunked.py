@@ -147,8 +147,7 @@ class ChunkedWaveletVolume:
         return (f"ChunkedWaveletVolume(shape={self.shape}, wavelets={self.wavelets}, levels={self.levels}, "
                 f"chunks={self.volume.data.chunksize})")
 
-    def content_box(self):
-        return None if self.content is None else (np.array(self.content[0]), np.array(self.content[1]))
+    content_box = WaveletVolume.content_box
 
     # ------------------------------------------------------------- passes
     def _plan(self, wavelet, gi, focus=None):
@@ -174,7 +173,7 @@ class ChunkedWaveletVolume:
         if (keep is None) == (threshold is None):
             raise InputError("give exactly one of keep= (fraction of voxels) or threshold= (importance)")
         keep, threshold, focus = check_thresholding(keep, threshold, focus)
-        if not all(rule.every for rules in self.rules for rule in rules):
+        if not all(_keeps_every(rules) for rules in self.rules):
             raise InputError("this chunked model is thresholded already: threshold the model from_volume gave, or "
                              "compute() this one and threshold that")
         if keep is None:
@@ -228,17 +227,19 @@ class ChunkedWaveletVolume:
                 yield (gi,) + (out if tiers else out[:2])
         self.kept = max(counts)
 
-    def content_blocks(self):
-        """Delayed ``(slices, packed bits)`` of the content mask, a source block at a time."""
+    def content_blocks(self, client):
+        """Yield ``(slices, bool block)`` of the content mask, a source block at a time (sent packed)."""
         import dask
 
         mask = content_of(self.volume.data)
         starts = [np.cumsum((0,) + c) for c in mask.chunks]
-        out = []
+        tasks = []
         for index, block in np.ndenumerate(mask.to_delayed()):
             box = tuple(slice(int(s[i]), int(s[i + 1])) for s, i in zip(starts, index))
-            out.append(dask.delayed(_pack)(block, box))
-        return out
+            tasks.append(dask.delayed(_pack)(block, box))
+        for box, packed in stream(client, tasks, desc="content mask", progress_bar=self.progress_bar):
+            shape = tuple(s.stop - s.start for s in box)
+            yield box, np.unpackbits(packed, count=int(np.prod(shape))).reshape(shape).view(bool)
 
     def compute(self) -> WaveletVolume:
         """Gather the selected coefficients into an in-memory :class:`WaveletVolume` (it must fit: threshold
@@ -247,21 +248,12 @@ class ChunkedWaveletVolume:
         parts = {gi: [] for gi in range(len(groups))}
         mask = np.zeros(self.shape, dtype=bool)
         with client_for(self.scheduler) as client:
-            for box, packed in stream(client, self.content_blocks(), desc="content mask",
-                                      progress_bar=self.progress_bar):
-                mask[box] = np.unpackbits(packed, count=_size(box)).reshape(_shape(box)).astype(bool)
+            for box, block in self.content_blocks(client):
+                mask[box] = block
             for gi, positions, values in self.selected(client):
                 parts[gi].append((positions, values))
-        out = []
-        for gi, (wavelet, channels) in enumerate(groups):
-            bands = band_layout(wavelet, self.shape, self.levels)
-            pos = np.concatenate([p for p, _ in parts[gi]]) if parts[gi] else np.zeros(0, np.int64)
-            values = np.concatenate([v for _, v in parts[gi]], axis=1) if parts[gi] else \
-                np.zeros((len(channels), 0), np.float32)
-            order = np.argsort(pos, kind="stable")
-            pos, values = pos[order], np.ascontiguousarray(values[:, order])
-            every = self.rules[gi][0].every and self.rules[gi][1].every
-            out.append(ChannelGroup(wavelet, channels, bands, None if every else pos, values))
+        out = [ChannelGroup.gathered(wavelet, channels, band_layout(wavelet, self.shape, self.levels), parts[gi])
+               for gi, (wavelet, channels) in enumerate(groups)]
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
                              content_mask=mask)
@@ -431,8 +423,7 @@ def _select_block(stack, level, offsets, plan):
     """``(kept (positions, values, tiers), candidates)`` of a block under the plan's rules; candidates
     ``(positions, values, tiers, importance, class)`` of a cut's bin, or None."""
     kept, cands = [], []
-    every = plan.rules[APPROX].every and plan.rules[DETAIL].every
-    for entries in _entries(stack, level, offsets, plan, live_only=not every):
+    for entries in _entries(stack, level, offsets, plan, live_only=not _keeps_every(plan.rules)):
         take, maybe = (np.flatnonzero(m) for m in plan.rules[entries.cls].kept(entries.importance))
         kept.append((entries.positions(take), entries.values[:, take], entries.tiers(take)))
         if len(maybe):
@@ -450,12 +441,9 @@ def _pack(block, box):
     return box, np.packbits(np.asarray(block, dtype=bool).reshape(-1))
 
 
-def _size(box) -> int:
-    return int(np.prod(_shape(box)))
-
-
-def _shape(box) -> tuple:
-    return tuple(s.stop - s.start for s in box)
+def _keeps_every(rules) -> bool:
+    """True for the rules of an unthresholded model: every position, zeros too."""
+    return all(rule.every for rule in rules)
 
 
 def _cut(hist, budget) -> tuple:

@@ -49,6 +49,22 @@ class ChannelGroup:
         self.positions = positions  # (K,) int64 ascending, or None for every position
         self.values = values        # (C, K) float32, channel-major for fast per-channel work
 
+    @classmethod
+    def gathered(cls, wavelet, channels, bands, parts) -> "ChannelGroup":
+        """A group from ``parts`` ``[(positions, values (C, n)), ...]`` in any order (a chunked pass, a file's
+        tiers): positions made ascending, None when every position is there; ValueError for a position given
+        twice."""
+        positions = np.concatenate([p for p, _ in parts]) if parts else np.zeros(0, np.int64)
+        values = np.concatenate([v for _, v in parts], axis=1) if parts else np.zeros((len(channels), 0), np.float32)
+        order = np.argsort(positions, kind="stable")
+        positions, values = positions[order], np.ascontiguousarray(values[:, order])
+        if np.any(np.diff(positions) <= 0):
+            raise ValueError("a coefficient position is given twice")
+        group = cls(wavelet, channels, bands, positions, values)
+        if len(positions) == group.total:
+            group.positions = None
+        return group
+
     @property
     def total(self) -> int:
         return self.bands[-1].start + self.bands[-1].size
@@ -216,16 +232,6 @@ class WaveletVolume:
     def importance(self, group: ChannelGroup) -> np.ndarray:
         """:func:`band_importance` of each kept position of the group (with this model's focus)."""
         return importance_of(group, self.focus, self.frame)
-
-    def support_centres(self, group, band_no, index) -> np.ndarray:
-        """World (x, y, z) centres of the basis supports (docs/model.md §4: X = o + 2^m (k + c0))."""
-        wav = group.wavelet
-        fine = np.empty(index.shape, dtype=np.float64)
-        for b_no, band in enumerate(group.bands):
-            sel = band_no == b_no
-            if sel.any():
-                fine[sel] = geometry.support_centres(wav, band.key, band.level, index[sel])
-        return fine_to_world(fine, wav.order, self.shape, self.spacing, self.origin)
 
     # ------------------------------------------------------------- threshold
     def threshold(self, keep=None, threshold=None, focus=None) -> "WaveletVolume":
