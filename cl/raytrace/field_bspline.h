@@ -1,24 +1,47 @@
-/* field_bspline.h: the field from the fine B-spline grids the kept coefficients expand to
- * (clwave/raytrace/finegrid.py): each sample reads j^3 grid points per channel group.
- * The interface every field backend provides to cl/raytrace/raytrace.cl: FIELD_PARAMS and
- * FIELD_INIT (the kernel arguments and the Field struct made of them), Active with active_init and
- * active_flags (per-ray state), Basis with segment_basis, sample_segment and sample_gradient. */
+/* field_bspline.h: the field from the brick-sparse multiresolution B-spline pool
+ * (clwave/raytrace/bricks.py): each sample reads j^3 lattice coefficients per channel group, on the
+ * lattice of the brick holding the segment.  The interface every field backend provides to
+ * cl/raytrace/raytrace.cl: FIELD_PARAMS and FIELD_INIT (the kernel arguments and the Field struct made
+ * of them), field_lattice (the knot planes around a point) and FIELD_BRICK (the cells between the
+ * planes where that can change; 0: never), Active with active_init and active_flags (per-ray state),
+ * Basis with segment_basis, sample_segment and sample_gradient. */
 #ifndef CLW_FIELD_H
 #define CLW_FIELD_H
 #include "raytrace/types.h"
 
-/* ---- B-spline path: the fine grids the kept coefficients expand to (clwave/raytrace/finegrid.py) ---- */
-#define FIELD_PARAMS __global const float4 *coef, __constant const int4 *start, __constant const int4 *shape, \
-                     __constant const int *offset
+/* ---- B-spline path: bricks of lattice coefficients (clwave/raytrace/bricks.py) ---- */
+#define FIELD_PARAMS __global const float4 *coef, __global const int *pages, const int4 page_origin, \
+                     const int4 page_shape, __global const float4 *frames, __global const int4 *boxes, \
+                     __global const float4 *lattices
 typedef struct {
     __global const float4 *coef;
-    __constant const int4 *start, *shape;
-    __constant const int *offset;
+    __global const int *pages;
+    int4 page_origin, page_shape;
+    __global const float4 *frames;
+    __global const int4 *boxes;
+    __global const float4 *lattices;
 } Field;
-#define FIELD_INIT {coef, start, shape, offset}
+#define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices}
+#define FIELD_BRICK CLW_SUPER_CELLS /* a brick is a superblock */
 typedef int Active; /* no per-ray state */
 inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = 0; }
 inline int active_flags(const Active *A) { return 0; }
+
+/* the pool slot of the brick holding grid-0 point x, -1 where there is none */
+inline int brick_slot(const Field G, const real3 x)
+{
+    const int4 k = convert_int4((real4)(floor(x / FIELD_BRICK), 0)) - G.page_origin;
+    if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= G.page_shape.x || k.y >= G.page_shape.y || k.z >= G.page_shape.z)
+        return -1;
+    return G.pages[((size_t)k.z * G.page_shape.y + k.y) * G.page_shape.x + k.x];
+}
+
+/* the knot planes of the brick holding x: origin (x, y, z) and spacing */
+inline real4 field_lattice(const Field G, const real3 x)
+{
+    const int slot = brick_slot(G, x);
+    return slot < 0 ? (real4)(0, 0, 0, CLW_LATTICE) : to_real4(G.lattices[slot]);
+}
 
 /* w[r] = N_j(u + r) (BSPLINE_WEIGHTS) and dw[r] = N_j'(u + r) (BSPLINE_DERIVATIVES), r = 0..j-1:
  * the weight of coefficient c - r in cell c at u = x - c (docs/model.md §1), per lane of TYPE.
@@ -120,14 +143,16 @@ GROUP_GRADIENT(real4, group_gradient4)
 typedef struct {
     __global const float4 *corner;
     int sy, sz;
+    real inv_step; /* lattice cells per grid-0 fine cell: the gradient's scale */
     real8 u[3], w[3][4];
     real4 u4[3], w4[3][4];
 } Basis;
 
-/* Grid g's part of the segment at the sample points xm + radius xi_k D, sample k in lane k.  Every
- * sample comes from the cells holding the midpoint xm, so from the same polynomial. */
-inline void segment_basis(const Field G, const int g, const real3 xm, const real radius, const real3 D,
-                          __constant const real *nodes, Basis *B)
+/* Grid g's part of the segment at the sample points xm + radius xi_k D, sample k in lane k, from the
+ * brick in `slot` (-1: none, all weights 0).  Every sample comes from the lattice cell holding the
+ * midpoint, so from the same polynomial. */
+inline void segment_basis(const Field G, const int g, const int slot, const real3 xm, const real radius,
+                          const real3 D, __constant const real *nodes, Basis *B)
 {
     real lane_xi[12];
     for (int k = 0; k < 12; k++)
@@ -135,11 +160,11 @@ inline void segment_basis(const Field G, const int g, const real3 xm, const real
     const real8 xi = vload8(0, lane_xi);
     const real4 xi4 = vload4(2, lane_xi);
     const int j = ORDER[g];
-    const real3 x = xm + (real)(j - ORDER[0]) / 2; /* grid g's lattice (docs/raytracing.md §2) */
-    const int4 s = G.shape[g], lo = G.start[g];
-    const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, lo.xyz + j - 1, lo.xyz + s.xyz - 1), 0);
-    const int4 p = c - lo;
-    const real3 u = x - convert_real3(c.xyz), step = radius * D; /* x - cell at xi = 0, and per unit xi */
+    const real4 f = slot < 0 ? (real4)(0) : to_real4(G.frames[slot * CLW_GROUPS + g]);
+    const int4 n = slot < 0 ? (int4)(j, j, j, 0) : G.boxes[slot * CLW_GROUPS + g];
+    const real3 x = (xm - f.xyz) * f.w; /* the brick's lattice coordinates (docs/raytracing.md §3) */
+    const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, j - 1, n.xyz - 1), 0);
+    const real3 u = x - convert_real3(c.xyz), step = radius * D * f.w; /* x - cell at xi = 0, and per unit xi */
     const real ua[3] = {u.x, u.y, u.z}, sa[3] = {step.x, step.y, step.z};
     for (int a = 0; a < 3; a++) {
         B->u[a] = ua[a] + sa[a] * xi;
@@ -147,9 +172,16 @@ inline void segment_basis(const Field G, const int g, const real3 xm, const real
         bspline_weights8(j, B->u[a], B->w[a]);
         bspline_weights4(j, B->u4[a], B->w4[a]);
     }
-    B->sy = s.x;
-    B->sz = s.x * s.y;
-    B->corner = G.coef + G.offset[g] + ((size_t)p.z * s.y + p.y) * s.x + p.x;
+    if (slot < 0)
+        for (int a = 0; a < 3; a++)
+            for (int r = 0; r < j; r++) {
+                B->w[a][r] = 0;
+                B->w4[a][r] = 0;
+            }
+    B->inv_step = f.w;
+    B->sy = n.x;
+    B->sz = n.x * n.y;
+    B->corner = G.coef + n.w + ((size_t)c.z * n.y + c.y) * n.x + c.x;
 }
 
 /* The field at the segment's sample points (lane P0 only when `fresh`: else it is the last
@@ -160,9 +192,10 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
 {
     for (int k = 0; k < NS; k++)
         fq[k] = (real4)(0);
+    const int slot = brick_slot(G, xm);
     for (int g = 0; g < CLW_GROUPS; g++) {
         Basis *B = &basis[g];
-        segment_basis(G, g, xm, radius, D, nodes, B);
+        segment_basis(G, g, slot, xm, radius, D, nodes, B);
         const int j = ORDER[g];
         real lw[3][64]; /* the weights per sample and axis, for the field's float4 sums */
         for (int a = 0; a < 3; a++)
@@ -197,7 +230,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
         case 3: group_gradient##WIDTH(c, B->sy, B->sz, 3, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
         case 4: group_gradient##WIDTH(c, B->sy, B->sz, 4, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
         }                                                                                                 \
-        gx->OUT = hx; gy->OUT = hy; gz->OUT = hz;                                                         \
+        gx->OUT = hx * B->inv_step; gy->OUT = hy * B->inv_step; gz->OUT = hz * B->inv_step;               \
     }
 inline void sample_gradient(const Basis *basis, const bool all, realv *gx, realv *gy, realv *gz)
 {

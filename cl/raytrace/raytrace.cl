@@ -21,30 +21,33 @@
 #endif
 #include "raytrace/quadrature.h"
 
-/* plane[a]: the next plane x_a = plane[a] h the ray x0 + t dd meets beyond t, tp[a] its t;
- * inv = 1 / dd (products: divisions were a tenth of the march) */
-inline void next_planes(const real *x0, const real *dd, const real *inv, const real t, const real h, int *plane,
+/* The planes x_a = lat_a + k lat.w (a lattice of knot planes, origin lat.xyz and spacing lat.w):
+ * plane[a] the next one the ray x0 + t dd meets beyond t, tp[a] its t; inv = 1 / dd (products:
+ * divisions were a tenth of the march) */
+inline void next_planes(const real *x0, const real *dd, const real *inv, const real t, const real4 lat, int *plane,
                         real *tp)
 {
+    const real o[3] = {lat.x, lat.y, lat.z}, h = lat.w;
     for (int a = 0; a < 3; a++) {
-        const real x = x0[a] + t * dd[a];
+        const real x = x0[a] + t * dd[a] - o[a];
         plane[a] = dd[a] > 0 ? (int)floor(x / h) + 1 : (int)ceil(x / h) - 1;
-        tp[a] = dd[a] == 0 ? INFINITY : (plane[a] * h - x0[a]) * inv[a];
+        tp[a] = dd[a] == 0 ? INFINITY : (plane[a] * h + o[a] - x0[a]) * inv[a];
         while (tp[a] <= t) { /* x sat on a plane but rounded to its near side */
             plane[a] += dd[a] > 0 ? 1 : -1;
-            tp[a] = (plane[a] * h - x0[a]) * inv[a];
+            tp[a] = (plane[a] * h + o[a] - x0[a]) * inv[a];
         }
     }
 }
 
 /* past the planes met at tn: the next ones along those axes */
-inline void step_planes(const real *x0, const real *dd, const real *inv, const real tn, const real h, int *plane,
+inline void step_planes(const real *x0, const real *dd, const real *inv, const real tn, const real4 lat, int *plane,
                         real *tp)
 {
+    const real o[3] = {lat.x, lat.y, lat.z};
     for (int a = 0; a < 3; a++)
         if (tp[a] <= tn) {
             plane[a] += dd[a] > 0 ? 1 : -1;
-            tp[a] = (plane[a] * h - x0[a]) * inv[a];
+            tp[a] = (plane[a] * lat.w + o[a] - x0[a]) * inv[a];
         }
 }
 
@@ -226,17 +229,18 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
         real tp[3];
         int plane[3];
         real fine_end = -INFINITY;
-        next_planes(x0, dd, inv, t0, CLW_BLOCK, plane, tp);
+        const real4 blocks = (real4)(0, 0, 0, CLW_BLOCK);
+        next_planes(x0, dd, inv, t0, blocks, plane, tp);
         for (real t = t0; t < t1;) {
             const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
             real end;
             rest += region_bound(x0, dd, inv, X0 + (t + tn) / 2 * D, tn, t1, &regions, &fine_end, &end) * (end - t);
             if (end > tn) { /* a coarse superblock: on past it */
                 t = end;
-                next_planes(x0, dd, inv, t, CLW_BLOCK, plane, tp);
+                next_planes(x0, dd, inv, t, blocks, plane, tp);
             } else {
                 t = tn;
-                step_planes(x0, dd, inv, tn, CLW_BLOCK, plane, tp);
+                step_planes(x0, dd, inv, tn, blocks, plane, tp);
             }
         }
     }
@@ -259,17 +263,27 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     /* the block or coarse superblock the last segment lay in (its bound, where the ray leaves it),
      * and where the ray leaves the last fine superblock */
     real bnd = 0, texit = -INFINITY, fine_end = -INFINITY;
-    const real h = CLW_LATTICE;
+    /* the knot planes of the brick the ray is in (the field's lattice there), and where it leaves the brick */
+    real4 lat = (real4)(0, 0, 0, CLW_LATTICE);
+    real brick_end = FIELD_BRICK ? -INFINITY : INFINITY;
     real tp[3];
     int plane[3];
     real t = t0;
     bool replan = true;
     while (t < t1) {
+        if (!(t < brick_end)) { /* a new brick: its lattice, and where the ray leaves it */
+            real btp[3];
+            int bplane[3];
+            next_planes(x0, dd, inv, t, (real4)(0, 0, 0, FIELD_BRICK), bplane, btp);
+            brick_end = fmin(t1, fmin(btp[0], fmin(btp[1], btp[2])));
+            lat = field_lattice(G, X0 + (t + brick_end) / 2 * D);
+            replan = true;
+        }
         if (replan) { /* the next knot plane per axis, from the position at t */
-            next_planes(x0, dd, inv, t, h, plane, tp);
+            next_planes(x0, dd, inv, t, lat, plane, tp);
             replan = false;
         }
-        const real tn = fmin(t1, fmin(tp[0], fmin(tp[1], tp[2])));
+        const real tn = fmin(brick_end, fmin(t1, fmin(tp[0], fmin(tp[1], tp[2]))));
         const real3 xm = X0 + (t + tn) / 2 * D;
         if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
             bnd = region_bound(x0, dd, inv, xm, tn, t1, &regions, &fine_end, &texit);
@@ -291,7 +305,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
 #ifdef CLW_CONTENT
         if (tn > t && !reached(content, content_origin, content_shape, xm)) { /* no content reaches: empty */
             t = tn;
-            step_planes(x0, dd, inv, tn, h, plane, tp);
+            step_planes(x0, dd, inv, tn, lat, plane, tp);
             continue;
         }
 #endif
@@ -403,7 +417,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
 #endif
         }
         t = tn;
-        step_planes(x0, dd, inv, tn, h, plane, tp);
+        step_planes(x0, dd, inv, tn, lat, plane, tp);
     }
 #ifdef CLW_XRAY
     image[pix] = convert_float4(I);

@@ -27,17 +27,6 @@ def superblocks(bound: np.ndarray, origin) -> tuple[np.ndarray, np.ndarray]:
     return padded.reshape(count[0], SUPER, count[1], SUPER, count[2], SUPER).max(axis=(1, 3, 5)), s_origin
 
 
-def occupancy(wv: WaveletVolume, dense=None):
-    """Blocks of BLOCK^3 fine cells (grid-0 coordinates) touched by a kept non-zero coefficient.
-
-    ``dense``: each group's :meth:`ChannelGroup.dense_bands`, when the caller has them already.
-    Returns ``(occ, origin, box)`` as :func:`block_sums`, with ``occ`` (Z, Y, X) uint8.
-    """
-    dense = dense if dense is not None else [g.dense_bands() for g in wv.groups]
-    counts, origin, box = block_sums(wv, [np.any(arr != 0, axis=3) for group in dense for arr in group])
-    return (counts > 0).astype(np.uint8), origin, box
-
-
 def block_sums(wv: WaveletVolume, weights):
     """Per block of BLOCK^3 fine cells, the sum of ``weights`` over the coefficients whose supports meet it.
 

@@ -12,7 +12,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import pyopencl as cl
 import pyopencl.array as cla
 from pyopencl import cltypes
 
@@ -24,8 +23,8 @@ from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
-from .bounds import block_sums, cell_blocks, clip_box, content_cells, occupancy, superblocks
-from .finegrid import fine_grids, int4_xyz
+from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
+from .bricks import build, group_defines
 from .quadrature import sample_tables
 from ..io.result import RenderResult
 from ..model.wavelet import WaveletVolume
@@ -60,10 +59,9 @@ def light_direction(azimuth, elevation) -> np.ndarray:
 FIELDS = ("bspline", "wavelet")
 B, I32, INT4, FLOAT4 = BUFFER, np.int32, cltypes.int4, cltypes.float4
 #: the arguments of each field backend (FIELD_PARAMS of cl/raytrace/field_*.h)
-FIELD_ARGS = dict(bspline=(("coef", B), ("start", B), ("shape", B), ("offset", B)),
+FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("page_shape", INT4), ("frames", B),
+                           ("boxes", B), ("lattices", B)),
                   wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
-_BLOCK_MAX = Kernel("block_max", ("out", B), ("occ", B), ("origin", INT4), ("nblocks", INT4),
-                    *FIELD_ARGS["bspline"])
 
 
 def raytrace_kernel(field: str) -> Kernel:
@@ -103,48 +101,32 @@ class RayTracer:
         self.cc = ComputeContext.get(device)
         self.orders = [g.wavelet.order for g in wv.groups]
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
-        dense = [g.dense_bands() for g in wv.groups]  # expansion, tables and block bounds share them
         if field == "bspline":
-            self._expand(dense)
+            self._expand()
         else:
-            self._bands(dense)
+            self._bands([g.dense_bands() for g in wv.groups])
         self.super_bound_host, self.super_origin = superblocks(self.block_bound.get(), self.occ_origin)
         self.super_bound = cla.to_device(self.cc.queue, self.super_bound_host)
 
-    def _expand(self, dense):
-        """B-spline field: fine grids on the device, and their per-block maxima as bounds."""
-        wv, orders = self.wv, self.orders
-        self.grids, self.setup_seconds = fine_grids(wv, self.cc, pad=max(orders), dense=dense)
-        q = self.cc.queue
-        offsets, total = [], 0
-        for g in self.grids:
-            offsets.append(total)
-            total += int(np.prod(g.shape))
-        if len(self.grids) == 1:
-            self.coef = self.grids[0].data
-        else:  # one buffer for all groups' grids, each at its offset
-            self.coef = cla.empty(q, (total, 4), np.float32)
-            for g, off in zip(self.grids, offsets):
-                cl.enqueue_copy(q, self.coef.data, g.data.data, dst_offset=off * 16, byte_count=g.nbytes)
-        self.tables = dict(
-            start=cla.to_device(q, np.array([int4_xyz(g.start) for g in self.grids])),
-            shape=cla.to_device(q, np.array([int4_xyz(g.shape) for g in self.grids])),
-            offset=cla.to_device(q, np.array(offsets, np.int32)))
-        occ, self.occ_origin, _ = occupancy(wv, dense)
-        occ = self._empty_space(occ)
-        self.block_bound = cla.empty(q, occ.shape, np.float32)
-        blocks = programs.build(self.cc, ["raytrace/blocks.cl"], dict(CLW_GROUPS=len(orders),
-                                                                      CLW_ORDERS=",".join(map(str, orders))))
-        self.field_tables = dict(coef=self.coef, **self.tables)
-        _BLOCK_MAX(blocks, q, occ.shape[::-1], None, self.field_tables, out=self.block_bound,
-                   occ=cla.to_device(q, occ), origin=self.occ_origin[::-1], nblocks=occ.shape[::-1])
-        # the largest |coefficient| of any grid bounds every channel (partition of unity)
-        self.q_bound = float(cla.max(self.block_bound).get())
-        self.occupied_fraction = float(occ.mean())
+    def _expand(self):
+        """B-spline field: the bricks on the device (:mod:`clwave.raytrace.bricks`), and their per-block
+        maxima as bounds."""
+        self.bricks = build(self.wv, self.cc)
+        self.setup_seconds = self.bricks.seconds
+        bound = self.bricks.block_bounds(self.cc)
+        self.occ_origin = self.bricks.origin * SUPER
+        self.box = clip_box(bound, self.occ_origin)
+        self.content_origin, self.content_cells = self.occ_origin * BLOCK, None  # the bricks clamp to content
+        self.content = cla.to_device(self.cc.queue, np.ones(1, np.uint8))
+        self.content_shape = np.zeros(3, np.int64)
+        self.block_bound = cla.to_device(self.cc.queue, bound)
+        self.q_bound = float(bound.max())
+        self.occupied_fraction = float(np.mean(bound > 0))
+        self.field_tables = self.bricks.tables()
         # explicit groups: PoCL's default for a big image (up to 4096 rays) keeps every ray's private
         # arrays at once, which overflowed its threads' stacks
         self.local_size = (8, 8)
-        self.defines = dict(CLW_GROUPS=len(orders), CLW_ORDERS=",".join(map(str, orders)))
+        self.defines = group_defines(self.orders)
 
     def _bands(self, dense):
         """Wavelet field: the dense bands and their tables (cl/raytrace/field_wavelet.h), bounds from the coefficients.
@@ -194,7 +176,7 @@ class RayTracer:
         self.field_tables = dict(coef=self.coef, info=self.tables["info"], shape=self.tables["shape"],
                                  band_lo=self.tables["lo"])
         self.defines = dict(CLW_WAVELET=None, CLW_BANDS=len(info), CLW_ACTIVE=self.active,
-                            CLW_GROUPS=len(self.orders), CLW_ORDERS=",".join(map(str, self.orders)))
+                            **group_defines(self.orders))
         # PoCL keeps a work-group's private active lists on one thread's stack: small groups
         self.local_size = (WAVELET_GROUP, 1)
         self.setup_seconds = time.perf_counter() - start

@@ -1,0 +1,69 @@
+/* bricks.cl: the brick pool of the ray tracer's B-spline field (clwave/raytrace/bricks.py,
+ * docs/raytracing.md §3): copying each brick's lattice coefficients out of a slab's synthesis,
+ * and the bounds on |field| per CLW_BLOCK^3 block of the bricks for empty-space skipping (§4). */
+#include "common/clw_common.h"
+
+constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
+
+/* gather_bricks: pool[box.w + local index] = scale * src[start + local index], zero outside src.
+ *   src, src_start, src_shape   one level's synthesis over a slab: a box of float4 (x, y, z)
+ *   starts       per brick the lattice index (x, y, z) of its first coefficient
+ *   boxes        per brick (nx, ny, nz, first pool element)
+ *   depth        the largest nz: work-items depth * b .. depth * (b + 1) - 1 along axis 2 copy brick b
+ *   scale        2^(-3 l / 2): the level-l B-splines' normalisation (docs/model.md §4)
+ * Grid: global (max nx, max ny, depth * bricks). */
+__kernel void gather_bricks(__global float4 *pool, __global const float4 *src, const int4 src_start,
+                            const int4 src_shape, __global const int4 *starts, __global const int4 *boxes,
+                            const int depth, const float scale)
+{
+    const int b = get_global_id(2) / depth;
+    const int4 at = (int4)(get_global_id(0), get_global_id(1), get_global_id(2) % depth, 0), box = boxes[b];
+    if (at.x >= box.x || at.y >= box.y || at.z >= box.z)
+        return;
+    const int4 p = starts[b] + at - src_start;
+    const bool inside = p.x >= 0 && p.y >= 0 && p.z >= 0 && p.x < src_shape.x && p.y < src_shape.y && p.z < src_shape.z;
+    const float4 v = inside ? src[((size_t)p.z * src_shape.y + p.y) * src_shape.x + p.x] : (float4)(0.0f);
+    pool[box.w + ((size_t)at.z * box.y + at.y) * box.x + at.x] = scale * v;
+}
+
+/* brick_bounds: per block of CLW_BLOCK^3 grid-0 fine cells of every brick, the largest |coefficient|
+ * of any group whose B-spline reaches it (partition of unity: |f| <= max |c| there, every channel).
+ *   out          (Z, Y, X) float over the page table's box, CLW_SUPER_CELLS / CLW_BLOCK blocks per brick
+ *   nblocks      out's shape (x, y, z); origin the brick index (x, y, z) of the page table's first
+ *   coef, frames, boxes   the pool as in field_bspline.h; bricks: per slot its brick (x, y, z) in the
+ *                page table
+ * Grid: global ((CLW_SUPER_CELLS / CLW_BLOCK)^3, slots). */
+__kernel void brick_bounds(__global float *out, const int4 nblocks, const int4 origin, __global const float4 *coef,
+                           __global const int4 *bricks, __global const float4 *frames, __global const int4 *boxes)
+{
+    const int per = CLW_SUPER_CELLS / CLW_BLOCK, k = get_global_id(0), slot = get_global_id(1);
+    const int4 block = bricks[slot] * per + (int4)(k % per, k / per % per, k / (per * per), 0);
+    const float4 lo = convert_float4((block + origin * per) * CLW_BLOCK), hi = lo + CLW_BLOCK;
+    float m = 0.0f;
+    for (int g = 0; g < CLW_GROUPS; g++) {
+        const float4 f = frames[slot * CLW_GROUPS + g];
+        const int4 n = boxes[slot * CLW_GROUPS + g];
+        const int4 first = max(convert_int4(floor((lo - f) * f.w)) - ORDER[g] + 1, 0);
+        const int4 last = min(convert_int4(ceil((hi - f) * f.w)) - 1, n - 1);
+        for (int z = first.z; z <= last.z; z++)
+            for (int y = first.y; y <= last.y; y++)
+                for (int x = first.x; x <= last.x; x++) {
+                    const float4 c = fabs(coef[n.w + ((size_t)z * n.y + y) * n.x + x]);
+                    m = fmax(m, fmax(fmax(c.x, c.y), fmax(c.z, c.w)));
+                }
+    }
+    out[((size_t)block.z * nblocks.y + block.y) * nblocks.x + block.x] = m;
+}
+
+/* alpha_floor: per slot the least alpha (channel 3, lane w) coefficient of group `g` of the brick: the
+ * B-splines are non-negative and sum to 1, so alpha >= that floor in the brick.
+ * Grid: global (slots). */
+__kernel void alpha_floor(__global float *out, __global const float4 *coef, __global const int4 *boxes, const int g)
+{
+    const int slot = get_global_id(0);
+    const int4 n = boxes[slot * CLW_GROUPS + g];
+    float m = INFINITY;
+    for (size_t i = 0; i < (size_t)n.x * n.y * n.z; i++)
+        m = fmin(m, coef[n.w + i].w);
+    out[slot] = m;
+}

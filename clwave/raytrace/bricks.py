@@ -1,0 +1,430 @@
+"""The brick-sparse multiresolution B-spline field of the ray tracer (docs/raytracing.md §3).
+
+The thresholded wavelet expansion of a channel group is, near a point, a B-spline expansion on
+the lattice of level l, where l + 1 is the finest level with a kept detail whose support reaches
+there (docs/model.md §4: the synthesis of the coarser bands is a change of basis).  The grid-0
+fine lattice is cut into bricks of :data:`BRICK`^3 cells (a brick is a superblock of the empty-space
+bounds); :func:`plan` gives each brick the coarsest such level over every group, and
+:func:`build` expands each brick's coefficients at that level on the device, slab of bricks by
+slab, from the model's sparse coefficients (never a full-size array), into one pool with a page
+table.  ``cl/raytrace/field_bspline.h`` evaluates it; ``cl/raytrace/raytrace.cl`` cuts rays at each
+brick's own knot planes, so segments in smooth bricks are ``2^l`` cells long.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from itertools import product
+
+import numpy as np
+import pyopencl.array as cla
+from pyopencl import cltypes
+from pyopencl.elementwise import ElementwiseKernel
+
+from ..device import programs
+from ..device.constants import BLOCK, SUPER
+from ..device.context import ComputeContext
+from ..device.kernels import BUFFER, Kernel
+from ..errors import DeviceMemoryError, InputError
+from ..model.geometry import band_lattice
+from .bounds import content_weights
+
+BRICK = BLOCK * SUPER  #: fine cells along a brick's edge (grid-0 coordinates)
+ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
+
+
+def _part_args(name: str) -> tuple:
+    """The arguments of one input part of ``synth_axis`` (cl/raytrace/expand.cl)."""
+    return ((name, BUFFER), (f"{name}_start", cltypes.int4), (f"{name}_shape", cltypes.int4),
+            (f"{name}_taps", BUFFER), (f"n{name}", np.int32), (f"{name}_shift", np.int32))
+
+
+_SYNTH_AXIS = Kernel("synth_axis", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
+                     *_part_args("a"), *_part_args("b"), ("has_b", np.int32))
+_GATHER = Kernel("gather_bricks", ("pool", BUFFER), ("src", BUFFER), ("src_start", cltypes.int4),
+                 ("src_shape", cltypes.int4), ("starts", BUFFER), ("boxes", BUFFER), ("depth", np.int32),
+                 ("scale", np.float32))
+_FLOOR = Kernel("alpha_floor", ("out", BUFFER), ("coef", BUFFER), ("boxes", BUFFER), ("g", np.int32))
+_BOUNDS = Kernel("brick_bounds", ("out", BUFFER), ("nblocks", cltypes.int4), ("origin", cltypes.int4),
+                 ("coef", BUFFER), ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER))
+
+
+@dataclass
+class Plan:
+    """Which bricks exist and at which lattice level (z, y, x brick indices from ``origin``)."""
+
+    origin: np.ndarray   # (3,) brick index of level[0, 0, 0]
+    level: np.ndarray    # (Z, Y, X) int8: the brick's lattice level, ABSENT where there is no brick
+    clamp: np.ndarray    # (Z, Y, X) bool: the brick holds empty voxels' fine coefficients, zeroed (level 0)
+
+
+def plan(wv) -> Plan:
+    """The bricks of a model and their levels.
+
+    A brick exists where a kept non-zero coefficient's support reaches and (for a model that knows its
+    content) some non-empty voxel's fine coefficient does; its level is the coarsest lattice that holds
+    every group there exactly.  A brick where empty and non-empty voxels' fine coefficients meet is
+    expanded at level 0, where they are zeroed (docs/raytracing.md §4).  Reach is counted with whole
+    support boxes, on the safe side: a brick may be finer than needed, never coarser.
+    """
+    j0 = wv.groups[0].wavelet.order
+    spans = []  # per band with kept non-zero coefficients: (level or None for the approximation, lo, extent)
+    for g in wv.groups:
+        wav, shift = g.wavelet, g.wavelet.order - j0
+        for band, sl in zip(g.bands, g.band_slices()):
+            positions = g.all_positions()[sl] - band.start
+            index = np.column_stack(np.unravel_index(positions[np.any(g.values[:, sl] != 0, axis=0)], band.shape))
+            if not len(index):
+                continue
+            off, step, support = band_lattice(wav, band.key, band.level)
+            corner = off - shift / 2.0 + step * index  # grid-0 support corners (docs/raytracing.md §3)
+            lo = np.floor(corner / BRICK).astype(np.int64)
+            spans.append((band.level if band.key != "aaa" else None, lo,
+                          np.ceil((corner + step * support) / BRICK).astype(np.int64) - 1 - lo))
+    if not spans:
+        return Plan(np.zeros(3, np.int64), np.full((1, 1, 1), ABSENT, np.int8), np.zeros((1, 1, 1), bool))
+    origin = np.min([lo.min(axis=0) for _, lo, _ in spans], axis=0)
+    shape = tuple(np.max([(lo + ext).max(axis=0) for _, lo, ext in spans], axis=0) - origin + 1)
+    present, level = np.zeros(shape, bool), np.full(shape, wv.levels, np.int8)
+    for m, lo, extent in spans:
+        reach = _reach(lo - origin, extent, shape)
+        present |= reach
+        if m is not None:  # the finest detail reaching a brick sets its level
+            level[reach] = np.minimum(level[reach], m - 1)
+    level[~present] = ABSENT
+    clamp = np.zeros(level.shape, bool)
+    if wv.content_mask is not None:
+        empty, mixed = _content(wv, origin, level.shape)
+        level[empty] = ABSENT
+        clamp = mixed & (level != ABSENT)
+        level[clamp] = 0
+    return Plan(origin, level, clamp)
+
+
+def _reach(lo, extent, shape) -> np.ndarray:
+    """The bricks ``lo .. lo + extent`` of all the coefficients (K, 3), as a boolean grid: the corners marked per
+    extent class, then each class spread over its extent."""
+    top = extent.max(axis=0) + 1
+    corners = np.zeros(shape + tuple(top), bool)
+    corners[tuple(lo.T) + tuple(extent.T)] = True
+    reach = np.zeros(shape, bool)
+    for e in product(*(range(n) for n in top)):
+        marked = corners[(Ellipsis, *e)]
+        if marked.any():
+            for d in product(*(range(k + 1) for k in e)):
+                reach[tuple(slice(k, None) for k in d)] |= marked[tuple(slice(0, n - k) for n, k in zip(shape, d))]
+    return reach
+
+
+def _content(wv, origin, shape) -> tuple:
+    """Per brick: (no group's window holds a non-empty voxel, some group's window holds an empty one).
+
+    Group g's window in brick b is the fine coefficients (= voxels, docs/raytracing.md §4) whose
+    B-splines reach it: voxels ``floor(16 b + s_g) - j_g + 1 .. ceil(16 b + 16 + s_g) - 1`` per axis (s_g
+    the grid shift), counted separably, one axis at a time.
+    """
+    j0 = wv.groups[0].wavelet.order
+    has_any, has_all = [], []
+    for g in wv.groups:
+        j, s = g.wavelet.order, (g.wavelet.order - j0) / 2.0
+        first, width = int(np.floor(s)) - j + 1, int(np.ceil(BRICK + s) - np.floor(s)) + j - 1
+        count = wv.content_mask.astype(np.uint16)
+        for axis in range(3):
+            count = _window_sums(count, axis, BRICK * origin[axis] + first, width, shape[axis])
+        has_any.append(count > 0)
+        has_all.append(count == width ** 3)
+    empty = ~np.any(has_any, axis=0)
+    mixed = np.any([a & ~b for a, b in zip(has_any, has_all)], axis=0) | np.any([~a for a in has_any], axis=0)
+    return empty, mixed & ~empty
+
+
+def _window_sums(arr, axis, start, width, count):
+    """Sums of ``arr`` along ``axis`` over ``[start + 16 b, start + 16 b + width)``, b < count (zero outside)."""
+    assert BRICK <= width <= 2 * BRICK
+    n = arr.shape[axis]
+    length = BRICK * (count + 1)
+    padded = np.zeros(arr.shape[:axis] + (length,) + arr.shape[axis + 1:], np.uint16)
+    lo, hi = max(start, 0), min(start + length, n)
+    if hi > lo:
+        idx = [slice(None)] * arr.ndim
+        idx[axis] = slice(lo - start, hi - start)
+        src = [slice(None)] * arr.ndim
+        src[axis] = slice(lo, hi)
+        padded[tuple(idx)] = arr[tuple(src)]
+    blocks = padded.reshape(arr.shape[:axis] + (count + 1, BRICK) + arr.shape[axis + 1:])
+    whole = blocks.sum(axis=axis + 1, dtype=np.uint16)
+    tail = np.take(blocks, range(width - BRICK), axis=axis + 1).sum(axis=axis + 1, dtype=np.uint16)
+    return np.take(whole, range(count), axis=axis) + np.take(tail, range(1, count + 1), axis=axis)
+
+
+@dataclass
+class BrickField:
+    """The bricks of a model on the device (``FIELD_PARAMS`` of ``cl/raytrace/field_bspline.h``).
+
+    Slot s holds brick ``bricks[s]`` at level ``levels[s]``; its group g is the box of lattice
+    coefficients ``boxes[s, g]`` = (nx, ny, nz, first pool element), whose local lattice coordinate
+    at grid-0 point x is ``(x - frames[s, g].xyz) * frames[s, g].w``; ``lattices[s]`` is the origin
+    (x, y, z) and spacing of the brick's knot planes (every group's, at its level).
+    """
+
+    pool: cla.Array        # float4 coefficients, pre-multiplied by 2^(-3l/2), channels in their own slots
+    pages: cla.Array       # (Z, Y, X) int32 slot per brick, -1 where there is none
+    origin: np.ndarray     # (3,) brick index (z, y, x) of pages[0, 0, 0]
+    frames: cla.Array      # (slots, groups) float4
+    boxes: cla.Array       # (slots, groups) int4
+    lattices: cla.Array    # (slots,) float4
+    bricks: np.ndarray     # (slots, 3) brick index (z, y, x)
+    levels: np.ndarray     # (slots,) lattice level
+    orders: tuple          # the groups' B-spline orders
+    seconds: float         # expansion time
+
+    @property
+    def nbytes(self) -> int:
+        return self.pool.nbytes + self.pages.nbytes + self.frames.nbytes + self.boxes.nbytes + self.lattices.nbytes
+
+    def tables(self) -> dict:
+        """The kernel arguments of the field (``FIELD_PARAMS``)."""
+        return dict(coef=self.pool, pages=self.pages, page_origin=self.origin[::-1], page_shape=self.pages.shape[::-1],
+                    frames=self.frames, boxes=self.boxes, lattices=self.lattices)
+
+    def block_bounds(self, cc) -> np.ndarray:
+        """(Z, Y, X) per BLOCK^3 block of the page table's box: the largest |coefficient| of any group whose
+        B-spline reaches it (partition of unity: it bounds every channel there), 0 outside the bricks."""
+        shape = tuple(int(n) * SUPER for n in self.pages.shape)
+        out = cla.zeros(cc.queue, shape, np.float32)
+        if len(self.levels):
+            kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(self.orders))
+            bricks = np.zeros((len(self.bricks), 4), np.int32)
+            bricks[:, :3] = (self.bricks - self.origin)[:, ::-1]
+            _BOUNDS(kernels, cc.queue, (SUPER ** 3, len(self.levels)), None, out=out, nblocks=shape[::-1],
+                    origin=self.origin[::-1], coef=self.pool, bricks=cla.to_device(cc.queue, bricks),
+                    frames=self.frames, boxes=self.boxes)
+        return out.get()
+
+
+def group_defines(orders) -> dict:
+    """The build defines of the channel groups' orders (``ORDER`` in the kernels)."""
+    return dict(CLW_GROUPS=len(orders), CLW_ORDERS=",".join(map(str, orders)))
+
+
+def layout(wv, p: Plan) -> dict:
+    """Per slot (present brick, in brick order) and group: the lattice box, its frame, its pool offset."""
+    bricks = np.argwhere(p.level != ABSENT) + p.origin
+    levels = p.level[tuple((bricks - p.origin).T)].astype(np.int64)
+    j0 = wv.groups[0].wavelet.order
+    step = 2.0 ** levels[:, None]
+    base, count, frame = [], [], []
+    for g in wv.groups:
+        wav, s = g.wavelet, (g.wavelet.order - j0) / 2.0
+        off = np.array([wav.offset("a", int(lv)) for lv in range(wv.levels + 1)], float)[levels][:, None]
+        u_lo = (BRICK * bricks + s - off) / step          # the brick in the level's lattice coordinates
+        u_hi = (BRICK * (bricks + 1) + s - off) / step
+        first = np.floor(u_lo).astype(np.int64) - wav.order + 1
+        base.append(first)
+        count.append(np.ceil(u_hi).astype(np.int64) - first)
+        frame.append(off - s + first * step)
+    base, count, frame = np.stack(base, 1), np.stack(count, 1), np.stack(frame, 1)  # (slots, groups, 3)
+    sizes = np.prod(count, axis=2).reshape(-1)
+    offset = np.concatenate([[0], np.cumsum(sizes)])
+    if offset[-1] >= 2 ** 31:
+        raise DeviceMemoryError(f"{offset[-1]} brick coefficients are more than one pool indexes (2^31); "
+                                f"render a cropped or downsampled volume")
+    return dict(bricks=bricks, levels=levels, base=base, count=count, frame=frame,
+                offset=offset[:-1].reshape(len(bricks), len(wv.groups)), total=int(offset[-1]))
+
+
+def lattice_of_levels(wv) -> np.ndarray:
+    """(levels + 1, 4) per lattice level l: the origin (x, y, z) and spacing of the knot planes every group's
+    level-l B-splines share (grid-0 coordinates), or the fine lattice where they do not share a coarser one."""
+    j0 = wv.groups[0].wavelet.order
+    fine = 0.5 if len({g.wavelet.order % 2 for g in wv.groups}) > 1 else 1.0
+    out = []
+    for lv in range(wv.levels + 1):
+        step = 2.0 ** lv
+        starts = {(g.wavelet.offset("a", lv) - (g.wavelet.order - j0) / 2.0) % step for g in wv.groups}
+        out.append((*(starts.pop(),) * 3, step) if len(starts) == 1 else (0.0, 0.0, 0.0, fine))
+    return np.array(out, np.float32)
+
+
+def build(wv, cc: ComputeContext, p: Plan | None = None) -> BrickField:
+    """Expand the model's bricks on the device, slab of bricks (one brick row along z) by slab.
+
+    Per slab and group the real-line synthesis (``cl/raytrace/expand.cl``) runs from the approximation
+    down to the slab's finest brick level, each level cropped to the box its bricks and the next level
+    need; after each level the bricks at it are copied into the pool (``gather_bricks``).  The bands
+    are cropped from the model's sparse coefficients per slab.  Raises :class:`DeviceMemoryError`
+    before allocating when the pool and one slab's work do not fit.
+    """
+    if wv.channels > 4:
+        raise InputError(f"the ray tracer takes at most 4 channels (RGBA), this volume has {wv.channels}")
+    p = p if p is not None else plan(wv)
+    lay = layout(wv, p)
+    q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
+    _check_fits(wv, cc, p, lay)
+    synth = [programs.build(cc, ["raytrace/expand.cl"], dict(CLW_AXIS=a)) for a in range(3)]  # compile apart
+    kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(orders))
+    start = time.perf_counter()
+    pool = cla.empty(q, (max(lay["total"], 16), 4), np.float32)  # 16: an absent brick's reads stay inside
+    clamp = ElementwiseKernel(cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f",
+                              "clamp_to_content")
+    slabs = lay["bricks"][:, 0]
+    for bz in np.unique(slabs):
+        slots = np.flatnonzero(slabs == bz)
+        clamped = bool(p.clamp[tuple((lay["bricks"][slots] - p.origin).T)].any())
+        for gi in range(len(wv.groups)):
+            _expand_slab(wv, gi, lay, slots, clamped and wv.content_mask is not None, cc, synth, kernels, pool, clamp)
+    q.finish()
+    seconds = time.perf_counter() - start
+    pages = np.full(p.level.shape, -1, np.int32)
+    pages[tuple((lay["bricks"] - p.origin).T)] = np.arange(len(lay["bricks"]), dtype=np.int32)
+    n, G = len(lay["bricks"]), len(wv.groups)
+    frames = np.zeros((max(n, 1), G, 4), np.float32)
+    boxes = np.zeros((max(n, 1), G, 4), np.int32)
+    frames[:n, :, :3] = lay["frame"][..., ::-1]
+    frames[:n, :, 3] = 2.0 ** -lay["levels"][:, None]
+    boxes[:n, :, :3] = lay["count"][..., ::-1]
+    boxes[:n, :, 3] = lay["offset"]
+    boxes = cla.to_device(q, boxes)
+    lattices = lattice_of_levels(wv)[lay["levels"] if n else [0]]
+    alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
+    if n and alpha is not None:  # docs/raytracing.md §3: where alpha may dip below 0, the fine lattice's segments
+        floor = cla.empty(q, n, np.float32)
+        _FLOOR(kernels, q, (n,), None, out=floor, coef=pool, boxes=boxes, g=alpha)
+        lattices[floor.get() < 0] = lattice_of_levels(wv)[0]
+    return BrickField(pool, cla.to_device(q, pages), p.origin, cla.to_device(q, frames), boxes,
+                      cla.to_device(q, lattices), lay["bricks"], lay["levels"], orders, seconds)
+
+
+def _check_fits(wv, cc, p: Plan, lay):
+    """DeviceMemoryError unless the pool, the bounds and one slab's synthesis fit the device."""
+    pool = 16 * lay["total"]
+    bounds = 4 * p.level.size * SUPER ** 3
+    section = np.prod((np.array(p.level.shape[1:]) + 1) * BRICK)
+    slab = 3 * 16 * (BRICK + 2 * max(g.wavelet.order for g in wv.groups)) * section  # input, pairs, output
+    need = pool + bounds + slab
+    if need > cc.info.global_mem * 0.8 or max(pool, slab / 3) > cc.info.max_alloc:
+        raise DeviceMemoryError(
+            f"the bricks of this volume need about {need / 2**20:.0f} MiB on {cc.info.name}, which has "
+            f"{cc.info.global_mem / 2**20:.0f} MiB ({cc.info.max_alloc / 2**20:.0f} MiB per buffer); use fewer "
+            f"levels, keep fewer coefficients, crop the volume or pick another --device")
+
+
+def _parents(wav, taps, lo, hi) -> tuple:
+    """The parent index box (first, last per axis) that the children ``lo .. hi`` of one synthesis step read."""
+    firsts, lasts = [], []
+    for letter in "ad":
+        shift, n = wav.synthesis_shift(letter), len(taps[letter])
+        firsts.append(-((shift + n - 1 - lo) // 2))  # ceil((lo - shift - n + 1) / 2)
+        lasts.append((hi - shift) // 2)
+    return np.min(firsts, axis=0), np.max(lasts, axis=0)
+
+
+def _crop(g, band_no: int, band_slice: slice, lo, hi) -> np.ndarray:
+    """The band's coefficients in the index box lo .. hi (inclusive), dense (nz, ny, nx, C), zero where not kept."""
+    band = g.bands[band_no]
+    out = np.zeros((*(hi - lo + 1), len(g.channels)), np.float32)
+    a, b = np.maximum(lo, 0), np.minimum(hi + 1, band.shape)
+    if np.any(b <= a):
+        return out
+    target = tuple(slice(x - o, y - o) for x, y, o in zip(a, b, lo))
+    if g.positions is None:
+        values = g.values[:, band.start:band.start + band.size].reshape(-1, *band.shape)
+        out[target] = np.moveaxis(values[(slice(None), *(slice(x, y) for x, y in zip(a, b)))], 0, -1)
+        return out
+    plane = band.shape[1] * band.shape[2]
+    positions = g.positions[band_slice]
+    i, k = np.searchsorted(positions, band.start + np.array([a[0], b[0]]) * plane)
+    kz, rest = np.divmod(positions[i:k] - band.start, plane)
+    ky, kx = np.divmod(rest, band.shape[2])
+    sel = (ky >= a[1]) & (ky < b[1]) & (kx >= a[2]) & (kx < b[2])
+    out[kz[sel] - lo[0], ky[sel] - lo[1], kx[sel] - lo[2]] = g.values[:, band_slice][:, i:k][:, sel].T
+    return out
+
+
+def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, clamp):
+    g, q = wv.groups[gi], cc.queue
+    wav = g.wavelet
+    taps = {"a": (wav.p / np.sqrt(2.0)).astype(np.float32), "d": (wav.q / np.sqrt(2.0)).astype(np.float32)}
+    levels = lay["levels"][slots]
+    first, last = lay["base"][slots, gi], lay["base"][slots, gi] + lay["count"][slots, gi] - 1
+    own = {int(lv): (first[levels == lv].min(axis=0), last[levels == lv].max(axis=0)) for lv in np.unique(levels)}
+    need = {min(own): own[min(own)]}
+    for lv in range(min(own) + 1, wv.levels + 1):
+        lo, hi = _parents(wav, taps, *need[lv - 1])
+        if lv in own:
+            lo, hi = np.minimum(lo, own[lv][0]), np.maximum(hi, own[lv][1])
+        need[lv] = (lo, hi)
+    slices = g.band_slices()
+
+    def part(band_no, box):
+        arr = _crop(g, band_no, slices[band_no], *box)
+        return _Part(_upload(cc, arr, g.channels), box[0], np.array(arr.shape[:3])) if arr.any() else None
+
+    def gather(level, src):
+        sel = slots[levels == level]
+        starts = np.zeros((len(sel), 4), np.int32)
+        starts[:, :3] = lay["base"][sel, gi][:, ::-1]
+        boxes = np.zeros((len(sel), 4), np.int32)
+        boxes[:, :3] = lay["count"][sel, gi][:, ::-1]
+        boxes[:, 3] = lay["offset"][sel, gi]
+        n = boxes[:, :3].max(axis=0)
+        _GATHER(kernels, q, (int(n[0]), int(n[1]), int(n[2]) * len(sel)), None, pool=pool, src=src.data,
+                src_start=src.start[::-1], src_shape=src.shape[::-1], starts=cla.to_device(q, starts),
+                boxes=cla.to_device(q, boxes), depth=int(n[2]), scale=2.0 ** (-1.5 * level))
+
+    approx = part(0, need[wv.levels]) or _Part(cla.zeros(q, (1, 1, 1, 4), np.float32), need[wv.levels][0],
+                                                np.ones(3, np.int64))
+    if wv.levels in own:
+        gather(wv.levels, approx)
+    d_taps = {k: cla.to_device(q, v) for k, v in taps.items()}
+    shifts = {k: wav.synthesis_shift(k) for k in "ad"}
+    for m in range(wv.levels, min(own), -1):
+        parts = {"aaa": approx}
+        for band_no, band in enumerate(g.bands):
+            if band.level == m and band.key != "aaa" and (detail := part(band_no, need[m])) is not None:
+                parts[band.key] = detail
+        lo, hi = need[m - 1]
+        for axis in range(3):  # array axis z, y, x; keys lose their leading letter per axis done
+            merged = {}
+            for rest in sorted({key[1:] for key in parts}):
+                pair = [(letter, parts[letter + rest]) for letter in "ad" if letter + rest in parts]
+                merged[rest] = _synth_axis(cc, synth[2 - axis], pair, axis, d_taps, taps, shifts,
+                                           (lo[axis], hi[axis]))
+            parts = merged
+        approx = parts[""]
+        if m == 1 and clamped:  # docs/raytracing.md §4: empty voxels' fine coefficients are zero
+            keep = content_weights(wv.content_mask, approx.start, approx.shape).astype(np.uint8)
+            clamp(approx.data.reshape(-1), cla.to_device(q, keep))
+        if m - 1 in own:
+            gather(m - 1, approx)
+
+
+@dataclass
+class _Part:
+    data: cla.Array
+    start: np.ndarray  # (z, y, x)
+    shape: np.ndarray
+
+
+def _upload(cc, arr, channels) -> cla.Array:
+    out = np.zeros(arr.shape[:3] + (4,), np.float32)
+    out[..., list(channels)] = arr
+    return cla.to_device(cc.queue, out)
+
+
+def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, crop) -> _Part:
+    """One synthesis step along array ``axis`` of an ('a', part) / ('d', part) pair, the output cropped to the
+    child indices ``crop`` (first, last) along ``axis``."""
+    lo = np.min([p.start for _, p in pair], axis=0)
+    hi = np.max([p.start + p.shape for _, p in pair], axis=0)
+    lo[axis], hi[axis] = crop[0], crop[1] + 1
+    shape = hi - lo
+    out = cla.empty(cc.queue, tuple(int(s) for s in shape) + (4,), np.float32)
+    parts = {}
+    for name, (letter, p) in zip("ab", pair + pair[:1] * (2 - len(pair))):  # a lone part twice, the second ignored
+        parts.update({name: p.data, f"{name}_start": p.start[::-1], f"{name}_shape": p.shape[::-1],
+                      f"{name}_taps": d_taps[letter], f"n{name}": len(taps[letter]), f"{name}_shift": shifts[letter]})
+    _SYNTH_AXIS(kernels, cc.queue, tuple(int(s) for s in shape[::-1]), None, parts, out=out, out_start=lo[::-1],
+                out_shape=shape[::-1], has_b=len(pair) == 2)
+    return _Part(out, lo, shape)
