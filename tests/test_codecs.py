@@ -1,7 +1,11 @@
 """Quantised .clw values (docs/codecs.md): the voxel error bound against PyWavelets' own synthesis, files that
 hold it, readers that check it, and tools/compare_codecs.py on a tiny volume."""
 
+import importlib.util
+import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import dask.array as da
@@ -17,6 +21,7 @@ from clwave.io.clw import synthesis_bound
 from clwave.model.bspline import wavelet_for
 
 ROOT = Path(__file__).resolve().parents[1]
+
 
 
 @pytest.fixture(scope="module")
@@ -151,3 +156,31 @@ def test_compress_quantise_reports_the_error_of_the_file(tmp_path, capsys):
     assert main(["compress", "phantom:hydrogen:16", "--quantise", "tiny", "-o", str(tmp_path / "x.clw")]) == 2
     err = capsys.readouterr().err
     assert "--quantise tiny must be a bound > 0" in err and err.count("\n") == 1
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(importlib.util.find_spec("matplotlib") is None, reason="matplotlib (the test extra) is missing")
+def test_compare_codecs_end_to_end(tmp_path):
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "compare_codecs.py"), "--size", "24", "--volumes",
+                           "hydrogen", "shepp-logan", "--keep", "0.005", "0.05", "0.2", "--out", str(tmp_path),
+                           "--figure", str(tmp_path / "rd.png")], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    report = json.loads((tmp_path / "rate_distortion.json").read_text())
+    for volume in ("hydrogen", "shepp-logan"):
+        rows = [r for r in report["rows"] if r["volume"] == volume]
+        clw = {(r["codec"], r["keep"]): r for r in rows if r["codec"].startswith(".clw")}
+        for codec in (".clw float", ".clw quantised"):
+            assert clw[(codec, 0.2)]["psnr"] > clw[(codec, 0.005)]["psnr"]
+            assert clw[(codec, 0.2)]["xray_error"] < clw[(codec, 0.005)]["xray_error"]
+        for keep in (0.005, 0.05, 0.2):
+            assert clw[(".clw quantised", keep)]["bits_per_voxel"] < clw[(".clw float", keep)]["bits_per_voxel"]
+        for r in rows:  # sizes are the bytes written; errors as measured here from the decoded voxels
+            assert r["bits_per_voxel"] == pytest.approx(8 * r["bytes"] / 24 ** 3)
+            assert np.isfinite(r["psnr"]) and r["rmse"] > 0
+        names = {r["codec"] for r in rows}
+        if importlib.util.find_spec("zfpy"):
+            assert {"zfp fixed-rate", "zfp fixed-accuracy"} <= names
+        if importlib.util.find_spec("pysz"):
+            assert "SZ3" in names
+    assert (tmp_path / "rd.png").stat().st_size > 0 and "| hydrogen |" in (tmp_path / "rate_distortion.md").read_text()
