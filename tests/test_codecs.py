@@ -23,7 +23,6 @@ from clwave.model.bspline import wavelet_for
 ROOT = Path(__file__).resolve().parents[1]
 
 
-
 @pytest.fixture(scope="module")
 def hydrogen():
     return clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 24), "cubic", levels=2).threshold(keep=0.2)

@@ -11,7 +11,8 @@ and said so, without nilearn).  Per keep fraction K, the model of ``--wavelet``/
 
 - ``.clw float``: ``save(path)``, the float32 values (deflate);
 - ``.clw quantised``: ``save(path, quantise="auto")`` (docs/codecs.md §1);
-- ``zfp fixed-rate``: zfpy at the rate (bits per voxel) of the quantised ``.clw`` file;
+- ``zfp fixed-rate``: zfpy at the rate (bits per voxel) of the quantised ``.clw`` file (none below
+  ``ZFP_MIN_RATE``);
 - ``zfp fixed-accuracy`` and ``SZ3`` (pysz, absolute error bound): the tolerance bisected so the stream is as
   large as the quantised ``.clw`` file (within 2 %, or the nearest reached).
 
@@ -44,6 +45,7 @@ sys.path.insert(0, str(ROOT))  # run from a checkout
 import clwave  # noqa: E402
 
 PHANTOMS = ("hydrogen", "marschner-lobb", "shepp-logan")
+ZFP_MIN_RATE = 9 / 64  # zfpy's fixed rate needs 9 bits a 4x4x4 block of float32; below, it corrupts its heap
 MATCH = 0.02  # bisection stops within this relative size of the target
 ITERATIONS = 40
 
@@ -131,9 +133,12 @@ def peer_rows(vol, targets, log) -> list:
             start = time.perf_counter()
             if codec == "zfp fixed-rate":
                 value = 8.0 * target / data.size
+                if value < ZFP_MIN_RATE:
+                    log(f"  {100 * keep:g} %: zfp fixed-rate cannot go below {ZFP_MIN_RATE:.3f} bits per voxel")
+                    continue
                 stream = encode(value)
             else:
-                value, stream = matched(encode, target, span * 1e-9, span)
+                value, stream = matched(encode, target, span * 1e-9, span * 1e3)
             seconds = time.perf_counter() - start
             rows.append(dict(codec=codec, keep=keep, parameter=f"{name} {value:.4g}", seconds=seconds,
                              **measure(vol.data, decode(stream), len(stream))))
