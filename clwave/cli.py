@@ -273,9 +273,18 @@ def cmd_compress(args):
     out = _check_output(args.output, args.force)
     if out.suffix.lower() != ".clw":
         raise InputError(f"output {out} must end in .clw")
+    from .io.clw import check_quantise, read_clw
+
+    quantise = args.quantise
+    if quantise not in (None, "auto"):
+        try:
+            quantise = float(quantise)
+        except ValueError:
+            pass  # check_quantise names it
+    quantise = check_quantise(quantise)  # before any work
     wv, reference = build_model(args, gather=False)
     start = time.perf_counter()
-    wv.save(out, overwrite=args.force)
+    wv.save(out, overwrite=args.force, quantise=quantise)
     saved = time.perf_counter() - start
     size, voxels = out.stat().st_size, wv.n_voxels
     raw = voxels * wv.channels * 4  # the volume the model approximates, as float32
@@ -287,7 +296,8 @@ def cmd_compress(args):
     print(f"file                  {out}: {_bytes(size)}, {raw / size:.1f}:1 against the volume as raw float32 "
           f"({_bytes(raw)}), written in {saved:.2f} s")
     if reference is not None:
-        error = np.sqrt(np.mean((wv.reconstruct().data - reference.data) ** 2))
+        stored = wv if quantise is None else read_clw(out)  # the rounded values, as the file holds them
+        error = np.sqrt(np.mean((stored.reconstruct().data - reference.data) ** 2))
         peak = max(float(np.max(np.abs(reference.data))), np.finfo(np.float32).tiny)
         print(f"error                 RMS over the voxels {error / peak:.2e} of the largest value "
               f"(PSNR {20 * np.log10(peak / max(error, 1e-30)):.1f} dB)")
@@ -514,7 +524,9 @@ def make_parser():
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=cmd_info)
 
-    _command(sub, "compress", "write a thresholded wavelet volume (.clw)", cmd_compress, "output .clw file")
+    p = _command(sub, "compress", "write a thresholded wavelet volume (.clw)", cmd_compress, "output .clw file")
+    p.add_argument("--quantise", help="store the values rounded so that no voxel moves by more than this bound "
+                                      "(volume units), or 'auto' (half the smallest kept detail); docs/codecs.md")
     p = _command(sub, "render", "render an image: wavelet splatting (X-ray) or ray tracing (shaded)", cmd_render,
                  "output .png (or .gif with --turntable)", view=True)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",

@@ -183,7 +183,7 @@ def test_a_signal_while_writing_leaves_nothing(tmp_path, signum, code):
 import sys, time
 from clwave import cli
 from clwave.io import clw
-def slow(model, fh):
+def slow(model, fh, *_):
     fh.write(b"partial")
     fh.flush()
     print("writing", flush=True)

@@ -9,13 +9,14 @@ Layout (version 2)::
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
     g<i>/positions  int64 (N,): a channel group's stored coefficients, into its band layout, ascending
                     within a run and stored as differences (the first of a run as it is)
-    g<i>/values     float32 (N, C)
+    g<i>/values     float32 (N, C); or, quantised, int32 q with attribute ``step``: the values are q * step
     g<i>/runs       int64 (R, 3): (tier, first row, rows) of each run of rows of one tier
 
 A tier is -1 for the coarsest approximation, else :func:`~clwave.model.chunked.tiers_of` of the
 details' importance; a reader takes the runs of the approximation, then of the tiers from the most
 important down, as far as it needs.  Zero coefficients are not stored.  Every dataset is chunked,
-deflated and checksummed (Fletcher-32), so a damaged file is told apart from a valid one.
+deflated and checksummed (Fletcher-32), so a damaged file is told apart from a valid one; a quantised
+file is compressed with Zstandard (hdf5plugin) instead (docs/codecs.md).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveError, FileFormatError, InputError
+from ..errors import ClwaveError, FileFormatError, InputError, finite_number
 from ..model.bspline import SplineWavelet, max_levels
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.transform import band_layout
@@ -40,18 +41,115 @@ ROWS = 1 << 14               # coefficients a dataset chunk holds, and a tier's 
 MASK_CHUNK = (64, 64, 64)
 MAX_HEADER = 1 << 20
 FILTERS = dict(compression="gzip", compression_opts=4, shuffle=True, fletcher32=True)
+ZSTD_LEVEL = 19              # quantised files: Zstandard's strongest ordinary level (docs/codecs.md §2)
+INT32_LIMIT = 2 ** 31 - 1
+AUTO_FLOOR = 2.0 ** -24      # quantise="auto": a step no finer than float32's resolution of the largest value
+
+
+def _filters(quantised) -> dict:
+    """Per dataset (positions, values, content_mask, runs), the HDF5 filters of a float or a quantised file:
+    deflate, or Zstandard, which a quantised file's integers favour (measured in docs/codecs.md §2)."""
+    if not quantised:
+        return dict(positions=FILTERS, values=FILTERS, content_mask=FILTERS, runs=FILTERS)
+    import hdf5plugin
+
+    zstd = dict(fletcher32=True, **hdf5plugin.Zstd(clevel=ZSTD_LEVEL))
+    return dict(positions=dict(shuffle=True, **zstd), values=zstd, content_mask=zstd, runs=FILTERS)
 
 
 # ---------------------------------------------------------------- writing
 
 
-def write_clw(model, path, overwrite=False) -> Path:
+def write_clw(model, path, overwrite=False, quantise=None) -> Path:
     """Write a :class:`WaveletVolume`, or stream a :class:`ChunkedWaveletVolume`, to ``path`` atomically;
-    refuses to replace a file unless ``overwrite``."""
-    return write_atomic(path, lambda fh: _write(model, fh), overwrite)
+    refuses to replace a file unless ``overwrite``.  ``quantise``: None (exact float32 values), a bound on
+    the change of any voxel of :meth:`~WaveletVolume.reconstruct`, or "auto" (:func:`quantisation_steps`)."""
+    steps = quantisation_steps(model, quantise)
+    return write_atomic(path, lambda fh: _write(model, fh, steps), overwrite)
 
 
-def _write(model, fh):
+def check_quantise(quantise):
+    """None, "auto" or a finite bound > 0 (InputError naming the fix otherwise)."""
+    if quantise is None or (isinstance(quantise, str) and quantise == "auto"):
+        return quantise
+    why = "must be a bound > 0 on the change of any voxel (in the volume's units), or 'auto'"
+    try:
+        bound = finite_number(quantise, "quantise")
+    except InputError:
+        bound = float("nan")
+    if not bound > 0:
+        raise InputError(f"quantise={quantise!r} {why}", cli=f"--quantise {quantise} {why}")
+    return bound
+
+
+def quantisation_steps(model, quantise) -> list | None:
+    """Per channel group, the step its values are rounded to (docs/codecs.md §1), or None unquantised.
+
+    A bound ``E``: step ``2 E / L``, L the synthesis bound (:func:`synthesis_bound`), so no voxel of the
+    reconstruction moves by more than E.  "auto": half the smallest stored detail coefficient (largest over
+    channels), so no stored coefficient rounds to zero, yet at least float32's resolution of the largest
+    value (``AUTO_FLOOR``); an in-memory model only.
+    """
+    quantise = check_quantise(quantise)
+    if quantise is None:
+        return None
+    chunked = isinstance(model, ChunkedWaveletVolume)
+    if quantise == "auto":
+        if chunked:
+            raise InputError("quantise='auto' needs the coefficients in memory; give a chunked model a bound, "
+                             "e.g. quantise=1e-3", cli="--quantise auto needs the whole model in memory; give a "
+                                                       "chunked input a bound, e.g. --quantise 1e-3")
+        steps = []
+        for g in model.groups:
+            largest = np.abs(g.values).max(axis=0)
+            details = largest[g.band_slices()[0].stop:]
+            smallest = details[details > 0] if np.any(details > 0) else largest[largest > 0]
+            top = float(largest.max()) if len(largest) else 0.0
+            steps.append(max(0.5 * float(smallest.min()), AUTO_FLOOR * top) if len(smallest) else 1.0)
+        return steps
+    wavelets = [w for w, _ in model.groups()] if chunked else [g.wavelet for g in model.groups]
+    steps = [2.0 * quantise / synthesis_bound(w, model.levels) for w in wavelets]
+    if not chunked:
+        for g, step in zip(model.groups, steps):
+            _check_range(g.values, step)
+    return steps
+
+
+def synthesis_bound(wavelet, levels) -> float:
+    """The most any voxel of :meth:`WaveletVolume.reconstruct` changes when every coefficient changes by at
+    most 1: sum over the bands of the largest row sum of |synthesis| (docs/codecs.md §1).  Per band the
+    row sum is the product over the axes of the 1-D one (a tensor product): the largest, over the 2^m
+    residues, sum of |response| of a level-m scaling function ('a') or wavelet ('d') at the fine level.
+    The interpolating model's sampling filter is positive and sums to 1, so the bound holds for it too."""
+    bank = wavelet.bank
+
+    def row_sum(letter, m):
+        response = np.ones(1)
+        for step in range(m):  # m synthesis steps from the coarse coefficient down to the voxels
+            up = np.zeros(2 * len(response) - 1)
+            up[::2] = response
+            response = np.convolve(up, bank["rec_hi" if letter == "d" and step == 0 else "rec_lo"])
+        period = 1 << m
+        padded = np.append(np.abs(response), np.zeros(-len(response) % period))
+        return float(padded.reshape(-1, period).sum(axis=0).max())
+
+    total = row_sum("a", levels) ** 3
+    for m in range(1, levels + 1):
+        a, d = row_sum("a", m), row_sum("d", m)
+        total += (a + d) ** 3 - a ** 3  # the seven detail bands of level m
+    return total
+
+
+def _check_range(values, step):
+    """Refuse a step at which some value would not fit an int32."""
+    top = float(np.abs(values).max()) if values.size else 0.0
+    if top / step > INT32_LIMIT:
+        raise InputError(f"a quantisation step of {step:.3g} is too fine for coefficients up to {top:.3g} (their "
+                         "multiples must fit in 32 bits); give a larger bound", cli="--quantise: the bound is too "
+                         "small for these coefficients (their multiples must fit in 32 bits); give a larger one")
+
+
+def _write(model, fh, steps):
     import h5py
 
     chunked = isinstance(model, ChunkedWaveletVolume)
@@ -64,13 +162,14 @@ def _write(model, fh):
     with h5py.File(fh, "w", libver="latest", meta_block_size=512) as h5:  # small metadata blocks: small models
         text = json.dumps(header)
         h5.attrs.update(format=FILE_FORMAT, version=FILE_VERSION, header=text, header_crc32=zlib.crc32(text.encode()))
+        filters = _filters(steps is not None)
         tiers = _Tiers(h5, [band_layout(w, model.shape, model.levels)[0].size for w, _ in groups],
-                       [len(c) for _, c in groups])
+                       [len(c) for _, c in groups], steps, filters)
         if chunked:
-            _stream(model, h5, tiers)
+            _stream(model, h5, tiers, filters)
         else:
             if model.content_mask is not None:
-                _mask_dataset(h5, model.shape)[...] = np.ascontiguousarray(model.content_mask).view(np.uint8)
+                _mask_dataset(h5, model.shape, filters)[...] = np.ascontiguousarray(model.content_mask).view(np.uint8)
             for gi, g in enumerate(model.groups):
                 stored = np.any(g.values != 0, axis=0)  # a zero coefficient adds nothing: it is not stored
                 plain = importance_of(g, None, model.frame)  # tiers rank without the focus (docs/chunked.md §4)
@@ -78,10 +177,10 @@ def _write(model, fh):
         tiers.flush()
 
 
-def _stream(model: ChunkedWaveletVolume, h5, tiers):
+def _stream(model: ChunkedWaveletVolume, h5, tiers, filters):
     from ..cluster import client_for
 
-    mask = _mask_dataset(h5, model.shape)
+    mask = _mask_dataset(h5, model.shape, filters)
     with client_for(model.scheduler) as client:
         for box, block in model.content_blocks(client):
             mask[box] = block.view(np.uint8)
@@ -90,25 +189,31 @@ def _stream(model: ChunkedWaveletVolume, h5, tiers):
             tiers.append(gi, positions[stored], values[:, stored], tier[stored])
 
 
-def _mask_dataset(h5, shape):
+def _mask_dataset(h5, shape, filters):
     return h5.create_dataset("content_mask", shape=shape, dtype=np.uint8,
-                             chunks=tuple(min(c, n) for c, n in zip(MASK_CHUNK, shape)), **FILTERS)
+                             chunks=tuple(min(c, n) for c, n in zip(MASK_CHUNK, shape)), **filters["content_mask"])
 
 
 class _Tiers:
     """Appends coefficients to their group's datasets in runs of one tier, whole chunks of :data:`ROWS`
-    rows at a time (the rest waits in a buffer for more of its tier, or for :meth:`flush`)."""
+    rows at a time (the rest waits in a buffer for more of its tier, or for :meth:`flush`); with ``steps``,
+    each group's values as integer multiples of its step."""
 
-    def __init__(self, h5, approx_sizes, channels):
-        self.h5, self.approx_sizes = h5, approx_sizes
+    def __init__(self, h5, approx_sizes, channels, steps, filters):
+        self.h5, self.approx_sizes, self.steps, self.filters = h5, approx_sizes, steps, filters
         self.buffers, self.runs = {}, {gi: [] for gi in range(len(channels))}
         for gi, c in enumerate(channels):
             h5.create_dataset(f"g{gi}/positions", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(ROWS,),
-                              **FILTERS)
-            h5.create_dataset(f"g{gi}/values", shape=(0, c), maxshape=(None, c), dtype=np.float32,
-                              chunks=(ROWS, c), **FILTERS)
+                              **filters["positions"])
+            values = h5.create_dataset(f"g{gi}/values", shape=(0, c), maxshape=(None, c), chunks=(ROWS, c),
+                                       dtype=np.float32 if steps is None else np.int32, **filters["values"])
+            if steps is not None:
+                values.attrs["step"] = np.float64(steps[gi])
 
     def append(self, gi, positions, values, tiers):
+        if self.steps is not None:  # a value that rounds to zero adds nothing: it is not stored
+            kept = np.any(np.rint(values / np.float64(self.steps[gi])) != 0, axis=0)
+            positions, values, tiers = positions[kept], values[:, kept], tiers[kept]
         names = np.where(positions < self.approx_sizes[gi], -1, tiers)  # the approximation: band 0 of the layout
         for tier in np.unique(names)[::-1]:
             sel = names == tier
@@ -128,7 +233,7 @@ class _Tiers:
             tiers = sorted((t for g, t in self.buffers if g == gi), key=lambda t: (t != -1, -t))
             self._write(gi, [(t, self.buffers.pop((gi, t))) for t in tiers])
             self.h5.create_dataset(f"g{gi}/runs", data=np.array(self.runs[gi], dtype=np.int64).reshape(-1, 3),
-                                   **FILTERS)
+                                   **self.filters["runs"])
 
     def _write(self, gi, tier_parts):
         """Append runs ``[(tier, [(positions, values (C, n)), ...]), ...]`` in one write."""
@@ -140,10 +245,14 @@ class _Tiers:
             deltas.append(np.diff(positions[order], prepend=0))
             rows_values.append(np.concatenate([v for _, v in parts], axis=1).T[order])
             self.runs[gi].append((tier, start + sum(len(d) for d in deltas[:-1]), len(positions)))
-        for name, data in (("positions", deltas), ("values", rows_values)):
+        values = np.concatenate(rows_values)
+        if self.steps is not None:  # round to the nearest multiple (docs/codecs.md §1)
+            _check_range(values, self.steps[gi])
+            values = np.rint(values / np.float64(self.steps[gi])).astype(np.int32)
+        for name, data in (("positions", np.concatenate(deltas)), ("values", values)):
             dataset = self.h5[f"g{gi}/{name}"]
-            dataset.resize(start + sum(len(d) for d in deltas), axis=0)
-            dataset[start:] = np.concatenate(data)
+            dataset.resize(start + len(data), axis=0)
+            dataset[start:] = data
 
 
 # ---------------------------------------------------------------- reading
@@ -157,6 +266,7 @@ def read_clw(path, keep=None) -> WaveletVolume:
     the header, before anything is read; the checksums are verified as the data is read.
     """
     import h5py
+    import hdf5plugin  # noqa: F401  (registers the Zstandard filter of quantised files)
 
     path = Path(path)
     if keep is not None:
@@ -222,7 +332,7 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
     _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
     n = stored.shape[0] if stored is not None else -1
     _check_dataset(stored, (n,), np.int64)
-    _check_dataset(stored_values, (n, c), np.float32)  # one handle each: its chunk cache serves every run
+    step = _check_values(stored_values, (n, c))  # one handle each: its chunk cache serves every run
     runs = runs[...]
     if n > total or runs.shape[0] > n + 1 or np.any(runs[:, 2] < 0) or np.any(runs[:, 0] < -1) or \
             not np.array_equal(np.sort(runs[:, 1]), np.cumsum(np.append(0, runs[np.argsort(runs[:, 1]), 2]))[:-1]) or \
@@ -236,6 +346,9 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
         mine = sorted((int(start), int(start + count)) for _, start, count in runs[runs[:, 0] == tier])
         positions = np.concatenate([np.cumsum(stored[a:b]) for a, b in mine])
         values = np.concatenate([stored_values[a:b] for a, b in mine])
+        if step is not None:
+            with np.errstate(over="ignore"):  # beyond float32: infinite, refused below
+                values = (values * step).astype(np.float32)
         lo, hi = (0, n_approx) if tier == -1 else (n_approx, total)
         if len(positions) and (positions.min() < lo or positions.max() >= hi):
             raise ValueError(f"group {gi} tier {tier} holds positions outside its bands")
@@ -261,6 +374,20 @@ def _tiers_to_read(sizes, budget) -> tuple:
             return i + 1, (None if done + n == budget else budget - done)
         done += n
     return len(sizes), None
+
+
+def _check_values(dataset, shape):
+    """A group's values: float32, or int32 with a finite positive scalar ``step`` attribute (returned)."""
+    import h5py
+
+    step = dataset.attrs.get("step") if isinstance(dataset, h5py.Dataset) else None
+    if step is None:
+        _check_dataset(dataset, shape, np.float32)
+        return None
+    if not (isinstance(step, np.floating) and np.isfinite(step) and step > 0):
+        raise ValueError(f"member {dataset.name} has a quantisation step {step!r}, not one finite number > 0")
+    _check_dataset(dataset, shape, np.int32)
+    return float(step)
 
 
 def _check_dataset(dataset, shape, dtype):

@@ -258,11 +258,12 @@ class ChunkedWaveletVolume:
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
                              content_mask=mask)
 
-    def save(self, path, overwrite=False) -> Path:
-        """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory."""
+    def save(self, path, overwrite=False, quantise=None) -> Path:
+        """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;
+        ``quantise`` as :meth:`WaveletVolume.save` (a bound only)."""
         from ..io.clw import write_clw
 
-        return write_clw(self, path, overwrite)
+        return write_clw(self, path, overwrite, quantise)
 
 
 # ---------------------------------------------------------------- the graph

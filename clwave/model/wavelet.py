@@ -377,12 +377,13 @@ class WaveletVolume:
         self._shared.clear()
 
     # ------------------------------------------------------------- files
-    def save(self, path, overwrite=False) -> Path:
+    def save(self, path, overwrite=False, quantise=None) -> Path:
         """Write a ``.clw`` file (docs/model.md §6, :mod:`clwave.io.clw`); refuses to replace an
-        existing file unless ``overwrite``; writes atomically."""
+        existing file unless ``overwrite``; writes atomically.  ``quantise``: a bound on the change of any
+        voxel of :meth:`reconstruct`, or "auto", stores the values rounded to a step (docs/codecs.md)."""
         from ..io.clw import write_clw  # io builds on the model, not the other way round
 
-        return write_clw(self, path, overwrite)
+        return write_clw(self, path, overwrite, quantise)
 
     @classmethod
     def open(cls, path, keep=None) -> "WaveletVolume":
