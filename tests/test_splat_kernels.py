@@ -174,3 +174,33 @@ def test_accumulate(cc, scene, variant, channels):
     assert np.abs(images[0] - expected).max() <= 1e-5 * np.abs(expected).max()
     if channels == 1:  # the other channels of the framebuffer keep their values
         assert np.array_equal(images[0][:, 1:], np.full((PIXELS, 3), 0.5, np.float32))
+
+
+def test_stages_in_bands_of_one_item_give_the_results_of_long_launches(cc, scene, monkeypatch):
+    """Count, place and accumulate go in bounded launches (Ctrl-C is taken between them,
+    clwave.device.kernels.in_bands): one splat of every chunk, or one tile, a launch gives the oracle's
+    counts and records and the image of long launches bit for bit."""
+    from clwave.device import kernels
+
+    st, q, n = Stages(cc, 4), cc.queue, scene["n"]
+    d, runs, textures = upload(q, scene), TILES * scene["textures_per_layer"], scene["textures_per_layer"]
+    chunks = 7
+    expected = reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"], scene["bbox"],
+                                 scene["stex"], scene["values"], scene["layers"], 4)
+    starts = np.concatenate([[0], np.cumsum(counts(scene, chunks).T)[:-1]]).astype(np.uint32)
+    ranges = cla.to_device(q, scene["ranges"])
+    images = []
+    for seconds in (1e9, 0.0):  # bands growing to the whole (twice the last), then a band of one item each
+        monkeypatch.setattr(kernels, "LAUNCH_SECONDS", seconds)
+        table = cla.empty(q, (chunks * runs,), np.uint32)
+        st.count(n, chunks, TILES, textures, scene["first"], d["bbox"], d["centre"], d["stex"], d["values"], d, table)
+        assert np.array_equal(table.get(), counts(scene, chunks).ravel())
+        cursors = cla.to_device(q, np.ascontiguousarray(starts.reshape(-1, chunks).T).ravel())
+        records = cla.empty(q, expected.shape, np.uint32)
+        st.place(n, chunks, TILES, textures, scene["first"], d["bbox"], d["centre"], d["stex"], d["values"], d,
+                 cursors, records)
+        assert np.array_equal(records.get(), expected)
+        fb = cla.zeros(q, (PIXELS, 4), np.float32)
+        st.accumulate(TILES, len(LAYERS), d, ranges, records, fb)
+        images.append(fb.get())
+    assert np.abs(images[0]).max() > 1 and np.array_equal(images[0], images[1])

@@ -13,7 +13,7 @@ from pyopencl.scan import ExclusiveScanKernel
 
 from ..device import programs
 from ..device.constants import TILE, record_uint4s
-from ..device.kernels import BUFFER, Kernel
+from ..device.kernels import BUFFER, Kernel, Pace, in_bands
 
 GPU_PIXELS = 1  # pixels per work-item of raster_gpu.cl (CLW_PX)
 U32, I32 = np.uint32, np.int32
@@ -22,9 +22,9 @@ _PROJECT = Kernel("splat_project", ("n", U32), ("first", U32), ("coef", BUFFER),
                   ("tex_layer", BUFFER), ("layers", BUFFER), ("centre", BUFFER), ("bbox", BUFFER),
                   ("stex", BUFFER), ("count", BUFFER))
 _CHUNK_TILES = Kernel("splat_chunk_tiles", ("n", U32), ("chunk", U32), ("chunks", U32), ("tiles", U32),
-                      ("textures", U32), ("place", I32), ("first", U32), ("bbox", BUFFER), ("centre", BUFFER),
-                      ("stex", BUFFER), ("values", BUFFER), ("tex_layer", BUFFER), ("layers", BUFFER),
-                      ("table", BUFFER), ("records", BUFFER))
+                      ("textures", U32), ("place", I32), ("first", U32), ("lo", U32), ("hi", U32),
+                      ("bbox", BUFFER), ("centre", BUFFER), ("stex", BUFFER), ("values", BUFFER),
+                      ("tex_layer", BUFFER), ("layers", BUFFER), ("table", BUFFER), ("records", BUFFER))
 _TRANSPOSE = Kernel("transpose_counts", ("rows", U32), ("cols", U32), ("src", BUFFER), ("dst", BUFFER))
 _TILE_RANGES = Kernel("tile_ranges", ("tiles", U32), ("textures", U32), ("chunks", U32), ("total", U32),
                       ("offset", BUFFER), ("ranges", BUFFER))
@@ -74,6 +74,8 @@ class Stages:
         # binning chunks: on a CPU one work-item per group, so the few chunks spread over the cores
         self.bin_local = None if cc.info.kind == "GPU" else (1,)
         self._scan = ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")
+        # the rates of the banded stages (in_bands), kept between passes and views
+        self.paces = dict(count=Pace(), place=Pace(), accumulate=Pace())
 
     def pair_budget(self) -> int:
         """The most (tile, splat) pairs one pass may bin: their records within :data:`TILE_LIST_SHARE`
@@ -86,9 +88,11 @@ class Stages:
         _PROJECT(self.kernels, self.cc.queue, (n,), None, tables, n=n, first=first, coef=coef,
                  centre=centre, bbox=bbox, stex=stex, count=count)
 
-    def count(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts):
-        """Per chunk of consecutive splats, its splats per (tile, texture), chunk-major."""
-        self._chunk_tiles(0, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, counts)
+    def count(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, pairs=0):
+        """Per chunk of consecutive splats, its splats per (tile, texture), chunk-major (``pairs``: the
+        (tile, splat) pairs of the n splats, if known, to pace the launches)."""
+        self._chunk_tiles(0, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, counts,
+                          pairs)
 
     def transpose(self, rows, cols, src, dst):
         """``dst`` = the (rows, cols) table ``src`` transposed."""
@@ -103,18 +107,29 @@ class Stages:
         _TILE_RANGES(self.kernels, self.cc.queue, (tiles,), None, tiles=tiles, textures=textures, chunks=chunks,
                      total=total, offset=starts, ranges=ranges)
 
-    def place(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records):
-        """A record per (tile, splat) pair at each chunk's write cursors (chunk-major)."""
-        self._chunk_tiles(1, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records)
+    def place(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records, pairs=0):
+        """A record per (tile, splat) pair at each chunk's write cursors (chunk-major); ``pairs`` as for count."""
+        self._chunk_tiles(1, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records,
+                          pairs)
 
     def accumulate(self, tiles, layer_count, tables, ranges, records, fb):
-        """Add every tile's records to the framebuffers ``fb`` of the view's ``layer_count`` layers."""
-        local = self.accumulate_local
-        _ACCUMULATE(self.kernels, self.cc.queue, (tiles * local,), (local,), tables, layer_count=layer_count,
-                    ranges=ranges, records=records, fb=fb)
+        """Add every tile's records to the framebuffers ``fb`` of the view's ``layer_count`` layers, in
+        bands of tiles of about equal work (a tile's records, and one for its pixels; ``in_bands``)."""
+        local, q = self.accumulate_local, self.cc.queue
+        r = ranges.get().reshape(-1, 2).astype(np.int64)
+        work = np.concatenate([[0], np.cumsum(r[:, 1] - r[:, 0] + 1)])
+        in_bands(q, lambda first, count: _ACCUMULATE(
+            self.kernels, q, (count * local,), (local,), tables, global_offset=(first * local,),
+            layer_count=layer_count, ranges=ranges, records=records, fb=fb), tiles, work=work,
+            pace=self.paces["accumulate"])
 
     def _chunk_tiles(self, place, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, table,
-                     records):
-        _CHUNK_TILES(self.kernels, self.cc.queue, (chunks,), self.bin_local, tables, n=n, chunk=-(-n // chunks),
-                     chunks=chunks, tiles=tiles, textures=textures, place=place, first=first, bbox=bbox,
-                     centre=centre, stex=stex, values=values, table=table, records=records)
+                     records, pairs):
+        """Count or place, in launches of a band of splats of every chunk at a time (``in_bands``), a splat
+        costing one and its tile pairs."""
+        q, chunk = self.cc.queue, -(-n // chunks)
+        in_bands(q, lambda lo, count: _CHUNK_TILES(
+            self.kernels, q, (chunks,), self.bin_local, tables, n=n, chunk=chunk, chunks=chunks, tiles=tiles,
+            textures=textures, place=place, first=first, lo=lo, hi=lo + count, bbox=bbox, centre=centre, stex=stex,
+            values=values, table=table, records=records), chunk, work=chunks * (1 + pairs / max(n, 1)),
+            pace=self.paces["place" if place else "count"])
