@@ -33,7 +33,8 @@ _ACCUMULATE = Kernel("splat_accumulate", ("layer_count", I32), ("layers", BUFFER
                      ("fb", BUFFER))
 
 
-TILE_LIST_SHARE = 0.25  # of the device's memory, at most, for the tile lists of one chunk of splats
+TILE_LIST_SHARE = 0.25  # of the device budget, at most, for the tile lists of one chunk of splats
+BIN_TABLE_SHARE = 1 / 32  # of the device budget for the three count tables of a pass, unless one chunk needs more
 
 
 #: binning work-items (chunks of consecutive splats) per compute unit: a GPU needs many; on a CPU
@@ -41,15 +42,27 @@ TILE_LIST_SHARE = 0.25  # of the device's memory, at most, for the tile lists of
 CHUNKS_PER_UNIT = dict(GPU=64, CPU=4)
 
 
-def bin_chunks(n: int, runs: int, info) -> int:
+def tile_list_bytes(budget) -> int:
+    """The most bytes of tile lists one pass may use within ``budget`` (a
+    :class:`~clwave.device.memory.DeviceBudget`): :data:`TILE_LIST_SHARE` of it, in one buffer."""
+    return int(min(budget.max_alloc, budget.total * TILE_LIST_SHARE))
+
+
+def bin_table_bytes(runs: int, budget) -> int:
+    """The most bytes of the three uint32 count tables of a pass with ``runs`` (tile, texture) runs: those
+    of :func:`bin_chunks` chunks, one chunk at the least."""
+    return max(12 * runs, int(budget.total * BIN_TABLE_SHARE) // 12 * 12)
+
+
+def bin_chunks(n: int, runs: int, info, budget) -> int:
     """Number of chunks of consecutive splats the binning works in (one work-item each).
 
     Enough for every compute unit of the device (``info``: :class:`clwave.device.context.DeviceInfo`),
     bounded by the splats and by the (tile, texture, chunk) count tables (``runs`` = tiles x
-    textures): three of them, uint32, in at most 1/32 of the device's memory.
+    textures): three of them, uint32, within :data:`BIN_TABLE_SHARE` of ``budget`` and one allocation.
     """
     per_unit = CHUNKS_PER_UNIT["GPU" if info.kind == "GPU" else "CPU"]
-    entries = min(info.max_alloc // 4, info.global_mem // 32 // 12)
+    entries = min(budget.max_alloc // 4, int(budget.total * BIN_TABLE_SHARE) // 12)
     return max(1, min(n, per_unit * info.compute_units, entries // runs))
 
 
@@ -77,11 +90,10 @@ class Stages:
         # the rates of the banded stages (in_bands), kept between passes and views
         self.paces = dict(count=Pace(), place=Pace(), accumulate=Pace())
 
-    def pair_budget(self) -> int:
-        """The most (tile, splat) pairs one pass may bin: their records within :data:`TILE_LIST_SHARE`
-        of the device, and record indices (pairs x 2 uint4s) within 32 bits."""
-        info = self.cc.info
-        return min(int(min(info.max_alloc, info.global_mem * TILE_LIST_SHARE)) // self.record_bytes, 2**31 - 1)
+    def pair_budget(self, budget) -> int:
+        """The most (tile, splat) pairs one pass may bin: their records within :func:`tile_list_bytes`
+        of ``budget``, and record indices (pairs x 2 uint4s) within 32 bits."""
+        return min(tile_list_bytes(budget) // self.record_bytes, 2**31 - 1)
 
     def project(self, n, first, coef, tables, centre, bbox, stex, count):
         """Each splat's pixel centre, pixel box, texture and tile count (0: culled)."""
