@@ -334,6 +334,8 @@ def _camera_options(p):
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
     g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic bands into coarser framebuffers "
                    "within this error relative to the image maximum (e.g. 1e-2; default: off)")
+    g.add_argument("--device-memory", metavar="SIZE", help="splatting: device memory to use at most, e.g. 2GiB or "
+                   "512M (default: the device's); coefficients beyond it stream in chunks (docs/splatting.md §6)")
 
 
 def _raytrace_options(p):
@@ -374,6 +376,13 @@ def _display_window(args):
     return "auto" if args.display_window == "auto" else _numbers(args.display_window, "--window", (2,))
 
 
+def _device_memory(args):
+    """``device_memory=`` from ``--device-memory SIZE``, checked before any work."""
+    from .device.memory import parse_size
+
+    return None if args.device_memory is None else parse_size(args.device_memory)
+
+
 def _write_gif(path, pictures, seconds_per_frame, force):
     import imageio.v3 as iio
 
@@ -402,6 +411,9 @@ def cmd_render(args):
         raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
     if args.method == "raytrace" and args.coarse is not None:
         raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
+    if args.method == "raytrace" and args.device_memory is not None:
+        raise InputError("--device-memory applies to splatting (--method splat); ray tracing does not take it yet")
+    device_memory = _device_memory(args)
     if args.omega_s is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
         raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
     if not (np.isfinite(args.tolerance) and args.tolerance > 0):
@@ -416,7 +428,8 @@ def cmd_render(args):
         def render(cam):
             return raytrace(wv, cam, tracer=tracer, **options)
     else:
-        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse)
+        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse,
+                                 device_memory=device_memory)
 
         def render(cam):
             return splat(wv, cam, renderer=renderer)
@@ -474,9 +487,10 @@ def cmd_progressive(args):
     camera = make_camera(args)
     steps = 8 if args.steps is None and args.budget is None else args.steps
     check_schedule(steps, args.budget)
+    device_memory = _device_memory(args)
     wv, _ = build_model(args)
     frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device,
-                              omega_s=args.omega_s, coarse=args.coarse))
+                              omega_s=args.omega_s, coarse=args.coarse, device_memory=device_memory))
     window = _display_window(args)
     if window == "auto":  # the final image's window for every frame: refinement stays visible
         window = resolve_window(frames[0].final_image()[..., :3], "auto")

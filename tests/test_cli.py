@@ -243,3 +243,31 @@ def test_turntable_summary_gives_the_whole_job(tmp_path, capsys):
     code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "--turntable", "3",
                          "-o", str(tmp_path / "t.gif"))
     assert code == 0 and "turntable of 3 views" in out and "a view, median" in out
+
+
+def test_device_memory_streams_splatting_and_is_checked(tmp_path, capsys):
+    """--device-memory caps the splat renderer (docs/splatting.md §6): the API's image with the same cap;
+    a bad size, a cap below one chunk and the ray tracer (which does not take it yet) are one-line errors."""
+    import json
+
+    import clwave
+    raw, stats, frames = tmp_path / "s.npy", tmp_path / "s.json", tmp_path / "p.json"
+    argv = ["phantom:hydrogen:16", "--levels", "2", "--keep", "1", "--size", "32"]
+    code, out, err = run(capsys, "render", *argv, "--device-memory", "1300KiB", "-o", str(tmp_path / "s.png"),
+                         "--raw", str(raw), "--stats", str(stats))
+    assert code == 0, err
+    meta = json.loads(stats.read_text())
+    assert meta["coefficient_chunks"] >= 2 and meta["device_budget"] == 1300 * 1024
+    wv = WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=2).threshold(keep=1.0)
+    api = clwave.splat(wv, clwave.Camera(30, 20, size=32), device_memory=1300 << 10)
+    assert np.array_equal(np.load(raw), api.image)
+    code, out, err = run(capsys, "progressive", *argv, "--device-memory", "1300K", "--steps", "2", "-o",
+                         str(tmp_path / "p.gif"), "--stats", str(frames))
+    assert code == 0, err
+    assert json.loads(frames.read_text())["meta"]["coefficient_chunks"] >= 2
+    for extra, needle in ((["--device-memory", "2GB"], "--device-memory 2GB is not a size"),
+                          (["--device-memory", "1K"], "--device-memory 1 KiB is too small"),
+                          (["--tf", "hydrogen", "--method", "raytrace", "--device-memory", "1G"],
+                           "applies to splatting")):
+        code, out, err = run(capsys, "render", *argv, *extra, "-o", str(tmp_path / "x.png"))
+        assert code == 2 and err.count("\n") == 1 and needle in err and not (tmp_path / "x.png").exists()

@@ -333,3 +333,31 @@ def test_a_nrrd_header_declaring_more_than_its_data_is_refused_before_reading(tm
     with pytest.raises(FileFormatError, match="declares 4000 x 4000 x 4000 voxels"):
         clwave.load(path)
     assert time.perf_counter() - start < 1.0
+
+
+def test_ctrl_c_stops_a_long_splat_within_a_second(tmp_path):
+    """A 1000^2 splat of every coefficient of 32^3 accumulates for half a minute on 2 cores; its launches
+    are bounded (docs/splatting.md §6), so the command line takes Ctrl-C at once: one line, code 130."""
+    script = f"""
+import sys
+from clwave import cli
+from clwave.splat import stages
+accumulate = stages.Stages.accumulate
+def announced(self, *args):
+    print("accumulating", flush=True)
+    accumulate(self, *args)
+stages.Stages.accumulate = announced
+sys.exit(cli.main(["render", "phantom:hydrogen:32", "--levels", "2", "--keep", "1", "--size", "1000",
+                   "-o", {str(tmp_path / 'out.png')!r}]))
+"""
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    while b"accumulating" not in proc.stdout.readline():
+        assert proc.poll() is None
+    time.sleep(0.5)
+    start = time.perf_counter()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert time.perf_counter() - start < 1.5
+    assert proc.returncode == 130 and err.decode().strip() == "clwave: interrupted"
+    assert not list(tmp_path.iterdir())

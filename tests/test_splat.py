@@ -284,3 +284,18 @@ def test_one_shot_calls_share_their_renderer_until_released(cc, data, monkeypatc
     wv.release()
     with pytest.raises(AssertionError, match="second renderer"):
         clwave.splat(wv, cams[0], device=cc)
+
+
+def test_bounded_launches_give_the_image_of_long_ones(cc, data, monkeypatch):
+    """Binning and accumulation go in launches of about LAUNCH_SECONDS (Ctrl-C is taken between them,
+    docs/splatting.md §6): a band of one splat of every chunk, or one tile, a launch gives the image of
+    long launches bit for bit."""
+    from clwave.device import kernels
+
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2).threshold(keep=0.5)
+    cam = clwave.Camera(30, 20, size=(40, 56))
+    monkeypatch.setattr(kernels, "LAUNCH_SECONDS", 1e9)
+    whole = clwave.splat(wv, cam, renderer=clwave.SplatRenderer(wv, device=cc)).image
+    monkeypatch.setattr(kernels, "LAUNCH_SECONDS", 0.0)
+    banded = clwave.splat(wv, cam, renderer=clwave.SplatRenderer(wv, device=cc)).image
+    assert np.abs(whole).max() > 1 and np.array_equal(banded, whole)

@@ -8,6 +8,7 @@ import numpy as np
 import pyopencl.array as cla
 import pytest
 
+from clwave.device.memory import device_budget
 from clwave.splat import reference
 from clwave.splat.stages import Stages, bin_chunks
 from clwave.splat.tables import LINEAR_U, LINEAR_V, pack_texture
@@ -80,8 +81,8 @@ def upload(q, s):
     return {k: cla.to_device(q, v) for k, v in s.items() if isinstance(v, np.ndarray)}
 
 
-def chunkings(n, runs, info):
-    return (1, 7, bin_chunks(n, runs, info))  # one chunk, a few uneven ones, the renderer's
+def chunkings(cc, n, runs):
+    return (1, 7, bin_chunks(n, runs, cc.info, device_budget(cc)))  # one chunk, a few uneven ones, the renderer's
 
 
 def counts(s, chunks):
@@ -104,7 +105,7 @@ def test_project(cc, scene):
 def test_count(cc, scene):
     st, q, n = Stages(cc, 4), cc.queue, scene["n"]
     d, runs = upload(q, scene), TILES * scene["textures_per_layer"]
-    for chunks in chunkings(n, runs, cc.info):
+    for chunks in chunkings(cc, n, runs):
         table = cla.empty(q, (chunks * runs,), np.uint32)
         st.count(n, chunks, TILES, scene["textures_per_layer"], scene["first"], d["bbox"], d["centre"], d["stex"],
                  d["values"], d, table)
@@ -129,7 +130,7 @@ def test_scan(cc, rng):
 def test_ranges(cc, scene):
     st, q = Stages(cc, 4), cc.queue
     runs = TILES * scene["textures_per_layer"]
-    for chunks in chunkings(scene["n"], runs, cc.info):
+    for chunks in chunkings(cc, scene["n"], runs):
         starts = np.concatenate([[0], np.cumsum(counts(scene, chunks).T)[:-1]]).astype(np.uint32)  # run-major
         ranges = cla.empty(q, (TILES, 2), np.uint32)
         st.ranges(TILES, scene["textures_per_layer"], chunks, scene["total"], cla.to_device(q, starts), ranges)
@@ -142,7 +143,7 @@ def test_place(cc, scene, channels):
     d, runs = upload(q, scene), TILES * scene["textures_per_layer"]
     expected = reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"], scene["bbox"],
                                  scene["stex"], scene["values"], scene["layers"], channels)
-    for chunks in chunkings(n, runs, cc.info):
+    for chunks in chunkings(cc, n, runs):
         starts = np.concatenate([[0], np.cumsum(counts(scene, chunks).T)[:-1]]).astype(np.uint32)
         cursors = cla.to_device(q, np.ascontiguousarray(starts.reshape(-1, chunks).T).ravel())  # chunk-major
         records = cla.empty(q, expected.shape, np.uint32)
@@ -174,3 +175,33 @@ def test_accumulate(cc, scene, variant, channels):
     assert np.abs(images[0] - expected).max() <= 1e-5 * np.abs(expected).max()
     if channels == 1:  # the other channels of the framebuffer keep their values
         assert np.array_equal(images[0][:, 1:], np.full((PIXELS, 3), 0.5, np.float32))
+
+
+def test_stages_in_bands_of_one_item_give_the_results_of_long_launches(cc, scene, monkeypatch):
+    """Count, place and accumulate go in bounded launches (Ctrl-C is taken between them,
+    clwave.device.kernels.in_bands): one splat of every chunk, or one tile, a launch gives the oracle's
+    counts and records and the image of long launches bit for bit."""
+    from clwave.device import kernels
+
+    st, q, n = Stages(cc, 4), cc.queue, scene["n"]
+    d, runs, textures = upload(q, scene), TILES * scene["textures_per_layer"], scene["textures_per_layer"]
+    chunks = 7
+    expected = reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"], scene["bbox"],
+                                 scene["stex"], scene["values"], scene["layers"], 4)
+    starts = np.concatenate([[0], np.cumsum(counts(scene, chunks).T)[:-1]]).astype(np.uint32)
+    ranges = cla.to_device(q, scene["ranges"])
+    images = []
+    for seconds in (1e9, 0.0):  # bands growing to the whole (twice the last), then a band of one item each
+        monkeypatch.setattr(kernels, "LAUNCH_SECONDS", seconds)
+        table = cla.empty(q, (chunks * runs,), np.uint32)
+        st.count(n, chunks, TILES, textures, scene["first"], d["bbox"], d["centre"], d["stex"], d["values"], d, table)
+        assert np.array_equal(table.get(), counts(scene, chunks).ravel())
+        cursors = cla.to_device(q, np.ascontiguousarray(starts.reshape(-1, chunks).T).ravel())
+        records = cla.empty(q, expected.shape, np.uint32)
+        st.place(n, chunks, TILES, textures, scene["first"], d["bbox"], d["centre"], d["stex"], d["values"], d,
+                 cursors, records)
+        assert np.array_equal(records.get(), expected)
+        fb = cla.zeros(q, (PIXELS, 4), np.float32)
+        st.accumulate(TILES, len(LAYERS), d, ranges, records, fb)
+        images.append(fb.get())
+    assert np.abs(images[0]).max() > 1 and np.array_equal(images[0], images[1])

@@ -74,6 +74,9 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
  *   textures     the most textures of any layer (runs are keyed by the index within the layer)
  *   place        0: count, 1: place
  *   first        index of the chunk's first coefficient (values are indexed first + splat)
+ *   lo, hi       this launch walks splats lo .. hi - 1 of each chunk (of its own numbering): long passes
+ *                go in several launches, each continuing the counts or cursors of the last
+ *                (clwave.device.kernels.in_bands), so Ctrl-C is taken between them
  *   bbox, stex   in  (n,) from splat_project; centre too (read when placing)
  *   values       in  (K,) float4: coefficient per channel
  *   tex_layer, layers  in  as for splat_project
@@ -87,7 +90,8 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
  *                the splats' tables at random (those misses took 40 % of its time)
  * Grid: global (chunks,), any local size; work-item c owns row c of table. */
 __kernel void splat_chunk_tiles(const uint n, const uint chunk, const uint chunks, const uint tiles,
-                                const uint textures, const int place, const uint first,
+                                const uint textures, const int place, const uint first, const uint lo,
+                                const uint hi,
                                 __global const int4 *bbox, __global const float2 *centre, __global const int *stex,
                                 __global const float4 *values, __global const int2 *tex_layer,
                                 __global const int4 *layers, __global uint *table, __global uint4 *records)
@@ -95,11 +99,11 @@ __kernel void splat_chunk_tiles(const uint n, const uint chunk, const uint chunk
     const uint c = get_global_id(0);
     if (c >= chunks)
         return;
-    if (!place)
+    if (!place && lo == 0)
         for (uint t = 0; t < tiles * textures; ++t)
             table[c * tiles * textures + t] = 0;
-    const uint end = min(n, (c + 1) * chunk);
-    for (uint i = c * chunk; i < end; ++i) {
+    const uint end = min(min(n, (c + 1) * chunk), c * chunk + hi);
+    for (uint i = c * chunk + lo; i < end; ++i) {
         const int4 b = bbox[i];
         if (b.z < b.x)
             continue;

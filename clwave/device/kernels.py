@@ -63,24 +63,51 @@ class Kernel:
         return kernels[self.name](queue, global_size, local_size, *args, global_offset=global_offset)
 
 
-LAUNCH_SECONDS = 0.2  #: what one launch of a long 2-D kernel aims at: Ctrl-C waits for the launch running
+LAUNCH_SECONDS = 0.2  #: what one launch of a long kernel aims at: Ctrl-C waits for the launch running
+
+
+class Pace:
+    """The rate (work per second) of the last band of one kernel's :func:`in_bands`, kept between calls,
+    so that a call's first band is sized from it rather than grown from one step (each launch and
+    wait costs a fraction of a millisecond, and small bands leave cores idle)."""
+
+    def __init__(self):
+        self.rate = None
+
+
+def in_bands(queue, launch, total: int, step: int = 1, work=None, pace: Pace | None = None):
+    """``launch(first, count)`` over consecutive bands of the items ``0 .. total``, the queue finished after
+    each, so that Python takes a KeyboardInterrupt within about :data:`LAUNCH_SECONDS` however long the
+    whole is.  Bands are whole multiples of ``step`` items (the last may be short), each sized from the
+    rate of the last, at most twice its work (light items say little of the next ones); the first from
+    ``pace`` (the rate of the last call) for half of :data:`LAUNCH_SECONDS` (other work, a weaker guide),
+    or one step.  ``work`` is the cost of the items: a number per item, or their cumulative cost
+    (``total + 1`` non-decreasing numbers from 0) where it varies (a tile's records); default 1 each."""
+    uniform = work is None or np.isscalar(work)
+
+    def fit(first, budget):  # how many items from ``first`` cost at most ``budget``, in whole steps
+        n = budget / (work or 1) if uniform else np.searchsorted(work, work[first] + budget, side="right") - 1 - first
+        return max(step, int(n) // step * step)
+
+    done = 0
+    items = step if pace is None or not pace.rate else fit(0, pace.rate * LAUNCH_SECONDS / 2)
+    while done < total:
+        count = min(items, total - done)
+        start = time.perf_counter()
+        launch(done, count)
+        queue.finish()
+        spent = max(count * (work or 1) if uniform else work[done + count] - work[done], 1e-9)
+        rate = spent / max(time.perf_counter() - start, 1e-6)
+        if pace is not None:
+            pace.rate = rate
+        done += count
+        items = fit(done, min(2 * spent, rate * LAUNCH_SECONDS)) if done < total else 0
 
 
 def in_row_bands(queue, launch, global_size, local_size):
-    """``launch(global_size, global_offset)`` over bands of rows (axis 1) of a 2-D range, the queue finished
-    after each, so that Python takes a KeyboardInterrupt within about :data:`LAUNCH_SECONDS` however long
-    the whole is; each band sized from the rate of the last (whole work-groups of rows), at most twice
-    as tall as it (empty rows are fast, and say little of the next ones)."""
-    step, total = local_size[1], global_size[1]
-    row, rows = 0, step
-    while row < total:
-        band = min(rows, total - row)
-        start = time.perf_counter()
-        launch((global_size[0], band), (0, row))
-        queue.finish()
-        row += band
-        rate = band / max(time.perf_counter() - start, 1e-6)
-        rows = max(step, min(2 * band, int(rate * LAUNCH_SECONDS) // step * step))
+    """``launch(global_size, global_offset)`` of a 2-D range over :func:`in_bands` of its rows (axis 1,
+    whole work-groups of rows)."""
+    in_bands(queue, lambda row, rows: launch((global_size[0], rows), (0, row)), global_size[1], local_size[1])
 
 
 def _vector(kind: np.dtype, value):

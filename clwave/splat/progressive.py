@@ -123,7 +123,7 @@ def schedule(total: int, steps: int) -> list:
 
 
 def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, device=None, *,
-                omega_s=None, sampling="auto", coarse=None, renderer: SplatRenderer | None = None):
+                omega_s=None, sampling="auto", coarse=None, device_memory=None, renderer: SplatRenderer | None = None):
     """Yield :class:`ProgressiveFrame` s, coarse to fine, into one framebuffer.
 
     Parameters
@@ -135,11 +135,12 @@ def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, devi
         Seconds: keep doubling while the next step is expected to finish within the
         budget (estimated from the throughput so far); the last frame yielded is the
         last one completed.  The first frame is always made.
-    omega_s, sampling, coarse :
-        As for :class:`clwave.SplatRenderer`.
+    omega_s, sampling, coarse, device_memory :
+        As for :class:`clwave.SplatRenderer` (coefficients beyond the device budget stream in chunks;
+        a frame's passes end at chunk boundaries too).
     """
     check_schedule(steps, budget)
-    r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse)
+    r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse, device_memory)
     return _frames(r, camera, steps, budget)
 
 

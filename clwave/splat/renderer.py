@@ -1,9 +1,11 @@
 """Wavelet splatting (paper §4, docs/splatting.md): X-ray images as sums of basis-function footprints.
 
-:class:`SplatRenderer` uploads a model's ranked coefficients once; each view's :class:`Accumulator`
-makes the footprint textures and tables (:mod:`clwave.splat.tables`) and runs the device
-stages (:mod:`clwave.splat.stages`) over coefficient ranges in importance order.  The image is
-the line integral of each channel in world units (docs/coordinates.md).
+:class:`SplatRenderer` keeps a model's ranked coefficients on the device, or streams them there in
+chunks in importance order where they and a view's working set do not fit its budget
+(docs/splatting.md §6); each view's :class:`Accumulator` makes the footprint textures and tables
+(:mod:`clwave.splat.tables`) and runs the device stages (:mod:`clwave.splat.stages`) over coefficient
+ranges in importance order.  The image is the line integral of each channel in world units
+(docs/coordinates.md).
 """
 
 from __future__ import annotations
@@ -17,17 +19,28 @@ from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
 from ..device.context import ComputeContext
+from ..device.memory import device_budget, format_size, parse_size
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.camera import Camera
 from ..model.wavelet import WaveletVolume
 from .coarse import Layer, coarse_factor
-from .stages import Stages, bin_chunks
+from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .tables import MAX_LEVELS, ViewTables
+
+COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
+SPLAT_BYTES = 32  # per splat of a pass: centre float2, pixel box int4, texture int, tile count uint
+#: streamed chunks hold at least this many coefficients: below it, a pass's work over every tile (count
+#: tables, ranges, framebuffer writes) outweighs its splats
+MIN_CHUNK = 1024
+#: a view's device tables (clwave.splat.tables.ViewTables), uploaded by name
+VIEW_TABLES = ("band_tex", "band_origin", "step_col", "step_row", "tex_box", "tex_layer", "layers", "tex_int",
+               "tex_map", "texels")
 
 
 class SplatRenderer:
-    """Uploads a wavelet volume's ranked coefficients once and splats any view.
+    """Splats any view of a wavelet volume: its ranked coefficients stay on the device, or stream there in
+    chunks in importance order where they and the view's working set exceed the device budget.
 
     Parameters
     ----------
@@ -45,9 +58,15 @@ class SplatRenderer:
         Tolerance, relative to the image maximum, for drawing coarse cubic bands into
         coarser framebuffers that are upsampled with the cubic B-spline (docs/splatting.md §4;
         see :func:`clwave.splat.coarse.coarse_factor`).  None (default): every band at the image's pixel.
+    device_memory : int or str, optional
+        Cap on the device memory the renderer holds: bytes, or a size such as "2GiB" or "512M"
+        (:func:`clwave.device.memory.parse_size`); default the device's memory.  Coefficients that do not
+        fit with a view's framebuffers, footprints and tile lists stream in chunks (docs/splatting.md §6);
+        ``meta["coefficient_chunks"]`` counts a view's uploads.
     """
 
-    def __init__(self, wv: WaveletVolume, device=None, omega_s=None, sampling="auto", coarse=None):
+    def __init__(self, wv: WaveletVolume, device=None, omega_s=None, sampling="auto", coarse=None,
+                 device_memory=None):
         if not isinstance(wv, WaveletVolume):
             raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
         if wv.levels >= MAX_LEVELS:
@@ -58,6 +77,7 @@ class SplatRenderer:
             raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
         self.wv, self.omega_s, self.sampling, self.coarse = wv, omega_s, sampling, coarse
         self.cc = ComputeContext.get(device)
+        self.budget = device_budget(self.cc, device_memory)
         start = time.perf_counter()
         # one build per channel count of the groups: a scalar volume accumulates one channel
         self.stages = {c: Stages(self.cc, c) for c in sorted({len(g.channels) for g in wv.groups})}
@@ -67,29 +87,27 @@ class SplatRenderer:
         self.compile_seconds = time.perf_counter() - start
         self.groups = []
         q = self.cc.queue
-        # per-chunk scratch comes from a pool that keeps its buffers, and the tile lists from one
-        # buffer grown as needed, so a new view does not map (and the OS zero) fresh pages
+        # per-pass tables come from a pool that keeps its buffers, and the tile lists from one buffer grown as
+        # needed, so a new view does not map (and the OS zero) fresh pages
         self.scratch = MemoryPool(ImmediateAllocator(q))
         self._tile_lists = None
+        self.chunk = None  # coefficients per streamed chunk; None while every group's are on the device
+        self._resident = None  # per group: (coef, values) device arrays of every coefficient
+        self._work = None  # per-splat buffers of a pass, and the streamed chunk's (coef, values)
+        self._sizes = None  # the count tables' sizes of the last view
         for gi, g in enumerate(wv.groups):
             table = wv.ranked(gi)
-            coef = np.zeros((len(table.level), 4), np.int32)
-            coef[:, :3] = table.index[:, ::-1]  # (k_x, k_y, k_z)
-            coef[:, 3] = table.level.astype(np.int32) * 8 + table.key_code  # bit 0: psi along x
-            values = np.zeros((len(table.level), 4), np.float32)
-            values[:, : table.values.shape[1]] = table.values
             # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22)
-            kept = set(np.unique(coef[:, 3]).tolist())
+            kept = set(np.unique(table.level.astype(np.int32) * 8 + table.key_code).tolist())
             present = {(b.level, b.key) for b in g.bands if b.level * 8 + b.code in kept}
-            self.groups.append(dict(coef=cla.to_device(q, coef), values=cla.to_device(q, values),
-                                    count=len(coef), channels=len(g.channels), present=present,
+            self.groups.append(dict(table=table, count=len(table.level), channels=len(g.channels), present=present,
                                     energy=_energy_prefix(table.values)))
 
     def tile_lists(self, nbytes: int):
         """A device buffer of at least ``nbytes`` for the tile lists, kept between chunks and views."""
         if self._tile_lists is None or self._tile_lists.size < nbytes:
             self._tile_lists = None  # released before the larger one is made
-            room = max(nbytes, min(nbytes + nbytes // 4, self.cc.info.max_alloc))  # room to grow
+            room = max(nbytes, min(nbytes + nbytes // 4, tile_list_bytes(self.budget)))  # room to grow
             self._tile_lists = cl.Buffer(self.cc.ctx, cl.mem_flags.READ_WRITE, room)
         return self._tile_lists
 
@@ -125,7 +143,61 @@ class SplatRenderer:
                                            for layer in layers], self.omega_s, self.sampling, device=self.cc,
                              max_texels=self.cc.info.max_alloc // 4)
                   for gi, fg in enumerate(factors)]
+        self._prepare(tables, view.size)
         return Accumulator(self, view, layers, tables)
+
+    # -------------------------------------------------------------- device memory
+    def _prepare(self, tables: list, size):
+        """The coefficients on the device for a view with these tables: all of them where they fit the budget
+        with the view's working set, else a buffer for a chunk of the most that fit (docs/splatting.md §6)."""
+        chunk = self._plan(tables, size)
+        sizes = tuple(t.tiles * max(t.layer_textures, default=0) for t in tables)
+        if sizes != self._sizes:  # count tables of other sizes: the pool's held buffers go
+            self.scratch.free_held()
+            self._sizes = sizes
+        if chunk != self.chunk:  # from all on the device to streamed, or another chunk: the last buffers go
+            self._resident = self._work = None
+            self.chunk = chunk
+        q = self.cc.queue
+        if chunk is None and self._resident is None:
+            self._resident = [tuple(cla.to_device(q, a) for a in _pack(g["table"], 0, g["count"])) for g in self.groups]
+        if self._work is None:
+            n = max(chunk or max(g["count"] for g in self.groups), 1)
+            self._work = dict(centre=cla.empty(q, (n, 2), np.float32), bbox=cla.empty(q, (n, 4), np.int32),
+                              stex=cla.empty(q, (n,), np.int32), counts=cla.empty(q, (n,), np.uint32))
+            if chunk is not None:
+                self._work.update(coef=cla.empty(q, (n, 4), np.int32), values=cla.empty(q, (n, 4), np.float32))
+
+    def _plan(self, tables: list, size):
+        """None when every group's coefficients fit on the device with this view's working set, else the
+        coefficients per streamed chunk; a :class:`DeviceMemoryError` naming the least budget that would do
+        when not even :data:`MIN_CHUNK` of them fit."""
+        b, counts = self.budget, [g["count"] for g in self.groups]
+        most, least = max(counts), min(MIN_CHUNK, max(counts))
+        runs = max(t.tiles * max(t.layer_textures, default=0) for t in tables)
+        one_splat = max(t.tiles for t in tables) * max(st.record_bytes for st in self.stages.values())
+        # framebuffers, the view's tables and texel pool, and a pass's tile ranges
+        fixed = sum(16 * t.pixels + sum(getattr(t, name).nbytes for name in VIEW_TABLES) + 8 * t.tiles
+                    for t in tables)
+        free = b.total - fixed - tile_list_bytes(b) - bin_table_bytes(runs, b)
+        if COEFFICIENT_BYTES * sum(counts) + SPLAT_BYTES * most <= free and 16 * most <= b.max_alloc:
+            return None
+        chunk = min(free // (COEFFICIENT_BYTES + SPLAT_BYTES), b.max_alloc // 16, most)
+        if chunk >= least and tile_list_bytes(b) >= one_splat:
+            return int(chunk)
+        # the least total T with T (1 - shares) >= fixed + a least chunk, the count tables at their floor where
+        # that is more, and tile lists for one splat over every tile
+        base = fixed + (COEFFICIENT_BYTES + SPLAT_BYTES) * least
+        need = max(base / (1 - TILE_LIST_SHARE - BIN_TABLE_SHARE), (base + 12 * runs) / (1 - TILE_LIST_SHARE),
+                   one_splat / TILE_LIST_SHARE)
+        H, W = size
+        what = (f"a {H}x{W} view needs at least {format_size(int(need) + 1)} of device memory (framebuffers, "
+                f"footprints, tile lists and {least:,} coefficients at a time)")
+        if b.cap is not None and b.cap < self.cc.info.global_mem:
+            raise DeviceMemoryError(f"device_memory={format_size(b.cap)} is too small: {what}; give more or render "
+                                    f"a smaller image", cli=f"--device-memory {format_size(b.cap)} is too small: "
+                                                            f"{what}; give more or render a smaller image")
+        raise DeviceMemoryError(f"{self.cc.info.name} has {format_size(b.total)}, and {what}; render a smaller image")
 
 
 
@@ -136,12 +208,10 @@ class Accumulator:
     def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list):
         self.r, self.view, self.layers, self.tables = renderer, view, layers, tables
         cc = renderer.cc
-        self.device_tables = [{name: cc.upload(getattr(t, name)) for name in
-                               ("band_tex", "band_origin", "step_col", "step_row", "tex_box", "tex_layer",
-                                "layers", "tex_int", "tex_map", "texels")} for t in tables]
+        self.device_tables = [{name: cc.upload(getattr(t, name)) for name in VIEW_TABLES} for t in tables]
         self.fbs = [cla.zeros(cc.queue, (t.pixels * 4,), np.float32) for t in tables]
-        self.stats = dict(splats=0, pairs=0, pixel_updates=0, bin_seconds=0.0, accumulate_seconds=0.0,
-                          upsample_seconds=0.0)
+        self.stats = dict(splats=0, pairs=0, pixel_updates=0, chunks=0, bin_seconds=0.0, accumulate_seconds=0.0,
+                          upload_seconds=0.0, upsample_seconds=0.0)
 
     @property
     def footprint_seconds(self) -> float:
@@ -149,29 +219,46 @@ class Accumulator:
 
     def splat(self, first: int, count: int):
         """Add coefficients ``first .. first + count`` (importance order) of every group."""
-        for gi in range(len(self.r.groups)):
-            n = max(0, min(count, self.r.groups[gi]["count"] - first))
-            if n:
-                self._splat_group(gi, first, n)
-                self.stats["splats"] += n
+        for gi, g in enumerate(self.r.groups):
+            n = max(0, min(count, g["count"] - first))
+            for coef, values, offset, m in self._chunks(gi, first, n):
+                self._splat_group(gi, coef, values, offset, m)
+            self.stats["splats"] += n
 
-    def _splat_group(self, gi, first, n):
+    def _chunks(self, gi, first, n):
+        """``(coef, values, offset, count)`` on the device for coefficients ``first .. first + n`` of group
+        ``gi``: where they are all on the device, that range of them; else chunk after chunk, each uploaded
+        in turn into the one chunk buffer (docs/splatting.md §6)."""
+        r = self.r
+        if r.chunk is None:
+            if n:
+                yield (*r._resident[gi], first, n)
+            return
+        coef, values = r._work["coef"], r._work["values"]
+        for lo in range(first, first + n, r.chunk):
+            m = min(r.chunk, first + n - lo)
+            start = time.perf_counter()
+            for device, host in zip((coef, values), _pack(r.groups[gi]["table"], lo, lo + m)):
+                cl.enqueue_copy(r.cc.queue, device.data, host)  # blocking: the host chunk goes with the loop
+            self.stats["upload_seconds"] += time.perf_counter() - start
+            self.stats["chunks"] += 1
+            yield coef, values, 0, m
+
+    def _splat_group(self, gi, coef, values, first, n):
+        """Splat coefficients ``first .. first + n`` of the device arrays ``coef``, ``values`` of group ``gi``."""
         r, q = self.r, self.r.cc.queue
-        g, t, tables = r.groups[gi], self.device_tables[gi], self.tables[gi]
+        g, t, tables, w = r.groups[gi], self.device_tables[gi], self.tables[gi], r._work
         st = r.stages[g["channels"]]
         start = time.perf_counter()
-        centre = cla.empty(q, (n, 2), np.float32, allocator=r.scratch)
-        bbox = cla.empty(q, (n, 4), np.int32, allocator=r.scratch)
-        stex = cla.empty(q, (n,), np.int32, allocator=r.scratch)
-        counts = cla.empty(q, (n,), np.uint32, allocator=r.scratch)
-        st.project(n, first, g["coef"], t, centre, bbox, stex, counts)
-        total = int(cla.sum(counts, dtype=np.uint64).get())
-        budget = st.pair_budget()
+        centre, bbox, stex, counts = w["centre"], w["bbox"], w["stex"], w["counts"]  # the first n are this pass's
+        st.project(n, first, coef, t, centre, bbox, stex, counts)
+        total = int(cla.sum(counts[:n], dtype=np.uint64).get())
+        budget = st.pair_budget(r.budget)
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
             half = n // 2
             self.stats["bin_seconds"] += time.perf_counter() - start
-            self._splat_group(gi, first, half)
-            self._splat_group(gi, first + half, n - half)
+            self._splat_group(gi, coef, values, first, half)
+            self._splat_group(gi, coef, values, first + half, n - half)
             return
         if total > budget:
             raise DeviceMemoryError(f"one splat needs {total * st.record_bytes} bytes of tile lists, more "
@@ -181,19 +268,19 @@ class Accumulator:
         records = r.tile_lists(max(total, 1) * st.record_bytes)
         if total:
             textures = max(tables.layer_textures)
-            chunks = bin_chunks(n, tiles * textures, r.cc.info)
+            chunks = bin_chunks(n, tiles * textures, r.cc.info, r.budget)
             runs = tiles * textures
             # chunk-major counts (each chunk's together, cached by its core), scanned run-major,
             # then back to chunk-major as each chunk's write cursors
             table = cla.empty(q, (chunks * runs,), np.uint32, allocator=r.scratch)
             by_run, starts = cla.empty_like(table), cla.empty_like(table)
-            splats = (n, chunks, tiles, textures, first, bbox, centre, stex, g["values"], t)
-            st.count(*splats, table)
+            splats = (n, chunks, tiles, textures, first, bbox, centre, stex, values, t)
+            st.count(*splats, table, pairs=total)
             st.transpose(chunks, runs, table, by_run)
             st.scan(by_run, starts)
             st.ranges(tiles, textures, chunks, total, starts, ranges)
             st.transpose(runs, chunks, starts, table)
-            st.place(*splats, table, records)
+            st.place(*splats, table, records, pairs=total)
         q.finish()
         mid = time.perf_counter()
         st.accumulate(tiles, len(tables.layers), t, ranges, records, self.fbs[gi])
@@ -212,9 +299,11 @@ class Accumulator:
                     texture_sampling=sorted({s for t in tables for s in t.samplings}),
                     omega_s=tables[0].omega_s if tables else None,
                     coarse=r.coarse, framebuffers=[layer.factor for layer in self.layers],
+                    device_budget=r.budget.total, chunk_coefficients=r.chunk, coefficient_chunks=self.stats["chunks"],
                     seconds=dict(total=seconds, footprints=self.footprint_seconds,
                                  binning=self.stats["bin_seconds"], accumulation=self.stats["accumulate_seconds"],
-                                 upsampling=self.stats["upsample_seconds"], compile=r.compile_seconds))
+                                 upload=self.stats["upload_seconds"], upsampling=self.stats["upsample_seconds"],
+                                 compile=r.compile_seconds))
 
     def image(self) -> np.ndarray:
         """The image so far as (H, W, C) float32: the framebuffers summed at the image's pixels."""
@@ -232,17 +321,18 @@ class Accumulator:
 
 
 def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampling="auto", coarse=None,
-          renderer: SplatRenderer | None = None) -> RenderResult:
+          device_memory=None, renderer: SplatRenderer | None = None) -> RenderResult:
     """X-ray image of a wavelet volume by wavelet splatting.
 
     Returns a :class:`RenderResult` whose ``image`` (H, W, C) holds the line integral of
     each channel in world units and whose ``meta`` reports the coefficients splatted,
     footprint, binning, accumulation and upsampling times (kernel compile time apart), the
-    footprint texture sampling and the framebuffer factors.  ``omega_s``, ``sampling`` and
-    ``coarse`` are those of :class:`SplatRenderer`; without ``renderer``, calls on the same model,
-    device and options share one (:meth:`WaveletVolume.shared`).
+    footprint texture sampling, the framebuffer factors and the coefficient chunks streamed.
+    ``omega_s``, ``sampling``, ``coarse`` and ``device_memory`` are those of :class:`SplatRenderer`;
+    without ``renderer``, calls on the same model, device and options share one
+    (:meth:`WaveletVolume.shared`).
     """
-    r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse)
+    r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse, device_memory)
     start = time.perf_counter()
     acc = r.begin(camera)
     acc.splat(0, r.count)
@@ -250,15 +340,29 @@ def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampl
     return RenderResult(image, acc.meta(time.perf_counter() - start))
 
 
-def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse) -> SplatRenderer:
+def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device_memory=None) -> SplatRenderer:
     """The :class:`SplatRenderer` that one-shot calls on ``wv`` with these options share."""
     if not isinstance(wv, WaveletVolume):
         raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
     cc = ComputeContext.get(device)
-    return wv.shared(("splat", cc.info.id, omega_s, sampling, coarse),
-                     lambda: SplatRenderer(wv, device=cc, omega_s=omega_s, sampling=sampling, coarse=coarse))
+    cap = None if device_memory is None else parse_size(device_memory)
+    return wv.shared(("splat", cc.info.id, omega_s, sampling, coarse, cap),
+                     lambda: SplatRenderer(wv, device=cc, omega_s=omega_s, sampling=sampling, coarse=coarse,
+                                           device_memory=cap))
 
 
 def _energy_prefix(values) -> np.ndarray:
     """Cumulative coefficient energy sum c^2 over channels, in importance order."""
     return np.cumsum(np.sum(np.asarray(values, np.float64) ** 2, axis=1))
+
+
+def _pack(table, first: int, end: int) -> tuple:
+    """Coefficients ``first .. end`` of a ranked table as the kernels read them: (n, 4) int32
+    ``(k_x, k_y, k_z, band)`` with band = level * 8 + subband code (bit 0: psi along x), and (n, 4)
+    float32 values (channels beyond the group's are zero)."""
+    coef = np.zeros((end - first, 4), np.int32)
+    coef[:, :3] = table.index[first:end, ::-1]  # (k_x, k_y, k_z)
+    coef[:, 3] = table.level[first:end].astype(np.int32) * 8 + table.key_code[first:end]
+    values = np.zeros((end - first, 4), np.float32)
+    values[:, : table.values.shape[1]] = table.values[first:end]
+    return coef, values

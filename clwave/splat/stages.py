@@ -13,7 +13,7 @@ from pyopencl.scan import ExclusiveScanKernel
 
 from ..device import programs
 from ..device.constants import TILE, record_uint4s
-from ..device.kernels import BUFFER, Kernel
+from ..device.kernels import BUFFER, Kernel, Pace, in_bands
 
 GPU_PIXELS = 1  # pixels per work-item of raster_gpu.cl (CLW_PX)
 U32, I32 = np.uint32, np.int32
@@ -22,9 +22,9 @@ _PROJECT = Kernel("splat_project", ("n", U32), ("first", U32), ("coef", BUFFER),
                   ("tex_layer", BUFFER), ("layers", BUFFER), ("centre", BUFFER), ("bbox", BUFFER),
                   ("stex", BUFFER), ("count", BUFFER))
 _CHUNK_TILES = Kernel("splat_chunk_tiles", ("n", U32), ("chunk", U32), ("chunks", U32), ("tiles", U32),
-                      ("textures", U32), ("place", I32), ("first", U32), ("bbox", BUFFER), ("centre", BUFFER),
-                      ("stex", BUFFER), ("values", BUFFER), ("tex_layer", BUFFER), ("layers", BUFFER),
-                      ("table", BUFFER), ("records", BUFFER))
+                      ("textures", U32), ("place", I32), ("first", U32), ("lo", U32), ("hi", U32),
+                      ("bbox", BUFFER), ("centre", BUFFER), ("stex", BUFFER), ("values", BUFFER),
+                      ("tex_layer", BUFFER), ("layers", BUFFER), ("table", BUFFER), ("records", BUFFER))
 _TRANSPOSE = Kernel("transpose_counts", ("rows", U32), ("cols", U32), ("src", BUFFER), ("dst", BUFFER))
 _TILE_RANGES = Kernel("tile_ranges", ("tiles", U32), ("textures", U32), ("chunks", U32), ("total", U32),
                       ("offset", BUFFER), ("ranges", BUFFER))
@@ -33,7 +33,8 @@ _ACCUMULATE = Kernel("splat_accumulate", ("layer_count", I32), ("layers", BUFFER
                      ("fb", BUFFER))
 
 
-TILE_LIST_SHARE = 0.25  # of the device's memory, at most, for the tile lists of one chunk of splats
+TILE_LIST_SHARE = 0.25  # of the device budget, at most, for the tile lists of one chunk of splats
+BIN_TABLE_SHARE = 1 / 32  # of the device budget for the three count tables of a pass, unless one chunk needs more
 
 
 #: binning work-items (chunks of consecutive splats) per compute unit: a GPU needs many; on a CPU
@@ -41,15 +42,27 @@ TILE_LIST_SHARE = 0.25  # of the device's memory, at most, for the tile lists of
 CHUNKS_PER_UNIT = dict(GPU=64, CPU=4)
 
 
-def bin_chunks(n: int, runs: int, info) -> int:
+def tile_list_bytes(budget) -> int:
+    """The most bytes of tile lists one pass may use within ``budget`` (a
+    :class:`~clwave.device.memory.DeviceBudget`): :data:`TILE_LIST_SHARE` of it, in one buffer."""
+    return int(min(budget.max_alloc, budget.total * TILE_LIST_SHARE))
+
+
+def bin_table_bytes(runs: int, budget) -> int:
+    """The most bytes of the three uint32 count tables of a pass with ``runs`` (tile, texture) runs: those
+    of :func:`bin_chunks` chunks, one chunk at the least."""
+    return max(12 * runs, int(budget.total * BIN_TABLE_SHARE) // 12 * 12)
+
+
+def bin_chunks(n: int, runs: int, info, budget) -> int:
     """Number of chunks of consecutive splats the binning works in (one work-item each).
 
     Enough for every compute unit of the device (``info``: :class:`clwave.device.context.DeviceInfo`),
     bounded by the splats and by the (tile, texture, chunk) count tables (``runs`` = tiles x
-    textures): three of them, uint32, in at most 1/32 of the device's memory.
+    textures): three of them, uint32, within :data:`BIN_TABLE_SHARE` of ``budget`` and one allocation.
     """
     per_unit = CHUNKS_PER_UNIT["GPU" if info.kind == "GPU" else "CPU"]
-    entries = min(info.max_alloc // 4, info.global_mem // 32 // 12)
+    entries = min(budget.max_alloc // 4, int(budget.total * BIN_TABLE_SHARE) // 12)
     return max(1, min(n, per_unit * info.compute_units, entries // runs))
 
 
@@ -74,21 +87,24 @@ class Stages:
         # binning chunks: on a CPU one work-item per group, so the few chunks spread over the cores
         self.bin_local = None if cc.info.kind == "GPU" else (1,)
         self._scan = ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")
+        # the rates of the banded stages (in_bands), kept between passes and views
+        self.paces = dict(count=Pace(), place=Pace(), accumulate=Pace())
 
-    def pair_budget(self) -> int:
-        """The most (tile, splat) pairs one pass may bin: their records within :data:`TILE_LIST_SHARE`
-        of the device, and record indices (pairs x 2 uint4s) within 32 bits."""
-        info = self.cc.info
-        return min(int(min(info.max_alloc, info.global_mem * TILE_LIST_SHARE)) // self.record_bytes, 2**31 - 1)
+    def pair_budget(self, budget) -> int:
+        """The most (tile, splat) pairs one pass may bin: their records within :func:`tile_list_bytes`
+        of ``budget``, and record indices (pairs x 2 uint4s) within 32 bits."""
+        return min(tile_list_bytes(budget) // self.record_bytes, 2**31 - 1)
 
     def project(self, n, first, coef, tables, centre, bbox, stex, count):
         """Each splat's pixel centre, pixel box, texture and tile count (0: culled)."""
         _PROJECT(self.kernels, self.cc.queue, (n,), None, tables, n=n, first=first, coef=coef,
                  centre=centre, bbox=bbox, stex=stex, count=count)
 
-    def count(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts):
-        """Per chunk of consecutive splats, its splats per (tile, texture), chunk-major."""
-        self._chunk_tiles(0, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, counts)
+    def count(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, pairs=0):
+        """Per chunk of consecutive splats, its splats per (tile, texture), chunk-major (``pairs``: the
+        (tile, splat) pairs of the n splats, if known, to pace the launches)."""
+        self._chunk_tiles(0, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, counts,
+                          pairs)
 
     def transpose(self, rows, cols, src, dst):
         """``dst`` = the (rows, cols) table ``src`` transposed."""
@@ -103,18 +119,29 @@ class Stages:
         _TILE_RANGES(self.kernels, self.cc.queue, (tiles,), None, tiles=tiles, textures=textures, chunks=chunks,
                      total=total, offset=starts, ranges=ranges)
 
-    def place(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records):
-        """A record per (tile, splat) pair at each chunk's write cursors (chunk-major)."""
-        self._chunk_tiles(1, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records)
+    def place(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records, pairs=0):
+        """A record per (tile, splat) pair at each chunk's write cursors (chunk-major); ``pairs`` as for count."""
+        self._chunk_tiles(1, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records,
+                          pairs)
 
     def accumulate(self, tiles, layer_count, tables, ranges, records, fb):
-        """Add every tile's records to the framebuffers ``fb`` of the view's ``layer_count`` layers."""
-        local = self.accumulate_local
-        _ACCUMULATE(self.kernels, self.cc.queue, (tiles * local,), (local,), tables, layer_count=layer_count,
-                    ranges=ranges, records=records, fb=fb)
+        """Add every tile's records to the framebuffers ``fb`` of the view's ``layer_count`` layers, in
+        bands of tiles of about equal work (a tile's records, and one for its pixels; ``in_bands``)."""
+        local, q = self.accumulate_local, self.cc.queue
+        r = ranges.get().reshape(-1, 2).astype(np.int64)
+        work = np.concatenate([[0], np.cumsum(r[:, 1] - r[:, 0] + 1)])
+        in_bands(q, lambda first, count: _ACCUMULATE(
+            self.kernels, q, (count * local,), (local,), tables, global_offset=(first * local,),
+            layer_count=layer_count, ranges=ranges, records=records, fb=fb), tiles, work=work,
+            pace=self.paces["accumulate"])
 
     def _chunk_tiles(self, place, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, table,
-                     records):
-        _CHUNK_TILES(self.kernels, self.cc.queue, (chunks,), self.bin_local, tables, n=n, chunk=-(-n // chunks),
-                     chunks=chunks, tiles=tiles, textures=textures, place=place, first=first, bbox=bbox,
-                     centre=centre, stex=stex, values=values, table=table, records=records)
+                     records, pairs):
+        """Count or place, in launches of a band of splats of every chunk at a time (``in_bands``), a splat
+        costing one and its tile pairs."""
+        q, chunk = self.cc.queue, -(-n // chunks)
+        in_bands(q, lambda lo, count: _CHUNK_TILES(
+            self.kernels, q, (chunks,), self.bin_local, tables, n=n, chunk=chunk, chunks=chunks, tiles=tiles,
+            textures=textures, place=place, first=first, lo=lo, hi=lo + count, bbox=bbox, centre=centre, stex=stex,
+            values=values, table=table, records=records), chunk, work=chunks * (1 + pairs / max(n, 1)),
+            pace=self.paces["place" if place else "count"])

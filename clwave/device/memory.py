@@ -1,0 +1,72 @@
+"""How much device memory a renderer may hold: the device's own limits, or less where the user caps it
+(``device_memory=`` in the API, ``--device-memory`` on the command line); docs/splatting.md §6.
+
+:func:`parse_size` reads a cap (bytes, or a string with a binary unit); :func:`device_budget` gives the
+budget a renderer plans its buffers within; :func:`format_size` writes sizes for messages.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from ..errors import InputError
+
+#: what :func:`parse_size` accepts, as its errors say it
+SIZE_FORMS = ("a whole number of bytes (e.g. 536870912) or a number with a binary unit K, M, G or T "
+              "(KiB, MiB, GiB, TiB), e.g. '512MiB', '2GiB', '1.5G', '800M'")
+
+_SIZE = re.compile(r"(\d+(?:\.\d+)?)\s*([KMGT](?:iB)?)?", re.IGNORECASE)
+_UNITS = dict(K=2**10, M=2**20, G=2**30, T=2**40)
+
+
+def parse_size(value, name: str = "device_memory") -> int:
+    """Bytes from ``value``: a positive int, or a string of a number and a binary unit ("2GiB",
+    "512MiB", "1.5G", "800M"; K, M, G, T are powers of 1024, case-insensitive; decimal units such as
+    "GB" are refused as ambiguous).  Anything else, or less than one byte, is an :class:`InputError`
+    naming ``name`` (an API argument; the command line's ``--name`` in its words)."""
+    flag = "--" + name.replace("_", "-")
+    if isinstance(value, str):
+        match = _SIZE.fullmatch(value.strip())
+        if match is None or (match.group(2) is None and "." in match.group(1)):  # no fractions of a byte
+            raise InputError(f"{name}={value!r} is not a size: give {SIZE_FORMS}",
+                             cli=f"{flag} {value} is not a size: give {SIZE_FORMS}")
+        number, unit = match.groups()
+        value = int(float(number) * _UNITS[unit[0].upper()]) if unit else int(number)
+    elif isinstance(value, bool) or not hasattr(value, "__index__"):
+        raise InputError(f"{name}={value!r} is not a size: give {SIZE_FORMS}")
+    if int(value) < 1:
+        raise InputError(f"{name}={value!r} must be at least one byte: give {SIZE_FORMS}",
+                         cli=f"{flag} {value} must be at least one byte")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class DeviceBudget:
+    """Device memory a renderer may hold at once (``total``) and in one buffer (``max_alloc``), in bytes;
+    ``cap`` is the user's cap (None: the device's memory is the budget)."""
+
+    total: int
+    max_alloc: int
+    cap: int | None = None
+
+
+def device_budget(cc, device_memory=None) -> DeviceBudget:
+    """The budget on ``cc`` (a :class:`~clwave.device.context.ComputeContext`): its global memory and
+    allocation limit, each no more than ``device_memory`` (bytes or a size string, :func:`parse_size`)."""
+    info = cc.info
+    cap = None if device_memory is None else parse_size(device_memory)
+    total = info.global_mem if cap is None else min(cap, info.global_mem)
+    return DeviceBudget(total, min(info.max_alloc, total), cap)
+
+
+def format_size(nbytes: int) -> str:
+    """``nbytes`` in the largest binary unit that keeps it at least 1, rounded up so that a minimum stays
+    one ("37 MiB", "1.5 GiB", "812 KiB", "100 bytes")."""
+    for unit, size in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if nbytes >= size:
+            digits = 1 if nbytes < 10 * size else 0
+            scale = 10 ** digits
+            value = -(-nbytes * scale // size) / scale  # rounded up
+            return f"{value:.{digits}f} {unit}".replace(".0 ", " ")
+    return f"{nbytes} bytes"

@@ -1,0 +1,116 @@
+"""Splatting within a device-memory budget (docs/splatting.md §6): coefficients streamed to the device in
+chunks in importance order against the same coefficients all on the device, and the budget itself
+(clwave.device.memory)."""
+
+import numpy as np
+import pytest
+
+import clwave
+from clwave.device.memory import DeviceBudget, device_budget, format_size, parse_size
+from clwave.errors import DeviceMemoryError, InputError
+from clwave.splat import renderer as renderer_module
+
+#: a cap that leaves a 32^2 view of 16^3 (29203 cubic coefficients, 2 levels) room for about 12000 at a time
+CAP = "1600KiB"
+#: float32 sums of the same terms in other groups (test_splat.py's splitting tests), relative to the image maximum
+REGROUPED = 1e-5
+
+
+@pytest.fixture(scope="module")
+def wv():
+    data = np.random.default_rng(7).random((16, 16, 16)).astype(np.float32)
+    return clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2)
+
+
+@pytest.mark.parametrize("value, size", [("2GiB", 2 * 2**30), ("512MiB", 512 * 2**20), ("1.5G", 3 * 2**29),
+                                         ("800M", 800 * 2**20), ("64 k", 65536), ("1kib", 1024),
+                                         ("1048576", 2**20), (4096, 4096), (np.int64(7), 7)])
+def test_sizes_are_bytes_or_binary_units(value, size):
+    assert parse_size(value) == size
+
+
+@pytest.mark.parametrize("value", ["2GB", "1.5", "1.M", "abc", "", "-1M", "0", "0K", 0, -3, 1.5, True, None])
+def test_anything_else_is_one_line_naming_the_forms(value):
+    with pytest.raises(InputError, match="device_memory") as err:
+        parse_size(value)
+    assert "\n" not in str(err.value) and ("512MiB" in str(err.value) or "at least one byte" in str(err.value))
+
+
+def test_the_budget_is_the_device_or_less(cc):
+    info = cc.info
+    assert device_budget(cc) == DeviceBudget(info.global_mem, info.max_alloc, None)
+    assert device_budget(cc, "1M") == DeviceBudget(2**20, 2**20, 2**20)
+    assert device_budget(cc, 4 * info.global_mem).total == info.global_mem
+    assert [format_size(n) for n in (100, 2**10, 37 * 2**20 + 1, 3 * 2**29)] == ["100 bytes", "1 KiB", "38 MiB",
+                                                                                   "1.5 GiB"]
+
+
+def test_streamed_chunks_equal_the_same_ranges_on_the_device(cc, wv, monkeypatch):
+    """Same coefficients, same order, same passes: bit for bit; and no host copy beyond a chunk."""
+    packed = []
+    pack = renderer_module._pack
+    monkeypatch.setattr(renderer_module, "_pack", lambda table, first, end: packed.append(end - first) or
+                        pack(table, first, end))
+    cam = clwave.Camera(30, 20, size=32)
+    streamed = clwave.splat(wv, cam, renderer=clwave.SplatRenderer(wv, device=cc, device_memory=CAP))
+    chunk, chunks = streamed.meta["chunk_coefficients"], streamed.meta["coefficient_chunks"]
+    assert chunks == -(-wv.kept // chunk) >= 3 and max(packed) == chunk and sum(packed) == wv.kept
+    assert streamed.meta["device_budget"] == parse_size(CAP) and streamed.meta["coefficients"] == wv.kept
+    resident = clwave.SplatRenderer(wv, device=cc)
+    acc = resident.begin(cam)
+    for first in range(0, wv.kept, chunk):
+        acc.splat(first, chunk)
+    assert acc.meta(0)["coefficient_chunks"] == 0 and acc.meta(0)["chunk_coefficients"] is None
+    assert np.array_equal(streamed.image, acc.image())
+    # against one pass of every coefficient: the same float32 terms, added to the framebuffer as ``chunks``
+    # partial sums instead of one; the terms of random data cancel (their magnitudes sum to several times
+    # the image), so regrouping shows at a few 1e-6 of its maximum: the bound of the other regrouping tests
+    whole = clwave.splat(wv, cam, renderer=resident).image
+    assert np.abs(streamed.image - whole).max() <= REGROUPED * np.abs(whole).max()
+
+
+def test_streamed_progressive_frames_equal_those_on_the_device(cc, wv):
+    cam = clwave.Camera(-70, -15, size=(24, 40))
+    frames = list(clwave.progressive(wv, cam, steps=4, device=cc))
+    streamed = list(clwave.progressive(wv, cam, steps=4, device=cc, device_memory=CAP))
+    assert [f.coefficients for f in streamed] == [f.coefficients for f in frames]
+    assert streamed[-1].meta["coefficient_chunks"] >= 3 and frames[-1].meta["coefficient_chunks"] == 0
+    for a, b in zip(streamed, frames):  # chunk boundaries split some frames' passes: another sum order
+        assert np.abs(a.image - b.image).max() <= REGROUPED * np.abs(frames[-1].image).max()
+
+
+def test_streamed_channel_groups(cc):
+    """RGBA with one wavelet for colour and another for opacity: two groups, streamed each in turn."""
+    data = np.random.default_rng(3).random((16, 16, 16, 4)).astype(np.float32)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), ["cubic"] * 3 + ["linear"], levels=2)
+    cam = clwave.Camera(30, 20, size=32)
+    whole = clwave.splat(wv, cam, device=cc)
+    streamed = clwave.splat(wv, cam, device=cc, device_memory="6500KiB")  # the linear texel pool is large
+    assert len(wv.groups) == 2 and streamed.meta["coefficient_chunks"] >= 2 * 2
+    assert np.abs(streamed.image - whole.image).max() <= REGROUPED * np.abs(whole.image).max()
+
+
+def test_a_budget_below_one_chunk_names_the_least_that_works(cc, wv):
+    cam = clwave.Camera(30, 20, size=32)
+    with pytest.raises(DeviceMemoryError, match="needs at least") as err:
+        clwave.splat(wv, cam, device=cc, device_memory="1MiB")
+    message = str(err.value)
+    assert "\n" not in message and message.startswith("device_memory=1 MiB is too small")
+    assert err.value.cli_message().startswith("--device-memory 1 MiB is too small")
+    least = parse_size(message.split("needs at least ")[1].split(" of device")[0])
+    result = clwave.splat(wv, cam, device=cc, device_memory=least)
+    assert result.meta["chunk_coefficients"] >= renderer_module.MIN_CHUNK
+    with pytest.raises(DeviceMemoryError):  # a least, rounded up to a tenth of its unit, not a loose guess
+        clwave.splat(wv, cam, device=cc, device_memory=int(0.9 * least))
+
+
+def test_a_renderer_moves_between_resident_and_streamed_views(cc, wv):
+    """A small view keeps every coefficient on the device, a large one under the same cap streams them,
+    and the small one after it is the image it was."""
+    r = clwave.SplatRenderer(wv, device=cc, device_memory="4MiB")
+    small, large = clwave.Camera(30, 20, size=32), clwave.Camera(30, 20, size=64)  # footprints grow with it
+    first = clwave.splat(wv, small, renderer=r)
+    streamed = clwave.splat(wv, large, renderer=r)
+    again = clwave.splat(wv, small, renderer=r)
+    assert first.meta["chunk_coefficients"] is None and streamed.meta["coefficient_chunks"] >= 2
+    assert np.array_equal(first.image, again.image)
