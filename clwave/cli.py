@@ -334,8 +334,9 @@ def _camera_options(p):
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
     g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic bands into coarser framebuffers "
                    "within this error relative to the image maximum (e.g. 1e-2; default: off)")
-    g.add_argument("--device-memory", metavar="SIZE", help="splatting: device memory to use at most, e.g. 2GiB or "
-                   "512M (default: the device's); coefficients beyond it stream in chunks (docs/splatting.md §6)")
+    g.add_argument("--device-memory", metavar="SIZE", help="device memory to use at most, e.g. 2GiB or 512M "
+                   "(default: the device's); splatting streams coefficients beyond it in chunks (docs/splatting.md "
+                   "§6), ray tracing renders bricks beyond it in passes (docs/raytracing.md §6)")
 
 
 def _raytrace_options(p):
@@ -411,8 +412,6 @@ def cmd_render(args):
         raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
     if args.method == "raytrace" and args.coarse is not None:
         raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
-    if args.method == "raytrace" and args.device_memory is not None:
-        raise InputError("--device-memory applies to splatting (--method splat); ray tracing does not take it yet")
     device_memory = _device_memory(args)
     if args.omega_s is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
         raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
@@ -421,7 +420,7 @@ def cmd_render(args):
     lights, window = _lights(args), _display_window(args)
     wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray)
     if args.method == "raytrace":
-        tracer = RayTracer(wv, device=args.device, field=args.field)
+        tracer = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory)
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
                        absorption=not args.xray)
 

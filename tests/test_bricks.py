@@ -3,6 +3,7 @@ each brick's lattice coefficients against the model's closed-form field, the pla
 census of the kept supports and the voxels, and the ray tracer's images against the dense fine-grid
 path it replaced (tests/data/dense_reference.npz)."""
 
+import re
 from itertools import product
 from pathlib import Path
 
@@ -12,6 +13,8 @@ import pytest
 import clwave
 from clwave import TransferFunction, WaveletVolume
 from clwave.device.context import ComputeContext
+from clwave.device.memory import device_budget
+from clwave.errors import DeviceMemoryError
 from clwave.io.phantoms import phantom
 from clwave.model.bspline import bspline, bspline_derivative
 from clwave.model.geometry import band_lattice, fine_to_world
@@ -26,7 +29,10 @@ BRICK = bricks.BRICK
 def pool_field(wv, field: bricks.BrickField, x0, derivative=False):
     """The brick field at grid-0 fine points (N, 3) (z, y, x), from the pool read back: (N, 4), or the
     gradient (N, 4, 3) in fine units (z, y, x)."""
-    pool, frames, boxes, pages = field.pool.get(), field.frames.get(), field.boxes.get(), field.pages.get()
+    pool = field.pool.get() if field.resident else field.host
+    frames, boxes = field.frames, field.boxes
+    pages = np.full(field.shape, -1)
+    pages[tuple((field.bricks - field.origin).T)] = np.arange(len(field.bricks))
     out = np.zeros((len(x0), 4, 3) if derivative else (len(x0), 4))
     for p, x in enumerate(x0):
         b = np.floor(x / BRICK).astype(int) - field.origin
@@ -49,6 +55,11 @@ def pool_field(wv, field: bricks.BrickField, x0, derivative=False):
                 else:
                     out[p] += w[0] * w[1] * w[2] * coef[k[2], k[1], k[0]]
     return out
+
+
+def build(wv, device_memory=None):
+    cc = ComputeContext.get()
+    return bricks.build(wv, cc, device_budget(cc, device_memory))
 
 
 def smooth_volume(n=44, channels=4, empty_corner=False):
@@ -122,7 +133,7 @@ def test_brick_field_equals_the_model_at_random_points(wavelet, levels, content)
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels).threshold(keep=0.1)
     if not content:
         wv.content_mask = None
-    field = bricks.build(wv, ComputeContext.get())
+    field = build(wv)
     j0 = wv.groups[0].wavelet.order
     rng = np.random.default_rng(7)
     x0 = rng.uniform(-6, 50, (300, 3))
@@ -145,8 +156,8 @@ def test_block_bounds_hold_the_field(content):
     wv = WaveletVolume.from_volume(smooth_volume(empty_corner=content), wavelet="cubic", levels=3).threshold(keep=0.1)
     if not content:
         wv.content_mask = None
-    field = bricks.build(wv, ComputeContext.get())
-    bound = field.block_bounds(ComputeContext.get())
+    field = build(wv)
+    bound = field.bounds
     x0 = np.random.default_rng(3).uniform(-20, 64, (3000, 3))
     values = np.abs(pool_field(wv, field, x0)).max(axis=1)
     block = np.floor(x0 / bricks.BLOCK).astype(int) - field.origin * bricks.SUPER
@@ -164,8 +175,8 @@ def test_bricks_hold_only_where_the_model_reaches():
     alpha = np.where(x ** 2 + y ** 2 + z ** 2 < 64, 0.2, 0.0)
     vol = clwave.Volume(np.stack([alpha, alpha, alpha, alpha], -1).astype(np.float32))
     wv = WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.05)
-    field = bricks.build(wv, ComputeContext.get())
-    assert len(field.levels) <= 8 and field.nbytes < 16 * n ** 3 / 10  # the ball meets 2^3 bricks
+    field = build(wv)
+    assert len(field.levels) <= 8 and field.pool_bytes < 16 * n ** 3 / 10  # the ball meets 2^3 bricks
 
 
 def test_mixed_levels_across_brick_boundaries_trace_like_the_reference():
@@ -218,3 +229,40 @@ def test_images_equal_the_dense_path(model):
             assert np.max(np.abs(got - want)) <= 1e-5, (name, mode)
             fast = tracer.render(cam, tolerance=1e-3, **kw).image  # float32 within the tolerance
             assert np.max(np.abs(fast - want)) <= 1e-3, (name, mode)
+
+
+def out_of_core_model():
+    vol = smooth_volume(n=64, empty_corner=True)
+    rgba = clwave.Volume(vol.data * np.array([1.0, 0.8, 0.6, 0.05], np.float32), spacing=vol.spacing)
+    return WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.1)
+
+
+def test_out_of_core_passes_equal_one_pass():
+    """Bricks in host memory, rendered region by region in depth order with each ray's colour, transmittance
+    and budgets carried between passes (docs/raytracing.md §6): the image of one pass, to rounding."""
+    wv = out_of_core_model()
+    whole, parts = RayTracer(wv), RayTracer(wv, device_memory="12MiB")
+    assert whole.bricks.resident and not parts.bricks.resident
+    for cam, kw in ((clwave.Camera(30, 20, size=48), {}), (clwave.Camera(-60, 35, size=40), dict(absorption=False)),
+                    (clwave.Camera(10, 5, size=40, perspective=True, distance=8.0, fov=70), {}),  # eye inside
+                    (clwave.Camera(200, -30, size=32, perspective=True, distance=90.0), dict(shading=False))):
+        a, b = whole.render(cam, tolerance=1e-3, **kw), parts.render(cam, tolerance=1e-3, **kw)
+        assert a.meta["passes"] == 1 and b.meta["passes"] > 1 and b.meta["pool"] == "host"
+        assert a.meta["segments"] == b.meta["segments"] and np.abs(a.image).max() > 0.5
+        assert np.max(np.abs(a.image - b.image)) <= 1e-6 * np.abs(a.image).max()
+
+
+@pytest.mark.parametrize("cap,size", [("4MiB", 8), ("12MiB", 400)])
+def test_a_device_memory_cap_too_small_names_the_least_that_works(cap, size):
+    """Below one slab's expansion (4 MiB), or below one brick beside a 400^2 image's buffers (12 MiB): an
+    error naming the least cap that works, and that cap works."""
+    wv = out_of_core_model()
+    cam = clwave.Camera(30, 20, size=size)
+
+    def render(device_memory):
+        return RayTracer(wv, device_memory=device_memory).render(cam, tolerance=1e-2)
+
+    with pytest.raises(DeviceMemoryError, match="at least") as err:
+        render(cap)
+    least = re.search(r"at least ([\d.]+) (MiB|KiB)", str(err.value))
+    assert render(f"{least.group(1)}{least.group(2)}").image.shape == (size, size, 4)

@@ -247,7 +247,7 @@ def test_turntable_summary_gives_the_whole_job(tmp_path, capsys):
 
 def test_device_memory_streams_splatting_and_is_checked(tmp_path, capsys):
     """--device-memory caps the splat renderer (docs/splatting.md §6): the API's image with the same cap;
-    a bad size, a cap below one chunk and the ray tracer (which does not take it yet) are one-line errors."""
+    a bad size, a cap below one chunk and a cap below what ray tracing needs are one-line errors."""
     import json
 
     import clwave
@@ -267,7 +267,7 @@ def test_device_memory_streams_splatting_and_is_checked(tmp_path, capsys):
     assert json.loads(frames.read_text())["meta"]["coefficient_chunks"] >= 2
     for extra, needle in ((["--device-memory", "2GB"], "--device-memory 2GB is not a size"),
                           (["--device-memory", "1K"], "--device-memory 1 KiB is too small"),
-                          (["--tf", "hydrogen", "--method", "raytrace", "--device-memory", "1G"],
-                           "applies to splatting")):
+                          (["--tf", "hydrogen", "--method", "raytrace", "--device-memory", "1K"],
+                           "needs at least")):
         code, out, err = run(capsys, "render", *argv, *extra, "-o", str(tmp_path / "x.png"))
         assert code == 2 and err.count("\n") == 1 and needle in err and not (tmp_path / "x.png").exists()

@@ -288,7 +288,7 @@ def test_too_little_device_memory_is_reported(monkeypatch, field):
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=8), wavelet="linear", levels=1)
     cc = clwave.ComputeContext.get()
     monkeypatch.setattr(cc, "info", dataclasses.replace(cc.info, global_mem=1000))
-    with pytest.raises(clwave.DeviceMemoryError, match="MiB"):
+    with pytest.raises(clwave.DeviceMemoryError, match="need"):
         RayTracer(wv, field=field)
 
 

@@ -150,6 +150,10 @@ inline real2 simpson_pair(const real8 v, const real first)
  *                of alpha they are rounding noise, whose random normals would make the integrand
  *                jump everywhere
  *   lights       (nlights,) unit directions towards the lights; phong (ka, kd, ks, shininess)
+ *   passes       0: one pass over the whole ray.  Else the ray is marched only inside the box pass_lo ..
+ *                pass_hi (grid-0 fine coordinates), going on from carry (premultiplied colour and T, or the
+ *                X-ray integrals), ledger (the skipping and shading budgets left, R consumed, and R of the
+ *                whole ray: 0 before the first pass) and stats, which it updates (docs/raytracing.md §6)
  * Grid: global (W, H). */
 __kernel void raytrace(__global float4 *image, __global int4 *stats, const int width, const int height,
                        FIELD_PARAMS,
@@ -163,7 +167,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
                        __constant const real *nodes, __constant const real *weights, const real tol,
                        const real shade_gain,
                        const real grad_floor,
-                       __constant const float4 *lights, const int nlights, const float4 phong)
+                       __constant const float4 *lights, const int nlights, const float4 phong,
+                       const int passes, const float4 pass_lo, const float4 pass_hi, __global real4 *carry,
+                       __global real4 *ledger)
 {
     const int col = get_global_id(0), row = get_global_id(1);
     if (col >= width || row >= height)
@@ -201,10 +207,32 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     Active active;
     active_init(&active, G, pix, X0, D);
     int segments = 0, midpoints = 0, evals = 0, flags = 0;
-    if (!(t1 > t0)) {
-        image[pix] = (float4)(0.0f);
-        stats[pix] = (int4)(0);
+    if (passes) { /* docs/raytracing.md §6: go on from the last pass; a terminated ray is done */
+        const int4 s = stats[pix];
+        segments = s.x; midpoints = s.y; evals = s.z; flags = s.w;
+    }
+    if (!(t1 > t0) || (flags & 1)) {
+        if (!passes) {
+            image[pix] = (float4)(0.0f);
+            stats[pix] = (int4)(0);
+        }
         return;
+    }
+    real ta = t0, tb = t1; /* the part of the ray this pass marches: inside the pass box */
+    if (passes) {
+        const real plo[3] = {pass_lo.x, pass_lo.y, pass_lo.z}, phi[3] = {pass_hi.x, pass_hi.y, pass_hi.z};
+        for (int a = 0; a < 3; a++) {
+            if (dd[a] == 0) {
+                if (x0[a] < plo[a] || x0[a] >= phi[a])
+                    tb = -INFINITY;
+            } else {
+                const real ea = (plo[a] - x0[a]) * inv[a], eb = (phi[a] - x0[a]) * inv[a];
+                ta = fmax(ta, fmin(ea, eb));
+                tb = fmin(tb, fmax(ea, eb));
+            }
+        }
+        if (!(tb > ta))
+            return;
     }
 
 #ifndef CLW_XRAY
@@ -223,9 +251,14 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     real skip_budget = tol / 4;
     real shade_budget = tol * 3 / 8; /* three quarters of the quadrature's half, when shading */
     const real quadrature_share = SHADING ? tol / 8 : tol / 2;
-    /* R(t0): the region bounds integrated along the whole ray, region by region */
-    real rest = 0;
-    {
+    /* R(t0): the region bounds integrated along the whole ray, region by region (once, in the first pass) */
+    real rest = 0, consumed = 0;
+    if (passes) {
+        const real4 c = carry[pix], l = ledger[pix];
+        I = c.xyz; T = c.w;
+        skip_budget = l.x; shade_budget = l.y; consumed = l.z; rest = l.w;
+    }
+    if (!(rest > 0)) {
         real tp[3];
         int plane[3];
         real fine_end = -INFINITY;
@@ -247,10 +280,13 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     /* R(t) = rest - consumed, the part of the sum at t' < t subtracted as the march passes it;
      * slack covers the rounding of the two sums (float32: ~1e-7 relative per term) */
     const real slack = rest * (real)1e-4;
-    real consumed = 0;
 #else
     real4 I = (real4)(0);
     real skip_budget = tol / 2;
+    if (passes) {
+        I = carry[pix];
+        skip_budget = ledger[pix].x;
+    }
 #endif
     /* the last evaluated segment's end: where, the field, and (shaded point by point) the
      * shaded emission and alpha's gradient */
@@ -268,14 +304,14 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     real brick_end = FIELD_BRICK ? -INFINITY : INFINITY;
     real tp[3];
     int plane[3];
-    real t = t0;
+    real t = ta;
     bool replan = true;
-    while (t < t1) {
+    while (t < tb) {
         if (!(t < brick_end)) { /* a new brick: its lattice, and where the ray leaves it */
             real btp[3];
             int bplane[3];
             next_planes(x0, dd, inv, t, (real4)(0, 0, 0, FIELD_BRICK), bplane, btp);
-            brick_end = fmin(t1, fmin(btp[0], fmin(btp[1], btp[2])));
+            brick_end = fmin(tb, fmin(btp[0], fmin(btp[1], btp[2])));
             lat = field_lattice(G, X0 + (t + brick_end) / 2 * D);
             replan = true;
         }
@@ -283,7 +319,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             next_planes(x0, dd, inv, t, lat, plane, tp);
             replan = false;
         }
-        const real tn = fmin(brick_end, fmin(t1, fmin(tp[0], fmin(tp[1], tp[2]))));
+        const real tn = fmin(brick_end, fmin(tb, fmin(tp[0], fmin(tp[1], tp[2]))));
         const real3 xm = X0 + (t + tn) / 2 * D;
         if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
             bnd = region_bound(x0, dd, inv, xm, tn, t1, &regions, &fine_end, &texit);
@@ -421,8 +457,16 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     }
 #ifdef CLW_XRAY
     image[pix] = convert_float4(I);
+    if (passes) {
+        carry[pix] = I;
+        ledger[pix] = (real4)(skip_budget, 0, 0, 0);
+    }
 #else
     image[pix] = (float4)(convert_float3(I), (float)(1 - T));
+    if (passes) {
+        carry[pix] = (real4)(I, T);
+        ledger[pix] = (real4)(skip_budget, shade_budget, consumed, rest);
+    }
 #endif
     stats[pix] = (int4)(segments, midpoints, evals, flags | active_flags(&active));
 }

@@ -26,6 +26,7 @@ from ..device import programs
 from ..device.constants import BLOCK, SUPER
 from ..device.context import ComputeContext
 from ..device.kernels import BUFFER, Kernel
+from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError, InputError
 from ..model.geometry import band_lattice
 from .bounds import content_weights
@@ -160,47 +161,63 @@ def _window_sums(arr, axis, start, width, count):
 
 @dataclass
 class BrickField:
-    """The bricks of a model on the device (``FIELD_PARAMS`` of ``cl/raytrace/field_bspline.h``).
+    """The bricks of a model (``FIELD_PARAMS`` of ``cl/raytrace/field_bspline.h``).
 
     Slot s holds brick ``bricks[s]`` at level ``levels[s]``; its group g is the box of lattice
     coefficients ``boxes[s, g]`` = (nx, ny, nz, first pool element), whose local lattice coordinate
     at grid-0 point x is ``(x - frames[s, g].xyz) * frames[s, g].w``; ``lattices[s]`` is the origin
-    (x, y, z) and spacing of the brick's knot planes (every group's, at its level).
+    (x, y, z) and spacing of the brick's knot planes (every group's, at its level).  The pool is on
+    the device (``resident``) or, when it does not fit there, in host memory, and the renderer uploads
+    the bricks of one region at a time (docs/raytracing.md §6).
     """
 
-    pool: cla.Array        # float4 coefficients, pre-multiplied by 2^(-3l/2), channels in their own slots
-    pages: cla.Array       # (Z, Y, X) int32 slot per brick, -1 where there is none
-    origin: np.ndarray     # (3,) brick index (z, y, x) of pages[0, 0, 0]
-    frames: cla.Array      # (slots, groups) float4
-    boxes: cla.Array       # (slots, groups) int4
-    lattices: cla.Array    # (slots,) float4
+    origin: np.ndarray     # (3,) brick index (z, y, x) of the page table's first brick
+    shape: tuple           # the page table's shape (Z, Y, X) in bricks
     bricks: np.ndarray     # (slots, 3) brick index (z, y, x)
     levels: np.ndarray     # (slots,) lattice level
+    frames: np.ndarray     # (slots, groups, 4) float32
+    boxes: np.ndarray      # (slots, groups, 4) int32
+    lattices: np.ndarray   # (slots, 4) float32
+    bounds: np.ndarray     # (Z, Y, X) * SUPER per BLOCK^3 block: the largest |coefficient| reaching it
     orders: tuple          # the groups' B-spline orders
     seconds: float         # expansion time
+    pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2)
+    host: np.ndarray | None = None  # or in host memory, (elements, 4) float32
 
     @property
-    def nbytes(self) -> int:
-        return self.pool.nbytes + self.pages.nbytes + self.frames.nbytes + self.boxes.nbytes + self.lattices.nbytes
+    def resident(self) -> bool:
+        return self.pool is not None
 
-    def tables(self) -> dict:
-        """The kernel arguments of the field (``FIELD_PARAMS``)."""
-        return dict(coef=self.pool, pages=self.pages, page_origin=self.origin[::-1], page_shape=self.pages.shape[::-1],
-                    frames=self.frames, boxes=self.boxes, lattices=self.lattices)
+    @property
+    def pool_bytes(self) -> int:
+        return int(self.pool.nbytes if self.resident else self.host.nbytes)
 
-    def block_bounds(self, cc) -> np.ndarray:
-        """(Z, Y, X) per BLOCK^3 block of the page table's box: the largest |coefficient| of any group whose
-        B-spline reaches it (partition of unity: it bounds every channel there), 0 outside the bricks."""
-        shape = tuple(int(n) * SUPER for n in self.pages.shape)
-        out = cla.zeros(cc.queue, shape, np.float32)
-        if len(self.levels):
-            kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(self.orders))
-            bricks = np.zeros((len(self.bricks), 4), np.int32)
-            bricks[:, :3] = (self.bricks - self.origin)[:, ::-1]
-            _BOUNDS(kernels, cc.queue, (SUPER ** 3, len(self.levels)), None, out=out, nblocks=shape[::-1],
-                    origin=self.origin[::-1], coef=self.pool, bricks=cla.to_device(cc.queue, bricks),
-                    frames=self.frames, boxes=self.boxes)
-        return out.get()
+    def slot_bytes(self) -> np.ndarray:
+        """(slots,) pool bytes of each brick (all groups)."""
+        return 16 * np.prod(self.boxes[:, :, :3].astype(np.int64), axis=2).sum(axis=1)
+
+    def tables(self, cc, slots=None) -> dict:
+        """The kernel arguments of the field (``FIELD_PARAMS``): every brick (resident), or the bricks ``slots``
+        uploaded from host memory, the others absent."""
+        q, pages = cc.queue, np.full(self.shape, -1, np.int32)
+        if slots is None:
+            slots, pool = np.arange(len(self.levels)), self.pool
+            boxes = self.boxes
+        else:
+            starts, sizes = self.boxes[slots, 0, 3].astype(np.int64), self.slot_bytes()[slots] // 16
+            pool = cla.to_device(q, np.concatenate([self.host[a:a + n] for a, n in zip(starts, sizes)] +
+                                                   [np.zeros((16, 4), np.float32)]))
+            boxes = self.boxes[slots].copy()
+            boxes[..., 3] += (np.concatenate([[0], np.cumsum(sizes)[:-1]]) - starts)[:, None].astype(np.int32)
+        pages[tuple((self.bricks[slots] - self.origin).T)] = np.arange(len(slots), dtype=np.int32)
+        return dict(coef=pool, pages=cla.to_device(q, pages), page_origin=self.origin[::-1],
+                    page_shape=self.shape[::-1], frames=cla.to_device(q, _one(self.frames[slots])),
+                    boxes=cla.to_device(q, _one(boxes)), lattices=cla.to_device(q, _one(self.lattices[slots])))
+
+
+def _one(arr):
+    """At least one row: OpenCL has no empty buffers."""
+    return arr if len(arr) else np.zeros((1,) + arr.shape[1:], arr.dtype)
 
 
 def group_defines(orders) -> dict:
@@ -247,67 +264,86 @@ def lattice_of_levels(wv) -> np.ndarray:
     return np.array(out, np.float32)
 
 
-def build(wv, cc: ComputeContext, p: Plan | None = None) -> BrickField:
+def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -> BrickField:
     """Expand the model's bricks on the device, slab of bricks (one brick row along z) by slab.
 
     Per slab and group the real-line synthesis (``cl/raytrace/expand.cl``) runs from the approximation
     down to the slab's finest brick level, each level cropped to the box its bricks and the next level
     need; after each level the bricks at it are copied into the pool (``gather_bricks``).  The bands
-    are cropped from the model's sparse coefficients per slab.  Raises :class:`DeviceMemoryError`
-    before allocating when the pool and one slab's work do not fit.
+    are cropped from the model's sparse coefficients per slab.  The pool stays on the device when it
+    fits the budget with the bounds, else each slab's bricks go to host memory.  Raises
+    :class:`DeviceMemoryError` before allocating when one slab's work does not fit.
     """
     if wv.channels > 4:
         raise InputError(f"the ray tracer takes at most 4 channels (RGBA), this volume has {wv.channels}")
     p = p if p is not None else plan(wv)
     lay = layout(wv, p)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
-    _check_fits(wv, cc, p, lay)
+    resident = _check_fits(wv, cc, p, lay, budget)
     synth = [programs.build(cc, ["raytrace/expand.cl"], dict(CLW_AXIS=a)) for a in range(3)]  # compile apart
     kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(orders))
     start = time.perf_counter()
-    pool = cla.empty(q, (max(lay["total"], 16), 4), np.float32)  # 16: an absent brick's reads stay inside
+    n, G = len(lay["bricks"]), len(wv.groups)
+    frames = np.zeros((n, G, 4), np.float32)
+    boxes = np.zeros((n, G, 4), np.int32)
+    frames[..., :3] = lay["frame"][..., ::-1]
+    frames[..., 3] = 2.0 ** -lay["levels"][:, None]
+    boxes[..., :3] = lay["count"][..., ::-1]
+    boxes[..., 3] = lay["offset"]
+    lattices = lattice_of_levels(wv)[lay["levels"]]
+    alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
+    bounds = cla.zeros(q, tuple(int(k) * SUPER for k in p.level.shape), np.float32)
+    pool = cla.empty(q, (max(lay["total"], 16), 4), np.float32) if resident else None  # 16: absent bricks' reads
+    host = None if resident else np.empty((lay["total"], 4), np.float32)
     clamp = ElementwiseKernel(cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f",
                               "clamp_to_content")
     slabs = lay["bricks"][:, 0]
     for bz in np.unique(slabs):
         slots = np.flatnonzero(slabs == bz)
-        clamped = bool(p.clamp[tuple((lay["bricks"][slots] - p.origin).T)].any())
-        for gi in range(len(wv.groups)):
-            _expand_slab(wv, gi, lay, slots, clamped and wv.content_mask is not None, cc, synth, kernels, pool, clamp)
+        first = int(lay["offset"][slots[0], 0])
+        last = int(lay["offset"][slots[-1], -1] + np.prod(lay["count"][slots[-1], -1]))
+        target, base = (pool, 0) if resident else (cla.empty(q, (last - first, 4), np.float32), first)
+        clamped = wv.content_mask is not None and bool(p.clamp[tuple((lay["bricks"][slots] - p.origin).T)].any())
+        for gi in range(G):
+            _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, target, base, clamp)
+        local = boxes[slots].copy()
+        local[..., 3] -= base
+        local = cla.to_device(q, local)
+        at = np.zeros((len(slots), 4), np.int32)
+        at[:, :3] = (lay["bricks"][slots] - p.origin)[:, ::-1]
+        _BOUNDS(kernels, q, (SUPER ** 3, len(slots)), None, out=bounds, nblocks=bounds.shape[::-1],
+                origin=p.origin[::-1], coef=target, bricks=cla.to_device(q, at),
+                frames=cla.to_device(q, frames[slots]), boxes=local)
+        if alpha is not None:  # docs/raytracing.md §3: where alpha may dip below 0, the fine lattice's segments
+            floor = cla.empty(q, len(slots), np.float32)
+            _FLOOR(kernels, q, (len(slots),), None, out=floor, coef=target, boxes=local, g=alpha)
+            lattices[slots[floor.get() < 0]] = lattice_of_levels(wv)[0]
+        if not resident:
+            target.get(q, host[first:last])
     q.finish()
-    seconds = time.perf_counter() - start
-    pages = np.full(p.level.shape, -1, np.int32)
-    pages[tuple((lay["bricks"] - p.origin).T)] = np.arange(len(lay["bricks"]), dtype=np.int32)
-    n, G = len(lay["bricks"]), len(wv.groups)
-    frames = np.zeros((max(n, 1), G, 4), np.float32)
-    boxes = np.zeros((max(n, 1), G, 4), np.int32)
-    frames[:n, :, :3] = lay["frame"][..., ::-1]
-    frames[:n, :, 3] = 2.0 ** -lay["levels"][:, None]
-    boxes[:n, :, :3] = lay["count"][..., ::-1]
-    boxes[:n, :, 3] = lay["offset"]
-    boxes = cla.to_device(q, boxes)
-    lattices = lattice_of_levels(wv)[lay["levels"] if n else [0]]
-    alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
-    if n and alpha is not None:  # docs/raytracing.md §3: where alpha may dip below 0, the fine lattice's segments
-        floor = cla.empty(q, n, np.float32)
-        _FLOOR(kernels, q, (n,), None, out=floor, coef=pool, boxes=boxes, g=alpha)
-        lattices[floor.get() < 0] = lattice_of_levels(wv)[0]
-    return BrickField(pool, cla.to_device(q, pages), p.origin, cla.to_device(q, frames), boxes,
-                      cla.to_device(q, lattices), lay["bricks"], lay["levels"], orders, seconds)
+    return BrickField(p.origin, p.level.shape, lay["bricks"], lay["levels"], frames, boxes, lattices, bounds.get(),
+                      orders, time.perf_counter() - start, pool, host)
 
 
-def _check_fits(wv, cc, p: Plan, lay):
-    """DeviceMemoryError unless the pool, the bounds and one slab's synthesis fit the device."""
+def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:
+    """Whether the pool fits the device with the bounds and one slab's synthesis; DeviceMemoryError when
+    the bounds and one slab's synthesis alone do not.  A slab's synthesis holds about three boxes of its
+    finest level's float4 coefficients at once (the parts, the pairs of one axis step, the output)."""
     pool = 16 * lay["total"]
     bounds = 4 * p.level.size * SUPER ** 3
-    section = np.prod((np.array(p.level.shape[1:]) + 1) * BRICK)
-    slab = 3 * 16 * (BRICK + 2 * max(g.wavelet.order for g in wv.groups)) * section  # input, pairs, output
-    need = pool + bounds + slab
-    if need > cc.info.global_mem * 0.8 or max(pool, slab / 3) > cc.info.max_alloc:
+    halo = 2 * max(g.wavelet.order for g in wv.groups)
+    slab = 0
+    for bz in np.unique(lay["bricks"][:, 0]):
+        sel = lay["bricks"][:, 0] == bz
+        bricks, finest = lay["bricks"][sel], 2.0 ** lay["levels"][sel].min()
+        cells = (np.append(BRICK, (bricks[:, 1:].max(axis=0) - bricks[:, 1:].min(axis=0) + 1) * BRICK) + halo) / finest
+        slab = max(slab, 3 * 16 * int(np.prod(np.ceil(cells))))
+    if bounds + slab > budget.total or slab / 3 > budget.max_alloc:
         raise DeviceMemoryError(
-            f"the bricks of this volume need about {need / 2**20:.0f} MiB on {cc.info.name}, which has "
-            f"{cc.info.global_mem / 2**20:.0f} MiB ({cc.info.max_alloc / 2**20:.0f} MiB per buffer); use fewer "
-            f"levels, keep fewer coefficients, crop the volume or pick another --device")
+            f"expanding the bricks of this volume needs at least {format_size(bounds + slab)} on {cc.info.name}, "
+            f"which allows {format_size(budget.total)} ({format_size(budget.max_alloc)} per buffer); raise "
+            f"--device-memory, crop the volume or pick another --device")
+    return pool + bounds + slab <= budget.total and pool <= budget.max_alloc
 
 
 def _parents(wav, taps, lo, hi) -> tuple:
@@ -342,7 +378,8 @@ def _crop(g, band_no: int, band_slice: slice, lo, hi) -> np.ndarray:
     return out
 
 
-def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, clamp):
+def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, clamp):
+    """One group's bricks of one slab into ``pool``, whose first element is pool element ``base``."""
     g, q = wv.groups[gi], cc.queue
     wav = g.wavelet
     taps = {"a": (wav.p / np.sqrt(2.0)).astype(np.float32), "d": (wav.q / np.sqrt(2.0)).astype(np.float32)}
@@ -367,7 +404,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, clamp):
         starts[:, :3] = lay["base"][sel, gi][:, ::-1]
         boxes = np.zeros((len(sel), 4), np.int32)
         boxes[:, :3] = lay["count"][sel, gi][:, ::-1]
-        boxes[:, 3] = lay["offset"][sel, gi]
+        boxes[:, 3] = lay["offset"][sel, gi] - base
         n = boxes[:, :3].max(axis=0)
         _GATHER(kernels, q, (int(n[0]), int(n[1]), int(n[2]) * len(sel)), None, pool=pool, src=src.data,
                 src_start=src.start[::-1], src_shape=src.shape[::-1], starts=cla.to_device(q, starts),

@@ -23,6 +23,7 @@ from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
+from ..device.memory import device_budget, format_size, parse_size
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import build, group_defines
 from .quadrature import sample_tables
@@ -64,6 +65,13 @@ FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("p
                   wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
 
 
+def _region_sums(sizes, c) -> np.ndarray:
+    """Sums of ``sizes`` over regions of c^3 cells (the last ones cut by the array's end)."""
+    padded = np.pad(sizes, [(0, -n % c) for n in sizes.shape])
+    Z, Y, X = (n // c for n in padded.shape)
+    return padded.reshape(Z, c, Y, c, X, c).sum(axis=(1, 3, 5))
+
+
 def raytrace_kernel(field: str) -> Kernel:
     """The arguments of ``raytrace`` (cl/raytrace/raytrace.cl) with a field backend."""
     return Kernel("raytrace", ("image", B), ("stats", B), ("width", I32), ("height", I32), *FIELD_ARGS[field],
@@ -73,7 +81,9 @@ def raytrace_kernel(field: str) -> Kernel:
                   ("box_hi", FLOAT4), ("base", FLOAT4), ("du", FLOAT4), ("dv", FLOAT4), ("dir", FLOAT4),
                   ("perspective", I32), ("to_fine_scale", FLOAT4), ("to_fine_offset", FLOAT4), ("nodes", B),
                   ("weights", B), ("tol", REAL), ("shade_gain", REAL), ("grad_floor", REAL), ("lights", B),
-                  ("nlights", I32), ("phong", FLOAT4))
+                  ("nlights", I32), ("phong", FLOAT4), ("passes", I32), ("pass_lo", FLOAT4), ("pass_hi", FLOAT4),
+                  ("carry", B), ("ledger", B))
+REAL4 = {np.float32: cltypes.float4, np.float64: cltypes.double4}
 GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
 ACTIVE = 1024    # entries of a ray's active list (wavelet field); more fall back to visiting every index
@@ -85,10 +95,12 @@ class RayTracer:
 
     ``field`` chooses how the field is evaluated: ``"bspline"`` (expanded fine grids, fast)
     or ``"wavelet"`` (active lists over the kept coefficients, the reference); see the
-    module docstring.  ``active`` bounds the wavelet field's per-ray list.
+    module docstring.  ``active`` bounds the wavelet field's per-ray list.  ``device_memory`` caps the
+    device memory it uses (bytes, or a size such as ``"2GiB"``); a B-spline field bigger than that (or than
+    the device) stays in host memory and renders in passes (docs/raytracing.md §6).
     """
 
-    def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE):
+    def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None):
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
         if field not in FIELDS:
@@ -99,6 +111,7 @@ class RayTracer:
             raise InputError(f"active={active!r} must be a positive whole number of list entries")
         self.wv, self.field, self.active = wv, field, int(active)
         self.cc = ComputeContext.get(device)
+        self.budget = device_budget(self.cc, device_memory)
         self.orders = [g.wavelet.order for g in wv.groups]
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
         if field == "bspline":
@@ -109,11 +122,10 @@ class RayTracer:
         self.super_bound = cla.to_device(self.cc.queue, self.super_bound_host)
 
     def _expand(self):
-        """B-spline field: the bricks on the device (:mod:`clwave.raytrace.bricks`), and their per-block
-        maxima as bounds."""
-        self.bricks = build(self.wv, self.cc)
+        """B-spline field: the bricks (:mod:`clwave.raytrace.bricks`), and their per-block maxima as bounds."""
+        self.bricks = build(self.wv, self.cc, self.budget)
         self.setup_seconds = self.bricks.seconds
-        bound = self.bricks.block_bounds(self.cc)
+        bound = self.bricks.bounds
         self.occ_origin = self.bricks.origin * SUPER
         self.box = clip_box(bound, self.occ_origin)
         self.content_origin, self.content_cells = self.occ_origin * BLOCK, None  # the bricks clamp to content
@@ -122,7 +134,7 @@ class RayTracer:
         self.block_bound = cla.to_device(self.cc.queue, bound)
         self.q_bound = float(bound.max())
         self.occupied_fraction = float(np.mean(bound > 0))
-        self.field_tables = self.bricks.tables()
+        self.field_tables = self.bricks.tables(self.cc) if self.bricks.resident else None
         # explicit groups: PoCL's default for a big image (up to 4096 rays) keeps every ray's private
         # arrays at once, which overflowed its threads' stacks
         self.local_size = (8, 8)
@@ -207,6 +219,38 @@ class RayTracer:
         eps = np.finfo(np.float64 if precision == "double" else np.float32).eps
         return GRAD_NOISE * eps * self.q_bound / min(self.wv.spacing)
 
+    def _passes(self, view, scale, offset, per_image) -> list:
+        """The bricks in host memory as regions of c^3 bricks that fit the device one at a time, in an order
+        every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z).
+
+        Along every ray the distance of its region index from the eye's (perspective), or the index times the
+        direction's sign (orthographic), never decreases per axis, so sorting regions by those keys
+        (lexicographically) orders them along every ray alike (docs/raytracing.md §6).
+        """
+        f = self.bricks
+        fixed = per_image + 2 * self.block_bound.nbytes + 4 * int(np.prod(f.shape)) + 48 * len(f.levels) + 256
+        room = min(self.budget.total - fixed, self.budget.max_alloc)
+        sizes = np.zeros(f.shape, np.int64)
+        sizes[tuple((f.bricks - f.origin).T)] = f.slot_bytes()
+        if room < sizes.max():
+            raise DeviceMemoryError(
+                f"ray tracing this volume needs at least {format_size(fixed + sizes.max())} of device memory (its "
+                f"largest brick and this image's buffers) but {format_size(self.budget.total)} are allowed; raise "
+                f"--device-memory (device_memory=) or render a smaller image")
+        c = max(k for k in range(1, max(f.shape) + 1) if _region_sums(sizes, k).max() <= room)
+        sums = _region_sums(sizes, c)
+        eye = ((view.eye if view.perspective else view.target) * scale + offset)[::-1]  # fine (z, y, x)
+        direction = (-view.n * scale)[::-1]
+        eye_region = np.floor((eye / BLOCK / SUPER - f.origin) / c)
+        regions = []
+        for r in np.argwhere(sums > 0):
+            key = np.abs(r - eye_region) if view.perspective else r * np.sign(direction)
+            inside = np.all(((f.bricks - f.origin) // c) == r, axis=1)
+            lo = (f.origin + r * c) * BLOCK * SUPER
+            regions.append((tuple(key), np.flatnonzero(inside), lo[::-1], (lo + c * BLOCK * SUPER)[::-1]))
+        regions.sort(key=lambda item: item[0])
+        return [(slots, lo, hi) for _, slots, lo, hi in regions]
+
     def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
                precision="single", trace=0) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.
@@ -273,12 +317,19 @@ class RayTracer:
             light_buf[: len(light_dirs), :3] = light_dirs
         p = phong or Phong()
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
-        image = cla.empty(q, (H, W, 4), np.float32)
-        stats = cla.empty(q, (H, W, 4), np.int32)
-        field_tables = dict(self.field_tables)
+        passes = None if self.field == "wavelet" or self.bricks.resident else \
+            self._passes(view, scale, offset, H * W * (32 + 32 * np.dtype(real).itemsize))
+        image = cla.empty(q, (H, W, 4), np.float32) if passes is None else cla.zeros(q, (H, W, 4), np.float32)
+        stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
+        carry, ledger = cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, REAL4[real])
+        if passes is not None:  # docs/raytracing.md §6: what each ray carries from one pass to the next
+            ledger_start = (tol / 2, 0, 0, 0) if not absorption else (tol / 4, tol * 3 / 8, 0, 0)
+            carry = cla.to_device(q, np.tile(np.array((0, 0, 0, 0 if not absorption else 1), real), (H, W, 1)))
+            ledger = cla.to_device(q, np.tile(np.array(ledger_start, real), (H, W, 1)))
+        traced = None
         if self.field == "wavelet":
             traced = cla.zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
-            field_tables.update(poly=cla.to_device(q, self.poly.astype(real)), trace=traced)
+            field_tables = dict(self.field_tables, poly=cla.to_device(q, self.poly.astype(real)), trace=traced)
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         arguments = dict(
@@ -290,10 +341,14 @@ class RayTracer:
             box_hi=self.box[1], base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
             to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
             grad_floor=self.grad_floor(precision), lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
-            phong=[p.ambient, p.diffuse, p.specular, p.shininess])
-        in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
-            kernels, q, size, self.local_size, field_tables, real_type=real, global_offset=first, **arguments),
-            rounded, self.local_size)  # bounded launches: Ctrl-C within a fraction of a second
+            phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger)
+        for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
+            if self.field == "bspline":
+                field_tables = self.field_tables if slots is None else self.bricks.tables(cc, slots)
+            in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
+                kernels, q, size, self.local_size, field_tables, real_type=real, global_offset=first,
+                passes=slots is not None, pass_lo=lo, pass_hi=hi, **arguments),
+                rounded, self.local_size)  # bounded launches: Ctrl-C within a fraction of a second
         seconds = time.perf_counter() - start
         img = image.get()
         counts = stats.get().reshape(-1, 4).astype(np.int64)
@@ -311,7 +366,11 @@ class RayTracer:
             rays_active_list_overflowed=int(np.count_nonzero(counts[:, 3] & 4)),
             occupied_blocks=round(self.occupied_fraction, 4),
             setup_seconds=self.setup_seconds, compile_seconds=compile_seconds, render_seconds=seconds,
-            segments_per_second=float(counts[:, 0].sum() / seconds) if seconds > 0 else 0.0)
+            segments_per_second=float(counts[:, 0].sum() / seconds) if seconds > 0 else 0.0,
+            passes=1 if passes is None else len(passes))
+        if self.field == "bspline":
+            meta.update(bricks=len(self.bricks.levels), brick_levels=np.bincount(self.bricks.levels).tolist(),
+                        brick_pool_bytes=self.bricks.pool_bytes, pool="device" if self.bricks.resident else "host")
         if trace and self.field == "wavelet":
             meta["active_trace"] = traced.get()
         return RenderResult(img, meta)
@@ -331,7 +390,8 @@ class RayTracer:
 
 
 def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
-             device=None, *, field="bspline", precision="single", tracer: RayTracer | None = None) -> RenderResult:
+             device=None, *, field="bspline", precision="single", device_memory=None,
+             tracer: RayTracer | None = None) -> RenderResult:
     """Ray trace a wavelet volume (paper §3).
 
     Parameters
@@ -356,6 +416,9 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         reference); both give the same image within the tolerance.
     precision : "single" or "double"
         Kernel arithmetic; "double" gives converged references (float64 devices only).
+    device_memory : int or str, optional
+        Device memory to use at most (bytes, or e.g. ``"2GiB"``); bricks beyond it render in passes
+        (docs/raytracing.md §6).
     tracer : RayTracer, optional
         Render with this one; without it, calls on the same model, device and field share one
         (:meth:`WaveletVolume.shared`): the field is set up once.
@@ -368,6 +431,8 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
         cc = ComputeContext.get(device)
-        tracer = wv.shared(("raytrace", cc.info.id, field), lambda: RayTracer(wv, device=cc, field=field))
+        cap = None if device_memory is None else parse_size(device_memory)
+        tracer = wv.shared(("raytrace", cc.info.id, field, cap),
+                           lambda: RayTracer(wv, device=cc, field=field, device_memory=cap))
     return tracer.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                          precision=precision)
