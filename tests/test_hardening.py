@@ -350,14 +350,21 @@ stages.Stages.accumulate = announced
 sys.exit(cli.main(["render", "phantom:hydrogen:32", "--levels", "2", "--keep", "1", "--size", "1000",
                    "-o", {str(tmp_path / 'out.png')!r}]))
 """
+    seconds, code, err = interrupted(script, b"accumulating")
+    assert seconds < 1.5 and code == 130 and err.decode().strip() == "clwave: interrupted"
+    assert not list(tmp_path.iterdir())
+
+
+def interrupted(script: str, marker: bytes, after=0.5) -> tuple:
+    """Run ``script`` in a Python process of its own, send SIGINT ``after`` seconds after it prints a line
+    with ``marker``, and return (seconds from the signal to its exit, exit code, its stderr)."""
     proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             env=dict(os.environ, PYTHONPATH=str(ROOT)))
-    while b"accumulating" not in proc.stdout.readline():
-        assert proc.poll() is None
-    time.sleep(0.5)
+    for line in proc.stdout:
+        if marker in line:
+            break
+    time.sleep(after)
     start = time.perf_counter()
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
-    assert time.perf_counter() - start < 1.5
-    assert proc.returncode == 130 and err.decode().strip() == "clwave: interrupted"
-    assert not list(tmp_path.iterdir())
+    err = proc.communicate(timeout=60)[1]
+    return time.perf_counter() - start, proc.returncode, err

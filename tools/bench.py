@@ -14,7 +14,9 @@ approximating model) + thresholding to 5 %.
 (Haar, linear, cubic; 3 levels), as the splat renderer makes them; throughput in texels/s.
 ``splat``: hydrogen scalar, cubic, 3 levels, 1 %, 5 % and all coefficients at 512² and
 256², each render at a new view with its footprints; throughput = footprint-pixel updates
-per second of accumulation.
+per second of accumulation.  With ``--device-memory SIZE ...``, also the thresholded sets at 512²
+(single resolution) within each device-memory cap: coefficients streamed in chunks
+(docs/splatting.md §6), with the chunks and upload time.
 ``raytrace``: hydrogen RGBA (preset), cubic, 3 levels, 5 %, shaded, for tolerances 1e-2 and
 1e-3 over ``--raytrace-views`` views, per path: the B-spline path at ``--raytrace-image``
 (512²); the wavelet-space path (active lists, the paper's reference) for volumes up to
@@ -136,6 +138,8 @@ def bench_splat(args) -> dict:
                     texture_sampling=runs[0]["texture_sampling"], omega_s=runs[0]["omega_s"],
                     framebuffers=runs[0]["framebuffers"])
         cases[f"keep {keep:g}"] = dict(compile_seconds=renderer.compile_seconds)
+        for cap in args.device_memory if keep < 1.0 else ():
+            cases[f"keep {keep:g} at 512x512, device memory {cap}"] = streamed_splat(wv, cap, args)
         if keep < 1.0:
             cases[f"keep {keep:g} at 512x512, coarse 0.02: one-shot calls"] = one_shot_splat(wv, args)
     return dict(setting=dict(volume=f"hydrogen {args.size}^3 scalar", wavelet="cubic", levels=3,
@@ -143,6 +147,19 @@ def bench_splat(args) -> dict:
                 targets=dict(keep_0_01_seconds=0.1, keep_0_05_seconds=0.4, full_seconds=8.0,
                              updates_per_second=0.8e9),
                 cases=cases)
+
+
+def streamed_splat(wv, cap, args) -> dict:
+    """Seconds a view at 512² within a device-memory cap (single resolution), the chunks streamed."""
+    renderer = clwave.SplatRenderer(wv, device=args.device, device_memory=cap)
+    clwave.splat(wv, clwave.Camera(10.0, 5.0, size=512), renderer=renderer)  # warm-up
+    runs = [clwave.splat(wv, clwave.Camera(az, el, size=512), renderer=renderer).meta for az, el in views(args.views)]
+    return dict(coefficients=wv.kept, device_budget=runs[0]["device_budget"],
+                chunk_coefficients=runs[0]["chunk_coefficients"],
+                coefficient_chunks=statistics.median(m["coefficient_chunks"] for m in runs),
+                tile_pairs=statistics.median(m["tile_pairs"] for m in runs),
+                seconds={k: summary([m["seconds"][k] for m in runs])
+                         for k in ("total", "footprints", "binning", "accumulation", "upload")})
 
 
 def one_shot_splat(wv, args) -> dict:
@@ -374,6 +391,8 @@ def main(argv=None):
     parser.add_argument("--views", type=int, default=4, help="distinct views per case")
     parser.add_argument("--keep", type=float, nargs="+", default=[0.01, 0.05, 1.0],
                         help="kept fractions to splat (1 = the full coefficient set)")
+    parser.add_argument("--device-memory", nargs="+", default=[],
+                        help="splat: also render 512^2 within these device-memory caps, e.g. 12MiB (streaming)")
     parser.add_argument("--progressive-keep", type=float, default=0.08,
                         help="kept fraction refined progressively in 4 doubling frames")
     parser.add_argument("--raytrace-views", type=int, default=2, help="distinct views per ray-tracing case")
