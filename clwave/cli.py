@@ -7,6 +7,7 @@ code 2; an existing output file is never replaced without ``--force``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
@@ -165,14 +166,15 @@ def _needs_rgba(name, channels, fix) -> InputError:
                       f"channel(s): {fix}, or render line integrals with --xray")
 
 
-def build_model(args, log=print, rgba=False, gather=True):
+def build_model(args, log=print, rgba=False, gather=True, cluster_render=False):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
 
     Returns ``(wavelet_volume, reference_volume)``; the reference is the volume the
     model approximates (None when the input was already a ``.clw`` file).  A chunked input gives no
     reference, and with ``gather`` false a :class:`~clwave.model.chunked.ChunkedWaveletVolume`
-    (thresholded, not gathered).
+    (thresholded, not gathered).  ``cluster_render``: a ``.clw`` input takes ``--workers``/``--scheduler``
+    (the render runs there).
     """
     from .model.transfer import TransferFunction
     from .model.wavelet import WaveletVolume, check_decomposition
@@ -180,7 +182,8 @@ def build_model(args, log=print, rgba=False, gather=True):
     thresholding = _thresholding(args)
     scheduler = _scheduler(args)
     if args.input.lower().endswith(".clw"):
-        given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)]
+        given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
+                 and not (cluster_render and name in ("workers", "scheduler"))]
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
                              f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")
@@ -397,6 +400,7 @@ def cmd_render(args):
     from .raytrace.tracer import RayTracer, raytrace
     from .io.result import resolve_window
     from .splat.renderer import SplatRenderer, splat
+    from .cluster import client_for as cluster_client
 
     out = _check_output(args.output, args.force)
     extras = [Path(p) for p in (args.raw, args.stats) if p]
@@ -418,25 +422,36 @@ def cmd_render(args):
     if not (np.isfinite(args.tolerance) and args.tolerance > 0):
         raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
     lights, window = _lights(args), _display_window(args)
-    wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray)
+    on_cluster = args.input.lower().endswith(".clw") and (args.workers, args.scheduler) != (None, None)
+    if on_cluster and args.method != "raytrace":
+        raise InputError("--workers/--scheduler with a .clw input render on a Dask cluster with --method raytrace; "
+                         "splatting renders here")
+    wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
+    cluster = cluster_client(_scheduler(args)) if on_cluster else contextlib.nullcontext()
     if args.method == "raytrace":
-        tracer = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory)
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
                        absorption=not args.xray)
+        if on_cluster:  # docs/raytracing.md §7: each worker opens the file and traces its slab
+            options.update(device=args.device, field=args.field, device_memory=device_memory)
+        else:
+            options["tracer"] = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory)
 
         def render(cam):
-            return raytrace(wv, cam, tracer=tracer, **options)
+            return raytrace(wv, cam, scheduler=client, **options)
     else:
         renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse,
                                  device_memory=device_memory)
 
         def render(cam):
             return splat(wv, cam, renderer=renderer)
+    cameras = [camera] if args.turntable is None else \
+        [camera.rotated(360.0 * i / args.turntable) for i in range(args.turntable)]
+    with cluster as client:
+        results = [render(cam) for cam in cameras]
     if args.turntable is None:
-        result = render(camera)
+        result = results[0]
         result.save(out, window=window, background=background, overwrite=args.force)
     else:
-        results = [render(camera.rotated(360.0 * i / args.turntable)) for i in range(args.turntable)]
         if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
             window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
         _write_gif(out, [r.to_uint8(window, background) for r in results], 0.1, args.force)

@@ -132,6 +132,7 @@ class WaveletVolume:
         # (nz, ny, nx) bool: the source volume's non-zero voxels, beyond whose B-splines the approximating
         # model of every coefficient is zero (docs/raytracing.md §4); None where not known
         self.content_mask = content_mask
+        self.source = None  # (path, keep) of the .clw file this model was opened from
         self._shared = {}  # renderers of one-shot calls (shared)
 
     # ------------------------------------------------------------------ build
@@ -392,7 +393,9 @@ class WaveletVolume:
         (docs/chunked.md §4)."""
         from ..io.clw import read_clw
 
-        return read_clw(path, keep)
+        wv = read_clw(path, keep)
+        wv.source = (str(Path(path).resolve()), keep)  # workers of a Dask cluster open it themselves
+        return wv
 
 
 # ---------------------------------------------------------------- helpers

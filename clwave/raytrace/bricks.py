@@ -215,6 +215,16 @@ class BrickField:
                     boxes=cla.to_device(q, _one(boxes)), lattices=cla.to_device(q, _one(self.lattices[slots])))
 
 
+def ray_order(index, eye, direction, perspective: bool) -> tuple:
+    """Sort key of the region at ``index`` (z, y, x) of a grid of boxes: sorted by it, regions come in the order
+    every ray meets them (docs/raytracing.md §6).  ``eye``: the grid index holding the eye (perspective, any
+    real number); ``direction``: the rays' direction (z, y, x) (orthographic).  Along a ray the distance of its
+    region from the eye's, or the index times the direction's sign, never decreases on any axis, so two regions
+    one ray meets are ordered alike by every axis' key."""
+    index = np.asarray(index, float)
+    return tuple(np.abs(index - eye) if perspective else index * np.sign(direction))
+
+
 def _one(arr):
     """At least one row: OpenCL has no empty buffers."""
     return arr if len(arr) else np.zeros((1,) + arr.shape[1:], arr.dtype)

@@ -25,7 +25,7 @@ from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..device.memory import device_budget, format_size, parse_size
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
-from .bricks import build, group_defines
+from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
 from .quadrature import sample_tables
 from ..io.result import RenderResult
 from ..model.wavelet import WaveletVolume
@@ -65,6 +65,13 @@ FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("p
                   wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
 
 
+def view_in_fine(view, scale, offset) -> tuple:
+    """The eye (perspective; orthographic: the target) and the rays' direction in grid-0 fine coordinates
+    (z, y, x)."""
+    eye = ((view.eye if view.perspective else view.target) * scale + offset)[::-1]
+    return eye, (-view.n * scale)[::-1]
+
+
 def _region_sums(sizes, c) -> np.ndarray:
     """Sums of ``sizes`` over regions of c^3 cells (the last ones cut by the array's end)."""
     padded = np.pad(sizes, [(0, -n % c) for n in sizes.shape])
@@ -97,10 +104,13 @@ class RayTracer:
     or ``"wavelet"`` (active lists over the kept coefficients, the reference); see the
     module docstring.  ``active`` bounds the wavelet field's per-ray list.  ``device_memory`` caps the
     device memory it uses (bytes, or a size such as ``"2GiB"``); a B-spline field bigger than that (or than
-    the device) stays in host memory and renders in passes (docs/raytracing.md §6).
+    the device) stays in host memory and renders in passes (docs/raytracing.md §6).  ``region`` (first, stop):
+    only the bricks of those layers along array axis 0 (z), and rays marched inside them only: one worker's
+    part of an image rendered on a Dask cluster (:mod:`clwave.raytrace.regions`).
     """
 
-    def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None):
+    def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,
+                 region=None):
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
         if field not in FIELDS:
@@ -109,7 +119,7 @@ class RayTracer:
             raise InputError(f"ray tracing takes at most 4 channels, the volume has {wv.channels}")
         if int(active) != active or active < 1:
             raise InputError(f"active={active!r} must be a positive whole number of list entries")
-        self.wv, self.field, self.active = wv, field, int(active)
+        self.wv, self.field, self.active, self.region = wv, field, int(active), region
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
         self.orders = [g.wavelet.order for g in wv.groups]
@@ -123,7 +133,11 @@ class RayTracer:
 
     def _expand(self):
         """B-spline field: the bricks (:mod:`clwave.raytrace.bricks`), and their per-block maxima as bounds."""
-        self.bricks = build(self.wv, self.cc, self.budget)
+        p = plan(self.wv)
+        if self.region is not None:  # the bricks of the region's layers only
+            layers = p.origin[0] + np.arange(p.level.shape[0])
+            p.level[(layers < self.region[0]) | (layers >= self.region[1])] = ABSENT
+        self.bricks = build(self.wv, self.cc, self.budget, p)
         self.setup_seconds = self.bricks.seconds
         bound = self.bricks.bounds
         self.occ_origin = self.bricks.origin * SUPER
@@ -239,15 +253,14 @@ class RayTracer:
                 f"--device-memory (device_memory=) or render a smaller image")
         c = max(k for k in range(1, max(f.shape) + 1) if _region_sums(sizes, k).max() <= room)
         sums = _region_sums(sizes, c)
-        eye = ((view.eye if view.perspective else view.target) * scale + offset)[::-1]  # fine (z, y, x)
-        direction = (-view.n * scale)[::-1]
-        eye_region = np.floor((eye / BLOCK / SUPER - f.origin) / c)
+        eye, direction = view_in_fine(view, scale, offset)
+        eye_region = np.floor((eye / BRICK - f.origin) / c)
         regions = []
         for r in np.argwhere(sums > 0):
-            key = np.abs(r - eye_region) if view.perspective else r * np.sign(direction)
             inside = np.all(((f.bricks - f.origin) // c) == r, axis=1)
-            lo = (f.origin + r * c) * BLOCK * SUPER
-            regions.append((tuple(key), np.flatnonzero(inside), lo[::-1], (lo + c * BLOCK * SUPER)[::-1]))
+            lo = (f.origin + r * c) * BRICK
+            regions.append((ray_order(r, eye_region, direction, view.perspective), np.flatnonzero(inside),
+                            lo[::-1], (lo + c * BRICK)[::-1]))
         regions.sort(key=lambda item: item[0])
         return [(slots, lo, hi) for _, slots, lo, hi in regions]
 
@@ -317,8 +330,13 @@ class RayTracer:
             light_buf[: len(light_dirs), :3] = light_dirs
         p = phong or Phong()
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
-        passes = None if self.field == "wavelet" or self.bricks.resident else \
-            self._passes(view, scale, offset, H * W * (32 + 32 * np.dtype(real).itemsize))
+        passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
+        if self.field == "bspline" and not self.bricks.resident:
+            passes = self._passes(view, scale, offset, H * W * (32 + 32 * np.dtype(real).itemsize))
+        elif self.region is not None:
+            f = self.bricks
+            lo = np.append(self.region[0], f.origin[1:]) * BRICK
+            passes = [(None, lo[::-1], np.append(self.region[1], f.origin[1:] + f.shape[1:])[::-1] * BRICK)]
         image = cla.empty(q, (H, W, 4), np.float32) if passes is None else cla.zeros(q, (H, W, 4), np.float32)
         stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
         carry, ledger = cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, REAL4[real])
@@ -347,7 +365,7 @@ class RayTracer:
                 field_tables = self.field_tables if slots is None else self.bricks.tables(cc, slots)
             in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
                 kernels, q, size, self.local_size, field_tables, real_type=real, global_offset=first,
-                passes=slots is not None, pass_lo=lo, pass_hi=hi, **arguments),
+                passes=passes is not None, pass_lo=lo, pass_hi=hi, **arguments),
                 rounded, self.local_size)  # bounded launches: Ctrl-C within a fraction of a second
         seconds = time.perf_counter() - start
         img = image.get()
@@ -390,7 +408,7 @@ class RayTracer:
 
 
 def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
-             device=None, *, field="bspline", precision="single", device_memory=None,
+             device=None, *, field="bspline", precision="single", device_memory=None, scheduler=None,
              tracer: RayTracer | None = None) -> RenderResult:
     """Ray trace a wavelet volume (paper §3).
 
@@ -419,6 +437,10 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     device_memory : int or str, optional
         Device memory to use at most (bytes, or e.g. ``"2GiB"``); bricks beyond it render in passes
         (docs/raytracing.md §6).
+    scheduler : optional
+        Render on a Dask cluster (:mod:`clwave.cluster`: a number of local worker processes, an address or a
+        ``distributed.Client``): each worker traces the rays through its slab of bricks, opening the model's
+        ``.clw`` file itself (docs/raytracing.md §7).
     tracer : RayTracer, optional
         Render with this one; without it, calls on the same model, device and field share one
         (:meth:`WaveletVolume.shared`): the field is set up once.
@@ -427,6 +449,16 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     the line integrals; ``meta`` holds the field, segment and evaluation counts, shading,
     and timings (B-spline expansion and kernel compile apart).
     """
+    if scheduler is not None:
+        from ..cluster import client_for
+        from .regions import raytrace_on_cluster
+
+        if not isinstance(wv, WaveletVolume) or not isinstance(camera, Camera):
+            raise InputError("ray tracing needs a clwave.WaveletVolume and a clwave.Camera")
+        options = dict(tolerance=finite_number(tolerance, "tolerance"), lights=lights, shading=shading,
+                       absorption=absorption, precision=precision)
+        with client_for(scheduler) as client:
+            return raytrace_on_cluster(wv, camera, client, options, field, device, device_memory)
     if tracer is None:
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")

@@ -1,0 +1,88 @@
+"""Ray tracing on a Dask cluster (docs/raytracing.md §7): the bricks split among the workers into slabs of
+brick layers along z, each worker opening the ``.clw`` file itself and tracing the rays through its slab
+only; X-ray images are the sums of the slabs' images, emission-absorption images are composited from each
+slab's premultiplied colour and transmittance in the order every ray meets the slabs (sort-last
+compositing).  Each slab gets an equal share of the tolerance, so the whole image stays within it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.result import RenderResult
+from ..model.geometry import world_to_fine_affine
+from .bricks import BRICK, layout, plan, ray_order
+from ..model.wavelet import WaveletVolume
+from .tracer import RayTracer, view_in_fine
+
+_TRACERS = {}  # per worker process: the tracer of each (file, keep, device, region), set up once
+
+
+def slabs(wv, count: int) -> list:
+    """Up to ``count`` runs of brick layers along z, ``[(first, stop)]``, of about equal pool bytes."""
+    p = plan(wv)
+    lay = layout(wv, p)
+    sizes = np.bincount(lay["bricks"][:, 0] - p.origin[0], weights=np.prod(lay["count"], axis=2).sum(axis=1),
+                        minlength=p.level.shape[0])
+    if not sizes.any():
+        return [(int(p.origin[0]), int(p.origin[0] + 1))]
+    cuts = np.searchsorted(np.cumsum(sizes) / sizes.sum(), np.arange(1, count) / count, side="right")
+    edges = np.unique(np.concatenate([[0], cuts, [len(sizes)]]))
+    return [(int(p.origin[0] + a), int(p.origin[0] + b)) for a, b in zip(edges[:-1], edges[1:]) if sizes[a:b].any()]
+
+
+def raytrace_on_cluster(wv, camera, client, options: dict, field: str, device, device_memory) -> RenderResult:
+    """:func:`clwave.raytrace` with ``scheduler=``: one task per slab, run where the scheduler puts it."""
+    if wv.source is None:
+        raise InputError("ray tracing on a Dask cluster needs a model opened from a .clw file (its workers open "
+                         "the file themselves): save it (wv.save) and render WaveletVolume.open(path)")
+    if field != "bspline":
+        raise InputError("ray tracing on a Dask cluster takes the B-spline field (field='bspline')")
+    workers = max(1, len(client.scheduler_info().get("workers", {})))
+    parts = slabs(wv, workers)
+    share = dict(options, tolerance=options["tolerance"] / len(parts))
+    futures = [client.submit(_trace_slab, wv.source, device, device_memory, region, camera, share, pure=False)
+               for region in parts]
+    results = client.gather(futures)
+    order = slab_order(wv, parts, camera)
+    image = composite([results[i][0] for i in order], options["absorption"])
+    meta = dict(results[0][1], tolerance=options["tolerance"], workers=workers, slabs=[list(r) for r in parts])
+    for key in ("segments", "segments_shaded_at_midpoint", "integrand_evaluations", "rays_terminated_early",
+                "rays_at_simpson_depth_limit", "bricks", "brick_pool_bytes"):
+        meta[key] = int(sum(m[key] for _, m in results))
+    meta["render_seconds"] = max(m["render_seconds"] for _, m in results)
+    meta["setup_seconds"] = max(m["setup_seconds"] for _, m in results)
+    return RenderResult(image, meta)
+
+
+def slab_order(wv, parts, camera) -> list:
+    """The slabs ``parts`` in the order every ray of the view meets them (:func:`ray_order` on a grid of slabs)."""
+    view = camera.view(wv)
+    eye, direction = view_in_fine(view, *world_to_fine_affine(wv.groups[0].wavelet.order, wv.shape, wv.spacing,
+                                                              wv.origin))
+    eye_slab = np.searchsorted([stop for _, stop in parts], eye[0] / BRICK, side="right")
+    return sorted(range(len(parts)), key=lambda i: ray_order([i], eye_slab, direction[:1], view.perspective))
+
+
+def composite(images: list, absorption: bool) -> np.ndarray:
+    """The image of the slabs' images, given front to back: sums (X-ray), or premultiplied colour over colour
+    (``C += (1 - A) C_k``, ``A = 1 - (1 - A)(1 - A_k)``)."""
+    if not absorption:
+        return np.sum(images, axis=0)
+    out = np.zeros_like(images[0])
+    for img in images:
+        out[..., :3] += (1 - out[..., 3:]) * img[..., :3]
+        out[..., 3] = 1 - (1 - out[..., 3]) * (1 - img[..., 3])
+    return out
+
+
+def _trace_slab(source, device, device_memory, region, camera, options) -> tuple:
+    """On a worker: the image of the rays inside one slab, and the meta (the tracer is kept for later views)."""
+    key = (source, device, device_memory, region)
+    if key not in _TRACERS:
+        _TRACERS.clear()  # one model at a time per worker: the last one asked for
+        wv = WaveletVolume.open(source[0], keep=source[1])
+        _TRACERS[key] = RayTracer(wv, device=device, device_memory=device_memory, region=region)
+    result = _TRACERS[key].render(camera, **options)
+    return result.image, result.meta
