@@ -22,7 +22,9 @@ per second of accumulation.  With ``--device-memory SIZE ...``, also the thresho
 (512²); the wavelet-space path (active lists, the paper's reference) for volumes up to
 ``--wavelet-max-size`` (128³) at ``--wavelet-image`` (256²), timed on its
 ``--wavelet-crop`` (32²) centre crop, with an estimate for the whole image; error against a
-float64 render at tolerance 1e-5 of the 64x64 centre crop; set-up (expansion) apart.
+float64 render at tolerance 1e-5 of the 64x64 centre crop; set-up (the bricks' expansion) apart, with
+the bricks per level, the pool, passes and segments per lattice; VTK's shaded composite of the same
+phantom and image size in the same run when VTK is installed (tools/compare_peers.py).
 ``progressive``: frames of 1, 2, 4 and 8 % of the voxels (``--progressive-keep`` 0.08 in 4
 doubling steps) at 512², single resolution and with coarse framebuffers (``coarse=2e-2``); per
 frame the time since the start of the view, energy, and RMS error against the final image.
@@ -31,8 +33,10 @@ frame the time since the start of the view, energy, and RMS error against the fi
 ``--size``³ float32 voxels (or ``--scale-shape Z,Y,X`` of ``--scale-dtype``) is written to a Zarr
 store in ``--scratch`` chunk by chunk (tools/make_zarr.py, timed apart, kept for the next run), then
 compressed to 5 % (``--scale-tf``: classified to RGBA first) chunk by chunk on the threads of one
-process, and its file splatted at 512² with 1 % read as a prefix and a reused renderer.  Each step
-runs in a process of its own, which reports its peak resident memory.
+process, and its file splatted at 512² with 1 % read as a prefix and a reused renderer; classified,
+also ray traced (whole file, shaded, tolerance 1e-2, ``--raytrace-image``) within the first
+``--device-memory`` cap (default 2GiB): set-up, render, bricks, passes, segments per lattice.  Each
+step runs in a process of its own, which reports its peak resident memory.
 
 A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) and an
 entry in ``BENCHMARKS``.
@@ -251,7 +255,11 @@ def bench_raytrace(args) -> dict:
         fast = fast or tracer
         out["paths"][path] = _raytrace_cases(tracer, fast, wv, size, crop, args.raytrace_views)
         out["paths"][path]["setup_seconds"] = setup
+        if path == "bspline":
+            meta = tracer.render(clwave.Camera(*views(1)[0], size=size), tolerance=1e-2).meta
+            out["paths"][path]["bricks"] = brick_figures(tracer, meta)
     out["one_shot"] = one_shot_raytrace(wv, args)
+    out["vtk_composite"] = vtk_composite(args)
     return out
 
 
@@ -273,6 +281,31 @@ def one_shot_raytrace(wv, args) -> dict:
         out[name] = summary(walls)
     out["ratio"] = out["one_shot"]["median"] / out["reused_tracer"]["median"]
     return out
+
+
+def brick_figures(tracer, meta) -> dict:
+    """The B-spline field's bricks (docs/raytracing.md §3, §6) and what one render of them did."""
+    f = tracer.bricks
+    return dict(bricks=len(f.levels), bricks_per_level=np.bincount(f.levels).tolist(), pool_bytes=f.pool_bytes,
+                pool=meta["pool"], passes=meta["passes"], segments=meta["segments"],
+                segments_by_lattice=meta["segments_by_lattice"],
+                device_bytes=(f.pool_bytes if f.resident else 0) + 2 * f.bounds.nbytes)
+
+
+def vtk_composite(args) -> dict | None:
+    """VTK's shaded composite (tools/compare_peers.py, ``Render()`` alone) of the same phantom at the same image
+    size, when VTK is installed: the ratio to beat next."""
+    import importlib.util
+
+    if importlib.util.find_spec("vtk") is None:
+        return None
+    import compare_peers
+
+    case = dict(phantom="hydrogen", n=args.size, image=args.raytrace_image, views=views(args.raytrace_views),
+                device=args.device, tf="hydrogen")
+    res = compare_peers.in_process("vtk", case, ("composite",))
+    return dict(seconds=summary(res["seconds"]), prepare_seconds=res["prepare"],
+                framing="compare_peers' camera: the volume's diagonal spans the image")
 
 
 def _raytrace_cases(tracer, fast, wv, size, crop, n_views) -> dict:
@@ -325,6 +358,10 @@ def bench_scale(args) -> dict:
         out["make_zarr_seconds"] = time.perf_counter() - start
     out["compress"] = _scale_step(dict(step="compress", store=str(store), model=str(model), tf=args.scale_tf))
     out["splat"] = _scale_step(dict(step="splat", model=str(model), views=args.views, device=args.device))
+    if args.scale_tf:
+        out["raytrace"] = _scale_step(dict(step="raytrace", model=str(model), views=args.raytrace_views,
+                                           device=args.device, device_memory=(args.device_memory or ["2GiB"])[0],
+                                           image=args.raytrace_image))
     return out
 
 
@@ -355,6 +392,18 @@ def scale_step(spec) -> dict:
         kept.save(spec["model"], overwrite=True)
         times["select_and_write"] = time.perf_counter() - start
         figures = dict(kept=kept.kept, file_bytes=os.path.getsize(spec["model"]), blocks=vol.data.numblocks)
+    elif spec["step"] == "raytrace":
+        start = time.perf_counter()
+        wv = WaveletVolume.open(spec["model"])
+        times["open"] = time.perf_counter() - start
+        start = time.perf_counter()
+        tracer = clwave.RayTracer(wv, device=spec["device"], device_memory=spec["device_memory"])
+        times["set_up"] = time.perf_counter() - start
+        runs = [tracer.render(clwave.Camera(az, el, size=spec["image"]), tolerance=1e-2).meta
+                for az, el in views(spec["views"])]
+        times["render"] = summary([m["render_seconds"] for m in runs])
+        figures = dict(brick_figures(tracer, runs[0]), device_memory=spec["device_memory"],
+                       compile_seconds=runs[0]["compile_seconds"])
     else:
         start = time.perf_counter()
         wv = WaveletVolume.open(spec["model"], keep=0.01)

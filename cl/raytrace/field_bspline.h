@@ -23,8 +23,8 @@ typedef struct {
 } Field;
 #define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices}
 #define FIELD_BRICK CLW_SUPER_CELLS /* a brick is a superblock */
-typedef int Active; /* no per-ray state */
-inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = 0; }
+typedef int Active; /* the pool slot of the brick the ray is in (field_lattice sets it) */
+inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = -1; }
 inline int active_flags(const Active *A) { return 0; }
 
 /* the pool slot of the brick holding grid-0 point x, -1 where there is none */
@@ -36,11 +36,11 @@ inline int brick_slot(const Field G, const real3 x)
     return G.pages[((size_t)k.z * G.page_shape.y + k.y) * G.page_shape.x + k.x];
 }
 
-/* the knot planes of the brick holding x: origin (x, y, z) and spacing */
-inline real4 field_lattice(const Field G, const real3 x)
+/* the knot planes of the brick holding x, which the ray has entered: origin (x, y, z) and spacing */
+inline real4 field_lattice(const Field G, const real3 x, Active *A)
 {
-    const int slot = brick_slot(G, x);
-    return slot < 0 ? (real4)(0, 0, 0, CLW_LATTICE) : to_real4(G.lattices[slot]);
+    *A = brick_slot(G, x);
+    return *A < 0 ? (real4)(0, 0, 0, CLW_LATTICE) : to_real4(G.lattices[*A]);
 }
 
 /* w[r] = N_j(u + r) (BSPLINE_WEIGHTS) and dw[r] = N_j'(u + r) (BSPLINE_DERIVATIVES), r = 0..j-1:
@@ -192,7 +192,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
 {
     for (int k = 0; k < NS; k++)
         fq[k] = (real4)(0);
-    const int slot = brick_slot(G, xm);
+    const int slot = *A; /* every segment lies in the brick the ray last entered */
     for (int g = 0; g < CLW_GROUPS; g++) {
         Basis *B = &basis[g];
         segment_basis(G, g, slot, xm, radius, D, nodes, B);

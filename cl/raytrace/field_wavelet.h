@@ -40,7 +40,7 @@ typedef struct {
 } Field;
 #define FIELD_INIT {coef, info, shape, band_lo, poly, trace}
 #define FIELD_BRICK 0 /* one lattice everywhere: the fine one */
-inline real4 field_lattice(const Field G, const real3 x) { return (real4)(0, 0, 0, CLW_LATTICE); }
+inline real4 field_lattice(const Field G, const real3 x, void *A) { return (real4)(0, 0, 0, CLW_LATTICE); }
 
 typedef struct {
     real t;     /* t_A: where the ray leaves the support */

@@ -128,6 +128,7 @@ inline real2 simpson_pair(const real8 v, const real first)
  *   stats        out (H, W) int4: segments, segments shaded at the midpoint (no gradient), integrand
  *                    evaluations, flags
  *                    (bit 0 terminated early, bit 1 Simpson depth limit reached)
+ *   lattice_stats out (H, W) int4: the segments on knot lattices of 1 (or 1/2), 2, 4, and 8 or more cells
  *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
  *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
  *   super_bound, super_origin, super_shape  the largest of those per superblock of CLW_SUPER_CELLS^3 fine cells
@@ -155,7 +156,8 @@ inline real2 simpson_pair(const real8 v, const real first)
  *                X-ray integrals), ledger (the skipping and shading budgets left, R consumed, and R of the
  *                whole ray: 0 before the first pass) and stats, which it updates (docs/raytracing.md §6)
  * Grid: global (W, H). */
-__kernel void raytrace(__global float4 *image, __global int4 *stats, const int width, const int height,
+__kernel void raytrace(__global float4 *image, __global int4 *stats, __global int4 *lattice_stats, const int width,
+                       const int height,
                        FIELD_PARAMS,
                        __global const float *bound, const int4 occ_origin, const int4 occ_shape,
                        __global const float *super_bound, const int4 super_origin, const int4 super_shape,
@@ -207,14 +209,17 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     Active active;
     active_init(&active, G, pix, X0, D);
     int segments = 0, midpoints = 0, evals = 0, flags = 0;
+    int4 spans = (int4)(0); /* segments on lattices of 1 (or 1/2), 2, 4, and 8 or more cells */
     if (passes) { /* docs/raytracing.md §6: go on from the last pass; a terminated ray is done */
         const int4 s = stats[pix];
         segments = s.x; midpoints = s.y; evals = s.z; flags = s.w;
+        spans = lattice_stats[pix];
     }
     if (!(t1 > t0) || (flags & 1)) {
         if (!passes) {
             image[pix] = (float4)(0.0f);
             stats[pix] = (int4)(0);
+            lattice_stats[pix] = (int4)(0);
         }
         return;
     }
@@ -312,7 +317,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             int bplane[3];
             next_planes(x0, dd, inv, t, (real4)(0, 0, 0, FIELD_BRICK), bplane, btp);
             brick_end = fmin(tb, fmin(btp[0], fmin(btp[1], btp[2])));
-            lat = field_lattice(G, X0 + (t + brick_end) / 2 * D);
+            lat = field_lattice(G, X0 + (t + brick_end) / 2 * D, &active);
             replan = true;
         }
         if (replan) { /* the next knot plane per axis, from the position at t */
@@ -358,6 +363,10 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
             end_field = S.fq[7];
             t_joined = tn;
             segments += 1;
+            {
+                const int lv = lat.w <= 1 ? 0 : lat.w <= 2 ? 1 : lat.w <= 4 ? 2 : 3;
+                spans += (int4)(lv == 0, lv == 1, lv == 2, lv == 3);
+            }
 #ifdef CLW_XRAY /* the integral over the segment */
             real4 integral = (real4)(0);
             for (int k = 0; k < NS; k++)
@@ -469,4 +478,5 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, const int w
     }
 #endif
     stats[pix] = (int4)(segments, midpoints, evals, flags | active_flags(&active));
+    lattice_stats[pix] = spans;
 }

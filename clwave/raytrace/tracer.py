@@ -81,7 +81,8 @@ def _region_sums(sizes, c) -> np.ndarray:
 
 def raytrace_kernel(field: str) -> Kernel:
     """The arguments of ``raytrace`` (cl/raytrace/raytrace.cl) with a field backend."""
-    return Kernel("raytrace", ("image", B), ("stats", B), ("width", I32), ("height", I32), *FIELD_ARGS[field],
+    return Kernel("raytrace", ("image", B), ("stats", B), ("lattice_stats", B), ("width", I32), ("height", I32),
+                  *FIELD_ARGS[field],
                   ("bound", B), ("occ_origin", INT4), ("occ_shape", INT4), ("super_bound", B),
                   ("super_origin", INT4), ("super_shape", INT4), ("content", B), ("content_origin", INT4),
                   ("content_shape", INT4), ("coarse_bound", REAL), ("box_lo", FLOAT4),
@@ -339,6 +340,7 @@ class RayTracer:
             passes = [(None, lo[::-1], np.append(self.region[1], f.origin[1:] + f.shape[1:])[::-1] * BRICK)]
         image = cla.empty(q, (H, W, 4), np.float32) if passes is None else cla.zeros(q, (H, W, 4), np.float32)
         stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
+        lattice_stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
         carry, ledger = cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, REAL4[real])
         if passes is not None:  # docs/raytracing.md §6: what each ray carries from one pass to the next
             ledger_start = (tol / 2, 0, 0, 0) if not absorption else (tol / 4, tol * 3 / 8, 0, 0)
@@ -351,7 +353,8 @@ class RayTracer:
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         arguments = dict(
-            image=image, stats=stats, width=W, height=H, bound=self.block_bound, occ_origin=self.occ_origin[::-1],
+            image=image, stats=stats, lattice_stats=lattice_stats, width=W, height=H, bound=self.block_bound,
+            occ_origin=self.occ_origin[::-1],
             occ_shape=self.block_bound.shape[::-1],
             super_bound=self.super_bound, super_origin=self.super_origin[::-1], content=self.content,
             content_origin=self.content_origin[::-1], content_shape=self.content_shape[::-1],
@@ -385,7 +388,9 @@ class RayTracer:
             occupied_blocks=round(self.occupied_fraction, 4),
             setup_seconds=self.setup_seconds, compile_seconds=compile_seconds, render_seconds=seconds,
             segments_per_second=float(counts[:, 0].sum() / seconds) if seconds > 0 else 0.0,
-            passes=1 if passes is None else len(passes))
+            passes=1 if passes is None else len(passes),
+            segments_by_lattice=dict(zip(("1", "2", "4", "8+"),
+                                         lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())))
         if self.field == "bspline":
             meta.update(bricks=len(self.bricks.levels), brick_levels=np.bincount(self.bricks.levels).tolist(),
                         brick_pool_bytes=self.bricks.pool_bytes, pool="device" if self.bricks.resident else "host")
