@@ -427,6 +427,10 @@ def cmd_render(args):
         raise InputError("--workers/--scheduler with a .clw input render on a Dask cluster with --method raytrace; "
                          "splatting renders here")
     wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
+    if on_cluster:
+        from .raytrace.regions import check_cluster_model
+
+        check_cluster_model(wv, args.field)  # before any worker starts
     cluster = cluster_client(_scheduler(args)) if on_cluster else contextlib.nullcontext()
     if args.method == "raytrace":
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
@@ -467,10 +471,11 @@ def cmd_render(args):
     size = f"{camera.size[0]}x{camera.size[1]}"
     m = result.meta
     if args.method == "raytrace":
+        where = f"on {m['workers']} workers in {len(m['slabs'])} slabs" if "slabs" in m else \
+            f"{m['rays_terminated_early']:,} rays terminated early"
         print(f"ray traced {size} ({m['mode']}, {m['field']} field, tolerance {m['tolerance']:g}, shading "
-              f"{m['shading']}) in {m['render_seconds']:.3f} s: {m['segments']:,} segments, "
-              f"{m['rays_terminated_early']:,} rays terminated early (set-up {m['setup_seconds']:.2f} s and "
-              f"kernel build {m['compile_seconds']:.2f} s apart) -> {out}")
+              f"{m['shading']}) in {m['render_seconds']:.3f} s: {m['segments']:,} segments, {where} (set-up "
+              f"{m['setup_seconds']:.2f} s and kernel build {m['compile_seconds']:.2f} s apart) -> {out}")
     else:
         s = m["seconds"]
         print(f"splatted {m['coefficients']:,} coefficients at {size} in {s['total']:.3f} s (footprints "

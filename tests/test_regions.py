@@ -63,9 +63,23 @@ def test_on_a_local_cluster_of_two_worker_processes(model):
         assert client.status == "running"
 
 
-def test_a_cluster_needs_a_model_opened_from_a_file(model):
+def test_a_cluster_needs_a_model_opened_from_a_file(model, monkeypatch):
+    """Refused before any worker starts."""
+    import clwave.cluster
+
+    monkeypatch.setattr(clwave.cluster, "client_for", None)  # starting a cluster would fail the test
     with pytest.raises(InputError, match=r"\.clw file"):
         clwave.raytrace(model.threshold(keep=0.5), clwave.Camera(size=8), scheduler=1)
+    for bad in (dict(field="wavelet"), dict(tolerance=0), dict(device_memory="2GB")):
+        with pytest.raises(InputError):
+            clwave.raytrace(model, clwave.Camera(size=8), scheduler=1, **bad)
+
+
+@pytest.mark.parametrize("region,field", [("ab", "bspline"), ((0,), "bspline"), ((5, 2), "bspline"),
+                                          ((0, 1.5), "bspline"), ((0, 1), "wavelet")])
+def test_bad_regions_are_refused(model, region, field):
+    with pytest.raises(InputError, match="region="):
+        RayTracer(model, region=region, field=field)
 
 
 def test_command_line_renders_a_clw_file_on_worker_processes(model, capsys, tmp_path):

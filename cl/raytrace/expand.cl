@@ -10,7 +10,7 @@
  * over the taps t with L - shift - t even.  Every array is a box of float4 in absolute
  * index coordinates (the processed axis in child indices, the others in the level's own);
  * a read outside an input's box is zero, so the output box may be larger than the inputs
- * (the ray tracer pads its grids that way).  Host: clwave/raytrace/finegrid.py. */
+ * (the ray tracer crops them to the boxes its bricks need).  Host: clwave/raytrace/bricks.py. */
 
 #include "common/clw_common.h"
 

@@ -127,9 +127,10 @@ inline real2 simpson_pair(const real8 v, const real first)
  *   image        out (H, W) float4: premultiplied (R, G, B, 1 - T), or line integrals (CLW_XRAY)
  *   stats        out (H, W) int4: segments, segments shaded at the midpoint (no gradient), integrand
  *                    evaluations, flags
- *                    (bit 0 terminated early, bit 1 Simpson depth limit reached)
+ *                    (bit 0 terminated early, bit 1 Simpson depth limit reached, bit 2 active list overflowed)
  *   lattice_stats out (H, W) int4: the segments on knot lattices of 1 (or 1/2), 2, 4, and 8 or more cells
- *   coef, start, shape, offset   the fine grids (float4), per grid box (x, y, z) and first element
+ *   FIELD_PARAMS the field backend's arguments: the brick pool, page table and per-slot tables
+ *                (field_bspline.h), or the wavelet bands and their tables (field_wavelet.h)
  *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
  *   super_bound, super_origin, super_shape  the largest of those per superblock of CLW_SUPER_CELLS^3 fine cells
  *   content, content_origin, content_shape  CLW_CONTENT builds: per grid-0 fine cell, 1 where the source

@@ -27,7 +27,7 @@ from ..device.constants import BLOCK, SUPER
 from ..device.context import ComputeContext
 from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
-from ..errors import DeviceMemoryError, InputError
+from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
 from .bounds import content_weights
 
@@ -70,29 +70,28 @@ def plan(wv) -> Plan:
     support boxes, on the safe side: a brick may be finer than needed, never coarser.
     """
     j0 = wv.groups[0].wavelet.order
-    spans = []  # per band with kept non-zero coefficients: (level or None for the approximation, lo, extent)
+    bands = []  # (group, band, slice, per axis the first and last brick each index reaches)
     for g in wv.groups:
-        wav, shift = g.wavelet, g.wavelet.order - j0
         for band, sl in zip(g.bands, g.band_slices()):
-            positions = g.all_positions()[sl] - band.start
-            index = np.column_stack(np.unravel_index(positions[np.any(g.values[:, sl] != 0, axis=0)], band.shape))
-            if not len(index):
-                continue
-            off, step, support = band_lattice(wav, band.key, band.level)
-            corner = off - shift / 2.0 + step * index  # grid-0 support corners (docs/raytracing.md §3)
-            lo = np.floor(corner / BRICK).astype(np.int64)
-            spans.append((band.level if band.key != "aaa" else None, lo,
-                          np.ceil((corner + step * support) / BRICK).astype(np.int64) - 1 - lo))
-    if not spans:
-        return Plan(np.zeros(3, np.int64), np.full((1, 1, 1), ABSENT, np.int8), np.zeros((1, 1, 1), bool))
-    origin = np.min([lo.min(axis=0) for _, lo, _ in spans], axis=0)
-    shape = tuple(np.max([(lo + ext).max(axis=0) for _, lo, ext in spans], axis=0) - origin + 1)
+            off, step, support = band_lattice(g.wavelet, band.key, band.level)
+            corner = [off[a] - (g.wavelet.order - j0) / 2.0 + step * np.arange(n) for a, n in enumerate(band.shape)]
+            bands.append((g, band, sl, [(np.floor(c / BRICK).astype(np.int64),  # grid-0 (docs/raytracing.md §3)
+                                         np.ceil((c + step * support[a]) / BRICK).astype(np.int64) - 1)
+                                        for a, c in enumerate(corner)]))
+    origin = np.min([[lo[0] for lo, _ in axes] for *_, axes in bands], axis=0)
+    shape = tuple(np.max([[hi[-1] for _, hi in axes] for *_, axes in bands], axis=0) - origin + 1)
     present, level = np.zeros(shape, bool), np.full(shape, wv.levels, np.int8)
-    for m, lo, extent in spans:
-        reach = _reach(lo - origin, extent, shape)
+    for g, band, sl, axes in bands:  # one band at a time: no per-coefficient array of the whole model
+        positions = g.all_positions()[sl] - band.start
+        index = np.unravel_index(positions[np.any(g.values[:, sl] != 0, axis=0)], band.shape)
+        if not len(index[0]):
+            continue
+        lo = np.stack([axes[a][0][k] - origin[a] for a, k in enumerate(index)], axis=1)
+        extent = np.stack([axes[a][1][k] - axes[a][0][k] for a, k in enumerate(index)], axis=1)
+        reach = _reach(lo, extent, shape)
         present |= reach
-        if m is not None:  # the finest detail reaching a brick sets its level
-            level[reach] = np.minimum(level[reach], m - 1)
+        if band.key != "aaa":  # the finest detail reaching a brick sets its level
+            level[reach] = np.minimum(level[reach], band.level - 1)
     level[~present] = ABSENT
     clamp = np.zeros(level.shape, bool)
     if wv.content_mask is not None:
@@ -130,9 +129,10 @@ def _content(wv, origin, shape) -> tuple:
     for g in wv.groups:
         j, s = g.wavelet.order, (g.wavelet.order - j0) / 2.0
         first, width = int(np.floor(s)) - j + 1, int(np.ceil(BRICK + s) - np.floor(s)) + j - 1
-        count = wv.content_mask.astype(np.uint16)
-        for axis in range(3):
-            count = _window_sums(count, axis, BRICK * origin[axis] + first, width, shape[axis])
+        count = wv.content_mask.view(np.uint8)
+        for axis in range(3):  # counts of at most 20, 400, 8000 voxels: uint8 for the first (the largest array)
+            count = _window_sums(count, axis, BRICK * origin[axis] + first, width, shape[axis],
+                                 np.uint8 if axis == 0 else np.uint16)
         has_any.append(count > 0)
         has_all.append(count == width ** 3)
     empty = ~np.any(has_any, axis=0)
@@ -140,12 +140,12 @@ def _content(wv, origin, shape) -> tuple:
     return empty, mixed & ~empty
 
 
-def _window_sums(arr, axis, start, width, count):
+def _window_sums(arr, axis, start, width, count, dtype):
     """Sums of ``arr`` along ``axis`` over ``[start + 16 b, start + 16 b + width)``, b < count (zero outside)."""
     assert BRICK <= width <= 2 * BRICK
     n = arr.shape[axis]
     length = BRICK * (count + 1)
-    padded = np.zeros(arr.shape[:axis] + (length,) + arr.shape[axis + 1:], np.uint16)
+    padded = np.zeros(arr.shape[:axis] + (length,) + arr.shape[axis + 1:], dtype)
     lo, hi = max(start, 0), min(start + length, n)
     if hi > lo:
         idx = [slice(None)] * arr.ndim
@@ -154,8 +154,8 @@ def _window_sums(arr, axis, start, width, count):
         src[axis] = slice(lo, hi)
         padded[tuple(idx)] = arr[tuple(src)]
     blocks = padded.reshape(arr.shape[:axis] + (count + 1, BRICK) + arr.shape[axis + 1:])
-    whole = blocks.sum(axis=axis + 1, dtype=np.uint16)
-    tail = np.take(blocks, range(width - BRICK), axis=axis + 1).sum(axis=axis + 1, dtype=np.uint16)
+    whole = blocks.sum(axis=axis + 1, dtype=dtype)
+    tail = np.take(blocks, range(width - BRICK), axis=axis + 1).sum(axis=axis + 1, dtype=dtype)
     return np.take(whole, range(count), axis=axis) + np.take(tail, range(1, count + 1), axis=axis)
 
 
@@ -206,7 +206,7 @@ class BrickField:
         else:
             starts, sizes = self.boxes[slots, 0, 3].astype(np.int64), self.slot_bytes()[slots] // 16
             pool = cla.to_device(q, np.concatenate([self.host[a:a + n] for a, n in zip(starts, sizes)] +
-                                                   [np.zeros((16, 4), np.float32)]))
+                                                   [np.zeros((64, 4), np.float32)]))
             boxes = self.boxes[slots].copy()
             boxes[..., 3] += (np.concatenate([[0], np.cumsum(sizes)[:-1]]) - starts)[:, None].astype(np.int32)
         pages[tuple((self.bricks[slots] - self.origin).T)] = np.arange(len(slots), dtype=np.int32)
@@ -284,8 +284,6 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     fits the budget with the bounds, else each slab's bricks go to host memory.  Raises
     :class:`DeviceMemoryError` before allocating when one slab's work does not fit.
     """
-    if wv.channels > 4:
-        raise InputError(f"the ray tracer takes at most 4 channels (RGBA), this volume has {wv.channels}")
     p = p if p is not None else plan(wv)
     lay = layout(wv, p)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
@@ -300,10 +298,12 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     frames[..., 3] = 2.0 ** -lay["levels"][:, None]
     boxes[..., :3] = lay["count"][..., ::-1]
     boxes[..., 3] = lay["offset"]
-    lattices = lattice_of_levels(wv)[lay["levels"]]
+    level_lattices = lattice_of_levels(wv)
+    lattices = level_lattices[lay["levels"]]
     alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
     bounds = cla.zeros(q, tuple(int(k) * SUPER for k in p.level.shape), np.float32)
-    pool = cla.empty(q, (max(lay["total"], 16), 4), np.float32) if resident else None  # 16: absent bricks' reads
+    # 64 = 4^3: the reads of a segment in no brick (weights 0; the march never samples one) stay inside
+    pool = cla.empty(q, (max(lay["total"], 64), 4), np.float32) if resident else None
     host = None if resident else np.empty((lay["total"], 4), np.float32)
     clamp = ElementwiseKernel(cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f",
                               "clamp_to_content")
@@ -327,7 +327,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
         if alpha is not None:  # docs/raytracing.md §3: where alpha may dip below 0, the fine lattice's segments
             floor = cla.empty(q, len(slots), np.float32)
             _FLOOR(kernels, q, (len(slots),), None, out=floor, coef=target, boxes=local, g=alpha)
-            lattices[slots[floor.get() < 0]] = lattice_of_levels(wv)[0]
+            lattices[slots[floor.get() < 0]] = level_lattices[0]
         if not resident:
             target.get(q, host[first:last])
     q.finish()

@@ -7,6 +7,8 @@ compositing).  Each slab gets an equal share of the tolerance, so the whole imag
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..errors import InputError
@@ -16,7 +18,9 @@ from .bricks import BRICK, layout, plan, ray_order
 from ..model.wavelet import WaveletVolume
 from .tracer import RayTracer, view_in_fine
 
-_TRACERS = {}  # per worker process: the tracer of each (file, keep, device, region), set up once
+_TRACERS = {}  # per worker process: the tracers of the last (file, keep, device, region)s asked for
+_KEEP_TRACERS = 4
+_LOCK = threading.Lock()
 
 
 def slabs(wv, count: int) -> list:
@@ -32,27 +36,44 @@ def slabs(wv, count: int) -> list:
     return [(int(p.origin[0] + a), int(p.origin[0] + b)) for a, b in zip(edges[:-1], edges[1:]) if sizes[a:b].any()]
 
 
-def raytrace_on_cluster(wv, camera, client, options: dict, field: str, device, device_memory) -> RenderResult:
-    """:func:`clwave.raytrace` with ``scheduler=``: one task per slab, run where the scheduler puts it."""
+def check_cluster_model(wv, field):
+    """InputError unless ``wv`` can be ray traced on a cluster: opened from a ``.clw`` file, B-spline field."""
+    if not isinstance(wv, WaveletVolume):
+        raise InputError("ray tracing needs a clwave.WaveletVolume")
     if wv.source is None:
-        raise InputError("ray tracing on a Dask cluster needs a model opened from a .clw file (its workers open "
-                         "the file themselves): save it (wv.save) and render WaveletVolume.open(path)")
+        raise InputError("ray tracing on a Dask cluster needs a model opened from a .clw file, as it is (its workers "
+                         "open the file themselves): save it (wv.save) and render WaveletVolume.open(path)",
+                         cli="--workers/--scheduler ray trace the .clw file as it is: --threshold and --focus cannot "
+                             "apply there; compress a model with them first")
     if field != "bspline":
         raise InputError("ray tracing on a Dask cluster takes the B-spline field (field='bspline')")
-    workers = max(1, len(client.scheduler_info().get("workers", {})))
-    parts = slabs(wv, workers)
+
+
+def raytrace_on_cluster(wv, camera, client, options: dict, device, device_memory) -> RenderResult:
+    """:func:`clwave.raytrace` with ``scheduler=``: one task per slab, each slab on a worker of its own (round
+    robin), where the worker keeps its tracer for later views."""
+    workers = sorted(client.scheduler_info().get("workers", {})) or [None]
+    parts = slabs(wv, len(workers))
     share = dict(options, tolerance=options["tolerance"] / len(parts))
-    futures = [client.submit(_trace_slab, wv.source, device, device_memory, region, camera, share, pure=False)
-               for region in parts]
+    futures = [client.submit(_trace_slab, wv.source, device, device_memory, region, camera, share, pure=False,
+                             workers=None if workers[0] is None else [workers[i % len(workers)]])
+               for i, region in enumerate(parts)]
     results = client.gather(futures)
     order = slab_order(wv, parts, camera)
     image = composite([results[i][0] for i in order], options["absorption"])
-    meta = dict(results[0][1], tolerance=options["tolerance"], workers=workers, slabs=[list(r) for r in parts])
-    for key in ("segments", "segments_shaded_at_midpoint", "integrand_evaluations", "rays_terminated_early",
-                "rays_at_simpson_depth_limit", "bricks", "brick_pool_bytes"):
-        meta[key] = int(sum(m[key] for _, m in results))
-    meta["render_seconds"] = max(m["render_seconds"] for _, m in results)
-    meta["setup_seconds"] = max(m["setup_seconds"] for _, m in results)
+    metas = [m for _, m in results]
+    meta = {k: v for k, v in metas[0].items() if k not in ("rays_terminated_early", "segments_per_second",
+                                                           "rays_at_simpson_depth_limit", "pool")}
+    meta.update(tolerance=options["tolerance"], workers=len(workers), slabs=[list(r) for r in parts],
+                passes=[m["passes"] for m in metas], pool=[m["pool"] for m in metas])
+    for key in ("segments", "segments_shaded_at_midpoint", "integrand_evaluations", "bricks", "brick_pool_bytes"):
+        meta[key] = int(sum(m[key] for m in metas))
+    meta["segments_by_lattice"] = {k: sum(m["segments_by_lattice"][k] for m in metas)
+                                   for k in metas[0]["segments_by_lattice"]}
+    meta["brick_levels"] = np.sum([np.pad(m["brick_levels"], (0, 8 - len(m["brick_levels"]))) for m in metas],
+                                  axis=0).tolist()
+    for key in ("render_seconds", "setup_seconds", "compile_seconds"):
+        meta[key] = max(m[key] for m in metas)
     return RenderResult(image, meta)
 
 
@@ -80,9 +101,12 @@ def composite(images: list, absorption: bool) -> np.ndarray:
 def _trace_slab(source, device, device_memory, region, camera, options) -> tuple:
     """On a worker: the image of the rays inside one slab, and the meta (the tracer is kept for later views)."""
     key = (source, device, device_memory, region)
-    if key not in _TRACERS:
-        _TRACERS.clear()  # one model at a time per worker: the last one asked for
-        wv = WaveletVolume.open(source[0], keep=source[1])
-        _TRACERS[key] = RayTracer(wv, device=device, device_memory=device_memory, region=region)
-    result = _TRACERS[key].render(camera, **options)
+    with _LOCK:  # a worker of several threads: one set-up at a time
+        if key not in _TRACERS:
+            while len(_TRACERS) >= _KEEP_TRACERS:
+                _TRACERS.pop(next(iter(_TRACERS)))
+            wv = WaveletVolume.open(source[0], keep=source[1])
+            _TRACERS[key] = RayTracer(wv, device=device, device_memory=device_memory, region=region)
+        tracer = _TRACERS[key]
+    result = tracer.render(camera, **options)
     return result.image, result.meta

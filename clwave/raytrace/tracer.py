@@ -1,9 +1,10 @@
 """Ray tracing in wavelet space (paper §3, docs/raytracing.md): shaded emission-absorption
 images, or line integrals, within an absolute error bound per pixel.
 
-:class:`RayTracer` prepares a model's field on the device with one of two backends (``"bspline"``:
-fine B-spline grids, :mod:`clwave.raytrace.finegrid`; ``"wavelet"``: per-ray active lists, the
-paper's reference) and its bounds for empty-space skipping; ``cl/raytrace/raytrace.cl`` marches.
+:class:`RayTracer` prepares a model's field with one of two backends (``"bspline"``: bricks of
+B-spline coefficients, each at its own lattice level, :mod:`clwave.raytrace.bricks`; ``"wavelet"``:
+per-ray active lists, the paper's reference) and its bounds for empty-space skipping;
+``cl/raytrace/raytrace.cl`` marches, in passes over regions of bricks where they do not fit the device.
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ WAVELET_GROUP = 8  # rays per work-group with the wavelet field
 class RayTracer:
     """A wavelet volume prepared for ray tracing on one device; render many views with it.
 
-    ``field`` chooses how the field is evaluated: ``"bspline"`` (expanded fine grids, fast)
+    ``field`` chooses how the field is evaluated: ``"bspline"`` (bricks, fast)
     or ``"wavelet"`` (active lists over the kept coefficients, the reference); see the
     module docstring.  ``active`` bounds the wavelet field's per-ray list.  ``device_memory`` caps the
     device memory it uses (bytes, or a size such as ``"2GiB"``); a B-spline field bigger than that (or than
@@ -120,6 +121,11 @@ class RayTracer:
             raise InputError(f"ray tracing takes at most 4 channels, the volume has {wv.channels}")
         if int(active) != active or active < 1:
             raise InputError(f"active={active!r} must be a positive whole number of list entries")
+        if region is not None and (field != "bspline" or len(np.shape(region)) != 1 or len(region) != 2
+                                   or not all(isinstance(v, (int, np.integer)) for v in region)
+                                   or not region[0] < region[1]):
+            raise InputError(f"region={region!r} must be (first, stop) brick layers along z with first < stop, "
+                             f"for the B-spline field")
         self.wv, self.field, self.active, self.region = wv, field, int(active), region
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
@@ -186,7 +192,7 @@ class RayTracer:
             raise DeviceMemoryError(f"{offset} wavelet coefficients are more than the wavelet field indexes "
                                     f"(2^31); use field='bspline'")
         coef = np.concatenate(values)
-        room = min(self.cc.info.max_alloc, self.cc.info.global_mem // 2)
+        room = min(self.budget.max_alloc, self.budget.total // 2)
         if coef.nbytes > room:
             raise DeviceMemoryError(f"the dense bands need {coef.nbytes / 2**20:.0f} MiB but {self.cc.info.name} "
                                     f"has room for {room / 2**20:.0f} MiB; use field='bspline' or a smaller volume")
@@ -243,10 +249,10 @@ class RayTracer:
         (lexicographically) orders them along every ray alike (docs/raytracing.md §6).
         """
         f = self.bricks
-        fixed = per_image + 2 * self.block_bound.nbytes + 4 * int(np.prod(f.shape)) + 48 * len(f.levels) + 256
+        fixed = per_image + 2 * self.block_bound.nbytes + 4 * int(np.prod(f.shape)) + 256
         room = min(self.budget.total - fixed, self.budget.max_alloc)
-        sizes = np.zeros(f.shape, np.int64)
-        sizes[tuple((f.bricks - f.origin).T)] = f.slot_bytes()
+        sizes = np.zeros(f.shape, np.int64)  # a brick's pool and its tables (frames, boxes, lattices)
+        sizes[tuple((f.bricks - f.origin).T)] = f.slot_bytes() + 16 + 32 * len(self.orders)
         if room < sizes.max():
             raise DeviceMemoryError(
                 f"ray tracing this volume needs at least {format_size(fixed + sizes.max())} of device memory (its "
@@ -288,7 +294,7 @@ class RayTracer:
             raise InputError(f"{cc.info.name} has no float64 support; use precision='single'")
         view = camera.view(wv)
         H, W = view.size
-        if H * W * 32 > cc.info.max_alloc:
+        if H * W * 32 > self.budget.max_alloc:
             raise DeviceMemoryError(f"a {H}x{W} image needs {H * W * 32 / 2**20:.0f} MiB but {cc.info.name} "
                                     f"allows {cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
         phong, shading_note = self._phong(shading, absorption)
@@ -331,9 +337,18 @@ class RayTracer:
             light_buf[: len(light_dirs), :3] = light_dirs
         p = phong or Phong()
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
+        per_pixel = H * W * (48 + 8 * np.dtype(real).itemsize)  # image, two stats; carry and ledger
         passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
+        if self.field == "bspline" and self.bricks.resident:
+            need = self.bricks.pool_bytes + 2 * self.block_bound.nbytes + per_pixel
+            if need > self.budget.total:
+                raise DeviceMemoryError(
+                    f"a {H}x{W} ray-traced image needs {format_size(per_pixel)} of device memory beside the "
+                    f"{format_size(self.bricks.pool_bytes)} of bricks, {format_size(need)} in all, but "
+                    f"{format_size(self.budget.total)} are allowed; render a smaller image, or make the tracer with "
+                    f"a smaller device_memory= (--device-memory) so that its bricks render in passes")
         if self.field == "bspline" and not self.bricks.resident:
-            passes = self._passes(view, scale, offset, H * W * (32 + 32 * np.dtype(real).itemsize))
+            passes = self._passes(view, scale, offset, per_pixel)
         elif self.region is not None:
             f = self.bricks
             lo = np.append(self.region[0], f.origin[1:]) * BRICK
@@ -365,6 +380,7 @@ class RayTracer:
             phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger)
         for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
             if self.field == "bspline":
+                field_tables = None  # the last region's pool goes before the next one comes
                 field_tables = self.field_tables if slots is None else self.bricks.tables(cc, slots)
             in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
                 kernels, q, size, self.local_size, field_tables, real_type=real, global_offset=first,
@@ -455,15 +471,19 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     and timings (B-spline expansion and kernel compile apart).
     """
     if scheduler is not None:
-        from ..cluster import client_for
-        from .regions import raytrace_on_cluster
+        from ..cluster import check_scheduler, client_for
+        from .regions import check_cluster_model, raytrace_on_cluster
 
-        if not isinstance(wv, WaveletVolume) or not isinstance(camera, Camera):
-            raise InputError("ray tracing needs a clwave.WaveletVolume and a clwave.Camera")
-        options = dict(tolerance=finite_number(tolerance, "tolerance"), lights=lights, shading=shading,
-                       absorption=absorption, precision=precision)
-        with client_for(scheduler) as client:
-            return raytrace_on_cluster(wv, camera, client, options, field, device, device_memory)
+        check_cluster_model(wv, field)  # before any worker starts
+        if not isinstance(camera, Camera):
+            raise InputError("camera must be a clwave.Camera")
+        tol = finite_number(tolerance, "tolerance")
+        if tol <= 0:
+            raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
+        cap = None if device_memory is None else parse_size(device_memory)
+        options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision)
+        with client_for(check_scheduler(scheduler)) as client:
+            return raytrace_on_cluster(wv, camera, client, options, device, cap)
     if tracer is None:
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
