@@ -400,7 +400,7 @@ def cmd_render(args):
     from .raytrace.tracer import RayTracer, raytrace
     from .io.result import resolve_window
     from .splat.renderer import SplatRenderer, splat
-    from .cluster import client_for as cluster_client
+    from .cluster import check_model_file, client_for as cluster_client
 
     out = _check_output(args.output, args.force)
     extras = [Path(p) for p in (args.raw, args.stats) if p]
@@ -423,19 +423,19 @@ def cmd_render(args):
         raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
     lights, window = _lights(args), _display_window(args)
     on_cluster = args.input.lower().endswith(".clw") and (args.workers, args.scheduler) != (None, None)
-    if on_cluster and args.method != "raytrace":
-        raise InputError("--workers/--scheduler with a .clw input render on a Dask cluster with --method raytrace; "
-                         "splatting renders here")
     wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
-    if on_cluster:
+    if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
         from .raytrace.regions import check_cluster_model
 
-        check_cluster_model(wv, args.field)  # before any worker starts
+        if args.method == "raytrace":
+            check_cluster_model(wv, args.field)
+        else:
+            check_model_file(wv, "splatting")
     cluster = cluster_client(_scheduler(args)) if on_cluster else contextlib.nullcontext()
     if args.method == "raytrace":
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
                        absorption=not args.xray)
-        if on_cluster:  # docs/raytracing.md §7: each worker opens the file and traces its slab
+        if on_cluster:
             options.update(device=args.device, field=args.field, device_memory=device_memory)
         else:
             options["tracer"] = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory)
@@ -443,11 +443,12 @@ def cmd_render(args):
         def render(cam):
             return raytrace(wv, cam, scheduler=client, **options)
     else:
-        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse,
-                                 device_memory=device_memory)
+        options = dict(device=args.device, omega_s=args.omega_s, coarse=args.coarse, device_memory=device_memory)
+        if not on_cluster:
+            options = dict(renderer=SplatRenderer(wv, **options))
 
         def render(cam):
-            return splat(wv, cam, renderer=renderer)
+            return splat(wv, cam, scheduler=client, **options)
     cameras = [camera] if args.turntable is None else \
         [camera.rotated(360.0 * i / args.turntable) for i in range(args.turntable)]
     with cluster as client:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import threading
 import warnings
 
 from .errors import InputError
@@ -86,3 +87,55 @@ def stream(client, tasks, *, desc, progress_bar=None):
             future.release()
             bar.update(1)
             yield result
+
+
+# ---------------------------------------------------------------- rendering on a cluster
+#: per worker process: the renderers of the last few (file, options, part) asked for, set up once
+_RENDERERS: dict = {}
+_KEEP_RENDERERS = 4
+_LOCK = threading.Lock()
+
+
+def check_model_file(wv, what: str):
+    """InputError unless ``wv`` was opened from a ``.clw`` file as it is there: the workers of a cluster open
+    the file themselves (docs/raytracing.md §7); ``what`` names the rendering."""
+    from .model.wavelet import WaveletVolume
+
+    if not isinstance(wv, WaveletVolume):
+        raise InputError(f"{what} needs a clwave.WaveletVolume")
+    if wv.source is None:
+        raise InputError(f"{what} on a Dask cluster needs a model opened from a .clw file, as it is (its workers "
+                         "open the file themselves): save it (wv.save) and render WaveletVolume.open(path)",
+                         cli="--workers/--scheduler render the .clw file as it is: --threshold and --focus cannot "
+                             "apply there; compress a model with them first")
+
+
+def render_parts(client, task, source, parts, *args) -> list:
+    """``task(renderer_of, part, *args)`` for each part, each part on a worker of its own (round robin), the
+    results in the order of ``parts``.  ``renderer_of(make)`` on the worker gives the renderer ``make(model)``
+    builds for this file, part and arguments, kept there for later views."""
+    workers = sorted(client.scheduler_info().get("workers", {}))
+    futures = [client.submit(_run_part, task, source, part, args, pure=False,
+                             workers=[workers[i % len(workers)]] if workers else None)
+               for i, part in enumerate(parts)]
+    return client.gather(futures)
+
+
+def workers_of(client) -> int:
+    """How many workers the cluster has (at least 1)."""
+    return max(1, len(client.scheduler_info().get("workers", {})))
+
+
+def _run_part(task, source, part, args):
+    def renderer_of(make, *key):
+        with _LOCK:  # a worker of several threads: one set-up at a time
+            full = (task.__qualname__, source, part, *key)
+            if full not in _RENDERERS:
+                from .model.wavelet import WaveletVolume
+
+                while len(_RENDERERS) >= _KEEP_RENDERERS:
+                    _RENDERERS.pop(next(iter(_RENDERERS)))
+                _RENDERERS[full] = make(WaveletVolume.open(source[0], keep=source[1]))
+            return _RENDERERS[full]
+
+    return task(renderer_of, part, *args)

@@ -50,7 +50,9 @@ def test_slab_images_composited_in_ray_order_equal_the_whole_image(model, precis
 
 
 def test_on_a_local_cluster_of_two_worker_processes(model):
-    """clwave.raytrace(scheduler=client): the one-machine image within the tolerance, for every kind of view."""
+    """clwave.raytrace(scheduler=client): the one-machine image within the tolerance, for every kind of view;
+    clwave.splat(scheduler=client): the sum of the workers' shares of the coefficients, the one-machine image
+    to rounding (with coarse framebuffers too)."""
     from distributed import Client, LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
@@ -60,6 +62,11 @@ def test_on_a_local_cluster_of_two_worker_processes(model):
             got = clwave.raytrace(model, cam, tolerance=1e-3, scheduler=client, **kw)
             assert got.meta["workers"] == 2 and len(got.meta["slabs"]) == 2
             assert np.abs(want.image).max() > 0.5 and np.max(np.abs(got.image - want.image)) <= 1e-3
+        for cam, kw in ((clwave.Camera(30, 20, size=40), {}), (clwave.Camera(-70, 10, size=64), dict(coarse=2e-2))):
+            want = clwave.splat(model, cam, **kw)
+            got = clwave.splat(model, cam, scheduler=client, **kw)
+            assert got.meta["workers"] == 2 and got.meta["coefficients"] == want.meta["coefficients"]
+            assert np.max(np.abs(got.image - want.image)) <= 1e-5 * np.abs(want.image).max()
         assert client.status == "running"
 
 
@@ -83,8 +90,8 @@ def test_bad_regions_are_refused(model, region, field):
 
 
 def test_command_line_renders_a_clw_file_on_worker_processes(model, capsys, tmp_path):
-    """--workers N with a .clw input and --method raytrace: the image of the API on a cluster; splatting there
-    is an error."""
+    """--workers N with a .clw input: the images of the API on a cluster, ray traced and splatted; a model the
+    file does not hold as it is (--threshold) is refused before any worker starts."""
     from test_cli import run
 
     path, raw = model.source[0], tmp_path / "x.npy"
@@ -93,5 +100,10 @@ def test_command_line_renders_a_clw_file_on_worker_processes(model, capsys, tmp_
     assert code == 0, err
     want = clwave.raytrace(model, clwave.Camera(size=24), tolerance=1e-3).image
     assert np.max(np.abs(np.load(raw) - want)) <= 1e-3
-    code, out, err = run(capsys, "render", path, "--workers", "2", "-o", str(tmp_path / "y.png"))
-    assert code == 2 and "--method raytrace" in err and err.count("\n") == 1
+    code, out, err = run(capsys, "render", path, "--workers", "2", "--size", "24", "-o", str(tmp_path / "y.png"),
+                         "--raw", str(raw), "--force")
+    assert code == 0, err
+    want = clwave.splat(model, clwave.Camera(size=24)).image
+    assert np.max(np.abs(np.load(raw) - want)) <= 1e-5 * np.abs(want).max()
+    code, out, err = run(capsys, "render", path, "--workers", "2", "--threshold", "0.1", "-o", str(tmp_path / "z.png"))
+    assert code == 2 and "--threshold" in err and err.count("\n") == 1 and not (tmp_path / "z.png").exists()

@@ -7,20 +7,14 @@ compositing).  Each slab gets an equal share of the tolerance, so the whole imag
 
 from __future__ import annotations
 
-import threading
-
 import numpy as np
 
+from ..cluster import check_model_file, render_parts, workers_of
 from ..errors import InputError
 from ..io.result import RenderResult
 from ..model.geometry import world_to_fine_affine
 from .bricks import BRICK, layout, plan, ray_order
-from ..model.wavelet import WaveletVolume
 from .tracer import RayTracer, view_in_fine
-
-_TRACERS = {}  # per worker process: the tracers of the last (file, keep, device, region)s asked for
-_KEEP_TRACERS = 4
-_LOCK = threading.Lock()
 
 
 def slabs(wv, count: int) -> list:
@@ -38,13 +32,7 @@ def slabs(wv, count: int) -> list:
 
 def check_cluster_model(wv, field):
     """InputError unless ``wv`` can be ray traced on a cluster: opened from a ``.clw`` file, B-spline field."""
-    if not isinstance(wv, WaveletVolume):
-        raise InputError("ray tracing needs a clwave.WaveletVolume")
-    if wv.source is None:
-        raise InputError("ray tracing on a Dask cluster needs a model opened from a .clw file, as it is (its workers "
-                         "open the file themselves): save it (wv.save) and render WaveletVolume.open(path)",
-                         cli="--workers/--scheduler ray trace the .clw file as it is: --threshold and --focus cannot "
-                             "apply there; compress a model with them first")
+    check_model_file(wv, "ray tracing")
     if field != "bspline":
         raise InputError("ray tracing on a Dask cluster takes the B-spline field (field='bspline')")
 
@@ -52,19 +40,16 @@ def check_cluster_model(wv, field):
 def raytrace_on_cluster(wv, camera, client, options: dict, device, device_memory) -> RenderResult:
     """:func:`clwave.raytrace` with ``scheduler=``: one task per slab, each slab on a worker of its own (round
     robin), where the worker keeps its tracer for later views."""
-    workers = sorted(client.scheduler_info().get("workers", {})) or [None]
-    parts = slabs(wv, len(workers))
+    workers = workers_of(client)
+    parts = slabs(wv, workers)
     share = dict(options, tolerance=options["tolerance"] / len(parts))
-    futures = [client.submit(_trace_slab, wv.source, device, device_memory, region, camera, share, pure=False,
-                             workers=None if workers[0] is None else [workers[i % len(workers)]])
-               for i, region in enumerate(parts)]
-    results = client.gather(futures)
+    results = render_parts(client, _trace_slab, wv.source, parts, device, device_memory, camera, share)
     order = slab_order(wv, parts, camera)
     image = composite([results[i][0] for i in order], options["absorption"])
     metas = [m for _, m in results]
     meta = {k: v for k, v in metas[0].items() if k not in ("rays_terminated_early", "segments_per_second",
                                                            "rays_at_simpson_depth_limit", "pool")}
-    meta.update(tolerance=options["tolerance"], workers=len(workers), slabs=[list(r) for r in parts],
+    meta.update(tolerance=options["tolerance"], workers=workers, slabs=[list(r) for r in parts],
                 passes=[m["passes"] for m in metas], pool=[m["pool"] for m in metas])
     for key in ("segments", "segments_shaded_at_midpoint", "integrand_evaluations", "bricks", "brick_pool_bytes"):
         meta[key] = int(sum(m[key] for m in metas))
@@ -98,15 +83,9 @@ def composite(images: list, absorption: bool) -> np.ndarray:
     return out
 
 
-def _trace_slab(source, device, device_memory, region, camera, options) -> tuple:
-    """On a worker: the image of the rays inside one slab, and the meta (the tracer is kept for later views)."""
-    key = (source, device, device_memory, region)
-    with _LOCK:  # a worker of several threads: one set-up at a time
-        if key not in _TRACERS:
-            while len(_TRACERS) >= _KEEP_TRACERS:
-                _TRACERS.pop(next(iter(_TRACERS)))
-            wv = WaveletVolume.open(source[0], keep=source[1])
-            _TRACERS[key] = RayTracer(wv, device=device, device_memory=device_memory, region=region)
-        tracer = _TRACERS[key]
+def _trace_slab(renderer_of, region, device, device_memory, camera, options) -> tuple:
+    """On a worker: the image of the rays inside one slab, and the meta."""
+    tracer = renderer_of(lambda wv: RayTracer(wv, device=device, device_memory=device_memory, region=region),
+                         device, device_memory)
     result = tracer.render(camera, **options)
     return result.image, result.meta

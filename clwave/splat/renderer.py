@@ -321,7 +321,7 @@ class Accumulator:
 
 
 def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampling="auto", coarse=None,
-          device_memory=None, renderer: SplatRenderer | None = None) -> RenderResult:
+          device_memory=None, scheduler=None, renderer: SplatRenderer | None = None) -> RenderResult:
     """X-ray image of a wavelet volume by wavelet splatting.
 
     Returns a :class:`RenderResult` whose ``image`` (H, W, C) holds the line integral of
@@ -330,14 +330,49 @@ def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampl
     footprint texture sampling, the framebuffer factors and the coefficient chunks streamed.
     ``omega_s``, ``sampling``, ``coarse`` and ``device_memory`` are those of :class:`SplatRenderer`;
     without ``renderer``, calls on the same model, device and options share one
-    (:meth:`WaveletVolume.shared`).
+    (:meth:`WaveletVolume.shared`).  ``scheduler`` (a number of local worker processes, an address or a
+    ``distributed.Client``, :mod:`clwave.cluster`): each worker opens the model's ``.clw`` file and splats an
+    equal share of its coefficients, and the image is the sum of theirs (docs/splatting.md §7).
     """
+    if scheduler is not None:
+        return _splat_on_cluster(wv, camera, scheduler, device, dict(
+            omega_s=omega_s, sampling=sampling, coarse=coarse,
+            device_memory=None if device_memory is None else parse_size(device_memory)))
     r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse, device_memory)
     start = time.perf_counter()
     acc = r.begin(camera)
     acc.splat(0, r.count)
     image = acc.image()
     return RenderResult(image, acc.meta(time.perf_counter() - start))
+
+
+def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
+    from ..cluster import check_model_file, check_scheduler, client_for, render_parts, workers_of
+
+    check_model_file(wv, "splatting")  # before any worker starts
+    if not isinstance(camera, Camera):
+        raise InputError("camera must be a clwave.Camera")
+    with client_for(check_scheduler(scheduler)) as client:
+        shares = workers_of(client)
+        results = render_parts(client, _splat_share, wv.source, [(i, shares) for i in range(shares)], device,
+                               options, camera)
+    metas = [m for _, m in results]
+    meta = dict(metas[0], workers=shares, seconds={k: max(m["seconds"][k] for m in metas) for k in metas[0]["seconds"]},
+                **{k: int(sum(m[k] for m in metas)) for k in ("coefficients", "tile_pairs", "pixel_updates",
+                                                               "coefficient_chunks")})
+    return RenderResult(np.sum([image for image, _ in results], axis=0), meta)
+
+
+def _splat_share(renderer_of, share, device, options, camera) -> tuple:
+    """On a worker: the image of its share ``(i, n)``: coefficients ``i K / n .. (i + 1) K / n`` of each group
+    in importance order (splatting is linear: the shares' images add up to the whole)."""
+    r = renderer_of(lambda wv: SplatRenderer(wv, device=device, **options), device, tuple(sorted(options.items())))
+    i, n = share
+    start = time.perf_counter()
+    acc = r.begin(camera)
+    acc.splat(r.count * i // n, r.count * (i + 1) // n - r.count * i // n)
+    image = acc.image()
+    return image, acc.meta(time.perf_counter() - start)
 
 
 def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device_memory=None) -> SplatRenderer:
