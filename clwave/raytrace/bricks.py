@@ -307,7 +307,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     host = None if resident else np.empty((lay["total"], 4), np.float32)
     clamp = ElementwiseKernel(cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f",
                               "clamp_to_content")
-    slabs = lay["bricks"][:, 0]
+    slabs, hold = lay["bricks"][:, 0], []
     for bz in np.unique(slabs):
         slots = np.flatnonzero(slabs == bz)
         first = int(lay["offset"][slots[0], 0])
@@ -315,21 +315,24 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
         target, base = (pool, 0) if resident else (cla.empty(q, (last - first, 4), np.float32), first)
         clamped = wv.content_mask is not None and bool(p.clamp[tuple((lay["bricks"][slots] - p.origin).T)].any())
         for gi in range(G):
-            _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, target, base, clamp)
+            _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, target, base, clamp, hold)
         local = boxes[slots].copy()
         local[..., 3] -= base
         local = cla.to_device(q, local)
         at = np.zeros((len(slots), 4), np.int32)
         at[:, :3] = (lay["bricks"][slots] - p.origin)[:, ::-1]
-        _BOUNDS(kernels, q, (SUPER ** 3, len(slots)), None, out=bounds, nblocks=bounds.shape[::-1],
+        _BOUNDS(kernels, q, (SUPER ** 3, len(slots)), (SUPER ** 3, 1), out=bounds, nblocks=bounds.shape[::-1],
                 origin=p.origin[::-1], coef=target, bricks=cla.to_device(q, at),
                 frames=cla.to_device(q, frames[slots]), boxes=local)
         if alpha is not None:  # docs/raytracing.md §3: where alpha may dip below 0, the fine lattice's segments
             floor = cla.empty(q, len(slots), np.float32)
-            _FLOOR(kernels, q, (len(slots),), None, out=floor, coef=target, boxes=local, g=alpha)
+            _FLOOR(kernels, q, (len(slots),), (1,), out=floor, coef=target, boxes=local, g=alpha)
             lattices[slots[floor.get() < 0]] = level_lattices[0]
         if not resident:
             target.get(q, host[first:last])
+        if alpha is None and resident:
+            q.finish()
+        hold.clear()  # the queue has finished (the reads above wait for it): the uploads are done
     q.finish()
     return BrickField(p.origin, p.level.shape, lay["bricks"], lay["levels"], frames, boxes, lattices, bounds.get(),
                       orders, time.perf_counter() - start, pool, host)
@@ -388,7 +391,7 @@ def _crop(g, band_no: int, band_slice: slice, lo, hi) -> np.ndarray:
     return out
 
 
-def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, clamp):
+def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, clamp, hold):
     """One group's bricks of one slab into ``pool``, whose first element is pool element ``base``."""
     g, q = wv.groups[gi], cc.queue
     wav = g.wavelet
@@ -406,7 +409,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
 
     def part(band_no, box):
         arr = _crop(g, band_no, slices[band_no], *box)
-        return _Part(_upload(cc, arr, g.channels), box[0], np.array(arr.shape[:3])) if arr.any() else None
+        return _Part(_upload(cc, arr, g.channels, hold), box[0], np.array(arr.shape[:3])) if arr.any() else None
 
     def gather(level, src):
         sel = slots[levels == level]
@@ -416,7 +419,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
         boxes[:, :3] = lay["count"][sel, gi][:, ::-1]
         boxes[:, 3] = lay["offset"][sel, gi] - base
         n = boxes[:, :3].max(axis=0)
-        _GATHER(kernels, q, (int(n[0]), int(n[1]), int(n[2]) * len(sel)), None, pool=pool, src=src.data,
+        _GATHER(kernels, q, _whole_groups((int(n[0]), int(n[1]), int(n[2]) * len(sel))), GROUP, pool=pool, src=src.data,
                 src_start=src.start[::-1], src_shape=src.shape[::-1], starts=cla.to_device(q, starts),
                 boxes=cla.to_device(q, boxes), depth=int(n[2]), scale=2.0 ** (-1.5 * level))
 
@@ -447,6 +450,16 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
             gather(m - 1, approx)
 
 
+#: work-group of the expansion's 3-D launches: one size for every box, so that PoCL compiles each kernel once
+#: (it specialises a kernel per work-group size, and picks a new one for many a global size)
+GROUP = (8, 8, 1)
+
+
+def _whole_groups(size) -> tuple:
+    """A 3-D global size rounded up to whole :data:`GROUP` work-groups (the kernels skip what lies beyond)."""
+    return tuple(-(-int(n) // g) * g for n, g in zip(size, GROUP))
+
+
 @dataclass
 class _Part:
     data: cla.Array
@@ -454,10 +467,16 @@ class _Part:
     shape: np.ndarray
 
 
-def _upload(cc, arr, channels) -> cla.Array:
-    out = np.zeros(arr.shape[:3] + (4,), np.float32)
-    out[..., list(channels)] = arr
-    return cla.to_device(cc.queue, out)
+def _upload(cc, arr, channels, hold: list) -> cla.Array:
+    """``arr`` (Z, Y, X, C) as float4 with channel c in slot ``channels[c]``, copied without waiting for the queue:
+    the host array is held in ``hold`` until the caller has finished the queue."""
+    if tuple(channels) == (0, 1, 2, 3) and arr.dtype == np.float32 and arr.flags.c_contiguous:
+        out = arr
+    else:
+        out = np.zeros(arr.shape[:3] + (4,), np.float32)
+        out[..., list(channels)] = arr
+    hold.append(out)
+    return cla.to_device(cc.queue, out, async_=True)
 
 
 def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, crop) -> _Part:
@@ -472,6 +491,6 @@ def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, crop) -> _Part:
     for name, (letter, p) in zip("ab", pair + pair[:1] * (2 - len(pair))):  # a lone part twice, the second ignored
         parts.update({name: p.data, f"{name}_start": p.start[::-1], f"{name}_shape": p.shape[::-1],
                       f"{name}_taps": d_taps[letter], f"n{name}": len(taps[letter]), f"{name}_shift": shifts[letter]})
-    _SYNTH_AXIS(kernels, cc.queue, tuple(int(s) for s in shape[::-1]), None, parts, out=out, out_start=lo[::-1],
+    _SYNTH_AXIS(kernels, cc.queue, _whole_groups(shape[::-1]), GROUP, parts, out=out, out_start=lo[::-1],
                 out_shape=shape[::-1], has_b=len(pair) == 2)
     return _Part(out, lo, shape)
