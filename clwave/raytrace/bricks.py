@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from itertools import product
 
 import numpy as np
+import pyopencl as cl
 import pyopencl.array as cla
 from pyopencl import cltypes
 from pyopencl.elementwise import ElementwiseKernel
@@ -205,10 +206,15 @@ class BrickField:
             boxes = self.boxes
         else:
             starts, sizes = self.boxes[slots, 0, 3].astype(np.int64), self.slot_bytes()[slots] // 16
-            pool = cla.to_device(q, np.concatenate([self.host[a:a + n] for a, n in zip(starts, sizes)] +
-                                                   [np.zeros((64, 4), np.float32)]))
+            at = np.concatenate([[0], np.cumsum(sizes)])  # where each brick goes in the region's pool
+            pool = cla.zeros(q, (int(at[-1]) + 64, 4), np.float32)  # 64: as build()'s
+            # runs of bricks that follow each other in host memory, each copied in one piece, no host copy
+            breaks = np.flatnonzero(starts[1:] != starts[:-1] + sizes[:-1]) + 1
+            for a, b in zip(np.concatenate([[0], breaks]), np.concatenate([breaks, [len(slots)]])):
+                cl.enqueue_copy(q, pool.data, self.host[starts[a]:starts[b - 1] + sizes[b - 1]],
+                                dst_offset=int(at[a]) * 16)
             boxes = self.boxes[slots].copy()
-            boxes[..., 3] += (np.concatenate([[0], np.cumsum(sizes)[:-1]]) - starts)[:, None].astype(np.int32)
+            boxes[..., 3] += (at[:-1] - starts)[:, None].astype(np.int32)
         pages[tuple((self.bricks[slots] - self.origin).T)] = np.arange(len(slots), dtype=np.int32)
         return dict(coef=pool, pages=cla.to_device(q, pages), page_origin=self.origin[::-1],
                     page_shape=self.shape[::-1], frames=cla.to_device(q, _one(self.frames[slots])),
