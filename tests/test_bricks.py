@@ -75,14 +75,14 @@ def smooth_volume(n=44, channels=4, empty_corner=False):
 
 def census(wv):
     """Brute force: per brick (dict by index), the coarsest level holding every group exactly, from every kept
-    non-zero coefficient's support box one by one."""
+    coefficient's support box one by one."""
     j0 = wv.groups[0].wavelet.order
     level = {}
     for g in wv.groups:
         shift = (g.wavelet.order - j0) / 2.0
         _, index = g.locate(g.all_positions())
         band_no, _ = g.locate(g.all_positions())
-        for i in np.flatnonzero(np.any(g.values != 0, axis=0)):
+        for i in range(g.kept):
             band = g.bands[band_no[i]]
             off, step, support = band_lattice(g.wavelet, band.key, band.level)
             lo = off - shift + step * index[i]

@@ -64,7 +64,7 @@ class Plan:
 def plan(wv) -> Plan:
     """The bricks of a model and their levels.
 
-    A brick exists where a kept non-zero coefficient's support reaches and (for a model that knows its
+    A brick exists where a kept coefficient's support reaches and (for a model that knows its
     content) some non-empty voxel's fine coefficient does; its level is the coarsest lattice that holds
     every group there exactly.  A brick where empty and non-empty voxels' fine coefficients meet is
     expanded at level 0, where they are zeroed (docs/raytracing.md §4).  Reach is counted with whole
@@ -84,12 +84,9 @@ def plan(wv) -> Plan:
     present, level = np.zeros(shape, bool), np.full(shape, wv.levels, np.int8)
     for g, band, sl, axes in bands:  # one band at a time: no per-coefficient array of the whole model
         positions = g.all_positions()[sl] - band.start
-        index = np.unravel_index(positions[np.any(g.values[:, sl] != 0, axis=0)], band.shape)
-        if not len(index[0]):
+        if not len(positions):
             continue
-        lo = np.stack([axes[a][0][k] - origin[a] for a, k in enumerate(index)], axis=1)
-        extent = np.stack([axes[a][1][k] - axes[a][0][k] for a, k in enumerate(index)], axis=1)
-        reach = _reach(lo, extent, shape)
+        reach = _reach(positions, band.shape, [(lo - o, hi - lo) for (lo, hi), o in zip(axes, origin)], shape)
         present |= reach
         if band.key != "aaa":  # the finest detail reaching a brick sets its level
             level[reach] = np.minimum(level[reach], band.level - 1)
@@ -103,15 +100,25 @@ def plan(wv) -> Plan:
     return Plan(origin, level, clamp)
 
 
-def _reach(lo, extent, shape) -> np.ndarray:
-    """The bricks ``lo .. lo + extent`` of all the coefficients (K, 3), as a boolean grid: the corners marked per
-    extent class, then each class spread over its extent."""
-    top = extent.max(axis=0) + 1
-    corners = np.zeros(shape + tuple(top), bool)
-    corners[tuple(lo.T) + tuple(extent.T)] = True
+def _reach(positions, band_shape, axes, shape) -> np.ndarray:
+    """The bricks the supports of a band's coefficients at flat ``positions`` reach, as a boolean grid of ``shape``.
+
+    ``axes``: per axis, the first brick (from the grid's origin) and the extent (bricks beyond it) of each index
+    along that axis.  Each coefficient marks its class, (first brick, extent) per axis, through one flat index;
+    each extent class is then spread over its extent.
+    """
+    top = [int(extent.max()) + 1 for _, extent in axes]
+    classes = [first * n + extent for (first, extent), n in zip(axes, top)]  # per axis and index
+    plane = band_shape[1] * band_shape[2]
+    kz, rest = np.divmod(positions, plane)
+    ky, kx = np.divmod(rest, band_shape[2])
+    flat = (classes[0][kz] * (shape[1] * top[1]) + classes[1][ky]) * (shape[2] * top[2]) + classes[2][kx]
+    marks = np.zeros(int(np.prod(shape)) * int(np.prod(top)), bool)
+    marks[flat] = True
+    corners = marks.reshape(shape[0], top[0], shape[1], top[1], shape[2], top[2])
     reach = np.zeros(shape, bool)
     for e in product(*(range(n) for n in top)):
-        marked = corners[(Ellipsis, *e)]
+        marked = corners[:, e[0], :, e[1], :, e[2]]
         if marked.any():
             for d in product(*(range(k + 1) for k in e)):
                 reach[tuple(slice(k, None) for k in d)] |= marked[tuple(slice(0, n - k) for n, k in zip(shape, d))]
