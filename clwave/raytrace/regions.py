@@ -2,7 +2,8 @@
 brick layers along z, each worker opening the ``.clw`` file itself and tracing the rays through its slab
 only; X-ray images are the sums of the slabs' images, emission-absorption images are composited from each
 slab's premultiplied colour and transmittance in the order every ray meets the slabs (sort-last
-compositing).  Each slab gets an equal share of the tolerance, so the whole image stays within it.
+compositing).  Each slab gets an equal share of the tolerance: X-ray images stay within it, composited
+colours within it but for what a slab's opacity error dims behind it (docs/raytracing.md §7).
 """
 
 from __future__ import annotations
@@ -55,7 +56,8 @@ def raytrace_on_cluster(wv, camera, client, options: dict, device, device_memory
         meta[key] = int(sum(m[key] for m in metas))
     meta["segments_by_lattice"] = {k: sum(m["segments_by_lattice"][k] for m in metas)
                                    for k in metas[0]["segments_by_lattice"]}
-    meta["brick_levels"] = np.sum([np.pad(m["brick_levels"], (0, 8 - len(m["brick_levels"]))) for m in metas],
+    longest = max(len(m["brick_levels"]) for m in metas)
+    meta["brick_levels"] = np.sum([np.pad(m["brick_levels"], (0, longest - len(m["brick_levels"]))) for m in metas],
                                   axis=0).tolist()
     for key in ("render_seconds", "setup_seconds", "compile_seconds"):
         meta[key] = max(m[key] for m in metas)
