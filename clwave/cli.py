@@ -382,9 +382,9 @@ def _display_window(args):
 
 def _device_memory(args):
     """``device_memory=`` from ``--device-memory SIZE``, checked before any work."""
-    from .device.memory import parse_size
+    from .device.memory import parse_cap
 
-    return None if args.device_memory is None else parse_size(args.device_memory)
+    return parse_cap(args.device_memory)
 
 
 def _write_gif(path, pictures, seconds_per_frame, force):

@@ -105,7 +105,7 @@ def test_streamed_quantised_file_equals_the_in_memory_file(tmp_path, rng):
                                                                                               quantise="auto")
 
 
-@pytest.mark.parametrize("quantise", [0, -1e-3, float("nan"), float("inf"), "fine", [1e-3]])
+@pytest.mark.parametrize("quantise", [0, -1e-3, float("nan"), float("inf"), "fine", [1e-3], True])
 def test_bad_bounds_are_refused_before_writing(tmp_path, hydrogen, quantise):
     with pytest.raises(InputError, match="must be a bound > 0") as err:
         hydrogen.save(tmp_path / "q.clw", quantise=quantise)
@@ -121,7 +121,9 @@ def test_a_bound_too_small_for_32_bits_is_refused(tmp_path, hydrogen):
     (lambda d: d.attrs.__setitem__("step", -0.5), "quantisation step"),
     (lambda d: d.attrs.__setitem__("step", np.nan), "quantisation step"),
     (lambda d: d.attrs.__setitem__("step", "0.1"), "quantisation step"),
-    (lambda d: d.attrs.__setitem__("step", np.array([0.1, 0.2])), "quantisation step"),
+    (lambda d: d.attrs.__setitem__("step", np.array([0.1, 0.2])), "quantisation step of shape"),
+    (lambda d: d.attrs.__setitem__("step", np.zeros(1 << 20)), "quantisation step of shape"),  # not read
+    (lambda d: d.attrs.__setitem__("step", np.int64(2)), "quantisation step of shape"),
     (lambda d: d.attrs.__delitem__("step"), "expected .* float32"),
     (lambda d: d.attrs.__setitem__("step", 1e300), "non-finite"),
 ])
@@ -132,6 +134,15 @@ def test_reader_refuses_bad_quantisation(tmp_path, hydrogen, change, needle):
     with pytest.raises(FileFormatError, match=needle) as err:
         clwave.WaveletVolume.open(tmp_path / "q.clw")
     assert "\n" not in str(err.value)
+
+
+def test_a_bound_that_rounds_every_value_to_zero_keeps_nothing(tmp_path, hydrogen):
+    """Nothing left to store is an empty file of the model, not a crash."""
+    hydrogen.save(tmp_path / "z.clw", quantise=1e9)
+    assert clwave.WaveletVolume.open(tmp_path / "z.clw").kept == 0
+    empty = clwave.WaveletVolume.from_volume(clwave.Volume(np.zeros((8, 8, 8), np.float32)), levels=1)
+    empty.save(tmp_path / "e.clw")
+    assert clwave.WaveletVolume.open(tmp_path / "e.clw").kept == 0
 
 
 def test_reader_refuses_a_float_file_with_a_step(tmp_path, hydrogen):

@@ -41,6 +41,11 @@ def parse_size(value, name: str = "device_memory") -> int:
     return int(value)
 
 
+def parse_cap(value, name: str = "device_memory") -> int | None:
+    """:func:`parse_size` of a cap that may be absent (None: no cap)."""
+    return None if value is None else parse_size(value, name)
+
+
 @dataclass(frozen=True)
 class DeviceBudget:
     """Device memory a renderer may hold at once (``total``) and in one buffer (``max_alloc``), in bytes;
@@ -55,7 +60,7 @@ def device_budget(cc, device_memory=None) -> DeviceBudget:
     """The budget on ``cc`` (a :class:`~clwave.device.context.ComputeContext`): its global memory and
     allocation limit, each no more than ``device_memory`` (bytes or a size string, :func:`parse_size`)."""
     info = cc.info
-    cap = None if device_memory is None else parse_size(device_memory)
+    cap = parse_cap(device_memory)
     total = info.global_mem if cap is None else min(cap, info.global_mem)
     return DeviceBudget(total, min(info.max_alloc, total), cap)
 

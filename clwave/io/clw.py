@@ -16,7 +16,8 @@ A tier is -1 for the coarsest approximation, else :func:`~clwave.model.chunked.t
 details' importance; a reader takes the runs of the approximation, then of the tiers from the most
 important down, as far as it needs.  Zero coefficients are not stored.  Every dataset is chunked,
 deflated and checksummed (Fletcher-32), so a damaged file is told apart from a valid one; a quantised
-file is compressed with Zstandard (hdf5plugin) instead (docs/codecs.md).
+file's positions, values and content mask are compressed with Zstandard (hdf5plugin) instead, its runs
+deflated (docs/codecs.md).
 """
 
 from __future__ import annotations
@@ -74,7 +75,7 @@ def check_quantise(quantise):
         return quantise
     why = "must be a bound > 0 on the change of any voxel (in the volume's units), or 'auto'"
     try:
-        bound = finite_number(quantise, "quantise")
+        bound = float("nan") if isinstance(quantise, bool) else finite_number(quantise, "quantise")
     except InputError:
         bound = float("nan")
     if not bound > 0:
@@ -237,6 +238,8 @@ class _Tiers:
 
     def _write(self, gi, tier_parts):
         """Append runs ``[(tier, [(positions, values (C, n)), ...]), ...]`` in one write."""
+        if not tier_parts:  # nothing kept (an all-zero model, or every value rounded to 0)
+            return
         start = self.h5[f"g{gi}/positions"].shape[0]
         deltas, rows_values = [], []
         for tier, parts in tier_parts:
@@ -380,11 +383,15 @@ def _check_values(dataset, shape):
     """A group's values: float32, or int32 with a finite positive scalar ``step`` attribute (returned)."""
     import h5py
 
-    step = dataset.attrs.get("step") if isinstance(dataset, h5py.Dataset) else None
-    if step is None:
+    if not (isinstance(dataset, h5py.Dataset) and "step" in dataset.attrs):
         _check_dataset(dataset, shape, np.float32)
         return None
-    if not (isinstance(step, np.floating) and np.isfinite(step) and step > 0):
+    stored = dataset.attrs.get_id("step")  # its shape and type before its value: an array is not read
+    if stored.shape != () or stored.dtype.kind != "f":
+        raise ValueError(f"member {dataset.name} has a quantisation step of shape {stored.shape} and type "
+                         f"{stored.dtype}, not one number")
+    step = dataset.attrs["step"]
+    if not (np.isfinite(step) and step > 0):
         raise ValueError(f"member {dataset.name} has a quantisation step {step!r}, not one finite number > 0")
     _check_dataset(dataset, shape, np.int32)
     return float(step)

@@ -24,7 +24,7 @@ from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
-from ..device.memory import device_budget, format_size, parse_size
+from ..device.memory import device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
 from .quadrature import sample_tables
@@ -295,8 +295,8 @@ class RayTracer:
         view = camera.view(wv)
         H, W = view.size
         if H * W * 32 > self.budget.max_alloc:
-            raise DeviceMemoryError(f"a {H}x{W} image needs {H * W * 32 / 2**20:.0f} MiB but {cc.info.name} "
-                                    f"allows {cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
+            raise DeviceMemoryError(f"a {H}x{W} image needs {format_size(H * W * 32)} but {cc.info.name} allows "
+                                    f"{format_size(self.budget.max_alloc)} per buffer; render a smaller image")
         phong, shading_note = self._phong(shading, absorption)
         light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
         if len(light_dirs) > MAX_LIGHTS:
@@ -480,7 +480,7 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         tol = finite_number(tolerance, "tolerance")
         if tol <= 0:
             raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
-        cap = None if device_memory is None else parse_size(device_memory)
+        cap = parse_cap(device_memory)
         options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision)
         with client_for(check_scheduler(scheduler)) as client:
             return raytrace_on_cluster(wv, camera, client, options, device, cap)
@@ -488,7 +488,7 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
         cc = ComputeContext.get(device)
-        cap = None if device_memory is None else parse_size(device_memory)
+        cap = parse_cap(device_memory)
         tracer = wv.shared(("raytrace", cc.info.id, field, cap),
                            lambda: RayTracer(wv, device=cc, field=field, device_memory=cap))
     return tracer.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,

@@ -19,7 +19,7 @@ from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
 from ..device.context import ComputeContext
-from ..device.memory import device_budget, format_size, parse_size
+from ..device.memory import device_budget, format_size, parse_cap
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.camera import Camera
@@ -134,7 +134,7 @@ class SplatRenderer:
                    for g, gr in zip(self.wv.groups, self.groups)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * 16
-        if fb_bytes > self.cc.info.max_alloc:
+        if fb_bytes > self.cc.info.max_alloc:  # the device's own limit; a cap is held by _plan, naming the least
             H, W = view.size
             raise DeviceMemoryError(
                 f"a {H}x{W} image needs {fb_bytes / 2**20:.0f} MiB of framebuffers but {self.cc.info.name} "
@@ -337,7 +337,7 @@ def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampl
     if scheduler is not None:
         return _splat_on_cluster(wv, camera, scheduler, device, dict(
             omega_s=omega_s, sampling=sampling, coarse=coarse,
-            device_memory=None if device_memory is None else parse_size(device_memory)))
+            device_memory=parse_cap(device_memory)))
     r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse, device_memory)
     start = time.perf_counter()
     acc = r.begin(camera)
@@ -380,7 +380,7 @@ def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device
     if not isinstance(wv, WaveletVolume):
         raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
     cc = ComputeContext.get(device)
-    cap = None if device_memory is None else parse_size(device_memory)
+    cap = parse_cap(device_memory)
     return wv.shared(("splat", cc.info.id, omega_s, sampling, coarse, cap),
                      lambda: SplatRenderer(wv, device=cc, omega_s=omega_s, sampling=sampling, coarse=coarse,
                                            device_memory=cap))
