@@ -320,9 +320,11 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     host = None if resident else np.empty((lay["total"], 4), np.float32)
     clamp = ElementwiseKernel(cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f",
                               "clamp_to_content")
-    slabs, hold = lay["bricks"][:, 0], []
+    # host work on one slab overlaps the device's on the last: uploads do not wait for the queue, and what they
+    # read (and a slab's pool on its way to host memory) is held until a marker says the slab is done
+    slabs, floors, last_slab = lay["bricks"][:, 0], [], None
     for bz in np.unique(slabs):
-        slots = np.flatnonzero(slabs == bz)
+        slots, hold = np.flatnonzero(slabs == bz), []
         first = int(lay["offset"][slots[0], 0])
         last = int(lay["offset"][slots[-1], -1] + np.prod(lay["count"][slots[-1], -1]))
         target, base = (pool, 0) if resident else (cla.empty(q, (last - first, 4), np.float32), first)
@@ -331,45 +333,52 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
             _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, target, base, clamp, hold)
         local = boxes[slots].copy()
         local[..., 3] -= base
-        local = cla.to_device(q, local)
+        local = _send(q, local, hold)
         at = np.zeros((len(slots), 4), np.int32)
         at[:, :3] = (lay["bricks"][slots] - p.origin)[:, ::-1]
         _BOUNDS(kernels, q, (SUPER ** 3, len(slots)), (SUPER ** 3, 1), out=bounds, nblocks=bounds.shape[::-1],
-                origin=p.origin[::-1], coef=target, bricks=cla.to_device(q, at),
-                frames=cla.to_device(q, frames[slots]), boxes=local)
+                origin=p.origin[::-1], coef=target, bricks=_send(q, at, hold),
+                frames=_send(q, frames[slots], hold), boxes=local)
         if alpha is not None:  # docs/raytracing.md §3: where alpha may dip below 0, the fine lattice's segments
-            floor = cla.empty(q, len(slots), np.float32)
-            _FLOOR(kernels, q, (len(slots),), (1,), out=floor, coef=target, boxes=local, g=alpha)
-            lattices[slots[floor.get() < 0]] = level_lattices[0]
+            floors.append((slots, cla.empty(q, len(slots), np.float32)))
+            _FLOOR(kernels, q, (len(slots),), (1,), out=floors[-1][1], coef=target, boxes=local, g=alpha)
         if not resident:
-            target.get(q, host[first:last])
-        if alpha is None and resident:
-            q.finish()
-        hold.clear()  # the queue has finished (the reads above wait for it): the uploads are done
+            hold.append(target)
+            target.get_async(q, host[first:last])
+        if last_slab is not None:
+            last_slab[0].wait()  # and with it, what it held goes
+        last_slab = (cl.enqueue_marker(q), hold)
+    q.finish()
+    for slots, floor in floors:
+        lattices[slots[floor.get() < 0]] = level_lattices[0]
     q.finish()
     return BrickField(p.origin, p.level.shape, lay["bricks"], lay["levels"], frames, boxes, lattices, bounds.get(),
                       orders, time.perf_counter() - start, pool, host)
 
 
 def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:
-    """Whether the pool fits the device with the bounds and one slab's synthesis; DeviceMemoryError when
-    the bounds and one slab's synthesis alone do not.  A slab's synthesis holds about three boxes of its
-    finest level's float4 coefficients at once (the parts, the pairs of one axis step, the output)."""
+    """Whether the pool fits the device with the bounds and the expansion's work; DeviceMemoryError when the
+    bounds and the work alone do not.  A slab's synthesis holds about three boxes of its finest level's float4
+    coefficients at once (the parts, the pairs of one axis step, the output), and two slabs can be under way
+    (build's overlap), with their pools when the pool goes to host memory."""
     pool = 16 * lay["total"]
     bounds = 4 * p.level.size * SUPER ** 3
     halo = 2 * max(g.wavelet.order for g in wv.groups)
-    slab = 0
+    slab, slab_pool = 0, 0
+    ends = np.append(lay["offset"][:, 0], lay["total"])
     for bz in np.unique(lay["bricks"][:, 0]):
-        sel = lay["bricks"][:, 0] == bz
+        sel = np.flatnonzero(lay["bricks"][:, 0] == bz)
         bricks, finest = lay["bricks"][sel], 2.0 ** lay["levels"][sel].min()
         cells = (np.append(BRICK, (bricks[:, 1:].max(axis=0) - bricks[:, 1:].min(axis=0) + 1) * BRICK) + halo) / finest
         slab = max(slab, 3 * 16 * int(np.prod(np.ceil(cells))))
-    if bounds + slab > budget.total or slab / 3 > budget.max_alloc:
+        slab_pool = max(slab_pool, 16 * int(ends[sel[-1] + 1] - ends[sel[0]]))
+    work = 2 * slab
+    if bounds + work + 2 * slab_pool > budget.total or slab / 3 > budget.max_alloc:
         raise DeviceMemoryError(
-            f"expanding the bricks of this volume needs at least {format_size(bounds + slab)} on {cc.info.name}, "
-            f"which allows {format_size(budget.total)} ({format_size(budget.max_alloc)} per buffer); raise "
-            f"--device-memory, crop the volume or pick another --device")
-    return pool + bounds + slab <= budget.total and pool <= budget.max_alloc
+            f"expanding the bricks of this volume needs at least {format_size(bounds + work + 2 * slab_pool)} on "
+            f"{cc.info.name}, which allows {format_size(budget.total)} ({format_size(budget.max_alloc)} per "
+            f"buffer); raise --device-memory, crop the volume or pick another --device")
+    return pool + bounds + work <= budget.total and pool <= budget.max_alloc
 
 
 def _parents(wav, taps, lo, hi) -> tuple:
@@ -433,14 +442,14 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
         boxes[:, 3] = lay["offset"][sel, gi] - base
         n = boxes[:, :3].max(axis=0)
         _GATHER(kernels, q, _whole_groups((int(n[0]), int(n[1]), int(n[2]) * len(sel))), GROUP, pool=pool, src=src.data,
-                src_start=src.start[::-1], src_shape=src.shape[::-1], starts=cla.to_device(q, starts),
-                boxes=cla.to_device(q, boxes), depth=int(n[2]), scale=2.0 ** (-1.5 * level))
+                src_start=src.start[::-1], src_shape=src.shape[::-1], starts=_send(q, starts, hold),
+                boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level))
 
     approx = part(0, need[wv.levels]) or _Part(cla.zeros(q, (1, 1, 1, 4), np.float32), need[wv.levels][0],
                                                 np.ones(3, np.int64))
     if wv.levels in own:
         gather(wv.levels, approx)
-    d_taps = {k: cla.to_device(q, v) for k, v in taps.items()}
+    d_taps = {k: _send(q, v, hold) for k, v in taps.items()}
     shifts = {k: wav.synthesis_shift(k) for k in "ad"}
     for m in range(wv.levels, min(own), -1):
         parts = {"aaa": approx}
@@ -458,7 +467,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
         approx = parts[""]
         if m == 1 and clamped:  # docs/raytracing.md §4: empty voxels' fine coefficients are zero
             keep = content_weights(wv.content_mask, approx.start, approx.shape).astype(np.uint8)
-            clamp(approx.data.reshape(-1), cla.to_device(q, keep))
+            clamp(approx.data.reshape(-1), _send(q, keep, hold))
         if m - 1 in own:
             gather(m - 1, approx)
 
@@ -481,15 +490,21 @@ class _Part:
 
 
 def _upload(cc, arr, channels, hold: list) -> cla.Array:
-    """``arr`` (Z, Y, X, C) as float4 with channel c in slot ``channels[c]``, copied without waiting for the queue:
-    the host array is held in ``hold`` until the caller has finished the queue."""
+    """``arr`` (Z, Y, X, C) on the device as float4 with channel c in slot ``channels[c]`` (:func:`_send`)."""
     if tuple(channels) == (0, 1, 2, 3) and arr.dtype == np.float32 and arr.flags.c_contiguous:
         out = arr
     else:
         out = np.zeros(arr.shape[:3] + (4,), np.float32)
         out[..., list(channels)] = arr
-    hold.append(out)
-    return cla.to_device(cc.queue, out, async_=True)
+    return _send(cc.queue, out, hold)
+
+
+def _send(q, arr, hold: list) -> cla.Array:
+    """``arr`` copied to the device without waiting for the queue; the host array is held in ``hold`` until the
+    caller knows the queue has passed the copy."""
+    arr = np.ascontiguousarray(arr)
+    hold.append(arr)
+    return cla.to_device(q, arr, async_=True)
 
 
 def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, crop) -> _Part:
