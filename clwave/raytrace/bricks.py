@@ -271,7 +271,8 @@ def layout(wv, p: Plan) -> dict:
         raise DeviceMemoryError(f"{offset[-1]} brick coefficients are more than one pool indexes (2^31); "
                                 f"render a cropped or downsampled volume")
     return dict(bricks=bricks, levels=levels, base=base, count=count, frame=frame,
-                offset=offset[:-1].reshape(len(bricks), len(wv.groups)), total=int(offset[-1]))
+                offset=offset[:-1].reshape(len(bricks), len(wv.groups)), total=int(offset[-1]),
+                ends=offset[::len(wv.groups)])  # slot s spans pool elements ends[s] .. ends[s + 1]
 
 
 def lattice_of_levels(wv) -> np.ndarray:
@@ -325,8 +326,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     slabs, floors, last_slab = lay["bricks"][:, 0], [], None
     for bz in np.unique(slabs):
         slots, hold = np.flatnonzero(slabs == bz), []
-        first = int(lay["offset"][slots[0], 0])
-        last = int(lay["offset"][slots[-1], -1] + np.prod(lay["count"][slots[-1], -1]))
+        first, last = int(lay["ends"][slots[0]]), int(lay["ends"][slots[-1] + 1])
         target, base = (pool, 0) if resident else (cla.empty(q, (last - first, 4), np.float32), first)
         clamped = wv.content_mask is not None and bool(p.clamp[tuple((lay["bricks"][slots] - p.origin).T)].any())
         for gi in range(G):
@@ -351,7 +351,6 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     q.finish()
     for slots, floor in floors:
         lattices[slots[floor.get() < 0]] = level_lattices[0]
-    q.finish()
     return BrickField(p.origin, p.level.shape, lay["bricks"], lay["levels"], frames, boxes, lattices, bounds.get(),
                       orders, time.perf_counter() - start, pool, host)
 
@@ -364,8 +363,7 @@ def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:
     pool = 16 * lay["total"]
     bounds = 4 * p.level.size * SUPER ** 3
     halo = 2 * max(g.wavelet.order for g in wv.groups)
-    slab, slab_pool = 0, 0
-    ends = np.append(lay["offset"][:, 0], lay["total"])
+    slab, slab_pool, ends = 0, 0, lay["ends"]
     for bz in np.unique(lay["bricks"][:, 0]):
         sel = np.flatnonzero(lay["bricks"][:, 0] == bz)
         bricks, finest = lay["bricks"][sel], 2.0 ** lay["levels"][sel].min()

@@ -73,6 +73,16 @@ def view_in_fine(view, scale, offset) -> tuple:
     return eye, (-view.n * scale)[::-1]
 
 
+def _checked_view(camera, tolerance) -> float:
+    """The tolerance of a render, with its camera checked (InputError naming the argument)."""
+    if not isinstance(camera, Camera):
+        raise InputError("camera must be a clwave.Camera")
+    tol = finite_number(tolerance, "tolerance")
+    if tol <= 0:
+        raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
+    return tol
+
+
 def _region_sums(sizes, c) -> np.ndarray:
     """Sums of ``sizes`` over regions of c^3 cells (the last ones cut by the array's end)."""
     padded = np.pad(sizes, [(0, -n % c) for n in sizes.shape])
@@ -279,11 +289,7 @@ class RayTracer:
         segments in ``meta["active_trace"]`` (see ``cl/raytrace/field_wavelet.h``).
         """
         wv, cc = self.wv, self.cc
-        if not isinstance(camera, Camera):
-            raise InputError("camera must be a clwave.Camera")
-        tol = finite_number(tolerance, "tolerance")
-        if tol <= 0:
-            raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
+        tol = _checked_view(camera, tolerance)
         if absorption and wv.channels != 4:
             raise InputError(f"emission-absorption ray tracing needs an RGBA volume (4 channels), this one has "
                              f"{wv.channels}; classify it first (TransferFunction.classify), or pass "
@@ -471,18 +477,13 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     and timings (B-spline expansion and kernel compile apart).
     """
     if scheduler is not None:
-        from ..cluster import check_scheduler, client_for
+        from ..cluster import client_for
         from .regions import check_cluster_model, raytrace_on_cluster
 
         check_cluster_model(wv, field)  # before any worker starts
-        if not isinstance(camera, Camera):
-            raise InputError("camera must be a clwave.Camera")
-        tol = finite_number(tolerance, "tolerance")
-        if tol <= 0:
-            raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
-        cap = parse_cap(device_memory)
+        tol, cap = _checked_view(camera, tolerance), parse_cap(device_memory)
         options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision)
-        with client_for(check_scheduler(scheduler)) as client:
+        with client_for(scheduler) as client:  # which checks the scheduler before starting anything
             return raytrace_on_cluster(wv, camera, client, options, device, cap)
     if tracer is None:
         if not isinstance(wv, WaveletVolume):

@@ -347,12 +347,12 @@ def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampl
 
 
 def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
-    from ..cluster import check_model_file, check_scheduler, client_for, render_parts, workers_of
+    from ..cluster import check_model_file, client_for, render_parts, workers_of
 
     check_model_file(wv, "splatting")  # before any worker starts
     if not isinstance(camera, Camera):
         raise InputError("camera must be a clwave.Camera")
-    with client_for(check_scheduler(scheduler)) as client:
+    with client_for(scheduler) as client:  # which checks the scheduler before starting anything
         shares = workers_of(client)
         results = render_parts(client, _splat_share, wv.source, [(i, shares) for i in range(shares)], device,
                                options, camera)
