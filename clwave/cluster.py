@@ -112,8 +112,9 @@ def check_model_file(wv, what: str):
 
 def render_parts(client, task, source, parts, *args) -> list:
     """``task(renderer_of, part, *args)`` for each part, each part on a worker of its own (round robin), the
-    results in the order of ``parts``.  ``renderer_of(make)`` on the worker gives the renderer ``make(model)``
-    builds for this file, part and arguments, kept there for later views."""
+    results in the order of ``parts``.  ``renderer_of(make, *key)`` on the worker gives the renderer
+    ``make(model)`` builds for this file, part and ``key`` (the options it depends on), kept there for later
+    views."""
     workers = sorted(client.scheduler_info().get("workers", {}))
     futures = [client.submit(_run_part, task, source, part, args, pure=False,
                              workers=[workers[i % len(workers)]] if workers else None)

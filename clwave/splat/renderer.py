@@ -339,11 +339,16 @@ def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampl
             omega_s=omega_s, sampling=sampling, coarse=coarse,
             device_memory=parse_cap(device_memory)))
     r = renderer or shared_renderer(wv, device, omega_s, sampling, coarse, device_memory)
+    return RenderResult(*_splat_range(r, camera, 0, r.count))
+
+
+def _splat_range(r: SplatRenderer, camera, first: int, stop: int) -> tuple:
+    """``(image, meta)`` of coefficients ``first .. stop`` of each group, in importance order."""
     start = time.perf_counter()
     acc = r.begin(camera)
-    acc.splat(0, r.count)
+    acc.splat(first, stop - first)
     image = acc.image()
-    return RenderResult(image, acc.meta(time.perf_counter() - start))
+    return image, acc.meta(time.perf_counter() - start)
 
 
 def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
@@ -368,11 +373,7 @@ def _splat_share(renderer_of, share, device, options, camera) -> tuple:
     in importance order (splatting is linear: the shares' images add up to the whole)."""
     r = renderer_of(lambda wv: SplatRenderer(wv, device=device, **options), device, tuple(sorted(options.items())))
     i, n = share
-    start = time.perf_counter()
-    acc = r.begin(camera)
-    acc.splat(r.count * i // n, r.count * (i + 1) // n - r.count * i // n)
-    image = acc.image()
-    return image, acc.meta(time.perf_counter() - start)
+    return _splat_range(r, camera, r.count * i // n, r.count * (i + 1) // n)
 
 
 def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device_memory=None) -> SplatRenderer:
