@@ -3,7 +3,11 @@ each brick's lattice coefficients against the model's closed-form field, the pla
 census of the kept supports and the voxels, and the ray tracer's images against the dense fine-grid
 path it replaced (tests/data/dense_reference.npz)."""
 
+import errno
+import os
 import re
+import shutil
+import tempfile
 from itertools import product
 from pathlib import Path
 
@@ -14,7 +18,7 @@ import clwave
 from clwave import TransferFunction, WaveletVolume
 from clwave.device.context import ComputeContext
 from clwave.device.memory import device_budget
-from clwave.errors import DeviceMemoryError
+from clwave.errors import DeviceMemoryError, OutputError
 from clwave.io.phantoms import phantom
 from clwave.model.bspline import bspline, bspline_derivative
 from clwave.model.geometry import band_lattice, fine_to_world
@@ -29,7 +33,7 @@ BRICK = bricks.BRICK
 def pool_field(wv, field: bricks.BrickField, x0, derivative=False):
     """The brick field at grid-0 fine points (N, 3) (z, y, x), from the pool read back: (N, 4), or the
     gradient (N, 4, 3) in fine units (z, y, x)."""
-    pool = field.pool.get() if field.resident else field.host
+    pool = field.pool.get() if field.resident else field.spill.read(0, field.pool_bytes // 16)
     frames, boxes = field.frames, field.boxes
     pages = np.full(field.shape, -1)
     pages[tuple((field.bricks - field.origin).T)] = np.arange(len(field.bricks))
@@ -255,7 +259,7 @@ def test_out_of_core_passes_equal_one_pass():
                     (clwave.Camera(10, 5, size=40, perspective=True, distance=8.0, fov=70), {}),  # eye inside
                     (clwave.Camera(200, -30, size=32, perspective=True, distance=90.0), dict(shading=False))):
         a, b = whole.render(cam, tolerance=1e-3, **kw), parts.render(cam, tolerance=1e-3, **kw)
-        assert a.meta["passes"] == 1 and b.meta["passes"] > 1 and b.meta["pool"] == "host"
+        assert a.meta["passes"] == 1 and b.meta["passes"] > 1 and b.meta["pool"] == "scratch file"
         for key in ("segments", "segments_by_lattice", "rays_terminated_early"):
             assert a.meta[key] == b.meta[key], key
         # a pass's first segment takes its first sample afresh: Simpson may halve a panel more or less there
@@ -263,6 +267,39 @@ def test_out_of_core_passes_equal_one_pass():
             "integrand_evaluations"]
         assert np.abs(a.image).max() > 0.5
         assert np.max(np.abs(a.image - b.image)) <= 1e-6 * np.abs(a.image).max()
+
+
+def test_bricks_beyond_the_device_go_to_a_scratch_file_bit_for_bit(tmp_path, monkeypatch):
+    """A pool bigger than the device budget is written to an unnamed scratch file in TMPDIR as it is expanded
+    (docs/raytracing.md §6): what is read back equals the pool kept on the device, element for element, and the
+    file takes room in TMPDIR, not in the process."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    wv = out_of_core_model()
+    whole, parts = RayTracer(wv), RayTracer(wv, device_memory="14MiB")
+    spill = parts.bricks.spill
+    assert spill.folder == str(tmp_path) and spill.nbytes == whole.bricks.pool_bytes
+    assert os.fstat(spill.file.fileno()).st_size == spill.nbytes and not os.listdir(tmp_path)  # unnamed
+    assert np.array_equal(spill.read(0, spill.nbytes // 16), whole.bricks.pool.get())
+
+
+def test_no_room_for_the_scratch_file_is_a_clear_error(tmp_path, monkeypatch):
+    """Too little room in TMPDIR for the bricks beyond the device, found before expanding, or a disk that fills
+    while they are written: one OutputError naming the folder and the fix."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    wv = out_of_core_model()
+    real = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: real._replace(free=1 << 20))
+    with pytest.raises(OutputError, match=f"need that much room in {tmp_path}.*set TMPDIR"):
+        RayTracer(wv, device_memory="14MiB")
+    monkeypatch.undo()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+    def full(fd, data, offset):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "pwrite", full)
+    with pytest.raises(OutputError, match=f"{tmp_path} failed: No space left on device.*set TMPDIR"):
+        RayTracer(wv, device_memory="14MiB")
 
 
 @pytest.mark.parametrize("cap,size", [("4MiB", 8), ("14MiB", 500)])

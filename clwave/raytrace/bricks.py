@@ -13,7 +13,11 @@ brick's own knot planes, so segments in smooth bricks are ``2^l`` cells long.
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 import time
+import weakref
 from dataclasses import dataclass
 from itertools import product
 
@@ -28,7 +32,7 @@ from ..device.constants import BLOCK, SUPER
 from ..device.context import ComputeContext
 from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
-from ..errors import DeviceMemoryError
+from ..errors import DeviceMemoryError, OutputError
 from ..model.geometry import band_lattice
 from .bounds import content_weights
 
@@ -175,8 +179,8 @@ class BrickField:
     coefficients ``boxes[s, g]`` = (nx, ny, nz, first pool element), whose local lattice coordinate
     at grid-0 point x is ``(x - frames[s, g].xyz) * frames[s, g].w``; ``lattices[s]`` is the origin
     (x, y, z) and spacing of the brick's knot planes (every group's, at its level).  The pool is on
-    the device (``resident``) or, when it does not fit there, in host memory, and the renderer uploads
-    the bricks of one region at a time (docs/raytracing.md §6).
+    the device (``resident``) or, when it does not fit there, in a scratch file (:class:`Spill`), and the
+    renderer uploads the bricks of one region at a time (docs/raytracing.md §6).
     """
 
     origin: np.ndarray     # (3,) brick index (z, y, x) of the page table's first brick
@@ -190,7 +194,7 @@ class BrickField:
     orders: tuple          # the groups' B-spline orders
     seconds: float         # expansion time
     pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2)
-    host: np.ndarray | None = None  # or in host memory, (elements, 4) float32
+    spill: Spill | None = None      # or in a scratch file
 
     @property
     def resident(self) -> bool:
@@ -198,7 +202,7 @@ class BrickField:
 
     @property
     def pool_bytes(self) -> int:
-        return int(self.pool.nbytes if self.resident else self.host.nbytes)
+        return int(self.pool.nbytes if self.resident else self.spill.nbytes)
 
     def slot_bytes(self) -> np.ndarray:
         """(slots,) pool bytes of each brick (all groups)."""
@@ -206,7 +210,7 @@ class BrickField:
 
     def tables(self, cc, slots=None) -> dict:
         """The kernel arguments of the field (``FIELD_PARAMS``): every brick (resident), or the bricks ``slots``
-        uploaded from host memory, the others absent."""
+        read from the scratch file, the others absent."""
         q, pages = cc.queue, np.full(self.shape, -1, np.int32)
         if slots is None:
             slots, pool = np.arange(len(self.levels)), self.pool
@@ -214,18 +218,67 @@ class BrickField:
         else:
             starts, sizes = self.boxes[slots, 0, 3].astype(np.int64), self.slot_bytes()[slots] // 16
             at = np.concatenate([[0], np.cumsum(sizes)])  # where each brick goes in the region's pool
-            pool = cla.zeros(q, (int(at[-1]) + 64, 4), np.float32)  # 64: as build()'s
-            # runs of bricks that follow each other in host memory, each copied in one piece, no host copy
-            breaks = np.flatnonzero(starts[1:] != starts[:-1] + sizes[:-1]) + 1
-            for a, b in zip(np.concatenate([[0], breaks]), np.concatenate([breaks, [len(slots)]])):
-                cl.enqueue_copy(q, pool.data, self.host[starts[a]:starts[b - 1] + sizes[b - 1]],
-                                dst_offset=int(at[a]) * 16)
+            pool = cla.empty(q, (int(at[-1]) + 64, 4), np.float32)  # 64: as build()'s
+            # read straight into the mapped buffer (no host copy), a run of bricks that follow each other in the
+            # file at a time
+            mapped, _ = cl.enqueue_map_buffer(q, pool.data, cl.map_flags.WRITE_INVALIDATE_REGION, 0, pool.shape,
+                                              np.float32)
+            try:
+                breaks = np.flatnonzero(starts[1:] != starts[:-1] + sizes[:-1]) + 1
+                for a, b in zip(np.concatenate([[0], breaks]), np.concatenate([breaks, [len(slots)]])):
+                    self.spill.read_into(int(starts[a]), mapped[at[a]:at[b]])
+                mapped[at[-1]:] = 0
+            finally:
+                mapped.base.release(q)
             boxes = self.boxes[slots].copy()
             boxes[..., 3] += (at[:-1] - starts)[:, None].astype(np.int32)
         pages[tuple((self.bricks[slots] - self.origin).T)] = np.arange(len(slots), dtype=np.int32)
         return dict(coef=pool, pages=cla.to_device(q, pages), page_origin=self.origin[::-1],
                     page_shape=self.shape[::-1], frames=cla.to_device(q, _one(self.frames[slots])),
                     boxes=cla.to_device(q, _one(boxes)), lattices=cla.to_device(q, _one(self.lattices[slots])))
+
+
+class Spill:
+    """Pool elements (float4) that do not fit the device, in an unnamed scratch file in the temporary folder
+    (``TMPDIR``): they cost the process no memory, the OS keeps what fits in free memory in its cache, and the
+    file goes with the tracer (docs/raytracing.md §6).  Raises :class:`OutputError` when the folder has no room."""
+
+    def __init__(self, elements: int):
+        self.nbytes, folder = 16 * elements, tempfile.gettempdir()
+        free = shutil.disk_usage(folder).free
+        if self.nbytes > free:
+            raise OutputError(f"the {format_size(self.nbytes)} of bricks beyond the device need that much room in "
+                              f"{folder}, which has {format_size(free)}; free space there, or set TMPDIR to a "
+                              f"folder on a larger disk")
+        self.folder = folder
+        self.file = tempfile.TemporaryFile(dir=folder, prefix="clwave-bricks-")
+        weakref.finalize(self, self.file.close)  # closed (and so gone) with the pool
+
+    def write(self, first: int, values: np.ndarray):
+        """Elements ``first ..`` from ``values`` ((n, 4) float32)."""
+        self._io(os.pwrite, first, np.ascontiguousarray(values, np.float32))
+
+    def read_into(self, first: int, out: np.ndarray):
+        """Elements ``first .. first + len(out)`` into ``out`` ((n, 4) float32, contiguous)."""
+        self._io(lambda fd, view, at: os.preadv(fd, [view], at), first, out)
+
+    def read(self, first: int, count: int) -> np.ndarray:
+        out = np.empty((count, 4), np.float32)
+        self.read_into(first, out)
+        return out
+
+    def _io(self, call, first, arr):
+        view, done = memoryview(arr).cast("B"), 0
+        try:
+            while done < len(view):
+                moved = call(self.file.fileno(), view[done:], 16 * first + done)
+                if moved <= 0:
+                    raise OSError(0, "the scratch file ended early")
+                done += moved
+        except OSError as exc:
+            raise OutputError(f"the scratch file of the bricks beyond the device in {self.folder} failed: "
+                              f"{exc.strerror or exc}; free space there, or set TMPDIR to a folder on a larger "
+                              f"disk") from None
 
 
 def ray_order(index, eye, direction, perspective: bool) -> tuple:
@@ -295,7 +348,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     down to the slab's finest brick level, each level cropped to the box its bricks and the next level
     need; after each level the bricks at it are copied into the pool (``gather_bricks``).  The bands
     are cropped from the model's sparse coefficients per slab.  The pool stays on the device when it
-    fits the budget with the bounds, else each slab's bricks go to host memory.  Raises
+    fits the budget with the bounds, else each slab's bricks go to a scratch file (:class:`Spill`).  Raises
     :class:`DeviceMemoryError` before allocating when one slab's work does not fit.
     """
     p = p if p is not None else plan(wv)
@@ -318,12 +371,19 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     bounds = cla.zeros(q, tuple(int(k) * SUPER for k in p.level.shape), np.float32)
     # 64 = 4^3: the reads of a segment in no brick (weights 0; the march never samples one) stay inside
     pool = cla.empty(q, (max(lay["total"], 64), 4), np.float32) if resident else None
-    host = None if resident else np.empty((lay["total"], 4), np.float32)
+    spill = None if resident else Spill(lay["total"])
     clamp = ElementwiseKernel(cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f",
                               "clamp_to_content")
     # host work on one slab overlaps the device's on the last: uploads do not wait for the queue, and what they
-    # read (and a slab's pool on its way to host memory) is held until a marker says the slab is done
+    # read (and a slab's pool on its way to the scratch file) is held until a marker says the slab is done
     slabs, floors, last_slab = lay["bricks"][:, 0], [], None
+
+    def finish(slab):  # the slab's work is done: what it held goes, its pool to the scratch file
+        marker, hold, staged = slab
+        marker.wait()
+        if staged is not None:
+            spill.write(*staged)
+
     for bz in np.unique(slabs):
         slots, hold = np.flatnonzero(slabs == bz), []
         first, last = int(lay["ends"][slots[0]]), int(lay["ends"][slots[-1] + 1])
@@ -342,17 +402,21 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
         if alpha is not None:  # docs/raytracing.md §3: where alpha may dip below 0, the fine lattice's segments
             floors.append((slots, cla.empty(q, len(slots), np.float32)))
             _FLOOR(kernels, q, (len(slots),), (1,), out=floors[-1][1], coef=target, boxes=local, g=alpha)
+        staged = None
         if not resident:
+            staged = (first, np.empty((last - first, 4), np.float32))
             hold.append(target)
-            target.get_async(q, host[first:last])
+            target.get_async(q, staged[1])
         if last_slab is not None:
-            last_slab[0].wait()  # and with it, what it held goes
-        last_slab = (cl.enqueue_marker(q), hold)
+            finish(last_slab)
+        last_slab = (cl.enqueue_marker(q), hold, staged)
+    if last_slab is not None:
+        finish(last_slab)
     q.finish()
     for slots, floor in floors:
         lattices[slots[floor.get() < 0]] = level_lattices[0]
     return BrickField(p.origin, p.level.shape, lay["bricks"], lay["levels"], frames, boxes, lattices, bounds.get(),
-                      orders, time.perf_counter() - start, pool, host)
+                      orders, time.perf_counter() - start, pool, spill)
 
 
 def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:

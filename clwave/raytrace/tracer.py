@@ -116,7 +116,7 @@ class RayTracer:
     or ``"wavelet"`` (active lists over the kept coefficients, the reference); see the
     module docstring.  ``active`` bounds the wavelet field's per-ray list.  ``device_memory`` caps the
     device memory it uses (bytes, or a size such as ``"2GiB"``); a B-spline field bigger than that (or than
-    the device) stays in host memory and renders in passes (docs/raytracing.md §6).  ``region`` (first, stop):
+    the device) goes to a scratch file and renders in passes (docs/raytracing.md §6).  ``region`` (first, stop):
     only the bricks of those layers along array axis 0 (z), and rays marched inside them only: one worker's
     part of an image rendered on a Dask cluster (:mod:`clwave.raytrace.regions`).
     """
@@ -251,7 +251,7 @@ class RayTracer:
         return GRAD_NOISE * eps * self.q_bound / min(self.wv.spacing)
 
     def _passes(self, view, scale, offset, per_image) -> list:
-        """The bricks in host memory as regions of c^3 bricks that fit the device one at a time, in an order
+        """The bricks in the scratch file as regions of c^3 bricks that fit the device one at a time, in an order
         every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z).
 
         Along every ray the distance of its region index from the eye's (perspective), or the index times the
@@ -415,7 +415,8 @@ class RayTracer:
                                          lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())))
         if self.field == "bspline":
             meta.update(bricks=len(self.bricks.levels), brick_levels=np.bincount(self.bricks.levels).tolist(),
-                        brick_pool_bytes=self.bricks.pool_bytes, pool="device" if self.bricks.resident else "host")
+                        brick_pool_bytes=self.bricks.pool_bytes,
+                        pool="device" if self.bricks.resident else "scratch file")
         if trace and self.field == "wavelet":
             meta["active_trace"] = traced.get()
         return RenderResult(img, meta)
