@@ -127,14 +127,19 @@ def test_plan_clamps_bricks_where_empty_and_non_empty_voxels_meet():
     assert p.clamp.any() and (p.level == bricks.ABSENT).any() and (p.level > 0).any()
 
 
-@pytest.mark.parametrize("wavelet,levels,content", [("cubic", 3, False), ("cubic", 2, True), ("linear", 2, True),
-                                                    ("quadratic", 2, False), ("haar", 1, True),
-                                                    (["cubic", "cubic", "cubic", "haar"], 2, True)])
-def test_brick_field_equals_the_model_at_random_points(wavelet, levels, content):
+@pytest.mark.parametrize("wavelet,levels,content,keep", [("cubic", 3, False, 0.1), ("cubic", 2, True, 0.1),
+                                                         ("linear", 2, True, 0.1), ("quadratic", 2, False, 0.1),
+                                                         ("haar", 1, True, 0.1),
+                                                         (["cubic", "cubic", "cubic", "haar"], 2, True, 0.1),
+                                                         ("cubic", 2, True, None)])  # every coefficient stored
+def test_brick_field_equals_the_model_at_random_points(wavelet, levels, content, keep):
     """Values and gradients, on bricks of every level, against the closed-form wavelet sum (with the content
-    known: the host synthesis with empty voxels' fine coefficients zeroed, docs/raytracing.md §4)."""
+    known: the host synthesis with empty voxels' fine coefficients zeroed, docs/raytracing.md §4); the bands'
+    boxes come from kept coefficients scattered on the device, or from a model that stores every one."""
     vol = smooth_volume(empty_corner=content)
-    wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels).threshold(keep=0.1)
+    wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels)
+    wv = wv if keep is None else wv.threshold(keep=keep)
+    assert all((g.positions is None) == (keep is None) for g in wv.groups)
     if not content:
         wv.content_mask = None
     field = build(wv)

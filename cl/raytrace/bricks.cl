@@ -1,9 +1,33 @@
 /* bricks.cl: the brick pool of the ray tracer's B-spline field (clwave/raytrace/bricks.py,
- * docs/raytracing.md §3): copying each brick's lattice coefficients out of a slab's synthesis,
- * and the bounds on |field| per CLW_BLOCK^3 block of the bricks for empty-space skipping (§4). */
+ * docs/raytracing.md §3): a band's kept coefficients into the box a slab's synthesis reads, copying each
+ * brick's lattice coefficients out of that synthesis, and the bounds on |field| per CLW_BLOCK^3 block of the bricks for empty-space skipping (§4). */
 #include "common/clw_common.h"
 
 constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
+
+/* scatter_band: a band's kept coefficients into a zeroed box of float4, each channel in its slot.
+ *   out, out_start, out_shape   a box of float4 in the band's index coordinates (x, y, z)
+ *   positions    (n,) flat positions in the band (row-major over band_shape, x fastest), from band_start
+ *   values       (channels, n) their values, channel by channel
+ *   slots        the float4 component of channel c in component c (x, y, z, w); channels > c
+ * Grid: global (n). */
+__kernel void scatter_band(__global float *out, const int4 out_start, const int4 out_shape,
+                           __global const long *positions, const long band_start, const int4 band_shape,
+                           __global const float *values, const int n, const int4 slots, const int channels)
+{
+    const int i = get_global_id(0);
+    if (i >= n)
+        return;
+    const long p = positions[i] - band_start, plane = (long)band_shape.x * band_shape.y;
+    const int z = (int)(p / plane), y = (int)(p % plane / band_shape.x), x = (int)(p % band_shape.x);
+    const int4 k = (int4)(x, y, z, 0) - out_start;
+    if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= out_shape.x || k.y >= out_shape.y || k.z >= out_shape.z)
+        return;
+    const size_t at = 4 * (((size_t)k.z * out_shape.y + k.y) * out_shape.x + k.x);
+    const int slot[4] = {slots.x, slots.y, slots.z, slots.w};
+    for (int c = 0; c < channels; c++)
+        out[at + slot[c]] = values[(size_t)c * n + i];
+}
 
 /* gather_bricks: pool[box.w + local index] = scale * src[start + local index], zero outside src.
  *   src, src_start, src_shape   one level's synthesis over a slab: a box of float4 (x, y, z)

@@ -51,6 +51,9 @@ _SYNTH_AXIS = Kernel("synth_axis", ("out", BUFFER), ("out_start", cltypes.int4),
 _GATHER = Kernel("gather_bricks", ("pool", BUFFER), ("src", BUFFER), ("src_start", cltypes.int4),
                  ("src_shape", cltypes.int4), ("starts", BUFFER), ("boxes", BUFFER), ("depth", np.int32),
                  ("scale", np.float32))
+_SCATTER = Kernel("scatter_band", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
+                  ("positions", BUFFER), ("band_start", np.int64), ("band_shape", cltypes.int4), ("values", BUFFER),
+                  ("n", np.int32), ("slots", cltypes.int4), ("channels", np.int32))
 _FLOOR = Kernel("alpha_floor", ("out", BUFFER), ("coef", BUFFER), ("boxes", BUFFER), ("g", np.int32))
 _BOUNDS = Kernel("brick_bounds", ("out", BUFFER), ("nblocks", cltypes.int4), ("origin", cltypes.int4),
                  ("coef", BUFFER), ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER))
@@ -453,26 +456,36 @@ def _parents(wav, taps, lo, hi) -> tuple:
     return np.min(firsts, axis=0), np.max(lasts, axis=0)
 
 
-def _crop(g, band_no: int, band_slice: slice, lo, hi) -> np.ndarray:
-    """The band's coefficients in the index box lo .. hi (inclusive), dense (nz, ny, nx, C), zero where not kept."""
-    band = g.bands[band_no]
-    out = np.zeros((*(hi - lo + 1), len(g.channels)), np.float32)
+def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) -> _Part | None:
+    """The band's coefficients in the index box lo .. hi (inclusive, z, y, x) on the device, dense float4 with
+    channel c in slot ``g.channels[c]``, zero where not kept; None where the band keeps nothing in the box's
+    layers.  The kept coefficients of those layers (one contiguous run of the sorted positions) are scattered
+    into the box on the device: no dense copy on the host."""
+    band, q = g.bands[band_no], cc.queue
+    shape = hi - lo + 1
     a, b = np.maximum(lo, 0), np.minimum(hi + 1, band.shape)
     if np.any(b <= a):
-        return out
-    target = tuple(slice(x - o, y - o) for x, y, o in zip(a, b, lo))
-    if g.positions is None:
+        return None
+    if g.positions is None:  # every coefficient stored: the box is a slice of the band
+        out = np.zeros((*shape, 4), np.float32)
         values = g.values[:, band.start:band.start + band.size].reshape(-1, *band.shape)
-        out[target] = np.moveaxis(values[(slice(None), *(slice(x, y) for x, y in zip(a, b)))], 0, -1)
-        return out
+        target = tuple(slice(x - o, y - o) for x, y, o in zip(a, b, lo))
+        out[(*target, list(g.channels))] = np.moveaxis(values[(slice(None), *(slice(x, y) for x, y in zip(a, b)))],
+                                                      0, -1)
+        return _Part(_send(q, out, hold), lo, shape)
     plane = band.shape[1] * band.shape[2]
     positions = g.positions[band_slice]
     i, k = np.searchsorted(positions, band.start + np.array([a[0], b[0]]) * plane)
-    kz, rest = np.divmod(positions[i:k] - band.start, plane)
-    ky, kx = np.divmod(rest, band.shape[2])
-    sel = (ky >= a[1]) & (ky < b[1]) & (kx >= a[2]) & (kx < b[2])
-    out[kz[sel] - lo[0], ky[sel] - lo[1], kx[sel] - lo[2]] = g.values[:, band_slice][:, i:k][:, sel].T
-    return out
+    if k == i:
+        return None
+    out = cla.zeros(q, (*(int(n) for n in shape), 4), np.float32)
+    slots = np.full(4, -1)
+    slots[:len(g.channels)] = g.channels
+    _SCATTER(kernels, q, (int(-(-(k - i) // 64) * 64),), (64,), out=out, out_start=lo[::-1], out_shape=shape[::-1],
+             positions=_send(q, positions[i:k], hold), band_start=band.start, band_shape=band.shape[::-1],
+             values=_send(q, g.values[:, band_slice][:, i:k], hold), n=k - i, slots=slots,
+             channels=len(g.channels))
+    return _Part(out, lo, shape)
 
 
 def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, clamp, hold):
@@ -492,8 +505,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
     slices = g.band_slices()
 
     def part(band_no, box):
-        arr = _crop(g, band_no, slices[band_no], *box)
-        return _Part(_upload(cc, arr, g.channels, hold), box[0], np.array(arr.shape[:3])) if arr.any() else None
+        return _band_part(cc, kernels, g, band_no, slices[band_no], *box, hold)
 
     def gather(level, src):
         sel = slots[levels == level]
@@ -549,16 +561,6 @@ class _Part:
     data: cla.Array
     start: np.ndarray  # (z, y, x)
     shape: np.ndarray
-
-
-def _upload(cc, arr, channels, hold: list) -> cla.Array:
-    """``arr`` (Z, Y, X, C) on the device as float4 with channel c in slot ``channels[c]`` (:func:`_send`)."""
-    if tuple(channels) == (0, 1, 2, 3) and arr.dtype == np.float32 and arr.flags.c_contiguous:
-        out = arr
-    else:
-        out = np.zeros(arr.shape[:3] + (4,), np.float32)
-        out[..., list(channels)] = arr
-    return _send(cc.queue, out, hold)
 
 
 def _send(q, arr, hold: list) -> cla.Array:
