@@ -173,11 +173,10 @@ typedef struct {
 inline void segment_basis(const Field G, const int g, const int slot, const real3 xm, const real radius,
                           const real3 D, __constant const real *nodes, Basis *B)
 {
-    real lane_xi[12];
-    for (int k = 0; k < 12; k++)
-        lane_xi[k] = nodes[k < NS ? k : 0];
-    const real8 xi = vload8(0, lane_xi);
-    const real4 xi4 = vload4(2, lane_xi);
+    /* the lanes' points straight from nodes (lanes past NS repeat lane 0): vector loads of a private
+     * array's scalar stores stalled on store forwarding */
+    const real8 xi = vload8(0, nodes);
+    const real4 xi4 = (real4)(nodes[8], nodes[NS > 9 ? 9 : 0], nodes[0], nodes[0]);
     const int j = ORDER[g];
     const real4 f = slot < 0 ? (real4)(0) : to_real4(G.frames[slot * CLW_GROUPS + g]);
     const int4 n = slot < 0 ? (int4)(j, j, j, 0) : G.boxes[slot * CLW_GROUPS + g];
