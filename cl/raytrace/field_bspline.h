@@ -81,30 +81,49 @@ BSPLINE_WEIGHTS(real4, bspline_weights4)
 BSPLINE_DERIVATIVES(real8, bspline_derivatives8)
 BSPLINE_DERIVATIVES(real4, bspline_derivatives4)
 
-/* One group's part of the field at sample k: the j^3 coefficients ending at `corner` (the
- * segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
- * along z) with sample k's weights w?[r * 16 + k]; rows are `sy` apart, planes `sz`.  Always
- * inlined with a literal order j, so the loops unroll. */
-__attribute__((always_inline)) inline real4 group_field(__global const float4 *corner, const int sy, const int sz,
-                                                        const int j, const real *wx, const real *wy, const real *wz,
-                                                        const int k)
+/* One group's part of the field at every sample at once: the j^3 coefficients ending at `corner`
+ * (the segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
+ * along z).  The lanes are fq's memory order, sample-major: samples 0..3 in v[0], 4..7 in v[1]
+ * (four channels each), 8 and 9 in f8 (only when `tail`), so each coefficient is read once per
+ * segment and feeds 40 lanes in three vector FMAs.  w[a][r][h] and w8[a][r] are the weights spread
+ * to those lanes; the sums are added to f, f8.  Always inlined with a literal order j and `tail`, so the loops unroll. */
+__attribute__((always_inline)) inline void group_field(__global const float4 *corner, const int sy, const int sz,
+                                                       const int j, const bool tail, real16 w[3][4][2],
+                                                       real8 w8[3][4], real16 *f, real8 *f8)
 {
-    real4 v = (real4)(0);
+    real16 v0 = 0, v1 = 0;
+    real8 v8 = 0;
 #pragma unroll
     for (int rz = 0; rz < j; rz++) {
-        real4 plane = (real4)(0);
+        real16 plane0 = 0, plane1 = 0;
+        real8 plane8 = 0;
 #pragma unroll
         for (int ry = 0; ry < j; ry++) {
             __global const float4 *row = corner - rz * sz - ry * sy;
-            real4 line = (real4)(0);
+            real16 line0 = 0, line1 = 0;
+            real8 line8 = 0;
 #pragma unroll
-            for (int rx = 0; rx < j; rx++)
-                line = fma(to_real4(row[-rx]), (real4)(wx[rx * 16 + k]), line);
-            plane = fma(line, (real4)(wy[ry * 16 + k]), plane);
+            for (int rx = 0; rx < j; rx++) {
+                const real4 c = to_real4(row[-rx]);
+                const real16 c16 = (real16)(c, c, c, c);
+                line0 = fma(c16, w[0][rx][0], line0);
+                line1 = fma(c16, w[0][rx][1], line1);
+                if (tail)
+                    line8 = fma(c16.lo, w8[0][rx], line8);
+            }
+            plane0 = fma(line0, w[1][ry][0], plane0);
+            plane1 = fma(line1, w[1][ry][1], plane1);
+            if (tail)
+                plane8 = fma(line8, w8[1][ry], plane8);
         }
-        v = fma(plane, (real4)(wz[rz * 16 + k]), v);
+        v0 = fma(plane0, w[2][rz][0], v0);
+        v1 = fma(plane1, w[2][rz][1], v1);
+        if (tail)
+            v8 = fma(plane8, w8[2][rz], v8);
     }
-    return v;
+    f[0] += v0;
+    f[1] += v1;
+    *f8 += v8;
 }
 
 /* The alpha group's part of alpha's fine gradient at all lanes of TYPE at once: the same
@@ -154,11 +173,10 @@ typedef struct {
 inline void segment_basis(const Field G, const int g, const int slot, const real3 xm, const real radius,
                           const real3 D, __constant const real *nodes, Basis *B)
 {
-    real lane_xi[12];
-    for (int k = 0; k < 12; k++)
-        lane_xi[k] = nodes[k < NS ? k : 0];
-    const real8 xi = vload8(0, lane_xi);
-    const real4 xi4 = vload4(2, lane_xi);
+    /* the lanes' points straight from nodes (lanes past NS repeat lane 0): vector loads of a private
+     * array's scalar stores stalled on store forwarding */
+    const real8 xi = vload8(0, nodes);
+    const real4 xi4 = (real4)(nodes[8], nodes[NS > 9 ? 9 : 0], nodes[0], nodes[0]);
     const int j = ORDER[g];
     const real4 f = slot < 0 ? (real4)(0) : to_real4(G.frames[slot * CLW_GROUPS + g]);
     const int4 n = slot < 0 ? (int4)(j, j, j, 0) : G.boxes[slot * CLW_GROUPS + g];
@@ -184,36 +202,46 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
     B->corner = G.coef + n.w + ((size_t)c.z * n.y + c.y) * n.x + c.x;
 }
 
-/* The field at the segment's sample points (lane P0 only when `fresh`: else it is the last
- * segment's end), and each grid's Basis for the gradient */
+/* The field at the segment's sample points (lane P0 only when `fresh` or when it shares a vector
+ * with lane 9: else it is the last segment's end), and each grid's Basis for the gradient */
 inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
                            const real3 D, __constant const real *nodes, const bool fresh, real4 *fq,
                            Basis *basis)
 {
-    for (int k = 0; k < NS; k++)
-        fq[k] = (real4)(0);
+    real16 f[2] = {0, 0};
+    real8 f8 = 0;
+    const bool tail = NS > P0 + 1 || fresh;
     const int slot = *A; /* every segment lies in the brick the ray last entered */
     for (int g = 0; g < CLW_GROUPS; g++) {
         Basis *B = &basis[g];
         segment_basis(G, g, slot, xm, radius, D, nodes, B);
         const int j = ORDER[g];
-        real lw[3][64]; /* the weights per sample and axis, for the field's float4 sums */
+        real16 w[3][4][2];
+        real8 w8[3][4];
         for (int a = 0; a < 3; a++)
             for (int r = 0; r < j; r++) {
-                vstore8(B->w[a][r], 2 * r, lw[a]);
-                vstore4(B->w4[a][r], 4 * r + 2, lw[a]);
+                w[a][r][0] = B->w[a][r].s0000111122223333;
+                w[a][r][1] = B->w[a][r].s4444555566667777;
+                w8[a][r] = B->w4[a][r].s00001111;
             }
-        for (int k = 0; k < NS; k++) {
-            if (k == P0 && !fresh)
-                continue;
-            switch (j) {
-            case 1: fq[k] += group_field(B->corner, B->sy, B->sz, 1, lw[0], lw[1], lw[2], k); break;
-            case 2: fq[k] += group_field(B->corner, B->sy, B->sz, 2, lw[0], lw[1], lw[2], k); break;
-            case 3: fq[k] += group_field(B->corner, B->sy, B->sz, 3, lw[0], lw[1], lw[2], k); break;
-            default: fq[k] += group_field(B->corner, B->sy, B->sz, 4, lw[0], lw[1], lw[2], k); break;
-            }
+        switch (j + 4 * tail) {
+        case 1: group_field(B->corner, B->sy, B->sz, 1, false, w, w8, f, &f8); break;
+        case 2: group_field(B->corner, B->sy, B->sz, 2, false, w, w8, f, &f8); break;
+        case 3: group_field(B->corner, B->sy, B->sz, 3, false, w, w8, f, &f8); break;
+        case 4: group_field(B->corner, B->sy, B->sz, 4, false, w, w8, f, &f8); break;
+        case 5: group_field(B->corner, B->sy, B->sz, 1, true, w, w8, f, &f8); break;
+        case 6: group_field(B->corner, B->sy, B->sz, 2, true, w, w8, f, &f8); break;
+        case 7: group_field(B->corner, B->sy, B->sz, 3, true, w, w8, f, &f8); break;
+        default: group_field(B->corner, B->sy, B->sz, 4, true, w, w8, f, &f8); break;
         }
     }
+    real *out = (real *)fq;
+    vstore16(f[0], 0, out);
+    vstore16(f[1], 1, out);
+    if (NS > P0 + 1)
+        vstore8(f8, 4, out);
+    else
+        vstore4(f8.lo, 8, out);
 }
 
 /* alpha's fine gradient in the lanes of (gx, gy, gz), only for segments shaded point by point:

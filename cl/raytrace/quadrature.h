@@ -126,24 +126,50 @@ typedef struct {
     int depth; /* halvings from the whole segment */
 } Panel;
 
+/* Simpson on panel p and on its halves (values flm, fmr at its quarter points): when the two agree
+ * within p's tolerance, or below the rounding floor, or at the depth limit (flagged), the
+ * extrapolated sum is added to total and the panel is done */
+inline bool panel_done(const Panel *p, const real3 flm, const real3 fmr, real3 *total, int *flags)
+{
+    const real w = p->r - p->l;
+    const real3 s1 = w / 6 * (p->fl + 4 * p->fm + p->fr);
+    const real3 s2 = w / 12 * (p->fl + 4 * flm + 2 * p->fm + 4 * fmr + p->fr);
+    const real3 d = fabs(s2 - s1);
+    const real err = fmax(d.x, fmax(d.y, d.z));
+    /* below the rounding floor of the arithmetic, halving the panel cannot help */
+    const real floor_err = 16 * REAL_EPSILON * fmax(fabs(s2.x), fmax(fabs(s2.y), fabs(s2.z)));
+    if (err <= fmax(15 * p->tol, floor_err) || p->depth >= CLW_MAX_DEPTH) {
+        if (err > fmax(15 * p->tol, floor_err))
+            *flags |= 2;
+        *total += s2 + (s2 - s1) / 15;
+        return true;
+    }
+    return false;
+}
+
 /* int_{-1}^{1} q e^{-A} dxi by adaptive Simpson from 2 panels; counts evaluations, flags depth.
- * f9 holds the integrand at xi = -1 + p/4, p = 0..8: the 2 panels and their halves.
+ * f9 holds the integrand at xi = -1 + p/4, p = 0..8: the 2 panels and their halves, so the stack
+ * is needed only when a panel must halve again (nearly never at tolerance 1e-2).
  * Depth first, right half pushed first: the stack holds at most one panel per depth. */
 inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant const real *nodes, const real tol,
                      int *evals, int *flags)
 {
+    const Panel first = {-1, 0, tol / 2, f9[0], f9[2], f9[4], 1}, second = {0, 1, tol / 2, f9[4], f9[6], f9[8], 1};
+    real3 total = (real3)(0);
+    *evals += 9;
     Panel stack[CLW_MAX_DEPTH + 1];
     int top = 0;
-    *evals += 9;
-    stack[0].l = 0; stack[0].r = 1; stack[0].fl = f9[4]; stack[0].fm = f9[6]; stack[0].fr = f9[8];
-    stack[1].l = -1; stack[1].r = 0; stack[1].fl = f9[0]; stack[1].fm = f9[2]; stack[1].fr = f9[4];
-    stack[0].tol = stack[1].tol = tol / 2;
-    stack[0].depth = stack[1].depth = 1;
-    top = 2;
-    real3 total = (real3)(0);
+    if (panel_done(&first, f9[1], f9[3], &total, flags)) {
+        if (panel_done(&second, f9[5], f9[7], &total, flags))
+            return total;
+        stack[top++] = second;
+    } else {
+        stack[top++] = second;
+        stack[top++] = first;
+    }
     while (top > 0) {
         const Panel p = stack[--top];
-        const real m = (p.l + p.r) / 2, w = p.r - p.l;
+        const real m = (p.l + p.r) / 2;
         real3 flm, fmr;
         if (p.depth == 1) {
             flm = f9[p.l < 0 ? 1 : 5];
@@ -155,17 +181,7 @@ inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant c
             fmr = integrand(S, P, (m + p.r) / 2);
             *evals += 2;
         }
-        const real3 s1 = w / 6 * (p.fl + 4 * p.fm + p.fr);
-        const real3 s2 = w / 12 * (p.fl + 4 * flm + 2 * p.fm + 4 * fmr + p.fr);
-        const real3 d = fabs(s2 - s1);
-        const real err = fmax(d.x, fmax(d.y, d.z));
-        /* below the rounding floor of the arithmetic, halving the panel cannot help */
-        const real floor_err = 16 * REAL_EPSILON * fmax(fabs(s2.x), fmax(fabs(s2.y), fabs(s2.z)));
-        if (err <= fmax(15 * p.tol, floor_err) || p.depth >= CLW_MAX_DEPTH) {
-            if (err > fmax(15 * p.tol, floor_err))
-                *flags |= 2;
-            total += s2 + (s2 - s1) / 15;
-        } else {
+        if (!panel_done(&p, flm, fmr, &total, flags)) {
             Panel *right = &stack[top++], *left = &stack[top++];
             right->l = m; right->r = p.r; right->fl = p.fm; right->fm = fmr; right->fr = p.fr;
             left->l = p.l; left->r = m; left->fl = p.fl; left->fm = flm; left->fr = p.fm;
