@@ -2,7 +2,7 @@
  * coefficients (the inverse transform on the whole real line, docs/model.md §1 and §4).
  *
  * One launch is one separable synthesis step along one axis for one pair of parts that
- * differ only in that axis' letter: the 'a' part through the lowpass h = p/sqrt2 and the
+ * differ only in that axis' letter (either may be absent): the 'a' part through the lowpass h = p/sqrt2 and the
  * 'd' part through the highpass g = q/sqrt2 (docs/model.md §1 (the synthesis step)):
  *
  *     out[L] = sum_t h[t] A[(L - shift_a - t) / 2] + sum_t g[t] D[(L - shift_d - t) / 2]
@@ -14,8 +14,8 @@
 
 #include "common/clw_common.h"
 
-/* Compile-time CLW_AXIS (0 = x, 1 = y, 2 = z), and branch-free reads, so that PoCL can
- * vectorise the work-item loop along x. */
+/* Compile-time CLW_AXIS (0 = x, 1 = y, 2 = z), CLW_NH and CLW_NG (the filters' lengths, so that the
+ * tap loops unroll), and branch-free reads, so that PoCL can vectorise the work-item loop along x. */
 
 inline float4 filter_part(__global const float4 *a, const int4 start, const int4 shape,
                           __constant const float *taps, const int ntaps, const int shift,
@@ -33,6 +33,7 @@ inline float4 filter_part(__global const float4 *a, const int4 start, const int4
     const size_t row = CLW_AXIS == 0 ? ((size_t)p.z * shape.y + p.y) * shape.x
                      : CLW_AXIS == 1 ? (size_t)p.z * shape.y * shape.x + p.x
                                      : (size_t)p.y * shape.x + p.x;
+#pragma unroll
     for (int i = 0; 2 * i < ntaps; i++) {
         const int t = first + 2 * i, k = top - i; /* parent index along the axis */
         const bool ok = others_in && t < ntaps && k >= 0 && k < len;
@@ -46,23 +47,24 @@ inline float4 filter_part(__global const float4 *a, const int4 start, const int4
  *
  * Parameters
  *   out          out  box (out_start, out_shape) of float4
- *   a            in   one part with its box, filter (na taps) and shift: the 'a' part with h
- *                     and shift_a, or the 'd' part with g and shift_d
- *   b            in   the other part, likewise; has_b = 0 when it is all zero
+ *   a            in   the 'a' part with its box, through h (CLW_NH taps) with shift_a; has_a = 0: none
+ *   d            in   the 'd' part with its box, through g (CLW_NG taps) with shift_d; has_d = 0: none
  * Grid: global (out_shape.x, out_shape.y, out_shape.z). */
 __kernel void synth_axis(__global float4 *out, const int4 out_start, const int4 out_shape,
                          __global const float4 *a, const int4 a_start, const int4 a_shape,
-                         __constant const float *a_taps, const int na, const int a_shift,
-                         __global const float4 *b, const int4 b_start, const int4 b_shape,
-                         __constant const float *b_taps, const int nb, const int b_shift, const int has_b)
+                         __constant const float *h, const int a_shift, const int has_a,
+                         __global const float4 *d, const int4 d_start, const int4 d_shape,
+                         __constant const float *g, const int d_shift, const int has_d)
 {
     const int4 idx = (int4)(get_global_id(0), get_global_id(1), get_global_id(2), 0);
     if (idx.x >= out_shape.x || idx.y >= out_shape.y || idx.z >= out_shape.z)
         return;
     const int4 at = out_start + idx;
     const int child = CLW_AXIS == 0 ? at.x : (CLW_AXIS == 1 ? at.y : at.z);
-    float4 acc = filter_part(a, a_start, a_shape, a_taps, na, a_shift, at, child);
-    if (has_b)
-        acc += filter_part(b, b_start, b_shape, b_taps, nb, b_shift, at, child);
+    float4 acc = (float4)(0.0f);
+    if (has_a)
+        acc = filter_part(a, a_start, a_shape, h, CLW_NH, a_shift, at, child);
+    if (has_d)
+        acc += filter_part(d, d_start, d_shape, g, CLW_NG, d_shift, at, child);
     out[((size_t)idx.z * out_shape.y + idx.y) * out_shape.x + idx.x] = acc;
 }

@@ -40,14 +40,14 @@ BRICK = BLOCK * SUPER  #: fine cells along a brick's edge (grid-0 coordinates)
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
 
 
-def _part_args(name: str) -> tuple:
+def _part_args(name: str, taps: str) -> tuple:
     """The arguments of one input part of ``synth_axis`` (cl/raytrace/expand.cl)."""
-    return ((name, BUFFER), (f"{name}_start", cltypes.int4), (f"{name}_shape", cltypes.int4),
-            (f"{name}_taps", BUFFER), (f"n{name}", np.int32), (f"{name}_shift", np.int32))
+    return ((name, BUFFER), (f"{name}_start", cltypes.int4), (f"{name}_shape", cltypes.int4), (taps, BUFFER),
+            (f"{name}_shift", np.int32), (f"has_{name}", np.int32))
 
 
 _SYNTH_AXIS = Kernel("synth_axis", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
-                     *_part_args("a"), *_part_args("b"), ("has_b", np.int32))
+                     *_part_args("a", "h"), *_part_args("d", "g"))
 _GATHER = Kernel("gather_bricks", ("pool", BUFFER), ("src", BUFFER), ("src_start", cltypes.int4),
                  ("src_shape", cltypes.int4), ("starts", BUFFER), ("boxes", BUFFER), ("depth", np.int32),
                  ("scale", np.float32))
@@ -358,7 +358,8 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     lay = layout(wv, p)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
     resident = _check_fits(wv, cc, p, lay, budget)
-    synth = [programs.build(cc, ["raytrace/expand.cl"], dict(CLW_AXIS=a)) for a in range(3)]  # compile apart
+    synth = {(g.wavelet.order, a): programs.build(cc, ["raytrace/expand.cl"], dict(  # compile apart
+        CLW_AXIS=a, CLW_NH=len(g.wavelet.p), CLW_NG=len(g.wavelet.q))) for g in wv.groups for a in range(3)}
     kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(orders))
     start = time.perf_counter()
     n, G = len(lay["bricks"]), len(wv.groups)
@@ -535,7 +536,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
             merged = {}
             for rest in sorted({key[1:] for key in parts}):
                 pair = [(letter, parts[letter + rest]) for letter in "ad" if letter + rest in parts]
-                merged[rest] = _synth_axis(cc, synth[2 - axis], pair, axis, d_taps, taps, shifts,
+                merged[rest] = _synth_axis(cc, synth[wav.order, 2 - axis], pair, axis, d_taps, shifts,
                                            (lo[axis], hi[axis]))
             parts = merged
         approx = parts[""]
@@ -571,18 +572,20 @@ def _send(q, arr, hold: list) -> cla.Array:
     return cla.to_device(q, arr, async_=True)
 
 
-def _synth_axis(cc, kernels, pair, axis, d_taps, taps, shifts, crop) -> _Part:
-    """One synthesis step along array ``axis`` of an ('a', part) / ('d', part) pair, the output cropped to the
-    child indices ``crop`` (first, last) along ``axis``."""
+def _synth_axis(cc, kernels, pair, axis, d_taps, shifts, crop) -> _Part:
+    """One synthesis step along array ``axis`` of an ('a', part) / ('d', part) pair (either may be missing), the
+    output cropped to the child indices ``crop`` (first, last) along ``axis``."""
     lo = np.min([p.start for _, p in pair], axis=0)
     hi = np.max([p.start + p.shape for _, p in pair], axis=0)
     lo[axis], hi[axis] = crop[0], crop[1] + 1
     shape = hi - lo
     out = cla.empty(cc.queue, tuple(int(s) for s in shape) + (4,), np.float32)
+    given, any_part = dict(pair), pair[0][1]  # a missing part is flagged, its buffer any of the given
     parts = {}
-    for name, (letter, p) in zip("ab", pair + pair[:1] * (2 - len(pair))):  # a lone part twice, the second ignored
+    for name, taps in (("a", "h"), ("d", "g")):
+        p = given.get(name, any_part)
         parts.update({name: p.data, f"{name}_start": p.start[::-1], f"{name}_shape": p.shape[::-1],
-                      f"{name}_taps": d_taps[letter], f"n{name}": len(taps[letter]), f"{name}_shift": shifts[letter]})
+                      taps: d_taps[name], f"{name}_shift": shifts[name], f"has_{name}": name in given})
     _SYNTH_AXIS(kernels, cc.queue, _whole_groups(shape[::-1]), GROUP, parts, out=out, out_start=lo[::-1],
-                out_shape=shape[::-1], has_b=len(pair) == 2)
+                out_shape=shape[::-1])
     return _Part(out, lo, shape)
