@@ -117,7 +117,10 @@ def small_wavelet_tracer(small_rgba):
 
 @pytest.mark.parametrize("field", ["bspline", "wavelet"])
 @pytest.mark.parametrize("kw", [dict(absorption=False), dict(shading=False), dict(),
-                                dict(lights=[(0, 90), (120, -10)], shading=Phong(0.2, 0.6, 0.5, 8))])
+                                dict(lights=[(0, 90), (120, -10)], shading=Phong(0.2, 0.6, 0.5, 8)),
+                                # shininess not a whole number up to 64: powers through logarithms, not squaring
+                                dict(lights=[(40, 30)], shading=Phong(0.2, 0.6, 0.9, 7.5)),
+                                dict(lights=[(40, 30)], shading=Phong(0.2, 0.6, 0.9, 80))])
 def test_kernel_equals_numpy_reference(small_rgba, small_wavelet_tracer, kw, field):
     wv, tracer = small_rgba
     tracer = small_wavelet_tracer if field == "wavelet" else tracer

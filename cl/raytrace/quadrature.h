@@ -67,6 +67,7 @@ inline void segment_series(Segment *S, __constant const real *nodes)
 
 typedef struct {
     real ka, kd, ks, shininess;
+    int whole, exponent; /* shininess a whole number up to 64: powers by squaring */
     real grad_floor; /* world gradients of alpha this short are flat: no normal, ambient light only */
     int nlights;
     real3 light[CLW_MAX_LIGHTS], halfway[CLW_MAX_LIGHTS];
@@ -78,10 +79,28 @@ typedef struct {
 #else
 #define SHADING 0
 #endif
+
+/* c^shininess for c > 0, by squaring where the shininess is a whole number up to 64 (the usual case: exact,
+ * and 5-7 % of the render cheaper than the logarithms), else as exp2(shininess log2 c): PoCL's pow goes
+ * through extended-precision logarithms and took a quarter of the render time */
+#define POWER(TYPE, NAME)                                                                            \
+    inline TYPE NAME(const TYPE c, const Shading *P)                                                 \
+    {                                                                                                \
+        if (P->whole) {                                                                              \
+            TYPE out = (TYPE)(1), base = c;                                                          \
+            for (int e = P->exponent; e > 0; e >>= 1) {                                              \
+                out = (e & 1) ? out * base : out;                                                    \
+                base *= base;                                                                        \
+            }                                                                                        \
+            return out;                                                                              \
+        }                                                                                            \
+        return fast_exp2(P->shininess * fast_log2(c));                                               \
+    }
+
 /* The shaded emission of eq. 4, (r, g, b) in place, from the field (r, g, b, a) and the fine
  * gradient of alpha (gx, gy, gz): one point (TYPE real) or eight at once (real8; the comparisons
  * and ?: then act per lane, so the same text serves both). */
-#define SHADE(TYPE, NAME)                                                                            \
+#define SHADE(TYPE, NAME, POWER_OF)                                                                  \
     inline void NAME(TYPE *r, TYPE *g, TYPE *b, const TYPE a, const TYPE gx, const TYPE gy, const TYPE gz, \
                      const Shading *P)                                                               \
     {                                                                                                \
@@ -97,18 +116,18 @@ typedef struct {
         TYPE diffuse = (TYPE)(0), specular = (TYPE)(0);                                              \
         for (int i = 0; i < P->nlights; i++) {                                                       \
             diffuse += fmax(nx * P->light[i].x + ny * P->light[i].y + nz * P->light[i].z, (TYPE)(0)); \
-            /* max(c, 0)^shininess as exp2(shininess log2 c): PoCL's pow goes through           */   \
-            /* extended-precision logarithms and took a quarter of the render time             */   \
             const TYPE c = nx * P->halfway[i].x + ny * P->halfway[i].y + nz * P->halfway[i].z;       \
-            specular += c > 0 ? fast_exp2(P->shininess * fast_log2(c)) : (TYPE)(P->shininess == 0);  \
+            specular += c > 0 ? POWER_OF(c, P) : (TYPE)(P->shininess == 0);                         \
         }                                                                                            \
         diffuse = flat > 0 ? (TYPE)(0) : diffuse;                                                    \
         specular = flat > 0 ? (TYPE)(0) : P->ks * fmax(a, (TYPE)(0)) * specular;                     \
         const TYPE lit = P->ka + P->kd * diffuse;                                                    \
         *r = *r * lit + specular; *g = *g * lit + specular; *b = *b * lit + specular;                \
     }
-SHADE(real, shade)
-SHADE(real8, shade8)
+POWER(real, power)
+POWER(real8, power8)
+SHADE(real, shade, power)
+SHADE(real8, shade8, power8)
 
 /* q e^{-A} at xi from the series: the shaded emission attenuated inside the segment */
 inline real3 integrand(const Segment *S, const Shading *P, const real xi)

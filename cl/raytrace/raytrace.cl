@@ -244,6 +244,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
 #ifndef CLW_XRAY
     Shading P;
     P.ka = phong.x; P.kd = phong.y; P.ks = phong.z; P.shininess = phong.w;
+    P.whole = phong.w == floor(phong.w) && phong.w <= 64; /* powers by squaring (quadrature.h) */
+    P.exponent = (int)phong.w;
     P.grad_floor = grad_floor;
     P.nlights = min(nlights, CLW_MAX_LIGHTS);
     P.scale = scale;
