@@ -60,20 +60,20 @@ class KernelSet:
             raise AttributeError(name) from None
 
 
-def build(cc: ComputeContext, files, defines=None) -> KernelSet:
+def build(cc: ComputeContext, files, defines=None, options=()) -> KernelSet:
     """Build (or reuse) the program made of ``files`` (paths below ``cl/``) with ``-D`` ``defines``
-    and the shared constants (:func:`clwave.device.constants.defines`)."""
+    and the shared constants (:func:`clwave.device.constants.defines`), and compiler ``options``."""
     import pyopencl as cl
 
-    files = tuple(files)
+    files, options = tuple(files), tuple(options)
     defines = tuple(sorted({**constants.defines(), **(defines or {})}.items()))
-    key = (files, defines)
+    key = (files, defines, options)
     if key in cc.programs:
         return cc.programs[key]
     folder = cl_dir()
     source = "\n".join(f'#include "{name}"' for name in files) + "\n"
     # -w: PoCL prints ABI notes about float16 vectors straight to stderr otherwise
-    options = ["-I", str(folder), f"-DCLW_SRC_HASH={source_hash(folder)}", "-w"]
+    options = ["-I", str(folder), f"-DCLW_SRC_HASH={source_hash(folder)}", "-w", *options]
     options += [f"-D{k}" if v is None else f"-D{k}={v}" for k, v in defines]
     start = time.perf_counter()
     try:
