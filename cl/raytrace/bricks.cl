@@ -1,6 +1,7 @@
 /* bricks.cl: the brick pool of the ray tracer's B-spline field (clwave/raytrace/bricks.py,
  * docs/raytracing.md §3): a band's kept coefficients into the box a slab's synthesis reads, copying each
- * brick's lattice coefficients out of that synthesis, and the bounds on |field| per CLW_BLOCK^3 block of the bricks for empty-space skipping (§4). */
+ * brick's lattice coefficients out of that synthesis, and the bounds on |field| per CLW_BLOCK^3 block
+ * of the bricks for empty-space skipping (§4). */
 #include "common/clw_common.h"
 
 constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};

@@ -2,8 +2,8 @@
  * coefficients (the inverse transform on the whole real line, docs/model.md §1 and §4).
  *
  * One launch is one separable synthesis step along one axis for one pair of parts that
- * differ only in that axis' letter (either may be absent): the 'a' part through the lowpass h = p/sqrt2 and the
- * 'd' part through the highpass g = q/sqrt2 (docs/model.md §1 (the synthesis step)):
+ * differ only in that axis' letter (either may be absent): the 'a' part through the lowpass
+ * h = p/sqrt2 and the 'd' part through the highpass g = q/sqrt2 (docs/model.md §1 (the synthesis step)):
  *
  *     out[L] = sum_t h[t] A[(L - shift_a - t) / 2] + sum_t g[t] D[(L - shift_d - t) / 2]
  *
