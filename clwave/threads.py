@@ -5,7 +5,7 @@ Threads are started once, not per call (starting them cost more than a small vie
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from functools import lru_cache
 
 
@@ -34,3 +34,10 @@ def thread_map(work, items) -> list:
     if len(items) < 2 or cores() < 2:
         return [work(item) for item in items]
     return list(_pool().map(work, items))
+
+
+def background(work, *args, **kwargs) -> Future:
+    """``work(*args, **kwargs)`` started in the pool while the caller goes on; ``.result()`` waits for it.
+
+    ``work`` must not itself wait on the pool."""
+    return _pool().submit(work, *args, **kwargs)

@@ -96,8 +96,20 @@ def test_a_version_1_file_is_named_as_such(tmp_path):
         clwave.WaveletVolume.open(old)
 
 
+def _approximation_in_the_details(h5):
+    """The approximation's first position moved to the first detail band's (a position of the group)."""
+    from clwave.model.bspline import SplineWavelet
+    from clwave.model.transform import band_layout
+
+    header = json.loads(h5.attrs["header"])
+    n_approx = band_layout(SplineWavelet(header["groups"][0]["wavelet"]), header["shape"], header["levels"])[0].size
+    runs = h5["g0/runs"][...]
+    h5["g0/positions"][runs[runs[:, 0] == -1][0, 1]] = n_approx  # a run's first difference is its first position
+
+
 @pytest.mark.parametrize("change, needle", [
     (lambda h5: h5.__delitem__("g0/runs"), "missing"),
+    (_approximation_in_the_details, "outside its bands"),
     (lambda h5: h5["g0/runs"].__setitem__((0, 2), 10 ** 9), "do not tile"),
     (lambda h5: h5["g0/positions"].__setitem__(0, -5), "outside its bands"),
     (lambda h5: h5["g0/values"].__setitem__((0, 0), np.nan), "non-finite"),

@@ -34,6 +34,7 @@ from ..model.bspline import SplineWavelet, max_levels
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
+from ..threads import background
 from .files import write_atomic
 
 FILE_FORMAT = "clwave-wavelet-volume"
@@ -335,7 +336,7 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
     _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
     n = stored.shape[0] if stored is not None else -1
     _check_dataset(stored, (n,), np.int64)
-    step = _check_values(stored_values, (n, c))  # one handle each: its chunk cache serves every run
+    step = _check_values(stored_values, (n, c))
     runs = runs[...]
     if n > total or runs.shape[0] > n + 1 or np.any(runs[:, 2] < 0) or np.any(runs[:, 0] < -1) or \
             not np.array_equal(np.sort(runs[:, 1]), np.cumsum(np.append(0, runs[np.argsort(runs[:, 1]), 2]))[:-1]) or \
@@ -344,27 +345,48 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
     tiers = sorted(set(runs[:, 0].tolist()), key=lambda t: (t != -1, -t))  # the approximation, then down
     sizes = [int(runs[runs[:, 0] == t, 2].sum()) for t in tiers]
     read, last_cut = _tiers_to_read(sizes, budget)
-    parts = []
-    for tier in tiers[:read]:
-        mine = sorted((int(start), int(start + count)) for _, start, count in runs[runs[:, 0] == tier])
-        positions = np.concatenate([np.cumsum(stored[a:b]) for a, b in mine])
-        values = np.concatenate([stored_values[a:b] for a, b in mine])
-        if step is not None:
-            with np.errstate(over="ignore"):  # beyond float32: infinite, refused below
-                values = (values * step).astype(np.float32)
-        lo, hi = (0, n_approx) if tier == -1 else (n_approx, total)
-        if len(positions) and (positions.min() < lo or positions.max() >= hi):
-            raise ValueError(f"group {gi} tier {tier} holds positions outside its bands")
-        if not np.all(np.isfinite(values)):
-            raise ValueError(f"group {gi} holds non-finite values")
-        parts.append((positions, values.T))
+    wanted = runs[np.isin(runs[:, 0], tiers[:read]) & (runs[:, 2] > 0)]
+    wanted = wanted[np.argsort(wanted[:, 1])]  # in file order: each chunk is inflated once
+    run_tiers, spans = wanted[:, 0], wanted[:, 1:]  # (start, count) per run
+    positions = np.cumsum(_read_rows(stored, spans, np.empty(int(spans[:, 1].sum()), np.int64)))
+    offsets = np.cumsum(spans[:, 1]) - spans[:, 1]  # a run's first difference is its first position
+    positions -= np.repeat(np.where(offsets > 0, positions[offsets - 1], 0), spans[:, 1])
+    # the merge's sort runs while the values are read (a cut of the last tier changes what is merged)
+    order = background(np.argsort, positions, kind="stable") if last_cut is None else None
+    values = _read_rows(stored_values, spans, np.empty((len(positions), c), stored_values.dtype))
+    if step is not None:
+        with np.errstate(over="ignore"):  # beyond float32: infinite, refused below
+            values = (values * step).astype(np.float32)
+    if len(positions):  # the approximation's runs hold positions in its band, the others beyond it
+        lo, hi = np.minimum.reduceat(positions, offsets), np.maximum.reduceat(positions, offsets)
+        if np.any(np.where(run_tiers == -1, (lo < 0) | (hi >= n_approx), (lo < n_approx) | (hi >= total))):
+            raise ValueError(f"group {gi} holds a tier's positions outside its bands")
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"group {gi} holds non-finite values")
     if last_cut is not None:  # the last tier read gives only its most important ``last_cut``
-        positions, values = parts[-1]
-        order = np.argsort(positions, kind="stable")
-        part = ChannelGroup(wav, gh["channels"], bands, positions[order], values[:, order])
-        chosen = order[_top(importance_of(part, None, frame), last_cut)]
-        parts[-1] = (positions[chosen], values[:, chosen])
-    return ChannelGroup.gathered(wav, gh["channels"], bands, parts)
+        last = np.repeat(run_tiers == tiers[read - 1], spans[:, 1])
+        rows = np.flatnonzero(last)
+        rows = rows[np.argsort(positions[rows], kind="stable")]
+        part = ChannelGroup(wav, gh["channels"], bands, positions[rows], values[rows].T)
+        last[rows[_top(importance_of(part, None, frame), last_cut)]] = False
+        positions, values = positions[~last], values[~last]
+    return ChannelGroup.gathered(wav, gh["channels"], bands, [(positions, values.T)],
+                                 order=None if order is None else order.result())
+
+
+def _read_rows(dataset, spans, out):
+    """Rows ``spans`` ((start, count) per run, in file order, none empty) of a group's dataset into ``out``:
+    adjacent runs in one read, so a chunk two runs share is inflated once."""
+    if not len(spans):
+        return out
+    ends = spans[:, 0] + spans[:, 1]
+    breaks = np.flatnonzero(spans[1:, 0] != ends[:-1]) + 1
+    done = 0
+    for first, last in zip(np.append(0, breaks), np.append(breaks, len(spans))):
+        a, b = int(spans[first, 0]), int(ends[last - 1])
+        dataset.read_direct(out, np.s_[a:b], np.s_[done:done + b - a])
+        done += b - a
+    return out
 
 
 def _tiers_to_read(sizes, budget) -> tuple:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, finite_number
+from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from . import geometry
 from .geometry import fine_to_world, world_to_fine
@@ -50,14 +51,22 @@ class ChannelGroup:
         self.values = values        # (C, K) float32, channel-major for fast per-channel work
 
     @classmethod
-    def gathered(cls, wavelet, channels, bands, parts) -> "ChannelGroup":
+    def gathered(cls, wavelet, channels, bands, parts, order=None) -> "ChannelGroup":
         """A group from ``parts`` ``[(positions, values (C, n)), ...]`` in any order (a chunked pass, a file's
-        tiers): positions made ascending, None when every position is there; ValueError for a position given
-        twice."""
-        positions = np.concatenate([p for p, _ in parts]) if parts else np.zeros(0, np.int64)
-        values = np.concatenate([v for _, v in parts], axis=1) if parts else np.zeros((len(channels), 0), np.float32)
-        order = np.argsort(positions, kind="stable")
-        positions, values = positions[order], np.ascontiguousarray(values[:, order])
+        runs): positions made ascending, None when every position is there; ValueError for a position given
+        twice.  ``order``: the stable argsort of the parts' positions, where the caller made it."""
+        if len(parts) == 1:
+            positions, values = parts[0]
+        else:
+            positions = np.concatenate([p for p, _ in parts]) if parts else np.zeros(0, np.int64)
+            values = (np.concatenate([v for _, v in parts], axis=1) if parts
+                      else np.zeros((len(channels), 0), np.float32))
+        if order is None:
+            order = np.argsort(positions, kind="stable")  # timsort: parts made of ascending runs merge fast
+        positions, gathered = np.take(positions, order), np.empty(values.shape, values.dtype)
+        # per channel (several times faster than values[:, order]), in the host threads
+        thread_map(lambda ch: np.take(values[ch], order, out=gathered[ch]), range(len(values)))
+        values = gathered
         if np.any(np.diff(positions) <= 0):
             raise ValueError("a coefficient position is given twice")
         group = cls(wavelet, channels, bands, positions, values)
