@@ -112,14 +112,31 @@ def check_model_file(wv, what: str):
 
 def render_parts(client, task, source, parts, *args) -> list:
     """``task(renderer_of, part, *args)`` for each part, each part on a worker of its own (round robin), the
-    results in the order of ``parts``.  ``renderer_of(make, *key)`` on the worker gives the renderer
-    ``make(model)`` builds for this file, part and ``key`` (the options it depends on), kept there for later
-    views."""
-    workers = sorted(client.scheduler_info().get("workers", {}))
-    futures = [client.submit(_run_part, task, source, part, args, pure=False,
-                             workers=[workers[i % len(workers)]] if workers else None)
-               for i, part in enumerate(parts)]
+    results in the order of ``parts``.  ``renderer_of(make, device, device_memory, *key)`` on the worker gives
+    the renderer ``make(model, cap)`` builds for this file, part, device, cap and ``key`` (the other options it
+    depends on), kept there for later views; ``cap`` is the worker's share of the device (:func:`worker_cap`)."""
+    info = client.scheduler_info().get("workers", {})
+    workers = sorted(info)
+    hosts = [info[w].get("host") for w in workers]
+    futures = []
+    for i, part in enumerate(parts):
+        worker = workers[i % len(workers)] if workers else None
+        sharing = hosts.count(info[worker].get("host")) if worker else 1
+        futures.append(client.submit(_run_part, task, source, part, sharing, args, pure=False,
+                                     workers=None if worker is None else [worker]))
     return client.gather(futures)
+
+
+def worker_cap(device, device_memory, sharing: int):
+    """The device memory one of ``sharing`` workers on one machine plans for: at most ``device_memory`` and at
+    most its share of the device, which they may all have picked (a CPU device is the machine's memory)."""
+    if sharing <= 1:
+        return device_memory
+    from .device.context import ComputeContext
+    from .device.memory import parse_cap
+
+    total, cap = ComputeContext.get(device).info.global_mem, parse_cap(device_memory)
+    return min(total if cap is None else cap, total // sharing)
 
 
 def workers_of(client) -> int:
@@ -127,16 +144,17 @@ def workers_of(client) -> int:
     return max(1, len(client.scheduler_info().get("workers", {})))
 
 
-def _run_part(task, source, part, args):
-    def renderer_of(make, *key):
+def _run_part(task, source, part, sharing, args):
+    def renderer_of(make, device, device_memory, *key):
         with _LOCK:  # a worker of several threads: one set-up at a time
-            full = (task.__qualname__, source, part, *key)
+            full = (task.__qualname__, source, part, device, device_memory, *key)
             if full not in _RENDERERS:
                 from .model.wavelet import WaveletVolume
 
                 while len(_RENDERERS) >= _KEEP_RENDERERS:
                     _RENDERERS.pop(next(iter(_RENDERERS)))
-                _RENDERERS[full] = make(WaveletVolume.open(source[0], keep=source[1]))
+                _RENDERERS[full] = make(WaveletVolume.open(source[0], keep=source[1]),
+                                        worker_cap(device, device_memory, sharing))
             return _RENDERERS[full]
 
     return task(renderer_of, part, *args)

@@ -64,12 +64,28 @@ def test_on_a_local_cluster_of_two_worker_processes(model):
             got = clwave.raytrace(model, cam, tolerance=1e-3, scheduler=client, **kw)
             assert got.meta["workers"] == 2 and len(got.meta["slabs"]) == 2
             assert np.abs(want.image).max() > 0.5 and np.max(np.abs(got.image - want.image)) <= 1e-3
+            # two workers on this machine: each plans for half the device (PoCL's is this machine's memory)
+            assert len(got.meta["device_budget"]) == 2
+            assert max(got.meta["device_budget"]) <= 0.6 * want.meta["device_budget"]
         for cam, kw in ((clwave.Camera(30, 20, size=40), {}), (clwave.Camera(-70, 10, size=64), dict(coarse=2e-2))):
             want = clwave.splat(model, cam, **kw)
             got = clwave.splat(model, cam, scheduler=client, **kw)
             assert got.meta["workers"] == 2 and got.meta["coefficients"] == want.meta["coefficients"]
+            assert max(got.meta["device_budget"]) <= 0.6 * want.meta["device_budget"]
             assert np.max(np.abs(got.image - want.image)) <= 1e-5 * np.abs(want.image).max()
         assert client.status == "running"
+
+
+def test_workers_on_one_machine_share_its_device():
+    from clwave.cluster import worker_cap
+    from clwave.device.context import ComputeContext
+
+    total = ComputeContext.get(None).info.global_mem
+    assert worker_cap(None, "2GiB", 1) == "2GiB"  # alone: as given
+    assert worker_cap(None, None, 1) is None
+    assert worker_cap(None, None, 3) == total // 3
+    assert worker_cap(None, "1MiB", 2) == 2 ** 20  # a cap below the share stands
+    assert worker_cap(None, 2 * total, 2) == total // 2
 
 
 def test_a_cluster_needs_a_model_opened_from_a_file(model, monkeypatch):

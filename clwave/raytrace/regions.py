@@ -50,7 +50,8 @@ def raytrace_on_cluster(wv, camera, client, options: dict, device, device_memory
     meta = {k: v for k, v in metas[0].items() if k not in ("rays_terminated_early", "segments_per_second",
                                                            "rays_at_simpson_depth_limit", "pool")}
     meta.update(tolerance=options["tolerance"], workers=workers, slabs=[list(r) for r in parts],
-                passes=[m["passes"] for m in metas], pool=[m["pool"] for m in metas])
+                passes=[m["passes"] for m in metas], pool=[m["pool"] for m in metas],
+                device_budget=[m["device_budget"] for m in metas])
     for key in ("segments", "segments_shaded_at_midpoint", "integrand_evaluations", "bricks", "brick_pool_bytes"):
         meta[key] = int(sum(m[key] for m in metas))
     meta["segments_by_lattice"] = {k: sum(m["segments_by_lattice"][k] for m in metas)
@@ -86,7 +87,7 @@ def composite(images: list, absorption: bool) -> np.ndarray:
 
 def _trace_slab(renderer_of, region, device, device_memory, camera, options) -> tuple:
     """On a worker: the image of the rays inside one slab, and the meta."""
-    tracer = renderer_of(lambda wv: RayTracer(wv, device=device, device_memory=device_memory, region=region),
+    tracer = renderer_of(lambda wv, cap: RayTracer(wv, device=device, device_memory=cap, region=region),
                          device, device_memory)
     result = tracer.render(camera, **options)
     return result.image, result.meta

@@ -413,7 +413,7 @@ class RayTracer:
             occupied_blocks=round(self.occupied_fraction, 4),
             setup_seconds=self.setup_seconds, compile_seconds=compile_seconds, render_seconds=seconds,
             segments_per_second=float(counts[:, 0].sum() / seconds) if seconds > 0 else 0.0,
-            passes=1 if passes is None else len(passes),
+            passes=1 if passes is None else len(passes), device_budget=self.budget.total,
             segments_by_lattice=dict(zip(("1", "2", "4", "8+"),
                                          lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())))
         if self.field == "bspline":

@@ -362,7 +362,8 @@ def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
         results = render_parts(client, _splat_share, wv.source, [(i, shares) for i in range(shares)], device,
                                options, camera)
     metas = [m for _, m in results]
-    meta = dict(metas[0], workers=shares, seconds={k: max(m["seconds"][k] for m in metas) for k in metas[0]["seconds"]},
+    meta = dict(metas[0], workers=shares, device_budget=[m["device_budget"] for m in metas],
+                seconds={k: max(m["seconds"][k] for m in metas) for k in metas[0]["seconds"]},
                 **{k: int(sum(m[k] for m in metas)) for k in ("coefficients", "tile_pairs", "pixel_updates",
                                                                "coefficient_chunks")})
     return RenderResult(np.sum([image for image, _ in results], axis=0), meta)
@@ -371,7 +372,9 @@ def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
 def _splat_share(renderer_of, share, device, options, camera) -> tuple:
     """On a worker: the image of its share ``(i, n)``: coefficients ``i K / n .. (i + 1) K / n`` of each group
     in importance order (splatting is linear: the shares' images add up to the whole)."""
-    r = renderer_of(lambda wv: SplatRenderer(wv, device=device, **options), device, tuple(sorted(options.items())))
+    others = {k: v for k, v in options.items() if k != "device_memory"}
+    r = renderer_of(lambda wv, cap: SplatRenderer(wv, device=device, device_memory=cap, **others), device,
+                    options.get("device_memory"), tuple(sorted(others.items())))
     i, n = share
     return _splat_range(r, camera, r.count * i // n, r.count * (i + 1) // n)
 
