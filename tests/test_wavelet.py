@@ -269,3 +269,29 @@ def test_zero_coefficients_are_never_kept_or_stored(tmp_path, wavelet):
     assert np.array_equal(back.reconstruct().data, wv.reconstruct().data)
     # the source's content travels with the model: its non-zero voxels and their box
     assert np.array_equal(back.content_mask, data != 0) and np.array_equal(back.content_box(), wv.content_box())
+
+
+@pytest.mark.parametrize("shape", [(5, 7, 13), (9, 4, 16), (3, 6, 1)])
+def test_content_mask_boxes_and_blocks_equal_the_byte_mask(rng, shape):
+    """The packed mask's boxes are the byte mask's (False beyond the volume), for boxes that cross every edge
+    and bytes; blocks put at any x offset land as numpy assignment does."""
+    from clwave.model.mask import ContentMask
+
+    dense = rng.random(shape) < 0.4
+    mask = ContentMask.of(dense)
+    assert mask.bits.nbytes == shape[0] * shape[1] * -(-shape[2] // 8)
+    padded = np.pad(dense, 9)  # voxel i at i + 9
+    for _ in range(40):
+        start = rng.integers(-9, np.array(shape) + 1)
+        size = rng.integers(1, 9, 3)
+        want = padded[tuple(slice(a + 9, a + 9 + n) for a, n in zip(start, size))]
+        assert np.array_equal(mask.box(start, size), want)
+    built = ContentMask(shape)
+    for z, y, x in np.ndindex(2, 2, 3):  # blocks of uneven sizes that tile the volume
+        lo = np.array([z, y, x]) * -(-np.array(shape) // [2, 2, 3])
+        hi = np.minimum(lo + -(-np.array(shape) // [2, 2, 3]), shape)
+        if np.all(hi > lo):
+            built.put(lo, dense[tuple(slice(a, b) for a, b in zip(lo, hi))])
+    assert np.array_equal(built.bits, mask.bits) and np.array_equal(np.asarray(built), dense)
+    with pytest.raises(ValueError, match="outside the mask"):
+        built.put((0, 0, shape[2] - 1), np.ones((1, 1, 2), bool))

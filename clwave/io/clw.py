@@ -32,6 +32,7 @@ import numpy as np
 from ..errors import ClwaveError, FileFormatError, InputError, finite_number
 from ..model.bspline import SplineWavelet, max_levels
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
+from ..model.mask import ContentMask
 from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from ..threads import background
@@ -171,7 +172,7 @@ def _write(model, fh, steps):
             _stream(model, h5, tiers, filters)
         else:
             if model.content_mask is not None:
-                _mask_dataset(h5, model.shape, filters)[...] = np.ascontiguousarray(model.content_mask).view(np.uint8)
+                _write_mask(_mask_dataset(h5, model.shape, filters), model.content_mask)
             for gi, g in enumerate(model.groups):
                 stored = np.any(g.values != 0, axis=0)  # a zero coefficient adds nothing: it is not stored
                 plain = importance_of(g, None, model.frame)  # tiers rank without the focus (docs/chunked.md §4)
@@ -189,6 +190,15 @@ def _stream(model: ChunkedWaveletVolume, h5, tiers, filters):
         for gi, positions, values, tier in model.selected(client, tiers=True):
             stored = np.any(values != 0, axis=0)
             tiers.append(gi, positions[stored], values[:, stored], tier[stored])
+
+
+def _write_mask(data, mask):
+    """``mask`` (a ContentMask) into the dataset ``data``, a layer of chunks at a time, a byte a voxel only for
+    that layer.  The dataset is closed on return, which writes its cached chunks where the streamed writer
+    writes them: the two files stay the same, byte for byte."""
+    for z in range(0, mask.shape[0], MASK_CHUNK[0]):
+        layers = min(MASK_CHUNK[0], mask.shape[0] - z)
+        data[z:z + layers] = mask.box((z, 0, 0), (layers, *mask.shape[1:])).view(np.uint8)
 
 
 def _mask_dataset(h5, shape, filters):
@@ -291,8 +301,9 @@ def read_clw(path, keep=None) -> WaveletVolume:
             if "content_mask" in h5:
                 data = h5["content_mask"]
                 _check_dataset(data, shape, np.uint8)
-                mask = data[...]
-                mask = np.minimum(mask, 1, out=mask).view(bool)  # 0 or 1, in place: no second copy of a big mask
+                mask = ContentMask(shape)
+                for z in range(0, shape[0], MASK_CHUNK[0]):  # a layer of chunks at a time, packed to bits
+                    mask.bits[z:z + MASK_CHUNK[0]] = np.packbits(data[z:z + MASK_CHUNK[0]] != 0, axis=2)
     except ClwaveError:
         raise
     except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError) as exc:

@@ -23,6 +23,7 @@ from ..errors import InputError
 from .bspline import SplineWavelet
 from .transform import KEYS, band_layout, check_coefficients
 from .volume import Volume, content_of
+from .mask import ContentMask
 from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
@@ -246,10 +247,10 @@ class ChunkedWaveletVolume:
         first); equal to the in-memory model's (docs/chunked.md §2-3)."""
         groups = self.groups()
         parts = {gi: [] for gi in range(len(groups))}
-        mask = np.zeros(self.shape, dtype=bool)
+        mask = ContentMask(self.shape)
         with client_for(self.scheduler) as client:
             for box, block in self.content_blocks(client):
-                mask[box] = block
+                mask.put([s.start for s in box], block)
             for gi, positions, values in self.selected(client):
                 parts[gi].append((positions, values))
         out = [ChannelGroup.gathered(wavelet, channels, band_layout(wavelet, self.shape, self.levels), parts[gi])

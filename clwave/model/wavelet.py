@@ -18,6 +18,7 @@ from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from . import geometry
 from .geometry import fine_to_world, world_to_fine
+from .mask import ContentMask
 from .transform import (apply_sampling_filter, band_sum, crop_to_grid, decompose, reconstruct_channel,
                         synthesize)
 from .volume import Volume
@@ -138,8 +139,8 @@ class WaveletVolume:
         self.transfer_function = transfer_function  # JSON-safe dict, or None
         # world (lo, hi) of the source volume's non-zero voxels: the default framing (Camera)
         self.content = None if content is None else tuple(tuple(float(c) for c in corner) for corner in content)
-        # (nz, ny, nx) bool: the source volume's non-zero voxels, beyond whose B-splines the approximating
-        # model of every coefficient is zero (docs/raytracing.md §4); None where not known
+        # ContentMask: the source volume's non-zero voxels, beyond whose B-splines the approximating model of
+        # every coefficient is zero (docs/raytracing.md §4); None where not known
         self.content_mask = content_mask
         self.source = None  # (path, keep) of the .clw file this model was opened from
         self._shared = {}  # renderers of one-shot calls (shared)
@@ -194,7 +195,7 @@ class WaveletVolume:
             groups.append(ChannelGroup(wav, chans, bands, None, values))
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
                    interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask),
-                   content_mask=None if interpolate else mask)
+                   content_mask=None if interpolate else ContentMask.of(mask))
 
     # ------------------------------------------------------------- properties
     @property

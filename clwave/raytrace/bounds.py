@@ -100,7 +100,7 @@ def content_cells(wv: WaveletVolume, origin, shape):
     a = int(np.floor(-max(s + j for s, j in shifts))) + 1
     b = int(np.ceil(1 - min(s for s, _ in shifts))) - 1
     origin, shape = np.asarray(origin, np.int64), np.asarray(shape, np.int64)
-    window = content_weights(wv.content_mask, origin + a, shape + b - a).view(np.uint8)  # the voxels that reach
+    window = wv.content_mask.box(origin + a, shape + b - a).view(np.uint8)  # the voxels that reach
     width = b - a + 1
     for axis in range(3):  # any voxel of [c + a, c + b]: a running maximum, centred at offset width // 2
         window = maximum_filter1d(window, width, axis=axis, mode="constant")
@@ -111,19 +111,3 @@ def cell_blocks(cells) -> np.ndarray:
     """Per block of BLOCK^3 cells (the cells' box a whole number of blocks), whether any cell is set."""
     Z, Y, X = (n // BLOCK for n in cells.shape)
     return cells.reshape(Z, BLOCK, Y, BLOCK, X, BLOCK).any(axis=(1, 3, 5))
-
-
-def content_weights(mask: np.ndarray, start, shape) -> np.ndarray:
-    """Whether the fine coefficients ``start + index`` (a box of ``shape``) belong to non-zero voxels.
-
-    Fine coefficient i of the approximating model is voxel i, so where the source volume is zero
-    (and beyond it) the full model's are zero; a thresholded model's are not (truncated wavelets
-    ring), and that ringing is all they add there: the B-spline field zeroes them.
-    """
-    keep = np.zeros(tuple(shape), bool)
-    lo = np.maximum(start, 0)
-    hi = np.minimum(np.add(start, shape), mask.shape)
-    if np.all(hi > lo):
-        inside = tuple(slice(a, b) for a, b in zip(lo, hi))
-        keep[tuple(slice(a - s, b - s) for a, b, s in zip(lo, hi, start))] = mask[inside]
-    return keep

@@ -34,7 +34,6 @@ from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError, OutputError
 from ..model.geometry import band_lattice
-from .bounds import content_weights
 
 BRICK = BLOCK * SUPER  #: fine cells along a brick's edge (grid-0 coordinates)
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
@@ -139,15 +138,19 @@ def _content(wv, origin, shape) -> tuple:
     B-splines reach it: voxels ``floor(16 b + s_g) - j_g + 1 .. ceil(16 b + 16 + s_g) - 1`` per axis (s_g
     the grid shift), counted separably, one axis at a time.
     """
-    j0 = wv.groups[0].wavelet.order
+    j0, mask = wv.groups[0].wavelet.order, wv.content_mask
     has_any, has_all = [], []
     for g in wv.groups:
         j, s = g.wavelet.order, (g.wavelet.order - j0) / 2.0
         first, width = int(np.floor(s)) - j + 1, int(np.ceil(BRICK + s) - np.floor(s)) + j - 1
-        count = wv.content_mask.view(np.uint8)
-        for axis in range(3):  # counts of at most 20, 400, 8000 voxels: uint8 for the first (the largest array)
-            count = _window_sums(count, axis, BRICK * origin[axis] + first, width, shape[axis],
-                                 np.uint8 if axis == 0 else np.uint16)
+        rows = []
+        for bz in range(shape[0]):  # a brick row at a time: the mask's layers its window reaches, unpacked
+            layers = mask.box((BRICK * (origin[0] + bz) + first, 0, 0), (width, *mask.shape[1:]))
+            count = layers.sum(axis=0, keepdims=True, dtype=np.uint8)  # at most 20 voxels
+            for axis in (1, 2):  # then at most 400, 8000
+                count = _window_sums(count, axis, BRICK * origin[axis] + first, width, shape[axis], np.uint16)
+            rows.append(count)
+        count = np.concatenate(rows)
         has_any.append(count > 0)
         has_all.append(count == width ** 3)
     empty = ~np.any(has_any, axis=0)
@@ -541,7 +544,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
             parts = merged
         approx = parts[""]
         if m == 1 and clamped:  # docs/raytracing.md §4: empty voxels' fine coefficients are zero
-            keep = content_weights(wv.content_mask, approx.start, approx.shape).astype(np.uint8)
+            keep = wv.content_mask.box(approx.start, approx.shape).view(np.uint8)
             clamp(approx.data.reshape(-1), _send(q, keep, hold))
         if m - 1 in own:
             gather(m - 1, approx)

@@ -16,7 +16,6 @@ from numpy.polynomial import chebyshev
 from ..device.constants import BLOCK, SUPER
 from ..model.geometry import world_to_fine, world_to_fine_affine
 from ..model.transform import Band, band_sum
-from .bounds import content_weights
 from .quadrature import sample_points
 from .tracer import SIMPSON_DEPTH, Phong, RayTracer, light_direction
 
@@ -150,7 +149,7 @@ def _content_field(wv):
     parts = []
     for gi, g in enumerate(wv.groups):
         coeffs, start = wv.fine_coefficients(gi)
-        coeffs = coeffs * content_weights(wv.content_mask, start, coeffs.shape[:3])[..., None]
+        coeffs = coeffs * wv.content_mask.box(start, coeffs.shape[:3])[..., None]
         parts.append((g, coeffs, np.array(start, float)))
 
     def field(points, derivative):
