@@ -114,16 +114,15 @@ def render_parts(client, task, source, parts, *args) -> list:
     """``task(renderer_of, part, *args)`` for each part, each part on a worker of its own (round robin), the
     results in the order of ``parts``.  ``renderer_of(make, device, device_memory, *key)`` on the worker gives
     the renderer ``make(model, cap)`` builds for this file, part, device, cap and ``key`` (the other options it
-    depends on), kept there for later views; ``cap`` is the worker's share of the device (:func:`worker_cap`)."""
+    depends on), kept there for later views; ``cap`` is its share of the device (:func:`worker_cap`) among the
+    parts on that worker's machine."""
     info = client.scheduler_info().get("workers", {})
     workers = sorted(info)
-    hosts = [info[w].get("host") for w in workers]
-    futures = []
-    for i, part in enumerate(parts):
-        worker = workers[i % len(workers)] if workers else None
-        sharing = hosts.count(info[worker].get("host")) if worker else 1
-        futures.append(client.submit(_run_part, task, source, part, sharing, args, pure=False,
-                                     workers=None if worker is None else [worker]))
+    chosen = [workers[i % len(workers)] if workers else None for i in range(len(parts))]
+    hosts = [info[w].get("host") if w else None for w in chosen]
+    futures = [client.submit(_run_part, task, source, part, hosts.count(host), args, pure=False,
+                             workers=None if worker is None else [worker])
+               for part, worker, host in zip(parts, chosen, hosts)]
     return client.gather(futures)
 
 
@@ -147,7 +146,7 @@ def workers_of(client) -> int:
 def _run_part(task, source, part, sharing, args):
     def renderer_of(make, device, device_memory, *key):
         with _LOCK:  # a worker of several threads: one set-up at a time
-            full = (task.__qualname__, source, part, device, device_memory, *key)
+            full = (task.__qualname__, source, part, device, device_memory, sharing, *key)
             if full not in _RENDERERS:
                 from .model.wavelet import WaveletVolume
 

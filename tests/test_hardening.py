@@ -107,8 +107,18 @@ def _approximation_in_the_details(h5):
     h5["g0/positions"][runs[runs[:, 0] == -1][0, 1]] = n_approx  # a run's first difference is its first position
 
 
+def _unwritten_mask(h5):
+    """The content mask replaced by a dataset of the same shape whose chunks were never written: reading it
+    would allocate for data the file does not hold."""
+    old = h5["content_mask"]
+    shape, chunks = old.shape, old.chunks
+    del h5["content_mask"]
+    h5.create_dataset("content_mask", shape=shape, dtype=np.uint8, chunks=chunks, compression="gzip")
+
+
 @pytest.mark.parametrize("change, needle", [
     (lambda h5: h5.__delitem__("g0/runs"), "missing"),
+    (_unwritten_mask, "stores 0 of its 1 chunks"),
     (_approximation_in_the_details, "outside its bands"),
     (lambda h5: h5["g0/runs"].__setitem__((0, 2), 10 ** 9), "do not tile"),
     (lambda h5: h5["g0/positions"].__setitem__(0, -5), "outside its bands"),
@@ -118,6 +128,29 @@ def test_crafted_clw_members_are_refused(model_file, tmp_path, change, needle):
     with pytest.raises(FileFormatError, match=needle) as err:
         clwave.WaveletVolume.open(crafted(model_file, tmp_path, change=change))
     assert "\n" not in str(err.value)
+
+
+def test_an_empty_run_where_another_starts_is_read(model_file, tmp_path):
+    """The writer ends a tier of whole chunks with a run of no rows, which starts where the next run does:
+    the runs still tile the rows, whichever order the table lists them in."""
+    def empty_run_after_its_peer(h5):
+        runs = h5["g0/runs"][...]
+        del h5["g0/runs"]
+        h5["g0/runs"] = np.vstack([runs, [runs[-1, 0], runs[0, 1], 0]])
+    back = clwave.WaveletVolume.open(crafted(model_file, tmp_path, change=empty_run_after_its_peer))
+    whole = clwave.WaveletVolume.open(model_file)
+    assert np.array_equal(back.groups[0].all_positions(), whole.groups[0].all_positions())
+    assert np.array_equal(back.groups[0].values, whole.groups[0].values)
+
+
+def test_a_model_beyond_memory_is_named_with_the_way_out(model_file, monkeypatch):
+    from clwave.io import clw
+
+    def no_memory(shape):
+        raise MemoryError
+    monkeypatch.setattr(clw, "ContentMask", no_memory)
+    with pytest.raises(InputError, match="more than this machine's memory.*keep"):
+        clwave.WaveletVolume.open(model_file)
 
 
 def test_a_flipped_bit_in_the_header_fails_its_checksum(model_file, tmp_path):

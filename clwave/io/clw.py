@@ -296,16 +296,20 @@ def read_clw(path, keep=None) -> WaveletVolume:
             shape, levels, channels, groups_header = _checked_header(header)
             budget = None if keep is None else max(1, int(round(keep * int(np.prod(shape)))))
             frame = (shape, tuple(header["spacing"]), tuple(header["origin"]))
+            data = h5.get("content_mask")
+            if data is not None:
+                _check_dataset(data, shape, np.uint8)
             groups = [_read_group(h5, gi, gh, shape, levels, budget, frame) for gi, gh in enumerate(groups_header)]
             mask = None
-            if "content_mask" in h5:
-                data = h5["content_mask"]
-                _check_dataset(data, shape, np.uint8)
+            if data is not None:
                 mask = ContentMask(shape)
                 for z in range(0, shape[0], MASK_CHUNK[0]):  # a layer of chunks at a time, packed to bits
                     mask.bits[z:z + MASK_CHUNK[0]] = np.packbits(data[z:z + MASK_CHUNK[0]] != 0, axis=2)
     except ClwaveError:
         raise
+    except MemoryError:
+        raise InputError(f"{path} holds more than this machine's memory can take; open a part of it "
+                         "(keep=, --keep: its most important coefficients)") from None
     except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError) as exc:
         raise FileFormatError(f"cannot read {path} as a .clw file ({type(exc).__name__}: "
                               f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
@@ -349,9 +353,9 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
     _check_dataset(stored, (n,), np.int64)
     step = _check_values(stored_values, (n, c))
     runs = runs[...]
+    by_start = runs[np.lexsort((runs[:, 2], runs[:, 1]))]  # an empty run (a tier of whole chunks) before its peer
     if n > total or runs.shape[0] > n + 1 or np.any(runs[:, 2] < 0) or np.any(runs[:, 0] < -1) or \
-            not np.array_equal(np.sort(runs[:, 1]), np.cumsum(np.append(0, runs[np.argsort(runs[:, 1]), 2]))[:-1]) or \
-            runs[:, 2].sum() != n:
+            not np.array_equal(by_start[:, 1], np.cumsum(np.append(0, by_start[:, 2]))[:-1]) or runs[:, 2].sum() != n:
         raise ValueError(f"group {gi}: its runs do not tile its {n} rows (of {total} positions)")
     tiers = sorted(set(runs[:, 0].tolist()), key=lambda t: (t != -1, -t))  # the approximation, then down
     sizes = [int(runs[runs[:, 0] == t, 2].sum()) for t in tiers]
@@ -362,16 +366,17 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
     positions = np.cumsum(_read_rows(stored, spans, np.empty(int(spans[:, 1].sum()), np.int64)))
     offsets = np.cumsum(spans[:, 1]) - spans[:, 1]  # a run's first difference is its first position
     positions -= np.repeat(np.where(offsets > 0, positions[offsets - 1], 0), spans[:, 1])
+    if len(positions):  # the approximation's runs hold positions in its band, the others beyond it
+        lo, hi = np.minimum.reduceat(positions, offsets), np.maximum.reduceat(positions, offsets)
+        bad = np.where(run_tiers == -1, (lo < 0) | (hi >= n_approx), (lo < n_approx) | (hi >= total))
+        if np.any(bad):
+            raise ValueError(f"group {gi} tier {run_tiers[bad][0]} holds positions outside its bands")
     # the merge's sort runs while the values are read (a cut of the last tier changes what is merged)
     order = background(np.argsort, positions, kind="stable") if last_cut is None else None
     values = _read_rows(stored_values, spans, np.empty((len(positions), c), stored_values.dtype))
     if step is not None:
         with np.errstate(over="ignore"):  # beyond float32: infinite, refused below
             values = (values * step).astype(np.float32)
-    if len(positions):  # the approximation's runs hold positions in its band, the others beyond it
-        lo, hi = np.minimum.reduceat(positions, offsets), np.maximum.reduceat(positions, offsets)
-        if np.any(np.where(run_tiers == -1, (lo < 0) | (hi >= n_approx), (lo < n_approx) | (hi >= total))):
-            raise ValueError(f"group {gi} holds a tier's positions outside its bands")
     if not np.all(np.isfinite(values)):
         raise ValueError(f"group {gi} holds non-finite values")
     if last_cut is not None:  # the last tier read gives only its most important ``last_cut``
@@ -442,6 +447,13 @@ def _check_dataset(dataset, shape, dtype):
                          f"{np.dtype(dtype)}")
     if dataset.chunks is not None and int(np.prod(dataset.chunks)) * dataset.dtype.itemsize > 1 << 26:
         raise ValueError(f"member {dataset.name} has chunks of {dataset.chunks}, larger than a .clw writes")
+    # a .clw writes every chunk: a member whose chunks are not all stored would have the reader allocate
+    # for data the file does not hold
+    stored, whole = ((dataset.id.get_num_chunks(), int(np.prod([-(-n // c) for n, c in zip(shape, dataset.chunks)])))
+                     if dataset.chunks is not None else (dataset.id.get_storage_size(), dataset.nbytes))
+    if stored < whole:
+        raise ValueError(f"member {dataset.name} stores {stored} of its {whole} "
+                         f"{'chunks' if dataset.chunks is not None else 'bytes'}")
 
 
 def _checked_header(header) -> tuple:

@@ -54,5 +54,7 @@ class ContentMask:
 
     def __array__(self, dtype=None, copy=None):
         """The whole mask, unpacked: for small volumes and tests."""
+        if copy is False:
+            raise ValueError("a ContentMask is packed: unpacking it copies")
         whole = self.box((0, 0, 0), self.shape)
         return whole if dtype is None else whole.astype(dtype)

@@ -65,8 +65,9 @@ class ChannelGroup:
         if order is None:
             order = np.argsort(positions, kind="stable")  # timsort: parts made of ascending runs merge fast
         positions, gathered = np.take(positions, order), np.empty(values.shape, values.dtype)
-        # per channel (several times faster than values[:, order]), in the host threads
-        thread_map(lambda ch: np.take(values[ch], order, out=gathered[ch]), range(len(values)))
+        # per channel (several times faster than values[:, order]), in the host threads; "clip" (order is a
+        # permutation) spares np.take a buffer for out=
+        thread_map(lambda ch: np.take(values[ch], order, out=gathered[ch], mode="clip"), range(len(values)))
         values = gathered
         if np.any(np.diff(positions) <= 0):
             raise ValueError("a coefficient position is given twice")
