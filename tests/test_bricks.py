@@ -30,10 +30,17 @@ pytestmark = pytest.mark.opencl
 BRICK = bricks.BRICK
 
 
+def spilled(spill: bricks.Spill) -> np.ndarray:
+    """The whole scratch file, (elements, 4) float32."""
+    out = np.empty((spill.nbytes // 16, 4), np.float32)
+    spill.read_into(0, out)
+    return out
+
+
 def pool_field(wv, field: bricks.BrickField, x0, derivative=False):
     """The brick field at grid-0 fine points (N, 3) (z, y, x), from the pool read back: (N, 4), or the
     gradient (N, 4, 3) in fine units (z, y, x)."""
-    pool = field.pool.get() if field.resident else field.spill.read(0, field.pool_bytes // 16)
+    pool = field.pool.get() if field.resident else spilled(field.spill)
     frames, boxes = field.frames, field.boxes
     pages = np.full(field.shape, -1)
     pages[tuple((field.bricks - field.origin).T)] = np.arange(len(field.bricks))
@@ -284,7 +291,7 @@ def test_bricks_beyond_the_device_go_to_a_scratch_file_bit_for_bit(tmp_path, mon
     spill = parts.bricks.spill
     assert spill.folder == str(tmp_path) and spill.nbytes == whole.bricks.pool_bytes
     assert os.fstat(spill.file.fileno()).st_size == spill.nbytes and not os.listdir(tmp_path)  # unnamed
-    assert np.array_equal(spill.read(0, spill.nbytes // 16), whole.bricks.pool.get())
+    assert np.array_equal(spilled(spill), whole.bricks.pool.get())
 
 
 def test_no_room_for_the_scratch_file_is_a_clear_error(tmp_path, monkeypatch):

@@ -360,8 +360,8 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
     tiers = sorted(set(runs[:, 0].tolist()), key=lambda t: (t != -1, -t))  # the approximation, then down
     sizes = [int(runs[runs[:, 0] == t, 2].sum()) for t in tiers]
     read, last_cut = _tiers_to_read(sizes, budget)
-    wanted = runs[np.isin(runs[:, 0], tiers[:read]) & (runs[:, 2] > 0)]
-    wanted = wanted[np.argsort(wanted[:, 1])]  # in file order: each chunk is inflated once
+    # in file order (by_start), so that each chunk is inflated once
+    wanted = by_start[np.isin(by_start[:, 0], tiers[:read]) & (by_start[:, 2] > 0)]
     run_tiers, spans = wanted[:, 0], wanted[:, 1:]  # (start, count) per run
     positions = np.cumsum(_read_rows(stored, spans, np.empty(int(spans[:, 1].sum()), np.int64)))
     offsets = np.cumsum(spans[:, 1]) - spans[:, 1]  # a run's first difference is its first position

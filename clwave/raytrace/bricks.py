@@ -268,11 +268,6 @@ class Spill:
         """Elements ``first .. first + len(out)`` into ``out`` ((n, 4) float32, contiguous)."""
         self._io(lambda fd, view, at: os.preadv(fd, [view], at), first, out)
 
-    def read(self, first: int, count: int) -> np.ndarray:
-        out = np.empty((count, 4), np.float32)
-        self.read_into(first, out)
-        return out
-
     def _io(self, call, first, arr):
         view, done = memoryview(arr).cast("B"), 0
         try:
