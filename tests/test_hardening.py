@@ -298,7 +298,7 @@ def test_an_unexpected_exception_is_one_line_that_says_it_is_a_bug(monkeypatch, 
     def broken(args):
         raise RuntimeError("something nobody foresaw")
 
-    monkeypatch.setattr(cli, "cmd_info", broken)
+    monkeypatch.setattr(cli.info, "run", broken)
     assert cli.main(["info"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "bug" in err and "something nobody foresaw" in err and "--debug" in err

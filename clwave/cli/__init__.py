@@ -1,0 +1,87 @@
+"""The ``clwave`` command line (never interactive): one module per command.
+
+Every user mistake ends with one line ``clwave: error: ...`` on stderr and exit
+code 2; an existing output file is never replaced without ``--force``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+
+from ..errors import ClwaveError, InputError
+from . import compress, info, progressive, render
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (its default prints the whole usage first)."""
+
+    def error(self, message):
+        raise InputError(f"{message} (see `{self.prog} --help`)")
+
+
+#: the subcommands, in the order ``clwave --help`` lists them
+COMMANDS = (info, compress, render, progressive)
+
+
+def make_parser():
+    parser = _Parser(prog="clwave", description="Wavelet-domain volume rendering (OpenCL).")
+    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for command in COMMANDS:
+        command.add_parser(sub)
+    return parser
+
+
+def _version():
+    from .. import __version__
+    return f"clwave {__version__}"
+
+
+class Terminated(Exception):
+    """SIGTERM, raised where the program is, so that what it was writing is cleaned up on the way out."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
+def main(argv=None) -> int:
+    previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() \
+        else None
+    debug = "--debug" in (sys.argv[1:] if argv is None else argv)
+    try:
+        args = make_parser().parse_args(argv)
+        return args.run(args)
+    except ClwaveError as exc:
+        print(f"clwave: error: {exc.cli_message()}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("clwave: interrupted", file=sys.stderr)
+        return 130
+    except Terminated:
+        print("clwave: terminated", file=sys.stderr)
+        return 143
+    except MemoryError as exc:
+        print(f"clwave: error: not enough memory for this work ({exc or 'an allocation failed'}); render fewer "
+              f"pixels, keep fewer coefficients or use a smaller volume", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as exc:  # a bug: one line, the traceback only when asked for
+        if debug:
+            raise
+        print(f"clwave: internal error ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}); "
+              f"this is a bug in clwave: please report it with the command line, and run with --debug for the "
+              f"traceback", file=sys.stderr)
+        return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,70 @@
+"""``clwave compress``: a thresholded wavelet model into a ``.clw`` file."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .options import add_command, build_model, check_output
+
+
+def run(args):
+    out = check_output(args.output, args.force)
+    if out.suffix.lower() != ".clw":
+        raise InputError(f"output {out} must end in .clw")
+    from ..io.clw import check_quantise, read_clw
+
+    quantise = args.quantise
+    if quantise not in (None, "auto"):
+        try:
+            quantise = float(quantise)
+        except ValueError:
+            pass  # check_quantise names it
+    quantise = check_quantise(quantise)  # before any work
+    wv, reference = build_model(args, gather=False)
+    start = time.perf_counter()
+    wv.save(out, overwrite=args.force, quantise=quantise)
+    saved = time.perf_counter() - start
+    size, voxels = out.stat().st_size, wv.n_voxels
+    raw = voxels * wv.channels * 4  # the volume the model approximates, as float32
+    classified = f", classified to {wv.channels} channels (--tf {args.tf})" if args.tf else ""
+    print(f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z)"
+          f"{classified}{_on_disk(args.input)}")
+    print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} levels, "
+          f"{wv.kept:,} coefficients = {100 * wv.kept / voxels:.2f} % of the voxels")
+    print(f"file                  {out}: {_bytes(size)}, {raw / size:.1f}:1 against the volume as raw float32 "
+          f"({_bytes(raw)}), written in {saved:.2f} s")
+    if reference is not None:
+        stored = wv if quantise is None else read_clw(out)  # the rounded values, as the file holds them
+        error = np.sqrt(np.mean((stored.reconstruct().data - reference.data) ** 2))
+        peak = max(float(np.max(np.abs(reference.data))), np.finfo(np.float32).tiny)
+        print(f"error                 RMS over the voxels {error / peak:.2e} of the largest value "
+              f"(PSNR {20 * np.log10(peak / max(error, 1e-30)):.1f} dB)")
+    elif not args.input.lower().endswith(".clw"):
+        print("error                 not measured: the input was read chunk by chunk (the error needs it whole)")
+    return 0
+
+
+def _on_disk(spec) -> str:
+    """", N MB on disk" for an input file or folder (nothing for a phantom)."""
+    path = Path(spec)
+    if spec.startswith("phantom:") or not path.exists():
+        return ""
+    files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
+    return f", {_bytes(sum(p.stat().st_size for p in files))} on disk"
+
+
+def _bytes(n) -> str:
+    for unit in ("bytes", "KB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:,.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
+
+
+def add_parser(sub):
+    p = add_command(sub, "compress", "write a thresholded wavelet volume (.clw)", run, "output .clw file")
+    p.add_argument("--quantise", help="store the values rounded so that no voxel moves by more than this bound "
+                                      "(volume units), or 'auto' (half the smallest kept detail); docs/codecs.md")

@@ -1,0 +1,304 @@
+"""What the commands share: reading the input into a wavelet model, the view and output options."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, OutputExistsError
+from ..memory import check_fits
+
+DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
+DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
+#: host bytes per float32 value of the volume below which decomposing and thresholding it cannot run: the
+#: in-memory model peaks at 3 (RGBA) to 9 (scalar) times the volume; work beyond 4 times what is available
+#: is refused before it starts
+MODEL_BYTES_PER_VALUE = 16
+
+
+def numbers(text, name, counts, kind=float, sep=",") -> tuple:
+    """Numbers separated by ``sep``, e.g. ``--spacing 2,1,1``; ``counts`` lists the lengths allowed."""
+    try:
+        values = tuple(kind(v) for v in str(text).split(sep))
+    except ValueError:
+        values = ()
+    if len(values) not in counts:
+        allowed = " or ".join(str(c) for c in counts)
+        words = "comma-separated numbers" if sep == "," else f"numbers separated by {sep!r}"
+        raise InputError(f"{name} {text!r} must be {allowed} {words}")
+    return values
+
+
+def add_input_options(p):
+    p.add_argument("input", help="volume file, DICOM folder, .clw file, or phantom:NAME[:N]")
+    g = p.add_argument_group("reading the input")
+    g.add_argument("--shape", help=".raw only: Z,Y,X or Z,Y,X,C")
+    g.add_argument("--dtype", help=".raw only: numpy dtype, e.g. uint16")
+    g.add_argument("--byte-order", choices=["<", ">"], help=".raw only: little (<) or big (>) endian")
+    g.add_argument("--spacing", help="voxel spacing DZ,DY,DX (or one number); overrides the file")
+    g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
+    g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water)")
+    g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
+    g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
+    g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
+                                    "edge N (default: Zarr and HDF5 always, .npy/.raw/.nii from 1 GiB)")
+    c = p.add_argument_group("chunked work (a chunked input; docs/chunked.md)")
+    w = c.add_mutually_exclusive_group()
+    w.add_argument("--workers", type=int, help="a local Dask cluster of N worker processes (default: threads)")
+    w.add_argument("--scheduler", help="address tcp://HOST:PORT of a running Dask scheduler")
+
+
+def add_model_options(p):
+    from ..model.transfer import TransferFunction
+
+    g = p.add_argument_group("wavelet model (from a volume; a .clw input is a model already)")
+    g.add_argument("--wavelet", help=f"haar, linear, quadratic or cubic; or one per channel, comma-separated "
+                                     f"(default {DEFAULT_WAVELET})")
+    g.add_argument("--levels", type=int, help=f"decomposition levels (default {DEFAULT_LEVELS})")
+    k = g.add_mutually_exclusive_group()
+    k.add_argument("--keep", type=float, help=f"fraction of voxels kept as coefficients, (0, 1] (default "
+                                              f"{DEFAULT_KEEP} for a volume; 1 keeps every coefficient)")
+    k.add_argument("--threshold", type=float, help="keep coefficients above this importance")
+    g.add_argument("--focus", help="local level of detail: world centre X,Y,Z (needs --sigma)")
+    g.add_argument("--sigma", type=float, help="local level of detail: Gaussian width (world units)")
+    g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
+    g.add_argument("--tf", help="classify with a transfer-function preset first: "
+                                + ", ".join(TransferFunction.PRESETS))
+    g.add_argument("--tf-window", help="transfer-function window: auto or LO,HI")
+
+
+def read_volume(args):
+    """The Volume named by ``args.input`` (a file, a folder or ``phantom:NAME[:N]``)."""
+    from ..io.loaders import load
+    from ..io.phantoms import phantom
+    from ..model.volume import Volume
+
+    spec = args.input
+    spacing = None if args.spacing is None else numbers(args.spacing, "--spacing", (1, 3))
+    if spec.startswith("phantom:"):
+        given = [_flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu", "level", "chunks")
+                 if getattr(args, n, None) is not None and getattr(args, n) is not False]
+        if given:
+            raise InputError(f"{', '.join(given)} cannot apply to {spec}: a phantom is not read from a file")
+        parts = spec.split(":")
+        if len(parts) > 3 or (len(parts) == 3 and not parts[2].isdigit()):
+            raise InputError(f"{spec!r}: write phantom:NAME or phantom:NAME:N (N voxels per axis)")
+        n = int(parts[2]) if len(parts) == 3 else 128
+        check_fits(MODEL_BYTES_PER_VALUE * n ** 3 * (4 if args.tf else 1), f"decomposing a {n}^3 phantom",
+                   "choose a smaller N")
+        vol = phantom(parts[1], n=n)
+        return vol if spacing is None else Volume(vol.data, spacing=spacing)
+    shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
+    series = args.series
+    if series is not None and series.isdigit():
+        series = int(series)
+    return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
+                series=series, level=args.level, chunks=_chunks(args.chunks), background=args.subtract or 0.0,
+                hu_to_mu=args.hu_to_mu)
+
+
+def _chunks(text):
+    """``load``'s ``chunks=`` from ``--chunks auto|off|N``."""
+    if text is None or text == "auto":
+        return text
+    if text == "off":
+        return False
+    if not text.isdigit() or int(text) < 2:
+        raise InputError(f"--chunks {text} must be auto, off or a chunk edge N >= 2 (voxels)")
+    return int(text)
+
+
+def parse_scheduler(args):
+    """The Dask scheduler of chunked work: ``--workers N``, ``--scheduler ADDRESS`` or threads (None)."""
+    from ..cluster import check_scheduler
+
+    return check_scheduler(args.workers if args.workers is not None else args.scheduler)
+
+
+#: options that make a model from a volume, and so cannot apply to a .clw input (a model already)
+VOLUME_ONLY = ("tf", "tf_window", "wavelet", "levels", "interpolate", "spacing", "shape", "dtype", "byte_order",
+               "series", "subtract", "hu_to_mu", "level", "chunks", "workers", "scheduler")
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _thresholding(args) -> dict:
+    """``threshold()`` arguments from ``--keep``, ``--threshold``, ``--focus``/``--sigma``, checked before any work."""
+    from ..model.wavelet import check_thresholding
+
+    focus = None
+    if args.focus is not None or args.sigma is not None:
+        if args.focus is None or args.sigma is None:
+            raise InputError("--focus X,Y,Z and --sigma S go together")
+        if args.keep is None and args.threshold is None and args.input.lower().endswith(".clw"):
+            raise InputError("--focus selects where detail is kept: give --keep or --threshold too")
+        focus = (numbers(args.focus, "--focus", (3,)), args.sigma)
+    keep, threshold, focus = check_thresholding(args.keep, args.threshold, focus)
+    return dict(keep=keep, threshold=threshold, focus=focus)
+
+
+def _needs_rgba(name, channels, fix) -> InputError:
+    return InputError(f"shaded ray tracing needs a classified (RGBA, 4 channels) model, {name} has {channels} "
+                      f"channel(s): {fix}, or render line integrals with --xray")
+
+
+def build_model(args, log=print, rgba=False, gather=True, cluster_render=False):
+    """Read, classify (``--tf``), decompose and threshold as the options say; every option is
+    checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
+
+    Returns ``(wavelet_volume, reference_volume)``; the reference is the volume the
+    model approximates (None when the input was already a ``.clw`` file).  A chunked input gives no
+    reference, and with ``gather`` false a :class:`~clwave.model.chunked.ChunkedWaveletVolume`
+    (thresholded, not gathered).  ``cluster_render``: a ``.clw`` input takes ``--workers``/``--scheduler``
+    (the render runs there).
+    """
+    from ..model.transfer import TransferFunction
+    from ..model.wavelet import WaveletVolume, check_decomposition
+
+    thresholding = _thresholding(args)
+    scheduler = parse_scheduler(args)
+    if args.input.lower().endswith(".clw"):
+        given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
+                 and not (cluster_render and name in ("workers", "scheduler"))]
+        if given:
+            raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
+                             f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")
+        wv = WaveletVolume.open(args.input, keep=args.keep if args.focus is None else None)
+        if rgba and wv.channels != 4:
+            raise _needs_rgba(args.input, wv.channels, "compress the volume with --tf PRESET")
+        if args.threshold is not None or args.focus is not None:  # --keep alone: a prefix of the file
+            wv = wv.threshold(**thresholding)
+        return wv, None
+    vol = read_volume(args)
+    tf = None
+    if args.tf:
+        window = args.tf_window
+        if window not in (None, "auto"):
+            window = numbers(window, "--tf-window", (2,))
+        tf = TransferFunction.preset(args.tf, window=window)
+    elif args.tf_window is not None:
+        raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
+    if rgba and tf is None and vol.channels != 4:
+        presets = ", ".join(TransferFunction.PRESETS)
+        raise _needs_rgba(args.input, vol.channels, f"classify it with --tf PRESET ({presets})")
+    wavelet = args.wavelet or DEFAULT_WAVELET
+    wavelet = wavelet.split(",") if "," in wavelet else wavelet
+    wavelet, levels = check_decomposition(vol.shape, 4 if tf else vol.channels, wavelet,
+                                          DEFAULT_LEVELS if args.levels is None else args.levels)
+    if not vol.chunked:
+        check_fits(MODEL_BYTES_PER_VALUE * int(np.prod(vol.shape)) * (4 if tf else vol.channels),
+                   "decomposing this volume", "read it chunk by chunk (--chunks auto), or crop or subsample it")
+    elif args.interpolate:
+        raise InputError("--interpolate needs the whole volume in memory (its prefilter is global); leave it out "
+                         "for a chunked input, or read the input whole with --chunks off")
+    if tf is not None:
+        tf = tf.resolved(vol)  # records an "auto" window
+        vol = tf.classify(vol)
+    start = time.perf_counter()
+    wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
+                                   transfer_function=tf, scheduler=scheduler)
+    log(f"{'read (content) of' if vol.chunked else 'decomposed'} {' x '.join(map(str, vol.shape[::-1]))} voxels "
+        f"(x, y, z), {vol.channels} channel(s), in {time.perf_counter() - start:.2f} s")
+    if args.keep is None and args.threshold is None:
+        thresholding["keep"] = DEFAULT_KEEP
+    wv = wv.threshold(**thresholding)
+    if not vol.chunked:
+        return wv, vol
+    return (wv.compute() if gather else wv), None
+
+
+def check_output(path, force):
+    path = Path(path)
+    if path.exists() and not force:
+        raise OutputExistsError(f"{path} exists; pass --force to replace it")
+    if not path.parent.exists():
+        raise InputError(f"the folder of {path} does not exist; create it first")
+    return path
+
+
+def add_camera_options(p):
+    g = p.add_argument_group("view")
+    g.add_argument("--azimuth", type=float, default=30.0, help="degrees (default 30)")
+    g.add_argument("--elevation", type=float, default=20.0, help="degrees (default 20)")
+    g.add_argument("--size", default="512", help="image size: N or HxW, e.g. 512 or 300x400 (default 512)")
+    g.add_argument("--extent", type=float, help="world width of the image (default: the bounding sphere of the "
+                                                 "non-empty voxels spans the image, the same at every view)")
+    g.add_argument("--window", dest="display_window", default="auto", help="PNG window: auto or LO,HI")
+    g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
+    g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
+    g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic bands into coarser framebuffers "
+                   "within this error relative to the image maximum (e.g. 1e-2; default: off)")
+    g.add_argument("--device-memory", metavar="SIZE", help="device memory to use at most, e.g. 2GiB or 512M "
+                   "(default: the device's); splatting streams coefficients beyond it in chunks (docs/splatting.md "
+                   "§6), ray tracing renders bricks beyond it in passes (docs/raytracing.md §6)")
+
+
+def add_raytrace_options(p):
+    g = p.add_argument_group("ray tracing (--method raytrace)")
+    g.add_argument("--perspective", action="store_true", help="perspective camera (default orthographic)")
+    g.add_argument("--fov", type=float, default=30.0, help="perspective: vertical field of view, degrees")
+    g.add_argument("--distance", type=float, help="perspective: eye distance from the target (world units)")
+    g.add_argument("--tolerance", type=float, default=1e-3, help="absolute error per output value (default 1e-3)")
+    g.add_argument("--light", action="append", help="directional light AZ,EL in degrees; repeat for more; "
+                   "'none' for ambient only (default: a headlight)")
+    g.add_argument("--no-shading", action="store_true", help="unlit emission")
+    g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
+    g.add_argument("--background", default="0,0,0", help="PNG: colour R,G,B in 0..1 behind the volume")
+    g.add_argument("--field", choices=("bspline", "wavelet"), default="bspline",
+                   help="evaluate the field from fine B-spline grids (fast) or from the wavelet coefficients "
+                        "with per-ray active lists (the paper's reference)")
+
+
+def make_camera(args):
+    from ..model.camera import Camera
+
+    size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
+    perspective = dict(perspective=True, distance=args.distance, fov=args.fov) \
+        if getattr(args, "perspective", False) else {}
+    return Camera(args.azimuth, args.elevation, size if len(size) == 2 else size[0], extent=args.extent,
+                  **perspective)
+
+
+def parse_lights(args):
+    if args.light is None:
+        return None
+    if args.light == ["none"]:
+        return []
+    return [tuple(numbers(spec, "--light", (2,))) for spec in args.light]
+
+
+def parse_window(args):
+    return "auto" if args.display_window == "auto" else numbers(args.display_window, "--window", (2,))
+
+
+def parse_device_memory(args):
+    """``device_memory=`` from ``--device-memory SIZE``, checked before any work."""
+    from ..device.memory import parse_cap
+
+    return parse_cap(args.device_memory)
+
+
+def write_gif(path, pictures, seconds_per_frame, force):
+    import imageio.v3 as iio
+
+    from ..io.files import write_atomic
+    write_atomic(path, lambda fh: iio.imwrite(fh, np.stack(pictures), extension=".gif",
+                                              is_batch=True, duration=int(1000 * seconds_per_frame), loop=0),
+                 force)
+
+
+def add_command(sub, name, help, run, output_help, view=False):
+    """A subcommand reading a volume into a wavelet model and writing ``-o`` (``--force`` to replace)."""
+    p = sub.add_parser(name, help=help)
+    add_input_options(p)
+    add_model_options(p)
+    if view:
+        add_camera_options(p)
+    p.add_argument("-o", "--output", required=True, help=output_help)
+    p.add_argument("--force", action="store_true", help="replace existing output files")
+    p.set_defaults(run=run)
+    return p

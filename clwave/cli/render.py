@@ -1,0 +1,117 @@
+"""``clwave render``: one image (or a turntable) by splatting or ray tracing."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .options import (add_command, add_raytrace_options, build_model, check_output, make_camera, numbers,
+                      parse_device_memory, parse_lights, parse_scheduler, parse_window, write_gif)
+
+
+def run(args):
+    from ..raytrace.tracer import RayTracer, raytrace
+    from ..io.result import resolve_window
+    from ..splat.renderer import SplatRenderer, splat
+    from ..cluster import check_model_file, client_for as cluster_client
+
+    out = check_output(args.output, args.force)
+    extras = [Path(p) for p in (args.raw, args.stats) if p]
+    for extra in extras:
+        check_output(extra, args.force)
+    if args.turntable is not None and (args.turntable < 1 or out.suffix.lower() != ".gif"):
+        raise InputError("--turntable N needs N >= 1 and an output ending in .gif")
+    if args.turntable is None and out.suffix.lower() != ".png":
+        raise InputError(f"output {out} must end in .png (or .gif with --turntable N)")
+    background = numbers(args.background, "--background", (3,))
+    camera = make_camera(args)
+    if args.method == "splat" and camera.perspective:
+        raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
+    if args.method == "raytrace" and args.coarse is not None:
+        raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
+    device_memory = parse_device_memory(args)
+    if args.omega_s is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
+        raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
+    if not (np.isfinite(args.tolerance) and args.tolerance > 0):
+        raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
+    lights, window = parse_lights(args), parse_window(args)
+    on_cluster = args.input.lower().endswith(".clw") and (args.workers, args.scheduler) != (None, None)
+    wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
+    if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
+        from ..raytrace.regions import check_cluster_model
+
+        if args.method == "raytrace":
+            check_cluster_model(wv, args.field)
+        else:
+            check_model_file(wv, "splatting")
+    cluster = cluster_client(parse_scheduler(args)) if on_cluster else contextlib.nullcontext()
+    if args.method == "raytrace":
+        options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
+                       absorption=not args.xray)
+        if on_cluster:
+            options.update(device=args.device, field=args.field, device_memory=device_memory)
+        else:
+            options["tracer"] = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory)
+
+        def render(cam):
+            return raytrace(wv, cam, scheduler=client, **options)
+    else:
+        options = dict(device=args.device, omega_s=args.omega_s, coarse=args.coarse, device_memory=device_memory)
+        if not on_cluster:
+            options = dict(renderer=SplatRenderer(wv, **options))
+
+        def render(cam):
+            return splat(wv, cam, scheduler=client, **options)
+    cameras = [camera] if args.turntable is None else \
+        [camera.rotated(360.0 * i / args.turntable) for i in range(args.turntable)]
+    with cluster as client:
+        results = [render(cam) for cam in cameras]
+    if args.turntable is None:
+        result = results[0]
+        result.save(out, window=window, background=background, overwrite=args.force)
+    else:
+        if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
+            window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
+        write_gif(out, [r.to_uint8(window, background) for r in results], 0.1, args.force)
+        result = results[0]
+        result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
+        seconds = result.meta["turntable_seconds"]
+        print(f"turntable of {len(results)} views at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
+              f"({np.median(seconds):.3f} s a view, median); the first view:")
+    if args.raw:
+        result.save(args.raw, overwrite=args.force)
+    if args.stats:
+        result.save(args.stats, overwrite=args.force)
+    size = f"{camera.size[0]}x{camera.size[1]}"
+    m = result.meta
+    if args.method == "raytrace":
+        where = f"on {m['workers']} workers in {len(m['slabs'])} slabs" if "slabs" in m else \
+            f"{m['rays_terminated_early']:,} rays terminated early"
+        print(f"ray traced {size} ({m['mode']}, {m['field']} field, tolerance {m['tolerance']:g}, shading "
+              f"{m['shading']}) in {m['render_seconds']:.3f} s: {m['segments']:,} segments, {where} (set-up "
+              f"{m['setup_seconds']:.2f} s and kernel build {m['compile_seconds']:.2f} s apart) -> {out}")
+    else:
+        s = m["seconds"]
+        print(f"splatted {m['coefficients']:,} coefficients at {size} in {s['total']:.3f} s (footprints "
+              f"{s['footprints']:.3f}, binning {s['binning']:.3f}, accumulation {s['accumulation']:.3f}; "
+              f"kernel build {s['compile']:.2f} s apart) -> {out}")
+    return 0
+
+
+def _total_seconds(meta) -> float:
+    return meta["render_seconds"] if meta["method"] == "raytrace" else meta["seconds"]["total"]
+
+
+def add_parser(sub):
+    p = add_command(sub, "render", "render an image: wavelet splatting (X-ray) or ray tracing (shaded)", run,
+                    "output .png (or .gif with --turntable)", view=True)
+    p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
+                   help="splat (default): X-ray line integrals; raytrace: emission-absorption, shaded (needs a "
+                        "classified model: --tf, or a .clw compressed with it; or --xray)")
+    add_raytrace_options(p)
+    p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
+    p.add_argument("--raw", help="also write the float32 image as .npy")
+    p.add_argument("--stats", help="also write the figures as .json")
