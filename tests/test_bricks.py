@@ -37,13 +37,12 @@ def spilled(spill: bricks.Spill) -> np.ndarray:
     return out
 
 
-def pool_field(wv, field: bricks.BrickField, x0, derivative=False):
+def pool_field(wv, field: bricks.BrickField, x0, derivative=False, detail=0):
     """The brick field at grid-0 fine points (N, 3) (z, y, x), from the pool read back: (N, 4), or the
-    gradient (N, 4, 3) in fine units (z, y, x)."""
+    gradient (N, 4, 3) in fine units (z, y, x); the bricks of ``detail``."""
     pool = field.pool.get() if field.resident else spilled(field.spill)
     frames, boxes = field.frames, field.boxes
-    pages = np.full(field.shape, -1)
-    pages[tuple((field.bricks - field.origin).T)] = np.arange(len(field.bricks))
+    pages = field.pages[detail]
     out = np.zeros((len(x0), 4, 3) if derivative else (len(x0), 4))
     for p, x in enumerate(x0):
         b = np.floor(x / BRICK).astype(int) - field.origin
@@ -111,7 +110,8 @@ def test_plan_equals_a_census_of_the_supports(wavelet, levels):
     wv.content_mask = None
     p = bricks.plan(wv)
     expected = census(wv)
-    got = {tuple(int(v) for v in b + p.origin): int(p.level[tuple(b)]) for b in np.argwhere(p.level != bricks.ABSENT)}
+    got = {tuple(int(v) for v in b + p.origin): int(p.level[0][tuple(b)])
+           for b in np.argwhere(p.level[0] != bricks.ABSENT)}
     assert got == expected
     assert len(set(got.values())) >= 2  # bricks of several levels side by side
 
@@ -121,17 +121,17 @@ def test_plan_clamps_bricks_where_empty_and_non_empty_voxels_meet():
     wv = WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.05)
     p = bricks.plan(wv)
     mask = np.pad(wv.content_mask, 64)  # voxel i at i + 64
-    for b in np.argwhere(np.ones(p.level.shape, bool)):
+    for b in np.argwhere(np.ones(p.level.shape[1:], bool)):
         first = (b + p.origin) * BRICK - 3 + 64  # voxels whose cubic B-splines reach the brick
         window = mask[tuple(slice(f, f + BRICK + 3) for f in first)]
-        level, clamp = p.level[tuple(b)], p.clamp[tuple(b)]
+        level, clamp = p.level[0][tuple(b)], p.clamp[0][tuple(b)]
         if not window.any():
             assert level == bricks.ABSENT
         elif not window.all():
             assert clamp and level == 0
         else:
             assert not clamp
-    assert p.clamp.any() and (p.level == bricks.ABSENT).any() and (p.level > 0).any()
+    assert p.clamp[0].any() and (p.level[0] == bricks.ABSENT).any() and (p.level[0] > 0).any()
 
 
 @pytest.mark.parametrize("wavelet,levels,content,keep", [("cubic", 3, False, 0.1), ("cubic", 2, True, 0.1),
@@ -173,7 +173,7 @@ def test_block_bounds_hold_the_field(content):
     if not content:
         wv.content_mask = None
     field = build(wv)
-    bound = field.bounds
+    bound = field.bound_grid(field.pages[0])
     x0 = np.random.default_rng(3).uniform(-20, 64, (3000, 3))
     values = np.abs(pool_field(wv, field, x0)).max(axis=1)
     block = np.floor(x0 / bricks.BLOCK).astype(int) - field.origin * bricks.SUPER
@@ -192,7 +192,9 @@ def test_bricks_hold_only_where_the_model_reaches():
     vol = clwave.Volume(np.stack([alpha, alpha, alpha, alpha], -1).astype(np.float32))
     wv = WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.05)
     field = build(wv)
-    assert 1 <= len(field.levels) <= 8 and field.pool_bytes < 16 * n ** 3 / 10  # the ball meets 2^3 bricks
+    full = field.pages[0][field.pages[0] >= 0]
+    assert 1 <= len(full) <= 8 and field.slot_bytes()[full].sum() < 16 * n ** 3 / 10  # the ball meets 2^3 bricks
+    assert field.pool_bytes < 16 * n ** 3 / 5  # every detail's (docs/raytracing.md §8)
     image = RayTracer(wv).render(clwave.Camera(30, 20, size=24), tolerance=1e-3).image
     assert image[..., 3].max() > 0.5
 
@@ -207,7 +209,7 @@ def test_mixed_levels_across_brick_boundaries_trace_like_the_reference():
     wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.1)
     wv.content_mask = None
     tracer = RayTracer(wv)
-    levels = set(tracer.bricks.levels.tolist())
+    levels = set(tracer.bricks.levels[tracer.field_at(0).slots].tolist())
     assert len(levels) >= 3 and max(levels) == 3
     for cam, kw in ((clwave.Camera(25, 15, size=(2, 3)), dict(absorption=False)),
                     (clwave.Camera(-35, 30, size=(2, 2), perspective=True, distance=70.0), dict())):

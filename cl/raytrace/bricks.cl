@@ -36,10 +36,11 @@ __kernel void scatter_band(__global float *out, const int4 out_start, const int4
  *   boxes        per brick (nx, ny, nz, first pool element)
  *   depth        the largest nz: work-items depth * b .. depth * (b + 1) - 1 along axis 2 copy brick b
  *   scale        2^(-3 l / 2): the level-l B-splines' normalisation (docs/model.md §4)
+ *   nonneg       clamp the w lane (alpha) at 0: bricks of the coarser details (docs/raytracing.md §8)
  * Grid: global (max nx, max ny, depth * bricks). */
 __kernel void gather_bricks(__global float4 *pool, __global const float4 *src, const int4 src_start,
                             const int4 src_shape, __global const int4 *starts, __global const int4 *boxes,
-                            const int depth, const float scale)
+                            const int depth, const float scale, const int nonneg)
 {
     const int b = get_global_id(2) / depth;
     const int4 at = (int4)(get_global_id(0), get_global_id(1), get_global_id(2) % depth, 0), box = boxes[b];
@@ -47,18 +48,22 @@ __kernel void gather_bricks(__global float4 *pool, __global const float4 *src, c
         return;
     const int4 p = starts[b] + at - src_start;
     const bool inside = p.x >= 0 && p.y >= 0 && p.z >= 0 && p.x < src_shape.x && p.y < src_shape.y && p.z < src_shape.z;
-    const float4 v = inside ? src[((size_t)p.z * src_shape.y + p.y) * src_shape.x + p.x] : (float4)(0.0f);
+    float4 v = inside ? src[((size_t)p.z * src_shape.y + p.y) * src_shape.x + p.x] : (float4)(0.0f);
+    if (nonneg)
+        v.w = fmax(v.w, 0.0f);
     pool[box.w + ((size_t)at.z * box.y + at.y) * box.x + at.x] = scale * v;
 }
 
 /* brick_bounds: per block of CLW_BLOCK^3 grid-0 fine cells of every brick, the largest |coefficient|
  * of any group whose B-spline reaches it (partition of unity: |f| <= max |c| there, every channel).
- *   out          (Z, Y, X) float over the page table's box, CLW_SUPER_CELLS / CLW_BLOCK blocks per brick
- *   nblocks      out's shape (x, y, z); origin the brick index (x, y, z) of the page table's first
+ *   out          (slots, per, per, per) float, per = CLW_SUPER_CELLS / CLW_BLOCK blocks along a brick's edge
+ *                (z, y, x): the blocks of each slot, whatever detail it serves (clwave/raytrace/lod.py)
+ *   first        out's slot of the launch's slot 0 (a slab's slots are consecutive)
+ *   origin       the brick index (x, y, z) of the page table's first brick
  *   coef, frames, boxes   the pool as in field_bspline.h; bricks: per slot its brick (x, y, z) in the
  *                page table
- * Grid: global ((CLW_SUPER_CELLS / CLW_BLOCK)^3, slots). */
-__kernel void brick_bounds(__global float *out, const int4 nblocks, const int4 origin, __global const float4 *coef,
+ * Grid: global (per^3, slots). */
+__kernel void brick_bounds(__global float *out, const int first, const int4 origin, __global const float4 *coef,
                            __global const int4 *bricks, __global const float4 *frames, __global const int4 *boxes)
 {
     const int per = CLW_SUPER_CELLS / CLW_BLOCK, k = get_global_id(0), slot = get_global_id(1);
@@ -77,7 +82,7 @@ __kernel void brick_bounds(__global float *out, const int4 nblocks, const int4 o
                     m = fmax(m, fmax(fmax(c.x, c.y), fmax(c.z, c.w)));
                 }
     }
-    out[((size_t)block.z * nblocks.y + block.y) * nblocks.x + block.x] = m;
+    out[(size_t)(first + slot) * per * per * per + k] = m;
 }
 
 /* alpha_floor: per slot the least alpha (channel 3, lane w) coefficient of group `g` of the brick: the

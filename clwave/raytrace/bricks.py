@@ -34,6 +34,7 @@ from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError, OutputError
 from ..model.geometry import band_lattice
+from .lod import content_windows, occupancy
 
 BRICK = BLOCK * SUPER  #: fine cells along a brick's edge (grid-0 coordinates)
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
@@ -49,31 +50,51 @@ _SYNTH_AXIS = Kernel("synth_axis", ("out", BUFFER), ("out_start", cltypes.int4),
                      *_part_args("a", "h"), *_part_args("d", "g"))
 _GATHER = Kernel("gather_bricks", ("pool", BUFFER), ("src", BUFFER), ("src_start", cltypes.int4),
                  ("src_shape", cltypes.int4), ("starts", BUFFER), ("boxes", BUFFER), ("depth", np.int32),
-                 ("scale", np.float32))
+                 ("scale", np.float32), ("nonneg", np.int32))
 _SCATTER = Kernel("scatter_band", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
                   ("positions", BUFFER), ("band_start", np.int64), ("band_shape", cltypes.int4), ("values", BUFFER),
                   ("n", np.int32), ("slots", cltypes.int4), ("channels", np.int32))
 _FLOOR = Kernel("alpha_floor", ("out", BUFFER), ("coef", BUFFER), ("boxes", BUFFER), ("g", np.int32))
-_BOUNDS = Kernel("brick_bounds", ("out", BUFFER), ("nblocks", cltypes.int4), ("origin", cltypes.int4),
+_BOUNDS = Kernel("brick_bounds", ("out", BUFFER), ("first", np.int32), ("origin", cltypes.int4),
                  ("coef", BUFFER), ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER))
 
 
 @dataclass
 class Plan:
-    """Which bricks exist and at which lattice level (z, y, x brick indices from ``origin``)."""
+    """Which bricks exist and at which lattice level, per detail (z, y, x brick indices from ``origin``).
 
-    origin: np.ndarray   # (3,) brick index of level[0, 0, 0]
-    level: np.ndarray    # (Z, Y, X) int8: the brick's lattice level, ABSENT where there is no brick
-    clamp: np.ndarray    # (Z, Y, X) bool: the brick holds empty voxels' fine coefficients, zeroed (level 0)
+    Detail L (0 .. levels) drops the kept details of levels 1 .. L (:mod:`clwave.raytrace.lod`).
+    """
+
+    origin: np.ndarray   # (3,) brick index of level[:, 0, 0, 0]
+    level: np.ndarray    # (details, Z, Y, X) int8: the brick's lattice level, ABSENT where there is no brick
+    clamp: np.ndarray    # (details, Z, Y, X) bool: the brick's coefficients at that level are clamped to content
+
+    def slots(self) -> tuple:
+        """The distinct bricks over every detail, in brick order: (bricks (n, 3) z, y, x, levels (n,), clamped
+        (n,), coarse (n,): serving the coarser details, whose alpha coefficients are clamped at 0, pages
+        (details, Z, Y, X) int32: each detail's slot of each brick, -1 for none).  An unclamped brick at level l
+        is one slot for every coarser detail that has it: its coefficients come from the bands above l alone."""
+        at = np.argwhere(self.level != ABSENT)  # (detail, z, y, x)
+        flat = np.ravel_multi_index(tuple(at[:, 1:].T), self.level.shape[1:])
+        level = self.level[tuple(at.T)].astype(np.int64)
+        key = ((flat * 64 + level) * 2 + self.clamp[tuple(at.T)]) * 2 + (at[:, 0] > 0)
+        unique, slot = np.unique(key, return_inverse=True)
+        pages = np.full(self.level.shape, -1, np.int32)
+        pages[tuple(at.T)] = slot
+        bricks = np.stack(np.unravel_index(unique // 256, self.level.shape[1:]), axis=1) + self.origin
+        return (bricks, (unique // 4 % 64).astype(np.int64), (unique // 2 % 2).astype(bool),
+                (unique % 2).astype(bool), pages)
 
 
-def plan(wv) -> Plan:
-    """The bricks of a model and their levels.
+def plan(wv, details: int | None = None) -> Plan:
+    """The bricks of a model and their levels, at details 0 .. ``details`` - 1 (default: every one).
 
-    A brick exists where a kept coefficient's support reaches and (for a model that knows its
-    content) some non-empty voxel's fine coefficient does; its level is the coarsest lattice that holds
-    every group there exactly.  A brick where empty and non-empty voxels' fine coefficients meet is
-    expanded at level 0, where they are zeroed (docs/raytracing.md §4).  Reach is counted with whole
+    A brick exists where a kept coefficient's support reaches and (for a model that knows its content) some
+    occupied coefficient does (:func:`clwave.raytrace.lod.occupancy`); its level is the coarsest lattice that
+    holds every group there exactly, no finer than the detail.  A brick where occupied and unoccupied
+    coefficients of the detail's level meet is expanded at that level, where the unoccupied are zeroed: at
+    full detail, empty voxels' fine coefficients (docs/raytracing.md §4, §8).  Reach is counted with whole
     support boxes, on the safe side: a brick may be finer than needed, never coarser.
     """
     j0 = wv.groups[0].wavelet.order
@@ -87,23 +108,31 @@ def plan(wv) -> Plan:
                                         for a, c in enumerate(corner)]))
     origin = np.min([[lo[0] for lo, _ in axes] for *_, axes in bands], axis=0)
     shape = tuple(np.max([[hi[-1] for _, hi in axes] for *_, axes in bands], axis=0) - origin + 1)
-    present, level = np.zeros(shape, bool), np.full(shape, wv.levels, np.int8)
+    reach_by = {}  # per band level (levels + 1: the approximation) the bricks its kept supports reach
     for g, band, sl, axes in bands:  # one band at a time: no per-coefficient array of the whole model
         positions = g.all_positions()[sl] - band.start
         if not len(positions):
             continue
+        m = wv.levels + 1 if band.key == "aaa" else band.level
         reach = _reach(positions, band.shape, [(lo - o, hi - lo) for (lo, hi), o in zip(axes, origin)], shape)
-        present |= reach
-        if band.key != "aaa":  # the finest detail reaching a brick sets its level
-            level[reach] = np.minimum(level[reach], band.level - 1)
-    level[~present] = ABSENT
-    clamp = np.zeros(level.shape, bool)
-    if wv.content_mask is not None:
-        empty, mixed = _content(wv, origin, level.shape)
-        level[empty] = ABSENT
-        clamp = mixed & (level != ABSENT)
-        level[clamp] = 0
-    return Plan(origin, level, clamp)
+        reach_by[m] = reach_by[m] | reach if m in reach_by else reach
+    details = wv.levels + 1 if details is None else details
+    levels, clamps = np.full((details, *shape), ABSENT, np.int8), np.zeros((details, *shape), bool)
+    for detail in range(details):
+        present, level = np.zeros(shape, bool), np.full(shape, wv.levels, np.int8)
+        for m, reach in sorted(reach_by.items(), reverse=True):  # the finest detail reaching a brick sets its level
+            if m > detail:
+                present |= reach
+                if m <= wv.levels:
+                    level[reach] = m - 1
+        level[~present] = ABSENT
+        if wv.content_mask is not None:
+            empty, mixed = content_windows(wv, detail, origin, shape)
+            level[empty] = ABSENT
+            clamps[detail] = mixed & (level != ABSENT)
+            level[clamps[detail]] = detail
+        levels[detail] = level
+    return Plan(origin, levels, clamps)
 
 
 def _reach(positions, band_shape, axes, shape) -> np.ndarray:
@@ -131,52 +160,6 @@ def _reach(positions, band_shape, axes, shape) -> np.ndarray:
     return reach
 
 
-def _content(wv, origin, shape) -> tuple:
-    """Per brick: (no group's window holds a non-empty voxel, some group's window holds an empty one).
-
-    Group g's window in brick b is the fine coefficients (= voxels, docs/raytracing.md §4) whose
-    B-splines reach it: voxels ``floor(16 b + s_g) - j_g + 1 .. ceil(16 b + 16 + s_g) - 1`` per axis (s_g
-    the grid shift), counted separably, one axis at a time.
-    """
-    j0, mask = wv.groups[0].wavelet.order, wv.content_mask
-    has_any, has_all = [], []
-    for g in wv.groups:
-        j, s = g.wavelet.order, (g.wavelet.order - j0) / 2.0
-        first, width = int(np.floor(s)) - j + 1, int(np.ceil(BRICK + s) - np.floor(s)) + j - 1
-        rows = []
-        for bz in range(shape[0]):  # a brick row at a time: the mask's layers its window reaches, unpacked
-            layers = mask.box((BRICK * (origin[0] + bz) + first, 0, 0), (width, *mask.shape[1:]))
-            count = layers.sum(axis=0, keepdims=True, dtype=np.uint8)  # at most 20 voxels
-            for axis in (1, 2):  # then at most 400, 8000
-                count = _window_sums(count, axis, BRICK * origin[axis] + first, width, shape[axis], np.uint16)
-            rows.append(count)
-        count = np.concatenate(rows)
-        has_any.append(count > 0)
-        has_all.append(count == width ** 3)
-    empty = ~np.any(has_any, axis=0)
-    mixed = np.any([a & ~b for a, b in zip(has_any, has_all)], axis=0) | np.any([~a for a in has_any], axis=0)
-    return empty, mixed & ~empty
-
-
-def _window_sums(arr, axis, start, width, count, dtype):
-    """Sums of ``arr`` along ``axis`` over ``[start + 16 b, start + 16 b + width)``, b < count (zero outside)."""
-    assert BRICK <= width <= 2 * BRICK
-    n = arr.shape[axis]
-    length = BRICK * (count + 1)
-    padded = np.zeros(arr.shape[:axis] + (length,) + arr.shape[axis + 1:], dtype)
-    lo, hi = max(start, 0), min(start + length, n)
-    if hi > lo:
-        idx = [slice(None)] * arr.ndim
-        idx[axis] = slice(lo - start, hi - start)
-        src = [slice(None)] * arr.ndim
-        src[axis] = slice(lo, hi)
-        padded[tuple(idx)] = arr[tuple(src)]
-    blocks = padded.reshape(arr.shape[:axis] + (count + 1, BRICK) + arr.shape[axis + 1:])
-    whole = blocks.sum(axis=axis + 1, dtype=dtype)
-    tail = np.take(blocks, range(width - BRICK), axis=axis + 1).sum(axis=axis + 1, dtype=dtype)
-    return np.take(whole, range(count), axis=axis) + np.take(tail, range(1, count + 1), axis=axis)
-
-
 @dataclass
 class BrickField:
     """The bricks of a model (``FIELD_PARAMS`` of ``cl/raytrace/field_bspline.h``).
@@ -193,14 +176,17 @@ class BrickField:
     shape: tuple           # the page table's shape (Z, Y, X) in bricks
     bricks: np.ndarray     # (slots, 3) brick index (z, y, x)
     levels: np.ndarray     # (slots,) lattice level
+    clamped: np.ndarray    # (slots,) bool: coefficients clamped to content at their level
+    pages: np.ndarray      # (details, Z, Y, X) int32: each detail's slot of each brick, -1 for none
     frames: np.ndarray     # (slots, groups, 4) float32
     boxes: np.ndarray      # (slots, groups, 4) int32
     lattices: np.ndarray   # (slots, 4) float32
-    bounds: np.ndarray     # (Z, Y, X) * SUPER per BLOCK^3 block: the largest |coefficient| reaching it
+    bounds: np.ndarray     # (slots, SUPER, SUPER, SUPER) per BLOCK^3 block: the largest |coefficient| reaching it
     orders: tuple          # the groups' B-spline orders
     seconds: float         # expansion time
     pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2)
     spill: Spill | None = None      # or in a scratch file
+    _static: dict | None = None     # the per-slot tables on the device, uploaded once
 
     @property
     def resident(self) -> bool:
@@ -214,32 +200,43 @@ class BrickField:
         """(slots,) pool bytes of each brick (all groups)."""
         return 16 * np.prod(self.boxes[:, :, :3].astype(np.int64), axis=2).sum(axis=1)
 
-    def tables(self, cc, slots=None) -> dict:
-        """The kernel arguments of the field (``FIELD_PARAMS``): every brick (resident), or the bricks ``slots``
-        read from the scratch file, the others absent."""
-        q, pages = cc.queue, np.full(self.shape, -1, np.int32)
+    def bound_grid(self, pages) -> np.ndarray:
+        """The block bounds over the page table's box, (Z, Y, X) * SUPER, of the slots ``pages`` (Z, Y, X) picks."""
+        grid = np.zeros((*self.shape, SUPER, SUPER, SUPER), np.float32)
+        present = pages >= 0
+        grid[present] = self.bounds[pages[present]]
+        return grid.transpose(0, 3, 1, 4, 2, 5).reshape(tuple(n * SUPER for n in self.shape))
+
+    def tables(self, cc, pages, slots=None) -> dict:
+        """The kernel arguments of the field (``FIELD_PARAMS``) with the slots ``pages`` (Z, Y, X) picks: from the
+        pool on the device (resident), or only the bricks ``slots`` read from the scratch file, the others
+        absent."""
+        q = cc.queue
         if slots is None:
-            slots, pool = np.arange(len(self.levels)), self.pool
-            boxes = self.boxes
-        else:
-            starts, sizes = self.boxes[slots, 0, 3].astype(np.int64), self.slot_bytes()[slots] // 16
-            at = np.concatenate([[0], np.cumsum(sizes)])  # where each brick goes in the region's pool
-            pool = cla.empty(q, (int(at[-1]) + 64, 4), np.float32)  # 64: as build()'s
-            # read straight into the mapped buffer (no host copy), a run of bricks that follow each other in the
-            # file at a time
-            mapped, _ = cl.enqueue_map_buffer(q, pool.data, cl.map_flags.WRITE_INVALIDATE_REGION, 0, pool.shape,
-                                              np.float32)
-            try:
-                breaks = np.flatnonzero(starts[1:] != starts[:-1] + sizes[:-1]) + 1
-                for a, b in zip(np.concatenate([[0], breaks]), np.concatenate([breaks, [len(slots)]])):
-                    self.spill.read_into(int(starts[a]), mapped[at[a]:at[b]])
-                mapped[at[-1]:] = 0
-            finally:
-                mapped.base.release(q)
-            boxes = self.boxes[slots].copy()
-            boxes[..., 3] += (at[:-1] - starts)[:, None].astype(np.int32)
-        pages[tuple((self.bricks[slots] - self.origin).T)] = np.arange(len(slots), dtype=np.int32)
-        return dict(coef=pool, pages=cla.to_device(q, pages), page_origin=self.origin[::-1],
+            if self._static is None:
+                self._static = {name: cla.to_device(q, _one(getattr(self, name)))
+                                for name in ("frames", "boxes", "lattices")}
+            return dict(coef=self.pool, pages=cla.to_device(q, pages.astype(np.int32)), page_origin=self.origin[::-1],
+                        page_shape=self.shape[::-1], **self._static)
+        starts, sizes = self.boxes[slots, 0, 3].astype(np.int64), self.slot_bytes()[slots] // 16
+        at = np.concatenate([[0], np.cumsum(sizes)])  # where each brick goes in the region's pool
+        pool = cla.empty(q, (int(at[-1]) + 64, 4), np.float32)  # 64: as build()'s
+        # read straight into the mapped buffer (no host copy), a run of bricks that follow each other in the
+        # file at a time
+        mapped, _ = cl.enqueue_map_buffer(q, pool.data, cl.map_flags.WRITE_INVALIDATE_REGION, 0, pool.shape,
+                                          np.float32)
+        try:
+            breaks = np.flatnonzero(starts[1:] != starts[:-1] + sizes[:-1]) + 1
+            for a, b in zip(np.concatenate([[0], breaks]), np.concatenate([breaks, [len(slots)]])):
+                self.spill.read_into(int(starts[a]), mapped[at[a]:at[b]])
+            mapped[at[-1]:] = 0
+        finally:
+            mapped.base.release(q)
+        boxes = self.boxes[slots].copy()
+        boxes[..., 3] += (at[:-1] - starts)[:, None].astype(np.int32)
+        local = np.full(self.shape, -1, np.int32)
+        local[tuple((self.bricks[slots] - self.origin).T)] = np.arange(len(slots), dtype=np.int32)
+        return dict(coef=pool, pages=cla.to_device(q, local), page_origin=self.origin[::-1],
                     page_shape=self.shape[::-1], frames=cla.to_device(q, _one(self.frames[slots])),
                     boxes=cla.to_device(q, _one(boxes)), lattices=cla.to_device(q, _one(self.lattices[slots])))
 
@@ -302,10 +299,10 @@ def group_defines(orders) -> dict:
     return dict(CLW_GROUPS=len(orders), CLW_ORDERS=",".join(map(str, orders)))
 
 
-def layout(wv, p: Plan) -> dict:
-    """Per slot (present brick, in brick order) and group: the lattice box, its frame, its pool offset."""
-    bricks = np.argwhere(p.level != ABSENT) + p.origin
-    levels = p.level[tuple((bricks - p.origin).T)].astype(np.int64)
+def layout(wv, bricks, levels) -> dict:
+    """Per slot (``bricks`` (n, 3) z, y, x at ``levels``, in brick order) and group: the lattice box, its frame,
+    its pool offset."""
+    levels = np.asarray(levels, np.int64)
     j0 = wv.groups[0].wavelet.order
     step = 2.0 ** levels[:, None]
     base, count, frame = [], [], []
@@ -353,7 +350,8 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     :class:`DeviceMemoryError` before allocating when one slab's work does not fit.
     """
     p = p if p is not None else plan(wv)
-    lay = layout(wv, p)
+    bricks, levels, clamped, coarse, pages = p.slots()
+    lay = layout(wv, bricks, levels)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
     resident = _check_fits(wv, cc, p, lay, budget)
     synth = {(g.wavelet.order, a): programs.build(cc, ["raytrace/expand.cl"], dict(  # compile apart
@@ -370,7 +368,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     level_lattices = lattice_of_levels(wv)
     lattices = level_lattices[lay["levels"]]
     alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
-    bounds = cla.zeros(q, tuple(int(k) * SUPER for k in p.level.shape), np.float32)
+    bounds = cla.zeros(q, (max(n, 1), SUPER, SUPER, SUPER), np.float32)
     # 64 = 4^3: the reads of a segment in no brick (weights 0; the march never samples one) stay inside
     pool = cla.empty(q, (max(lay["total"], 64), 4), np.float32) if resident else None
     spill = None if resident else Spill(lay["total"])
@@ -390,15 +388,15 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
         slots, hold = np.flatnonzero(slabs == bz), []
         first, last = int(lay["ends"][slots[0]]), int(lay["ends"][slots[-1] + 1])
         target, base = (pool, 0) if resident else (cla.empty(q, (last - first, 4), np.float32), first)
-        clamped = wv.content_mask is not None and bool(p.clamp[tuple((lay["bricks"][slots] - p.origin).T)].any())
         for gi in range(G):
-            _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, target, base, clamp, hold)
+            _expand_slab(wv, gi, lay, slots, clamped[slots], coarse[slots] & (gi == alpha), cc, synth, kernels,
+                         target, base, clamp, hold)
         local = boxes[slots].copy()
         local[..., 3] -= base
         local = _send(q, local, hold)
         at = np.zeros((len(slots), 4), np.int32)
         at[:, :3] = (lay["bricks"][slots] - p.origin)[:, ::-1]
-        _BOUNDS(kernels, q, (SUPER ** 3, len(slots)), (SUPER ** 3, 1), out=bounds, nblocks=bounds.shape[::-1],
+        _BOUNDS(kernels, q, (SUPER ** 3, len(slots)), (SUPER ** 3, 1), out=bounds, first=int(slots[0]),
                 origin=p.origin[::-1], coef=target, bricks=_send(q, at, hold),
                 frames=_send(q, frames[slots], hold), boxes=local)
         if alpha is not None:  # docs/raytracing.md §3: where alpha may dip below 0, the fine lattice's segments
@@ -417,8 +415,8 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     q.finish()
     for slots, floor in floors:
         lattices[slots[floor.get() < 0]] = level_lattices[0]
-    return BrickField(p.origin, p.level.shape, lay["bricks"], lay["levels"], frames, boxes, lattices, bounds.get(),
-                      orders, time.perf_counter() - start, pool, spill)
+    return BrickField(p.origin, p.level.shape[1:], lay["bricks"], lay["levels"], clamped, pages, frames, boxes,
+                      lattices, bounds.get()[:n], orders, time.perf_counter() - start, pool, spill)
 
 
 def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:
@@ -427,14 +425,15 @@ def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:
     coefficients at once (the parts, the pairs of one axis step, the output), and two slabs can be under way
     (build's overlap), with their pools when the pool goes to host memory."""
     pool = 16 * lay["total"]
-    bounds = 4 * p.level.size * SUPER ** 3
+    bounds = 4 * SUPER ** 3 * (len(lay["levels"]) + int(np.prod(p.level.shape[1:])))  # per slot, and a grid
     halo = 2 * max(g.wavelet.order for g in wv.groups)
     slab, slab_pool, ends = 0, 0, lay["ends"]
     for bz in np.unique(lay["bricks"][:, 0]):
         sel = np.flatnonzero(lay["bricks"][:, 0] == bz)
-        bricks, finest = lay["bricks"][sel], 2.0 ** lay["levels"][sel].min()
-        cells = (np.append(BRICK, (bricks[:, 1:].max(axis=0) - bricks[:, 1:].min(axis=0) + 1) * BRICK) + halo) / finest
-        slab = max(slab, 3 * 16 * int(np.prod(np.ceil(cells))))
+        for lv in np.unique(lay["levels"][sel]):  # each level's box holds the bricks at it and finer ones' parents
+            bricks = lay["bricks"][sel[lay["levels"][sel] <= lv]]
+            extent = (bricks[:, 1:].max(axis=0) - bricks[:, 1:].min(axis=0) + 1) * BRICK
+            slab = max(slab, 3 * 16 * int(np.prod(np.ceil((np.append(BRICK, extent) + halo) / 2.0 ** lv))))
         slab_pool = max(slab_pool, 16 * int(ends[sel[-1] + 1] - ends[sel[0]]))
     work = 2 * slab
     if bounds + work + 2 * slab_pool > budget.total or slab / 3 > budget.max_alloc:
@@ -487,8 +486,10 @@ def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) ->
     return _Part(out, lo, shape)
 
 
-def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, clamp, hold):
-    """One group's bricks of one slab into ``pool``, whose first element is pool element ``base``."""
+def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, base, clamp, hold):
+    """One group's bricks of one slab into ``pool``, whose first element is pool element ``base``; per slot,
+    ``clamped``: coefficients zeroed where unoccupied, ``nonneg``: alpha coefficients clamped at 0
+    (docs/raytracing.md §8)."""
     g, q = wv.groups[gi], cc.queue
     wav = g.wavelet
     taps = {"a": (wav.p / np.sqrt(2.0)).astype(np.float32), "d": (wav.q / np.sqrt(2.0)).astype(np.float32)}
@@ -507,7 +508,19 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
         return _band_part(cc, kernels, g, band_no, slices[band_no], *box, hold)
 
     def gather(level, src):
-        sel = slots[levels == level]
+        here = levels == level
+        for floor in (False, True):
+            if np.any(sel := here & ~clamped & (nonneg == floor)):
+                copy(slots[sel], level, src, floor)
+        if np.any(here & clamped):  # docs/raytracing.md §8; at the finest level the synthesis is done with
+            data = src.data.copy() if level > min(own) else src.data
+            keep = occupancy(wv.content_mask, wav, level, src.start, src.shape).view(np.uint8)
+            clamp(data.reshape(-1), _send(q, keep, hold))
+            for floor in (False, True):
+                if np.any(sel := here & clamped & (nonneg == floor)):
+                    copy(slots[sel], level, _Part(data, src.start, src.shape), floor)
+
+    def copy(sel, level, src, floor):
         starts = np.zeros((len(sel), 4), np.int32)
         starts[:, :3] = lay["base"][sel, gi][:, ::-1]
         boxes = np.zeros((len(sel), 4), np.int32)
@@ -516,7 +529,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
         n = boxes[:, :3].max(axis=0)
         _GATHER(kernels, q, _whole_groups((int(n[0]), int(n[1]), int(n[2]) * len(sel))), GROUP, pool=pool, src=src.data,
                 src_start=src.start[::-1], src_shape=src.shape[::-1], starts=_send(q, starts, hold),
-                boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level))
+                boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level), nonneg=int(floor))
 
     approx = part(0, need[wv.levels]) or _Part(cla.zeros(q, (1, 1, 1, 4), np.float32), need[wv.levels][0],
                                                 np.ones(3, np.int64))
@@ -538,9 +551,6 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
                                            (lo[axis], hi[axis]))
             parts = merged
         approx = parts[""]
-        if m == 1 and clamped:  # docs/raytracing.md §4: empty voxels' fine coefficients are zero
-            keep = wv.content_mask.box(approx.start, approx.shape).view(np.uint8)
-            clamp(approx.data.reshape(-1), _send(q, keep, hold))
         if m - 1 in own:
             gather(m - 1, approx)
 

@@ -21,8 +21,9 @@ from .tracer import RayTracer, view_in_fine
 def slabs(wv, count: int) -> list:
     """Up to ``count`` runs of brick layers along z, ``[(first, stop)]``, of about equal pool bytes."""
     p = plan(wv)
-    lay = layout(wv, p)
-    sizes = np.bincount(lay["bricks"][:, 0] - p.origin[0], weights=np.diff(lay["ends"]), minlength=p.level.shape[0])
+    bricks, levels, *_ = p.slots()
+    lay = layout(wv, bricks, levels)
+    sizes = np.bincount(lay["bricks"][:, 0] - p.origin[0], weights=np.diff(lay["ends"]), minlength=p.level.shape[1])
     if not sizes.any():
         return [(int(p.origin[0]), int(p.origin[0] + 1))]
     cuts = np.searchsorted(np.cumsum(sizes) / sizes.sum(), np.arange(1, count) / count, side="right")

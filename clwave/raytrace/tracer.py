@@ -27,6 +27,7 @@ from ..errors import DeviceMemoryError, InputError, finite_number
 from ..device.memory import device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
+from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .quadrature import sample_tables
 from ..io.result import RenderResult
 from ..model.wavelet import WaveletVolume
@@ -107,6 +108,7 @@ GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field b
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
 ACTIVE = 1024    # entries of a ray's active list (wavelet field); more fall back to visiting every index
 WAVELET_GROUP = 8  # rays per work-group with the wavelet field
+DETAILS_KEPT = 8   # a tracer keeps the bounds of this many details (docs/raytracing.md §8)
 #: single-precision builds may reassociate sums and flush denormals (2-3 % of a render, results moved within the
 #: arithmetic's rounding); float64 references are built as written
 FAST_MATH = ("-cl-unsafe-math-optimizations", "-cl-denorms-are-zero")
@@ -121,11 +123,13 @@ class RayTracer:
     device memory it uses (bytes, or a size such as ``"2GiB"``); a B-spline field bigger than that (or than
     the device) goes to a scratch file and renders in passes (docs/raytracing.md §6).  ``region`` (first, stop):
     only the bricks of those layers along array axis 0 (z), and rays marched inside them only: one worker's
-    part of an image rendered on a Dask cluster (:mod:`clwave.raytrace.regions`).
+    part of an image rendered on a Dask cluster (:mod:`clwave.raytrace.regions`).  ``lod=True`` (B-spline field)
+    also expands the bricks of every coarser detail, so that ``render(..., detail=)`` picks one without a new
+    set-up (docs/raytracing.md §8); it costs the coarser pools' memory and their share of the set-up.
     """
 
     def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,
-                 region=None):
+                 region=None, lod=False):
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
         if field not in FIELDS:
@@ -139,7 +143,8 @@ class RayTracer:
                                    or not region[0] < region[1]):
             raise InputError(f"region={region!r} must be (first, stop) brick layers along z with first < stop, "
                              f"for the B-spline field")
-        self.wv, self.field, self.active, self.region = wv, field, int(active), region
+        self.wv, self.field, self.active, self.region, self.lod = wv, field, int(active), region, bool(lod)
+        self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
         self.orders = [g.wavelet.order for g in wv.groups]
@@ -148,31 +153,56 @@ class RayTracer:
             self._expand()
         else:
             self._bands([g.dense_bands() for g in wv.groups])
-        self.super_bound_host, self.super_origin = superblocks(self.block_bound.get(), self.occ_origin)
-        self.super_bound = cla.to_device(self.cc.queue, self.super_bound_host)
+            self.super_bound_host, self.super_origin = superblocks(self.block_bound.get(), self.occ_origin)
+            self.super_bound = cla.to_device(self.cc.queue, self.super_bound_host)
 
     def _expand(self):
         """B-spline field: the bricks (:mod:`clwave.raytrace.bricks`), and their per-block maxima as bounds."""
-        p = plan(self.wv)
+        p = plan(self.wv, None if self.lod else 1)
         if self.region is not None:  # the bricks of the region's layers only
-            layers = p.origin[0] + np.arange(p.level.shape[0])
-            p.level[(layers < self.region[0]) | (layers >= self.region[1])] = ABSENT
+            layers = p.origin[0] + np.arange(p.level.shape[1])
+            p.level[:, (layers < self.region[0]) | (layers >= self.region[1])] = ABSENT
         self.bricks = build(self.wv, self.cc, self.budget, p)
+        self.expansions += 1
         self.setup_seconds = self.bricks.seconds
-        bound = self.bricks.bounds
         self.occ_origin = self.bricks.origin * SUPER
-        self.box = clip_box(bound, self.occ_origin)
+        full = self.field_at(0)  # full detail; other details pick other slots (docs/raytracing.md §8)
+        for name in ("box", "block_bound", "q_bound", "occupied_fraction", "field_tables", "super_bound",
+                     "super_bound_host", "super_origin"):
+            setattr(self, name, getattr(full, name))
         self.content_origin, self.content_cells = self.occ_origin * BLOCK, None  # the bricks clamp to content
         self.content = cla.to_device(self.cc.queue, np.ones(1, np.uint8))
         self.content_shape = np.zeros(3, np.int64)
-        self.block_bound = cla.to_device(self.cc.queue, bound)
-        self.q_bound = float(bound.max())
-        self.occupied_fraction = float(np.mean(bound > 0))
-        self.field_tables = self.bricks.tables(self.cc) if self.bricks.resident else None
         # explicit groups: PoCL's default for a big image (up to 4096 rays) keeps every ray's private
         # arrays at once, which overflowed its threads' stacks
         self.local_size = (8, 8)
         self.defines = group_defines(self.orders)
+
+    def field_at(self, caps) -> FieldAt:
+        """The B-spline field at detail ``caps`` (one level, or one per brick): made once per detail from the
+        bricks already expanded (docs/raytracing.md §8), the last few kept."""
+        key = np.asarray(caps, np.int8).tobytes() + bytes([np.ndim(caps)])
+        if key not in self._at:
+            if len(self._at) >= DETAILS_KEPT:
+                self._at.pop(next(iter(self._at)))
+            self._at[key] = field_at(self.bricks, self.cc, pick(self.bricks, caps))
+        return self._at[key]
+
+    def _detail(self, detail, view, scale, offset) -> tuple:
+        """(FieldAt, the meta's detail level: an int, or the least and largest over the bricks) of a render."""
+        detail = Detail.of(detail, self.wv.levels)
+        if detail != Detail() and (self.field != "bspline" or not self.lod):
+            raise InputError("detail= needs a tracer of the B-spline field that holds every detail "
+                             "(RayTracer(wv, lod=True))")
+        if self.field != "bspline":
+            return self, 0
+        f = self.bricks
+        lo = (BRICK * (np.indices(f.shape).reshape(3, -1).T + f.origin))[:, ::-1] - offset  # (x, y, z) fine
+        caps = brick_caps(detail, self.wv.levels, view, (lo / scale, BRICK / scale), self.wv.spacing)
+        if np.ndim(caps):
+            caps = caps.reshape(f.shape)
+            return self.field_at(caps), [int(caps.min()), int(caps.max())]
+        return self.field_at(caps), caps
 
     def _bands(self, dense):
         """Wavelet field: the dense bands and their tables (cl/raytrace/field_wavelet.h), bounds from the coefficients.
@@ -247,13 +277,14 @@ class RayTracer:
         the field could add along any chord through one is then at most tol / 4096."""
         return tol / 4096 / (BLOCK * SUPER * np.sqrt(3) * max(self.wv.spacing))
 
-    def grad_floor(self, precision="single") -> float:
+    def grad_floor(self, precision="single", q_bound=None) -> float:
         """World gradients of alpha at most this long count as flat when shading (``cl/raytrace/raytrace.cl``):
-        on a plateau of alpha the summed gradient is rounding noise of this size."""
+        on a plateau of alpha the summed gradient is rounding noise of this size (``q_bound``: the field's
+        largest block bound, by default at full detail)."""
         eps = np.finfo(np.float64 if precision == "double" else np.float32).eps
-        return GRAD_NOISE * eps * self.q_bound / min(self.wv.spacing)
+        return GRAD_NOISE * eps * (self.q_bound if q_bound is None else q_bound) / min(self.wv.spacing)
 
-    def _passes(self, view, scale, offset, per_image) -> list:
+    def _passes(self, view, scale, offset, per_image, at: FieldAt) -> list:
         """The bricks in the scratch file as regions of c^3 bricks that fit the device one at a time, in an order
         every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z).
 
@@ -262,10 +293,10 @@ class RayTracer:
         (lexicographically) orders them along every ray alike (docs/raytracing.md §6).
         """
         f = self.bricks
-        fixed = per_image + 2 * self.block_bound.nbytes + 4 * int(np.prod(f.shape)) + 256
+        fixed = per_image + 2 * at.block_bound.nbytes + 4 * int(np.prod(f.shape)) + 256
         room = min(self.budget.total - fixed, self.budget.max_alloc)
         sizes = np.zeros(f.shape, np.int64)  # a brick's pool and its tables (frames, boxes, lattices)
-        sizes[tuple((f.bricks - f.origin).T)] = f.slot_bytes() + 16 + 32 * len(self.orders)
+        sizes[tuple((f.bricks[at.slots] - f.origin).T)] = f.slot_bytes()[at.slots] + 16 + 32 * len(self.orders)
         if room < sizes.max():
             raise DeviceMemoryError(
                 f"ray tracing this volume needs at least {format_size(fixed + sizes.max())} of device memory (its "
@@ -277,16 +308,20 @@ class RayTracer:
         eye_region = np.floor((eye / BRICK - f.origin) / c)
         regions = []
         for r in np.argwhere(sums > 0):
-            inside = np.all(((f.bricks - f.origin) // c) == r, axis=1)
+            inside = np.all(((f.bricks[at.slots] - f.origin) // c) == r, axis=1)
             lo = (f.origin + r * c) * BRICK
-            regions.append((ray_order(r, eye_region, direction, view.perspective), np.flatnonzero(inside),
+            regions.append((ray_order(r, eye_region, direction, view.perspective), at.slots[inside],
                             lo[::-1], (lo + c * BRICK)[::-1]))
         regions.sort(key=lambda item: item[0])
         return [(slots, lo, hi) for _, slots, lo, hi in regions]
 
     def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
-               precision="single", trace=0) -> RenderResult:
+               precision="single", trace=0, detail=None) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.
+
+        ``detail`` (B-spline field): a level from 0 (full detail, the default) to ``levels``, or a
+        :class:`~clwave.raytrace.lod.Detail` (a level cap and/or a screen-space error in pixels); the bricks of
+        every detail are expanded when the tracer is made, so changing it rebuilds nothing (docs/raytracing.md §8).
 
         ``trace`` (wavelet field, tests): record each ray's active set on its first ``trace``
         segments in ``meta["active_trace"]`` (see ``cl/raytrace/field_wavelet.h``).
@@ -341,6 +376,9 @@ class RayTracer:
             base, du, dv, direction = view.eye, s * view.u, s * view.v, -view.n
         else:
             base, du, dv, direction = view.target, view.pixel * view.u, view.pixel * view.v, -view.n
+        start = time.perf_counter()
+        at, detail_level = self._detail(detail, view, scale, offset)
+        detail_seconds = time.perf_counter() - start
         light_buf = np.zeros((max(1, len(light_dirs)), 4), np.float32)
         if light_dirs:
             light_buf[: len(light_dirs), :3] = light_dirs
@@ -349,7 +387,7 @@ class RayTracer:
         per_pixel = H * W * (48 + 8 * np.dtype(real).itemsize)  # image, two stats; carry and ledger
         passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
         if self.field == "bspline" and self.bricks.resident:
-            need = self.bricks.pool_bytes + 2 * self.block_bound.nbytes + per_pixel
+            need = self.bricks.pool_bytes + 2 * at.block_bound.nbytes + per_pixel
             if need > self.budget.total:
                 raise DeviceMemoryError(
                     f"a {H}x{W} ray-traced image needs {format_size(per_pixel)} of device memory beside the "
@@ -357,7 +395,7 @@ class RayTracer:
                     f"{format_size(self.budget.total)} are allowed; render a smaller image, or make the tracer with "
                     f"a smaller device_memory= (--device-memory) so that its bricks render in passes")
         if self.field == "bspline" and not self.bricks.resident:
-            passes = self._passes(view, scale, offset, per_pixel)
+            passes = self._passes(view, scale, offset, per_pixel, at)
         elif self.region is not None:
             f = self.bricks
             lo = np.append(self.region[0], f.origin[1:]) * BRICK
@@ -377,20 +415,21 @@ class RayTracer:
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         arguments = dict(
-            image=image, stats=stats, lattice_stats=lattice_stats, width=W, height=H, bound=self.block_bound,
+            image=image, stats=stats, lattice_stats=lattice_stats, width=W, height=H, bound=at.block_bound,
             occ_origin=self.occ_origin[::-1],
-            occ_shape=self.block_bound.shape[::-1],
-            super_bound=self.super_bound, super_origin=self.super_origin[::-1], content=self.content,
+            occ_shape=at.block_bound.shape[::-1],
+            super_bound=at.super_bound, super_origin=at.super_origin[::-1], content=self.content,
             content_origin=self.content_origin[::-1], content_shape=self.content_shape[::-1],
-            super_shape=self.super_bound.shape[::-1], coarse_bound=self.coarse_bound(tol), box_lo=self.box[0],
-            box_hi=self.box[1], base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
+            super_shape=at.super_bound.shape[::-1], coarse_bound=self.coarse_bound(tol), box_lo=at.box[0],
+            box_hi=at.box[1], base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
             to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
-            grad_floor=self.grad_floor(precision), lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
+            grad_floor=self.grad_floor(precision, at.q_bound), lights=cla.to_device(q, light_buf),
+            nlights=len(light_dirs),
             phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger)
         for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
             if self.field == "bspline":
                 field_tables = None  # the last region's pool goes before the next one comes
-                field_tables = self.field_tables if slots is None else self.bricks.tables(cc, slots)
+                field_tables = at.field_tables if slots is None else self.bricks.tables(cc, None, slots)
             in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
                 kernels, q, size, self.local_size, field_tables, real_type=real, global_offset=first,
                 passes=passes is not None, pass_lo=lo, pass_hi=hi, **arguments),
@@ -410,15 +449,15 @@ class RayTracer:
             rays_terminated_early=int(np.count_nonzero(counts[:, 3] & 1)),
             rays_at_simpson_depth_limit=int(np.count_nonzero(counts[:, 3] & 2)),
             rays_active_list_overflowed=int(np.count_nonzero(counts[:, 3] & 4)),
-            occupied_blocks=round(self.occupied_fraction, 4),
+            occupied_blocks=round(at.occupied_fraction, 4), detail=detail_level, detail_seconds=detail_seconds,
             setup_seconds=self.setup_seconds, compile_seconds=compile_seconds, render_seconds=seconds,
             segments_per_second=float(counts[:, 0].sum() / seconds) if seconds > 0 else 0.0,
             passes=1 if passes is None else len(passes), device_budget=self.budget.total,
             segments_by_lattice=dict(zip(("1", "2", "4", "8+"),
                                          lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())))
         if self.field == "bspline":
-            meta.update(bricks=len(self.bricks.levels), brick_levels=np.bincount(self.bricks.levels).tolist(),
-                        brick_pool_bytes=self.bricks.pool_bytes,
+            meta.update(bricks=len(at.slots), brick_levels=np.bincount(self.bricks.levels[at.slots]).tolist(),
+                        brick_slots=len(self.bricks.levels), brick_pool_bytes=self.bricks.pool_bytes,
                         pool="device" if self.bricks.resident else "scratch file")
         if trace and self.field == "wavelet":
             meta["active_trace"] = traced.get()

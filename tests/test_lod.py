@@ -1,0 +1,201 @@
+"""Level of detail of the ray tracer's B-spline field (clwave/raytrace/lod.py, docs/raytracing.md §8): the
+bricks of each coarser detail against the closed-form model without the dropped details, clamped by a
+brute-force occupancy; renders at a detail against the reference field on that model; detail chosen at render
+time without a new expansion."""
+
+from itertools import product
+
+import numpy as np
+import pytest
+
+import clwave
+from clwave import WaveletVolume
+from clwave.model.bspline import SplineWavelet
+from clwave.model.geometry import fine_to_world, world_to_fine
+from clwave.model.mask import ContentMask
+from clwave.model.transform import Band, band_sum, synthesize
+from clwave.model.wavelet import ChannelGroup
+from clwave.raytrace import bricks, tracer as tracer_module
+from clwave.raytrace.lod import Detail, occupancy
+from clwave.raytrace.tracer import RayTracer
+from test_bricks import build, pool_field, smooth_volume
+
+pytestmark = pytest.mark.opencl
+
+
+def without_details(wv, level):
+    """The model with the kept details of levels 1 .. ``level`` dropped (the closed-form coarser model)."""
+    groups = []
+    for g in wv.groups:
+        keep = np.ones(g.kept, bool)
+        for band, sl in zip(g.bands, g.band_slices()):
+            if band.key != "aaa" and band.level <= level:
+                keep[sl] = False
+        groups.append(ChannelGroup(g.wavelet, g.channels, g.bands, g.all_positions()[keep], g.values[:, keep]))
+    return WaveletVolume(wv.shape, wv.spacing, wv.origin, wv.levels, groups, wv.channels,
+                         content_mask=wv.content_mask)
+
+
+def brute_occupancy(mask, wavelet, level, start, shape):
+    """Level-``level`` coefficient k is occupied where one of the fine B-splines inside its support (voxels
+    o_L + 2^L k .. o_L + 2^L k + (2^L - 1) j) is a non-empty voxel: one coefficient at a time."""
+    dense = np.asarray(mask)
+    step, o = 2 ** level, wavelet.offset("a", level)
+    out = np.zeros(shape, bool)
+    for idx in product(*(range(n) for n in shape)):
+        lo = [o + step * (s + i) for s, i in zip(start, idx)]
+        hi = [a + (step - 1) * wavelet.order + 1 for a in lo]
+        lo, hi = np.maximum(lo, 0), np.minimum(hi, dense.shape)
+        out[idx] = np.all(hi > lo) and dense[tuple(slice(a, b) for a, b in zip(lo, hi))].any()
+    return out
+
+
+def coarse_fields(wv, detail):
+    """The field at ``detail``, host side, per lattice level l >= detail its bricks may have: every group's
+    level-l coefficients from the host's real-line synthesis of the bands above l, zeroed where not occupied
+    (brute force), alpha clamped at 0, summed in closed form.  Returns ``field(points, level)``."""
+    parts = {}
+    for level in range(detail, wv.levels + 1):
+        for g in wv.groups:
+            bands, dense = zip(*[(b, d) for b, d in zip(g.bands, g.dense_bands())
+                                 if b.key == "aaa" or b.level > level])
+            coeffs, start = synthesize(g.wavelet, bands, dense)
+            if wv.content_mask is not None:
+                coeffs = coeffs * brute_occupancy(wv.content_mask, g.wavelet, level, start, coeffs.shape[:3])[..., None]
+            if 3 in g.channels:
+                alpha = g.channels.index(3)
+                coeffs[..., alpha] = np.maximum(coeffs[..., alpha], 0)
+            parts.setdefault(level, []).append((g, coeffs, np.array(start, float)))
+
+    def field(points, level):
+        out = np.zeros((len(points), wv.channels))
+        for g, coeffs, start in parts[level]:
+            fine = world_to_fine(points, g.wavelet.order, wv.shape, wv.spacing, wv.origin) - 2 ** level * start
+            out[:, list(g.channels)] = band_sum(g.wavelet, Band(level, "aaa", coeffs.shape[:3], 0), coeffs, fine,
+                                                False)
+        return out
+    return field
+
+
+def brick_levels(field, detail, x0) -> np.ndarray:
+    """The lattice level of the brick holding each grid-0 fine point (z, y, x) at ``detail``, -1 for none."""
+    b = np.floor(x0 / bricks.BRICK).astype(int) - field.origin
+    inside = np.all((b >= 0) & (b < field.shape), axis=1)
+    out = np.full(len(x0), -1)
+    slot = field.pages[detail][tuple(b[inside].T)]
+    out[np.flatnonzero(inside)[slot >= 0]] = field.levels[slot[slot >= 0]]
+    return out
+
+
+def test_occupancy_equals_brute_force():
+    wv = WaveletVolume.from_volume(smooth_volume(n=24, empty_corner=True), wavelet="cubic", levels=2)
+    mask = np.asarray(wv.content_mask)
+    mask[12:, 20:, :5] = False
+    wv.content_mask = ContentMask.of(mask)
+    for wavelet in (wv.groups[0].wavelet, SplineWavelet(2)):
+        for level in (0, 1, 2):
+            start, shape = (-4, -3, -5), (16, 14, 17)
+            assert np.array_equal(occupancy(wv.content_mask, wavelet, level, start, shape),
+                                  brute_occupancy(wv.content_mask, wavelet, level, start, shape))
+
+
+@pytest.mark.parametrize("wavelet,levels,content", [("cubic", 3, True), ("cubic", 2, False), ("linear", 2, True),
+                                                    (["cubic", "cubic", "cubic", "haar"], 2, True)])
+def test_coarse_bricks_equal_the_model_without_the_finer_details(wavelet, levels, content):
+    """Each coarser detail's bricks hold the model without the details of levels 1 .. L, clamped to the
+    occupied coefficients of level L (docs/raytracing.md §8); full detail is the model itself."""
+    wv = WaveletVolume.from_volume(smooth_volume(empty_corner=content), wavelet=wavelet, levels=levels)
+    wv = wv.threshold(keep=0.1)
+    if not content:
+        wv.content_mask = None
+    field = build(wv)
+    j0 = wv.groups[0].wavelet.order
+    x0 = np.random.default_rng(11).uniform(-20, 64, (250, 3))
+    world = fine_to_world(x0, j0, wv.shape, wv.spacing, wv.origin)
+    for detail in range(1, levels + 1):
+        at = field.pages[detail][field.pages[detail] >= 0]
+        assert np.all(field.levels[at] >= detail) and np.any(field.levels[at] == detail)
+        fields, where = coarse_fields(wv, detail), brick_levels(field, detail, x0)
+        ref = np.zeros((len(x0), wv.channels))
+        for level in np.unique(where[where >= 0]):
+            ref[where == level] = fields(world[where == level], level)
+        assert np.abs(ref).max() > 0.1
+        np.testing.assert_allclose(pool_field(wv, field, x0, detail=detail), ref, rtol=0,
+                                   atol=2e-6 * np.abs(ref).max())
+        if not content:  # nothing clamped: the colours of the closed-form model without the finer details
+            np.testing.assert_allclose(ref[:, :3], without_details(wv, detail).evaluate(world)[:, :3], rtol=0,
+                                       atol=1e-9 * np.abs(ref).max())
+
+
+def test_coarse_detail_renders_the_coarser_model():
+    """An X-ray render at detail L against the reference (wavelet) field of the model without the details of
+    levels 1 .. L, within the tolerance (colours: alpha is clamped at 0 at coarser details); shaded, segments
+    2^L cells long."""
+    vol = smooth_volume(n=40)
+    rgba = clwave.Volume(vol.data * np.array([1.0, 0.8, 0.6, 0.05], np.float32), spacing=vol.spacing)
+    wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.1)
+    wv.content_mask = None
+    tr = RayTracer(wv, lod=True)
+    cam = clwave.Camera(25, 15, size=8)
+    full = tr.render(cam, tolerance=1e-3)
+    for level in (1, 2, 3):
+        ref = RayTracer(without_details(wv, level), field="wavelet").render(cam, tolerance=1e-4, absorption=False)
+        xray = tr.render(cam, tolerance=1e-3, detail=level, absorption=False)
+        assert np.max(np.abs(xray.image[..., :3] - ref.image[..., :3])) <= 1.1e-3
+        coarse = tr.render(cam, tolerance=1e-3, detail=level)
+        lattice = ("1", "2", "4", "8+")[level]
+        assert coarse.meta["segments_by_lattice"][lattice] > 0.5 * coarse.meta["segments"]
+        assert coarse.meta["detail"] == level and coarse.meta["segments"] < full.meta["segments"]
+        assert np.max(np.abs(coarse.image - full.image)) > 1e-3  # the details dropped show
+
+
+def test_detail_changes_rebuild_nothing(monkeypatch):
+    """After the set-up, renders at any detail (levels, screen-space errors, back to full) expand nothing; full
+    detail is bit for bit the image of a tracer without the coarser details."""
+    wv = WaveletVolume.from_volume(smooth_volume(n=40, empty_corner=True), wavelet="cubic", levels=2)
+    wv = wv.threshold(keep=0.1)
+    rgba = RayTracer(wv, lod=True)
+    plain = RayTracer(wv).render(clwave.Camera(30, 20, size=16), tolerance=1e-3, absorption=False)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a detail change expanded bricks")
+
+    monkeypatch.setattr(tracer_module, "build", refuse)
+    monkeypatch.setattr(tracer_module, "plan", refuse)
+    monkeypatch.setattr(bricks, "build", refuse)
+    cam = clwave.Camera(30, 20, size=16)
+    images = {}
+    for detail in (0, 2, 1, Detail(pixels=4.0), Detail(level=1, pixels=0.5), None):
+        res = rgba.render(cam, tolerance=1e-3, absorption=False, detail=detail)
+        images[repr(detail)] = res.image
+        assert res.meta["detail_seconds"] < 1.0
+    assert rgba.expansions == 1
+    assert np.array_equal(images["None"], plain.image) and np.array_equal(images["0"], plain.image)
+    assert not np.array_equal(images["2"], plain.image)
+
+
+def test_screen_space_error_picks_levels_by_projected_cell_size():
+    """Orthographic: the coarsest level whose cells project to at most the error in pixels, the same for every
+    brick; perspective: finer near the eye than far from it."""
+    wv = WaveletVolume.from_volume(smooth_volume(n=40), wavelet="cubic", levels=3).threshold(keep=0.1)
+    wv.content_mask = None
+    tr = RayTracer(wv, lod=True)
+    cam = clwave.Camera(30, 20, size=10)  # the default framing: the volume's ~40 cells over 10 pixels
+    pixel = cam.view(wv).pixel / max(wv.spacing)  # cells per pixel
+    for pixels in (0.5, 1.0, 2.0):
+        want = int(np.clip(np.floor(np.log2(pixels * pixel)), 0, 3))
+        assert tr.render(cam, tolerance=1e-2, absorption=False, detail=Detail(pixels=pixels)).meta["detail"] == want
+    near = clwave.Camera(30, 20, size=16, perspective=True, distance=30.0, fov=60)
+    lo, hi = tr.render(near, tolerance=1e-2, absorption=False, detail=Detail(pixels=2.0)).meta["detail"]
+    assert lo < hi
+
+
+def test_bad_detail_is_one_clear_error():
+    wv = WaveletVolume.from_volume(smooth_volume(n=24), wavelet="cubic", levels=2).threshold(keep=0.1)
+    cam = clwave.Camera(30, 20, size=4)
+    with pytest.raises(clwave.errors.InputError, match="lod=True"):
+        RayTracer(wv).render(cam, absorption=False, detail=1)
+    tr = RayTracer(wv, lod=True)
+    for bad in (3, -1, 1.5, "coarse", Detail(pixels=0.0)):
+        with pytest.raises(clwave.errors.InputError, match="detail|pixels"):
+            tr.render(cam, absorption=False, detail=bad)
