@@ -15,7 +15,7 @@ from .model.wavelet import WaveletVolume
 from .model.camera import Camera
 from .io.result import RenderResult
 from .splat.renderer import SplatRenderer, splat
-from .splat.progressive import progressive
+from .progressive import progressive
 from .raytrace.tracer import Phong, RayTracer, raytrace
 
 __version__ = "0.1.0"

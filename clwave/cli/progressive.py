@@ -1,17 +1,21 @@
-"""``clwave progressive``: progressive splatting frames as a GIF or a folder of PNGs."""
+"""``clwave progressive``: progressive frames (splatting, or ray tracing) as a GIF or a folder of PNGs."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import InputError
-from .options import add_command, build_model, check_output, make_camera, parse_device_memory, parse_window, write_gif
+from .options import (add_command, add_raytrace_options, build_model, check_output, make_camera, numbers,
+                      parse_device_memory, parse_lights, parse_window, write_gif)
 
 
 def run(args):
-    from ..splat.progressive import check_schedule, progressive
-    from ..io.result import RenderResult, resolve_window
+    from ..progressive import check_error, progressive
+    from ..splat.progressive import check_schedule
+    from ..io.result import resolve_window
 
     out = Path(args.output)
     as_folder = out.suffix == ""
@@ -25,20 +29,37 @@ def run(args):
     if args.stats:
         check_output(args.stats, args.force)
     camera = make_camera(args)
-    steps = 8 if args.steps is None and args.budget is None else args.steps
-    check_schedule(steps, args.budget)
+    check_error(args.error)
+    raytrace = args.method == "raytrace"
+    if raytrace:
+        if args.coarse is not None:
+            raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
+        if args.field != "bspline":
+            raise InputError("progressive ray tracing takes the B-spline field; leave out --field")
+        if not (np.isfinite(args.tolerance) and args.tolerance > 0):
+            raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
+        steps = args.steps
+        options = dict(tolerance=args.tolerance, lights=parse_lights(args), shading=not args.no_shading,
+                       absorption=not args.xray)
+    else:
+        if camera.perspective:
+            raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
+        steps = 8 if args.steps is None and args.budget is None else args.steps
+        check_schedule(steps, args.budget)
+        options = dict(omega_s=args.omega_s, coarse=args.coarse)
+    background = numbers(args.background, "--background", (3,))
     device_memory = parse_device_memory(args)
-    wv, _ = build_model(args)
-    frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device,
-                              omega_s=args.omega_s, coarse=args.coarse, device_memory=device_memory))
+    wv, _ = build_model(args, rgba=raytrace and not args.xray)
+    frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device, method=args.method,
+                              error=args.error, device_memory=device_memory, **options))
     window = parse_window(args)
-    if window == "auto":  # the final image's window for every frame: refinement stays visible
+    if window == "auto" and frames[-1].result().is_xray:  # the final image's window for every frame
         window = resolve_window(frames[0].final_image()[..., :3], "auto")
-    pictures = [RenderResult(f.image, f.meta).to_uint8(window) for f in frames]
+    pictures = [f.result().to_uint8(window, background) for f in frames]
     if as_folder:
         out.mkdir(parents=True, exist_ok=True)
-        for f, picture in zip(frames, pictures):
-            RenderResult(f.image, f.meta).save(out / f"frame_{f.index:03d}.png", window=window, overwrite=True)
+        for f in frames:
+            f.save(out / f"frame_{f.index:03d}.png", window=window, background=background, overwrite=True)
     else:
         write_gif(out, pictures, 0.5, args.force)
     figures = [f.figures() for f in frames]
@@ -47,16 +68,26 @@ def run(args):
         text = json.dumps(dict(frames=figures, meta=frames[-1].meta), indent=2, default=str).encode()
         write_atomic(args.stats, lambda fh: fh.write(text), args.force)
     for f in figures:
-        print(f"frame {f['index']}: {f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} % of those kept, "
-              f"{100 * f['voxel_fraction']:.3f} % of the voxels) at {f['seconds']:.3f} s; error against the final "
-              f"image: RMS {f['relative_rms_error']:.2e}, max {f['relative_max_error']:.2e} of its largest value")
+        what = (f"detail {f['detail']} on a 1/{f['reduction']} image" if raytrace else
+                f"{f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} % of those kept, "
+                f"{100 * f['voxel_fraction']:.3f} % of the voxels)")
+        print(f"frame {f['index']}: {what} at {f['seconds']:.3f} s; error against the final image: RMS "
+              f"{f['relative_rms_error']:.2e} (estimated {f['estimated_relative_rms_error']:.2e}), max "
+              f"{f['relative_max_error']:.2e} (estimated {f['estimated_relative_max_error']:.2e}) of its largest "
+              f"value")
     return 0
 
 
 def add_parser(sub):
-    p = add_command(sub, "progressive", "progressive splatting frames as a GIF or a folder of PNGs", run,
+    p = add_command(sub, "progressive", "progressive frames, cheap to exact, as a GIF or a folder of PNGs", run,
                     "output .gif, or a folder for PNG frames", view=True)
+    p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
+                   help="splat (default): coefficients by importance; raytrace: coarse detail on a small image "
+                        "first, ending at the direct render (needs a classified model, or --xray)")
+    add_raytrace_options(p)
     k = p.add_mutually_exclusive_group()
-    k.add_argument("--steps", type=int, help="number of frames (default 8)")
+    k.add_argument("--steps", type=int, help="number of frames (splatting: default 8; ray tracing: the last N)")
     k.add_argument("--budget", type=float, help="seconds: stop when the next step would not fit")
+    p.add_argument("--error", type=float, help="stop at the first frame whose estimated relative RMS error is "
+                                               "at most this, e.g. 0.01")
     p.add_argument("--stats", help="per-frame figures as .json")

@@ -463,6 +463,17 @@ class RayTracer:
             meta["active_trace"] = traced.get()
         return RenderResult(img, meta)
 
+    def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, steps=None,
+               budget=None, error=None):
+        """Frames of ``camera`` from cheap to exact (:mod:`clwave.raytrace.progressive`, docs/raytracing.md §9),
+        for a viewer that shows each as it comes: a generator (``RaytraceFrame`` s: ``image``, ``figures()``),
+        the last bit for bit :meth:`render` at full detail; stop iterating when the view changes (nothing is
+        left running).  Needs ``lod=True``; use it from one thread at a time."""
+        from .progressive import frames
+
+        options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
+        return frames(self, camera, options, steps, budget, error)
+
     def _phong(self, shading, absorption):
         """(Phong or None, what the meta says about shading)."""
         if not absorption:

@@ -1,0 +1,150 @@
+"""Progressive ray tracing (docs/raytracing.md §9): frames from cheap to exact, a coarse detail on a reduced
+image first, then finer details on larger images, ending at full detail, the full image and the requested
+tolerance: bit for bit the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error
+against the final image (:class:`clwave.progressive.ErrorEstimate`); :meth:`RayTracer.refine` is the same
+sequence for a viewer, which stops iterating when the view changes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import map_coordinates
+
+from ..errors import InputError
+from ..model.camera import Camera
+from ..progressive import ErrorEstimate, FinalImage, Frame, check_error, reached
+from .tracer import RayTracer
+
+#: the smallest reduced image side: coarser frames would be mostly edge
+MIN_SIDE = 8
+
+
+@dataclass(kw_only=True)
+class RaytraceFrame(Frame):
+    """One step of progressive ray tracing: ``image`` (H, W, C) at the full size, rendered at ``detail`` on an
+    image ``reduction`` times smaller per side (then interpolated); errors as :class:`~clwave.progressive.Frame`
+    (the final image: full detail, full size, the requested tolerance)."""
+
+    detail: int
+    reduction: int
+
+    def own_figures(self) -> dict:
+        return dict(detail=self.detail, reduction=self.reduction)
+
+
+def schedule(levels: int, size, steps=None) -> list:
+    """``[(detail, reduction)]`` from cheap to exact: ``levels + 1`` frames on images ``2^levels .. 1`` times
+    smaller per side (no side below :data:`MIN_SIDE`), each a detail finer, from ``levels - 1`` to full detail on
+    the last two (docs/raytracing.md §9); ``steps`` keeps the last that many."""
+    top = max(0, int(np.floor(np.log2(max(1, min(size) / MIN_SIDE)))))
+    frames = [(max(r - 1, 0), 2 ** min(r, top)) for r in range(levels, -1, -1)]
+    return frames if steps is None else frames[-int(steps):]
+
+
+def reduced_camera(view, camera: Camera, reduction: int) -> Camera:
+    """The camera of the same view with ``reduction`` times larger pixels (sides rounded up, same centre)."""
+    H, W = view.size
+    h, w = -(-H // reduction), -(-W // reduction)
+    fov = camera.fov
+    if view.perspective:
+        s = 2.0 * np.tan(np.radians(view.fov) / 2.0) / H * reduction  # image-plane units per reduced pixel
+        fov = float(np.degrees(2.0 * np.arctan(s * h / 2.0)))
+    return Camera(camera.azimuth, camera.elevation, size=(h, w), target=view.target, extent=view.pixel * reduction * w,
+                  perspective=view.perspective, distance=float(np.linalg.norm(view.eye - view.target)), fov=fov)
+
+
+def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:
+    """A reduced image at the full ``size``: linear interpolation at the full pixels' centres."""
+    if reduction == 1:
+        return image
+    H, W = size
+    h, w = image.shape[:2]
+    rows = (np.arange(H) + 0.5 - H / 2) / reduction + h / 2 - 0.5
+    cols = (np.arange(W) + 0.5 - W / 2) / reduction + w / 2 - 0.5
+    grid = np.meshgrid(rows, cols, indexing="ij")
+    return np.stack([map_coordinates(image[..., c], grid, order=1, mode="nearest") for c in range(image.shape[2])],
+                    axis=-1).astype(np.float32)
+
+
+def progressive(wv, camera: Camera, steps=None, budget=None, device=None, *, error=None, tolerance=1e-3,
+                lights=None, shading=True, absorption=True, device_memory=None, tracer: RayTracer | None = None):
+    """Yield :class:`RaytraceFrame` s from cheap to exact; the last is bit for bit the image of
+    ``RayTracer.render`` (full detail, the full image, ``tolerance``).
+
+    Parameters
+    ----------
+    steps : int >= 1, optional
+        The last ``steps`` frames of the schedule (default every one: a frame per level of the model, the
+        coarsest on an image about 2^levels times smaller per side).
+    budget : float > 0, optional
+        Seconds: stop before a frame expected to end beyond the budget (from the last frame's time per pixel);
+        the first frame is always made.
+    error : float in (0, 1), optional
+        Stop at the first frame whose estimated relative RMS error is at most this.
+    tolerance, lights, shading, absorption :
+        As for :func:`clwave.raytrace`; every frame uses them.
+    tracer : RayTracer, optional
+        One made with ``lod=True``; without it, calls on the same model and device share one.
+    """
+    if tracer is None:
+        from ..device.context import ComputeContext
+        from ..device.memory import parse_cap
+
+        cc, cap = ComputeContext.get(device), parse_cap(device_memory)
+        tracer = wv.shared(("raytrace-lod", cc.info.id, cap), lambda: RayTracer(wv, device=cc, device_memory=cap,
+                                                                              lod=True))
+    options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
+    return frames(tracer, camera, options, steps, budget, error)
+
+
+def frames(tracer: RayTracer, camera: Camera, options: dict, steps=None, budget=None, error=None):
+    """The frames of :func:`progressive` from a tracer (:meth:`RayTracer.refine`), arguments checked first."""
+    check_error(error)
+    if steps is not None and (isinstance(steps, bool) or int(steps) != steps or steps < 1):
+        raise InputError(f"steps={steps!r} must be a whole number of frames, at least 1",
+                         cli=f"--steps {steps} must be a whole number of frames, at least 1")
+    if budget is not None and not (np.isfinite(budget) and budget > 0):
+        raise InputError(f"budget={budget!r} must be a positive number of seconds",
+                         cli=f"--budget {budget:g} must be a positive number of seconds")
+    if not tracer.lod:
+        raise InputError("progressive ray tracing needs a tracer of every detail: RayTracer(wv, lod=True)")
+    if not isinstance(camera, Camera):
+        raise InputError("camera must be a clwave.Camera")
+    return _frames(tracer, camera, options, steps, budget, error)
+
+
+def _frames(tracer, camera, options, steps, budget, error):
+    view = camera.view(tracer.wv)
+    plan = schedule(tracer.wv.levels, view.size, steps)
+    final = FinalImage(lambda: tracer.render(camera, **options).image)
+    start = time.perf_counter()
+
+    def render(detail, reduction):
+        res = tracer.render(camera if reduction == 1 else reduced_camera(view, camera, reduction), detail=detail,
+                            **options)
+        return upsample(res.image, view.size, reduction), res.meta
+
+    estimate = ErrorEstimate()
+    if len(plan) > 1:  # the first frame's estimate: the step from a frame a detail and half the side coarser
+        estimate.add(render(min(plan[0][0] + 1, tracer.wv.levels), 2 * plan[0][1])[0])
+    last = None
+    for index, (detail, reduction) in enumerate(plan):
+        if budget is not None and last is not None:
+            elapsed = time.perf_counter() - start
+            if elapsed + last * (plan[index - 1][1] / reduction) ** 2 > budget:
+                return
+        t0 = time.perf_counter()
+        image, meta = render(detail, reduction)
+        last = time.perf_counter() - t0
+        rms, top = estimate.add(image)
+        if index == len(plan) - 1 and (detail, reduction) == (0, 1):
+            final.image, rms, top = image, 0.0, 0.0
+        frame = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
+                              estimated_relative_rms_error=rms, estimated_relative_max_error=top, meta=meta,
+                              _final=final, detail=detail, reduction=reduction)
+        yield frame
+        if reached(frame, error):
+            return
