@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|footprints|splat|progressive|raytrace|scale|all [--size 128 256] [--repeats 3]
+    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|scale|all [--size 128 256] [--repeats 3]
                           [--views 4] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
 
 Every benchmark runs once per ``--size`` (hydrogen phantom of that many voxels per axis, made
@@ -28,6 +28,10 @@ phantom and image size in the same run when VTK is installed (tools/compare_peer
 ``progressive``: frames of 1, 2, 4 and 8 % of the voxels (``--progressive-keep`` 0.08 in 4
 doubling steps) at 512², single resolution and with coarse framebuffers (``coarse=2e-2``); per
 frame the time since the start of the view, energy, and RMS error against the final image.
+
+``lod``: level of detail and progressive ray tracing (docs/raytracing.md §8, §9): hydrogen RGBA, cubic, 3
+levels, 5 % and 0.1 %, at ``--raytrace-image``; set-up with and without every detail, per-detail render times
+(interleaved), the time to change detail, and the progressive frames with their measured and estimated errors.
 
 ``scale`` (not in ``all``): volumes bigger than memory (docs/chunked.md).  A hydrogen phantom of
 ``--size``³ float32 voxels (or ``--scale-shape Z,Y,X`` of ``--scale-dtype``) is written to a Zarr
@@ -354,6 +358,51 @@ def _raytrace_cases(tracer, fast, wv, size, crop, n_views) -> dict:
     return dict(image=f"{size}x{size}", compile_seconds=compile_seconds, cases=cases)
 
 
+def bench_lod(args) -> dict:
+    """Level of detail and progressive ray tracing (docs/raytracing.md §8, §9): hydrogen RGBA, cubic, 3 levels,
+    5 % and 0.1 % kept, shaded, tolerance 1e-2, ``--raytrace-image``; set-up without and with every detail
+    (``lod=True``), each detail's render (interleaved over the views, detail by detail per view), the time to
+    change detail (the first render at a detail: its bounds laid out; then kept), and the progressive frames of
+    the first view: time since the start, detail, reduction, measured and estimated relative RMS error."""
+    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+    model = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3)
+    small = WaveletVolume.from_volume(TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=24)),
+                                      wavelet="cubic", levels=3).threshold(keep=0.05)
+    clwave.RayTracer(small, device=args.device, lod=True)  # warm-up: the set-up's kernels built apart
+    cams = [clwave.Camera(az, el, size=args.raytrace_image) for az, el in views(args.raytrace_views)]
+    out = dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3,
+                            tolerance=1e-2, image=args.raytrace_image, views=args.raytrace_views), keeps={})
+    for keep in (0.05, 0.001):
+        wv = model.threshold(keep=keep)
+        case = {}
+        for lod in (False, True):
+            start = time.perf_counter()
+            tracer = clwave.RayTracer(wv, device=args.device, lod=lod)
+            case["setup_lod" if lod else "setup"] = dict(seconds=time.perf_counter() - start,
+                                                         pool_bytes=tracer.bricks.pool_bytes)
+        details = list(range(wv.levels + 1)) + [clwave.Detail(pixels=1.0)]
+        tracer.render(cams[0], tolerance=1e-2, detail=None)  # the kernel built apart
+        change, walls, metas = {}, {}, {}
+        for cam in cams:
+            for detail in details:
+                res = tracer.render(cam, tolerance=1e-2, detail=detail)
+                change.setdefault(repr(detail), res.meta["detail_seconds"])  # the first at this detail
+                walls.setdefault(repr(detail), []).append(res.meta["render_seconds"])
+                metas[repr(detail)] = res.meta
+        case["details"] = {k: dict(render=summary(walls[k]), change_seconds=change[k], detail=metas[k]["detail"],
+                                   segments=metas[k]["segments"], bricks=metas[k]["bricks"],
+                                   segments_by_lattice=metas[k]["segments_by_lattice"]) for k in walls}
+        frames = []
+        for f in tracer.refine(cams[0], tolerance=1e-2):
+            frames.append(f)
+        case["progressive"] = [{k: f.figures()[k] for k in ("detail", "reduction", "seconds", "relative_rms_error",
+                                                            "estimated_relative_rms_error", "relative_max_error",
+                                                            "estimated_relative_max_error")} for f in frames]
+        out["keeps"][str(keep)] = case
+    out["peak_resident_gib"] = peak_resident_gib()
+    return out
+
+
 def bench_scale(args) -> dict:
     shape = args.scale_shape or (args.size,) * 3
     name = f"hydrogen_{'x'.join(map(str, shape))}_{args.scale_dtype}"
@@ -441,7 +490,7 @@ def scale_step(spec) -> dict:
 
 
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
-              "progressive": bench_progressive, "raytrace": bench_raytrace, "scale": bench_scale}
+              "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "scale": bench_scale}
 
 
 def main(argv=None):
