@@ -199,3 +199,29 @@ def test_bad_detail_is_one_clear_error():
     for bad in (3, -1, 1.5, "coarse", Detail(pixels=0.0)):
         with pytest.raises(clwave.errors.InputError, match="detail|pixels"):
             tr.render(cam, absorption=False, detail=bad)
+
+
+def test_empty_space_stays_empty_at_every_detail():
+    """The haze bound (docs/raytracing.md §4) at every detail: at detail L the thresholded model, which rings
+    far into the empty margin, is seen only by rays passing within the reach of an occupied level-L
+    coefficient of the content, (2^L - 1) j + 2^L j cells (its refinement window and its support)."""
+    from test_raytrace import classified_ball
+
+    vol = classified_ball(n=64)
+    thin = WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.05)
+    margin = vol.voxel_to_world(np.argwhere(vol.content_mask() == 0)[::97])
+    assert np.abs(thin.evaluate(margin)[:, 3]).max() > 1e-3  # the model rings in the empty margin
+    cam = clwave.Camera(30, 20, size=48, extent=80.0)
+    view = cam.view(thin)
+    H, W = view.size
+    r, c = np.mgrid[:H, :W]
+    centres = (view.target + ((c + 0.5 - W / 2) * view.pixel)[..., None] * view.u
+               + ((H / 2 - r - 0.5) * view.pixel)[..., None] * view.v).reshape(-1, 3)
+    content = vol.voxel_to_world(np.argwhere(vol.content_mask()))
+    off = content[None] - centres[:, None]  # (pixels, voxels, 3)
+    distance = np.linalg.norm(off - (off @ view.n)[..., None] * view.n, axis=2).min(axis=1).reshape(H, W)
+    tracer, j = RayTracer(thin, lod=True), 4
+    for detail in range(3):
+        image = tracer.render(cam, tolerance=1e-4, detail=detail).image
+        far = distance > (2 ** detail - 1) * j + 2 ** detail * j
+        assert 0.1 < far.mean() and np.all(image[far] == 0) and image.max() > 0.1
