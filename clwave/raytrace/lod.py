@@ -122,16 +122,14 @@ class Detail:
         return detail
 
 
-def brick_caps(detail: Detail, levels: int, view, bricks_lo, spacing, eye=None) -> np.ndarray | int:
-    """The detail level of every brick for one view: ``detail.level``, or where ``detail.pixels`` allows a
-    coarser one, the coarsest whose cells (``2^l`` fine cells of the largest spacing) project to at most that
-    many pixels; an int where one level serves every brick.
+def brick_caps(detail: Detail, levels: int, view, bricks_lo, spacing) -> np.ndarray | int:
+    """The detail level of every brick for one view under ``detail.pixels``: the coarsest level (at least
+    ``detail.level``) whose cells (``2^l`` fine cells of the largest spacing) project to at most that many
+    pixels; an int where one level serves every brick (orthographic views).
 
-    ``bricks_lo`` (n, 3): the bricks' boxes' corners in world (x, y, z) with their edge (``BRICK`` fine cells
-    of the spacing); ``eye`` the view's eye (perspective).
+    ``bricks_lo``: the bricks' boxes' corners (n, 3) in world (x, y, z) and their edge (``BRICK`` fine cells of
+    the spacing, per axis).
     """
-    if detail.pixels is None:
-        return detail.level
     cell = float(max(spacing))
     if not view.perspective:
         pixel = view.pixel  # world units per pixel

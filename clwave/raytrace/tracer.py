@@ -196,6 +196,8 @@ class RayTracer:
                              "(RayTracer(wv, lod=True))")
         if self.field != "bspline":
             return self, 0
+        if detail.pixels is None:
+            return self.field_at(detail.level), detail.level
         f = self.bricks
         lo = (BRICK * (np.indices(f.shape).reshape(3, -1).T + f.origin))[:, ::-1] - offset  # (x, y, z) fine
         caps = brick_caps(detail, self.wv.levels, view, (lo / scale, BRICK / scale), self.wv.spacing)
