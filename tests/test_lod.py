@@ -225,3 +225,19 @@ def test_empty_space_stays_empty_at_every_detail():
         image = tracer.render(cam, tolerance=1e-4, detail=detail).image
         far = distance > (2 ** detail - 1) * j + 2 ** detail * j
         assert 0.1 < far.mean() and np.all(image[far] == 0) and image.max() > 0.1
+
+
+def test_coarser_details_render_in_passes_like_in_one():
+    """Bricks beyond the device (docs/raytracing.md §6) at a coarser detail: the passes take that detail's
+    slots, and the image is the one pass's, to rounding."""
+    from test_bricks import out_of_core_model
+
+    wv = out_of_core_model()
+    whole, parts = RayTracer(wv, lod=True), RayTracer(wv, lod=True, device_memory="14MiB")
+    assert not parts.bricks.resident
+    cam = clwave.Camera(30, 20, size=40)
+    for detail in (0, 1, 3):
+        a, b = whole.render(cam, tolerance=1e-3, detail=detail), parts.render(cam, tolerance=1e-3, detail=detail)
+        assert b.meta["pool"] == "scratch file" and (b.meta["passes"] > 1 or detail > 0)
+        assert a.meta["segments"] == b.meta["segments"] and a.meta["detail"] == detail
+        assert np.max(np.abs(a.image - b.image)) <= 1e-6 * np.abs(a.image).max()
