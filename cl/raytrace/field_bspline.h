@@ -127,7 +127,13 @@ __attribute__((always_inline)) inline void group_field(__global const float4 *co
 }
 
 /* The alpha group's part of alpha's fine gradient at all lanes of TYPE at once: the same
- * separable sum as group_field on the alpha channel, with the derivative weights d? */
+ * separable sum as group_field on the alpha channel, with the derivative weights d?.  Post-classified
+ * (CLW_POST), the gradient of the scalar (channel 0) instead: normals come from it (classify.h). */
+#ifdef CLW_POST
+#define GRADIENT_LANE x
+#else
+#define GRADIENT_LANE w
+#endif
 #define GROUP_GRADIENT(TYPE, NAME)                                                                        \
     __attribute__((always_inline)) inline void NAME(__global const float4 *corner, const int sy, const int sz, \
                                                     const int j, const TYPE *wx, const TYPE *wy, const TYPE *wz, \
@@ -140,7 +146,7 @@ __attribute__((always_inline)) inline void group_field(__global const float4 *co
                 __global const float4 *row = corner - rz * sz - ry * sy;                                  \
                 TYPE line = 0, line_dx = 0;                                                               \
                 _Pragma("unroll") for (int rx = 0; rx < j; rx++) {                                        \
-                    const TYPE a = (TYPE)(row[-rx].w);                                                    \
+                    const TYPE a = (TYPE)(row[-rx].GRADIENT_LANE);                                        \
                     line = fma(a, wx[rx], line);                                                          \
                     line_dx = fma(a, dx[rx], line_dx);                                                    \
                 }                                                                                         \
