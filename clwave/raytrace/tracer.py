@@ -30,6 +30,7 @@ from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
 from .classified import ScalarRange, bernstein_matrix
 from .quadrature import sample_tables
 from ..io.result import RenderResult
+from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume
 
 
@@ -296,6 +297,8 @@ class RayTracer:
         """
         wv, cc = self.wv, self.cc
         tol = _checked_view(camera, tolerance)
+        if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
+            transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
         if transfer_function is not None:
             self._check_post(absorption)
         elif absorption and wv.channels != 4:
@@ -504,7 +507,8 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     transfer_function : TransferFunction, optional
         Classify a scalar model while rendering (post-classification, docs/raytracing.md §8): colour and
         opacity as ``TransferFunction.classify`` gives them (docs/model.md §5), normals from the scalar's
-        gradient; another transfer function or window needs no new set-up.
+        gradient; another transfer function or window needs no new set-up.  Default: the one a scalar model
+        was made with (``WaveletVolume.from_volume(..., transfer_function=)``, kept in its ``.clw`` file).
     tracer : RayTracer, optional
         Render with this one; without it, calls on the same model, device and field share one
         (:meth:`WaveletVolume.shared`): the field is set up once.
