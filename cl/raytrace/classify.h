@@ -6,7 +6,7 @@
  * the antiderivative of u's Chebyshev series.  The segment is cut where u crosses a breakpoint: the
  * Bernstein coefficients of u on a span bound its range (convex hull), a span whose range holds one
  * breakpoint and whose coefficients change sign once about it holds exactly one crossing, found by
- * bisection; other spans are halved (de Casteljau).  Each piece's emission integral comes from
+ * bisection, and the span is cut there; other spans are halved (de Casteljau).  Each piece's emission integral comes from
  * adaptive Simpson on the classified, shaded integrand (quadrature.h), its tolerance the piece's share
  * of the segment's.
  *
@@ -19,7 +19,7 @@
 #define CLW_CLASSIFY_H
 #include "raytrace/quadrature.h"
 
-#define POST_DEPTH 12     /* spans are halved at most this often; a span still straddling is flagged */
+#define POST_DEPTH 16      /* spans are cut at most this often; a span still straddling is flagged */
 #define POST_BISECTIONS 40 /* bisection steps for a crossing (stops earlier at the arithmetic's resolution) */
 
 /* One piece of a segment: u's series, its antiderivative, the gradient series of s (shading) and the
@@ -42,11 +42,26 @@ inline int tf_interval(__global const real4 *tf, const int K, const real u)
     return k;
 }
 
-/* int alpha dxi from the piece's start to xi (exact: alpha is linear in u there) */
+/* int alpha dxi from the piece's start to xi (exact: alpha is linear in u there), for e^{-A} inside the piece */
 inline real piece_depth(const Piece *C, const real xi)
 {
     const real du_int = cheb1(C->ui, NS + 1, xi) - C->ui_a - C->line.x * (xi - C->a);
     return C->line.y * (xi - C->a) + C->line.z * du_int;
+}
+
+/* int alpha dxi over the whole piece [a, b] by 5-point Gauss-Legendre: exact for alpha's degree (at most 9),
+ * and free of the cancellation in piece_depth's differences where the transfer function is steep */
+inline real piece_total(const Piece *C, const real a, const real b)
+{
+    const real x[3] = {0, (real)0.538469310105683091, (real)0.906179845938663993};
+    const real w[3] = {(real)0.568888888888888889, (real)0.478628670499366468, (real)0.236926885056189088};
+    real sum = 0;
+    for (int i = 0; i < 3; i++)
+        for (int side = -1; side <= (i ? 1 : -1); side += 2) {
+            const real u = cheb1(C->us, NS, (a + b) / 2 + side * x[i] * (b - a) / 2);
+            sum += w[i] * fmax(C->line.y + C->line.z * (u - C->line.x), (real)0);
+        }
+    return sum * (b - a) / 2;
 }
 
 /* the shaded emission times e^{-A} at xi (A from the segment's start) */
@@ -103,17 +118,17 @@ inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, 
     for (int p = 0; p <= 8; p++)
         f9[p] = piece_point(C, P, nodes, a + (b - a) * p / 8);
     *emission += piece_simpson(C, P, f9, nodes, a, b, tol * (b - a) / 2, evals, flags);
-    C->depth_a += piece_depth(C, b);
+    C->depth_a += piece_total(C, a, b);
 }
 
-/* Whether u - v has exactly one root in the span of Bernstein coefficients c: the coefficients change sign
- * once (Descartes' rule for the Bernstein basis), ends non-zero */
-inline bool one_crossing(const real *c, const real v)
+/* Whether u - v has exactly one root inside the span of Bernstein coefficients c: the coefficients change sign
+ * once (Descartes' rule for the Bernstein basis), the ends clear of v by more than eps */
+inline bool one_crossing(const real *c, const real v, const real eps)
 {
     int changes = 0;
     for (int i = 1; i < NS; i++)
         changes += (c[i - 1] - v) * (c[i] - v) < 0;
-    return changes == 1 && c[0] != v && c[NS - 1] != v;
+    return changes == 1 && fabs(c[0] - v) > eps && fabs(c[NS - 1] - v) > eps;
 }
 
 /* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from the scalar s at the
@@ -145,7 +160,7 @@ inline real4 classified_segment(const real *s, const real3 *grad, const real rad
     C.radius = radius;
     C.depth_a = 0;
     real3 emission = (real3)(0);
-    /* spans left to right: the right halves wait on a stack */
+    /* spans left to right: the right parts wait on a stack, one per depth at most */
     real stack_c[POST_DEPTH][NS], stack_ab[POST_DEPTH][2];
     int stack_depth[POST_DEPTH], top = 0, depth = 0;
     real a = -1, b = 1;
@@ -155,51 +170,55 @@ inline real4 classified_segment(const real *s, const real3 *grad, const real rad
             lo = fmin(lo, c[i]);
             hi = fmax(hi, c[i]);
         }
-        int inside = 0;
-        real v = 0;
-        for (int i = 1; i <= K; i++)
-            if (tf[i].x > lo && tf[i].x < hi) {
+        /* breakpoints inside the range by more than u is known to: the samples' rounding times the interpolation's
+         * Lebesgue constant (about 30 for these points); a crossing by less moves nothing measurable */
+        const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
+        int inside = 0, cross = 0; /* cross: the first breakpoint crossed once, 0 for none */
+        for (int i = 1; i <= K; i++) {
+            const real v = tf[i].x;
+            if (v > lo + eps && v < hi - eps) {
                 inside += 1;
-                v = tf[i].x;
+                if (!cross && one_crossing(c, v, eps))
+                    cross = i;
             }
+        }
         if (inside == 0 || depth >= POST_DEPTH) { /* one interval (or unresolved: flagged) */
             if (inside)
                 *flags |= 2;
             add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
-        } else if (inside == 1 && one_crossing(c, v)) { /* one crossing: bisection, then both sides */
-            const real sa = c[0] - v;
-            real l = a, r = b;
-            for (int it = 0; it < POST_BISECTIONS; it++) {
-                const real m = (l + r) / 2;
-                if (!(m > l && m < r))
-                    break;
-                if ((cheb1(C.us, NS, m) - v) * sa > 0)
-                    l = m;
-                else
-                    r = m;
-            }
-            const real x = (l + r) / 2;
-            add_piece(&C, P, nodes, tf, K, a, x, tol, &emission, evals, flags);
-            add_piece(&C, P, nodes, tf, K, x, b, tol, &emission, evals, flags);
-        } else { /* halve: the right half waits */
-            real left[NS];
-            bernstein_split(c, (real)0.5, left, stack_c[top]);
-            stack_ab[top][0] = (a + b) / 2;
-            stack_ab[top][1] = b;
-            stack_depth[top++] = ++depth;
+            if (top == 0)
+                break;
+            top -= 1;
             for (int i = 0; i < NS; i++)
-                c[i] = left[i];
-            b = (a + b) / 2;
+                c[i] = stack_c[top][i];
+            a = stack_ab[top][0];
+            b = stack_ab[top][1];
+            depth = stack_depth[top];
             continue;
         }
-        if (top == 0)
-            break;
-        top -= 1;
+        real x = (a + b) / 2; /* where the span is cut: its midpoint, or a crossing found by bisection */
+        const real v = tf[cross].x;
+        if (cross) {
+            const real sa = c[0] - v;
+            real l = a, r = b;
+            for (int it = 0; it < POST_BISECTIONS && l < x && x < r; it++) {
+                if ((cheb1(C.us, NS, x) - v) * sa > 0)
+                    l = x;
+                else
+                    r = x;
+                x = (l + r) / 2;
+            }
+        }
+        real left[NS];
+        bernstein_split(c, (x - a) / (b - a), left, stack_c[top]);
+        if (cross) /* u = v at the cut, exactly: no part sees the crossing again */
+            left[NS - 1] = stack_c[top][0] = v;
+        stack_ab[top][0] = x;
+        stack_ab[top][1] = b;
+        stack_depth[top++] = ++depth;
         for (int i = 0; i < NS; i++)
-            c[i] = stack_c[top][i];
-        a = stack_ab[top][0];
-        b = stack_ab[top][1];
-        depth = stack_depth[top];
+            c[i] = left[i];
+        b = x;
     }
     return (real4)(emission, C.depth_a);
 }

@@ -366,7 +366,8 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
                     i = np.searchsorted(values, chebyshev.chebval((a + b) / 2, s_series[k]), side="right")
                     slope = opacity[i] - opacity[i - 1] if 0 < i < len(values) else 0.0  # normals: alpha falls
                     grads = chebyshev.chebval(xs, g_series[k]).T * (-1.0 if slope < 0 else 1.0)
-                    q = np.array([_shade(qi, ai, gi, phong, light_dirs, w, floor) for qi, ai, gi in zip(q, alpha, grads)])
+                    q = np.array([_shade(qi, ai, gi, phong, light_dirs, w, floor)
+                                  for qi, ai, gi in zip(q, alpha, grads)])
                 weights = np.tile(gauss_w, 8) * (b - a) / 16
                 emitted = np.einsum("n,nc->c", weights * np.exp(-rad[k] * depth_to(xs)), q)
                 colour_sum += T * rad[k] * emitted

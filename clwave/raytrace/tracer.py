@@ -102,8 +102,8 @@ def raytrace_kernel(field: str) -> Kernel:
                   ("box_hi", FLOAT4), ("base", FLOAT4), ("du", FLOAT4), ("dv", FLOAT4), ("dir", FLOAT4),
                   ("perspective", I32), ("to_fine_scale", FLOAT4), ("to_fine_offset", FLOAT4), ("nodes", B),
                   ("weights", B), ("tol", REAL), ("shade_gain", REAL), ("grad_floor", REAL), ("lights", B),
-                  ("nlights", I32), ("phong", FLOAT4), ("tf", B), ("passes", I32), ("pass_lo", FLOAT4), ("pass_hi", FLOAT4),
-                  ("carry", B), ("ledger", B))
+                  ("nlights", I32), ("phong", FLOAT4), ("tf", B), ("passes", I32), ("pass_lo", FLOAT4),
+                  ("pass_hi", FLOAT4), ("carry", B), ("ledger", B))
 REAL4 = {np.float32: cltypes.float4, np.float64: cltypes.double4}
 GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
