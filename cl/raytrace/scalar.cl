@@ -37,3 +37,53 @@ __kernel void strided(__global float *out, __global const float4 *coef, const lo
     if (i < n)
         out[i] = coef[i * step].x;
 }
+
+/* the opacity of the transfer function's table (cl/raytrace/classify.h) at u */
+inline float table_alpha(__global const float4 *tf, const int K, const float u)
+{
+    int k = 0;
+    for (int i = 1; i <= K; i++)
+        k += tf[i].x <= u;
+    const float4 line = tf[1 + K + 3 * k];
+    return fmax(line.y + line.z * (u - line.x), 0.0f);
+}
+
+/* classified_bounds: per block the largest opacity of the transfer function over the block's range
+ * [min - slack, max + slack]: at its ends or at a point inside (the function is piecewise linear).
+ *   bound   out (n,) float; range (n,) float2 from scalar_range; tf the table (float)
+ * Grid: global (n). */
+__kernel void classified_bounds(__global float *bound, __global const float2 *range, __global const float4 *tf,
+                                const float slack, const int n)
+{
+    const int i = get_global_id(0);
+    if (i >= n)
+        return;
+    const float4 head = tf[0];
+    const int K = (int)head.z;
+    const float lo = (range[i].x - slack) * head.x + head.y, hi = (range[i].y + slack) * head.x + head.y;
+    float m = fmax(table_alpha(tf, K, lo), table_alpha(tf, K, hi));
+    for (int p = 1; p <= K; p++) {
+        const float v = tf[p].x;
+        if (lo <= v && v <= hi)
+            m = fmax(m, table_alpha(tf, K, v));
+    }
+    bound[i] = m;
+}
+
+/* superblock_max: per superblock of CLW_SUPER_CELLS / CLW_BLOCK blocks a side, the largest block bound (the
+ * blocks' origin a whole number of superblocks).
+ *   out (S, S, S shape ns) float; bound (nb) float over the blocks
+ * Grid: global (ns.x, ns.y, ns.z). */
+__kernel void superblock_max(__global float *out, const int4 ns, __global const float *bound, const int4 nb)
+{
+    const int per = CLW_SUPER_CELLS / CLW_BLOCK;
+    const int x = get_global_id(0), y = get_global_id(1), z = get_global_id(2);
+    if (x >= ns.x || y >= ns.y || z >= ns.z)
+        return;
+    float m = 0.0f;
+    for (int c = z * per; c < min(z * per + per, nb.z); c++)
+        for (int b = y * per; b < min(y * per + per, nb.y); b++)
+            for (int a = x * per; a < min(x * per + per, nb.x); a++)
+                m = fmax(m, bound[((size_t)c * nb.y + b) * nb.x + a]);
+    out[((size_t)z * ns.y + y) * ns.x + x] = m;
+}

@@ -3,10 +3,10 @@
 
 The tracer's set-up holds the scalar's range per block of fine cells (:class:`ScalarRange`, from the brick
 pool: the B-splines are non-negative and sum to 1, so the scalar lies between the least and the largest
-coefficient reaching a block).  A transfer function then costs only host arithmetic on those blocks: its
-table for the kernel (``cl/raytrace/classify.h``) and, per block, the largest opacity over the block's
-range, the bound that empty-space skipping and early termination use (§4).  Nothing is expanded, compiled
-or transformed again.
+coefficient reaching a block).  A transfer function then costs its table for the kernel
+(``cl/raytrace/classify.h``) and two small kernels (``cl/raytrace/scalar.cl``): per block the largest opacity
+over the block's range, the bound that empty-space skipping and early termination use (§4), and its
+superblock maxima.  Nothing is expanded, compiled or transformed again.
 """
 
 from __future__ import annotations
@@ -24,15 +24,19 @@ from ..device.constants import SUPER
 from ..device.kernels import BUFFER, Kernel
 from ..errors import InputError
 from ..model.transfer import TransferFunction, auto_window
-from .bounds import clip_box, superblocks
 
 _RANGE = Kernel("scalar_range", ("out", BUFFER), ("nblocks", cltypes.int4), ("origin", cltypes.int4),
                 ("coef", BUFFER), ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
 _STRIDED = Kernel("strided", ("out", BUFFER), ("coef", BUFFER), ("step", np.int64), ("n", np.int32))
+_BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf", BUFFER), ("slack", np.float32),
+                 ("n", np.int32))
+_SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound", BUFFER), ("nb", cltypes.int4))
 #: how many of the pool's coefficients a window "auto" looks at
 AUTO_COEFFICIENTS = 1 << 20
-#: a block's range is widened by this much of the scalar's largest magnitude (the kernel's float32 rounding)
+#: a block's range is widened by this much of the scalar's largest magnitude (the kernels' float32 rounding)
 RANGE_SLACK = 1e-6
+#: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
+FLAT = 1e-4
 
 
 def tf_table(tf: TransferFunction, window) -> np.ndarray:
@@ -60,17 +64,6 @@ def tf_table(tf: TransferFunction, window) -> np.ndarray:
     return table
 
 
-def opacity_bound(low, high, tf: TransferFunction, window) -> np.ndarray:
-    """The largest opacity of ``tf`` (under ``window``) over each range ``[low, high]`` (data units): at the
-    ends, or at a point inside (the function is piecewise linear)."""
-    values, alpha = tf.data_points(window), tf.points[:, 4]
-    bound = np.maximum(np.interp(low, values, alpha), np.interp(high, values, alpha))
-    for v, a in zip(values, alpha):
-        if a > 0:
-            np.maximum(bound, np.where((low <= v) & (v <= high), a, 0.0), out=bound)
-    return bound
-
-
 @dataclass
 class Classification:
     """One transfer function's kernel arguments: the table and the classified bounds."""
@@ -81,39 +74,49 @@ class Classification:
     bound: cla.Array        # per block: the largest opacity
     super_bound: cla.Array  # per superblock
     super_origin: np.ndarray
-    box: tuple              # clip box (x, y, z) around the blocks that are not transparent
+    box: tuple              # clip box (x, y, z): the model's
+    grad_floor: float       # world gradients of the scalar this short are flat
     seconds: float          # what the change of transfer function cost
 
 
 class ScalarRange:
-    """The scalar's range per block of a ray tracer's brick pool (set up once), and the classifications of
-    transfer functions from it (:meth:`classify`, milliseconds)."""
+    """The scalar's range per block of a ray tracer's brick pool (set up once, on the device), and the
+    classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
+
+    Made, the pool on the device keeps the scalar alone: one float a coefficient instead of four
+    (``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``), a quarter of the memory.
+    """
 
     def __init__(self, tracer):
         f, cc = tracer.bricks, tracer.cc
-        shape = tuple(int(k) * SUPER for k in f.shape)
-        self.origin, self.box = tracer.occ_origin, tracer.box
+        q, shape = cc.queue, tuple(int(k) * SUPER for k in f.shape)
+        self.cc, self.origin, self.box = cc, tracer.occ_origin, tracer.box
+        self.noise_floor, self.spacing = tracer.grad_floor("single"), min(tracer.wv.spacing)
+        self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
         if f.resident and len(f.levels):
-            kernels = programs.build(cc, ["raytrace/scalar.cl"])
             tables = tracer.field_tables
-            out = cla.zeros(cc.queue, shape + (2,), np.float32)
+            self.range = cla.zeros(q, shape + (2,), np.float32)
             at = np.zeros((len(f.bricks), 4), np.int32)
             at[:, :3] = (f.bricks - f.origin)[:, ::-1]
-            _RANGE(kernels, cc.queue, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=out,
+            _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=self.range,
                    nblocks=shape[::-1], origin=f.origin[::-1], coef=tables["coef"],
-                   bricks=cla.to_device(cc.queue, at), frames=tables["frames"], boxes=tables["boxes"],
-                   order=f.orders[0])
-            rng = out.get()
+                   bricks=cla.to_device(q, at), frames=tables["frames"], boxes=tables["boxes"], order=f.orders[0])
             n = min(AUTO_COEFFICIENTS, len(tables["coef"]))
-            sample = cla.empty(cc.queue, n, np.float32)
-            _STRIDED(kernels, cc.queue, (n,), None, out=sample, coef=tables["coef"],
-                     step=len(tables["coef"]) // n, n=n)
+            sample = cla.empty(q, n, np.float32)
+            _STRIDED(self.kernels, q, (n,), None, out=sample, coef=tables["coef"], step=len(tables["coef"]) // n, n=n)
             self.sample = sample.get()
+            scalar = cla.empty(q, len(f.pool), np.float32)  # the scalar alone: the float4 pool goes
+            _STRIDED(self.kernels, q, (len(f.pool),), None, out=scalar, coef=f.pool, step=1, n=len(f.pool))
+            f.pool = scalar
+            tracer.field_tables = f.tables(cc)
+            tracer.defines["CLW_SCALAR_POOL"] = None
         else:  # bricks in a scratch file: |s| <= the block bound
             bound = tracer.block_bound.get()
-            rng, self.sample = np.stack([-bound, bound], axis=-1), None
-        slack = RANGE_SLACK * float(np.abs(rng).max(initial=0.0))
-        self.low, self.high = rng[..., 0] - slack, rng[..., 1] + slack
+            self.range, self.sample = cla.to_device(q, np.stack([-bound, bound], axis=-1)), None
+        self.slack = RANGE_SLACK * float(tracer.q_bound)
+        self.bound = cla.empty(q, shape, np.float32)
+        self.super_bound = cla.empty(q, tuple(-(-n // SUPER) for n in shape), np.float32)
+        self.super_origin = np.asarray(self.origin) // SUPER
         self.last = None
 
     def window(self, tf: TransferFunction):
@@ -135,13 +138,17 @@ class ScalarRange:
             return last
         start = time.perf_counter()
         window = self.window(tf)
-        bound = opacity_bound(self.low, self.high, tf, window).astype(np.float32)
-        super_bound, super_origin = superblocks(bound, self.origin)
-        lo, hi = clip_box(bound, self.origin)
-        box = (np.maximum(lo, self.box[0]), np.minimum(hi, self.box[1]))  # inside the model's support
-        q = cc.queue
-        self.last = Classification(tf, window, cla.to_device(q, tf_table(tf, window).astype(real)),
-                                   cla.to_device(q, bound), cla.to_device(q, super_bound), super_origin, box, 0.0)
+        table, q = tf_table(tf, window), cc.queue
+        _BOUNDS(self.kernels, q, (self.bound.size,), None, bound=self.bound, range=self.range,
+                tf=cla.to_device(q, table.astype(np.float32)), slack=self.slack, n=self.bound.size)
+        _SUPER(self.kernels, q, self.super_bound.shape[::-1], None, out=self.super_bound,
+               ns=self.super_bound.shape[::-1], bound=self.bound, nb=self.bound.shape[::-1])
+        # flat: below FLAT of the span per unit length, or the float32 field's rounding noise, in both precisions
+        values = tf.data_points(window)
+        floor = max(self.noise_floor, FLAT * (values[-1] - values[0]) / self.spacing)
+        self.last = Classification(tf, window, cla.to_device(q, table.astype(real)), self.bound, self.super_bound,
+                                   self.super_origin, self.box, floor, 0.0)
+        q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last
 

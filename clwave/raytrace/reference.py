@@ -308,7 +308,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     coefficients); the segment is cut at every real root of ``s - v`` for each point value v (NumPy's
     companion-matrix roots); on each piece the opacity ``np.interp(s)`` is a polynomial, fitted and integrated
     exactly, and the emission integral is composite Gauss-Legendre (8 x 8 nodes).  ``tracer`` supplies the
-    clip box, the window of an "auto" transfer function and the gradient floor the kernel used.
+    clip box, the window of an "auto" transfer function and the gradient floor the kernel uses.
     """
     tr = tracer or RayTracer(wv)
     view = camera.view(wv)
@@ -325,7 +325,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     gauss, gauss_w = np.polynomial.legendre.leggauss(8)
     evaluate = _content_field(wv) if wv.content_mask is not None else _model_field(wv)
     out = np.zeros((H, W, 4))
-    floor = tr.grad_floor("double")
+    floor = tr.scalar.classify(transfer_function, tr.cc, np.float64).grad_floor  # the kernel's flat gradients
     for r, c in np.ndindex(H, W):
         p, w = _ray(view, r, c)
         x0, d = p * scale + offset, w * scale

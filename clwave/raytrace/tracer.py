@@ -302,9 +302,10 @@ class RayTracer:
         if transfer_function is not None:
             self._check_post(absorption)
         elif absorption and wv.channels != 4:
-            raise InputError(f"emission-absorption ray tracing needs an RGBA volume (4 channels) or, for a scalar "
-                             f"one, a transfer_function=; this one has {wv.channels} channels; classify it "
-                             f"(TransferFunction.classify), or pass absorption=False for line integrals")
+            raise InputError(f"emission-absorption ray tracing needs an RGBA volume (4 channels), this one has "
+                             f"{wv.channels}; classify it first (TransferFunction.classify), give a scalar one a "
+                             f"transfer_function= to classify it while rendering, or pass absorption=False for "
+                             f"line integrals")
         if precision not in ("single", "double"):
             raise InputError(f"precision={precision!r} must be 'single' or 'double'")
         if precision == "double" and not cc.queue.device.double_fp_config:
@@ -401,9 +402,9 @@ class RayTracer:
             content_origin=self.content_origin[::-1], content_shape=self.content_shape[::-1],
             coarse_bound=self.coarse_bound(tol), base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
             to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
-            grad_floor=self.grad_floor(precision), lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
-            phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger,
-            tf=post.table if post is not None else carry)
+            grad_floor=post.grad_floor if post else self.grad_floor(precision), lights=cla.to_device(q, light_buf),
+            nlights=len(light_dirs), phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry,
+            ledger=ledger, tf=post.table if post is not None else carry)
         for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
             if self.field == "bspline":
                 field_tables = None  # the last region's pool goes before the next one comes
