@@ -19,7 +19,7 @@ from clwave.raytrace.quadrature import sample_points, sample_tables
 from clwave.raytrace.reference import _content_field, classified_reference
 
 CHECK = Kernel("classify_segments", ("out", BUFFER), ("samples", BUFFER), ("radius", BUFFER), ("nodes", BUFFER),
-               ("tf", BUFFER), ("tol", REAL), ("flags", BUFFER), ("n", np.int32))
+               ("weights", BUFFER), ("tf", BUFFER), ("tol", REAL), ("flags", BUFFER), ("n", np.int32))
 
 
 def random_tf(rng, lo, hi, steps=True, clear=False):
@@ -72,7 +72,7 @@ def test_segment_integral_against_fine_quadrature(precision):
         pytest.skip("no float64 on this device")
     real = np.float64 if precision == "double" else np.float32
     rng = np.random.default_rng(7)
-    nodes, _ = sample_tables(9)
+    nodes, weights = sample_tables(9)
     xi = sample_points(9)
     nodes = np.concatenate([nodes, bernstein_matrix(xi).ravel()])
     kernels = programs.build(cc, ["raytrace/classify_check.cl"], dict(
@@ -92,6 +92,7 @@ def test_segment_integral_against_fine_quadrature(precision):
         flags = cla.zeros(q, len(polys), np.int32)
         CHECK(kernels, q, (len(polys),), None, real_type=real, out=out, samples=cla.to_device(q, samples.astype(real)),
               radius=cla.to_device(q, radius.astype(real)), nodes=cla.to_device(q, nodes.astype(real)),
+              weights=cla.to_device(q, weights.astype(real)),
               tf=cla.to_device(q, table.astype(real)), tol=tol, flags=flags, n=len(polys))
         got = out.get()
         for p, r, g in zip(polys, radius, got):

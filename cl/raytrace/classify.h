@@ -121,6 +121,40 @@ inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, 
     C->depth_a += piece_total(C, a, b);
 }
 
+/* The whole segment in the transfer function's interval k (the usual case): its samples are the piece's
+ * first nine points, as on the pre-classified path: alpha at the samples gives the optical depth exactly
+ * (`weights`, alpha being a polynomial of u's degree there), u and the gradient lanes the emission */
+inline void add_segment(Piece *C, const Shading *P, __constant const real *nodes, __constant const real *weights,
+                        __global const real4 *tf, const int K, const real *u, const real *gx, const real *gy,
+                        const real *gz, const real tol, real3 *emission, int *evals, int *flags)
+{
+    const int k = tf_interval(tf, K, u[3]); /* xi = 0 */
+    const real4 line = tf[1 + K + 3 * k];
+    if (line.y == 0 && line.z == 0)
+        return;
+    C->line = (real4)(line.xyz, line.z < 0 ? -1 : 1);
+    C->rgb = tf[2 + K + 3 * k].xyz;
+    C->rgb_slope = tf[3 + K + 3 * k].xyz;
+    C->a = -1;
+    C->ui_a = cheb1(C->ui, NS + 1, -1);
+    real alpha[NS], depth[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (int i = 0; i < NS; i++) {
+        alpha[i] = fmax(line.y + line.z * (u[i] - line.x), (real)0);
+        for (int p = 0; p < 8; p++)
+            depth[p] += weights[8 * i + p] * alpha[i];
+    }
+    real3 f9[9];
+    for (int p = 0; p <= 8; p++) { /* xi = -1 + p/4: lane P0 for p = 0, else lane p - 1 */
+        const int lane = p ? p - 1 : P0;
+        const real3 rgb = clamp(C->rgb + C->rgb_slope * (u[lane] - line.x), (real)0, (real)1) * alpha[lane];
+        real r = rgb.x, g = rgb.y, b = rgb.z;
+        shade(&r, &g, &b, alpha[lane], gx[lane] * C->line.w, gy[lane] * C->line.w, gz[lane] * C->line.w, P);
+        f9[p] = (real3)(r, g, b) * fast_exp(-C->radius * (p ? depth[p - 1] : 0));
+    }
+    *emission += piece_simpson(C, P, f9, nodes, -1, 1, tol, evals, flags);
+    C->depth_a = depth[7];
+}
+
 /* Whether u - v has exactly one root inside the span of Bernstein coefficients c: the coefficients change sign
  * once (Descartes' rule for the Bernstein basis), the ends clear of v by more than eps */
 inline bool one_crossing(const real *c, const real v, const real eps)
@@ -132,21 +166,24 @@ inline bool one_crossing(const real *c, const real v, const real eps)
 }
 
 /* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from the scalar s at the
- * samples (s[k], lane order of fq), the gradient series of s (shading), the half length `radius` and
- * the tolerance `tol` on the first (in xi units).  Flags bit 1 where a span could not be resolved. */
-inline real4 classified_segment(const real *s, const real3 *grad, const real radius, __constant const real *nodes,
+ * samples (s[k], lane order of fq), the gradient of s at them (gx, gy, gz: lanes 0..8) and its series (grad;
+ * shading), the half length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1 where a
+ * span could not be resolved. */
+inline real4 classified_segment(const real *s, const real *gx, const real *gy, const real *gz, const real3 *grad,
+                                const real radius, __constant const real *nodes, __constant const real *weights,
                                 __global const real4 *tf, const Shading *P, const real tol, int *evals, int *flags)
 {
     const real4 head = tf[0];
     const int K = (int)head.z;
     Piece C;
-    real c[NS];
+    real c[NS], u[NS];
+    for (int k = 0; k < NS; k++)
+        u[k] = s[k] * head.x + head.y;
     for (int m = 0; m < NS; m++) { /* u's series and Bernstein coefficients */
         real am = 0, bm = 0;
         for (int k = 0; k < NS; k++) {
-            const real u = s[k] * head.x + head.y;
-            am += u * nodes[NS + m * NS + k];
-            bm += u * nodes[NS + NS * NS + 81 + m * NS + k];
+            am += u[k] * nodes[NS + m * NS + k];
+            bm += u[k] * nodes[NS + NS * NS + 81 + m * NS + k];
         }
         C.us[m] = am;
         c[m] = bm;
@@ -185,7 +222,10 @@ inline real4 classified_segment(const real *s, const real3 *grad, const real rad
         if (inside == 0 || depth >= POST_DEPTH) { /* one interval (or unresolved: flagged) */
             if (inside)
                 *flags |= 2;
-            add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
+            if (depth == 0)
+                add_segment(&C, P, nodes, weights, tf, K, u, gx, gy, gz, tol, &emission, evals, flags);
+            else
+                add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
             if (top == 0)
                 break;
             top -= 1;

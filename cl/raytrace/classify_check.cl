@@ -3,28 +3,30 @@
  * CLW_MAX_DEPTH.
  *   out      (n,) real4: int q e^{-A} dxi (rgb) and int alpha dxi over xi in [-1, 1]
  *   samples  (n, CLW_SAMPLES) the scalar at the sample points (lane order of the ray tracer's fq)
- *   radius   (n,) half the segment length; nodes, tf as in raytrace.cl; tol on the emission (xi units)
+ *   radius   (n,) half the segment length; nodes, weights, tf as in raytrace.cl; tol on the emission (xi units)
  *   flags    (n,) the segment's flags (bit 1: a span or panel at its depth limit)
  * Grid: global (n). */
 #include "raytrace/types.h"
 #include "raytrace/classify.h"
 
 __kernel void classify_segments(__global real4 *out, __global const real *samples, __global const real *radius,
-                                __constant const real *nodes, __global const real4 *tf, const real tol,
-                                __global int *flags, const int n)
+                                __constant const real *nodes, __constant const real *weights,
+                                __global const real4 *tf, const real tol, __global int *flags, const int n)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
-    real s[NS];
+    real s[NS], flat[16];
     real3 g[9];
     for (int k = 0; k < NS; k++)
         s[k] = samples[i * NS + k];
     for (int m = 0; m < 9; m++)
         g[m] = (real3)(0);
+    for (int k = 0; k < 16; k++)
+        flat[k] = 0;
     Shading P;
     P.nlights = 0;
     int evals = 0, f = 0;
-    out[i] = classified_segment(s, g, radius[i], nodes, tf, &P, tol, &evals, &f);
+    out[i] = classified_segment(s, flat, flat, flat, g, radius[i], nodes, weights, tf, &P, tol, &evals, &f);
     flags[i] = f;
 }

@@ -395,19 +395,23 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             real depth; /* int alpha dxi over the segment */
 #ifdef CLW_POST
             {   /* the scalar classified by the transfer function (classify.h) */
-                real s[NS];
+                real s[NS], gx[16], gy[16], gz[16];
                 for (int k = 0; k < NS; k++)
                     s[k] = S.fq[k].x;
 #ifdef CLW_SHADE
                 sample_gradient(basis, true, &S.gx, &S.gy, &S.gz);
                 segment_series(&S, nodes);
 #else
+                S.gx = 0; S.gy = 0; S.gz = 0;
                 for (int m = 0; m < 9; m++)
                     S.g[m] = (real3)(0);
 #endif
+                vstore16(S.gx, 0, gx);
+                vstore16(S.gy, 0, gy);
+                vstore16(S.gz, 0, gz);
                 const real seg_tol = quadrature_share * (tn - t) / total / T;
-                const real4 r = classified_segment(s, S.g, S.radius, nodes, tf, &P, seg_tol / S.radius, &evals,
-                                                   &flags);
+                const real4 r = classified_segment(s, gx, gy, gz, S.g, S.radius, nodes, weights, tf, &P,
+                                                   seg_tol / S.radius, &evals, &flags);
                 part = r.xyz;
                 depth = r.w;
             }
