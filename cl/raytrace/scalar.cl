@@ -62,11 +62,9 @@ __kernel void classified_bounds(__global float *bound, __global const float2 *ra
     const int K = (int)head.z;
     const float lo = (range[i].x - slack) * head.x + head.y, hi = (range[i].y + slack) * head.x + head.y;
     float m = fmax(table_alpha(tf, K, lo), table_alpha(tf, K, hi));
-    for (int p = 1; p <= K; p++) {
-        const float v = tf[p].x;
-        if (lo <= v && v <= hi)
-            m = fmax(m, table_alpha(tf, K, v));
-    }
+    for (int p = 1; p <= K; p++) /* point p - 1: the opacity at the start of interval p */
+        if (lo <= tf[p].x && tf[p].x <= hi)
+            m = fmax(m, tf[1 + K + 3 * p].y);
     bound[i] = m;
 }
 

@@ -31,6 +31,7 @@ _STRIDED = Kernel("strided", ("out", BUFFER), ("coef", BUFFER), ("step", np.int6
 _BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf", BUFFER), ("slack", np.float32),
                  ("n", np.int32))
 _SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound", BUFFER), ("nb", cltypes.int4))
+GROUP = 256  #: work-group of classified_bounds
 #: how many of the pool's coefficients a window "auto" looks at
 AUTO_COEFFICIENTS = 1 << 20
 #: a block's range is widened by this much of the scalar's largest magnitude (the kernels' float32 rounding)
@@ -139,8 +140,9 @@ class ScalarRange:
         start = time.perf_counter()
         window = self.window(tf)
         table, q = tf_table(tf, window), cc.queue
-        _BOUNDS(self.kernels, q, (self.bound.size,), None, bound=self.bound, range=self.range,
-                tf=cla.to_device(q, table.astype(np.float32)), slack=self.slack, n=self.bound.size)
+        n = self.bound.size  # explicit work-groups: PoCL's default for this size was a tenth as fast
+        _BOUNDS(self.kernels, q, (-(-n // GROUP) * GROUP,), (GROUP,), bound=self.bound, range=self.range,
+                tf=cla.to_device(q, table.astype(np.float32)), slack=self.slack, n=n)
         _SUPER(self.kernels, q, self.super_bound.shape[::-1], None, out=self.super_bound,
                ns=self.super_bound.shape[::-1], bound=self.bound, nb=self.bound.shape[::-1])
         # flat: below FLAT of the span per unit length, or the float32 field's rounding noise, in both precisions
