@@ -39,7 +39,7 @@ __kernel void strided(__global float *out, __global const float4 *coef, const lo
 }
 
 /* the opacity of the transfer function's table (cl/raytrace/classify.h) at u */
-inline float table_alpha(__global const float4 *tf, const int K, const float u)
+inline float table_alpha(__constant const float4 *tf, const int K, const float u)
 {
     int k = 0;
     for (int i = 1; i <= K; i++)
@@ -52,7 +52,7 @@ inline float table_alpha(__global const float4 *tf, const int K, const float u)
  * [min - slack, max + slack]: at its ends or at a point inside (the function is piecewise linear).
  *   bound   out (n,) float; range (n,) float2 from scalar_range; tf the table (float)
  * Grid: global (n). */
-__kernel void classified_bounds(__global float *bound, __global const float2 *range, __global const float4 *tf,
+__kernel void classified_bounds(__global float *bound, __global const float2 *range, __constant const float4 *tf,
                                 const float slack, const int n)
 {
     const int i = get_global_id(0);
