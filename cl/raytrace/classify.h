@@ -165,18 +165,22 @@ inline bool one_crossing(const real *c, const real v, const real eps)
     return changes == 1 && fabs(c[0] - v) > eps && fabs(c[NS - 1] - v) > eps;
 }
 
-/* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from the scalar s at the
- * samples (s[k], lane order of fq), the gradient of s at them (gx, gy, gz: lanes 0..8) and its series (grad;
- * shading), the half length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1 where a
- * span could not be resolved. */
-inline real4 classified_segment(const real *s, const real *gx, const real *gy, const real *gz, const real3 *grad,
-                                const real radius, __constant const real *nodes, __constant const real *weights,
-                                __global const real4 *tf, const Shading *P, const real tol, int *evals, int *flags)
+/* the transfer function's opacity at u */
+inline real tf_alpha(__global const real4 *tf, const int K, const real u)
+{
+    const real4 line = tf[1 + K + 3 * tf_interval(tf, K, u)];
+    return fmax(line.y + line.z * (u - line.x), (real)0);
+}
+
+/* A segment's scalar as the classification needs it, from s at the samples (lane order of fq): u there,
+ * u's Chebyshev series and antiderivative (in C), its Bernstein coefficients c on [-1, 1].  Returns whether
+ * the transfer function is opaque anywhere in the coefficients' hull: a segment where it is not adds
+ * nothing, and needs no gradient. */
+inline bool segment_scalar(const real *s, __constant const real *nodes, __global const real4 *tf, Piece *C,
+                           real *u, real *c)
 {
     const real4 head = tf[0];
     const int K = (int)head.z;
-    Piece C;
-    real c[NS], u[NS];
     for (int k = 0; k < NS; k++)
         u[k] = s[k] * head.x + head.y;
     for (int m = 0; m < NS; m++) { /* u's series and Bernstein coefficients */
@@ -185,15 +189,38 @@ inline real4 classified_segment(const real *s, const real *gx, const real *gy, c
             am += u[k] * nodes[NS + m * NS + k];
             bm += u[k] * nodes[NS + NS * NS + 81 + m * NS + k];
         }
-        C.us[m] = am;
+        C->us[m] = am;
         c[m] = bm;
     }
+    /* u's antiderivative: C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 (any constant term) */
+    C->ui[0] = 0;
+    for (int k = 1; k <= NS; k++)
+        C->ui[k] = (C->us[k - 1] * (k == 1 ? 2 : 1) - (k + 1 < NS ? C->us[k + 1] : 0)) / (2 * k);
+    real lo = c[0], hi = c[0];
+    for (int i = 1; i < NS; i++) {
+        lo = fmin(lo, c[i]);
+        hi = fmax(hi, c[i]);
+    }
+    real m = fmax(tf_alpha(tf, K, lo), tf_alpha(tf, K, hi));
+    for (int p = 1; p <= K; p++) /* point p - 1: the opacity at the start of interval p */
+        if (lo <= tf[p].x && tf[p].x <= hi)
+            m = fmax(m, tf[1 + K + 3 * p].y);
+    return m > 0;
+}
+
+/* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from segment_scalar's C, u
+ * and c, the gradient of s at the samples (gx, gy, gz: lanes 0..8) and its series (grad; shading), the half
+ * length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1 where a span could not be
+ * resolved. */
+inline real4 classified_segment(Piece *C0, real *c, const real *u, const real *gx, const real *gy, const real *gz,
+                                const real3 *grad, const real radius, __constant const real *nodes,
+                                __constant const real *weights, __global const real4 *tf, const Shading *P,
+                                const real tol, int *evals, int *flags)
+{
+    const int K = (int)tf[0].z;
+    Piece C = *C0;
     for (int m = 0; m < 9; m++)
         C.g[m] = grad[m];
-    /* u's antiderivative: C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 (any constant term) */
-    C.ui[0] = 0;
-    for (int k = 1; k <= NS; k++)
-        C.ui[k] = (C.us[k - 1] * (k == 1 ? 2 : 1) - (k + 1 < NS ? C.us[k + 1] : 0)) / (2 * k);
     C.radius = radius;
     C.depth_a = 0;
     real3 emission = (real3)(0);

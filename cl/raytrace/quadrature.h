@@ -30,6 +30,21 @@ typedef struct {
     real A[NS + 1];  /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
 } Segment;
 
+/* the Chebyshev series of the gradient's lanes 0..8 (nodes: after the points and the field's matrix) */
+inline void gradient_series(Segment *S, __constant const real *nodes)
+{
+    real gx[16], gy[16], gz[16];
+    vstore16(S->gx, 0, gx);
+    vstore16(S->gy, 0, gy);
+    vstore16(S->gz, 0, gz);
+    for (int m = 0; m < 9; m++) {
+        real3 ag = (real3)(0);
+        for (int k = 0; k < 9; k++)
+            ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * 9 + k];
+        S->g[m] = ag;
+    }
+}
+
 /* the Chebyshev series of the segment's samples (nodes: the points, then the field's and the
  * gradient's sample-to-series matrices), and the antiderivative of alpha's */
 inline void segment_series(Segment *S, __constant const real *nodes)
@@ -41,16 +56,7 @@ inline void segment_series(Segment *S, __constant const real *nodes)
         S->q[m] = aq;
     }
 #ifdef CLW_SHADE /* only shading reads the gradient series */
-    real gx[16], gy[16], gz[16];
-    vstore16(S->gx, 0, gx);
-    vstore16(S->gy, 0, gy);
-    vstore16(S->gz, 0, gz);
-    for (int m = 0; m < 9; m++) {
-        real3 ag = (real3)(0);
-        for (int k = 0; k < 9; k++)
-            ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * 9 + k];
-        S->g[m] = ag;
-    }
+    gradient_series(S, nodes);
 #endif
     /* C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0, and C_0 so that A(-1) = 0 */
     real c0 = 0, sign = -1;

@@ -395,25 +395,30 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             real depth; /* int alpha dxi over the segment */
 #ifdef CLW_POST
             {   /* the scalar classified by the transfer function (classify.h) */
-                real s[NS], gx[16], gy[16], gz[16];
+                real s[NS], u[NS], c[NS], gx[16], gy[16], gz[16];
+                Piece C;
                 for (int k = 0; k < NS; k++)
                     s[k] = S.fq[k].x;
+                part = (real3)(0);
+                depth = 0;
+                if (segment_scalar(s, nodes, tf, &C, u, c)) { /* else transparent all along */
 #ifdef CLW_SHADE
-                sample_gradient(basis, true, &S.gx, &S.gy, &S.gz);
-                segment_series(&S, nodes);
+                    sample_gradient(basis, true, &S.gx, &S.gy, &S.gz);
+                    gradient_series(&S, nodes);
 #else
-                S.gx = 0; S.gy = 0; S.gz = 0;
-                for (int m = 0; m < 9; m++)
-                    S.g[m] = (real3)(0);
+                    S.gx = 0; S.gy = 0; S.gz = 0;
+                    for (int m = 0; m < 9; m++)
+                        S.g[m] = (real3)(0);
 #endif
-                vstore16(S.gx, 0, gx);
-                vstore16(S.gy, 0, gy);
-                vstore16(S.gz, 0, gz);
-                const real seg_tol = quadrature_share * (tn - t) / total / T;
-                const real4 r = classified_segment(s, gx, gy, gz, S.g, S.radius, nodes, weights, tf, &P,
-                                                   seg_tol / S.radius, &evals, &flags);
-                part = r.xyz;
-                depth = r.w;
+                    vstore16(S.gx, 0, gx);
+                    vstore16(S.gy, 0, gy);
+                    vstore16(S.gz, 0, gz);
+                    const real seg_tol = quadrature_share * (tn - t) / total / T;
+                    const real4 r = classified_segment(&C, c, u, gx, gy, gz, S.g, S.radius, nodes, weights, tf, &P,
+                                                       seg_tol / S.radius, &evals, &flags);
+                    part = r.xyz;
+                    depth = r.w;
+                }
             }
 #else
             /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
