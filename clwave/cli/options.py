@@ -90,7 +90,8 @@ def read_volume(args):
         if len(parts) > 3 or (len(parts) == 3 and not parts[2].isdigit()):
             raise InputError(f"{spec!r}: write phantom:NAME or phantom:NAME:N (N voxels per axis)")
         n = int(parts[2]) if len(parts) == 3 else 128
-        check_fits(MODEL_BYTES_PER_VALUE * n ** 3 * (4 if args.tf else 1), f"decomposing a {n}^3 phantom",
+        classified = args.tf and getattr(args, "classify", "pre") == "pre"  # four channels, or the scalar
+        check_fits(MODEL_BYTES_PER_VALUE * n ** 3 * (4 if classified else 1), f"decomposing a {n}^3 phantom",
                    "choose a smaller N")
         vol = phantom(parts[1], n=n)
         return vol if spacing is None else Volume(vol.data, spacing=spacing)
