@@ -523,6 +523,9 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         from .regions import check_cluster_model, raytrace_on_cluster
 
         check_cluster_model(wv, field)  # before any worker starts
+        if transfer_function is not None and getattr(transfer_function, "window", None) == "auto":
+            raise InputError('a transfer function window "auto" would be resolved by each worker on its own part; '
+                             "give the window (lo, hi) to render on a cluster")
         tol, cap = _checked_view(camera, tolerance), parse_cap(device_memory)
         options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision,
                        transfer_function=transfer_function)
