@@ -2,13 +2,12 @@
  *
  * On a segment the scalar s is a polynomial in xi (degree NS - 1 at most) known exactly from its
  * samples.  The transfer function is piecewise linear in u = s scale + shift, so where u stays inside
- * one of its intervals, opacity and colour are polynomials in xi and the optical depth is exact from
- * the antiderivative of u's Chebyshev series.  The segment is cut where u crosses a breakpoint: the
- * Bernstein coefficients of u on a span bound its range (convex hull), a span whose range holds one
- * breakpoint and whose coefficients change sign once about it holds exactly one crossing, found by
- * bisection, and the span is cut there; other spans are halved (de Casteljau).  Each piece's emission integral comes from
- * adaptive Simpson on the classified, shaded integrand (quadrature.h), its tolerance the piece's share
- * of the segment's.
+ * one of its intervals, opacity and colour are polynomials in xi and the optical depth is exact.  The
+ * segment is cut where u crosses a breakpoint: the Bernstein coefficients of u on a span bound its range
+ * (convex hull); where they change sign once about a breakpoint, the span holds exactly one crossing,
+ * found by bisection, and is cut there; other spans that straddle are halved (de Casteljau).  Each
+ * piece's emission integral comes from adaptive Simpson on the classified, shaded integrand
+ * (quadrature.h), its tolerance the piece's share of the segment's.
  *
  * The table `tf` (real4 rows, clwave/raytrace/classified.py): row 0 (scale, shift, K, 0); rows
  * 1..K the breakpoints u_i (x); then per interval k = 0..K (u below u_0, between u_{k-1} and u_k,
