@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|scale|all [--size 128 256] [--repeats 3]
-                          [--views 4] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
+    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|scale|all [--size 128 256]
+                          [--repeats 3] [--views 4] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
 
 Every benchmark runs once per ``--size`` (hydrogen phantom of that many voxels per axis, made
 once outside the timing); times are medians (with min, max and the number of runs) after one
@@ -32,6 +32,8 @@ frame the time since the start of the view, energy, and RMS error against the fi
 ``lod``: level of detail and progressive ray tracing (docs/raytracing.md §8, §9): hydrogen RGBA, cubic, 3
 levels, 5 % and 0.1 %, at ``--raytrace-image``; set-up with and without every detail, per-detail render times
 (interleaved), the time to change detail, and the progressive frames with their measured and estimated errors.
+``post``: post-classification (a transfer function at render time, docs/raytracing.md §10) against
+pre-classification of the same phantom, renders interleaved; transfer-function changes, pools, errors.
 
 ``scale`` (not in ``all``): volumes bigger than memory (docs/chunked.md).  A hydrogen phantom of
 ``--size``³ float32 voxels (or ``--scale-shape Z,Y,X`` of ``--scale-dtype``) is written to a Zarr
@@ -489,8 +491,85 @@ def scale_step(spec) -> dict:
                 peak_resident_gib=peak_resident_gib(), **figures)
 
 
+def bench_post(args) -> dict:
+    """Post-classification (docs/raytracing.md §8) against pre-classification of the same phantom: hydrogen
+    (preset), cubic, 3 levels, 5 %, shaded, at ``--raytrace-image`` for tolerances 1e-2 and 1e-3, renders
+    interleaved (post, pre, post, pre, ...) over ``--raytrace-views`` views; a change of transfer function or
+    window (the table and the classified bounds: meta ``classify_seconds``); the brick pools; the error against a
+    float64 render (tolerance 1e-5) of the same post-classified model on the first view's 64x64 centre, for
+    hydrogen and for Marschner-Lobb (``grey``) and a CT-like phantom (``ct-bone``) at 64^3."""
+    tf = TransferFunction.preset("hydrogen")
+    vol = phantom("hydrogen", n=args.size)
+    models = dict(post=WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=0.05),
+                  pre=WaveletVolume.from_volume(tf.classify(vol), wavelet="cubic", levels=3).threshold(keep=0.05))
+    tracers, setup, compile_seconds = {}, {}, {}
+    for name, wv in models.items():
+        start = time.perf_counter()
+        tracers[name] = clwave.RayTracer(wv, device=args.device)
+        setup[name] = time.perf_counter() - start
+        extra = dict(transfer_function=tf) if name == "post" else {}
+        compile_seconds[name] = tracers[name].render(clwave.Camera(10.0, 5.0, size=(16, 8)), tolerance=1e-2,
+                                                     **extra).meta["compile_seconds"]
+    cams = [clwave.Camera(az, el, size=args.raytrace_image) for az, el in views(args.raytrace_views)]
+    cases = {}
+    for tol in (1e-2, 1e-3):
+        seconds = dict(post=[], pre=[])
+        segments = dict(post=[], pre=[])
+        for cam in cams:  # interleaved: the machine's load falls on both alike
+            for name in ("post", "pre"):
+                extra = dict(transfer_function=tf) if name == "post" else {}
+                meta = tracers[name].render(cam, tolerance=tol, **extra).meta
+                seconds[name].append(meta["render_seconds"])
+                segments[name].append(meta["segments"])
+        cases[f"tolerance {tol:g}"] = dict(
+            seconds={k: summary(v) for k, v in seconds.items()},
+            segments={k: statistics.median(v) for k, v in segments.items()},
+            post_over_pre=[a / b for a, b in zip(seconds["post"], seconds["pre"])])
+    changes = []
+    small = clwave.Camera(*views(1)[0], size=64)
+    for window in ((0.0, 1.0), (0.05, 0.95), (0.1, 0.8), (0.0, 0.6), (0.2, 1.0)):
+        for preset in ("hydrogen", "grey"):
+            changes.append(tracers["post"].render(small, tolerance=1e-2, transfer_function=TransferFunction.preset(
+                preset, window=window)).meta["classify_seconds"])
+    pools = {name: t.bricks.pool_bytes for name, t in tracers.items()}
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3", wavelet="cubic", levels=3, keep=0.05,
+                             shading="phong, headlight", image=f"{args.raytrace_image}^2", views=len(cams),
+                             transfer_function="hydrogen preset"),
+                setup_seconds=setup, compile_seconds=compile_seconds, cases=cases,
+                tf_change_seconds=summary(changes), pool_bytes=pools, pool_ratio=pools["post"] / pools["pre"],
+                errors=post_errors(tracers["post"], models["post"], tf, args),
+                peak_resident_gib=peak_resident_gib(), targets=dict(tf_change_seconds=0.05, pool_ratio=0.3,
+                                                                     post_over_pre=1.0))
+
+
+def ct_like(n) -> clwave.Volume:
+    """Shepp-Logan in Hounsfield units: outside -1000, the brain's ellipses about 0..60, the skull 1200."""
+    v = phantom("shepp-logan", n=n).data
+    return clwave.Volume(np.interp(v, [0.0, 0.1, 0.5, 1.0], [-1000.0, 0.0, 60.0, 1200.0]).astype(np.float32))
+
+
+def post_errors(tracer, wv, tf, args) -> dict:
+    """Max error of post-classified float32 renders at 1e-2 and 1e-3 against a float64 render at 1e-5 of the same
+    model, on a 64x64 centre of the first view (``--raytrace-image`` framing)."""
+    out = {}
+    cases = [("hydrogen", wv, tf, tracer)]
+    for name, vol, preset in (("marschner-lobb 64^3", phantom("marschner-lobb", n=64), "grey"),
+                              ("ct-like 64^3 (Shepp-Logan in HU)", ct_like(64), "ct-bone")):
+        model = WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=0.05)
+        cases.append((name, model, TransferFunction.preset(preset), clwave.RayTracer(model, device=args.device)))
+    for name, model, function, t in cases:
+        full = clwave.Camera(*views(1)[0], size=args.raytrace_image).view(model)
+        cam = clwave.Camera(*views(1)[0], size=64, extent=full.pixel * 64)
+        reference = t.render(cam, tolerance=1e-5, precision="double", transfer_function=function).image
+        out[name] = {f"tolerance {tol:g}": float(np.abs(t.render(cam, tolerance=tol, transfer_function=function)
+                                                         .image - reference).max()) for tol in (1e-2, 1e-3)}
+        out[name]["transfer_function"] = function.name
+    return out
+
+
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
-              "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "scale": bench_scale}
+              "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "post": bench_post,
+              "scale": bench_scale}
 
 
 def main(argv=None):

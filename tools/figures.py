@@ -3,7 +3,7 @@
 
     python tools/figures.py [--out docs/figures] [--size 128] [--image 256] [--scan FILE]
                             [--scan-step 1] [--raytrace-image 128] [--tolerance 1e-2]
-                            [--only table1 fig07 fig10 fig11 fig12 fig14 fig15 fig16 fig17]
+                            [--only table1 fig07 fig10 fig11 fig12 fig14 fig15 fig16 fig17 prepost]
 
 - ``table1``: Table I, texture samples per axis N(m) (eq. 36, omega_s = 14) for Haar, linear
   and cubic B-splines, ours against the paper's (printed and saved as ``table1.md``);
@@ -22,7 +22,9 @@
 - ``fig16``: local level of detail (Gaussian focus in wavelet space), Haar and cubic, M = 3:
   all coefficients, the approximation band and 0.5 % of the voxels in details chosen uniformly,
   and the same count with the focus;
-- ``fig17``: 30, 60 and 90 % of the level-0 scaling functions, Haar against cubic.
+- ``fig17``: 30, 60 and 90 % of the level-0 scaling functions, Haar against cubic;
+- ``prepost``: pre- against post-classification (a transfer function given while ray tracing), with the
+  data set's preset and with a sharp step of opacity.
 
 Every figure is made for the hydrogen phantom (``--size``³) and for a real scan (``--scan``,
 read with ``clwave.load``; default the ICBM 2009a MNI152 T1 MRI template, 197 x 233 x 189 at
@@ -306,9 +308,33 @@ def fig17(out: Path, data, args, log):
              f"{d.label}", out / f"fig17_{d.key}.png")
 
 
+def prepost(out: Path, data, args, log):
+    """Pre- against post-classification (docs/model.md §5, docs/raytracing.md §8): the data set's preset and a
+    sharp transfer function (a step of opacity over 0.2 % of the window), classified before the transform (one
+    model each) and while ray tracing (one scalar model for both), cubic, 3 levels, 5 %."""
+    for d in data:
+        lo, hi = d.tf.resolve_window(d.vol.data)
+        colour = d.tf.points[-1, 1:4]
+        sharp = clwave.TransferFunction([(0.0, *colour, 0.0), (0.3, *colour, 0.0), (0.302, *colour, d.tf.points[-1, 4]),
+                                         (1.0, *colour, d.tf.points[-1, 4])], window=(lo, hi), name="sharp")
+        scalar = clwave.WaveletVolume.from_volume(d.vol, wavelet="cubic", levels=3).threshold(keep=0.05)
+        tracer = clwave.RayTracer(scalar)
+        cam = d.view(args.raytrace_image)
+        row = []
+        for name, tf in ((d.tf.name, d.tf.resolved(d.vol)), ("sharp step", sharp)):
+            rgba = clwave.WaveletVolume.from_volume(tf.classify(d.vol), wavelet="cubic", levels=3).threshold(keep=0.05)
+            pre, secs, _ = trace(rgba, cam, args.tolerance)
+            row.append((pre, f"{name}: pre-classified ({secs:.1f} s)", None, False))
+            res = tracer.render(cam, tolerance=args.tolerance, transfer_function=tf)
+            row.append((res.to_uint8(), f"{name}: post-classified ({res.meta['render_seconds']:.1f} s)", None, False))
+            log(f"  prepost {d.key} {name}: pre {secs:.2f} s, post {res.meta['render_seconds']:.2f} s")
+        grid([row], f"Pre- vs post-classification, cubic, 5 %, tolerance {args.tolerance:g}\n{d.label}",
+             out / f"prepost_{d.key}.png")
+
+
 FIGURES = {"table1": table1, "fig07": fig07, "fig10": fig10, "fig11": fig11,
            "fig12": functools.partial(local_lod, raytraced=True), "fig14": fig14, "fig15": fig15,
-           "fig16": functools.partial(local_lod, raytraced=False), "fig17": fig17}
+           "fig16": functools.partial(local_lod, raytraced=False), "fig17": fig17, "prepost": prepost}
 
 
 def main(argv=None):

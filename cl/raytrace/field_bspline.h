@@ -10,11 +10,28 @@
 #include "raytrace/types.h"
 
 /* ---- B-spline path: bricks of lattice coefficients (clwave/raytrace/bricks.py) ---- */
-#define FIELD_PARAMS __global const float4 *coef, __global const int *pages, const int4 page_origin, \
+/* A coefficient of the pool: float4 (channels in their slots), or one float for a scalar model
+ * (CLW_SCALAR_POOL, clwave/raytrace/classified.py); COEF4 reads it as four channels, COEF_LANE as the
+ * channel whose gradient shades: alpha, or the scalar post-classified (CLW_POST, classify.h) */
+#ifdef CLW_POST
+#define GRADIENT_LANE x
+#else
+#define GRADIENT_LANE w
+#endif
+#ifdef CLW_SCALAR_POOL
+typedef float coef_t;
+#define COEF4(c) ((real4)((real)(c), 0, 0, 0))
+#define COEF_LANE(c) (c)
+#else
+typedef float4 coef_t;
+#define COEF4(c) to_real4(c)
+#define COEF_LANE(c) ((c).GRADIENT_LANE)
+#endif
+#define FIELD_PARAMS __global const coef_t *coef, __global const int *pages, const int4 page_origin, \
                      const int4 page_shape, __global const float4 *frames, __global const int4 *boxes, \
                      __global const float4 *lattices
 typedef struct {
-    __global const float4 *coef;
+    __global const coef_t *coef;
     __global const int *pages;
     int4 page_origin, page_shape;
     __global const float4 *frames;
@@ -87,7 +104,7 @@ BSPLINE_DERIVATIVES(real4, bspline_derivatives4)
  * (four channels each), 8 and 9 in f8 (only when `tail`), so each coefficient is read once per
  * segment and feeds 40 lanes in three vector FMAs.  w[a][r][h] and w8[a][r] are the weights spread
  * to those lanes; the sums are added to f, f8.  Always inlined with a literal order j and `tail`, so the loops unroll. */
-__attribute__((always_inline)) inline void group_field(__global const float4 *corner, const int sy, const int sz,
+__attribute__((always_inline)) inline void group_field(__global const coef_t *corner, const int sy, const int sz,
                                                        const int j, const bool tail, real16 w[3][4][2],
                                                        real8 w8[3][4], real16 *f, real8 *f8)
 {
@@ -99,12 +116,12 @@ __attribute__((always_inline)) inline void group_field(__global const float4 *co
         real8 plane8 = 0;
 #pragma unroll
         for (int ry = 0; ry < j; ry++) {
-            __global const float4 *row = corner - rz * sz - ry * sy;
+            __global const coef_t *row = corner - rz * sz - ry * sy;
             real16 line0 = 0, line1 = 0;
             real8 line8 = 0;
 #pragma unroll
             for (int rx = 0; rx < j; rx++) {
-                const real4 c = to_real4(row[-rx]);
+                const real4 c = COEF4(row[-rx]);
                 const real16 c16 = (real16)(c, c, c, c);
                 line0 = fma(c16, w[0][rx][0], line0);
                 line1 = fma(c16, w[0][rx][1], line1);
@@ -127,9 +144,9 @@ __attribute__((always_inline)) inline void group_field(__global const float4 *co
 }
 
 /* The alpha group's part of alpha's fine gradient at all lanes of TYPE at once: the same
- * separable sum as group_field on the alpha channel, with the derivative weights d? */
+ * separable sum as group_field on the alpha channel (COEF_LANE), with the derivative weights d? */
 #define GROUP_GRADIENT(TYPE, NAME)                                                                        \
-    __attribute__((always_inline)) inline void NAME(__global const float4 *corner, const int sy, const int sz, \
+    __attribute__((always_inline)) inline void NAME(__global const coef_t *corner, const int sy, const int sz, \
                                                     const int j, const TYPE *wx, const TYPE *wy, const TYPE *wz, \
                                                     const TYPE *dx, const TYPE *dy, const TYPE *dz, TYPE *gx,   \
                                                     TYPE *gy, TYPE *gz)                                         \
@@ -137,10 +154,10 @@ __attribute__((always_inline)) inline void group_field(__global const float4 *co
         _Pragma("unroll") for (int rz = 0; rz < j; rz++) {                                                \
             TYPE plane = 0, plane_dx = 0, plane_dy = 0;                                                   \
             _Pragma("unroll") for (int ry = 0; ry < j; ry++) {                                            \
-                __global const float4 *row = corner - rz * sz - ry * sy;                                  \
+                __global const coef_t *row = corner - rz * sz - ry * sy;                                  \
                 TYPE line = 0, line_dx = 0;                                                               \
                 _Pragma("unroll") for (int rx = 0; rx < j; rx++) {                                        \
-                    const TYPE a = (TYPE)(row[-rx].w);                                                    \
+                    const TYPE a = (TYPE)(COEF_LANE(row[-rx]));                                          \
                     line = fma(a, wx[rx], line);                                                          \
                     line_dx = fma(a, dx[rx], line_dx);                                                    \
                 }                                                                                         \
@@ -160,7 +177,7 @@ GROUP_GRADIENT(real4, group_gradient4)
  * axis the position u in the cell and the B-spline weights w at lanes 0..7 (real8) and 8..11
  * (real4: the lanes past NS are unused) */
 typedef struct {
-    __global const float4 *corner;
+    __global const coef_t *corner;
     int sy, sz;
     real inv_step; /* lattice cells per grid-0 fine cell: the gradient's scale */
     real8 u[3], w[3][4];
@@ -251,7 +268,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
         real##WIDTH d[3][4], hx = 0, hy = 0, hz = 0;                                                      \
         for (int a = 0; a < 3; a++)                                                                       \
             bspline_derivatives##WIDTH(j, B->U[a], d[a]);                                                 \
-        __global const float4 *c = B->corner;                                                             \
+        __global const coef_t *c = B->corner;                                                             \
         const real##WIDTH *wx = B->W[0], *wy = B->W[1], *wz = B->W[2];                                   \
         switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */                         \
         case 2: group_gradient##WIDTH(c, B->sy, B->sz, 2, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \

@@ -30,6 +30,21 @@ typedef struct {
     real A[NS + 1];  /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
 } Segment;
 
+/* the Chebyshev series of the gradient's lanes 0..8 (nodes: after the points and the field's matrix) */
+inline void gradient_series(Segment *S, __constant const real *nodes)
+{
+    real gx[16], gy[16], gz[16];
+    vstore16(S->gx, 0, gx);
+    vstore16(S->gy, 0, gy);
+    vstore16(S->gz, 0, gz);
+    for (int m = 0; m < 9; m++) {
+        real3 ag = (real3)(0);
+        for (int k = 0; k < 9; k++)
+            ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * 9 + k];
+        S->g[m] = ag;
+    }
+}
+
 /* the Chebyshev series of the segment's samples (nodes: the points, then the field's and the
  * gradient's sample-to-series matrices), and the antiderivative of alpha's */
 inline void segment_series(Segment *S, __constant const real *nodes)
@@ -41,16 +56,7 @@ inline void segment_series(Segment *S, __constant const real *nodes)
         S->q[m] = aq;
     }
 #ifdef CLW_SHADE /* only shading reads the gradient series */
-    real gx[16], gy[16], gz[16];
-    vstore16(S->gx, 0, gx);
-    vstore16(S->gy, 0, gy);
-    vstore16(S->gz, 0, gz);
-    for (int m = 0; m < 9; m++) {
-        real3 ag = (real3)(0);
-        for (int k = 0; k < 9; k++)
-            ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * 9 + k];
-        S->g[m] = ag;
-    }
+    gradient_series(S, nodes);
 #endif
     /* C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0, and C_0 so that A(-1) = 0 */
     real c0 = 0, sign = -1;
@@ -166,48 +172,61 @@ inline bool panel_done(const Panel *p, const real3 flm, const real3 fmr, real3 *
     return false;
 }
 
-/* int_{-1}^{1} q e^{-A} dxi by adaptive Simpson from 2 panels; counts evaluations, flags depth.
- * f9 holds the integrand at xi = -1 + p/4, p = 0..8: the 2 panels and their halves, so the stack
- * is needed only when a panel must halve again (nearly never at tolerance 1e-2).
- * Depth first, right half pushed first: the stack holds at most one panel per depth. */
-inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant const real *nodes, const real tol,
-                     int *evals, int *flags)
+/* ADAPTIVE_SIMPSON(NAME, CTX, EVAL): int_l^r f dxi by adaptive Simpson from 2 panels, for an integrand
+ * f = EVAL(ctx, P, nodes, xi); counts evaluations, flags depth.  f9 holds f at xi = l + (r - l) p/8,
+ * p = 0..8: the 2 panels and their halves, so EVAL is needed only when a panel must halve again
+ * (nearly never at tolerance 1e-2).  Depth first, right half pushed first: the stack holds at most one
+ * panel per depth. */
+#define ADAPTIVE_SIMPSON(NAME, CTX, EVAL)                                                                     \
+    inline real3 NAME(CTX *S, const Shading *P, const real3 *f9, __constant const real *nodes, const real l,   \
+                      const real r, const real tol, int *evals, int *flags)                                   \
+    {                                                                                                         \
+        const real mid = (l + r) / 2;                                                                         \
+        const Panel first = {l, mid, tol / 2, f9[0], f9[2], f9[4], 1},                                        \
+                    second = {mid, r, tol / 2, f9[4], f9[6], f9[8], 1};                                       \
+        real3 total = (real3)(0);                                                                             \
+        *evals += 9;                                                                                          \
+        Panel stack[CLW_MAX_DEPTH + 1];                                                                       \
+        int top = 0;                                                                                          \
+        if (panel_done(&first, f9[1], f9[3], &total, flags)) {                                                \
+            if (panel_done(&second, f9[5], f9[7], &total, flags))                                             \
+                return total;                                                                                 \
+            stack[top++] = second;                                                                            \
+        } else {                                                                                              \
+            stack[top++] = second;                                                                            \
+            stack[top++] = first;                                                                             \
+        }                                                                                                     \
+        while (top > 0) {                                                                                     \
+            const Panel p = stack[--top];                                                                     \
+            const real m = (p.l + p.r) / 2;                                                                   \
+            real3 flm, fmr;                                                                                   \
+            if (p.depth == 1) {                                                                               \
+                flm = f9[p.l < mid ? 1 : 5];                                                                  \
+                fmr = f9[p.l < mid ? 3 : 7];                                                                  \
+            } else {                                                                                          \
+                flm = EVAL(S, P, nodes, (p.l + m) / 2);                                                       \
+                fmr = EVAL(S, P, nodes, (m + p.r) / 2);                                                       \
+                *evals += 2;                                                                                  \
+            }                                                                                                 \
+            if (!panel_done(&p, flm, fmr, &total, flags)) {                                                   \
+                Panel *right = &stack[top++], *left = &stack[top++];                                          \
+                right->l = m; right->r = p.r; right->fl = p.fm; right->fm = fmr; right->fr = p.fr;            \
+                left->l = p.l; left->r = m; left->fl = p.fl; left->fm = flm; left->fr = p.fm;                 \
+                right->tol = left->tol = p.tol / 2;                                                           \
+                right->depth = left->depth = p.depth + 1;                                                     \
+            }                                                                                                 \
+        }                                                                                                     \
+        return total;                                                                                         \
+    }
+
+/* the pre-classified integrand at xi, its series made when first needed */
+inline real3 segment_point(Segment *S, const Shading *P, __constant const real *nodes, const real xi)
 {
-    const Panel first = {-1, 0, tol / 2, f9[0], f9[2], f9[4], 1}, second = {0, 1, tol / 2, f9[4], f9[6], f9[8], 1};
-    real3 total = (real3)(0);
-    *evals += 9;
-    Panel stack[CLW_MAX_DEPTH + 1];
-    int top = 0;
-    if (panel_done(&first, f9[1], f9[3], &total, flags)) {
-        if (panel_done(&second, f9[5], f9[7], &total, flags))
-            return total;
-        stack[top++] = second;
-    } else {
-        stack[top++] = second;
-        stack[top++] = first;
-    }
-    while (top > 0) {
-        const Panel p = stack[--top];
-        const real m = (p.l + p.r) / 2;
-        real3 flm, fmr;
-        if (p.depth == 1) {
-            flm = f9[p.l < 0 ? 1 : 5];
-            fmr = f9[p.l < 0 ? 3 : 7];
-        } else {
-            if (!S->series)
-                segment_series(S, nodes);
-            flm = integrand(S, P, (p.l + m) / 2);
-            fmr = integrand(S, P, (m + p.r) / 2);
-            *evals += 2;
-        }
-        if (!panel_done(&p, flm, fmr, &total, flags)) {
-            Panel *right = &stack[top++], *left = &stack[top++];
-            right->l = m; right->r = p.r; right->fl = p.fm; right->fm = fmr; right->fr = p.fr;
-            left->l = p.l; left->r = m; left->fl = p.fl; left->fm = flm; left->fr = p.fm;
-            right->tol = left->tol = p.tol / 2;
-            right->depth = left->depth = p.depth + 1;
-        }
-    }
-    return total;
+    if (!S->series)
+        segment_series(S, nodes);
+    return integrand(S, P, xi);
 }
+
+/* simpson(S, P, f9, nodes, -1, 1, tol, evals, flags): int_{-1}^{1} q e^{-A} dxi of a segment */
+ADAPTIVE_SIMPSON(simpson, Segment, segment_point)
 #endif

@@ -12,7 +12,7 @@
  * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
  * CLW_SAMPLES samples per segment (9 or 10); CLW_JOIN when every order is >= 3; CLW_LATTICE 1 or
  * 0.5 (orders of both parities); CLW_SHADE for Phong shading; CLW_XRAY for line integrals;
- * CLW_DOUBLE for a float64 build. */
+ * CLW_DOUBLE for a float64 build; CLW_POST to classify a scalar by a transfer function while rendering. */
 #include "raytrace/types.h"
 #ifdef CLW_WAVELET
 #include "raytrace/field_wavelet.h"
@@ -20,6 +20,12 @@
 #include "raytrace/field_bspline.h"
 #endif
 #include "raytrace/quadrature.h"
+#ifdef CLW_POST
+#include "raytrace/classify.h"
+#define POST 1
+#else
+#define POST 0
+#endif
 
 /* Per axis, the next plane x_a = lat_a + k lat.w of a lattice of knot planes (origin lat.xyz, spacing
  * lat.w) that the ray x0 + t dd meets: its index k and its t */
@@ -161,6 +167,8 @@ inline real2 simpson_pair(const real8 v, const real first)
  *                of alpha they are rounding noise, whose random normals would make the integrand
  *                jump everywhere
  *   lights       (nlights,) unit directions towards the lights; phong (ka, kd, ks, shininess)
+ *   tf           CLW_POST builds: the transfer function's table (classify.h) that classifies the scalar
+ *                (channel 0); the bounds then bound the classified opacity
  *   passes       0: one pass over the whole ray.  Else the ray is marched only inside the box pass_lo ..
  *                pass_hi (grid-0 fine coordinates), going on from carry (premultiplied colour and T, or the
  *                X-ray integrals), ledger (the skipping and shading budgets left, R consumed, and R of the
@@ -180,6 +188,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                        const real shade_gain,
                        const real grad_floor,
                        __constant const float4 *lights, const int nlights, const float4 phong,
+                       __global const real4 *tf,
                        const int passes, const float4 pass_lo, const float4 pass_hi, __global real4 *carry,
                        __global real4 *ledger)
 {
@@ -269,7 +278,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
     const real total = t1 - t0;
     real skip_budget = tol / 4;
     real shade_budget = tol * 3 / 8; /* three quarters of the quadrature's half, when shading */
-    const real quadrature_share = SHADING ? tol / 8 : tol / 2;
+    const real quadrature_share = SHADING && !POST ? tol / 8 : tol / 2; /* post: no midpoint shading */
     /* R(t0): the region bounds integrated along the whole ray, region by region (once, in the first pass) */
     real rest = 0, consumed = 0;
     if (passes) {
@@ -382,6 +391,36 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                 integral += S.fq[k] * weights[8 * k + 7];
             I += S.radius * integral;
 #else
+            real3 part;
+            real depth; /* int alpha dxi over the segment */
+#ifdef CLW_POST
+            {   /* the scalar classified by the transfer function (classify.h) */
+                real s[NS], u[NS], c[NS], gx[16], gy[16], gz[16];
+                Piece C;
+                for (int k = 0; k < NS; k++)
+                    s[k] = S.fq[k].x;
+                part = (real3)(0);
+                depth = 0;
+                if (segment_scalar(s, nodes, tf, &C, u, c)) { /* else transparent all along */
+#ifdef CLW_SHADE
+                    sample_gradient(basis, true, &S.gx, &S.gy, &S.gz);
+                    gradient_series(&S, nodes);
+#else
+                    S.gx = 0; S.gy = 0; S.gz = 0;
+                    for (int m = 0; m < 9; m++)
+                        S.g[m] = (real3)(0);
+#endif
+                    vstore16(S.gx, 0, gx);
+                    vstore16(S.gy, 0, gy);
+                    vstore16(S.gz, 0, gz);
+                    const real seg_tol = quadrature_share * (tn - t) / total / T;
+                    const real4 r = classified_segment(&C, c, u, gx, gy, gz, S.g, S.radius, nodes, weights, tf, &P,
+                                                       seg_tol / S.radius, &evals, &flags);
+                    part = r.xyz;
+                    depth = r.w;
+                }
+            }
+#else
             /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
             real lr[8], lg[8], lb[8], la[8];
             real8 A8 = 0;
@@ -400,10 +439,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             real8 r8 = vload8(0, lr), g8 = vload8(0, lg), b8 = vload8(0, lb);
             const real8 a8 = vload8(0, la);
             const real4 f0 = fmax(S.fq[P0], (real4)(0));
-            const real depth = A8.s7; /* int alpha dxi over the segment */
+            depth = A8.s7;
             const real8 att = fast_exp(-S.radius * A8);
             bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
-            real3 part;
 #ifdef CLW_SHADE
             {   /* Shading turns q into q (ka + kd D) + ks alpha S with D, S in [0, nlights]: the
                  * midpoint of that range errs by at most half its width, times the unshaded
@@ -457,9 +495,10 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                 for (int p = 1; p <= 8; p++)
                     f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
                 const real seg_tol = quadrature_share * (tn - t) / total / T;
-                part = simpson(&S, &P, f9, nodes, seg_tol / S.radius, &evals, &flags);
+                part = simpson(&S, &P, f9, nodes, -1, 1, seg_tol / S.radius, &evals, &flags);
             }
             end_shaded = simpson_full;
+#endif
             I += T * S.radius * part;
             T *= exp(-S.radius * depth);
             consumed += bnd * (tn - t);

@@ -30,7 +30,8 @@ def run(args):
     saved = time.perf_counter() - start
     size, voxels = out.stat().st_size, wv.n_voxels
     raw = voxels * wv.channels * 4  # the volume the model approximates, as float32
-    classified = f", classified to {wv.channels} channels (--tf {args.tf})" if args.tf else ""
+    classified = "" if not args.tf else f", classified to {wv.channels} channels (--tf {args.tf})" \
+        if args.classify == "pre" else f", the scalar kept with --tf {args.tf} to classify while ray tracing"
     print(f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z)"
           f"{classified}{_on_disk(args.input)}")
     print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} levels, "

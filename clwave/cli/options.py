@@ -67,6 +67,10 @@ def add_model_options(p):
     g.add_argument("--tf", help="classify with a transfer-function preset first: "
                                 + ", ".join(TransferFunction.PRESETS))
     g.add_argument("--tf-window", help="transfer-function window: auto or LO,HI")
+    g.add_argument("--classify", choices=("pre", "post"), default="pre",
+                   help="with --tf: pre (default) classifies the volume before the transform; post keeps the "
+                        "scalar and the transfer function for ray tracing to classify while rendering (a .clw "
+                        "input: --tf always classifies while rendering)")
 
 
 def read_volume(args):
@@ -86,7 +90,8 @@ def read_volume(args):
         if len(parts) > 3 or (len(parts) == 3 and not parts[2].isdigit()):
             raise InputError(f"{spec!r}: write phantom:NAME or phantom:NAME:N (N voxels per axis)")
         n = int(parts[2]) if len(parts) == 3 else 128
-        check_fits(MODEL_BYTES_PER_VALUE * n ** 3 * (4 if args.tf else 1), f"decomposing a {n}^3 phantom",
+        classified = args.tf and getattr(args, "classify", "pre") == "pre"  # four channels, or the scalar
+        check_fits(MODEL_BYTES_PER_VALUE * n ** 3 * (4 if classified else 1), f"decomposing a {n}^3 phantom",
                    "choose a smaller N")
         vol = phantom(parts[1], n=n)
         return vol if spacing is None else Volume(vol.data, spacing=spacing)
@@ -163,41 +168,40 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False):
     scheduler = parse_scheduler(args)
     if args.input.lower().endswith(".clw"):
         given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
-                 and not (cluster_render and name in ("workers", "scheduler"))]
+                 and not (cluster_render and name in ("workers", "scheduler"))
+                 and not (rgba and name in ("tf", "tf_window"))]  # a scalar .clw: classified while rendering
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
                              f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")
         wv = WaveletVolume.open(args.input, keep=args.keep if args.focus is None else None)
-        if rgba and wv.channels != 4:
-            raise _needs_rgba(args.input, wv.channels, "compress the volume with --tf PRESET")
+        if rgba and wv.channels != 4 and post_transfer_function(args, wv) is None:
+            raise _needs_rgba(args.input, wv.channels, "give --tf PRESET to classify it while rendering, or "
+                                                       "compress the volume with --tf PRESET")
         if args.threshold is not None or args.focus is not None:  # --keep alone: a prefix of the file
             wv = wv.threshold(**thresholding)
         return wv, None
     vol = read_volume(args)
-    tf = None
-    if args.tf:
-        window = args.tf_window
-        if window not in (None, "auto"):
-            window = numbers(window, "--tf-window", (2,))
-        tf = TransferFunction.preset(args.tf, window=window)
-    elif args.tf_window is not None:
-        raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
+    tf = _preset(args)
+    post = tf is not None and args.classify == "post"
+    if post and vol.channels != 1:
+        raise InputError(f"--classify post keeps a scalar volume for ray tracing to classify; {args.input} has "
+                         f"{vol.channels} channels: leave --classify post out")
     if rgba and tf is None and vol.channels != 4:
         presets = ", ".join(TransferFunction.PRESETS)
         raise _needs_rgba(args.input, vol.channels, f"classify it with --tf PRESET ({presets})")
     wavelet = args.wavelet or DEFAULT_WAVELET
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
-    wavelet, levels = check_decomposition(vol.shape, 4 if tf else vol.channels, wavelet,
+    wavelet, levels = check_decomposition(vol.shape, 4 if tf and not post else vol.channels, wavelet,
                                           DEFAULT_LEVELS if args.levels is None else args.levels)
     if not vol.chunked:
-        check_fits(MODEL_BYTES_PER_VALUE * int(np.prod(vol.shape)) * (4 if tf else vol.channels),
+        check_fits(MODEL_BYTES_PER_VALUE * int(np.prod(vol.shape)) * (4 if tf and not post else vol.channels),
                    "decomposing this volume", "read it chunk by chunk (--chunks auto), or crop or subsample it")
     elif args.interpolate:
         raise InputError("--interpolate needs the whole volume in memory (its prefilter is global); leave it out "
                          "for a chunked input, or read the input whole with --chunks off")
     if tf is not None:
         tf = tf.resolved(vol)  # records an "auto" window
-        vol = tf.classify(vol)
+        vol = vol if post else tf.classify(vol)  # post: the scalar, and tf as its default for ray tracing
     start = time.perf_counter()
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
                                    transfer_function=tf, scheduler=scheduler)
@@ -209,6 +213,41 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False):
     if not vol.chunked:
         return wv, vol
     return (wv.compute() if gather else wv), None
+
+
+def _preset(args):
+    """The transfer function of ``--tf PRESET [--tf-window auto|LO,HI]``, or None without ``--tf``."""
+    from ..model.transfer import TransferFunction
+
+    if not args.tf:
+        if args.tf_window is not None:
+            raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
+        return None
+    return TransferFunction.preset(args.tf, window=None if args.tf_window is None else _preset_window(args.tf_window))
+
+
+def post_transfer_function(args, wv):
+    """The transfer function that classifies a scalar model while ray tracing (docs/raytracing.md §10): on a .clw
+    input ``--tf`` (with ``--tf-window``), else the model's own (``--tf PRESET --classify post``; a .clw input's
+    with ``--tf-window`` if given); None for a classified model or a scalar one without any."""
+    from ..model.transfer import TransferFunction
+
+    clw = args.input.lower().endswith(".clw")
+    if wv.channels != 1:
+        if clw and (args.tf or args.tf_window):
+            raise InputError(f"--tf and --tf-window classify a scalar model; {args.input} has {wv.channels} "
+                             f"channels (classified already): leave them out")
+        return None
+    if clw and (args.tf or wv.transfer_function is None):
+        return _preset(args)
+    tf = None if wv.transfer_function is None else TransferFunction.from_dict(wv.transfer_function)
+    if tf is not None and clw and args.tf_window is not None:
+        tf = TransferFunction(tf.points, window=_preset_window(args.tf_window), name=tf.name)
+    return tf
+
+
+def _preset_window(text):
+    return text if text == "auto" else numbers(text, "--tf-window", (2,))
 
 
 def check_output(path, force):

@@ -9,7 +9,8 @@ import numpy as np
 
 from ..errors import InputError
 from .options import (add_command, add_raytrace_options, build_model, check_output, make_camera, numbers,
-                      parse_device_memory, parse_lights, parse_scheduler, parse_window, write_gif)
+                      parse_device_memory, parse_lights, parse_scheduler, parse_window, post_transfer_function,
+                      write_gif)
 
 
 def run(args):
@@ -50,7 +51,8 @@ def run(args):
     cluster = cluster_client(parse_scheduler(args)) if on_cluster else contextlib.nullcontext()
     if args.method == "raytrace":
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
-                       absorption=not args.xray)
+                       absorption=not args.xray,
+                       transfer_function=None if args.xray else post_transfer_function(args, wv))
         if on_cluster:
             options.update(device=args.device, field=args.field, device_memory=device_memory)
         else:
@@ -110,7 +112,8 @@ def add_parser(sub):
                     "output .png (or .gif with --turntable)", view=True)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
                    help="splat (default): X-ray line integrals; raytrace: emission-absorption, shaded (needs a "
-                        "classified model: --tf, or a .clw compressed with it; or --xray)")
+                        "classified model: --tf, or a .clw compressed with it; a scalar .clw takes --tf to classify "
+                        "while rendering; or --xray)")
     add_raytrace_options(p)
     p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
     p.add_argument("--raw", help="also write the float32 image as .npy")

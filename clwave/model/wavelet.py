@@ -164,7 +164,9 @@ class WaveletVolume:
             approximating, mass preserving).  True: prefilter so the model passes
             through the samples (docs/model.md §1).
         transfer_function : TransferFunction or dict, optional
-            Stored with the volume (and in ``.clw`` files) to record how it was classified.
+            Stored with the volume (and in ``.clw`` files): for a classified volume, how it was classified;
+            for a scalar one, the transfer function ray tracing classifies it with by default
+            (post-classification, docs/raytracing.md §10).
         scheduler : optional
             Chunked volumes only: the Dask scheduler of the passes (:mod:`clwave.cluster`).
 

@@ -28,8 +28,10 @@ from ..device.memory import device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
+from .classified import ScalarRange, bernstein_matrix
 from .quadrature import sample_tables
 from ..io.result import RenderResult
+from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume
 
 
@@ -101,8 +103,8 @@ def raytrace_kernel(field: str) -> Kernel:
                   ("box_hi", FLOAT4), ("base", FLOAT4), ("du", FLOAT4), ("dv", FLOAT4), ("dir", FLOAT4),
                   ("perspective", I32), ("to_fine_scale", FLOAT4), ("to_fine_offset", FLOAT4), ("nodes", B),
                   ("weights", B), ("tol", REAL), ("shade_gain", REAL), ("grad_floor", REAL), ("lights", B),
-                  ("nlights", I32), ("phong", FLOAT4), ("passes", I32), ("pass_lo", FLOAT4), ("pass_hi", FLOAT4),
-                  ("carry", B), ("ledger", B))
+                  ("nlights", I32), ("phong", FLOAT4), ("tf", B), ("passes", I32), ("pass_lo", FLOAT4),
+                  ("pass_hi", FLOAT4), ("carry", B), ("ledger", B))
 REAL4 = {np.float32: cltypes.float4, np.float64: cltypes.double4}
 GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
@@ -155,6 +157,8 @@ class RayTracer:
             self._bands([g.dense_bands() for g in wv.groups])
             self.super_bound_host, self.super_origin = superblocks(self.block_bound.get(), self.occ_origin)
             self.super_bound = cla.to_device(self.cc.queue, self.super_bound_host)
+        # a scalar model: its range per block, for transfer functions at render time (docs/raytracing.md §10)
+        self.scalar = ScalarRange(self) if wv.channels == 1 and field == "bspline" and not lod else None
 
     def _expand(self):
         """B-spline field: the bricks (:mod:`clwave.raytrace.bricks`), and their per-block maxima as bounds."""
@@ -187,6 +191,13 @@ class RayTracer:
                 self._at.pop(next(iter(self._at)))
             self._at[key] = field_at(self.bricks, self.cc, pick(self.bricks, caps))
         return self._at[key]
+
+    def replace_pool(self, pool):
+        """The bricks' pool on the device replaced by ``pool`` (post-classification's scalar pool, docs/raytracing.md
+        §10): the field's tables of every detail name the new one."""
+        self.bricks.pool = pool
+        self._at.clear()
+        self.field_tables = self.field_at(0).field_tables
 
     def _detail(self, detail, view, scale, offset) -> tuple:
         """(FieldAt, the meta's detail level: an int, or the least and largest over the bricks) of a render."""
@@ -318,7 +329,7 @@ class RayTracer:
         return [(slots, lo, hi) for _, slots, lo, hi in regions]
 
     def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
-               precision="single", trace=0, detail=None) -> RenderResult:
+               precision="single", trace=0, detail=None, transfer_function=None) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.
 
         ``detail`` (B-spline field): a level from 0 (full detail, the default) to ``levels``, or a
@@ -330,10 +341,15 @@ class RayTracer:
         """
         wv, cc = self.wv, self.cc
         tol = _checked_view(camera, tolerance)
-        if absorption and wv.channels != 4:
+        if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
+            transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
+        if transfer_function is not None:
+            self._check_post(absorption, detail)
+        elif absorption and wv.channels != 4:
             raise InputError(f"emission-absorption ray tracing needs an RGBA volume (4 channels), this one has "
-                             f"{wv.channels}; classify it first (TransferFunction.classify), or pass "
-                             f"absorption=False for line integrals")
+                             f"{wv.channels}; classify it first (TransferFunction.classify), give a scalar one a "
+                             f"transfer_function= to classify it while rendering, or pass absorption=False for "
+                             f"line integrals")
         if precision not in ("single", "double"):
             raise InputError(f"precision={precision!r} must be 'single' or 'double'")
         if precision == "double" and not cc.queue.device.double_fp_config:
@@ -350,7 +366,12 @@ class RayTracer:
 
         nodes, weights = sample_tables(3 * (max(self.orders) - 1))
         n_samples = len(weights)
-        defines = dict(self.defines, CLW_ALPHA=self.alpha_group, CLW_SAMPLES=n_samples,
+        real = np.float64 if precision == "double" else np.float32
+        post = None  # docs/raytracing.md §10: the transfer function's table and bounds
+        if transfer_function is not None:
+            post = self.scalar.classify(transfer_function, cc, real)
+            nodes = np.concatenate([nodes, bernstein_matrix(nodes[:n_samples]).ravel()])
+        defines = dict(self.defines, CLW_ALPHA=0 if post else self.alpha_group, CLW_SAMPLES=n_samples,
                        CLW_MAX_DEPTH=SIMPSON_DEPTH,
                        CLW_LATTICE="0.5" if len({o % 2 for o in self.orders}) > 1 else "1.0")
         if min(self.orders) >= 3:  # the field and its gradient are continuous across knot planes
@@ -359,13 +380,14 @@ class RayTracer:
             defines["CLW_XRAY"] = None
         elif phong is not None:
             defines["CLW_SHADE"] = None
+        if post is not None:
+            defines["CLW_POST"] = None
         if self.content_shape.any():
             defines["CLW_CONTENT"] = None
         if precision == "double":
             defines["CLW_DOUBLE"] = None
         if trace and self.field == "wavelet":
             defines["CLW_TRACE"] = int(trace)
-        real = np.float64 if precision == "double" else np.float32
         start = time.perf_counter()
         kernels = programs.build(cc, ["raytrace/raytrace.cl"], defines, () if precision == "double" else FAST_MATH)
         compile_seconds = time.perf_counter() - start
@@ -414,20 +436,23 @@ class RayTracer:
         if self.field == "wavelet":
             traced = cla.zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
             field_tables = dict(self.field_tables, poly=cla.to_device(q, self.poly.astype(real)), trace=traced)
+        skip = dict(bound=at.block_bound, super_bound=at.super_bound, super_origin=at.super_origin[::-1],
+                    super_shape=at.super_bound.shape[::-1], box_lo=at.box[0], box_hi=at.box[1])
+        if post is not None:  # the classified opacity bounds the field (docs/raytracing.md §10)
+            skip.update(bound=post.bound, super_bound=post.super_bound, super_origin=post.super_origin[::-1],
+                        super_shape=post.super_bound.shape[::-1], box_lo=post.box[0], box_hi=post.box[1])
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         arguments = dict(
-            image=image, stats=stats, lattice_stats=lattice_stats, width=W, height=H, bound=at.block_bound,
-            occ_origin=self.occ_origin[::-1],
-            occ_shape=at.block_bound.shape[::-1],
-            super_bound=at.super_bound, super_origin=at.super_origin[::-1], content=self.content,
+            image=image, stats=stats, lattice_stats=lattice_stats, width=W, height=H, **skip,
+            occ_origin=self.occ_origin[::-1], occ_shape=at.block_bound.shape[::-1], content=self.content,
             content_origin=self.content_origin[::-1], content_shape=self.content_shape[::-1],
-            super_shape=at.super_bound.shape[::-1], coarse_bound=self.coarse_bound(tol), box_lo=at.box[0],
-            box_hi=at.box[1], base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
+            coarse_bound=self.coarse_bound(tol), base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
             to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
-            grad_floor=self.grad_floor(precision, at.q_bound), lights=cla.to_device(q, light_buf),
-            nlights=len(light_dirs),
-            phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger)
+            grad_floor=post.grad_floor if post else self.grad_floor(precision, at.q_bound),
+            lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
+            phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger,
+            tf=post.table if post is not None else carry)
         for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
             if self.field == "bspline":
                 field_tables = None  # the last region's pool goes before the next one comes
@@ -457,6 +482,10 @@ class RayTracer:
             passes=1 if passes is None else len(passes), device_budget=self.budget.total,
             segments_by_lattice=dict(zip(("1", "2", "4", "8+"),
                                          lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())))
+        if post is not None:
+            meta.update(classification="post", transfer_function=post.tf.to_dict(),
+                        tf_window=None if post.window is None else list(post.window),
+                        classify_seconds=post.seconds)
         if self.field == "bspline":
             meta.update(bricks=len(at.slots), brick_levels=np.bincount(self.bricks.levels[at.slots]).tolist(),
                         brick_slots=len(self.bricks.levels), brick_pool_bytes=self.bricks.pool_bytes,
@@ -476,6 +505,22 @@ class RayTracer:
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
         return frames(self, camera, options, steps, budget, error)
 
+    def _check_post(self, absorption, detail):
+        """A transfer function at render time needs a scalar model with the B-spline field, absorption, and full
+        detail (docs/known-gaps.md §10: the scalar's ranges are those of the full-detail bricks)."""
+        if self.wv.channels != 1:
+            raise InputError(f"transfer_function= classifies a scalar model while rendering; this one has "
+                             f"{self.wv.channels} channels (already classified: render it without one)")
+        if self.lod or detail not in (None, 0):
+            raise InputError("transfer_function= renders at full detail, from a tracer made with lod=False; leave "
+                             "detail= and lod= out (level of detail with a render-time transfer function is not "
+                             "built yet)")
+        if self.scalar is None:
+            raise InputError("transfer_function= needs field='bspline' (--field bspline)")
+        if not absorption:
+            raise InputError("transfer_function= is for emission-absorption images; X-ray mode (absorption=False) "
+                             "integrates the scalar itself")
+
     def _phong(self, shading, absorption):
         """(Phong or None, what the meta says about shading)."""
         if not absorption:
@@ -492,14 +537,14 @@ class RayTracer:
 
 def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
              device=None, *, field="bspline", precision="single", device_memory=None, scheduler=None,
-             tracer: RayTracer | None = None) -> RenderResult:
+             tracer: RayTracer | None = None, transfer_function=None) -> RenderResult:
     """Ray trace a wavelet volume (paper §3).
 
     Parameters
     ----------
     wv : WaveletVolume
         Four channels ``(q_R, q_G, q_B, alpha)`` (``TransferFunction.classify``) for
-        emission-absorption; any channels for ``absorption=False``.
+        emission-absorption, or one (a scalar) with ``transfer_function``; any channels for ``absorption=False``.
     camera : Camera
         Orthographic or perspective; an eye inside the volume integrates from the eye.
     tolerance : float
@@ -524,6 +569,11 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         Render on a Dask cluster (:mod:`clwave.cluster`: a number of local worker processes, an address or a
         ``distributed.Client``): each worker traces the rays through its slab of bricks, opening the model's
         ``.clw`` file itself (docs/raytracing.md §7).
+    transfer_function : TransferFunction, optional
+        Classify a scalar model while rendering (post-classification, docs/raytracing.md §10): colour and
+        opacity as ``TransferFunction.classify`` gives them (docs/model.md §5), normals from the scalar's
+        gradient; another transfer function or window needs no new set-up.  Default: the one a scalar model
+        was made with (``WaveletVolume.from_volume(..., transfer_function=)``, kept in its ``.clw`` file).
     tracer : RayTracer, optional
         Render with this one; without it, calls on the same model, device and field share one
         (:meth:`WaveletVolume.shared`): the field is set up once.
@@ -537,8 +587,12 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         from .regions import check_cluster_model, raytrace_on_cluster
 
         check_cluster_model(wv, field)  # before any worker starts
+        if transfer_function is not None and getattr(transfer_function, "window", None) == "auto":
+            raise InputError('a transfer function window "auto" would be resolved by each worker on its own part; '
+                             "give the window (lo, hi) to render on a cluster")
         tol, cap = _checked_view(camera, tolerance), parse_cap(device_memory)
-        options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision)
+        options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision,
+                       transfer_function=transfer_function)
         with client_for(scheduler) as client:  # which checks the scheduler before starting anything
             return raytrace_on_cluster(wv, camera, client, options, device, cap)
     if tracer is None:
@@ -549,4 +603,4 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         tracer = wv.shared(("raytrace", cc.info.id, field, cap),
                            lambda: RayTracer(wv, device=cc, field=field, device_memory=cap))
     return tracer.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
-                         precision=precision)
+                         precision=precision, transfer_function=transfer_function)

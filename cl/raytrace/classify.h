@@ -1,0 +1,291 @@
+/* classify.h: post-classification, a transfer function applied while rendering (docs/raytracing.md §10).
+ *
+ * On a segment the scalar s is a polynomial in xi (degree NS - 1 at most) known exactly from its
+ * samples.  The transfer function is piecewise linear in u = s scale + shift, so where u stays inside
+ * one of its intervals, opacity and colour are polynomials in xi and the optical depth is exact.  The
+ * segment is cut where u crosses a breakpoint: the Bernstein coefficients of u on a span bound its range
+ * (convex hull); where they change sign once about a breakpoint, the span holds exactly one crossing,
+ * found by bisection, and is cut there; other spans that straddle are halved (de Casteljau).  Each
+ * piece's emission integral comes from adaptive Simpson on the classified, shaded integrand
+ * (quadrature.h), its tolerance the piece's share of the segment's.
+ *
+ * The table `tf` (real4 rows, clwave/raytrace/classified.py): row 0 (scale, shift, K, 0); rows
+ * 1..K the breakpoints u_i (x); then per interval k = 0..K (u below u_0, between u_{k-1} and u_k,
+ * above u_{K-1}) three rows (u_ref, alpha_ref, alpha_slope, 0), (rgb_ref, 0), (rgb_slope, 0).
+ * Build: CLW_POST; nodes carry, after the sample tables, the (NS, NS) matrix from the samples to
+ * the Bernstein coefficients on [-1, 1]. */
+#ifndef CLW_CLASSIFY_H
+#define CLW_CLASSIFY_H
+#include "raytrace/quadrature.h"
+
+#define POST_DEPTH 16      /* spans are cut at most this often; a span still straddling is flagged */
+#define POST_BISECTIONS 40 /* bisection steps for a crossing (stops earlier at the arithmetic's resolution) */
+
+/* One piece of a segment: u's series, its antiderivative, the gradient series of s (shading) and the
+ * transfer function's linear interval on the piece */
+typedef struct {
+    real us[NS], ui[NS + 1]; /* u's Chebyshev series, and its antiderivative (any constant) */
+    real3 g[9];              /* the gradient of s (fine units), Chebyshev series */
+    real radius;             /* half the segment length (world units) */
+    real a, ui_a, depth_a;   /* the piece's start, ui there, and int alpha dxi from -1 to there */
+    real4 line;              /* (u_ref, alpha_ref, alpha_slope, normal sign) */
+    real3 rgb, rgb_slope;    /* colour at u_ref and per unit u */
+} Piece;
+
+/* the interval of u: how many breakpoints are <= u */
+inline int tf_interval(__global const real4 *tf, const int K, const real u)
+{
+    int k = 0;
+    for (int i = 1; i <= K; i++)
+        k += tf[i].x <= u;
+    return k;
+}
+
+/* int alpha dxi from the piece's start to xi (exact: alpha is linear in u there), for e^{-A} inside the piece */
+inline real piece_depth(const Piece *C, const real xi)
+{
+    const real du_int = cheb1(C->ui, NS + 1, xi) - C->ui_a - C->line.x * (xi - C->a);
+    return C->line.y * (xi - C->a) + C->line.z * du_int;
+}
+
+/* int alpha dxi over the whole piece [a, b] by 5-point Gauss-Legendre: exact for alpha's degree (at most 9),
+ * and free of the cancellation in piece_depth's differences where the transfer function is steep */
+inline real piece_total(const Piece *C, const real a, const real b)
+{
+    const real x[3] = {0, (real)0.538469310105683091, (real)0.906179845938663993};
+    const real w[3] = {(real)0.568888888888888889, (real)0.478628670499366468, (real)0.236926885056189088};
+    real sum = 0;
+    for (int i = 0; i < 3; i++)
+        for (int side = -1; side <= (i ? 1 : -1); side += 2) {
+            const real u = cheb1(C->us, NS, (a + b) / 2 + side * x[i] * (b - a) / 2);
+            sum += w[i] * fmax(C->line.y + C->line.z * (u - C->line.x), (real)0);
+        }
+    return sum * (b - a) / 2;
+}
+
+/* the shaded emission times e^{-A} at xi (A from the segment's start) */
+inline real3 piece_point(Piece *C, const Shading *P, __constant const real *nodes, const real xi)
+{
+    const real du = cheb1(C->us, NS, xi) - C->line.x;
+    const real alpha = fmax(C->line.y + C->line.z * du, (real)0);
+    const real3 rgb = clamp(C->rgb + C->rgb_slope * du, (real)0, (real)1) * alpha;
+    real r = rgb.x, g = rgb.y, b = rgb.z;
+#ifdef CLW_SHADE
+    const real3 grad = cheb3(C->g, 9, xi) * C->line.w;
+    shade(&r, &g, &b, alpha, grad.x, grad.y, grad.z, P);
+#else
+    shade(&r, &g, &b, alpha, 0, 0, 0, P);
+#endif
+    return (real3)(r, g, b) * fast_exp(-C->radius * (C->depth_a + piece_depth(C, xi)));
+}
+
+ADAPTIVE_SIMPSON(piece_simpson, Piece, piece_point)
+
+/* value of a Bernstein polynomial's coefficients c on its span at tau in [0, 1], and the coefficients of
+ * its two parts [0, tau] (left) and [tau, 1] (right) (de Casteljau) */
+inline void bernstein_split(const real *c, const real tau, real *left, real *right)
+{
+    real w[NS];
+    for (int i = 0; i < NS; i++)
+        w[i] = c[i];
+    left[0] = c[0];
+    right[NS - 1] = c[NS - 1];
+    for (int r = 1; r < NS; r++) {
+        for (int i = 0; i < NS - r; i++)
+            w[i] = (1 - tau) * w[i] + tau * w[i + 1];
+        left[r] = w[0];
+        right[NS - 1 - r] = w[NS - 1 - r];
+    }
+}
+
+/* The piece [a, b] of the segment, lying in the transfer function's interval k: its emission added to
+ * *emission and its int alpha dxi to C->depth_a */
+inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, __global const real4 *tf,
+                      const int K, const real a, const real b, const real tol, real3 *emission, int *evals,
+                      int *flags)
+{
+    const int k = tf_interval(tf, K, cheb1(C->us, NS, (a + b) / 2));
+    const real4 line = tf[1 + K + 3 * k];
+    if (line.y == 0 && line.z == 0) /* transparent: nothing emitted, nothing absorbed */
+        return;
+    C->line = (real4)(line.xyz, line.z < 0 ? -1 : 1); /* normals face where alpha decreases */
+    C->rgb = tf[2 + K + 3 * k].xyz;
+    C->rgb_slope = tf[3 + K + 3 * k].xyz;
+    C->a = a;
+    C->ui_a = cheb1(C->ui, NS + 1, a);
+    real3 f9[9];
+    for (int p = 0; p <= 8; p++)
+        f9[p] = piece_point(C, P, nodes, a + (b - a) * p / 8);
+    *emission += piece_simpson(C, P, f9, nodes, a, b, tol * (b - a) / 2, evals, flags);
+    C->depth_a += piece_total(C, a, b);
+}
+
+/* The whole segment in the transfer function's interval k (the usual case): its samples are the piece's
+ * first nine points, as on the pre-classified path: alpha at the samples gives the optical depth exactly
+ * (`weights`, alpha being a polynomial of u's degree there), u and the gradient lanes the emission */
+inline void add_segment(Piece *C, const Shading *P, __constant const real *nodes, __constant const real *weights,
+                        __global const real4 *tf, const int K, const real *u, const real *gx, const real *gy,
+                        const real *gz, const real tol, real3 *emission, int *evals, int *flags)
+{
+    const int k = tf_interval(tf, K, u[3]); /* xi = 0 */
+    const real4 line = tf[1 + K + 3 * k];
+    if (line.y == 0 && line.z == 0)
+        return;
+    C->line = (real4)(line.xyz, line.z < 0 ? -1 : 1);
+    C->rgb = tf[2 + K + 3 * k].xyz;
+    C->rgb_slope = tf[3 + K + 3 * k].xyz;
+    C->a = -1;
+    C->ui_a = cheb1(C->ui, NS + 1, -1);
+    real alpha[NS], depth[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    for (int i = 0; i < NS; i++) {
+        alpha[i] = fmax(line.y + line.z * (u[i] - line.x), (real)0);
+        for (int p = 0; p < 8; p++)
+            depth[p] += weights[8 * i + p] * alpha[i];
+    }
+    real3 f9[9];
+    for (int p = 0; p <= 8; p++) { /* xi = -1 + p/4: lane P0 for p = 0, else lane p - 1 */
+        const int lane = p ? p - 1 : P0;
+        const real3 rgb = clamp(C->rgb + C->rgb_slope * (u[lane] - line.x), (real)0, (real)1) * alpha[lane];
+        real r = rgb.x, g = rgb.y, b = rgb.z;
+        shade(&r, &g, &b, alpha[lane], gx[lane] * C->line.w, gy[lane] * C->line.w, gz[lane] * C->line.w, P);
+        f9[p] = (real3)(r, g, b) * fast_exp(-C->radius * (p ? depth[p - 1] : 0));
+    }
+    *emission += piece_simpson(C, P, f9, nodes, -1, 1, tol, evals, flags);
+    C->depth_a = depth[7];
+}
+
+/* Whether u - v has exactly one root inside the span of Bernstein coefficients c: the coefficients change sign
+ * once (Descartes' rule for the Bernstein basis), the ends clear of v by more than eps */
+inline bool one_crossing(const real *c, const real v, const real eps)
+{
+    int changes = 0;
+    for (int i = 1; i < NS; i++)
+        changes += (c[i - 1] - v) * (c[i] - v) < 0;
+    return changes == 1 && fabs(c[0] - v) > eps && fabs(c[NS - 1] - v) > eps;
+}
+
+/* the transfer function's opacity at u */
+inline real tf_alpha(__global const real4 *tf, const int K, const real u)
+{
+    const real4 line = tf[1 + K + 3 * tf_interval(tf, K, u)];
+    return fmax(line.y + line.z * (u - line.x), (real)0);
+}
+
+/* A segment's scalar as the classification needs it, from s at the samples (lane order of fq): u there,
+ * u's Chebyshev series and antiderivative (in C), its Bernstein coefficients c on [-1, 1].  Returns whether
+ * the transfer function is opaque anywhere in the coefficients' hull: a segment where it is not adds
+ * nothing, and needs no gradient. */
+inline bool segment_scalar(const real *s, __constant const real *nodes, __global const real4 *tf, Piece *C,
+                           real *u, real *c)
+{
+    const real4 head = tf[0];
+    const int K = (int)head.z;
+    for (int k = 0; k < NS; k++)
+        u[k] = s[k] * head.x + head.y;
+    for (int m = 0; m < NS; m++) { /* u's series and Bernstein coefficients */
+        real am = 0, bm = 0;
+        for (int k = 0; k < NS; k++) {
+            am += u[k] * nodes[NS + m * NS + k];
+            bm += u[k] * nodes[NS + NS * NS + 81 + m * NS + k];
+        }
+        C->us[m] = am;
+        c[m] = bm;
+    }
+    /* u's antiderivative: C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 (any constant term) */
+    C->ui[0] = 0;
+    for (int k = 1; k <= NS; k++)
+        C->ui[k] = (C->us[k - 1] * (k == 1 ? 2 : 1) - (k + 1 < NS ? C->us[k + 1] : 0)) / (2 * k);
+    real lo = c[0], hi = c[0];
+    for (int i = 1; i < NS; i++) {
+        lo = fmin(lo, c[i]);
+        hi = fmax(hi, c[i]);
+    }
+    real m = fmax(tf_alpha(tf, K, lo), tf_alpha(tf, K, hi));
+    for (int p = 1; p <= K; p++) /* point p - 1: the opacity at the start of interval p */
+        if (lo <= tf[p].x && tf[p].x <= hi)
+            m = fmax(m, tf[1 + K + 3 * p].y);
+    return m > 0;
+}
+
+/* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from segment_scalar's C, u
+ * and c, the gradient of s at the samples (gx, gy, gz: lanes 0..8) and its series (grad; shading), the half
+ * length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1 where a span could not be
+ * resolved. */
+inline real4 classified_segment(Piece *C0, real *c, const real *u, const real *gx, const real *gy, const real *gz,
+                                const real3 *grad, const real radius, __constant const real *nodes,
+                                __constant const real *weights, __global const real4 *tf, const Shading *P,
+                                const real tol, int *evals, int *flags)
+{
+    const int K = (int)tf[0].z;
+    Piece C = *C0;
+    for (int m = 0; m < 9; m++)
+        C.g[m] = grad[m];
+    C.radius = radius;
+    C.depth_a = 0;
+    real3 emission = (real3)(0);
+    /* spans left to right: the right parts wait on a stack, one per depth at most */
+    real stack_c[POST_DEPTH][NS], stack_ab[POST_DEPTH][2];
+    int stack_depth[POST_DEPTH], top = 0, depth = 0;
+    real a = -1, b = 1;
+    while (true) {
+        real lo = c[0], hi = c[0];
+        for (int i = 1; i < NS; i++) {
+            lo = fmin(lo, c[i]);
+            hi = fmax(hi, c[i]);
+        }
+        /* breakpoints inside the range by more than u is known to: the samples' rounding times the interpolation's
+         * Lebesgue constant (about 30 for these points); a crossing by less moves nothing measurable */
+        const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
+        int inside = 0, cross = 0; /* cross: the first breakpoint crossed once, 0 for none */
+        for (int i = 1; i <= K; i++) {
+            const real v = tf[i].x;
+            if (v > lo + eps && v < hi - eps) {
+                inside += 1;
+                if (!cross && one_crossing(c, v, eps))
+                    cross = i;
+            }
+        }
+        if (inside == 0 || depth >= POST_DEPTH) { /* one interval (or unresolved: flagged) */
+            if (inside)
+                *flags |= 2;
+            if (depth == 0)
+                add_segment(&C, P, nodes, weights, tf, K, u, gx, gy, gz, tol, &emission, evals, flags);
+            else
+                add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
+            if (top == 0)
+                break;
+            top -= 1;
+            for (int i = 0; i < NS; i++)
+                c[i] = stack_c[top][i];
+            a = stack_ab[top][0];
+            b = stack_ab[top][1];
+            depth = stack_depth[top];
+            continue;
+        }
+        real x = (a + b) / 2; /* where the span is cut: its midpoint, or a crossing found by bisection */
+        const real v = tf[cross].x;
+        if (cross) {
+            const real sa = c[0] - v;
+            real l = a, r = b;
+            for (int it = 0; it < POST_BISECTIONS && l < x && x < r; it++) {
+                if ((cheb1(C.us, NS, x) - v) * sa > 0)
+                    l = x;
+                else
+                    r = x;
+                x = (l + r) / 2;
+            }
+        }
+        real left[NS];
+        bernstein_split(c, (x - a) / (b - a), left, stack_c[top]);
+        if (cross) /* u = v at the cut, exactly: no part sees the crossing again */
+            left[NS - 1] = stack_c[top][0] = v;
+        stack_ab[top][0] = x;
+        stack_ab[top][1] = b;
+        stack_depth[top++] = ++depth;
+        for (int i = 0; i < NS; i++)
+            c[i] = left[i];
+        b = x;
+    }
+    return (real4)(emission, C.depth_a);
+}
+#endif

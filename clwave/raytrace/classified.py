@@ -1,0 +1,164 @@
+"""Post-classification: a scalar model ray traced through a transfer function given at render time
+(docs/raytracing.md §10).
+
+The tracer's set-up holds the scalar's range per block of fine cells (:class:`ScalarRange`, from the brick
+pool: the B-splines are non-negative and sum to 1, so the scalar lies between the least and the largest
+coefficient reaching a block).  A transfer function then costs its table for the kernel
+(``cl/raytrace/classify.h``) and two small kernels (``cl/raytrace/scalar.cl``): per block the largest opacity
+over the block's range, the bound that empty-space skipping and early termination use (§4), and its
+superblock maxima.  Nothing is expanded, compiled or transformed again.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl.array as cla
+from pyopencl import cltypes
+from scipy.special import comb
+
+from ..device import programs
+from ..device.constants import SUPER
+from ..device.kernels import BUFFER, Kernel
+from ..errors import InputError
+from ..model.transfer import TransferFunction, auto_window
+
+_RANGE = Kernel("scalar_range", ("out", BUFFER), ("nblocks", cltypes.int4), ("origin", cltypes.int4),
+                ("coef", BUFFER), ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
+_STRIDED = Kernel("strided", ("out", BUFFER), ("coef", BUFFER), ("step", np.int64), ("n", np.int32))
+_BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf", BUFFER), ("slack", np.float32),
+                 ("n", np.int32))
+_SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound", BUFFER), ("nb", cltypes.int4))
+GROUP = 256  #: work-group of classified_bounds
+#: how many of the pool's coefficients a window "auto" looks at
+AUTO_COEFFICIENTS = 1 << 20
+#: a block's range is widened by this much of the scalar's largest magnitude (the kernels' float32 rounding)
+RANGE_SLACK = 1e-6
+#: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
+FLAT = 1e-4
+
+
+def tf_table(tf: TransferFunction, window) -> np.ndarray:
+    """The kernel's table of ``tf`` under ``window`` (data units), (rows, 4) float64 (``cl/raytrace/classify.h``).
+
+    u = s scale + shift maps the first point to 0 and the last to 1 (values of order 1 in any data units);
+    row 0 is (scale, shift, K, 0), rows 1..K the points' u, then per interval k = 0..K three rows:
+    (u_ref, alpha_ref, alpha_slope, 0), (rgb_ref, 0), (rgb_slope, 0); outside the points the end rows hold.
+    """
+    values = tf.data_points(window)
+    scale = 1.0 / (values[-1] - values[0])
+    u = (values - values[0]) * scale
+    K, rows = len(u), tf.points[:, 1:5]  # r, g, b, opacity
+    table = np.zeros((1 + K + 3 * (K + 1), 4))
+    table[0, :3] = scale, -values[0] * scale, K
+    table[1:K + 1, 0] = u
+    for k in range(K + 1):
+        i = min(max(k - 1, 0), K - 1)  # the interval's first point
+        du = u[k] - u[i] if 0 < k < K else 0.0
+        slope = (rows[k] - rows[i]) / du if du > 0 else np.zeros(4)
+        at = 1 + K + 3 * k
+        table[at, :3] = u[i], rows[i, 3], slope[3]
+        table[at + 1, :3] = rows[i, :3]
+        table[at + 2, :3] = slope[:3]
+    return table
+
+
+@dataclass
+class Classification:
+    """One transfer function's kernel arguments: the table and the classified bounds."""
+
+    tf: TransferFunction
+    window: tuple | None
+    table: cla.Array        # (rows, 4) real
+    bound: cla.Array        # per block: the largest opacity
+    super_bound: cla.Array  # per superblock
+    super_origin: np.ndarray
+    box: tuple              # clip box (x, y, z): the model's
+    grad_floor: float       # world gradients of the scalar this short are flat
+    seconds: float          # what the change of transfer function cost
+
+
+class ScalarRange:
+    """The scalar's range per block of a ray tracer's brick pool (set up once, on the device), and the
+    classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
+
+    Made, the pool on the device keeps the scalar alone: one float a coefficient instead of four
+    (``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``), a quarter of the memory.
+    """
+
+    def __init__(self, tracer):
+        f, cc = tracer.bricks, tracer.cc
+        q, shape = cc.queue, tuple(int(k) * SUPER for k in f.shape)
+        self.cc, self.origin, self.box = cc, tracer.occ_origin, tracer.box
+        self.noise_floor, self.spacing = tracer.grad_floor("single"), min(tracer.wv.spacing)
+        self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
+        if f.resident and len(f.levels):
+            tables = tracer.field_tables
+            self.range = cla.zeros(q, shape + (2,), np.float32)
+            at = np.zeros((len(f.bricks), 4), np.int32)
+            at[:, :3] = (f.bricks - f.origin)[:, ::-1]
+            _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=self.range,
+                   nblocks=shape[::-1], origin=f.origin[::-1], coef=tables["coef"],
+                   bricks=cla.to_device(q, at), frames=tables["frames"], boxes=tables["boxes"], order=f.orders[0])
+            n = min(AUTO_COEFFICIENTS, len(tables["coef"]))
+            sample = cla.empty(q, n, np.float32)
+            _STRIDED(self.kernels, q, (n,), None, out=sample, coef=tables["coef"], step=len(tables["coef"]) // n, n=n)
+            self.sample = sample.get()
+            scalar = cla.empty(q, len(f.pool), np.float32)  # the scalar alone: the float4 pool goes
+            _STRIDED(self.kernels, q, (len(f.pool),), None, out=scalar, coef=f.pool, step=1, n=len(f.pool))
+            tracer.replace_pool(scalar)
+            tracer.defines["CLW_SCALAR_POOL"] = None
+        else:  # bricks in a scratch file: |s| <= the block bound
+            bound = tracer.block_bound.get()
+            self.range, self.sample = cla.to_device(q, np.stack([-bound, bound], axis=-1)), None
+        self.slack = RANGE_SLACK * float(tracer.q_bound)
+        self.bound = cla.empty(q, shape, np.float32)
+        self.super_bound = cla.empty(q, tuple(-(-n // SUPER) for n in shape), np.float32)
+        self.super_origin = np.asarray(self.origin) // SUPER
+        self.last = None
+
+    def window(self, tf: TransferFunction):
+        """``tf``'s window in data units; "auto" from the percentiles of the pool's coefficients (the voxels'
+        values where bricks are at the finest level, docs/raytracing.md §10)."""
+        if tf.window != "auto":
+            return tf.window
+        if self.sample is None:
+            raise InputError('a transfer function window "auto" at render time needs the bricks on the device; '
+                             "give the window (lo, hi) (--tf-window LO,HI)")
+        return auto_window(self.sample)
+
+    def classify(self, tf, cc, real) -> Classification:
+        """The kernel arguments of ``tf`` (reused while the transfer function and precision stay the same)."""
+        if not isinstance(tf, TransferFunction):
+            raise InputError("transfer_function must be a clwave.TransferFunction")
+        last = self.last
+        if last is not None and last.tf == tf and last.table.dtype == real:
+            return last
+        start = time.perf_counter()
+        window = self.window(tf)
+        table, q = tf_table(tf, window), cc.queue
+        n = self.bound.size  # explicit work-groups: PoCL's default for this size was a tenth as fast
+        _BOUNDS(self.kernels, q, (-(-n // GROUP) * GROUP,), (GROUP,), bound=self.bound, range=self.range,
+                tf=cla.to_device(q, table.astype(np.float32)), slack=self.slack, n=n)
+        _SUPER(self.kernels, q, self.super_bound.shape[::-1], None, out=self.super_bound,
+               ns=self.super_bound.shape[::-1], bound=self.bound, nb=self.bound.shape[::-1])
+        # flat: below FLAT of the span per unit length, or the float32 field's rounding noise, in both precisions
+        values = tf.data_points(window)
+        floor = max(self.noise_floor, FLAT * (values[-1] - values[0]) / self.spacing)
+        self.last = Classification(tf, window, cla.to_device(q, table.astype(real)), self.bound, self.super_bound,
+                                   self.super_origin, self.box, floor, 0.0)
+        q.finish()
+        self.last.seconds = time.perf_counter() - start
+        return self.last
+
+
+def bernstein_matrix(xi) -> np.ndarray:
+    """(n, n) the matrix from a polynomial's values at the n points ``xi`` in [-1, 1] to its Bernstein
+    coefficients of degree n - 1 on [-1, 1] (``cl/raytrace/classify.h``)."""
+    n = len(xi) - 1
+    t = (np.asarray(xi, float) + 1) / 2
+    k = np.arange(n + 1)
+    basis = comb(n, k) * t[:, None] ** k * (1 - t[:, None]) ** (n - k)  # (points, k)
+    return np.linalg.inv(basis)

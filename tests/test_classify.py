@@ -1,0 +1,327 @@
+"""Post-classification (docs/raytracing.md §10): a scalar model ray traced through a transfer function given at
+render time, held to independent answers."""
+
+import numpy as np
+import pyopencl.array as cla
+from pyopencl import cltypes
+import pytest
+from numpy.polynomial import Polynomial
+from scipy.integrate import quad
+
+import clwave
+from clwave.model.wavelet import WaveletVolume
+from clwave.device import programs
+from clwave.device.context import ComputeContext
+from clwave.device.kernels import BUFFER, REAL, Kernel
+from clwave.errors import InputError
+from clwave.raytrace.classified import bernstein_matrix, tf_table
+from clwave.raytrace.quadrature import sample_points, sample_tables
+from clwave.raytrace.reference import _content_field, classified_reference
+
+CHECK = Kernel("classify_segments", ("out", BUFFER), ("samples", BUFFER), ("radius", BUFFER), ("nodes", BUFFER),
+               ("weights", BUFFER), ("tf", BUFFER), ("tol", REAL), ("flags", BUFFER), ("n", np.int32))
+
+
+def random_tf(rng, lo, hi, steps=True, clear=False):
+    """A random piecewise-linear transfer function over (lo, hi); with ``steps``, a jump over 1e-4 of the range;
+    ``clear``: transparent from lo up to its second point."""
+    k = rng.integers(3, 7)
+    values = np.sort(rng.uniform(lo, hi, k))
+    if clear:
+        values[0] = lo
+    if steps:
+        at = rng.integers(0, k)
+        values = np.sort(np.append(values, values[at] + 1e-4 * (hi - lo)))
+    rows = np.column_stack([values, rng.uniform(0, 1, (len(values), 3)), rng.uniform(0, 2, len(values))])
+    rows[rng.random(len(values)) < 0.3, 4] = 0.0  # transparent stretches
+    if clear:
+        rows[:2, 4] = 0.0
+    return clwave.TransferFunction(rows)
+
+
+def exact_segment(poly, tf, radius):
+    """(int q e^{-radius A} dxi, int alpha dxi) over [-1, 1] for the scalar ``poly`` (a Polynomial in xi), cut at
+    every real root of poly - v (NumPy's roots); alpha is a polynomial on each piece, integrated exactly, and the
+    emission comes from scipy's quad with tight tolerances."""
+    values, alpha_pts, colour = tf.points[:, 0], tf.points[:, 4], tf.points[:, 1:4]
+    cuts = {-1.0, 1.0}
+    for v in values:
+        cuts |= {r.real for r in (poly - v).roots() if abs(r.imag) < 1e-9 and -1 < r.real < 1}
+    cuts = sorted(cuts)
+    emission, depth = np.zeros(3), 0.0
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        x = np.linspace(a, b, 12)  # alpha(poly) on the piece: a polynomial of poly's degree
+        alpha = Polynomial.fit(x, np.interp(poly(x), values, alpha_pts), poly.degree())  # on its own domain [a, b]
+        integral = alpha.integ(lbnd=a)
+        for c in range(3):
+            def f(xi, c=c, integral=integral, d=depth):
+                s = poly(xi)
+                return np.interp(s, values, colour[:, c]) * np.interp(s, values, alpha_pts) \
+                    * np.exp(-radius * (d + integral(xi)))
+            emission[c] += quad(f, a, b, epsabs=1e-13, epsrel=1e-12, limit=200)[0]
+        depth += integral(b)
+    return emission, depth
+
+
+@pytest.mark.parametrize("precision", ["double", "single"])
+def test_segment_integral_against_fine_quadrature(precision):
+    """classified_segment on random cubics (and degree-9 polynomials) through random piecewise-linear transfer
+    functions with steps: the emission within the tolerance, the optical depth exact, for 60 segments."""
+    cc = ComputeContext.get()
+    if precision == "double" and not cc.queue.device.double_fp_config:
+        pytest.skip("no float64 on this device")
+    real = np.float64 if precision == "double" else np.float32
+    rng = np.random.default_rng(7)
+    nodes, weights = sample_tables(9)
+    xi = sample_points(9)
+    nodes = np.concatenate([nodes, bernstein_matrix(xi).ravel()])
+    kernels = programs.build(cc, ["raytrace/classify_check.cl"], dict(
+        CLW_POST=None, CLW_SAMPLES=len(xi), CLW_GROUPS=1, CLW_ORDERS=4, CLW_MAX_DEPTH=16,
+        **({"CLW_DOUBLE": None} if precision == "double" else {})))
+    tol = 1e-6 if precision == "double" else 1e-3
+    worst = 0.0
+    for trial in range(6):
+        tf = random_tf(rng, -1.0, 1.0, steps=trial % 2 == 0)
+        table = tf_table(tf, None)
+        polys = [Polynomial(rng.normal(0, 0.6, 4 if i % 2 else 10) * 0.5 ** np.arange(4 if i % 2 else 10))
+                 for i in range(10)]
+        radius = rng.uniform(0.2, 3.0, len(polys))
+        samples = np.array([p(xi) for p in polys])
+        q = cc.queue
+        out = cla.empty(q, len(polys), {np.float64: cltypes.double4, np.float32: cltypes.float4}[real])
+        flags = cla.zeros(q, len(polys), np.int32)
+        CHECK(kernels, q, (len(polys),), None, real_type=real, out=out, samples=cla.to_device(q, samples.astype(real)),
+              radius=cla.to_device(q, radius.astype(real)), nodes=cla.to_device(q, nodes.astype(real)),
+              weights=cla.to_device(q, weights.astype(real)),
+              tf=cla.to_device(q, table.astype(real)), tol=tol, flags=flags, n=len(polys))
+        got = out.get()
+        for p, r, g in zip(polys, radius, got):
+            emission, depth = exact_segment(p, tf, r)
+            assert abs(g["w"] - depth) <= (1e-9 if precision == "double" else 1e-5) * max(1.0, depth)
+            error = np.max(np.abs([g["x"] - emission[0], g["y"] - emission[1], g["z"] - emission[2]]))
+            worst = max(worst, error)
+            assert error <= tol, (trial, error)
+    assert worst > 0  # the comparison ran on non-trivial integrals
+
+
+def test_table_against_the_transfer_function():
+    """The kernel's table evaluates to TransferFunction.__call__ (an independent np.interp-style evaluation) at
+    random values, windowed."""
+    rng = np.random.default_rng(3)
+    tf = clwave.TransferFunction.preset("ct-bone", window=(-500.0, 1500.0))
+    table = tf_table(tf, tf.window)
+    scale, shift, K = table[0, :3]
+    K = int(K)
+    s = rng.uniform(-800, 1800, 500)
+    u = s * scale + shift
+    k = np.sum(table[1:K + 1, 0][None, :] <= u[:, None], axis=1)
+    line, rgb, slope = table[1 + K + 3 * k], table[2 + K + 3 * k], table[3 + K + 3 * k]
+    alpha = line[:, 1] + line[:, 2] * (u - line[:, 0])
+    colour = rgb[:, :3] + slope[:, :3] * (u - line[:, 0])[:, None]
+    want_rgb, want_alpha = tf(s)
+    np.testing.assert_allclose(alpha, want_alpha, atol=1e-12)
+    np.testing.assert_allclose(colour, want_rgb, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def hydrogen():
+    vol = clwave.phantom("hydrogen", n=20)
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.1)
+    return wv, clwave.RayTracer(wv)
+
+
+@pytest.mark.parametrize("shading", [False, True])
+def test_image_against_float64_oracle(hydrogen, shading):
+    """Hydrogen with its preset, shaded and unshaded: each value within the tolerance of the brute-force float64
+    oracle (which has no skipping, no termination and no adaptivity), at 1e-2 and 1e-3."""
+    wv, tr = hydrogen
+    tf = clwave.TransferFunction.preset("hydrogen")
+    cam = clwave.Camera(30, 20, size=12)
+    ref = classified_reference(wv, cam, tf, shading=shading, tracer=tr)
+    assert ref[..., 3].max() > 0.1
+    for tol in (1e-2, 1e-3):
+        img = tr.render(cam, tolerance=tol, transfer_function=tf, shading=shading).image
+        assert np.abs(img - ref).max() <= tol
+
+
+def ct_phantom(n=20):
+    """A CT-like phantom in Hounsfield units: air (-1000) around soft tissue (40) holding a bone shell (1200)."""
+    z, y, x = np.mgrid[:n, :n, :n] - (n - 1) / 2
+    r = np.sqrt(x ** 2 + (1.3 * y) ** 2 + z ** 2) / (n / 2)
+    hu = np.where(r < 0.85, 40.0, -1000.0)
+    hu = np.where((r > 0.45) & (r < 0.6), 1200.0, hu)
+    return clwave.Volume(hu.astype(np.float32), spacing=(1.0, 1.0, 1.0))
+
+
+def test_sharp_bone_threshold_does_not_alias():
+    """ct-bone with a threshold over 2 HU, on a CT-like phantom (perspective, shaded): within the tolerance of the
+    oracle, so a sharp transfer function is integrated, not sampled."""
+    vol = ct_phantom()
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.2)
+    tr = clwave.RayTracer(wv)
+    sharp = clwave.TransferFunction([(-1000, 0.9, 0.8, 0.7, 0), (300, 0.9, 0.8, 0.7, 0), (302, 1, 1, 1, 0.4),
+                                     (2000, 1, 1, 1, 0.4)])
+    cam = clwave.Camera(20, 30, size=12, perspective=True, fov=40)
+    ref = classified_reference(wv, cam, sharp, tracer=tr)
+    assert ref[..., 3].max() > 0.5
+    for tol in (1e-2, 1e-3):
+        img = tr.render(cam, tolerance=tol, transfer_function=sharp).image
+        assert np.abs(img - ref).max() <= tol
+    preset = clwave.TransferFunction.preset("ct-bone")
+    img = tr.render(cam, tolerance=1e-3, transfer_function=preset).image
+    assert np.abs(img - classified_reference(wv, cam, preset, tracer=tr)).max() <= 1e-3
+
+
+def test_skipping_never_skips_content(hydrogen):
+    """For random transfer functions, the block bounds are the largest opacity over the blocks' ranges (dense
+    sampling), every block whose bound is 0 (skipped) holds no opacity: the model (its content-clamped B-spline
+    form, evaluated in closed form) at 20 random points per such block, classified, is 0 there; and the images
+    match the oracle."""
+    wv, tr = hydrogen
+    rng = np.random.default_rng(11)
+    cam = clwave.Camera(120, -10, size=8)
+    from clwave.device.constants import BLOCK
+    from clwave.model.geometry import world_to_fine_affine
+    scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)
+    field = _content_field(wv)  # the model the B-spline field holds: zero beyond the content (§4)
+    for trial in range(3):
+        tf = random_tf(rng, 0.0, 1.0, steps=trial != 1, clear=True)
+        bound = tr.scalar.classify(tf, tr.cc, np.float32).bound.get()
+        # the largest opacity over each block's range, sampled densely and at the points inside it
+        ranges = tr.scalar.range.get().reshape(-1, 2)
+        some = rng.choice(len(ranges), 300, replace=False)
+        points = tf.points[:, 0]
+        dense = np.array([tf(np.concatenate([np.linspace(a, b, 101), points[(points >= a) & (points <= b)]]))[1].max()
+                          for a, b in ranges[some]])
+        got = bound.ravel()[some]  # never below (skipping is safe); above by the ranges' float32 slack at most
+        assert np.all(got >= dense - 1e-6) and np.all(got <= dense + 1e-3 * tf.points[:, 4].max())
+        empty = np.argwhere(bound == 0)
+        assert 0 < len(empty) < bound.size
+        picks = empty[rng.choice(len(empty), min(200, len(empty)), replace=False)]
+        fine = (tr.occ_origin + picks)[:, None, :] * BLOCK + rng.uniform(0, BLOCK, (len(picks), 20, 3))  # (z, y, x)
+        world = (fine[..., ::-1].reshape(-1, 3) - offset) / scale
+        _, alpha = tf(field(world, False)[:, 0])
+        assert alpha.max() == 0
+        img = tr.render(cam, tolerance=1e-3, transfer_function=tf).image
+        assert np.abs(img - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
+
+
+def test_transfer_function_change_rebuilds_nothing(hydrogen, monkeypatch):
+    """Another transfer function or window: no expansion, no new program, no new scalar range; only the table and
+    the bounds (meta classify_seconds)."""
+    from clwave.raytrace import classified, tracer
+
+    wv, tr = hydrogen
+    cam = clwave.Camera(30, 20, size=8)
+    tr.render(cam, tolerance=1e-2, transfer_function=clwave.TransferFunction.preset("hydrogen"))
+    calls = []
+    monkeypatch.setattr(tracer, "build", lambda *a, **k: calls.append("build"))
+    monkeypatch.setattr(classified.ScalarRange, "__init__", lambda *a, **k: calls.append("range"))
+    programs_before = dict(tr.cc.programs)
+    for tf in (clwave.TransferFunction.preset("hydrogen", window=(0.1, 0.9)), clwave.TransferFunction.preset("grey"),
+               clwave.TransferFunction.preset("ct-bone", window=(0.0, 1.0))):
+        res = tr.render(cam, tolerance=1e-2, transfer_function=tf)
+        assert res.meta["transfer_function"] == tf.to_dict() and res.meta["classify_seconds"] > 0
+    assert calls == [] and dict(tr.cc.programs) == programs_before
+    again = tr.render(cam, tolerance=1e-2, transfer_function=clwave.TransferFunction.preset("ct-bone", window=(0, 1)))
+    assert again.meta["classify_seconds"] == res.meta["classify_seconds"]  # the same function: reused
+
+
+def test_post_converges_to_pre_for_smooth_transfer_functions():
+    """A linear transfer function (alpha = 0.2 s, colour constant) makes pre-classification exact: the classified
+    channels are linear in s, so the RGBA model is the scalar model times constants.  Both renders agree within
+    the tolerances."""
+    vol = clwave.phantom("hydrogen", n=20)
+    tf = clwave.TransferFunction([(0.0, 0.8, 0.5, 0.2, 0.0), (1.0, 0.8, 0.5, 0.2, 0.2)])
+    scalar = clwave.WaveletVolume.from_volume(vol, levels=2)
+    rgba = clwave.WaveletVolume.from_volume(tf.classify(vol), levels=2)
+    cam = clwave.Camera(40, 10, size=10)
+    post = clwave.raytrace(scalar, cam, tolerance=1e-3, transfer_function=tf, shading=False).image
+    pre = clwave.raytrace(rgba, cam, tolerance=1e-3, shading=False).image
+    assert post[..., 3].max() > 0.2
+    assert np.abs(post - pre).max() <= 2e-3
+
+
+def test_errors_and_default_transfer_function(tmp_path, hydrogen):
+    wv, tr = hydrogen
+    cam = clwave.Camera(30, 20, size=8)
+    tf = clwave.TransferFunction.preset("hydrogen")
+    with pytest.raises(InputError, match="transfer_function"):
+        tr.render(cam)  # a scalar model without a transfer function
+    with pytest.raises(InputError, match="X-ray"):
+        tr.render(cam, transfer_function=tf, absorption=False)
+    with pytest.raises(InputError, match="field='bspline'"):
+        clwave.RayTracer(wv, field="wavelet").render(cam, transfer_function=tf)
+    rgba = clwave.WaveletVolume.from_volume(tf.classify(clwave.phantom("hydrogen", n=16)), levels=1)
+    with pytest.raises(InputError, match="4 channels"):
+        clwave.raytrace(rgba, cam, transfer_function=tf)
+    with pytest.raises(InputError, match="TransferFunction"):
+        tr.render(cam, transfer_function="hydrogen")
+    # a scalar model made with a transfer function renders with it by default, also from its .clw file
+    made = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=20), levels=2, transfer_function=tf)
+    made.threshold(keep=0.1).save(tmp_path / "s.clw")
+    opened = clwave.WaveletVolume.open(tmp_path / "s.clw")
+    default = clwave.raytrace(opened, cam, tolerance=1e-2)
+    given = clwave.raytrace(opened, cam, tolerance=1e-2, transfer_function=tf)
+    assert default.meta["transfer_function"] == tf.to_dict()
+    np.testing.assert_array_equal(default.image, given.image)
+
+
+def test_command_line(tmp_path, capsys):
+    """render scalar.clw --method raytrace --tf PRESET [--tf-window]; compress --tf PRESET --classify post stores the
+    default; the mistakes are one line each."""
+    from clwave.cli import main
+
+    def run(*argv):
+        code = main([str(a) for a in argv])
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    scalar, post = tmp_path / "s.clw", tmp_path / "p.clw"
+    assert run("compress", "phantom:hydrogen:16", "--levels", "1", "-o", scalar)[0] == 0
+    code, out, err = run("compress", "phantom:hydrogen:16", "--levels", "1", "--tf", "hydrogen", "--classify", "post",
+                         "-o", post)
+    assert code == 0 and "classify while ray tracing" in out
+    assert WaveletVolume.open(post).channels == 1
+    assert WaveletVolume.open(post).transfer_function == clwave.TransferFunction.preset("hydrogen").to_dict()
+    images = {}
+    for name, argv in (("given", [scalar, "--tf", "hydrogen"]), ("default", [post]),
+                       ("window", [scalar, "--tf", "hydrogen", "--tf-window", "0,0.5"]),
+                       ("default-window", [post, "--tf-window", "0,0.5"])):
+        raw = tmp_path / f"{name}.npy"
+        code, out, err = run("render", *argv, "--method", "raytrace", "--size", "8", "--tolerance", "1e-2",
+                             "--raw", raw, "-o", tmp_path / f"{name}.png")
+        assert code == 0, err
+        images[name] = np.load(raw)
+    np.testing.assert_array_equal(images["given"], images["default"])
+    np.testing.assert_array_equal(images["window"], images["default-window"])
+    assert images["window"][..., 3].sum() > images["given"][..., 3].sum()  # a narrower window: more opaque
+    rgba = tmp_path / "r.clw"
+    assert run("compress", "phantom:hydrogen:16", "--levels", "1", "--tf", "hydrogen", "-o", rgba)[0] == 0
+    for argv, needle in (([rgba, "--tf", "hydrogen"], "4 channels"),
+                         ([scalar, "--tf", "hydrogen", "--field", "wavelet"], "--field bspline"),
+                         ([scalar, "--tf-window", "0,1"], "--tf too"),
+                         ([scalar], "--tf PRESET")):
+        code, out, err = run("render", *argv, "--method", "raytrace", "--size", "8", "-o", tmp_path / "x.png")
+        assert code == 2 and needle in err and err.count("\n") == 1, err
+    code, out, err = run("compress", "phantom:hydrogen:16", "--tf", "mri", "--classify", "post", "--tf-window", "auto",
+                         "-o", tmp_path / "auto.clw")
+    assert code == 0 and isinstance(WaveletVolume.open(tmp_path / "auto.clw").transfer_function["window"], list)
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_slabs_composite_to_the_whole_image(hydrogen):
+    """Post-classified slabs of bricks (each a RayTracer(region=...), as on a Dask cluster, docs/raytracing.md §7)
+    composited front to back give the whole image within the tolerance."""
+    from clwave.raytrace.regions import composite, slab_order, slabs
+
+    wv, tr = hydrogen
+    tf = clwave.TransferFunction.preset("hydrogen", window=(0.0, 0.7))
+    cam = clwave.Camera(20, 60, size=10)
+    whole = tr.render(cam, tolerance=1e-3, transfer_function=tf).image
+    parts = slabs(wv, 2)
+    images = [clwave.RayTracer(wv, region=tuple(int(v) for v in part)).render(
+        cam, tolerance=1e-3 / len(parts), transfer_function=tf).image for part in parts]
+    together = composite([images[i] for i in slab_order(wv, parts, cam)], True)
+    assert len(parts) == 2 and whole[..., 3].max() > 0.1
+    assert np.abs(together - whole).max() <= 2e-3
