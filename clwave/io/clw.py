@@ -37,6 +37,7 @@ from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from ..threads import background
 from .files import write_atomic
+from .hdf5_safety import check_self_contained
 
 FILE_FORMAT = "clwave-wavelet-volume"
 FILE_VERSION = 2
@@ -292,6 +293,7 @@ def read_clw(path, keep=None) -> WaveletVolume:
                               f"reads; compress the volume again to make a version {FILE_VERSION} file")
     try:
         with h5py.File(path, "r") as h5:
+            check_self_contained(h5, path, MAX_HEADER)  # nothing outside the file, nothing unbounded
             header = _header(h5, path)
             shape, levels, channels, groups_header = _checked_header(header)
             budget = None if keep is None else max(1, int(round(keep * int(np.prod(shape)))))
@@ -310,7 +312,7 @@ def read_clw(path, keep=None) -> WaveletVolume:
     except MemoryError:
         raise InputError(f"{path} holds more than this machine's memory can take; open a part of it "
                          "(keep=, --keep: its most important coefficients)") from None
-    except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, json.JSONDecodeError) as exc:
         raise FileFormatError(f"cannot read {path} as a .clw file ({type(exc).__name__}: "
                               f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
                               "the file may be truncated or corrupt") from None
@@ -338,7 +340,10 @@ def _header(h5, path) -> dict:
         raise ValueError("the header is missing or too long")
     if h5.attrs.get("header_crc32") != zlib.crc32(text.encode()):  # HDF5 checksums datasets, not attributes
         raise ValueError("the header does not match its checksum")
-    return json.loads(text)
+    header = json.loads(text)
+    if not isinstance(header, dict):
+        raise ValueError(f"the header is a JSON {type(header).__name__}, not an object")
+    return header
 
 
 def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
