@@ -413,3 +413,36 @@ def interrupted(script: str, marker: bytes, after=0.5) -> tuple:
     proc.send_signal(signal.SIGINT)
     err = proc.communicate(timeout=60)[1]
     return time.perf_counter() - start, proc.returncode, err
+
+
+def test_a_disk_filling_while_a_clw_is_written_is_one_line_and_leaves_nothing(tmp_path):
+    """The disk fills at every stage of the write: the first chunks, the middle, the last byte of the close
+    (HDF5 writes metadata then). One line, exit 2, nothing left; never the SIGSEGV of a file HDF5 could not
+    close (docs/chunked.md §4)."""
+    argv = ["compress", "phantom:hydrogen:32", "--levels", "2", "--keep", "0.5"]
+    from clwave.cli import main
+
+    assert main(argv + ["-o", str(tmp_path / "whole.clw")]) == 0
+    size = (tmp_path / "whole.clw").stat().st_size
+    for limit in (1000, size // 2, size - 1):
+        folder = tmp_path / f"full{limit}"
+        folder.mkdir()
+        script = f"""
+import errno, io, sys
+from clwave import cli
+
+class Full(io.FileIO):  # a disk with {limit} bytes free
+    def write(self, data):
+        if self.tell() + len(memoryview(data).cast("B")) > {limit}:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return super().write(data)
+
+io.FileIO = Full
+sys.exit(cli.main({argv + ["-o", str(folder / "out.clw")]!r}))
+"""
+        proc = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                              env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        assert proc.returncode == 2, (limit, proc.returncode, proc.stderr[-2000:])
+        assert proc.stderr.splitlines() == [f"clwave: error: cannot write {folder / 'out.clw'}: No space left on "
+                                            "device; check the folder's permissions and free space"], proc.stderr
+        assert not list(folder.iterdir())
