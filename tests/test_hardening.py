@@ -446,3 +446,55 @@ sys.exit(cli.main({argv + ["-o", str(folder / "out.clw")]!r}))
         assert proc.stderr.splitlines() == [f"clwave: error: cannot write {folder / 'out.clw'}: No space left on "
                                             "device; check the folder's permissions and free space"], proc.stderr
         assert not list(folder.iterdir())
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--raw", "{d}/missing/raw.npy"], "the folder of --raw {d}/missing/raw.npy does not exist"),
+    (["--raw", "{d}/raw.txt"], "--raw {d}/raw.txt must end in .npy"),
+    (["--raw", "{d}/x.png"], "--raw {d}/x.png must end in .npy"),
+    (["--stats", "{d}/s.npy"], "--stats {d}/s.npy must end in .json"),
+    (["--raw", "{d}/r.json"], "--raw {d}/r.json must end in .npy"),
+    (["--raw", "{d}/r.npy", "--stats", "{d}/r.npy"], "--stats {d}/r.npy must end in .json"),
+    (["--raw", "{d}/sub"], "--raw {d}/sub must end in .npy"),
+    (["--raw", "{d}/sub.npy"], "--raw {d}/sub.npy is a folder; name a file"),
+    (["--raw", "{d}/old.npy"], "{d}/old.npy exists; pass --force"),
+])
+def test_every_render_output_is_checked_before_any_work(tmp_path, capsys, monkeypatch, extra, needle):
+    from clwave.cli import main, render
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub.npy").mkdir()
+    (tmp_path / "old.npy").write_bytes(b"precious")
+    monkeypatch.setattr(render, "build_model", lambda *a, **k: pytest.fail("work started"))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code = main(["render", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "-o", str(tmp_path / "x.png")]
+                + [e.format(d=tmp_path) for e in extra])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith(f"clwave: error: {needle.format(d=tmp_path)}") and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == before and (tmp_path / "old.npy").read_bytes() == b"precious"
+
+
+def test_two_outputs_naming_one_file_are_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """--raw equal to -o, and a --stats name that is a (dangling) link to the -o file: the second write would
+    find the first's file, after the work and the first write."""
+    from clwave.cli import main, render
+
+    monkeypatch.setattr(render, "build_model", lambda *a, **k: pytest.fail("work started"))
+    png = tmp_path / "x.png"
+    (tmp_path / "s.json").symlink_to(png)
+    for extra, needle in ((["--raw", str(png)], f"--raw {png} must end in .npy"),
+                          (["--stats", str(tmp_path / "s.json")], f"-o and --stats both name {tmp_path / 's.json'}")):
+        assert main(["render", "phantom:hydrogen:16", "-o", str(png)] + extra) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"clwave: error: {needle}") and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json"]
+
+
+def test_progressive_into_an_existing_file_without_a_suffix_is_one_line(tmp_path, capsys):
+    from clwave.cli import main
+
+    (tmp_path / "frames").write_bytes(b"precious")
+    assert main(["progressive", "phantom:hydrogen:16", "--levels", "1", "-o", str(tmp_path / "frames")]) == 2
+    assert capsys.readouterr().err == (f"clwave: error: -o {tmp_path / 'frames'} is a file; name a folder for the "
+                                       "PNG frames, or a .gif\n")
+    assert (tmp_path / "frames").read_bytes() == b"precious"

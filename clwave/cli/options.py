@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -211,12 +212,39 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False):
     return (wv.compute() if gather else wv), None
 
 
-def check_output(path, force):
+def check_outputs(force, *outputs) -> list:
+    """The paths of a command's outputs ``(path or None, option, suffixes)``, each checked before any work:
+    it ends in one of ``suffixes``, its folder exists, it is no folder, it exists only with ``--force``;
+    and no two name one file.  None where an output is not asked for."""
+    paths, seen = [], {}
+    for path, option, suffixes in outputs:
+        if path is None:
+            paths.append(None)
+            continue
+        path = Path(path)
+        if path.suffix.lower() not in suffixes:
+            raise InputError(f"{option} {path} must end in {' or '.join(suffixes)}")
+        if path.is_dir():
+            raise InputError(f"{option} {path} is a folder; name a file")
+        if not path.parent.is_dir():
+            raise InputError(f"the folder of {option} {path} does not exist; create it first")
+        if path.exists() and not force:
+            raise OutputExistsError(f"{path} exists; pass --force to replace it")
+        same = seen.get(os.path.realpath(path))  # one file by two names, links included
+        if same is not None:
+            raise InputError(f"{same} and {option} both name {path}; give each output its own file")
+        seen[os.path.realpath(path)] = option
+        paths.append(path)
+    return paths
+
+
+def check_frames_folder(path, force) -> Path:
+    """A folder for PNG frames: none yet, or an empty one (any with ``--force``), never a file."""
     path = Path(path)
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path} exists; pass --force to replace it")
-    if not path.parent.exists():
-        raise InputError(f"the folder of {path} does not exist; create it first")
+    if path.exists() and not path.is_dir():
+        raise InputError(f"-o {path} is a file; name a folder for the PNG frames, or a .gif")
+    if path.is_dir() and any(path.iterdir()) and not force:
+        raise InputError(f"folder {path} is not empty; pass --force to write into it")
     return path
 
 

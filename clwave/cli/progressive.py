@@ -6,7 +6,8 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
-from .options import add_command, build_model, check_output, make_camera, parse_device_memory, parse_window, write_gif
+from .options import (add_command, build_model, check_frames_folder, check_outputs, make_camera, parse_device_memory,
+                      parse_window, write_gif)
 
 
 def run(args):
@@ -18,12 +19,8 @@ def run(args):
     if not as_folder and out.suffix.lower() != ".gif":
         raise InputError(f"output {out} must end in .gif, or be a folder name for PNG frames")
     if as_folder:
-        if out.exists() and any(out.iterdir()) and not args.force:
-            raise InputError(f"folder {out} is not empty; pass --force to write into it")
-    else:
-        check_output(out, args.force)
-    if args.stats:
-        check_output(args.stats, args.force)
+        check_frames_folder(out, args.force)
+    check_outputs(args.force, (None if as_folder else out, "-o", (".gif",)), (args.stats, "--stats", (".json",)))
     camera = make_camera(args)
     steps = 8 if args.steps is None and args.budget is None else args.steps
     check_schedule(steps, args.budget)
