@@ -229,3 +229,31 @@ def test_a_filter_the_writer_does_not_use_is_refused_before_hdf5_looks_for_it(mo
         h5["g0/values"][...] = replace_values(h5, chunks=True, **hdf5plugin.BZip2())
     monkeypatch.setenv("HDF5_PLUGIN_PATH", str(tmp_path / "plugins"))
     refused(hostile(model_file, tmp_path, bzip2), "id 307")
+
+
+@pytest.mark.parametrize("how", ["external storage", "virtual", "external link", "soft link"])
+def test_an_hdf5_volume_input_is_read_from_its_own_file_only(tmp_path, how):
+    """A volume input (.h5) whose dataset's data is elsewhere: refused, never read (the other file is a valid
+    volume, which a silent read would return)."""
+    other, path = tmp_path / "other.h5", tmp_path / "input.h5"
+    data = np.arange(4 * 5 * 6, dtype=np.float32).reshape(4, 5, 6)
+    with h5py.File(other, "w") as f:
+        f["v"] = data
+        offset = f["v"].id.get_offset()
+    with h5py.File(path, "w") as h5:
+        if how == "external storage":
+            h5.create_dataset("v", shape=data.shape, dtype=data.dtype, external=[(str(other), offset, data.nbytes)])
+        elif how == "virtual":
+            layout = h5py.VirtualLayout(shape=data.shape, dtype=data.dtype)
+            layout[...] = h5py.VirtualSource(str(other), "v", shape=data.shape)
+            h5.create_virtual_dataset("v", layout)
+        elif how == "external link":
+            h5["v"] = h5py.ExternalLink(str(other), "/v")
+        else:
+            h5["w"] = np.zeros(3)
+            h5["v"] = h5py.SoftLink("/elsewhere")
+    with pytest.raises(FileFormatError) as err:
+        clwave.load(f"{path}:/v")
+    assert "\n" not in str(err.value)
+    assert ("another file" in str(err.value) or "virtual" in str(err.value)) if "link" not in how \
+        else "holds no array /v" in str(err.value)

@@ -84,12 +84,9 @@ def _check_dataset_storage(dataset, member) -> tuple:
     from h5py import h5d, h5s, h5t
 
     plist = dataset.get_create_plist()
-    layout = plist.get_layout()
+    layout = check_stored_inside(dataset, member)
     if layout not in (h5d.CONTIGUOUS, h5d.CHUNKED):
-        kind = {h5d.VIRTUAL: "a virtual dataset", h5d.COMPACT: "a compact dataset"}.get(layout, "of another layout")
-        raise ValueError(f"member {member} is {kind}, not stored contiguously or in chunks")
-    if plist.get_external_count():
-        raise ValueError(f"member {member} keeps its data in another file (external storage)")
+        raise ValueError(f"member {member} is a compact dataset, not stored contiguously or in chunks")
     for i in range(plist.get_nfilters()):
         code, _, _, label = plist.get_filter(i)
         if code not in WRITER_FILTERS:
@@ -109,6 +106,20 @@ def _check_dataset_storage(dataset, member) -> tuple:
     if per_chunk < min(elements, MIN_CHUNK):
         raise ValueError(f"member {member} has chunks of {chunk}, smaller than a .clw writes")
     return dataset.get_storage_size(), _product(-(-n // c) for n, c in zip(shape, chunk))
+
+
+def check_stored_inside(dataset, member) -> int:
+    """The layout of a dataset (its low-level id), refused (``ValueError``) unless its data is in the file
+    itself: not external raw storage (any file's bytes), not virtual (other datasets')."""
+    from h5py import h5d
+
+    plist = dataset.get_create_plist()
+    layout = plist.get_layout()
+    if layout not in (h5d.CONTIGUOUS, h5d.CHUNKED, h5d.COMPACT):
+        raise ValueError(f"member {member} is a virtual dataset, whose data is other datasets'")
+    if plist.get_external_count():
+        raise ValueError(f"member {member} keeps its data in another file (external storage)")
+    return layout
 
 
 def _check_attributes(obj, member, max_bytes):
