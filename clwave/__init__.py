@@ -17,6 +17,8 @@ from .io.result import RenderResult
 from .splat.renderer import SplatRenderer, splat
 from .splat.progressive import progressive
 from .raytrace.tracer import Phong, RayTracer, raytrace
+from .model.chunked import ChunkedWaveletVolume
+from .io import clw as _clw  # noqa: F401  (WaveletVolume.save and .open: the model does not import its file format)
 
 __version__ = "0.1.0"
 
@@ -25,4 +27,5 @@ __all__ = [
     "KernelBuildError", "OutputError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult",
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
+    "ChunkedWaveletVolume",
 ]

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, OutputExistsError
-from ..memory import check_fits
+from ..device.memory import check_fits
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
@@ -113,7 +113,7 @@ def _chunks(text):
 
 def parse_scheduler(args):
     """The Dask scheduler of chunked work: ``--workers N``, ``--scheduler ADDRESS`` or threads (None)."""
-    from ..cluster import check_scheduler
+    from ..schedulers import check_scheduler
 
     return check_scheduler(args.workers if args.workers is not None else args.scheduler)
 

@@ -15,7 +15,8 @@ def run(args):
     from ..raytrace.tracer import RayTracer, raytrace
     from ..io.result import resolve_window
     from ..splat.renderer import SplatRenderer, splat
-    from ..cluster import check_model_file, client_for as cluster_client
+    from ..cluster import check_model_file
+    from ..schedulers import client_for as cluster_client
 
     if args.turntable is not None and args.turntable < 1:
         raise InputError("--turntable N needs N >= 1")

@@ -182,7 +182,7 @@ def _write(model, fh, steps):
 
 
 def _stream(model: ChunkedWaveletVolume, h5, tiers, filters):
-    from ..cluster import client_for
+    from ..schedulers import client_for
 
     mask = _mask_dataset(h5, model.shape, filters)
     with client_for(model.scheduler) as client:
@@ -490,3 +490,6 @@ def _checked_header(header) -> tuple:
     if sorted(seen) != list(range(channels)):
         raise ValueError(f"the groups hold channels {sorted(seen)}, not each of the {channels} once")
     return shape, levels, channels, groups
+
+
+WaveletVolume.file_format = (read_clw, write_clw)
