@@ -23,14 +23,6 @@ from clwave.io.files import write_atomic
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope="module")
-def model_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("clw") / "m.clw"
-    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), "cubic", levels=1).threshold(keep=0.2)
-    wv.save(path)
-    return path
-
-
 def crafted(model_file, tmp_path, edit=None, change=None) -> Path:
     """A copy of ``model_file`` whose header ``edit`` changed, or that ``change(h5 file)`` changed."""
     out = tmp_path / "crafted.clw"

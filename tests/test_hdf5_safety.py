@@ -19,14 +19,6 @@ from clwave.errors import FileFormatError
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope="module")
-def model_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("clw") / "m.clw"
-    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), "cubic", levels=1).threshold(keep=0.5)
-    wv.save(path)
-    return path
-
-
 def hostile(model_file, tmp_path, change) -> Path:
     """A copy of ``model_file`` written anew member by member, with ``change(h5 file, tmp_path)`` applied."""
     out = tmp_path / "hostile.clw"
