@@ -18,6 +18,8 @@ from .splat.renderer import SplatRenderer, splat
 from .progressive import progressive
 from .raytrace.tracer import Phong, RayTracer, raytrace
 from .raytrace.lod import Detail
+from .model.chunked import ChunkedWaveletVolume
+from .io import clw as _clw  # noqa: F401  (WaveletVolume.save and .open: the model does not import its file format)
 
 __version__ = "0.1.0"
 
@@ -27,4 +29,5 @@ __all__ = [
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult",
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
     "Detail",
+    "ChunkedWaveletVolume",
 ]

@@ -1,95 +1,14 @@
-"""Dask as the engine of chunked work (docs/chunked.md §5): the scheduler a user names, and the results of
-many block tasks streamed back as they finish, so that only a few are held at a time.
-
-``scheduler`` everywhere takes: None (threads of this process: a ``distributed.LocalCluster`` without
-processes), an int N (a local cluster of N worker processes), an address ``tcp://HOST:PORT`` of a
-running scheduler, or a ``distributed.Client``.
+"""Rendering on a Dask cluster (docs/raytracing.md §7, docs/splatting.md §7): parts of an image, each on a
+worker that opens the model's ``.clw`` file itself and keeps its renderer for later views.  The cluster is
+named as :mod:`clwave.schedulers` takes it.
 """
 
 from __future__ import annotations
 
-import contextlib
-import logging
 import threading
-import warnings
 
 from .errors import InputError
-from .io.progress import progress
-from .threads import cores
 
-CONNECT_TIMEOUT = "10s"
-
-
-def check_scheduler(scheduler):
-    """``scheduler`` if it is one of the forms this module takes, else an InputError naming them."""
-    if scheduler is None or _is_client(scheduler):
-        return scheduler
-    if isinstance(scheduler, int) and not isinstance(scheduler, bool):
-        if not 1 <= scheduler <= 4 * cores() + 64:
-            raise InputError(f"workers={scheduler} must be a number of local worker processes from 1 to "
-                             f"{4 * cores() + 64}", cli=f"--workers {scheduler} must be from 1 to {4 * cores() + 64}")
-        return scheduler
-    if isinstance(scheduler, str) and "://" in scheduler:
-        return scheduler
-    raise InputError(f"scheduler={scheduler!r} is not a Dask scheduler: give None (threads), a number of local "
-                     "worker processes, an address tcp://HOST:PORT or a distributed.Client",
-                     cli=f"--scheduler {scheduler} is not an address: give tcp://HOST:PORT of a running "
-                         "Dask scheduler")
-
-
-@contextlib.contextmanager
-def client_for(scheduler=None):
-    """A ``distributed.Client`` for ``scheduler`` (see the module), closed on leaving unless it was given."""
-    scheduler = check_scheduler(scheduler)
-    if _is_client(scheduler):
-        yield scheduler
-        return
-    from distributed import Client, LocalCluster
-
-    for name in ("distributed", "tornado"):  # their chatter (and a failed task's log: it is raised here) is not ours
-        logging.getLogger(name).setLevel(logging.CRITICAL)
-    if isinstance(scheduler, str):
-        try:
-            client = Client(scheduler, timeout=CONNECT_TIMEOUT)
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"no Dask scheduler answers at {scheduler} ({type(exc).__name__}); start one "
-                             "(`dask scheduler`, then `dask worker ADDRESS`) or check the address",
-                             cli=f"--scheduler {scheduler}: no Dask scheduler answers there; start one "
-                                 "(`dask scheduler`, then `dask worker ADDRESS`) or check the address") from None
-        with client:
-            yield client
-        return
-    if scheduler is None:
-        cluster = LocalCluster(processes=False, n_workers=1, threads_per_worker=cores(),
-                               dashboard_address=":0", memory_limit=0)
-    else:
-        cluster = LocalCluster(n_workers=scheduler, threads_per_worker=1, dashboard_address=":0")
-    with cluster, Client(cluster) as client:
-        yield client
-
-
-def _is_client(scheduler) -> bool:
-    return type(scheduler).__name__ == "Client" and type(scheduler).__module__.startswith("distributed")
-
-
-def stream(client, tasks, *, desc, progress_bar=None):
-    """Yield the results of ``tasks`` (``dask.delayed`` objects of one graph) as they finish, in any order,
-    each released once yielded; a bar counts them.  They are submitted together, so that what they share
-    (a chunk read once, feeding its neighbours' halos) is computed once; the scheduler's root-task
-    queuing keeps the chunks in memory to a few per worker thread."""
-    from distributed import as_completed
-
-    with warnings.catch_warnings():  # a volume of thousands of blocks makes a graph of some MB: expected
-        warnings.filterwarnings("ignore", message="Sending large graph")
-        futures = client.compute(list(tasks))
-    with progress(total=len(futures), desc=desc, enabled=progress_bar) as bar:
-        for future, result in as_completed(futures, with_results=True):
-            future.release()
-            bar.update(1)
-            yield result
-
-
-# ---------------------------------------------------------------- rendering on a cluster
 #: per worker process: the renderers of the last few (file, options, part) asked for, set up once
 _RENDERERS: dict = {}
 _KEEP_RENDERERS = 4

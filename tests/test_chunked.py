@@ -173,7 +173,7 @@ def test_bad_chunked_inputs(rng, monkeypatch):
         clwave.WaveletVolume.from_volume(dvol, "haar", levels=1).threshold(threshold=0.5).threshold(keep=0.1)
     with pytest.raises(InputError, match="not a Dask scheduler"):
         clwave.WaveletVolume.from_volume(dvol, scheduler="localhost")
-    monkeypatch.setattr(clwave.cluster, "CONNECT_TIMEOUT", "1s")
+    monkeypatch.setattr(clwave.schedulers, "CONNECT_TIMEOUT", "1s")
     start = time.perf_counter()
     with pytest.raises(InputError, match="no Dask scheduler answers at tcp://127.0.0.1:9"):
         clwave.WaveletVolume.from_volume(dvol, scheduler="tcp://127.0.0.1:9")

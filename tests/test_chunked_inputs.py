@@ -14,6 +14,7 @@ import zarr
 
 from clwave.errors import ClwaveError, FileFormatError, InputError
 from clwave.io import loaders
+from clwave.io.loaders import shared
 from clwave.io.loaders import load
 from clwave.io.phantoms import NAMES, phantom, phantom_block
 from clwave.model import transfer
@@ -124,15 +125,15 @@ def test_the_rule_chunked_or_whole(tmp_path, volume, monkeypatch):
     assert not load(tmp_path / "v.npy").chunked                       # small files: in memory, as ever
     assert load(tmp_path / "v.zarr").chunked and load(tmp_path / "v.h5").chunked    # stores: always chunked
     assert not load(tmp_path / "v.zarr", chunks=False).chunked
-    monkeypatch.setattr(loaders, "CHUNKED_MIN_BYTES", volume.size * 4)
+    monkeypatch.setattr(shared, "CHUNKED_MIN_BYTES", volume.size * 4)
     assert load(tmp_path / "v.npy").chunked                           # as big as the threshold: chunked
     # chunks="auto": whole multiples of the store's own chunks (3, 5, 4), up to CHUNK_BYTES of float32
     assert load(tmp_path / "v.h5").data.chunks == ((9,), (10,), (11,))
-    monkeypatch.setattr(loaders, "CHUNK_BYTES", 3 * 5 * 4 * 4 * 2)
+    monkeypatch.setattr(shared, "CHUNK_BYTES", 3 * 5 * 4 * 4 * 2)
     chunks = load(tmp_path / "v.h5").data.chunks
     assert 1 < np.prod([c[0] for c in chunks]) <= 120
     assert all(c % own == 0 for axis, own in zip(chunks, (3, 5, 4)) for c in axis[:-1])
-    monkeypatch.setattr(loaders, "CHUNK_BYTES", 100)     # store chunks bigger than that: one each, never cut
+    monkeypatch.setattr(shared, "CHUNK_BYTES", 100)     # store chunks bigger than that: one each, never cut
     assert [axis[0] for axis in load(tmp_path / "v.h5").data.chunks] == [3, 5, 4]
 
 
@@ -307,7 +308,7 @@ def test_bad_stores_and_options(tmp_path, volume):
 
 def test_too_many_chunks_are_refused_up_front(tmp_path, monkeypatch):
     zarr.create_array(tmp_path / "v.zarr", shape=(50, 50, 50), dtype="uint8", chunks=(50, 50, 50))
-    monkeypatch.setattr(loaders, "MAX_CHUNKS", 1000)
+    monkeypatch.setattr(shared, "MAX_CHUNKS", 1000)
     with pytest.raises(InputError) as excinfo:
         load(tmp_path / "v.zarr", chunks=4)
     one_line(excinfo, "2,197 chunks", "bigger chunk edge")

@@ -23,14 +23,6 @@ from clwave.io.files import write_atomic
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope="module")
-def model_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("clw") / "m.clw"
-    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), "cubic", levels=1).threshold(keep=0.2)
-    wv.save(path)
-    return path
-
-
 def crafted(model_file, tmp_path, edit=None, change=None) -> Path:
     """A copy of ``model_file`` whose header ``edit`` changed, or that ``change(h5 file)`` changed."""
     out = tmp_path / "crafted.clw"
@@ -413,3 +405,88 @@ def interrupted(script: str, marker: bytes, after=0.5) -> tuple:
     proc.send_signal(signal.SIGINT)
     err = proc.communicate(timeout=60)[1]
     return time.perf_counter() - start, proc.returncode, err
+
+
+def test_a_disk_filling_while_a_clw_is_written_is_one_line_and_leaves_nothing(tmp_path):
+    """The disk fills at every stage of the write: the first chunks, the middle, the last byte of the close
+    (HDF5 writes metadata then). One line, exit 2, nothing left; never the SIGSEGV of a file HDF5 could not
+    close (docs/chunked.md §4)."""
+    argv = ["compress", "phantom:hydrogen:32", "--levels", "2", "--keep", "0.5"]
+    from clwave.cli import main
+
+    assert main(argv + ["-o", str(tmp_path / "whole.clw")]) == 0
+    size = (tmp_path / "whole.clw").stat().st_size
+    for limit in (1000, size // 2, size - 1):
+        folder = tmp_path / f"full{limit}"
+        folder.mkdir()
+        script = f"""
+import errno, io, sys
+from clwave import cli
+
+class Full(io.FileIO):  # a disk with {limit} bytes free
+    def write(self, data):
+        if self.tell() + len(memoryview(data).cast("B")) > {limit}:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return super().write(data)
+
+io.FileIO = Full
+sys.exit(cli.main({argv + ["-o", str(folder / "out.clw")]!r}))
+"""
+        proc = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                              env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        assert proc.returncode == 2, (limit, proc.returncode, proc.stderr[-2000:])
+        assert proc.stderr.splitlines() == [f"clwave: error: cannot write {folder / 'out.clw'}: No space left on "
+                                            "device; check the folder's permissions and free space"], proc.stderr
+        assert not list(folder.iterdir())
+
+
+@pytest.mark.parametrize("extra, needle", [
+    (["--raw", "{d}/missing/raw.npy"], "the folder of --raw {d}/missing/raw.npy does not exist"),
+    (["--raw", "{d}/raw.txt"], "--raw {d}/raw.txt must end in .npy"),
+    (["--raw", "{d}/x.png"], "--raw {d}/x.png must end in .npy"),
+    (["--stats", "{d}/s.npy"], "--stats {d}/s.npy must end in .json"),
+    (["--raw", "{d}/r.json"], "--raw {d}/r.json must end in .npy"),
+    (["--raw", "{d}/r.npy", "--stats", "{d}/r.npy"], "--stats {d}/r.npy must end in .json"),
+    (["--raw", "{d}/sub"], "--raw {d}/sub must end in .npy"),
+    (["--raw", "{d}/sub.npy"], "--raw {d}/sub.npy is a folder; name a file"),
+    (["--raw", "{d}/old.npy"], "{d}/old.npy exists; pass --force"),
+])
+def test_every_render_output_is_checked_before_any_work(tmp_path, capsys, monkeypatch, extra, needle):
+    from clwave.cli import main, render
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub.npy").mkdir()
+    (tmp_path / "old.npy").write_bytes(b"precious")
+    monkeypatch.setattr(render, "build_model", lambda *a, **k: pytest.fail("work started"))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code = main(["render", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "-o", str(tmp_path / "x.png")]
+                + [e.format(d=tmp_path) for e in extra])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith(f"clwave: error: {needle.format(d=tmp_path)}") and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == before and (tmp_path / "old.npy").read_bytes() == b"precious"
+
+
+def test_two_outputs_naming_one_file_are_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    """--raw equal to -o, and a --stats name that is a (dangling) link to the -o file: the second write would
+    find the first's file, after the work and the first write."""
+    from clwave.cli import main, render
+
+    monkeypatch.setattr(render, "build_model", lambda *a, **k: pytest.fail("work started"))
+    png = tmp_path / "x.png"
+    (tmp_path / "s.json").symlink_to(png)
+    for extra, needle in ((["--raw", str(png)], f"--raw {png} must end in .npy"),
+                          (["--stats", str(tmp_path / "s.json")], f"-o and --stats both name {tmp_path / 's.json'}")):
+        assert main(["render", "phantom:hydrogen:16", "-o", str(png)] + extra) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"clwave: error: {needle}") and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json"]
+
+
+def test_progressive_into_an_existing_file_without_a_suffix_is_one_line(tmp_path, capsys):
+    from clwave.cli import main
+
+    (tmp_path / "frames").write_bytes(b"precious")
+    assert main(["progressive", "phantom:hydrogen:16", "--levels", "1", "-o", str(tmp_path / "frames")]) == 2
+    assert capsys.readouterr().err == (f"clwave: error: -o {tmp_path / 'frames'} is a file; name a folder for the "
+                                       "PNG frames, or a .gif\n")
+    assert (tmp_path / "frames").read_bytes() == b"precious"

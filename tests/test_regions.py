@@ -90,9 +90,9 @@ def test_workers_on_one_machine_share_its_device():
 
 def test_a_cluster_needs_a_model_opened_from_a_file(model, monkeypatch):
     """Refused before any worker starts."""
-    import clwave.cluster
+    import clwave.schedulers
 
-    monkeypatch.setattr(clwave.cluster, "client_for", None)  # starting a cluster would fail the test
+    monkeypatch.setattr(clwave.schedulers, "client_for", None)  # starting a cluster would fail the test
     with pytest.raises(InputError, match=r"\.clw file"):
         clwave.raytrace(model.threshold(keep=0.5), clwave.Camera(size=8), scheduler=1)
     for bad in (dict(field="wavelet"), dict(tolerance=0), dict(device_memory="2GB")):

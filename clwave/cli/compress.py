@@ -7,14 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from .options import add_command, build_model, check_output
+from .options import add_command, build_model, check_outputs
 
 
 def run(args):
-    out = check_output(args.output, args.force)
-    if out.suffix.lower() != ".clw":
-        raise InputError(f"output {out} must end in .clw")
+    out, = check_outputs(args.force, (args.output, "-o", (".clw",)))
     from ..io.clw import check_quantise, read_clw
 
     quantise = args.quantise

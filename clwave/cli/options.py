@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError, OutputExistsError
-from ..memory import check_fits
+from ..device.memory import check_fits
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
@@ -117,7 +118,7 @@ def _chunks(text):
 
 def parse_scheduler(args):
     """The Dask scheduler of chunked work: ``--workers N``, ``--scheduler ADDRESS`` or threads (None)."""
-    from ..cluster import check_scheduler
+    from ..schedulers import check_scheduler
 
     return check_scheduler(args.workers if args.workers is not None else args.scheduler)
 
@@ -250,12 +251,39 @@ def _preset_window(text):
     return text if text == "auto" else numbers(text, "--tf-window", (2,))
 
 
-def check_output(path, force):
+def check_outputs(force, *outputs) -> list:
+    """The paths of a command's outputs ``(path or None, option, suffixes)``, each checked before any work:
+    it ends in one of ``suffixes``, its folder exists, it is no folder, it exists only with ``--force``;
+    and no two name one file.  None where an output is not asked for."""
+    paths, seen = [], {}
+    for path, option, suffixes in outputs:
+        if path is None:
+            paths.append(None)
+            continue
+        path = Path(path)
+        if path.suffix.lower() not in suffixes:
+            raise InputError(f"{option} {path} must end in {' or '.join(suffixes)}")
+        if path.is_dir():
+            raise InputError(f"{option} {path} is a folder; name a file")
+        if not path.parent.is_dir():
+            raise InputError(f"the folder of {option} {path} does not exist; create it first")
+        if path.exists() and not force:
+            raise OutputExistsError(f"{path} exists; pass --force to replace it")
+        same = seen.get(os.path.realpath(path))  # one file by two names, links included
+        if same is not None:
+            raise InputError(f"{same} and {option} both name {path}; give each output its own file")
+        seen[os.path.realpath(path)] = option
+        paths.append(path)
+    return paths
+
+
+def check_frames_folder(path, force) -> Path:
+    """A folder for PNG frames: none yet, or an empty one (any with ``--force``), never a file."""
     path = Path(path)
-    if path.exists() and not force:
-        raise OutputExistsError(f"{path} exists; pass --force to replace it")
-    if not path.parent.exists():
-        raise InputError(f"the folder of {path} does not exist; create it first")
+    if path.exists() and not path.is_dir():
+        raise InputError(f"-o {path} is a file; name a folder for the PNG frames, or a .gif")
+    if path.is_dir() and any(path.iterdir()) and not force:
+        raise InputError(f"folder {path} is not empty; pass --force to write into it")
     return path
 
 

@@ -8,12 +8,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .options import (add_command, add_raytrace_options, build_model, check_output, make_camera, numbers,
-                      parse_device_memory, parse_lights, parse_window, write_gif)
+from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, make_camera,
+                      numbers, parse_device_memory, parse_lights, parse_window, write_gif)
 
 
 def run(args):
-    from ..progressive import check_error, progressive
+    from ..frames import check_error
+    from ..progressive import progressive
     from ..splat.progressive import check_schedule
     from ..io.result import resolve_window
 
@@ -22,12 +23,8 @@ def run(args):
     if not as_folder and out.suffix.lower() != ".gif":
         raise InputError(f"output {out} must end in .gif, or be a folder name for PNG frames")
     if as_folder:
-        if out.exists() and any(out.iterdir()) and not args.force:
-            raise InputError(f"folder {out} is not empty; pass --force to write into it")
-    else:
-        check_output(out, args.force)
-    if args.stats:
-        check_output(args.stats, args.force)
+        check_frames_folder(out, args.force)
+    check_outputs(args.force, (None if as_folder else out, "-o", (".gif",)), (args.stats, "--stats", (".json",)))
     camera = make_camera(args)
     check_error(args.error)
     raytrace = args.method == "raytrace"

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import contextlib
-from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from .options import (add_command, add_raytrace_options, build_model, check_output, make_camera, numbers,
+from .options import (add_command, add_raytrace_options, build_model, check_outputs, make_camera, numbers,
                       parse_device_memory, parse_lights, parse_scheduler, parse_window, post_transfer_function,
                       write_gif)
 
@@ -17,16 +16,13 @@ def run(args):
     from ..raytrace.tracer import RayTracer, raytrace
     from ..io.result import resolve_window
     from ..splat.renderer import SplatRenderer, splat
-    from ..cluster import check_model_file, client_for as cluster_client
+    from ..cluster import check_model_file
+    from ..schedulers import client_for as cluster_client
 
-    out = check_output(args.output, args.force)
-    extras = [Path(p) for p in (args.raw, args.stats) if p]
-    for extra in extras:
-        check_output(extra, args.force)
-    if args.turntable is not None and (args.turntable < 1 or out.suffix.lower() != ".gif"):
-        raise InputError("--turntable N needs N >= 1 and an output ending in .gif")
-    if args.turntable is None and out.suffix.lower() != ".png":
-        raise InputError(f"output {out} must end in .png (or .gif with --turntable N)")
+    if args.turntable is not None and args.turntable < 1:
+        raise InputError("--turntable N needs N >= 1")
+    out, raw, stats = check_outputs(args.force, (args.output, "-o", (".png",) if args.turntable is None else (".gif",)),
+                                    (args.raw, "--raw", (".npy",)), (args.stats, "--stats", (".json",)))
     background = numbers(args.background, "--background", (3,))
     camera = make_camera(args)
     if args.method == "splat" and camera.perspective:
@@ -83,10 +79,9 @@ def run(args):
         seconds = result.meta["turntable_seconds"]
         print(f"turntable of {len(results)} views at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
               f"({np.median(seconds):.3f} s a view, median); the first view:")
-    if args.raw:
-        result.save(args.raw, overwrite=args.force)
-    if args.stats:
-        result.save(args.stats, overwrite=args.force)
+    for extra in (raw, stats):
+        if extra is not None:
+            result.save(extra, overwrite=args.force)
     size = f"{camera.size[0]}x{camera.size[1]}"
     m = result.meta
     if args.method == "raytrace":

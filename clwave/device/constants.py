@@ -8,6 +8,7 @@ TILE = 16        #: splat images are binned and accumulated in TILE x TILE pixel
 MAX_LIGHTS = 8   #: the ray tracer keeps its lights in private memory
 BLOCK = 4        #: empty-space blocks of the ray tracer are BLOCK^3 fine cells
 SUPER = 4        #: and its superblocks SUPER^3 blocks, crossed in one step where all are empty
+BRICK = BLOCK * SUPER  #: fine cells along the edge of a ray-tracing brick (grid-0 coordinates)
 
 
 def defines() -> dict:

@@ -1,16 +1,21 @@
-"""How much device memory a renderer may hold: the device's own limits, or less where the user caps it
-(``device_memory=`` in the API, ``--device-memory`` on the command line); docs/splatting.md §6.
+"""Memory figures, the device's and the host's.
 
+How much device memory a renderer may hold: the device's own limits, or less where the user caps it
+(``device_memory=`` in the API, ``--device-memory`` on the command line); docs/splatting.md §6.
 :func:`parse_size` reads a cap (bytes, or a string with a binary unit); :func:`device_budget` gives the
 budget a renderer plans its buffers within; :func:`format_size` writes sizes for messages.
+
+How much host memory there is to spend (:func:`available_bytes`): work that cannot fit is refused before it
+starts (:func:`check_fits`).
 """
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
 
-from ..errors import InputError
+from ..errors import ClwaveError, InputError
 
 #: what :func:`parse_size` accepts, as its errors say it
 SIZE_FORMS = ("a whole number of bytes (e.g. 536870912) or a number with a binary unit K, M, G or T "
@@ -75,3 +80,27 @@ def format_size(nbytes: int) -> str:
             value = -(-nbytes * scale // size) / scale  # rounded up
             return f"{value:.{digits}f} {unit}".replace(".0 ", " ")
     return f"{nbytes} bytes"
+
+
+class HostMemoryError(ClwaveError, MemoryError):
+    """Work refused before it starts: it would not fit in the host's memory."""
+
+
+def available_bytes() -> int:
+    """Memory the system could give this process now (Linux: MemAvailable), else the physical memory."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:  # pragma: no cover - not Linux
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def check_fits(nbytes: int, what: str, hint: str):
+    """A :class:`HostMemoryError` naming ``what`` and the numbers when ``nbytes`` exceed what is available."""
+    free = available_bytes()
+    if nbytes > free:
+        raise HostMemoryError(f"{what} needs about {nbytes / 2**30:,.1f} GiB, and this machine has "
+                              f"{free / 2**30:,.1f} GiB available; {hint}")

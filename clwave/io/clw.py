@@ -36,7 +36,8 @@ from ..model.mask import ContentMask
 from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from ..threads import background
-from .files import write_atomic
+from .files import hdf5_target, write_atomic
+from .hdf5_safety import check_self_contained
 
 FILE_FORMAT = "clwave-wavelet-volume"
 FILE_VERSION = 2
@@ -162,12 +163,12 @@ def _write(model, fh, steps):
                   focus=None if model.focus is None else [list(model.focus[0]), model.focus[1]],
                   transfer_function=model.transfer_function, content=model.content,
                   groups=[dict(wavelet=w.order, channels=list(c)) for w, c in groups])
-    with h5py.File(fh, "w", libver="latest", meta_block_size=512) as h5:  # small metadata blocks: small models
+    with hdf5_target(fh) as target, h5py.File(target, "w", libver="latest", meta_block_size=512) as h5:
         text = json.dumps(header)
         h5.attrs.update(format=FILE_FORMAT, version=FILE_VERSION, header=text, header_crc32=zlib.crc32(text.encode()))
         filters = _filters(steps is not None)
         tiers = _Tiers(h5, [band_layout(w, model.shape, model.levels)[0].size for w, _ in groups],
-                       [len(c) for _, c in groups], steps, filters)
+                       [len(c) for _, c in groups], steps, filters, target.check)
         if chunked:
             _stream(model, h5, tiers, filters)
         else:
@@ -181,7 +182,7 @@ def _write(model, fh, steps):
 
 
 def _stream(model: ChunkedWaveletVolume, h5, tiers, filters):
-    from ..cluster import client_for
+    from ..schedulers import client_for
 
     mask = _mask_dataset(h5, model.shape, filters)
     with client_for(model.scheduler) as client:
@@ -209,10 +210,10 @@ def _mask_dataset(h5, shape, filters):
 class _Tiers:
     """Appends coefficients to their group's datasets in runs of one tier, whole chunks of :data:`ROWS`
     rows at a time (the rest waits in a buffer for more of its tier, or for :meth:`flush`); with ``steps``,
-    each group's values as integer multiples of its step."""
+    each group's values as integer multiples of its step; ``check`` raises a failed write (a full disk)."""
 
-    def __init__(self, h5, approx_sizes, channels, steps, filters):
-        self.h5, self.approx_sizes, self.steps, self.filters = h5, approx_sizes, steps, filters
+    def __init__(self, h5, approx_sizes, channels, steps, filters, check):
+        self.h5, self.approx_sizes, self.steps, self.filters, self.check = h5, approx_sizes, steps, filters, check
         self.buffers, self.runs = {}, {gi: [] for gi in range(len(channels))}
         for gi, c in enumerate(channels):
             h5.create_dataset(f"g{gi}/positions", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(ROWS,),
@@ -267,6 +268,7 @@ class _Tiers:
             dataset = self.h5[f"g{gi}/{name}"]
             dataset.resize(start + len(data), axis=0)
             dataset[start:] = data
+        self.check()
 
 
 # ---------------------------------------------------------------- reading
@@ -292,6 +294,7 @@ def read_clw(path, keep=None) -> WaveletVolume:
                               f"reads; compress the volume again to make a version {FILE_VERSION} file")
     try:
         with h5py.File(path, "r") as h5:
+            check_self_contained(h5, path, MAX_HEADER)  # nothing outside the file, nothing unbounded
             header = _header(h5, path)
             shape, levels, channels, groups_header = _checked_header(header)
             budget = None if keep is None else max(1, int(round(keep * int(np.prod(shape)))))
@@ -310,7 +313,7 @@ def read_clw(path, keep=None) -> WaveletVolume:
     except MemoryError:
         raise InputError(f"{path} holds more than this machine's memory can take; open a part of it "
                          "(keep=, --keep: its most important coefficients)") from None
-    except (OSError, ValueError, KeyError, TypeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, json.JSONDecodeError) as exc:
         raise FileFormatError(f"cannot read {path} as a .clw file ({type(exc).__name__}: "
                               f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
                               "the file may be truncated or corrupt") from None
@@ -338,7 +341,10 @@ def _header(h5, path) -> dict:
         raise ValueError("the header is missing or too long")
     if h5.attrs.get("header_crc32") != zlib.crc32(text.encode()):  # HDF5 checksums datasets, not attributes
         raise ValueError("the header does not match its checksum")
-    return json.loads(text)
+    header = json.loads(text)
+    if not isinstance(header, dict):
+        raise ValueError(f"the header is a JSON {type(header).__name__}, not an object")
+    return header
 
 
 def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
@@ -484,3 +490,6 @@ def _checked_header(header) -> tuple:
     if sorted(seen) != list(range(channels)):
         raise ValueError(f"the groups hold channels {sorted(seen)}, not each of the {channels} once")
     return shape, levels, channels, groups
+
+
+WaveletVolume.file_format = (read_clw, write_clw)

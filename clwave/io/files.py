@@ -10,7 +10,9 @@ sees (errors, Ctrl-C, SIGTERM through the command line).
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import io
 import os
 import tempfile
 from pathlib import Path
@@ -98,3 +100,64 @@ def _publish(tmp, path, overwrite):
         if path.exists():  # a filesystem without hard links: check, then rename
             raise FileExistsError(path) from None
         os.replace(tmp, path)
+
+
+@contextlib.contextmanager
+def hdf5_target(fh):
+    """The file object to give h5py for writing HDF5 into ``fh`` (a file of :func:`write_atomic`); the
+    first error writing it is raised after the HDF5 file, closed inside the ``with``, is closed."""
+    target = HDF5Sink(fh)
+    yield target
+    target.check()
+
+
+class HDF5Sink:
+    """A file object for h5py writing into ``fh`` (:func:`hdf5_target`) that never fails HDF5.
+
+    An exception raised in h5py's file-object driver stays set in Python, so that every later call of the
+    driver fails too: HDF5 cannot close the file and keeps it open until the interpreter's exit flushes it
+    through a closed file object (SIGSEGV).  So after the first failure (a full disk), writes are dropped,
+    and :meth:`check` raises it, between HDF5 calls.  Unbuffered, so that only a write can fail, and
+    writing on through a partial write.
+    """
+
+    def __init__(self, fh):
+        fh.flush()
+        self.raw, self.error = io.FileIO(fh.fileno(), "r+b", closefd=False), None
+
+    def seek(self, offset, whence=os.SEEK_SET):
+        return self.raw.seek(offset, whence)
+
+    def tell(self):
+        return self.raw.tell()
+
+    def read(self, size=-1):
+        return self.raw.read(size)
+
+    def readinto(self, buffer):
+        return self.raw.readinto(buffer)
+
+    def write(self, data):
+        view, done = memoryview(data).cast("B"), 0
+        while done < len(view) and self.error is None:
+            done += self._quietly(self.raw.write, view[done:]) or 0
+        return len(view)
+
+    def truncate(self, size=None):
+        return self._quietly(self.raw.truncate, size)
+
+    def flush(self):
+        pass  # unbuffered
+
+    def check(self):
+        """Raise the first error of a write, if any."""
+        if self.error is not None:
+            raise self.error
+
+    def _quietly(self, operation, argument):
+        if self.error is None:
+            try:
+                return operation(argument)
+            except OSError as exc:
+                self.error = exc
+        return None

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
-from ..memory import check_fits
+from ..device.memory import check_fits
 from ..model.volume import Volume
 
 NAMES = ("hydrogen", "marschner-lobb", "shepp-logan")

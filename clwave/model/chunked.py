@@ -4,7 +4,7 @@ A :class:`ChunkedWaveletVolume` holds no coefficients.  It holds, per channel gr
 a Dask graph (:func:`level_stacks`: level by level, each block of a level's input with the halo its
 filters need, transformed by PyWavelets exactly as the in-memory transform does) and a selection rule
 per class of coefficients (the coarsest approximation, the details: :class:`Rule`).  Each pass runs
-the graph and streams small per-block results back (:func:`clwave.cluster.stream`): importance
+the graph and streams small per-block results back (:func:`clwave.schedulers.stream`): importance
 histograms, from which ``keep=`` finds its exact cut, or the selected coefficients, gathered into a
 :class:`WaveletVolume` (:meth:`compute`) or written to a ``.clw`` file as they come (:meth:`save`).
 """
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pywt
 
-from ..cluster import client_for, stream
+from ..schedulers import client_for, stream
 from ..errors import InputError
 from .bspline import SplineWavelet
 from .transform import KEYS, band_layout, check_coefficients
@@ -96,7 +96,7 @@ class ChunkedWaveletVolume:
     Made by :meth:`WaveletVolume.from_volume` for a chunked volume.  :meth:`threshold` selects exactly
     the coefficients the in-memory model would (ties aside); :meth:`compute` gathers the selection into
     a :class:`WaveletVolume`; :meth:`save` streams it into a ``.clw`` file.  Every pass runs on
-    ``scheduler`` (:mod:`clwave.cluster`).
+    ``scheduler`` (:mod:`clwave.schedulers`).
     """
 
     def __init__(self, volume: Volume, wavelets, levels, *, transfer_function=None, focus=None,
@@ -262,9 +262,7 @@ class ChunkedWaveletVolume:
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;
         ``quantise`` as :meth:`WaveletVolume.save` (a bound only)."""
-        from ..io.clw import write_clw
-
-        return write_clw(self, path, overwrite, quantise)
+        return WaveletVolume.file_format[1](self, path, overwrite, quantise)
 
 
 # ---------------------------------------------------------------- the graph
@@ -465,3 +463,5 @@ def _bin_rule(hist, count) -> Rule:
     b = int(np.flatnonzero(above >= count)[-1])
     return Rule(bin=b, take=count - int(above[b] - hist[b]))
 
+
+WaveletVolume.chunked_model = ChunkedWaveletVolume

@@ -68,6 +68,13 @@ def world_to_fine_affine(order: int, shape, spacing, origin) -> tuple:
 
 
 # ----------------------------------------------------------------------------- supports of the bases
+def view_in_fine(view, scale, offset) -> tuple:
+    """The eye (perspective; orthographic: the target) and the rays' direction in grid-0 fine coordinates
+    (z, y, x)."""
+    eye = ((view.eye if view.perspective else view.target) * scale + offset)[::-1]
+    return eye, (-view.n * scale)[::-1]
+
+
 def band_lattice(wav: SplineWavelet, key: str, level: int) -> tuple:
     """``(offset, step, support)`` of the basis functions of band ``(level, key)``, per array axis.
 

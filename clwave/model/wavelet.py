@@ -127,6 +127,12 @@ class WaveletVolume:
     (1638, 0.95)
     """
 
+    #: what builds on this class and which it calls, set by those modules (imported with clwave): the model of a
+    #: chunked volume (:mod:`clwave.model.chunked`), and the ``.clw`` file's ``(read, write)``
+    #: (:mod:`clwave.io.clw`); this module imports neither (the model below its file format)
+    chunked_model = None
+    file_format = None
+
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
                  focus=None, transfer_function=None, content=None, content_mask=None):
         self.shape = tuple(int(s) for s in shape)
@@ -168,7 +174,7 @@ class WaveletVolume:
             for a scalar one, the transfer function ray tracing classifies it with by default
             (post-classification, docs/raytracing.md §10).
         scheduler : optional
-            Chunked volumes only: the Dask scheduler of the passes (:mod:`clwave.cluster`).
+            Chunked volumes only: the Dask scheduler of the passes (:mod:`clwave.schedulers`).
 
         Returns
         -------
@@ -183,11 +189,9 @@ class WaveletVolume:
                              "HDF5 store, or chunks='auto'); this one is in memory",
                              cli="--workers and --scheduler apply to a chunked input (Zarr, HDF5, or --chunks auto)")
         if volume.chunked:
-            from .chunked import ChunkedWaveletVolume  # built on this module
-
-            return ChunkedWaveletVolume.from_volume(volume, wavelet, levels, interpolate=interpolate,
-                                                    transfer_function=transfer_function, scheduler=scheduler,
-                                                    progress_bar=progress_bar)
+            return WaveletVolume.chunked_model.from_volume(volume, wavelet, levels, interpolate=interpolate,
+                                                           transfer_function=transfer_function,
+                                                           scheduler=scheduler, progress_bar=progress_bar)
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
         tf = transfer_function.to_dict() if hasattr(transfer_function, "to_dict") else transfer_function
         mask = volume.content_mask()
@@ -395,18 +399,14 @@ class WaveletVolume:
         """Write a ``.clw`` file (docs/model.md §6, :mod:`clwave.io.clw`); refuses to replace an
         existing file unless ``overwrite``; writes atomically.  ``quantise``: a bound on the change of any
         voxel of :meth:`reconstruct`, or "auto", stores the values rounded to a step (docs/codecs.md)."""
-        from ..io.clw import write_clw  # io builds on the model, not the other way round
-
-        return write_clw(self, path, overwrite, quantise)
+        return WaveletVolume.file_format[1](self, path, overwrite, quantise)
 
     @classmethod
     def open(cls, path, keep=None) -> "WaveletVolume":
         """Read a ``.clw`` file written by :meth:`save`; with ``keep``, only its most important coefficients,
         reading about that fraction of the file: the same model as ``open(path).threshold(keep=keep)``
         (docs/chunked.md §4)."""
-        from ..io.clw import read_clw
-
-        wv = read_clw(path, keep)
+        wv = WaveletVolume.file_format[0](path, keep)
         wv.source = (str(Path(path).resolve()), keep)  # workers of a Dask cluster open it themselves
         return wv
 

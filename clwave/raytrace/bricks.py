@@ -28,7 +28,7 @@ from pyopencl import cltypes
 from pyopencl.elementwise import ElementwiseKernel
 
 from ..device import programs
-from ..device.constants import BLOCK, SUPER
+from ..device.constants import BRICK, SUPER
 from ..device.context import ComputeContext
 from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
@@ -36,7 +36,6 @@ from ..errors import DeviceMemoryError, OutputError
 from ..model.geometry import band_lattice
 from .lod import content_windows, occupancy
 
-BRICK = BLOCK * SUPER  #: fine cells along a brick's edge (grid-0 coordinates)
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
 
 

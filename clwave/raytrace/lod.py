@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl.array as cla
 
-from ..device.constants import SUPER
+from ..device.constants import BRICK, SUPER
 from ..errors import InputError, finite_number
 from .bounds import clip_box, superblocks
 
@@ -52,7 +52,6 @@ def content_windows(wv, level: int, origin, shape) -> tuple:
     Group g's window in brick b is its level-L coefficients whose B-splines reach the brick (as
     :func:`clwave.raytrace.bricks.layout` counts them); counted separably a brick row at a time.
     """
-    from .bricks import BRICK
 
     j0, mask = wv.groups[0].wavelet.order, wv.content_mask
     has_any, has_all = [], []

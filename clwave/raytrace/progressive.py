@@ -1,7 +1,7 @@
 """Progressive ray tracing (docs/raytracing.md §9): frames from cheap to exact, a coarse detail on a reduced
 image first, then finer details on larger images, ending at full detail, the full image and the requested
 tolerance: bit for bit the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error
-against the final image (:class:`clwave.progressive.ErrorEstimate`); :meth:`RayTracer.refine` is the same
+against the final image (:class:`clwave.frames.ErrorEstimate`); :meth:`RayTracer.refine` is the same
 sequence for a viewer, which stops iterating when the view changes.
 """
 
@@ -15,8 +15,7 @@ from scipy.ndimage import map_coordinates
 
 from ..errors import InputError
 from ..model.camera import Camera
-from ..progressive import ErrorEstimate, FinalImage, Frame, check_error, reached
-from .tracer import RayTracer
+from ..frames import ErrorEstimate, FinalImage, Frame, check_error, reached
 
 #: the smallest reduced image side: coarser frames would be mostly edge
 MIN_SIDE = 8
@@ -25,7 +24,7 @@ MIN_SIDE = 8
 @dataclass(kw_only=True)
 class RaytraceFrame(Frame):
     """One step of progressive ray tracing: ``image`` (H, W, C) at the full size, rendered at ``detail`` on an
-    image ``reduction`` times smaller per side (then interpolated); errors as :class:`~clwave.progressive.Frame`
+    image ``reduction`` times smaller per side (then interpolated); errors as :class:`~clwave.frames.Frame`
     (the final image: full detail, full size, the requested tolerance)."""
 
     detail: int
@@ -69,39 +68,9 @@ def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:
                     axis=-1).astype(np.float32)
 
 
-def progressive(wv, camera: Camera, steps=None, budget=None, device=None, *, error=None, tolerance=1e-3,
-                lights=None, shading=True, absorption=True, device_memory=None, tracer: RayTracer | None = None):
-    """Yield :class:`RaytraceFrame` s from cheap to exact; the last is bit for bit the image of
-    ``RayTracer.render`` (full detail, the full image, ``tolerance``).
-
-    Parameters
-    ----------
-    steps : int >= 1, optional
-        The last ``steps`` frames of the schedule (default every one: a frame per level of the model, the
-        coarsest on an image about 2^levels times smaller per side).
-    budget : float > 0, optional
-        Seconds: stop before a frame expected to end beyond the budget (from the last frame's time per pixel);
-        the first frame is always made.
-    error : float in (0, 1), optional
-        Stop at the first frame whose estimated relative RMS error is at most this.
-    tolerance, lights, shading, absorption :
-        As for :func:`clwave.raytrace`; every frame uses them.
-    tracer : RayTracer, optional
-        One made with ``lod=True``; without it, calls on the same model and device share one.
-    """
-    if tracer is None:
-        from ..device.context import ComputeContext
-        from ..device.memory import parse_cap
-
-        cc, cap = ComputeContext.get(device), parse_cap(device_memory)
-        tracer = wv.shared(("raytrace-lod", cc.info.id, cap), lambda: RayTracer(wv, device=cc, device_memory=cap,
-                                                                              lod=True))
-    options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
-    return frames(tracer, camera, options, steps, budget, error)
-
-
-def frames(tracer: RayTracer, camera: Camera, options: dict, steps=None, budget=None, error=None):
-    """The frames of :func:`progressive` from a tracer (:meth:`RayTracer.refine`), arguments checked first."""
+def frames(tracer, camera: Camera, options: dict, steps=None, budget=None, error=None):
+    """The frames of :func:`clwave.progressive.raytrace_progressive` from a :class:`~clwave.RayTracer` (its
+    :meth:`~clwave.RayTracer.refine`), arguments checked first."""
     check_error(error)
     if steps is not None and (isinstance(steps, bool) or int(steps) != steps or steps < 1):
         raise InputError(f"steps={steps!r} must be a whole number of frames, at least 1",

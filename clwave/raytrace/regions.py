@@ -13,9 +13,8 @@ import numpy as np
 from ..cluster import check_model_file, render_parts, workers_of
 from ..errors import InputError
 from ..io.result import RenderResult
-from ..model.geometry import world_to_fine_affine
+from ..model.geometry import view_in_fine, world_to_fine_affine
 from .bricks import BRICK, layout, plan, ray_order
-from .tracer import RayTracer, view_in_fine
 
 
 def slabs(wv, count: int) -> list:
@@ -38,13 +37,14 @@ def check_cluster_model(wv, field):
         raise InputError("ray tracing on a Dask cluster takes the B-spline field (field='bspline')")
 
 
-def raytrace_on_cluster(wv, camera, client, options: dict, device, device_memory) -> RenderResult:
+def raytrace_on_cluster(tracer, wv, camera, client, options: dict, device, device_memory) -> RenderResult:
     """:func:`clwave.raytrace` with ``scheduler=``: one task per slab, each slab on a worker of its own (round
-    robin), where the worker keeps its tracer for later views."""
+    robin), where the worker keeps its ``tracer`` (the class :class:`~clwave.raytrace.tracer.RayTracer`, which
+    calls this module) for later views."""
     workers = workers_of(client)
     parts = slabs(wv, workers)
     share = dict(options, tolerance=options["tolerance"] / len(parts))
-    results = render_parts(client, _trace_slab, wv.source, parts, device, device_memory, camera, share)
+    results = render_parts(client, _trace_slab, wv.source, parts, tracer, device, device_memory, camera, share)
     order = slab_order(wv, parts, camera)
     image = composite([results[i][0] for i in order], options["absorption"])
     metas = [m for _, m in results]
@@ -86,9 +86,9 @@ def composite(images: list, absorption: bool) -> np.ndarray:
     return out
 
 
-def _trace_slab(renderer_of, region, device, device_memory, camera, options) -> tuple:
+def _trace_slab(renderer_of, region, tracer, device, device_memory, camera, options) -> tuple:
     """On a worker: the image of the rays inside one slab, and the meta."""
-    tracer = renderer_of(lambda wv, cap: RayTracer(wv, device=device, device_memory=cap, region=region),
-                         device, device_memory)
-    result = tracer.render(camera, **options)
+    renderer = renderer_of(lambda wv, cap: tracer(wv, device=device, device_memory=cap, region=region),
+                           device, device_memory)
+    result = renderer.render(camera, **options)
     return result.image, result.meta

@@ -20,7 +20,7 @@ from ..device import programs
 from ..device.constants import BLOCK, MAX_LIGHTS, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
 from ..model.bspline import piece_polynomials
-from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
+from ..model.geometry import band_lattice, view_frame, view_in_fine, world_to_fine_affine
 from ..model.camera import Camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
@@ -29,6 +29,7 @@ from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblock
 from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import ScalarRange, bernstein_matrix
+from .progressive import frames
 from .quadrature import sample_tables
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
@@ -67,13 +68,6 @@ B, I32, INT4, FLOAT4 = BUFFER, np.int32, cltypes.int4, cltypes.float4
 FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("page_shape", INT4), ("frames", B),
                            ("boxes", B), ("lattices", B)),
                   wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
-
-
-def view_in_fine(view, scale, offset) -> tuple:
-    """The eye (perspective; orthographic: the target) and the rays' direction in grid-0 fine coordinates
-    (z, y, x)."""
-    eye = ((view.eye if view.perspective else view.target) * scale + offset)[::-1]
-    return eye, (-view.n * scale)[::-1]
 
 
 def _checked_view(camera, tolerance) -> float:
@@ -500,8 +494,6 @@ class RayTracer:
         for a viewer that shows each as it comes: a generator (``RaytraceFrame`` s: ``image``, ``figures()``),
         the last bit for bit :meth:`render` at full detail; stop iterating when the view changes (nothing is
         left running).  Needs ``lod=True``; use it from one thread at a time."""
-        from .progressive import frames
-
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
         return frames(self, camera, options, steps, budget, error)
 
@@ -566,7 +558,7 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         Device memory to use at most (bytes, or e.g. ``"2GiB"``); bricks beyond it render in passes
         (docs/raytracing.md §6).
     scheduler : optional
-        Render on a Dask cluster (:mod:`clwave.cluster`: a number of local worker processes, an address or a
+        Render on a Dask cluster (:mod:`clwave.schedulers`: a number of local worker processes, an address or a
         ``distributed.Client``): each worker traces the rays through its slab of bricks, opening the model's
         ``.clw`` file itself (docs/raytracing.md §7).
     transfer_function : TransferFunction, optional
@@ -583,7 +575,7 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     and timings (B-spline expansion and kernel compile apart).
     """
     if scheduler is not None:
-        from ..cluster import client_for
+        from ..schedulers import client_for
         from .regions import check_cluster_model, raytrace_on_cluster
 
         check_cluster_model(wv, field)  # before any worker starts
@@ -594,7 +586,7 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
         options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision,
                        transfer_function=transfer_function)
         with client_for(scheduler) as client:  # which checks the scheduler before starting anything
-            return raytrace_on_cluster(wv, camera, client, options, device, cap)
+            return raytrace_on_cluster(RayTracer, wv, camera, client, options, device, cap)
     if tracer is None:
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")

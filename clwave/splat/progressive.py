@@ -3,7 +3,7 @@
 Coefficients are splatted in order of importance into one framebuffer, so frame
 k adds to frame k - 1 and never restarts.  Each frame reports the time so far,
 the fraction of coefficients, the energy captured, its estimated error against the final
-image (:class:`clwave.progressive.ErrorEstimate`) and, on demand, the measured one.
+image (:class:`clwave.frames.ErrorEstimate`) and, on demand, the measured one.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from ..model.camera import Camera
 from ..errors import InputError
-from ..progressive import ErrorEstimate, FinalImage, Frame, check_error, reached
+from ..frames import ErrorEstimate, FinalImage, Frame, check_error, reached
 from .renderer import SplatRenderer, shared_renderer
 from ..model.wavelet import WaveletVolume
 
@@ -23,7 +23,7 @@ from ..model.wavelet import WaveletVolume
 @dataclass(kw_only=True)
 class ProgressiveFrame(Frame):
     """One refinement step: ``image`` (H, W, C) after ``coefficients`` splats, ``fraction`` of the
-    model's kept coefficients and ``voxel_fraction`` of its voxels; errors as :class:`~clwave.progressive.Frame`
+    model's kept coefficients and ``voxel_fraction`` of its voxels; errors as :class:`~clwave.frames.Frame`
     (the final image: every kept coefficient)."""
 
     coefficients: int

@@ -331,7 +331,7 @@ def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampl
     ``omega_s``, ``sampling``, ``coarse`` and ``device_memory`` are those of :class:`SplatRenderer`;
     without ``renderer``, calls on the same model, device and options share one
     (:meth:`WaveletVolume.shared`).  ``scheduler`` (a number of local worker processes, an address or a
-    ``distributed.Client``, :mod:`clwave.cluster`): each worker opens the model's ``.clw`` file and splats an
+    ``distributed.Client``, :mod:`clwave.schedulers`): each worker opens the model's ``.clw`` file and splats an
     equal share of its coefficients, and the image is the sum of theirs (docs/splatting.md §7).
     """
     if scheduler is not None:
@@ -352,7 +352,8 @@ def _splat_range(r: SplatRenderer, camera, first: int, stop: int) -> tuple:
 
 
 def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
-    from ..cluster import check_model_file, client_for, render_parts, workers_of
+    from ..cluster import check_model_file, render_parts, workers_of
+    from ..schedulers import client_for
 
     check_model_file(wv, "splatting")  # before any worker starts
     if not isinstance(camera, Camera):

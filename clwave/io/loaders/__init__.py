@@ -1,0 +1,197 @@
+"""Read volumes from files: one :func:`load` for every supported format.
+
+The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
+(NIfTI, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
+millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
+stores, and large .npy, .raw and .nii files, are read chunk by chunk as Dask arrays (docs/chunked.md §1).
+
+One module per format family (``raw``: .raw and .npy; ``nifti``, ``nrrd``, ``tiff``, ``dicom``, ``hdf5``,
+``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared`` holds what they share.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import FileFormatError, InputError, finite_number
+from ...model.volume import Volume, is_dask
+from . import dicom, hdf5, nifti, nrrd, raw, tiff, zarr
+from .shared import SUPPORTED, check_chunks, reading, to_float32
+
+__all__ = ["load", "SUPPORTED"]
+
+_FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".nrrd": "nrrd",
+               ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
+               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"}
+# 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
+_INNER_PATH = re.compile(r"(.*\.(?:h5|hdf5|hdf|zarr)):(.*)", re.IGNORECASE | re.DOTALL)
+# Options that apply to one kind of input only
+_ONLY_FOR = {"shape": ".raw files", "dtype": ".raw files", "byte_order": ".raw files", "series": "DICOM folders",
+             "level": "OME-Zarr images"}
+
+
+def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
+         chunks=None, background=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None) -> Volume:
+    """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.npy``, ``.nii``, ``.nii.gz``, ``.nrrd``, ``.nhdr``, a multi-page
+        ``.tif``/``.tiff``, a folder of 2-D TIFF slices (stacked in natural name
+        order: ``slice2`` before ``slice10``), a folder of DICOM files (other files
+        in it are ignored), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
+        or an HDF5 file ``.h5``/``.hdf5``/``.hdf``.  ``file.h5:/name`` and
+        ``store.zarr:/name`` name an array inside; without a name the store's only
+        3-D/4-D array is read (an OME-Zarr image: its ``level``).
+    shape : tuple of int, optional
+        ``.raw`` only: ``(Z, Y, X)`` or ``(Z, Y, X, C)``, C-ordered (x fastest).
+    dtype : str or numpy.dtype, optional
+        ``.raw`` only: the sample type, e.g. ``"uint16"``.
+    spacing : float or 3 floats, optional
+        Voxel size ``(dz, dy, dx)``; overrides the file's spacing.
+    byte_order : {'<', '>'}, optional
+        ``.raw`` only: little or big endian (default: this machine's).
+    series : int or str, optional
+        DICOM only: 0-based index or ``SeriesInstanceUID`` of the series to load
+        when the folder holds several.
+    level : int, optional
+        OME-Zarr only: the resolution level (default 0, the finest).
+    chunks : None, False, "auto" or int
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw`` and
+        ``.nii`` too when their volume takes at least ``CHUNKED_MIN_BYTES`` (1 GiB)
+        as float32; everything else is read whole.  ``False``: read whole.
+        ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
+        of the store's own.  An int: chunk by chunk, cubes of that edge in voxels.
+        Chunked volumes hold a Dask array, read only when computed (docs/chunked.md).
+    background : float
+        Subtracted from every voxel (after ``hu_to_mu``), so that the data is ~0
+        outside the object.
+    hu_to_mu : bool
+        Convert CT Hounsfield units to linear attenuation
+        ``mu = mu_water * (1 + HU / 1000)``, clipped at 0 (air -> 0).
+    mu_water : float
+        Attenuation of water per world unit (default 0.0193 per mm, ~60 keV).
+    progress_bar : bool, optional
+        Show a bar while reading slices; None shows it when stderr is a terminal.
+
+    Returns
+    -------
+    Volume
+
+    Raises
+    ------
+    FileFormatError
+        Missing, unknown, truncated or corrupt input.
+    InputError
+        Bad arguments, several DICOM series without ``series=``, or data that is
+        not a volume (see :class:`Volume`).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> f = pathlib.Path(tempfile.mkdtemp()) / "v.npy"
+    >>> np.save(f, np.zeros((4, 5, 6), np.int16))
+    >>> load(f, spacing=(2.0, 1.0, 1.0))
+    Volume(shape=(4, 5, 6), channels=1, spacing=(2.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0))
+    """
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputError(f"path must be a file or folder name (str or pathlib.Path), got {type(path).__name__}")
+    path = Path(path)
+    background = finite_number(background, "background")
+    mu_water = finite_number(mu_water, "mu_water")
+    if hu_to_mu and mu_water <= 0:
+        raise InputError(f"mu_water={mu_water} must be positive (attenuation of water per "
+                         "world unit)")
+    path, inner = _split_inner(path)
+    kind = _kind(path)
+    if kind != "raw":
+        _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order)
+    if kind != "dicom":
+        _reject_unused(kind, series=series)
+    if kind != "zarr":
+        _reject_unused(kind, level=level)
+    chunks = check_chunks(chunks, kind, path)
+
+    with reading(path):
+        if kind == "zarr":
+            data, file_spacing, origin = zarr.read_zarr(path, inner, level, chunks)
+        elif kind == "hdf5":
+            data, file_spacing, origin = hdf5.read_hdf5(path, inner, chunks)
+        elif kind == "raw":
+            data, file_spacing, origin = raw.read_raw(path, shape, dtype, byte_order, chunks)
+        elif kind == "npy":
+            data, file_spacing, origin = raw.read_npy(path, chunks), None, None
+        elif kind == "nifti":
+            data, file_spacing, origin = nifti.read_nifti(path, chunks)
+        elif kind == "nrrd":
+            data, file_spacing, origin = nrrd.read_nrrd(path)
+        elif kind == "tiff":
+            data, file_spacing, origin = tiff.read_tiff(path), None, None
+        elif kind == "tiff-folder":
+            data, file_spacing, origin = tiff.read_tiff_folder(path, progress_bar), None, None
+        else:
+            data, file_spacing, origin = dicom.read_dicom_folder(path, series, progress_bar)
+
+    if not is_dask(data):
+        data = np.asarray(data)
+    if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
+        if hu_to_mu and data.ndim != 3:
+            raise InputError(f"hu_to_mu converts scalar CT volumes, but this one has "
+                             f"{data.shape[3]} channels; leave hu_to_mu off")
+        convert = partial(to_float32, path=path, mu_water=mu_water if hu_to_mu else None, background=background)
+        data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
+    return Volume(data,
+                  spacing=spacing if spacing is not None else (file_spacing or 1.0),
+                  origin=origin if origin is not None else (0.0, 0.0, 0.0))
+
+
+def _split_inner(path):
+    """``(file, name inside it or None)`` of ``file.h5:/name`` or ``store.zarr:/name`` (an existing path is
+    never split)."""
+    text = os.fspath(path)
+    match = _INNER_PATH.fullmatch(text)
+    if match and not os.path.exists(text):
+        return Path(match[1]), match[2].strip("/") or None
+    return Path(text), None
+
+
+def _kind(path: Path) -> str:
+    """Format of ``path`` from its extension, or the content of a folder."""
+    zarr_named = path.suffix.lower() == ".zarr"
+    if path.is_dir():
+        if any((path / name).is_file() for name in zarr.ZARR_METADATA):
+            return "zarr"
+        if zarr_named:
+            raise FileFormatError(f"{path} is not a Zarr store: it has no {', '.join(zarr.ZARR_METADATA)}; name the "
+                                  "store's top folder (or one array or group folder inside it)")
+        return "tiff-folder" if tiff.tiff_files(path) else "dicom"
+    name = path.name.lower()
+    suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
+    if not path.exists():
+        raise FileFormatError(f"no file or folder at {path}; supported inputs: {SUPPORTED}")
+    if zarr_named:
+        raise FileFormatError(f"{path} is a file, not a Zarr store; clwave reads Zarr stores that are folders "
+                              "(unzip a zipped store first)")
+    if suffix in (".dcm", ".ima"):
+        raise FileFormatError(f"{path} is one DICOM slice; pass the folder that holds the whole series "
+                              f"({path.parent})")
+    if suffix not in _FILE_KINDS:
+        raise FileFormatError(f"unknown file type {suffix or '(no extension)'!r} of {path}; "
+                              f"supported inputs: {SUPPORTED}")
+    return _FILE_KINDS[suffix]
+
+
+def _reject_unused(kind, **options):
+    """Refuse options the format ignores, so a mistaken call is not silently accepted."""
+    given = [name for name, value in options.items() if value is not None]
+    if given:
+        needs = _ONLY_FOR[given[0]]
+        raise InputError(f"{'=, '.join(given)}= only apply to {needs}; leave them out for a {kind} input",
+                         cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only apply to {needs}; "
+                             f"leave them out for a {kind} input")

@@ -1,0 +1,38 @@
+"""One dataset of an HDF5 file (``.h5``, ``.hdf5``, ``.hdf``), read chunk by chunk; never one whose data is
+in another file (external storage, a virtual dataset, an external or soft link)."""
+
+from __future__ import annotations
+
+from functools import partial
+
+from ...errors import FileFormatError
+from ..hdf5_safety import check_stored_inside
+from .shared import OnDemand, as_array, pick_array
+
+
+def read_hdf5(path, name, chunks):
+    """One dataset of an HDF5 file: the one named, or the file's only 3-D/4-D dataset; axes (z, y, x[, c])."""
+    import h5py
+
+    datasets = {}
+
+    def visit(found, node):
+        if isinstance(node, h5py.Dataset):
+            datasets[found] = node  # returns None: the visit goes on
+
+    with h5py.File(path, "r") as fh:
+        fh.visititems(visit)
+        name, dataset = pick_array(datasets, name, path)  # reached by hard links: visititems follows no other
+        try:  # the volume's bytes are in this file (docs/chunked.md §4)
+            check_stored_inside(dataset.id, f"{path}:/{name}")
+        except ValueError as exc:
+            raise FileFormatError(f"{exc}; clwave reads volumes stored in the file itself") from None
+        source = OnDemand(partial(_read_dataset, str(path), name), dataset.shape, dataset.dtype, dataset.chunks)
+    return as_array(source, chunks), None, None
+
+
+def _read_dataset(path, name, index):
+    import h5py
+
+    with h5py.File(path, "r") as fh:
+        return fh[name][index]

@@ -1,0 +1,50 @@
+"""Headerless ``.raw`` files and ``.npy`` files: memory maps, read whole or chunk by chunk."""
+
+from __future__ import annotations
+
+import os
+from functools import partial
+
+import numpy as np
+
+from ...errors import FileFormatError, InputError
+from .shared import OnDemand, as_array
+
+
+def read_raw(path, shape, dtype, byte_order, chunks):
+    """Headerless samples, C order (x fastest); the file size must match exactly."""
+    if shape is None or dtype is None:
+        raise InputError(f"{path.name}: a .raw file has no header; give shape=(Z, Y, X) or "
+                         "(Z, Y, X, C) and dtype= (e.g. 'uint16')")
+    try:
+        shape = tuple(int(n) for n in shape)
+        dt = np.dtype(dtype)
+    except (TypeError, ValueError):
+        raise InputError(f"bad shape={shape!r} or dtype={dtype!r} for {path.name}; give "
+                         "shape=(Z, Y, X) and a numpy dtype such as 'uint16'") from None
+    if len(shape) not in (3, 4) or min(shape) < 1:
+        raise InputError(f"shape={shape} must be (Z, Y, X) or (Z, Y, X, C) with positive sizes")
+    if byte_order not in (None, "<", ">"):
+        raise InputError(f"byte_order={byte_order!r} must be '<' (little endian) or '>' "
+                         "(big endian)")
+    if byte_order is not None:
+        dt = dt.newbyteorder(byte_order)
+    expected = int(np.prod(shape)) * dt.itemsize
+    actual = os.path.getsize(path)
+    if actual != expected:
+        raise FileFormatError(
+            f"{path} has {actual} bytes but shape {shape} of {dt.name} needs {expected} bytes; "
+            "check shape= and dtype=, or the file is truncated")
+    return as_array(OnDemand(partial(_read_memmap, str(path), dt, shape, 0, "C"), shape, dt), chunks), None, None
+
+
+def read_npy(path, chunks):
+    """A .npy file, memory-mapped (C or Fortran order)."""
+    mapped = np.load(path, mmap_mode="r", allow_pickle=False)  # reads the header only
+    order = "F" if mapped.flags.f_contiguous and not mapped.flags.c_contiguous else "C"
+    return as_array(OnDemand(partial(_read_memmap, str(path), mapped.dtype, mapped.shape, mapped.offset, order),
+                            mapped.shape, mapped.dtype), chunks)
+
+
+def _read_memmap(path, dtype, shape, offset, order, index):
+    return np.array(np.memmap(path, dtype, "r", offset, shape, order)[index])

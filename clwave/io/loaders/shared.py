@@ -1,0 +1,251 @@
+"""What the loaders of every format share: errors while reading, float32 conversion, arrays read whole or
+chunk by chunk (docs/chunked.md §1), picking an array of a store, RAS+ reorientation, stacks of slices."""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import re
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import ClwaveError, FileFormatError, InputError
+from ..progress import progress
+
+log = logging.getLogger(__name__)
+
+SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of "
+             "2-D slices), a folder of DICOM files, .raw (with shape= and dtype=), a Zarr or OME-Zarr "
+             "store (folder), .h5/.hdf5 (file.h5:/dataset)")
+
+#: chunks=None reads .npy, .raw and .nii files whose volume takes at least this many bytes as float32 chunk
+#: by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
+CHUNKED_MIN_BYTES = 1 << 30
+
+#: chunks="auto": at most this many bytes of float32 per chunk, in multiples of the store's own chunks
+#: (of 64 voxels per axis for files without chunks: 128³ voxels), or the store's own when they are bigger.
+#: Small, because the chunked transform holds some ten times a block a thread, and a slab of blocks for
+#: their halos (docs/chunked.md §2, §5).
+CHUNK_BYTES = 8 << 20
+
+#: More chunks than this make Dask's task graph itself too big to handle.
+MAX_CHUNKS = 100_000
+
+# The formats read chunk by chunk (not .nii.gz: gzip cannot seek)
+_CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti")
+
+
+@contextmanager
+def reading(path):
+    """Turn any library exception while reading ``path`` into a one-line FileFormatError; the readers'
+    own log lines (tifffile's on a cut file) are kept quiet, the error says what went wrong."""
+    quiet = logging.getLogger("tifffile")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)
+    try:
+        yield
+    except ClwaveError:
+        raise
+    except OSError as exc:
+        if exc.errno is None:  # e.g. gzip.BadGzipFile, not a system error
+            raise FileFormatError(_corrupt(path, exc)) from exc
+        # exc.filename: e.g. the data file that a .nhdr header points to
+        raise FileFormatError(f"cannot read {exc.filename or path}: {exc.strerror}; check the "
+                              "path and its permissions") from exc
+    except Exception as exc:
+        raise FileFormatError(_corrupt(path, exc)) from exc
+    finally:
+        quiet.setLevel(level)
+
+
+def _corrupt(path, exc) -> str:
+    lines = str(exc).strip().splitlines()
+    reason = type(exc).__name__ + (f": {lines[0][:200]}" if lines else "")
+    return f"cannot read {path}: {reason}; the file may be truncated or corrupt"
+
+
+def to_float32(block, path, mu_water, background, copy=True):
+    """``block`` (the whole volume, or one chunk as it is read) as float32: Hounsfield units -> attenuation
+    when ``mu_water`` is given (clipped at 0: air, -1000 HU, is exactly 0), minus ``background``; float64
+    values beyond float32's range are refused.  ``copy``: never write into ``block`` (a Dask chunk)."""
+    if block.dtype.kind == "f" and block.dtype.itemsize > 4 and block.size:
+        top = float(np.nanmax(np.abs(np.where(np.isfinite(block), block, 0.0))))
+        if top > float(np.finfo(np.float32).max):
+            raise InputError(f"{path} holds values up to {top:.3g}, beyond float32's range (3.4e38); rescale "
+                             f"the data first")
+    data = np.array(block, np.float32, order="C") if copy else np.ascontiguousarray(block, np.float32)
+    if mu_water is not None:
+        data += 1000.0
+        data *= np.float32(mu_water / 1000.0)
+        np.maximum(data, 0.0, out=data)
+    if background:
+        data -= np.float32(background)
+    return data
+
+
+def check_chunks(chunks, kind, path):
+    """``chunks`` validated for a ``kind`` input: None (by size), False (whole), "auto" or a cube edge."""
+    edge = isinstance(chunks, (int, np.integer)) and not isinstance(chunks, (bool, np.bool_)) and chunks >= 1
+    if not (edge or chunks is None or chunks is False or chunks == "auto"):
+        raise InputError(f"chunks={chunks!r} must be None, False, 'auto' or a chunk edge in voxels (an int >= 1)",
+                         cli=f"--chunks {chunks} must be auto, off or a chunk edge in voxels (an int >= 1)")
+    if kind not in _CHUNKABLE or path.name.lower().endswith(".gz"):
+        if chunks not in (None, False):
+            found = "a .nii.gz file (gzip cannot seek: gunzip it first)" if kind == "nifti" else f"a {kind} input"
+            raise InputError(f"chunks= applies to Zarr, HDF5, .npy, .raw and .nii inputs, not to {found}; leave "
+                             "it out to read the volume whole",
+                             cli=f"--chunks applies to Zarr, HDF5, .npy, .raw and .nii inputs, not to {found}; "
+                                 "leave it out to read the volume whole")
+        return False
+    return "auto" if chunks is None and kind in ("zarr", "hdf5") else chunks
+
+
+class OnDemand:
+    """A read-only array in a file that ``read(index)`` opens anew for each read: a Dask graph over it holds no
+    open file and pickles small (for process-based schedulers)."""
+
+    def __init__(self, read, shape, dtype, chunks=None):
+        self.read, self.shape, self.dtype, self.chunks = read, tuple(shape), np.dtype(dtype), chunks
+        self.ndim = len(self.shape)
+
+    def __getitem__(self, index):
+        return self.read(index)
+
+
+def as_array(source, chunks, roles=None):
+    """``source`` (an array read on demand: ``shape``, ``dtype``, ``source[index]``, maybe the store's ``chunks``)
+    read whole, or as a Dask array that reads each chunk when it is computed (docs/chunked.md §1).
+
+    ``chunks``: False, None (whole below ``CHUNKED_MIN_BYTES`` as float32), "auto" or a cube edge.  ``roles``
+    names each axis: 's' spatial (chunked), 't' time (one per chunk), 'c' channel (whole); default: 3
+    spatial axes, then channels.
+    """
+    shape = tuple(int(n) for n in source.shape)
+    roles = roles or "s" * min(len(shape), 3) + "c" * max(len(shape) - 3, 0)
+    if chunks is None:
+        chunks = "auto" if 4 * math.prod(shape) >= CHUNKED_MIN_BYTES else False
+    if chunks is False:
+        return np.asarray(source[...])
+    import dask.array as da
+    from dask.array.core import normalize_chunks
+
+    own = getattr(source, "chunks", None) or tuple(64 if r == "s" else 1 for r in roles)
+    edges = [chunks] * len(roles)
+    if chunks == "auto" and 4 * math.prod(n for n, r in zip(own, roles) if r == "s") >= CHUNK_BYTES:
+        edges = own  # the store's chunks are big already: one each (a Zarr chunk is decoded whole)
+    edges = tuple({"t": 1, "c": -1}.get(r, edge) for r, edge in zip(roles, edges))
+    blocks = normalize_chunks(edges, shape, limit=CHUNK_BYTES, dtype=np.float32, previous_chunks=own)
+    count = math.prod(len(b) for b in blocks)
+    if count > MAX_CHUNKS:
+        problem = (f"cut the {' x '.join(map(str, shape))} volume into {count:,} chunks; more than {MAX_CHUNKS:,} "
+                   "make Dask's task graph too big: give a bigger chunk edge")
+        raise InputError(f"chunks={chunks!r} {problem}", cli=f"--chunks {chunks} {problem}")
+    return da.from_array(source, chunks=blocks, meta=np.empty((0,) * len(shape), source.dtype))
+
+
+def _listing(arrays, most=8) -> str:
+    """'/a (5, 6, 7) int16, /b (4, 4) float32' for {name: array}, the first ``most`` of them."""
+    names = list(arrays)
+    text = ", ".join(f"/{n} {tuple(arrays[n].shape)} {arrays[n].dtype}" for n in names[:most])
+    return (text + (f" and {len(names) - most} more" if len(names) > most else "")) or "none"
+
+
+def pick_array(arrays, name, store):
+    """The array ``name`` of ``arrays`` ({name: array} of a Zarr or HDF5 store), or without a name its only
+    3-D/4-D array."""
+    if name is None:
+        volumes = [n for n, a in arrays.items() if len(a.shape) in (3, 4)]
+        if len(volumes) != 1:
+            raise FileFormatError(f"{store} holds {len(volumes) or 'no'} 3-D/4-D arrays (its arrays: "
+                                  f"{_listing(arrays)}); name one as {store}:/NAME")
+        name = volumes[0]
+    if name not in arrays:
+        raise FileFormatError(f"{store} holds no array /{name}; its arrays: {_listing(arrays)}")
+    array = arrays[name]
+    if len(array.shape) not in (3, 4):
+        raise FileFormatError(f"{store}:/{name} has shape {tuple(array.shape)}; clwave reads a 3-D (z, y, x) or "
+                              f"4-D (z, y, x, c) array: name another one ({_listing(arrays)})")
+    return name, array
+
+
+def to_canonical(array_ijk, affine_ras):
+    """Reorient an array with an index -> RAS affine to ``(z, y, x)`` RAS+ axes.
+
+    Parameters
+    ----------
+    array_ijk : ndarray or Dask array, shape (ni, nj, nk) or (ni, nj, nk, c)
+        Voxels indexed like the affine's columns.
+    affine_ras : ndarray, shape (4, 4)
+        Maps ``(i, j, k, 1)`` to RAS world coordinates (mm).
+
+    Returns
+    -------
+    array_zyx : ndarray or Dask array
+        Permuted and flipped view: axis 0 -> superior, 1 -> anterior, 2 -> right.
+    spacing_zyx : tuple of float
+        ``(dz, dy, dx)``, the lengths of the reoriented affine's columns.
+    origin_xyz : tuple of float
+        RAS position of the volume centre.
+    """
+    from nibabel.affines import obliquity
+    from nibabel.orientations import inv_ornt_aff, io_orientation
+
+    ornt = io_orientation(affine_ras)
+    # nibabel's apply_orientation by slicing and transposing, so a Dask array stays lazy
+    flips = tuple(slice(None, None, -1) if flip < 0 else slice(None) for flip in ornt[:, 1])
+    array_xyz = array_ijk[flips].transpose(tuple(np.argsort(ornt[:, 0])) + tuple(range(3, array_ijk.ndim)))
+    affine_xyz = affine_ras @ inv_ornt_aff(ornt, array_ijk.shape[:3])
+    tilt = np.degrees(np.abs(obliquity(affine_xyz)).max())
+    if tilt > 0.01:
+        log.warning("the volume is oblique by %.2f degrees; it is shown in the closest "
+                    "canonical (RAS) orientation", tilt)
+    spacing_xyz = np.linalg.norm(affine_xyz[:3, :3], axis=0)
+    centre = affine_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
+    array_zyx = array_xyz.transpose((2, 1, 0) + tuple(range(3, array_xyz.ndim)))
+    return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3])
+
+
+def read_slices(paths, read_slice, desc, progress_bar):
+    """Stack one 2-D slice per file along z, each read with its own error wrapping."""
+    volume = None
+    for z, path in enumerate(progress(paths, total=len(paths), desc=desc, enabled=progress_bar)):
+        with reading(path):
+            image = read_slice(path)
+        if volume is None:
+            volume = np.empty((len(paths),) + image.shape, image.dtype)
+        elif image.shape != volume.shape[1:]:
+            raise FileFormatError(
+                f"slice {path} has shape {image.shape} but {paths[0].name} has "
+                f"{volume.shape[1:]}; all slices of a volume must have the same size")
+        volume[z] = image
+    return volume
+
+
+def _natural_key(path):
+    """Sort key where digit runs compare as numbers: slice2 < slice10."""
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path.name)]
+
+
+def folder_files(folder):
+    return sorted((p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".")),
+                  key=_natural_key)
+
+
+def check_declared_size(path, offset, nbytes, shape, gzip=None):
+    """Refuse a header that declares more data than the file holds, before anything is allocated
+    (gzip, by default for a ``.gz`` name: its trailer's size of the uncompressed stream, modulo 2^32)."""
+    path = Path(path)
+    if gzip if gzip is not None else path.name.lower().endswith(".gz"):
+        with open(path, "rb") as fh:
+            fh.seek(-4, os.SEEK_END)
+            present = int.from_bytes(fh.read(4), "little")
+        lies = (offset + nbytes) % 2 ** 32 > present  # the trailer counts the stream modulo 2^32
+    else:
+        present = path.stat().st_size
+        lies = offset + nbytes > present
+    if lies:
+        raise FileFormatError(f"{path}: its header declares {' x '.join(map(str, shape))} voxels ({nbytes:,} bytes) "
+                              f"but the file holds {present:,} bytes; it is truncated or its header is wrong")

@@ -1,0 +1,126 @@
+"""Zarr stores (v2, v3) and OME-Zarr multiscale images (NGFF 0.4/0.5), read chunk by chunk."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+
+from ...errors import FileFormatError, InputError
+from .shared import as_array, pick_array
+
+ZARR_METADATA = ("zarr.json", ".zarray", ".zgroup")  # v3, v2 array, v2 group
+
+# NGFF axis name -> its role in as_array; units of length in metres (the NGFF list: UDUNITS-2 names)
+_NGFF_ROLES = {"z": "s", "y": "s", "x": "s", "c": "c", "t": "t"}
+_SI_PREFIXES = {"yocto": -24, "zepto": -21, "atto": -18, "femto": -15, "pico": -12, "nano": -9, "micro": -6,
+                "milli": -3, "centi": -2, "deci": -1, "": 0, "hecto": 2, "kilo": 3, "mega": 6, "giga": 9,
+                "tera": 12, "peta": 15, "exa": 18, "zetta": 21, "yotta": 24}
+_METRES = {prefix + "meter": Fraction(10) ** power for prefix, power in _SI_PREFIXES.items()} | {
+    "angstrom": Fraction(10) ** -10, "inch": Fraction("0.0254"), "foot": Fraction("0.3048"),
+    "mile": Fraction("1609.344"), "parsec": Fraction("3.0857e16")}  # exact: 1 micrometer is 1000.0 nanometer
+
+
+def read_zarr(path, name, level, chunks):
+    """A Zarr array (v2 or v3), or one level of an OME-Zarr multiscale image with its spacing and origin."""
+    import zarr
+
+    def arrays(group, prefix=""):
+        """{name from the store's top: array} of the arrays in ``group`` (at ``prefix``), at any depth."""
+        return {prefix + n: a for n, a in group.members(max_depth=None) if isinstance(a, zarr.Array)}
+
+    node = zarr.open(str(path), mode="r")
+    if name is not None:
+        if not isinstance(node, zarr.Group):
+            raise FileFormatError(f"{path} is one Zarr array, with no array /{name} inside; leave out ':/{name}'")
+        if name not in node:
+            pick_array(arrays(node), name, path)  # says which arrays there are
+        node = node[name]
+    where = f"{path}:/{name}" if name else str(path)
+    if isinstance(node, zarr.Group):
+        attrs = node.attrs.asdict()
+        ome = attrs.get("ome", attrs)  # NGFF 0.5 keeps its metadata under "ome"
+        if "multiscales" in ome:
+            return _read_ome_zarr(node, ome["multiscales"], where, level, chunks)
+        node = pick_array(arrays(node, f"{name}/" if name else ""), None, path)[1]
+    elif len(node.shape) not in (3, 4):
+        raise FileFormatError(f"{where} holds an array of shape {node.shape}; clwave reads a 3-D (z, y, x) or "
+                              "4-D (z, y, x, c) array")
+    if level is not None:
+        raise InputError(f"level= applies to OME-Zarr multiscale images, and {where} is a plain Zarr array; leave "
+                         "it out", cli=f"--level applies to OME-Zarr multiscale images, and {where} is a plain "
+                                        "Zarr array; leave it out")
+    return as_array(node, chunks), None, None
+
+
+def _read_ome_zarr(group, multiscales, where, level, chunks):
+    """Level ``level`` (default 0) of the first OME-Zarr (NGFF 0.4/0.5) multiscale image in ``group``: axes named
+    z, y, x, an optional c (channels, moved last) and t (length 1, dropped); spacing and origin from the scale
+    and translation of the level and of the whole image (NGFF puts voxel centres at integer indices, so the
+    translation is the first voxel's centre)."""
+    def bad(problem):
+        return FileFormatError(f"{where}: its OME-Zarr metadata {problem}")
+
+    image = multiscales[0] if isinstance(multiscales, list) and multiscales else None
+    if not isinstance(image, dict):
+        raise bad(f"holds multiscales {multiscales!r}, not a list of images")
+    axes = [a if isinstance(a, dict) else {"name": a} for a in image.get("axes") or []]
+    names = [str(a.get("name", "")).lower() for a in axes]
+    if not {"z", "y", "x"} <= set(names) <= set(_NGFF_ROLES) or len(set(names)) < len(names):
+        raise bad(f"names axes {names}; clwave reads axes z, y, x, with an optional c (channels) and t (time)")
+    datasets = image.get("datasets")
+    if not isinstance(datasets, list) or not datasets or not all(isinstance(d, dict) and "path" in d
+                                                                 for d in datasets):
+        raise bad(f"lists datasets {datasets!r}, not the levels' paths")
+    if level is None:
+        level = 0
+    if isinstance(level, (bool, np.bool_)) or not isinstance(level, (int, np.integer)) \
+            or not 0 <= level < len(datasets):
+        shapes = [tuple(group[d["path"]].shape) if d["path"] in group else "missing" for d in datasets]
+        levels = ", ".join(f"{i} {s}" for i, s in enumerate(shapes))
+        raise InputError(f"level={level!r} does not exist in the OME-Zarr image {where}; its levels: {levels}",
+                         cli=f"--level {level} does not exist in the OME-Zarr image {where}; its levels: {levels}")
+    path = datasets[level]["path"]
+    if path not in group:
+        raise bad(f"names array {path!r} for level {level}, which the store does not hold")
+    array = group[path]
+    if len(array.shape) != len(names):
+        raise bad(f"names {len(names)} axes {names}, but level {level} ({path}) has shape {array.shape}")
+    if "t" in names and array.shape[names.index("t")] != 1:
+        raise FileFormatError(f"{where} holds {array.shape[names.index('t')]} time points (axis t); clwave reads "
+                              "one volume: write one time point to a store of its own")
+
+    scale, translation = np.ones(len(names)), np.zeros(len(names))
+    for transforms in (datasets[level].get("coordinateTransformations") or [],
+                       image.get("coordinateTransformations") or []):  # the level's, then the image's
+        for transform in transforms:
+            kind = transform.get("type") if isinstance(transform, dict) else None
+            if kind == "identity":
+                continue
+            values = np.asarray(transform.get(kind) if kind in ("scale", "translation") else [], float)
+            if values.shape != (len(names),) or not np.all(np.isfinite(values)):
+                raise bad(f"has the coordinate transformation {transform!r}; clwave reads a scale and a "
+                          f"translation of {len(names)} finite numbers each, one per axis {names}")
+            if kind == "scale":
+                scale, translation = scale * values, translation * values
+            else:
+                translation = translation + values
+    zyx = [names.index(a) for a in "zyx"]
+    if np.any(scale[zyx] <= 0):
+        raise bad(f"scales the axes {names} by {scale.tolist()}; the z, y, x scale must be positive")
+    units = [axes[i].get("unit") for i in zyx]
+    if len(set(units)) > 1:  # convert to the x axis's unit
+        if not all(u in _METRES for u in units):
+            raise bad(f"gives the z, y, x axes the units {units}; clwave converts different units of length "
+                      f"only ({', '.join(_METRES)})")
+        factor = np.array([float(_METRES[u] / _METRES[units[2]]) for u in units])
+        scale[zyx], translation[zyx] = scale[zyx] * factor, translation[zyx] * factor
+
+    data = as_array(array, chunks, "".join(_NGFF_ROLES[n] for n in names))
+    data = data[tuple(0 if n == "t" else slice(None) for n in names)]
+    names = [n for n in names if n != "t"]
+    data = data.transpose([names.index(a) for a in "zyxc" if a in names])
+    shape = np.array(data.shape[:3])
+    spacing = tuple(float(d) for d in scale[zyx])
+    origin = translation[zyx] + scale[zyx] * (shape - 1) / 2  # the volume's centre, (z, y, x)
+    return data, spacing, tuple(float(o) for o in origin[::-1])
