@@ -30,7 +30,7 @@ log = logging.getLogger("clwave.view")
 STATIC = {"/": ("index.html", "text/html"), "/viewer.js": ("viewer.js", "text/javascript"),
           "/viewer.css": ("viewer.css", "text/css")}
 HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Content-Type-Options": "nosniff",
-           "Content-Security-Policy": "default-src 'self'; img-src 'self' blob:; connect-src 'self'; "
+           "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
                                       "object-src 'none'; base-uri 'none'; form-action 'none'"}
 
 

@@ -3,14 +3,14 @@
 (() => {
   const $ = (id) => document.getElementById(id);
   const token = new URLSearchParams(location.search).get("token") || "";
-  const img = $("image"), status = $("status");
+  const canvas = $("image"), ctx = canvas.getContext("2d"), status = $("status");
   const HOME = { azimuth: 30, elevation: 20, zoom: 1 };
   const state = { ...HOME, mode: "xray", detail: 1, window: null, moving: false, background: 0, shading: true };
   let sentSeq = 0, hello = null, current = null, pending = false, idleTimer = null;
-  // what the tests and tools/bench.py read: frames received, shown, dropped as superseded, times in ms
-  const stats = { received: 0, shown: 0, dropped: 0, stale: 0, opened: performance.now(), firstImage: null,
-                  lastShown: null, frames: [] };
-  window.clwave = { state, stats, send: () => request(), current: () => current };
+  // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
+  const stats = { received: 0, shown: 0, dropped: 0, opened: performance.now(), firstImage: null, frames: [] };
+  window.clwave = { state, stats, send: () => request(), current: () => current,
+                    latest: () => (pending ? -1 : sentSeq) };  // the view asked for last (-1: one is on its way)
 
   const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws?token=` +
                            encodeURIComponent(token));
@@ -34,31 +34,32 @@
     else if (msg.type === "error" && msg.seq === sentSeq) { status.textContent = msg.message; status.classList.add("error"); }
   }
 
+  let received = 0, drawn = 0;
   function onFrame(buffer) {
     stats.received += 1;
     const n = new DataView(buffer).getUint32(0);
     const fig = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, n)));
     if (fig.seq !== sentSeq) { stats.dropped += 1; return; }  // a frame of a view the user has left
-    const blob = new Blob([new Uint8Array(buffer, 4 + n)], { type: fig.mime });
-    const url = URL.createObjectURL(blob), old = img.src;
-    img.onload = () => {
-      if (old.startsWith("blob:")) URL.revokeObjectURL(old);
-      if (fig.seq !== sentSeq) stats.stale += 1;  // decoded after the view changed (it is replaced next)
+    const blob = new Blob([new Uint8Array(buffer, 4 + n)], { type: fig.mime }), k = ++received;
+    createImageBitmap(blob).then((bitmap) => {
+      // decoded off the main thread: by now the view may have moved on, or a later frame been drawn
+      if (fig.seq !== sentSeq || k < drawn) { stats.dropped += 1; bitmap.close(); return; }
+      drawn = k;
+      ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);  // a smaller frame (while dragging) scaled up
+      bitmap.close();
       const now = performance.now();
       if (stats.firstImage === null) stats.firstImage = now - stats.opened;
       stats.shown += 1;
-      stats.lastShown = now;
       stats.frames.push({ seq: fig.seq, final: fig.final, moving: state.moving, at: now });
       if (stats.frames.length > 500) stats.frames.shift();
-    };
-    img.src = url;
-    current = { fig, blob };
-    showFigures(fig);
+      current = { fig, blob };
+      showFigures(fig);
+    });
   }
 
   function setup() {
     const [h, w] = hello.size;
-    img.width = w; img.height = h;
+    canvas.width = w; canvas.height = h;
     const m = hello.model;
     $("model").textContent = `${m.shape.slice().reverse().join(" × ")} voxels, ${m.channels} channel(s), ` +
       `${m.wavelets.join(", ")}, ${m.coefficients.toLocaleString()} coefficients kept` +
@@ -76,12 +77,12 @@
 
   // ---------------------------------------------------------------- orbit, zoom, reset
   let drag = null;
-  img.addEventListener("pointerdown", (ev) => {
+  canvas.addEventListener("pointerdown", (ev) => {
     drag = { x: ev.clientX, y: ev.clientY };
-    img.setPointerCapture(ev.pointerId);
-    img.classList.add("dragging");
+    canvas.setPointerCapture(ev.pointerId);
+    canvas.classList.add("dragging");
   });
-  img.addEventListener("pointermove", (ev) => {
+  canvas.addEventListener("pointermove", (ev) => {
     if (!drag) return;
     const dx = ev.clientX - drag.x, dy = ev.clientY - drag.y;
     if (!dx && !dy) return;
@@ -95,13 +96,13 @@
   const release = () => {
     if (!drag) return;
     drag = null;
-    img.classList.remove("dragging");
+    canvas.classList.remove("dragging");
     state.moving = false;
     request();
   };
-  img.addEventListener("pointerup", release);
-  img.addEventListener("pointercancel", release);
-  img.addEventListener("wheel", (ev) => {
+  canvas.addEventListener("pointerup", release);
+  canvas.addEventListener("pointercancel", release);
+  canvas.addEventListener("wheel", (ev) => {
     ev.preventDefault();
     state.zoom = Math.max(0.1, Math.min(50, state.zoom * Math.exp(-0.0015 * ev.deltaY)));
     state.moving = true;
@@ -109,7 +110,7 @@
     clearTimeout(idleTimer);
     idleTimer = setTimeout(() => { state.moving = false; request(); }, 200);
   }, { passive: false });
-  img.addEventListener("dblclick", () => { Object.assign(state, HOME, { moving: false }); request(); });
+  canvas.addEventListener("dblclick", () => { Object.assign(state, HOME, { moving: false }); request(); });
 
   // ---------------------------------------------------------------- controls
   const syncMode = () => {
