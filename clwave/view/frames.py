@@ -20,10 +20,12 @@ from ..model.camera import Camera
 from ..splat.progressive import schedule
 from ..splat.renderer import SplatRenderer
 
+#: frames while dragging: this share of the image size (a view's footprints and framebuffers shrink with it)
+DRAG_SCALE = 0.5
 #: X-ray frames while dragging aim at this many seconds of splatting (the coefficient prefix adapts to it)
 DRAG_SECONDS = 0.06
-#: shaded frames while dragging: this share of the image size, and the tolerance times this
-DRAG_SCALE, DRAG_LOOSEN = 0.5, 10.0
+#: shaded frames while dragging and the first when still: the tolerance times this
+DRAG_LOOSEN = 10.0
 #: still X-ray views refine in this many frames at most, doubling the coefficients each time
 STILL_STEPS = 6
 #: the display window "auto" is taken from an image of every coefficient at this size (line integrals are in
@@ -96,8 +98,8 @@ class Source:
 
 class XraySource(Source):
     """X-ray frames by splatting prefixes of the ranked coefficients with one reused :class:`SplatRenderer`
-    (paper §5.2): a prefix sized to keep up while dragging, then doubling prefixes of one framebuffer up to
-    ``detail`` of the kept coefficients when still (docs/splatting.md §5)."""
+    (paper §5.2): a smaller image of a prefix sized to keep up while dragging, then doubling prefixes of one
+    framebuffer up to ``detail`` of the kept coefficients when still (docs/splatting.md §5)."""
 
     mode = "xray"
     capabilities = dict(detail=True, window=True)
@@ -121,7 +123,7 @@ class XraySource(Source):
         window = state.window or self.auto_window
         if state.moving:
             count = min(self.drag_count, limit)
-            image = self._image(self.camera(state), count)
+            image = self._image(self.camera(state, DRAG_SCALE), count)
             seconds = time.perf_counter() - start
             # the next drag frame's prefix: scaled towards DRAG_SECONDS, at most doubled or halved per frame
             self.drag_count = int(np.clip(count * np.clip(DRAG_SECONDS / max(seconds, 1e-4), 0.5, 2.0),

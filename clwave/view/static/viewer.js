@@ -8,7 +8,7 @@
   const state = { ...HOME, mode: "xray", detail: 1, window: null, moving: false, background: 0, shading: true };
   let sentSeq = 0, hello = null, current = null, pending = false, idleTimer = null;
   // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
-  const stats = { received: 0, shown: 0, dropped: 0, opened: performance.now(), firstImage: null, frames: [] };
+  const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, frames: [] };
   window.clwave = { state, stats, send: () => request(), current: () => current,
                     latest: () => (pending ? -1 : sentSeq) };  // the view asked for last (-1: one is on its way)
 
@@ -19,14 +19,21 @@
                          status.classList.add("error"); };
   ws.onmessage = (ev) => (typeof ev.data === "string" ? onText(JSON.parse(ev.data)) : onFrame(ev.data));
 
+  // While dragging, one view at a time is on its way: the next is sent when its frame arrives (or after a
+  // second), so every frame rendered is of the view asked for last and none is dropped; a still view is sent
+  // at once (the server abandons what it was refining).
+  let awaiting = 0, since = 0;
   function send() {
     pending = false;
     if (ws.readyState !== WebSocket.OPEN) return;
+    if (state.moving && awaiting && performance.now() - since < 1000) return;  // sent again when the frame comes
     sentSeq += 1;
+    awaiting = state.moving ? sentSeq : 0;
+    since = performance.now();
     ws.send(JSON.stringify({ type: "view", seq: sentSeq, ...state }));
   }
-  function request() {  // at most one message per animation frame (a hidden tab has none: a timer then)
-    if (!pending) { pending = true; if (document.hidden) setTimeout(send, 16); else requestAnimationFrame(send); }
+  function request() {  // at most one message per 16 ms: the latest state then
+    if (!pending) { pending = true; setTimeout(send, 16); }
   }
 
   function onText(msg) {
@@ -39,6 +46,7 @@
     stats.received += 1;
     const n = new DataView(buffer).getUint32(0);
     const fig = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, n)));
+    if (fig.seq === awaiting) { awaiting = 0; request(); }  // the next view of a drag may go
     if (fig.seq !== sentSeq) { stats.dropped += 1; return; }  // a frame of a view the user has left
     const blob = new Blob([new Uint8Array(buffer, 4 + n)], { type: fig.mime }), k = ++received;
     createImageBitmap(blob).then((bitmap) => {
@@ -48,9 +56,10 @@
       ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);  // a smaller frame (while dragging) scaled up
       bitmap.close();
       const now = performance.now();
-      if (stats.firstImage === null) stats.firstImage = now - stats.opened;
+      if (stats.firstImage === null) stats.firstImage = now;  // since the page's navigation started
       stats.shown += 1;
-      stats.frames.push({ seq: fig.seq, final: fig.final, moving: state.moving, at: now });
+      stats.frames.push({ seq: fig.seq, final: fig.final, moving: state.moving, at: now, seconds: fig.seconds,
+                          width: fig.width });
       if (stats.frames.length > 500) stats.frames.shift();
       current = { fig, blob };
       showFigures(fig);
@@ -96,6 +105,7 @@
   const release = () => {
     if (!drag) return;
     drag = null;
+    stats.released = performance.now();
     canvas.classList.remove("dragging");
     state.moving = false;
     request();
