@@ -17,6 +17,7 @@ from .io.result import RenderResult
 from .splat.renderer import SplatRenderer, splat
 from .splat.progressive import progressive
 from .raytrace.tracer import Phong, RayTracer, raytrace
+from .view import Viewer, view
 
 __version__ = "0.1.0"
 
@@ -25,4 +26,5 @@ __all__ = [
     "KernelBuildError", "OutputError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult",
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
+    "Viewer", "view",
 ]

@@ -213,3 +213,36 @@ def test_cli_view_refuses_bad_options_before_any_work(capsys):
     assert "--port 70000" in capsys.readouterr().err
     assert main(["view", "phantom:hydrogen:16", "--tolerance", "0"]) == 2
     assert "--tolerance" in capsys.readouterr().err
+
+
+def test_cli_view_serves_until_interrupted():
+    """``clwave view`` prints the address with its token once the model is ready; the page needs the token;
+    Ctrl-C stops it cleanly."""
+    import signal
+    import subprocess
+    import sys
+    import urllib.error
+    import urllib.request
+
+    with subprocess.Popen([sys.executable, "-m", "clwave", "view", "phantom:hydrogen:24", "--size", "32"],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        try:
+            lines = [proc.stdout.readline() for _ in range(2)]  # the model's line, then the address
+            assert lines[1].startswith("clwave view: open http://127.0.0.1:"), lines
+            url = lines[1].split()[-1]
+            assert urllib.request.urlopen(url, timeout=30).status == 200
+            with pytest.raises(urllib.error.HTTPError, match="403") as refused:
+                urllib.request.urlopen(url.split("?")[0], timeout=30)
+            refused.value.close()
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(timeout=30) == 0
+            assert "stopped" in proc.stderr.read()
+        finally:
+            proc.kill()
+
+
+def test_loopback_names():
+    from clwave.view.server import is_loopback
+
+    assert all(map(is_loopback, ("127.0.0.1", "localhost", "::1", "127.1.2.3")))
+    assert not any(map(is_loopback, ("0.0.0.0", "192.168.1.4", "::", "example.org")))

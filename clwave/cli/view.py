@@ -22,7 +22,10 @@ def run(args):
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
     wv, _ = build_model(args)
-    logging.basicConfig(level=logging.INFO, format="clwave view: %(message)s", stream=sys.stderr)
+    handler = logging.StreamHandler(sys.stderr)  # the server's refusals and closings; not other libraries' logs
+    handler.setFormatter(logging.Formatter("clwave view: %(message)s"))
+    logging.getLogger("clwave.view").addHandler(handler)
+    logging.getLogger("clwave.view").setLevel(logging.INFO)
     server = ViewServer(wv, size, tolerance=args.tolerance, device=args.device, host=args.host, port=args.port)
 
     async def serve():

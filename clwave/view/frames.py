@@ -17,7 +17,6 @@ import numpy as np
 
 from ..io.result import RenderResult, resolve_window
 from ..model.camera import Camera
-from ..splat.progressive import schedule
 from ..splat.renderer import SplatRenderer
 
 #: frames while dragging: this share of the image size (a view's footprints and framebuffers shrink with it)
@@ -26,8 +25,9 @@ DRAG_SCALE = 0.5
 DRAG_SECONDS = 0.06
 #: shaded frames while dragging and the first when still: the tolerance times this
 DRAG_LOOSEN = 10.0
-#: still X-ray views refine in this many frames at most, doubling the coefficients each time
-STILL_STEPS = 6
+#: still X-ray views refine from the drag prefix to the detail kept, the coefficients growing by at most this
+#: factor from frame to frame (fewer, larger steps reach the final frame sooner: each costs a read-back and a PNG)
+STILL_GROWTH = 4.0
 #: the display window "auto" is taken from an image of every coefficient at this size (line integrals are in
 #: world units, so the percentiles hardly depend on the image size)
 WINDOW_SIZE = 128
@@ -65,6 +65,17 @@ def encode(picture: np.ndarray, lossless: bool) -> tuple:
     if lossless:
         return iio.imwrite("<bytes>", picture, extension=".png", compress_level=1), "image/png"
     return iio.imwrite("<bytes>", picture, extension=".jpg", quality=85), "image/jpeg"
+
+
+def still_counts(first: int, limit: int) -> list:
+    """Coefficient counts of a still view's frames: ``first`` to ``limit`` in equal ratios of at most
+    :data:`STILL_GROWTH`.
+
+    >>> still_counts(1000, 64000)
+    [1000, 4000, 16000, 64000]
+    """
+    steps = int(np.ceil(np.log(limit / first) / np.log(STILL_GROWTH) - 1e-9)) if limit > first else 0
+    return [int(round(first * (limit / first) ** (i / steps))) for i in range(steps)] + [limit]
 
 
 class Source:
@@ -131,9 +142,8 @@ class XraySource(Source):
             yield self._xray_frame(state, image, count, window, False, seconds, start)
             return
         acc = r.begin(self.camera(state))
-        steps = max(1, min(STILL_STEPS, int(np.ceil(np.log2(max(limit / self.drag_count, 1)))) + 1))
         done = 0
-        for count in schedule(limit, steps):
+        for count in still_counts(min(self.drag_count, limit), limit):
             stage = time.perf_counter()
             acc.splat(done, count - done)
             done = count

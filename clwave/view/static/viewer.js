@@ -10,7 +10,7 @@
   // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
   const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, frames: [] };
   window.clwave = { state, stats, send: () => request(), current: () => current,
-                    latest: () => (pending ? -1 : sentSeq) };  // the view asked for last (-1: one is on its way)
+                    latest: () => (pending || held ? -1 : sentSeq) };  // the view asked for last (-1: one is on its way)
 
   const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws?token=` +
                            encodeURIComponent(token));
@@ -22,11 +22,12 @@
   // While dragging, one view at a time is on its way: the next is sent when its frame arrives (or after a
   // second), so every frame rendered is of the view asked for last and none is dropped; a still view is sent
   // at once (the server abandons what it was refining).
-  let awaiting = 0, since = 0;
+  let awaiting = 0, since = 0, held = false;
   function send() {
     pending = false;
     if (ws.readyState !== WebSocket.OPEN) return;
-    if (state.moving && awaiting && performance.now() - since < 1000) return;  // sent again when the frame comes
+    if (state.moving && awaiting && performance.now() - since < 1000) { held = true; return; }  // sent with the frame
+    held = false;
     sentSeq += 1;
     awaiting = state.moving ? sentSeq : 0;
     since = performance.now();
@@ -38,7 +39,10 @@
 
   function onText(msg) {
     if (msg.type === "hello") { hello = msg; setup(); request(); }
-    else if (msg.type === "error" && msg.seq === sentSeq) { status.textContent = msg.message; status.classList.add("error"); }
+    else if (msg.type === "error" && msg.seq === sentSeq) {
+      status.textContent = msg.message; status.classList.add("error");
+      if (awaiting) { awaiting = 0; if (held) send(); }
+    }
   }
 
   let received = 0, drawn = 0;
@@ -46,7 +50,7 @@
     stats.received += 1;
     const n = new DataView(buffer).getUint32(0);
     const fig = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, n)));
-    if (fig.seq === awaiting) { awaiting = 0; request(); }  // the next view of a drag may go
+    if (fig.seq === awaiting) { awaiting = 0; if (held) send(); }  // the next view of a drag goes at once
     if (fig.seq !== sentSeq) { stats.dropped += 1; return; }  // a frame of a view the user has left
     const blob = new Blob([new Uint8Array(buffer, 4 + n)], { type: fig.mime }), k = ++received;
     createImageBitmap(blob).then((bitmap) => {
