@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """The README's viewer pictures, taken from the real page in headless chromium (tools/browser.py):
 
-    python tools/viewer_media.py [--out docs/figures] [--n 128] [--size 320] [--steps 24]
+    python tools/viewer_media.py [--out docs/figures] [--n 128] [--size 256] [--steps 24]
 
 ``viewer_page.png``: a screenshot of the page (hydrogen, classified with its preset, X-ray);
 ``viewer_orbit.gif``: the image as the page shows it after each of ``--steps`` drags that orbit once around
-(each frame the refined one of its view).
+the Shepp-Logan phantom (X-ray; each frame the refined one of its view).
 """
 
 from __future__ import annotations
@@ -30,25 +30,27 @@ DEGREES_PER_PIXEL = 0.4
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("docs/figures"))
-    parser.add_argument("--n", type=int, default=128, help="hydrogen phantom voxels per axis")
-    parser.add_argument("--size", type=int, default=320, help="the viewer's image size")
+    parser.add_argument("--n", type=int, default=128, help="phantom voxels per axis")
+    parser.add_argument("--size", type=int, default=256, help="the viewer's image size")
     parser.add_argument("--steps", type=int, default=24, help="drags around the orbit (frames of the GIF)")
     args = parser.parse_args(argv)
     import imageio.v3 as iio
 
-    vol = clwave.phantom("hydrogen", n=args.n)
-    with view(vol, size=args.size, tf="hydrogen", keep=0.05) as viewer, \
-            browser.chromium(width=args.size + 340, height=max(args.size, 560) + 40) as driver:
+    frames = []
+    with view(clwave.phantom("shepp-logan", n=args.n), size=args.size, keep=0.05) as viewer, \
+            browser.chromium(width=args.size + 340, height=args.size + 300) as driver:
         browser.open_viewer(driver, viewer.url)
         browser.wait_final(driver)
         canvas = driver.find_element("id", "image")
-        frames = []
         step = 360.0 / args.steps / DEGREES_PER_PIXEL
         for _ in range(args.steps):
             browser.drag(driver, -step, 0, steps=3, pause=0.02, hold=False)
             browser.wait_final(driver)
             frames.append(iio.imread(io.BytesIO(canvas.screenshot_as_png))[..., :3])
-        browser.drag(driver, 0, 30, steps=3, pause=0.02, hold=False)  # a view from above for the page
+    with view(clwave.phantom("hydrogen", n=args.n), size=args.size, tf="hydrogen", keep=0.05) as viewer, \
+            browser.chromium(width=args.size + 340, height=1000) as driver:
+        browser.open_viewer(driver, viewer.url)
+        browser.drag(driver, 20, 40, steps=3, pause=0.02, hold=False)
         browser.wait_final(driver)
         page = driver.get_screenshot_as_png()
     args.out.mkdir(parents=True, exist_ok=True)

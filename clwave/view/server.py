@@ -139,7 +139,10 @@ class ViewServer:
 
     def hello(self) -> dict:
         wv, xray = self.wv, self.sources["xray"]
+        from ..model.transfer import TransferFunction
+
         return dict(type="hello", modes=list(self.sources), size=list(xray.size), window=list(xray.auto_window),
+                    presets=list(TransferFunction.PRESETS),
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()},
                     model=dict(shape=list(wv.shape), channels=wv.channels, coefficients=xray.r.count,
                                voxels=wv.n_voxels, levels=wv.levels,

@@ -80,6 +80,11 @@
     const shaded = hello.modes.includes("shaded");
     document.querySelector('input[value="shaded"]').disabled = !shaded;
     $("shaded-note").textContent = shaded ? "" : "shaded needs a classified (RGBA) model: give --tf PRESET";
+    $("tf-preset").replaceChildren(...hello.presets.map((name) => {
+      const option = document.createElement("option");
+      option.textContent = name; option.selected = name === m.transfer_function;
+      return option;
+    }));
     const tf = shaded && hello.capabilities.shaded.tf;
     $("tf").disabled = !tf;
     $("tf-note").textContent = tf ? "" : "transfer functions at render time are not in this build: the model " +
@@ -138,7 +143,7 @@
   const detailOf = (v) => Math.pow(10, -3 + 3 * v / 1000);
   function showDetail() {
     const d = detailOf(+$("detail").value);
-    $("detail-out").textContent = `${(100 * d).toPrecision(2)} %`;
+    $("detail-out").textContent = `${(100 * d).toFixed(d >= 0.1 ? 0 : d >= 0.01 ? 1 : 2)} %`;
     return d;
   }
   $("detail").addEventListener("input", () => { state.detail = showDetail(); request(); });
