@@ -204,6 +204,10 @@ def test_view_refuses_what_it_cannot_show():
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1)
     with pytest.raises(clwave.InputError, match="wavelet model already"):
         view(wv, tf="hydrogen")
+    with pytest.raises(clwave.InputError, match="tolerance=0 must be a positive"):
+        view(wv, tolerance=0)
+    with pytest.raises(clwave.InputError, match="image size"):
+        view(wv, size=0)
 
 
 def test_cli_view_refuses_bad_options_before_any_work(capsys):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import InputError, finite_number
+from ..errors import InputError
 from .options import add_input_options, add_model_options, build_model, numbers
 
 
@@ -13,12 +13,12 @@ def run(args):
     import logging
 
     from ..model.camera import Camera
+    from ..view.frames import check_tolerance
     from ..view.server import ViewServer, is_loopback
 
     size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
     size = Camera(size=size if len(size) == 2 else size[0]).size
-    if not finite_number(args.tolerance, "--tolerance") > 0:
-        raise InputError(f"--tolerance {args.tolerance:g} must be a positive error per value (e.g. 1e-2)")
+    check_tolerance(args.tolerance)
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
     wv, _ = build_model(args)

@@ -59,7 +59,8 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3):
     if tf is not None:
         tf = (TransferFunction.preset(tf) if isinstance(tf, str) else tf).resolved(vol)
         vol = tf.classify(vol)
-    return WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, transfer_function=tf).threshold(keep=keep)
+    wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, transfer_function=tf).threshold(keep=keep)
+    return wv.compute() if vol.chunked else wv  # a chunked volume's model, gathered
 
 
 def view(model_or_volume, *, size=512, tolerance=1e-2, keep=0.05, tf=None, device=None, host="127.0.0.1", port=0,
@@ -72,14 +73,17 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=0.05, tf=None, devic
     (0: a free one); every request needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
     """
     from ..model.camera import Camera
+    from .frames import check_tolerance
     from .server import BackgroundServer, ViewServer, is_loopback
 
+    size = Camera(size=size).size
+    check_tolerance(tolerance)
     wv = as_model(model_or_volume, keep=keep, tf=tf)
     if not is_loopback(host):
         import warnings
         warnings.warn(f"the viewer listens on {host}: anyone who can reach it and learns the address with its token "
                       f"can see this volume", stacklevel=2)
-    server = ViewServer(wv, Camera(size=size).size, tolerance=tolerance, device=device, host=host, port=port)
+    server = ViewServer(wv, size, tolerance=tolerance, device=device, host=host, port=port)
     viewer = Viewer(BackgroundServer(server))
     if open_browser:
         import webbrowser

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError, finite_number
 from ..io.result import RenderResult, resolve_window
 from ..model.camera import Camera
 from ..splat.renderer import SplatRenderer
@@ -65,6 +66,14 @@ def encode(picture: np.ndarray, lossless: bool) -> tuple:
     if lossless:
         return iio.imwrite("<bytes>", picture, extension=".png", compress_level=1), "image/png"
     return iio.imwrite("<bytes>", picture, extension=".jpg", quality=85), "image/jpeg"
+
+
+def check_tolerance(tolerance) -> float:
+    """The shaded mode's tolerance, a positive number (checked before any work)."""
+    if not finite_number(tolerance, "tolerance") > 0:
+        raise InputError(f"tolerance={tolerance!r} must be a positive error per value (e.g. 1e-2)",
+                         cli=f"--tolerance {tolerance:g} must be a positive error per value (e.g. 1e-2)")
+    return float(tolerance)
 
 
 def still_counts(first: int, limit: int) -> list:
@@ -172,7 +181,7 @@ class ShadedSource(Source):
 
     def __init__(self, wv, size, tolerance, device=None):
         super().__init__(wv, size)
-        self.tolerance, self.device, self._tracer = float(tolerance), device, None
+        self.tolerance, self.device, self._tracer = check_tolerance(tolerance), device, None
 
     @property
     def tracer(self):

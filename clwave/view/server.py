@@ -210,9 +210,13 @@ class Session:
                     self.sent += 1
             except ClwaveError as exc:  # e.g. an image too large for the device: the page shows the line
                 await self.ws.send_json(dict(type="error", seq=state.seq, message=str(exc)))
-            except (ConnectionResetError, RuntimeError) as exc:  # the socket went away mid-send
+            except ConnectionResetError as exc:  # the socket went away mid-send
                 log.info("%s: %s", self.name, exc)
                 return
+            except Exception as exc:  # a bug: logged in full, one line to the page, the tab goes on
+                log.exception("%s: rendering view %d failed", self.name, state.seq)
+                await self.ws.send_json(dict(type="error", seq=state.seq, message=f"internal error "
+                                             f"({type(exc).__name__}); this is a bug in clwave, see the server's log"))
             finally:
                 await asyncio.shield(loop.run_in_executor(pool, frames.close))
 
