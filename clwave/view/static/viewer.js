@@ -41,7 +41,7 @@
     if (msg.type === "hello") { hello = msg; setup(); request(); }
     else if (msg.type === "error" && msg.seq === sentSeq) {
       status.textContent = msg.message; status.classList.add("error");
-      if (awaiting) { awaiting = 0; if (held) send(); }
+      next(msg);
     }
   }
 
@@ -50,12 +50,11 @@
     stats.received += 1;
     const n = new DataView(buffer).getUint32(0);
     const fig = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, n)));
-    if (fig.seq === awaiting) { awaiting = 0; if (held) send(); }  // the next view of a drag goes at once
     if (fig.seq !== sentSeq) { stats.dropped += 1; return; }  // a frame of a view the user has left
     const blob = new Blob([new Uint8Array(buffer, 4 + n)], { type: fig.mime }), k = ++received;
     createImageBitmap(blob).then((bitmap) => {
       // decoded off the main thread: by now the view may have moved on, or a later frame been drawn
-      if (fig.seq !== sentSeq || k < drawn) { stats.dropped += 1; bitmap.close(); return; }
+      if (fig.seq !== sentSeq || k < drawn) { stats.dropped += 1; bitmap.close(); next(fig); return; }
       drawn = k;
       ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);  // a smaller frame (while dragging) scaled up
       bitmap.close();
@@ -67,7 +66,11 @@
       if (stats.frames.length > 500) stats.frames.shift();
       current = { fig, blob };
       showFigures(fig);
+      next(fig);
     });
+  }
+  function next(fig) {  // a drag's frame is drawn: its next view goes at once
+    if (fig.seq === awaiting) { awaiting = 0; if (held) send(); }
   }
 
   function setup() {
