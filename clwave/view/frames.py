@@ -118,7 +118,7 @@ class Source:
 
 class XraySource(Source):
     """X-ray frames by splatting prefixes of the ranked coefficients with one reused :class:`SplatRenderer`
-    (paper §5.2): a smaller image of a prefix sized to keep up while dragging, then doubling prefixes of one
+    (paper §5.2): a smaller image of a prefix sized to keep up while dragging, then growing prefixes of one
     framebuffer up to ``detail`` of the kept coefficients when still (docs/splatting.md §5)."""
 
     mode = "xray"
