@@ -20,6 +20,7 @@ from .raytrace.tracer import Phong, RayTracer, raytrace
 from .raytrace.lod import Detail
 from .model.chunked import ChunkedWaveletVolume
 from .io import clw as _clw  # noqa: F401  (WaveletVolume.save and .open: the model does not import its file format)
+from .view import Viewer, view
 
 __version__ = "0.1.0"
 
@@ -30,4 +31,5 @@ __all__ = [
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
     "Detail",
     "ChunkedWaveletVolume",
+    "Viewer", "view",
 ]

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|scale|all [--size 128 256]
+    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|scale|view|all [--size 128 256]
                           [--repeats 3] [--views 4] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
 
 Every benchmark runs once per ``--size`` (hydrogen phantom of that many voxels per axis, made
@@ -43,6 +43,11 @@ process, and its file splatted at 512² with 1 % read as a prefix and a reused r
 also ray traced (whole file, shaded, tolerance 1e-2, ``--raytrace-image``) within the first
 ``--device-memory`` cap (default 2GiB): set-up, render, bricks, passes, segments per lattice.  Each
 step runs in a process of its own, which reports its peak resident memory.
+
+``view`` (not in ``all``; needs chromium, tools/browser.py): ``clwave view`` of hydrogen scalar, cubic, 5 %, at
+``--view-image`` (512²) in headless chromium, ``--views`` drags after a warm-up: the first image after the page
+loads (model ready), frames per second while dragging (and each drag frame's render time and width), and the
+time from releasing to the final frame, beside a one-shot ``clwave.splat`` of the same image in the same run.
 
 A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) and an
 entry in ``BENCHMARKS``.
@@ -492,7 +497,7 @@ def scale_step(spec) -> dict:
 
 
 def bench_post(args) -> dict:
-    """Post-classification (docs/raytracing.md §8) against pre-classification of the same phantom: hydrogen
+    """Post-classification (docs/raytracing.md §10) against pre-classification of the same phantom: hydrogen
     (preset), cubic, 3 levels, 5 %, shaded, at ``--raytrace-image`` for tolerances 1e-2 and 1e-3, renders
     interleaved (post, pre, post, pre, ...) over ``--raytrace-views`` views; a change of transfer function or
     window (the table and the classified bounds: meta ``classify_seconds``); the brick pools; the error against a
@@ -567,9 +572,60 @@ def post_errors(tracer, wv, tf, args) -> dict:
     return out
 
 
+def bench_view(args) -> dict:
+    """``clwave view`` in headless chromium (tools/browser.py): hydrogen scalar, cubic, 3 levels, 5 % kept, X-ray
+    at ``--view-image``: the first image after the page loads (the model ready, the server started), frames per
+    second while dragging, and the time from releasing to the final (every kept coefficient) frame."""
+    import browser
+    from clwave.view import view
+
+    wv = WaveletVolume.from_volume(phantom("hydrogen", n=args.size), wavelet="cubic", levels=3).threshold(keep=0.05)
+    size = args.view_image
+    start = time.perf_counter()
+    first, fps, refine, drag_frame, drag_width = [], [], [], [], []
+    with view(wv, size=size, device=args.device) as viewer, browser.chromium() as driver:
+        server_seconds = time.perf_counter() - start
+        for run in range(args.views + 1):  # run 0 is the warm-up (the browser's first page)
+            first_image = browser.open_viewer(driver, viewer.url)
+            browser.wait_final(driver)
+            shown = browser.shown(driver)
+            t0 = time.perf_counter()
+            browser.drag(driver, 240, 60, steps=60, pause=0.05)  # ~3 s of dragging, 20 moves a second
+            dragged = time.perf_counter() - t0
+            frames = driver.execute_script("return window.clwave.stats.frames")[-(browser.shown(driver) - shown):]
+            browser.release(driver)
+            browser.wait_final(driver)
+            stats = driver.execute_script("return window.clwave.stats")
+            if run:
+                moving = [f for f in frames if f["moving"]]
+                first.append(first_image)
+                fps.append(len(moving) / dragged)
+                refine.append((stats["frames"][-1]["at"] - stats["released"]) / 1000.0)
+                drag_frame += [f["seconds"] for f in moving]
+                drag_width += [f["width"] for f in moving]
+        # the same final image in one call, in the same period: refinement's overhead as a ratio the load
+        # changes less than the times
+        one_shot = []
+        for run, (azimuth, elevation) in enumerate(views(args.views + 1)):
+            t0 = time.perf_counter()
+            clwave.splat(wv, clwave.Camera(azimuth, elevation, size))
+            if run:
+                one_shot.append(time.perf_counter() - t0)
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3", channels=1, wavelet="cubic", levels=3, keep=0.05,
+                             image=f"{size}^2", mode="xray", browser="headless chromium (Selenium)",
+                             drag="60 moves over 240 x 60 pixels, 50 ms apart"),
+                coefficients=viewer.server.sources["xray"].r.count, server_start_seconds=server_seconds,
+                first_image_seconds=summary(first), drag_frames_per_second=summary(fps),
+                drag_frame_render_seconds=summary(drag_frame), drag_frame_width=summary(drag_width),
+                refine_seconds=summary(refine), one_shot_splat_seconds=summary(one_shot),
+                refine_over_one_shot=statistics.median(refine) / statistics.median(one_shot),
+                peak_resident_gib=peak_resident_gib(),
+                target=dict(first_image_seconds=0.3, drag_frames_per_second=10, refine_seconds=1.0))
+
+
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "post": bench_post,
-              "scale": bench_scale}
+              "scale": bench_scale, "view": bench_view}
 
 
 def main(argv=None):
@@ -601,10 +657,11 @@ def main(argv=None):
     parser.add_argument("--scale-tf", action="store_true", help="scale: classify to RGBA (hydrogen preset) first")
     parser.add_argument("--scratch", type=Path, default=Path("/tmp/clwave-bench"),
                         help="scale: folder of the Zarr stores and models (kept between runs)")
+    parser.add_argument("--view-image", type=int, default=512, help="view: the viewer's image size")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
-    names = [n for n in BENCHMARKS if n != "scale"] if args.benchmark == "all" else [args.benchmark]
+    names = [n for n in BENCHMARKS if n not in ("scale", "view")] if args.benchmark == "all" else [args.benchmark]
     results = {}
     for name in names:
         shaped = name == "scale" and args.scale_shape is not None  # one volume of that shape, not --size

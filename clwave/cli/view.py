@@ -1,0 +1,71 @@
+"""``clwave view``: a progressive viewer in the browser (docs/viewer.md)."""
+
+from __future__ import annotations
+
+import sys
+
+from ..errors import InputError
+from .options import add_input_options, add_model_options, build_model, numbers
+
+
+def run(args):
+    import asyncio
+    import logging
+
+    from ..model.camera import Camera
+    from ..view.frames import check_tolerance
+    from ..view.server import ViewServer, is_loopback
+
+    size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
+    size = Camera(size=size if len(size) == 2 else size[0]).size
+    check_tolerance(args.tolerance)
+    if not 0 <= args.port <= 65535:
+        raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
+    wv, _ = build_model(args)
+    handler = logging.StreamHandler(sys.stderr)  # the server's refusals and closings; not other libraries' logs
+    handler.setFormatter(logging.Formatter("clwave view: %(message)s"))
+    logging.getLogger("clwave.view").addHandler(handler)
+    logging.getLogger("clwave.view").setLevel(logging.INFO)
+    server = ViewServer(wv, size, tolerance=args.tolerance, device=args.device, host=args.host, port=args.port)
+
+    async def serve():
+        try:
+            url = await server.start()
+        except OSError as exc:
+            raise InputError(f"cannot listen on {args.host}:{args.port} ({exc.strerror or exc}); choose another "
+                             f"--port, or leave it out for a free one") from None
+        if not is_loopback(args.host):
+            print(f"clwave view: warning: listening on {args.host}, not only on this machine: anyone who can reach "
+                  f"it and learns the address with its token can see this volume", file=sys.stderr)
+        print(f"clwave view: open {url}", flush=True)
+        print("clwave view: Ctrl-C stops the server", file=sys.stderr, flush=True)
+        if args.open:
+            import webbrowser
+            if not webbrowser.open(url):
+                print("clwave view: no browser found here; open the address above", file=sys.stderr)
+        try:
+            await asyncio.Event().wait()  # until interrupted
+        finally:
+            await server.stop()
+
+    try:
+        asyncio.run(serve())
+    except KeyboardInterrupt:
+        print("clwave view: stopped", file=sys.stderr)
+    return 0
+
+
+def add_parser(sub):
+    p = sub.add_parser("view", help="a progressive viewer in the browser (X-ray, and shaded for an RGBA model)")
+    add_input_options(p)
+    add_model_options(p)
+    g = p.add_argument_group("viewer")
+    g.add_argument("--size", default="512", help="image size: N or HxW (default 512)")
+    g.add_argument("--tolerance", type=float, default=1e-2, help="shaded: error per value when still (default 1e-2)")
+    g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
+    g.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1, this machine "
+                                                        "only; another one is reachable by others: a warning)")
+    g.add_argument("--port", type=int, default=0, help="port (default: a free one)")
+    g.add_argument("--open", action="store_true", help="open the address in a browser, where one exists")
+    p.set_defaults(run=run)
+    return p

@@ -1,0 +1,91 @@
+"""A progressive viewer in the browser (docs/viewer.md): ``clwave.view(...)`` and ``clwave view INPUT``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+
+
+class Viewer:
+    """A running viewer: open :attr:`url` in a browser (it holds the token); in a Jupyter notebook the object
+    shows the page inline.  :meth:`close` stops the server."""
+
+    def __init__(self, background):
+        self._background = background
+        self.server = background.server
+
+    @property
+    def url(self) -> str:
+        return self.server.url
+
+    def close(self):
+        self._background.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __repr__(self):
+        return f"<clwave viewer at {self.url}>"
+
+    def _repr_html_(self):
+        import html
+
+        h, w = self.server.sources["xray"].size
+        return (f'<iframe src="{html.escape(self.url)}" width="{w + 300}" height="{max(h, 400) + 60}" '
+                f'style="border: 0"></iframe>')
+
+
+def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3):
+    """A thresholded :class:`~clwave.WaveletVolume` from a model (as it is), a :class:`~clwave.Volume` or an
+    array ``(z, y, x[, c])`` (classified with ``tf``, a preset name or a TransferFunction, first)."""
+    from ..model.transfer import TransferFunction
+    from ..model.volume import Volume
+    from ..model.wavelet import WaveletVolume
+
+    if isinstance(model_or_volume, WaveletVolume):
+        if tf is not None:
+            raise InputError("tf= classifies a volume before its transform; this is a wavelet model already")
+        return model_or_volume
+    if isinstance(model_or_volume, np.ndarray):
+        model_or_volume = Volume(model_or_volume)
+    if not isinstance(model_or_volume, Volume):
+        raise InputError(f"view() takes a clwave.WaveletVolume, a clwave.Volume or an array, not "
+                         f"{type(model_or_volume).__name__}")
+    vol = model_or_volume
+    if tf is not None:
+        tf = (TransferFunction.preset(tf) if isinstance(tf, str) else tf).resolved(vol)
+        vol = tf.classify(vol)
+    wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, transfer_function=tf).threshold(keep=keep)
+    return wv.compute() if vol.chunked else wv  # a chunked volume's model, gathered
+
+
+def view(model_or_volume, *, size=512, tolerance=1e-2, keep=0.05, tf=None, device=None, host="127.0.0.1", port=0,
+         open_browser=False) -> Viewer:
+    """Serve a progressive view of a model or volume in the browser; returns a :class:`Viewer`.
+
+    ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (shaded
+    needs an RGBA model: a classified one, or ``tf=`` for a volume).  A volume is decomposed with cubic
+    wavelets and ``keep`` of its voxels kept.  The server binds ``host`` (loopback unless given) at ``port``
+    (0: a free one); every request needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
+    """
+    from ..model.camera import Camera
+    from .frames import check_tolerance
+    from .server import BackgroundServer, ViewServer, is_loopback
+
+    size = Camera(size=size).size
+    check_tolerance(tolerance)
+    wv = as_model(model_or_volume, keep=keep, tf=tf)
+    if not is_loopback(host):
+        import warnings
+        warnings.warn(f"the viewer listens on {host}: anyone who can reach it and learns the address with its token "
+                      f"can see this volume", stacklevel=2)
+    server = ViewServer(wv, size, tolerance=tolerance, device=device, host=host, port=port)
+    viewer = Viewer(BackgroundServer(server))
+    if open_browser:
+        import webbrowser
+        webbrowser.open(viewer.url)
+    return viewer

@@ -1,0 +1,112 @@
+"""The viewer's WebSocket messages (docs/viewer.md §3): what a page may send, checked field by field.
+
+A page sends only JSON text messages ``{"type": "view", ...}`` holding the whole state of its view; the
+server answers with one JSON text ``hello`` and then binary frames: a 4-byte big-endian length, that many
+bytes of JSON figures, then the encoded picture.  Nothing a page sends names a file or a command: a message
+is a view or it is refused, and a refused message closes its connection (:class:`Refused`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import time
+
+from .frames import ViewState
+
+#: the largest message a page may send (a view is about 250 bytes)
+MAX_MESSAGE = 4096
+#: messages per second a page may send on average, and in a burst (the page sends at most one per
+#: animation frame, 60 a second)
+RATE, BURST = 120.0, 240
+MODES = ("xray", "shaded")
+ZOOM = (0.1, 50.0)
+#: close codes (RFC 6455 §7.4.1): policy violation, message too big
+POLICY, TOO_BIG = 1008, 1009
+
+
+class Refused(Exception):
+    """A message that closes its connection; ``str()`` is the logged reason, ``code`` the close code."""
+
+    def __init__(self, reason, code=POLICY):
+        super().__init__(reason)
+        self.code = code
+
+
+def _number(msg, name, lo, hi) -> float:
+    value = msg.get(name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not lo <= value <= hi:
+        raise Refused(f"{name}={value!r} must be a number from {lo:g} to {hi:g}")
+    return float(value)
+
+
+def _flag(msg, name) -> bool:
+    value = msg.get(name)
+    if not isinstance(value, bool):
+        raise Refused(f"{name}={value!r} must be true or false")
+    return value
+
+
+FIELDS = {"type", "seq", "azimuth", "elevation", "zoom", "mode", "detail", "window", "moving", "background",
+          "shading"}
+
+
+def parse_view(text: str, last_seq: int, modes) -> ViewState:
+    """The :class:`ViewState` of a page's message, or :class:`Refused` naming what is wrong with it."""
+    if len(text) > MAX_MESSAGE:
+        raise Refused(f"a message of {len(text)} characters is more than {MAX_MESSAGE}", TOO_BIG)
+    try:
+        msg = json.loads(text)
+    except ValueError:
+        raise Refused("a message that is not JSON") from None
+    if not isinstance(msg, dict) or msg.get("type") != "view":
+        raise Refused("a message that is not {\"type\": \"view\", ...}")
+    unknown = sorted(set(msg) - FIELDS)
+    if unknown:
+        raise Refused(f"unknown field(s) {', '.join(map(repr, unknown[:5]))}")
+    seq = msg.get("seq")
+    if isinstance(seq, bool) or not isinstance(seq, int) or not last_seq < seq < 2 ** 53:
+        raise Refused(f"seq={seq!r} must be a whole number above the last one ({last_seq})")
+    if msg.get("mode") not in modes:
+        raise Refused(f"mode={msg.get('mode')!r} must be one of {', '.join(modes)}")
+    window = msg.get("window")
+    if window is not None:
+        if not isinstance(window, list) or len(window) != 2:
+            raise Refused(f"window={window!r} must be null (auto) or [lo, hi]")
+        window = (_number({"lo": window[0]}, "lo", -1e30, 1e30), _number({"hi": window[1]}, "hi", -1e30, 1e30))
+        if not window[0] < window[1]:
+            raise Refused(f"window {list(window)} must have lo < hi")
+    return ViewState(seq=seq, azimuth=_number(msg, "azimuth", -1e6, 1e6), elevation=_number(msg, "elevation", -90, 90),
+                     zoom=_number(msg, "zoom", *ZOOM), mode=msg["mode"], detail=_number(msg, "detail", 1e-6, 1.0),
+                     window=window, moving=_flag(msg, "moving"), background=_number(msg, "background", 0.0, 1.0),
+                     shading=_flag(msg, "shading"))
+
+
+class RateLimit:
+    """A token bucket: :data:`RATE` messages a second on average, :data:`BURST` at once."""
+
+    def __init__(self, rate=RATE, burst=BURST, clock=time.monotonic):
+        self.rate, self.burst, self.clock = rate, burst, clock
+        self.tokens, self.when = float(burst), clock()
+
+    def take(self):
+        now = self.clock()
+        self.tokens = min(self.burst, self.tokens + (now - self.when) * self.rate)
+        self.when = now
+        if self.tokens < 1.0:
+            raise Refused(f"more than {self.rate:g} messages a second (a burst of {self.burst})")
+        self.tokens -= 1.0
+
+
+def pack_frame(figures: dict, data: bytes, mime: str) -> bytes:
+    """A binary frame message: the figures (with the picture's type) as JSON, then the picture."""
+    head = json.dumps(dict(figures, mime=mime), separators=(",", ":")).encode()
+    return struct.pack(">I", len(head)) + head + data
+
+
+def unpack_frame(message: bytes) -> tuple:
+    """``(figures, picture bytes)`` of a frame message (tests and tools; the page does this in JavaScript)."""
+    (n,) = struct.unpack(">I", message[:4])
+    return json.loads(message[4: 4 + n]), message[4 + n:]

@@ -1,0 +1,253 @@
+"""The viewer's web server (docs/viewer.md §1): aiohttp, one page, one WebSocket per tab.
+
+Every request and socket needs the random token of the printed address (403 without); the routes are a
+fixed set, so a page can never name a file or run anything.  Each tab's socket holds its own view; frames
+are rendered one stage at a time on a single render thread (OpenCL work is serialised and tabs take turns),
+and a tab's work for a view it has left is dropped between stages and never sent.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import itertools
+import logging
+import secrets
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from importlib import resources
+from urllib.parse import urlsplit
+
+from aiohttp import WSMsgType, web
+
+from ..errors import ClwaveError
+from .frames import ShadedSource, ViewState, XraySource
+from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, pack_frame, parse_view
+
+log = logging.getLogger("clwave.view")
+
+#: the page's files, the only ones served (read once from the package)
+STATIC = {"/": ("index.html", "text/html"), "/viewer.js": ("viewer.js", "text/javascript"),
+          "/viewer.css": ("viewer.css", "text/css")}
+HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Content-Type-Options": "nosniff",
+           "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
+                                      "object-src 'none'; base-uri 'none'; form-action 'none'"}
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+class ViewServer:
+    """Serves views of one wavelet model: the X-ray source always, the shaded one for an RGBA model.
+
+    ``size`` (H, W) is the full image; ``tolerance`` the shaded frames' when still.  :meth:`start` binds
+    ``host:port`` (port 0: a free one) inside a running event loop; :attr:`url` is the address with the token.
+    """
+
+    def __init__(self, wv, size=(512, 512), tolerance=1e-2, device=None, host="127.0.0.1", port=0):
+        self.wv, self.host, self.port = wv, host, int(port)
+        self.token = secrets.token_urlsafe(24)
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render")
+        self.sessions = {}  # id -> Session, the open sockets
+        self._ids = itertools.count(1)
+        self._runner = None
+        self.sources = self.pool.submit(self._prepare, wv, size, tolerance, device).result()
+        self.pages = {path: (resources.files(__package__).joinpath("static", name).read_text(), mime)
+                      for path, (name, mime) in STATIC.items()}
+
+    def _prepare(self, wv, size, tolerance, device) -> dict:
+        """The sources, made on the render thread, with one frame of each kind drawn (kernels built, warm)."""
+        from ..splat.renderer import SplatRenderer
+
+        xray = XraySource(wv, size, SplatRenderer(wv, device=device))
+        for moving in (True, False):
+            for _ in xray.frames(self.initial_view(xray, moving)):
+                pass
+        sources = dict(xray=xray)
+        if wv.channels == 4:
+            sources["shaded"] = ShadedSource(wv, size, tolerance, device=device)
+        return sources
+
+    @staticmethod
+    def initial_view(source, moving=False) -> ViewState:
+        return ViewState(seq=0, azimuth=30.0, elevation=20.0, zoom=1.0, mode=source.mode, detail=1.0, window=None,
+                         moving=moving, background=0.0, shading=True)
+
+    # ------------------------------------------------------------------ HTTP
+    @web.middleware
+    async def _token(self, request, handler):
+        given = request.query.get("token", "")
+        if not secrets.compare_digest(given.encode(), self.token.encode()):
+            log.warning("refused %s %s from %s: no valid token", request.method, request.path, request.remote)
+            raise web.HTTPForbidden(text="403: open the address clwave printed, with its ?token=...\n")
+        response = await handler(request)
+        response.headers.update(HEADERS)
+        return response
+
+    async def _page(self, request):
+        text, mime = self.pages[request.path]
+        return web.Response(text=text.replace("{{token}}", self.token), content_type=mime)
+
+    def app(self) -> web.Application:
+        app = web.Application(middlewares=[self._token], client_max_size=MAX_MESSAGE)
+        app.router.add_get("/ws", self._socket)
+        for path in STATIC:
+            app.router.add_get(path, self._page)
+        return app
+
+    async def start(self):
+        self._runner = web.AppRunner(self.app(), access_log=None, handle_signals=False)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.host, self.port)
+        await site.start()
+        self.port = self._runner.addresses[0][1]
+        return self.url
+
+    async def stop(self):
+        for session in list(self.sessions.values()):
+            await session.ws.close()
+        if self._runner is not None:
+            await self._runner.cleanup()
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/?token={self.token}"
+
+    # ------------------------------------------------------------------ sockets
+    async def _socket(self, request):
+        origin = request.headers.get("Origin")
+        if origin and urlsplit(origin).netloc != request.host:  # another site's page, even with the token
+            log.warning("refused a socket from %s: origin %s is not this server", request.remote, origin)
+            raise web.HTTPForbidden(text="403: another origin\n")
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=30.0)
+        await ws.prepare(request)
+        session = Session(self, ws, f"tab {next(self._ids)} ({request.remote})")
+        self.sessions[id(session)] = session
+        try:
+            await session.run()
+        finally:
+            del self.sessions[id(session)]
+        return ws
+
+    def hello(self) -> dict:
+        wv, xray = self.wv, self.sources["xray"]
+        from ..model.transfer import TransferFunction
+
+        return dict(type="hello", modes=list(self.sources), size=list(xray.size), window=list(xray.auto_window),
+                    presets=list(TransferFunction.PRESETS),
+                    capabilities={mode: s.capabilities for mode, s in self.sources.items()},
+                    model=dict(shape=list(wv.shape), channels=wv.channels, coefficients=xray.r.count,
+                               voxels=wv.n_voxels, levels=wv.levels,
+                               wavelets=sorted({g.wavelet.name for g in wv.groups}),
+                               transfer_function=(wv.transfer_function or {}).get("name")))
+
+
+class Session:
+    """One tab: its latest view, and the loop that renders it stage by stage while it stays the latest."""
+
+    def __init__(self, server: ViewServer, ws, name: str):
+        self.server, self.ws, self.name = server, ws, name
+        self.state, self.seq, self.limit = None, -1, RateLimit()
+        self.wake = asyncio.Event()
+        self.sent = self.dropped = 0
+
+    async def run(self):
+        ws, modes = self.ws, tuple(self.server.sources)
+        await ws.send_json(self.server.hello())
+        renderer = asyncio.create_task(self._render())
+        try:
+            async for msg in ws:
+                if msg.type == WSMsgType.TEXT:
+                    try:
+                        self.limit.take()
+                        self.state = parse_view(msg.data, self.seq, modes)
+                    except Refused as refused:
+                        await self._close(refused)
+                        break
+                    self.seq = self.state.seq
+                    self.wake.set()
+                elif msg.type == WSMsgType.BINARY:
+                    await self._close(Refused("a binary message (a page sends JSON text only)"))
+                    break
+                elif msg.type == WSMsgType.ERROR:
+                    exc = ws.exception()
+                    code = getattr(exc, "code", None)
+                    log.warning("closed %s: %s", self.name, "a message over the size limit" if code == TOO_BIG
+                                else exc)
+                    break
+        finally:
+            self.state = None
+            renderer.cancel()
+
+    async def _close(self, refused: Refused):
+        log.warning("closed %s: %s", self.name, refused)
+        await self.ws.close(code=refused.code, message=str(refused).encode()[:120])
+
+    async def _render(self):
+        loop, pool = asyncio.get_running_loop(), self.server.pool
+        while True:
+            await self.wake.wait()
+            self.wake.clear()
+            state = self.state
+            frames = self.server.sources[state.mode].frames(state)
+            try:
+                while self.state is state:
+                    frame = await loop.run_in_executor(pool, next, frames, None)
+                    if frame is None:
+                        break
+                    if self.state is not state:  # the tab has moved on while this stage rendered
+                        self.dropped += 1
+                        break
+                    await self.ws.send_bytes(pack_frame(frame.figures, frame.data, frame.mime))
+                    self.sent += 1
+            except ClwaveError as exc:  # e.g. an image too large for the device: the page shows the line
+                await self.ws.send_json(dict(type="error", seq=state.seq, message=str(exc)))
+            except ConnectionResetError as exc:  # the socket went away mid-send
+                log.info("%s: %s", self.name, exc)
+                return
+            except Exception as exc:  # a bug: logged in full, one line to the page, the tab goes on
+                log.exception("%s: rendering view %d failed", self.name, state.seq)
+                await self.ws.send_json(dict(type="error", seq=state.seq, message=f"internal error "
+                                             f"({type(exc).__name__}); this is a bug in clwave, see the server's log"))
+            finally:
+                await asyncio.shield(loop.run_in_executor(pool, frames.close))
+
+
+class BackgroundServer:
+    """A :class:`ViewServer` on an event loop of its own thread (for scripts and notebooks)."""
+
+    def __init__(self, server: ViewServer):
+        self.server = server
+        self.loop = asyncio.new_event_loop()
+        started = threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(started,), name="clwave-view-server", daemon=True)
+        self.thread.start()
+        started.wait()
+        if self._error is not None:
+            raise self._error
+
+    def _run(self, started):
+        asyncio.set_event_loop(self.loop)
+        self._error = None
+        try:
+            self.loop.run_until_complete(self.server.start())
+        except OSError as exc:
+            self._error = exc
+            started.set()
+            return
+        started.set()
+        self.loop.run_forever()
+
+    def close(self):
+        if self.thread.is_alive():
+            asyncio.run_coroutine_threadsafe(self.server.stop(), self.loop).result(timeout=10)
+            self.loop.call_soon_threadsafe(self.loop.stop)
+            self.thread.join(timeout=10)

@@ -1,0 +1,252 @@
+"""The viewer's server without a browser (docs/viewer.md): tokens, hostile messages, superseded frames, the
+frames themselves against the one-shot renderers.  The page in a real browser: tests/test_view_browser.py."""
+
+import asyncio
+import io
+import json
+
+import aiohttp
+import numpy as np
+import pytest
+
+import clwave
+from clwave.view import view
+from clwave.view.protocol import BURST, MAX_MESSAGE, RateLimit, Refused, parse_view, unpack_frame
+
+BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
+            background=0.0, shading=True)
+
+
+@pytest.fixture(scope="module")
+def viewer():
+    with view(clwave.phantom("hydrogen", n=40), size=(48, 64), keep=0.2) as v:
+        yield v
+
+
+def socket_url(v):
+    return v.url.replace("/?", "/ws?")
+
+
+def run(coroutine):
+    return asyncio.run(coroutine)
+
+
+async def frames_until_final(ws, seq):
+    """The frames of view ``seq`` up to its final one (others are dropped as a page drops them)."""
+    out = []
+    while True:
+        msg = await ws.receive(timeout=60)
+        assert msg.type == aiohttp.WSMsgType.BINARY, msg
+        figures, data = unpack_frame(msg.data)
+        if figures["seq"] == seq:
+            out.append((figures, data))
+            if figures["final"]:
+                return out
+
+
+def decode(data):
+    import imageio.v3 as iio
+    return iio.imread(io.BytesIO(data))
+
+
+# ---------------------------------------------------------------------------- messages
+def test_parse_view_takes_a_whole_view():
+    state = parse_view(json.dumps(dict(BASE, seq=3, window=[0, 2.5])), 2, ("xray",))
+    assert (state.seq, state.azimuth, state.window, state.moving) == (3, 30.0, (0.0, 2.5), False)
+
+
+@pytest.mark.parametrize("change, words", [
+    (dict(seq=2), "above the last"), (dict(seq=True), "whole number"), (dict(azimuth="30"), "azimuth"),
+    (dict(elevation=91), "elevation"), (dict(zoom=float("nan")), "zoom"), (dict(mode="shaded"), "mode"),
+    (dict(detail=0), "detail"), (dict(window=[2, 1]), "lo < hi"), (dict(window="auto"), "window"),
+    (dict(moving=1), "moving"), (dict(path="/etc/passwd"), "unknown field"), (dict(type="run"), "type"),
+])
+def test_parse_view_refuses_what_is_not_a_view(change, words):
+    with pytest.raises(Refused, match=words):
+        parse_view(json.dumps({**BASE, "seq": 3, **change}), 2, ("xray",))
+    with pytest.raises(Refused, match="not JSON"):
+        parse_view("{", 2, ("xray",))
+    with pytest.raises(Refused, match="more than") as exc:
+        parse_view(" " * (MAX_MESSAGE + 1), 2, ("xray",))
+    assert exc.value.code == 1009
+
+
+def test_rate_limit_allows_a_burst_then_the_rate():
+    now = [0.0]
+    limit = RateLimit(rate=10.0, burst=5, clock=lambda: now[0])
+    for _ in range(5):
+        limit.take()
+    with pytest.raises(Refused, match="messages a second"):
+        limit.take()
+    now[0] += 0.1  # one more token
+    limit.take()
+
+
+# ---------------------------------------------------------------------------- the server
+def test_every_route_needs_the_token(viewer):
+    async def go():
+        async with aiohttp.ClientSession() as s:
+            for path in ("/", "/viewer.js", "/viewer.css", "/ws"):
+                for query in ("", "?token=wrong", "?token=" + viewer.server.token[:-1]):
+                    r = await s.get(viewer.url.split("/?")[0] + path + query)
+                    assert r.status == 403, (path, query)
+            page = await s.get(viewer.url)
+            assert page.status == 200 and "text/html" in page.headers["Content-Type"]
+            assert f"viewer.js?token={viewer.server.token}" in await page.text()
+            assert "default-src 'self'" in page.headers["Content-Security-Policy"]
+            missing = await s.get(viewer.url.replace("/?", "/../clwave/__init__.py?"))
+            assert missing.status in (403, 404)
+            other = await s.ws_connect(socket_url(viewer), headers={"Origin": "http://evil.example"})
+            assert False, other  # pragma: no cover
+    with pytest.raises(aiohttp.WSServerHandshakeError) as exc:
+        run(go())
+    assert exc.value.status == 403
+
+
+def test_binds_loopback_only_by_default(viewer):
+    assert viewer.server.host == "127.0.0.1" and viewer.url.startswith("http://127.0.0.1:")
+
+
+@pytest.mark.parametrize("hostile", ["not json", json.dumps(dict(BASE, seq=1, path="/etc/passwd")),
+                                     b"\x00binary", "x" * (2 * MAX_MESSAGE), "flood"])
+def test_a_hostile_message_closes_only_its_connection(viewer, hostile, caplog):
+    async def go():
+        async with aiohttp.ClientSession() as s:
+            good, bad = await s.ws_connect(socket_url(viewer)), await s.ws_connect(socket_url(viewer))
+            for ws in (good, bad):
+                assert (await ws.receive_json())["type"] == "hello"
+            if hostile == "flood":
+                for seq in range(1, BURST + 50):
+                    await bad.send_str(json.dumps(dict(BASE, seq=seq, moving=True)))
+            elif isinstance(hostile, bytes):
+                await bad.send_bytes(hostile)
+            else:
+                await bad.send_str(hostile)
+            while (await bad.receive(timeout=60)).type not in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED):
+                pass
+            assert bad.close_code in (1008, 1009)
+            await good.send_str(json.dumps(dict(BASE, seq=1)))
+            assert (await frames_until_final(good, 1))[-1][0]["final"]
+    with caplog.at_level("WARNING", logger="clwave.view"):
+        run(go())
+    assert any("closed tab" in r.getMessage() for r in caplog.records)
+
+
+def test_a_superseded_view_is_abandoned(viewer):
+    async def go():
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(viewer))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1)))
+            await ws.send_str(json.dumps(dict(BASE, seq=2, azimuth=120.0)))
+            seen = []
+            while True:
+                figures, _ = unpack_frame((await ws.receive(timeout=60)).data)
+                seen.append((figures["seq"], figures["final"]))
+                if figures["seq"] == 2 and figures["final"]:
+                    return seen
+    seen = run(go())
+    old = [final for seq, final in seen if seq == 1]
+    assert len(old) <= 1 and not any(old)  # at most the stage under way when view 2 came, never view 1's last
+    assert [seq for seq, _ in seen if seq == 2] == [2] * (len(seen) - len(old))
+
+
+def test_still_xray_frames_refine_to_the_splat_of_the_view(viewer):
+    """The still view's frames: doubling prefixes, the last one clwave.splat of the same camera (within one grey
+    level of the encoded PNG); a drag frame is a cheaper prefix, at the same view."""
+    state = dict(BASE, seq=1, azimuth=75.0, elevation=-35.0, zoom=1.3, window=[0.0, 0.4])
+
+    async def go():
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(viewer))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(dict(state, moving=True)))
+            drag = unpack_frame((await ws.receive(timeout=60)).data)
+            await ws.send_str(json.dumps(dict(state, seq=2)))
+            return drag, await frames_until_final(ws, 2)
+    (drag, _), frames = run(go())
+    counts = [f["coefficients"] for f, _ in frames]
+    total = viewer.server.sources["xray"].r.count
+    assert counts == sorted(counts) and counts[-1] == total and drag["coefficients"] < total
+    assert [f["error"] for f, _ in frames][-1] == 0.0
+    final, data = frames[-1]
+    assert final["mime"] == "image/png" and final["window"] == [0.0, 0.4]
+    wv = viewer.server.wv
+    camera = clwave.Camera(75.0, -35.0, (48, 64), extent=final["extent"])
+    expect = clwave.splat(wv, camera).to_uint8((0.0, 0.4))
+    got = decode(data)
+    assert got.shape == expect.shape and expect.std() > 10
+    assert np.abs(got.astype(int) - expect).max() <= 1
+
+
+def test_shaded_frames_end_at_the_ray_traced_view():
+    wv = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(
+        clwave.phantom("hydrogen", n=24)), levels=2).threshold(keep=0.3)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            hello = await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", azimuth=10.0, background=1.0)))
+            return hello, await frames_until_final(ws, 1)
+    with view(wv, size=32, tolerance=2e-2) as v:
+        hello, frames = run(go(v))
+    assert hello["modes"] == ["xray", "shaded"] and hello["capabilities"]["shaded"]["tf"] is False
+    assert [f["tolerance"] for f, _ in frames] == [0.2, 2e-2]
+    expect = clwave.raytrace(wv, clwave.Camera(10.0, 20.0, 32, extent=frames[-1][0]["extent"]),
+                             tolerance=2e-2).to_uint8(background=(1.0, 1.0, 1.0))
+    assert np.abs(decode(frames[-1][1]).astype(int) - expect).max() <= 1
+
+
+def test_view_refuses_what_it_cannot_show():
+    with pytest.raises(clwave.InputError, match="WaveletVolume, a clwave.Volume or an array"):
+        view("volume.npy")
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1)
+    with pytest.raises(clwave.InputError, match="wavelet model already"):
+        view(wv, tf="hydrogen")
+    with pytest.raises(clwave.InputError, match="tolerance=0 must be a positive"):
+        view(wv, tolerance=0)
+    with pytest.raises(clwave.InputError, match="image size"):
+        view(wv, size=0)
+
+
+def test_cli_view_refuses_bad_options_before_any_work(capsys):
+    from clwave.cli import main
+
+    assert main(["view", "phantom:hydrogen:16", "--port", "70000"]) == 2
+    assert "--port 70000" in capsys.readouterr().err
+    assert main(["view", "phantom:hydrogen:16", "--tolerance", "0"]) == 2
+    assert "--tolerance" in capsys.readouterr().err
+
+
+def test_cli_view_serves_until_interrupted():
+    """``clwave view`` prints the address with its token once the model is ready; the page needs the token;
+    Ctrl-C stops it cleanly."""
+    import signal
+    import subprocess
+    import sys
+    import urllib.error
+    import urllib.request
+
+    with subprocess.Popen([sys.executable, "-m", "clwave", "view", "phantom:hydrogen:24", "--size", "32"],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        try:
+            lines = [proc.stdout.readline() for _ in range(2)]  # the model's line, then the address
+            assert lines[1].startswith("clwave view: open http://127.0.0.1:"), lines
+            url = lines[1].split()[-1]
+            assert urllib.request.urlopen(url, timeout=30).status == 200
+            with pytest.raises(urllib.error.HTTPError, match="403") as refused:
+                urllib.request.urlopen(url.split("?")[0], timeout=30)
+            refused.value.close()
+            proc.send_signal(signal.SIGINT)
+            assert proc.wait(timeout=30) == 0
+            assert "stopped" in proc.stderr.read()
+        finally:
+            proc.kill()
+
+
+def test_loopback_names():
+    from clwave.view.server import is_loopback
+
+    assert all(map(is_loopback, ("127.0.0.1", "localhost", "::1", "127.1.2.3")))
+    assert not any(map(is_loopback, ("0.0.0.0", "192.168.1.4", "::", "example.org")))

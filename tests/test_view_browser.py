@@ -1,0 +1,113 @@
+"""The viewer's page in a real headless browser (Debian's chromium through Selenium; docs/viewer.md §5):
+first image, orbit by dragging, the final X-ray frame against clwave.splat, a wrong token, two tabs, superseded
+frames, a hostile socket beside a working page."""
+
+import io
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import clwave
+from clwave.view import view
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+import browser  # noqa: E402  (tools/browser.py)
+
+pytestmark = pytest.mark.skipif(browser.executables() is None, reason=browser.SETUP)
+SIZE = (64, 80)
+
+
+@pytest.fixture(scope="module")
+def viewer():
+    with view(clwave.phantom("hydrogen", n=40), size=SIZE, keep=0.2) as v:
+        yield v
+
+
+@pytest.fixture(scope="module")
+def page():
+    with browser.chromium() as driver:
+        yield driver
+
+
+def decode(data):
+    import imageio.v3 as iio
+    return iio.imread(io.BytesIO(data))
+
+
+def test_drag_orbits_and_the_still_view_refines_to_the_splat(viewer, page):
+    assert browser.open_viewer(page, viewer.url) > 0
+    browser.wait_final(page)
+    start, data0 = browser.current_frame(page)
+    browser.drag(page, 60, 24, steps=8, pause=0.05)  # held: the frames while moving
+    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {start['seq']} && f")
+    assert not moving["final"] and moving["mime"] == "image/jpeg"
+    browser.release(page)
+    final = browser.wait_final(page)
+    state = page.execute_script("return window.clwave.state")
+    # dragging right turns the volume right (azimuth down), dragging down looks from above (elevation up)
+    assert final["azimuth"] == pytest.approx(state["azimuth"]) and (final["azimuth"] - 30) % 360 > 180
+    assert final["elevation"] == pytest.approx(state["elevation"]) and final["elevation"] > 20
+    figures, data = browser.current_frame(page)
+    got = decode(data)
+    assert figures["mime"] == "image/png" and got.shape == SIZE and np.any(got != decode(data0))
+    camera = clwave.Camera(final["azimuth"], final["elevation"], SIZE, extent=final["extent"])
+    expect = clwave.splat(viewer.server.wv, camera).to_uint8(tuple(final["window"]))
+    assert expect.std() > 10 and np.abs(got.astype(int) - expect).max() <= 1
+    stats = page.execute_script("return window.clwave.stats")
+    assert stats["frames"][-1]["seq"] == final["seq"] and stats["shown"] > 2
+
+
+def test_a_wrong_token_gets_403(viewer, page):
+    page.get(viewer.url[:-2] + "xx")
+    assert "403" in page.find_element("tag name", "body").text
+    page.get(viewer.url.split("?")[0])
+    assert "403" in page.find_element("tag name", "body").text
+
+
+def test_two_tabs_orbit_independently(viewer, page):
+    browser.open_viewer(page, viewer.url)
+    first = page.current_window_handle
+    page.switch_to.new_window("tab")
+    browser.open_viewer(page, viewer.url)
+    second = page.current_window_handle
+    browser.drag(page, -40, 0, steps=4, hold=False)
+    turned = browser.wait_final(page)
+    page.switch_to.window(first)
+    browser.drag(page, 0, -30, steps=4, hold=False)
+    tilted = browser.wait_final(page)
+    assert turned["azimuth"] > 30 and turned["elevation"] == 20
+    assert tilted["azimuth"] == 30 and tilted["elevation"] < 20
+    page.switch_to.window(second)
+    assert page.execute_script("return window.clwave.current().fig")["azimuth"] == turned["azimuth"]
+    page.close()
+    page.switch_to.window(first)
+
+
+def test_superseded_frames_are_dropped(viewer, page):
+    """Views sent faster than they render: the page shows only frames of its latest view, and the server
+    abandons the others (fewer frames arrive than views were sent)."""
+    browser.open_viewer(page, viewer.url)
+    page.execute_script("const c = window.clwave; for (let i = 1; i <= 20; i++) "
+                        "setTimeout(() => { c.state.azimuth = 30 + 3 * i; c.send(); }, 5 * i);")
+    final = browser.wait_for(page, "const c = window.clwave.current(); return c && c.fig.final && "
+                                   "c.fig.azimuth === 90 && c.fig")
+    stats = page.execute_script("return window.clwave.stats")
+    seqs = [f["seq"] for f in stats["frames"]]
+    assert seqs == sorted(seqs) and seqs[-1] == final["seq"]  # never a frame of an earlier view after a later
+    views = final["seq"] - 1  # the page's first view, then one per change
+    assert stats["received"] < views * 6  # a still view has up to 6 frames; most views' were never rendered
+
+
+def test_a_hostile_socket_closes_and_the_page_keeps_working(viewer, page):
+    browser.open_viewer(page, viewer.url)
+    code = page.execute_async_script(
+        "const done = arguments[arguments.length - 1];"
+        "const ws = new WebSocket(`ws://${location.host}/ws${location.search}`);"
+        "ws.onopen = () => ws.send(JSON.stringify({type: 'view', seq: 1, command: 'rm -rf /'}));"
+        "ws.onclose = (ev) => done(ev.code);")
+    assert code == 1008
+    before = browser.shown(page)
+    browser.drag(page, 30, 0, steps=3, hold=False)
+    assert browser.wait_final(page)["azimuth"] != 30 and browser.shown(page) > before
