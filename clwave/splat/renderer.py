@@ -127,6 +127,9 @@ class SplatRenderer:
         if not isinstance(camera, Camera):
             raise InputError("camera must be a clwave.Camera")
         view = camera.view(self.wv)
+        if view.perspective:
+            raise InputError("splatting renders orthographic views: give Camera(perspective=False), or ray trace "
+                             "the perspective view (clwave.raytrace(..., absorption=False) for an X-ray)")
         # framebuffer factor of each band that has coefficients, per group: 1 unless drawn coarse
         factors = [{(b.level, b.key): coarse_factor(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa",
                                                       view.pixel, min(self.wv.spacing), self.coarse)
