@@ -87,9 +87,3 @@ def test_bad_geometry_is_one_line(make, words):
         make()
     assert words in str(err.value) and "\n" not in str(err.value)
 
-
-def test_splatting_refuses_perspective_until_supported():
-    import clwave
-    wv = clwave.WaveletVolume.from_volume(Volume(np.ones((4, 4, 4))), levels=1)
-    with pytest.raises(InputError, match="orthographic"):
-        clwave.splat(wv, Camera(0, 0, 8, perspective=True))
