@@ -141,3 +141,17 @@ def test_eye_inside_or_near_the_model_is_refused(camera, words):
     with pytest.raises(InputError, match=words) as err:
         clwave.splat(wv, camera)
     assert "\n" not in str(err.value)
+
+
+def test_cone_accumulation_layouts_agree():
+    # a work-item per tile (CPUs) and per pixel (GPUs) accumulate the same records in the same order
+    from clwave.splat.stages import Stages
+
+    wv = _model((10, 10, 10), (1.0, 1.0, 1.0), levels=1, seed=9)
+    cam = clwave.Camera(-30, 40, (20, 36), perspective=True, distance=40)
+    images = []
+    for variant in ("cpu", "gpu"):
+        r = clwave.SplatRenderer(wv)
+        r.stages[(1, True)] = Stages(r.cc, 1, variant=variant, perspective=True)
+        images.append(r.render(cam).image)
+    assert np.abs(images[0] - images[1]).max() <= 1e-6 * images[0].max()

@@ -90,12 +90,40 @@ inline float cone_bilinear(__global const float *t, const int stride, const floa
     return (1.0f - fv) * ((1.0f - fu) * t[0] + fu * t[1]) + fv * ((1.0f - fu) * t[stride] + fu * t[stride + 1]);
 }
 
-/* splat_accumulate_cone: add every tile's records to the framebuffers, one work-item per pixel.
+/* The node cell of the slope grid for slope s along one axis: its first node (returned) and the weight of
+ * the next (slopes beyond the grid take its edge).  lo, inv: the first node's slope and 1 / step. */
+inline int cone_cell(const float s, const float lo, const float inv, const int nodes, float *w)
+{
+    const float g = clamp((s - lo) * inv, 0.0f, (float)(nodes - 1));
+    const int i = min((int)g, nodes - 2);
+    *w = g - (float)i;
+    return i;
+}
+
+/* A splat's sample at texel (tu, tv) between the four nodes at t (node n), t + 1 node, t + ku nodes and
+ * t + ku + 1 nodes with slope weights (wu, wv); ti: the texture's tex_int.  Clamped onto the zero margin
+ * (index -1 .. size - 1 of the unpadded texture, +1 for the margin). */
+inline float cone_sample(__global const float *texels, const int4 ti, const int node, const int ku, const float tu,
+                         const float tv, const float wu, const float wv)
+{
+    const float fiu = floor(tu), fiv = floor(tv);
+    const int iu = clamp((int)fiu, -1, ti.y - 3), iv = clamp((int)fiv, -1, ti.w - 3);
+    const float fu = tu - fiu, fv = tv - fiv;
+    __global const float *t = texels + ti.x + (iv + 1) * ti.y + (iu + 1) + node * ti.z;
+    const float s00 = cone_bilinear(t, ti.y, fu, fv), s01 = cone_bilinear(t + ti.z, ti.y, fu, fv);
+    const float s10 = cone_bilinear(t + ku * ti.z, ti.y, fu, fv);
+    const float s11 = cone_bilinear(t + (ku + 1) * ti.z, ti.y, fu, fv);
+    return (1.0f - wv) * ((1.0f - wu) * s00 + wu * s01) + wv * ((1.0f - wu) * s10 + wu * s11);
+}
+
+/* splat_accumulate_cone: add every tile's records to the framebuffers.
  *   ranges, records, layers, fb: as cl/splat/raster.h (records sorted by tile, texture, importance)
  *   tex_int, tex_map, texels, layer_slope, cone: the tables above (texels with 16 zeros before)
- * Each pixel finds its slope's cell in the node grid once (bilinear weights between 4 nodes), then per
- * splat its texel position w / h = depth * sigma * (pixel - centre) / h and 4 x 4 texels.
- * Grid: one work-group of CLW_TILE^2 items per tile (global offset: a band of tiles).
+ * A pixel's slope sets its cell in the node grid (4 nodes, bilinear weights); per splat its texel
+ * position is w / h = depth * sigma * (pixel - centre) / h, and it reads 2 x 2 texels of each node.
+ * Grid, -DCLW_CONE_TILE (CPUs): a work-item per tile, its pixels in private memory, the columns' texel
+ * positions computed once per splat; otherwise (GPUs): a work-group of CLW_TILE^2 items per tile, a
+ * pixel each.  Either with the global offset of a band of tiles.
  * Assumes: every pixel owned by one work-item, splats in sorted order: bit-identical repeats. */
 __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *layers,
                                     __global const float4 *layer_slope, __global const float4 *cone,
@@ -103,46 +131,67 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
                                     __global const int4 *tex_int, __global const float4 *tex_map,
                                     __global const float *texels, __global float4 *fb)
 {
+#ifdef CLW_CONE_TILE
+    const int tile = get_global_id(0);
+#else
     const int tile = get_global_id(0) / (CLW_TILE * CLW_TILE);
     const int lid = get_local_id(0), lx = lid % CLW_TILE, ly = lid / CLW_TILE;
+#endif
     int2 corner;
     const int l = cone_layer(tile, layer_count, layers, &corner);
     const int4 layer = layers[l];
-    const int x = corner.x + lx, y = corner.y + ly;
     const float2 sigma = layer_slope[l].xy;
     const float4 grid = cone[4], cells = cone[5];
-    const float su = grid.x + ((float)x + 0.5f - 0.5f * (float)layer.x) * sigma.x;
-    const float sv = grid.y + (0.5f * (float)layer.y - (float)y - 0.5f) * sigma.y;
-    /* the pixel's cell of the slope grid and its weights (slopes beyond the grid take its edge) */
     const int ku = (int)cells.z, kv = (int)cells.w;
-    const float gu = clamp((su - grid.z) * cells.x, 0.0f, (float)(ku - 1));
-    const float gv = clamp((sv - grid.w) * cells.y, 0.0f, (float)(kv - 1));
-    const int nu = min((int)gu, ku - 2), nv = min((int)gv, kv - 2);
-    const float wu = gu - (float)nu, wv = gv - (float)nv;
-    const int node = nv * ku + nu;
-    float4 acc = (float4)(0.0f);
     const uint2 r = ranges[tile];
+#ifdef CLW_CONE_TILE
+    float4 acc[CLW_TILE][CLW_TILE];
+    int ncol[CLW_TILE], nrow[CLW_TILE];
+    float wcol[CLW_TILE], wrow[CLW_TILE], tcol[CLW_TILE];
+    for (int i = 0; i < CLW_TILE; ++i) {
+        const float su = grid.x + ((float)(corner.x + i) + 0.5f - 0.5f * (float)layer.x) * sigma.x;
+        const float sv = grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y;
+        ncol[i] = cone_cell(su, grid.z, cells.x, ku, &wcol[i]);
+        nrow[i] = cone_cell(sv, grid.w, cells.y, kv, &wrow[i]) * ku;
+        for (int j = 0; j < CLW_TILE; ++j)
+            acc[i][j] = (float4)(0.0f);
+    }
+    for (uint k = r.x; k < r.y; ++k) {
+        int4 bx;
+        float4 cen, c;
+        const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &c);
+        const int4 ti = tex_int[tex];
+        const float4 tm = tex_map[tex];
+        const float ru = cen.z * sigma.x * tm.z, rv = cen.z * sigma.y * tm.w;  /* texels per pixel */
+        for (int x = bx.x; x <= bx.z; ++x)
+            tcol[x] = tm.x + ((float)(corner.x + x) - cen.x) * ru;
+        for (int y = bx.y; y <= bx.w; ++y) {
+            const float tv = tm.y + (cen.y - (float)(corner.y + y)) * rv;
+            for (int x = bx.x; x <= bx.z; ++x)
+                acc[y][x] += c * cone_sample(texels, ti, nrow[y] + ncol[x], ku, tcol[x], tv, wcol[x], wrow[y]);
+        }
+    }
+    for (int y = 0; y < CLW_TILE && corner.y + y < layer.y; ++y)
+        for (int x = 0; x < CLW_TILE && corner.x + x < layer.x; ++x)
+            fb[layer.w + (corner.y + y) * layer.x + corner.x + x] += acc[y][x];
+#else
+    const int x = corner.x + lx, y = corner.y + ly;
+    float wu, wv;
+    const int nu = cone_cell(grid.x + ((float)x + 0.5f - 0.5f * (float)layer.x) * sigma.x, grid.z, cells.x, ku, &wu);
+    const int nv = cone_cell(grid.y + (0.5f * (float)layer.y - (float)y - 0.5f) * sigma.y, grid.w, cells.y, kv, &wv);
+    float4 acc = (float4)(0.0f);
     for (uint k = r.x; k < r.y; ++k) {
         int4 bx;
         float4 cen, c;
         const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &c);
         if (lx < bx.x || lx > bx.z || ly < bx.y || ly > bx.w)
             continue;
-        const int4 ti = tex_int[tex];
         const float4 tm = tex_map[tex];
         const float tu = tm.x + ((float)x - cen.x) * cen.z * sigma.x * tm.z;
         const float tv = tm.y + (cen.y - (float)y) * cen.z * sigma.y * tm.w;
-        const float fiu = floor(tu), fiv = floor(tv);
-        /* clamped onto the zero margin: index -1 .. size - 1, then +1 for the margin */
-        const int iu = clamp((int)fiu, -1, ti.y - 3), iv = clamp((int)fiv, -1, ti.w - 3);
-        const float fu = tu - fiu, fv = tv - fiv;
-        __global const float *t = texels + ti.x + (iv + 1) * ti.y + (iu + 1) + node * ti.z;
-        const float s00 = cone_bilinear(t, ti.y, fu, fv), s01 = cone_bilinear(t + ti.z, ti.y, fu, fv);
-        const float s10 = cone_bilinear(t + ku * ti.z, ti.y, fu, fv);
-        const float s11 = cone_bilinear(t + (ku + 1) * ti.z, ti.y, fu, fv);
-        const float sample = (1.0f - wv) * ((1.0f - wu) * s00 + wu * s01) + wv * ((1.0f - wu) * s10 + wu * s11);
-        acc += c * sample;
+        acc += c * cone_sample(texels, tex_int[tex], nv * ku + nu, ku, tu, tv, wu, wv);
     }
     if (x < layer.x && y < layer.y)
         fb[layer.w + y * layer.x + x] += acc;
+#endif
 }

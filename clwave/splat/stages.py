@@ -79,24 +79,26 @@ class Stages:
     ``variant`` is the accumulation kernel: ``"cpu"`` (``cl/splat/raster_cpu.cl``, a work-item per
     tile) or ``"gpu"`` (``cl/splat/raster_gpu.cl``, a work-item per pixel); default by the device.
     ``perspective``: the cone-beam kernels of ``cl/splat/cone.cl`` (docs/splatting.md §8) project and
-    accumulate instead, a work-item per pixel on every device.
+    accumulate instead, in the same two layouts (a work-item per tile, or per pixel).
     ``tables`` arguments are a view's uploaded :class:`~clwave.splat.tables.ViewTables` by name.
     """
 
     def __init__(self, cc, channels: int, variant=None, perspective=False):
         self.cc, self.channels, self.perspective = cc, channels, perspective
-        self.variant = "cone" if perspective else variant or ("gpu" if cc.info.kind == "GPU" else "cpu")
+        self.variant = variant or ("gpu" if cc.info.kind == "GPU" else "cpu")
         uint4s = record_uint4s(channels, perspective)
         defines = dict(CLW_CHANNELS=channels, CLW_RECORD=uint4s)
-        if self.variant == "gpu":
+        if self.variant == "gpu" and not perspective:
             defines["CLW_PX"] = GPU_PIXELS
         if perspective:
             defines["CLW_PERSPECTIVE"] = 1
+            if self.variant == "cpu":
+                defines["CLW_CONE_TILE"] = 1
         self.kernels = programs.build(cc, ["splat/bin.cl", "splat/cone.cl" if perspective else
                                            f"splat/raster_{self.variant}.cl"], defines)
         self.record_bytes = 16 * uint4s
-        # work-items per tile: one on CPUs (raster_cpu.cl), TILE^2 / GPU_PIXELS on GPUs, TILE^2 for cone.cl
-        self.accumulate_local = TILE * TILE // (1 if perspective else GPU_PIXELS) if self.variant != "cpu" else 1
+        # work-items per tile: one on CPUs (raster_cpu.cl, cone.cl), TILE^2 / GPU_PIXELS on GPUs (TILE^2: cone.cl)
+        self.accumulate_local = TILE * TILE // (1 if perspective else GPU_PIXELS) if self.variant == "gpu" else 1
         # binning chunks: on a CPU one work-item per group, so the few chunks spread over the cores
         self.bin_local = None if cc.info.kind == "GPU" else (1,)
         self._scan = ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")
