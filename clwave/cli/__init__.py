@@ -12,7 +12,7 @@ import sys
 import threading
 
 from ..errors import ClwaveError, InputError
-from . import compress, info, progressive, render
+from . import compress, drr, info, progressive, render
 
 EXIT_USAGE = 2
 
@@ -25,7 +25,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 #: the subcommands, in the order ``clwave --help`` lists them
-COMMANDS = (info, compress, render, progressive)
+COMMANDS = (info, compress, render, progressive, drr)
 
 
 def make_parser():

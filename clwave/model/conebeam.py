@@ -153,3 +153,43 @@ class ConeBeam:
     def __repr__(self):
         return (f"ConeBeam(dso={self.dso:g}, dsd={self.dsd:g}, size={self.size}, pixel={self.pixel}, "
                 f"offset={self.offset})")
+
+
+#: the columns of a pose table (:func:`poses`): ConeBeam's parameters, per row
+POSE_COLUMNS = ("azimuth", "elevation", "roll", "dso", "dsd", "offset_u", "offset_v", "isocentre_x", "isocentre_y",
+                "isocentre_z")
+#: or a 3 x 4 projection matrix per row, row-major
+MATRIX_COLUMNS = tuple(f"p{r}{c}" for r in range(3) for c in range(4))
+
+
+def poses(rows, size, pixel=1.0, dso=1000.0, dsd=1500.0, offset=(0.0, 0.0), isocentre=(0.0, 0.0, 0.0)) -> list:
+    """:class:`ConeBeam` of each row (a mapping of column name to number) of a pose table: gantry angles and
+    any of the other :data:`POSE_COLUMNS` overriding the defaults given here, or the 12 :data:`MATRIX_COLUMNS`
+    of a projection matrix (``size`` pixels).  Refused with one line: unknown or missing columns.
+
+    >>> [cb.source.round(6).tolist() for cb in poses([dict(azimuth=90), dict(azimuth=0, dso=500)], 8)]
+    [[0.0, 1000.0, 0.0], [500.0, 0.0, 0.0]]
+    """
+    out = []
+    for i, row in enumerate(rows, 1):
+        names = set(row)
+        if names >= set(MATRIX_COLUMNS) and names <= set(MATRIX_COLUMNS):
+            out.append(ConeBeam.from_matrix(np.array([row[c] for c in MATRIX_COLUMNS], float).reshape(3, 4), size))
+            continue
+        unknown = sorted(names - set(POSE_COLUMNS))
+        if unknown:
+            raise InputError(f"pose {i}: unknown column(s) {', '.join(unknown)}; use {', '.join(POSE_COLUMNS)} or "
+                             f"p00..p23 (a projection matrix)")
+        g = row.get
+        out.append(ConeBeam(g("dso", dso), g("dsd", dsd), size, pixel,
+                            offset=(g("offset_u", offset[0]), g("offset_v", offset[1])),
+                            azimuth=g("azimuth", 0.0), elevation=g("elevation", 0.0), roll=g("roll", 0.0),
+                            isocentre=(g("isocentre_x", isocentre[0]), g("isocentre_y", isocentre[1]),
+                                       g("isocentre_z", isocentre[2]))))
+    return out
+
+
+def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
+    """Beer-Lambert: the intensity ``i0 exp(-∫mu)`` reaching the detector from attenuation line integrals
+    (``--hu-to-mu`` CTs: mu per mm, integrals over mm)."""
+    return (i0 * np.exp(-np.asarray(line_integrals, np.float64))).astype(np.float32)
