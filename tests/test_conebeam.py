@@ -87,3 +87,19 @@ def test_bad_geometry_is_one_line(make, words):
         make()
     assert words in str(err.value) and "\n" not in str(err.value)
 
+
+
+def test_tigre_round_trip_and_layout():
+    geo = dict(DSO=1000.0, DSD=1536.0, nDetector=np.array([6, 8]), dDetector=np.array([0.8, 0.6]),
+               offDetector=np.array([2.0, -1.0]), offOrigin=np.array([5.0, 0.0, -3.0]))
+    cb = ConeBeam.from_tigre(geo, np.pi / 2, volume_origin=(1.0, 2.0, 3.0))
+    # TIGRE: the source starts on +x and turns about z; the volume's centre is offOrigin from the isocentre
+    assert np.allclose(cb.source, cb.isocentre + [0.0, 1000.0, 0.0]) and np.allclose(cb.isocentre, [-4.0, 2.0, 6.0])
+    # its detector: u along +y at angle 0 (here -x), v along +z, shifted by offDetector from the principal ray
+    assert np.allclose(cb.u, [-1, 0, 0]) and np.allclose(cb.v, [0, 0, 1]) and cb.offset == (-2.0, 1.0)
+    back, angle = cb.to_tigre(volume_origin=(1.0, 2.0, 3.0))
+    assert angle == pytest.approx(np.pi / 2)
+    for key, value in geo.items():
+        assert np.allclose(back[key], value), key
+    with pytest.raises(InputError, match="about z"):
+        ConeBeam(100, 150, 8, elevation=10).to_tigre()

@@ -131,6 +131,33 @@ class ConeBeam:
         R = np.array([self.u, -self.v, -self.n])
         return K @ np.hstack([R, -(R @ self.source)[:, None]])
 
+    # ----------------------------------------------------------------- TIGRE
+    @classmethod
+    def from_tigre(cls, geo, angle, volume_origin=(0.0, 0.0, 0.0)) -> "ConeBeam":
+        """The view of TIGRE's cone-beam geometry ``geo`` (an object or mapping with ``DSO``, ``DSD``,
+        ``nDetector`` (v, u), ``dDetector`` (v, u) and optionally ``offDetector`` (u, v) and ``offOrigin``
+        (x, y, z)) at gantry ``angle`` (radians, about z) for a volume centred at ``volume_origin`` in
+        clwave's world (docs/coordinates.md §5: TIGRE's source starts on +x, its detector u along +y and v
+        along +z, and the volume's centre sits at ``offOrigin`` from its isocentre)."""
+        get = geo.get if isinstance(geo, dict) else lambda name, default=None: getattr(geo, name, default)
+        nv, nu = (int(x) for x in np.asarray(get("nDetector")).reshape(2))
+        dv, du = (float(x) for x in np.asarray(get("dDetector")).reshape(2))
+        off_u, off_v = (float(x) for x in np.asarray(get("offDetector", (0.0, 0.0))).reshape(2))
+        iso = np.asarray(volume_origin, float) - np.asarray(get("offOrigin", (0.0, 0.0, 0.0)), float).reshape(3)
+        return cls(float(get("DSO")), float(get("DSD")), (nv, nu), (dv, du), offset=(-off_u, -off_v),
+                   azimuth=float(np.degrees(angle)), isocentre=iso)
+
+    def to_tigre(self, volume_origin=(0.0, 0.0, 0.0)) -> tuple:
+        """``(geo, angle)``: TIGRE's geometry fields (a dict) and gantry angle (radians) of this view, the
+        inverse of :meth:`from_tigre`; only views that TIGRE's circular orbit reaches (elevation and roll
+        0) are accepted."""
+        if not np.isclose(self.n[2], 0.0, atol=1e-12) or not np.isclose(self.u[2], 0.0, atol=1e-12):
+            raise InputError("TIGRE's circular orbit is about z: this view has an elevation or roll")
+        H, W = self.size
+        geo = dict(DSO=self.dso, DSD=self.dsd, nDetector=np.array([H, W]), dDetector=np.array(self.pixel),
+                   offDetector=-np.array(self.offset), offOrigin=np.asarray(volume_origin, float) - self.isocentre)
+        return geo, float(np.arctan2(self.n[1], self.n[0]))
+
     # ----------------------------------------------------------------- rendering
     def view(self, volume) -> View:
         """Resolve against a volume-like object (``shape``, ``spacing``, ``origin``): refuses a source
