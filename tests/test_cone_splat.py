@@ -155,3 +155,17 @@ def test_cone_accumulation_layouts_agree():
         r.stages[(1, True)] = Stages(r.cc, 1, variant=variant, perspective=True)
         images.append(r.render(cam).image)
     assert np.abs(images[0] - images[1]).max() <= 1e-6 * images[0].max()
+
+
+def test_footprint_spectra_in_batches_and_refused_beyond_the_texel_cap(monkeypatch):
+    from clwave.splat import perspective
+
+    n, u, v = view_frame(30.0, 20.0)
+    args = (SplineWavelet(4), (1.0, 1.0, 1.0), n, u, v, {(0, "aaa"): 0.1, (1, "dda"): 0.2},
+            np.array([[0.0, 0.1], [0.2, -0.1], [-0.1, 0.0]]), "fft")
+    whole = sheared_footprints(*args, device=clwave.ComputeContext.get())
+    monkeypatch.setattr(perspective, "SPECTRA_BATCH_BYTES", 1)  # a launch per texture
+    batched = sheared_footprints(*args, device=clwave.ComputeContext.get())
+    assert all(np.array_equal(whole[b].data, batched[b].data) for b in whole)
+    with pytest.raises(clwave.DeviceMemoryError, match="ray slopes"):
+        sheared_footprints(*args, max_texels=1000)

@@ -22,7 +22,7 @@ from ..model.bspline import wavelet_for
 from ..model.geometry import check_key, fine_to_world, spacing_xyz, support_centres, support_extent
 from ..threads import cores, thread_map
 from .spatial import exact_samples
-from .spectral import device_spectra, fft_texture, slice_plan
+from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
 from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
 from .textures import Texture, _axis_points, _axis_sampling, _centred
 
@@ -31,6 +31,7 @@ from .textures import Texture, _axis_points, _axis_sampling, _centred
 #: phi-phi-phi footprint at 0.1 (the error of each footprint scales with the square of the step)
 SLOPE_STEP = 0.1
 TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.splat.tables.TEXTURE_TOL)
+SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
 #: the host tables of a perspective view, uploaded by name (cl/splat/cone.cl)
 CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "layers", "layer_slope", "cone",
                "tex_int", "tex_map", "texels")
@@ -46,13 +47,15 @@ def slope_grid(views) -> tuple:
     return lo, step, count
 
 
-def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None) -> dict:
+def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None,
+                       max_texels=None) -> dict:
     """A :class:`~clwave.splat.textures.Texture` of each band whose ``data[node, iv, iu]`` holds its footprint
     at each of the (K, 2) ``slopes``: the line integrals of its basis
     function along ``n - s_u u - s_v v`` (per unit of depth) through the points ``a u + b v`` from its
     support centre.  ``bands`` maps ``(m, key)`` to the texel (world units); ``"fft"`` slices the 3-D
     spectrum along ``u + s_u n``, ``v + s_v n`` (docs/splatting.md §8; on ``device``, every spectrum in one
-    launch, as orthographic views do), ``"spatial"`` integrates exactly (:mod:`clwave.splat.spatial`)."""
+    launch, as orthographic views do), ``"spatial"`` integrates exactly (:mod:`clwave.splat.spatial`).
+    ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made."""
     wav = wavelet_for(wavelet)
     d_xyz = spacing_xyz(spacing_zyx)
     n, u, v = (np.asarray(x, float) for x in (n, u, v))
@@ -67,8 +70,14 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, texel) for w in (width_u, width_v))
         grids[(m, key)] = (nu, h_u, nv, h_v)
         jobs += [((m, key), k) for k in range(len(slopes))]
+    texels = sum(len(slopes) * (nu + 3) * (nv + 3) for nu, _, nv, _ in grids.values())
+    if max_texels is not None and texels > max_texels:
+        raise DeviceMemoryError(
+            f"the footprints of this perspective view need {4 * texels / 2**20:,.0f} MiB ({len(slopes)} ray slopes a "
+            f"band), more than the {4 * max_texels / 2**20:,.0f} MiB allowed; render fewer pixels, a narrower cone "
+            f"or a lower omega_s")
     spectra = {}
-    if sampling == "fft" and device is not None:  # non-separable slices on the device, in one launch
+    if sampling == "fft" and device is not None:  # non-separable slices on the device, in few launches
         plans = {}
         for band, k in jobs:
             nu, h_u, nv, h_v = grids[band]
@@ -76,7 +85,15 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
             scale, axes = slice_plan(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu * h_u, nv * h_v)
             if any(alpha and beta for _, alpha, beta in axes):
                 plans[(band, k)] = (scale, axes, nu, nv)
-        spectra = dict(zip(plans, device_spectra(device, wav.order, list(plans.values()))))
+        batch, held = [], 0
+        for job, plan in list(plans.items()) + [(None, None)]:  # launches of at most SPECTRA_BATCH_BYTES
+            size = 0 if plan is None else 8 * plan[3] * (plan[2] // 2 + 1 + SPECTRUM_BLOCK)
+            if batch and (plan is None or held + size > SPECTRA_BATCH_BYTES):
+                spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch])))
+                batch, held = [], 0
+            if plan is not None:
+                batch.append(job)
+                held += size
 
     def make(job):
         band, k = job
@@ -158,7 +175,7 @@ class ConeTables:
                 texels[band] = pixel / texels_per_pixel(wav.order, b.level, omega, pixel, d_min)
         start = time.perf_counter()
         textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
-                                      TEXTURE_TOL if wav.order == 4 else 0.0, device)
+                                      TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
         self.footprint_seconds = time.perf_counter() - start
         self.samplings = [sampling]
 
