@@ -13,6 +13,7 @@ from .io.phantoms import phantom
 from .model.transfer import TransferFunction
 from .model.wavelet import WaveletVolume
 from .model.camera import Camera
+from .model.conebeam import ConeBeam
 from .io.result import RenderResult
 from .splat.renderer import SplatRenderer, splat
 from .progressive import progressive
@@ -27,7 +28,7 @@ __version__ = "0.1.0"
 __all__ = [
     "ClwaveError", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
     "KernelBuildError", "OutputError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
-    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "RenderResult",
+    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "ConeBeam", "RenderResult",
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
     "Detail",
     "ChunkedWaveletVolume",

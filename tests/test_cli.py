@@ -187,7 +187,7 @@ def test_progressive_gif_folder_and_stats(tmp_path, capsys):
     (["render", "phantom:hydrogen:16", "--levels", "1", "--method", "raytrace"], "--tf PRESET"),
     (["render", "phantom:hydrogen:16", "--levels", "1", "--method", "raytrace", "--tf", "hydrogen",
       "--tolerance", "0"], "tolerance"),
-    (["render", "phantom:hydrogen:16", "--perspective"], "--method raytrace"),
+    (["render", "phantom:hydrogen:16", "--perspective", "--distance", "2"], "inside the model"),
     (["render", "phantom:hydrogen:16", "--coarse", "2"], "coarse"),
     (["render", "phantom:hydrogen:16", "--tf", "hydrogen", "--method", "raytrace", "--coarse", "1e-2"], "--tolerance"),
     (["render", "phantom:hydrogen:16", "--method", "raytrace", "--light", "10"], "--light"),

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|scale|view|all [--size 128 256]
-                          [--repeats 3] [--views 4] [--keep 0.01 0.05 1] [--device auto] [--json out.json]
+    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|scale|view|drr|all
+                          [--size 128 256] [--repeats 3] [--views 4] [--keep 0.01 0.05 1] [--device auto]
+                          [--json out.json]
 
 Every benchmark runs once per ``--size`` (hydrogen phantom of that many voxels per axis, made
 once outside the timing); times are medians (with min, max and the number of runs) after one
@@ -34,6 +35,11 @@ levels, 5 % and 0.1 %, at ``--raytrace-image``; set-up with and without every de
 (interleaved), the time to change detail, and the progressive frames with their measured and estimated errors.
 ``post``: post-classification (a transfer function at render time, docs/raytracing.md §10) against
 pre-classification of the same phantom, renders interleaved; transfer-function changes, pools, errors.
+``drr`` (not in ``all``): digitally reconstructed radiographs (docs/splatting.md §8): a
+Shepp-Logan phantom of ``--size``³ voxels of 300 mm / ``--size`` (a head-sized CT), cubic, 3 levels,
+5 %, through a C-arm (dso 1000 mm, dsd 1500 mm, a 400 mm detector): one renderer reused, each view
+a new pose; 512² single views (``--views``), interleaved with orthographic views of the same framing
+(the ratio), and a batch of ``--drr-batch`` poses at 256² (``render_many``, wall time).
 
 ``scale`` (not in ``all``): volumes bigger than memory (docs/chunked.md).  A hydrogen phantom of
 ``--size``³ float32 voxels (or ``--scale-shape Z,Y,X`` of ``--scale-dtype``) is written to a Zarr
@@ -623,9 +629,40 @@ def bench_view(args) -> dict:
                 target=dict(first_image_seconds=0.3, drag_frames_per_second=10, refine_seconds=1.0))
 
 
+def bench_drr(args) -> dict:
+    vol = phantom("shepp-logan", n=args.size)
+    vol = clwave.Volume(vol.data, spacing=(300.0 / args.size,) * 3)
+    wv = WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=0.05)
+    renderer = clwave.SplatRenderer(wv, device=args.device)
+
+    def cone(az, el, size):
+        return clwave.ConeBeam(1000.0, 1500.0, size, pixel=400.0 / size, azimuth=az, elevation=el)
+
+    renderer.render(cone(10.0, 5.0, 512))  # warm-up: kernels, first footprints
+    runs = {"cone beam": [], "orthographic": []}
+    for az, el in views(args.views):  # interleaved: the machine's load falls on both alike
+        runs["cone beam"].append(renderer.render(cone(az, el, 512)).meta)
+        runs["orthographic"].append(renderer.render(clwave.Camera(az, el, 512, extent=400.0 / 1.5)).meta)
+    cases = {f"{name} at 512x512": dict(
+        seconds={k: summary([m["seconds"][k] for m in metas]) for k in ("total", "footprints", "binning",
+                                                                        "accumulation")},
+        pixel_updates=statistics.median(m["pixel_updates"] for m in metas)) for name, metas in runs.items()}
+    cases["cone beam / orthographic"] = (cases["cone beam at 512x512"]["seconds"]["total"]["median"]
+                                         / cases["orthographic at 512x512"]["seconds"]["total"]["median"])
+    poses = [cone(az, el, 256) for az, el in views(args.drr_batch)]
+    start = time.perf_counter()
+    stack = renderer.render_many(poses)
+    wall = time.perf_counter() - start
+    cases[f"batch of {len(poses)} at 256x256"] = dict(seconds=wall, per_view=wall / len(poses),
+                                                      shape=list(stack.shape))
+    return dict(setting=dict(volume=f"shepp-logan {args.size}^3 of {300.0 / args.size:.3g} mm", wavelet="cubic",
+                             levels=3, keep=0.05, coefficients=wv.kept, geometry="dso 1000, dsd 1500, 400 mm detector"),
+                targets=dict(seconds_512=0.5, batch_100_at_256_seconds=10.0), cases=cases)
+
+
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "post": bench_post,
-              "scale": bench_scale, "view": bench_view}
+              "scale": bench_scale, "view": bench_view, "drr": bench_drr}
 
 
 def main(argv=None):
@@ -662,6 +699,11 @@ def main(argv=None):
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
     names = [n for n in BENCHMARKS if n not in ("scale", "view")] if args.benchmark == "all" else [args.benchmark]
+    parser.add_argument("--drr-batch", type=int, default=100, help="drr: poses in the 256^2 batch")
+    parser.add_argument("--device", default="auto")
+    parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
+    args = parser.parse_args(argv)
+    names = [n for n in BENCHMARKS if n not in ("scale", "drr")] if args.benchmark == "all" else [args.benchmark]
     results = {}
     for name in names:
         shaped = name == "scale" and args.scale_shape is not None  # one volume of that shape, not --size

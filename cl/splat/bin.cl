@@ -32,7 +32,8 @@
  *   bbox         out (n,) int4: covered pixels (x0, y0, x1, y1) of its layer, inclusive; x1 < x0 when empty
  *   stex         out (n,) int: texture id
  *   count        out (n,) uint: number of tiles the box touches
- * Grid: global (n,), any local size. */
+ * Grid: global (n,), any local size.  (Perspective builds project in cl/splat/cone.cl.) */
+#ifndef CLW_PERSPECTIVE
 __kernel void splat_project(const uint n, const uint first, __global const int4 *coef,
                             __global const int *band_tex, __global const float2 *band_origin,
                             __global const float4 *step_col, __global const float4 *step_row,
@@ -67,6 +68,7 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
     stex[i] = tex;
     count[i] = cnt;
 }
+#endif
 
 /* splat_chunk_tiles: walk the tiles each splat of a chunk touches, to count or to place them.
  *   n            number of splats; chunk c holds splats c * chunk .. c * chunk + chunk - 1
@@ -77,7 +79,8 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
  *   lo, hi       this launch walks splats lo .. hi - 1 of each chunk (of its own numbering): long passes
  *                go in several launches, each continuing the counts or cursors of the last
  *                (clwave.device.kernels.in_bands), so Ctrl-C is taken between them
- *   bbox, stex   in  (n,) from splat_project; centre too (read when placing)
+ *   bbox, stex   in  (n,) from splat_project; centre too (read when placing; float4 with its depth in
+ *                perspective builds, cl/splat/record.h)
  *   values       in  (K,) float4: coefficient per channel
  *   tex_layer, layers  in  as for splat_project
  *   table        (chunks, tiles, textures) uint.  counting: out, [(c * tiles + tile) * textures + j]
@@ -92,7 +95,7 @@ __kernel void splat_project(const uint n, const uint first, __global const int4 
 __kernel void splat_chunk_tiles(const uint n, const uint chunk, const uint chunks, const uint tiles,
                                 const uint textures, const int place, const uint first, const uint lo,
                                 const uint hi,
-                                __global const int4 *bbox, __global const float2 *centre, __global const int *stex,
+                                __global const int4 *bbox, __global const CLW_CENTRE *centre, __global const int *stex,
                                 __global const float4 *values, __global const int2 *tex_layer,
                                 __global const int4 *layers, __global uint *table, __global uint4 *records)
 {

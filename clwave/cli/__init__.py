@@ -12,7 +12,7 @@ import sys
 import threading
 
 from ..errors import ClwaveError, InputError
-from . import compress, info, progressive, render, view
+from . import compress, drr, info, progressive, render, view
 
 EXIT_USAGE = 2
 
@@ -25,7 +25,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 #: the subcommands, in the order ``clwave --help`` lists them
-COMMANDS = (info, compress, render, progressive, view)
+COMMANDS = (info, compress, render, progressive, drr, view)
 
 
 def make_parser():

@@ -39,8 +39,6 @@ def run(args):
         options = dict(tolerance=args.tolerance, lights=parse_lights(args), shading=not args.no_shading,
                        absorption=not args.xray)
     else:
-        if camera.perspective:
-            raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
         steps = 8 if args.steps is None and args.budget is None else args.steps
         check_schedule(steps, args.budget)
         options = dict(omega_s=args.omega_s, coarse=args.coarse)

@@ -25,8 +25,6 @@ def run(args):
                                     (args.raw, "--raw", (".npy",)), (args.stats, "--stats", (".json",)))
     background = numbers(args.background, "--background", (3,))
     camera = make_camera(args)
-    if args.method == "splat" and camera.perspective:
-        raise InputError("--perspective is for --method raytrace; splatting renders orthographic views")
     if args.method == "raytrace" and args.coarse is not None:
         raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
     device_memory = parse_device_memory(args)

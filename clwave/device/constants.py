@@ -16,7 +16,8 @@ def defines() -> dict:
     return dict(CLW_TILE=TILE, CLW_MAX_LIGHTS=MAX_LIGHTS, CLW_BLOCK=BLOCK, CLW_SUPER_CELLS=BLOCK * SUPER)
 
 
-def record_uint4s(channels: int) -> int:
+def record_uint4s(channels: int, perspective: bool = False) -> int:
     """uint4s in the splat record of one (tile, splat) pair (``cl/splat/record.h``): the centre,
-    texture and pixel box with the first channel's value, and a second uint4 for 2-4 channels."""
-    return 1 if channels == 1 else 2
+    texture and pixel box with the first channel's value, and a second uint4 for 2-4 channels or the
+    depth of a perspective splat."""
+    return 1 if channels == 1 and not perspective else 2

@@ -32,14 +32,46 @@ class View:
     perspective: bool
     eye: np.ndarray      # (3,) eye position (perspective only)
     fov: float           # vertical field of view in degrees (perspective only)
+    #: perspective: ray slopes (along u, along v) per pixel, and the slopes of the image centre's ray
+    #: (docs/coordinates.md §5); the ray of slopes (s_u, s_v) leaves the eye along -n + s_u u + s_v v
+    slope: tuple = None
+    principal: tuple = (0.0, 0.0)
 
     def to_pixels(self, points_xyz) -> np.ndarray:
-        """Orthographic projection of world points to continuous (col, row) pixel coordinates."""
-        d = np.asarray(points_xyz, float) - self.target
+        """Projection of world points to continuous (col, row) pixel coordinates (orthographic, or
+        through the eye onto the detector where perspective)."""
         H, W = self.size
+        if self.perspective:
+            d = np.asarray(points_xyz, float) - self.eye
+            depth = -(d @ self.n)
+            col = (d @ self.u / depth - self.principal[0]) / self.slope[0] + W / 2.0 - 0.5
+            row = H / 2.0 - 0.5 - (d @ self.v / depth - self.principal[1]) / self.slope[1]
+            return np.stack([col, row], axis=-1)
+        d = np.asarray(points_xyz, float) - self.target
         col = d @ self.u / self.pixel + W / 2.0 - 0.5
         row = H / 2.0 - 0.5 - d @ self.v / self.pixel
         return np.stack([col, row], axis=-1)
+
+    def depth(self, points_xyz) -> np.ndarray:
+        """Perspective: the distance of world points from the eye along the view axis -n."""
+        return -((np.asarray(points_xyz, float) - self.eye) @ self.n)
+
+    def slopes(self) -> np.ndarray:
+        """Perspective: the ray slopes ``(s_u, s_v)`` of every pixel centre, (H, W, 2)."""
+        H, W = self.size
+        su = self.principal[0] + (np.arange(W) + 0.5 - W / 2.0) * self.slope[0]
+        sv = self.principal[1] + (H / 2.0 - np.arange(H) - 0.5) * self.slope[1]
+        return np.stack(np.broadcast_arrays(su[None, :], sv[:, None]), axis=-1)
+
+    def rays(self) -> np.ndarray:
+        """Perspective: the unit direction of every pixel's ray from the eye, (H, W, 3)."""
+        s = self.slopes()
+        d = -self.n + s[..., :1] * self.u + s[..., 1:] * self.v
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def obliquity(self) -> np.ndarray:
+        """Perspective: the path length per unit depth of every pixel's ray, ``sqrt(1 + s_u^2 + s_v^2)``, (H, W)."""
+        return np.sqrt(1.0 + np.sum(self.slopes() ** 2, axis=-1))
 
     def pixel_centres(self) -> np.ndarray:
         """World centres of all pixels, (H, W, 3)."""
@@ -65,8 +97,8 @@ class Camera:
         shorter side, the same at every view (a turntable keeps its framing).  The content is
         where the model (or volume) is non-zero (``content_box()``), else its voxel box.
     perspective, distance, fov :
-        Perspective projection (ray tracing): eye at ``target + distance * n``,
-        vertical field of view ``fov`` degrees.
+        Perspective projection: eye at ``target + distance * n``, vertical field of view ``fov``
+        degrees (a cone beam whose detector is centred on the axis; :class:`clwave.ConeBeam` for others).
 
     Examples
     --------
@@ -112,8 +144,11 @@ class Camera:
         radius = float(np.max(np.linalg.norm(corners - target, axis=1)))
         extent = self.extent or 2.0 * radius * W / min(H, W)
         distance = self.distance or 2.0 * extent
-        return View(n, u, v, target, (H, W), extent / W, self.perspective,
-                    target + distance * n, self.fov)
+        if not self.perspective:
+            return View(n, u, v, target, (H, W), extent / W, False, target + distance * n, self.fov)
+        slope = 2.0 * np.tan(np.radians(self.fov) / 2.0) / H  # square pixels, the centre on the axis
+        return View(n, u, v, target, (H, W), slope * distance, True, target + distance * n, self.fov,
+                    (slope, slope), (0.0, 0.0))
 
     def rotated(self, degrees) -> "Camera":
         """The same camera turned about the z axis (turntables)."""

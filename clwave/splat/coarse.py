@@ -63,9 +63,10 @@ class Layer:
 
     def __init__(self, view, factor: int):
         H, W = view.size
-        if factor > 1:  # same centre, pixel x factor, a margin around the image
+        if factor > 1:  # same centre, pixel (perspective: ray slope per pixel) x factor, a margin around the image
             size = (-(-H // factor) + 2 * COARSE_MARGIN, -(-W // factor) + 2 * COARSE_MARGIN)
-            view = dataclasses.replace(view, size=size, pixel=view.pixel * factor)
+            slope = None if view.slope is None else (view.slope[0] * factor, view.slope[1] * factor)
+            view = dataclasses.replace(view, size=size, pixel=view.pixel * factor, slope=slope)
         self.view, self.fine, self.factor = view, (H, W), factor
 
     def image(self, pixels: np.ndarray) -> np.ndarray:

@@ -159,10 +159,11 @@ def exact_xray(coeffs, order, spacing, origin, view):
     """Exact X-ray image of the fine-level spline ``sum_i c_i N_j(x - i)`` (float64).
 
     ``coeffs`` (nz, ny, nx[, C]) are the fine B-spline coefficients (``reconstruct()``
-    for the approximating model), ``view`` a resolved camera.  Each pixel's line is cut
-    at every knot plane of the three axes; between knots the integrand is a polynomial
-    of degree 3(j - 1), integrated exactly by Gauss-Legendre.  An oracle for small
-    volumes: it visits every segment of every ray in NumPy.
+    for the approximating model), ``view`` a resolved camera: orthographic (each pixel's line
+    along n through its centre) or perspective (each pixel's ray from the eye, ``View.rays``; the
+    model must lie in front of the eye).  Each line is cut at every knot plane of the three axes;
+    between knots the integrand is a polynomial of degree 3(j - 1), integrated exactly by
+    Gauss-Legendre.  An oracle for small volumes: it visits every segment of every ray in NumPy.
     """
     from ..model.bspline import bspline
 
@@ -171,20 +172,28 @@ def exact_xray(coeffs, order, spacing, origin, view):
     shape = np.array(c.shape[:3][::-1], float)  # (nx, ny, nz)
     d = np.array(spacing[::-1], float)
     H, W = view.size
-    starts = view.pixel_centres().reshape(-1, 3)
-    x0 = world_to_fine(starts, order, c.shape[:3], spacing, origin)[:, ::-1]  # (x, y, z), along p = start + t n
-    w = np.asarray(view.n) / d
+    if view.perspective:
+        starts, directions = np.broadcast_to(view.eye, (H * W, 3)), view.rays().reshape(-1, 3)
+    else:
+        starts, directions = view.pixel_centres().reshape(-1, 3), np.broadcast_to(view.n, (H * W, 3))
+    x0 = world_to_fine(starts, order, c.shape[:3], spacing, origin)[:, ::-1]  # (x, y, z), along p = start + t dir
+    w = np.asarray(directions) / d
     g = (3 * (order - 1)) // 2 + 1
     nodes, weights = np.polynomial.legendre.leggauss(g)
     knots = []  # t where x_a crosses each integer of the support [0, n_a + j], all pixels at once
     for a in range(3):
         planes = np.arange(0, shape[a] + order + 1)
-        if abs(w[a]) > 1e-14:
-            knots.append((planes[None, :] - x0[:, a, None]) / w[a])
-    knots = np.sort(np.concatenate(knots, axis=1), axis=1)  # (P, K); f = 0 outside [first, last]
+        rate = np.where(np.abs(w[:, a]) > 1e-14, w[:, a], 0.0)[:, None]
+        if np.any(rate):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                knots.append((planes[None, :] - x0[:, a, None]) / rate)
+    knots = np.concatenate(knots, axis=1)
+    # a ray along an axis' planes crosses none of them: its crossings there repeat the ray's last one
+    last = np.max(np.where(np.isfinite(knots), knots, -np.inf), axis=1, keepdims=True)
+    knots = np.sort(np.where(np.isfinite(knots), knots, last), axis=1)  # (P, K); f = 0 outside [first, last]
     mid, half = (knots[:, 1:] + knots[:, :-1]) / 2, (knots[:, 1:] - knots[:, :-1]) / 2
     t = mid[..., None] + half[..., None] * nodes  # (P, K - 1, g)
-    x = x0[:, None, None, :] + t[..., None] * w  # fine coordinates of every Gauss point
+    x = x0[:, None, None, :] + t[..., None] * w[:, None, None, :]  # fine coordinates of every Gauss point
     base = np.floor(x).astype(int) - order + 1  # first coefficient whose support holds x
     n_int = shape.astype(int)
     # per axis and offset: the B-spline weight, zero where the coefficient lies off the grid

@@ -23,19 +23,19 @@ from ..device.memory import device_budget, format_size, parse_cap
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.camera import Camera
+from ..model.conebeam import ConeBeam
 from ..model.wavelet import WaveletVolume
 from .coarse import Layer, coarse_factor
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
+from .perspective import ConeTables, depth_range
 from .tables import MAX_LEVELS, ViewTables
 
 COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
 SPLAT_BYTES = 32  # per splat of a pass: centre float2, pixel box int4, texture int, tile count uint
+CONE_SPLAT_BYTES = 40  # perspective: the centre is float4 (col, row, depth, 0)
 #: streamed chunks hold at least this many coefficients: below it, a pass's work over every tile (count
 #: tables, ranges, framebuffer writes) outweighs its splats
 MIN_CHUNK = 1024
-#: a view's device tables (clwave.splat.tables.ViewTables), uploaded by name
-VIEW_TABLES = ("band_tex", "band_origin", "step_col", "step_row", "tex_box", "tex_layer", "layers", "tex_int",
-               "tex_map", "texels")
 
 
 class SplatRenderer:
@@ -80,7 +80,7 @@ class SplatRenderer:
         self.budget = device_budget(self.cc, device_memory)
         start = time.perf_counter()
         # one build per channel count of the groups: a scalar volume accumulates one channel
-        self.stages = {c: Stages(self.cc, c) for c in sorted({len(g.channels) for g in wv.groups})}
+        self.stages = {(c, False): Stages(self.cc, c) for c in sorted({len(g.channels) for g in wv.groups})}
         self.pixel_updates = ReductionKernel(
             self.cc.ctx, np.int64, neutral="0", reduce_expr="a+b", arguments="__global const int4 *bbox",
             map_expr="bbox[i].z < bbox[i].x ? 0 : (long)(bbox[i].z - bbox[i].x + 1) * (bbox[i].w - bbox[i].y + 1)")
@@ -122,14 +122,26 @@ class SplatRenderer:
         return self.groups[0]["energy"] if self.groups else np.zeros(1)
 
     # -------------------------------------------------------------- drawing
-    def begin(self, camera: Camera):
-        """Start an image: resolve the view, make footprints, zero the framebuffers (an :class:`Accumulator`)."""
-        if not isinstance(camera, Camera):
-            raise InputError("camera must be a clwave.Camera")
+    def stage(self, channels: int, perspective: bool) -> Stages:
+        """The kernels for groups of ``channels`` channels, orthographic or perspective (built on first use)."""
+        if (channels, perspective) not in self.stages:
+            start = time.perf_counter()
+            self.stages[(channels, perspective)] = Stages(self.cc, channels, perspective=perspective)
+            self.compile_seconds += time.perf_counter() - start
+        return self.stages[(channels, perspective)]
+
+    def begin(self, camera):
+        """Start an image of a :class:`Camera` or :class:`ConeBeam`: resolve the view, make footprints, zero
+        the framebuffers (an :class:`Accumulator`)."""
+        if not isinstance(camera, (Camera, ConeBeam)):
+            raise InputError("camera must be a clwave.Camera or a clwave.ConeBeam")
         view = camera.view(self.wv)
+        # the world width of a pixel for the coarse framebuffers' error: in perspective the widest, at the far
+        # side of the volume (docs/splatting.md §8)
+        pixel = max(view.slope) * depth_range(view, self.wv, 0)[1] if view.perspective else view.pixel
         # framebuffer factor of each band that has coefficients, per group: 1 unless drawn coarse
         factors = [{(b.level, b.key): coarse_factor(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa",
-                                                      view.pixel, min(self.wv.spacing), self.coarse)
+                                                      pixel, min(self.wv.spacing), self.coarse)
                     if self.coarse else 1 for b in g.bands if (b.level, b.key) in gr["present"]}
                    for g, gr in zip(self.wv.groups, self.groups)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
@@ -139,12 +151,42 @@ class SplatRenderer:
             raise DeviceMemoryError(
                 f"a {H}x{W} image needs {fb_bytes / 2**20:.0f} MiB of framebuffers but {self.cc.info.name} "
                 f"allows {self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
-        tables = [ViewTables(self.wv, gi, [(layer.view, {band for band, f in fg.items() if f == layer.factor})
-                                           for layer in layers], self.omega_s, self.sampling, device=self.cc,
-                             max_texels=self.cc.info.max_alloc // 4)
-                  for gi, fg in enumerate(factors)]
+        per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factor}) for layer in layers]
+                     for fg in factors]
+        if view.perspective:
+            for g in self.wv.groups:
+                self.stage(len(g.channels), True)
+            tables = [ConeTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
+                                 max_texels=self.cc.info.max_alloc // 4)
+                      for gi, ls in enumerate(per_layer)]
+        else:
+            tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
+                                 max_texels=self.cc.info.max_alloc // 4) for gi, ls in enumerate(per_layer)]
         self._prepare(tables, view.size)
         return Accumulator(self, view, layers, tables)
+
+    def render(self, camera) -> RenderResult:
+        """The X-ray image of one view (a :class:`Camera` or :class:`ConeBeam`) from every coefficient."""
+        return RenderResult(*_splat_range(self, camera, 0, self.count))
+
+    def views(self, cameras):
+        """:class:`RenderResult` of each camera in turn: the coefficients stay on the device and the kernels
+        built, so a view costs its footprints, binning and accumulation only (docs/splatting.md §8)."""
+        for camera in cameras:
+            yield self.render(camera)
+
+    def render_many(self, cameras, out=None) -> np.ndarray:
+        """Images of many views (poses) of one size as an (N, H, W, C) float32 array, or into ``out`` (an
+        array of that shape, e.g. ``numpy.lib.format.open_memmap`` to stream them to a file)."""
+        cameras = list(cameras)
+        for i, res in enumerate(self.views(cameras)):
+            if out is None:
+                out = np.empty((len(cameras),) + res.image.shape, np.float32)
+            if out.shape != (len(cameras),) + res.image.shape:
+                raise InputError(f"out has shape {out.shape}, the views need {(len(cameras),) + res.image.shape} "
+                                 "(every view must have the same size)")
+            out[i] = res.image
+        return np.zeros((0,), np.float32) if out is None else out
 
     # -------------------------------------------------------------- device memory
     def _prepare(self, tables: list, size):
@@ -155,15 +197,18 @@ class SplatRenderer:
         if sizes != self._sizes:  # count tables of other sizes: the pool's held buffers go
             self.scratch.free_held()
             self._sizes = sizes
+        centre = 4 if isinstance(tables[0], ConeTables) else 2  # floats per splat centre
         if chunk != self.chunk:  # from all on the device to streamed, or another chunk: the last buffers go
             self._resident = self._work = None
             self.chunk = chunk
+        if self._work is not None and self._work["centre"].shape[1] != centre:
+            self._work = None
         q = self.cc.queue
         if chunk is None and self._resident is None:
             self._resident = [tuple(cla.to_device(q, a) for a in _pack(g["table"], 0, g["count"])) for g in self.groups]
         if self._work is None:
             n = max(chunk or max(g["count"] for g in self.groups), 1)
-            self._work = dict(centre=cla.empty(q, (n, 2), np.float32), bbox=cla.empty(q, (n, 4), np.int32),
+            self._work = dict(centre=cla.empty(q, (n, centre), np.float32), bbox=cla.empty(q, (n, 4), np.int32),
                               stex=cla.empty(q, (n,), np.int32), counts=cla.empty(q, (n,), np.uint32))
             if chunk is not None:
                 self._work.update(coef=cla.empty(q, (n, 4), np.int32), values=cla.empty(q, (n, 4), np.float32))
@@ -177,17 +222,18 @@ class SplatRenderer:
         runs = max(t.tiles * max(t.layer_textures, default=0) for t in tables)
         one_splat = max(t.tiles for t in tables) * max(st.record_bytes for st in self.stages.values())
         # framebuffers, the view's tables and texel pool, and a pass's tile ranges
-        fixed = sum(16 * t.pixels + sum(getattr(t, name).nbytes for name in VIEW_TABLES) + 8 * t.tiles
+        fixed = sum(16 * t.pixels + sum(getattr(t, name).nbytes for name in t.names) + 8 * t.tiles
                     for t in tables)
         free = b.total - fixed - tile_list_bytes(b) - bin_table_bytes(runs, b)
-        if COEFFICIENT_BYTES * sum(counts) + SPLAT_BYTES * most <= free and 16 * most <= b.max_alloc:
+        splat_bytes = CONE_SPLAT_BYTES if isinstance(tables[0], ConeTables) else SPLAT_BYTES
+        if COEFFICIENT_BYTES * sum(counts) + splat_bytes * most <= free and 16 * most <= b.max_alloc:
             return None
-        chunk = min(free // (COEFFICIENT_BYTES + SPLAT_BYTES), b.max_alloc // 16, most)
+        chunk = min(free // (COEFFICIENT_BYTES + splat_bytes), b.max_alloc // 16, most)
         if chunk >= least and tile_list_bytes(b) >= one_splat:
             return int(chunk)
         # the least total T with T (1 - shares) >= fixed + a least chunk, the count tables at their floor where
         # that is more, and tile lists for one splat over every tile
-        base = fixed + (COEFFICIENT_BYTES + SPLAT_BYTES) * least
+        base = fixed + (COEFFICIENT_BYTES + splat_bytes) * least
         need = max(base / (1 - TILE_LIST_SHARE - BIN_TABLE_SHARE), (base + 12 * runs) / (1 - TILE_LIST_SHARE),
                    one_splat / TILE_LIST_SHARE)
         H, W = size
@@ -208,7 +254,7 @@ class Accumulator:
     def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list):
         self.r, self.view, self.layers, self.tables = renderer, view, layers, tables
         cc = renderer.cc
-        self.device_tables = [{name: cc.upload(getattr(t, name)) for name in VIEW_TABLES} for t in tables]
+        self.device_tables = [{name: cc.upload(getattr(t, name)) for name in t.names} for t in tables]
         self.fbs = [cla.zeros(cc.queue, (t.pixels * 4,), np.float32) for t in tables]
         self.stats = dict(splats=0, pairs=0, pixel_updates=0, chunks=0, bin_seconds=0.0, accumulate_seconds=0.0,
                           upload_seconds=0.0, upsample_seconds=0.0)
@@ -248,7 +294,7 @@ class Accumulator:
         """Splat coefficients ``first .. first + n`` of the device arrays ``coef``, ``values`` of group ``gi``."""
         r, q = self.r, self.r.cc.queue
         g, t, tables, w = r.groups[gi], self.device_tables[gi], self.tables[gi], r._work
-        st = r.stages[g["channels"]]
+        st = r.stage(g["channels"], self.view.perspective)
         start = time.perf_counter()
         centre, bbox, stex, counts = w["centre"], w["bbox"], w["stex"], w["counts"]  # the first n are this pass's
         st.project(n, first, coef, t, centre, bbox, stex, counts)
@@ -317,12 +363,15 @@ class Accumulator:
                                              if drawn)  # a layer may draw nothing of this group
         if len(self.layers) > 1:
             self.stats["upsample_seconds"] += time.perf_counter() - start
+        if self.view.perspective:  # the path length per unit depth of each pixel's ray (docs/splatting.md §8)
+            out *= self.view.obliquity().astype(np.float32)[..., None]
         return out
 
 
-def splat(wv: WaveletVolume, camera: Camera, device=None, *, omega_s=None, sampling="auto", coarse=None,
+def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="auto", coarse=None,
           device_memory=None, scheduler=None, renderer: SplatRenderer | None = None) -> RenderResult:
-    """X-ray image of a wavelet volume by wavelet splatting.
+    """X-ray image of a wavelet volume by wavelet splatting, through a :class:`Camera` (orthographic or
+    perspective) or a :class:`ConeBeam` (docs/splatting.md §8).
 
     Returns a :class:`RenderResult` whose ``image`` (H, W, C) holds the line integral of
     each channel in world units and whose ``meta`` reports the coefficients splatted,
@@ -356,8 +405,8 @@ def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
     from ..schedulers import client_for
 
     check_model_file(wv, "splatting")  # before any worker starts
-    if not isinstance(camera, Camera):
-        raise InputError("camera must be a clwave.Camera")
+    if not isinstance(camera, (Camera, ConeBeam)):
+        raise InputError("camera must be a clwave.Camera or a clwave.ConeBeam")
     with client_for(scheduler) as client:  # which checks the scheduler before starting anything
         shares = workers_of(client)
         results = render_parts(client, _splat_share, wv.source, [(i, shares) for i in range(shares)], device,

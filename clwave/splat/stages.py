@@ -28,6 +28,13 @@ _CHUNK_TILES = Kernel("splat_chunk_tiles", ("n", U32), ("chunk", U32), ("chunks"
 _TRANSPOSE = Kernel("transpose_counts", ("rows", U32), ("cols", U32), ("src", BUFFER), ("dst", BUFFER))
 _TILE_RANGES = Kernel("tile_ranges", ("tiles", U32), ("textures", U32), ("chunks", U32), ("total", U32),
                       ("offset", BUFFER), ("ranges", BUFFER))
+_PROJECT_CONE = Kernel("splat_project_cone", ("n", U32), ("first", U32), ("coef", BUFFER), ("band_tex", BUFFER),
+                       ("band_world", BUFFER), ("band_step", BUFFER), ("tex_box", BUFFER), ("tex_layer", BUFFER),
+                       ("layers", BUFFER), ("layer_slope", BUFFER), ("cone", BUFFER), ("centre", BUFFER),
+                       ("bbox", BUFFER), ("stex", BUFFER), ("count", BUFFER))
+_ACCUMULATE_CONE = Kernel("splat_accumulate_cone", ("layer_count", I32), ("layers", BUFFER), ("layer_slope", BUFFER),
+                          ("cone", BUFFER), ("ranges", BUFFER), ("records", BUFFER), ("tex_int", BUFFER),
+                          ("tex_map", BUFFER), ("texels", BUFFER), ("fb", BUFFER))
 _ACCUMULATE = Kernel("splat_accumulate", ("layer_count", I32), ("layers", BUFFER), ("ranges", BUFFER),
                      ("records", BUFFER), ("tex_int", BUFFER), ("tex_map", BUFFER), ("texels", BUFFER),
                      ("fb", BUFFER))
@@ -71,19 +78,27 @@ class Stages:
 
     ``variant`` is the accumulation kernel: ``"cpu"`` (``cl/splat/raster_cpu.cl``, a work-item per
     tile) or ``"gpu"`` (``cl/splat/raster_gpu.cl``, a work-item per pixel); default by the device.
+    ``perspective``: the cone-beam kernels of ``cl/splat/cone.cl`` (docs/splatting.md §8) project and
+    accumulate instead, in the same two layouts (a work-item per tile, or per pixel).
     ``tables`` arguments are a view's uploaded :class:`~clwave.splat.tables.ViewTables` by name.
     """
 
-    def __init__(self, cc, channels: int, variant=None):
-        self.cc, self.channels = cc, channels
+    def __init__(self, cc, channels: int, variant=None, perspective=False):
+        self.cc, self.channels, self.perspective = cc, channels, perspective
         self.variant = variant or ("gpu" if cc.info.kind == "GPU" else "cpu")
-        defines = dict(CLW_CHANNELS=channels, CLW_RECORD=record_uint4s(channels))
-        if self.variant == "gpu":
+        uint4s = record_uint4s(channels, perspective)
+        defines = dict(CLW_CHANNELS=channels, CLW_RECORD=uint4s)
+        if self.variant == "gpu" and not perspective:
             defines["CLW_PX"] = GPU_PIXELS
-        self.kernels = programs.build(cc, ["splat/bin.cl", f"splat/raster_{self.variant}.cl"], defines)
-        self.record_bytes = 16 * record_uint4s(channels)
-        # work-items per tile: one on CPUs (raster_cpu.cl), TILE^2 / GPU_PIXELS on GPUs
-        self.accumulate_local = TILE * TILE // GPU_PIXELS if self.variant == "gpu" else 1
+        if perspective:
+            defines["CLW_PERSPECTIVE"] = 1
+            if self.variant == "cpu":
+                defines["CLW_CONE_TILE"] = 1
+        self.kernels = programs.build(cc, ["splat/bin.cl", "splat/cone.cl" if perspective else
+                                           f"splat/raster_{self.variant}.cl"], defines)
+        self.record_bytes = 16 * uint4s
+        # work-items per tile: one on CPUs (raster_cpu.cl, cone.cl), TILE^2 / GPU_PIXELS on GPUs (TILE^2: cone.cl)
+        self.accumulate_local = TILE * TILE // (1 if perspective else GPU_PIXELS) if self.variant == "gpu" else 1
         # binning chunks: on a CPU one work-item per group, so the few chunks spread over the cores
         self.bin_local = None if cc.info.kind == "GPU" else (1,)
         self._scan = ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")
@@ -97,8 +112,9 @@ class Stages:
 
     def project(self, n, first, coef, tables, centre, bbox, stex, count):
         """Each splat's pixel centre, pixel box, texture and tile count (0: culled)."""
-        _PROJECT(self.kernels, self.cc.queue, (n,), None, tables, n=n, first=first, coef=coef,
-                 centre=centre, bbox=bbox, stex=stex, count=count)
+        (_PROJECT_CONE if self.perspective else _PROJECT)(self.kernels, self.cc.queue, (n,), None, tables, n=n,
+                                                          first=first, coef=coef, centre=centre, bbox=bbox, stex=stex,
+                                                          count=count)
 
     def count(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, pairs=0):
         """Per chunk of consecutive splats, its splats per (tile, texture), chunk-major (``pairs``: the
@@ -130,7 +146,7 @@ class Stages:
         local, q = self.accumulate_local, self.cc.queue
         r = ranges.get().reshape(-1, 2).astype(np.int64)
         work = np.concatenate([[0], np.cumsum(r[:, 1] - r[:, 0] + 1)])
-        in_bands(q, lambda first, count: _ACCUMULATE(
+        in_bands(q, lambda first, count: (_ACCUMULATE_CONE if self.perspective else _ACCUMULATE)(
             self.kernels, q, (count * local,), (local,), tables, global_offset=(first * local,),
             layer_count=layer_count, ranges=ranges, records=records, fb=fb), tiles, work=work,
             pace=self.paces["accumulate"])

@@ -52,6 +52,10 @@ class ViewTables:
     not drawn in an earlier layer.  Bands drawn nowhere are culled (``band_tex = -1``).
     """
 
+    #: the device tables, uploaded by name
+    names = ("band_tex", "band_origin", "step_col", "step_row", "tex_box", "tex_layer", "layers", "tex_int",
+             "tex_map", "texels")
+
     def __init__(self, wv: WaveletVolume, group: int, layers, omega_s=None, sampling="auto", device=None,
                  max_texels=None):
         g = wv.groups[group]
@@ -70,11 +74,8 @@ class ViewTables:
                 band = (b.level, b.key)
                 if band in self.layer_of or (bands is not None and band not in bands):
                     continue
-                # texels of exactly 1/P pixel (cl/splat/raster.h), at least the band of eq. 36 and the
-                # least band of the level's own prototype (clwave.splat.textures); Haar and linear footprints
-                # have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level
-                least = DEFAULT_OMEGA_MIN[wav.order] / 2.0 ** b.level if wav.order >= 3 else KINKED_OMEGA_MIN
-                P = max(2, int(np.ceil(max(omega, least) * view.pixel / (np.pi * min(wv.spacing)) - 1e-9)))
+                # texels of exactly 1/P pixel (cl/splat/raster.h)
+                P = texels_per_pixel(wav.order, b.level, omega, view.pixel, min(wv.spacing))
                 self.layer_of[band] = li
                 self.texels_per_pixel[band] = P * (CELL_REFINE if sampling == "cells" else 1)
                 texel[band] = view.pixel / self.texels_per_pixel[band]
@@ -134,11 +135,17 @@ class ViewTables:
             if origins:
                 self.band_origin[list(origins)] = view.to_pixels(np.array(list(origins.values())))
             self.layer_textures.append(len(ints) - first_tex)
-        self.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
-        self.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
-        self.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
-        self.tex_layer = np.array(tex_layer or [(0, 0)], np.int32).reshape(-1, 2)
-        self.texels = np.concatenate(pool + [np.zeros(2 * POOL_GUARD)]).astype(np.float32)
+        set_texture_tables(self, boxes, ints, maps, tex_layer, pool)
+
+
+def set_texture_tables(tables, boxes, ints, maps, tex_layer, pool):
+    """The per-texture device tables from their rows (``tex_box``, ``tex_int``, ``tex_map``, ``tex_layer``;
+    one dummy row where a view draws nothing) and the texel pool with its guard of zeros after it."""
+    tables.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
+    tables.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
+    tables.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
+    tables.tex_layer = np.array(tex_layer or [(0, 0)], np.int32).reshape(-1, 2)
+    tables.texels = np.concatenate(pool + [np.zeros(2 * POOL_GUARD)]).astype(np.float32)
 
 
 def _axis_box(count, centre, steps, cell) -> tuple:
@@ -159,6 +166,14 @@ def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
     rows = np.zeros((nv + 3, cols * P), np.float32)
     rows[1:nv + 1, P:P + nu] = data  # texel iu at P + iu: column (iu // P) + 1 of plane iu % P
     return np.ascontiguousarray(rows.reshape(nv + 3, cols, P).transpose(2, 0, 1))
+
+
+def texels_per_pixel(order: int, level: int, omega: float, pixel: float, d_min: float) -> int:
+    """P, the texels per pixel of a band's texture (docs/splatting.md §2): at least the band ``omega`` of
+    eq. 36 and the least band of the level's own prototype (:data:`DEFAULT_OMEGA_MIN`); Haar and linear
+    footprints have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level."""
+    least = DEFAULT_OMEGA_MIN[order] / 2.0 ** level if order >= 3 else KINKED_OMEGA_MIN
+    return max(2, int(np.ceil(max(omega, least) * pixel / (np.pi * d_min) - 1e-9)))
 
 
 def default_omega_s(pixel, min_spacing) -> float:

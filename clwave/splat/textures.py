@@ -51,7 +51,8 @@ class Texture:
     """One sampled footprint ``T_{level,key}``.
 
     ``data[iv, iu] = T(a, b)`` at ``a = (iu - centre_u) h_u``, ``b = (iv - centre_v) h_v``
-    (world units; rows run along v, columns along u).
+    (world units; rows run along v, columns along u).  A perspective view's textures hold one such
+    per node of its slope grid, ``data[node, iv, iu]`` (:mod:`clwave.splat.perspective`).
 
     Attributes
     ----------
@@ -89,7 +90,7 @@ class Texture:
 
     def coordinates(self) -> tuple:
         """World offsets ``(a, b)`` of the columns and rows from the support centre."""
-        nv, nu = self.data.shape
+        nv, nu = self.data.shape[-2:]
         return (np.arange(nu) - self.centre_u) * self.h_u, (np.arange(nv) - self.centre_v) * self.h_v
 
     @property

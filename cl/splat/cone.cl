@@ -1,0 +1,197 @@
+/* cl/splat/cone.cl: perspective (cone-beam) splatting, docs/splatting.md §8.
+ *
+ * Built with -DCLW_PERSPECTIVE beside bin.cl (whose binning it shares; records carry the splat's depth,
+ * cl/splat/record.h).  The ray of a pixel leaves the eye E along -n + s_u u + s_v v (slopes s); at the
+ * depth z_c of a splat's centre X it passes X + w, w = z_c (s - s_c) in the plane through X parallel
+ * to the detector.  Its integral over the basis function is G_s(w) = ∫ B(X + w + t (n - s_u u - s_v v)) dt
+ * times the path length per unit depth sqrt(1 + |s|^2) (applied to the image on the host): exact.  The
+ * footprint G_s depends on the slope, so every texture holds G at a grid of slopes (nodes) and each
+ * pixel interpolates bilinearly between the four nodes around its own slope.
+ *
+ * Tables (clwave.splat.perspective.ConeTables):
+ *   band_world  (64,) float4: world centre (x, y, z) of coefficient k = 0 of each band
+ *   band_step   (64,) float4: world step per unit k_x, k_y, k_z (2^m d_x, 2^m d_y, 2^m d_z)
+ *   band_tex    (64,) int: texture of each band, -1 when it is not drawn
+ *   tex_box     (T,) float4: texture box in world units about the centre (a_min, a_max, b_min, b_max)
+ *   tex_int     (T,) int4: (offset of node 0's first texel, row stride, node stride, rows); every node
+ *               is (rows, row stride) texels with a zero margin of one texel all round
+ *   tex_map     (T,) float4: (centre_u, centre_v) in texels of the unpadded texture, 1/h_u, 1/h_v
+ *   tex_layer, layers: as bin.cl
+ *   layer_slope (L,) float4: slope per pixel (sigma_u, sigma_v) of each layer
+ *   cone        (6,) float4: eye, n, u, v; (s0_u, s0_v, lo_u, lo_v): the image centre's slopes and the
+ *               first node's; (1 / step_u, 1 / step_v, nodes_u, nodes_v) of the slope grid, row-major by v */
+#include "splat/record.h"
+
+#ifndef CLW_PERSPECTIVE
+#error "cone.cl is built with CLW_PERSPECTIVE"
+#endif
+
+/* The index of the layer holding a tile, and the tile's corner pixel in it */
+inline int cone_layer(const int tile, const int layer_count, __global const int4 *layers, int2 *corner)
+{
+    int l = 0;
+    while (l + 1 < layer_count && layers[l + 1].z <= tile)
+        ++l;
+    const int tiles_x = (layers[l].x + CLW_TILE - 1) / CLW_TILE, index = tile - layers[l].z;
+    *corner = (int2)(index % tiles_x, index / tiles_x) * CLW_TILE;
+    return l;
+}
+
+/* splat_project_cone: as bin.cl's splat_project, through the eye.
+ *   centre  out (n,) float4: pixel (col, row) of the support centre in its layer, its depth, 0
+ *   (the others as splat_project)
+ * A splat whose centre is not in front of the eye is culled (the host refuses such views).
+ * Grid: global (n,), any local size. */
+__kernel void splat_project_cone(const uint n, const uint first, __global const int4 *coef,
+                                 __global const int *band_tex, __global const float4 *band_world,
+                                 __global const float4 *band_step, __global const float4 *tex_box,
+                                 __global const int2 *tex_layer, __global const int4 *layers,
+                                 __global const float4 *layer_slope, __global const float4 *cone,
+                                 __global float4 *centre, __global int4 *bbox, __global int *stex,
+                                 __global uint *count)
+{
+    const uint i = get_global_id(0);
+    if (i >= n)
+        return;
+    const int4 c = coef[first + i];
+    const int tex = band_tex[c.w];
+    const float4 step = band_step[c.w];
+    const float4 x = band_world[c.w] + (float4)((float)c.x * step.x, (float)c.y * step.y, (float)c.z * step.z, 0.0f);
+    const float4 d = x - cone[0];
+    const float depth = -dot(d, cone[1]);
+    int4 box = (int4)(0, 0, -1, -1);
+    uint cnt = 0;
+    float col = 0.0f, row = 0.0f;
+    if (tex >= 0 && depth > 0.0f) {
+        const float4 b = tex_box[tex];
+        const int l = tex_layer[tex].x;
+        const int4 layer = layers[l];
+        const float2 sigma = layer_slope[l].xy, s0 = cone[4].xy;
+        col = (dot(d, cone[2]) / depth - s0.x) / sigma.x + 0.5f * (float)layer.x - 0.5f;
+        row = 0.5f * (float)layer.y - 0.5f - (dot(d, cone[3]) / depth - s0.y) / sigma.y;
+        /* the texture box in pixels: world offsets w at the splat's depth, w = depth * sigma * pixels */
+        const float pu = 1.0f / (depth * sigma.x), pv = 1.0f / (depth * sigma.y);
+        const float x0 = fmax(ceil(col + b.x * pu), 0.0f), x1 = fmin(floor(col + b.y * pu), (float)(layer.x - 1));
+        const float y0 = fmax(ceil(row - b.w * pv), 0.0f), y1 = fmin(floor(row - b.z * pv), (float)(layer.y - 1));
+        if (x0 <= x1 && y0 <= y1) {
+            box = (int4)((int)x0, (int)y0, (int)x1, (int)y1);
+            cnt = (uint)((box.z / CLW_TILE - box.x / CLW_TILE + 1) * (box.w / CLW_TILE - box.y / CLW_TILE + 1));
+        }
+    }
+    centre[i] = (float4)(col, row, depth, 0.0f);
+    bbox[i] = box;
+    stex[i] = tex;
+    count[i] = cnt;
+}
+
+/* One node's texel (iu, iv) by bilinear weights fu, fv; t points at (0, 0) of the padded node */
+inline float cone_bilinear(__global const float *t, const int stride, const float fu, const float fv)
+{
+    return (1.0f - fv) * ((1.0f - fu) * t[0] + fu * t[1]) + fv * ((1.0f - fu) * t[stride] + fu * t[stride + 1]);
+}
+
+/* The node cell of the slope grid for slope s along one axis: its first node (returned) and the weight of
+ * the next (slopes beyond the grid take its edge).  lo, inv: the first node's slope and 1 / step. */
+inline int cone_cell(const float s, const float lo, const float inv, const int nodes, float *w)
+{
+    const float g = clamp((s - lo) * inv, 0.0f, (float)(nodes - 1));
+    const int i = min((int)g, nodes - 2);
+    *w = g - (float)i;
+    return i;
+}
+
+/* A splat's sample at texel (tu, tv) between the four nodes at t (node n), t + 1 node, t + ku nodes and
+ * t + ku + 1 nodes with slope weights (wu, wv); ti: the texture's tex_int.  Clamped onto the zero margin
+ * (index -1 .. size - 1 of the unpadded texture, +1 for the margin). */
+inline float cone_sample(__global const float *texels, const int4 ti, const int node, const int ku, const float tu,
+                         const float tv, const float wu, const float wv)
+{
+    const float fiu = floor(tu), fiv = floor(tv);
+    const int iu = clamp((int)fiu, -1, ti.y - 3), iv = clamp((int)fiv, -1, ti.w - 3);
+    const float fu = tu - fiu, fv = tv - fiv;
+    __global const float *t = texels + ti.x + (iv + 1) * ti.y + (iu + 1) + node * ti.z;
+    const float s00 = cone_bilinear(t, ti.y, fu, fv), s01 = cone_bilinear(t + ti.z, ti.y, fu, fv);
+    const float s10 = cone_bilinear(t + ku * ti.z, ti.y, fu, fv);
+    const float s11 = cone_bilinear(t + (ku + 1) * ti.z, ti.y, fu, fv);
+    return (1.0f - wv) * ((1.0f - wu) * s00 + wu * s01) + wv * ((1.0f - wu) * s10 + wu * s11);
+}
+
+/* splat_accumulate_cone: add every tile's records to the framebuffers.
+ *   ranges, records, layers, fb: as cl/splat/raster.h (records sorted by tile, texture, importance)
+ *   tex_int, tex_map, texels, layer_slope, cone: the tables above (texels with 16 zeros before)
+ * A pixel's slope sets its cell in the node grid (4 nodes, bilinear weights); per splat its texel
+ * position is w / h = depth * sigma * (pixel - centre) / h, and it reads 2 x 2 texels of each node.
+ * Grid, -DCLW_CONE_TILE (CPUs): a work-item per tile, its pixels in private memory, the columns' texel
+ * positions computed once per splat; otherwise (GPUs): a work-group of CLW_TILE^2 items per tile, a
+ * pixel each.  Either with the global offset of a band of tiles.
+ * Assumes: every pixel owned by one work-item, splats in sorted order: bit-identical repeats. */
+__kernel void splat_accumulate_cone(const int layer_count, __global const int4 *layers,
+                                    __global const float4 *layer_slope, __global const float4 *cone,
+                                    __global const uint2 *ranges, __global const uint4 *records,
+                                    __global const int4 *tex_int, __global const float4 *tex_map,
+                                    __global const float *texels, __global float4 *fb)
+{
+#ifdef CLW_CONE_TILE
+    const int tile = get_global_id(0);
+#else
+    const int tile = get_global_id(0) / (CLW_TILE * CLW_TILE);
+    const int lid = get_local_id(0), lx = lid % CLW_TILE, ly = lid / CLW_TILE;
+#endif
+    int2 corner;
+    const int l = cone_layer(tile, layer_count, layers, &corner);
+    const int4 layer = layers[l];
+    const float2 sigma = layer_slope[l].xy;
+    const float4 grid = cone[4], cells = cone[5];
+    const int ku = (int)cells.z, kv = (int)cells.w;
+    const uint2 r = ranges[tile];
+#ifdef CLW_CONE_TILE
+    float4 acc[CLW_TILE][CLW_TILE];
+    int ncol[CLW_TILE], nrow[CLW_TILE];
+    float wcol[CLW_TILE], wrow[CLW_TILE], tcol[CLW_TILE];
+    for (int i = 0; i < CLW_TILE; ++i) {
+        const float su = grid.x + ((float)(corner.x + i) + 0.5f - 0.5f * (float)layer.x) * sigma.x;
+        const float sv = grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y;
+        ncol[i] = cone_cell(su, grid.z, cells.x, ku, &wcol[i]);
+        nrow[i] = cone_cell(sv, grid.w, cells.y, kv, &wrow[i]) * ku;
+        for (int j = 0; j < CLW_TILE; ++j)
+            acc[i][j] = (float4)(0.0f);
+    }
+    for (uint k = r.x; k < r.y; ++k) {
+        int4 bx;
+        float4 cen, c;
+        const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &c);
+        const int4 ti = tex_int[tex];
+        const float4 tm = tex_map[tex];
+        const float ru = cen.z * sigma.x * tm.z, rv = cen.z * sigma.y * tm.w;  /* texels per pixel */
+        for (int x = bx.x; x <= bx.z; ++x)
+            tcol[x] = tm.x + ((float)(corner.x + x) - cen.x) * ru;
+        for (int y = bx.y; y <= bx.w; ++y) {
+            const float tv = tm.y + (cen.y - (float)(corner.y + y)) * rv;
+            for (int x = bx.x; x <= bx.z; ++x)
+                acc[y][x] += c * cone_sample(texels, ti, nrow[y] + ncol[x], ku, tcol[x], tv, wcol[x], wrow[y]);
+        }
+    }
+    for (int y = 0; y < CLW_TILE && corner.y + y < layer.y; ++y)
+        for (int x = 0; x < CLW_TILE && corner.x + x < layer.x; ++x)
+            fb[layer.w + (corner.y + y) * layer.x + corner.x + x] += acc[y][x];
+#else
+    const int x = corner.x + lx, y = corner.y + ly;
+    float wu, wv;
+    const int nu = cone_cell(grid.x + ((float)x + 0.5f - 0.5f * (float)layer.x) * sigma.x, grid.z, cells.x, ku, &wu);
+    const int nv = cone_cell(grid.y + (0.5f * (float)layer.y - (float)y - 0.5f) * sigma.y, grid.w, cells.y, kv, &wv);
+    float4 acc = (float4)(0.0f);
+    for (uint k = r.x; k < r.y; ++k) {
+        int4 bx;
+        float4 cen, c;
+        const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &c);
+        if (lx < bx.x || lx > bx.z || ly < bx.y || ly > bx.w)
+            continue;
+        const float4 tm = tex_map[tex];
+        const float tu = tm.x + ((float)x - cen.x) * cen.z * sigma.x * tm.z;
+        const float tv = tm.y + (cen.y - (float)y) * cen.z * sigma.y * tm.w;
+        acc += c * cone_sample(texels, tex_int[tex], nv * ku + nu, ku, tu, tv, wu, wv);
+    }
+    if (x < layer.x && y < layer.y)
+        fb[layer.w + y * layer.x + x] += acc;
+#endif
+}

@@ -1,0 +1,100 @@
+"""``clwave drr``: digitally reconstructed radiographs, one per cone-beam pose (docs/coordinates.md §5), by
+perspective splatting (docs/splatting.md §8), streamed to one ``.npy`` stack."""
+
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .options import add_command, build_model, check_outputs, numbers, parse_device_memory, parse_window
+
+
+def read_pose_table(path) -> list:
+    """The rows of a CSV pose table (a header of column names, then numbers) as dicts."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"pose table {path} does not exist")
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        rows = []
+        for line, row in enumerate(reader, 2):
+            try:
+                rows.append({k.strip(): float(v) for k, v in row.items() if k is not None and v not in (None, "")})
+            except (AttributeError, ValueError):
+                raise InputError(f"{path}, line {line}: every value must be a number") from None
+    if not rows:
+        raise InputError(f"pose table {path} has no poses (a header line of column names, then one pose a line)")
+    return rows
+
+
+def run(args):
+    from ..io.files import write_atomic
+    from ..io.result import RenderResult
+    from ..model.conebeam import poses, transmitted
+    from ..splat.renderer import SplatRenderer
+
+    out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png")))
+    H, W = (int(v) for v in (numbers(args.size, "--size", (1, 2), int, "x") * 2)[:2])
+    pixel = numbers(args.pixel, "--pixel", (1, 2))
+    cameras = poses(read_pose_table(args.poses), (H, W), pixel if len(pixel) == 2 else pixel[0],
+                    args.dso, args.dsd, numbers(args.offset, "--offset", (2,)), numbers(args.isocentre, "--isocentre",
+                                                                                       (3,)))
+    if out.suffix.lower() == ".png" and len(cameras) != 1:
+        raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy")
+    device_memory = parse_device_memory(args)
+    wv, _ = build_model(args)
+    if wv.channels != 1:
+        raise InputError("radiographs need a one-channel (attenuation) volume; do not classify it (--tf)")
+    renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse,
+                             device_memory=device_memory)
+    for cb in cameras:  # every pose checked before the first is rendered
+        cb.view(wv)
+    start = time.perf_counter()
+
+    def image(res):
+        return transmitted(res.image[..., 0]) if args.intensity else res.image[..., 0]
+
+    if out.suffix.lower() == ".png":
+        res = renderer.render(cameras[0])
+        RenderResult(image(res)[..., None], res.meta).save(out, window=parse_window(args), overwrite=args.force)
+    else:
+        def write(fh):  # the .npy header, then each radiograph as it is rendered
+            np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
+                                                          shape=(len(cameras), H, W)))
+            for res in renderer.views(cameras):
+                fh.write(np.ascontiguousarray(image(res), "<f4").tobytes())
+
+        write_atomic(out, write, args.force)
+    seconds = time.perf_counter() - start
+    kind = "transmitted intensities" if args.intensity else "line integrals"
+    print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}) in {seconds:.2f} s, {seconds / len(cameras):.3f} s "
+          f"each, on {renderer.cc.info.name}: {out}")
+    return 0
+
+
+def add_parser(sub):
+    p = add_command(sub, "drr", "digitally reconstructed radiographs: cone-beam X-rays of many poses", run,
+                    "output .npy (N, H, W) float32 stack, or .png for one pose")
+    p.add_argument("--poses", required=True, help="CSV pose table: a header line naming columns among azimuth, "
+                   "elevation, roll, dso, dsd, offset_u, offset_v, isocentre_x/_y/_z (degrees, world units), or "
+                   "p00..p23 (a 3x4 projection matrix), then one pose a line (docs/coordinates.md §5)")
+    g = p.add_argument_group("detector (defaults for every pose)")
+    g.add_argument("--size", default="512", help="detector pixels N or HxW (default 512)")
+    g.add_argument("--pixel", default="1.0", help="detector pixel spacing, or DV,DU (world units; default 1)")
+    g.add_argument("--dso", type=float, default=1000.0, help="source-to-isocentre distance (default 1000)")
+    g.add_argument("--dsd", type=float, default=1500.0, help="source-to-detector distance (default 1500)")
+    g.add_argument("--offset", default="0,0", help="principal point A,B from the detector's centre (default 0,0)")
+    g.add_argument("--isocentre", default="0,0,0", help="world X,Y,Z the principal ray passes (default 0,0,0)")
+    g.add_argument("--intensity", action="store_true", help="Beer-Lambert transmitted intensity exp(-line "
+                   "integral) instead of the line integrals (a --hu-to-mu CT: mu per mm)")
+    g.add_argument("--window", dest="display_window", default="auto", help=".png display window: auto or LO,HI")
+    g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
+    g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
+    g.add_argument("--coarse", type=float, help="draw coarse cubic bands into coarser framebuffers within this "
+                   "error relative to the image maximum (e.g. 1e-2; default: off)")
+    g.add_argument("--device-memory", metavar="SIZE", help="device memory to use at most, e.g. 2GiB")
+    return p

@@ -1,0 +1,222 @@
+"""Cone-beam X-ray geometry (docs/coordinates.md §5): a point source and a flat detector, as C-arms and
+CT gantries have, for digitally reconstructed radiographs.
+
+World units and axes are those of docs/coordinates.md (RAS+ millimetres for medical files).  The source
+sits at ``isocentre + dso n`` and the detector, perpendicular to n, ``dsd`` from the source on the other
+side; n, u, v are the frame of paper eq. 31 for the gantry angles (azimuth, elevation), turned by
+``roll`` about n; detector columns run along u and rows down v, row 0 at the top.  A detector point at
+``(a, b)`` mm from the foot of the source's perpendicular is hit by the ray of slopes
+``(a, b) / dsd``: the ray leaves the source along ``-n + (a / dsd) u + (b / dsd) v``.
+
+A 3 x 4 projection matrix P maps homogeneous world points ``(x, y, z, 1)`` to homogeneous pixel
+coordinates ``(col w, row w, w)`` with pixel centres at whole (col, row), row 0 at the top; ``w`` is the
+depth along -n.  ``P = K [R | -R source]`` with ``R = (u, -v, -n)`` as rows and
+``K = [[1/σ_u, 0, c_col], [0, 1/σ_v, c_row], [0, 0, 1]]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from ..errors import InputError, finite_number
+from .camera import View, _content_box, _size, _vector
+from .geometry import view_frame
+
+
+class ConeBeam:
+    """A cone-beam projection: source, detector and pose (docs/coordinates.md §5).
+
+    Parameters
+    ----------
+    dso, dsd : float
+        Source-to-isocentre and source-to-detector distances, world units (mm).
+    size : int or (H, W)
+        Detector pixels (rows, columns).
+    pixel : float or (dv, du)
+        Detector pixel spacing, world units: one number for square pixels, or (row, column) spacing.
+    offset : (a, b)
+        Principal-point offset: where the source's perpendicular meets the detector, in world units from
+        the detector's centre along u and v (TIGRE's ``offDetector`` with the sign turned, see
+        :meth:`from_tigre`).
+    azimuth, elevation, roll : float
+        Gantry angles in degrees: the direction from the isocentre to the source (paper eq. 31), and a turn
+        of the detector about that axis (u towards v).
+    isocentre : (x, y, z)
+        World point the source's perpendicular passes through.
+
+    Examples
+    --------
+    >>> cb = ConeBeam(1000.0, 1500.0, (4, 6), pixel=2.0)
+    >>> cb.source.tolist(), cb.slope
+    ([1000.0, 0.0, 0.0], (0.0013333333333333333, 0.0013333333333333333))
+    >>> bool(np.allclose(ConeBeam.from_matrix(cb.matrix(), cb.size).matrix(), cb.matrix()))
+    True
+    """
+
+    def __init__(self, dso, dsd, size, pixel=1.0, *, offset=(0.0, 0.0), azimuth=0.0, elevation=0.0, roll=0.0,
+                 isocentre=(0.0, 0.0, 0.0)):
+        dso, dsd = finite_number(dso, "dso"), finite_number(dsd, "dsd")
+        if not dso > 0:
+            raise InputError(f"dso={dso!r} must be a positive source-to-isocentre distance")
+        if not dsd > 0:
+            raise InputError(f"dsd={dsd!r}: the detector is behind the source; give a positive source-to-detector "
+                             "distance")
+        spacing = np.broadcast_to(np.asarray(pixel, float), (2,)) if np.ndim(pixel) <= 1 else np.zeros(0)
+        if spacing.shape != (2,) or not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
+            raise InputError(f"pixel={pixel!r} must be a positive detector spacing, or (row, column) spacings")
+        shift = np.asarray(offset, float)
+        if shift.shape != (2,) or not np.all(np.isfinite(shift)):
+            raise InputError(f"offset={offset!r} must be two finite numbers (along u, along v)")
+        n, u, v = view_frame(finite_number(azimuth, "azimuth"), finite_number(elevation, "elevation"))
+        r = np.radians(finite_number(roll, "roll"))
+        u, v = np.cos(r) * u + np.sin(r) * v, np.cos(r) * v - np.sin(r) * u
+        n, u, v = (np.where(np.abs(x) < 1e-15, 0.0, x) for x in (n, u, v))  # axis views stay exact
+        iso = _vector(isocentre, "isocentre")
+        self._set(n, u, v, iso + dso * n, _size(size), (spacing[1] / dsd, spacing[0] / dsd),
+                  (shift[0] / dsd, shift[1] / dsd), iso)
+        self.dso, self.dsd, self.pixel, self.offset = dso, dsd, (float(spacing[0]), float(spacing[1])), tuple(shift)
+
+    def _set(self, n, u, v, source, size, slope, principal, isocentre):
+        self.n, self.u, self.v, self.source = n, u, v, np.asarray(source, float)
+        self.size, self.slope, self.principal = size, tuple(map(float, slope)), tuple(map(float, principal))
+        self.isocentre = isocentre
+
+    # ----------------------------------------------------------------- projection matrices
+    @classmethod
+    def from_matrix(cls, matrix, size, isocentre=None) -> "ConeBeam":
+        """The geometry of a 3 x 4 projection matrix (module docstring) for a detector of ``size`` pixels.
+
+        The matrix fixes the source and the ray of every pixel, not the detector's distance: ``dso`` is the
+        source's distance from ``isocentre`` (default: the point of the principal ray nearest the world
+        origin), and ``dsd``, ``pixel`` and ``offset`` are reported for a detector through the isocentre.
+        Refused with one line: non-finite or singular matrices, skewed pixels.
+        """
+        P = np.asarray(matrix, float) if np.ndim(matrix) == 2 else np.zeros(0)
+        if P.shape != (3, 4) or not np.all(np.isfinite(P)):
+            raise InputError("a projection matrix must be 3 x 4 finite numbers")
+        M = P[:, :3]
+        if not abs(np.linalg.det(M)) > 1e-12 * np.linalg.norm(M) ** 3:
+            raise InputError("the projection matrix is singular: its left 3 x 3 block must be invertible")
+        P = P / np.linalg.norm(M[2]) * np.sign(np.linalg.det(M))  # w = depth, points in front at w > 0
+        K, R = scipy.linalg.rq(P[:, :3])
+        signs = np.sign(np.diag(K))  # K's diagonal positive: R = (u, -v, -n)
+        K, R = K * signs, signs[:, None] * R
+        if abs(K[0, 1]) > 1e-9 * K[0, 0]:
+            raise InputError("the projection matrix has skewed pixels; clwave's detectors have rectangular pixels")
+        K = K / K[2, 2]
+        source = -np.linalg.solve(P[:, :3], P[:, 3])
+        H, W = _size(size)
+        u, v, n = R[0], -R[1], -R[2]
+        slope = (1.0 / K[0, 0], 1.0 / K[1, 1])
+        principal = ((W / 2.0 - 0.5 - K[0, 2]) * slope[0], (K[1, 2] - H / 2.0 + 0.5) * slope[1])
+        if isocentre is None:
+            isocentre = source - n * float(np.dot(source, n))  # the principal ray's point nearest the origin
+        cb = cls.__new__(cls)
+        cb._set(n, u, v, source, (H, W), slope, principal, _vector(isocentre, "isocentre"))
+        cb.dso = float(np.linalg.norm(cb.source - cb.isocentre))
+        if not cb.dso > 0:
+            raise InputError("the isocentre must not be the source")
+        cb.dsd = cb.dso  # a detector through the isocentre: pixel spacing is the slope times dso
+        cb.pixel = (slope[1] * cb.dso, slope[0] * cb.dso)
+        cb.offset = (principal[0] * cb.dso, principal[1] * cb.dso)
+        return cb
+
+    def matrix(self) -> np.ndarray:
+        """The 3 x 4 projection matrix (module docstring)."""
+        H, W = self.size
+        K = np.array([[1.0 / self.slope[0], 0.0, W / 2.0 - 0.5 - self.principal[0] / self.slope[0]],
+                      [0.0, 1.0 / self.slope[1], H / 2.0 - 0.5 + self.principal[1] / self.slope[1]],
+                      [0.0, 0.0, 1.0]])
+        R = np.array([self.u, -self.v, -self.n])
+        return K @ np.hstack([R, -(R @ self.source)[:, None]])
+
+    # ----------------------------------------------------------------- TIGRE
+    @classmethod
+    def from_tigre(cls, geo, angle, volume_origin=(0.0, 0.0, 0.0)) -> "ConeBeam":
+        """The view of TIGRE's cone-beam geometry ``geo`` (an object or mapping with ``DSO``, ``DSD``,
+        ``nDetector`` (v, u), ``dDetector`` (v, u) and optionally ``offDetector`` (u, v) and ``offOrigin``
+        (x, y, z)) at gantry ``angle`` (radians, about z) for a volume centred at ``volume_origin`` in
+        clwave's world (docs/coordinates.md §5: TIGRE's source starts on +x, its detector u along +y and v
+        along +z, and the volume's centre sits at ``offOrigin`` from its isocentre)."""
+        get = geo.get if isinstance(geo, dict) else lambda name, default=None: getattr(geo, name, default)
+        nv, nu = (int(x) for x in np.asarray(get("nDetector")).reshape(2))
+        dv, du = (float(x) for x in np.asarray(get("dDetector")).reshape(2))
+        off_u, off_v = (float(x) for x in np.asarray(get("offDetector", (0.0, 0.0))).reshape(2))
+        iso = np.asarray(volume_origin, float) - np.asarray(get("offOrigin", (0.0, 0.0, 0.0)), float).reshape(3)
+        return cls(float(get("DSO")), float(get("DSD")), (nv, nu), (dv, du), offset=(-off_u, -off_v),
+                   azimuth=float(np.degrees(angle)), isocentre=iso)
+
+    def to_tigre(self, volume_origin=(0.0, 0.0, 0.0)) -> tuple:
+        """``(geo, angle)``: TIGRE's geometry fields (a dict) and gantry angle (radians) of this view, the
+        inverse of :meth:`from_tigre`; only views that TIGRE's circular orbit reaches (elevation and roll
+        0) are accepted."""
+        if not np.isclose(self.n[2], 0.0, atol=1e-12) or not np.isclose(self.u[2], 0.0, atol=1e-12):
+            raise InputError("TIGRE's circular orbit is about z: this view has an elevation or roll")
+        H, W = self.size
+        geo = dict(DSO=self.dso, DSD=self.dsd, nDetector=np.array([H, W]), dDetector=np.array(self.pixel),
+                   offDetector=-np.array(self.offset), offOrigin=np.asarray(volume_origin, float) - self.isocentre)
+        return geo, float(np.arctan2(self.n[1], self.n[0]))
+
+    # ----------------------------------------------------------------- rendering
+    def view(self, volume) -> View:
+        """Resolve against a volume-like object (``shape``, ``spacing``, ``origin``): refuses a source
+        inside the volume's box or a volume wholly behind the source."""
+        lo, hi = _content_box(volume)
+        half = np.array(volume.shape[:3][::-1], float) * np.array(volume.spacing[::-1], float) / 2.0
+        box_lo, box_hi = np.asarray(volume.origin, float) - half, np.asarray(volume.origin, float) + half
+        if np.all(self.source > box_lo) and np.all(self.source < box_hi):
+            raise InputError(f"the X-ray source {np.round(self.source, 3).tolist()} is inside the volume "
+                             f"(box {np.round(box_lo, 3).tolist()} .. {np.round(box_hi, 3).tolist()}); "
+                             "move it out (a larger dso)")
+        corners = np.array(np.meshgrid(*zip(lo, hi), indexing="ij")).reshape(3, -1).T
+        if np.all((corners - self.source) @ self.n >= 0):
+            raise InputError("the volume is behind the X-ray source: turn the gantry or move the isocentre")
+        H, W = self.size
+        fov = float(np.degrees(2.0 * np.arctan(self.slope[1] * H / 2.0)))
+        return View(self.n, self.u, self.v, np.asarray(self.isocentre, float), (H, W), self.slope[1] * self.dso,
+                    True, self.source, fov, self.slope, self.principal)
+
+    def __repr__(self):
+        return (f"ConeBeam(dso={self.dso:g}, dsd={self.dsd:g}, size={self.size}, pixel={self.pixel}, "
+                f"offset={self.offset})")
+
+
+#: the columns of a pose table (:func:`poses`): ConeBeam's parameters, per row
+POSE_COLUMNS = ("azimuth", "elevation", "roll", "dso", "dsd", "offset_u", "offset_v", "isocentre_x", "isocentre_y",
+                "isocentre_z")
+#: or a 3 x 4 projection matrix per row, row-major
+MATRIX_COLUMNS = tuple(f"p{r}{c}" for r in range(3) for c in range(4))
+
+
+def poses(rows, size, pixel=1.0, dso=1000.0, dsd=1500.0, offset=(0.0, 0.0), isocentre=(0.0, 0.0, 0.0)) -> list:
+    """:class:`ConeBeam` of each row (a mapping of column name to number) of a pose table: gantry angles and
+    any of the other :data:`POSE_COLUMNS` overriding the defaults given here, or the 12 :data:`MATRIX_COLUMNS`
+    of a projection matrix (``size`` pixels).  Refused with one line: unknown or missing columns.
+
+    >>> [cb.source.round(6).tolist() for cb in poses([dict(azimuth=90), dict(azimuth=0, dso=500)], 8)]
+    [[0.0, 1000.0, 0.0], [500.0, 0.0, 0.0]]
+    """
+    out = []
+    for i, row in enumerate(rows, 1):
+        names = set(row)
+        if names >= set(MATRIX_COLUMNS) and names <= set(MATRIX_COLUMNS):
+            out.append(ConeBeam.from_matrix(np.array([row[c] for c in MATRIX_COLUMNS], float).reshape(3, 4), size))
+            continue
+        unknown = sorted(names - set(POSE_COLUMNS))
+        if unknown:
+            raise InputError(f"pose {i}: unknown column(s) {', '.join(unknown)}; use {', '.join(POSE_COLUMNS)} or "
+                             f"p00..p23 (a projection matrix)")
+        g = row.get
+        out.append(ConeBeam(g("dso", dso), g("dsd", dsd), size, pixel,
+                            offset=(g("offset_u", offset[0]), g("offset_v", offset[1])),
+                            azimuth=g("azimuth", 0.0), elevation=g("elevation", 0.0), roll=g("roll", 0.0),
+                            isocentre=(g("isocentre_x", isocentre[0]), g("isocentre_y", isocentre[1]),
+                                       g("isocentre_z", isocentre[2]))))
+    return out
+
+
+def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
+    """Beer-Lambert: the intensity ``i0 exp(-∫mu)`` reaching the detector from attenuation line integrals
+    (``--hu-to-mu`` CTs: mu per mm, integrals over mm)."""
+    return (i0 * np.exp(-np.asarray(line_integrals, np.float64))).astype(np.float32)

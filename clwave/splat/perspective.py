@@ -1,0 +1,222 @@
+"""Perspective (cone-beam) splatting: one view's footprints at a grid of ray slopes and the tables of
+``cl/splat/cone.cl`` (docs/splatting.md §8).
+
+A pixel's ray of slopes ``s = (s_u, s_v)`` meets the plane through a splat's centre X, parallel to the
+detector, at ``X + w`` with ``w = z_c (s - s_c)`` (z_c the centre's depth, s_c its slopes): exactly, with
+no approximation.  Its integral over the basis function is ``sqrt(1 + |s|^2) G_s(w)`` with the sheared
+footprint ``G_s(w) = ∫ B(X + w + t (n - s_u u - s_v v)) dt``, whose spectrum is the slice of the 3-D one
+along ``u + s_u n`` and ``v + s_v n`` (:func:`sheared_footprints`).  G_s depends on s smoothly: it is
+sampled at nodes :data:`SLOPE_STEP` apart covering every pixel's slope, and each pixel interpolates
+between the four around its own.
+"""
+
+from __future__ import annotations
+
+import time
+import numpy as np
+import scipy.fft
+
+from ..device.constants import TILE
+from ..errors import DeviceMemoryError, InputError
+from ..model.bspline import wavelet_for
+from ..model.geometry import check_key, fine_to_world, spacing_xyz, support_centres, support_extent
+from ..threads import cores, thread_map
+from .spatial import exact_samples
+from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
+from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
+from .textures import Texture, _axis_points, _axis_sampling, _centred
+
+#: Spacing of the slope grid (docs/splatting.md §8): bilinear interpolation between nodes errs by at most
+#: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
+#: phi-phi-phi footprint at 0.1 (the error of each footprint scales with the square of the step)
+SLOPE_STEP = 0.1
+TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.splat.tables.TEXTURE_TOL)
+SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
+#: the host tables of a perspective view, uploaded by name (cl/splat/cone.cl)
+CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "layers", "layer_slope", "cone",
+               "tex_int", "tex_map", "texels")
+
+
+def slope_grid(views) -> tuple:
+    """``(lo, step, count)``, each (u, v): nodes ``lo + i step``, ``i < count``, at most
+    :data:`SLOPE_STEP` apart, covering the slopes of every pixel centre of ``views`` (two at least)."""
+    s = np.concatenate([view.slopes().reshape(-1, 2) for view in views])
+    lo, hi = s.min(axis=0), s.max(axis=0)
+    count = np.maximum(2, np.ceil((hi - lo) / SLOPE_STEP - 1e-9).astype(int) + 1)
+    step = np.where(hi > lo, (hi - lo) / (count - 1), SLOPE_STEP)
+    return lo, step, count
+
+
+def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None,
+                       max_texels=None) -> dict:
+    """A :class:`~clwave.splat.textures.Texture` of each band whose ``data[node, iv, iu]`` holds its footprint
+    at each of the (K, 2) ``slopes``: the line integrals of its basis
+    function along ``n - s_u u - s_v v`` (per unit of depth) through the points ``a u + b v`` from its
+    support centre.  ``bands`` maps ``(m, key)`` to the texel (world units); ``"fft"`` slices the 3-D
+    spectrum along ``u + s_u n``, ``v + s_v n`` (docs/splatting.md §8; on ``device``, every spectrum in one
+    launch, as orthographic views do), ``"spatial"`` integrates exactly (:mod:`clwave.splat.spatial`).
+    ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made."""
+    wav = wavelet_for(wavelet)
+    d_xyz = spacing_xyz(spacing_zyx)
+    n, u, v = (np.asarray(x, float) for x in (n, u, v))
+    slopes = np.asarray(slopes, float).reshape(-1, 2)
+    grids, jobs = {}, []
+    for (m, key), texel in bands.items():
+        m, key = int(m), check_key(key)
+        extent = support_extent(wav, key, m, d_xyz)
+        # every node on one grid: the widest oblique projection of the support box over the nodes
+        width_u = max(float(np.abs(u + s * n) @ extent) for s in slopes[:, 0])
+        width_v = max(float(np.abs(v + s * n) @ extent) for s in slopes[:, 1])
+        (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, texel) for w in (width_u, width_v))
+        grids[(m, key)] = (nu, h_u, nv, h_v)
+        jobs += [((m, key), k) for k in range(len(slopes))]
+    texels = sum(len(slopes) * (nu + 3) * (nv + 3) for nu, _, nv, _ in grids.values())
+    if max_texels is not None and texels > max_texels:
+        raise DeviceMemoryError(
+            f"the footprints of this perspective view need {4 * texels / 2**20:,.0f} MiB ({len(slopes)} ray slopes a "
+            f"band), more than the {4 * max_texels / 2**20:,.0f} MiB allowed; render fewer pixels, a narrower cone "
+            f"or a lower omega_s")
+    spectra = {}
+    if sampling == "fft" and device is not None:  # non-separable slices on the device, in few launches
+        plans = {}
+        for band, k in jobs:
+            nu, h_u, nv, h_v = grids[band]
+            su, sv = slopes[k]
+            scale, axes = slice_plan(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu * h_u, nv * h_v)
+            if any(alpha and beta for _, alpha, beta in axes):
+                plans[(band, k)] = (scale, axes, nu, nv)
+        batch, held = [], 0
+        for job, plan in list(plans.items()) + [(None, None)]:  # launches of at most SPECTRA_BATCH_BYTES
+            size = 0 if plan is None else 8 * plan[3] * (plan[2] // 2 + 1 + SPECTRUM_BLOCK)
+            if batch and (plan is None or held + size > SPECTRA_BATCH_BYTES):
+                spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch])))
+                batch, held = [], 0
+            if plan is not None:
+                batch.append(job)
+                held += size
+
+    def make(job):
+        band, k = job
+        nu, h_u, nv, h_v = grids[band]
+        su, sv = slopes[k]
+        if job in spectra:
+            return _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32)
+        if sampling == "fft":
+            return _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u,
+                                        nv * h_v, 1), np.float32)
+        aa, bb = _axis_points(nu, h_u, False)[0], _axis_points(nv, h_v, False)[0]
+        a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
+        return exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
+                             b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
+
+    samples = thread_map(make, jobs) if len(jobs) > 1 and cores() > 1 else [make(job) for job in jobs]
+    out = {}
+    for band, (nu, h_u, nv, h_v) in grids.items():
+        data = np.stack([x for (b, _), x in zip(jobs, samples) if b == band])
+        cu, cv = float(nu // 2), float(nv // 2)
+        if tol > 0:  # the box of the samples above tol of the peak, over every node
+            mask = np.any(np.abs(data) > tol * np.max(np.abs(data)), axis=0)
+            if mask.any():
+                rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+                data = data[:, rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+                cu, cv = cu - cols[0], cv - rows[0]
+        out[band] = Texture(np.ascontiguousarray(data), h_u, h_v, cu, cv, sampling, *band)
+    return out
+
+
+def depth_range(view, wv, extent_xyz) -> tuple:
+    """The least and greatest depth (along -n from the eye) of the model's voxel box grown by a support box
+    ``extent_xyz`` (world, x y z): no basis function of that size reaches nearer the eye."""
+    half = np.array(wv.shape[::-1], float) * np.array(wv.spacing[::-1], float) / 2.0 + np.asarray(extent_xyz) / 2.0
+    corners = np.array(np.meshgrid(*zip(np.asarray(wv.origin) - half, np.asarray(wv.origin) + half),
+                                   indexing="ij")).reshape(3, -1).T
+    depth = view.depth(corners)
+    return float(np.min(depth)), float(np.max(depth))
+
+
+class ConeTables:
+    """The tables of one channel group for one perspective view (``cl/splat/cone.cl``), every layer
+    (framebuffer) in one set, as :class:`clwave.splat.tables.ViewTables` for orthographic views."""
+
+    names = CONE_TABLES
+
+    def __init__(self, wv, group: int, layers, omega_s=None, sampling="auto", device=None, max_texels=None):
+        g = wv.groups[group]
+        wav = g.wavelet
+        if sampling == "cells":
+            raise InputError("footprint sampling 'cells' is for orthographic views; perspective views take "
+                             "'auto', 'fft' or 'spatial'")
+        sampling = ("fft" if wav.order >= 3 else "spatial") if sampling == "auto" else sampling
+        view0 = layers[0][0]
+        d_xyz, d_min = np.array(wv.spacing[::-1], float), min(wv.spacing)
+        lo, step, count = slope_grid([view for view, _ in layers])
+        nodes = np.stack(np.meshgrid(lo[0] + step[0] * np.arange(count[0]), lo[1] + step[1] * np.arange(count[1])),
+                         -1).reshape(-1, 2)
+        self.cone = np.zeros((6, 4), np.float32)
+        self.cone[0, :3], self.cone[1, :3], self.cone[2, :3], self.cone[3, :3] = view0.eye, view0.n, view0.u, view0.v
+        self.cone[4] = (*view0.principal, *lo)
+        self.cone[5] = (*(1.0 / step), *count)
+        # each band in the first layer that draws it, with texels of 1/P of its nearest pixel
+        texels, layer_of, self.omega_s = {}, {}, None
+        for li, (view, bands) in enumerate(layers):
+            for b in g.bands:
+                band = (b.level, b.key)
+                if band in layer_of or (bands is not None and band not in bands):
+                    continue
+                near = depth_range(view, wv, support_extent(wav, b.key, b.level, d_xyz))[0]
+                if not near > 0:
+                    raise InputError("the eye (X-ray source) is inside the model or too near it for splatting: "
+                                     f"its level-{b.level} basis functions reach behind the eye; move it farther "
+                                     "away (a larger distance or dso)")
+                pixel = min(view.slope) * near
+                omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min)
+                self.omega_s = self.omega_s or omega
+                layer_of[band] = li
+                texels[band] = pixel / texels_per_pixel(wav.order, b.level, omega, pixel, d_min)
+        start = time.perf_counter()
+        textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
+                                      TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
+        self.footprint_seconds = time.perf_counter() - start
+        self.samplings = [sampling]
+
+        self.band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
+        self.band_world = np.zeros((8 * MAX_LEVELS, 4), np.float32)
+        self.band_step = np.zeros((8 * MAX_LEVELS, 4), np.float32)
+        self.layers = np.zeros((len(layers), 4), np.int32)  # (width, height, first tile, first pixel)
+        self.layer_slope = np.zeros((len(layers), 4), np.float32)
+        boxes, ints, maps, tex_layer, pool, offset = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
+        self.tiles = self.pixels = 0
+        self.layer_textures = []
+        for li, (view, _) in enumerate(layers):
+            H, W = view.size
+            self.layers[li] = (W, H, self.tiles, self.pixels)
+            self.layer_slope[li, :2] = view.slope
+            self.tiles += -(-W // TILE) * -(-H // TILE)
+            self.pixels += H * W
+            first_tex = len(ints)
+            for b in g.bands:
+                band, bid = (b.level, b.key), b.level * 8 + b.code
+                if layer_of.get(band) != li:
+                    continue
+                # world centre of coefficient k = 0 (docs/model.md §4: X = o + 2^m (k + c0)) and its steps
+                self.band_world[bid, :3] = fine_to_world(support_centres(wav, b.key, b.level, (0, 0, 0)), wav.order,
+                                                         wv.shape, wv.spacing, wv.origin)
+                self.band_step[bid, :3] = 2.0 ** b.level * d_xyz
+                tex = textures[band]
+                K, nv, nu = tex.data.shape
+                padded = np.zeros((K, nv + 2, nu + 2), np.float32)
+                padded[:, 1:-1, 1:-1] = tex.data
+                if max_texels is not None and offset + padded.size > max_texels:
+                    raise DeviceMemoryError(
+                        f"the footprints of this perspective view need more than {4 * max_texels / 2**20:,.0f} MiB "
+                        f"({K} ray slopes a band); render fewer pixels, a narrower cone or a lower omega_s")
+                self.band_tex[bid] = len(ints)
+                tex_layer.append((li, len(ints) - first_tex))
+                boxes.append((-tex.centre_u * tex.h_u, (nu - 1 - tex.centre_u) * tex.h_u,
+                              -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
+                ints.append((offset, nu + 2, padded[0].size, nv + 2))
+                maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
+                pool.append(padded.ravel())
+                offset += padded.size
+            self.layer_textures.append(len(ints) - first_tex)
+        set_texture_tables(self, boxes, ints, maps, tex_layer, pool)

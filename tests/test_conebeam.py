@@ -1,0 +1,105 @@
+"""Cone-beam geometry (docs/coordinates.md §5): projection matrices, pixel maps, conversions, bad geometry."""
+
+import numpy as np
+import pytest
+
+from clwave.errors import InputError
+from clwave.model.camera import Camera
+from clwave.model.conebeam import ConeBeam
+from clwave.model.volume import Volume
+
+VOL = Volume(np.zeros((6, 8, 10)), spacing=(2.0, 1.0, 0.5), origin=(1.0, -2.0, 3.0))
+
+
+def _ray_hits(view, points):
+    """Independent pixel map: intersect the ray source -> point with the detector plane (NumPy, float64)."""
+    cb_u, cb_v = view.u, view.v
+    d = points - view.eye
+    depth = -(d @ view.n)
+    a, b = d @ cb_u / depth, d @ cb_v / depth  # slopes, i.e. detector mm / dsd
+    H, W = view.size
+    return np.stack([(a - view.principal[0]) / view.slope[0] + W / 2 - 0.5,
+                     H / 2 - 0.5 - (b - view.principal[1]) / view.slope[1]], -1)
+
+
+GEOMETRIES = [
+    dict(dso=100.0, dsd=150.0, size=(12, 16), pixel=1.5),
+    dict(dso=80.0, dsd=200.0, size=(10, 7), pixel=(2.0, 1.25), offset=(3.0, -4.5), azimuth=30, elevation=20,
+         roll=10, isocentre=(1.0, -2.0, 3.5)),
+    dict(dso=60.0, dsd=60.0, size=9, pixel=0.7, azimuth=-120, elevation=-35),
+]
+
+
+@pytest.mark.parametrize("kw", GEOMETRIES)
+def test_matrix_round_trip_and_projection(kw):
+    cb = ConeBeam(**kw)
+    P = cb.matrix()
+    back = ConeBeam.from_matrix(P, cb.size, isocentre=cb.isocentre)
+    assert np.allclose(back.matrix(), P, rtol=1e-12, atol=1e-9)
+    assert back.dso == pytest.approx(cb.dso) and np.allclose(back.source, cb.source)
+    for scale in (1.0, -3.0):  # a projection matrix is defined up to scale, sign included
+        assert np.allclose(ConeBeam.from_matrix(scale * P, cb.size).matrix(), P, atol=1e-9)
+    rng = np.random.default_rng(1)
+    pts = cb.isocentre + rng.uniform(-5, 5, (20, 3))
+    view = cb.view(VOL)
+    hom = np.hstack([pts, np.ones((20, 1))]) @ P.T
+    assert np.allclose(hom[:, :2] / hom[:, 2:], view.to_pixels(pts), atol=1e-9)
+    assert np.allclose(view.to_pixels(pts), _ray_hits(view, pts), atol=1e-9)
+    assert np.allclose(hom[:, 2], view.depth(pts))
+
+
+def test_detector_layout():
+    # source on +x: the detector's u is +y (columns right) and v is +z (rows go down, against v)
+    cb = ConeBeam(100.0, 150.0, (4, 6), pixel=3.0, offset=(6.0, 0.0))
+    view = cb.view(VOL)
+    assert cb.source.tolist() == [100.0, 0.0, 0.0] and view.u.tolist() == [0, 1, 0] and view.v.tolist() == [0, 0, 1]
+    # the detector point (a, b) mm from the principal point: pixel centre (c + 0.5 - W/2) 3 + 6 along u
+    s = view.slopes()
+    assert s[0, 0] == pytest.approx([((0.5 - 3) * 3 + 6) / 150, (2 - 0.5) * 3 / 150])
+    assert np.allclose(np.linalg.norm(view.rays(), axis=-1), 1)
+    assert view.obliquity()[0, 0] == pytest.approx(np.sqrt(1 + np.sum(s[0, 0] ** 2)))
+
+
+def test_perspective_camera_is_a_centred_cone_beam():
+    view = Camera(30, 20, (8, 12), perspective=True, fov=20, distance=50).view(VOL)
+    s = view.slopes()
+    assert np.arctan(-s[0, 0, 1]) == pytest.approx(-np.radians(10) * (1 - 1 / 8), rel=2e-2)  # near the top edge
+    assert s[0, 0, 1] == pytest.approx(np.tan(np.radians(10)) * 7 / 8)
+    pts = np.array([[1.0, 2.0, 3.0], [-2.0, 0.5, 1.0]])
+    assert np.allclose(view.to_pixels(pts), _ray_hits(view, pts))
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda: ConeBeam(100, -10, 8), "behind the source"),
+    (lambda: ConeBeam(0, 10, 8), "dso"),
+    (lambda: ConeBeam(100, 150, 8, pixel=0), "pixel"),
+    (lambda: ConeBeam(100, 150, 8, offset=(1, float("nan"))), "offset"),
+    (lambda: ConeBeam(float("inf"), 150, 8), "dso"),
+    (lambda: ConeBeam(2, 150, 8).view(VOL), "inside the volume"),
+    (lambda: ConeBeam(100, 150, 8, isocentre=(-300.0, 0, 0)).view(VOL), "behind the X-ray source"),
+    (lambda: ConeBeam.from_matrix(np.full((3, 4), np.nan), 8), "finite"),
+    (lambda: ConeBeam.from_matrix(np.zeros((3, 4)), 8), "singular"),
+    (lambda: ConeBeam.from_matrix(np.eye(3), 8), "3 x 4"),
+    (lambda: ConeBeam.from_matrix(np.array([[1, 0.5, 0, 0], [0, 1, 0, 0], [0, 0, 1, 5.0]]), 8), "skewed"),
+])
+def test_bad_geometry_is_one_line(make, words):
+    with pytest.raises(InputError) as err:
+        make()
+    assert words in str(err.value) and "\n" not in str(err.value)
+
+
+
+def test_tigre_round_trip_and_layout():
+    geo = dict(DSO=1000.0, DSD=1536.0, nDetector=np.array([6, 8]), dDetector=np.array([0.8, 0.6]),
+               offDetector=np.array([2.0, -1.0]), offOrigin=np.array([5.0, 0.0, -3.0]))
+    cb = ConeBeam.from_tigre(geo, np.pi / 2, volume_origin=(1.0, 2.0, 3.0))
+    # TIGRE: the source starts on +x and turns about z; the volume's centre is offOrigin from the isocentre
+    assert np.allclose(cb.source, cb.isocentre + [0.0, 1000.0, 0.0]) and np.allclose(cb.isocentre, [-4.0, 2.0, 6.0])
+    # its detector: u along +y at angle 0 (here -x), v along +z, shifted by offDetector from the principal ray
+    assert np.allclose(cb.u, [-1, 0, 0]) and np.allclose(cb.v, [0, 0, 1]) and cb.offset == (-2.0, 1.0)
+    back, angle = cb.to_tigre(volume_origin=(1.0, 2.0, 3.0))
+    assert angle == pytest.approx(np.pi / 2)
+    for key, value in geo.items():
+        assert np.allclose(back[key], value), key
+    with pytest.raises(InputError, match="about z"):
+        ConeBeam(100, 150, 8, elevation=10).to_tigre()

@@ -1,0 +1,69 @@
+"""Radiographs of many poses (docs/splatting.md §8): batches, pose tables, Beer-Lambert, ``clwave drr``."""
+
+import numpy as np
+import pytest
+
+import clwave
+from clwave.cli import main
+from clwave.errors import InputError
+from clwave.model.conebeam import ConeBeam, poses, transmitted
+
+
+@pytest.fixture(scope="module")
+def model():
+    vol = clwave.Volume(np.random.default_rng(2).random((10, 12, 14)).astype(np.float32), spacing=(1.0, 1.0, 1.5))
+    return clwave.WaveletVolume.from_volume(vol, levels=1)
+
+
+def test_a_batch_equals_single_renders(model):
+    cams = poses([dict(azimuth=a, elevation=e, roll=r) for a, e, r in ((0, 0, 0), (50, 20, 10), (200, -30, 0))],
+                 (12, 16), pixel=2.5, dso=60.0, dsd=90.0)
+    r = clwave.SplatRenderer(model)
+    batch = r.render_many(cams)
+    assert batch.shape == (3, 12, 16, 1)
+    for cam, image in zip(cams, batch):
+        assert np.array_equal(image, clwave.SplatRenderer(model).render(cam).image)
+    out = np.empty_like(batch)
+    assert r.render_many(cams, out=out) is out and np.array_equal(out, batch)
+    with pytest.raises(InputError, match="same size"):
+        r.render_many(cams[:1] + [ConeBeam(60.0, 90.0, 8, pixel=2.5)])
+
+
+def test_pose_table_rows():
+    a, b = poses([dict(azimuth=90, elevation=0, dso=500, offset_u=3, isocentre_z=2),
+                  {f"p{i}{j}": v for (i, j), v in np.ndenumerate(ConeBeam(80, 120, 8, azimuth=20).matrix())}], 8,
+                 pixel=2.0, dsd=800)
+    assert np.allclose(a.source, [0, 500, 2]) and a.dsd == 800 and a.offset == (3.0, 0.0)
+    assert np.allclose(b.matrix(), ConeBeam(80, 120, 8, azimuth=20).matrix())
+    with pytest.raises(InputError, match="unknown column"):
+        poses([dict(azimuth=0, tilt=3)], 8)
+
+
+def test_beer_lambert():
+    assert np.allclose(transmitted([0.0, np.log(2.0), np.inf], i0=3.0), [3.0, 1.5, 0.0])
+
+
+def test_drr_command(tmp_path, capsys, model):
+    table = tmp_path / "poses.csv"
+    table.write_text("azimuth,elevation,dso\n0,0,60\n90,10,70\n")
+    out = tmp_path / "drr.npy"
+    args = ["drr", "phantom:shepp-logan:16", "--levels", "1", "--keep", "1", "--poses", str(table), "--size",
+            "12x16", "--pixel", "2", "--dsd", "90"]
+    assert main(args + ["-o", str(out)]) == 0
+    stack = np.load(out)
+    vol = clwave.phantom("shepp-logan", n=16)
+    wv = clwave.WaveletVolume.from_volume(vol, levels=1).threshold(keep=1.0)  # as many as voxels, as --keep 1
+    single = clwave.splat(wv, ConeBeam(70, 90, (12, 16), pixel=2.0, azimuth=90, elevation=10)).image[..., 0]
+    assert stack.shape == (2, 12, 16) and stack.dtype == np.float32
+    assert np.abs(stack[1] - single).max() <= 1e-5 * single.max()
+    assert main(args + ["--intensity", "-o", str(tmp_path / "i.npy")]) == 0
+    assert np.allclose(np.load(tmp_path / "i.npy"), np.exp(-stack.astype(np.float64)), rtol=1e-5)
+    assert "2 radiograph(s) of 12x16" in capsys.readouterr().out
+    # mistakes: one line, exit code 2, nothing written
+    for extra, words in ((["-o", str(out)], "exists"), (["-o", str(tmp_path / "x.png")], "one radiograph"),
+                         (["--dsd", "-5", "-o", str(tmp_path / "y.npy")], "behind the source")):
+        assert main(args + extra) == 2
+        assert words in capsys.readouterr().err
+    table.write_text("azimuth,elevation\n0,zero\n")
+    assert main(args + ["-o", str(tmp_path / "z.npy")]) == 2 and "line 2" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists() and not (tmp_path / "y.npy").exists()
