@@ -10,7 +10,7 @@ from clwave.errors import FileFormatError, InputError, OutputExistsError
 from clwave.model.volume import Volume
 from clwave.model.wavelet import WaveletVolume
 
-FAMILIES = ("haar", "linear", "quadratic", "cubic")
+FAMILIES = ("haar", "linear", "quadratic", "cubic", "quintic")
 SHAPE = (13, 10, 11)  # odd and unequal sizes
 SPACING = (2.0, 1.0, 0.5)  # (dz, dy, dx): anisotropic
 
@@ -99,7 +99,7 @@ def test_interpolating_model_passes_through_samples(data):
     assert np.max(np.abs(approx.evaluate(pts)[:, 0] - expected)) > 1e-2
 
 
-@pytest.mark.parametrize("family", ["linear", "cubic"])
+@pytest.mark.parametrize("family", ["linear", "cubic", "quintic"])
 def test_gradient_matches_finite_differences(family, rng):
     smooth = np.fromfunction(lambda z, y, x: np.sin(0.4 * x) * np.cos(0.3 * y) + 0.05 * z * z, SHAPE)
     wv = WaveletVolume.from_volume(Volume(smooth, spacing=SPACING), family, levels=2).threshold(keep=0.3)
