@@ -54,7 +54,7 @@ def add_model_options(p):
     from ..model.transfer import TransferFunction
 
     g = p.add_argument_group("wavelet model (from a volume; a .clw input is a model already)")
-    g.add_argument("--wavelet", help=f"haar, linear, quadratic or cubic; or one per channel, comma-separated "
+    g.add_argument("--wavelet", help=f"haar, linear, quadratic, cubic or quintic; or one per channel, comma-separated "
                                      f"(default {DEFAULT_WAVELET})")
     g.add_argument("--levels", type=int, help=f"decomposition levels (default {DEFAULT_LEVELS})")
     k = g.add_mutually_exclusive_group()
