@@ -134,8 +134,9 @@ class RayTracer:
         if wv.channels > 4:
             raise InputError(f"ray tracing takes at most 4 channels, the volume has {wv.channels}")
         if any(g.wavelet.order not in RAYTRACE_ORDERS for g in wv.groups):
-            raise InputError(f"ray tracing takes B-spline orders {', '.join(map(str, RAYTRACE_ORDERS))} (haar to cubic), "
-                             f"this volume has {', '.join(wv.wavelets)}: splat it, or decompose with a lower order")
+            orders = ", ".join(map(str, RAYTRACE_ORDERS))
+            raise InputError(f"ray tracing takes B-spline orders {orders} (haar to cubic), this volume has "
+                             f"{', '.join(wv.wavelets)}: splat it, or decompose with a lower order")
         if int(active) != active or active < 1:
             raise InputError(f"active={active!r} must be a positive whole number of list entries")
         if region is not None and (field != "bspline" or len(np.shape(region)) != 1 or len(region) != 2
