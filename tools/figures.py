@@ -16,9 +16,10 @@
 - ``fig12``: local level of detail ray traced and shaded (the paper's Fig. 12/13): the set-up
   of ``fig16`` (the paper's Fig. 16 is "the same setup as in fig. 13"), i.e. its ray-traced half;
 - ``fig14``: B-splines of orders 1, 2, 4 and 6 for RGB and alpha: the scaling functions of M = 2
-  (4 voxels wide, so each basis shows) at one kept fraction, 2x zoom, ray traced (orders 1-4; Haar
-  has no gradient, so it renders unshaded, as in the paper) and splatted (the emission's line
-  integrals, every order); for the two data sets and a CT-like one, the Shepp-Logan phantom;
+  (4 voxels wide, so each basis shows; order 6's band, the largest, sets the kept fraction), 2x
+  zoom, ray traced (orders 1-4; Haar has no gradient, so it renders unshaded, as in the paper) and
+  splatted (the emission's line integrals, every order); for the two data sets and a CT-like one,
+  the Shepp-Logan phantom;
 - ``fig15``: progressive refinement (Haar, as the paper) with the error image after each
   step, time and energy;
 - ``fig16``: local level of detail (Gaussian focus in wavelet space), Haar and cubic, M = 3:
@@ -241,17 +242,18 @@ def ct_like(args) -> Data:
 
 
 def fig14(out: Path, data, args, log):
-    """Orders 1, 2, 4, 6 for RGB and alpha, the M = 2 scaling functions at one kept fraction (Haar's whole
-    approximation band: the larger bands of higher orders keep their largest): ray traced where clwave can
-    (orders 1-4; Haar unshaded) and, for every order, the splatted emission (line integrals of q_R, q_G, q_B)."""
+    """Orders 1, 2, 4, 6 for RGB and alpha, the M = 2 scaling functions at one kept fraction (the largest
+    approximation band, order 6's: every order keeps its whole band, the smaller ones their largest details
+    besides): ray traced where clwave can (orders 1-4; Haar unshaded) and, for every order, the splatted
+    emission (line integrals of q_R, q_G, q_B)."""
     from clwave.raytrace.tracer import RAYTRACE_ORDERS
     for d in [*data, ct_like(args)]:
         camera, splat_camera = d.view(args.raytrace_image, zoom=ZOOM14), d.view(args.image, zoom=ZOOM14)
-        traced, splatted, keep = [], [], None
+        traced, splatted = [], []
+        full = {w: clwave.WaveletVolume.from_volume(d.rgba, wavelet=w, levels=LEVELS14) for w in ORDERS14}
+        keep = max(approx_fraction(wv) for wv in full.values())
         for wavelet in ORDERS14:
-            wv = clwave.WaveletVolume.from_volume(d.rgba, wavelet=wavelet, levels=LEVELS14)
-            keep = keep or approx_fraction(wv)  # Haar's approximation band, the smallest
-            wv = wv.threshold(keep=keep)
+            wv = full.pop(wavelet).threshold(keep=keep)
             order = wv.groups[0].wavelet.order
             caption = f"order {order} ({wavelet}), {compression_text(wv)}"
             if order in RAYTRACE_ORDERS:
