@@ -264,7 +264,10 @@ def fig14(out: Path, data, args, log):
                 traced.append((np.zeros((1, 1, 3), np.uint8), f"order {order}: not ray traced (orders 1-4)", None,
                                False))
             start = time.perf_counter()
-            splatted.append((clwave.splat(wv, splat_camera).to_uint8(), caption, None, False))
+            emission = clwave.splat(wv, splat_camera)  # shown from 0: its own percentiles would magnify ringing
+            top = float(np.percentile(emission.image[..., :3], 99.5))
+            picture = emission.to_uint8(window=(0.0, top if top > 0 else 1.0))
+            splatted.append((picture, caption, None, False))
             log(f"  fig14 {d.key} {wavelet} splatted: {time.perf_counter() - start:.2f} s")
         grid([traced, splatted], f"Fig. 14: orders 1, 2, 4, 6 for RGB and α, scaling functions of M = {LEVELS14}, "
              f"{ZOOM14:g}x zoom. Top: ray traced (tolerance {args.tolerance:g}; Haar has no gradient: unshaded);\n"
