@@ -44,7 +44,7 @@ def assert_same(a: clwave.WaveletVolume, b: clwave.WaveletVolume):
     assert np.allclose(a.content, b.content)
 
 
-@pytest.mark.parametrize("wavelet", ["haar", "linear", "quadratic", "cubic"])
+@pytest.mark.parametrize("wavelet", ["haar", "linear", "quadratic", "cubic", "quintic"])
 def test_chunked_transform_and_threshold_equal_the_in_memory_ones(rng, wavelet):
     vol, dvol = pair(rng)
     ref = clwave.WaveletVolume.from_volume(vol, wavelet, levels=2)

@@ -38,6 +38,18 @@ def test_compress_phantom_report_and_file(tmp_path, capsys):
     assert 0 < error < 0.1
 
 
+def test_compress_quintic_colour_with_haar_opacity(tmp_path, capsys):
+    """Per-channel orders as the paper's Fig. 14 (order-6 colour, Haar opacity) through a .clw file."""
+    target = tmp_path / "q.clw"
+    code, out, err = run(capsys, "compress", "phantom:hydrogen:24", "--tf", "hydrogen", "--levels", "2",
+                         "--wavelet", "quintic,quintic,quintic,haar", "--keep", "0.1", "-o", str(target))
+    assert code == 0, err
+    assert WaveletVolume.open(target).wavelets == ("quintic", "quintic", "quintic", "haar")
+    code, out, err = run(capsys, "compress", "phantom:hydrogen:16", "--wavelet", "quartic", "-o",
+                         str(tmp_path / "x.clw"))
+    assert code == 2 and "quintic" in err and len(err.strip().splitlines()) == 1
+
+
 def test_existing_output_is_not_replaced(tmp_path, capsys):
     target = tmp_path / "keep.clw"
     target.write_bytes(b"precious")

@@ -104,7 +104,7 @@ def max_errors(order, view, m, spacing, sampling="auto", count=24, **kw):
 
 
 # ----------------------------------------------------------------------------- device spectra
-@pytest.mark.parametrize("order", (1, 2, 3, 4))
+@pytest.mark.parametrize("order", (1, 2, 3, 4, 6))
 def test_device_spectra_give_the_numpy_textures(cc, order):
     """cl/splat/footprint.cl against its NumPy twin (float64 spectra, same inverse FFT): every type at
     levels 0-2, oblique and axis-aligned views (those stay separable on the host), both spacings,
@@ -213,6 +213,16 @@ def test_cubic_fft_textures_within_1e3_of_the_aaa_peak(view, m, spacing):
     assert {t.sampling for t in tex.values() if t is not None} == {"fft"}
     assert len(errs) == (8 if view in OBLIQUE else 4)  # psi along n: 4 types vanish
     assert max(errs.values()) <= 1e-3, errs
+
+
+@pytest.mark.parametrize("m", (0, 1))
+def test_quintic_fft_textures_within_1e4_of_the_aaa_peak(m):
+    """Order 6 (psi with 2 vanishing moments: spectral.psi_poly's s^M factor) at its DEFAULT_OMEGA_MIN."""
+    for view in OBLIQUE + AXIS:
+        for spacing in SPACINGS:
+            errs, tex = max_errors(6, view, m, spacing)
+            assert {t.sampling for t in tex.values() if t is not None} == {"fft"}
+            assert max(errs.values()) <= 1e-4, (view, spacing, errs)
 
 
 @pytest.mark.parametrize("order", (1, 2))

@@ -412,6 +412,13 @@ def test_wavelet_block_bounds_hold_the_field():
     assert vals.max() > 0.1
 
 
+def test_order_6_is_refused_in_one_line():
+    vol = clwave.Volume(np.ones((12, 12, 12, 4), np.float32))
+    wv = clwave.WaveletVolume.from_volume(vol, ["quintic", "quintic", "quintic", "haar"], levels=1)
+    with pytest.raises(clwave.InputError, match=r"orders 1, 2, 3, 4 .*quintic, quintic, quintic, haar: splat it"):
+        clwave.raytrace(wv, clwave.Camera(size=8))
+
+
 def test_unknown_field_is_refused():
     with pytest.raises(clwave.InputError, match="field"):
         RayTracer(sparse_rgba("linear", levels=1), field="octree")

@@ -10,7 +10,7 @@ from clwave.errors import FileFormatError, InputError, OutputExistsError
 from clwave.model.volume import Volume
 from clwave.model.wavelet import WaveletVolume
 
-FAMILIES = ("haar", "linear", "quadratic", "cubic")
+FAMILIES = ("haar", "linear", "quadratic", "cubic", "quintic")
 SHAPE = (13, 10, 11)  # odd and unequal sizes
 SPACING = (2.0, 1.0, 0.5)  # (dz, dy, dx): anisotropic
 
@@ -85,21 +85,30 @@ def test_single_coefficient_matches_pywavelets_synthesis(key):
     assert np.max(np.abs(expected)) > 1e-3  # the points do see the basis function
 
 
-def test_interpolating_model_passes_through_samples(data):
+@pytest.mark.parametrize("family", ["cubic", "quintic"])
+def test_interpolating_model_passes_through_samples(data, family):
     vol = Volume(data, spacing=SPACING)
-    wv = WaveletVolume.from_volume(vol, "cubic", levels=2, interpolate=True)
+    wv = WaveletVolume.from_volume(vol, family, levels=2, interpolate=True)
     idx = np.array([[i, j, k] for i in (0, 6, 12) for j in (0, 5, 9) for k in (0, 4, 10)], float)
     pts = vol.voxel_to_world(idx)
     got = wv.evaluate(pts)[:, 0]
     expected = data[tuple(idx.astype(int).T)]
-    assert np.max(np.abs(got - expected)) < 1e-5
-    assert np.max(np.abs(wv.reconstruct().data - data)) < 1e-5
+    # float32 coefficients times the prefilter's gain: 1 / min of the sampling kernel's spectrum, 3 for cubic,
+    # 120 / 16 = 7.5 for quintic
+    tol = {"cubic": 1e-5, "quintic": 3e-5}[family]
+    assert np.max(np.abs(got - expected)) < tol
+    assert np.max(np.abs(wv.reconstruct().data - data)) < tol
     # the approximating model does not interpolate (it smooths)
-    approx = WaveletVolume.from_volume(vol, "cubic", levels=2)
+    approx = WaveletVolume.from_volume(vol, family, levels=2)
     assert np.max(np.abs(approx.evaluate(pts)[:, 0] - expected)) > 1e-2
+    # ... its value at a voxel centre is the weighted average of docs/model.md §1 (quintic: (1, 26, 66, 26, 1)/120)
+    w = {"cubic": np.array([1, 4, 1]) / 6, "quintic": np.array([1, 26, 66, 26, 1]) / 120}[family]
+    from scipy.ndimage import correlate
+    smoothed = correlate(data.astype(np.float64), np.einsum("i,j,k->ijk", w, w, w), mode="constant")
+    assert np.max(np.abs(approx.evaluate(pts)[:, 0] - smoothed[tuple(idx.astype(int).T)])) < 1e-5
 
 
-@pytest.mark.parametrize("family", ["linear", "cubic"])
+@pytest.mark.parametrize("family", ["linear", "cubic", "quintic"])
 def test_gradient_matches_finite_differences(family, rng):
     smooth = np.fromfunction(lambda z, y, x: np.sin(0.4 * x) * np.cos(0.3 * y) + 0.05 * z * z, SHAPE)
     wv = WaveletVolume.from_volume(Volume(smooth, spacing=SPACING), family, levels=2).threshold(keep=0.3)
@@ -122,10 +131,11 @@ def test_real_line_synthesis_matches_pywavelets_on_thresholded_set(data):
     assert np.max(np.abs(wv.evaluate(pts) - expected)) < 1e-5
 
 
-def test_mixed_orders_per_channel(rng):
+@pytest.mark.parametrize("colour", ["cubic", "quintic"])
+def test_mixed_orders_per_channel(rng, colour):
     rgba = rng.random(SHAPE + (4,)).astype(np.float32)
-    wv = WaveletVolume.from_volume(Volume(rgba), ["cubic", "cubic", "cubic", "haar"], levels=2)
-    assert wv.wavelets == ("cubic", "cubic", "cubic", "haar") and len(wv.groups) == 2
+    wv = WaveletVolume.from_volume(Volume(rgba), [colour, colour, colour, "haar"], levels=2)
+    assert wv.wavelets == (colour, colour, colour, "haar") and len(wv.groups) == 2
     assert np.max(np.abs(wv.reconstruct().data - rgba)) < 1e-5
     pts = rng.uniform(-4, 4, (50, 3))
     expected = fine_model(rgba[..., 3:].astype(np.float64), (0, 0, 0), 1, world_to_fine(pts, SHAPE, (1, 1, 1), 1))
@@ -196,14 +206,14 @@ def test_focus_keeps_more_detail_near_it(rng):
     assert around(centre) < 0.5 * around((8.0, -4.0, -6.0))
 
 
-@pytest.mark.parametrize("channels", [1, 4])
-def test_clw_round_trip_is_exact_and_small(tmp_path, channels, rng):
+@pytest.mark.parametrize("channels, wavelet", [(1, "cubic"), (4, "cubic"), (1, "quintic")])
+def test_clw_round_trip_is_exact_and_small(tmp_path, channels, wavelet, rng):
     shape = (48, 40, 44)
     z, y, x = np.meshgrid(*[np.linspace(-1, 1, n) for n in shape], indexing="ij")
     blob = np.exp(-4 * (x * x + 2 * y * y + 3 * z * z)) + 0.05 * rng.random(shape)
     data = np.stack([blob * (c + 1) for c in range(channels)], -1)
     vol = Volume(data.astype(np.float32), spacing=(1.2, 1.0, 0.8), origin=(1, 2, 3))
-    wv = WaveletVolume.from_volume(vol, "cubic", levels=3, transfer_function={"points": [[0, 1, 1, 1, 0.5]]})
+    wv = WaveletVolume.from_volume(vol, wavelet, levels=3, transfer_function={"points": [[0, 1, 1, 1, 0.5]]})
     th = wv.threshold(keep=0.05, focus=((0.0, 0.0, 0.0), 20.0))
     path = th.save(tmp_path / "v.clw")
     assert path.stat().st_size <= 0.10 * vol.data.nbytes

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|scale|view|drr|all
+    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|orders|scale|view|drr|all
                           [--size 128 256] [--repeats 3] [--views 4] [--keep 0.01 0.05 1] [--device auto]
                           [--json out.json]
 
@@ -660,9 +660,55 @@ def bench_drr(args) -> dict:
                 targets=dict(seconds_512=0.5, batch_100_at_256_seconds=10.0), cases=cases)
 
 
+def bench_orders(args) -> dict:
+    """The cost of the basis order (paper Fig. 14: orders 1, 2, 4, 6): decomposition of the classified hydrogen
+    phantom (4 channels, 3 levels), splatting (keep 0.05, 512²) and ray tracing (keep 0.05, 512², tolerance 1e-2;
+    orders 1-4 only) per order, the orders interleaved in every repeat so that a loaded machine slows them alike."""
+    from clwave.raytrace.tracer import RAYTRACE_ORDERS
+    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+    names = ("haar", "linear", "cubic", "quintic")
+    cams = [clwave.Camera(az, el, size=512) for az, el in views(args.raytrace_views)]
+    decompose, models = {n: [] for n in names}, {}
+    for run in range(args.repeats + 1):  # run 0 is the warm-up
+        for name in names:
+            start = time.perf_counter()
+            models[name] = WaveletVolume.from_volume(rgba, wavelet=name, levels=3).threshold(keep=0.05)
+            if run:
+                decompose[name].append(time.perf_counter() - start)
+    out = {}
+    for name in names:
+        wv = models[name]
+        renderer = clwave.SplatRenderer(wv, device=args.device)
+        clwave.splat(wv, clwave.Camera(10.0, 5.0, size=512), renderer=renderer)  # warm-up
+        splats = [clwave.splat(wv, cam, renderer=renderer).meta for cam in cams]
+        case = dict(order=wv.groups[0].wavelet.order, coefficients=wv.kept,
+                    decompose_and_threshold_seconds=summary(decompose[name]),
+                    splat_seconds=summary([m["seconds"]["total"] for m in splats]),
+                    splat_footprint_seconds=summary([m["seconds"]["footprints"] for m in splats]),
+                    splat_pixel_updates=statistics.median(m["pixel_updates"] for m in splats))
+        if case["order"] in RAYTRACE_ORDERS:
+            start = time.perf_counter()
+            tracer = clwave.RayTracer(wv, device=args.device)
+            case["raytrace_setup_seconds"] = time.perf_counter() - start
+            tracer.render(cams[0], tolerance=1e-2)  # warm-up
+            walls = []
+            for cam in cams:
+                start = time.perf_counter()
+                tracer.render(cam, tolerance=1e-2)
+                walls.append(time.perf_counter() - start)
+            case["raytrace_seconds"] = summary(walls)
+            del tracer
+        else:
+            case["raytrace_seconds"] = "refused: ray tracing takes orders 1-4"
+        out[name] = case
+    out["peak_resident_gib"] = peak_resident_gib()
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", levels=3, keep=0.05, image="512x512",
+                             views=args.raytrace_views, tolerance=1e-2), orders=out)
+
+
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "post": bench_post,
-              "scale": bench_scale, "view": bench_view, "drr": bench_drr}
+              "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr}
 
 
 def main(argv=None):

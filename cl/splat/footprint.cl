@@ -5,12 +5,13 @@
  * Texture t's spectrum is the slice F(U u + V v) at U = c du (column c = 0 .. nu/2) and
  * V = kv dv (row r in numpy.fft.fftfreq order: kv = r in the first half, r - nv after).  Per world axis a, with
  * x_a = rate_a.x c + rate_a.y kv (x = w/2 for phi, w/4 for psi),
- *     phi: (sin x / x)^J,      psi: (sin^2 x / x)^J P(sin^2 x),
+ *     phi: (sin x / x)^J,      psi: (sin^2 x / x)^J P(sin^2 x)  (M < J moments: (sin x / x)^J sin^M x P(sin^2 x),
+ *     the last two factors given as Chebyshev coefficients in sin x),
  * and the texture's value is phase * prod_a (complex: the centred factors are real, or
  * imaginary for odd-order psi; psi's 1/2, det(D) 2^(3m/2) and the inverse FFT's scale are in
  * phase).  An axis parallel to n is given as phi with rate (0, 0): a factor of 1.
  *
- * The host sets CLW_ORDER (J) and CLW_TERMS (P's coefficients).  Each work-item computes 16
+ * The host sets CLW_ORDER (J), CLW_TERMS (P's coefficients) and CLW_MOMENTS (psi's vanishing moments M).  Each work-item computes 16
  * columns as float16: PoCL vectorises the sines that way, not across work-items. */
 #include "common/clw_common.h"
 
@@ -29,11 +30,21 @@ inline float16 axis_factor(const float16 x, const int psi, __constant const floa
     const float16 sinc = select(s / x, 1.0f - x * x / 6.0f, fabs(x) < 1e-3f);
     if (!psi)
         return power(sinc);
+#if CLW_MOMENTS == CLW_ORDER
     const float16 s2 = s * s;
     float16 p = (float16)(poly[CLW_TERMS - 1]);
     for (int r = CLW_TERMS - 2; r >= 0; r--)
         p = p * s2 + poly[r];
     return power(sinc * s) * p;
+#else /* poly: s^M P(s^2) as Chebyshev coefficients, summed by Clenshaw (its power form loses 3e-4 in float) */
+    float16 b1 = (float16)(0.0f), b2 = (float16)(0.0f);
+    for (int r = CLW_TERMS - 1; r >= 1; r--) {
+        const float16 b0 = 2.0f * s * b1 - b2 + poly[r];
+        b2 = b1;
+        b1 = b0;
+    }
+    return power(sinc) * (s * b1 - b2 + poly[0]);
+#endif
 }
 
 /* footprint_spectra

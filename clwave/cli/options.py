@@ -55,7 +55,7 @@ def add_model_options(p):
     from ..model.transfer import TransferFunction
 
     g = p.add_argument_group("wavelet model (from a volume; a .clw input is a model already)")
-    g.add_argument("--wavelet", help=f"haar, linear, quadratic or cubic; or one per channel, comma-separated "
+    g.add_argument("--wavelet", help=f"haar, linear, quadratic, cubic or quintic; or one per channel, comma-separated "
                                      f"(default {DEFAULT_WAVELET})")
     g.add_argument("--levels", type=int, help=f"decomposition levels (default {DEFAULT_LEVELS})")
     k = g.add_mutually_exclusive_group()
@@ -297,8 +297,8 @@ def add_camera_options(p):
     g.add_argument("--window", dest="display_window", default="auto", help="PNG window: auto or LO,HI")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
-    g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic bands into coarser framebuffers "
-                   "within this error relative to the image maximum (e.g. 1e-2; default: off)")
+    g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic and quintic bands into coarser "
+                   "framebuffers within this error relative to the image maximum (e.g. 1e-2; default: off)")
     g.add_argument("--device-memory", metavar="SIZE", help="device memory to use at most, e.g. 2GiB or 512M "
                    "(default: the device's); splatting streams coefficients beyond it in chunks (docs/splatting.md "
                    "§6), ray tracing renders bricks beyond it in passes (docs/raytracing.md §6)")

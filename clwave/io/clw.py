@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ClwaveError, FileFormatError, InputError, finite_number
-from ..model.bspline import SplineWavelet, max_levels
+from ..model.bspline import WAVELET_ORDERS, SplineWavelet, max_levels
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
@@ -484,8 +484,9 @@ def _checked_header(header) -> tuple:
         raise ValueError("the file has no channel groups")
     seen = []
     for g in groups:
-        if not (isinstance(g, dict) and g.get("wavelet") in (1, 2, 3, 4) and isinstance(g.get("channels"), list)):
-            raise ValueError(f"channel group {g!r} is not a wavelet order 1-4 with a list of channels")
+        orders = sorted(WAVELET_ORDERS.values())
+        if not (isinstance(g, dict) and g.get("wavelet") in orders and isinstance(g.get("channels"), list)):
+            raise ValueError(f"channel group {g!r} is not a wavelet order {orders} with a list of channels")
         seen += g["channels"]
     if sorted(seen) != list(range(channels)):
         raise ValueError(f"the groups hold channels {sorted(seen)}, not each of the {channels} once")

@@ -1,4 +1,5 @@
-"""Cardinal B-splines and the CDF(j, j) spline wavelets of docs/model.md §1-4 and docs/splatting.md §1.
+"""Cardinal B-splines and the spline wavelets of docs/model.md §1-4 and docs/splatting.md §1: CDF(j, j) for
+orders 1-4 and CDF(6, 6) lifted to a better condition number for order 6 (docs/model.md §2).
 
 Everything the renderers need about one basis order lives here: the
 closed-form scaling function ``N_j`` and wavelet ``psi = sum_k q_k N_j(2x - k)``
@@ -39,9 +40,18 @@ _BANKS = {
             dec_hi=np.array([0, 0, 0, -1, 4, -6, 4, -1, 0, 0, 0, 0]) / 8,
             rec_lo=np.array([0, 0, 0, 1, 4, 6, 4, 1, 0, 0, 0, 0]) / 8,
             rec_hi=np.array([0, -5, -20, -1, 96, 70, -280, 70, 96, -1, -20, -5]) / 128),
+    # CDF(6, 6) with psi lifted by -sum_n s_n N_6(x - n), s = (1377, -3282, 1905, 1905, -3282, 1377) / 4096:
+    # condition number 123 -> 43, support [0, 11] kept (docs/model.md §2, tools/order6_banks.py)
+    6: dict(A=12, B=16,
+            dec_lo=np.array([0, -2385, 14310, -24989, -17016, 97134, -28124, -204387, 96366, 400326, 96366,
+                             -204387, -28124, 97134, -17016, -24989, 14310, -2385]) / 131072,
+            dec_hi=np.array([0, 0, 0, 0, 0, -1, 6, -15, 20, -15, 6, -1, 0, 0, 0, 0, 0, 0]) / 32,
+            rec_lo=np.array([0, 0, 0, 0, 0, 1, 6, 15, 20, 15, 6, 1, 0, 0, 0, 0, 0, 0]) / 32,
+            rec_hi=np.array([0, -2385, -14310, -24989, 17016, 97134, 28124, -204387, -96366, 400326, -96366,
+                             -204387, 28124, 97134, 17016, -24989, -14310, -2385]) / 131072),
 }
 
-WAVELET_ORDERS = {"haar": 1, "linear": 2, "quadratic": 3, "cubic": 4}
+WAVELET_ORDERS = {"haar": 1, "linear": 2, "quadratic": 3, "cubic": 4, "quintic": 6}
 
 
 def bspline(j: int, x) -> np.ndarray:
@@ -82,13 +92,13 @@ def bspline_explicit(j: int, x) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SplineWavelet:
-    """The CDF(j, j) B-spline wavelet of order ``j`` (1 = Haar ... 4 = cubic)."""
+    """The B-spline wavelet of order ``j`` (1 = Haar ... 4 = cubic, 6 = quintic; docs/model.md §1-2)."""
 
     order: int
 
     def __post_init__(self):
         if self.order not in _BANKS:
-            raise InputError(f"unsupported B-spline order {self.order}; use 1 to 4")
+            raise InputError(f"unsupported B-spline order {self.order}; use one of {', '.join(map(str, _BANKS))}")
 
     # --- names and filters -------------------------------------------------
     @property
@@ -103,7 +113,7 @@ class SplineWavelet:
     @cached_property
     def pywt(self) -> pywt.Wavelet:
         b = self.bank
-        return pywt.Wavelet(f"cdf{self.order}{self.order}",
+        return pywt.Wavelet(f"clwave-{self.name}",
                             filter_bank=[b["dec_lo"], b["dec_hi"], b["rec_lo"], b["rec_hi"]])
 
     @cached_property

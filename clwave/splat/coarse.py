@@ -31,7 +31,8 @@ def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixe
     wavelet level, an eighth to the next, and so on, so the errors sum to less than it.  A
     band's share e allows coarse pixels up to ``ratio (e / e_ref)^(1/4) 2^m d_min`` from
     :data:`COARSE_REFERENCE` (cubic B-spline interpolation errs like the fourth power of
-    the spacing).  Only cubic bands are coarsened (the others have kinks).
+    the spacing).  Only cubic and quintic bands are coarsened (the others have kinks; quintic bands,
+    smoother, stay within the cubic budget: tests/test_splat.py).
 
     >>> pixel = 3 ** 0.5 / 2  # 256^3 at 512^2 (the default extent)
     >>> [coarse_factor(4, 3, 3, a, pixel, 1.0, 2e-2) for a in (True, False)]
@@ -41,7 +42,7 @@ def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixe
     >>> coarse_factor(2, 3, 3, True, pixel, 1.0, 1e-2)
     1
     """
-    if order != 4:
+    if order < 4:
         return 1
     ratio, error = COARSE_REFERENCE["approximation" if approximation else "wavelet"]
     share = tolerance / 2.0 if approximation else tolerance / 2.0 ** (levels - level + 2)

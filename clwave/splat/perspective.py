@@ -169,7 +169,7 @@ class ConeTables:
                                      f"its level-{b.level} basis functions reach behind the eye; move it farther "
                                      "away (a larger distance or dso)")
                 pixel = min(view.slope) * near
-                omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min)
+                omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, wav.order)
                 self.omega_s = self.omega_s or omega
                 layer_of[band] = li
                 texels[band] = pixel / texels_per_pixel(wav.order, b.level, omega, pixel, d_min)

@@ -19,11 +19,12 @@ from ..model.bspline import SplineWavelet, wavelet_for
 # ----------------------------------------------------------------------------- Fourier factors
 @lru_cache(maxsize=None)
 def psi_poly(order: int) -> tuple:
-    """The tap sum of psi's centred transform as a polynomial: ``(coeffs, imaginary)``.
+    """The tap sum of psi's centred transform as a polynomial: ``(coeffs, imaginary, moments)``.
 
-    ``sum_k q_k e^(-i n_k t) = (-i)^imaginary s^j P(s^2)`` with ``s = sin t``,
-    ``n_k = 2k - (3j - 2)`` and ``P = sum_r coeffs[r] (s^2)^r``.  The factor ``s^j`` is psi's
-    j vanishing moments (``Q`` has the root ``(1 - e^(-iw))^j``).
+    ``sum_k q_k e^(-i n_k t) = (-i)^imaginary s^M P(s^2)`` with ``s = sin t``,
+    ``n_k = 2k - (3j - 2)`` and ``P = sum_r coeffs[r] (s^2)^r``.  The factor ``s^M`` is psi's
+    M vanishing moments (``Q`` has the root ``(1 - e^(-iw))^M``): M = j for CDF(j, j), 2 for the
+    lifted order-6 bank (docs/model.md §2).
     """
     q = SplineWavelet(order).q
     K = len(q) - 1
@@ -42,11 +43,11 @@ def psi_poly(order: int) -> tuple:
         else:  # cos(r t) = (-1)^(r/2) T_r(sin t) for even r
             cheb[r] += qk * (-1) ** (r // 2)
     power = np.polynomial.chebyshev.cheb2poly(cheb)
-    j = order
-    low, rest = power[:j], power[j:]
-    if np.max(np.abs(low)) > 1e-12 or np.max(np.abs(rest[1::2]), initial=0.0) > 1e-12:
-        raise InputError("footprints need psi with j vanishing moments")  # pragma: no cover
-    return tuple(rest[0::2]), imaginary
+    moments = int(np.argmax(np.abs(power) > 1e-12))
+    rest = power[moments:]
+    if moments == 0 or np.max(np.abs(rest[1::2]), initial=0.0) > 1e-12:
+        raise InputError("footprints need psi with a vanishing mean")  # pragma: no cover
+    return tuple(rest[0::2]), imaginary, moments
 
 
 def _poly(coeffs, z):
@@ -89,6 +90,8 @@ class _Axis:
         G = weight (-i)^imaginary (num / x)^j poly,
         phi: num = sin x, poly = 1;   psi: num = sin^2 x, poly = P(sin^2 x)  (:func:`psi_poly`)
 
+    (psi with M < j vanishing moments: num = sin x, poly = sin^M x P(sin^2 x).)
+
     Sines come from the 1-D tables by the addition theorem: no transcendental per grid point.
     """
 
@@ -101,7 +104,7 @@ class _Axis:
         self.sa, self.ca = np.sin(self.ak), np.cos(self.ak)
         self.sb, self.cb = np.sin(self.bl), np.cos(self.bl)
         self.weight = _WEIGHT[letter]
-        self.coeffs, self.imaginary = psi_poly(order) if letter == "d" else (None, False)
+        self.coeffs, self.imaginary, self.moments = psi_poly(order) if letter == "d" else (None, False, 0)
 
     def block(self, r0, r1):
         """``(num, x, poly)`` on rows r0:r1 (arrays of their own; 1-D kinds stay 1-D)."""
@@ -115,14 +118,17 @@ class _Axis:
             s += np.multiply.outer(self.cb[r0:r1], self.sa)
         if self.letter == "a":
             num, poly = s, None
-        else:
+        elif self.moments == self.order:
             num = s * s
             poly = _poly(self.coeffs, num)
+        else:
+            num = s
+            poly = _poly(self.coeffs, s * s) * s ** self.moments
         small = _small_positions(x, self.a_, self.b_, self.ku, self.kv[r0:r1])
         if len(small[0]):
             xs = x[small]
             sinc = 1.0 - xs * xs / 6.0  # sin(x)/x to 1e-17 for |x| < 1e-4
-            num[small] = sinc if self.letter == "a" else sinc * s[small]
+            num[small] = sinc if num is s else sinc * s[small]
             x[small] = 1.0
         return num, x, poly
 
@@ -248,7 +254,11 @@ def device_spectra(cc, order: int, plans) -> list:
     """
     if not plans:
         return []
-    coeffs, imaginary = psi_poly(order)
+    coeffs, imaginary, moments = psi_poly(order)
+    if moments < order:  # the kernel sums s^M P(s^2) in Chebyshev form: its power form is ill-conditioned
+        power = np.zeros(moments + 2 * len(coeffs) - 1)
+        power[moments::2] = coeffs
+        coeffs = np.polynomial.chebyshev.poly2cheb(power)
     sizes, rates, group_tex, first = [], [], [], 0
     for t, (scale, axes, nu, nv) in enumerate(plans):
         rate, psi = np.zeros(8), 0  # absent axes: phi at rate 0, a factor of 1
@@ -265,7 +275,8 @@ def device_spectra(cc, order: int, plans) -> list:
         first += groups * SPECTRUM_GROUP
     q = cc.queue
     out = cla.empty(q, (first * SPECTRUM_BLOCK,), np.complex64)
-    kernels = programs.build(cc, ["splat/footprint.cl"], {"CLW_ORDER": order, "CLW_TERMS": len(coeffs)})
+    kernels = programs.build(cc, ["splat/footprint.cl"], {"CLW_ORDER": order, "CLW_TERMS": len(coeffs),
+                                                               "CLW_MOMENTS": moments})
     _SPECTRA(kernels, q, (first,), (SPECTRUM_GROUP,), group_tex=cc.upload(np.array(group_tex, np.int32)),
              tex_size=cc.upload(np.array(sizes, np.int32)), tex_rate=cc.upload(np.array(rates, np.float32)),
              poly=cc.upload(np.array(coeffs, np.float32)), out=out)

@@ -29,7 +29,7 @@ POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pi
 CELL_REFINE = 8
 
 
-#: Cubic textures keep the bounding box of their samples above this fraction of their peak
+#: Cubic and quintic textures keep the bounding box of their samples above this fraction of their peak
 #: (paper Fig. 9).  Near the edges of the projected support box, where only the support's corners
 #: project, a cubic footprint is vanishingly small (its B-spline tails meet there to high order):
 #: at 1e-4 a third of the pixel updates go (docs/splatting.md §1) while 64^3 at 128^2 (every
@@ -65,7 +65,7 @@ class ViewTables:
         if sampling == "auto" and any(cell_axes(wav, image_view.u, image_view.v)):
             sampling = "cells"  # Haar with u or v along a world axis: exact cells along that axis
         # the texture band of each layer (a layer's pixel sets its default), the image's reported
-        omegas = [omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing))
+        omegas = [omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing), wav.order)
                   for view, _ in layers]
         self.omega_s = omegas[0]
         self.layer_of, self.texels_per_pixel, texel = {}, {}, {}
@@ -81,7 +81,7 @@ class ViewTables:
                 texel[band] = view.pixel / self.texels_per_pixel[band]
         start = time.perf_counter()
         self.textures = footprints(wav, wv.spacing, image_view.n, image_view.u, image_view.v, list(self.layer_of),
-                                   omega_s=self.omega_s, sampling=sampling, tol=TEXTURE_TOL if wav.order == 4 else 0.0,
+                                   omega_s=self.omega_s, sampling=sampling, tol=TEXTURE_TOL if wav.order >= 4 else 0.0,
                                    texel=texel, device=device, max_texels=max_texels)
         self.footprint_seconds = time.perf_counter() - start
         self.samplings = sorted({t.sampling for t in self.textures.values() if t is not None})
@@ -176,9 +176,15 @@ def texels_per_pixel(order: int, level: int, omega: float, pixel: float, d_min: 
     return max(2, int(np.ceil(max(omega, least) * pixel / (np.pi * d_min) - 1e-9)))
 
 
-def default_omega_s(pixel, min_spacing) -> float:
-    """Texture band: the paper's 14, finer when pixels are small (texel <= pixel / 4)."""
-    return max(14.0, 4.0 * np.pi * min_spacing / pixel)
+#: Texture band factor per order: order-6 wavelets (condition 34.6, docs/model.md §2) cancel more, so the
+#: texture error grows more in the image: full-set images of 24^3 hydrogen at 32^2, 3.4e-3 to 8.0e-3 of the
+#: image maximum from the exact line integrals at the band 14, 5.1e-4 to 7.5e-4 at 28 (docs/splatting.md §1)
+OMEGA_S_FACTOR = {6: 2.0}
+
+
+def default_omega_s(pixel, min_spacing, order=4) -> float:
+    """Texture band: the paper's 14, finer when pixels are small (texel <= pixel / 4); twice that for order 6."""
+    return max(14.0, 4.0 * np.pi * min_spacing / pixel) * OMEGA_S_FACTOR.get(order, 1.0)
 
 
 MAX_LEVELS = 8  # band id = level * 8 + subband code must fit the 64-entry table
