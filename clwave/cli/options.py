@@ -291,6 +291,9 @@ def add_camera_options(p):
     g = p.add_argument_group("view")
     g.add_argument("--azimuth", type=float, default=30.0, help="degrees (default 30)")
     g.add_argument("--elevation", type=float, default=20.0, help="degrees (default 20)")
+    g.add_argument("--perspective", action="store_true", help="perspective camera (default orthographic)")
+    g.add_argument("--fov", type=float, default=30.0, help="perspective: vertical field of view, degrees")
+    g.add_argument("--distance", type=float, help="perspective: eye distance from the target (world units)")
     g.add_argument("--size", default="512", help="image size: N or HxW, e.g. 512 or 300x400 (default 512)")
     g.add_argument("--extent", type=float, help="world width of the image (default: the bounding sphere of the "
                                                  "non-empty voxels spans the image, the same at every view)")
@@ -306,9 +309,6 @@ def add_camera_options(p):
 
 def add_raytrace_options(p):
     g = p.add_argument_group("ray tracing (--method raytrace)")
-    g.add_argument("--perspective", action="store_true", help="perspective camera (default orthographic)")
-    g.add_argument("--fov", type=float, default=30.0, help="perspective: vertical field of view, degrees")
-    g.add_argument("--distance", type=float, help="perspective: eye distance from the target (world units)")
     g.add_argument("--tolerance", type=float, default=1e-3, help="absolute error per output value (default 1e-3)")
     g.add_argument("--light", action="append", help="directional light AZ,EL in degrees; repeat for more; "
                    "'none' for ambient only (default: a headlight)")
