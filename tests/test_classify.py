@@ -252,6 +252,10 @@ def test_errors_and_default_transfer_function(tmp_path, hydrogen):
         tr.render(cam, transfer_function=tf, absorption=False)
     with pytest.raises(InputError, match="field='bspline'"):
         clwave.RayTracer(wv, field="wavelet").render(cam, transfer_function=tf)
+    with pytest.raises(InputError, match="full detail"):  # level of detail is not yet built for it
+        tr.render(cam, transfer_function=tf, detail=1)
+    with pytest.raises(InputError, match="full detail"):
+        clwave.RayTracer(wv, lod=True).render(cam, transfer_function=tf)
     rgba = clwave.WaveletVolume.from_volume(tf.classify(clwave.phantom("hydrogen", n=16)), levels=1)
     with pytest.raises(InputError, match="4 channels"):
         clwave.raytrace(rgba, cam, transfer_function=tf)

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .options import add_command, build_model, check_outputs, numbers, parse_device_memory, parse_window
+from .options import (add_command, add_device_options, build_model, check_outputs, numbers, parse_device_memory,
+                      parse_window)
 
 
 def read_pose_table(path) -> list:
@@ -91,10 +92,5 @@ def add_parser(sub):
     g.add_argument("--isocentre", default="0,0,0", help="world X,Y,Z the principal ray passes (default 0,0,0)")
     g.add_argument("--intensity", action="store_true", help="Beer-Lambert transmitted intensity exp(-line "
                    "integral) instead of the line integrals (a --hu-to-mu CT: mu per mm)")
-    g.add_argument("--window", dest="display_window", default="auto", help=".png display window: auto or LO,HI")
-    g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
-    g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
-    g.add_argument("--coarse", type=float, help="draw coarse cubic bands into coarser framebuffers within this "
-                   "error relative to the image maximum (e.g. 1e-2; default: off)")
-    g.add_argument("--device-memory", metavar="SIZE", help="device memory to use at most, e.g. 2GiB")
+    add_device_options(g)
     return p

@@ -297,6 +297,11 @@ def add_camera_options(p):
     g.add_argument("--size", default="512", help="image size: N or HxW, e.g. 512 or 300x400 (default 512)")
     g.add_argument("--extent", type=float, help="world width of the image (default: the bounding sphere of the "
                                                  "non-empty voxels spans the image, the same at every view)")
+    add_device_options(g)
+
+
+def add_device_options(g):
+    """The display window and the device options of every rendering command (``g``: an argument group)."""
     g.add_argument("--window", dest="display_window", default="auto", help="PNG window: auto or LO,HI")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")

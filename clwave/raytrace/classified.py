@@ -162,3 +162,20 @@ def bernstein_matrix(xi) -> np.ndarray:
     k = np.arange(n + 1)
     basis = comb(n, k) * t[:, None] ** k * (1 - t[:, None]) ** (n - k)  # (points, k)
     return np.linalg.inv(basis)
+
+
+def check_post(tracer, absorption, detail):
+    """Refuse what a transfer function at render time cannot take: it needs a scalar model, the B-spline field,
+    absorption and full detail (docs/known-gaps.md §10: the scalar's ranges are those of the full-detail bricks)."""
+    if tracer.wv.channels != 1:
+        raise InputError(f"transfer_function= classifies a scalar model while rendering; this one has "
+                         f"{tracer.wv.channels} channels (already classified: render it without one)")
+    if tracer.lod or detail not in (None, 0):
+        raise InputError("transfer_function= renders at full detail, from a tracer made with lod=False; leave "
+                         "detail= and lod= out (level of detail with a render-time transfer function is not "
+                         "built yet)")
+    if tracer.scalar is None:
+        raise InputError("transfer_function= needs field='bspline' (--field bspline)")
+    if not absorption:
+        raise InputError("transfer_function= is for emission-absorption images; X-ray mode (absorption=False) "
+                         "integrates the scalar itself")

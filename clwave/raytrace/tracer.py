@@ -28,7 +28,7 @@ from ..device.memory import device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
-from .classified import ScalarRange, bernstein_matrix
+from .classified import ScalarRange, bernstein_matrix, check_post
 from .progressive import frames
 from .quadrature import sample_tables
 from ..io.result import RenderResult
@@ -343,7 +343,7 @@ class RayTracer:
         if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
         if transfer_function is not None:
-            self._check_post(absorption, detail)
+            check_post(self, absorption, detail)
         elif absorption and wv.channels != 4:
             raise InputError(f"emission-absorption ray tracing needs an RGBA volume (4 channels), this one has "
                              f"{wv.channels}; classify it first (TransferFunction.classify), give a scalar one a "
@@ -501,22 +501,6 @@ class RayTracer:
         left running).  Needs ``lod=True``; use it from one thread at a time."""
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
         return frames(self, camera, options, steps, budget, error)
-
-    def _check_post(self, absorption, detail):
-        """A transfer function at render time needs a scalar model with the B-spline field, absorption, and full
-        detail (docs/known-gaps.md §10: the scalar's ranges are those of the full-detail bricks)."""
-        if self.wv.channels != 1:
-            raise InputError(f"transfer_function= classifies a scalar model while rendering; this one has "
-                             f"{self.wv.channels} channels (already classified: render it without one)")
-        if self.lod or detail not in (None, 0):
-            raise InputError("transfer_function= renders at full detail, from a tracer made with lod=False; leave "
-                             "detail= and lod= out (level of detail with a render-time transfer function is not "
-                             "built yet)")
-        if self.scalar is None:
-            raise InputError("transfer_function= needs field='bspline' (--field bspline)")
-        if not absorption:
-            raise InputError("transfer_function= is for emission-absorption images; X-ray mode (absorption=False) "
-                             "integrates the scalar itself")
 
     def _phong(self, shading, absorption):
         """(Phong or None, what the meta says about shading)."""
