@@ -16,6 +16,7 @@ import pytest
 
 import clwave
 from clwave import TransferFunction, WaveletVolume
+from clwave.device.constants import BLOCK, BRICK, SUPER
 from clwave.device.context import ComputeContext
 from clwave.device.memory import device_budget
 from clwave.errors import DeviceMemoryError, OutputError
@@ -27,7 +28,6 @@ from clwave.raytrace.reference import _content_field, raytrace_reference
 from clwave.raytrace.tracer import RayTracer
 
 pytestmark = pytest.mark.opencl
-BRICK = bricks.BRICK
 
 
 def spilled(spill: bricks.Spill) -> np.ndarray:
@@ -176,7 +176,7 @@ def test_block_bounds_hold_the_field(content):
     bound = field.bound_grid(field.pages[0])
     x0 = np.random.default_rng(3).uniform(-20, 64, (3000, 3))
     values = np.abs(pool_field(wv, field, x0)).max(axis=1)
-    block = np.floor(x0 / bricks.BLOCK).astype(int) - field.origin * bricks.SUPER
+    block = np.floor(x0 / BLOCK).astype(int) - field.origin * SUPER
     inside = np.all((block >= 0) & (block < bound.shape), axis=1)
     assert values[~inside].max(initial=0.0) == 0.0
     held = bound[tuple(block[inside].T)]

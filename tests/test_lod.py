@@ -10,6 +10,7 @@ import pytest
 
 import clwave
 from clwave import WaveletVolume
+from clwave.device.constants import BRICK
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import fine_to_world, world_to_fine
 from clwave.model.mask import ContentMask
@@ -79,7 +80,7 @@ def coarse_fields(wv, detail):
 
 def brick_levels(field, detail, x0) -> np.ndarray:
     """The lattice level of the brick holding each grid-0 fine point (z, y, x) at ``detail``, -1 for none."""
-    b = np.floor(x0 / bricks.BRICK).astype(int) - field.origin
+    b = np.floor(x0 / BRICK).astype(int) - field.origin
     inside = np.all((b >= 0) & (b < field.shape), axis=1)
     out = np.full(len(x0), -1)
     slot = field.pages[detail][tuple(b[inside].T)]
