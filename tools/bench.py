@@ -741,15 +741,12 @@ def main(argv=None):
     parser.add_argument("--scratch", type=Path, default=Path("/tmp/clwave-bench"),
                         help="scale: folder of the Zarr stores and models (kept between runs)")
     parser.add_argument("--view-image", type=int, default=512, help="view: the viewer's image size")
-    parser.add_argument("--device", default="auto")
-    parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
-    args = parser.parse_args(argv)
-    names = [n for n in BENCHMARKS if n not in ("scale", "view")] if args.benchmark == "all" else [args.benchmark]
     parser.add_argument("--drr-batch", type=int, default=100, help="drr: poses in the 256^2 batch")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
-    names = [n for n in BENCHMARKS if n not in ("scale", "drr")] if args.benchmark == "all" else [args.benchmark]
+    names = [n for n in BENCHMARKS if n not in ("scale", "view", "drr")] if args.benchmark == "all" \
+        else [args.benchmark]
     results = {}
     for name in names:
         shaped = name == "scale" and args.scale_shape is not None  # one volume of that shape, not --size
