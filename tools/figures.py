@@ -17,7 +17,7 @@
   of ``fig16`` (the paper's Fig. 16 is "the same setup as in fig. 13"), i.e. its ray-traced half;
 - ``fig14``: B-splines of orders 1, 2, 4 and 6 for RGB and alpha: the scaling functions of M = 2
   (4 voxels wide, so each basis shows; order 6's band, the largest, sets the kept fraction), 2x
-  zoom, ray traced (orders 1-4; Haar has no gradient, so it renders unshaded, as in the paper) and
+  zoom, ray traced (every order; Haar has no gradient, so it renders unshaded, as in the paper) and
   splatted (the emission's line integrals, every order); for the two data sets and a CT-like one,
   the Shepp-Logan phantom;
 - ``fig15``: progressive refinement (Haar, as the paper) with the error image after each
@@ -246,9 +246,7 @@ def ct_like(args) -> Data:
 def fig14(out: Path, data, args, log):
     """Orders 1, 2, 4, 6 for RGB and alpha, the M = 2 scaling functions at one kept fraction (the largest
     approximation band, order 6's: every order keeps its whole band, the smaller ones their largest details
-    besides): ray traced where clwave can (orders 1-4; Haar unshaded) and, for every order, the splatted
-    emission (line integrals of q_R, q_G, q_B)."""
-    from clwave.raytrace.tracer import RAYTRACE_ORDERS
+    besides): ray traced (Haar unshaded) and splatted (the emission's line integrals of q_R, q_G, q_B)."""
     for d in [*data, ct_like(args)]:
         camera, splat_camera = d.view(args.raytrace_image, zoom=ZOOM14), d.view(args.image, zoom=ZOOM14)
         traced, splatted = [], []
@@ -258,13 +256,9 @@ def fig14(out: Path, data, args, log):
             wv = full.pop(wavelet).threshold(keep=keep)
             order = wv.groups[0].wavelet.order
             caption = f"order {order} ({wavelet}), {compression_text(wv)}"
-            if order in RAYTRACE_ORDERS:
-                image, secs, note = trace(wv, camera, args.tolerance)
-                traced.append((image, caption + note, None, False))
-                log(f"  fig14 {d.key} {wavelet} ray traced: {secs:.2f} s")
-            else:
-                traced.append((np.zeros((1, 1, 3), np.uint8), f"order {order}: not ray traced (orders 1-4)", None,
-                               False))
+            image, secs, note = trace(wv, camera, args.tolerance)
+            traced.append((image, caption + note, None, False))
+            log(f"  fig14 {d.key} {wavelet} ray traced: {secs:.2f} s")
             start = time.perf_counter()
             emission = clwave.splat(wv, splat_camera)  # shown from 0: its own percentiles would magnify ringing
             top = float(np.percentile(emission.image[..., :3], 99.5))

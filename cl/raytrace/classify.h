@@ -25,7 +25,7 @@
  * transfer function's linear interval on the piece */
 typedef struct {
     real us[NS], ui[NS + 1]; /* u's Chebyshev series, and its antiderivative (any constant) */
-    real3 g[9];              /* the gradient of s (fine units), Chebyshev series */
+    real3 g[NG];             /* the gradient of s (fine units), Chebyshev series */
     real radius;             /* half the segment length (world units) */
     real a, ui_a, depth_a;   /* the piece's start, ui there, and int alpha dxi from -1 to there */
     real4 line;              /* (u_ref, alpha_ref, alpha_slope, normal sign) */
@@ -48,15 +48,25 @@ inline real piece_depth(const Piece *C, const real xi)
     return C->line.y * (xi - C->a) + C->line.z * du_int;
 }
 
-/* int alpha dxi over the whole piece [a, b] by 5-point Gauss-Legendre: exact for alpha's degree (at most 9),
- * and free of the cancellation in piece_depth's differences where the transfer function is steep */
+/* int alpha dxi over the whole piece [a, b] by 5-point Gauss-Legendre (8-point for 16 samples): exact for alpha's
+ * degree (at most NS - 1), and free of the cancellation in piece_depth's differences where the transfer function
+ * is steep.  x, w: the non-negative nodes and their weights; the centre (x = 0, 5 points) counts once */
 inline real piece_total(const Piece *C, const real a, const real b)
 {
+#if NS > 10
+    const int n = 4, first_pair = 0;
+    const real x[4] = {(real)0.183434642495649805, (real)0.525532409916328986, (real)0.796666477413626740,
+                       (real)0.960289856497536232};
+    const real w[4] = {(real)0.362683783378361983, (real)0.313706645877887287, (real)0.222381034453374471,
+                       (real)0.101228536290376259};
+#else
+    const int n = 3, first_pair = 1;
     const real x[3] = {0, (real)0.538469310105683091, (real)0.906179845938663993};
     const real w[3] = {(real)0.568888888888888889, (real)0.478628670499366468, (real)0.236926885056189088};
+#endif
     real sum = 0;
-    for (int i = 0; i < 3; i++)
-        for (int side = -1; side <= (i ? 1 : -1); side += 2) {
+    for (int i = 0; i < n; i++)
+        for (int side = -1; side <= (i >= first_pair ? 1 : -1); side += 2) {
             const real u = cheb1(C->us, NS, (a + b) / 2 + side * x[i] * (b - a) / 2);
             sum += w[i] * fmax(C->line.y + C->line.z * (u - C->line.x), (real)0);
         }
@@ -71,7 +81,7 @@ inline real3 piece_point(Piece *C, const Shading *P, __constant const real *node
     const real3 rgb = clamp(C->rgb + C->rgb_slope * du, (real)0, (real)1) * alpha;
     real r = rgb.x, g = rgb.y, b = rgb.z;
 #ifdef CLW_SHADE
-    const real3 grad = cheb3(C->g, 9, xi) * C->line.w;
+    const real3 grad = cheb3(C->g, NG, xi) * C->line.w;
     shade(&r, &g, &b, alpha, grad.x, grad.y, grad.z, P);
 #else
     shade(&r, &g, &b, alpha, 0, 0, 0, P);
@@ -186,7 +196,7 @@ inline bool segment_scalar(const real *s, __constant const real *nodes, __global
         real am = 0, bm = 0;
         for (int k = 0; k < NS; k++) {
             am += u[k] * nodes[NS + m * NS + k];
-            bm += u[k] * nodes[NS + NS * NS + 81 + m * NS + k];
+            bm += u[k] * nodes[NS + NS * NS + NG * NG + m * NS + k];
         }
         C->us[m] = am;
         c[m] = bm;
@@ -208,7 +218,7 @@ inline bool segment_scalar(const real *s, __constant const real *nodes, __global
 }
 
 /* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from segment_scalar's C, u
- * and c, the gradient of s at the samples (gx, gy, gz: lanes 0..8) and its series (grad; shading), the half
+ * and c, the gradient of s at the samples (gx, gy, gz: lanes 0..NG-1) and its series (grad; shading), the half
  * length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1 where a span could not be
  * resolved. */
 inline real4 classified_segment(Piece *C0, real *c, const real *u, const real *gx, const real *gy, const real *gz,
@@ -218,7 +228,7 @@ inline real4 classified_segment(Piece *C0, real *c, const real *u, const real *g
 {
     const int K = (int)tf[0].z;
     Piece C = *C0;
-    for (int m = 0; m < 9; m++)
+    for (int m = 0; m < NG; m++)
         C.g[m] = grad[m];
     C.radius = radius;
     C.depth_a = 0;

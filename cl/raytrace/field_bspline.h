@@ -75,9 +75,16 @@ inline real4 field_lattice(const Field G, const real3 x, Active *A)
             w[0] = u; w[1] = s;                                                                   \
         } else if (j == 3) {                                                                      \
             w[0] = u * u * one_half; w[1] = (-2 * u * u + 2 * u + 1) * one_half; w[2] = s * s * one_half; \
-        } else {                                                                                  \
+        } else if (j == 4) {                                                                      \
             w[0] = u * u * u * sixth; w[1] = ((-3 * u + 3) * u * u + 3 * u + 1) * sixth;          \
             w[2] = ((3 * u - 6) * u * u + 4) * sixth; w[3] = s * s * s * sixth;                   \
+        } else {                                                                                  \
+            const real c = (real)1 / 120;                                                         \
+            const TYPE u2 = u * u, s2 = s * s;                                                    \
+            w[0] = u2 * u2 * u * c; w[1] = (1 + u * (5 + u * (10 + u * (10 + u * (5 - 5 * u))))) * c; \
+            w[2] = (26 + u * (50 + u * (20 + u * (-20 + u * (-20 + 10 * u))))) * c;               \
+            w[3] = (66 + u2 * (-60 + u2 * (30 - 10 * u))) * c;                                    \
+            w[4] = (26 + u * (-50 + u * (20 + u * (20 + u * (-20 + 5 * u))))) * c; w[5] = s2 * s2 * s * c; \
         }                                                                                         \
     }
 #define BSPLINE_DERIVATIVES(TYPE, NAME)                                                           \
@@ -91,22 +98,35 @@ inline real4 field_lattice(const Field G, const real3 x, Active *A)
         } else if (j == 4) {                                                                      \
             dw[0] = u * u * one_half; dw[1] = (-3 * u * u + 2 * u + 1) * one_half;                \
             dw[2] = (3 * u - 4) * u * one_half; dw[3] = -(1 - u) * (1 - u) * one_half;            \
+        } else if (j == 6) {                                                                      \
+            const real c = (real)1 / 120;                                                         \
+            const TYPE u2 = u * u, s2 = (1 - u) * (1 - u);                                        \
+            dw[0] = 5 * u2 * u2 * c; dw[1] = (5 + u * (20 + u * (30 + u * (20 - 25 * u)))) * c;   \
+            dw[2] = (50 + u * (40 + u * (-60 + u * (-80 + 50 * u)))) * c;                         \
+            dw[3] = u * (-120 + u2 * (120 - 50 * u)) * c;                                         \
+            dw[4] = (-50 + u * (40 + u * (60 + u * (-80 + 25 * u)))) * c; dw[5] = -5 * s2 * s2 * c; \
         }                                                                                         \
     }
+/* lanes 8..11 (real4), or 8..15 (real8) when NS = 16 */
+#if NS > 12
+typedef real8 realt;
+#else
+typedef real4 realt;
+#endif
 BSPLINE_WEIGHTS(real8, bspline_weights8)
-BSPLINE_WEIGHTS(real4, bspline_weights4)
+BSPLINE_WEIGHTS(realt, bspline_weights_tail)
 BSPLINE_DERIVATIVES(real8, bspline_derivatives8)
-BSPLINE_DERIVATIVES(real4, bspline_derivatives4)
+BSPLINE_DERIVATIVES(realt, bspline_derivatives_tail)
 
 /* One group's part of the field at every sample at once: the j^3 coefficients ending at `corner`
  * (the segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
  * along z).  The lanes are fq's memory order, sample-major: samples 0..3 in v[0], 4..7 in v[1]
  * (four channels each), 8 and 9 in f8 (only when `tail`), so each coefficient is read once per
- * segment and feeds 40 lanes in three vector FMAs.  w[a][r][h] and w8[a][r] are the weights spread
+ * segment and feeds 40 lanes in three vector FMAs (16 samples, order 6: a second call for samples 8..15).  w[a][r][h] and w8[a][r] are the weights spread
  * to those lanes; the sums are added to f, f8.  Always inlined with a literal order j and `tail`, so the loops unroll. */
 __attribute__((always_inline)) inline void group_field(__global const coef_t *corner, const int sy, const int sz,
-                                                       const int j, const bool tail, real16 w[3][4][2],
-                                                       real8 w8[3][4], real16 *f, real8 *f8)
+                                                       const int j, const bool tail, real16 w[3][MAX_ORDER][2],
+                                                       real8 w8[3][MAX_ORDER], real16 *f, real8 *f8)
 {
     real16 v0 = 0, v1 = 0;
     real8 v8 = 0;
@@ -171,17 +191,17 @@ __attribute__((always_inline)) inline void group_field(__global const coef_t *co
         }                                                                                                 \
     }
 GROUP_GRADIENT(real8, group_gradient8)
-GROUP_GRADIENT(real4, group_gradient4)
+GROUP_GRADIENT(realt, group_gradient_tail)
 
 /* What a grid's part of a segment needs besides its samples: the cell's last coefficient, and per
- * axis the position u in the cell and the B-spline weights w at lanes 0..7 (real8) and 8..11
- * (real4: the lanes past NS are unused) */
+ * axis the position u in the cell and the B-spline weights w at lanes 0..7 (real8) and 8.. (realt:
+ * the lanes past NS are unused) */
 typedef struct {
     __global const coef_t *corner;
     int sy, sz;
     real inv_step; /* lattice cells per grid-0 fine cell: the gradient's scale */
-    real8 u[3], w[3][4];
-    real4 u4[3], w4[3][4];
+    real8 u[3], w[3][MAX_ORDER];
+    realt ut[3], wt[3][MAX_ORDER];
 } Basis;
 
 /* Grid g's part of the segment at the sample points xm + radius xi_k D, sample k in lane k, from the
@@ -193,7 +213,11 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
     /* the lanes' points straight from nodes (lanes past NS repeat lane 0): vector loads of a private
      * array's scalar stores stalled on store forwarding */
     const real8 xi = vload8(0, nodes);
-    const real4 xi4 = (real4)(nodes[8], nodes[NS > 9 ? 9 : 0], nodes[0], nodes[0]);
+#if NS > 12
+    const realt xit = vload8(1, nodes);
+#else
+    const realt xit = (real4)(nodes[8], nodes[NS > 9 ? 9 : 0], nodes[0], nodes[0]);
+#endif
     const int j = ORDER[g];
     const real4 f = slot < 0 ? (real4)(0) : to_real4(G.frames[slot * CLW_GROUPS + g]);
     const int4 n = slot < 0 ? (int4)(j, j, j, 0) : G.boxes[slot * CLW_GROUPS + g];
@@ -203,15 +227,15 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
     const real ua[3] = {u.x, u.y, u.z}, sa[3] = {step.x, step.y, step.z};
     for (int a = 0; a < 3; a++) {
         B->u[a] = ua[a] + sa[a] * xi;
-        B->u4[a] = ua[a] + sa[a] * xi4;
+        B->ut[a] = ua[a] + sa[a] * xit;
         bspline_weights8(j, B->u[a], B->w[a]);
-        bspline_weights4(j, B->u4[a], B->w4[a]);
+        bspline_weights_tail(j, B->ut[a], B->wt[a]);
     }
     if (slot < 0)
         for (int a = 0; a < 3; a++)
             for (int r = 0; r < j; r++) {
                 B->w[a][r] = 0;
-                B->w4[a][r] = 0;
+                B->wt[a][r] = 0;
             }
     B->inv_step = f.w;
     B->sy = n.x;
@@ -219,71 +243,100 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
     B->corner = G.coef + n.w + ((size_t)c.z * n.y + c.y) * n.x + c.x;
 }
 
+/* group_field with a literal order and tail (the loops unroll): w, w8 and the sums as group_field's */
+#define GROUP_FIELD(J) \
+    case J: \
+        if (tail) \
+            group_field(B->corner, B->sy, B->sz, J, true, w, w8, f, &f8); \
+        else \
+            group_field(B->corner, B->sy, B->sz, J, false, w, w8, f, &f8); \
+        if (NS > 12) /* samples 8..15 like 0..7 */ \
+            group_field(B->corner, B->sy, B->sz, J, false, wt, w8, f + 2, &f8); \
+        break;
+
 /* The field at the segment's sample points (lane P0 only when `fresh` or when it shares a vector
- * with lane 9: else it is the last segment's end), and each grid's Basis for the gradient */
+ * with other tail lanes: else it is the last segment's end), and each grid's Basis for the gradient */
 inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
                            const real3 D, __constant const real *nodes, const bool fresh, real4 *fq,
                            Basis *basis)
 {
-    real16 f[2] = {0, 0};
+    real16 f[4] = {0, 0, 0, 0};
     real8 f8 = 0;
-    const bool tail = NS > P0 + 1 || fresh;
+    const bool tail = NS < 12 && (NS > P0 + 1 || fresh); /* samples 8, 9 (NS = 16: the second call's) */
     const int slot = *A; /* every segment lies in the brick the ray last entered */
     for (int g = 0; g < CLW_GROUPS; g++) {
         Basis *B = &basis[g];
         segment_basis(G, g, slot, xm, radius, D, nodes, B);
         const int j = ORDER[g];
-        real16 w[3][4][2];
-        real8 w8[3][4];
+        real16 w[3][MAX_ORDER][2], wt[3][MAX_ORDER][2];
+        real8 w8[3][MAX_ORDER];
         for (int a = 0; a < 3; a++)
             for (int r = 0; r < j; r++) {
                 w[a][r][0] = B->w[a][r].s0000111122223333;
                 w[a][r][1] = B->w[a][r].s4444555566667777;
-                w8[a][r] = B->w4[a][r].s00001111;
+#if NS > 12
+                wt[a][r][0] = B->wt[a][r].s0000111122223333;
+                wt[a][r][1] = B->wt[a][r].s4444555566667777;
+                w8[a][r] = 0;
+#else
+                w8[a][r] = B->wt[a][r].s00001111;
+#endif
             }
-        switch (j + 4 * tail) {
-        case 1: group_field(B->corner, B->sy, B->sz, 1, false, w, w8, f, &f8); break;
-        case 2: group_field(B->corner, B->sy, B->sz, 2, false, w, w8, f, &f8); break;
-        case 3: group_field(B->corner, B->sy, B->sz, 3, false, w, w8, f, &f8); break;
-        case 4: group_field(B->corner, B->sy, B->sz, 4, false, w, w8, f, &f8); break;
-        case 5: group_field(B->corner, B->sy, B->sz, 1, true, w, w8, f, &f8); break;
-        case 6: group_field(B->corner, B->sy, B->sz, 2, true, w, w8, f, &f8); break;
-        case 7: group_field(B->corner, B->sy, B->sz, 3, true, w, w8, f, &f8); break;
-        default: group_field(B->corner, B->sy, B->sz, 4, true, w, w8, f, &f8); break;
+        switch (j) {
+        GROUP_FIELD(1)
+        GROUP_FIELD(2)
+        GROUP_FIELD(3)
+        GROUP_FIELD(4)
+#if MAX_ORDER > 4
+        GROUP_FIELD(6)
+#endif
         }
     }
     real *out = (real *)fq;
     vstore16(f[0], 0, out);
     vstore16(f[1], 1, out);
-    if (NS > P0 + 1)
+    if (NS > 12) {
+        vstore16(f[2], 2, out);
+        vstore16(f[3], 3, out);
+    } else if (NS > P0 + 1) {
         vstore8(f8, 4, out);
-    else
+    } else {
         vstore4(f8.lo, 8, out);
+    }
 }
 
 /* alpha's fine gradient in the lanes of (gx, gy, gz), only for segments shaded point by point:
- * lanes 0..8, or lanes 0..7 (one real8) when lane P0 comes from the last segment */
-#define GRADIENT_LANES(W, WIDTH, U, OUT)                                                                  \
+ * lanes 0..7 (real8), and the tail lanes 8.. (realt) unless lane P0 comes from the last segment and is the
+ * only one there (NS < 16) */
+#define GRADIENT_LANES(W, TYPE, DERIVATIVES, GRADIENT, U, OUT)                                             \
     {                                                                                                     \
-        real##WIDTH d[3][4], hx = 0, hy = 0, hz = 0;                                                      \
+        TYPE d[3][MAX_ORDER], hx = 0, hy = 0, hz = 0;                                                     \
         for (int a = 0; a < 3; a++)                                                                       \
-            bspline_derivatives##WIDTH(j, B->U[a], d[a]);                                                 \
+            DERIVATIVES(j, B->U[a], d[a]);                                                                \
         __global const coef_t *c = B->corner;                                                             \
-        const real##WIDTH *wx = B->W[0], *wy = B->W[1], *wz = B->W[2];                                   \
+        const TYPE *wx = B->W[0], *wy = B->W[1], *wz = B->W[2];                                           \
         switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */                         \
-        case 2: group_gradient##WIDTH(c, B->sy, B->sz, 2, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
-        case 3: group_gradient##WIDTH(c, B->sy, B->sz, 3, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
-        case 4: group_gradient##WIDTH(c, B->sy, B->sz, 4, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break; \
+        case 2: GRADIENT(c, B->sy, B->sz, 2, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;         \
+        case 3: GRADIENT(c, B->sy, B->sz, 3, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;         \
+        case 4: GRADIENT(c, B->sy, B->sz, 4, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;         \
+        GRADIENT_6(GRADIENT)                                                                              \
         }                                                                                                 \
         gx->OUT = hx * B->inv_step; gy->OUT = hy * B->inv_step; gz->OUT = hz * B->inv_step;               \
     }
+#if MAX_ORDER > 4
+#define GRADIENT_6(GRADIENT) case 6: GRADIENT(c, B->sy, B->sz, 6, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;
+#define TAIL_LANES hi
+#else
+#define GRADIENT_6(GRADIENT)
+#define TAIL_LANES s89ab
+#endif
 inline void sample_gradient(const Basis *basis, const bool all, realv *gx, realv *gy, realv *gz)
 {
     const Basis *B = &basis[CLW_ALPHA];
     const int j = ORDER[CLW_ALPHA];
     *gx = 0; *gy = 0; *gz = 0;
-    GRADIENT_LANES(w, 8, u, lo)
-    if (all)
-        GRADIENT_LANES(w4, 4, u4, s89ab)
+    GRADIENT_LANES(w, real8, bspline_derivatives8, group_gradient8, u, lo)
+    if (all || NS > 12)
+        GRADIENT_LANES(wt, realt, bspline_derivatives_tail, group_gradient_tail, ut, TAIL_LANES)
 }
 #endif

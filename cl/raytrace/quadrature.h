@@ -22,25 +22,25 @@ CLENSHAW(real4, cheb4)
 
 typedef struct {
     real4 fq[NS];    /* the field at the sample points, alpha clamped to >= 0 */
-    realv gx, gy, gz; /* the gradient of alpha there (fine units), lanes 0..8 */
+    realv gx, gy, gz; /* the gradient of alpha there (fine units), lanes 0..NG-1 */
     real radius;     /* half the segment length in world units */
     bool series;     /* q, g, A below are made (only panels finer than quarters need them) */
     real4 q[NS];     /* field series (q_R, q_G, q_B, alpha) in xi in [-1, 1] */
-    real3 g[9];      /* gradient-of-alpha series (fine units), of degree <= 8 */
+    real3 g[NG];     /* gradient-of-alpha series (fine units), of degree <= NG - 1 */
     real A[NS + 1];  /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
 } Segment;
 
-/* the Chebyshev series of the gradient's lanes 0..8 (nodes: after the points and the field's matrix) */
+/* the Chebyshev series of the gradient's lanes 0..NG-1 (nodes: after the points and the field's matrix) */
 inline void gradient_series(Segment *S, __constant const real *nodes)
 {
     real gx[16], gy[16], gz[16];
     vstore16(S->gx, 0, gx);
     vstore16(S->gy, 0, gy);
     vstore16(S->gz, 0, gz);
-    for (int m = 0; m < 9; m++) {
+    for (int m = 0; m < NG; m++) {
         real3 ag = (real3)(0);
-        for (int k = 0; k < 9; k++)
-            ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * 9 + k];
+        for (int k = 0; k < NG; k++)
+            ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * NG + k];
         S->g[m] = ag;
     }
 }
@@ -139,7 +139,7 @@ SHADE(real8, shade8, power8)
 inline real3 integrand(const Segment *S, const Shading *P, const real xi)
 {
     const real4 f = cheb4(S->q, NS, xi);
-    const real3 g = cheb3(S->g, 9, xi);
+    const real3 g = cheb3(S->g, NG, xi);
     real r = f.x, gr = f.y, b = f.z;
     shade(&r, &gr, &b, f.w, g.x, g.y, g.z, P);
     return (real3)(r, gr, b) * fast_exp(-S->radius * cheb1(S->A, NS + 1, xi));

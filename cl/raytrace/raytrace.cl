@@ -2,15 +2,15 @@
  *
  * One work-item per ray.  The ray is cut at every knot plane of the channel groups' lattices;
  * inside a segment the field and the gradient of alpha are polynomials in t, sampled at
- * CLW_SAMPLES points (lanes 0..7: xi = -1 + p/4 for p = 1..8, lane 8: p = 0, lane 9: 15/16 for
- * cubics).  Optical depth and X-ray integrals are exact from those samples, the emission integral
+ * CLW_SAMPLES points (lanes 0..7: xi = -1 + p/4 for p = 1..8, lane 8: p = 0, lanes 9..: more points for
+ * cubics and quintics, clwave/raytrace/quadrature.py).  Optical depth and X-ray integrals are exact from those samples, the emission integral
  * comes from adaptive Simpson with Phong-shaded q, and the tolerance is shared between quadrature,
  * early termination and empty-space skipping: docs/raytracing.md §2 (the error budget), §4
  * (blocks and superblocks), §5 (shading).  The field comes from the backend header
  * (field_bspline.h or field_wavelet.h), the segment integrals from quadrature.h.
  *
  * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
- * CLW_SAMPLES samples per segment (9 or 10); CLW_JOIN when every order is >= 3; CLW_LATTICE 1 or
+ * CLW_SAMPLES samples per segment (9, 10 or 16); CLW_JOIN when every order is >= 3; CLW_LATTICE 1 or
  * 0.5 (orders of both parities); CLW_SHADE for Phong shading; CLW_XRAY for line integrals;
  * CLW_DOUBLE for a float64 build; CLW_POST to classify a scalar by a transfer function while rendering. */
 #include "raytrace/types.h"
@@ -157,8 +157,8 @@ inline real2 simpson_pair(const real8 v, const real first)
  *                                with c, r the pixel centre's offsets from the image centre
  *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset
  *   nodes        the sample points xi_k (CLW_SAMPLES), then the (CLW_SAMPLES, CLW_SAMPLES) matrix
- *                from the samples to the field's Chebyshev series, then the (9, 9) one from lanes
- *                0..8 to the gradient's
+ *                from the samples to the field's Chebyshev series, then the (NG, NG) one from lanes
+ *                0..NG-1 to the gradient's (types.h)
  *   weights      (CLW_SAMPLES, 8) sample k's weights in the integral from -1 to xi = -1 + p/4,
  *                p = 1..8, of the polynomial through the samples (p = 8: the whole segment)
  *   tol          absolute tolerance per output value
@@ -407,7 +407,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                     gradient_series(&S, nodes);
 #else
                     S.gx = 0; S.gy = 0; S.gz = 0;
-                    for (int m = 0; m < 9; m++)
+                    for (int m = 0; m < NG; m++)
                         S.g[m] = (real3)(0);
 #endif
                     vstore16(S.gx, 0, gx);

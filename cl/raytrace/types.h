@@ -1,6 +1,6 @@
 /* types.h: what every ray-tracer source shares: the precision-dependent real types (CLW_DOUBLE for
  * a float64 build), the samples per segment and their lanes, and the orders of the channel groups.
- * Build: CLW_SAMPLES (9 or 10), CLW_GROUPS and CLW_ORDERS, CLW_JOIN when every order is >= 3. */
+ * Build: CLW_SAMPLES (9, 10 or 16), CLW_GROUPS and CLW_ORDERS, CLW_JOIN when every order is >= 3. */
 #ifndef CLW_RAYTRACE_TYPES_H
 #define CLW_RAYTRACE_TYPES_H
 #include "common/clw_common.h"
@@ -46,6 +46,10 @@ typedef float16 real16;
 
 /* The samples of a segment in the lanes of one vector (lanes NS.. repeat lane 0, unused) */
 typedef real16 realv;
+/* Orders up to 4 (pieces of degree 9 at most, NS 9 or 10) or order 6 among the groups (degree 15, NS = 16):
+ * the largest order, and the lanes 0..NG-1 that give alpha's gradient series (degree 8, or 14) */
+#define MAX_ORDER (NS > 10 ? 6 : 4)
+#define NG (NS > 10 ? NS - 1 : 9)
 
 constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
 #endif

@@ -39,7 +39,9 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     regions = _Regions(tr.block_bound.get(), tr.occ_origin, tr.super_bound_host, tr.super_origin,
                        tr.coarse_bound(tolerance))
     scale, offset = world_to_fine_affine(orders[0], wv.shape, wv.spacing, wv.origin)
-    xi = sample_points(3 * (max(orders) - 1))  # the kernel's points (the field is the same polynomial)
+    # the kernel's points (the field is the same polynomial), a hair inside the segment's ends: there a Haar channel
+    # takes its value from inside the segment, as the kernel's one piece per segment does (docs/raytracing.md §3)
+    xi = sample_points(3 * (max(orders) - 1)) * (1.0 - 2.0 ** -32)
     n_samples = len(xi)
     out = np.zeros((H, W, 4 if absorption else wv.channels))
     rays = []
@@ -304,11 +306,11 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     force: no skipping, no early termination, no adaptivity (docs/raytracing.md §10).
 
     On each fine knot segment the scalar and its gradient are polynomials, fitted exactly from the model at ten
-    Chebyshev points (:meth:`WaveletVolume.evaluate` / ``gradient``, or the B-spline backend's content-clamped
-    coefficients); the segment is cut at every real root of ``s - v`` for each point value v (NumPy's
-    companion-matrix roots); on each piece the opacity ``np.interp(s)`` is a polynomial, fitted and integrated
-    exactly, and the emission integral is composite Gauss-Legendre (8 x 8 nodes).  ``tracer`` supplies the
-    clip box, the window of an "auto" transfer function and the gradient floor the kernel uses.
+    Chebyshev points, sixteen for order 6 (:meth:`WaveletVolume.evaluate` / ``gradient``, or the B-spline
+    backend's content-clamped coefficients); the segment is cut at every real root of ``s - v`` for each point
+    value v (NumPy's companion-matrix roots); on each piece the opacity ``np.interp(s)`` is a polynomial, fitted
+    and integrated exactly, and the emission integral is composite Gauss-Legendre (8 x 8 nodes).  ``tracer``
+    supplies the clip box, the window of an "auto" transfer function and the gradient floor the kernel uses.
     """
     tr = tracer or RayTracer(wv)
     view = camera.view(wv)
@@ -320,8 +322,9 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     values = transfer_function.data_points(tr.scalar.window(transfer_function))
     colour, opacity = transfer_function.points[:, 1:4], transfer_function.points[:, 4]
     scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)
-    cheb = np.cos(np.pi * (np.arange(10) + 0.5) / 10)  # degree 9 at most on a knot segment
-    to_series = np.linalg.inv(chebyshev.chebvander(cheb, 9))
+    n = max(10, 3 * tr.orders[0] - 2)  # degree 3 (j - 1) at most on a knot segment
+    cheb = np.cos(np.pi * (np.arange(n) + 0.5) / n)
+    to_series = np.linalg.inv(chebyshev.chebvander(cheb, n - 1))
     gauss, gauss_w = np.polynomial.legendre.leggauss(8)
     evaluate = _content_field(wv) if wv.content_mask is not None else _model_field(wv)
     out = np.zeros((H, W, 4))
@@ -336,14 +339,14 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
         lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
         mid, rad = (lo + hi) / 2, (hi - lo) / 2
         points = p + (mid[:, None] + rad[:, None] * cheb).reshape(-1, 1) * w
-        s_series = np.einsum("mk,sk->sm", to_series, evaluate(points, False)[:, 0].reshape(len(mid), 10))
-        g_series = np.einsum("mk,skc->smc", to_series, evaluate(points, True)[:, 0].reshape(len(mid), 10, 3)) \
+        s_series = np.einsum("mk,sk->sm", to_series, evaluate(points, False)[:, 0].reshape(len(mid), n))
+        g_series = np.einsum("mk,skc->smc", to_series, evaluate(points, True)[:, 0].reshape(len(mid), n, 3)) \
             if phong else None
         T, colour_sum = 1.0, np.zeros(3)
         for k in range(len(mid)):
             cuts = [-1.0, 1.0]
             for v in values:
-                roots = chebyshev.chebroots(s_series[k] - v * (np.arange(10) == 0))
+                roots = chebyshev.chebroots(s_series[k] - v * (np.arange(n) == 0))
                 cuts += [x.real for x in roots if abs(x.imag) < 1e-6 and -1 < x.real < 1]
             cuts = np.unique(cuts)
             for a, b in zip(cuts[:-1], cuts[1:]):

@@ -105,7 +105,6 @@ SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flag
 ACTIVE = 1024    # entries of a ray's active list (wavelet field); more fall back to visiting every index
 WAVELET_GROUP = 8  # rays per work-group with the wavelet field
 DETAILS_KEPT = 8   # a tracer keeps the bounds of this many details (docs/raytracing.md §8)
-RAYTRACE_ORDERS = (1, 2, 3, 4)  # the kernels' pieces are of degree 3 at most (order 6 splats only: known-gaps.md)
 #: single-precision builds may reassociate sums and flush denormals (2-3 % of a render, results moved within the
 #: arithmetic's rounding); float64 references are built as written
 FAST_MATH = ("-cl-unsafe-math-optimizations", "-cl-denorms-are-zero")
@@ -133,10 +132,6 @@ class RayTracer:
             raise InputError(f"ray tracing field must be one of {', '.join(FIELDS)}, got {field!r}")
         if wv.channels > 4:
             raise InputError(f"ray tracing takes at most 4 channels, the volume has {wv.channels}")
-        if any(g.wavelet.order not in RAYTRACE_ORDERS for g in wv.groups):
-            orders = ", ".join(map(str, RAYTRACE_ORDERS))
-            raise InputError(f"ray tracing takes B-spline orders {orders} (haar to cubic), this volume has "
-                             f"{', '.join(wv.wavelets)}: splat it, or decompose with a lower order")
         if int(active) != active or active < 1:
             raise InputError(f"active={active!r} must be a positive whole number of list entries")
         if region is not None and (field != "bspline" or len(np.shape(region)) != 1 or len(region) != 2
