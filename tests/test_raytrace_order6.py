@@ -62,6 +62,20 @@ def test_kernel_equals_numpy_reference(quintic_rgba, kw):
     assert np.max(np.abs(got.image - ref)) <= 1e-5 * max(1.0, np.abs(ref).max())
 
 
+def test_wavelet_field_equals_numpy_reference(quintic_rgba):
+    """The wavelet field (active lists, degree-5 piece polynomials and their derivatives) equals the float64 oracle,
+    shaded with two lights."""
+    wv = quintic_rgba[0].threshold(keep=0.2)
+    tracer = RayTracer(wv, field="wavelet")
+    cam = clwave.Camera(30, 20, size=(3, 4))
+    kw = dict(lights=[(0, 90), (120, -10)], shading=Phong(0.2, 0.6, 0.5, 8))
+    ref = raytrace_reference(wv, cam, tolerance=1e-3, tracer=tracer, **kw)
+    got = tracer.render(cam, tolerance=1e-3, **kw)
+    assert got.meta["field"] == "wavelet" and got.meta["rays_active_list_overflowed"] == 0
+    assert np.abs(ref).max() > 0.3
+    assert np.max(np.abs(got.image - ref)) <= 1e-5
+
+
 @pytest.mark.parametrize("camera,kw", [(clwave.Camera(30, 20, size=(3, 4)), dict()),
                                        (clwave.Camera(-50, 35, size=(3, 3), perspective=True, distance=9.0),
                                         dict(shading=False)),

@@ -16,8 +16,8 @@
  *   info   (CLW_BANDS,) int4: (level m, psi axes as bits x | y << 1 | z << 2, order j, offset)
  *   shape  (CLW_BANDS,) int4: (nx, ny, nz)
  *   band_lo (CLW_BANDS,) float4: lower support corner of k = 0, grid-0 fine coordinates; w = 2^m
- *   poly   rows of 4 monomial coefficients: N_j(s + r) at PHI_AT(j) + r, psi((s + c) / 2) at
- *          PSI_AT(j) + c, for s in [0, 1)
+ *   poly   rows of 6 monomial coefficients (clwave.model.bspline.piece_polynomials): N_j(s + r) at
+ *          PHI_ROW[j] + r, psi((s + c) / 2) at PSI_ROW[j] + c, for s in [0, 1)
  *   trace  CLW_TRACE builds: per ray and for its first CLW_TRACE segments, the active set as
  *          (count, sum of (id + 1), sum of (id + 1)^2 (both mod 2^32), t_mid as float bits),
  *          id = index into coef, for the test against the brute-force set of supports */
@@ -26,8 +26,9 @@
 #define CLW_FIELD_H
 #include "raytrace/types.h"
 
-#define PHI_AT(j) ((j) * ((j) - 1) / 2)
-#define PSI_AT(j) (10 + 2 * ((j) - 1) * ((j) - 1))
+/* the first row of order j's pieces (j = 1, 2, 3, 4, 6): phi's j rows each, then psi's 2 (2j - 1) */
+constant int PHI_ROW[7] = {0, 0, 1, 3, 6, 0, 10};
+constant int PSI_ROW[7] = {0, 16, 18, 24, 34, 0, 48};
 
 #define FIELD_PARAMS __global const float4 *coef, __constant const int4 *info, __constant const int4 *shape, \
                      __constant const float4 *band_lo, __constant const real *poly, __global int4 *trace
@@ -142,8 +143,14 @@ inline void heap_pop(Active *A)
         A->heap[i] = last;
 }
 
-inline real horner(__constant const real *p, const real s) { return ((p[3] * s + p[2]) * s + p[1]) * s + p[0]; }
-inline real horner_d(__constant const real *p, const real s) { return (3 * p[3] * s + 2 * p[2]) * s + p[1]; }
+inline real horner(__constant const real *p, const real s)
+{
+    return ((((p[5] * s + p[4]) * s + p[3]) * s + p[2]) * s + p[1]) * s + p[0];
+}
+inline real horner_d(__constant const real *p, const real s)
+{
+    return (((5 * p[5] * s + 4 * p[4]) * s + 3 * p[3]) * s + 2 * p[2]) * s + p[1];
+}
 
 typedef struct {
     uint count, sum, sum2;
@@ -166,7 +173,7 @@ inline void add_basis(const Field G, const int b, const int id, const int4 k, co
         const real u = ((xs[a] - os[a]) * inv - ks[a]) * (psi ? 2 : 1);  /* local coordinate at the midpoint */
         const int cells = psi ? 2 * (2 * inf.z - 1) : inf.z;
         const int piece = clamp((int)floor(u), 0, cells - 1);             /* one polynomial for the segment */
-        rows[a] = G.poly + 4 * ((psi ? PSI_AT(inf.z) : PHI_AT(inf.z)) + piece);
+        rows[a] = G.poly + 6 * ((psi ? PSI_ROW[inf.z] : PHI_ROW[inf.z]) + piece);
         chain[a] = inv * (psi ? 2 : 1);
         at[a] = u - piece;
         slope[a] = radius * ds[a] * chain[a];

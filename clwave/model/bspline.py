@@ -251,10 +251,11 @@ def knots(order: int, letter: str) -> np.ndarray:
 
 
 def piece_polynomials() -> np.ndarray:
-    """(42, 4) monomial coefficients of the prototypes' :func:`pieces` for orders 1-4, as
-    ``cl/raytrace/field_wavelet.h`` reads them: rows ``j (j - 1) / 2 + r`` hold ``N_j(s + r)``,
-    r < j; rows ``10 + 2 (j - 1)^2 + c`` hold ``psi((s + c) / 2)``, c < 2 (2j - 1); each a
-    polynomial in s on [0, 1) of degree j - 1, zero-padded to 4 coefficients."""
-    rows = [np.pad(c, ((0, 0), (0, 4 - c.shape[1]))) for letter in "ad" for j in range(1, 5)
+    """(70, 6) monomial coefficients of the prototypes' :func:`pieces` for orders 1, 2, 3, 4 and 6, as
+    ``cl/raytrace/field_wavelet.h`` reads them (``PHI_ROW``, ``PSI_ROW``): the rows of ``N_j(s + r)``, r < j,
+    for each order in turn (from row 0), then those of ``psi((s + c) / 2)``, c < 2 (2j - 1) (from row 16);
+    each a polynomial in s on [0, 1) of degree j - 1, zero-padded to 6 coefficients."""
+    orders = sorted(set(WAVELET_ORDERS.values()))
+    rows = [np.pad(c, ((0, 0), (0, 6 - c.shape[1]))) for letter in "ad" for j in orders
             for c in [pieces(j, letter)[1]]]
     return np.ascontiguousarray(np.concatenate(rows))
