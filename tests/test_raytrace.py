@@ -424,16 +424,19 @@ def test_normals_equal_the_normalised_finite_difference_gradient(small_rgba, sma
                                                                  field):
     """Shaded kernel image == the NumPy reference whose normals come from central differences of alpha."""
     wv, tracer = small_rgba
-    tracer = small_wavelet_tracer if field == "wavelet" else tracer
+    check_normals_against_finite_differences(wv, small_wavelet_tracer if field == "wavelet" else tracer, monkeypatch)
+
+
+def check_normals_against_finite_differences(wv, tracer, monkeypatch, h=1e-4):
+    """The shaded kernel image equals the oracle's whose gradients come from central differences of the model."""
     cam = clwave.Camera(30, 20, size=(3, 4))
     kw = dict(tolerance=1e-4, lights=[(10, 60), (200, 0)], shading=Phong(0.1, 0.8, 0.6, 12))
     got = tracer.render(cam, **kw).image
-    evaluate, h = wv.evaluate, 1e-4
+    evaluate = wv.evaluate
 
     def central_differences(points):
         pts = np.atleast_2d(np.asarray(points, float))
-        steps = [np.eye(3)[a] * h for a in range(3)]
-        return np.stack([(evaluate(pts + s) - evaluate(pts - s)) / (2 * h) for s in steps], axis=-1)
+        return np.stack([(evaluate(pts + s) - evaluate(pts - s)) / (2 * h) for s in np.eye(3) * h], axis=-1)
 
     monkeypatch.setattr(wv, "gradient", central_differences)
     ref = raytrace_reference(wv, cam, tracer=tracer, **kw)

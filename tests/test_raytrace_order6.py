@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from test_bricks import build, pool_field, smooth_volume
 from test_lod import without_details
+from test_raytrace import check_normals_against_finite_differences
 
 import clwave
 from clwave import TransferFunction, WaveletVolume
@@ -94,20 +95,7 @@ def test_images_within_tolerance_of_the_converged_float64_reference(quintic_rgba
 
 def test_normals_equal_the_normalised_finite_difference_gradient(quintic_rgba, monkeypatch):
     """The kernel's analytic gradients of degree-5 pieces shade as normals from central differences of alpha."""
-    wv, tracer = quintic_rgba
-    cam = clwave.Camera(30, 20, size=(3, 4))
-    kw = dict(tolerance=1e-4, lights=[(10, 60), (200, 0)], shading=Phong(0.1, 0.8, 0.6, 12))
-    got = tracer.render(cam, **kw).image
-    evaluate, h = wv.evaluate, 1e-4
-
-    def central_differences(points):
-        pts = np.atleast_2d(np.asarray(points, float))
-        return np.stack([(evaluate(pts + s) - evaluate(pts - s)) / (2 * h) for s in np.eye(3) * h], axis=-1)
-
-    monkeypatch.setattr(wv, "gradient", central_differences)
-    ref = raytrace_reference(wv, cam, tracer=tracer, **kw)
-    assert np.abs(ref[..., :3]).max() > 0.05
-    assert np.max(np.abs(got - ref)) <= 1e-5
+    check_normals_against_finite_differences(*quintic_rgba, monkeypatch)
 
 
 def test_mixed_orders_quintic_colour_with_haar_opacity():
