@@ -45,6 +45,9 @@ def test_compress_quintic_colour_with_haar_opacity(tmp_path, capsys):
                          "--wavelet", "quintic,quintic,quintic,haar", "--keep", "0.1", "-o", str(target))
     assert code == 0, err
     assert WaveletVolume.open(target).wavelets == ("quintic", "quintic", "quintic", "haar")
+    png = tmp_path / "q.png"  # ray traced like any order (docs/raytracing.md §11)
+    code, out, err = run(capsys, "render", str(target), "--method", "raytrace", "--size", "8", "-o", str(png))
+    assert code == 0 and png.exists() and "ray traced 8x8" in out, err
     code, out, err = run(capsys, "compress", "phantom:hydrogen:16", "--wavelet", "quartic", "-o",
                          str(tmp_path / "x.clw"))
     assert code == 2 and "quintic" in err and len(err.strip().splitlines()) == 1
