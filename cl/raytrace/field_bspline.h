@@ -122,8 +122,9 @@ BSPLINE_DERIVATIVES(realt, bspline_derivatives_tail)
  * (the segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
  * along z).  The lanes are fq's memory order, sample-major: samples 0..3 in v[0], 4..7 in v[1]
  * (four channels each), 8 and 9 in f8 (only when `tail`), so each coefficient is read once per
- * segment and feeds 40 lanes in three vector FMAs (16 samples, order 6: a second call for samples 8..15).  w[a][r][h] and w8[a][r] are the weights spread
- * to those lanes; the sums are added to f, f8.  Always inlined with a literal order j and `tail`, so the loops unroll. */
+ * segment and feeds 40 lanes in three vector FMAs (with 16 samples, order 6, a second call sums samples
+ * 8..15 the way of 0..7).  w[a][r][h] and w8[a][r] are the weights spread to those lanes; the sums are
+ * added to f, f8.  Always inlined with a literal order j and `tail`, so the loops unroll. */
 __attribute__((always_inline)) inline void group_field(__global const coef_t *corner, const int sy, const int sz,
                                                        const int j, const bool tail, real16 w[3][MAX_ORDER][2],
                                                        real8 w8[3][MAX_ORDER], real16 *f, real8 *f8)
