@@ -90,6 +90,18 @@ inline float cone_bilinear(__global const float *t, const int stride, const floa
     return (1.0f - fv) * ((1.0f - fu) * t[0] + fu * t[1]) + fv * ((1.0f - fu) * t[stride] + fu * t[stride + 1]);
 }
 
+/* 16 lanes' bilinear samples of one node: lane i at texel offset at[i] (texel (iu, iv) of the padded node),
+ * weights fu[i] and fv: gathered, as each lane reads its own texels */
+inline float16 cone_gather(__global const float *t, const int16 at, const int stride, const float16 fu, const float fv)
+{
+#define CLW_G(d) (float16)(t[at.s0 + (d)], t[at.s1 + (d)], t[at.s2 + (d)], t[at.s3 + (d)], t[at.s4 + (d)], \
+    t[at.s5 + (d)], t[at.s6 + (d)], t[at.s7 + (d)], t[at.s8 + (d)], t[at.s9 + (d)], t[at.sa + (d)], t[at.sb + (d)], \
+    t[at.sc + (d)], t[at.sd + (d)], t[at.se + (d)], t[at.sf + (d)])
+    const float16 top = (1.0f - fu) * CLW_G(0) + fu * CLW_G(1), bottom = (1.0f - fu) * CLW_G(stride) + fu * CLW_G(stride + 1);
+#undef CLW_G
+    return (1.0f - fv) * top + fv * bottom;
+}
+
 /* The node cell of the slope grid for slope s along one axis: its first node (returned) and the weight of
  * the next (slopes beyond the grid take its edge).  lo, inv: the first node's slope and 1 / step. */
 inline int cone_cell(const float s, const float lo, const float inv, const int nodes, float *w)
@@ -145,35 +157,57 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
     const int ku = (int)cells.z, kv = (int)cells.w;
     const uint2 r = ranges[tile];
 #ifdef CLW_CONE_TILE
-    float4 acc[CLW_TILE][CLW_TILE];
-    int ncol[CLW_TILE], nrow[CLW_TILE];
-    float wcol[CLW_TILE], wrow[CLW_TILE], tcol[CLW_TILE];
+    /* a row of the tile is 16 lanes: each lane's slope cell and weight along u once per tile, each row's
+     * along v; per splat and row, 4 nodes x 2 x 2 texels gathered per lane, the arithmetic in vectors */
+    const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const float16 gu = clamp((grid.x + ((float)corner.x + 0.5f - 0.5f * (float)layer.x + lane) * sigma.x - grid.z)
+                             * cells.x, 0.0f, (float)(ku - 1));
+    const int16 ncol = min(convert_int16(gu), (int16)(ku - 2));
+    const float16 wcol = gu - convert_float16(ncol);
+    int nrow[CLW_TILE];
+    float wrow[CLW_TILE];
+    float16 acc[CLW_CHANNELS][CLW_TILE];
     for (int i = 0; i < CLW_TILE; ++i) {
-        const float su = grid.x + ((float)(corner.x + i) + 0.5f - 0.5f * (float)layer.x) * sigma.x;
-        const float sv = grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y;
-        ncol[i] = cone_cell(su, grid.z, cells.x, ku, &wcol[i]);
-        nrow[i] = cone_cell(sv, grid.w, cells.y, kv, &wrow[i]) * ku;
-        for (int j = 0; j < CLW_TILE; ++j)
-            acc[i][j] = (float4)(0.0f);
+        nrow[i] = cone_cell(grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y, grid.w,
+                            cells.y, kv, &wrow[i]) * ku;
+        for (int ch = 0; ch < CLW_CHANNELS; ++ch)
+            acc[ch][i] = 0.0f;
     }
     for (uint k = r.x; k < r.y; ++k) {
         int4 bx;
-        float4 cen, c;
-        const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &c);
+        float4 cen, w;
+        const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &w);
+        const float c[4] = {w.x, w.y, w.z, w.w};
         const int4 ti = tex_int[tex];
         const float4 tm = tex_map[tex];
         const float ru = cen.z * sigma.x * tm.z, rv = cen.z * sigma.y * tm.w;  /* texels per pixel */
-        for (int x = bx.x; x <= bx.z; ++x)
-            tcol[x] = tm.x + ((float)(corner.x + x) - cen.x) * ru;
+        const float16 tu = tm.x + ((float)corner.x - cen.x + lane) * ru;
+        const float16 fiu = floor(tu), fu = tu - fiu;
+        const int16 iu = clamp(convert_int16(fiu), (int16)(-1), (int16)(ti.y - 3));
+        const int16 col = ti.x + iu + 1 + ncol * ti.z;  /* node (ncol, 0), row -1 of the padded node */
+        const float16 mask = select((float16)(0.0f), (float16)(1.0f),
+                                    isgreaterequal(lane, (float16)(bx.x)) & islessequal(lane, (float16)(bx.z)));
         for (int y = bx.y; y <= bx.w; ++y) {
             const float tv = tm.y + (cen.y - (float)(corner.y + y)) * rv;
-            for (int x = bx.x; x <= bx.z; ++x)
-                acc[y][x] += c * cone_sample(texels, ti, nrow[y] + ncol[x], ku, tcol[x], tv, wcol[x], wrow[y]);
+            const float fiv = floor(tv), fv = tv - fiv;
+            const int16 at = col + ((clamp((int)fiv, -1, ti.w - 3) + 1) * ti.y + nrow[y] * ti.z);
+            const float16 s00 = cone_gather(texels, at, ti.y, fu, fv);
+            const float16 s01 = cone_gather(texels, at + ti.z, ti.y, fu, fv);
+            const float16 s10 = cone_gather(texels, at + ku * ti.z, ti.y, fu, fv);
+            const float16 s11 = cone_gather(texels, at + (ku + 1) * ti.z, ti.y, fu, fv);
+            const float16 sample = mask * ((1.0f - wrow[y]) * ((1.0f - wcol) * s00 + wcol * s01)
+                                           + wrow[y] * ((1.0f - wcol) * s10 + wcol * s11));
+            for (int ch = 0; ch < CLW_CHANNELS; ++ch)
+                acc[ch][y] += c[ch] * sample;
         }
     }
-    for (int y = 0; y < CLW_TILE && corner.y + y < layer.y; ++y)
-        for (int x = 0; x < CLW_TILE && corner.x + x < layer.x; ++x)
-            fb[layer.w + (corner.y + y) * layer.x + corner.x + x] += acc[y][x];
+    for (int i = 0; i < CLW_TILE && corner.y + i < layer.y; ++i) {
+        float out[4][16] = {{0}};
+        for (int ch = 0; ch < CLW_CHANNELS; ++ch)
+            vstore16(acc[ch][i], 0, out[ch]);
+        for (int p = 0; p < 16 && corner.x + p < layer.x; ++p)
+            fb[layer.w + (corner.y + i) * layer.x + corner.x + p] += (float4)(out[0][p], out[1][p], out[2][p], out[3][p]);
+    }
 #else
     const int x = corner.x + lx, y = corner.y + ly;
     float wu, wv;

@@ -24,7 +24,7 @@ from ..threads import cores, thread_map
 from .spatial import exact_samples
 from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
 from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
-from .textures import Texture, _axis_points, _axis_sampling, _centred
+from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, _axis_sampling, _centred
 
 #: Spacing of the slope grid (docs/splatting.md §8): bilinear interpolation between nodes errs by at most
 #: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
@@ -124,6 +124,23 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     return out
 
 
+def band_texel(order: int, level: int, omega_s, pixel: float, d_min: float) -> tuple:
+    """``(texel, omega)``: a band's texel (world units) and the texture band that set it (docs/splatting.md §8).
+
+    Smooth footprints (order >= 3) are read at any magnification, so their texels follow the band alone, as
+    in §1: ``pi d_min / max(omega, omega_least)``, ``omega`` the paper's 14 (doubled for order 6) or
+    ``omega_s``, whatever the pixel; a texel far finer than the footprint's band buys no accuracy, only texels
+    (a 64^3 volume at 512^2 had footprints of 1000^2 texels a node).  Kinked footprints (orders 1, 2) keep
+    the orthographic rule at the nearest pixel (``pixel``): a fraction of it, so that bilinear reads place
+    their kinks within a fraction of a pixel."""
+    if order >= 3:
+        omega = omega_s if omega_s is not None else default_omega_s(np.inf, d_min, order)
+        least = DEFAULT_OMEGA_MIN[order] / 2.0 ** level
+        return np.pi * d_min / max(omega, least), omega
+    omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, order)
+    return pixel / texels_per_pixel(order, level, omega, pixel, d_min), omega
+
+
 def depth_range(view, wv, extent_xyz) -> tuple:
     """The least and greatest depth (along -n from the eye) of the model's voxel box grown by a support box
     ``extent_xyz`` (world, x y z): no basis function of that size reaches nearer the eye."""
@@ -168,11 +185,9 @@ class ConeTables:
                     raise InputError("the eye (X-ray source) is inside the model or too near it for splatting: "
                                      f"its level-{b.level} basis functions reach behind the eye; move it farther "
                                      "away (a larger distance or dso)")
-                pixel = min(view.slope) * near
-                omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, wav.order)
-                self.omega_s = self.omega_s or omega
                 layer_of[band] = li
-                texels[band] = pixel / texels_per_pixel(wav.order, b.level, omega, pixel, d_min)
+                texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_min)
+                self.omega_s = self.omega_s or omega
         start = time.perf_counter()
         textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
                                       TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
