@@ -13,8 +13,11 @@
  *   band_step   (64,) float4: world step per unit k_x, k_y, k_z (2^m d_x, 2^m d_y, 2^m d_z)
  *   band_tex    (64,) int: texture of each band, -1 when it is not drawn
  *   tex_box     (T,) float4: texture box in world units about the centre (a_min, a_max, b_min, b_max)
- *   tex_int     (T,) int4: (offset of node 0's first texel, row stride, node stride, rows); every node
- *               is (rows, row stride) texels with a zero margin of one texel all round
+ *   tex_int     (T,) int4: (offset of cell 0's first texel, row stride in texels, cell stride in floats,
+ *               rows).  A cell of the slope grid (its first node (i_u, i_v); cells row-major by v) is
+ *               (rows, row stride) texels of 4 floats, its four nodes' samples (i_u, i_v), (i_u + 1, i_v),
+ *               (i_u, i_v + 1), (i_u + 1, i_v + 1): a pixel's 16 reads are 2 runs of 8 floats.  Every node has a
+ *               zero margin of one texel all round
  *   tex_map     (T,) float4: (centre_u, centre_v) in texels of the unpadded texture, 1/h_u, 1/h_v
  *   tex_layer, layers: as bin.cl
  *   layer_slope (L,) float4: slope per pixel (sigma_u, sigma_v) of each layer
@@ -84,24 +87,6 @@ __kernel void splat_project_cone(const uint n, const uint first, __global const 
     count[i] = cnt;
 }
 
-/* One node's texel (iu, iv) by bilinear weights fu, fv; t points at (0, 0) of the padded node */
-inline float cone_bilinear(__global const float *t, const int stride, const float fu, const float fv)
-{
-    return (1.0f - fv) * ((1.0f - fu) * t[0] + fu * t[1]) + fv * ((1.0f - fu) * t[stride] + fu * t[stride + 1]);
-}
-
-/* 16 lanes' bilinear samples of one node: lane i at texel offset at[i] (texel (iu, iv) of the padded node),
- * weights fu[i] and fv: gathered, as each lane reads its own texels */
-inline float16 cone_gather(__global const float *t, const int16 at, const int stride, const float16 fu, const float fv)
-{
-#define CLW_G(d) (float16)(t[at.s0 + (d)], t[at.s1 + (d)], t[at.s2 + (d)], t[at.s3 + (d)], t[at.s4 + (d)], \
-    t[at.s5 + (d)], t[at.s6 + (d)], t[at.s7 + (d)], t[at.s8 + (d)], t[at.s9 + (d)], t[at.sa + (d)], t[at.sb + (d)], \
-    t[at.sc + (d)], t[at.sd + (d)], t[at.se + (d)], t[at.sf + (d)])
-    const float16 top = (1.0f - fu) * CLW_G(0) + fu * CLW_G(1), bottom = (1.0f - fu) * CLW_G(stride) + fu * CLW_G(stride + 1);
-#undef CLW_G
-    return (1.0f - fv) * top + fv * bottom;
-}
-
 /* The node cell of the slope grid for slope s along one axis: its first node (returned) and the weight of
  * the next (slopes beyond the grid take its edge).  lo, inv: the first node's slope and 1 / step. */
 inline int cone_cell(const float s, const float lo, const float inv, const int nodes, float *w)
@@ -112,20 +97,20 @@ inline int cone_cell(const float s, const float lo, const float inv, const int n
     return i;
 }
 
-/* A splat's sample at texel (tu, tv) between the four nodes at t (node n), t + 1 node, t + ku nodes and
- * t + ku + 1 nodes with slope weights (wu, wv); ti: the texture's tex_int.  Clamped onto the zero margin
- * (index -1 .. size - 1 of the unpadded texture, +1 for the margin). */
-inline float cone_sample(__global const float *texels, const int4 ti, const int node, const int ku, const float tu,
-                         const float tv, const float wu, const float wv)
+/* A splat's sample at texel (tu, tv) of slope cell ci (its four nodes interleaved, see the tables above) with
+ * slope weights (wu, wv); ti: the texture's tex_int.  Clamped onto the zero margin (index -1 .. size - 1 of the
+ * unpadded texture, +1 for the margin).  Two reads of 8 floats: texels iu and iu + 1 of rows iv and iv + 1. */
+inline float cone_sample(__global const float *texels, const int4 ti, const int ci, const float tu, const float tv,
+                         const float wu, const float wv)
 {
     const float fiu = floor(tu), fiv = floor(tv);
     const int iu = clamp((int)fiu, -1, ti.y - 3), iv = clamp((int)fiv, -1, ti.w - 3);
     const float fu = tu - fiu, fv = tv - fiv;
-    __global const float *t = texels + ti.x + (iv + 1) * ti.y + (iu + 1) + node * ti.z;
-    const float s00 = cone_bilinear(t, ti.y, fu, fv), s01 = cone_bilinear(t + ti.z, ti.y, fu, fv);
-    const float s10 = cone_bilinear(t + ku * ti.z, ti.y, fu, fv);
-    const float s11 = cone_bilinear(t + (ku + 1) * ti.z, ti.y, fu, fv);
-    return (1.0f - wv) * ((1.0f - wu) * s00 + wu * s01) + wv * ((1.0f - wu) * s10 + wu * s11);
+    __global const float *t = texels + ti.x + ci * ti.z + 4 * ((iv + 1) * ti.y + iu + 1);
+    const float8 top = vload8(0, t), bottom = vload8(0, t + 4 * ti.y);
+    const float4 w = (float4)((1.0f - wu) * (1.0f - wv), wu * (1.0f - wv), (1.0f - wu) * wv, wu * wv);
+    const float s00 = dot(top.lo, w), s01 = dot(top.hi, w), s10 = dot(bottom.lo, w), s11 = dot(bottom.hi, w);
+    return (1.0f - fv) * ((1.0f - fu) * s00 + fu * s01) + fv * ((1.0f - fu) * s10 + fu * s11);
 }
 
 /* splat_accumulate_cone: add every tile's records to the framebuffers.
@@ -157,19 +142,19 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
     const int ku = (int)cells.z, kv = (int)cells.w;
     const uint2 r = ranges[tile];
 #ifdef CLW_CONE_TILE
-    /* a row of the tile is 16 lanes: each lane's slope cell and weight along u once per tile, each row's
-     * along v; per splat and row, 4 nodes x 2 x 2 texels gathered per lane, the arithmetic in vectors */
+    /* a row of the tile is 16 lanes: each lane's slope cell and weight along u once per tile, each row's along
+     * v; per splat and row, each lane gathers its 2 runs of 8 floats (cone_sample), the arithmetic in vectors */
     const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     const float16 gu = clamp((grid.x + ((float)corner.x + 0.5f - 0.5f * (float)layer.x + lane) * sigma.x - grid.z)
                              * cells.x, 0.0f, (float)(ku - 1));
-    const int16 ncol = min(convert_int16(gu), (int16)(ku - 2));
-    const float16 wcol = gu - convert_float16(ncol);
-    int nrow[CLW_TILE];
+    const int16 ccol = min(convert_int16(gu), (int16)(ku - 2));
+    const float16 wu = gu - convert_float16(ccol);
+    int crow[CLW_TILE];
     float wrow[CLW_TILE];
     float16 acc[CLW_CHANNELS][CLW_TILE];
     for (int i = 0; i < CLW_TILE; ++i) {
-        nrow[i] = cone_cell(grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y, grid.w,
-                            cells.y, kv, &wrow[i]) * ku;
+        crow[i] = cone_cell(grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y, grid.w,
+                            cells.y, kv, &wrow[i]) * (ku - 1);
         for (int ch = 0; ch < CLW_CHANNELS; ++ch)
             acc[ch][i] = 0.0f;
     }
@@ -184,19 +169,25 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
         const float16 tu = tm.x + ((float)corner.x - cen.x + lane) * ru;
         const float16 fiu = floor(tu), fu = tu - fiu;
         const int16 iu = clamp(convert_int16(fiu), (int16)(-1), (int16)(ti.y - 3));
-        const int16 col = ti.x + iu + 1 + ncol * ti.z;  /* node (ncol, 0), row -1 of the padded node */
+        const int16 col = ti.x + 4 * (iu + 1) + ccol * ti.z;
         const float16 mask = select((float16)(0.0f), (float16)(1.0f),
                                     isgreaterequal(lane, (float16)(bx.x)) & islessequal(lane, (float16)(bx.z)));
         for (int y = bx.y; y <= bx.w; ++y) {
             const float tv = tm.y + (cen.y - (float)(corner.y + y)) * rv;
             const float fiv = floor(tv), fv = tv - fiv;
-            const int16 at = col + ((clamp((int)fiv, -1, ti.w - 3) + 1) * ti.y + nrow[y] * ti.z);
-            const float16 s00 = cone_gather(texels, at, ti.y, fu, fv);
-            const float16 s01 = cone_gather(texels, at + ti.z, ti.y, fu, fv);
-            const float16 s10 = cone_gather(texels, at + ku * ti.z, ti.y, fu, fv);
-            const float16 s11 = cone_gather(texels, at + (ku + 1) * ti.z, ti.y, fu, fv);
-            const float16 sample = mask * ((1.0f - wrow[y]) * ((1.0f - wcol) * s00 + wcol * s01)
-                                           + wrow[y] * ((1.0f - wcol) * s10 + wcol * s11));
+            const int16 at = col + (crow[y] * ti.z + 4 * (clamp((int)fiv, -1, ti.w - 3) + 1) * ti.y);
+            const float v0 = 1.0f - wrow[y], v1 = wrow[y];
+            const float16 w00 = (1.0f - wu) * v0, w01 = wu * v0, w10 = (1.0f - wu) * v1, w11 = wu * v1;
+#define CLW_G(d) (float16)(texels[at.s0 + (d)], texels[at.s1 + (d)], texels[at.s2 + (d)], texels[at.s3 + (d)],     \
+    texels[at.s4 + (d)], texels[at.s5 + (d)], texels[at.s6 + (d)], texels[at.s7 + (d)], texels[at.s8 + (d)],     \
+    texels[at.s9 + (d)], texels[at.sa + (d)], texels[at.sb + (d)], texels[at.sc + (d)], texels[at.sd + (d)],     \
+    texels[at.se + (d)], texels[at.sf + (d)])
+#define CLW_S(d) (w00 * CLW_G(d) + w01 * CLW_G((d) + 1) + w10 * CLW_G((d) + 2) + w11 * CLW_G((d) + 3))
+            const int below = 4 * ti.y;
+            const float16 sample = mask * ((1.0f - fv) * ((1.0f - fu) * CLW_S(0) + fu * CLW_S(4))
+                                           + fv * ((1.0f - fu) * CLW_S(below) + fu * CLW_S(below + 4)));
+#undef CLW_S
+#undef CLW_G
             for (int ch = 0; ch < CLW_CHANNELS; ++ch)
                 acc[ch][y] += c[ch] * sample;
         }
@@ -223,7 +214,7 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
         const float4 tm = tex_map[tex];
         const float tu = tm.x + ((float)x - cen.x) * cen.z * sigma.x * tm.z;
         const float tv = tm.y + (cen.y - (float)y) * cen.z * sigma.y * tm.w;
-        acc += c * cone_sample(texels, tex_int[tex], nv * ku + nu, ku, tu, tv, wu, wv);
+        acc += c * cone_sample(texels, tex_int[tex], nv * (ku - 1) + nu, tu, tv, wu, wv);
     }
     if (x < layer.x && y < layer.y)
         fb[layer.w + y * layer.x + x] += acc;

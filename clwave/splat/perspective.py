@@ -70,7 +70,7 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, texel) for w in (width_u, width_v))
         grids[(m, key)] = (nu, h_u, nv, h_v)
         jobs += [((m, key), k) for k in range(len(slopes))]
-    texels = sum(len(slopes) * (nu + 3) * (nv + 3) for nu, _, nv, _ in grids.values())
+    texels = sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values())  # slope_cells
     if max_texels is not None and texels > max_texels:
         raise DeviceMemoryError(
             f"the footprints of this perspective view need {4 * texels / 2**20:,.0f} MiB ({len(slopes)} ray slopes a "
@@ -139,6 +139,18 @@ def band_texel(order: int, level: int, omega_s, pixel: float, d_min: float) -> t
         return np.pi * d_min / max(omega, least), omega
     omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, order)
     return pixel / texels_per_pixel(order, level, omega, pixel, d_min), omega
+
+
+def slope_cells(data: np.ndarray, count) -> np.ndarray:
+    """A texture's nodes ``data`` (K, nv, nu), K = count_u count_v row-major by v, as ``cl/splat/cone.cl``
+    reads them: one block per cell of the slope grid, (nv + 2, nu + 2, 4) float32, the cell's four nodes
+    interleaved per texel (first node, next along u, next along v, both), with a zero margin all round."""
+    ku, kv = (int(c) for c in count)
+    K, nv, nu = data.shape
+    nodes = np.zeros((kv, ku, nv + 2, nu + 2), np.float32)
+    nodes.reshape(K, nv + 2, nu + 2)[:, 1:-1, 1:-1] = data
+    return np.stack([nodes[:-1, :-1], nodes[:-1, 1:], nodes[1:, :-1], nodes[1:, 1:]], -1).reshape(
+        (kv - 1) * (ku - 1), nv + 2, nu + 2, 4)
 
 
 def depth_range(view, wv, extent_xyz) -> tuple:
@@ -219,8 +231,7 @@ class ConeTables:
                 self.band_step[bid, :3] = 2.0 ** b.level * d_xyz
                 tex = textures[band]
                 K, nv, nu = tex.data.shape
-                padded = np.zeros((K, nv + 2, nu + 2), np.float32)
-                padded[:, 1:-1, 1:-1] = tex.data
+                padded = slope_cells(tex.data, count)
                 if max_texels is not None and offset + padded.size > max_texels:
                     raise DeviceMemoryError(
                         f"the footprints of this perspective view need more than {4 * max_texels / 2**20:,.0f} MiB "
@@ -229,7 +240,7 @@ class ConeTables:
                 tex_layer.append((li, len(ints) - first_tex))
                 boxes.append((-tex.centre_u * tex.h_u, (nu - 1 - tex.centre_u) * tex.h_u,
                               -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
-                ints.append((offset, nu + 2, padded[0].size, nv + 2))
+                ints.append((offset, nu + 2, padded[0].size, nv + 2))  # cells' texels are 4 floats
                 maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
                 pool.append(padded.ravel())
                 offset += padded.size
