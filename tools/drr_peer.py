@@ -77,6 +77,20 @@ def ncc(a: np.ndarray, b: np.ndarray) -> float:
     return float(a @ b / np.sqrt((a @ a) * (b @ b)))
 
 
+def gallery(path: str, clw: np.ndarray, siddon: np.ndarray, panel: int = 256):
+    """A PNG of clwave's DRR, DiffDRR's Siddon DRR and ten times their difference side by side, each
+    ``panel`` pixels (block means), on one grey scale from 0 to Siddon's maximum (README's gallery)."""
+    import imageio.v3 as iio
+
+    f = max(1, clw.shape[0] // panel)
+    shrink = lambda a: a[: a.shape[0] // f * f, : a.shape[1] // f * f].reshape(  # noqa: E731
+        a.shape[0] // f, f, a.shape[1] // f, f).mean(axis=(1, 3))
+    top = float(siddon.max())
+    panels = [shrink(clw), shrink(siddon), 10.0 * np.abs(shrink(clw) - shrink(siddon))]
+    rgb = np.concatenate([np.clip(x / top, 0.0, 1.0) for x in panels], axis=1)
+    iio.imwrite(path, np.round(255.0 * rgb).astype(np.uint8))
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--peer-python", default=os.environ.get("CLWAVE_PEER_PYTHON", sys.executable),
@@ -88,6 +102,7 @@ def main(argv=None):
     p.add_argument("--device", default=None, help="clwave's OpenCL device")
     p.add_argument("--json", default=None, help="write the figures here too")
     p.add_argument("--save", default=None, help="write the images (.npz): DiffDRR's and clwave's")
+    p.add_argument("--png", default=None, help="write clwave's DRR, DiffDRR's Siddon DRR and 10x their difference")
     p.add_argument("--diffdrr", metavar="OUT", help=argparse.SUPPRESS)  # the peer's half
     args = p.parse_args(argv)
     if args.diffdrr:
@@ -140,6 +155,8 @@ def main(argv=None):
             json.dump(report, f, indent=1)
     if args.save:
         np.savez(args.save, clwave=image, siddon=peer["siddon"], trilinear=peer["trilinear"])
+    if args.png:
+        gallery(args.png, image, peer["siddon"])
 
 
 if __name__ == "__main__":
