@@ -113,14 +113,28 @@ inline float cone_sample(__global const float *texels, const int4 ti, const int 
     return (1.0f - fv) * ((1.0f - fu) * s00 + fu * s01) + fv * ((1.0f - fu) * s10 + fu * s11);
 }
 
+/* 16 lanes' samples at one texel each (lane j's at texels + at[j] + d): its cell's four nodes, one read of 4
+ * floats a lane, blended with the lanes' slope weights */
+inline float16 cone_nodes(__global const float *texels, const int *at, const int d, const float16 w00,
+                          const float16 w01, const float16 w10, const float16 w11)
+{
+    float4 q[16];
+    for (int j = 0; j < 16; ++j)
+        q[j] = vload4(0, texels + at[j] + d);
+#define CLW_L(c) (float16)(q[0].c, q[1].c, q[2].c, q[3].c, q[4].c, q[5].c, q[6].c, q[7].c, q[8].c, q[9].c, q[10].c, \
+    q[11].c, q[12].c, q[13].c, q[14].c, q[15].c)
+    return w00 * CLW_L(x) + w01 * CLW_L(y) + w10 * CLW_L(z) + w11 * CLW_L(w);
+#undef CLW_L
+}
+
 /* splat_accumulate_cone: add every tile's records to the framebuffers.
  *   ranges, records, layers, fb: as cl/splat/raster.h (records sorted by tile, texture, importance)
  *   tex_int, tex_map, texels, layer_slope, cone: the tables above (texels with 16 zeros before)
  * A pixel's slope sets its cell in the node grid (4 nodes, bilinear weights); per splat its texel
- * position is w / h = depth * sigma * (pixel - centre) / h, and it reads 2 x 2 texels of each node.
- * Grid, -DCLW_CONE_TILE (CPUs): a work-item per tile, its pixels in private memory, the columns' texel
- * positions computed once per splat; otherwise (GPUs): a work-group of CLW_TILE^2 items per tile, a
- * pixel each.  Either with the global offset of a band of tiles.
+ * position is w / h = depth * sigma * (pixel - centre) / h, and it reads 2 x 2 texels of each node (the
+ * cell's 4 nodes are interleaved per texel).
+ * Grid, -DCLW_CONE_TILE (CPUs): a work-item per tile, a row of 16 pixels a float16 (each lane's texels
+ * gathered); otherwise (GPUs): a work-group of CLW_TILE^2 items per tile, a pixel each.  Either with the global offset of a band of tiles.
  * Assumes: every pixel owned by one work-item, splats in sorted order: bit-identical repeats. */
 __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *layers,
                                     __global const float4 *layer_slope, __global const float4 *cone,
@@ -143,7 +157,8 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
     const uint2 r = ranges[tile];
 #ifdef CLW_CONE_TILE
     /* a row of the tile is 16 lanes: each lane's slope cell and weight along u once per tile, each row's along
-     * v; per splat and row, each lane gathers its 2 runs of 8 floats (cone_sample), the arithmetic in vectors */
+     * v; per splat and row, each lane reads its cell's four nodes at its 2 x 2 texels, 4 floats a read
+     * (cone_nodes), and the arithmetic is in vectors */
     const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     const float16 gu = clamp((grid.x + ((float)corner.x + 0.5f - 0.5f * (float)layer.x + lane) * sigma.x - grid.z)
                              * cells.x, 0.0f, (float)(ku - 1));
@@ -178,16 +193,13 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
             const int16 at = col + (crow[y] * ti.z + 4 * (clamp((int)fiv, -1, ti.w - 3) + 1) * ti.y);
             const float v0 = 1.0f - wrow[y], v1 = wrow[y];
             const float16 w00 = (1.0f - wu) * v0, w01 = wu * v0, w10 = (1.0f - wu) * v1, w11 = wu * v1;
-#define CLW_G(d) (float16)(texels[at.s0 + (d)], texels[at.s1 + (d)], texels[at.s2 + (d)], texels[at.s3 + (d)],     \
-    texels[at.s4 + (d)], texels[at.s5 + (d)], texels[at.s6 + (d)], texels[at.s7 + (d)], texels[at.s8 + (d)],     \
-    texels[at.s9 + (d)], texels[at.sa + (d)], texels[at.sb + (d)], texels[at.sc + (d)], texels[at.sd + (d)],     \
-    texels[at.se + (d)], texels[at.sf + (d)])
-#define CLW_S(d) (w00 * CLW_G(d) + w01 * CLW_G((d) + 1) + w10 * CLW_G((d) + 2) + w11 * CLW_G((d) + 3))
+            int ats[16];
+            vstore16(at, 0, ats);
             const int below = 4 * ti.y;
-            const float16 sample = mask * ((1.0f - fv) * ((1.0f - fu) * CLW_S(0) + fu * CLW_S(4))
-                                           + fv * ((1.0f - fu) * CLW_S(below) + fu * CLW_S(below + 4)));
-#undef CLW_S
-#undef CLW_G
+            const float16 sample = mask * ((1.0f - fv) * ((1.0f - fu) * cone_nodes(texels, ats, 0, w00, w01, w10, w11)
+                                                          + fu * cone_nodes(texels, ats, 4, w00, w01, w10, w11))
+                                           + fv * ((1.0f - fu) * cone_nodes(texels, ats, below, w00, w01, w10, w11)
+                                                   + fu * cone_nodes(texels, ats, below + 4, w00, w01, w10, w11)));
             for (int ch = 0; ch < CLW_CHANNELS; ++ch)
                 acc[ch][y] += c[ch] * sample;
         }
