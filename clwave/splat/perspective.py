@@ -24,7 +24,7 @@ from ..threads import cores, thread_map
 from .spatial import exact_samples
 from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
 from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
-from .textures import Texture, _axis_points, _axis_sampling, _centred
+from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, _axis_sampling, _centred
 
 #: Spacing of the slope grid (docs/splatting.md §8): bilinear interpolation between nodes errs by at most
 #: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
@@ -52,9 +52,10 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     """A :class:`~clwave.splat.textures.Texture` of each band whose ``data[node, iv, iu]`` holds its footprint
     at each of the (K, 2) ``slopes``: the line integrals of its basis
     function along ``n - s_u u - s_v v`` (per unit of depth) through the points ``a u + b v`` from its
-    support centre.  ``bands`` maps ``(m, key)`` to the texel (world units); ``"fft"`` slices the 3-D
-    spectrum along ``u + s_u n``, ``v + s_v n`` (docs/splatting.md §8; on ``device``, every spectrum in one
-    launch, as orthographic views do), ``"spatial"`` integrates exactly (:mod:`clwave.splat.spatial`).
+    support centre.  ``bands`` maps ``(m, key)`` to the texel (world units; or a pair, along u and along v);
+    ``"fft"`` slices the 3-D spectrum along ``u + s_u n``, ``v + s_v n`` (docs/splatting.md §8; on ``device``,
+    every spectrum in one launch, as orthographic views do), ``"spatial"`` integrates exactly
+    (:mod:`clwave.splat.spatial`).
     ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made."""
     wav = wavelet_for(wavelet)
     d_xyz = spacing_xyz(spacing_zyx)
@@ -67,10 +68,11 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         # every node on one grid: the widest oblique projection of the support box over the nodes
         width_u = max(float(np.abs(u + s * n) @ extent) for s in slopes[:, 0])
         width_v = max(float(np.abs(v + s * n) @ extent) for s in slopes[:, 1])
-        (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, texel) for w in (width_u, width_v))
+        (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, h)
+                                      for w, h in zip((width_u, width_v), np.broadcast_to(texel, 2)))
         grids[(m, key)] = (nu, h_u, nv, h_v)
         jobs += [((m, key), k) for k in range(len(slopes))]
-    texels = sum(len(slopes) * (nu + 3) * (nv + 3) for nu, _, nv, _ in grids.values())
+    texels = sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values())  # slope_cells
     if max_texels is not None and texels > max_texels:
         raise DeviceMemoryError(
             f"the footprints of this perspective view need {4 * texels / 2**20:,.0f} MiB ({len(slopes)} ray slopes a "
@@ -124,6 +126,59 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     return out
 
 
+def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, axes) -> tuple:
+    """``((texel_u, texel_v), omega)``: a band's texel along each texture axis (world units) and the texture band
+    that set it (docs/splatting.md §8); ``axes``: the sheared texture axes ``(u + s_u n, v + s_v n)`` of every
+    slope node.
+
+    Smooth footprints (order >= 3) are read at any magnification, so their texels follow the band alone, as
+    in §1, ``pi c / max(omega, omega_least)`` with ``omega`` the paper's 14 (doubled for order 6) or
+    ``omega_s``, whatever the pixel, and ``c`` the spacing the footprint varies on along that axis: at least
+    d_min, more where every world axis that the texture axis crosses is coarser (:func:`axis_scale`; a CT's
+    2.5 mm slices seen from the side).  Kinked footprints (orders 1, 2) keep the orthographic rule at the
+    nearest pixel (``pixel``): a fraction of it, so that bilinear reads place their kinks within a fraction of
+    a pixel."""
+    d_min = float(np.min(d_xyz))
+    if order >= 3:
+        omega = omega_s if omega_s is not None else default_omega_s(np.inf, d_min, order)
+        band = max(omega, DEFAULT_OMEGA_MIN[order] / 2.0 ** level)
+        scale = [max(d_min, min(axis_scale(a[i], a[1 - i], d_xyz) for a in axes)) for i in (0, 1)]
+        return (np.pi * scale[0] / band, np.pi * scale[1] / band), omega
+    omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, order)
+    texel = pixel / texels_per_pixel(order, level, omega, pixel, d_min)
+    return (texel, texel), omega
+
+
+def axis_scale(a, b, d_xyz) -> float:
+    """``min_t max_k d_k |a_k + t b_k|``: the spectrum ``F(U a + V b)`` of a tensor-product footprint (§1:
+    ``Π_k G(2^m d_k w_k)``) falls, at every V, at least as fast along U as an axis-aligned one of spacing this
+    (its slowest factor's argument is at least ``U`` times it), so a texel along ``a`` may be ``pi`` times it
+    over the band.  The minimum of this convex, piecewise linear function of t is at a kink: where a term
+    vanishes or two are equal."""
+    a, b, d = (np.asarray(x, float) for x in (a, b, d_xyz))
+    da, db = d * a, d * b
+    t = [0.0] + [-x / y for x, y in zip(da, db) if y != 0.0]
+    for i in range(3):
+        for j in range(3):
+            for sign in (1.0, -1.0):
+                if i != j and db[i] != sign * db[j]:
+                    t.append((sign * da[j] - da[i]) / (db[i] - sign * db[j]))
+    t = np.array(t)
+    return float(np.min(np.max(np.abs(da[None, :] + t[:, None] * db[None, :]), axis=1)))
+
+
+def slope_cells(data: np.ndarray, count) -> np.ndarray:
+    """A texture's nodes ``data`` (K, nv, nu), K = count_u count_v row-major by v, as ``cl/splat/cone.cl``
+    reads them: one block per cell of the slope grid, (nv + 2, nu + 2, 4) float32, the cell's four nodes
+    interleaved per texel (first node, next along u, next along v, both), with a zero margin all round."""
+    ku, kv = (int(c) for c in count)
+    K, nv, nu = data.shape
+    nodes = np.zeros((kv, ku, nv + 2, nu + 2), np.float32)
+    nodes.reshape(K, nv + 2, nu + 2)[:, 1:-1, 1:-1] = data
+    return np.stack([nodes[:-1, :-1], nodes[:-1, 1:], nodes[1:, :-1], nodes[1:, 1:]], -1).reshape(
+        (kv - 1) * (ku - 1), nv + 2, nu + 2, 4)
+
+
 def depth_range(view, wv, extent_xyz) -> tuple:
     """The least and greatest depth (along -n from the eye) of the model's voxel box grown by a support box
     ``extent_xyz`` (world, x y z): no basis function of that size reaches nearer the eye."""
@@ -148,7 +203,7 @@ class ConeTables:
                              "'auto', 'fft' or 'spatial'")
         sampling = ("fft" if wav.order >= 3 else "spatial") if sampling == "auto" else sampling
         view0 = layers[0][0]
-        d_xyz, d_min = np.array(wv.spacing[::-1], float), min(wv.spacing)
+        d_xyz = np.array(wv.spacing[::-1], float)
         lo, step, count = slope_grid([view for view, _ in layers])
         nodes = np.stack(np.meshgrid(lo[0] + step[0] * np.arange(count[0]), lo[1] + step[1] * np.arange(count[1])),
                          -1).reshape(-1, 2)
@@ -156,6 +211,7 @@ class ConeTables:
         self.cone[0, :3], self.cone[1, :3], self.cone[2, :3], self.cone[3, :3] = view0.eye, view0.n, view0.u, view0.v
         self.cone[4] = (*view0.principal, *lo)
         self.cone[5] = (*(1.0 / step), *count)
+        axes = [(view0.u + su * view0.n, view0.v + sv * view0.n) for su, sv in nodes]  # sheared texture axes
         # each band in the first layer that draws it, with texels of 1/P of its nearest pixel
         texels, layer_of, self.omega_s = {}, {}, None
         for li, (view, bands) in enumerate(layers):
@@ -168,11 +224,9 @@ class ConeTables:
                     raise InputError("the eye (X-ray source) is inside the model or too near it for splatting: "
                                      f"its level-{b.level} basis functions reach behind the eye; move it farther "
                                      "away (a larger distance or dso)")
-                pixel = min(view.slope) * near
-                omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, wav.order)
-                self.omega_s = self.omega_s or omega
                 layer_of[band] = li
-                texels[band] = pixel / texels_per_pixel(wav.order, b.level, omega, pixel, d_min)
+                texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, axes)
+                self.omega_s = self.omega_s or omega
         start = time.perf_counter()
         textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
                                       TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
@@ -204,8 +258,7 @@ class ConeTables:
                 self.band_step[bid, :3] = 2.0 ** b.level * d_xyz
                 tex = textures[band]
                 K, nv, nu = tex.data.shape
-                padded = np.zeros((K, nv + 2, nu + 2), np.float32)
-                padded[:, 1:-1, 1:-1] = tex.data
+                padded = slope_cells(tex.data, count)
                 if max_texels is not None and offset + padded.size > max_texels:
                     raise DeviceMemoryError(
                         f"the footprints of this perspective view need more than {4 * max_texels / 2**20:,.0f} MiB "
@@ -214,7 +267,7 @@ class ConeTables:
                 tex_layer.append((li, len(ints) - first_tex))
                 boxes.append((-tex.centre_u * tex.h_u, (nu - 1 - tex.centre_u) * tex.h_u,
                               -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
-                ints.append((offset, nu + 2, padded[0].size, nv + 2))
+                ints.append((offset, nu + 2, padded[0].size, nv + 2))  # cells' texels are 4 floats
                 maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
                 pool.append(padded.ravel())
                 offset += padded.size
