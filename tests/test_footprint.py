@@ -14,7 +14,7 @@ import pytest
 from scipy.integrate import quad
 
 from clwave.model.bspline import SplineWavelet
-from clwave.errors import InputError
+from clwave.errors import DeviceMemoryError, InputError
 from clwave.model.geometry import projected_halfwidths, view_frame
 from clwave.splat.spatial import line_integral
 from clwave.splat.spectral import centred_fourier
@@ -458,3 +458,13 @@ def test_input_validation():
         footprints(4, (1, 1, 1), n, u, v, [(-1, "aaa")])
     with pytest.raises(InputError, match="texel"):
         footprints(4, (1, 1, 1), n, u, v, [(1, "aaa")], texel={(1, "aaa"): 0.1, (2, "aaa"): -0.1})
+
+
+def test_textures_over_the_texel_cap_are_refused_before_any_is_made():
+    n, u, v = view_frame(30.0, 20.0)
+    bands = {(0, "aaa"): 0.05, (1, "dda"): 0.1}
+    made = footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands)
+    texels = sum(t.data.size for t in made.values())
+    assert footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands, max_texels=texels).keys() == made.keys()
+    with pytest.raises(DeviceMemoryError, match=f"need {texels:,} texels .* render a wider extent"):
+        footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands, max_texels=texels - 1)

@@ -24,7 +24,7 @@ from ..threads import cores, thread_map
 from .spatial import exact_samples
 from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
 from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
-from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, _axis_sampling, _centred
+from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _axis_sampling, _centred
 
 #: Spacing of the slope grid (docs/splatting.md §8): bilinear interpolation between nodes errs by at most
 #: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
@@ -72,12 +72,9 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
                                       for w, h in zip((width_u, width_v), np.broadcast_to(texel, 2)))
         grids[(m, key)] = (nu, h_u, nv, h_v)
         jobs += [((m, key), k) for k in range(len(slopes))]
-    texels = sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values())  # slope_cells
-    if max_texels is not None and texels > max_texels:
-        raise DeviceMemoryError(
-            f"the footprints of this perspective view need {4 * texels / 2**20:,.0f} MiB ({len(slopes)} ray slopes a "
-            f"band), more than the {4 * max_texels / 2**20:,.0f} MiB allowed; render fewer pixels, a narrower cone "
-            f"or a lower omega_s")
+    check_texels(sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values()),  # slope_cells
+                 max_texels, f"the footprints of this perspective view ({len(slopes)} ray slopes a band)",
+                 "render fewer pixels, a narrower cone or a lower omega_s")
     spectra = {}
     if sampling == "fft" and device is not None:  # non-separable slices on the device, in few launches
         plans = {}

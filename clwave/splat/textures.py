@@ -194,6 +194,14 @@ def _axis_points(count, h, cell) -> tuple:
     return (np.arange(2 if cell else count + 1) - centre) * h, centre
 
 
+def check_texels(texels: int, max_texels: int | None, what: str, fix: str) -> None:
+    """Refuse footprint textures of more than ``max_texels`` float texels (the device budget of
+    docs/splatting.md §6) in one line: ``what`` needs so many, and ``fix``."""
+    if max_texels is not None and texels > max_texels:
+        raise DeviceMemoryError(f"{what} need {texels:,} texels ({4 * texels / 2**20:,.0f} MiB), more than the "
+                                f"{4 * max_texels / 2**20:,.0f} MiB allowed: {fix}")
+
+
 def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omega_min=None,
                sampling: str = "auto", tol: float = 0.0, texel=None, device=None, max_texels=None) -> dict:
     """Footprint textures of the (level, key) pairs in ``bands`` for one view.
@@ -274,12 +282,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         h = texel.get((m, key)) if isinstance(texel, dict) else texel
         jobs.append((m, key) + tuple(_axis_sampling(float(np.abs(w) @ extent), cell, omega, d_min, h)
                                      for w, cell in ((u, cells[0]), (v, cells[1]))))
-    texels = sum(job[2][0] * job[3][0] for job in jobs)
-    if max_texels is not None and texels > max_texels:
-        raise DeviceMemoryError(
-            f"the footprint textures of this view need {texels:,} texels ({4 * texels / 2**20:,.0f} MiB), more than "
-            f"the {4 * max_texels / 2**20:,.0f} MiB allowed: the pixels are far smaller than the voxels (or the "
-            f"spacing is very uneven); render a wider extent, fewer pixels, or a lower omega_s")
+    texels = sum(len(_axis_points(*job[2])[0]) * len(_axis_points(*job[3])[0]) for job in jobs)
+    check_texels(texels, max_texels, "the footprint textures of this view",
+                 "the pixels are far smaller than the voxels (or the spacing is very uneven); render a wider "
+                 "extent, fewer pixels, or a lower omega_s")
     spectra = {}
     if sampling == "fft" and device is not None:
         # 2-D spectra on the device; at axis-aligned views (every axis along u or v) the texture
