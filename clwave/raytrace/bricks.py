@@ -13,11 +13,7 @@ brick's own knot planes, so segments in smooth bricks are ``2^l`` cells long.
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 import time
-import weakref
 from dataclasses import dataclass
 from itertools import product
 
@@ -32,9 +28,10 @@ from ..device.constants import BRICK, SUPER
 from ..device.context import ComputeContext
 from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
-from ..errors import DeviceMemoryError, OutputError
+from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
 from .lod import content_windows, occupancy
+from .passes import Spill
 
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
 
@@ -238,54 +235,6 @@ class BrickField:
         return dict(coef=pool, pages=cla.to_device(q, local), page_origin=self.origin[::-1],
                     page_shape=self.shape[::-1], frames=cla.to_device(q, _one(self.frames[slots])),
                     boxes=cla.to_device(q, _one(boxes)), lattices=cla.to_device(q, _one(self.lattices[slots])))
-
-
-class Spill:
-    """Pool elements (float4) that do not fit the device, in an unnamed scratch file in the temporary folder
-    (``TMPDIR``): they cost the process no memory, the OS keeps what fits in free memory in its cache, and the
-    file goes with the tracer (docs/raytracing.md §6).  Raises :class:`OutputError` when the folder has no room."""
-
-    def __init__(self, elements: int):
-        self.nbytes, folder = 16 * elements, tempfile.gettempdir()
-        free = shutil.disk_usage(folder).free
-        if self.nbytes > free:
-            raise OutputError(f"the {format_size(self.nbytes)} of bricks beyond the device need that much room in "
-                              f"{folder}, which has {format_size(free)}; free space there, or set TMPDIR to a "
-                              f"folder on a larger disk")
-        self.folder = folder
-        self.file = tempfile.TemporaryFile(dir=folder, prefix="clwave-bricks-")
-        weakref.finalize(self, self.file.close)  # closed (and so gone) with the pool
-
-    def write(self, first: int, values: np.ndarray):
-        """Elements ``first ..`` from ``values`` ((n, 4) float32)."""
-        self._io(os.pwrite, first, np.ascontiguousarray(values, np.float32))
-
-    def read_into(self, first: int, out: np.ndarray):
-        """Elements ``first .. first + len(out)`` into ``out`` ((n, 4) float32, contiguous)."""
-        self._io(lambda fd, view, at: os.preadv(fd, [view], at), first, out)
-
-    def _io(self, call, first, arr):
-        view, done = memoryview(arr).cast("B"), 0
-        try:
-            while done < len(view):
-                moved = call(self.file.fileno(), view[done:], 16 * first + done)
-                if moved <= 0:
-                    raise OSError(0, "the scratch file ended early")
-                done += moved
-        except OSError as exc:
-            raise OutputError(f"the scratch file of the bricks beyond the device in {self.folder} failed: "
-                              f"{exc.strerror or exc}; free space there, or set TMPDIR to a folder on a larger "
-                              f"disk") from None
-
-
-def ray_order(index, eye, direction, perspective: bool) -> tuple:
-    """Sort key of the region at ``index`` (z, y, x) of a grid of boxes: sorted by it, regions come in the order
-    every ray meets them (docs/raytracing.md §6).  ``eye``: the grid index holding the eye (perspective, any
-    real number); ``direction``: the rays' direction (z, y, x) (orthographic).  Along a ray the distance of its
-    region from the eye's, or the index times the direction's sign, never decreases on any axis, so two regions
-    one ray meets are ordered alike by every axis' key."""
-    index = np.asarray(index, float)
-    return tuple(np.abs(index - eye) if perspective else index * np.sign(direction))
 
 
 def _one(arr):

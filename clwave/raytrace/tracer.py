@@ -20,13 +20,14 @@ from ..device import programs
 from ..device.constants import BLOCK, MAX_LIGHTS, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
 from ..model.bspline import piece_polynomials
-from ..model.geometry import band_lattice, view_frame, view_in_fine, world_to_fine_affine
+from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..device.memory import device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
-from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
+from .bricks import ABSENT, BRICK, build, group_defines, plan
+from .passes import passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import ScalarRange, bernstein_matrix, check_post
 from .progressive import frames
@@ -78,13 +79,6 @@ def _checked_view(camera, tolerance) -> float:
     if tol <= 0:
         raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
     return tol
-
-
-def _region_sums(sizes, c) -> np.ndarray:
-    """Sums of ``sizes`` over regions of c^3 cells (the last ones cut by the array's end)."""
-    padded = np.pad(sizes, [(0, -n % c) for n in sizes.shape])
-    Z, Y, X = (n // c for n in padded.shape)
-    return padded.reshape(Z, c, Y, c, X, c).sum(axis=(1, 3, 5))
 
 
 def raytrace_kernel(field: str) -> Kernel:
@@ -296,37 +290,6 @@ class RayTracer:
         eps = np.finfo(np.float64 if precision == "double" else np.float32).eps
         return GRAD_NOISE * eps * (self.q_bound if q_bound is None else q_bound) / min(self.wv.spacing)
 
-    def _passes(self, view, scale, offset, per_image, at: FieldAt) -> list:
-        """The bricks in the scratch file as regions of c^3 bricks that fit the device one at a time, in an order
-        every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z).
-
-        Along every ray the distance of its region index from the eye's (perspective), or the index times the
-        direction's sign (orthographic), never decreases per axis, so sorting regions by those keys
-        (lexicographically) orders them along every ray alike (docs/raytracing.md §6).
-        """
-        f = self.bricks
-        fixed = per_image + 2 * at.block_bound.nbytes + 4 * int(np.prod(f.shape)) + 256
-        room = min(self.budget.total - fixed, self.budget.max_alloc)
-        sizes = np.zeros(f.shape, np.int64)  # a brick's pool and its tables (frames, boxes, lattices)
-        sizes[tuple((f.bricks[at.slots] - f.origin).T)] = f.slot_bytes()[at.slots] + 16 + 32 * len(self.orders)
-        if room < sizes.max():
-            raise DeviceMemoryError(
-                f"ray tracing this volume needs at least {format_size(fixed + sizes.max())} of device memory (its "
-                f"largest brick and this image's buffers) but {format_size(self.budget.total)} are allowed; raise "
-                f"--device-memory (device_memory=) or render a smaller image")
-        c = max(k for k in range(1, max(f.shape) + 1) if _region_sums(sizes, k).max() <= room)
-        sums = _region_sums(sizes, c)
-        eye, direction = view_in_fine(view, scale, offset)
-        eye_region = np.floor((eye / BRICK - f.origin) / c)
-        regions = []
-        for r in np.argwhere(sums > 0):
-            inside = np.all(((f.bricks[at.slots] - f.origin) // c) == r, axis=1)
-            lo = (f.origin + r * c) * BRICK
-            regions.append((ray_order(r, eye_region, direction, view.perspective), at.slots[inside],
-                            lo[::-1], (lo + c * BRICK)[::-1]))
-        regions.sort(key=lambda item: item[0])
-        return [(slots, lo, hi) for _, slots, lo, hi in regions]
-
     def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
                precision="single", trace=0, detail=None, transfer_function=None) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.
@@ -418,7 +381,7 @@ class RayTracer:
                     f"{format_size(self.budget.total)} are allowed; render a smaller image, or make the tracer with "
                     f"a smaller device_memory= (--device-memory) so that its bricks render in passes")
         if self.field == "bspline" and not self.bricks.resident:
-            passes = self._passes(view, scale, offset, per_pixel, at)
+            passes = region_passes(self, view, scale, offset, per_pixel, at)
         elif self.region is not None:
             f = self.bricks
             lo = np.append(self.region[0], f.origin[1:]) * BRICK
