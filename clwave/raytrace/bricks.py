@@ -83,8 +83,9 @@ class Plan:
                 (unique % 2).astype(bool), pages)
 
 
-def plan(wv, details: int | None = None) -> Plan:
-    """The bricks of a model and their levels, at details 0 .. ``details`` - 1 (default: every one).
+def plan(wv, details=None) -> Plan:
+    """The bricks of a model and their levels at the detail levels ``details`` (default: every one, 0 .. levels;
+    the others have no bricks).
 
     A brick exists where a kept coefficient's support reaches and (for a model that knows its content) some
     occupied coefficient does (:func:`clwave.raytrace.lod.occupancy`); its level is the coarsest lattice that
@@ -112,9 +113,9 @@ def plan(wv, details: int | None = None) -> Plan:
         m = wv.levels + 1 if band.key == "aaa" else band.level
         reach = _reach(positions, band.shape, [(lo - o, hi - lo) for (lo, hi), o in zip(axes, origin)], shape)
         reach_by[m] = reach_by[m] | reach if m in reach_by else reach
-    details = wv.levels + 1 if details is None else details
-    levels, clamps = np.full((details, *shape), ABSENT, np.int8), np.zeros((details, *shape), bool)
-    for detail in range(details):
+    levels = np.full((wv.levels + 1, *shape), ABSENT, np.int8)
+    clamps = np.zeros(levels.shape, bool)
+    for detail in range(wv.levels + 1) if details is None else details:
         present, level = np.zeros(shape, bool), np.full(shape, wv.levels, np.int8)
         for m, reach in sorted(reach_by.items(), reverse=True):  # the finest detail reaching a brick sets its level
             if m > detail:
@@ -302,8 +303,10 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     lay = layout(wv, bricks, levels)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
     resident = _check_fits(wv, cc, p, lay, budget)
-    synth = {(g.wavelet.order, a): programs.build(cc, ["raytrace/expand.cl"], dict(  # compile apart
-        CLW_AXIS=a, CLW_NH=len(g.wavelet.p), CLW_NG=len(g.wavelet.q))) for g in wv.groups for a in range(3)}
+    synth = _Synthesis(cc)
+    if len(levels) and levels.min() < wv.levels:  # some brick needs a synthesis step: its programs built apart
+        for g, axis in product(wv.groups, range(3)):
+            synth.kernels(g.wavelet, axis)
     kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(orders))
     start = time.perf_counter()
     n, G = len(lay["bricks"]), len(wv.groups)
@@ -495,7 +498,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
             merged = {}
             for rest in sorted({key[1:] for key in parts}):
                 pair = [(letter, parts[letter + rest]) for letter in "ad" if letter + rest in parts]
-                merged[rest] = _synth_axis(cc, synth[wav.order, 2 - axis], pair, axis, d_taps, shifts,
+                merged[rest] = _synth_axis(cc, synth.kernels(wav, 2 - axis), pair, axis, d_taps, shifts,
                                            (lo[axis], hi[axis]))
             parts = merged
         approx = parts[""]
@@ -511,6 +514,21 @@ GROUP = (8, 8, 1)
 def _whole_groups(size) -> tuple:
     """A 3-D global size rounded up to whole :data:`GROUP` work-groups (the kernels skip what lies beyond)."""
     return tuple(-(-int(n) // g) * g for n, g in zip(size, GROUP))
+
+
+class _Synthesis:
+    """The synthesis programs (``cl/raytrace/expand.cl``), one per order and axis, built once: a model expanded
+    at its coarsest level alone (the staged set-up's first stage) synthesises nothing and builds none."""
+
+    def __init__(self, cc):
+        self.cc, self.built = cc, {}
+
+    def kernels(self, wavelet, axis):
+        key = (wavelet.order, axis)
+        if key not in self.built:
+            self.built[key] = programs.build(self.cc, ["raytrace/expand.cl"], dict(
+                CLW_AXIS=axis, CLW_NH=len(wavelet.p), CLW_NG=len(wavelet.q)))
+        return self.built[key]
 
 
 @dataclass

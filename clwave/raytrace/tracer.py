@@ -116,7 +116,10 @@ class RayTracer:
     only the bricks of those layers along array axis 0 (z), and rays marched inside them only: one worker's
     part of an image rendered on a Dask cluster (:mod:`clwave.raytrace.regions`).  ``lod=True`` (B-spline field)
     also expands the bricks of every coarser detail, so that ``render(..., detail=)`` picks one without a new
-    set-up (docs/raytracing.md §8); it costs the coarser pools' memory and their share of the set-up.
+    set-up (docs/raytracing.md §8); it costs the coarser pools' memory and their share of the set-up.  ``lod``
+    may also name the detail levels to expand (e.g. ``(3,)``: the coarsest of 3 levels alone), the finest of
+    them the default detail of a render.  :meth:`open` sets up from a ``.clw`` file in stages, the coarsest
+    detail first (docs/raytracing.md §11).
     """
 
     def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,
@@ -138,7 +141,9 @@ class RayTracer:
                                    or not region[0] < region[1]):
             raise InputError(f"region={region!r} must be (first, stop) brick layers along z with first < stop, "
                              f"for the B-spline field")
-        self.wv, self.field, self.active, self.region, self.lod = wv, field, int(active), region, bool(lod)
+        self.details = _details(lod, wv.levels, field)  # the detail levels expanded (docs/raytracing.md §8)
+        self.wv, self.field, self.active, self.region = wv, field, int(active), region
+        self.lod = self.details != (0,)
         self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
@@ -155,7 +160,7 @@ class RayTracer:
 
     def _expand(self):
         """B-spline field: the bricks (:mod:`clwave.raytrace.bricks`), and their per-block maxima as bounds."""
-        p = plan(self.wv, None if self.lod else 1)
+        p = plan(self.wv, self.details)
         if self.region is not None:  # the bricks of the region's layers only
             layers = p.origin[0] + np.arange(p.level.shape[1])
             p.level[:, (layers < self.region[0]) | (layers >= self.region[1])] = ABSENT
@@ -163,7 +168,7 @@ class RayTracer:
         self.expansions += 1
         self.setup_seconds = self.bricks.seconds
         self.occ_origin = self.bricks.origin * SUPER
-        full = self.field_at(0)  # full detail; other details pick other slots (docs/raytracing.md §8)
+        full = self.field_at(self.details[0])  # the finest; other details pick other slots (docs/raytracing.md §8)
         for name in ("box", "block_bound", "q_bound", "occupied_fraction", "field_tables", "super_bound",
                      "super_bound_host", "super_origin"):
             setattr(self, name, getattr(full, name))
@@ -194,10 +199,12 @@ class RayTracer:
 
     def _detail(self, detail, view, scale, offset) -> tuple:
         """(FieldAt, the meta's detail level: an int, or the least and largest over the bricks) of a render."""
-        detail = Detail.of(detail, self.wv.levels)
-        if detail != Detail() and (self.field != "bspline" or not self.lod):
+        detail = Detail(self.details[0]) if detail is None else Detail.of(detail, self.wv.levels)
+        every = len(self.details) == self.wv.levels + 1
+        if detail.level not in self.details or (detail.pixels is not None and not every):
             raise InputError("detail= needs a tracer of the B-spline field that holds every detail "
-                             "(RayTracer(wv, lod=True))")
+                             "(RayTracer(wv, lod=True))" if not self.lod else
+                             f"this tracer holds details {', '.join(map(str, self.details))} only, not {detail}")
         if self.field != "bspline":
             return self, 0
         if detail.pixels is None:
@@ -456,6 +463,16 @@ class RayTracer:
             meta["active_trace"] = traced.get()
         return RenderResult(img, meta)
 
+    @classmethod
+    def open(cls, path, device=None, device_memory=None, lod=False):
+        """A :class:`~clwave.raytrace.staged.StagedTracer` of a ``.clw`` file: the coarsest detail from the file's
+        approximation alone, ready on return; the whole file's tracer (``lod`` as here) set up in a background
+        thread; its ``refine(camera)`` yields frames from the first to the full-detail image
+        (docs/raytracing.md §11)."""
+        from .staged import StagedTracer
+
+        return StagedTracer(cls, path, device=device, device_memory=device_memory, lod=lod)
+
     def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, steps=None,
                budget=None, error=None):
         """Frames of ``camera`` from cheap to exact (:mod:`clwave.raytrace.progressive`, docs/raytracing.md §9),
@@ -477,6 +494,19 @@ class RayTracer:
         if self.orders[self.alpha_group] == 1:
             return None, "off: the Haar basis has no usable gradient, rendered unshaded"
         return phong, "phong"
+
+
+def _details(lod, levels, field) -> tuple:
+    """The detail levels a tracer expands: ``lod`` False (full detail), True (every one) or the levels named."""
+    if lod is True or lod is False:
+        details = tuple(range(levels + 1)) if lod else (0,)
+    elif np.ndim(lod) == 1 and len(lod) and all(isinstance(v, (int, np.integer)) and 0 <= v <= levels for v in lod):
+        details = tuple(sorted({int(v) for v in lod}))
+    else:
+        raise InputError(f"lod={lod!r} must be True, False or detail levels from 0 to {levels}")
+    if details != (0,) and field != "bspline":
+        raise InputError("level of detail (lod=) needs the B-spline field")
+    return details
 
 
 def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
