@@ -1,4 +1,4 @@
-"""The first image from a ``.clw`` file at once (clwave/raytrace/staged.py, docs/raytracing.md §11): the
+"""The first image from a ``.clw`` file at once (clwave/raytrace/staged.py, docs/raytracing.md §8): the
 approximation read alone against the whole file's, the content mask read a layer of chunks at a time against
 the mask it was written from, the coarse stage's X-ray colours against the reference (wavelet) field of the
 approximation, and the staged frames ending bit for bit at the whole file's direct render."""

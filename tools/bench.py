@@ -508,7 +508,7 @@ def scale_step(spec) -> dict:
 
 
 def bench_first_image(args) -> dict:
-    """The first image from a ``.clw`` file (docs/raytracing.md §11): ``--first-image-file`` (default: hydrogen
+    """The first image from a ``.clw`` file (docs/raytracing.md §8): ``--first-image-file`` (default: hydrogen
     ``--size``^3 RGBA, cubic, 3 levels, 5 %, written to ``--scratch`` once), each measurement in a fresh process
     after a warm-up process (kernel binaries and the file in the OS caches): seconds from calling
     ``RayTracer.open`` to the first X-ray frame and to the first shaded frame of ``refine`` at

@@ -278,7 +278,7 @@ class _Tiers:
 def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
     """Read a ``.clw`` file written by :func:`write_clw`; with ``keep``, its ``keep`` most important
     coefficients (:meth:`WaveletVolume.open`), read tier by tier; with ``approximation``, the coarsest
-    approximation alone (its own tier, read first: the model of the coarsest detail, docs/raytracing.md §11).
+    approximation alone (its own tier, read first: the model of the coarsest detail, docs/raytracing.md §8).
 
     The file is untrusted: its header is checked, and every dataset's shape, type and chunking against
     the header, before anything is read; the checksums are verified as the data is read.  The content mask
@@ -331,7 +331,7 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
 class FileMask(ContentMask):
     """The content mask of a ``.clw`` file, read when a box of it is first asked for, a layer of the file's
     chunks at a time (packed to bits as it comes): an image that needs a part of the mask, or none of it (a
-    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §11).  Thread-safe."""
+    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §8).  Thread-safe."""
 
     def __init__(self, path, shape):
         super().__init__(shape)  # zeroed pages: no memory until a layer is read

@@ -406,7 +406,7 @@ class WaveletVolume:
         """Read a ``.clw`` file written by :meth:`save`; with ``keep``, only its most important coefficients,
         reading about that fraction of the file: the same model as ``open(path).threshold(keep=keep)``
         (docs/chunked.md §4); with ``approximation``, the coarsest approximation alone (a first image at once,
-        docs/raytracing.md §11).  The content mask is read when first used, a part at a time."""
+        docs/raytracing.md §8).  The content mask is read when first used, a part at a time."""
         wv = WaveletVolume.file_format[0](path, keep, approximation)
         if not approximation:
             wv.source = (str(Path(path).resolve()), keep)  # workers of a Dask cluster open it themselves

@@ -1,4 +1,4 @@
-"""The first image from a ``.clw`` file at once (docs/raytracing.md §11): :meth:`clwave.RayTracer.open` reads the
+"""The first image from a ``.clw`` file at once (docs/raytracing.md §8): :meth:`clwave.RayTracer.open` reads the
 coarsest approximation alone (its own tier of the file, read first) and expands its bricks at the coarsest detail,
 without the content mask; the whole model is read and set up in a background thread while the caller renders
 the coarse stage.  :meth:`StagedTracer.refine` yields frames from the coarse stage until the full one is ready,
@@ -81,7 +81,7 @@ class StagedTracer:
         iterating when the view changes; the set-up goes on): the coarse stage on an image ``2^levels`` times
         smaller per side, then (if the full stage is not ready) on one twice as large; then, once the full stage
         is ready, full detail on an image half as large per side and on the full image, bit for bit its
-        ``render``.  Estimates and ``error=`` as :meth:`RayTracer.refine` (docs/raytracing.md §9, §11)."""
+        ``render``.  Estimates and ``error=`` as :meth:`RayTracer.refine` (docs/raytracing.md §8, §9)."""
         check_error(error)
         if not isinstance(camera, Camera):
             raise InputError("camera must be a clwave.Camera")

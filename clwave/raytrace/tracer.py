@@ -119,7 +119,7 @@ class RayTracer:
     set-up (docs/raytracing.md §8); it costs the coarser pools' memory and their share of the set-up.  ``lod``
     may also name the detail levels to expand (e.g. ``(3,)``: the coarsest of 3 levels alone), the finest of
     them the default detail of a render.  :meth:`open` sets up from a ``.clw`` file in stages, the coarsest
-    detail first (docs/raytracing.md §11).
+    detail first (docs/raytracing.md §8).
     """
 
     def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,
@@ -468,7 +468,7 @@ class RayTracer:
         """A :class:`~clwave.raytrace.staged.StagedTracer` of a ``.clw`` file: the coarsest detail from the file's
         approximation alone, ready on return; the whole file's tracer (``lod`` as here) set up in a background
         thread; its ``refine(camera)`` yields frames from the first to the full-detail image
-        (docs/raytracing.md §11)."""
+        (docs/raytracing.md §8)."""
         from .staged import StagedTracer
 
         return StagedTracer(cls, path, device=device, device_memory=device_memory, lod=lod)
