@@ -16,7 +16,7 @@ from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached
 from ..model.camera import Camera
 from ..model.wavelet import WaveletVolume
-from .progressive import MIN_SIDE, RaytraceFrame, reduced_camera, upsample
+from .progressive import MIN_SIDE, RaytraceFrame, estimate, reduced_camera, upsample
 
 
 class StagedTracer:
@@ -90,18 +90,23 @@ class StagedTracer:
 
     def _frames(self, camera, options, error):
         view, start = camera.view(self.coarse.wv), time.perf_counter()
-        levels, estimate = self.coarse.wv.levels, ErrorEstimate()
+        levels, steps = self.coarse.wv.levels, ErrorEstimate()  # the coarse stage: the step estimate
         final = FinalImage(lambda: self.wait().render(camera, **options).image)
         index = 0
 
-        def frame(tracer, detail, reduction):
-            nonlocal index
+        def render(tracer, detail, reduction):
             cam = camera if reduction == 1 else reduced_camera(view, camera, reduction)
             res = tracer.render(cam, detail=detail, **options)
-            image = upsample(res.image, view.size, reduction)
-            rms, top = estimate.add(image)
-            if tracer is self.full and reduction == 1:
-                final.image, rms, top = image, 0.0, 0.0
+            return upsample(res.image, view.size, reduction), res
+
+        def frame(tracer, detail, reduction):
+            nonlocal index
+            image, res = render(tracer, detail, reduction)
+            rms, top = steps.add(image)
+            if tracer is self.full:  # full detail: what the size misses (docs/raytracing.md §9)
+                rms, top = (0.0, 0.0) if reduction == 1 else estimate(image, image, render(tracer, 0, 2 * reduction)[0])
+                if reduction == 1:
+                    final.image = image
             made = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
                                  estimated_relative_rms_error=rms, estimated_relative_max_error=top,
                                  meta=dict(res.meta, stage="full" if tracer is self.full else "coarse"),
