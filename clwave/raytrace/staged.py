@@ -15,7 +15,8 @@ import numpy as np
 from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached
 from ..model.camera import Camera
-from ..model.wavelet import WaveletVolume
+from ..model.transform import band_layout
+from ..model.wavelet import ChannelGroup, WaveletVolume
 from .progressive import MIN_SIDE, RaytraceFrame, estimate, reduced_camera, upsample
 
 
@@ -33,16 +34,25 @@ class StagedTracer:
         start = time.perf_counter()
         approximation = WaveletVolume.open(path, approximation=True)
         approximation.content_mask = None  # the coarse stage has no content clamp: the mask is not read for it
-        self.coarse = tracer_class(approximation, device=device, device_memory=device_memory,
-                                   lod=(approximation.levels,))
+        self.levels = approximation.levels
+        if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
+            self.coarse = tracer_class(coarse_volume(approximation), device=device, device_memory=device_memory)
+        else:  # the groups' lattices shift by half cells of the fine lattice: bricks of the coarsest detail
+            self.coarse = tracer_class(approximation, device=device, device_memory=device_memory,
+                                       lod=(approximation.levels,))
         self.coarse_seconds = time.perf_counter() - start
         self.full, self.full_seconds, self._failure = None, None, None
         # the stages share the device-memory budget: the full stage's bricks beyond what the coarse one leaves go
         # to its scratch file (docs/raytracing.md §6)
         left = self.coarse.budget.total - self.coarse.bricks.pool_bytes - 2 * self.coarse.block_bound.nbytes
         self._thread = threading.Thread(target=self._set_up, args=(tracer_class, path, max(left, 1), lod),
-                                        name="clwave-staged-setup", daemon=True)
+                                        name="clwave-staged-setup")  # the interpreter waits for it at exit
         self._thread.start()
+
+    @property
+    def coarse_detail(self):
+        """The ``detail=`` of the coarse stage's renders (None: its only one)."""
+        return None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
 
     def _set_up(self, tracer_class, path, device_memory, lod):
         start = time.perf_counter()
@@ -72,7 +82,8 @@ class StagedTracer:
         full = self.wait(0) if self.ready else None
         if full is None and options.get("detail") is not None:
             raise InputError("detail= needs the full stage: wait() for it first")
-        result = (full or self.coarse).render(camera, **options)
+        result = full.render(camera, **options) if full else self.coarse.render(camera, **options,
+                                                                                 detail=self.coarse_detail)
         result.meta["stage"] = "full" if full is not None else "coarse"
         return result
 
@@ -90,7 +101,7 @@ class StagedTracer:
 
     def _frames(self, camera, options, error):
         view, start = camera.view(self.coarse.wv), time.perf_counter()
-        levels, steps = self.coarse.wv.levels, ErrorEstimate()  # the coarse stage: the step estimate
+        levels, steps = self.levels, ErrorEstimate()  # the coarse stage: the step estimate
         final = FinalImage(lambda: self.wait().render(camera, **options).image)
         index = 0
 
@@ -110,13 +121,13 @@ class StagedTracer:
             made = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
                                  estimated_relative_rms_error=rms, estimated_relative_max_error=top,
                                  meta=dict(res.meta, stage="full" if tracer is self.full else "coarse"),
-                                 _final=final, detail=detail, reduction=reduction)
+                                 _final=final, detail=levels if detail is None else detail, reduction=reduction)
             index += 1
             return made
 
         smallest = 2 ** max(0, min(levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
         for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):  # the coarse stage, unless ready
-            made = frame(self.coarse, levels, reduction)
+            made = frame(self.coarse, self.coarse_detail, reduction)
             yield made
             if reached(made, error):
                 return
@@ -128,3 +139,26 @@ class StagedTracer:
             yield made
             if reached(made, error):
                 return
+
+
+def coarse_volume(approximation: WaveletVolume) -> WaveletVolume:
+    """The model of the approximation alone (levels L, one wavelet order) as a volume ``2^L`` times coarser per
+    axis with no detail bands: the same field (docs/raytracing.md §8).  Level-L coefficient k spans fine cells
+    ``o_L + 2^L k .. + 2^L j`` of a lattice of the volume's spacing; as a level-0 coefficient of a lattice of
+    spacing ``2^L`` times that, normalised by ``2^(-3L/2)`` (docs/model.md §4), it spans cells ``k .. k + j`` of
+    the coarse volume, whose origin puts them in the same place.  Bricks of the coarse volume cover ``2^L`` times
+    more cells each than bricks of the coarsest detail, and segments are as long."""
+    L, wv, wavelet = approximation.levels, approximation, approximation.groups[0].wavelet
+    step, shape = 2 ** L, approximation.groups[0].bands[0].shape  # (z, y, x)
+    spacing = np.array(wv.spacing[::-1]) * step  # (x, y, z), as the origin; fine = (world - origin) / s + (n - 1) / 2
+    fine_corner = wavelet.offset("a", L) - (np.array(wv.shape[::-1]) - 1) / 2.0 - wavelet.order / 2.0
+    coarse_corner = -(np.array(shape[::-1]) - 1) / 2.0 - wavelet.order / 2.0
+    origin = np.array(wv.origin) + np.array(wv.spacing[::-1]) * fine_corner - spacing * coarse_corner
+    half = np.array(wv.shape[::-1]) * np.array(wv.spacing[::-1]) / 2.0  # the framing of the volume itself
+    content = wv.content if wv.content is not None else (tuple(wv.origin - half), tuple(wv.origin + half))
+    bands = band_layout(wavelet, shape, 0)
+    groups = [ChannelGroup(g.wavelet, g.channels, bands, g.positions, g.values * np.float32(step ** -1.5))
+              for g in approximation.groups]
+    return WaveletVolume(shape, spacing[::-1], origin, 0, groups, wv.channels, interpolate=wv.interpolate,
+                         transfer_function=wv.transfer_function, content=content)
+
