@@ -23,8 +23,8 @@ from .progressive import MIN_SIDE, RaytraceFrame, estimate, reduced_camera, upsa
 class StagedTracer:
     """A ray tracer of a ``.clw`` file set up in two stages (made by :meth:`clwave.RayTracer.open`).
 
-    ``coarse``: a :class:`~clwave.RayTracer` of the file's approximation alone at its coarsest detail (its
-    segments ``2^levels`` cells long, alpha clamped at 0 as at every coarser detail, no content clamp: the
+    ``coarse``: a :class:`~clwave.RayTracer` of the file's approximation alone (:func:`coarse_volume`; for mixed
+    orders the bricks of the coarsest detail), its segments ``2^levels`` cells long, no content clamp (the
     coarse field blurs the content a little into empty space, docs/raytracing.md §8), ready when ``open``
     returns; ``full``: the tracer of the whole file (``RayTracer(WaveletVolume.open(path), lod=lod)``), made in a
     background thread (:attr:`ready`, :meth:`wait`).  Use from one thread at a time.
