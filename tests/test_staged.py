@@ -86,3 +86,15 @@ def test_staged_frames_start_coarse_and_end_at_the_direct_render_bit_for_bit(mod
     direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
     assert np.array_equal(frames[-1].image, direct.image)
     assert staged.render(cam, tolerance=1e-3).meta["stage"] == "full"
+
+
+def test_a_tracer_of_chosen_details_refuses_others_in_one_line():
+    wv = WaveletVolume.from_volume(smooth_volume(n=16), wavelet="cubic", levels=2).threshold(keep=0.2)
+    for bad in ((3,), (), "coarse", (1.5,)):
+        with pytest.raises(clwave.errors.InputError, match="lod=") as err:
+            RayTracer(wv, lod=bad)
+        assert "\n" not in str(err.value)
+    tracer, cam = RayTracer(wv, lod=(2,)), clwave.Camera(20, 10, size=8)
+    assert tracer.details == (2,) and tracer.render(cam, absorption=False).meta["detail"] == 2
+    with pytest.raises(clwave.errors.InputError, match="holds details 2 only"):
+        tracer.render(cam, absorption=False, detail=0)
