@@ -126,6 +126,7 @@ class StagedTracer:
             return made
 
         smallest = 2 ** max(0, min(levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
+        steps.add(render(self.coarse, self.coarse_detail, 2 * smallest)[0])  # the first frame's step: a pilot
         for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):  # the coarse stage, unless ready
             made = frame(self.coarse, self.coarse_detail, reduction)
             yield made
