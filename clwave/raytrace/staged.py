@@ -27,7 +27,8 @@ class StagedTracer:
     orders the bricks of the coarsest detail), its segments ``2^levels`` cells long, no content clamp (the
     coarse field blurs the content a little into empty space, docs/raytracing.md §8), ready when ``open``
     returns; ``full``: the tracer of the whole file (``RayTracer(WaveletVolume.open(path), lod=lod)``), made in a
-    background thread (:attr:`ready`, :meth:`wait`).  Use from one thread at a time.
+    background thread started by the first coarse image (:meth:`start`, :attr:`ready`, :meth:`wait`).  Use from
+    one thread at a time.
     """
 
     def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False):
@@ -47,7 +48,6 @@ class StagedTracer:
         left = self.coarse.budget.total - self.coarse.bricks.pool_bytes - 2 * self.coarse.block_bound.nbytes
         self._thread = threading.Thread(target=self._set_up, args=(tracer_class, path, max(left, 1), lod),
                                         name="clwave-staged-setup")  # the interpreter waits for it at exit
-        self._thread.start()
 
     @property
     def coarse_detail(self):
@@ -64,13 +64,20 @@ class StagedTracer:
         self.full_seconds = time.perf_counter() - start
         self.full = full
 
+    def start(self):
+        """Start setting up the full stage (once): done by the first image of the coarse stage, so that the
+        background's reading does not slow that image down, or by :meth:`wait`."""
+        if self._thread.ident is None:
+            self._thread.start()
+
     @property
     def ready(self) -> bool:
         """Whether the full stage is set up (or its set-up failed: :meth:`wait` raises its error)."""
-        return not self._thread.is_alive()
+        return self._thread.ident is not None and not self._thread.is_alive()
 
     def wait(self, timeout=None):
         """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first)."""
+        self.start()
         self._thread.join(timeout)
         if self._failure is not None:
             raise self._failure
@@ -85,6 +92,7 @@ class StagedTracer:
         result = full.render(camera, **options) if full else self.coarse.render(camera, **options,
                                                                                  detail=self.coarse_detail)
         result.meta["stage"] = "full" if full is not None else "coarse"
+        self.start()
         return result
 
     def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, error=None):
@@ -129,6 +137,7 @@ class StagedTracer:
         steps.add(render(self.coarse, self.coarse_detail, 2 * smallest)[0])  # the first frame's step: a pilot
         for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):  # the coarse stage, unless ready
             made = frame(self.coarse, self.coarse_detail, reduction)
+            self.start()
             yield made
             if reached(made, error):
                 return
