@@ -23,14 +23,14 @@ from clwave.errors import DeviceMemoryError, OutputError
 from clwave.io.phantoms import phantom
 from clwave.model.bspline import bspline, bspline_derivative
 from clwave.model.geometry import band_lattice, fine_to_world
-from clwave.raytrace import bricks
+from clwave.raytrace import bricks, passes
 from clwave.raytrace.reference import _content_field, raytrace_reference
 from clwave.raytrace.tracer import RayTracer
 
 pytestmark = pytest.mark.opencl
 
 
-def spilled(spill: bricks.Spill) -> np.ndarray:
+def spilled(spill: passes.Spill) -> np.ndarray:
     """The whole scratch file, (elements, 4) float32."""
     out = np.empty((spill.nbytes // 16, 4), np.float32)
     spill.read_into(0, out)

@@ -140,7 +140,7 @@ def test_a_model_beyond_memory_is_named_with_the_way_out(model_file, monkeypatch
 
     def no_memory(shape):
         raise MemoryError
-    monkeypatch.setattr(clw, "ContentMask", no_memory)
+    monkeypatch.setattr(clw, "FileMask", lambda path, shape: no_memory(shape))
     with pytest.raises(InputError, match="more than this machine's memory.*keep"):
         clwave.WaveletVolume.open(model_file)
 

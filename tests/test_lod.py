@@ -38,14 +38,16 @@ def without_details(wv, level):
 
 
 def brute_occupancy(mask, wavelet, level, start, shape):
-    """Level-``level`` coefficient k is occupied where one of the fine B-splines inside its support (voxels
-    o_L + 2^L k .. o_L + 2^L k + (2^L - 1) j) is a non-empty voxel: one coefficient at a time."""
+    """Level-``level`` coefficient k is occupied where one of the 2^L fine B-splines at the centre of those
+    inside its support (voxels o_L + 2^L k .. o_L + 2^L k + (2^L - 1) j, (2^L - 1) j + 1 of them) is a
+    non-empty voxel: one coefficient at a time."""
     dense = np.asarray(mask)
     step, o = 2 ** level, wavelet.offset("a", level)
+    inside = (step - 1) * wavelet.order + 1
     out = np.zeros(shape, bool)
     for idx in product(*(range(n) for n in shape)):
-        lo = [o + step * (s + i) for s, i in zip(start, idx)]
-        hi = [a + (step - 1) * wavelet.order + 1 for a in lo]
+        lo = [o + step * (s + i) + (inside - step) // 2 for s, i in zip(start, idx)]
+        hi = [a + step for a in lo]
         lo, hi = np.maximum(lo, 0), np.minimum(hi, dense.shape)
         out[idx] = np.all(hi > lo) and dense[tuple(slice(a, b) for a, b in zip(lo, hi))].any()
     return out

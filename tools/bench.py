@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """clwave benchmarks: JSON out, warm-up first, compile time apart, machine and device described.
 
-    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|orders|scale|view|drr|all
+    python tools/bench.py decompose|footprints|splat|progressive|raytrace|lod|post|orders|scale|view|drr|first-image|all
                           [--size 128 256] [--repeats 3] [--views 4] [--keep 0.01 0.05 1] [--device auto]
                           [--json out.json]
 
@@ -49,6 +49,9 @@ process, and its file splatted at 512² with 1 % read as a prefix and a reused r
 also ray traced (whole file, shaded, tolerance 1e-2, ``--raytrace-image``) within the first
 ``--device-memory`` cap (default 2GiB): set-up, render, bricks, passes, segments per lattice.  Each
 step runs in a process of its own, which reports its peak resident memory.
+
+``first-image`` (not in ``all``): the first X-ray and shaded images from a ``.clw`` file (``--first-image-file``,
+default hydrogen ``--size``^3 RGBA 5 %), each in a fresh process: ``RayTracer.open``, its staged frames.
 
 ``view`` (not in ``all``; needs chromium, tools/browser.py): ``clwave view`` of hydrogen scalar, cubic, 5 %, at
 ``--view-image`` (512²) in headless chromium, ``--views`` drags after a warm-up: the first image after the page
@@ -448,6 +451,8 @@ def _scale_step(spec) -> dict:
 
 
 def scale_step(spec) -> dict:
+    if spec["step"].startswith("first-"):  # a step of ``first-image``
+        return first_image_step(spec)
     times = {}
     if spec["step"] == "compress":
         start = time.perf_counter()
@@ -500,6 +505,64 @@ def scale_step(spec) -> dict:
     times["total"] = sum(v for v in times.values() if isinstance(v, float))
     return dict(seconds=times, peak_resident_bytes=int(peak_resident_gib() * 2 ** 30),
                 peak_resident_gib=peak_resident_gib(), **figures)
+
+
+def bench_first_image(args) -> dict:
+    """The first image from a ``.clw`` file (docs/raytracing.md §8): ``--first-image-file`` (default: hydrogen
+    ``--size``^3 RGBA, cubic, 3 levels, 5 %, written to ``--scratch`` once), each measurement in a fresh process
+    after a warm-up process (kernel binaries and the file in the OS caches): seconds from calling
+    ``RayTracer.open`` to the first X-ray frame and to the first shaded frame of ``refine`` at
+    ``--raytrace-image`` (tolerance 1e-2), and on to each later frame (the last the whole file's full-detail
+    render), with the stages' set-up times and the peak resident memory; and the X-ray image splatted from the
+    approximation alone (``WaveletVolume.open(path, approximation=True)``, a new renderer), and the first image
+    of the whole file read and set up (``RayTracer(WaveletVolume.open(path)).render``), for comparison."""
+    path = args.first_image_file
+    if path is None:
+        path = args.scratch / f"hydrogen_{args.size}_rgba.clw"
+        if not path.exists():
+            args.scratch.mkdir(parents=True, exist_ok=True)
+            rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+            WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05).save(path)
+    spec = dict(model=str(path), device=args.device, image=args.raytrace_image)
+    _scale_step(dict(spec, step="first-shaded", frames=1))  # warm-up: kernels built, the file cached
+    return dict(setting=dict(file=str(path), image=args.raytrace_image, tolerance=1e-2, device_memory="2GiB"),
+                xray=_scale_step(dict(spec, step="first-xray")),
+                shaded=_scale_step(dict(spec, step="first-shaded", frames=None)),
+                splat_approximation=_scale_step(dict(spec, step="first-splat")),
+                whole_file_first=_scale_step(dict(spec, step="first-whole")))
+
+
+def first_image_step(spec) -> dict:
+    """One measurement of ``first-image`` in this (fresh) process: seconds from the call that opens the file."""
+    cam = clwave.Camera(30.0, 20.0, size=spec["image"])
+    start = time.perf_counter()
+    if spec["step"] == "first-splat":
+        wv = WaveletVolume.open(spec["model"], approximation=True)
+        opened = time.perf_counter() - start
+        clwave.splat(wv, cam, device=spec["device"])
+        return dict(open_seconds=opened, first_image_seconds=time.perf_counter() - start, coefficients=wv.kept,
+                    peak_resident_gib=peak_resident_gib())
+    if spec["step"] == "first-whole":  # before the staged set-up: the whole file read and set up, then a render
+        wv = WaveletVolume.open(spec["model"])
+        opened = time.perf_counter() - start
+        tracer = clwave.RayTracer(wv, device=spec["device"], device_memory="2GiB")
+        set_up = time.perf_counter() - start
+        tracer.render(cam, tolerance=1e-2)
+        return dict(open_seconds=opened, set_up_seconds=set_up - opened,
+                    first_image_seconds=time.perf_counter() - start, peak_resident_gib=peak_resident_gib())
+    staged = clwave.RayTracer.open(spec["model"], device=spec["device"], device_memory="2GiB")
+    out = dict(coarse_setup_seconds=time.perf_counter() - start, frames=[])
+    for frame in staged.refine(cam, tolerance=1e-2, absorption=spec["step"] != "first-xray"):
+        out["frames"].append(dict(seconds_since_open=time.perf_counter() - start, stage=frame.meta["stage"],
+                                  detail=frame.detail, reduction=frame.reduction,
+                                  render_seconds=frame.meta["render_seconds"],
+                                  compile_seconds=frame.meta["compile_seconds"], bricks=frame.meta["bricks"],
+                                  estimated_relative_rms_error=frame.estimated_relative_rms_error))
+        if spec["step"] == "first-xray" or len(out["frames"]) == spec.get("frames"):
+            break
+    out.update(full_setup_seconds=staged.wait().setup_seconds if spec["step"] == "first-shaded" else None,
+               full_stage_seconds=staged.full_seconds, peak_resident_gib=peak_resident_gib())
+    return out
 
 
 def bench_post(args) -> dict:
@@ -709,7 +772,8 @@ def bench_orders(args) -> dict:
 
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "post": bench_post,
-              "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr}
+              "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
+              "first-image": bench_first_image}
 
 
 def main(argv=None):
@@ -742,11 +806,13 @@ def main(argv=None):
     parser.add_argument("--scratch", type=Path, default=Path("/tmp/clwave-bench"),
                         help="scale: folder of the Zarr stores and models (kept between runs)")
     parser.add_argument("--view-image", type=int, default=512, help="view: the viewer's image size")
+    parser.add_argument("--first-image-file", type=Path,
+                        help="first-image: the .clw file (default: hydrogen --size^3 RGBA 5 %% in --scratch)")
     parser.add_argument("--drr-batch", type=int, default=100, help="drr: poses in the 256^2 batch")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
-    names = [n for n in BENCHMARKS if n not in ("scale", "view", "drr")] if args.benchmark == "all" \
+    names = [n for n in BENCHMARKS if n not in ("scale", "view", "drr", "first-image")] if args.benchmark == "all" \
         else [args.benchmark]
     results = {}
     for name in names:

@@ -23,6 +23,7 @@ deflated (docs/codecs.md).
 from __future__ import annotations
 
 import json
+import threading
 import zipfile
 import zlib
 from pathlib import Path
@@ -274,12 +275,14 @@ class _Tiers:
 # ---------------------------------------------------------------- reading
 
 
-def read_clw(path, keep=None) -> WaveletVolume:
+def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
     """Read a ``.clw`` file written by :func:`write_clw`; with ``keep``, its ``keep`` most important
-    coefficients (:meth:`WaveletVolume.open`), read tier by tier.
+    coefficients (:meth:`WaveletVolume.open`), read tier by tier; with ``approximation``, the coarsest
+    approximation alone (its own tier, read first: the model of the coarsest detail, docs/raytracing.md §8).
 
     The file is untrusted: its header is checked, and every dataset's shape, type and chunking against
-    the header, before anything is read; the checksums are verified as the data is read.
+    the header, before anything is read; the checksums are verified as the data is read.  The content mask
+    is read when first used, a layer of chunks at a time (:class:`FileMask`).
     """
     import h5py
     import hdf5plugin  # noqa: F401  (registers the Zstandard filter of quantised files)
@@ -302,12 +305,9 @@ def read_clw(path, keep=None) -> WaveletVolume:
             data = h5.get("content_mask")
             if data is not None:
                 _check_dataset(data, shape, np.uint8)
-            groups = [_read_group(h5, gi, gh, shape, levels, budget, frame) for gi, gh in enumerate(groups_header)]
-            mask = None
-            if data is not None:
-                mask = ContentMask(shape)
-                for z in range(0, shape[0], MASK_CHUNK[0]):  # a layer of chunks at a time, packed to bits
-                    mask.bits[z:z + MASK_CHUNK[0]] = np.packbits(data[z:z + MASK_CHUNK[0]] != 0, axis=2)
+            groups = [_read_group(h5, gi, gh, shape, levels, budget, frame, approximation)
+                      for gi, gh in enumerate(groups_header)]
+            mask = None if data is None else FileMask(path, shape)
     except ClwaveError:
         raise
     except MemoryError:
@@ -326,6 +326,58 @@ def read_clw(path, keep=None) -> WaveletVolume:
                              content_mask=mask)
     except (KeyError, ValueError, TypeError, InputError) as exc:
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None
+
+
+class FileMask(ContentMask):
+    """The content mask of a ``.clw`` file, read when a box of it is first asked for, a layer of the file's
+    chunks at a time (packed to bits as it comes): an image that needs a part of the mask, or none of it (a
+    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §8).  Thread-safe."""
+
+    def __init__(self, path, shape):
+        super().__init__(shape)  # zeroed pages: no memory until a layer is read
+        self.path, self.read = Path(path), np.zeros(-(-self.shape[0] // MASK_CHUNK[0]), bool)
+        self.lock = threading.Lock()
+
+    def box(self, start, shape) -> np.ndarray:
+        lo, hi = max(int(start[0]), 0), min(int(start[0]) + int(shape[0]), self.shape[0])
+        self.load(lo, hi)
+        return super().box(start, shape)
+
+    def put(self, start, block):
+        self.load(0, self.shape[0])
+        super().put(start, block)
+
+    def load(self, lo, hi):
+        """Read the layers of chunks that hold layers ``lo .. hi`` of the mask and are not read yet."""
+        first, stop = lo // MASK_CHUNK[0], -(-hi // MASK_CHUNK[0])
+        if hi <= lo or self.read[first:stop].all():
+            return
+        import h5py
+
+        with self.lock:
+            todo = [c for c in range(first, stop) if not self.read[c]]
+            if not todo:
+                return
+            try:
+                with h5py.File(self.path, "r") as h5:
+                    data = h5["content_mask"]
+                    for c in todo:
+                        z = c * MASK_CHUNK[0]
+                        self.bits[z:z + MASK_CHUNK[0]] = np.packbits(data[z:z + MASK_CHUNK[0]] != 0, axis=2)
+                        self.read[c] = True
+            except (OSError, ValueError, KeyError) as exc:
+                raise FileFormatError(f"cannot read the content mask of {self.path} ({type(exc).__name__}: "
+                                      f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); the file may "
+                                      f"have changed since it was opened, or be corrupt") from None
+
+    def __reduce__(self):  # to a worker: the bits read so far go with it, the rest it reads itself
+        return _file_mask, (str(self.path), self.shape, self.bits, self.read)
+
+
+def _file_mask(path, shape, bits, read) -> FileMask:
+    mask = FileMask(path, shape)
+    mask.bits, mask.read = bits, read
+    return mask
 
 
 def _header(h5, path) -> dict:
@@ -347,9 +399,10 @@ def _header(h5, path) -> dict:
     return header
 
 
-def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
+def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -> ChannelGroup:
     """One channel group: every stored coefficient, or the ``budget`` most important (approximation first,
-    then details tier by tier, the last tier cut by importance as :meth:`WaveletVolume.threshold` cuts)."""
+    then details tier by tier, the last tier cut by importance as :meth:`WaveletVolume.threshold` cuts), or
+    with ``approximation`` the approximation's tier alone."""
     wav = SplineWavelet(gh["wavelet"])
     bands = band_layout(wav, shape, levels)
     total, n_approx, c = bands[-1].start + bands[-1].size, bands[0].size, len(gh["channels"])
@@ -365,7 +418,7 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame) -> ChannelGroup:
         raise ValueError(f"group {gi}: its runs do not tile its {n} rows (of {total} positions)")
     tiers = sorted(set(runs[:, 0].tolist()), key=lambda t: (t != -1, -t))  # the approximation, then down
     sizes = [int(runs[runs[:, 0] == t, 2].sum()) for t in tiers]
-    read, last_cut = _tiers_to_read(sizes, budget)
+    read, last_cut = (int(tiers[:1] == [-1]), None) if approximation else _tiers_to_read(sizes, budget)
     # in file order (by_start), so that each chunk is inflated once
     wanted = by_start[np.isin(by_start[:, 0], tiers[:read]) & (by_start[:, 2] > 0)]
     run_tiers, spans = wanted[:, 0], wanted[:, 1:]  # (start, count) per run

@@ -402,12 +402,14 @@ class WaveletVolume:
         return WaveletVolume.file_format[1](self, path, overwrite, quantise)
 
     @classmethod
-    def open(cls, path, keep=None) -> "WaveletVolume":
+    def open(cls, path, keep=None, *, approximation=False) -> "WaveletVolume":
         """Read a ``.clw`` file written by :meth:`save`; with ``keep``, only its most important coefficients,
         reading about that fraction of the file: the same model as ``open(path).threshold(keep=keep)``
-        (docs/chunked.md §4)."""
-        wv = WaveletVolume.file_format[0](path, keep)
-        wv.source = (str(Path(path).resolve()), keep)  # workers of a Dask cluster open it themselves
+        (docs/chunked.md §4); with ``approximation``, the coarsest approximation alone (a first image at once,
+        docs/raytracing.md §8).  The content mask is read when first used, a part at a time."""
+        wv = WaveletVolume.file_format[0](path, keep, approximation)
+        if not approximation:
+            wv.source = (str(Path(path).resolve()), keep)  # workers of a Dask cluster open it themselves
         return wv
 
 

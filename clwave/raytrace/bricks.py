@@ -13,11 +13,7 @@ brick's own knot planes, so segments in smooth bricks are ``2^l`` cells long.
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 import time
-import weakref
 from dataclasses import dataclass
 from itertools import product
 
@@ -32,9 +28,10 @@ from ..device.constants import BRICK, SUPER
 from ..device.context import ComputeContext
 from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
-from ..errors import DeviceMemoryError, OutputError
+from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
 from .lod import content_windows, occupancy
+from .passes import Spill
 
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
 
@@ -86,8 +83,9 @@ class Plan:
                 (unique % 2).astype(bool), pages)
 
 
-def plan(wv, details: int | None = None) -> Plan:
-    """The bricks of a model and their levels, at details 0 .. ``details`` - 1 (default: every one).
+def plan(wv, details=None) -> Plan:
+    """The bricks of a model and their levels at the detail levels ``details`` (default: every one, 0 .. levels;
+    the others have no bricks).
 
     A brick exists where a kept coefficient's support reaches and (for a model that knows its content) some
     occupied coefficient does (:func:`clwave.raytrace.lod.occupancy`); its level is the coarsest lattice that
@@ -115,9 +113,9 @@ def plan(wv, details: int | None = None) -> Plan:
         m = wv.levels + 1 if band.key == "aaa" else band.level
         reach = _reach(positions, band.shape, [(lo - o, hi - lo) for (lo, hi), o in zip(axes, origin)], shape)
         reach_by[m] = reach_by[m] | reach if m in reach_by else reach
-    details = wv.levels + 1 if details is None else details
-    levels, clamps = np.full((details, *shape), ABSENT, np.int8), np.zeros((details, *shape), bool)
-    for detail in range(details):
+    levels = np.full((wv.levels + 1, *shape), ABSENT, np.int8)
+    clamps = np.zeros(levels.shape, bool)
+    for detail in range(wv.levels + 1) if details is None else details:
         present, level = np.zeros(shape, bool), np.full(shape, wv.levels, np.int8)
         for m, reach in sorted(reach_by.items(), reverse=True):  # the finest detail reaching a brick sets its level
             if m > detail:
@@ -240,54 +238,6 @@ class BrickField:
                     boxes=cla.to_device(q, _one(boxes)), lattices=cla.to_device(q, _one(self.lattices[slots])))
 
 
-class Spill:
-    """Pool elements (float4) that do not fit the device, in an unnamed scratch file in the temporary folder
-    (``TMPDIR``): they cost the process no memory, the OS keeps what fits in free memory in its cache, and the
-    file goes with the tracer (docs/raytracing.md §6).  Raises :class:`OutputError` when the folder has no room."""
-
-    def __init__(self, elements: int):
-        self.nbytes, folder = 16 * elements, tempfile.gettempdir()
-        free = shutil.disk_usage(folder).free
-        if self.nbytes > free:
-            raise OutputError(f"the {format_size(self.nbytes)} of bricks beyond the device need that much room in "
-                              f"{folder}, which has {format_size(free)}; free space there, or set TMPDIR to a "
-                              f"folder on a larger disk")
-        self.folder = folder
-        self.file = tempfile.TemporaryFile(dir=folder, prefix="clwave-bricks-")
-        weakref.finalize(self, self.file.close)  # closed (and so gone) with the pool
-
-    def write(self, first: int, values: np.ndarray):
-        """Elements ``first ..`` from ``values`` ((n, 4) float32)."""
-        self._io(os.pwrite, first, np.ascontiguousarray(values, np.float32))
-
-    def read_into(self, first: int, out: np.ndarray):
-        """Elements ``first .. first + len(out)`` into ``out`` ((n, 4) float32, contiguous)."""
-        self._io(lambda fd, view, at: os.preadv(fd, [view], at), first, out)
-
-    def _io(self, call, first, arr):
-        view, done = memoryview(arr).cast("B"), 0
-        try:
-            while done < len(view):
-                moved = call(self.file.fileno(), view[done:], 16 * first + done)
-                if moved <= 0:
-                    raise OSError(0, "the scratch file ended early")
-                done += moved
-        except OSError as exc:
-            raise OutputError(f"the scratch file of the bricks beyond the device in {self.folder} failed: "
-                              f"{exc.strerror or exc}; free space there, or set TMPDIR to a folder on a larger "
-                              f"disk") from None
-
-
-def ray_order(index, eye, direction, perspective: bool) -> tuple:
-    """Sort key of the region at ``index`` (z, y, x) of a grid of boxes: sorted by it, regions come in the order
-    every ray meets them (docs/raytracing.md §6).  ``eye``: the grid index holding the eye (perspective, any
-    real number); ``direction``: the rays' direction (z, y, x) (orthographic).  Along a ray the distance of its
-    region from the eye's, or the index times the direction's sign, never decreases on any axis, so two regions
-    one ray meets are ordered alike by every axis' key."""
-    index = np.asarray(index, float)
-    return tuple(np.abs(index - eye) if perspective else index * np.sign(direction))
-
-
 def _one(arr):
     """At least one row: OpenCL has no empty buffers."""
     return arr if len(arr) else np.zeros((1,) + arr.shape[1:], arr.dtype)
@@ -353,8 +303,10 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     lay = layout(wv, bricks, levels)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
     resident = _check_fits(wv, cc, p, lay, budget)
-    synth = {(g.wavelet.order, a): programs.build(cc, ["raytrace/expand.cl"], dict(  # compile apart
-        CLW_AXIS=a, CLW_NH=len(g.wavelet.p), CLW_NG=len(g.wavelet.q))) for g in wv.groups for a in range(3)}
+    synth = _Synthesis(cc)
+    if len(levels) and levels.min() < wv.levels:  # some brick needs a synthesis step: its programs built apart
+        for g, axis in product(wv.groups, range(3)):
+            synth.kernels(g.wavelet, axis)
     kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(orders))
     start = time.perf_counter()
     n, G = len(lay["bricks"]), len(wv.groups)
@@ -546,7 +498,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
             merged = {}
             for rest in sorted({key[1:] for key in parts}):
                 pair = [(letter, parts[letter + rest]) for letter in "ad" if letter + rest in parts]
-                merged[rest] = _synth_axis(cc, synth[wav.order, 2 - axis], pair, axis, d_taps, shifts,
+                merged[rest] = _synth_axis(cc, synth.kernels(wav, 2 - axis), pair, axis, d_taps, shifts,
                                            (lo[axis], hi[axis]))
             parts = merged
         approx = parts[""]
@@ -562,6 +514,21 @@ GROUP = (8, 8, 1)
 def _whole_groups(size) -> tuple:
     """A 3-D global size rounded up to whole :data:`GROUP` work-groups (the kernels skip what lies beyond)."""
     return tuple(-(-int(n) // g) * g for n, g in zip(size, GROUP))
+
+
+class _Synthesis:
+    """The synthesis programs (``cl/raytrace/expand.cl``), one per order and axis, built once: a model expanded
+    at its coarsest level alone (the staged set-up's first stage) synthesises nothing and builds none."""
+
+    def __init__(self, cc):
+        self.cc, self.built = cc, {}
+
+    def kernels(self, wavelet, axis):
+        key = (wavelet.order, axis)
+        if key not in self.built:
+            self.built[key] = programs.build(self.cc, ["raytrace/expand.cl"], dict(
+                CLW_AXIS=axis, CLW_NH=len(wavelet.p), CLW_NG=len(wavelet.q)))
+        return self.built[key]
 
 
 @dataclass

@@ -2,11 +2,11 @@
 
 Detail L drops the kept details of levels 1 .. L: the field is then a B-spline on the level-L lattice (or
 coarser, where no kept detail of a coarser level reaches), and a ray crosses it in segments ``2^L`` cells long.
-Empty space stays empty by one rule at every level: level-L coefficient k of a group is kept where its
-B-spline's refinement holds a non-empty voxel's fine B-spline (:func:`occupancy`); at L = 0 that is the voxel
-itself (docs/raytracing.md §4).  :func:`content_windows` says per brick whether that clamp removes anything at
-detail L; :class:`Detail` is what a render asks for (a level cap and/or a screen-space error in pixels, after
-Guthe et al. 2002), and :func:`brick_caps` turns it into a detail per brick for one view.
+Empty space stays empty by one rule at every level: level-L coefficient k of a group is kept where the
+``2^L`` voxels at the centre of its B-spline's refinement hold a non-empty one (:func:`occupancy`); at L = 0
+that is the voxel itself (docs/raytracing.md §4).  :func:`content_windows` says per brick whether that clamp
+removes anything at detail L; :class:`Detail` is what a render asks for (a level cap and/or a screen-space error
+in pixels, after Guthe et al. 2002), and :func:`brick_caps` turns it into a detail per brick for one view.
 """
 
 from __future__ import annotations
@@ -23,26 +23,20 @@ from .bounds import clip_box, superblocks
 
 def occupancy(mask, wavelet, level: int, start, shape) -> np.ndarray:
     """Bool (``shape``): whether level-``level`` coefficient ``start + index`` (z, y, x) of a group with this
-    wavelet holds a non-empty voxel in its refinement.
+    wavelet holds a non-empty voxel at the centre of its refinement (docs/raytracing.md §8).
 
     Coefficient k's B-spline spans fine cells ``o_L + 2^L k .. o_L + 2^L (k + j)`` (``o_L`` the level's offset,
     docs/model.md §4); the fine B-splines inside it, whose coefficients its subdivision makes, are voxels
-    ``o_L + 2^L k .. o_L + 2^L k + (2^L - 1) j``.  At level 0 that is voxel k alone.
+    ``o_L + 2^L k .. o_L + 2^L k + (2^L - 1) j``, and the ``2^L`` at their centre start
+    ``(2^L - 1)(j - 1) // 2`` after the first: the level's coefficients share the voxels out, each voxel to one.
+    At level 0 that is voxel k alone.
     """
-    step, width = 2 ** level, (2 ** level - 1) * wavelet.order + 1
+    step = 2 ** level
     start, shape = np.asarray(start, np.int64), np.asarray(shape, np.int64)
-    fine = mask.box(wavelet.offset("a", level) + step * start, step * (shape - 1) + width)
-    for axis in range(3):
-        fine = np.moveaxis(_sliding_any(np.moveaxis(fine, axis, 0), width)[::step], 0, axis)
-    return np.ascontiguousarray(fine)
-
-
-def _sliding_any(arr, width) -> np.ndarray:
-    """``out[p] = any(arr[p:p + width])`` along axis 0, by doubling windows (a few ORs of the whole array)."""
-    span = 1
-    while 2 * span <= width:
-        arr, span = arr[:-span] | arr[span:], 2 * span
-    return arr[:len(arr) - (width - span)] | arr[width - span:] if width > span else arr
+    first = wavelet.offset("a", level) + (step - 1) * (wavelet.order - 1) // 2
+    fine = mask.box(first + step * start, step * shape)
+    n = [int(v) for v in shape]
+    return np.ascontiguousarray(fine.reshape(n[0], step, n[1], step, n[2], step).any(axis=(1, 3, 5)))
 
 
 def content_windows(wv, level: int, origin, shape) -> tuple:

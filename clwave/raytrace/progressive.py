@@ -1,8 +1,8 @@
 """Progressive ray tracing (docs/raytracing.md §9): frames from cheap to exact, a coarse detail on a reduced
 image first, then finer details on larger images, ending at full detail, the full image and the requested
 tolerance: bit for bit the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error
-against the final image (:class:`clwave.frames.ErrorEstimate`); :meth:`RayTracer.refine` is the same
-sequence for a viewer, which stops iterating when the view changes.
+against the final image (:func:`estimate`, from full-detail pilots on images of the frame's size and half of it);
+:meth:`RayTracer.refine` is the same sequence for a viewer, which stops iterating when the view changes.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from scipy.ndimage import map_coordinates
 
 from ..errors import InputError
 from ..model.camera import Camera
-from ..frames import ErrorEstimate, FinalImage, Frame, check_error, reached
+from ..frames import FinalImage, Frame, check_error, reached
 
 #: the smallest reduced image side: coarser frames would be mostly edge
 MIN_SIDE = 8
@@ -89,16 +89,15 @@ def _frames(tracer, camera, options, steps, budget, error):
     view = camera.view(tracer.wv)
     plan = schedule(tracer.wv.levels, view.size, steps)
     final = FinalImage(lambda: tracer.render(camera, **options).image)
-    start = time.perf_counter()
+    start, made = time.perf_counter(), {}
 
-    def render(detail, reduction):
-        res = tracer.render(camera if reduction == 1 else reduced_camera(view, camera, reduction), detail=detail,
-                            **options)
-        return upsample(res.image, view.size, reduction), res.meta
+    def render(detail, reduction):  # each (detail, reduction) once: frames and the estimate's full-detail pilots
+        if (detail, reduction) not in made:
+            res = tracer.render(camera if reduction == 1 else reduced_camera(view, camera, reduction), detail=detail,
+                                **options)
+            made[detail, reduction] = upsample(res.image, view.size, reduction), res.meta
+        return made[detail, reduction]
 
-    estimate = ErrorEstimate()
-    if len(plan) > 1:  # the first frame's estimate: the step from a frame a detail and half the side coarser
-        estimate.add(render(min(plan[0][0] + 1, tracer.wv.levels), 2 * plan[0][1])[0])
     last = None
     for index, (detail, reduction) in enumerate(plan):
         if budget is not None and last is not None:
@@ -107,13 +106,26 @@ def _frames(tracer, camera, options, steps, budget, error):
                 return
         t0 = time.perf_counter()
         image, meta = render(detail, reduction)
-        last = time.perf_counter() - t0
-        rms, top = estimate.add(image)
-        if index == len(plan) - 1 and (detail, reduction) == (0, 1):
+        if reduction == 1 and detail == 0:
             final.image, rms, top = image, 0.0, 0.0
+        else:  # docs/raytracing.md §9: what the detail misses at this size, and what the size misses
+            rms, top = estimate(image, render(0, reduction)[0], render(0, 2 * reduction)[0])
+        last = time.perf_counter() - t0
         frame = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
                               estimated_relative_rms_error=rms, estimated_relative_max_error=top, meta=meta,
                               _final=final, detail=detail, reduction=reduction)
         yield frame
         if reached(frame, error):
             return
+
+
+def estimate(image, full, half) -> tuple:
+    """(relative RMS, relative max) estimated error of a frame ``image`` against the final image, from ``full``
+    (full detail at the frame's size) and ``half`` (full detail at half its size), all at the full size
+    (docs/raytracing.md §9): the frame's distance from ``full``, plus ``full``'s from ``half`` for what the
+    frame's size misses.  Relative to the largest magnitude of ``full``."""
+    peak = max(float(np.max(np.abs(full), initial=0.0)), np.finfo(np.float32).tiny)
+    detail, size = image - full, full - half
+    rms = float(np.sqrt(np.mean(detail ** 2))) + float(np.sqrt(np.mean(size ** 2)))
+    top = float(np.max(np.abs(detail), initial=0.0)) + float(np.max(np.abs(size), initial=0.0))
+    return rms / peak, top / peak

@@ -14,7 +14,8 @@ from ..cluster import check_model_file, render_parts, workers_of
 from ..errors import InputError
 from ..io.result import RenderResult
 from ..model.geometry import view_in_fine, world_to_fine_affine
-from .bricks import BRICK, layout, plan, ray_order
+from .bricks import BRICK, layout, plan
+from .passes import ray_order
 
 
 def slabs(wv, count: int) -> list:

@@ -20,13 +20,14 @@ from ..device import programs
 from ..device.constants import BLOCK, MAX_LIGHTS, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
 from ..model.bspline import piece_polynomials
-from ..model.geometry import band_lattice, view_frame, view_in_fine, world_to_fine_affine
+from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..device.memory import device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
-from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
+from .bricks import ABSENT, BRICK, build, group_defines, plan
+from .passes import passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import ScalarRange, bernstein_matrix, check_post
 from .progressive import frames
@@ -80,13 +81,6 @@ def _checked_view(camera, tolerance) -> float:
     return tol
 
 
-def _region_sums(sizes, c) -> np.ndarray:
-    """Sums of ``sizes`` over regions of c^3 cells (the last ones cut by the array's end)."""
-    padded = np.pad(sizes, [(0, -n % c) for n in sizes.shape])
-    Z, Y, X = (n // c for n in padded.shape)
-    return padded.reshape(Z, c, Y, c, X, c).sum(axis=(1, 3, 5))
-
-
 def raytrace_kernel(field: str) -> Kernel:
     """The arguments of ``raytrace`` (cl/raytrace/raytrace.cl) with a field backend."""
     return Kernel("raytrace", ("image", B), ("stats", B), ("lattice_stats", B), ("width", I32), ("height", I32),
@@ -121,7 +115,10 @@ class RayTracer:
     only the bricks of those layers along array axis 0 (z), and rays marched inside them only: one worker's
     part of an image rendered on a Dask cluster (:mod:`clwave.raytrace.regions`).  ``lod=True`` (B-spline field)
     also expands the bricks of every coarser detail, so that ``render(..., detail=)`` picks one without a new
-    set-up (docs/raytracing.md §8); it costs the coarser pools' memory and their share of the set-up.
+    set-up (docs/raytracing.md §8); it costs the coarser pools' memory and their share of the set-up.  ``lod``
+    may also name the detail levels to expand (e.g. ``(3,)``: the coarsest of 3 levels alone), the finest of
+    them the default detail of a render.  :meth:`open` sets up from a ``.clw`` file in stages, the coarsest
+    detail first (docs/raytracing.md §8).
     """
 
     def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,
@@ -139,7 +136,9 @@ class RayTracer:
                                    or not region[0] < region[1]):
             raise InputError(f"region={region!r} must be (first, stop) brick layers along z with first < stop, "
                              f"for the B-spline field")
-        self.wv, self.field, self.active, self.region, self.lod = wv, field, int(active), region, bool(lod)
+        self.details = _details(lod, wv.levels, field)  # the detail levels expanded (docs/raytracing.md §8)
+        self.wv, self.field, self.active, self.region = wv, field, int(active), region
+        self.lod = self.details != (0,)
         self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
@@ -156,7 +155,7 @@ class RayTracer:
 
     def _expand(self):
         """B-spline field: the bricks (:mod:`clwave.raytrace.bricks`), and their per-block maxima as bounds."""
-        p = plan(self.wv, None if self.lod else 1)
+        p = plan(self.wv, self.details)
         if self.region is not None:  # the bricks of the region's layers only
             layers = p.origin[0] + np.arange(p.level.shape[1])
             p.level[:, (layers < self.region[0]) | (layers >= self.region[1])] = ABSENT
@@ -164,7 +163,7 @@ class RayTracer:
         self.expansions += 1
         self.setup_seconds = self.bricks.seconds
         self.occ_origin = self.bricks.origin * SUPER
-        full = self.field_at(0)  # full detail; other details pick other slots (docs/raytracing.md §8)
+        full = self.field_at(self.details[0])  # the finest; other details pick other slots (docs/raytracing.md §8)
         for name in ("box", "block_bound", "q_bound", "occupied_fraction", "field_tables", "super_bound",
                      "super_bound_host", "super_origin"):
             setattr(self, name, getattr(full, name))
@@ -195,10 +194,12 @@ class RayTracer:
 
     def _detail(self, detail, view, scale, offset) -> tuple:
         """(FieldAt, the meta's detail level: an int, or the least and largest over the bricks) of a render."""
-        detail = Detail.of(detail, self.wv.levels)
-        if detail != Detail() and (self.field != "bspline" or not self.lod):
+        detail = Detail(self.details[0]) if detail is None else Detail.of(detail, self.wv.levels)
+        every = len(self.details) == self.wv.levels + 1
+        if detail.level not in self.details or (detail.pixels is not None and not every):
             raise InputError("detail= needs a tracer of the B-spline field that holds every detail "
-                             "(RayTracer(wv, lod=True))")
+                             "(RayTracer(wv, lod=True))" if not self.lod else
+                             f"this tracer holds details {', '.join(map(str, self.details))} only, not {detail}")
         if self.field != "bspline":
             return self, 0
         if detail.pixels is None:
@@ -291,37 +292,6 @@ class RayTracer:
         eps = np.finfo(np.float64 if precision == "double" else np.float32).eps
         return GRAD_NOISE * eps * (self.q_bound if q_bound is None else q_bound) / min(self.wv.spacing)
 
-    def _passes(self, view, scale, offset, per_image, at: FieldAt) -> list:
-        """The bricks in the scratch file as regions of c^3 bricks that fit the device one at a time, in an order
-        every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z).
-
-        Along every ray the distance of its region index from the eye's (perspective), or the index times the
-        direction's sign (orthographic), never decreases per axis, so sorting regions by those keys
-        (lexicographically) orders them along every ray alike (docs/raytracing.md §6).
-        """
-        f = self.bricks
-        fixed = per_image + 2 * at.block_bound.nbytes + 4 * int(np.prod(f.shape)) + 256
-        room = min(self.budget.total - fixed, self.budget.max_alloc)
-        sizes = np.zeros(f.shape, np.int64)  # a brick's pool and its tables (frames, boxes, lattices)
-        sizes[tuple((f.bricks[at.slots] - f.origin).T)] = f.slot_bytes()[at.slots] + 16 + 32 * len(self.orders)
-        if room < sizes.max():
-            raise DeviceMemoryError(
-                f"ray tracing this volume needs at least {format_size(fixed + sizes.max())} of device memory (its "
-                f"largest brick and this image's buffers) but {format_size(self.budget.total)} are allowed; raise "
-                f"--device-memory (device_memory=) or render a smaller image")
-        c = max(k for k in range(1, max(f.shape) + 1) if _region_sums(sizes, k).max() <= room)
-        sums = _region_sums(sizes, c)
-        eye, direction = view_in_fine(view, scale, offset)
-        eye_region = np.floor((eye / BRICK - f.origin) / c)
-        regions = []
-        for r in np.argwhere(sums > 0):
-            inside = np.all(((f.bricks[at.slots] - f.origin) // c) == r, axis=1)
-            lo = (f.origin + r * c) * BRICK
-            regions.append((ray_order(r, eye_region, direction, view.perspective), at.slots[inside],
-                            lo[::-1], (lo + c * BRICK)[::-1]))
-        regions.sort(key=lambda item: item[0])
-        return [(slots, lo, hi) for _, slots, lo, hi in regions]
-
     def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
                precision="single", trace=0, detail=None, transfer_function=None) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.
@@ -413,7 +383,7 @@ class RayTracer:
                     f"{format_size(self.budget.total)} are allowed; render a smaller image, or make the tracer with "
                     f"a smaller device_memory= (--device-memory) so that its bricks render in passes")
         if self.field == "bspline" and not self.bricks.resident:
-            passes = self._passes(view, scale, offset, per_pixel, at)
+            passes = region_passes(self, view, scale, offset, per_pixel, at)
         elif self.region is not None:
             f = self.bricks
             lo = np.append(self.region[0], f.origin[1:]) * BRICK
@@ -488,6 +458,16 @@ class RayTracer:
             meta["active_trace"] = traced.get()
         return RenderResult(img, meta)
 
+    @classmethod
+    def open(cls, path, device=None, device_memory=None, lod=False):
+        """A :class:`~clwave.raytrace.staged.StagedTracer` of a ``.clw`` file: the coarsest detail from the file's
+        approximation alone, ready on return; the whole file's tracer (``lod`` as here) set up in a background
+        thread; its ``refine(camera)`` yields frames from the first to the full-detail image
+        (docs/raytracing.md §8)."""
+        from .staged import StagedTracer
+
+        return StagedTracer(cls, path, device=device, device_memory=device_memory, lod=lod)
+
     def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, steps=None,
                budget=None, error=None):
         """Frames of ``camera`` from cheap to exact (:mod:`clwave.raytrace.progressive`, docs/raytracing.md §9),
@@ -509,6 +489,19 @@ class RayTracer:
         if self.orders[self.alpha_group] == 1:
             return None, "off: the Haar basis has no usable gradient, rendered unshaded"
         return phong, "phong"
+
+
+def _details(lod, levels, field) -> tuple:
+    """The detail levels a tracer expands: ``lod`` False (full detail), True (every one) or the levels named."""
+    if lod is True or lod is False:
+        details = tuple(range(levels + 1)) if lod else (0,)
+    elif np.ndim(lod) == 1 and len(lod) and all(isinstance(v, (int, np.integer)) and 0 <= v <= levels for v in lod):
+        details = tuple(sorted({int(v) for v in lod}))
+    else:
+        raise InputError(f"lod={lod!r} must be True, False or detail levels from 0 to {levels}")
+    if details != (0,) and field != "bspline":
+        raise InputError("level of detail (lod=) needs the B-spline field")
+    return details
 
 
 def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,

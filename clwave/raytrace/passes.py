@@ -1,0 +1,104 @@
+"""Bigger than the device (docs/raytracing.md §6): the bricks beyond the device in a scratch file
+(:class:`Spill`), and the regions of bricks a render uploads one at a time, in the order every ray meets them
+(:func:`passes`, :func:`ray_order`)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import weakref
+
+import numpy as np
+
+from ..device.constants import BRICK
+from ..device.memory import format_size
+from ..errors import DeviceMemoryError, OutputError
+from ..model.geometry import view_in_fine
+
+
+class Spill:
+    """Pool elements (float4) that do not fit the device, in an unnamed scratch file in the temporary folder
+    (``TMPDIR``): they cost the process no memory, the OS keeps what fits in free memory in its cache, and the
+    file goes with the tracer (docs/raytracing.md §6).  Raises :class:`OutputError` when the folder has no room."""
+
+    def __init__(self, elements: int):
+        self.nbytes, folder = 16 * elements, tempfile.gettempdir()
+        free = shutil.disk_usage(folder).free
+        if self.nbytes > free:
+            raise OutputError(f"the {format_size(self.nbytes)} of bricks beyond the device need that much room in "
+                              f"{folder}, which has {format_size(free)}; free space there, or set TMPDIR to a "
+                              f"folder on a larger disk")
+        self.folder = folder
+        self.file = tempfile.TemporaryFile(dir=folder, prefix="clwave-bricks-")
+        weakref.finalize(self, self.file.close)  # closed (and so gone) with the pool
+
+    def write(self, first: int, values: np.ndarray):
+        """Elements ``first ..`` from ``values`` ((n, 4) float32)."""
+        self._io(os.pwrite, first, np.ascontiguousarray(values, np.float32))
+
+    def read_into(self, first: int, out: np.ndarray):
+        """Elements ``first .. first + len(out)`` into ``out`` ((n, 4) float32, contiguous)."""
+        self._io(lambda fd, view, at: os.preadv(fd, [view], at), first, out)
+
+    def _io(self, call, first, arr):
+        view, done = memoryview(arr).cast("B"), 0
+        try:
+            while done < len(view):
+                moved = call(self.file.fileno(), view[done:], 16 * first + done)
+                if moved <= 0:
+                    raise OSError(0, "the scratch file ended early")
+                done += moved
+        except OSError as exc:
+            raise OutputError(f"the scratch file of the bricks beyond the device in {self.folder} failed: "
+                              f"{exc.strerror or exc}; free space there, or set TMPDIR to a folder on a larger "
+                              f"disk") from None
+
+
+def ray_order(index, eye, direction, perspective: bool) -> tuple:
+    """Sort key of the region at ``index`` (z, y, x) of a grid of boxes: sorted by it, regions come in the order
+    every ray meets them (docs/raytracing.md §6).  ``eye``: the grid index holding the eye (perspective, any
+    real number); ``direction``: the rays' direction (z, y, x) (orthographic).  Along a ray the distance of its
+    region from the eye's, or the index times the direction's sign, never decreases on any axis, so two regions
+    one ray meets are ordered alike by every axis' key."""
+    index = np.asarray(index, float)
+    return tuple(np.abs(index - eye) if perspective else index * np.sign(direction))
+
+
+def _region_sums(sizes, c) -> np.ndarray:
+    """Sums of ``sizes`` over regions of c^3 cells (the last ones cut by the array's end)."""
+    padded = np.pad(sizes, [(0, -n % c) for n in sizes.shape])
+    Z, Y, X = (n // c for n in padded.shape)
+    return padded.reshape(Z, c, Y, c, X, c).sum(axis=(1, 3, 5))
+
+
+def passes(tracer, view, scale, offset, per_image, at) -> list:
+    """The bricks of ``tracer`` in the scratch file as regions of c^3 bricks that fit the device one at a time, in
+    an order every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z).
+
+    Along every ray the distance of its region index from the eye's (perspective), or the index times the
+    direction's sign (orthographic), never decreases per axis, so sorting regions by those keys
+    (lexicographically) orders them along every ray alike (docs/raytracing.md §6).
+    """
+    f = tracer.bricks
+    fixed = per_image + 2 * at.block_bound.nbytes + 4 * int(np.prod(f.shape)) + 256
+    room = min(tracer.budget.total - fixed, tracer.budget.max_alloc)
+    sizes = np.zeros(f.shape, np.int64)  # a brick's pool and its tables (frames, boxes, lattices)
+    sizes[tuple((f.bricks[at.slots] - f.origin).T)] = f.slot_bytes()[at.slots] + 16 + 32 * len(tracer.orders)
+    if room < sizes.max():
+        raise DeviceMemoryError(
+            f"ray tracing this volume needs at least {format_size(fixed + sizes.max())} of device memory (its "
+            f"largest brick and this image's buffers) but {format_size(tracer.budget.total)} are allowed; raise "
+            f"--device-memory (device_memory=) or render a smaller image")
+    c = max(k for k in range(1, max(f.shape) + 1) if _region_sums(sizes, k).max() <= room)
+    sums = _region_sums(sizes, c)
+    eye, direction = view_in_fine(view, scale, offset)
+    eye_region = np.floor((eye / BRICK - f.origin) / c)
+    regions = []
+    for r in np.argwhere(sums > 0):
+        inside = np.all(((f.bricks[at.slots] - f.origin) // c) == r, axis=1)
+        lo = (f.origin + r * c) * BRICK
+        regions.append((ray_order(r, eye_region, direction, view.perspective), at.slots[inside],
+                        lo[::-1], (lo + c * BRICK)[::-1]))
+    regions.sort(key=lambda item: item[0])
+    return [(slots, lo, hi) for _, slots, lo, hi in regions]

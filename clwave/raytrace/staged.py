@@ -1,0 +1,174 @@
+"""The first image from a ``.clw`` file at once (docs/raytracing.md §8): :meth:`clwave.RayTracer.open` reads the
+coarsest approximation alone (its own tier of the file, read first) and expands its bricks at the coarsest detail,
+without the content mask; the whole model is read and set up in a background thread while the caller renders
+the coarse stage.  :meth:`StagedTracer.refine` yields frames from the coarse stage until the full one is ready,
+then the full stage's, the last bit for bit what the full tracer's ``render`` gives.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from ..errors import InputError
+from ..frames import ErrorEstimate, FinalImage, check_error, reached
+from ..model.camera import Camera
+from ..model.transform import band_layout
+from ..model.wavelet import ChannelGroup, WaveletVolume
+from .progressive import MIN_SIDE, RaytraceFrame, estimate, reduced_camera, upsample
+
+
+class StagedTracer:
+    """A ray tracer of a ``.clw`` file set up in two stages (made by :meth:`clwave.RayTracer.open`).
+
+    ``coarse``: a :class:`~clwave.RayTracer` of the file's approximation alone (:func:`coarse_volume`; for mixed
+    orders the bricks of the coarsest detail), its segments ``2^levels`` cells long, no content clamp (the
+    coarse field blurs the content a little into empty space, docs/raytracing.md §8), ready when ``open``
+    returns; ``full``: the tracer of the whole file (``RayTracer(WaveletVolume.open(path), lod=lod)``), made in a
+    background thread started by the first coarse image (:meth:`start`, :attr:`ready`, :meth:`wait`).  Use from
+    one thread at a time.
+    """
+
+    def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False):
+        start = time.perf_counter()
+        approximation = WaveletVolume.open(path, approximation=True)
+        approximation.content_mask = None  # the coarse stage has no content clamp: the mask is not read for it
+        self.levels = approximation.levels
+        if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
+            self.coarse = tracer_class(coarse_volume(approximation), device=device, device_memory=device_memory)
+        else:  # the groups' lattices shift by half cells of the fine lattice: bricks of the coarsest detail
+            self.coarse = tracer_class(approximation, device=device, device_memory=device_memory,
+                                       lod=(approximation.levels,))
+        self.coarse_seconds = time.perf_counter() - start
+        self.full, self.full_seconds, self._failure = None, None, None
+        # the stages share the device-memory budget: the full stage's bricks beyond what the coarse one leaves go
+        # to its scratch file (docs/raytracing.md §6)
+        left = self.coarse.budget.total - self.coarse.bricks.pool_bytes - 2 * self.coarse.block_bound.nbytes
+        self._thread = threading.Thread(target=self._set_up, args=(tracer_class, path, max(left, 1), lod),
+                                        name="clwave-staged-setup")  # the interpreter waits for it at exit
+
+    @property
+    def coarse_detail(self):
+        """The ``detail=`` of the coarse stage's renders (None: its only one)."""
+        return None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
+
+    def _set_up(self, tracer_class, path, device_memory, lod):
+        start = time.perf_counter()
+        try:
+            full = tracer_class(WaveletVolume.open(path), device=self.coarse.cc, device_memory=device_memory, lod=lod)
+        except BaseException as exc:  # raised again where the caller waits for the full stage
+            self._failure = exc
+            return
+        self.full_seconds = time.perf_counter() - start
+        self.full = full
+
+    def start(self):
+        """Start setting up the full stage (once): done by the first image of the coarse stage, so that the
+        background's reading does not slow that image down, or by :meth:`wait`."""
+        if self._thread.ident is None:
+            self._thread.start()
+
+    @property
+    def ready(self) -> bool:
+        """Whether the full stage is set up (or its set-up failed: :meth:`wait` raises its error)."""
+        return self._thread.ident is not None and not self._thread.is_alive()
+
+    def wait(self, timeout=None):
+        """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first)."""
+        self.start()
+        self._thread.join(timeout)
+        if self._failure is not None:
+            raise self._failure
+        return self.full
+
+    def render(self, camera: Camera, **options):
+        """One image from the best stage ready now: the full one (``options`` as :meth:`RayTracer.render`), or
+        the coarse one at its coarsest detail (``detail=`` refused there).  ``meta["stage"]`` says which."""
+        full = self.wait(0) if self.ready else None
+        if full is None and options.get("detail") is not None:
+            raise InputError("detail= needs the full stage: wait() for it first")
+        result = full.render(camera, **options) if full else self.coarse.render(camera, **options,
+                                                                                 detail=self.coarse_detail)
+        result.meta["stage"] = "full" if full is not None else "coarse"
+        self.start()
+        return result
+
+    def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, error=None):
+        """Frames of ``camera`` from cheap to exact, for a viewer that shows each as it comes (a generator it stops
+        iterating when the view changes; the set-up goes on): the coarse stage on an image ``2^levels`` times
+        smaller per side, then (if the full stage is not ready) on one twice as large; then, once the full stage
+        is ready, full detail on an image half as large per side and on the full image, bit for bit its
+        ``render``.  Estimates and ``error=`` as :meth:`RayTracer.refine` (docs/raytracing.md §8, §9)."""
+        check_error(error)
+        if not isinstance(camera, Camera):
+            raise InputError("camera must be a clwave.Camera")
+        options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
+        return self._frames(camera, options, error)
+
+    def _frames(self, camera, options, error):
+        view, start = camera.view(self.coarse.wv), time.perf_counter()
+        levels, steps = self.levels, ErrorEstimate()  # the coarse stage: the step estimate
+        final = FinalImage(lambda: self.wait().render(camera, **options).image)
+        index = 0
+
+        def render(tracer, detail, reduction):
+            cam = camera if reduction == 1 else reduced_camera(view, camera, reduction)
+            res = tracer.render(cam, detail=detail, **options)
+            return upsample(res.image, view.size, reduction), res
+
+        def frame(tracer, detail, reduction):
+            nonlocal index
+            image, res = render(tracer, detail, reduction)
+            rms, top = steps.add(image)
+            if tracer is self.full:  # full detail: what the size misses (docs/raytracing.md §9)
+                rms, top = (0.0, 0.0) if reduction == 1 else estimate(image, image, render(tracer, 0, 2 * reduction)[0])
+                if reduction == 1:
+                    final.image = image
+            made = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
+                                 estimated_relative_rms_error=rms, estimated_relative_max_error=top,
+                                 meta=dict(res.meta, stage="full" if tracer is self.full else "coarse"),
+                                 _final=final, detail=levels if detail is None else detail, reduction=reduction)
+            index += 1
+            return made
+
+        smallest = 2 ** max(0, min(levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
+        steps.add(render(self.coarse, self.coarse_detail, 2 * smallest)[0])  # the first frame's step: a pilot
+        for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):  # the coarse stage, unless ready
+            made = frame(self.coarse, self.coarse_detail, reduction)
+            self.start()
+            yield made
+            if reached(made, error):
+                return
+            if self.ready:
+                break
+        full = self.wait()
+        for reduction in (2, 1) if min(view.size) >= 16 else (1,):
+            made = frame(full, 0, reduction)
+            yield made
+            if reached(made, error):
+                return
+
+
+def coarse_volume(approximation: WaveletVolume) -> WaveletVolume:
+    """The model of the approximation alone (levels L, one wavelet order) as a volume ``2^L`` times coarser per
+    axis with no detail bands: the same field (docs/raytracing.md §8).  Level-L coefficient k spans fine cells
+    ``o_L + 2^L k .. + 2^L j`` of a lattice of the volume's spacing; as a level-0 coefficient of a lattice of
+    spacing ``2^L`` times that, normalised by ``2^(-3L/2)`` (docs/model.md §4), it spans cells ``k .. k + j`` of
+    the coarse volume, whose origin puts them in the same place.  Bricks of the coarse volume cover ``2^L`` times
+    more cells each than bricks of the coarsest detail, and segments are as long."""
+    L, wv, wavelet = approximation.levels, approximation, approximation.groups[0].wavelet
+    step, shape = 2 ** L, approximation.groups[0].bands[0].shape  # (z, y, x)
+    spacing = np.array(wv.spacing[::-1]) * step  # (x, y, z), as the origin; fine = (world - origin) / s + (n - 1) / 2
+    fine_corner = wavelet.offset("a", L) - (np.array(wv.shape[::-1]) - 1) / 2.0 - wavelet.order / 2.0
+    coarse_corner = -(np.array(shape[::-1]) - 1) / 2.0 - wavelet.order / 2.0
+    origin = np.array(wv.origin) + np.array(wv.spacing[::-1]) * fine_corner - spacing * coarse_corner
+    half = np.array(wv.shape[::-1]) * np.array(wv.spacing[::-1]) / 2.0  # the framing of the volume itself
+    content = wv.content if wv.content is not None else (tuple(wv.origin - half), tuple(wv.origin + half))
+    bands = band_layout(wavelet, shape, 0)
+    groups = [ChannelGroup(g.wavelet, g.channels, bands, g.positions, g.values * np.float32(step ** -1.5))
+              for g in approximation.groups]
+    return WaveletVolume(shape, spacing[::-1], origin, 0, groups, wv.channels, interpolate=wv.interpolate,
+                         transfer_function=wv.transfer_function, content=content)
+

@@ -1,0 +1,100 @@
+"""The first image from a ``.clw`` file at once (clwave/raytrace/staged.py, docs/raytracing.md §8): the
+approximation read alone against the whole file's, the content mask read a layer of chunks at a time against
+the mask it was written from, the coarse stage's X-ray colours against the reference (wavelet) field of the
+approximation, and the staged frames ending bit for bit at the whole file's direct render."""
+
+import numpy as np
+import pytest
+
+import clwave
+from clwave import WaveletVolume
+from clwave.io.clw import MASK_CHUNK
+from clwave.raytrace.staged import coarse_volume
+from clwave.raytrace.tracer import RayTracer
+from test_bricks import smooth_volume
+
+pytestmark = pytest.mark.opencl
+
+
+@pytest.fixture(scope="module", params=["cubic", ["cubic", "cubic", "cubic", "linear"]])
+def model_file(tmp_path_factory, request):
+    """RGBA with a content mask; one order (the coarse stage a coarser volume), or mixed orders (the coarse stage
+    the bricks of the coarsest detail)."""
+    vol = smooth_volume(n=32, empty_corner=True)
+    rgba = clwave.Volume(vol.data * np.array([1.0, 0.8, 0.6, 0.05], np.float32), spacing=vol.spacing)
+    path = tmp_path_factory.mktemp("staged") / "model.clw"
+    WaveletVolume.from_volume(rgba, wavelet=request.param, levels=3).threshold(keep=0.1).save(path)
+    return path
+
+
+def test_the_approximation_alone_is_the_approximation_band_of_the_file(model_file):
+    whole, coarse = WaveletVolume.open(model_file), WaveletVolume.open(model_file, approximation=True)
+    for g, a in zip(whole.groups, coarse.groups):
+        band = g.band_slices()[0]
+        assert a.kept == band.stop - band.start > 0
+        assert np.array_equal(a.all_positions(), g.all_positions()[band])
+        assert np.array_equal(a.values, g.values[:, band])
+    assert coarse.levels == whole.levels and coarse.content == whole.content
+
+
+@pytest.mark.parametrize("wavelet", ["cubic", "linear", "haar"])
+def test_the_coarse_volume_is_the_approximations_field(tmp_path, wavelet):
+    """The approximation of L levels as a level-0 model of a volume 2^L times coarser: the closed-form field
+    (``evaluate``) at random world points, on an anisotropic volume off the origin."""
+    vol = smooth_volume(n=40, channels=2)
+    vol = clwave.Volume(vol.data[:, :36, :33], spacing=(0.7, 1.3, 0.9), origin=(4.0, -2.0, 7.5))
+    WaveletVolume.from_volume(vol, wavelet=wavelet, levels=2).threshold(keep=0.2).save(tmp_path / "m.clw")
+    approximation = WaveletVolume.open(tmp_path / "m.clw", approximation=True)
+    coarse = coarse_volume(approximation)
+    assert coarse.levels == 0 and coarse.shape == approximation.groups[0].bands[0].shape
+    lo, hi = np.array(vol.origin) - 25, np.array(vol.origin) + 25
+    points = np.random.default_rng(5).uniform(lo, hi, (300, 3))
+    ref = approximation.evaluate(points)
+    assert np.abs(ref).max() > 0.1
+    np.testing.assert_allclose(coarse.evaluate(points), ref, rtol=0, atol=1e-6 * np.abs(ref).max())
+    assert np.array_equal(coarse.content_box(), approximation.content_box())
+
+
+def test_the_content_mask_is_read_a_layer_of_chunks_at_a_time(tmp_path):
+    data = np.random.default_rng(3).uniform(0, 1, (2 * MASK_CHUNK[0] + 9, 6, 11)).astype(np.float32)
+    data[data < 0.3] = 0
+    path = tmp_path / "tall.clw"
+    WaveletVolume.from_volume(data, wavelet="linear", levels=1).save(path)
+    mask = WaveletVolume.open(path).content_mask
+    assert not mask.read.any()
+    z = MASK_CHUNK[0] + 5
+    assert np.array_equal(mask.box((z, -2, 3), (7, 9, 20)),
+                          np.pad(data != 0, ((0, 0), (2, 1), (0, 12)))[z:z + 7, :, 3:23])
+    assert mask.read.tolist() == [False, True, False]
+    assert np.array_equal(np.asarray(mask), data != 0) and mask.read.all()
+
+
+def test_staged_frames_start_coarse_and_end_at_the_direct_render_bit_for_bit(model_file):
+    staged = RayTracer.open(model_file)
+    cam = clwave.Camera(25, 15, size=16)
+    # the coarse stage: the approximation's field (no content clamp), every channel
+    approximation = WaveletVolume.open(model_file, approximation=True)
+    approximation.content_mask = None
+    ref = RayTracer(approximation, field="wavelet").render(cam, tolerance=1e-4, absorption=False)
+    xray = staged.coarse.render(cam, tolerance=1e-3, absorption=False, detail=staged.coarse_detail)
+    colours = 3 if staged.coarse.lod else 4  # the coarsest detail's bricks clamp alpha at 0 (raytracing.md §8)
+    assert np.abs(ref.image).max() > 0.1
+    assert np.max(np.abs(xray.image - ref.image)[..., :colours]) <= 1.1e-3
+    frames = list(staged.refine(cam, tolerance=1e-3))
+    assert frames[0].meta["stage"] == "coarse" and frames[0].reduction == 2 and frames[0].detail == 3
+    assert frames[-1].meta["stage"] == "full" and frames[-1].estimated_relative_rms_error == 0
+    direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
+    assert np.array_equal(frames[-1].image, direct.image)
+    assert staged.render(cam, tolerance=1e-3).meta["stage"] == "full"
+
+
+def test_a_tracer_of_chosen_details_refuses_others_in_one_line():
+    wv = WaveletVolume.from_volume(smooth_volume(n=16), wavelet="cubic", levels=2).threshold(keep=0.2)
+    for bad in ((3,), (), "coarse", (1.5,)):
+        with pytest.raises(clwave.errors.InputError, match="lod=") as err:
+            RayTracer(wv, lod=bad)
+        assert "\n" not in str(err.value)
+    tracer, cam = RayTracer(wv, lod=(2,)), clwave.Camera(20, 10, size=8)
+    assert tracer.details == (2,) and tracer.render(cam, absorption=False).meta["detail"] == 2
+    with pytest.raises(clwave.errors.InputError, match="holds details 2 only"):
+        tracer.render(cam, absorption=False, detail=0)
