@@ -154,6 +154,12 @@ class ScalarRange:
         return self.last
 
 
+def post_nodes(nodes, n_samples) -> np.ndarray:
+    """``nodes`` (:func:`clwave.raytrace.quadrature.sample_tables`) with what ``cl/raytrace/classify.h`` adds: the
+    matrices from the samples, and from the gradient's lanes 0..8, to their Bernstein coefficients."""
+    return np.concatenate([nodes, bernstein_matrix(nodes[:n_samples]).ravel(), bernstein_matrix(nodes[:9]).ravel()])
+
+
 def bernstein_matrix(xi) -> np.ndarray:
     """(n, n) the matrix from a polynomial's values at the n points ``xi`` in [-1, 1] to its Bernstein
     coefficients of degree n - 1 on [-1, 1] (``cl/raytrace/classify.h``)."""

@@ -306,7 +306,8 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     On each fine knot segment the scalar and its gradient are polynomials, fitted exactly from the model at ten
     Chebyshev points (:meth:`WaveletVolume.evaluate` / ``gradient``, or the B-spline backend's content-clamped
     coefficients); the segment is cut at every real root of ``s - v`` for each point value v (NumPy's
-    companion-matrix roots); on each piece the opacity ``np.interp(s)`` is a polynomial, fitted and integrated
+    companion-matrix roots), and where shading, at every real root of ``grad s . L`` for each light L and halfway
+    vector (the normal flips there); on each piece the opacity ``np.interp(s)`` is a polynomial, fitted and integrated
     exactly, and the emission integral is composite Gauss-Legendre (8 x 8 nodes).  ``tracer`` supplies the
     clip box, the window of an "auto" transfer function and the gradient floor the kernel uses.
     """
@@ -332,6 +333,8 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
         t0, t1 = _clip(x0, d, tr.box, view.perspective)
         if not t1 > t0:
             continue
+        directions = [*light_dirs, *((light - w) / np.linalg.norm(light - w) for light in light_dirs)] \
+            if phong is not None and phong.specular else light_dirs
         knots = _knots(x0, d, t0, t1, 1.0)
         lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
         mid, rad = (lo + hi) / 2, (hi - lo) / 2
@@ -342,8 +345,11 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
         T, colour_sum = 1.0, np.zeros(3)
         for k in range(len(mid)):
             cuts = [-1.0, 1.0]
-            for v in values:
-                roots = chebyshev.chebroots(s_series[k] - v * (np.arange(10) == 0))
+            polys = [s_series[k] - v * (np.arange(10) == 0) for v in values]
+            if phong is not None:  # where the normal flips against a light or halfway vector, n . L jumps or kinks
+                polys += [g_series[k] @ d for d in directions]
+            for poly in polys:
+                roots = chebyshev.chebroots(poly)
                 cuts += [x.real for x in roots if abs(x.imag) < 1e-6 and -1 < x.real < 1]
             cuts = np.unique(cuts)
             for a, b in zip(cuts[:-1], cuts[1:]):

@@ -28,7 +28,7 @@ from ..device.memory import device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan, ray_order
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
-from .classified import ScalarRange, bernstein_matrix, check_post
+from .classified import ScalarRange, check_post, post_nodes
 from .progressive import frames
 from .quadrature import sample_tables
 from ..io.result import RenderResult
@@ -369,7 +369,7 @@ class RayTracer:
         post = None  # docs/raytracing.md §10: the transfer function's table and bounds
         if transfer_function is not None:
             post = self.scalar.classify(transfer_function, cc, real)
-            nodes = np.concatenate([nodes, bernstein_matrix(nodes[:n_samples]).ravel()])
+            nodes = post_nodes(nodes, n_samples)
         defines = dict(self.defines, CLW_ALPHA=0 if post else self.alpha_group, CLW_SAMPLES=n_samples,
                        CLW_MAX_DEPTH=SIMPSON_DEPTH,
                        CLW_LATTICE="0.5" if len({o % 2 for o in self.orders}) > 1 else "1.0")
