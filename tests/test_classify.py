@@ -234,7 +234,7 @@ def test_skipping_never_skips_content(hydrogen):
         tf = random_tf(rng, 0.0, 1.0, steps=trial != 1, clear=True)
         bound = tr.scalar.classify(tf, tr.cc, np.float32).bound.get()
         # the largest opacity over each block's range, sampled densely and at the points inside it
-        ranges = tr.scalar.range.get().reshape(-1, 2)
+        ranges = tr.scalar.range(tr.field_at(0)).get().reshape(-1, 2)
         some = rng.choice(len(ranges), 300, replace=False)
         points = tf.points[:, 0]
         dense = np.array([tf(np.concatenate([np.linspace(a, b, 101), points[(points >= a) & (points <= b)]]))[1].max()
@@ -273,6 +273,37 @@ def test_transfer_function_change_rebuilds_nothing(hydrogen, monkeypatch):
     assert again.meta["classify_seconds"] == res.meta["classify_seconds"]  # the same function: reused
 
 
+def test_coarser_details_classify_the_coarser_model(monkeypatch):
+    """RayTracer(lod=True) with a render-time transfer function: at detail L (levels, a screen-space error) each
+    value within the tolerance of the float64 oracle of the model without the details of levels 1 .. L; a change
+    of transfer function or detail rebuilds nothing (only that detail's ranges, once); refine() classifies every
+    frame, its last bit for bit the full-detail render."""
+    from clwave.raytrace import classified, tracer
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=20), wavelet="cubic", levels=2)
+    wv = wv.threshold(keep=0.2)
+    tr = clwave.RayTracer(wv, lod=True)
+    tf = clwave.TransferFunction.preset("hydrogen", window=(0.0, 0.6))
+    cam = clwave.Camera(30, 20, size=6)
+    full = tr.render(cam, tolerance=1e-3, transfer_function=tf).image
+    calls = []
+    monkeypatch.setattr(tracer, "build", lambda *a, **k: calls.append("build"))
+    monkeypatch.setattr(classified.ScalarRange, "__init__", lambda *a, **k: calls.append("range"))
+    for level in (1, 2):
+        ref = classified_reference(wv, cam, tf, tracer=tr, detail=level)
+        assert np.abs(ref - full).max() > 1e-2  # the details dropped show
+        for tol in (1e-2, 1e-3):
+            res = tr.render(cam, tolerance=tol, transfer_function=tf, detail=level)
+            assert res.meta["detail"] == level and np.abs(res.image - ref).max() <= tol
+    other = clwave.TransferFunction.preset("grey", window=(0.0, 0.5))
+    coarse = tr.render(cam, tolerance=1e-2, transfer_function=other, detail=clwave.Detail(level=1, pixels=1e3))
+    assert coarse.meta["detail"] == 2 and coarse.meta["classify_seconds"] > 0
+    assert calls == [] and tr.expansions == 1 and len(tr.scalar.ranges) == 3  # full detail, 1 and 2
+    frames = list(tr.refine(cam, tolerance=1e-3, transfer_function=tf))
+    assert len(frames) > 1 and frames[0].detail > 0
+    np.testing.assert_array_equal(frames[-1].image, full)
+
+
 def test_post_converges_to_pre_for_smooth_transfer_functions():
     """A linear transfer function (alpha = 0.2 s, colour constant) makes pre-classification exact: the classified
     channels are linear in s, so the RGBA model is the scalar model times constants.  Both renders agree within
@@ -298,10 +329,8 @@ def test_errors_and_default_transfer_function(tmp_path, hydrogen):
         tr.render(cam, transfer_function=tf, absorption=False)
     with pytest.raises(InputError, match="field='bspline'"):
         clwave.RayTracer(wv, field="wavelet").render(cam, transfer_function=tf)
-    with pytest.raises(InputError, match="full detail"):  # level of detail is not yet built for it
+    with pytest.raises(InputError, match="lod=True"):  # a coarser detail needs a tracer that holds it
         tr.render(cam, transfer_function=tf, detail=1)
-    with pytest.raises(InputError, match="full detail"):
-        clwave.RayTracer(wv, lod=True).render(cam, transfer_function=tf)
     rgba = clwave.WaveletVolume.from_volume(tf.classify(clwave.phantom("hydrogen", n=16)), levels=1)
     with pytest.raises(InputError, match="4 channels"):
         clwave.raytrace(rgba, cam, transfer_function=tf)
