@@ -148,11 +148,11 @@ class ScalarRange:
     def classify(self, tf, cc, real, at=None) -> Classification:
         """The kernel arguments of ``tf`` at the detail of ``at`` (default full detail), reused while the transfer
         function, detail and precision stay the same."""
+        start = time.perf_counter()  # a detail's first classification lays its ranges out too
         at = self.tracer.field_at(0) if at is None else at
         last, ranges = self.last, self.range(at)
         if last is not None and last.tf == tf and last.table.dtype == real and last.range is ranges:
             return last
-        start = time.perf_counter()
         window = self.window(tf)
         table, q = tf_table(tf, window), cc.queue
         bound = cla.empty(q, ranges.shape[:3], np.float32)
