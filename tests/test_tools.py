@@ -75,6 +75,9 @@ def test_compare_peers_end_to_end(tmp_path):
     assert shaded["clwave raytrace 1 (shaded, tol 0.01)"]["error"] < 0.05
     assert shaded["clwave raytrace 1 (shaded, tol 0.01)"]["error"] < shaded["clwave raytrace 0.05 (shaded, tol 0.01)"][
         "error"]
+    # post-classified (the scalar model through the preset at render time) against its own float64 reference
+    post = shaded["clwave raytrace 1 (post-classified, shaded, tol 0.01)"]["error"]
+    assert post < 0.01 and post < shaded["clwave raytrace 0.05 (post-classified, shaded, tol 0.01)"]["error"]
     table = (tmp_path / "comparison.md").read_text()
     assert "| hydrogen | 32³ | Fourier volume rendering |" in table
     assert report["headline"] and "clwave / FVR" in report["headline"][0]
@@ -86,6 +89,7 @@ def test_compare_peers_end_to_end(tmp_path):
         assert "skipped" not in row and row["median"] > 0 and len(row["extra"]["readback"]) == 2
         assert row["extra"]["window"] == "vtkEGLRenderWindow"
     assert "error" not in rows["VTK additive"]
-    # VTK's composite with clwave's transfer function, opacity units and Phong light: close to clwave's image
+    # VTK's composite with clwave's transfer function, opacity units and Phong light: close to clwave's post-classified
+    # image
     assert rows["VTK composite (shaded, hydrogen)"]["error"] < 0.15
     assert (tmp_path / "error_vs_time.png").exists()

@@ -571,7 +571,8 @@ def bench_post(args) -> dict:
     interleaved (post, pre, post, pre, ...) over ``--raytrace-views`` views; a change of transfer function or
     window (the table and the classified bounds: meta ``classify_seconds``); the brick pools; the error against a
     float64 render (tolerance 1e-5) of the same post-classified model on the first view's 64x64 centre, for
-    hydrogen and for Marschner-Lobb (``grey``) and a CT-like phantom (``ct-bone``) at 64^3."""
+    hydrogen and for Marschner-Lobb (``grey``) and a CT-like phantom (``ct-bone``) at 64^3, and the MNI152 MRI
+    (``mri``) when nilearn is installed; VTK's composite against the post-classified render, interleaved."""
     tf = TransferFunction.preset("hydrogen")
     vol = phantom("hydrogen", n=args.size)
     models = dict(post=WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=0.05),
@@ -612,8 +613,32 @@ def bench_post(args) -> dict:
                 setup_seconds=setup, compile_seconds=compile_seconds, cases=cases,
                 tf_change_seconds=summary(changes), pool_bytes=pools, pool_ratio=pools["post"] / pools["pre"],
                 errors=post_errors(tracers["post"], models["post"], tf, args),
+                vtk_composite=post_vs_vtk(tracers["post"], tf, args),
                 peak_resident_gib=peak_resident_gib(), targets=dict(tf_change_seconds=0.05, pool_ratio=0.3,
-                                                                     post_over_pre=1.0))
+                                                                     post_over_pre=1.0, post_over_vtk=1.5))
+
+
+def post_vs_vtk(tracer, tf, args) -> dict | None:
+    """VTK's composite ray caster of the scalar volume under the same preset (tools/compare_peers.py: post-classified
+    too), against the post-classified render of the same views at tolerance 1e-2, interleaved (VTK, clwave, VTK,
+    clwave; VTK in its own process, its ``Render()`` alone, its first view, the set-up, left out), when VTK is
+    installed."""
+    import importlib.util
+
+    if importlib.util.find_spec("vtk") is None:
+        return None
+    import compare_peers
+
+    case = dict(phantom="hydrogen", n=args.size, image=args.raytrace_image, views=views(max(3, args.raytrace_views)),
+                device=args.device, tf=tf.name)
+    seconds = dict(vtk=[], post=[])
+    for _ in range(2):
+        seconds["vtk"] += compare_peers.in_process("vtk", case, ("composite",))["seconds"][1:]
+        seconds["post"] += [tracer.render(compare_peers.camera(case, az, el), tolerance=1e-2, transfer_function=tf)
+                            .meta["render_seconds"] for az, el in case["views"][1:]]
+    return dict(seconds={k: summary(v) for k, v in seconds.items()},
+                post_over_vtk=statistics.median(seconds["post"]) / statistics.median(seconds["vtk"]),
+                framing="compare_peers' camera: the volume's diagonal spans the image")
 
 
 def ct_like(n) -> clwave.Volume:
@@ -627,8 +652,15 @@ def post_errors(tracer, wv, tf, args) -> dict:
     model, on a 64x64 centre of the first view (``--raytrace-image`` framing)."""
     out = {}
     cases = [("hydrogen", wv, tf, tracer)]
-    for name, vol, preset in (("marschner-lobb 64^3", phantom("marschner-lobb", n=64), "grey"),
-                              ("ct-like 64^3 (Shepp-Logan in HU)", ct_like(64), "ct-bone")):
+    volumes = [("marschner-lobb 64^3", phantom("marschner-lobb", n=64), "grey"),
+               ("ct-like 64^3 (Shepp-Logan in HU)", ct_like(64), "ct-bone")]
+    import importlib.util
+
+    if importlib.util.find_spec("nilearn") is not None:  # the MNI152 T1 template inside the nilearn wheel
+        from figures import default_scan
+
+        volumes.append(("MNI152 T1 MRI 197x233x189", clwave.load(default_scan()), "mri"))
+    for name, vol, preset in volumes:
         model = WaveletVolume.from_volume(vol, wavelet="cubic", levels=3).threshold(keep=0.05)
         cases.append((name, model, TransferFunction.preset(preset), clwave.RayTracer(model, device=args.device)))
     for name, model, function, t in cases:

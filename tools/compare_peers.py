@@ -6,7 +6,8 @@
                                   [--progressive-keep 0.08] [--steps 4] [--raytrace-keep 0.05]
                                   [--raytrace-tolerance 1e-3] [--raytrace-views 1] [--tf hydrogen]
                                   [--shaded-keep 0.05 1] [--shaded-tolerance 1e-2]
-                                  [--shaded-reference-tolerance 1e-4] [--shaded-views 1] [--out out/peers]
+                                  [--shaded-reference-tolerance 1e-4] [--shaded-views 1] [--post-views 1]
+                                  [--skip-xray] [--out out/peers]
 
 Every method renders the same phantom (sampled at the cell centres of an n³ grid, spacing 1)
 from the same orthographic views (``clwave.Camera``: golden-angle spiral, image ``--image``²,
@@ -45,6 +46,11 @@ Shaded rows (``--shaded-views`` > 0): the phantom classified with the ``--tf`` p
 - both compared (RGB) with a float64 clwave ray trace of the full classified model at
   ``--shaded-reference-tolerance``.
 
+Post-classified rows (``--post-views`` > 0): ``clwave raytrace K (post-classified, ...)`` ray traces the *scalar*
+model through the same preset at render time (``transfer_function=``), as VTK's composite does with the scalar
+volume; both compared with a float64 clwave ray trace of the full scalar model, post-classified (the VTK
+composite row then with this reference).  ``--skip-xray`` leaves out the X-ray rows and their ground truth.
+
 X-ray ground truth is the line integral of the phantom's *formula* (``clwave.io.phantoms.analytic``)
 over the chord of each ray through the phantom's cube: composite Gauss-Legendre (8 nodes per
 segment of at most 8 voxels); the same integral with twice the segments on every 8th row is
@@ -80,8 +86,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 import clwave  # noqa: E402
 from clwave.io.phantoms import analytic  # noqa: E402
 from fvr import FourierRenderer  # noqa: E402
+from peers_report import (TARGET_ERROR, have, headline, markdown, montage, plot, row_text,  # noqa: E402
+                          target_text)
 
-TARGET_ERROR = 0.01
 GL_NODES = 8        # Gauss-Legendre nodes per ray segment
 GL_SEGMENT = 8.0    # longest segment, voxels
 
@@ -241,25 +248,31 @@ def run_fourier(case):
                 model_peak=model_peak)
 
 
-def run_shaded(case, keep, tolerance, precision, count):
-    """Shaded emission-absorption ray tracing of the classified phantom (the ``--tf`` preset), first ``count`` views;
-    prepare = classification + decomposition + thresholding + expansion; a 1-pixel warm-up builds the kernel."""
-    vol = clwave.TransferFunction.preset(case["tf"]).classify(clwave.phantom(case["phantom"], case["n"]))
+def run_shaded(case, keep, tolerance, precision, count, classification="pre"):
+    """Shaded emission-absorption ray tracing of the phantom under the ``--tf`` preset, first ``count`` views:
+    ``classification`` "pre" classifies the voxels before the transform (the RGBA model), "post" ray traces the
+    scalar model through the transfer function (docs/raytracing.md §10); prepare = decomposition + thresholding
+    + expansion; a 1-pixel warm-up builds the kernel."""
+    tf = clwave.TransferFunction.preset(case["tf"])
+    vol = clwave.phantom(case["phantom"], case["n"])
+    vol = tf.classify(vol) if classification == "pre" else vol
+    extra = dict(transfer_function=tf) if classification == "post" else {}
     start = time.perf_counter()
     wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=3)
     wv = wv.threshold(keep=keep) if keep < 1 else wv
     tracer = clwave.RayTracer(wv, device=case["device"])
     prepare = time.perf_counter() - start
     model_peak = _peak_mib()
-    warm = tracer.render(clwave.Camera(size=1), tolerance=tolerance, precision=precision)
+    warm = tracer.render(clwave.Camera(size=1), tolerance=tolerance, precision=precision, **extra)
     seconds, images = [], []
     for az, el in case["views"][:count]:
         t = time.perf_counter()
-        res = tracer.render(camera(case, az, el), tolerance=tolerance, precision=precision)
+        res = tracer.render(camera(case, az, el), tolerance=tolerance, precision=precision, **extra)
         seconds.append(time.perf_counter() - t)
         images.append(res.image[..., :3])
     return dict(prepare=prepare, seconds=seconds, images=images, compile=warm.meta["compile_seconds"],
-                model_peak=model_peak, tolerance=tolerance, precision=precision, coefficients=wv.kept)
+                model_peak=model_peak, tolerance=tolerance, precision=precision, coefficients=wv.kept,
+                classification=classification, pool_bytes=tracer.bricks.pool_bytes)
 
 
 def run_vtk(case, blend):
@@ -412,15 +425,17 @@ def compare(case, args, log) -> tuple:
     X-ray rows are compared with the analytic line integrals; shaded rows (clwave's ray tracing and VTK's
     composite, the ``--tf`` classification) with a float64 clwave ray trace of the full classified model."""
     cams = [camera(case, az, el) for az, el in case["views"]]
-    start = time.perf_counter()
-    truths = [ground_truth(case["phantom"], case["n"], cam) for cam in cams]
-    check = slice(0, None, 8)
-    finer = ground_truth(case["phantom"], case["n"], cams[0], segment=GL_SEGMENT / 2, rows=check)
-    case_info = dict(truth_seconds=(time.perf_counter() - start) / len(cams),
-                     truth_accuracy=relative_rms(truths[0][check], finer))
-    log(f"  ground truth: {case_info['truth_seconds']:.1f} s a view, "
-        f"accuracy {case_info['truth_accuracy']:.1e} (against twice the segments)")
-    references = {"truth": truths}
+    references, case_info = {}, {}
+    if not args.skip_xray:
+        start = time.perf_counter()
+        truths = [ground_truth(case["phantom"], case["n"], cam) for cam in cams]
+        check = slice(0, None, 8)
+        finer = ground_truth(case["phantom"], case["n"], cams[0], segment=GL_SEGMENT / 2, rows=check)
+        case_info = dict(truth_seconds=(time.perf_counter() - start) / len(cams),
+                         truth_accuracy=relative_rms(truths[0][check], finer))
+        log(f"  ground truth: {case_info['truth_seconds']:.1f} s a view, "
+            f"accuracy {case_info['truth_accuracy']:.1e} (against twice the segments)")
+        references["truth"] = truths
     jobs = [(f"clwave splat {k:g}, renderer reused", "splat", (k, args.coarse, False), "truth") for k in args.keep]
     jobs += [(f"clwave splat {args.keep[0]:g}, one-shot clwave.splat", "splat", (args.keep[0], args.coarse, True),
               "truth")]
@@ -430,17 +445,26 @@ def compare(case, args, log) -> tuple:
                      (args.raytrace_keep, args.raytrace_tolerance, args.raytrace_views), "truth"))
     jobs += [("NumPy/SciPy map_coordinates", "numpy", (), "truth"),
              ("Fourier volume rendering", "fourier", (), "truth")]
-    jobs += [("VTK additive", "vtk", ("additive",), None)]
+    if args.skip_xray:
+        jobs = []
+    else:
+        jobs += [("VTK additive", "vtk", ("additive",), None)]
     if args.shaded_views:
         jobs.append((f"shaded reference (clwave raytrace, float64, tol {args.shaded_reference_tolerance:g})", "shaded",
                      (1.0, args.shaded_reference_tolerance, "double", args.shaded_views), "reference"))
         jobs += [(f"clwave raytrace {k:g} (shaded, tol {args.shaded_tolerance:g})", "shaded",
                   (k, args.shaded_tolerance, "single", args.shaded_views), "shaded") for k in args.shaded_keep]
-    jobs += [(f"VTK composite (shaded, {args.tf})", "vtk", ("composite",), "shaded" if args.shaded_views else None)]
-    rows, images = [], {"ground truth": truths[0]}
+    if args.post_views:  # both post-classified: the scalar volume through the transfer function
+        jobs.append((f"post-classified reference (clwave raytrace, float64, tol {args.shaded_reference_tolerance:g})",
+                     "shaded", (1.0, args.shaded_reference_tolerance, "double", args.post_views, "post"), "reference"))
+        jobs += [(f"clwave raytrace {k:g} (post-classified, shaded, tol {args.shaded_tolerance:g})", "shaded",
+                  (k, args.shaded_tolerance, "single", args.post_views, "post"), "shaded") for k in args.shaded_keep]
+    compared = "shaded" if args.shaded_views or args.post_views else None  # the last reference: post's if made
+    jobs += [(f"VTK composite (shaded, {args.tf})", "vtk", ("composite",), compared)]
+    rows, images = [], {"ground truth": references["truth"][0]} if "truth" in references else {}
     for label, method, params, reference in jobs:
         package = METHODS[method][1]
-        if package and not _have(package):
+        if package and not have(package):
             rows.append(dict(method=label, skipped=f"{package} is not installed (pip install .[peers])"))
             log(f"  {label}: skipped, {rows[-1]['skipped']}")
             continue
@@ -453,7 +477,7 @@ def compare(case, args, log) -> tuple:
         if method == "progressive":
             rows.extend(_progressive_rows(label, res, truths, res["memory_mib"]))
             images[rows[-1]["method"]] = res["frames"][0][-1][1]
-            log("  " + _row_text(rows[-1]))
+            log("  " + row_text(rows[-1]))
             continue
         images[label] = res["images"][0] if res["images"][0].ndim == 2 else np.clip(res["images"][0], 0, 1)
         row = dict(method=label, kind="shaded" if reference in ("shaded", "reference") else "xray",
@@ -467,9 +491,9 @@ def compare(case, args, log) -> tuple:
             pairs = list(zip(res["images"], references[reference]))
             row["error"] = statistics.median(relative_rms(im, ref) for im, ref in pairs)
             row["to_target"] = row["median"] if row["error"] <= TARGET_ERROR else None
-            row["target_text"] = _target_text(row["to_target"], row["error"])
+            row["target_text"] = target_text(row["to_target"], row["error"])
         rows.append(row)
-        log("  " + _row_text(rows[-1]))
+        log("  " + row_text(rows[-1]))
     return rows, case_info, images
 
 
@@ -486,167 +510,12 @@ def _progressive_rows(label, res, truths, memory) -> list:
                          target_text=""))
     reached = next((r for r in rows if r["error"] <= TARGET_ERROR), None)
     if reached:
-        reached["target_text"] = _target_text(reached["median"], reached["error"])
+        reached["target_text"] = target_text(reached["median"], reached["error"])
     else:
-        rows[-1]["target_text"] = _target_text(None, min(r["error"] for r in rows))
+        rows[-1]["target_text"] = target_text(None, min(r["error"] for r in rows))
     for r in rows:
         r["to_target"] = reached["median"] if reached else None
     return rows
-
-
-def _target_text(seconds, best_error) -> str:
-    return f"{seconds:.3g} s" if seconds is not None else f"not reached (best {100 * best_error:.3g} %)"
-
-
-def _have(package) -> bool:
-    import importlib.util
-    return importlib.util.find_spec(package) is not None
-
-
-def _row_text(row) -> str:
-    if "skipped" in row:
-        return f"{row['method']}: skipped ({row['skipped']})"
-    err = f"error {row['error']:.2e}" if "error" in row else "error n/a"
-    m = row["memory_mib"]
-    return f"{row['method']}: first {row['first']:.3f} s, median {row['median']:.4f} s, {err}, " \
-           f"peak {row['peak_rss_mib']:.0f} MiB (baseline {m['baseline']:.0f} + model {m['model']:.0f} " \
-           f"+ views {m['views']:.0f})"
-
-
-# ----------------------------------------------------------------------------- outputs
-def markdown(report) -> str:
-    lines = ["| phantom | size | method | prepare s | first view s | median view s | peak RSS MiB "
-             "(baseline + model + views) | rel. RMS error | time to 1 % |", "|---|---|---|---|---|---|---|---|---|"]
-    for case in report["cases"]:
-        for row in case["rows"]:
-            head = f"| {case['phantom']} | {case['n']}³ | {row['method']} "
-            if "skipped" in row:
-                lines.append(head + f"| skipped: {row['skipped']} | | | | | |")
-                continue
-            prep = "" if row.get("prepare") is None else f"{row['prepare']:.2f}"
-            m = row["memory_mib"]
-            error = f"{100 * row['error']:.3g} %" if "error" in row else "n/a"
-            error += " (shaded)" if "error" in row and row["kind"] == "shaded" else ""
-            target = row["target_text"] if "error" in row else ("the reference" if row["kind"] == "shaded"
-                                                                  else "speed reference only")
-            lines.append(head + f"| {prep} | {row['first']:.3g} | {row['median']:.3g} | {row['peak_rss_mib']:.0f} "
-                         f"({m['baseline']:.0f} + {m['model']:.0f} + {m['views']:.0f}) | {error} | {target} |")
-    return "\n".join(lines) + "\n"
-
-
-def headline(report) -> list:
-    """clwave / FVR and clwave / VTK per case: X-ray (splat, reused and one-shot) and shaded (ray tracing)."""
-    out = []
-    for case in report["cases"]:
-        rows = [r for r in case["rows"] if "skipped" not in r]
-        find = lambda start: next((r for r in rows if r["method"].startswith(start)), None)  # noqa: E731
-        reused = min((r for r in rows if r["method"].endswith("renderer reused") and r.get("to_target")),
-                     key=lambda r: r["to_target"], default=None)
-        oneshot, fvr, vtk = find("clwave splat") and next(
-            (r for r in rows if "one-shot" in r["method"]), None), find("Fourier"), find("VTK additive")
-        where = f"{case['phantom']} {case['n']}³ at {report['image']}²"
-        for r in (reused, oneshot):
-            if r is None:
-                continue
-            text = f"{where}: {r['method']} {1e3 * r['median']:.1f} ms (error {100 * r['error']:.3g} %, " \
-                   f"peak {r['peak_rss_mib']:.0f} MiB)"
-            if fvr:
-                text += f"; FVR {1e3 * fvr['median']:.1f} ms ({100 * fvr['error']:.3g} %, peak " \
-                        f"{fvr['peak_rss_mib']:.0f} MiB, spectrum {fvr['extra']['spectrum_mib']:.0f} MiB): " \
-                        f"clwave / FVR = {r['median'] / fvr['median']:.2f}"
-            if vtk:
-                text += f"; VTK additive Render() {1e3 * vtk['median']:.1f} ms: " \
-                        f"clwave / VTK = {r['median'] / vtk['median']:.2f}"
-            out.append(text)
-        composite = find("VTK composite")
-        for r in (r for r in rows if r["kind"] == "shaded" and r["method"].startswith("clwave")):
-            text = f"{where}, shaded: {r['method']} {r['median']:.3g} s (error {100 * r['error']:.3g} %)"
-            if composite and "error" in composite:
-                text += f"; VTK composite Render() {composite['median']:.3g} s (error " \
-                        f"{100 * composite['error']:.3g} %): clwave / VTK = {r['median'] / composite['median']:.1f}"
-            out.append(text)
-    return out
-
-
-def plot(report, path) -> bool:
-    """Error against time per case: X-ray methods (top) and shaded ones (bottom, where measured)."""
-    if not _have("matplotlib"):
-        return False
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from matplotlib.ticker import NullFormatter
-
-    cases = report["cases"]
-    shaded = any(r.get("kind") == "shaded" and "error" in r for c in cases for r in c["rows"])
-    fig, axes = plt.subplots(1 + shaded, len(cases), figsize=(5.6 * len(cases), 4.4 * (1 + shaded)), squeeze=False)
-    for col, case in enumerate(cases):
-        ax = axes[0, col]
-        rows = [r for r in case["rows"] if "skipped" not in r]
-        prog = [r for r in rows if r["method"].startswith("clwave progressive")]
-        if prog:
-            ax.plot([r["median"] for r in prog], [r["error"] for r in prog], "o-", color="C0",
-                    label="clwave progressive")
-            for r in prog:
-                ax.annotate(f"{100 * r['kept']:.3g}%", (r["median"], r["error"]), fontsize=7,
-                            textcoords="offset points", xytext=(4, 4))
-        for r, style in zip([r for r in rows if r["method"].startswith("clwave splat")], ("s", "p", "h", "8")):
-            ax.plot([r["median"]], [r["error"]], style, color="C1", markersize=8, label=r["method"])
-        for r in [r for r in rows if r["method"].startswith("clwave raytrace") and r["kind"] == "xray"]:
-            ax.plot([r["median"]], [r["error"]], "*", color="C5", markersize=11, label=r["method"])
-        for r, style, colour in zip([r for r in rows if r["method"] in ("NumPy/SciPy map_coordinates",
-                                                                       "Fourier volume rendering")], ("^", "D"),
-                                    ("C4", "C2")):
-            ax.plot([r["median"]], [r["error"]], style, color=colour, markersize=8, label=r["method"])
-        for r in [r for r in rows if r["method"] == "VTK additive"]:
-            ax.axvline(r["median"], color="C3", ls=":", label="VTK additive Render() (time only)")
-        _axes(ax, f"{case['phantom']} {case['n']}³, {report['image']}², X-ray", "relative RMS error vs analytic",
-              NullFormatter)
-        if shaded:
-            ax = axes[1, col]
-            for r, style in zip([r for r in rows if r["kind"] == "shaded" and "error" in r], ("*", "P", "X", "o")):
-                ax.plot([r["median"]], [r["error"]], style, markersize=10, label=r["method"])
-            _axes(ax, f"{case['phantom']} {case['n']}³, shaded", "relative RMS error vs float64 ray trace",
-                  NullFormatter)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return True
-
-
-def _axes(ax, title, ylabel, null):
-    ax.axhline(TARGET_ERROR, color="grey", lw=0.8)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.xaxis.set_minor_formatter(null())
-    ax.yaxis.set_minor_formatter(null())
-    ax.set_xlabel("seconds per view (median)")
-    ax.set_ylabel(ylabel)
-    ax.set_title(title, fontsize=10)
-    ax.grid(True, which="both", alpha=0.3)
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(fontsize=7)
-
-
-def montage(images, title, path) -> bool:
-    """First-view images of every method side by side (each windowed to its own range)."""
-    if not _have("matplotlib"):
-        return False
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, len(images), figsize=(2.3 * len(images), 2.7))
-    for ax, (label, image) in zip(np.atleast_1d(axes), images.items()):
-        ax.imshow(image, cmap="gray", vmin=0.0, vmax=float(np.percentile(image, 99.9)) or 1.0)
-        ax.set_title(label, fontsize=7)
-        ax.axis("off")
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return True
 
 
 def main(argv=None):
@@ -674,13 +543,17 @@ def main(argv=None):
                         help="tolerance of the float64 reference ray trace (the full classified model)")
     parser.add_argument("--shaded-views", type=int, default=1,
                         help="views ray traced shaded, and the VTK composite views compared (0: no shaded errors)")
+    parser.add_argument("--post-views", type=int, default=1,
+                        help="views ray traced post-classified (the scalar model through --tf), with their own float64 "
+                             "reference that the VTK composite views are then compared with (0: none)")
+    parser.add_argument("--skip-xray", action="store_true", help="only the shaded rows (no X-ray rows or truth)")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--out", type=Path, default=Path("out/peers"), help="folder for the outputs")
     args = parser.parse_args(argv)
     if args.views < 1 or args.image < 8 or args.steps < 1:
         parser.error("--views and --steps must be >= 1 and --image >= 8")
-    if not (0 <= args.raytrace_views <= args.views and 0 <= args.shaded_views <= args.views):
-        parser.error("--raytrace-views and --shaded-views must be between 0 and --views")
+    if not all(0 <= k <= args.views for k in (args.raytrace_views, args.shaded_views, args.post_views)):
+        parser.error("--raytrace-views, --shaded-views and --post-views must be between 0 and --views")
     if not isinstance(clwave.TransferFunction.preset(args.tf).window, tuple):
         parser.error(f"--tf {args.tf}: VTK needs a preset with a fixed window")
     args.out.mkdir(parents=True, exist_ok=True)

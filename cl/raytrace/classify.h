@@ -7,19 +7,25 @@
  * (convex hull); where they change sign once about a breakpoint, the span holds exactly one crossing,
  * found by bisection, and is cut there; other spans that straddle are halved (de Casteljau).  Each
  * piece's emission integral comes from adaptive Simpson on the classified, shaded integrand
- * (quadrature.h), its tolerance the piece's share of the segment's.
+ * (quadrature.h), its tolerance the piece's share of the segment's; when shading, the piece is cut again where
+ * grad s . L changes sign for a light L (or halfway vector), since the normal flips there and n . L jumps or
+ * kinks (found the same way, on grad s . L's Bernstein coefficients).
  *
  * The table `tf` (real4 rows, clwave/raytrace/classified.py): row 0 (scale, shift, K, 0); rows
  * 1..K the breakpoints u_i (x); then per interval k = 0..K (u below u_0, between u_{k-1} and u_k,
  * above u_{K-1}) three rows (u_ref, alpha_ref, alpha_slope, 0), (rgb_ref, 0), (rgb_slope, 0).
  * Build: CLW_POST; nodes carry, after the sample tables, the (NS, NS) matrix from the samples to
- * the Bernstein coefficients on [-1, 1]. */
+ * the Bernstein coefficients on [-1, 1], then the (9, 9) one from the gradient lanes 0..8 to theirs
+ * (clwave/raytrace/classified.py post_nodes). */
 #ifndef CLW_CLASSIFY_H
 #define CLW_CLASSIFY_H
 #include "raytrace/quadrature.h"
 
 #define POST_DEPTH 16      /* spans are cut at most this often; a span still straddling is flagged */
 #define POST_BISECTIONS 40 /* bisection steps for a crossing (stops earlier at the arithmetic's resolution) */
+#define SHADE_CUTS 8       /* cuts at most per piece where grad s . L changes sign (more: Simpson alone) */
+#define SHADE_DEPTH 10     /* spans of grad s . L are halved at most this often in the search for its roots */
+#define BERNSTEIN9 (NS + 2 * NS * NS + 81) /* where the lanes-to-Bernstein matrix of degree 8 starts in nodes */
 
 /* One piece of a segment: u's series, its antiderivative, the gradient series of s (shading) and the
  * transfer function's linear interval on the piece */
@@ -91,21 +97,141 @@ inline real3 piece_point(Piece *C, const Shading *P, __constant const real *node
 
 ADAPTIVE_SIMPSON(piece_simpson, Piece, piece_point)
 
-/* value of a Bernstein polynomial's coefficients c on its span at tau in [0, 1], and the coefficients of
- * its two parts [0, tau] (left) and [tau, 1] (right) (de Casteljau) */
-inline void bernstein_split(const real *c, const real tau, real *left, real *right)
+/* the coefficients of the two parts [0, tau] (left) and [tau, 1] (right) of a Bernstein polynomial of degree
+ * n - 1 on its span, c its coefficients (de Casteljau); left[n - 1] = right[0] is its value at tau */
+inline void bernstein_split_n(const real *c, const int n, const real tau, real *left, real *right)
 {
     real w[NS];
-    for (int i = 0; i < NS; i++)
+    for (int i = 0; i < n; i++)
         w[i] = c[i];
     left[0] = c[0];
-    right[NS - 1] = c[NS - 1];
-    for (int r = 1; r < NS; r++) {
-        for (int i = 0; i < NS - r; i++)
+    right[n - 1] = c[n - 1];
+    for (int r = 1; r < n; r++) {
+        for (int i = 0; i < n - r; i++)
             w[i] = (1 - tau) * w[i] + tau * w[i + 1];
         left[r] = w[0];
-        right[NS - 1 - r] = w[NS - 1 - r];
+        right[n - 1 - r] = w[n - 1 - r];
     }
+}
+
+inline void bernstein_split(const real *c, const real tau, real *left, real *right)
+{
+    bernstein_split_n(c, NS, tau, left, right);
+}
+
+/* Where the degree-8 polynomial p changes sign inside [a, b], from its values v at a + (b - a)(xi_j + 1) / 2
+ * (xi_j: the gradient lanes' points): merged in increasing order into cuts[0..*n), at most SHADE_CUTS.  Its
+ * Bernstein coefficients bound it on a span: no sign change there, no root; one, exactly one root of odd
+ * multiplicity (Descartes' rule), found by bisection on the coefficients (de Casteljau); more, the span is
+ * halved, at most SHADE_DEPTH times (a span still holding several is left to Simpson).  Roots within the
+ * coefficients' rounding of 0 at an end are ignored: no sign change there that Simpson could miss. */
+inline void sign_changes(const real *v, __constant const real *nodes, const real a, const real b, real *cuts,
+                         int *n)
+{
+    real c[9], big = 0;
+    for (int k = 0; k < 9; k++) {
+        real sum = 0;
+        for (int j = 0; j < 9; j++)
+            sum += nodes[BERNSTEIN9 + 9 * k + j] * v[j];
+        c[k] = sum;
+        big = fmax(big, fabs(sum));
+    }
+    const real eps = 64 * REAL_EPSILON * big;
+    real stack_c[SHADE_DEPTH][9], stack_ab[SHADE_DEPTH][2];
+    int stack_depth[SHADE_DEPTH], top = 0, depth = 0;
+    real l = a, r = b;
+    while (true) {
+        int changes = 0, last = 0; /* sign changes among the coefficients clear of 0 */
+        for (int i = 0; i < 9; i++)
+            if (fabs(c[i]) > eps) {
+                changes += c[i] * c[last] < 0;
+                last = i;
+            }
+        if (changes == 1 || (changes > 1 && depth < SHADE_DEPTH)) {
+            real x = (l + r) / 2, left[9], right[9];
+            if (changes == 1) { /* the root, by bisection on the span's coefficients */
+                real lo = 0, hi = 1, tau = 0.5;
+                for (int it = 0; it < POST_BISECTIONS && lo < tau && tau < hi; it++) {
+                    bernstein_split_n(c, 9, tau, left, right);
+                    if (right[0] * c[0] > 0)
+                        lo = tau;
+                    else
+                        hi = tau;
+                    tau = (lo + hi) / 2;
+                }
+                x = l + (r - l) * tau;
+                if (*n < SHADE_CUTS && x > a && x < b && (*n == 0 || x != cuts[*n - 1])) {
+                    int i = *n;
+                    for (; i > 0 && cuts[i - 1] > x; i--)
+                        cuts[i] = cuts[i - 1];
+                    cuts[i] = x;
+                    *n += 1;
+                }
+            } else { /* halved: the right part waits */
+                bernstein_split_n(c, 9, (real)0.5, left, stack_c[top]);
+                stack_ab[top][0] = x;
+                stack_ab[top][1] = r;
+                stack_depth[top++] = ++depth;
+                for (int i = 0; i < 9; i++)
+                    c[i] = left[i];
+                r = x;
+                continue;
+            }
+        }
+        if (top == 0)
+            return;
+        top -= 1;
+        for (int i = 0; i < 9; i++)
+            c[i] = stack_c[top][i];
+        l = stack_ab[top][0];
+        r = stack_ab[top][1];
+        depth = stack_depth[top];
+    }
+}
+
+/* Where the shading may jump or kink inside [a, b]: the sign changes of grad s . L for each light L and of
+ * grad s . H for its halfway vector H when there is a specular term (world gradient: the fine one times
+ * P->scale), from the gradient lanes 0..8 (whole segment, `lanes`) or C's series; returns how many, in cuts */
+inline int shading_cuts(const Piece *C, const Shading *P, __constant const real *nodes, const bool lanes,
+                        const real *gx, const real *gy, const real *gz, const real a, const real b, real *cuts)
+{
+    int n = 0;
+#ifdef CLW_SHADE
+    real3 g[9];
+    for (int j = 0; j < 9; j++)
+        g[j] = lanes ? (real3)(gx[j], gy[j], gz[j])
+                     : cheb3(C->g, 9, a + (b - a) * (nodes[j] + 1) / 2);
+    for (int i = 0; i < 2 * P->nlights; i++) {
+        if (i % 2 && (P->ks == 0 || all(P->halfway[i / 2] == P->light[i / 2])))
+            continue;
+        const real3 d = (i % 2 ? P->halfway[i / 2] : P->light[i / 2]) * P->scale;
+        real v[9];
+        for (int j = 0; j < 9; j++)
+            v[j] = dot(g[j], d);
+        sign_changes(v, nodes, a, b, cuts, &n);
+    }
+#endif
+    return n;
+}
+
+/* int of piece_point over [a, b] cut at cuts[0..n): adaptive Simpson on each part with its share of tol;
+ * f9: the first nine points of [a, b] when n = 0 */
+inline real3 cut_simpson(Piece *C, const Shading *P, __constant const real *nodes, const real3 *f9, const real *cuts,
+                         const int n, const real a, const real b, const real tol, int *evals, int *flags)
+{
+    if (n == 0)
+        return piece_simpson(C, P, f9, nodes, a, b, tol, evals, flags);
+    real3 sum = (real3)(0);
+    real l = a;
+    for (int i = 0; i <= n; i++) {
+        const real r = i < n ? cuts[i] : b;
+        real3 g9[9];
+        for (int p = 0; p <= 8; p++)
+            g9[p] = piece_point(C, P, nodes, l + (r - l) * p / 8);
+        sum += piece_simpson(C, P, g9, nodes, l, r, tol * (r - l) / (b - a), evals, flags);
+        l = r;
+    }
+    return sum;
 }
 
 /* The piece [a, b] of the segment, lying in the transfer function's interval k: its emission added to
@@ -123,15 +249,17 @@ inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, 
     C->rgb_slope = tf[3 + K + 3 * k].xyz;
     C->a = a;
     C->ui_a = cheb1(C->ui, NS + 1, a);
+    real cuts[SHADE_CUTS];
+    const int n = shading_cuts(C, P, nodes, false, 0, 0, 0, a, b, cuts);
     real3 f9[9];
-    for (int p = 0; p <= 8; p++)
+    for (int p = 0; p <= 8 && n == 0; p++)
         f9[p] = piece_point(C, P, nodes, a + (b - a) * p / 8);
-    *emission += piece_simpson(C, P, f9, nodes, a, b, tol * (b - a) / 2, evals, flags);
+    *emission += cut_simpson(C, P, nodes, f9, cuts, n, a, b, tol * (b - a) / 2, evals, flags);
     C->depth_a += piece_total(C, a, b);
 }
 
 /* The whole segment in the transfer function's interval k (the usual case): its samples are the piece's
- * first nine points, as on the pre-classified path: alpha at the samples gives the optical depth exactly
+ * first nine points (where the shading needs no cut), as on the pre-classified path: alpha at the samples gives the optical depth exactly
  * (`weights`, alpha being a polynomial of u's degree there), u and the gradient lanes the emission */
 inline void add_segment(Piece *C, const Shading *P, __constant const real *nodes, __constant const real *weights,
                         __global const real4 *tf, const int K, const real *u, const real *gx, const real *gy,
@@ -152,15 +280,17 @@ inline void add_segment(Piece *C, const Shading *P, __constant const real *nodes
         for (int p = 0; p < 8; p++)
             depth[p] += weights[8 * i + p] * alpha[i];
     }
+    real cuts[SHADE_CUTS];
+    const int n = shading_cuts(C, P, nodes, true, gx, gy, gz, -1, 1, cuts);
     real3 f9[9];
-    for (int p = 0; p <= 8; p++) { /* xi = -1 + p/4: lane P0 for p = 0, else lane p - 1 */
+    for (int p = 0; p <= 8 && n == 0; p++) { /* xi = -1 + p/4: lane P0 for p = 0, else lane p - 1 */
         const int lane = p ? p - 1 : P0;
         const real3 rgb = clamp(C->rgb + C->rgb_slope * (u[lane] - line.x), (real)0, (real)1) * alpha[lane];
         real r = rgb.x, g = rgb.y, b = rgb.z;
         shade(&r, &g, &b, alpha[lane], gx[lane] * C->line.w, gy[lane] * C->line.w, gz[lane] * C->line.w, P);
         f9[p] = (real3)(r, g, b) * fast_exp(-C->radius * (p ? depth[p - 1] : 0));
     }
-    *emission += piece_simpson(C, P, f9, nodes, -1, 1, tol, evals, flags);
+    *emission += cut_simpson(C, P, nodes, f9, cuts, n, -1, 1, tol, evals, flags);
     C->depth_a = depth[7];
 }
 

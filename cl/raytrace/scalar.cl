@@ -2,13 +2,14 @@
  * docs/raytracing.md §10): the range of the scalar per block, and a strided sample of its coefficients. */
 #include "common/clw_common.h"
 
-/* scalar_range: per block of CLW_BLOCK^3 grid-0 fine cells of every brick, the least and largest
- * coefficient (channel 0) whose B-spline reaches it: the B-splines are non-negative and sum to 1, so the
- * scalar lies between them there.
- *   out          (Z, Y, X) float2 (min, max) over the page table's box, zero in blocks of no brick
- *   nblocks, origin, coef, bricks, frames, boxes   as brick_bounds (cl/raytrace/bricks.cl), one group
+/* scalar_range: per block of CLW_BLOCK^3 grid-0 fine cells of every brick slot (whatever detail it serves), the
+ * least and largest coefficient (channel 0) whose B-spline reaches it: the B-splines are non-negative and sum to
+ * 1, so the scalar lies between them there.
+ *   out          (slots, per, per, per) float2 (min, max), per = CLW_SUPER_CELLS / CLW_BLOCK blocks along a
+ *                brick's edge (z, y, x), as brick_bounds lays out its bounds (cl/raytrace/bricks.cl)
+ *   origin, coef, bricks, frames, boxes   as brick_bounds, one group
  * Grid: global ((CLW_SUPER_CELLS / CLW_BLOCK)^3, slots). */
-__kernel void scalar_range(__global float2 *out, const int4 nblocks, const int4 origin, __global const float4 *coef,
+__kernel void scalar_range(__global float2 *out, const int4 origin, __global const float4 *coef,
                            __global const int4 *bricks, __global const float4 *frames, __global const int4 *boxes,
                            const int order)
 {
@@ -26,7 +27,7 @@ __kernel void scalar_range(__global float2 *out, const int4 nblocks, const int4 
                 const float c = coef[n.w + ((size_t)z * n.y + y) * n.x + x].x;
                 m = (float2)(fmin(m.x, c), fmax(m.y, c));
             }
-    out[((size_t)block.z * nblocks.y + block.y) * nblocks.x + block.x] = m;
+    out[(size_t)slot * per * per * per + k] = m;
 }
 
 /* strided: out[i] = coef[i * step].x, the scalar coefficients of a strided sample of the pool.

@@ -197,12 +197,14 @@ class BrickField:
         """(slots,) pool bytes of each brick (all groups)."""
         return 16 * np.prod(self.boxes[:, :, :3].astype(np.int64), axis=2).sum(axis=1)
 
-    def bound_grid(self, pages) -> np.ndarray:
-        """The block bounds over the page table's box, (Z, Y, X) * SUPER, of the slots ``pages`` (Z, Y, X) picks."""
-        grid = np.zeros((*self.shape, SUPER, SUPER, SUPER), np.float32)
-        present = pages >= 0
-        grid[present] = self.bounds[pages[present]]
-        return grid.transpose(0, 3, 1, 4, 2, 5).reshape(tuple(n * SUPER for n in self.shape))
+    def bound_grid(self, pages, per_slot=None) -> np.ndarray:
+        """The block bounds over the page table's box, (Z, Y, X) * SUPER, of the slots ``pages`` (Z, Y, X) picks
+        (or any ``per_slot`` (slots, SUPER, SUPER, SUPER, ...) block values so laid out; zero where no brick)."""
+        per_slot = self.bounds if per_slot is None else per_slot
+        grid = np.zeros((*self.shape, *per_slot.shape[1:]), per_slot.dtype)
+        grid[pages >= 0] = per_slot[pages[pages >= 0]]
+        return grid.transpose(0, 3, 1, 4, 2, 5, *range(6, grid.ndim)).reshape(
+            *(n * SUPER for n in self.shape), *per_slot.shape[4:])
 
     def tables(self, cc, pages, slots=None) -> dict:
         """The kernel arguments of the field (``FIELD_PARAMS``) with the slots ``pages`` (Z, Y, X) picks: from the

@@ -25,8 +25,8 @@ from ..device.kernels import BUFFER, Kernel
 from ..errors import InputError
 from ..model.transfer import TransferFunction, auto_window
 
-_RANGE = Kernel("scalar_range", ("out", BUFFER), ("nblocks", cltypes.int4), ("origin", cltypes.int4),
-                ("coef", BUFFER), ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
+_RANGE = Kernel("scalar_range", ("out", BUFFER), ("origin", cltypes.int4), ("coef", BUFFER), ("bricks", BUFFER),
+                ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
 _STRIDED = Kernel("strided", ("out", BUFFER), ("coef", BUFFER), ("step", np.int64), ("n", np.int32))
 _BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf", BUFFER), ("slack", np.float32),
                  ("n", np.int32))
@@ -34,6 +34,8 @@ _SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound
 GROUP = 256  #: work-group of classified_bounds
 #: how many of the pool's coefficients a window "auto" looks at
 AUTO_COEFFICIENTS = 1 << 20
+#: a tracer keeps the ranges per block of this many details (each picks its own bricks, docs/raytracing.md §8)
+RANGES_KEPT = 8
 #: a block's range is widened by this much of the scalar's largest magnitude (the kernels' float32 rounding)
 RANGE_SLACK = 1e-6
 #: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
@@ -78,11 +80,13 @@ class Classification:
     box: tuple              # clip box (x, y, z): the model's
     grad_floor: float       # world gradients of the scalar this short are flat
     seconds: float          # what the change of transfer function cost
+    range: cla.Array        # the detail's range per block that the bounds come from
 
 
 class ScalarRange:
-    """The scalar's range per block of a ray tracer's brick pool (set up once, on the device), and the
-    classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
+    """The scalar's range per block of every brick slot of a ray tracer's pool (set up once, on the device), laid
+    out per detail when a render first asks for it (:mod:`clwave.raytrace.lod`: each detail picks its slots), and
+    the classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
 
     Made, the pool on the device keeps the scalar alone: one float a coefficient instead of four
     (``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``), a quarter of the memory.
@@ -90,18 +94,20 @@ class ScalarRange:
 
     def __init__(self, tracer):
         f, cc = tracer.bricks, tracer.cc
-        q, shape = cc.queue, tuple(int(k) * SUPER for k in f.shape)
-        self.cc, self.origin, self.box = cc, tracer.occ_origin, tracer.box
+        q = cc.queue
+        self.cc, self.bricks, self.tracer = cc, f, tracer
         self.noise_floor, self.spacing = tracer.grad_floor("single"), min(tracer.wv.spacing)
         self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
+        self.slot_range, self.sample = None, None  # bricks in a scratch file: |s| <= the block bound
         if f.resident and len(f.levels):
             tables = tracer.field_tables
-            self.range = cla.zeros(q, shape + (2,), np.float32)
+            slot_range = cla.empty(q, (len(f.levels), SUPER, SUPER, SUPER, 2), np.float32)
             at = np.zeros((len(f.bricks), 4), np.int32)
             at[:, :3] = (f.bricks - f.origin)[:, ::-1]
-            _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=self.range,
-                   nblocks=shape[::-1], origin=f.origin[::-1], coef=tables["coef"],
-                   bricks=cla.to_device(q, at), frames=tables["frames"], boxes=tables["boxes"], order=f.orders[0])
+            _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=slot_range,
+                   origin=f.origin[::-1], coef=tables["coef"], bricks=cla.to_device(q, at), frames=tables["frames"],
+                   boxes=tables["boxes"], order=f.orders[0])
+            self.slot_range = slot_range.get()
             n = min(AUTO_COEFFICIENTS, len(tables["coef"]))
             sample = cla.empty(q, n, np.float32)
             _STRIDED(self.kernels, q, (n,), None, out=sample, coef=tables["coef"], step=len(tables["coef"]) // n, n=n)
@@ -110,14 +116,24 @@ class ScalarRange:
             _STRIDED(self.kernels, q, (len(f.pool),), None, out=scalar, coef=f.pool, step=1, n=len(f.pool))
             tracer.replace_pool(scalar)
             tracer.defines["CLW_SCALAR_POOL"] = None
-        else:  # bricks in a scratch file: |s| <= the block bound
-            bound = tracer.block_bound.get()
-            self.range, self.sample = cla.to_device(q, np.stack([-bound, bound], axis=-1)), None
         self.slack = RANGE_SLACK * float(tracer.q_bound)
-        self.bound = cla.empty(q, shape, np.float32)
-        self.super_bound = cla.empty(q, tuple(-(-n // SUPER) for n in shape), np.float32)
-        self.super_origin = np.asarray(self.origin) // SUPER
+        self.ranges = {}  # per detail (its pages' bytes): the range per block on the device
         self.last = None
+
+    def range(self, at):
+        """The range per block (Z, Y, X, 2) on the device at the detail of ``at`` (a ``FieldAt``): the slots' ranges
+        laid out by its pages (absent bricks: s = 0), or +-its block bounds for bricks in a scratch file."""
+        key = at.pages.tobytes()
+        if key not in self.ranges:
+            if len(self.ranges) >= RANGES_KEPT:
+                self.ranges.pop(next(iter(self.ranges)))
+            if self.slot_range is not None:
+                grid = self.bricks.bound_grid(at.pages, self.slot_range)
+            else:
+                bound = at.block_bound.get()
+                grid = np.stack([-bound, bound], axis=-1)
+            self.ranges[key] = cla.to_device(self.cc.queue, grid)
+        return self.ranges[key]
 
     def window(self, tf: TransferFunction):
         """``tf``'s window in data units; "auto" from the percentiles of the pool's coefficients (the voxels'
@@ -129,29 +145,37 @@ class ScalarRange:
                              "give the window (lo, hi) (--tf-window LO,HI)")
         return auto_window(self.sample)
 
-    def classify(self, tf, cc, real) -> Classification:
-        """The kernel arguments of ``tf`` (reused while the transfer function and precision stay the same)."""
-        if not isinstance(tf, TransferFunction):
-            raise InputError("transfer_function must be a clwave.TransferFunction")
-        last = self.last
-        if last is not None and last.tf == tf and last.table.dtype == real:
+    def classify(self, tf, cc, real, at=None) -> Classification:
+        """The kernel arguments of ``tf`` at the detail of ``at`` (default full detail), reused while the transfer
+        function, detail and precision stay the same."""
+        start = time.perf_counter()  # a detail's first classification lays its ranges out too
+        at = self.tracer.field_at(0) if at is None else at
+        last, ranges = self.last, self.range(at)
+        if last is not None and last.tf == tf and last.table.dtype == real and last.range is ranges:
             return last
-        start = time.perf_counter()
         window = self.window(tf)
         table, q = tf_table(tf, window), cc.queue
-        n = self.bound.size  # explicit work-groups: PoCL's default for this size was a tenth as fast
-        _BOUNDS(self.kernels, q, (-(-n // GROUP) * GROUP,), (GROUP,), bound=self.bound, range=self.range,
+        bound = cla.empty(q, ranges.shape[:3], np.float32)
+        super_bound = cla.empty(q, at.super_bound.shape, np.float32)
+        n = bound.size  # explicit work-groups: PoCL's default for this size was a tenth as fast
+        _BOUNDS(self.kernels, q, (-(-n // GROUP) * GROUP,), (GROUP,), bound=bound, range=ranges,
                 tf=cla.to_device(q, table.astype(np.float32)), slack=self.slack, n=n)
-        _SUPER(self.kernels, q, self.super_bound.shape[::-1], None, out=self.super_bound,
-               ns=self.super_bound.shape[::-1], bound=self.bound, nb=self.bound.shape[::-1])
+        _SUPER(self.kernels, q, super_bound.shape[::-1], None, out=super_bound, ns=super_bound.shape[::-1],
+               bound=bound, nb=bound.shape[::-1])
         # flat: below FLAT of the span per unit length, or the float32 field's rounding noise, in both precisions
         values = tf.data_points(window)
         floor = max(self.noise_floor, FLAT * (values[-1] - values[0]) / self.spacing)
-        self.last = Classification(tf, window, cla.to_device(q, table.astype(real)), self.bound, self.super_bound,
-                                   self.super_origin, self.box, floor, 0.0)
+        self.last = Classification(tf, window, cla.to_device(q, table.astype(real)), bound, super_bound,
+                                   at.super_origin, at.box, floor, 0.0, ranges)
         q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last
+
+
+def post_nodes(nodes, n_samples) -> np.ndarray:
+    """``nodes`` (:func:`clwave.raytrace.quadrature.sample_tables`) with what ``cl/raytrace/classify.h`` adds: the
+    matrices from the samples, and from the gradient's lanes 0..8, to their Bernstein coefficients."""
+    return np.concatenate([nodes, bernstein_matrix(nodes[:n_samples]).ravel(), bernstein_matrix(nodes[:9]).ravel()])
 
 
 def bernstein_matrix(xi) -> np.ndarray:
@@ -164,16 +188,14 @@ def bernstein_matrix(xi) -> np.ndarray:
     return np.linalg.inv(basis)
 
 
-def check_post(tracer, absorption, detail):
-    """Refuse what a transfer function at render time cannot take: it needs a scalar model, the B-spline field,
-    absorption and full detail (docs/known-gaps.md §10: the scalar's ranges are those of the full-detail bricks)."""
+def check_post(tracer, tf, absorption):
+    """Refuse what a transfer function at render time cannot take: it needs a scalar model, the B-spline field
+    and absorption."""
+    if not isinstance(tf, TransferFunction):
+        raise InputError("transfer_function must be a clwave.TransferFunction")
     if tracer.wv.channels != 1:
         raise InputError(f"transfer_function= classifies a scalar model while rendering; this one has "
                          f"{tracer.wv.channels} channels (already classified: render it without one)")
-    if tracer.lod or detail not in (None, 0):
-        raise InputError("transfer_function= renders at full detail, from a tracer made with lod=False; leave "
-                         "detail= and lod= out (level of detail with a render-time transfer function is not "
-                         "built yet)")
     if tracer.scalar is None:
         raise InputError("transfer_function= needs field='bspline' (--field bspline)")
     if not absorption:

@@ -15,7 +15,8 @@ from numpy.polynomial import chebyshev
 
 from ..device.constants import BLOCK, SUPER
 from ..model.geometry import world_to_fine, world_to_fine_affine
-from ..model.transform import Band, band_sum
+from ..model.transform import Band, band_sum, synthesize
+from .lod import occupancy
 from .quadrature import sample_points
 from .tracer import SIMPSON_DEPTH, Phong, RayTracer, light_direction
 
@@ -145,20 +146,27 @@ def _model_field(wv):
     return lambda points, derivative: wv.gradient(points) if derivative else wv.evaluate(points)
 
 
-def _content_field(wv):
+def _content_field(wv, level=0):
     """The B-spline backend's field for a model that knows its content: the fine B-spline coefficients
-    of the host's real-line synthesis, zero on empty voxels (docs/raytracing.md §4)."""
+    of the host's real-line synthesis, zero on empty voxels (docs/raytracing.md §4); at detail ``level`` > 0
+    (§8) the level's coefficients from the bands above it, zero where unoccupied (any model)."""
     parts = []
     for gi, g in enumerate(wv.groups):
-        coeffs, start = wv.fine_coefficients(gi)
-        coeffs = coeffs * wv.content_mask.box(start, coeffs.shape[:3])[..., None]
-        parts.append((g, coeffs, np.array(start, float)))
+        if level == 0:
+            coeffs, start = wv.fine_coefficients(gi)
+            coeffs = coeffs * wv.content_mask.box(start, coeffs.shape[:3])[..., None]
+        else:
+            coeffs, start = synthesize(g.wavelet, *zip(*[(b, d) for b, d in zip(g.bands, g.dense_bands())
+                                                         if b.key == "aaa" or b.level > level]))
+            if wv.content_mask is not None:
+                coeffs = coeffs * occupancy(wv.content_mask, g.wavelet, level, start, coeffs.shape[:3])[..., None]
+        parts.append((g, coeffs, 2.0 ** level * np.array(start, float)))
 
     def field(points, derivative):
         out = np.zeros((len(points), wv.channels, 3) if derivative else (len(points), wv.channels))
         for g, coeffs, start in parts:
             fine = world_to_fine(points, g.wavelet.order, wv.shape, wv.spacing, wv.origin) - start
-            value = band_sum(g.wavelet, Band(0, "aaa", coeffs.shape[:3], 0), coeffs, fine, derivative)
+            value = band_sum(g.wavelet, Band(level, "aaa", coeffs.shape[:3], 0), coeffs, fine, derivative)
             out[:, list(g.channels)] = value[..., ::-1] / np.asarray(wv.spacing)[::-1] if derivative else value
         return out
     return field
@@ -301,16 +309,19 @@ def _simpson(f, tol):
 
 
 def classified_reference(wv, camera, transfer_function, lights=None, shading=True,
-                         tracer: RayTracer | None = None) -> np.ndarray:
+                         tracer: RayTracer | None = None, detail=0) -> np.ndarray:
     """(H, W, 4) float64 image of a scalar model through ``transfer_function`` (post-classification), by brute
     force: no skipping, no early termination, no adaptivity (docs/raytracing.md §10).
 
     On each fine knot segment the scalar and its gradient are polynomials, fitted exactly from the model at ten
     Chebyshev points, sixteen for order 6 (:meth:`WaveletVolume.evaluate` / ``gradient``, or the B-spline
     backend's content-clamped coefficients); the segment is cut at every real root of ``s - v`` for each point
-    value v (NumPy's companion-matrix roots); on each piece the opacity ``np.interp(s)`` is a polynomial, fitted
-    and integrated exactly, and the emission integral is composite Gauss-Legendre (8 x 8 nodes).  ``tracer``
-    supplies the clip box, the window of an "auto" transfer function and the gradient floor the kernel uses.
+    value v (NumPy's companion-matrix roots), and where shading, at every real root of ``grad s . L`` for each
+    light L and halfway vector (the normal flips there); on each piece the opacity ``np.interp(s)`` is a
+    polynomial, fitted and integrated exactly, and the emission integral is composite Gauss-Legendre (8 x 8
+    nodes).  ``tracer`` supplies the clip box, the window of an "auto" transfer function and the gradient floor
+    the kernel uses; ``detail``: the model without its details of levels 1 .. detail, as the B-spline field
+    holds it (docs/raytracing.md §8).
     """
     tr = tracer or RayTracer(wv)
     view = camera.view(wv)
@@ -326,7 +337,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     cheb = np.cos(np.pi * (np.arange(n) + 0.5) / n)
     to_series = np.linalg.inv(chebyshev.chebvander(cheb, n - 1))
     gauss, gauss_w = np.polynomial.legendre.leggauss(8)
-    evaluate = _content_field(wv) if wv.content_mask is not None else _model_field(wv)
+    evaluate = _content_field(wv, detail) if wv.content_mask is not None or detail else _model_field(wv)
     out = np.zeros((H, W, 4))
     floor = tr.scalar.classify(transfer_function, tr.cc, np.float64).grad_floor  # the kernel's flat gradients
     for r, c in np.ndindex(H, W):
@@ -335,6 +346,8 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
         t0, t1 = _clip(x0, d, tr.box, view.perspective)
         if not t1 > t0:
             continue
+        directions = [*light_dirs, *((light - w) / np.linalg.norm(light - w) for light in light_dirs)] \
+            if phong is not None and phong.specular else light_dirs
         knots = _knots(x0, d, t0, t1, 1.0)
         lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
         mid, rad = (lo + hi) / 2, (hi - lo) / 2
@@ -345,8 +358,11 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
         T, colour_sum = 1.0, np.zeros(3)
         for k in range(len(mid)):
             cuts = [-1.0, 1.0]
-            for v in values:
-                roots = chebyshev.chebroots(s_series[k] - v * (np.arange(n) == 0))
+            polys = [s_series[k] - v * (np.arange(n) == 0) for v in values]
+            if phong is not None:  # where the normal flips against a light or halfway vector, n . L jumps or kinks
+                polys += [g_series[k] @ d for d in directions]
+            for poly in polys:
+                roots = chebyshev.chebroots(poly)
                 cuts += [x.real for x in roots if abs(x.imag) < 1e-6 and -1 < x.real < 1]
             cuts = np.unique(cuts)
             for a, b in zip(cuts[:-1], cuts[1:]):

@@ -29,7 +29,7 @@ from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblock
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .passes import passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
-from .classified import ScalarRange, bernstein_matrix, check_post
+from .classified import ScalarRange, check_post, post_nodes
 from .progressive import frames
 from .quadrature import sample_tables
 from ..io.result import RenderResult
@@ -151,7 +151,7 @@ class RayTracer:
             self.super_bound_host, self.super_origin = superblocks(self.block_bound.get(), self.occ_origin)
             self.super_bound = cla.to_device(self.cc.queue, self.super_bound_host)
         # a scalar model: its range per block, for transfer functions at render time (docs/raytracing.md §10)
-        self.scalar = ScalarRange(self) if wv.channels == 1 and field == "bspline" and not lod else None
+        self.scalar = ScalarRange(self) if wv.channels == 1 and field == "bspline" else None
 
     def _expand(self):
         """B-spline field: the bricks (:mod:`clwave.raytrace.bricks`), and their per-block maxima as bounds."""
@@ -308,7 +308,7 @@ class RayTracer:
         if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
         if transfer_function is not None:
-            check_post(self, absorption, detail)
+            check_post(self, transfer_function, absorption)
         elif absorption and wv.channels != 4:
             raise InputError(f"emission-absorption ray tracing needs an RGBA volume (4 channels), this one has "
                              f"{wv.channels}; classify it first (TransferFunction.classify), give a scalar one a "
@@ -331,12 +331,10 @@ class RayTracer:
         nodes, weights = sample_tables(3 * (max(self.orders) - 1))
         n_samples = len(weights)
         real = np.float64 if precision == "double" else np.float32
-        post = None  # docs/raytracing.md §10: the transfer function's table and bounds
-        if transfer_function is not None:
-            post = self.scalar.classify(transfer_function, cc, real)
-            nodes = np.concatenate([nodes, bernstein_matrix(nodes[:n_samples]).ravel()])
-        defines = dict(self.defines, CLW_ALPHA=0 if post else self.alpha_group, CLW_SAMPLES=n_samples,
-                       CLW_MAX_DEPTH=SIMPSON_DEPTH,
+        if transfer_function is not None:  # docs/raytracing.md §10
+            nodes = post_nodes(nodes, n_samples)
+        defines = dict(self.defines, CLW_ALPHA=self.alpha_group if transfer_function is None else 0,
+                       CLW_SAMPLES=n_samples, CLW_MAX_DEPTH=SIMPSON_DEPTH,
                        CLW_LATTICE="0.5" if len({o % 2 for o in self.orders}) > 1 else "1.0")
         if min(self.orders) >= 3:  # the field and its gradient are continuous across knot planes
             defines["CLW_JOIN"] = None
@@ -344,7 +342,7 @@ class RayTracer:
             defines["CLW_XRAY"] = None
         elif phong is not None:
             defines["CLW_SHADE"] = None
-        if post is not None:
+        if transfer_function is not None:
             defines["CLW_POST"] = None
         if self.content_shape.any():
             defines["CLW_CONTENT"] = None
@@ -367,6 +365,8 @@ class RayTracer:
         start = time.perf_counter()
         at, detail_level = self._detail(detail, view, scale, offset)
         detail_seconds = time.perf_counter() - start
+        # the transfer function's table and bounds at this detail (docs/raytracing.md §10)
+        post = None if transfer_function is None else self.scalar.classify(transfer_function, cc, real, at)
         light_buf = np.zeros((max(1, len(light_dirs)), 4), np.float32)
         if light_dirs:
             light_buf[: len(light_dirs), :3] = light_dirs
@@ -469,12 +469,14 @@ class RayTracer:
         return StagedTracer(cls, path, device=device, device_memory=device_memory, lod=lod)
 
     def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, steps=None,
-               budget=None, error=None):
+               budget=None, error=None, transfer_function=None):
         """Frames of ``camera`` from cheap to exact (:mod:`clwave.raytrace.progressive`, docs/raytracing.md §9),
         for a viewer that shows each as it comes: a generator (``RaytraceFrame`` s: ``image``, ``figures()``),
         the last bit for bit :meth:`render` at full detail; stop iterating when the view changes (nothing is
-        left running).  Needs ``lod=True``; use it from one thread at a time."""
-        options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
+        left running).  Needs ``lod=True``; use it from one thread at a time.  ``transfer_function``: as
+        :meth:`render`'s, the same at every frame."""
+        options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
+                       transfer_function=transfer_function)
         return frames(self, camera, options, steps, budget, error)
 
     def _phong(self, shading, absorption):
