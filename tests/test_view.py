@@ -179,6 +179,45 @@ def test_still_xray_frames_refine_to_the_splat_of_the_view(viewer):
     assert np.abs(got.astype(int) - expect).max() <= 1
 
 
+def test_a_drag_prefix_with_the_footprints_of_its_bands_only_is_the_same_image(viewer):
+    """``begin(camera, upto=n)`` makes the footprints of the bands the first n coefficients reach: their image
+    equals the same prefix splatted into a view with every band's footprints, and it takes no more."""
+    r = viewer.server.sources["xray"].r
+    camera = clwave.Camera(40.0, 10.0, (40, 56))
+    n = 600  # the scaling band and a few of the coarsest details
+    prefix = r.begin(camera, upto=n)
+    prefix.splat(0, n)
+    full = r.begin(camera)
+    full.splat(0, n)
+    assert len(prefix.tables[0].textures) < len(full.tables[0].textures)
+    assert np.allclose(prefix.image(), full.image(), rtol=1e-6, atol=1e-6 * np.abs(full.image()).max())
+    with pytest.raises(ValueError, match="first 600 coefficients only"):
+        prefix.splat(n, 1)
+
+
+def test_still_frames_are_passes_of_whole_quanta_and_end_at_the_kept_set(viewer):
+    """Every still pass but a first remainder is a whole multiple of QUANTUM (no new kernel builds), each frame
+    at least doubles the coefficients, and the rest goes at once when it is expected within 1.5 frames."""
+    from clwave.view.frames import QUANTUM, STILL_SECONDS, ladder
+
+    xray = viewer.server.sources["xray"]
+    limit, rate = 10 * QUANTUM + 123, xray.rate
+    try:
+        xray.rate = STILL_SECONDS / (2 * QUANTUM)  # a frame's time splats two quanta
+        done, counts = 0, []
+        while done < limit:
+            done = xray._still_count(done, limit)
+            counts.append(done)
+        assert all(c % QUANTUM == limit % QUANTUM for c in counts) and counts[-1] == limit
+        assert all(b >= 2 * a for a, b in zip(counts, counts[1:-1]))
+        assert counts[0] >= 2 * QUANTUM and len(counts) == 3  # 2 quanta, then doubling to the kept set
+        xray.rate = STILL_SECONDS / limit  # the whole view within a frame's time: one frame
+        assert xray._still_count(0, limit) == limit
+    finally:
+        xray.rate = rate
+    assert [ladder(n, 10**6) for n in (3, 1000, 4097, 6500)] == [4, 1024, 4096, 8192]
+
+
 def test_shaded_frames_end_at_the_ray_traced_view():
     wv = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(
         clwave.phantom("hydrogen", n=24)), levels=2).threshold(keep=0.3)
