@@ -29,8 +29,6 @@ DRAG_SCALES = (0.5, 0.375, 0.25)
 #: each kernel anew for each work-group size, which it takes from the global size (0.3-0.6 s a build on 2 cores),
 #: and every multiple of 4096 gets the same one
 QUANTUM = 4096
-#: shaded frames while dragging and the first when still: the tolerance times this
-DRAG_LOOSEN = 10.0
 #: a still view shows a better frame about this often; when the rest of it is expected within 1.5 times this, the
 #: rest goes at once into the final frame (each frame costs a pass over every tile, a read-back and a PNG)
 STILL_SECONDS = 0.3
@@ -53,6 +51,7 @@ class ViewState:
     moving: bool
     background: float  # shaded: grey level behind the volume, 0..1
     shading: bool  # shaded: Phong lighting (a headlight) or unlit emission
+    tf: tuple | None = None  # shaded, scalar model: (preset, centre, width, opacity), see shaded.transfer_function
 
 
 @dataclass
@@ -95,10 +94,17 @@ def ladder(n: float, total: int) -> int:
 
 
 class Source:
-    """Common to both sources: the model, the image size and the framing."""
+    """Common to both sources: the model, the image size and the framing.  A source is ready to render at once
+    (:meth:`ready`), or after :meth:`prepare` has run on a thread of its own (the shaded one's bricks)."""
 
     mode = ""
     capabilities: dict = {}
+
+    def ready(self) -> bool:
+        return True
+
+    def prepare(self):
+        """What :meth:`frames` needs that takes long, made off the render thread."""
 
     def __init__(self, wv, size):
         self.wv, self.size = wv, (int(size[0]), int(size[1]))
@@ -207,37 +213,3 @@ class XraySource(Source):
                        error=float(np.sqrt(max(0.0, 1.0 - captured))), error_kind="relative L2 (coefficients left)",
                        window=list(window), seconds=seconds)
         return self._frame(state, picture, final or not state.moving, figures, start)
-
-
-class ShadedSource(Source):
-    """Shaded emission-absorption frames by one reused :class:`~clwave.RayTracer`: a smaller image at a looser
-    tolerance while dragging; when still the full image at the looser, then the given tolerance.  Needs an
-    RGBA (pre-classified) model: transfer functions at render time (``capabilities["tf"]``) are not there yet."""
-
-    mode = "shaded"
-    capabilities = dict(tf=False, background=True, shading=True)
-
-    def __init__(self, wv, size, tolerance, device=None):
-        super().__init__(wv, size)
-        self.tolerance, self.device, self._tracer = check_tolerance(tolerance), device, None
-
-    @property
-    def tracer(self):
-        """The :class:`~clwave.RayTracer`, made on first use (its bricks take a while)."""
-        if self._tracer is None:
-            from ..raytrace.tracer import RayTracer
-            self._tracer = RayTracer(self.wv, device=self.device)
-        return self._tracer
-
-    def frames(self, state: ViewState):
-        start = time.perf_counter()
-        stages = [(DRAG_SCALES[0], self.tolerance * DRAG_LOOSEN)] if state.moving else \
-            [(1.0, self.tolerance * DRAG_LOOSEN), (1.0, self.tolerance)]
-        for i, (scale, tolerance) in enumerate(stages):
-            stage = time.perf_counter()
-            result = self.tracer.render(self.camera(state, scale), tolerance=tolerance, shading=state.shading)
-            final = not state.moving and i == len(stages) - 1
-            picture = result.to_uint8(background=(state.background,) * 3)
-            figures = dict(final=final, tolerance=tolerance, error=tolerance, error_kind="absolute, per value",
-                           seconds=time.perf_counter() - stage)
-            yield self._frame(state, picture, final or not state.moving, figures, start)
