@@ -144,6 +144,7 @@ class XraySource(Source):
         self.drag_count = ladder(max(DRAG_LEAST, renderer.count / 100), renderer.count)
         self.drag_scale = 0  # index in DRAG_SCALES
         self.rate = None  # seconds per coefficient of the last still view (its footprints included)
+        self.dragged = None  # (azimuth, elevation, zoom) of the last drag frame
         acc = renderer.begin(Camera(30.0, 20.0, WINDOW_SIZE))
         acc.splat(0, renderer.count)
         self.auto_window = tuple(float(v) for v in resolve_window(acc.image()[..., :3], "auto"))
@@ -161,13 +162,17 @@ class XraySource(Source):
             image = acc.image()
             seconds = time.perf_counter() - start
             self._pace(count, seconds)
+            self.dragged = (state.azimuth, state.elevation, state.zoom)
             yield self._xray_frame(state, image, count, window, False, seconds, start)
             return
         acc = self.r.begin(self.camera(state))
         done, busy = 0, time.perf_counter() - start
+        # a view the page has no drag frame of (a page's first, a reset, a control): a quick first frame, about a
+        # drag frame's time at the full size
+        quick = (state.azimuth, state.elevation, state.zoom) != self.dragged
         while done < limit:
             stage = time.perf_counter()
-            count = self._still_count(done, limit)
+            count = self._still_count(done, limit, ladder(self.drag_count / 4, limit) if quick and not done else 0)
             if done == 0 and 0 < limit % QUANTUM < count:  # the remainder first: the other passes are whole
                 done = limit % QUANTUM                        # multiples of QUANTUM (no new kernel builds)
                 acc.splat(0, done)
@@ -191,12 +196,14 @@ class XraySource(Source):
             self.drag_scale, want = self.drag_scale - 1, want / 2
         self.drag_count = ladder(max(want, least), self.r.count)
 
-    def _still_count(self, done: int, limit: int) -> int:
-        """The coefficients after the next still frame: at least twice ``done``, about :data:`STILL_SECONDS` more
-        of splatting at the last still view's rate, all ``limit`` where the rest is expected within 1.5 times
-        that (before a first still view: from the drag prefix, doubling); from a first frame on, ``limit`` less a
-        whole multiple of :data:`QUANTUM`."""
-        if self.rate is None:
+    def _still_count(self, done: int, limit: int, quick: int = 0) -> int:
+        """The coefficients after the next still frame: ``quick`` where given, else at least twice ``done``, about
+        :data:`STILL_SECONDS` more of splatting at the last still view's rate, all ``limit`` where the rest is
+        expected within 1.5 times that (before a first still view: from the drag prefix, doubling); from a first
+        frame on, ``limit`` less a whole multiple of :data:`QUANTUM`."""
+        if quick:
+            count = quick
+        elif self.rate is None:
             count = max(2 * done, self.drag_count)
         else:
             step = STILL_SECONDS / self.rate

@@ -28,7 +28,7 @@ LOOSEN = 10.0
 #: for a quick look and an error estimate, then the final image)
 STILL_STEPS = ((4, LOOSEN), (2, LOOSEN), (1, 1))
 #: frames while dragging, cheapest first: (image scale, detail); a model without level of detail uses the scales
-DRAG_STEPS = ((0.125, 2), (0.1875, 2), (0.25, 1), (0.375, 1), (0.5, 1), (0.5, 0))
+DRAG_STEPS = ((0.0625, 3), (0.125, 2), (0.1875, 2), (0.25, 1), (0.375, 1), (0.5, 1), (0.5, 0))
 
 
 class ShadedSource(Source):
