@@ -154,9 +154,10 @@ class XraySource(Source):
         total = self.r.count
         limit = total if state.detail >= 1.0 else ladder(state.detail * total, total)
         window = state.window or self.auto_window
-        if state.moving:
+        # a drag frame while moving, and first for a still view the page has no drag frame of (a page's first, a
+        # reset): a smaller image of a prefix, with the footprints of the bands it reaches only
+        if state.moving or (state.azimuth, state.elevation, state.zoom) != self.dragged:
             count = min(self.drag_count, limit)
-            # the footprints of the bands this prefix reaches only
             acc = self.r.begin(self.camera(state, DRAG_SCALES[self.drag_scale]), upto=count)
             acc.splat(0, count)
             image = acc.image()
@@ -164,15 +165,14 @@ class XraySource(Source):
             self._pace(count, seconds)
             self.dragged = (state.azimuth, state.elevation, state.zoom)
             yield self._xray_frame(state, image, count, window, False, seconds, start)
-            return
+            if state.moving:
+                return
+        stage = time.perf_counter()
         acc = self.r.begin(self.camera(state))
-        done, busy = 0, time.perf_counter() - start
-        # a view the page has no drag frame of (a page's first, a reset, a control): a quick first frame, about a
-        # drag frame's time at the full size
-        quick = (state.azimuth, state.elevation, state.zoom) != self.dragged
+        done, busy = 0, time.perf_counter() - stage
         while done < limit:
             stage = time.perf_counter()
-            count = self._still_count(done, limit, ladder(self.drag_count / 4, limit) if quick and not done else 0)
+            count = self._still_count(done, limit)
             if done == 0 and 0 < limit % QUANTUM < count:  # the remainder first: the other passes are whole
                 done = limit % QUANTUM                        # multiples of QUANTUM (no new kernel builds)
                 acc.splat(0, done)
@@ -196,14 +196,12 @@ class XraySource(Source):
             self.drag_scale, want = self.drag_scale - 1, want / 2
         self.drag_count = ladder(max(want, least), self.r.count)
 
-    def _still_count(self, done: int, limit: int, quick: int = 0) -> int:
-        """The coefficients after the next still frame: ``quick`` where given, else at least twice ``done``, about
-        :data:`STILL_SECONDS` more of splatting at the last still view's rate, all ``limit`` where the rest is
-        expected within 1.5 times that (before a first still view: from the drag prefix, doubling); from a first
-        frame on, ``limit`` less a whole multiple of :data:`QUANTUM`."""
-        if quick:
-            count = quick
-        elif self.rate is None:
+    def _still_count(self, done: int, limit: int) -> int:
+        """The coefficients after the next still frame: at least twice ``done``, about :data:`STILL_SECONDS` more
+        of splatting at the last still view's rate, all ``limit`` where the rest is expected within 1.5 times
+        that (before a first still view: from the drag prefix, doubling); from a first frame on, ``limit`` less a
+        whole multiple of :data:`QUANTUM`."""
+        if self.rate is None:
             count = max(2 * done, self.drag_count)
         else:
             step = STILL_SECONDS / self.rate
