@@ -47,7 +47,7 @@ class ShadedSource(Source):
         self.steps = [(s, d if self.lod else None) for s, d in DRAG_STEPS
                       if (d if self.lod else 0) <= wv.levels and (self.lod or d)]
         self.step = len(self.steps) // 2
-        self.capabilities = dict(tf=self.scalar, detail=self.lod, background=True, shading=True)
+        self.capabilities = dict(tf=self.scalar, background=True, shading=True)
         self.default_tf = (TransferFunction.from_dict(wv.transfer_function) if wv.transfer_function
                            else TransferFunction.preset("grey")) if self.scalar else None
         self._tf = (None, self.default_tf)  # the last (spec, transfer function): the tracer reuses its table
