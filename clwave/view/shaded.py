@@ -44,8 +44,8 @@ class ShadedSource(Source):
         # scalar model has full-detail bricks, and its drag frames a smaller image only; where they combine,
         # this is True for both and nothing else changes
         self.lod = not self.scalar
-        self.steps = [(s, d if self.lod else None) for s, d in DRAG_STEPS
-                      if (d if self.lod else 0) <= wv.levels and (self.lod or d)]
+        self.steps = ([(s, d) for s, d in DRAG_STEPS if d <= wv.levels] if self.lod
+                      else [(s, None) for s in sorted({s for s, _ in DRAG_STEPS})])
         self.step = len(self.steps) // 2
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
         self.default_tf = (TransferFunction.from_dict(wv.transfer_function) if wv.transfer_function
