@@ -15,6 +15,7 @@ from clwave.view.protocol import BURST, MAX_MESSAGE, RateLimit, Refused, parse_v
 
 BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
             background=0.0, shading=True)
+TF = dict(preset="hydrogen", centre=0.1, width=2.0, opacity=2.0)
 
 
 @pytest.fixture(scope="module")
@@ -31,16 +32,20 @@ def run(coroutine):
     return asyncio.run(coroutine)
 
 
-async def frames_until_final(ws, seq):
-    """The frames of view ``seq`` up to its final one (others are dropped as a page drops them)."""
+async def frames_until_final(ws, seq, until_seq=False):
+    """The frames of view ``seq`` up to its final one (others are dropped as a page drops them); ``until_seq``:
+    its first frame only (a view while moving has no final one).  A status message (what is being made) is
+    passed over."""
     out = []
     while True:
         msg = await ws.receive(timeout=60)
+        if msg.type == aiohttp.WSMsgType.TEXT and json.loads(msg.data)["type"] == "status":
+            continue  # what is being prepared
         assert msg.type == aiohttp.WSMsgType.BINARY, msg
         figures, data = unpack_frame(msg.data)
         if figures["seq"] == seq:
             out.append((figures, data))
-            if figures["final"]:
+            if figures["final"] or until_seq:
                 return out
 
 
@@ -52,7 +57,8 @@ def decode(data):
 # ---------------------------------------------------------------------------- messages
 def test_parse_view_takes_a_whole_view():
     state = parse_view(json.dumps(dict(BASE, seq=3, window=[0, 2.5])), 2, ("xray",))
-    assert (state.seq, state.azimuth, state.window, state.moving) == (3, 30.0, (0.0, 2.5), False)
+    assert (state.seq, state.azimuth, state.window, state.moving, state.tf) == (3, 30.0, (0.0, 2.5), False, None)
+    assert parse_view(json.dumps(dict(BASE, seq=3, tf=TF)), 2, ("xray",)).tf == ("hydrogen", 0.1, 2.0, 2.0)
 
 
 @pytest.mark.parametrize("change, words", [
@@ -60,6 +66,8 @@ def test_parse_view_takes_a_whole_view():
     (dict(elevation=91), "elevation"), (dict(zoom=float("nan")), "zoom"), (dict(mode="shaded"), "mode"),
     (dict(detail=0), "detail"), (dict(window=[2, 1]), "lo < hi"), (dict(window="auto"), "window"),
     (dict(moving=1), "moving"), (dict(path="/etc/passwd"), "unknown field"), (dict(type="run"), "type"),
+    (dict(tf=[1]), "tf must be"), (dict(tf=dict(TF, preset="/etc/passwd")), "preset"),
+    (dict(tf=dict(TF, opacity=-1)), "opacity"), (dict(tf=dict(TF, code="x")), "tf must be"),
 ])
 def test_parse_view_refuses_what_is_not_a_view(change, words):
     with pytest.raises(Refused, match=words):
@@ -179,7 +187,48 @@ def test_still_xray_frames_refine_to_the_splat_of_the_view(viewer):
     assert np.abs(got.astype(int) - expect).max() <= 1
 
 
-def test_shaded_frames_end_at_the_ray_traced_view():
+def test_a_drag_prefix_with_the_footprints_of_its_bands_only_is_the_same_image(viewer):
+    """``begin(camera, upto=n)`` makes the footprints of the bands the first n coefficients reach: their image
+    equals the same prefix splatted into a view with every band's footprints, and it takes no more."""
+    r = viewer.server.sources["xray"].r
+    camera = clwave.Camera(40.0, 10.0, (40, 56))
+    n = 600  # the scaling band and a few of the coarsest details
+    prefix = r.begin(camera, upto=n)
+    prefix.splat(0, n)
+    full = r.begin(camera)
+    full.splat(0, n)
+    assert len(prefix.tables[0].textures) < len(full.tables[0].textures)
+    assert np.allclose(prefix.image(), full.image(), rtol=1e-6, atol=1e-6 * np.abs(full.image()).max())
+    with pytest.raises(ValueError, match="first 600 coefficients only"):
+        prefix.splat(n, 1)
+
+
+def test_still_frames_are_passes_of_whole_quanta_and_end_at_the_kept_set(viewer):
+    """Every still pass but a first remainder is a whole multiple of QUANTUM (no new kernel builds), each frame
+    at least doubles the coefficients, and the rest goes at once when it is expected within 1.5 frames."""
+    from clwave.view.frames import QUANTUM, STILL_SECONDS, ladder
+
+    xray = viewer.server.sources["xray"]
+    limit, rate = 10 * QUANTUM + 123, xray.rate
+    try:
+        xray.rate = STILL_SECONDS / (2 * QUANTUM)  # a frame's time splats two quanta
+        done, counts = 0, []
+        while done < limit:
+            done = xray._still_count(done, limit)
+            counts.append(done)
+        assert all(c % QUANTUM == limit % QUANTUM for c in counts) and counts[-1] == limit
+        assert all(b >= 2 * a for a, b in zip(counts, counts[1:-1]))
+        assert counts[0] >= 2 * QUANTUM and len(counts) == 3  # 2 quanta, then doubling to the kept set
+        xray.rate = STILL_SECONDS / limit  # the whole view within a frame's time: one frame
+        assert xray._still_count(0, limit) == limit
+    finally:
+        xray.rate = rate
+    assert [ladder(n, 10**6) for n in (3, 1000, 4097, 6500)] == [4, 1024, 4096, 8192]
+
+
+def test_shaded_frames_of_an_rgba_model_refine_in_detail_to_the_ray_traced_view():
+    """An RGBA model: a drag frame at a reduced size and coarse detail; when still, RayTracer.refine's frames,
+    coarse detail on a reduced image to full detail, with error estimates, the last clwave.raytrace of the view."""
     wv = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(
         clwave.phantom("hydrogen", n=24)), levels=2).threshold(keep=0.3)
 
@@ -187,15 +236,59 @@ def test_shaded_frames_end_at_the_ray_traced_view():
         async with aiohttp.ClientSession() as s:
             ws = await s.ws_connect(socket_url(v))
             hello = await ws.receive_json()
-            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", azimuth=10.0, background=1.0)))
-            return hello, await frames_until_final(ws, 1)
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", azimuth=10.0, background=1.0, moving=True)))
+            drag = await frames_until_final(ws, 1, until_seq=True)
+            await ws.send_str(json.dumps(dict(BASE, seq=2, mode="shaded", azimuth=10.0, background=1.0)))
+            return hello, drag, await frames_until_final(ws, 2)
     with view(wv, size=32, tolerance=2e-2) as v:
-        hello, frames = run(go(v))
+        hello, drag, frames = run(go(v))
     assert hello["modes"] == ["xray", "shaded"] and hello["capabilities"]["shaded"]["tf"] is False
-    assert [f["tolerance"] for f, _ in frames] == [0.2, 2e-2]
-    expect = clwave.raytrace(wv, clwave.Camera(10.0, 20.0, 32, extent=frames[-1][0]["extent"]),
+    assert drag[0][0]["width"] < 32 and not drag[0][0]["final"]
+    figures = [f for f, _ in frames]
+    assert [f["detail"] for f in figures] == sorted(f["detail"] for f in figures)[::-1] and figures[-1]["detail"] == 0
+    assert figures[0]["reduction"] > 1 and figures[-1]["reduction"] == 1 and figures[-1]["error"] == 0.0
+    assert all(f["tolerance"] == 2e-2 for f in figures) and all(f["error"] >= 0 for f in figures[1:])
+    expect = clwave.raytrace(wv, clwave.Camera(10.0, 20.0, 32, extent=figures[-1]["extent"]),
                              tolerance=2e-2).to_uint8(background=(1.0, 1.0, 1.0))
     assert np.abs(decode(frames[-1][1]).astype(int) - expect).max() <= 1
+
+
+def test_a_scalar_model_is_shaded_through_the_tabs_transfer_function_built_off_the_render_thread(monkeypatch):
+    """A scalar model: the editor's transfer function (a preset, its window moved and widened, its opacity scaled)
+    classifies while rendering, the final frame clwave.raytrace with that function; the ray tracer is made on the
+    build thread, and X-ray frames go on meanwhile."""
+    import threading
+
+    from clwave.view.shaded import ShadedSource
+
+    gate, prepare = threading.Event(), ShadedSource.prepare
+    monkeypatch.setattr(ShadedSource, "prepare", lambda self: gate.wait(60) and prepare(self))
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.3)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            hello = await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", tf=TF)))
+            status = await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=2)))  # X-ray while the tracer is being made
+            xray = await frames_until_final(ws, 2)
+            gate.set()
+            await ws.send_str(json.dumps(dict(BASE, seq=3, mode="shaded", tf=TF, azimuth=50.0)))
+            return hello, status, xray, await frames_until_final(ws, 3)
+    with view(wv, size=32, tolerance=2e-2) as v:
+        hello, status, xray, frames = run(go(v))
+    assert hello["capabilities"]["shaded"]["tf"] is True and status["type"] == "status"
+    assert xray[-1][0]["mode"] == "xray" and xray[-1][0]["final"]
+    figures = [f for f, _ in frames]
+    assert [f["reduction"] for f in figures] == [4, 2, 1] and figures[-1]["tolerance"] == 2e-2
+    # hydrogen's window (0, 1): centre moved 0.1 of its width, twice as wide; opacity doubled
+    points = clwave.TransferFunction.preset("hydrogen").points.copy()
+    points[:, 4] *= 2.0
+    tf = clwave.TransferFunction(points, window=(-0.4, 1.6))
+    expect = clwave.raytrace(wv, clwave.Camera(50.0, 20.0, 32, extent=figures[-1]["extent"]), tolerance=2e-2,
+                             transfer_function=tf).to_uint8(background=(0.0, 0.0, 0.0))
+    assert expect.std() > 5 and np.abs(decode(frames[-1][1]).astype(int) - expect).max() <= 1
 
 
 def test_view_refuses_what_it_cannot_show():

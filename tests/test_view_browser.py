@@ -111,3 +111,27 @@ def test_a_hostile_socket_closes_and_the_page_keeps_working(viewer, page):
     before = browser.shown(page)
     browser.drag(page, 30, 0, steps=3, hold=False)
     assert browser.wait_final(page)["azimuth"] != 30 and browser.shown(page) > before
+
+
+def test_shaded_with_the_transfer_function_editor(viewer, page):
+    """A scalar model in the shaded mode: moving the opacity slider shows a cheaper frame of the new function
+    at once; let go, the final frame is clwave.raytrace of the view with that function (made here from the preset)."""
+    browser.open_viewer(page, viewer.url)
+    page.execute_script('document.querySelector(\'input[value="shaded"]\').click();'
+                        'const p = document.getElementById("tf-preset"); p.value = "hydrogen";'
+                        'p.dispatchEvent(new Event("change"));')
+    browser.wait_final(page)
+    seq = page.execute_script("const e = document.getElementById('tf-opacity'); e.value = 75;"
+                              "e.dispatchEvent(new Event('input')); return window.clwave.current().fig.seq")
+    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {seq} && f")
+    assert moving["mode"] == "shaded" and not moving["final"] and moving["width"] < SIZE[1]
+    page.execute_script("document.getElementById('tf-opacity').dispatchEvent(new Event('change'))")
+    final = browser.wait_final(page)
+    points = clwave.TransferFunction.preset("hydrogen").points.copy()
+    points[:, 4] *= 10.0  # the slider at 75: 10^((75 - 50) / 25)
+    camera = clwave.Camera(final["azimuth"], final["elevation"], SIZE, extent=final["extent"])
+    expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=clwave.TransferFunction(
+        points, window=(0.0, 1.0))).to_uint8(background=(0.0, 0.0, 0.0))
+    figures, data = browser.current_frame(page)
+    assert figures["tolerance"] == 1e-2 and expect.std() > 5
+    assert np.abs(decode(data).astype(int) - expect).max() <= 1

@@ -56,7 +56,9 @@ default hydrogen ``--size``^3 RGBA 5 %), each in a fresh process: ``RayTracer.op
 ``view`` (not in ``all``; needs chromium, tools/browser.py): ``clwave view`` of hydrogen scalar, cubic, 5 %, at
 ``--view-image`` (512²) in headless chromium, ``--views`` drags after a warm-up: the first image after the page
 loads (model ready), frames per second while dragging (and each drag frame's render time and width), and the
-time from releasing to the final frame, beside a one-shot ``clwave.splat`` of the same image in the same run.
+time from releasing to the final frame, beside a one-shot ``clwave.splat`` of the same image in the same run;
+then shaded (the scalar through the hydrogen preset at render time): frames per second dragging, release to the
+final frame beside a one-shot ray trace of it, and an opacity-slider move to its first frame on the page.
 
 A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) and an
 entry in ``BENCHMARKS``.
@@ -674,54 +676,104 @@ def post_errors(tracer, wv, tf, args) -> dict:
 
 
 def bench_view(args) -> dict:
-    """``clwave view`` in headless chromium (tools/browser.py): hydrogen scalar, cubic, 3 levels, 5 % kept, X-ray
-    at ``--view-image``: the first image after the page loads (the model ready, the server started), frames per
-    second while dragging, and the time from releasing to the final (every kept coefficient) frame."""
+    """``clwave view`` in headless chromium (tools/browser.py): hydrogen scalar, cubic, 3 levels, 5 % kept, at
+    ``--view-image``.  X-ray: the first image after the page loads (the model ready, the server started), frames per
+    second while dragging, and the time from releasing to the final (every kept coefficient) frame, each drag and
+    release beside a one-shot splat of its final view (interleaved: a ratio the load changes less).  Shaded (the
+    scalar through the hydrogen preset at render time, tolerance 1e-2): frames per second while dragging, release
+    to the final frame beside a one-shot ``clwave.raytrace`` of it, and a transfer-function slider move to its first
+    frame on the page."""
     import browser
     from clwave.view import view
 
     wv = WaveletVolume.from_volume(phantom("hydrogen", n=args.size), wavelet="cubic", levels=3).threshold(keep=0.05)
     size = args.view_image
     start = time.perf_counter()
-    first, fps, refine, drag_frame, drag_width = [], [], [], [], []
+    first, fps, refine, drag_frame, drag_width, one_shot = [], [], [], [], [], []
     with view(wv, size=size, device=args.device) as viewer, browser.chromium() as driver:
         server_seconds = time.perf_counter() - start
         for run in range(args.views + 1):  # run 0 is the warm-up (the browser's first page)
             first_image = browser.open_viewer(driver, viewer.url)
             browser.wait_final(driver)
-            shown = browser.shown(driver)
-            t0 = time.perf_counter()
-            browser.drag(driver, 240, 60, steps=60, pause=0.05)  # ~3 s of dragging, 20 moves a second
-            dragged = time.perf_counter() - t0
-            frames = driver.execute_script("return window.clwave.stats.frames")[-(browser.shown(driver) - shown):]
+            moving, dragged = _view_drag(browser, driver)
             browser.release(driver)
-            browser.wait_final(driver)
+            final = browser.wait_final(driver)
             stats = driver.execute_script("return window.clwave.stats")
+            t0 = time.perf_counter()
+            clwave.splat(wv, clwave.Camera(final["azimuth"], final["elevation"], size, extent=final["extent"]))
             if run:
-                moving = [f for f in frames if f["moving"]]
+                one_shot.append(time.perf_counter() - t0)
                 first.append(first_image)
                 fps.append(len(moving) / dragged)
                 refine.append((stats["frames"][-1]["at"] - stats["released"]) / 1000.0)
                 drag_frame += [f["seconds"] for f in moving]
                 drag_width += [f["width"] for f in moving]
-        # the same final image in one call, in the same period: refinement's overhead as a ratio the load
-        # changes less than the times
-        one_shot = []
-        for run, (azimuth, elevation) in enumerate(views(args.views + 1)):
-            t0 = time.perf_counter()
-            clwave.splat(wv, clwave.Camera(azimuth, elevation, size))
-            if run:
-                one_shot.append(time.perf_counter() - t0)
+        shaded = _view_shaded(browser, driver, viewer, wv, args)
     return dict(setting=dict(volume=f"hydrogen {args.size}^3", channels=1, wavelet="cubic", levels=3, keep=0.05,
-                             image=f"{size}^2", mode="xray", browser="headless chromium (Selenium)",
+                             image=f"{size}^2", browser="headless chromium (Selenium)",
                              drag="60 moves over 240 x 60 pixels, 50 ms apart"),
                 coefficients=viewer.server.sources["xray"].r.count, server_start_seconds=server_seconds,
-                first_image_seconds=summary(first), drag_frames_per_second=summary(fps),
-                drag_frame_render_seconds=summary(drag_frame), drag_frame_width=summary(drag_width),
-                refine_seconds=summary(refine), one_shot_splat_seconds=summary(one_shot),
-                refine_over_one_shot=statistics.median(refine) / statistics.median(one_shot),
-                peak_resident_gib=peak_resident_gib(),
-                target=dict(first_image_seconds=0.3, drag_frames_per_second=10, refine_seconds=1.0))
+                xray=dict(first_image_seconds=summary(first), drag_frames_per_second=summary(fps),
+                          drag_frame_render_seconds=summary(drag_frame), drag_frame_width=summary(drag_width),
+                          refine_seconds=summary(refine), one_shot_splat_seconds=summary(one_shot),
+                          refine_over_one_shot=statistics.median(r / o for r, o in zip(refine, one_shot))),
+                shaded=shaded, peak_resident_gib=peak_resident_gib(),
+                target=dict(first_image_seconds=0.3, drag_frames_per_second=10, refine_seconds=1.0,
+                            shaded_drag_frames_per_second=5, tf_slider_first_frame_seconds=0.2))
+
+
+def _view_drag(browser, driver) -> tuple:
+    """Drag (held) 60 moves 50 ms apart: the frames shown while moving, and the seconds it took."""
+    shown = browser.shown(driver)
+    t0 = time.perf_counter()
+    browser.drag(driver, 240, 60, steps=60, pause=0.05)
+    dragged = time.perf_counter() - t0
+    frames = driver.execute_script("return window.clwave.stats.frames")[-(browser.shown(driver) - shown):]
+    return [f for f in frames if f["moving"]], dragged
+
+
+def _view_shaded(browser, driver, viewer, wv, args) -> dict:
+    """The shaded mode of the page already open: a drag, its release to the final frame beside a one-shot ray trace
+    of that view, and opacity-slider moves to their first frames."""
+    size = args.view_image
+    start = time.perf_counter()
+    driver.execute_script('document.querySelector(\'input[value="shaded"]\').click();'
+                          'const p = document.getElementById("tf-preset"); p.value = "hydrogen";'
+                          'p.dispatchEvent(new Event("change"));')
+    browser.wait_final(driver, timeout=600)
+    ready = time.perf_counter() - start
+    out = dict(first_final_seconds=ready, tolerance=1e-2, transfer_function="hydrogen preset, at render time")
+    fps, frame, width, refine, one_shot = [], [], [], [], []
+    for run in range(max(1, args.views)):
+        moving, dragged = _view_drag(browser, driver)
+        browser.release(driver)
+        final = browser.wait_final(driver, timeout=600)
+        stats = driver.execute_script("return window.clwave.stats")
+        fps.append(len(moving) / dragged)
+        frame += [f["seconds"] for f in moving]
+        width += [f["width"] for f in moving]
+        refine.append((stats["frames"][-1]["at"] - stats["released"]) / 1000.0)
+        source = viewer.server.sources["shaded"]
+        t0 = time.perf_counter()
+        source.tracer.render(clwave.Camera(final["azimuth"], final["elevation"], size, extent=final["extent"]),
+                             tolerance=1e-2, transfer_function=source.transfer_function(
+                                 ("hydrogen", 0.0, 1.0, 1.0)))
+        one_shot.append(time.perf_counter() - t0)
+    slider = []
+    for value in (60, 70, 80, 65, 55, 45, 40, 50):  # opacity-scale moves, each to its first frame on the page
+        seq = driver.execute_script("return window.clwave.stats.frames.slice(-1)[0].seq")
+        driver.execute_script(f"window.clwave.stats.tfInput = null; const e = document.getElementById('tf-opacity');"
+                              f"e.value = {value}; e.dispatchEvent(new Event('input'));")
+        shown = browser.wait_for(driver, f"const f = window.clwave.stats.frames.slice(-1)[0]; return f.seq > {seq} "
+                                         f"&& f", timeout=120)
+        slider.append((shown["at"] - driver.execute_script("return window.clwave.stats.tfInput")) / 1000.0)
+        time.sleep(0.1)
+    driver.execute_script("document.getElementById('tf-opacity').dispatchEvent(new Event('change'))")
+    browser.wait_final(driver, timeout=600)
+    return dict(out, drag_frames_per_second=summary(fps), drag_frame_render_seconds=summary(frame),
+                drag_frame_width=summary(width), refine_seconds=summary(refine), one_shot_raytrace_seconds=summary(
+                    one_shot), refine_over_one_shot=statistics.median(r / o for r, o in zip(refine, one_shot)),
+                tf_slider_first_frame_seconds=summary(slider))
 
 
 def bench_drr(args) -> dict:

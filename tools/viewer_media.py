@@ -3,7 +3,7 @@
 
     python tools/viewer_media.py [--out docs/figures] [--n 128] [--size 256] [--steps 24]
 
-``viewer_page.png``: a screenshot of the page (hydrogen, classified with its preset, X-ray);
+``viewer_page.png``: a screenshot of the page (hydrogen, scalar, shaded through its preset at render time);
 ``viewer_orbit.gif``: the image as the page shows it after each of ``--steps`` drags that orbit once around
 the Shepp-Logan phantom (X-ray; each frame the refined one of its view).
 """
@@ -47,11 +47,14 @@ def main(argv=None):
             browser.drag(driver, -step, 0, steps=3, pause=0.02, hold=False)
             browser.wait_final(driver)
             frames.append(iio.imread(io.BytesIO(canvas.screenshot_as_png))[..., :3])
-    with view(clwave.phantom("hydrogen", n=args.n), size=args.size, tf="hydrogen", keep=0.05) as viewer, \
+    with view(clwave.phantom("hydrogen", n=args.n), size=args.size, keep=0.05) as viewer, \
             browser.chromium(width=args.size + 340, height=1000) as driver:
         browser.open_viewer(driver, viewer.url)
+        driver.execute_script('document.querySelector(\'input[value="shaded"]\').click();'
+                              'const p = document.getElementById("tf-preset"); p.value = "hydrogen";'
+                              'p.dispatchEvent(new Event("change"));')
         browser.drag(driver, 20, 40, steps=3, pause=0.02, hold=False)
-        browser.wait_final(driver)
+        browser.wait_final(driver, timeout=600)
         page = driver.get_screenshot_as_png()
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "viewer_page.png").write_bytes(page)

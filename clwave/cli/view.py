@@ -56,7 +56,7 @@ def run(args):
 
 
 def add_parser(sub):
-    p = sub.add_parser("view", help="a progressive viewer in the browser (X-ray, and shaded for an RGBA model)")
+    p = sub.add_parser("view", help="a progressive viewer in the browser (X-ray and shaded)")
     add_input_options(p)
     add_model_options(p)
     g = p.add_argument_group("viewer")

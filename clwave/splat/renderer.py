@@ -97,9 +97,12 @@ class SplatRenderer:
         self._sizes = None  # the count tables' sizes of the last view
         for gi, g in enumerate(wv.groups):
             table = wv.ranked(gi)
-            # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22)
-            kept = set(np.unique(table.level.astype(np.int32) * 8 + table.key_code).tolist())
-            present = {(b.level, b.key) for b in g.bands if b.level * 8 + b.code in kept}
+            # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22); each present band
+            # with its first coefficient in importance order (a prefix needs only the bands it reaches)
+            codes, firsts = np.unique(table.level.astype(np.int32) * 8 + table.key_code, return_index=True)
+            first_of = dict(zip(codes.tolist(), firsts.tolist()))
+            present = {(b.level, b.key): first_of[b.level * 8 + b.code] for b in g.bands
+                       if b.level * 8 + b.code in first_of}
             self.groups.append(dict(table=table, count=len(table.level), channels=len(g.channels), present=present,
                                     energy=_energy_prefix(table.values)))
 
@@ -130,19 +133,22 @@ class SplatRenderer:
             self.compile_seconds += time.perf_counter() - start
         return self.stages[(channels, perspective)]
 
-    def begin(self, camera):
+    def begin(self, camera, upto=None):
         """Start an image of a :class:`Camera` or :class:`ConeBeam`: resolve the view, make footprints, zero
-        the framebuffers (an :class:`Accumulator`)."""
+        the framebuffers (an :class:`Accumulator`).  ``upto``: the image splats only the first ``upto``
+        coefficients, so only the bands they reach get footprints (a viewer's frame while dragging)."""
         if not isinstance(camera, (Camera, ConeBeam)):
             raise InputError("camera must be a clwave.Camera or a clwave.ConeBeam")
         view = camera.view(self.wv)
         # the world width of a pixel for the coarse framebuffers' error: in perspective the widest, at the far
         # side of the volume (docs/splatting.md §8)
         pixel = max(view.slope) * depth_range(view, self.wv, 0)[1] if view.perspective else view.pixel
-        # framebuffer factor of each band that has coefficients, per group: 1 unless drawn coarse
+        # framebuffer factor of each band that has coefficients (among the first ``upto``), per group: 1 unless
+        # drawn coarse
+        reach = np.inf if upto is None else upto
         factors = [{(b.level, b.key): coarse_factor(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa",
                                                       pixel, min(self.wv.spacing), self.coarse)
-                    if self.coarse else 1 for b in g.bands if (b.level, b.key) in gr["present"]}
+                    if self.coarse else 1 for b in g.bands if gr["present"].get((b.level, b.key), np.inf) < reach}
                    for g, gr in zip(self.wv.groups, self.groups)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * 16
@@ -163,7 +169,7 @@ class SplatRenderer:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
                                  max_texels=self.cc.info.max_alloc // 4) for gi, ls in enumerate(per_layer)]
         self._prepare(tables, view.size)
-        return Accumulator(self, view, layers, tables)
+        return Accumulator(self, view, layers, tables, upto)
 
     def render(self, camera) -> RenderResult:
         """The X-ray image of one view (a :class:`Camera` or :class:`ConeBeam`) from every coefficient."""
@@ -251,8 +257,8 @@ class Accumulator:
     """One image being accumulated: splat coefficient ranges in importance order into the
     framebuffers (layers) of each channel group, all layers in one pass."""
 
-    def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list):
-        self.r, self.view, self.layers, self.tables = renderer, view, layers, tables
+    def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list, upto=None):
+        self.r, self.view, self.layers, self.tables, self.upto = renderer, view, layers, tables, upto
         cc = renderer.cc
         self.device_tables = [{name: cc.upload(getattr(t, name)) for name in t.names} for t in tables]
         self.fbs = [cla.zeros(cc.queue, (t.pixels * 4,), np.float32) for t in tables]
@@ -265,6 +271,8 @@ class Accumulator:
 
     def splat(self, first: int, count: int):
         """Add coefficients ``first .. first + count`` (importance order) of every group."""
+        if self.upto is not None and first + count > self.upto:
+            raise ValueError(f"this image was begun for the first {self.upto} coefficients only")
         for gi, g in enumerate(self.r.groups):
             n = max(0, min(count, g["count"] - first))
             for coef, values, offset, m in self._chunks(gi, first, n):

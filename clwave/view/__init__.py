@@ -67,8 +67,9 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=0.05, tf=None, devic
          open_browser=False) -> Viewer:
     """Serve a progressive view of a model or volume in the browser; returns a :class:`Viewer`.
 
-    ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (shaded
-    needs an RGBA model: a classified one, or ``tf=`` for a volume).  A volume is decomposed with cubic
+    ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (an RGBA
+    model, classified first by ``tf=`` for a volume, or a scalar one through the page's transfer function at render
+    time).  A volume is decomposed with cubic
     wavelets and ``keep`` of its voxels kept.  The server binds ``host`` (loopback unless given) at ``port``
     (0: a free one); every request needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
     """

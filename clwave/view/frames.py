@@ -20,15 +20,18 @@ from ..io.result import RenderResult, resolve_window
 from ..model.camera import Camera
 from ..splat.renderer import SplatRenderer
 
-#: frames while dragging: this share of the image size (a view's footprints and framebuffers shrink with it)
-DRAG_SCALE = 0.5
-#: X-ray frames while dragging aim at this many seconds of splatting (the coefficient prefix adapts to it)
-DRAG_SECONDS = 0.06
-#: shaded frames while dragging and the first when still: the tolerance times this
-DRAG_LOOSEN = 10.0
-#: still X-ray views refine from the drag prefix to the detail kept, the coefficients growing by at most this
-#: factor from frame to frame (fewer, larger steps reach the final frame sooner: each costs a read-back and a PNG)
-STILL_GROWTH = 4.0
+#: X-ray frames while dragging aim at this many seconds of rendering: the coefficient prefix adapts to the measured
+#: time, and below DRAG_LEAST coefficients the image shrinks instead, through DRAG_SCALES of the full size
+DRAG_SECONDS = 0.04
+DRAG_LEAST = 2048
+DRAG_SCALES = (0.5, 0.375, 0.25)
+#: coefficient passes are whole multiples of this, past a first remainder (below it, powers of two): PoCL builds
+#: each kernel anew for each work-group size, which it takes from the global size (0.3-0.6 s a build on 2 cores),
+#: and every multiple of 4096 gets the same one
+QUANTUM = 4096
+#: a still view shows a better frame about this often; when the rest of it is expected within 1.5 times this, the
+#: rest goes at once into the final frame (each frame costs a pass over every tile, a read-back and a PNG)
+STILL_SECONDS = 0.3
 #: the display window "auto" is taken from an image of every coefficient at this size (line integrals are in
 #: world units, so the percentiles hardly depend on the image size)
 WINDOW_SIZE = 128
@@ -48,6 +51,7 @@ class ViewState:
     moving: bool
     background: float  # shaded: grey level behind the volume, 0..1
     shading: bool  # shaded: Phong lighting (a headlight) or unlit emission
+    tf: tuple | None = None  # shaded, scalar model: (preset, centre, width, opacity), see shaded.transfer_function
 
 
 @dataclass
@@ -76,22 +80,31 @@ def check_tolerance(tolerance) -> float:
     return float(tolerance)
 
 
-def still_counts(first: int, limit: int) -> list:
-    """Coefficient counts of a still view's frames: ``first`` to ``limit`` in equal ratios of at most
-    :data:`STILL_GROWTH`.
+def ladder(n: float, total: int) -> int:
+    """A coefficient count near ``n`` that a pass takes without a new kernel build (:data:`QUANTUM`), at most
+    ``total``.
 
-    >>> still_counts(1000, 64000)
-    [1000, 4000, 16000, 64000]
+    >>> [ladder(n, 10**6) for n in (1, 700, 3000, 5000, 70000, 2e6)]
+    [1, 512, 4096, 4096, 69632, 1000000]
     """
-    steps = int(np.ceil(np.log(limit / first) / np.log(STILL_GROWTH) - 1e-9)) if limit > first else 0
-    return [int(round(first * (limit / first) ** (i / steps))) for i in range(steps)] + [limit]
+    if n >= total:
+        return int(total)
+    n = 2 ** round(np.log2(max(n, 1.0))) if n < QUANTUM else QUANTUM * round(n / QUANTUM)
+    return int(min(n, total))
 
 
 class Source:
-    """Common to both sources: the model, the image size and the framing."""
+    """Common to both sources: the model, the image size and the framing.  A source is ready to render at once
+    (:meth:`ready`), or after :meth:`prepare` has run on a thread of its own (the shaded one's bricks)."""
 
     mode = ""
     capabilities: dict = {}
+
+    def ready(self) -> bool:
+        return True
+
+    def prepare(self):
+        """What :meth:`frames` needs that takes long, made off the render thread."""
 
     def __init__(self, wv, size):
         self.wv, self.size = wv, (int(size[0]), int(size[1]))
@@ -118,8 +131,9 @@ class Source:
 
 class XraySource(Source):
     """X-ray frames by splatting prefixes of the ranked coefficients with one reused :class:`SplatRenderer`
-    (paper §5.2): a smaller image of a prefix sized to keep up while dragging, then growing prefixes of one
-    framebuffer up to ``detail`` of the kept coefficients when still (docs/splatting.md §5)."""
+    (paper §5.2): while dragging, a smaller image of a prefix sized to the measured render time; when still,
+    growing prefixes accumulated into one framebuffer up to ``detail`` of the kept coefficients, a frame about
+    every :data:`STILL_SECONDS` (docs/viewer.md §2)."""
 
     mode = "xray"
     capabilities = dict(detail=True, window=True)
@@ -127,37 +141,72 @@ class XraySource(Source):
     def __init__(self, wv, size, renderer: SplatRenderer):
         super().__init__(wv, size)
         self.r = renderer
-        self.drag_count = max(1, min(renderer.count, max(1024, renderer.count // 100)))
-        result = RenderResult(self._image(Camera(30.0, 20.0, WINDOW_SIZE), renderer.count))
-        self.auto_window = tuple(float(v) for v in resolve_window(result.image[..., :3], "auto"))
-
-    def _image(self, camera, count):
-        acc = self.r.begin(camera)
-        acc.splat(0, count)
-        return acc.image()
+        self.drag_count = ladder(max(DRAG_LEAST, renderer.count / 100), renderer.count)
+        self.drag_scale = 0  # index in DRAG_SCALES
+        self.rate = None  # seconds per coefficient of the last still view (its footprints included)
+        self.dragged = None  # (azimuth, elevation, zoom) of the last drag frame
+        acc = renderer.begin(Camera(30.0, 20.0, WINDOW_SIZE))
+        acc.splat(0, renderer.count)
+        self.auto_window = tuple(float(v) for v in resolve_window(acc.image()[..., :3], "auto"))
 
     def frames(self, state: ViewState):
         start = time.perf_counter()
-        r = self.r
-        limit = max(1, int(np.ceil(state.detail * r.count)))
+        total = self.r.count
+        limit = total if state.detail >= 1.0 else ladder(state.detail * total, total)
         window = state.window or self.auto_window
-        if state.moving:
+        # a drag frame while moving, and first for a still view the page has no drag frame of (a page's first, a
+        # reset): a smaller image of a prefix, with the footprints of the bands it reaches only
+        if state.moving or (state.azimuth, state.elevation, state.zoom) != self.dragged:
             count = min(self.drag_count, limit)
-            image = self._image(self.camera(state, DRAG_SCALE), count)
-            seconds = time.perf_counter() - start
-            # the next drag frame's prefix: scaled towards DRAG_SECONDS, at most doubled or halved per frame
-            self.drag_count = int(np.clip(count * np.clip(DRAG_SECONDS / max(seconds, 1e-4), 0.5, 2.0),
-                                          min(1024, r.count), r.count))
-            yield self._xray_frame(state, image, count, window, False, seconds, start)
-            return
-        acc = r.begin(self.camera(state))
-        done = 0
-        for count in still_counts(min(self.drag_count, limit), limit):
-            stage = time.perf_counter()
-            acc.splat(done, count - done)
-            done = count
+            acc = self.r.begin(self.camera(state, DRAG_SCALES[self.drag_scale]), upto=count)
+            acc.splat(0, count)
             image = acc.image()
-            yield self._xray_frame(state, image, done, window, done == limit, time.perf_counter() - stage, start)
+            seconds = time.perf_counter() - start
+            self._pace(count, seconds)
+            self.dragged = (state.azimuth, state.elevation, state.zoom)
+            yield self._xray_frame(state, image, count, window, False, seconds, start)
+            if state.moving:
+                return
+        stage = time.perf_counter()
+        acc = self.r.begin(self.camera(state))
+        done, busy = 0, time.perf_counter() - stage
+        while done < limit:
+            stage = time.perf_counter()
+            count = self._still_count(done, limit)
+            if done == 0 and 0 < limit % QUANTUM < count:  # the remainder first: the other passes are whole
+                done = limit % QUANTUM                        # multiples of QUANTUM (no new kernel builds)
+                acc.splat(0, done)
+            acc.splat(done, count - done)
+            image = acc.image()
+            done, seconds = count, time.perf_counter() - stage
+            busy += seconds
+            if done == limit:
+                self.rate = busy / limit
+            yield self._xray_frame(state, image, done, window, done == limit, seconds, start)
+
+    def _pace(self, count, seconds):
+        """The next drag frame's prefix and size: the prefix scaled towards :data:`DRAG_SECONDS` (at most doubled
+        or halved a frame); where it would fall below :data:`DRAG_LEAST` coefficients the image shrinks a step,
+        and where it grows past four times that the image grows back a step."""
+        want = count * float(np.clip(DRAG_SECONDS / max(seconds, 1e-4), 0.5, 2.0))
+        least = min(DRAG_LEAST, self.r.count)
+        if want < least and self.drag_scale < len(DRAG_SCALES) - 1:
+            self.drag_scale, want = self.drag_scale + 1, least
+        elif want > 4 * least and self.drag_scale > 0:
+            self.drag_scale, want = self.drag_scale - 1, want / 2
+        self.drag_count = ladder(max(want, least), self.r.count)
+
+    def _still_count(self, done: int, limit: int) -> int:
+        """The coefficients after the next still frame: at least twice ``done``, about :data:`STILL_SECONDS` more
+        of splatting at the last still view's rate, all ``limit`` where the rest is expected within 1.5 times
+        that (before a first still view: from the drag prefix, doubling); from a first frame on, ``limit`` less a
+        whole multiple of :data:`QUANTUM`."""
+        if self.rate is None:
+            count = max(2 * done, self.drag_count)
+        else:
+            step = STILL_SECONDS / self.rate
+            count = limit if limit - done <= 1.5 * step else done + max(done, step)
+        return int(limit - max(0, (limit - count) // QUANTUM * QUANTUM))
 
     def _xray_frame(self, state, image, count, window, final, seconds, start) -> Frame:
         energy = self.r.energy
@@ -169,37 +218,3 @@ class XraySource(Source):
                        error=float(np.sqrt(max(0.0, 1.0 - captured))), error_kind="relative L2 (coefficients left)",
                        window=list(window), seconds=seconds)
         return self._frame(state, picture, final or not state.moving, figures, start)
-
-
-class ShadedSource(Source):
-    """Shaded emission-absorption frames by one reused :class:`~clwave.RayTracer`: a smaller image at a looser
-    tolerance while dragging; when still the full image at the looser, then the given tolerance.  Needs an
-    RGBA (pre-classified) model: transfer functions at render time (``capabilities["tf"]``) are not there yet."""
-
-    mode = "shaded"
-    capabilities = dict(tf=False, background=True, shading=True)
-
-    def __init__(self, wv, size, tolerance, device=None):
-        super().__init__(wv, size)
-        self.tolerance, self.device, self._tracer = check_tolerance(tolerance), device, None
-
-    @property
-    def tracer(self):
-        """The :class:`~clwave.RayTracer`, made on first use (its bricks take a while)."""
-        if self._tracer is None:
-            from ..raytrace.tracer import RayTracer
-            self._tracer = RayTracer(self.wv, device=self.device)
-        return self._tracer
-
-    def frames(self, state: ViewState):
-        start = time.perf_counter()
-        stages = [(DRAG_SCALE, self.tolerance * DRAG_LOOSEN)] if state.moving else \
-            [(1.0, self.tolerance * DRAG_LOOSEN), (1.0, self.tolerance)]
-        for i, (scale, tolerance) in enumerate(stages):
-            stage = time.perf_counter()
-            result = self.tracer.render(self.camera(state, scale), tolerance=tolerance, shading=state.shading)
-            final = not state.moving and i == len(stages) - 1
-            picture = result.to_uint8(background=(state.background,) * 3)
-            figures = dict(final=final, tolerance=tolerance, error=tolerance, error_kind="absolute, per value",
-                           seconds=time.perf_counter() - stage)
-            yield self._frame(state, picture, final or not state.moving, figures, start)

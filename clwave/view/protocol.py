@@ -50,7 +50,23 @@ def _flag(msg, name) -> bool:
 
 
 FIELDS = {"type", "seq", "azimuth", "elevation", "zoom", "mode", "detail", "window", "moving", "background",
-          "shading"}
+          "shading", "tf"}
+#: a transfer function from the page's editor: a preset, its window's centre moved by this many of its widths, its
+#: width times this, its opacity times this (clwave.view.shaded.ShadedSource.transfer_function)
+TF_RANGES = dict(centre=(-2.0, 2.0), width=(0.02, 50.0), opacity=(1e-3, 1e3))
+
+
+def _tf(value):
+    """``(preset, centre, width, opacity)`` of a page's ``tf`` field, or None (the model's own)."""
+    from ..model.transfer import TransferFunction
+
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != {"preset", *TF_RANGES}:
+        raise Refused(f"tf must be null or {{\"preset\", {', '.join(map(repr, TF_RANGES))}}}")
+    if value["preset"] not in TransferFunction.PRESETS:
+        raise Refused(f"tf preset={value['preset']!r} must be one of {', '.join(TransferFunction.PRESETS)}")
+    return (value["preset"], *(_number(value, name, *span) for name, span in TF_RANGES.items()))
 
 
 def parse_view(text: str, last_seq: int, modes) -> ViewState:
@@ -81,7 +97,7 @@ def parse_view(text: str, last_seq: int, modes) -> ViewState:
     return ViewState(seq=seq, azimuth=_number(msg, "azimuth", -1e6, 1e6), elevation=_number(msg, "elevation", -90, 90),
                      zoom=_number(msg, "zoom", *ZOOM), mode=msg["mode"], detail=_number(msg, "detail", 1e-6, 1.0),
                      window=window, moving=_flag(msg, "moving"), background=_number(msg, "background", 0.0, 1.0),
-                     shading=_flag(msg, "shading"))
+                     shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")))
 
 
 class RateLimit:

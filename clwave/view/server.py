@@ -21,7 +21,8 @@ from urllib.parse import urlsplit
 from aiohttp import WSMsgType, web
 
 from ..errors import ClwaveError
-from .frames import ShadedSource, ViewState, XraySource
+from .frames import DRAG_SCALES, ViewState, XraySource
+from .shaded import ShadedSource
 from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, pack_frame, parse_view
 
 log = logging.getLogger("clwave.view")
@@ -54,6 +55,10 @@ class ViewServer:
         self.wv, self.host, self.port = wv, host, int(port)
         self.token = secrets.token_urlsafe(24)
         self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render")
+        # what a source makes before its first frame (the ray tracer's bricks) is made here, so that the render
+        # thread goes on serving every tab meanwhile
+        self.builder = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-build")
+        self._builds = {}  # mode -> the Future of its source's prepare()
         self.sessions = {}  # id -> Session, the open sockets
         self._ids = itertools.count(1)
         self._runner = None
@@ -66,13 +71,23 @@ class ViewServer:
         from ..splat.renderer import SplatRenderer
 
         xray = XraySource(wv, size, SplatRenderer(wv, device=device))
-        for moving in (True, False):
-            for _ in xray.frames(self.initial_view(xray, moving)):
+        for scale in range(len(DRAG_SCALES)):  # the kernels of each drag image size (PoCL builds per size)
+            xray.drag_scale = scale
+            for _ in xray.frames(self.initial_view(xray, moving=True)):
                 pass
+        xray.drag_scale = 0
+        for _ in xray.frames(self.initial_view(xray)):
+            pass
         sources = dict(xray=xray)
-        if wv.channels == 4:
+        if wv.channels in (1, 4):  # a scalar model through a transfer function at render time, or RGBA
             sources["shaded"] = ShadedSource(wv, size, tolerance, device=device)
         return sources
+
+    def prepared(self, source):
+        """The Future of ``source.prepare()`` on the build thread (started on first call)."""
+        if source.mode not in self._builds:
+            self._builds[source.mode] = asyncio.wrap_future(self.builder.submit(source.prepare))
+        return self._builds[source.mode]
 
     @staticmethod
     def initial_view(source, moving=False) -> ViewState:
@@ -115,6 +130,7 @@ class ViewServer:
         if self._runner is not None:
             await self._runner.cleanup()
         self.pool.shutdown(wait=False, cancel_futures=True)
+        self.builder.shutdown(wait=False, cancel_futures=True)
 
     @property
     def url(self) -> str:
@@ -187,6 +203,27 @@ class Session:
             self.state = None
             renderer.cancel()
 
+    async def _prepared(self, source, state) -> bool:
+        """Wait for ``source`` to be made on the build thread, or for a newer view (False: go to it); the page
+        hears what is being made, or why it failed."""
+        building = self.server.prepared(source)
+        if not building.done():
+            await self.ws.send_json(dict(type="status", seq=state.seq, message="preparing the ray tracer (its "
+                                         "bricks) for the first shaded view…"))
+            newer = asyncio.ensure_future(self.wake.wait())
+            await asyncio.wait({building, newer}, return_when=asyncio.FIRST_COMPLETED)
+            newer.cancel()
+            if not building.done():
+                return False
+        if building.exception() is not None:
+            exc = building.exception()
+            if not isinstance(exc, ClwaveError):
+                log.error("%s: preparing the %s view failed", self.name, source.mode, exc_info=exc)
+            await self.ws.send_json(dict(type="error", seq=state.seq, message=str(exc) if isinstance(exc, ClwaveError)
+                                         else f"internal error ({type(exc).__name__}); see the server's log"))
+            return False
+        return self.state is state  # else the newer view is waiting (wake is set)
+
     async def _close(self, refused: Refused):
         log.warning("closed %s: %s", self.name, refused)
         await self.ws.close(code=refused.code, message=str(refused).encode()[:120])
@@ -197,7 +234,10 @@ class Session:
             await self.wake.wait()
             self.wake.clear()
             state = self.state
-            frames = self.server.sources[state.mode].frames(state)
+            source = self.server.sources[state.mode]
+            if not source.ready() and not await self._prepared(source, state):
+                continue
+            frames = source.frames(state)
             try:
                 while self.state is state:
                     frame = await loop.run_in_executor(pool, next, frames, None)

@@ -5,10 +5,11 @@
   const token = new URLSearchParams(location.search).get("token") || "";
   const canvas = $("image"), ctx = canvas.getContext("2d"), status = $("status");
   const HOME = { azimuth: 30, elevation: 20, zoom: 1 };
-  const state = { ...HOME, mode: "xray", detail: 1, window: null, moving: false, background: 0, shading: true };
+  const state = { ...HOME, mode: "xray", detail: 1, window: null, moving: false, background: 0, shading: true,
+                  tf: null };
   let sentSeq = 0, hello = null, current = null, pending = false, idleTimer = null;
   // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
-  const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, frames: [] };
+  const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, tfInput: null, frames: [] };
   window.clwave = { state, stats, send: () => request(), current: () => current,
                     latest: () => (pending || held ? -1 : sentSeq) };  // the view asked for last (-1: one is on its way)
 
@@ -39,6 +40,7 @@
 
   function onText(msg) {
     if (msg.type === "hello") { hello = msg; setup(); request(); }
+    else if (msg.type === "status" && msg.seq === sentSeq) status.textContent = msg.message;
     else if (msg.type === "error" && msg.seq === sentSeq) {
       status.textContent = msg.message; status.classList.add("error");
       next(msg);
@@ -52,9 +54,11 @@
     const fig = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, n)));
     if (fig.seq !== sentSeq) { stats.dropped += 1; return; }  // a frame of a view the user has left
     const blob = new Blob([new Uint8Array(buffer, 4 + n)], { type: fig.mime }), k = ++received;
+    next(fig);  // a drag's next view goes now: the server renders it while this frame decodes and is drawn
     createImageBitmap(blob).then((bitmap) => {
-      // decoded off the main thread: by now the view may have moved on, or a later frame been drawn
-      if (fig.seq !== sentSeq || k < drawn) { stats.dropped += 1; bitmap.close(); next(fig); return; }
+      // decoded off the main thread: drawn unless a frame that arrived later has been drawn meanwhile (this one
+      // was of the latest view when it arrived)
+      if (k < drawn) { stats.dropped += 1; bitmap.close(); return; }
       drawn = k;
       ctx.drawImage(bitmap, 0, 0, canvas.width, canvas.height);  // a smaller frame (while dragging) scaled up
       bitmap.close();
@@ -66,10 +70,9 @@
       if (stats.frames.length > 500) stats.frames.shift();
       current = { fig, blob };
       showFigures(fig);
-      next(fig);
     });
   }
-  function next(fig) {  // a drag's frame is drawn: its next view goes at once
+  function next(fig) {  // a drag's frame has come: its next view goes at once
     if (fig.seq === awaiting) { awaiting = 0; if (held) send(); }
   }
 
@@ -82,16 +85,17 @@
       (m.transfer_function ? `, classified with ${m.transfer_function}` : "");
     const shaded = hello.modes.includes("shaded");
     document.querySelector('input[value="shaded"]').disabled = !shaded;
-    $("shaded-note").textContent = shaded ? "" : "shaded needs a classified (RGBA) model: give --tf PRESET";
+    $("shaded-note").textContent = shaded ? "" : "shaded needs a scalar or a classified (RGBA) model";
     $("tf-preset").replaceChildren(...hello.presets.map((name) => {
       const option = document.createElement("option");
-      option.textContent = name; option.selected = name === m.transfer_function;
+      option.textContent = name; option.selected = name === (m.transfer_function || "grey");
       return option;
     }));
     const tf = shaded && hello.capabilities.shaded.tf;
     $("tf").disabled = !tf;
-    $("tf-note").textContent = tf ? "" : "transfer functions at render time are not in this build: the model " +
-      "was classified before its transform; lighting and background act now";
+    $("tf-note").textContent = tf ? "classified while rendering" : "the model was classified before its " +
+      "transform (RGBA): lighting and background act";
+    if (tf) { state.tf = { preset: $("tf-preset").value, centre: 0, width: 1, opacity: 1 }; showTf(); }
     syncMode();
     showDetail(); showWindow();
   }
@@ -165,6 +169,21 @@
   $("hi").addEventListener("input", moveWindow);
   $("auto-window").addEventListener("click", () => { state.window = null; showWindow(); request(); });
   $("shading").addEventListener("change", (ev) => { state.shading = ev.target.checked; request(); });
+  // transfer function (a scalar model, classified while rendering): a slider being moved asks for the cheap
+  // frames of a drag, its release for the refined view
+  const TF_SLIDERS = { "tf-window": ["centre", (v) => (v - 50) / 50], "tf-width": ["width", (v) => 10 ** ((v - 50) / 50)],
+                       "tf-opacity": ["opacity", (v) => 10 ** ((v - 50) / 25)] };
+  function showTf() {
+    for (const [id, [key]] of Object.entries(TF_SLIDERS)) $(id + "-out").textContent = state.tf[key].toPrecision(2);
+  }
+  for (const [id, [key, of]] of Object.entries(TF_SLIDERS)) {
+    $(id).addEventListener("input", (ev) => {
+      state.tf = { ...state.tf, [key]: of(+ev.target.value) }; state.moving = true; showTf(); request();
+      if (stats.tfInput === null) stats.tfInput = performance.now();
+    });
+    $(id).addEventListener("change", () => { state.moving = false; request(); });
+  }
+  $("tf-preset").addEventListener("change", (ev) => { state.tf = { ...state.tf, preset: ev.target.value }; request(); });
   $("background").addEventListener("input", (ev) => {
     state.background = ev.target.value / 100; $("background-out").textContent = state.background.toFixed(2); request();
   });
@@ -178,7 +197,9 @@
       rows.push(["coefficients", `${f.coefficients.toLocaleString()} (${(100 * f.fraction).toPrecision(3)} %)`]);
       rows.push(["error estimate", `${fmt(f.error)} (${f.error_kind})`]);
     } else {
-      rows.push(["tolerance", fmt(f.tolerance)]);
+      rows.push(["tolerance", `${fmt(f.tolerance)}, detail ${f.detail}` +
+                 (f.reduction > 1 ? `, 1/${f.reduction} size` : "")]);
+      if (f.error !== null) rows.push(["error estimate", `${fmt(f.error)} (${f.error_kind})`]);
     }
     rows.push(["frame", `${(1000 * f.seconds).toFixed(0)} ms render, ${(1000 * f.elapsed).toFixed(0)} ms since view`]);
     const table = $("figures");

@@ -1,0 +1,141 @@
+"""The viewer's shaded frames (docs/viewer.md §2): emission-absorption ray tracing with one reused
+:class:`~clwave.RayTracer`, made off the render thread on the first shaded view.
+
+An RGBA (classified) model is traced with every detail's bricks (``lod=True``, docs/raytracing.md §8): while
+dragging, a reduced image at a coarse detail and a looser tolerance, paced to the measured time; when still,
+:meth:`~clwave.RayTracer.refine` (§9), coarse detail on a reduced image to full detail at the tolerance, each
+frame with its error estimate.  A scalar model is classified while rendering by the tab's transfer function
+(``transfer_function=``, §10): a preset, its window moved and widened, its opacity scaled, from the page's editor.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..frames import ErrorEstimate
+from ..io.result import RenderResult
+from ..model.transfer import TransferFunction
+from ..raytrace.progressive import upsample
+from .frames import Frame, Source, ViewState, check_tolerance
+
+#: shaded frames while dragging aim at this many seconds of ray tracing (5 frames a second with the round trip)
+DRAG_SECONDS = 0.12
+#: frames while dragging, and a scalar model's first still frame: the tolerance times this
+LOOSEN = 10.0
+#: a still view of a model without level of detail: (reduction, tolerance factor) of its frames (the first two
+#: for a quick look and an error estimate, then the final image)
+STILL_STEPS = ((4, LOOSEN), (2, LOOSEN), (1, 1))
+#: frames while dragging, cheapest first: (image scale, detail); a model without level of detail uses the scales
+DRAG_STEPS = ((0.0625, 3), (0.125, 2), (0.1875, 2), (0.25, 1), (0.375, 1), (0.5, 1), (0.5, 0))
+
+
+class ShadedSource(Source):
+    """Shaded frames of an RGBA model (level of detail) or a scalar one (a transfer function at render time)."""
+
+    mode = "shaded"
+
+    def __init__(self, wv, size, tolerance, device=None):
+        super().__init__(wv, size)
+        self.tolerance, self.device, self.tracer = check_tolerance(tolerance), device, None
+        self.scalar = wv.channels == 1
+        # level of detail with a transfer function at render time is refused today (docs/known-gaps.md §12): a
+        # scalar model has full-detail bricks, and its drag frames a smaller image only; where they combine,
+        # this is True for both and nothing else changes
+        self.lod = not self.scalar
+        self.steps = ([(s, d) for s, d in DRAG_STEPS if d <= wv.levels] if self.lod
+                      else [(s, None) for s in sorted({s for s, _ in DRAG_STEPS})])
+        self.step = len(self.steps) // 2
+        self.capabilities = dict(tf=self.scalar, background=True, shading=True)
+        self.default_tf = (TransferFunction.from_dict(wv.transfer_function) if wv.transfer_function
+                           else TransferFunction.preset("grey")) if self.scalar else None
+        self._tf = (None, self.default_tf)  # the last (spec, transfer function): the tracer reuses its table
+
+    def ready(self) -> bool:
+        return self.tracer is not None
+
+    def prepare(self):
+        """The ray tracer, and its kernels built by a small image (on the build thread, not the render thread)."""
+        if self.tracer is None:
+            from ..model.camera import Camera
+            from ..raytrace.tracer import RayTracer
+
+            tracer = RayTracer(self.wv, device=self.device, lod=self.lod)
+            tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN,
+                          **(dict(transfer_function=self.default_tf) if self.scalar else {}))
+            self.tracer = tracer
+        return self.tracer
+
+    def transfer_function(self, spec):
+        """The transfer function of a tab's ``(preset, centre, width, opacity)``: the preset's points with their
+        opacity times ``opacity``, under its window (the pool's percentiles where "auto") widened ``width`` times and
+        moved by ``centre`` of its width; None: the model's own (or grey).  None for an RGBA model."""
+        if not self.scalar:
+            return None
+        if spec is None:
+            return self.default_tf
+        if self._tf[0] != spec:
+            name, centre, width, opacity = spec
+            base = TransferFunction.preset(name)
+            lo, hi = self.tracer.scalar.window(base)
+            mid, half = (lo + hi) / 2 + centre * (hi - lo), (hi - lo) * width / 2
+            points = base.points.copy()
+            points[:, 4] *= opacity
+            self._tf = (spec, TransferFunction(points, window=(mid - half, mid + half), name=name))
+        return self._tf[1]
+
+    def frames(self, state: ViewState):
+        start = time.perf_counter()
+        options = dict(shading=state.shading)
+        if self.scalar:
+            options["transfer_function"] = self.transfer_function(state.tf)
+        if state.moving:
+            scale, detail = self.steps[self.step]
+            result = self.tracer.render(self.camera(state, scale), tolerance=self.tolerance * LOOSEN, detail=detail,
+                                        **options)
+            seconds = time.perf_counter() - start
+            self._pace(seconds)
+            yield self._shaded(state, result, False, dict(tolerance=self.tolerance * LOOSEN, detail=detail or 0,
+                                                          error=None), seconds, start)
+            return
+        if self.lod:
+            last = start
+            for f in self.tracer.refine(self.camera(state), tolerance=self.tolerance, **options):
+                final = (f.detail, f.reduction) == (0, 1)
+                now = time.perf_counter()
+                yield self._shaded(state, f.result(), final, dict(tolerance=self.tolerance, detail=f.detail,
+                                                                  reduction=f.reduction,
+                                                                  error=_number(f.estimated_relative_rms_error)),
+                                   now - last, start)
+                last = time.perf_counter()
+            return
+        estimate = ErrorEstimate()  # of each frame from the step to it, on the full image's pixels
+        for reduction, tolerance in STILL_STEPS:
+            stage = time.perf_counter()
+            final = reduction == 1 and tolerance == 1
+            result = self.tracer.render(self.camera(state, 1 / reduction), tolerance=self.tolerance * tolerance,
+                                        **options)
+            rms = 0.0 if final else estimate.add(upsample(result.image, self.size, reduction))[0]
+            yield self._shaded(state, result, final, dict(tolerance=self.tolerance * tolerance, detail=0,
+                                                          reduction=reduction, error=_number(rms)),
+                               time.perf_counter() - stage, start)
+
+    def _pace(self, seconds):
+        """The next drag frame a step cheaper when this one took longer than :data:`DRAG_SECONDS`, a step finer
+        when it took under a third of that."""
+        if seconds > DRAG_SECONDS and self.step > 0:
+            self.step -= 1
+        elif seconds < DRAG_SECONDS / 3 and self.step < len(self.steps) - 1:
+            self.step += 1
+
+    def _shaded(self, state, result: RenderResult, final, figures, seconds, start) -> Frame:
+        picture = result.to_uint8(background=(state.background,) * 3)
+        return self._frame(state, picture, final or not state.moving,
+                           dict(figures, final=final, seconds=seconds,
+                                error_kind="relative RMS, estimated from the last step"), start)
+
+
+def _number(x):
+    """A figure for JSON: None where it is not a finite number (a first frame's estimate)."""
+    return float(x) if x is not None and np.isfinite(x) else None
