@@ -1,11 +1,12 @@
 """The viewer's shaded frames (docs/viewer.md §2): emission-absorption ray tracing with one reused
 :class:`~clwave.RayTracer`, made off the render thread on the first shaded view.
 
-An RGBA (classified) model is traced with every detail's bricks (``lod=True``, docs/raytracing.md §8): while
-dragging, a reduced image at a coarse detail and a looser tolerance, paced to the measured time; when still,
+The model is traced with every detail's bricks (``lod=True``, docs/raytracing.md §8): while dragging, a reduced
+image at a coarse detail and a looser tolerance, paced to the measured time; when still,
 :meth:`~clwave.RayTracer.refine` (§9), coarse detail on a reduced image to full detail at the tolerance, each
 frame with its error estimate.  A scalar model is classified while rendering by the tab's transfer function
-(``transfer_function=``, §10): a preset, its window moved and widened, its opacity scaled, from the page's editor.
+(``transfer_function=``, §10, at every detail): a preset, its window moved and widened, its opacity scaled,
+from the page's editor.
 """
 
 from __future__ import annotations
@@ -14,20 +15,15 @@ import time
 
 import numpy as np
 
-from ..frames import ErrorEstimate
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
-from ..raytrace.progressive import upsample
 from .frames import Frame, Source, ViewState, check_tolerance
 
 #: shaded frames while dragging aim at this many seconds of ray tracing (5 frames a second with the round trip)
 DRAG_SECONDS = 0.12
-#: frames while dragging, and a scalar model's first still frame: the tolerance times this
+#: frames while dragging: the tolerance times this
 LOOSEN = 10.0
-#: a still view of a model without level of detail: (reduction, tolerance factor) of its frames (the first two
-#: for a quick look and an error estimate, then the final image)
-STILL_STEPS = ((4, LOOSEN), (2, LOOSEN), (1, 1))
-#: frames while dragging, cheapest first: (image scale, detail); a model without level of detail uses the scales
+#: frames while dragging, cheapest first: (image scale, detail)
 DRAG_STEPS = ((0.0625, 3), (0.125, 2), (0.1875, 2), (0.25, 1), (0.375, 1), (0.5, 1), (0.5, 0))
 
 
@@ -40,12 +36,7 @@ class ShadedSource(Source):
         super().__init__(wv, size)
         self.tolerance, self.device, self.tracer = check_tolerance(tolerance), device, None
         self.scalar = wv.channels == 1
-        # level of detail with a transfer function at render time is refused today (docs/known-gaps.md §12): a
-        # scalar model has full-detail bricks, and its drag frames a smaller image only; where they combine,
-        # this is True for both and nothing else changes
-        self.lod = not self.scalar
-        self.steps = ([(s, d) for s, d in DRAG_STEPS if d <= wv.levels] if self.lod
-                      else [(s, None) for s in sorted({s for s, _ in DRAG_STEPS})])
+        self.steps = [(s, d) for s, d in DRAG_STEPS if d <= wv.levels]
         self.step = len(self.steps) // 2
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
         self.default_tf = (TransferFunction.from_dict(wv.transfer_function) if wv.transfer_function
@@ -61,7 +52,7 @@ class ShadedSource(Source):
             from ..model.camera import Camera
             from ..raytrace.tracer import RayTracer
 
-            tracer = RayTracer(self.wv, device=self.device, lod=self.lod)
+            tracer = RayTracer(self.wv, device=self.device, lod=True)
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN,
                           **(dict(transfer_function=self.default_tf) if self.scalar else {}))
             self.tracer = tracer
@@ -96,30 +87,18 @@ class ShadedSource(Source):
                                         **options)
             seconds = time.perf_counter() - start
             self._pace(seconds)
-            yield self._shaded(state, result, False, dict(tolerance=self.tolerance * LOOSEN, detail=detail or 0,
+            yield self._shaded(state, result, False, dict(tolerance=self.tolerance * LOOSEN, detail=detail,
                                                           error=None), seconds, start)
             return
-        if self.lod:
-            last = start
-            for f in self.tracer.refine(self.camera(state), tolerance=self.tolerance, **options):
-                final = (f.detail, f.reduction) == (0, 1)
-                now = time.perf_counter()
-                yield self._shaded(state, f.result(), final, dict(tolerance=self.tolerance, detail=f.detail,
-                                                                  reduction=f.reduction,
-                                                                  error=_number(f.estimated_relative_rms_error)),
-                                   now - last, start)
-                last = time.perf_counter()
-            return
-        estimate = ErrorEstimate()  # of each frame from the step to it, on the full image's pixels
-        for reduction, tolerance in STILL_STEPS:
-            stage = time.perf_counter()
-            final = reduction == 1 and tolerance == 1
-            result = self.tracer.render(self.camera(state, 1 / reduction), tolerance=self.tolerance * tolerance,
-                                        **options)
-            rms = 0.0 if final else estimate.add(upsample(result.image, self.size, reduction))[0]
-            yield self._shaded(state, result, final, dict(tolerance=self.tolerance * tolerance, detail=0,
-                                                          reduction=reduction, error=_number(rms)),
-                               time.perf_counter() - stage, start)
+        last = start
+        for f in self.tracer.refine(self.camera(state), tolerance=self.tolerance, **options):
+            final = (f.detail, f.reduction) == (0, 1)
+            now = time.perf_counter()
+            yield self._shaded(state, f.result(), final, dict(tolerance=self.tolerance, detail=f.detail,
+                                                              reduction=f.reduction,
+                                                              error=_number(f.estimated_relative_rms_error)),
+                               now - last, start)
+            last = time.perf_counter()
 
     def _pace(self, seconds):
         """The next drag frame a step cheaper when this one took longer than :data:`DRAG_SECONDS`, a step finer
