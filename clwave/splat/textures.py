@@ -191,7 +191,12 @@ def _axis_points(count, h, cell) -> tuple:
     the 2 cell centres (a quarter of the support out), or the ``count + 1`` samples of the
     closed box ``[-count h / 2, count h / 2]``."""
     centre = 0.5 if cell else float(count // 2)
-    return (np.arange(2 if cell else count + 1) - centre) * h, centre
+    return (np.arange(_axis_samples(count, cell)) - centre) * h, centre
+
+
+def _axis_samples(count, cell) -> int:
+    """How many samples :func:`_axis_points` gives along one axis."""
+    return 2 if cell else count + 1
 
 
 def check_texels(texels: int, max_texels: int | None, what: str, fix: str) -> None:
@@ -282,7 +287,8 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         h = texel.get((m, key)) if isinstance(texel, dict) else texel
         jobs.append((m, key) + tuple(_axis_sampling(float(np.abs(w) @ extent), cell, omega, d_min, h)
                                      for w, cell in ((u, cells[0]), (v, cells[1]))))
-    texels = sum(len(_axis_points(*job[2])[0]) * len(_axis_points(*job[3])[0]) for job in jobs)
+    texels = sum(_axis_samples(nu, cell_u) * _axis_samples(nv, cell_v)
+                 for _, _, (nu, _, cell_u), (nv, _, cell_v) in jobs)
     check_texels(texels, max_texels, "the footprint textures of this view",
                  "the pixels are far smaller than the voxels (or the spacing is very uneven); render a wider "
                  "extent, fewer pixels, or a lower omega_s")
