@@ -119,6 +119,33 @@ inline void bernstein_split(const real *c, const real tau, real *left, real *rig
     bernstein_split_n(c, NS, tau, left, right);
 }
 
+/* The Bernstein coefficients c of the degree-8 polynomial whose values at the gradient lanes' points are v;
+ * returns their rounding, 64 eps times the largest */
+inline real bernstein9(const real *v, __constant const real *nodes, real *c)
+{
+    real big = 0;
+    for (int k = 0; k < 9; k++) {
+        real sum = 0;
+        for (int j = 0; j < 9; j++)
+            sum += nodes[BERNSTEIN9 + 9 * k + j] * v[j];
+        c[k] = sum;
+        big = fmax(big, fabs(sum));
+    }
+    return 64 * REAL_EPSILON * big;
+}
+
+/* sign changes among the coefficients c[0..8] clear of eps */
+inline int coefficient_sign_changes(const real *c, const real eps)
+{
+    int changes = 0, last = 0;
+    for (int i = 0; i < 9; i++)
+        if (fabs(c[i]) > eps) {
+            changes += c[i] * c[last] < 0;
+            last = i;
+        }
+    return changes;
+}
+
 /* Where the degree-8 polynomial p changes sign inside [a, b], from its values v at a + (b - a)(xi_j + 1) / 2
  * (xi_j: the gradient lanes' points): merged in increasing order into cuts[0..*n), at most SHADE_CUTS.  Its
  * Bernstein coefficients bound it on a span: no sign change there, no root; one, exactly one root of odd
@@ -128,25 +155,13 @@ inline void bernstein_split(const real *c, const real tau, real *left, real *rig
 inline void sign_changes(const real *v, __constant const real *nodes, const real a, const real b, real *cuts,
                          int *n)
 {
-    real c[9], big = 0;
-    for (int k = 0; k < 9; k++) {
-        real sum = 0;
-        for (int j = 0; j < 9; j++)
-            sum += nodes[BERNSTEIN9 + 9 * k + j] * v[j];
-        c[k] = sum;
-        big = fmax(big, fabs(sum));
-    }
-    const real eps = 64 * REAL_EPSILON * big;
+    real c[9];
+    const real eps = bernstein9(v, nodes, c);
     real stack_c[SHADE_DEPTH][9], stack_ab[SHADE_DEPTH][2];
     int stack_depth[SHADE_DEPTH], top = 0, depth = 0;
     real l = a, r = b;
     while (true) {
-        int changes = 0, last = 0; /* sign changes among the coefficients clear of 0 */
-        for (int i = 0; i < 9; i++)
-            if (fabs(c[i]) > eps) {
-                changes += c[i] * c[last] < 0;
-                last = i;
-            }
+        const int changes = coefficient_sign_changes(c, eps);
         if (changes == 1 || (changes > 1 && depth < SHADE_DEPTH)) {
             real x = (l + r) / 2, left[9], right[9];
             if (changes == 1) { /* the root, by bisection on the span's coefficients */
@@ -189,22 +204,32 @@ inline void sign_changes(const real *v, __constant const real *nodes, const real
     }
 }
 
+/* the i-th direction whose sign of grad s . d matters to the shading: light i / 2 (even i), or its halfway vector
+ * (odd i) when there is a specular term and it differs from the light; world gradient: the fine one times P->scale.
+ * false: none */
+inline bool shading_direction(const Shading *P, const int i, real3 *d)
+{
+    if (i % 2 && (P->ks == 0 || all(P->halfway[i / 2] == P->light[i / 2])))
+        return false;
+    *d = (i % 2 ? P->halfway[i / 2] : P->light[i / 2]) * P->scale;
+    return true;
+}
+
 /* Where the shading may jump or kink inside [a, b]: the sign changes of grad s . L for each light L and of
- * grad s . H for its halfway vector H when there is a specular term (world gradient: the fine one times
- * P->scale), from the gradient lanes 0..8 (whole segment, `lanes`) or C's series; returns how many, in cuts */
+ * grad s . H for its halfway vector H when there is a specular term, from the gradient lanes 0..8 (whole segment,
+ * `lanes`) or C's series; returns how many, in cuts */
 inline int shading_cuts(const Piece *C, const Shading *P, __constant const real *nodes, const bool lanes,
                         const real *gx, const real *gy, const real *gz, const real a, const real b, real *cuts)
 {
     int n = 0;
 #ifdef CLW_SHADE
-    real3 g[9];
+    real3 g[9], d;
     for (int j = 0; j < 9; j++)
         g[j] = lanes ? (real3)(gx[j], gy[j], gz[j])
                      : cheb3(C->g, 9, a + (b - a) * (nodes[j] + 1) / 2);
     for (int i = 0; i < 2 * P->nlights; i++) {
-        if (i % 2 && (P->ks == 0 || all(P->halfway[i / 2] == P->light[i / 2])))
+        if (!shading_direction(P, i, &d))
             continue;
-        const real3 d = (i % 2 ? P->halfway[i / 2] : P->light[i / 2]) * P->scale;
         real v[9];
         for (int j = 0; j < 9; j++)
             v[j] = dot(g[j], d);
@@ -212,6 +237,24 @@ inline int shading_cuts(const Piece *C, const Shading *P, __constant const real 
     }
 #endif
     return n;
+}
+
+/* Whether the shading may jump or kink on the segment (shading_cuts would cut it), from the gradient lanes */
+inline bool shading_turns(const realv gx, const realv gy, const realv gz, const Shading *P,
+                          __constant const real *nodes)
+{
+#ifdef CLW_SHADE
+    real3 d;
+    for (int i = 0; i < 2 * P->nlights; i++) {
+        if (!shading_direction(P, i, &d))
+            continue;
+        real v[16], c[9];
+        vstore16(gx * d.x + gy * d.y + gz * d.z, 0, v);
+        if (coefficient_sign_changes(c, bernstein9(v, nodes, c)))
+            return true;
+    }
+#endif
+    return false;
 }
 
 /* int of piece_point over [a, b] cut at cuts[0..n): adaptive Simpson on each part with its share of tol;
@@ -258,42 +301,6 @@ inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, 
     C->depth_a += piece_total(C, a, b);
 }
 
-/* The whole segment in the transfer function's interval k (the usual case): its samples are the piece's
- * first nine points (where the shading needs no cut), as on the pre-classified path: alpha at the samples gives the optical depth exactly
- * (`weights`, alpha being a polynomial of u's degree there), u and the gradient lanes the emission */
-inline void add_segment(Piece *C, const Shading *P, __constant const real *nodes, __constant const real *weights,
-                        __global const real4 *tf, const int K, const real *u, const real *gx, const real *gy,
-                        const real *gz, const real tol, real3 *emission, int *evals, int *flags)
-{
-    const int k = tf_interval(tf, K, u[3]); /* xi = 0 */
-    const real4 line = tf[1 + K + 3 * k];
-    if (line.y == 0 && line.z == 0)
-        return;
-    C->line = (real4)(line.xyz, line.z < 0 ? -1 : 1);
-    C->rgb = tf[2 + K + 3 * k].xyz;
-    C->rgb_slope = tf[3 + K + 3 * k].xyz;
-    C->a = -1;
-    C->ui_a = cheb1(C->ui, NS + 1, -1);
-    real alpha[NS], depth[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    for (int i = 0; i < NS; i++) {
-        alpha[i] = fmax(line.y + line.z * (u[i] - line.x), (real)0);
-        for (int p = 0; p < 8; p++)
-            depth[p] += weights[8 * i + p] * alpha[i];
-    }
-    real cuts[SHADE_CUTS];
-    const int n = shading_cuts(C, P, nodes, true, gx, gy, gz, -1, 1, cuts);
-    real3 f9[9];
-    for (int p = 0; p <= 8 && n == 0; p++) { /* xi = -1 + p/4: lane P0 for p = 0, else lane p - 1 */
-        const int lane = p ? p - 1 : P0;
-        const real3 rgb = clamp(C->rgb + C->rgb_slope * (u[lane] - line.x), (real)0, (real)1) * alpha[lane];
-        real r = rgb.x, g = rgb.y, b = rgb.z;
-        shade(&r, &g, &b, alpha[lane], gx[lane] * C->line.w, gy[lane] * C->line.w, gz[lane] * C->line.w, P);
-        f9[p] = (real3)(r, g, b) * fast_exp(-C->radius * (p ? depth[p - 1] : 0));
-    }
-    *emission += cut_simpson(C, P, nodes, f9, cuts, n, -1, 1, tol, evals, flags);
-    C->depth_a = depth[7];
-}
-
 /* Whether u - v has exactly one root inside the span of Bernstein coefficients c: the coefficients change sign
  * once (Descartes' rule for the Bernstein basis), the ends clear of v by more than eps */
 inline bool one_crossing(const real *c, const real v, const real eps)
@@ -311,30 +318,21 @@ inline real tf_alpha(__global const real4 *tf, const int K, const real u)
     return fmax(line.y + line.z * (u - line.x), (real)0);
 }
 
-/* A segment's scalar as the classification needs it, from s at the samples (lane order of fq): u there,
- * u's Chebyshev series and antiderivative (in C), its Bernstein coefficients c on [-1, 1].  Returns whether
- * the transfer function is opaque anywhere in the coefficients' hull: a segment where it is not adds
- * nothing, and needs no gradient. */
-inline bool segment_scalar(const real *s, __constant const real *nodes, __global const real4 *tf, Piece *C,
-                           real *u, real *c)
+/* A segment's scalar as the classification needs it, from s at the samples (lane order of fq): u there and its
+ * Bernstein coefficients c on [-1, 1].  Returns whether the transfer function is opaque anywhere in the
+ * coefficients' hull: a segment where it is not adds nothing, and needs no gradient. */
+inline bool segment_scalar(const real *s, __constant const real *nodes, __global const real4 *tf, real *u, real *c)
 {
     const real4 head = tf[0];
     const int K = (int)head.z;
     for (int k = 0; k < NS; k++)
         u[k] = s[k] * head.x + head.y;
-    for (int m = 0; m < NS; m++) { /* u's series and Bernstein coefficients */
-        real am = 0, bm = 0;
-        for (int k = 0; k < NS; k++) {
-            am += u[k] * nodes[NS + m * NS + k];
+    for (int m = 0; m < NS; m++) {
+        real bm = 0;
+        for (int k = 0; k < NS; k++)
             bm += u[k] * nodes[NS + NS * NS + NG * NG + m * NS + k];
-        }
-        C->us[m] = am;
         c[m] = bm;
     }
-    /* u's antiderivative: C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 (any constant term) */
-    C->ui[0] = 0;
-    for (int k = 1; k <= NS; k++)
-        C->ui[k] = (C->us[k - 1] * (k == 1 ? 2 : 1) - (k + 1 < NS ? C->us[k + 1] : 0)) / (2 * k);
     real lo = c[0], hi = c[0];
     for (int i = 1; i < NS; i++) {
         lo = fmin(lo, c[i]);
@@ -347,51 +345,203 @@ inline bool segment_scalar(const real *s, __constant const real *nodes, __global
     return m > 0;
 }
 
-/* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from segment_scalar's C, u
- * and c, the gradient of s at the samples (gx, gy, gz: lanes 0..NG-1) and its series (grad; shading), the half
- * length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1 where a span could not be
- * resolved. */
-inline real4 classified_segment(Piece *C0, real *c, const real *u, const real *gx, const real *gy, const real *gz,
+/* How many breakpoints lie inside the hull of the Bernstein coefficients c by more than u is known to (the
+ * samples' rounding times the interpolation's Lebesgue constant, about 30 for these points: a crossing by less
+ * moves nothing measurable); *cross: the first of them that u crosses exactly once, 0 for none */
+inline int breakpoints_inside(__global const real4 *tf, const int K, const real *c, int *cross)
+{
+    real lo = c[0], hi = c[0];
+    for (int i = 1; i < NS; i++) {
+        lo = fmin(lo, c[i]);
+        hi = fmax(hi, c[i]);
+    }
+    const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
+    int inside = 0;
+    *cross = 0;
+    for (int i = 1; i <= K; i++) {
+        const real v = tf[i].x;
+        if (v > lo + eps && v < hi - eps) {
+            inside += 1;
+            if (!*cross && one_crossing(c, v, eps))
+                *cross = i;
+        }
+    }
+    return inside;
+}
+
+/* A segment inside one interval of the transfer function: the interval's line, alpha at the samples and the
+ * optical depth from -1 to xi = -1 + p/4 (p = 1..8, `weights`: exact, alpha being a polynomial of u's degree there),
+ * e^{-radius depth} there, and u - u_ref at the samples */
+typedef struct {
+    bool transparent;
+    real4 line;          /* (u_ref, alpha_ref, alpha_slope, 0) */
+    real3 rgb, slope;    /* colour at u_ref and per unit u */
+    real8 du, alpha, att; /* lanes 0..7: xi = -1 + p/4, p = 1..8 */
+    real du0, alpha0;    /* lane P0: xi = -1 */
+    real depth;          /* int alpha dxi over the segment */
+} OneInterval;
+
+/* Whether the segment lies inside one interval (no breakpoint inside the hull of u's Bernstein coefficients c),
+ * and then O from u at the samples and the half length radius */
+inline bool one_interval(const real *u, const real *c, __constant const real *weights, __global const real4 *tf,
+                         const real radius, OneInterval *O)
+{
+    const int K = (int)tf[0].z;
+    int cross;
+    if (breakpoints_inside(tf, K, c, &cross))
+        return false;
+    const int k = tf_interval(tf, K, u[3]); /* xi = 0 */
+    O->line = tf[1 + K + 3 * k];
+    O->transparent = O->line.y == 0 && O->line.z == 0;
+    O->rgb = tf[2 + K + 3 * k].xyz;
+    O->slope = tf[3 + K + 3 * k].xyz;
+    real alpha[NS];
+    real8 depth = 0;
+    for (int i = 0; i < NS; i++) {
+        alpha[i] = fmax(O->line.y + O->line.z * (u[i] - O->line.x), (real)0);
+        depth = fma((real8)(alpha[i]), vload8(i, weights), depth);
+    }
+    O->du = vload8(0, u) - O->line.x;
+    O->du0 = u[P0] - O->line.x;
+    O->alpha = vload8(0, alpha);
+    O->alpha0 = alpha[P0];
+    O->att = fast_exp(-radius * depth);
+    O->depth = depth.s7;
+    return true;
+}
+
+/* the unshaded emission rgb(u) alpha at the lanes 0..7 (r, g, b) and at P0 (*q0) */
+inline void interval_emission(const OneInterval *O, real8 *r, real8 *g, real8 *b, real3 *q0)
+{
+    *r = clamp(O->rgb.x + O->slope.x * O->du, (real8)(0), (real8)(1)) * O->alpha;
+    *g = clamp(O->rgb.y + O->slope.y * O->du, (real8)(0), (real8)(1)) * O->alpha;
+    *b = clamp(O->rgb.z + O->slope.z * O->du, (real8)(0), (real8)(1)) * O->alpha;
+    *q0 = clamp(O->rgb + O->slope * O->du0, (real)0, (real)1) * O->alpha0;
+}
+
+/* the segment's first nine points xi = -1 + p/4, p = 0..8, of the shaded emission times e^{-A}, from the gradient
+ * lanes of s (lanes 0..7 and P0), eight at once as on the pre-classified path */
+inline void interval_points(const OneInterval *O, const realv gx, const realv gy, const realv gz, const Shading *P,
+                            real3 *f9)
+{
+    real8 r, g, b;
+    real3 q0;
+    interval_emission(O, &r, &g, &b, &q0);
+    const real sign = O->line.z < 0 ? -1 : 1; /* normals face where alpha decreases */
+    shade8(&r, &g, &b, O->alpha, gx.lo * sign, gy.lo * sign, gz.lo * sign, P);
+    real q0r = q0.x, q0g = q0.y, q0b = q0.z;
+    shade(&q0r, &q0g, &q0b, O->alpha0, gx.s8 * sign, gy.s8 * sign, gz.s8 * sign, P);
+    f9[0] = (real3)(q0r, q0g, q0b);
+    real fr[8], fg[8], fb[8];
+    vstore8(r * O->att, 0, fr);
+    vstore8(g * O->att, 0, fg);
+    vstore8(b * O->att, 0, fb);
+    for (int p = 1; p <= 8; p++)
+        f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
+}
+
+/* Shaded at its midpoint where that is within what is left of the shading budget (midpoint_shading): weight is
+ * what a unit of the segment's integrals is worth in the image (T radius).  Returns whether it was: then
+ * *part = int q' e^{-A} dxi, and no gradient is needed. */
+inline bool interval_midpoint(const OneInterval *O, const Shading *P, const real weight, real *budget, real3 *part)
+{
+    real8 r, g, b;
+    real3 q0;
+    interval_emission(O, &r, &g, &b, &q0);
+    return midpoint_shading(r * O->att, g * O->att, b * O->att, O->alpha * O->att, (real4)(q0, O->alpha0), P,
+                            weight, budget, part);
+}
+
+/* Shaded point by point where the shading does not turn on the segment (shading_turns) and Simpson on the first
+ * nine points is within tol on both panels (panel_done): returns whether it was, *emission = int q' e^{-A} dxi.
+ * Otherwise classified_segment takes the segment (cuts, finer panels). */
+inline bool interval_simpson(const OneInterval *O, const realv gx, const realv gy, const realv gz, const Shading *P,
+                             __constant const real *nodes, const real tol, real3 *emission, int *evals)
+{
+    if (shading_turns(gx, gy, gz, P, nodes))
+        return false;
+    real3 f9[9], total = (real3)(0);
+    interval_points(O, gx, gy, gz, P, f9);
+    const Panel first = {-1, 0, tol / 2, f9[0], f9[2], f9[4], 1}, second = {0, 1, tol / 2, f9[4], f9[6], f9[8], 1};
+    int flags = 0; /* panels at depth 1: never at the depth limit */
+    if (!panel_done(&first, f9[1], f9[3], &total, &flags) || !panel_done(&second, f9[5], f9[7], &total, &flags))
+        return false;
+    *emission = total;
+    *evals += 9;
+    return true;
+}
+
+/* The whole segment inside one interval of the transfer function (the usual case), cut where the shading turns
+ * (O: one_interval's): its samples are the first nine points where it needs no cut, as on the pre-classified path */
+inline void add_segment(Piece *C, const OneInterval *O, const Shading *P, __constant const real *nodes,
+                        const real *gx, const real *gy, const real *gz, const real tol, real3 *emission, int *evals,
+                        int *flags)
+{
+    if (O->transparent)
+        return;
+    C->line = (real4)(O->line.xyz, O->line.z < 0 ? -1 : 1);
+    C->rgb = O->rgb;
+    C->rgb_slope = O->slope;
+    C->a = -1;
+    C->ui_a = cheb1(C->ui, NS + 1, -1);
+    real cuts[SHADE_CUTS];
+    const int n = shading_cuts(C, P, nodes, true, gx, gy, gz, -1, 1, cuts);
+    real3 f9[9];
+    if (n == 0)
+        interval_points(O, vload16(0, gx), vload16(0, gy), vload16(0, gz), P, f9);
+    *emission += cut_simpson(C, P, nodes, f9, cuts, n, -1, 1, tol, evals, flags);
+    C->depth_a = O->depth;
+}
+
+/* u's Chebyshev series and antiderivative (any constant) from u at the samples: for pieces cut out of the
+ * segment and Simpson's panels finer than quarters */
+inline void piece_series(Piece *C, const real *u, __constant const real *nodes)
+{
+    for (int m = 0; m < NS; m++) {
+        real am = 0;
+        for (int k = 0; k < NS; k++)
+            am += u[k] * nodes[NS + m * NS + k];
+        C->us[m] = am;
+    }
+    /* C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 */
+    C->ui[0] = 0;
+    for (int k = 1; k <= NS; k++)
+        C->ui[k] = (C->us[k - 1] * (k == 1 ? 2 : 1) - (k + 1 < NS ? C->us[k + 1] : 0)) / (2 * k);
+}
+
+/* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from u at the samples and c, its
+ * Bernstein coefficients (segment_scalar), the gradient of s at the samples (gx, gy, gz: lanes 0..NG-1) and its
+ * series (grad; shading), the half length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1
+ * where a span could not be resolved. */
+inline real4 classified_segment(real *c, const real *u, const real *gx, const real *gy, const real *gz,
                                 const real3 *grad, const real radius, __constant const real *nodes,
                                 __constant const real *weights, __global const real4 *tf, const Shading *P,
                                 const real tol, int *evals, int *flags)
 {
     const int K = (int)tf[0].z;
-    Piece C = *C0;
+    Piece C;
+    piece_series(&C, u, nodes);
     for (int m = 0; m < NG; m++)
         C.g[m] = grad[m];
     C.radius = radius;
     C.depth_a = 0;
     real3 emission = (real3)(0);
+    OneInterval O;
+    if (one_interval(u, c, weights, tf, radius, &O)) {
+        add_segment(&C, &O, P, nodes, gx, gy, gz, tol, &emission, evals, flags);
+        return (real4)(emission, C.depth_a);
+    }
     /* spans left to right: the right parts wait on a stack, one per depth at most */
     real stack_c[POST_DEPTH][NS], stack_ab[POST_DEPTH][2];
     int stack_depth[POST_DEPTH], top = 0, depth = 0;
     real a = -1, b = 1;
     while (true) {
-        real lo = c[0], hi = c[0];
-        for (int i = 1; i < NS; i++) {
-            lo = fmin(lo, c[i]);
-            hi = fmax(hi, c[i]);
-        }
-        /* breakpoints inside the range by more than u is known to: the samples' rounding times the interpolation's
-         * Lebesgue constant (about 30 for these points); a crossing by less moves nothing measurable */
-        const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
-        int inside = 0, cross = 0; /* cross: the first breakpoint crossed once, 0 for none */
-        for (int i = 1; i <= K; i++) {
-            const real v = tf[i].x;
-            if (v > lo + eps && v < hi - eps) {
-                inside += 1;
-                if (!cross && one_crossing(c, v, eps))
-                    cross = i;
-            }
-        }
+        int cross;
+        const int inside = breakpoints_inside(tf, K, c, &cross);
         if (inside == 0 || depth >= POST_DEPTH) { /* one interval (or unresolved: flagged) */
             if (inside)
                 *flags |= 2;
-            if (depth == 0)
-                add_segment(&C, P, nodes, weights, tf, K, u, gx, gy, gz, tol, &emission, evals, flags);
-            else
-                add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
+            add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
             if (top == 0)
                 break;
             top -= 1;

@@ -27,10 +27,9 @@ __kernel void classify_segments(__global real4 *out, __global const real *sample
     Shading P;
     P.nlights = 0;
     int evals = 0, f = 0;
-    Piece C;
     real u[NS], c[NS];
-    out[i] = segment_scalar(s, nodes, tf, &C, u, c)
-                 ? classified_segment(&C, c, u, flat, flat, flat, g, radius[i], nodes, weights, tf, &P, tol, &evals, &f)
+    out[i] = segment_scalar(s, nodes, tf, u, c)
+                 ? classified_segment(c, u, flat, flat, flat, g, radius[i], nodes, weights, tf, &P, tol, &evals, &f)
                  : (real4)(0);
     flags[i] = f;
 }
