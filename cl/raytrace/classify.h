@@ -262,12 +262,12 @@ inline bool shading_turns(const realv gx, const realv gy, const realv gz, const 
 inline real3 cut_simpson(Piece *C, const Shading *P, __constant const real *nodes, const real3 *f9, const real *cuts,
                          const int n, const real a, const real b, const real tol, int *evals, int *flags)
 {
-    if (n == 0)
+    if (n == 0 && f9)
         return piece_simpson(C, P, f9, nodes, a, b, tol, evals, flags);
     real3 sum = (real3)(0);
     real l = a;
-    for (int i = 0; i <= n; i++) {
-        const real r = i < n ? cuts[i] : b;
+    for (int i = 0; i <= 2 * n + 1; i++) {
+        const real r = i % 2 == 0 ? (l + (i / 2 < n ? cuts[i / 2] : b)) / 2 : (i / 2 < n ? cuts[i / 2] : b);
         real3 g9[9];
         for (int p = 0; p <= 8; p++)
             g9[p] = piece_point(C, P, nodes, l + (r - l) * p / 8);
@@ -294,10 +294,7 @@ inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, 
     C->ui_a = cheb1(C->ui, NS + 1, a);
     real cuts[SHADE_CUTS];
     const int n = shading_cuts(C, P, nodes, false, 0, 0, 0, a, b, cuts);
-    real3 f9[9];
-    for (int p = 0; p <= 8 && n == 0; p++)
-        f9[p] = piece_point(C, P, nodes, a + (b - a) * p / 8);
-    *emission += cut_simpson(C, P, nodes, f9, cuts, n, a, b, tol * (b - a) / 2, evals, flags);
+    *emission += cut_simpson(C, P, nodes, 0, cuts, n, a, b, tol * (b - a) / 2, evals, flags);
     C->depth_a += piece_total(C, a, b);
 }
 
@@ -577,5 +574,46 @@ inline real4 classified_segment(real *c, const real *u, const real *gx, const re
         b = x;
     }
     return (real4)(emission, C.depth_a);
+}
+/* A segment of the post-classified ray (docs/raytracing.md §10), first without the gradient: from s at the samples,
+ * u there and its Bernstein coefficients c (segment_scalar), and whether it lies inside one interval (*one, then
+ * *O).  Returns true when it is done: transparent all along (*r = 0), or inside one interval and shaded at its
+ * midpoint within what is left of the shading budget (*r = (int q' e^{-A} dxi, int alpha dxi); weight: what a unit
+ * of those is worth in the image, T radius).  Otherwise post_gradient takes it, with the gradient. */
+inline bool post_segment(const real *s, __constant const real *nodes, __constant const real *weights,
+                         __global const real4 *tf, const Shading *P, const real radius, const real weight,
+                         real *budget, real *u, real *c, OneInterval *O, bool *one, real4 *r, int *midpoints,
+                         int *evals)
+{
+    *r = (real4)(0);
+    if (!segment_scalar(s, nodes, tf, u, c))
+        return true;
+    *one = one_interval(u, c, weights, tf, radius, O);
+    real3 e;
+    if (!(*one && SHADING && interval_midpoint(O, P, weight, budget, &e)))
+        return false;
+    *r = (real4)(e, O->depth);
+    *midpoints += 1;
+    *evals += 9;
+    return true;
+}
+
+/* The rest of post_segment's segments, from the gradient of s at the lanes (fine units): inside one interval and
+ * where the shading does not turn, Simpson on the nine samples when that is within tol; else cut where u crosses a
+ * breakpoint or the shading turns, and finer panels (classified_segment) */
+inline real4 post_gradient(const OneInterval *O, const bool one, real *c, const real *u, const realv gx,
+                           const realv gy, const realv gz, const real radius, __constant const real *nodes,
+                           __constant const real *weights, __global const real4 *tf, const Shading *P,
+                           const real tol, int *evals, int *flags)
+{
+    real3 e, g[NG];
+    if (one && interval_simpson(O, gx, gy, gz, P, nodes, tol, &e, evals))
+        return (real4)(e, O->depth);
+    lane_series(gx, gy, gz, nodes, g);
+    real lx[16], ly[16], lz[16];
+    vstore16(gx, 0, lx);
+    vstore16(gy, 0, ly);
+    vstore16(gz, 0, lz);
+    return classified_segment(c, u, lx, ly, lz, g, radius, nodes, weights, tf, P, tol, evals, flags);
 }
 #endif

@@ -30,20 +30,22 @@ typedef struct {
     real A[NS + 1];  /* antiderivative of alpha in xi, zero at xi = -1 (times radius = optical depth) */
 } Segment;
 
-/* the Chebyshev series of the gradient's lanes 0..NG-1 (nodes: after the points and the field's matrix) */
-inline void gradient_series(Segment *S, __constant const real *nodes)
+/* the Chebyshev series g of the gradient's lanes 0..NG-1 (nodes: after the points and the field's matrix) */
+inline void lane_series(const realv gxv, const realv gyv, const realv gzv, __constant const real *nodes, real3 *g)
 {
     real gx[16], gy[16], gz[16];
-    vstore16(S->gx, 0, gx);
-    vstore16(S->gy, 0, gy);
-    vstore16(S->gz, 0, gz);
+    vstore16(gxv, 0, gx);
+    vstore16(gyv, 0, gy);
+    vstore16(gzv, 0, gz);
     for (int m = 0; m < NG; m++) {
         real3 ag = (real3)(0);
         for (int k = 0; k < NG; k++)
             ag += (real3)(gx[k], gy[k], gz[k]) * nodes[NS + NS * NS + m * NG + k];
-        S->g[m] = ag;
+        g[m] = ag;
     }
 }
+
+inline void gradient_series(Segment *S, __constant const real *nodes) { lane_series(S->gx, S->gy, S->gz, nodes, S->g); }
 
 /* the Chebyshev series of the segment's samples (nodes: the points, then the field's and the
  * gradient's sample-to-series matrices), and the antiderivative of alpha's */

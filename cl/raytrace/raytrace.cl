@@ -387,36 +387,21 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             real depth; /* int alpha dxi over the segment */
 #ifdef CLW_POST
             {   /* the scalar classified by the transfer function (classify.h, docs/raytracing.md §10) */
-                real s[NS], u[NS], c[NS], gx[16], gy[16], gz[16];
+                real s[NS], u[NS], c[NS];
                 for (int k = 0; k < NS; k++)
                     s[k] = S.fq[k].x;
-                real4 r = (real4)(0); /* (int q' e^{-A} dxi, int alpha dxi); 0: transparent all along */
                 OneInterval O;
-                real3 e;
-                if (segment_scalar(s, nodes, tf, u, c)) {
-                    const bool one = one_interval(u, c, weights, tf, S.radius, &O);
-                    if (one && SHADING && interval_midpoint(&O, &P, T * S.radius, &shade_budget, &e)) {
-                        r = (real4)(e, O.depth); /* no gradient needed */
-                        midpoints += 1;
-                        evals += 9;
-                    } else {
+                bool one;
+                real4 r; /* (int q' e^{-A} dxi, int alpha dxi) */
+                if (!post_segment(s, nodes, weights, tf, &P, S.radius, T * S.radius, &shade_budget, u, c, &O, &one,
+                                  &r, &midpoints, &evals)) {
 #ifdef CLW_SHADE
-                        sample_gradient(basis, true, &S.gx, &S.gy, &S.gz);
+                    sample_gradient(basis, true, &S.gx, &S.gy, &S.gz);
 #else
-                        S.gx = 0; S.gy = 0; S.gz = 0;
+                    S.gx = 0; S.gy = 0; S.gz = 0;
 #endif
-                        const real seg_tol = quadrature_share * (tn - t) / total / T / S.radius;
-                        if (one && interval_simpson(&O, S.gx, S.gy, S.gz, &P, nodes, seg_tol, &e, &evals)) {
-                            r = (real4)(e, O.depth);
-                        } else { /* cut where u crosses a breakpoint or the shading turns, or finer panels */
-                            gradient_series(&S, nodes);
-                            vstore16(S.gx, 0, gx);
-                            vstore16(S.gy, 0, gy);
-                            vstore16(S.gz, 0, gz);
-                            r = classified_segment(c, u, gx, gy, gz, S.g, S.radius, nodes, weights, tf, &P, seg_tol,
-                                                   &evals, &flags);
-                        }
-                    }
+                    r = post_gradient(&O, one, c, u, S.gx, S.gy, S.gz, S.radius, nodes, weights, tf, &P,
+                                      quadrature_share * (tn - t) / total / T / S.radius, &evals, &flags);
                 }
                 part = r.xyz;
                 depth = r.w;
