@@ -393,10 +393,17 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                 OneInterval O;
                 bool one;
                 real4 r; /* (int q' e^{-A} dxi, int alpha dxi) */
+                const bool gradient_joined = joined && end_shaded; /* lane P0's gradient: the last segment's end */
+                end_shaded = false;
                 if (!post_segment(s, nodes, weights, tf, &P, S.radius, T * S.radius, &shade_budget, u, c, &O, &one,
                                   &r, &midpoints, &evals)) {
 #ifdef CLW_SHADE
-                    sample_gradient(basis, true, &S.gx, &S.gy, &S.gz);
+                    sample_gradient(basis, !gradient_joined, &S.gx, &S.gy, &S.gz);
+                    if (gradient_joined) {
+                        S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
+                    }
+                    end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
+                    end_shaded = true;
 #else
                     S.gx = 0; S.gy = 0; S.gz = 0;
 #endif
