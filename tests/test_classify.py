@@ -18,8 +18,10 @@ from clwave.raytrace.classified import post_nodes, tf_table
 from clwave.raytrace.quadrature import sample_points, sample_tables
 from clwave.raytrace.reference import _content_field, classified_reference
 
-CHECK = Kernel("classify_segments", ("out", BUFFER), ("samples", BUFFER), ("radius", BUFFER), ("nodes", BUFFER),
-               ("weights", BUFFER), ("tf", BUFFER), ("tol", REAL), ("flags", BUFFER), ("n", np.int32))
+CHECK = Kernel("classify_segments", ("out", BUFFER), ("samples", BUFFER), ("grads", BUFFER), ("radius", BUFFER),
+               ("nodes", BUFFER), ("weights", BUFFER), ("tf", BUFFER), ("tol", REAL), ("shading", BUFFER),
+               ("budget", BUFFER), ("stats", BUFFER), ("n", np.int32))
+PHONG = (0.3, 0.7, 0.3, 20.0)  # ka, kd, ks, shininess (clwave.Phong's defaults)
 
 
 def random_tf(rng, lo, hi, steps=True, clear=False):
@@ -39,24 +41,44 @@ def random_tf(rng, lo, hi, steps=True, clear=False):
     return clwave.TransferFunction(rows)
 
 
-def exact_segment(poly, tf, radius):
-    """(int q e^{-radius A} dxi, int alpha dxi) over [-1, 1] for the scalar ``poly`` (a Polynomial in xi), cut at
+def exact_segment(poly, tf, radius, grad=None, light=None, halfway=None):
+    """(int q' e^{-radius A} dxi, int alpha dxi) over [-1, 1] for the scalar ``poly`` (a Polynomial in xi), cut at
     every real root of poly - v (NumPy's roots); alpha is a polynomial on each piece, integrated exactly, and the
-    emission comes from scipy's quad with tight tolerances."""
+    emission comes from scipy's quad with tight tolerances.  With ``grad`` (three Polynomials: the gradient of s),
+    q' is Phong-shaded (PHONG) by one light: n = -grad/|grad|, turned where the opacity falls with s, and the pieces
+    are cut again at the real roots of grad . light and grad . halfway, where the shading kinks."""
     values, alpha_pts, colour = tf.points[:, 0], tf.points[:, 4], tf.points[:, 1:4]
     cuts = {-1.0, 1.0}
-    for v in values:
-        cuts |= {r.real for r in (poly - v).roots() if abs(r.imag) < 1e-9 and -1 < r.real < 1}
+    lines = [poly - v for v in values]
+    if grad is not None:
+        lines += [sum(g * d for g, d in zip(grad, direction)) for direction in (light, halfway)]
+    for line in lines:
+        cuts |= {r.real for r in line.roots() if abs(r.imag) < 1e-9 and -1 < r.real < 1}
     cuts = sorted(cuts)
+    ka, kd, ks, shininess = PHONG
+
+    def shaded(xi, s, alpha, q):
+        if grad is None:
+            return q
+        k = np.searchsorted(values, s, side="right")  # the interval: the normal faces where alpha decreases
+        slope = 0.0 if k in (0, len(values)) else alpha_pts[k] - alpha_pts[k - 1]
+        g = np.array([p(xi) for p in grad]) * (-1.0 if slope < 0 else 1.0)
+        n = -g / np.linalg.norm(g)
+        c = n @ halfway
+        return q * (ka + kd * max(n @ light, 0.0)) + ks * alpha * (c ** shininess if c > 0 else 0.0)
+
     emission, depth = np.zeros(3), 0.0
     for a, b in zip(cuts[:-1], cuts[1:]):
+        if b - a < 1e-12:  # coincident roots (a light and its halfway vector): nothing between them
+            continue
         x = np.linspace(a, b, 12)  # alpha(poly) on the piece: a polynomial of poly's degree
         alpha = Polynomial.fit(x, np.interp(poly(x), values, alpha_pts), poly.degree())  # on its own domain [a, b]
         integral = alpha.integ(lbnd=a)
         for c in range(3):
             def f(xi, c=c, integral=integral, d=depth):
                 s = poly(xi)
-                return np.interp(s, values, colour[:, c]) * np.interp(s, values, alpha_pts) \
+                opacity = np.interp(s, values, alpha_pts)
+                return shaded(xi, s, opacity, np.interp(s, values, colour[:, c]) * opacity) \
                     * np.exp(-radius * (d + integral(xi)))
             emission[c] += quad(f, a, b, epsabs=1e-13, epsrel=1e-12, limit=200)[0]
         depth += integral(b)
@@ -64,44 +86,60 @@ def exact_segment(poly, tf, radius):
 
 
 @pytest.mark.parametrize("precision", ["double", "single"])
-def test_segment_integral_against_fine_quadrature(precision):
-    """classified_segment on random cubics (and degree-9 polynomials) through random piecewise-linear transfer
-    functions with steps: the emission within the tolerance, the optical depth exact, for 60 segments."""
+@pytest.mark.parametrize("shading", [False, True])
+def test_segment_integral_against_fine_quadrature(precision, shading):
+    """A post-classified segment (post_segment, post_gradient) on random cubics (and degree-9 polynomials) through
+    random piecewise-linear transfer functions with steps, shaded by a random light with random degree-8 gradients or
+    unshaded: the optical depth exact, the emission within the tolerance plus what the segment took from the shading
+    budget.  Every path runs: cut segments, whole ones inside one interval by Simpson on their samples (a budget of
+    0), and (shaded, a budget of 10) at the midpoint, whose error stays within the cost it charged."""
     cc = ComputeContext.get()
     if precision == "double" and not cc.queue.device.double_fp_config:
         pytest.skip("no float64 on this device")
     real = np.float64 if precision == "double" else np.float32
+    real4 = {np.float64: cltypes.double4, np.float32: cltypes.float4}[real]
     rng = np.random.default_rng(7)
     nodes, weights = sample_tables(9)
     xi = sample_points(9)
     nodes = post_nodes(nodes, len(xi))
     kernels = programs.build(cc, ["raytrace/classify_check.cl"], dict(
         CLW_POST=None, CLW_SAMPLES=len(xi), CLW_GROUPS=1, CLW_ORDERS=4, CLW_MAX_DEPTH=16,
-        **({"CLW_DOUBLE": None} if precision == "double" else {})))
+        **({"CLW_DOUBLE": None} if precision == "double" else {}), **({"CLW_SHADE": None} if shading else {})))
     tol = 1e-6 if precision == "double" else 1e-3
-    worst = 0.0
+    q = cc.queue
+    worst, paths = 0.0, np.zeros(3, int)  # cut, one interval, midpoint
     for trial in range(6):
         tf = random_tf(rng, -1.0, 1.0, steps=trial % 2 == 0)
         table = tf_table(tf, None)
         polys = [Polynomial(rng.normal(0, 0.6, 4 if i % 2 else 10) * 0.5 ** np.arange(4 if i % 2 else 10))
                  for i in range(10)]
+        grads = [[Polynomial(rng.normal(0, 1, 9) * 0.5 ** np.arange(9)) for _ in range(3)] for _ in polys]
+        light = rng.normal(size=3)
+        light /= np.linalg.norm(light)
+        halfway = light if trial % 3 == 0 else light + rng.normal(size=3) * 0.5
+        halfway = halfway / np.linalg.norm(halfway)
         radius = rng.uniform(0.2, 3.0, len(polys))
         samples = np.array([p(xi) for p in polys])
-        q = cc.queue
-        out = cla.empty(q, len(polys), {np.float64: cltypes.double4, np.float32: cltypes.float4}[real])
-        flags = cla.zeros(q, len(polys), np.int32)
-        CHECK(kernels, q, (len(polys),), None, real_type=real, out=out, samples=cla.to_device(q, samples.astype(real)),
-              radius=cla.to_device(q, radius.astype(real)), nodes=cla.to_device(q, nodes.astype(real)),
-              weights=cla.to_device(q, weights.astype(real)),
-              tf=cla.to_device(q, table.astype(real)), tol=tol, flags=flags, n=len(polys))
-        got = out.get()
-        for p, r, g in zip(polys, radius, got):
-            emission, depth = exact_segment(p, tf, r)
-            assert abs(g["w"] - depth) <= (1e-9 if precision == "double" else 1e-5) * max(1.0, depth)
-            error = np.max(np.abs([g["x"] - emission[0], g["y"] - emission[1], g["z"] - emission[2]]))
-            worst = max(worst, error)
-            assert error <= tol, (trial, error)
-    assert worst > 0  # the comparison ran on non-trivial integrals
+        lanes = np.zeros((len(polys), 3, 16))
+        lanes[:, :, :9] = [[g(xi[:9]) for g in gr] for gr in grads]
+        for budget in ((0.0, 10.0) if shading else (0.0,)):
+            out = cla.empty(q, len(polys), real4)
+            left = cla.to_device(q, np.full(len(polys), budget, real))
+            stats = cla.empty(q, len(polys), cltypes.int4)
+            CHECK(kernels, q, (len(polys),), None, real_type=real, out=out,
+                  samples=cla.to_device(q, samples.astype(real)), grads=cla.to_device(q, lanes.astype(real)),
+                  radius=cla.to_device(q, radius.astype(real)), nodes=cla.to_device(q, nodes.astype(real)),
+                  weights=cla.to_device(q, weights.astype(real)), tf=cla.to_device(q, table.astype(real)), tol=tol,
+                  shading=cla.to_device(q, np.array([*PHONG, *light, *halfway, 1e-12], real)), budget=left,
+                  stats=stats, n=len(polys))
+            got, charged, stat = out.get(), budget - left.get(), stats.get()
+            for p, g, r, v, cost, st in zip(polys, grads, radius, got, charged, stat):
+                emission, depth = exact_segment(p, tf, r, *((g, light, halfway) if shading else ()))
+                assert abs(v["w"] - depth) <= (1e-9 if precision == "double" else 1e-5) * max(1.0, depth)
+                error = np.max(np.abs([v["x"] - emission[0], v["y"] - emission[1], v["z"] - emission[2]]))
+                worst = max(worst, error)
+                paths += [not st["z"], st["z"] and not st["y"], st["y"]]
+    assert worst > 0 and paths[0] > 0 and paths[1] > 0 and (paths[2] > 0) == shading, paths
 
 
 def test_table_against_the_transfer_function():

@@ -9,23 +9,20 @@
  * piece's emission integral comes from adaptive Simpson on the classified, shaded integrand
  * (quadrature.h), its tolerance the piece's share of the segment's; when shading, the piece is cut again where
  * grad s . L changes sign for a light L (or halfway vector), since the normal flips there and n . L jumps or
- * kinks (found the same way, on grad s . L's Bernstein coefficients).
+ * kinks (found the same way, on grad s . L's Bernstein coefficients; bernstein.h).  The common case is cheap
+ * (post_segment, post_gradient): a segment transparent by its hull needs nothing more; one inside one interval takes
+ * the midpoint shading (no gradient) or Simpson on its samples where the shading does not turn on it.
  *
  * The table `tf` (real4 rows, clwave/raytrace/classified.py): row 0 (scale, shift, K, 0); rows
  * 1..K the breakpoints u_i (x); then per interval k = 0..K (u below u_0, between u_{k-1} and u_k,
  * above u_{K-1}) three rows (u_ref, alpha_ref, alpha_slope, 0), (rgb_ref, 0), (rgb_slope, 0).
- * Build: CLW_POST; nodes carry, after the sample tables, the (NS, NS) matrix from the samples to
- * the Bernstein coefficients on [-1, 1], then the (9, 9) one from the gradient lanes 0..8 to theirs
- * (clwave/raytrace/classified.py post_nodes). */
+ * Build: CLW_POST; nodes as bernstein.h says. */
 #ifndef CLW_CLASSIFY_H
 #define CLW_CLASSIFY_H
 #include "raytrace/quadrature.h"
+#include "raytrace/bernstein.h"
 
-#define POST_DEPTH 16      /* spans are cut at most this often; a span still straddling is flagged */
-#define POST_BISECTIONS 40 /* bisection steps for a crossing (stops earlier at the arithmetic's resolution) */
-#define SHADE_CUTS 8       /* cuts at most per piece where grad s . L changes sign (more: Simpson alone) */
-#define SHADE_DEPTH 10     /* spans of grad s . L are halved at most this often in the search for its roots */
-#define BERNSTEIN9 (NS + 2 * NS * NS + 81) /* where the lanes-to-Bernstein matrix of degree 8 starts in nodes */
+#define POST_DEPTH 16 /* spans are cut at most this often; a span still straddling is flagged */
 
 /* One piece of a segment: u's series, its antiderivative, the gradient series of s (shading) and the
  * transfer function's linear interval on the piece */
@@ -97,114 +94,32 @@ inline real3 piece_point(Piece *C, const Shading *P, __constant const real *node
 
 ADAPTIVE_SIMPSON(piece_simpson, Piece, piece_point)
 
-/* the coefficients of the two parts [0, tau] (left) and [tau, 1] (right) of a Bernstein polynomial of degree
- * n - 1 on its span, c its coefficients (de Casteljau); left[n - 1] = right[0] is its value at tau */
-inline void bernstein_split_n(const real *c, const int n, const real tau, real *left, real *right)
+/* the i-th direction whose sign of grad s . d matters to the shading: light i / 2 (even i), or its halfway vector
+ * (odd i) when there is a specular term and it differs from the light; world gradient: the fine one times P->scale.
+ * false: none */
+inline bool shading_direction(const Shading *P, const int i, real3 *d)
 {
-    real w[NS];
-    for (int i = 0; i < n; i++)
-        w[i] = c[i];
-    left[0] = c[0];
-    right[n - 1] = c[n - 1];
-    for (int r = 1; r < n; r++) {
-        for (int i = 0; i < n - r; i++)
-            w[i] = (1 - tau) * w[i] + tau * w[i + 1];
-        left[r] = w[0];
-        right[n - 1 - r] = w[n - 1 - r];
-    }
-}
-
-inline void bernstein_split(const real *c, const real tau, real *left, real *right)
-{
-    bernstein_split_n(c, NS, tau, left, right);
-}
-
-/* Where the degree-8 polynomial p changes sign inside [a, b], from its values v at a + (b - a)(xi_j + 1) / 2
- * (xi_j: the gradient lanes' points): merged in increasing order into cuts[0..*n), at most SHADE_CUTS.  Its
- * Bernstein coefficients bound it on a span: no sign change there, no root; one, exactly one root of odd
- * multiplicity (Descartes' rule), found by bisection on the coefficients (de Casteljau); more, the span is
- * halved, at most SHADE_DEPTH times (a span still holding several is left to Simpson).  Roots within the
- * coefficients' rounding of 0 at an end are ignored: no sign change there that Simpson could miss. */
-inline void sign_changes(const real *v, __constant const real *nodes, const real a, const real b, real *cuts,
-                         int *n)
-{
-    real c[9], big = 0;
-    for (int k = 0; k < 9; k++) {
-        real sum = 0;
-        for (int j = 0; j < 9; j++)
-            sum += nodes[BERNSTEIN9 + 9 * k + j] * v[j];
-        c[k] = sum;
-        big = fmax(big, fabs(sum));
-    }
-    const real eps = 64 * REAL_EPSILON * big;
-    real stack_c[SHADE_DEPTH][9], stack_ab[SHADE_DEPTH][2];
-    int stack_depth[SHADE_DEPTH], top = 0, depth = 0;
-    real l = a, r = b;
-    while (true) {
-        int changes = 0, last = 0; /* sign changes among the coefficients clear of 0 */
-        for (int i = 0; i < 9; i++)
-            if (fabs(c[i]) > eps) {
-                changes += c[i] * c[last] < 0;
-                last = i;
-            }
-        if (changes == 1 || (changes > 1 && depth < SHADE_DEPTH)) {
-            real x = (l + r) / 2, left[9], right[9];
-            if (changes == 1) { /* the root, by bisection on the span's coefficients */
-                real lo = 0, hi = 1, tau = 0.5;
-                for (int it = 0; it < POST_BISECTIONS && lo < tau && tau < hi; it++) {
-                    bernstein_split_n(c, 9, tau, left, right);
-                    if (right[0] * c[0] > 0)
-                        lo = tau;
-                    else
-                        hi = tau;
-                    tau = (lo + hi) / 2;
-                }
-                x = l + (r - l) * tau;
-                if (*n < SHADE_CUTS && x > a && x < b && (*n == 0 || x != cuts[*n - 1])) {
-                    int i = *n;
-                    for (; i > 0 && cuts[i - 1] > x; i--)
-                        cuts[i] = cuts[i - 1];
-                    cuts[i] = x;
-                    *n += 1;
-                }
-            } else { /* halved: the right part waits */
-                bernstein_split_n(c, 9, (real)0.5, left, stack_c[top]);
-                stack_ab[top][0] = x;
-                stack_ab[top][1] = r;
-                stack_depth[top++] = ++depth;
-                for (int i = 0; i < 9; i++)
-                    c[i] = left[i];
-                r = x;
-                continue;
-            }
-        }
-        if (top == 0)
-            return;
-        top -= 1;
-        for (int i = 0; i < 9; i++)
-            c[i] = stack_c[top][i];
-        l = stack_ab[top][0];
-        r = stack_ab[top][1];
-        depth = stack_depth[top];
-    }
+    if (i % 2 && (P->ks == 0 || all(P->halfway[i / 2] == P->light[i / 2])))
+        return false;
+    *d = (i % 2 ? P->halfway[i / 2] : P->light[i / 2]) * P->scale;
+    return true;
 }
 
 /* Where the shading may jump or kink inside [a, b]: the sign changes of grad s . L for each light L and of
- * grad s . H for its halfway vector H when there is a specular term (world gradient: the fine one times
- * P->scale), from the gradient lanes 0..8 (whole segment, `lanes`) or C's series; returns how many, in cuts */
+ * grad s . H for its halfway vector H when there is a specular term, from the gradient lanes 0..8 (whole segment,
+ * `lanes`) or C's series; returns how many, in cuts */
 inline int shading_cuts(const Piece *C, const Shading *P, __constant const real *nodes, const bool lanes,
                         const real *gx, const real *gy, const real *gz, const real a, const real b, real *cuts)
 {
     int n = 0;
 #ifdef CLW_SHADE
-    real3 g[9];
+    real3 g[9], d;
     for (int j = 0; j < 9; j++)
         g[j] = lanes ? (real3)(gx[j], gy[j], gz[j])
                      : cheb3(C->g, 9, a + (b - a) * (nodes[j] + 1) / 2);
     for (int i = 0; i < 2 * P->nlights; i++) {
-        if (i % 2 && (P->ks == 0 || all(P->halfway[i / 2] == P->light[i / 2])))
+        if (!shading_direction(P, i, &d))
             continue;
-        const real3 d = (i % 2 ? P->halfway[i / 2] : P->light[i / 2]) * P->scale;
         real v[9];
         for (int j = 0; j < 9; j++)
             v[j] = dot(g[j], d);
@@ -214,17 +129,35 @@ inline int shading_cuts(const Piece *C, const Shading *P, __constant const real 
     return n;
 }
 
+/* Whether the shading may jump or kink on the segment (shading_cuts would cut it), from the gradient lanes */
+inline bool shading_turns(const realv gx, const realv gy, const realv gz, const Shading *P,
+                          __constant const real *nodes)
+{
+#ifdef CLW_SHADE
+    real3 d;
+    for (int i = 0; i < 2 * P->nlights; i++) {
+        if (!shading_direction(P, i, &d))
+            continue;
+        real v[16], c[9];
+        vstore16(gx * d.x + gy * d.y + gz * d.z, 0, v);
+        if (coefficient_sign_changes(c, bernstein9(v, nodes, c)))
+            return true;
+    }
+#endif
+    return false;
+}
+
 /* int of piece_point over [a, b] cut at cuts[0..n): adaptive Simpson on each part with its share of tol;
  * f9: the first nine points of [a, b] when n = 0 */
 inline real3 cut_simpson(Piece *C, const Shading *P, __constant const real *nodes, const real3 *f9, const real *cuts,
                          const int n, const real a, const real b, const real tol, int *evals, int *flags)
 {
-    if (n == 0)
+    if (n == 0 && f9)
         return piece_simpson(C, P, f9, nodes, a, b, tol, evals, flags);
     real3 sum = (real3)(0);
     real l = a;
-    for (int i = 0; i <= n; i++) {
-        const real r = i < n ? cuts[i] : b;
+    for (int i = 0; i <= 2 * n + 1; i++) {
+        const real r = i % 2 == 0 ? (l + (i / 2 < n ? cuts[i / 2] : b)) / 2 : (i / 2 < n ? cuts[i / 2] : b);
         real3 g9[9];
         for (int p = 0; p <= 8; p++)
             g9[p] = piece_point(C, P, nodes, l + (r - l) * p / 8);
@@ -251,57 +184,8 @@ inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, 
     C->ui_a = cheb1(C->ui, NS + 1, a);
     real cuts[SHADE_CUTS];
     const int n = shading_cuts(C, P, nodes, false, 0, 0, 0, a, b, cuts);
-    real3 f9[9];
-    for (int p = 0; p <= 8 && n == 0; p++)
-        f9[p] = piece_point(C, P, nodes, a + (b - a) * p / 8);
-    *emission += cut_simpson(C, P, nodes, f9, cuts, n, a, b, tol * (b - a) / 2, evals, flags);
+    *emission += cut_simpson(C, P, nodes, 0, cuts, n, a, b, tol * (b - a) / 2, evals, flags);
     C->depth_a += piece_total(C, a, b);
-}
-
-/* The whole segment in the transfer function's interval k (the usual case): its samples are the piece's
- * first nine points (where the shading needs no cut), as on the pre-classified path: alpha at the samples gives the optical depth exactly
- * (`weights`, alpha being a polynomial of u's degree there), u and the gradient lanes the emission */
-inline void add_segment(Piece *C, const Shading *P, __constant const real *nodes, __constant const real *weights,
-                        __global const real4 *tf, const int K, const real *u, const real *gx, const real *gy,
-                        const real *gz, const real tol, real3 *emission, int *evals, int *flags)
-{
-    const int k = tf_interval(tf, K, u[3]); /* xi = 0 */
-    const real4 line = tf[1 + K + 3 * k];
-    if (line.y == 0 && line.z == 0)
-        return;
-    C->line = (real4)(line.xyz, line.z < 0 ? -1 : 1);
-    C->rgb = tf[2 + K + 3 * k].xyz;
-    C->rgb_slope = tf[3 + K + 3 * k].xyz;
-    C->a = -1;
-    C->ui_a = cheb1(C->ui, NS + 1, -1);
-    real alpha[NS], depth[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    for (int i = 0; i < NS; i++) {
-        alpha[i] = fmax(line.y + line.z * (u[i] - line.x), (real)0);
-        for (int p = 0; p < 8; p++)
-            depth[p] += weights[8 * i + p] * alpha[i];
-    }
-    real cuts[SHADE_CUTS];
-    const int n = shading_cuts(C, P, nodes, true, gx, gy, gz, -1, 1, cuts);
-    real3 f9[9];
-    for (int p = 0; p <= 8 && n == 0; p++) { /* xi = -1 + p/4: lane P0 for p = 0, else lane p - 1 */
-        const int lane = p ? p - 1 : P0;
-        const real3 rgb = clamp(C->rgb + C->rgb_slope * (u[lane] - line.x), (real)0, (real)1) * alpha[lane];
-        real r = rgb.x, g = rgb.y, b = rgb.z;
-        shade(&r, &g, &b, alpha[lane], gx[lane] * C->line.w, gy[lane] * C->line.w, gz[lane] * C->line.w, P);
-        f9[p] = (real3)(r, g, b) * fast_exp(-C->radius * (p ? depth[p - 1] : 0));
-    }
-    *emission += cut_simpson(C, P, nodes, f9, cuts, n, -1, 1, tol, evals, flags);
-    C->depth_a = depth[7];
-}
-
-/* Whether u - v has exactly one root inside the span of Bernstein coefficients c: the coefficients change sign
- * once (Descartes' rule for the Bernstein basis), the ends clear of v by more than eps */
-inline bool one_crossing(const real *c, const real v, const real eps)
-{
-    int changes = 0;
-    for (int i = 1; i < NS; i++)
-        changes += (c[i - 1] - v) * (c[i] - v) < 0;
-    return changes == 1 && fabs(c[0] - v) > eps && fabs(c[NS - 1] - v) > eps;
 }
 
 /* the transfer function's opacity at u */
@@ -311,30 +195,21 @@ inline real tf_alpha(__global const real4 *tf, const int K, const real u)
     return fmax(line.y + line.z * (u - line.x), (real)0);
 }
 
-/* A segment's scalar as the classification needs it, from s at the samples (lane order of fq): u there,
- * u's Chebyshev series and antiderivative (in C), its Bernstein coefficients c on [-1, 1].  Returns whether
- * the transfer function is opaque anywhere in the coefficients' hull: a segment where it is not adds
- * nothing, and needs no gradient. */
-inline bool segment_scalar(const real *s, __constant const real *nodes, __global const real4 *tf, Piece *C,
-                           real *u, real *c)
+/* A segment's scalar as the classification needs it, from s at the samples (lane order of fq): u there and its
+ * Bernstein coefficients c on [-1, 1].  Returns whether the transfer function is opaque anywhere in the
+ * coefficients' hull: a segment where it is not adds nothing, and needs no gradient. */
+inline bool segment_scalar(const real *s, __constant const real *nodes, __global const real4 *tf, real *u, real *c)
 {
     const real4 head = tf[0];
     const int K = (int)head.z;
     for (int k = 0; k < NS; k++)
         u[k] = s[k] * head.x + head.y;
-    for (int m = 0; m < NS; m++) { /* u's series and Bernstein coefficients */
-        real am = 0, bm = 0;
-        for (int k = 0; k < NS; k++) {
-            am += u[k] * nodes[NS + m * NS + k];
+    for (int m = 0; m < NS; m++) {
+        real bm = 0;
+        for (int k = 0; k < NS; k++)
             bm += u[k] * nodes[NS + NS * NS + NG * NG + m * NS + k];
-        }
-        C->us[m] = am;
         c[m] = bm;
     }
-    /* u's antiderivative: C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 (any constant term) */
-    C->ui[0] = 0;
-    for (int k = 1; k <= NS; k++)
-        C->ui[k] = (C->us[k - 1] * (k == 1 ? 2 : 1) - (k + 1 < NS ? C->us[k + 1] : 0)) / (2 * k);
     real lo = c[0], hi = c[0];
     for (int i = 1; i < NS; i++) {
         lo = fmin(lo, c[i]);
@@ -347,51 +222,203 @@ inline bool segment_scalar(const real *s, __constant const real *nodes, __global
     return m > 0;
 }
 
-/* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from segment_scalar's C, u
- * and c, the gradient of s at the samples (gx, gy, gz: lanes 0..NG-1) and its series (grad; shading), the half
- * length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1 where a span could not be
- * resolved. */
-inline real4 classified_segment(Piece *C0, real *c, const real *u, const real *gx, const real *gy, const real *gz,
+/* How many breakpoints lie inside the hull of the Bernstein coefficients c by more than u is known to (the
+ * samples' rounding times the interpolation's Lebesgue constant, about 30 for these points: a crossing by less
+ * moves nothing measurable); *cross: the first of them that u crosses exactly once, 0 for none */
+inline int breakpoints_inside(__global const real4 *tf, const int K, const real *c, int *cross)
+{
+    real lo = c[0], hi = c[0];
+    for (int i = 1; i < NS; i++) {
+        lo = fmin(lo, c[i]);
+        hi = fmax(hi, c[i]);
+    }
+    const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
+    int inside = 0;
+    *cross = 0;
+    for (int i = 1; i <= K; i++) {
+        const real v = tf[i].x;
+        if (v > lo + eps && v < hi - eps) {
+            inside += 1;
+            if (!*cross && one_crossing(c, v, eps))
+                *cross = i;
+        }
+    }
+    return inside;
+}
+
+/* A segment inside one interval of the transfer function: the interval's line, alpha at the samples and the
+ * optical depth from -1 to xi = -1 + p/4 (p = 1..8, `weights`: exact, alpha being a polynomial of u's degree there),
+ * e^{-radius depth} there, and u - u_ref at the samples */
+typedef struct {
+    bool transparent;
+    real4 line;          /* (u_ref, alpha_ref, alpha_slope, 0) */
+    real3 rgb, slope;    /* colour at u_ref and per unit u */
+    real8 du, alpha, att; /* lanes 0..7: xi = -1 + p/4, p = 1..8 */
+    real du0, alpha0;    /* lane P0: xi = -1 */
+    real depth;          /* int alpha dxi over the segment */
+} OneInterval;
+
+/* Whether the segment lies inside one interval (no breakpoint inside the hull of u's Bernstein coefficients c),
+ * and then O from u at the samples and the half length radius */
+inline bool one_interval(const real *u, const real *c, __constant const real *weights, __global const real4 *tf,
+                         const real radius, OneInterval *O)
+{
+    const int K = (int)tf[0].z;
+    int cross;
+    if (breakpoints_inside(tf, K, c, &cross))
+        return false;
+    const int k = tf_interval(tf, K, u[3]); /* xi = 0 */
+    O->line = tf[1 + K + 3 * k];
+    O->transparent = O->line.y == 0 && O->line.z == 0;
+    O->rgb = tf[2 + K + 3 * k].xyz;
+    O->slope = tf[3 + K + 3 * k].xyz;
+    real alpha[NS];
+    real8 depth = 0;
+    for (int i = 0; i < NS; i++) {
+        alpha[i] = fmax(O->line.y + O->line.z * (u[i] - O->line.x), (real)0);
+        depth = fma((real8)(alpha[i]), vload8(i, weights), depth);
+    }
+    O->du = vload8(0, u) - O->line.x;
+    O->du0 = u[P0] - O->line.x;
+    O->alpha = vload8(0, alpha);
+    O->alpha0 = alpha[P0];
+    O->att = fast_exp(-radius * depth);
+    O->depth = depth.s7;
+    return true;
+}
+
+/* the unshaded emission rgb(u) alpha at the lanes 0..7 (r, g, b) and at P0 (*q0) */
+inline void interval_emission(const OneInterval *O, real8 *r, real8 *g, real8 *b, real3 *q0)
+{
+    *r = clamp(O->rgb.x + O->slope.x * O->du, (real8)(0), (real8)(1)) * O->alpha;
+    *g = clamp(O->rgb.y + O->slope.y * O->du, (real8)(0), (real8)(1)) * O->alpha;
+    *b = clamp(O->rgb.z + O->slope.z * O->du, (real8)(0), (real8)(1)) * O->alpha;
+    *q0 = clamp(O->rgb + O->slope * O->du0, (real)0, (real)1) * O->alpha0;
+}
+
+/* the segment's first nine points xi = -1 + p/4, p = 0..8, of the shaded emission times e^{-A}, from the gradient
+ * lanes of s (lanes 0..7 and P0), eight at once as on the pre-classified path */
+inline void interval_points(const OneInterval *O, const realv gx, const realv gy, const realv gz, const Shading *P,
+                            real3 *f9)
+{
+    real8 r, g, b;
+    real3 q0;
+    interval_emission(O, &r, &g, &b, &q0);
+    const real sign = O->line.z < 0 ? -1 : 1; /* normals face where alpha decreases */
+    shade8(&r, &g, &b, O->alpha, gx.lo * sign, gy.lo * sign, gz.lo * sign, P);
+    real q0r = q0.x, q0g = q0.y, q0b = q0.z;
+    shade(&q0r, &q0g, &q0b, O->alpha0, gx.s8 * sign, gy.s8 * sign, gz.s8 * sign, P);
+    f9[0] = (real3)(q0r, q0g, q0b);
+    real fr[8], fg[8], fb[8];
+    vstore8(r * O->att, 0, fr);
+    vstore8(g * O->att, 0, fg);
+    vstore8(b * O->att, 0, fb);
+    for (int p = 1; p <= 8; p++)
+        f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
+}
+
+/* Shaded at its midpoint where that is within what is left of the shading budget (midpoint_shading): weight is
+ * what a unit of the segment's integrals is worth in the image (T radius).  Returns whether it was: then
+ * *part = int q' e^{-A} dxi, and no gradient is needed. */
+inline bool interval_midpoint(const OneInterval *O, const Shading *P, const real weight, real *budget, real3 *part)
+{
+    real8 r, g, b;
+    real3 q0;
+    interval_emission(O, &r, &g, &b, &q0);
+    return midpoint_shading(r * O->att, g * O->att, b * O->att, O->alpha * O->att, (real4)(q0, O->alpha0), P,
+                            weight, budget, part);
+}
+
+/* Shaded point by point where the shading does not turn on the segment (shading_turns) and Simpson on the first
+ * nine points is within tol on both panels (panel_done): returns whether it was, *emission = int q' e^{-A} dxi.
+ * Otherwise classified_segment takes the segment (cuts, finer panels). */
+inline bool interval_simpson(const OneInterval *O, const realv gx, const realv gy, const realv gz, const Shading *P,
+                             __constant const real *nodes, const real tol, real3 *emission, int *evals)
+{
+    if (shading_turns(gx, gy, gz, P, nodes))
+        return false;
+    real3 f9[9], total = (real3)(0);
+    interval_points(O, gx, gy, gz, P, f9);
+    const Panel first = {-1, 0, tol / 2, f9[0], f9[2], f9[4], 1}, second = {0, 1, tol / 2, f9[4], f9[6], f9[8], 1};
+    int flags = 0; /* panels at depth 1: never at the depth limit */
+    if (!panel_done(&first, f9[1], f9[3], &total, &flags) || !panel_done(&second, f9[5], f9[7], &total, &flags))
+        return false;
+    *emission = total;
+    *evals += 9;
+    return true;
+}
+
+/* The whole segment inside one interval of the transfer function (the usual case), cut where the shading turns
+ * (O: one_interval's): its samples are the first nine points where it needs no cut, as on the pre-classified path */
+inline void add_segment(Piece *C, const OneInterval *O, const Shading *P, __constant const real *nodes,
+                        const real *gx, const real *gy, const real *gz, const real tol, real3 *emission, int *evals,
+                        int *flags)
+{
+    if (O->transparent)
+        return;
+    C->line = (real4)(O->line.xyz, O->line.z < 0 ? -1 : 1);
+    C->rgb = O->rgb;
+    C->rgb_slope = O->slope;
+    C->a = -1;
+    C->ui_a = cheb1(C->ui, NS + 1, -1);
+    real cuts[SHADE_CUTS];
+    const int n = shading_cuts(C, P, nodes, true, gx, gy, gz, -1, 1, cuts);
+    real3 f9[9];
+    if (n == 0)
+        interval_points(O, vload16(0, gx), vload16(0, gy), vload16(0, gz), P, f9);
+    *emission += cut_simpson(C, P, nodes, f9, cuts, n, -1, 1, tol, evals, flags);
+    C->depth_a = O->depth;
+}
+
+/* u's Chebyshev series and antiderivative (any constant) from u at the samples: for pieces cut out of the
+ * segment and Simpson's panels finer than quarters */
+inline void piece_series(Piece *C, const real *u, __constant const real *nodes)
+{
+    for (int m = 0; m < NS; m++) {
+        real am = 0;
+        for (int k = 0; k < NS; k++)
+            am += u[k] * nodes[NS + m * NS + k];
+        C->us[m] = am;
+    }
+    /* C_k = (a'_{k-1} - a_{k+1}) / 2k, a'_0 = 2 a_0 */
+    C->ui[0] = 0;
+    for (int k = 1; k <= NS; k++)
+        C->ui[k] = (C->us[k - 1] * (k == 1 ? 2 : 1) - (k + 1 < NS ? C->us[k + 1] : 0)) / (2 * k);
+}
+
+/* The classified segment: (int q' e^{-A} dxi, int alpha dxi) over xi in [-1, 1], from u at the samples and c, its
+ * Bernstein coefficients (segment_scalar), the gradient of s at the samples (gx, gy, gz: lanes 0..NG-1) and its
+ * series (grad; shading), the half length `radius` and the tolerance `tol` on the first (in xi units).  Flags bit 1
+ * where a span could not be resolved. */
+inline real4 classified_segment(real *c, const real *u, const real *gx, const real *gy, const real *gz,
                                 const real3 *grad, const real radius, __constant const real *nodes,
                                 __constant const real *weights, __global const real4 *tf, const Shading *P,
                                 const real tol, int *evals, int *flags)
 {
     const int K = (int)tf[0].z;
-    Piece C = *C0;
+    Piece C;
+    piece_series(&C, u, nodes);
     for (int m = 0; m < NG; m++)
         C.g[m] = grad[m];
     C.radius = radius;
     C.depth_a = 0;
     real3 emission = (real3)(0);
+    OneInterval O;
+    if (one_interval(u, c, weights, tf, radius, &O)) {
+        add_segment(&C, &O, P, nodes, gx, gy, gz, tol, &emission, evals, flags);
+        return (real4)(emission, C.depth_a);
+    }
     /* spans left to right: the right parts wait on a stack, one per depth at most */
     real stack_c[POST_DEPTH][NS], stack_ab[POST_DEPTH][2];
     int stack_depth[POST_DEPTH], top = 0, depth = 0;
     real a = -1, b = 1;
     while (true) {
-        real lo = c[0], hi = c[0];
-        for (int i = 1; i < NS; i++) {
-            lo = fmin(lo, c[i]);
-            hi = fmax(hi, c[i]);
-        }
-        /* breakpoints inside the range by more than u is known to: the samples' rounding times the interpolation's
-         * Lebesgue constant (about 30 for these points); a crossing by less moves nothing measurable */
-        const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
-        int inside = 0, cross = 0; /* cross: the first breakpoint crossed once, 0 for none */
-        for (int i = 1; i <= K; i++) {
-            const real v = tf[i].x;
-            if (v > lo + eps && v < hi - eps) {
-                inside += 1;
-                if (!cross && one_crossing(c, v, eps))
-                    cross = i;
-            }
-        }
+        int cross;
+        const int inside = breakpoints_inside(tf, K, c, &cross);
         if (inside == 0 || depth >= POST_DEPTH) { /* one interval (or unresolved: flagged) */
             if (inside)
                 *flags |= 2;
-            if (depth == 0)
-                add_segment(&C, P, nodes, weights, tf, K, u, gx, gy, gz, tol, &emission, evals, flags);
-            else
-                add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
+            add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
             if (top == 0)
                 break;
             top -= 1;
@@ -427,5 +454,46 @@ inline real4 classified_segment(Piece *C0, real *c, const real *u, const real *g
         b = x;
     }
     return (real4)(emission, C.depth_a);
+}
+/* A segment of the post-classified ray (docs/raytracing.md §10), first without the gradient: from s at the samples,
+ * u there and its Bernstein coefficients c (segment_scalar), and whether it lies inside one interval (*one, then
+ * *O).  Returns true when it is done: transparent all along (*r = 0), or inside one interval and shaded at its
+ * midpoint within what is left of the shading budget (*r = (int q' e^{-A} dxi, int alpha dxi); weight: what a unit
+ * of those is worth in the image, T radius).  Otherwise post_gradient takes it, with the gradient. */
+inline bool post_segment(const real *s, __constant const real *nodes, __constant const real *weights,
+                         __global const real4 *tf, const Shading *P, const real radius, const real weight,
+                         real *budget, real *u, real *c, OneInterval *O, bool *one, real4 *r, int *midpoints,
+                         int *evals)
+{
+    *r = (real4)(0);
+    if (!segment_scalar(s, nodes, tf, u, c))
+        return true;
+    *one = one_interval(u, c, weights, tf, radius, O);
+    real3 e;
+    if (!(*one && SHADING && interval_midpoint(O, P, weight, budget, &e)))
+        return false;
+    *r = (real4)(e, O->depth);
+    *midpoints += 1;
+    *evals += 9;
+    return true;
+}
+
+/* The rest of post_segment's segments, from the gradient of s at the lanes (fine units): inside one interval and
+ * where the shading does not turn, Simpson on the nine samples when that is within tol; else cut where u crosses a
+ * breakpoint or the shading turns, and finer panels (classified_segment) */
+inline real4 post_gradient(const OneInterval *O, const bool one, real *c, const real *u, const realv gx,
+                           const realv gy, const realv gz, const real radius, __constant const real *nodes,
+                           __constant const real *weights, __global const real4 *tf, const Shading *P,
+                           const real tol, int *evals, int *flags)
+{
+    real3 e, g[NG];
+    if (one && interval_simpson(O, gx, gy, gz, P, nodes, tol, &e, evals))
+        return (real4)(e, O->depth);
+    lane_series(gx, gy, gz, nodes, g);
+    real lx[16], ly[16], lz[16];
+    vstore16(gx, 0, lx);
+    vstore16(gy, 0, ly);
+    vstore16(gz, 0, lz);
+    return classified_segment(c, u, lx, ly, lz, g, radius, nodes, weights, tf, P, tol, evals, flags);
 }
 #endif

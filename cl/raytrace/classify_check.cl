@@ -1,36 +1,47 @@
-/* classify_check.cl: classified_segment (classify.h) on given segments, for its test against an independent
- * quadrature (tests/test_classify.py).  Unshaded; build with CLW_POST, CLW_SAMPLES, CLW_GROUPS, CLW_ORDERS,
- * CLW_MAX_DEPTH.
- *   out      (n,) real4: int q e^{-A} dxi (rgb) and int alpha dxi over xi in [-1, 1]
+/* classify_check.cl: a post-classified segment (classify.h: post_segment, then post_gradient) on given segments, for
+ * its test against an independent quadrature (tests/test_classify.py).  Build with CLW_POST, CLW_SAMPLES,
+ * CLW_GROUPS, CLW_ORDERS, CLW_MAX_DEPTH, and CLW_SHADE for Phong shading by one light.
+ *   out      (n,) real4: int q' e^{-A} dxi (rgb) and int alpha dxi over xi in [-1, 1]
  *   samples  (n, CLW_SAMPLES) the scalar at the sample points (lane order of the ray tracer's fq)
+ *   grads    (n, 3, 16) its gradient (fine units) at the lanes 0..NG-1, per axis
  *   radius   (n,) half the segment length; nodes, weights, tf as in raytrace.cl; tol on the emission (xi units)
- *   flags    (n,) the segment's flags (bit 1: a span or panel at its depth limit)
+ *   shading  (ka, kd, ks, shininess, the light's direction (3), the halfway vector (3), the flat gradients' floor)
+ *   budget   (n,) the shading budget (xi units: the segment's weight is 1), replaced by what is left of it
+ *   stats    (n,) int4: flags (bit 1: a span or panel at its depth limit), shaded at the midpoint, inside one
+ *            interval, integrand evaluations
  * Grid: global (n). */
 #include "raytrace/types.h"
 #include "raytrace/classify.h"
 
-__kernel void classify_segments(__global real4 *out, __global const real *samples, __global const real *radius,
-                                __constant const real *nodes, __constant const real *weights,
-                                __global const real4 *tf, const real tol, __global int *flags, const int n)
+__kernel void classify_segments(__global real4 *out, __global const real *samples, __global const real *grads,
+                                __global const real *radius, __constant const real *nodes,
+                                __constant const real *weights, __global const real4 *tf, const real tol,
+                                __global const real *shading, __global real *budget, __global int4 *stats, const int n)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
-    real s[NS], flat[16];
-    real3 g[9];
+    real s[NS], u[NS], c[NS];
     for (int k = 0; k < NS; k++)
         s[k] = samples[i * NS + k];
-    for (int m = 0; m < 9; m++)
-        g[m] = (real3)(0);
-    for (int k = 0; k < 16; k++)
-        flat[k] = 0;
     Shading P;
-    P.nlights = 0;
-    int evals = 0, f = 0;
-    Piece C;
-    real u[NS], c[NS];
-    out[i] = segment_scalar(s, nodes, tf, &C, u, c)
-                 ? classified_segment(&C, c, u, flat, flat, flat, g, radius[i], nodes, weights, tf, &P, tol, &evals, &f)
-                 : (real4)(0);
-    flags[i] = f;
+    P.ka = shading[0]; P.kd = shading[1]; P.ks = shading[2]; P.shininess = shading[3];
+    P.whole = P.shininess == floor(P.shininess) && P.shininess <= 64;
+    P.exponent = (int)P.shininess;
+    P.nlights = 1;
+    P.light[0] = (real3)(shading[4], shading[5], shading[6]);
+    P.halfway[0] = (real3)(shading[7], shading[8], shading[9]);
+    P.grad_floor = shading[10];
+    P.scale = (real3)(1);
+    int evals = 0, flags = 0, midpoints = 0;
+    real left = budget[i];
+    OneInterval O;
+    bool one = false;
+    real4 r;
+    if (!post_segment(s, nodes, weights, tf, &P, radius[i], 1, &left, u, c, &O, &one, &r, &midpoints, &evals))
+        r = post_gradient(&O, one, c, u, vload16(3 * i, grads), vload16(3 * i + 1, grads), vload16(3 * i + 2, grads),
+                          radius[i], nodes, weights, tf, &P, tol, &evals, &flags);
+    out[i] = r;
+    budget[i] = left;
+    stats[i] = (int4)(flags, midpoints, one, evals);
 }

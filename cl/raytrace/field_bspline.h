@@ -244,6 +244,76 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
     B->corner = G.coef + n.w + ((size_t)c.z * n.y + c.y) * n.x + c.x;
 }
 
+#ifdef CLW_SCALAR_POOL
+/* group_field for a scalar pool: one lane a sample (samples 0..7 in *f, the tail lanes in *ft when `tail`), where
+ * group_field's four channel lanes a sample would sum three of zeros */
+__attribute__((always_inline)) inline void scalar_field(const Basis *B, const int j, const bool tail, real8 *f,
+                                                        realt *ft)
+{
+#pragma unroll
+    for (int rz = 0; rz < j; rz++) {
+        real8 plane = 0;
+        realt plane_t = 0;
+#pragma unroll
+        for (int ry = 0; ry < j; ry++) {
+            __global const coef_t *row = B->corner - rz * B->sz - ry * B->sy;
+            real8 line = 0;
+            realt line_t = 0;
+#pragma unroll
+            for (int rx = 0; rx < j; rx++) {
+                const real c = row[-rx];
+                line = fma((real8)(c), B->w[0][rx], line);
+                if (tail)
+                    line_t = fma((realt)(c), B->wt[0][rx], line_t);
+            }
+            plane = fma(line, B->w[1][ry], plane);
+            if (tail)
+                plane_t = fma(line_t, B->wt[1][ry], plane_t);
+        }
+        *f = fma(plane, B->w[2][rz], *f);
+        if (tail)
+            *ft = fma(plane_t, B->wt[2][rz], *ft);
+    }
+}
+
+#define SCALAR_FIELD(J) \
+    case J: \
+        if (tail) \
+            scalar_field(B, J, true, &f, &ft); \
+        else \
+            scalar_field(B, J, false, &f, &ft); \
+        break;
+
+/* sample_segment for a scalar pool (one group): fq[k] = (s_k, 0, 0, 0) */
+inline void sample_segment(const Field G, Active *A, const real t_mid, const real3 xm, const real radius,
+                           const real3 D, __constant const real *nodes, const bool fresh, real4 *fq,
+                           Basis *basis)
+{
+    const bool tail = NS > 12 || NS > P0 + 1 || fresh; /* samples 8.. (lane P0 alone: only when fresh) */
+    Basis *B = &basis[0];
+    segment_basis(G, 0, *A, xm, radius, D, nodes, B);
+    real8 f = 0;
+    realt ft = 0;
+    switch (ORDER[0]) {
+    SCALAR_FIELD(1)
+    SCALAR_FIELD(2)
+    SCALAR_FIELD(3)
+    SCALAR_FIELD(4)
+#if MAX_ORDER > 4
+    SCALAR_FIELD(6)
+#endif
+    }
+    real s[16];
+    vstore8(f, 0, s);
+#if NS > 12
+    vstore8(ft, 1, s);
+#else
+    vstore4(ft, 2, s);
+#endif
+    for (int k = 0; k < NS; k++)
+        fq[k] = (real4)(s[k], 0, 0, 0);
+}
+#else
 /* group_field with a literal order and tail (the loops unroll): w, w8 and the sums as group_field's */
 #define GROUP_FIELD(J) \
     case J: \
@@ -305,6 +375,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
         vstore4(f8.lo, 8, out);
     }
 }
+#endif
 
 /* alpha's fine gradient in the lanes of (gx, gy, gz), only for segments shaded point by point:
  * lanes 0..7 (real8), and the tail lanes 8.. (realt) unless lane P0 comes from the last segment and is the

@@ -128,14 +128,6 @@ inline bool reached(__global const uchar *content, const int4 origin, const int4
     return content[((size_t)k.z * shape.y + k.y) * shape.x + k.x] != 0;
 }
 
-/* (S4, S2): Simpson's rule over [-1, 1] on 4 and on 2 panels, from the values at xi = -1 + p/4,
- * p = 1..8 in the lanes of v and p = 0 in `first` */
-inline real2 simpson_pair(const real8 v, const real first)
-{
-    const real8 w4 = v * (real8)(4, 2, 4, 2, 4, 2, 4, 1), w2 = v * (real8)(0, 4, 0, 2, 0, 4, 0, 1);
-    return (real2)((dot(w4.lo + w4.hi, (real4)(1)) + first) / 12, (dot(w2.lo + w2.hi, (real4)(1)) + first) / 6);
-}
-
 /* raytrace: one ray per pixel.
  *
  * Parameters
@@ -278,7 +270,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
     const real total = t1 - t0;
     real skip_budget = tol / 4;
     real shade_budget = tol * 3 / 8; /* three quarters of the quadrature's half, when shading */
-    const real quadrature_share = SHADING && !POST ? tol / 8 : tol / 2; /* post: no midpoint shading */
+    const real quadrature_share = SHADING ? tol / 8 : tol / 2;
     /* R(t0): the region bounds integrated along the whole ray, region by region (once, in the first pass) */
     real rest = 0, consumed = 0;
     if (passes) {
@@ -394,31 +386,32 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             real3 part;
             real depth; /* int alpha dxi over the segment */
 #ifdef CLW_POST
-            {   /* the scalar classified by the transfer function (classify.h) */
-                real s[NS], u[NS], c[NS], gx[16], gy[16], gz[16];
-                Piece C;
+            {   /* the scalar classified by the transfer function (classify.h, docs/raytracing.md §10) */
+                real s[NS], u[NS], c[NS];
                 for (int k = 0; k < NS; k++)
                     s[k] = S.fq[k].x;
-                part = (real3)(0);
-                depth = 0;
-                if (segment_scalar(s, nodes, tf, &C, u, c)) { /* else transparent all along */
+                OneInterval O;
+                bool one;
+                real4 r; /* (int q' e^{-A} dxi, int alpha dxi) */
+                const bool gradient_joined = joined && end_shaded; /* lane P0's gradient: the last segment's end */
+                end_shaded = false;
+                if (!post_segment(s, nodes, weights, tf, &P, S.radius, T * S.radius, &shade_budget, u, c, &O, &one,
+                                  &r, &midpoints, &evals)) {
 #ifdef CLW_SHADE
-                    sample_gradient(basis, true, &S.gx, &S.gy, &S.gz);
-                    gradient_series(&S, nodes);
+                    sample_gradient(basis, !gradient_joined, &S.gx, &S.gy, &S.gz);
+                    if (gradient_joined) {
+                        S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
+                    }
+                    end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
+                    end_shaded = true;
 #else
                     S.gx = 0; S.gy = 0; S.gz = 0;
-                    for (int m = 0; m < NG; m++)
-                        S.g[m] = (real3)(0);
 #endif
-                    vstore16(S.gx, 0, gx);
-                    vstore16(S.gy, 0, gy);
-                    vstore16(S.gz, 0, gz);
-                    const real seg_tol = quadrature_share * (tn - t) / total / T;
-                    const real4 r = classified_segment(&C, c, u, gx, gy, gz, S.g, S.radius, nodes, weights, tf, &P,
-                                                       seg_tol / S.radius, &evals, &flags);
-                    part = r.xyz;
-                    depth = r.w;
+                    r = post_gradient(&O, one, c, u, S.gx, S.gy, S.gz, S.radius, nodes, weights, tf, &P,
+                                      quadrature_share * (tn - t) / total / T / S.radius, &evals, &flags);
                 }
+                part = r.xyz;
+                depth = r.w;
             }
 #else
             /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
@@ -443,26 +436,11 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             const real8 att = fast_exp(-S.radius * A8);
             bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
 #ifdef CLW_SHADE
-            {   /* Shading turns q into q (ka + kd D) + ks alpha S with D, S in [0, nlights]: the
-                 * midpoint of that range errs by at most half its width, times the unshaded
-                 * integrals (Simpson on 4 panels, plus |S4 - S2| for their error).  A segment whose
-                 * error that way fits in what is left of the shading budget takes the midpoint
-                 * and needs no gradient. */
-                const real2 sr = simpson_pair(r8 * att, f0.x), sg = simpson_pair(g8 * att, f0.y),
-                            sb = simpson_pair(b8 * att, f0.z), sa = simpson_pair(a8 * att, f0.w);
-                const real3 s4 = (real3)(sr.x, sg.x, sb.x), ds = fabs(s4 - (real3)(sr.y, sg.y, sb.y));
-                const real dsa = fabs(sa.x - sa.y);
-                const real n = P.nlights, diffuse_mid = P.ka + P.kd * n / 2, specular_mid = P.ks * n / 2;
-                const real3 err = P.kd * n / 2 * (s4 + ds) + specular_mid * (sa.x + dsa) /* the range */
-                                  + diffuse_mid * ds + specular_mid * dsa;            /* the quadrature */
-                const real cost = T * S.radius * fmax(err.x, fmax(err.y, err.z));
-                if (cost <= shade_budget) {
-                    shade_budget -= cost;
-                    part = diffuse_mid * s4 + specular_mid * sa.x;
-                    simpson_full = false;
-                    midpoints += 1;
-                    evals += 9;
-                }
+            if (midpoint_shading(r8 * att, g8 * att, b8 * att, a8 * att, f0, &P, T * S.radius, &shade_budget,
+                                 &part)) { /* no gradient needed (docs/raytracing.md §5) */
+                simpson_full = false;
+                midpoints += 1;
+                evals += 9;
             }
 #endif
             if (simpson_full) {
