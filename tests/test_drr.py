@@ -15,12 +15,19 @@ def model():
     return clwave.WaveletVolume.from_volume(vol, levels=1)
 
 
-def test_a_batch_equals_single_renders(model):
-    cams = poses([dict(azimuth=a, elevation=e, roll=r) for a, e, r in ((0, 0, 0), (50, 20, 10), (200, -30, 0))],
+def test_a_batch_equals_single_renders(model, monkeypatch):
+    from clwave.splat import perspective
+
+    made = []  # footprints are made once per direction: the translated pose (a registration step) reuses them
+    monkeypatch.setattr(perspective, "sheared_footprints",
+                        lambda *a, _f=perspective.sheared_footprints, **k: made.append(1) or _f(*a, **k))
+    cams = poses([dict(azimuth=a, elevation=e, roll=r, isocentre_x=x) for a, e, r, x in
+                  ((0, 0, 0, 0), (50, 20, 10, 0), (50, 20, 10, 1.5), (200, -30, 0, 0))],
                  (12, 16), pixel=2.5, dso=60.0, dsd=90.0)
     r = clwave.SplatRenderer(model)
     batch = r.render_many(cams)
-    assert batch.shape == (3, 12, 16, 1)
+    assert batch.shape == (4, 12, 16, 1) and len(made) == 3
+    assert not np.array_equal(batch[1], batch[2])
     for cam, image in zip(cams, batch):
         assert np.array_equal(image, clwave.SplatRenderer(model).render(cam).image)
     out = np.empty_like(batch)

@@ -39,7 +39,8 @@ pre-classification of the same phantom, renders interleaved; transfer-function c
 Shepp-Logan phantom of ``--size``³ voxels of 300 mm / ``--size`` (a head-sized CT), cubic, 3 levels,
 5 %, through a C-arm (dso 1000 mm, dsd 1500 mm, a 400 mm detector): one renderer reused, each view
 a new pose; 512² single views (``--views``), interleaved with orthographic views of the same framing
-(the ratio), and a batch of ``--drr-batch`` poses at 256² (``render_many``, wall time).
+(the ratio), a batch of ``--drr-batch`` poses at 256² (``render_many``, wall time), and as many
+registration steps (one direction, the volume moved by up to 5 mm: the poses share their footprints).
 
 ``scale`` (not in ``all``): volumes bigger than memory (docs/chunked.md).  A hydrogen phantom of
 ``--size``³ float32 voxels (or ``--scale-shape Z,Y,X`` of ``--scale-dtype``) is written to a Zarr
@@ -802,6 +803,14 @@ def bench_drr(args) -> dict:
     wall = time.perf_counter() - start
     cases[f"batch of {len(poses)} at 256x256"] = dict(seconds=wall, per_view=wall / len(poses),
                                                       shape=list(stack.shape))
+    # registration steps: one direction, the volume moved by up to 5 mm (poses share their footprints)
+    shifts = np.random.default_rng(0).uniform(-5.0, 5.0, (args.drr_batch, 3))
+    steps = [clwave.ConeBeam(1000.0, 1500.0, 256, pixel=400.0 / 256, azimuth=30.0, elevation=10.0, isocentre=tuple(d))
+             for d in shifts]
+    start = time.perf_counter()
+    renderer.render_many(steps)
+    wall = time.perf_counter() - start
+    cases[f"batch of {len(steps)} translations at 256x256"] = dict(seconds=wall, per_view=wall / len(steps))
     return dict(setting=dict(volume=f"shepp-logan {args.size}^3 of {300.0 / args.size:.3g} mm", wavelet="cubic",
                              levels=3, keep=0.05, coefficients=wv.kept, geometry="dso 1000, dsd 1500, 400 mm detector"),
                 targets=dict(seconds_512=0.5, batch_100_at_256_seconds=10.0), cases=cases)

@@ -13,6 +13,8 @@ between the four around its own.
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
+
 import numpy as np
 import scipy.fft
 
@@ -31,6 +33,7 @@ from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _a
 #: phi-phi-phi footprint at 0.1 (the error of each footprint scales with the square of the step)
 SLOPE_STEP = 0.1
 TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.splat.tables.TEXTURE_TOL)
+FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
 SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
 #: the host tables of a perspective view, uploaded by name (cl/splat/cone.cl)
 CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "layers", "layer_slope", "cone",
@@ -192,7 +195,11 @@ class ConeTables:
 
     names = CONE_TABLES
 
-    def __init__(self, wv, group: int, layers, omega_s=None, sampling="auto", device=None, max_texels=None):
+    def __init__(self, wv, group: int, layers, omega_s=None, sampling="auto", device=None, max_texels=None,
+                 cache=None):
+        """``cache``: a dict in which a renderer keeps the texture tables of its last views (at most
+        :data:`FOOTPRINT_CACHE`), keyed by all they depend on (the view's direction and slope grid, the bands'
+        texels and layers), so poses that differ by a translation (registration steps) share them."""
         g = wv.groups[group]
         wav = g.wavelet
         if sampling == "cells":
@@ -224,49 +231,71 @@ class ConeTables:
                 layer_of[band] = li
                 texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, axes)
                 self.omega_s = self.omega_s or omega
-        start = time.perf_counter()
-        textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
-                                      TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
-        self.footprint_seconds = time.perf_counter() - start
         self.samplings = [sampling]
-
         self.band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
         self.band_world = np.zeros((8 * MAX_LEVELS, 4), np.float32)
         self.band_step = np.zeros((8 * MAX_LEVELS, 4), np.float32)
         self.layers = np.zeros((len(layers), 4), np.int32)  # (width, height, first tile, first pixel)
         self.layer_slope = np.zeros((len(layers), 4), np.float32)
-        boxes, ints, maps, tex_layer, pool, offset = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
         self.tiles = self.pixels = 0
-        self.layer_textures = []
         for li, (view, _) in enumerate(layers):
             H, W = view.size
             self.layers[li] = (W, H, self.tiles, self.pixels)
             self.layer_slope[li, :2] = view.slope
             self.tiles += -(-W // TILE) * -(-H // TILE)
             self.pixels += H * W
-            first_tex = len(ints)
-            for b in g.bands:
-                band, bid = (b.level, b.key), b.level * 8 + b.code
-                if layer_of.get(band) != li:
-                    continue
-                # world centre of coefficient k = 0 (docs/model.md §4: X = o + 2^m (k + c0)) and its steps
-                self.band_world[bid, :3] = fine_to_world(support_centres(wav, b.key, b.level, (0, 0, 0)), wav.order,
-                                                         wv.shape, wv.spacing, wv.origin)
-                self.band_step[bid, :3] = 2.0 ** b.level * d_xyz
-                tex = textures[band]
-                K, nv, nu = tex.data.shape
-                padded = slope_cells(tex.data, count)
-                if max_texels is not None and offset + padded.size > max_texels:
-                    raise DeviceMemoryError(
-                        f"the footprints of this perspective view need more than {4 * max_texels / 2**20:,.0f} MiB "
-                        f"({K} ray slopes a band); render fewer pixels, a narrower cone or a lower omega_s")
-                self.band_tex[bid] = len(ints)
-                tex_layer.append((li, len(ints) - first_tex))
-                boxes.append((-tex.centre_u * tex.h_u, (nu - 1 - tex.centre_u) * tex.h_u,
-                              -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
-                ints.append((offset, nu + 2, padded[0].size, nv + 2))  # cells' texels are 4 floats
-                maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
-                pool.append(padded.ravel())
-                offset += padded.size
-            self.layer_textures.append(len(ints) - first_tex)
-        set_texture_tables(self, boxes, ints, maps, tex_layer, pool)
+        for b in g.bands:
+            if (b.level, b.key) in layer_of:  # world centre of coefficient k = 0 (docs/model.md §4) and its steps
+                self.band_world[b.level * 8 + b.code, :3] = fine_to_world(
+                    support_centres(wav, b.key, b.level, (0, 0, 0)), wav.order, wv.shape, wv.spacing, wv.origin)
+                self.band_step[b.level * 8 + b.code, :3] = 2.0 ** b.level * d_xyz
+        key = (group, sampling, max_texels, tuple(sorted(layer_of.items())),
+               tuple(sorted((band, tuple(np.broadcast_to(h, 2).tolist())) for band, h in texels.items())),
+               *(np.asarray(x, np.float64).tobytes() for x in (view0.n, view0.u, view0.v, nodes)))
+        start = time.perf_counter()
+        if cache is not None and key in cache:
+            packed = cache[key]
+        else:
+            textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
+                                          TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
+            packed = _pack(g, textures, layer_of, len(layers), count, max_texels)
+            if cache is not None:
+                while len(cache) >= FOOTPRINT_CACHE:
+                    cache.pop(next(iter(cache)))
+                cache[key] = packed
+        self.footprint_seconds = time.perf_counter() - start
+        self.band_tex[:] = packed["band_tex"]
+        self.tex_box, self.tex_int, self.tex_map, self.tex_layer, self.texels, self.layer_textures = (
+            packed[name] for name in ("tex_box", "tex_int", "tex_map", "tex_layer", "texels", "layer_textures"))
+
+
+def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
+    """The texture tables of a view (``band_tex``, ``tex_*``, ``texels``; ``layer_textures``, the textures of each
+    layer): each layer's bands in order, each texture as :func:`slope_cells`."""
+    band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
+    boxes, ints, maps, tex_layer, pool, offset, layer_textures = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD, []
+    for li in range(layer_count):
+        first_tex = len(ints)
+        for b in g.bands:
+            band = (b.level, b.key)
+            if layer_of.get(band) != li:
+                continue
+            tex = textures[band]
+            K, nv, nu = tex.data.shape
+            padded = slope_cells(tex.data, count)
+            if max_texels is not None and offset + padded.size > max_texels:
+                raise DeviceMemoryError(
+                    f"the footprints of this perspective view need more than {4 * max_texels / 2**20:,.0f} MiB "
+                    f"({K} ray slopes a band); render fewer pixels, a narrower cone or a lower omega_s")
+            band_tex[b.level * 8 + b.code] = len(ints)
+            tex_layer.append((li, len(ints) - first_tex))
+            boxes.append((-tex.centre_u * tex.h_u, (nu - 1 - tex.centre_u) * tex.h_u,
+                          -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
+            ints.append((offset, nu + 2, padded[0].size, nv + 2))  # cells' texels are 4 floats
+            maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
+            pool.append(padded.ravel())
+            offset += padded.size
+        layer_textures.append(len(ints) - first_tex)
+    out = SimpleNamespace()
+    set_texture_tables(out, boxes, ints, maps, tex_layer, pool)
+    return dict(vars(out), band_tex=band_tex, layer_textures=layer_textures)

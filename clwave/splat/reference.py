@@ -89,11 +89,14 @@ def records(ranges, vals, first, centre, bbox, stex, values, layers, channels):
 
     Per pair: centre, the bits (texture id; the splat's pixels in the tile, 4 bits each) and
     c_0, then, with more than one channel, c_1..c_3 and 0 (R = 2 uint4s); floats as their bits.
+    Perspective centres (col, row, depth, 0) put the depth in the w of the second uint4, always present
+    (with every channel's value before it).
     The packing restates ``cl/splat/record.h``; :func:`accumulate` works from ``vals`` and the
     splats' own tables instead, so a wrong layout also shows in the accumulated image.
     """
-    floats = np.zeros((len(vals), 4 if channels == 1 else 8), np.float32)
-    nc = 1 if channels == 1 else 4
+    perspective = centre.shape[1] == 4
+    nc = 1 if channels == 1 and not perspective else 4
+    floats = np.zeros((len(vals), 4 * (1 + (nc > 1))), np.float32)
     bits = np.zeros(len(vals), np.uint32)
     for tile, (start, end) in enumerate(ranges):
         _, x, y = tile_corner(tile, layers)
@@ -101,7 +104,9 @@ def records(ranges, vals, first, centre, bbox, stex, values, layers, channels):
             s = vals[k]
             x0, y0, x1, y1 = (int(v) for v in np.clip(bbox[s] - [x, y, x, y], 0, TILE - 1))
             bits[k] = int(stex[s]) | x0 << 16 | x1 << 20 | y0 << 24 | y1 << 28
-            floats[k, :2] = centre[s]
+            floats[k, :2] = centre[s, :2]
+            if perspective:
+                floats[k, 7] = centre[s, 2]
             floats[k, 3:3 + nc] = values[first + s, :nc]
     out = floats.view(np.uint32)
     out[:, 2] = bits
@@ -133,25 +138,109 @@ def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, layers
     where it is clear.  Image rows go down while v goes up.
     """
     fbs = [np.zeros((h, w, 4)) for w, h, _, _ in layers]
+    for layer, s, xs, ys in _tile_pixels(ranges, vals, bbox, layers):
+        data, cu, cv, lookup, su, sv = textures[stex[s]]
+        nv, nu = data.shape
+        tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
+        tex[1:-1, 1:-1] = data
+        iu0, iu1, fu = _axis_lookup(xs, centre[s, 0], cu, su, nu, lookup & LINEAR_U)
+        # rows: offset (centre - y) along v, i.e. the same lookup of -y about -centre
+        iv0, iv1, fv = _axis_lookup(-ys, -centre[s, 1], cv, sv, nv, lookup & LINEAR_V)
+        top = tex[iv0[:, None], iu0] * (1 - fu) + tex[iv0[:, None], iu1] * fu
+        bot = tex[iv1[:, None], iu0] * (1 - fu) + tex[iv1[:, None], iu1] * fu
+        sample = top * (1 - fv[:, None]) + bot * fv[:, None]
+        fbs[layer][ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
+    return np.concatenate([fb.reshape(-1, 4) for fb in fbs])
+
+
+def _tile_pixels(ranges, vals, bbox, layers):
+    """``(layer, splat, columns, rows)`` of every record in tile order: the splat's pixels in its tile."""
     for tile, (start, end) in enumerate(ranges):
         layer, x, y = tile_corner(tile, layers)
         for s in vals[start:end]:
             x0, y0, x1, y1 = bbox[s]
             xs = np.arange(max(x0, x), min(x1, x + TILE - 1) + 1)
             ys = np.arange(max(y0, y), min(y1, y + TILE - 1) + 1)
-            if not len(xs) or not len(ys):
-                continue
-            data, cu, cv, lookup, su, sv = textures[stex[s]]
-            nv, nu = data.shape
-            tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
-            tex[1:-1, 1:-1] = data
-            iu0, iu1, fu = _axis_lookup(xs, centre[s, 0], cu, su, nu, lookup & LINEAR_U)
-            # rows: offset (centre - y) along v, i.e. the same lookup of -y about -centre
-            iv0, iv1, fv = _axis_lookup(-ys, -centre[s, 1], cv, sv, nv, lookup & LINEAR_V)
-            top = tex[iv0[:, None], iu0] * (1 - fu) + tex[iv0[:, None], iu1] * fu
-            bot = tex[iv1[:, None], iu0] * (1 - fu) + tex[iv1[:, None], iu1] * fu
-            sample = top * (1 - fv[:, None]) + bot * fv[:, None]
-            fbs[layer][ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
+            if len(xs) and len(ys):
+                yield layer, s, xs, ys
+
+
+def project_cone(coef, first, band_tex, band_world, band_step, tex_box, tex_layer, layers, layer_slope, cone, n):
+    """Reference of ``splat_project_cone`` (``cl/splat/cone.cl``, float64): per splat the centre ``(col, row,
+    depth, 0)`` in its layer, bbox, texture id and tile count, and each box's *slack*: how far (pixels) its
+    four unclamped edges lie from a whole pixel, below which float32 rounding may move an edge."""
+    c = np.asarray(coef[first:first + n])
+    band = c[:, 3]
+    tex = band_tex[band]
+    t = np.maximum(tex, 0)
+    x = band_world[band, :3].astype(float) + c[:, :3] * band_step[band, :3].astype(float)
+    e, nrm, u, v = (np.asarray(cone[i, :3], float) for i in range(4))
+    d = x - e
+    depth = -(d @ nrm)
+    layer = layers[tex_layer[t, 0]]
+    sigma = layer_slope[tex_layer[t, 0], :2].astype(float)
+    shown = (tex >= 0) & (depth > 0)
+    z = np.where(shown, depth, 1.0)
+    col = np.where(shown, (d @ u / z - cone[4, 0]) / sigma[:, 0] + 0.5 * layer[:, 0] - 0.5, 0.0)
+    row = np.where(shown, 0.5 * layer[:, 1] - 0.5 - (d @ v / z - cone[4, 1]) / sigma[:, 1], 0.0)
+    b = tex_box[t].astype(float)
+    pu, pv = 1.0 / (z * sigma[:, 0]), 1.0 / (z * sigma[:, 1])
+    edges = np.stack([col + b[:, 0] * pu, col + b[:, 1] * pu, row - b[:, 3] * pv, row - b[:, 2] * pv], 1)
+    x0, x1 = np.maximum(np.ceil(edges[:, 0]), 0), np.minimum(np.floor(edges[:, 1]), layer[:, 0] - 1)
+    y0, y1 = np.maximum(np.ceil(edges[:, 2]), 0), np.minimum(np.floor(edges[:, 3]), layer[:, 1] - 1)
+    hit = shown & (x0 <= x1) & (y0 <= y1)
+    bbox = np.where(hit[:, None], np.stack([x0, y0, x1, y1], 1), [0, 0, -1, -1]).astype(np.int32)
+    count = np.where(hit, (bbox[:, 2] // TILE - bbox[:, 0] // TILE + 1) * (bbox[:, 3] // TILE - bbox[:, 1] // TILE + 1),
+                     0).astype(np.uint32)
+    slack = np.abs(edges - np.round(edges)).min(axis=1)
+    centre = np.stack([col, row, depth, np.zeros(n)], 1)
+    return centre, bbox, tex.astype(np.int32), count, slack
+
+
+def accumulate_cone(ranges, vals, first, centre, bbox, stex, values, textures, layers, layer_slope, cone,
+                    channels=4):
+    """Reference of ``splat_accumulate_cone`` (float64), as :func:`accumulate` for perspective views.
+
+    ``textures`` are ``(nodes (K, nv, nu), centre_u, centre_v, 1/h_u, 1/h_v)``: the footprint at each node of
+    the slope grid ``cone[4].zw + i / cone[5].xy``, ``i < cone[5].zw`` (row-major by v).  A pixel's ray has
+    slopes ``s``; it blends the four nodes around ``s`` bilinearly (edge nodes beyond the grid), each read
+    bilinearly (zeros outside) at ``(centre_u, centre_v) + depth sigma (pixel - splat centre) / h``.
+    """
+    lo, inv, count = np.asarray(cone[4, 2:], float), np.asarray(cone[5, :2], float), cone[5, 2:].astype(int)
+
+    def cell(s, a):  # first node and the next's weight along axis a
+        g = np.clip((s - lo[a]) * inv[a], 0, count[a] - 1)
+        i = np.minimum(np.floor(g).astype(int), count[a] - 2)
+        return i, g - i
+
+    def bilinear(tex, tu, tv):  # tex with a ring of zeros; tu (X,), tv (Y,) in unpadded texels
+        iu, iv = np.floor(tu).astype(int), np.floor(tv).astype(int)
+        fu, fv = tu - iu, tv - iv
+        def at(r, q):  # texel rows r, columns q; the ring beyond
+            return tex[np.clip(r + 1, 0, tex.shape[0] - 1)[:, None], np.clip(q + 1, 0, tex.shape[1] - 1)]
+
+        return ((1 - fv)[:, None] * ((1 - fu) * at(iv, iu) + fu * at(iv, iu + 1))
+                + fv[:, None] * ((1 - fu) * at(iv + 1, iu) + fu * at(iv + 1, iu + 1)))
+
+    fbs = [np.zeros((h, w, 4)) for w, h, _, _ in layers]
+    for layer, s, xs, ys in _tile_pixels(ranges, vals, bbox, layers):
+        W, H = (int(a) for a in layers[layer, :2])
+        sigma = np.asarray(layer_slope[layer, :2], float)
+        nodes, cu, cv, iu_h, iv_h = textures[stex[s]]
+        K, nv, nu = nodes.shape
+        tex = np.zeros((K, nv + 2, nu + 2))
+        tex[:, 1:-1, 1:-1] = nodes
+        col, row, depth = (float(a) for a in centre[s, :3])
+        reads = np.stack([bilinear(tex[k], cu + (xs - col) * depth * sigma[0] * iu_h,
+                                   cv + (row - ys) * depth * sigma[1] * iv_h) for k in range(K)])  # (K, Y, X)
+        i_u, w_u = cell(cone[4, 0] + (xs + 0.5 - 0.5 * W) * sigma[0], 0)
+        i_v, w_v = cell(cone[4, 1] + (0.5 * H - ys - 0.5) * sigma[1], 1)
+        sample = np.zeros((len(ys), len(xs)))
+        for dv, dv_w in ((0, 1 - w_v), (1, w_v)):
+            for du, du_w in ((0, 1 - w_u), (1, w_u)):
+                node = (i_v + dv)[:, None] * count[0] + (i_u + du)[None, :]
+                sample += dv_w[:, None] * du_w[None, :] * np.take_along_axis(reads, node[None], 0)[0]
+        fbs[layer][ys[:, None], xs[None, :], :channels] += sample[..., None] * values[first + s, :channels]
     return np.concatenate([fb.reshape(-1, 4) for fb in fbs])
 
 

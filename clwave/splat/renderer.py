@@ -95,6 +95,7 @@ class SplatRenderer:
         self._resident = None  # per group: (coef, values) device arrays of every coefficient
         self._work = None  # per-splat buffers of a pass, and the streamed chunk's (coef, values)
         self._sizes = None  # the count tables' sizes of the last view
+        self._cone_footprints = {}  # perspective views' texture tables, shared by poses of one direction
         for gi, g in enumerate(wv.groups):
             table = wv.ranked(gi)
             # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22); each present band
@@ -163,7 +164,7 @@ class SplatRenderer:
             for g in self.wv.groups:
                 self.stage(len(g.channels), True)
             tables = [ConeTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
-                                 max_texels=self.cc.info.max_alloc // 4)
+                                 max_texels=self.cc.info.max_alloc // 4, cache=self._cone_footprints)
                       for gi, ls in enumerate(per_layer)]
         else:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,

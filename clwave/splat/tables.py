@@ -145,7 +145,7 @@ def set_texture_tables(tables, boxes, ints, maps, tex_layer, pool):
     tables.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
     tables.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
     tables.tex_layer = np.array(tex_layer or [(0, 0)], np.int32).reshape(-1, 2)
-    tables.texels = np.concatenate(pool + [np.zeros(2 * POOL_GUARD)]).astype(np.float32)
+    tables.texels = np.concatenate([np.asarray(x, np.float32) for x in pool] + [np.zeros(2 * POOL_GUARD, np.float32)])
 
 
 def _axis_box(count, centre, steps, cell) -> tuple:

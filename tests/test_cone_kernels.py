@@ -1,0 +1,137 @@
+"""Each cone-beam kernel stage (cl/splat/cone.cl, docs/splatting.md §8) against its NumPy oracle
+(clwave.splat.reference: project_cone, records, accumulate_cone) on a small random scene: two layers
+(framebuffers), a rotated frame, splats behind the eye and beyond the slope grid; each stage gets its inputs
+from the oracles of the stages before it, as tests/test_splat_kernels.py does for orthographic views."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pyopencl.array as cla
+import pytest
+
+from clwave.splat import reference
+from clwave.splat.perspective import slope_cells
+from clwave.splat.stages import Stages
+from clwave.splat.tables import POOL_GUARD, set_texture_tables
+
+LAYERS = np.array([(45, 37, 0, 0), (29, 21, 9, 45 * 37)], np.int32)  # as test_splat_kernels: 3 x 3 tiles, 2 x 2
+TILES, PIXELS = 13, 45 * 37 + 29 * 21
+TEX_LAYER = np.array([(0, 0), (0, 1), (0, 2), (0, 3), (0, 4), (1, 0), (1, 1), (1, 2)], np.int32)
+COUNT = (5, 4)  # slope nodes along u, v
+
+
+def cone_scene(rng, n=300):
+    q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    n_, u, v = q.T  # a random orthonormal frame
+    eye = rng.uniform(-5, 5, 3)
+    layer_slope = np.zeros((2, 4), np.float32)
+    layer_slope[0, :2] = (0.02, 0.025)
+    layer_slope[1, :2] = 2 * layer_slope[0, :2]  # a coarse layer of factor 2
+    s0 = rng.uniform(-0.05, 0.05, 2)
+    step = np.array([0.16, 0.2])  # the grid covers slopes s0 - 0.35 .. s0 + 0.29 (u), .. + 0.25 (v): pixels beyond
+    cone = np.zeros((6, 4), np.float32)
+    cone[0, :3], cone[1, :3], cone[2, :3], cone[3, :3] = eye, n_, u, v
+    cone[4] = (*s0, *(s0 - 0.35))
+    cone[5] = (*(1.0 / step), *COUNT)
+    coef = np.zeros((n + 7, 4), np.int32)
+    coef[:, :3] = rng.integers(-3, 12, (n + 7, 3))
+    coef[:, 3] = rng.integers(0, 3, n + 7) * 8 + rng.integers(0, 8, n + 7)
+    band_tex = rng.integers(-1, len(TEX_LAYER), 64).astype(np.int32)
+    depth, lateral = rng.uniform(4, 40, 64), rng.uniform(-0.3, 0.3, (64, 2))
+    depth[::8] = -3.0  # bands behind the eye
+    band_world = np.zeros((64, 4), np.float32)
+    band_world[:, :3] = eye + depth[:, None] * (-n_ + lateral[:, :1] * u + lateral[:, 1:] * v)
+    band_step = np.zeros((64, 4), np.float32)
+    band_step[:, :3] = rng.uniform(0.3, 1.6, (64, 3))
+    textures, boxes, ints, maps, pool, offset = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
+    for _ in TEX_LAYER:
+        nu, nv = rng.integers(2, 24, 2)
+        nodes = rng.standard_normal((COUNT[0] * COUNT[1], nv, nu)).astype(np.float32)
+        cu, cv, h_u, h_v = rng.uniform(0, nu - 1), rng.uniform(0, nv - 1), *rng.uniform(0.05, 0.8, 2)
+        cells = slope_cells(nodes, COUNT)
+        boxes.append((-cu * h_u, (nu - 1 - cu) * h_u, -cv * h_v, (nv - 1 - cv) * h_v))
+        ints.append((offset, nu + 2, cells[0].size, nv + 2))
+        maps.append((cu, cv, 1.0 / h_u, 1.0 / h_v))
+        pool.append(cells.ravel())
+        offset += cells.size
+        textures.append((nodes, np.float32(cu), np.float32(cv), np.float32(1.0 / h_u), np.float32(1.0 / h_v)))
+    t = SimpleNamespace()
+    set_texture_tables(t, boxes, ints, maps, [tuple(x) for x in TEX_LAYER], pool)
+    return dict(coef=coef, band_tex=band_tex, band_world=band_world, band_step=band_step, tex_box=t.tex_box,
+                tex_layer=t.tex_layer, layers=LAYERS, layer_slope=layer_slope, cone=cone, tex_int=t.tex_int,
+                tex_map=t.tex_map, texels=t.texels, values=rng.standard_normal((n + 7, 4)).astype(np.float32),
+                n=n, first=7, textures=textures)
+
+
+@pytest.fixture
+def scene(rng):
+    s = cone_scene(rng)
+    s["centre"], s["bbox"], s["stex"], s["count"], s["slack"] = reference.project_cone(
+        s["coef"], s["first"], s["band_tex"], s["band_world"], s["band_step"], s["tex_box"], s["tex_layer"],
+        s["layers"], s["layer_slope"], s["cone"], s["n"])
+    shown = s["count"] > 0
+    assert 0 < np.count_nonzero(shown) < s["n"] and np.any(s["centre"][:, 2] <= 0)  # drawn, culled, behind the eye
+    assert set(s["tex_layer"][s["stex"][shown], 0]) == {0, 1}
+    s["centre"] = s["centre"].astype(np.float32)
+    s["ranges"], s["vals"] = reference.bin_by_tile(s["bbox"], s["stex"], s["tex_layer"], s["layers"], TILES)
+    return s
+
+
+def upload(q, s):
+    return {k: cla.to_device(q, v) for k, v in s.items() if isinstance(v, np.ndarray)}
+
+
+def test_project_cone(cc, scene):
+    st, q, n = Stages(cc, 4, perspective=True), cc.queue, scene["n"]
+    d = upload(q, scene)
+    centre, bbox = cla.empty(q, (n, 4), np.float32), cla.empty(q, (n, 4), np.int32)
+    stex, count = cla.empty(q, (n,), np.int32), cla.empty(q, (n,), np.uint32)
+    st.project(n, scene["first"], d["coef"], d, centre, bbox, stex, count)
+    assert np.array_equal(stex.get(), scene["stex"])
+    got, want = centre.get(), scene["centre"]
+    shown = (scene["stex"] >= 0) & (want[:, 2] > 0)
+    assert np.allclose(got[:, 2], want[:, 2], rtol=1e-5, atol=1e-4)
+    assert np.allclose(got[shown, :2], want[shown, :2], rtol=1e-5, atol=1e-3)  # pixels: float32 over a depth
+    # boxes equal wherever float32 rounding cannot move an edge across a whole pixel
+    sure = scene["slack"] > 1e-3
+    assert sure.mean() > 0.95
+    assert np.array_equal(bbox.get()[sure], scene["bbox"][sure]) and np.array_equal(count.get()[sure],
+                                                                                    scene["count"][sure])
+
+
+def test_place_cone_records(cc, scene):
+    # binning (cl/splat/bin.cl, shared) writes the perspective records: the depth in the second uint4's w
+    st, q, n = Stages(cc, 1, perspective=True), cc.queue, scene["n"]
+    d = upload(q, scene)
+    textures = int(scene["tex_layer"][:, 1].max()) + 1
+    chunks = 5
+    counts = reference.count_tiles(scene["bbox"], scene["stex"], scene["tex_layer"], scene["layers"], textures,
+                                   -(-n // chunks), chunks, TILES)
+    starts = np.concatenate([[0], np.cumsum(counts.T)[:-1]]).astype(np.uint32)
+    cursors = cla.to_device(q, np.ascontiguousarray(starts.reshape(-1, chunks).T).ravel())
+    expected = reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"], scene["bbox"],
+                                 scene["stex"], scene["values"], scene["layers"], 1)
+    assert expected.shape[1] == 8 and np.any(expected[:, 7])  # two uint4s, the depth in the last word
+    records = cla.empty(q, expected.shape, np.uint32)
+    st.place(n, chunks, TILES, textures, scene["first"], d["bbox"], d["centre"], d["stex"], d["values"], d,
+             cursors, records)
+    assert np.array_equal(records.get(), expected)
+
+
+@pytest.mark.parametrize("variant, channels", [("cpu", 4), ("cpu", 1), ("gpu", 4), ("gpu", 1)])
+def test_accumulate_cone(cc, scene, variant, channels):
+    st, q = Stages(cc, channels, variant, perspective=True), cc.queue
+    d = upload(q, scene)
+    records = cla.to_device(q, reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"],
+                                                 scene["bbox"], scene["stex"], scene["values"], scene["layers"],
+                                                 channels))
+    fb = cla.to_device(q, np.full((PIXELS, 4), 0.5, np.float32))
+    st.accumulate(TILES, len(LAYERS), d, cla.to_device(q, scene["ranges"]), records, fb)
+    expected = 0.5 + reference.accumulate_cone(scene["ranges"], scene["vals"], scene["first"], scene["centre"],
+                                               scene["bbox"], scene["stex"], scene["values"], scene["textures"],
+                                               scene["layers"], scene["layer_slope"], scene["cone"], channels)
+    assert np.abs(expected - 0.5).max() > 1  # splats did land
+    got = fb.get()
+    assert np.abs(got - expected).max() <= 1e-5 * np.abs(expected).max()
+    if channels == 1:  # the other channels of the framebuffer keep their values
+        assert np.array_equal(got[:, 1:], np.full((PIXELS, 3), 0.5, np.float32))
