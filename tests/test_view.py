@@ -11,7 +11,6 @@ import pytest
 
 import clwave
 from clwave.view import view
-from clwave.view.frames import DRAG_LEAST, ladder
 from clwave.view.protocol import BURST, MAX_MESSAGE, RateLimit, Refused, parse_view, unpack_frame
 
 BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
@@ -164,9 +163,7 @@ def test_still_xray_frames_refine_to_the_splat_of_the_view(viewer):
     """The still view's frames: doubling prefixes, the last one clwave.splat of the same camera (within one grey
     level of the encoded PNG); a drag frame is a cheaper prefix, at the same view."""
     state = dict(BASE, seq=1, azimuth=75.0, elevation=-35.0, zoom=1.3, window=[0.0, 0.4])
-    xray = viewer.server.sources["xray"]
-    # the pacing of a fresh source: the module's earlier fast drags may have grown the drag prefix to every coefficient
-    xray.drag_count, xray.drag_scale = ladder(max(DRAG_LEAST, xray.r.count / 100), xray.r.count), 0
+    xray = viewer.server.sources["xray"]  # a new socket paces its own frames: the module's earlier drags do not count
 
     async def go():
         async with aiohttp.ClientSession() as s:
@@ -218,13 +215,13 @@ def test_still_frames_are_passes_of_whole_quanta_and_end_at_the_kept_set(viewer)
         xray.rate = STILL_SECONDS / (2 * QUANTUM)  # a frame's time splats two quanta
         done, counts = 0, []
         while done < limit:
-            done = xray._still_count(done, limit)
+            done = xray._still_count(done, limit, QUANTUM)
             counts.append(done)
         assert all(c % QUANTUM == limit % QUANTUM for c in counts) and counts[-1] == limit
         assert all(b >= 2 * a for a, b in zip(counts, counts[1:-1]))
         assert counts[0] >= 2 * QUANTUM and len(counts) == 3  # 2 quanta, then doubling to the kept set
         xray.rate = STILL_SECONDS / limit  # the whole view within a frame's time: one frame
-        assert xray._still_count(0, limit) == limit
+        assert xray._still_count(0, limit, QUANTUM) == limit
     finally:
         xray.rate = rate
     assert [ladder(n, 10**6) for n in (3, 1000, 4097, 6500)] == [4, 1024, 4096, 8192]
@@ -296,7 +293,7 @@ def test_a_scalar_model_is_shaded_through_the_tabs_transfer_function_built_off_t
 
 
 def test_view_refuses_what_it_cannot_show():
-    with pytest.raises(clwave.InputError, match="WaveletVolume, a clwave.Volume or an array"):
+    with pytest.raises(clwave.InputError, match="WaveletVolume, a clwave.Volume, an array or a .clw"):
         view("volume.npy")
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1)
     with pytest.raises(clwave.InputError, match="wavelet model already"):
