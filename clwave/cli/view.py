@@ -23,6 +23,9 @@ def run(args):
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
     wv, _ = build_model(args, opener=PrefixFirst)  # a .clw file: its prefix now, the rest read while serving
+    if isinstance(wv, PrefixFirst) and not wv.complete:
+        print(f"clwave view: serving the {wv.prefix.kept:,} most important coefficients of {args.input} at once; "
+              f"the rest is read while serving", file=sys.stderr, flush=True)
     handler = logging.StreamHandler(sys.stderr)  # the server's refusals and closings; not other libraries' logs
     handler.setFormatter(logging.Formatter("clwave view: %(message)s"))
     logging.getLogger("clwave.view").addHandler(handler)

@@ -33,10 +33,10 @@ QUANTUM = 4096
 #: rest goes at once into the final frame (each frame costs a pass over every tile, a read-back and a PNG)
 STILL_SECONDS = 0.3
 #: the display window "auto" is taken from an image at this size (line integrals are in world units, so the
-#: percentiles hardly depend on the image size) of at most WINDOW_COEFFICIENTS leading coefficients (the prefix a
-#: .clw file is served from first: at 1024^3 every coefficient took a minute)
+#: percentiles hardly depend on the image size) of at most WINDOW_COEFFICIENTS leading coefficients (at 1024^3
+#: every coefficient took a minute)
 WINDOW_SIZE = 128
-WINDOW_COEFFICIENTS = 1 << 20
+WINDOW_COEFFICIENTS = 1 << 18
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ import itertools
 import logging
 import secrets
 import threading
+import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from importlib import resources
 from urllib.parse import urlsplit
@@ -21,7 +22,7 @@ from urllib.parse import urlsplit
 from aiohttp import WSMsgType, web
 
 from ..errors import ClwaveError
-from .frames import DRAG_SCALES, ViewState, XraySource
+from .frames import ViewState, XraySource
 from .shaded import ShadedSource
 from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, pack_frame, parse_view
 
@@ -83,13 +84,8 @@ class ViewServer:
         from ..splat.renderer import SplatRenderer
 
         xray = XraySource(wv, size, SplatRenderer(wv, device=self.device), complete=self.whole is None)
-        pace = xray.pacing()
-        for scale in range(len(DRAG_SCALES)):  # the kernels of each drag image size (PoCL builds per size)
-            pace.drag_scale = scale
-            for _ in xray.frames(self.initial_view(xray, moving=True), pace):
-                pass
-        for _ in xray.frames(self.initial_view(xray), xray.pacing()):
-            pass
+        for _ in xray.frames(self.initial_view(xray, moving=True), xray.pacing()):  # the kernels built (one build
+            pass                                                                   # serves every size, stages.py)
         sources = dict(xray=xray)
         if wv.channels in (1, 4):  # a scalar model through a transfer function at render time, or RGBA
             # a whole file (not a part of it, keep=) is traced by RayTracer.open: its coarse stage at once
@@ -107,21 +103,26 @@ class ViewServer:
         """On the reading thread: the whole model and its renderer, then swapped in on the render thread."""
         from ..splat.renderer import SplatRenderer
 
+        start = time.perf_counter()
         try:
             wv = opened.whole()
             self.whole.set_result(wv)
+            read = time.perf_counter() - start
             renderer = SplatRenderer(wv, device=self.device)
         except Exception as exc:  # noqa: BLE001  (logged; the prefix goes on being served)
             log.error("reading the rest of %s failed: %s", opened.path, exc)
             if not self.whole.done():
                 self.whole.set_exception(exc)
             return
+        log.info("read the whole of %s in %.1f s (%s coefficients), its renderer in %.1f s", opened.path.name, read,
+                 f"{renderer.count:,}", time.perf_counter() - start - read)
         self.pool.submit(self._swap, wv, renderer)
 
     def _swap(self, wv, renderer):
         """On the render thread, between two stages: the whole model in place of the prefix."""
         self.wv = wv
         self.sources["xray"].swap(wv, renderer)
+        log.info("serving the whole model")
         self.upgraded("xray")
 
     def upgraded(self, mode):
