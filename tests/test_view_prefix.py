@@ -15,10 +15,11 @@ from clwave.splat.renderer import SplatRenderer
 from clwave.view import frames as view_frames
 from clwave.view import prefix as view_prefix
 from clwave.view import view
-from clwave.view.frames import QUANTUM, XraySource
+from clwave.view.frames import XraySource
 from clwave.view.prefix import PrefixFirst
 from clwave.view.protocol import unpack_frame
 
+PASS = 4096  # coefficients a still pass adds in the test of a swap under way
 BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
             background=0.0, shading=True)
 SIZE = (40, 48)
@@ -91,10 +92,10 @@ def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_s
 def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
     """Swapping the whole model in between two stages of a still view: that view's frames go on with the prefix's
     renderer to the prefix's last coefficient, none final; the same view again refines to the whole model."""
-    prefix = clwave.WaveletVolume.open(clw, keep=3 * QUANTUM / 40**3)
+    prefix = clwave.WaveletVolume.open(clw, keep=3 * PASS / 40**3)
     model = clwave.WaveletVolume.open(clw)
     xray = XraySource(prefix, SIZE, SplatRenderer(prefix), complete=False)
-    xray.rate = view_frames.STILL_SECONDS / QUANTUM  # a pass of one quantum a frame
+    xray.rate = view_frames.STILL_SECONDS / PASS  # a pass of 4096 coefficients a frame
     state, pace = view_frames.ViewState(1, 50.0, 10.0, 1.0, "xray", 1.0, None, False, 0.0, True), xray.pacing()
     pace.dragged = (50.0, 10.0, 1.0)  # the page has this view's drag frame: still passes only
     under_way = xray.frames(state, pace)
@@ -102,9 +103,9 @@ def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
     xray.swap(model, SplatRenderer(model))
     rest = [first] + list(under_way)
     counts = [f.figures["coefficients"] for f in rest]
-    assert len(rest) > 1 and counts[-1] == 3 * QUANTUM and not any(f.figures["final"] for f in rest)
+    assert len(rest) > 1 and counts[-1] == 3 * PASS and not any(f.figures["final"] for f in rest)
     again = list(xray.frames(state, pace))
-    assert again[0].figures["coefficients"] >= 3 * QUANTUM and again[-1].figures["final"]
+    assert again[0].figures["coefficients"] >= 3 * PASS and again[-1].figures["final"]
     assert again[-1].figures["coefficients"] == model.kept
 
 

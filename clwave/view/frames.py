@@ -25,10 +25,6 @@ from ..splat.renderer import SplatRenderer
 DRAG_SECONDS = 0.04
 DRAG_LEAST = 2048
 DRAG_SCALES = (0.5, 0.375, 0.25)
-#: coefficient passes are whole multiples of this, past a first remainder (below it, powers of two): PoCL builds
-#: each kernel anew for each work-group size, which it takes from the global size (0.3-0.6 s a build on 2 cores),
-#: and every multiple of 4096 gets the same one
-QUANTUM = 4096
 #: a still view shows a better frame about this often; when the rest of it is expected within 1.5 times this, the
 #: rest goes at once into the final frame (each frame costs a pass over every tile, a read-back and a PNG)
 STILL_SECONDS = 0.3
@@ -80,19 +76,6 @@ def check_tolerance(tolerance) -> float:
         raise InputError(f"tolerance={tolerance!r} must be a positive error per value (e.g. 1e-2)",
                          cli=f"--tolerance {tolerance:g} must be a positive error per value (e.g. 1e-2)")
     return float(tolerance)
-
-
-def ladder(n: float, total: int) -> int:
-    """A coefficient count near ``n`` that a pass takes without a new kernel build (:data:`QUANTUM`), at most
-    ``total``.
-
-    >>> [ladder(n, 10**6) for n in (1, 700, 3000, 5000, 70000, 2e6)]
-    [1, 512, 4096, 4096, 69632, 1000000]
-    """
-    if n >= total:
-        return int(total)
-    n = 2 ** round(np.log2(max(n, 1.0))) if n < QUANTUM else QUANTUM * round(n / QUANTUM)
-    return int(min(n, total))
 
 
 class Source:
@@ -169,7 +152,7 @@ class XraySource(Source):
         self.auto_window = tuple(float(v) for v in resolve_window(acc.image()[..., :3], "auto"))
 
     def pacing(self) -> XrayPace:
-        return XrayPace(ladder(max(DRAG_LEAST, self.r.count / 100), self.r.count))
+        return XrayPace(min(max(DRAG_LEAST, self.r.count // 100), self.r.count))
 
     def swap(self, wv, renderer: SplatRenderer):
         """The whole model and its renderer in place of the prefix's (on the render thread, between stages: frames
@@ -180,7 +163,7 @@ class XraySource(Source):
         start = time.perf_counter()
         r, complete = self.r, self.complete  # a swap meanwhile does not change a view under way
         total = r.count
-        limit = total if state.detail >= 1.0 else ladder(state.detail * total, total)
+        limit = max(1, min(total, round(state.detail * total)))
         window = state.window or self.auto_window
         here = (state.azimuth, state.elevation, state.zoom)
         # a drag frame while moving, and first for a still view the page has no drag frame of (a page's first, a
@@ -205,9 +188,6 @@ class XraySource(Source):
         while done < limit:
             stage = time.perf_counter()
             count = max(self._still_count(done, limit, pace.drag_count), min(least, limit))
-            if done == 0 and 0 < limit % QUANTUM < count:  # the remainder first: the other passes are whole
-                done = limit % QUANTUM                        # multiples of QUANTUM (no new kernel builds)
-                acc.splat(0, done)
             acc.splat(done, count - done)
             image = acc.image()
             done, seconds = count, time.perf_counter() - stage
@@ -229,19 +209,16 @@ class XraySource(Source):
             pace.drag_scale, want = pace.drag_scale + 1, least
         elif want > 4 * least and pace.drag_scale > 0:
             pace.drag_scale, want = pace.drag_scale - 1, want / 2
-        pace.drag_count = ladder(max(want, least), total)
+        pace.drag_count = int(min(max(want, least), total))
 
     def _still_count(self, done: int, limit: int, drag_count: int) -> int:
         """The coefficients after the next still frame: at least twice ``done``, about :data:`STILL_SECONDS` more
         of splatting at the last still view's rate, all ``limit`` where the rest is expected within 1.5 times
-        that (before a first still view: doubling from the tab's drag prefix); from a first frame on, ``limit`` less a
-        whole multiple of :data:`QUANTUM`."""
+        that (before a first still view: doubling from the tab's drag prefix)."""
         if self.rate is None:
-            count = max(2 * done, drag_count)
-        else:
-            step = STILL_SECONDS / self.rate
-            count = limit if limit - done <= 1.5 * step else done + max(done, step)
-        return int(limit - max(0, (limit - count) // QUANTUM * QUANTUM))
+            return int(min(limit, max(2 * done, drag_count)))
+        step = STILL_SECONDS / self.rate
+        return int(limit if limit - done <= 1.5 * step else min(limit, done + max(done, step)))
 
     def _xray_frame(self, state, r, complete, image, count, window, final, seconds, start) -> Frame:
         energy = r.energy
