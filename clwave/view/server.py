@@ -116,7 +116,10 @@ class ViewServer:
             return
         log.info("read the whole of %s in %.1f s (%s coefficients), its renderer in %.1f s", opened.path.name, read,
                  f"{renderer.count:,}", time.perf_counter() - start - read)
-        self.pool.submit(self._swap, wv, renderer)
+        try:
+            self.pool.submit(self._swap, wv, renderer)
+        except RuntimeError:  # the server has stopped meanwhile
+            pass
 
     def _swap(self, wv, renderer):
         """On the render thread, between two stages: the whole model in place of the prefix."""
