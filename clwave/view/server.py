@@ -70,6 +70,7 @@ class ViewServer:
         self.sessions = {}  # id -> Session, the open sockets
         self._ids = itertools.count(1)
         self._runner = self.loop = None
+        self.stopping = False
         # a file's prefix: the rest is read on a thread of its own, started by the first frame sent (or READ_AFTER
         # seconds after start), and swapped in on the render thread (docs/viewer.md §2)
         self.whole = None if opened is None or opened.complete else Future()
@@ -109,10 +110,10 @@ class ViewServer:
             self.whole.set_result(wv)
             read = time.perf_counter() - start
             renderer = SplatRenderer(wv, device=self.device)
-        except Exception as exc:  # noqa: BLE001  (logged; the prefix goes on being served)
-            log.error("reading the rest of %s failed: %s", opened.path, exc)
+        except Exception as exc:  # noqa: BLE001  (the prefix goes on being served)
             if not self.whole.done():
                 self.whole.set_exception(exc)
+            self.upgraded("xray", exc)
             return
         log.info("read the whole of %s in %.1f s (%s coefficients), its renderer in %.1f s", opened.path.name, read,
                  f"{renderer.count:,}", time.perf_counter() - start - read)
@@ -128,9 +129,14 @@ class ViewServer:
         log.info("serving the whole model")
         self.upgraded("xray")
 
-    def upgraded(self, mode):
+    def upgraded(self, mode, failure=None):
         """A source has a better model now (from any thread): each tab hears it, and one whose still view of that
-        mode has had no final frame renders it again."""
+        mode has had no final frame renders it again.  ``failure``: making it failed (logged, unless the server is
+        stopping meanwhile); the source goes on as it was."""
+        if failure is not None:
+            if not self.stopping:
+                log.error("making the whole model for %s views failed: %s", mode, failure)
+            return
         if self.loop is not None:
             self.loop.call_soon_threadsafe(lambda: [s.upgraded(mode) for s in list(self.sessions.values())])
 
@@ -179,6 +185,7 @@ class ViewServer:
         return self.url
 
     async def stop(self):
+        self.stopping = True
         for session in list(self.sessions.values()):
             await session.ws.close()
         if self._runner is not None:

@@ -41,8 +41,8 @@ class ShadedSource(Source):
 
     ``path``: the model is that ``.clw`` file, traced by :meth:`~clwave.RayTracer.open` (docs/raytracing.md §8):
     frames of its coarse stage at once, of the whole file's tracer once it is set up in the background, when
-    ``upgraded`` (a callable, from that thread) is called.  ``whole``: ``wv`` is a prefix of the model, and this
-    Future gives the whole one, which the tracer waits for."""
+    ``upgraded(mode, failure)`` (a callable, from that thread) is called.  ``whole``: ``wv`` is a prefix of the
+    model, and this Future gives the whole one, which the tracer waits for."""
 
     mode = "shaded"
 
@@ -83,15 +83,16 @@ class ShadedSource(Source):
             self.tracer = tracer
 
     def _upgrade(self):
-        """Wait for a file's full stage, then trace with it (its set-up failing: the coarse stage stays)."""
+        """Wait for a file's full stage, then trace with it (its set-up failing: the coarse stage stays); tell
+        ``upgraded`` either way."""
         try:
             self.tracer = self.staged.wait()
-        except Exception:  # noqa: BLE001  (logged; the coarse stage goes on serving)
-            import logging
-            logging.getLogger("clwave.view").exception("setting up the whole file for shaded views failed")
-            return
+        except Exception as exc:  # noqa: BLE001  (the coarse stage goes on serving)
+            failure = exc
+        else:
+            failure = None
         if self.upgraded is not None:
-            self.upgraded(self.mode)
+            self.upgraded(self.mode, failure)
 
     def transfer_function(self, spec):
         """The transfer function of a tab's ``(preset, centre, width, opacity)``: the preset's points with their
