@@ -89,6 +89,29 @@ def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_s
     assert expect.std() > 10 and np.abs(got.astype(int) - expect).max() <= 1
 
 
+def test_a_failed_reading_of_the_rest_is_logged_and_the_prefix_goes_on(clw, monkeypatch, caplog):
+    """Reading the rest failing (a file damaged past its prefix): one logged line, the prefix's frames go on."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self: (_ for _ in ()).throw(clwave.FileFormatError("damaged")))
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await receive(ws)
+            for seq in (1, 2):
+                await ws.send_str(json.dumps(dict(BASE, seq=seq, azimuth=30.0 + seq)))
+                kind, message = await receive(ws)
+                while message["coefficients"] < 2048:
+                    kind, message = await receive(ws)
+                v.server._reader.join(30)
+            return message
+
+    with view(clw, size=SIZE) as v:
+        last = asyncio.run(go(v))
+    assert last["prefix"] and not last["final"] and last["seq"] == 2
+    assert any("failed: damaged" in r.getMessage() for r in caplog.records)
+
+
 def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
     """Swapping the whole model in between two stages of a still view: that view's frames go on with the prefix's
     renderer to the prefix's last coefficient, none final; the same view again refines to the whole model."""
