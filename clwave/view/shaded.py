@@ -49,7 +49,7 @@ class ShadedSource(Source):
     def __init__(self, wv, size, tolerance, device=None, path=None, whole=None, upgraded=None):
         super().__init__(wv, size)
         self.tolerance, self.device, self.tracer = check_tolerance(tolerance), device, None
-        self.path, self.whole, self.staged, self.upgraded = path, whole, None, upgraded
+        self.path, self.whole, self.staged, self.upgraded, self._watch = path, whole, None, upgraded, None
         self.scalar = wv.channels == 1
         self.steps = [(s, d) for s, d in DRAG_STEPS if d <= wv.levels]
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
@@ -72,15 +72,23 @@ class ShadedSource(Source):
         warm = dict(transfer_function=self.default_tf) if self.scalar else {}
         if self.path is not None and self.staged is None:
             staged = RayTracer.open(self.path, device=self.device, lod=True)
-            staged.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)  # starts the full stage
+            # the coarse stage's kernels; the whole file's set-up starts with the page's first frame (staged.render),
+            # so that its reading does not delay that frame
+            staged.coarse.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN,
+                                 detail=staged.coarse_detail, **warm)
             self.staged = staged
-            threading.Thread(target=self._upgrade, name="clwave-view-full-stage", daemon=True).start()
+            self._watch = threading.Thread(target=self._upgrade, name="clwave-view-full-stage", daemon=True)
         elif self.path is None and self.tracer is None:
             if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
                 self.wv = self.whole.result()
             tracer = RayTracer(self.wv, device=self.device, lod=True)
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
             self.tracer = tracer
+
+    def _watch_full_stage(self):
+        """Once a coarse frame has started the whole file's set-up: a thread that waits for it (:meth:`_upgrade`)."""
+        if self._watch.ident is None:
+            self._watch.start()
 
     def _upgrade(self):
         """Wait for a file's full stage, then trace with it (its set-up failing: the coarse stage stays); tell
@@ -123,6 +131,7 @@ class ShadedSource(Source):
             if tracer is None:
                 result, detail = self.staged.render(self.camera(state, scale), tolerance=self.tolerance * LOOSEN,
                                                     **options), self.wv.levels
+                self._watch_full_stage()
             else:
                 result = tracer.render(self.camera(state, scale), tolerance=self.tolerance * LOOSEN, detail=detail,
                                        **options)
@@ -150,6 +159,7 @@ class ShadedSource(Source):
         for reduction in (4, 1):
             stage = time.perf_counter()
             result = self.staged.render(self.camera(state, 1 / reduction), tolerance=self.tolerance, **options)
+            self._watch_full_stage()
             yield self._shaded(state, result, False, dict(tolerance=self.tolerance, detail=self.wv.levels,
                                                           reduction=reduction, error=None, prefix=True),
                                time.perf_counter() - stage, start)
