@@ -313,21 +313,23 @@ def test_cli_view_refuses_bad_options_before_any_work(capsys):
     assert "--tolerance" in capsys.readouterr().err
 
 
-def test_cli_view_serves_until_interrupted():
-    """``clwave view`` prints the address with its token once the model is ready; the page needs the token;
-    Ctrl-C stops it cleanly."""
+def test_cli_view_serves_until_interrupted(tmp_path):
+    """``clwave view`` of a ``.clw`` file (opened by its prefix, here all of a small file) prints the address with its
+    token; the page needs the token; Ctrl-C stops it cleanly."""
     import signal
     import subprocess
     import sys
     import urllib.error
     import urllib.request
 
-    with subprocess.Popen([sys.executable, "-m", "clwave", "view", "phantom:hydrogen:24", "--size", "32"],
+    path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.2).save(
+        tmp_path / "h.clw")
+    with subprocess.Popen([sys.executable, "-m", "clwave", "view", str(path), "--size", "32"],
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
         try:
-            lines = [proc.stdout.readline() for _ in range(2)]  # the model's line, then the address
-            assert lines[1].startswith("clwave view: open http://127.0.0.1:"), lines
-            url = lines[1].split()[-1]
+            line = proc.stdout.readline()
+            assert line.startswith("clwave view: open http://127.0.0.1:"), line
+            url = line.split()[-1]
             assert urllib.request.urlopen(url, timeout=30).status == 200
             with pytest.raises(urllib.error.HTTPError, match="403") as refused:
                 urllib.request.urlopen(url.split("?")[0], timeout=30)

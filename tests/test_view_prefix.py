@@ -182,25 +182,6 @@ def test_tabs_pace_their_drag_frames_apart(clw, monkeypatch):
     assert first[0] == other[0] == fresh and first[-1] > 2 * fresh
 
 
-def test_cli_view_of_a_clw_file_prints_its_address_and_serves(clw):
-    """``clwave view FILE.clw`` opens the file by its prefix (here all of it: a small file) and serves the page."""
-    import signal
-    import subprocess
-    import sys
-    import urllib.request
-
-    with subprocess.Popen([sys.executable, "-m", "clwave", "view", str(clw), "--size", "32"], stdout=subprocess.PIPE,
-                          stderr=subprocess.PIPE, text=True) as proc:
-        try:
-            line = proc.stdout.readline()
-            assert line.startswith("clwave view: open http://127.0.0.1:"), line
-            assert urllib.request.urlopen(line.split()[-1], timeout=30).status == 200
-            proc.send_signal(signal.SIGINT)
-            assert proc.wait(timeout=30) == 0
-        finally:
-            proc.kill()
-
-
 def decode(data):
     import io
 
