@@ -120,6 +120,39 @@ def test_transpose(cc, rng, rows, cols):
     assert np.array_equal(d_dst.get(), src.reshape(rows, cols).T.ravel())
 
 
+def test_each_stage_launches_one_work_group_size_whatever_the_count(cc, scene, monkeypatch):
+    """PoCL builds a kernel anew for each work-group size (and derives one from the global size where none is
+    given): every stage gives its own, the same for any count, the global size in whole groups."""
+    from clwave.device.kernels import Kernel
+
+    launches, call = [], Kernel.__call__
+
+    def record(self, kernels, queue, global_size, local_size, *args, **kwargs):
+        launches.append((self.name, global_size[0], local_size))
+        return call(self, kernels, queue, global_size, local_size, *args, **kwargs)
+
+    monkeypatch.setattr(Kernel, "__call__", record)
+    st, q = Stages(cc, 4), cc.queue
+    d, runs = upload(q, scene), TILES * scene["textures_per_layer"]
+    for n in (scene["n"], 123, 1):
+        centre, bbox = cla.empty(q, (n, 2), np.float32), cla.empty(q, (n, 4), np.int32)
+        stex, count = cla.empty(q, (n,), np.int32), cla.empty(q, (n,), np.uint32)
+        st.project(n, scene["first"], d["coef"], d, centre, bbox, stex, count)
+        for chunks in chunkings(cc, n, runs):
+            table = cla.empty(q, (chunks * runs,), np.uint32)
+            st.count(n, chunks, TILES, scene["textures_per_layer"], scene["first"], bbox, centre, stex, d["values"],
+                     d, table)
+            st.transpose(chunks, runs, table, cla.empty_like(table))
+        st.ranges(n % TILES + 1, scene["textures_per_layer"], 1, 0, cla.zeros(q, (runs,), np.uint32),
+                  cla.empty(q, (TILES, 2), np.uint32))
+    sizes = {}
+    for name, global_size, local_size in launches:
+        assert local_size is not None and global_size % local_size[0] == 0, name
+        sizes.setdefault(name, set()).add(local_size)
+    assert set(sizes) == {"splat_project", "splat_chunk_tiles", "transpose_counts", "tile_ranges"}
+    assert all(len(s) == 1 for s in sizes.values()), sizes
+
+
 def test_scan(cc, rng):
     values = rng.integers(0, 50, 1000, dtype=np.uint32)
     d_in, d_out = cla.to_device(cc.queue, values), cla.empty(cc.queue, (1000,), np.uint32)

@@ -61,6 +61,10 @@ time from releasing to the final frame, beside a one-shot ``clwave.splat`` of th
 then shaded (the scalar through the hydrogen preset at render time): frames per second dragging, release to the
 final frame beside a one-shot ray trace of it, and an opacity-slider move to its first frame on the page.
 
+``view-file`` (not in ``all``; needs chromium): ``clwave view FILE.clw`` (``--first-image-file``) in a fresh process:
+the seconds to its address, to the page's first image (the file's prefix), a drag while the rest is read, and to the
+final frame of the whole model; the server's peak memory.
+
 A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) and an
 entry in ``BENCHMARKS``.
 """
@@ -76,6 +80,7 @@ import statistics
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -777,6 +782,75 @@ def _view_shaded(browser, driver, viewer, wv, args) -> dict:
                 tf_slider_first_frame_seconds=summary(slider))
 
 
+def bench_view_file(args) -> dict:
+    """``clwave view FILE`` of a ``.clw`` file (``--first-image-file``; default: first-image's hydrogen ``--size``^3
+    RGBA in ``--scratch``) at ``--view-image``, in a fresh process with headless chromium already running: seconds
+    from the command's start to the printed address, from the page's start to its first image (and from the address),
+    frames per second of a drag while the rest of the file is read, from the address to the final frame of the whole
+    model, and the server's peak resident memory (docs/viewer.md §2); then, in another fresh process, the seconds from
+    choosing the shaded mode on the page's first image to its first shaded frame (``RayTracer.open``'s coarse stage)."""
+    import browser
+
+    path = args.first_image_file or args.scratch / f"hydrogen_{args.size}_rgba.clw"
+    if not path.exists():
+        raise SystemExit(f"{path} does not exist: run `bench.py first-image --size {args.size}` or give "
+                         f"--first-image-file")
+    command = [sys.executable, "-m", "clwave", "view", str(path), "--size", str(args.view_image), "--device",
+               args.device]
+    with browser.chromium() as driver:
+        with _view_server(command) as (proc, url, address, log):
+            start = time.perf_counter()
+            first_image = browser.open_viewer(driver, url, timeout=600)
+            first_wall = time.perf_counter() - start
+            first = driver.execute_script("return window.clwave.current().fig")
+            moving, dragged = _view_drag(browser, driver)
+            browser.release(driver)
+            final = browser.wait_for(driver, "const c = window.clwave.current(); return c && c.fig.final && "
+                                             "!c.fig.prefix && c.fig", timeout=900)
+            final_wall = time.perf_counter() - start
+            status = Path(f"/proc/{proc.pid}/status").read_text()
+            peak = int(next(x for x in status.splitlines() if x.startswith("VmHWM")).split()[1]) / 2 ** 20
+        with _view_server(command) as (proc, url, _, shaded_log):
+            browser.open_viewer(driver, url, timeout=600)
+            start = time.perf_counter()
+            driver.execute_script('document.querySelector(\'input[value="shaded"]\').click()')
+            shaded = browser.wait_for(driver, "const c = window.clwave.current(); return c.fig.mode === 'shaded' && "
+                                              "c.fig", timeout=600)
+            shaded_wall = time.perf_counter() - start
+    return dict(setting=dict(file=str(path), image=f"{args.view_image}^2", browser="headless chromium (Selenium)",
+                             drag="60 moves over 240 x 60 pixels, 50 ms apart, right after the first image"),
+                address_seconds=address, first_image_seconds_from_page_start=first_image,
+                first_image_seconds_after_address=first_wall, first_frame=dict(
+                    coefficients=first["coefficients"], prefix=first["prefix"], width=first["width"]),
+                drag_frames_per_second=len(moving) / dragged, drag_frame_width=summary([f["width"] for f in moving]),
+                final_seconds_after_address=final_wall, final_coefficients=final["coefficients"],
+                server_peak_resident_gib=peak, server_log=log,
+                shaded_first_frame=dict(seconds_after_choosing=shaded_wall, width=shaded["width"],
+                                        detail=shaded["detail"], prefix=shaded.get("prefix", False),
+                                        server_log=shaded_log),
+                target=dict(first_image_seconds_after_address=2.0))
+
+
+@contextmanager
+def _view_server(command):
+    """``(process, address, seconds from its start to the address, its stderr lines)`` of a ``clwave view`` process,
+    interrupted on leaving (the lines are filled in then)."""
+    import signal
+
+    start, log = time.perf_counter(), []
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                          cwd=Path(__file__).resolve().parents[1]) as proc:
+        try:
+            line = proc.stdout.readline()
+            while line and "open http" not in line:
+                line = proc.stdout.readline()
+            yield proc, line.split()[-1], time.perf_counter() - start, log
+        finally:
+            proc.send_signal(signal.SIGINT)
+            proc.wait(timeout=60)
+            log += proc.stderr.read().splitlines()
+
+
 def bench_drr(args) -> dict:
     vol = phantom("shepp-logan", n=args.size)
     vol = clwave.Volume(vol.data, spacing=(300.0 / args.size,) * 3)
@@ -866,7 +940,7 @@ def bench_orders(args) -> dict:
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "post": bench_post,
               "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
-              "first-image": bench_first_image}
+              "first-image": bench_first_image, "view-file": bench_view_file}
 
 
 def main(argv=None):
@@ -907,6 +981,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     names = [n for n in BENCHMARKS if n not in ("scale", "view", "drr", "first-image")] if args.benchmark == "all" \
         else [args.benchmark]
+    names = [n for n in names if n != "view-file" or args.benchmark == n]  # view-file: not in all either
     results = {}
     for name in names:
         shaped = name == "scale" and args.scale_shape is not None  # one volume of that shape, not --size

@@ -152,7 +152,7 @@ def _needs_rgba(name, channels, fix) -> InputError:
                       f"channel(s): {fix}, or render line integrals with --xray")
 
 
-def build_model(args, log=print, rgba=False, gather=True, cluster_render=False):
+def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
 
@@ -160,7 +160,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False):
     model approximates (None when the input was already a ``.clw`` file).  A chunked input gives no
     reference, and with ``gather`` false a :class:`~clwave.model.chunked.ChunkedWaveletVolume`
     (thresholded, not gathered).  ``cluster_render``: a ``.clw`` input takes ``--workers``/``--scheduler``
-    (the render runs there).
+    (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
+    instead of the model read (``clwave view`` opens it by its prefix first).
     """
     from ..model.transfer import TransferFunction
     from ..model.wavelet import WaveletVolume, check_decomposition
@@ -174,6 +175,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False):
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
                              f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")
+        if opener is not None and args.threshold is None and args.focus is None:
+            return opener(args.input, args.keep), None
         wv = WaveletVolume.open(args.input, keep=args.keep if args.focus is None else None)
         if rgba and wv.channels != 4 and post_transfer_function(args, wv) is None:
             raise _needs_rgba(args.input, wv.channels, "give --tf PRESET to classify it while rendering, or "

@@ -14,6 +14,7 @@ def run(args):
 
     from ..model.camera import Camera
     from ..view.frames import check_tolerance
+    from ..view.prefix import PrefixFirst
     from ..view.server import ViewServer, is_loopback
 
     size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
@@ -21,7 +22,10 @@ def run(args):
     check_tolerance(args.tolerance)
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
-    wv, _ = build_model(args)
+    wv, _ = build_model(args, opener=PrefixFirst)  # a .clw file: its prefix now, the rest read while serving
+    if isinstance(wv, PrefixFirst) and not wv.complete:
+        print(f"clwave view: serving the {wv.prefix.kept:,} most important coefficients of {args.input} at once; "
+              f"the rest is read while serving", file=sys.stderr, flush=True)
     handler = logging.StreamHandler(sys.stderr)  # the server's refusals and closings; not other libraries' logs
     handler.setFormatter(logging.Formatter("clwave view: %(message)s"))
     logging.getLogger("clwave.view").addHandler(handler)

@@ -9,6 +9,7 @@ each stage.
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 from pyopencl.scan import ExclusiveScanKernel
 
 from ..device import programs
@@ -47,6 +48,17 @@ BIN_TABLE_SHARE = 1 / 32  # of the device budget for the three count tables of a
 #: binning work-items (chunks of consecutive splats) per compute unit: a GPU needs many; on a CPU
 #: each chunk keeps a write position in every (tile, texture) run, and few keep those in cache
 CHUNKS_PER_UNIT = dict(GPU=64, CPU=4)
+
+#: work-items per work-group of the kernels of one item each (project, transpose, tile ranges; binning on a GPU),
+#: the global size rounded up to whole groups (the kernels skip the items past the end): PoCL builds a kernel anew
+#: for each work-group size, and given none it takes one from the global size, so each new splat count or image
+#: size cost a build (0.3-0.6 s on 2 cores, docs/splatting.md §3)
+GROUP = 256
+
+
+def groups(n: int, local: int = GROUP) -> tuple:
+    """The global size of ``n`` items in whole work-groups of ``local``."""
+    return (max(1, -(-n // local)) * local,)
 
 
 def tile_list_bytes(budget) -> int:
@@ -99,11 +111,21 @@ class Stages:
         self.record_bytes = 16 * uint4s
         # work-items per tile: one on CPUs (raster_cpu.cl, cone.cl), TILE^2 / GPU_PIXELS on GPUs (TILE^2: cone.cl)
         self.accumulate_local = TILE * TILE // (1 if perspective else GPU_PIXELS) if self.variant == "gpu" else 1
-        # binning chunks: on a CPU one work-item per group, so the few chunks spread over the cores
-        self.bin_local = None if cc.info.kind == "GPU" else (1,)
+        # work-group sizes, fixed per kernel (GROUP, or less where the device allows less for a kernel); binning
+        # chunks on a CPU one work-item per group, so that the few chunks spread over the cores
+        size = cl.kernel_work_group_info.WORK_GROUP_SIZE
+        self.local = {k.name: min(GROUP, self.kernels[k.name].get_work_group_info(size, cc.device))
+                      for k in (_PROJECT_CONE if perspective else _PROJECT, _TRANSPOSE, _TILE_RANGES, _CHUNK_TILES)}
+        if cc.info.kind != "GPU":
+            self.local[_CHUNK_TILES.name] = 1
         self._scan = ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")
         # the rates of the banded stages (in_bands), kept between passes and views
         self.paces = dict(count=Pace(), place=Pace(), accumulate=Pace())
+
+    def _launch(self, kernel, items, tables=None, **args):
+        """``kernel`` over ``items`` work-items in whole work-groups of its fixed size."""
+        local = self.local[kernel.name]
+        kernel(self.kernels, self.cc.queue, groups(items, local), (local,), tables, **args)
 
     def pair_budget(self, budget) -> int:
         """The most (tile, splat) pairs one pass may bin: their records within :func:`tile_list_bytes`
@@ -112,9 +134,8 @@ class Stages:
 
     def project(self, n, first, coef, tables, centre, bbox, stex, count):
         """Each splat's pixel centre, pixel box, texture and tile count (0: culled)."""
-        (_PROJECT_CONE if self.perspective else _PROJECT)(self.kernels, self.cc.queue, (n,), None, tables, n=n,
-                                                          first=first, coef=coef, centre=centre, bbox=bbox, stex=stex,
-                                                          count=count)
+        self._launch(_PROJECT_CONE if self.perspective else _PROJECT, n, tables, n=n, first=first, coef=coef,
+                     centre=centre, bbox=bbox, stex=stex, count=count)
 
     def count(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, counts, pairs=0):
         """Per chunk of consecutive splats, its splats per (tile, texture), chunk-major (``pairs``: the
@@ -124,7 +145,7 @@ class Stages:
 
     def transpose(self, rows, cols, src, dst):
         """``dst`` = the (rows, cols) table ``src`` transposed."""
-        _TRANSPOSE(self.kernels, self.cc.queue, (rows * cols,), None, rows=rows, cols=cols, src=src, dst=dst)
+        self._launch(_TRANSPOSE, rows * cols, rows=rows, cols=cols, src=src, dst=dst)
 
     def scan(self, counts, starts):
         """Exclusive prefix sums (arrays of uint32)."""
@@ -132,8 +153,8 @@ class Stages:
 
     def ranges(self, tiles, textures, chunks, total, starts, ranges):
         """Each tile's [start, end) in the records, from the scanned run-major counts."""
-        _TILE_RANGES(self.kernels, self.cc.queue, (tiles,), None, tiles=tiles, textures=textures, chunks=chunks,
-                     total=total, offset=starts, ranges=ranges)
+        self._launch(_TILE_RANGES, tiles, tiles=tiles, textures=textures, chunks=chunks, total=total, offset=starts,
+                     ranges=ranges)
 
     def place(self, n, chunks, tiles, textures, first, bbox, centre, stex, values, tables, cursors, records, pairs=0):
         """A record per (tile, splat) pair at each chunk's write cursors (chunk-major); ``pairs`` as for count."""
@@ -156,8 +177,8 @@ class Stages:
         """Count or place, in launches of a band of splats of every chunk at a time (``in_bands``), a splat
         costing one and its tile pairs."""
         q, chunk = self.cc.queue, -(-n // chunks)
-        in_bands(q, lambda lo, count: _CHUNK_TILES(
-            self.kernels, q, (chunks,), self.bin_local, tables, n=n, chunk=chunk, chunks=chunks, tiles=tiles,
+        in_bands(q, lambda lo, count: self._launch(
+            _CHUNK_TILES, chunks, tables, n=n, chunk=chunk, chunks=chunks, tiles=tiles,
             textures=textures, place=place, first=first, lo=lo, hi=lo + count, bbox=bbox, centre=centre, stex=stex,
             values=values, table=table, records=records), chunk, work=chunks * (1 + pairs / max(n, 1)),
             pace=self.paces["place" if place else "count"])

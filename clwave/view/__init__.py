@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from os import PathLike
+
 import numpy as np
 
 from ..errors import InputError
@@ -53,7 +55,7 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3):
     if isinstance(model_or_volume, np.ndarray):
         model_or_volume = Volume(model_or_volume)
     if not isinstance(model_or_volume, Volume):
-        raise InputError(f"view() takes a clwave.WaveletVolume, a clwave.Volume or an array, not "
+        raise InputError(f"view() takes a clwave.WaveletVolume, a clwave.Volume, an array or a .clw file, not "
                          f"{type(model_or_volume).__name__}")
     vol = model_or_volume
     if tf is not None:
@@ -63,23 +65,30 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3):
     return wv.compute() if vol.chunked else wv  # a chunked volume's model, gathered
 
 
-def view(model_or_volume, *, size=512, tolerance=1e-2, keep=0.05, tf=None, device=None, host="127.0.0.1", port=0,
+def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, device=None, host="127.0.0.1", port=0,
          open_browser=False) -> Viewer:
-    """Serve a progressive view of a model or volume in the browser; returns a :class:`Viewer`.
+    """Serve a progressive view of a model, a volume or a ``.clw`` file in the browser; returns a :class:`Viewer`.
 
     ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (an RGBA
     model, classified first by ``tf=`` for a volume, or a scalar one through the page's transfer function at render
-    time).  A volume is decomposed with cubic
-    wavelets and ``keep`` of its voxels kept.  The server binds ``host`` (loopback unless given) at ``port``
-    (0: a free one); every request needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
+    time).  A volume is decomposed with cubic wavelets and ``keep`` (default 0.05) of its voxels kept; a ``.clw``
+    file (a path) is served at once from its most important coefficients while the rest (its ``keep`` most
+    important, default all) is read (docs/viewer.md §2).  The server binds ``host`` (loopback unless given) at
+    ``port`` (0: a free one); every request needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
     """
     from ..model.camera import Camera
     from .frames import check_tolerance
+    from .prefix import PrefixFirst
     from .server import BackgroundServer, ViewServer, is_loopback
 
     size = Camera(size=size).size
     check_tolerance(tolerance)
-    wv = as_model(model_or_volume, keep=keep, tf=tf)
+    if isinstance(model_or_volume, (str, PathLike)) and str(model_or_volume).lower().endswith(".clw"):
+        if tf is not None:
+            raise InputError("tf= classifies a volume before its transform; a .clw file is a wavelet model already")
+        wv = PrefixFirst(model_or_volume, keep=keep)
+    else:
+        wv = as_model(model_or_volume, keep=0.05 if keep is None else keep, tf=tf)
     if not is_loopback(host):
         import warnings
         warnings.warn(f"the viewer listens on {host}: anyone who can reach it and learns the address with its token "

@@ -25,16 +25,14 @@ from ..splat.renderer import SplatRenderer
 DRAG_SECONDS = 0.04
 DRAG_LEAST = 2048
 DRAG_SCALES = (0.5, 0.375, 0.25)
-#: coefficient passes are whole multiples of this, past a first remainder (below it, powers of two): PoCL builds
-#: each kernel anew for each work-group size, which it takes from the global size (0.3-0.6 s a build on 2 cores),
-#: and every multiple of 4096 gets the same one
-QUANTUM = 4096
 #: a still view shows a better frame about this often; when the rest of it is expected within 1.5 times this, the
 #: rest goes at once into the final frame (each frame costs a pass over every tile, a read-back and a PNG)
 STILL_SECONDS = 0.3
-#: the display window "auto" is taken from an image of every coefficient at this size (line integrals are in
-#: world units, so the percentiles hardly depend on the image size)
+#: the display window "auto" is taken from an image at this size (line integrals are in world units, so the
+#: percentiles hardly depend on the image size) of at most WINDOW_COEFFICIENTS leading coefficients (at 1024^3
+#: every coefficient took a minute)
 WINDOW_SIZE = 128
+WINDOW_COEFFICIENTS = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -80,22 +78,11 @@ def check_tolerance(tolerance) -> float:
     return float(tolerance)
 
 
-def ladder(n: float, total: int) -> int:
-    """A coefficient count near ``n`` that a pass takes without a new kernel build (:data:`QUANTUM`), at most
-    ``total``.
-
-    >>> [ladder(n, 10**6) for n in (1, 700, 3000, 5000, 70000, 2e6)]
-    [1, 512, 4096, 4096, 69632, 1000000]
-    """
-    if n >= total:
-        return int(total)
-    n = 2 ** round(np.log2(max(n, 1.0))) if n < QUANTUM else QUANTUM * round(n / QUANTUM)
-    return int(min(n, total))
-
-
 class Source:
     """Common to both sources: the model, the image size and the framing.  A source is ready to render at once
-    (:meth:`ready`), or after :meth:`prepare` has run on a thread of its own (the shaded one's bricks)."""
+    (:meth:`ready`), or after :meth:`prepare` has run on a thread of its own (the shaded one's bricks).  What a
+    tab's frames are paced by is the tab's own (:meth:`pacing`), so that tabs dragging at once do not pace each
+    other."""
 
     mode = ""
     capabilities: dict = {}
@@ -116,7 +103,10 @@ class Source:
         size = (max(8, round(H * scale)), max(8, round(W * scale)))
         return Camera(state.azimuth, state.elevation, size, extent=self.base_extent / state.zoom)
 
-    def frames(self, state: ViewState):
+    def pacing(self):
+        """A tab's pacing state of this source's frames (passed to :meth:`frames`)."""
+
+    def frames(self, state: ViewState, pace):
         raise NotImplementedError
 
     def _frame(self, state, picture, lossless, figures, start) -> Frame:
@@ -129,91 +119,113 @@ class Source:
                                       elapsed=time.perf_counter() - start))
 
 
+@dataclass
+class XrayPace:
+    """One tab's X-ray pacing: the next drag frame's prefix and image size (an index in :data:`DRAG_SCALES`), the
+    view of its last drag frame, and ``(view, coefficients)`` of its last still frame."""
+
+    drag_count: int
+    drag_scale: int = 0
+    dragged: tuple | None = None
+    still: tuple = (None, 0)
+
+
 class XraySource(Source):
     """X-ray frames by splatting prefixes of the ranked coefficients with one reused :class:`SplatRenderer`
     (paper §5.2): while dragging, a smaller image of a prefix sized to the measured render time; when still,
     growing prefixes accumulated into one framebuffer up to ``detail`` of the kept coefficients, a frame about
-    every :data:`STILL_SECONDS` (docs/viewer.md §2)."""
+    every :data:`STILL_SECONDS` (docs/viewer.md §2).
+
+    ``complete``: False while the model is a prefix of a ``.clw`` file whose rest is being read; then no frame is
+    final, and :meth:`swap` puts the whole model in (docs/viewer.md §2)."""
 
     mode = "xray"
     capabilities = dict(detail=True, window=True)
 
-    def __init__(self, wv, size, renderer: SplatRenderer):
+    def __init__(self, wv, size, renderer: SplatRenderer, complete=True):
         super().__init__(wv, size)
-        self.r = renderer
-        self.drag_count = ladder(max(DRAG_LEAST, renderer.count / 100), renderer.count)
-        self.drag_scale = 0  # index in DRAG_SCALES
+        self.r, self.complete = renderer, complete
         self.rate = None  # seconds per coefficient of the last still view (its footprints included)
-        self.dragged = None  # (azimuth, elevation, zoom) of the last drag frame
-        acc = renderer.begin(Camera(30.0, 20.0, WINDOW_SIZE))
-        acc.splat(0, renderer.count)
+        n = min(renderer.count, WINDOW_COEFFICIENTS)
+        acc = renderer.begin(Camera(30.0, 20.0, WINDOW_SIZE), upto=n)
+        acc.splat(0, n)
         self.auto_window = tuple(float(v) for v in resolve_window(acc.image()[..., :3], "auto"))
 
-    def frames(self, state: ViewState):
+    def pacing(self) -> XrayPace:
+        return XrayPace(min(max(DRAG_LEAST, self.r.count // 100), self.r.count))
+
+    def swap(self, wv, renderer: SplatRenderer):
+        """The whole model and its renderer in place of the prefix's (on the render thread, between stages: frames
+        under way keep the renderer they began with)."""
+        self.wv, self.r, self.complete = wv, renderer, True
+
+    def frames(self, state: ViewState, pace: XrayPace):
         start = time.perf_counter()
-        total = self.r.count
-        limit = total if state.detail >= 1.0 else ladder(state.detail * total, total)
+        r, complete = self.r, self.complete  # a swap meanwhile does not change a view under way
+        total = r.count
+        limit = max(1, min(total, round(state.detail * total)))
         window = state.window or self.auto_window
+        here = (state.azimuth, state.elevation, state.zoom)
         # a drag frame while moving, and first for a still view the page has no drag frame of (a page's first, a
         # reset): a smaller image of a prefix, with the footprints of the bands it reaches only
-        if state.moving or (state.azimuth, state.elevation, state.zoom) != self.dragged:
-            count = min(self.drag_count, limit)
-            acc = self.r.begin(self.camera(state, DRAG_SCALES[self.drag_scale]), upto=count)
+        if state.moving or here != pace.dragged:
+            count = min(pace.drag_count, limit)
+            acc = r.begin(self.camera(state, DRAG_SCALES[pace.drag_scale]), upto=count)
             acc.splat(0, count)
             image = acc.image()
             seconds = time.perf_counter() - start
-            self._pace(count, seconds)
-            self.dragged = (state.azimuth, state.elevation, state.zoom)
-            yield self._xray_frame(state, image, count, window, False, seconds, start)
+            self._pace(pace, r.count, count, seconds)
+            pace.dragged = here
+            yield self._xray_frame(state, r, complete, image, count, window, False, seconds, start)
             if state.moving:
                 return
         stage = time.perf_counter()
-        acc = self.r.begin(self.camera(state))
+        acc = r.begin(self.camera(state))
         done, busy = 0, time.perf_counter() - stage
+        # never a worse frame than the page shows: the same view again (the whole model swapped in) starts from as
+        # many coefficients as its last still frame
+        least = pace.still[1] if pace.still[0] == (here, state.detail) else 0
         while done < limit:
             stage = time.perf_counter()
-            count = self._still_count(done, limit)
-            if done == 0 and 0 < limit % QUANTUM < count:  # the remainder first: the other passes are whole
-                done = limit % QUANTUM                        # multiples of QUANTUM (no new kernel builds)
-                acc.splat(0, done)
+            count = max(self._still_count(done, limit, pace.drag_count), min(least, limit))
             acc.splat(done, count - done)
             image = acc.image()
             done, seconds = count, time.perf_counter() - stage
             busy += seconds
             if done == limit:
                 self.rate = busy / limit
-            yield self._xray_frame(state, image, done, window, done == limit, seconds, start)
+            pace.still = ((here, state.detail), done)
+            yield self._xray_frame(state, r, complete, image, done, window, complete and done == limit, seconds,
+                                   start)
 
-    def _pace(self, count, seconds):
-        """The next drag frame's prefix and size: the prefix scaled towards :data:`DRAG_SECONDS` (at most doubled
-        or halved a frame); where it would fall below :data:`DRAG_LEAST` coefficients the image shrinks a step,
-        and where it grows past four times that the image grows back a step."""
+    @staticmethod
+    def _pace(pace: XrayPace, total, count, seconds):
+        """The tab's next drag frame's prefix and size: the prefix scaled towards :data:`DRAG_SECONDS` (at most
+        doubled or halved a frame); where it would fall below :data:`DRAG_LEAST` coefficients the image shrinks a
+        step, and where it grows past four times that the image grows back a step."""
         want = count * float(np.clip(DRAG_SECONDS / max(seconds, 1e-4), 0.5, 2.0))
-        least = min(DRAG_LEAST, self.r.count)
-        if want < least and self.drag_scale < len(DRAG_SCALES) - 1:
-            self.drag_scale, want = self.drag_scale + 1, least
-        elif want > 4 * least and self.drag_scale > 0:
-            self.drag_scale, want = self.drag_scale - 1, want / 2
-        self.drag_count = ladder(max(want, least), self.r.count)
+        least = min(DRAG_LEAST, total)
+        if want < least and pace.drag_scale < len(DRAG_SCALES) - 1:
+            pace.drag_scale, want = pace.drag_scale + 1, least
+        elif want > 4 * least and pace.drag_scale > 0:
+            pace.drag_scale, want = pace.drag_scale - 1, want / 2
+        pace.drag_count = int(min(max(want, least), total))
 
-    def _still_count(self, done: int, limit: int) -> int:
+    def _still_count(self, done: int, limit: int, drag_count: int) -> int:
         """The coefficients after the next still frame: at least twice ``done``, about :data:`STILL_SECONDS` more
         of splatting at the last still view's rate, all ``limit`` where the rest is expected within 1.5 times
-        that (before a first still view: from the drag prefix, doubling); from a first frame on, ``limit`` less a
-        whole multiple of :data:`QUANTUM`."""
+        that (before a first still view: doubling from the tab's drag prefix)."""
         if self.rate is None:
-            count = max(2 * done, self.drag_count)
-        else:
-            step = STILL_SECONDS / self.rate
-            count = limit if limit - done <= 1.5 * step else done + max(done, step)
-        return int(limit - max(0, (limit - count) // QUANTUM * QUANTUM))
+            return int(min(limit, max(2 * done, drag_count)))
+        step = STILL_SECONDS / self.rate
+        return int(limit if limit - done <= 1.5 * step else min(limit, done + max(done, step)))
 
-    def _xray_frame(self, state, image, count, window, final, seconds, start) -> Frame:
-        energy = self.r.energy
+    def _xray_frame(self, state, r, complete, image, count, window, final, seconds, start) -> Frame:
+        energy = r.energy
         captured = float(energy[count - 1] / energy[-1]) if count and energy[-1] > 0 else 1.0
         picture = RenderResult(image, dict(mode="xray")).to_uint8(window)
-        figures = dict(final=final, coefficients=count, fraction=count / max(self.r.count, 1),
-                       voxel_fraction=count / self.wv.n_voxels,
+        figures = dict(final=final, coefficients=count, fraction=count / max(r.count, 1),
+                       voxel_fraction=count / self.wv.n_voxels, prefix=not complete,
                        # the coefficient energy not yet splatted: the relative L2 error of the model drawn
                        error=float(np.sqrt(max(0.0, 1.0 - captured))), error_kind="relative L2 (coefficients left)",
                        window=list(window), seconds=seconds)

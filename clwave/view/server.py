@@ -14,14 +14,15 @@ import itertools
 import logging
 import secrets
 import threading
-from concurrent.futures import ThreadPoolExecutor
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from importlib import resources
 from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
 from ..errors import ClwaveError
-from .frames import DRAG_SCALES, ViewState, XraySource
+from .frames import ViewState, XraySource
 from .shaded import ShadedSource
 from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, pack_frame, parse_view
 
@@ -30,6 +31,9 @@ log = logging.getLogger("clwave.view")
 #: the page's files, the only ones served (read once from the package)
 STATIC = {"/": ("index.html", "text/html"), "/viewer.js": ("viewer.js", "text/javascript"),
           "/viewer.css": ("viewer.css", "text/css")}
+#: a file's rest is read from the first frame sent (its reading shares the cores and the interpreter with that
+#: frame), or this many seconds after the server starts, whichever is first
+READ_AFTER = 5.0
 HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Content-Type-Options": "nosniff",
            "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
                                       "object-src 'none'; base-uri 'none'; form-action 'none'"}
@@ -51,8 +55,12 @@ class ViewServer:
     ``host:port`` (port 0: a free one) inside a running event loop; :attr:`url` is the address with the token.
     """
 
-    def __init__(self, wv, size=(512, 512), tolerance=1e-2, device=None, host="127.0.0.1", port=0):
-        self.wv, self.host, self.port = wv, host, int(port)
+    def __init__(self, model, size=(512, 512), tolerance=1e-2, device=None, host="127.0.0.1", port=0):
+        from .prefix import PrefixFirst
+
+        opened = model if isinstance(model, PrefixFirst) else None
+        self.wv = opened.prefix if opened else model
+        self.host, self.port, self.device = host, int(port), device
         self.token = secrets.token_urlsafe(24)
         self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render")
         # what a source makes before its first frame (the ray tracer's bricks) is made here, so that the render
@@ -61,27 +69,76 @@ class ViewServer:
         self._builds = {}  # mode -> the Future of its source's prepare()
         self.sessions = {}  # id -> Session, the open sockets
         self._ids = itertools.count(1)
-        self._runner = None
-        self.sources = self.pool.submit(self._prepare, wv, size, tolerance, device).result()
+        self._runner = self.loop = None
+        self.stopping = False
+        # a file's prefix: the rest is read on a thread of its own, started by the first frame sent (or READ_AFTER
+        # seconds after start), and swapped in on the render thread (docs/viewer.md §2)
+        self.whole = None if opened is None or opened.complete else Future()
+        self._reader = None if self.whole is None else threading.Thread(
+            target=self._read_whole, args=(opened,), name="clwave-view-read", daemon=True)
+        self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened).result()
         self.pages = {path: (resources.files(__package__).joinpath("static", name).read_text(), mime)
                       for path, (name, mime) in STATIC.items()}
 
-    def _prepare(self, wv, size, tolerance, device) -> dict:
+    def _prepare(self, wv, size, tolerance, opened) -> dict:
         """The sources, made on the render thread, with one frame of each kind drawn (kernels built, warm)."""
         from ..splat.renderer import SplatRenderer
 
-        xray = XraySource(wv, size, SplatRenderer(wv, device=device))
-        for scale in range(len(DRAG_SCALES)):  # the kernels of each drag image size (PoCL builds per size)
-            xray.drag_scale = scale
-            for _ in xray.frames(self.initial_view(xray, moving=True)):
-                pass
-        xray.drag_scale = 0
-        for _ in xray.frames(self.initial_view(xray)):
-            pass
+        xray = XraySource(wv, size, SplatRenderer(wv, device=self.device), complete=self.whole is None)
+        for _ in xray.frames(self.initial_view(xray, moving=True), xray.pacing()):  # the kernels built (one build
+            pass                                                                   # serves every size, stages.py)
         sources = dict(xray=xray)
         if wv.channels in (1, 4):  # a scalar model through a transfer function at render time, or RGBA
-            sources["shaded"] = ShadedSource(wv, size, tolerance, device=device)
+            # a whole file (not a part of it, keep=) is traced by RayTracer.open: its coarse stage at once
+            path = opened.path if opened is not None and opened.keep is None else None
+            sources["shaded"] = ShadedSource(wv, size, tolerance, device=self.device, path=path,
+                                             whole=None if path else self.whole, upgraded=self.upgraded)
         return sources
+
+    def read_whole(self):
+        """Start reading the rest of a file opened by its prefix (once; nothing to read otherwise)."""
+        if self._reader is not None and self._reader.ident is None:
+            self._reader.start()
+
+    def _read_whole(self, opened):
+        """On the reading thread: the whole model and its renderer, then swapped in on the render thread."""
+        from ..splat.renderer import SplatRenderer
+
+        start = time.perf_counter()
+        try:
+            wv = opened.whole()
+            self.whole.set_result(wv)
+            read = time.perf_counter() - start
+            renderer = SplatRenderer(wv, device=self.device)
+        except Exception as exc:  # noqa: BLE001  (the prefix goes on being served)
+            if not self.whole.done():
+                self.whole.set_exception(exc)
+            self.upgraded("xray", exc)
+            return
+        log.info("read the whole of %s in %.1f s (%s coefficients), its renderer in %.1f s", opened.path.name, read,
+                 f"{renderer.count:,}", time.perf_counter() - start - read)
+        try:
+            self.pool.submit(self._swap, wv, renderer)
+        except RuntimeError:  # the server has stopped meanwhile
+            pass
+
+    def _swap(self, wv, renderer):
+        """On the render thread, between two stages: the whole model in place of the prefix."""
+        self.wv = wv
+        self.sources["xray"].swap(wv, renderer)
+        log.info("serving the whole model")
+        self.upgraded("xray")
+
+    def upgraded(self, mode, failure=None):
+        """A source has a better model now (from any thread): each tab hears it, and one whose still view of that
+        mode has had no final frame renders it again.  ``failure``: making it failed (logged, unless the server is
+        stopping meanwhile); the source goes on as it was."""
+        if failure is not None:
+            if not self.stopping:
+                log.error("making the whole model for %s views failed: %s", mode, failure)
+            return
+        if self.loop is not None:
+            self.loop.call_soon_threadsafe(lambda: [s.upgraded(mode) for s in list(self.sessions.values())])
 
     def prepared(self, source):
         """The Future of ``source.prepare()`` on the build thread (started on first call)."""
@@ -117,6 +174,9 @@ class ViewServer:
         return app
 
     async def start(self):
+        self.loop = asyncio.get_running_loop()
+        if self._reader is not None:
+            self.loop.call_later(READ_AFTER, self.read_whole)
         self._runner = web.AppRunner(self.app(), access_log=None, handle_signals=False)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port)
@@ -125,6 +185,7 @@ class ViewServer:
         return self.url
 
     async def stop(self):
+        self.stopping = True
         for session in list(self.sessions.values()):
             await session.ws.close()
         if self._runner is not None:
@@ -154,16 +215,19 @@ class ViewServer:
         return ws
 
     def hello(self) -> dict:
-        wv, xray = self.wv, self.sources["xray"]
+        xray = self.sources["xray"]
         from ..model.transfer import TransferFunction
 
         return dict(type="hello", modes=list(self.sources), size=list(xray.size), window=list(xray.auto_window),
                     presets=list(TransferFunction.PRESETS),
-                    capabilities={mode: s.capabilities for mode, s in self.sources.items()},
-                    model=dict(shape=list(wv.shape), channels=wv.channels, coefficients=xray.r.count,
-                               voxels=wv.n_voxels, levels=wv.levels,
-                               wavelets=sorted({g.wavelet.name for g in wv.groups}),
-                               transfer_function=(wv.transfer_function or {}).get("name")))
+                    capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model())
+
+    def model(self) -> dict:
+        """The model's figures for the page; ``reading``: a file's prefix, the rest being read."""
+        wv, xray = self.wv, self.sources["xray"]
+        return dict(shape=list(wv.shape), channels=wv.channels, coefficients=xray.r.count, voxels=wv.n_voxels,
+                    levels=wv.levels, wavelets=sorted({g.wavelet.name for g in wv.groups}),
+                    transfer_function=(wv.transfer_function or {}).get("name"), reading=not xray.complete)
 
 
 class Session:
@@ -174,6 +238,14 @@ class Session:
         self.state, self.seq, self.limit = None, -1, RateLimit()
         self.wake = asyncio.Event()
         self.sent = self.dropped = 0
+        self.paces = {}  # mode -> this tab's pacing of its frames (frames.XrayPace, shaded.ShadedPace)
+        self.news = set()  # modes whose source has a better model since this tab's last view began
+        self.rendered, self.final = None, False  # the last view rendered, and whether its final frame was sent
+
+    def upgraded(self, mode):
+        """The ``mode`` source has a better model (a file's whole, swapped in for its prefix)."""
+        self.news.add(mode)
+        self.wake.set()
 
     async def run(self):
         ws, modes = self.ws, tuple(self.server.sources)
@@ -233,11 +305,20 @@ class Session:
         while True:
             await self.wake.wait()
             self.wake.clear()
+            news, self.news = self.news, set()
+            if "xray" in news:  # the whole model is in: the page's figures of it
+                await self.ws.send_json(dict(type="model", model=self.server.model()))
             state = self.state
+            # a wake by news alone renders the view again where its mode has news and it has had no final frame
+            if state is None or state is self.rendered and (self.final or state.mode not in news):
+                continue
+            self.rendered, self.final = state, False
             source = self.server.sources[state.mode]
             if not source.ready() and not await self._prepared(source, state):
                 continue
-            frames = source.frames(state)
+            if state.mode not in self.paces:
+                self.paces[state.mode] = source.pacing()
+            frames = source.frames(state, self.paces[state.mode])
             try:
                 while self.state is state:
                     frame = await loop.run_in_executor(pool, next, frames, None)
@@ -248,6 +329,8 @@ class Session:
                         break
                     await self.ws.send_bytes(pack_frame(frame.figures, frame.data, frame.mime))
                     self.sent += 1
+                    self.final = frame.figures["final"]
+                    self.server.read_whole()  # a file's rest, once the first frame is out
             except ClwaveError as exc:  # e.g. an image too large for the device: the page shows the line
                 await self.ws.send_json(dict(type="error", seq=state.seq, message=str(exc)))
             except ConnectionResetError as exc:  # the socket went away mid-send

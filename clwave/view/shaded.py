@@ -11,7 +11,9 @@ from the page's editor.
 
 from __future__ import annotations
 
+import threading
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -27,36 +29,78 @@ LOOSEN = 10.0
 DRAG_STEPS = ((0.0625, 3), (0.125, 2), (0.1875, 2), (0.25, 1), (0.375, 1), (0.5, 1), (0.5, 0))
 
 
+@dataclass
+class ShadedPace:
+    """One tab's shaded pacing: the index of its next drag frame in the source's steps."""
+
+    step: int
+
+
 class ShadedSource(Source):
-    """Shaded frames of an RGBA model (level of detail) or a scalar one (a transfer function at render time)."""
+    """Shaded frames of an RGBA model (level of detail) or a scalar one (a transfer function at render time).
+
+    ``path``: the model is that ``.clw`` file, traced by :meth:`~clwave.RayTracer.open` (docs/raytracing.md §8):
+    frames of its coarse stage at once, of the whole file's tracer once it is set up in the background, when
+    ``upgraded(mode, failure)`` (a callable, from that thread) is called.  ``whole``: ``wv`` is a prefix of the
+    model, and this Future gives the whole one, which the tracer waits for."""
 
     mode = "shaded"
 
-    def __init__(self, wv, size, tolerance, device=None):
+    def __init__(self, wv, size, tolerance, device=None, path=None, whole=None, upgraded=None):
         super().__init__(wv, size)
         self.tolerance, self.device, self.tracer = check_tolerance(tolerance), device, None
+        self.path, self.whole, self.staged, self.upgraded, self._watch = path, whole, None, upgraded, None
         self.scalar = wv.channels == 1
         self.steps = [(s, d) for s, d in DRAG_STEPS if d <= wv.levels]
-        self.step = len(self.steps) // 2
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
         self.default_tf = (TransferFunction.from_dict(wv.transfer_function) if wv.transfer_function
                            else TransferFunction.preset("grey")) if self.scalar else None
         self._tf = (None, self.default_tf)  # the last (spec, transfer function): the tracer reuses its table
 
     def ready(self) -> bool:
-        return self.tracer is not None
+        return self.tracer is not None or self.staged is not None
+
+    def pacing(self) -> ShadedPace:
+        return ShadedPace(len(self.steps) // 2)
 
     def prepare(self):
-        """The ray tracer, and its kernels built by a small image (on the build thread, not the render thread)."""
-        if self.tracer is None:
-            from ..model.camera import Camera
-            from ..raytrace.tracer import RayTracer
+        """The ray tracer (of a file: its coarse stage), and its kernels built by a small image (on the build
+        thread, not the render thread)."""
+        from ..model.camera import Camera
+        from ..raytrace.tracer import RayTracer
 
+        warm = dict(transfer_function=self.default_tf) if self.scalar else {}
+        if self.path is not None and self.staged is None:
+            staged = RayTracer.open(self.path, device=self.device, lod=True)
+            # the coarse stage's kernels; the whole file's set-up starts with the page's first frame (staged.render),
+            # so that its reading does not delay that frame
+            staged.coarse.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN,
+                                 detail=staged.coarse_detail, **warm)
+            self.staged = staged
+            self._watch = threading.Thread(target=self._upgrade, name="clwave-view-full-stage", daemon=True)
+        elif self.path is None and self.tracer is None:
+            if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
+                self.wv = self.whole.result()
             tracer = RayTracer(self.wv, device=self.device, lod=True)
-            tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN,
-                          **(dict(transfer_function=self.default_tf) if self.scalar else {}))
+            tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
             self.tracer = tracer
-        return self.tracer
+
+    def _watch_full_stage(self):
+        """Once a coarse frame has started the whole file's set-up: a thread that waits for it (:meth:`_upgrade`)."""
+        if self._watch.ident is None:
+            self._watch.start()
+
+    def _upgrade(self):
+        """Wait for a file's full stage, then trace with it (its set-up failing: the coarse stage stays); tell
+        ``upgraded`` either way."""
+        try:
+            self.tracer = self.staged.wait()
+        except Exception as exc:  # noqa: BLE001  (the coarse stage goes on serving)
+            failure = exc
+        else:
+            failure = None
+        if self.upgraded is not None:
+            self.upgraded(self.mode, failure)
 
     def transfer_function(self, spec):
         """The transfer function of a tab's ``(preset, centre, width, opacity)``: the preset's points with their
@@ -69,26 +113,35 @@ class ShadedSource(Source):
         if self._tf[0] != spec:
             name, centre, width, opacity = spec
             base = TransferFunction.preset(name)
-            lo, hi = self.tracer.scalar.window(base)
+            lo, hi = (self.tracer or self.staged.coarse).scalar.window(base)
             mid, half = (lo + hi) / 2 + centre * (hi - lo), (hi - lo) * width / 2
             points = base.points.copy()
             points[:, 4] *= opacity
             self._tf = (spec, TransferFunction(points, window=(mid - half, mid + half), name=name))
         return self._tf[1]
 
-    def frames(self, state: ViewState):
+    def frames(self, state: ViewState, pace: ShadedPace):
         start = time.perf_counter()
+        tracer = self.tracer  # None while a file's whole tracer is being set up: its coarse stage
         options = dict(shading=state.shading)
         if self.scalar:
             options["transfer_function"] = self.transfer_function(state.tf)
         if state.moving:
-            scale, detail = self.steps[self.step]
-            result = self.tracer.render(self.camera(state, scale), tolerance=self.tolerance * LOOSEN, detail=detail,
-                                        **options)
+            scale, detail = self.steps[pace.step]
+            if tracer is None:
+                result, detail = self.staged.render(self.camera(state, scale), tolerance=self.tolerance * LOOSEN,
+                                                    **options), self.wv.levels
+                self._watch_full_stage()
+            else:
+                result = tracer.render(self.camera(state, scale), tolerance=self.tolerance * LOOSEN, detail=detail,
+                                       **options)
             seconds = time.perf_counter() - start
-            self._pace(seconds)
+            self._pace(pace, seconds)
             yield self._shaded(state, result, False, dict(tolerance=self.tolerance * LOOSEN, detail=detail,
                                                           error=None), seconds, start)
+            return
+        if tracer is None:
+            yield from self._coarse(state, options, start)
             return
         last = start
         for f in self.tracer.refine(self.camera(state), tolerance=self.tolerance, **options):
@@ -100,13 +153,24 @@ class ShadedSource(Source):
                                now - last, start)
             last = time.perf_counter()
 
-    def _pace(self, seconds):
-        """The next drag frame a step cheaper when this one took longer than :data:`DRAG_SECONDS`, a step finer
-        when it took under a third of that."""
-        if seconds > DRAG_SECONDS and self.step > 0:
-            self.step -= 1
-        elif seconds < DRAG_SECONDS / 3 and self.step < len(self.steps) - 1:
-            self.step += 1
+    def _coarse(self, state, options, start):
+        """A still view while a file's whole tracer is set up: its coarse stage on a quarter and on the whole
+        image, neither final (the view is traced again when the whole file is in)."""
+        for reduction in (4, 1):
+            stage = time.perf_counter()
+            result = self.staged.render(self.camera(state, 1 / reduction), tolerance=self.tolerance, **options)
+            self._watch_full_stage()
+            yield self._shaded(state, result, False, dict(tolerance=self.tolerance, detail=self.wv.levels,
+                                                          reduction=reduction, error=None, prefix=True),
+                               time.perf_counter() - stage, start)
+
+    def _pace(self, pace: ShadedPace, seconds):
+        """The tab's next drag frame a step cheaper when this one took longer than :data:`DRAG_SECONDS`, a step
+        finer when it took under a third of that."""
+        if seconds > DRAG_SECONDS and pace.step > 0:
+            pace.step -= 1
+        elif seconds < DRAG_SECONDS / 3 and pace.step < len(self.steps) - 1:
+            pace.step += 1
 
     def _shaded(self, state, result: RenderResult, final, figures, seconds, start) -> Frame:
         picture = result.to_uint8(background=(state.background,) * 3)

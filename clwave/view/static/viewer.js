@@ -40,6 +40,7 @@
 
   function onText(msg) {
     if (msg.type === "hello") { hello = msg; setup(); request(); }
+    else if (msg.type === "model") { hello.model = msg.model; showModel(); }  // a file's whole model is in
     else if (msg.type === "status" && msg.seq === sentSeq) status.textContent = msg.message;
     else if (msg.type === "error" && msg.seq === sentSeq) {
       status.textContent = msg.message; status.classList.add("error");
@@ -80,9 +81,7 @@
     const [h, w] = hello.size;
     canvas.width = w; canvas.height = h;
     const m = hello.model;
-    $("model").textContent = `${m.shape.slice().reverse().join(" × ")} voxels, ${m.channels} channel(s), ` +
-      `${m.wavelets.join(", ")}, ${m.coefficients.toLocaleString()} coefficients kept` +
-      (m.transfer_function ? `, classified with ${m.transfer_function}` : "");
+    showModel();
     const shaded = hello.modes.includes("shaded");
     document.querySelector('input[value="shaded"]').disabled = !shaded;
     $("shaded-note").textContent = shaded ? "" : "shaded needs a scalar or a classified (RGBA) model";
@@ -98,6 +97,14 @@
     if (tf) { state.tf = { preset: $("tf-preset").value, centre: 0, width: 1, opacity: 1 }; showTf(); }
     syncMode();
     showDetail(); showWindow();
+  }
+
+  function showModel() {
+    const m = hello.model;
+    $("model").textContent = `${m.shape.slice().reverse().join(" × ")} voxels, ${m.channels} channel(s), ` +
+      `${m.wavelets.join(", ")}, ${m.coefficients.toLocaleString()} coefficients ` +
+      (m.reading ? "(the file's most important; reading the rest…)" : "kept") +
+      (m.transfer_function ? `, classified with ${m.transfer_function}` : "");
   }
 
   // ---------------------------------------------------------------- orbit, zoom, reset
@@ -209,7 +216,8 @@
       return tr;
     }));
     status.classList.remove("error");
-    status.textContent = f.final ? "refined" : state.moving ? "moving" : "refining…";
+    status.textContent = f.final ? "refined" : state.moving ? "moving" : f.prefix ? "refined from the file's most " +
+      "important part; the rest is being read…" : "refining…";
     $("save").disabled = !(f.final && f.mime === "image/png");
   }
   $("save").addEventListener("click", () => {

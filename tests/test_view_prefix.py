@@ -1,0 +1,191 @@
+"""A ``.clw`` file in the viewer, opened by its prefix first (docs/viewer.md §2), and per-tab pacing: served before
+the whole file is read, a refinement under way kept through the swap, the final frame clwave.splat of the whole
+model."""
+
+import asyncio
+import json
+import threading
+
+import aiohttp
+import numpy as np
+import pytest
+
+import clwave
+from clwave.splat.renderer import SplatRenderer
+from clwave.view import frames as view_frames
+from clwave.view import prefix as view_prefix
+from clwave.view import view
+from clwave.view.frames import XraySource
+from clwave.view.prefix import PrefixFirst
+from clwave.view.protocol import unpack_frame
+
+PASS = 4096  # coefficients a still pass adds in the test of a swap under way
+BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
+            background=0.0, shading=True)
+SIZE = (40, 48)
+
+
+@pytest.fixture(scope="module")
+def clw(tmp_path_factory):
+    """Hydrogen 40^3 RGBA, 20 % kept: 12,800 coefficients in the file."""
+    path = tmp_path_factory.mktemp("view") / "hydrogen.clw"
+    rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", n=40))
+    clwave.WaveletVolume.from_volume(rgba, levels=2).threshold(keep=0.2).save(path)
+    return path
+
+
+async def receive(ws):
+    """The next message: ``("frame", figures)`` or ``(type, message)``."""
+    msg = await ws.receive(timeout=60)
+    if msg.type == aiohttp.WSMsgType.BINARY:
+        figures, data = unpack_frame(msg.data)
+        return "frame", dict(figures, data=data)
+    assert msg.type == aiohttp.WSMsgType.TEXT, msg
+    message = json.loads(msg.data)
+    return message["type"], message
+
+
+def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_splat(clw, monkeypatch):
+    """The server answers from the file's 2,048 most important coefficients while the rest is not read (held by a
+    gate); no frame of the prefix is final; once read, the page hears the whole model and the still view is
+    rendered again, from no fewer coefficients, to clwave.splat of the whole file within one grey level."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    gate, whole = threading.Event(), PrefixFirst.whole
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self: gate.wait(60) and whole(self))
+    model = clwave.WaveletVolume.open(clw)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            kind, hello = await receive(ws)
+            await ws.send_str(json.dumps(dict(BASE, seq=1)))
+            before = []
+            while not before or (before[-1]["mime"], before[-1]["coefficients"]) != ("image/png", 2048):
+                kind, message = await receive(ws)
+                before.append(message)
+            assert not gate.is_set()  # all of that before the rest of the file was read
+            gate.set()
+            after = []
+            while not after or not after[-1]["final"]:
+                kind, message = await receive(ws)
+                if kind == "model":
+                    model_message = message
+                else:
+                    after.append(message)
+            return hello, before, model_message, after
+
+    with view(clw, size=SIZE) as v:
+        hello, before, model_message, after = asyncio.run(go(v))
+        assert v.server.wv.kept == model.kept
+    assert hello["model"]["reading"] and hello["model"]["coefficients"] == 2048
+    assert all(f["prefix"] and not f["final"] for f in before)
+    assert not model_message["model"]["reading"] and model_message["model"]["coefficients"] == model.kept
+    assert [f["seq"] for f in after] == [1] * len(after) and after[0]["coefficients"] >= 2048
+    final = after[-1]
+    assert final["coefficients"] == model.kept and final["mime"] == "image/png" and not final["prefix"]
+    camera = clwave.Camera(30.0, 20.0, SIZE, extent=final["extent"])
+    expect = clwave.splat(model, camera).to_uint8(tuple(final["window"]))
+    got = decode(final["data"])
+    assert expect.std() > 10 and np.abs(got.astype(int) - expect).max() <= 1
+
+
+def test_a_failed_reading_of_the_rest_is_logged_and_the_prefix_goes_on(clw, monkeypatch, caplog):
+    """Reading the rest failing (a file damaged past its prefix): one logged line, the prefix's frames go on."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self: (_ for _ in ()).throw(clwave.FileFormatError("damaged")))
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await receive(ws)
+            for seq in (1, 2):
+                await ws.send_str(json.dumps(dict(BASE, seq=seq, azimuth=30.0 + seq)))
+                kind, message = await receive(ws)
+                while (message["seq"], message["mime"], message["coefficients"]) != (seq, "image/png", 2048):
+                    kind, message = await receive(ws)  # to the still view's last frame (all of the prefix)
+                while v.server._reader.ident is None:  # started just after the first frame is sent
+                    await asyncio.sleep(0.01)
+                v.server._reader.join(30)
+            return message
+
+    with view(clw, size=SIZE) as v:
+        last = asyncio.run(go(v))
+    assert last["prefix"] and not last["final"] and last["seq"] == 2
+    assert any("failed: damaged" in r.getMessage() for r in caplog.records)
+
+
+def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
+    """Swapping the whole model in between two stages of a still view: that view's frames go on with the prefix's
+    renderer to the prefix's last coefficient, none final; the same view again refines to the whole model."""
+    prefix = clwave.WaveletVolume.open(clw, keep=3 * PASS / 40**3)
+    model = clwave.WaveletVolume.open(clw)
+    xray = XraySource(prefix, SIZE, SplatRenderer(prefix), complete=False)
+    xray.rate = view_frames.STILL_SECONDS / PASS  # a pass of 4096 coefficients a frame
+    state, pace = view_frames.ViewState(1, 50.0, 10.0, 1.0, "xray", 1.0, None, False, 0.0, True), xray.pacing()
+    pace.dragged = (50.0, 10.0, 1.0)  # the page has this view's drag frame: still passes only
+    under_way = xray.frames(state, pace)
+    first = next(under_way)
+    xray.swap(model, SplatRenderer(model))
+    rest = [first] + list(under_way)
+    counts = [f.figures["coefficients"] for f in rest]
+    assert len(rest) > 1 and counts[-1] == 3 * PASS and not any(f.figures["final"] for f in rest)
+    again = list(xray.frames(state, pace))
+    assert again[0].figures["coefficients"] >= 3 * PASS and again[-1].figures["final"]
+    assert again[-1].figures["coefficients"] == model.kept
+
+
+def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(clw):
+    """A .clw file's shaded views come from RayTracer.open: coarse-stage frames (not final) while the whole file is
+    set up, and a still view ends at clwave.raytrace of the whole model within one grey level."""
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", azimuth=10.0)))
+            frames = []
+            while not frames or not frames[-1]["final"]:
+                kind, message = await receive(ws)
+                if kind == "frame":
+                    frames.append(message)
+            return frames
+
+    with view(clw, size=32, tolerance=2e-2) as v:
+        frames = asyncio.run(go(v))
+    assert all(not f["final"] for f in frames if f.get("prefix")) and frames[-1]["detail"] == 0
+    expect = clwave.raytrace(clwave.WaveletVolume.open(clw), clwave.Camera(10.0, 20.0, 32, extent=frames[-1]["extent"]),
+                             tolerance=2e-2).to_uint8(background=(0.0, 0.0, 0.0))
+    assert expect.std() > 5 and np.abs(decode(frames[-1]["data"]).astype(int) - expect).max() <= 1
+
+
+def test_tabs_pace_their_drag_frames_apart(clw, monkeypatch):
+    """One tab's fast drags grow its own drag prefix only: another tab's first drag frame has a fresh tab's."""
+    monkeypatch.setattr(view_frames, "DRAG_SECONDS", 60.0)  # every drag frame is fast: each doubles the prefix
+
+    async def drag(ws, seqs):
+        counts = []
+        for seq in seqs:
+            await ws.send_str(json.dumps(dict(BASE, seq=seq, azimuth=30.0 + seq, moving=True)))
+            kind, message = await receive(ws)
+            while kind != "frame":
+                kind, message = await receive(ws)
+            counts.append(message["coefficients"])
+        return counts
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            a, b = [await s.ws_connect(v.url.replace("/?", "/ws?")) for _ in range(2)]
+            await a.receive_json(), await b.receive_json()
+            return await drag(a, range(1, 5)), await drag(b, [1])
+
+    model = clwave.WaveletVolume.open(clw)
+    with view(model, size=SIZE) as v:
+        fresh = v.server.sources["xray"].pacing().drag_count
+        first, other = asyncio.run(go(v))
+    assert first[0] == other[0] == fresh and first[-1] > 2 * fresh
+
+
+def decode(data):
+    import io
+
+    import imageio.v3 as iio
+    return iio.imread(io.BytesIO(data))
