@@ -422,7 +422,8 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
     # in file order (by_start), so that each chunk is inflated once
     wanted = by_start[np.isin(by_start[:, 0], tiers[:read]) & (by_start[:, 2] > 0)]
     run_tiers, spans = wanted[:, 0], wanted[:, 1:]  # (start, count) per run
-    positions = np.cumsum(_read_rows(stored, spans, np.empty(int(spans[:, 1].sum()), np.int64)))
+    positions = _read_rows(stored, spans, np.empty(int(spans[:, 1].sum()), np.int64))
+    np.cumsum(positions, out=positions)
     offsets = np.cumsum(spans[:, 1]) - spans[:, 1]  # a run's first difference is its first position
     positions -= np.repeat(np.where(offsets > 0, positions[offsets - 1], 0), spans[:, 1])
     if len(positions):  # the approximation's runs hold positions in its band, the others beyond it
@@ -445,8 +446,9 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
         part = ChannelGroup(wav, gh["channels"], bands, positions[rows], values[rows].T)
         last[rows[_top(importance_of(part, None, frame), last_cut)]] = False
         positions, values = positions[~last], values[~last]
-    return ChannelGroup.gathered(wav, gh["channels"], bands, [(positions, values.T)],
-                                 order=None if order is None else order.result())
+    parts, order = [(positions, values.T)], None if order is None else order.result()
+    del positions, values  # gathered() frees each as its sorted copy is made (the open's peak, docs/chunked.md §4)
+    return ChannelGroup.gathered(wav, gh["channels"], bands, parts, order=order)
 
 
 def _read_rows(dataset, spans, out):
