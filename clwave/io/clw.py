@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import ClwaveError, FileFormatError, InputError, finite_number
 from ..model.bspline import WAVELET_ORDERS, SplineWavelet, max_levels
-from ..model.chunked import ChunkedWaveletVolume, tiers_of
+from ..model.chunked import TIER_SHIFT, ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
@@ -449,6 +449,33 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
     parts, order = [(positions, values.T)], None if order is None else order.result()
     del positions, values  # gathered() frees each as its sorted copy is made (the open's peak, docs/chunked.md §4)
     return ChannelGroup.gathered(wav, gh["channels"], bands, parts, order=order)
+
+
+def detail_energy(path) -> float:
+    """The sum of the squared importances (``|c| ||basis||``, :func:`~clwave.model.wavelet.band_importance`) of
+    a ``.clw`` file's stored details, from its tiers' run tables alone (a few kilobytes, no coefficient read):
+    a tier holds importances within ``2^(1/8)`` of each other, each counted at the tier's geometric middle.  What
+    the approximation alone leaves out (docs/raytracing.md §9)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            check_self_contained(h5, path, MAX_HEADER)
+            energy = 0.0
+            for gi in range(len(_checked_header(_header(h5, path))[3])):
+                runs = h5.get(f"g{gi}/runs")
+                _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
+                runs = runs[...]
+                runs = runs[(runs[:, 0] >= 0) & (runs[:, 0] < 1 << (32 - TIER_SHIFT - 1))]  # details, finite tiers
+                lo = (runs[:, 0].astype(np.uint32) << TIER_SHIFT).view(np.float32).astype(np.float64)
+                hi = ((runs[:, 0].astype(np.uint32) + 1) << TIER_SHIFT).view(np.float32).astype(np.float64)
+                energy += float(np.sum(runs[:, 2] * lo * hi))
+    except ClwaveError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, json.JSONDecodeError) as exc:
+        raise FileFormatError(f"cannot read the tiers of {path} ({type(exc).__name__}: "
+                              f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); the file may be corrupt")
+    return energy
 
 
 def _read_rows(dataset, spans, out):
