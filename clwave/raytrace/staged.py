@@ -29,8 +29,9 @@ class StagedTracer:
     coarse field blurs the content a little into empty space, docs/raytracing.md §8), ready when ``open``
     returns and let go (None) once the full stage is; ``full``: the tracer of the whole file
     (``RayTracer(WaveletVolume.open(path), lod=lod)``), made in a background thread started by the first coarse
-    image (:meth:`start`, :attr:`ready`, :meth:`wait`).  ``missing``: the relative size of the details the coarse
-    stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` (docs/raytracing.md §9).  Use from one thread at a time.
+    image (:meth:`start`, :attr:`ready`, :meth:`wait`).  ``missing``: the relative size of the details the
+    coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` (docs/raytracing.md §9).  Use from one
+    thread at a time.
     """
 
     def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False):
