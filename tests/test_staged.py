@@ -8,7 +8,7 @@ import pytest
 
 import clwave
 from clwave import WaveletVolume
-from clwave.io.clw import MASK_CHUNK, detail_energy
+from clwave.io.clw import MASK_CHUNK, FileMask, detail_energy
 from clwave.model.wavelet import importance_of
 from clwave.raytrace.staged import coarse_volume
 from clwave.raytrace.tracer import RayTracer
@@ -104,6 +104,22 @@ def test_staged_frames_start_coarse_and_end_at_the_direct_render_bit_for_bit(mod
     direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
     assert np.array_equal(frames[-1].image, direct.image)
     assert staged.render(cam, tolerance=1e-3).meta["stage"] == "full"
+
+
+def test_a_set_up_given_up_stops_between_two_slabs_of_its_expansion(model_file, monkeypatch):
+    """At exit (staged._abandon) the full stage's thread stops at the content mask's next box, leaving no full stage
+    and no failure, so that the interpreter does not wait for the whole set-up."""
+    staged, asked, box = RayTracer.open(model_file), [], FileMask.box
+
+    def give_up_after_one(mask, *args):
+        asked.append(args)
+        part = box(mask, *args)
+        staged._abandon.set()  # as the interpreter's exit does
+        return part
+
+    monkeypatch.setattr(FileMask, "box", give_up_after_one)
+    staged.start()
+    assert staged.wait() is None and len(asked) == 2 and staged._failure is None
 
 
 def test_a_tracer_of_chosen_details_refuses_others_in_one_line():

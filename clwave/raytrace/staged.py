@@ -7,6 +7,7 @@ then the full stage's, the last bit for bit what the full tracer's ``render`` gi
 
 from __future__ import annotations
 
+import atexit
 import threading
 import time
 
@@ -16,7 +17,7 @@ from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached
 from ..model.camera import Camera
 from ..model.transform import band_layout
-from ..io.clw import detail_energy
+from ..io.clw import Abandoned, FileMask, detail_energy
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
 from .progressive import MIN_SIDE, RaytraceFrame, reduced_camera, upsample
 
@@ -29,7 +30,8 @@ class StagedTracer:
     coarse field blurs the content a little into empty space, docs/raytracing.md §8), ready when ``open``
     returns and let go (None) once the full stage is; ``full``: the tracer of the whole file
     (``RayTracer(WaveletVolume.open(path), lod=lod)``), made in a background thread started by the first coarse
-    image (:meth:`start`, :attr:`ready`, :meth:`wait`).  ``missing``: the relative size of the details the
+    image (:meth:`start`, :attr:`ready`, :meth:`wait`); at the interpreter's exit a set-up still running is
+    given up (:func:`_abandon`).  ``missing``: the relative size of the details the
     coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` (docs/raytracing.md §9).  Use from one
     thread at a time.
     """
@@ -49,12 +51,12 @@ class StagedTracer:
             self.coarse = tracer_class(approximation, device=device, device_memory=device_memory,
                                        lod=(approximation.levels,))
         self.coarse_seconds = time.perf_counter() - start
-        self.full, self.full_seconds, self._failure = None, None, None
+        self.full, self.full_seconds, self._failure, self._abandon = None, None, None, threading.Event()
         # the stages share the device-memory budget: the full stage's bricks beyond what the coarse one leaves go
         # to its scratch file (docs/raytracing.md §6)
         left = self.coarse.budget.total - self.coarse.bricks.pool_bytes - 2 * self.coarse.block_bound.nbytes
         self._thread = threading.Thread(target=self._set_up, args=(tracer_class, path, max(left, 1), lod),
-                                        name="clwave-staged-setup")  # not a daemon: see known-gaps.md §9
+                                        name="clwave-staged-setup", daemon=True)  # given up at exit: _abandon
 
     @property
     def coarse_detail(self):
@@ -62,9 +64,16 @@ class StagedTracer:
         return None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
 
     def _set_up(self, tracer_class, path, device_memory, lod):
-        start = time.perf_counter()
+        start, cc = time.perf_counter(), self.coarse.cc
         try:
-            full = tracer_class(WaveletVolume.open(path), device=self.coarse.cc, device_memory=device_memory, lod=lod)
+            wv = WaveletVolume.open(path)
+            if self._abandon.is_set():
+                return
+            if isinstance(wv.content_mask, FileMask):  # the expansion asks it for boxes slab by slab
+                wv.content_mask.abandon = self._abandon
+            full = tracer_class(wv, device=cc, device_memory=device_memory, lod=lod)
+        except Abandoned:
+            return
         except BaseException as exc:  # raised again where the caller waits for the full stage
             self._failure = exc
             return
@@ -75,6 +84,7 @@ class StagedTracer:
         """Start setting up the full stage (once): done by the first image of the coarse stage, so that the
         background's reading does not slow that image down, or by :meth:`wait`."""
         if self._thread.ident is None:
+            atexit.register(_abandon, self._abandon, self._thread)
             self._thread.start()
 
     @property
@@ -152,6 +162,14 @@ class StagedTracer:
         yield RaytraceFrame(index=index, image=res.image, seconds=time.perf_counter() - start,
                             estimated_relative_rms_error=0.0, estimated_relative_max_error=0.0,
                             meta=dict(res.meta, stage="full"), _final=final, detail=0, reduction=1)
+
+
+def _abandon(event, thread):
+    """At exit: give up a full stage still being set up, and wait for its thread to stop, which it does after the
+    file's reading or between two slabs of the expansion (the content mask raises ``Abandoned``).  A daemon
+    thread stopped by the interpreter instead would keep h5py's lock, or abort inside OpenCL calls."""
+    event.set()
+    thread.join()
 
 
 def coarse_volume(approximation: WaveletVolume) -> WaveletVolume:
