@@ -35,8 +35,8 @@ def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, er
     Parameters
     ----------
     steps : int >= 1, optional
-        The last ``steps`` frames of the schedule (default every one: a frame per level of the model, the
-        coarsest on an image about 2^levels times smaller per side).
+        The last ``steps`` frames of the schedule (default every one: detail d on an image 2^(d+1) times smaller
+        per side, from the coarsest detail to full detail, then the full image; docs/raytracing.md §9).
     budget : float > 0, optional
         Seconds: stop before a frame expected to end beyond the budget (from the last frame's time per pixel);
         the first frame is always made.

@@ -8,7 +8,8 @@ import pytest
 
 import clwave
 from clwave import WaveletVolume
-from clwave.io.clw import MASK_CHUNK
+from clwave.io.clw import MASK_CHUNK, FileMask, detail_energy
+from clwave.model.wavelet import importance_of
 from clwave.raytrace.staged import coarse_volume
 from clwave.raytrace.tracer import RayTracer
 from test_bricks import smooth_volume
@@ -55,6 +56,18 @@ def test_the_coarse_volume_is_the_approximations_field(tmp_path, wavelet):
     assert np.array_equal(coarse.content_box(), approximation.content_box())
 
 
+def test_the_energy_of_the_details_is_read_from_the_tiers_alone(model_file):
+    """detail_energy against the sum of the squared importances of the whole file's details (each tier spans
+    2^(1/8), so the two agree within that); StagedTracer.missing is its share of the whole model's energy."""
+    whole = WaveletVolume.open(model_file)
+    parts = [importance_of(g, None, whole.frame).astype(np.float64) ** 2 for g in whole.groups]
+    approximation = sum(p[g.band_slices()[0]].sum() for p, g in zip(parts, whole.groups))
+    details = sum(p.sum() for p in parts) - approximation
+    assert details > 0 and 2 ** -0.125 <= detail_energy(model_file) / details <= 2 ** 0.125
+    missing = RayTracer.open(model_file).missing
+    assert abs(missing ** 2 - details / (details + approximation)) <= 0.2 * missing ** 2
+
+
 def test_the_content_mask_is_read_a_layer_of_chunks_at_a_time(tmp_path):
     data = np.random.default_rng(3).uniform(0, 1, (2 * MASK_CHUNK[0] + 9, 6, 11)).astype(np.float32)
     data[data < 0.3] = 0
@@ -83,9 +96,30 @@ def test_staged_frames_start_coarse_and_end_at_the_direct_render_bit_for_bit(mod
     frames = list(staged.refine(cam, tolerance=1e-3))
     assert frames[0].meta["stage"] == "coarse" and frames[0].reduction == 2 and frames[0].detail == 3
     assert frames[-1].meta["stage"] == "full" and frames[-1].estimated_relative_rms_error == 0
+    assert staged.coarse is None and [f.meta["stage"] for f in frames].count("full") == 1  # no full-stage preview
+    for f in frames[:-1]:  # the coarse frames' estimates see the details they lack (docs/raytracing.md §9)
+        figures = f.figures()
+        assert figures["estimated_relative_rms_error"] >= figures["relative_rms_error"], figures
+        assert figures["estimated_relative_max_error"] >= figures["relative_max_error"], figures
     direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
     assert np.array_equal(frames[-1].image, direct.image)
     assert staged.render(cam, tolerance=1e-3).meta["stage"] == "full"
+
+
+def test_a_set_up_given_up_stops_between_two_slabs_of_its_expansion(model_file, monkeypatch):
+    """At exit (staged._abandon) the full stage's thread stops at the content mask's next box, leaving no full stage
+    and no failure, so that the interpreter does not wait for the whole set-up."""
+    staged, asked, box = RayTracer.open(model_file), [], FileMask.box
+
+    def give_up_after_one(mask, *args):
+        asked.append(args)
+        part = box(mask, *args)
+        staged._abandon.set()  # as the interpreter's exit does
+        return part
+
+    monkeypatch.setattr(FileMask, "box", give_up_after_one)
+    staged.start()
+    assert staged.wait() is None and len(asked) == 2 and staged._failure is None
 
 
 def test_a_tracer_of_chosen_details_refuses_others_in_one_line():

@@ -559,15 +559,20 @@ def first_image_step(spec) -> dict:
         return dict(open_seconds=opened, set_up_seconds=set_up - opened,
                     first_image_seconds=time.perf_counter() - start, peak_resident_gib=peak_resident_gib())
     staged = clwave.RayTracer.open(spec["model"], device=spec["device"], device_memory="2GiB")
-    out = dict(coarse_setup_seconds=time.perf_counter() - start, frames=[])
+    out, made = dict(coarse_setup_seconds=time.perf_counter() - start, frames=[]), []
     for frame in staged.refine(cam, tolerance=1e-2, absorption=spec["step"] != "first-xray"):
         out["frames"].append(dict(seconds_since_open=time.perf_counter() - start, stage=frame.meta["stage"],
                                   detail=frame.detail, reduction=frame.reduction,
                                   render_seconds=frame.meta["render_seconds"],
                                   compile_seconds=frame.meta["compile_seconds"], bricks=frame.meta["bricks"],
-                                  estimated_relative_rms_error=frame.estimated_relative_rms_error))
+                                  estimated_relative_rms_error=frame.estimated_relative_rms_error,
+                                  estimated_relative_max_error=frame.estimated_relative_max_error))
+        made.append(frame)
         if spec["step"] == "first-xray" or len(out["frames"]) == spec.get("frames"):
             break
+    if made[-1].meta["stage"] == "full":  # every frame's measured error against the final one
+        for record, frame in zip(out["frames"], made):
+            record.update(relative_rms_error=frame.relative_rms_error, relative_max_error=frame.relative_max_error)
     out.update(full_setup_seconds=staged.wait().setup_seconds if spec["step"] == "first-shaded" else None,
                full_stage_seconds=staged.full_seconds, peak_resident_gib=peak_resident_gib())
     return out

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import ClwaveError, FileFormatError, InputError, finite_number
 from ..model.bspline import WAVELET_ORDERS, SplineWavelet, max_levels
-from ..model.chunked import ChunkedWaveletVolume, tiers_of
+from ..model.chunked import TIER_SHIFT, ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
@@ -328,17 +328,25 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None
 
 
+class Abandoned(Exception):
+    """A :class:`FileMask` asked for a box after its reader gave it up (``abandon`` set)."""
+
+
 class FileMask(ContentMask):
     """The content mask of a ``.clw`` file, read when a box of it is first asked for, a layer of the file's
     chunks at a time (packed to bits as it comes): an image that needs a part of the mask, or none of it (a
-    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §8).  Thread-safe."""
+    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §8).  Thread-safe.  ``abandon``
+    (a ``threading.Event``, or None): once set, asking for a box raises :class:`Abandoned` (a set-up given up
+    between two slabs of its expansion)."""
 
     def __init__(self, path, shape):
         super().__init__(shape)  # zeroed pages: no memory until a layer is read
         self.path, self.read = Path(path), np.zeros(-(-self.shape[0] // MASK_CHUNK[0]), bool)
-        self.lock = threading.Lock()
+        self.lock, self.abandon = threading.Lock(), None
 
     def box(self, start, shape) -> np.ndarray:
+        if self.abandon is not None and self.abandon.is_set():
+            raise Abandoned(f"the set-up reading the content mask of {self.path} was given up")
         lo, hi = max(int(start[0]), 0), min(int(start[0]) + int(shape[0]), self.shape[0])
         self.load(lo, hi)
         return super().box(start, shape)
@@ -422,7 +430,8 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
     # in file order (by_start), so that each chunk is inflated once
     wanted = by_start[np.isin(by_start[:, 0], tiers[:read]) & (by_start[:, 2] > 0)]
     run_tiers, spans = wanted[:, 0], wanted[:, 1:]  # (start, count) per run
-    positions = np.cumsum(_read_rows(stored, spans, np.empty(int(spans[:, 1].sum()), np.int64)))
+    positions = _read_rows(stored, spans, np.empty(int(spans[:, 1].sum()), np.int64))
+    np.cumsum(positions, out=positions)
     offsets = np.cumsum(spans[:, 1]) - spans[:, 1]  # a run's first difference is its first position
     positions -= np.repeat(np.where(offsets > 0, positions[offsets - 1], 0), spans[:, 1])
     if len(positions):  # the approximation's runs hold positions in its band, the others beyond it
@@ -445,8 +454,36 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
         part = ChannelGroup(wav, gh["channels"], bands, positions[rows], values[rows].T)
         last[rows[_top(importance_of(part, None, frame), last_cut)]] = False
         positions, values = positions[~last], values[~last]
-    return ChannelGroup.gathered(wav, gh["channels"], bands, [(positions, values.T)],
-                                 order=None if order is None else order.result())
+    parts, order = [(positions, values.T)], None if order is None else order.result()
+    del positions, values  # gathered() frees each as its sorted copy is made (the open's peak, docs/chunked.md §4)
+    return ChannelGroup.gathered(wav, gh["channels"], bands, parts, order=order)
+
+
+def detail_energy(path) -> float:
+    """The sum of the squared importances (``|c| ||basis||``, :func:`~clwave.model.wavelet.band_importance`) of
+    a ``.clw`` file's stored details, from its tiers' run tables alone (a few kilobytes, no coefficient read):
+    a tier holds importances within ``2^(1/8)`` of each other, each counted at the tier's geometric middle.  What
+    the approximation alone leaves out (docs/raytracing.md §9)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            check_self_contained(h5, path, MAX_HEADER)
+            energy = 0.0
+            for gi in range(len(_checked_header(_header(h5, path))[3])):
+                runs = h5.get(f"g{gi}/runs")
+                _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
+                runs = runs[...]
+                runs = runs[(runs[:, 0] >= 0) & (runs[:, 0] < 1 << (32 - TIER_SHIFT - 1))]  # details, finite tiers
+                lo = (runs[:, 0].astype(np.uint32) << TIER_SHIFT).view(np.float32).astype(np.float64)
+                hi = ((runs[:, 0].astype(np.uint32) + 1) << TIER_SHIFT).view(np.float32).astype(np.float64)
+                energy += float(np.sum(runs[:, 2] * lo * hi))
+    except ClwaveError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, json.JSONDecodeError) as exc:
+        raise FileFormatError(f"cannot read the tiers of {path} ({type(exc).__name__}: "
+                              f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); the file may be corrupt")
+    return energy
 
 
 def _read_rows(dataset, spans, out):

@@ -55,23 +55,25 @@ class ChannelGroup:
     def gathered(cls, wavelet, channels, bands, parts, order=None) -> "ChannelGroup":
         """A group from ``parts`` ``[(positions, values (C, n)), ...]`` in any order (a chunked pass, a file's
         runs): positions made ascending, None when every position is there; ValueError for a position given
-        twice.  ``order``: the stable argsort of the parts' positions, where the caller made it."""
+        twice.  ``order``: the stable argsort of the parts' positions, where the caller made it.  ``parts`` is
+        emptied, so that each array the caller gave up is freed as soon as its sorted copy is made."""
         if len(parts) == 1:
-            positions, values = parts[0]
+            positions, values = parts.pop()
         else:
             positions = np.concatenate([p for p, _ in parts]) if parts else np.zeros(0, np.int64)
             values = (np.concatenate([v for _, v in parts], axis=1) if parts
                       else np.zeros((len(channels), 0), np.float32))
+            parts.clear()
         if order is None:
             order = np.argsort(positions, kind="stable")  # timsort: parts made of ascending runs merge fast
         positions, gathered = np.take(positions, order), np.empty(values.shape, values.dtype)
         # per channel (several times faster than values[:, order]), in the host threads; "clip" (order is a
         # permutation) spares np.take a buffer for out=
         thread_map(lambda ch: np.take(values[ch], order, out=gathered[ch], mode="clip"), range(len(values)))
-        values = gathered
-        if np.any(np.diff(positions) <= 0):
+        values = order = None  # freed before the check below: the peak of opening a file (docs/chunked.md §4)
+        if np.any(positions[1:] <= positions[:-1]):
             raise ValueError("a coefficient position is given twice")
-        group = cls(wavelet, channels, bands, positions, values)
+        group = cls(wavelet, channels, bands, positions, gathered)
         if len(positions) == group.total:
             group.positions = None
         return group

@@ -11,7 +11,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import map_coordinates
 
 from ..errors import InputError
 from ..model.camera import Camera
@@ -35,11 +34,15 @@ class RaytraceFrame(Frame):
 
 
 def schedule(levels: int, size, steps=None) -> list:
-    """``[(detail, reduction)]`` from cheap to exact: ``levels + 1`` frames on images ``2^levels .. 1`` times
-    smaller per side (no side below :data:`MIN_SIDE`), each a detail finer, from ``levels - 1`` to full detail on
-    the last two (docs/raytracing.md §9); ``steps`` keeps the last that many."""
-    top = max(0, int(np.floor(np.log2(max(1, min(size) / MIN_SIDE)))))
-    frames = [(max(r - 1, 0), 2 ** min(r, top)) for r in range(levels, -1, -1)]
+    """``[(detail, reduction)]`` from cheap to exact: detail d on an image ``2^(d + 1)`` times smaller per side, from
+    the coarsest detail ``levels`` to full detail, then full detail on the full image (docs/raytracing.md §9); a
+    frame whose image would have a side below :data:`MIN_SIDE` is left out, and an image too small to reduce gets a
+    frame per detail at its full size.  ``steps`` keeps the last that many."""
+    top = int(np.floor(np.log2(max(1, min(size) / MIN_SIDE))))  # the largest reduction: 2^top
+    if top == 0:
+        frames = [(d, 1) for d in range(levels, -1, -1)]
+    else:
+        frames = [(d, 2 ** (d + 1)) for d in range(levels, -1, -1) if d + 1 <= top] + [(0, 1)]
     return frames if steps is None else frames[-int(steps):]
 
 
@@ -56,16 +59,18 @@ def reduced_camera(view, camera: Camera, reduction: int) -> Camera:
 
 
 def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:
-    """A reduced image at the full ``size``: linear interpolation at the full pixels' centres."""
+    """A reduced image at the full ``size``: linear interpolation at the full pixels' centres (the edge pixels
+    extended), one axis at a time."""
     if reduction == 1:
         return image
-    H, W = size
-    h, w = image.shape[:2]
-    rows = (np.arange(H) + 0.5 - H / 2) / reduction + h / 2 - 0.5
-    cols = (np.arange(W) + 0.5 - W / 2) / reduction + w / 2 - 0.5
-    grid = np.meshgrid(rows, cols, indexing="ij")
-    return np.stack([map_coordinates(image[..., c], grid, order=1, mode="nearest") for c in range(image.shape[2])],
-                    axis=-1).astype(np.float32)
+    for axis, n in enumerate(size):
+        m = image.shape[axis]
+        at = np.clip((np.arange(n) + 0.5 - n / 2) / reduction + m / 2 - 0.5, 0, m - 1)
+        lo = np.minimum(at.astype(np.intp), max(m - 2, 0))
+        w = (at - lo).astype(np.float32).reshape((-1,) + (1,) * (image.ndim - 1 - axis))
+        a, b = np.take(image, lo, axis), np.take(image, np.minimum(lo + 1, m - 1), axis)
+        image = a + w * (b - a)
+    return image.astype(np.float32, copy=False)
 
 
 def frames(tracer, camera: Camera, options: dict, steps=None, budget=None, error=None):

@@ -7,6 +7,7 @@ then the full stage's, the last bit for bit what the full tracer's ``render`` gi
 
 from __future__ import annotations
 
+import atexit
 import threading
 import time
 
@@ -16,8 +17,9 @@ from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached
 from ..model.camera import Camera
 from ..model.transform import band_layout
-from ..model.wavelet import ChannelGroup, WaveletVolume
-from .progressive import MIN_SIDE, RaytraceFrame, estimate, reduced_camera, upsample
+from ..io.clw import Abandoned, FileMask, detail_energy
+from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
+from .progressive import MIN_SIDE, RaytraceFrame, reduced_camera, upsample
 
 
 class StagedTracer:
@@ -26,9 +28,12 @@ class StagedTracer:
     ``coarse``: a :class:`~clwave.RayTracer` of the file's approximation alone (:func:`coarse_volume`; for mixed
     orders the bricks of the coarsest detail), its segments ``2^levels`` cells long, no content clamp (the
     coarse field blurs the content a little into empty space, docs/raytracing.md §8), ready when ``open``
-    returns; ``full``: the tracer of the whole file (``RayTracer(WaveletVolume.open(path), lod=lod)``), made in a
-    background thread started by the first coarse image (:meth:`start`, :attr:`ready`, :meth:`wait`).  Use from
-    one thread at a time.
+    returns and let go (None) once the full stage is; ``full``: the tracer of the whole file
+    (``RayTracer(WaveletVolume.open(path), lod=lod)``), made in a background thread started by the first coarse
+    image (:meth:`start`, :attr:`ready`, :meth:`wait`); at the interpreter's exit a set-up still running is
+    given up (:func:`_abandon`).  ``missing``: the relative size of the details the
+    coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` (docs/raytracing.md §9).  Use from one
+    thread at a time.
     """
 
     def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False):
@@ -36,18 +41,22 @@ class StagedTracer:
         approximation = WaveletVolume.open(path, approximation=True)
         approximation.content_mask = None  # the coarse stage has no content clamp: the mask is not read for it
         self.levels = approximation.levels
+        read = sum(float(np.sum(importance_of(g, None, approximation.frame).astype(np.float64) ** 2))
+                   for g in approximation.groups)
+        unread = detail_energy(path)  # from the file's tiers: nothing more is read
+        self.missing = float(np.sqrt(unread / (read + unread))) if read + unread > 0 else 0.0
         if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
             self.coarse = tracer_class(coarse_volume(approximation), device=device, device_memory=device_memory)
         else:  # the groups' lattices shift by half cells of the fine lattice: bricks of the coarsest detail
             self.coarse = tracer_class(approximation, device=device, device_memory=device_memory,
                                        lod=(approximation.levels,))
         self.coarse_seconds = time.perf_counter() - start
-        self.full, self.full_seconds, self._failure = None, None, None
+        self.full, self.full_seconds, self._failure, self._abandon = None, None, None, threading.Event()
         # the stages share the device-memory budget: the full stage's bricks beyond what the coarse one leaves go
         # to its scratch file (docs/raytracing.md §6)
         left = self.coarse.budget.total - self.coarse.bricks.pool_bytes - 2 * self.coarse.block_bound.nbytes
         self._thread = threading.Thread(target=self._set_up, args=(tracer_class, path, max(left, 1), lod),
-                                        name="clwave-staged-setup")  # the interpreter waits for it at exit
+                                        name="clwave-staged-setup", daemon=True)  # given up at exit: _abandon
 
     @property
     def coarse_detail(self):
@@ -55,9 +64,16 @@ class StagedTracer:
         return None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
 
     def _set_up(self, tracer_class, path, device_memory, lod):
-        start = time.perf_counter()
+        start, cc = time.perf_counter(), self.coarse.cc
         try:
-            full = tracer_class(WaveletVolume.open(path), device=self.coarse.cc, device_memory=device_memory, lod=lod)
+            wv = WaveletVolume.open(path)
+            if self._abandon.is_set():
+                return
+            if isinstance(wv.content_mask, FileMask):  # the expansion asks it for boxes slab by slab
+                wv.content_mask.abandon = self._abandon
+            full = tracer_class(wv, device=cc, device_memory=device_memory, lod=lod)
+        except Abandoned:
+            return
         except BaseException as exc:  # raised again where the caller waits for the full stage
             self._failure = exc
             return
@@ -68,6 +84,7 @@ class StagedTracer:
         """Start setting up the full stage (once): done by the first image of the coarse stage, so that the
         background's reading does not slow that image down, or by :meth:`wait`."""
         if self._thread.ident is None:
+            atexit.register(_abandon, self._abandon, self._thread)
             self._thread.start()
 
     @property
@@ -76,11 +93,14 @@ class StagedTracer:
         return self._thread.ident is not None and not self._thread.is_alive()
 
     def wait(self, timeout=None):
-        """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first)."""
+        """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first); the
+        coarse stage is let go then (its memory)."""
         self.start()
         self._thread.join(timeout)
         if self._failure is not None:
             raise self._failure
+        if self.full is not None:
+            self.coarse = None
         return self.full
 
     def render(self, camera: Camera, **options):
@@ -99,8 +119,9 @@ class StagedTracer:
         """Frames of ``camera`` from cheap to exact, for a viewer that shows each as it comes (a generator it stops
         iterating when the view changes; the set-up goes on): the coarse stage on an image ``2^levels`` times
         smaller per side, then (if the full stage is not ready) on one twice as large; then, once the full stage
-        is ready, full detail on an image half as large per side and on the full image, bit for bit its
-        ``render``.  Estimates and ``error=`` as :meth:`RayTracer.refine` (docs/raytracing.md §8, §9)."""
+        is ready, its full-detail image, bit for bit its ``render``.  ``error=`` as :meth:`RayTracer.refine`; the
+        coarse frames' estimates add what their size misses (the step from an image half as large) and what the
+        details they lack change (:attr:`missing`, docs/raytracing.md §9)."""
         check_error(error)
         if not isinstance(camera, Camera):
             raise InputError("camera must be a clwave.Camera")
@@ -108,47 +129,47 @@ class StagedTracer:
         return self._frames(camera, options, error)
 
     def _frames(self, camera, options, error):
-        view, start = camera.view(self.coarse.wv), time.perf_counter()
-        levels, steps = self.levels, ErrorEstimate()  # the coarse stage: the step estimate
+        view, start = camera.view(self.coarse.wv if self.coarse is not None else self.full.wv), time.perf_counter()
         final = FinalImage(lambda: self.wait().render(camera, **options).image)
-        index = 0
+        steps, index = ErrorEstimate(), 0  # the coarse frames' size term: the step from the last image
 
-        def render(tracer, detail, reduction):
+        def render(detail, reduction):
             cam = camera if reduction == 1 else reduced_camera(view, camera, reduction)
-            res = tracer.render(cam, detail=detail, **options)
+            res = self.coarse.render(cam, detail=detail, **options)
             return upsample(res.image, view.size, reduction), res
 
-        def frame(tracer, detail, reduction):
-            nonlocal index
-            image, res = render(tracer, detail, reduction)
-            rms, top = steps.add(image)
-            if tracer is self.full:  # full detail: what the size misses (docs/raytracing.md §9)
-                rms, top = (0.0, 0.0) if reduction == 1 else estimate(image, image, render(tracer, 0, 2 * reduction)[0])
-                if reduction == 1:
-                    final.image = image
-            made = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
-                                 estimated_relative_rms_error=rms, estimated_relative_max_error=top,
-                                 meta=dict(res.meta, stage="full" if tracer is self.full else "coarse"),
-                                 _final=final, detail=levels if detail is None else detail, reduction=reduction)
-            index += 1
-            return made
-
-        smallest = 2 ** max(0, min(levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
-        steps.add(render(self.coarse, self.coarse_detail, 2 * smallest)[0])  # the first frame's step: a pilot
+        smallest = 2 ** max(0, min(self.levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
+        if not self.ready:
+            steps.add(render(self.coarse_detail, 2 * smallest)[0])  # the first frame's step: a pilot
         for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):  # the coarse stage, unless ready
-            made = frame(self.coarse, self.coarse_detail, reduction)
+            if self.ready:
+                break
+            image, res = render(self.coarse_detail, reduction)
+            rms, top = steps.add(image)
+            peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
+            rms += self.missing * float(np.sqrt(np.mean(image ** 2))) / peak  # the details it lacks (§9)
+            made = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
+                                 estimated_relative_rms_error=rms, estimated_relative_max_error=top + self.missing,
+                                 meta=dict(res.meta, stage="coarse"), _final=final, detail=self.levels,
+                                 reduction=reduction)
+            index += 1
             self.start()
             yield made
             if reached(made, error):
                 return
-            if self.ready:
-                break
-        full = self.wait()
-        for reduction in (2, 1) if min(view.size) >= 16 else (1,):
-            made = frame(full, 0, reduction)
-            yield made
-            if reached(made, error):
-                return
+        res = self.wait().render(camera, **options)
+        final.image = res.image
+        yield RaytraceFrame(index=index, image=res.image, seconds=time.perf_counter() - start,
+                            estimated_relative_rms_error=0.0, estimated_relative_max_error=0.0,
+                            meta=dict(res.meta, stage="full"), _final=final, detail=0, reduction=1)
+
+
+def _abandon(event, thread):
+    """At exit: give up a full stage still being set up, and wait for its thread to stop, which it does after the
+    file's reading or between two slabs of the expansion (the content mask raises ``Abandoned``).  A daemon
+    thread stopped by the interpreter instead would keep h5py's lock, or abort inside OpenCL calls."""
+    event.set()
+    thread.join()
 
 
 def coarse_volume(approximation: WaveletVolume) -> WaveletVolume:
