@@ -30,6 +30,7 @@ from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
+from .bounds import reached_blocks
 from .lod import content_windows, occupancy
 from .passes import Spill
 
@@ -368,8 +369,12 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     q.finish()
     for slots, floor in floors:
         lattices[slots[floor.get() < 0]] = level_lattices[0]
+    bounds = bounds.get()[:n]
+    cut = np.flatnonzero(clamped & (lay["levels"] == wv.levels))  # the coarsest detail's (docs/raytracing.md §8)
+    if len(cut) and (reached := reached_blocks(wv, lay["bricks"][cut])) is not None:
+        bounds[cut] *= reached
     return BrickField(p.origin, p.level.shape[1:], lay["bricks"], lay["levels"], clamped, pages, frames, boxes,
-                      lattices, bounds.get()[:n], orders, time.perf_counter() - start, pool, spill)
+                      lattices, bounds, orders, time.perf_counter() - start, pool, spill)
 
 
 def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:
