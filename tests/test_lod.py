@@ -253,11 +253,11 @@ def test_blocks_no_content_reaches_are_skipped_at_full_and_coarsest_detail():
     census of the voxels), and the bounds still hold the field where it reaches."""
     from test_raytrace import classified_ball
 
-    wv = WaveletVolume.from_volume(classified_ball(n=40), "cubic", levels=2).threshold(keep=0.05)
+    wv = WaveletVolume.from_volume(classified_ball(n=32), "cubic", levels=2).threshold(keep=0.05)
     field = RayTracer(wv, lod=True).bricks
     origin, shape = field.origin * SUPER, np.array(field.shape) * SUPER
     reached = cell_blocks(content_cells(wv, origin * BLOCK, shape * BLOCK))
-    x0 = np.random.default_rng(5).uniform(-8, 48, (600, 3))
+    x0 = np.random.default_rng(5).uniform(-8, 40, (400, 3))
     for detail in (0, 2):
         bound = field.bound_grid(field.pages[detail])
         assert not np.any(bound[~reached]) and np.any(bound[reached] > 0)
