@@ -113,8 +113,6 @@ def cell_blocks(cells) -> np.ndarray:
     return cells.reshape(Z, BLOCK, Y, BLOCK, X, BLOCK).any(axis=(1, 3, 5))
 
 
-
-
 def reached_blocks(wv: WaveletVolume, bricks) -> np.ndarray | None:
     """(n, SUPER, SUPER, SUPER) bool per block (z, y, x) of each brick ``bricks`` (n, 3) (z, y, x brick indices):
     whether a non-zero voxel of the source volume reaches a cell of it (:func:`content_cells`); None when the model

@@ -180,6 +180,7 @@ class BrickField:
     boxes: np.ndarray      # (slots, groups, 4) int32
     lattices: np.ndarray   # (slots, 4) float32
     bounds: np.ndarray     # (slots, SUPER, SUPER, SUPER) per BLOCK^3 block: the largest |coefficient| reaching it
+    #                        (0 in the coarsest detail's blocks that no content reaches, docs/raytracing.md §8)
     orders: tuple          # the groups' B-spline orders
     seconds: float         # expansion time
     pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2)
