@@ -10,13 +10,14 @@ import pytest
 
 import clwave
 from clwave import WaveletVolume
-from clwave.device.constants import BRICK
+from clwave.device.constants import BLOCK, BRICK, SUPER
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import fine_to_world, world_to_fine
 from clwave.model.mask import ContentMask
 from clwave.model.transform import Band, band_sum, synthesize
 from clwave.model.wavelet import ChannelGroup
 from clwave.raytrace import bricks, tracer as tracer_module
+from clwave.raytrace.bounds import cell_blocks, content_cells
 from clwave.raytrace.lod import Detail, occupancy
 from clwave.raytrace.tracer import RayTracer
 from test_bricks import build, pool_field, smooth_volume
@@ -244,3 +245,25 @@ def test_coarser_details_render_in_passes_like_in_one():
         assert b.meta["pool"] == "scratch file" and (b.meta["passes"] > 1 or detail > 0)
         assert a.meta["segments"] == b.meta["segments"] and a.meta["detail"] == detail
         assert np.max(np.abs(a.image - b.image)) <= 1e-6 * np.abs(a.image).max()
+
+
+def test_blocks_no_content_reaches_are_skipped_at_full_and_coarsest_detail():
+    """docs/raytracing.md §8: at full detail (by the zeroed voxels) and at the coarsest (by the cut) a block bound
+    is 0 where no non-empty voxel's B-spline reaches a cell of the block (content_cells, itself tested against a
+    census of the voxels), and the bounds still hold the field where it reaches."""
+    from test_raytrace import classified_ball
+
+    wv = WaveletVolume.from_volume(classified_ball(n=32), "cubic", levels=2).threshold(keep=0.05)
+    field = RayTracer(wv, lod=True).bricks
+    origin, shape = field.origin * SUPER, np.array(field.shape) * SUPER
+    reached = cell_blocks(content_cells(wv, origin * BLOCK, shape * BLOCK))
+    x0 = np.random.default_rng(5).uniform(-8, 40, (400, 3))
+    for detail in (0, 2):
+        bound = field.bound_grid(field.pages[detail])
+        assert not np.any(bound[~reached]) and np.any(bound[reached] > 0)
+        values = np.abs(pool_field(wv, field, x0, detail=detail)).max(axis=1)
+        block = np.floor(x0 / BLOCK).astype(int) - origin
+        inside = np.all((block >= 0) & (block < shape), axis=1)
+        live = np.zeros(len(x0), bool)
+        live[inside] = reached[tuple(block[inside].T)]
+        assert np.all(values[live] <= bound[tuple(block[live].T)] * (1 + 1e-6))

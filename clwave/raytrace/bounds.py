@@ -111,3 +111,21 @@ def cell_blocks(cells) -> np.ndarray:
     """Per block of BLOCK^3 cells (the cells' box a whole number of blocks), whether any cell is set."""
     Z, Y, X = (n // BLOCK for n in cells.shape)
     return cells.reshape(Z, BLOCK, Y, BLOCK, X, BLOCK).any(axis=(1, 3, 5))
+
+
+def reached_blocks(wv: WaveletVolume, bricks) -> np.ndarray | None:
+    """(n, SUPER, SUPER, SUPER) bool per block (z, y, x) of each brick ``bricks`` (n, 3) (z, y, x brick indices):
+    whether a non-zero voxel of the source volume reaches a cell of it (:func:`content_cells`); None when the model
+    does not know its content.  Computed a brick layer at a time (docs/raytracing.md §8)."""
+    if wv.content_mask is None:
+        return None
+    bricks = np.asarray(bricks, np.int64)
+    out = np.zeros((len(bricks), SUPER, SUPER, SUPER), bool)
+    for bz in np.unique(bricks[:, 0]):
+        sel = np.flatnonzero(bricks[:, 0] == bz)
+        lo = bricks[sel].min(axis=0)
+        count = bricks[sel].max(axis=0) - lo + 1
+        blocks = cell_blocks(content_cells(wv, lo * BLOCK * SUPER, count * BLOCK * SUPER))
+        per = blocks.reshape(count[0], SUPER, count[1], SUPER, count[2], SUPER).transpose(0, 2, 4, 1, 3, 5)
+        out[sel] = per[tuple((bricks[sel] - lo).T)]
+    return out

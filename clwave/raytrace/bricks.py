@@ -30,6 +30,7 @@ from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
+from .bounds import reached_blocks
 from .lod import content_windows, occupancy
 from .passes import Spill
 
@@ -179,6 +180,7 @@ class BrickField:
     boxes: np.ndarray      # (slots, groups, 4) int32
     lattices: np.ndarray   # (slots, 4) float32
     bounds: np.ndarray     # (slots, SUPER, SUPER, SUPER) per BLOCK^3 block: the largest |coefficient| reaching it
+    #                        (0 in the coarsest detail's blocks that no content reaches, docs/raytracing.md §8)
     orders: tuple          # the groups' B-spline orders
     seconds: float         # expansion time
     pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2)
@@ -368,8 +370,12 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     q.finish()
     for slots, floor in floors:
         lattices[slots[floor.get() < 0]] = level_lattices[0]
+    bounds = bounds.get()[:n]
+    cut = np.flatnonzero(clamped & (lay["levels"] == wv.levels))  # the coarsest detail's (docs/raytracing.md §8)
+    if len(cut) and (reached := reached_blocks(wv, lay["bricks"][cut])) is not None:
+        bounds[cut] *= reached
     return BrickField(p.origin, p.level.shape[1:], lay["bricks"], lay["levels"], clamped, pages, frames, boxes,
-                      lattices, bounds.get()[:n], orders, time.perf_counter() - start, pool, spill)
+                      lattices, bounds, orders, time.perf_counter() - start, pool, spill)
 
 
 def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:
