@@ -93,6 +93,7 @@ def test_staged_frames_start_coarse_and_end_at_the_direct_render_bit_for_bit(mod
     colours = 3 if staged.coarse.lod else 4  # the coarsest detail's bricks clamp alpha at 0 (raytracing.md §8)
     assert np.abs(ref.image).max() > 0.1
     assert np.max(np.abs(xray.image - ref.image)[..., :colours]) <= 1.1e-3
+    cam = clwave.Camera(25, 15, size=64)  # coarse frames on 32^2 and 64^2 (no side below MIN_SIDE)
     frames = list(staged.refine(cam, tolerance=1e-3))
     assert frames[0].meta["stage"] == "coarse" and frames[0].reduction == 2 and frames[0].detail == 3
     assert frames[-1].meta["stage"] == "full" and frames[-1].estimated_relative_rms_error == 0

@@ -16,8 +16,9 @@ from ..errors import InputError
 from ..model.camera import Camera
 from ..frames import FinalImage, Frame, check_error, reached
 
-#: the smallest reduced image side: coarser frames would be mostly edge
-MIN_SIDE = 8
+#: the smallest reduced image side: below it a frame no longer halves the error of the one before
+#: (docs/raytracing.md §9)
+MIN_SIDE = 32
 
 
 @dataclass(kw_only=True)
