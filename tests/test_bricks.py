@@ -83,6 +83,12 @@ def smooth_volume(n=44, channels=4, empty_corner=False):
     return clwave.Volume(data.astype(np.float32), spacing=(1.0, 0.9, 1.1))
 
 
+def smooth_rgba(n=44, empty_corner=False):
+    """:func:`smooth_volume` as an RGBA model's input: colours of about 1, a faint alpha (rays see through)."""
+    vol = smooth_volume(n=n, empty_corner=empty_corner)
+    return clwave.Volume(vol.data * np.array([1.0, 0.8, 0.6, 0.05], np.float32), spacing=vol.spacing)
+
+
 def census(wv):
     """Brute force: per brick (dict by index), the coarsest level holding every group exactly, from every kept
     coefficient's support box one by one."""
@@ -204,8 +210,7 @@ def test_mixed_levels_across_brick_boundaries_trace_like_the_reference():
     oracle, which cuts every ray at every fine knot plane and sums the wavelets in closed form: X-ray segment
     integrals are exact, so they agree to rounding; at a tolerance, the kernel is within it of the converged
     oracle."""
-    vol = smooth_volume(n=40)
-    rgba = clwave.Volume(vol.data * np.array([1.0, 0.8, 0.6, 0.05], np.float32), spacing=vol.spacing)
+    rgba = smooth_rgba(n=40)
     wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.1)
     wv.content_mask = None
     tracer = RayTracer(wv)

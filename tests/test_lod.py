@@ -20,7 +20,7 @@ from clwave.raytrace import bricks, tracer as tracer_module
 from clwave.raytrace.bounds import cell_blocks, content_cells
 from clwave.raytrace.lod import Detail, occupancy
 from clwave.raytrace.tracer import RayTracer
-from test_bricks import build, pool_field, smooth_volume
+from test_bricks import build, pool_field, smooth_rgba, smooth_volume
 
 pytestmark = pytest.mark.opencl
 
@@ -135,8 +135,7 @@ def test_coarse_detail_renders_the_coarser_model():
     """An X-ray render at detail L against the reference (wavelet) field of the model without the details of
     levels 1 .. L, within the tolerance (colours: alpha is clamped at 0 at coarser details); shaded, segments
     2^L cells long."""
-    vol = smooth_volume(n=40)
-    rgba = clwave.Volume(vol.data * np.array([1.0, 0.8, 0.6, 0.05], np.float32), spacing=vol.spacing)
+    rgba = smooth_rgba(n=40)
     wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.1)
     wv.content_mask = None
     tr = RayTracer(wv, lod=True)

@@ -3,7 +3,7 @@
 
 import numpy as np
 import pytest
-from test_bricks import build, pool_field, smooth_volume
+from test_bricks import build, pool_field, smooth_rgba, smooth_volume
 from test_lod import without_details
 from test_raytrace import check_normals_against_finite_differences
 
@@ -130,8 +130,7 @@ def test_post_classified_quintic_against_the_oracle():
 def test_level_of_detail_renders_the_coarser_quintic_model():
     """lod=True: the colours of an X-ray render at detail 1 equal those of the model without the level-1 details
     (alpha is clamped at 0 at coarser details, docs/raytracing.md §8), with fewer, coarser segments."""
-    vol = smooth_volume(n=20)
-    rgba = clwave.Volume(vol.data * np.array([1.0, 0.8, 0.6, 0.05], np.float32), spacing=vol.spacing)
+    rgba = smooth_rgba(n=20)
     wv = WaveletVolume.from_volume(rgba, wavelet="quintic", levels=2).threshold(keep=0.2)
     wv.content_mask = None
     tracer = RayTracer(wv, lod=True)

@@ -12,7 +12,7 @@ from clwave.io.clw import MASK_CHUNK, FileMask, detail_energy
 from clwave.model.wavelet import importance_of
 from clwave.raytrace.staged import coarse_volume
 from clwave.raytrace.tracer import RayTracer
-from test_bricks import smooth_volume
+from test_bricks import smooth_rgba, smooth_volume
 
 pytestmark = pytest.mark.opencl
 
@@ -21,8 +21,7 @@ pytestmark = pytest.mark.opencl
 def model_file(tmp_path_factory, request):
     """RGBA with a content mask; one order (the coarse stage a coarser volume), or mixed orders (the coarse stage
     the bricks of the coarsest detail)."""
-    vol = smooth_volume(n=32, empty_corner=True)
-    rgba = clwave.Volume(vol.data * np.array([1.0, 0.8, 0.6, 0.05], np.float32), spacing=vol.spacing)
+    rgba = smooth_rgba(n=32, empty_corner=True)
     path = tmp_path_factory.mktemp("staged") / "model.clw"
     WaveletVolume.from_volume(rgba, wavelet=request.param, levels=3).threshold(keep=0.1).save(path)
     return path
