@@ -80,9 +80,11 @@ def test_compare_peers_end_to_end(tmp_path):
     assert shaded["clwave raytrace 1 (shaded, tol 0.01)"]["error"] < 0.05
     assert shaded["clwave raytrace 1 (shaded, tol 0.01)"]["error"] < shaded["clwave raytrace 0.05 (shaded, tol 0.01)"][
         "error"]
-    # post-classified (the scalar model through the preset at render time) against its own float64 reference
+    # post-classified (the scalar model through the preset at render time) against its own float64 reference: the
+    # pre-classified rows' bound, as both now spend the tolerance's shading share at the segment's midpoint
+    # (docs/raytracing.md §5, §10; the per-value bound itself: tests/test_classify.py)
     post = shaded["clwave raytrace 1 (post-classified, shaded, tol 0.01)"]["error"]
-    assert post < 0.01 and post < shaded["clwave raytrace 0.05 (post-classified, shaded, tol 0.01)"]["error"]
+    assert post < 0.05 and post < shaded["clwave raytrace 0.05 (post-classified, shaded, tol 0.01)"]["error"]
     table = (tmp_path / "comparison.md").read_text()
     assert "| hydrogen | 32³ | Fourier volume rendering |" in table
     assert report["headline"] and "clwave / FVR" in report["headline"][0]
