@@ -3,16 +3,21 @@ approximation read alone against the whole file's, the content mask read a layer
 the mask it was written from, the coarse stage's X-ray colours against the reference (wavelet) field of the
 approximation, and the staged frames ending bit for bit at the whole file's direct render."""
 
+import ctypes
+import os
+
 import numpy as np
 import pytest
 
 import clwave
 from clwave import WaveletVolume
+from clwave.device import memory
 from clwave.io.clw import MASK_CHUNK, FileMask, detail_energy
 from clwave.model.wavelet import importance_of
+from clwave.raytrace import passes
 from clwave.raytrace.staged import coarse_volume
 from clwave.raytrace.tracer import RayTracer
-from test_bricks import smooth_rgba, smooth_volume
+from test_bricks import out_of_core_model, smooth_rgba, smooth_volume
 
 pytestmark = pytest.mark.opencl
 
@@ -132,3 +137,31 @@ def test_a_tracer_of_chosen_details_refuses_others_in_one_line():
     assert tracer.details == (2,) and tracer.render(cam, absorption=False).meta["detail"] == 2
     with pytest.raises(clwave.errors.InputError, match="holds details 2 only"):
         tracer.render(cam, absorption=False, detail=0)
+
+
+def resident_bytes() -> int:
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+@pytest.mark.skipif(getattr(ctypes.CDLL(None), "malloc_trim", None) is None, reason="glibc's malloc_trim only")
+def test_memory_freed_but_kept_by_the_c_library_goes_back_to_the_system():
+    """glibc keeps freed chunks below a live one in its heap: 96 MiB of 48 KiB arrays freed but the last stay
+    resident until ``return_freed`` (docs/raytracing.md §6)."""
+    chunks = [np.ones(6144) for _ in range(2048)]  # 48 KiB each, below glibc's mmap threshold: from the heap
+    last = chunks.pop()
+    del chunks
+    before = resident_bytes()
+    assert memory.return_freed()
+    assert before - resident_bytes() >= 64 * 2 ** 20 and last.sum() == 6144
+
+
+def test_a_render_in_passes_returns_the_freed_memory_before_its_first_region(monkeypatch):
+    """The set-up's freed memory goes back to the system before a render's regions are read back from the scratch
+    file (on PoCL into host memory): the 1024^3 staged run's peak (benchmarks.md §13)."""
+    tracer, calls = RayTracer(out_of_core_model(), device_memory="14MiB"), []
+    tables = type(tracer.bricks).tables
+    monkeypatch.setattr(passes, "return_freed", lambda: calls.append("freed"))
+    monkeypatch.setattr(type(tracer.bricks), "tables", lambda *a: calls.append("region") or tables(*a))
+    meta = tracer.render(clwave.Camera(30, 20, size=32), tolerance=1e-2).meta
+    assert meta["passes"] > 1 and calls == ["freed"] + ["region"] * meta["passes"]

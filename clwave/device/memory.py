@@ -11,6 +11,7 @@ starts (:func:`check_fits`).
 
 from __future__ import annotations
 
+import ctypes
 import os
 import re
 from dataclasses import dataclass
@@ -96,6 +97,22 @@ def available_bytes() -> int:
     except OSError:  # pragma: no cover - not Linux
         pass
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def return_freed() -> bool:
+    """Give the memory this process has freed back to the system, where the C library keeps it (glibc's
+    ``malloc_trim``; elsewhere nothing, False).  glibc keeps freed chunks in its heaps, one per thread that
+    allocated them, for reuse; the large buffers that come next (a pass's bricks, on PoCL the device's memory
+    is the host's) are mapped anew and cannot reuse them (docs/raytracing.md §6)."""
+    trim = getattr(_libc(), "malloc_trim", None)
+    return bool(trim(0)) if trim is not None else False
+
+
+def _libc():
+    try:
+        return ctypes.CDLL(None)  # the symbols this process has loaded (its C library among them)
+    except (OSError, TypeError):  # pragma: no cover - Windows
+        return None
 
 
 def check_fits(nbytes: int, what: str, hint: str):

@@ -12,7 +12,7 @@ import weakref
 import numpy as np
 
 from ..device.constants import BRICK
-from ..device.memory import format_size
+from ..device.memory import format_size, return_freed
 from ..errors import DeviceMemoryError, OutputError
 from ..model.geometry import view_in_fine
 
@@ -91,6 +91,7 @@ def passes(tracer, view, scale, offset, per_image, at) -> list:
             f"largest brick and this image's buffers) but {format_size(tracer.budget.total)} are allowed; raise "
             f"--device-memory (device_memory=) or render a smaller image")
     c = max(k for k in range(1, max(f.shape) + 1) if _region_sums(sizes, k).max() <= room)
+    return_freed()  # the set-up's freed memory, kept by the C library, back to the system before a region comes
     sums = _region_sums(sizes, c)
     eye, direction = view_in_fine(view, scale, offset)
     eye_region = np.floor((eye / BRICK - f.origin) / c)
