@@ -26,6 +26,7 @@ import json
 import threading
 import zipfile
 import zlib
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -284,39 +285,19 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
     the header, before anything is read; the checksums are verified as the data is read.  The content mask
     is read when first used, a layer of chunks at a time (:class:`FileMask`).
     """
-    import h5py
-    import hdf5plugin  # noqa: F401  (registers the Zstandard filter of quantised files)
-
     path = Path(path)
     if keep is not None:
         keep = check_thresholding(keep, None, None)[0]
-    if not path.is_file():
-        raise FileFormatError(f"{path} does not exist or is not a file")
-    if zipfile.is_zipfile(path):
-        raise FileFormatError(f"{path} is a .clw file of format version 1 (clwave 0.1), which this clwave no longer "
-                              f"reads; compress the volume again to make a version {FILE_VERSION} file")
-    try:
-        with h5py.File(path, "r") as h5:
-            check_self_contained(h5, path, MAX_HEADER)  # nothing outside the file, nothing unbounded
-            header = _header(h5, path)
-            shape, levels, channels, groups_header = _checked_header(header)
-            budget = None if keep is None else max(1, int(round(keep * int(np.prod(shape)))))
-            frame = (shape, tuple(header["spacing"]), tuple(header["origin"]))
-            data = h5.get("content_mask")
-            if data is not None:
-                _check_dataset(data, shape, np.uint8)
-            groups = [_read_group(h5, gi, gh, shape, levels, budget, frame, approximation)
-                      for gi, gh in enumerate(groups_header)]
-            mask = None if data is None else FileMask(path, shape)
-    except ClwaveError:
-        raise
-    except MemoryError:
-        raise InputError(f"{path} holds more than this machine's memory can take; open a part of it "
-                         "(keep=, --keep: its most important coefficients)") from None
-    except (OSError, ValueError, KeyError, TypeError, RuntimeError, json.JSONDecodeError) as exc:
-        raise FileFormatError(f"cannot read {path} as a .clw file ({type(exc).__name__}: "
-                              f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
-                              "the file may be truncated or corrupt") from None
+    with _reading(path) as (h5, header):
+        shape, levels, channels, groups_header = _checked_header(header)
+        budget = None if keep is None else max(1, int(round(keep * int(np.prod(shape)))))
+        frame = (shape, tuple(header["spacing"]), tuple(header["origin"]))
+        data = h5.get("content_mask")
+        if data is not None:
+            _check_dataset(data, shape, np.uint8)
+        groups = [_read_group(h5, gi, gh, shape, levels, budget, frame, approximation)
+                  for gi, gh in enumerate(groups_header)]
+        mask = None if data is None else FileMask(path, shape)
     focus = header["focus"] if keep is None else None  # as threshold(keep=) without a focus
     try:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, channels,
@@ -326,6 +307,42 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
                              content_mask=mask)
     except (KeyError, ValueError, TypeError, InputError) as exc:
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None
+
+
+def read_header(path) -> dict:
+    """The header of a ``.clw`` file (shape, spacing, origin, levels, channels, groups, ...), checked as
+    :func:`read_clw` checks it, without reading a coefficient: what a reader needs to plan its reading."""
+    with _reading(path) as (_, header):
+        _checked_header(header)
+    return header
+
+
+@contextmanager
+def _reading(path):
+    """The open HDF5 file of a ``.clw`` and its header: any failure to read it, there or in the ``with`` block,
+    one line naming the file (a :class:`FileFormatError`; too little memory an :class:`InputError`)."""
+    import h5py
+    import hdf5plugin  # noqa: F401  (registers the Zstandard filter of quantised files)
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileFormatError(f"{path} does not exist or is not a file")
+    if zipfile.is_zipfile(path):
+        raise FileFormatError(f"{path} is a .clw file of format version 1 (clwave 0.1), which this clwave no longer "
+                              f"reads; compress the volume again to make a version {FILE_VERSION} file")
+    try:
+        with h5py.File(path, "r") as h5:
+            check_self_contained(h5, path, MAX_HEADER)  # nothing outside the file, nothing unbounded
+            yield h5, _header(h5, path)
+    except ClwaveError:
+        raise
+    except MemoryError:
+        raise InputError(f"{path} holds more than this machine's memory can take; open a part of it "
+                         "(keep=, --keep: its most important coefficients)") from None
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, json.JSONDecodeError) as exc:
+        raise FileFormatError(f"cannot read {path} as a .clw file ({type(exc).__name__}: "
+                              f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
+                              "the file may be truncated or corrupt") from None
 
 
 class Abandoned(Exception):
@@ -464,25 +481,16 @@ def detail_energy(path) -> float:
     a ``.clw`` file's stored details, from its tiers' run tables alone (a few kilobytes, no coefficient read):
     a tier holds importances within ``2^(1/8)`` of each other, each counted at the tier's geometric middle.  What
     the approximation alone leaves out (docs/raytracing.md §9)."""
-    import h5py
-
-    try:
-        with h5py.File(path, "r") as h5:
-            check_self_contained(h5, path, MAX_HEADER)
-            energy = 0.0
-            for gi in range(len(_checked_header(_header(h5, path))[3])):
-                runs = h5.get(f"g{gi}/runs")
-                _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
-                runs = runs[...]
-                runs = runs[(runs[:, 0] >= 0) & (runs[:, 0] < 1 << (32 - TIER_SHIFT - 1))]  # details, finite tiers
-                lo = (runs[:, 0].astype(np.uint32) << TIER_SHIFT).view(np.float32).astype(np.float64)
-                hi = ((runs[:, 0].astype(np.uint32) + 1) << TIER_SHIFT).view(np.float32).astype(np.float64)
-                energy += float(np.sum(runs[:, 2] * lo * hi))
-    except ClwaveError:
-        raise
-    except (OSError, ValueError, KeyError, TypeError, RuntimeError, json.JSONDecodeError) as exc:
-        raise FileFormatError(f"cannot read the tiers of {path} ({type(exc).__name__}: "
-                              f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); the file may be corrupt")
+    energy = 0.0
+    with _reading(path) as (h5, header):
+        for gi in range(len(_checked_header(header)[3])):
+            runs = h5.get(f"g{gi}/runs")
+            _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
+            runs = runs[...]
+            runs = runs[(runs[:, 0] >= 0) & (runs[:, 0] < 1 << (32 - TIER_SHIFT - 1))]  # details, finite tiers
+            lo = (runs[:, 0].astype(np.uint32) << TIER_SHIFT).view(np.float32).astype(np.float64)
+            hi = ((runs[:, 0].astype(np.uint32) + 1) << TIER_SHIFT).view(np.float32).astype(np.float64)
+            energy += float(np.sum(runs[:, 2] * lo * hi))
     return energy
 
 

@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
+from ..io.clw import read_header
 from ..model.wavelet import WaveletVolume, check_thresholding
 
 #: coefficients (per channel group) the viewer serves from at once: at 1024^3 (5 % kept) about 2 % of the file,
@@ -24,7 +27,7 @@ class PrefixFirst:
 
     def __init__(self, path, keep=None):
         self.path, self.keep = Path(path), None if keep is None else check_thresholding(keep, None, None)[0]
-        n = WaveletVolume.open(path, approximation=True).n_voxels  # the approximation's tier, read first anyway
+        n = int(np.prod(read_header(path)["shape"]))  # the voxels, from the header alone
         share = min(1.0, PREFIX / n)
         self.prefix = WaveletVolume.open(path, keep=share if self.keep is None else min(self.keep, share))
         budget = max(1, round(share * n))

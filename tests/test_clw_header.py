@@ -1,0 +1,57 @@
+"""The header of a ``.clw`` file read alone (clwave/io/clw.py ``read_header``): what ``read_clw`` reads of it on a
+good file, and on a bad one the same one-line error ``read_clw`` gives."""
+
+import numpy as np
+import pytest
+
+from clwave.errors import FileFormatError
+from clwave.io.clw import read_clw, read_header
+from test_hardening import crafted, setter
+
+
+def test_the_header_alone_is_what_the_whole_file_says(model_file, monkeypatch):
+    from clwave.io import clw
+
+    monkeypatch.setattr(clw, "_read_group", None)  # no coefficient is read
+    header = read_header(model_file)
+    monkeypatch.undo()
+    wv = read_clw(model_file)
+    assert tuple(header["shape"]) == wv.shape and header["levels"] == wv.levels
+    assert header["channels"] == wv.channels and [g["channels"] for g in header["groups"]] == [
+        list(g.channels) for g in wv.groups]
+    assert np.allclose(header["spacing"], wv.spacing) and np.allclose(header["origin"], wv.origin)
+
+
+def flip(h5):
+    h5.attrs["header"] = h5.attrs["header"].replace('"levels": 1', '"levels": 0')
+
+
+def other_hdf5(h5):
+    del h5.attrs["format"]
+
+
+@pytest.mark.parametrize("edit, change", [
+    (setter("shape", [-16, 16, 16]), None), (setter("groups", []), None), (setter("channels", 3), None),
+    (setter("spacing", [0, 1, 1]), None), (setter("levels", 9), None), (setter("version", 99), None),
+    (None, flip), (None, other_hdf5)])
+def test_a_bad_header_is_the_error_read_clw_gives(model_file, tmp_path, edit, change):
+    path = crafted(model_file, tmp_path, edit, change)
+    with pytest.raises(FileFormatError) as whole:
+        read_clw(path)
+    with pytest.raises(FileFormatError) as alone:
+        read_header(path)
+    assert str(alone.value) == str(whole.value) and "\n" not in str(alone.value)
+
+
+def test_files_that_are_no_clw_are_the_error_read_clw_gives(tmp_path):
+    npy, old, missing = tmp_path / "x.clw", tmp_path / "old.clw", tmp_path / "missing.clw"
+    np.save(tmp_path / "x.npy", np.zeros(8))
+    (tmp_path / "x.npy").rename(npy)
+    with open(old, "wb") as fh:  # version 1 was a zip of .npy members
+        np.savez_compressed(fh, header=np.frombuffer(b'{"version": 1}', np.uint8))
+    for path in (npy, old, missing):
+        with pytest.raises(FileFormatError) as whole:
+            read_clw(path)
+        with pytest.raises(FileFormatError) as alone:
+            read_header(path)
+        assert str(alone.value) == str(whole.value) and "\n" not in str(alone.value)
