@@ -101,8 +101,8 @@ def available_bytes() -> int:
 
 def return_freed() -> bool:
     """Give the memory this process has freed back to the system, where the C library keeps it (glibc's
-    ``malloc_trim``; elsewhere nothing, False).  glibc keeps freed chunks in its heaps, one per thread that
-    allocated them, for reuse; the large buffers that come next (a pass's bricks, on PoCL the device's memory
+    ``malloc_trim``; elsewhere nothing, False).  glibc keeps freed chunks for reuse in its heaps (other threads'
+    allocations in heaps of their own); the large buffers that come next (a pass's bricks, on PoCL the device's memory
     is the host's) are mapped anew and cannot reuse them (docs/raytracing.md §6)."""
     trim = getattr(_libc(), "malloc_trim", None)
     return bool(trim(0)) if trim is not None else False
