@@ -41,6 +41,14 @@ def random_tf(rng, lo, hi, steps=True, clear=False):
     return clwave.TransferFunction(rows)
 
 
+def one_sign(poly, tf):
+    """The sign of the opacity's slope in the transfer function's interval holding poly(0) (+1 where flat): the
+    normals face where the opacity decreases."""
+    values, alpha = tf.points[:, 0], tf.points[:, 4]
+    k = np.searchsorted(values, poly(0.0), side="right")
+    return -1.0 if 0 < k < len(values) and alpha[k] < alpha[k - 1] else 1.0
+
+
 def exact_segment(poly, tf, radius, grad=None, light=None, halfway=None):
     """(int q' e^{-radius A} dxi, int alpha dxi) over [-1, 1] for the scalar ``poly`` (a Polynomial in xi), cut at
     every real root of poly - v (NumPy's roots); alpha is a polynomial on each piece, integrated exactly, and the
@@ -92,7 +100,9 @@ def test_segment_integral_against_fine_quadrature(precision, shading):
     random piecewise-linear transfer functions with steps, shaded by a random light with random degree-8 gradients or
     unshaded: the optical depth exact, the emission within the tolerance plus what the segment took from the shading
     budget.  Every path runs: cut segments, whole ones inside one interval by Simpson on their samples (a budget of
-    0), and (shaded, a budget of 10) at the midpoint, whose error stays within the cost it charged."""
+    0), and (shaded, a budget of 10) at the midpoint, whose error stays within the cost it charged, and, lit by a
+    headlight, those turned away from it (s falling along the ray where the opacity rises with s) with no gradient
+    at a small cost.  The gradients' component along the view direction is ds/dt, as in a render."""
     cc = ComputeContext.get()
     if precision == "double" and not cc.queue.device.double_fp_config:
         pytest.skip("no float64 on this device")
@@ -107,18 +117,27 @@ def test_segment_integral_against_fine_quadrature(precision, shading):
         **({"CLW_DOUBLE": None} if precision == "double" else {}), **({"CLW_SHADE": None} if shading else {})))
     tol = 1e-6 if precision == "double" else 1e-3
     q = cc.queue
-    worst, paths = 0.0, np.zeros(3, int)  # cut, one interval, midpoint
+    worst, paths, unlit = 0.0, np.zeros(3, int), 0  # cut, one interval, midpoint; turned from a headlight
+    fine = np.linspace(-1, 1, 201)
     for trial in range(6):
         tf = random_tf(rng, -1.0, 1.0, steps=trial % 2 == 0)
         table = tf_table(tf, None)
         polys = [Polynomial(rng.normal(0, 0.6, 4 if i % 2 else 10) * 0.5 ** np.arange(4 if i % 2 else 10))
                  for i in range(10)]
+        # and three gentle ones, nearly linear around a random value, rising or falling: mostly inside one interval
+        polys += [Polynomial(np.r_[rng.uniform(-1, 1), rng.choice([-1, 1]) * rng.uniform(5e-3, 3e-2),
+                                   rng.normal(0, 5e-4, 2)]) for _ in range(3)]
         grads = [[Polynomial(rng.normal(0, 1, 9) * 0.5 ** np.arange(9)) for _ in range(3)] for _ in polys]
         light = rng.normal(size=3)
         light /= np.linalg.norm(light)
         halfway = light if trial % 3 == 0 else light + rng.normal(size=3) * 0.5
         halfway = halfway / np.linalg.norm(halfway)
         radius = rng.uniform(0.2, 3.0, len(polys))
+        # the gradient of s along the view direction w (given by L and H: w = L - 2 (L.H) H) is ds/dt, as in the ray
+        # tracer (interval_unlit relies on it): the random gradients' component along w replaced by s' / radius
+        w = light - 2 * (light @ halfway) * halfway
+        grads = [[gr[a] - w[a] * sum(w[b] * gr[b] for b in range(3)) + w[a] * p.deriv() / r for a in range(3)]
+                 for p, gr, r in zip(polys, grads, radius)]
         samples = np.array([p(xi) for p in polys])
         lanes = np.zeros((len(polys), 3, 16))
         lanes[:, :, :9] = [[g(xi[:9]) for g in gr] for gr in grads]
@@ -138,8 +157,15 @@ def test_segment_integral_against_fine_quadrature(precision, shading):
                 assert abs(v["w"] - depth) <= (1e-9 if precision == "double" else 1e-5) * max(1.0, depth)
                 error = np.max(np.abs([v["x"] - emission[0], v["y"] - emission[1], v["z"] - emission[2]]))
                 worst = max(worst, error)
+                if st["y"]:  # taken without the gradient: within what it charged
+                    assert error <= tol + cost, (trial, budget, error, cost)
                 paths += [not st["z"], st["z"] and not st["y"], st["y"]]
+                # turned away from a headlight inside one interval: no gradient, and charged little (interval_unlit)
+                if shading and budget and trial % 3 == 0 and st["z"] and one_sign(p, tf) * p.deriv()(fine).max() < 0:
+                    unlit += 1
+                    assert st["y"] and cost <= 0.1 * np.max(emission) + 1e-9, (trial, cost, emission)
     assert worst > 0 and paths[0] > 0 and paths[1] > 0 and (paths[2] > 0) == shading, paths
+    assert (unlit > 0) == shading, unlit
 
 
 def test_table_against_the_transfer_function():
@@ -288,6 +314,24 @@ def test_skipping_never_skips_content(hydrogen):
         assert alpha.max() == 0
         img = tr.render(cam, tolerance=1e-3, transfer_function=tf).image
         assert np.abs(img - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
+
+
+def test_ranges_whole_where_segments_cross_block_faces():
+    """Bricks whose knot planes are not all block faces (a coarser level's planes at odd fine coordinates, or
+    planes farther apart than a block) get one range, the union of their blocks' (a segment crossing a block face is
+    charged to one block when the march subtracts it from R); bricks on the fine lattice keep their blocks' own."""
+    from clwave.raytrace.classified import whole_where_crossed
+    rng = np.random.default_rng(3)
+    lo = rng.uniform(-1, 0, (5, 4, 4, 4))
+    ranges = np.stack([lo, lo + rng.uniform(0, 1, lo.shape)], axis=-1).astype(np.float32)
+    lattices = np.array([[0, 0, 0, 1], [1, 1, 1, 2], [0, 0, 0, 2], [3, 3, 3, 4], [0, 0, 8, 8]], np.float32)
+    got = whole_where_crossed(ranges, lattices)
+    for slot, crossed in enumerate([False, True, False, True, True]):
+        if crossed:
+            assert np.all(got[slot, ..., 0] == ranges[slot, ..., 0].min())
+            assert np.all(got[slot, ..., 1] == ranges[slot, ..., 1].max())
+        else:
+            assert np.array_equal(got[slot], ranges[slot])
 
 
 def test_transfer_function_change_rebuilds_nothing(hydrogen, monkeypatch):

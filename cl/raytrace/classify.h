@@ -10,8 +10,9 @@
  * (quadrature.h), its tolerance the piece's share of the segment's; when shading, the piece is cut again where
  * grad s . L changes sign for a light L (or halfway vector), since the normal flips there and n . L jumps or
  * kinks (found the same way, on grad s . L's Bernstein coefficients; bernstein.h).  The common case is cheap
- * (post_segment, post_gradient): a segment transparent by its hull needs nothing more; one inside one interval takes
- * the midpoint shading (no gradient) or Simpson on its samples where the shading does not turn on it.
+ * (post_segment, post_gradient): a segment transparent by its hull needs nothing more; one inside one interval is
+ * shaded by the ambient term alone where s falls along the ray away from a headlight (interval_unlit), or takes the
+ * midpoint shading (neither needs the gradient), or Simpson on its samples where the shading does not turn on it.
  *
  * The table `tf` (real4 rows, clwave/raytrace/classified.py): row 0 (scale, shift, K, 0); rows
  * 1..K the breakpoints u_i (x); then per interval k = 0..K (u below u_0, between u_{k-1} and u_k,
@@ -329,6 +330,52 @@ inline bool interval_midpoint(const OneInterval *O, const Shading *P, const real
                             weight, budget, part);
 }
 
+/* Turned away from a headlight all along (docs/raytracing.md §10): with one light L and the ray's direction w (unit,
+ * world), ds/dt = grad s . w, so n . L = sign ds/dt / |grad s| + sign grad s . (-w - L) / |grad s| (n = -sign grad s /
+ * |grad s|, sign: alpha's slope in the interval) is at most eps = |L + w| where sign ds/dt <= 0, which the Bernstein
+ * coefficients c of u (u increasing with s) show when each step sign (c[i+1] - c[i]) is below minus their rounding.
+ * The view direction is not an argument but H = (L - w) / |L - w| is: w = L - 2 (L . H) H, eps = 2 |L x H| (plus
+ * 1e-6 for the inputs' rounding), and n . H <= eps + |H - L|.  There the diffuse factor lies in [0, eps] and the
+ * specular one in [0, (eps + |H - L|)^shininess], so ka q is the shaded emission within kd eps q + ks (...) alpha,
+ * charged with Simpson's |S4 - S2| to the shading budget as midpoint_shading does.  Returns whether it was taken:
+ * then *part = int q' e^{-A} dxi, and no gradient is needed.  A light elsewhere (eps above 1e-3): never. */
+inline bool interval_unlit(const OneInterval *O, const real *c, const Shading *P, const real weight, real *budget,
+                           real3 *part)
+{
+#ifdef CLW_SHADE
+    if (P->nlights != 1 || !(P->shininess > 0))
+        return false;
+    const real3 L = P->light[0], H = P->halfway[0];
+    const real eps = 2 * length(cross(L, H)) + (real)1e-6;
+    if (!(eps <= (real)1e-3 && dot(L, H) > 0))
+        return false;
+    const real sign = O->line.z < 0 ? -1 : 1;
+    real big = 0;
+    for (int i = 0; i < NS; i++)
+        big = fmax(big, fabs(c[i]));
+    const real rounding = 64 * REAL_EPSILON * (1 + big);
+    for (int i = 0; i + 1 < NS; i++)
+        if (!(sign * (c[i + 1] - c[i]) < -rounding))
+            return false;
+    real8 r, g, b;
+    real3 q0;
+    interval_emission(O, &r, &g, &b, &q0);
+    const real2 sr = simpson_pair(r * O->att, q0.x), sg = simpson_pair(g * O->att, q0.y),
+                sb = simpson_pair(b * O->att, q0.z), sa = simpson_pair(O->alpha * O->att, O->alpha0);
+    const real3 s4 = (real3)(sr.x, sg.x, sb.x), ds = fabs(s4 - (real3)(sr.y, sg.y, sb.y));
+    const real specular = P->ks * fast_exp2(P->shininess * fast_log2(fmin(eps + length(H - L), (real)1)));
+    const real3 err = P->ka * ds + P->kd * eps * (s4 + ds) + specular * (sa.x + fabs(sa.x - sa.y));
+    const real cost = weight * fmax(err.x, fmax(err.y, err.z));
+    if (cost > *budget)
+        return false;
+    *budget -= cost;
+    *part = P->ka * s4;
+    return true;
+#else
+    return false;
+#endif
+}
+
 /* Shaded point by point where the shading does not turn on the segment (shading_turns) and Simpson on the first
  * nine points is within tol on both panels (panel_done): returns whether it was, *emission = int q' e^{-A} dxi.
  * Otherwise classified_segment takes the segment (cuts, finer panels). */
@@ -457,9 +504,10 @@ inline real4 classified_segment(real *c, const real *u, const real *gx, const re
 }
 /* A segment of the post-classified ray (docs/raytracing.md §10), first without the gradient: from s at the samples,
  * u there and its Bernstein coefficients c (segment_scalar), and whether it lies inside one interval (*one, then
- * *O).  Returns true when it is done: transparent all along (*r = 0), or inside one interval and shaded at its
- * midpoint within what is left of the shading budget (*r = (int q' e^{-A} dxi, int alpha dxi); weight: what a unit
- * of those is worth in the image, T radius).  Otherwise post_gradient takes it, with the gradient. */
+ * *O).  Returns true when it is done: transparent all along (*r = 0), or inside one interval, turned away from a
+ * headlight (interval_unlit) or shaded at its midpoint, within what is left of the shading budget (*r = (int q'
+ * e^{-A} dxi, int alpha dxi); weight: what a unit of those is worth in the image, T radius).  Otherwise
+ * post_gradient takes it, with the gradient. */
 inline bool post_segment(const real *s, __constant const real *nodes, __constant const real *weights,
                          __global const real4 *tf, const Shading *P, const real radius, const real weight,
                          real *budget, real *u, real *c, OneInterval *O, bool *one, real4 *r, int *midpoints,
@@ -470,7 +518,8 @@ inline bool post_segment(const real *s, __constant const real *nodes, __constant
         return true;
     *one = one_interval(u, c, weights, tf, radius, O);
     real3 e;
-    if (!(*one && SHADING && interval_midpoint(O, P, weight, budget, &e)))
+    if (!(*one && SHADING && (interval_unlit(O, c, P, weight, budget, &e)
+                               || interval_midpoint(O, P, weight, budget, &e))))
         return false;
     *r = (real4)(e, O->depth);
     *midpoints += 1;
