@@ -57,7 +57,9 @@ class SplatRenderer:
     coarse : float, optional
         Tolerance, relative to the image maximum, for drawing coarse cubic bands into
         coarser framebuffers that are upsampled with the cubic B-spline (docs/splatting.md §4;
-        see :func:`clwave.splat.coarse.coarse_factor`).  None (default): every band at the image's pixel.
+        see :func:`clwave.splat.coarse.coarse_factor`); in perspective views, what that leaves of it also drops
+        wavelet splats under a bound (docs/splatting.md §8, ``meta["dropped"]``).  None (default): every band at the
+        image's pixel, every splat drawn.
     device_memory : int or str, optional
         Cap on the device memory the renderer holds: bytes, or a size such as "2GiB" or "512M"
         (:func:`clwave.device.memory.parse_size`); default the device's memory.  Coefficients that do not
