@@ -15,6 +15,7 @@ import time
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
+from pyopencl.elementwise import ElementwiseKernel
 from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
@@ -86,6 +87,10 @@ class SplatRenderer:
         self.pixel_updates = ReductionKernel(
             self.cc.ctx, np.int64, neutral="0", reduce_expr="a+b", arguments="__global const int4 *bbox",
             map_expr="bbox[i].z < bbox[i].x ? 0 : (long)(bbox[i].z - bbox[i].x + 1) * (bbox[i].w - bbox[i].y + 1)")
+        # a pass that draws some of its splats only: the others' boxes emptied after projection (docs/splatting.md §8)
+        self.mask_splats = ElementwiseKernel(
+            self.cc.ctx, "int4 *bbox, uint *counts, const uchar *keep",
+            "if (!keep[i]) { bbox[i] = (int4)(0, 0, -1, -1); counts[i] = 0; }", "mask_splats")
         self.compile_seconds = time.perf_counter() - start
         self.groups = []
         q = self.cc.queue
@@ -373,10 +378,7 @@ class Accumulator:
         centre, bbox, stex, counts = w["centre"], w["bbox"], w["stex"], w["counts"]  # the first n are this pass's
         st.project(n, first, coef, t, centre, bbox, stex, counts)
         if keep is not None:
-            boxes, tiles = bbox[:n].get(), counts[:n].get()
-            boxes[~keep], tiles[~keep] = (0, 0, -1, -1), 0
-            cl.enqueue_copy(q, bbox.data, boxes)
-            cl.enqueue_copy(q, counts.data, tiles)
+            r.mask_splats(bbox, counts, cla.to_device(q, keep.view(np.uint8)), range=slice(0, n), queue=q)
         total = int(cla.sum(counts[:n], dtype=np.uint64).get())
         budget = st.pair_budget(r.budget)
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
