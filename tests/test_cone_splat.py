@@ -6,12 +6,13 @@ import re
 
 import numpy as np
 import pytest
+import scipy.ndimage
 
 import clwave
 from clwave.errors import InputError
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import view_frame
-from clwave.splat.perspective import SLOPE_STEP, sheared_footprints
+from clwave.splat.perspective import SLOPE_STEP, _cell_range_peaks, drop_share, select_drops, sheared_footprints
 from clwave.splat.reference import exact_xray
 from clwave.splat.spatial import line_integral
 
@@ -182,3 +183,55 @@ def test_axis_scale_is_the_least_of_its_convex_function():
         brute = np.max(np.abs(d * a + t[:, None] * (d * b)), axis=1).min()
         assert brute - 1e-3 <= axis_scale(a, b, d) <= brute + 1e-12
     assert axis_scale([0, 0.1, 1], [-1, 0, 0], [0.7, 0.7, 2.5]) == pytest.approx(2.5)  # a CT's slices from the side
+
+
+def test_dropped_splats_stay_within_their_bound():
+    # a smooth volume seen along an axis: the wavelets with psi along the ray have small footprints near the axis,
+    # so the tolerance that coarse framebuffers leave unspent drops many (docs/splatting.md §8 "Dropped splats")
+    data = scipy.ndimage.gaussian_filter(np.random.default_rng(2).random((16, 16, 16)), 2.0).astype(np.float32)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data, spacing=(1.0, 1.0, 1.0)), wavelet="cubic", levels=2)
+    cam = clwave.ConeBeam(60.0, 90.0, 32, pixel=1.6, azimuth=0, elevation=0)
+    exact = _exact(wv, cam)
+    full = clwave.splat(wv, cam)
+    res = clwave.splat(wv, cam, coarse=2e-2)
+    dropped = res.meta["dropped"]
+    assert res.meta["framebuffers"] == [1] and dropped["splats"] > 0 and dropped["pixel_updates"] > 0
+    share = drop_share({(2, "aaa"): 1, (2, "aad"): 1, (1, "aad"): 1}, 2, 2e-2)
+    assert share == pytest.approx(2e-2 * (1 / 2 + 1 / 4 + 1 / 8))
+    assert drop_share({(2, "aaa"): 2, (2, "aad"): 1, (1, "aad"): 1, (1, "daa"): 2}, 2, 2e-2) == pytest.approx(5e-3)
+    assert dropped["bound"] <= share  # the stated bound, of the image maximum
+    assert np.abs(res.image - full.image).max() <= (dropped["bound"] + 1e-5) * np.abs(res.image).max()  # it holds
+    assert np.abs(res.image - exact).max() <= BOUND * exact.max()
+    assert res.meta["pixel_updates"] + dropped["pixel_updates"] == full.meta["pixel_updates"]
+
+
+def test_select_drops_and_cell_peaks_against_brute_force():
+    rng = np.random.default_rng(4)
+    H, W, n = 9, 11, 60
+    x0, y0 = rng.integers(0, W, n), rng.integers(0, H, n)
+    bbox = np.stack([x0, y0, np.minimum(x0 + rng.integers(0, 4, n), W - 1), np.minimum(y0 + rng.integers(0, 4, n),
+                                                                                       H - 1)], 1)
+    bound = rng.random((n, 2))
+    budget = np.array([1.5, 2.0])
+
+    def cover(mask):  # per pixel and channel, the dropped bounds summed over the boxes that cover it
+        img = np.zeros((H, W, 2))
+        for (a, b, c, d), w in zip(bbox[mask], bound[mask]):
+            img[b:d + 1, a:c + 1] += w
+        return img.reshape(-1, 2).max(axis=0)
+
+    drop, most = select_drops(bbox, bound, (H, W), budget)
+    order = np.argsort(np.floor(8 * np.log2(np.max(bound / budget, axis=1))), kind="stable")
+    k = int(drop.sum())
+    assert 0 < k < n and drop[order[:k]].all()
+    assert np.allclose(most, cover(drop)) and np.all(most <= budget)
+    longer = drop.copy()
+    longer[order[k]] = True
+    assert np.any(cover(longer) > budget)  # the longest run that fits
+    peaks = rng.random((3, 4, 5))  # (textures, nodes along v, along u)
+    got = _cell_range_peaks(peaks)
+    for v0 in range(3):
+        for v1 in range(v0, 3):
+            for u0 in range(4):
+                for u1 in range(u0, 4):
+                    assert np.array_equal(got[:, v0, v1, u0, u1], peaks[:, v0:v1 + 2, u0:u1 + 2].max(axis=(1, 2)))

@@ -39,7 +39,8 @@ pre-classification of the same phantom, renders interleaved; transfer-function c
 Shepp-Logan phantom of ``--size``³ voxels of 300 mm / ``--size`` (a head-sized CT), cubic, 3 levels,
 5 %, through a C-arm (dso 1000 mm, dsd 1500 mm, a 400 mm detector): one renderer reused, each view
 a new pose; 512² single views (``--views``), interleaved with orthographic views of the same framing
-(the ratio), a batch of ``--drr-batch`` poses at 256² (``render_many``, wall time), and as many
+(the ratio) and with a renderer that draws coarse framebuffers and drops splats under a bound
+(``coarse=2e-2``), a batch of ``--drr-batch`` poses at 256² (``render_many``, wall time), and as many
 registration steps (one direction, the volume moved by up to 5 mm: the poses share their footprints).
 
 ``scale`` (not in ``all``): volumes bigger than memory (docs/chunked.md).  A hydrogen phantom of
@@ -865,15 +866,21 @@ def bench_drr(args) -> dict:
     def cone(az, el, size):
         return clwave.ConeBeam(1000.0, 1500.0, size, pixel=400.0 / size, azimuth=az, elevation=el)
 
+    dropping = clwave.SplatRenderer(wv, device=args.device, coarse=2e-2)  # splats dropped under a bound (§8)
     renderer.render(cone(10.0, 5.0, 512))  # warm-up: kernels, first footprints
-    runs = {"cone beam": [], "orthographic": []}
-    for az, el in views(args.views):  # interleaved: the machine's load falls on both alike
+    dropping.render(cone(10.0, 5.0, 512))
+    runs = {"cone beam": [], "orthographic": [], "cone beam, coarse=2e-2": []}
+    for az, el in views(args.views):  # interleaved: the machine's load falls on all alike
         runs["cone beam"].append(renderer.render(cone(az, el, 512)).meta)
         runs["orthographic"].append(renderer.render(clwave.Camera(az, el, 512, extent=400.0 / 1.5)).meta)
+        runs["cone beam, coarse=2e-2"].append(dropping.render(cone(az, el, 512)).meta)
     cases = {f"{name} at 512x512": dict(
         seconds={k: summary([m["seconds"][k] for m in metas]) for k in ("total", "footprints", "binning",
                                                                         "accumulation")},
-        pixel_updates=statistics.median(m["pixel_updates"] for m in metas)) for name, metas in runs.items()}
+        pixel_updates=statistics.median(m["pixel_updates"] for m in metas),
+        **({"dropped": [m["dropped"] for m in metas]} if "dropped" in metas[0] else {}),
+        **({"framebuffers": metas[0]["framebuffers"]} if len(metas[0]["framebuffers"]) > 1 else {}))
+        for name, metas in runs.items()}
     cases["cone beam / orthographic"] = (cases["cone beam at 512x512"]["seconds"]["total"]["median"]
                                          / cases["orthographic at 512x512"]["seconds"]["total"]["median"])
     poses = [cone(az, el, 256) for az, el in views(args.drr_batch)]

@@ -265,8 +265,73 @@ class ConeTables:
                 cache[key] = packed
         self.footprint_seconds = time.perf_counter() - start
         self.band_tex[:] = packed["band_tex"]
-        self.tex_box, self.tex_int, self.tex_map, self.tex_layer, self.texels, self.layer_textures = (
-            packed[name] for name in ("tex_box", "tex_int", "tex_map", "tex_layer", "texels", "layer_textures"))
+        self.tex_box, self.tex_int, self.tex_map, self.tex_layer, self.texels, self.layer_textures, self.cell_peaks = (
+            packed[name] for name in ("tex_box", "tex_int", "tex_map", "tex_layer", "texels", "layer_textures",
+                                      "cell_peaks"))
+
+    def splat_bounds(self, view, bbox, stex, values) -> np.ndarray:
+        """(n, C): a bound of each image-layer splat's contribution to any of its pixels before the obliquity
+        factor, ``|c|`` times its footprint's largest magnitude at the slope nodes of the cells its pixels read
+        (a pixel's value is bilinear between them; docs/splatting.md §8 "Dropped splats").  ``bbox`` (n, 4)
+        ``(x0, y0, x1, y1)`` in ``view``'s pixels (non-empty), ``stex`` their textures, ``values`` (n, C)."""
+        lo, inv, count = self.cone[4, 2:], self.cone[5, :2], self.cone[5, 2:].astype(int)
+        slopes = view.slopes()
+        cu = np.clip(np.floor((slopes[0, :, 0] - lo[0]) * inv[0]), 0, count[0] - 2).astype(np.intp)  # per column
+        cv = np.clip(np.floor((slopes[:, 0, 1] - lo[1]) * inv[1]), 0, count[1] - 2).astype(np.intp)  # per row
+        (u0, u1), (v0, v1) = ((np.minimum(a, b), np.maximum(a, b))  # slopes are monotonic along rows and columns
+                              for a, b in ((cu[bbox[:, 0]], cu[bbox[:, 2]]), (cv[bbox[:, 1]], cv[bbox[:, 3]])))
+        return np.abs(values) * self.cell_peaks[stex, v0, v1, u0, u1][:, None]
+
+
+def drop_share(factors: dict, levels: int, tolerance: float) -> float:
+    """The share of ``tolerance`` (relative to the image maximum) that dropped splats may take: the coarse
+    framebuffers' shares (:func:`clwave.splat.coarse.coarse_factor`: half for the approximation band, ``2^{m-L-2}``
+    for wavelet level m) of every band kind that ``factors`` ((level, key) -> framebuffer factor) draws at the
+    image's pixels, where coarsening spends none of it."""
+    share = 0.0
+    for level in range(1, levels + 1):
+        for approximation, part in ((True, 0.5), (False, 2.0 ** (level - levels - 2))):
+            bands = [f for (m, key), f in factors.items() if m == level and (key == "aaa") == approximation]
+            if bands and max(bands) == 1:
+                share += part
+    return tolerance * share
+
+
+def select_drops(bbox, bound, size, budget) -> tuple:
+    """``(drop, most)``: a mask of the splats to drop, the longest run of them in order of increasing bound
+    (relative to ``budget``, (C,); to within an eighth of an octave) whose bounds, summed over the splats covering
+    any pixel of the (H, W) ``size``, stay within ``budget`` in every channel; and that sum's maximum over the
+    pixels (C,).  ``bbox`` (n, 4) ``(x0, y0, x1, y1)``, ``bound`` (n, C)."""
+    H, W = size
+    budget = np.asarray(budget, float)
+    # in order of increasing bound to within an eighth of an octave (a radix sort of small integers)
+    ratio = np.max(bound / budget, axis=1)
+    key = np.clip(np.floor(8.0 * np.log2(np.maximum(ratio, 2.0 ** -1000))), -8000, 8000).astype(np.int16)
+    order = np.argsort(key, kind="stable")
+    box, weight = bbox[order].astype(np.intp), bound[order]
+    # each box as a 2-D difference array's four corners, integrated by cumulative sums
+    corners = np.stack([box[:, 1] * (W + 1) + box[:, 0], box[:, 1] * (W + 1) + box[:, 2] + 1,
+                        (box[:, 3] + 1) * (W + 1) + box[:, 0], (box[:, 3] + 1) * (W + 1) + box[:, 2] + 1], 1)
+    signs = np.array([1.0, -1.0, -1.0, 1.0])
+
+    def add(diff, a, b):  # the difference arrays of splats a..b added to those of every channel
+        return diff + np.stack([np.bincount(corners[a:b].ravel(), (weight[a:b, c, None] * signs).ravel(),
+                                            minlength=(H + 1) * (W + 1)) for c in range(len(budget))])
+
+    def most(diff):
+        return diff.reshape(-1, H + 1, W + 1).cumsum(1).cumsum(2).max(axis=(1, 2))
+
+    lo, hi, fits = 0, len(order), np.zeros((len(budget), (H + 1) * (W + 1)))
+    while lo < hi:  # the longest prefix that fits (the sums grow with the prefix); each try adds only its new splats
+        mid = (lo + hi + 1) // 2
+        trial = add(fits, lo, mid)
+        if np.all(most(trial) <= budget):
+            lo, fits = mid, trial
+        else:
+            hi = mid - 1
+    drop = np.zeros(len(order), bool)
+    drop[order[:lo]] = True
+    return drop, most(fits)
 
 
 def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
@@ -274,6 +339,7 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
     layer): each layer's bands in order, each texture as :func:`slope_cells`."""
     band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
     boxes, ints, maps, tex_layer, pool, offset, layer_textures = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD, []
+    peaks = []  # each texture's largest magnitude at each slope node
     for li in range(layer_count):
         first_tex = len(ints)
         for b in g.bands:
@@ -293,9 +359,25 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
                           -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
             ints.append((offset, nu + 2, padded[0].size, nv + 2))  # cells' texels are 4 floats
             maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
+            peaks.append(np.abs(tex.data).max(axis=(1, 2)).astype(np.float64))
             pool.append(padded.ravel())
             offset += padded.size
         layer_textures.append(len(ints) - first_tex)
     out = SimpleNamespace()
     set_texture_tables(out, boxes, ints, maps, tex_layer, pool)
-    return dict(vars(out), band_tex=band_tex, layer_textures=layer_textures)
+    cells = np.asarray(count, int)[::-1] - 1  # (v, u)
+    node_peaks = np.array(peaks or [np.zeros(int(np.prod(count)))]).reshape(-1, *(cells + 1))
+    return dict(vars(out), band_tex=band_tex, layer_textures=layer_textures, cell_peaks=_cell_range_peaks(node_peaks))
+
+
+def _cell_range_peaks(node_peaks) -> np.ndarray:
+    """``[t, v0, v1, u0, u1]``: texture t's largest node magnitude over the nodes of slope cells ``v0..v1`` by
+    ``u0..u1`` (each cell's four nodes; ``node_peaks`` (T, k_v, k_u))."""
+    T, kv, ku = node_peaks.shape
+    out = np.zeros((T, kv - 1, kv - 1, ku - 1, ku - 1))
+    for v0 in range(kv - 1):
+        for v1 in range(v0, kv - 1):
+            rows = node_peaks[:, v0:v1 + 2].max(axis=1)  # (T, k_u)
+            for u0 in range(ku - 1):  # cells u0..u1 read nodes u0..u1 + 1
+                out[:, v0, v1, u0, u0:] = np.maximum.accumulate(rows[:, u0:], axis=1)[:, 1:]
+    return out

@@ -15,6 +15,7 @@ import time
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
+from pyopencl.elementwise import ElementwiseKernel
 from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
@@ -27,7 +28,7 @@ from ..model.conebeam import ConeBeam
 from ..model.wavelet import WaveletVolume
 from .coarse import Layer, coarse_factor
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
-from .perspective import ConeTables, depth_range
+from .perspective import ConeTables, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
 
 COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
@@ -57,7 +58,9 @@ class SplatRenderer:
     coarse : float, optional
         Tolerance, relative to the image maximum, for drawing coarse cubic bands into
         coarser framebuffers that are upsampled with the cubic B-spline (docs/splatting.md §4;
-        see :func:`clwave.splat.coarse.coarse_factor`).  None (default): every band at the image's pixel.
+        see :func:`clwave.splat.coarse.coarse_factor`); in perspective views, what that leaves of it also drops
+        wavelet splats under a bound (docs/splatting.md §8, ``meta["dropped"]``).  None (default): every band at the
+        image's pixel, every splat drawn.
     device_memory : int or str, optional
         Cap on the device memory the renderer holds: bytes, or a size such as "2GiB" or "512M"
         (:func:`clwave.device.memory.parse_size`); default the device's memory.  Coefficients that do not
@@ -84,6 +87,10 @@ class SplatRenderer:
         self.pixel_updates = ReductionKernel(
             self.cc.ctx, np.int64, neutral="0", reduce_expr="a+b", arguments="__global const int4 *bbox",
             map_expr="bbox[i].z < bbox[i].x ? 0 : (long)(bbox[i].z - bbox[i].x + 1) * (bbox[i].w - bbox[i].y + 1)")
+        # a pass that draws some of its splats only: the others' boxes emptied after projection (docs/splatting.md §8)
+        self.mask_splats = ElementwiseKernel(
+            self.cc.ctx, "int4 *bbox, uint *counts, const uchar *keep",
+            "if (!keep[i]) { bbox[i] = (int4)(0, 0, -1, -1); counts[i] = 0; }", "mask_splats")
         self.compile_seconds = time.perf_counter() - start
         self.groups = []
         q = self.cc.queue
@@ -170,7 +177,10 @@ class SplatRenderer:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
                                  max_texels=self.cc.info.max_alloc // 4) for gi, ls in enumerate(per_layer)]
         self._prepare(tables, view.size)
-        return Accumulator(self, view, layers, tables, upto)
+        acc = Accumulator(self, view, layers, tables, upto)
+        if view.perspective and self.coarse:  # what coarsening leaves of the tolerance (docs/splatting.md §8)
+            acc.drop_share = [drop_share(fg, self.wv.levels, self.coarse) for fg in factors]
+        return acc
 
     def render(self, camera) -> RenderResult:
         """The X-ray image of one view (a :class:`Camera` or :class:`ConeBeam`) from every coefficient."""
@@ -265,6 +275,8 @@ class Accumulator:
         self.fbs = [cla.zeros(cc.queue, (t.pixels * 4,), np.float32) for t in tables]
         self.stats = dict(splats=0, pairs=0, pixel_updates=0, chunks=0, bin_seconds=0.0, accumulate_seconds=0.0,
                           upload_seconds=0.0, upsample_seconds=0.0)
+        self.drop_share = [0.0] * len(tables)  # per group: the tolerance share dropped splats may take
+        self.dropped = None  # what splat_dropping dropped
 
     @property
     def footprint_seconds(self) -> float:
@@ -299,21 +311,81 @@ class Accumulator:
             self.stats["chunks"] += 1
             yield coef, values, 0, m
 
-    def _splat_group(self, gi, coef, values, first, n):
-        """Splat coefficients ``first .. first + n`` of the device arrays ``coef``, ``values`` of group ``gi``."""
+    def splat_dropping(self):
+        """Add every coefficient of a perspective view, less the wavelet splats of the image's framebuffer whose
+        bounds, summed over any pixel, stay within :attr:`drop_share` of the image maximum (docs/splatting.md §8
+        "Dropped splats"): first every other splat, whose image's maximum sets the budget, then the wavelet splats
+        kept; should the finished image's maximum not cover the dropped splats' bound, the dearest of them are drawn
+        too, until it does."""
+        r, obliquity = self.r, float(self.view.obliquity().max())
+        plans = []
+        for gi, g in enumerate(r.groups):
+            w, n = r._work, g["count"]
+            r.stage(g["channels"], True).project(n, 0, r._resident[gi][0], self.device_tables[gi], w["centre"],
+                                                 w["bbox"], w["stex"], w["counts"])
+            bbox, stex = w["bbox"][:n].get(), w["stex"][:n].get()
+            wavelet = np.flatnonzero((g["table"].key_code != 0) & (bbox[:, 2] >= bbox[:, 0]))
+            wavelet = wavelet[self.tables[gi].tex_layer[stex[wavelet], 0] == 0]  # drawn at the image's pixels
+            bound = self.tables[gi].splat_bounds(self.view, bbox[wavelet], stex[wavelet], g["table"].values[wavelet])
+            plans.append((wavelet, bbox[wavelet], bound))
+            self._draw(gi, wavelet, False)
+            self.stats["splats"] += n
+        drops = [None] * len(plans)  # per group: (the candidates left undrawn, the largest sum of their bounds)
+        while True:  # E L <= share (top - E L): the dropped splats' error within share of the finished image's maximum
+            image, done = self.image(), True
+            for gi, (wavelet, bbox, bound) in enumerate(plans):
+                chans, share = list(r.wv.groups[gi].channels), self.drop_share[gi]
+                top = np.abs(image[..., chans]).reshape(-1, len(chans)).max(axis=0)
+                error = None if drops[gi] is None else drops[gi][1] * obliquity  # bound of the dropped splats' error
+                if error is not None and np.all(error <= share * (top - error)):
+                    continue
+                done = False
+                candidates = np.ones(len(wavelet), bool) if drops[gi] is None else drops[gi][0]
+                drop, most = np.zeros(len(wavelet), bool), np.zeros(len(chans))
+                if top.min() > 0 and candidates.any():
+                    sub, most = select_drops(bbox[candidates], bound[candidates], self.view.size,
+                                             share * top / (obliquity * (1.0 + share)))
+                    drop[np.flatnonzero(candidates)[sub]] = True
+                self._draw(gi, wavelet[candidates & ~drop], True)
+                drops[gi] = (drop, most)
+            if done:
+                break
+        self.dropped = dict(splats=0, pixel_updates=0, bound=0.0)
+        for gi, ((wavelet, bbox, _), (drop, most)) in enumerate(zip(plans, drops)):
+            top = np.abs(image[..., list(r.wv.groups[gi].channels)]).reshape(-1, len(most)).max(axis=0)
+            box = bbox[drop]
+            self.dropped["splats"] += int(drop.sum())
+            self.dropped["pixel_updates"] += int(np.sum((box[:, 2] - box[:, 0] + 1).astype(np.int64)
+                                                        * (box[:, 3] - box[:, 1] + 1)))
+            if drop.any():
+                self.dropped["bound"] = max(self.dropped["bound"], float(np.max(most * obliquity / top)))
+
+    def _draw(self, gi, where, value: bool):
+        """Splat group ``gi``'s coefficients at indices ``where`` (``value``) or all but those (not ``value``)."""
+        n = self.r.groups[gi]["count"]
+        keep = np.full(n, not value)
+        keep[where] = value
+        if keep.any():
+            self._splat_group(gi, *self.r._resident[gi], 0, n, keep=keep)
+
+    def _splat_group(self, gi, coef, values, first, n, keep=None):
+        """Splat coefficients ``first .. first + n`` of the device arrays ``coef``, ``values`` of group ``gi``;
+        ``keep``: a mask of those to splat (the others' boxes are emptied after projection)."""
         r, q = self.r, self.r.cc.queue
         g, t, tables, w = r.groups[gi], self.device_tables[gi], self.tables[gi], r._work
         st = r.stage(g["channels"], self.view.perspective)
         start = time.perf_counter()
         centre, bbox, stex, counts = w["centre"], w["bbox"], w["stex"], w["counts"]  # the first n are this pass's
         st.project(n, first, coef, t, centre, bbox, stex, counts)
+        if keep is not None:
+            r.mask_splats(bbox, counts, cla.to_device(q, keep.view(np.uint8)), range=slice(0, n), queue=q)
         total = int(cla.sum(counts[:n], dtype=np.uint64).get())
         budget = st.pair_budget(r.budget)
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
             half = n // 2
             self.stats["bin_seconds"] += time.perf_counter() - start
-            self._splat_group(gi, coef, values, first, half)
-            self._splat_group(gi, coef, values, first + half, n - half)
+            self._splat_group(gi, coef, values, first, half, None if keep is None else keep[:half])
+            self._splat_group(gi, coef, values, first + half, n - half, None if keep is None else keep[half:])
             return
         if total > budget:
             raise DeviceMemoryError(f"one splat needs {total * st.record_bytes} bytes of tile lists, more "
@@ -358,7 +430,8 @@ class Accumulator:
                     seconds=dict(total=seconds, footprints=self.footprint_seconds,
                                  binning=self.stats["bin_seconds"], accumulation=self.stats["accumulate_seconds"],
                                  upload=self.stats["upload_seconds"], upsampling=self.stats["upsample_seconds"],
-                                 compile=r.compile_seconds))
+                                 compile=r.compile_seconds),
+                    **({} if self.dropped is None else dict(dropped=self.dropped)))
 
     def image(self) -> np.ndarray:
         """The image so far as (H, W, C) float32: the framebuffers summed at the image's pixels."""
@@ -404,7 +477,10 @@ def _splat_range(r: SplatRenderer, camera, first: int, stop: int) -> tuple:
     """``(image, meta)`` of coefficients ``first .. stop`` of each group, in importance order."""
     start = time.perf_counter()
     acc = r.begin(camera)
-    acc.splat(first, stop - first)
+    if any(acc.drop_share) and r.chunk is None and (first, stop) == (0, r.count):
+        acc.splat_dropping()
+    else:
+        acc.splat(first, stop - first)
     image = acc.image()
     return image, acc.meta(time.perf_counter() - start)
 
