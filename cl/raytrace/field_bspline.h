@@ -73,8 +73,9 @@ inline real4 field_lattice(const Field G, const real3 x, Active *A)
     A->coarse = -1;
     if (A->slot < 0)
         return (real4)(0, 0, 0, CLW_LATTICE);
-    A->fine_lat = to_real4(G.lattices[A->slot]);
     const int4 m = G.mixes[A->slot];
+    /* a brick mixed with itself (unclamped, alpha may dip below 0): its fine pieces on the fine lattice */
+    A->fine_lat = m.x == A->slot ? (real4)(0, 0, 0, CLW_LATTICE) : to_real4(G.lattices[A->slot]);
     if (m.x >= 0) {
         A->coarse = m.x;
         A->table = m.y;

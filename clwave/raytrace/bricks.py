@@ -260,7 +260,8 @@ class BrickField:
         mixes = self.mixes[slots].copy()
         mixes[:, 0] = where[mixes[:, 0]]
         pages = np.full(self.shape, -1, np.int32)  # the page table names a mixed brick's fine slot
-        shown = slots[~np.isin(slots, self.mixes[:, 0])]
+        coarse_only = self.mixes[:, 0][(self.mixes[:, 0] >= 0) & (self.mixes[:, 0] != np.arange(len(self.mixes)))]
+        shown = slots[~np.isin(slots, coarse_only)]
         pages[tuple((self.bricks[shown] - self.origin).T)] = where[shown]
         return dict(coef=pool, pages=cla.to_device(q, pages), page_origin=self.origin[::-1],
                     page_shape=self.shape[::-1], frames=cla.to_device(q, _one(self.frames[slots])),
@@ -394,8 +395,12 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     if last_slab is not None:
         finish(last_slab)
     q.finish()
-    for slots, floor in floors:  # a mixed brick's coarse slot: alpha checked per piece instead (pieces.py)
-        lattices[slots[(floor.get() < 0) & ~np.isin(slots, alt)]] = level_lattices[0]
+    below = np.concatenate([slots[floor.get() < 0] for slots, floor in floors] or [np.zeros(0, np.int64)])
+    # full-detail unclamped bricks where alpha may dip below 0: mixed with themselves, alpha checked per piece
+    selfish = below[~coarse[below] & ~clamped[below] & (levels[below] > 0)]
+    selfish = selfish[level_lattices[levels[selfish], 3] == 2.0 ** levels[selfish]]  # the groups share the level
+    alt[selfish] = selfish
+    lattices[below[~np.isin(below, alt)]] = level_lattices[0]  # the others: fine segments (docs/raytracing.md §3)
     mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill)
     bounds = bounds.get()[:n]
     cut = np.flatnonzero(clamped & (lay["levels"] == wv.levels))  # the coarsest detail's (docs/raytracing.md §8)

@@ -66,16 +66,19 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
         sel = fine[bricks[fine, 0] == bz]
         lo = bricks[sel].min(axis=0)
         count = bricks[sel].max(axis=0) - lo + 1
-        inner = content_cells(wv, lo * BRICK, count * BRICK, every=True).astype(bool)
+        inner = None
         for s in sel:
             coarse, b = int(alt[s]), bricks[s]
+            if inner is None and coarse != s:  # a clamped brick: where only content voxels reach
+                inner = content_cells(wv, lo * BRICK, count * BRICK, every=True).astype(bool)
             level = int(lay["levels"][coarse])
             step, origin = 2 ** level, float(lattices[level][0])  # one origin on every axis
             lead = int((BRICK * b[0] - origin) % step)  # the brick's first cell in its first coarse cell
             n = -(-(lead + BRICK) // step)
             cells = np.ones((n * step,) * 3, bool)
             at = tuple(slice(BRICK * (k - o), BRICK * (k - o + 1)) for k, o in zip(b, lo))
-            cells[lead:lead + BRICK, lead:lead + BRICK, lead:lead + BRICK] = inner[at]
+            if coarse != s:  # else an unclamped brick mixed with itself: alpha alone decides
+                cells[lead:lead + BRICK, lead:lead + BRICK, lead:lead + BRICK] = inner[at]
             ok = cells.reshape(n, step, n, step, n, step).all(axis=(1, 3, 5))
             if alpha is not None and ok.any():
                 g = wv.groups[alpha]
