@@ -397,7 +397,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     q.finish()
     below = np.concatenate([slots[floor.get() < 0] for slots, floor in floors] or [np.zeros(0, np.int64)])
     # full-detail unclamped bricks where alpha may dip below 0: mixed with themselves, alpha checked per piece
-    selfish = below[~coarse[below] & ~clamped[below] & (levels[below] > 0)]
+    selfish = below[~coarse[below] & ~clamped[below] & (levels[below] > 0) & ~np.isin(below, alt)]
     selfish = selfish[level_lattices[levels[selfish], 3] == 2.0 ** levels[selfish]]  # the groups share the level
     alt[selfish] = selfish
     lattices[below[~np.isin(below, alt)]] = level_lattices[0]  # the others: fine segments (docs/raytracing.md §3)
