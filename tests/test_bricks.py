@@ -362,7 +362,7 @@ def test_bernstein_floors_bound_each_cell_and_are_the_cubic_bezier_points():
 
     cubic = wavelet_for("cubic")
     want = np.array([[1, 4, 1, 0], [0, 4, 2, 0], [0, 2, 4, 0], [0, 1, 4, 1]]) / 6.0
-    np.testing.assert_allclose(bernstein(cubic)[:, ::-1], want, atol=1e-12)
+    np.testing.assert_allclose(bernstein(cubic.order)[:, ::-1], want, atol=1e-12)
     rng = np.random.default_rng(4)
     for name in ("linear", "quadratic", "cubic"):
         wav = wavelet_for(name)

@@ -12,23 +12,27 @@ coarse slot; any other piece is marched cell by cell on the clamped fine slot.  
 
 from __future__ import annotations
 
+from functools import lru_cache
+from math import comb
+
 import numpy as np
+import pyopencl.array as cla
 
 from ..device.constants import BRICK
+from ..model.bspline import bspline
 from .bounds import content_cells
 
 
-def bernstein(wavelet) -> np.ndarray:
+@lru_cache
+def bernstein(j: int) -> np.ndarray:
     """(j, j): row k the Bernstein coefficient k (degree j - 1, on the cell [0, 1]) of the polynomial piece
-    ``sum_r w_r N_j(u + r)``, per weight r (the coefficient r cells before the cell's last, docs/model.md §1)."""
-    j = wavelet.order
+    ``sum_r w_r N_j(u + r)`` of order j, per weight r (the coefficient r cells before the cell's last,
+    docs/model.md §1)."""
     if j == 1:
         return np.ones((1, 1))
-    from math import comb
-
     u = np.linspace(0.0, 1.0, j)
     basis = np.array([[comb(j - 1, k) * x ** k * (1 - x) ** (j - 1 - k) for k in range(j)] for x in u])
-    weights = np.stack([wavelet.phi(u + r) for r in range(j)], axis=1)
+    weights = np.stack([bspline(j, u + r) for r in range(j)], axis=1)
     return np.linalg.solve(basis, weights)
 
 
@@ -36,9 +40,11 @@ def alpha_floors(coef, wavelet) -> np.ndarray:
     """(n, n, n): per cell of a brick's lattice box ``coef`` (n + j - 1 per axis, z, y, x) the least Bernstein
     coefficient of its polynomial piece: the field is at least that on the cell (convex hull)."""
     j = wavelet.order
-    m = bernstein(wavelet)[:, ::-1]  # per window position q = j - 1 - r
-    windows = np.lib.stride_tricks.sliding_window_view(np.asarray(coef, np.float64), (j, j, j))
-    return np.einsum("ai,bj,ck,...ijk->...abc", m, m, m, windows, optimize=True).min(axis=(-3, -2, -1))
+    m = bernstein(j)[:, ::-1]  # per window position q = j - 1 - r
+    out = np.asarray(coef, np.float64)
+    for axis in range(3):  # separably: each window of j along the axis times the matrix (a Bernstein axis added)
+        out = np.lib.stride_tricks.sliding_window_view(out, j, axis=axis) @ m.T
+    return out.min(axis=(-3, -2, -1))
 
 
 def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
@@ -50,13 +56,6 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
     group holding alpha (None: none); the pool on the device, or the scratch file (:class:`~.passes.Spill`).
     Counted a brick layer at a time (the content mask read a layer of bricks' cells at once).
     """
-    def read(start, size):  # float4 pool elements
-        if pool is not None:
-            return pool[start:start + size].get()
-        out = np.empty((size, 4), np.float32)
-        spill.read_into(start, out)
-        return out
-
     mixes = np.zeros((len(alt), 4), np.int32)
     mixes[:, 0] = -1
     flags, offset = [], 0
@@ -79,13 +78,32 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
             at = tuple(slice(BRICK * (k - o), BRICK * (k - o + 1)) for k, o in zip(b, lo))
             if coarse != s:  # else an unclamped brick mixed with itself: alpha alone decides
                 cells[lead:lead + BRICK, lead:lead + BRICK, lead:lead + BRICK] = inner[at]
-            ok = cells.reshape(n, step, n, step, n, step).all(axis=(1, 3, 5))
-            if alpha is not None and ok.any():
-                g = wv.groups[alpha]
-                shape = lay["count"][coarse, alpha]
-                box = read(int(lay["offset"][coarse, alpha]), int(np.prod(shape)))[:, 3].reshape(shape)
-                ok &= alpha_floors(box, g.wavelet) >= 0
             mixes[s] = (coarse, offset, n, 0)
-            flags.append(ok.astype(np.uint8).ravel())
+            flags.append(cells.reshape(n, step, n, step, n, step).all(axis=(1, 3, 5)))
             offset += n ** 3
-    return mixes, (np.concatenate(flags) if flags else np.zeros(1, np.uint8))
+    if alpha is not None:  # and where alpha's Bernstein coefficients are >= 0: the alpha boxes read at once
+        need = [i for i, s in enumerate(fine) if flags[i].any()]
+        shapes = [lay["count"][alt[fine[i]], alpha] for i in need]
+        boxes = _alpha_boxes(pool, spill, [int(lay["offset"][alt[fine[i]], alpha]) for i in need],
+                             [int(np.prod(shape)) for shape in shapes])
+        for i, shape, box in zip(need, shapes, boxes):
+            flags[i] &= alpha_floors(box.reshape(shape), wv.groups[alpha].wavelet) >= 0
+    return mixes, (np.concatenate([f.astype(np.uint8).ravel() for f in flags]) if flags else np.zeros(1, np.uint8))
+
+
+def _alpha_boxes(pool, spill, starts, sizes) -> list:
+    """The alpha lane of the pool elements ``start .. start + size`` per box: from the device in one gather and one
+    copy (a copy per box waited on the queue each time), or from the scratch file."""
+    if not starts:
+        return []
+    if pool is None:
+        out = []
+        for start, size in zip(starts, sizes):
+            box = np.empty((size, 4), np.float32)
+            spill.read_into(start, box)
+            out.append(box[:, 3])
+        return out
+    index = np.concatenate([4 * (start + np.arange(size)) + 3 for start, size in zip(starts, sizes)])
+    flat = pool.reshape(-1)
+    values = cla.take(flat, cla.to_device(pool.queue, index.astype(np.int64))).get()
+    return np.split(values, np.cumsum(sizes)[:-1])
