@@ -58,7 +58,7 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
     """
     mixes = np.zeros((len(alt), 4), np.int32)
     mixes[:, 0] = -1
-    flags, offset = [], 0
+    flags, slots, offset = [], [], 0
     fine = np.flatnonzero(alt >= 0)
     bricks = lay["bricks"]
     for bz in np.unique(bricks[fine, 0]):
@@ -79,12 +79,13 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
             if coarse != s:  # else an unclamped brick mixed with itself: alpha alone decides
                 cells[lead:lead + BRICK, lead:lead + BRICK, lead:lead + BRICK] = inner[at]
             mixes[s] = (coarse, offset, n, 0)
+            slots.append(s)
             flags.append(cells.reshape(n, step, n, step, n, step).all(axis=(1, 3, 5)))
             offset += n ** 3
     if alpha is not None:  # and where alpha's Bernstein coefficients are >= 0: the alpha boxes read at once
-        need = [i for i, s in enumerate(fine) if flags[i].any()]
-        shapes = [lay["count"][alt[fine[i]], alpha] for i in need]
-        boxes = _alpha_boxes(pool, spill, [int(lay["offset"][alt[fine[i]], alpha]) for i in need],
+        need = [i for i, f in enumerate(flags) if f.any()]
+        shapes = [lay["count"][alt[slots[i]], alpha] for i in need]
+        boxes = _alpha_boxes(pool, spill, [int(lay["offset"][alt[slots[i]], alpha]) for i in need],
                              [int(np.prod(shape)) for shape in shapes])
         for i, shape, box in zip(need, shapes, boxes):
             flags[i] &= alpha_floors(box.reshape(shape), wv.groups[alpha].wavelet) >= 0
