@@ -453,6 +453,7 @@ class RayTracer:
         if self.field == "bspline":
             meta.update(bricks=len(at.slots), brick_levels=np.bincount(self.bricks.levels[at.slots]).tolist(),
                         brick_slots=len(self.bricks.levels), brick_pool_bytes=self.bricks.pool_bytes,
+                        mixed_bricks=int(np.sum(self.bricks.mixes[at.slots, 0] >= 0)),  # docs/raytracing.md §3
                         pool="device" if self.bricks.resident else "scratch file")
         if trace and self.field == "wavelet":
             meta["active_trace"] = traced.get()
