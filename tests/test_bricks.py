@@ -3,6 +3,7 @@ each brick's lattice coefficients against the model's closed-form field, the pla
 census of the kept supports and the voxels, and the ray tracer's images against the dense fine-grid
 path it replaced (tests/data/dense_reference.npz)."""
 
+import dataclasses
 import errno
 import os
 import re
@@ -273,7 +274,7 @@ def test_out_of_core_passes_equal_one_pass():
     and budgets carried between passes (docs/raytracing.md §6): the image of one pass, to rounding."""
     wv = out_of_core_model()
     whole, parts = RayTracer(wv), RayTracer(wv, device_memory="14MiB")
-    assert whole.bricks.resident and not parts.bricks.resident
+    assert whole.bricks.resident and not parts.bricks.resident and whole.bricks.pieces.any()  # mixed bricks too
     for cam, kw in ((clwave.Camera(30, 20, size=48), {}), (clwave.Camera(-60, 35, size=40), dict(absorption=False)),
                     (clwave.Camera(10, 5, size=40, perspective=True, distance=8.0, fov=70), {}),  # eye inside
                     (clwave.Camera(200, -30, size=32, perspective=True, distance=90.0), dict(shading=False))):
@@ -335,3 +336,95 @@ def test_a_device_memory_cap_too_small_names_the_least_that_works(cap, size):
         render(cap)
     least = re.search(r"at least ([\d.]+) (MiB|KiB)", str(err.value))
     assert render(f"{least.group(1)}{least.group(2)}").image.shape == (size, size, 4)
+
+
+def piece_slot(field: bricks.BrickField, x) -> int:
+    """The slot the march reads at grid-0 point ``x`` (z, y, x) at full detail: a mixed brick's coarse slot in its
+    pieces flagged coarse (field_piece in cl/raytrace/field_bspline.h), else the page table's."""
+    b = np.floor(x / BRICK).astype(int) - field.origin
+    if np.any(b < 0) or np.any(b >= field.shape) or field.pages[0][tuple(b)] < 0:
+        return -1
+    slot = field.pages[0][tuple(b)]
+    coarse, table, n, _ = field.mixes[slot]
+    if coarse < 0:
+        return slot
+    o, h = field.lattices[coarse][0], field.lattices[coarse][3]
+    k = np.clip((np.floor((x - o) / h) - np.floor((np.floor(x / BRICK) * BRICK - o) / h)).astype(int), 0, n - 1)
+    return coarse if field.pieces[table + (k[0] * n + k[1]) * n + k[2]] else slot
+
+
+def test_bernstein_floors_bound_each_cell_and_are_the_cubic_bezier_points():
+    """pieces.alpha_floors: the least Bernstein coefficient of a cell's polynomial, at most the least of 6^3 samples
+    of the closed-form B-spline sum on that cell; for the cubic, the Bezier points of the uniform B-spline
+    (c0 + 4 c1 + c2) / 6, (2 c1 + c2) / 3, (c1 + 2 c2) / 3, (c1 + 4 c2 + c3) / 6 (closed form)."""
+    from clwave.model.bspline import wavelet_for
+    from clwave.raytrace.pieces import alpha_floors, bernstein
+
+    cubic = wavelet_for("cubic")
+    want = np.array([[1, 4, 1, 0], [0, 4, 2, 0], [0, 2, 4, 0], [0, 1, 4, 1]]) / 6.0
+    np.testing.assert_allclose(bernstein(cubic.order)[:, ::-1], want, atol=1e-12)
+    rng = np.random.default_rng(4)
+    for name in ("linear", "quadratic", "cubic"):
+        wav = wavelet_for(name)
+        j = wav.order
+        coef = rng.normal(0.2, 1.0, (j + 1, j + 1, j + 1))
+        floors = alpha_floors(coef, wav)
+        u = np.linspace(0, 1, 6)
+        for cell in product(range(2), repeat=3):  # cell c's last coefficient is c + j - 1 (weights N_j(u + r))
+            w = [np.array([[bspline(j, uu + (j - 1 - q)) for q in range(j)] for uu in u]) for _ in range(3)]
+            box = coef[tuple(slice(c, c + j) for c in cell)]
+            samples = np.einsum("ai,bj,ck,ijk->abc", w[0], w[1], w[2], box)
+            assert floors[cell] <= samples.min() + 1e-12
+        assert np.allclose(alpha_floors(np.full((j, j, j), 0.3), wav), 0.3)  # a constant is its own hull
+
+
+def mixed_model():
+    """The classified ball of test_raytrace (a sharp edge in an empty margin) at 5 %: its clamped bricks are
+    level 1 on their own, so they are mixed (docs/raytracing.md §3)."""
+    from test_raytrace import classified_ball
+
+    return WaveletVolume.from_volume(classified_ball(), "cubic", levels=2).threshold(keep=0.05)
+
+
+def test_mixed_pieces_are_the_clamped_field():
+    """Where a mixed brick's piece is marched on its coarse slot, the coarse slot's field is the content-clamped
+    closed-form model (docs/raytracing.md §3, §4), with alpha >= 0; the other pieces read the clamped slot."""
+    wv = mixed_model()
+    field = build(wv)
+    mixed = np.flatnonzero(field.mixes[:, 0] >= 0)
+    assert len(mixed) and field.pieces.any() and not field.pieces.all()
+    assert np.all(field.levels[field.mixes[mixed, 0]] > 0) and np.all(field.levels[mixed] == 0)
+    rng = np.random.default_rng(5)
+    x0 = rng.uniform(0, 32, (4000, 3))
+    slots = np.array([piece_slot(field, x) for x in x0])
+    coarse = np.isin(slots, field.mixes[mixed, 0])
+    assert coarse.sum() > 40
+    x0 = np.concatenate([x0[coarse][:120], x0[~coarse & (slots >= 0)][:40]])
+    got = np.zeros((len(x0), 4))
+    for i, x in enumerate(x0):  # pool_field with the piece's slot
+        pages = field.pages[0].copy()
+        pages[tuple(np.floor(x / BRICK).astype(int) - field.origin)] = piece_slot(field, x)
+        got[i] = pool_field(wv, dataclasses.replace(field, pages=pages[None]), x[None])[0]
+    ref = _content_field(wv)(fine_to_world(x0, 4, wv.shape, wv.spacing, wv.origin), False)
+    assert np.abs(ref).max() > 0.05
+    np.testing.assert_allclose(got, ref, rtol=0, atol=2e-6 * np.abs(ref).max())
+    assert got[:120, 3].min() >= -1e-7
+
+
+def test_mixed_bricks_render_the_fine_function_with_fewer_segments():
+    """Full detail of a model with mixed bricks: within the tolerance of the same tracer with every piece marched
+    on the clamped fine slot (the function of today's bricks) and of a float64 render, with fewer segments (in
+    passes: test_out_of_core_passes_equal_one_pass, whose model has mixed bricks)."""
+    tracer = RayTracer(mixed_model())
+    cam = clwave.Camera(30, 20, size=40)
+    mixed = tracer.render(cam, tolerance=1e-3)
+    exact = tracer.render(cam, tolerance=1e-6, precision="double").image
+    tracer.bricks.pieces[:] = 0  # every piece on the fine slot
+    tracer.bricks._static = None
+    tracer.replace_pool(tracer.bricks.pool)
+    fine = tracer.render(cam, tolerance=1e-3)
+    assert np.abs(mixed.image).max() > 0.3
+    for image in (mixed.image, fine.image):
+        assert np.max(np.abs(image - exact)) <= 1e-3
+    assert mixed.meta["segments"] < fine.meta["segments"] and mixed.meta["mixed_bricks"] == 8
+    assert mixed.meta["segments_by_lattice"]["2"] > 1000 + fine.meta["segments_by_lattice"]["2"]

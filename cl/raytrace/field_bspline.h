@@ -29,7 +29,7 @@ typedef float4 coef_t;
 #endif
 #define FIELD_PARAMS __global const coef_t *coef, __global const int *pages, const int4 page_origin, \
                      const int4 page_shape, __global const float4 *frames, __global const int4 *boxes, \
-                     __global const float4 *lattices
+                     __global const float4 *lattices, __global const int4 *mixes, __global const uchar *pieces
 typedef struct {
     __global const coef_t *coef;
     __global const int *pages;
@@ -37,11 +37,24 @@ typedef struct {
     __global const float4 *frames;
     __global const int4 *boxes;
     __global const float4 *lattices;
+    __global const int4 *mixes;  /* per slot: a mixed brick's coarse slot (-1: not mixed), first piece, pieces per axis */
+    __global const uchar *pieces; /* per piece of a mixed brick: 1 to march it on the coarse slot */
 } Field;
-#define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices}
+#define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices, mixes, pieces}
 #define FIELD_BRICK CLW_SUPER_CELLS /* a brick is a superblock */
-typedef int Active; /* the pool slot of the brick the ray is in (field_lattice sets it) */
-inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D) { *A = -1; }
+/* The brick the ray is in (field_lattice sets it): the slot its segments read, and in a mixed brick
+ * (clwave/raytrace/pieces.py, docs/raytracing.md §3) its fine and coarse slots, the coarse knot lattice whose
+ * cells the ray crosses as pieces, and the brick's piece flags (field_piece picks a piece's slot) */
+typedef struct {
+    int slot, fine, coarse, table, n;
+    real4 fine_lat, coarse_lat;
+} Active;
+#define FIELD_MIXES
+inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D)
+{
+    A->slot = -1;
+    A->coarse = -1;
+}
 inline int active_flags(const Active *A) { return 0; }
 
 /* the pool slot of the brick holding grid-0 point x, -1 where there is none */
@@ -56,8 +69,35 @@ inline int brick_slot(const Field G, const real3 x)
 /* the knot planes of the brick holding x, which the ray has entered: origin (x, y, z) and spacing */
 inline real4 field_lattice(const Field G, const real3 x, Active *A)
 {
-    *A = brick_slot(G, x);
-    return *A < 0 ? (real4)(0, 0, 0, CLW_LATTICE) : to_real4(G.lattices[*A]);
+    A->slot = A->fine = brick_slot(G, x);
+    A->coarse = -1;
+    if (A->slot < 0)
+        return (real4)(0, 0, 0, CLW_LATTICE);
+    const int4 m = G.mixes[A->slot];
+    /* a brick mixed with itself (unclamped, alpha may dip below 0): its fine pieces on the fine lattice */
+    A->fine_lat = m.x == A->slot ? (real4)(0, 0, 0, CLW_LATTICE) : to_real4(G.lattices[A->slot]);
+    if (m.x >= 0) {
+        A->coarse = m.x;
+        A->table = m.y;
+        A->n = m.z;
+        A->coarse_lat = to_real4(G.lattices[m.x]);
+    }
+    return A->fine_lat;
+}
+
+/* whether the ray is in a mixed brick */
+inline bool field_mixed(const Active *A) { return A->coarse >= 0; }
+
+/* In a mixed brick: the slot of the piece (the brick's part of a coarse cell) holding x, and its knot planes:
+ * the coarse slot's where its flag is set, else the fine slot's */
+inline real4 field_piece(const Field G, const real3 x, Active *A)
+{
+    const real h = A->coarse_lat.w;
+    const real3 o = A->coarse_lat.xyz, first = floor(x / FIELD_BRICK) * FIELD_BRICK;
+    const int3 k = clamp(convert_int3(floor((x - o) / h) - floor((first - o) / h)), 0, A->n - 1);
+    const bool coarse = G.pieces[A->table + (k.z * A->n + k.y) * A->n + k.x];
+    A->slot = coarse ? A->coarse : A->fine;
+    return coarse ? A->coarse_lat : A->fine_lat;
 }
 
 /* w[r] = N_j(u + r) (BSPLINE_WEIGHTS) and dw[r] = N_j'(u + r) (BSPLINE_DERIVATIVES), r = 0..j-1:
@@ -291,7 +331,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
 {
     const bool tail = NS > 12 || NS > P0 + 1 || fresh; /* samples 8.. (lane P0 alone: only when fresh) */
     Basis *B = &basis[0];
-    segment_basis(G, 0, *A, xm, radius, D, nodes, B);
+    segment_basis(G, 0, A->slot, xm, radius, D, nodes, B);
     real8 f = 0;
     realt ft = 0;
     switch (ORDER[0]) {
@@ -334,7 +374,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
     real16 f[4] = {0, 0, 0, 0};
     real8 f8 = 0;
     const bool tail = NS < 12 && (NS > P0 + 1 || fresh); /* samples 8, 9 (NS = 16: the second call's) */
-    const int slot = *A; /* every segment lies in the brick the ray last entered */
+    const int slot = A->slot; /* every segment lies in the brick (or piece) the ray last entered */
     for (int g = 0; g < CLW_GROUPS; g++) {
         Basis *B = &basis[g];
         segment_basis(G, g, slot, xm, radius, D, nodes, B);

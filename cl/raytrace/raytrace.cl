@@ -118,6 +118,24 @@ inline real region_bound(const real *x0, const real *dd, const real *inv, const 
     return bb;
 }
 
+/* The bound integrated over [t, tn], region by region: a segment of a coarser lattice may cross several blocks,
+ * whose bounds all count (the midpoint's alone could skip, or end the ray on, what the others hold) */
+inline real swept_bound(const real *x0, const real *dd, const real *inv, const real3 X0, const real3 D, const real t,
+                        const real tn, const real t1, const Regions *R, real *fine_end)
+{
+    real sum = 0;
+    for (real s = t; s < tn;) {
+        const Planes P = next_planes(x0, dd, inv, s, (real4)(0, 0, 0, CLW_BLOCK));
+        const real sn = fmin(tn, nearest(&P));
+        real end;
+        const real b = region_bound(x0, dd, inv, X0 + (s + sn) / 2 * D, sn, t1, R, fine_end, &end);
+        const real e = fmin(end, tn); /* past a coarse superblock at once */
+        sum += b * (e - s);
+        s = e;
+    }
+    return sum;
+}
+
 /* whether the grid-0 fine cell holding x is reached by a non-zero voxel of the source volume
  * (clwave.raytrace.bounds.content_cells); cells outside the table are not */
 inline bool reached(__global const uchar *content, const int4 origin, const int4 shape, const real3 x)
@@ -320,6 +338,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
     /* the knot planes of the brick the ray is in (the field's lattice there), and where it leaves the brick */
     real4 lat = (real4)(0, 0, 0, CLW_LATTICE);
     real brick_end = FIELD_BRICK ? -INFINITY : INFINITY;
+    real piece_end = INFINITY; /* in a mixed brick, where the ray leaves the piece it is in */
     Planes planes;
     real t = ta;
     bool replan = true;
@@ -329,25 +348,42 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             brick_end = fmin(tb, nearest(&faces));
             lat = field_lattice(G, X0 + (t + brick_end) / 2 * D, &active);
             replan = true;
+#ifdef FIELD_MIXES
+            piece_end = field_mixed(&active) ? -INFINITY : INFINITY;
+        }
+        if (!(t < piece_end)) { /* a mixed brick's next piece: the coarse slot or the fine one (field_piece) */
+            const Planes cells = next_planes(x0, dd, inv, t, active.coarse_lat);
+            piece_end = fmin(brick_end, nearest(&cells));
+            lat = field_piece(G, X0 + (t + piece_end) / 2 * D, &active);
+            replan = true;
+#endif
         }
         if (replan) { /* the next knot plane per axis, from the position at t */
             planes = next_planes(x0, dd, inv, t, lat);
             replan = false;
         }
-        const real tn = fmin(brick_end, fmin(tb, nearest(&planes)));
+        const real tn = fmin(fmin(brick_end, piece_end), fmin(tb, nearest(&planes)));
         const real3 xm = X0 + (t + tn) / 2 * D;
-        if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
-            bnd = region_bound(x0, dd, inv, xm, tn, t1, &regions, &fine_end, &texit);
+        real swept, marched; /* the bound integrated over [t, texit] (what a skip passes) and over [t, tn] */
+        if (lat.w > CLW_LATTICE) { /* a segment of a coarser lattice may cross blocks: their bounds, summed */
+            swept = marched = swept_bound(x0, dd, inv, X0, D, t, tn, t1, &regions, &fine_end);
+            texit = tn;
+        } else {
+            if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
+                bnd = region_bound(x0, dd, inv, xm, tn, t1, &regions, &fine_end, &texit);
+            swept = bnd * (texit - t);
+            marched = bnd * (tn - t);
+        }
 #ifdef CLW_XRAY
-        const real cost = bnd * (texit - t);
+        const real cost = swept;
 #else
-        const real rest_after = fmax(rest - consumed - bnd * (texit - t), (real)0) + slack;
-        const real cost = T * bnd * (texit - t) * (shade_gain * (1 + rest_after) + 1);
+        const real rest_after = fmax(rest - consumed - swept, (real)0) + slack;
+        const real cost = T * swept * (shade_gain * (1 + rest_after) + 1);
 #endif
         if (cost <= skip_budget) { /* (nearly) empty region: jump to where the ray leaves it */
             skip_budget -= cost;
 #ifndef CLW_XRAY
-            consumed += bnd * (texit - t);
+            consumed += swept;
 #endif
             t = texit;
             replan = true;
@@ -479,7 +515,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
 #endif
             I += T * S.radius * part;
             T *= exp(-S.radius * depth);
-            consumed += bnd * (tn - t);
+            consumed += marched;
             const real left = fmax(rest - consumed, (real)0) + slack;
             if (T * fmax(fmin((real)1, left), shade_gain * left) <= tol / 4) {
                 flags |= 1;

@@ -5,7 +5,7 @@ them, and their maxima per superblock."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d
+from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
 from ..device.constants import BLOCK, SUPER
 from ..model.geometry import band_lattice
@@ -84,9 +84,11 @@ def _broadcast(flags, axis):
     return flags.reshape(shape)
 
 
-def content_cells(wv: WaveletVolume, origin, shape):
+def content_cells(wv: WaveletVolume, origin, shape, every: bool = False):
     """(Z, Y, X) uint8 per grid-0 fine cell ``origin + index``: 1 where a non-zero voxel of the source
-    volume reaches, 0 where none does; None when the model does not know its content.
+    volume reaches, 0 where none does; None when the model does not know its content.  ``every``: 1 where
+    every voxel whose B-spline (of any group) reaches the cell is non-zero, so that clamping the fine
+    coefficients to content changes nothing there (docs/raytracing.md §3, mixed bricks).
 
     The approximating model of every coefficient, ``sum_k v_k N_j(x - k)`` over the voxels v, is zero
     on a cell that no non-zero voxel's B-spline reaches; a thresholded model is not (truncated
@@ -102,8 +104,9 @@ def content_cells(wv: WaveletVolume, origin, shape):
     origin, shape = np.asarray(origin, np.int64), np.asarray(shape, np.int64)
     window = wv.content_mask.box(origin + a, shape + b - a).view(np.uint8)  # the voxels that reach
     width = b - a + 1
-    for axis in range(3):  # any voxel of [c + a, c + b]: a running maximum, centred at offset width // 2
-        window = maximum_filter1d(window, width, axis=axis, mode="constant")
+    running = minimum_filter1d if every else maximum_filter1d
+    for axis in range(3):  # any (every) voxel of [c + a, c + b]: a running maximum (minimum), centred at width // 2
+        window = running(window, width, axis=axis, mode="constant")
     return np.ascontiguousarray(window[tuple(slice(width // 2, width // 2 + n) for n in shape)])
 
 

@@ -32,6 +32,7 @@ from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
 from .bounds import reached_blocks
 from .lod import content_windows, occupancy
+from .pieces import mixed_pieces
 from .passes import Spill
 
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
@@ -66,22 +67,31 @@ class Plan:
     origin: np.ndarray   # (3,) brick index of level[:, 0, 0, 0]
     level: np.ndarray    # (details, Z, Y, X) int8: the brick's lattice level, ABSENT where there is no brick
     clamp: np.ndarray    # (details, Z, Y, X) bool: the brick's coefficients at that level are clamped to content
+    mixed: np.ndarray    # (Z, Y, X) int8: a full-detail clamped brick's own level where coarser, else ABSENT
+    #                      (mixed bricks: clwave/raytrace/pieces.py)
 
     def slots(self) -> tuple:
         """The distinct bricks over every detail, in brick order: (bricks (n, 3) z, y, x, levels (n,), clamped
         (n,), coarse (n,): serving the coarser details, whose alpha coefficients are clamped at 0, pages
-        (details, Z, Y, X) int32: each detail's slot of each brick, -1 for none).  An unclamped brick at level l
-        is one slot for every coarser detail that has it: its coefficients come from the bands above l alone."""
+        (details, Z, Y, X) int32: each detail's slot of each brick, -1 for none, alt (n,): a mixed brick's
+        coarse slot, unclamped at the brick's own level, beside its full-detail clamped slot, -1 for none).  An
+        unclamped brick at level l is one slot for every coarser detail that has it: its coefficients come from
+        the bands above l alone."""
         at = np.argwhere(self.level != ABSENT)  # (detail, z, y, x)
         flat = np.ravel_multi_index(tuple(at[:, 1:].T), self.level.shape[1:])
         level = self.level[tuple(at.T)].astype(np.int64)
         key = ((flat * 64 + level) * 2 + self.clamp[tuple(at.T)]) * 2 + (at[:, 0] > 0)
-        unique, slot = np.unique(key, return_inverse=True)
+        mixed = np.argwhere((self.mixed != ABSENT) & (self.level[0] != ABSENT) & self.clamp[0])
+        mixed_flat = np.ravel_multi_index(tuple(mixed.T), self.level.shape[1:])
+        coarse_key = (mixed_flat * 64 + self.mixed[tuple(mixed.T)]) * 4
+        unique, slot = np.unique(np.concatenate([key, coarse_key]), return_inverse=True)
         pages = np.full(self.level.shape, -1, np.int32)
-        pages[tuple(at.T)] = slot
+        pages[tuple(at.T)] = slot[:len(key)]
+        alt = np.full(len(unique), -1, np.int64)
+        alt[pages[(0, *mixed.T)]] = slot[len(key):]
         bricks = np.stack(np.unravel_index(unique // 256, self.level.shape[1:]), axis=1) + self.origin
         return (bricks, (unique // 4 % 64).astype(np.int64), (unique // 2 % 2).astype(bool),
-                (unique % 2).astype(bool), pages)
+                (unique % 2).astype(bool), pages, alt)
 
 
 def plan(wv, details=None) -> Plan:
@@ -116,6 +126,8 @@ def plan(wv, details=None) -> Plan:
         reach_by[m] = reach_by[m] | reach if m in reach_by else reach
     levels = np.full((wv.levels + 1, *shape), ABSENT, np.int8)
     clamps = np.zeros(levels.shape, bool)
+    mixed = np.full(shape, ABSENT, np.int8)
+    own_lattice = lattice_of_levels(wv)[:, 3] == 2.0 ** np.arange(wv.levels + 1)  # the groups share it
     for detail in range(wv.levels + 1) if details is None else details:
         present, level = np.zeros(shape, bool), np.full(shape, wv.levels, np.int8)
         for m, reach in sorted(reach_by.items(), reverse=True):  # the finest detail reaching a brick sets its level
@@ -125,12 +137,16 @@ def plan(wv, details=None) -> Plan:
                     level[reach] = m - 1
         level[~present] = ABSENT
         if wv.content_mask is not None:
-            empty, mixed = content_windows(wv, detail, origin, shape)
+            empty, mixed_windows = content_windows(wv, detail, origin, shape)
             level[empty] = ABSENT
-            clamps[detail] = mixed & (level != ABSENT)
+            clamps[detail] = mixed_windows & (level != ABSENT)
+            if detail == 0:  # mixed bricks: the clamped ones whose own level is coarser (pieces.py)
+                keep = clamps[0] & (level > 0)
+                keep[keep] = own_lattice[level[keep]]
+                mixed[keep] = level[keep]
             level[clamps[detail]] = detail
         levels[detail] = level
-    return Plan(origin, levels, clamps)
+    return Plan(origin, levels, clamps, mixed)
 
 
 def _reach(positions, band_shape, axes, shape) -> np.ndarray:
@@ -183,6 +199,9 @@ class BrickField:
     #                        (0 in the coarsest detail's blocks that no content reaches, docs/raytracing.md §8)
     orders: tuple          # the groups' B-spline orders
     seconds: float         # expansion time
+    mixes: np.ndarray      # (slots, 4) int32: a mixed brick's fine slot: its coarse slot, first piece flag, pieces
+    #                        per axis; -1, 0, 0, 0 for the others (clwave/raytrace/pieces.py)
+    pieces: np.ndarray     # uint8 per piece of the mixed bricks: 1 where it is marched on the coarse slot
     pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2)
     spill: Spill | None = None      # or in a scratch file
     _static: dict | None = None     # the per-slot tables on the device, uploaded once
@@ -216,9 +235,10 @@ class BrickField:
         if slots is None:
             if self._static is None:
                 self._static = {name: cla.to_device(q, _one(getattr(self, name)))
-                                for name in ("frames", "boxes", "lattices")}
+                                for name in ("frames", "boxes", "lattices", "mixes", "pieces")}
             return dict(coef=self.pool, pages=cla.to_device(q, pages.astype(np.int32)), page_origin=self.origin[::-1],
                         page_shape=self.shape[::-1], **self._static)
+        slots = np.union1d(slots, self.mixes[slots, 0][self.mixes[slots, 0] >= 0])  # and its mixed bricks' coarse
         starts, sizes = self.boxes[slots, 0, 3].astype(np.int64), self.slot_bytes()[slots] // 16
         at = np.concatenate([[0], np.cumsum(sizes)])  # where each brick goes in the region's pool
         pool = cla.empty(q, (int(at[-1]) + 64, 4), np.float32)  # 64: as build()'s
@@ -235,11 +255,18 @@ class BrickField:
             mapped.base.release(q)
         boxes = self.boxes[slots].copy()
         boxes[..., 3] += (at[:-1] - starts)[:, None].astype(np.int32)
-        local = np.full(self.shape, -1, np.int32)
-        local[tuple((self.bricks[slots] - self.origin).T)] = np.arange(len(slots), dtype=np.int32)
-        return dict(coef=pool, pages=cla.to_device(q, local), page_origin=self.origin[::-1],
+        where = np.full(len(self.levels) + 1, -1, np.int32)  # each slot's place in the region's tables
+        where[slots] = np.arange(len(slots), dtype=np.int32)
+        mixes = self.mixes[slots].copy()
+        mixes[:, 0] = where[mixes[:, 0]]
+        pages = np.full(self.shape, -1, np.int32)  # the page table names a mixed brick's fine slot
+        coarse_only = self.mixes[:, 0][(self.mixes[:, 0] >= 0) & (self.mixes[:, 0] != np.arange(len(self.mixes)))]
+        shown = slots[~np.isin(slots, coarse_only)]
+        pages[tuple((self.bricks[shown] - self.origin).T)] = where[shown]
+        return dict(coef=pool, pages=cla.to_device(q, pages), page_origin=self.origin[::-1],
                     page_shape=self.shape[::-1], frames=cla.to_device(q, _one(self.frames[slots])),
-                    boxes=cla.to_device(q, _one(boxes)), lattices=cla.to_device(q, _one(self.lattices[slots])))
+                    boxes=cla.to_device(q, _one(boxes)), lattices=cla.to_device(q, _one(self.lattices[slots])),
+                    mixes=cla.to_device(q, _one(mixes)), pieces=cla.to_device(q, self.pieces))
 
 
 def _one(arr):
@@ -303,7 +330,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     :class:`DeviceMemoryError` before allocating when one slab's work does not fit.
     """
     p = p if p is not None else plan(wv)
-    bricks, levels, clamped, coarse, pages = p.slots()
+    bricks, levels, clamped, coarse, pages, alt = p.slots()
     lay = layout(wv, bricks, levels)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
     resident = _check_fits(wv, cc, p, lay, budget)
@@ -368,14 +395,19 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     if last_slab is not None:
         finish(last_slab)
     q.finish()
-    for slots, floor in floors:
-        lattices[slots[floor.get() < 0]] = level_lattices[0]
+    below = np.concatenate([slots[floor.get() < 0] for slots, floor in floors] or [np.zeros(0, np.int64)])
+    # full-detail unclamped bricks where alpha may dip below 0: mixed with themselves, alpha checked per piece
+    selfish = below[~coarse[below] & ~clamped[below] & (levels[below] > 0) & ~np.isin(below, alt)]
+    selfish = selfish[level_lattices[levels[selfish], 3] == 2.0 ** levels[selfish]]  # the groups share the level
+    alt[selfish] = selfish
+    lattices[below[~np.isin(below, alt)]] = level_lattices[0]  # the others: fine segments (docs/raytracing.md §3)
+    mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill)
     bounds = bounds.get()[:n]
     cut = np.flatnonzero(clamped & (lay["levels"] == wv.levels))  # the coarsest detail's (docs/raytracing.md §8)
     if len(cut) and (reached := reached_blocks(wv, lay["bricks"][cut])) is not None:
         bounds[cut] *= reached
     return BrickField(p.origin, p.level.shape[1:], lay["bricks"], lay["levels"], clamped, pages, frames, boxes,
-                      lattices, bounds, orders, time.perf_counter() - start, pool, spill)
+                      lattices, bounds, orders, time.perf_counter() - start, mixes, pieces, pool, spill)
 
 
 def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:

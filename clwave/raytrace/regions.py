@@ -54,7 +54,8 @@ def raytrace_on_cluster(tracer, wv, camera, client, options: dict, device, devic
     meta.update(tolerance=options["tolerance"], workers=workers, slabs=[list(r) for r in parts],
                 passes=[m["passes"] for m in metas], pool=[m["pool"] for m in metas],
                 device_budget=[m["device_budget"] for m in metas])
-    for key in ("segments", "segments_shaded_at_midpoint", "integrand_evaluations", "bricks", "brick_pool_bytes"):
+    for key in ("segments", "segments_shaded_at_midpoint", "integrand_evaluations", "bricks", "brick_pool_bytes",
+                "mixed_bricks"):
         meta[key] = int(sum(m[key] for m in metas))
     meta["segments_by_lattice"] = {k: sum(m["segments_by_lattice"][k] for m in metas)
                                    for k in metas[0]["segments_by_lattice"]}

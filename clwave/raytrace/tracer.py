@@ -67,7 +67,7 @@ FIELDS = ("bspline", "wavelet")
 B, I32, INT4, FLOAT4 = BUFFER, np.int32, cltypes.int4, cltypes.float4
 #: the arguments of each field backend (FIELD_PARAMS of cl/raytrace/field_*.h)
 FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("page_shape", INT4), ("frames", B),
-                           ("boxes", B), ("lattices", B)),
+                           ("boxes", B), ("lattices", B), ("mixes", B), ("pieces", B)),
                   wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
 
 
@@ -453,6 +453,7 @@ class RayTracer:
         if self.field == "bspline":
             meta.update(bricks=len(at.slots), brick_levels=np.bincount(self.bricks.levels[at.slots]).tolist(),
                         brick_slots=len(self.bricks.levels), brick_pool_bytes=self.bricks.pool_bytes,
+                        mixed_bricks=int(np.sum(self.bricks.mixes[at.slots, 0] >= 0)),  # docs/raytracing.md §3
                         pool="device" if self.bricks.resident else "scratch file")
         if trace and self.field == "wavelet":
             meta["active_trace"] = traced.get()
