@@ -316,24 +316,6 @@ def test_skipping_never_skips_content(hydrogen):
         assert np.abs(img - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
 
 
-def test_ranges_whole_where_segments_cross_block_faces():
-    """Bricks whose knot planes are not all block faces (a coarser level's planes at odd fine coordinates, or
-    planes farther apart than a block) get one range, the union of their blocks' (a segment crossing a block face is
-    charged to one block when the march subtracts it from R); bricks on the fine lattice keep their blocks' own."""
-    from clwave.raytrace.classified import whole_where_crossed
-    rng = np.random.default_rng(3)
-    lo = rng.uniform(-1, 0, (5, 4, 4, 4))
-    ranges = np.stack([lo, lo + rng.uniform(0, 1, lo.shape)], axis=-1).astype(np.float32)
-    lattices = np.array([[0, 0, 0, 1], [1, 1, 1, 2], [0, 0, 0, 2], [3, 3, 3, 4], [0, 0, 8, 8]], np.float32)
-    got = whole_where_crossed(ranges, lattices)
-    for slot, crossed in enumerate([False, True, False, True, True]):
-        if crossed:
-            assert np.all(got[slot, ..., 0] == ranges[slot, ..., 0].min())
-            assert np.all(got[slot, ..., 1] == ranges[slot, ..., 1].max())
-        else:
-            assert np.array_equal(got[slot], ranges[slot])
-
-
 def test_transfer_function_change_rebuilds_nothing(hydrogen, monkeypatch):
     """Another transfer function or window: no expansion, no new program, no new scalar range; only the table and
     the bounds (meta classify_seconds)."""

@@ -20,7 +20,7 @@ from pyopencl import cltypes
 from scipy.special import comb
 
 from ..device import programs
-from ..device.constants import BLOCK, SUPER
+from ..device.constants import SUPER
 from ..device.kernels import BUFFER, Kernel
 from ..errors import InputError
 from ..model.transfer import TransferFunction, auto_window
@@ -107,7 +107,7 @@ class ScalarRange:
             _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=slot_range,
                    origin=f.origin[::-1], coef=tables["coef"], bricks=cla.to_device(q, at), frames=tables["frames"],
                    boxes=tables["boxes"], order=f.orders[0])
-            self.slot_range = whole_where_crossed(slot_range.get(), f.lattices)
+            self.slot_range = slot_range.get()
             n = min(AUTO_COEFFICIENTS, len(tables["coef"]))
             sample = cla.empty(q, n, np.float32)
             _STRIDED(self.kernels, q, (n,), None, out=sample, coef=tables["coef"], step=len(tables["coef"]) // n, n=n)
@@ -170,22 +170,6 @@ class ScalarRange:
         q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last
-
-
-def whole_where_crossed(slot_range, lattices) -> np.ndarray:
-    """``slot_range`` (slots, SUPER, SUPER, SUPER, 2) with one range, the union of its blocks', over every brick whose
-    knot planes (``lattices``: origin, spacing) are not all the block faces.  There a segment can cross a block face,
-    and the march charges its whole length to the block holding its midpoint when it subtracts it from R, which R's
-    sum had charged block by block (``cl/raytrace/raytrace.cl``, docs/raytracing.md §4): where neighbouring bounds
-    differ, R ran out with content ahead (hydrogen 128^3 at tolerance 1e-3: 13 pixels up to 3e-3).  One bound a brick
-    makes the two sums agree; segments never cross a brick face."""
-    crossed = (BLOCK % lattices[:, 3] != 0) | np.any(lattices[:, :3] % lattices[:, 3:] != 0, axis=1)
-    whole = slot_range[crossed]
-    whole[..., 0] = whole[..., 0].min(axis=(1, 2, 3), keepdims=True)
-    whole[..., 1] = whole[..., 1].max(axis=(1, 2, 3), keepdims=True)
-    out = slot_range.copy()
-    out[crossed] = whole
-    return out
 
 
 def post_nodes(nodes, n_samples) -> np.ndarray:
