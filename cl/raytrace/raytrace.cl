@@ -365,9 +365,15 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
         const real tn = fmin(fmin(brick_end, piece_end), fmin(tb, nearest(&planes)));
         const real3 xm = X0 + (t + tn) / 2 * D;
         real swept, marched; /* the bound integrated over [t, texit] (what a skip passes) and over [t, tn] */
-        if (lat.w > CLW_LATTICE) { /* a segment of a coarser lattice may cross blocks: their bounds, summed */
-            swept = marched = swept_bound(x0, dd, inv, X0, D, t, tn, t1, &regions, &fine_end);
-            texit = tn;
+        if (lat.w > CLW_LATTICE) { /* a segment of a coarser lattice may cross blocks: the region holding t decides
+                                     * a skip, and what the segment passes is every block's bound it crosses, summed */
+            if (!(t < texit)) {
+                const Planes faces = next_planes(x0, dd, inv, t, (real4)(0, 0, 0, CLW_BLOCK));
+                const real tface = fmin(tn, nearest(&faces));
+                bnd = region_bound(x0, dd, inv, X0 + (t + tface) / 2 * D, tface, t1, &regions, &fine_end, &texit);
+            }
+            swept = bnd * (texit - t);
+            marched = tn <= texit ? bnd * (tn - t) : swept_bound(x0, dd, inv, X0, D, t, tn, t1, &regions, &fine_end);
         } else {
             if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
                 bnd = region_bound(x0, dd, inv, xm, tn, t1, &regions, &fine_end, &texit);
