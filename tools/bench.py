@@ -533,7 +533,8 @@ def bench_first_image(args) -> dict:
             rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
             WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05).save(path)
     spec = dict(model=str(path), device=args.device, image=args.raytrace_image)
-    _scale_step(dict(spec, step="first-shaded", frames=1))  # warm-up: kernels built, the file cached
+    for step in ("first-shaded", "first-xray"):  # warm-up: both kernels built, the file cached
+        _scale_step(dict(spec, step=step, frames=1))
     return dict(setting=dict(file=str(path), image=args.raytrace_image, tolerance=1e-2, device_memory="2GiB"),
                 xray=_scale_step(dict(spec, step="first-xray")),
                 shaded=_scale_step(dict(spec, step="first-shaded", frames=None)),

@@ -1,14 +1,13 @@
 """The brick-sparse multiresolution B-spline field of the ray tracer (docs/raytracing.md §3).
 
-The thresholded wavelet expansion of a channel group is, near a point, a B-spline expansion on
-the lattice of level l, where l + 1 is the finest level with a kept detail whose support reaches
-there (docs/model.md §4: the synthesis of the coarser bands is a change of basis).  The grid-0
-fine lattice is cut into bricks of :data:`BRICK`^3 cells (a brick is a superblock of the empty-space
-bounds); :func:`plan` gives each brick the coarsest such level over every group, and
-:func:`build` expands each brick's coefficients at that level on the device, slab of bricks by
-slab, from the model's sparse coefficients (never a full-size array), into one pool with a page
-table.  ``cl/raytrace/field_bspline.h`` evaluates it; ``cl/raytrace/raytrace.cl`` cuts rays at each
-brick's own knot planes, so segments in smooth bricks are ``2^l`` cells long.
+The thresholded wavelet expansion of a channel group is, near a point, a B-spline expansion on the lattice of level
+l, where l + 1 is the finest level with a kept detail whose support reaches there (docs/model.md §4: the synthesis
+of the coarser bands is a change of basis).  The grid-0 fine lattice is cut into bricks of :data:`BRICK`^3 cells (a
+brick is a superblock of the empty-space bounds); :func:`plan` gives each brick the coarsest such level over every
+group, and :func:`build` expands each brick's coefficients at that level on the device, slab of bricks by slab, from
+the model's sparse coefficients (never a full-size array), into one pool with a page table.
+``cl/raytrace/field_bspline.h`` evaluates it; ``cl/raytrace/raytrace.cl`` cuts rays at each brick's own knot planes,
+so segments in smooth bricks are ``2^l`` cells long.
 """
 
 from __future__ import annotations
@@ -67,16 +66,14 @@ class Plan:
     origin: np.ndarray   # (3,) brick index of level[:, 0, 0, 0]
     level: np.ndarray    # (details, Z, Y, X) int8: the brick's lattice level, ABSENT where there is no brick
     clamp: np.ndarray    # (details, Z, Y, X) bool: the brick's coefficients at that level are clamped to content
-    mixed: np.ndarray    # (Z, Y, X) int8: a full-detail clamped brick's own level where coarser, else ABSENT
-    #                      (mixed bricks: clwave/raytrace/pieces.py)
+    mixed: np.ndarray    # (Z, Y, X) int8: a clamped full-detail brick's own level where coarser (pieces.py)
 
     def slots(self) -> tuple:
         """The distinct bricks over every detail, in brick order: (bricks (n, 3) z, y, x, levels (n,), clamped
         (n,), coarse (n,): serving the coarser details, whose alpha coefficients are clamped at 0, pages
-        (details, Z, Y, X) int32: each detail's slot of each brick, -1 for none, alt (n,): a mixed brick's
-        coarse slot, unclamped at the brick's own level, beside its full-detail clamped slot, -1 for none).  An
-        unclamped brick at level l is one slot for every coarser detail that has it: its coefficients come from
-        the bands above l alone."""
+        (details, Z, Y, X) int32: each detail's slot of each brick, -1 for none, alt (n,): a mixed brick's coarse
+        slot, unclamped at its own level, -1 for none).  An unclamped brick at level l is one slot for every
+        coarser detail that has it: its coefficients come from the bands above l alone."""
         at = np.argwhere(self.level != ABSENT)  # (detail, z, y, x)
         flat = np.ravel_multi_index(tuple(at[:, 1:].T), self.level.shape[1:])
         level = self.level[tuple(at.T)].astype(np.int64)
@@ -195,12 +192,10 @@ class BrickField:
     frames: np.ndarray     # (slots, groups, 4) float32
     boxes: np.ndarray      # (slots, groups, 4) int32
     lattices: np.ndarray   # (slots, 4) float32
-    bounds: np.ndarray     # (slots, SUPER, SUPER, SUPER) per BLOCK^3 block: the largest |coefficient| reaching it
-    #                        (0 in the coarsest detail's blocks that no content reaches, docs/raytracing.md §8)
+    bounds: np.ndarray     # (slots, SUPER, SUPER, SUPER) per block: the largest |coefficient| reaching it (§4, §8)
     orders: tuple          # the groups' B-spline orders
     seconds: float         # expansion time
-    mixes: np.ndarray      # (slots, 4) int32: a mixed brick's fine slot: its coarse slot, first piece flag, pieces
-    #                        per axis; -1, 0, 0, 0 for the others (clwave/raytrace/pieces.py)
+    mixes: np.ndarray      # (slots, 4) int32: coarse slot, first piece flag, pieces per axis; -1, 0, 0, 0 (pieces.py)
     pieces: np.ndarray     # uint8 per piece of the mixed bricks: 1 where it is marched on the coarse slot
     pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2)
     spill: Spill | None = None      # or in a scratch file
