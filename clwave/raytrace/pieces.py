@@ -13,7 +13,6 @@ coarse slot; any other piece is marched cell by cell on the clamped fine slot.  
 from __future__ import annotations
 
 from functools import lru_cache
-from math import comb
 
 import numpy as np
 import pyopencl.array as cla
@@ -21,19 +20,16 @@ import pyopencl.array as cla
 from ..device.constants import BRICK
 from ..model.bspline import bspline
 from .bounds import content_cells
+from .classified import bernstein_matrix
 
 
 @lru_cache
 def bernstein(j: int) -> np.ndarray:
     """(j, j): row k the Bernstein coefficient k (degree j - 1, on the cell [0, 1]) of the polynomial piece
     ``sum_r w_r N_j(u + r)`` of order j, per weight r (the coefficient r cells before the cell's last,
-    docs/model.md §1)."""
-    if j == 1:
-        return np.ones((1, 1))
+    docs/model.md §1): the pieces' values at j points, taken to Bernstein coefficients."""
     u = np.linspace(0.0, 1.0, j)
-    basis = np.array([[comb(j - 1, k) * x ** k * (1 - x) ** (j - 1 - k) for k in range(j)] for x in u])
-    weights = np.stack([bspline(j, u + r) for r in range(j)], axis=1)
-    return np.linalg.solve(basis, weights)
+    return bernstein_matrix(2 * u - 1) @ np.stack([bspline(j, u + r) for r in range(j)], axis=1)
 
 
 def alpha_floors(coef, wavelet) -> np.ndarray:
