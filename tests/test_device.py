@@ -98,3 +98,24 @@ def test_cl_sources_ship_with_the_package():
     project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
     assert project["tool"]["hatch"]["build"]["targets"]["wheel"]["force-include"]["cl"] == "clwave/cl"
     assert cl.get_platforms()  # the loader finds a platform
+
+
+def test_a_second_renderer_builds_no_program(cc, monkeypatch):
+    """Renderers on one context share its programs, pyopencl's generated kernels (scan, reduction,
+    element-wise) included: a second splatting renderer and ray tracer build nothing."""
+    import clwave
+
+    vol = clwave.phantom("hydrogen", n=16)
+    tf = clwave.TransferFunction.preset("hydrogen")
+    wv = clwave.WaveletVolume.from_volume(tf.classify(vol), levels=2).threshold(keep=0.2)
+    cam = clwave.Camera(azimuth=30, elevation=20, size=16)
+    first = (clwave.SplatRenderer(wv, device=cc).render(cam).image,
+             clwave.RayTracer(wv, device=cc).render(cam).image)
+    builds = []
+    build = cl.Program.build
+    monkeypatch.setattr(cl.Program, "build", lambda self, *a, **k: builds.append(self) or build(self, *a, **k))
+    again = (clwave.SplatRenderer(wv, device=cc).render(cam).image,
+             clwave.RayTracer(wv, device=cc).render(cam).image)
+    assert builds == []
+    for a, b in zip(first, again):
+        np.testing.assert_array_equal(a, b)

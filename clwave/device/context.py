@@ -166,6 +166,13 @@ class ComputeContext:
             cls._shared[info] = cls(info)
         return cls._shared[info]
 
+    def generated(self, name: str, make):
+        """One of pyopencl's generated kernels (element-wise, reduction, scan), made by ``make()`` the first
+        time ``name`` is asked for in this context and reused after: making one builds a program each time."""
+        if name not in self.programs:
+            self.programs[name] = make()
+        return self.programs[name]
+
     def upload(self, host):
         """A read-only device buffer holding a copy of a (non-empty) host array, in one call
         (cheaper than ``pyopencl.array.to_device`` for the many small tables of a view)."""

@@ -349,8 +349,8 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     # 64 = 4^3: the reads of a segment in no brick (weights 0; the march never samples one) stay inside
     pool = cla.empty(q, (max(lay["total"], 64), 4), np.float32) if resident else None
     spill = None if resident else Spill(lay["total"])
-    clamp = ElementwiseKernel(cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f",
-                              "clamp_to_content")
+    clamp = cc.generated("clamp_to_content", lambda: ElementwiseKernel(
+        cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f", "clamp_to_content"))
     # host work on one slab overlaps the device's on the last: uploads do not wait for the queue, and what they
     # read (and a slab's pool on its way to the scratch file) is held until a marker says the slab is done
     slabs, floors, last_slab = lay["bricks"][:, 0], [], None

@@ -84,13 +84,13 @@ class SplatRenderer:
         start = time.perf_counter()
         # one build per channel count of the groups: a scalar volume accumulates one channel
         self.stages = {(c, False): Stages(self.cc, c) for c in sorted({len(g.channels) for g in wv.groups})}
-        self.pixel_updates = ReductionKernel(
+        self.pixel_updates = self.cc.generated("pixel_updates", lambda: ReductionKernel(
             self.cc.ctx, np.int64, neutral="0", reduce_expr="a+b", arguments="__global const int4 *bbox",
-            map_expr="bbox[i].z < bbox[i].x ? 0 : (long)(bbox[i].z - bbox[i].x + 1) * (bbox[i].w - bbox[i].y + 1)")
+            map_expr="bbox[i].z < bbox[i].x ? 0 : (long)(bbox[i].z - bbox[i].x + 1) * (bbox[i].w - bbox[i].y + 1)"))
         # a pass that draws some of its splats only: the others' boxes emptied after projection (docs/splatting.md §8)
-        self.mask_splats = ElementwiseKernel(
+        self.mask_splats = self.cc.generated("mask_splats", lambda: ElementwiseKernel(
             self.cc.ctx, "int4 *bbox, uint *counts, const uchar *keep",
-            "if (!keep[i]) { bbox[i] = (int4)(0, 0, -1, -1); counts[i] = 0; }", "mask_splats")
+            "if (!keep[i]) { bbox[i] = (int4)(0, 0, -1, -1); counts[i] = 0; }", "mask_splats"))
         self.compile_seconds = time.perf_counter() - start
         self.groups = []
         q = self.cc.queue

@@ -118,7 +118,8 @@ class Stages:
                       for k in (_PROJECT_CONE if perspective else _PROJECT, _TRANSPOSE, _TILE_RANGES, _CHUNK_TILES)}
         if cc.info.kind != "GPU":
             self.local[_CHUNK_TILES.name] = 1
-        self._scan = ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0")
+        self._scan = cc.generated("exclusive_scan_uint",
+                                  lambda: ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0"))
         # the rates of the banded stages (in_bands), kept between passes and views
         self.paces = dict(count=Pace(), place=Pace(), accumulate=Pace())
 
