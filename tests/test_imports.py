@@ -89,3 +89,15 @@ def test_no_import_circles():
     assert len(graph) > 50 and graph["clwave.io.clw"] >= {"clwave.model.wavelet", "clwave.schedulers"}
     found = circles(graph)
     assert not found, "; ".join(" <-> ".join(c) for c in found)
+
+
+def test_start_up_leaves_out_what_only_reconstruction_needs():
+    """``import clwave`` (every command, the viewer) does not load scipy.signal, which brings scipy.stats:
+    a second of start-up on 2 cores; reconstruction imports it when it runs (model/transform.py)."""
+    import subprocess
+    import sys
+
+    code = "import sys, clwave; print(sorted(m for m in ('scipy.signal', 'scipy.stats') if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=PACKAGE.parent).stdout
+    assert out.strip() == "[]"

@@ -12,7 +12,6 @@ import numpy as np
 import pywt
 from scipy.linalg import solve_banded
 from scipy.ndimage import correlate1d
-from scipy.signal import upfirdn
 
 from ..errors import InputError
 from ..io.progress import progress
@@ -191,6 +190,9 @@ def synthesize(wavelet: SplineWavelet, bands, dense) -> tuple:
     Follows from the offsets oA_m, oD_m of docs/model.md §4 and the two-scale relations
     phi = sum p_i phi(2x - i), psi = sum q_i phi(2x - i), with filters h = p/sqrt2, g = q/sqrt2.
     """
+    # imported here: scipy.signal brings scipy.stats, a second of every start-up, and only reconstruction needs it
+    from scipy.signal import upfirdn
+
     approx, start = dense[0], np.zeros(3, dtype=np.int64)
     filters = {"a": wavelet.p / np.sqrt(2.0), "d": wavelet.q / np.sqrt(2.0)}
     shifts = {"a": wavelet.synthesis_shift("a"), "d": wavelet.synthesis_shift("d")}
