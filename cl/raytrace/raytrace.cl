@@ -66,6 +66,18 @@ inline void step_planes(const real3 x0, const real3 inv, const int3 step, const 
 /* the nearest of the three planes */
 inline real nearest(const Planes *P) { return fmin(P->t.x, fmin(P->t.y, P->t.z)); }
 
+/* where the segment from t ends: at the next knot plane of lattice lat, or at `end` (brick, piece or pass) if sooner;
+ * the planes are found anew from t after a jump (*replan) */
+inline real segment_end(const real *x0, const real *dd, const real *inv, const real t, const real4 lat, const real end,
+                        Planes *planes, bool *replan)
+{
+    if (*replan) {
+        *planes = next_planes(x0, dd, inv, t, lat);
+        *replan = false;
+    }
+    return fmin(end, nearest(planes));
+}
+
 /* the block of `size` fine cells holding x, and the bound on |field| there (0 outside the blocks) */
 inline real block_bound(__global const float *bound, const int4 origin, const int4 shape, const real3 x,
                         const int size, int4 *b)
@@ -118,20 +130,33 @@ inline real region_bound(const real *x0, const real *dd, const real *inv, const 
     return bb;
 }
 
-/* The bound integrated over [t, tn], region by region: a segment of a coarser lattice may cross several blocks,
- * whose bounds all count (the midpoint's alone could skip, or end the ray on, what the others hold) */
-inline real swept_bound(const real *x0, const real *dd, const real *inv, const real3 X0, const real3 D, const real t,
-                        const real tn, const real t1, const Regions *R, real *fine_end)
+/* The bound integrated over [s, *tn], region by region, where the ray enters a new region at s: a segment of a
+ * coarser lattice may cross several blocks, whose bounds all count (the midpoint's alone could skip, or end the ray
+ * on, what the others hold).  The segment ends where it would enter a region of bound 0 (*tn moves there): a block no
+ * content reaches is empty in the model (docs/raytracing.md §4, §8), whatever the coarse lattice's field holds there.
+ * The block planes are stepped, not found anew per block; *bnd and *end are left at the region where the next
+ * segment starts, so that it needs no second look-up. */
+inline real swept_bound(const real *x0, const real *dd, const real *inv, const real3 X0, const real3 D,
+                        const real3 inv3, const int3 step, real s, real *tn, const real t1, const Regions *R,
+                        real *fine_end, real *bnd, real *end)
 {
+    const real4 blocks = (real4)(0, 0, 0, CLW_BLOCK);
     real sum = 0;
-    for (real s = t; s < tn;) {
-        const Planes P = next_planes(x0, dd, inv, s, (real4)(0, 0, 0, CLW_BLOCK));
-        const real sn = fmin(tn, nearest(&P));
-        real end;
-        const real b = region_bound(x0, dd, inv, X0 + (s + sn) / 2 * D, sn, t1, R, fine_end, &end);
-        const real e = fmin(end, tn); /* past a coarse superblock at once */
-        sum += b * (e - s);
+    Planes P = next_planes(x0, dd, inv, s, blocks);
+    while (s < *tn) {
+        const real sn = fmin(*tn, nearest(&P));
+        *bnd = region_bound(x0, dd, inv, X0 + (s + sn) / 2 * D, sn, t1, R, fine_end, end);
+        if (*bnd == 0) {
+            *tn = s;
+            break;
+        }
+        const real e = fmin(*end, *tn); /* past a coarse superblock at once */
+        sum += *bnd * (e - s);
         s = e;
+        if (e > sn)
+            P = next_planes(x0, dd, inv, s, blocks);
+        else
+            step_planes(X0, inv3, step, sn, blocks, &P);
     }
     return sum;
 }
@@ -358,28 +383,18 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             replan = true;
 #endif
         }
-        if (replan) { /* the next knot plane per axis, from the position at t */
-            planes = next_planes(x0, dd, inv, t, lat);
-            replan = false;
+        /* a segment of a coarser lattice may cross blocks: the region holding t decides a skip, before the segment's
+         * end is planned (a skip needs none), and what a marched segment passes is summed below */
+        const bool coarse = lat.w > CLW_LATTICE;
+        if (coarse && !(t < texit)) {
+            const Planes faces = next_planes(x0, dd, inv, t, (real4)(0, 0, 0, CLW_BLOCK));
+            const real tface = nearest(&faces);
+            bnd = region_bound(x0, dd, inv, X0 + (t + tface) / 2 * D, tface, t1, &regions, &fine_end, &texit);
         }
-        const real tn = fmin(fmin(brick_end, piece_end), fmin(tb, nearest(&planes)));
-        const real3 xm = X0 + (t + tn) / 2 * D;
-        real swept, marched; /* the bound integrated over [t, texit] (what a skip passes) and over [t, tn] */
-        if (lat.w > CLW_LATTICE) { /* a segment of a coarser lattice may cross blocks: the region holding t decides
-                                     * a skip, and what the segment passes is every block's bound it crosses, summed */
-            if (!(t < texit)) {
-                const Planes faces = next_planes(x0, dd, inv, t, (real4)(0, 0, 0, CLW_BLOCK));
-                const real tface = fmin(tn, nearest(&faces));
-                bnd = region_bound(x0, dd, inv, X0 + (t + tface) / 2 * D, tface, t1, &regions, &fine_end, &texit);
-            }
-            swept = bnd * (texit - t);
-            marched = tn <= texit ? bnd * (tn - t) : swept_bound(x0, dd, inv, X0, D, t, tn, t1, &regions, &fine_end);
-        } else {
-            if (!(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
-                bnd = region_bound(x0, dd, inv, xm, tn, t1, &regions, &fine_end, &texit);
-            swept = bnd * (texit - t);
-            marched = bnd * (tn - t);
-        }
+        real tn = coarse ? t : segment_end(x0, dd, inv, t, lat, fmin(fmin(brick_end, piece_end), tb), &planes, &replan);
+        if (!coarse && !(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
+            bnd = region_bound(x0, dd, inv, X0 + (t + tn) / 2 * D, tn, t1, &regions, &fine_end, &texit);
+        const real swept = bnd * (texit - t); /* the bound integrated over [t, texit]: what a skip passes */
 #ifdef CLW_XRAY
         const real cost = swept;
 #else
@@ -395,6 +410,15 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             replan = true;
             continue;
         }
+        real marched = bnd * (tn - t); /* the bound integrated over the segment */
+        if (coarse) {
+            tn = segment_end(x0, dd, inv, t, lat, fmin(fmin(brick_end, piece_end), tb), &planes, &replan);
+            marched = bnd * (fmin(tn, texit) - t);
+            if (tn > texit) /* it crosses blocks: each one's bound counts, and it ends before an empty one */
+                marched += swept_bound(x0, dd, inv, X0, D, inv3, step, texit, &tn, t1, &regions, &fine_end, &bnd,
+                                       &texit);
+        }
+        const real3 xm = X0 + (t + tn) / 2 * D;
 #ifdef CLW_CONTENT
         if (tn > t && !reached(content, content_origin, content_shape, xm)) { /* no content reaches: empty */
             t = tn;
