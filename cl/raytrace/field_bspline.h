@@ -302,9 +302,18 @@ __attribute__((always_inline)) inline void scalar_field(const Basis *B, const in
             __global const coef_t *row = B->corner - rz * B->sz - ry * B->sy;
             real8 line = 0;
             realt line_t = 0;
+            real cr[MAX_ORDER]; /* the row's q: a cubic's four in one vector load and conversion, which made the
+                                  * 16-bit pool no slower than the float one (docs/benchmarks.md §8) */
+            if (j == 4) {
+                const float4 v = convert_float4(vload4(0, row - 3));
+                cr[0] = v.s3; cr[1] = v.s2; cr[2] = v.s1; cr[3] = v.s0;
+            } else
+#pragma unroll
+            for (int rx = 0; rx < j; rx++)
+                cr[rx] = row[-rx];
 #pragma unroll
             for (int rx = 0; rx < j; rx++) {
-                const real c = row[-rx];
+                const real c = cr[rx];
                 line = fma((real8)(c), B->w[0][rx], line);
                 if (tail)
                     line_t = fma((realt)(c), B->wt[0][rx], line_t);

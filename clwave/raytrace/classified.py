@@ -123,7 +123,6 @@ class ScalarRange:
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half a step of the floats
             self.slot_range += (quant[:, 1:] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]
-            self.quant = quant
             tracer.replace_pool(cla.to_device(q, coded), cla.to_device(q, quant))
             tracer.defines["CLW_SCALAR_POOL"] = None
         self.slack = RANGE_SLACK * float(tracer.q_bound)
