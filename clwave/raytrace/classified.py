@@ -43,7 +43,7 @@ FLAT = 1e-4
 #: the scalar pool's coefficients are 16-bit integers q: per slot s = offset + step q (docs/raytracing.md §10)
 Q_MAX = 65535
 #: coefficients quantized at a time (float64 work arrays of this many elements)
-Q_CHUNK = 1 << 22
+Q_CHUNK = 1 << 20
 
 
 def tf_table(tf: TransferFunction, window) -> np.ndarray:
