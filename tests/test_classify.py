@@ -285,15 +285,23 @@ def test_volumes_against_float64_oracle(case):
 def test_skipping_never_skips_content(hydrogen):
     """For random transfer functions, the block bounds are the largest opacity over the blocks' ranges (dense
     sampling), every block whose bound is 0 (skipped) holds no opacity: the model (its content-clamped B-spline
-    form, evaluated in closed form) at 20 random points per such block, classified, is 0 there; and the images
-    match the oracle."""
+    form, evaluated in closed form) and the 16-bit model the kernel renders (its bricks' decoded coefficients, brute
+    force) at 20 random points per such block, classified, are 0 there; and the images match the oracle."""
     wv, tr = hydrogen
     rng = np.random.default_rng(11)
     cam = clwave.Camera(120, -10, size=8)
-    from clwave.device.constants import BLOCK
+    from clwave.device.constants import BLOCK, SUPER
     from clwave.model.geometry import world_to_fine_affine
     scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)
     field = _content_field(wv)  # the model the B-spline field holds: zero beyond the content (§4)
+    f, pages = tr.bricks, tr.field_at(0).pages
+    quant, sizes = tr.quant.get().view(np.float32).reshape(-1, 2).astype(np.float64), np.prod(f.boxes[:, 0, :3], axis=1)
+    decoded = quant[:, 0].repeat(sizes) + quant[:, 1].repeat(sizes) * tr.bricks.pool.get()[:sizes.sum()]
+
+    def quantized(fine):  # the 16-bit model at fine points (P, 3) (z, y, x) of one brick
+        slot = pages[tuple(int(k) for k in fine[0] // (SUPER * BLOCK) - f.origin)]
+        return np.zeros(len(fine)) if slot < 0 else \
+            brick_field(decoded, f.boxes[slot, 0], f.frames[slot, 0], tr.orders[0], fine[:, ::-1])
     for trial in range(3):
         tf = random_tf(rng, 0.0, 1.0, steps=trial != 1, clear=True)
         bound = tr.scalar.classify(tf, tr.cc, np.float32).bound.get()
@@ -312,6 +320,12 @@ def test_skipping_never_skips_content(hydrogen):
         world = (fine[..., ::-1].reshape(-1, 3) - offset) / scale
         _, alpha = tf(field(world, False)[:, 0])
         assert alpha.max() == 0
+        assert max(tf(quantized(points))[1].max() for points in fine) == 0
+        # the lookup finds the brick: the 16-bit model is the model where there is content
+        full = np.column_stack(np.unravel_index(np.argsort(bound, axis=None)[-5:], bound.shape))
+        inside = (tr.occ_origin + full)[:, None, :] * BLOCK + rng.uniform(0, BLOCK, (len(full), 20, 3))
+        exact = field((inside[..., ::-1].reshape(-1, 3) - offset) / scale, False)[:, 0].reshape(len(full), 20)
+        assert np.abs(exact).max() > 1e-2 and np.abs(np.array([quantized(p) for p in inside]) - exact).max() <= 1e-5
         img = tr.render(cam, tolerance=1e-3, transfer_function=tf).image
         assert np.abs(img - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
 
