@@ -285,15 +285,23 @@ def test_volumes_against_float64_oracle(case):
 def test_skipping_never_skips_content(hydrogen):
     """For random transfer functions, the block bounds are the largest opacity over the blocks' ranges (dense
     sampling), every block whose bound is 0 (skipped) holds no opacity: the model (its content-clamped B-spline
-    form, evaluated in closed form) at 20 random points per such block, classified, is 0 there; and the images
-    match the oracle."""
+    form, evaluated in closed form) and the 16-bit model the kernel renders (its bricks' decoded coefficients, brute
+    force) at 20 random points per such block, classified, are 0 there; and the images match the oracle."""
     wv, tr = hydrogen
     rng = np.random.default_rng(11)
     cam = clwave.Camera(120, -10, size=8)
-    from clwave.device.constants import BLOCK
+    from clwave.device.constants import BLOCK, SUPER
     from clwave.model.geometry import world_to_fine_affine
     scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)
     field = _content_field(wv)  # the model the B-spline field holds: zero beyond the content (§4)
+    f, pages = tr.bricks, tr.field_at(0).pages
+    quant, sizes = tr.quant.get().view(np.float32).reshape(-1, 2).astype(np.float64), np.prod(f.boxes[:, 0, :3], axis=1)
+    decoded = quant[:, 0].repeat(sizes) + quant[:, 1].repeat(sizes) * tr.bricks.pool.get()[:sizes.sum()]
+
+    def quantized(fine):  # the 16-bit model at fine points (P, 3) (z, y, x) of one brick
+        slot = pages[tuple(int(k) for k in fine[0] // (SUPER * BLOCK) - f.origin)]
+        return np.zeros(len(fine)) if slot < 0 else \
+            brick_field(decoded, f.boxes[slot, 0], f.frames[slot, 0], tr.orders[0], fine[:, ::-1])
     for trial in range(3):
         tf = random_tf(rng, 0.0, 1.0, steps=trial != 1, clear=True)
         bound = tr.scalar.classify(tf, tr.cc, np.float32).bound.get()
@@ -312,8 +320,89 @@ def test_skipping_never_skips_content(hydrogen):
         world = (fine[..., ::-1].reshape(-1, 3) - offset) / scale
         _, alpha = tf(field(world, False)[:, 0])
         assert alpha.max() == 0
+        assert max(tf(quantized(points))[1].max() for points in fine) == 0
+        # the lookup finds the brick: the 16-bit model is the model where there is content
+        full = np.column_stack(np.unravel_index(np.argsort(bound, axis=None)[-5:], bound.shape))
+        inside = (tr.occ_origin + full)[:, None, :] * BLOCK + rng.uniform(0, BLOCK, (len(full), 20, 3))
+        exact = field((inside[..., ::-1].reshape(-1, 3) - offset) / scale, False)[:, 0].reshape(len(full), 20)
+        assert np.abs(exact).max() > 1e-2 and np.abs(np.array([quantized(p) for p in inside]) - exact).max() <= 1e-5
         img = tr.render(cam, tolerance=1e-3, transfer_function=tf).image
         assert np.abs(img - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
+
+
+def brick_field(coef, box, frame, order, fine):
+    """Brute force: the field of one brick at grid-0 fine points (P, 3) (x, y, z), the sum over its lattice
+    coefficients (box (nx, ny, nz, first)) of coef times the cardinal B-splines of ``order`` on [i, i + order] in
+    the brick's lattice coordinates (fine - frame.xyz) * frame.w (cl/raytrace/field_bspline.h)."""
+    from scipy.interpolate import BSpline
+
+    n, first = box[:3], box[3]
+    c = np.asarray(coef[first:first + np.prod(n)], np.float64).reshape(n[::-1])
+    x = (fine - frame[:3]) * frame[3]
+    basis = BSpline.basis_element(np.arange(order + 1), extrapolate=False)
+    w = [np.nan_to_num(basis(x[:, a:a + 1] - np.arange(n[a]))) for a in range(3)]
+    return np.einsum("zyx,pz,py,px->p", c, w[2], w[1], w[0])
+
+
+def test_quantized_pool_within_half_a_step(monkeypatch):
+    """The scalar pool's 16-bit coefficients (docs/raytracing.md §10), brute force at random points of random
+    blocks: the brick's field from the float coefficients is the model's (the float64 closed form); the field from
+    the decoded ones is within half the slot's step of it (and a coefficient's error nearly that); both lie in the
+    block's range that skipping classifies; the pool is 2 bytes a coefficient."""
+    from clwave.device.constants import BLOCK, SUPER
+    from clwave.model.geometry import world_to_fine_affine
+    from clwave.raytrace import classified
+
+    seen, quantize = {}, classified.quantize
+
+    def spy(scalar, starts, sizes):
+        seen["float"], seen["sizes"] = scalar.copy(), sizes
+        seen["coded"], seen["quant"] = quantize(scalar, starts, sizes)
+        return seen["coded"], seen["quant"]
+
+    monkeypatch.setattr(classified, "quantize", spy)
+    vol = clwave.phantom("hydrogen", n=20)
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.1)
+    tr = clwave.RayTracer(wv)
+    f, order, quant, sizes = tr.bricks, tr.orders[0], seen["quant"].astype(np.float64), seen["sizes"]
+    assert tr.bricks.pool_bytes == 2 * len(seen["float"]) and tr.bricks.pool.dtype == np.uint16
+    n = sizes.sum()  # the slots lie one after another from element 0
+    decoded = quant[:, 0].repeat(sizes) + quant[:, 1].repeat(sizes) * seen["coded"][:n]
+    steps = quant[:, 1].repeat(sizes)
+    error = np.abs(decoded - seen["float"][:n])[steps > 0] / steps[steps > 0]
+    assert error.max() <= 0.5 + 1e-6 and error.max() > 0.45
+    assert np.all(decoded[steps == 0] == seen["float"][:n][steps == 0])
+    scale, offset = world_to_fine_affine(order, wv.shape, wv.spacing, wv.origin)
+    model = _content_field(wv)
+    rng = np.random.default_rng(3)
+    widest = 0.0
+    for s in rng.choice(len(f.levels), 12, replace=False):
+        blocks = rng.integers(0, SUPER, (4, 3))  # (z, y, x) in the brick
+        for b in blocks:
+            fine = ((f.bricks[s] * SUPER + b) * BLOCK)[::-1] + rng.uniform(0, BLOCK, (20, 3))  # (x, y, z)
+            exact = brick_field(seen["float"], f.boxes[s, 0], f.frames[s, 0], order, fine)
+            quantized = brick_field(decoded, f.boxes[s, 0], f.frames[s, 0], order, fine)
+            if f.levels[s] == 0:  # the finest bricks hold the model itself
+                truth = model((fine - offset) / scale, False)[:, 0]
+                np.testing.assert_allclose(exact, truth, rtol=0, atol=1e-6 * np.abs(truth).max() + 1e-7)
+            assert np.abs(quantized - exact).max() <= quant[s, 1] / 2 * (1 + 1e-6) + 1e-12
+            widest = max(widest, np.abs(quantized - exact).max() / quant[s, 1])
+            lo, hi = tr.scalar.slot_range[(s, *b)]
+            assert lo <= min(exact.min(), quantized.min()) and max(exact.max(), quantized.max()) <= hi
+    assert widest > 0.01  # the decoded field does differ
+
+
+def test_scalar_pool_in_a_scratch_file():
+    """Bricks in a scratch file (out-of-core passes, docs/raytracing.md §6) keep float coefficients: the
+    post-classified image is within the tolerance of the float64 oracle there too."""
+    vol = clwave.phantom("hydrogen", n=40)
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.1)
+    tr = clwave.RayTracer(wv, device_memory="10MiB")
+    tf = clwave.TransferFunction.preset("hydrogen")
+    cam = clwave.Camera(30, 20, size=8)
+    res = tr.render(cam, tolerance=1e-3, transfer_function=tf)
+    assert res.meta["pool"] == "scratch file"
+    assert np.abs(res.image - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
 
 
 def test_transfer_function_change_rebuilds_nothing(hydrogen, monkeypatch):

@@ -10,8 +10,9 @@
 #include "raytrace/types.h"
 
 /* ---- B-spline path: bricks of lattice coefficients (clwave/raytrace/bricks.py) ---- */
-/* A coefficient of the pool: float4 (channels in their slots), or one float for a scalar model
- * (CLW_SCALAR_POOL, clwave/raytrace/classified.py); COEF4 reads it as four channels, COEF_LANE as the
+/* A coefficient of the pool: float4 (channels in their slots), or for a scalar model a 16-bit integer q, the
+ * coefficient offset + step q with its slot's (offset, step) in quant (CLW_SCALAR_POOL, clwave/raytrace/classified.py,
+ * docs/raytracing.md §10; sample_segment decodes the sums); COEF4 reads it as four channels, COEF_LANE as the
  * channel whose gradient shades: alpha, or the scalar post-classified (CLW_POST, classify.h) */
 #ifdef CLW_POST
 #define GRADIENT_LANE x
@@ -19,7 +20,7 @@
 #define GRADIENT_LANE w
 #endif
 #ifdef CLW_SCALAR_POOL
-typedef float coef_t;
+typedef ushort coef_t;
 #define COEF4(c) ((real4)((real)(c), 0, 0, 0))
 #define COEF_LANE(c) (c)
 #else
@@ -29,7 +30,8 @@ typedef float4 coef_t;
 #endif
 #define FIELD_PARAMS __global const coef_t *coef, __global const int *pages, const int4 page_origin, \
                      const int4 page_shape, __global const float4 *frames, __global const int4 *boxes, \
-                     __global const float4 *lattices, __global const int4 *mixes, __global const uchar *pieces
+                     __global const float4 *lattices, __global const int4 *mixes, __global const uchar *pieces, \
+                     __global const float2 *quant
 typedef struct {
     __global const coef_t *coef;
     __global const int *pages;
@@ -39,8 +41,9 @@ typedef struct {
     __global const float4 *lattices;
     __global const int4 *mixes;  /* per slot: a mixed brick's coarse slot (-1: not mixed), first piece, pieces per axis */
     __global const uchar *pieces; /* per piece of a mixed brick: 1 to march it on the coarse slot */
+    __global const float2 *quant; /* per slot of a scalar pool: (offset, step) of its 16-bit coefficients */
 } Field;
-#define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices, mixes, pieces}
+#define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices, mixes, pieces, quant}
 #define FIELD_BRICK CLW_SUPER_CELLS /* a brick is a superblock */
 /* The brick the ray is in (field_lattice sets it): the slot its segments read, and in a mixed brick
  * (clwave/raytrace/pieces.py, docs/raytracing.md §3) its fine and coarse slots, the coarse knot lattice whose
@@ -299,9 +302,18 @@ __attribute__((always_inline)) inline void scalar_field(const Basis *B, const in
             __global const coef_t *row = B->corner - rz * B->sz - ry * B->sy;
             real8 line = 0;
             realt line_t = 0;
+            real cr[MAX_ORDER]; /* the row's q: a cubic's four in one vector load and conversion, which made the
+                                  * 16-bit pool no slower than the float one (docs/benchmarks.md §8) */
+            if (j == 4) {
+                const float4 v = convert_float4(vload4(0, row - 3));
+                cr[0] = v.s3; cr[1] = v.s2; cr[2] = v.s1; cr[3] = v.s0;
+            } else
+#pragma unroll
+            for (int rx = 0; rx < j; rx++)
+                cr[rx] = row[-rx];
 #pragma unroll
             for (int rx = 0; rx < j; rx++) {
-                const real c = row[-rx];
+                const real c = cr[rx];
                 line = fma((real8)(c), B->w[0][rx], line);
                 if (tail)
                     line_t = fma((realt)(c), B->wt[0][rx], line_t);
@@ -332,6 +344,10 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
     const bool tail = NS > 12 || NS > P0 + 1 || fresh; /* samples 8.. (lane P0 alone: only when fresh) */
     Basis *B = &basis[0];
     segment_basis(G, 0, A->slot, xm, radius, D, nodes, B);
+    /* the slot's coefficients are offset + step q and the B-splines sum to 1 (their derivatives to 0): s is
+     * offset + step times the sum over q, and the gradient step times its sum (no brick: weights 0, s = 0) */
+    const float2 quant = A->slot < 0 ? (float2)(0) : G.quant[A->slot];
+    B->inv_step *= quant.y;
     real8 f = 0;
     realt ft = 0;
     switch (ORDER[0]) {
@@ -343,6 +359,8 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
     SCALAR_FIELD(6)
 #endif
     }
+    f = fma(f, (real8)(quant.y), (real8)(quant.x));
+    ft = fma(ft, (realt)(quant.y), (realt)(quant.x));
     real s[16];
     vstore8(f, 0, s);
 #if NS > 12

@@ -40,6 +40,10 @@ RANGES_KEPT = 8
 RANGE_SLACK = 1e-6
 #: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
 FLAT = 1e-4
+#: the scalar pool's coefficients are 16-bit integers q: per slot s = offset + step q (docs/raytracing.md §10)
+Q_MAX = 65535
+#: coefficients quantized at a time (float64 work arrays of this many elements)
+Q_CHUNK = 1 << 20
 
 
 def tf_table(tf: TransferFunction, window) -> np.ndarray:
@@ -88,8 +92,9 @@ class ScalarRange:
     out per detail when a render first asks for it (:mod:`clwave.raytrace.lod`: each detail picks its slots), and
     the classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
 
-    Made, the pool on the device keeps the scalar alone: one float a coefficient instead of four
-    (``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``), a quarter of the memory.
+    Made, the pool on the device keeps the scalar alone, as 16-bit integers with an offset and a step per slot
+    (:func:`quantize`; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``), an eighth of the float4 pool's memory;
+    the ranges are widened by half a step, so they hold the float model and the one rendered.
     """
 
     def __init__(self, tracer):
@@ -107,14 +112,18 @@ class ScalarRange:
             _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=slot_range,
                    origin=f.origin[::-1], coef=tables["coef"], bricks=cla.to_device(q, at), frames=tables["frames"],
                    boxes=tables["boxes"], order=f.orders[0])
-            self.slot_range = slot_range.get()
             n = min(AUTO_COEFFICIENTS, len(tables["coef"]))
             sample = cla.empty(q, n, np.float32)
             _STRIDED(self.kernels, q, (n,), None, out=sample, coef=tables["coef"], step=len(tables["coef"]) // n, n=n)
             self.sample = sample.get()
             scalar = cla.empty(q, len(f.pool), np.float32)  # the scalar alone: the float4 pool goes
             _STRIDED(self.kernels, q, (len(f.pool),), None, out=scalar, coef=f.pool, step=1, n=len(f.pool))
-            tracer.replace_pool(scalar)
+            sizes = np.prod(f.boxes[:, 0, :3].astype(np.int64), axis=1)
+            coded, quant = quantize(scalar.get(), f.boxes[:, 0, 3].astype(np.int64), sizes)
+            del scalar
+            self.slot_range = slot_range.get()  # the decoded coefficients lie within half a step of the floats
+            self.slot_range += (quant[:, 1:] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]
+            tracer.replace_pool(cla.to_device(q, coded), cla.to_device(q, quant))
             tracer.defines["CLW_SCALAR_POOL"] = None
         self.slack = RANGE_SLACK * float(tracer.q_bound)
         self.ranges = {}  # per detail (its pages' bytes): the range per block on the device
@@ -170,6 +179,34 @@ class ScalarRange:
         q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last
+
+
+def quantize(scalar, starts, sizes) -> tuple:
+    """(coded, quant): the pool's coefficients ``scalar`` (float32; slot s spans ``starts[s]`` .. + ``sizes[s]``, one
+    after another) as uint16 q with (offset, step) per slot (float32), the decoded ``offset + step q`` within
+    ``step / 2`` of each: offset the slot's least coefficient (float32, at most it), step its range / Q_MAX rounded
+    up in float32, q the nearest whole number in float64 (docs/raytracing.md §10)."""
+    end = int(starts[-1] + sizes[-1]) if len(starts) else 0
+    coded = np.zeros(len(scalar), np.uint16)  # elements past the last slot (the pool's margin): 0
+    if not end:
+        return coded, np.zeros((max(len(starts), 1), 2), np.float32)
+    lo = np.minimum.reduceat(scalar[:end], starts).astype(np.float64)
+    hi = np.maximum.reduceat(scalar[:end], starts).astype(np.float64)
+    offset = lo.astype(np.float32)  # exact: the coefficients are float32
+    step = ((hi - offset) / Q_MAX).astype(np.float32)
+    step = np.where(step.astype(np.float64) * Q_MAX < hi - offset, np.nextafter(step, np.float32(np.inf)), step)
+    inverse = np.divide(1.0, step.astype(np.float64), out=np.zeros(len(step)), where=step > 0)
+    first = 0
+    while first < len(starts):  # slots in chunks of about Q_CHUNK coefficients
+        last = int(np.searchsorted(starts, starts[first] + Q_CHUNK, side="right"))
+        last = max(last, first + 1)
+        a, b = int(starts[first]), int(starts[last - 1] + sizes[last - 1])
+        reps = sizes[first:last]
+        u = (scalar[a:b] - np.repeat(offset[first:last].astype(np.float64), reps)) * np.repeat(inverse[first:last],
+                                                                                                reps)
+        coded[a:b] = np.clip(np.rint(u), 0, Q_MAX)
+        first = last
+    return coded, np.column_stack([offset, step]).astype(np.float32)
 
 
 def post_nodes(nodes, n_samples) -> np.ndarray:

@@ -67,7 +67,7 @@ FIELDS = ("bspline", "wavelet")
 B, I32, INT4, FLOAT4 = BUFFER, np.int32, cltypes.int4, cltypes.float4
 #: the arguments of each field backend (FIELD_PARAMS of cl/raytrace/field_*.h)
 FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("page_shape", INT4), ("frames", B),
-                           ("boxes", B), ("lattices", B), ("mixes", B), ("pieces", B)),
+                           ("boxes", B), ("lattices", B), ("mixes", B), ("pieces", B), ("quant", B)),
                   wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
 
 
@@ -174,6 +174,7 @@ class RayTracer:
         # arrays at once, which overflowed its threads' stacks
         self.local_size = (8, 8)
         self.defines = group_defines(self.orders)
+        self.quant = cla.zeros(self.cc.queue, 1, cltypes.float2)  # a scalar pool's (offset, step) per slot
 
     def field_at(self, caps) -> FieldAt:
         """The B-spline field at detail ``caps`` (one level, or one per brick): made once per detail from the
@@ -185,10 +186,11 @@ class RayTracer:
             self._at[key] = field_at(self.bricks, self.cc, pick(self.bricks, caps))
         return self._at[key]
 
-    def replace_pool(self, pool):
+    def replace_pool(self, pool, quant=None):
         """The bricks' pool on the device replaced by ``pool`` (post-classification's scalar pool, docs/raytracing.md
-        §10): the field's tables of every detail name the new one."""
+        §10; ``quant``: its (offset, step) per slot): the field's tables of every detail name the new one."""
         self.bricks.pool = pool
+        self.quant = self.quant if quant is None else quant
         self._at.clear()
         self.field_tables = self.field_at(0).field_tables
 
@@ -417,6 +419,8 @@ class RayTracer:
             lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
             phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger,
             tf=post.table if post is not None else carry)
+        if self.field == "bspline":
+            arguments["quant"] = self.quant
         for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
             if self.field == "bspline":
                 field_tables = None  # the last region's pool goes before the next one comes
