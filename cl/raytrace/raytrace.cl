@@ -351,10 +351,18 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
 #ifdef FIELD_MIXES
             piece_end = field_mixed(&active) ? -INFINITY : INFINITY;
         }
-        if (!(t < piece_end)) { /* a mixed brick's next piece: the coarse slot or the fine one (field_piece) */
-            const Planes cells = next_planes(x0, dd, inv, t, active.coarse_lat);
-            piece_end = fmin(brick_end, nearest(&cells));
-            lat = field_piece(G, X0 + (t + piece_end) / 2 * D, &active);
+        if (!(t < piece_end)) { /* a mixed brick's next run of pieces with one flag: the coarse slot or the fine one */
+            Planes cuts = next_planes(x0, dd, inv, t, active.piece_lat);
+            piece_end = fmin(brick_end, nearest(&cuts));
+            const bool coarse = field_piece(G, X0 + (t + piece_end) / 2 * D, &active);
+            while (piece_end < brick_end) {
+                step_planes(X0, inv3, step, piece_end, active.piece_lat, &cuts);
+                const real next = fmin(brick_end, nearest(&cuts));
+                if (field_piece(G, X0 + (piece_end + next) / 2 * D, &active) != coarse)
+                    break;
+                piece_end = next;
+            }
+            lat = field_run(&active, coarse);
             replan = true;
 #endif
         }
