@@ -338,20 +338,27 @@ def test_a_device_memory_cap_too_small_names_the_least_that_works(cap, size):
     assert render(f"{least.group(1)}{least.group(2)}").image.shape == (size, size, 4)
 
 
-def piece_slot(field: bricks.BrickField, x) -> int:
-    """The slot the march reads at grid-0 point ``x`` (z, y, x) at full detail: a mixed brick's coarse slot in its
-    pieces flagged coarse (field_piece in cl/raytrace/field_bspline.h), else the page table's."""
+def piece_flag(field: bricks.BrickField, x) -> tuple:
+    """The slot the page table names at grid-0 point ``x`` (z, y, x) at full detail (-1: none) and, in a mixed
+    brick, the flag of the piece holding ``x`` (field_piece in cl/raytrace/field_bspline.h; else -1)."""
     b = np.floor(x / BRICK).astype(int) - field.origin
     if np.any(b < 0) or np.any(b >= field.shape) or field.pages[0][tuple(b)] < 0:
-        return -1
+        return -1, -1
     slot = field.pages[0][tuple(b)]
     coarse, table, n, side = field.mixes[slot]
     if coarse < 0:
-        return slot
+        return slot, -1
     o, h = field.lattices[coarse][0], field.lattices[coarse][3]
     first = np.floor((np.floor(x / BRICK) * BRICK - o) / h) * (h // side)  # the brick's first coarse cell's piece
     k = np.clip((np.floor((x - o) / side) - first).astype(int), 0, n - 1)
-    return coarse if field.pieces[table + (k[0] * n + k[1]) * n + k[2]] else slot
+    return slot, int(field.pieces[table + (k[0] * n + k[1]) * n + k[2]])
+
+
+def piece_slot(field: bricks.BrickField, x) -> int:
+    """The slot the march reads at grid-0 point ``x`` (z, y, x) at full detail: a mixed brick's coarse slot in its
+    pieces flagged coarse, else the page table's."""
+    slot, flag = piece_flag(field, x)
+    return field.mixes[slot, 0] if flag == 1 else slot
 
 
 def test_bernstein_floors_bound_each_cell_and_are_the_cubic_bezier_points():
@@ -429,6 +436,12 @@ def test_mixed_pieces_are_the_clamped_field(levels):
     assert np.abs(ref).max() > 0.05
     np.testing.assert_allclose(got, ref, rtol=0, atol=2e-6 * np.abs(ref).max())
     assert got[:120, 3].min() >= -1e-7
+    # the pieces the march passes (flag 2): the content-clamped model is 0 there, and so is the clamped slot
+    x0 = rng.uniform(0, 32, (4000, 3))
+    x0 = x0[np.array([piece_flag(field, x)[1] for x in x0]) == 2][:60]
+    assert len(x0) == 60
+    assert np.all(_content_field(wv)(fine_to_world(x0, 4, wv.shape, wv.spacing, wv.origin), False) == 0)
+    assert np.all(pool_field(wv, field, x0) == 0)
 
 
 @pytest.mark.parametrize("levels", [2, 3])

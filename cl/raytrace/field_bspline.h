@@ -91,9 +91,13 @@ inline real4 field_lattice(const Field G, const real3 x, Active *A)
 /* whether the ray is in a mixed brick */
 inline bool field_mixed(const Active *A) { return A->coarse >= 0; }
 
-/* In a mixed brick: whether the piece holding x is marched on the coarse slot (its flag).  The brick's pieces
- * start with the first coarse cell holding one of its cells. */
-inline bool field_piece(const Field G, const real3 x, const Active *A)
+/* In a mixed brick: the flag of the piece holding x (PIECE_FINE, PIECE_COARSE: marched on that slot; PIECE_EMPTY:
+ * no content voxel reaches it, the clamped field is 0 there).  The brick's pieces start with the first coarse
+ * cell holding one of its cells. */
+#define PIECE_FINE 0
+#define PIECE_COARSE 1
+#define PIECE_EMPTY 2
+inline int field_piece(const Field G, const real3 x, const Active *A)
 {
     const real3 o = A->coarse_lat.xyz, first = floor(x / FIELD_BRICK) * FIELD_BRICK;
     const int3 k = clamp(convert_int3(floor((x - o) / A->piece_lat.w)) -
@@ -101,11 +105,11 @@ inline bool field_piece(const Field G, const real3 x, const Active *A)
     return G.pieces[A->table + (k.z * A->n + k.y) * A->n + k.x];
 }
 
-/* In a mixed brick: a run of pieces read from the coarse slot or from the fine one; its knot planes */
-inline real4 field_run(Active *A, const bool coarse)
+/* In a mixed brick: a run of pieces with one flag, read from the coarse slot or from the fine one; its knot planes */
+inline real4 field_run(Active *A, const int flag)
 {
-    A->slot = coarse ? A->coarse : A->fine;
-    return coarse ? A->coarse_lat : A->fine_lat;
+    A->slot = flag == PIECE_COARSE ? A->coarse : A->fine;
+    return flag == PIECE_COARSE ? A->coarse_lat : A->fine_lat;
 }
 
 /* w[r] = N_j(u + r) (BSPLINE_WEIGHTS) and dw[r] = N_j'(u + r) (BSPLINE_DERIVATIVES), r = 0..j-1:

@@ -354,16 +354,20 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
         if (!(t < piece_end)) { /* a mixed brick's next run of pieces with one flag: the coarse slot or the fine one */
             Planes cuts = next_planes(x0, dd, inv, t, active.piece_lat);
             piece_end = fmin(brick_end, nearest(&cuts));
-            const bool coarse = field_piece(G, X0 + (t + piece_end) / 2 * D, &active);
+            const int flag = field_piece(G, X0 + (t + piece_end) / 2 * D, &active);
             while (piece_end < brick_end) {
                 step_planes(X0, inv3, step, piece_end, active.piece_lat, &cuts);
                 const real next = fmin(brick_end, nearest(&cuts));
-                if (field_piece(G, X0 + (piece_end + next) / 2 * D, &active) != coarse)
+                if (field_piece(G, X0 + (piece_end + next) / 2 * D, &active) != flag)
                     break;
                 piece_end = next;
             }
-            lat = field_run(&active, coarse);
+            lat = field_run(&active, flag);
             replan = true;
+            if (flag == PIECE_EMPTY) { /* no content reaches: the field is 0 (as CLW_CONTENT's cells below) */
+                t = piece_end;
+                continue;
+            }
 #endif
         }
         if (replan) { /* the next knot plane per axis, from the position at t */

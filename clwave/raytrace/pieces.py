@@ -71,8 +71,9 @@ def alpha_floors(coef, wavelet, parts: int = 1, where=None) -> np.ndarray:
 def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
     """Per slot (int32 (slots, 4)): its coarse slot, the first of its pieces' flags, the pieces per axis and a
     piece's side in fine cells (-1, 0, 0, 0 where the slot is not a mixed brick's fine slot), and the flags (uint8,
-    1: the piece is marched on the coarse slot), for the fine slots ``alt >= 0`` whose coarse slot is ``alt``
-    (docs/raytracing.md §3).  The pieces of a brick are the :data:`PIECE`-cell parts of the coarse cells that
+    1: the piece is marched on the coarse slot; 2: no content voxel reaches it, so that the clamped field is 0 there
+    and the march passes it; 0: marched on the fine slot), for the fine slots ``alt >= 0`` whose coarse slot is
+    ``alt`` (docs/raytracing.md §3).  The pieces of a brick are the :data:`PIECE`-cell parts of the coarse cells that
     hold its cells, from the first of those coarse cells.
 
     ``lay``: :func:`clwave.raytrace.bricks.layout`; ``lattices``: per level its knot lattice; ``alpha``: the
@@ -81,31 +82,36 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
     """
     mixes = np.zeros((len(alt), 4), np.int32)
     mixes[:, 0] = -1
-    flags, slots, offset = [], [], 0
+    flags, empty, slots, offset = [], [], [], 0
     fine = np.flatnonzero(alt >= 0)
     bricks = lay["bricks"]
     for bz in np.unique(bricks[fine, 0]):
         sel = fine[bricks[fine, 0] == bz]
         lo = bricks[sel].min(axis=0)
         count = bricks[sel].max(axis=0) - lo + 1
-        inner = None
+        inner = reach = None
         for s in sel:
             coarse, b = int(alt[s]), bricks[s]
-            if inner is None and coarse != s:  # a clamped brick: where only content voxels reach
+            if inner is None and coarse != s:  # a clamped brick: where only content voxels reach, where any does
                 inner = content_cells(wv, lo * BRICK, count * BRICK, every=True).astype(bool)
+                reach = content_cells(wv, lo * BRICK, count * BRICK).astype(bool)
             level = int(lay["levels"][coarse])
             step, origin = 2 ** level, float(lattices[level][0])  # one origin on every axis
             lead = int((BRICK * b[0] - origin) % step)  # the brick's first cell in its first coarse cell
             n = -(-(lead + BRICK) // step)
             side = min(PIECE, step)
-            cells = np.ones((n * step,) * 3, bool)
+            cells, unreached = np.ones((n * step,) * 3, bool), np.ones((n * step,) * 3, bool)  # beyond the brick too
             at = tuple(slice(BRICK * (k - o), BRICK * (k - o + 1)) for k, o in zip(b, lo))
+            mine = (slice(lead, lead + BRICK),) * 3
             if coarse != s:  # else an unclamped brick mixed with itself: alpha alone decides
-                cells[lead:lead + BRICK, lead:lead + BRICK, lead:lead + BRICK] = inner[at]
+                cells[mine], unreached[mine] = inner[at], ~reach[at]
+            else:
+                unreached[mine] = False
             k = n * step // side  # pieces per axis
             mixes[s] = (coarse, offset, k, side)
             slots.append(s)
             flags.append(cells.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)))
+            empty.append(unreached.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)))
             offset += k ** 3
     if alpha is not None:  # and where alpha's Bernstein coefficients are >= 0: the alpha boxes read at once
         need = [i for i, f in enumerate(flags) if f.any()]
@@ -121,7 +127,9 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
             floors = alpha_floors(np.stack([boxes[k].reshape(shape) for k in same]), wavelet, parts, np.stack(some))
             for k, floor in zip(same, floors):
                 flags[need[k]] &= floor >= 0
-    return mixes, (np.concatenate([f.astype(np.uint8).ravel() for f in flags]) if flags else np.zeros(1, np.uint8))
+    if not flags:
+        return mixes, np.zeros(1, np.uint8)
+    return mixes, np.concatenate([(f + 2 * e).astype(np.uint8).ravel() for f, e in zip(flags, empty)])
 
 
 def _alpha_boxes(pool, spill, starts, sizes) -> list:
