@@ -4,10 +4,13 @@ A brick where content and empty voxels meet is expanded at level 0 with the empt
 zeroed (the content clamp).  But in a fine cell that only content voxels' B-splines reach, the clamp zeroes
 nothing: the field there is the unclamped one, which is exactly the brick's field at its own (coarser) level,
 since refining a B-spline expansion is exact.  So such a brick keeps a second, **coarse** slot at that level, and
-the ray crosses the brick's cells of that coarser lattice as pieces: a piece whose fine cells are all reached by
-content alone, and where alpha cannot dip below 0 (the least Bernstein coefficient of alpha's polynomial on that
-coarse cell is at least 0: the same reason as the fine segments of §3), is one coarse segment read from the
-coarse slot; any other piece is marched cell by cell on the clamped fine slot.  Both give the same function.
+the ray crosses the brick as pieces, parts of that coarser lattice's cells ``PIECE`` fine cells a side: a piece whose
+fine cells are all reached by content alone, and where alpha cannot dip below 0 (the least Bernstein coefficient
+of alpha's polynomial on that part of the coarse cell is at least 0: the same reason as the fine segments of §3),
+is read from the coarse slot; a piece that no content voxel reaches is passed (the clamped field is 0 there); any
+other is marched cell by cell on the clamped fine slot.  Both slots give the same function.  A coarse cell with
+one rim cell in it keeps its other parts on the coarse slot, and the march crosses a run of pieces with one flag
+on one slot, in segments of that slot's lattice.
 """
 
 from __future__ import annotations
@@ -101,8 +104,10 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
             n = -(-(lead + BRICK) // step)
             side = min(PIECE, step)
             cells, unreached = np.ones((n * step,) * 3, bool), np.ones((n * step,) * 3, bool)  # beyond the brick too
+            inside = np.zeros((n * step,) * 3, bool)
             at = tuple(slice(BRICK * (k - o), BRICK * (k - o + 1)) for k, o in zip(b, lo))
             mine = (slice(lead, lead + BRICK),) * 3
+            inside[mine] = True
             if coarse != s:  # else an unclamped brick mixed with itself: alpha alone decides
                 cells[mine], unreached[mine] = inner[at], ~reach[at]
             else:
@@ -110,8 +115,9 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
             k = n * step // side  # pieces per axis
             mixes[s] = (coarse, offset, k, side)
             slots.append(s)
-            flags.append(cells.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)))
-            empty.append(unreached.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)))
+            crossed = inside.reshape(k, side, k, side, k, side).any(axis=(1, 3, 5))  # the others are never crossed
+            flags.append(cells.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)) & crossed)
+            empty.append(unreached.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)) & crossed)
             offset += k ** 3
     if alpha is not None:  # and where alpha's Bernstein coefficients are >= 0: the alpha boxes read at once
         need = [i for i, f in enumerate(flags) if f.any()]
