@@ -364,7 +364,8 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             }
             lat = field_run(&active, flag);
             replan = true;
-            if (flag == PIECE_EMPTY) { /* no content reaches: the field is 0 (as CLW_CONTENT's cells below) */
+            if (flag == PIECE_EMPTY && !POST) { /* no content reaches: the field is 0 (as CLW_CONTENT's cells below);
+                                                * post-classified, 0 is classified (marched on the fine slot) */
                 t = piece_end;
                 continue;
             }
