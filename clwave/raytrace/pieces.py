@@ -64,8 +64,8 @@ def alpha_floors(coef, wavelet, parts: int = 1, where=None) -> np.ndarray:
     if parts > 1:
         cut = np.stack([bernstein(j, q, parts)[:, ::-1] for q in range(parts)])
         dips = np.flatnonzero((out[:, 0] < 0) & (True if where is None else np.ravel(where)))
-        for chunk in np.array_split(dips, max(1, len(dips) // 4096)):
-            out[chunk] = floors(cells[chunk], cut)
+        for start in range(0, len(dips), 4096):
+            out[dips[start:start + 4096]] = floors(cells[dips[start:start + 4096]], cut)
     b = len(lead) - 3
     out = out.reshape(lead + (parts,) * 3).transpose(*range(b), b, b + 3, b + 1, b + 4, b + 2, b + 5)
     return out.reshape(lead[:b] + tuple(n * parts for n in lead[b:]))
