@@ -338,19 +338,27 @@ def test_a_device_memory_cap_too_small_names_the_least_that_works(cap, size):
     assert render(f"{least.group(1)}{least.group(2)}").image.shape == (size, size, 4)
 
 
-def piece_slot(field: bricks.BrickField, x) -> int:
-    """The slot the march reads at grid-0 point ``x`` (z, y, x) at full detail: a mixed brick's coarse slot in its
-    pieces flagged coarse (field_piece in cl/raytrace/field_bspline.h), else the page table's."""
+def piece_flag(field: bricks.BrickField, x) -> tuple:
+    """The slot the page table names at grid-0 point ``x`` (z, y, x) at full detail (-1: none) and, in a mixed
+    brick, the flag of the piece holding ``x`` (field_piece in cl/raytrace/field_bspline.h; else -1)."""
     b = np.floor(x / BRICK).astype(int) - field.origin
     if np.any(b < 0) or np.any(b >= field.shape) or field.pages[0][tuple(b)] < 0:
-        return -1
+        return -1, -1
     slot = field.pages[0][tuple(b)]
-    coarse, table, n, _ = field.mixes[slot]
+    coarse, table, n, side = field.mixes[slot]
     if coarse < 0:
-        return slot
+        return slot, -1
     o, h = field.lattices[coarse][0], field.lattices[coarse][3]
-    k = np.clip((np.floor((x - o) / h) - np.floor((np.floor(x / BRICK) * BRICK - o) / h)).astype(int), 0, n - 1)
-    return coarse if field.pieces[table + (k[0] * n + k[1]) * n + k[2]] else slot
+    first = np.floor((np.floor(x / BRICK) * BRICK - o) / h) * (h // side)  # the brick's first coarse cell's piece
+    k = np.clip((np.floor((x - o) / side) - first).astype(int), 0, n - 1)
+    return slot, int(field.pieces[table + (k[0] * n + k[1]) * n + k[2]])
+
+
+def piece_slot(field: bricks.BrickField, x) -> int:
+    """The slot the march reads at grid-0 point ``x`` (z, y, x) at full detail: a mixed brick's coarse slot in its
+    pieces flagged coarse, else the page table's."""
+    slot, flag = piece_flag(field, x)
+    return field.mixes[slot, 0] if flag == 1 else slot
 
 
 def test_bernstein_floors_bound_each_cell_and_are_the_cubic_bezier_points():
@@ -375,25 +383,45 @@ def test_bernstein_floors_bound_each_cell_and_are_the_cubic_bezier_points():
             box = coef[tuple(slice(c, c + j) for c in cell)]
             samples = np.einsum("ai,bj,ck,ijk->abc", w[0], w[1], w[2], box)
             assert floors[cell] <= samples.min() + 1e-12
-        assert np.allclose(alpha_floors(np.full((j, j, j), 0.3), wav), 0.3)  # a constant is its own hull
+        for parts in (1, 2):  # a constant is its own hull
+            assert np.allclose(alpha_floors(np.full((j, j, j), 0.3), wav, parts), 0.3)
+        # the floors of a cell's p^3 parts: each at most the part's samples, at least the whole cell's floor, and
+        # the polynomial whose Bernstein coefficients they are is the B-spline sum on the part (its end values)
+        parts = alpha_floors(coef, wav, 4)
+        assert parts.shape == (8, 8, 8)
+        assert np.all(parts.reshape(2, 4, 2, 4, 2, 4).min(axis=(1, 3, 5)) >= floors - 1e-12)
+        for cell in product(range(2), repeat=3):
+            box = coef[tuple(slice(c, c + j) for c in cell)]
+            for part in product(range(4), repeat=3):
+                w = [np.array([[bspline(j, uu + (j - 1 - q)) for q in range(j)] for uu in (p + u) / 4]) for p in part]
+                samples = np.einsum("ai,bj,ck,ijk->abc", w[0], w[1], w[2], box)
+                assert parts[tuple(4 * c + p for c, p in zip(cell, part))] <= samples.min() + 1e-12
+    for part in range(3):  # a part's Bernstein coefficients end at the piece's values at the part's ends
+        m = bernstein(4, part, 3)
+        ends = np.array([[bspline(4, u + r) for r in range(4)] for u in (part / 3, (part + 1) / 3)])
+        np.testing.assert_allclose(m[[0, -1]], ends, atol=1e-12)
 
 
-def mixed_model():
-    """The classified ball of test_raytrace (a sharp edge in an empty margin) at 5 %: its clamped bricks are
-    level 1 on their own, so they are mixed (docs/raytracing.md §3)."""
+def mixed_model(levels=2):
+    """The classified ball of test_raytrace (a sharp edge in an empty margin) at 5 % (2 levels) or 2 % (3): its
+    clamped bricks are level 1 (a piece a whole coarse cell) or 3 (a coarse cell 4^3 pieces) on their own, so
+    they are mixed (docs/raytracing.md §3)."""
     from test_raytrace import classified_ball
 
-    return WaveletVolume.from_volume(classified_ball(), "cubic", levels=2).threshold(keep=0.05)
+    return WaveletVolume.from_volume(classified_ball(), "cubic", levels=levels).threshold(keep=0.05 if levels == 2
+                                                                                           else 0.02)
 
 
-def test_mixed_pieces_are_the_clamped_field():
+@pytest.mark.parametrize("levels", [2, 3])
+def test_mixed_pieces_are_the_clamped_field(levels):
     """Where a mixed brick's piece is marched on its coarse slot, the coarse slot's field is the content-clamped
     closed-form model (docs/raytracing.md §3, §4), with alpha >= 0; the other pieces read the clamped slot."""
-    wv = mixed_model()
+    wv = mixed_model(levels)
     field = build(wv)
     mixed = np.flatnonzero(field.mixes[:, 0] >= 0)
     assert len(mixed) and field.pieces.any() and not field.pieces.all()
-    assert np.all(field.levels[field.mixes[mixed, 0]] > 0) and np.all(field.levels[mixed] == 0)
+    assert np.all(field.levels[field.mixes[mixed, 0]] == levels - 1 + (levels == 3))
+    assert np.all(field.levels[mixed] == 0) and np.all(field.mixes[mixed, 3] == 2)  # pieces of 2 fine cells
     rng = np.random.default_rng(5)
     x0 = rng.uniform(0, 32, (4000, 3))
     slots = np.array([piece_slot(field, x) for x in x0])
@@ -409,13 +437,24 @@ def test_mixed_pieces_are_the_clamped_field():
     assert np.abs(ref).max() > 0.05
     np.testing.assert_allclose(got, ref, rtol=0, atol=2e-6 * np.abs(ref).max())
     assert got[:120, 3].min() >= -1e-7
+    # the pieces the march passes (flag 2): the content-clamped model is 0 there, and so is the clamped slot
+    x0 = rng.uniform(0, 32, (4000, 3))
+    x0 = x0[np.array([piece_flag(field, x)[1] for x in x0]) == 2][:60]
+    assert len(x0) == 60
+    assert np.all(_content_field(wv)(fine_to_world(x0, 4, wv.shape, wv.spacing, wv.origin), False) == 0)
+    assert np.all(pool_field(wv, field, x0) == 0)
 
 
-def test_mixed_bricks_render_the_fine_function_with_fewer_segments():
+@pytest.mark.parametrize("levels", [2, 3])
+def test_mixed_bricks_render_the_fine_function_with_fewer_segments(levels, monkeypatch):
     """Full detail of a model with mixed bricks: within the tolerance of the same tracer with every piece marched
     on the clamped fine slot (the function of today's bricks) and of a float64 render, with fewer segments (in
-    passes: test_out_of_core_passes_equal_one_pass, whose model has mixed bricks)."""
-    tracer = RayTracer(mixed_model())
+    passes: test_out_of_core_passes_equal_one_pass, whose model has mixed bricks); with level-3 bricks, fewer
+    segments than with whole coarse cells as pieces, within the tolerance of that render too."""
+    from clwave.raytrace import pieces
+
+    wv = mixed_model(levels)
+    tracer = RayTracer(wv)
     cam = clwave.Camera(30, 20, size=40)
     mixed = tracer.render(cam, tolerance=1e-3)
     exact = tracer.render(cam, tolerance=1e-6, precision="double").image
@@ -427,4 +466,10 @@ def test_mixed_bricks_render_the_fine_function_with_fewer_segments():
     for image in (mixed.image, fine.image):
         assert np.max(np.abs(image - exact)) <= 1e-3
     assert mixed.meta["segments"] < fine.meta["segments"] and mixed.meta["mixed_bricks"] == 8
-    assert mixed.meta["segments_by_lattice"]["2"] > 1000 + fine.meta["segments_by_lattice"]["2"]
+    lattice = "2" if levels == 2 else "8+"
+    assert mixed.meta["segments_by_lattice"][lattice] > 500 + fine.meta["segments_by_lattice"][lattice]
+    if levels == 3:
+        monkeypatch.setattr(pieces, "PIECE", 8)
+        whole = RayTracer(wv).render(cam, tolerance=1e-3)
+        assert np.max(np.abs(whole.image - exact)) <= 1e-3
+        assert mixed.meta["segments"] < 0.97 * whole.meta["segments"]

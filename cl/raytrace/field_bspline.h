@@ -46,11 +46,12 @@ typedef struct {
 #define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices, mixes, pieces, quant}
 #define FIELD_BRICK CLW_SUPER_CELLS /* a brick is a superblock */
 /* The brick the ray is in (field_lattice sets it): the slot its segments read, and in a mixed brick
- * (clwave/raytrace/pieces.py, docs/raytracing.md §3) its fine and coarse slots, the coarse knot lattice whose
- * cells the ray crosses as pieces, and the brick's piece flags (field_piece picks a piece's slot) */
+ * (clwave/raytrace/pieces.py, docs/raytracing.md §3) its fine and coarse slots and their knot lattices, the
+ * lattice of its pieces (parts of the coarse cells, `piece_lat.w` fine cells a side; `parts` per coarse cell and
+ * axis, `n` per axis in the brick) and its piece flags (field_piece reads a piece's, field_run picks a slot) */
 typedef struct {
-    int slot, fine, coarse, table, n;
-    real4 fine_lat, coarse_lat;
+    int slot, fine, coarse, table, n, parts;
+    real4 fine_lat, coarse_lat, piece_lat;
 } Active;
 #define FIELD_MIXES
 inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D)
@@ -84,6 +85,8 @@ inline real4 field_lattice(const Field G, const real3 x, Active *A)
         A->table = m.y;
         A->n = m.z;
         A->coarse_lat = to_real4(G.lattices[m.x]);
+        A->piece_lat = (real4)(A->coarse_lat.xyz, (real)m.w);
+        A->parts = (int)(A->coarse_lat.w / m.w);
     }
     return A->fine_lat;
 }
@@ -91,16 +94,25 @@ inline real4 field_lattice(const Field G, const real3 x, Active *A)
 /* whether the ray is in a mixed brick */
 inline bool field_mixed(const Active *A) { return A->coarse >= 0; }
 
-/* In a mixed brick: the slot of the piece (the brick's part of a coarse cell) holding x, and its knot planes:
- * the coarse slot's where its flag is set, else the fine slot's */
-inline real4 field_piece(const Field G, const real3 x, Active *A)
+/* In a mixed brick: the flag of the piece holding x (PIECE_FINE, PIECE_COARSE: marched on that slot; PIECE_EMPTY:
+ * no content voxel reaches it, the clamped field is 0 there).  The brick's pieces start with the first coarse
+ * cell holding one of its cells. */
+#define PIECE_FINE 0
+#define PIECE_COARSE 1
+#define PIECE_EMPTY 2
+inline int field_piece(const Field G, const real3 x, const Active *A)
 {
-    const real h = A->coarse_lat.w;
     const real3 o = A->coarse_lat.xyz, first = floor(x / FIELD_BRICK) * FIELD_BRICK;
-    const int3 k = clamp(convert_int3(floor((x - o) / h) - floor((first - o) / h)), 0, A->n - 1);
-    const bool coarse = G.pieces[A->table + (k.z * A->n + k.y) * A->n + k.x];
-    A->slot = coarse ? A->coarse : A->fine;
-    return coarse ? A->coarse_lat : A->fine_lat;
+    const int3 k = clamp(convert_int3(floor((x - o) / A->piece_lat.w)) -
+                         convert_int3(floor((first - o) / A->coarse_lat.w)) * A->parts, 0, A->n - 1);
+    return G.pieces[A->table + (k.z * A->n + k.y) * A->n + k.x];
+}
+
+/* In a mixed brick: a run of pieces with one flag, read from the coarse slot or from the fine one; its knot planes */
+inline real4 field_run(Active *A, const int flag)
+{
+    A->slot = flag == PIECE_COARSE ? A->coarse : A->fine;
+    return flag == PIECE_COARSE ? A->coarse_lat : A->fine_lat;
 }
 
 /* w[r] = N_j(u + r) (BSPLINE_WEIGHTS) and dw[r] = N_j'(u + r) (BSPLINE_DERIVATIVES), r = 0..j-1:

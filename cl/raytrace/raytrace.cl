@@ -376,11 +376,24 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
 #ifdef FIELD_MIXES
             piece_end = field_mixed(&active) ? -INFINITY : INFINITY;
         }
-        if (!(t < piece_end)) { /* a mixed brick's next piece: the coarse slot or the fine one (field_piece) */
-            const Planes cells = next_planes(x0, dd, inv, t, active.coarse_lat);
-            piece_end = fmin(brick_end, nearest(&cells));
-            lat = field_piece(G, X0 + (t + piece_end) / 2 * D, &active);
+        if (!(t < piece_end)) { /* a mixed brick's next run of pieces with one flag: the coarse slot or the fine one */
+            Planes cuts = next_planes(x0, dd, inv, t, active.piece_lat);
+            piece_end = fmin(brick_end, nearest(&cuts));
+            const int flag = field_piece(G, X0 + (t + piece_end) / 2 * D, &active);
+            while (piece_end < brick_end) {
+                step_planes(X0, inv3, step, piece_end, active.piece_lat, &cuts);
+                const real next = fmin(brick_end, nearest(&cuts));
+                if (field_piece(G, X0 + (piece_end + next) / 2 * D, &active) != flag)
+                    break;
+                piece_end = next;
+            }
+            lat = field_run(&active, flag);
             replan = true;
+            if (flag == PIECE_EMPTY && !POST) { /* no content reaches: the field is 0 (as CLW_CONTENT's cells below);
+                                                * post-classified, 0 is classified (marched on the fine slot) */
+                t = piece_end;
+                continue;
+            }
 #endif
         }
         /* a segment of a coarser lattice may cross blocks: the region holding t decides a skip, before the segment's

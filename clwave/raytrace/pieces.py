@@ -4,10 +4,13 @@ A brick where content and empty voxels meet is expanded at level 0 with the empt
 zeroed (the content clamp).  But in a fine cell that only content voxels' B-splines reach, the clamp zeroes
 nothing: the field there is the unclamped one, which is exactly the brick's field at its own (coarser) level,
 since refining a B-spline expansion is exact.  So such a brick keeps a second, **coarse** slot at that level, and
-the ray crosses the brick's cells of that coarser lattice as pieces: a piece whose fine cells are all reached by
-content alone, and where alpha cannot dip below 0 (the least Bernstein coefficient of alpha's polynomial on that
-coarse cell is at least 0: the same reason as the fine segments of §3), is one coarse segment read from the
-coarse slot; any other piece is marched cell by cell on the clamped fine slot.  Both give the same function.
+the ray crosses the brick as pieces, parts of that coarser lattice's cells ``PIECE`` fine cells a side: a piece whose
+fine cells are all reached by content alone, and where alpha cannot dip below 0 (the least Bernstein coefficient
+of alpha's polynomial on that part of the coarse cell is at least 0: the same reason as the fine segments of §3),
+is read from the coarse slot; a piece that no content voxel reaches is passed (the clamped field is 0 there); any
+other is marched cell by cell on the clamped fine slot.  Both slots give the same function.  A coarse cell with
+one rim cell in it keeps its other parts on the coarse slot, and the march crosses a run of pieces with one flag
+on one slot, in segments of that slot's lattice.
 """
 
 from __future__ import annotations
@@ -22,31 +25,59 @@ from ..model.bspline import bspline
 from .bounds import content_cells
 from .classified import bernstein_matrix
 
+#: a piece's side in fine cells (at most the coarse cell's): the host count on hydrogen 256^3 at 0.1 % gave the
+#: mixed bricks 0.76 of their all-fine segments with whole coarse cells (8), 0.65 with 4 and 0.60 with 2
+#: (docs/raytracing.md §3)
+PIECE = 2
+
 
 @lru_cache
-def bernstein(j: int) -> np.ndarray:
-    """(j, j): row k the Bernstein coefficient k (degree j - 1, on the cell [0, 1]) of the polynomial piece
-    ``sum_r w_r N_j(u + r)`` of order j, per weight r (the coefficient r cells before the cell's last,
-    docs/model.md §1): the pieces' values at j points, taken to Bernstein coefficients."""
-    u = np.linspace(0.0, 1.0, j)
-    return bernstein_matrix(2 * u - 1) @ np.stack([bspline(j, u + r) for r in range(j)], axis=1)
+def bernstein(j: int, part: int = 0, parts: int = 1) -> np.ndarray:
+    """(j, j): row k the Bernstein coefficient k (degree j - 1) of the polynomial piece ``sum_r w_r N_j(u + r)`` of
+    order j on the part ``[part, part + 1] / parts`` of the cell [0, 1], per weight r (the coefficient r cells
+    before the cell's last, docs/model.md §1): the piece's values at j points of the part, taken to Bernstein
+    coefficients on it."""
+    v = np.linspace(0.0, 1.0, j)
+    u = (part + v) / parts
+    return bernstein_matrix(2 * v - 1) @ np.stack([bspline(j, u + r) for r in range(j)], axis=1)
 
 
-def alpha_floors(coef, wavelet) -> np.ndarray:
-    """(n, n, n): per cell of a brick's lattice box ``coef`` (n + j - 1 per axis, z, y, x) the least Bernstein
-    coefficient of its polynomial piece: the field is at least that on the cell (convex hull)."""
+def alpha_floors(coef, wavelet, parts: int = 1, where=None) -> np.ndarray:
+    """(..., n p, n p, n p) for ``parts`` p: per cell of a brick's lattice box ``coef`` (..., n + j - 1 per axis, z,
+    y, x; leading axes: bricks) cut into p^3 equal parts, the least Bernstein coefficient of the cell's polynomial
+    on that part: the field is at least that there (convex hull).  A part's coefficients are convex combinations
+    of the whole cell's (subdivision), so only a cell whose own floor is negative is cut, and only where ``where``
+    (..., n, n, n) is set (elsewhere its parts get the cell's floor)."""
     j = wavelet.order
-    m = bernstein(j)[:, ::-1]  # per window position q = j - 1 - r
-    out = np.asarray(coef, np.float64)
-    for axis in range(3):  # separably: each window of j along the axis times the matrix (a Bernstein axis added)
-        out = np.lib.stride_tricks.sliding_window_view(out, j, axis=axis) @ m.T
-    return out.min(axis=(-3, -2, -1))
+    coef = np.asarray(coef, np.float64)
+    cells = np.lib.stride_tricks.sliding_window_view(coef, (j, j, j), axis=(-3, -2, -1))  # (..., n, n, n, j, j, j)
+    lead = cells.shape[:-3]
+    cells = cells.reshape(-1, j, j, j)
+
+    def floors(rows, m):  # per cell and part (m: per part, its matrix by window position), one axis at a time
+        x = np.einsum("nijk,rck->nrijc", rows, m)
+        x = np.einsum("nrijc,qbj->nqribc", x, m)
+        x = np.einsum("nqribc,pai->npqrabc", x, m)
+        return x.reshape(len(rows), len(m) ** 3, -1).min(axis=2)  # the least coefficient of each part
+
+    out = np.repeat(floors(cells, bernstein(j)[None, :, ::-1]), parts ** 3, axis=1)
+    if parts > 1:
+        cut = np.stack([bernstein(j, q, parts)[:, ::-1] for q in range(parts)])
+        dips = np.flatnonzero((out[:, 0] < 0) & (True if where is None else np.ravel(where)))
+        for start in range(0, len(dips), 4096):
+            out[dips[start:start + 4096]] = floors(cells[dips[start:start + 4096]], cut)
+    b = len(lead) - 3
+    out = out.reshape(lead + (parts,) * 3).transpose(*range(b), b, b + 3, b + 1, b + 4, b + 2, b + 5)
+    return out.reshape(lead[:b] + tuple(n * parts for n in lead[b:]))
 
 
 def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
-    """Per slot (int32 (slots, 4)): its coarse slot, the first of its pieces' flags, the pieces per axis (-1, 0,
-    0, 0 where the slot is not a mixed brick's fine slot), and the flags (uint8, 1: the piece is marched on the
-    coarse slot), for the fine slots ``alt >= 0`` whose coarse slot is ``alt`` (docs/raytracing.md §3).
+    """Per slot (int32 (slots, 4)): its coarse slot, the first of its pieces' flags, the pieces per axis and a
+    piece's side in fine cells (-1, 0, 0, 0 where the slot is not a mixed brick's fine slot), and the flags (uint8,
+    1: the piece is marched on the coarse slot; 2: no content voxel reaches it, so that the clamped field is 0 there
+    and the march passes it; 0: marched on the fine slot), for the fine slots ``alt >= 0`` whose coarse slot is
+    ``alt`` (docs/raytracing.md §3).  The pieces of a brick are the :data:`PIECE`-cell parts of the coarse cells that
+    hold its cells, from the first of those coarse cells.
 
     ``lay``: :func:`clwave.raytrace.bricks.layout`; ``lattices``: per level its knot lattice; ``alpha``: the
     group holding alpha (None: none); the pool on the device, or the scratch file (:class:`~.passes.Spill`).
@@ -54,38 +85,57 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
     """
     mixes = np.zeros((len(alt), 4), np.int32)
     mixes[:, 0] = -1
-    flags, slots, offset = [], [], 0
+    flags, empty, slots, offset = [], [], [], 0
     fine = np.flatnonzero(alt >= 0)
     bricks = lay["bricks"]
     for bz in np.unique(bricks[fine, 0]):
         sel = fine[bricks[fine, 0] == bz]
         lo = bricks[sel].min(axis=0)
         count = bricks[sel].max(axis=0) - lo + 1
-        inner = None
+        inner = reach = None
         for s in sel:
             coarse, b = int(alt[s]), bricks[s]
-            if inner is None and coarse != s:  # a clamped brick: where only content voxels reach
+            if inner is None and coarse != s:  # a clamped brick: where only content voxels reach, where any does
                 inner = content_cells(wv, lo * BRICK, count * BRICK, every=True).astype(bool)
+                reach = content_cells(wv, lo * BRICK, count * BRICK).astype(bool)
             level = int(lay["levels"][coarse])
             step, origin = 2 ** level, float(lattices[level][0])  # one origin on every axis
             lead = int((BRICK * b[0] - origin) % step)  # the brick's first cell in its first coarse cell
             n = -(-(lead + BRICK) // step)
-            cells = np.ones((n * step,) * 3, bool)
+            side = min(PIECE, step)
+            cells, unreached = np.ones((n * step,) * 3, bool), np.ones((n * step,) * 3, bool)  # beyond the brick too
+            inside = np.zeros((n * step,) * 3, bool)
             at = tuple(slice(BRICK * (k - o), BRICK * (k - o + 1)) for k, o in zip(b, lo))
+            mine = (slice(lead, lead + BRICK),) * 3
+            inside[mine] = True
             if coarse != s:  # else an unclamped brick mixed with itself: alpha alone decides
-                cells[lead:lead + BRICK, lead:lead + BRICK, lead:lead + BRICK] = inner[at]
-            mixes[s] = (coarse, offset, n, 0)
+                cells[mine], unreached[mine] = inner[at], ~reach[at]
+            else:
+                unreached[mine] = False
+            k = n * step // side  # pieces per axis
+            mixes[s] = (coarse, offset, k, side)
             slots.append(s)
-            flags.append(cells.reshape(n, step, n, step, n, step).all(axis=(1, 3, 5)))
-            offset += n ** 3
+            crossed = inside.reshape(k, side, k, side, k, side).any(axis=(1, 3, 5))  # the others are never crossed
+            flags.append(cells.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)) & crossed)
+            empty.append(unreached.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)) & crossed)
+            offset += k ** 3
     if alpha is not None:  # and where alpha's Bernstein coefficients are >= 0: the alpha boxes read at once
         need = [i for i, f in enumerate(flags) if f.any()]
         shapes = [lay["count"][alt[slots[i]], alpha] for i in need]
         boxes = _alpha_boxes(pool, spill, [int(lay["offset"][alt[slots[i]], alpha]) for i in need],
                              [int(np.prod(shape)) for shape in shapes])
-        for i, shape, box in zip(need, shapes, boxes):
-            flags[i] &= alpha_floors(box.reshape(shape), wv.groups[alpha].wavelet) >= 0
-    return mixes, (np.concatenate([f.astype(np.uint8).ravel() for f in flags]) if flags else np.zeros(1, np.uint8))
+        wavelet = wv.groups[alpha].wavelet
+        for shape in {tuple(shape) for shape in shapes}:  # the boxes of one shape at once
+            same = [k for k, other in enumerate(shapes) if tuple(other) == shape]
+            n = shape[0] - wavelet.order + 1
+            parts = len(flags[need[same[0]]]) // n
+            some = [flags[need[k]].reshape(n, parts, n, parts, n, parts).any(axis=(1, 3, 5)) for k in same]
+            floors = alpha_floors(np.stack([boxes[k].reshape(shape) for k in same]), wavelet, parts, np.stack(some))
+            for k, floor in zip(same, floors):
+                flags[need[k]] &= floor >= 0
+    if not flags:
+        return mixes, np.zeros(1, np.uint8)
+    return mixes, np.concatenate([(f + 2 * e).astype(np.uint8).ravel() for f, e in zip(flags, empty)])
 
 
 def _alpha_boxes(pool, spill, starts, sizes) -> list:
