@@ -103,6 +103,7 @@ class SplatRenderer:
         self._work = None  # per-splat buffers of a pass, and the streamed chunk's (coef, values)
         self._sizes = None  # the count tables' sizes of the last view
         self._cone_footprints = {}  # perspective views' texture tables, shared by poses of one direction
+        self._pools = {}  # the last perspective view's texel pools on the device, by their ConeTables.key
         for gi, g in enumerate(wv.groups):
             table = wv.ranked(gi)
             # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22); each present band
@@ -181,6 +182,14 @@ class SplatRenderer:
         if view.perspective and self.coarse:  # what coarsening leaves of the tolerance (docs/splatting.md §8)
             acc.drop_share = [drop_share(fg, self.wv.levels, self.coarse) for fg in factors]
         return acc
+
+    def texel_pools(self, tables: list) -> list:
+        """Each table's texel pool on the device; a perspective view whose footprints are the last view's (a pose
+        moved by a translation) reuses its upload.  Only the last view's pools are held."""
+        keys = [getattr(t, "key", None) for t in tables]
+        pools = [self._pools[k] if k in self._pools else self.cc.upload(t.texels) for k, t in zip(keys, tables)]
+        self._pools = {k: pool for k, pool in zip(keys, pools) if k is not None}
+        return pools
 
     def render(self, camera) -> RenderResult:
         """The X-ray image of one view (a :class:`Camera` or :class:`ConeBeam`) from every coefficient."""
@@ -271,7 +280,9 @@ class Accumulator:
     def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list, upto=None):
         self.r, self.view, self.layers, self.tables, self.upto = renderer, view, layers, tables, upto
         cc = renderer.cc
-        self.device_tables = [{name: cc.upload(getattr(t, name)) for name in t.names} for t in tables]
+        pools = renderer.texel_pools(tables)
+        self.device_tables = [{name: pool if name == "texels" else cc.upload(getattr(t, name)) for name in t.names}
+                              for t, pool in zip(tables, pools)]
         self.fbs = [cla.zeros(cc.queue, (t.pixels * 4,), np.float32) for t in tables]
         self.stats = dict(splats=0, pairs=0, pixel_updates=0, chunks=0, bin_seconds=0.0, accumulate_seconds=0.0,
                           upload_seconds=0.0, upsample_seconds=0.0)
