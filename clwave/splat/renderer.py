@@ -344,9 +344,10 @@ class Accumulator:
         drops = [None] * len(plans)  # per group: (the candidates left undrawn, the largest sum of their bounds)
         while True:  # E L <= share (top - E L): the dropped splats' error within share of the finished image's maximum
             image, done = self.image(), True
+            tops = [np.abs(image[..., list(g.channels)]).reshape(-1, len(g.channels)).max(axis=0)
+                    for g in r.wv.groups]  # per group and channel
             for gi, (wavelet, bbox, bound) in enumerate(plans):
-                chans, share = list(r.wv.groups[gi].channels), self.drop_share[gi]
-                top = np.abs(image[..., chans]).reshape(-1, len(chans)).max(axis=0)
+                chans, share, top = list(r.wv.groups[gi].channels), self.drop_share[gi], tops[gi]
                 error = None if drops[gi] is None else drops[gi][1] * obliquity  # bound of the dropped splats' error
                 if error is not None and np.all(error <= share * (top - error)):
                     continue
@@ -362,8 +363,7 @@ class Accumulator:
             if done:
                 break
         self.dropped = dict(splats=0, pixel_updates=0, bound=0.0)
-        for gi, ((wavelet, bbox, _), (drop, most)) in enumerate(zip(plans, drops)):
-            top = np.abs(image[..., list(r.wv.groups[gi].channels)]).reshape(-1, len(most)).max(axis=0)
+        for (_, bbox, _), (drop, most), top in zip(plans, drops, tops):
             box = bbox[drop]
             self.dropped["splats"] += int(drop.sum())
             self.dropped["pixel_updates"] += int(np.sum((box[:, 2] - box[:, 0] + 1).astype(np.int64)
