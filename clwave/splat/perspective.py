@@ -375,13 +375,21 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
             placed.append((tex.data, offset, size))
             offset += size
         layer_textures.append(len(ints) - first_tex)
-    pool = np.zeros(offset + 2 * POOL_GUARD, np.float32)  # the guards of zeros before and after
+    pool = _page_aligned(offset + 2 * POOL_GUARD)  # the guards of zeros before and after
     for data, at, size in placed:
         slope_cells(data, count, pool[at:at + size])
     out = SimpleNamespace()
     set_texture_tables(out, boxes, ints, maps, tex_layer, pool)
     node_peaks = np.array(peaks or [np.zeros(int(np.prod(count)))]).reshape(-1, *(np.asarray(count, int)[::-1]))
     return dict(vars(out), band_tex=band_tex, layer_textures=layer_textures, cell_peaks=_cell_range_peaks(node_peaks))
+
+
+def _page_aligned(size: int) -> np.ndarray:
+    """``size`` float32 zeros starting on a 4 KiB page, so that a CPU device uses them in place
+    (:meth:`clwave.splat.renderer.SplatRenderer.texel_pools`)."""
+    block = np.zeros(size + 1024, np.float32)
+    first = (-block.ctypes.data % 4096) // 4
+    return block[first:first + size]
 
 
 def _cell_range_peaks(node_peaks) -> np.ndarray:
