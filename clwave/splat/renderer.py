@@ -186,8 +186,8 @@ class SplatRenderer:
     def texel_pools(self, tables: list) -> list:
         """Each table's texel pool on the device; a perspective view whose footprints are the last view's (a pose
         moved by a translation) reuses its upload.  Only the last view's pools are held.  On a CPU device a
-        perspective pool is the host's array itself (``USE_HOST_PTR``), not a copy: 0.43-0.53 s saved a view
-        for the 148 MB pool of Shepp-Logan 64^3 with coarse framebuffers (docs/benchmarks.md §11)."""
+        perspective pool is the host's array itself (``USE_HOST_PTR``; page-aligned, read only), not a copy
+        (docs/splatting.md §8 "Cost")."""
         keys = [getattr(t, "key", None) for t in tables]
         shared = self.cc.info.kind == "CPU"
         pools = [self._pools[k] if k in self._pools else self.cc.upload(t.texels) if k is None or not shared else
