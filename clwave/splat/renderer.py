@@ -188,12 +188,16 @@ class SplatRenderer:
         moved by a translation) reuses its upload.  Only the last view's pools are held.  On a CPU device a
         perspective pool is the host's array itself (``USE_HOST_PTR``; page-aligned, read only), not a copy
         (docs/splatting.md §8 "Cost")."""
-        keys = [getattr(t, "key", None) for t in tables]
-        shared = self.cc.info.kind == "CPU"
-        pools = [self._pools[k] if k in self._pools else self.cc.upload(t.texels) if k is None or not shared else
-                 cl.Buffer(self.cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=t.texels)
-                 for k, t in zip(keys, tables)]
-        self._pools = {k: pool for k, pool in zip(keys, pools) if k is not None}
+        keys, pools = [getattr(t, "key", None) for t in tables], []
+        for key, t in zip(keys, tables):
+            if key in self._pools:
+                pools.append(self._pools[key])
+            elif key is not None and self.cc.info.kind == "CPU":
+                pools.append(cl.Buffer(self.cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR,
+                                       hostbuf=t.texels))
+            else:
+                pools.append(self.cc.upload(t.texels))
+        self._pools = {key: pool for key, pool in zip(keys, pools) if key is not None}
         return pools
 
     def render(self, camera) -> RenderResult:
