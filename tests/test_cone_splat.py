@@ -119,6 +119,21 @@ def test_sheared_footprints_fft_equal_exact_line_integrals(key):
     assert np.allclose(exact.data[0], ortho, atol=1e-6 * np.abs(ortho).max())
 
 
+def test_sheared_footprints_trimmed_to_the_box_above_tol():
+    # trimming keeps the least box holding every sample above tol of the peak over all nodes, values unchanged
+    n, u, v = view_frame(30.0, 20.0)
+    slopes = np.array([[0.0, 0.0], [0.2, -0.15], [-0.27, 0.27]])
+    full, cut = (sheared_footprints(SplineWavelet(4), (1.0, 2.0, 1.0), n, u, v, {(1, "dad"): 0.1}, slopes, "fft",
+                                    tol=tol)[(1, "dad")] for tol in (0.0, 1e-2))
+    ou, ov = int(full.centre_u - cut.centre_u), int(full.centre_v - cut.centre_v)
+    assert (ou, ov) == (full.centre_u - cut.centre_u, full.centre_v - cut.centre_v)
+    K, nv, nu = cut.data.shape
+    assert np.array_equal(full.data[:, ov:ov + nv, ou:ou + nu], cut.data)
+    above = np.abs(full.data).max(axis=0) > 1e-2 * np.abs(full.data).max()
+    rows, cols = np.flatnonzero(above.any(axis=1)), np.flatnonzero(above.any(axis=0))
+    assert (rows[0], rows[-1], cols[0], cols[-1]) == (ov, ov + nv - 1, ou, ou + nu - 1)
+
+
 def test_slope_interpolation_error_bound():
     # docs/splatting.md §8: between nodes SLOPE_STEP apart a cubic phi-phi-phi footprint interpolates within
     # 3e-3 of its peak (worst at the cell's centre), and the error falls with the square of the step

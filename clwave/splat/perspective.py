@@ -97,56 +97,63 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
                 batch.append(job)
                 held += size
 
-    def make(job):
+    def make(job):  # a node's samples and their largest magnitude along each row and each column
         band, k = job
         nu, h_u, nv, h_v = grids[band]
         su, sv = slopes[k]
         if job in spectra:
-            return _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32)
-        if sampling == "fft":
-            return _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u,
-                                        nv * h_v, 1), np.float32)
-        aa, bb = _axis_points(nu, h_u, False)[0], _axis_points(nv, h_v, False)[0]
-        a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
-        return exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
-                             b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
+            x = _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32)
+        elif sampling == "fft":
+            x = _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u, nv * h_v,
+                                     1), np.float32)
+        else:
+            aa, bb = _axis_points(nu, h_u, False)[0], _axis_points(nv, h_v, False)[0]
+            a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
+            x = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
+                              b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
+        data[band][k] = x
+        magnitude = np.abs(x)
+        return magnitude.max(axis=1), magnitude.max(axis=0)
 
-    samples = thread_map(make, jobs) if len(jobs) > 1 and cores() > 1 else [make(job) for job in jobs]
+    data = {band: np.empty((len(slopes), nv + 1, nu + 1), np.float32) for band, (nu, _, nv, _) in grids.items()}
+    profiles = thread_map(make, jobs) if len(jobs) > 1 and cores() > 1 else [make(job) for job in jobs]
     out = {}
     for band, (nu, h_u, nv, h_v) in grids.items():
-        data = np.stack([x for (b, _), x in zip(jobs, samples) if b == band])
-        cu, cv = float(nu // 2), float(nv // 2)
-        if tol > 0:  # the box of the samples above tol of the peak, over every node
-            mask = np.any(np.abs(data) > tol * np.max(np.abs(data)), axis=0)
-            if mask.any():
-                rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-                data = data[:, rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
-                cu, cv = cu - cols[0], cv - rows[0]
-        out[band] = Texture(np.ascontiguousarray(data), h_u, h_v, cu, cv, sampling, *band)
+        rows, cols = (np.max([p[i] for (b, _), p in zip(jobs, profiles) if b == band], axis=0) for i in (0, 1))
+        cu, cv, x = float(nu // 2), float(nv // 2), data[band]
+        if tol > 0 and rows.max() > 0:  # the box of the samples above tol of the peak, over every node
+            rows, cols = np.flatnonzero(rows > tol * rows.max()), np.flatnonzero(cols > tol * rows.max())
+            x = x[:, rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+            cu, cv = cu - cols[0], cv - rows[0]
+        out[band] = Texture(x, h_u, h_v, cu, cv, sampling, *band)
     return out
 
 
-def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, axes) -> tuple:
+def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, scale) -> tuple:
     """``((texel_u, texel_v), omega)``: a band's texel along each texture axis (world units) and the texture band
-    that set it (docs/splatting.md §8); ``axes``: the sheared texture axes ``(u + s_u n, v + s_v n)`` of every
-    slope node.
+    that set it (docs/splatting.md §8); ``scale``: the view's :func:`texel_scale`.
 
     Smooth footprints (order >= 3) are read at any magnification, so their texels follow the band alone, as
     in §1, ``pi c / max(omega, omega_least)`` with ``omega`` the paper's 14 (doubled for order 6) or
-    ``omega_s``, whatever the pixel, and ``c`` the spacing the footprint varies on along that axis: at least
-    d_min, more where every world axis that the texture axis crosses is coarser (:func:`axis_scale`; a CT's
-    2.5 mm slices seen from the side).  Kinked footprints (orders 1, 2) keep the orthographic rule at the
-    nearest pixel (``pixel``): a fraction of it, so that bilinear reads place their kinks within a fraction of
-    a pixel."""
+    ``omega_s``, whatever the pixel, and ``c`` (``scale``) the spacing the footprint varies on along that axis.
+    Kinked footprints (orders 1, 2) keep the orthographic rule at the nearest pixel (``pixel``): a fraction of
+    it, so that bilinear reads place their kinks within a fraction of a pixel."""
     d_min = float(np.min(d_xyz))
     if order >= 3:
         omega = omega_s if omega_s is not None else default_omega_s(np.inf, d_min, order)
         band = max(omega, DEFAULT_OMEGA_MIN[order] / 2.0 ** level)
-        scale = [max(d_min, min(axis_scale(a[i], a[1 - i], d_xyz) for a in axes)) for i in (0, 1)]
         return (np.pi * scale[0] / band, np.pi * scale[1] / band), omega
     omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, order)
     texel = pixel / texels_per_pixel(order, level, omega, pixel, d_min)
     return (texel, texel), omega
+
+
+def texel_scale(axes, d_xyz) -> tuple:
+    """``(c_u, c_v)``: the spacing a footprint varies on along each sheared texture axis, over every slope node's
+    ``axes`` ``(u + s_u n, v + s_v n)``: at least d_min, more where every world axis that the texture axis crosses
+    is coarser (:func:`axis_scale`; a CT's 2.5 mm slices seen from the side).  The same for every band."""
+    d_min = float(np.min(d_xyz))
+    return tuple(max(d_min, min(axis_scale(a[i], a[1 - i], d_xyz) for a in axes)) for i in (0, 1))
 
 
 def axis_scale(a, b, d_xyz) -> float:
@@ -167,16 +174,19 @@ def axis_scale(a, b, d_xyz) -> float:
     return float(np.min(np.max(np.abs(da[None, :] + t[:, None] * db[None, :]), axis=1)))
 
 
-def slope_cells(data: np.ndarray, count) -> np.ndarray:
+def slope_cells(data: np.ndarray, count, out=None) -> np.ndarray:
     """A texture's nodes ``data`` (K, nv, nu), K = count_u count_v row-major by v, as ``cl/splat/cone.cl``
     reads them: one block per cell of the slope grid, (nv + 2, nu + 2, 4) float32, the cell's four nodes
-    interleaved per texel (first node, next along u, next along v, both), with a zero margin all round."""
+    interleaved per texel (first node, next along u, next along v, both), with a zero margin all round;
+    written into ``out`` (zeros, that many floats) where given."""
     ku, kv = (int(c) for c in count)
     K, nv, nu = data.shape
-    nodes = np.zeros((kv, ku, nv + 2, nu + 2), np.float32)
-    nodes.reshape(K, nv + 2, nu + 2)[:, 1:-1, 1:-1] = data
-    return np.stack([nodes[:-1, :-1], nodes[:-1, 1:], nodes[1:, :-1], nodes[1:, 1:]], -1).reshape(
-        (kv - 1) * (ku - 1), nv + 2, nu + 2, 4)
+    shape = ((kv - 1) * (ku - 1), nv + 2, nu + 2, 4)
+    out = np.zeros(shape, np.float32) if out is None else out.reshape(shape)
+    cells, nodes = out.reshape(kv - 1, ku - 1, nv + 2, nu + 2, 4), data.reshape(kv, ku, nv, nu)
+    for c, (dv, du) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+        cells[:, :, 1:-1, 1:-1, c] = nodes[dv:dv + kv - 1, du:du + ku - 1]
+    return out
 
 
 def depth_range(view, wv, extent_xyz) -> tuple:
@@ -215,7 +225,7 @@ class ConeTables:
         self.cone[0, :3], self.cone[1, :3], self.cone[2, :3], self.cone[3, :3] = view0.eye, view0.n, view0.u, view0.v
         self.cone[4] = (*view0.principal, *lo)
         self.cone[5] = (*(1.0 / step), *count)
-        axes = [(view0.u + su * view0.n, view0.v + sv * view0.n) for su, sv in nodes]  # sheared texture axes
+        scale = texel_scale([(view0.u + su * view0.n, view0.v + sv * view0.n) for su, sv in nodes], d_xyz)
         # each band in the first layer that draws it, with texels of 1/P of its nearest pixel
         texels, layer_of, self.omega_s = {}, {}, None
         for li, (view, bands) in enumerate(layers):
@@ -229,7 +239,7 @@ class ConeTables:
                                      f"its level-{b.level} basis functions reach behind the eye; move it farther "
                                      "away (a larger distance or dso)")
                 layer_of[band] = li
-                texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, axes)
+                texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, scale)
                 self.omega_s = self.omega_s or omega
         self.samplings = [sampling]
         self.band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
@@ -252,6 +262,7 @@ class ConeTables:
         key = (group, sampling, max_texels, tuple(sorted(layer_of.items())),
                tuple(sorted((band, tuple(np.broadcast_to(h, 2).tolist())) for band, h in texels.items())),
                *(np.asarray(x, np.float64).tobytes() for x in (view0.n, view0.u, view0.v, nodes)))
+        self.key = key  # the texel pool's identity: a renderer keeps the last view's pool on the device
         start = time.perf_counter()
         if cache is not None and key in cache:
             packed = cache[key]
@@ -336,9 +347,10 @@ def select_drops(bbox, bound, size, budget) -> tuple:
 
 def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
     """The texture tables of a view (``band_tex``, ``tex_*``, ``texels``; ``layer_textures``, the textures of each
-    layer): each layer's bands in order, each texture as :func:`slope_cells`."""
+    layer): each layer's bands in order, each texture as :func:`slope_cells`, written in place into the pool."""
     band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
-    boxes, ints, maps, tex_layer, pool, offset, layer_textures = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD, []
+    cells = (int(count[0]) - 1) * (int(count[1]) - 1)
+    boxes, ints, maps, tex_layer, offset, layer_textures, placed = [], [], [], [], POOL_GUARD, [], []
     peaks = []  # each texture's largest magnitude at each slope node
     for li in range(layer_count):
         first_tex = len(ints)
@@ -348,8 +360,8 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
                 continue
             tex = textures[band]
             K, nv, nu = tex.data.shape
-            padded = slope_cells(tex.data, count)
-            if max_texels is not None and offset + padded.size > max_texels:
+            size = cells * (nv + 2) * (nu + 2) * 4
+            if max_texels is not None and offset + size > max_texels:
                 raise DeviceMemoryError(
                     f"the footprints of this perspective view need more than {4 * max_texels / 2**20:,.0f} MiB "
                     f"({K} ray slopes a band); render fewer pixels, a narrower cone or a lower omega_s")
@@ -357,17 +369,27 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
             tex_layer.append((li, len(ints) - first_tex))
             boxes.append((-tex.centre_u * tex.h_u, (nu - 1 - tex.centre_u) * tex.h_u,
                           -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
-            ints.append((offset, nu + 2, padded[0].size, nv + 2))  # cells' texels are 4 floats
+            ints.append((offset, nu + 2, size // cells, nv + 2))  # cells' texels are 4 floats
             maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
-            peaks.append(np.abs(tex.data).max(axis=(1, 2)).astype(np.float64))
-            pool.append(padded.ravel())
-            offset += padded.size
+            peaks.append(np.maximum(tex.data.max(axis=(1, 2)), -tex.data.min(axis=(1, 2))).astype(np.float64))
+            placed.append((tex.data, offset, size))
+            offset += size
         layer_textures.append(len(ints) - first_tex)
+    pool = _page_aligned(offset + 2 * POOL_GUARD)  # the guards of zeros before and after
+    for data, at, size in placed:
+        slope_cells(data, count, pool[at:at + size])
     out = SimpleNamespace()
     set_texture_tables(out, boxes, ints, maps, tex_layer, pool)
-    cells = np.asarray(count, int)[::-1] - 1  # (v, u)
-    node_peaks = np.array(peaks or [np.zeros(int(np.prod(count)))]).reshape(-1, *(cells + 1))
+    node_peaks = np.array(peaks or [np.zeros(int(np.prod(count)))]).reshape(-1, *(np.asarray(count, int)[::-1]))
     return dict(vars(out), band_tex=band_tex, layer_textures=layer_textures, cell_peaks=_cell_range_peaks(node_peaks))
+
+
+def _page_aligned(size: int) -> np.ndarray:
+    """``size`` float32 zeros starting on a 4 KiB page, so that a CPU device uses them in place
+    (:meth:`clwave.splat.renderer.SplatRenderer.texel_pools`)."""
+    block = np.zeros(size + 1024, np.float32)
+    first = (-block.ctypes.data % 4096) // 4
+    return block[first:first + size]
 
 
 def _cell_range_peaks(node_peaks) -> np.ndarray:

@@ -103,6 +103,7 @@ class SplatRenderer:
         self._work = None  # per-splat buffers of a pass, and the streamed chunk's (coef, values)
         self._sizes = None  # the count tables' sizes of the last view
         self._cone_footprints = {}  # perspective views' texture tables, shared by poses of one direction
+        self._pools = {}  # the last perspective view's texel pools on the device, by their ConeTables.key
         for gi, g in enumerate(wv.groups):
             table = wv.ranked(gi)
             # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22); each present band
@@ -181,6 +182,23 @@ class SplatRenderer:
         if view.perspective and self.coarse:  # what coarsening leaves of the tolerance (docs/splatting.md §8)
             acc.drop_share = [drop_share(fg, self.wv.levels, self.coarse) for fg in factors]
         return acc
+
+    def texel_pools(self, tables: list) -> list:
+        """Each table's texel pool on the device; a perspective view whose footprints are the last view's (a pose
+        moved by a translation) reuses its upload.  Only the last view's pools are held.  On a CPU device a
+        perspective pool is the host's array itself (``USE_HOST_PTR``; page-aligned, read only), not a copy
+        (docs/splatting.md §8 "Cost")."""
+        keys, pools = [getattr(t, "key", None) for t in tables], []
+        for key, t in zip(keys, tables):
+            if key in self._pools:
+                pools.append(self._pools[key])
+            elif key is not None and self.cc.info.kind == "CPU":
+                pools.append(cl.Buffer(self.cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR,
+                                       hostbuf=t.texels))
+            else:
+                pools.append(self.cc.upload(t.texels))
+        self._pools = {key: pool for key, pool in zip(keys, pools) if key is not None}
+        return pools
 
     def render(self, camera) -> RenderResult:
         """The X-ray image of one view (a :class:`Camera` or :class:`ConeBeam`) from every coefficient."""
@@ -271,7 +289,9 @@ class Accumulator:
     def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list, upto=None):
         self.r, self.view, self.layers, self.tables, self.upto = renderer, view, layers, tables, upto
         cc = renderer.cc
-        self.device_tables = [{name: cc.upload(getattr(t, name)) for name in t.names} for t in tables]
+        pools = renderer.texel_pools(tables)
+        self.device_tables = [{name: pool if name == "texels" else cc.upload(getattr(t, name)) for name in t.names}
+                              for t, pool in zip(tables, pools)]
         self.fbs = [cla.zeros(cc.queue, (t.pixels * 4,), np.float32) for t in tables]
         self.stats = dict(splats=0, pairs=0, pixel_updates=0, chunks=0, bin_seconds=0.0, accumulate_seconds=0.0,
                           upload_seconds=0.0, upsample_seconds=0.0)
@@ -333,9 +353,10 @@ class Accumulator:
         drops = [None] * len(plans)  # per group: (the candidates left undrawn, the largest sum of their bounds)
         while True:  # E L <= share (top - E L): the dropped splats' error within share of the finished image's maximum
             image, done = self.image(), True
+            tops = [np.abs(image[..., list(g.channels)]).reshape(-1, len(g.channels)).max(axis=0)
+                    for g in r.wv.groups]  # per group and channel
             for gi, (wavelet, bbox, bound) in enumerate(plans):
-                chans, share = list(r.wv.groups[gi].channels), self.drop_share[gi]
-                top = np.abs(image[..., chans]).reshape(-1, len(chans)).max(axis=0)
+                chans, share, top = list(r.wv.groups[gi].channels), self.drop_share[gi], tops[gi]
                 error = None if drops[gi] is None else drops[gi][1] * obliquity  # bound of the dropped splats' error
                 if error is not None and np.all(error <= share * (top - error)):
                     continue
@@ -351,8 +372,7 @@ class Accumulator:
             if done:
                 break
         self.dropped = dict(splats=0, pixel_updates=0, bound=0.0)
-        for gi, ((wavelet, bbox, _), (drop, most)) in enumerate(zip(plans, drops)):
-            top = np.abs(image[..., list(r.wv.groups[gi].channels)]).reshape(-1, len(most)).max(axis=0)
+        for (_, bbox, _), (drop, most), top in zip(plans, drops, tops):
             box = bbox[drop]
             self.dropped["splats"] += int(drop.sum())
             self.dropped["pixel_updates"] += int(np.sum((box[:, 2] - box[:, 0] + 1).astype(np.int64)

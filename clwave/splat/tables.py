@@ -140,12 +140,14 @@ class ViewTables:
 
 def set_texture_tables(tables, boxes, ints, maps, tex_layer, pool):
     """The per-texture device tables from their rows (``tex_box``, ``tex_int``, ``tex_map``, ``tex_layer``;
-    one dummy row where a view draws nothing) and the texel pool with its guard of zeros after it."""
+    one dummy row where a view draws nothing) and the texel pool with its guard of zeros after it (``pool``: its
+    parts, or the whole pool, guards included, as one float32 array)."""
     tables.tex_box = np.array(boxes or [(0, -1, 0, -1)], np.float32).reshape(-1, 4)
     tables.tex_int = np.array(ints or [(0, 0, 0, 0)], np.int32).reshape(-1, 4)
     tables.tex_map = np.array(maps or [(0, 0, 0, 0)], np.float32).reshape(-1, 4)
     tables.tex_layer = np.array(tex_layer or [(0, 0)], np.int32).reshape(-1, 2)
-    tables.texels = np.concatenate([np.asarray(x, np.float32) for x in pool] + [np.zeros(2 * POOL_GUARD, np.float32)])
+    tables.texels = pool if isinstance(pool, np.ndarray) else np.concatenate(
+        [np.asarray(x, np.float32) for x in pool] + [np.zeros(2 * POOL_GUARD, np.float32)])
 
 
 def _axis_box(count, centre, steps, cell) -> tuple:
