@@ -912,7 +912,8 @@ def bench_drr(args) -> dict:
         cases["chest CT"] = _drr_chest_ct(args)
     return dict(setting=dict(volume=f"shepp-logan {args.size}^3 of {300.0 / args.size:.3g} mm", wavelet="cubic",
                              levels=3, keep=0.05, coefficients=wv.kept, geometry="dso 1000, dsd 1500, 400 mm detector"),
-                targets=dict(seconds_512=0.5, batch_100_at_256_seconds=10.0), cases=cases)
+                targets=dict(seconds_512=0.5, batch_100_at_256_seconds=10.0), cases=cases,
+                peak_resident_gib=peak_resident_gib())  # this process: phantom, model, all renderers, the batches
 
 
 def _drr_chest_ct(args) -> dict:
