@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-import clwave
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
+
+import clwave  # noqa: E402
 
 # --------------------------------------------------------------------------- cases
 # Every case is plain data (it goes into the manifest as is):
