@@ -12,7 +12,8 @@ import clwave
 from clwave.errors import InputError
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import view_frame
-from clwave.splat.perspective import SLOPE_STEP, _cell_range_peaks, drop_share, select_drops, sheared_footprints
+from clwave.splat.perspective import (SLOPE_STEP, _cell_range_peaks, drop_share, quasi_interpolant, select_drops,
+                                      sheared_footprints)
 from clwave.splat.reference import exact_xray
 from clwave.splat.spatial import line_integral
 
@@ -146,6 +147,31 @@ def test_slope_interpolation_error_bound():
                                      "spatial")[(0, "aaa")]
             errors.append(np.abs(tex.data[:4].mean(axis=0) - tex.data[4]).max() / np.abs(tex.data[4]).max())
         assert 1e-4 < errors[0] <= 3e-3 and 3.5 < errors[0] / errors[1] < 4.5
+
+
+def test_quasi_interpolant_halves_the_bilinear_bound():
+    # docs/splatting.md §8: multilinear reads of a quadratic's samples err by up to sum_a |f_aa| h_a^2 / 8 (at the
+    # cells' centres); of its quasi-interpolant, by at most sum_a |f_aa| h_a^2 / 16, at the centres and at the nodes
+    from scipy.interpolate import RegularGridInterpolator
+
+    h, curv = np.array([0.1, 0.13, 0.3, 0.2]), np.array([2.0, 1.0, 1.5, 0.8])  # (slope v, slope u, texel v, u)
+    axes = [np.arange(n) * step for n, step in zip((4, 3, 6, 5), h)]
+    mixed = np.array([[0.0, 0.3, -0.2, 0.1], [0.3, 0.0, 0.4, 0.0], [-0.2, 0.4, 0.0, 0.5], [0.1, 0.0, 0.5, 0.0]])
+
+    def f(p):  # any mixed terms, which multilinear reads reproduce
+        return p ** 2 @ (curv / 2) + np.einsum("...a,ab,...b->...", p, mixed, p) + p @ [1, -2, 0, 3]
+
+    samples = f(np.stack(np.meshgrid(*axes, indexing="ij"), -1))
+    centres = np.stack(np.meshgrid(*[a[:-1] + s / 2 for a, s in zip(axes, h)], indexing="ij"), -1).reshape(-1, 4)
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 4)
+    bound = np.sum(np.abs(curv) * h ** 2)
+    raw = RegularGridInterpolator(axes, samples)(centres) - f(centres)
+    assert np.allclose(raw, bound / 8, rtol=1e-9)
+    quasi = RegularGridInterpolator(axes, quasi_interpolant(samples.copy()))
+    assert np.allclose(quasi(centres) - f(centres), bound / 16, rtol=1e-9)
+    assert np.allclose(quasi(nodes) - f(nodes), -bound / 16, rtol=1e-9)
+    two = np.array([[1.0, 5.0]])  # axes of fewer than three samples are left alone
+    assert np.array_equal(quasi_interpolant(two.copy()), two)
 
 
 @pytest.mark.parametrize("camera, words", [

@@ -32,6 +32,10 @@ from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _a
 #: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
 #: phi-phi-phi footprint at 0.1 (the error of each footprint scales with the square of the step)
 SLOPE_STEP = 0.1
+#: Smooth footprints (order >= 3) are stored as quasi-interpolants (:func:`quasi_interpolant`), whose bilinear reads
+#: err by half the bound of the samples' (in slope, above, and in texels): their texel floor is this much coarser,
+#: which keeps the texels' share of the bound and halves the slopes' (docs/splatting.md §8)
+QUASI_GAIN = np.sqrt(2.0)
 TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.splat.tables.TEXTURE_TOL)
 FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
 SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
@@ -48,6 +52,25 @@ def slope_grid(views) -> tuple:
     count = np.maximum(2, np.ceil((hi - lo) / SLOPE_STEP - 1e-9).astype(int) + 1)
     step = np.where(hi > lo, (hi - lo) / (count - 1), SLOPE_STEP)
     return lo, step, count
+
+
+def quasi_interpolant(x: np.ndarray) -> np.ndarray:
+    """``x`` less 1/16 of its second differences along each axis of three samples or more (at either end, the
+    nearest one), in place: for a locally quadratic function, multilinear reads of these values err by at most
+    ``Σ_a |f_aa| h_a^2 / 16`` (between -1/16 at the nodes and +1/16 at the cells' centres) where reads of the samples
+    err by up to ``Σ_a |f_aa| h_a^2 / 8`` (docs/splatting.md §8)."""
+    correction = np.zeros_like(x)
+    for axis, n in enumerate(x.shape):
+        if n >= 3:
+            xa, ca = np.moveaxis(x, axis, 0), np.moveaxis(correction, axis, 0)
+            d2 = xa[2:] + xa[:-2]
+            d2 -= 2.0 * xa[1:-1]
+            ca[1:-1] += d2
+            ca[0] += d2[0]
+            ca[-1] += d2[-1]
+    correction *= 1.0 / 16.0
+    x -= correction
+    return x
 
 
 def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None,
@@ -134,14 +157,15 @@ def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, scale) -> t
     that set it (docs/splatting.md §8); ``scale``: the view's :func:`texel_scale`.
 
     Smooth footprints (order >= 3) are read at any magnification, so their texels follow the band alone, as
-    in §1, ``pi c / max(omega, omega_least)`` with ``omega`` the paper's 14 (doubled for order 6) or
-    ``omega_s``, whatever the pixel, and ``c`` (``scale``) the spacing the footprint varies on along that axis.
+    in §1, ``pi c / max(omega / QUASI_GAIN, omega_least)`` with ``omega`` the paper's 14 (doubled for order 6) or
+    ``omega_s``, whatever the pixel, and ``c`` (``scale``) the spacing the footprint varies on along that axis
+    (:data:`QUASI_GAIN`: they are stored as quasi-interpolants).
     Kinked footprints (orders 1, 2) keep the orthographic rule at the nearest pixel (``pixel``): a fraction of
     it, so that bilinear reads place their kinks within a fraction of a pixel."""
     d_min = float(np.min(d_xyz))
     if order >= 3:
         omega = omega_s if omega_s is not None else default_omega_s(np.inf, d_min, order)
-        band = max(omega, DEFAULT_OMEGA_MIN[order] / 2.0 ** level)
+        band = max(omega / QUASI_GAIN, DEFAULT_OMEGA_MIN[order] / 2.0 ** level)
         return (np.pi * scale[0] / band, np.pi * scale[1] / band), omega
     omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, order)
     texel = pixel / texels_per_pixel(order, level, omega, pixel, d_min)
@@ -269,6 +293,9 @@ class ConeTables:
         else:
             textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
                                           TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
+            if wav.order >= 3:  # along the slope nodes (k_v, k_u) and the texels (rows, columns)
+                thread_map(lambda t: quasi_interpolant(t.data.reshape(count[1], count[0], *t.data.shape[1:])),
+                           textures.values())
             packed = _pack(g, textures, layer_of, len(layers), count, max_texels)
             if cache is not None:
                 while len(cache) >= FOOTPRINT_CACHE:
