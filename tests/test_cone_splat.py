@@ -276,3 +276,16 @@ def test_select_drops_and_cell_peaks_against_brute_force():
             for u0 in range(4):
                 for u1 in range(u0, 4):
                     assert np.array_equal(got[:, v0, v1, u0, u1], peaks[:, v0:v1 + 2, u0:u1 + 2].max(axis=(1, 2)))
+
+
+def test_quasi_interpolants_in_the_spectra_equal_those_of_the_samples():
+    # docs/splatting.md §8: the device's spectra times 1 + (sin^2(pi c/nu) + sin^2(pi kv/nv)) / 4 give the samples
+    # less 1/16 of their second differences along rows and columns, as the host makes them
+    n, u, v = view_frame(30.0, 20.0)
+    slopes, cc = np.array([[0.0, 0.0], [0.2, -0.15]]), clwave.ComputeContext.get()
+    for key in ("aaa", "dad"):
+        plain, quasi = (sheared_footprints(SplineWavelet(4), (1.0, 2.0, 1.0), n, u, v, {(1, key): 0.5}, slopes, "fft",
+                                           device=cc, quasi=q)[(1, key)] for q in (False, True))
+        want = np.stack([quasi_interpolant(x.astype(float)) for x in plain.data])
+        assert np.abs(quasi.data - want).max() <= 2e-6 * np.abs(want).max()
+        assert np.abs(quasi.data - plain.data).max() > 1e-3 * np.abs(want).max()  # the correction is not nothing

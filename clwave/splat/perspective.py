@@ -54,14 +54,14 @@ def slope_grid(views) -> tuple:
     return lo, step, count
 
 
-def quasi_interpolant(x: np.ndarray) -> np.ndarray:
-    """``x`` less 1/16 of its second differences along each axis of three samples or more (at either end, the
-    nearest one), in place: for a locally quadratic function, multilinear reads of these values err by at most
-    ``Σ_a |f_aa| h_a^2 / 16`` (between -1/16 at the nodes and +1/16 at the cells' centres) where reads of the samples
-    err by up to ``Σ_a |f_aa| h_a^2 / 8`` (docs/splatting.md §8)."""
+def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
+    """``x`` less 1/16 of its second differences along each of ``axes`` (default all) of three samples or more (at
+    either end, the nearest one), in place: for a locally quadratic function, multilinear reads of these values err
+    by at most ``Σ_a |f_aa| h_a^2 / 16`` (between -1/16 at the nodes and +1/16 at the cells' centres) where reads of
+    the samples err by up to ``Σ_a |f_aa| h_a^2 / 8`` (docs/splatting.md §8)."""
     correction = np.zeros_like(x)
-    for axis, n in enumerate(x.shape):
-        if n >= 3:
+    for axis in range(x.ndim) if axes is None else axes:
+        if x.shape[axis] >= 3:
             xa, ca = np.moveaxis(x, axis, 0), np.moveaxis(correction, axis, 0)
             d2 = xa[2:] + xa[:-2]
             d2 -= 2.0 * xa[1:-1]
@@ -74,7 +74,7 @@ def quasi_interpolant(x: np.ndarray) -> np.ndarray:
 
 
 def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None,
-                       max_texels=None) -> dict:
+                       max_texels=None, quasi=False) -> dict:
     """A :class:`~clwave.splat.textures.Texture` of each band whose ``data[node, iv, iu]`` holds its footprint
     at each of the (K, 2) ``slopes``: the line integrals of its basis
     function along ``n - s_u u - s_v v`` (per unit of depth) through the points ``a u + b v`` from its
@@ -82,7 +82,9 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     ``"fft"`` slices the 3-D spectrum along ``u + s_u n``, ``v + s_v n`` (docs/splatting.md §8; on ``device``,
     every spectrum in one launch, as orthographic views do), ``"spatial"`` integrates exactly
     (:mod:`clwave.splat.spatial`).
-    ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made."""
+    ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made.
+    ``quasi``: each node's samples as their quasi-interpolant along rows and columns (:func:`quasi_interpolant`;
+    on ``device``, in the spectra)."""
     wav = wavelet_for(wavelet)
     d_xyz = spacing_xyz(spacing_zyx)
     n, u, v = (np.asarray(x, float) for x in (n, u, v))
@@ -114,7 +116,7 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         for job, plan in list(plans.items()) + [(None, None)]:  # launches of at most SPECTRA_BATCH_BYTES
             size = 0 if plan is None else 8 * plan[3] * (plan[2] // 2 + 1 + SPECTRUM_BLOCK)
             if batch and (plan is None or held + size > SPECTRA_BATCH_BYTES):
-                spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch])))
+                spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch], quasi)))
                 batch, held = [], 0
             if plan is not None:
                 batch.append(job)
@@ -134,6 +136,8 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
             a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
             x = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
                               b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
+        if quasi and job not in spectra:
+            quasi_interpolant(x)
         data[band][k] = x
         magnitude = np.abs(x)
         return magnitude.max(axis=1), magnitude.max(axis=0)
@@ -292,9 +296,10 @@ class ConeTables:
             packed = cache[key]
         else:
             textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
-                                          TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
-            if wav.order >= 3:  # along the slope nodes (k_v, k_u) and the texels (rows, columns)
-                thread_map(lambda t: quasi_interpolant(t.data.reshape(count[1], count[0], *t.data.shape[1:])),
+                                          TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
+                                          quasi=wav.order >= 3)
+            if wav.order >= 3:  # quasi-interpolants along the slope nodes (k_v, k_u) too
+                thread_map(lambda t: quasi_interpolant(t.data.reshape(count[1], count[0], *t.data.shape[1:]), (0, 1)),
                            textures.values())
             packed = _pack(g, textures, layer_of, len(layers), count, max_texels)
             if cache is not None:
@@ -403,8 +408,7 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
             offset += size
         layer_textures.append(len(ints) - first_tex)
     pool = _page_aligned(offset + 2 * POOL_GUARD)  # the guards of zeros before and after
-    for data, at, size in placed:
-        slope_cells(data, count, pool[at:at + size])
+    thread_map(lambda p: slope_cells(p[0], count, pool[p[1]:p[1] + p[2]]), placed)  # NumPy's copies free the GIL
     out = SimpleNamespace()
     set_texture_tables(out, boxes, ints, maps, tex_layer, pool)
     node_peaks = np.array(peaks or [np.zeros(int(np.prod(count)))]).reshape(-1, *(np.asarray(count, int)[::-1]))
