@@ -33,8 +33,9 @@ from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _a
 #: phi-phi-phi footprint at 0.1 (the error of each footprint scales with the square of the step)
 SLOPE_STEP = 0.1
 #: Smooth footprints (order >= 3) are stored as quasi-interpolants (:func:`quasi_interpolant`), whose bilinear reads
-#: err by half the bound of the samples' (in slope, above, and in texels): their texel floor is this much coarser,
-#: which keeps the texels' share of the bound and halves the slopes' (docs/splatting.md §8)
+#: err by half the bound of the samples' (in slope, above, and in texels): cubic ones take a texel floor this much
+#: coarser, which keeps the texels' share of the bound and halves the slopes' (docs/splatting.md §8; quintic images
+#: came out less accurate with it, so they keep theirs)
 QUASI_GAIN = np.sqrt(2.0)
 TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.splat.tables.TEXTURE_TOL)
 FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
@@ -161,15 +162,15 @@ def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, scale) -> t
     that set it (docs/splatting.md §8); ``scale``: the view's :func:`texel_scale`.
 
     Smooth footprints (order >= 3) are read at any magnification, so their texels follow the band alone, as
-    in §1, ``pi c / max(omega / QUASI_GAIN, omega_least)`` with ``omega`` the paper's 14 (doubled for order 6) or
-    ``omega_s``, whatever the pixel, and ``c`` (``scale``) the spacing the footprint varies on along that axis
-    (:data:`QUASI_GAIN`: they are stored as quasi-interpolants).
+    in §1, ``pi c / max(omega / QUASI_GAIN, omega_least)`` (cubic; other orders ``omega``) with ``omega`` the paper's
+    14 (doubled for order 6) or ``omega_s``, whatever the pixel, and ``c`` (``scale``) the spacing the footprint
+    varies on along that axis (:data:`QUASI_GAIN`: they are stored as quasi-interpolants).
     Kinked footprints (orders 1, 2) keep the orthographic rule at the nearest pixel (``pixel``): a fraction of
     it, so that bilinear reads place their kinks within a fraction of a pixel."""
     d_min = float(np.min(d_xyz))
     if order >= 3:
         omega = omega_s if omega_s is not None else default_omega_s(np.inf, d_min, order)
-        band = max(omega / QUASI_GAIN, DEFAULT_OMEGA_MIN[order] / 2.0 ** level)
+        band = max(omega / (QUASI_GAIN if order == 4 else 1.0), DEFAULT_OMEGA_MIN[order] / 2.0 ** level)
         return (np.pi * scale[0] / band, np.pi * scale[1] / band), omega
     omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, order)
     texel = pixel / texels_per_pixel(order, level, omega, pixel, d_min)
