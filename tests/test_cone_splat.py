@@ -42,7 +42,7 @@ def _half_angle(wv, camera):
     ((2.0, 1.0, 0.5), "cubic", 1, clwave.Camera(-70, -15, (20, 28), perspective=True, fov=32, distance=45)),
     ((1.0, 1.0, 1.0), "cubic", 2, clwave.Camera(10, 60, 24, perspective=True, fov=30, distance=70)),
     ((1.0, 1.0, 1.0), "linear", 1, clwave.Camera(0, 0, 24, perspective=True, fov=30, distance=50)),
-    ((1.0, 1.0, 1.0), "quintic", 1, clwave.Camera(-70, -15, 24, perspective=True, fov=32, distance=60)),
+    ((1.0, 1.0, 1.0), "quintic", 1, clwave.Camera(-70, -15, 16, perspective=True, fov=32, distance=60)),
     ((1.5, 0.75, 1.0), "cubic", 1, clwave.ConeBeam(60.0, 90.0, (22, 26), pixel=(1.7, 1.4), offset=(6.0, -4.0),
                                                    azimuth=120, elevation=35, roll=20, isocentre=(1.0, 0.5, -1.0))),
 ])
