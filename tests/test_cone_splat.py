@@ -12,7 +12,8 @@ import clwave
 from clwave.errors import InputError
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import view_frame
-from clwave.splat.perspective import SLOPE_STEP, _cell_range_peaks, drop_share, select_drops, sheared_footprints
+from clwave.splat.perspective import (SLOPE_STEP, _cell_range_peaks, drop_share, quasi_interpolant, select_drops,
+                                      sheared_footprints)
 from clwave.splat.reference import exact_xray
 from clwave.splat.spatial import line_integral
 
@@ -41,6 +42,7 @@ def _half_angle(wv, camera):
     ((2.0, 1.0, 0.5), "cubic", 1, clwave.Camera(-70, -15, (20, 28), perspective=True, fov=32, distance=45)),
     ((1.0, 1.0, 1.0), "cubic", 2, clwave.Camera(10, 60, 24, perspective=True, fov=30, distance=70)),
     ((1.0, 1.0, 1.0), "linear", 1, clwave.Camera(0, 0, 24, perspective=True, fov=30, distance=50)),
+    ((1.0, 1.0, 1.0), "quintic", 1, clwave.Camera(-70, -15, 16, perspective=True, fov=32, distance=60)),
     ((1.5, 0.75, 1.0), "cubic", 1, clwave.ConeBeam(60.0, 90.0, (22, 26), pixel=(1.7, 1.4), offset=(6.0, -4.0),
                                                    azimuth=120, elevation=35, roll=20, isocentre=(1.0, 0.5, -1.0))),
 ])
@@ -148,6 +150,31 @@ def test_slope_interpolation_error_bound():
         assert 1e-4 < errors[0] <= 3e-3 and 3.5 < errors[0] / errors[1] < 4.5
 
 
+def test_quasi_interpolant_halves_the_bilinear_bound():
+    # docs/splatting.md §8: multilinear reads of a quadratic's samples err by up to sum_a |f_aa| h_a^2 / 8 (at the
+    # cells' centres); of its quasi-interpolant, by at most sum_a |f_aa| h_a^2 / 16, at the centres and at the nodes
+    from scipy.interpolate import RegularGridInterpolator
+
+    h, curv = np.array([0.1, 0.13, 0.3, 0.2]), np.array([2.0, 1.0, 1.5, 0.8])  # (slope v, slope u, texel v, u)
+    axes = [np.arange(n) * step for n, step in zip((4, 3, 6, 5), h)]
+    mixed = np.array([[0.0, 0.3, -0.2, 0.1], [0.3, 0.0, 0.4, 0.0], [-0.2, 0.4, 0.0, 0.5], [0.1, 0.0, 0.5, 0.0]])
+
+    def f(p):  # any mixed terms, which multilinear reads reproduce
+        return p ** 2 @ (curv / 2) + np.einsum("...a,ab,...b->...", p, mixed, p) + p @ [1, -2, 0, 3]
+
+    samples = f(np.stack(np.meshgrid(*axes, indexing="ij"), -1))
+    centres = np.stack(np.meshgrid(*[a[:-1] + s / 2 for a, s in zip(axes, h)], indexing="ij"), -1).reshape(-1, 4)
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 4)
+    bound = np.sum(np.abs(curv) * h ** 2)
+    raw = RegularGridInterpolator(axes, samples)(centres) - f(centres)
+    assert np.allclose(raw, bound / 8, rtol=1e-9)
+    quasi = RegularGridInterpolator(axes, quasi_interpolant(samples.copy()))
+    assert np.allclose(quasi(centres) - f(centres), bound / 16, rtol=1e-9)
+    assert np.allclose(quasi(nodes) - f(nodes), -bound / 16, rtol=1e-9)
+    two = np.array([[1.0, 5.0]])  # axes of fewer than three samples are left alone
+    assert np.array_equal(quasi_interpolant(two.copy()), two)
+
+
 @pytest.mark.parametrize("camera, words", [
     (clwave.Camera(0, 0, 16, perspective=True, distance=5.0), "inside the model"),
     (clwave.ConeBeam(9.0, 20.0, 16, pixel=1.0), "too near"),
@@ -250,3 +277,16 @@ def test_select_drops_and_cell_peaks_against_brute_force():
             for u0 in range(4):
                 for u1 in range(u0, 4):
                     assert np.array_equal(got[:, v0, v1, u0, u1], peaks[:, v0:v1 + 2, u0:u1 + 2].max(axis=(1, 2)))
+
+
+def test_quasi_interpolants_in_the_spectra_equal_those_of_the_samples():
+    # docs/splatting.md §8: the device's spectra times 1 + (sin^2(pi c/nu) + sin^2(pi kv/nv)) / 4 give the samples
+    # less 1/16 of their second differences along rows and columns, as the host makes them
+    n, u, v = view_frame(30.0, 20.0)
+    slopes, cc = np.array([[0.0, 0.0], [0.2, -0.15]]), clwave.ComputeContext.get()
+    for key in ("aaa", "dad"):
+        plain, quasi = (sheared_footprints(SplineWavelet(4), (1.0, 2.0, 1.0), n, u, v, {(1, key): 0.5}, slopes, "fft",
+                                           device=cc, quasi=q)[(1, key)] for q in (False, True))
+        want = np.stack([quasi_interpolant(x.astype(float)) for x in plain.data])
+        assert np.abs(quasi.data - want).max() <= 2e-6 * np.abs(want).max()
+        assert np.abs(quasi.data - plain.data).max() > 1e-3 * np.abs(want).max()  # the correction is not nothing

@@ -12,7 +12,11 @@
  * phase).  An axis parallel to n is given as phi with rate (0, 0): a factor of 1.
  *
  * The host sets CLW_ORDER (J), CLW_TERMS (P's coefficients) and CLW_MOMENTS (psi's vanishing moments M).  Each work-item computes 16
- * columns as float16: PoCL vectorises the sines that way, not across work-items. */
+ * columns as float16: PoCL vectorises the sines that way, not across work-items.
+ *
+ * Perspective views (clwave/splat/perspective.py) set CLW_QUASI: the texture is stored as a quasi-interpolant, the
+ * samples less 1/16 of their second differences along rows and columns, which is the spectrum times
+ * 1 + (sin^2(pi c / nu) + sin^2(pi kv / nv)) / 4 (docs/splatting.md §8).  Orthographic views do not. */
 #include "common/clw_common.h"
 
 inline float16 power(const float16 x)
@@ -52,7 +56,7 @@ inline float16 axis_factor(const float16 x, const int psi, __constant const floa
  * Parameters
  *   group_tex  in  (groups,) int: the texture of each work-group
  *   tex_size   in  (T,) int4: (first work-item, rows nv, blocks of 16 columns per row, psi bits:
- *                  bit a for axis a)
+ *                  bit a for axis a, and the columns nu from bit 3 on)
  *   tex_rate   in  (T,) float8: (rate, rate, rate, phase) as 4 float2: the rates of the axes not
  *                  parallel to n, in world order, then (0, 0) for each such axis
  *   poly       in  (CLW_TERMS,) float: P's coefficients, lowest power first
@@ -77,7 +81,14 @@ __kernel void footprint_spectra(__global const int *group_tex, __global const in
     const float16 value = axis_factor(r.s0 * c + r.s1 * kv, size.w & 1, poly)
                         * axis_factor(r.s2 * c + r.s3 * kv, (size.w >> 1) & 1, poly)
                         * axis_factor(r.s4 * c + r.s5 * kv, (size.w >> 2) & 1, poly);
+#ifdef CLW_QUASI
+    const float16 su = sinpi(c / (float)(size.w >> 3));
+    const float sv = sinpi(kv / (float)size.y);
+    const float16 quasi = 1.0f + (su * su + sv * sv) * 0.25f;
+    const float16 re = value * r.s6 * quasi, im = value * r.s7 * quasi;
+#else
     const float16 re = value * r.s6, im = value * r.s7;
+#endif
     const uint16 low = (uint16)(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
     vstore16(shuffle2(re, im, low), 0, out + 32 * get_global_id(0));
     vstore16(shuffle2(re, im, low + 8u), 0, out + 32 * get_global_id(0) + 16);

@@ -32,6 +32,11 @@ from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _a
 #: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
 #: phi-phi-phi footprint at 0.1 (the error of each footprint scales with the square of the step)
 SLOPE_STEP = 0.1
+#: Smooth footprints (order >= 3) are stored as quasi-interpolants (:func:`quasi_interpolant`), whose bilinear reads
+#: err by half the bound of the samples' (in slope, above, and in texels): cubic ones take a texel floor this much
+#: coarser, which keeps the texels' share of the bound and halves the slopes' (docs/splatting.md §8; quintic images
+#: came out less accurate with it, so they keep theirs)
+QUASI_GAIN = np.sqrt(2.0)
 TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.splat.tables.TEXTURE_TOL)
 FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
 SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
@@ -50,8 +55,27 @@ def slope_grid(views) -> tuple:
     return lo, step, count
 
 
+def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
+    """``x`` less 1/16 of its second differences along each of ``axes`` (default all) of three samples or more (at
+    either end, the nearest one), in place: for a locally quadratic function, multilinear reads of these values err
+    by at most ``Σ_a |f_aa| h_a^2 / 16`` (between -1/16 at the nodes and +1/16 at the cells' centres) where reads of
+    the samples err by up to ``Σ_a |f_aa| h_a^2 / 8`` (docs/splatting.md §8)."""
+    correction = np.zeros_like(x)
+    for axis in range(x.ndim) if axes is None else axes:
+        if x.shape[axis] >= 3:
+            xa, ca = np.moveaxis(x, axis, 0), np.moveaxis(correction, axis, 0)
+            d2 = xa[2:] + xa[:-2]
+            d2 -= 2.0 * xa[1:-1]
+            ca[1:-1] += d2
+            ca[0] += d2[0]
+            ca[-1] += d2[-1]
+    correction *= 1.0 / 16.0
+    x -= correction
+    return x
+
+
 def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None,
-                       max_texels=None) -> dict:
+                       max_texels=None, quasi=False) -> dict:
     """A :class:`~clwave.splat.textures.Texture` of each band whose ``data[node, iv, iu]`` holds its footprint
     at each of the (K, 2) ``slopes``: the line integrals of its basis
     function along ``n - s_u u - s_v v`` (per unit of depth) through the points ``a u + b v`` from its
@@ -59,7 +83,9 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     ``"fft"`` slices the 3-D spectrum along ``u + s_u n``, ``v + s_v n`` (docs/splatting.md §8; on ``device``,
     every spectrum in one launch, as orthographic views do), ``"spatial"`` integrates exactly
     (:mod:`clwave.splat.spatial`).
-    ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made."""
+    ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made.
+    ``quasi``: each node's samples as their quasi-interpolant along rows and columns (:func:`quasi_interpolant`;
+    on ``device``, in the spectra)."""
     wav = wavelet_for(wavelet)
     d_xyz = spacing_xyz(spacing_zyx)
     n, u, v = (np.asarray(x, float) for x in (n, u, v))
@@ -91,7 +117,7 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         for job, plan in list(plans.items()) + [(None, None)]:  # launches of at most SPECTRA_BATCH_BYTES
             size = 0 if plan is None else 8 * plan[3] * (plan[2] // 2 + 1 + SPECTRUM_BLOCK)
             if batch and (plan is None or held + size > SPECTRA_BATCH_BYTES):
-                spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch])))
+                spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch], quasi)))
                 batch, held = [], 0
             if plan is not None:
                 batch.append(job)
@@ -111,6 +137,8 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
             a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
             x = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
                               b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
+        if quasi and job not in spectra:
+            quasi_interpolant(x)
         data[band][k] = x
         magnitude = np.abs(x)
         return magnitude.max(axis=1), magnitude.max(axis=0)
@@ -134,14 +162,15 @@ def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, scale) -> t
     that set it (docs/splatting.md §8); ``scale``: the view's :func:`texel_scale`.
 
     Smooth footprints (order >= 3) are read at any magnification, so their texels follow the band alone, as
-    in §1, ``pi c / max(omega, omega_least)`` with ``omega`` the paper's 14 (doubled for order 6) or
-    ``omega_s``, whatever the pixel, and ``c`` (``scale``) the spacing the footprint varies on along that axis.
+    in §1, ``pi c / max(omega / QUASI_GAIN, omega_least)`` (cubic; other orders ``omega``) with ``omega`` the paper's
+    14 (doubled for order 6) or ``omega_s``, whatever the pixel, and ``c`` (``scale``) the spacing the footprint
+    varies on along that axis (:data:`QUASI_GAIN`: they are stored as quasi-interpolants).
     Kinked footprints (orders 1, 2) keep the orthographic rule at the nearest pixel (``pixel``): a fraction of
     it, so that bilinear reads place their kinks within a fraction of a pixel."""
     d_min = float(np.min(d_xyz))
     if order >= 3:
         omega = omega_s if omega_s is not None else default_omega_s(np.inf, d_min, order)
-        band = max(omega, DEFAULT_OMEGA_MIN[order] / 2.0 ** level)
+        band = max(omega / (QUASI_GAIN if order == 4 else 1.0), DEFAULT_OMEGA_MIN[order] / 2.0 ** level)
         return (np.pi * scale[0] / band, np.pi * scale[1] / band), omega
     omega = omega_s if omega_s is not None else default_omega_s(pixel, d_min, order)
     texel = pixel / texels_per_pixel(order, level, omega, pixel, d_min)
@@ -268,7 +297,11 @@ class ConeTables:
             packed = cache[key]
         else:
             textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
-                                          TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels)
+                                          TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
+                                          quasi=wav.order >= 3)
+            if wav.order >= 3:  # quasi-interpolants along the slope nodes (k_v, k_u) too
+                thread_map(lambda t: quasi_interpolant(t.data.reshape(count[1], count[0], *t.data.shape[1:]), (0, 1)),
+                           textures.values())
             packed = _pack(g, textures, layer_of, len(layers), count, max_texels)
             if cache is not None:
                 while len(cache) >= FOOTPRINT_CACHE:
@@ -376,8 +409,7 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
             offset += size
         layer_textures.append(len(ints) - first_tex)
     pool = _page_aligned(offset + 2 * POOL_GUARD)  # the guards of zeros before and after
-    for data, at, size in placed:
-        slope_cells(data, count, pool[at:at + size])
+    thread_map(lambda p: slope_cells(p[0], count, pool[p[1]:p[1] + p[2]]), placed)  # NumPy's copies free the GIL
     out = SimpleNamespace()
     set_texture_tables(out, boxes, ints, maps, tex_layer, pool)
     node_peaks = np.array(peaks or [np.zeros(int(np.prod(count)))]).reshape(-1, *(np.asarray(count, int)[::-1]))

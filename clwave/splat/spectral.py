@@ -244,13 +244,14 @@ SPECTRUM_GROUP = 16  # work-items per work-group of cl/splat/footprint.cl, each 
 SPECTRUM_BLOCK = 16  # columns per work-item: the kernel's float16
 
 
-def device_spectra(cc, order: int, plans) -> list:
+def device_spectra(cc, order: int, plans, quasi=False) -> list:
     """Half-spectra of textures on an OpenCL device (``cl/splat/footprint.cl``), in one launch.
 
     ``plans`` holds ``(scale, axes, nu, nv)`` per texture (:func:`slice_plan`); each spectrum
     comes back as an ``(nv, nu // 2 + 1)`` complex64 view in FFT row order, scaled for
     ``irfft2`` (float32 throughout: the textures are within ~1e-6 of their peak from those of
-    the float64 NumPy spectra).
+    the float64 NumPy spectra).  ``quasi``: of the textures' quasi-interpolants along rows and columns
+    (:func:`clwave.splat.perspective.quasi_interpolant`, periodic), for perspective views.
     """
     if not plans:
         return []
@@ -268,15 +269,15 @@ def device_spectra(cc, order: int, plans) -> list:
         phase = scale * nu * nv * (-1j) ** (imaginary * bin(psi).count("1"))
         rate[6:] = phase.real, phase.imag
         blocks = -(-(nu // 2 + 1) // SPECTRUM_BLOCK)
-        sizes.append((first, nv, blocks, psi))
+        sizes.append((first, nv, blocks, psi | nu << 3))
         rates.append(rate)
         groups = -(-nv * blocks // SPECTRUM_GROUP)
         group_tex += [t] * groups
         first += groups * SPECTRUM_GROUP
     q = cc.queue
     out = cla.empty(q, (first * SPECTRUM_BLOCK,), np.complex64)
-    kernels = programs.build(cc, ["splat/footprint.cl"], {"CLW_ORDER": order, "CLW_TERMS": len(coeffs),
-                                                               "CLW_MOMENTS": moments})
+    defines = {"CLW_ORDER": order, "CLW_TERMS": len(coeffs), "CLW_MOMENTS": moments}
+    kernels = programs.build(cc, ["splat/footprint.cl"], {**defines, "CLW_QUASI": None} if quasi else defines)
     _SPECTRA(kernels, q, (first,), (SPECTRUM_GROUP,), group_tex=cc.upload(np.array(group_tex, np.int32)),
              tex_size=cc.upload(np.array(sizes, np.int32)), tex_rate=cc.upload(np.array(rates, np.float32)),
              poly=cc.upload(np.array(coeffs, np.float32)), out=out)
