@@ -51,7 +51,7 @@ __kernel void classify_segments(__global real4 *out, __global const real *sample
 /* unpack_pool: every q of slot s of a packed scalar pool (the pool `words`, its `quant`; boxes as field_bspline.h's,
  * w the slot's first coefficient) into out[w ..], rows of up to four by pool_row as the ray tracer reads them.
  * Grid: global (slots). */
-__kernel void unpack_pool(__global float *out, __global const uint *words, __global const Quant *quant,
+__kernel void unpack_pool(__global float *out, __global const uchar *words, __global const Quant *quant,
                           __global const int4 *boxes)
 {
     const int s = get_global_id(0);

@@ -12,7 +12,7 @@
 
 /* ---- B-spline path: bricks of lattice coefficients (clwave/raytrace/bricks.py) ---- */
 /* A coefficient of the pool: float4 (channels in their slots), or for a scalar model a whole number q packed in
- * the pool's words, the coefficient offset + step q with its slot's Quant in quant (CLW_SCALAR_POOL, scalar_pool.h,
+ * the pool's bytes, the coefficient offset + step q with its slot's Quant in quant (CLW_SCALAR_POOL, scalar_pool.h,
  * clwave/raytrace/classified.py, docs/raytracing.md §10: sample_segment decodes the segment's cell once, into
  * Basis.q, and sums q); COEF4 reads a float4 as four channels, COEF_LANE as the channel whose gradient shades: alpha,
  * or the scalar post-classified (CLW_POST, classify.h).  CORNER is what a Basis reads its cell's coefficients from
@@ -24,7 +24,7 @@
 #define GRADIENT_LANE w
 #endif
 #ifdef CLW_SCALAR_POOL
-typedef uint coef_t;
+typedef uchar coef_t;
 #define COEF4(c) ((real4)((real)(c), 0, 0, 0))
 #define CORNER(B) ((B)->q)
 #define CORNER_COEF(c, sy, sz, j, rz, ry, rx) ((c)[((rz) * (j) + (ry)) * (j) + (rx)])

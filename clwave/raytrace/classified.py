@@ -40,13 +40,13 @@ RANGES_KEPT = 8
 RANGE_SLACK = 1e-6
 #: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
 FLAT = 1e-4
-#: the scalar pool's coefficients are whole numbers q of at most Q_BITS bits: per slot s = offset + step q, and the
+#: the scalar pool's coefficients are whole numbers q of 0..Q_BITS - 2 or Q_BITS bits: per slot s = offset + step q, and the
 #: pool's step bound is the widest slot's range / Q_MAX (docs/raytracing.md §10)
 Q_BITS = 16
 Q_MAX = 2 ** Q_BITS - 1
 #: per slot of a packed pool: its (offset, step) and where its q lie (``Quant`` in ``cl/raytrace/scalar_pool.h``)
 QUANT = np.dtype([("offset", "<f4"), ("step", "<f4"), ("word", "<u4"), ("bits", "<u4")])
-#: spare words at the end of a packed pool (a row's window reads four words)
+#: spare words at the end of a packed pool (a row reads eight bytes)
 POOL_PAD = 4
 #: coefficients packed at a time (float64 work arrays of this many elements)
 Q_CHUNK = 1 << 20
@@ -190,7 +190,7 @@ class ScalarRange:
 def pack(scalar, starts, sizes) -> tuple:
     """(words, quant): the pool's coefficients ``scalar`` (float32; slot s spans ``starts[s]`` .. + ``sizes[s]``, one
     after another) packed for ``cl/raytrace/scalar_pool.h`` (docs/raytracing.md §10).  The pool's step bound S is the
-    widest slot's range / Q_MAX; each slot gets the fewest bits b (0..Q_BITS) whose 2^b - 1 steps of S span its range,
+    widest slot's range / Q_MAX; each slot gets the fewest bits b (0..14, 16) whose 2^b - 1 steps of S span its range,
     then its own step, its range / (2^b - 1) rounded up in float32 (at most S), offset its least coefficient (float32,
     so exact), and q the nearest whole number in float64: the decoded ``offset + step q`` is within
     ``step / 2 <= S / 2`` of each coefficient.  ``words`` (uint32) holds slot s's q in bits ``i b`` .. of its words
@@ -205,6 +205,7 @@ def pack(scalar, starts, sizes) -> tuple:
     span = hi - offset
     levels = span.max() / Q_MAX * (2.0 ** np.arange(Q_BITS + 1) - 1)  # what b bits span at the bound's step
     bits = np.minimum(np.searchsorted(levels, span), Q_BITS)
+    bits[bits == Q_BITS - 1] = Q_BITS  # four fields in eight bytes from any byte (cl/raytrace/scalar_pool.h)
     top = 2.0 ** bits - 1
     step = np.divide(span, top, out=np.zeros(len(span)), where=bits > 0).astype(np.float32)
     step = np.where(step.astype(np.float64) * top < span, np.nextafter(step, np.float32(np.inf)), step)
