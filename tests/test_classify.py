@@ -363,10 +363,10 @@ def brick_field(coef, box, frame, order, fine):
 
 
 def test_packed_pool_within_half_a_step(monkeypatch):
-    """The scalar pool packed with 0..14 or 16 bits a slot (docs/raytracing.md §10): the ray tracer's decode gives the host's
-    q exactly (the nearest whole number of steps above the slot's least coefficient), each slot has the fewest bits
-    whose steps of the pool's bound S (the widest slot's range / 65535) span its range, its step is at most S and its
-    coefficients within half a step; brute force at random points of random blocks: the brick's field from the float
+    """The scalar pool packed with 0..14 or 16 bits a slot (docs/raytracing.md §10): the ray tracer's decode gives the
+    host's q exactly (the nearest whole number of steps above the slot's least coefficient), each slot has the fewest
+    bits whose steps of the pool's bound S (the widest slot's range / 65535) span its range, its step is at most S and
+    its coefficients within half a step; brute force at random points of random blocks: the brick's field from the float
     coefficients is the model's (the float64 closed form), the field from the decoded ones within half the slot's step
     of it, both in the block's range that skipping classifies; the pool's words are the slots' bits."""
     from clwave.device.constants import BLOCK, SUPER

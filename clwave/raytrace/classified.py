@@ -40,8 +40,8 @@ RANGES_KEPT = 8
 RANGE_SLACK = 1e-6
 #: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
 FLAT = 1e-4
-#: the scalar pool's coefficients are whole numbers q of 0..Q_BITS - 2 or Q_BITS bits: per slot s = offset + step q, and the
-#: pool's step bound is the widest slot's range / Q_MAX (docs/raytracing.md §10)
+#: the scalar pool's coefficients are whole numbers q of 0..Q_BITS - 2 or Q_BITS bits: per slot s = offset + step q,
+#: and the pool's step bound is the widest slot's range / Q_MAX (docs/raytracing.md §10)
 Q_BITS = 16
 Q_MAX = 2 ** Q_BITS - 1
 #: per slot of a packed pool: its (offset, step) and where its q lie (``Quant`` in ``cl/raytrace/scalar_pool.h``)
