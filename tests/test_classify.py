@@ -21,6 +21,7 @@ from clwave.raytrace.reference import _content_field, classified_reference
 CHECK = Kernel("classify_segments", ("out", BUFFER), ("samples", BUFFER), ("grads", BUFFER), ("radius", BUFFER),
                ("nodes", BUFFER), ("weights", BUFFER), ("tf", BUFFER), ("tol", REAL), ("shading", BUFFER),
                ("budget", BUFFER), ("stats", BUFFER), ("n", np.int32))
+UNPACK = Kernel("unpack_pool", ("out", BUFFER), ("words", BUFFER), ("quant", BUFFER), ("boxes", BUFFER))
 PHONG = (0.3, 0.7, 0.3, 20.0)  # ka, kd, ks, shininess (clwave.Phong's defaults)
 
 
@@ -285,7 +286,7 @@ def test_volumes_against_float64_oracle(case):
 def test_skipping_never_skips_content(hydrogen):
     """For random transfer functions, the block bounds are the largest opacity over the blocks' ranges (dense
     sampling), every block whose bound is 0 (skipped) holds no opacity: the model (its content-clamped B-spline
-    form, evaluated in closed form) and the 16-bit model the kernel renders (its bricks' decoded coefficients, brute
+    form, evaluated in closed form) and the packed model the kernel renders (its bricks' decoded coefficients, brute
     force) at 20 random points per such block, classified, are 0 there; and the images match the oracle."""
     wv, tr = hydrogen
     rng = np.random.default_rng(11)
@@ -295,10 +296,9 @@ def test_skipping_never_skips_content(hydrogen):
     scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)
     field = _content_field(wv)  # the model the B-spline field holds: zero beyond the content (§4)
     f, pages = tr.bricks, tr.field_at(0).pages
-    quant, sizes = tr.quant.get().view(np.float32).reshape(-1, 2).astype(np.float64), np.prod(f.boxes[:, 0, :3], axis=1)
-    decoded = quant[:, 0].repeat(sizes) + quant[:, 1].repeat(sizes) * tr.bricks.pool.get()[:sizes.sum()]
+    decoded = decoded_pool(tr)[0]
 
-    def quantized(fine):  # the 16-bit model at fine points (P, 3) (z, y, x) of one brick
+    def quantized(fine):  # the packed model at fine points (P, 3) (z, y, x) of one brick
         slot = pages[tuple(int(k) for k in fine[0] // (SUPER * BLOCK) - f.origin)]
         return np.zeros(len(fine)) if slot < 0 else \
             brick_field(decoded, f.boxes[slot, 0], f.frames[slot, 0], tr.orders[0], fine[:, ::-1])
@@ -321,13 +321,31 @@ def test_skipping_never_skips_content(hydrogen):
         _, alpha = tf(field(world, False)[:, 0])
         assert alpha.max() == 0
         assert max(tf(quantized(points))[1].max() for points in fine) == 0
-        # the lookup finds the brick: the 16-bit model is the model where there is content
+        # the lookup finds the brick: the packed model is the model where there is content
         full = np.column_stack(np.unravel_index(np.argsort(bound, axis=None)[-5:], bound.shape))
         inside = (tr.occ_origin + full)[:, None, :] * BLOCK + rng.uniform(0, BLOCK, (len(full), 20, 3))
         exact = field((inside[..., ::-1].reshape(-1, 3) - offset) / scale, False)[:, 0].reshape(len(full), 20)
-        assert np.abs(exact).max() > 1e-2 and np.abs(np.array([quantized(p) for p in inside]) - exact).max() <= 1e-5
+        within = tr.quant.get()["step"].max() / 2 + 1e-6 * np.abs(exact).max()  # half a step, and float32 bricks
+        assert np.abs(exact).max() > 1e-2 and np.abs(np.array([quantized(p) for p in inside]) - exact).max() <= within
         img = tr.render(cam, tolerance=1e-3, transfer_function=tf).image
         assert np.abs(img - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
+
+
+def decoded_pool(tr):
+    """(coefficients offset + step q float64, q, step per coefficient) of the tracer's packed scalar pool, q as the
+    ray tracer reads them (``pool_row``, by the ``unpack_pool`` harness kernel); the slots one after another."""
+    cc, f = tr.cc, tr.bricks
+    kernels = programs.build(cc, ["raytrace/classify_check.cl"], dict(CLW_POST=None, CLW_SAMPLES=9, CLW_GROUPS=1,
+                                                                       CLW_ORDERS=4, CLW_MAX_DEPTH=16))
+    boxes = np.ascontiguousarray(f.boxes[:, 0])
+    sizes = np.prod(boxes[:, :3].astype(np.int64), axis=1)
+    out = cla.zeros(cc.queue, int(sizes.sum()), np.float32)
+    UNPACK(kernels, cc.queue, (len(boxes),), None, out=out, words=f.pool, quant=tr.quant,
+           boxes=cla.to_device(cc.queue, boxes))
+    quant = tr.quant.get()
+    q = out.get().astype(np.float64)
+    step = quant["step"].astype(np.float64).repeat(sizes)
+    return quant["offset"].astype(np.float64).repeat(sizes) + step * q, q, step
 
 
 def brick_field(coef, box, frame, order, fine):
@@ -344,34 +362,45 @@ def brick_field(coef, box, frame, order, fine):
     return np.einsum("zyx,pz,py,px->p", c, w[2], w[1], w[0])
 
 
-def test_quantized_pool_within_half_a_step(monkeypatch):
-    """The scalar pool's 16-bit coefficients (docs/raytracing.md §10), brute force at random points of random
-    blocks: the brick's field from the float coefficients is the model's (the float64 closed form); the field from
-    the decoded ones is within half the slot's step of it (and a coefficient's error nearly that); both lie in the
-    block's range that skipping classifies; the pool is 2 bytes a coefficient."""
+def test_packed_pool_within_half_a_step(monkeypatch):
+    """The scalar pool packed with 0..14 or 16 bits a slot (docs/raytracing.md §10): the ray tracer's decode gives the
+    host's q exactly (the nearest whole number of steps above the slot's least coefficient), each slot has the fewest
+    bits whose steps of the pool's bound S (the widest slot's range / 65535) span its range, its step is at most S and
+    its coefficients within half a step; brute force at random points of random blocks: the brick's field from the float
+    coefficients is the model's (the float64 closed form), the field from the decoded ones within half the slot's step
+    of it, both in the block's range that skipping classifies; the pool's words are the slots' bits."""
     from clwave.device.constants import BLOCK, SUPER
     from clwave.model.geometry import world_to_fine_affine
     from clwave.raytrace import classified
 
-    seen, quantize = {}, classified.quantize
+    seen, pack = {}, classified.pack
 
     def spy(scalar, starts, sizes):
-        seen["float"], seen["sizes"] = scalar.copy(), sizes
-        seen["coded"], seen["quant"] = quantize(scalar, starts, sizes)
-        return seen["coded"], seen["quant"]
+        seen["float"], seen["starts"], seen["sizes"] = scalar.copy(), starts, sizes
+        return pack(scalar, starts, sizes)
 
-    monkeypatch.setattr(classified, "quantize", spy)
+    monkeypatch.setattr(classified, "pack", spy)
     vol = clwave.phantom("hydrogen", n=20)
     wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.1)
     tr = clwave.RayTracer(wv)
-    f, order, quant, sizes = tr.bricks, tr.orders[0], seen["quant"].astype(np.float64), seen["sizes"]
-    assert tr.bricks.pool_bytes == 2 * len(seen["float"]) and tr.bricks.pool.dtype == np.uint16
+    f, order, sizes, quant = tr.bricks, tr.orders[0], seen["sizes"], tr.quant.get()
     n = sizes.sum()  # the slots lie one after another from element 0
-    decoded = quant[:, 0].repeat(sizes) + quant[:, 1].repeat(sizes) * seen["coded"][:n]
-    steps = quant[:, 1].repeat(sizes)
-    error = np.abs(decoded - seen["float"][:n])[steps > 0] / steps[steps > 0]
+    coef = seen["float"][:n].astype(np.float64)
+    decoded, q, steps = decoded_pool(tr)
+    slot_of = np.repeat(np.arange(len(sizes)), sizes)
+    lo = np.minimum.reduceat(coef, seen["starts"])
+    span = np.maximum.reduceat(coef, seen["starts"]) - lo
+    bound, bits = span.max() / 65535, quant["bits"].astype(np.int64)
+    expected = np.rint(np.divide(coef - lo[slot_of], steps, out=np.zeros(n), where=steps > 0))
+    np.testing.assert_array_equal(q, expected)
+    fewer = np.where(bits == 16, 14, bits - 1)  # the next width down (15 is not used: cl/raytrace/scalar_pool.h)
+    assert np.all(span <= bound * (2.0 ** bits - 1) * (1 + 1e-6)) and np.all(span[bits > 0] > bound * (2.0 ** fewer[
+        bits > 0] - 1)) and not np.any(bits == 15)
+    assert np.all(quant["step"] <= bound * (1 + 1e-6)) and len(np.unique(bits % 8)) > 2  # fields straddle words
+    assert tr.bricks.pool_bytes == 4 * (np.sum(-(-sizes * bits // 32)) + classified.POOL_PAD) < 2 * n
+    error = np.abs(decoded - coef)[steps > 0] / steps[steps > 0]
     assert error.max() <= 0.5 + 1e-6 and error.max() > 0.45
-    assert np.all(decoded[steps == 0] == seen["float"][:n][steps == 0])
+    assert np.all(decoded[steps == 0] == coef[steps == 0])
     scale, offset = world_to_fine_affine(order, wv.shape, wv.spacing, wv.origin)
     model = _content_field(wv)
     rng = np.random.default_rng(3)
@@ -380,13 +409,13 @@ def test_quantized_pool_within_half_a_step(monkeypatch):
         blocks = rng.integers(0, SUPER, (4, 3))  # (z, y, x) in the brick
         for b in blocks:
             fine = ((f.bricks[s] * SUPER + b) * BLOCK)[::-1] + rng.uniform(0, BLOCK, (20, 3))  # (x, y, z)
-            exact = brick_field(seen["float"], f.boxes[s, 0], f.frames[s, 0], order, fine)
+            exact = brick_field(coef, f.boxes[s, 0], f.frames[s, 0], order, fine)
             quantized = brick_field(decoded, f.boxes[s, 0], f.frames[s, 0], order, fine)
             if f.levels[s] == 0:  # the finest bricks hold the model itself
                 truth = model((fine - offset) / scale, False)[:, 0]
                 np.testing.assert_allclose(exact, truth, rtol=0, atol=1e-6 * np.abs(truth).max() + 1e-7)
-            assert np.abs(quantized - exact).max() <= quant[s, 1] / 2 * (1 + 1e-6) + 1e-12
-            widest = max(widest, np.abs(quantized - exact).max() / quant[s, 1])
+            assert np.abs(quantized - exact).max() <= quant["step"][s] / 2 * (1 + 1e-6) + 1e-12
+            widest = max(widest, np.abs(quantized - exact).max() / max(quant["step"][s], 1e-30))
             lo, hi = tr.scalar.slot_range[(s, *b)]
             assert lo <= min(exact.min(), quantized.min()) and max(exact.max(), quantized.max()) <= hi
     assert widest > 0.01  # the decoded field does differ

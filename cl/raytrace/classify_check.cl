@@ -9,9 +9,11 @@
  *   budget   (n,) the shading budget (xi units: the segment's weight is 1), replaced by what is left of it
  *   stats    (n,) int4: flags (bit 1: a span or panel at its depth limit), shaded at the midpoint, inside one
  *            interval, integrand evaluations
- * Grid: global (n). */
+ * Grid: global (n).
+ * And unpack_pool: a packed scalar pool's q through the ray tracer's decode (scalar_pool.h), for its test. */
 #include "raytrace/types.h"
 #include "raytrace/classify.h"
+#include "raytrace/scalar_pool.h"
 
 __kernel void classify_segments(__global real4 *out, __global const real *samples, __global const real *grads,
                                 __global const real *radius, __constant const real *nodes,
@@ -44,4 +46,22 @@ __kernel void classify_segments(__global real4 *out, __global const real *sample
     out[i] = r;
     budget[i] = left;
     stats[i] = (int4)(flags, midpoints, one, evals);
+}
+
+/* unpack_pool: every q of slot s of a packed scalar pool (the pool `words`, its `quant`; boxes as field_bspline.h's,
+ * w the slot's first coefficient) into out[w ..], rows of up to four by pool_row as the ray tracer reads them.
+ * Grid: global (slots). */
+__kernel void unpack_pool(__global float *out, __global const uchar *words, __global const Quant *quant,
+                          __global const int4 *boxes)
+{
+    const int s = get_global_id(0);
+    const int4 n = boxes[s];
+    const uint size = n.x * n.y * n.z;
+    for (uint i = 0; i < size; i += 4) {
+        float row[4];
+        const int k = min(4u, size - i);
+        pool_row(words, quant[s], i, k, row);
+        for (int r = 0; r < k; r++)
+            out[n.w + i + r] = row[k - 1 - r];
+    }
 }

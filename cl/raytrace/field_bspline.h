@@ -8,30 +8,38 @@
 #ifndef CLW_FIELD_H
 #define CLW_FIELD_H
 #include "raytrace/types.h"
+#include "raytrace/scalar_pool.h"
 
 /* ---- B-spline path: bricks of lattice coefficients (clwave/raytrace/bricks.py) ---- */
-/* A coefficient of the pool: float4 (channels in their slots), or for a scalar model a 16-bit integer q, the
- * coefficient offset + step q with its slot's (offset, step) in quant (CLW_SCALAR_POOL, clwave/raytrace/classified.py,
- * docs/raytracing.md §10; sample_segment decodes the sums); COEF4 reads it as four channels, COEF_LANE as the
- * channel whose gradient shades: alpha, or the scalar post-classified (CLW_POST, classify.h) */
+/* A coefficient of the pool: float4 (channels in their slots), or for a scalar model a whole number q packed in
+ * the pool's bytes, the coefficient offset + step q with its slot's Quant in quant (CLW_SCALAR_POOL, scalar_pool.h,
+ * clwave/raytrace/classified.py, docs/raytracing.md §10: sample_segment decodes the segment's cell once, into
+ * Basis.q, and sums q); COEF4 reads a float4 as four channels, COEF_LANE as the channel whose gradient shades: alpha,
+ * or the scalar post-classified (CLW_POST, classify.h).  CORNER is what a Basis reads its cell's coefficients from
+ * (the pool at the cell's last coefficient, or the decoded q) and CORNER_COEF(c, sy, sz, j, rz, ry, rx) the
+ * coefficient rz planes, ry rows and rx places before that last one. */
 #ifdef CLW_POST
 #define GRADIENT_LANE x
 #else
 #define GRADIENT_LANE w
 #endif
 #ifdef CLW_SCALAR_POOL
-typedef ushort coef_t;
+typedef uchar coef_t;
 #define COEF4(c) ((real4)((real)(c), 0, 0, 0))
-#define COEF_LANE(c) (c)
+#define CORNER(B) ((B)->q)
+#define CORNER_COEF(c, sy, sz, j, rz, ry, rx) ((c)[((rz) * (j) + (ry)) * (j) + (rx)])
+typedef const real *corner_t;
 #else
 typedef float4 coef_t;
 #define COEF4(c) to_real4(c)
-#define COEF_LANE(c) ((c).GRADIENT_LANE)
+#define CORNER(B) ((B)->corner)
+#define CORNER_COEF(c, sy, sz, j, rz, ry, rx) ((c)[-(rz) * (sz) - (ry) * (sy) - (rx)].GRADIENT_LANE)
+typedef __global const coef_t *corner_t;
 #endif
 #define FIELD_PARAMS __global const coef_t *coef, __global const int *pages, const int4 page_origin, \
                      const int4 page_shape, __global const float4 *frames, __global const int4 *boxes, \
                      __global const float4 *lattices, __global const int4 *mixes, __global const uchar *pieces, \
-                     __global const float2 *quant
+                     __global const Quant *quant
 typedef struct {
     __global const coef_t *coef;
     __global const int *pages;
@@ -41,7 +49,7 @@ typedef struct {
     __global const float4 *lattices;
     __global const int4 *mixes;  /* per slot: a mixed brick's coarse slot (-1: not mixed), first piece, pieces per axis */
     __global const uchar *pieces; /* per piece of a mixed brick: 1 to march it on the coarse slot */
-    __global const float2 *quant; /* per slot of a scalar pool: (offset, step) of its 16-bit coefficients */
+    __global const Quant *quant; /* per slot of a scalar pool: where its q lie, and their offset and step */
 } Field;
 #define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices, mixes, pieces, quant}
 #define FIELD_BRICK CLW_SUPER_CELLS /* a brick is a superblock */
@@ -220,9 +228,9 @@ __attribute__((always_inline)) inline void group_field(__global const coef_t *co
 }
 
 /* The alpha group's part of alpha's fine gradient at all lanes of TYPE at once: the same
- * separable sum as group_field on the alpha channel (COEF_LANE), with the derivative weights d? */
+ * separable sum as group_field on the alpha channel (CORNER_COEF), with the derivative weights d? */
 #define GROUP_GRADIENT(TYPE, NAME)                                                                        \
-    __attribute__((always_inline)) inline void NAME(__global const coef_t *corner, const int sy, const int sz, \
+    __attribute__((always_inline)) inline void NAME(const corner_t corner, const int sy, const int sz,         \
                                                     const int j, const TYPE *wx, const TYPE *wy, const TYPE *wz, \
                                                     const TYPE *dx, const TYPE *dy, const TYPE *dz, TYPE *gx,   \
                                                     TYPE *gy, TYPE *gz)                                         \
@@ -230,10 +238,9 @@ __attribute__((always_inline)) inline void group_field(__global const coef_t *co
         _Pragma("unroll") for (int rz = 0; rz < j; rz++) {                                                \
             TYPE plane = 0, plane_dx = 0, plane_dy = 0;                                                   \
             _Pragma("unroll") for (int ry = 0; ry < j; ry++) {                                            \
-                __global const coef_t *row = corner - rz * sz - ry * sy;                                  \
                 TYPE line = 0, line_dx = 0;                                                               \
                 _Pragma("unroll") for (int rx = 0; rx < j; rx++) {                                        \
-                    const TYPE a = (TYPE)(COEF_LANE(row[-rx]));                                          \
+                    const TYPE a = (TYPE)(CORNER_COEF(corner, sy, sz, j, rz, ry, rx));                   \
                     line = fma(a, wx[rx], line);                                                          \
                     line_dx = fma(a, dx[rx], line_dx);                                                    \
                 }                                                                                         \
@@ -258,6 +265,9 @@ typedef struct {
     real inv_step; /* lattice cells per grid-0 fine cell: the gradient's scale */
     real8 u[3], w[3][MAX_ORDER];
     realt ut[3], wt[3][MAX_ORDER];
+#ifdef CLW_SCALAR_POOL
+    real q[MAX_ORDER * MAX_ORDER * MAX_ORDER]; /* the cell's q, decoded once for the samples and the gradient */
+#endif
 } Basis;
 
 /* Grid g's part of the segment at the sample points xm + radius xi_k D, sample k in lane k, from the
@@ -300,8 +310,27 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
 }
 
 #ifdef CLW_SCALAR_POOL
-/* group_field for a scalar pool: one lane a sample (samples 0..7 in *f, the tail lanes in *ft when `tail`), where
- * group_field's four channel lanes a sample would sum three of zeros */
+/* The q of the segment's cell (the j^3 coefficients ending at B->corner) from the packed pool into B->q, in
+ * CORNER_COEF's order: one decode a segment, for its samples and its gradient (slot -1: q = 0) */
+__attribute__((always_inline)) inline void scalar_cell(const Field G, const int slot, const Quant Q, const int j,
+                                                       Basis *B)
+{
+    /* the cell's last coefficient within the slot: B->corner counts from the slot's first, G.boxes' w */
+    const uint last = (uint)(B->corner - G.coef) - (slot < 0 ? 0 : G.boxes[slot * CLW_GROUPS].w);
+#pragma unroll
+    for (int rz = 0; rz < j; rz++)
+#pragma unroll
+        for (int ry = 0; ry < j; ry++) {
+            float row[MAX_ORDER];
+            pool_row(G.coef, Q, last - rz * B->sz - ry * B->sy - (j - 1), j, row);
+#pragma unroll
+            for (int rx = 0; rx < j; rx++)
+                B->q[(rz * j + ry) * j + rx] = row[rx];
+        }
+}
+
+/* group_field for a scalar pool, from the decoded q: one lane a sample (samples 0..7 in *f, the tail lanes in *ft
+ * when `tail`), where group_field's four channel lanes a sample would sum three of zeros */
 __attribute__((always_inline)) inline void scalar_field(const Basis *B, const int j, const bool tail, real8 *f,
                                                         realt *ft)
 {
@@ -311,21 +340,11 @@ __attribute__((always_inline)) inline void scalar_field(const Basis *B, const in
         realt plane_t = 0;
 #pragma unroll
         for (int ry = 0; ry < j; ry++) {
-            __global const coef_t *row = B->corner - rz * B->sz - ry * B->sy;
             real8 line = 0;
             realt line_t = 0;
-            real cr[MAX_ORDER]; /* the row's q: a cubic's four in one vector load and conversion, which made the
-                                  * 16-bit pool no slower than the float one (docs/benchmarks.md §8) */
-            if (j == 4) {
-                const float4 v = convert_float4(vload4(0, row - 3));
-                cr[0] = v.s3; cr[1] = v.s2; cr[2] = v.s1; cr[3] = v.s0;
-            } else
-#pragma unroll
-            for (int rx = 0; rx < j; rx++)
-                cr[rx] = row[-rx];
 #pragma unroll
             for (int rx = 0; rx < j; rx++) {
-                const real c = cr[rx];
+                const real c = CORNER_COEF(B->q, B->sy, B->sz, j, rz, ry, rx);
                 line = fma((real8)(c), B->w[0][rx], line);
                 if (tail)
                     line_t = fma((realt)(c), B->wt[0][rx], line_t);
@@ -342,6 +361,7 @@ __attribute__((always_inline)) inline void scalar_field(const Basis *B, const in
 
 #define SCALAR_FIELD(J) \
     case J: \
+        scalar_cell(G, A->slot, Q, J, B); \
         if (tail) \
             scalar_field(B, J, true, &f, &ft); \
         else \
@@ -358,8 +378,8 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
     segment_basis(G, 0, A->slot, xm, radius, D, nodes, B);
     /* the slot's coefficients are offset + step q and the B-splines sum to 1 (their derivatives to 0): s is
      * offset + step times the sum over q, and the gradient step times its sum (no brick: weights 0, s = 0) */
-    const float2 quant = A->slot < 0 ? (float2)(0) : G.quant[A->slot];
-    B->inv_step *= quant.y;
+    const Quant none = {0, 0, 0, 0}, Q = A->slot < 0 ? none : G.quant[A->slot];
+    B->inv_step *= Q.step;
     real8 f = 0;
     realt ft = 0;
     switch (ORDER[0]) {
@@ -371,8 +391,8 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
     SCALAR_FIELD(6)
 #endif
     }
-    f = fma(f, (real8)(quant.y), (real8)(quant.x));
-    ft = fma(ft, (realt)(quant.y), (realt)(quant.x));
+    f = fma(f, (real8)(Q.step), (real8)(Q.offset));
+    ft = fma(ft, (realt)(Q.step), (realt)(Q.offset));
     real s[16];
     vstore8(f, 0, s);
 #if NS > 12
@@ -455,7 +475,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
         TYPE d[3][MAX_ORDER], hx = 0, hy = 0, hz = 0;                                                     \
         for (int a = 0; a < 3; a++)                                                                       \
             DERIVATIVES(j, B->U[a], d[a]);                                                                \
-        __global const coef_t *c = B->corner;                                                             \
+        const corner_t c = CORNER(B);                                                                     \
         const TYPE *wx = B->W[0], *wy = B->W[1], *wz = B->W[2];                                           \
         switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */                         \
         case 2: GRADIENT(c, B->sy, B->sz, 2, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;         \

@@ -40,9 +40,15 @@ RANGES_KEPT = 8
 RANGE_SLACK = 1e-6
 #: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
 FLAT = 1e-4
-#: the scalar pool's coefficients are 16-bit integers q: per slot s = offset + step q (docs/raytracing.md §10)
-Q_MAX = 65535
-#: coefficients quantized at a time (float64 work arrays of this many elements)
+#: the scalar pool's coefficients are whole numbers q of 0..Q_BITS - 2 or Q_BITS bits: per slot s = offset + step q,
+#: and the pool's step bound is the widest slot's range / Q_MAX (docs/raytracing.md §10)
+Q_BITS = 16
+Q_MAX = 2 ** Q_BITS - 1
+#: per slot of a packed pool: its (offset, step) and where its q lie (``Quant`` in ``cl/raytrace/scalar_pool.h``)
+QUANT = np.dtype([("offset", "<f4"), ("step", "<f4"), ("word", "<u4"), ("bits", "<u4")])
+#: spare words at the end of a packed pool (a row reads eight bytes)
+POOL_PAD = 4
+#: coefficients packed at a time (float64 work arrays of this many elements)
 Q_CHUNK = 1 << 20
 
 
@@ -92,9 +98,9 @@ class ScalarRange:
     out per detail when a render first asks for it (:mod:`clwave.raytrace.lod`: each detail picks its slots), and
     the classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
 
-    Made, the pool on the device keeps the scalar alone, as 16-bit integers with an offset and a step per slot
-    (:func:`quantize`; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``), an eighth of the float4 pool's memory;
-    the ranges are widened by half a step, so they hold the float model and the one rendered.
+    Made, the pool on the device keeps the scalar alone, packed with 0 to 16 bits a coefficient and an offset and a
+    step per slot (:func:`pack`; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the ranges are widened by
+    half the slot's step, so they hold the float model and the one rendered.
     """
 
     def __init__(self, tracer):
@@ -119,11 +125,11 @@ class ScalarRange:
             scalar = cla.empty(q, len(f.pool), np.float32)  # the scalar alone: the float4 pool goes
             _STRIDED(self.kernels, q, (len(f.pool),), None, out=scalar, coef=f.pool, step=1, n=len(f.pool))
             sizes = np.prod(f.boxes[:, 0, :3].astype(np.int64), axis=1)
-            coded, quant = quantize(scalar.get(), f.boxes[:, 0, 3].astype(np.int64), sizes)
+            words, quant = pack(scalar.get(), f.boxes[:, 0, 3].astype(np.int64), sizes)
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half a step of the floats
-            self.slot_range += (quant[:, 1:] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]
-            tracer.replace_pool(cla.to_device(q, coded), cla.to_device(q, quant))
+            self.slot_range += (quant["step"][:, None] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]
+            tracer.replace_pool(cla.to_device(q, words), cla.to_device(q, quant))
             tracer.defines["CLW_SCALAR_POOL"] = None
         self.slack = RANGE_SLACK * float(tracer.q_bound)
         self.ranges = {}  # per detail (its pages' bytes): the range per block on the device
@@ -181,32 +187,49 @@ class ScalarRange:
         return self.last
 
 
-def quantize(scalar, starts, sizes) -> tuple:
-    """(coded, quant): the pool's coefficients ``scalar`` (float32; slot s spans ``starts[s]`` .. + ``sizes[s]``, one
-    after another) as uint16 q with (offset, step) per slot (float32), the decoded ``offset + step q`` within
-    ``step / 2`` of each: offset the slot's least coefficient (float32, at most it), step its range / Q_MAX rounded
-    up in float32, q the nearest whole number in float64 (docs/raytracing.md §10)."""
+def pack(scalar, starts, sizes) -> tuple:
+    """(words, quant): the pool's coefficients ``scalar`` (float32; slot s spans ``starts[s]`` .. + ``sizes[s]``, one
+    after another) packed for ``cl/raytrace/scalar_pool.h`` (docs/raytracing.md §10).  The pool's step bound S is the
+    widest slot's range / Q_MAX; each slot gets the fewest bits b (0..14, 16) whose 2^b - 1 steps of S span its range,
+    then its own step, its range / (2^b - 1) rounded up in float32 (at most S), offset its least coefficient (float32,
+    so exact), and q the nearest whole number in float64: the decoded ``offset + step q`` is within
+    ``step / 2 <= S / 2`` of each coefficient.  ``words`` (uint32) holds slot s's q in bits ``i b`` .. of its words
+    from ``quant["word"][s]``, then POOL_PAD spare words; ``quant`` is (slots,) QUANT."""
     end = int(starts[-1] + sizes[-1]) if len(starts) else 0
-    coded = np.zeros(len(scalar), np.uint16)  # elements past the last slot (the pool's margin): 0
+    quant = np.zeros(max(len(starts), 1), QUANT)
     if not end:
-        return coded, np.zeros((max(len(starts), 1), 2), np.float32)
+        return np.zeros(POOL_PAD, np.uint32), quant
     lo = np.minimum.reduceat(scalar[:end], starts).astype(np.float64)
     hi = np.maximum.reduceat(scalar[:end], starts).astype(np.float64)
     offset = lo.astype(np.float32)  # exact: the coefficients are float32
-    step = ((hi - offset) / Q_MAX).astype(np.float32)
-    step = np.where(step.astype(np.float64) * Q_MAX < hi - offset, np.nextafter(step, np.float32(np.inf)), step)
+    span = hi - offset
+    levels = span.max() / Q_MAX * (2.0 ** np.arange(Q_BITS + 1) - 1)  # what b bits span at the bound's step
+    bits = np.minimum(np.searchsorted(levels, span), Q_BITS)
+    bits[bits == Q_BITS - 1] = Q_BITS  # four fields in eight bytes from any byte (cl/raytrace/scalar_pool.h)
+    top = 2.0 ** bits - 1
+    step = np.divide(span, top, out=np.zeros(len(span)), where=bits > 0).astype(np.float32)
+    step = np.where(step.astype(np.float64) * top < span, np.nextafter(step, np.float32(np.inf)), step)
     inverse = np.divide(1.0, step.astype(np.float64), out=np.zeros(len(step)), where=step > 0)
+    word = np.concatenate([[0], np.cumsum(-(-sizes * bits // 32))])
+    words = np.zeros(int(word[-1]) + POOL_PAD, np.uint32)
     first = 0
     while first < len(starts):  # slots in chunks of about Q_CHUNK coefficients
-        last = int(np.searchsorted(starts, starts[first] + Q_CHUNK, side="right"))
-        last = max(last, first + 1)
-        a, b = int(starts[first]), int(starts[last - 1] + sizes[last - 1])
-        reps = sizes[first:last]
+        last = max(int(np.searchsorted(starts, starts[first] + Q_CHUNK, side="right")), first + 1)
+        a, b, reps = int(starts[first]), int(starts[last - 1] + sizes[last - 1]), sizes[first:last]
         u = (scalar[a:b] - np.repeat(offset[first:last].astype(np.float64), reps)) * np.repeat(inverse[first:last],
                                                                                                 reps)
-        coded[a:b] = np.clip(np.rint(u), 0, Q_MAX)
+        q = np.clip(np.rint(u), 0, np.repeat(top[first:last], reps))
+        # bit i b of the slot's words: fields never overlap, so a word's 64-bit window is the sum of those that start
+        # in it (each below 2^47: exact in float64)
+        bit = np.repeat(word[first:last] * 32 - starts[first:last] * bits[first:last], reps) + \
+            np.arange(a, b) * np.repeat(bits[first:last], reps)
+        k0 = int(word[first])
+        window = np.bincount(bit // 32 - k0, q * 2.0 ** (bit % 32)).astype(np.uint64)
+        words[k0:k0 + len(window)] |= (window & 0xFFFFFFFF).astype(np.uint32)
+        words[k0 + 1:k0 + 1 + len(window)] |= (window >> np.uint64(32)).astype(np.uint32)
         first = last
-    return coded, np.column_stack([offset, step]).astype(np.float32)
+    quant["offset"], quant["step"], quant["word"], quant["bits"] = offset, step, word[:-1], bits
+    return words, quant
 
 
 def post_nodes(nodes, n_samples) -> np.ndarray:

@@ -29,7 +29,7 @@ from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblock
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .passes import passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
-from .classified import ScalarRange, check_post, post_nodes
+from .classified import QUANT, ScalarRange, check_post, post_nodes
 from .progressive import frames
 from .quadrature import sample_tables
 from ..io.result import RenderResult
@@ -174,7 +174,7 @@ class RayTracer:
         # arrays at once, which overflowed its threads' stacks
         self.local_size = (8, 8)
         self.defines = group_defines(self.orders)
-        self.quant = cla.zeros(self.cc.queue, 1, cltypes.float2)  # a scalar pool's (offset, step) per slot
+        self.quant = cla.zeros(self.cc.queue, 1, QUANT)  # a packed scalar pool's Quant per slot (classified.pack)
 
     def field_at(self, caps) -> FieldAt:
         """The B-spline field at detail ``caps`` (one level, or one per brick): made once per detail from the
@@ -188,7 +188,7 @@ class RayTracer:
 
     def replace_pool(self, pool, quant=None):
         """The bricks' pool on the device replaced by ``pool`` (post-classification's scalar pool, docs/raytracing.md
-        §10; ``quant``: its (offset, step) per slot): the field's tables of every detail name the new one."""
+        §10; ``quant``: its QUANT per slot): the field's tables of every detail name the new one."""
         self.bricks.pool = pool
         self.quant = self.quant if quant is None else quant
         self._at.clear()
