@@ -521,3 +521,29 @@ def test_piece_flags_equal_a_census_of_each_piece(levels):
             assert field.pieces[first + (p[0] * k + p[1]) * k + p[2]] == want, (s, p)
             counts[want] += 1
     assert np.all(counts > 20), counts
+
+
+@pytest.mark.parametrize("wavelet", ["cubic", ["cubic"] * 3 + ["haar"], ["linear"] * 3 + ["quadratic"]])
+def test_content_cells_equal_a_census_of_the_voxels_reaching_each_cell(wavelet):
+    """bounds.content_cells against one cell at a time: voxel k's B-spline of a group of order j reaches grid-0 cells
+    [k + s, k + s + j) (s = (j0 - j) / 2, docs/raytracing.md §3); a cell is 1 where any voxel reaching it (of any
+    group) is non-zero, or with ``every`` where all are (voxels beyond the volume are empty)."""
+    from clwave.model.mask import ContentMask
+    from clwave.raytrace.bounds import content_cells
+
+    wv = WaveletVolume.from_volume(smooth_volume(n=10), wavelet=wavelet, levels=1)
+    mask = np.random.default_rng(9).random(wv.shape) < 0.7
+    mask[1:8, 1:9, 2:9] = True
+    wv.content_mask = ContentMask.of(mask)
+    j0 = wv.groups[0].wavelet.order
+    origin, shape = np.array([-3, -1, 4]), np.array([9, 8, 9])
+    some, every = content_cells(wv, origin, shape), content_cells(wv, origin, shape, every=True)
+    for c in product(*(range(o, o + n) for o, n in zip(origin, shape))):
+        reach = set()
+        for g in wv.groups:
+            j, s = g.wavelet.order, (j0 - g.wavelet.order) / 2.0
+            reach |= set(product(*(range(int(np.floor(x - j - s)) + 1, int(np.ceil(x + 1 - s))) for x in c)))
+        values = [bool(np.all(np.array(k) >= 0) and np.all(np.array(k) < wv.shape) and mask[k]) for k in reach]
+        at = tuple(np.array(c) - origin)
+        assert some[at] == any(values) and every[at] == all(values), c
+    assert some.any() and not some.all() and every.any() and not np.array_equal(some, every)

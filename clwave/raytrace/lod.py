@@ -39,8 +39,8 @@ def occupancy(mask, wavelet, level: int, start, shape) -> np.ndarray:
 
 def any_blocks(fine, step: int) -> np.ndarray:
     """Bool (``fine.shape // step``): whether any of each ``step``^3 block of the C-ordered bool array ``fine``
-    is set.  One axis at a time from the innermost, whose blocks of 2, 4 or 8 bytes are read as one integer: a
-    reduction over three strided axes at once took 10x as long (docs/benchmarks.md §7, set-up)."""
+    is set.  One axis at a time from the innermost, whose blocks of 2, 4 or 8 bytes are read as one integer: numpy's
+    reduction over three strided axes at once is far slower (docs/benchmarks.md §7, set-up)."""
     n = [v // step for v in fine.shape]
     if step == 1:
         return np.ascontiguousarray(fine)
