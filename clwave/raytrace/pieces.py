@@ -31,6 +31,9 @@ from .lod import any_blocks
 #: (docs/raytracing.md §3)
 PIECE = 2
 
+#: the most mixed bricks whose pieces are counted at once (their cells held as bytes: up to 24^3 each at level 3)
+CHUNK = 512
+
 
 @lru_cache
 def bernstein(j: int, part: int = 0, parts: int = 1) -> np.ndarray:
@@ -107,11 +110,14 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
         if np.any(coarse[layer] != fine[layer]):  # a clamped brick: where only content voxels reach, where any does
             inner = _brick_cells(content_cells(wv, lo * BRICK, count * BRICK, every=True), count)
             reach = _brick_cells(content_cells(wv, lo * BRICK, count * BRICK), count)
-        for key in np.unique(np.stack([lead[layer], side[layer], k[layer]], axis=1), axis=0):
-            group = layer[np.all(np.stack([lead[layer], side[layer], k[layer]], axis=1) == key, axis=1)]
-            f, e = _piece_flags(coarse[group] != fine[group], inner, reach, bricks[fine[group]] - lo, *map(int, key))
-            for i, a, b in zip(group, f, e):
-                flags[i], empty[i] = a, b
+        kinds = np.stack([lead[layer], side[layer], k[layer]], axis=1)
+        for key in np.unique(kinds, axis=0):  # the bricks of one kind, at most CHUNK at once
+            same = layer[np.all(kinds == key, axis=1)]
+            for group in np.split(same, np.arange(CHUNK, len(same), CHUNK)):
+                f, e = _piece_flags(coarse[group] != fine[group], inner, reach, bricks[fine[group]] - lo,
+                                    *map(int, key))
+                for i, a, b in zip(group, f, e):
+                    flags[i], empty[i] = a, b
     if alpha is not None:  # and where alpha's Bernstein coefficients are >= 0: the alpha boxes read at once
         need = [i for i, f in enumerate(flags) if f.any()]
         shapes = [lay["count"][coarse[i], alpha] for i in need]
