@@ -473,3 +473,77 @@ def test_mixed_bricks_render_the_fine_function_with_fewer_segments(levels, monke
         whole = RayTracer(wv).render(cam, tolerance=1e-3)
         assert np.max(np.abs(whole.image - exact)) <= 1e-3
         assert mixed.meta["segments"] < 0.97 * whole.meta["segments"]
+
+
+@pytest.mark.parametrize("levels", [2, 3])
+def test_piece_flags_equal_a_census_of_each_piece(levels):
+    """pieces.mixed_pieces against one piece at a time.  Piece p of a mixed brick b covers fine cells
+    ``o + h c0 + side p .. + side`` (c0: the coarse cell holding the brick's first cell, h its size, o the lattice
+    origin); of those, the cells inside the brick decide: flag 2 where no content voxel reaches any of them (bounds.
+    content_cells), 1 where only content voxels reach all of them and the least Bernstein coefficient of alpha on
+    that part of its coarse cell (alpha_floors of the one cell) is >= 0, 0 otherwise; pieces outside the brick 0."""
+    from clwave.raytrace.bounds import content_cells
+    from clwave.raytrace.pieces import alpha_floors
+
+    wv = mixed_model(levels)
+    field = build(wv)
+    pool = field.pool.get()
+    lo, shape = field.origin * BRICK, np.array(field.shape) * BRICK
+    some = content_cells(wv, lo, shape).astype(bool)
+    every = content_cells(wv, lo, shape, every=True).astype(bool)
+    alpha = next(gi for gi, g in enumerate(wv.groups) if 3 in g.channels)
+    j = wv.groups[alpha].wavelet.order
+    counts = np.zeros(3, int)
+    for s in np.flatnonzero(field.mixes[:, 0] >= 0):
+        coarse, first, k, side = (int(v) for v in field.mixes[s])
+        o, h = float(field.lattices[coarse][0]), float(field.lattices[coarse][3])
+        start = BRICK * field.bricks[s]
+        c0 = np.floor((start - o) / h)
+        frame, box = field.frames[coarse, alpha], field.boxes[coarse, alpha]
+        coef = pool[box[3]:box[3] + np.prod(box[:3]), 3].reshape(box[2], box[1], box[0])  # z, y, x
+        parts = int(h // side)
+        floors = alpha_floors(coef, wv.groups[alpha].wavelet, parts)  # per part of each cell of the box
+        for p in product(range(k), repeat=3):
+            piece = o + h * c0 + side * np.array(p)
+            a, b = np.maximum(piece, start).astype(int), np.minimum(piece + side, start + BRICK).astype(int)
+            want = 0
+            if np.all(b > a):
+                cells = tuple(slice(x - y, z - y) for x, z, y in zip(a, b, lo))
+                u = ((piece + side / 2)[::-1] - frame[:3]) * frame[3]  # the coarse cell's lattice coordinates (x, y, z)
+                c = np.floor(u).astype(int)
+                # cell c reads coefficients c - j + 1 .. c: its parts are floors[(c - j + 1) parts + ...]
+                part = (c - j + 1) * parts + np.floor((u - c) * parts).astype(int)
+                floor = floors[tuple(part[::-1])]
+                if coarse != s and not some[cells].any():
+                    want = 2
+                elif (coarse == s or every[cells].all()) and floor >= 0:
+                    want = 1
+            assert field.pieces[first + (p[0] * k + p[1]) * k + p[2]] == want, (s, p)
+            counts[want] += 1
+    assert np.all(counts > 20), counts
+
+
+@pytest.mark.parametrize("wavelet", [["cubic"] * 3 + ["haar"], ["linear"] * 3 + ["quadratic"]])
+def test_content_cells_equal_a_census_of_the_voxels_reaching_each_cell(wavelet):
+    """bounds.content_cells against one cell at a time: voxel k's B-spline of a group of order j reaches grid-0 cells
+    [k + s, k + s + j) (s = (j0 - j) / 2, docs/raytracing.md §3); a cell is 1 where any voxel reaching it (of any
+    group) is non-zero, or with ``every`` where all are (voxels beyond the volume are empty)."""
+    from clwave.model.mask import ContentMask
+    from clwave.raytrace.bounds import content_cells
+
+    wv = WaveletVolume.from_volume(smooth_volume(n=10), wavelet=wavelet, levels=1)
+    mask = np.random.default_rng(9).random(wv.shape) < 0.7
+    mask[1:8, 1:9, 2:9] = True
+    wv.content_mask = ContentMask.of(mask)
+    j0 = wv.groups[0].wavelet.order
+    origin, shape = np.array([-3, -1, 4]), np.array([9, 8, 9])
+    some, every = content_cells(wv, origin, shape), content_cells(wv, origin, shape, every=True)
+    for c in product(*(range(o, o + n) for o, n in zip(origin, shape))):
+        reach = set()
+        for g in wv.groups:
+            j, s = g.wavelet.order, (j0 - g.wavelet.order) / 2.0
+            reach |= set(product(*(range(int(np.floor(x - j - s)) + 1, int(np.ceil(x + 1 - s))) for x in c)))
+        values = [bool(np.all(np.array(k) >= 0) and np.all(np.array(k) < wv.shape) and mask[k]) for k in reach]
+        at = tuple(np.array(c) - origin)
+        assert some[at] == any(values) and every[at] == all(values), c
+    assert some.any() and not some.all() and every.any() and not np.array_equal(some, every)

@@ -18,7 +18,7 @@ from clwave.model.transform import Band, band_sum, synthesize
 from clwave.model.wavelet import ChannelGroup
 from clwave.raytrace import bricks, tracer as tracer_module
 from clwave.raytrace.bounds import cell_blocks, content_cells
-from clwave.raytrace.lod import Detail, occupancy
+from clwave.raytrace.lod import Detail, any_blocks, occupancy
 from clwave.raytrace.tracer import RayTracer
 from test_bricks import build, pool_field, smooth_rgba, smooth_volume
 
@@ -97,10 +97,22 @@ def test_occupancy_equals_brute_force():
     mask[12:, 20:, :5] = False
     wv.content_mask = ContentMask.of(mask)
     for wavelet in (wv.groups[0].wavelet, SplineWavelet(2)):
-        for level in (0, 1, 2):
+        for level in (0, 1, 2, 3):
             start, shape = (-4, -3, -5), (16, 14, 17)
             assert np.array_equal(occupancy(wv.content_mask, wavelet, level, start, shape),
                                   brute_occupancy(wv.content_mask, wavelet, level, start, shape))
+
+
+def test_any_blocks_equals_a_reduction_over_each_block():
+    """lod.any_blocks (one axis at a time, the innermost read as words) against numpy's any over each block's three
+    axes at once, for block sides that are a word (2, 4, 8) and that are not (1, 3, 16)."""
+    rng = np.random.default_rng(8)
+    for step in (1, 2, 3, 4, 8, 16):
+        n = (3, 2, 5) if step == 16 else (4, 5, 3)
+        for density in (0.002, 0.05):
+            fine = rng.random(tuple(step * v for v in n)) < density
+            want = fine.reshape(n[0], step, n[1], step, n[2], step).any(axis=(1, 3, 5))
+            assert np.array_equal(any_blocks(fine, step), want)
 
 
 @pytest.mark.parametrize("wavelet,levels,content", [("cubic", 3, True), ("cubic", 2, False), ("linear", 2, True),

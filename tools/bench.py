@@ -33,6 +33,8 @@ frame the time since the start of the view, energy, and RMS error against the fi
 ``lod``: level of detail and progressive ray tracing (docs/raytracing.md §8, §9): hydrogen RGBA, cubic, 3
 levels, 5 % and 0.1 %, at ``--raytrace-image``; set-up with and without every detail, per-detail render times
 (interleaved), the time to change detail, and the progressive frames with their measured and estimated errors.
+``setup``: the ray tracer's set-up (plan, expansion, mixed pieces, bounds) of the ``lod`` models, without and
+with every detail, ``--repeats`` times after a warm-up: seconds, the expansion's share, pool, slots, mixed bricks.
 ``post``: post-classification (a transfer function at render time, docs/raytracing.md §10) against
 pre-classification of the same phantom, renders interleaved; transfer-function changes, pools, errors.
 ``drr`` (not in ``all``): digitally reconstructed radiographs (docs/splatting.md §8): a
@@ -426,6 +428,35 @@ def bench_lod(args) -> dict:
                                                             "estimated_relative_rms_error", "relative_max_error",
                                                             "estimated_relative_max_error")} for f in frames]
         out["keeps"][str(keep)] = case
+    out["peak_resident_gib"] = peak_resident_gib()
+    return out
+
+
+def bench_setup(args) -> dict:
+    """The ray tracer's set-up (``RayTracer(...)``: plan, expansion, mixed pieces, bounds; docs/benchmarks.md §7):
+    hydrogen RGBA, cubic, 3 levels, 5 % and 0.1 %, without and with every detail (``lod=True``), ``--repeats``
+    set-ups after a warm-up that builds the kernels; the expansion's share (``BrickField.seconds``), the pool,
+    slots and mixed bricks."""
+    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+    model = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3)
+    small = WaveletVolume.from_volume(TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=24)),
+                                      wavelet="cubic", levels=3).threshold(keep=0.05)
+    clwave.RayTracer(small, device=args.device, lod=True)
+    out = dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3,
+                            repeats=args.repeats), cases={})
+    for keep in (0.05, 0.001):
+        wv = model.threshold(keep=keep)
+        for lod in (False, True):
+            walls, expansion = [], []
+            for _ in range(args.repeats):
+                start = time.perf_counter()
+                tracer = clwave.RayTracer(wv, device=args.device, lod=lod)
+                walls.append(time.perf_counter() - start)
+                expansion.append(tracer.bricks.seconds)
+            field = tracer.bricks
+            out["cases"][f"{keep} lod={lod}"] = dict(
+                setup=summary(walls), expansion=summary(expansion), pool_bytes=field.pool_bytes,
+                slots=len(field.levels), mixed_bricks=int(np.sum(field.mixes[:, 0] >= 0)), pieces=len(field.pieces))
     out["peak_resident_gib"] = peak_resident_gib()
     return out
 
@@ -997,7 +1028,8 @@ def bench_orders(args) -> dict:
 
 
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
-              "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "post": bench_post,
+              "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "setup": bench_setup,
+              "post": bench_post,
               "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
               "first-image": bench_first_image, "view-file": bench_view_file}
 

@@ -5,7 +5,6 @@ them, and their maxima per superblock."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
 from ..device.constants import BLOCK, SUPER
 from ..model.geometry import band_lattice
@@ -102,12 +101,15 @@ def content_cells(wv: WaveletVolume, origin, shape, every: bool = False):
     a = int(np.floor(-max(s + j for s, j in shifts))) + 1
     b = int(np.ceil(1 - min(s for s, _ in shifts))) - 1
     origin, shape = np.asarray(origin, np.int64), np.asarray(shape, np.int64)
-    window = wv.content_mask.box(origin + a, shape + b - a).view(np.uint8)  # the voxels that reach
-    width = b - a + 1
-    running = minimum_filter1d if every else maximum_filter1d
-    for axis in range(3):  # any (every) voxel of [c + a, c + b]: a running maximum (minimum), centred at width // 2
-        window = running(window, width, axis=axis, mode="constant")
-    return np.ascontiguousarray(window[tuple(slice(width // 2, width // 2 + n) for n in shape)])
+    window = np.asarray(wv.content_mask.box(origin + a, shape + b - a), bool)  # the voxels that reach
+    combine = np.logical_and if every else np.logical_or
+    for axis in range(3):  # any (every) voxel of [c + a, c + b]: the window's b - a + 1 shifts along the axis combined
+        n = window.shape[axis] - (b - a)
+        out = window[(slice(None),) * axis + (slice(0, n),)].copy()
+        for shift in range(1, b - a + 1):
+            combine(out, window[(slice(None),) * axis + (slice(shift, shift + n),)], out=out)
+        window = out
+    return np.ascontiguousarray(window).view(np.uint8)
 
 
 def cell_blocks(cells) -> np.ndarray:

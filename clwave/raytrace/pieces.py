@@ -24,11 +24,15 @@ from ..device.constants import BRICK
 from ..model.bspline import bspline
 from .bounds import content_cells
 from .classified import bernstein_matrix
+from .lod import any_blocks
 
 #: a piece's side in fine cells (at most the coarse cell's): the host count on hydrogen 256^3 at 0.1 % gave the
 #: mixed bricks 0.76 of their all-fine segments with whole coarse cells (8), 0.65 with 4 and 0.60 with 2
 #: (docs/raytracing.md §3)
 PIECE = 2
+
+#: the most mixed bricks whose pieces are counted at once (their cells held as bytes: up to 24^3 each at level 3)
+CHUNK = 512
 
 
 @lru_cache
@@ -85,57 +89,74 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
     """
     mixes = np.zeros((len(alt), 4), np.int32)
     mixes[:, 0] = -1
-    flags, empty, slots, offset = [], [], [], 0
     fine = np.flatnonzero(alt >= 0)
-    bricks = lay["bricks"]
-    for bz in np.unique(bricks[fine, 0]):
-        sel = fine[bricks[fine, 0] == bz]
-        lo = bricks[sel].min(axis=0)
-        count = bricks[sel].max(axis=0) - lo + 1
+    if not len(fine):
+        return mixes, np.zeros(1, np.uint8)
+    bricks, coarse = lay["bricks"], alt[fine]
+    levels = lay["levels"][coarse]
+    step = 2 ** levels
+    # the brick's first cell in its first coarse cell (one lattice origin on every axis), the coarse cells that
+    # hold its cells per axis, and the pieces per axis
+    lead = np.remainder(BRICK * bricks[fine, 0] - lattices[levels, 0].astype(np.float64), step).astype(np.int64)
+    side = np.minimum(PIECE, step)
+    k = -(-(lead + BRICK) // step) * step // side
+    mixes[fine] = np.stack([coarse, np.cumsum(k ** 3) - k ** 3, k, side], axis=1)
+    flags, empty = [None] * len(fine), [None] * len(fine)
+    for bz in np.unique(bricks[fine, 0]):  # a brick layer at a time: the content mask read for its cells at once
+        layer = np.flatnonzero(bricks[fine, 0] == bz)
+        lo = bricks[fine[layer]].min(axis=0)
+        count = bricks[fine[layer]].max(axis=0) - lo + 1
         inner = reach = None
-        for s in sel:
-            coarse, b = int(alt[s]), bricks[s]
-            if inner is None and coarse != s:  # a clamped brick: where only content voxels reach, where any does
-                inner = content_cells(wv, lo * BRICK, count * BRICK, every=True).astype(bool)
-                reach = content_cells(wv, lo * BRICK, count * BRICK).astype(bool)
-            level = int(lay["levels"][coarse])
-            step, origin = 2 ** level, float(lattices[level][0])  # one origin on every axis
-            lead = int((BRICK * b[0] - origin) % step)  # the brick's first cell in its first coarse cell
-            n = -(-(lead + BRICK) // step)
-            side = min(PIECE, step)
-            cells, unreached = np.ones((n * step,) * 3, bool), np.ones((n * step,) * 3, bool)  # beyond the brick too
-            inside = np.zeros((n * step,) * 3, bool)
-            at = tuple(slice(BRICK * (k - o), BRICK * (k - o + 1)) for k, o in zip(b, lo))
-            mine = (slice(lead, lead + BRICK),) * 3
-            inside[mine] = True
-            if coarse != s:  # else an unclamped brick mixed with itself: alpha alone decides
-                cells[mine], unreached[mine] = inner[at], ~reach[at]
-            else:
-                unreached[mine] = False
-            k = n * step // side  # pieces per axis
-            mixes[s] = (coarse, offset, k, side)
-            slots.append(s)
-            crossed = inside.reshape(k, side, k, side, k, side).any(axis=(1, 3, 5))  # the others are never crossed
-            flags.append(cells.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)) & crossed)
-            empty.append(unreached.reshape(k, side, k, side, k, side).all(axis=(1, 3, 5)) & crossed)
-            offset += k ** 3
+        if np.any(coarse[layer] != fine[layer]):  # a clamped brick: where only content voxels reach, where any does
+            inner = _brick_cells(content_cells(wv, lo * BRICK, count * BRICK, every=True), count)
+            reach = _brick_cells(content_cells(wv, lo * BRICK, count * BRICK), count)
+        kinds = np.stack([lead[layer], side[layer], k[layer]], axis=1)
+        for key in np.unique(kinds, axis=0):  # the bricks of one kind, at most CHUNK at once
+            same = layer[np.all(kinds == key, axis=1)]
+            for group in np.split(same, np.arange(CHUNK, len(same), CHUNK)):
+                f, e = _piece_flags(coarse[group] != fine[group], inner, reach, bricks[fine[group]] - lo,
+                                    *map(int, key))
+                for i, a, b in zip(group, f, e):
+                    flags[i], empty[i] = a, b
     if alpha is not None:  # and where alpha's Bernstein coefficients are >= 0: the alpha boxes read at once
         need = [i for i, f in enumerate(flags) if f.any()]
-        shapes = [lay["count"][alt[slots[i]], alpha] for i in need]
-        boxes = _alpha_boxes(pool, spill, [int(lay["offset"][alt[slots[i]], alpha]) for i in need],
+        shapes = [lay["count"][coarse[i], alpha] for i in need]
+        boxes = _alpha_boxes(pool, spill, [int(lay["offset"][coarse[i], alpha]) for i in need],
                              [int(np.prod(shape)) for shape in shapes])
         wavelet = wv.groups[alpha].wavelet
         for shape in {tuple(shape) for shape in shapes}:  # the boxes of one shape at once
-            same = [k for k, other in enumerate(shapes) if tuple(other) == shape]
+            same = [i for i, other in enumerate(shapes) if tuple(other) == shape]
             n = shape[0] - wavelet.order + 1
             parts = len(flags[need[same[0]]]) // n
-            some = [flags[need[k]].reshape(n, parts, n, parts, n, parts).any(axis=(1, 3, 5)) for k in same]
-            floors = alpha_floors(np.stack([boxes[k].reshape(shape) for k in same]), wavelet, parts, np.stack(some))
-            for k, floor in zip(same, floors):
-                flags[need[k]] &= floor >= 0
-    if not flags:
-        return mixes, np.zeros(1, np.uint8)
+            stacked = np.stack([flags[need[i]] for i in same])
+            some = stacked.reshape(-1, n, parts, n, parts, n, parts).any(axis=(2, 4, 6))
+            floors = alpha_floors(np.stack([boxes[i].reshape(shape) for i in same]), wavelet, parts, some)
+            for i, floor in zip(same, floors):
+                flags[need[i]] &= floor >= 0
     return mixes, np.concatenate([(f + 2 * e).astype(np.uint8).ravel() for f, e in zip(flags, empty)])
+
+
+def _brick_cells(cells, count) -> np.ndarray:
+    """(Z, Y, X, BRICK, BRICK, BRICK) the cells of a box of ``count`` bricks, brick by brick."""
+    return cells.astype(bool).reshape(count[0], BRICK, count[1], BRICK, count[2], BRICK).transpose(0, 2, 4, 1, 3, 5)
+
+
+def _piece_flags(clamped, inner, reach, at, lead: int, side: int, k: int) -> tuple:
+    """(m, k, k, k) per brick at ``at`` (brick index in ``inner``, ``reach``) whose first cell is ``lead`` into its
+    first coarse cell: whether only content voxels reach each piece's crossed cells (an unclamped brick, not
+    ``clamped``: all of them), and whether none does (unclamped: none of them)."""
+    m, n = len(at), k * side
+    mine = (slice(None),) + (slice(lead, lead + BRICK),) * 3
+    cells, unreached = np.ones((m, n, n, n), bool), np.ones((m, n, n, n), bool)  # beyond the brick too
+    unreached[mine] = False
+    if inner is not None:
+        own = tuple(at[clamped].T)
+        cells[mine][clamped], unreached[mine][clamped] = inner[own], ~reach[own]
+    inside = np.zeros((n, n, n), bool)
+    inside[mine[1:]] = True
+    crossed = any_blocks(inside, side)  # the others are never crossed
+    return ~any_blocks(~cells.reshape(m * n, n, n), side).reshape(m, k, k, k) & crossed, \
+        ~any_blocks(~unreached.reshape(m * n, n, n), side).reshape(m, k, k, k) & crossed
 
 
 def _alpha_boxes(pool, spill, starts, sizes) -> list:
