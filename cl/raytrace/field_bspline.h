@@ -558,35 +558,32 @@ inline void sample_gradient(const Basis *basis, const bool all, realv *gx, realv
 }
 
 #ifdef CLW_SPAN
-/* The largest |4th difference| along axis `span` of the coefficients whose cubic B-splines have a knot on the plane
- * the segment crosses at grid-0 point `cross` (5 along that axis, the 4 of the cell holding xm along each other
- * one), over every group and channel: the jump of the field's third derivative across the plane is their B-spline
- * sum (docs/raytracing.md §12).  INFINITY where that window leaves the slot's box; 0 in no brick. */
+/* The largest |4th difference| along axis `span` of alpha's coefficients whose cubic B-splines have a knot on the
+ * plane the segment crosses at grid-0 point `cross` (5 along that axis, the 4 of the cell holding xm along each other
+ * one): the jump of alpha's third derivative across the plane is their B-spline sum, and alpha's is the error the
+ * bound charges (docs/raytracing.md §12).  INFINITY where that window leaves the slot's box; 0 in no brick. */
 inline real span_jump(const Field G, const int slot, const real3 xm, const real3 cross, const int span)
 {
     if (slot < 0)
         return 0;
-    real4 jump = 0;
-    for (int g = 0; g < CLW_GROUPS; g++) {
-        const real4 f = to_real4(G.frames[slot * CLW_GROUPS + g]);
-        const int4 n = G.boxes[slot * CLW_GROUPS + g];
-        const int4 c = clamp(convert_int4((real4)(floor((xm - f.xyz) * f.w), 0)), (int4)(3), n - 1);
-        const int4 k = convert_int4((real4)(round((cross - f.xyz) * f.w), 0));
-        const int ca[3] = {c.x, c.y, c.z}, ka[3] = {k.x, k.y, k.z}, na[3] = {n.x, n.y, n.z};
-        const int stride[3] = {1, n.x, n.x * n.y}, b = span == 0 ? 1 : 0, e = span == 2 ? 1 : 2; /* the others */
-        if (ka[span] < 4 || ka[span] > na[span] - 1)
-            return INFINITY;
-        const int s = stride[span];
-        __global const coef_t *top = G.coef + n.w + ka[span] * s + ca[b] * stride[b] + ca[e] * stride[e];
-        for (int rb = 0; rb < 4; rb++)
-            for (int re = 0; re < 4; re++) {
-                __global const coef_t *p = top - rb * stride[b] - re * stride[e];
-                const real4 d = COEF4(p[0]) - 4 * COEF4(p[-s]) + 6 * COEF4(p[-2 * s]) - 4 * COEF4(p[-3 * s]) +
-                                COEF4(p[-4 * s]);
-                jump = fmax(jump, fabs(d));
-            }
-    }
-    return fmax(fmax(jump.x, jump.y), fmax(jump.z, jump.w));
+    const real4 f = to_real4(G.frames[slot * CLW_GROUPS + CLW_ALPHA]);
+    const int4 n = G.boxes[slot * CLW_GROUPS + CLW_ALPHA];
+    const int4 c = clamp(convert_int4((real4)(floor((xm - f.xyz) * f.w), 0)), (int4)(3), n - 1);
+    const int4 k = convert_int4((real4)(round((cross - f.xyz) * f.w), 0));
+    const int ca[3] = {c.x, c.y, c.z}, ka[3] = {k.x, k.y, k.z}, na[3] = {n.x, n.y, n.z};
+    const int stride[3] = {1, n.x, n.x * n.y}, b = span == 0 ? 1 : 0, e = span == 2 ? 1 : 2; /* the other axes */
+    if (ka[span] < 4 || ka[span] > na[span] - 1)
+        return INFINITY;
+    const int s = stride[span];
+    __global const coef_t *top = G.coef + n.w + ka[span] * s + ca[b] * stride[b] + ca[e] * stride[e];
+    real jump = 0;
+    for (int rb = 0; rb < 4; rb++)
+        for (int re = 0; re < 4; re++) {
+            __global const coef_t *p = top - rb * stride[b] - re * stride[e];
+            jump = fmax(jump, fabs((real)COEF_LANE(p[0]) - 4 * (real)COEF_LANE(p[-s]) + 6 * (real)COEF_LANE(p[-2 * s]) -
+                                   4 * (real)COEF_LANE(p[-3 * s]) + (real)COEF_LANE(p[-4 * s])));
+        }
+    return jump;
 }
 #endif
 #endif
