@@ -201,12 +201,12 @@ WINDOW_WEIGHTS(realt, window_derivatives_tail, bspline_derivatives_tail)
 #endif
 
 /* One group's part of the field at every sample at once: the jx jy jz coefficients ending at `corner`
- * (the segment's cell: j a side, or j + 1 along the axis of a knot plane it crosses, §12), summed separably (along x per (y, z) row, then along y per z plane, then
- * along z).  The lanes are fq's memory order, sample-major: samples 0..3 in v[0], 4..7 in v[1]
- * (four channels each), 8 and 9 in f8 (only when `tail`), so each coefficient is read once per
- * segment and feeds 40 lanes in three vector FMAs (with 16 samples, order 6, a second call sums samples
- * 8..15 the way of 0..7).  w[a][r][h] and w8[a][r] are the weights spread to those lanes; the sums are
- * added to f, f8.  Always inlined with a literal order j and `tail`, so the loops unroll. */
+ * (the segment's cell: j a side, or j + 1 along the axis of a knot plane it crosses, §12), summed separably
+ * (along x per (y, z) row, then along y per z plane, then along z).  The lanes are fq's memory order,
+ * sample-major: samples 0..3 in v[0], 4..7 in v[1] (four channels each), 8 and 9 in f8 (only when `tail`), so
+ * each coefficient is read once per segment and feeds 40 lanes in three vector FMAs (with 16 samples, order 6, a
+ * second call sums samples 8..15 the way of 0..7).  w[a][r][h] and w8[a][r] are the weights spread to those lanes;
+ * the sums are added to f, f8.  Always inlined with literal taps and `tail`, so the loops unroll. */
 __attribute__((always_inline)) inline void group_field(__global const coef_t *corner, const int sy, const int sz,
                                                        const int jx, const int jy, const int jz, const bool tail,
                                                        real16 w[3][TAPS][2], real8 w8[3][TAPS], real16 *f, real8 *f8)
@@ -504,7 +504,8 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
 /* alpha's fine gradient in the lanes of (gx, gy, gz), only for segments shaded point by point:
  * lanes 0..7 (real8), and the tail lanes 8.. (realt) unless lane P0 comes from the last segment and is the
  * only one there (NS < 16); across a knot plane (B->span >= 0) with the window's derivatives along its axis */
-#define GRADIENT_TAPS(GRADIENT, JX, JY, JZ) GRADIENT(c, B->sy, B->sz, JX, JY, JZ, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz);
+#define GRADIENT_TAPS(GRADIENT, JX, JY, JZ) \
+    GRADIENT(c, B->sy, B->sz, JX, JY, JZ, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz);
 #define GRADIENT_LANES(W, TYPE, DERIVATIVES, WINDOW, GRADIENT, U, OUT)                                     \
     {                                                                                                     \
         TYPE d[3][TAPS], hx = 0, hy = 0, hz = 0;                                                          \

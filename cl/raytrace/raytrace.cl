@@ -321,8 +321,9 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             const real slope = axis == 0 ? cells.x : axis == 1 ? cells.y : cells.z;
             const real jump = span_jump(G, active.slot, X0 + (t + tn) / 2 * D, X0 + cross * D, axis);
             const real left = fmax(rest - consumed, (real)0) + slack; /* the rest's emission it dims, its own too */
-            charge = T * r * span_bound(weights + 8 * NS, (cross - t) / r - 1, slope, cells.x + cells.y + cells.z - slope,
-                                        jump) * (1 + shade_gain * left);
+            const real sigma = cells.x + cells.y + cells.z - slope; /* along the other two axes */
+            charge = T * r * span_bound(weights + 8 * NS, (cross - t) / r - 1, slope, sigma, jump) *
+                     (1 + shade_gain * left);
             if (charge <= shade_budget) { /* from the shading share, which midpoint shading draws on too (§5) */
                 shade_budget -= charge;
                 active.span = axis;
@@ -361,131 +362,131 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             const real3 gradient_before = end_gradient, emission_before = end_emission;
 #endif
             for (;;) { /* once; twice where a segment across a knot plane falls back to its cut (§12) */
-            S.radius = (tn - t) / 2;
-            S.series = false;
-            sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, nodes, !joined, S.fq, basis);
-            if (joined)
-                S.fq[P0] = end_field;
-            end_sample = S.fq[7];
+                S.radius = (tn - t) / 2;
+                S.series = false;
+                sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, nodes, !joined, S.fq, basis);
+                if (joined)
+                    S.fq[P0] = end_field;
+                end_sample = S.fq[7];
 #ifdef CLW_XRAY /* the integral over the segment */
-            real4 integral = (real4)(0);
-            for (int k = 0; k < NS; k++)
-                integral += S.fq[k] * weights[8 * k + 7];
-            I += S.radius * integral;
+                real4 integral = (real4)(0);
+                for (int k = 0; k < NS; k++)
+                    integral += S.fq[k] * weights[8 * k + 7];
+                I += S.radius * integral;
 #else
 #ifdef CLW_POST
-            {   /* the scalar classified by the transfer function (classify.h, docs/raytracing.md §10) */
-                real s[NS], u[NS], c[NS];
-                for (int k = 0; k < NS; k++)
-                    s[k] = S.fq[k].x;
-                OneInterval O;
-                bool one;
-                real4 r; /* (int q' e^{-A} dxi, int alpha dxi) */
-                const bool gradient_joined = joined && end_shaded; /* lane P0's gradient: the last segment's end */
-                end_shaded = false;
-                if (!post_segment(s, nodes, weights, tf, &P, S.radius, T * S.radius, &shade_budget, u, c, &O, &one,
-                                  &r, &midpoints, &evals)) {
+                {   /* the scalar classified by the transfer function (classify.h, docs/raytracing.md §10) */
+                    real s[NS], u[NS], c[NS];
+                    for (int k = 0; k < NS; k++)
+                        s[k] = S.fq[k].x;
+                    OneInterval O;
+                    bool one;
+                    real4 r; /* (int q' e^{-A} dxi, int alpha dxi) */
+                    const bool gradient_joined = joined && end_shaded; /* lane P0's gradient: the last segment's end */
+                    end_shaded = false;
+                    if (!post_segment(s, nodes, weights, tf, &P, S.radius, T * S.radius, &shade_budget, u, c, &O, &one,
+                                      &r, &midpoints, &evals)) {
 #ifdef CLW_SHADE
-                    sample_gradient(basis, !gradient_joined, &S.gx, &S.gy, &S.gz);
-                    if (gradient_joined) {
-                        S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
+                        sample_gradient(basis, !gradient_joined, &S.gx, &S.gy, &S.gz);
+                        if (gradient_joined) {
+                            S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
+                        }
+                        end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
+                        end_shaded = true;
+#else
+                        S.gx = 0; S.gy = 0; S.gz = 0;
+#endif
+                        r = post_gradient(&O, one, c, u, S.gx, S.gy, S.gz, S.radius, nodes, weights, tf, &P,
+                                          quadrature_share * (tn - t) / total / T / S.radius, &evals, &flags);
                     }
-                    end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
-                    end_shaded = true;
-#else
-                    S.gx = 0; S.gy = 0; S.gz = 0;
-#endif
-                    r = post_gradient(&O, one, c, u, S.gx, S.gy, S.gz, S.radius, nodes, weights, tf, &P,
-                                      quadrature_share * (tn - t) / total / T / S.radius, &evals, &flags);
+                    part = r.xyz;
+                    depth = r.w;
                 }
-                part = r.xyz;
-                depth = r.w;
-            }
 #else
-            /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
-            real lr[8], lg[8], lb[8], la[8];
-            real8 A8 = 0;
-            bool dips = false;
-            for (int k = 0; k < NS; k++) {
-                dips |= S.fq[k].w < 0;
-                /* alpha and q clamped at 0 (thresholding can make them dip below); q stays a
-                 * polynomial for the series (shade clamps it wherever it is evaluated): the
-                 * interpolant of clamped samples would oscillate by up to the points' Lebesgue
-                 * constant times the dip */
-                const real4 v = fmax(S.fq[k], (real4)(0));
-                S.fq[k].w = v.w;
-                if (k < 8) {
-                    lr[k] = v.x; lg[k] = v.y; lb[k] = v.z; la[k] = v.w;
+                /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
+                real lr[8], lg[8], lb[8], la[8];
+                real8 A8 = 0;
+                bool dips = false;
+                for (int k = 0; k < NS; k++) {
+                    dips |= S.fq[k].w < 0;
+                    /* alpha and q clamped at 0 (thresholding can make them dip below); q stays a
+                     * polynomial for the series (shade clamps it wherever it is evaluated): the
+                     * interpolant of clamped samples would oscillate by up to the points' Lebesgue
+                     * constant times the dip */
+                    const real4 v = fmax(S.fq[k], (real4)(0));
+                    S.fq[k].w = v.w;
+                    if (k < 8) {
+                        lr[k] = v.x; lg[k] = v.y; lb[k] = v.z; la[k] = v.w;
+                    }
+                    A8 = fma((real8)(v.w), vload8(k, weights), A8);
                 }
-                A8 = fma((real8)(v.w), vload8(k, weights), A8);
-            }
 #ifdef CLW_SPAN
-            if (active.span >= 0 && dips) { /* where alpha is clamped the samples' places matter (§3): cut */
-                SPAN_CUT
-                xm = X0 + (t + tn) / 2 * D;
-                continue;
-            }
-#endif
-            real8 r8 = vload8(0, lr), g8 = vload8(0, lg), b8 = vload8(0, lb);
-            const real8 a8 = vload8(0, la);
-            const real4 f0 = fmax(S.fq[P0], (real4)(0));
-            depth = A8.s7;
-            const real8 att = fast_exp(-S.radius * A8);
-            bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
-#ifdef CLW_SHADE
-            if (midpoint_shading(r8 * att, g8 * att, b8 * att, a8 * att, f0, &P, T * S.radius, &shade_budget,
-                                 &part)) { /* no gradient needed (docs/raytracing.md §5) */
-                simpson_full = false;
-                midpoints += 1;
-                evals += 9;
-            }
-#endif
-            if (simpson_full) {
-                /* the shaded emission at p = 0 (and alpha's gradient there) from the last segment
-                 * when that was shaded point by point too */
-                const bool shaded_joined = joined && end_shaded;
-                real3 f9[9];
-#ifdef CLW_SHADE
-                sample_gradient(basis, !shaded_joined, &S.gx, &S.gy, &S.gz);
-                if (shaded_joined) {
-                    S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
-                }
-                end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
-#else
-                S.gx = 0; S.gy = 0; S.gz = 0; /* unshaded: shade8 and shade only clamp */
-#endif
-                shade8(&r8, &g8, &b8, a8, S.gx.lo, S.gy.lo, S.gz.lo, &P);
-                if (shaded_joined) {
-                    f9[0] = end_emission;
-                } else {
-                    real r = f0.x, gr = f0.y, b = f0.z;
-                    shade(&r, &gr, &b, f0.w, S.gx.s8, S.gy.s8, S.gz.s8, &P);
-                    f9[0] = (real3)(r, gr, b);
-                }
-                end_emission = (real3)(r8.s7, g8.s7, b8.s7);
-                real fr[8], fg[8], fb[8];
-                vstore8(r8 * att, 0, fr);
-                vstore8(g8 * att, 0, fg);
-                vstore8(b8 * att, 0, fb);
-                for (int p = 1; p <= 8; p++)
-                    f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
-                const real seg_tol = quadrature_share * (tn - t) / total / T;
-#ifdef CLW_SPAN
-                if (active.span >= 0 && simpson_needs_series(f9, seg_tol / S.radius)) { /* the series would be the
-                                                                                          * samples' interpolant */
-                    end_gradient = gradient_before;
-                    end_emission = emission_before;
+                if (active.span >= 0 && dips) { /* where alpha is clamped the samples' places matter (§3): cut */
                     SPAN_CUT
                     xm = X0 + (t + tn) / 2 * D;
                     continue;
                 }
 #endif
-                part = simpson(&S, &P, f9, nodes, -1, 1, seg_tol / S.radius, &evals, &flags);
-            }
-            end_shaded = simpson_full;
+                real8 r8 = vload8(0, lr), g8 = vload8(0, lg), b8 = vload8(0, lb);
+                const real8 a8 = vload8(0, la);
+                const real4 f0 = fmax(S.fq[P0], (real4)(0));
+                depth = A8.s7;
+                const real8 att = fast_exp(-S.radius * A8);
+                bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
+#ifdef CLW_SHADE
+                if (midpoint_shading(r8 * att, g8 * att, b8 * att, a8 * att, f0, &P, T * S.radius, &shade_budget,
+                                     &part)) { /* no gradient needed (docs/raytracing.md §5) */
+                    simpson_full = false;
+                    midpoints += 1;
+                    evals += 9;
+                }
+#endif
+                if (simpson_full) {
+                    /* the shaded emission at p = 0 (and alpha's gradient there) from the last segment
+                     * when that was shaded point by point too */
+                    const bool shaded_joined = joined && end_shaded;
+                    real3 f9[9];
+#ifdef CLW_SHADE
+                    sample_gradient(basis, !shaded_joined, &S.gx, &S.gy, &S.gz);
+                    if (shaded_joined) {
+                        S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
+                    }
+                    end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
+#else
+                    S.gx = 0; S.gy = 0; S.gz = 0; /* unshaded: shade8 and shade only clamp */
+#endif
+                    shade8(&r8, &g8, &b8, a8, S.gx.lo, S.gy.lo, S.gz.lo, &P);
+                    if (shaded_joined) {
+                        f9[0] = end_emission;
+                    } else {
+                        real r = f0.x, gr = f0.y, b = f0.z;
+                        shade(&r, &gr, &b, f0.w, S.gx.s8, S.gy.s8, S.gz.s8, &P);
+                        f9[0] = (real3)(r, gr, b);
+                    }
+                    end_emission = (real3)(r8.s7, g8.s7, b8.s7);
+                    real fr[8], fg[8], fb[8];
+                    vstore8(r8 * att, 0, fr);
+                    vstore8(g8 * att, 0, fg);
+                    vstore8(b8 * att, 0, fb);
+                    for (int p = 1; p <= 8; p++)
+                        f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
+                    const real seg_tol = quadrature_share * (tn - t) / total / T;
+#ifdef CLW_SPAN
+                    if (active.span >= 0 && simpson_needs_series(f9, seg_tol / S.radius)) { /* the series would be the
+                                                                                              * samples' interpolant */
+                        end_gradient = gradient_before;
+                        end_emission = emission_before;
+                        SPAN_CUT
+                        xm = X0 + (t + tn) / 2 * D;
+                        continue;
+                    }
+#endif
+                    part = simpson(&S, &P, f9, nodes, -1, 1, seg_tol / S.radius, &evals, &flags);
+                }
+                end_shaded = simpson_full;
 #endif
 #endif
-            break;
+                break;
             }
             end_field = end_sample;
             t_joined = tn;
