@@ -315,14 +315,21 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
 __attribute__((always_inline)) inline void scalar_cell(const Field G, const int slot, const Quant Q, const int j,
                                                        Basis *B)
 {
-    /* the cell's last coefficient within the slot: B->corner counts from the slot's first, G.boxes' w */
-    const uint last = (uint)(B->corner - G.coef) - (slot < 0 ? 0 : G.boxes[slot * CLW_GROUPS].w);
+    if (slot < 0) {
+        for (int i = 0; i < j * j * j; i++)
+            B->q[i] = 0;
+        return;
+    }
+    /* the cell's last coefficient (x, y, z) within the slot: B->corner counts from the slot's first, the box's w */
+    const int4 box = G.boxes[slot * CLW_GROUPS];
+    const int last = (int)(B->corner - G.coef) - box.w, row_of = last / box.x, z = row_of / box.y;
+    const int x = last - row_of * box.x, y = row_of - z * box.y;
 #pragma unroll
     for (int rz = 0; rz < j; rz++)
 #pragma unroll
         for (int ry = 0; ry < j; ry++) {
             float row[MAX_ORDER];
-            pool_row(G.coef, Q, last - rz * B->sz - ry * B->sy - (j - 1), j, row);
+            pool_row(G.coef, Q, box, x - (j - 1), y - ry, z - rz, j, row);
 #pragma unroll
             for (int rx = 0; rx < j; rx++)
                 B->q[(rz * j + ry) * j + rx] = row[rx];
