@@ -210,50 +210,50 @@ def pack(scalar, boxes) -> tuple:
     step = np.nextafter(step, np.float32(np.inf)) if float(step) * Q_MAX < span.max() else step
     inverse = 1.0 / float(step) if step > 0 else 0.0
     quant["offset"], quant["step"] = lo, step
-    out, at, first = [], 0, 0
-    while first < len(boxes):  # slots in chunks of about Q_CHUNK coefficients, each chunk's words in one go
-        last = max(int(np.searchsorted(starts, starts[first] + Q_CHUNK, side="right")), first + 1)
-        chunk = [_pack_slot(scalar, boxes[s], lo[s], inverse) for s in range(first, last)]
-        word = at + np.concatenate([[0], np.cumsum([len(c) for c in chunk])])
-        for s, c in zip(range(first, last), chunk):
-            c[0:2 * c.tiles:2] += np.uint32(word[s - first])  # the entries' words are the pool's
-            quant["word"][s], quant["tiles_y"][s] = word[s - first], -(-boxes[s, 1] // TILE)
-        out += chunk
-        at, first = int(word[-1]), last
+    out, at = [], 0
+    for shape in np.unique(boxes[:, :3], axis=0):  # the slots of one box shape, about Q_CHUNK coefficients at a time
+        slots = np.flatnonzero(np.all(boxes[:, :3] == shape, axis=1))
+        per = max(Q_CHUNK // int(np.prod(shape)), 1)
+        for k in range(0, len(slots), per):
+            chunk = slots[k:k + per]
+            words, start = _pack_slots(scalar, shape, starts[chunk], lo[chunk].astype(np.float64), inverse, at)
+            quant["word"][chunk], quant["tiles_y"][chunk] = start, -(-shape[1] // TILE)
+            out.append(words)
+            at += len(words)
     return np.concatenate(out + [np.zeros(POOL_PAD, np.uint32)]), quant
 
 
-class _Slot(np.ndarray):
-    """One slot's words (its tile entries first), and how many tiles it has."""
-    tiles: int
-
-
-def _pack_slot(scalar, box, offset, inverse) -> _Slot:
-    """Slot ``box``'s words for :func:`pack`, its entries' words counted from the slot's first."""
-    nx, ny, nz, first = (int(v) for v in box)
-    q = np.rint((scalar[first:first + nx * ny * nz].astype(np.float64) - offset) * inverse).reshape(nz, ny, nx)
-    ty, tz = -(-ny // TILE), -(-nz // TILE)
-    tiled = np.pad(q, ((0, tz * TILE - nz), (0, ty * TILE - ny), (0, 0)), mode="edge").reshape(tz, TILE, ty, TILE, nx)
-    base = tiled.min(axis=(1, 3, 4)).ravel()
-    bits = np.searchsorted(2.0 ** np.arange(Q_BITS + 1) - 1, tiled.max(axis=(1, 3, 4)).ravel() - base)  # the fewest
+def _pack_slots(scalar, shape, firsts, offsets, inverse, at) -> tuple:
+    """(words, start): the words of slots of one box ``shape`` (nx, ny, nz) whose coefficients start at ``firsts``,
+    for :func:`pack`, laid out one after another from the pool's word ``at``, and where each slot's start."""
+    nx, ny, nz = (int(v) for v in shape)
+    m, ty, tz = len(firsts), -(-ny // TILE), -(-nz // TILE)
+    coef = scalar[firsts[:, None] + np.arange(nx * ny * nz)].astype(np.float64)
+    q = np.rint((coef - offsets[:, None]) * inverse).reshape(m, nz, ny, nx)
+    tiled = np.pad(q, ((0, 0), (0, tz * TILE - nz), (0, ty * TILE - ny), (0, 0)), mode="edge").reshape(
+        m, tz, TILE, ty, TILE, nx)
+    base = tiled.min(axis=(2, 4, 5)).reshape(m, -1)
+    bits = np.searchsorted(2.0 ** np.arange(Q_BITS + 1) - 1, tiled.max(axis=(2, 4, 5)).reshape(m, -1) - base)
     bits[bits == Q_BITS - 1] = Q_BITS  # four fields in eight bytes from any byte (cl/raytrace/scalar_pool.h)
-    # the q - base in tile order (z, y), each tile's rows (z, y) then x; the padding's rows left out
+    # the q - base per slot in tile order (z, y), each tile's rows (z, y) then x; the padding's rows left out
     rows = (np.arange(tz * TILE) < nz).reshape(tz, 1, TILE, 1) & (np.arange(ty * TILE) < ny).reshape(1, ty, 1, TILE)
-    value = (tiled.transpose(0, 2, 1, 3, 4) - base.reshape(tz, ty, 1, 1, 1))[rows].ravel()
-    counts = rows.sum(axis=(2, 3)).ravel() * nx
-    word = 2 * ty * tz + np.concatenate([[0], np.cumsum(-(-counts * bits // 32))])
-    words = np.zeros(int(word[-1]), np.uint32).view(_Slot)
-    words.tiles = ty * tz
-    words[0:2 * words.tiles:2] = word[:-1]
-    words[1:2 * words.tiles:2] = base.astype(np.uint32) | bits.astype(np.uint32) << np.uint32(16)
-    # field i of tile k at bit word[k] 32 + i bits[k]: fields never overlap, so a word's 64-bit window is the sum of
+    value = (tiled.transpose(0, 1, 3, 2, 4, 5) - base.reshape(m, tz, ty, 1, 1, 1))[:, rows].ravel()
+    counts = np.tile(rows.sum(axis=(2, 3)).ravel() * nx, m)  # per tile of every slot
+    data = (-(-counts * bits.ravel() // 32)).reshape(m, -1)
+    start = np.concatenate([[0], np.cumsum(2 * ty * tz + data.sum(axis=1))])
+    tile_word = (start[:-1, None] + 2 * ty * tz + np.cumsum(data, axis=1) - data).ravel()  # after the slot's entries
+    words = np.zeros(int(start[-1]), np.uint32)
+    entry = (start[:-1, None] + 2 * np.arange(ty * tz)).ravel()
+    words[entry] = at + tile_word
+    words[entry + 1] = base.ravel().astype(np.uint32) | bits.ravel().astype(np.uint32) << np.uint32(16)
+    # field i of a tile from word w at bit 32 w + i b: fields never overlap, so a word's 64-bit window is the sum of
     # those that start in it (each below 2^47: exact in float64; 0-bit tiles' fields, all 0, may start past the end)
-    starts = np.repeat(np.cumsum(counts) - counts, counts)
-    bit = np.repeat(word[:-1] * 32, counts) + (np.arange(len(value)) - starts) * np.repeat(bits, counts)
+    bit = np.repeat(tile_word * 32, counts) + (np.arange(len(value)) - np.repeat(np.cumsum(counts) - counts, counts)) \
+        * np.repeat(bits.ravel(), counts)
     window = np.bincount(bit // 32, value * 2.0 ** (bit % 32), minlength=len(words))[:len(words)].astype(np.uint64)
     words |= (window & 0xFFFFFFFF).astype(np.uint32)
     words[1:] |= (window[:-1] >> np.uint64(32)).astype(np.uint32)
-    return words
+    return words, at + start[:-1]
 
 
 def post_nodes(nodes, n_samples) -> np.ndarray:
