@@ -40,11 +40,12 @@ RANGES_KEPT = 8
 RANGE_SLACK = 1e-6
 #: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
 FLAT = 1e-4
-#: the scalar pool's coefficients are whole numbers q of 0..Q_BITS - 2 or Q_BITS bits: per slot s = offset + step q,
-#: and the pool's step bound is the widest slot's range / Q_MAX (docs/raytracing.md §10)
+#: the scalar pool's coefficients are s = offset + step q, q a base per tile plus 0..Q_BITS - 2 or Q_BITS bits, an
+#: offset per slot and one step, the widest slot's range / Q_MAX (docs/raytracing.md §10)
 Q_BITS = 16
 Q_MAX = 2 ** Q_BITS - 1
-#: per slot of a packed pool: its (offset, step) and where its q lie (``Quant`` in ``cl/raytrace/scalar_pool.h``)
+#: per slot of a packed pool: its (offset, step), where its tiles' entries lie and how many tiles along y (``Quant`` in
+#: ``cl/raytrace/scalar_pool.h``)
 QUANT = np.dtype([("offset", "<f4"), ("step", "<f4"), ("word", "<u4"), ("tiles_y", "<u4")])
 #: a packed pool's tile: TILE x TILE of a slot's x rows (in y and z), its q with its own base and bits (the unit the
 #: counts in docs/known-gaps.md §10 found to pay; a cell's rows each lie in one tile)
@@ -101,9 +102,9 @@ class ScalarRange:
     out per detail when a render first asks for it (:mod:`clwave.raytrace.lod`: each detail picks its slots), and
     the classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
 
-    Made, the pool on the device keeps the scalar alone, packed with 0 to 16 bits a coefficient and an offset and a
-    step per slot (:func:`pack`; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the ranges are widened by
-    half the slot's step, so they hold the float model and the one rendered.
+    Made, the pool on the device keeps the scalar alone, packed with 0 to 16 bits a coefficient, a width and base per
+    tile, an offset per slot and one step (:func:`pack`; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the
+    ranges are widened by half the step, so they hold the float model and the one rendered.
     """
 
     def __init__(self, tracer):
