@@ -22,6 +22,8 @@ CHECK = Kernel("classify_segments", ("out", BUFFER), ("samples", BUFFER), ("grad
                ("nodes", BUFFER), ("weights", BUFFER), ("tf", BUFFER), ("tol", REAL), ("shading", BUFFER),
                ("budget", BUFFER), ("stats", BUFFER), ("n", np.int32))
 UNPACK = Kernel("unpack_pool", ("out", BUFFER), ("words", BUFFER), ("quant", BUFFER), ("boxes", BUFFER))
+CELLS = Kernel("unpack_cells", ("out", BUFFER), ("words", BUFFER), ("quant", BUFFER), ("boxes", BUFFER),
+               ("cells", BUFFER), ("j", np.int32))
 PHONG = (0.3, 0.7, 0.3, 20.0)  # ka, kd, ks, shininess (clwave.Phong's defaults)
 
 
@@ -331,12 +333,17 @@ def test_skipping_never_skips_content(hydrogen):
         assert np.abs(img - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
 
 
+def pool_kernels(cc):
+    """The packed pool's harness kernels (``cl/raytrace/classify_check.cl``) for a cubic float32 field."""
+    return programs.build(cc, ["raytrace/classify_check.cl"], dict(CLW_POST=None, CLW_SAMPLES=9, CLW_GROUPS=1,
+                                                                   CLW_ORDERS=4, CLW_MAX_DEPTH=16))
+
+
 def decoded_pool(tr):
     """(coefficients offset + step q float64, q, step per coefficient) of the tracer's packed scalar pool, q as the
     ray tracer reads them (``pool_row``, by the ``unpack_pool`` harness kernel); the slots one after another."""
     cc, f = tr.cc, tr.bricks
-    kernels = programs.build(cc, ["raytrace/classify_check.cl"], dict(CLW_POST=None, CLW_SAMPLES=9, CLW_GROUPS=1,
-                                                                       CLW_ORDERS=4, CLW_MAX_DEPTH=16))
+    kernels = pool_kernels(cc)
     boxes = np.ascontiguousarray(f.boxes[:, 0])
     sizes = np.prod(boxes[:, :3].astype(np.int64), axis=1)
     out = cla.zeros(cc.queue, int(sizes.sum()), np.float32)
@@ -364,7 +371,8 @@ def brick_field(coef, box, frame, order, fine):
 
 def test_packed_pool_within_half_a_step(monkeypatch):
     """The scalar pool packed with 0..14 or 16 bits a tile of 4 x 4 x-rows (docs/raytracing.md §10): the ray tracer's
-    decode, a row read from any x, gives the host's q exactly (the nearest whole number of the pool's step S, the
+    decode, a row read from any x and every cubic cell as `scalar_cell` reads it (`pool_cell`, its rows in up to four
+    tiles), gives the host's q exactly (the nearest whole number of the pool's step S, the
     widest slot's range / 65535, above the slot's least coefficient), each tile has the fewest bits covering its q
     above its least, its coefficients within half a step; brute force at random points of random blocks: the brick's
     field from the float coefficients is the model's (the float64 closed form), the field from the decoded ones within
@@ -410,6 +418,23 @@ def test_packed_pool_within_half_a_step(monkeypatch):
     assert tr.bricks.pool_bytes == 4 * (total + classified.POOL_PAD) < 2 * n
     error = np.abs(decoded - coef) / steps
     assert error.max() <= 0.5 + 1e-6 and error.max() > 0.45
+    # every cubic cell of every slot as scalar_cell decodes it (pool_cell): the host's q, cells across tiles included
+    cells, expected = [], []
+    for s, (nx, ny, nz, first) in enumerate(boxes):
+        c = q[first:first + sizes[s]].reshape(nz, ny, nx)
+        z, y, x = (a.ravel() for a in np.meshgrid(*(np.arange(order - 1, m) for m in (nz, ny, nx)), indexing="ij"))
+        cells.append(np.stack([np.full(len(z), s), (z * ny + y) * nx + x], axis=1))
+        r = np.arange(order)
+        expected.append(c[(z[:, None] - r)[:, :, None, None], (y[:, None] - r)[:, None, :, None],
+                          (x[:, None] - r)[:, None, None, :]].reshape(len(z), -1))  # from the last, CORNER_COEF's
+    cells, expected = np.concatenate(cells).astype(np.int32), np.concatenate(expected)
+    crossing = np.any(cells[:, 1:2] // boxes[cells[:, 0], :1] % boxes[cells[:, 0], 1:2] % 4 < order - 1, axis=1)
+    assert crossing.mean() > 0.3  # cells whose rows lie in two tiles along y (and as many along z)
+    out = cla.zeros(tr.cc.queue, expected.size, np.float32)
+    CELLS(pool_kernels(tr.cc), tr.cc.queue, (len(cells),), None, out=out, words=f.pool, quant=tr.quant,
+          boxes=cla.to_device(tr.cc.queue, np.ascontiguousarray(f.boxes[:, 0])), cells=cla.to_device(tr.cc.queue,
+                                                                                                     cells), j=order)
+    np.testing.assert_array_equal(out.get().reshape(expected.shape), expected)
     scale, offset = world_to_fine_affine(order, wv.shape, wv.spacing, wv.origin)
     model = _content_field(wv)
     rng = np.random.default_rng(3)

@@ -10,7 +10,7 @@
  *   stats    (n,) int4: flags (bit 1: a span or panel at its depth limit), shaded at the midpoint, inside one
  *            interval, integrand evaluations
  * Grid: global (n).
- * And unpack_pool: a packed scalar pool's q through the ray tracer's decode (scalar_pool.h), for its test. */
+ * And unpack_pool, unpack_cells: a packed scalar pool's q through the ray tracer's decode (scalar_pool.h), for its test. */
 #include "raytrace/types.h"
 #include "raytrace/classify.h"
 #include "raytrace/scalar_pool.h"
@@ -66,4 +66,16 @@ __kernel void unpack_pool(__global float *out, __global const uchar *words, __gl
                     for (int r = 0; r < k; r++)
                         out[i + r] = !again || out[i + r] == row[k - 1 - r] ? row[k - 1 - r] : NAN;
                 }
+}
+
+/* unpack_cells: the j^3 q of cell k (cells[k]: its slot, and its last coefficient within the slot) into
+ * out[k j^3 ..] by pool_cell, as the ray tracer's scalar_cell decodes a segment's cell.  Grid: global (cells). */
+__kernel void unpack_cells(__global real *out, __global const uchar *words, __global const Quant *quant,
+                           __global const int4 *boxes, __global const int2 *cells, const int j)
+{
+    const int k = get_global_id(0);
+    real q[MAX_ORDER * MAX_ORDER * MAX_ORDER];
+    pool_cell(words, quant[cells[k].x], boxes[cells[k].x], cells[k].y, j, q);
+    for (int i = 0; i < j * j * j; i++)
+        out[(size_t)k * j * j * j + i] = q[i];
 }

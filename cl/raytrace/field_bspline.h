@@ -320,20 +320,9 @@ __attribute__((always_inline)) inline void scalar_cell(const Field G, const int 
             B->q[i] = 0;
         return;
     }
-    /* the cell's last coefficient (x, y, z) within the slot: B->corner counts from the slot's first, the box's w */
+    /* the cell's last coefficient within the slot: B->corner counts from the slot's first, the box's w */
     const int4 box = G.boxes[slot * CLW_GROUPS];
-    const int last = (int)(B->corner - G.coef) - box.w, row_of = last / box.x, z = row_of / box.y;
-    const int x = last - row_of * box.x, y = row_of - z * box.y;
-#pragma unroll
-    for (int rz = 0; rz < j; rz++)
-#pragma unroll
-        for (int ry = 0; ry < j; ry++) {
-            float row[MAX_ORDER];
-            pool_row(G.coef, Q, box, x - (j - 1), y - ry, z - rz, j, row);
-#pragma unroll
-            for (int rx = 0; rx < j; rx++)
-                B->q[(rz * j + ry) * j + rx] = row[rx];
-        }
+    pool_cell(G.coef, Q, box, (int)(B->corner - G.coef) - box.w, j, B->q);
 }
 
 /* group_field for a scalar pool, from the decoded q: one lane a sample (samples 0..7 in *f, the tail lanes in *ft
