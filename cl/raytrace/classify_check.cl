@@ -10,7 +10,8 @@
  *   stats    (n,) int4: flags (bit 1: a span or panel at its depth limit), shaded at the midpoint, inside one
  *            interval, integrand evaluations
  * Grid: global (n).
- * And unpack_pool, unpack_cells: a packed scalar pool's q through the ray tracer's decode (scalar_pool.h), for its test. */
+ * And unpack_pool, unpack_cells: a packed scalar pool's q through the ray tracer's decode (scalar_pool.h), for
+ * its test. */
 #include "raytrace/types.h"
 #include "raytrace/classify.h"
 #include "raytrace/scalar_pool.h"
