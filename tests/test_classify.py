@@ -22,6 +22,8 @@ CHECK = Kernel("classify_segments", ("out", BUFFER), ("samples", BUFFER), ("grad
                ("nodes", BUFFER), ("weights", BUFFER), ("tf", BUFFER), ("tol", REAL), ("shading", BUFFER),
                ("budget", BUFFER), ("stats", BUFFER), ("n", np.int32))
 UNPACK = Kernel("unpack_pool", ("out", BUFFER), ("words", BUFFER), ("quant", BUFFER), ("boxes", BUFFER))
+CELLS = Kernel("unpack_cells", ("out", BUFFER), ("words", BUFFER), ("quant", BUFFER), ("boxes", BUFFER),
+               ("cells", BUFFER), ("j", np.int32))
 PHONG = (0.3, 0.7, 0.3, 20.0)  # ka, kd, ks, shininess (clwave.Phong's defaults)
 
 
@@ -331,12 +333,17 @@ def test_skipping_never_skips_content(hydrogen):
         assert np.abs(img - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
 
 
+def pool_kernels(cc):
+    """The packed pool's harness kernels (``cl/raytrace/classify_check.cl``) for a cubic float32 field."""
+    return programs.build(cc, ["raytrace/classify_check.cl"], dict(CLW_POST=None, CLW_SAMPLES=9, CLW_GROUPS=1,
+                                                                   CLW_ORDERS=4, CLW_MAX_DEPTH=16))
+
+
 def decoded_pool(tr):
     """(coefficients offset + step q float64, q, step per coefficient) of the tracer's packed scalar pool, q as the
     ray tracer reads them (``pool_row``, by the ``unpack_pool`` harness kernel); the slots one after another."""
     cc, f = tr.cc, tr.bricks
-    kernels = programs.build(cc, ["raytrace/classify_check.cl"], dict(CLW_POST=None, CLW_SAMPLES=9, CLW_GROUPS=1,
-                                                                       CLW_ORDERS=4, CLW_MAX_DEPTH=16))
+    kernels = pool_kernels(cc)
     boxes = np.ascontiguousarray(f.boxes[:, 0])
     sizes = np.prod(boxes[:, :3].astype(np.int64), axis=1)
     out = cla.zeros(cc.queue, int(sizes.sum()), np.float32)
@@ -363,44 +370,71 @@ def brick_field(coef, box, frame, order, fine):
 
 
 def test_packed_pool_within_half_a_step(monkeypatch):
-    """The scalar pool packed with 0..14 or 16 bits a slot (docs/raytracing.md §10): the ray tracer's decode gives the
-    host's q exactly (the nearest whole number of steps above the slot's least coefficient), each slot has the fewest
-    bits whose steps of the pool's bound S (the widest slot's range / 65535) span its range, its step is at most S and
-    its coefficients within half a step; brute force at random points of random blocks: the brick's field from the float
-    coefficients is the model's (the float64 closed form), the field from the decoded ones within half the slot's step
-    of it, both in the block's range that skipping classifies; the pool's words are the slots' bits."""
+    """The scalar pool packed with 0..14 or 16 bits a tile of 4 x 4 x-rows (docs/raytracing.md §10): the ray tracer's
+    decode, a row read from any x and every cubic cell as `scalar_cell` reads it (`pool_cell`, its rows in up to four
+    tiles), gives the host's q exactly (the nearest whole number of the pool's step S, the
+    widest slot's range / 65535, above the slot's least coefficient), each tile has the fewest bits covering its q
+    above its least, its coefficients within half a step; brute force at random points of random blocks: the brick's
+    field from the float coefficients is the model's (the float64 closed form), the field from the decoded ones within
+    half a step of it, both in the block's range that skipping classifies; the pool's words are the tiles' bits."""
     from clwave.device.constants import BLOCK, SUPER
     from clwave.model.geometry import world_to_fine_affine
     from clwave.raytrace import classified
 
     seen, pack = {}, classified.pack
 
-    def spy(scalar, starts, sizes):
-        seen["float"], seen["starts"], seen["sizes"] = scalar.copy(), starts, sizes
-        return pack(scalar, starts, sizes)
+    def spy(scalar, boxes):
+        seen["float"], seen["boxes"] = scalar.copy(), np.array(boxes, np.int64)
+        return pack(scalar, boxes)
 
     monkeypatch.setattr(classified, "pack", spy)
     vol = clwave.phantom("hydrogen", n=20)
     wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.1)
     tr = clwave.RayTracer(wv)
-    f, order, sizes, quant = tr.bricks, tr.orders[0], seen["sizes"], tr.quant.get()
+    f, order, boxes, quant = tr.bricks, tr.orders[0], seen["boxes"], tr.quant.get()
+    sizes, starts = np.prod(boxes[:, :3], axis=1), boxes[:, 3]
     n = sizes.sum()  # the slots lie one after another from element 0
     coef = seen["float"][:n].astype(np.float64)
     decoded, q, steps = decoded_pool(tr)
     slot_of = np.repeat(np.arange(len(sizes)), sizes)
-    lo = np.minimum.reduceat(coef, seen["starts"])
-    span = np.maximum.reduceat(coef, seen["starts"]) - lo
-    bound, bits = span.max() / 65535, quant["bits"].astype(np.int64)
-    expected = np.rint(np.divide(coef - lo[slot_of], steps, out=np.zeros(n), where=steps > 0))
-    np.testing.assert_array_equal(q, expected)
-    fewer = np.where(bits == 16, 14, bits - 1)  # the next width down (15 is not used: cl/raytrace/scalar_pool.h)
-    assert np.all(span <= bound * (2.0 ** bits - 1) * (1 + 1e-6)) and np.all(span[bits > 0] > bound * (2.0 ** fewer[
-        bits > 0] - 1)) and not np.any(bits == 15)
-    assert np.all(quant["step"] <= bound * (1 + 1e-6)) and len(np.unique(bits % 8)) > 2  # fields straddle words
-    assert tr.bricks.pool_bytes == 4 * (np.sum(-(-sizes * bits // 32)) + classified.POOL_PAD) < 2 * n
-    error = np.abs(decoded - coef)[steps > 0] / steps[steps > 0]
+    lo = np.minimum.reduceat(coef, starts)
+    bound = (np.maximum.reduceat(coef, starts) - lo).max() / 65535
+    assert np.all(steps == steps[0]) and bound <= steps[0] <= bound * (1 + 1e-6)
+    np.testing.assert_array_equal(q, np.rint((coef - lo[slot_of]) / steps))
+    words, total, widths = f.pool.get(), 0, []
+    for s, (nx, ny, nz, first) in enumerate(boxes):  # each tile's entry: the fewest bits above its least q
+        c = q[first:first + sizes[s]].reshape(nz, ny, nx)
+        tiles = [c[z:z + 4, y:y + 4] for z in range(0, nz, 4) for y in range(0, ny, 4)]
+        entries = words[quant["word"][s]:quant["word"][s] + 2 * len(tiles)].reshape(-1, 2)
+        base, bits = entries[:, 1] & 0xFFFF, (entries[:, 1] >> 16).astype(np.int64)
+        np.testing.assert_array_equal(base, [t.min() for t in tiles])
+        top = np.array([t.max() - t.min() for t in tiles])
+        fewer = np.where(bits == 16, 14, bits - 1)  # the next width down (15 is not used: cl/raytrace/scalar_pool.h)
+        assert np.all(top <= 2.0 ** bits - 1) and np.all(top[bits > 0] > 2.0 ** fewer[bits > 0] - 1)
+        assert not np.any(bits == 15) and quant["tiles_y"][s] == -(-ny // 4)
+        total += 2 * len(tiles) + np.sum(-(-np.array([t.size for t in tiles]) * bits // 32))
+        widths.append(len(np.unique(bits)))
+    assert max(widths) > 2  # tiles of a slot differ
+    assert tr.bricks.pool_bytes == 4 * (total + classified.POOL_PAD) < 2 * n
+    error = np.abs(decoded - coef) / steps
     assert error.max() <= 0.5 + 1e-6 and error.max() > 0.45
-    assert np.all(decoded[steps == 0] == coef[steps == 0])
+    # every cubic cell of every slot as scalar_cell decodes it (pool_cell): the host's q, cells across tiles included
+    cells, expected = [], []
+    for s, (nx, ny, nz, first) in enumerate(boxes):
+        c = q[first:first + sizes[s]].reshape(nz, ny, nx)
+        z, y, x = (a.ravel() for a in np.meshgrid(*(np.arange(order - 1, m) for m in (nz, ny, nx)), indexing="ij"))
+        cells.append(np.stack([np.full(len(z), s), (z * ny + y) * nx + x], axis=1))
+        r = np.arange(order)
+        expected.append(c[(z[:, None] - r)[:, :, None, None], (y[:, None] - r)[:, None, :, None],
+                          (x[:, None] - r)[:, None, None, :]].reshape(len(z), -1))  # from the last, CORNER_COEF's
+    cells, expected = np.concatenate(cells).astype(np.int32), np.concatenate(expected)
+    crossing = np.any(cells[:, 1:2] // boxes[cells[:, 0], :1] % boxes[cells[:, 0], 1:2] % 4 < order - 1, axis=1)
+    assert crossing.mean() > 0.3  # cells whose rows lie in two tiles along y (and as many along z)
+    out = cla.zeros(tr.cc.queue, expected.size, np.float32)
+    CELLS(pool_kernels(tr.cc), tr.cc.queue, (len(cells),), None, out=out, words=f.pool, quant=tr.quant,
+          boxes=cla.to_device(tr.cc.queue, np.ascontiguousarray(f.boxes[:, 0])), cells=cla.to_device(tr.cc.queue,
+                                                                                                     cells), j=order)
+    np.testing.assert_array_equal(out.get().reshape(expected.shape), expected)
     scale, offset = world_to_fine_affine(order, wv.shape, wv.spacing, wv.origin)
     model = _content_field(wv)
     rng = np.random.default_rng(3)

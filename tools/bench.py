@@ -37,6 +37,8 @@ levels, 5 % and 0.1 %, at ``--raytrace-image``; set-up with and without every de
 with every detail, ``--repeats`` times after a warm-up: seconds, the expansion's share, pool, slots, mixed bricks.
 ``post``: post-classification (a transfer function at render time, docs/raytracing.md §10) against
 pre-classification of the same phantom, renders interleaved; transfer-function changes, pools, errors.
+``pools``: the packed scalar pool over the RGBA pool (docs/raytracing.md §10) for hydrogen at ``--size``³ and 128³,
+Marschner-Lobb and a CT-like phantom at 128³, each with its preset, and ``pack``'s time.
 ``drr`` (not in ``all``): digitally reconstructed radiographs (docs/splatting.md §8): a
 Shepp-Logan phantom of ``--size``³ voxels of 300 mm / ``--size`` (a head-sized CT), cubic, 3 levels,
 5 %, through a C-arm (dso 1000 mm, dsd 1500 mm, a 400 mm detector): one renderer reused, each view
@@ -695,6 +697,41 @@ def ct_like(n) -> clwave.Volume:
     return clwave.Volume(np.interp(v, [0.0, 0.1, 0.5, 1.0], [-1000.0, 0.0, 60.0, 1200.0]).astype(np.float32))
 
 
+def bench_pools(args) -> dict:
+    """The scalar tracer's packed brick pool over the RGBA tracer's for the same volume classified by its preset (cubic,
+    3 levels, 5 %), and the time ``pack`` took (docs/raytracing.md §10; the issue's target 0.30)."""
+    from clwave.raytrace import classified
+
+    seconds, pack = [], classified.pack
+
+    def timed(*pack_args):
+        start = time.perf_counter()
+        out = pack(*pack_args)
+        seconds.append(time.perf_counter() - start)
+        return out
+
+    out = {}
+    cases = [(f"hydrogen {args.size}^3", phantom("hydrogen", n=args.size), "hydrogen"),
+             ("hydrogen 128^3", phantom("hydrogen", n=128), "hydrogen"),
+             ("marschner-lobb 128^3", phantom("marschner-lobb", n=128), "grey"),
+             ("ct-like 128^3 (Shepp-Logan in HU)", ct_like(128), "ct-bone")]
+    classified.pack = timed
+    try:
+        for name, vol, preset in cases:
+            tf = TransferFunction.preset(preset)
+            models = [WaveletVolume.from_volume(v, wavelet="cubic", levels=3).threshold(keep=0.05)
+                      for v in (vol, tf.classify(vol))]
+            post = clwave.RayTracer(models[0], device=args.device)
+            post.render(clwave.Camera(10.0, 5.0, size=(8, 8)), tolerance=1e-2, transfer_function=tf)  # packs
+            pre = clwave.RayTracer(models[1], device=args.device).bricks.pool_bytes
+            out[name] = dict(transfer_function=preset, post_bytes=post.bricks.pool_bytes, pre_bytes=pre,
+                             ratio=post.bricks.pool_bytes / pre, pack_seconds=seconds[-1])
+    finally:
+        classified.pack = pack
+    return dict(setting=dict(wavelet="cubic", levels=3, keep=0.05), pools=out, target_ratio=0.3,
+                peak_resident_gib=peak_resident_gib())
+
+
 def post_errors(tracer, wv, tf, args) -> dict:
     """Max error of post-classified float32 renders at 1e-2 and 1e-3 against a float64 render at 1e-5 of the same
     model, on a 64x64 centre of the first view (``--raytrace-image`` framing)."""
@@ -1029,7 +1066,7 @@ def bench_orders(args) -> dict:
 
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "setup": bench_setup,
-              "post": bench_post,
+              "post": bench_post, "pools": bench_pools,
               "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
               "first-image": bench_first_image, "view-file": bench_view_file}
 

@@ -10,7 +10,8 @@
  *   stats    (n,) int4: flags (bit 1: a span or panel at its depth limit), shaded at the midpoint, inside one
  *            interval, integrand evaluations
  * Grid: global (n).
- * And unpack_pool: a packed scalar pool's q through the ray tracer's decode (scalar_pool.h), for its test. */
+ * And unpack_pool, unpack_cells: a packed scalar pool's q through the ray tracer's decode (scalar_pool.h), for
+ * its test. */
 #include "raytrace/types.h"
 #include "raytrace/classify.h"
 #include "raytrace/scalar_pool.h"
@@ -49,19 +50,33 @@ __kernel void classify_segments(__global real4 *out, __global const real *sample
 }
 
 /* unpack_pool: every q of slot s of a packed scalar pool (the pool `words`, its `quant`; boxes as field_bspline.h's,
- * w the slot's first coefficient) into out[w ..], rows of up to four by pool_row as the ray tracer reads them.
- * Grid: global (slots). */
+ * w the slot's first coefficient) into out[w ..], rows of up to four by pool_row as the ray tracer reads them; then
+ * the rows read again from every x: a q that differs is NaN.  Grid: global (slots). */
 __kernel void unpack_pool(__global float *out, __global const uchar *words, __global const Quant *quant,
                           __global const int4 *boxes)
 {
     const int s = get_global_id(0);
     const int4 n = boxes[s];
-    const uint size = n.x * n.y * n.z;
-    for (uint i = 0; i < size; i += 4) {
-        float row[4];
-        const int k = min(4u, size - i);
-        pool_row(words, quant[s], i, k, row);
-        for (int r = 0; r < k; r++)
-            out[n.w + i + r] = row[k - 1 - r];
-    }
+    for (int again = 0; again < 2; again++)
+        for (int z = 0; z < n.z; z++)
+            for (int y = 0; y < n.y; y++)
+                for (int x = 0; x < n.x; x += again ? 1 : 4) {
+                    float row[4];
+                    const int k = min(4, n.x - x), i = n.w + (z * n.y + y) * n.x + x;
+                    pool_row(words, quant[s], n, x, y, z, k, row);
+                    for (int r = 0; r < k; r++)
+                        out[i + r] = !again || out[i + r] == row[k - 1 - r] ? row[k - 1 - r] : NAN;
+                }
+}
+
+/* unpack_cells: the j^3 q of cell k (cells[k]: its slot, and its last coefficient within the slot) into
+ * out[k j^3 ..] by pool_cell, as the ray tracer's scalar_cell decodes a segment's cell.  Grid: global (cells). */
+__kernel void unpack_cells(__global real *out, __global const uchar *words, __global const Quant *quant,
+                           __global const int4 *boxes, __global const int2 *cells, const int j)
+{
+    const int k = get_global_id(0);
+    real q[MAX_ORDER * MAX_ORDER * MAX_ORDER];
+    pool_cell(words, quant[cells[k].x], boxes[cells[k].x], cells[k].y, j, q);
+    for (int i = 0; i < j * j * j; i++)
+        out[(size_t)k * j * j * j + i] = q[i];
 }

@@ -359,18 +359,14 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
 __attribute__((always_inline)) inline void scalar_cell(const Field G, const int slot, const Quant Q, const int j,
                                                        Basis *B)
 {
-    /* the cell's last coefficient within the slot: B->corner counts from the slot's first, G.boxes' w */
-    const uint last = (uint)(B->corner - G.coef) - (slot < 0 ? 0 : G.boxes[slot * CLW_GROUPS].w);
-#pragma unroll
-    for (int rz = 0; rz < j; rz++)
-#pragma unroll
-        for (int ry = 0; ry < j; ry++) {
-            float row[MAX_ORDER];
-            pool_row(G.coef, Q, last - rz * B->sz - ry * B->sy - (j - 1), j, row);
-#pragma unroll
-            for (int rx = 0; rx < j; rx++)
-                B->q[(rz * j + ry) * j + rx] = row[rx];
-        }
+    if (slot < 0) {
+        for (int i = 0; i < j * j * j; i++)
+            B->q[i] = 0;
+        return;
+    }
+    /* the cell's last coefficient within the slot: B->corner counts from the slot's first, the box's w */
+    const int4 box = G.boxes[slot * CLW_GROUPS];
+    pool_cell(G.coef, Q, box, (int)(B->corner - G.coef) - box.w, j, B->q);
 }
 
 /* group_field for a scalar pool, from the decoded q: one lane a sample (samples 0..7 in *f, the tail lanes in *ft

@@ -40,12 +40,16 @@ RANGES_KEPT = 8
 RANGE_SLACK = 1e-6
 #: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
 FLAT = 1e-4
-#: the scalar pool's coefficients are whole numbers q of 0..Q_BITS - 2 or Q_BITS bits: per slot s = offset + step q,
-#: and the pool's step bound is the widest slot's range / Q_MAX (docs/raytracing.md §10)
+#: the scalar pool's coefficients are s = offset + step q, q a base per tile plus 0..Q_BITS - 2 or Q_BITS bits, an
+#: offset per slot and one step, the widest slot's range / Q_MAX (docs/raytracing.md §10)
 Q_BITS = 16
 Q_MAX = 2 ** Q_BITS - 1
-#: per slot of a packed pool: its (offset, step) and where its q lie (``Quant`` in ``cl/raytrace/scalar_pool.h``)
-QUANT = np.dtype([("offset", "<f4"), ("step", "<f4"), ("word", "<u4"), ("bits", "<u4")])
+#: per slot of a packed pool: its (offset, step), where its tiles' entries lie and how many tiles along y (``Quant`` in
+#: ``cl/raytrace/scalar_pool.h``)
+QUANT = np.dtype([("offset", "<f4"), ("step", "<f4"), ("word", "<u4"), ("tiles_y", "<u4")])
+#: a packed pool's tile: TILE x TILE of a slot's x rows (in y and z), its q with its own base and bits (the unit the
+#: counts in docs/known-gaps.md §10 found to pay; a cell's rows each lie in one tile)
+TILE = 4
 #: spare words at the end of a packed pool (a row reads eight bytes)
 POOL_PAD = 4
 #: coefficients packed at a time (float64 work arrays of this many elements)
@@ -98,9 +102,9 @@ class ScalarRange:
     out per detail when a render first asks for it (:mod:`clwave.raytrace.lod`: each detail picks its slots), and
     the classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
 
-    Made, the pool on the device keeps the scalar alone, packed with 0 to 16 bits a coefficient and an offset and a
-    step per slot (:func:`pack`; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the ranges are widened by
-    half the slot's step, so they hold the float model and the one rendered.
+    Made, the pool on the device keeps the scalar alone, packed with 0 to 16 bits a coefficient, a width and base per
+    tile, an offset per slot and one step (:func:`pack`; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the
+    ranges are widened by half the step, so they hold the float model and the one rendered.
     """
 
     def __init__(self, tracer):
@@ -124,8 +128,7 @@ class ScalarRange:
             self.sample = sample.get()
             scalar = cla.empty(q, len(f.pool), np.float32)  # the scalar alone: the float4 pool goes
             _STRIDED(self.kernels, q, (len(f.pool),), None, out=scalar, coef=f.pool, step=1, n=len(f.pool))
-            sizes = np.prod(f.boxes[:, 0, :3].astype(np.int64), axis=1)
-            words, quant = pack(scalar.get(), f.boxes[:, 0, 3].astype(np.int64), sizes)
+            words, quant = pack(scalar.get(), f.boxes[:, 0])
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half a step of the floats
             self.slot_range += (quant["step"][:, None] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]
@@ -187,49 +190,71 @@ class ScalarRange:
         return self.last
 
 
-def pack(scalar, starts, sizes) -> tuple:
-    """(words, quant): the pool's coefficients ``scalar`` (float32; slot s spans ``starts[s]`` .. + ``sizes[s]``, one
-    after another) packed for ``cl/raytrace/scalar_pool.h`` (docs/raytracing.md §10).  The pool's step bound S is the
-    widest slot's range / Q_MAX; each slot gets the fewest bits b (0..14, 16) whose 2^b - 1 steps of S span its range,
-    then its own step, its range / (2^b - 1) rounded up in float32 (at most S), offset its least coefficient (float32,
-    so exact), and q the nearest whole number in float64: the decoded ``offset + step q`` is within
-    ``step / 2 <= S / 2`` of each coefficient.  ``words`` (uint32) holds slot s's q in bits ``i b`` .. of its words
-    from ``quant["word"][s]``, then POOL_PAD spare words; ``quant`` is (slots,) QUANT."""
-    end = int(starts[-1] + sizes[-1]) if len(starts) else 0
-    quant = np.zeros(max(len(starts), 1), QUANT)
-    if not end:
+def pack(scalar, boxes) -> tuple:
+    """(words, quant): the pool's coefficients ``scalar`` (float32; slot s a box ``boxes[s]`` = (nx, ny, nz, first) of
+    coefficients, x fastest) packed for ``cl/raytrace/scalar_pool.h`` (docs/raytracing.md §10).  One step S for the
+    pool, the widest slot's range / Q_MAX rounded up in float32; per slot its offset, its least coefficient (float32, so
+    exact), and per coefficient q the nearest whole number of steps above it (float64), so ``offset + S q`` is within
+    S / 2 of each coefficient.  Each tile (TILE x TILE of a slot's x rows in y and z) holds its q - base in the fewest
+    bits b (0..14, 16) covering its q, base its least q.  Slot s's words from ``quant["word"][s]``: per tile (z, y
+    order) its entry (its first word, base | b << 16), then the tiles' words, each tile's rows (z, y order) one after
+    another from a whole word; then POOL_PAD spare words.  ``quant`` is (slots,) QUANT."""
+    boxes = np.asarray(boxes, np.int64).reshape(-1, 4)
+    sizes = np.prod(boxes[:, :3], axis=1)
+    quant = np.zeros(max(len(boxes), 1), QUANT)
+    if not sizes.sum():
         return np.zeros(POOL_PAD, np.uint32), quant
-    lo = np.minimum.reduceat(scalar[:end], starts).astype(np.float64)
-    hi = np.maximum.reduceat(scalar[:end], starts).astype(np.float64)
-    offset = lo.astype(np.float32)  # exact: the coefficients are float32
-    span = hi - offset
-    levels = span.max() / Q_MAX * (2.0 ** np.arange(Q_BITS + 1) - 1)  # what b bits span at the bound's step
-    bits = np.minimum(np.searchsorted(levels, span), Q_BITS)
+    starts, end = boxes[:, 3], int(boxes[-1, 3] + sizes[-1])  # the slots lie one after another
+    lo = np.minimum.reduceat(scalar[:end], starts)
+    span = np.maximum.reduceat(scalar[:end], starts).astype(np.float64) - lo
+    step = np.float32(span.max() / Q_MAX)
+    step = np.nextafter(step, np.float32(np.inf)) if float(step) * Q_MAX < span.max() else step
+    inverse = 1.0 / float(step) if step > 0 else 0.0
+    quant["offset"], quant["step"] = lo, step
+    out, at = [], 0
+    for shape in np.unique(boxes[:, :3], axis=0):  # the slots of one box shape, about Q_CHUNK coefficients at a time
+        slots = np.flatnonzero(np.all(boxes[:, :3] == shape, axis=1))
+        per = max(Q_CHUNK // int(np.prod(shape)), 1)
+        for k in range(0, len(slots), per):
+            chunk = slots[k:k + per]
+            words, start = _pack_slots(scalar, shape, starts[chunk], lo[chunk].astype(np.float64), inverse, at)
+            quant["word"][chunk], quant["tiles_y"][chunk] = start, -(-shape[1] // TILE)
+            out.append(words)
+            at += len(words)
+    return np.concatenate(out + [np.zeros(POOL_PAD, np.uint32)]), quant
+
+
+def _pack_slots(scalar, shape, firsts, offsets, inverse, at) -> tuple:
+    """(words, start): the words of slots of one box ``shape`` (nx, ny, nz) whose coefficients start at ``firsts``,
+    for :func:`pack`, laid out one after another from the pool's word ``at``, and where each slot's start."""
+    nx, ny, nz = (int(v) for v in shape)
+    m, ty, tz = len(firsts), -(-ny // TILE), -(-nz // TILE)
+    coef = scalar[firsts[:, None] + np.arange(nx * ny * nz)].astype(np.float64)
+    q = np.rint((coef - offsets[:, None]) * inverse).reshape(m, nz, ny, nx)
+    tiled = np.pad(q, ((0, 0), (0, tz * TILE - nz), (0, ty * TILE - ny), (0, 0)), mode="edge").reshape(
+        m, tz, TILE, ty, TILE, nx)
+    base = tiled.min(axis=(2, 4, 5)).reshape(m, -1)
+    bits = np.searchsorted(2.0 ** np.arange(Q_BITS + 1) - 1, tiled.max(axis=(2, 4, 5)).reshape(m, -1) - base)
     bits[bits == Q_BITS - 1] = Q_BITS  # four fields in eight bytes from any byte (cl/raytrace/scalar_pool.h)
-    top = 2.0 ** bits - 1
-    step = np.divide(span, top, out=np.zeros(len(span)), where=bits > 0).astype(np.float32)
-    step = np.where(step.astype(np.float64) * top < span, np.nextafter(step, np.float32(np.inf)), step)
-    inverse = np.divide(1.0, step.astype(np.float64), out=np.zeros(len(step)), where=step > 0)
-    word = np.concatenate([[0], np.cumsum(-(-sizes * bits // 32))])
-    words = np.zeros(int(word[-1]) + POOL_PAD, np.uint32)
-    first = 0
-    while first < len(starts):  # slots in chunks of about Q_CHUNK coefficients
-        last = max(int(np.searchsorted(starts, starts[first] + Q_CHUNK, side="right")), first + 1)
-        a, b, reps = int(starts[first]), int(starts[last - 1] + sizes[last - 1]), sizes[first:last]
-        u = (scalar[a:b] - np.repeat(offset[first:last].astype(np.float64), reps)) * np.repeat(inverse[first:last],
-                                                                                                reps)
-        q = np.clip(np.rint(u), 0, np.repeat(top[first:last], reps))
-        # bit i b of the slot's words: fields never overlap, so a word's 64-bit window is the sum of those that start
-        # in it (each below 2^47: exact in float64)
-        bit = np.repeat(word[first:last] * 32 - starts[first:last] * bits[first:last], reps) + \
-            np.arange(a, b) * np.repeat(bits[first:last], reps)
-        k0 = int(word[first])
-        window = np.bincount(bit // 32 - k0, q * 2.0 ** (bit % 32)).astype(np.uint64)
-        words[k0:k0 + len(window)] |= (window & 0xFFFFFFFF).astype(np.uint32)
-        words[k0 + 1:k0 + 1 + len(window)] |= (window >> np.uint64(32)).astype(np.uint32)
-        first = last
-    quant["offset"], quant["step"], quant["word"], quant["bits"] = offset, step, word[:-1], bits
-    return words, quant
+    # the q - base per slot in tile order (z, y), each tile's rows (z, y) then x; the padding's rows left out
+    rows = (np.arange(tz * TILE) < nz).reshape(tz, 1, TILE, 1) & (np.arange(ty * TILE) < ny).reshape(1, ty, 1, TILE)
+    value = (tiled.transpose(0, 1, 3, 2, 4, 5) - base.reshape(m, tz, ty, 1, 1, 1))[:, rows].ravel()
+    counts = np.tile(rows.sum(axis=(2, 3)).ravel() * nx, m)  # per tile of every slot
+    data = (-(-counts * bits.ravel() // 32)).reshape(m, -1)
+    start = np.concatenate([[0], np.cumsum(2 * ty * tz + data.sum(axis=1))])
+    tile_word = (start[:-1, None] + 2 * ty * tz + np.cumsum(data, axis=1) - data).ravel()  # after the slot's entries
+    words = np.zeros(int(start[-1]), np.uint32)
+    entry = (start[:-1, None] + 2 * np.arange(ty * tz)).ravel()
+    words[entry] = at + tile_word
+    words[entry + 1] = base.ravel().astype(np.uint32) | bits.ravel().astype(np.uint32) << np.uint32(16)
+    # field i of a tile from word w at bit 32 w + i b: fields never overlap, so a word's 64-bit window is the sum of
+    # those that start in it (each below 2^47: exact in float64; 0-bit tiles' fields, all 0, may start past the end)
+    bit = np.repeat(tile_word * 32, counts) + (np.arange(len(value)) - np.repeat(np.cumsum(counts) - counts, counts)) \
+        * np.repeat(bits.ravel(), counts)
+    window = np.bincount(bit // 32, value * 2.0 ** (bit % 32), minlength=len(words))[:len(words)].astype(np.uint64)
+    words |= (window & 0xFFFFFFFF).astype(np.uint32)
+    words[1:] |= (window[:-1] >> np.uint64(32)).astype(np.uint32)
+    return words, at + start[:-1]
 
 
 def post_nodes(nodes, n_samples) -> np.ndarray:
