@@ -86,7 +86,10 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     (:mod:`clwave.splat.spatial`).
     ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made.
     ``quasi``: each node's samples as their quasi-interpolant along rows and columns (:func:`quasi_interpolant`;
-    on ``device``, in the spectra)."""
+    on ``device``, in the spectra).
+    A coarser band is made from the finest of its type in ``bands``: a scaled copy where its texels are that one's
+    dilated too, else (``"fft"``, ``tol`` > 0) an FFT of the period that the box its trimming keeps needs
+    (docs/splatting.md §8 "Periods from the trimmed box")."""
     wav = wavelet_for(wavelet)
     d_xyz = spacing_xyz(spacing_zyx)
     n, u, v = (np.asarray(x, float) for x in (n, u, v))
