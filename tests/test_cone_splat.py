@@ -214,6 +214,27 @@ def test_footprint_spectra_in_batches_and_refused_beyond_the_texel_cap(monkeypat
         sheared_footprints(*args, max_texels=1000)
 
 
+@pytest.mark.parametrize("on_device, mispredicted", [(False, False), (True, False), (False, True)])
+def test_coarser_footprints_as_the_whole_support_makes_them(monkeypatch, on_device, mispredicted):
+    # docs/splatting.md §8: a coarser level's footprints are the finest one's dilated (texels doubled) or an FFT of the
+    # period its trimmed box needs (a box predicted too small: the whole support after all); each as the FFT over
+    # the whole support makes it, band by band
+    from clwave.splat import perspective
+
+    if mispredicted:
+        monkeypatch.setattr(perspective, "kept_radius", lambda grid, profiles, tol: np.zeros(2))
+    n, u, v = view_frame(40.0, 25.0)
+    cc = clwave.ComputeContext.get() if on_device else None
+    bands = {(1, "dad"): 0.3, (2, "dad"): 0.6, (3, "dad"): 0.9, (1, "aad"): (0.3, 0.35), (2, "aad"): (0.5, 0.45)}
+    args = (SplineWavelet(4), (1.0, 1.2, 0.8), n, u, v)
+    slopes = np.array([[0.0, 0.1], [0.2, -0.1]])
+    together = sheared_footprints(*args, bands, slopes, "fft", 1e-4, cc, quasi=True)
+    for band, texel in bands.items():
+        alone, t = sheared_footprints(*args, {band: texel}, slopes, "fft", 1e-4, cc, quasi=True)[band], together[band]
+        assert t.data.shape == alone.data.shape and (t.centre_u, t.centre_v) == (alone.centre_u, alone.centre_v)
+        assert np.abs(t.data - alone.data).max() <= 2e-6 * np.abs(alone.data).max()
+
+
 def test_axis_scale_is_the_least_of_its_convex_function():
     # docs/splatting.md §8: the spacing a sheared footprint varies on along a texture axis, by brute force
     from clwave.splat.perspective import axis_scale

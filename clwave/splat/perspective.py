@@ -13,6 +13,7 @@ between the four around its own.
 from __future__ import annotations
 
 import time
+from math import ceil
 from types import SimpleNamespace
 
 import numpy as np
@@ -26,7 +27,7 @@ from ..threads import cores, thread_map
 from .spatial import exact_samples
 from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
 from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
-from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _axis_sampling, _centred
+from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _axis_sampling, _centred, _fast_even
 
 #: Spacing of the slope grid (docs/splatting.md §8): bilinear interpolation between nodes errs by at most
 #: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
@@ -85,76 +86,138 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     (:mod:`clwave.splat.spatial`).
     ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made.
     ``quasi``: each node's samples as their quasi-interpolant along rows and columns (:func:`quasi_interpolant`;
-    on ``device``, in the spectra)."""
+    on ``device``, in the spectra).
+    A coarser band is made from the finest of its type in ``bands``: a scaled copy where its texels are that one's
+    dilated too, else (``"fft"``, ``tol`` > 0) an FFT of the period that the box its trimming keeps needs
+    (docs/splatting.md §8 "Periods from the trimmed box")."""
     wav = wavelet_for(wavelet)
     d_xyz = spacing_xyz(spacing_zyx)
     n, u, v = (np.asarray(x, float) for x in (n, u, v))
     slopes = np.asarray(slopes, float).reshape(-1, 2)
-    grids, jobs = {}, []
+    grids, widths = {}, {}
     for (m, key), texel in bands.items():
         m, key = int(m), check_key(key)
         extent = support_extent(wav, key, m, d_xyz)
         # every node on one grid: the widest oblique projection of the support box over the nodes
-        width_u = max(float(np.abs(u + s * n) @ extent) for s in slopes[:, 0])
-        width_v = max(float(np.abs(v + s * n) @ extent) for s in slopes[:, 1])
+        widths[(m, key)] = (max(float(np.abs(u + s * n) @ extent) for s in slopes[:, 0]),
+                            max(float(np.abs(v + s * n) @ extent) for s in slopes[:, 1]))
         (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, h)
-                                      for w, h in zip((width_u, width_v), np.broadcast_to(texel, 2)))
+                                      for w, h in zip(widths[(m, key)], np.broadcast_to(texel, 2)))
         grids[(m, key)] = (nu, h_u, nv, h_v)
-        jobs += [((m, key), k) for k in range(len(slopes))]
     check_texels(sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values()),  # slope_cells
                  max_texels, f"the footprints of this perspective view ({len(slopes)} ray slopes a band)",
                  "render fewer pixels, a narrower cone or a lower omega_s")
-    spectra = {}
-    if sampling == "fft" and device is not None:  # non-separable slices on the device, in few launches
-        plans = {}
-        for band, k in jobs:
+    data, profiles = {}, {}
+
+    def sample(chosen):  # the samples of the bands ``chosen`` on their grids, and their row and column profiles
+        jobs = [(band, k) for band in chosen for k in range(len(slopes))]
+        spectra = {}
+        if sampling == "fft" and device is not None:  # non-separable slices on the device, in few launches
+            plans = {}
+            for band, k in jobs:
+                nu, h_u, nv, h_v = grids[band]
+                su, sv = slopes[k]
+                scale, axes = slice_plan(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu * h_u, nv * h_v)
+                if any(alpha and beta for _, alpha, beta in axes):
+                    plans[(band, k)] = (scale, axes, nu, nv)
+            batch, held = [], 0
+            for job, plan in list(plans.items()) + [(None, None)]:  # launches of at most SPECTRA_BATCH_BYTES
+                size = 0 if plan is None else 8 * plan[3] * (plan[2] // 2 + 1 + SPECTRUM_BLOCK)
+                if batch and (plan is None or held + size > SPECTRA_BATCH_BYTES):
+                    spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch], quasi)))
+                    batch, held = [], 0
+                if plan is not None:
+                    batch.append(job)
+                    held += size
+
+        def make(job):  # a node's samples and their largest magnitude along each row and each column
+            band, k = job
             nu, h_u, nv, h_v = grids[band]
             su, sv = slopes[k]
-            scale, axes = slice_plan(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu * h_u, nv * h_v)
-            if any(alpha and beta for _, alpha, beta in axes):
-                plans[(band, k)] = (scale, axes, nu, nv)
-        batch, held = [], 0
-        for job, plan in list(plans.items()) + [(None, None)]:  # launches of at most SPECTRA_BATCH_BYTES
-            size = 0 if plan is None else 8 * plan[3] * (plan[2] // 2 + 1 + SPECTRUM_BLOCK)
-            if batch and (plan is None or held + size > SPECTRA_BATCH_BYTES):
-                spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch], quasi)))
-                batch, held = [], 0
-            if plan is not None:
-                batch.append(job)
-                held += size
+            if job in spectra:
+                x = _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32)
+            elif sampling == "fft":
+                x = _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u,
+                                         nv * h_v, 1), np.float32)
+            else:
+                aa, bb = _axis_points(nu, h_u, False)[0], _axis_points(nv, h_v, False)[0]
+                a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
+                x = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
+                                  b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
+            if quasi and job not in spectra:
+                quasi_interpolant(x)
+            data[band][k] = x
+            magnitude = np.abs(x)
+            return magnitude.max(axis=1), magnitude.max(axis=0)
 
-    def make(job):  # a node's samples and their largest magnitude along each row and each column
-        band, k = job
+        for band in chosen:
+            nu, _, nv, _ = grids[band]
+            data[band] = np.empty((len(slopes), nv + 1, nu + 1), np.float32)
+        found = thread_map(make, jobs) if len(jobs) > 1 and cores() > 1 else [make(job) for job in jobs]
+        for band in chosen:
+            profiles[band] = tuple(np.max([p[i] for (b, _), p in zip(jobs, found) if b == band], axis=0)
+                                   for i in (0, 1))
+
+    def crop(band, ru, rv):  # the samples within ru, rv texels of the centre
         nu, h_u, nv, h_v = grids[band]
-        su, sv = slopes[k]
-        if job in spectra:
-            x = _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32)
-        elif sampling == "fft":
-            x = _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u, nv * h_v,
-                                     1), np.float32)
-        else:
-            aa, bb = _axis_points(nu, h_u, False)[0], _axis_points(nv, h_v, False)[0]
-            a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
-            x = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
-                              b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
-        if quasi and job not in spectra:
-            quasi_interpolant(x)
-        data[band][k] = x
-        magnitude = np.abs(x)
-        return magnitude.max(axis=1), magnitude.max(axis=0)
+        cu, cv = nu // 2, nv // 2
+        data[band] = data[band][:, cv - rv:cv + rv + 1, cu - ru:cu + ru + 1]
+        rows, cols = profiles[band]
+        profiles[band] = (rows[cv - rv:cv + rv + 1], cols[cu - ru:cu + ru + 1])
+        grids[band] = (2 * ru, h_u, 2 * rv, h_v)
 
-    data = {band: np.empty((len(slopes), nv + 1, nu + 1), np.float32) for band, (nu, _, nv, _) in grids.items()}
-    profiles = thread_map(make, jobs) if len(jobs) > 1 and cores() > 1 else [make(job) for job in jobs]
+    # the finest band of each key first: a coarser one's footprints are its own dilated by 2^(m - m0), with the
+    # values 2^((m0 - m)/2) as large (docs/splatting.md §8)
+    first = {}
+    for band in sorted(grids):
+        first.setdefault(band[1], band)
+    sample(list(first.values()))
+    rest, full, kept = [band for band in grids if band not in first.values()], dict(grids), {}
+    for band in rest:
+        sib, ratio = first[band[1]], 2.0 ** (band[0] - first[band[1]][0])
+        nu, h_u, nv, h_v = grids[band]
+        if np.allclose((h_u, h_v), ratio * np.array(grids[sib][1::2]), rtol=1e-12, atol=0.0):  # texels dilated too
+            data[band] = data[sib] * np.float32(ratio ** -0.5)
+            profiles[band] = tuple(p * ratio ** -0.5 for p in profiles[sib])
+            grids[band] = (grids[sib][0], h_u, grids[sib][2], h_v)
+        elif tol > 0 and sampling == "fft":  # the box its trimming keeps, known from the finest one's
+            reach = ratio * (kept_radius(grids[sib], profiles[sib], tol) + grids[sib][1::2])
+            kept[band] = np.minimum(np.ceil(reach / (h_u, h_v)).astype(int) + 1, (nu // 2, nv // 2)).tolist()
+            # a period past the box by half the support: the periodic copies of the support miss the box
+            nu, nv = (min(count, max(2 * r, _fast_even(ceil(r + w / (2.0 * h))))) for count, r, w, h in
+                      zip((nu, nv), kept[band], widths[band], (h_u, h_v)))
+            grids[band] = (nu, h_u, nv, h_v)
+    sample([band for band in rest if band not in data])
+    wider = []
+    for band in kept:  # the box kept, and a check that the samples at its edges fall under tol
+        crop(band, *kept[band])
+        rows, cols = profiles[band]
+        if max(rows[0], rows[-1], cols[0], cols[-1]) > tol * rows.max():
+            wider.append(band)
+    grids.update({band: full[band] for band in wider})  # past its prediction: the whole support after all
+    sample(wider)
     out = {}
     for band, (nu, h_u, nv, h_v) in grids.items():
-        rows, cols = (np.max([p[i] for (b, _), p in zip(jobs, profiles) if b == band], axis=0) for i in (0, 1))
-        cu, cv, x = float(nu // 2), float(nv // 2), data[band]
+        (rows, cols), cu, cv, x = profiles[band], float(nu // 2), float(nv // 2), data[band]
         if tol > 0 and rows.max() > 0:  # the box of the samples above tol of the peak, over every node
             rows, cols = np.flatnonzero(rows > tol * rows.max()), np.flatnonzero(cols > tol * rows.max())
             x = x[:, rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
             cu, cv = cu - cols[0], cv - rows[0]
         out[band] = Texture(x, h_u, h_v, cu, cv, sampling, *band)
     return out
+
+
+def kept_radius(grid, profiles, tol) -> np.ndarray:
+    """``(r_u, r_v)``: how far (world units) from the centre of a texture on ``grid`` ``(nu, h_u, nv, h_v)`` its
+    samples above ``tol`` of the peak reach, from their ``profiles`` (largest magnitude along each row, each
+    column)."""
+    nu, h_u, nv, h_v = grid
+    rows, cols = profiles
+    out = []
+    for profile, count, h in ((cols, nu, h_u), (rows, nv, h_v)):
+        above = np.flatnonzero(profile > tol * rows.max())
+        out.append(0.0 if above.size == 0 else max(count // 2 - above[0], above[-1] - count // 2) * h)
+    return np.array(out)
 
 
 def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, scale) -> tuple:
