@@ -549,23 +549,3 @@ def test_coarse_lattices_stay_within_tolerance_of_float64():
         assert res.meta["segments_by_lattice"]["4"] == res.meta["segments"] > 0
         assert res.meta["rays_terminated_early"] > 0
         assert np.max(np.abs(res.image - exact)) <= tol
-
-
-def test_segments_across_knot_planes_at_a_coarse_detail():
-    """At a detail coarser than full, a segment may cross one knot plane where the bound on what that costs the
-    quadrature fits the shading share, else it is cut there (docs/raytracing.md §12): fewer segments, the image
-    within the tolerance of a float64 render of the same detail, whose tiny budget cuts at most planes; full
-    detail crosses none (its images as before)."""
-    wv = clwave.WaveletVolume.from_volume(classified_ball(n=24, radius=7.0), "cubic", levels=2).threshold(keep=0.05)
-    tr = clwave.RayTracer(wv, lod=True)
-    cam = clwave.Camera(31, 23, size=16)
-    exact = tr.render(cam, tolerance=1e-6, precision="double", detail=2)
-    assert exact.meta["cuts_at_planes"] > exact.meta["segments_across_planes"]
-    assert tr.render(cam, tolerance=1e-2, detail=0).meta["segments_across_planes"] == 0
-    across = {}
-    for tol in (1e-2, 1e-3):
-        res = tr.render(cam, tolerance=tol, detail=2)
-        across[tol] = res.meta["segments_across_planes"]
-        assert res.meta["segments"] < exact.meta["segments"]
-        assert np.max(np.abs(res.image - exact.image)) <= tol
-    assert across[1e-2] >= across[1e-3] > 0

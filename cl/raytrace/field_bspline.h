@@ -14,10 +14,10 @@
 /* A coefficient of the pool: float4 (channels in their slots), or for a scalar model a whole number q packed in
  * the pool's bytes, the coefficient offset + step q with its slot's Quant in quant (CLW_SCALAR_POOL, scalar_pool.h,
  * clwave/raytrace/classified.py, docs/raytracing.md §10: sample_segment decodes the segment's cell once, into
- * Basis.q, and sums q); COEF4 reads a float4 as four channels, GRADIENT_LANE names the channel whose gradient
- * shades: alpha, or the scalar post-classified (CLW_POST, classify.h).  CORNER is what a Basis reads its cell's
- * coefficients from (the pool at the cell's last coefficient, or the decoded q) and CORNER_COEF(c, sy, sz, j, rz,
- * ry, rx) the coefficient rz planes, ry rows and rx places before that last one. */
+ * Basis.q, and sums q); COEF4 reads a float4 as four channels, COEF_LANE as the channel whose gradient shades: alpha,
+ * or the scalar post-classified (CLW_POST, classify.h).  CORNER is what a Basis reads its cell's coefficients from
+ * (the pool at the cell's last coefficient, or the decoded q) and CORNER_COEF(c, sy, sz, j, rz, ry, rx) the
+ * coefficient rz planes, ry rows and rx places before that last one. */
 #ifdef CLW_POST
 #define GRADIENT_LANE x
 #else
@@ -60,15 +60,12 @@ typedef struct {
 typedef struct {
     int slot, fine, coarse, table, n, parts;
     real4 fine_lat, coarse_lat, piece_lat;
-    int span;    /* the axis of the knot plane the next segment crosses (-1: none; CLW_SPAN, docs/raytracing.md §12) */
-    real3 cross; /* and the grid-0 point where it crosses it */
 } Active;
 #define FIELD_MIXES
 inline void active_init(Active *A, const Field G, const size_t pix, const real3 X0, const real3 D)
 {
     A->slot = -1;
     A->coarse = -1;
-    A->span = -1;
 }
 inline int active_flags(const Active *A) { return 0; }
 
@@ -173,13 +170,6 @@ inline real4 field_run(Active *A, const int flag)
             dw[4] = (-50 + u * (40 + u * (60 + u * (-80 + 25 * u)))) * c; dw[5] = -5 * s2 * s2 * c; \
         }                                                                                         \
     }
-/* The weights per axis: j, or j + 1 along the axis of a knot plane that a segment crosses (CLW_SPAN,
- * docs/raytracing.md §12) */
-#ifdef CLW_SPAN
-#define TAPS (MAX_ORDER + 1)
-#else
-#define TAPS MAX_ORDER
-#endif
 /* lanes 8..11 (real4), or 8..15 (real8) when NS = 16 */
 #if NS > 12
 typedef real8 realt;
@@ -190,48 +180,31 @@ BSPLINE_WEIGHTS(real8, bspline_weights8)
 BSPLINE_WEIGHTS(realt, bspline_weights_tail)
 BSPLINE_DERIVATIVES(real8, bspline_derivatives8)
 BSPLINE_DERIVATIVES(realt, bspline_derivatives_tail)
-/* The j + 1 weights (or derivatives) of a window across the knot at u = 0, u measured from the cell above it: a
- * lane at u < 0 lies in the cell below, where coefficient r + 1 of the window has the weight of r at u + 1 */
-#define WINDOW_WEIGHTS(TYPE, NAME, BASIS)                                                         \
-    inline void NAME(const int j, const TYPE u, TYPE *w)                                          \
-    {                                                                                             \
-        TYPE above[MAX_ORDER], below[MAX_ORDER];                                                  \
-        BASIS(j, u, above);                                                                       \
-        BASIS(j, u + 1, below);                                                                   \
-        for (int r = 0; r <= j; r++)                                                              \
-            w[r] = u < 0 ? (r > 0 ? below[r - 1] : (TYPE)(0)) : (r < j ? above[r] : (TYPE)(0));   \
-    }
-#ifdef CLW_SPAN
-WINDOW_WEIGHTS(real8, window_weights8, bspline_weights8)
-WINDOW_WEIGHTS(realt, window_weights_tail, bspline_weights_tail)
-WINDOW_WEIGHTS(real8, window_derivatives8, bspline_derivatives8)
-WINDOW_WEIGHTS(realt, window_derivatives_tail, bspline_derivatives_tail)
-#endif
 
-/* One group's part of the field at every sample at once: the jx jy jz coefficients ending at `corner`
- * (the segment's cell: j a side, or j + 1 along the axis of a knot plane it crosses, §12), summed separably
- * (along x per (y, z) row, then along y per z plane, then along z).  The lanes are fq's memory order,
- * sample-major: samples 0..3 in v[0], 4..7 in v[1] (four channels each), 8 and 9 in f8 (only when `tail`), so
- * each coefficient is read once per segment and feeds 40 lanes in three vector FMAs (with 16 samples, order 6, a
- * second call sums samples 8..15 the way of 0..7).  w[a][r][h] and w8[a][r] are the weights spread to those lanes;
- * the sums are added to f, f8.  Always inlined with literal taps and `tail`, so the loops unroll. */
+/* One group's part of the field at every sample at once: the j^3 coefficients ending at `corner`
+ * (the segment's cell), summed separably (along x per (y, z) row, then along y per z plane, then
+ * along z).  The lanes are fq's memory order, sample-major: samples 0..3 in v[0], 4..7 in v[1]
+ * (four channels each), 8 and 9 in f8 (only when `tail`), so each coefficient is read once per
+ * segment and feeds 40 lanes in three vector FMAs (with 16 samples, order 6, a second call sums samples
+ * 8..15 the way of 0..7).  w[a][r][h] and w8[a][r] are the weights spread to those lanes; the sums are
+ * added to f, f8.  Always inlined with a literal order j and `tail`, so the loops unroll. */
 __attribute__((always_inline)) inline void group_field(__global const coef_t *corner, const int sy, const int sz,
-                                                       const int jx, const int jy, const int jz, const bool tail,
-                                                       real16 w[3][TAPS][2], real8 w8[3][TAPS], real16 *f, real8 *f8)
+                                                       const int j, const bool tail, real16 w[3][MAX_ORDER][2],
+                                                       real8 w8[3][MAX_ORDER], real16 *f, real8 *f8)
 {
     real16 v0 = 0, v1 = 0;
     real8 v8 = 0;
 #pragma unroll
-    for (int rz = 0; rz < jz; rz++) {
+    for (int rz = 0; rz < j; rz++) {
         real16 plane0 = 0, plane1 = 0;
         real8 plane8 = 0;
 #pragma unroll
-        for (int ry = 0; ry < jy; ry++) {
+        for (int ry = 0; ry < j; ry++) {
             __global const coef_t *row = corner - rz * sz - ry * sy;
             real16 line0 = 0, line1 = 0;
             real8 line8 = 0;
 #pragma unroll
-            for (int rx = 0; rx < jx; rx++) {
+            for (int rx = 0; rx < j; rx++) {
                 const real4 c = COEF4(row[-rx]);
                 const real16 c16 = (real16)(c, c, c, c);
                 line0 = fma(c16, w[0][rx][0], line0);
@@ -258,16 +231,16 @@ __attribute__((always_inline)) inline void group_field(__global const coef_t *co
  * separable sum as group_field on the alpha channel (CORNER_COEF), with the derivative weights d? */
 #define GROUP_GRADIENT(TYPE, NAME)                                                                        \
     __attribute__((always_inline)) inline void NAME(const corner_t corner, const int sy, const int sz,         \
-                                                    const int jx, const int jy, const int jz, const TYPE *wx,   \
-                                                    const TYPE *wy, const TYPE *wz, const TYPE *dx,             \
-                                                    const TYPE *dy, const TYPE *dz, TYPE *gx, TYPE *gy, TYPE *gz) \
+                                                    const int j, const TYPE *wx, const TYPE *wy, const TYPE *wz, \
+                                                    const TYPE *dx, const TYPE *dy, const TYPE *dz, TYPE *gx,   \
+                                                    TYPE *gy, TYPE *gz)                                         \
     {                                                                                                     \
-        _Pragma("unroll") for (int rz = 0; rz < jz; rz++) {                                               \
+        _Pragma("unroll") for (int rz = 0; rz < j; rz++) {                                                \
             TYPE plane = 0, plane_dx = 0, plane_dy = 0;                                                   \
-            _Pragma("unroll") for (int ry = 0; ry < jy; ry++) {                                           \
+            _Pragma("unroll") for (int ry = 0; ry < j; ry++) {                                            \
                 TYPE line = 0, line_dx = 0;                                                               \
-                _Pragma("unroll") for (int rx = 0; rx < jx; rx++) {                                       \
-                    const TYPE a = (TYPE)(CORNER_COEF(corner, sy, sz, jx, rz, ry, rx));                  \
+                _Pragma("unroll") for (int rx = 0; rx < j; rx++) {                                        \
+                    const TYPE a = (TYPE)(CORNER_COEF(corner, sy, sz, j, rz, ry, rx));                   \
                     line = fma(a, wx[rx], line);                                                          \
                     line_dx = fma(a, dx[rx], line_dx);                                                    \
                 }                                                                                         \
@@ -285,14 +258,13 @@ GROUP_GRADIENT(realt, group_gradient_tail)
 
 /* What a grid's part of a segment needs besides its samples: the cell's last coefficient, and per
  * axis the position u in the cell and the B-spline weights w at lanes 0..7 (real8) and 8.. (realt:
- * the lanes past NS are unused); along the axis `span` of a knot plane the segment crosses (-1: none), u from the
- * cell above the plane and j + 1 weights (§12) */
+ * the lanes past NS are unused) */
 typedef struct {
     __global const coef_t *corner;
-    int sy, sz, span;
+    int sy, sz;
     real inv_step; /* lattice cells per grid-0 fine cell: the gradient's scale */
-    real8 u[3], w[3][TAPS];
-    realt ut[3], wt[3][TAPS];
+    real8 u[3], w[3][MAX_ORDER];
+    realt ut[3], wt[3][MAX_ORDER];
 #ifdef CLW_SCALAR_POOL
     real q[MAX_ORDER * MAX_ORDER * MAX_ORDER]; /* the cell's q, decoded once for the samples and the gradient */
 #endif
@@ -300,10 +272,9 @@ typedef struct {
 
 /* Grid g's part of the segment at the sample points xm + radius xi_k D, sample k in lane k, from the
  * brick in `slot` (-1: none, all weights 0).  Every sample comes from the lattice cell holding the
- * midpoint, so from the same polynomial; or, where the segment crosses the knot plane of axis `span` (>= 0) at
- * grid-0 point `cross`, from the cells on either side of it along that axis (docs/raytracing.md §12). */
+ * midpoint, so from the same polynomial. */
 inline void segment_basis(const Field G, const int g, const int slot, const real3 xm, const real radius,
-                          const real3 D, __constant const real *nodes, const int span, const real3 cross, Basis *B)
+                          const real3 D, __constant const real *nodes, Basis *B)
 {
     /* the lanes' points straight from nodes (lanes past NS repeat lane 0): vector loads of a private
      * array's scalar stores stalled on store forwarding */
@@ -317,27 +288,12 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
     const real4 f = slot < 0 ? (real4)(0) : to_real4(G.frames[slot * CLW_GROUPS + g]);
     const int4 n = slot < 0 ? (int4)(j, j, j, 0) : G.boxes[slot * CLW_GROUPS + g];
     const real3 x = (xm - f.xyz) * f.w; /* the brick's lattice coordinates (docs/raytracing.md §3) */
-    int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, j - 1, n.xyz - 1), 0);
-    B->span = -1;
-#ifdef CLW_SPAN
-    if (span >= 0 && slot >= 0) { /* the cell above the plane (span_jump checked that its window is in the box) */
-        const int4 k = convert_int4((real4)(round((cross - f.xyz) * f.w), 0));
-        c = (int4)(span == 0 ? k.x : c.x, span == 1 ? k.y : c.y, span == 2 ? k.z : c.z, 0);
-        B->span = span;
-    }
-#endif
+    const int4 c = (int4)(clamp(convert_int4((real4)(floor(x), 0)).xyz, j - 1, n.xyz - 1), 0);
     const real3 u = x - convert_real3(c.xyz), step = radius * D * f.w; /* x - cell at xi = 0, and per unit xi */
     const real ua[3] = {u.x, u.y, u.z}, sa[3] = {step.x, step.y, step.z};
     for (int a = 0; a < 3; a++) {
         B->u[a] = ua[a] + sa[a] * xi;
         B->ut[a] = ua[a] + sa[a] * xit;
-#ifdef CLW_SPAN
-        if (a == B->span) {
-            window_weights8(j, B->u[a], B->w[a]);
-            window_weights_tail(j, B->ut[a], B->wt[a]);
-            continue;
-        }
-#endif
         bspline_weights8(j, B->u[a], B->w[a]);
         bspline_weights_tail(j, B->ut[a], B->wt[a]);
     }
@@ -415,7 +371,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
 {
     const bool tail = NS > 12 || NS > P0 + 1 || fresh; /* samples 8.. (lane P0 alone: only when fresh) */
     Basis *B = &basis[0];
-    segment_basis(G, 0, A->slot, xm, radius, D, nodes, A->span, A->cross, B);
+    segment_basis(G, 0, A->slot, xm, radius, D, nodes, B);
     /* the slot's coefficients are offset + step q and the B-splines sum to 1 (their derivatives to 0): s is
      * offset + step times the sum over q, and the gradient step times its sum (no brick: weights 0, s = 0) */
     const Quant none = {0, 0, 0, 0}, Q = A->slot < 0 ? none : G.quant[A->slot];
@@ -444,26 +400,16 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
         fq[k] = (real4)(s[k], 0, 0, 0);
 }
 #else
-/* group_field with literal taps and tail (the loops unroll): w, w8 and the sums as group_field's */
-#define GROUP_FIELD_TAPS(JX, JY, JZ) \
+/* group_field with a literal order and tail (the loops unroll): w, w8 and the sums as group_field's */
+#define GROUP_FIELD(J) \
+    case J: \
         if (tail) \
-            group_field(B->corner, B->sy, B->sz, JX, JY, JZ, true, w, w8, f, &f8); \
+            group_field(B->corner, B->sy, B->sz, J, true, w, w8, f, &f8); \
         else \
-            group_field(B->corner, B->sy, B->sz, JX, JY, JZ, false, w, w8, f, &f8); \
+            group_field(B->corner, B->sy, B->sz, J, false, w, w8, f, &f8); \
         if (NS > 12) /* samples 8..15 like 0..7 */ \
-            group_field(B->corner, B->sy, B->sz, JX, JY, JZ, false, wt, w8, f + 2, &f8);
-#define GROUP_FIELD(J) case J: GROUP_FIELD_TAPS(J, J, J) break;
-#ifdef CLW_SPAN /* cubic across a knot plane: 5 taps along its axis (§12) */
-#define GROUP_FIELD_4 \
-    case 4: \
-        if (B->span == 0) { GROUP_FIELD_TAPS(5, 4, 4) } \
-        else if (B->span == 1) { GROUP_FIELD_TAPS(4, 5, 4) } \
-        else if (B->span == 2) { GROUP_FIELD_TAPS(4, 4, 5) } \
-        else { GROUP_FIELD_TAPS(4, 4, 4) } \
+            group_field(B->corner, B->sy, B->sz, J, false, wt, w8, f + 2, &f8); \
         break;
-#else
-#define GROUP_FIELD_4 GROUP_FIELD(4)
-#endif
 
 /* The field at the segment's sample points (lane P0 only when `fresh` or when it shares a vector
  * with other tail lanes: else it is the last segment's end), and each grid's Basis for the gradient */
@@ -477,12 +423,12 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
     const int slot = A->slot; /* every segment lies in the brick (or piece) the ray last entered */
     for (int g = 0; g < CLW_GROUPS; g++) {
         Basis *B = &basis[g];
-        segment_basis(G, g, slot, xm, radius, D, nodes, A->span, A->cross, B);
+        segment_basis(G, g, slot, xm, radius, D, nodes, B);
         const int j = ORDER[g];
-        real16 w[3][TAPS][2], wt[3][TAPS][2];
-        real8 w8[3][TAPS];
+        real16 w[3][MAX_ORDER][2], wt[3][MAX_ORDER][2];
+        real8 w8[3][MAX_ORDER];
         for (int a = 0; a < 3; a++)
-            for (int r = 0; r < j + (a == B->span); r++) {
+            for (int r = 0; r < j; r++) {
                 w[a][r][0] = B->w[a][r].s0000111122223333;
                 w[a][r][1] = B->w[a][r].s4444555566667777;
 #if NS > 12
@@ -497,7 +443,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
         GROUP_FIELD(1)
         GROUP_FIELD(2)
         GROUP_FIELD(3)
-        GROUP_FIELD_4
+        GROUP_FIELD(4)
 #if MAX_ORDER > 4
         GROUP_FIELD(6)
 #endif
@@ -519,45 +465,24 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
 
 /* alpha's fine gradient in the lanes of (gx, gy, gz), only for segments shaded point by point:
  * lanes 0..7 (real8), and the tail lanes 8.. (realt) unless lane P0 comes from the last segment and is the
- * only one there (NS < 16); across a knot plane (B->span >= 0) with the window's derivatives along its axis */
-#define GRADIENT_TAPS(GRADIENT, JX, JY, JZ) \
-    GRADIENT(c, B->sy, B->sz, JX, JY, JZ, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz);
-#define GRADIENT_LANES(W, TYPE, DERIVATIVES, WINDOW, GRADIENT, U, OUT)                                     \
+ * only one there (NS < 16) */
+#define GRADIENT_LANES(W, TYPE, DERIVATIVES, GRADIENT, U, OUT)                                             \
     {                                                                                                     \
-        TYPE d[3][TAPS], hx = 0, hy = 0, hz = 0;                                                          \
-        for (int a = 0; a < 3; a++) {                                                                     \
-            if (SPAN_AXIS(a))                                                                             \
-                WINDOW(j, B->U[a], d[a]);                                                                 \
-            else                                                                                          \
-                DERIVATIVES(j, B->U[a], d[a]);                                                            \
-        }                                                                                                 \
+        TYPE d[3][MAX_ORDER], hx = 0, hy = 0, hz = 0;                                                     \
+        for (int a = 0; a < 3; a++)                                                                       \
+            DERIVATIVES(j, B->U[a], d[a]);                                                                \
         const corner_t c = CORNER(B);                                                                     \
         const TYPE *wx = B->W[0], *wy = B->W[1], *wz = B->W[2];                                           \
         switch (j) { /* order 1 has no gradient: shading is off for Haar alpha */                         \
-        case 2: GRADIENT_TAPS(GRADIENT, 2, 2, 2) break;                                                   \
-        case 3: GRADIENT_TAPS(GRADIENT, 3, 3, 3) break;                                                   \
-        GRADIENT_4(GRADIENT)                                                                              \
+        case 2: GRADIENT(c, B->sy, B->sz, 2, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;         \
+        case 3: GRADIENT(c, B->sy, B->sz, 3, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;         \
+        case 4: GRADIENT(c, B->sy, B->sz, 4, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;         \
         GRADIENT_6(GRADIENT)                                                                              \
         }                                                                                                 \
         gx->OUT = hx * B->inv_step; gy->OUT = hy * B->inv_step; gz->OUT = hz * B->inv_step;               \
     }
-#ifdef CLW_SPAN
-#define SPAN_AXIS(a) ((a) == B->span)
-#define GRADIENT_4(GRADIENT)                                                                              \
-    case 4:                                                                                               \
-        if (B->span == 0) { GRADIENT_TAPS(GRADIENT, 5, 4, 4) }                                            \
-        else if (B->span == 1) { GRADIENT_TAPS(GRADIENT, 4, 5, 4) }                                       \
-        else if (B->span == 2) { GRADIENT_TAPS(GRADIENT, 4, 4, 5) }                                       \
-        else { GRADIENT_TAPS(GRADIENT, 4, 4, 4) }                                                         \
-        break;
-#else
-#define SPAN_AXIS(a) false
-#define window_derivatives8 bspline_derivatives8
-#define window_derivatives_tail bspline_derivatives_tail
-#define GRADIENT_4(GRADIENT) case 4: GRADIENT_TAPS(GRADIENT, 4, 4, 4) break;
-#endif
 #if MAX_ORDER > 4
-#define GRADIENT_6(GRADIENT) case 6: GRADIENT_TAPS(GRADIENT, 6, 6, 6) break;
+#define GRADIENT_6(GRADIENT) case 6: GRADIENT(c, B->sy, B->sz, 6, wx, wy, wz, d[0], d[1], d[2], &hx, &hy, &hz); break;
 #define TAIL_LANES hi
 #else
 #define GRADIENT_6(GRADIENT)
@@ -568,10 +493,8 @@ inline void sample_gradient(const Basis *basis, const bool all, realv *gx, realv
     const Basis *B = &basis[CLW_ALPHA];
     const int j = ORDER[CLW_ALPHA];
     *gx = 0; *gy = 0; *gz = 0;
-    GRADIENT_LANES(w, real8, bspline_derivatives8, window_derivatives8, group_gradient8, u, lo)
+    GRADIENT_LANES(w, real8, bspline_derivatives8, group_gradient8, u, lo)
     if (all || NS > 12)
-        GRADIENT_LANES(wt, realt, bspline_derivatives_tail, window_derivatives_tail, group_gradient_tail, ut,
-                       TAIL_LANES)
+        GRADIENT_LANES(wt, realt, bspline_derivatives_tail, group_gradient_tail, ut, TAIL_LANES)
 }
-
 #endif

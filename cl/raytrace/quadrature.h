@@ -263,34 +263,4 @@ inline real3 segment_point(Segment *S, const Shading *P, __constant const real *
 
 /* simpson(S, P, f9, nodes, -1, 1, tol, evals, flags): int_{-1}^{1} q e^{-A} dxi of a segment */
 ADAPTIVE_SIMPSON(simpson, Segment, segment_point)
-#ifdef CLW_SPAN
-/* A cubic segment across one knot plane at xi_c (docs/raytracing.md §12): there the field gains
- * (slope (xi - xi_c))^3_+ / 6 J(xi), slope the lattice cells per unit xi along the axis crossed, J the jump of the
- * third derivative (|J| <= jump, span_jump; its m-th derivative along the ray <= (2 sigma)^m jump, sigma the cells
- * per unit xi along the other two axes), so every row of `weights` (alpha's integral from -1 to the quarter points)
- * errs by at most the Taylor sum below over `table` (clwave/raytrace/quadrature.py span_table: per bin of xi_c and
- * power 3 + m, the rows' largest error on (xi - xi_c)^(3+m)_+).  Returns that bound, in units of int alpha dxi. */
-inline real span_bound(__constant const real *table, const real xi_c, const real slope, const real sigma,
-                       const real jump)
-{
-    const int bin = clamp((int)((xi_c + 1) * (CLW_SPAN_BINS / 2)), 0, CLW_SPAN_BINS - 1);
-    __constant const real *e = table + 8 * bin;
-    const real s2 = 2 * sigma;
-    real taylor = e[6];
-    for (int m = 5; m >= 0; m--) /* sum over m of (2 sigma)^m / m! e[m], by Horner */
-        taylor = e[m] + s2 / (m + 1) * taylor;
-    const real a = fabs(slope);
-    return a * a * a / 6 * jump * taylor;
-}
-
-/* whether adaptive Simpson on f9 would halve one of its first two panels below the quarter points, where it needs
- * the segment's series (simpson, above) */
-inline bool simpson_needs_series(const real3 *f9, const real tol)
-{
-    const Panel first = {-1, 0, tol / 2, f9[0], f9[2], f9[4], 1}, second = {0, 1, tol / 2, f9[4], f9[6], f9[8], 1};
-    real3 total = (real3)(0);
-    int flags = 0;
-    return !panel_done(&first, f9[1], f9[3], &total, &flags) || !panel_done(&second, f9[5], f9[7], &total, &flags);
-}
-#endif
 #endif

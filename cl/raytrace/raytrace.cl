@@ -6,16 +6,13 @@
  * cubics and quintics, clwave/raytrace/quadrature.py).  Optical depth and X-ray integrals are exact from those samples, the emission integral
  * comes from adaptive Simpson with Phong-shaded q, and the tolerance is shared between quadrature,
  * early termination and empty-space skipping: docs/raytracing.md §2 (the error budget), §4
- * (blocks and superblocks), §5 (shading), §12 (segments across a knot plane).  The field comes from the backend
- * header (field_bspline.h or field_wavelet.h), the segment integrals from quadrature.h, the knot planes and
- * regions met along the ray from march.h.
+ * (blocks and superblocks), §5 (shading).  The field comes from the backend header
+ * (field_bspline.h or field_wavelet.h), the segment integrals from quadrature.h.
  *
  * Compile-time: CLW_GROUPS grids with orders CLW_ORDERS; CLW_ALPHA the grid holding alpha;
  * CLW_SAMPLES samples per segment (9, 10 or 16); CLW_JOIN when every order is >= 3; CLW_LATTICE 1 or
  * 0.5 (orders of both parities); CLW_SHADE for Phong shading; CLW_XRAY for line integrals;
- * CLW_DOUBLE for a float64 build; CLW_POST to classify a scalar by a transfer function while rendering; CLW_SPAN
- * (cubic, shaded, pre-classified, B-spline field) for segments across a knot plane, with CLW_SPAN_BINS rows of its
- * bound's table after the weights' (docs/raytracing.md §12). */
+ * CLW_DOUBLE for a float64 build; CLW_POST to classify a scalar by a transfer function while rendering. */
 #include "raytrace/types.h"
 #ifdef CLW_WAVELET
 #include "raytrace/field_wavelet.h"
@@ -23,30 +20,156 @@
 #include "raytrace/field_bspline.h"
 #endif
 #include "raytrace/quadrature.h"
-#include "raytrace/march.h"
 #ifdef CLW_POST
 #include "raytrace/classify.h"
 #define POST 1
 #else
 #define POST 0
 #endif
-#ifdef CLW_SPAN
-#define SPAN 1
-/* cut where the segment crosses a knot plane (docs/raytracing.md §12): the charge given back, the region where it
- * started restored, the bound integrated up to the plane */
-#define SPAN_CUT                                                                                              \
-    {                                                                                                         \
-        shade_budget += charge;                                                                               \
-        charge = 0;                                                                                           \
-        active.span = -1;                                                                                     \
-        tn = cross;                                                                                           \
-        bnd = bnd0; texit = texit0; fine_end = fine_end0;                                                     \
-        marched = segment_bound(x0, dd, inv, X0, D, inv3, step, t, &tn, t1, &regions, &fine_end, &bnd, &texit); \
-        cuts += 1;                                                                                            \
+
+/* Per axis, the next plane x_a = lat_a + k lat.w of a lattice of knot planes (origin lat.xyz, spacing
+ * lat.w) that the ray x0 + t dd meets: its index k and its t */
+typedef struct {
+    real3 t;
+    int3 k;
+} Planes;
+
+/* the next planes beyond t; inv = 1 / dd (products: divisions were a tenth of the march) */
+inline Planes next_planes(const real *x0, const real *dd, const real *inv, const real t, const real4 lat)
+{
+    const real o[3] = {lat.x, lat.y, lat.z}, h = lat.w;
+    real tp[3];
+    int plane[3];
+    for (int a = 0; a < 3; a++) {
+        const real x = x0[a] + t * dd[a] - o[a];
+        plane[a] = dd[a] > 0 ? (int)floor(x / h) + 1 : (int)ceil(x / h) - 1;
+        tp[a] = dd[a] == 0 ? INFINITY : (plane[a] * h + o[a] - x0[a]) * inv[a];
+        while (tp[a] <= t) { /* x sat on a plane but rounded to its near side */
+            plane[a] += dd[a] > 0 ? 1 : -1;
+            tp[a] = (plane[a] * h + o[a] - x0[a]) * inv[a];
+        }
     }
-#else
-#define SPAN 0
-#endif
+    const Planes P = {(real3)(tp[0], tp[1], tp[2]), (int3)(plane[0], plane[1], plane[2])};
+    return P;
+}
+
+/* past the planes met at tn: the next ones along those axes (step: +1 or -1 per axis, the sign of dd).
+ * All three axes at once, in registers: per axis, the compiler stored two lanes of an array and read the
+ * third back, which stalled the store forwarding on every segment (5 % of a render) */
+inline void step_planes(const real3 x0, const real3 inv, const int3 step, const real tn, const real4 lat, Planes *P)
+{
+    const real3 moved = (convert_real3(P->k + step) * lat.w + lat.xyz - x0) * inv;
+    P->k += step & convert_int3(P->t <= tn);
+    P->t = select(P->t, moved, P->t <= tn);
+}
+
+/* the nearest of the three planes */
+inline real nearest(const Planes *P) { return fmin(P->t.x, fmin(P->t.y, P->t.z)); }
+
+/* where the segment from t ends: at the next knot plane of lattice lat, or at `end` (brick, piece or pass) if sooner;
+ * the planes are found anew from t after a jump (*replan) */
+inline real segment_end(const real *x0, const real *dd, const real *inv, const real t, const real4 lat, const real end,
+                        Planes *planes, bool *replan)
+{
+    if (*replan) {
+        *planes = next_planes(x0, dd, inv, t, lat);
+        *replan = false;
+    }
+    return fmin(end, nearest(planes));
+}
+
+/* the block of `size` fine cells holding x, and the bound on |field| there (0 outside the blocks) */
+inline real block_bound(__global const float *bound, const int4 origin, const int4 shape, const real3 x,
+                        const int size, int4 *b)
+{
+    *b = convert_int4((real4)(floor(x / size), 0));
+    const int4 k = *b - origin;
+    if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= shape.x || k.y >= shape.y || k.z >= shape.z)
+        return 0;
+    return bound[((size_t)k.z * shape.y + k.y) * shape.x + k.x];
+}
+
+/* where the ray leaves block b of `size` fine cells (at most t1) */
+inline real block_exit(const real *x0, const real *dd, const real *inv, const int4 b, const int size, const real t1)
+{
+    const int bb[3] = {b.x, b.y, b.z};
+    real texit = t1;
+    for (int a = 0; a < 3; a++)
+        if (dd[a] != 0)
+            texit = fmin(texit, ((bb[a] + (dd[a] > 0)) * size - x0[a]) * inv[a]);
+    return texit;
+}
+
+/* The bounds on |field| for skipping and R: per CLW_BLOCK^3 block, and per superblock of CLW_SUPER_CELLS^3
+ * fine cells the largest of those; a superblock bounded by at most `coarse` is one region */
+typedef struct {
+    __global const float *block, *super;
+    int4 block_origin, block_shape, super_origin, super_shape;
+    real coarse;
+} Regions;
+
+/* The region of the ray around xm (segment [t, tn]) that one bound covers, and that bound: the
+ * superblock when its bound is at most R->coarse (empty, or nearly: crossed in one step), else the
+ * block.  Returns the bound; *end is where the ray leaves the region.  *fine_end caches where the
+ * ray leaves the last superblock found above R->coarse, whose blocks need no second look. */
+inline real region_bound(const real *x0, const real *dd, const real *inv, const real3 xm, const real tn,
+                         const real t1, const Regions *R, real *fine_end, real *end)
+{
+    int4 b;
+    if (!(tn <= *fine_end)) {
+        const real sb = block_bound(R->super, R->super_origin, R->super_shape, xm, CLW_SUPER_CELLS, &b);
+        const real sexit = fmax(block_exit(x0, dd, inv, b, CLW_SUPER_CELLS, t1), tn);
+        if (sb <= R->coarse) {
+            *end = sexit;
+            return sb;
+        }
+        *fine_end = sexit;
+    }
+    const real bb = block_bound(R->block, R->block_origin, R->block_shape, xm, CLW_BLOCK, &b);
+    *end = fmax(block_exit(x0, dd, inv, b, CLW_BLOCK, t1), tn);
+    return bb;
+}
+
+/* The bound integrated over [s, *tn], region by region, where the ray enters a new region at s: a segment of a
+ * coarser lattice may cross several blocks, whose bounds all count (the midpoint's alone could skip, or end the ray
+ * on, what the others hold).  The segment ends where it would enter a region of bound 0 (*tn moves there): a block no
+ * content reaches is empty in the model (docs/raytracing.md §4, §8), whatever the coarse lattice's field holds there.
+ * The block planes are stepped, not found anew per block; *bnd and *end are left at the region where the next
+ * segment starts, so that it needs no second look-up. */
+inline real swept_bound(const real *x0, const real *dd, const real *inv, const real3 X0, const real3 D,
+                        const real3 inv3, const int3 step, real s, real *tn, const real t1, const Regions *R,
+                        real *fine_end, real *bnd, real *end)
+{
+    const real4 blocks = (real4)(0, 0, 0, CLW_BLOCK);
+    real sum = 0;
+    Planes P = next_planes(x0, dd, inv, s, blocks);
+    while (s < *tn) {
+        const real sn = fmin(*tn, nearest(&P));
+        *bnd = region_bound(x0, dd, inv, X0 + (s + sn) / 2 * D, sn, t1, R, fine_end, end);
+        if (*bnd == 0) {
+            *tn = s;
+            break;
+        }
+        const real e = fmin(*end, *tn); /* past a coarse superblock at once */
+        sum += *bnd * (e - s);
+        s = e;
+        if (e > sn)
+            P = next_planes(x0, dd, inv, s, blocks);
+        else
+            step_planes(X0, inv3, step, sn, blocks, &P);
+    }
+    return sum;
+}
+
+/* whether the grid-0 fine cell holding x is reached by a non-zero voxel of the source volume
+ * (clwave.raytrace.bounds.content_cells); cells outside the table are not */
+inline bool reached(__global const uchar *content, const int4 origin, const int4 shape, const real3 x)
+{
+    const int4 k = convert_int4((real4)(floor(x), 0)) - origin;
+    if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= shape.x || k.y >= shape.y || k.z >= shape.z)
+        return false;
+    return content[((size_t)k.z * shape.y + k.y) * shape.x + k.x] != 0;
+}
 
 /* raytrace: one ray per pixel.
  *
@@ -56,8 +179,6 @@
  *                    evaluations, flags
  *                    (bit 0 terminated early, bit 1 Simpson depth limit reached, bit 2 active list overflowed)
  *   lattice_stats out (H, W) int4: the segments on knot lattices of 1 (or 1/2), 2, 4, and 8 or more cells
- *   span_stats   out (H, W) int2: CLW_SPAN builds, the segments across a knot plane, and the cuts where one would
- *                    have crossed it (its bound did not fit, or it fell back; docs/raytracing.md §12)
  *   FIELD_PARAMS the field backend's arguments: the brick pool, page table and per-slot tables
  *                (field_bspline.h), or the wavelet bands and their tables (field_wavelet.h)
  *   bound, occ_origin, occ_shape bound on |field| per CLW_BLOCK^3 block (grid-0 fine coordinates / block)
@@ -88,8 +209,8 @@
  *                X-ray integrals), ledger (the skipping and shading budgets left, R consumed, and R of the
  *                whole ray: 0 before the first pass) and stats, which it updates (docs/raytracing.md §6)
  * Grid: global (W, H). */
-__kernel void raytrace(__global float4 *image, __global int4 *stats, __global int4 *lattice_stats,
-                       __global int2 *span_stats, const int width, const int height,
+__kernel void raytrace(__global float4 *image, __global int4 *stats, __global int4 *lattice_stats, const int width,
+                       const int height,
                        FIELD_PARAMS,
                        __global const float *bound, const int4 occ_origin, const int4 occ_shape,
                        __global const float *super_bound, const int4 super_origin, const int4 super_shape,
@@ -145,19 +266,16 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
     active_init(&active, G, pix, X0, D);
     int segments = 0, midpoints = 0, evals = 0, flags = 0;
     int4 spans = (int4)(0); /* segments on lattices of 1 (or 1/2), 2, 4, and 8 or more cells */
-    int across = 0, cuts = 0; /* segments across a knot plane, and cuts at one (CLW_SPAN) */
     if (passes) { /* docs/raytracing.md §6: go on from the last pass; a terminated ray is done */
         const int4 s = stats[pix];
         segments = s.x; midpoints = s.y; evals = s.z; flags = s.w;
         spans = lattice_stats[pix];
-        across = span_stats[pix].x; cuts = span_stats[pix].y;
     }
     if (!(t1 > t0) || (flags & 1)) {
         if (!passes) {
             image[pix] = (float4)(0.0f);
             stats[pix] = (int4)(0);
             lattice_stats[pix] = (int4)(0);
-            span_stats[pix] = (int2)(0);
         }
         return;
     }
@@ -280,7 +398,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
         }
         /* a segment of a coarser lattice may cross blocks: the region holding t decides a skip, before the segment's
          * end is planned (a skip needs none), and what a marched segment passes is summed below */
-        const bool coarse = SPAN || lat.w > CLW_LATTICE; /* segments across knot planes may cross blocks too */
+        const bool coarse = lat.w > CLW_LATTICE;
         if (coarse && !(t < texit)) {
             const Planes faces = next_planes(x0, dd, inv, t, (real4)(0, 0, 0, CLW_BLOCK));
             const real tface = nearest(&faces);
@@ -306,41 +424,14 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             continue;
         }
         real marched = bnd * (tn - t); /* the bound integrated over the segment */
-#ifdef CLW_SPAN
-        /* across at most one knot plane, at `cross`, where the bound on what that costs the quadrature fits the
-         * shading share (docs/raytracing.md §12); else, or where it falls back below, cut there */
-        const real bnd0 = bnd, texit0 = texit, fine_end0 = fine_end;
-        real cross, charge = 0;
-        int axis;
-        tn = span_end(x0, dd, inv, t, lat, fmin(fmin(brick_end, piece_end), tb), &planes, &replan, &cross, &axis);
-        marched = segment_bound(x0, dd, inv, X0, D, inv3, step, t, &tn, t1, &regions, &fine_end, &bnd, &texit);
-        active.span = -1;
-        if (axis >= 0 && cross < tn) {
-            const real r = (tn - t) / 2;
-            const real3 cells = fabs(D) * (r / lat.w); /* lattice cells per unit xi, per axis */
-            const real slope = axis == 0 ? cells.x : axis == 1 ? cells.y : cells.z;
-            const real jump = span_jump(G, active.slot, X0 + (t + tn) / 2 * D, X0 + cross * D, axis);
-            const real left = fmax(rest - consumed, (real)0) + slack; /* the rest's emission it dims, its own too */
-            const real sigma = cells.x + cells.y + cells.z - slope; /* along the other two axes */
-            charge = T * r * span_bound(weights + 8 * NS, (cross - t) / r - 1, slope, sigma, jump) *
-                     (1 + shade_gain * left);
-            if (charge <= shade_budget) { /* from the shading share, which midpoint shading draws on too (§5) */
-                shade_budget -= charge;
-                active.span = axis;
-                active.cross = X0 + cross * D;
-            } else {
-                charge = 0; /* nothing taken */
-            }
-        }
-        if (axis >= 0 && cross < tn && active.span < 0)
-            SPAN_CUT
-#else
         if (coarse) {
             tn = segment_end(x0, dd, inv, t, lat, fmin(fmin(brick_end, piece_end), tb), &planes, &replan);
-            marched = segment_bound(x0, dd, inv, X0, D, inv3, step, t, &tn, t1, &regions, &fine_end, &bnd, &texit);
+            marched = bnd * (fmin(tn, texit) - t);
+            if (tn > texit) /* it crosses blocks: each one's bound counts, and it ends before an empty one */
+                marched += swept_bound(x0, dd, inv, X0, D, inv3, step, texit, &tn, t1, &regions, &fine_end, &bnd,
+                                       &texit);
         }
-#endif
-        real3 xm = X0 + (t + tn) / 2 * D;
+        const real3 xm = X0 + (t + tn) / 2 * D;
 #ifdef CLW_CONTENT
         if (tn > t && !reached(content, content_origin, content_shape, xm)) { /* no content reaches: empty */
             t = tn;
@@ -351,154 +442,120 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
         if (tn > t) {
             Segment S;
             Basis basis[CLW_GROUPS];
+            S.radius = (tn - t) / 2;
+            S.series = false;
             /* p = 0 from the last segment's p = 8 when it ended here (and the field is C^1) */
             const bool joined = JOIN && t == t_joined;
-#ifndef CLW_XRAY
-            real3 part;
-            real depth; /* int alpha dxi over the segment */
-#endif
-            real4 end_sample;
-#if defined(CLW_SPAN) && defined(CLW_SHADE)
-            const real3 gradient_before = end_gradient, emission_before = end_emission;
-#endif
-            for (;;) { /* once; twice where a segment across a knot plane falls back to its cut (§12) */
-                S.radius = (tn - t) / 2;
-                S.series = false;
-                sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, nodes, !joined, S.fq, basis);
-                if (joined)
-                    S.fq[P0] = end_field;
-                end_sample = S.fq[7];
-#ifdef CLW_XRAY /* the integral over the segment */
-                real4 integral = (real4)(0);
-                for (int k = 0; k < NS; k++)
-                    integral += S.fq[k] * weights[8 * k + 7];
-                I += S.radius * integral;
-#else
-#ifdef CLW_POST
-                {   /* the scalar classified by the transfer function (classify.h, docs/raytracing.md §10) */
-                    real s[NS], u[NS], c[NS];
-                    for (int k = 0; k < NS; k++)
-                        s[k] = S.fq[k].x;
-                    OneInterval O;
-                    bool one;
-                    real4 r; /* (int q' e^{-A} dxi, int alpha dxi) */
-                    const bool gradient_joined = joined && end_shaded; /* lane P0's gradient: the last segment's end */
-                    end_shaded = false;
-                    if (!post_segment(s, nodes, weights, tf, &P, S.radius, T * S.radius, &shade_budget, u, c, &O, &one,
-                                      &r, &midpoints, &evals)) {
-#ifdef CLW_SHADE
-                        sample_gradient(basis, !gradient_joined, &S.gx, &S.gy, &S.gz);
-                        if (gradient_joined) {
-                            S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
-                        }
-                        end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
-                        end_shaded = true;
-#else
-                        S.gx = 0; S.gy = 0; S.gz = 0;
-#endif
-                        r = post_gradient(&O, one, c, u, S.gx, S.gy, S.gz, S.radius, nodes, weights, tf, &P,
-                                          quadrature_share * (tn - t) / total / T / S.radius, &evals, &flags);
-                    }
-                    part = r.xyz;
-                    depth = r.w;
-                }
-#else
-                /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
-                real lr[8], lg[8], lb[8], la[8];
-                real8 A8 = 0;
-                bool dips = false;
-                for (int k = 0; k < NS; k++) {
-                    dips |= S.fq[k].w < 0;
-                    /* alpha and q clamped at 0 (thresholding can make them dip below); q stays a
-                     * polynomial for the series (shade clamps it wherever it is evaluated): the
-                     * interpolant of clamped samples would oscillate by up to the points' Lebesgue
-                     * constant times the dip */
-                    const real4 v = fmax(S.fq[k], (real4)(0));
-                    S.fq[k].w = v.w;
-                    if (k < 8) {
-                        lr[k] = v.x; lg[k] = v.y; lb[k] = v.z; la[k] = v.w;
-                    }
-                    A8 = fma((real8)(v.w), vload8(k, weights), A8);
-                }
-#ifdef CLW_SPAN
-                if (active.span >= 0 && dips) { /* where alpha is clamped the samples' places matter (§3): cut */
-                    SPAN_CUT
-                    xm = X0 + (t + tn) / 2 * D;
-                    continue;
-                }
-#endif
-                real8 r8 = vload8(0, lr), g8 = vload8(0, lg), b8 = vload8(0, lb);
-                const real8 a8 = vload8(0, la);
-                const real4 f0 = fmax(S.fq[P0], (real4)(0));
-                depth = A8.s7;
-                const real8 att = fast_exp(-S.radius * A8);
-                bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
-#ifdef CLW_SHADE
-                if (midpoint_shading(r8 * att, g8 * att, b8 * att, a8 * att, f0, &P, T * S.radius, &shade_budget,
-                                     &part)) { /* no gradient needed (docs/raytracing.md §5) */
-                    simpson_full = false;
-                    midpoints += 1;
-                    evals += 9;
-                }
-#endif
-                if (simpson_full) {
-                    /* the shaded emission at p = 0 (and alpha's gradient there) from the last segment
-                     * when that was shaded point by point too */
-                    const bool shaded_joined = joined && end_shaded;
-                    real3 f9[9];
-#ifdef CLW_SHADE
-                    sample_gradient(basis, !shaded_joined, &S.gx, &S.gy, &S.gz);
-                    if (shaded_joined) {
-                        S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
-                    }
-                    end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
-#else
-                    S.gx = 0; S.gy = 0; S.gz = 0; /* unshaded: shade8 and shade only clamp */
-#endif
-                    shade8(&r8, &g8, &b8, a8, S.gx.lo, S.gy.lo, S.gz.lo, &P);
-                    if (shaded_joined) {
-                        f9[0] = end_emission;
-                    } else {
-                        real r = f0.x, gr = f0.y, b = f0.z;
-                        shade(&r, &gr, &b, f0.w, S.gx.s8, S.gy.s8, S.gz.s8, &P);
-                        f9[0] = (real3)(r, gr, b);
-                    }
-                    end_emission = (real3)(r8.s7, g8.s7, b8.s7);
-                    real fr[8], fg[8], fb[8];
-                    vstore8(r8 * att, 0, fr);
-                    vstore8(g8 * att, 0, fg);
-                    vstore8(b8 * att, 0, fb);
-                    for (int p = 1; p <= 8; p++)
-                        f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
-                    const real seg_tol = quadrature_share * (tn - t) / total / T;
-#ifdef CLW_SPAN
-                    if (active.span >= 0 && simpson_needs_series(f9, seg_tol / S.radius)) { /* the series would be the
-                                                                                              * samples' interpolant */
-                        end_gradient = gradient_before;
-                        end_emission = emission_before;
-                        SPAN_CUT
-                        xm = X0 + (t + tn) / 2 * D;
-                        continue;
-                    }
-#endif
-                    part = simpson(&S, &P, f9, nodes, -1, 1, seg_tol / S.radius, &evals, &flags);
-                }
-                end_shaded = simpson_full;
-#endif
-#endif
-                break;
-            }
-            end_field = end_sample;
+            sample_segment(G, &active, (t + tn) / 2, xm, S.radius, D, nodes, !joined, S.fq, basis);
+            if (joined)
+                S.fq[P0] = end_field;
+            end_field = S.fq[7];
             t_joined = tn;
             segments += 1;
             {
                 const int lv = lat.w <= 1 ? 0 : lat.w <= 2 ? 1 : lat.w <= 4 ? 2 : 3;
                 spans += (int4)(lv == 0, lv == 1, lv == 2, lv == 3);
             }
-#ifdef CLW_SPAN
-            across += active.span >= 0;
+#ifdef CLW_XRAY /* the integral over the segment */
+            real4 integral = (real4)(0);
+            for (int k = 0; k < NS; k++)
+                integral += S.fq[k] * weights[8 * k + 7];
+            I += S.radius * integral;
+#else
+            real3 part;
+            real depth; /* int alpha dxi over the segment */
+#ifdef CLW_POST
+            {   /* the scalar classified by the transfer function (classify.h, docs/raytracing.md §10) */
+                real s[NS], u[NS], c[NS];
+                for (int k = 0; k < NS; k++)
+                    s[k] = S.fq[k].x;
+                OneInterval O;
+                bool one;
+                real4 r; /* (int q' e^{-A} dxi, int alpha dxi) */
+                const bool gradient_joined = joined && end_shaded; /* lane P0's gradient: the last segment's end */
+                end_shaded = false;
+                if (!post_segment(s, nodes, weights, tf, &P, S.radius, T * S.radius, &shade_budget, u, c, &O, &one,
+                                  &r, &midpoints, &evals)) {
+#ifdef CLW_SHADE
+                    sample_gradient(basis, !gradient_joined, &S.gx, &S.gy, &S.gz);
+                    if (gradient_joined) {
+                        S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
+                    }
+                    end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
+                    end_shaded = true;
+#else
+                    S.gx = 0; S.gy = 0; S.gz = 0;
 #endif
-#ifndef CLW_XRAY
+                    r = post_gradient(&O, one, c, u, S.gx, S.gy, S.gz, S.radius, nodes, weights, tf, &P,
+                                      quadrature_share * (tn - t) / total / T / S.radius, &evals, &flags);
+                }
+                part = r.xyz;
+                depth = r.w;
+            }
+#else
+            /* the field at p = 1..8 per channel, alpha's integral from -1 to there, and p = 0 */
+            real lr[8], lg[8], lb[8], la[8];
+            real8 A8 = 0;
+            for (int k = 0; k < NS; k++) {
+                /* alpha and q clamped at 0 (thresholding can make them dip below); q stays a
+                 * polynomial for the series (shade clamps it wherever it is evaluated): the
+                 * interpolant of clamped samples would oscillate by up to the points' Lebesgue
+                 * constant times the dip */
+                const real4 v = fmax(S.fq[k], (real4)(0));
+                S.fq[k].w = v.w;
+                if (k < 8) {
+                    lr[k] = v.x; lg[k] = v.y; lb[k] = v.z; la[k] = v.w;
+                }
+                A8 = fma((real8)(v.w), vload8(k, weights), A8);
+            }
+            real8 r8 = vload8(0, lr), g8 = vload8(0, lg), b8 = vload8(0, lb);
+            const real8 a8 = vload8(0, la);
+            const real4 f0 = fmax(S.fq[P0], (real4)(0));
+            depth = A8.s7;
+            const real8 att = fast_exp(-S.radius * A8);
+            bool simpson_full = true; /* adaptive Simpson on the shaded integrand */
+#ifdef CLW_SHADE
+            if (midpoint_shading(r8 * att, g8 * att, b8 * att, a8 * att, f0, &P, T * S.radius, &shade_budget,
+                                 &part)) { /* no gradient needed (docs/raytracing.md §5) */
+                simpson_full = false;
+                midpoints += 1;
+                evals += 9;
+            }
+#endif
+            if (simpson_full) {
+                /* the shaded emission at p = 0 (and alpha's gradient there) from the last segment
+                 * when that was shaded point by point too */
+                const bool shaded_joined = joined && end_shaded;
+                real3 f9[9];
+#ifdef CLW_SHADE
+                sample_gradient(basis, !shaded_joined, &S.gx, &S.gy, &S.gz);
+                if (shaded_joined) {
+                    S.gx.s8 = end_gradient.x; S.gy.s8 = end_gradient.y; S.gz.s8 = end_gradient.z;
+                }
+                end_gradient = (real3)(S.gx.s7, S.gy.s7, S.gz.s7);
+#else
+                S.gx = 0; S.gy = 0; S.gz = 0; /* unshaded: shade8 and shade only clamp */
+#endif
+                shade8(&r8, &g8, &b8, a8, S.gx.lo, S.gy.lo, S.gz.lo, &P);
+                if (shaded_joined) {
+                    f9[0] = end_emission;
+                } else {
+                    real r = f0.x, gr = f0.y, b = f0.z;
+                    shade(&r, &gr, &b, f0.w, S.gx.s8, S.gy.s8, S.gz.s8, &P);
+                    f9[0] = (real3)(r, gr, b);
+                }
+                end_emission = (real3)(r8.s7, g8.s7, b8.s7);
+                real fr[8], fg[8], fb[8];
+                vstore8(r8 * att, 0, fr);
+                vstore8(g8 * att, 0, fg);
+                vstore8(b8 * att, 0, fb);
+                for (int p = 1; p <= 8; p++)
+                    f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
+                const real seg_tol = quadrature_share * (tn - t) / total / T;
+                part = simpson(&S, &P, f9, nodes, -1, 1, seg_tol / S.radius, &evals, &flags);
+            }
+            end_shaded = simpson_full;
+#endif
             I += T * S.radius * part;
             T *= exp(-S.radius * depth);
             consumed += marched;
@@ -511,8 +568,6 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
         }
         t = tn;
         step_planes(X0, inv3, step, tn, lat, &planes);
-        if (SPAN && nearest(&planes) <= tn) /* it crossed a plane of the axis it ends on: one more */
-            step_planes(X0, inv3, step, tn, lat, &planes);
     }
 #ifdef CLW_XRAY
     image[pix] = convert_float4(I);
@@ -529,5 +584,4 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
 #endif
     stats[pix] = (int4)(segments, midpoints, evals, flags | active_flags(&active));
     lattice_stats[pix] = spans;
-    span_stats[pix] = (int2)(across, cuts);
 }

@@ -3,8 +3,6 @@ where a segment is sampled, and the weights that integrate the polynomial throug
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 from numpy.polynomial import chebyshev
 
@@ -47,65 +45,3 @@ def sample_tables(degree: int) -> tuple[np.ndarray, np.ndarray]:
     weights = chebyshev.chebval(ends, chebyshev.chebint(to_series, lbnd=-1))  # (points, 8)
     nodes = np.concatenate([xi, to_series.ravel(), gradient_series.ravel()])
     return nodes, np.ascontiguousarray(weights)
-
-
-#: bins of the knot's position xi_c in [-1, 1] in :func:`span_table`
-SPAN_BINS = 32
-
-
-def span_errors(degree: int, xi_c: float) -> np.ndarray:
-    """``(2 (j - 1) + 1,)``: for m = 0.., the largest error over the rows of :func:`sample_tables`' weights (the
-    integrals from -1 to xi = -1 + p/4) on the truncated power ``(xi - xi_c)^(j - 1 + m)_+`` of a segment crossing
-    one knot plane at ``xi_c`` (order j = degree / 3 + 1; docs/raytracing.md §12)."""
-    xi = sample_points(degree)
-    _, weights = sample_tables(degree)
-    ends = -1.0 + np.arange(1, 9) / 4.0
-    n = degree // 3 + np.arange(2 * (degree // 3) + 1)  # the powers j - 1 + m
-    rule = (np.where(xi > xi_c, xi - xi_c, 0.0)[None, :] ** n[:, None]) @ weights  # (m, rows)
-    exact = np.where(ends > xi_c, ends - xi_c, 0.0)[None, :] ** (n[:, None] + 1) / (n[:, None] + 1)
-    return np.abs(rule - exact).max(axis=1)
-
-
-@functools.cache
-def span_table(degree: int) -> np.ndarray:
-    """``(SPAN_BINS, 8)`` float64: row b, column m, the largest of :func:`span_errors` over the knot positions
-    xi_c of bin b (``[-1 + 2b/SPAN_BINS, -1 + 2(b + 1)/SPAN_BINS]``), exact: between the sample points and the
-    rows' ends each error is a polynomial in xi_c, whose largest magnitude is at an end or a root of its
-    derivative (plus 1e-11 for the rounding of the expanded powers in float64).  The kernel's bound on a segment
-    across a knot plane (``span_cost`` in ``cl/raytrace/quadrature.h``, :func:`span_bound`) reads it."""
-    xi = sample_points(degree)
-    _, weights = sample_tables(degree)
-    ends = -1.0 + np.arange(1, 9) / 4.0
-    powers = degree // 3 + np.arange(2 * (degree // 3) + 1)
-    edges = np.linspace(-1.0, 1.0, SPAN_BINS + 1)
-    breaks = np.unique(np.concatenate([xi, ends, edges]))
-    table = np.zeros((SPAN_BINS, 8))
-    P = np.polynomial.Polynomial
-    for lo, hi in zip(breaks[:-1], breaks[1:]):
-        mid = (lo + hi) / 2
-        worst = np.zeros(len(powers))
-        for i, n in enumerate(powers):
-            for p in range(8):  # the rule's error as a polynomial in xi_c on (lo, hi)
-                err = sum((weights[k, p] * P([x, -1.0]) ** n for k, x in enumerate(xi) if x > mid), P([0.0]))
-                if ends[p] > mid:
-                    err = err - P([ends[p], -1.0]) ** (n + 1) / (n + 1)
-                roots = err.deriv().roots()
-                at = np.concatenate([[lo, hi], roots.real[(abs(roots.imag) < 1e-12) & (roots.real > lo)
-                                                          & (roots.real < hi)]])
-                worst[i] = max(worst[i], np.abs(err(at)).max())
-        first, last = np.searchsorted(edges, lo, "right") - 1, np.searchsorted(edges, hi, "left") - 1
-        rows = slice(max(first, 0), min(last, SPAN_BINS - 1) + 1)
-        table[rows, : len(powers)] = np.maximum(table[rows, : len(powers)], worst + 1e-11)
-    return table
-
-
-def span_bound(table: np.ndarray, degree: int, xi_c: float, slope: float, sigma: float, jump: float) -> float:
-    """The bound on the error of every row of the weights (alpha's integral from -1 to the quarter points, in xi)
-    on a segment across one knot plane at ``xi_c``, where the field gains
-    ``(slope (xi - xi_c))^(j-1)_+ / (j-1)! J(xi)``: ``slope`` lattice cells per unit xi along the crossed axis,
-    ``sigma`` the sum of those along the other two, ``jump`` the largest |j-th difference| of the coefficients
-    across the plane (docs/raytracing.md §12; the kernel's ``span_cost``)."""
-    k = degree // 3
-    b = min(max(int((xi_c + 1) * SPAN_BINS / 2), 0), SPAN_BINS - 1)
-    taylor = sum((2 * sigma) ** m / np.prod(np.arange(1, m + 1)) * table[b, m] for m in range(2 * k + 1))
-    return abs(slope) ** k / np.prod(np.arange(1, k + 1)) * jump * taylor

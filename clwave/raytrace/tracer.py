@@ -31,7 +31,7 @@ from .passes import passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import QUANT, ScalarRange, check_post, post_nodes
 from .progressive import frames
-from .quadrature import SPAN_BINS, sample_tables, span_table
+from .quadrature import sample_tables
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume
@@ -83,8 +83,7 @@ def _checked_view(camera, tolerance) -> float:
 
 def raytrace_kernel(field: str) -> Kernel:
     """The arguments of ``raytrace`` (cl/raytrace/raytrace.cl) with a field backend."""
-    return Kernel("raytrace", ("image", B), ("stats", B), ("lattice_stats", B), ("span_stats", B), ("width", I32),
-                  ("height", I32),
+    return Kernel("raytrace", ("image", B), ("stats", B), ("lattice_stats", B), ("width", I32), ("height", I32),
                   *FIELD_ARGS[field],
                   ("bound", B), ("occ_origin", INT4), ("occ_shape", INT4), ("super_bound", B),
                   ("super_origin", INT4), ("super_shape", INT4), ("content", B), ("content_origin", INT4),
@@ -331,10 +330,6 @@ class RayTracer:
         if len(light_dirs) > MAX_LIGHTS:
             raise InputError(f"at most {MAX_LIGHTS} lights, got {len(light_dirs)}")
 
-        scale, offset = world_to_fine_affine(self.orders[0], wv.shape, wv.spacing, wv.origin)
-        start = time.perf_counter()
-        at, detail_level = self._detail(detail, view, scale, offset)
-        detail_seconds = time.perf_counter() - start
         nodes, weights = sample_tables(3 * (max(self.orders) - 1))
         n_samples = len(weights)
         real = np.float64 if precision == "double" else np.float32
@@ -353,12 +348,6 @@ class RayTracer:
             defines["CLW_POST"] = None
         if self.content_shape.any():
             defines["CLW_CONTENT"] = None
-        if self.field == "bspline" and set(self.orders) == {4} and phong is not None and transfer_function is None \
-                and np.min(detail_level) > 0:
-            # coarser than full detail: segments across a knot plane, their bound's table after the weights
-            # (docs/raytracing.md §12)
-            defines.update(CLW_SPAN=None, CLW_SPAN_BINS=SPAN_BINS)
-            weights = np.concatenate([weights, span_table(9)])
         if precision == "double":
             defines["CLW_DOUBLE"] = None
         if trace and self.field == "wavelet":
@@ -369,11 +358,15 @@ class RayTracer:
 
         q = cc.queue
         nodes, weights = cla.to_device(q, nodes.astype(real)), cla.to_device(q, weights.astype(real))
+        scale, offset = world_to_fine_affine(self.orders[0], wv.shape, wv.spacing, wv.origin)
         if view.perspective:
             s = 2.0 * np.tan(np.radians(view.fov) / 2.0) / H  # image-plane units per pixel at distance 1
             base, du, dv, direction = view.eye, s * view.u, s * view.v, -view.n
         else:
             base, du, dv, direction = view.target, view.pixel * view.u, view.pixel * view.v, -view.n
+        start = time.perf_counter()
+        at, detail_level = self._detail(detail, view, scale, offset)
+        detail_seconds = time.perf_counter() - start
         # the transfer function's table and bounds at this detail (docs/raytracing.md §10)
         post = None if transfer_function is None else self.scalar.classify(transfer_function, cc, real, at)
         light_buf = np.zeros((max(1, len(light_dirs)), 4), np.float32)
@@ -400,7 +393,6 @@ class RayTracer:
         image = cla.empty(q, (H, W, 4), np.float32) if passes is None else cla.zeros(q, (H, W, 4), np.float32)
         stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
         lattice_stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
-        span_stats = cla.empty(q, (H, W, 2), np.int32) if passes is None else cla.zeros(q, (H, W, 2), np.int32)
         carry, ledger = cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, REAL4[real])
         if passes is not None:  # docs/raytracing.md §6: what each ray carries from one pass to the next
             ledger_start = (tol / 2, 0, 0, 0) if not absorption else (tol / 4, tol * 3 / 8, 0, 0)
@@ -418,7 +410,7 @@ class RayTracer:
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         arguments = dict(
-            image=image, stats=stats, lattice_stats=lattice_stats, span_stats=span_stats, width=W, height=H, **skip,
+            image=image, stats=stats, lattice_stats=lattice_stats, width=W, height=H, **skip,
             occ_origin=self.occ_origin[::-1], occ_shape=at.block_bound.shape[::-1], content=self.content,
             content_origin=self.content_origin[::-1], content_shape=self.content_shape[::-1],
             coarse_bound=self.coarse_bound(tol), base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
@@ -457,10 +449,7 @@ class RayTracer:
             segments_per_second=float(counts[:, 0].sum() / seconds) if seconds > 0 else 0.0,
             passes=1 if passes is None else len(passes), device_budget=self.budget.total,
             segments_by_lattice=dict(zip(("1", "2", "4", "8+"),
-                                         lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())),
-            # docs/raytracing.md §12: segments across a knot plane, and cuts where one would have crossed it
-            **dict(zip(("segments_across_planes", "cuts_at_planes"),
-                       span_stats.get().reshape(-1, 2).sum(axis=0).tolist())))
+                                         lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())))
         if post is not None:
             meta.update(classification="post", transfer_function=post.tf.to_dict(),
                         tf_window=None if post.window is None else list(post.window),
