@@ -14,10 +14,10 @@
 /* A coefficient of the pool: float4 (channels in their slots), or for a scalar model a whole number q packed in
  * the pool's bytes, the coefficient offset + step q with its slot's Quant in quant (CLW_SCALAR_POOL, scalar_pool.h,
  * clwave/raytrace/classified.py, docs/raytracing.md §10: sample_segment decodes the segment's cell once, into
- * Basis.q, and sums q); COEF4 reads a float4 as four channels, COEF_LANE as the channel whose gradient shades: alpha,
- * or the scalar post-classified (CLW_POST, classify.h).  CORNER is what a Basis reads its cell's coefficients from
- * (the pool at the cell's last coefficient, or the decoded q) and CORNER_COEF(c, sy, sz, j, rz, ry, rx) the
- * coefficient rz planes, ry rows and rx places before that last one. */
+ * Basis.q, and sums q); COEF4 reads a float4 as four channels, GRADIENT_LANE names the channel whose gradient
+ * shades: alpha, or the scalar post-classified (CLW_POST, classify.h).  CORNER is what a Basis reads its cell's
+ * coefficients from (the pool at the cell's last coefficient, or the decoded q) and CORNER_COEF(c, sy, sz, j, rz,
+ * ry, rx) the coefficient rz planes, ry rows and rx places before that last one. */
 #ifdef CLW_POST
 #define GRADIENT_LANE x
 #else
