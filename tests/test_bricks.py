@@ -54,17 +54,16 @@ def pool_field(wv, field: bricks.BrickField, x0, derivative=False, detail=0):
             j, frame, box = g.wavelet.order, frames[slot, gi], boxes[slot, gi]
             u = (x[::-1] - frame[:3]) * frame[3]  # lattice coordinates (x, y, z)
             coef = pool[box[3]:box[3] + np.prod(box[:3])].reshape(box[2], box[1], box[0], 4)
-            c = np.floor(u).astype(int)
-            for r in product(range(j), repeat=3):
-                k = c - np.array(r)
-                assert np.all(k >= 0) and np.all(k < box[:3])  # the brick holds every B-spline that reaches
-                w = [bspline(j, u[a] - k[a]) for a in range(3)]
-                if derivative:
-                    dw = [bspline_derivative(j, u[a] - k[a]) * frame[3] for a in range(3)]
-                    grad = np.array([w[0] * w[1] * dw[2], w[0] * dw[1] * w[2], dw[0] * w[1] * w[2]])  # z, y, x
-                    out[p] += coef[k[2], k[1], k[0]][:, None] * grad[None]
-                else:
-                    out[p] += w[0] * w[1] * w[2] * coef[k[2], k[1], k[0]]
+            k = np.floor(u).astype(int)[:, None] - np.arange(j)  # per axis (x, y, z) the j B-splines that reach
+            assert np.all(k >= 0) and np.all(k < box[:3, None])  # the brick holds every B-spline that reaches
+            near = coef[np.ix_(k[2], k[1], k[0])]  # (z, y, x, channel)
+            w = [bspline(j, u[a] - k[a]) for a in range(3)]
+            if derivative:
+                dw = [bspline_derivative(j, u[a] - k[a]) * frame[3] for a in range(3)]
+                for axis, (wz, wy, wx) in enumerate(((dw[2], w[1], w[0]), (w[2], dw[1], w[0]), (w[2], w[1], dw[0]))):
+                    out[p, :, axis] += np.einsum("z,y,x,zyxc->c", wz, wy, wx, near)  # z, y, x
+            else:
+                out[p] += np.einsum("z,y,x,zyxc->c", w[2], w[1], w[0], near)
     return out
 
 
