@@ -230,30 +230,36 @@ def _pack_slots(scalar, shape, firsts, offsets, inverse, at) -> tuple:
     nx, ny, nz = (int(v) for v in shape)
     m, ty, tz = len(firsts), -(-ny // TILE), -(-nz // TILE)
     coef = scalar[firsts[:, None] + np.arange(nx * ny * nz)].astype(np.float64)
-    q = np.rint((coef - offsets[:, None]) * inverse).reshape(m, nz, ny, nx)
+    q = np.rint((coef - offsets[:, None]) * inverse).astype(np.int32).reshape(m, nz, ny, nx)
     tiled = np.pad(q, ((0, 0), (0, tz * TILE - nz), (0, ty * TILE - ny), (0, 0)), mode="edge").reshape(
-        m, tz, TILE, ty, TILE, nx)
-    base = tiled.min(axis=(2, 4, 5)).reshape(m, -1)
-    bits = np.searchsorted(2.0 ** np.arange(Q_BITS + 1) - 1, tiled.max(axis=(2, 4, 5)).reshape(m, -1) - base)
+        m, tz, TILE, ty, TILE, nx).transpose(0, 1, 3, 2, 4, 5).reshape(m, tz, ty, TILE * TILE * nx)
+    base = tiled.min(axis=3)
+    bits = np.searchsorted(2 ** np.arange(Q_BITS + 1) - 1, tiled.max(axis=3) - base)
     bits[bits == Q_BITS - 1] = Q_BITS  # four fields in eight bytes from any byte (cl/raytrace/scalar_pool.h)
-    # the q - base per slot in tile order (z, y), each tile's rows (z, y) then x; the padding's rows left out
+    # a tile's rows (z, y) inside the slot, one after another, each row's x: a coefficient's place in its tile
     rows = (np.arange(tz * TILE) < nz).reshape(tz, 1, TILE, 1) & (np.arange(ty * TILE) < ny).reshape(1, ty, 1, TILE)
-    value = (tiled.transpose(0, 1, 3, 2, 4, 5) - base.reshape(m, tz, ty, 1, 1, 1))[:, rows].ravel()
-    counts = np.tile(rows.sum(axis=(2, 3)).ravel() * nx, m)  # per tile of every slot
-    data = (-(-counts * bits.ravel() // 32)).reshape(m, -1)
+    rows = rows.reshape(tz, ty, TILE * TILE)
+    place = ((np.cumsum(rows, axis=-1) - 1)[..., None] * nx + np.arange(nx)).reshape(tz, ty, -1)
+    counts = np.broadcast_to(rows.sum(axis=-1) * nx, (m, tz, ty))
+    data = -(-counts * bits // 32).reshape(m, -1)
     start = np.concatenate([[0], np.cumsum(2 * ty * tz + data.sum(axis=1))])
-    tile_word = (start[:-1, None] + 2 * ty * tz + np.cumsum(data, axis=1) - data).ravel()  # after the slot's entries
+    tile_word = start[:-1, None] + 2 * ty * tz + np.cumsum(data, axis=1) - data  # after the slot's entries
     words = np.zeros(int(start[-1]), np.uint32)
     entry = (start[:-1, None] + 2 * np.arange(ty * tz)).ravel()
-    words[entry] = at + tile_word
+    words[entry] = at + tile_word.ravel()
     words[entry + 1] = base.ravel().astype(np.uint32) | bits.ravel().astype(np.uint32) << np.uint32(16)
-    # field i of a tile from word w at bit 32 w + i b: fields never overlap, so a word's 64-bit window is the sum of
-    # those that start in it (each below 2^47: exact in float64; 0-bit tiles' fields, all 0, may start past the end)
-    bit = np.repeat(tile_word * 32, counts) + (np.arange(len(value)) - np.repeat(np.cumsum(counts) - counts, counts)) \
-        * np.repeat(bits.ravel(), counts)
-    window = np.bincount(bit // 32, value * 2.0 ** (bit % 32), minlength=len(words))[:len(words)].astype(np.uint64)
-    words |= (window & 0xFFFFFFFF).astype(np.uint32)
-    words[1:] |= (window[:-1] >> np.uint64(32)).astype(np.uint32)
+    # field i of a tile from word w at bit 32 w + i b, in word order: fields never overlap, so a word's 64-bit window
+    # is the OR of those that start in it (each below 2^48; a 0-bit tile's fields, all 0, may start past the end)
+    keep = np.broadcast_to(rows[None, ..., None], (m, tz, ty, TILE * TILE, nx)).reshape(m, tz, ty, -1)
+    bit = (tile_word.reshape(m, tz, ty, 1) * 32 + place * bits[..., None].astype(np.int64))[keep]
+    value = (tiled - base[..., None])[keep].astype(np.uint64) << (bit & 31).astype(np.uint64)
+    key = bit >> 5
+    first = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+    key, window = key[first], np.bitwise_or.reduceat(value, first)
+    inside = key < len(words)
+    words[key[inside]] |= (window[inside] & 0xFFFFFFFF).astype(np.uint32)
+    inside &= key + 1 < len(words)
+    words[key[inside] + 1] |= (window[inside] >> np.uint64(32)).astype(np.uint32)
     return words, at + start[:-1]
 
 
