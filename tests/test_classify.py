@@ -430,6 +430,7 @@ def test_packed_pool_within_half_a_step(monkeypatch):
     cells, expected = np.concatenate(cells).astype(np.int32), np.concatenate(expected)
     crossing = np.any(cells[:, 1:2] // boxes[cells[:, 0], :1] % boxes[cells[:, 0], 1:2] % 4 < order - 1, axis=1)
     assert crossing.mean() > 0.3  # cells whose rows lie in two tiles along y (and as many along z)
+    assert np.any(boxes[:, 1:3] % 4)  # and slots whose last tiles are short of rows
     out = cla.zeros(tr.cc.queue, expected.size, np.float32)
     CELLS(pool_kernels(tr.cc), tr.cc.queue, (len(cells),), None, out=out, words=f.pool, quant=tr.quant,
           boxes=cla.to_device(tr.cc.queue, np.ascontiguousarray(f.boxes[:, 0])), cells=cla.to_device(tr.cc.queue,

@@ -76,7 +76,9 @@ __kernel void unpack_cells(__global real *out, __global const uchar *words, __gl
 {
     const int k = get_global_id(0);
     real q[MAX_ORDER * MAX_ORDER * MAX_ORDER];
-    pool_cell(words, quant[cells[k].x], boxes[cells[k].x], cells[k].y, j, q);
+    const int4 n = boxes[cells[k].x];
+    const int last = cells[k].y, row = last / n.x;
+    pool_cell(words, quant[cells[k].x], n.x, n.y, (int4)(last - row * n.x, row % n.y, row / n.y, 0), j, q);
     for (int i = 0; i < j * j * j; i++)
         out[(size_t)k * j * j * j + i] = q[i];
 }

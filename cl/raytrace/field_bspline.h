@@ -267,6 +267,7 @@ typedef struct {
     realt ut[3], wt[3][MAX_ORDER];
 #ifdef CLW_SCALAR_POOL
     real q[MAX_ORDER * MAX_ORDER * MAX_ORDER]; /* the cell's q, decoded once for the samples and the gradient */
+    int4 cell; /* the (x, y, z) in the slot of the cell's last coefficient, and the slot's box's ny */
 #endif
 } Basis;
 
@@ -307,11 +308,15 @@ inline void segment_basis(const Field G, const int g, const int slot, const real
     B->sy = n.x;
     B->sz = n.x * n.y;
     B->corner = G.coef + n.w + ((size_t)c.z * n.y + c.y) * n.x + c.x;
+#ifdef CLW_SCALAR_POOL
+    B->cell = (int4)(c.xyz, n.y);
+#endif
 }
 
 #ifdef CLW_SCALAR_POOL
-/* The q of the segment's cell (the j^3 coefficients ending at B->corner) from the packed pool into B->q, in
- * CORNER_COEF's order: one decode a segment, for its samples and its gradient (slot -1: q = 0) */
+/* The q of the segment's cell (the j^3 coefficients ending at B->cell, its lattice coordinates from segment_basis)
+ * from the packed pool into B->q, in CORNER_COEF's order: one decode a segment, for its samples and its gradient
+ * (slot -1: q = 0) */
 __attribute__((always_inline)) inline void scalar_cell(const Field G, const int slot, const Quant Q, const int j,
                                                        Basis *B)
 {
@@ -320,9 +325,7 @@ __attribute__((always_inline)) inline void scalar_cell(const Field G, const int 
             B->q[i] = 0;
         return;
     }
-    /* the cell's last coefficient within the slot: B->corner counts from the slot's first, the box's w */
-    const int4 box = G.boxes[slot * CLW_GROUPS];
-    pool_cell(G.coef, Q, box, (int)(B->corner - G.coef) - box.w, j, B->q);
+    pool_cell(G.coef, Q, B->sy, B->cell.w, B->cell, j, B->q);
 }
 
 /* group_field for a scalar pool, from the decoded q: one lane a sample (samples 0..7 in *f, the tail lanes in *ft

@@ -41,19 +41,19 @@ inline void pool_row(__global const uchar *pool, const Quant Q, const int4 box, 
     }
 }
 
-/* q of the j^3 coefficients of a cell of a slot (`box`) ending at its coefficient `last` into q (x fastest, then y,
- * z: CORNER_COEF's order), each row from its own tile (a cell's rows come from up to 2 x 2 tiles, 3 x 3 at order 6) */
-__attribute__((always_inline)) inline void pool_cell(__global const uchar *pool, const Quant Q, const int4 box,
-                                                     const int last, const int j, real *q)
+/* q of the j^3 coefficients of a cell of a slot (nx, ny: its box's rows and columns) ending at its coefficient
+ * last.xyz into q (x fastest, then y, z: CORNER_COEF's order), each row from its own tile (a cell's rows come from up to
+ * 2 x 2 tiles, 3 x 3 at order 6) */
+__attribute__((always_inline)) inline void pool_cell(__global const uchar *pool, const Quant Q, const int nx,
+                                                     const int ny, const int4 last, const int j, real *q)
 {
-    /* the last coefficient's (x, y, z) in the slot */
-    const int row_of = last / box.x, z = row_of / box.y, x = last - row_of * box.x, y = row_of - z * box.y;
+    const int4 box = (int4)(nx, ny, 0, 0);
 #pragma unroll
     for (int rz = 0; rz < j; rz++)
 #pragma unroll
         for (int ry = 0; ry < j; ry++) {
             float row[MAX_ORDER];
-            pool_row(pool, Q, box, x - (j - 1), y - ry, z - rz, j, row);
+            pool_row(pool, Q, box, last.x - (j - 1), last.y - ry, last.z - rz, j, row);
 #pragma unroll
             for (int rx = 0; rx < j; rx++)
                 q[(rz * j + ry) * j + rx] = row[rx];
