@@ -60,3 +60,11 @@ def test_a_pose_table_with_a_byte_order_mark(tmp_path):
     table = tmp_path / "poses.csv"
     table.write_bytes("\ufeffazimuth,elevation\n30,,\n".replace(",,", ",").encode("utf-8") + b"90,\n")
     assert read_pose_table(table) == [dict(azimuth=30.0), dict(azimuth=90.0)]  # an empty value: the default
+
+
+def test_an_all_zero_scalar_model_takes_an_auto_window():
+    # with no bricks at all, window "auto" was refused as if the bricks were in a scratch file
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(np.zeros((6, 7, 8), np.float32)), levels=1)
+    tf = clwave.TransferFunction([(0.0, 0.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0, 1.0, 1.0)], window="auto")
+    res = clwave.raytrace(wv, clwave.Camera(20, 30, (4, 5)), transfer_function=tf)
+    assert res.image.shape == (4, 5, 4) and not res.image.any()  # no content, no bricks: nothing to render
