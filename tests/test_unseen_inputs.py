@@ -68,3 +68,22 @@ def test_an_all_zero_scalar_model_takes_an_auto_window():
     tf = clwave.TransferFunction([(0.0, 0.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0, 1.0, 1.0)], window="auto")
     res = clwave.raytrace(wv, clwave.Camera(20, 30, (4, 5)), transfer_function=tf)
     assert res.image.shape == (4, 5, 4) and not res.image.any()  # no content, no bricks: nothing to render
+
+
+def test_a_staged_scalar_file_refines_with_a_transfer_function(scalar_model, tmp_path):
+    # RayTracer.open(scalar.clw).refine(camera) took no transfer_function=: a scalar file had no shaded frames
+    path = tmp_path / "s.clw"
+    scalar_model.save(path)
+    tf = clwave.TransferFunction.preset("grey", window=(0.2, 0.9))
+    cam = clwave.Camera(35, 25, (6, 8))
+    frames = list(clwave.RayTracer.open(path).refine(cam, transfer_function=tf))
+    full = clwave.RayTracer(clwave.WaveletVolume.open(path)).render(cam, transfer_function=tf)
+    assert frames[-1].meta["stage"] == "full" and np.array_equal(frames[-1].image, full.image)
+    assert full.image[..., 3].max() > 0.05  # not an empty image
+
+
+def test_a_detector_spacing_of_three_numbers_is_refused():
+    # pixel=(1, 2, 3) ended in numpy's broadcasting ValueError
+    with pytest.raises(clwave.errors.InputError, match="pixel=.* must be a positive detector spacing"):
+        clwave.ConeBeam(100.0, 150.0, 4, pixel=(1.0, 2.0, 3.0))
+    assert clwave.ConeBeam(100.0, 150.0, 4, pixel=[[2.0]]).pixel == (2.0, 2.0)

@@ -62,7 +62,7 @@ class ConeBeam:
         if not dsd > 0:
             raise InputError(f"dsd={dsd!r}: the detector is behind the source; give a positive source-to-detector "
                              "distance")
-        spacing = np.broadcast_to(np.asarray(pixel, float), (2,)) if np.ndim(pixel) <= 1 else np.zeros(0)
+        spacing = np.resize(np.asarray(pixel, float), 2) if np.size(pixel) == 1 else np.asarray(pixel, float)
         if spacing.shape != (2,) or not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
             raise InputError(f"pixel={pixel!r} must be a positive detector spacing, or (row, column) spacings")
         shift = np.asarray(offset, float)
