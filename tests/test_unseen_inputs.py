@@ -87,3 +87,12 @@ def test_a_detector_spacing_of_three_numbers_is_refused():
     with pytest.raises(clwave.errors.InputError, match="pixel=.* must be a positive detector spacing"):
         clwave.ConeBeam(100.0, 150.0, 4, pixel=(1.0, 2.0, 3.0))
     assert clwave.ConeBeam(100.0, 150.0, 4, pixel=[[2.0]]).pixel == (2.0, 2.0)
+
+
+def test_a_first_splatting_frame_of_one_coefficient_carries_an_estimate(scalar_model, tmp_path):
+    # a model small enough that the first frame holds one coefficient gave it the estimate NaN (and NaN in --stats)
+    wv = scalar_model.threshold(keep=0.05)
+    first = next(iter(clwave.progressive(wv, clwave.Camera(30, 20, (6, 6)), steps=8)))
+    figures = first.figures()
+    assert first.coefficients == 1 and figures["estimated_relative_max_error"] == 1.0  # the step from nothing
+    assert 0 < figures["estimated_relative_rms_error"] < 1
