@@ -253,5 +253,6 @@ def poses(rows, size, pixel=1.0, dso=1000.0, dsd=1500.0, offset=(0.0, 0.0), isoc
 
 def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
     """Beer-Lambert: the intensity ``i0 exp(-∫mu)`` reaching the detector from attenuation line integrals
-    (``--hu-to-mu`` CTs: mu per mm, integrals over mm)."""
-    return (i0 * np.exp(-np.asarray(line_integrals, np.float64))).astype(np.float32)
+    (``--hu-to-mu`` CTs: mu per mm, integrals over mm).  Integrals below 0 (a thresholded model rings) count as 0:
+    mu >= 0, so that is nearer the truth, and no pixel gets more than ``i0``."""
+    return (i0 * np.exp(-np.maximum(np.asarray(line_integrals, np.float64), 0.0))).astype(np.float32)
