@@ -28,7 +28,7 @@ def progressive(wv, camera, steps=None, budget=None, device=None, *, method="spl
 
 def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, error=None, tolerance=1e-3,
                          lights=None, shading=True, absorption=True, device_memory=None,
-                         tracer: RayTracer | None = None):
+                         tracer: RayTracer | None = None, transfer_function=None):
     """Yield :class:`~clwave.raytrace.progressive.RaytraceFrame` s from cheap to exact; the last is bit for bit the
     image of ``RayTracer.render`` (full detail, the full image, ``tolerance``).
 
@@ -42,7 +42,7 @@ def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, er
         the first frame is always made.
     error : float in (0, 1), optional
         Stop at the first frame whose estimated relative RMS error is at most this.
-    tolerance, lights, shading, absorption :
+    tolerance, lights, shading, absorption, transfer_function :
         As for :func:`clwave.raytrace`; every frame uses them.
     tracer : RayTracer, optional
         One made with ``lod=True``; without it, calls on the same model and device share one.
@@ -51,5 +51,6 @@ def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, er
         cc, cap = ComputeContext.get(device), parse_cap(device_memory)
         tracer = wv.shared(("raytrace-lod", cc.info.id, cap), lambda: RayTracer(wv, device=cc, device_memory=cap,
                                                                               lod=True))
-    options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
+    options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
+                   transfer_function=transfer_function)
     return tracer.refine(camera, **options, steps=steps, budget=budget, error=error)

@@ -19,17 +19,26 @@ def read_pose_table(path) -> list:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"pose table {path} does not exist")
-    with open(path, newline="") as fh:
-        reader = csv.DictReader(fh)
-        rows = []
-        for line, row in enumerate(reader, 2):
-            try:
-                rows.append({k.strip(): float(v) for k, v in row.items() if k is not None and v not in (None, "")})
-            except (AttributeError, ValueError):
-                raise InputError(f"{path}, line {line}: every value must be a number") from None
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:  # -sig: a spreadsheet's byte-order mark
+            reader = csv.DictReader(fh)
+            rows = [_pose_row(path, reader.line_num, row, len(reader.fieldnames)) for row in reader]
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise InputError(f"pose table {path} is not a CSV text file ({e})") from None
     if not rows:
         raise InputError(f"pose table {path} has no poses (a header line of column names, then one pose a line)")
     return rows
+
+
+def _pose_row(path, line, row, columns) -> dict:
+    """One line of a pose table as {column: number}; an empty value takes the default of its column."""
+    if None in row or None in row.values():  # more values than columns, or fewer
+        values = sum(v is not None for k, v in row.items() if k is not None) + len(row.get(None, ()))
+        raise InputError(f"{path}, line {line}: {values} values for the header's {columns} columns")
+    try:
+        return {k.strip(): float(v) for k, v in row.items() if v != ""}
+    except ValueError:
+        raise InputError(f"{path}, line {line}: every value must be a number") from None
 
 
 def run(args):

@@ -57,7 +57,8 @@ def add_model_options(p):
     g = p.add_argument_group("wavelet model (from a volume; a .clw input is a model already)")
     g.add_argument("--wavelet", help=f"haar, linear, quadratic, cubic or quintic; or one per channel, comma-separated "
                                      f"(default {DEFAULT_WAVELET})")
-    g.add_argument("--levels", type=int, help=f"decomposition levels (default {DEFAULT_LEVELS})")
+    g.add_argument("--levels", type=int, help=f"decomposition levels (default {DEFAULT_LEVELS}, or as many as a "
+                                              "small volume allows)")
     k = g.add_mutually_exclusive_group()
     k.add_argument("--keep", type=float, help=f"fraction of voxels kept as coefficients, (0, 1] (default "
                                               f"{DEFAULT_KEEP} for a volume; 1 keeps every coefficient)")
@@ -163,6 +164,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
     instead of the model read (``clwave view`` opens it by its prefix first).
     """
+    from ..model.bspline import max_levels
     from ..model.transfer import TransferFunction
     from ..model.wavelet import WaveletVolume, check_decomposition
 
@@ -195,8 +197,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         raise _needs_rgba(args.input, vol.channels, f"classify it with --tf PRESET ({presets})")
     wavelet = args.wavelet or DEFAULT_WAVELET
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
-    wavelet, levels = check_decomposition(vol.shape, 4 if tf and not post else vol.channels, wavelet,
-                                          DEFAULT_LEVELS if args.levels is None else args.levels)
+    levels = min(DEFAULT_LEVELS, max_levels(vol.shape)) if args.levels is None else args.levels
+    wavelet, levels = check_decomposition(vol.shape, 4 if tf and not post else vol.channels, wavelet, levels)
     if not vol.chunked:
         check_fits(MODEL_BYTES_PER_VALUE * int(np.prod(vol.shape)) * (4 if tf and not post else vol.channels),
                    "decomposing this volume", "read it chunk by chunk (--chunks auto), or crop or subsample it")

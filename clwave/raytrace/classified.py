@@ -113,7 +113,8 @@ class ScalarRange:
         self.cc, self.bricks, self.tracer = cc, f, tracer
         self.noise_floor, self.spacing = tracer.grad_floor("single"), min(tracer.wv.spacing)
         self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
-        self.slot_range, self.sample = None, None  # bricks in a scratch file: |s| <= the block bound
+        self.slot_range = None  # bricks in a scratch file: |s| <= the block bound
+        self.sample = np.zeros(1, np.float32) if f.resident else None  # no bricks at all: s = 0 everywhere
         if f.resident and len(f.levels):
             tables = tracer.field_tables
             slot_range = cla.empty(q, (len(f.levels), SUPER, SUPER, SUPER, 2), np.float32)

@@ -115,17 +115,20 @@ class StagedTracer:
         self.start()
         return result
 
-    def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, error=None):
+    def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, error=None,
+               transfer_function=None):
         """Frames of ``camera`` from cheap to exact, for a viewer that shows each as it comes (a generator it stops
         iterating when the view changes; the set-up goes on): the coarse stage on an image ``2^levels`` times
         smaller per side, then (if the full stage is not ready) on one twice as large; then, once the full stage
         is ready, its full-detail image, bit for bit its ``render``.  ``error=`` as :meth:`RayTracer.refine`; the
         coarse frames' estimates add what their size misses (the step from an image half as large) and what the
-        details they lack change (:attr:`missing`, docs/raytracing.md §9)."""
+        details they lack change (:attr:`missing`, docs/raytracing.md §9).  ``transfer_function``: as
+        :meth:`RayTracer.render`'s, every stage classifying a scalar model with it."""
         check_error(error)
         if not isinstance(camera, Camera):
             raise InputError("camera must be a clwave.Camera")
-        options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption)
+        options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
+                       transfer_function=transfer_function)
         return self._frames(camera, options, error)
 
     def _frames(self, camera, options, error):

@@ -100,11 +100,10 @@ def _frames(r: SplatRenderer, camera: Camera, steps, budget, error):
     start = time.perf_counter()
     acc = r.begin(camera)
     counts = schedule(total, int(steps) if steps is not None else 8)
-    done, estimate = 0, ErrorEstimate()
-    if counts[0] > 1:  # the first frame's estimate: a step from half its coefficients
-        done = counts[0] // 2
+    done, estimate = counts[0] // 2, ErrorEstimate()  # the first frame's estimate: a step from half its
+    if done:                                           # coefficients (from the empty image if it has one)
         acc.splat(0, done)
-        estimate.add(acc.image())
+    estimate.add(acc.image())
     for index, count in enumerate(counts):
         if budget is not None and index > 0:
             elapsed = time.perf_counter() - start

