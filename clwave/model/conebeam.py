@@ -20,7 +20,7 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import InputError, finite_number
-from .camera import View, _content_box, _size, _vector
+from .camera import Camera, View, _content_box, _size, _vector
 from .geometry import view_frame
 
 
@@ -215,9 +215,26 @@ class ConeBeam:
         return View(self.n, self.u, self.v, np.asarray(self.isocentre, float), (H, W), self.slope[1] * self.dso,
                     True, self.source, fov, self.slope, self.principal)
 
+    def reduced(self, reduction: int) -> "ConeBeam":
+        """The same view with ``reduction`` times larger detector pixels (sides rounded up, the same centre): a
+        progressive frame's reduced image."""
+        H, W = self.size
+        cb = ConeBeam.__new__(ConeBeam)
+        cb._set(self.n, self.u, self.v, self.source, (-(-H // reduction), -(-W // reduction)),
+                (self.slope[0] * reduction, self.slope[1] * reduction), self.principal, self.isocentre)
+        cb.dso, cb.dsd, cb.offset = self.dso, self.dsd, self.offset
+        cb.pixel = (self.pixel[0] * reduction, self.pixel[1] * reduction)
+        return cb
+
     def __repr__(self):
         return (f"ConeBeam(dso={self.dso:g}, dsd={self.dsd:g}, size={self.size}, pixel={self.pixel}, "
                 f"offset={self.offset})")
+
+
+def check_camera(camera):
+    """Refuse (one line) what is neither a :class:`Camera` nor a :class:`ConeBeam`."""
+    if not isinstance(camera, (Camera, ConeBeam)):
+        raise InputError("camera must be a clwave.Camera or a clwave.ConeBeam")
 
 
 #: the columns of a pose table (:func:`poses`): ConeBeam's parameters, per row

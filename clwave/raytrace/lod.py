@@ -148,7 +148,7 @@ def brick_caps(detail: Detail, levels: int, view, bricks_lo, spacing) -> np.ndar
     lo, edge = bricks_lo
     nearest = np.clip(view.eye, lo, lo + edge)
     distance = np.maximum(np.linalg.norm(nearest - view.eye, axis=1), cell)
-    pixel = distance * 2.0 * np.tan(np.radians(view.fov) / 2.0) / view.size[0]
+    pixel = distance * max(view.slope)  # the wider of a cone beam's pixels (View.slope: per unit distance)
     return np.clip(np.floor(np.log2(detail.pixels * pixel / cell)), detail.level, levels).astype(np.int64)
 
 

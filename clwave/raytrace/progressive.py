@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.camera import Camera
+from ..model.conebeam import ConeBeam, check_camera
 from ..frames import FinalImage, Frame, check_error, reached
 
 #: the smallest reduced image side: below it a frame no longer halves the error of the one before
@@ -47,8 +48,10 @@ def schedule(levels: int, size, steps=None) -> list:
     return frames if steps is None else frames[-int(steps):]
 
 
-def reduced_camera(view, camera: Camera, reduction: int) -> Camera:
+def reduced_camera(view, camera: Camera | ConeBeam, reduction: int) -> Camera | ConeBeam:
     """The camera of the same view with ``reduction`` times larger pixels (sides rounded up, same centre)."""
+    if isinstance(camera, ConeBeam):
+        return camera.reduced(reduction)
     H, W = view.size
     h, w = -(-H // reduction), -(-W // reduction)
     fov = camera.fov
@@ -74,7 +77,7 @@ def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:
     return image.astype(np.float32, copy=False)
 
 
-def frames(tracer, camera: Camera, options: dict, steps=None, budget=None, error=None):
+def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=None, error=None):
     """The frames of :func:`clwave.progressive.raytrace_progressive` from a :class:`~clwave.RayTracer` (its
     :meth:`~clwave.RayTracer.refine`), arguments checked first."""
     check_error(error)
@@ -86,8 +89,7 @@ def frames(tracer, camera: Camera, options: dict, steps=None, budget=None, error
                          cli=f"--budget {budget:g} must be a positive number of seconds")
     if not tracer.lod:
         raise InputError("progressive ray tracing needs a tracer of every detail: RayTracer(wv, lod=True)")
-    if not isinstance(camera, Camera):
-        raise InputError("camera must be a clwave.Camera")
+    check_camera(camera)
     return _frames(tracer, camera, options, steps, budget, error)
 
 

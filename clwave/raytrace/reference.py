@@ -187,8 +187,8 @@ def _ray(view, r, c):
     H, W = view.size
     pc, pr = c + 0.5 - W / 2, H / 2 - r - 0.5
     if view.perspective:
-        s = 2 * np.tan(np.radians(view.fov) / 2) / H
-        w = -view.n + pc * s * view.u + pr * s * view.v
+        su, sv = view.principal[0] + pc * view.slope[0], view.principal[1] + pr * view.slope[1]  # View.slopes
+        w = -view.n + su * view.u + sv * view.v
         return view.eye, w / np.linalg.norm(w)
     return view.target + pc * view.pixel * view.u + pr * view.pixel * view.v, -view.n
 

@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached
 from ..model.camera import Camera
+from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
 from ..io.clw import Abandoned, FileMask, detail_energy
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
@@ -103,7 +104,7 @@ class StagedTracer:
             self.coarse = None
         return self.full
 
-    def render(self, camera: Camera, **options):
+    def render(self, camera: Camera | ConeBeam, **options):
         """One image from the best stage ready now: the full one (``options`` as :meth:`RayTracer.render`), or
         the coarse one at its coarsest detail (``detail=`` refused there).  ``meta["stage"]`` says which."""
         full = self.wait(0) if self.ready else None
@@ -115,8 +116,8 @@ class StagedTracer:
         self.start()
         return result
 
-    def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, error=None,
-               transfer_function=None):
+    def refine(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True, *,
+               error=None, transfer_function=None):
         """Frames of ``camera`` from cheap to exact, for a viewer that shows each as it comes (a generator it stops
         iterating when the view changes; the set-up goes on): the coarse stage on an image ``2^levels`` times
         smaller per side, then (if the full stage is not ready) on one twice as large; then, once the full stage
@@ -125,8 +126,7 @@ class StagedTracer:
         details they lack change (:attr:`missing`, docs/raytracing.md §9).  ``transfer_function``: as
         :meth:`RayTracer.render`'s, every stage classifying a scalar model with it."""
         check_error(error)
-        if not isinstance(camera, Camera):
-            raise InputError("camera must be a clwave.Camera")
+        check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                        transfer_function=transfer_function)
         return self._frames(camera, options, error)

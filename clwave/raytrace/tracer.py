@@ -22,6 +22,7 @@ from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
 from ..model.bspline import piece_polynomials
 from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
 from ..model.camera import Camera
+from ..model.conebeam import ConeBeam, check_camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..device.memory import device_budget, format_size, parse_cap
@@ -73,8 +74,7 @@ FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("p
 
 def _checked_view(camera, tolerance) -> float:
     """The tolerance of a render, with its camera checked (InputError naming the argument)."""
-    if not isinstance(camera, Camera):
-        raise InputError("camera must be a clwave.Camera")
+    check_camera(camera)
     tol = finite_number(tolerance, "tolerance")
     if tol <= 0:
         raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
@@ -294,7 +294,7 @@ class RayTracer:
         eps = np.finfo(np.float64 if precision == "double" else np.float32).eps
         return GRAD_NOISE * eps * (self.q_bound if q_bound is None else q_bound) / min(self.wv.spacing)
 
-    def render(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
+    def render(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True,
                precision="single", trace=0, detail=None, transfer_function=None) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.
 
@@ -359,9 +359,10 @@ class RayTracer:
         q = cc.queue
         nodes, weights = cla.to_device(q, nodes.astype(real)), cla.to_device(q, weights.astype(real))
         scale, offset = world_to_fine_affine(self.orders[0], wv.shape, wv.spacing, wv.origin)
-        if view.perspective:
-            s = 2.0 * np.tan(np.radians(view.fov) / 2.0) / H  # image-plane units per pixel at distance 1
-            base, du, dv, direction = view.eye, s * view.u, s * view.v, -view.n
+        if view.perspective:  # the ray of pixel (c, r) leaves the eye along -n + s_u u + s_v v (View.slopes)
+            base, du, dv, direction = view.eye, view.slope[0] * view.u, view.slope[1] * view.v, -view.n
+            if any(view.principal):  # a cone beam's principal point off the detector's centre
+                direction = direction + view.principal[0] * view.u + view.principal[1] * view.v
         else:
             base, du, dv, direction = view.target, view.pixel * view.u, view.pixel * view.v, -view.n
         start = time.perf_counter()
@@ -473,7 +474,8 @@ class RayTracer:
 
         return StagedTracer(cls, path, device=device, device_memory=device_memory, lod=lod)
 
-    def refine(self, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True, *, steps=None,
+    def refine(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True, *,
+               steps=None,
                budget=None, error=None, transfer_function=None):
         """Frames of ``camera`` from cheap to exact (:mod:`clwave.raytrace.progressive`, docs/raytracing.md §9),
         for a viewer that shows each as it comes: a generator (``RaytraceFrame`` s: ``image``, ``figures()``),
@@ -511,7 +513,7 @@ def _details(lod, levels, field) -> tuple:
     return details
 
 
-def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
+def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True,
              device=None, *, field="bspline", precision="single", device_memory=None, scheduler=None,
              tracer: RayTracer | None = None, transfer_function=None) -> RenderResult:
     """Ray trace a wavelet volume (paper §3).
@@ -521,8 +523,9 @@ def raytrace(wv: WaveletVolume, camera: Camera, tolerance=1e-3, lights=None, sha
     wv : WaveletVolume
         Four channels ``(q_R, q_G, q_B, alpha)`` (``TransferFunction.classify``) for
         emission-absorption, or one (a scalar) with ``transfer_function``; any channels for ``absorption=False``.
-    camera : Camera
-        Orthographic or perspective; an eye inside the volume integrates from the eye.
+    camera : Camera or ConeBeam
+        Orthographic or perspective; an eye inside the volume integrates from the eye.  A :class:`ConeBeam`
+        traces its own detector's rays (principal point and pixel spacings included): a DRR with ``absorption=False``.
     tolerance : float
         Absolute error allowed on each output value, early ray termination included.
     lights : list of (azimuth, elevation), optional
