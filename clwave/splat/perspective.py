@@ -12,20 +12,26 @@ between the four around its own.
 
 from __future__ import annotations
 
+import sys
 import time
 from math import ceil
 from types import SimpleNamespace
 
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 import scipy.fft
 
+from ..device import programs
 from ..device.constants import TILE
+from ..device.kernels import BUFFER, Kernel
 from ..errors import DeviceMemoryError, InputError
 from ..model.bspline import wavelet_for
 from ..model.geometry import check_key, fine_to_world, spacing_xyz, support_centres, support_extent
 from ..threads import cores, thread_map
 from .spatial import exact_samples
 from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
+from .stages import GROUP, I32, groups
 from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
 from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _axis_sampling, _centred, _fast_even
 
@@ -42,6 +48,7 @@ TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.spla
 FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
 SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
 #: the host tables of a perspective view, uploaded by name (cl/splat/cone.cl)
+POOL_ROOM = 1.25  # a view's texel pool is allocated this much larger, so that the next views can write over it
 CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "layers", "layer_slope", "cone",
                "tex_int", "tex_map", "texels")
 
@@ -49,7 +56,12 @@ CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "l
 def slope_grid(views) -> tuple:
     """``(lo, step, count)``, each (u, v): nodes ``lo + i step``, ``i < count``, at most
     :data:`SLOPE_STEP` apart, covering the slopes of every pixel centre of ``views`` (two at least)."""
-    s = np.concatenate([view.slopes().reshape(-1, 2) for view in views])
+    ends = []  # the slopes of each view's first and last column and row, as View.slopes makes them: the extremes
+    for view in views:
+        (H, W), p, sigma = view.size, view.principal, view.slope
+        ends.append(np.stack([p[0] + (np.array([0, W - 1]) + 0.5 - W / 2.0) * sigma[0],
+                              p[1] + (H / 2.0 - np.array([0, H - 1]) - 0.5) * sigma[1]], axis=1))
+    s = np.concatenate(ends)
     lo, hi = s.min(axis=0), s.max(axis=0)
     count = np.maximum(2, np.ceil((hi - lo) / SLOPE_STEP - 1e-9).astype(int) + 1)
     step = np.where(hi > lo, (hi - lo) / (count - 1), SLOPE_STEP)
@@ -104,7 +116,7 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, h)
                                       for w, h in zip(widths[(m, key)], np.broadcast_to(texel, 2)))
         grids[(m, key)] = (nu, h_u, nv, h_v)
-    check_texels(sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values()),  # slope_cells
+    check_texels(sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values()),  # the cells
                  max_texels, f"the footprints of this perspective view ({len(slopes)} ray slopes a band)",
                  "render fewer pixels, a narrower cone or a lower omega_s")
     data, profiles = {}, {}
@@ -266,21 +278,6 @@ def axis_scale(a, b, d_xyz) -> float:
     return float(np.min(np.max(np.abs(da[None, :] + t[:, None] * db[None, :]), axis=1)))
 
 
-def slope_cells(data: np.ndarray, count, out=None) -> np.ndarray:
-    """A texture's nodes ``data`` (K, nv, nu), K = count_u count_v row-major by v, as ``cl/splat/cone.cl``
-    reads them: one block per cell of the slope grid, (nv + 2, nu + 2, 4) float32, the cell's four nodes
-    interleaved per texel (first node, next along u, next along v, both), with a zero margin all round;
-    written into ``out`` (zeros, that many floats) where given."""
-    ku, kv = (int(c) for c in count)
-    K, nv, nu = data.shape
-    shape = ((kv - 1) * (ku - 1), nv + 2, nu + 2, 4)
-    out = np.zeros(shape, np.float32) if out is None else out.reshape(shape)
-    cells, nodes = out.reshape(kv - 1, ku - 1, nv + 2, nu + 2, 4), data.reshape(kv, ku, nv, nu)
-    for c, (dv, du) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
-        cells[:, :, 1:-1, 1:-1, c] = nodes[dv:dv + kv - 1, du:du + ku - 1]
-    return out
-
-
 def depth_range(view, wv, extent_xyz) -> tuple:
     """The least and greatest depth (along -n from the eye) of the model's voxel box grown by a support box
     ``extent_xyz`` (world, x y z): no basis function of that size reaches nearer the eye."""
@@ -354,7 +351,6 @@ class ConeTables:
         key = (group, sampling, max_texels, tuple(sorted(layer_of.items())),
                tuple(sorted((band, tuple(np.broadcast_to(h, 2).tolist())) for band, h in texels.items())),
                *(np.asarray(x, np.float64).tobytes() for x in (view0.n, view0.u, view0.v, nodes)))
-        self.key = key  # the texel pool's identity: a renderer keeps the last view's pool on the device
         start = time.perf_counter()
         if cache is not None and key in cache:
             packed = cache[key]
@@ -362,14 +358,17 @@ class ConeTables:
             textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
                                           TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
                                           quasi=wav.order >= 3)
-            if wav.order >= 3:  # quasi-interpolants along the slope nodes (k_v, k_u) too
-                thread_map(lambda t: quasi_interpolant(t.data.reshape(count[1], count[0], *t.data.shape[1:]), (0, 1)),
-                           textures.values())
             packed = _pack(g, textures, layer_of, len(layers), count, max_texels)
             if cache is not None:
                 while len(cache) >= FOOTPRINT_CACHE:
                     cache.pop(next(iter(cache)))
                 cache[key] = packed
+        if packed["texels"] is None:  # the slope cells on the device, quasi-interpolants along the slope nodes too
+            packed["texels"], packed["cell_peaks"] = slope_cells(device, packed, count, wav.order >= 3,
+                                                                 _idle_pool(cache or {}, key, packed["pool_floats"]))
+        for other, older in (cache or {}).items():  # only this view's pool stays on the device with the cache
+            if other != key:
+                older["texels"] = None
         self.footprint_seconds = time.perf_counter() - start
         self.band_tex[:] = packed["band_tex"]
         self.tex_box, self.tex_int, self.tex_map, self.tex_layer, self.texels, self.layer_textures, self.cell_peaks = (
@@ -442,12 +441,14 @@ def select_drops(bbox, bound, size, budget) -> tuple:
 
 
 def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
-    """The texture tables of a view (``band_tex``, ``tex_*``, ``texels``; ``layer_textures``, the textures of each
-    layer): each layer's bands in order, each texture as :func:`slope_cells`, written in place into the pool."""
+    """The texture tables of a view (``band_tex``, ``tex_*``; ``layer_textures``, the textures of each layer; the
+    pool ``texels`` None, for :func:`slope_cells`): each layer's bands in order, their nodes one after the other in
+    ``nodes`` (page-aligned), where ``tex_nodes`` gives each texture's first work-item of ``cl/splat/cone_cells.cl``
+    and its nodes' offset."""
     band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
     cells = (int(count[0]) - 1) * (int(count[1]) - 1)
     boxes, ints, maps, tex_layer, offset, layer_textures, placed = [], [], [], [], POOL_GUARD, [], []
-    peaks = []  # each texture's largest magnitude at each slope node
+    tex_nodes, rows, node_offset = [], 0, 0
     for li in range(layer_count):
         first_tex = len(ints)
         for b in g.bands:
@@ -467,21 +468,68 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
                           -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
             ints.append((offset, nu + 2, size // cells, nv + 2))  # cells' texels are 4 floats
             maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
-            peaks.append(np.maximum(tex.data.max(axis=(1, 2)), -tex.data.min(axis=(1, 2))).astype(np.float64))
-            placed.append((tex.data, offset, size))
-            offset += size
+            tex_nodes.append((rows, node_offset))
+            placed.append((tex.data, node_offset))
+            offset, rows, node_offset = offset + size, rows + cells * (nv + 2), node_offset + tex.data.size
         layer_textures.append(len(ints) - first_tex)
-    pool = _page_aligned(offset + 2 * POOL_GUARD)  # the guards of zeros before and after
-    thread_map(lambda p: slope_cells(p[0], count, pool[p[1]:p[1] + p[2]]), placed)  # NumPy's copies free the GIL
+    nodes = _page_aligned(max(node_offset, 1))
+
+    def place(job):  # NumPy's copies free the GIL
+        data, first = job
+        nodes[first:first + data.size].reshape(data.shape)[...] = data
+
+    thread_map(place, placed)
     out = SimpleNamespace()
-    set_texture_tables(out, boxes, ints, maps, tex_layer, pool)
-    node_peaks = np.array(peaks or [np.zeros(int(np.prod(count)))]).reshape(-1, *(np.asarray(count, int)[::-1]))
-    return dict(vars(out), band_tex=band_tex, layer_textures=layer_textures, cell_peaks=_cell_range_peaks(node_peaks))
+    set_texture_tables(out, boxes, ints, maps, tex_layer, [])
+    return dict(vars(out), texels=None, pool_floats=offset + 2 * POOL_GUARD, band_tex=band_tex,
+                layer_textures=layer_textures, nodes=nodes, tex_nodes=np.array(tex_nodes or [(0, 0)], np.int32),
+                rows=rows)
+
+
+_CELLS = Kernel("cone_cells", ("textures", I32), ("ku", I32), ("kv", I32), ("quasi", I32), ("tex_int", BUFFER),
+                ("tex_nodes", BUFFER), ("nodes", BUFFER), ("texels", BUFFER), ("peaks", BUFFER))
+
+
+def slope_cells(cc, packed: dict, count, quasi: bool, pool=None) -> tuple:
+    """``(pool, cell_peaks)``: the texel pool of :func:`_pack`'s tables on the device ``cc``, its slope cells made
+    there from the nodes (``cl/splat/cone_cells.cl``; on a CPU device the nodes are read in place), and for
+    each texture the largest magnitude over the nodes of each range of cells (:func:`_cell_range_peaks`).
+    ``quasi``: the nodes' quasi-interpolants along the slope axes (:func:`quasi_interpolant`).  ``pool``: a device
+    buffer of that many floats or more to write over (fresh memory costs its first touch, docs/splatting.md §8)."""
+    ku, kv = (int(c) for c in count)
+    T = len(packed["tex_nodes"])
+    floats = packed["pool_floats"]
+    if pool is None:  # room for a view somewhat larger, which can then write over it
+        pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE, 4 * int(POOL_ROOM * floats))
+    for start, size in ((0, POOL_GUARD), (floats - 2 * POOL_GUARD, 2 * POOL_GUARD)):  # the guards of zeros
+        cl.enqueue_fill_buffer(cc.queue, pool, np.float32(0.0), 4 * start, 4 * size)
+    peaks = np.zeros(T * ku * kv, np.uint32)
+    if packed["rows"]:
+        nodes = (cl.Buffer(cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=packed["nodes"])
+                 if cc.info.kind == "CPU" else cc.upload(packed["nodes"]))
+        peaks_d = cla.to_device(cc.queue, peaks)
+        _CELLS(programs.build(cc, ["splat/cone_cells.cl"]), cc.queue, groups(packed["rows"]), (GROUP,),
+               textures=T, ku=ku, kv=kv, quasi=int(quasi), tex_int=cc.upload(packed["tex_int"]),
+               tex_nodes=cc.upload(packed["tex_nodes"]), nodes=nodes, texels=pool, peaks=peaks_d)
+        peaks = peaks_d.get()
+    return pool, _cell_range_peaks(peaks.view(np.float32).astype(np.float64).reshape(T, kv, ku))
+
+
+def _idle_pool(cache: dict, key, floats: int):
+    """The device pool of another view in ``cache`` that holds ``floats`` and that no view in use holds any more
+    (only the cache does), taken from it (should that view come back, its cells are made again), or None."""
+    for other, packed in cache.items():
+        pool = packed["texels"]
+        # references: the cache's, ``pool`` and getrefcount's argument
+        if other != key and pool is not None and pool.size >= 4 * floats and sys.getrefcount(pool) <= 3:
+            packed["texels"] = None
+            return pool
+    return None
 
 
 def _page_aligned(size: int) -> np.ndarray:
     """``size`` float32 zeros starting on a 4 KiB page, so that a CPU device uses them in place
-    (:meth:`clwave.splat.renderer.SplatRenderer.texel_pools`)."""
+    (:func:`slope_cells`)."""
     block = np.zeros(size + 1024, np.float32)
     first = (-block.ctypes.data % 4096) // 4
     return block[first:first + size]
