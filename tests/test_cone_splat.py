@@ -311,3 +311,24 @@ def test_quasi_interpolants_in_the_spectra_equal_those_of_the_samples():
         want = np.stack([quasi_interpolant(x.astype(float)) for x in plain.data])
         assert np.abs(quasi.data - want).max() <= 2e-6 * np.abs(want).max()
         assert np.abs(quasi.data - plain.data).max() > 1e-3 * np.abs(want).max()  # the correction is not nothing
+
+
+def test_device_spectra_write_over_their_kept_arrays(cc):
+    # a renderer keeps a view's spectra arrays for the next (fresh memory costs its first touch): a smaller call
+    # writes over them and gives what fresh arrays give
+    from clwave.splat.spectral import device_spectra, slice_plan
+
+    wav, d = SplineWavelet(4), np.array([1.0, 2.0, 1.0])
+    n, u, v = view_frame(30.0, 20.0)
+
+    def plans(sizes, s):
+        return [(*slice_plan(wav, key, 1, d, u + s * n, v - s * n, nu * 0.3, nv * 0.3), nu, nv)
+                for key, (nu, nv) in zip(("dad", "aad", "ddd"), sizes)]
+
+    work = {}
+    first = [x.copy() for x in device_spectra(cc, 4, plans([(40, 36), (30, 50), (24, 24)], 0.1), True, work)]
+    kept = work["host"]
+    again = device_spectra(cc, 4, plans([(32, 30), (20, 22)], -0.2), True, work)
+    assert work["host"] is kept and np.shares_memory(again[0], kept)
+    fresh = device_spectra(cc, 4, plans([(32, 30), (20, 22)], -0.2), True)
+    assert all(np.array_equal(a, b) for a, b in zip(again, fresh)) and len(first) == 3

@@ -88,7 +88,7 @@ def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
 
 
 def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None,
-                       max_texels=None, quasi=False) -> dict:
+                       max_texels=None, quasi=False, work=None) -> dict:
     """A :class:`~clwave.splat.textures.Texture` of each band whose ``data[node, iv, iu]`` holds its footprint
     at each of the (K, 2) ``slopes``: the line integrals of its basis
     function along ``n - s_u u - s_v v`` (per unit of depth) through the points ``a u + b v`` from its
@@ -98,7 +98,8 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     (:mod:`clwave.splat.spatial`).
     ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made.
     ``quasi``: each node's samples as their quasi-interpolant along rows and columns (:func:`quasi_interpolant`;
-    on ``device``, in the spectra).
+    on ``device``, in the spectra).  ``work``: a dict that keeps the device spectra's arrays for the next call
+    (:func:`~clwave.splat.spectral.device_spectra`).
     A coarser band is made from the finest of its type in ``bands``: a scaled copy where its texels are that one's
     dilated too, else (``"fft"``, ``tol`` > 0) an FFT of the period that the box its trimming keeps needs
     (docs/splatting.md §8 "Periods from the trimmed box")."""
@@ -132,12 +133,13 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
                 scale, axes = slice_plan(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu * h_u, nv * h_v)
                 if any(alpha and beta for _, alpha, beta in axes):
                     plans[(band, k)] = (scale, axes, nu, nv)
-            batch, held = [], 0
+            batch, held, launch = [], 0, 0
             for job, plan in list(plans.items()) + [(None, None)]:  # launches of at most SPECTRA_BATCH_BYTES
                 size = 0 if plan is None else 8 * plan[3] * (plan[2] // 2 + 1 + SPECTRUM_BLOCK)
                 if batch and (plan is None or held + size > SPECTRA_BATCH_BYTES):
-                    spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch], quasi)))
-                    batch, held = [], 0
+                    spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch], quasi,
+                                                             None if work is None else work.setdefault(launch, {}))))
+                    batch, held, launch = [], 0, launch + 1
                 if plan is not None:
                     batch.append(job)
                     held += size
@@ -295,10 +297,11 @@ class ConeTables:
     names = CONE_TABLES
 
     def __init__(self, wv, group: int, layers, omega_s=None, sampling="auto", device=None, max_texels=None,
-                 cache=None):
+                 cache=None, work=None):
         """``cache``: a dict in which a renderer keeps the texture tables of its last views (at most
         :data:`FOOTPRINT_CACHE`), keyed by all they depend on (the view's direction and slope grid, the bands'
-        texels and layers), so poses that differ by a translation (registration steps) share them."""
+        texels and layers), so poses that differ by a translation (registration steps) share them; ``work``: a dict
+        that keeps the footprint spectra's arrays for the next view (:func:`sheared_footprints`)."""
         g = wv.groups[group]
         wav = g.wavelet
         if sampling == "cells":
@@ -357,7 +360,7 @@ class ConeTables:
         else:
             textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
                                           TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
-                                          quasi=wav.order >= 3)
+                                          quasi=wav.order >= 3, work=work)
             packed = _pack(g, textures, layer_of, len(layers), count, max_texels)
             if cache is not None:
                 while len(cache) >= FOOTPRINT_CACHE:

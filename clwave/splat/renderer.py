@@ -103,6 +103,7 @@ class SplatRenderer:
         self._work = None  # per-splat buffers of a pass, and the streamed chunk's (coef, values)
         self._sizes = None  # the count tables' sizes of the last view
         self._cone_footprints = {}  # perspective views' texture tables, shared by poses of one direction
+        self._spectra_work = {}  # their footprint spectra's arrays, written over by the next view's
         for gi, g in enumerate(wv.groups):
             table = wv.ranked(gi)
             # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22); each present band
@@ -171,7 +172,8 @@ class SplatRenderer:
             for g in self.wv.groups:
                 self.stage(len(g.channels), True)
             tables = [ConeTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
-                                 max_texels=self.cc.info.max_alloc // 4, cache=self._cone_footprints)
+                                 max_texels=self.cc.info.max_alloc // 4, cache=self._cone_footprints,
+                                 work=self._spectra_work)
                       for gi, ls in enumerate(per_layer)]
         else:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
