@@ -138,10 +138,11 @@ def test_accumulate_cone(cc, scene, variant, channels):
         assert np.array_equal(got[:, 1:], np.full((PIXELS, 3), 0.5, np.float32))
 
 
-@pytest.mark.parametrize("count, quasi", [((5, 4), True), ((5, 4), False), ((2, 3), True)])
-def test_cone_cells(cc, rng, count, quasi):
+@pytest.mark.parametrize("count, quasi, spare", [((5, 4), True, False), ((5, 4), False, False), ((2, 3), True, True)])
+def test_cone_cells(cc, rng, count, quasi, spare):
     # the texel pool made on the device from each texture's nodes (cl/splat/cone_cells.cl), textures of two layers
-    # and a band not drawn, against the oracle: the cells, their guards of zeros, each node's largest magnitude
+    # and a band not drawn, against the oracle: the cells, their guards of zeros, each node's largest magnitude;
+    # written over a spare node array and pool of an earlier view (NaNs here) too
     bands = [SimpleNamespace(level=level, key=key, code=code) for level, key, code in
              ((2, "aaa", 0), (2, "aad", 1), (1, "dda", 6), (1, "ddd", 7), (1, "add", 3))]
     layer_of = {(2, "aaa"): 1, (2, "aad"): 0, (1, "dda"): 0, (1, "ddd"): 1}
@@ -150,9 +151,12 @@ def test_cone_cells(cc, rng, count, quasi):
         nu, nv = rng.integers(1, 30, 2)
         nodes = rng.standard_normal((count[0] * count[1], nv + 3, nu + 2)).astype(np.float32)[:, 2:-1, 1:-1]  # a view
         textures[(b.level, b.key)] = SimpleNamespace(data=nodes, centre_u=nu / 2, centre_v=nv / 2, h_u=0.5, h_v=0.25)
-    packed = _pack(SimpleNamespace(bands=bands), textures, layer_of, 2, count, None)
-    pool, cell_peaks = slope_cells(cc, packed, count, quasi)
-    got = np.empty(pool.size // 4, np.float32)
+    old = np.full(10**5, np.nan, np.float32) if spare else None
+    packed = _pack(SimpleNamespace(bands=bands), textures, layer_of, 2, count, None, old)
+    assert (packed["nodes"] is old) == spare
+    pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=old) if spare else None
+    pool, cell_peaks = slope_cells(cc, packed, count, quasi, pool)
+    got = np.empty(packed["pool_floats"], np.float32)
     cl.enqueue_copy(cc.queue, got, pool)
     order = [(2, "aad"), (1, "dda"), (2, "aaa"), (1, "ddd")]  # each layer's bands in the group's order
     assert np.array_equal(packed["tex_layer"], [(0, 0), (0, 1), (1, 0), (1, 1)])

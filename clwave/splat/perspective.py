@@ -48,7 +48,7 @@ TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.spla
 FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
 SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
 #: the host tables of a perspective view, uploaded by name (cl/splat/cone.cl)
-POOL_ROOM = 1.25  # a view's texel pool is allocated this much larger, so that the next views can write over it
+POOL_ROOM = 1.25  # a view's texel pool and nodes are allocated this much larger, so the next views can write over them
 CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "layers", "layer_slope", "cone",
                "tex_int", "tex_map", "texels")
 
@@ -361,10 +361,11 @@ class ConeTables:
             textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
                                           TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
                                           quasi=wav.order >= 3, work=work)
-            packed = _pack(g, textures, layer_of, len(layers), count, max_texels)
+            spare = None  # the nodes' array of the view that leaves the cache, to write over
+            while cache is not None and len(cache) >= FOOTPRINT_CACHE:
+                spare = cache.pop(next(iter(cache)))["nodes"]
+            packed = _pack(g, textures, layer_of, len(layers), count, max_texels, spare)
             if cache is not None:
-                while len(cache) >= FOOTPRINT_CACHE:
-                    cache.pop(next(iter(cache)))
                 cache[key] = packed
         if packed["texels"] is None:  # the slope cells on the device, quasi-interpolants along the slope nodes too
             packed["texels"], packed["cell_peaks"] = slope_cells(device, packed, count, wav.order >= 3,
@@ -443,11 +444,11 @@ def select_drops(bbox, bound, size, budget) -> tuple:
     return drop, most(fits)
 
 
-def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
+def _pack(g, textures, layer_of, layer_count, count, max_texels, spare=None) -> dict:
     """The texture tables of a view (``band_tex``, ``tex_*``; ``layer_textures``, the textures of each layer; the
-    pool ``texels`` None, for :func:`slope_cells`): each layer's bands in order, their nodes one after the other in
-    ``nodes`` (page-aligned), where ``tex_nodes`` gives each texture's first work-item of ``cl/splat/cone_cells.cl``
-    and its nodes' offset."""
+    pool ``texels`` None, for :func:`slope_cells`): each layer's bands in order, their nodes one after the other at
+    the start of ``nodes`` (page-aligned; ``spare``'s where it holds them, fresh memory costing its first touch),
+    where ``tex_nodes`` gives each texture's first work-item of ``cl/splat/cone_cells.cl`` and its nodes' offset."""
     band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
     cells = (int(count[0]) - 1) * (int(count[1]) - 1)
     boxes, ints, maps, tex_layer, offset, layer_textures, placed = [], [], [], [], POOL_GUARD, [], []
@@ -475,7 +476,8 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
             placed.append((tex.data, node_offset))
             offset, rows, node_offset = offset + size, rows + cells * (nv + 2), node_offset + tex.data.size
         layer_textures.append(len(ints) - first_tex)
-    nodes = _page_aligned(max(node_offset, 1))
+    fits = spare is not None and spare.size >= node_offset
+    nodes = spare if fits else _page_aligned(max(int(POOL_ROOM * node_offset), 1))
 
     def place(job):  # NumPy's copies free the GIL
         data, first = job
@@ -484,9 +486,9 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
     thread_map(place, placed)
     out = SimpleNamespace()
     set_texture_tables(out, boxes, ints, maps, tex_layer, [])
-    return dict(vars(out), texels=None, pool_floats=offset + 2 * POOL_GUARD, band_tex=band_tex,
-                layer_textures=layer_textures, nodes=nodes, tex_nodes=np.array(tex_nodes or [(0, 0)], np.int32),
-                rows=rows)
+    return dict(vars(out), texels=None, pool_floats=offset + 2 * POOL_GUARD, node_floats=node_offset,
+                band_tex=band_tex, layer_textures=layer_textures, nodes=nodes,
+                tex_nodes=np.array(tex_nodes or [(0, 0)], np.int32), rows=rows)
 
 
 _CELLS = Kernel("cone_cells", ("textures", I32), ("ku", I32), ("kv", I32), ("quasi", I32), ("tex_int", BUFFER),
@@ -508,8 +510,9 @@ def slope_cells(cc, packed: dict, count, quasi: bool, pool=None) -> tuple:
         cl.enqueue_fill_buffer(cc.queue, pool, np.float32(0.0), 4 * start, 4 * size)
     peaks = np.zeros(T * ku * kv, np.uint32)
     if packed["rows"]:
-        nodes = (cl.Buffer(cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=packed["nodes"])
-                 if cc.info.kind == "CPU" else cc.upload(packed["nodes"]))
+        used = packed["nodes"][:packed["node_floats"]]
+        nodes = (cl.Buffer(cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=used)
+                 if cc.info.kind == "CPU" else cc.upload(used))
         peaks_d = cla.to_device(cc.queue, peaks)
         _CELLS(programs.build(cc, ["splat/cone_cells.cl"]), cc.queue, groups(packed["rows"]), (GROUP,),
                textures=T, ku=ku, kv=kv, quasi=int(quasi), tex_int=cc.upload(packed["tex_int"]),
