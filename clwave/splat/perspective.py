@@ -148,19 +148,19 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
             band, k = job
             nu, h_u, nv, h_v = grids[band]
             su, sv = slopes[k]
+            x = data[band][k]  # written in place
             if job in spectra:
-                x = _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32)
+                _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32, x)
             elif sampling == "fft":
-                x = _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u,
-                                         nv * h_v, 1), np.float32)
+                _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u,
+                                     nv * h_v, 1), np.float32, x)
             else:
                 aa, bb = _axis_points(nu, h_u, False)[0], _axis_points(nv, h_v, False)[0]
                 a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
-                x = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
-                                  b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
+                x[...] = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
+                                       b.ravel().copy()).reshape(nv + 1, nu + 1)
             if quasi and job not in spectra:
                 quasi_interpolant(x)
-            data[band][k] = x
             magnitude = np.abs(x)
             return magnitude.max(axis=1), magnitude.max(axis=0)
 
