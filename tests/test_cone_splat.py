@@ -235,6 +235,21 @@ def test_coarser_footprints_as_the_whole_support_makes_them(monkeypatch, on_devi
         assert np.abs(t.data - alone.data).max() <= 2e-6 * np.abs(alone.data).max()
 
 
+def test_sheared_footprints_write_over_their_kept_arrays(cc):
+    # a renderer keeps a view's arrays for the next view (docs/splatting.md §8): a call that outgrows them makes
+    # its own, the next that fits writes over them, and each gives what a call with fresh arrays gives
+    n, u, v = view_frame(40.0, 25.0)
+    bands = {(1, "dad"): 0.3, (2, "dad"): 0.6, (3, "dad"): 0.9, (1, "aad"): (0.3, 0.35)}
+    args = (SplineWavelet(4), (1.0, 1.2, 0.8), n, u, v)
+    small, large = np.array([[0.0, 0.1], [0.1, 0.1]]), np.array([[0.0, 0.1], [0.2, -0.1], [0.1, 0.0]])
+    work = {}
+    for slopes in (small, large, large):
+        got = sheared_footprints(*args, bands, slopes, "fft", 1e-4, cc, quasi=True, work=work)
+        fresh = sheared_footprints(*args, bands, slopes, "fft", 1e-4, cc, quasi=True)
+        assert all(np.array_equal(got[b].data, fresh[b].data) for b in bands)
+    assert all(np.shares_memory(got[b].data, work["samples"][0]) for b in bands)
+
+
 def test_axis_scale_is_the_least_of_its_convex_function():
     # docs/splatting.md §8: the spacing a sheared footprint varies on along a texture axis, by brute force
     from clwave.splat.perspective import axis_scale

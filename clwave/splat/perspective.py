@@ -30,7 +30,7 @@ from ..model.bspline import wavelet_for
 from ..model.geometry import check_key, fine_to_world, spacing_xyz, support_centres, support_extent
 from ..threads import cores, thread_map
 from .spatial import exact_samples
-from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
+from .spectral import SPECTRUM_BLOCK, WORK_ROOM, device_spectra, fft_texture, slice_plan
 from .stages import GROUP, I32, groups
 from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
 from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _axis_sampling, _centred, _fast_even
@@ -48,7 +48,6 @@ TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.spla
 FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
 SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
 #: the host tables of a perspective view, uploaded by name (cl/splat/cone.cl)
-POOL_ROOM = 1.25  # a view's texel pool and nodes are allocated this much larger, so the next views can write over them
 CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "layers", "layer_slope", "cone",
                "tex_int", "tex_map", "texels")
 
@@ -98,8 +97,10 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     (:mod:`clwave.splat.spatial`).
     ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made.
     ``quasi``: each node's samples as their quasi-interpolant along rows and columns (:func:`quasi_interpolant`;
-    on ``device``, in the spectra).  ``work``: a dict that keeps the device spectra's arrays for the next call
-    (:func:`~clwave.splat.spectral.device_spectra`).
+    on ``device``, in the spectra).  ``work``: a dict that keeps this call's arrays for the next to write over
+    (fresh memory costs its first touch, docs/splatting.md §8): the device spectra's
+    (:func:`~clwave.splat.spectral.device_spectra`) and the samples', so the textures returned are then views valid
+    until the next call with it.
     A coarser band is made from the finest of its type in ``bands``: a scaled copy where its texels are that one's
     dilated too, else (``"fft"``, ``tol`` > 0) an FFT of the period that the box its trimming keeps needs
     (docs/splatting.md §8 "Periods from the trimmed box")."""
@@ -121,6 +122,19 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
                  max_texels, f"the footprints of this perspective view ({len(slopes)} ray slopes a band)",
                  "render fewer pixels, a narrower cone or a lower omega_s")
     data, profiles = {}, {}
+    store = None if work is None else work.setdefault("samples", [np.zeros(0, np.float32), 0, 0])
+    if store is not None:
+        store[1:] = 0, 0  # (array, floats handed out, floats asked for)
+
+    def empty(shape):  # a band's samples: in work's array after the bands' before it where it has room, else fresh
+        size = int(np.prod(shape))
+        if store is None:
+            return np.empty(shape, np.float32)
+        store[2] += size
+        if store[1] + size > store[0].size:
+            return np.empty(shape, np.float32)
+        store[1] += size
+        return store[0][store[1] - size:store[1]].reshape(shape)
 
     def sample(chosen):  # the samples of the bands ``chosen`` on their grids, and their row and column profiles
         jobs = [(band, k) for band in chosen for k in range(len(slopes))]
@@ -166,7 +180,7 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
 
         for band in chosen:
             nu, _, nv, _ = grids[band]
-            data[band] = np.empty((len(slopes), nv + 1, nu + 1), np.float32)
+            data[band] = empty((len(slopes), nv + 1, nu + 1))
         found = thread_map(make, jobs) if len(jobs) > 1 and cores() > 1 else [make(job) for job in jobs]
         for band in chosen:
             profiles[band] = tuple(np.max([p[i] for (b, _), p in zip(jobs, found) if b == band], axis=0)
@@ -191,7 +205,7 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         sib, ratio = first[band[1]], 2.0 ** (band[0] - first[band[1]][0])
         nu, h_u, nv, h_v = grids[band]
         if np.allclose((h_u, h_v), ratio * np.array(grids[sib][1::2]), rtol=1e-12, atol=0.0):  # texels dilated too
-            data[band] = data[sib] * np.float32(ratio ** -0.5)
+            data[band] = np.multiply(data[sib], np.float32(ratio ** -0.5), out=empty(data[sib].shape))
             profiles[band] = tuple(p * ratio ** -0.5 for p in profiles[sib])
             grids[band] = (grids[sib][0], h_u, grids[sib][2], h_v)
         elif tol > 0 and sampling == "fft":  # the box its trimming keeps, known from the finest one's
@@ -218,6 +232,8 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
             x = x[:, rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
             cu, cv = cu - cols[0], cv - rows[0]
         out[band] = Texture(x, h_u, h_v, cu, cv, sampling, *band)
+    if store is not None and store[2] > store[0].size:  # room for the next call, which then writes over it
+        store[0] = np.empty(int(WORK_ROOM * store[2]), np.float32)
     return out
 
 
@@ -477,7 +493,7 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels, spare=None) -> 
             offset, rows, node_offset = offset + size, rows + cells * (nv + 2), node_offset + tex.data.size
         layer_textures.append(len(ints) - first_tex)
     fits = spare is not None and spare.size >= node_offset
-    nodes = spare if fits else _page_aligned(max(int(POOL_ROOM * node_offset), 1))
+    nodes = spare if fits else _page_aligned(max(int(WORK_ROOM * node_offset), 1))
 
     def place(job):  # NumPy's copies free the GIL
         data, first = job
@@ -505,7 +521,7 @@ def slope_cells(cc, packed: dict, count, quasi: bool, pool=None) -> tuple:
     T = len(packed["tex_nodes"])
     floats = packed["pool_floats"]
     if pool is None:  # room for a view somewhat larger, which can then write over it
-        pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE, 4 * int(POOL_ROOM * floats))
+        pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE, 4 * int(WORK_ROOM * floats))
     for start, size in ((0, POOL_GUARD), (floats - 2 * POOL_GUARD, 2 * POOL_GUARD)):  # the guards of zeros
         cl.enqueue_fill_buffer(cc.queue, pool, np.float32(0.0), 4 * start, 4 * size)
     peaks = np.zeros(T * ku * kv, np.uint32)

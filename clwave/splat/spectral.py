@@ -242,7 +242,9 @@ SPECTRUM_GROUP = 16  # work-items per work-group of cl/splat/footprint.cl, each 
 
 
 SPECTRUM_BLOCK = 16  # columns per work-item: the kernel's float16
-WORK_ROOM = 1.25  # device_spectra's kept arrays are allocated this much larger than the call that makes them
+#: arrays kept for the next call to write over (a view's spectra, samples, nodes, pool) are allocated this much larger
+#: than the call that makes them needs, so that somewhat larger ones fit too
+WORK_ROOM = 1.25
 
 
 def device_spectra(cc, order: int, plans, quasi=False, work=None) -> list:
