@@ -11,23 +11,39 @@
  * at node k (float bits; cells' bounds for dropped splats). */
 #include "common/clw_common.h"
 
-/* The value stored for node (a, b) of a node grid at `x` (node (a, b) at x + (b ku + a) plane) */
-inline float cell_node(__global const float *restrict x, const size_t plane, const int a, const int b, const int ku,
-                       const int kv, const int quasi)
+/* The rows a node's stored value is made of: its own, and the three of its second difference along v and along u
+ * (at j = clamp(node, 1, k - 2)); an axis of fewer than 3 nodes gets its own row three times, whose (x + x) - 2 x
+ * is exactly 0, so the loop has no branch but quasi's */
+typedef struct {
+    __global const float *self, *v_lo, *v_mid, *v_hi, *u_lo, *u_mid, *u_hi;
+} node_rows;
+
+/* node (a, b) at x + (b ku + a) plane */
+inline node_rows rows_of(__global const float *x, const size_t plane, const int a, const int b, const int ku,
+                         const int kv)
 {
-    const float value = x[(b * ku + a) * plane];
-    if (!quasi)
-        return value;
-    float correction = 0.0f;  /* the host's order: along v, then along u added, times 1/16 */
+    node_rows r;
+    r.self = r.v_lo = r.v_mid = r.v_hi = r.u_lo = r.u_mid = r.u_hi = x + (b * ku + a) * plane;
     if (kv >= 3) {
         const int j = clamp(b, 1, kv - 2);
-        correction = (x[((j + 1) * ku + a) * plane] + x[((j - 1) * ku + a) * plane]) - 2.0f * x[(j * ku + a) * plane];
+        r.v_lo = x + ((j - 1) * ku + a) * plane;
+        r.v_mid = x + (j * ku + a) * plane;
+        r.v_hi = x + ((j + 1) * ku + a) * plane;
     }
     if (ku >= 3) {
         const int j = clamp(a, 1, ku - 2);
-        correction += (x[(b * ku + j + 1) * plane] + x[(b * ku + j - 1) * plane]) - 2.0f * x[(b * ku + j) * plane];
+        r.u_lo = x + (b * ku + j - 1) * plane;
+        r.u_mid = x + (b * ku + j) * plane;
+        r.u_hi = x + (b * ku + j + 1) * plane;
     }
-    return value - correction * 0.0625f;
+    return r;
+}
+
+/* The value stored at texel i: less 1/16 of the correction, along v and then along u added (the host's order) */
+inline float stored(const node_rows r, const int i)
+{
+    const float correction = ((r.v_hi[i] + r.v_lo[i]) - 2.0f * r.v_mid[i]) + ((r.u_hi[i] + r.u_lo[i]) - 2.0f * r.u_mid[i]);
+    return r.self[i] - correction * 0.0625f;
 }
 
 /* cone_cells
@@ -67,12 +83,13 @@ __kernel void cone_cells(const int textures, const int ku, const int kv, const i
     }
     const size_t plane = (size_t)nu * nv;
     __global const float *x = nodes + tex_nodes[t].y + (size_t)iv * nu;
+    const node_rows r00 = rows_of(x, plane, cu, cv, ku, kv), r10 = rows_of(x, plane, cu + 1, cv, ku, kv);
+    const node_rows r01 = rows_of(x, plane, cu, cv + 1, ku, kv);
+    const node_rows r11 = rows_of(x, plane, cu + 1, cv + 1, ku, kv);
     float4 most = (float4)(0.0f);
     for (int i = 0; i < nu; ++i) {
-        const float4 v = (float4)(cell_node(x + i, plane, cu, cv, ku, kv, quasi),
-                                  cell_node(x + i, plane, cu + 1, cv, ku, kv, quasi),
-                                  cell_node(x + i, plane, cu, cv + 1, ku, kv, quasi),
-                                  cell_node(x + i, plane, cu + 1, cv + 1, ku, kv, quasi));
+        const float4 v = quasi ? (float4)(stored(r00, i), stored(r10, i), stored(r01, i), stored(r11, i))
+                               : (float4)(r00.self[i], r10.self[i], r01.self[i], r11.self[i]);
         out[i + 1] = v;
         most = fmax(most, fabs(v));
     }
