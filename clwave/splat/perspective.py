@@ -521,7 +521,8 @@ def slope_cells(cc, packed: dict, count, quasi: bool, pool=None) -> tuple:
     T = len(packed["tex_nodes"])
     floats = packed["pool_floats"]
     if pool is None:  # room for a view somewhat larger, which can then write over it
-        pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE, 4 * int(WORK_ROOM * floats))
+        pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE, 4 * max(floats, min(int(WORK_ROOM * floats),
+                                                                               cc.info.max_alloc // 4)))
     for start, size in ((0, POOL_GUARD), (floats - 2 * POOL_GUARD, 2 * POOL_GUARD)):  # the guards of zeros
         cl.enqueue_fill_buffer(cc.queue, pool, np.float32(0.0), 4 * start, 4 * size)
     peaks = np.zeros(T * ku * kv, np.uint32)
