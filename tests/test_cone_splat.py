@@ -82,6 +82,20 @@ def test_perspective_streams_and_progressive():
     assert np.abs(frames[-1].image - whole).max() <= 1e-5 * whole.max()
 
 
+def test_a_view_in_use_keeps_its_pool():
+    # a renderer writes a view's texel pool over another's only where no view in use holds it (docs/splatting.md §8):
+    # a view begun, then two other directions rendered (their pools written over each other), then the first one
+    # splatted, gives the image it gives alone
+    wv = _model((10, 10, 10), (1.0, 1.0, 1.0), levels=1, seed=3)
+    r = clwave.SplatRenderer(wv)
+    cams = [clwave.ConeBeam(70.0, 100.0, 16, pixel=1.5, azimuth=az, elevation=10) for az in (20, 80, 140)]
+    held = r.begin(cams[0])
+    others = [r.render(cam).image for cam in cams[1:]] + [r.render(cams[2]).image]
+    held.splat(0, r.count)
+    assert np.array_equal(held.image(), clwave.SplatRenderer(wv).render(cams[0]).image)
+    assert np.array_equal(others[1], others[2])
+
+
 def test_perspective_coarse_framebuffers():
     wv = _model((12, 12, 12), (1.0, 1.0, 1.0), levels=2, seed=5)
     cam = clwave.ConeBeam(70.0, 100.0, 32, pixel=0.8, azimuth=25, elevation=10)
