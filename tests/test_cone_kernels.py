@@ -1,16 +1,17 @@
 """Each cone-beam kernel stage (cl/splat/cone.cl, docs/splatting.md §8) against its NumPy oracle
-(clwave.splat.reference: project_cone, records, accumulate_cone) on a small random scene: two layers
+(clwave.splat.reference: slope_cells, project_cone, records, accumulate_cone) on a small random scene: two layers
 (framebuffers), a rotated frame, splats behind the eye and beyond the slope grid; each stage gets its inputs
 from the oracles of the stages before it, as tests/test_splat_kernels.py does for orthographic views."""
 
 from types import SimpleNamespace
 
 import numpy as np
+import pyopencl as cl
 import pyopencl.array as cla
 import pytest
 
 from clwave.splat import reference
-from clwave.splat.perspective import slope_cells
+from clwave.splat.perspective import _pack, slope_cells
 from clwave.splat.stages import Stages
 from clwave.splat.tables import POOL_GUARD, set_texture_tables
 
@@ -48,7 +49,7 @@ def cone_scene(rng, n=300):
         nu, nv = rng.integers(2, 24, 2)
         nodes = rng.standard_normal((COUNT[0] * COUNT[1], nv, nu)).astype(np.float32)
         cu, cv, h_u, h_v = rng.uniform(0, nu - 1), rng.uniform(0, nv - 1), *rng.uniform(0.05, 0.8, 2)
-        cells = slope_cells(nodes, COUNT)
+        cells = reference.slope_cells(nodes, COUNT)[0]
         boxes.append((-cu * h_u, (nu - 1 - cu) * h_u, -cv * h_v, (nv - 1 - cv) * h_v))
         ints.append((offset, nu + 2, cells[0].size, nv + 2))
         maps.append((cu, cv, 1.0 / h_u, 1.0 / h_v))
@@ -135,3 +136,37 @@ def test_accumulate_cone(cc, scene, variant, channels):
     assert np.abs(got - expected).max() <= 1e-5 * np.abs(expected).max()
     if channels == 1:  # the other channels of the framebuffer keep their values
         assert np.array_equal(got[:, 1:], np.full((PIXELS, 3), 0.5, np.float32))
+
+
+@pytest.mark.parametrize("count, quasi, spare", [((5, 4), True, False), ((5, 4), False, False), ((2, 3), True, True)])
+def test_cone_cells(cc, rng, count, quasi, spare):
+    # the texel pool made on the device from each texture's nodes (cl/splat/cone_cells.cl), textures of two layers
+    # and a band not drawn, against the oracle: the cells, their guards of zeros, each node's largest magnitude;
+    # written over a spare node array and pool of an earlier view (NaNs here) too
+    bands = [SimpleNamespace(level=level, key=key, code=code) for level, key, code in
+             ((2, "aaa", 0), (2, "aad", 1), (1, "dda", 6), (1, "ddd", 7), (1, "add", 3))]
+    layer_of = {(2, "aaa"): 1, (2, "aad"): 0, (1, "dda"): 0, (1, "ddd"): 1}
+    textures = {}
+    for b in bands:
+        nu, nv = rng.integers(1, 30, 2)
+        nodes = rng.standard_normal((count[0] * count[1], nv + 3, nu + 2)).astype(np.float32)[:, 2:-1, 1:-1]  # a view
+        textures[(b.level, b.key)] = SimpleNamespace(data=nodes, centre_u=nu / 2, centre_v=nv / 2, h_u=0.5, h_v=0.25)
+    old = np.full(10**5, np.nan, np.float32) if spare else None
+    packed = _pack(SimpleNamespace(bands=bands), textures, layer_of, 2, count, None, old)
+    assert (packed["nodes"] is old) == spare
+    pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=old) if spare else None
+    pool, cell_peaks = slope_cells(cc, packed, count, quasi, pool)
+    got = np.empty(packed["pool_floats"], np.float32)
+    cl.enqueue_copy(cc.queue, got, pool)
+    order = [(2, "aad"), (1, "dda"), (2, "aaa"), (1, "ddd")]  # each layer's bands in the group's order
+    assert np.array_equal(packed["tex_layer"], [(0, 0), (0, 1), (1, 0), (1, 1)])
+    peaks = []
+    for band, (offset, _, size, _) in zip(order, packed["tex_int"]):
+        cells, node_peaks = reference.slope_cells(textures[band].data, count, quasi)
+        assert np.array_equal(got[offset:offset + cells.size], cells.ravel())
+        peaks.append(node_peaks)
+    end = packed["tex_int"][-1, 0] + packed["tex_int"][-1, 2] * (count[0] - 1) * (count[1] - 1)
+    assert not np.any(got[:POOL_GUARD]) and not np.any(got[end:end + 2 * POOL_GUARD])  # the guards of zeros
+    node_peaks = np.array(peaks).reshape(4, count[1], count[0])
+    assert np.array_equal(cell_peaks[:, 0, -1, 0, -1], node_peaks.max(axis=(1, 2)))
+    assert np.array_equal(cell_peaks[:, -1, -1, -1, -1], node_peaks[:, -2:, -2:].max(axis=(1, 2)))

@@ -82,6 +82,20 @@ def test_perspective_streams_and_progressive():
     assert np.abs(frames[-1].image - whole).max() <= 1e-5 * whole.max()
 
 
+def test_a_view_in_use_keeps_its_pool():
+    # a renderer writes a view's texel pool over another's only where no view in use holds it (docs/splatting.md §8):
+    # a view begun, then two other directions rendered (their pools written over each other), then the first one
+    # splatted, gives the image it gives alone
+    wv = _model((10, 10, 10), (1.0, 1.0, 1.0), levels=1, seed=3)
+    r = clwave.SplatRenderer(wv)
+    cams = [clwave.ConeBeam(70.0, 100.0, 16, pixel=1.5, azimuth=az, elevation=10) for az in (20, 80, 140)]
+    held = r.begin(cams[0])
+    others = [r.render(cam).image for cam in cams[1:]] + [r.render(cams[2]).image]
+    held.splat(0, r.count)
+    assert np.array_equal(held.image(), clwave.SplatRenderer(wv).render(cams[0]).image)
+    assert np.array_equal(others[1], others[2])
+
+
 def test_perspective_coarse_framebuffers():
     wv = _model((12, 12, 12), (1.0, 1.0, 1.0), levels=2, seed=5)
     cam = clwave.ConeBeam(70.0, 100.0, 32, pixel=0.8, azimuth=25, elevation=10)
@@ -235,6 +249,21 @@ def test_coarser_footprints_as_the_whole_support_makes_them(monkeypatch, on_devi
         assert np.abs(t.data - alone.data).max() <= 2e-6 * np.abs(alone.data).max()
 
 
+def test_sheared_footprints_write_over_their_kept_arrays(cc):
+    # a renderer keeps a view's arrays for the next view (docs/splatting.md §8): a call that outgrows them makes
+    # its own, the next that fits writes over them, and each gives what a call with fresh arrays gives
+    n, u, v = view_frame(40.0, 25.0)
+    bands = {(1, "dad"): 0.3, (2, "dad"): 0.6, (3, "dad"): 0.9, (1, "aad"): (0.3, 0.35)}
+    args = (SplineWavelet(4), (1.0, 1.2, 0.8), n, u, v)
+    small, large = np.array([[0.0, 0.1], [0.1, 0.1]]), np.array([[0.0, 0.1], [0.2, -0.1], [0.1, 0.0]])
+    work = {}
+    for slopes in (small, large, large):
+        got = sheared_footprints(*args, bands, slopes, "fft", 1e-4, cc, quasi=True, work=work)
+        fresh = sheared_footprints(*args, bands, slopes, "fft", 1e-4, cc, quasi=True)
+        assert all(np.array_equal(got[b].data, fresh[b].data) for b in bands)
+    assert all(np.shares_memory(got[b].data, work["samples"][0]) for b in bands)
+
+
 def test_axis_scale_is_the_least_of_its_convex_function():
     # docs/splatting.md §8: the spacing a sheared footprint varies on along a texture axis, by brute force
     from clwave.splat.perspective import axis_scale
@@ -311,3 +340,24 @@ def test_quasi_interpolants_in_the_spectra_equal_those_of_the_samples():
         want = np.stack([quasi_interpolant(x.astype(float)) for x in plain.data])
         assert np.abs(quasi.data - want).max() <= 2e-6 * np.abs(want).max()
         assert np.abs(quasi.data - plain.data).max() > 1e-3 * np.abs(want).max()  # the correction is not nothing
+
+
+def test_device_spectra_write_over_their_kept_arrays(cc):
+    # a renderer keeps a view's spectra arrays for the next (fresh memory costs its first touch): a smaller call
+    # writes over them and gives what fresh arrays give
+    from clwave.splat.spectral import device_spectra, slice_plan
+
+    wav, d = SplineWavelet(4), np.array([1.0, 2.0, 1.0])
+    n, u, v = view_frame(30.0, 20.0)
+
+    def plans(sizes, s):
+        return [(*slice_plan(wav, key, 1, d, u + s * n, v - s * n, nu * 0.3, nv * 0.3), nu, nv)
+                for key, (nu, nv) in zip(("dad", "aad", "ddd"), sizes)]
+
+    work = {}
+    first = [x.copy() for x in device_spectra(cc, 4, plans([(40, 36), (30, 50), (24, 24)], 0.1), True, work)]
+    kept = work["host"]
+    again = device_spectra(cc, 4, plans([(32, 30), (20, 22)], -0.2), True, work)
+    assert work["host"] is kept and np.shares_memory(again[0], kept)
+    fresh = device_spectra(cc, 4, plans([(32, 30), (20, 22)], -0.2), True)
+    assert all(np.array_equal(a, b) for a, b in zip(again, fresh)) and len(first) == 3

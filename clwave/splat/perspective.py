@@ -12,20 +12,26 @@ between the four around its own.
 
 from __future__ import annotations
 
+import sys
 import time
 from math import ceil
 from types import SimpleNamespace
 
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 import scipy.fft
 
+from ..device import programs
 from ..device.constants import TILE
+from ..device.kernels import BUFFER, Kernel
 from ..errors import DeviceMemoryError, InputError
 from ..model.bspline import wavelet_for
 from ..model.geometry import check_key, fine_to_world, spacing_xyz, support_centres, support_extent
 from ..threads import cores, thread_map
 from .spatial import exact_samples
-from .spectral import SPECTRUM_BLOCK, device_spectra, fft_texture, slice_plan
+from .spectral import SPECTRUM_BLOCK, WORK_ROOM, device_spectra, fft_texture, slice_plan
+from .stages import GROUP, I32, groups
 from .tables import MAX_LEVELS, POOL_GUARD, default_omega_s, set_texture_tables, texels_per_pixel
 from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _axis_sampling, _centred, _fast_even
 
@@ -49,7 +55,12 @@ CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "l
 def slope_grid(views) -> tuple:
     """``(lo, step, count)``, each (u, v): nodes ``lo + i step``, ``i < count``, at most
     :data:`SLOPE_STEP` apart, covering the slopes of every pixel centre of ``views`` (two at least)."""
-    s = np.concatenate([view.slopes().reshape(-1, 2) for view in views])
+    ends = []  # the slopes of each view's first and last column and row, as View.slopes makes them: the extremes
+    for view in views:
+        (H, W), p, sigma = view.size, view.principal, view.slope
+        ends.append(np.stack([p[0] + (np.array([0, W - 1]) + 0.5 - W / 2.0) * sigma[0],
+                              p[1] + (H / 2.0 - np.array([0, H - 1]) - 0.5) * sigma[1]], axis=1))
+    s = np.concatenate(ends)
     lo, hi = s.min(axis=0), s.max(axis=0)
     count = np.maximum(2, np.ceil((hi - lo) / SLOPE_STEP - 1e-9).astype(int) + 1)
     step = np.where(hi > lo, (hi - lo) / (count - 1), SLOPE_STEP)
@@ -76,7 +87,7 @@ def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
 
 
 def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None,
-                       max_texels=None, quasi=False) -> dict:
+                       max_texels=None, quasi=False, work=None) -> dict:
     """A :class:`~clwave.splat.textures.Texture` of each band whose ``data[node, iv, iu]`` holds its footprint
     at each of the (K, 2) ``slopes``: the line integrals of its basis
     function along ``n - s_u u - s_v v`` (per unit of depth) through the points ``a u + b v`` from its
@@ -86,7 +97,10 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     (:mod:`clwave.splat.spatial`).
     ``max_texels``: refuse (:class:`DeviceMemoryError`) textures that would hold more, before any is made.
     ``quasi``: each node's samples as their quasi-interpolant along rows and columns (:func:`quasi_interpolant`;
-    on ``device``, in the spectra).
+    on ``device``, in the spectra).  ``work``: a dict that keeps this call's arrays for the next to write over
+    (fresh memory costs its first touch, docs/splatting.md §8): the device spectra's
+    (:func:`~clwave.splat.spectral.device_spectra`) and the samples', so the textures returned are then views valid
+    until the next call with it.
     A coarser band is made from the finest of its type in ``bands``: a scaled copy where its texels are that one's
     dilated too, else (``"fft"``, ``tol`` > 0) an FFT of the period that the box its trimming keeps needs
     (docs/splatting.md §8 "Periods from the trimmed box")."""
@@ -104,10 +118,23 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, h)
                                       for w, h in zip(widths[(m, key)], np.broadcast_to(texel, 2)))
         grids[(m, key)] = (nu, h_u, nv, h_v)
-    check_texels(sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values()),  # slope_cells
+    check_texels(sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values()),  # the cells
                  max_texels, f"the footprints of this perspective view ({len(slopes)} ray slopes a band)",
                  "render fewer pixels, a narrower cone or a lower omega_s")
     data, profiles = {}, {}
+    store = None if work is None else work.setdefault("samples", [np.zeros(0, np.float32), 0, 0])
+    if store is not None:
+        store[1:] = 0, 0  # (array, floats handed out, floats asked for)
+
+    def empty(shape):  # a band's samples: in work's array after the bands' before it where it has room, else fresh
+        size = int(np.prod(shape))
+        if store is None:
+            return np.empty(shape, np.float32)
+        store[2] += size
+        if store[1] + size > store[0].size:
+            return np.empty(shape, np.float32)
+        store[1] += size
+        return store[0][store[1] - size:store[1]].reshape(shape)
 
     def sample(chosen):  # the samples of the bands ``chosen`` on their grids, and their row and column profiles
         jobs = [(band, k) for band in chosen for k in range(len(slopes))]
@@ -120,12 +147,13 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
                 scale, axes = slice_plan(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu * h_u, nv * h_v)
                 if any(alpha and beta for _, alpha, beta in axes):
                     plans[(band, k)] = (scale, axes, nu, nv)
-            batch, held = [], 0
+            batch, held, launch = [], 0, 0
             for job, plan in list(plans.items()) + [(None, None)]:  # launches of at most SPECTRA_BATCH_BYTES
                 size = 0 if plan is None else 8 * plan[3] * (plan[2] // 2 + 1 + SPECTRUM_BLOCK)
                 if batch and (plan is None or held + size > SPECTRA_BATCH_BYTES):
-                    spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch], quasi)))
-                    batch, held = [], 0
+                    spectra.update(zip(batch, device_spectra(device, wav.order, [plans[b] for b in batch], quasi,
+                                                             None if work is None else work.setdefault(launch, {}))))
+                    batch, held, launch = [], 0, launch + 1
                 if plan is not None:
                     batch.append(job)
                     held += size
@@ -134,25 +162,25 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
             band, k = job
             nu, h_u, nv, h_v = grids[band]
             su, sv = slopes[k]
+            x = data[band][k]  # written in place
             if job in spectra:
-                x = _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32)
+                _centred(scipy.fft.irfft2(spectra[job], s=(nv, nu), workers=1, overwrite_x=True), np.float32, x)
             elif sampling == "fft":
-                x = _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u,
-                                         nv * h_v, 1), np.float32)
+                _centred(fft_texture(wav, band[1], band[0], d_xyz, u + su * n, v + sv * n, nu, nv, nu * h_u,
+                                     nv * h_v, 1), np.float32, x)
             else:
                 aa, bb = _axis_points(nu, h_u, False)[0], _axis_points(nv, h_v, False)[0]
                 a, b = np.broadcast_arrays(aa[None, :], bb[:, None])
-                x = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
-                                  b.ravel().copy()).reshape(nv + 1, nu + 1).astype(np.float32)
+                x[...] = exact_samples(wav, band[1], band[0], d_xyz, n - su * u - sv * v, u, v, a.ravel().copy(),
+                                       b.ravel().copy()).reshape(nv + 1, nu + 1)
             if quasi and job not in spectra:
                 quasi_interpolant(x)
-            data[band][k] = x
             magnitude = np.abs(x)
             return magnitude.max(axis=1), magnitude.max(axis=0)
 
         for band in chosen:
             nu, _, nv, _ = grids[band]
-            data[band] = np.empty((len(slopes), nv + 1, nu + 1), np.float32)
+            data[band] = empty((len(slopes), nv + 1, nu + 1))
         found = thread_map(make, jobs) if len(jobs) > 1 and cores() > 1 else [make(job) for job in jobs]
         for band in chosen:
             profiles[band] = tuple(np.max([p[i] for (b, _), p in zip(jobs, found) if b == band], axis=0)
@@ -177,7 +205,7 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         sib, ratio = first[band[1]], 2.0 ** (band[0] - first[band[1]][0])
         nu, h_u, nv, h_v = grids[band]
         if np.allclose((h_u, h_v), ratio * np.array(grids[sib][1::2]), rtol=1e-12, atol=0.0):  # texels dilated too
-            data[band] = data[sib] * np.float32(ratio ** -0.5)
+            data[band] = np.multiply(data[sib], np.float32(ratio ** -0.5), out=empty(data[sib].shape))
             profiles[band] = tuple(p * ratio ** -0.5 for p in profiles[sib])
             grids[band] = (grids[sib][0], h_u, grids[sib][2], h_v)
         elif tol > 0 and sampling == "fft":  # the box its trimming keeps, known from the finest one's
@@ -204,6 +232,8 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
             x = x[:, rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
             cu, cv = cu - cols[0], cv - rows[0]
         out[band] = Texture(x, h_u, h_v, cu, cv, sampling, *band)
+    if store is not None and store[2] > store[0].size:  # room for the next call, which then writes over it
+        store[0] = np.empty(int(WORK_ROOM * store[2]), np.float32)
     return out
 
 
@@ -266,21 +296,6 @@ def axis_scale(a, b, d_xyz) -> float:
     return float(np.min(np.max(np.abs(da[None, :] + t[:, None] * db[None, :]), axis=1)))
 
 
-def slope_cells(data: np.ndarray, count, out=None) -> np.ndarray:
-    """A texture's nodes ``data`` (K, nv, nu), K = count_u count_v row-major by v, as ``cl/splat/cone.cl``
-    reads them: one block per cell of the slope grid, (nv + 2, nu + 2, 4) float32, the cell's four nodes
-    interleaved per texel (first node, next along u, next along v, both), with a zero margin all round;
-    written into ``out`` (zeros, that many floats) where given."""
-    ku, kv = (int(c) for c in count)
-    K, nv, nu = data.shape
-    shape = ((kv - 1) * (ku - 1), nv + 2, nu + 2, 4)
-    out = np.zeros(shape, np.float32) if out is None else out.reshape(shape)
-    cells, nodes = out.reshape(kv - 1, ku - 1, nv + 2, nu + 2, 4), data.reshape(kv, ku, nv, nu)
-    for c, (dv, du) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
-        cells[:, :, 1:-1, 1:-1, c] = nodes[dv:dv + kv - 1, du:du + ku - 1]
-    return out
-
-
 def depth_range(view, wv, extent_xyz) -> tuple:
     """The least and greatest depth (along -n from the eye) of the model's voxel box grown by a support box
     ``extent_xyz`` (world, x y z): no basis function of that size reaches nearer the eye."""
@@ -298,10 +313,11 @@ class ConeTables:
     names = CONE_TABLES
 
     def __init__(self, wv, group: int, layers, omega_s=None, sampling="auto", device=None, max_texels=None,
-                 cache=None):
+                 cache=None, work=None):
         """``cache``: a dict in which a renderer keeps the texture tables of its last views (at most
         :data:`FOOTPRINT_CACHE`), keyed by all they depend on (the view's direction and slope grid, the bands'
-        texels and layers), so poses that differ by a translation (registration steps) share them."""
+        texels and layers), so poses that differ by a translation (registration steps) share them; ``work``: a dict
+        that keeps the footprint spectra's arrays for the next view (:func:`sheared_footprints`)."""
         g = wv.groups[group]
         wav = g.wavelet
         if sampling == "cells":
@@ -354,22 +370,25 @@ class ConeTables:
         key = (group, sampling, max_texels, tuple(sorted(layer_of.items())),
                tuple(sorted((band, tuple(np.broadcast_to(h, 2).tolist())) for band, h in texels.items())),
                *(np.asarray(x, np.float64).tobytes() for x in (view0.n, view0.u, view0.v, nodes)))
-        self.key = key  # the texel pool's identity: a renderer keeps the last view's pool on the device
         start = time.perf_counter()
         if cache is not None and key in cache:
             packed = cache[key]
         else:
             textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
                                           TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
-                                          quasi=wav.order >= 3)
-            if wav.order >= 3:  # quasi-interpolants along the slope nodes (k_v, k_u) too
-                thread_map(lambda t: quasi_interpolant(t.data.reshape(count[1], count[0], *t.data.shape[1:]), (0, 1)),
-                           textures.values())
-            packed = _pack(g, textures, layer_of, len(layers), count, max_texels)
+                                          quasi=wav.order >= 3, work=work)
+            spare = None  # the nodes' array of the view that leaves the cache, to write over
+            while cache is not None and len(cache) >= FOOTPRINT_CACHE:
+                spare = cache.pop(next(iter(cache)))["nodes"]
+            packed = _pack(g, textures, layer_of, len(layers), count, max_texels, spare)
             if cache is not None:
-                while len(cache) >= FOOTPRINT_CACHE:
-                    cache.pop(next(iter(cache)))
                 cache[key] = packed
+        if packed["texels"] is None:  # the slope cells on the device, quasi-interpolants along the slope nodes too
+            packed["texels"], packed["cell_peaks"] = slope_cells(device, packed, count, wav.order >= 3,
+                                                                 _idle_pool(cache or {}, key, packed["pool_floats"]))
+        for other, older in (cache or {}).items():  # only this view's pool stays on the device with the cache
+            if other != key:
+                older["texels"] = None
         self.footprint_seconds = time.perf_counter() - start
         self.band_tex[:] = packed["band_tex"]
         self.tex_box, self.tex_int, self.tex_map, self.tex_layer, self.texels, self.layer_textures, self.cell_peaks = (
@@ -441,13 +460,15 @@ def select_drops(bbox, bound, size, budget) -> tuple:
     return drop, most(fits)
 
 
-def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
-    """The texture tables of a view (``band_tex``, ``tex_*``, ``texels``; ``layer_textures``, the textures of each
-    layer): each layer's bands in order, each texture as :func:`slope_cells`, written in place into the pool."""
+def _pack(g, textures, layer_of, layer_count, count, max_texels, spare=None) -> dict:
+    """The texture tables of a view (``band_tex``, ``tex_*``; ``layer_textures``, the textures of each layer; the
+    pool ``texels`` None, for :func:`slope_cells`): each layer's bands in order, their nodes one after the other at
+    the start of ``nodes`` (page-aligned; ``spare``'s where it holds them, fresh memory costing its first touch),
+    where ``tex_nodes`` gives each texture's first work-item of ``cl/splat/cone_cells.cl`` and its nodes' offset."""
     band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
     cells = (int(count[0]) - 1) * (int(count[1]) - 1)
     boxes, ints, maps, tex_layer, offset, layer_textures, placed = [], [], [], [], POOL_GUARD, [], []
-    peaks = []  # each texture's largest magnitude at each slope node
+    tex_nodes, rows, node_offset = [], 0, 0
     for li in range(layer_count):
         first_tex = len(ints)
         for b in g.bands:
@@ -467,21 +488,71 @@ def _pack(g, textures, layer_of, layer_count, count, max_texels) -> dict:
                           -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))
             ints.append((offset, nu + 2, size // cells, nv + 2))  # cells' texels are 4 floats
             maps.append((tex.centre_u, tex.centre_v, 1.0 / tex.h_u, 1.0 / tex.h_v))
-            peaks.append(np.maximum(tex.data.max(axis=(1, 2)), -tex.data.min(axis=(1, 2))).astype(np.float64))
-            placed.append((tex.data, offset, size))
-            offset += size
+            tex_nodes.append((rows, node_offset))
+            placed.append((tex.data, node_offset))
+            offset, rows, node_offset = offset + size, rows + cells * (nv + 2), node_offset + tex.data.size
         layer_textures.append(len(ints) - first_tex)
-    pool = _page_aligned(offset + 2 * POOL_GUARD)  # the guards of zeros before and after
-    thread_map(lambda p: slope_cells(p[0], count, pool[p[1]:p[1] + p[2]]), placed)  # NumPy's copies free the GIL
+    fits = spare is not None and spare.size >= node_offset
+    nodes = spare if fits else _page_aligned(max(int(WORK_ROOM * node_offset), 1))
+
+    def place(job):  # NumPy's copies free the GIL
+        data, first = job
+        nodes[first:first + data.size].reshape(data.shape)[...] = data
+
+    thread_map(place, placed)
     out = SimpleNamespace()
-    set_texture_tables(out, boxes, ints, maps, tex_layer, pool)
-    node_peaks = np.array(peaks or [np.zeros(int(np.prod(count)))]).reshape(-1, *(np.asarray(count, int)[::-1]))
-    return dict(vars(out), band_tex=band_tex, layer_textures=layer_textures, cell_peaks=_cell_range_peaks(node_peaks))
+    set_texture_tables(out, boxes, ints, maps, tex_layer, [])
+    return dict(vars(out), texels=None, pool_floats=offset + 2 * POOL_GUARD, node_floats=node_offset,
+                band_tex=band_tex, layer_textures=layer_textures, nodes=nodes,
+                tex_nodes=np.array(tex_nodes or [(0, 0)], np.int32), rows=rows)
+
+
+_CELLS = Kernel("cone_cells", ("textures", I32), ("ku", I32), ("kv", I32), ("quasi", I32), ("tex_int", BUFFER),
+                ("tex_nodes", BUFFER), ("nodes", BUFFER), ("texels", BUFFER), ("peaks", BUFFER))
+
+
+def slope_cells(cc, packed: dict, count, quasi: bool, pool=None) -> tuple:
+    """``(pool, cell_peaks)``: the texel pool of :func:`_pack`'s tables on the device ``cc``, its slope cells made
+    there from the nodes (``cl/splat/cone_cells.cl``; on a CPU device the nodes are read in place), and for
+    each texture the largest magnitude over the nodes of each range of cells (:func:`_cell_range_peaks`).
+    ``quasi``: the nodes' quasi-interpolants along the slope axes (:func:`quasi_interpolant`).  ``pool``: a device
+    buffer of that many floats or more to write over (fresh memory costs its first touch, docs/splatting.md §8)."""
+    ku, kv = (int(c) for c in count)
+    T = len(packed["tex_nodes"])
+    floats = packed["pool_floats"]
+    if pool is None:  # room for a view somewhat larger, which can then write over it
+        pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE, 4 * max(floats, min(int(WORK_ROOM * floats),
+                                                                               cc.info.max_alloc // 4)))
+    for start, size in ((0, POOL_GUARD), (floats - 2 * POOL_GUARD, 2 * POOL_GUARD)):  # the guards of zeros
+        cl.enqueue_fill_buffer(cc.queue, pool, np.float32(0.0), 4 * start, 4 * size)
+    peaks = np.zeros(T * ku * kv, np.uint32)
+    if packed["rows"]:
+        used = packed["nodes"][:packed["node_floats"]]
+        nodes = (cl.Buffer(cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=used)
+                 if cc.info.kind == "CPU" else cc.upload(used))
+        peaks_d = cla.to_device(cc.queue, peaks)
+        _CELLS(programs.build(cc, ["splat/cone_cells.cl"]), cc.queue, groups(packed["rows"]), (GROUP,),
+               textures=T, ku=ku, kv=kv, quasi=int(quasi), tex_int=cc.upload(packed["tex_int"]),
+               tex_nodes=cc.upload(packed["tex_nodes"]), nodes=nodes, texels=pool, peaks=peaks_d)
+        peaks = peaks_d.get()
+    return pool, _cell_range_peaks(peaks.view(np.float32).astype(np.float64).reshape(T, kv, ku))
+
+
+def _idle_pool(cache: dict, key, floats: int):
+    """The device pool of another view in ``cache`` that holds ``floats`` and that no view in use holds any more
+    (only the cache does), taken from it (should that view come back, its cells are made again), or None."""
+    for other, packed in cache.items():
+        pool = packed["texels"]
+        # references: the cache's, ``pool`` and getrefcount's argument
+        if other != key and pool is not None and pool.size >= 4 * floats and sys.getrefcount(pool) <= 3:
+            packed["texels"] = None
+            return pool
+    return None
 
 
 def _page_aligned(size: int) -> np.ndarray:
     """``size`` float32 zeros starting on a 4 KiB page, so that a CPU device uses them in place
-    (:meth:`clwave.splat.renderer.SplatRenderer.texel_pools`)."""
+    (:func:`slope_cells`)."""
     block = np.zeros(size + 1024, np.float32)
     first = (-block.ctypes.data % 4096) // 4
     return block[first:first + size]

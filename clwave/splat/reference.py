@@ -11,6 +11,7 @@ import numpy as np
 
 from ..device.constants import TILE
 from ..model.geometry import world_to_fine
+from .perspective import quasi_interpolant
 from .tables import LINEAR_U, LINEAR_V
 
 
@@ -195,6 +196,23 @@ def project_cone(coef, first, band_tex, band_world, band_step, tex_box, tex_laye
     slack = np.abs(edges - np.round(edges)).min(axis=1)
     centre = np.stack([col, row, depth, np.zeros(n)], 1)
     return centre, bbox, tex.astype(np.int32), count, slack
+
+
+def slope_cells(nodes, count, quasi=False) -> tuple:
+    """Reference of ``cone_cells`` (``cl/splat/cone_cells.cl``) for one texture: ``(cells, peaks)``, its nodes
+    (K, nv, nu), K = count_u count_v row-major by v, as ``cl/splat/cone.cl`` reads them, one block per cell of the
+    slope grid, (cells, nv + 2, nu + 2, 4) float32, the cell's four nodes interleaved per texel (first node, next
+    along u, next along v, both) with a zero margin all round; and each node's largest magnitude (K,).  ``quasi``:
+    the nodes' quasi-interpolants along the slope axes (:func:`clwave.splat.perspective.quasi_interpolant`)."""
+    ku, kv = (int(c) for c in count)
+    K, nv, nu = nodes.shape
+    x = np.array(nodes, np.float32).reshape(kv, ku, nv, nu)
+    if quasi:
+        quasi_interpolant(x, (0, 1))
+    cells = np.zeros((kv - 1, ku - 1, nv + 2, nu + 2, 4), np.float32)
+    for c, (dv, du) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+        cells[:, :, 1:-1, 1:-1, c] = x[dv:dv + kv - 1, du:du + ku - 1]
+    return cells.reshape(-1, nv + 2, nu + 2, 4), np.abs(x).max(axis=(2, 3)).ravel()
 
 
 def accumulate_cone(ranges, vals, first, centre, bbox, stex, values, textures, layers, layer_slope, cone,

@@ -103,7 +103,7 @@ class SplatRenderer:
         self._work = None  # per-splat buffers of a pass, and the streamed chunk's (coef, values)
         self._sizes = None  # the count tables' sizes of the last view
         self._cone_footprints = {}  # perspective views' texture tables, shared by poses of one direction
-        self._pools = {}  # the last perspective view's texel pools on the device, by their ConeTables.key
+        self._spectra_work = {}  # their footprint spectra's arrays, written over by the next view's
         for gi, g in enumerate(wv.groups):
             table = wv.ranked(gi)
             # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22); each present band
@@ -172,7 +172,8 @@ class SplatRenderer:
             for g in self.wv.groups:
                 self.stage(len(g.channels), True)
             tables = [ConeTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
-                                 max_texels=self.cc.info.max_alloc // 4, cache=self._cone_footprints)
+                                 max_texels=self.cc.info.max_alloc // 4, cache=self._cone_footprints,
+                                 work=self._spectra_work)
                       for gi, ls in enumerate(per_layer)]
         else:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
@@ -184,21 +185,9 @@ class SplatRenderer:
         return acc
 
     def texel_pools(self, tables: list) -> list:
-        """Each table's texel pool on the device; a perspective view whose footprints are the last view's (a pose
-        moved by a translation) reuses its upload.  Only the last view's pools are held.  On a CPU device a
-        perspective pool is the host's array itself (``USE_HOST_PTR``; page-aligned, read only), not a copy
-        (docs/splatting.md §8 "Cost")."""
-        keys, pools = [getattr(t, "key", None) for t in tables], []
-        for key, t in zip(keys, tables):
-            if key in self._pools:
-                pools.append(self._pools[key])
-            elif key is not None and self.cc.info.kind == "CPU":
-                pools.append(cl.Buffer(self.cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR,
-                                       hostbuf=t.texels))
-            else:
-                pools.append(self.cc.upload(t.texels))
-        self._pools = {key: pool for key, pool in zip(keys, pools) if key is not None}
-        return pools
+        """Each table's texel pool on the device: a perspective view's is made there (:class:`ConeTables`, shared
+        by poses that differ by a translation), an orthographic one's uploaded."""
+        return [t.texels if isinstance(t, ConeTables) else self.cc.upload(t.texels) for t in tables]
 
     def render(self, camera) -> RenderResult:
         """The X-ray image of one view (a :class:`Camera` or :class:`ConeBeam`) from every coefficient."""
@@ -257,7 +246,7 @@ class SplatRenderer:
         runs = max(t.tiles * max(t.layer_textures, default=0) for t in tables)
         one_splat = max(t.tiles for t in tables) * max(st.record_bytes for st in self.stages.values())
         # framebuffers, the view's tables and texel pool, and a pass's tile ranges
-        fixed = sum(16 * t.pixels + sum(getattr(t, name).nbytes for name in t.names) + 8 * t.tiles
+        fixed = sum(16 * t.pixels + sum(_bytes(getattr(t, name)) for name in t.names) + 8 * t.tiles
                     for t in tables)
         free = b.total - fixed - tile_list_bytes(b) - bin_table_bytes(runs, b)
         splat_bytes = CONE_SPLAT_BYTES if isinstance(tables[0], ConeTables) else SPLAT_BYTES
@@ -548,6 +537,11 @@ def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device
 def _energy_prefix(values) -> np.ndarray:
     """Cumulative coefficient energy sum c^2 over channels, in importance order."""
     return np.cumsum(np.sum(np.asarray(values, np.float64) ** 2, axis=1))
+
+
+def _bytes(table) -> int:
+    """A host table's bytes, or a device buffer's (a perspective view's texel pool, :class:`ConeTables`)."""
+    return table.nbytes if isinstance(table, np.ndarray) else table.size
 
 
 def _pack(table, first: int, end: int) -> tuple:

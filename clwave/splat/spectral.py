@@ -242,9 +242,12 @@ SPECTRUM_GROUP = 16  # work-items per work-group of cl/splat/footprint.cl, each 
 
 
 SPECTRUM_BLOCK = 16  # columns per work-item: the kernel's float16
+#: arrays kept for the next call to write over (a view's spectra, samples, nodes, pool) are allocated this much larger
+#: than the call that makes them needs, so that somewhat larger ones fit too
+WORK_ROOM = 1.25
 
 
-def device_spectra(cc, order: int, plans, quasi=False) -> list:
+def device_spectra(cc, order: int, plans, quasi=False, work=None) -> list:
     """Half-spectra of textures on an OpenCL device (``cl/splat/footprint.cl``), in one launch.
 
     ``plans`` holds ``(scale, axes, nu, nv)`` per texture (:func:`slice_plan`); each spectrum
@@ -252,6 +255,9 @@ def device_spectra(cc, order: int, plans, quasi=False) -> list:
     ``irfft2`` (float32 throughout: the textures are within ~1e-6 of their peak from those of
     the float64 NumPy spectra).  ``quasi``: of the textures' quasi-interpolants along rows and columns
     (:func:`clwave.splat.perspective.quasi_interpolant`, periodic), for perspective views.
+    ``work``: a dict in which the spectra's host array (and on a CPU device, whose buffers are host memory, the
+    device's) is kept and written over by the next call that fits it: fresh memory costs its first touch (a view's
+    spectra are tens of MB, docs/splatting.md §8); the spectra returned are then views of it, valid until that call.
     """
     if not plans:
         return []
@@ -274,13 +280,20 @@ def device_spectra(cc, order: int, plans, quasi=False) -> list:
         groups = -(-nv * blocks // SPECTRUM_GROUP)
         group_tex += [t] * groups
         first += groups * SPECTRUM_GROUP
-    q = cc.queue
-    out = cla.empty(q, (first * SPECTRUM_BLOCK,), np.complex64)
+    q, total, room = cc.queue, first * SPECTRUM_BLOCK, 1.0 if work is None else WORK_ROOM
+    work = {} if work is None else work
+    if work.get("host", np.zeros(0)).size < total:  # room for a somewhat larger call, which then fits
+        work["host"] = np.empty(int(room * total), np.complex64)
+    out = work.get("device")
+    if out is None or out.size < total:
+        out = cla.empty(q, work["host"].shape, np.complex64)
+        if cc.info.kind == "CPU":
+            work["device"] = out
     defines = {"CLW_ORDER": order, "CLW_TERMS": len(coeffs), "CLW_MOMENTS": moments}
     kernels = programs.build(cc, ["splat/footprint.cl"], {**defines, "CLW_QUASI": None} if quasi else defines)
     _SPECTRA(kernels, q, (first,), (SPECTRUM_GROUP,), group_tex=cc.upload(np.array(group_tex, np.int32)),
              tex_size=cc.upload(np.array(sizes, np.int32)), tex_rate=cc.upload(np.array(rates, np.float32)),
              poly=cc.upload(np.array(coeffs, np.float32)), out=out)
-    spectra = out.get()
+    spectra = out[:total].get(ary=work["host"][:total])
     return [spectra[f * SPECTRUM_BLOCK: (f + nv * blocks) * SPECTRUM_BLOCK].reshape(nv, -1)[:, : nu // 2 + 1]
             for (f, nv, blocks, _), (_, _, nu, _) in zip(sizes, plans)]

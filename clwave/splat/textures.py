@@ -142,15 +142,16 @@ def cell_axes(wavelet, u, v) -> tuple:
 
 
 # ----------------------------------------------------------------------------- textures
-def _centred(t, dtype) -> np.ndarray:
-    """FFT-order samples (sample 0 at a = b = 0) to the closed box, centre at ``(N//2, N//2)``.
+def _centred(t, dtype, out=None) -> np.ndarray:
+    """FFT-order samples (sample 0 at a = b = 0) to the closed box, centre at ``(N//2, N//2)``
+    (into ``out`` where given).
 
     Row and column N repeat row and column 0 (the period is the box width), so the box
     ``[-W/2, W/2]`` is closed on both sides.
     """
     nv, nu = t.shape
     hv, hu = nv // 2, nu // 2  # N even: N - N//2 == N//2
-    out = np.empty((nv + 1, nu + 1), dtype)
+    out = np.empty((nv + 1, nu + 1), dtype) if out is None else out
     out[hv:nv, hu:nu] = t[:hv, :hu]
     out[hv:nv, :hu] = t[:hv, hu:]
     out[:hv, hu:nu] = t[hv:, :hu]
