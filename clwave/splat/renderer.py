@@ -23,8 +23,7 @@ from ..device.context import ComputeContext
 from ..device.memory import device_budget, format_size, parse_cap
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
-from ..model.camera import Camera
-from ..model.conebeam import ConeBeam
+from ..model.conebeam import check_camera
 from ..model.wavelet import WaveletVolume
 from .coarse import Layer, coarse_factor
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
@@ -146,8 +145,7 @@ class SplatRenderer:
         """Start an image of a :class:`Camera` or :class:`ConeBeam`: resolve the view, make footprints, zero
         the framebuffers (an :class:`Accumulator`).  ``upto``: the image splats only the first ``upto``
         coefficients, so only the bands they reach get footprints (a viewer's frame while dragging)."""
-        if not isinstance(camera, (Camera, ConeBeam)):
-            raise InputError("camera must be a clwave.Camera or a clwave.ConeBeam")
+        check_camera(camera)
         view = camera.view(self.wv)
         # the world width of a pixel for the coarse framebuffers' error: in perspective the widest, at the far
         # side of the volume (docs/splatting.md §8)
@@ -499,8 +497,7 @@ def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
     from ..schedulers import client_for
 
     check_model_file(wv, "splatting")  # before any worker starts
-    if not isinstance(camera, (Camera, ConeBeam)):
-        raise InputError("camera must be a clwave.Camera or a clwave.ConeBeam")
+    check_camera(camera)
     with client_for(scheduler) as client:  # which checks the scheduler before starting anything
         shares = workers_of(client)
         results = render_parts(client, _splat_share, wv.source, [(i, shares) for i in range(shares)], device,
