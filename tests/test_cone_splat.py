@@ -361,3 +361,30 @@ def test_device_spectra_write_over_their_kept_arrays(cc):
     assert work["host"] is kept and np.shares_memory(again[0], kept)
     fresh = device_spectra(cc, 4, plans([(32, 30), (20, 22)], -0.2), True)
     assert all(np.array_equal(a, b) for a, b in zip(again, fresh)) and len(first) == 3
+
+
+@pytest.mark.parametrize("camera", [
+    clwave.Camera(0, 0, 4, perspective=True, fov=170, distance=50),
+    clwave.Camera(0, 0, 4, perspective=True, fov=179, distance=50),
+    clwave.ConeBeam(100.0, 200.0, (8, 8), pixel=2000.0),  # a detector 16 m wide 20 cm from the source
+])
+def test_too_wide_a_cone_is_refused_at_once(camera):
+    import time
+
+    wv = _model((8, 8, 8), (1.0, 1.0, 1.0), levels=1)
+    r = clwave.SplatRenderer(wv)
+    start = time.perf_counter()
+    with pytest.raises(clwave.DeviceMemoryError, match=r"too wide .* narrow the cone .* clwave\.raytrace") as err:
+        r.render(camera)
+    assert time.perf_counter() - start < 0.5 and "\n" not in str(err.value)
+
+
+def test_texel_scale_over_nodes_equals_each_nodes_least():
+    from clwave.splat.perspective import axis_scale, texel_scale
+
+    rng = np.random.default_rng(5)
+    a, b, d = rng.normal(size=(40, 3)), rng.normal(size=(40, 3)), np.array([0.7, 1.0, 2.5])
+    a[0, 1] = b[0, 1] = b[1] = 0.0  # kinks with a zero denominator
+    each = [axis_scale(x, y, d) for x, y in zip(a, b)]
+    assert np.array_equal(axis_scale(a, b, d), each)
+    assert texel_scale(a, b, d) == (max(0.7, min(each)), max(0.7, min(axis_scale(y, x, d) for x, y in zip(a, b))))
