@@ -388,3 +388,20 @@ def test_texel_scale_over_nodes_equals_each_nodes_least():
     each = [axis_scale(x, y, d) for x, y in zip(a, b)]
     assert np.array_equal(axis_scale(a, b, d), each)
     assert texel_scale(a, b, d) == (max(0.7, min(each)), max(0.7, min(axis_scale(y, x, d) for x, y in zip(a, b))))
+
+
+def test_coarse_levels_near_the_source_name_their_fixes():
+    # 16^3 at 3 levels from two diagonals: the level-3 functions reach behind the source (known-gaps §15)
+    vol = clwave.Volume(np.random.default_rng(0).random((16, 16, 16)).astype(np.float32))
+    wv = clwave.WaveletVolume.from_volume(vol, levels=3)
+    cone = dict(dsd=90.0, size=6, pixel=6.0, azimuth=30, elevation=20)
+    with pytest.raises(InputError, match=r"level-3 .* at most 2 level\(s\), a distance or dso above ([\d.]+), or the "
+                                         r"ray tracer: clwave\.raytrace\(wv, camera, absorption=False\)") as err:
+        clwave.splat(wv, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone))
+    assert "\n" not in str(err.value)
+    dso = float(re.search(r"above ([\d.]+)", str(err.value)).group(1))
+    with pytest.raises(InputError, match="too near"):  # the distance named is the least (to its 4 digits)
+        clwave.splat(wv, clwave.ConeBeam(dso * (1 - 1e-3), **cone))
+    assert clwave.splat(wv, clwave.ConeBeam(dso * (1 + 1e-3), **cone)).image.max() > 0
+    two = clwave.WaveletVolume.from_volume(vol, levels=2)
+    assert clwave.splat(two, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone)).image.max() > 0

@@ -329,6 +329,24 @@ def depth_range(view, wv, extent_xyz) -> tuple:
     return float(np.min(depth)), float(np.max(depth))
 
 
+def _too_near(view, wv, wav, d_xyz, level: int):
+    """Refuse (one line) an eye behind which the level-``level`` basis functions reach (a splat's footprint
+    integrates the whole line, docs/splatting.md §8), naming the fixes: the most levels whose functions stay in
+    front, the distance that keeps every level's in front, the ray tracer."""
+    def near(m):  # the least depth a level-m basis function reaches (the widest: scaling or wavelet along each axis)
+        return depth_range(view, wv, np.maximum(support_extent(wav, "aaa", m, d_xyz),
+                                                support_extent(wav, "ddd", m, d_xyz)))[0]
+
+    fit = 0
+    while fit + 1 < level and near(fit + 1) > 0:
+        fit += 1
+    levels = f"a model of at most {fit} level(s), " if fit else ""
+    distance = float(np.linalg.norm(view.eye - view.target)) - min(near(m) for m in range(1, wv.levels + 1))
+    raise InputError(f"the eye (X-ray source) is inside the model or too near it for splatting: its level-{level} "
+                     f"basis functions reach behind the eye; use {levels}a distance or dso above {distance:.4g}, or "
+                     "the ray tracer: clwave.raytrace(wv, camera, absorption=False)")
+
+
 class ConeTables:
     """The tables of one channel group for one perspective view (``cl/splat/cone.cl``), every layer
     (framebuffer) in one set, as :class:`clwave.splat.tables.ViewTables` for orthographic views."""
@@ -368,9 +386,7 @@ class ConeTables:
                     continue
                 near = depth_range(view, wv, support_extent(wav, b.key, b.level, d_xyz))[0]
                 if not near > 0:
-                    raise InputError("the eye (X-ray source) is inside the model or too near it for splatting: "
-                                     f"its level-{b.level} basis functions reach behind the eye; move it farther "
-                                     "away (a larger distance or dso)")
+                    _too_near(view, wv, wav, d_xyz, b.level)
                 layer_of[band] = li
                 texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, scale)
                 self.omega_s = self.omega_s or omega
