@@ -79,11 +79,13 @@ def check_slope_grid(lo, step, count, textures: int) -> None:
     need = 8 * max(int(textures), 1) * int(cells[0]) ** 2 * int(cells[1]) ** 2
     if need > CELL_PEAKS_BYTES:
         reach = np.degrees(np.arctan(np.max(np.abs([lo, lo + step * cells]))))
-        raise DeviceMemoryError(
-            f"the cone is too wide for splatting: rays up to {reach:.1f} degrees off the axis, {count[0]} x "
-            f"{count[1]} ray-slope nodes (docs/splatting.md §8) whose footprint bounds alone need "
-            f"{need / 2**20:,.0f} MiB (at most {CELL_PEAKS_BYTES / 2**20:,.0f}); narrow the cone (a smaller fov "
-            "or detector, a longer dsd), or ray-trace it: clwave.raytrace(wv, camera, absorption=False)")
+        why = (f"the cone is too wide for splatting: rays up to {reach:.1f} degrees off the axis, {count[0]} x "
+               f"{count[1]} ray-slope nodes (docs/splatting.md §8) whose footprint bounds alone need "
+               f"{need / 2**20:,.0f} MiB (at most {CELL_PEAKS_BYTES / 2**20:,.0f}); narrow the cone")
+        raise DeviceMemoryError(f"{why} (a smaller fov or detector, a longer dsd), or ray-trace it: "
+                                "clwave.raytrace(wv, camera, absorption=False)",
+                                cli=f"{why} (--fov, --size, --pixel or --dsd), or ray-trace it (clwave render "
+                                "--method raytrace --xray)")
 
 
 def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
@@ -329,22 +331,25 @@ def depth_range(view, wv, extent_xyz) -> tuple:
     return float(np.min(depth)), float(np.max(depth))
 
 
-def _too_near(view, wv, wav, d_xyz, level: int):
+def _too_near(view, wv, wav, d_xyz, level: int, drawn):
     """Refuse (one line) an eye behind which the level-``level`` basis functions reach (a splat's footprint
     integrates the whole line, docs/splatting.md §8), naming the fixes: the most levels whose functions stay in
-    front, the distance that keeps every level's in front, the ray tracer."""
-    def near(m):  # the least depth a level-m basis function reaches (the widest: scaling or wavelet along each axis)
-        return depth_range(view, wv, np.maximum(support_extent(wav, "aaa", m, d_xyz),
-                                                support_extent(wav, "ddd", m, d_xyz)))[0]
+    front (of any type), the distance that keeps those of every band ``drawn`` ((level, key)) in front, the ray
+    tracer."""
+    def near(m, keys=("aaa", "ddd")):  # the least depth a level-m function of these types reaches
+        return depth_range(view, wv, np.max([support_extent(wav, key, m, d_xyz) for key in keys], axis=0))[0]
 
     fit = 0
     while fit + 1 < level and near(fit + 1) > 0:
         fit += 1
-    levels = f"a model of at most {fit} level(s), " if fit else ""
-    distance = float(np.linalg.norm(view.eye - view.target)) - min(near(m) for m in range(1, wv.levels + 1))
-    raise InputError(f"the eye (X-ray source) is inside the model or too near it for splatting: its level-{level} "
-                     f"basis functions reach behind the eye; use {levels}a distance or dso above {distance:.4g}, or "
-                     "the ray tracer: clwave.raytrace(wv, camera, absorption=False)")
+    distance = float(np.linalg.norm(view.eye - view.target)) - min(near(m, [key]) for m, key in drawn)
+    why = (f"the eye (X-ray source) is inside the model or too near it for splatting: its level-{level} basis "
+           "functions reach behind the eye; use ")
+    fixes = f"a distance or dso above {distance:.4g}, or "
+    raise InputError(why + (f"a model of at most {fit} level(s), " if fit else "") + fixes
+                     + "the ray tracer: clwave.raytrace(wv, camera, absorption=False)",
+                     cli=why + (f"--levels {fit} or fewer, " if fit else "") + fixes
+                     + "the ray tracer (clwave render --method raytrace --xray)")
 
 
 class ConeTables:
@@ -368,8 +373,9 @@ class ConeTables:
         view0 = layers[0][0]
         d_xyz = np.array(wv.spacing[::-1], float)
         lo, step, count = slope_grid([view for view, _ in layers])
-        check_slope_grid(lo, step, count, sum(any(bands is None or (b.level, b.key) in bands for _, bands in layers)
-                                              for b in g.bands))
+        drawn = [(b.level, b.key) for b in g.bands if any(bands is None or (b.level, b.key) in bands
+                                                          for _, bands in layers)]
+        check_slope_grid(lo, step, count, len(drawn))
         nodes = np.stack(np.meshgrid(lo[0] + step[0] * np.arange(count[0]), lo[1] + step[1] * np.arange(count[1])),
                          -1).reshape(-1, 2)
         self.cone = np.zeros((6, 4), np.float32)
@@ -386,7 +392,7 @@ class ConeTables:
                     continue
                 near = depth_range(view, wv, support_extent(wav, b.key, b.level, d_xyz))[0]
                 if not near > 0:
-                    _too_near(view, wv, wav, d_xyz, b.level)
+                    _too_near(view, wv, wav, d_xyz, b.level, drawn)
                 layer_of[band] = li
                 texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, scale)
                 self.omega_s = self.omega_s or omega
