@@ -46,8 +46,8 @@ SLOPE_STEP = 0.1
 QUASI_GAIN = np.sqrt(2.0)
 TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.splat.tables.TEXTURE_TOL)
 FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
-#: the most host memory of a view's slope-cell bounds (``cell_peaks``, :func:`check_slope_grid`): 45 x 45 cells for 8
-#: textures, rays up to ~65 degrees off the axis (a square cone)
+#: the most host memory of a view's slope-cell bounds (``cell_peaks``, :func:`check_slope_grid`): 64 x 64 cells for the
+#: 8 textures of one level, 49 x 49 for three levels' 22; rays up to 68-72 degrees off the axis of a square cone
 CELL_PEAKS_BYTES = 1 << 30
 SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
 #: the host tables of a perspective view, uploaded by name (cl/splat/cone.cl)
