@@ -361,3 +361,49 @@ def test_device_spectra_write_over_their_kept_arrays(cc):
     assert work["host"] is kept and np.shares_memory(again[0], kept)
     fresh = device_spectra(cc, 4, plans([(32, 30), (20, 22)], -0.2), True)
     assert all(np.array_equal(a, b) for a, b in zip(again, fresh)) and len(first) == 3
+
+
+@pytest.mark.parametrize("camera", [
+    clwave.Camera(0, 0, 4, perspective=True, fov=170, distance=50),
+    clwave.Camera(0, 0, 4, perspective=True, fov=179, distance=50),
+    clwave.ConeBeam(100.0, 200.0, (8, 8), pixel=2000.0),  # a detector 16 m wide 20 cm from the source
+])
+def test_too_wide_a_cone_is_refused_at_once(camera):
+    import time
+
+    wv = _model((8, 8, 8), (1.0, 1.0, 1.0), levels=1)
+    r = clwave.SplatRenderer(wv)
+    start = time.perf_counter()
+    with pytest.raises(clwave.DeviceMemoryError, match=r"too wide .* narrow the cone .* clwave\.raytrace") as err:
+        r.render(camera)
+    assert time.perf_counter() - start < 0.5 and "\n" not in str(err.value)
+    assert "(--fov, --size, --pixel or --dsd), or ray-trace it (clwave render --method raytrace --xray)" in (
+        err.value.cli_message())
+
+
+def test_texel_scale_over_nodes_equals_each_nodes_least():
+    from clwave.splat.perspective import axis_scale, texel_scale
+
+    rng = np.random.default_rng(5)
+    a, b, d = rng.normal(size=(40, 3)), rng.normal(size=(40, 3)), np.array([0.7, 1.0, 2.5])
+    a[0, 1] = b[0, 1] = b[1] = 0.0  # kinks with a zero denominator
+    each = [axis_scale(x, y, d) for x, y in zip(a, b)]
+    assert np.array_equal(axis_scale(a, b, d), each)
+    assert texel_scale(a, b, d) == (max(0.7, min(each)), max(0.7, min(axis_scale(y, x, d) for x, y in zip(a, b))))
+
+
+def test_coarse_levels_near_the_source_name_their_fixes():
+    # 16^3 at 3 levels from two diagonals: the level-3 functions reach behind the source (known-gaps §15)
+    vol = clwave.Volume(np.random.default_rng(0).random((16, 16, 16)).astype(np.float32))
+    wv = clwave.WaveletVolume.from_volume(vol, levels=3)
+    cone = dict(dsd=90.0, size=6, pixel=6.0, azimuth=30, elevation=20)
+    with pytest.raises(InputError, match=r"level-3 .* at most 2 level\(s\), a distance or dso above ([\d.]+), or the "
+                                         r"ray tracer: clwave\.raytrace\(wv, camera, absorption=False\)") as err:
+        clwave.splat(wv, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone))
+    assert "\n" not in str(err.value) and "--levels 2 or fewer" in err.value.cli_message()
+    dso = float(re.search(r"above ([\d.]+)", str(err.value)).group(1))
+    with pytest.raises(InputError, match="too near"):  # the distance named is the least (to its 4 digits)
+        clwave.splat(wv, clwave.ConeBeam(dso * (1 - 1e-3), **cone))
+    assert clwave.splat(wv, clwave.ConeBeam(dso * (1 + 1e-3), **cone)).image.max() > 0
+    two = clwave.WaveletVolume.from_volume(vol, levels=2)
+    assert clwave.splat(two, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone)).image.max() > 0

@@ -136,3 +136,22 @@ def test_slope_grid_covers_every_pixel():
     s = np.concatenate([view.slopes().reshape(-1, 2) for view in views])
     assert np.array_equal(lo, s.min(axis=0)) and np.allclose(lo + step * (count - 1), s.max(axis=0), atol=1e-15)
     assert np.all(step <= SLOPE_STEP) and np.all(count >= 2)
+
+
+@pytest.mark.parametrize("kw", GEOMETRIES[:2])
+def test_mirrored_matrix_named_with_its_fix(kw):
+    cb = ConeBeam(**kw)
+    P, W = cb.matrix(), cb.size[1]
+    mirrored = np.vstack([(W - 1) * P[2] - P[0], P[1:]])  # columns the other way: col -> W - 1 - col
+    for scale in (1.0, -2.0):
+        with pytest.raises(InputError, match=r"mirrored .*P\[0\] = \(W - 1\) P\[2\] - P\[0\]") as err:
+            ConeBeam.from_matrix(scale * mirrored, cb.size).view(VOL)
+        assert "\n" not in str(err.value)
+    with pytest.raises(InputError, match="mirrored"):  # a reduced frame of it too
+        ConeBeam.from_matrix(mirrored, cb.size).reduced(2).view(VOL)
+    fixed = np.vstack([(W - 1) * mirrored[2] - mirrored[0], mirrored[1:]])  # the fix the line gives
+    assert np.allclose(ConeBeam.from_matrix(fixed, cb.size).view(VOL).to_pixels(VOL.origin),
+                       cb.view(VOL).to_pixels(VOL.origin), atol=1e-9)
+    with pytest.raises(InputError, match="turn the gantry") as err:  # a gantry facing away is not a matrix's mirror
+        ConeBeam(**dict(kw, azimuth=kw.get("azimuth", 0) + 180, isocentre=2 * cb.source - cb.isocentre)).view(VOL)
+    assert "mirrored" not in str(err.value)

@@ -11,7 +11,8 @@ side; n, u, v are the frame of paper eq. 31 for the gantry angles (azimuth, elev
 A 3 x 4 projection matrix P maps homogeneous world points ``(x, y, z, 1)`` to homogeneous pixel
 coordinates ``(col w, row w, w)`` with pixel centres at whole (col, row), row 0 at the top; ``w`` is the
 depth along -n.  ``P = K [R | -R source]`` with ``R = (u, -v, -n)`` as rows and
-``K = [[1/σ_u, 0, c_col], [0, 1/σ_v, c_row], [0, 0, 1]]``.
+``K = [[1/σ_u, 0, c_col], [0, 1/σ_v, c_row], [0, 0, 1]]``.  P's sign is free, so a mirrored (left-handed)
+detector's matrix is that of a source facing away: :meth:`ConeBeam.view` names it when the volume is behind.
 """
 
 from __future__ import annotations
@@ -54,6 +55,8 @@ class ConeBeam:
     True
     """
 
+    _from_matrix = False  # made by from_matrix, whose sign cannot tell a mirrored detector (view)
+
     def __init__(self, dso, dsd, size, pixel=1.0, *, offset=(0.0, 0.0), azimuth=0.0, elevation=0.0, roll=0.0,
                  isocentre=(0.0, 0.0, 0.0)):
         dso, dsd = finite_number(dso, "dso"), finite_number(dsd, "dsd")
@@ -90,7 +93,9 @@ class ConeBeam:
         The matrix fixes the source and the ray of every pixel, not the detector's distance: ``dso`` is the
         source's distance from ``isocentre`` (default: the point of the principal ray nearest the world
         origin), and ``dsd``, ``pixel`` and ``offset`` are reported for a detector through the isocentre.
-        Refused with one line: non-finite or singular matrices, skewed pixels.
+        Refused with one line: non-finite or singular matrices, skewed pixels; and at :meth:`view`, a volume
+        behind the source, which is how a mirrored detector reads (``det P[:, :3]``'s sign is free, so it is taken
+        positive: points in front at ``w > 0`` for right-handed detectors).
         """
         P = np.asarray(matrix, float) if np.ndim(matrix) == 2 else np.zeros(0)
         if P.shape != (3, 4) or not np.all(np.isfinite(P)):
@@ -114,6 +119,7 @@ class ConeBeam:
             isocentre = source - n * float(np.dot(source, n))  # the principal ray's point nearest the origin
         cb = cls.__new__(cls)
         cb._set(n, u, v, source, (H, W), slope, principal, _vector(isocentre, "isocentre"))
+        cb._from_matrix = True
         cb.dso = float(np.linalg.norm(cb.source - cb.isocentre))
         if not cb.dso > 0:
             raise InputError("the isocentre must not be the source")
@@ -209,6 +215,10 @@ class ConeBeam:
                              "move it out (a larger dso)")
         corners = np.array(np.meshgrid(*zip(lo, hi), indexing="ij")).reshape(3, -1).T
         if np.all((corners - self.source) @ self.n >= 0):
+            if self._from_matrix:  # the mirror image of a right-handed detector facing the volume
+                raise InputError("the volume is behind the X-ray source of this projection matrix: its detector is "
+                                 "mirrored (left-handed; clwave's columns run along u, rows down v); flip the "
+                                 "matrix's columns (P[0] = (W - 1) P[2] - P[0]) and the image's, or turn the pose")
             raise InputError("the volume is behind the X-ray source: turn the gantry or move the isocentre")
         H, W = self.size
         fov = float(np.degrees(2.0 * np.arctan(self.slope[1] * H / 2.0)))
@@ -222,7 +232,7 @@ class ConeBeam:
         cb = ConeBeam.__new__(ConeBeam)
         cb._set(self.n, self.u, self.v, self.source, (-(-H // reduction), -(-W // reduction)),
                 (self.slope[0] * reduction, self.slope[1] * reduction), self.principal, self.isocentre)
-        cb.dso, cb.dsd, cb.offset = self.dso, self.dsd, self.offset
+        cb.dso, cb.dsd, cb.offset, cb._from_matrix = self.dso, self.dsd, self.offset, self._from_matrix
         cb.pixel = (self.pixel[0] * reduction, self.pixel[1] * reduction)
         return cb
 

@@ -46,6 +46,9 @@ SLOPE_STEP = 0.1
 QUASI_GAIN = np.sqrt(2.0)
 TEXTURE_TOL = 1e-4  # cubic footprints trimmed as orthographic ones (clwave.splat.tables.TEXTURE_TOL)
 FOOTPRINT_CACHE = 2  # views' texture tables a renderer keeps for poses that share a direction (ConeTables)
+#: the most host memory of a view's slope-cell bounds (``cell_peaks``, :func:`check_slope_grid`): 64 x 64 cells for the
+#: 8 textures of one level, 49 x 49 for three levels' 22; rays up to 68-72 degrees off the axis of a square cone
+CELL_PEAKS_BYTES = 1 << 30
 SPECTRA_BATCH_BYTES = 256 << 20  # the footprint spectra of a view go to the device in launches of at most this
 #: the host tables of a perspective view, uploaded by name (cl/splat/cone.cl)
 CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "layers", "layer_slope", "cone",
@@ -65,6 +68,24 @@ def slope_grid(views) -> tuple:
     count = np.maximum(2, np.ceil((hi - lo) / SLOPE_STEP - 1e-9).astype(int) + 1)
     step = np.where(hi > lo, (hi - lo) / (count - 1), SLOPE_STEP)
     return lo, step, count
+
+
+def check_slope_grid(lo, step, count, textures: int) -> None:
+    """Refuse (one line, before any work per node) a view whose :func:`slope_grid` ``(lo, step, count)`` is too wide
+    for splatting: ``textures`` footprint textures need bounds over every range of slope cells (``cell_peaks``,
+    ``T (k_u - 1)^2 (k_v - 1)^2`` doubles), which grow as tan^4 of the half-angle; past :data:`CELL_PEAKS_BYTES`
+    the textures' texels are far beyond any device's memory too (docs/splatting.md §8)."""
+    cells = np.asarray(count, np.int64) - 1
+    need = 8 * max(int(textures), 1) * int(cells[0]) ** 2 * int(cells[1]) ** 2
+    if need > CELL_PEAKS_BYTES:
+        reach = np.degrees(np.arctan(np.max(np.abs([lo, lo + step * cells]))))
+        why = (f"the cone is too wide for splatting: rays up to {reach:.1f} degrees off the axis, {count[0]} x "
+               f"{count[1]} ray-slope nodes (docs/splatting.md §8) whose footprint bounds alone need "
+               f"{need / 2**20:,.0f} MiB (at most {CELL_PEAKS_BYTES / 2**20:,.0f}); narrow the cone")
+        raise DeviceMemoryError(f"{why} (a smaller fov or detector, a longer dsd), or ray-trace it: "
+                                "clwave.raytrace(wv, camera, absorption=False)",
+                                cli=f"{why} (--fov, --size, --pixel or --dsd), or ray-trace it (clwave render "
+                                "--method raytrace --xray)")
 
 
 def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
@@ -113,8 +134,8 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         m, key = int(m), check_key(key)
         extent = support_extent(wav, key, m, d_xyz)
         # every node on one grid: the widest oblique projection of the support box over the nodes
-        widths[(m, key)] = (max(float(np.abs(u + s * n) @ extent) for s in slopes[:, 0]),
-                            max(float(np.abs(v + s * n) @ extent) for s in slopes[:, 1]))
+        widths[(m, key)] = (max(float(np.abs(u + s * n) @ extent) for s in np.unique(slopes[:, 0])),
+                            max(float(np.abs(v + s * n) @ extent) for s in np.unique(slopes[:, 1])))
         (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, h)
                                       for w, h in zip(widths[(m, key)], np.broadcast_to(texel, 2)))
         grids[(m, key)] = (nu, h_u, nv, h_v)
@@ -270,30 +291,34 @@ def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, scale) -> t
     return (texel, texel), omega
 
 
-def texel_scale(axes, d_xyz) -> tuple:
+def texel_scale(axes_u, axes_v, d_xyz) -> tuple:
     """``(c_u, c_v)``: the spacing a footprint varies on along each sheared texture axis, over every slope node's
-    ``axes`` ``(u + s_u n, v + s_v n)``: at least d_min, more where every world axis that the texture axis crosses
-    is coarser (:func:`axis_scale`; a CT's 2.5 mm slices seen from the side).  The same for every band."""
+    axes ``u + s_u n`` (``axes_u``, (K, 3)) and ``v + s_v n`` (``axes_v``): at least d_min, more where every world
+    axis that the texture axis crosses is coarser (:func:`axis_scale`; a CT's 2.5 mm slices seen from the side).
+    The same for every band."""
     d_min = float(np.min(d_xyz))
-    return tuple(max(d_min, min(axis_scale(a[i], a[1 - i], d_xyz) for a in axes)) for i in (0, 1))
+    return (max(d_min, float(np.min(axis_scale(axes_u, axes_v, d_xyz)))),
+            max(d_min, float(np.min(axis_scale(axes_v, axes_u, d_xyz)))))
 
 
-def axis_scale(a, b, d_xyz) -> float:
+def axis_scale(a, b, d_xyz):
     """``min_t max_k d_k |a_k + t b_k|``: the spectrum ``F(U a + V b)`` of a tensor-product footprint (§1:
     ``Π_k G(2^m d_k w_k)``) falls, at every V, at least as fast along U as an axis-aligned one of spacing this
     (its slowest factor's argument is at least ``U`` times it), so a texel along ``a`` may be ``pi`` times it
     over the band.  The minimum of this convex, piecewise linear function of t is at a kink: where a term
-    vanishes or two are equal."""
+    vanishes or two are equal.  ``a``, ``b``: (3,), a float back, or (K, 3), one for each row."""
     a, b, d = (np.asarray(x, float) for x in (a, b, d_xyz))
-    da, db = d * a, d * b
-    t = [0.0] + [-x / y for x, y in zip(da, db) if y != 0.0]
-    for i in range(3):
-        for j in range(3):
-            for sign in (1.0, -1.0):
-                if i != j and db[i] != sign * db[j]:
-                    t.append((sign * da[j] - da[i]) / (db[i] - sign * db[j]))
-    t = np.array(t)
-    return float(np.min(np.max(np.abs(da[None, :] + t[:, None] * db[None, :]), axis=1)))
+    da, db = np.atleast_2d(d * a), np.atleast_2d(d * b)
+
+    def kink(num, den):  # num / den, or 0 (a kink listed already) where den is 0
+        return np.divide(num, den, out=np.zeros_like(num), where=den != 0.0)
+
+    t = [np.zeros(len(da))] + [kink(-da[:, k], db[:, k]) for k in range(3)]
+    t += [kink(sign * da[:, j] - da[:, i], db[:, i] - sign * db[:, j])
+          for i in range(3) for j in range(3) for sign in (1.0, -1.0) if i != j]
+    t = np.stack(t, axis=1)  # (K, kinks)
+    out = np.min(np.max(np.abs(da[:, None, :] + t[:, :, None] * db[:, None, :]), axis=2), axis=1)
+    return float(out[0]) if a.ndim == 1 else out
 
 
 def depth_range(view, wv, extent_xyz) -> tuple:
@@ -304,6 +329,27 @@ def depth_range(view, wv, extent_xyz) -> tuple:
                                    indexing="ij")).reshape(3, -1).T
     depth = view.depth(corners)
     return float(np.min(depth)), float(np.max(depth))
+
+
+def _too_near(view, wv, wav, d_xyz, level: int, drawn):
+    """Refuse (one line) an eye behind which the level-``level`` basis functions reach (a splat's footprint
+    integrates the whole line, docs/splatting.md §8), naming the fixes: the most levels whose functions stay in
+    front (of any type), the distance that keeps those of every band ``drawn`` ((level, key)) in front, the ray
+    tracer."""
+    def near(m, keys=("aaa", "ddd")):  # the least depth a level-m function of these types reaches
+        return depth_range(view, wv, np.max([support_extent(wav, key, m, d_xyz) for key in keys], axis=0))[0]
+
+    fit = 0
+    while fit + 1 < level and near(fit + 1) > 0:
+        fit += 1
+    distance = float(np.linalg.norm(view.eye - view.target)) - min(near(m, [key]) for m, key in drawn)
+    why = (f"the eye (X-ray source) is inside the model or too near it for splatting: its level-{level} basis "
+           "functions reach behind the eye; use ")
+    fixes = f"a distance or dso above {distance:.4g}, or "
+    raise InputError(why + (f"a model of at most {fit} level(s), " if fit else "") + fixes
+                     + "the ray tracer: clwave.raytrace(wv, camera, absorption=False)",
+                     cli=why + (f"--levels {fit} or fewer, " if fit else "") + fixes
+                     + "the ray tracer (clwave render --method raytrace --xray)")
 
 
 class ConeTables:
@@ -327,13 +373,16 @@ class ConeTables:
         view0 = layers[0][0]
         d_xyz = np.array(wv.spacing[::-1], float)
         lo, step, count = slope_grid([view for view, _ in layers])
+        drawn = [(b.level, b.key) for b in g.bands if any(bands is None or (b.level, b.key) in bands
+                                                          for _, bands in layers)]
+        check_slope_grid(lo, step, count, len(drawn))
         nodes = np.stack(np.meshgrid(lo[0] + step[0] * np.arange(count[0]), lo[1] + step[1] * np.arange(count[1])),
                          -1).reshape(-1, 2)
         self.cone = np.zeros((6, 4), np.float32)
         self.cone[0, :3], self.cone[1, :3], self.cone[2, :3], self.cone[3, :3] = view0.eye, view0.n, view0.u, view0.v
         self.cone[4] = (*view0.principal, *lo)
         self.cone[5] = (*(1.0 / step), *count)
-        scale = texel_scale([(view0.u + su * view0.n, view0.v + sv * view0.n) for su, sv in nodes], d_xyz)
+        scale = texel_scale(view0.u + nodes[:, :1] * view0.n, view0.v + nodes[:, 1:] * view0.n, d_xyz)
         # each band in the first layer that draws it, with texels of 1/P of its nearest pixel
         texels, layer_of, self.omega_s = {}, {}, None
         for li, (view, bands) in enumerate(layers):
@@ -343,9 +392,7 @@ class ConeTables:
                     continue
                 near = depth_range(view, wv, support_extent(wav, b.key, b.level, d_xyz))[0]
                 if not near > 0:
-                    raise InputError("the eye (X-ray source) is inside the model or too near it for splatting: "
-                                     f"its level-{b.level} basis functions reach behind the eye; move it farther "
-                                     "away (a larger distance or dso)")
+                    _too_near(view, wv, wav, d_xyz, b.level, drawn)
                 layer_of[band] = li
                 texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, scale)
                 self.omega_s = self.omega_s or omega
