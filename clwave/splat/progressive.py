@@ -8,7 +8,6 @@ image (:class:`SplatEstimate`, from the coefficients still to splat) and, on dem
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
 
@@ -176,6 +175,7 @@ class SplatEstimate:
             weight = band_energies(g.wavelet, r.wv.spacing, view)[table.level.astype(np.int64) * 8 + table.key_code]
             c2 = np.sum(np.asarray(table.values, np.float64) ** 2, axis=1)
             self.prefix.append(np.concatenate([[0.0], np.cumsum(weight * c2)]))
+        self.whole = sum(float(p[-1]) for p in self.prefix)
         self.last, self.done, self.kappa, self.top_ratio = None, 0, None, None
 
     def predicted(self, count: int) -> float:
@@ -192,7 +192,7 @@ class SplatEstimate:
         step = image - last
         peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
         measured, top = float(np.sum(step.astype(np.float64) ** 2)), float(np.max(np.abs(step), initial=0.0))
-        made, rest = self.predicted(done) - self.predicted(before), self.predicted(sys.maxsize) - self.predicted(done)
+        made, rest = self.predicted(done) - self.predicted(before), self.whole - self.predicted(done)
         if made > 0 and measured > 0:
             self.kappa, self.top_ratio = measured / made, top / np.sqrt(made)
         if self.kappa is None:  # nothing measured yet: the step alone
