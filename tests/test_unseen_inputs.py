@@ -94,8 +94,9 @@ def test_a_first_splatting_frame_of_one_coefficient_carries_an_estimate(scalar_m
     wv = scalar_model.threshold(keep=0.05)
     first = next(iter(clwave.progressive(wv, clwave.Camera(30, 20, (6, 6)), steps=8)))
     figures = first.figures()
-    assert first.coefficients == 1 and figures["estimated_relative_max_error"] == 1.0  # the step from nothing
-    assert 0 < figures["estimated_relative_rms_error"] < 1
+    assert first.coefficients == 1  # its estimate: the step from nothing, scaled to the rest (docs/splatting.md §5)
+    for norm in ("rms", "max"):
+        assert figures[f"relative_{norm}_error"] <= figures[f"estimated_relative_{norm}_error"] < np.inf, figures
 
 
 def test_beer_lambert_never_brighter_than_the_source():
