@@ -168,6 +168,7 @@ class FieldAt:
     q_bound: float
     occupied_fraction: float
     field_tables: dict | None
+    joins: object
 
 
 def field_at(field, cc, pages) -> FieldAt:
@@ -177,9 +178,23 @@ def field_at(field, cc, pages) -> FieldAt:
     occ_origin = field.origin * SUPER
     super_host, super_origin = superblocks(bound, occ_origin)
     q = cc.queue
+    joins = cla.to_device(q, lattice_joins(field, pages))
     return FieldAt(pages, np.unique(pages[pages >= 0]), cla.to_device(q, bound), cla.to_device(q, super_host),
                    super_host, super_origin, clip_box(bound, occ_origin), float(bound.max(initial=0.0)),
-                   float(np.mean(bound > 0)), field.tables(cc, pages) if field.resident else None)
+                   float(np.mean(bound > 0)), dict(field.tables(cc, pages), joins=joins) if field.resident else None,
+                   joins)
+
+
+def lattice_joins(field, pages) -> np.ndarray:
+    """uint8 per brick (Z, Y, X): the spacing of its knot lattice where that is coarser than the fine one and the
+    brick is not mixed, else 0.  A segment on a coarse lattice crosses the face into a brick with its own spacing
+    (docs/raytracing.md §3, "segments per brick"): bricks of one level share that level's lattice and hold the same
+    coefficients where their boxes meet."""
+    out = np.zeros(pages.shape, np.uint8)
+    slots = pages[pages >= 0]
+    spacing = field.lattices[slots, 3]  # the fine lattice's is 1 or 1/2, a coarse one's 2^l
+    out[pages >= 0] = np.where((field.mixes[slots, 0] < 0) & (spacing >= 2), spacing, 0).astype(np.uint8)
+    return out
 
 
 def pick(field, caps) -> np.ndarray:
