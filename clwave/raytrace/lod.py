@@ -156,7 +156,8 @@ def brick_caps(detail: Detail, levels: int, view, bricks_lo, spacing) -> np.ndar
 class FieldAt:
     """What a render of the B-spline field reads at one choice of detail: the slot of each brick (``pages``,
     (Z, Y, X), -1 for none) and the picked ``slots``, the block bounds on the device and their superblocks, the
-    clip box, the largest bound and the occupied block fraction, and the field's tables (resident pools)."""
+    clip box, the largest bound and the occupied block fraction, the field's tables (resident pools), and per brick
+    whether a coarse segment may cross into it (``joins``, :func:`lattice_joins`)."""
 
     pages: np.ndarray
     slots: np.ndarray
@@ -193,7 +194,8 @@ def lattice_joins(field, pages) -> np.ndarray:
     out = np.zeros(pages.shape, np.uint8)
     slots = pages[pages >= 0]
     spacing = field.lattices[slots, 3]  # the fine lattice's is 1 or 1/2, a coarse one's 2^l
-    out[pages >= 0] = np.where((field.mixes[slots, 0] < 0) & (spacing >= 2), spacing, 0).astype(np.uint8)
+    joined = (field.mixes[slots, 0] < 0) & (spacing >= 2) & (spacing < 256)  # (a byte: levels past 7 do not join)
+    out[pages >= 0] = np.where(joined, spacing, 0).astype(np.uint8)
     return out
 
 
