@@ -39,7 +39,7 @@ typedef __global const coef_t *corner_t;
 #define FIELD_PARAMS __global const coef_t *coef, __global const int *pages, const int4 page_origin, \
                      const int4 page_shape, __global const float4 *frames, __global const int4 *boxes, \
                      __global const float4 *lattices, __global const int4 *mixes, __global const uchar *pieces, \
-                     __global const Quant *quant
+                     __global const Quant *quant, __global const uchar *joins
 typedef struct {
     __global const coef_t *coef;
     __global const int *pages;
@@ -50,8 +50,9 @@ typedef struct {
     __global const int4 *mixes;  /* per slot: a mixed brick's coarse slot (-1: not mixed), first piece, pieces per axis */
     __global const uchar *pieces; /* per piece of a mixed brick: 1 to march it on the coarse slot */
     __global const Quant *quant; /* per slot of a scalar pool: where its q lie, and their offset and step */
+    __global const uchar *joins; /* per brick of the page table: its coarse lattice's spacing (not mixed), else 0 */
 } Field;
-#define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices, mixes, pieces, quant}
+#define FIELD_INIT {coef, pages, page_origin, page_shape, frames, boxes, lattices, mixes, pieces, quant, joins}
 #define FIELD_BRICK CLW_SUPER_CELLS /* a brick is a superblock */
 /* The brick the ray is in (field_lattice sets it): the slot its segments read, and in a mixed brick
  * (clwave/raytrace/pieces.py, docs/raytracing.md §3) its fine and coarse slots and their knot lattices, the
@@ -97,6 +98,20 @@ inline real4 field_lattice(const Field G, const real3 x, Active *A)
         A->parts = (int)(A->coarse_lat.w / m.w);
     }
     return A->fine_lat;
+}
+
+/* whether the brick holding x goes on with the knot lattice lat of the one the ray is in, so that a segment may cross
+ * the face between them (docs/raytracing.md §3, "segments per brick"): a brick that is not mixed, on the same lattice
+ * (a coarse one: the caller's test; `joins` says it for every brick, whichever slots a pass holds).  Bricks of one
+ * level share its lattice and hold the same coefficients where their boxes meet, and a segment lies in one lattice
+ * cell, whose coefficients are all in the box of each brick it touches: the brick the segment starts in gives the
+ * polynomial of its whole cell. */
+inline bool field_continues(const Field G, const real3 x, const real4 lat)
+{
+    const int4 k = convert_int4((real4)(floor(x / FIELD_BRICK), 0)) - G.page_origin;
+    if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= G.page_shape.x || k.y >= G.page_shape.y || k.z >= G.page_shape.z)
+        return false;
+    return G.joins[((size_t)k.z * G.page_shape.y + k.y) * G.page_shape.x + k.x] == lat.w;
 }
 
 /* whether the ray is in a mixed brick */

@@ -207,7 +207,8 @@ inline bool reached(__global const uchar *content, const int4 origin, const int4
  *   passes       0: one pass over the whole ray.  Else the ray is marched only inside the box pass_lo ..
  *                pass_hi (grid-0 fine coordinates), going on from carry (premultiplied colour and T, or the
  *                X-ray integrals), ledger (the skipping and shading budgets left, R consumed, and R of the
- *                whole ray: 0 before the first pass) and stats, which it updates (docs/raytracing.md §6)
+ *                whole ray: 0 before the first pass), resume (where the last pass stopped, -inf before the first: a
+ *                coarse segment may end past a pass's box) and stats, which it updates (docs/raytracing.md §6)
  * Grid: global (W, H). */
 __kernel void raytrace(__global float4 *image, __global int4 *stats, __global int4 *lattice_stats, const int width,
                        const int height,
@@ -225,7 +226,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                        __constant const float4 *lights, const int nlights, const float4 phong,
                        __global const real4 *tf,
                        const int passes, const float4 pass_lo, const float4 pass_hi, __global real4 *carry,
-                       __global real4 *ledger)
+                       __global real4 *ledger, __global real *resume)
 {
     const int col = get_global_id(0), row = get_global_id(1);
     if (col >= width || row >= height)
@@ -292,6 +293,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                 tb = fmin(tb, fmax(ea, eb));
             }
         }
+        ta = fmax(ta, resume[pix]); /* the last pass's last segment (or skip) may have ended past its box */
         if (!(tb > ta))
             return;
     }
@@ -363,6 +365,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
     /* the knot planes of the brick the ray is in (the field's lattice there), and where it leaves the brick */
     real4 lat = (real4)(0, 0, 0, CLW_LATTICE);
     real brick_end = FIELD_BRICK ? -INFINITY : INFINITY;
+    real cut_end = tb; /* where segments are cut: the brick's face, or the next brick's where that one goes on */
     real piece_end = INFINITY; /* in a mixed brick, where the ray leaves the piece it is in */
     Planes planes;
     real t = ta;
@@ -370,11 +373,23 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
     while (t < tb) {
         if (!(t < brick_end)) { /* a new brick: its lattice, and where the ray leaves it */
             const Planes faces = next_planes(x0, dd, inv, t, (real4)(0, 0, 0, FIELD_BRICK));
-            brick_end = fmin(tb, nearest(&faces));
+            const real face = nearest(&faces);
+            brick_end = fmin(tb, face);
             lat = field_lattice(G, X0 + (t + brick_end) / 2 * D, &active);
             replan = true;
+            cut_end = brick_end;
 #ifdef FIELD_MIXES
             piece_end = field_mixed(&active) ? -INFINITY : INFINITY;
+            /* a coarse lattice that the next brick goes on with: segments cross the face (the next one starts the
+             * look-up of that brick), so a lattice cell cut by a face is one segment, not two; also where a pass's
+             * box ends there (the next pass starts where the segment ended), so that passes cut as one pass does */
+            if (lat.w > CLW_LATTICE && face < t1 && !field_mixed(&active)) {
+                Planes next = faces;
+                step_planes(X0, inv3, step, face, (real4)(0, 0, 0, FIELD_BRICK), &next);
+                const real beyond = fmin(t1, nearest(&next));
+                if (field_continues(G, X0 + (face + beyond) / 2 * D, lat))
+                    cut_end = beyond;
+            }
         }
         if (!(t < piece_end)) { /* a mixed brick's next run of pieces with one flag: the coarse slot or the fine one */
             Planes cuts = next_planes(x0, dd, inv, t, active.piece_lat);
@@ -404,7 +419,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             const real tface = nearest(&faces);
             bnd = region_bound(x0, dd, inv, X0 + (t + tface) / 2 * D, tface, t1, &regions, &fine_end, &texit);
         }
-        real tn = coarse ? t : segment_end(x0, dd, inv, t, lat, fmin(fmin(brick_end, piece_end), tb), &planes, &replan);
+        real tn = coarse ? t : segment_end(x0, dd, inv, t, lat, fmin(fmin(cut_end, piece_end), t1), &planes, &replan);
         if (!coarse && !(tn <= texit)) /* a new block or superblock: its bound, and where the ray leaves it */
             bnd = region_bound(x0, dd, inv, X0 + (t + tn) / 2 * D, tn, t1, &regions, &fine_end, &texit);
         const real swept = bnd * (texit - t); /* the bound integrated over [t, texit]: what a skip passes */
@@ -425,7 +440,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
         }
         real marched = bnd * (tn - t); /* the bound integrated over the segment */
         if (coarse) {
-            tn = segment_end(x0, dd, inv, t, lat, fmin(fmin(brick_end, piece_end), tb), &planes, &replan);
+            tn = segment_end(x0, dd, inv, t, lat, fmin(fmin(cut_end, piece_end), t1), &planes, &replan);
             marched = bnd * (fmin(tn, texit) - t);
             if (tn > texit) /* it crosses blocks: each one's bound counts, and it ends before an empty one */
                 marched += swept_bound(x0, dd, inv, X0, D, inv3, step, texit, &tn, t1, &regions, &fine_end, &bnd,
@@ -574,12 +589,14 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
     if (passes) {
         carry[pix] = I;
         ledger[pix] = (real4)(skip_budget, 0, 0, 0);
+        resume[pix] = t;
     }
 #else
     image[pix] = (float4)(convert_float3(I), (float)(1 - T));
     if (passes) {
         carry[pix] = (real4)(I, T);
         ledger[pix] = (real4)(skip_budget, shade_budget, consumed, rest);
+        resume[pix] = t;
     }
 #endif
     stats[pix] = (int4)(segments, midpoints, evals, flags | active_flags(&active));

@@ -156,7 +156,8 @@ def brick_caps(detail: Detail, levels: int, view, bricks_lo, spacing) -> np.ndar
 class FieldAt:
     """What a render of the B-spline field reads at one choice of detail: the slot of each brick (``pages``,
     (Z, Y, X), -1 for none) and the picked ``slots``, the block bounds on the device and their superblocks, the
-    clip box, the largest bound and the occupied block fraction, and the field's tables (resident pools)."""
+    clip box, the largest bound and the occupied block fraction, the field's tables (resident pools), and per brick
+    whether a coarse segment may cross into it (``joins``, :func:`lattice_joins`)."""
 
     pages: np.ndarray
     slots: np.ndarray
@@ -168,6 +169,7 @@ class FieldAt:
     q_bound: float
     occupied_fraction: float
     field_tables: dict | None
+    joins: object
 
 
 def field_at(field, cc, pages) -> FieldAt:
@@ -177,9 +179,24 @@ def field_at(field, cc, pages) -> FieldAt:
     occ_origin = field.origin * SUPER
     super_host, super_origin = superblocks(bound, occ_origin)
     q = cc.queue
+    joins = cla.to_device(q, lattice_joins(field, pages))
     return FieldAt(pages, np.unique(pages[pages >= 0]), cla.to_device(q, bound), cla.to_device(q, super_host),
                    super_host, super_origin, clip_box(bound, occ_origin), float(bound.max(initial=0.0)),
-                   float(np.mean(bound > 0)), field.tables(cc, pages) if field.resident else None)
+                   float(np.mean(bound > 0)), dict(field.tables(cc, pages), joins=joins) if field.resident else None,
+                   joins)
+
+
+def lattice_joins(field, pages) -> np.ndarray:
+    """uint8 per brick (Z, Y, X): the spacing of its knot lattice where that is coarser than the fine one and the
+    brick is not mixed, else 0.  A segment on a coarse lattice crosses the face into a brick with its own spacing
+    (docs/raytracing.md §3, "segments per brick"): bricks of one level share that level's lattice and hold the same
+    coefficients where their boxes meet."""
+    out = np.zeros(pages.shape, np.uint8)
+    slots = pages[pages >= 0]
+    spacing = field.lattices[slots, 3]  # the fine lattice's is 1 or 1/2, a coarse one's 2^l
+    joined = (field.mixes[slots, 0] < 0) & (spacing >= 2) & (spacing < 256)  # (a byte: levels past 7 do not join)
+    out[pages >= 0] = np.where(joined, spacing, 0).astype(np.uint8)
+    return out
 
 
 def pick(field, caps) -> np.ndarray:

@@ -68,7 +68,8 @@ FIELDS = ("bspline", "wavelet")
 B, I32, INT4, FLOAT4 = BUFFER, np.int32, cltypes.int4, cltypes.float4
 #: the arguments of each field backend (FIELD_PARAMS of cl/raytrace/field_*.h)
 FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("page_shape", INT4), ("frames", B),
-                           ("boxes", B), ("lattices", B), ("mixes", B), ("pieces", B), ("quant", B)),
+                           ("boxes", B), ("lattices", B), ("mixes", B), ("pieces", B), ("quant", B),
+                           ("joins", B)),
                   wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
 
 
@@ -92,7 +93,7 @@ def raytrace_kernel(field: str) -> Kernel:
                   ("perspective", I32), ("to_fine_scale", FLOAT4), ("to_fine_offset", FLOAT4), ("nodes", B),
                   ("weights", B), ("tol", REAL), ("shade_gain", REAL), ("grad_floor", REAL), ("lights", B),
                   ("nlights", I32), ("phong", FLOAT4), ("tf", B), ("passes", I32), ("pass_lo", FLOAT4),
-                  ("pass_hi", FLOAT4), ("carry", B), ("ledger", B))
+                  ("pass_hi", FLOAT4), ("carry", B), ("ledger", B), ("resume", B))
 REAL4 = {np.float32: cltypes.float4, np.float64: cltypes.double4}
 GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
@@ -375,7 +376,7 @@ class RayTracer:
             light_buf[: len(light_dirs), :3] = light_dirs
         p = phong or Phong()
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
-        per_pixel = H * W * (48 + 8 * np.dtype(real).itemsize)  # image, two stats; carry and ledger
+        per_pixel = H * W * (48 + 9 * np.dtype(real).itemsize)  # image, two stats; carry, ledger, resume
         passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
         if self.field == "bspline" and self.bricks.resident:
             need = self.bricks.pool_bytes + 2 * at.block_bound.nbytes + per_pixel
@@ -394,11 +395,12 @@ class RayTracer:
         image = cla.empty(q, (H, W, 4), np.float32) if passes is None else cla.zeros(q, (H, W, 4), np.float32)
         stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
         lattice_stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
-        carry, ledger = cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, REAL4[real])
+        carry, ledger, resume = cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, real)
         if passes is not None:  # docs/raytracing.md §6: what each ray carries from one pass to the next
             ledger_start = (tol / 2, 0, 0, 0) if not absorption else (tol / 4, tol * 3 / 8, 0, 0)
             carry = cla.to_device(q, np.tile(np.array((0, 0, 0, 0 if not absorption else 1), real), (H, W, 1)))
             ledger = cla.to_device(q, np.tile(np.array(ledger_start, real), (H, W, 1)))
+            resume = cla.to_device(q, np.full((H, W), -np.inf, real))
         traced = None
         if self.field == "wavelet":
             traced = cla.zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
@@ -418,14 +420,15 @@ class RayTracer:
             to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
             grad_floor=post.grad_floor if post else self.grad_floor(precision, at.q_bound),
             lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
-            phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger,
+            phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger, resume=resume,
             tf=post.table if post is not None else carry)
         if self.field == "bspline":
             arguments["quant"] = self.quant
         for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
             if self.field == "bspline":
                 field_tables = None  # the last region's pool goes before the next one comes
-                field_tables = at.field_tables if slots is None else self.bricks.tables(cc, None, slots)
+                field_tables = at.field_tables if slots is None else dict(self.bricks.tables(cc, None, slots),
+                                                                              joins=at.joins)
             in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
                 kernels, q, size, self.local_size, field_tables, real_type=real, global_offset=first,
                 passes=passes is not None, pass_lo=lo, pass_hi=hi, **arguments),
