@@ -630,12 +630,12 @@ def test_slabs_composite_to_the_whole_image(hydrogen):
 
 @pytest.mark.parametrize("wavelet", ["cubic", ["quadratic", "linear"]])
 def test_expansion_of_one_channel_is_the_float4_ones(wavelet, monkeypatch):
-    """A group of one channel is synthesised one float a coefficient (expand.cl's CLW_LANES, four outputs a work-item
+    """A group of one channel is synthesised one float a coefficient (synthesis.lanes, four outputs a work-item
     along y and z) and a scalar model's pool holds one float a coefficient (bricks.build's scalar): the same bits as
     the float4 expansion's lane of that channel, its other lanes 0, and the same block bounds (a scalar model with
     its content mask, and a two-channel model of two one-channel groups: the second channel in lane 1)."""
     from clwave.device.memory import device_budget
-    from clwave.raytrace import bricks
+    from clwave.raytrace import bricks, synthesis
 
     z, y, x = np.mgrid[:20, :22, :18] / 20.0
     blob = np.where((x - 0.5) ** 2 + (y - 0.5) ** 2 + (z - 0.4) ** 2 < 0.12, np.sin(9 * x) * np.cos(7 * y) + 1.5, 0.0)
@@ -646,7 +646,8 @@ def test_expansion_of_one_channel_is_the_float4_ones(wavelet, monkeypatch):
     cc = ComputeContext.get()
     budget = device_budget(cc)
     one = bricks.build(wv, cc, budget, scalar=channels == 1)
-    monkeypatch.setattr(bricks, "lanes", lambda g: 4)
+    for module in (bricks, synthesis):
+        monkeypatch.setattr(module, "lanes", lambda g: 4)
     four = bricks.build(wv, cc, budget)
     pool = four.pool.get()
     assert np.abs(pool).max() > 0.1 and np.array_equal(one.bounds, four.bounds)

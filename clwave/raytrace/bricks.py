@@ -33,18 +33,11 @@ from .bounds import reached_blocks
 from .lod import content_windows, occupancy
 from .pieces import mixed_pieces
 from .passes import Spill
+from .synthesis import GROUP, Part, Synthesis, lanes, synth_axis, whole_groups
 
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
 
 
-def _part_args(name: str, taps: str) -> tuple:
-    """The arguments of one input part of ``synth_axis`` (cl/raytrace/expand.cl)."""
-    return ((name, BUFFER), (f"{name}_start", cltypes.int4), (f"{name}_shape", cltypes.int4), (taps, BUFFER),
-            (f"{name}_shift", np.int32), (f"has_{name}", np.int32))
-
-
-_SYNTH_AXIS = Kernel("synth_axis", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
-                     *_part_args("a", "h"), *_part_args("d", "g"))
 _GATHER = Kernel("gather_bricks", ("pool", BUFFER), ("src", BUFFER), ("src_start", cltypes.int4),
                  ("src_shape", cltypes.int4), ("starts", BUFFER), ("boxes", BUFFER), ("depth", np.int32),
                  ("scale", np.float32), ("nonneg", np.int32), ("lane", np.int32))
@@ -335,7 +328,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
     resident = _check_fits(wv, cc, p, lay, budget, 1 if scalar else 4)
     scalar = scalar and resident and len(levels) > 0  # else the renderer reads the pool: float4
-    synth = _Synthesis(cc)
+    synth = Synthesis(cc)
     if len(levels) and levels.min() < wv.levels:  # some brick needs a synthesis step: its programs built apart
         for g, axis in product(wv.groups, range(3)):
             synth.kernels(g, axis)
@@ -449,13 +442,7 @@ def _parents(wav, taps, lo, hi) -> tuple:
     return np.min(firsts, axis=0), np.max(lasts, axis=0)
 
 
-def lanes(g) -> int:
-    """Floats a coefficient of group ``g``'s synthesis (``CLW_LANES`` of ``cl/raytrace/expand.cl``): its channels in
-    their slots of a float4, or a group of one channel's alone (a scalar model's synthesis a quarter of the work)."""
-    return 1 if len(g.channels) == 1 else 4
-
-
-def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) -> _Part | None:
+def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) -> Part | None:
     """The band's coefficients in the index box lo .. hi (inclusive, z, y, x) on the device, dense, :func:`lanes`
     floats a coefficient with channel c in slot ``g.channels[c]`` (one lane: the channel alone), zero where not
     kept; None where the band keeps nothing in the box's layers.  The kept coefficients of those layers (one
@@ -471,7 +458,7 @@ def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) ->
         target = tuple(slice(x - o, y - o) for x, y, o in zip(a, b, lo))
         out[(*target, list(g.channels) if n_lanes == 4 else [0])] = np.moveaxis(
             values[(slice(None), *(slice(x, y) for x, y in zip(a, b)))], 0, -1)
-        return _Part(_send(q, out, hold), lo, shape)
+        return Part(_send(q, out, hold), lo, shape)
     plane = band.shape[1] * band.shape[2]
     positions = g.positions[band_slice]
     i, k = np.searchsorted(positions, band.start + np.array([a[0], b[0]]) * plane)
@@ -484,7 +471,7 @@ def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) ->
              positions=_send(q, positions[i:k], hold), band_start=band.start, band_shape=band.shape[::-1],
              values=_send(q, g.values[:, band_slice][:, i:k], hold), n=k - i, slots=slots,
              channels=len(g.channels), lanes=n_lanes)
-    return _Part(out, lo, shape)
+    return Part(out, lo, shape)
 
 
 def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, base, clamp, hold):
@@ -519,7 +506,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
             clamp(data.reshape(-1), _send(q, keep, hold), lanes(g))
             for floor in (False, True):
                 if np.any(sel := here & clamped & (nonneg == floor)):
-                    copy(slots[sel], level, _Part(data, src.start, src.shape), floor)
+                    copy(slots[sel], level, Part(data, src.start, src.shape), floor)
 
     def copy(sel, level, src, floor):
         starts = np.zeros((len(sel), 4), np.int32)
@@ -528,12 +515,12 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
         boxes[:, :3] = lay["count"][sel, gi][:, ::-1]
         boxes[:, 3] = lay["offset"][sel, gi] - base
         n = boxes[:, :3].max(axis=0)
-        _GATHER(kernels, q, _whole_groups((int(n[0]), int(n[1]), int(n[2]) * len(sel))), GROUP, pool=pool, src=src.data,
+        _GATHER(kernels, q, whole_groups((int(n[0]), int(n[1]), int(n[2]) * len(sel))), GROUP, pool=pool, src=src.data,
                 src_start=src.start[::-1], src_shape=src.shape[::-1], starts=_send(q, starts, hold),
                 boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level), nonneg=int(floor),
                 lane=-1 if lanes(g) == 4 else g.channels[0])
 
-    approx = part(0, need[wv.levels]) or _Part(cla.zeros(q, (1, 1, 1, lanes(g)), np.float32), need[wv.levels][0],
+    approx = part(0, need[wv.levels]) or Part(cla.zeros(q, (1, 1, 1, lanes(g)), np.float32), need[wv.levels][0],
                                                 np.ones(3, np.int64))
     if wv.levels in own:
         gather(wv.levels, approx)
@@ -549,45 +536,12 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
             merged = {}
             for rest in sorted({key[1:] for key in parts}):
                 pair = [(letter, parts[letter + rest]) for letter in "ad" if letter + rest in parts]
-                merged[rest] = _synth_axis(cc, synth.kernels(g, 2 - axis), pair, axis, d_taps, shifts,
+                merged[rest] = synth_axis(cc, synth.kernels(g, 2 - axis), pair, axis, d_taps, shifts,
                                            (lo[axis], hi[axis]))
             parts = merged
         approx = parts[""]
         if m - 1 in own:
             gather(m - 1, approx)
-
-
-#: work-group of the expansion's 3-D launches: one size for every box, so that PoCL compiles each kernel once
-#: (it specialises a kernel per work-group size, and picks a new one for many a global size)
-GROUP = (8, 8, 1)
-
-
-def _whole_groups(size) -> tuple:
-    """A 3-D global size rounded up to whole :data:`GROUP` work-groups (the kernels skip what lies beyond)."""
-    return tuple(-(-int(n) // g) * g for n, g in zip(size, GROUP))
-
-
-class _Synthesis:
-    """The synthesis programs (``cl/raytrace/expand.cl``), one per order, axis and :func:`lanes`, built once: a model
-    expanded at its coarsest level alone (the staged set-up's first stage) synthesises nothing and builds none."""
-
-    def __init__(self, cc):
-        self.cc, self.built = cc, {}
-
-    def kernels(self, group, axis):
-        wavelet = group.wavelet
-        key = (wavelet.order, axis, lanes(group))
-        if key not in self.built:
-            self.built[key] = programs.build(self.cc, ["raytrace/expand.cl"], dict(
-                CLW_AXIS=axis, CLW_NH=len(wavelet.p), CLW_NG=len(wavelet.q), CLW_LANES=key[2]))
-        return self.built[key]
-
-
-@dataclass
-class _Part:
-    data: cla.Array
-    start: np.ndarray  # (z, y, x)
-    shape: np.ndarray
 
 
 def _send(q, arr, hold: list) -> cla.Array:
@@ -596,25 +550,3 @@ def _send(q, arr, hold: list) -> cla.Array:
     arr = np.ascontiguousarray(arr)
     hold.append(arr)
     return cla.to_device(q, arr, async_=True)
-
-
-def _synth_axis(cc, kernels, pair, axis, d_taps, shifts, crop) -> _Part:
-    """One synthesis step along array ``axis`` of an ('a', part) / ('d', part) pair (either may be missing), the
-    output cropped to the child indices ``crop`` (first, last) along ``axis``."""
-    lo = np.min([p.start for _, p in pair], axis=0)
-    hi = np.max([p.start + p.shape for _, p in pair], axis=0)
-    lo[axis], hi[axis] = crop[0], crop[1] + 1
-    shape = hi - lo
-    out = cla.empty(cc.queue, tuple(int(s) for s in shape) + pair[0][1].data.shape[3:], np.float32)
-    given, any_part = dict(pair), pair[0][1]  # a missing part is flagged, its buffer any of the given
-    parts = {}
-    for name, taps in (("a", "h"), ("d", "g")):
-        p = given.get(name, any_part)
-        parts.update({name: p.data, f"{name}_start": p.start[::-1], f"{name}_shape": p.shape[::-1],
-                      taps: d_taps[name], f"{name}_shift": shifts[name], f"has_{name}": name in given})
-    size = shape[::-1].copy()
-    if out.ndim == 3 and axis != 2:  # one float a coefficient along y or z: four outputs a work-item (CLW_X4)
-        size[0] = -(-size[0] // 4)
-    _SYNTH_AXIS(kernels, cc.queue, _whole_groups(size), GROUP, parts, out=out, out_start=lo[::-1],
-                out_shape=shape[::-1])
-    return _Part(out, lo, shape)
