@@ -456,9 +456,14 @@ def test_packed_pool_within_half_a_step(monkeypatch):
     assert widest > 0.01  # the decoded field does differ
 
 
-def test_scalar_pool_in_a_scratch_file():
+def test_scalar_pool_in_a_scratch_file(monkeypatch):
     """Bricks in a scratch file (out-of-core passes, docs/raytracing.md §6) keep float coefficients: the
-    post-classified image is within the tolerance of the float64 oracle there too."""
+    post-classified image is within the tolerance of the float64 oracle there too.  (A scalar pool on the device,
+    one float a coefficient, fits wherever the expansion's work does: here it is made not to.)"""
+    from clwave.raytrace import bricks
+
+    fits = bricks._check_fits
+    monkeypatch.setattr(bricks, "_check_fits", lambda *args: fits(*args) and False)
     vol = clwave.phantom("hydrogen", n=40)
     wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=2).threshold(keep=0.1)
     tr = clwave.RayTracer(wv, device_memory="10MiB")
@@ -621,3 +626,34 @@ def test_slabs_composite_to_the_whole_image(hydrogen):
     together = composite([images[i] for i in slab_order(wv, parts, cam)], True)
     assert len(parts) == 2 and whole[..., 3].max() > 0.1
     assert np.abs(together - whole).max() <= 2e-3
+
+
+@pytest.mark.parametrize("wavelet", ["cubic", ["quadratic", "linear"]])
+def test_expansion_of_one_channel_is_the_float4_ones(wavelet, monkeypatch):
+    """A group of one channel is synthesised one float a coefficient (synthesis.lanes, four outputs a work-item
+    along y and z) and a scalar model's pool holds one float a coefficient (bricks.build's scalar): the same bits as
+    the float4 expansion's lane of that channel, its other lanes 0, and the same block bounds (a scalar model with
+    its content mask, and a two-channel model of two one-channel groups: the second channel in lane 1)."""
+    from clwave.device.memory import device_budget
+    from clwave.raytrace import bricks, synthesis
+
+    z, y, x = np.mgrid[:20, :22, :18] / 20.0
+    blob = np.where((x - 0.5) ** 2 + (y - 0.5) ** 2 + (z - 0.4) ** 2 < 0.12, np.sin(9 * x) * np.cos(7 * y) + 1.5, 0.0)
+    channels = 1 if isinstance(wavelet, str) else 2
+    data = np.stack([blob, blob * z][:channels], axis=-1).astype(np.float32)
+    wv = WaveletVolume.from_volume(clwave.Volume(data[..., 0] if channels == 1 else data), wavelet=wavelet,
+                                   levels=2).threshold(keep=0.2)
+    cc = ComputeContext.get()
+    budget = device_budget(cc)
+    one = bricks.build(wv, cc, budget, scalar=channels == 1)
+    for module in (bricks, synthesis):
+        monkeypatch.setattr(module, "lanes", lambda g: 4)
+    four = bricks.build(wv, cc, budget)
+    pool = four.pool.get()
+    assert np.abs(pool).max() > 0.1 and np.array_equal(one.bounds, four.bounds)
+    if channels == 1:
+        assert one.pool.shape == (len(pool),) and np.array_equal(one.pool.get().view(np.uint32),
+                                                                 pool[:, 0].view(np.uint32))
+        assert not pool[:, 1:].any()
+    else:
+        assert np.array_equal(one.pool.get().view(np.uint32), pool.view(np.uint32))

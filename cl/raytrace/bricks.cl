@@ -6,15 +6,31 @@
 
 constant int ORDER[CLW_GROUPS] = {CLW_ORDERS};
 
-/* scatter_band: a band's kept coefficients into a zeroed box of float4, each channel in its slot.
- *   out, out_start, out_shape   a box of float4 in the band's index coordinates (x, y, z)
+/* The pool's coefficient: a float4, each channel in its lane, or with CLW_POOL_SCALAR a float, the channel of a
+ * model of one channel alone (its pool packed by post-classification, clwave/raytrace/classified.py). */
+#ifdef CLW_POOL_SCALAR
+typedef float pool_coef;
+inline float coef_abs_max(const float c) { return fabs(c); }
+#else
+typedef float4 pool_coef;
+inline float coef_abs_max(const float4 c)
+{
+    const float4 a = fabs(c);
+    return fmax(fmax(a.x, a.y), fmax(a.z, a.w));
+}
+#endif
+
+/* scatter_band: a band's kept coefficients into a zeroed box of `lanes` floats a coefficient (4, or 1 for a group
+ * of one channel: expand.cl's CLW_LANES), each channel in its slot.
+ *   out, out_start, out_shape   a box of lanes floats in the band's index coordinates (x, y, z)
  *   positions    (n,) flat positions in the band (row-major over band_shape, x fastest), from band_start
  *   values       (channels, n) their values, channel by channel
- *   slots        the float4 component of channel c in component c (x, y, z, w); channels > c
+ *   slots        the lane of channel c in component c (x, y, z, w); channels > c
  * Grid: global (n). */
 __kernel void scatter_band(__global float *out, const int4 out_start, const int4 out_shape,
                            __global const long *positions, const long band_start, const int4 band_shape,
-                           __global const float *values, const int n, const int4 slots, const int channels)
+                           __global const float *values, const int n, const int4 slots, const int channels,
+                           const int lanes)
 {
     const int i = get_global_id(0);
     if (i >= n)
@@ -24,23 +40,25 @@ __kernel void scatter_band(__global float *out, const int4 out_start, const int4
     const int4 k = (int4)(x, y, z, 0) - out_start;
     if (k.x < 0 || k.y < 0 || k.z < 0 || k.x >= out_shape.x || k.y >= out_shape.y || k.z >= out_shape.z)
         return;
-    const size_t at = 4 * (((size_t)k.z * out_shape.y + k.y) * out_shape.x + k.x);
+    const size_t at = lanes * (((size_t)k.z * out_shape.y + k.y) * out_shape.x + k.x);
     const int slot[4] = {slots.x, slots.y, slots.z, slots.w};
     for (int c = 0; c < channels; c++)
         out[at + slot[c]] = values[(size_t)c * n + i];
 }
 
-/* gather_bricks: pool[box.w + local index] = scale * src[start + local index], zero outside src.
- *   src, src_start, src_shape   one level's synthesis over a slab: a box of float4 (x, y, z)
+/* gather_bricks: pool[box.w + local index] = scale * src[start + local index], zero outside src (CLW_POOL_SCALAR:
+ * its lane `lane` alone).
+ *   src, src_start, src_shape   one level's synthesis over a slab: a box of float4 (x, y, z), or of float
+ *                (lane >= 0: a group of one channel, expand.cl's CLW_LANES = 1) put in component `lane`, the others 0
  *   starts       per brick the lattice index (x, y, z) of its first coefficient
  *   boxes        per brick (nx, ny, nz, first pool element)
  *   depth        the largest nz: work-items depth * b .. depth * (b + 1) - 1 along axis 2 copy brick b
  *   scale        2^(-3 l / 2): the level-l B-splines' normalisation (docs/model.md §4)
  *   nonneg       clamp the w lane (alpha) at 0: bricks of the coarser details (docs/raytracing.md §8)
  * Grid: global (max nx, max ny, depth * bricks). */
-__kernel void gather_bricks(__global float4 *pool, __global const float4 *src, const int4 src_start,
+__kernel void gather_bricks(__global pool_coef *pool, __global const float *src, const int4 src_start,
                             const int4 src_shape, __global const int4 *starts, __global const int4 *boxes,
-                            const int depth, const float scale, const int nonneg)
+                            const int depth, const float scale, const int nonneg, const int lane)
 {
     const int b = get_global_id(2) / depth;
     const int4 at = (int4)(get_global_id(0), get_global_id(1), get_global_id(2) % depth, 0), box = boxes[b];
@@ -48,10 +66,17 @@ __kernel void gather_bricks(__global float4 *pool, __global const float4 *src, c
         return;
     const int4 p = starts[b] + at - src_start;
     const bool inside = p.x >= 0 && p.y >= 0 && p.z >= 0 && p.x < src_shape.x && p.y < src_shape.y && p.z < src_shape.z;
-    float4 v = inside ? src[((size_t)p.z * src_shape.y + p.y) * src_shape.x + p.x] : (float4)(0.0f);
+    const size_t i = inside ? ((size_t)p.z * src_shape.y + p.y) * src_shape.x + p.x : 0;
+    float4 v = lane < 0 ? vload4(i, src) : select((float4)(0.0f), (float4)(src[i]), (int4)(0, 1, 2, 3) == lane);
+    v = inside ? v : (float4)(0.0f);
     if (nonneg)
         v.w = fmax(v.w, 0.0f);
-    pool[box.w + ((size_t)at.z * box.y + at.y) * box.x + at.x] = scale * v;
+    const size_t out = box.w + ((size_t)at.z * box.y + at.y) * box.x + at.x;
+#ifdef CLW_POOL_SCALAR
+    pool[out] = scale * v.x;
+#else
+    pool[out] = scale * v;
+#endif
 }
 
 /* brick_bounds: per block of CLW_BLOCK^3 grid-0 fine cells of every brick, the largest |coefficient|
@@ -63,7 +88,7 @@ __kernel void gather_bricks(__global float4 *pool, __global const float4 *src, c
  *   coef, frames, boxes   the pool as in field_bspline.h; bricks: per slot its brick (x, y, z) in the
  *                page table
  * Grid: global (per^3, slots). */
-__kernel void brick_bounds(__global float *out, const int first, const int4 origin, __global const float4 *coef,
+__kernel void brick_bounds(__global float *out, const int first, const int4 origin, __global const pool_coef *coef,
                            __global const int4 *bricks, __global const float4 *frames, __global const int4 *boxes)
 {
     const int per = CLW_SUPER_CELLS / CLW_BLOCK, k = get_global_id(0), slot = get_global_id(1);
@@ -77,14 +102,13 @@ __kernel void brick_bounds(__global float *out, const int first, const int4 orig
         const int4 last = min(convert_int4(ceil((hi - f) * f.w)) - 1, n - 1);
         for (int z = first.z; z <= last.z; z++)
             for (int y = first.y; y <= last.y; y++)
-                for (int x = first.x; x <= last.x; x++) {
-                    const float4 c = fabs(coef[n.w + ((size_t)z * n.y + y) * n.x + x]);
-                    m = fmax(m, fmax(fmax(c.x, c.y), fmax(c.z, c.w)));
-                }
+                for (int x = first.x; x <= last.x; x++)
+                    m = fmax(m, coef_abs_max(coef[n.w + ((size_t)z * n.y + y) * n.x + x]));
     }
     out[(size_t)(first + slot) * per * per * per + k] = m;
 }
 
+#ifndef CLW_POOL_SCALAR
 /* alpha_floor: per slot the least alpha (channel 3, lane w) coefficient of group `g` of the brick: the
  * B-splines are non-negative and sum to 1, so alpha >= that floor in the brick.
  * Grid: global (slots). */
@@ -97,3 +121,4 @@ __kernel void alpha_floor(__global float *out, __global const float4 *coef, __gl
         m = fmin(m, coef[n.w + i].w);
     out[slot] = m;
 }
+#endif

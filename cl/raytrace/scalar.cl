@@ -1,15 +1,16 @@
 /* scalar.cl: what post-classification needs of a scalar model's brick pool (clwave/raytrace/classified.py,
- * docs/raytracing.md §10): the range of the scalar per block, and a strided sample of its coefficients. */
+ * docs/raytracing.md §10): the range of the scalar per block. */
 #include "common/clw_common.h"
 
 /* scalar_range: per block of CLW_BLOCK^3 grid-0 fine cells of every brick slot (whatever detail it serves), the
- * least and largest coefficient (channel 0) whose B-spline reaches it: the B-splines are non-negative and sum to
- * 1, so the scalar lies between them there.
+ * least and largest coefficient whose B-spline reaches it: the B-splines are non-negative and sum to 1, so the
+ * scalar lies between them there.
  *   out          (slots, per, per, per) float2 (min, max), per = CLW_SUPER_CELLS / CLW_BLOCK blocks along a
  *                brick's edge (z, y, x), as brick_bounds lays out its bounds (cl/raytrace/bricks.cl)
- *   origin, coef, bricks, frames, boxes   as brick_bounds, one group
+ *   origin, coef, bricks, frames, boxes   as brick_bounds, one group, the pool one float a coefficient
+ *                (CLW_POOL_SCALAR of cl/raytrace/bricks.cl)
  * Grid: global ((CLW_SUPER_CELLS / CLW_BLOCK)^3, slots). */
-__kernel void scalar_range(__global float2 *out, const int4 origin, __global const float4 *coef,
+__kernel void scalar_range(__global float2 *out, const int4 origin, __global const float *coef,
                            __global const int4 *bricks, __global const float4 *frames, __global const int4 *boxes,
                            const int order)
 {
@@ -24,19 +25,10 @@ __kernel void scalar_range(__global float2 *out, const int4 origin, __global con
     for (int z = first.z; z <= last.z; z++)
         for (int y = first.y; y <= last.y; y++)
             for (int x = first.x; x <= last.x; x++) {
-                const float c = coef[n.w + ((size_t)z * n.y + y) * n.x + x].x;
+                const float c = coef[n.w + ((size_t)z * n.y + y) * n.x + x];
                 m = (float2)(fmin(m.x, c), fmax(m.y, c));
             }
     out[(size_t)slot * per * per * per + k] = m;
-}
-
-/* strided: out[i] = coef[i * step].x, the scalar coefficients of a strided sample of the pool.
- * Grid: global (n). */
-__kernel void strided(__global float *out, __global const float4 *coef, const long step, const int n)
-{
-    const int i = get_global_id(0);
-    if (i < n)
-        out[i] = coef[i * step].x;
 }
 
 /* the opacity of the transfer function's table (cl/raytrace/classify.h) at u */

@@ -33,24 +33,17 @@ from .bounds import reached_blocks
 from .lod import content_windows, occupancy
 from .pieces import mixed_pieces
 from .passes import Spill
+from .synthesis import GROUP, Part, Synthesis, lanes, synth_axis, whole_groups
 
 ABSENT = -1            #: the level of a brick that no kept support reaches, or only empty voxels
 
 
-def _part_args(name: str, taps: str) -> tuple:
-    """The arguments of one input part of ``synth_axis`` (cl/raytrace/expand.cl)."""
-    return ((name, BUFFER), (f"{name}_start", cltypes.int4), (f"{name}_shape", cltypes.int4), (taps, BUFFER),
-            (f"{name}_shift", np.int32), (f"has_{name}", np.int32))
-
-
-_SYNTH_AXIS = Kernel("synth_axis", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
-                     *_part_args("a", "h"), *_part_args("d", "g"))
 _GATHER = Kernel("gather_bricks", ("pool", BUFFER), ("src", BUFFER), ("src_start", cltypes.int4),
                  ("src_shape", cltypes.int4), ("starts", BUFFER), ("boxes", BUFFER), ("depth", np.int32),
-                 ("scale", np.float32), ("nonneg", np.int32))
+                 ("scale", np.float32), ("nonneg", np.int32), ("lane", np.int32))
 _SCATTER = Kernel("scatter_band", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
                   ("positions", BUFFER), ("band_start", np.int64), ("band_shape", cltypes.int4), ("values", BUFFER),
-                  ("n", np.int32), ("slots", cltypes.int4), ("channels", np.int32))
+                  ("n", np.int32), ("slots", cltypes.int4), ("channels", np.int32), ("lanes", np.int32))
 _FLOOR = Kernel("alpha_floor", ("out", BUFFER), ("coef", BUFFER), ("boxes", BUFFER), ("g", np.int32))
 _BOUNDS = Kernel("brick_bounds", ("out", BUFFER), ("first", np.int32), ("origin", cltypes.int4),
                  ("coef", BUFFER), ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER))
@@ -197,7 +190,8 @@ class BrickField:
     seconds: float         # expansion time
     mixes: np.ndarray      # (slots, 4) int32: coarse slot, first piece flag, pieces per axis; -1, 0, 0, 0 (pieces.py)
     pieces: np.ndarray     # uint8 per piece of the mixed bricks: 1 where it is marched on the coarse slot
-    pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2)
+    pool: cla.Array | None = None   # float4 coefficients on the device, pre-multiplied by 2^(-3l/2) (build's scalar:
+    #                                 one float a coefficient)
     spill: Spill | None = None      # or in a scratch file
     _static: dict | None = None     # the per-slot tables on the device, uploaded once
 
@@ -314,7 +308,7 @@ def lattice_of_levels(wv) -> np.ndarray:
     return np.array(out, np.float32)
 
 
-def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -> BrickField:
+def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, scalar=False) -> BrickField:
     """Expand the model's bricks on the device, slab of bricks (one brick row along z) by slab.
 
     Per slab and group the real-line synthesis (``cl/raytrace/expand.cl``) runs from the approximation
@@ -322,18 +316,24 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     need; after each level the bricks at it are copied into the pool (``gather_bricks``).  The bands
     are cropped from the model's sparse coefficients per slab.  The pool stays on the device when it
     fits the budget with the bounds, else each slab's bricks go to a scratch file (:class:`Spill`).  Raises
-    :class:`DeviceMemoryError` before allocating when one slab's work does not fit.
+    :class:`DeviceMemoryError` before allocating when one slab's work does not fit.  ``scalar``: a model of one
+    channel's pool, when it stays on the device, holds one float a coefficient, the channel alone (``CLW_POOL_SCALAR``
+    of ``cl/raytrace/bricks.cl``), for post-classification to pack (:class:`~.classified.ScalarRange`).
     """
+    if scalar and wv.channels != 1:
+        raise ValueError(f"a scalar pool is for a model of one channel, not {wv.channels}")
     p = p if p is not None else plan(wv)
     bricks, levels, clamped, coarse, pages, alt = p.slots()
     lay = layout(wv, bricks, levels)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
-    resident = _check_fits(wv, cc, p, lay, budget)
-    synth = _Synthesis(cc)
+    resident = _check_fits(wv, cc, p, lay, budget, 1 if scalar else 4)
+    scalar = scalar and resident and len(levels) > 0  # else the renderer reads the pool: float4
+    synth = Synthesis(cc)
     if len(levels) and levels.min() < wv.levels:  # some brick needs a synthesis step: its programs built apart
         for g, axis in product(wv.groups, range(3)):
-            synth.kernels(g.wavelet, axis)
-    kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(orders))
+            synth.kernels(g, axis)
+    kernels = programs.build(cc, ["raytrace/bricks.cl"], group_defines(orders) | (dict(CLW_POOL_SCALAR=None)
+                                                                                  if scalar else {}))
     start = time.perf_counter()
     n, G = len(lay["bricks"]), len(wv.groups)
     frames = np.zeros((n, G, 4), np.float32)
@@ -347,10 +347,11 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
     alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
     bounds = cla.zeros(q, (max(n, 1), SUPER, SUPER, SUPER), np.float32)
     # 64 = 4^3: the reads of a segment in no brick (weights 0; the march never samples one) stay inside
-    pool = cla.empty(q, (max(lay["total"], 64), 4), np.float32) if resident else None
+    pool = cla.empty(q, (max(lay["total"], 64),) + (() if scalar else (4,)), np.float32) if resident else None
     spill = None if resident else Spill(lay["total"])
     clamp = cc.generated("clamp_to_content", lambda: ElementwiseKernel(
-        cc.ctx, "float *grid, const uchar *keep", "if (!keep[i / 4]) grid[i] = 0.0f", "clamp_to_content"))
+        cc.ctx, "float *grid, const uchar *keep, const int lanes", "if (!keep[i / lanes]) grid[i] = 0.0f",
+        "clamp_to_content"))
     # host work on one slab overlaps the device's on the last: uploads do not wait for the queue, and what they
     # read (and a slab's pool on its way to the scratch file) is held until a marker says the slab is done
     slabs, floors, last_slab = lay["bricks"][:, 0], [], None
@@ -405,12 +406,13 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None) -
                       lattices, bounds, orders, time.perf_counter() - start, mixes, pieces, pool, spill)
 
 
-def _check_fits(wv, cc, p: Plan, lay, budget) -> bool:
-    """Whether the pool fits the device with the bounds and the expansion's work; DeviceMemoryError when the
+def _check_fits(wv, cc, p: Plan, lay, budget, pool_lanes=4) -> bool:
+    """Whether the pool (``pool_lanes`` floats a coefficient) fits the device with the bounds and the expansion's
+    work; DeviceMemoryError when the
     bounds and the work alone do not.  A slab's synthesis holds about three boxes of its finest level's float4
     coefficients at once (the parts, the pairs of one axis step, the output), and two slabs can be under way
     (build's overlap), with their pools when the pool goes to host memory."""
-    pool = 16 * lay["total"]
+    pool = 4 * pool_lanes * lay["total"]
     bounds = 4 * SUPER ** 3 * (len(lay["levels"]) + int(np.prod(p.level.shape[1:])))  # per slot, and a grid
     halo = 2 * max(g.wavelet.order for g in wv.groups)
     slab, slab_pool, ends = 0, 0, lay["ends"]
@@ -440,36 +442,36 @@ def _parents(wav, taps, lo, hi) -> tuple:
     return np.min(firsts, axis=0), np.max(lasts, axis=0)
 
 
-def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) -> _Part | None:
-    """The band's coefficients in the index box lo .. hi (inclusive, z, y, x) on the device, dense float4 with
-    channel c in slot ``g.channels[c]``, zero where not kept; None where the band keeps nothing in the box's
-    layers.  The kept coefficients of those layers (one contiguous run of the sorted positions) are scattered
-    into the box on the device: no dense copy on the host."""
-    band, q = g.bands[band_no], cc.queue
+def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) -> Part | None:
+    """The band's coefficients in the index box lo .. hi (inclusive, z, y, x) on the device, dense, :func:`lanes`
+    floats a coefficient with channel c in slot ``g.channels[c]`` (one lane: the channel alone), zero where not
+    kept; None where the band keeps nothing in the box's layers.  The kept coefficients of those layers (one
+    contiguous run of the sorted positions) are scattered into the box on the device: no dense copy on the host."""
+    band, q, n_lanes = g.bands[band_no], cc.queue, lanes(g)
     shape = hi - lo + 1
     a, b = np.maximum(lo, 0), np.minimum(hi + 1, band.shape)
     if np.any(b <= a):
         return None
     if g.positions is None:  # every coefficient stored: the box is a slice of the band
-        out = np.zeros((*shape, 4), np.float32)
+        out = np.zeros((*shape, n_lanes), np.float32)
         values = g.values[:, band.start:band.start + band.size].reshape(-1, *band.shape)
         target = tuple(slice(x - o, y - o) for x, y, o in zip(a, b, lo))
-        out[(*target, list(g.channels))] = np.moveaxis(values[(slice(None), *(slice(x, y) for x, y in zip(a, b)))],
-                                                      0, -1)
-        return _Part(_send(q, out, hold), lo, shape)
+        out[(*target, list(g.channels) if n_lanes == 4 else [0])] = np.moveaxis(
+            values[(slice(None), *(slice(x, y) for x, y in zip(a, b)))], 0, -1)
+        return Part(_send(q, out, hold), lo, shape)
     plane = band.shape[1] * band.shape[2]
     positions = g.positions[band_slice]
     i, k = np.searchsorted(positions, band.start + np.array([a[0], b[0]]) * plane)
     if k == i:
         return None
-    out = cla.zeros(q, (*(int(n) for n in shape), 4), np.float32)
+    out = cla.zeros(q, (*(int(n) for n in shape), n_lanes), np.float32)
     slots = np.full(4, -1)
-    slots[:len(g.channels)] = g.channels
+    slots[:len(g.channels)] = g.channels if n_lanes == 4 else 0
     _SCATTER(kernels, q, (int(-(-(k - i) // 64) * 64),), (64,), out=out, out_start=lo[::-1], out_shape=shape[::-1],
              positions=_send(q, positions[i:k], hold), band_start=band.start, band_shape=band.shape[::-1],
              values=_send(q, g.values[:, band_slice][:, i:k], hold), n=k - i, slots=slots,
-             channels=len(g.channels))
-    return _Part(out, lo, shape)
+             channels=len(g.channels), lanes=n_lanes)
+    return Part(out, lo, shape)
 
 
 def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, base, clamp, hold):
@@ -501,10 +503,10 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
         if np.any(here & clamped):  # docs/raytracing.md §8; at the finest level the synthesis is done with
             data = src.data.copy() if level > min(own) else src.data
             keep = occupancy(wv.content_mask, wav, level, src.start, src.shape).view(np.uint8)
-            clamp(data.reshape(-1), _send(q, keep, hold))
+            clamp(data.reshape(-1), _send(q, keep, hold), lanes(g))
             for floor in (False, True):
                 if np.any(sel := here & clamped & (nonneg == floor)):
-                    copy(slots[sel], level, _Part(data, src.start, src.shape), floor)
+                    copy(slots[sel], level, Part(data, src.start, src.shape), floor)
 
     def copy(sel, level, src, floor):
         starts = np.zeros((len(sel), 4), np.int32)
@@ -513,11 +515,12 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
         boxes[:, :3] = lay["count"][sel, gi][:, ::-1]
         boxes[:, 3] = lay["offset"][sel, gi] - base
         n = boxes[:, :3].max(axis=0)
-        _GATHER(kernels, q, _whole_groups((int(n[0]), int(n[1]), int(n[2]) * len(sel))), GROUP, pool=pool, src=src.data,
+        _GATHER(kernels, q, whole_groups((int(n[0]), int(n[1]), int(n[2]) * len(sel))), GROUP, pool=pool, src=src.data,
                 src_start=src.start[::-1], src_shape=src.shape[::-1], starts=_send(q, starts, hold),
-                boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level), nonneg=int(floor))
+                boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level), nonneg=int(floor),
+                lane=-1 if lanes(g) == 4 else g.channels[0])
 
-    approx = part(0, need[wv.levels]) or _Part(cla.zeros(q, (1, 1, 1, 4), np.float32), need[wv.levels][0],
+    approx = part(0, need[wv.levels]) or Part(cla.zeros(q, (1, 1, 1, lanes(g)), np.float32), need[wv.levels][0],
                                                 np.ones(3, np.int64))
     if wv.levels in own:
         gather(wv.levels, approx)
@@ -533,44 +536,12 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
             merged = {}
             for rest in sorted({key[1:] for key in parts}):
                 pair = [(letter, parts[letter + rest]) for letter in "ad" if letter + rest in parts]
-                merged[rest] = _synth_axis(cc, synth.kernels(wav, 2 - axis), pair, axis, d_taps, shifts,
+                merged[rest] = synth_axis(cc, synth.kernels(g, 2 - axis), pair, axis, d_taps, shifts,
                                            (lo[axis], hi[axis]))
             parts = merged
         approx = parts[""]
         if m - 1 in own:
             gather(m - 1, approx)
-
-
-#: work-group of the expansion's 3-D launches: one size for every box, so that PoCL compiles each kernel once
-#: (it specialises a kernel per work-group size, and picks a new one for many a global size)
-GROUP = (8, 8, 1)
-
-
-def _whole_groups(size) -> tuple:
-    """A 3-D global size rounded up to whole :data:`GROUP` work-groups (the kernels skip what lies beyond)."""
-    return tuple(-(-int(n) // g) * g for n, g in zip(size, GROUP))
-
-
-class _Synthesis:
-    """The synthesis programs (``cl/raytrace/expand.cl``), one per order and axis, built once: a model expanded
-    at its coarsest level alone (the staged set-up's first stage) synthesises nothing and builds none."""
-
-    def __init__(self, cc):
-        self.cc, self.built = cc, {}
-
-    def kernels(self, wavelet, axis):
-        key = (wavelet.order, axis)
-        if key not in self.built:
-            self.built[key] = programs.build(self.cc, ["raytrace/expand.cl"], dict(
-                CLW_AXIS=axis, CLW_NH=len(wavelet.p), CLW_NG=len(wavelet.q)))
-        return self.built[key]
-
-
-@dataclass
-class _Part:
-    data: cla.Array
-    start: np.ndarray  # (z, y, x)
-    shape: np.ndarray
 
 
 def _send(q, arr, hold: list) -> cla.Array:
@@ -579,22 +550,3 @@ def _send(q, arr, hold: list) -> cla.Array:
     arr = np.ascontiguousarray(arr)
     hold.append(arr)
     return cla.to_device(q, arr, async_=True)
-
-
-def _synth_axis(cc, kernels, pair, axis, d_taps, shifts, crop) -> _Part:
-    """One synthesis step along array ``axis`` of an ('a', part) / ('d', part) pair (either may be missing), the
-    output cropped to the child indices ``crop`` (first, last) along ``axis``."""
-    lo = np.min([p.start for _, p in pair], axis=0)
-    hi = np.max([p.start + p.shape for _, p in pair], axis=0)
-    lo[axis], hi[axis] = crop[0], crop[1] + 1
-    shape = hi - lo
-    out = cla.empty(cc.queue, tuple(int(s) for s in shape) + (4,), np.float32)
-    given, any_part = dict(pair), pair[0][1]  # a missing part is flagged, its buffer any of the given
-    parts = {}
-    for name, taps in (("a", "h"), ("d", "g")):
-        p = given.get(name, any_part)
-        parts.update({name: p.data, f"{name}_start": p.start[::-1], f"{name}_shape": p.shape[::-1],
-                      taps: d_taps[name], f"{name}_shift": shifts[name], f"has_{name}": name in given})
-    _SYNTH_AXIS(kernels, cc.queue, _whole_groups(shape[::-1]), GROUP, parts, out=out, out_start=lo[::-1],
-                out_shape=shape[::-1])
-    return _Part(out, lo, shape)

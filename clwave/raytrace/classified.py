@@ -27,7 +27,6 @@ from ..model.transfer import TransferFunction, auto_window
 
 _RANGE = Kernel("scalar_range", ("out", BUFFER), ("origin", cltypes.int4), ("coef", BUFFER), ("bricks", BUFFER),
                 ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
-_STRIDED = Kernel("strided", ("out", BUFFER), ("coef", BUFFER), ("step", np.int64), ("n", np.int32))
 _BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf", BUFFER), ("slack", np.float32),
                  ("n", np.int32))
 _SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound", BUFFER), ("nb", cltypes.int4))
@@ -102,9 +101,10 @@ class ScalarRange:
     out per detail when a render first asks for it (:mod:`clwave.raytrace.lod`: each detail picks its slots), and
     the classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
 
-    Made, the pool on the device keeps the scalar alone, packed with 0 to 16 bits a coefficient, a width and base per
-    tile, an offset per slot and one step (:func:`pack`; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the
-    ranges are widened by half the step, so they hold the float model and the one rendered.
+    Made, the pool on the device (expanded one float a coefficient: :func:`~.bricks.build`'s ``scalar``) is packed
+    with 0 to 16 bits a coefficient, a width and base per tile, an offset per slot and one step (:func:`pack`;
+    ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the ranges are widened by half the step, so they hold
+    the float model and the one rendered.
     """
 
     def __init__(self, tracer):
@@ -123,13 +123,10 @@ class ScalarRange:
             _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=slot_range,
                    origin=f.origin[::-1], coef=tables["coef"], bricks=cla.to_device(q, at), frames=tables["frames"],
                    boxes=tables["boxes"], order=f.orders[0])
-            n = min(AUTO_COEFFICIENTS, len(tables["coef"]))
-            sample = cla.empty(q, n, np.float32)
-            _STRIDED(self.kernels, q, (n,), None, out=sample, coef=tables["coef"], step=len(tables["coef"]) // n, n=n)
-            self.sample = sample.get()
-            scalar = cla.empty(q, len(f.pool), np.float32)  # the scalar alone: the float4 pool goes
-            _STRIDED(self.kernels, q, (len(f.pool),), None, out=scalar, coef=f.pool, step=1, n=len(f.pool))
-            words, quant = pack(scalar.get(), f.boxes[:, 0])
+            scalar = f.pool.get()  # one float a coefficient (bricks.build's scalar)
+            n = min(AUTO_COEFFICIENTS, len(scalar))
+            self.sample = scalar[::len(scalar) // n][:n]
+            words, quant = pack(scalar, f.boxes[:, 0])
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half a step of the floats
             self.slot_range += (quant["step"][:, None] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]

@@ -160,7 +160,7 @@ class RayTracer:
         if self.region is not None:  # the bricks of the region's layers only
             layers = p.origin[0] + np.arange(p.level.shape[1])
             p.level[:, (layers < self.region[0]) | (layers >= self.region[1])] = ABSENT
-        self.bricks = build(self.wv, self.cc, self.budget, p)
+        self.bricks = build(self.wv, self.cc, self.budget, p, scalar=self.wv.channels == 1)  # ScalarRange packs it
         self.expansions += 1
         self.setup_seconds = self.bricks.seconds
         self.occ_origin = self.bricks.origin * SUPER
