@@ -1,5 +1,6 @@
 """``clwave drr``: digitally reconstructed radiographs, one per cone-beam pose (docs/coordinates.md §5), by
-perspective splatting (docs/splatting.md §8), streamed to one ``.npy`` stack."""
+perspective splatting (docs/splatting.md §8) or the ray tracer's X-ray mode (docs/raytracing.md), streamed to one
+``.npy`` stack."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import ClwaveError, InputError
 from .options import (add_command, add_device_options, build_model, check_outputs, numbers, parse_device_memory,
                       parse_window)
 
@@ -45,8 +46,17 @@ def run(args):
     from ..io.files import write_atomic
     from ..io.result import RenderResult
     from ..model.conebeam import poses, transmitted
+    from ..raytrace.tracer import RayTracer
     from ..splat.renderer import SplatRenderer
 
+    if args.method == "splat" and args.tolerance is not None:
+        raise InputError("--tolerance is for --method raytrace; splatting controls its error with --coarse")
+    if args.method == "raytrace" and (args.coarse, args.omega_s) != (None, None):
+        raise InputError("--coarse and --omega-s are for --method splat; ray tracing controls its error with "
+                         "--tolerance")
+    tolerance = 1e-3 if args.tolerance is None else args.tolerance
+    if not (np.isfinite(tolerance) and tolerance > 0):
+        raise InputError(f"--tolerance {tolerance:g} must be a positive absolute error, e.g. 1e-3")
     out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png")))
     H, W = (int(v) for v in (numbers(args.size, "--size", (1, 2), int, "x") * 2)[:2])
     pixel = numbers(args.pixel, "--pixel", (1, 2))
@@ -59,8 +69,15 @@ def run(args):
     wv, _ = build_model(args)
     if wv.channels != 1:
         raise InputError("radiographs need a one-channel (attenuation) volume; do not classify it (--tf)")
-    renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse,
-                             device_memory=device_memory)
+    if args.method == "raytrace":  # X-ray mode: the line integrals of the same spline (docs/raytracing.md)
+        renderer = RayTracer(wv, device=args.device, device_memory=device_memory)
+
+        def render(cb):
+            return renderer.render(cb, tolerance=tolerance, absorption=False)
+    else:
+        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse,
+                                 device_memory=device_memory)
+        render = renderer.render
     for cb in cameras:  # every pose checked before the first is rendered
         cb.view(wv)
     start = time.perf_counter()
@@ -68,20 +85,25 @@ def run(args):
     def image(res):
         return transmitted(res.image[..., 0]) if args.intensity else res.image[..., 0]
 
-    if out.suffix.lower() == ".png":
-        res = renderer.render(cameras[0])
-        RenderResult(image(res)[..., None], res.meta).save(out, window=parse_window(args), overwrite=args.force)
-    else:
-        def write(fh):  # the .npy header, then each radiograph as it is rendered
-            np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
-                                                          shape=(len(cameras), H, W)))
-            for res in renderer.views(cameras):
-                fh.write(np.ascontiguousarray(image(res), "<f4").tobytes())
+    try:
+        if out.suffix.lower() == ".png":
+            res = render(cameras[0])
+            RenderResult(image(res)[..., None], res.meta).save(out, window=parse_window(args), overwrite=args.force)
+        else:
+            def write(fh):  # the .npy header, then each radiograph as it is rendered
+                np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
+                                                              shape=(len(cameras), H, W)))
+                for cb in cameras:
+                    fh.write(np.ascontiguousarray(image(render(cb)), "<f4").tobytes())
 
-        write_atomic(out, write, args.force)
+            write_atomic(out, write, args.force)
+    except ClwaveError as e:  # the splatter's "too near"/"too wide" name render's ray tracer; here it is drr's
+        e.cli = e.cli and e.cli.replace("clwave render --method raytrace --xray", "clwave drr --method raytrace")
+        raise
     seconds = time.perf_counter() - start
     kind = "transmitted intensities" if args.intensity else "line integrals"
-    print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}) in {seconds:.2f} s, {seconds / len(cameras):.3f} s "
+    how = f"ray traced, tolerance {tolerance:g}" if args.method == "raytrace" else "splatted"
+    print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) in {seconds:.2f} s, {seconds / len(cameras):.3f} s "
           f"each, on {renderer.cc.info.name}: {out}")
     return 0
 
@@ -89,6 +111,11 @@ def run(args):
 def add_parser(sub):
     p = add_command(sub, "drr", "digitally reconstructed radiographs: cone-beam X-rays of many poses", run,
                     "output .npy (N, H, W) float32 stack, or .png for one pose")
+    p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
+                   help="splat (default): perspective wavelet splatting; raytrace: the ray tracer's X-ray mode, "
+                        "within --tolerance of the exact line integrals (near or wide cones splatting refuses)")
+    p.add_argument("--tolerance", type=float, help="--method raytrace: absolute error per line integral "
+                   "(default 1e-3)")
     p.add_argument("--poses", required=True, help="CSV pose table: a header line naming columns among azimuth, "
                    "elevation, roll, dso, dsd, offset_u, offset_v, isocentre_x/_y/_z (degrees, world units), or "
                    "p00..p23 (a 3x4 projection matrix), then one pose a line (docs/coordinates.md §5)")
