@@ -188,8 +188,8 @@ inline bool reached(__global const uchar *content, const int4 origin, const int4
  *   coarse_bound superblocks bounded by at most this are one region for skipping and R
  *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates
  *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;
- *                                perspective p = base (the eye), w = normalize(dir + c du + r dv),
- *                                with c, r the pixel centre's offsets from the image centre
+ *                                perspective p = base (the eye), w = normalize(dir + c du + r dv) (a cone beam's
+ *                                principal point in dir), with c, r the pixel centre's offsets from the image centre
  *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset
  *   nodes        the sample points xi_k (CLW_SAMPLES), then the (CLW_SAMPLES, CLW_SAMPLES) matrix
  *                from the samples to the field's Chebyshev series, then the (NG, NG) one from lanes
@@ -211,20 +211,16 @@ inline bool reached(__global const uchar *content, const int4 origin, const int4
  *                coarse segment may end past a pass's box) and stats, which it updates (docs/raytracing.md §6)
  * Grid: global (W, H). */
 __kernel void raytrace(__global float4 *image, __global int4 *stats, __global int4 *lattice_stats, const int width,
-                       const int height,
-                       FIELD_PARAMS,
+                       const int height, FIELD_PARAMS,
                        __global const float *bound, const int4 occ_origin, const int4 occ_shape,
                        __global const float *super_bound, const int4 super_origin, const int4 super_shape,
                        __global const uchar *content, const int4 content_origin, const int4 content_shape,
-                       const real coarse_bound,
-                       const float4 box_lo, const float4 box_hi,
+                       const real coarse_bound, const float4 box_lo, const float4 box_hi,
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
                        const float4 to_fine_scale, const float4 to_fine_offset,
                        __constant const real *nodes, __constant const real *weights, const real tol,
-                       const real shade_gain,
-                       const real grad_floor,
-                       __constant const float4 *lights, const int nlights, const float4 phong,
-                       __global const real4 *tf,
+                       const real shade_gain, const real grad_floor,
+                       __constant const float4 *lights, const int nlights, const float4 phong, __global const real4 *tf,
                        const int passes, const float4 pass_lo, const float4 pass_hi, __global real4 *carry,
                        __global real4 *ledger, __global real *resume)
 {
