@@ -11,7 +11,7 @@ import pyopencl.array as cla
 import pytest
 
 from clwave.splat import reference
-from clwave.splat.perspective import _pack, slope_cells
+from clwave.splat.cone_cells import pack_nodes, slope_cells
 from clwave.splat.stages import Stages
 from clwave.splat.tables import POOL_GUARD, set_texture_tables
 
@@ -152,7 +152,7 @@ def test_cone_cells(cc, rng, count, quasi, spare):
         nodes = rng.standard_normal((count[0] * count[1], nv + 3, nu + 2)).astype(np.float32)[:, 2:-1, 1:-1]  # a view
         textures[(b.level, b.key)] = SimpleNamespace(data=nodes, centre_u=nu / 2, centre_v=nv / 2, h_u=0.5, h_v=0.25)
     old = np.full(10**5, np.nan, np.float32) if spare else None
-    packed = _pack(SimpleNamespace(bands=bands), textures, layer_of, 2, count, None, old)
+    packed = pack_nodes(SimpleNamespace(bands=bands), textures, layer_of, 2, count, None, old)
     assert (packed["nodes"] is old) == spare
     pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=old) if spare else None
     pool, cell_peaks = slope_cells(cc, packed, count, quasi, pool)

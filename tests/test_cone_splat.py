@@ -12,8 +12,8 @@ import clwave
 from clwave.errors import InputError
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import view_frame
-from clwave.splat.perspective import (SLOPE_STEP, _cell_range_peaks, drop_share, quasi_interpolant, select_drops,
-                                      sheared_footprints)
+from clwave.splat.cone_cells import cell_range_peaks
+from clwave.splat.perspective import (SLOPE_STEP, drop_share, quasi_interpolant, select_drops, sheared_footprints)
 from clwave.splat.reference import exact_xray
 from clwave.splat.spatial import line_integral
 
@@ -321,7 +321,7 @@ def test_select_drops_and_cell_peaks_against_brute_force():
     longer[order[k]] = True
     assert np.any(cover(longer) > budget)  # the longest run that fits
     peaks = rng.random((3, 4, 5))  # (textures, nodes along v, along u)
-    got = _cell_range_peaks(peaks)
+    got = cell_range_peaks(peaks)
     for v0 in range(3):
         for v1 in range(v0, 3):
             for u0 in range(4):

@@ -98,7 +98,8 @@ def run(args):
 
             write_atomic(out, write, args.force)
     except ClwaveError as e:  # the splatter's "too near"/"too wide" name render's ray tracer; here it is drr's
-        e.cli = e.cli and e.cli.replace("clwave render --method raytrace --xray", "clwave drr --method raytrace")
+        e.cli = e.cli and e.cli.replace("clwave render --method raytrace --xray",  # and drr has no --fov
+                                        "clwave drr --method raytrace").replace("--fov, ", "")
         raise
     seconds = time.perf_counter() - start
     kind = "transmitted intensities" if args.intensity else "line integrals"

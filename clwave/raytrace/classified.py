@@ -125,7 +125,7 @@ class ScalarRange:
                    boxes=tables["boxes"], order=f.orders[0])
             scalar = f.pool.get()  # one float a coefficient (bricks.build's scalar)
             n = min(AUTO_COEFFICIENTS, len(scalar))
-            self.sample = scalar[::len(scalar) // n][:n]
+            self.sample = scalar[::len(scalar) // n][:n].copy()  # not a view: the pool copy goes below
             words, quant = pack(scalar, f.boxes[:, 0])
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half a step of the floats

@@ -478,8 +478,7 @@ class RayTracer:
         return StagedTracer(cls, path, device=device, device_memory=device_memory, lod=lod)
 
     def refine(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True, *,
-               steps=None,
-               budget=None, error=None, transfer_function=None):
+               steps=None, budget=None, error=None, transfer_function=None):
         """Frames of ``camera`` from cheap to exact (:mod:`clwave.raytrace.progressive`, docs/raytracing.md §9),
         for a viewer that shows each as it comes: a generator (``RaytraceFrame`` s: ``image``, ``figures()``),
         the last bit for bit :meth:`render` at full detail; stop iterating when the view changes (nothing is

@@ -128,8 +128,8 @@ def _frames(r: SplatRenderer, camera: Camera, steps, budget, error):
             return
 
 
-
-SLICE_POINTS = 64  # per side of the slice grid integrating a band's footprint energy (docs/splatting.md §5)
+SLICE_POINTS = 64  # per side of the slice grid integrating a band's footprint energy (docs/splatting.md §5), times
+#                   the spacings' largest ratio (the finest spectral lobe is 2 pi / max(d) wide), up to 8 times
 
 
 def band_energies(wavelet, spacing, view) -> np.ndarray:
@@ -144,7 +144,7 @@ def band_energies(wavelet, spacing, view) -> np.ndarray:
     """
     d_xyz = np.asarray(spacing, float)[::-1]
     reach = 16.0 * np.pi / float(np.min(d_xyz))  # |G|^2 is below 1e-6 of its peak beyond 16 pi / d
-    grid = np.linspace(-reach, reach, SLICE_POINTS)
+    grid = np.linspace(-reach, reach, int(SLICE_POINTS * min(8.0, np.ceil(np.max(d_xyz) / np.min(d_xyz)))))
     U, V = np.meshgrid(grid, grid)
     power = [{letter: np.abs(centred_fourier(wavelet, letter, d_xyz[a] * (U * view.u[a] + V * view.v[a]))) ** 2
               for letter in "ad"} for a in range(3)]
