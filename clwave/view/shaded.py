@@ -41,8 +41,9 @@ class ShadedSource(Source):
 
     ``path``: the model is that ``.clw`` file, traced by :meth:`~clwave.RayTracer.open` (docs/raytracing.md §8):
     frames of its coarse stage at once, of the whole file's tracer once it is set up in the background, when
-    ``upgraded(mode, failure)`` (a callable, from that thread) is called.  ``whole``: ``wv`` is a prefix of the
-    model, and this Future gives the whole one, which the tracer waits for."""
+    ``upgraded(mode, failure)`` (a callable, from that thread) is called: made from the model the viewer holds (``wv``,
+    or ``whole()`` where given), not read again.  ``whole``: ``wv`` is a prefix of the model, and this callable gives
+    the whole one (read meanwhile for the X-ray views), which the tracer waits for."""
 
     mode = "shaded"
 
@@ -69,11 +70,13 @@ class ShadedSource(Source):
         """The ray tracer (of a file: its coarse stage), and its kernels built by a small image (on the build
         thread, not the render thread)."""
         from ..model.camera import Camera
+        from ..raytrace.staged import StagedTracer
         from ..raytrace.tracer import RayTracer
 
         warm = dict(transfer_function=self.start_tf) if self.scalar else {}
         if self.path is not None and self.staged is None:
-            staged = RayTracer.open(self.path, device=self.device, lod=True)
+            staged = StagedTracer(RayTracer, self.path, device=self.device, lod=True,
+                                  whole=self.whole or (lambda: self.wv))  # the model held, not read again
             # the coarse stage's kernels; the whole file's set-up starts with the page's first frame (staged.render),
             # so that its reading does not delay that frame
             staged.coarse.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN,
@@ -82,7 +85,7 @@ class ShadedSource(Source):
             self._watch = threading.Thread(target=self._upgrade, name="clwave-view-full-stage", daemon=True)
         elif self.path is None and self.tracer is None:
             if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
-                self.wv = self.whole.result()
+                self.wv = self.whole()
             tracer = RayTracer(self.wv, device=self.device, lod=True)
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
             self.tracer = tracer
