@@ -39,11 +39,12 @@ class ShadedPace:
 class ShadedSource(Source):
     """Shaded frames of an RGBA model (level of detail) or a scalar one (a transfer function at render time).
 
-    ``path``: the model is that ``.clw`` file, traced by :meth:`~clwave.RayTracer.open` (docs/raytracing.md §8):
-    frames of its coarse stage at once, of the whole file's tracer once it is set up in the background, when
-    ``upgraded(mode, failure)`` (a callable, from that thread) is called: made from the model the viewer holds (``wv``,
-    or ``whole()`` where given), not read again.  ``whole``: ``wv`` is a prefix of the model, and this callable gives
-    the whole one (read meanwhile for the X-ray views), which the tracer waits for."""
+    ``path``: the model is that ``.clw`` file, traced in stages (:class:`~clwave.raytrace.staged.StagedTracer`,
+    docs/raytracing.md §8): frames of its coarse stage at once, of the whole file's tracer once it is set up in the
+    background, when ``upgraded(mode, failure)`` (a callable, from that thread) is called: made from the model the
+    viewer holds (``wv``, or ``whole()`` where given), not read again.  ``whole``: ``wv`` is a prefix of the model,
+    and this callable gives the whole one (read meanwhile for the X-ray views), which the tracer waits for.
+    ``transfer_function``: a scalar model's starting function (None: its own, or grey)."""
 
     mode = "shaded"
 
@@ -119,8 +120,8 @@ class ShadedSource(Source):
         """``(transfer function, its window in data units)`` of a tab's ``(preset, centre, width, opacity)``: the
         preset's points (preset None: the starting function's) with their opacity times ``opacity``, under its window
         (the pool's percentiles where "auto") widened ``width`` times and moved by ``centre`` of its width; spec None,
-        or the starting function unchanged, is the starting function itself (a render of it is ``clwave.raytrace``'s
-        with it, bit for bit).  ``(None, None)`` for an RGBA model."""
+        or the starting function unchanged, is the starting function itself (its window as given, not recomputed).
+        ``(None, None)`` for an RGBA model."""
         if not self.scalar:
             return None, None
         tracer = self.tracer or self.staged.coarse  # an "auto" window is the pool's: the whole file's once it is in
