@@ -80,7 +80,6 @@
   function setup() {
     const [h, w] = hello.size;
     canvas.width = w; canvas.height = h;
-    const m = hello.model;
     showModel();
     const shaded = hello.modes.includes("shaded");
     document.querySelector('input[value="shaded"]').disabled = !shaded;
