@@ -324,6 +324,17 @@ def test_a_scalar_model_is_classified_by_the_transfer_function_given_from_the_fi
     assert expect.std() > 5 and np.abs(decode(frames[-1][1]).astype(int) - expect).max() <= 1
 
 
+def test_a_volume_classified_post_stays_scalar_with_its_transfer_function():
+    """view(volume, tf=, classify="post") serves the scalar model carrying tf (its window resolved), which the shaded
+    views start from; classify="pre" (the default) classifies it to RGBA first."""
+    from clwave.view import as_model
+
+    vol, tf = clwave.phantom("hydrogen", n=16), clwave.TransferFunction.preset("grey")
+    post, pre = (as_model(vol, keep=0.2, tf=tf, classify=c) for c in ("post", "pre"))
+    assert (post.channels, pre.channels) == (1, 4)
+    assert clwave.TransferFunction.from_dict(post.transfer_function) == tf.resolved(vol) != tf  # "auto" made concrete
+
+
 def test_view_refuses_what_it_cannot_show():
     with pytest.raises(clwave.InputError, match="WaveletVolume, a clwave.Volume, an array or a .clw"):
         view("volume.npy")
