@@ -292,30 +292,105 @@ def test_a_scalar_model_is_shaded_through_the_tabs_transfer_function_built_off_t
     assert expect.std() > 5 and np.abs(decode(frames[-1][1]).astype(int) - expect).max() <= 1
 
 
+def test_a_scalar_model_is_classified_by_the_transfer_function_given_from_the_first_frame(monkeypatch):
+    """view(scalar model, tf=) (what `clwave view scalar.clw --tf P --tf-window LO,HI` serves): the hello names the
+    function for the page's editor, every render of the shaded source (its warm-up, the drag frame, each still frame)
+    is classified by it, each frame reports its window, and the final still frame is clwave.raytrace of the view with
+    it within a grey level (not bit for bit: the viewer's tracer holds every detail, docs/viewer.md §2)."""
+    from clwave.raytrace.tracer import RayTracer
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.3)
+    tf = clwave.TransferFunction.preset("hydrogen", window=(0.1, 0.8))
+    used, render = [], RayTracer.render
+    monkeypatch.setattr(RayTracer, "render", lambda self, *a, **k: used.append(k.get("transfer_function")) or
+                        render(self, *a, **k))
+    start = dict(preset=None, centre=0.0, width=1.0, opacity=1.0)  # the page's editor at its start
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            hello = await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", tf=start, moving=True)))
+            drag = await frames_until_final(ws, 1, until_seq=True)
+            await ws.send_str(json.dumps(dict(BASE, seq=2, mode="shaded", tf=start, azimuth=50.0)))
+            return hello, drag + await frames_until_final(ws, 2)
+    with view(wv, size=32, tolerance=2e-2, tf=tf) as v:
+        hello, frames = run(go(v))
+    assert hello["tf"] == dict(name="hydrogen", window=[0.1, 0.8])
+    assert len(used) >= 3 and all(u == tf for u in used)
+    assert all(f["tf_window"] == [0.1, 0.8] for f, _ in frames) and frames[-1][0]["final"]
+    expect = clwave.raytrace(wv, clwave.Camera(50.0, 20.0, 32, extent=frames[-1][0]["extent"]), tolerance=2e-2,
+                             transfer_function=tf).to_uint8(background=(0.0, 0.0, 0.0))
+    assert expect.std() > 5 and np.abs(decode(frames[-1][1]).astype(int) - expect).max() <= 1
+
+
+def test_a_volume_classified_post_stays_scalar_with_its_transfer_function():
+    """view(volume, tf=, classify="post") serves the scalar model carrying tf (its window resolved), which the shaded
+    views start from; classify="pre" (the default) classifies it to RGBA first."""
+    from clwave.view import as_model
+
+    vol, tf = clwave.phantom("hydrogen", n=16), clwave.TransferFunction.preset("grey")
+    post, pre = (as_model(vol, keep=0.2, tf=tf, classify=c) for c in ("post", "pre"))
+    assert (post.channels, pre.channels) == (1, 4)
+    assert clwave.TransferFunction.from_dict(post.transfer_function) == tf.resolved(vol) != tf  # "auto" made concrete
+
+
 def test_view_refuses_what_it_cannot_show():
     with pytest.raises(clwave.InputError, match="WaveletVolume, a clwave.Volume, an array or a .clw"):
         view("volume.npy")
+    rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", n=8))
+    with pytest.raises(clwave.InputError, match="4 channels .classified already.: leave tf out"):
+        view(clwave.WaveletVolume.from_volume(rgba, levels=1), tf="hydrogen")
+    with pytest.raises(clwave.InputError, match="has 4 channels: leave classify out"):
+        view(rgba, tf="hydrogen", classify="post")
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1)
-    with pytest.raises(clwave.InputError, match="wavelet model already"):
-        view(wv, tf="hydrogen")
+    with pytest.raises(clwave.InputError, match="classify='later' must be"):
+        view(wv, classify="later")
     with pytest.raises(clwave.InputError, match="tolerance=0 must be a positive"):
         view(wv, tolerance=0)
     with pytest.raises(clwave.InputError, match="image size"):
         view(wv, size=0)
 
 
-def test_cli_view_refuses_bad_options_before_any_work(capsys):
+def test_cli_view_refuses_bad_options_before_any_work(capsys, tmp_path):
+    """What `render` refuses of --tf/--tf-window, `view` refuses in the same words (one home, cli/options.py)."""
     from clwave.cli import main
 
-    assert main(["view", "phantom:hydrogen:16", "--port", "70000"]) == 2
-    assert "--port 70000" in capsys.readouterr().err
-    assert main(["view", "phantom:hydrogen:16", "--tolerance", "0"]) == 2
-    assert "--tolerance" in capsys.readouterr().err
+    rgba = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(
+        clwave.phantom("hydrogen", n=8)), levels=1).save(tmp_path / "rgba.clw")
+    for argv, words in [(["--port", "70000"], "--port 70000"), (["--tolerance", "0"], "--tolerance"),
+                        (["--tf-window", "0,1"], "give --tf too"), (["--tf", "bone"], "bone"),
+                        (["--tf", "hydrogen", "--tf-window", "1"], "--tf-window '1' must be 2"),
+                        ([str(rgba), "--tf", "hydrogen"], "4 channels (classified already): leave them out")]:
+        assert main(["view", *([] if argv[0].endswith(".clw") else ["phantom:hydrogen:16"]), *argv]) == 2, argv
+        assert words in capsys.readouterr().err, argv
 
 
-def test_cli_view_serves_until_interrupted(tmp_path):
-    """``clwave view`` of a ``.clw`` file (opened by its prefix, here all of a small file) prints the address with its
-    token; the page needs the token; Ctrl-C stops it cleanly."""
+def test_cli_view_of_a_volume_classified_post_starts_from_its_transfer_function(monkeypatch):
+    """``clwave view VOLUME --tf P --tf-window LO,HI --classify post``: the server gets the scalar model and starts its
+    shaded views from that function (the model's own, as `render` takes it); without --classify, an RGBA model."""
+    from clwave.cli import main
+    from clwave.view import server
+
+    class Served(Exception):
+        pass
+
+    def record(model, size, **options):
+        raise Served(model, options["transfer_function"])
+    monkeypatch.setattr(server, "ViewServer", record)
+    tf = clwave.TransferFunction.preset("hydrogen", window=(0.1, 0.8))
+    for post, channels, given in (["--classify", "post"], 1, tf), ([], 4, None):
+        with pytest.raises(Served) as served:
+            main(["--debug", "view", "phantom:hydrogen:16", "--tf", "hydrogen", "--tf-window", "0.1,0.8", *post])
+        model, start = served.value.args
+        assert model.channels == channels and start == given
+
+
+def test_cli_view_serves_a_scalar_file_classified_by_tf_until_interrupted(tmp_path):
+    """``clwave view scalar.clw --tf P --tf-window LO,HI`` (opened by its prefix, here all of a small file) prints the
+    address with its token; the page needs the token; the hello names the function for the page's editor; every
+    shaded frame is classified under that window, and the final still frame is clwave.raytrace of the view with it
+    within a grey level (docs/viewer.md §2), where the preset's own window is further; Ctrl-C stops it cleanly."""
     import signal
     import subprocess
     import sys
@@ -324,8 +399,17 @@ def test_cli_view_serves_until_interrupted(tmp_path):
 
     path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.2).save(
         tmp_path / "h.clw")
-    with subprocess.Popen([sys.executable, "-m", "clwave", "view", str(path), "--size", "32"],
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+    start = dict(preset=None, centre=0.0, width=1.0, opacity=1.0)  # the page's editor at its start
+
+    async def shaded(url):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(url.replace("/?", "/ws?"))
+            hello = await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", tf=start, azimuth=50.0)))
+            return hello, await frames_until_final(ws, 1)
+    with subprocess.Popen([sys.executable, "-m", "clwave", "view", str(path), "--size", "32", "--tf", "hydrogen",
+                           "--tf-window", "0.1,0.8"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          text=True) as proc:
         try:
             line = proc.stdout.readline()
             assert line.startswith("clwave view: open http://127.0.0.1:"), line
@@ -334,11 +418,19 @@ def test_cli_view_serves_until_interrupted(tmp_path):
             with pytest.raises(urllib.error.HTTPError, match="403") as refused:
                 urllib.request.urlopen(url.split("?")[0], timeout=30)
             refused.value.close()
+            hello, frames = run(shaded(url))
             proc.send_signal(signal.SIGINT)
             assert proc.wait(timeout=30) == 0
             assert "stopped" in proc.stderr.read()
         finally:
             proc.kill()
+    assert hello["tf"] == dict(name="hydrogen", window=[0.1, 0.8])
+    assert all(f["tf_window"] == [0.1, 0.8] for f, _ in frames) and frames[-1][0]["final"]
+    got, camera = decode(frames[-1][1]).astype(int), clwave.Camera(50.0, 20.0, 32, extent=frames[-1][0]["extent"])
+    expect, other = (clwave.raytrace(clwave.WaveletVolume.open(path), camera, tolerance=1e-2, transfer_function=clwave.
+                                     TransferFunction.preset("hydrogen", window=window)).to_uint8(background=(0, 0, 0))
+                     for window in ((0.1, 0.8), None))
+    assert expect.std() > 5 and np.abs(got - expect).max() <= 1 < np.abs(got - other).max()
 
 
 def test_loopback_names():

@@ -134,9 +134,19 @@ def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
     assert again[-1].figures["coefficients"] == model.kept
 
 
-def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(clw):
-    """A .clw file's shaded views come from RayTracer.open: coarse-stage frames (not final) while the whole file is
-    set up, and a still view ends at clwave.raytrace of the whole model within one grey level."""
+@pytest.mark.parametrize("prefix", [None, 2048])
+def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(clw, monkeypatch, prefix):
+    """A .clw file's shaded views come from a staged tracer: coarse-stage frames (not final) while the whole file is
+    set up, and a still view ends at clwave.raytrace of the whole model within one grey level.  The full stage takes
+    the model the viewer holds (the prefix, all of this file) or reads for its X-ray views (a prefix of 2,048): the
+    whole file is read once at most (instrumented)."""
+    if prefix is not None:
+        monkeypatch.setattr(view_prefix, "PREFIX", prefix)
+    reads, open_ = [], clwave.WaveletVolume.open.__func__
+    monkeypatch.setattr(clwave.WaveletVolume, "open", classmethod(
+        lambda cls, path, keep=None, **k: reads.append((keep, k.get("approximation", False))) or
+        open_(cls, path, keep, **k)))
+
     async def go(v):
         async with aiohttp.ClientSession() as s:
             ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
@@ -152,6 +162,9 @@ def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(c
     with view(clw, size=32, tolerance=2e-2) as v:
         frames = asyncio.run(go(v))
     assert all(not f["final"] for f in frames if f.get("prefix")) and frames[-1]["detail"] == 0
+    # the prefix, the coarse stage's approximation, and (a prefix of 2,048) the rest read once, for both modes
+    assert reads == [(1.0, False), (None, True)] if prefix is None else \
+        reads == [(2048 / 40 ** 3, False), (None, True), (None, False)]
     expect = clwave.raytrace(clwave.WaveletVolume.open(clw), clwave.Camera(10.0, 20.0, 32, extent=frames[-1]["extent"]),
                              tolerance=2e-2).to_uint8(background=(0.0, 0.0, 0.0))
     assert expect.std() > 5 and np.abs(decode(frames[-1]["data"]).astype(int) - expect).max() <= 1

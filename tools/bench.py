@@ -928,6 +928,68 @@ def _view_server(command):
             log += proc.stderr.read().splitlines()
 
 
+def bench_view_held(args) -> dict:
+    """The viewer's shaded views of a ``.clw`` file (``--first-image-file``; default: first-image's hydrogen
+    ``--size``^3 RGBA in ``--scratch``) at ``--view-image``, in this process through its socket (no browser): after the
+    page's first X-ray frame (which starts the reading of a large file's rest), the seconds from asking for a still
+    shaded view to its first frame and to its final frame, the full stage's set-up, with the full stage taking the
+    model the viewer holds or reads for its X-ray views (docs/viewer.md §2) against reading the file again
+    (``held`` false), interleaved over ``--repeats`` rounds (tolerance 1e-2)."""
+    import asyncio
+
+    import aiohttp
+
+    from clwave.raytrace import staged
+    from clwave.view import view
+    from clwave.view.protocol import unpack_frame
+
+    path = args.first_image_file or args.scratch / f"hydrogen_{args.size}_rgba.clw"
+    if not path.exists():
+        return dict(skipped=f"{path} does not exist: run `bench.py first-image --size {args.size}` or give "
+                            f"--first-image-file")
+    base = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, detail=1.0, window=None, moving=False,
+                background=0.0, shading=True, tf=None)
+
+    async def frames(ws, seq, until):
+        while True:
+            msg = await ws.receive(timeout=900)
+            if msg.type == aiohttp.WSMsgType.BINARY:
+                figures = unpack_frame(msg.data)[0]
+                if figures["seq"] == seq and until(figures):
+                    return figures
+
+    async def session(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(dict(base, seq=1, mode="xray")))
+            await frames(ws, 1, lambda f: True)
+            start = time.perf_counter()
+            await ws.send_str(json.dumps(dict(base, seq=2, mode="shaded")))
+            await frames(ws, 2, lambda f: True)
+            first = time.perf_counter() - start
+            await frames(ws, 2, lambda f: f["final"] and not f.get("prefix"))
+            return first, time.perf_counter() - start
+
+    made = staged.StagedTracer.__init__
+    runs = {True: [], False: []}
+    try:
+        for _ in range(args.repeats):
+            for held in (False, True):
+                staged.StagedTracer.__init__ = made if held else (
+                    lambda self, *a, whole=None, **k: made(self, *a, **k))  # the file read again
+                with view(path, size=args.view_image, tolerance=1e-2, device=args.device) as v:
+                    first, final = asyncio.run(session(v))
+                    runs[held].append(dict(first=first, final=final,
+                                           full_setup=v.server.sources["shaded"].staged.full_seconds))
+    finally:
+        staged.StagedTracer.__init__ = made
+    return dict(setting=dict(file=str(path), image=f"{args.view_image}^2", tolerance=1e-2, rounds=args.repeats),
+                **{"held" if held else "read again": {k: summary([r[k] for r in rs]) for k in rs[0]}
+                   for held, rs in runs.items()},
+                rounds={"held" if held else "read again": rs for held, rs in runs.items()})
+
+
 DRR_TURN = 10  # drr: poses a batch renderer draws before the other takes its turn
 
 
@@ -1068,7 +1130,7 @@ BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "spl
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "setup": bench_setup,
               "post": bench_post, "pools": bench_pools,
               "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
-              "first-image": bench_first_image, "view-file": bench_view_file}
+              "first-image": bench_first_image, "view-file": bench_view_file, "view-held": bench_view_held}
 
 
 def main(argv=None):

@@ -153,9 +153,11 @@ def _needs_rgba(name, channels, fix) -> InputError:
                       f"channel(s): {fix}, or render line integrals with --xray")
 
 
-def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None):
+def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None, post=False):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
+    ``post`` (implied by ``rgba``): a scalar ``.clw`` input takes ``--tf``/``--tf-window``, the transfer function
+    the caller classifies with while rendering (:func:`post_transfer_function`).
 
     Returns ``(wavelet_volume, reference_volume)``; the reference is the volume the
     model approximates (None when the input was already a ``.clw`` file).  A chunked input gives no
@@ -173,7 +175,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     if args.input.lower().endswith(".clw"):
         given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
                  and not (cluster_render and name in ("workers", "scheduler"))
-                 and not (rgba and name in ("tf", "tf_window"))]  # a scalar .clw: classified while rendering
+                 and not ((rgba or post) and name in ("tf", "tf_window"))]  # a scalar .clw: classified while rendering
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
                              f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 from ..errors import InputError
-from .options import add_input_options, add_model_options, build_model, numbers
+from .options import add_input_options, add_model_options, build_model, numbers, post_transfer_function
 
 
 def run(args):
@@ -22,7 +22,10 @@ def run(args):
     check_tolerance(args.tolerance)
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
-    wv, _ = build_model(args, opener=PrefixFirst)  # a .clw file: its prefix now, the rest read while serving
+    # a .clw file: its prefix now, the rest read while serving; a scalar model's shaded views are classified while
+    # rendering by --tf [--tf-window] (a .clw input; a volume's with --classify post), checked as `render` checks them
+    wv, _ = build_model(args, opener=PrefixFirst, post=True)
+    tf = post_transfer_function(args, wv.prefix if isinstance(wv, PrefixFirst) else wv)
     if isinstance(wv, PrefixFirst) and not wv.complete:
         print(f"clwave view: serving the {wv.prefix.kept:,} most important coefficients of {args.input} at once; "
               f"the rest is read while serving", file=sys.stderr, flush=True)
@@ -30,7 +33,8 @@ def run(args):
     handler.setFormatter(logging.Formatter("clwave view: %(message)s"))
     logging.getLogger("clwave.view").addHandler(handler)
     logging.getLogger("clwave.view").setLevel(logging.INFO)
-    server = ViewServer(wv, size, tolerance=args.tolerance, device=args.device, host=args.host, port=args.port)
+    server = ViewServer(wv, size, tolerance=args.tolerance, device=args.device, host=args.host, port=args.port,
+                        transfer_function=tf)
 
     async def serve():
         try:

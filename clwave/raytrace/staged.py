@@ -32,12 +32,13 @@ class StagedTracer:
     returns and let go (None) once the full stage is; ``full``: the tracer of the whole file
     (``RayTracer(WaveletVolume.open(path), lod=lod)``), made in a background thread started by the first coarse
     image (:meth:`start`, :attr:`ready`, :meth:`wait`); at the interpreter's exit a set-up still running is
-    given up (:func:`_abandon`).  ``missing``: the relative size of the details the
-    coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` (docs/raytracing.md §9).  Use from one
-    thread at a time.
+    given up (:func:`_abandon`); ``whole``, where given, a callable giving that whole model, read from the file
+    where not (the viewer holds the model, or reads it anyway: docs/viewer.md §2).  ``missing``: the relative size
+    of the details the coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` (docs/raytracing.md
+    §9).  Use from one thread at a time.
     """
 
-    def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False):
+    def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False, whole=None):
         start = time.perf_counter()
         approximation = WaveletVolume.open(path, approximation=True)
         approximation.content_mask = None  # the coarse stage has no content clamp: the mask is not read for it
@@ -56,7 +57,7 @@ class StagedTracer:
         # the stages share the device-memory budget: the full stage's bricks beyond what the coarse one leaves go
         # to its scratch file (docs/raytracing.md §6)
         left = self.coarse.budget.total - self.coarse.bricks.pool_bytes - 2 * self.coarse.block_bound.nbytes
-        self._thread = threading.Thread(target=self._set_up, args=(tracer_class, path, max(left, 1), lod),
+        self._thread = threading.Thread(target=self._set_up, args=(tracer_class, path, max(left, 1), lod, whole),
                                         name="clwave-staged-setup", daemon=True)  # given up at exit: _abandon
 
     @property
@@ -64,10 +65,10 @@ class StagedTracer:
         """The ``detail=`` of the coarse stage's renders (None: its only one)."""
         return None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
 
-    def _set_up(self, tracer_class, path, device_memory, lod):
+    def _set_up(self, tracer_class, path, device_memory, lod, whole):
         start, cc = time.perf_counter(), self.coarse.cc
         try:
-            wv = WaveletVolume.open(path)
+            wv = WaveletVolume.open(path) if whole is None else whole()
             if self._abandon.is_set():
                 return
             if isinstance(wv.content_mask, FileMask):  # the expansion asks it for boxes slab by slab

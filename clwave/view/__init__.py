@@ -41,16 +41,14 @@ class Viewer:
                 f'style="border: 0"></iframe>')
 
 
-def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3):
+def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3, classify="pre"):
     """A thresholded :class:`~clwave.WaveletVolume` from a model (as it is), a :class:`~clwave.Volume` or an
-    array ``(z, y, x[, c])`` (classified with ``tf``, a preset name or a TransferFunction, first)."""
-    from ..model.transfer import TransferFunction
+    array ``(z, y, x[, c])``: classified with ``tf`` (a TransferFunction) first, or with ``classify="post"`` the
+    scalar kept with ``tf`` as its transfer function, classified while rendering (docs/raytracing.md §10)."""
     from ..model.volume import Volume
     from ..model.wavelet import WaveletVolume
 
     if isinstance(model_or_volume, WaveletVolume):
-        if tf is not None:
-            raise InputError("tf= classifies a volume before its transform; this is a wavelet model already")
         return model_or_volume
     if isinstance(model_or_volume, np.ndarray):
         model_or_volume = Volume(model_or_volume)
@@ -59,41 +57,59 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3):
                          f"{type(model_or_volume).__name__}")
     vol = model_or_volume
     if tf is not None:
-        tf = (TransferFunction.preset(tf) if isinstance(tf, str) else tf).resolved(vol)
-        vol = tf.classify(vol)
+        if classify == "post" and vol.channels != 1:
+            raise InputError(f'classify="post" keeps a scalar volume for ray tracing to classify; this volume has '
+                             f'{vol.channels} channels: leave classify out')
+        tf = tf.resolved(vol)
+        vol = tf.classify(vol) if classify == "pre" else vol
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, transfer_function=tf).threshold(keep=keep)
     return wv.compute() if vol.chunked else wv  # a chunked volume's model, gathered
 
 
-def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, device=None, host="127.0.0.1", port=0,
-         open_browser=False) -> Viewer:
+def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, classify="pre", device=None,
+         host="127.0.0.1", port=0, open_browser=False) -> Viewer:
     """Serve a progressive view of a model, a volume or a ``.clw`` file in the browser; returns a :class:`Viewer`.
 
     ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (an RGBA
-    model, classified first by ``tf=`` for a volume, or a scalar one through the page's transfer function at render
-    time).  A volume is decomposed with cubic wavelets and ``keep`` (default 0.05) of its voxels kept; a ``.clw``
-    file (a path) is served at once from its most important coefficients while the rest (its ``keep`` most
-    important, default all) is read (docs/viewer.md §2).  The server binds ``host`` (loopback unless given) at
-    ``port`` (0: a free one); every request needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
+    model, or a scalar one classified at render time through the page's transfer-function editor).  ``tf`` (a preset
+    name or a TransferFunction): a volume is classified with it before its transform (``classify="pre"``), or kept
+    scalar and classified with it while rendering (``classify="post"``); a scalar model or ``.clw`` file is
+    classified with it while rendering; the editor starts from it (else from the model's own, or grey).  A volume is
+    decomposed with cubic wavelets and ``keep`` (default 0.05) of its voxels kept; a ``.clw`` file (a path) is served
+    at once from its most important coefficients while the rest (its ``keep`` most important, default all) is read
+    (docs/viewer.md §2).  The server binds ``host`` (loopback unless given) at ``port`` (0: a free one); every request
+    needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
     """
     from ..model.camera import Camera
+    from ..model.transfer import TransferFunction
+    from ..model.wavelet import WaveletVolume
     from .frames import check_tolerance
     from .prefix import PrefixFirst
     from .server import BackgroundServer, ViewServer, is_loopback
 
     size = Camera(size=size).size
     check_tolerance(tolerance)
+    if classify not in ("pre", "post"):
+        raise InputError(f"classify={classify!r} must be 'pre' (classify a volume before its transform) or 'post' "
+                         f"(while rendering)")
+    tf = TransferFunction.preset(tf) if isinstance(tf, str) else tf
+    if tf is not None and not isinstance(tf, TransferFunction):
+        raise InputError(f"tf= must be a preset name or a clwave.TransferFunction, not {type(tf).__name__}")
     if isinstance(model_or_volume, (str, PathLike)) and str(model_or_volume).lower().endswith(".clw"):
-        if tf is not None:
-            raise InputError("tf= classifies a volume before its transform; a .clw file is a wavelet model already")
         wv = PrefixFirst(model_or_volume, keep=keep)
+        model = wv.prefix
     else:
-        wv = as_model(model_or_volume, keep=0.05 if keep is None else keep, tf=tf)
+        model = model_or_volume if isinstance(model_or_volume, WaveletVolume) else None  # else a volume's tf is its own
+        wv = as_model(model_or_volume, keep=0.05 if keep is None else keep, tf=tf, classify=classify)
+    if model is not None and tf is not None and model.channels != 1:  # a model: classified while rendering
+        raise InputError(f"tf= classifies a scalar model while rendering; this model has {model.channels} channels "
+                         f"(classified already): leave tf out")
     if not is_loopback(host):
         import warnings
         warnings.warn(f"the viewer listens on {host}: anyone who can reach it and learns the address with its token "
                       f"can see this volume", stacklevel=2)
-    server = ViewServer(wv, size, tolerance=tolerance, device=device, host=host, port=port)
+    server = ViewServer(wv, size, tolerance=tolerance, device=device, host=host, port=port,
+                        transfer_function=None if model is None else tf)
     viewer = Viewer(BackgroundServer(server))
     if open_browser:
         import webbrowser

@@ -57,15 +57,17 @@ TF_RANGES = dict(centre=(-2.0, 2.0), width=(0.02, 50.0), opacity=(1e-3, 1e3))
 
 
 def _tf(value):
-    """``(preset, centre, width, opacity)`` of a page's ``tf`` field, or None (the model's own)."""
+    """``(preset, centre, width, opacity)`` of a page's ``tf`` field (preset None: the starting transfer function,
+    the one the server was given, the model's own or grey), or None (the starting function as it is)."""
     from ..model.transfer import TransferFunction
 
     if value is None:
         return None
     if not isinstance(value, dict) or set(value) != {"preset", *TF_RANGES}:
         raise Refused(f"tf must be null or {{\"preset\", {', '.join(map(repr, TF_RANGES))}}}")
-    if value["preset"] not in TransferFunction.PRESETS:
-        raise Refused(f"tf preset={value['preset']!r} must be one of {', '.join(TransferFunction.PRESETS)}")
+    if value["preset"] is not None and value["preset"] not in TransferFunction.PRESETS:
+        raise Refused(f"tf preset={value['preset']!r} must be null (the starting one) or one of "
+                      f"{', '.join(TransferFunction.PRESETS)}")
     return (value["preset"], *(_number(value, name, *span) for name, span in TF_RANGES.items()))
 
 

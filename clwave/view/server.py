@@ -49,13 +49,16 @@ def is_loopback(host: str) -> bool:
 
 
 class ViewServer:
-    """Serves views of one wavelet model: the X-ray source always, the shaded one for an RGBA model.
+    """Serves views of one wavelet model: the X-ray source always, the shaded one for a scalar or an RGBA model.
 
-    ``size`` (H, W) is the full image; ``tolerance`` the shaded frames' when still.  :meth:`start` binds
-    ``host:port`` (port 0: a free one) inside a running event loop; :attr:`url` is the address with the token.
+    ``size`` (H, W) is the full image; ``tolerance`` the shaded frames' when still; ``transfer_function`` a scalar
+    model's shaded views' from the first frame (None: the model's own, or grey), where the page's editor starts.
+    :meth:`start` binds ``host:port`` (port 0: a free one) inside a running event loop; :attr:`url` is the address
+    with the token.
     """
 
-    def __init__(self, model, size=(512, 512), tolerance=1e-2, device=None, host="127.0.0.1", port=0):
+    def __init__(self, model, size=(512, 512), tolerance=1e-2, device=None, host="127.0.0.1", port=0,
+                 transfer_function=None):
         from .prefix import PrefixFirst
 
         opened = model if isinstance(model, PrefixFirst) else None
@@ -76,11 +79,12 @@ class ViewServer:
         self.whole = None if opened is None or opened.complete else Future()
         self._reader = None if self.whole is None else threading.Thread(
             target=self._read_whole, args=(opened,), name="clwave-view-read", daemon=True)
-        self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened).result()
+        self._starting = threading.Lock()  # the reader is started from the event loop or the shaded set-up
+        self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened, transfer_function).result()
         self.pages = {path: (resources.files(__package__).joinpath("static", name).read_text(), mime)
                       for path, (name, mime) in STATIC.items()}
 
-    def _prepare(self, wv, size, tolerance, opened) -> dict:
+    def _prepare(self, wv, size, tolerance, opened, transfer_function) -> dict:
         """The sources, made on the render thread, with one frame of each kind drawn (kernels built, warm)."""
         from ..splat.renderer import SplatRenderer
 
@@ -89,16 +93,26 @@ class ViewServer:
             pass                                                                   # serves every size, stages.py)
         sources = dict(xray=xray)
         if wv.channels in (1, 4):  # a scalar model through a transfer function at render time, or RGBA
-            # a whole file (not a part of it, keep=) is traced by RayTracer.open: its coarse stage at once
+            # a whole file (not a part of it, keep=) is traced in stages: its coarse stage at once, read from the file;
+            # the full one from the model held (the prefix, where it is all of the file) or read for the X-ray views
             path = opened.path if opened is not None and opened.keep is None else None
             sources["shaded"] = ShadedSource(wv, size, tolerance, device=self.device, path=path,
-                                             whole=None if path else self.whole, upgraded=self.upgraded)
+                                             whole=None if self.whole is None else self.whole_model,
+                                             upgraded=self.upgraded,
+                                             transfer_function=transfer_function)
         return sources
 
     def read_whole(self):
-        """Start reading the rest of a file opened by its prefix (once; nothing to read otherwise)."""
-        if self._reader is not None and self._reader.ident is None:
-            self._reader.start()
+        """Start reading the rest of a file opened by its prefix (once, from any thread; nothing to read otherwise)."""
+        with self._starting:
+            if self._reader is not None and self._reader.ident is None:
+                self._reader.start()
+
+    def whole_model(self):
+        """The whole model of a file opened by its prefix (its reading started if it has not been, and waited for):
+        the shaded views' tracer takes it rather than reading the file again."""
+        self.read_whole()
+        return self.whole.result()
 
     def _read_whole(self, opened):
         """On the reading thread: the whole model and its renderer, then swapped in on the render thread."""
@@ -218,8 +232,9 @@ class ViewServer:
         xray = self.sources["xray"]
         from ..model.transfer import TransferFunction
 
+        shaded = self.sources.get("shaded")
         return dict(type="hello", modes=list(self.sources), size=list(xray.size), window=list(xray.auto_window),
-                    presets=list(TransferFunction.PRESETS),
+                    presets=list(TransferFunction.PRESETS), tf=shaded.start_figures() if shaded else None,
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model())
 
     def model(self) -> dict:

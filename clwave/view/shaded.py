@@ -39,23 +39,27 @@ class ShadedPace:
 class ShadedSource(Source):
     """Shaded frames of an RGBA model (level of detail) or a scalar one (a transfer function at render time).
 
-    ``path``: the model is that ``.clw`` file, traced by :meth:`~clwave.RayTracer.open` (docs/raytracing.md §8):
-    frames of its coarse stage at once, of the whole file's tracer once it is set up in the background, when
-    ``upgraded(mode, failure)`` (a callable, from that thread) is called.  ``whole``: ``wv`` is a prefix of the
-    model, and this Future gives the whole one, which the tracer waits for."""
+    ``path``: the model is that ``.clw`` file, traced in stages (:class:`~clwave.raytrace.staged.StagedTracer`,
+    docs/raytracing.md §8): frames of its coarse stage at once, of the whole file's tracer once it is set up in the
+    background, when ``upgraded(mode, failure)`` (a callable, from that thread) is called: made from the model the
+    viewer holds (``wv``, or ``whole()`` where given), not read again.  ``whole``: ``wv`` is a prefix of the model,
+    and this callable gives the whole one (read meanwhile for the X-ray views), which the tracer waits for.
+    ``transfer_function``: a scalar model's starting function (None: its own, or grey)."""
 
     mode = "shaded"
 
-    def __init__(self, wv, size, tolerance, device=None, path=None, whole=None, upgraded=None):
+    def __init__(self, wv, size, tolerance, device=None, path=None, whole=None, upgraded=None, transfer_function=None):
         super().__init__(wv, size)
         self.tolerance, self.device, self.tracer = check_tolerance(tolerance), device, None
         self.path, self.whole, self.staged, self.upgraded, self._watch = path, whole, None, upgraded, None
         self.scalar = wv.channels == 1
         self.steps = [(s, d) for s, d in DRAG_STEPS if d <= wv.levels]
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
-        self.default_tf = (TransferFunction.from_dict(wv.transfer_function) if wv.transfer_function
-                           else TransferFunction.preset("grey")) if self.scalar else None
-        self._tf = (None, self.default_tf)  # the last (spec, transfer function): the tracer reuses its table
+        # where a scalar model's classification starts (the page's editor too): the one given, the model's, or grey
+        own = wv.transfer_function
+        self.start_tf = None if not self.scalar else transfer_function or (
+            TransferFunction.from_dict(own) if own else TransferFunction.preset("grey"))
+        self._tf = (None, None, None)  # the last (key, transfer function, window): the tracer reuses its table
 
     def ready(self) -> bool:
         return self.tracer is not None or self.staged is not None
@@ -67,11 +71,13 @@ class ShadedSource(Source):
         """The ray tracer (of a file: its coarse stage), and its kernels built by a small image (on the build
         thread, not the render thread)."""
         from ..model.camera import Camera
+        from ..raytrace.staged import StagedTracer
         from ..raytrace.tracer import RayTracer
 
-        warm = dict(transfer_function=self.default_tf) if self.scalar else {}
+        warm = dict(transfer_function=self.start_tf) if self.scalar else {}
         if self.path is not None and self.staged is None:
-            staged = RayTracer.open(self.path, device=self.device, lod=True)
+            staged = StagedTracer(RayTracer, self.path, device=self.device, lod=True,
+                                  whole=self.whole or (lambda: self.wv))  # the model held, not read again
             # the coarse stage's kernels; the whole file's set-up starts with the page's first frame (staged.render),
             # so that its reading does not delay that frame
             staged.coarse.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN,
@@ -80,7 +86,7 @@ class ShadedSource(Source):
             self._watch = threading.Thread(target=self._upgrade, name="clwave-view-full-stage", daemon=True)
         elif self.path is None and self.tracer is None:
             if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
-                self.wv = self.whole.result()
+                self.wv = self.whole()
             tracer = RayTracer(self.wv, device=self.device, lod=True)
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
             self.tracer = tracer
@@ -102,30 +108,44 @@ class ShadedSource(Source):
         if self.upgraded is not None:
             self.upgraded(self.mode, failure)
 
-    def transfer_function(self, spec):
-        """The transfer function of a tab's ``(preset, centre, width, opacity)``: the preset's points with their
-        opacity times ``opacity``, under its window (the pool's percentiles where "auto") widened ``width`` times and
-        moved by ``centre`` of its width; None: the model's own (or grey).  None for an RGBA model."""
+    def start_figures(self) -> dict | None:
+        """The page's editor's start: the starting transfer function's name and window (``"auto"``: the pool's
+        percentiles, known once the tracer is made); None for an RGBA model."""
         if not self.scalar:
             return None
-        if spec is None:
-            return self.default_tf
-        if self._tf[0] != spec:
-            name, centre, width, opacity = spec
-            base = TransferFunction.preset(name)
-            lo, hi = (self.tracer or self.staged.coarse).scalar.window(base)
-            mid, half = (lo + hi) / 2 + centre * (hi - lo), (hi - lo) * width / 2
-            points = base.points.copy()
-            points[:, 4] *= opacity
-            self._tf = (spec, TransferFunction(points, window=(mid - half, mid + half), name=name))
-        return self._tf[1]
+        window = self.start_tf.window
+        return dict(name=self.start_tf.name, window=window if window == "auto" else [float(v) for v in window])
+
+    def transfer_function(self, spec) -> tuple:
+        """``(transfer function, its window in data units)`` of a tab's ``(preset, centre, width, opacity)``: the
+        preset's points (preset None: the starting function's) with their opacity times ``opacity``, under its window
+        (the pool's percentiles where "auto") widened ``width`` times and moved by ``centre`` of its width; spec None,
+        or the starting function unchanged, is the starting function itself (its window as given, not recomputed).
+        ``(None, None)`` for an RGBA model."""
+        if not self.scalar:
+            return None, None
+        tracer = self.tracer or self.staged.coarse  # an "auto" window is the pool's: the whole file's once it is in
+        key = (spec, id(tracer))
+        if self._tf[0] != key:
+            name, *change = (None, 0.0, 1.0, 1.0) if spec is None else spec
+            tf = self.start_tf if name is None else TransferFunction.preset(name)
+            lo, hi = window = tracer.scalar.window(tf)
+            if change != [0.0, 1.0, 1.0]:
+                centre, width, opacity = change
+                mid, half = (lo + hi) / 2 + centre * (hi - lo), (hi - lo) * width / 2
+                points = tf.points.copy()
+                points[:, 4] *= opacity
+                window = (mid - half, mid + half)
+                tf = TransferFunction(points, window=window, name=tf.name)
+            self._tf = (key, tf, [float(v) for v in window])
+        return self._tf[1:]
 
     def frames(self, state: ViewState, pace: ShadedPace):
         start = time.perf_counter()
         tracer = self.tracer  # None while a file's whole tracer is being set up: its coarse stage
-        options = dict(shading=state.shading)
+        options, classified = dict(shading=state.shading), {}  # a scalar model's: its window, a figure of each frame
         if self.scalar:
-            options["transfer_function"] = self.transfer_function(state.tf)
+            options["transfer_function"], classified["tf_window"] = self.transfer_function(state.tf)
         if state.moving:
             scale, detail = self.steps[pace.step]
             if tracer is None:
@@ -138,10 +158,10 @@ class ShadedSource(Source):
             seconds = time.perf_counter() - start
             self._pace(pace, seconds)
             yield self._shaded(state, result, False, dict(tolerance=self.tolerance * LOOSEN, detail=detail,
-                                                          error=None), seconds, start)
+                                                          error=None, **classified), seconds, start)
             return
         if tracer is None:
-            yield from self._coarse(state, options, start)
+            yield from self._coarse(state, options, classified, start)
             return
         last = start
         for f in self.tracer.refine(self.camera(state), tolerance=self.tolerance, **options):
@@ -149,11 +169,12 @@ class ShadedSource(Source):
             now = time.perf_counter()
             yield self._shaded(state, f.result(), final, dict(tolerance=self.tolerance, detail=f.detail,
                                                               reduction=f.reduction,
-                                                              error=_number(f.estimated_relative_rms_error)),
+                                                              error=_number(f.estimated_relative_rms_error),
+                                                              **classified),
                                now - last, start)
             last = time.perf_counter()
 
-    def _coarse(self, state, options, start):
+    def _coarse(self, state, options, classified, start):
         """A still view while a file's whole tracer is set up: its coarse stage on a quarter and on the whole
         image, neither final (the view is traced again when the whole file is in)."""
         for reduction in (4, 1):
@@ -161,7 +182,8 @@ class ShadedSource(Source):
             result = self.staged.render(self.camera(state, 1 / reduction), tolerance=self.tolerance, **options)
             self._watch_full_stage()
             yield self._shaded(state, result, False, dict(tolerance=self.tolerance, detail=self.wv.levels,
-                                                          reduction=reduction, error=None, prefix=True),
+                                                          reduction=reduction, error=None, prefix=True,
+                                                          **classified),
                                time.perf_counter() - stage, start)
 
     def _pace(self, pace: ShadedPace, seconds):

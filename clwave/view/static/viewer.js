@@ -80,23 +80,31 @@
   function setup() {
     const [h, w] = hello.size;
     canvas.width = w; canvas.height = h;
-    const m = hello.model;
     showModel();
     const shaded = hello.modes.includes("shaded");
     document.querySelector('input[value="shaded"]').disabled = !shaded;
     $("shaded-note").textContent = shaded ? "" : "shaded needs a scalar or a classified (RGBA) model";
-    $("tf-preset").replaceChildren(...hello.presets.map((name) => {
+    // the first entry is the transfer function the server starts from (given with --tf/--tf-window, the model's
+    // own, or grey; preset null), then the presets with their own windows
+    const start = hello.tf || { name: "grey", window: "auto" };
+    $("tf-preset").replaceChildren(...[null, ...hello.presets].map((name) => {
       const option = document.createElement("option");
-      option.textContent = name; option.selected = name === (m.transfer_function || "grey");
+      option.value = name || "";
+      option.textContent = name || `${start.name || "custom"}, window ${showRange(start.window)} (start)`;
       return option;
     }));
     const tf = shaded && hello.capabilities.shaded.tf;
     $("tf").disabled = !tf;
     $("tf-note").textContent = tf ? "classified while rendering" : "the model was classified before its " +
       "transform (RGBA): lighting and background act";
-    if (tf) { state.tf = { preset: $("tf-preset").value, centre: 0, width: 1, opacity: 1 }; showTf(); }
+    $("tf-range").textContent = showRange(start.window);
+    if (tf) { state.tf = { preset: null, centre: 0, width: 1, opacity: 1 }; showTf(); }
     syncMode();
     showDetail(); showWindow();
+  }
+
+  function showRange(w) {  // a transfer function's window in data units ("auto": the volume's percentiles)
+    return w === "auto" ? "auto" : w.map((v) => String(+v.toPrecision(4))).join(" … ");
   }
 
   function showModel() {
@@ -190,7 +198,9 @@
     });
     $(id).addEventListener("change", () => { state.moving = false; request(); });
   }
-  $("tf-preset").addEventListener("change", (ev) => { state.tf = { ...state.tf, preset: ev.target.value }; request(); });
+  $("tf-preset").addEventListener("change", (ev) => {
+    state.tf = { ...state.tf, preset: ev.target.value || null }; request();
+  });
   $("background").addEventListener("input", (ev) => {
     state.background = ev.target.value / 100; $("background-out").textContent = state.background.toFixed(2); request();
   });
@@ -207,6 +217,7 @@
       rows.push(["tolerance", `${fmt(f.tolerance)}, detail ${f.detail}` +
                  (f.reduction > 1 ? `, 1/${f.reduction} size` : "")]);
       if (f.error !== null) rows.push(["error estimate", `${fmt(f.error)} (${f.error_kind})`]);
+      if (f.tf_window) $("tf-range").textContent = showRange(f.tf_window);  // the window this frame was classified by
     }
     rows.push(["frame", `${(1000 * f.seconds).toFixed(0)} ms render, ${(1000 * f.elapsed).toFixed(0)} ms since view`]);
     const table = $("figures");
