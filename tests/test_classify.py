@@ -372,7 +372,7 @@ def brick_field(coef, box, frame, order, fine):
 def test_packed_pool_within_half_a_step(monkeypatch):
     """The scalar pool packed with 0..14 or 16 bits a tile of 4 x 4 x-rows (docs/raytracing.md §10): the ray tracer's
     decode, a row read from any x and every cubic cell as `scalar_cell` reads it (`pool_cell`, its rows in up to four
-    tiles), gives the host's q exactly (the nearest whole number of the pool's step S, the
+    tiles), gives the host's q exactly (the nearest whole number of the step S, one for a pool of full detail alone, the
     widest slot's range / 65535, above the slot's least coefficient), each tile has the fewest bits covering its q
     above its least, its coefficients within half a step; brute force at random points of random blocks: the brick's
     field from the float coefficients is the model's (the float64 closed form), the field from the decoded ones within
@@ -383,9 +383,10 @@ def test_packed_pool_within_half_a_step(monkeypatch):
 
     seen, pack = {}, classified.pack
 
-    def spy(scalar, boxes):
+    def spy(scalar, boxes, full):
         seen["float"], seen["boxes"] = scalar.copy(), np.array(boxes, np.int64)
-        return pack(scalar, boxes)
+        assert np.all(full)  # a tracer of full detail alone: one step for the pool
+        return pack(scalar, boxes, full)
 
     monkeypatch.setattr(classified, "pack", spy)
     vol = clwave.phantom("hydrogen", n=20)
@@ -458,8 +459,9 @@ def test_packed_pool_within_half_a_step(monkeypatch):
 
 def test_scalar_pool_in_a_scratch_file(monkeypatch):
     """Bricks in a scratch file (out-of-core passes, docs/raytracing.md §6) keep float coefficients: the
-    post-classified image is within the tolerance of the float64 oracle there too.  (A scalar pool on the device,
-    one float a coefficient, fits wherever the expansion's work does: here it is made not to.)"""
+    post-classified image is within the tolerance of the float64 oracle there too, and a tracer of every detail's is
+    bit for bit at full detail.  (A scalar pool on the device, one float a coefficient, fits wherever the expansion's
+    work does: here it is made not to.)"""
     from clwave.raytrace import bricks
 
     fits = bricks._check_fits
@@ -472,6 +474,9 @@ def test_scalar_pool_in_a_scratch_file(monkeypatch):
     res = tr.render(cam, tolerance=1e-3, transfer_function=tf)
     assert res.meta["pool"] == "scratch file"
     assert np.abs(res.image - classified_reference(wv, cam, tf, tracer=tr)).max() <= 1e-3
+    lod = clwave.RayTracer(wv, device_memory="14MiB", lod=True).render(cam, tolerance=1e-3, transfer_function=tf)
+    assert lod.meta["pool"] == "scratch file" and lod.meta["segments"] == res.meta["segments"]
+    np.testing.assert_array_equal(lod.image, res.image)
 
 
 def test_transfer_function_change_rebuilds_nothing(hydrogen, monkeypatch):
@@ -657,3 +662,51 @@ def test_expansion_of_one_channel_is_the_float4_ones(wavelet, monkeypatch):
         assert not pool[:, 1:].any()
     else:
         assert np.array_equal(one.pool.get().view(np.uint32), pool.view(np.uint32))
+
+
+def smooth_random(n=20, seed=7) -> clwave.Volume:
+    """A smooth random scalar volume (Gaussian-filtered noise, every voxel content)."""
+    from scipy.ndimage import gaussian_filter
+
+    data = gaussian_filter(np.random.default_rng(seed).normal(size=(n, n, n)), 1.5)
+    return clwave.Volume((data / np.abs(data).max()).astype(np.float32), spacing=(1.0, 0.9, 1.1))
+
+
+@pytest.mark.parametrize("case", ["smooth-random", "hydrogen"])
+def test_level_of_detail_keeps_full_detail_bit_for_bit(case, monkeypatch):
+    """A scalar model's pool packed by a tracer of every detail: its full-detail slots are packed as a tracer of
+    full detail alone packs them (their offset, step and q; docs/raytracing.md §10), so a render-time transfer
+    function's full-detail image and segments are bit for bit the direct render's (window "auto" and given), and so
+    is clwave.progressive's last frame; its coarse slots, whose range is wider, keep a step of their own, the widest
+    coarse slot's range / 65535, and every decoded coefficient lies within half its slot's step of the float one."""
+    from clwave.raytrace import classified
+
+    floats, pack = [], classified.pack
+    monkeypatch.setattr(classified, "pack", lambda scalar, *a: floats.append(scalar[:]) or pack(scalar, *a))
+    if case == "hydrogen":
+        wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), wavelet="cubic", levels=3)
+        wv, tf = wv.threshold(keep=0.2), clwave.TransferFunction.preset("hydrogen", window=(0.0, 0.6))
+    else:
+        wv = clwave.WaveletVolume.from_volume(smooth_random(), wavelet="cubic", levels=2).threshold(keep=0.3)
+        tf = clwave.TransferFunction.preset("grey")  # window "auto": from the full-detail slots' coefficients
+    direct, lod = clwave.RayTracer(wv), clwave.RayTracer(wv, lod=True)
+    step, steps = direct.quant.get()["step"], lod.quant.get()["step"]
+    assert np.all(step == step[0]) and steps.max() > step[0]  # one step at full detail; the coarse slots' wider
+    full = classified.full_detail_slots(lod.bricks)
+    (one, q_one, _), (every, q_every, per) = decoded_pool(direct), decoded_pool(lod)
+    picked = np.repeat(full, np.prod(lod.bricks.boxes[:, 0, :3].astype(np.int64), axis=1))
+    np.testing.assert_array_equal(q_every[picked], q_one)
+    np.testing.assert_array_equal(every[picked], one)
+    np.testing.assert_array_equal(lod.quant.get()[["offset", "step"]][full], direct.quant.get()[["offset", "step"]])
+    coef = floats[1][:len(every)].astype(np.float64)
+    span = np.maximum.reduceat(coef, lod.bricks.boxes[:, 0, 3]) - np.minimum.reduceat(coef, lod.bricks.boxes[:, 0, 3])
+    assert span[~full].max() / 65535 <= steps[~full][0] <= span[~full].max() / 65535 * (1 + 1e-6)
+    assert np.all(steps[~full] == steps[~full][0]) and np.abs(every - coef).max(initial=0) > 0
+    assert np.all(np.abs(every - coef) <= per / 2 * (1 + 1e-6))
+    cam = clwave.Camera(30, 20, size=10)
+    want = direct.render(cam, tolerance=1e-2, transfer_function=tf)
+    got = lod.render(cam, tolerance=1e-2, transfer_function=tf)
+    np.testing.assert_array_equal(got.image, want.image)
+    assert got.meta["segments"] == want.meta["segments"] and got.meta["tf_window"] == want.meta["tf_window"]
+    frames = list(clwave.progressive(wv, cam, method="raytrace", tolerance=1e-2, transfer_function=tf, tracer=lod))
+    np.testing.assert_array_equal(frames[-1].image, want.image)

@@ -39,6 +39,8 @@ with every detail, ``--repeats`` times after a warm-up: seconds, the expansion's
 pre-classification of the same phantom, renders interleaved; transfer-function changes, pools, errors.
 ``pools``: the packed scalar pool over the RGBA pool (docs/raytracing.md §10) for hydrogen at ``--size``³ and 128³,
 Marschner-Lobb and a CT-like phantom at 128³, each with its preset, and ``pack``'s time.
+``pools-lod``: the same for tracers of every detail (``lod=True``), hydrogen at ``--size``³: the pool with a step for
+the full-detail slots and one for the coarser details' against one step for the whole pool, and the steps.
 ``drr`` (not in ``all``): digitally reconstructed radiographs (docs/splatting.md §8): a
 Shepp-Logan phantom of ``--size``³ voxels of 300 mm / ``--size`` (a head-sized CT), cubic, 3 levels,
 5 %, through a C-arm (dso 1000 mm, dsd 1500 mm, a 400 mm detector): one renderer reused, each view
@@ -732,6 +734,44 @@ def bench_pools(args) -> dict:
                 peak_resident_gib=peak_resident_gib())
 
 
+def bench_pools_lod(args) -> dict:
+    """The packed scalar pool of a tracer of every detail (``lod=True``) over the RGBA one's, hydrogen at ``--size``³
+    (cubic, 3 levels, 5 %): with a step for the full-detail slots and one for the coarser details' (its full-detail
+    slots packed as without level of detail, docs/raytracing.md §10), and as one step for the whole pool would pack
+    it (the packing before), with the steps."""
+    from clwave.raytrace import classified
+
+    seen, pack = {}, classified.pack
+
+    def spy(scalar, boxes, full=None):
+        seen.update(scalar=scalar.copy(), boxes=boxes, full=full)
+        return pack(scalar, boxes, full)
+
+    tf = TransferFunction.preset("hydrogen")
+    vol = phantom("hydrogen", n=args.size)
+    models = [WaveletVolume.from_volume(v, wavelet="cubic", levels=3).threshold(keep=0.05)
+              for v in (vol, tf.classify(vol))]
+    classified.pack = spy
+    try:
+        post = clwave.RayTracer(models[0], device=args.device, lod=True)
+        post.render(clwave.Camera(10.0, 5.0, size=(8, 8)), tolerance=1e-2, transfer_function=tf)  # packs
+    finally:
+        classified.pack = pack
+    steps = post.quant.get()["step"]
+    one_step = 4 * len(pack(seen["scalar"], seen["boxes"])[0])
+    del seen["scalar"]
+    pre = clwave.RayTracer(models[1], device=args.device, lod=True).bricks.pool_bytes
+    direct = clwave.RayTracer(models[0], device=args.device)
+    direct.render(clwave.Camera(10.0, 5.0, size=(8, 8)), tolerance=1e-2, transfer_function=tf)
+    full = seen["full"]
+    return dict(setting=dict(volume=f"hydrogen {args.size}^3", wavelet="cubic", levels=3, keep=0.05, lod=True),
+                post_bytes=post.bricks.pool_bytes, pre_bytes=pre, ratio=post.bricks.pool_bytes / pre,
+                one_step_bytes=one_step, one_step_ratio=one_step / pre, full_detail_step=float(steps[full][0]),
+                coarse_step=float(steps[~full].max()), slots=len(steps), full_detail_slots=int(full.sum()),
+                direct_post_bytes=direct.bricks.pool_bytes, direct_step=float(direct.quant.get()["step"][0]),
+                target_ratio=0.3, peak_resident_gib=peak_resident_gib())
+
+
 def post_errors(tracer, wv, tf, args) -> dict:
     """Max error of post-classified float32 renders at 1e-2 and 1e-3 against a float64 render at 1e-5 of the same
     model, on a 64x64 centre of the first view (``--raytrace-image`` framing)."""
@@ -1128,7 +1168,7 @@ def bench_orders(args) -> dict:
 
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "setup": bench_setup,
-              "post": bench_post, "pools": bench_pools,
+              "post": bench_post, "pools": bench_pools, "pools-lod": bench_pools_lod,
               "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
               "first-image": bench_first_image, "view-file": bench_view_file, "view-held": bench_view_held}
 

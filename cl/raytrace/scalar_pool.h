@@ -3,14 +3,15 @@
  * i * bits .. + bits - 1 of its tile's words (least significant first), for the tile (TILE x TILE of the slot's x rows
  * in y and z) holding it and i its place there (rows in z, y order, then x).  The slot's words start at `word` with an
  * entry a tile (z, y order): its first word in the pool, and base | bits << 16 (bits 0..14 or 16, the fewest that keep
- * the pool's one step).  The pool ends with POOL_PAD spare words, so a row's eight bytes never lie past it. */
+ * the slot's step).  The pool ends with POOL_PAD spare words, so a row's eight bytes never lie past it. */
 #ifndef CLW_SCALAR_POOL_H
 #define CLW_SCALAR_POOL_H
 
 #define POOL_TILE 4 /* classified.py's TILE */
 
 typedef struct {
-    float offset, step; /* the slot's least coefficient, and the pool's step */
+    float offset, step; /* the slot's least coefficient, and its step (one for the full-detail slots, one for
+                         * the coarser details': classified.py `pack`) */
     uint word, tiles_y; /* its first word in the pool (its tiles' entries), and its tiles along y */
 } Quant;
 

@@ -40,7 +40,8 @@ RANGE_SLACK = 1e-6
 #: a scalar changing by less than this share of the transfer function's span per unit length is flat: unlit
 FLAT = 1e-4
 #: the scalar pool's coefficients are s = offset + step q, q a base per tile plus 0..Q_BITS - 2 or Q_BITS bits, an
-#: offset per slot and one step, the widest slot's range / Q_MAX (docs/raytracing.md §10)
+#: offset per slot and a step per slot: the widest full-detail slot's range / Q_MAX, and the widest coarser one's for
+#: the slots only coarser details read (docs/raytracing.md §10)
 Q_BITS = 16
 Q_MAX = 2 ** Q_BITS - 1
 #: per slot of a packed pool: its (offset, step), where its tiles' entries lie and how many tiles along y (``Quant`` in
@@ -102,9 +103,9 @@ class ScalarRange:
     the classifications of transfer functions from it (:meth:`classify`: a table, two small kernels).
 
     Made, the pool on the device (expanded one float a coefficient: :func:`~.bricks.build`'s ``scalar``) is packed
-    with 0 to 16 bits a coefficient, a width and base per tile, an offset per slot and one step (:func:`pack`;
-    ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the ranges are widened by half the step, so they hold
-    the float model and the one rendered.
+    with 0 to 16 bits a coefficient, a width and base per tile, an offset and a step per slot (:func:`pack`: the
+    full-detail slots packed as without level of detail; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the
+    ranges are widened by half each slot's step, so they hold the float model and the one rendered.
     """
 
     def __init__(self, tracer):
@@ -124,11 +125,11 @@ class ScalarRange:
                    origin=f.origin[::-1], coef=tables["coef"], bricks=cla.to_device(q, at), frames=tables["frames"],
                    boxes=tables["boxes"], order=f.orders[0])
             scalar = f.pool.get()  # one float a coefficient (bricks.build's scalar)
-            n = min(AUTO_COEFFICIENTS, len(scalar))
-            self.sample = scalar[::len(scalar) // n][:n].copy()  # not a view: the pool copy goes below
-            words, quant = pack(scalar, f.boxes[:, 0])
+            full = full_detail_slots(f)
+            self.sample = _sample(scalar, f.boxes[:, 0], full if full.any() else ~full)
+            words, quant = pack(scalar, f.boxes[:, 0], full)
             del scalar
-            self.slot_range = slot_range.get()  # the decoded coefficients lie within half a step of the floats
+            self.slot_range = slot_range.get()  # the decoded coefficients lie within half their step of the floats
             self.slot_range += (quant["step"][:, None] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]
             tracer.replace_pool(cla.to_device(q, words), cla.to_device(q, quant))
             tracer.defines["CLW_SCALAR_POOL"] = None
@@ -152,8 +153,8 @@ class ScalarRange:
         return self.ranges[key]
 
     def window(self, tf: TransferFunction):
-        """``tf``'s window in data units; "auto" from the percentiles of the pool's coefficients (the voxels'
-        values where bricks are at the finest level, docs/raytracing.md §10)."""
+        """``tf``'s window in data units; "auto" from the percentiles of the full-detail slots' coefficients
+        (docs/raytracing.md §10), the same with level of detail or without."""
         if tf.window != "auto":
             return tf.window
         if self.sample is None:
@@ -188,10 +189,37 @@ class ScalarRange:
         return self.last
 
 
-def pack(scalar, boxes) -> tuple:
+def full_detail_slots(field) -> np.ndarray:
+    """(slots,) bool: the slots of a :class:`~clwave.raytrace.bricks.BrickField` that a full-detail render reads
+    (detail 0's pages and their mixed bricks' coarse slots, docs/raytracing.md §3, §8): all of a tracer's slots
+    without level of detail, and the same slots, coefficient for coefficient, in one with it."""
+    full = np.zeros(len(field.levels), bool)
+    full[field.pages[0][field.pages[0] >= 0]] = True
+    alt = field.mixes[full, 0]
+    full[alt[alt >= 0]] = True
+    return full
+
+
+def _sample(scalar, boxes, slots) -> np.ndarray:
+    """At most AUTO_COEFFICIENTS of the coefficients of the slots ``slots`` (bool) picks (one after another in slot
+    order, every k-th), for window "auto": the same wherever the pool holds those slots (a copy, not a view)."""
+    sizes = np.prod(boxes[slots, :3].astype(np.int64), axis=1)
+    total = int(sizes.sum())
+    if not total:
+        return np.zeros(1, np.float32)
+    n = min(AUTO_COEFFICIENTS, total)
+    at = np.arange(n, dtype=np.int64) * (total // n)  # place among the picked slots' coefficients
+    ends = np.cumsum(sizes)
+    k = np.searchsorted(ends, at, side="right")
+    return scalar[boxes[slots, 3].astype(np.int64)[k] + at - (ends[k] - sizes[k])]
+
+
+def pack(scalar, boxes, full=None) -> tuple:
     """(words, quant): the pool's coefficients ``scalar`` (float32; slot s a box ``boxes[s]`` = (nx, ny, nz, first) of
-    coefficients, x fastest) packed for ``cl/raytrace/scalar_pool.h`` (docs/raytracing.md §10).  One step S for the
-    pool, the widest slot's range / Q_MAX rounded up in float32; per slot its offset, its least coefficient (float32, so
+    coefficients, x fastest) packed for ``cl/raytrace/scalar_pool.h`` (docs/raytracing.md §10).  A step S for the
+    slots a full-detail render reads (``full``, (slots,) bool; default every slot) and one for the others (a tracer's
+    coarser details), each the widest range of its slots / Q_MAX rounded up in float32, so the full-detail slots are
+    packed alike whatever coarser details the pool holds; per slot its offset, its least coefficient (float32, so
     exact), and per coefficient q the nearest whole number of steps above it (float64), so ``offset + S q`` is within
     S / 2 of each coefficient.  Each tile (TILE x TILE of a slot's x rows in y and z) holds its q - base in the fewest
     bits b (0..14, 16) covering its q, base its least q.  Slot s's words from ``quant["word"][s]``: per tile (z, y
@@ -205,30 +233,40 @@ def pack(scalar, boxes) -> tuple:
     starts, end = boxes[:, 3], int(boxes[-1, 3] + sizes[-1])  # the slots lie one after another
     lo = np.minimum.reduceat(scalar[:end], starts)
     span = np.maximum.reduceat(scalar[:end], starts).astype(np.float64) - lo
-    step = np.float32(span.max() / Q_MAX)
-    step = np.nextafter(step, np.float32(np.inf)) if float(step) * Q_MAX < span.max() else step
-    inverse = 1.0 / float(step) if step > 0 else 0.0
-    quant["offset"], quant["step"] = lo, step
+    full = np.ones(len(boxes), bool) if full is None else np.asarray(full, bool)
+    for part in (full, ~full):
+        if part.any():
+            quant["step"][part] = _step(span[part].max())
+    inverse = np.divide(1.0, quant["step"].astype(np.float64), out=np.zeros(len(quant)), where=quant["step"] > 0)
+    quant["offset"] = lo
     out, at = [], 0
     for shape in np.unique(boxes[:, :3], axis=0):  # the slots of one box shape, about Q_CHUNK coefficients at a time
         slots = np.flatnonzero(np.all(boxes[:, :3] == shape, axis=1))
         per = max(Q_CHUNK // int(np.prod(shape)), 1)
         for k in range(0, len(slots), per):
             chunk = slots[k:k + per]
-            words, start = _pack_slots(scalar, shape, starts[chunk], lo[chunk].astype(np.float64), inverse, at)
+            words, start = _pack_slots(scalar, shape, starts[chunk], lo[chunk].astype(np.float64), inverse[chunk],
+                                        at)
             quant["word"][chunk], quant["tiles_y"][chunk] = start, -(-shape[1] // TILE)
             out.append(words)
             at += len(words)
     return np.concatenate(out + [np.zeros(POOL_PAD, np.uint32)]), quant
 
 
+def _step(span) -> np.float32:
+    """The step of slots whose widest range is ``span``: span / Q_MAX rounded up in float32."""
+    step = np.float32(span / Q_MAX)
+    return np.nextafter(step, np.float32(np.inf)) if float(step) * Q_MAX < span else step
+
+
 def _pack_slots(scalar, shape, firsts, offsets, inverse, at) -> tuple:
-    """(words, start): the words of slots of one box ``shape`` (nx, ny, nz) whose coefficients start at ``firsts``,
-    for :func:`pack`, laid out one after another from the pool's word ``at``, and where each slot's start."""
+    """(words, start): the words of slots of one box ``shape`` (nx, ny, nz) whose coefficients start at ``firsts``
+    (``inverse``: 1 / each slot's step), for :func:`pack`, laid out one after another from the pool's word ``at``, and
+    where each slot's start."""
     nx, ny, nz = (int(v) for v in shape)
     m, ty, tz = len(firsts), -(-ny // TILE), -(-nz // TILE)
     coef = scalar[firsts[:, None] + np.arange(nx * ny * nz)].astype(np.float64)
-    q = np.rint((coef - offsets[:, None]) * inverse).astype(np.int32).reshape(m, nz, ny, nx)
+    q = np.rint((coef - offsets[:, None]) * inverse[:, None]).astype(np.int32).reshape(m, nz, ny, nx)
     tiled = np.pad(q, ((0, 0), (0, tz * TILE - nz), (0, ty * TILE - ny), (0, 0)), mode="edge").reshape(
         m, tz, TILE, ty, TILE, nx).transpose(0, 1, 3, 2, 4, 5).reshape(m, tz, ty, TILE * TILE * nx)
     base = tiled.min(axis=3)
