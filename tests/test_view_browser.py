@@ -131,9 +131,7 @@ def test_shaded_with_the_transfer_function_editor(viewer, page):
     camera = clwave.Camera(start["azimuth"], start["elevation"], SIZE, extent=start["extent"])
     expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=START).to_uint8(
         background=(0.0, 0.0, 0.0))
-    # within a grey level, not bit for bit: the viewer's tracer holds every detail's bricks, and the packed scalar
-    # pool's one step is the widest slot's, here a coarse one (docs/viewer.md §2)
-    assert expect.std() > 5 and np.abs(decode(browser.current_frame(page)[1]).astype(int) - expect).max() <= 1
+    assert expect.std() > 5 and np.array_equal(decode(browser.current_frame(page)[1]), expect)
     page.execute_script('const p = document.getElementById("tf-preset"); p.value = "hydrogen";'
                         'p.dispatchEvent(new Event("change"));')
     browser.wait_for(page, "const f = window.clwave.current().fig; return f.final && f.tf_window[0] === 0 && f")
