@@ -224,14 +224,14 @@ inline bool panel_done(const Panel *p, const real3 flm, const real3 fmr, const b
 inline int normal_turns(const realv gx, const realv gy, const realv gz, const Shading *P)
 {
 #ifdef CLW_SHADE
-    const real8 x = gx.lo * P->scale.x, y = gy.lo * P->scale.y, z = gz.lo * P->scale.z;
-    const real8 px = gx.s80123456 * P->scale.x, py = gy.s80123456 * P->scale.y, pz = gz.s80123456 * P->scale.z;
-    const real8 len = sqrt(x * x + y * y + z * z), plen = sqrt(px * px + py * py + pz * pz);
-    const real8 il = 1 / fmax(len, (real8)(FLT_MIN)), ipl = 1 / fmax(plen, (real8)(FLT_MIN));
-    const real8 cx = x * il - px * ipl, cy = y * il - py * ipl, cz = z * il - pz * ipl;
-    const real8 chord2 = fmin(len, plen) > P->grad_floor ? cx * cx + cy * cy + cz * cz : (real8)(0);
-    const real8 most = (real8)(NORMAL_CHORD * NORMAL_CHORD);
-    return (any(chord2.lo > most.lo) ? 1 : 0) | (any(chord2.hi > most.hi) ? 2 : 0);
+    /* chord > c between unit normals: cos < 1 - c^2/2 = k, i.e. w.v <= 0 or (w.v)^2 < k^2 |w|^2 |v|^2 */
+    const realv x = gx * P->scale.x, y = gy * P->scale.y, z = gz * P->scale.z, len2 = x * x + y * y + z * z;
+    const real8 dot = x.lo * x.s80123456 + y.lo * y.s80123456 + z.lo * z.s80123456;
+    const real8 both = len2.lo * len2.s80123456;
+    const real k = 1 - NORMAL_CHORD * NORMAL_CHORD / 2, floor2 = P->grad_floor * P->grad_floor;
+    const real8 turned = select((real8)(0), (real8)(1), (dot <= 0 || dot * dot < k * k * both)
+                                                         && fmin(len2.lo, len2.s80123456) > floor2);
+    return (any(turned.lo > 0) ? 1 : 0) | (any(turned.hi > 0) ? 2 : 0);
 #else
     return 0;
 #endif
@@ -243,8 +243,10 @@ inline int series_turns(const real3 *g, const Shading *P, const real l, const re
 {
 #ifdef CLW_SHADE
     real lx[16], ly[16], lz[16];
-    for (int p = 0; p <= 8; p++) {
-        const real3 v = cheb3(g, NG, l + (r - l) * min(p, n) / n);
+    real3 v;
+    for (int p = 0; p <= 8; p++) { /* points past the n-th repeat it: no turn there */
+        if (p <= n)
+            v = cheb3(g, NG, l + (r - l) * p / n);
         const int lane = p == 0 ? 8 : p - 1;
         lx[lane] = v.x; ly[lane] = v.y; lz[lane] = v.z;
     }
