@@ -154,7 +154,7 @@ inline real3 cut_simpson(Piece *C, const Shading *P, __constant const real *node
                          const int n, const real a, const real b, const real tol, int *evals, int *flags)
 {
     if (n == 0 && f9)
-        return piece_simpson(C, P, f9, nodes, a, b, tol, evals, flags);
+        return piece_simpson(C, P, f9, nodes, a, b, tol, series_turns(C->g, P, a, b, 8), evals, flags);
     real3 sum = (real3)(0);
     real l = a;
     for (int i = 0; i <= 2 * n + 1; i++) {
@@ -162,7 +162,8 @@ inline real3 cut_simpson(Piece *C, const Shading *P, __constant const real *node
         real3 g9[9];
         for (int p = 0; p <= 8; p++)
             g9[p] = piece_point(C, P, nodes, l + (r - l) * p / 8);
-        sum += piece_simpson(C, P, g9, nodes, l, r, tol * (r - l) / (b - a), evals, flags);
+        sum += piece_simpson(C, P, g9, nodes, l, r, tol * (r - l) / (b - a), series_turns(C->g, P, l, r, 8), evals,
+                             flags);
         l = r;
     }
     return sum;
@@ -388,7 +389,9 @@ inline bool interval_simpson(const OneInterval *O, const realv gx, const realv g
     interval_points(O, gx, gy, gz, P, f9);
     const Panel first = {-1, 0, tol / 2, f9[0], f9[2], f9[4], 1}, second = {0, 1, tol / 2, f9[4], f9[6], f9[8], 1};
     int flags = 0; /* panels at depth 1: never at the depth limit */
-    if (!panel_done(&first, f9[1], f9[3], &total, &flags) || !panel_done(&second, f9[5], f9[7], &total, &flags))
+    const int turns = normal_turns(gx, gy, gz, P);
+    if (!panel_done(&first, f9[1], f9[3], turns & 1, &total, &flags)
+        || !panel_done(&second, f9[5], f9[7], turns & 2, &total, &flags))
         return false;
     *emission = total;
     *evals += 9;

@@ -187,14 +187,21 @@ typedef struct {
 
 /* Simpson on panel p and on its halves (values flm, fmr at its quarter points): when the two agree
  * within p's tolerance, or below the rounding floor, or at the depth limit (flagged), the
- * extrapolated sum is added to total and the panel is done */
-inline bool panel_done(const Panel *p, const real3 flm, const real3 fmr, real3 *total, int *flags)
+ * extrapolated sum is added to total and the panel is done.  Where the normal turns across the panel
+ * (`turns`: normal_turns) the two rules may agree by chance, so the error counted is at least what the whole
+ * panel adds, its width times its largest value: such a panel halves until it resolves the turn or adds too
+ * little to matter (docs/raytracing.md §2). */
+inline bool panel_done(const Panel *p, const real3 flm, const real3 fmr, const bool turns, real3 *total, int *flags)
 {
     const real w = p->r - p->l;
     const real3 s1 = w / 6 * (p->fl + 4 * p->fm + p->fr);
     const real3 s2 = w / 12 * (p->fl + 4 * flm + 2 * p->fm + 4 * fmr + p->fr);
     const real3 d = fabs(s2 - s1);
-    const real err = fmax(d.x, fmax(d.y, d.z));
+    real err = fmax(d.x, fmax(d.y, d.z));
+    if (turns) {
+        const real3 big = fmax(fmax(fabs(p->fl), fabs(flm)), fmax(fmax(fabs(p->fm), fabs(fmr)), fabs(p->fr)));
+        err = fmax(err, w * fmax(big.x, fmax(big.y, big.z)));
+    }
     /* below the rounding floor of the arithmetic, halving the panel cannot help */
     const real floor_err = 16 * REAL_EPSILON * fmax(fabs(s2.x), fmax(fabs(s2.y), fabs(s2.z)));
     if (err <= fmax(15 * p->tol, floor_err) || p->depth >= CLW_MAX_DEPTH) {
@@ -206,14 +213,57 @@ inline bool panel_done(const Panel *p, const real3 flm, const real3 fmr, real3 *
     return false;
 }
 
+/* Whether the normal turns between the samples (docs/raytracing.md §2).  Simpson's test compares two rules on one
+ * panel's five points, so a feature between them fools both alike; in the shaded emission that feature is the
+ * normal -grad/|grad| turning fast where alpha's gradient nearly vanishes (a coarse segment 1.4 % off: the light
+ * went out between two samples).  The gradient's lanes are exact samples of its polynomial; returns which of the
+ * two first panels (bit 0: [l, mid], bit 1: [mid, r]) see the normal move by more than NORMAL_CHORD between
+ * neighbouring samples (a flat gradient has no normal: no constraint).  Lanes 0..7: p = 1..8, lane 8: p = 0,
+ * of xi = l + (r - l) p/8. */
+#define NORMAL_CHORD 0.125f
+inline int normal_turns(const realv gx, const realv gy, const realv gz, const Shading *P)
+{
+#ifdef CLW_SHADE
+    /* chord > c between unit normals: cos < 1 - c^2/2 = k, i.e. w.v <= 0 or (w.v)^2 < k^2 |w|^2 |v|^2 */
+    const realv x = gx * P->scale.x, y = gy * P->scale.y, z = gz * P->scale.z, len2 = x * x + y * y + z * z;
+    const real8 dot = x.lo * x.s80123456 + y.lo * y.s80123456 + z.lo * z.s80123456;
+    const real8 both = len2.lo * len2.s80123456;
+    const real k = 1 - NORMAL_CHORD * NORMAL_CHORD / 2, floor2 = P->grad_floor * P->grad_floor;
+    const real8 turned = select((real8)(0), (real8)(1), (dot <= 0 || dot * dot < k * k * both)
+                                                         && fmin(len2.lo, len2.s80123456) > floor2);
+    return (any(turned.lo > 0) ? 1 : 0) | (any(turned.hi > 0) ? 2 : 0);
+#else
+    return 0;
+#endif
+}
+
+/* normal_turns from the gradient series g (degree NG - 1 in xi) at the n + 1 points l + (r - l) p/n: n = 8 for
+ * both first panels of [l, r], 4 for [l, r] as one panel (bit 0) */
+inline int series_turns(const real3 *g, const Shading *P, const real l, const real r, const int n)
+{
+#ifdef CLW_SHADE
+    real lx[16], ly[16], lz[16];
+    real3 v;
+    for (int p = 0; p <= 8; p++) { /* points past the n-th repeat it: no turn there */
+        if (p <= n)
+            v = cheb3(g, NG, l + (r - l) * p / n);
+        const int lane = p == 0 ? 8 : p - 1;
+        lx[lane] = v.x; ly[lane] = v.y; lz[lane] = v.z;
+    }
+    return normal_turns(vload16(0, lx), vload16(0, ly), vload16(0, lz), P);
+#else
+    return 0;
+#endif
+}
+
 /* ADAPTIVE_SIMPSON(NAME, CTX, EVAL): int_l^r f dxi by adaptive Simpson from 2 panels, for an integrand
- * f = EVAL(ctx, P, nodes, xi); counts evaluations, flags depth.  f9 holds f at xi = l + (r - l) p/8,
- * p = 0..8: the 2 panels and their halves, so EVAL is needed only when a panel must halve again
- * (nearly never at tolerance 1e-2).  Depth first, right half pushed first: the stack holds at most one
- * panel per depth. */
+ * f = EVAL(ctx, P, nodes, xi) and its gradient series ctx->g (made by EVAL); counts evaluations, flags depth.
+ * f9 holds f at xi = l + (r - l) p/8, p = 0..8: the 2 panels and their halves, so EVAL is needed only when a
+ * panel must halve again (nearly never at tolerance 1e-2); turns: normal_turns of the 2 panels.  Depth first,
+ * right half pushed first: the stack holds at most one panel per depth. */
 #define ADAPTIVE_SIMPSON(NAME, CTX, EVAL)                                                                     \
     inline real3 NAME(CTX *S, const Shading *P, const real3 *f9, __constant const real *nodes, const real l,   \
-                      const real r, const real tol, int *evals, int *flags)                                   \
+                      const real r, const real tol, const int turns, int *evals, int *flags)                  \
     {                                                                                                         \
         const real mid = (l + r) / 2;                                                                         \
         const Panel first = {l, mid, tol / 2, f9[0], f9[2], f9[4], 1},                                        \
@@ -222,8 +272,8 @@ inline bool panel_done(const Panel *p, const real3 flm, const real3 fmr, real3 *
         *evals += 9;                                                                                          \
         Panel stack[CLW_MAX_DEPTH + 1];                                                                       \
         int top = 0;                                                                                          \
-        if (panel_done(&first, f9[1], f9[3], &total, flags)) {                                                \
-            if (panel_done(&second, f9[5], f9[7], &total, flags))                                             \
+        if (panel_done(&first, f9[1], f9[3], turns & 1, &total, flags)) {                                     \
+            if (panel_done(&second, f9[5], f9[7], turns & 2, &total, flags))                                  \
                 return total;                                                                                 \
             stack[top++] = second;                                                                            \
         } else {                                                                                              \
@@ -234,15 +284,18 @@ inline bool panel_done(const Panel *p, const real3 flm, const real3 fmr, real3 *
             const Panel p = stack[--top];                                                                     \
             const real m = (p.l + p.r) / 2;                                                                   \
             real3 flm, fmr;                                                                                   \
+            bool turned;                                                                                      \
             if (p.depth == 1) {                                                                               \
                 flm = f9[p.l < mid ? 1 : 5];                                                                  \
                 fmr = f9[p.l < mid ? 3 : 7];                                                                  \
+                turned = turns & (p.l < mid ? 1 : 2);                                                         \
             } else {                                                                                          \
                 flm = EVAL(S, P, nodes, (p.l + m) / 2);                                                       \
                 fmr = EVAL(S, P, nodes, (m + p.r) / 2);                                                       \
                 *evals += 2;                                                                                  \
+                turned = series_turns(S->g, P, p.l, p.r, 4);                                                  \
             }                                                                                                 \
-            if (!panel_done(&p, flm, fmr, &total, flags)) {                                                   \
+            if (!panel_done(&p, flm, fmr, turned, &total, flags)) {                                           \
                 Panel *right = &stack[top++], *left = &stack[top++];                                          \
                 right->l = m; right->r = p.r; right->fl = p.fm; right->fm = fmr; right->fr = p.fr;            \
                 left->l = p.l; left->r = m; left->fl = p.fl; left->fm = flm; left->fr = p.fm;                 \
@@ -261,6 +314,12 @@ inline real3 segment_point(Segment *S, const Shading *P, __constant const real *
     return integrand(S, P, xi);
 }
 
-/* simpson(S, P, f9, nodes, -1, 1, tol, evals, flags): int_{-1}^{1} q e^{-A} dxi of a segment */
-ADAPTIVE_SIMPSON(simpson, Segment, segment_point)
+ADAPTIVE_SIMPSON(segment_simpson, Segment, segment_point)
+
+/* int_{-1}^{1} q e^{-A} dxi of a segment (its gradient at the lanes: normal_turns) */
+inline real3 simpson(Segment *S, const Shading *P, const real3 *f9, __constant const real *nodes, const real tol,
+                     int *evals, int *flags)
+{
+    return segment_simpson(S, P, f9, nodes, -1, 1, tol, normal_turns(S->gx, S->gy, S->gz, P), evals, flags);
+}
 #endif

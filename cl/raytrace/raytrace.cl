@@ -563,7 +563,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                 for (int p = 1; p <= 8; p++)
                     f9[p] = (real3)(fr[p - 1], fg[p - 1], fb[p - 1]);
                 const real seg_tol = quadrature_share * (tn - t) / total / T;
-                part = simpson(&S, &P, f9, nodes, -1, 1, seg_tol / S.radius, &evals, &flags);
+                part = simpson(&S, &P, f9, nodes, seg_tol / S.radius, &evals, &flags);
             }
             end_shaded = simpson_full;
 #endif

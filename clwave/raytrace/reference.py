@@ -4,8 +4,9 @@ The same algorithm, written independently of the kernel: the field comes from
 :meth:`WaveletVolume.evaluate` / :meth:`~WaveletVolume.gradient` (closed-form wavelet
 bases) instead of the device's fine B-spline grids; segments are the knot planes of
 the lattice; alpha's exact Chebyshev series gives ``A``; ``∫ q e^{-A}`` comes from
-recursive adaptive Simpson with two initial panels (docs/raytracing.md §2); early termination and
-the skipping of nearly empty blocks as in the kernel.  Slow (Python per segment): tiny volumes and images only.
+recursive adaptive Simpson with two initial panels and the normal's resolution test (docs/raytracing.md §2);
+early termination and the skipping of nearly empty blocks as in the kernel.  Slow (Python per segment): tiny
+volumes and images only.
 """
 
 from __future__ import annotations
@@ -265,8 +266,11 @@ def _emission_absorption(field, grad, xi, mid, rad, total, tol, gain, phong, lig
                 q = _shade(q, max(f[3], 0.0), chebyshev.chebval(x, grad_series[s]), phong, lights, w, floor)
             return q * np.exp(-rad[s] * chebyshev.chebval(x, A))
 
+        def turns(a, b, s=s):
+            return phong is not None and _normal_turns(chebyshev.chebval(np.linspace(a, b, 5), grad_series[s]).T, floor)
+
         seg_tol = quadrature_share * (2 * rad[s]) / total / T
-        color += T * rad[s] * _simpson(integrand, seg_tol / rad[s])
+        color += T * rad[s] * _simpson(integrand, seg_tol / rad[s], turns)
         T, done = _passed(T, rad[s], A, blocks, mid[s], gain, tol)
         if done:
             break
@@ -293,14 +297,30 @@ def _shade(q, alpha, grad, phong, lights, w, floor):
     return q * (phong.ambient + phong.diffuse * diffuse) + phong.specular * alpha * specular
 
 
-def _simpson(f, tol):
-    """∫_{-1}^{1} f by recursive adaptive Simpson from the panels [-1, 0] and [0, 1]."""
+NORMAL_CHORD = 0.125  # the kernel's (cl/raytrace/quadrature.h)
+
+
+def _normal_turns(grads, floor) -> bool:
+    """Whether the normal -grad/|grad| moves by more than NORMAL_CHORD between neighbouring rows of ``grads``
+    (world gradients at a panel's points) where neither is flat (docs/raytracing.md §2)."""
+    length = np.linalg.norm(grads, axis=1)
+    normals = grads / np.maximum(length, np.finfo(float).tiny)[:, None]
+    chords = np.linalg.norm(np.diff(normals, axis=0), axis=1)
+    return bool(np.any((np.minimum(length[:-1], length[1:]) > floor) & (chords > NORMAL_CHORD)))
+
+
+def _simpson(f, tol, turns):
+    """∫_{-1}^{1} f by recursive adaptive Simpson from the panels [-1, 0] and [0, 1]; a panel across which the
+    normal ``turns(a, b)`` counts at least its width times its largest value as its error."""
     def panel(a, b, fa, fm, fb, tol, depth):
         m = (a + b) / 2
         flm, fmr = f((a + m) / 2), f((m + b) / 2)
         s1 = (b - a) / 6 * (fa + 4 * fm + fb)
         s2 = (b - a) / 12 * (fa + 4 * flm + 2 * fm + 4 * fmr + fb)
-        if np.max(np.abs(s2 - s1)) <= 15 * tol or depth >= SIMPSON_DEPTH:
+        err = np.max(np.abs(s2 - s1))
+        if turns(a, b):
+            err = max(err, (b - a) * np.max(np.abs([fa, flm, fm, fmr, fb])))
+        if err <= 15 * tol or depth >= SIMPSON_DEPTH:
             return s2 + (s2 - s1) / 15
         return panel(a, m, fa, flm, fm, tol / 2, depth + 1) + panel(m, b, fm, fmr, fb, tol / 2, depth + 1)
 
