@@ -49,10 +49,11 @@ def model(name, n=48, keep=0.05):
 
 
 def test_schedule_goes_from_a_small_image_to_the_direct_render():
-    assert schedule((512, 512)) == [16, 8, 4, 1]
-    assert schedule((128, 140)) == [4, 1]  # no side below 32 pixels
-    assert schedule((100, 600)) == [1]  # the last preview a quarter of the side at most: none here
-    assert schedule((512, 512), steps=2) == [4, 1]
+    assert schedule((512, 512)) == [(0, 16), (0, 8), (0, 4), (0, 1)]  # the last preview 1/16 of the final's rays
+    assert schedule((128, 140), (0, 1, 2, 3)) == [(0, 4), (0, 1)]  # no side below 32 pixels
+    assert schedule((100, 600)) == [(0, 2), (0, 1)]  # the one preview a small image allows
+    assert schedule((40, 60), (0, 1, 2)) == [(2, 1), (1, 1), (0, 1)]  # too small to reduce: the coarser details
+    assert schedule((40, 60)) == [(0, 1)] and schedule((512, 512), steps=2) == [(0, 4), (0, 1)]
 
 
 @pytest.mark.parametrize("camera", [clwave.Camera(30, 20, size=128),

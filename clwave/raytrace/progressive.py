@@ -2,7 +2,8 @@
 smaller per side, each twice the side of the one before, then the full image at the requested tolerance: bit for bit
 the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error against the final image, the
 step from the frame before (or from a pilot at half its size); the last preview has 1/16 of the final image's rays,
-so the previews cost about 1/12 of the final render.  :meth:`RayTracer.refine` is the same sequence for a viewer,
+so the previews cost about 1/12 of the final render.  An image too small to reduce gets the tracer's coarser
+details instead.  :meth:`RayTracer.refine` is the same sequence for a viewer,
 which stops iterating when the view changes.
 """
 
@@ -42,12 +43,16 @@ class RaytraceFrame(Frame):
         return dict(detail=self.detail, reduction=self.reduction)
 
 
-def schedule(size, steps=None) -> list:
-    """The frames' reductions per side, from cheap to exact: images ``2^top, ..., 8, 4`` times smaller per side (the
-    largest reduction leaves sides of :data:`MIN_SIDE` at least), then the full image (docs/raytracing.md §9); an
-    image under ``4 MIN_SIDE`` a side gets the full image alone.  ``steps`` keeps the last that many."""
+def schedule(size, details=(), steps=None) -> list:
+    """``[(detail, reduction)]`` from cheap to exact: full detail on images ``2^top, ..., 8, 4`` times smaller per side
+    (the largest reduction leaves sides of :data:`MIN_SIDE` at least; an image under ``4 MIN_SIDE`` a side gets the
+    one it allows), then the full image (docs/raytracing.md §9).  An image too small to reduce gets a frame per
+    coarser detail the tracer holds (``details``), coarsest first, on the full image.  ``steps`` keeps the last that
+    many."""
     top = int(np.floor(np.log2(max(1, min(size) / MIN_SIDE))))
-    frames = [2 ** k for k in range(top, int(np.log2(LAST_REDUCTION)) - 1, -1)] + [1]
+    last = min(top, int(np.log2(LAST_REDUCTION)))
+    frames = [(0, 2 ** k) for k in range(top, last - 1, -1)] if top else [(d, 1) for d in sorted(details)[::-1] if d]
+    frames = frames + [(0, 1)]
     return frames if steps is None else frames[-int(steps):]
 
 
@@ -96,32 +101,36 @@ def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=
 
 def _frames(tracer, camera, options, steps, budget, error):
     view = camera.view(tracer.wv)
-    plan = schedule(view.size, steps)
+    plan = schedule(view.size, tracer.details, steps)
     final = FinalImage(lambda: tracer.render(camera, **options).image)
     start, steps_made, last = time.perf_counter(), ErrorEstimate(), None
 
-    def render(reduction):  # the tracer's own render (full detail) of an image reduction times smaller per side
-        res = tracer.render(camera if reduction == 1 else reduced_camera(view, camera, reduction), **options)
+    def render(detail, reduction):  # the tracer's render of an image reduction times smaller per side
+        res = tracer.render(camera if reduction == 1 else reduced_camera(view, camera, reduction), detail=detail,
+                            **options)
         return upsample(res.image, view.size, reduction), res.meta
 
-    for index, reduction in enumerate(plan):
+    for index, (detail, reduction) in enumerate(plan):
         if budget is not None and last is not None:
             elapsed = time.perf_counter() - start
-            if elapsed + last * (plan[index - 1] / reduction) ** 2 > budget:
+            if elapsed + last * (plan[index - 1][1] / reduction) ** 2 > budget:
                 return
         t0 = time.perf_counter()
         if index == 0 and reduction > 1:  # the first frame's pilot: the step from an image half its size (§9)
-            steps_made.add(render(2 * reduction)[0])
-        image, meta = render(reduction)
-        if reduction == 1:
+            steps_made.add(render(0, 2 * reduction)[0])
+        image, meta = render(detail, reduction)
+        if (detail, reduction) == (0, 1):
             final.image, rms, top = image, 0.0, 0.0
+        elif reduction == 1:  # a coarser detail on the full image: its step from the final image, made first (§9)
+            steps_made.last = final.get()
+            rms, top = steps_made.add(image)
         else:  # docs/raytracing.md §9: the step from the frame before, at half this frame's size
             rms, top = steps_made.add(image)
             top *= MAX_MARGIN
         last = time.perf_counter() - t0
         frame = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
                               estimated_relative_rms_error=rms, estimated_relative_max_error=top, meta=meta,
-                              _final=final, detail=meta["detail"], reduction=reduction)
+                              _final=final, detail=detail, reduction=reduction)
         yield frame
         if reached(frame, error):
             return
