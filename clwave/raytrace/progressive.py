@@ -3,8 +3,8 @@ smaller per side, each twice the side of the one before, then the full image at 
 the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error against the final image, the
 step from the frame before (or from a pilot at half its size); the last preview has 1/16 of the final image's rays,
 so the previews cost about 1/12 of the final render.  An image too small to reduce gets the tracer's coarser
-details instead.  :meth:`RayTracer.refine` is the same sequence for a viewer,
-which stops iterating when the view changes.
+details instead.  :meth:`RayTracer.refine` is the same sequence for a viewer, which stops iterating when the view
+changes.
 """
 
 from __future__ import annotations
@@ -23,7 +23,8 @@ from ..frames import ErrorEstimate, FinalImage, Frame, check_error, reached
 #: (docs/raytracing.md §9)
 MIN_SIDE = 32
 #: the max estimate's margin over the step: the max error of interpolation across a sharp edge falls at first order at
-#: best, so the step bounds it only where it falls by 2/3 or more per halving of the pixels (docs/raytracing.md §9)
+#: best (to half when the pixels halve, less at an edge not resolved yet); 1.5 steps bound it where it falls to 3/5
+#: or less (docs/raytracing.md §9)
 MAX_MARGIN = 1.5
 #: the last preview's reduction per side: the final image has 16 times its rays, and the previews before it (each a
 #: quarter of the next) cost at most 1/12 of the final render (docs/raytracing.md §9)
