@@ -5,10 +5,8 @@ to exact (:mod:`clwave.frames`), by splatting (:mod:`clwave.splat.progressive`) 
 
 from __future__ import annotations
 
-from .device.context import ComputeContext
-from .device.memory import parse_cap
 from .errors import InputError
-from .raytrace.tracer import RayTracer
+from .raytrace.tracer import RayTracer, shared_tracer
 from .splat.progressive import progressive as splat_progressive
 
 
@@ -35,8 +33,8 @@ def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, er
     Parameters
     ----------
     steps : int >= 1, optional
-        The last ``steps`` frames of the schedule (default every one: detail d on an image 2^(d+1) times smaller
-        per side, from the coarsest detail to full detail, then the full image; docs/raytracing.md §9).
+        The last ``steps`` frames of the schedule (default every one: images 2^k, ..., 8, 4 times smaller per side,
+        then the full image; docs/raytracing.md §9).
     budget : float > 0, optional
         Seconds: stop before a frame expected to end beyond the budget (from the last frame's time per pixel);
         the first frame is always made.
@@ -45,12 +43,10 @@ def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, er
     tolerance, lights, shading, absorption, transfer_function :
         As for :func:`clwave.raytrace`; every frame uses them.
     tracer : RayTracer, optional
-        One made with ``lod=True``; without it, calls on the same model and device share one.
+        Without it, calls on the same model and device share one with :func:`clwave.raytrace`.
     """
     if tracer is None:
-        cc, cap = ComputeContext.get(device), parse_cap(device_memory)
-        tracer = wv.shared(("raytrace-lod", cc.info.id, cap), lambda: RayTracer(wv, device=cc, device_memory=cap,
-                                                                              lod=True))
+        tracer = shared_tracer(wv, device, device_memory=device_memory)
     options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                    transfer_function=transfer_function)
     return tracer.refine(camera, **options, steps=steps, budget=budget, error=error)

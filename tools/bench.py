@@ -60,6 +60,10 @@ also ray traced (whole file, shaded, tolerance 1e-2, ``--raytrace-image``) withi
 ``--device-memory`` cap (default 2GiB): set-up, render, bricks, passes, segments per lattice.  Each
 step runs in a process of its own, which reports its peak resident memory.
 
+``refine``: ``RayTracer.refine`` against one direct render of the same view, interleaved (docs/raytracing.md §9):
+hydrogen RGBA and scalar (classified at render time), 5 %, at ``--raytrace-image``: seconds and segments of both, the
+first frame's seconds, each frame's measured and estimated errors.
+
 ``first-image`` (not in ``all``): the first X-ray and shaded images from a ``.clw`` file (``--first-image-file``,
 default hydrogen ``--size``^3 RGBA 5 %), each in a fresh process: ``RayTracer.open``, its staged frames.
 
@@ -1166,11 +1170,55 @@ def bench_orders(args) -> dict:
                              views=args.raytrace_views, tolerance=1e-2), orders=out)
 
 
+def bench_refine(args) -> dict:
+    """``RayTracer.refine`` against one direct render of the same view (docs/raytracing.md §9), interleaved (render,
+    refine, render, refine, ...) over ``--raytrace-views`` views: hydrogen at ``--size``^3, cubic, 3 levels, 5 %,
+    shaded, tolerance 1e-2, ``--raytrace-image``; an RGBA model (the preset classified first) and the scalar one
+    classified at render time.  Per view the render's seconds and segments, the sequence's (every render of it,
+    pilot included: ``tracer.render`` counted), the first frame's seconds, and each frame's reduction, seconds since
+    the start, measured and estimated relative errors."""
+    tf = TransferFunction.preset("hydrogen")
+    vol = phantom("hydrogen", n=args.size)
+    models = dict(rgba=(WaveletVolume.from_volume(tf.classify(vol), wavelet="cubic", levels=3), {}),
+                  scalar=(WaveletVolume.from_volume(vol, wavelet="cubic", levels=3), dict(transfer_function=tf)))
+    cams = [clwave.Camera(az, el, size=args.raytrace_image) for az, el in views(args.raytrace_views)]
+    out = dict(setting=dict(volume=f"hydrogen {args.size}^3 (preset)", wavelet="cubic", levels=3, keep=0.05,
+                            tolerance=1e-2, image=args.raytrace_image, views=args.raytrace_views), models={})
+    for name, (model, extra) in models.items():
+        tracer = clwave.RayTracer(model.threshold(keep=0.05), device=args.device)
+        render, made = tracer.render, []
+        tracer.render = lambda *a, **k: made.append(render(*a, **k)) or made[-1]  # counts the sequence's renders
+        tracer.render(clwave.Camera(10.0, 5.0, size=(16, 8)), tolerance=1e-2, **extra)  # the kernel built apart
+        rounds = []
+        for cam in cams:
+            made.clear()
+            start = time.perf_counter()
+            direct = tracer.render(cam, tolerance=1e-2, **extra)
+            one = dict(render_seconds=time.perf_counter() - start, render_segments=direct.meta["segments"])
+            made.clear()
+            start = time.perf_counter()
+            frames = [(f, time.perf_counter() - start) for f in tracer.refine(cam, tolerance=1e-2, **extra)]
+            one.update(refine_seconds=time.perf_counter() - start, first_frame_seconds=frames[0][1],
+                       refine_segments=sum(r.meta["segments"] for r in made), renders=len(made),
+                       frames=[dict(reduction=f.reduction, seconds=at, **{k: v for k, v in f.figures().items()
+                                                                          if "error" in k}) for f, at in frames])
+            one.update(refine_over_render=one["refine_seconds"] / one["render_seconds"],
+                       segments_over_render=one["refine_segments"] / one["render_segments"])
+            rounds.append(one)
+        out["models"][name] = dict(refine_over_render=summary([r["refine_over_render"] for r in rounds]),
+                                   segments_over_render=summary([r["segments_over_render"] for r in rounds]),
+                                   first_frame_over_render=summary([r["first_frame_seconds"] / r["render_seconds"]
+                                                                    for r in rounds]), rounds=rounds)
+    out["peak_resident_gib"] = peak_resident_gib()
+    return out
+
+
 BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "splat": bench_splat,
               "progressive": bench_progressive, "raytrace": bench_raytrace, "lod": bench_lod, "setup": bench_setup,
               "post": bench_post, "pools": bench_pools, "pools-lod": bench_pools_lod,
               "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
-              "first-image": bench_first_image, "view-file": bench_view_file, "view-held": bench_view_held}
+              "first-image": bench_first_image, "view-file": bench_view_file, "view-held": bench_view_held,
+              "refine": bench_refine}
 
 
 def main(argv=None):

@@ -80,7 +80,7 @@ def add_parser(sub):
     p = add_command(sub, "progressive", "progressive frames, cheap to exact, as a GIF or a folder of PNGs", run,
                     "output .gif, or a folder for PNG frames", view=True)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
-                   help="splat (default): coefficients by importance; raytrace: coarse detail on a small image "
+                   help="splat (default): coefficients by importance; raytrace: full detail on reduced images "
                         "first, ending at the direct render (needs a classified model, or --xray)")
     add_raytrace_options(p)
     k = p.add_mutually_exclusive_group()

@@ -1,8 +1,10 @@
-"""Progressive ray tracing (docs/raytracing.md §9): frames from cheap to exact, a coarse detail on a reduced
-image first, then finer details on larger images, ending at full detail, the full image and the requested
-tolerance: bit for bit the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error
-against the final image (:func:`estimate`, from full-detail pilots on images of the frame's size and half of it);
-:meth:`RayTracer.refine` is the same sequence for a viewer, which stops iterating when the view changes.
+"""Progressive ray tracing (docs/raytracing.md §9): frames from cheap to exact, full detail on images 2^k times
+smaller per side, each twice the side of the one before, then the full image at the requested tolerance: bit for bit
+the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error against the final image, the
+step from the frame before (or from a pilot at half its size); the last preview has 1/16 of the final image's rays,
+so the previews cost about 1/12 of the final render.  An image too small to reduce gets the tracer's coarser
+details instead.  :meth:`RayTracer.refine` is the same sequence for a viewer, which stops iterating when the view
+changes.
 """
 
 from __future__ import annotations
@@ -15,11 +17,18 @@ import numpy as np
 from ..errors import InputError
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
-from ..frames import FinalImage, Frame, check_error, reached
+from ..frames import ErrorEstimate, FinalImage, Frame, check_error, reached
 
 #: the smallest reduced image side: below it a frame no longer halves the error of the one before
 #: (docs/raytracing.md §9)
 MIN_SIDE = 32
+#: the max estimate's margin over the step: the max error of interpolation across a sharp edge falls at first order at
+#: best (to half when the pixels halve, less at an edge not resolved yet); 1.5 steps bound it where it falls to 3/5
+#: or less (docs/raytracing.md §9)
+MAX_MARGIN = 1.5
+#: the last preview's reduction per side: the final image has 16 times its rays, and the previews before it (each a
+#: quarter of the next) cost at most 1/12 of the final render (docs/raytracing.md §9)
+LAST_REDUCTION = 4
 
 
 @dataclass(kw_only=True)
@@ -35,16 +44,16 @@ class RaytraceFrame(Frame):
         return dict(detail=self.detail, reduction=self.reduction)
 
 
-def schedule(levels: int, size, steps=None) -> list:
-    """``[(detail, reduction)]`` from cheap to exact: detail d on an image ``2^(d + 1)`` times smaller per side, from
-    the coarsest detail ``levels`` to full detail, then full detail on the full image (docs/raytracing.md §9); a
-    frame whose image would have a side below :data:`MIN_SIDE` is left out, and an image too small to reduce gets a
-    frame per detail at its full size.  ``steps`` keeps the last that many."""
-    top = int(np.floor(np.log2(max(1, min(size) / MIN_SIDE))))  # the largest reduction: 2^top
-    if top == 0:
-        frames = [(d, 1) for d in range(levels, -1, -1)]
-    else:
-        frames = [(d, 2 ** (d + 1)) for d in range(levels, -1, -1) if d + 1 <= top] + [(0, 1)]
+def schedule(size, details=(), steps=None) -> list:
+    """``[(detail, reduction)]`` from cheap to exact: full detail on images ``2^top, ..., 8, 4`` times smaller per side
+    (the largest reduction leaves sides of :data:`MIN_SIDE` at least; an image under ``4 MIN_SIDE`` a side gets the
+    one it allows), then the full image (docs/raytracing.md §9).  An image too small to reduce gets a frame per
+    coarser detail the tracer holds (``details``), coarsest first, on the full image.  ``steps`` keeps the last that
+    many."""
+    top = int(np.floor(np.log2(max(1, min(size) / MIN_SIDE))))
+    last = min(top, int(np.log2(LAST_REDUCTION)))
+    frames = [(0, 2 ** k) for k in range(top, last - 1, -1)] if top else [(d, 1) for d in sorted(details)[::-1] if d]
+    frames = frames + [(0, 1)]
     return frames if steps is None else frames[-int(steps):]
 
 
@@ -87,37 +96,38 @@ def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=
     if budget is not None and not (np.isfinite(budget) and budget > 0):
         raise InputError(f"budget={budget!r} must be a positive number of seconds",
                          cli=f"--budget {budget:g} must be a positive number of seconds")
-    if not tracer.lod:
-        raise InputError("progressive ray tracing needs a tracer of every detail: RayTracer(wv, lod=True)")
     check_camera(camera)
     return _frames(tracer, camera, options, steps, budget, error)
 
 
 def _frames(tracer, camera, options, steps, budget, error):
     view = camera.view(tracer.wv)
-    plan = schedule(tracer.wv.levels, view.size, steps)
+    plan = schedule(view.size, tracer.details, steps)
     final = FinalImage(lambda: tracer.render(camera, **options).image)
-    start, made = time.perf_counter(), {}
+    start, steps_made, last = time.perf_counter(), ErrorEstimate(), None
 
-    def render(detail, reduction):  # each (detail, reduction) once: frames and the estimate's full-detail pilots
-        if (detail, reduction) not in made:
-            res = tracer.render(camera if reduction == 1 else reduced_camera(view, camera, reduction), detail=detail,
-                                **options)
-            made[detail, reduction] = upsample(res.image, view.size, reduction), res.meta
-        return made[detail, reduction]
+    def render(detail, reduction):  # the tracer's render of an image reduction times smaller per side
+        res = tracer.render(camera if reduction == 1 else reduced_camera(view, camera, reduction), detail=detail,
+                            **options)
+        return upsample(res.image, view.size, reduction), res.meta
 
-    last = None
     for index, (detail, reduction) in enumerate(plan):
         if budget is not None and last is not None:
             elapsed = time.perf_counter() - start
             if elapsed + last * (plan[index - 1][1] / reduction) ** 2 > budget:
                 return
         t0 = time.perf_counter()
+        if index == 0 and reduction > 1:  # the first frame's pilot: the step from an image half its size (§9)
+            steps_made.add(render(0, 2 * reduction)[0])
         image, meta = render(detail, reduction)
-        if reduction == 1 and detail == 0:
+        if (detail, reduction) == (0, 1):
             final.image, rms, top = image, 0.0, 0.0
-        else:  # docs/raytracing.md §9: what the detail misses at this size, and what the size misses
-            rms, top = estimate(image, render(0, reduction)[0], render(0, 2 * reduction)[0])
+        elif reduction == 1:  # a coarser detail on the full image: its step from the final image, made first (§9)
+            steps_made.last = final.get()
+            rms, top = steps_made.add(image)
+        else:  # docs/raytracing.md §9: the step from the frame before, at half this frame's size
+            rms, top = steps_made.add(image)
+            top *= MAX_MARGIN
         last = time.perf_counter() - t0
         frame = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
                               estimated_relative_rms_error=rms, estimated_relative_max_error=top, meta=meta,
@@ -125,15 +135,3 @@ def _frames(tracer, camera, options, steps, budget, error):
         yield frame
         if reached(frame, error):
             return
-
-
-def estimate(image, full, half) -> tuple:
-    """(relative RMS, relative max) estimated error of a frame ``image`` against the final image, from ``full``
-    (full detail at the frame's size) and ``half`` (full detail at half its size), all at the full size
-    (docs/raytracing.md §9): the frame's distance from ``full``, plus ``full``'s from ``half`` for what the
-    frame's size misses.  Relative to the largest magnitude of ``full``."""
-    peak = max(float(np.max(np.abs(full), initial=0.0)), np.finfo(np.float32).tiny)
-    detail, size = image - full, full - half
-    rms = float(np.sqrt(np.mean(detail ** 2))) + float(np.sqrt(np.mean(size ** 2)))
-    top = float(np.max(np.abs(detail), initial=0.0)) + float(np.max(np.abs(size), initial=0.0))
-    return rms / peak, top / peak

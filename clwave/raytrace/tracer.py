@@ -482,8 +482,8 @@ class RayTracer:
         """Frames of ``camera`` from cheap to exact (:mod:`clwave.raytrace.progressive`, docs/raytracing.md §9),
         for a viewer that shows each as it comes: a generator (``RaytraceFrame`` s: ``image``, ``figures()``),
         the last bit for bit :meth:`render` at full detail; stop iterating when the view changes (nothing is
-        left running).  Needs ``lod=True``; use it from one thread at a time.  ``transfer_function``: as
-        :meth:`render`'s, the same at every frame."""
+        left running); any tracer refines (the frames are its own renders of reduced images).  Use it from one
+        thread at a time.  ``transfer_function``: as :meth:`render`'s, the same at every frame."""
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                        transfer_function=transfer_function)
         return frames(self, camera, options, steps, budget, error)
@@ -579,9 +579,14 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
     if tracer is None:
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
-        cc = ComputeContext.get(device)
-        cap = parse_cap(device_memory)
-        tracer = wv.shared(("raytrace", cc.info.id, field, cap),
-                           lambda: RayTracer(wv, device=cc, field=field, device_memory=cap))
+        tracer = shared_tracer(wv, device, field, device_memory)
     return tracer.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                          precision=precision, transfer_function=transfer_function)
+
+
+def shared_tracer(wv, device=None, field="bspline", device_memory=None) -> RayTracer:
+    """The full-detail tracer of ``wv`` that :func:`raytrace` and :func:`clwave.progressive` calls on the same model,
+    device, field and memory cap share (made by the first)."""
+    cc, cap = ComputeContext.get(device), parse_cap(device_memory)
+    return wv.shared(("raytrace", cc.info.id, field, cap),
+                     lambda: RayTracer(wv, device=cc, field=field, device_memory=cap))
