@@ -3,7 +3,7 @@
 
 The model is traced with every detail's bricks (``lod=True``, docs/raytracing.md §8): while dragging, a reduced
 image at a coarse detail and a looser tolerance, paced to the measured time; when still,
-:meth:`~clwave.RayTracer.refine` (§9), coarse detail on a reduced image to full detail at the tolerance, each
+:meth:`~clwave.RayTracer.refine` (§9), full detail on reduced images to the full size at the tolerance, each
 frame with its error estimate.  A scalar model is classified while rendering by the tab's transfer function
 (``transfer_function=``, §10, at every detail): a preset, its window moved and widened, its opacity scaled,
 from the page's editor.
