@@ -9,7 +9,7 @@ import pytest
 import scipy.ndimage
 
 import clwave
-from clwave.errors import InputError
+from clwave.errors import CommandWords, InputError
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import view_frame
 from clwave.splat.cone_cells import cell_range_peaks
@@ -377,8 +377,7 @@ def test_too_wide_a_cone_is_refused_at_once(camera):
     with pytest.raises(clwave.DeviceMemoryError, match=r"too wide .* narrow the cone .* clwave\.raytrace") as err:
         r.render(camera)
     assert time.perf_counter() - start < 0.5 and "\n" not in str(err.value)
-    assert "(--fov, --size, --pixel or --dsd), or ray-trace it (clwave render --method raytrace --xray)" in (
-        err.value.cli_message())
+    assert err.value.cli_message(CommandWords("N", "D", "T")).endswith("narrow the cone (N), or ray-trace it (T)")
 
 
 def test_texel_scale_over_nodes_equals_each_nodes_least():
@@ -400,7 +399,8 @@ def test_coarse_levels_near_the_source_name_their_fixes():
     with pytest.raises(InputError, match=r"level-3 .* at most 2 level\(s\), a distance or dso above ([\d.]+), or the "
                                          r"ray tracer: clwave\.raytrace\(wv, camera, absorption=False\)") as err:
         clwave.splat(wv, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone))
-    assert "\n" not in str(err.value) and "--levels 2 or fewer" in err.value.cli_message()
+    assert "\n" not in str(err.value)
+    assert "--levels 2 or fewer, D above" in err.value.cli_message(CommandWords("N", "D", "T"))
     dso = float(re.search(r"above ([\d.]+)", str(err.value)).group(1))
     with pytest.raises(InputError, match="too near"):  # the distance named is the least (to its 4 digits)
         clwave.splat(wv, clwave.ConeBeam(dso * (1 - 1e-3), **cone))
