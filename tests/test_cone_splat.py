@@ -297,6 +297,27 @@ def test_dropped_splats_stay_within_their_bound():
     assert res.meta["pixel_updates"] + dropped["pixel_updates"] == full.meta["pixel_updates"]
 
 
+def test_dropping_projects_each_group_once_for_its_plan_and_first_draw(monkeypatch):
+    # splat_dropping's first draw of a group takes the projection its plan made; the image is the one made by
+    # projecting again for that draw, bit for bit
+    from clwave.splat.renderer import Accumulator
+    from clwave.splat.stages import Stages
+
+    data = scipy.ndimage.gaussian_filter(np.random.default_rng(2).random((12, 12, 12)), 2.0).astype(np.float32)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet="cubic", levels=2)
+    cam = clwave.ConeBeam(60.0, 90.0, 24, pixel=2.0, azimuth=0, elevation=0)
+    calls = []
+    monkeypatch.setattr(Stages, "project", lambda self, n, *a, _p=Stages.project: calls.append(n) or _p(self, n, *a))
+    once = clwave.splat(wv, cam, coarse=2e-2)
+    assert once.meta["dropped"]["splats"] > 0
+    projected, calls[:] = list(calls), []
+    monkeypatch.setattr(Accumulator, "_splat_group", lambda self, *a, projected=False, _s=Accumulator._splat_group,
+                        **k: _s(self, *a, **k))  # as before: every draw projects
+    again = clwave.splat(wv, cam, coarse=2e-2)
+    assert np.array_equal(once.image, again.image) and once.meta["dropped"] == again.meta["dropped"]
+    assert len(projected) == len(calls) - len(wv.groups) and len(projected) >= 2 * len(wv.groups)
+
+
 def test_select_drops_and_cell_peaks_against_brute_force():
     rng = np.random.default_rng(4)
     H, W, n = 9, 11, 60
