@@ -194,6 +194,7 @@ class BrickField:
     #                                 one float a coefficient)
     spill: Spill | None = None      # or in a scratch file
     _static: dict | None = None     # the per-slot tables on the device, uploaded once
+    given_back: bool = False        # whether a render in passes gave back the memory freed while it was made
 
     @property
     def resident(self) -> bool:

@@ -91,7 +91,9 @@ def passes(tracer, view, scale, offset, per_image, at) -> list:
             f"largest brick and this image's buffers) but {format_size(tracer.budget.total)} are allowed; raise "
             f"--device-memory (device_memory=) or render a smaller image")
     c = max(k for k in range(1, max(f.shape) + 1) if _region_sums(sizes, k).max() <= room)
-    return_freed()  # the set-up's freed memory, kept by the C library, back to the system before a region comes
+    if not f.given_back:  # the set-up's freed memory, kept by the C library, back to the system before the first
+        return_freed()  # region comes; later renders leave little to give back (docs/raytracing.md §6)
+        f.given_back = True
     sums = _region_sums(sizes, c)
     eye, direction = view_in_fine(view, scale, offset)
     eye_region = np.floor((eye / BRICK - f.origin) / c)
