@@ -4,19 +4,38 @@ The command line prints ``clwave: error: <message>`` and exits with code 2 for
 any :class:`ClwaveError`; library users can catch the specific subclasses.
 """
 
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+
+@dataclass(frozen=True)
+class CommandWords:
+    """What one command calls the fixes a refusal names (``{narrow}``, ``{distance}``, ``{tracer}`` in a
+    :class:`ClwaveError`'s ``cli``): a refusal raised deep in a renderer names them without knowing which
+    command called it."""
+
+    narrow: str  #: the options that narrow a perspective view's cone, e.g. "--fov or --size"
+    distance: str  #: the option that moves the eye (the X-ray source) away, e.g. "--distance"
+    tracer: str  #: the command that ray-traces the same X-ray, e.g. "clwave render --method raytrace --xray"
+
 
 class ClwaveError(Exception):
     """Base class: a user-facing problem with a one-line, actionable message.
 
     A message that names an API argument (``series=``) can say it in the command line's words
-    too (``cli``: ``--series``), which the command line prints instead.
+    too (``cli``: ``--series``), which the command line prints instead. With ``worded``, ``cli``
+    names fixes whose options differ between commands as fields of :class:`CommandWords`, which
+    the running command fills in (without them: the API's message).
     """
 
-    def __init__(self, message, *, cli=None):
+    def __init__(self, message, *, cli=None, worded=False):
         super().__init__(message)
-        self.cli = cli
+        self.cli, self.worded = cli, worded
 
-    def cli_message(self) -> str:
+    def cli_message(self, words: CommandWords | None = None) -> str:
+        if self.worded:
+            return self.cli.format_map(asdict(words)) if words else str(self)
         return self.cli or str(self)
 
 

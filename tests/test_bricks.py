@@ -321,12 +321,14 @@ def test_no_room_for_the_scratch_file_is_a_clear_error(tmp_path, monkeypatch):
         RayTracer(wv, device_memory="14MiB")
 
 
-@pytest.mark.parametrize("cap,size", [("4MiB", 8), ("14MiB", 500)])
-def test_a_device_memory_cap_too_small_names_the_least_that_works(cap, size):
-    """Below two slabs' expansion (4 MiB), or below one brick beside a 500^2 image's buffers (14 MiB): an
-    error naming the least cap that works, and that cap works."""
+@pytest.mark.parametrize("cap,size,pool", [("4MiB", 8, None), ("14MiB", 500, "scratch file"), ("16MiB", 600, "device")])
+def test_a_device_memory_cap_too_small_names_the_least_that_works(cap, size, pool):
+    """Below two slabs' expansion (4 MiB), or below one brick beside a 500^2 or 600^2 image's buffers: an error
+    naming the least cap that works, and that cap works. At the 500^2 image's the pool goes to the scratch file and
+    the image renders in passes; at the 600^2 image's (above 22.7 MiB) the tracer keeps the pool on the device,
+    where it must fit beside the image's buffers. (The model spans a few pixels: the rays cost little.)"""
     wv = out_of_core_model()
-    cam = clwave.Camera(30, 20, size=size)
+    cam = clwave.Camera(30, 20, size=size, extent=10.0 * size)
 
     def render(device_memory):
         return RayTracer(wv, device_memory=device_memory).render(cam, tolerance=1e-2)
@@ -334,7 +336,9 @@ def test_a_device_memory_cap_too_small_names_the_least_that_works(cap, size):
     with pytest.raises(DeviceMemoryError, match="at least") as err:
         render(cap)
     least = re.search(r"at least ([\d.]+) (MiB|KiB)", str(err.value))
-    assert render(f"{least.group(1)}{least.group(2)}").image.shape == (size, size, 4)
+    res = render(f"{least.group(1)}{least.group(2)}")
+    assert res.image.shape == (size, size, 4) and res.image.max() > 0
+    assert pool is None or (res.meta["pool"] == pool and (res.meta["passes"] > 1) == (pool == "scratch file"))
 
 
 def piece_flag(field: bricks.BrickField, x) -> tuple:

@@ -63,3 +63,20 @@ def test_default_view_frames_the_non_empty_region_at_every_azimuth():
     wv = WaveletVolume.from_volume(vol, levels=1).threshold(keep=0.2)
     assert np.allclose(wv.content_box()[0], lo) and np.allclose(wv.content_box()[1], hi)
     assert Camera(33, 25, 64).view(wv).pixel == pytest.approx(Camera(33, 25, 64).view(vol).pixel)
+
+
+@pytest.mark.parametrize("kwargs", [{}, dict(target=(1.0, -2.0, 0.5), extent=30.0),
+                                    dict(perspective=True, fov=40.0), dict(perspective=True, distance=60.0)])
+def test_a_reduced_camera_is_the_same_view_with_larger_pixels(kwargs):
+    # as ConeBeam.reduced (tests/test_raytrace_cone.py): a progressive frame's reduced image has the same centre, and
+    # its pixels are reduction x reduction of the full image's, also where the sides round up (42 x 37 -> 11 x 10)
+    vol = Volume(np.zeros((6, 7, 8)), spacing=(1.0, 2.0, 1.5), origin=(0.5, 1.0, -1.0))
+    points = np.random.default_rng(3).uniform(-5, 5, (20, 3))
+    for size in ((40, 36), (42, 37)):
+        cam = Camera(35, -25, size, **kwargs)
+        small = cam.reduced(4, cam.view(vol))
+        (H, W), (h, w) = cam.size, small.size
+        assert (h, w) == (-(-H // 4), -(-W // 4)) and small.perspective == cam.perspective
+        full = cam.view(vol).to_pixels(points) - (np.array([W, H]) / 2.0 - 0.5)  # from the image's centre
+        np.testing.assert_allclose(small.view(vol).to_pixels(points) - (np.array([w, h]) / 2.0 - 0.5), full / 4,
+                                   rtol=0, atol=1e-9)

@@ -9,7 +9,7 @@ import pytest
 import scipy.ndimage
 
 import clwave
-from clwave.errors import InputError
+from clwave.errors import CommandWords, InputError
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import view_frame
 from clwave.splat.cone_cells import cell_range_peaks
@@ -297,6 +297,27 @@ def test_dropped_splats_stay_within_their_bound():
     assert res.meta["pixel_updates"] + dropped["pixel_updates"] == full.meta["pixel_updates"]
 
 
+def test_dropping_projects_each_group_once_for_its_plan_and_first_draw(monkeypatch):
+    # splat_dropping's first draw of a group takes the projection its plan made; the image is the one made by
+    # projecting again for that draw, bit for bit
+    from clwave.splat.renderer import Accumulator
+    from clwave.splat.stages import Stages
+
+    data = scipy.ndimage.gaussian_filter(np.random.default_rng(2).random((12, 12, 12)), 2.0).astype(np.float32)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet="cubic", levels=2)
+    cam = clwave.ConeBeam(60.0, 90.0, 24, pixel=2.0, azimuth=0, elevation=0)
+    calls = []
+    monkeypatch.setattr(Stages, "project", lambda self, n, *a, _p=Stages.project: calls.append(n) or _p(self, n, *a))
+    once = clwave.splat(wv, cam, coarse=2e-2)
+    assert once.meta["dropped"]["splats"] > 0
+    projected, calls[:] = list(calls), []
+    monkeypatch.setattr(Accumulator, "_splat_group", lambda self, *a, projected=False, _s=Accumulator._splat_group,
+                        **k: _s(self, *a, **k))  # as before: every draw projects
+    again = clwave.splat(wv, cam, coarse=2e-2)
+    assert np.array_equal(once.image, again.image) and once.meta["dropped"] == again.meta["dropped"]
+    assert len(projected) == len(calls) - len(wv.groups) and len(projected) >= 2 * len(wv.groups)
+
+
 def test_select_drops_and_cell_peaks_against_brute_force():
     rng = np.random.default_rng(4)
     H, W, n = 9, 11, 60
@@ -377,8 +398,7 @@ def test_too_wide_a_cone_is_refused_at_once(camera):
     with pytest.raises(clwave.DeviceMemoryError, match=r"too wide .* narrow the cone .* clwave\.raytrace") as err:
         r.render(camera)
     assert time.perf_counter() - start < 0.5 and "\n" not in str(err.value)
-    assert "(--fov, --size, --pixel or --dsd), or ray-trace it (clwave render --method raytrace --xray)" in (
-        err.value.cli_message())
+    assert err.value.cli_message(CommandWords("N", "D", "T")).endswith("narrow the cone (N), or ray-trace it (T)")
 
 
 def test_texel_scale_over_nodes_equals_each_nodes_least():
@@ -400,7 +420,8 @@ def test_coarse_levels_near_the_source_name_their_fixes():
     with pytest.raises(InputError, match=r"level-3 .* at most 2 level\(s\), a distance or dso above ([\d.]+), or the "
                                          r"ray tracer: clwave\.raytrace\(wv, camera, absorption=False\)") as err:
         clwave.splat(wv, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone))
-    assert "\n" not in str(err.value) and "--levels 2 or fewer" in err.value.cli_message()
+    assert "\n" not in str(err.value)
+    assert "--levels 2 or fewer, D above" in err.value.cli_message(CommandWords("N", "D", "T"))
     dso = float(re.search(r"above ([\d.]+)", str(err.value)).group(1))
     with pytest.raises(InputError, match="too near"):  # the distance named is the least (to its 4 digits)
         clwave.splat(wv, clwave.ConeBeam(dso * (1 - 1e-3), **cone))

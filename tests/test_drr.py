@@ -116,3 +116,28 @@ def test_drr_command_ray_traces(tmp_path, capsys):
         err = capsys.readouterr().err
         assert words in err and err.count("\n") == 1
         assert not (tmp_path / "bad.npy").exists()
+
+
+@pytest.mark.parametrize("argv, own, foreign", [
+    (["render", "--perspective", "--distance", "2"], ["--distance above", "(clwave render --method raytrace --xray)"],
+     ["--dso", "drr"]),
+    (["render", "--perspective", "--distance", "50", "--fov", "179", "--size", "4"],
+     ["(--fov or --size), or ray-trace it (clwave render --method raytrace --xray)"], ["--pixel", "--dsd", "drr"]),
+    (["progressive", "--perspective", "--distance", "2"], ["--distance above",
+                                                            "(clwave progressive --method raytrace --xray)"],
+     ["--dso", "render", "drr"]),
+    (["drr", "--dso", "15", "--dsd", "40", "--size", "6"], ["--dso above", "(clwave drr --method raytrace)"],
+     ["--distance", "--xray", "render"]),
+    (["drr", "--dso", "100", "--dsd", "200", "--size", "8", "--pixel", "2000"],
+     ["(--size, --pixel or --dsd), or ray-trace it (clwave drr --method raytrace)"], ["--fov", "--xray", "render"]),
+])
+def test_cone_refusals_name_the_commands_own_options(tmp_path, capsys, argv, own, foreign):
+    # the splatter's "too near" and "too wide" refusals, worded by the command that met them (errors.CommandWords)
+    (tmp_path / "poses.csv").write_text("azimuth\n30\n")
+    poses_arg = ["--poses", str(tmp_path / "poses.csv")] if argv[0] == "drr" else []
+    out = tmp_path / {"render": "o.png", "progressive": "o.gif", "drr": "o.npy"}[argv[0]]
+    assert main([argv[0], "phantom:hydrogen:16", "--levels", "1", *poses_arg, *argv[1:], "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("clwave: error: ") and not out.exists()
+    assert all(words in err for words in own) and not any(words in err for words in foreign)
+    assert "clwave.raytrace" not in err and "{" not in err  # no API words, no unfilled field

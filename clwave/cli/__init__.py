@@ -55,11 +55,12 @@ def main(argv=None) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() \
         else None
     debug = "--debug" in (sys.argv[1:] if argv is None else argv)
+    args = None
     try:
         args = make_parser().parse_args(argv)
         return args.run(args)
-    except ClwaveError as exc:
-        print(f"clwave: error: {exc.cli_message()}", file=sys.stderr)
+    except ClwaveError as exc:  # in the running command's own options (its ``words``, errors.CommandWords)
+        print(f"clwave: error: {exc.cli_message(getattr(args, 'words', None))}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("clwave: interrupted", file=sys.stderr)

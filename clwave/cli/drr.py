@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveError, InputError
+from ..errors import CommandWords, InputError
 from .options import (add_command, add_device_options, build_model, check_outputs, numbers, parse_device_memory,
                       parse_window)
 
@@ -85,22 +85,17 @@ def run(args):
     def image(res):
         return transmitted(res.image[..., 0]) if args.intensity else res.image[..., 0]
 
-    try:
-        if out.suffix.lower() == ".png":
-            res = render(cameras[0])
-            RenderResult(image(res)[..., None], res.meta).save(out, window=parse_window(args), overwrite=args.force)
-        else:
-            def write(fh):  # the .npy header, then each radiograph as it is rendered
-                np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
-                                                              shape=(len(cameras), H, W)))
-                for cb in cameras:
-                    fh.write(np.ascontiguousarray(image(render(cb)), "<f4").tobytes())
+    if out.suffix.lower() == ".png":
+        res = render(cameras[0])
+        RenderResult(image(res)[..., None], res.meta).save(out, window=parse_window(args), overwrite=args.force)
+    else:
+        def write(fh):  # the .npy header, then each radiograph as it is rendered
+            np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
+                                                          shape=(len(cameras), H, W)))
+            for cb in cameras:
+                fh.write(np.ascontiguousarray(image(render(cb)), "<f4").tobytes())
 
-            write_atomic(out, write, args.force)
-    except ClwaveError as e:  # the splatter's "too near"/"too wide" name render's ray tracer; here it is drr's
-        e.cli = e.cli and e.cli.replace("clwave render --method raytrace --xray",  # and drr has no --fov
-                                        "clwave drr --method raytrace").replace("--fov, ", "")
-        raise
+        write_atomic(out, write, args.force)
     seconds = time.perf_counter() - start
     kind = "transmitted intensities" if args.intensity else "line integrals"
     how = f"ray traced, tolerance {tolerance:g}" if args.method == "raytrace" else "splatted"
@@ -130,4 +125,5 @@ def add_parser(sub):
     g.add_argument("--intensity", action="store_true", help="Beer-Lambert transmitted intensity exp(-line "
                    "integral) instead of the line integrals (a --hu-to-mu CT: mu per mm)")
     add_device_options(g)
+    p.set_defaults(words=CommandWords("--size, --pixel or --dsd", "--dso", "clwave drr --method raytrace"))
     return p

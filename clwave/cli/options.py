@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, OutputExistsError
+from ..errors import CommandWords, InputError, OutputExistsError
 from ..device.memory import check_fits
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
@@ -376,8 +376,9 @@ def add_command(sub, name, help, run, output_help, view=False):
     p = sub.add_parser(name, help=help)
     add_input_options(p)
     add_model_options(p)
-    if view:
+    if view:  # a perspective camera's fixes, in this command's options (errors.CommandWords)
         add_camera_options(p)
+        p.set_defaults(words=CommandWords("--fov or --size", "--distance", f"clwave {name} --method raytrace --xray"))
     p.add_argument("-o", "--output", required=True, help=output_help)
     p.add_argument("--force", action="store_true", help="replace existing output files")
     p.set_defaults(run=run)

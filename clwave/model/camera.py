@@ -150,6 +150,19 @@ class Camera:
         return View(n, u, v, target, (H, W), slope * distance, True, target + distance * n, self.fov,
                     (slope, slope), (0.0, 0.0))
 
+    def reduced(self, reduction: int, view: View) -> "Camera":
+        """The same view with ``reduction`` times larger pixels (sides rounded up, the same centre): a progressive
+        frame's reduced image. ``view``: this camera's :meth:`view` of the volume, which fixes what the camera
+        leaves to the volume (target, extent, distance)."""
+        H, W = self.size
+        h, w = -(-H // reduction), -(-W // reduction)
+        fov = self.fov
+        if self.perspective:
+            s = 2.0 * np.tan(np.radians(view.fov) / 2.0) / H * reduction  # image-plane units per reduced pixel
+            fov = float(np.degrees(2.0 * np.arctan(s * h / 2.0)))
+        return Camera(self.azimuth, self.elevation, size=(h, w), target=view.target, extent=view.pixel * reduction * w,
+                      perspective=self.perspective, distance=float(np.linalg.norm(view.eye - view.target)), fov=fov)
+
     def rotated(self, degrees) -> "Camera":
         """The same camera turned about the z axis (turntables)."""
         cam = Camera.__new__(Camera)

@@ -225,9 +225,10 @@ class ConeBeam:
         return View(self.n, self.u, self.v, np.asarray(self.isocentre, float), (H, W), self.slope[1] * self.dso,
                     True, self.source, fov, self.slope, self.principal)
 
-    def reduced(self, reduction: int) -> "ConeBeam":
+    def reduced(self, reduction: int, view: View | None = None) -> "ConeBeam":
         """The same view with ``reduction`` times larger detector pixels (sides rounded up, the same centre): a
-        progressive frame's reduced image."""
+        progressive frame's reduced image (``view`` as :meth:`Camera.reduced`'s; a cone beam needs none, since
+        no volume sets any of its geometry)."""
         H, W = self.size
         cb = ConeBeam.__new__(ConeBeam)
         cb._set(self.n, self.u, self.v, self.source, (-(-H // reduction), -(-W // reduction)),

@@ -194,6 +194,10 @@ class BrickField:
     #                                 one float a coefficient)
     spill: Spill | None = None      # or in a scratch file
     _static: dict | None = None     # the per-slot tables on the device, uploaded once
+    given_back: bool = False        # whether a render in passes gave back the memory freed while it was made
+    device_from: int | None = None  # the least device budget at which build keeps this pool on the device (None:
+    #                                 none, it is over one buffer's limit; _check_fits), and its bytes there
+    device_pool_bytes: int = 0
 
     @property
     def resident(self) -> bool:
@@ -326,8 +330,10 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     bricks, levels, clamped, coarse, pages, alt = p.slots()
     lay = layout(wv, bricks, levels)
     q, orders = cc.queue, tuple(g.wavelet.order for g in wv.groups)
-    resident = _check_fits(wv, cc, p, lay, budget, 1 if scalar else 4)
-    scalar = scalar and resident and len(levels) > 0  # else the renderer reads the pool: float4
+    pool_lanes = 1 if scalar and len(levels) > 0 else 4  # a scalar pool on the device holds one float a coefficient
+    device_from = _check_fits(wv, cc, p, lay, budget, pool_lanes)
+    resident = device_from is not None and device_from <= budget.total
+    scalar = resident and pool_lanes == 1  # else the renderer reads the pool: float4
     synth = Synthesis(cc)
     if len(levels) and levels.min() < wv.levels:  # some brick needs a synthesis step: its programs built apart
         for g, axis in product(wv.groups, range(3)):
@@ -346,8 +352,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     lattices = level_lattices[lay["levels"]]
     alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
     bounds = cla.zeros(q, (max(n, 1), SUPER, SUPER, SUPER), np.float32)
-    # 64 = 4^3: the reads of a segment in no brick (weights 0; the march never samples one) stay inside
-    pool = cla.empty(q, (max(lay["total"], 64),) + (() if scalar else (4,)), np.float32) if resident else None
+    pool = cla.empty(q, (_pool_elements(lay),) + (() if scalar else (4,)), np.float32) if resident else None
     spill = None if resident else Spill(lay["total"])
     clamp = cc.generated("clamp_to_content", lambda: ElementwiseKernel(
         cc.ctx, "float *grid, const uchar *keep, const int lanes", "if (!keep[i / lanes]) grid[i] = 0.0f",
@@ -403,16 +408,23 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     if len(cut) and (reached := reached_blocks(wv, lay["bricks"][cut])) is not None:
         bounds[cut] *= reached
     return BrickField(p.origin, p.level.shape[1:], lay["bricks"], lay["levels"], clamped, pages, frames, boxes,
-                      lattices, bounds, orders, time.perf_counter() - start, mixes, pieces, pool, spill)
+                      lattices, bounds, orders, time.perf_counter() - start, mixes, pieces, pool, spill,
+                      device_from=device_from, device_pool_bytes=4 * pool_lanes * _pool_elements(lay))
 
 
-def _check_fits(wv, cc, p: Plan, lay, budget, pool_lanes=4) -> bool:
-    """Whether the pool (``pool_lanes`` floats a coefficient) fits the device with the bounds and the expansion's
-    work; DeviceMemoryError when the
-    bounds and the work alone do not.  A slab's synthesis holds about three boxes of its finest level's float4
-    coefficients at once (the parts, the pairs of one axis step, the output), and two slabs can be under way
-    (build's overlap), with their pools when the pool goes to host memory."""
-    pool = 4 * pool_lanes * lay["total"]
+def _pool_elements(lay) -> int:
+    """The pool's coefficients on the device: 64 = 4^3 more at least, so that the reads of a segment in no brick
+    (weights 0; the march never samples one) stay inside."""
+    return max(lay["total"], 64)
+
+
+def _check_fits(wv, cc, p: Plan, lay, budget, pool_lanes=4) -> int | None:
+    """The least device budget at which the pool (``pool_lanes`` floats a coefficient) stays on the device, beside
+    the bounds and the expansion's work (None: one buffer cannot hold it); DeviceMemoryError when the
+    bounds and the work alone do not fit ``budget``.  A slab's synthesis holds about three boxes of its finest
+    level's float4 coefficients at once (the parts, the pairs of one axis step, the output), and two slabs can be
+    under way (build's overlap), with their pools when the pool goes to host memory."""
+    pool = 4 * pool_lanes * _pool_elements(lay)
     bounds = 4 * SUPER ** 3 * (len(lay["levels"]) + int(np.prod(p.level.shape[1:])))  # per slot, and a grid
     halo = 2 * max(g.wavelet.order for g in wv.groups)
     slab, slab_pool, ends = 0, 0, lay["ends"]
@@ -429,7 +441,7 @@ def _check_fits(wv, cc, p: Plan, lay, budget, pool_lanes=4) -> bool:
             f"expanding the bricks of this volume needs at least {format_size(bounds + work + 2 * slab_pool)} on "
             f"{cc.info.name}, which allows {format_size(budget.total)} ({format_size(budget.max_alloc)} per "
             f"buffer); raise --device-memory, crop the volume or pick another --device")
-    return pool + bounds + work <= budget.total and pool <= budget.max_alloc
+    return pool + bounds + work if pool <= cc.info.max_alloc else None
 
 
 def _parents(wav, taps, lo, hi) -> tuple:

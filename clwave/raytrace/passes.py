@@ -12,7 +12,7 @@ import weakref
 import numpy as np
 
 from ..device.constants import BRICK
-from ..device.memory import format_size, return_freed
+from ..device.memory import format_size, parse_size, return_freed
 from ..errors import DeviceMemoryError, OutputError
 from ..model.geometry import view_in_fine
 
@@ -72,6 +72,12 @@ def _region_sums(sizes, c) -> np.ndarray:
     return padded.reshape(Z, c, Y, c, X, c).sum(axis=(1, 3, 5))
 
 
+def on_device(pool_bytes: int, per_image: int, at) -> int:
+    """Device memory a render in one pass over bricks kept on the device needs: the pool, the image's buffers
+    (``per_image``) and the detail ``at``'s block bounds."""
+    return pool_bytes + 2 * at.block_bound.nbytes + per_image
+
+
 def passes(tracer, view, scale, offset, per_image, at) -> list:
     """The bricks of ``tracer`` in the scratch file as regions of c^3 bricks that fit the device one at a time, in
     an order every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z).
@@ -85,13 +91,20 @@ def passes(tracer, view, scale, offset, per_image, at) -> list:
     room = min(tracer.budget.total - fixed, tracer.budget.max_alloc)
     sizes = np.zeros(f.shape, np.int64)  # a brick's pool and its tables (frames, boxes, lattices)
     sizes[tuple((f.bricks[at.slots] - f.origin).T)] = f.slot_bytes()[at.slots] + 16 + 32 * len(tracer.orders)
-    if room < sizes.max():
+    if room < sizes.max():  # the least budget that works, by the rules a tracer made with it follows: passes, or
+        least, what = fixed + sizes.max(), "its largest brick and this image's buffers"
+        if f.device_from is not None and parse_size(format_size(least)) >= f.device_from:  # (as the message rounds)
+            # at that much build keeps the pool on the device, where it must fit beside this image's buffers
+            least = max(f.device_from, on_device(f.device_pool_bytes, per_image, at))
+            what = "its bricks, which stay on the device at that much, and this image's buffers"
         raise DeviceMemoryError(
-            f"ray tracing this volume needs at least {format_size(fixed + sizes.max())} of device memory (its "
-            f"largest brick and this image's buffers) but {format_size(tracer.budget.total)} are allowed; raise "
-            f"--device-memory (device_memory=) or render a smaller image")
+            f"ray tracing this volume needs at least {format_size(least)} of device memory ({what}) but "
+            f"{format_size(tracer.budget.total)} are allowed; raise --device-memory (device_memory=) or render a "
+            f"smaller image")
     c = max(k for k in range(1, max(f.shape) + 1) if _region_sums(sizes, k).max() <= room)
-    return_freed()  # the set-up's freed memory, kept by the C library, back to the system before a region comes
+    if not f.given_back:  # the set-up's freed memory, kept by the C library, back to the system before the first
+        return_freed()  # region comes; later renders leave little to give back (docs/raytracing.md §6)
+        f.given_back = True
     sums = _region_sums(sizes, c)
     eye, direction = view_in_fine(view, scale, offset)
     eye_region = np.floor((eye / BRICK - f.origin) / c)

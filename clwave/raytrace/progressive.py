@@ -58,17 +58,8 @@ def schedule(size, details=(), steps=None) -> list:
 
 
 def reduced_camera(view, camera: Camera | ConeBeam, reduction: int) -> Camera | ConeBeam:
-    """The camera of the same view with ``reduction`` times larger pixels (sides rounded up, same centre)."""
-    if isinstance(camera, ConeBeam):
-        return camera.reduced(reduction)
-    H, W = view.size
-    h, w = -(-H // reduction), -(-W // reduction)
-    fov = camera.fov
-    if view.perspective:
-        s = 2.0 * np.tan(np.radians(view.fov) / 2.0) / H * reduction  # image-plane units per reduced pixel
-        fov = float(np.degrees(2.0 * np.arctan(s * h / 2.0)))
-    return Camera(camera.azimuth, camera.elevation, size=(h, w), target=view.target, extent=view.pixel * reduction * w,
-                  perspective=view.perspective, distance=float(np.linalg.norm(view.eye - view.target)), fov=fov)
+    """The camera of the same ``view`` with ``reduction`` times larger pixels (sides rounded up, same centre)."""
+    return camera.reduced(reduction, view)
 
 
 def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:

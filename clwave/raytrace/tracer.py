@@ -28,7 +28,7 @@ from ..errors import DeviceMemoryError, InputError, finite_number
 from ..device.memory import device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan
-from .passes import passes as region_passes
+from .passes import on_device, passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import QUANT, ScalarRange, check_post, post_nodes
 from .progressive import frames
@@ -379,7 +379,7 @@ class RayTracer:
         per_pixel = H * W * (48 + 9 * np.dtype(real).itemsize)  # image, two stats; carry, ledger, resume
         passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
         if self.field == "bspline" and self.bricks.resident:
-            need = self.bricks.pool_bytes + 2 * at.block_bound.nbytes + per_pixel
+            need = on_device(self.bricks.pool_bytes, per_pixel, at)
             if need > self.budget.total:
                 raise DeviceMemoryError(
                     f"a {H}x{W} ray-traced image needs {format_size(per_pixel)} of device memory beside the "

@@ -78,8 +78,7 @@ def check_slope_grid(lo, step, count, textures: int) -> None:
                f"{need / 2**20:,.0f} MiB (at most {CELL_PEAKS_BYTES / 2**20:,.0f}); narrow the cone")
         raise DeviceMemoryError(f"{why} (a smaller fov or detector, a longer dsd), or ray-trace it: "
                                 "clwave.raytrace(wv, camera, absorption=False)",
-                                cli=f"{why} (--fov, --size, --pixel or --dsd), or ray-trace it (clwave render "
-                                "--method raytrace --xray)")
+                                cli=f"{why} ({{narrow}}), or ray-trace it ({{tracer}})", worded=True)
 
 
 def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
@@ -339,11 +338,11 @@ def _too_near(view, wv, wav, d_xyz, level: int, drawn):
     distance = float(np.linalg.norm(view.eye - view.target)) - min(near(m, [key]) for m, key in drawn)
     why = (f"the eye (X-ray source) is inside the model or too near it for splatting: its level-{level} basis "
            "functions reach behind the eye; use ")
-    fixes = f"a distance or dso above {distance:.4g}, or "
-    raise InputError(why + (f"a model of at most {fit} level(s), " if fit else "") + fixes
-                     + "the ray tracer: clwave.raytrace(wv, camera, absorption=False)",
-                     cli=why + (f"--levels {fit} or fewer, " if fit else "") + fixes
-                     + "the ray tracer (clwave render --method raytrace --xray)")
+    raise InputError(why + (f"a model of at most {fit} level(s), " if fit else "")
+                     + f"a distance or dso above {distance:.4g}, or the ray tracer: clwave.raytrace(wv, camera, "
+                     "absorption=False)", worded=True,
+                     cli=why + (f"--levels {fit} or fewer, " if fit else "")
+                     + f"{{distance}} above {distance:.4g}, or the ray tracer ({{tracer}})")
 
 
 class ConeTables:

@@ -335,7 +335,7 @@ class Accumulator:
             wavelet = wavelet[self.tables[gi].tex_layer[stex[wavelet], 0] == 0]  # drawn at the image's pixels
             bound = self.tables[gi].splat_bounds(self.view, bbox[wavelet], stex[wavelet], g["table"].values[wavelet])
             plans.append((wavelet, bbox[wavelet], bound))
-            self._draw(gi, wavelet, False)
+            self._draw(gi, wavelet, False, projected=True)  # the work arrays hold this projection still
             self.stats["splats"] += n
         drops = [None] * len(plans)  # per group: (the candidates left undrawn, the largest sum of their bounds)
         while True:  # E L <= share (top - E L): the dropped splats' error within share of the finished image's maximum
@@ -367,23 +367,26 @@ class Accumulator:
             if drop.any():
                 self.dropped["bound"] = max(self.dropped["bound"], float(np.max(most * obliquity / top)))
 
-    def _draw(self, gi, where, value: bool):
-        """Splat group ``gi``'s coefficients at indices ``where`` (``value``) or all but those (not ``value``)."""
+    def _draw(self, gi, where, value: bool, projected=False):
+        """Splat group ``gi``'s coefficients at indices ``where`` (``value``) or all but those (not ``value``);
+        ``projected`` as for :meth:`_splat_group`."""
         n = self.r.groups[gi]["count"]
         keep = np.full(n, not value)
         keep[where] = value
         if keep.any():
-            self._splat_group(gi, *self.r._resident[gi], 0, n, keep=keep)
+            self._splat_group(gi, *self.r._resident[gi], 0, n, keep=keep, projected=projected)
 
-    def _splat_group(self, gi, coef, values, first, n, keep=None):
+    def _splat_group(self, gi, coef, values, first, n, keep=None, projected=False):
         """Splat coefficients ``first .. first + n`` of the device arrays ``coef``, ``values`` of group ``gi``;
-        ``keep``: a mask of those to splat (the others' boxes are emptied after projection)."""
+        ``keep``: a mask of those to splat (the others' boxes are emptied after projection); ``projected``: the
+        work arrays hold these coefficients' projection, unmasked (``splat_dropping``'s first draw of a group)."""
         r, q = self.r, self.r.cc.queue
         g, t, tables, w = r.groups[gi], self.device_tables[gi], self.tables[gi], r._work
         st = r.stage(g["channels"], self.view.perspective)
         start = time.perf_counter()
         centre, bbox, stex, counts = w["centre"], w["bbox"], w["stex"], w["counts"]  # the first n are this pass's
-        st.project(n, first, coef, t, centre, bbox, stex, counts)
+        if not projected:
+            st.project(n, first, coef, t, centre, bbox, stex, counts)
         if keep is not None:
             r.mask_splats(bbox, counts, cla.to_device(q, keep.view(np.uint8)), range=slice(0, n), queue=q)
         total = int(cla.sum(counts[:n], dtype=np.uint64).get())
