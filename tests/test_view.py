@@ -296,7 +296,8 @@ def test_a_scalar_model_is_classified_by_the_transfer_function_given_from_the_fi
     """view(scalar model, tf=) (what `clwave view scalar.clw --tf P --tf-window LO,HI` serves): the hello names the
     function for the page's editor, every render of the shaded source (its warm-up, the drag frame, each still frame)
     is classified by it, each frame reports its window, and the final still frame is clwave.raytrace of the view with
-    it bit for bit (the viewer's tracer holds every detail; full detail is the one-detail tracer's, docs/viewer.md §2)."""
+    it bit for bit (the viewer's tracer holds every detail; its full detail is the one-detail tracer's, docs/viewer.md
+    §2)."""
     from clwave.raytrace.tracer import RayTracer
 
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.3)
