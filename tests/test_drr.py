@@ -77,6 +77,28 @@ def test_drr_command(tmp_path, capsys, model):
     assert not (tmp_path / "x.png").exists() and not (tmp_path / "y.npy").exists()
 
 
+def test_drr_ray_traces_the_model_splatting_sees(tmp_path, capsys):
+    """A thresholded model rings beyond its content: drr --method raytrace integrates the whole model, as splatting
+    does (within issue #33's bound), where the ray tracer's default content clamp (docs/raytracing.md §4) differs
+    by a quarter of the image maximum on this ball."""
+    n = 20
+    z, y, x = np.mgrid[:n, :n, :n] - (n - 1) / 2
+    data = np.where(np.sqrt(x * x + y * y + z * z) < 6, 1.0 + 0.1 * np.cos(x), 0.0).astype(np.float32)
+    np.save(tmp_path / "ball.npy", data)
+    (tmp_path / "poses.csv").write_text("azimuth,elevation\n30,20\n")
+    args = ["drr", str(tmp_path / "ball.npy"), "--levels", "2", "--keep", "0.1", "--poses", str(tmp_path / "poses.csv"),
+            "--size", "24", "--pixel", "1.5", "--dso", "60", "--dsd", "90"]
+    assert main(args + ["--method", "raytrace", "--tolerance", "1e-4", "-o", str(tmp_path / "ray.npy")]) == 0
+    assert main(args + ["-o", str(tmp_path / "splat.npy")]) == 0
+    ray, splat = np.load(tmp_path / "ray.npy")[0], np.load(tmp_path / "splat.npy")[0]
+    assert np.abs(splat - ray).max() <= 1e-2 * ray.max()
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=2).threshold(keep=0.1)
+    clamped = clwave.RayTracer(wv).render(ConeBeam(60.0, 90.0, (24, 24), pixel=1.5, azimuth=30, elevation=20),
+                                          tolerance=1e-4, absorption=False).image[..., 0]
+    assert wv.content_mask is not None and np.abs(clamped - ray).max() > 0.1 * ray.max()
+    capsys.readouterr()
+
+
 def test_drr_command_ray_traces(tmp_path, capsys):
     # --method raytrace: the ray tracer's X-ray mode against exact perspective line integrals of the same spline
     # (clwave/splat/reference.py's NumPy oracle) within its tolerance, and against splatting within issue #33's bound

@@ -69,8 +69,9 @@ def run(args):
     wv, _ = build_model(args)
     if wv.channels != 1:
         raise InputError("radiographs need a one-channel (attenuation) volume; do not classify it (--tf)")
-    if args.method == "raytrace":  # X-ray mode: the line integrals of the same spline (docs/raytracing.md)
-        renderer = RayTracer(wv, device=args.device, device_memory=device_memory)
+    if args.method == "raytrace":  # X-ray mode: the line integrals of the same spline as splatting's, its ringing
+        # beyond the content included (no content clamp, docs/raytracing.md §1)
+        renderer = RayTracer(wv, device=args.device, device_memory=device_memory, content_clamp=False)
 
         def render(cb):
             return renderer.render(cb, tolerance=tolerance, absorption=False)

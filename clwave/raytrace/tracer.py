@@ -9,6 +9,7 @@ per-ray active lists, the paper's reference) and its bounds for empty-space skip
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass
 
@@ -119,13 +120,18 @@ class RayTracer:
     set-up (docs/raytracing.md §8); it costs the coarser pools' memory and their share of the set-up.  ``lod``
     may also name the detail levels to expand (e.g. ``(3,)``: the coarsest of 3 levels alone), the finest of
     them the default detail of a render.  :meth:`open` sets up from a ``.clw`` file in stages, the coarsest
-    detail first (docs/raytracing.md §8).
+    detail first (docs/raytracing.md §8).  ``content_clamp=False`` renders the whole model, its ringing beyond
+    the source's non-zero voxels included, where the default clamps it to them (docs/raytracing.md §4): the line
+    integrals splatting computes, for X-ray images that match it.
     """
 
     def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,
-                 region=None, lod=False):
+                 region=None, lod=False, content_clamp=True):
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
+        if not content_clamp and wv.content_mask is not None:
+            wv = copy.copy(wv)  # the same coefficients without the mask: nothing is clamped (docs/raytracing.md §4)
+            wv.content_mask = None
         if field not in FIELDS:
             raise InputError(f"ray tracing field must be one of {', '.join(FIELDS)}, got {field!r}")
         if wv.channels > 4:
