@@ -8,7 +8,8 @@
                                   [--shaded-keep 0.05 1] [--shaded-tolerance 1e-2]
                                   [--shaded-reference-tolerance 1e-4] [--shaded-views 1] [--post-views 1]
                                   [--vtk-sweep 2 1 0.5] [--vtk-interpolation linear] [--vtk-resample 1 2]
-                                  [--vtk-window 1] [--sweep-tolerance 1e-2 1e-3] [--sweep-rounds 2]
+                                  [--vtk-window 1] [--sweep-tolerance 1e-2 1e-3] [--sweep-keep 0.05]
+                                  [--sweep-rounds 2]
                                   [--skip-xray] [--out out/peers]
 
 Every method renders the same phantom (sampled at the cell centres of an n³ grid, spacing 1)
@@ -324,6 +325,7 @@ def run_sweep(case, keep, tolerances, settings, count, rounds):
                                                        resample=resample)
             scenes[interpolation, resample].render(views[0])
             prepare[interpolation, resample] = time.perf_counter() - start
+    model_peak = _peak_mib()
     jobs = [("clwave", tol) for tol in tolerances] + [("vtk", s) for s in settings]
     seconds, images = {job: [] for job in jobs}, {job: [] for job in jobs}
     for r in range(rounds):
@@ -342,7 +344,7 @@ def run_sweep(case, keep, tolerances, settings, count, rounds):
                     images[(side, what)].append(image)
     return dict(jobs=[dict(side=side, setting=what, seconds=seconds[(side, what)], images=images[(side, what)],
                            prepare=prepare.get(what[1:3]) if side == "vtk" else None) for side, what in jobs],
-                keep=keep, rounds=rounds, model_peak=_peak_mib())
+                keep=keep, rounds=rounds, model_peak=model_peak)
 
 
 #: name -> (function, the peer package it needs, runs on OpenCL)
@@ -433,7 +435,7 @@ def compare(case, args, log) -> tuple:
     jobs += [(f"VTK composite (shaded, {args.tf})", "vtk", ("composite",), compared)]
     if args.vtk_sweep:  # at equal error: clwave's tolerances and VTK's settings, interleaved in one process
         settings = list(itertools.product(args.vtk_sweep, args.vtk_interpolation, args.vtk_resample, args.vtk_window))
-        jobs.append(("sweep", "sweep", (args.shaded_keep[0], args.sweep_tolerance, settings, args.post_views,
+        jobs.append(("sweep", "sweep", (args.sweep_keep, args.sweep_tolerance, settings, args.post_views,
                                         args.sweep_rounds), "shaded"))
     rows, images = [], {"ground truth": references["truth"][0]} if "truth" in references else {}
     for label, method, params, reference in jobs:
@@ -535,7 +537,8 @@ def main(argv=None):
     parser.add_argument("--vtk-window", type=float, nargs="+", default=[1.0],
                         help="the sweep's final colour windows (VTK's 15-bit image over [0, W] onto its 8 bits)")
     parser.add_argument("--sweep-tolerance", type=float, nargs="+", default=[1e-2, 1e-3],
-                        help="the sweep's clwave tolerances (the first --shaded-keep, post-classified)")
+                        help="the sweep's clwave tolerances (post-classified)")
+    parser.add_argument("--sweep-keep", type=float, default=0.05, help="kept fraction of the sweep's clwave model")
     parser.add_argument("--sweep-rounds", type=int, default=2, help="times the sweep renders every setting and view")
     parser.add_argument("--skip-xray", action="store_true", help="only the shaded rows (no X-ray rows or truth)")
     parser.add_argument("--device", default="auto")
