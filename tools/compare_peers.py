@@ -454,6 +454,11 @@ def compare(case, args, log) -> tuple:
             rows.extend(sweep_rows(res, references["shaded"], relative_rms))
             for row in rows[-len(res["jobs"]):]:
                 log("  " + row_text(row))
+            # VTK's 8-bit output alone: the reference over [0, W] rounded to 8 bits (its error floor's first part)
+            case_info["eight_bit_error"] = {str(w): statistics.median(relative_rms(
+                np.round(np.clip(ref / w, 0, 1) * 255) * (w / 255), ref) for ref in references["shaded"])
+                for w in args.vtk_window}
+            log(f"  VTK's 8 bits alone, window: error {case_info['eight_bit_error']}")
             continue
         if method == "progressive":
             rows.extend(_progressive_rows(label, res, truths, res["memory_mib"]))

@@ -82,6 +82,9 @@ def headline(report) -> list:
                         f"{100 * composite['error']:.3g} %): clwave / VTK = {r['median'] / composite['median']:.1f}"
             out.append(text)
         out += [equal_error_text(case, report["image"], found) for found in equal_error(rows)]
+        if "eight_bit_error" in case:
+            out.append(f"{where}: VTK's 8-bit output alone (the float64 reference over [0, window] rounded to 8 bits) "
+                       "is " + ", ".join(f"{100 * e:.3g} % at window {w}" for w, e in case["eight_bit_error"].items()))
     return out
 
 
