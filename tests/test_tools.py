@@ -112,7 +112,7 @@ def test_compare_peers_end_to_end(tmp_path):
     vtk = lambda d, f: sweep[f"sweep: VTK composite, distance {d}, linear, volume x{f}, window 1"]  # noqa: E731
     assert vtk(1, 1)["error"] == pytest.approx(rows["VTK composite (shaded, hydrogen)"]["error"], rel=1e-6)
     assert vtk(1, 2)["error"] < vtk(1, 1)["error"]
-    assert 0 < case["eight_bit_error"]["1.0"] < vtk(1, 1)["error"]  # its 8-bit output: part of its error
+    assert 0 < case["eight_bit_error"]["1"] < vtk(1, 1)["error"]  # its 8-bit output: part of its error
     lines = [t for t in report["headline"] if "at equal error" in t]
     assert len(lines) == 4 and lines[-2].startswith("hydrogen 32³ at 64², at equal error: VTK distance 1 linear x1")
 

@@ -307,7 +307,7 @@ def run_sweep(case, keep, tolerances, settings, count, rounds):
     ``count`` views, interleaved ``rounds`` times (clwave's tolerances, then VTK's settings, view by view), so that
     their ratios see the same load; each VTK scene (one a volume and interpolation) renders the first view
     once untimed (its set-up: the resampling, gradients), clwave a pixel (the kernel's build). Images are the first
-    round's."""
+    round's. A window "auto" is one 8-bit step over the brightest pixel of the scene's untimed renders."""
     from peers_vtk import VtkScene
 
     tf = clwave.TransferFunction.preset(case["tf"])
@@ -317,14 +317,16 @@ def run_sweep(case, keep, tolerances, settings, count, rounds):
     for tol in tolerances:
         tracer.render(clwave.Camera(size=1), tolerance=tol, transfer_function=tf)
     views = [camera(case, az, el).view(vol) for az, el in case["views"][:count]]
-    scenes, prepare = {}, {}
+    scenes, prepare, top = {}, {}, {}
     for _, interpolation, resample, _ in settings:  # one scene a volume and interpolation
         if (interpolation, resample) not in scenes:
             start = time.perf_counter()
-            scenes[interpolation, resample] = VtkScene(vol, case["image"], tf=tf, interpolation=interpolation,
-                                                       resample=resample)
-            scenes[interpolation, resample].render(views[0])
+            scene = scenes[interpolation, resample] = VtkScene(vol, case["image"], tf=tf, interpolation=interpolation,
+                                                               resample=resample)
+            top[interpolation, resample] = max(float(scene.render(view)[2].max()) for view in views)
             prepare[interpolation, resample] = time.perf_counter() - start
+    # the "auto" window: the brightest pixel of the scene's views at the default window, one 8-bit step above it
+    settings = [(d, i, f, min(1.0, top[i, f] + 1 / 255) if w == "auto" else w) for d, i, f, w in settings]
     model_peak = _peak_mib()
     jobs = [("clwave", tol) for tol in tolerances] + [("vtk", s) for s in settings]
     seconds, images = {job: [] for job in jobs}, {job: [] for job in jobs}
@@ -455,10 +457,10 @@ def compare(case, args, log) -> tuple:
             for row in rows[-len(res["jobs"]):]:
                 log("  " + row_text(row))
             # VTK's 8-bit output alone: the reference over [0, W] rounded to 8 bits (its error floor's first part)
-            case_info["eight_bit_error"] = {str(w): statistics.median(relative_rms(
+            windows = {r["sweep"]["window"] for r in rows[-len(res["jobs"]):] if r["sweep"]["side"] == "vtk"}
+            case_info["eight_bit_error"] = {f"{w:.3g}": statistics.median(relative_rms(
                 np.round(np.clip(ref / w, 0, 1) * 255) * (w / 255), ref) for ref in references["shaded"])
-                for w in args.vtk_window}
-            log(f"  VTK's 8 bits alone, window: error {case_info['eight_bit_error']}")
+                for w in sorted(windows)}
             continue
         if method == "progressive":
             rows.extend(_progressive_rows(label, res, truths, res["memory_mib"]))
@@ -539,12 +541,12 @@ def main(argv=None):
                         help="the sweep's VTK interpolations (its CPU ray caster has no cubic)")
     parser.add_argument("--vtk-resample", type=int, nargs="+", default=[1],
                         help="the sweep's volumes: 1 the voxels, F the cubic B-spline resampled F times finer")
-    parser.add_argument("--vtk-window", type=float, nargs="+", default=[1.0],
-                        help="the sweep's final colour windows (VTK's 15-bit image over [0, W] onto its 8 bits)")
+    parser.add_argument("--vtk-window", type=lambda w: w if w == "auto" else float(w), nargs="+", default=[1.0],
+                        help="the sweep's final colour windows, [0, W] onto VTK's 8 bits ('auto': its brightest pixel)")
     parser.add_argument("--sweep-tolerance", type=float, nargs="+", default=[1e-2, 1e-3],
                         help="the sweep's clwave tolerances (post-classified)")
     parser.add_argument("--sweep-keep", type=float, default=0.05, help="kept fraction of the sweep's clwave model")
-    parser.add_argument("--sweep-rounds", type=int, default=2, help="times the sweep renders every setting and view")
+    parser.add_argument("--sweep-rounds", type=int, default=2, help="times the sweep renders each setting and view")
     parser.add_argument("--skip-xray", action="store_true", help="only the shaded rows (no X-ray rows or truth)")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--out", type=Path, default=Path("out/peers"), help="folder for the outputs")
@@ -554,7 +556,7 @@ def main(argv=None):
     if not all(0 <= k <= args.views for k in (args.raytrace_views, args.shaded_views, args.post_views)):
         parser.error("--raytrace-views, --shaded-views and --post-views must be between 0 and --views")
     if args.vtk_sweep and not (args.post_views and args.sweep_rounds >= 1 and min(args.vtk_sweep) > 0
-                               and min(args.vtk_resample) >= 1 and min(args.vtk_window) > 0):
+                               and min(args.vtk_resample) >= 1 and all(w == "auto" or w > 0 for w in args.vtk_window)):
         parser.error("--vtk-sweep needs --post-views >= 1 (its reference), --sweep-rounds >= 1, and distances, "
                      "resample factors (>= 1) and windows above 0")
     if not isinstance(clwave.TransferFunction.preset(args.tf).window, tuple):

@@ -134,7 +134,7 @@ def plot(report, path) -> bool:
             for name, runs in series.items():
                 runs.sort(key=lambda r: _setting(r)[0])
                 ax.plot([r["median"] for r in runs], [r["error"] for r in runs], ".-" if name[0] == "vtk" else "s--",
-                        label="sweep: VTK {} x{} window {:g}, over its distance".format(*name[1:]) if name[0] == "vtk"
+                        label="sweep: VTK {} x{} window {:.3g}, over its distance".format(*name[1:]) if name[0] == "vtk"
                         else "sweep: clwave over its tolerance")
             _axes(ax, f"{case['phantom']} {case['n']}³, shaded", "relative RMS error vs float64 ray trace",
                   NullFormatter)
@@ -191,7 +191,7 @@ def sweep_rows(res, references, error_of) -> list:
         else:
             setting = dict(zip(("side", "distance", "interpolation", "resample", "window"), ("vtk", *job["setting"])))
             label = "sweep: VTK composite, distance {distance:g}, {interpolation}, volume x{resample}, " \
-                    "window {window:g}".format(**setting)
+                    "window {window:.3g}".format(**setting)
         error = statistics.median(error_of(im, ref) for im, ref in zip(job["images"], references))
         rows.append(dict(method=label, kind="shaded", sweep=setting, prepare=job["prepare"], first=job["seconds"][0],
                          median=statistics.median(job["seconds"]), error=error, peak_rss_mib=res["peak_rss_mib"],
@@ -264,4 +264,4 @@ def _short(row) -> str:
     s = row["sweep"]
     if s["side"] == "clwave":
         return f"clwave tol {s['tolerance']:g}"
-    return f"VTK distance {s['distance']:g} {s['interpolation']} x{s['resample']} window {s['window']:g}"
+    return f"VTK distance {s['distance']:g} {s['interpolation']} x{s['resample']} window {s['window']:.3g}"
