@@ -100,31 +100,34 @@ def plot(report, path) -> bool:
 
     cases = report["cases"]
     shaded = any(r.get("kind") == "shaded" and "error" in r for c in cases for r in c["rows"])
-    fig, axes = plt.subplots(1 + shaded, len(cases), figsize=(5.6 * len(cases), 4.4 * (1 + shaded)), squeeze=False)
+    xray = any(r.get("kind") == "xray" for c in cases for r in c["rows"])  # none with --skip-xray
+    fig, axes = plt.subplots(xray + shaded, len(cases), figsize=(5.6 * len(cases), 4.4 * (xray + shaded)),
+                             squeeze=False)
     for col, case in enumerate(cases):
-        ax = axes[0, col]
         rows = [r for r in case["rows"] if "skipped" not in r]
-        prog = [r for r in rows if r["method"].startswith("clwave progressive")]
-        if prog:
-            ax.plot([r["median"] for r in prog], [r["error"] for r in prog], "o-", color="C0",
-                    label="clwave progressive")
-            for r in prog:
-                ax.annotate(f"{100 * r['kept']:.3g}%", (r["median"], r["error"]), fontsize=7,
-                            textcoords="offset points", xytext=(4, 4))
-        for r, style in zip([r for r in rows if r["method"].startswith("clwave splat")], ("s", "p", "h", "8")):
-            ax.plot([r["median"]], [r["error"]], style, color="C1", markersize=8, label=r["method"])
-        for r in [r for r in rows if r["method"].startswith("clwave raytrace") and r["kind"] == "xray"]:
-            ax.plot([r["median"]], [r["error"]], "*", color="C5", markersize=11, label=r["method"])
-        for r, style, colour in zip([r for r in rows if r["method"] in ("NumPy/SciPy map_coordinates",
-                                                                       "Fourier volume rendering")], ("^", "D"),
-                                    ("C4", "C2")):
-            ax.plot([r["median"]], [r["error"]], style, color=colour, markersize=8, label=r["method"])
-        for r in [r for r in rows if r["method"] == "VTK additive"]:
-            ax.axvline(r["median"], color="C3", ls=":", label="VTK additive Render() (time only)")
-        _axes(ax, f"{case['phantom']} {case['n']}³, {report['image']}², X-ray", "relative RMS error vs analytic",
-              NullFormatter)
+        if xray:
+            ax = axes[0, col]
+            prog = [r for r in rows if r["method"].startswith("clwave progressive")]
+            if prog:
+                ax.plot([r["median"] for r in prog], [r["error"] for r in prog], "o-", color="C0",
+                        label="clwave progressive")
+                for r in prog:
+                    ax.annotate(f"{100 * r['kept']:.3g}%", (r["median"], r["error"]), fontsize=7,
+                                textcoords="offset points", xytext=(4, 4))
+            for r, style in zip([r for r in rows if r["method"].startswith("clwave splat")], ("s", "p", "h", "8")):
+                ax.plot([r["median"]], [r["error"]], style, color="C1", markersize=8, label=r["method"])
+            for r in [r for r in rows if r["method"].startswith("clwave raytrace") and r["kind"] == "xray"]:
+                ax.plot([r["median"]], [r["error"]], "*", color="C5", markersize=11, label=r["method"])
+            for r, style, colour in zip([r for r in rows if r["method"] in ("NumPy/SciPy map_coordinates",
+                                                                           "Fourier volume rendering")], ("^", "D"),
+                                        ("C4", "C2")):
+                ax.plot([r["median"]], [r["error"]], style, color=colour, markersize=8, label=r["method"])
+            for r in [r for r in rows if r["method"] == "VTK additive"]:
+                ax.axvline(r["median"], color="C3", ls=":", label="VTK additive Render() (time only)")
+            _axes(ax, f"{case['phantom']} {case['n']}³, {report['image']}², X-ray", "relative RMS error vs analytic",
+                  NullFormatter)
         if shaded:
-            ax = axes[1, col]
+            ax = axes[int(xray), col]
             for r, style in zip([r for r in rows if r["kind"] == "shaded" and "error" in r and "sweep" not in r],
                                 ("*", "P", "X", "o")):
                 ax.plot([r["median"]], [r["error"]], style, markersize=10, label=r["method"])
