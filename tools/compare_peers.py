@@ -7,7 +7,7 @@
                                   [--raytrace-tolerance 1e-3] [--raytrace-views 1] [--tf hydrogen]
                                   [--shaded-keep 0.05 1] [--shaded-tolerance 1e-2]
                                   [--shaded-reference-tolerance 1e-4] [--shaded-views 1] [--post-views 1]
-                                  [--vtk-sweep 2 1 0.5] [--vtk-interpolation linear] [--vtk-resample 1 2]
+                                  [--vtk-sweep D ...] [--vtk-interpolation linear] [--vtk-resample 1]
                                   [--vtk-window 1] [--sweep-tolerance 1e-2 1e-3] [--sweep-keep 0.05]
                                   [--sweep-rounds 2]
                                   [--skip-xray] [--out out/peers]
