@@ -55,7 +55,9 @@ def test_figures_end_to_end(tmp_path):
 
 def test_compare_peers_end_to_end(tmp_path):
     run_tool("compare_peers.py", "--phantom", "hydrogen", "--size", 32, "--image", 64, "--views", 2,
-             "--keep", 0.05, 1.0, "--progressive-keep", 0.5, "--steps", 3, "--raytrace-keep", 1.0, "--out", tmp_path)
+             "--keep", 0.05, 1.0, "--progressive-keep", 0.5, "--steps", 3, "--raytrace-keep", 1.0, "--out", tmp_path,
+             "--vtk-sweep", 2, 1, "--vtk-resample", 1, 2, "--sweep-tolerance", 0.1, 0.01, "--sweep-keep", 1,
+             "--sweep-rounds", 1)
     report = json.loads((tmp_path / "comparison.json").read_text())
     (case,) = report["cases"]
     rows = {r["method"]: r for r in case["rows"]}
@@ -89,7 +91,7 @@ def test_compare_peers_end_to_end(tmp_path):
     assert "| hydrogen | 32³ | Fourier volume rendering |" in table
     assert report["headline"] and "clwave / FVR" in report["headline"][0]
     if not HAVE_VTK:
-        assert "skipped" in rows["VTK additive"]
+        assert "skipped" in rows["VTK additive"] and "skipped" in rows["sweep"]
         pytest.skip("vtk is not installed (pip install .[peers]): the VTK rows were skipped")
     for label in ("VTK additive", "VTK composite (shaded, hydrogen)"):
         row = rows[label]
@@ -100,3 +102,63 @@ def test_compare_peers_end_to_end(tmp_path):
     # image
     assert rows["VTK composite (shaded, hydrogen)"]["error"] < 0.15
     assert (tmp_path / "error_vs_time.png").exists()
+    # the sweep at equal error (one process): clwave converges with its tolerance; VTK at its defaults renders what the
+    # VTK composite row rendered; the cubic B-spline resampled twice finer brings VTK closer to the reference
+    sweep = {r["method"]: r for r in case["rows"] if "sweep" in r}
+    assert len(sweep) == 2 + 2 * 2 and all(r["median"] > 0 for r in sweep.values())
+    clwave_rows = [sweep[f"sweep: clwave raytrace 1 (post-classified, tol {t})"] for t in ("0.1", "0.01")]
+    assert clwave_rows[1]["error"] < clwave_rows[0]["error"]
+    assert clwave_rows[1]["error"] == pytest.approx(post, rel=1e-3)  # the same render as the post row
+    vtk = lambda d, f: sweep[f"sweep: VTK composite, distance {d}, linear, volume x{f}, window 1"]  # noqa: E731
+    assert vtk(1, 1)["error"] == pytest.approx(rows["VTK composite (shaded, hydrogen)"]["error"], rel=1e-6)
+    assert vtk(1, 2)["error"] < vtk(1, 1)["error"]
+    assert 0 < case["eight_bit_error"]["1"] < vtk(1, 1)["error"]  # its 8-bit output: part of its error
+    lines = [t for t in report["headline"] if "at equal error" in t]
+    assert len(lines) == 4 and lines[-2].startswith("hydrogen 32³ at 64², at equal error: VTK distance 1 linear x1")
+
+
+def test_equal_error_measured_interpolated_or_not_reached():
+    """peers_report.at_error on a made-up sweep: the fastest setting at or under the error; a crossing between two
+    neighbouring settings interpolated in log time against log error (exact for a power law); none past the floor."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    from peers_report import at_error, equal_error
+
+    def row(side, swept, seconds, error):
+        setting = dict(side="clwave", tolerance=swept) if side == "clwave" else dict(
+            side="vtk", distance=swept, interpolation="linear", resample=1, window=1.0)
+        return dict(sweep=setting, median=seconds, error=error)
+
+    # VTK: error = 0.02 * d, seconds = 0.1 / d (error * seconds = 2e-3), floor 0.005 at d = 0.25
+    vtk = [row("vtk", d, 0.1 / d, 0.02 * d) for d in (2.0, 1.0, 0.5, 0.25)]
+    found = at_error(vtk, 0.01)
+    assert found["how"] == "measured" and found["seconds"] == pytest.approx(0.2)
+    found = at_error(vtk, 0.0141)
+    assert found["how"] == "interpolated" and found["seconds"] == pytest.approx(2e-3 / 0.0141)
+    assert found["row"]["sweep"]["distance"] == 0.5 and found["between"]["sweep"]["distance"] == 1.0
+    found = at_error(vtk, 0.001)
+    assert found["seconds"] is None and found["row"]["error"] == pytest.approx(0.005)
+    clwave = [row("clwave", 1e-2, 1.0, 0.006), row("clwave", 1e-3, 2.0, 0.0006)]
+    pairs = equal_error(clwave + vtk)
+    assert [p["how"] for p in pairs] == ["interpolated", "not reached", "measured", "interpolated"]
+    assert pairs[0]["seconds"] == pytest.approx(2e-3 / 0.006)              # VTK at clwave's 0.6 %
+    assert pairs[2]["given"] is vtk[1] and pairs[2]["seconds"] == 1.0      # clwave at VTK's defaults' 2 %
+    assert pairs[3]["given"] is vtk[3] and 1.0 < pairs[3]["seconds"] < 2.0  # clwave at VTK's floor, 0.5 %
+
+
+def test_vtk_finer_volume_is_the_cubic_model():
+    """The sweep's finer volume for VTK (vtkImageReslice, vtkImageBSplineInterpolator, the voxels as coefficients
+    over 2 voxels of zeros) samples clwave's approximating cubic model (docs/coordinates.md §1), edges included."""
+    pytest.importorskip("vtk")
+    sys.path.insert(0, str(ROOT / "tools"))
+    from peers_vtk import _image
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    vol = clwave.phantom("marschner-lobb", 12)  # not zero on its faces
+    image = _image(vol, 2)
+    nx, ny, nz = image.GetDimensions()
+    assert (nx, ny, nz) == (2 * (12 + 3) + 1,) * 3
+    values = vtk_to_numpy(image.GetPointData().GetScalars()).reshape(nz, ny, nx)
+    index = np.random.default_rng(0).integers(0, nx, (300, 3))  # (x, y, z)
+    points = np.array(image.GetOrigin()) + index * np.array(image.GetSpacing())
+    model = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=1).evaluate(points)[:, 0]
+    np.testing.assert_allclose(values[index[:, 2], index[:, 1], index[:, 0]], model, atol=1e-6)

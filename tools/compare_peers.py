@@ -7,6 +7,9 @@
                                   [--raytrace-tolerance 1e-3] [--raytrace-views 1] [--tf hydrogen]
                                   [--shaded-keep 0.05 1] [--shaded-tolerance 1e-2]
                                   [--shaded-reference-tolerance 1e-4] [--shaded-views 1] [--post-views 1]
+                                  [--vtk-sweep D ...] [--vtk-interpolation linear] [--vtk-resample 1]
+                                  [--vtk-window 1] [--sweep-tolerance 1e-2 1e-3] [--sweep-keep 0.05]
+                                  [--sweep-rounds 2]
                                   [--skip-xray] [--out out/peers]
 
 Every method renders the same phantom (sampled at the cell centres of an n³ grid, spacing 1)
@@ -29,27 +32,28 @@ centred, extent the volume diagonal):
 - ``Fourier volume rendering`` (``tools/fvr.py``): real-input FFT of the 2x zero-padded,
   roll-off-compensated volume once, then per view the half-plane central slice by Kaiser-Bessel
   interpolation (width 4, tabulated weights, threads) and one inverse 2-D FFT;
-- ``VTK additive``: ``vtkFixedPointVolumeRayCastMapper`` offscreen (EGL), linear interpolation,
-  sample distance 1 voxel, all cores; 1 - prod(1 - opacity) in 8 bits: a speed reference only.
-  Only ``Render()`` is timed; the read-back (``vtkWindowToImageFilter``, ``ShouldRerenderOff``)
-  is timed apart (``extra.readback``), and the first view (set-up) is reported apart.
+- ``VTK additive``: ``vtkFixedPointVolumeRayCastMapper`` (``tools/peers_vtk.py``), linear interpolation, sample
+  distance 1 voxel, all cores; 1 - prod(1 - opacity) in 8 bits: a speed reference only. Only ``Render()`` is timed;
+  the read-back is timed apart (``extra.readback``), and the first view (set-up) is reported apart.
 
 Shaded rows (``--shaded-views`` > 0): the phantom classified with the ``--tf`` preset,
 
 - ``clwave raytrace K (shaded, tol T)``: emission-absorption ray tracing with Phong shading
   (one headlight) of the cubic model thresholded to each ``--shaded-keep``;
-- ``VTK composite``: the same mapper on the scalar volume with the preset's colours, its opacity
-  per unit length as VTK's opacity per unit distance (1 - exp(-alpha)), clwave's Phong weights
-  and light (one-sided headlight whose ambient colour is white).  VTK classifies after
-  interpolating (trilinear), clwave before (its approximating cubic model of the classified
-  voxels), and VTK samples at fixed steps in 15-bit fixed point and returns 8 bits;
+- ``VTK composite``: the same mapper on the scalar volume with the preset's colours and opacity and clwave's Phong
+  light (``tools/peers_vtk.py``); it classifies after interpolating (trilinear), samples at fixed steps, composites
+  in 15-bit fixed point and returns 8 bits;
 - both compared (RGB) with a float64 clwave ray trace of the full classified model at
   ``--shaded-reference-tolerance``.
 
 Post-classified rows (``--post-views`` > 0): ``clwave raytrace K (post-classified, ...)`` ray traces the *scalar*
 model through the same preset at render time (``transfer_function=``), as VTK's composite does with the scalar
 volume; both compared with a float64 clwave ray trace of the full scalar model, post-classified (the VTK
-composite row then with this reference).  ``--skip-xray`` leaves out the X-ray rows and their ground truth.
+composite row then with this reference).  ``--vtk-sweep D ...`` adds, at equal error, clwave's post-classified
+render at each ``--sweep-tolerance`` and VTK's composite at each sample distance D × ``--vtk-interpolation`` ×
+``--vtk-resample`` × ``--vtk-window``, interleaved in one process (``run_sweep``), against the same reference, and
+the headline's time of each side at the other's error (``peers_report.equal_error``).  ``--skip-xray`` leaves out
+the X-ray rows and their ground truth.
 
 X-ray ground truth is the line integral of the phantom's *formula* (``clwave.io.phantoms.analytic``)
 over the chord of each ray through the phantom's cube: composite Gauss-Legendre (8 nodes per
@@ -66,6 +70,7 @@ and clwave / VTK) and ``error_vs_time.png`` into ``--out``.  VTK and matplotlib 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import multiprocessing
@@ -87,7 +92,7 @@ import clwave  # noqa: E402
 from clwave.io.phantoms import analytic  # noqa: E402
 from fvr import FourierRenderer  # noqa: E402
 from peers_report import (TARGET_ERROR, have, headline, markdown, montage, plot, row_text,  # noqa: E402
-                          target_text)
+                          sweep_rows, target_text)
 
 GL_NODES = 8        # Gauss-Legendre nodes per ray segment
 GL_SEGMENT = 8.0    # longest segment, voxels
@@ -276,104 +281,72 @@ def run_shaded(case, keep, tolerance, precision, count, classification="pre"):
 
 
 def run_vtk(case, blend):
-    """``vtkFixedPointVolumeRayCastMapper`` offscreen: ``Render()`` alone timed, the read-back apart.
-
-    ``additive``: the scalar volume with a linear opacity ramp (a speed reference, not a line integral);
-    ``composite``: shaded emission-absorption of the scalar volume under the ``--tf`` preset, its opacity per unit
-    world length turned into VTK's opacity per unit distance (1 - exp(-alpha)) and the Phong weights of
-    ``clwave.Phong``, so its RGB image compares with clwave's shaded ray tracing.
-    """
-    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (registers the OpenGL render window)
-    import vtkmodules.vtkRenderingVolumeOpenGL2  # noqa: F401  (the ray caster's display helper)
-    from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
-    from vtkmodules.vtkCommonDataModel import vtkImageData, vtkPiecewiseFunction
-    from vtkmodules.vtkRenderingCore import (vtkColorTransferFunction, vtkLight, vtkRenderer, vtkRenderWindow,
-                                             vtkVolume, vtkVolumeProperty, vtkWindowToImageFilter)
-    from vtkmodules.vtkRenderingVolume import vtkFixedPointVolumeRayCastMapper
+    """VTK's CPU ray caster at its defaults (tools/peers_vtk.py: the voxels, trilinear, sample distance 1, 8 bits):
+    ``additive`` (a speed reference, not a line integral) or ``composite`` (shaded, the ``--tf`` preset); only
+    ``Render()`` timed, the read-back apart, the first view (set-up) reported apart."""
+    from peers_vtk import VtkScene
 
     vol = clwave.phantom(case["phantom"], case["n"])
     start = time.perf_counter()
-    nz, ny, nx = vol.shape
-    image = vtkImageData()
-    image.SetDimensions(nx, ny, nz)
-    image.SetSpacing(*vol.spacing[::-1])
-    image.SetOrigin(*(np.array(vol.origin) - (np.array([nx, ny, nz]) - 1) / 2.0 * np.array(vol.spacing[::-1])))
-    image.GetPointData().SetScalars(numpy_to_vtk(vol.data.ravel(), deep=True))
-    mapper = vtkFixedPointVolumeRayCastMapper()
-    mapper.SetInputData(image)
-    mapper.AutoAdjustSampleDistancesOff()
-    mapper.SetSampleDistance(1.0)
-    opacity, colour, prop = vtkPiecewiseFunction(), vtkColorTransferFunction(), vtkVolumeProperty()
-    if blend == "additive":
-        top = float(vol.data.max())
-        mapper.SetBlendModeToAdditive()
-        opacity.AddPoint(0.0, 0.0)
-        opacity.AddPoint(top, 0.05)
-        colour.AddRGBPoint(0.0, 1.0, 1.0, 1.0)
-        colour.AddRGBPoint(top, 1.0, 1.0, 1.0)
-    else:
-        mapper.SetBlendModeToComposite()
-        tf = clwave.TransferFunction.preset(case["tf"])
-        lo, hi = tf.window
-        for value, r, g, b, alpha in tf.points:
-            x = lo + value * (hi - lo)
-            colour.AddRGBPoint(x, r, g, b)
-            opacity.AddPoint(x, 1.0 - math.exp(-alpha))      # absorbed over one world unit
-        prop.SetScalarOpacityUnitDistance(1.0)
-        phong = clwave.Phong()
-        prop.ShadeOn()
-        prop.SetAmbient(phong.ambient)
-        prop.SetDiffuse(phong.diffuse)
-        prop.SetSpecular(phong.specular)
-        prop.SetSpecularPower(phong.shininess)
-    prop.SetScalarOpacity(opacity)
-    prop.SetColor(colour)
-    prop.SetInterpolationTypeToLinear()
-    volume = vtkVolume()
-    volume.SetMapper(mapper)
-    volume.SetProperty(prop)
-    renderer = vtkRenderer()
-    renderer.AddVolume(volume)
-    if blend == "composite":  # clwave's light: one headlight, one-sided, ambient term = ka (VTK's default light: 0)
-        light = vtkLight()
-        light.SetLightTypeToHeadlight()
-        light.SetAmbientColor(1.0, 1.0, 1.0)
-        renderer.AddLight(light)
-        renderer.TwoSidedLightingOff()
-    window = vtkRenderWindow()
-    window.SetOffScreenRendering(1)
-    window.AddRenderer(renderer)
-    H, W = clwave.Camera(size=case["image"]).size
-    window.SetSize(W, H)
-    grab = vtkWindowToImageFilter()
-    grab.SetInput(window)
-    grab.ReadFrontBufferOff()
-    grab.ShouldRerenderOff()                                  # read what Render() drew, without drawing again
+    scene = VtkScene(vol, case["image"], blend, tf=clwave.TransferFunction.preset(case["tf"]))
     prepare = time.perf_counter() - start
     model_peak = _peak_mib()
     seconds, readback, images = [], [], []
     for az, el in case["views"]:
-        view = camera(case, az, el).view(vol)
-        eye = renderer.GetActiveCamera()
-        eye.ParallelProjectionOn()
-        eye.SetFocalPoint(*view.target)
-        eye.SetPosition(*(view.target + 2.0 * W * view.pixel * view.n))
-        eye.SetViewUp(*view.v)
-        eye.SetParallelScale(H * view.pixel / 2.0)
-        renderer.ResetCameraClippingRange()
-        t = time.perf_counter()
-        window.Render()
-        seconds.append(time.perf_counter() - t)
-        t = time.perf_counter()
-        grab.Modified()
-        grab.Update()
-        rgb = vtk_to_numpy(grab.GetOutput().GetPointData().GetScalars()).reshape(H, W, -1)[::-1, :, :3]
-        readback.append(time.perf_counter() - t)
-        rgb = rgb.astype(np.float32) / 255.0
+        t, r, rgb = scene.render(camera(case, az, el).view(vol))
+        seconds.append(t)
+        readback.append(r)
         images.append(rgb.mean(axis=-1) if blend == "additive" else rgb)
     return dict(prepare=prepare, seconds=seconds, images=images, readback=readback, model_peak=model_peak,
-                threads=mapper.GetNumberOfThreads(), window=type(window).__name__)
+                threads=scene.mapper.GetNumberOfThreads(), window=type(scene.window).__name__)
+
+
+def run_sweep(case, keep, tolerances, settings, count, rounds):
+    """clwave's post-classified ray trace at each tolerance and VTK's composite at each setting (sample distance,
+    interpolation, resample factor, final colour window: tools/peers_vtk.py), in this one process over the first
+    ``count`` views, interleaved ``rounds`` times (clwave's tolerances, then VTK's settings, view by view), so that
+    their ratios see the same load; each VTK scene (one a volume and interpolation) renders the first view
+    once untimed (its set-up: the resampling, gradients), clwave a pixel (the kernel's build). Images are the first
+    round's. A window "auto" is one 8-bit step over the brightest pixel of the scene's untimed renders."""
+    from peers_vtk import VtkScene
+
+    tf = clwave.TransferFunction.preset(case["tf"])
+    vol = clwave.phantom(case["phantom"], case["n"])
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=3)
+    tracer = clwave.RayTracer(wv.threshold(keep=keep) if keep < 1 else wv, device=case["device"])
+    for tol in tolerances:
+        tracer.render(clwave.Camera(size=1), tolerance=tol, transfer_function=tf)
+    views = [camera(case, az, el).view(vol) for az, el in case["views"][:count]]
+    scenes, prepare, top = {}, {}, {}
+    for _, interpolation, resample, _ in settings:  # one scene a volume and interpolation
+        if (interpolation, resample) not in scenes:
+            start = time.perf_counter()
+            scene = scenes[interpolation, resample] = VtkScene(vol, case["image"], tf=tf, interpolation=interpolation,
+                                                               resample=resample)
+            top[interpolation, resample] = max(float(scene.render(view)[2].max()) for view in views)
+            prepare[interpolation, resample] = time.perf_counter() - start
+    # the "auto" window: the brightest pixel of the scene's views at the default window, one 8-bit step above it
+    settings = [(d, i, f, min(1.0, top[i, f] + 1 / 255) if w == "auto" else w) for d, i, f, w in settings]
+    model_peak = _peak_mib()
+    jobs = [("clwave", tol) for tol in tolerances] + [("vtk", s) for s in settings]
+    seconds, images = {job: [] for job in jobs}, {job: [] for job in jobs}
+    for r in range(rounds):
+        for az_el, view in zip(case["views"], views):
+            for side, what in jobs:
+                if side == "clwave":
+                    t = time.perf_counter()
+                    image = tracer.render(camera(case, *az_el), tolerance=what, transfer_function=tf).image[..., :3]
+                    elapsed = time.perf_counter() - t
+                else:
+                    scene = scenes[what[1:3]]
+                    scene.set(what[0], what[3])
+                    elapsed, _, image = scene.render(view)
+                seconds[(side, what)].append(elapsed)
+                if r == 0:
+                    images[(side, what)].append(image)
+    return dict(jobs=[dict(side=side, setting=what, seconds=seconds[(side, what)], images=images[(side, what)],
+                           prepare=prepare.get(what[1:3]) if side == "vtk" else None) for side, what in jobs],
+                keep=keep, rounds=rounds, model_peak=model_peak)
 
 
 #: name -> (function, the peer package it needs, runs on OpenCL)
@@ -385,6 +358,7 @@ METHODS = {
     "fourier": (run_fourier, None, False),
     "shaded": (run_shaded, None, True),
     "vtk": (run_vtk, "vtk", False),
+    "sweep": (run_sweep, "vtk", True),
 }
 
 
@@ -461,6 +435,10 @@ def compare(case, args, log) -> tuple:
                   (k, args.shaded_tolerance, "single", args.post_views, "post"), "shaded") for k in args.shaded_keep]
     compared = "shaded" if args.shaded_views or args.post_views else None  # the last reference: post's if made
     jobs += [(f"VTK composite (shaded, {args.tf})", "vtk", ("composite",), compared)]
+    if args.vtk_sweep:  # at equal error: clwave's tolerances and VTK's settings, interleaved in one process
+        settings = list(itertools.product(args.vtk_sweep, args.vtk_interpolation, args.vtk_resample, args.vtk_window))
+        jobs.append(("sweep", "sweep", (args.sweep_keep, args.sweep_tolerance, settings, args.post_views,
+                                        args.sweep_rounds), "shaded"))
     rows, images = [], {"ground truth": references["truth"][0]} if "truth" in references else {}
     for label, method, params, reference in jobs:
         package = METHODS[method][1]
@@ -473,6 +451,16 @@ def compare(case, args, log) -> tuple:
         except BrokenProcessPool:
             rows.append(dict(method=label, skipped="its process died (VTK without EGL: bash tools/setup.sh --peers)"))
             log(f"  {label}: skipped, {rows[-1]['skipped']}")
+            continue
+        if method == "sweep":
+            rows.extend(sweep_rows(res, references["shaded"], relative_rms))
+            for row in rows[-len(res["jobs"]):]:
+                log("  " + row_text(row))
+            # VTK's 8-bit output alone: the reference over [0, W] rounded to 8 bits (its error floor's first part)
+            windows = {r["sweep"]["window"] for r in rows[-len(res["jobs"]):] if r["sweep"]["side"] == "vtk"}
+            case_info["eight_bit_error"] = {f"{w:.3g}": statistics.median(relative_rms(
+                np.round(np.clip(ref / w, 0, 1) * 255) * (w / 255), ref) for ref in references["shaded"])
+                for w in sorted(windows)}
             continue
         if method == "progressive":
             rows.extend(_progressive_rows(label, res, truths, res["memory_mib"]))
@@ -546,6 +534,19 @@ def main(argv=None):
     parser.add_argument("--post-views", type=int, default=1,
                         help="views ray traced post-classified (the scalar model through --tf), with their own float64 "
                              "reference that the VTK composite views are then compared with (0: none)")
+    parser.add_argument("--vtk-sweep", type=float, nargs="*", default=[], metavar="DISTANCE",
+                        help="VTK sample distances (world units) swept against clwave at equal error, in one process "
+                             "with the clwave tolerances --sweep-tolerance, interleaved (needs --post-views >= 1)")
+    parser.add_argument("--vtk-interpolation", nargs="+", default=["linear"], choices=["linear", "nearest"],
+                        help="the sweep's VTK interpolations (its CPU ray caster has no cubic)")
+    parser.add_argument("--vtk-resample", type=int, nargs="+", default=[1],
+                        help="the sweep's volumes: 1 the voxels, F the cubic B-spline resampled F times finer")
+    parser.add_argument("--vtk-window", type=lambda w: w if w == "auto" else float(w), nargs="+", default=[1.0],
+                        help="the sweep's final colour windows, [0, W] onto VTK's 8 bits ('auto': its brightest pixel)")
+    parser.add_argument("--sweep-tolerance", type=float, nargs="+", default=[1e-2, 1e-3],
+                        help="the sweep's clwave tolerances (post-classified)")
+    parser.add_argument("--sweep-keep", type=float, default=0.05, help="kept fraction of the sweep's clwave model")
+    parser.add_argument("--sweep-rounds", type=int, default=2, help="times the sweep renders each setting and view")
     parser.add_argument("--skip-xray", action="store_true", help="only the shaded rows (no X-ray rows or truth)")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--out", type=Path, default=Path("out/peers"), help="folder for the outputs")
@@ -554,6 +555,10 @@ def main(argv=None):
         parser.error("--views and --steps must be >= 1 and --image >= 8")
     if not all(0 <= k <= args.views for k in (args.raytrace_views, args.shaded_views, args.post_views)):
         parser.error("--raytrace-views, --shaded-views and --post-views must be between 0 and --views")
+    if args.vtk_sweep and not (args.post_views and args.sweep_rounds >= 1 and min(args.vtk_sweep) > 0
+                               and min(args.vtk_resample) >= 1 and all(w == "auto" or w > 0 for w in args.vtk_window)):
+        parser.error("--vtk-sweep needs --post-views >= 1 (its reference), --sweep-rounds >= 1, and distances, "
+                     "resample factors (>= 1) and windows above 0")
     if not isinstance(clwave.TransferFunction.preset(args.tf).window, tuple):
         parser.error(f"--tf {args.tf}: VTK needs a preset with a fixed window")
     args.out.mkdir(parents=True, exist_ok=True)

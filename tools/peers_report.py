@@ -3,6 +3,8 @@ plot and the montage of first views, from its report."""
 
 from __future__ import annotations
 
+import statistics
+
 import numpy as np
 
 TARGET_ERROR = 0.01  #: the error every method is timed to (relative RMS)
@@ -79,6 +81,10 @@ def headline(report) -> list:
                 text += f"; VTK composite Render() {composite['median']:.3g} s (error " \
                         f"{100 * composite['error']:.3g} %): clwave / VTK = {r['median'] / composite['median']:.1f}"
             out.append(text)
+        out += [equal_error_text(case, report["image"], found) for found in equal_error(rows)]
+        if "eight_bit_error" in case:
+            out.append(f"{where}: VTK's 8-bit output alone (the float64 reference over [0, window] rounded to 8 bits) "
+                       "is " + ", ".join(f"{100 * e:.3g} % at window {w}" for w, e in case["eight_bit_error"].items()))
     return out
 
 
@@ -94,33 +100,45 @@ def plot(report, path) -> bool:
 
     cases = report["cases"]
     shaded = any(r.get("kind") == "shaded" and "error" in r for c in cases for r in c["rows"])
-    fig, axes = plt.subplots(1 + shaded, len(cases), figsize=(5.6 * len(cases), 4.4 * (1 + shaded)), squeeze=False)
+    xray = any(r.get("kind") == "xray" for c in cases for r in c["rows"])  # none with --skip-xray
+    fig, axes = plt.subplots(xray + shaded, len(cases), figsize=(5.6 * len(cases), 4.4 * (xray + shaded)),
+                             squeeze=False)
     for col, case in enumerate(cases):
-        ax = axes[0, col]
         rows = [r for r in case["rows"] if "skipped" not in r]
-        prog = [r for r in rows if r["method"].startswith("clwave progressive")]
-        if prog:
-            ax.plot([r["median"] for r in prog], [r["error"] for r in prog], "o-", color="C0",
-                    label="clwave progressive")
-            for r in prog:
-                ax.annotate(f"{100 * r['kept']:.3g}%", (r["median"], r["error"]), fontsize=7,
-                            textcoords="offset points", xytext=(4, 4))
-        for r, style in zip([r for r in rows if r["method"].startswith("clwave splat")], ("s", "p", "h", "8")):
-            ax.plot([r["median"]], [r["error"]], style, color="C1", markersize=8, label=r["method"])
-        for r in [r for r in rows if r["method"].startswith("clwave raytrace") and r["kind"] == "xray"]:
-            ax.plot([r["median"]], [r["error"]], "*", color="C5", markersize=11, label=r["method"])
-        for r, style, colour in zip([r for r in rows if r["method"] in ("NumPy/SciPy map_coordinates",
-                                                                       "Fourier volume rendering")], ("^", "D"),
-                                    ("C4", "C2")):
-            ax.plot([r["median"]], [r["error"]], style, color=colour, markersize=8, label=r["method"])
-        for r in [r for r in rows if r["method"] == "VTK additive"]:
-            ax.axvline(r["median"], color="C3", ls=":", label="VTK additive Render() (time only)")
-        _axes(ax, f"{case['phantom']} {case['n']}³, {report['image']}², X-ray", "relative RMS error vs analytic",
-              NullFormatter)
+        if xray:
+            ax = axes[0, col]
+            prog = [r for r in rows if r["method"].startswith("clwave progressive")]
+            if prog:
+                ax.plot([r["median"] for r in prog], [r["error"] for r in prog], "o-", color="C0",
+                        label="clwave progressive")
+                for r in prog:
+                    ax.annotate(f"{100 * r['kept']:.3g}%", (r["median"], r["error"]), fontsize=7,
+                                textcoords="offset points", xytext=(4, 4))
+            for r, style in zip([r for r in rows if r["method"].startswith("clwave splat")], ("s", "p", "h", "8")):
+                ax.plot([r["median"]], [r["error"]], style, color="C1", markersize=8, label=r["method"])
+            for r in [r for r in rows if r["method"].startswith("clwave raytrace") and r["kind"] == "xray"]:
+                ax.plot([r["median"]], [r["error"]], "*", color="C5", markersize=11, label=r["method"])
+            for r, style, colour in zip([r for r in rows if r["method"] in ("NumPy/SciPy map_coordinates",
+                                                                           "Fourier volume rendering")], ("^", "D"),
+                                        ("C4", "C2")):
+                ax.plot([r["median"]], [r["error"]], style, color=colour, markersize=8, label=r["method"])
+            for r in [r for r in rows if r["method"] == "VTK additive"]:
+                ax.axvline(r["median"], color="C3", ls=":", label="VTK additive Render() (time only)")
+            _axes(ax, f"{case['phantom']} {case['n']}³, {report['image']}², X-ray", "relative RMS error vs analytic",
+                  NullFormatter)
         if shaded:
-            ax = axes[1, col]
-            for r, style in zip([r for r in rows if r["kind"] == "shaded" and "error" in r], ("*", "P", "X", "o")):
+            ax = axes[int(xray), col]
+            for r, style in zip([r for r in rows if r["kind"] == "shaded" and "error" in r and "sweep" not in r],
+                                ("*", "P", "X", "o")):
                 ax.plot([r["median"]], [r["error"]], style, markersize=10, label=r["method"])
+            series = {}
+            for r in (r for r in rows if "sweep" in r):
+                series.setdefault((r["sweep"]["side"],) + _setting(r)[1:], []).append(r)
+            for name, runs in series.items():
+                runs.sort(key=lambda r: _setting(r)[0])
+                ax.plot([r["median"] for r in runs], [r["error"] for r in runs], ".-" if name[0] == "vtk" else "s--",
+                        label="sweep: VTK {} x{} window {:.3g}, over its distance".format(*name[1:]) if name[0] == "vtk"
+                        else "sweep: clwave over its tolerance")
             _axes(ax, f"{case['phantom']} {case['n']}³, shaded", "relative RMS error vs float64 ray trace",
                   NullFormatter)
     fig.tight_layout()
@@ -161,3 +179,92 @@ def montage(images, title, path) -> bool:
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return True
+
+
+# ----------------------------------------------------------------------------- at equal error
+def sweep_rows(res, references, error_of) -> list:
+    """One row per clwave tolerance and VTK setting of compare_peers' ``run_sweep``, its error ``error_of`` (image,
+    reference) the median over the views against the post-classified float64 references, its time the median over
+    all its renders (views and rounds)."""
+    rows = []
+    for job in res["jobs"]:
+        if job["side"] == "clwave":
+            setting = dict(side="clwave", tolerance=job["setting"])
+            label = f"sweep: clwave raytrace {res['keep']:g} (post-classified, tol {job['setting']:g})"
+        else:
+            setting = dict(zip(("side", "distance", "interpolation", "resample", "window"), ("vtk", *job["setting"])))
+            label = "sweep: VTK composite, distance {distance:g}, {interpolation}, volume x{resample}, " \
+                    "window {window:.3g}".format(**setting)
+        error = statistics.median(error_of(im, ref) for im, ref in zip(job["images"], references))
+        rows.append(dict(method=label, kind="shaded", sweep=setting, prepare=job["prepare"], first=job["seconds"][0],
+                         median=statistics.median(job["seconds"]), error=error, peak_rss_mib=res["peak_rss_mib"],
+                         memory_mib=res["memory_mib"], to_target=None, target_text="",
+                         extra=dict(seconds=job["seconds"], rounds=res["rounds"])))
+    return rows
+
+
+def equal_error(rows) -> list:
+    """Time at equal error from a case's sweep rows (compare_peers ``--vtk-sweep``), both ways: for each clwave
+    tolerance, VTK's time at clwave's error; for VTK at its defaults and at its lowest error, clwave's time at
+    VTK's error. Each is ``at_error`` of the other side's rows: one dict per comparison."""
+    sweep = [r for r in rows if "sweep" in r]
+    sides = {side: [r for r in sweep if r["sweep"]["side"] == side] for side in ("clwave", "vtk")}
+    if not sides["clwave"] or not sides["vtk"]:
+        return []
+    out = [dict(given=r, **at_error(sides["vtk"], r["error"])) for r in sides["clwave"]]
+    default = next((r for r in sides["vtk"] if _setting(r)[1:] == ("linear", 1, 1.0) and r["sweep"]["distance"] == 1),
+                   None)
+    best = min(sides["vtk"], key=lambda r: r["error"])
+    out += [dict(given=r, **at_error(sides["clwave"], r["error"])) for r in (default, best) if r is not None]
+    return out
+
+
+def at_error(rows, error) -> dict:
+    """The fastest of ``rows`` (one side of a sweep) whose error is at most ``error`` ("measured"), or, where faster,
+    the time at which a series (one VTK volume, interpolation and window over its sample distances; clwave over its
+    tolerances) crosses ``error`` between two neighbouring settings, interpolated in log time against log error
+    ("interpolated"); ``seconds`` None (with the side's lowest error, its floor) where no setting reaches it."""
+    found = dict(seconds=None, how="not reached", row=min(rows, key=lambda r: r["error"]))
+    reached = [r for r in rows if r["error"] <= error]
+    if reached:
+        found = dict(seconds=min(r["median"] for r in reached), how="measured",
+                     row=min(reached, key=lambda r: r["median"]))
+    series = {}
+    for r in rows:
+        series.setdefault(_setting(r)[1:], []).append(r)
+    for runs in series.values():
+        runs.sort(key=lambda r: _setting(r)[0])
+        for a, b in zip(runs, runs[1:]):
+            if (a["error"] - error) * (b["error"] - error) < 0:
+                w = np.log(error / a["error"]) / np.log(b["error"] / a["error"])
+                seconds = float(np.exp((1 - w) * np.log(a["median"]) + w * np.log(b["median"])))
+                if found["seconds"] is None or seconds < found["seconds"]:
+                    found = dict(seconds=seconds, how="interpolated", row=a, between=b)
+    return found
+
+
+def _setting(row) -> tuple:
+    """The swept value first (VTK's sample distance, clwave's tolerance), then what names the series."""
+    s = row["sweep"]
+    if s["side"] == "clwave":
+        return (s["tolerance"],)
+    return s["distance"], s["interpolation"], s["resample"], s["window"]
+
+
+def equal_error_text(case, image, found) -> str:
+    given, row = found["given"], found["row"]
+    other = "VTK" if given["sweep"]["side"] == "clwave" else "clwave"
+    head = f"{case['phantom']} {case['n']}³ at {image}², at equal error: {_short(given)} {given['median']:.3g} s at " \
+           f"{100 * given['error']:.3g} %; {other} "
+    if found["seconds"] is None:
+        return head + f"does not reach it (its lowest error {100 * row['error']:.3g} %, {_short(row)})"
+    where = _short(row) if found["how"] == "measured" else f"between {_short(row)} and {_short(found['between'])}"
+    clwave, vtk = (given["median"], found["seconds"]) if other == "VTK" else (found["seconds"], given["median"])
+    return head + f"{found['seconds']:.3g} s ({found['how']}: {where}): clwave / VTK = {clwave / vtk:.2f}"
+
+
+def _short(row) -> str:
+    s = row["sweep"]
+    if s["side"] == "clwave":
+        return f"clwave tol {s['tolerance']:g}"
+    return f"VTK distance {s['distance']:g} {s['interpolation']} x{s['resample']} window {s['window']:.3g}"
