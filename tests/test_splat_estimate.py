@@ -8,7 +8,7 @@ from scipy.ndimage import gaussian_filter
 
 import clwave
 from clwave.model.bspline import wavelet_for
-from clwave.splat.progressive import band_energies
+from clwave.splat.estimate import band_energies
 
 pytestmark = pytest.mark.opencl
 
