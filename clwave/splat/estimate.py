@@ -77,8 +77,7 @@ class SplatEstimate:
                 wavelet=g.wavelet, table=table, channels=list(g.channels), count=group["count"], levels=r.wv.levels,
                 energy=band_energies(g.wavelet, r.wv.spacing, view) * float(np.prod(d)) ** 2))
         # the cells' margin holds every footprint reaching into the image: 3 standard deviations of the widest
-        self.scale = None
-        for gr in self.groups:
+        for gr in self.groups if view.perspective else ():  # the mean world width of a pixel at the coefficients
             for lo in range(0, gr["count"], CHUNK):
                 px = self._place(gr, lo, min(lo + CHUNK, gr["count"]))[2]
                 pixels, counted = pixels + float(np.sum(px)), counted + len(px)
