@@ -1,7 +1,7 @@
 """Progressive frames, whatever the method (docs/raytracing.md §9, docs/splatting.md §5): :class:`Frame` is what
 splatting (:mod:`clwave.splat.progressive`) and ray tracing (:mod:`clwave.raytrace.progressive`) yield, each with
 an estimate of its error against the final image made without the final image (splatting's from the coefficients
-still to splat, :class:`clwave.splat.progressive.SplatEstimate`; ray tracing's from the step between its
+still to splat, :class:`clwave.splat.estimate.SplatEstimate`; ray tracing's from the step between its
 full-detail frames, :class:`ErrorEstimate`).
 """
 

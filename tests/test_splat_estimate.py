@@ -1,4 +1,4 @@
-"""Splatting's error estimate (clwave/splat/progressive.py, docs/splatting.md §5): each band's footprint energy
+"""Splatting's error estimate (clwave/splat/estimate.py, docs/splatting.md §5): each band's footprint energy
 against the brute-force projection of its function, and the estimate of each frame, made without the final image,
 against the measured error on seeded random volumes that the margins were not calibrated on."""
 
@@ -7,8 +7,9 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 import clwave
+from clwave.io.phantoms import phantom
 from clwave.model.bspline import wavelet_for
-from clwave.splat.progressive import band_energies
+from clwave.splat.estimate import band_energies
 
 pytestmark = pytest.mark.opencl
 
@@ -41,27 +42,38 @@ def test_band_energies_are_the_projected_functions_energies(order):
 
 
 def _volumes():
+    # none of these tuned the margins (docs/splatting.md §5): smooth and white-noise random, a Shepp-Logan phantom,
+    # and the phantom as a CT's thick slices (3:1 spacing)
     rng = np.random.default_rng(2026)
     yield clwave.Volume(gaussian_filter(rng.standard_normal((20, 20, 20)), 1.5).astype(np.float32))
     yield clwave.Volume(rng.random((16, 16, 16)).astype(np.float32))
-    z, y, x = np.mgrid[:18, :18, :18] - 8.5
-    yield clwave.Volume((np.exp(-(x * x + 2 * y * y + 0.5 * z * z) / 20.0) * (1 + 0.3 * np.sin(x))).astype(np.float32))
+    yield phantom("shepp-logan", 20)
+    yield clwave.Volume(phantom("shepp-logan", 24).data[::3].copy(), spacing=(3.0, 1.0, 1.0))
 
 
-def test_the_estimate_bounds_the_measured_error_within_4x():
+def _projection(kind, volume):
+    if kind == "orthographic":
+        return clwave.Camera(40, 25, 20)
+    extent = float(np.max(np.array(volume.shape) * np.array(volume.spacing)))  # a cone of about 10 degrees
+    return clwave.ConeBeam(3 * extent, 4.5 * extent, 20, pixel=1.3 * 4.5 * extent / 3 / 20, azimuth=40, elevation=25)
+
+
+@pytest.mark.parametrize("kind", ["orthographic", "cone"])
+def test_the_estimate_bounds_the_measured_error_within_4x(kind):
+    # issue #30's bar, for RMS and max: the estimate at least the measured error on >= 95 % of the intermediate
+    # frames and at most 4x it on >= 95 %, made without the final image
     rms, top = [], []
     for volume in _volumes():
-        for levels in (1, 2):
-            wv = clwave.WaveletVolume.from_volume(volume, levels=levels)
-            for keep in (0.05, 0.3):
-                for frame in list(clwave.progressive(wv.threshold(keep=keep), clwave.Camera(40, 25, 20), steps=8))[:-1]:
-                    f = frame.figures()
-                    rms.append(f["estimated_relative_rms_error"] / f["relative_rms_error"])
-                    top.append(f["estimated_relative_max_error"] / f["relative_max_error"])
-    rms, top = np.array(rms), np.array(top)
-    assert len(rms) >= 60
-    assert np.mean(rms >= 1) >= 0.95 and np.mean(rms <= 4) >= 0.95, np.sort(rms)
-    assert np.mean(top >= 1) >= 0.95, np.sort(top)  # the maximum's upper side is not held (docs/splatting.md §5)
+        camera = _projection(kind, volume)
+        wv = clwave.WaveletVolume.from_volume(volume, levels=2)
+        for keep in (0.05, 0.3):
+            for frame in list(clwave.progressive(wv.threshold(keep=keep), camera, steps=8))[:-1]:
+                f = frame.figures()
+                rms.append(f["estimated_relative_rms_error"] / f["relative_rms_error"])
+                top.append(f["estimated_relative_max_error"] / f["relative_max_error"])
+    for ratio in (np.array(rms), np.array(top)):
+        assert len(ratio) >= 50 and np.all(np.isfinite(ratio))
+        assert np.mean(ratio >= 1) >= 0.95 and np.mean(ratio <= 4) >= 0.95, np.sort(ratio)
 
 
 def test_error_stops_at_the_first_frame_estimated_within_it():
