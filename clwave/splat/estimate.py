@@ -20,7 +20,8 @@ from .tables import MAX_LEVELS
 SLICE_POINTS = 64  # per side of the slice grid integrating a band's footprint energy (docs/splatting.md §5), times
 #                   the spacings' largest ratio (the finest spectral lobe is 2 pi / max(d) wide), up to 8 times
 
-GRID = 256  # cells per side, at most, of the estimate's maps (an image larger than this: cells of several pixels)
+GRID = 64  # cells per side, at most, of the estimate's maps (an image larger than this: cells of several pixels;
+#            docs/splatting.md §5 has the rates at 64 and 256)
 CHUNK = 1 << 18  # coefficients placed at once
 DETAIL_WIDTH = 0.5  # the standard deviation of a level-m detail footprint's square, in 2^m voxels along u or v
 
