@@ -92,6 +92,8 @@ class SplatEstimate:
         widest = max((max(self._sigmas(gr)[0].max(), self._sigmas(gr)[1][: gr["levels"] + 1].max())
                       for gr in self.groups), default=0.0)
         self.pad = int(np.ceil(3.0 * widest)) + 2
+        if view.perspective:  # at the cells' centres
+            self.obliquity = view.obliquity()[self.cell // 2::self.cell, self.cell // 2::self.cell, None]
         shape = (self.rows + 2 * self.pad, self.cols + 2 * self.pad)
         for gr in self.groups:
             gr["signed"] = np.zeros((len(gr["channels"]),) + shape)
@@ -151,8 +153,7 @@ class SplatEstimate:
         signed /= self.cell ** 2  # per cell -> per pixel
         variance /= self.cell ** 2
         if self.view.perspective:  # the path length per unit depth of each pixel's ray, as the image
-            obliquity = self.view.obliquity()[self.cell // 2::self.cell, self.cell // 2::self.cell, None]
-            signed, variance = signed * obliquity, variance * obliquity ** 2
+            signed, variance = signed * self.obliquity, variance * self.obliquity ** 2
         whole = np.repeat(np.repeat(signed, self.cell, 0), self.cell, 1)[: image.shape[0], : image.shape[1]]
         peak = max(float(np.max(np.abs(image + whole), initial=0.0)), np.finfo(np.float32).tiny)
         rms = np.sqrt(np.mean(signed ** 2 + variance))
