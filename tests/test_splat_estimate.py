@@ -76,6 +76,28 @@ def test_the_estimate_bounds_the_measured_error_within_4x(kind):
         assert np.mean(ratio >= 1) >= 0.95 and np.mean(ratio <= 4) >= 0.95, np.sort(ratio)
 
 
+def test_the_estimate_holds_on_cells_of_several_pixels():
+    # the bar as above on images wider than the estimate's grid (cells of 3 pixels a side, docs/splatting.md §5)
+    from clwave.splat.estimate import GRID
+
+    size = 3 * GRID
+    rms, top = [], []
+    for volume in (clwave.Volume(gaussian_filter(np.random.default_rng(5).standard_normal((24, 24, 24)), 1.0)
+                                 .astype(np.float32)), phantom("shepp-logan", 24)):
+        extent = float(np.max(volume.shape))
+        for camera in (clwave.Camera(40, 25, size),
+                       clwave.ConeBeam(3 * extent, 4.5 * extent, size, pixel=1.95 * extent / size, azimuth=40)):
+            wv = clwave.WaveletVolume.from_volume(volume, levels=2)
+            for keep in (0.05, 0.3):
+                for frame in list(clwave.progressive(wv.threshold(keep=keep), camera, steps=8))[:-1]:
+                    f = frame.figures()
+                    rms.append(f["estimated_relative_rms_error"] / f["relative_rms_error"])
+                    top.append(f["estimated_relative_max_error"] / f["relative_max_error"])
+    for ratio in (np.array(rms), np.array(top)):
+        assert len(ratio) >= 50 and np.all(np.isfinite(ratio))
+        assert np.mean(ratio >= 1) >= 0.95 and np.mean(ratio <= 4) >= 0.95, np.sort(ratio)
+
+
 def test_error_stops_at_the_first_frame_estimated_within_it():
     volume = clwave.Volume(gaussian_filter(np.random.default_rng(7).standard_normal((20, 20, 20)), 1.5)
                            .astype(np.float32))

@@ -20,7 +20,8 @@ from .tables import MAX_LEVELS
 SLICE_POINTS = 64  # per side of the slice grid integrating a band's footprint energy (docs/splatting.md §5), times
 #                   the spacings' largest ratio (the finest spectral lobe is 2 pi / max(d) wide), up to 8 times
 
-GRID = 256  # cells per side, at most, of the estimate's maps (an image larger than this: cells of several pixels)
+GRID = 64  # cells per side, at most, of the estimate's maps (an image larger than this: cells of several pixels;
+#            docs/splatting.md §5 has the rates at 64 and 256)
 CHUNK = 1 << 18  # coefficients placed at once
 DETAIL_WIDTH = 0.5  # the standard deviation of a level-m detail footprint's square, in 2^m voxels along u or v
 
@@ -75,16 +76,24 @@ class SplatEstimate:
             table = group["table"]
             self.groups.append(dict(
                 wavelet=g.wavelet, table=table, channels=list(g.channels), count=group["count"], levels=r.wv.levels,
-                energy=band_energies(g.wavelet, r.wv.spacing, view) * float(np.prod(d)) ** 2))
-        # the cells' margin holds every footprint reaching into the image: 3 standard deviations of the widest
-        for gr in self.groups if view.perspective else ():  # the mean world width of a pixel at the coefficients
-            for lo in range(0, gr["count"], CHUNK):
-                px = self._place(gr, lo, min(lo + CHUNK, gr["count"]))[2]
-                pixels, counted = pixels + float(np.sum(px)), counted + len(px)
+                energy=band_energies(g.wavelet, r.wv.spacing, view) * float(np.prod(d)) ** 2,
+                lattice=_lattices(g.wavelet)))
+        for gr in self.groups:  # placed once per view (docs/splatting.md §5): 14 bytes a coefficient
+            n = gr["count"]
+            gr["row"], gr["col"], gr["px"] = (np.empty(n, np.float32) for _ in range(3))
+            gr["band"] = np.empty(n, np.int16)
+            for lo in range(0, n, CHUNK):
+                hi = min(lo + CHUNK, n)
+                gr["row"][lo:hi], gr["col"][lo:hi], gr["px"][lo:hi], gr["band"][lo:hi] = self._place(gr, lo, hi)
+            pixels, counted = pixels + float(np.sum(gr["px"], dtype=np.float64)), counted + n
+        # the mean world width of a pixel at the coefficients; the cells' margin holds every footprint reaching
+        # into the image: 3 standard deviations of the widest
         self.scale = pixels / max(counted, 1) if view.perspective else view.pixel  # world units per pixel
         widest = max((max(self._sigmas(gr)[0].max(), self._sigmas(gr)[1][: gr["levels"] + 1].max())
                       for gr in self.groups), default=0.0)
         self.pad = int(np.ceil(3.0 * widest)) + 2
+        if view.perspective:  # at the cells' centres
+            self.obliquity = view.obliquity()[self.cell // 2::self.cell, self.cell // 2::self.cell, None]
         shape = (self.rows + 2 * self.pad, self.cols + 2 * self.pad)
         for gr in self.groups:
             gr["signed"] = np.zeros((len(gr["channels"]),) + shape)
@@ -99,14 +108,11 @@ class SplatEstimate:
 
     def _place(self, gr, lo, hi) -> tuple:
         """Coefficients lo..hi of a group: their (row, col) in cells, band codes, and world units per pixel."""
-        t, wav = gr["table"], gr["wavelet"]
+        t = gr["table"]
         band = t.level[lo:hi].astype(np.int64) * 8 + t.key_code[lo:hi]
-        fine = np.empty((hi - lo, 3))
-        for b in np.unique(band):
-            sel = band == b
-            offset, step, support = band_lattice(wav, "".join("ad"[b >> s & 1] for s in (2, 1, 0)), int(b) // 8)
-            fine[sel] = offset + step * (t.index[lo:hi][sel] + support / 2.0)
-        world = fine_to_world(fine, wav.order, *self.frame)
+        offset, step, support = gr["lattice"]
+        fine = offset[band] + step[band, None] * (t.index[lo:hi] + support[band] / 2.0)
+        world = fine_to_world(fine, gr["wavelet"].order, *self.frame)
         cols_rows = self.view.to_pixels(world)
         if self.view.perspective:
             px = np.sqrt(self.view.slope[0] * self.view.slope[1]) * np.maximum(self.view.depth(world), 1e-12)
@@ -119,19 +125,17 @@ class SplatEstimate:
         approx_sigma = self._sigmas(gr)[0]
         for start in range(lo, hi, CHUNK):
             end = min(start + CHUNK, hi)
-            row, col, px, band = self._place(gr, start, end)
+            row, col = (gr[key][start:end].astype(np.float64) + self.pad for key in ("row", "col"))
+            px, band = gr["px"][start:end].astype(np.float64), gr["band"][start:end].astype(np.int64)
             energy = gr["energy"][band] / px ** 2  # in pixels: each pixel's energy
             values = np.asarray(gr["table"].values[start:end], np.float64)
             approx = band % 8 == 0
             # the approximation: a Gaussian of the band's energy, integral^2 / (4 pi s_r s_c) in pixels
             amp = np.sqrt(energy[approx] * 4.0 * np.pi * np.prod(approx_sigma) * self.cell ** 2)
             for ch in range(values.shape[1]):
-                _bilinear(gr["signed"][ch], row[approx] + self.pad, col[approx] + self.pad,
-                          sign * values[approx, ch] * amp)
+                _bilinear(gr["signed"][ch:ch + 1], 0, row[approx], col[approx], sign * values[approx, ch] * amp)
             power = energy * np.sum(values ** 2, axis=1)
-            for m in np.unique(band[~approx] // 8):
-                sel = ~approx & (band // 8 == m)
-                _bilinear(gr["detail"][m], row[sel] + self.pad, col[sel] + self.pad, sign * power[sel])
+            _bilinear(gr["detail"], band[~approx] // 8, row[~approx], col[~approx], sign * power[~approx])
 
     def add(self, image: np.ndarray, done: int) -> tuple:
         """(relative RMS, relative max) estimated for ``image`` after ``done`` coefficients of every group."""
@@ -149,8 +153,7 @@ class SplatEstimate:
         signed /= self.cell ** 2  # per cell -> per pixel
         variance /= self.cell ** 2
         if self.view.perspective:  # the path length per unit depth of each pixel's ray, as the image
-            obliquity = self.view.obliquity()[self.cell // 2::self.cell, self.cell // 2::self.cell, None]
-            signed, variance = signed * obliquity, variance * obliquity ** 2
+            signed, variance = signed * self.obliquity, variance * self.obliquity ** 2
         whole = np.repeat(np.repeat(signed, self.cell, 0), self.cell, 1)[: image.shape[0], : image.shape[1]]
         peak = max(float(np.max(np.abs(image + whole), initial=0.0)), np.finfo(np.float32).tiny)
         rms = np.sqrt(np.mean(signed ** 2 + variance))
@@ -158,15 +161,24 @@ class SplatEstimate:
         return self.RMS_MARGIN * float(rms) / peak, self.MAX_MARGIN * top / peak
 
 
-def _bilinear(grid, row, col, weight):
-    """Add weights at fractional (row, col) of a 2-D grid, shared by the four nearest cells (off the grid: none)."""
+def _lattices(wav) -> tuple:
+    """:func:`band_lattice` of every band code ``level * 8 + code``: offsets and supports (8 MAX_LEVELS, 3), steps."""
+    bands = [band_lattice(wav, "".join("ad"[code >> s & 1] for s in (2, 1, 0)), level)
+             for level in range(MAX_LEVELS) for code in range(8)]
+    return tuple(np.array([b[i] for b in bands]) for i in range(3))
+
+
+def _bilinear(grids, layer, row, col, weight):
+    """Add weights at fractional (row, col) of layers of a stack of 2-D grids, shared by the four nearest cells (off
+    the grid: none)."""
     r0, c0 = np.floor(row).astype(np.int64), np.floor(col).astype(np.int64)
     fr, fc = row - r0, col - c0
-    rows, cols = grid.shape
-    for dr, dc, w in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc), (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
-        r, c = r0 + dr, c0 + dc
-        ok = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-        grid += np.bincount(r[ok] * cols + c[ok], (weight * w)[ok], minlength=grid.size).reshape(grid.shape)
+    _, rows, cols = grids.shape
+    r, c = np.concatenate([r0, r0, r0 + 1, r0 + 1]), np.concatenate([c0, c0 + 1, c0, c0 + 1])
+    w = np.concatenate([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc]) * np.tile(weight, 4)
+    ok = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+    flat = (np.tile(np.broadcast_to(layer, r0.shape), 4) * rows + r) * cols + c
+    grids += np.bincount(flat[ok], w[ok], minlength=grids.size).reshape(grids.shape)
 
 
 def _blur(grids, sigmas) -> np.ndarray:

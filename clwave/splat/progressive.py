@@ -111,9 +111,10 @@ def _frames(r: SplatRenderer, camera: Camera, steps, budget, error):
         acc.splat(done, count - done)
         done = count
         image = acc.image()
-        rms, top = estimate.add(image, done)
-        if done == total:
+        if done == total:  # the final image: no error
             final.image, rms, top = image, 0.0, 0.0
+        else:
+            rms, top = estimate.add(image, done)
         frame = ProgressiveFrame(index=index, image=image, seconds=time.perf_counter() - start,
                                  estimated_relative_rms_error=rms, estimated_relative_max_error=top,
                                  meta=acc.meta(time.perf_counter() - start), _final=final, coefficients=done,
