@@ -57,11 +57,6 @@ def schedule(size, details=(), steps=None) -> list:
     return frames if steps is None else frames[-int(steps):]
 
 
-def reduced_camera(view, camera: Camera | ConeBeam, reduction: int) -> Camera | ConeBeam:
-    """The camera of the same ``view`` with ``reduction`` times larger pixels (sides rounded up, same centre)."""
-    return camera.reduced(reduction, view)
-
-
 def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:
     """A reduced image at the full ``size``: linear interpolation at the full pixels' centres (the edge pixels
     extended), one axis at a time."""
@@ -98,7 +93,7 @@ def _frames(tracer, camera, options, steps, budget, error):
     start, steps_made, last = time.perf_counter(), ErrorEstimate(), None
 
     def render(detail, reduction):  # the tracer's render of an image reduction times smaller per side
-        res = tracer.render(camera if reduction == 1 else reduced_camera(view, camera, reduction), detail=detail,
+        res = tracer.render(camera if reduction == 1 else camera.reduced(reduction, view), detail=detail,
                             **options)
         return upsample(res.image, view.size, reduction), res.meta
 

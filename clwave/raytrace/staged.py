@@ -20,7 +20,7 @@ from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
 from ..io.clw import Abandoned, FileMask, detail_energy
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
-from .progressive import MIN_SIDE, RaytraceFrame, reduced_camera, upsample
+from .progressive import MIN_SIDE, RaytraceFrame, upsample
 
 
 class StagedTracer:
@@ -138,7 +138,7 @@ class StagedTracer:
         steps, index = ErrorEstimate(), 0  # the coarse frames' size term: the step from the last image
 
         def render(detail, reduction):
-            cam = camera if reduction == 1 else reduced_camera(view, camera, reduction)
+            cam = camera if reduction == 1 else camera.reduced(reduction, view)
             res = self.coarse.render(cam, detail=detail, **options)
             return upsample(res.image, view.size, reduction), res
 
