@@ -7,6 +7,7 @@ and a (channels, K) float32 value table.  Importance order is derived on demand.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -382,6 +383,13 @@ class WaveletVolume:
             for slot, channel in enumerate(g.channels):
                 data[..., channel] = reconstruct_channel(g, self._dense[gi], slot, self.shape, self.levels)
         return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin)
+
+    def unmasked(self) -> "WaveletVolume":
+        """The same coefficients without the content mask (nothing clamped, docs/raytracing.md §4), keeping no
+        renderer of this model's."""
+        out = copy.copy(self)
+        out.content_mask, out._shared = None, {}
+        return out
 
     # ----------------------------------------------------------- renderers
     def shared(self, key, make):

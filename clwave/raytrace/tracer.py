@@ -9,7 +9,6 @@ per-ray active lists, the paper's reference) and its bounds for empty-space skip
 
 from __future__ import annotations
 
-import copy
 import time
 from dataclasses import dataclass
 
@@ -130,8 +129,7 @@ class RayTracer:
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
         if not content_clamp and wv.content_mask is not None:
-            wv = copy.copy(wv)  # the same coefficients without the mask: nothing is clamped (docs/raytracing.md §4)
-            wv.content_mask = None
+            wv = wv.unmasked()
         if field not in FIELDS:
             raise InputError(f"ray tracing field must be one of {', '.join(FIELDS)}, got {field!r}")
         if wv.channels > 4:
