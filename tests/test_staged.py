@@ -101,14 +101,80 @@ def test_staged_frames_start_coarse_and_end_at_the_direct_render_bit_for_bit(mod
     frames = list(staged.refine(cam, tolerance=1e-3))
     assert frames[0].meta["stage"] == "coarse" and frames[0].reduction == 2 and frames[0].detail == 3
     assert frames[-1].meta["stage"] == "full" and frames[-1].estimated_relative_rms_error == 0
-    assert staged.coarse is None and [f.meta["stage"] for f in frames].count("full") == 1  # no full-stage preview
+    assert staged.coarse is None and [f.index for f in frames] == list(range(len(frames)))
     for f in frames[:-1]:  # the coarse frames' estimates see the details they lack (docs/raytracing.md §9)
+        if f.meta["stage"] == "full":
+            continue  # a full-stage preview: held to [1, 4] of its error below
         figures = f.figures()
         assert figures["estimated_relative_rms_error"] >= figures["relative_rms_error"], figures
         assert figures["estimated_relative_max_error"] >= figures["relative_max_error"], figures
     direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
     assert np.array_equal(frames[-1].image, direct.image)
     assert staged.render(cam, tolerance=1e-3).meta["stage"] == "full"
+
+
+@pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
+def test_a_ready_staged_tracer_refines_as_the_whole_files_tracer(model_file):
+    """Once the full stage is ready, refine is RayTracer.refine of the whole file: the same previews (images and
+    estimates, each estimate within [1, 4] of its measured error, RMS and max) and the same final image."""
+    staged, cam = RayTracer.open(model_file), clwave.Camera(-40, 25, size=256)
+    staged.wait()
+    frames = list(staged.refine(cam, tolerance=1e-3))
+    ordinary = list(RayTracer(WaveletVolume.open(model_file)).refine(cam, tolerance=1e-3))
+    assert [(f.index, f.reduction, f.meta["stage"]) for f in frames] == [(0, 8, "full"), (1, 4, "full"), (2, 1, "full")]
+    for f, o in zip(frames, ordinary, strict=True):
+        assert np.array_equal(f.image, o.image)
+        assert (f.estimated_relative_rms_error, f.estimated_relative_max_error) == (o.estimated_relative_rms_error,
+                                                                                  o.estimated_relative_max_error)
+    for f in frames[:-1]:
+        figures = f.figures()
+        for n in ("rms", "max"):
+            assert 1 <= figures[f"estimated_relative_{n}_error"] / figures[f"relative_{n}_error"] <= 4, figures
+
+
+@pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
+@pytest.mark.parametrize("ready", ["after the first coarse frame", "after the coarse frames"])
+def test_a_full_stage_ready_during_refine_continues_with_its_previews(model_file, monkeypatch, ready):
+    """The full stage set up between two frames, or only once the coarse frames are made: its previews follow the
+    coarse frames, every frame's estimate and measured error below the one before (docs/raytracing.md §9), the
+    last the direct render bit for bit."""
+    staged, cam = RayTracer.open(model_file), clwave.Camera(30, 20, size=256)
+    if ready == "after the coarse frames":
+        monkeypatch.setattr(type(staged), "ready", property(lambda self: False))
+    frames = staged.refine(cam, tolerance=1e-3)
+    made = [next(frames)]
+    if ready == "after the first coarse frame":
+        staged.wait()  # from here on the full stage is ready
+    made += list(frames)
+    coarse = {"after the first coarse frame": 1, "after the coarse frames": 2}[ready]
+    assert [f.meta["stage"] for f in made] == ["coarse"] * coarse + ["full"] * 3
+    assert [f.reduction for f in made[coarse:]] == [8, 4, 1] and [f.index for f in made] == list(range(coarse + 3))
+    figures = [f.figures() for f in made]
+    for n in ("rms", "max"):
+        estimates, errors = [f[f"estimated_relative_{n}_error"] for f in figures], [f[f"relative_{n}_error"]
+                                                                                   for f in figures]
+        assert all(b < a for a, b in zip(estimates[coarse - 1:], estimates[coarse:])), (n, estimates)
+        assert all(b < a for a, b in zip(errors[coarse - 1:], errors[coarse:])), (n, errors)
+    direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
+    assert np.array_equal(made[-1].image, direct.image)
+
+
+@pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
+def test_an_abandoned_staged_refinement_leaves_the_tracer_usable(model_file):
+    """A viewer stops iterating when the view changes: during the coarse frames (the set-up goes on) and during the
+    full stage's previews; the next view's frames still end at the direct render, bit for bit."""
+    staged = RayTracer.open(model_file)
+    frames = staged.refine(clwave.Camera(30, 20, size=128), tolerance=1e-3)
+    assert next(frames).meta["stage"] == "coarse"
+    frames.close()
+    staged.wait()
+    frames = staged.refine(clwave.Camera(50, 10, size=128), tolerance=1e-3)
+    assert (next(frames).meta["stage"], staged.full.expansions) == ("full", 1)
+    frames.close()
+    cam = clwave.Camera(-20, 40, size=128)
+    last = list(staged.refine(cam, tolerance=1e-3))[-1]
+    assert staged.full.expansions == 1  # nothing set up again
+    assert np.array_equal(last.image, RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3).image)
 
 
 def test_a_set_up_given_up_stops_between_two_slabs_of_its_expansion(model_file, monkeypatch):
