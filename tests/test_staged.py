@@ -116,7 +116,8 @@ def test_staged_frames_start_coarse_and_end_at_the_direct_render_bit_for_bit(mod
 @pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
 def test_a_ready_staged_tracer_refines_as_the_whole_files_tracer(model_file):
     """Once the full stage is ready, refine is RayTracer.refine of the whole file: the same previews (images and
-    estimates, each estimate within [1, 4] of its measured error, RMS and max) and the same final image."""
+    estimates, each estimate within [1, 4] of its measured error, RMS and max), the same final image; error= stops
+    at the first frame whose estimate reaches it."""
     staged, cam = RayTracer.open(model_file), clwave.Camera(-40, 25, size=256)
     staged.wait()
     frames = list(staged.refine(cam, tolerance=1e-3))
@@ -130,14 +131,19 @@ def test_a_ready_staged_tracer_refines_as_the_whole_files_tracer(model_file):
         figures = f.figures()
         for n in ("rms", "max"):
             assert 1 <= figures[f"estimated_relative_{n}_error"] / figures[f"relative_{n}_error"] <= 4, figures
+    stopped = list(staged.refine(cam, tolerance=1e-3, error=frames[1].estimated_relative_rms_error))
+    assert len(stopped) == 2 and np.array_equal(stopped[-1].image, frames[1].image)
 
 
 @pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
-@pytest.mark.parametrize("ready", ["after the first coarse frame", "after the coarse frames"])
-def test_a_full_stage_ready_during_refine_continues_with_its_previews(model_file, monkeypatch, ready):
+@pytest.mark.parametrize("ready, stages", [
+    ("after the first coarse frame", [("coarse", 8), ("full", 8), ("full", 4), ("full", 1)]),
+    ("after the coarse frames", [("coarse", 8), ("coarse", 4), ("full", 4), ("full", 1)])])
+def test_a_full_stage_ready_during_refine_continues_with_its_previews(model_file, monkeypatch, ready, stages):
     """The full stage set up between two frames, or only once the coarse frames are made: its previews follow the
-    coarse frames, every frame's estimate and measured error below the one before (docs/raytracing.md §9), the
-    last the direct render bit for bit."""
+    coarse frames from the size of the last (docs/raytracing.md §8), each frame's measured error from the last
+    coarse one on below the one before, the full stage's estimates within [1, 4] of theirs, the last the direct
+    render bit for bit.  (The second coarse frame is not nearer than the first: its error is the details it lacks.)"""
     staged, cam = RayTracer.open(model_file), clwave.Camera(30, 20, size=256)
     if ready == "after the coarse frames":
         monkeypatch.setattr(type(staged), "ready", property(lambda self: False))
@@ -146,15 +152,14 @@ def test_a_full_stage_ready_during_refine_continues_with_its_previews(model_file
     if ready == "after the first coarse frame":
         staged.wait()  # from here on the full stage is ready
     made += list(frames)
-    coarse = {"after the first coarse frame": 1, "after the coarse frames": 2}[ready]
-    assert [f.meta["stage"] for f in made] == ["coarse"] * coarse + ["full"] * 3
-    assert [f.reduction for f in made[coarse:]] == [8, 4, 1] and [f.index for f in made] == list(range(coarse + 3))
+    assert [(f.meta["stage"], f.reduction) for f in made] == stages and [f.index for f in made] == [0, 1, 2, 3]
+    coarse = [s for s, _ in stages].count("coarse")
     figures = [f.figures() for f in made]
     for n in ("rms", "max"):
-        estimates, errors = [f[f"estimated_relative_{n}_error"] for f in figures], [f[f"relative_{n}_error"]
-                                                                                   for f in figures]
-        assert all(b < a for a, b in zip(estimates[coarse - 1:], estimates[coarse:])), (n, estimates)
-        assert all(b < a for a, b in zip(errors[coarse - 1:], errors[coarse:])), (n, errors)
+        errors = [f[f"relative_{n}_error"] for f in figures][coarse - 1:]  # from the last coarse frame on
+        assert all(b < a for a, b in zip(errors, errors[1:])), (n, errors)
+        for f, stage in zip(figures[:-1], stages):  # the full stage's previews
+            assert stage[0] == "coarse" or 1 <= f[f"estimated_relative_{n}_error"] / f[f"relative_{n}_error"] <= 4, f
     direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
     assert np.array_equal(made[-1].image, direct.image)
 

@@ -21,7 +21,7 @@ from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
 from ..io.clw import Abandoned, FileMask, detail_energy
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
-from .progressive import MIN_SIDE, RaytraceFrame, frames, upsample
+from .progressive import MIN_SIDE, RaytraceFrame, frames, schedule, upsample
 
 
 class StagedTracer:
@@ -125,10 +125,11 @@ class StagedTracer:
         on an image ``2^levels`` times smaller per side, then (if it is still not ready) on one twice as large;
         their estimates add what their size misses (the step from an image half as large) and what the details
         they lack change (:attr:`missing`, docs/raytracing.md §9).  Then (waiting for it) the full stage's
-        :meth:`RayTracer.refine`, full detail on reduced images and the last bit for bit its ``render``, less the
-        previews whose estimate is not below the last frame's (a coarse frame already as good).  ``error=`` as
-        :meth:`RayTracer.refine`; ``transfer_function``: as :meth:`RayTracer.render`'s, every stage classifying a
-        scalar model with it.  ``meta["stage"]`` says which stage made a frame."""
+        :meth:`RayTracer.refine`, full detail on reduced images and the last bit for bit its ``render``, from the
+        image as large as the last coarse frame's (each frame at least the size and detail of the one before,
+        docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`; ``transfer_function``: as
+        :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.  ``meta["stage"]`` says which
+        stage made a frame."""
         check_error(error)
         check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
@@ -138,15 +139,16 @@ class StagedTracer:
     def _frames(self, camera, options, error):
         view, start = camera.view(self.coarse.wv if self.coarse is not None else self.full.wv), time.perf_counter()
         final = FinalImage(lambda: self.wait().render(camera, **options).image)
-        index, shown = 0, np.inf  # the last frame's estimated relative RMS error
+        index, shown = 0, None  # shown: the last coarse frame's reduction
         for made in self._coarse_frames(camera, view, options, final, start):
-            made.index, index, shown = index, index + 1, made.estimated_relative_rms_error
+            made.index, index, shown = index, index + 1, made.reduction
             yield made
             if reached(made, error):
                 return
-        for made in frames(self.wait(), camera, options, error=error, final=final):  # docs/raytracing.md §9
-            if (made.detail, made.reduction) != (0, 1) and not made.estimated_relative_rms_error < shown:
-                continue  # a preview no better than the coarse frame shown: the next one's pilot alone
+        full = self.wait()
+        plan = schedule(view.size, full.details)  # after a coarse frame, images at least as large as its (§8)
+        steps = None if shown is None else sum(reduction <= shown for _, reduction in plan)
+        for made in frames(full, camera, options, steps=steps, error=error, final=final):  # docs/raytracing.md §9
             made.index, made.seconds, made.meta["stage"] = index, time.perf_counter() - start, "full"
             index += 1
             yield made
