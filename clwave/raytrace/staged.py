@@ -137,7 +137,7 @@ class StagedTracer:
         return self._frames(camera, options, error)
 
     def _frames(self, camera, options, error):
-        view, start = camera.view(self.coarse.wv if self.coarse is not None else self.full.wv), time.perf_counter()
+        view, start = camera.view((self.coarse or self.full).wv), time.perf_counter()
         final = FinalImage(lambda: self.wait().render(camera, **options).image)
         index, shown = 0, None  # shown: the last coarse frame's reduction
         for made in self._coarse_frames(camera, view, options, final, start):
@@ -155,9 +155,11 @@ class StagedTracer:
 
     def _coarse_frames(self, camera, view, options, final, start):
         """The coarse stage's frames while the full stage is not ready (:meth:`refine`)."""
-        steps, coarse, detail = ErrorEstimate(), self.coarse, self.coarse_detail if self.coarse is not None else None
-        # (steps: the coarse frames' size term, the step from the last image; coarse: held here, as a wait() from
-        # another thread lets it go)
+        # the coarse stage held here: a wait() from another thread (the viewer's) lets it go
+        coarse, detail = self.coarse, self.coarse_detail if self.coarse is not None else None
+        if coarse is None or self.ready:
+            return
+        steps = ErrorEstimate()  # the coarse frames' size term: the step from the last image
 
         def render(reduction):
             cam = camera if reduction == 1 else camera.reduced(reduction, view)
@@ -165,8 +167,7 @@ class StagedTracer:
             return upsample(res.image, view.size, reduction), res
 
         smallest = 2 ** max(0, min(self.levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
-        if not self.ready:
-            steps.add(render(2 * smallest)[0])  # the first frame's step: a pilot
+        steps.add(render(2 * smallest)[0])  # the first frame's step: a pilot
         for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):
             if self.ready:
                 return
