@@ -101,14 +101,85 @@ def test_staged_frames_start_coarse_and_end_at_the_direct_render_bit_for_bit(mod
     frames = list(staged.refine(cam, tolerance=1e-3))
     assert frames[0].meta["stage"] == "coarse" and frames[0].reduction == 2 and frames[0].detail == 3
     assert frames[-1].meta["stage"] == "full" and frames[-1].estimated_relative_rms_error == 0
-    assert staged.coarse is None and [f.meta["stage"] for f in frames].count("full") == 1  # no full-stage preview
+    assert staged.coarse is None and [f.index for f in frames] == list(range(len(frames)))
     for f in frames[:-1]:  # the coarse frames' estimates see the details they lack (docs/raytracing.md §9)
+        if f.meta["stage"] == "full":
+            continue  # a full-stage preview: held to [1, 4] of its error below
         figures = f.figures()
         assert figures["estimated_relative_rms_error"] >= figures["relative_rms_error"], figures
         assert figures["estimated_relative_max_error"] >= figures["relative_max_error"], figures
     direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
     assert np.array_equal(frames[-1].image, direct.image)
     assert staged.render(cam, tolerance=1e-3).meta["stage"] == "full"
+
+
+@pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
+def test_a_ready_staged_tracer_refines_as_the_whole_files_tracer(model_file):
+    """Once the full stage is ready, refine is RayTracer.refine of the whole file: the same previews (images and
+    estimates, each estimate within [1, 4] of its measured error, RMS and max), the same final image; error= stops
+    at the first frame whose estimate reaches it."""
+    staged, cam = RayTracer.open(model_file), clwave.Camera(-40, 25, size=256)
+    staged.wait()
+    frames = list(staged.refine(cam, tolerance=1e-3))
+    ordinary = list(RayTracer(WaveletVolume.open(model_file)).refine(cam, tolerance=1e-3))
+    assert [(f.index, f.reduction, f.meta["stage"]) for f in frames] == [(0, 8, "full"), (1, 4, "full"), (2, 1, "full")]
+    for f, o in zip(frames, ordinary, strict=True):
+        assert np.array_equal(f.image, o.image)
+        assert (f.estimated_relative_rms_error, f.estimated_relative_max_error) == (o.estimated_relative_rms_error,
+                                                                                  o.estimated_relative_max_error)
+    for f in frames[:-1]:
+        figures = f.figures()
+        for n in ("rms", "max"):
+            assert 1 <= figures[f"estimated_relative_{n}_error"] / figures[f"relative_{n}_error"] <= 4, figures
+    stopped = list(staged.refine(cam, tolerance=1e-3, error=frames[1].estimated_relative_rms_error))
+    assert len(stopped) == 2 and np.array_equal(stopped[-1].image, frames[1].image)
+
+
+@pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
+@pytest.mark.parametrize("ready, stages", [
+    ("after the first coarse frame", [("coarse", 8), ("full", 8), ("full", 4), ("full", 1)]),
+    ("after the coarse frames", [("coarse", 8), ("coarse", 4), ("full", 4), ("full", 1)])])
+def test_a_full_stage_ready_during_refine_continues_with_its_previews(model_file, monkeypatch, ready, stages):
+    """The full stage set up between two frames, or only once the coarse frames are made: its previews follow the
+    coarse frames from the size of the last (docs/raytracing.md §8), each frame's measured error from the last
+    coarse one on below the one before, the full stage's estimates within [1, 4] of theirs, the last the direct
+    render bit for bit.  (The second coarse frame is not nearer than the first: its error is the details it lacks.)"""
+    staged, cam = RayTracer.open(model_file), clwave.Camera(30, 20, size=256)
+    if ready == "after the coarse frames":
+        monkeypatch.setattr(type(staged), "ready", property(lambda self: False))
+    frames = staged.refine(cam, tolerance=1e-3)
+    made = [next(frames)]
+    if ready == "after the first coarse frame":
+        staged.wait()  # from here on the full stage is ready
+    made += list(frames)
+    assert [(f.meta["stage"], f.reduction) for f in made] == stages and [f.index for f in made] == [0, 1, 2, 3]
+    coarse = [s for s, _ in stages].count("coarse")
+    figures = [f.figures() for f in made]
+    for n in ("rms", "max"):
+        errors = [f[f"relative_{n}_error"] for f in figures][coarse - 1:]  # from the last coarse frame on
+        assert all(b < a for a, b in zip(errors, errors[1:])), (n, errors)
+        for f, stage in zip(figures[:-1], stages):  # the full stage's previews
+            assert stage[0] == "coarse" or 1 <= f[f"estimated_relative_{n}_error"] / f[f"relative_{n}_error"] <= 4, f
+    direct = RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3)
+    assert np.array_equal(made[-1].image, direct.image)
+
+
+@pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
+def test_an_abandoned_staged_refinement_leaves_the_tracer_usable(model_file):
+    """A viewer stops iterating when the view changes: during the coarse frames (the set-up goes on) and during the
+    full stage's previews; the next view's frames still end at the direct render, bit for bit."""
+    staged = RayTracer.open(model_file)
+    frames = staged.refine(clwave.Camera(30, 20, size=128), tolerance=1e-3)
+    assert next(frames).meta["stage"] == "coarse"
+    frames.close()
+    staged.wait()
+    frames = staged.refine(clwave.Camera(50, 10, size=128), tolerance=1e-3)
+    assert (next(frames).meta["stage"], staged.full.expansions) == ("full", 1)
+    frames.close()
+    cam = clwave.Camera(-20, 40, size=128)
+    last = list(staged.refine(cam, tolerance=1e-3))[-1]
+    assert staged.full.expansions == 1  # nothing set up again
+    assert np.array_equal(last.image, RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3).image)
 
 
 def test_a_set_up_given_up_stops_between_two_slabs_of_its_expansion(model_file, monkeypatch):

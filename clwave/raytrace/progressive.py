@@ -72,9 +72,11 @@ def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:
     return image.astype(np.float32, copy=False)
 
 
-def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=None, error=None):
+def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=None, error=None, final=None):
     """The frames of :func:`clwave.progressive.raytrace_progressive` from a :class:`~clwave.RayTracer` (its
-    :meth:`~clwave.RayTracer.refine`), arguments checked first."""
+    :meth:`~clwave.RayTracer.refine`, and a staged tracer's once its full stage is ready), arguments checked first.
+    ``final``: the :class:`~clwave.frames.FinalImage` the frames measure against (one of ``tracer``'s renders of
+    ``camera`` with ``options``), where frames made before these share it."""
     check_error(error)
     if steps is not None and (isinstance(steps, bool) or int(steps) != steps or steps < 1):
         raise InputError(f"steps={steps!r} must be a whole number of frames, at least 1",
@@ -83,13 +85,13 @@ def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=
         raise InputError(f"budget={budget!r} must be a positive number of seconds",
                          cli=f"--budget {budget:g} must be a positive number of seconds")
     check_camera(camera)
-    return _frames(tracer, camera, options, steps, budget, error)
+    final = final or FinalImage(lambda: tracer.render(camera, **options).image)
+    return _frames(tracer, camera, options, steps, budget, error, final)
 
 
-def _frames(tracer, camera, options, steps, budget, error):
+def _frames(tracer, camera, options, steps, budget, error, final):
     view = camera.view(tracer.wv)
     plan = schedule(view.size, tracer.details, steps)
-    final = FinalImage(lambda: tracer.render(camera, **options).image)
     start, steps_made, last = time.perf_counter(), ErrorEstimate(), None
 
     def render(detail, reduction):  # the tracer's render of an image reduction times smaller per side

@@ -2,7 +2,8 @@
 coarsest approximation alone (its own tier of the file, read first) and expands its bricks at the coarsest detail,
 without the content mask; the whole model is read and set up in a background thread while the caller renders
 the coarse stage.  :meth:`StagedTracer.refine` yields frames from the coarse stage until the full one is ready,
-then the full stage's, the last bit for bit what the full tracer's ``render`` gives.
+then the full stage's progressive frames (:mod:`clwave.raytrace.progressive`), the last bit for bit what the full
+tracer's ``render`` gives.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
 from ..io.clw import Abandoned, FileMask, detail_energy
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
-from .progressive import MIN_SIDE, RaytraceFrame, upsample
+from .progressive import MIN_SIDE, RaytraceFrame, frames, schedule, upsample
 
 
 class StagedTracer:
@@ -120,12 +121,15 @@ class StagedTracer:
     def refine(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True, *,
                error=None, transfer_function=None):
         """Frames of ``camera`` from cheap to exact, for a viewer that shows each as it comes (a generator it stops
-        iterating when the view changes; the set-up goes on): the coarse stage on an image ``2^levels`` times
-        smaller per side, then (if the full stage is not ready) on one twice as large; then, once the full stage
-        is ready, its full-detail image, bit for bit its ``render``.  ``error=`` as :meth:`RayTracer.refine`; the
-        coarse frames' estimates add what their size misses (the step from an image half as large) and what the
-        details they lack change (:attr:`missing`, docs/raytracing.md §9).  ``transfer_function``: as
-        :meth:`RayTracer.render`'s, every stage classifying a scalar model with it."""
+        iterating when the view changes; the set-up goes on).  While the full stage is not ready: the coarse stage
+        on an image ``2^levels`` times smaller per side, then (if it is still not ready) on one twice as large;
+        their estimates add what their size misses (the step from an image half as large) and what the details
+        they lack change (:attr:`missing`, docs/raytracing.md §9).  Then (waiting for it) the full stage's
+        :meth:`RayTracer.refine`, full detail on reduced images and the last bit for bit its ``render``, from the
+        image as large as the last coarse frame's (each frame at least the size and detail of the one before,
+        docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`; ``transfer_function``: as
+        :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.  ``meta["stage"]`` says which
+        stage made a frame."""
         check_error(error)
         check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
@@ -133,39 +137,49 @@ class StagedTracer:
         return self._frames(camera, options, error)
 
     def _frames(self, camera, options, error):
-        view, start = camera.view(self.coarse.wv if self.coarse is not None else self.full.wv), time.perf_counter()
+        view, start = camera.view((self.coarse or self.full).wv), time.perf_counter()
         final = FinalImage(lambda: self.wait().render(camera, **options).image)
-        steps, index = ErrorEstimate(), 0  # the coarse frames' size term: the step from the last image
-
-        def render(detail, reduction):
-            cam = camera if reduction == 1 else camera.reduced(reduction, view)
-            res = self.coarse.render(cam, detail=detail, **options)
-            return upsample(res.image, view.size, reduction), res
-
-        smallest = 2 ** max(0, min(self.levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
-        if not self.ready:
-            steps.add(render(self.coarse_detail, 2 * smallest)[0])  # the first frame's step: a pilot
-        for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):  # the coarse stage, unless ready
-            if self.ready:
-                break
-            image, res = render(self.coarse_detail, reduction)
-            rms, top = steps.add(image)
-            peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
-            rms += self.missing * float(np.sqrt(np.mean(image ** 2))) / peak  # the details it lacks (§9)
-            made = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
-                                 estimated_relative_rms_error=rms, estimated_relative_max_error=top + self.missing,
-                                 meta=dict(res.meta, stage="coarse"), _final=final, detail=self.levels,
-                                 reduction=reduction)
-            index += 1
-            self.start()
+        index, shown = 0, None  # shown: the last coarse frame's reduction
+        for made in self._coarse_frames(camera, view, options, final, start):
+            made.index, index, shown = index, index + 1, made.reduction
             yield made
             if reached(made, error):
                 return
-        res = self.wait().render(camera, **options)
-        final.image = res.image
-        yield RaytraceFrame(index=index, image=res.image, seconds=time.perf_counter() - start,
-                            estimated_relative_rms_error=0.0, estimated_relative_max_error=0.0,
-                            meta=dict(res.meta, stage="full"), _final=final, detail=0, reduction=1)
+        full = self.wait()
+        plan = schedule(view.size, full.details)  # after a coarse frame, images at least as large as its (§8)
+        steps = None if shown is None else sum(reduction <= shown for _, reduction in plan)
+        for made in frames(full, camera, options, steps=steps, error=error, final=final):  # docs/raytracing.md §9
+            made.index, made.seconds, made.meta["stage"] = index, time.perf_counter() - start, "full"
+            index += 1
+            yield made
+
+    def _coarse_frames(self, camera, view, options, final, start):
+        """The coarse stage's frames while the full stage is not ready (:meth:`refine`)."""
+        # the coarse stage held here: a wait() from another thread (the viewer's) lets it go
+        coarse, detail = self.coarse, self.coarse_detail if self.coarse is not None else None
+        if coarse is None or self.ready:
+            return
+        steps = ErrorEstimate()  # the coarse frames' size term: the step from the last image
+
+        def render(reduction):
+            cam = camera if reduction == 1 else camera.reduced(reduction, view)
+            res = coarse.render(cam, detail=detail, **options)
+            return upsample(res.image, view.size, reduction), res
+
+        smallest = 2 ** max(0, min(self.levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
+        steps.add(render(2 * smallest)[0])  # the first frame's step: a pilot
+        for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):
+            if self.ready:
+                return
+            image, res = render(reduction)
+            rms, top = steps.add(image)
+            peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
+            rms += self.missing * float(np.sqrt(np.mean(image ** 2))) / peak  # the details it lacks (§9)
+            self.start()
+            yield RaytraceFrame(index=0, image=image, seconds=time.perf_counter() - start,
+                                estimated_relative_rms_error=rms, estimated_relative_max_error=top + self.missing,
+                                meta=dict(res.meta, stage="coarse"), _final=final, detail=self.levels,
+                                reduction=reduction)
 
 
 def _abandon(event, thread):
