@@ -334,6 +334,7 @@ def test_a_volume_classified_post_stays_scalar_with_its_transfer_function():
     post, pre = (as_model(vol, keep=0.2, tf=tf, classify=c) for c in ("post", "pre"))
     assert (post.channels, pre.channels) == (1, 4)
     assert clwave.TransferFunction.from_dict(post.transfer_function) == tf.resolved(vol) != tf  # "auto" made concrete
+    assert as_model(vol, keep=0.2, tf="grey", classify="post").transfer_function == post.transfer_function  # a name
 
 
 def test_view_refuses_what_it_cannot_show():

@@ -43,8 +43,9 @@ class Viewer:
 
 def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3, classify="pre"):
     """A thresholded :class:`~clwave.WaveletVolume` from a model (as it is), a :class:`~clwave.Volume` or an
-    array ``(z, y, x[, c])``: classified with ``tf`` (a TransferFunction) first, or with ``classify="post"`` the
-    scalar kept with ``tf`` as its transfer function, classified while rendering (docs/raytracing.md §10)."""
+    array ``(z, y, x[, c])``: classified with ``tf`` (a preset name or a TransferFunction) first, or with
+    ``classify="post"`` the scalar kept with ``tf`` as its transfer function, classified while rendering
+    (docs/raytracing.md §10)."""
     from ..model.volume import Volume
     from ..model.wavelet import WaveletVolume
 
@@ -55,7 +56,7 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3, cla
     if not isinstance(model_or_volume, Volume):
         raise InputError(f"view() takes a clwave.WaveletVolume, a clwave.Volume, an array or a .clw file, not "
                          f"{type(model_or_volume).__name__}")
-    vol = model_or_volume
+    vol, tf = model_or_volume, _transfer_function(tf)
     if tf is not None:
         if classify == "post" and vol.channels != 1:
             raise InputError(f'classify="post" keeps a scalar volume for ray tracing to classify; this volume has '
@@ -64,6 +65,16 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3, cla
         vol = tf.classify(vol) if classify == "pre" else vol
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, transfer_function=tf).threshold(keep=keep)
     return wv.compute() if vol.chunked else wv  # a chunked volume's model, gathered
+
+
+def _transfer_function(tf):
+    """``tf`` (a preset name, a TransferFunction or None) as a TransferFunction or None."""
+    from ..model.transfer import TransferFunction
+
+    tf = TransferFunction.preset(tf) if isinstance(tf, str) else tf
+    if tf is not None and not isinstance(tf, TransferFunction):
+        raise InputError(f"tf= must be a preset name or a clwave.TransferFunction, not {type(tf).__name__}")
+    return tf
 
 
 def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, classify="pre", device=None,
@@ -81,7 +92,6 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
     """
     from ..model.camera import Camera
-    from ..model.transfer import TransferFunction
     from ..model.wavelet import WaveletVolume
     from .frames import check_tolerance
     from .prefix import PrefixFirst
@@ -92,9 +102,7 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     if classify not in ("pre", "post"):
         raise InputError(f"classify={classify!r} must be 'pre' (classify a volume before its transform) or 'post' "
                          f"(while rendering)")
-    tf = TransferFunction.preset(tf) if isinstance(tf, str) else tf
-    if tf is not None and not isinstance(tf, TransferFunction):
-        raise InputError(f"tf= must be a preset name or a clwave.TransferFunction, not {type(tf).__name__}")
+    tf = _transfer_function(tf)
     if isinstance(model_or_volume, (str, PathLike)) and str(model_or_volume).lower().endswith(".clw"):
         wv = PrefixFirst(model_or_volume, keep=keep)
         model = wv.prefix

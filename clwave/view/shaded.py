@@ -116,15 +116,15 @@ class ShadedSource(Source):
         window = self.start_tf.window
         return dict(name=self.start_tf.name, window=window if window == "auto" else [float(v) for v in window])
 
-    def transfer_function(self, spec) -> tuple:
+    def transfer_function(self, spec, tracer) -> tuple:
         """``(transfer function, its window in data units)`` of a tab's ``(preset, centre, width, opacity)``: the
         preset's points (preset None: the starting function's) with their opacity times ``opacity``, under its window
         (the pool's percentiles where "auto") widened ``width`` times and moved by ``centre`` of its width; spec None,
-        or the starting function unchanged, is the starting function itself (its window as given, not recomputed).
+        or the starting function unchanged, is the starting function itself (its window as given, not recomputed);
+        an "auto" window is the pool of ``tracer``, the one that renders the frame (the whole file's once it is in).
         ``(None, None)`` for an RGBA model."""
         if not self.scalar:
             return None, None
-        tracer = self.tracer or self.staged.coarse  # an "auto" window is the pool's: the whole file's once it is in
         key = (spec, id(tracer))
         if self._tf[0] != key:
             name, *change = (None, 0.0, 1.0, 1.0) if spec is None else spec
@@ -145,7 +145,9 @@ class ShadedSource(Source):
         tracer = self.tracer  # None while a file's whole tracer is being set up: its coarse stage
         options, classified = dict(shading=state.shading), {}  # a scalar model's: its window, a figure of each frame
         if self.scalar:
-            options["transfer_function"], classified["tf_window"] = self.transfer_function(state.tf)
+            # the tracer read once: another thread sets self.tracer when the whole file's is ready
+            stage = tracer or self.staged.coarse or self.staged.full
+            options["transfer_function"], classified["tf_window"] = self.transfer_function(state.tf, stage)
         if state.moving:
             scale, detail = self.steps[pace.step]
             if tracer is None:
