@@ -206,8 +206,13 @@ def test_a_tracer_of_chosen_details_refuses_others_in_one_line():
         assert "\n" not in str(err.value)
     tracer, cam = RayTracer(wv, lod=(2,)), clwave.Camera(20, 10, size=8)
     assert tracer.details == (2,) and tracer.render(cam, absorption=False).meta["detail"] == 2
-    with pytest.raises(clwave.errors.InputError, match="holds details 2 only"):
+    with pytest.raises(clwave.errors.InputError, match="holds details 2 only, not detail 0$"):
         tracer.render(cam, absorption=False, detail=0)
+    # refine() ends at the finest detail such a tracer holds, bit for bit its render (its previews: that detail too)
+    cam = clwave.Camera(20, 10, size=64)
+    frames = list(tracer.refine(cam, absorption=False))
+    assert [(f.detail, f.reduction) for f in frames] == [(2, 2), (2, 1)]
+    assert np.array_equal(frames[-1].image, tracer.render(cam, absorption=False).image)
 
 
 def resident_bytes() -> int:

@@ -44,16 +44,18 @@ class RaytraceFrame(Frame):
         return dict(detail=self.detail, reduction=self.reduction)
 
 
-def schedule(size, details=(), steps=None) -> list:
-    """``[(detail, reduction)]`` from cheap to exact: full detail on images ``2^top, ..., 8, 4`` times smaller per side
-    (the largest reduction leaves sides of :data:`MIN_SIDE` at least; an image under ``4 MIN_SIDE`` a side gets the
-    one it allows), then the full image (docs/raytracing.md §9).  An image too small to reduce gets a frame per
-    coarser detail the tracer holds (``details``), coarsest first, on the full image.  ``steps`` keeps the last that
-    many."""
+def schedule(size, details=(0,), steps=None) -> list:
+    """``[(detail, reduction)]`` from cheap to exact: the finest of the tracer's ``details`` (full detail, unless it
+    holds coarser ones only) on images ``2^top, ..., 8, 4`` times smaller per side (the largest reduction leaves sides
+    of :data:`MIN_SIDE` at least; an image under ``4 MIN_SIDE`` a side gets the one it allows), then on the full image
+    (docs/raytracing.md §9).  An image too small to reduce gets a frame per coarser detail the tracer holds, coarsest
+    first, on the full image.  ``steps`` keeps the last that many."""
+    finest = min(details)
     top = int(np.floor(np.log2(max(1, min(size) / MIN_SIDE))))
     last = min(top, int(np.log2(LAST_REDUCTION)))
-    frames = [(0, 2 ** k) for k in range(top, last - 1, -1)] if top else [(d, 1) for d in sorted(details)[::-1] if d]
-    frames = frames + [(0, 1)]
+    frames = ([(finest, 2 ** k) for k in range(top, last - 1, -1)] if top else
+              [(d, 1) for d in sorted(details)[::-1] if d != finest])
+    frames = frames + [(finest, 1)]
     return frames if steps is None else frames[-int(steps):]
 
 
@@ -106,9 +108,9 @@ def _frames(tracer, camera, options, steps, budget, error, final):
                 return
         t0 = time.perf_counter()
         if index == 0 and reduction > 1:  # the first frame's pilot: the step from an image half its size (§9)
-            steps_made.add(render(0, 2 * reduction)[0])
+            steps_made.add(render(detail, 2 * reduction)[0])
         image, meta = render(detail, reduction)
-        if (detail, reduction) == (0, 1):
+        if (detail, reduction) == plan[-1]:
             final.image, rms, top = image, 0.0, 0.0
         elif reduction == 1:  # a coarser detail on the full image: its step from the final image, made first (§9)
             steps_made.last = final.get()

@@ -206,7 +206,9 @@ class RayTracer:
         if detail.level not in self.details or (detail.pixels is not None and not every):
             raise InputError("detail= needs a tracer of the B-spline field that holds every detail "
                              "(RayTracer(wv, lod=True))" if not self.lod else
-                             f"this tracer holds details {', '.join(map(str, self.details))} only, not {detail}")
+                             f"this tracer holds details {', '.join(map(str, self.details))} only, not detail "
+                             f"{detail.level}" + ("" if detail.pixels is None else
+                                                   " with a screen-space error (that needs lod=True)"))
         if self.field != "bspline":
             return self, 0
         if detail.pixels is None:
