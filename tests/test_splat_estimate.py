@@ -76,6 +76,12 @@ def test_the_estimate_holds_on_cells_of_several_pixels():
         cases += [(volume, clwave.Camera(40, 25, size)),
                   (volume, clwave.ConeBeam(3 * extent, 4.5 * extent, size, pixel=1.95 * extent / size, azimuth=40))]
     _assert_the_bar(cases)
+    # a side that the cells do not divide (65 = 32 cells of 2 pixels and one of 1): the obliquity at each cell
+    wv = clwave.WaveletVolume.from_volume(phantom("shepp-logan", 16), levels=1).threshold(keep=0.3)
+    for camera in (clwave.Camera(30, 20, size=(GRID + 1, GRID + 3), perspective=True, fov=40),
+                   clwave.ConeBeam(48, 72, GRID + 1, pixel=0.5)):
+        frames = list(clwave.progressive(wv, camera, steps=3))
+        assert all(np.isfinite(f.estimated_relative_rms_error) for f in frames)
 
 
 def _assert_the_bar(cases):

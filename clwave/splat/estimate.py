@@ -92,8 +92,10 @@ class SplatEstimate:
         widest = max((max(self._sigmas(gr)[0].max(), self._sigmas(gr)[1][: gr["levels"] + 1].max())
                       for gr in self.groups), default=0.0)
         self.pad = int(np.ceil(3.0 * widest)) + 2
-        if view.perspective:  # at the cells' centres
-            self.obliquity = view.obliquity()[self.cell // 2::self.cell, self.cell // 2::self.cell, None]
+        if view.perspective:  # at the cells' centres (the last cell's within the image, where it is cut short)
+            rows, cols = (np.minimum(np.arange(n) * self.cell + self.cell // 2, side - 1)
+                          for n, side in ((self.rows, H), (self.cols, W)))
+            self.obliquity = view.obliquity()[np.ix_(rows, cols)][..., None]
         shape = (self.rows + 2 * self.pad, self.cols + 2 * self.pad)
         for gr in self.groups:
             gr["signed"] = np.zeros((len(gr["channels"]),) + shape)
