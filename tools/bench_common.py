@@ -1,5 +1,5 @@
 """The bench's shared helpers (tools/bench.py and its families, tools/bench_*.py): the machine and the device
-described, the statistics of a sample, the views, the peak resident memory."""
+described, the statistics of a sample, the views, the peak resident memory, the classified phantom."""
 
 from __future__ import annotations
 
@@ -14,6 +14,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
 import clwave  # noqa: E402
+from clwave.io.phantoms import phantom  # noqa: E402
+from clwave.model.transfer import TransferFunction  # noqa: E402
 
 
 def machine() -> dict:
@@ -48,3 +50,8 @@ def peak_resident_gib() -> float:
     import resource
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20
+
+
+def hydrogen_rgba(n) -> clwave.Volume:
+    """The hydrogen phantom of ``n``^3 voxels classified by its preset (RGBA)."""
+    return TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=n))

@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from bench_common import peak_resident_gib, summary, views  # first: it puts the checkout on sys.path
+from bench_common import hydrogen_rgba, peak_resident_gib, summary, views  # first: it puts the checkout on sys.path
 
 import clwave
 from clwave.io.phantoms import phantom
@@ -17,7 +17,7 @@ from clwave.model.wavelet import WaveletVolume
 
 
 def bench_raytrace(args) -> dict:
-    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+    rgba = hydrogen_rgba(args.size)
     wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05)
     out = dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3, keep=0.05,
                             shading="phong, headlight", views=args.raytrace_views,
@@ -25,8 +25,7 @@ def bench_raytrace(args) -> dict:
                                             "64x64 centre crop (the timed crop where smaller)"),
                targets=dict(tolerance_1e_2_seconds=3.0, tolerance_1e_3_seconds=10.0), paths={})
     fast = None
-    small = WaveletVolume.from_volume(TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=24)),
-                                      wavelet="cubic", levels=3).threshold(keep=0.05)
+    small = warm_up_model()
     for path, size, crop in (("bspline", args.raytrace_image, None),
                              ("wavelet", args.wavelet_image, args.wavelet_crop)):
         if path == "wavelet" and args.size > args.wavelet_max_size:
@@ -45,6 +44,11 @@ def bench_raytrace(args) -> dict:
     out["peak_resident_gib"] = peak_resident_gib()  # this process: phantom, model, both paths' tracers, images
     out["vtk_composite"] = vtk_composite(args)
     return out
+
+
+def warm_up_model() -> WaveletVolume:
+    """Hydrogen 24^3 RGBA, cubic, 3 levels, 5 %: a tracer of it builds the set-up's kernels, apart from the timing."""
+    return WaveletVolume.from_volume(hydrogen_rgba(24), wavelet="cubic", levels=3).threshold(keep=0.05)
 
 
 def one_shot_raytrace(wv, args) -> dict:
@@ -133,10 +137,9 @@ def bench_lod(args) -> dict:
     (``lod=True``), each detail's render (interleaved over the views, detail by detail per view), the time to
     change detail (the first render at a detail: its bounds laid out; then kept), and the progressive frames of
     the first view: time since the start, detail, reduction, measured and estimated relative RMS error."""
-    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+    rgba = hydrogen_rgba(args.size)
     model = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3)
-    small = WaveletVolume.from_volume(TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=24)),
-                                      wavelet="cubic", levels=3).threshold(keep=0.05)
+    small = warm_up_model()
     clwave.RayTracer(small, device=args.device, lod=True)  # warm-up: the set-up's kernels built apart
     cams = [clwave.Camera(az, el, size=args.raytrace_image) for az, el in views(args.raytrace_views)]
     out = dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3,
@@ -177,10 +180,9 @@ def bench_setup(args) -> dict:
     hydrogen RGBA, cubic, 3 levels, 5 % and 0.1 %, without and with every detail (``lod=True``), ``--repeats``
     set-ups after a warm-up that builds the kernels; the expansion's share (``BrickField.seconds``), the pool,
     slots and mixed bricks."""
-    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+    rgba = hydrogen_rgba(args.size)
     model = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3)
-    small = WaveletVolume.from_volume(TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=24)),
-                                      wavelet="cubic", levels=3).threshold(keep=0.05)
+    small = warm_up_model()
     clwave.RayTracer(small, device=args.device, lod=True)
     out = dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", wavelet="cubic", levels=3,
                             repeats=args.repeats), cases={})

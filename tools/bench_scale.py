@@ -13,11 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bench_common import peak_resident_gib, summary, views  # first: it puts the checkout on sys.path
+from bench_common import hydrogen_rgba, peak_resident_gib, summary, views  # first: it puts the checkout on sys.path
 from bench_raytrace import brick_figures
 
 import clwave
-from clwave.io.phantoms import phantom
 from clwave.model.transfer import TransferFunction
 from clwave.model.wavelet import WaveletVolume
 
@@ -119,13 +118,11 @@ def bench_first_image(args) -> dict:
     render), with the stages' set-up times and the peak resident memory; and the X-ray image splatted from the
     approximation alone (``WaveletVolume.open(path, approximation=True)``, a new renderer), and the first image
     of the whole file read and set up (``RayTracer(WaveletVolume.open(path)).render``), for comparison."""
-    path = args.first_image_file
-    if path is None:
-        path = args.scratch / f"hydrogen_{args.size}_rgba.clw"
-        if not path.exists():
-            args.scratch.mkdir(parents=True, exist_ok=True)
-            rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
-            WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05).save(path)
+    path = first_image_file(args)
+    if args.first_image_file is None and not path.exists():
+        args.scratch.mkdir(parents=True, exist_ok=True)
+        rgba = hydrogen_rgba(args.size)
+        WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05).save(path)
     spec = dict(model=str(path), device=args.device, image=args.raytrace_image)
     for step in ("first-shaded", "first-xray"):  # warm-up: both kernels built, the file cached
         _scale_step(dict(spec, step=step, frames=1))
@@ -134,6 +131,12 @@ def bench_first_image(args) -> dict:
                 shaded=_scale_step(dict(spec, step="first-shaded", frames=None)),
                 splat_approximation=_scale_step(dict(spec, step="first-splat")),
                 whole_file_first=_scale_step(dict(spec, step="first-whole")))
+
+
+def first_image_file(args) -> Path:
+    """``--first-image-file``, or first-image's own: hydrogen ``--size``^3 RGBA, cubic, 3 levels, 5 %, in
+    ``--scratch``."""
+    return args.first_image_file or args.scratch / f"hydrogen_{args.size}_rgba.clw"
 
 
 def first_image_step(spec) -> dict:

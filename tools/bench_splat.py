@@ -7,7 +7,7 @@ from __future__ import annotations
 import statistics
 import time
 
-from bench_common import peak_resident_gib, summary, views  # first: it puts the checkout on sys.path
+from bench_common import hydrogen_rgba, peak_resident_gib, summary, views  # first: it puts the checkout on sys.path
 
 import clwave
 from clwave.device.context import ComputeContext
@@ -163,7 +163,7 @@ def bench_orders(args) -> dict:
     """The cost of the basis order (paper Fig. 14: orders 1, 2, 4, 6): decomposition of the classified hydrogen
     phantom (4 channels, 3 levels), splatting (keep 0.05, 512²) and ray tracing (keep 0.05, 512², tolerance 1e-2)
     per order, the orders interleaved in every repeat so that a loaded machine slows them alike."""
-    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", n=args.size))
+    rgba = hydrogen_rgba(args.size)
     names = ("haar", "linear", "cubic", "quintic")
     cams = [clwave.Camera(az, el, size=512) for az, el in views(args.raytrace_views)]
     decompose, models = {n: [] for n in names}, {}

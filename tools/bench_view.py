@@ -12,6 +12,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from bench_common import peak_resident_gib, summary  # first: it puts the checkout on sys.path
+from bench_scale import first_image_file
 
 import clwave
 from clwave.io.phantoms import phantom
@@ -128,7 +129,7 @@ def bench_view_file(args) -> dict:
     choosing the shaded mode on the page's first image to its first shaded frame (``RayTracer.open``'s coarse stage)."""
     import browser
 
-    path = args.first_image_file or args.scratch / f"hydrogen_{args.size}_rgba.clw"
+    path = first_image_file(args)
     if not path.exists():
         raise SystemExit(f"{path} does not exist: run `bench.py first-image --size {args.size}` or give "
                          f"--first-image-file")
@@ -203,7 +204,7 @@ def bench_view_held(args) -> dict:
     from clwave.view import view
     from clwave.view.protocol import unpack_frame
 
-    path = args.first_image_file or args.scratch / f"hydrogen_{args.size}_rgba.clw"
+    path = first_image_file(args)
     if not path.exists():
         return dict(skipped=f"{path} does not exist: run `bench.py first-image --size {args.size}` or give "
                             f"--first-image-file")
