@@ -78,6 +78,13 @@ final frame beside a one-shot ray trace of it, and an opacity-slider move to its
 the seconds to its address, to the page's first image (the file's prefix), a drag while the rest is read, and to the
 final frame of the whole model; the server's peak memory.
 
+``view-held``: the viewer's shaded views of a ``.clw`` file (``--first-image-file``) through its socket, no browser: a
+still shaded view's first and final frames, the full stage taking the model the viewer holds against reading the file
+again, over ``--repeats`` rounds; ``skipped`` (in ``all`` too) when the file is missing.
+
+``orders``: the cost of the basis order (Haar, linear, cubic, quintic): decomposition of the classified hydrogen
+phantom, splatting and ray tracing (5 %, 512², tolerance 1e-2), the orders interleaved.
+
 A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) in the module of its
 family and an entry in ``BENCHMARKS``: tools/bench_splat.py (decompose, footprints, splat, progressive,
 orders), tools/bench_raytrace.py (raytrace, lod, setup, refine), tools/bench_post.py (post, pools,
