@@ -90,7 +90,7 @@ import numpy as np
 
 sys.path.insert(0, "tools")
 import clwave  # noqa: E402
-from bench import machine, views  # noqa: E402  (the bench's views)
+from bench_common import machine, views  # noqa: E402  (the bench's views)
 
 device, out, sizes, IMAGE, reference, save = sys.argv[1], Path(sys.argv[2]), [int(s) for s in sys.argv[3].split()], \
     int(sys.argv[4]), sys.argv[5], sys.argv[6]
