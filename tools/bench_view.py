@@ -101,7 +101,7 @@ def _view_shaded(browser, driver, viewer, wv, args) -> dict:
         t0 = time.perf_counter()
         source.tracer.render(clwave.Camera(final["azimuth"], final["elevation"], size, extent=final["extent"]),
                              tolerance=1e-2, transfer_function=source.transfer_function(
-                                 ("hydrogen", 0.0, 1.0, 1.0))[0])  # (function, window)
+                                 ("hydrogen", 0.0, 1.0, 1.0), source.tracer)[0])  # (function, window)
         one_shot.append(time.perf_counter() - t0)
     slider = []
     for value in (60, 70, 80, 65, 55, 45, 40, 50):  # opacity-scale moves, each to its first frame on the page
