@@ -15,7 +15,7 @@ from clwave.device import memory
 from clwave.io.clw import MASK_CHUNK, FileMask, detail_energy
 from clwave.model.wavelet import importance_of
 from clwave.raytrace import passes
-from clwave.raytrace.staged import coarse_volume
+from clwave.raytrace.staged import StagedTracer, coarse_volume
 from clwave.raytrace.tracer import RayTracer
 from test_bricks import out_of_core_model, smooth_rgba, smooth_volume
 
@@ -196,6 +196,13 @@ def test_a_set_up_given_up_stops_between_two_slabs_of_its_expansion(model_file, 
     monkeypatch.setattr(FileMask, "box", give_up_after_one)
     staged.start()
     assert staged.wait() is None and len(asked) == 2 and staged._failure is None
+    # the model a caller holds (whole=, the viewer's): the set-up given up, the caller's mask still reads
+    held = WaveletVolume.open(model_file)
+    staged = StagedTracer(RayTracer, model_file, whole=lambda: held)
+    staged.start()
+    assert staged.wait() is None and staged._failure is None and held.content_mask.abandon is None
+    monkeypatch.setattr(FileMask, "box", box)
+    assert held.content_mask.box((0, 0, 0), (2, 2, 2)).shape == (2, 2, 2)
 
 
 def test_a_tracer_of_chosen_details_refuses_others_in_one_line():

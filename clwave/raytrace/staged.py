@@ -72,8 +72,8 @@ class StagedTracer:
             wv = WaveletVolume.open(path) if whole is None else whole()
             if self._abandon.is_set():
                 return
-            if isinstance(wv.content_mask, FileMask):  # the expansion asks it for boxes slab by slab
-                wv.content_mask.abandon = self._abandon
+            if isinstance(wv.content_mask, FileMask):  # the expansion asks it for boxes slab by slab; the mask
+                wv = wv.masked(wv.content_mask.watched(self._abandon))  # may be the caller's too (whole=)
             full = tracer_class(wv, device=cc, device_memory=device_memory, lod=lod)
         except Abandoned:
             return
