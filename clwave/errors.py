@@ -82,3 +82,13 @@ def finite_number(value, name) -> float:
     if number != number or number in (float("inf"), float("-inf")):
         raise InputError(f"{name}={number} must be finite")
     return number
+
+
+def whole_number(value) -> bool:
+    """Whether ``value`` is a whole number: an int, or a finite real without a fraction (not a bool or a string)."""
+    if isinstance(value, (bool, str, bytes)):
+        return False
+    try:
+        return float(value).is_integer()
+    except (TypeError, ValueError, OverflowError):
+        return False

@@ -119,6 +119,9 @@ def test_error_and_budget_stop_early():
     assert len(list(tr.refine(cam, tolerance=1e-2, budget=1e-9))) == 1  # the first frame is always made
     with pytest.raises(InputError, match="error"):
         tr.refine(cam, error=2.0)
+    for steps in (0, 2.5, "two", float("nan")):
+        with pytest.raises(InputError, match="whole number of frames"):
+            tr.refine(cam, steps=steps)
 
 
 def test_an_abandoned_refinement_leaves_the_tracer_as_it_was(monkeypatch):

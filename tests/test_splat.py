@@ -219,8 +219,8 @@ def test_scaling_functions_only_and_local_detail(cc, data):
     assert np.abs(image - exact).max() <= 5e-3 * np.abs(exact).max()
 
 
-@pytest.mark.parametrize("bad", [dict(steps=0), dict(steps=2.5), dict(budget=0), dict(budget=-1.0),
-                                 dict(steps=2, budget=1.0), dict()])
+@pytest.mark.parametrize("bad", [dict(steps=0), dict(steps=2.5), dict(steps="two"), dict(steps=float("nan")),
+                                 dict(budget=0), dict(budget=-1.0), dict(steps=2, budget=1.0), dict()])
 def test_bad_progressive_arguments(cc, data, bad):
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "haar", levels=1)
     with pytest.raises(InputError) as err:

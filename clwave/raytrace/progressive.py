@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, whole_number
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..frames import ErrorEstimate, FinalImage, Frame, check_error, reached
@@ -80,7 +80,7 @@ def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=
     ``final``: the :class:`~clwave.frames.FinalImage` the frames measure against (one of ``tracer``'s renders of
     ``camera`` with ``options``), where frames made before these share it."""
     check_error(error)
-    if steps is not None and (isinstance(steps, bool) or int(steps) != steps or steps < 1):
+    if steps is not None and (not whole_number(steps) or steps < 1):
         raise InputError(f"steps={steps!r} must be a whole number of frames, at least 1",
                          cli=f"--steps {steps} must be a whole number of frames, at least 1")
     if budget is not None and not (np.isfinite(budget) and budget > 0):

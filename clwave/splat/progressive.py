@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.camera import Camera
-from ..errors import InputError
+from ..errors import InputError, whole_number
 from ..frames import FinalImage, Frame, check_error, reached
 from .renderer import SplatRenderer, shared_renderer
 from .estimate import SplatEstimate
@@ -46,7 +46,7 @@ def check_schedule(steps, budget):
     if (steps is None) == (budget is None):
         raise InputError("give exactly one of steps= (number of frames) or budget= (seconds)",
                          cli="give one of --steps N or --budget SECONDS")
-    if steps is not None and (isinstance(steps, bool) or int(steps) != steps or not 1 <= steps <= MAX_STEPS):
+    if steps is not None and (not whole_number(steps) or not 1 <= steps <= MAX_STEPS):
         raise InputError(f"steps={steps!r} must be a whole number from 1 to {MAX_STEPS} (each frame doubles "
                          f"the coefficients)", cli=f"--steps {steps} must be a whole number from 1 to {MAX_STEPS}")
     if budget is not None and not (np.isfinite(budget) and budget > 0):

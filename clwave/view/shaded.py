@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import threading
 import time
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,7 +126,7 @@ class ShadedSource(Source):
         ``(None, None)`` for an RGBA model."""
         if not self.scalar:
             return None, None
-        key = (spec, id(tracer))
+        key = (spec, weakref.ref(tracer))  # not id(): a tracer let go may leave its id to the next
         if self._tf[0] != key:
             name, *change = (None, 0.0, 1.0, 1.0) if spec is None else spec
             tf = self.start_tf if name is None else TransferFunction.preset(name)
