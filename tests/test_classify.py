@@ -606,13 +606,17 @@ def test_command_line(tmp_path, capsys):
     for argv, needle in (([rgba, "--tf", "hydrogen"], "4 channels"),
                          ([scalar, "--tf", "hydrogen", "--field", "wavelet"], "--field bspline"),
                          ([scalar, "--tf-window", "0,1"], "--tf too"),
-                         ([scalar], "--tf PRESET")):
+                         ([scalar], "--tf PRESET"),
+                         ([scalar, "--tf", "ct-bone"], "values lie within")):  # HU on a model of other units
         code, out, err = run("render", *argv, "--method", "raytrace", "--size", "8", "-o", tmp_path / "x.png")
         assert code == 2 and needle in err and err.count("\n") == 1, err
     code, out, err = run("compress", "phantom:hydrogen:16", "--tf", "mri", "--classify", "post", "--tf-window", "auto",
                          "-o", tmp_path / "auto.clw")
     assert code == 0 and isinstance(WaveletVolume.open(tmp_path / "auto.clw").transfer_function["window"], list)
     assert not (tmp_path / "x.png").exists()
+    code, out, err = run("progressive", scalar, "--method", "raytrace", "--tf", "ct-bone", "--size", "8",
+                         "-o", tmp_path / "x.gif")
+    assert code == 2 and "no value of this model any opacity" in err and not (tmp_path / "x.gif").exists()
 
 
 def test_slabs_composite_to_the_whole_image(hydrogen):

@@ -50,6 +50,8 @@ def run(args):
         options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering
     frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device, method=args.method,
                               error=args.error, device_memory=device_memory, **options))
+    if frames[-1].meta.get("nothing_visible"):  # every frame blank: not what was asked for (docs/raytracing.md §10)
+        raise InputError(frames[-1].meta["nothing_visible"])
     window = parse_window(args)
     if window == "auto" and frames[-1].result().is_xray:  # the final image's window for every frame
         window = resolve_window(frames[0].final_image()[..., :3], "auto")

@@ -65,6 +65,8 @@ def run(args):
         [camera.rotated(360.0 * i / args.turntable) for i in range(args.turntable)]
     with cluster as client:
         results = [render(cam) for cam in cameras]
+    if results[0].meta.get("nothing_visible"):  # a blank image is not what was asked for (docs/raytracing.md §10)
+        raise InputError(results[0].meta["nothing_visible"])
     if args.turntable is None:
         result = results[0]
         result.save(out, window=window, background=background, overwrite=args.force)

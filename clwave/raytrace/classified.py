@@ -95,6 +95,7 @@ class Classification:
     grad_floor: float       # world gradients of the scalar this short are flat
     seconds: float          # what the change of transfer function cost
     range: cla.Array        # the detail's range per block that the bounds come from
+    opacity: float          # the largest opacity it gives any block: 0, nothing to see
 
 
 class ScalarRange:
@@ -162,6 +163,18 @@ class ScalarRange:
                              "give the window (lo, hi) (--tf-window LO,HI)")
         return auto_window(self.sample)
 
+    def invisible(self, post: Classification) -> str | None:
+        """Why ``post`` draws nothing (its transfer function gives no block of the model any opacity: most often a
+        window in other units than the model's, HU on a model of attenuation), in a line naming the fix; else None."""
+        if post.opacity > 0:
+            return None
+        lo, hi = post.tf.data_points(post.window)[[0, -1]]
+        values = None if self.slot_range is None else (self.slot_range[..., 0].min(), self.slot_range[..., 1].max())
+        held = "" if values is None else f"; this model's values lie within {values[0]:.4g} .. {values[1]:.4g}"
+        return (f"the transfer function {post.tf.name or ''} gives no value of this model any opacity (its points "
+                f"span {lo:.4g} .. {hi:.4g}{held}): give a window in the model's units (--tf-window LO,HI) or another "
+                f"function")
+
     def classify(self, tf, cc, real, at=None) -> Classification:
         """The kernel arguments of ``tf`` at the detail of ``at`` (default full detail), reused while the transfer
         function, detail and precision stay the same (its ``seconds`` then 0: what this render paid)."""
@@ -183,7 +196,8 @@ class ScalarRange:
         values = tf.data_points(window)
         floor = max(self.noise_floor, FLAT * (values[-1] - values[0]) / self.spacing)
         self.last = Classification(tf, window, cla.to_device(q, table.astype(real)), bound, super_bound,
-                                   at.super_origin, at.box, floor, 0.0, ranges)
+                                   at.super_origin, at.box, floor, 0.0, ranges,
+                                   float(super_bound.get().max(initial=0.0)))
         q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last

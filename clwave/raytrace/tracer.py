@@ -463,7 +463,7 @@ class RayTracer:
         if post is not None:
             meta.update(classification="post", transfer_function=post.tf.to_dict(),
                         tf_window=None if post.window is None else list(post.window),
-                        classify_seconds=post.seconds)
+                        classify_seconds=post.seconds, nothing_visible=self.scalar.invisible(post))
         if self.field == "bspline":
             meta.update(bricks=len(at.slots), brick_levels=np.bincount(self.bricks.levels[at.slots]).tolist(),
                         brick_slots=len(self.bricks.levels), brick_pool_bytes=self.bricks.pool_bytes,
