@@ -54,11 +54,12 @@ class SplatEstimate:
 
     The rest's image is predicted as ``A + D``: ``A`` the approximation band's footprints drawn signed (Gaussians
     of the band's energy and variance ``order / 12`` per axis, times ``2^L`` voxels), ``D`` the detail bands' as
-    an energy density ``V`` (each footprint's energy, :func:`band_energies`, spread as a Gaussian of
-    :data:`DETAIL_WIDTH` ``2^m`` voxels).  The relative RMS is ``sqrt(mean(A^2 + V))`` and the relative maximum
-    ``max(|A| + CREST sqrt(V))`` (a field of many oscillating footprints peaks near three of its local RMS), both
-    over the largest magnitude of ``frame + A``, the final image as predicted; times margins (docs/splatting.md §5
-    has their measured rates).  A perspective view magnifies each coefficient by its depth.
+    an energy density ``V`` per channel (each footprint's energy, :func:`band_energies`, times the coefficient's
+    value in that channel squared, spread as a Gaussian of :data:`DETAIL_WIDTH` ``2^m`` voxels).  The relative RMS
+    is ``sqrt(mean(A^2 + V))`` and the relative maximum ``max(|A| + CREST sqrt(V))`` (a field of many oscillating
+    footprints peaks near three of its local RMS), both over the largest magnitude of ``frame + A``, the final image
+    as predicted; times margins (docs/splatting.md §5 has their measured rates).  A perspective view magnifies each
+    coefficient by its depth.
     """
 
     RMS_MARGIN, MAX_MARGIN, CREST = 2.0, 1.7, 3.0
@@ -97,7 +98,7 @@ class SplatEstimate:
         shape = (self.rows + 2 * self.pad, self.cols + 2 * self.pad)
         for gr in self.groups:
             gr["signed"] = np.zeros((len(gr["channels"]),) + shape)
-            gr["detail"] = np.zeros((MAX_LEVELS,) + shape)
+            gr["detail"] = np.zeros((len(gr["channels"]), MAX_LEVELS) + shape)  # per channel: docs/splatting.md §5
             self._deposit(gr, 0, gr["count"], +1.0)
 
     def _sigmas(self, gr) -> tuple:
@@ -132,10 +133,11 @@ class SplatEstimate:
             approx = band % 8 == 0
             # the approximation: a Gaussian of the band's energy, integral^2 / (4 pi s_r s_c) in pixels
             amp = np.sqrt(energy[approx] * 4.0 * np.pi * np.prod(approx_sigma) * self.cell ** 2)
-            for ch in range(values.shape[1]):
+            detail = ~approx
+            for ch in range(values.shape[1]):  # each channel's own: their details' energies differ
                 _bilinear(gr["signed"][ch:ch + 1], 0, row[approx], col[approx], sign * values[approx, ch] * amp)
-            power = energy * np.sum(values ** 2, axis=1)
-            _bilinear(gr["detail"], band[~approx] // 8, row[~approx], col[~approx], sign * power[~approx])
+                _bilinear(gr["detail"][ch], band[detail] // 8, row[detail], col[detail],
+                          sign * energy[detail] * values[detail, ch] ** 2)
 
     def add(self, image: np.ndarray, done: int) -> tuple:
         """(relative RMS, relative max) estimated for ``image`` after ``done`` coefficients of every group."""
@@ -147,8 +149,7 @@ class SplatEstimate:
             inside = (slice(self.pad, self.pad + self.rows), slice(self.pad, self.pad + self.cols))
             for i, ch in enumerate(gr["channels"]):
                 signed[..., ch] = _blur([gr["signed"][i]], [approx_sigma])[inside]
-            power = _blur(gr["detail"], detail_sigma)[inside]
-            variance[..., gr["channels"]] = np.maximum(power, 0.0)[..., None] / len(gr["channels"])
+                variance[..., ch] = np.maximum(_blur(gr["detail"][i], detail_sigma)[inside], 0.0)
         self.done = done
         signed /= self.cell ** 2  # per cell -> per pixel
         variance /= self.cell ** 2
