@@ -89,11 +89,22 @@ def test_the_estimate_holds_on_four_channel_cone_views():
                                               elevation=25)) for f in (3.0, 8.0) for azimuth in (40, 130)], levels=3)
 
 
-def _assert_the_bar(cases, levels=2):
+def test_the_estimate_holds_for_order_6_on_smooth_and_noisy_volumes():
+    # the bar as above for the quintic wavelet (detail supports of 11 lattice steps, the cubic 7), orthographic and
+    # cone beam; on piecewise-constant volumes it does not hold yet (docs/known-gaps.md §15)
+    rng = np.random.default_rng(6)
+    cases = []
+    for volume in (clwave.Volume(gaussian_filter(rng.standard_normal((20, 20, 20)), 1.5).astype(np.float32)),
+                   clwave.Volume(rng.random((16, 16, 16)).astype(np.float32))):
+        cases += [(volume, _projection("orthographic", volume)), (volume, _projection("cone", volume))]
+    _assert_the_bar(cases, wavelet="quintic")
+
+
+def _assert_the_bar(cases, levels=2, wavelet="cubic"):
     """Issue #30's bar over the intermediate frames of each (volume, camera) at 5 % and 30 % kept, RMS and max."""
     rms, top = [], []
     for volume, camera in cases:
-        wv = clwave.WaveletVolume.from_volume(volume, levels=levels)
+        wv = clwave.WaveletVolume.from_volume(volume, wavelet=wavelet, levels=levels)
         for keep in (0.05, 0.3):
             for frame in list(clwave.progressive(wv.threshold(keep=keep), camera, steps=8))[:-1]:
                 f = frame.figures()
