@@ -17,8 +17,9 @@ from ..model.geometry import band_lattice, fine_to_world, spacing_xyz
 from .spectral import centred_fourier
 from .tables import MAX_LEVELS
 
-SLICE_POINTS = 64  # per side of the slice grid integrating a band's footprint energy (docs/splatting.md §5), times
-#                   the spacings' largest ratio (the finest spectral lobe is 2 pi / max(d) wide), up to 8 times
+SLICE_POINTS = 12  # per side of the slice grid integrating a band's footprint energy (docs/splatting.md §5), per
+#                   lattice step of the widest support S (its spectral lobes are 2 pi / (S max(d)) wide; 64 points at
+#                   least), times the spacings' largest ratio, up to 8 times
 
 GRID = 64  # cells per side, at most, of the estimate's maps (an image larger than this: cells of several pixels;
 #            docs/splatting.md §5 has the rates at 64 and 256)
@@ -38,7 +39,8 @@ def band_energies(wavelet, spacing, view) -> np.ndarray:
     """
     d_xyz = np.asarray(spacing, float)[::-1]
     reach = 16.0 * np.pi / float(np.min(d_xyz))  # |G|^2 is below 1e-6 of its peak beyond 16 pi / d
-    grid = np.linspace(-reach, reach, int(SLICE_POINTS * min(8.0, np.ceil(np.max(d_xyz) / np.min(d_xyz)))))
+    points = max(64, SLICE_POINTS * max(wavelet.support("a"), wavelet.support("d")))
+    grid = np.linspace(-reach, reach, int(points * min(8.0, np.ceil(np.max(d_xyz) / np.min(d_xyz)))))
     U, V = np.meshgrid(grid, grid)
     power = [{letter: np.abs(centred_fourier(wavelet, letter, d_xyz[a] * (U * view.u[a] + V * view.v[a]))) ** 2
               for letter in "ad"} for a in range(3)]
