@@ -25,7 +25,7 @@ def test_band_energies_are_the_projected_functions_energies(order):
     wav = wavelet_for(order)
     view = _view(30.0, 20.0)
     got = band_energies(wav, (1.0, 1.0, 1.0), view)[:8]
-    h = {2: 0.1, 4: 0.2, 6: 0.3}[order]  # smoother functions: coarser quadrature, the same accuracy (order 6's psi,
+    h = {2: 0.1, 4: 0.2, 6: 0.4}[order]  # smoother functions: coarser quadrature, the same accuracy (order 6's psi,
     #                                      11 lattice steps wide, was 20 % off on a 64-point slice grid)
     reach = np.sqrt(3.0) * max(wav.support("a"), wav.support("d")) / 2 + 1.0
     s = np.arange(-reach, reach + h / 2, h)
