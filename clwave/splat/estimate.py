@@ -99,7 +99,7 @@ class SplatEstimate:
             self.obliquity = view.obliquity()[self.cell // 2::self.cell, self.cell // 2::self.cell, None]
         shape = (self.rows + 2 * self.pad, self.cols + 2 * self.pad)
         for gr in self.groups:
-            gr["signed"] = np.zeros((len(gr["channels"]),) + shape)
+            gr["signed"] = np.zeros((len(gr["channels"]), 1) + shape)
             gr["detail"] = np.zeros((len(gr["channels"]), MAX_LEVELS) + shape)  # per channel: docs/splatting.md §5
             self._deposit(gr, 0, gr["count"], +1.0)
 
@@ -136,10 +136,10 @@ class SplatEstimate:
             # the approximation: a Gaussian of the band's energy, integral^2 / (4 pi s_r s_c) in pixels
             amp = np.sqrt(energy[approx] * 4.0 * np.pi * np.prod(approx_sigma) * self.cell ** 2)
             detail = ~approx
-            for ch in range(values.shape[1]):  # each channel's own: their details' energies differ
-                _bilinear(gr["signed"][ch:ch + 1], 0, row[approx], col[approx], sign * values[approx, ch] * amp)
-                _bilinear(gr["detail"][ch], band[detail] // 8, row[detail], col[detail],
-                          sign * energy[detail] * values[detail, ch] ** 2)
+            _bilinear(gr["signed"], 0, row[approx], col[approx], sign * values[approx] * amp[:, None])
+            # each channel's own energy: their details differ
+            _bilinear(gr["detail"], band[detail] // 8, row[detail], col[detail],
+                      sign * energy[detail, None] * values[detail] ** 2)
 
     def add(self, image: np.ndarray, done: int) -> tuple:
         """(relative RMS, relative max) estimated for ``image`` after ``done`` coefficients of every group."""
@@ -150,7 +150,7 @@ class SplatEstimate:
             approx_sigma, detail_sigma = self._sigmas(gr)
             inside = (slice(self.pad, self.pad + self.rows), slice(self.pad, self.pad + self.cols))
             for i, ch in enumerate(gr["channels"]):
-                signed[..., ch] = _blur([gr["signed"][i]], [approx_sigma])[inside]
+                signed[..., ch] = _blur(gr["signed"][i], [approx_sigma])[inside]
                 variance[..., ch] = np.maximum(_blur(gr["detail"][i], detail_sigma)[inside], 0.0)
         self.done = done
         signed /= self.cell ** 2  # per cell -> per pixel
@@ -171,17 +171,18 @@ def _lattices(wav) -> tuple:
     return tuple(np.array([b[i] for b in bands]) for i in range(3))
 
 
-def _bilinear(grids, layer, row, col, weight):
-    """Add weights at fractional (row, col) of layers of a stack of 2-D grids, shared by the four nearest cells (off
-    the grid: none)."""
+def _bilinear(stacks, layer, row, col, weights):
+    """Add weights (n, k) at fractional (row, col) of layers of k stacks of 2-D grids (k, layers, rows, cols), one
+    column a stack, shared by the four nearest cells (off the grid: none)."""
     r0, c0 = np.floor(row).astype(np.int64), np.floor(col).astype(np.int64)
     fr, fc = row - r0, col - c0
-    _, rows, cols = grids.shape
+    _, layers, rows, cols = stacks.shape
     r, c = np.concatenate([r0, r0, r0 + 1, r0 + 1]), np.concatenate([c0, c0 + 1, c0, c0 + 1])
-    w = np.concatenate([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc]) * np.tile(weight, 4)
+    share = np.concatenate([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc])
     ok = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-    flat = (np.tile(np.broadcast_to(layer, r0.shape), 4) * rows + r) * cols + c
-    grids += np.bincount(flat[ok], w[ok], minlength=grids.size).reshape(grids.shape)
+    flat = ((np.tile(np.broadcast_to(layer, r0.shape), 4) * rows + r) * cols + c)[ok]
+    for stack, weight in zip(stacks, weights.T):
+        stack += np.bincount(flat, (share * np.tile(weight, 4))[ok], minlength=stack.size).reshape(stack.shape)
 
 
 def _blur(grids, sigmas) -> np.ndarray:
