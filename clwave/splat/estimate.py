@@ -17,8 +17,9 @@ from ..model.geometry import band_lattice, fine_to_world, spacing_xyz
 from .spectral import centred_fourier
 from .tables import MAX_LEVELS
 
-SLICE_POINTS = 64  # per side of the slice grid integrating a band's footprint energy (docs/splatting.md §5), times
-#                   the spacings' largest ratio (the finest spectral lobe is 2 pi / max(d) wide), up to 8 times
+SLICE_POINTS = 12  # per side of the slice grid integrating a band's footprint energy (docs/splatting.md §5), per
+#                   lattice step of the widest support S (its spectral lobes are 2 pi / (S max(d)) wide; 64 points at
+#                   least), times the spacings' largest ratio, up to 8 times
 
 GRID = 64  # cells per side, at most, of the estimate's maps (an image larger than this: cells of several pixels;
 #            docs/splatting.md §5 has the rates at 64 and 256)
@@ -38,7 +39,8 @@ def band_energies(wavelet, spacing, view) -> np.ndarray:
     """
     d_xyz = np.asarray(spacing, float)[::-1]
     reach = 16.0 * np.pi / float(np.min(d_xyz))  # |G|^2 is below 1e-6 of its peak beyond 16 pi / d
-    grid = np.linspace(-reach, reach, int(SLICE_POINTS * min(8.0, np.ceil(np.max(d_xyz) / np.min(d_xyz)))))
+    points = max(64, SLICE_POINTS * max(wavelet.support("a"), wavelet.support("d")))
+    grid = np.linspace(-reach, reach, int(points * min(8.0, np.ceil(np.max(d_xyz) / np.min(d_xyz)))))
     U, V = np.meshgrid(grid, grid)
     power = [{letter: np.abs(centred_fourier(wavelet, letter, d_xyz[a] * (U * view.u[a] + V * view.v[a]))) ** 2
               for letter in "ad"} for a in range(3)]
@@ -54,11 +56,12 @@ class SplatEstimate:
 
     The rest's image is predicted as ``A + D``: ``A`` the approximation band's footprints drawn signed (Gaussians
     of the band's energy and variance ``order / 12`` per axis, times ``2^L`` voxels), ``D`` the detail bands' as
-    an energy density ``V`` (each footprint's energy, :func:`band_energies`, spread as a Gaussian of
-    :data:`DETAIL_WIDTH` ``2^m`` voxels).  The relative RMS is ``sqrt(mean(A^2 + V))`` and the relative maximum
-    ``max(|A| + CREST sqrt(V))`` (a field of many oscillating footprints peaks near three of its local RMS), both
-    over the largest magnitude of ``frame + A``, the final image as predicted; times margins (docs/splatting.md §5
-    has their measured rates).  A perspective view magnifies each coefficient by its depth.
+    an energy density ``V`` per channel (each footprint's energy, :func:`band_energies`, times the coefficient's
+    value in that channel squared, spread as a Gaussian of :data:`DETAIL_WIDTH` ``2^m`` voxels).  The relative RMS
+    is ``sqrt(mean(A^2 + V))`` and the relative maximum ``max(|A| + CREST sqrt(V))`` (a field of many oscillating
+    footprints peaks near three of its local RMS), both over the largest magnitude of ``frame + A``, the final image
+    as predicted; times margins (docs/splatting.md §5 has their measured rates).  A perspective view magnifies each
+    coefficient by its depth.
     """
 
     RMS_MARGIN, MAX_MARGIN, CREST = 2.0, 1.7, 3.0
@@ -98,8 +101,8 @@ class SplatEstimate:
             self.obliquity = view.obliquity()[np.ix_(rows, cols)][..., None]
         shape = (self.rows + 2 * self.pad, self.cols + 2 * self.pad)
         for gr in self.groups:
-            gr["signed"] = np.zeros((len(gr["channels"]),) + shape)
-            gr["detail"] = np.zeros((MAX_LEVELS,) + shape)
+            gr["signed"] = np.zeros((len(gr["channels"]), 1) + shape)
+            gr["detail"] = np.zeros((len(gr["channels"]), MAX_LEVELS) + shape)  # per channel: docs/splatting.md §5
             self._deposit(gr, 0, gr["count"], +1.0)
 
     def _sigmas(self, gr) -> tuple:
@@ -134,10 +137,11 @@ class SplatEstimate:
             approx = band % 8 == 0
             # the approximation: a Gaussian of the band's energy, integral^2 / (4 pi s_r s_c) in pixels
             amp = np.sqrt(energy[approx] * 4.0 * np.pi * np.prod(approx_sigma) * self.cell ** 2)
-            for ch in range(values.shape[1]):
-                _bilinear(gr["signed"][ch:ch + 1], 0, row[approx], col[approx], sign * values[approx, ch] * amp)
-            power = energy * np.sum(values ** 2, axis=1)
-            _bilinear(gr["detail"], band[~approx] // 8, row[~approx], col[~approx], sign * power[~approx])
+            detail = ~approx
+            _bilinear(gr["signed"], 0, row[approx], col[approx], sign * values[approx] * amp[:, None])
+            # each channel's own energy: their details differ
+            _bilinear(gr["detail"], band[detail] // 8, row[detail], col[detail],
+                      sign * energy[detail, None] * values[detail] ** 2)
 
     def add(self, image: np.ndarray, done: int) -> tuple:
         """(relative RMS, relative max) estimated for ``image`` after ``done`` coefficients of every group."""
@@ -148,9 +152,8 @@ class SplatEstimate:
             approx_sigma, detail_sigma = self._sigmas(gr)
             inside = (slice(self.pad, self.pad + self.rows), slice(self.pad, self.pad + self.cols))
             for i, ch in enumerate(gr["channels"]):
-                signed[..., ch] = _blur([gr["signed"][i]], [approx_sigma])[inside]
-            power = _blur(gr["detail"], detail_sigma)[inside]
-            variance[..., gr["channels"]] = np.maximum(power, 0.0)[..., None] / len(gr["channels"])
+                signed[..., ch] = _blur(gr["signed"][i], [approx_sigma])[inside]
+                variance[..., ch] = np.maximum(_blur(gr["detail"][i], detail_sigma)[inside], 0.0)
         self.done = done
         signed /= self.cell ** 2  # per cell -> per pixel
         variance /= self.cell ** 2
@@ -170,17 +173,18 @@ def _lattices(wav) -> tuple:
     return tuple(np.array([b[i] for b in bands]) for i in range(3))
 
 
-def _bilinear(grids, layer, row, col, weight):
-    """Add weights at fractional (row, col) of layers of a stack of 2-D grids, shared by the four nearest cells (off
-    the grid: none)."""
+def _bilinear(stacks, layer, row, col, weights):
+    """Add weights (n, k) at fractional (row, col) of layers of k stacks of 2-D grids (k, layers, rows, cols), one
+    column a stack, shared by the four nearest cells (off the grid: none)."""
     r0, c0 = np.floor(row).astype(np.int64), np.floor(col).astype(np.int64)
     fr, fc = row - r0, col - c0
-    _, rows, cols = grids.shape
+    _, layers, rows, cols = stacks.shape
     r, c = np.concatenate([r0, r0, r0 + 1, r0 + 1]), np.concatenate([c0, c0 + 1, c0, c0 + 1])
-    w = np.concatenate([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc]) * np.tile(weight, 4)
+    share = np.concatenate([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc])
     ok = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
-    flat = (np.tile(np.broadcast_to(layer, r0.shape), 4) * rows + r) * cols + c
-    grids += np.bincount(flat[ok], w[ok], minlength=grids.size).reshape(grids.shape)
+    flat = ((np.tile(np.broadcast_to(layer, r0.shape), 4) * rows + r) * cols + c)[ok]
+    for stack, weight in zip(stacks, weights.T):
+        stack += np.bincount(flat, (share * np.tile(weight, 4))[ok], minlength=stack.size).reshape(stack.shape)
 
 
 def _blur(grids, sigmas) -> np.ndarray:
