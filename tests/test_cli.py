@@ -222,9 +222,20 @@ def test_model_options_on_a_clw_input_are_errors_that_name_them(tmp_path, capsys
         named = [flag for flag in option if flag.startswith("--")]
         assert code == 2 and all(flag in err for flag in named) and ".clw" in err and err.count("\n") == 1
     assert not (tmp_path / "x.png").exists()
+    # --tf alone on a scalar .clw while splatting: the fix is ray tracing, where it classifies
+    code, out, err = run(capsys, "render", str(model), "--tf", "mri", "--size", "8", "-o", str(tmp_path / "x.png"))
+    assert code == 2 and "add --method raytrace" in err
     # a scalar model cannot be ray traced shaded: the message names the command line's way out
     code, out, err = run(capsys, "render", str(model), "--method", "raytrace", "-o", str(tmp_path / "x.png"))
     assert code == 2 and "--xray" in err and "absorption=" not in err
+    # nor an RGB one, which only a classified volume's model renders shaded (no --tf while rendering)
+    rgb = tmp_path / "rgb.npy"
+    np.save(rgb, np.random.default_rng(0).random((8, 8, 8, 3)).astype(np.float32))
+    assert run(capsys, "compress", str(rgb), "--levels", "1", "-o", str(tmp_path / "rgb.clw"))[0] == 0
+    code, out, err = run(capsys, "render", str(tmp_path / "rgb.clw"), "--method", "raytrace", "-o",
+                         str(tmp_path / "x.png"))
+    assert code == 2 and "3 channel" in err and "compress the original volume with --tf" in err
+    assert "classify it while rendering" not in err
 
 
 @pytest.mark.parametrize("argv, needle", [

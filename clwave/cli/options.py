@@ -177,14 +177,23 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                  and not (cluster_render and name in ("workers", "scheduler"))
                  and not ((rgba or post) and name in ("tf", "tf_window"))]  # a scalar .clw: classified while rendering
         if given:
+            them = 'them' if len(given) > 1 else 'it'
+            if set(given) <= {"--tf", "--tf-window"} and hasattr(args, "xray") and args.method == "splat":
+                # render and progressive: a scalar .clw takes them while ray tracing
+                verb = 'classify' if len(given) > 1 else 'classifies'
+                raise InputError(f"{', '.join(given)} {verb} a scalar .clw while ray tracing: add --method raytrace "
+                                 f"(splatting draws line integrals of the model as it is), or compress the original "
+                                 f"volume with {them}")
             raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
-                             f"already; compress the original volume with {'them' if len(given) > 1 else 'it'}")
+                             f"already; compress the original volume with {them}")
         if opener is not None and args.threshold is None and args.focus is None:
             return opener(args.input, args.keep), None
         wv = WaveletVolume.open(args.input, keep=args.keep if args.focus is None else None)
         if rgba and wv.channels != 4 and post_transfer_function(args, wv) is None:
             raise _needs_rgba(args.input, wv.channels, "give --tf PRESET to classify it while rendering, or "
-                                                       "compress the volume with --tf PRESET")
+                                                       "compress the volume with --tf PRESET" if wv.channels == 1 else
+                              "compress the original volume with --tf PRESET (its colours kept, the preset's "
+                              "opacity of their luminance)")
         if args.threshold is not None or args.focus is not None:  # --keep alone: a prefix of the file
             wv = wv.threshold(**thresholding)
         return wv, None
