@@ -122,6 +122,22 @@ def _assert_the_bar(cases, levels=2, wavelet="cubic"):
         assert np.mean(ratio >= 1) >= 0.95 and np.mean(ratio <= 4) >= 0.95, np.sort(ratio)
 
 
+def test_a_zoomed_view_keeps_the_estimate_small(monkeypatch):
+    # the widest footprint over 3 image widths: cells of several pixels keep the margin within GRID cells (it grew
+    # as the zoom, the maps with its square), and the estimates still bound the error (RMS and max, within 4x)
+    from clwave.splat import estimate
+
+    made, init = [], estimate.SplatEstimate.__init__
+    monkeypatch.setattr(estimate.SplatEstimate, "__init__", lambda self, r, view: (init(self, r, view),
+                                                                                  made.append(self))[0])
+    wv = clwave.WaveletVolume.from_volume(phantom("marschner-lobb", 16), levels=3).threshold(keep=0.3)
+    frames = list(clwave.progressive(wv, clwave.Camera(30, 20, 64, extent=3.0), steps=6))[:-1]
+    assert made[0].cell > 1 and made[0].pad <= estimate.GRID + 2
+    for f in (frame.figures() for frame in frames):
+        for kind in ("rms", "max"):
+            assert 1 <= f[f"estimated_relative_{kind}_error"] / f[f"relative_{kind}_error"] <= 4, f
+
+
 def test_error_stops_at_the_first_frame_estimated_within_it():
     volume = clwave.Volume(gaussian_filter(np.random.default_rng(7).standard_normal((20, 20, 20)), 1.5)
                            .astype(np.float32))

@@ -94,6 +94,16 @@ class SplatEstimate:
         self.scale = pixels / max(counted, 1) if view.perspective else view.pixel  # world units per pixel
         widest = max((max(self._sigmas(gr)[0].max(), self._sigmas(gr)[1][: gr["levels"] + 1].max())
                       for gr in self.groups), default=0.0)
+        # zoomed in, the widest footprints span more than the image: cells k times larger keep the margin within
+        # GRID cells (the maps' memory bounded; the finest detail's then still about 2 cells wide)
+        k = max(1, int(np.ceil(3.0 * widest / GRID)))
+        if k > 1:
+            self.cell *= k
+            self.rows, self.cols = -(-H // self.cell), -(-W // self.cell)
+            for gr in self.groups:
+                gr["row"], gr["col"] = ((gr[key] + np.float32(0.5)) / np.float32(k) - np.float32(0.5)
+                                        for key in ("row", "col"))
+            widest /= k
         self.pad = int(np.ceil(3.0 * widest)) + 2
         if view.perspective:  # at the cells' centres (the last cell's within the image, where it is cut short)
             rows, cols = (np.minimum(np.arange(n) * self.cell + self.cell // 2, side - 1)
