@@ -20,7 +20,7 @@ from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
 from ..device.context import ComputeContext
-from ..device.memory import device_budget, format_size, parse_cap
+from ..device.memory import check_buffer, device_budget, format_size, parse_cap
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera
@@ -159,11 +159,8 @@ class SplatRenderer:
                    for g, gr in zip(self.wv.groups, self.groups)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * 16
-        if fb_bytes > self.cc.info.max_alloc:  # the device's own limit; a cap is held by _plan, naming the least
-            H, W = view.size
-            raise DeviceMemoryError(
-                f"a {H}x{W} image needs {fb_bytes / 2**20:.0f} MiB of framebuffers but {self.cc.info.name} "
-                f"allows {self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
+        # the device's own limit here; a cap is held by _plan, which names the least that works
+        check_buffer(self.cc, fb_bytes, "a {}x{} image's framebuffers".format(*view.size), "render a smaller image")
         per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factor}) for layer in layers]
                      for fg in factors]
         if view.perspective:
