@@ -171,3 +171,8 @@ def test_a_nrrd_axis_of_no_voxels_is_named(tmp_path):
     path.write_bytes(path.read_bytes().replace(b"sizes: 6 6 6", b"sizes: 6 0 6"))
     with pytest.raises(clwave.FileFormatError, match="declares sizes 6 0 6; every axis needs at least one voxel"):
         clwave.load(path)
+
+
+def test_a_non_finite_spacing_is_named_in_numbers():
+    with pytest.raises(clwave.InputError, match=r"^spacing \(nan, 1, 1\) must be finite$"):
+        clwave.Volume(CUBE, spacing=(float("nan"), 1.0, 1.0))
