@@ -384,20 +384,24 @@ def test_device_spectra_write_over_their_kept_arrays(cc):
     assert all(np.array_equal(a, b) for a, b in zip(again, fresh)) and len(first) == 3
 
 
-@pytest.mark.parametrize("camera", [
-    clwave.Camera(0, 0, 4, perspective=True, fov=170, distance=50),
-    clwave.Camera(0, 0, 4, perspective=True, fov=179, distance=50),
-    clwave.ConeBeam(100.0, 200.0, (8, 8), pixel=2000.0),  # a detector 16 m wide 20 cm from the source
+@pytest.mark.parametrize("camera, own, foreign", [
+    (clwave.Camera(0, 0, 4, perspective=True, fov=170, distance=50), "Camera fov=", ["ConeBeam", "dsd", "detector"]),
+    (clwave.Camera(0, 0, 4, perspective=True, fov=179, distance=50), "Camera fov=", ["ConeBeam", "dsd", "detector"]),
+    (clwave.ConeBeam(100.0, 200.0, (8, 8), pixel=2000.0),  # a detector 16 m wide 20 cm from the source
+     "smaller detector, ConeBeam size= or pixel=, or a longer dsd=", ["Camera", "fov"]),
 ])
-def test_too_wide_a_cone_is_refused_at_once(camera):
+def test_too_wide_a_cone_is_refused_at_once(camera, own, foreign):
     import time
 
     wv = _model((8, 8, 8), (1.0, 1.0, 1.0), levels=1)
     r = clwave.SplatRenderer(wv)
     start = time.perf_counter()
-    with pytest.raises(clwave.DeviceMemoryError, match=r"too wide .* narrow the cone .* clwave\.raytrace") as err:
+    with pytest.raises(clwave.DeviceMemoryError, match=r"too wide .* narrow the cone .*clwave\.raytrace") as err:
         r.render(camera)
     assert time.perf_counter() - start < 0.5 and "\n" not in str(err.value)
+    # in the camera's own terms (known-gaps §15), the ray tracer beside them
+    assert own in str(err.value) and not any(word in str(err.value) for word in foreign)
+    assert str(err.value).endswith("), or ray-trace it (clwave.raytrace(wv, camera, absorption=False))")
     assert err.value.cli_message(CommandWords("N", "D", "T")).endswith("narrow the cone (N), or ray-trace it (T)")
 
 
@@ -417,10 +421,10 @@ def test_coarse_levels_near_the_source_name_their_fixes():
     vol = clwave.Volume(np.random.default_rng(0).random((16, 16, 16)).astype(np.float32))
     wv = clwave.WaveletVolume.from_volume(vol, levels=3)
     cone = dict(dsd=90.0, size=6, pixel=6.0, azimuth=30, elevation=20)
-    with pytest.raises(InputError, match=r"level-3 .* at most 2 level\(s\), a distance or dso above ([\d.]+), or the "
-                                         r"ray tracer: clwave\.raytrace\(wv, camera, absorption=False\)") as err:
+    with pytest.raises(InputError, match=r"level-3 .* at most 2 level\(s\), a ConeBeam dso= above ([\d.]+), or the "
+                                         r"ray tracer \(clwave\.raytrace\(wv, camera, absorption=False\)\)") as err:
         clwave.splat(wv, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone))
-    assert "\n" not in str(err.value)
+    assert "\n" not in str(err.value) and "Camera" not in str(err.value)
     assert "--levels 2 or fewer, D above" in err.value.cli_message(CommandWords("N", "D", "T"))
     dso = float(re.search(r"above ([\d.]+)", str(err.value)).group(1))
     with pytest.raises(InputError, match="too near"):  # the distance named is the least (to its 4 digits)

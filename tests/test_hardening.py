@@ -490,3 +490,39 @@ def test_progressive_into_an_existing_file_without_a_suffix_is_one_line(tmp_path
     assert capsys.readouterr().err == (f"clwave: error: -o {tmp_path / 'frames'} is a file; name a folder for the "
                                        "PNG frames, or a .gif\n")
     assert (tmp_path / "frames").read_bytes() == b"precious"
+
+
+def test_a_buffer_over_the_limit_names_the_true_fix():
+    # known-gaps §15: a larger device memory where only the user's cap holds the buffer back, else the other fix
+    from types import SimpleNamespace
+
+    from clwave.device.memory import DeviceBudget, check_buffer
+
+    cc = SimpleNamespace(info=SimpleNamespace(max_alloc=64 << 20, global_mem=256 << 20, name="Dev"))
+    capped = DeviceBudget(2 << 20, 2 << 20, 2 << 20)
+    check_buffer(cc, 2 << 20, "x", "fix", capped)  # at the limit: no refusal
+    with pytest.raises(clwave.DeviceMemoryError) as err:
+        check_buffer(cc, 3 << 20, "a 9x9 image", "render a smaller image", capped)
+    assert str(err.value) == ("a 9x9 image needs 3 MiB in one device buffer, more than device_memory=2 MiB allows; "
+                              "give device_memory= at least 3 MiB, or render a smaller image")
+    assert err.value.cli_message() == ("a 9x9 image needs 3 MiB in one device buffer, more than --device-memory "
+                                       "2MiB allows; give --device-memory 3MiB or more, or render a smaller image")
+    with pytest.raises(clwave.DeviceMemoryError, match="device_memory= at least 6 MiB, or F$"):  # half the budget
+        check_buffer(cc, 3 << 20, "w", "F", DeviceBudget(5 << 20, 5 << 20, 5 << 20), share=0.5)
+    for budget in (capped, None, DeviceBudget(256 << 20, 64 << 20)):  # beyond the device's own limit: no cap helps
+        with pytest.raises(clwave.DeviceMemoryError) as err:
+            check_buffer(cc, 65 << 20, "a 9x9 image", "render a smaller image", budget)
+        assert str(err.value) == err.value.cli_message() == (
+            "a 9x9 image needs 65 MiB in one device buffer, but Dev allows 64 MiB whatever the device memory given; "
+            "render a smaller image")
+
+
+def test_an_image_over_the_device_memory_cap_names_a_larger_cap(tmp_path, capsys):
+    from clwave.cli import main
+
+    out = tmp_path / "x.png"
+    argv = ["render", "phantom:hydrogen:8", "--levels", "1", "--method", "raytrace", "--xray", "--size", "300"]
+    assert main([*argv, "--device-memory", "2M", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and not out.exists()
+    assert "more than --device-memory 2MiB allows; give --device-memory 2.8MiB or more" in err

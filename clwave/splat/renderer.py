@@ -20,14 +20,14 @@ from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
 from ..device.context import ComputeContext
-from ..device.memory import device_budget, format_size, parse_cap
+from ..device.memory import check_buffer, device_budget, format_size, parse_cap
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera
 from ..model.wavelet import WaveletVolume
 from .coarse import Layer, coarse_factor
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
-from .perspective import ConeTables, depth_range, drop_share, select_drops
+from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
 
 COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
@@ -159,11 +159,8 @@ class SplatRenderer:
                    for g, gr in zip(self.wv.groups, self.groups)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * 16
-        if fb_bytes > self.cc.info.max_alloc:  # the device's own limit; a cap is held by _plan, naming the least
-            H, W = view.size
-            raise DeviceMemoryError(
-                f"a {H}x{W} image needs {fb_bytes / 2**20:.0f} MiB of framebuffers but {self.cc.info.name} "
-                f"allows {self.cc.info.max_alloc / 2**20:.0f} MiB per buffer; render a smaller image")
+        # the device's own limit here; a cap is held by _plan, which names the least that works
+        check_buffer(self.cc, fb_bytes, "a {}x{} image's framebuffers".format(*view.size), "render a smaller image")
         per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factor}) for layer in layers]
                      for fg in factors]
         if view.perspective:
@@ -171,7 +168,7 @@ class SplatRenderer:
                 self.stage(len(g.channels), True)
             tables = [ConeTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
                                  max_texels=self.cc.info.max_alloc // 4, cache=self._cone_footprints,
-                                 work=self._spectra_work)
+                                 work=self._spectra_work, words=camera_words(camera))
                       for gi, ls in enumerate(per_layer)]
         else:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import logging
+import warnings
+
 import numpy as np
 
 from ...errors import FileFormatError
@@ -9,12 +12,28 @@ from .shared import as_array, check_declared_size, to_canonical
 
 
 def read_nifti(path, chunks):
-    """NIfTI-1/2 through nibabel: RGB24/RGBA32 become channels; time series are refused."""
+    """NIfTI-1/2 through nibabel: RGB24/RGBA32 become channels; time series are refused; a header that cannot
+    describe a 3-D volume (its dimensions, a voxel-to-world affine that is not finite or not invertible, more data
+    than the file holds) is refused in one line before any voxel is read."""
     import nibabel
 
-    image = nibabel.load(path, mmap=False)
-    check_declared_size(path, int(image.header["vox_offset"]),
-                         int(np.prod(image.shape)) * image.header.get_data_dtype().itemsize, image.shape)
+    log = logging.getLogger("nibabel.global")  # nibabel's reports of the header fixes it makes: one line is ours
+    disabled, log.disabled = log.disabled, True
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            image = nibabel.load(path, mmap=False)
+            affine = image.affine
+    finally:
+        log.disabled = disabled
+    if len(image.shape) < 3 or min(image.shape) < 1:
+        raise FileFormatError(f"{path} holds a NIfTI image of shape {image.shape}; clwave reads 3-D volumes with at "
+                              "least one voxel an axis (stack 2-D slices into one first)")
+    if not (np.all(np.isfinite(affine)) and abs(np.linalg.det(affine[:3, :3])) > 0):
+        raise FileFormatError(f"{path}: its voxel-to-world affine (sform, qform or pixdim) is not finite or not "
+                              "invertible; fix the header, e.g. with nibabel's set_sform and set_qform")
+    check_declared_size(path, image.dataobj.offset,
+                        int(np.prod(image.shape)) * image.header.get_data_dtype().itemsize, image.shape)
     proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
     if proxy.ndim > 3:
         # NIfTI keeps time on the 4th axis and vector components on the 5th
@@ -27,4 +46,4 @@ def read_nifti(path, chunks):
     data = as_array(proxy, chunks)
     if data.dtype.names:  # RGB24 / RGBA32 structured samples
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
-    return to_canonical(data, image.affine)
+    return to_canonical(data, affine)

@@ -67,6 +67,9 @@ def _check_nrrd_size(path):
     if encoding != "raw":  # the gzip stream starts after the header; its trailer counts the stream alone
         offset = 0
     sizes = [int(n) for n in header["sizes"]]
+    if min(sizes) < 1:
+        raise FileFormatError(f"{path}: its header declares sizes {' '.join(map(str, sizes))}; every axis needs at "
+                              "least one voxel")
     nbytes = int(np.prod(sizes, dtype=np.float64)) * nrrd.reader._determine_datatype(header).itemsize
     skip = max(int(header.get("byte skip", 0) or 0), 0)
     check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=encoding != "raw")

@@ -248,4 +248,5 @@ def check_declared_size(path, offset, nbytes, shape, gzip=None):
         lies = offset + nbytes > present
     if lies:
         raise FileFormatError(f"{path}: its header declares {' x '.join(map(str, shape))} voxels ({nbytes:,} bytes) "
-                              f"but the file holds {present:,} bytes; it is truncated or its header is wrong")
+                              f"but the file holds {max(present - offset, 0):,} after its {offset:,}-byte header; "
+                              "it is truncated or its header is wrong")
