@@ -396,12 +396,14 @@ def test_too_wide_a_cone_is_refused_at_once(camera, own, foreign):
     wv = _model((8, 8, 8), (1.0, 1.0, 1.0), levels=1)
     r = clwave.SplatRenderer(wv)
     start = time.perf_counter()
-    with pytest.raises(clwave.DeviceMemoryError, match=r"too wide .* narrow the cone .*clwave\.raytrace") as err:
+    with pytest.raises(clwave.DeviceMemoryError,
+                       match=r"too wide .* narrow the cone .*clwave\.RayTracer\(wv, content_clamp=False\)") as err:
         r.render(camera)
     assert time.perf_counter() - start < 0.5 and "\n" not in str(err.value)
     # in the camera's own terms (known-gaps §15), the ray tracer beside them
     assert own in str(err.value) and not any(word in str(err.value) for word in foreign)
-    assert str(err.value).endswith("), or ray-trace it (clwave.raytrace(wv, camera, absorption=False))")
+    assert str(err.value).endswith(
+        "), or ray-trace it (clwave.RayTracer(wv, content_clamp=False).render(camera, absorption=False))")
     assert err.value.cli_message(CommandWords("N", "D", "T")).endswith("narrow the cone (N), or ray-trace it (T)")
 
 
@@ -422,7 +424,8 @@ def test_coarse_levels_near_the_source_name_their_fixes():
     wv = clwave.WaveletVolume.from_volume(vol, levels=3)
     cone = dict(dsd=90.0, size=6, pixel=6.0, azimuth=30, elevation=20)
     with pytest.raises(InputError, match=r"level-3 .* at most 2 level\(s\), a ConeBeam dso= above ([\d.]+), or the "
-                                         r"ray tracer \(clwave\.raytrace\(wv, camera, absorption=False\)\)") as err:
+                                         r"ray tracer \(clwave\.RayTracer\(wv, content_clamp=False\)\.render\(camera, "
+                                         r"absorption=False\)\)") as err:
         clwave.splat(wv, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone))
     assert "\n" not in str(err.value) and "Camera" not in str(err.value)
     assert "--levels 2 or fewer, D above" in err.value.cli_message(CommandWords("N", "D", "T"))

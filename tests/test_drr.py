@@ -96,6 +96,14 @@ def test_drr_ray_traces_the_model_splatting_sees(tmp_path, capsys):
     clamped = clwave.RayTracer(wv).render(ConeBeam(60.0, 90.0, (24, 24), pixel=1.5, azimuth=30, elevation=20),
                                           tolerance=1e-4, absorption=False).image[..., 0]
     assert wv.content_mask is not None and np.abs(clamped - ray).max() > 0.1 * ray.max()
+    # render --xray too: the ray tracer's line integrals of the model splatting draws (the same orthographic view)
+    view = ["render", str(tmp_path / "ball.npy"), "--levels", "2", "--keep", "0.1", "--size", "24", "--azimuth", "30",
+            "--elevation", "20"]
+    assert main(view + ["--method", "raytrace", "--xray", "--tolerance", "1e-4", "--raw", str(tmp_path / "r.npy"),
+                        "-o", str(tmp_path / "r.png")]) == 0
+    assert main(view + ["--raw", str(tmp_path / "s.npy"), "-o", str(tmp_path / "s.png")]) == 0
+    ray, splat = np.load(tmp_path / "r.npy")[..., 0], np.load(tmp_path / "s.npy")[..., 0]
+    assert np.abs(splat - ray).max() <= 1e-2 * ray.max()
     capsys.readouterr()
 
 

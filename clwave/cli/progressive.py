@@ -48,6 +48,10 @@ def run(args):
     wv, _ = build_model(args, rgba=raytrace and not args.xray)
     if raytrace and not args.xray:
         options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering
+    elif raytrace:  # line integrals of the whole model, as splatting draws them (docs/raytracing.md §1)
+        from ..raytrace.tracer import RayTracer
+
+        options["tracer"] = RayTracer(wv, device=args.device, device_memory=device_memory, content_clamp=False)
     frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device, method=args.method,
                               error=args.error, device_memory=device_memory, **options))
     if frames[-1].meta.get("nothing_visible"):  # every frame blank: not what was asked for (docs/raytracing.md §10)

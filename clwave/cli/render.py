@@ -50,7 +50,9 @@ def run(args):
         if on_cluster:
             options.update(device=args.device, field=args.field, device_memory=device_memory)
         else:
-            options["tracer"] = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory)
+            # --xray: line integrals of the whole model, as splatting draws them (docs/raytracing.md §1)
+            options["tracer"] = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory,
+                                          content_clamp=not args.xray)
 
         def render(cam):
             return raytrace(wv, cam, scheduler=client, **options)

@@ -70,7 +70,7 @@ def camera_words(camera) -> CommandWords:
     """The fixes a cone refusal names, in the API's words for ``camera``'s own class (a :class:`ConeBeam`'s
     detector and distances, a perspective :class:`Camera`'s field of view and distance); the command line fills
     in its options instead (:class:`clwave.errors.CommandWords`)."""
-    tracer = "clwave.raytrace(wv, camera, absorption=False)"
+    tracer = "clwave.RayTracer(wv, content_clamp=False).render(camera, absorption=False)"  # the same model
     if isinstance(camera, ConeBeam):
         return CommandWords("a smaller detector, ConeBeam size= or pixel=, or a longer dsd=", "a ConeBeam dso=", tracer)
     return CommandWords("a smaller Camera fov=, or a less wide size=", "a Camera distance=", tracer)
