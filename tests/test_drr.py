@@ -96,6 +96,8 @@ def test_drr_ray_traces_the_model_splatting_sees(tmp_path, capsys):
     clamped = clwave.RayTracer(wv).render(ConeBeam(60.0, 90.0, (24, 24), pixel=1.5, azimuth=30, elevation=20),
                                           tolerance=1e-4, absorption=False).image[..., 0]
     assert wv.content_mask is not None and np.abs(clamped - ray).max() > 0.1 * ray.max()
+    with pytest.raises(clwave.InputError, match="content_clamp='no' must be True"):
+        clwave.RayTracer(wv, content_clamp="no")
     # render --xray too: the ray tracer's line integrals of the model splatting draws (the same orthographic view)
     view = ["render", str(tmp_path / "ball.npy"), "--levels", "2", "--keep", "0.1", "--size", "24", "--azimuth", "30",
             "--elevation", "20"]

@@ -335,6 +335,8 @@ def test_a_volume_classified_post_stays_scalar_with_its_transfer_function():
     assert (post.channels, pre.channels) == (1, 4)
     assert clwave.TransferFunction.from_dict(post.transfer_function) == tf.resolved(vol) != tf  # "auto" made concrete
     assert as_model(vol, keep=0.2, tf="grey", classify="post").transfer_function == post.transfer_function  # a name
+    with pytest.raises(clwave.InputError, match="classify='later' must be 'pre'"):
+        as_model(vol, tf="grey", classify="later")
 
 
 def test_view_refuses_what_it_cannot_show():

@@ -128,6 +128,8 @@ class RayTracer:
                  region=None, lod=False, content_clamp=True):
         if not isinstance(wv, WaveletVolume):
             raise InputError("ray tracing needs a clwave.WaveletVolume")
+        if not isinstance(content_clamp, bool):
+            raise InputError(f"content_clamp={content_clamp!r} must be True (the model within its content) or False")
         if not content_clamp and wv.content_mask is not None:
             wv = wv.unmasked()
         if field not in FIELDS:

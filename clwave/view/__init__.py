@@ -56,6 +56,7 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3, cla
     if not isinstance(model_or_volume, Volume):
         raise InputError(f"view() takes a clwave.WaveletVolume, a clwave.Volume, an array or a .clw file, not "
                          f"{type(model_or_volume).__name__}")
+    _check_classify(classify)
     vol, tf = model_or_volume, _transfer_function(tf)
     if tf is not None:
         if classify == "post" and vol.channels != 1:
@@ -65,6 +66,12 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3, cla
         vol = tf.classify(vol) if classify == "pre" else vol
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, transfer_function=tf).threshold(keep=keep)
     return wv.compute() if vol.chunked else wv  # a chunked volume's model, gathered
+
+
+def _check_classify(classify):
+    if classify not in ("pre", "post"):
+        raise InputError(f"classify={classify!r} must be 'pre' (classify a volume before its transform) or 'post' "
+                         f"(while rendering)")
 
 
 def _transfer_function(tf):
@@ -99,9 +106,7 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
 
     size = Camera(size=size).size
     check_tolerance(tolerance)
-    if classify not in ("pre", "post"):
-        raise InputError(f"classify={classify!r} must be 'pre' (classify a volume before its transform) or 'post' "
-                         f"(while rendering)")
+    _check_classify(classify)
     tf = _transfer_function(tf)
     if isinstance(model_or_volume, (str, PathLike)) and str(model_or_volume).lower().endswith(".clw"):
         wv = PrefixFirst(model_or_volume, keep=keep)
