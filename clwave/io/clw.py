@@ -22,7 +22,6 @@ deflated (docs/codecs.md).
 
 from __future__ import annotations
 
-import copy
 import json
 import threading
 import zipfile
@@ -368,13 +367,6 @@ class FileMask(ContentMask):
         lo, hi = max(int(start[0]), 0), min(int(start[0]) + int(shape[0]), self.shape[0])
         self.load(lo, hi)
         return super().box(start, shape)
-
-    def watched(self, abandon) -> "FileMask":
-        """This mask for one reader (a staged set-up): its bits, reading and lock shared, its boxes raising
-        :class:`Abandoned` once ``abandon`` is set, where this mask's other users read on."""
-        out = copy.copy(self)
-        out.abandon = abandon
-        return out
 
     def put(self, start, block):
         self.load(0, self.shape[0])

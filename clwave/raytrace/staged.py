@@ -9,6 +9,7 @@ tracer's ``render`` gives.
 from __future__ import annotations
 
 import atexit
+import copy
 import threading
 import time
 
@@ -72,8 +73,10 @@ class StagedTracer:
             wv = WaveletVolume.open(path) if whole is None else whole()
             if self._abandon.is_set():
                 return
-            if isinstance(wv.content_mask, FileMask):  # the expansion asks it for boxes slab by slab; the mask
-                wv = wv.masked(wv.content_mask.watched(self._abandon))  # may be the caller's too (whole=)
+            if isinstance(wv.content_mask, FileMask):  # the expansion asks it for boxes slab by slab: this set-up's
+                mask = copy.copy(wv.content_mask)  # own view (bits, reading and lock shared), for the mask may be the
+                mask.abandon = self._abandon       # caller's too (whole=), whose other users read on
+                wv = wv.masked(mask)
             full = tracer_class(wv, device=cc, device_memory=device_memory, lod=lod)
         except Abandoned:
             return
