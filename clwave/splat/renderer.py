@@ -160,7 +160,7 @@ class SplatRenderer:
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * 16
         # the device's own limit here; a cap is held by _plan, which names the least that works
-        check_buffer(self.cc, fb_bytes, "a {}x{} image's framebuffers".format(*view.size), "render a smaller image")
+        check_buffer(self.cc, fb_bytes, "the framebuffer of a {}x{} image".format(*view.size), "render a smaller image")
         per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factor}) for layer in layers]
                      for fg in factors]
         if view.perspective:
