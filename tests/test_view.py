@@ -4,6 +4,7 @@ frames themselves against the one-shot renderers.  The page in a real browser: t
 import asyncio
 import io
 import json
+import re
 
 import aiohttp
 import numpy as np
@@ -188,6 +189,51 @@ def test_still_xray_frames_refine_to_the_splat_of_the_view(viewer):
     assert np.abs(got.astype(int) - expect).max() <= 1
 
 
+def test_device_memory_is_shared_out_among_the_renderers():
+    """``memory_shares``: halves for the X-ray and the shaded views where both are served, the X-ray half a quarter
+    for a file's prefix and the rest for its whole model; never more than the cap together."""
+    from clwave.view.server import memory_shares
+
+    assert memory_shares(None, True, True) == dict(prefix=None, whole=None, shaded=None)
+    assert memory_shares("1GiB", False, False) == dict(prefix=2**30, whole=2**30, shaded=None)
+    assert memory_shares(1000, True, False) == dict(prefix=500, whole=500, shaded=500)
+    cap = 2**30 + 7
+    shares = memory_shares(cap, True, True)
+    assert shares == dict(prefix=(cap // 2) // 4, whole=cap // 2 - (cap // 2) // 4, shaded=cap - cap // 2)
+    assert shares["prefix"] + shares["whole"] + shares["shaded"] == cap
+
+
+def test_a_capped_viewer_streams_within_its_share_to_the_same_image():
+    """``view(device_memory=)``: the X-ray renderer holds at most its share (its coefficients stream in chunks),
+    the shaded tracer its own, and the still view's last frame is the uncapped splat of the view; a cap too small
+    for the viewer is refused in one line naming the viewer's cap and the share."""
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=64)).threshold(keep=1.0)
+    state = dict(BASE, seq=1, azimuth=75.0, elevation=-35.0, zoom=1.3, window=[0.0, 0.4])
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(state))
+            return await frames_until_final(ws, 1)
+    with view(wv, size=128, device_memory="28MiB") as v:
+        frames = run(go(v))
+        xray = v.server.sources["xray"].r
+        assert xray.budget.cap == 14 * 2**20
+        with pytest.raises(clwave.DeviceMemoryError) as refused:  # the tracer, as a tab's first shaded view makes it
+            v.server.builder.submit(v.server.sources["shaded"].prepare).result()
+        assert re.fullmatch(r"expanding the bricks .* allows 14 MiB .*; raise --device-memory, crop the volume or pick "
+                            r"another --device \(within the shaded views' share of it \(docs/viewer.md §1\): "
+                            r"device_memory=28 MiB\)", str(v.server.explain(refused.value, "shaded")))
+        assert xray.chunk is not None and xray.chunk < xray.count  # streamed
+    final, data = frames[-1]
+    expect = clwave.splat(wv, clwave.Camera(75.0, -35.0, 128, extent=final["extent"])).to_uint8((0.0, 0.4))
+    assert expect.std() > 10 and np.abs(decode(data).astype(int) - expect).max() <= 1
+    with pytest.raises(clwave.DeviceMemoryError, match=r"device_memory=3 MiB is too small for this viewer: its "
+                                                       r"X-ray views get 1.5 MiB of it .docs/viewer.md §1., and a"):
+        view(wv, size=(48, 64), device_memory="3MiB")
+
+
 def test_a_drag_prefix_with_the_footprints_of_its_bands_only_is_the_same_image(viewer):
     """``begin(camera, upto=n)`` makes the footprints of the bands the first n coefficients reach: their image
     equals the same prefix splatted into a view with every band's footprints, and it takes no more."""
@@ -365,7 +411,8 @@ def test_cli_view_refuses_bad_options_before_any_work(capsys, tmp_path):
     for argv, words in [(["--port", "70000"], "--port 70000"), (["--tolerance", "0"], "--tolerance"),
                         (["--tf-window", "0,1"], "give --tf too"), (["--tf", "bone"], "bone"),
                         (["--tf", "hydrogen", "--tf-window", "1"], "--tf-window '1' must be 2"),
-                        ([str(rgba), "--tf", "hydrogen"], "4 channels (classified already): leave them out")]:
+                        ([str(rgba), "--tf", "hydrogen"], "4 channels (classified already): leave them out"),
+                        (["--device-memory", "2x"], "--device-memory 2x is not a size")]:
         assert main(["view", *([] if argv[0].endswith(".clw") else ["phantom:hydrogen:16"]), *argv]) == 2, argv
         assert words in capsys.readouterr().err, argv
 

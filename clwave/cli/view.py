@@ -5,7 +5,8 @@ from __future__ import annotations
 import sys
 
 from ..errors import InputError
-from .options import add_input_options, add_model_options, build_model, numbers, post_transfer_function
+from .options import (add_input_options, add_model_options, build_model, numbers, parse_device_memory,
+                      post_transfer_function)
 
 
 def run(args):
@@ -20,6 +21,7 @@ def run(args):
     size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
     size = Camera(size=size if len(size) == 2 else size[0]).size
     check_tolerance(args.tolerance)
+    device_memory = parse_device_memory(args)
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
     # a .clw file: its prefix now, the rest read while serving; a scalar model's shaded views are classified while
@@ -34,7 +36,7 @@ def run(args):
     logging.getLogger("clwave.view").addHandler(handler)
     logging.getLogger("clwave.view").setLevel(logging.INFO)
     server = ViewServer(wv, size, tolerance=args.tolerance, device=args.device, host=args.host, port=args.port,
-                        transfer_function=tf)
+                        transfer_function=tf, device_memory=device_memory)
 
     async def serve():
         try:
@@ -71,6 +73,8 @@ def add_parser(sub):
     g.add_argument("--size", default="512", help="image size: N or HxW (default 512)")
     g.add_argument("--tolerance", type=float, default=1e-2, help="shaded: error per value when still (default 1e-2)")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
+    g.add_argument("--device-memory", metavar="SIZE", help="device memory the viewer's renderers use at most "
+                                                           "together, e.g. 2GiB (default: the device's)")
     g.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1, this machine "
                                                         "only; another one is reachable by others: a warning)")
     g.add_argument("--port", type=int, default=0, help="port (default: a free one)")

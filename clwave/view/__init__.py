@@ -85,7 +85,7 @@ def _transfer_function(tf):
 
 
 def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, classify="pre", device=None,
-         host="127.0.0.1", port=0, open_browser=False) -> Viewer:
+         device_memory=None, host="127.0.0.1", port=0, open_browser=False) -> Viewer:
     """Serve a progressive view of a model, a volume or a ``.clw`` file in the browser; returns a :class:`Viewer`.
 
     ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (an RGBA
@@ -95,9 +95,12 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     classified with it while rendering; the editor starts from it (else from the model's own, or grey).  A volume is
     decomposed with cubic wavelets and ``keep`` (default 0.05) of its voxels kept; a ``.clw`` file (a path) is served
     at once from its most important coefficients while the rest (its ``keep`` most important, default all) is read
-    (docs/viewer.md §2).  The server binds ``host`` (loopback unless given) at ``port`` (0: a free one); every request
-    needs the token in :attr:`Viewer.url`.  ``open_browser`` opens it.
+    (docs/viewer.md §2).  ``device_memory`` (bytes or a size such as "2GiB"; default the device's) caps the device
+    memory of the viewer's renderers together (docs/viewer.md §1).  The server binds ``host`` (loopback unless
+    given) at ``port`` (0: a free one); every request needs the token in :attr:`Viewer.url`.  ``open_browser`` opens
+    it.
     """
+    from ..device.memory import parse_cap
     from ..model.camera import Camera
     from ..model.wavelet import WaveletVolume
     from .frames import check_tolerance
@@ -107,6 +110,7 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     size = Camera(size=size).size
     check_tolerance(tolerance)
     _check_classify(classify)
+    parse_cap(device_memory)
     tf = _transfer_function(tf)
     if isinstance(model_or_volume, (str, PathLike)) and str(model_or_volume).lower().endswith(".clw"):
         wv = PrefixFirst(model_or_volume, keep=keep)
@@ -122,7 +126,7 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
         warnings.warn(f"the viewer listens on {host}: anyone who can reach it and learns the address with its token "
                       f"can see this volume", stacklevel=2)
     server = ViewServer(wv, size, tolerance=tolerance, device=device, host=host, port=port,
-                        transfer_function=None if model is None else tf)
+                        transfer_function=None if model is None else tf, device_memory=device_memory)
     viewer = Viewer(BackgroundServer(server))
     if open_browser:
         import webbrowser

@@ -21,7 +21,8 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
-from ..errors import ClwaveError
+from ..device.memory import format_size, parse_cap
+from ..errors import ClwaveError, DeviceMemoryError
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
 from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, pack_frame, parse_view
@@ -39,6 +40,18 @@ HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Con
                                       "object-src 'none'; base-uri 'none'; form-action 'none'"}
 
 
+def memory_shares(device_memory, shaded: bool, prefix: bool) -> dict:
+    """The device memory (bytes; None: the device's) each renderer of a server may hold, ``device_memory`` shared
+    out (docs/viewer.md §1): half to the X-ray views and half to the shaded ones where both are served; of the X-ray
+    half, a file's prefix renderer a quarter and its whole model's the rest (both hold buffers at the swap)."""
+    cap = parse_cap(device_memory)
+    if cap is None:
+        return dict(prefix=None, whole=None, shaded=None)
+    xray = cap // 2 if shaded else cap
+    return dict(prefix=xray // 4 if prefix else xray, whole=xray - xray // 4 if prefix else xray,
+                shaded=cap - xray if shaded else None)
+
+
 def is_loopback(host: str) -> bool:
     if host == "localhost":
         return True
@@ -53,17 +66,22 @@ class ViewServer:
 
     ``size`` (H, W) is the full image; ``tolerance`` the shaded frames' when still; ``transfer_function`` a scalar
     model's shaded views' from the first frame (None: the model's own, or grey), where the page's editor starts.
+    ``device_memory`` (bytes or a size such as "2GiB"; None: the device's) caps the device memory of all the
+    server's renderers together (:func:`memory_shares`).
     :meth:`start` binds ``host:port`` (port 0: a free one) inside a running event loop; :attr:`url` is the address
     with the token.
     """
 
     def __init__(self, model, size=(512, 512), tolerance=1e-2, device=None, host="127.0.0.1", port=0,
-                 transfer_function=None):
+                 transfer_function=None, device_memory=None):
         from .prefix import PrefixFirst
 
         opened = model if isinstance(model, PrefixFirst) else None
         self.wv = opened.prefix if opened else model
         self.host, self.port, self.device = host, int(port), device
+        self.device_memory = parse_cap(device_memory)
+        self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4),
+                                    prefix=opened is not None and not opened.complete)
         self.token = secrets.token_urlsafe(24)
         self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render")
         # what a source makes before its first frame (the ray tracer's bricks) is made here, so that the render
@@ -80,7 +98,10 @@ class ViewServer:
         self._reader = None if self.whole is None else threading.Thread(
             target=self._read_whole, args=(opened,), name="clwave-view-read", daemon=True)
         self._starting = threading.Lock()  # the reader is started from the event loop or the shaded set-up
-        self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened, transfer_function).result()
+        try:
+            self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened, transfer_function).result()
+        except DeviceMemoryError as exc:
+            raise self.explain(exc, "xray") from None
         self.pages = {path: (resources.files(__package__).joinpath("static", name).read_text(), mime)
                       for path, (name, mime) in STATIC.items()}
 
@@ -88,7 +109,8 @@ class ViewServer:
         """The sources, made on the render thread, with one frame of each kind drawn (kernels built, warm)."""
         from ..splat.renderer import SplatRenderer
 
-        xray = XraySource(wv, size, SplatRenderer(wv, device=self.device), complete=self.whole is None)
+        xray = XraySource(wv, size, SplatRenderer(wv, device=self.device, device_memory=self.shares["prefix"]),
+                          complete=self.whole is None)
         for _ in xray.frames(self.initial_view(xray, moving=True), xray.pacing()):  # the kernels built (one build
             pass                                                                   # serves every size, stages.py)
         sources = dict(xray=xray)
@@ -96,7 +118,8 @@ class ViewServer:
             # a whole file (not a part of it, keep=) is traced in stages: its coarse stage at once, read from the file;
             # the full one from the model held (the prefix, where it is all of the file) or read for the X-ray views
             path = opened.path if opened is not None and opened.keep is None else None
-            sources["shaded"] = ShadedSource(wv, size, tolerance, device=self.device, path=path,
+            sources["shaded"] = ShadedSource(wv, size, tolerance, device=self.device,
+                                             device_memory=self.shares["shaded"], path=path,
                                              whole=None if self.whole is None else self.whole_model,
                                              upgraded=self.upgraded,
                                              transfer_function=transfer_function)
@@ -123,7 +146,7 @@ class ViewServer:
             wv = opened.whole()
             self.whole.set_result(wv)
             read = time.perf_counter() - start
-            renderer = SplatRenderer(wv, device=self.device)
+            renderer = SplatRenderer(wv, device=self.device, device_memory=self.shares["whole"])
         except Exception as exc:  # noqa: BLE001  (the prefix goes on being served)
             if not self.whole.done():
                 self.whole.set_exception(exc)
@@ -153,6 +176,22 @@ class ViewServer:
             return
         if self.loop is not None:
             self.loop.call_soon_threadsafe(lambda: [s.upgraded(mode) for s in list(self.sessions.values())])
+
+    def explain(self, exc: ClwaveError, mode: str) -> ClwaveError:
+        """``exc`` as the page (or the caller) should read it: a renderer refusing within its share of the viewer's
+        device memory names the share and the viewer's cap (:func:`memory_shares`)."""
+        if self.device_memory is None or not isinstance(exc, DeviceMemoryError):
+            return exc
+        views = "X-ray" if mode == "xray" else "shaded"
+        total = format_size(self.device_memory)
+        given, small, why = str(exc).partition(" is too small: ")  # a renderer's "device_memory=S is too small: ..."
+        if small:
+            words = f"too small for this viewer: its {views} views get {given.partition('=')[2]} of it " \
+                    f"(docs/viewer.md §1), and {why}"
+            return DeviceMemoryError(f"device_memory={total} is {words}", cli=f"--device-memory {total} is {words}")
+        share = f"the {views} views' share of it (docs/viewer.md §1)"
+        return DeviceMemoryError(f"{exc} (within {share}: device_memory={total})",
+                                 cli=f"{exc.cli_message()} (within {share}: --device-memory {total})")
 
     def prepared(self, source):
         """The Future of ``source.prepare()`` on the build thread (started on first call)."""
@@ -306,8 +345,9 @@ class Session:
             exc = building.exception()
             if not isinstance(exc, ClwaveError):
                 log.error("%s: preparing the %s view failed", self.name, source.mode, exc_info=exc)
-            await self.ws.send_json(dict(type="error", seq=state.seq, message=str(exc) if isinstance(exc, ClwaveError)
-                                         else f"internal error ({type(exc).__name__}); see the server's log"))
+            message = (str(self.server.explain(exc, source.mode)) if isinstance(exc, ClwaveError)
+                       else f"internal error ({type(exc).__name__}); see the server's log")
+            await self.ws.send_json(dict(type="error", seq=state.seq, message=message))
             return False
         return self.state is state  # else the newer view is waiting (wake is set)
 
@@ -347,7 +387,8 @@ class Session:
                     self.final = frame.figures["final"]
                     self.server.read_whole()  # a file's rest, once the first frame is out
             except ClwaveError as exc:  # e.g. an image too large for the device: the page shows the line
-                await self.ws.send_json(dict(type="error", seq=state.seq, message=str(exc)))
+                message = str(self.server.explain(exc, state.mode))
+                await self.ws.send_json(dict(type="error", seq=state.seq, message=message))
             except ConnectionResetError as exc:  # the socket went away mid-send
                 log.info("%s: %s", self.name, exc)
                 return
