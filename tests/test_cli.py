@@ -394,6 +394,26 @@ def test_a_clw_keep_above_what_it_stores_is_told_in_one_line(tmp_path, capsys):
     assert code == 0 and "--keep 0.1 asks for 410 coefficients" in err
 
 
+def test_view_tells_a_clw_keep_above_what_it_stores(tmp_path, capsys, monkeypatch):
+    """`clwave view` opens a .clw by its prefix: where that is all the file stores, it tells as `render` does."""
+    from clwave.view import server
+
+    model = tmp_path / "m.clw"
+    assert main(["compress", "phantom:shepp-logan:16", "--levels", "2", "--keep", "0.05", "-o", str(model)]) == 0
+    capsys.readouterr()
+
+    class Served(Exception):
+        pass
+
+    def serve(wv, size, **options):
+        raise Served(wv.prefix.kept)
+    monkeypatch.setattr(server, "ViewServer", serve)
+    with pytest.raises(Served) as served:
+        main(["--debug", "view", str(model), "--keep", "0.2"])
+    assert served.value.args == (205,)
+    assert "clwave: warning: --keep 0.2 asks for 819 coefficients, and" in capsys.readouterr().err
+
+
 def test_a_large_declared_nifti_is_refused_before_its_data_are_read(tmp_path, capsys, monkeypatch):
     """An honest .nii.gz of a big volume is small on disk (zeros deflate); its header's shape and type are weighed
     against the memory rule of `compress` (16 bytes a value) before nibabel inflates a voxel."""

@@ -174,7 +174,8 @@ def test_nrrd_unknown_spacing_is_taken_as_one_and_said(tmp_path, data_ijk, caplo
         vol = load(tmp_path / "v.nrrd")
     assert vol.spacing == (3.0, 2.0, 1.0)  # (z, y, x): the file's x axis unknown
     [record] = caplog.records
-    assert "unknown (nan); taken as 1" in record.getMessage() and "--spacing DZ,DY,DX" in record.getMessage()
+    assert "spacing (dz, dy, dx) 3.0, 2.0, nan is unknown (nan) on some axes; taken as 1 there" in record.getMessage()
+    assert "--spacing DZ,DY,DX" in record.getMessage()
     caplog.clear()
     with caplog.at_level("WARNING", logger="clwave.io.loaders.shared"):
         assert load(tmp_path / "v.nrrd", spacing=(3.0, 2.0, 0.5)).spacing == (3.0, 2.0, 0.5)
@@ -507,3 +508,15 @@ def test_a_raw_file_is_weighed_before_it_is_read(tmp_path, monkeypatch):
     monkeypatch.setattr(clwave.device.memory, "available_bytes", lambda: 64 ** 3 * 6 - 1)  # int16 + float32
     with pytest.raises(HostMemoryError, match="64 x 64 x 64 int16"):
         load(path, shape=(64, 64, 64), dtype="int16")
+
+
+def test_float32_is_weighed_as_read(tmp_path, monkeypatch):
+    """float32 samples are used as they are read: 4 bytes a value, no second copy (int16: 2 + 4)."""
+    import clwave.device.memory
+
+    np.save(tmp_path / "f.npy", np.ones((32, 32, 32), np.float32))
+    np.save(tmp_path / "i.npy", np.ones((32, 32, 32), np.int16))
+    monkeypatch.setattr(clwave.device.memory, "available_bytes", lambda: 32 ** 3 * 5)
+    assert load(tmp_path / "f.npy").data.sum() == 32 ** 3
+    with pytest.raises(MemoryError, match="32 x 32 x 32 int16"):
+        load(tmp_path / "i.npy")

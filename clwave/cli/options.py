@@ -110,7 +110,7 @@ def check_options(args):
                              "give --tf PRESET too")
     if hasattr(args, "workers"):
         parse_scheduler(args)
-    if hasattr(args, "device") and getattr(args, "scheduler", None) is None:  # a cluster's workers choose their own
+    if hasattr(args, "device") and not (is_clw(args) and args.scheduler):  # a remote cluster's workers choose theirs
         from ..device.context import select_device
         select_device(args.device)
     if hasattr(args, "display_window"):

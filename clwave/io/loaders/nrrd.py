@@ -51,8 +51,8 @@ def read_nrrd(path, fits=None, warn_spacing=True):
     else:
         spacings = np.asarray(header.get("spacings", np.ones(len(sizes))), float)[spatial]
         if warn_spacing and not np.all(np.isfinite(spacings)):
-            log.warning("%s: its spacings %s leave the voxel size unknown (nan); taken as 1 on those axes: give "
-                        "spacing= (--spacing DZ,DY,DX) for the true one", path, " ".join(map(str, spacings[::-1])))
+            log.warning("%s: its spacing (dz, dy, dx) %s is unknown (nan) on some axes; taken as 1 there: give "
+                        "spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(map(str, spacings[::-1])))
         affine[:3, :3] = np.diag(np.where(np.isfinite(spacings), spacings, 1.0))
     # other spaces (scanner-xyz, 3D-right-handed, none) are taken as RAS
     signs = _NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1))

@@ -120,13 +120,14 @@ def check_whole(path, shape, dtype, fits=None):
     """Refuse, before a voxel is read, a volume read whole whose declared ``shape`` (3 spatial axes, then any
     channel axes) of ``dtype`` samples (a structured one: a channel a field) would not fit in memory: by the
     caller's rule ``fits(voxels, channels)`` first (the command line weighs the model it makes of it), then by what
-    reading it takes (the samples as stored, and as float32)."""
+    reading it takes (the samples as stored, and a float32 copy of other types)."""
     dtype = np.dtype(dtype)
     voxels, samples = math.prod(shape[:3]), math.prod(shape[3:])
     channels = samples * (len(dtype.names) if dtype.names else 1)
     if fits is not None:
         fits(voxels, channels)
-    check_fits(voxels * (samples * dtype.itemsize + 4 * channels), f"reading {path} whole "
+    converted = 0 if dtype == np.float32 else 4 * channels  # float32 samples are used as they are read
+    check_fits(voxels * (samples * dtype.itemsize + converted), f"reading {path} whole "
                f"({' x '.join(map(str, shape))} {dtype})", "read it chunk by chunk (chunks='auto'; Zarr, HDF5, .npy, "
                ".raw, .nii), or crop it")
 
