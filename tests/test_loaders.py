@@ -520,3 +520,25 @@ def test_float32_is_weighed_as_read(tmp_path, monkeypatch):
     assert load(tmp_path / "f.npy").data.sum() == 32 ** 3
     with pytest.raises(MemoryError, match="32 x 32 x 32 int16"):
         load(tmp_path / "i.npy")
+
+
+def test_a_stack_of_slices_is_weighed_after_its_first_slice(tmp_path, monkeypatch):
+    """A folder of slices declares its size by its first slice and its number of files: weighed before the rest."""
+    from clwave.io.loaders import tiff
+
+    for z in range(8):
+        tifffile.imwrite(tmp_path / f"s{z}.tif", np.zeros((16, 16), np.uint16))
+    read, declared = [], []
+    real = tiff.read_tiff
+    monkeypatch.setattr(tiff, "read_tiff", lambda path, **kwargs: read.append(path) or real(path, **kwargs))
+
+    class Refused(ClwaveError):
+        pass
+
+    def fits(voxels, channels):
+        declared.append((voxels, channels))
+        raise Refused("refused")
+
+    with pytest.raises(Refused):
+        load(tmp_path, fits=fits)
+    assert declared == [(8 * 16 * 16, 1)] and [p.name for p in read] == ["s0.tif"]
