@@ -297,3 +297,138 @@ def test_device_memory_streams_splatting_and_is_checked(tmp_path, capsys):
                            "needs at least")):
         code, out, err = run(capsys, "render", *argv, *extra, "-o", str(tmp_path / "x.png"))
         assert code == 2 and err.count("\n") == 1 and needle in err and not (tmp_path / "x.png").exists()
+
+
+EARLY_MISTAKES = [
+    (["compress", "--tf", "nope"], "nope"),
+    (["compress", "--tf", "mri", "--tf-window", "1"], "--tf-window"),
+    (["compress", "--tf-window", "0,1"], "give --tf too"),
+    (["compress", "--classify", "post"], "give --tf PRESET too"),
+    (["compress", "--wavelet", "cubic,db4"], "unknown wavelet 'db4'"),
+    (["compress", "--levels", "-1"], "--levels -1"),
+    (["compress", "--spacing", "1,0,1"], "--spacing 1,0,1 must be positive"),
+    (["compress", "--spacing", "nan"], "--spacing nan must be positive"),
+    (["compress", "--chunks", "1"], "--chunks 1"),
+    (["compress", "--keep", "5"], "--keep 5"),
+    (["compress", "--quantise", "-1"], "--quantise"),
+    (["compress", "-o", "x.txt"], "must end in .clw"),
+    (["render", "--device", "no-such-device"], "no OpenCL device matches 'no-such-device'"),
+    (["render", "--window", "1"], "--window"),
+    (["render", "--omega-s", "0"], "--omega-s 0"),
+    (["render", "--coarse", "2"], "--coarse 2"),
+    (["render", "--device-memory", "2GB"], "--device-memory 2GB"),
+    (["render", "--method", "raytrace", "--tolerance", "-1"], "--tolerance -1"),
+    (["render", "--light", "10"], "--light"),
+    (["render", "--size", "0"], "size"),
+    (["render", "-o", "OUT_EXISTS"], "--force"),
+    (["progressive", "--window", "1,2,3"], "--window"),
+    (["progressive", "--coarse", "-1"], "--coarse -1"),
+    (["progressive", "--omega-s", "nan"], "--omega-s nan"),
+    (["progressive", "--method", "raytrace", "--steps", "0"], "--steps 0"),
+    (["progressive", "--method", "raytrace", "--budget", "-2"], "--budget -2"),
+    (["drr", "--window", "abc"], "--window"),
+    (["drr", "--device", "no-such-device"], "no-such-device"),
+    (["drr", "--coarse", "5"], "--coarse 5"),
+    (["view", "--device", "no-such-device"], "no-such-device"),
+    (["view", "--tolerance", "0"], "--tolerance 0"),
+    (["view", "--tf", "bone"], "bone"),
+]
+#: options a .clw input refuses anyway (a model already)
+VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")
+
+
+@pytest.mark.parametrize("kind, argv, needle", [("volume", *case) for case in EARLY_MISTAKES] + [
+    ("clw", *case) for case in EARLY_MISTAKES if not set(case[0]) & set(VOLUME_ONLY)])
+def test_options_are_checked_before_the_input_is_opened(tmp_path, capsys, monkeypatch, kind, argv, needle):
+    """A mistake in an option that does not depend on the input costs no read: the command refuses it in one
+    line (exit 2) before the loader or the .clw reader is called (both record being called here)."""
+    import clwave.io.loaders
+
+    opened = []
+
+    def recorded(*args, **kwargs):
+        opened.append(args)
+        raise AssertionError("the input was opened before the options were checked")
+
+    monkeypatch.setattr(clwave.io.loaders, "load", recorded)
+    monkeypatch.setattr(WaveletVolume, "open", recorded)
+    source = tmp_path / ("v.npy" if kind == "volume" else "v.clw")
+    source.write_bytes(b"never read")
+    (tmp_path / "OUT_EXISTS").mkdir()
+    (tmp_path / "OUT_EXISTS" / "o.png").write_bytes(b"precious")
+    command, options = argv[0], [str(tmp_path / "OUT_EXISTS" / "o.png") if a == "OUT_EXISTS" else a for a in argv[1:]]
+    out = {"compress": "o.clw", "render": "o.png", "progressive": "o.gif", "drr": "o.npy"}.get(command)
+    extra = [] if out is None or "-o" in options else ["-o", str(tmp_path / out)]
+    if command == "drr":
+        extra += ["--poses", str(tmp_path / "poses.csv")]  # not there either: the option is refused first
+    code, _, err = run(capsys, command, str(source), *options, *extra)
+    assert code == 2 and err.startswith("clwave: error:") and err.count("\n") == 1 and needle in err, err
+    assert not opened and (tmp_path / "OUT_EXISTS" / "o.png").read_bytes() == b"precious"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["OUT_EXISTS", source.name]  # nothing written
+
+
+def test_a_clw_keep_above_what_it_stores_is_told_in_one_line(tmp_path, capsys):
+    """`--keep` on a .clw asks for its most important coefficients; more than it stores gives all of them, and a
+    warning line with what it stores and the fix (not refused: a file holds fewer than its own --keep where the
+    rest were zero)."""
+    model = tmp_path / "m.clw"
+    assert main(["compress", "phantom:shepp-logan:16", "--levels", "2", "--keep", "0.05", "-o", str(model)]) == 0
+    stored = WaveletVolume.open(model).kept
+    assert stored == round(0.05 * 16 ** 3)
+    raw = tmp_path / "r.npy"
+    code, out, err = run(capsys, "render", str(model), "--keep", "0.2", "--size", "8", "-o", str(tmp_path / "a.png"),
+                         "--raw", str(raw))
+    assert code == 0 and err.count("\n") == 1
+    assert err.startswith("clwave: warning: --keep 0.2 asks for 819 coefficients") and \
+        f"stores {stored:,} (5.00 % of the voxels)" in err and "again with a larger --keep" in err
+    everything = tmp_path / "all.npy"
+    code, out, err = run(capsys, "render", str(model), "--size", "8", "-o", str(tmp_path / "b.png"), "--raw",
+                         str(everything))
+    assert code == 0
+    assert np.array_equal(np.load(raw), np.load(everything))  # all it stores, as without --keep
+    for keep in ("0.05", "0.02", "1"):  # within what it stores, or "every coefficient": no warning
+        code, out, err = run(capsys, "compress", str(model), "--keep", keep, "-o", str(tmp_path / f"{keep}.clw"))
+        assert code == 0 and err == "", (keep, err)
+    code, out, err = run(capsys, "compress", str(model), "--keep", "0.1", "--focus", "0,0,0", "--sigma", "4", "-o",
+                         str(tmp_path / "f.clw"))
+    assert code == 0 and "--keep 0.1 asks for 410 coefficients" in err
+
+
+def test_view_tells_a_clw_keep_above_what_it_stores(tmp_path, capsys, monkeypatch):
+    """`clwave view` opens a .clw by its prefix: where that is all the file stores, it tells as `render` does."""
+    from clwave.view import server
+
+    model = tmp_path / "m.clw"
+    assert main(["compress", "phantom:shepp-logan:16", "--levels", "2", "--keep", "0.05", "-o", str(model)]) == 0
+    capsys.readouterr()
+
+    class Served(Exception):
+        pass
+
+    def serve(wv, size, **options):
+        raise Served(wv.prefix.kept)
+    monkeypatch.setattr(server, "ViewServer", serve)
+    with pytest.raises(Served) as served:
+        main(["--debug", "view", str(model), "--keep", "0.2"])
+    assert served.value.args == (205,)
+    assert "clwave: warning: --keep 0.2 asks for 819 coefficients, and" in capsys.readouterr().err
+
+
+def test_a_large_declared_nifti_is_refused_before_its_data_are_read(tmp_path, capsys, monkeypatch):
+    """An honest .nii.gz of a big volume is small on disk (zeros deflate); its header's shape and type are weighed
+    against the memory rule of `compress` (16 bytes a value) before nibabel inflates a voxel."""
+    import nibabel
+    import clwave.device.memory
+
+    path = tmp_path / "big.nii.gz"
+    nibabel.save(nibabel.Nifti1Image(np.zeros((64, 64, 64), np.uint8), np.eye(4)), path)
+    assert path.stat().st_size < 10_000
+    monkeypatch.setattr(clwave.device.memory, "available_bytes", lambda: 3 << 20)  # 3 MiB: 64^3 x 16 is 4 MiB
+    reads = []
+    monkeypatch.setattr(nibabel.arrayproxy.ArrayProxy, "__getitem__", lambda self, index: reads.append(index))
+    code, out, err = run(capsys, "compress", str(path), "--levels", "1", "-o", str(tmp_path / "o.clw"))
+    assert code == 2 and err.count("\n") == 1 and not reads
+    assert "decomposing this volume needs about" in err
+    assert "gunzip a .nii.gz first" in err and not (tmp_path / "o.clw").exists()
+    code, out, err = run(capsys, "compress", str(path), "--tf", "grey", "--levels", "1", "-o", str(tmp_path / "o.clw"))
+    assert code == 2 and "decomposing this volume" in err and not reads  # classified: four channels a voxel

@@ -166,6 +166,22 @@ def test_nrrd_rgb_axis_becomes_channels(tmp_path, rng):
     np.testing.assert_array_equal(vol.data, rgb_cijk.transpose(3, 2, 1, 0))
 
 
+def test_nrrd_unknown_spacing_is_taken_as_one_and_said(tmp_path, data_ijk, caplog):
+    """NRRD's ``spacings: nan`` is "unknown": 1 on that axis, with a warning naming spacing= (none when given)."""
+    nrrd.write(str(tmp_path / "v.nrrd"), data_ijk, {"spacings": [np.nan, 2.0, 3.0]})
+    assert "spacings: nan 2 3" in (tmp_path / "v.nrrd").read_bytes().decode("latin-1")
+    with caplog.at_level("WARNING", logger="clwave.io.loaders.shared"):
+        vol = load(tmp_path / "v.nrrd")
+    assert vol.spacing == (3.0, 2.0, 1.0)  # (z, y, x): the file's x axis unknown
+    [record] = caplog.records
+    assert "spacing (dz, dy, dx) 3.0, 2.0, nan is unknown (nan) on some axes; taken as 1 there" in record.getMessage()
+    assert "--spacing DZ,DY,DX" in record.getMessage()
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="clwave.io.loaders.shared"):
+        assert load(tmp_path / "v.nrrd", spacing=(3.0, 2.0, 0.5)).spacing == (3.0, 2.0, 0.5)
+    assert not caplog.records
+
+
 # --------------------------------------------------------------------------- TIFF
 
 def test_tiff_stack_round_trip(tmp_path, rng):
@@ -192,6 +208,40 @@ def test_tiff_folder_stacks_in_natural_order(tmp_path, rng):
     vol = load(tmp_path, spacing=(3.0, 1.0, 1.0))
     np.testing.assert_array_equal(vol.data, np.stack([slices[n] for n in range(1, 13)]))
     assert vol.spacing == (3.0, 1.0, 1.0)
+
+
+@pytest.mark.parametrize("depth", [3, 4])
+def test_a_small_stack_tifffile_wrote_as_planar_samples_is_a_volume(tmp_path, rng, depth, caplog):
+    """``tifffile.imwrite`` of a 3 or 4 x Y x X array writes one RGB(A) page of planar samples; its own metadata
+    says the array's shape, and it is read as that many slices, with a warning."""
+    arr = rng.integers(0, 60000, (depth, 6, 7)).astype(np.uint16)
+    with pytest.warns(DeprecationWarning):  # tifffile's own: "stored as RGB with separate component planes"
+        tifffile.imwrite(tmp_path / "v.tif", arr)
+    with tifffile.TiffFile(tmp_path / "v.tif") as tif:
+        assert len(tif.pages) == 1 and tif.series[0].axes == "SYX"
+    with caplog.at_level("WARNING", logger="clwave.io.loaders.shared"):
+        vol = load(tmp_path / "v.tif")
+    np.testing.assert_array_equal(vol.data, arr)
+    assert vol.channels == 1 and f"read as {depth} slices" in caplog.records[0].getMessage()
+
+
+def test_one_tiff_image_is_refused_as_not_a_stack(tmp_path, rng):
+    """A 2-D TIFF (grey, or RGB as pixels) is no volume: one line naming how to write one."""
+    for name, arr, options in (("grey.tif", rng.integers(0, 255, (6, 7)).astype(np.uint8), {}),
+                               ("rgb.tif", rng.integers(0, 255, (6, 7, 3)).astype(np.uint8), {"photometric": "rgb"})):
+        tifffile.imwrite(tmp_path / name, arr, **options)
+        with pytest.raises(FileFormatError, match="one 2-D image .* photometric='minisblack'") as excinfo:
+            load(tmp_path / name)
+        assert_one_line_error(excinfo)
+
+
+def test_tiff_folder_of_planar_rgb_slices(tmp_path, rng):
+    """In a folder each file is one 2-D slice: tifffile's planar RGB page of a 3 x Y x X array stays colour."""
+    slices = rng.integers(0, 255, (4, 3, 6, 7)).astype(np.uint8)
+    for z, planes in enumerate(slices):
+        tifffile.imwrite(tmp_path / f"s{z}.tif", planes, photometric="rgb", planarconfig="separate")
+    vol = load(tmp_path)
+    np.testing.assert_array_equal(vol.data, slices.transpose(0, 2, 3, 1))
 
 
 # --------------------------------------------------------------------------- DICOM
@@ -389,3 +439,106 @@ def test_hu_to_mu_and_background(tmp_path):
     raw = load(tmp_path / "ct.npy", background=-1000)
     np.testing.assert_array_equal(raw.data, hu + 1000)
 
+
+
+# --------------------------------------------------------------------------- declared sizes
+
+
+def _zeros_nii_gz(path):
+    nib.save(nib.Nifti1Image(np.zeros((64, 64, 64), np.uint8), np.eye(4)), path)
+    return nib.arrayproxy.ArrayProxy, "__getitem__"
+
+
+def _zeros_nrrd_gzip(path):
+    nrrd.write(str(path), np.zeros((64, 64, 64), np.uint8), {"encoding": "gzip"})
+    return nrrd, "read_data"
+
+
+def _zeros_tiff_zlib(path):
+    tifffile.imwrite(path, np.zeros((64, 64, 64), np.uint8), photometric="minisblack", compression="zlib")
+    return tifffile.TiffPageSeries, "asarray"
+
+
+def _zeros_npy(path):
+    np.lib.format.open_memmap(path, "w+", np.uint8, (64, 64, 64)).flush()  # a sparse file
+    from clwave.io.loaders import raw
+    return raw, "_read_memmap"
+
+
+@pytest.mark.parametrize("write, name", [(_zeros_nii_gz, "v.nii.gz"), (_zeros_nrrd_gzip, "v.nrrd"),
+                                         (_zeros_tiff_zlib, "v.tif"), (_zeros_npy, "v.npy")])
+def test_a_declared_size_is_weighed_before_the_data_are_read(tmp_path, monkeypatch, write, name):
+    """The shape and type a header declares are weighed before the data are read: by ``fits`` (the command
+    line's rule for the model), then by what reading the volume whole takes (its samples, and float32)."""
+    import clwave.device.memory
+    from clwave.device.memory import HostMemoryError
+
+    path = tmp_path / name
+    owner, reader = write(path)
+    reads = []
+    monkeypatch.setattr(owner, reader, lambda *args, **kwargs: reads.append(args))
+
+    class Refused(ClwaveError):
+        pass
+
+    declared = []
+
+    def fits(voxels, channels):
+        declared.append((voxels, channels))
+        raise Refused("refused")
+
+    with pytest.raises(Refused):
+        load(path, fits=fits)
+    assert declared == [(64 ** 3, 1)] and not reads
+    monkeypatch.setattr(clwave.device.memory, "available_bytes", lambda: 64 ** 3 * 5 - 1)  # uint8 + float32
+    with pytest.raises(HostMemoryError, match=f"reading .*{name} whole \\(64 x 64 x 64 uint8\\)") as excinfo:
+        load(path)
+    assert isinstance(excinfo.value, MemoryError) and "\n" not in str(excinfo.value) and not reads
+
+
+def test_a_raw_file_is_weighed_before_it_is_read(tmp_path, monkeypatch):
+    import clwave.device.memory
+    from clwave.device.memory import HostMemoryError
+    from clwave.io.loaders import raw
+
+    path = tmp_path / "v.raw"
+    with open(path, "wb") as fh:
+        fh.truncate(64 ** 3 * 2)  # sparse
+    monkeypatch.setattr(raw, "_read_memmap", lambda *args: pytest.fail("read"))
+    monkeypatch.setattr(clwave.device.memory, "available_bytes", lambda: 64 ** 3 * 6 - 1)  # int16 + float32
+    with pytest.raises(HostMemoryError, match="64 x 64 x 64 int16"):
+        load(path, shape=(64, 64, 64), dtype="int16")
+
+
+def test_float32_is_weighed_as_read(tmp_path, monkeypatch):
+    """float32 samples are used as they are read: 4 bytes a value, no second copy (int16: 2 + 4)."""
+    import clwave.device.memory
+
+    np.save(tmp_path / "f.npy", np.ones((32, 32, 32), np.float32))
+    np.save(tmp_path / "i.npy", np.ones((32, 32, 32), np.int16))
+    monkeypatch.setattr(clwave.device.memory, "available_bytes", lambda: 32 ** 3 * 5)
+    assert load(tmp_path / "f.npy").data.sum() == 32 ** 3
+    with pytest.raises(MemoryError, match="32 x 32 x 32 int16"):
+        load(tmp_path / "i.npy")
+
+
+def test_a_stack_of_slices_is_weighed_after_its_first_slice(tmp_path, monkeypatch):
+    """A folder of slices declares its size by its first slice and its number of files: weighed before the rest."""
+    from clwave.io.loaders import tiff
+
+    for z in range(8):
+        tifffile.imwrite(tmp_path / f"s{z}.tif", np.zeros((16, 16), np.uint16))
+    read, declared = [], []
+    real = tiff.read_tiff
+    monkeypatch.setattr(tiff, "read_tiff", lambda path, **kwargs: read.append(path) or real(path, **kwargs))
+
+    class Refused(ClwaveError):
+        pass
+
+    def fits(voxels, channels):
+        declared.append((voxels, channels))
+        raise Refused("refused")
+
+    with pytest.raises(Refused):
+        load(tmp_path, fits=fits)
+    assert declared == [(8 * 16 * 16, 1)] and [p.name for p in read] == ["s0.tif"]

@@ -13,6 +13,7 @@ import threading
 
 from ..errors import ClwaveError, InputError
 from . import compress, drr, info, progressive, render, view
+from .options import check_options
 
 EXIT_USAGE = 2
 
@@ -58,6 +59,7 @@ def main(argv=None) -> int:
     args = None
     try:
         args = make_parser().parse_args(argv)
+        check_options(args)  # before the input is opened: a mistake costs no read
         return args.run(args)
     except ClwaveError as exc:  # in the running command's own options (its ``words``, errors.CommandWords)
         print(f"clwave: error: {exc.cli_message(getattr(args, 'words', None))}", file=sys.stderr)

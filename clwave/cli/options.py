@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +77,61 @@ def add_model_options(p):
                         "input: --tf always classifies while rendering)")
 
 
+def check_options(args):
+    """Every option the commands share whose validity does not depend on the input, checked before the input is
+    opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): the input's
+    spacing and chunks, the model's wavelets, levels, thresholding, transfer function and classification, the
+    scheduler, and the view's device, display window, footprint band, coarse tolerance, device memory, ray tracing
+    tolerance and lights.  An option a command does not have is not looked at."""
+    from ..model.bspline import wavelet_for
+
+    if getattr(args, "input", None) is None:  # clwave info: no input to spare
+        return
+    if getattr(args, "spacing", None) is not None:
+        spacing = numbers(args.spacing, "--spacing", (1, 3))
+        if not all(np.isfinite(spacing)) or min(spacing) <= 0:
+            raise InputError(f"--spacing {args.spacing} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
+    if getattr(args, "chunks", None) is not None:
+        _chunks(args.chunks)
+    if getattr(args, "wavelet", None) is not None:
+        for name in args.wavelet.split(","):
+            wavelet_for(name)
+    if getattr(args, "levels", None) is not None and args.levels < 0:
+        raise InputError(f"--levels {args.levels} must be 0 or more (at most floor(log2(shortest axis)) - 1)")
+    if hasattr(args, "keep"):
+        _thresholding(args)
+    if hasattr(args, "tf"):
+        if args.tf or not is_clw(args):  # a .clw's own transfer function takes --tf-window alone
+            _preset(args)
+        elif args.tf_window is not None:
+            _preset_window(args.tf_window)
+        if args.classify == "post" and not args.tf and not is_clw(args):
+            raise InputError("--classify post keeps the scalar for ray tracing to classify with the --tf preset: "
+                             "give --tf PRESET too")
+    if hasattr(args, "workers"):
+        parse_scheduler(args)
+    if hasattr(args, "device") and not (is_clw(args) and args.scheduler):  # a remote cluster's workers choose theirs
+        from ..device.context import select_device
+        select_device(args.device)
+    if hasattr(args, "display_window"):
+        parse_window(args)
+    if getattr(args, "omega_s", None) is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
+        raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
+    if getattr(args, "coarse", None) is not None and not 0 < args.coarse < 1:
+        raise InputError(f"--coarse {args.coarse:g} must be a tolerance between 0 and 1, e.g. 1e-2")
+    if hasattr(args, "device_memory"):
+        parse_device_memory(args)
+    if getattr(args, "tolerance", None) is not None and not (np.isfinite(args.tolerance) and args.tolerance > 0):
+        raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
+    if getattr(args, "light", None) is not None:
+        parse_lights(args)
+
+
+def is_clw(args) -> bool:
+    """Whether the input is a ``.clw`` file (a wavelet model already)."""
+    return args.input.lower().endswith(".clw")
+
+
 def read_volume(args):
     """The Volume named by ``args.input`` (a file, a folder or ``phantom:NAME[:N]``)."""
     from ..io.loaders import load
@@ -92,18 +149,27 @@ def read_volume(args):
         if len(parts) > 3 or (len(parts) == 3 and not parts[2].isdigit()):
             raise InputError(f"{spec!r}: write phantom:NAME or phantom:NAME:N (N voxels per axis)")
         n = int(parts[2]) if len(parts) == 3 else 128
-        classified = args.tf and getattr(args, "classify", "pre") == "pre"  # four channels, or the scalar
-        check_fits(MODEL_BYTES_PER_VALUE * n ** 3 * (4 if classified else 1), f"decomposing a {n}^3 phantom",
-                   "choose a smaller N")
+        check_model_fits(args, n ** 3, 1, f"decomposing a {n}^3 phantom", "choose a smaller N")
         vol = phantom(parts[1], n=n)
         return vol if spacing is None else Volume(vol.data, spacing=spacing)
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     series = args.series
     if series is not None and series.isdigit():
         series = int(series)
+    # weighed by the size the file declares, before its voxels are read
+    fits = partial(check_model_fits, args, what="decomposing this volume",
+                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii; gunzip a .nii.gz "
+                        "first), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
                 series=series, level=args.level, chunks=_chunks(args.chunks), background=args.subtract or 0.0,
-                hu_to_mu=args.hu_to_mu)
+                hu_to_mu=args.hu_to_mu, fits=fits)
+
+
+def check_model_fits(args, voxels, channels, what, hint):
+    """Refuse (a ``HostMemoryError``) a volume of ``voxels`` and ``channels`` whose model would not fit in the host's
+    memory (``MODEL_BYTES_PER_VALUE`` a value; ``--tf`` classifies a scalar into four channels first)."""
+    classified = getattr(args, "tf", None) and getattr(args, "classify", "pre") == "pre"
+    check_fits(MODEL_BYTES_PER_VALUE * voxels * (4 if classified else channels), what, hint)
 
 
 def _chunks(text):
@@ -141,7 +207,7 @@ def _thresholding(args) -> dict:
     if args.focus is not None or args.sigma is not None:
         if args.focus is None or args.sigma is None:
             raise InputError("--focus X,Y,Z and --sigma S go together")
-        if args.keep is None and args.threshold is None and args.input.lower().endswith(".clw"):
+        if args.keep is None and args.threshold is None and is_clw(args):
             raise InputError("--focus selects where detail is kept: give --keep or --threshold too")
         focus = (numbers(args.focus, "--focus", (3,)), args.sigma)
     keep, threshold, focus = check_thresholding(args.keep, args.threshold, focus)
@@ -172,7 +238,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
 
     thresholding = _thresholding(args)
     scheduler = parse_scheduler(args)
-    if args.input.lower().endswith(".clw"):
+    if is_clw(args):
         given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
                  and not (cluster_render and name in ("workers", "scheduler"))
                  and not ((rgba or post) and name in ("tf", "tf_window"))]  # a scalar .clw: classified while rendering
@@ -196,6 +262,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                               "opacity of their luminance)")
         if args.threshold is not None or args.focus is not None:  # --keep alone: a prefix of the file
             wv = wv.threshold(**thresholding)
+        note_stored(args, wv)
         return wv, None
     vol = read_volume(args)
     tf = _preset(args)
@@ -210,10 +277,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
     levels = min(DEFAULT_LEVELS, max_levels(vol.shape)) if args.levels is None else args.levels
     wavelet, levels = check_decomposition(vol.shape, 4 if tf and not post else vol.channels, wavelet, levels)
-    if not vol.chunked:
-        check_fits(MODEL_BYTES_PER_VALUE * int(np.prod(vol.shape)) * (4 if tf and not post else vol.channels),
-                   "decomposing this volume", "read it chunk by chunk (--chunks auto), or crop or subsample it")
-    elif args.interpolate:
+    if vol.chunked and args.interpolate:
         raise InputError("--interpolate needs the whole volume in memory (its prefilter is global); leave it out "
                          "for a chunked input, or read the input whole with --chunks off")
     if tf is not None:
@@ -230,6 +294,18 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     if not vol.chunked:
         return wv, vol
     return (wv.compute() if gather else wv), None
+
+
+def note_stored(args, wv):
+    """One line on stderr where a ``.clw`` input's ``--keep`` (below 1, "every coefficient") asks for more
+    coefficients than the file stores: all it stores are used.  Not refused: a file holds fewer than its own
+    ``--keep`` where the rest were zero, and the file cannot tell which."""
+    asked = None if args.keep is None or args.keep == 1 else max(1, round(args.keep * wv.n_voxels))
+    stored = min(g.kept for g in wv.groups)
+    if asked is not None and stored < asked:
+        print(f"clwave: warning: --keep {args.keep:g} asks for {asked:,} coefficients, and {args.input} stores "
+              f"{stored:,} ({100 * stored / wv.n_voxels:.2f} % of the voxels): all of them are used; for more detail, "
+              f"compress the original volume again with a larger --keep", file=sys.stderr)
 
 
 def _preset(args):
@@ -249,7 +325,7 @@ def post_transfer_function(args, wv):
     with ``--tf-window`` if given); None for a classified model or a scalar one without any."""
     from ..model.transfer import TransferFunction
 
-    clw = args.input.lower().endswith(".clw")
+    clw = is_clw(args)
     if wv.channels != 1:
         if clw and (args.tf or args.tf_window):
             raise InputError(f"--tf and --tf-window classify a scalar model; {args.input} has {wv.channels} "

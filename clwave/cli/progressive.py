@@ -5,8 +5,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, make_camera,
                       numbers, parse_device_memory, parse_lights, parse_window, post_transfer_function,
@@ -34,8 +32,8 @@ def run(args):
             raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
         if args.field != "bspline":
             raise InputError("progressive ray tracing takes the B-spline field; leave out --field")
-        if not (np.isfinite(args.tolerance) and args.tolerance > 0):
-            raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
+        if (args.steps, args.budget) != (None, None):  # else every frame of its schedule
+            check_schedule(args.steps, args.budget)
         steps = args.steps
         options = dict(tolerance=args.tolerance, lights=parse_lights(args), shading=not args.no_shading,
                        absorption=not args.xray)
@@ -44,7 +42,7 @@ def run(args):
         check_schedule(steps, args.budget)
         options = dict(omega_s=args.omega_s, coarse=args.coarse)
     background = numbers(args.background, "--background", (3,))
-    device_memory = parse_device_memory(args)
+    device_memory, window = parse_device_memory(args), parse_window(args)
     wv, _ = build_model(args, rgba=raytrace and not args.xray)
     if raytrace and not args.xray:
         options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering
@@ -56,7 +54,6 @@ def run(args):
                               error=args.error, device_memory=device_memory, **options))
     if frames[-1].meta.get("nothing_visible"):  # every frame blank: not what was asked for (docs/raytracing.md §10)
         raise InputError(frames[-1].meta["nothing_visible"])
-    window = parse_window(args)
     if window == "auto" and frames[-1].result().is_xray:  # the final image's window for every frame
         window = resolve_window(frames[0].final_image()[..., :3], "auto")
     pictures = [f.result().to_uint8(window, background) for f in frames]

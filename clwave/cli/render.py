@@ -7,7 +7,7 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .options import (add_command, add_raytrace_options, build_model, check_outputs, make_camera, numbers,
+from .options import (add_command, add_raytrace_options, build_model, check_outputs, is_clw, make_camera, numbers,
                       parse_device_memory, parse_lights, parse_scheduler, parse_window, post_transfer_function,
                       write_gif)
 
@@ -28,12 +28,8 @@ def run(args):
     if args.method == "raytrace" and args.coarse is not None:
         raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
     device_memory = parse_device_memory(args)
-    if args.omega_s is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
-        raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
-    if not (np.isfinite(args.tolerance) and args.tolerance > 0):
-        raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
     lights, window = parse_lights(args), parse_window(args)
-    on_cluster = args.input.lower().endswith(".clw") and (args.workers, args.scheduler) != (None, None)
+    on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
     wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
     if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
         from ..raytrace.regions import check_cluster_model

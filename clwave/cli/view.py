@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 from ..errors import InputError
-from .options import (add_input_options, add_model_options, build_model, numbers, parse_device_memory,
+from .options import (add_input_options, add_model_options, build_model, note_stored, numbers, parse_device_memory,
                       post_transfer_function)
 
 
@@ -14,19 +14,19 @@ def run(args):
     import logging
 
     from ..model.camera import Camera
-    from ..view.frames import check_tolerance
     from ..view.prefix import PrefixFirst
     from ..view.server import ViewServer, is_loopback
 
     size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
     size = Camera(size=size if len(size) == 2 else size[0]).size
-    check_tolerance(args.tolerance)
     device_memory = parse_device_memory(args)
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
     # a .clw file: its prefix now, the rest read while serving; a scalar model's shaded views are classified while
     # rendering by --tf [--tf-window] (a .clw input; a volume's with --classify post), checked as `render` checks them
     wv, _ = build_model(args, opener=PrefixFirst, post=True)
+    if isinstance(wv, PrefixFirst) and wv.complete:  # else how much the file stores is known once it is read
+        note_stored(args, wv.prefix)
     tf = post_transfer_function(args, wv.prefix if isinstance(wv, PrefixFirst) else wv)
     if isinstance(wv, PrefixFirst) and not wv.complete:
         print(f"clwave view: serving the {wv.prefix.kept:,} most important coefficients of {args.input} at once; "

@@ -36,7 +36,7 @@ _ONLY_FOR = {"shape": ".raw files", "dtype": ".raw files", "byte_order": ".raw f
 
 
 def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
-         chunks=None, background=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None) -> Volume:
+         chunks=None, background=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None, fits=None) -> Volume:
     """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
 
     Parameters
@@ -79,6 +79,12 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         Attenuation of water per world unit (default 0.0193 per mm, ~60 keV).
     progress_bar : bool, optional
         Show a bar while reading slices; None shows it when stderr is a terminal.
+    fits : callable, optional
+        ``fits(voxels, channels)``, called with the size the file's header declares before a volume read whole
+        (not chunk by chunk) is read (a stack of slices: once its first slice is read), to refuse one that is too
+        big by raising a :class:`~clwave.errors.ClwaveError` (the command line weighs the model it makes).
+        Whatever ``fits`` says, a volume whose reading would not fit in the memory available is refused then
+        (``HostMemoryError``).
 
     Returns
     -------
@@ -91,6 +97,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     InputError
         Bad arguments, several DICOM series without ``series=``, or data that is
         not a volume (see :class:`Volume`).
+    clwave.device.memory.HostMemoryError
+        A volume read whole that would not fit in memory (a ``MemoryError``).
 
     Examples
     --------
@@ -120,23 +128,23 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
 
     with reading(path):
         if kind == "zarr":
-            data, file_spacing, origin = zarr.read_zarr(path, inner, level, chunks)
+            data, file_spacing, origin = zarr.read_zarr(path, inner, level, chunks, fits)
         elif kind == "hdf5":
-            data, file_spacing, origin = hdf5.read_hdf5(path, inner, chunks)
+            data, file_spacing, origin = hdf5.read_hdf5(path, inner, chunks, fits)
         elif kind == "raw":
-            data, file_spacing, origin = raw.read_raw(path, shape, dtype, byte_order, chunks)
+            data, file_spacing, origin = raw.read_raw(path, shape, dtype, byte_order, chunks, fits)
         elif kind == "npy":
-            data, file_spacing, origin = raw.read_npy(path, chunks), None, None
+            data, file_spacing, origin = raw.read_npy(path, chunks, fits), None, None
         elif kind == "nifti":
-            data, file_spacing, origin = nifti.read_nifti(path, chunks)
+            data, file_spacing, origin = nifti.read_nifti(path, chunks, fits)
         elif kind == "nrrd":
-            data, file_spacing, origin = nrrd.read_nrrd(path)
+            data, file_spacing, origin = nrrd.read_nrrd(path, fits, spacing is None)
         elif kind == "tiff":
-            data, file_spacing, origin = tiff.read_tiff(path), None, None
+            data, file_spacing, origin = tiff.read_tiff(path, fits), None, None
         elif kind == "tiff-folder":
-            data, file_spacing, origin = tiff.read_tiff_folder(path, progress_bar), None, None
+            data, file_spacing, origin = tiff.read_tiff_folder(path, progress_bar, fits), None, None
         else:
-            data, file_spacing, origin = dicom.read_dicom_folder(path, series, progress_bar)
+            data, file_spacing, origin = dicom.read_dicom_folder(path, series, progress_bar, fits)
 
     if not is_dask(data):
         data = np.asarray(data)

@@ -16,7 +16,7 @@ _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSp
                      "Rows", "Columns", "PixelData")
 
 
-def read_dicom_folder(folder, series, progress_bar):
+def read_dicom_folder(folder, series, progress_bar, fits=None):
     """One DICOM series: slices sorted along their normal, rescaled, in RAS."""
     uid, headers = _pick_series(folder, _dicom_image_series(folder), series)
     if len(headers) < 2:
@@ -45,7 +45,7 @@ def read_dicom_folder(folder, series, progress_bar):
     dy, dx = (float(s) for s in headers[order[0]][1].PixelSpacing)  # row spacing, column spacing
 
     data_zyx = read_slices([headers[i][0] for i in order], _dicom_pixels,
-                            "reading DICOM slices", progress_bar)
+                            "reading DICOM slices", progress_bar, fits)
     # index (column, row, slice) -> LPS patient coordinates (mm)
     affine_lps = np.eye(4)
     affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, normal * dz])

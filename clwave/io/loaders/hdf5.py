@@ -10,7 +10,7 @@ from ..hdf5_safety import check_stored_inside
 from .shared import OnDemand, as_array, pick_array
 
 
-def read_hdf5(path, name, chunks):
+def read_hdf5(path, name, chunks, fits=None):
     """One dataset of an HDF5 file: the one named, or the file's only 3-D/4-D dataset; axes (z, y, x[, c])."""
     import h5py
 
@@ -28,7 +28,7 @@ def read_hdf5(path, name, chunks):
         except ValueError as exc:
             raise FileFormatError(f"{exc}; clwave reads volumes stored in the file itself") from None
         source = OnDemand(partial(_read_dataset, str(path), name), dataset.shape, dataset.dtype, dataset.chunks)
-    return as_array(source, chunks), None, None
+    return as_array(source, chunks, fits=fits, path=f"{path}:/{name}"), None, None
 
 
 def _read_dataset(path, name, index):

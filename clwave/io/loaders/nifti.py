@@ -11,7 +11,7 @@ from ...errors import FileFormatError
 from .shared import as_array, check_declared_size, to_canonical
 
 
-def read_nifti(path, chunks):
+def read_nifti(path, chunks, fits=None):
     """NIfTI-1/2 through nibabel: RGB24/RGBA32 become channels; time series are refused; a header that cannot
     describe a 3-D volume (its dimensions, a voxel-to-world affine that is not finite or not invertible, more data
     than the file holds) is refused in one line before any voxel is read."""
@@ -43,7 +43,7 @@ def read_nifti(path, chunks):
                 "volume (vector components on the 5th axis become channels): extract one "
                 "volume first, e.g. with nibabel.funcs.four_to_three")
         proxy = proxy.reshape(proxy.shape[:3] + proxy.shape[4:5])
-    data = as_array(proxy, chunks)
+    data = as_array(proxy, chunks, fits=fits, path=path)
     if data.dtype.names:  # RGB24 / RGBA32 structured samples
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
     return to_canonical(data, affine)

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_declared_size, to_canonical
+from .shared import check_declared_size, check_whole, log, to_canonical
 
 _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
@@ -16,27 +16,32 @@ _NRRD_SPACE_SIGNS = {
 }
 
 
-def read_nrrd(path):
-    """NRRD/NHDR through pynrrd: ``space directions`` and ``space`` give the RAS affine."""
+def read_nrrd(path, fits=None, warn_spacing=True):
+    """NRRD/NHDR through pynrrd: ``space directions`` and ``space`` give the RAS affine; the header is checked
+    (its declared size against the data and :func:`check_whole`) before the data is read.  An unknown spacing
+    (``spacings: nan``) is taken as 1, with a warning unless ``warn_spacing`` is false (one was given)."""
     import nrrd
 
-    _check_nrrd_size(path)
-    data, header = nrrd.read(str(path))  # index_order 'F': axes in file order, fastest first
-    directions = header.get("space directions")
-    if directions is not None:
-        directions = np.asarray(directions, float)
-        spatial = [a for a in range(data.ndim) if np.all(np.isfinite(directions[a]))]
-    elif "kinds" in header:
-        spatial = [a for a, kind in enumerate(header["kinds"])
-                   if kind.lower() in ("domain", "space")]
-    else:
-        spatial = list(range(data.ndim))
-    others = [a for a in range(data.ndim) if a not in spatial]
-    width = directions.shape[1] if directions is not None else 3
-    if len(spatial) != 3 or len(others) > 1 or width != 3:
-        raise FileFormatError(
-            f"{path} has {data.ndim} axes of sizes {data.shape} in a {width}-D space; clwave "
-            "reads 3 spatial axes in 3-D space plus at most one channel axis")
+    with open(path, "rb") as fh:
+        header = nrrd.read_header(fh)
+        _check_nrrd_size(path, header, fh.tell())
+        sizes = [int(n) for n in header["sizes"]]
+        directions = header.get("space directions")
+        if directions is not None:
+            directions = np.asarray(directions, float)
+            spatial = [a for a in range(len(sizes)) if np.all(np.isfinite(directions[a]))]
+        elif "kinds" in header:
+            spatial = [a for a, kind in enumerate(header["kinds"]) if kind.lower() in ("domain", "space")]
+        else:
+            spatial = list(range(len(sizes)))
+        others = [a for a in range(len(sizes)) if a not in spatial]
+        width = directions.shape[1] if directions is not None else 3
+        if len(spatial) != 3 or len(others) > 1 or width != 3:
+            raise FileFormatError(
+                f"{path} has {len(sizes)} axes of sizes {tuple(sizes)} in a {width}-D space; clwave "
+                "reads 3 spatial axes in 3-D space plus at most one channel axis")
+        check_whole(path, [sizes[a] for a in spatial + others], nrrd.reader._determine_datatype(header), fits)
+        data = nrrd.read_data(header, fh, str(path))  # index_order 'F': axes in file order, fastest first
     data = np.moveaxis(data, others, list(range(3, data.ndim)))
 
     affine = np.eye(4)
@@ -44,21 +49,22 @@ def read_nrrd(path):
         affine[:3, :3] = directions[spatial].T
         affine[:3, 3] = header.get("space origin", np.zeros(3))
     else:
-        spacings = np.asarray(header.get("spacings", np.ones(data.ndim)), float)[spatial]
+        spacings = np.asarray(header.get("spacings", np.ones(len(sizes))), float)[spatial]
+        if warn_spacing and not np.all(np.isfinite(spacings)):
+            log.warning("%s: its spacing (dz, dy, dx) %s is unknown (nan) on some axes; taken as 1 there: give "
+                        "spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(map(str, spacings[::-1])))
         affine[:3, :3] = np.diag(np.where(np.isfinite(spacings), spacings, 1.0))
     # other spaces (scanner-xyz, 3D-right-handed, none) are taken as RAS
     signs = _NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1))
     return to_canonical(data, np.diag(signs + (1,)) @ affine)
 
 
-def _check_nrrd_size(path):
-    """A NRRD header that declares more voxels than its raw or gzip data holds is refused before pynrrd
-    allocates them (other encodings, and a missing detached data file, are left to pynrrd)."""
+def _check_nrrd_size(path, header, offset):
+    """A NRRD header that declares more voxels than its raw or gzip data holds (attached data starting at
+    ``offset``) is refused before pynrrd allocates them (other encodings, and a missing detached data file, are
+    left to pynrrd)."""
     import nrrd
 
-    with open(path, "rb") as fh:
-        header = nrrd.read_header(fh)
-        offset = fh.tell()  # attached data start here
     encoding = str(header.get("encoding", "raw")).lower()
     if "data file" in header:  # a detached header: the data is a file of its own
         path, offset = Path(Path(path).parent, str(header["data file"])), 0

@@ -11,7 +11,7 @@ from ...errors import FileFormatError, InputError
 from .shared import OnDemand, as_array
 
 
-def read_raw(path, shape, dtype, byte_order, chunks):
+def read_raw(path, shape, dtype, byte_order, chunks, fits=None):
     """Headerless samples, C order (x fastest); the file size must match exactly."""
     if shape is None or dtype is None:
         raise InputError(f"{path.name}: a .raw file has no header; give shape=(Z, Y, X) or "
@@ -35,15 +35,16 @@ def read_raw(path, shape, dtype, byte_order, chunks):
         raise FileFormatError(
             f"{path} has {actual} bytes but shape {shape} of {dt.name} needs {expected} bytes; "
             "check shape= and dtype=, or the file is truncated")
-    return as_array(OnDemand(partial(_read_memmap, str(path), dt, shape, 0, "C"), shape, dt), chunks), None, None
+    return as_array(OnDemand(partial(_read_memmap, str(path), dt, shape, 0, "C"), shape, dt), chunks, fits=fits,
+                    path=path), None, None
 
 
-def read_npy(path, chunks):
+def read_npy(path, chunks, fits=None):
     """A .npy file, memory-mapped (C or Fortran order)."""
     mapped = np.load(path, mmap_mode="r", allow_pickle=False)  # reads the header only
     order = "F" if mapped.flags.f_contiguous and not mapped.flags.c_contiguous else "C"
     return as_array(OnDemand(partial(_read_memmap, str(path), mapped.dtype, mapped.shape, mapped.offset, order),
-                            mapped.shape, mapped.dtype), chunks)
+                            mapped.shape, mapped.dtype), chunks, fits=fits, path=path)
 
 
 def _read_memmap(path, dtype, shape, offset, order, index):

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...device.memory import check_fits
 from ...errors import ClwaveError, FileFormatError, InputError
 from ..progress import progress
 
@@ -115,19 +116,37 @@ class OnDemand:
         return self.read(index)
 
 
-def as_array(source, chunks, roles=None):
+def check_whole(path, shape, dtype, fits=None):
+    """Refuse, before a voxel is read, a volume read whole whose declared ``shape`` (3 spatial axes, then any
+    channel axes) of ``dtype`` samples (a structured one: a channel a field) would not fit in memory: by the
+    caller's rule ``fits(voxels, channels)`` first (the command line weighs the model it makes of it), then by what
+    reading it takes (the samples as stored, and a float32 copy of other types)."""
+    dtype = np.dtype(dtype)
+    voxels, samples = math.prod(shape[:3]), math.prod(shape[3:])
+    channels = samples * (len(dtype.names) if dtype.names else 1)
+    if fits is not None:
+        fits(voxels, channels)
+    converted = 0 if dtype == np.float32 else 4 * channels  # float32 samples are used as they are read
+    check_fits(voxels * (samples * dtype.itemsize + converted), f"reading {path} whole "
+               f"({' x '.join(map(str, shape))} {dtype})", "read it chunk by chunk (chunks='auto'; Zarr, HDF5, .npy, "
+               ".raw, .nii), or crop it")
+
+
+def as_array(source, chunks, roles=None, fits=None, path=None):
     """``source`` (an array read on demand: ``shape``, ``dtype``, ``source[index]``, maybe the store's ``chunks``)
     read whole, or as a Dask array that reads each chunk when it is computed (docs/chunked.md §1).
 
     ``chunks``: False, None (whole below ``CHUNKED_MIN_BYTES`` as float32), "auto" or a cube edge.  ``roles``
     names each axis: 's' spatial (chunked), 't' time (one per chunk), 'c' channel (whole); default: 3
-    spatial axes, then channels.
+    spatial axes, then channels.  A whole read of ``path`` is weighed first (:func:`check_whole`, ``fits``).
     """
     shape = tuple(int(n) for n in source.shape)
     roles = roles or "s" * min(len(shape), 3) + "c" * max(len(shape) - 3, 0)
     if chunks is None:
         chunks = "auto" if 4 * math.prod(shape) >= CHUNKED_MIN_BYTES else False
     if chunks is False:
+        check_whole(path, [n for n, r in zip(shape, roles) if r == "s"] + [n for n, r in zip(shape, roles) if r != "s"],
+                    source.dtype, fits)
         return np.asarray(source[...])
     import dask.array as da
     from dask.array.core import normalize_chunks
@@ -208,13 +227,15 @@ def to_canonical(array_ijk, affine_ras):
     return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3])
 
 
-def read_slices(paths, read_slice, desc, progress_bar):
-    """Stack one 2-D slice per file along z, each read with its own error wrapping."""
+def read_slices(paths, read_slice, desc, progress_bar, fits=None):
+    """Stack one 2-D slice per file along z, each read with its own error wrapping; the stack the first slice
+    declares (as many as there are files) is weighed before the others are read (:func:`check_whole`)."""
     volume = None
     for z, path in enumerate(progress(paths, total=len(paths), desc=desc, enabled=progress_bar)):
         with reading(path):
             image = read_slice(path)
         if volume is None:
+            check_whole(path.parent, (len(paths),) + image.shape, image.dtype, fits)
             volume = np.empty((len(paths),) + image.shape, image.dtype)
         elif image.shape != volume.shape[1:]:
             raise FileFormatError(

@@ -21,7 +21,7 @@ _METRES = {prefix + "meter": Fraction(10) ** power for prefix, power in _SI_PREF
     "mile": Fraction("1609.344"), "parsec": Fraction("3.0857e16")}  # exact: 1 micrometer is 1000.0 nanometer
 
 
-def read_zarr(path, name, level, chunks):
+def read_zarr(path, name, level, chunks, fits=None):
     """A Zarr array (v2 or v3), or one level of an OME-Zarr multiscale image with its spacing and origin."""
     import zarr
 
@@ -41,7 +41,7 @@ def read_zarr(path, name, level, chunks):
         attrs = node.attrs.asdict()
         ome = attrs.get("ome", attrs)  # NGFF 0.5 keeps its metadata under "ome"
         if "multiscales" in ome:
-            return _read_ome_zarr(node, ome["multiscales"], where, level, chunks)
+            return _read_ome_zarr(node, ome["multiscales"], where, level, chunks, fits)
         node = pick_array(arrays(node, f"{name}/" if name else ""), None, path)[1]
     elif len(node.shape) not in (3, 4):
         raise FileFormatError(f"{where} holds an array of shape {node.shape}; clwave reads a 3-D (z, y, x) or "
@@ -50,10 +50,10 @@ def read_zarr(path, name, level, chunks):
         raise InputError(f"level= applies to OME-Zarr multiscale images, and {where} is a plain Zarr array; leave "
                          "it out", cli=f"--level applies to OME-Zarr multiscale images, and {where} is a plain "
                                         "Zarr array; leave it out")
-    return as_array(node, chunks), None, None
+    return as_array(node, chunks, fits=fits, path=where), None, None
 
 
-def _read_ome_zarr(group, multiscales, where, level, chunks):
+def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
     """Level ``level`` (default 0) of the first OME-Zarr (NGFF 0.4/0.5) multiscale image in ``group``: axes named
     z, y, x, an optional c (channels, moved last) and t (length 1, dropped); spacing and origin from the scale
     and translation of the level and of the whole image (NGFF puts voxel centres at integer indices, so the
@@ -116,7 +116,7 @@ def _read_ome_zarr(group, multiscales, where, level, chunks):
         factor = np.array([float(_METRES[u] / _METRES[units[2]]) for u in units])
         scale[zyx], translation[zyx] = scale[zyx] * factor, translation[zyx] * factor
 
-    data = as_array(array, chunks, "".join(_NGFF_ROLES[n] for n in names))
+    data = as_array(array, chunks, "".join(_NGFF_ROLES[n] for n in names), fits, where)
     data = data[tuple(0 if n == "t" else slice(None) for n in names)]
     names = [n for n in names if n != "t"]
     data = data.transpose([names.index(a) for a in "zyxc" if a in names])
