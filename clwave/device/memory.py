@@ -141,5 +141,5 @@ def check_fits(nbytes: int, what: str, hint: str):
     """A :class:`HostMemoryError` naming ``what`` and the numbers when ``nbytes`` exceed what is available."""
     free = available_bytes()
     if nbytes > free:
-        raise HostMemoryError(f"{what} needs about {nbytes / 2**30:,.1f} GiB, and this machine has "
-                              f"{free / 2**30:,.1f} GiB available; {hint}")
+        raise HostMemoryError(f"{what} needs about {format_size(nbytes)}, and this machine has "
+                              f"{format_size(free)} available; {hint}")
