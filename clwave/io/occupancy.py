@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.bspline import bspline
+
 
 def central_start(wavelet, level: int) -> int:
     """The first voxel of level-``level`` coefficient 0's central block of ``2^level`` voxels (per axis): the
@@ -72,24 +74,16 @@ def mass_on_occupied(occupied: np.ndarray, wavelet, level: int) -> np.ndarray:
     """Per level-``level`` coefficient (``occupied``'s shape): the share of its B-spline's mass (its integral) that
     lies over occupied central blocks, a product of per-axis shares.  Coefficient k + m's central block spans
     ``central_start - o_L + 2^L m .. + 2^L`` of coefficient k's support, in fine cells (docs/raytracing.md §9)."""
-    from scipy.interpolate import BSpline
+    from scipy.ndimage import correlate1d
 
     j, step = wavelet.order, 2 ** level
-    spline = BSpline.basis_element(np.arange(j + 1), extrapolate=False)  # N_j on [0, j], integral 1
     at = (central_start(wavelet, level) - wavelet.offset("a", level)) / step  # coarse units
-    shifts = np.arange(int(np.floor(-at)), int(np.ceil(j - at)))
-    weights = [spline.integrate(max(at + m, 0.0), min(at + m + 1, float(j))) for m in shifts]
-    share = occupied.astype(np.float64)
-    for axis in range(3):
-        n = share.shape[axis]
-        out = np.zeros_like(share)
-        for m, w in zip(shifts, weights):  # out[k] += w share[k + m], share 0 beyond the band
-            lo, hi = max(0, -m), min(n, n - m)
-            if hi > lo:
-                index = [slice(None)] * 3
-                index[axis] = slice(lo, hi)
-                source = list(index)
-                source[axis] = slice(lo + m, hi + m)
-                out[tuple(index)] += w * share[tuple(source)]
-        share = out
+    reach = int(max(np.ceil(at), np.ceil(j - at)))  # the blocks k + m, |m| <= reach, that its support meets
+    ends = np.clip(at + np.arange(-reach, reach + 2), 0, j)
+    # the integral of N_j from 0 to x is sum_k N_{j+1}(x - k) (de Boor, A Practical Guide to Splines, ch. X)
+    integral = sum(bspline(j + 1, ends - k) for k in range(j + 1))
+    weights = np.diff(integral).astype(np.float32)
+    share = occupied.astype(np.float32)
+    for axis in range(3):  # out[k] = sum over m of weights[m] share[k + m], share 0 beyond the band
+        share = correlate1d(share, weights, axis=axis, mode="constant")
     return share
