@@ -1,6 +1,7 @@
 """The first image from a ``.clw`` file at once (docs/raytracing.md §8): :meth:`clwave.RayTracer.open` reads the
 coarsest approximation alone (its own tier of the file, read first) and expands its bricks at the coarsest detail,
-without the content mask; the whole model is read and set up in a background thread while the caller renders
+without the content mask (the file's occupancy of the approximation, a summary of it, gives its frames' estimate
+the clamp's term); the whole model is read and set up in a background thread while the caller renders
 the coarse stage.  :meth:`StagedTracer.refine` yields frames from the coarse stage until the full one is ready,
 then the full stage's progressive frames (:mod:`clwave.raytrace.progressive`), the last bit for bit what the full
 tracer's ``render`` gives.
@@ -136,12 +137,12 @@ class StagedTracer:
         iterating when the view changes; the set-up goes on).  While the full stage is not ready: the coarse stage
         on an image ``2^levels`` times smaller per side, then (if it is still not ready) on one twice as large;
         their estimates add what their size misses (the step from an image half as large) and what the details
-        they lack change (:attr:`missing`, docs/raytracing.md §9).  Then (waiting for it) the full stage's
-        :meth:`RayTracer.refine`, full detail on reduced images and the last bit for bit its ``render``, from the
-        image as large as the last coarse frame's (each frame at least the size and detail of the one before,
-        docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`; ``transfer_function``: as
-        :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.  ``meta["stage"]`` says which
-        stage made a frame."""
+        and the content clamp they lack change (:attr:`missing`, :attr:`outside`, docs/raytracing.md §9).  Then
+        (waiting for it) the full stage's :meth:`RayTracer.refine`, full detail on reduced images and the last bit for
+        bit its ``render``, from the image as large as the last coarse frame's (each frame at least the size and
+        detail of the one before, docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`;
+        ``transfer_function``: as :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.
+        ``meta["stage"]`` says which stage made a frame."""
         check_error(error)
         check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
