@@ -53,10 +53,11 @@ class StagedTracer:
         energies = [importance_of(g, None, approximation.frame).astype(np.float64) ** 2 for g in approximation.groups]
         read = sum(float(np.sum(e)) for e in energies)
         unread = detail_energy(path)  # from the file's tiers: nothing more is read
-        # the approximation's energy off its occupied blocks, from the file's occupancy (older files: none)
-        outside = sum(float(np.sum(e * (1 - mass_on_occupied(occupied, g.wavelet, self.levels).reshape(-1)[
-            g.all_positions()]))) for e, g, occupied in zip(energies, approximation.groups,
-                                                            approximation_occupancy(path)) if occupied is not None)
+        outside = 0.0  # the approximation's energy off its occupied blocks (a file without the occupancy: none)
+        for e, g, occupied in zip(energies, approximation.groups, approximation_occupancy(path)):
+            if occupied is not None:
+                share = mass_on_occupied(occupied, g.wavelet, self.levels).reshape(-1)[g.all_positions()]
+                outside += float(np.sum(e * (1 - share)))
         total = read + unread
         self.missing, self.outside = (float(np.sqrt(e / total)) if total > 0 else 0.0 for e in (unread, outside))
         if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
