@@ -6,6 +6,7 @@ import pytest
 
 from clwave.errors import FileFormatError
 from clwave.io.clw import read_clw, read_header
+from clwave.io.summary import approximation_occupancy
 from test_hardening import crafted, setter
 
 
@@ -55,3 +56,30 @@ def test_files_that_are_no_clw_are_the_error_read_clw_gives(tmp_path):
         with pytest.raises(FileFormatError) as alone:
             read_header(path)
         assert str(alone.value) == str(whole.value) and "\n" not in str(alone.value)
+
+
+def occupancy_as(data):
+    def change(h5):
+        del h5["g0/occupancy"]
+        if data is not None:
+            h5["g0/occupancy"] = data
+        else:
+            h5.create_group("g0/occupancy")
+    return change
+
+
+@pytest.mark.parametrize("change, needle", [
+    (occupancy_as(np.zeros((3, 3, 3), np.uint8)), "expected"),       # another shape
+    (occupancy_as(np.zeros((13, 13, 2), np.float32)), "expected"),   # the band's shape (packed), another type
+    (occupancy_as(None), "not a dataset")])
+def test_a_forged_occupancy_is_refused_in_one_line(model_file, tmp_path, change, needle):
+    """The file's summary of the content mask (docs/chunked.md §4) checked against the header as every dataset: the
+    coarse stage that reads it (RayTracer.open) refuses the file in one line naming the member."""
+    from clwave.raytrace.tracer import RayTracer
+
+    assert approximation_occupancy(model_file)[0].shape == (13, 13, 13)  # hydrogen 16^3, cubic, one level
+    path = crafted(model_file, tmp_path, change=change)
+    for read in (approximation_occupancy, RayTracer.open):
+        with pytest.raises(FileFormatError, match=needle) as err:
+            read(path)
+        assert "\n" not in str(err.value) and "occupancy" in str(err.value)

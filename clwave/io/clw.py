@@ -7,6 +7,8 @@ Layout (version 2)::
     attrs           format, version, header (JSON: shape, spacing, origin, levels, channels, groups, ...),
                     header_crc32 (zlib's CRC-32 of the header's UTF-8 bytes)
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
+    g<i>/occupancy  uint8, bits packed along x: which coarsest-approximation coefficients the content occupies
+                    (with the content mask, levels > 0; absent in older files)
     g<i>/positions  int64 (N,): a channel group's stored coefficients, into its band layout, ascending
                     within a run and stored as differences (the first of a run as it is)
     g<i>/values     float32 (N, C); or, quantised, int32 q with attribute ``step``: the values are q * step
@@ -33,13 +35,14 @@ import numpy as np
 
 from ..errors import ClwaveError, FileFormatError, InputError, finite_number
 from ..model.bspline import WAVELET_ORDERS, SplineWavelet, max_levels
-from ..model.chunked import TIER_SHIFT, ChunkedWaveletVolume, tiers_of
+from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from ..threads import background
 from .files import hdf5_target, write_atomic
 from .hdf5_safety import check_self_contained
+from .occupancy import OccupancyGrid
 
 FILE_FORMAT = "clwave-wavelet-volume"
 FILE_VERSION = 2
@@ -53,14 +56,14 @@ AUTO_FLOOR = 2.0 ** -24      # quantise="auto": a step no finer than float32's r
 
 
 def _filters(quantised) -> dict:
-    """Per dataset (positions, values, content_mask, runs), the HDF5 filters of a float or a quantised file:
-    deflate, or Zstandard, which a quantised file's integers favour (measured in docs/codecs.md §2)."""
+    """Per dataset (positions, values, content_mask, runs, occupancy), the HDF5 filters of a float or a quantised
+    file: deflate, or Zstandard, which a quantised file's integers favour (measured in docs/codecs.md §2)."""
     if not quantised:
-        return dict(positions=FILTERS, values=FILTERS, content_mask=FILTERS, runs=FILTERS)
+        return dict(positions=FILTERS, values=FILTERS, content_mask=FILTERS, runs=FILTERS, occupancy=FILTERS)
     import hdf5plugin
 
     zstd = dict(fletcher32=True, **hdf5plugin.Zstd(clevel=ZSTD_LEVEL))
-    return dict(positions=dict(shuffle=True, **zstd), values=zstd, content_mask=zstd, runs=FILTERS)
+    return dict(positions=dict(shuffle=True, **zstd), values=zstd, content_mask=zstd, runs=FILTERS, occupancy=FILTERS)
 
 
 # ---------------------------------------------------------------- writing
@@ -169,39 +172,49 @@ def _write(model, fh, steps):
         text = json.dumps(header)
         h5.attrs.update(format=FILE_FORMAT, version=FILE_VERSION, header=text, header_crc32=zlib.crc32(text.encode()))
         filters = _filters(steps is not None)
-        tiers = _Tiers(h5, [band_layout(w, model.shape, model.levels)[0].size for w, _ in groups],
-                       [len(c) for _, c in groups], steps, filters, target.check)
+        approximations = [band_layout(w, model.shape, model.levels)[0] for w, _ in groups]
+        tiers = _Tiers(h5, [a.size for a in approximations], [len(c) for _, c in groups], steps, filters, target.check)
+        # the summary of the content mask the staged tracer's coarse stage reads (docs/chunked.md §4)
+        grids = [OccupancyGrid(w, model.levels, a.shape) for (w, _), a in zip(groups, approximations)] \
+            if model.levels > 0 and (chunked or model.content_mask is not None) else []
         if chunked:
-            _stream(model, h5, tiers, filters)
+            _stream(model, h5, tiers, filters, grids)
         else:
             if model.content_mask is not None:
-                _write_mask(_mask_dataset(h5, model.shape, filters), model.content_mask)
+                _write_mask(_mask_dataset(h5, model.shape, filters), model.content_mask, grids)
             for gi, g in enumerate(model.groups):
                 stored = np.any(g.values != 0, axis=0)  # a zero coefficient adds nothing: it is not stored
                 plain = importance_of(g, None, model.frame)  # tiers rank without the focus (docs/chunked.md §4)
                 tiers.append(gi, g.all_positions()[stored], g.values[:, stored], tiers_of(plain[stored]))
         tiers.flush()
+        for gi, bits in enumerate(grid.bits for grid in grids):
+            h5.create_dataset(f"g{gi}/occupancy", data=bits, **filters["occupancy"],
+                              chunks=tuple(min(c, n) for c, n in zip(MASK_CHUNK, bits.shape)))
 
 
-def _stream(model: ChunkedWaveletVolume, h5, tiers, filters):
+def _stream(model: ChunkedWaveletVolume, h5, tiers, filters, grids):
     from ..schedulers import client_for
 
     mask = _mask_dataset(h5, model.shape, filters)
     with client_for(model.scheduler) as client:
         for box, block in model.content_blocks(client):
             mask[box] = block.view(np.uint8)
+            for grid in grids:
+                grid.add([b.start for b in box], block)
         for gi, positions, values, tier in model.selected(client, tiers=True):
             stored = np.any(values != 0, axis=0)
             tiers.append(gi, positions[stored], values[:, stored], tier[stored])
 
 
-def _write_mask(data, mask):
-    """``mask`` (a ContentMask) into the dataset ``data``, a layer of chunks at a time, a byte a voxel only for
-    that layer.  The dataset is closed on return, which writes its cached chunks where the streamed writer
-    writes them: the two files stay the same, byte for byte."""
+def _write_mask(data, mask, grids):
+    """``mask`` (a ContentMask) into the dataset ``data`` and the occupancy ``grids``, a layer of chunks at a time,
+    a byte a voxel only for that layer.  The dataset is closed on return, which writes its cached chunks where the
+    streamed writer writes them: the two files stay the same, byte for byte."""
     for z in range(0, mask.shape[0], MASK_CHUNK[0]):
-        layers = min(MASK_CHUNK[0], mask.shape[0] - z)
-        data[z:z + layers] = mask.box((z, 0, 0), (layers, *mask.shape[1:])).view(np.uint8)
+        layer = mask.box((z, 0, 0), (min(MASK_CHUNK[0], mask.shape[0] - z), *mask.shape[1:]))
+        data[z:z + len(layer)] = layer.view(np.uint8)
+        for grid in grids:
+            grid.add((z, 0, 0), layer)
 
 
 def _mask_dataset(h5, shape, filters):
@@ -474,24 +487,6 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
     parts, order = [(positions, values.T)], None if order is None else order.result()
     del positions, values  # gathered() frees each as its sorted copy is made (the open's peak, docs/chunked.md §4)
     return ChannelGroup.gathered(wav, gh["channels"], bands, parts, order=order)
-
-
-def detail_energy(path) -> float:
-    """The sum of the squared importances (``|c| ||basis||``, :func:`~clwave.model.wavelet.band_importance`) of
-    a ``.clw`` file's stored details, from its tiers' run tables alone (a few kilobytes, no coefficient read):
-    a tier holds importances within ``2^(1/8)`` of each other, each counted at the tier's geometric middle.  What
-    the approximation alone leaves out (docs/raytracing.md §9)."""
-    energy = 0.0
-    with _reading(path) as (h5, header):
-        for gi in range(len(_checked_header(header)[3])):
-            runs = h5.get(f"g{gi}/runs")
-            _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
-            runs = runs[...]
-            runs = runs[(runs[:, 0] >= 0) & (runs[:, 0] < 1 << (32 - TIER_SHIFT - 1))]  # details, finite tiers
-            lo = (runs[:, 0].astype(np.uint32) << TIER_SHIFT).view(np.float32).astype(np.float64)
-            hi = ((runs[:, 0].astype(np.uint32) + 1) << TIER_SHIFT).view(np.float32).astype(np.float64)
-            energy += float(np.sum(runs[:, 2] * lo * hi))
-    return energy
 
 
 def _read_rows(dataset, spans, out):

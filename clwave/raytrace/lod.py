@@ -18,6 +18,7 @@ import pyopencl.array as cla
 
 from ..device.constants import BRICK, SUPER
 from ..errors import InputError, finite_number
+from ..io.occupancy import any_blocks, central_start
 from .bounds import clip_box, superblocks
 
 
@@ -33,28 +34,7 @@ def occupancy(mask, wavelet, level: int, start, shape) -> np.ndarray:
     """
     step = 2 ** level
     start, shape = np.asarray(start, np.int64), np.asarray(shape, np.int64)
-    first = wavelet.offset("a", level) + (step - 1) * (wavelet.order - 1) // 2
-    return any_blocks(mask.box(first + step * start, step * shape), step)
-
-
-def any_blocks(fine, step: int) -> np.ndarray:
-    """Bool (``fine.shape // step``): whether any of each ``step``^3 block of the C-ordered bool array ``fine``
-    is set.  One axis at a time from the innermost, whose blocks of 2, 4 or 8 bytes are read as one integer: numpy's
-    reduction over three strided axes at once is far slower (docs/benchmarks.md §7, set-up)."""
-    n = [v // step for v in fine.shape]
-    if step == 1:
-        return np.ascontiguousarray(fine)
-    rows = np.ascontiguousarray(fine).reshape(-1, step)
-    if step in WORDS:
-        rows = rows.view(WORDS[step])[:, 0] != 0
-    else:
-        rows = rows.any(axis=1)
-    rows = rows.reshape(n[0] * step * n[1], step, n[2]).any(axis=1)
-    return rows.reshape(n[0], step, n[1] * n[2]).any(axis=1).reshape(n)
-
-
-#: unsigned integers as wide as 2, 4 and 8 bools: a block of the innermost axis read at once (:func:`any_blocks`)
-WORDS = {2: np.uint16, 4: np.uint32, 8: np.uint64}
+    return any_blocks(mask.box(central_start(wavelet, level) + step * start, step * shape), step)
 
 
 def content_windows(wv, level: int, origin, shape) -> tuple:

@@ -1,6 +1,7 @@
 """The first image from a ``.clw`` file at once (docs/raytracing.md §8): :meth:`clwave.RayTracer.open` reads the
 coarsest approximation alone (its own tier of the file, read first) and expands its bricks at the coarsest detail,
-without the content mask; the whole model is read and set up in a background thread while the caller renders
+without the content mask (the file's occupancy of the approximation, a summary of it, gives its frames' estimate
+the clamp's term); the whole model is read and set up in a background thread while the caller renders
 the coarse stage.  :meth:`StagedTracer.refine` yields frames from the coarse stage until the full one is ready,
 then the full stage's progressive frames (:mod:`clwave.raytrace.progressive`), the last bit for bit what the full
 tracer's ``render`` gives.
@@ -20,7 +21,9 @@ from ..frames import ErrorEstimate, FinalImage, check_error, reached
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
-from ..io.clw import Abandoned, FileMask, detail_energy
+from ..io.clw import Abandoned, FileMask
+from ..io.occupancy import mass_on_occupied
+from ..io.summary import approximation_occupancy, detail_energy
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
 from .progressive import MIN_SIDE, RaytraceFrame, frames, schedule, upsample
 
@@ -36,8 +39,10 @@ class StagedTracer:
     image (:meth:`start`, :attr:`ready`, :meth:`wait`); at the interpreter's exit a set-up still running is
     given up (:func:`_abandon`); ``whole``, where given, a callable giving that whole model, read from the file
     where not (the viewer holds the model, or reads it anyway: docs/viewer.md §2).  ``missing``: the relative size
-    of the details the coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` (docs/raytracing.md
-    §9).  Use from one thread at a time.
+    of the details the coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))``; ``outside``: that of
+    the approximation's field off the content, which the full stage's content clamp removes, from the file's
+    occupancy of the approximation (0 for a file without it; docs/raytracing.md §9).  Use from one thread at a
+    time.
     """
 
     def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False, whole=None):
@@ -45,10 +50,16 @@ class StagedTracer:
         approximation = WaveletVolume.open(path, approximation=True)
         approximation.content_mask = None  # the coarse stage has no content clamp: the mask is not read for it
         self.levels = approximation.levels
-        read = sum(float(np.sum(importance_of(g, None, approximation.frame).astype(np.float64) ** 2))
-                   for g in approximation.groups)
+        energies = [importance_of(g, None, approximation.frame).astype(np.float64) ** 2 for g in approximation.groups]
+        read = sum(float(np.sum(e)) for e in energies)
         unread = detail_energy(path)  # from the file's tiers: nothing more is read
-        self.missing = float(np.sqrt(unread / (read + unread))) if read + unread > 0 else 0.0
+        outside = 0.0  # the approximation's energy off its occupied blocks (a file without the occupancy: none)
+        for e, g, occupied in zip(energies, approximation.groups, approximation_occupancy(path)):
+            if occupied is not None:
+                share = mass_on_occupied(occupied, g.wavelet, self.levels).reshape(-1)[g.all_positions()]
+                outside += float(np.sum(e * (1 - share)))
+        total = read + unread
+        self.missing, self.outside = (float(np.sqrt(e / total)) if total > 0 else 0.0 for e in (unread, outside))
         if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
             self.coarse = tracer_class(coarse_volume(approximation), device=device, device_memory=device_memory)
         else:  # the groups' lattices shift by half cells of the fine lattice: bricks of the coarsest detail
@@ -127,12 +138,12 @@ class StagedTracer:
         iterating when the view changes; the set-up goes on).  While the full stage is not ready: the coarse stage
         on an image ``2^levels`` times smaller per side, then (if it is still not ready) on one twice as large;
         their estimates add what their size misses (the step from an image half as large) and what the details
-        they lack change (:attr:`missing`, docs/raytracing.md §9).  Then (waiting for it) the full stage's
-        :meth:`RayTracer.refine`, full detail on reduced images and the last bit for bit its ``render``, from the
-        image as large as the last coarse frame's (each frame at least the size and detail of the one before,
-        docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`; ``transfer_function``: as
-        :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.  ``meta["stage"]`` says which
-        stage made a frame."""
+        and the content clamp they lack change (:attr:`missing`, :attr:`outside`, docs/raytracing.md §9).  Then
+        (waiting for it) the full stage's :meth:`RayTracer.refine`, full detail on reduced images and the last bit for
+        bit its ``render``, from the image as large as the last coarse frame's (each frame at least the size and
+        detail of the one before, docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`;
+        ``transfer_function``: as :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.
+        ``meta["stage"]`` says which stage made a frame."""
         check_error(error)
         check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
@@ -177,10 +188,11 @@ class StagedTracer:
             image, res = render(reduction)
             rms, top = steps.add(image)
             peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
-            rms += self.missing * float(np.sqrt(np.mean(image ** 2))) / peak  # the details it lacks (§9)
+            lacks = float(np.hypot(self.missing, self.outside))  # the details and the clamp it lacks (§9)
+            rms += lacks * float(np.sqrt(np.mean(image ** 2))) / peak
             self.start()
             yield RaytraceFrame(index=0, image=image, seconds=time.perf_counter() - start,
-                                estimated_relative_rms_error=rms, estimated_relative_max_error=top + self.missing,
+                                estimated_relative_rms_error=rms, estimated_relative_max_error=top + lacks,
                                 meta=dict(res.meta, stage="coarse"), _final=final, detail=self.levels,
                                 reduction=reduction)
 

@@ -1,0 +1,45 @@
+"""What the staged tracer's coarse stage reads of a ``.clw`` file besides its approximation, without a coefficient
+more (docs/raytracing.md §8-§9, docs/chunked.md §4): the energy of the details it lacks, from the tiers' run tables,
+and the occupancy of the approximation's coefficients, the file's summary of the content mask."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.bspline import SplineWavelet
+from ..model.chunked import TIER_SHIFT
+from ..model.transform import band_layout
+from .clw import _check_dataset, _checked_header, _reading
+
+
+def detail_energy(path) -> float:
+    """The sum of the squared importances (``|c| ||basis||``, :func:`~clwave.model.wavelet.band_importance`) of
+    a ``.clw`` file's stored details, from its tiers' run tables alone (a few kilobytes, no coefficient read):
+    a tier holds importances within ``2^(1/8)`` of each other, each counted at the tier's geometric middle.  What
+    the approximation alone leaves out (docs/raytracing.md §9)."""
+    energy = 0.0
+    with _reading(path) as (h5, header):
+        for gi in range(len(_checked_header(header)[3])):
+            runs = h5.get(f"g{gi}/runs")
+            _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
+            runs = runs[...]
+            runs = runs[(runs[:, 0] >= 0) & (runs[:, 0] < 1 << (32 - TIER_SHIFT - 1))]  # details, finite tiers
+            lo = (runs[:, 0].astype(np.uint32) << TIER_SHIFT).view(np.float32).astype(np.float64)
+            hi = ((runs[:, 0].astype(np.uint32) + 1) << TIER_SHIFT).view(np.float32).astype(np.float64)
+            energy += float(np.sum(runs[:, 2] * lo * hi))
+    return energy
+
+
+def approximation_occupancy(path) -> list:
+    """Per channel group of a ``.clw`` file, bool (the approximation band's shape): which coefficients of its
+    coarsest approximation the content occupies (:class:`~clwave.io.occupancy.OccupancyGrid`), checked against the
+    header; None where the file has no such summary (written before it, or without a content mask)."""
+    with _reading(path) as (h5, header):
+        shape, levels, _, groups = _checked_header(header)
+        out = []
+        for gi, g in enumerate(groups):
+            data, band = h5.get(f"g{gi}/occupancy"), band_layout(SplineWavelet(g["wavelet"]), shape, levels)[0].shape
+            if data is not None:
+                _check_dataset(data, (*band[:2], -(-band[2] // 8)), np.uint8)
+            out.append(None if data is None else np.unpackbits(data[...], axis=2, count=band[2]).view(bool))
+    return out
