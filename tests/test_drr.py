@@ -187,14 +187,15 @@ def test_a_drr_of_hounsfield_units_is_refused_naming_hu_to_mu(hounsfield, tmp_pa
         intensity = transmitted(signed)
     assert np.mean(intensity == 1.0) > 0.5  # air outweighs tissue: the source's intensity, no radiograph
     assert np.array_equal(transmitted(mu), np.exp(-np.maximum(mu.astype(np.float64), 0.0)).astype(np.float32))
+    assert np.all(transmitted(signed[:, 0]) == 1.0)  # rays (1-D), not an image: not checked, as before
     capsys.readouterr()
 
 
 def test_an_intensity_png_is_shown_as_radiographs_are(hounsfield, tmp_path, capsys):
     """An --intensity .png is -ln I (the detector's log response) through the 0.5 and 99.5 percentiles: bone bright,
     air black, the body spread over the grey levels (a linear window of I, bone dark, crowds it into the darkest),
-    at most 1 % white; --window LO,HI in intensities, LO white.  Against a
-    NumPy window of the .npy intensities of the same pose."""
+    at most 1 % white; --window LO,HI in intensities, LO white.  Against a NumPy window of the .npy intensities of
+    the same pose."""
     import imageio.v3 as iio
 
     _, args = hounsfield
