@@ -150,6 +150,91 @@ def test_drr_command_ray_traces(tmp_path, capsys):
         assert not (tmp_path / "bad.npy").exists()
 
 
+@pytest.fixture(scope="module")
+def hounsfield(tmp_path_factory):
+    """A CT-like phantom in Hounsfield units (Shepp-Logan: air -1000 outside, the brain 0..60, the skull 1200), 24^3
+    voxels of 8 mm centred on the isocentre, and the arguments of one pose of it (192 mm wide at the isocentre)."""
+    folder = tmp_path_factory.mktemp("hu")
+    hu = np.interp(clwave.phantom("shepp-logan", 24).data, [0.0, 0.1, 0.5, 1.0], [-1000.0, 0.0, 60.0, 1200.0])
+    np.save(folder / "ct.npy", hu.astype(np.int16))
+    (folder / "poses.csv").write_text("azimuth,elevation\n30,20\n")
+    return folder, ["drr", str(folder / "ct.npy"), "--spacing", "8", "--levels", "2", "--poses",
+                    str(folder / "poses.csv"), "--size", "32", "--pixel", "9", "--dso", "400", "--dsd", "600"]
+
+
+def test_a_drr_of_hounsfield_units_is_refused_naming_hu_to_mu(hounsfield, tmp_path, capsys):
+    """Read without --hu-to-mu, a CT's line integrals are mostly far below 0 (air is -1000) and exp(-integral) is no
+    radiograph: refused in one line (as render refuses a blank image) naming --hu-to-mu; --signed writes the line
+    integrals of such a model as they are."""
+    _, args = hounsfield
+    out = tmp_path / "d.npy"
+    for extra, words in (([], ["--hu-to-mu", "--signed"]), (["--intensity"], ["--hu-to-mu"]),
+                         (["--intensity", "-o", str(tmp_path / "d.png")], ["--hu-to-mu"]),
+                         (["--signed", "--intensity"], ["leave one out"])):
+        assert main(args + extra + ["-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and all(w in err for w in words), err
+        assert not out.exists() and not (tmp_path / "d.png").exists()
+    assert main(args + ["--signed", "-o", str(out)]) == 0
+    signed = np.load(out)[0]
+    assert np.mean(signed < 0) > 0.5 and signed.min() < -1e4  # what --signed asked for: the values as they are
+    assert main(args + ["--hu-to-mu", "-o", str(tmp_path / "mu.npy")]) == 0
+    mu = np.load(tmp_path / "mu.npy")[0]  # mu = 0.0193 (1 + HU / 1000) per mm: the same CT's attenuation
+    assert mu.max() > 1.0 and np.sum(mu) > 0
+    # through the API: the intensity of such an image warns naming hu_to_mu, of an attenuation's does not
+    # (filterwarnings=error); a single ray's integral says nothing of a detector's total
+    with pytest.warns(UserWarning, match="hu_to_mu=True"):
+        intensity = transmitted(signed)
+    assert np.mean(intensity == 1.0) > 0.5  # air outweighs tissue: the source's intensity, no radiograph
+    assert np.array_equal(transmitted(mu), np.exp(-np.maximum(mu.astype(np.float64), 0.0)).astype(np.float32))
+    assert np.all(transmitted(signed[:, 0]) == 1.0)  # rays (1-D), not an image: not checked, as before
+    capsys.readouterr()
+
+
+def test_an_intensity_png_is_shown_as_radiographs_are(hounsfield, tmp_path, capsys):
+    """An --intensity .png is -ln I (the detector's log response) through the 0.5 and 99.5 percentiles: bone bright,
+    air black, the body spread over the grey levels (a linear window of I, bone dark, crowds it into the darkest),
+    at most 1 % white; --window LO,HI in intensities, LO white.  Against a NumPy window of the .npy intensities of
+    the same pose."""
+    import imageio.v3 as iio
+
+    _, args = hounsfield
+    args = args + ["--hu-to-mu", "--intensity", "-o"]
+    assert main(args + [str(tmp_path / "i.npy")]) == 0 and main(args + [str(tmp_path / "i.png")]) == 0
+    intensity = np.load(tmp_path / "i.npy")[0].astype(np.float64)
+    log = -np.log(intensity)
+    lo, hi = np.percentile(log, (0.5, 99.5))
+    picture = iio.imread(tmp_path / "i.png").astype(int)
+    assert np.abs(picture - np.round(255 * np.clip((log - lo) / (hi - lo), 0, 1))).max() <= 1
+    assert np.all(picture[intensity == 1.0] == 0) and picture[np.unravel_index(intensity.argmin(), log.shape)] == 255
+    assert np.mean(picture == 255) <= 0.01  # the 0.5 % above the window, and those rounding to its top
+    body = intensity < 0.9  # a quarter of it in the darkest quarter of the grey levels; a linear window of I: 61 %
+    lo, hi = np.percentile(intensity, (0.5, 99.5))
+    linear = np.round(255 * np.clip((intensity - lo) / (hi - lo), 0, 1))
+    assert np.mean(picture[body] < 64) < 0.3 and np.mean(linear[body] < 64) > 0.6
+    assert main(args + [str(tmp_path / "w.png"), "--window", "0.05,0.5"]) == 0
+    expected = np.round(255 * np.clip(np.log(0.5 / intensity) / np.log(0.5 / 0.05), 0, 1))
+    assert np.abs(iio.imread(tmp_path / "w.png") - expected).max() <= 1
+    assert main(args + [str(tmp_path / "bad.png"), "--window", "0,1"]) == 2
+    assert "0 < LO < HI" in capsys.readouterr().err and not (tmp_path / "bad.png").exists()
+
+
+@pytest.mark.parametrize("wavelet", ["cubic", "haar", "linear"])
+def test_below_zero_is_the_sign_of_the_models_integral(hounsfield, wavelet):
+    """below_zero (the sign of the approximation's sum) against the mean of the reconstructed model's samples, on the
+    HU phantom, its attenuation, and a thresholded Shepp-Logan that rings below 0 near its edges."""
+    from clwave.model.conebeam import below_zero
+
+    folder, _ = hounsfield
+    hu = np.load(folder / "ct.npy").astype(np.float32)
+    for data, keep, negative in ((hu, 0.05, True), (np.maximum(0.0193 * (1 + hu / 1000), 0), 0.05, False),
+                                 (clwave.phantom("shepp-logan", 24).data, 0.002, False)):
+        wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet=wavelet, levels=2).threshold(keep=keep)
+        samples = wv.unmasked().reconstruct().data  # the whole model, as radiographs integrate it
+        assert below_zero(wv) == (float(samples.mean()) < 0) == negative
+        assert negative or wavelet != "cubic" or samples.min() < 0  # cubic attenuation rings below 0, not refused
+
+
 @pytest.mark.parametrize("argv, own, foreign", [
     (["render", "--perspective", "--distance", "2"], ["--distance above", "(clwave render --method raytrace --xray)"],
      ["--dso", "drr"]),

@@ -1,12 +1,6 @@
 """Ray tracing (paper §3): analytic integrals, the NumPy reference, X-ray vs splatting, bad input."""
 
 import dataclasses
-import os
-import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,8 +14,8 @@ from clwave.raytrace.bounds import content_cells, superblocks
 from clwave.raytrace.quadrature import gradient_samples, sample_points, sample_tables
 from clwave.raytrace.tracer import Phong, RayTracer
 from clwave.splat.reference import exact_xray
+from test_hardening import LAUNCHED, interrupted
 
-ROOT = Path(__file__).resolve().parents[1]
 TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
 
 
@@ -513,26 +507,27 @@ def test_bands_of_rows_give_the_image_of_one_launch(small_rgba, monkeypatch):
 
 
 def test_ctrl_c_stops_a_long_ray_trace_within_a_second():
-    script = """
+    """A 1024^2 trace at tolerance 1e-6 takes many seconds on a CPU; its launches are bands of rows (in_row_bands), so
+    Ctrl-C, sent while one runs, stops it within a second of the signal."""
+    script = f"""
+import sys
 import clwave
+from clwave.raytrace import tracer as tracing
 rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", 48))
 wv = clwave.WaveletVolume.from_volume(rgba, "cubic", levels=2).threshold(keep=0.2)
 tracer = clwave.RayTracer(wv)
 tracer.render(clwave.Camera(30, 20, size=16), tolerance=1e-2)  # set-up and kernel build before the signal
-print("tracing", flush=True)
-tracer.render(clwave.Camera(30, 20, size=1024), tolerance=1e-6)  # many seconds on a CPU
+{LAUNCHED.format(module="tracing", bands="in_row_bands")}
+tracing.in_row_bands = launched
+try:
+    tracer.render(clwave.Camera(30, 20, size=1024), tolerance=1e-6)  # many seconds on a CPU
+except KeyboardInterrupt:
+    print("stopped", file=sys.stderr, flush=True)
+    raise
 print("finished", flush=True)
 """
-    proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
-    while b"tracing" not in proc.stdout.readline():
-        assert proc.poll() is None
-    time.sleep(0.5)
-    start = time.perf_counter()
-    proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=60)
-    assert b"finished" not in out and b"KeyboardInterrupt" in err
-    assert time.perf_counter() - start < 1.5
+    seconds, _, out, err = interrupted(script, b"stopped")
+    assert seconds < 1.0 and b"finished" not in out and b"KeyboardInterrupt" in err
 
 
 def test_coarse_lattices_stay_within_tolerance_of_float64():

@@ -162,3 +162,36 @@ def test_vtk_finer_volume_is_the_cubic_model():
     points = np.array(image.GetOrigin()) + index * np.array(image.GetSpacing())
     model = clwave.WaveletVolume.from_volume(vol, wavelet="cubic", levels=1).evaluate(points)[:, 0]
     np.testing.assert_allclose(values[index[:, 2], index[:, 1], index[:, 0]], model, atol=1e-6)
+
+
+def test_the_view_bench_drags_on_small_images():
+    """tools/bench.py view's drag (bench_view.drag_path) on the viewer's page in headless chromium: pressed where the
+    page's status line is not (at 48² it covered the image's centre, where the drag once pressed) and staying in the
+    image, it orbits by 0.4° a pixel (viewer.js) as far as it moved; 240 x 60 pixels in 60 moves at 512²."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    import browser
+    from bench_view import _view_drag, drag_path
+
+    if browser.executables() is None:
+        pytest.fail(browser.SETUP)
+    assert drag_path(512) == ((-120, -192), (240, 60), 60)
+    for size in range(32, 1025):
+        (x, y), (dx, dy), moves = drag_path(size)
+        x, y = x + size // 2, y + size // 2  # from the image's top left corner
+        assert 0 < x < x + dx < size and 0 < y <= y + dy < size - 25 and moves >= 15  # the status line: 25 pixels
+    with pytest.raises(SystemExit, match="at least 32 pixels"):
+        drag_path(31)
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1).threshold(keep=0.2)
+    with browser.chromium() as driver:
+        for size in (32, 48):
+            with clwave.view(wv, size=size) as viewer:
+                browser.open_viewer(driver, viewer.url)
+                browser.wait_final(driver)
+                before = driver.execute_script("return [window.clwave.state.azimuth, window.clwave.state.elevation]")
+                _, (dx, dy), _ = drag = drag_path(size)
+                _view_drag(browser, driver, drag)
+                browser.release(driver)
+                final = browser.wait_final(driver)
+                assert driver.execute_script("return window.clwave.stats.released") is not None
+                assert np.isclose(final["azimuth"], (before[0] - 0.4 * dx) % 360)
+                assert np.isclose(final["elevation"], before[1] + 0.4 * dy)

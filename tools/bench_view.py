@@ -32,6 +32,7 @@ def bench_view(args) -> dict:
 
     wv = WaveletVolume.from_volume(phantom("hydrogen", n=args.size), wavelet="cubic", levels=3).threshold(keep=0.05)
     size = args.view_image
+    drag = drag_path(size)  # refused before anything starts
     start = time.perf_counter()
     first, fps, refine, drag_frame, drag_width, one_shot = [], [], [], [], [], []
     with view(wv, size=size, device=args.device) as viewer, browser.chromium() as driver:
@@ -39,7 +40,7 @@ def bench_view(args) -> dict:
         for run in range(args.views + 1):  # run 0 is the warm-up (the browser's first page)
             first_image = browser.open_viewer(driver, viewer.url)
             browser.wait_final(driver)
-            moving, dragged = _view_drag(browser, driver)
+            moving, dragged = _view_drag(browser, driver, drag)
             browser.release(driver)
             final = browser.wait_final(driver)
             stats = driver.execute_script("return window.clwave.stats")
@@ -52,10 +53,10 @@ def bench_view(args) -> dict:
                 refine.append((stats["frames"][-1]["at"] - stats["released"]) / 1000.0)
                 drag_frame += [f["seconds"] for f in moving]
                 drag_width += [f["width"] for f in moving]
-        shaded = _view_shaded(browser, driver, viewer, wv, args)
+        shaded = _view_shaded(browser, driver, viewer, wv, args, drag)
     return dict(setting=dict(volume=f"hydrogen {args.size}^3", channels=1, wavelet="cubic", levels=3, keep=0.05,
                              image=f"{size}^2", browser="headless chromium (Selenium)",
-                             drag="60 moves over 240 x 60 pixels, 50 ms apart"),
+                             drag=_drag_words(drag)),
                 coefficients=viewer.server.sources["xray"].r.count, server_start_seconds=server_seconds,
                 xray=dict(first_image_seconds=summary(first), drag_frames_per_second=summary(fps),
                           drag_frame_render_seconds=summary(drag_frame), drag_frame_width=summary(drag_width),
@@ -66,17 +67,37 @@ def bench_view(args) -> dict:
                             shaded_drag_frames_per_second=5, tf_slider_first_frame_seconds=0.2))
 
 
-def _view_drag(browser, driver) -> tuple:
-    """Drag (held) 60 moves 50 ms apart: the frames shown while moving, and the seconds it took."""
+def drag_path(size: int) -> tuple:
+    """``(start, (dx, dy), moves)`` of the bench's drag on a ``size``² image: 15/32 of the image across and 15/128 down
+    (240 x 60 pixels at 512²) in at most 60 moves of whole pixels (none down where that is under a pixel a move),
+    pressed at ``start`` from the image's centre, an eighth of the image from its top (the page's status line covers
+    its foot), so that it stays in the image.  Below 32 pixels the status line covers the image: refused."""
+    if size < 32:
+        raise SystemExit(f"--view-image {size}: the bench drags on images of at least 32 pixels (the page's status "
+                         "line covers a smaller one)")
+    across, down = size * 15 // 32, size * 15 // 128
+    moves = min(60, across)
+    dx, dy = across // moves * moves, down // moves * moves
+    return (-(dx // 2), -(3 * size // 8)), (dx, dy), moves
+
+
+def _drag_words(drag) -> str:
+    _, (dx, dy), moves = drag
+    return f"{moves} moves over {dx} x {dy} pixels, 50 ms apart"
+
+
+def _view_drag(browser, driver, drag) -> tuple:
+    """Drag (held) :func:`drag_path`'s moves 50 ms apart: the frames shown while moving, and the seconds it took."""
+    start, (dx, dy), moves = drag
     shown = browser.shown(driver)
     t0 = time.perf_counter()
-    browser.drag(driver, 240, 60, steps=60, pause=0.05)
+    browser.drag(driver, dx, dy, steps=moves, pause=0.05, start=start)
     dragged = time.perf_counter() - t0
     frames = driver.execute_script("return window.clwave.stats.frames")[-(browser.shown(driver) - shown):]
     return [f for f in frames if f["moving"]], dragged
 
 
-def _view_shaded(browser, driver, viewer, wv, args) -> dict:
+def _view_shaded(browser, driver, viewer, wv, args, drag) -> dict:
     """The shaded mode of the page already open: a drag, its release to the final frame beside a one-shot ray trace
     of that view, and opacity-slider moves to their first frames."""
     size = args.view_image
@@ -89,7 +110,7 @@ def _view_shaded(browser, driver, viewer, wv, args) -> dict:
     out = dict(first_final_seconds=ready, tolerance=1e-2, transfer_function="hydrogen preset, at render time")
     fps, frame, width, refine, one_shot = [], [], [], [], []
     for run in range(max(1, args.views)):
-        moving, dragged = _view_drag(browser, driver)
+        moving, dragged = _view_drag(browser, driver, drag)
         browser.release(driver)
         final = browser.wait_final(driver, timeout=600)
         stats = driver.execute_script("return window.clwave.stats")
@@ -129,7 +150,7 @@ def bench_view_file(args) -> dict:
     choosing the shaded mode on the page's first image to its first shaded frame (``RayTracer.open``'s coarse stage)."""
     import browser
 
-    path = first_image_file(args)
+    path, drag = first_image_file(args), drag_path(args.view_image)
     if not path.exists():
         raise SystemExit(f"{path} does not exist: run `bench.py first-image --size {args.size}` or give "
                          f"--first-image-file")
@@ -141,7 +162,7 @@ def bench_view_file(args) -> dict:
             first_image = browser.open_viewer(driver, url, timeout=600)
             first_wall = time.perf_counter() - start
             first = driver.execute_script("return window.clwave.current().fig")
-            moving, dragged = _view_drag(browser, driver)
+            moving, dragged = _view_drag(browser, driver, drag)
             browser.release(driver)
             final = browser.wait_for(driver, "const c = window.clwave.current(); return c && c.fig.final && "
                                              "!c.fig.prefix && c.fig", timeout=900)
@@ -156,7 +177,7 @@ def bench_view_file(args) -> dict:
                                               "c.fig", timeout=600)
             shaded_wall = time.perf_counter() - start
     return dict(setting=dict(file=str(path), image=f"{args.view_image}^2", browser="headless chromium (Selenium)",
-                             drag="60 moves over 240 x 60 pixels, 50 ms apart, right after the first image"),
+                             drag=_drag_words(drag) + ", right after the first image"),
                 address_seconds=address, first_image_seconds_from_page_start=first_image,
                 first_image_seconds_after_address=first_wall, first_frame=dict(
                     coefficients=first["coefficients"], prefix=first["prefix"], width=first["width"]),

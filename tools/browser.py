@@ -71,14 +71,14 @@ def wait_final(driver, timeout=60.0) -> dict:
                             "c.fig.final && c.fig.seq === window.clwave.latest() && c.fig", timeout)
 
 
-def drag(driver, dx, dy, steps=10, pause=0.03, hold=True):
-    """Press on the image, move by ``(dx, dy)`` pixels in ``steps`` moves ``pause`` seconds apart, and release
-    (unless ``hold``: then :func:`release` ends it)."""
+def drag(driver, dx, dy, steps=10, pause=0.03, hold=True, start=(0, 0)):
+    """Press on the image ``start`` pixels from its centre, move by ``(dx, dy)`` pixels in ``steps`` moves ``pause``
+    seconds apart, and release (unless ``hold``: then :func:`release` ends it)."""
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
 
     image = driver.find_element(By.ID, "image")
-    chain = ActionChains(driver, duration=0).move_to_element(image).click_and_hold()
+    chain = ActionChains(driver, duration=0).move_to_element_with_offset(image, *start).click_and_hold()
     for _ in range(steps):
         chain.move_by_offset(round(dx / steps), round(dy / steps)).pause(pause)
     if not hold:

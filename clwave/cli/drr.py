@@ -45,7 +45,7 @@ def _pose_row(path, line, row, columns) -> dict:
 def run(args):
     from ..io.files import write_atomic
     from ..io.result import RenderResult
-    from ..model.conebeam import poses, transmitted
+    from ..model.conebeam import NOT_ATTENUATION, below_zero, poses, transmitted
     from ..raytrace.tracer import RayTracer
     from ..splat.renderer import SplatRenderer
 
@@ -54,10 +54,14 @@ def run(args):
     if args.method == "raytrace" and (args.coarse, args.omega_s) != (None, None):
         raise InputError("--coarse and --omega-s are for --method splat; ray tracing controls its error with "
                          "--tolerance")
+    if args.signed and args.intensity:
+        raise InputError("--signed writes the line integrals of values below 0 as they are; --intensity needs "
+                         "attenuation (mu >= 0): leave one out")
     tolerance = 1e-3 if args.tolerance is None else args.tolerance
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"--tolerance {tolerance:g} must be a positive absolute error, e.g. 1e-3")
     out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png")))
+    window = log_window(parse_window(args)) if args.intensity else parse_window(args)
     H, W = (int(v) for v in (numbers(args.size, "--size", (1, 2), int, "x") * 2)[:2])
     pixel = numbers(args.pixel, "--pixel", (1, 2))
     cameras = poses(read_pose_table(args.poses), (H, W), pixel if len(pixel) == 2 else pixel[0],
@@ -69,6 +73,10 @@ def run(args):
     wv, _ = build_model(args)
     if wv.channels != 1:
         raise InputError("radiographs need a one-channel (attenuation) volume; do not classify it (--tf)")
+    if below_zero(wv) and not args.signed:  # refused as render refuses a blank image (docs/coordinates.md §5)
+        raise InputError(NOT_ATTENUATION.format(
+            what=f"the model of {args.input} is", fix="read the CT with --hu-to-mu (a .clw: compress it again with "
+            "--hu-to-mu)" + ("" if args.intensity else ", or give --signed for the line integrals of its values")))
     if args.method == "raytrace":  # X-ray mode: the line integrals of the same spline as splatting's, its ringing
         # beyond the content included (no content clamp, docs/raytracing.md §1)
         renderer = RayTracer(wv, device=args.device, device_memory=device_memory, content_clamp=False)
@@ -88,7 +96,9 @@ def run(args):
 
     if out.suffix.lower() == ".png":
         res = render(cameras[0])
-        RenderResult(image(res)[..., None], res.meta).save(out, window=parse_window(args), overwrite=args.force)
+        # an intensity is shown as radiographs are: the detector's log response, bone bright (coordinates.md §5)
+        picture = np.maximum(res.image, 0.0) if args.intensity else res.image
+        RenderResult(picture, res.meta).save(out, window=window, overwrite=args.force)
     else:
         def write(fh):  # the .npy header, then each radiograph as it is rendered
             np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
@@ -103,6 +113,18 @@ def run(args):
     print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) in {seconds:.2f} s, {seconds / len(cameras):.3f} s "
           f"each, on {renderer.cc.info.name}: {out}")
     return 0
+
+
+def log_window(window):
+    """The window on ``-ln I`` (the line integrals, at least 0) of an ``--intensity`` picture's ``--window LO,HI`` of
+    intensities (LO white, HI black); "auto" stays the percentiles (of ``-ln I``, so of ``I``)."""
+    if window == "auto":
+        return window
+    lo, hi = window
+    if not 0 < lo < hi:
+        raise InputError(f"--window {lo:g},{hi:g}: an --intensity radiograph's window is two intensities 0 < LO < HI "
+                         "(LO white, HI black), e.g. 0.01,1")
+    return float(-np.log(hi)), float(-np.log(lo))
 
 
 def add_parser(sub):
@@ -124,7 +146,10 @@ def add_parser(sub):
     g.add_argument("--offset", default="0,0", help="principal point A,B from the detector's centre (default 0,0)")
     g.add_argument("--isocentre", default="0,0,0", help="world X,Y,Z the principal ray passes (default 0,0,0)")
     g.add_argument("--intensity", action="store_true", help="Beer-Lambert transmitted intensity exp(-line "
-                   "integral) instead of the line integrals (a --hu-to-mu CT: mu per mm)")
+                   "integral) instead of the line integrals (a --hu-to-mu CT: mu per mm); a .png shows it as "
+                   "radiographs are, -ln I windowed (bone bright; --window LO,HI in intensities, LO white)")
+    g.add_argument("--signed", action="store_true", help="write the line integrals of a model below 0 on the whole "
+                   "(not attenuation: refused without it, e.g. a CT in Hounsfield units read without --hu-to-mu)")
     add_device_options(g)
     p.set_defaults(words=CommandWords("--size, --pixel or --dsd", "--dso", "clwave drr --method raytrace"))
     return p

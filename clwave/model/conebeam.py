@@ -17,6 +17,8 @@ detector's matrix is that of a source facing away: :meth:`ConeBeam.view` names i
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.linalg
 
@@ -282,8 +284,30 @@ def poses(rows, size, pixel=1.0, dso=1000.0, dsd=1500.0, offset=(0.0, 0.0), isoc
     return out
 
 
+#: why a radiograph of values below 0 on the whole is wrong: Beer-Lambert needs mu >= 0 (``{what}``, ``{fix}``)
+NOT_ATTENUATION = ("{what} below 0 on the whole, which no attenuation (mu >= 0) is: a CT in Hounsfield units (air at "
+                   "-1000)? {fix}")
+
+
+def below_zero(wv) -> bool:
+    """Whether a one-channel model is below 0 on the whole: the sign of its integral, which is that of its coarsest
+    approximation coefficients' sum (its details integrate to 0).  A thresholded attenuation rings below 0 near its
+    edges, never on the whole; a CT in Hounsfield units is below 0 on the whole (air is -1000)."""
+    group = wv.groups[0]
+    return float(np.sum(group.values[0, group.band_slices()[0]], dtype=np.float64)) < 0
+
+
 def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
     """Beer-Lambert: the intensity ``i0 exp(-∫mu)`` reaching the detector from attenuation line integrals
     (``--hu-to-mu`` CTs: mu per mm, integrals over mm).  Integrals below 0 (a thresholded model rings) count as 0:
-    mu >= 0, so that is nearer the truth, and no pixel gets more than ``i0``."""
-    return (i0 * np.exp(-np.maximum(np.asarray(line_integrals, np.float64), 0.0))).astype(np.float32)
+    mu >= 0, so that is nearer the truth, and no pixel gets more than ``i0``.
+
+    Warns (``UserWarning``) when an image's integrals (an ``(H, W)`` image, or a stack of them) sum to below 0: a
+    detector's total is the attenuation it sees, above 0 for any attenuation, ringing included, and far below 0 for a CT
+    left in Hounsfield units, whose intensity would be ``i0`` wherever air outweighs tissue (load it with
+    ``hu_to_mu=True``)."""
+    integrals = np.asarray(line_integrals, np.float64)
+    if integrals.ndim >= 2 and np.sum(integrals) < 0:
+        warnings.warn(NOT_ATTENUATION.format(what=f"these line integrals (sum {np.sum(integrals):.4g}) are",
+                                             fix="load it with clwave.load(..., hu_to_mu=True)"), stacklevel=2)
+    return (i0 * np.exp(-np.maximum(integrals, 0.0))).astype(np.float32)
