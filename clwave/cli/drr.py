@@ -57,22 +57,24 @@ def run(args):
     if args.signed and args.intensity:
         raise InputError("--signed writes the line integrals of values below 0 as they are; --intensity needs "
                          "attenuation (mu >= 0): leave one out")
-    tolerance = 1e-3 if args.tolerance is None else args.tolerance
-    if not (np.isfinite(tolerance) and tolerance > 0):
-        raise InputError(f"--tolerance {tolerance:g} must be a positive absolute error, e.g. 1e-3")
+    tolerance = 1e-3 if args.tolerance is None else args.tolerance  # its value is checked with every command's
     out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png")))
     window = log_window(parse_window(args)) if args.intensity else parse_window(args)
     H, W = (int(v) for v in (numbers(args.size, "--size", (1, 2), int, "x") * 2)[:2])
     pixel = numbers(args.pixel, "--pixel", (1, 2))
-    cameras = poses(read_pose_table(args.poses), (H, W), pixel if len(pixel) == 2 else pixel[0],
-                    args.dso, args.dsd, numbers(args.offset, "--offset", (2,)), numbers(args.isocentre, "--isocentre",
-                                                                                       (3,)))
+    centre = args.isocentre is None  # the volume's centre, known once it is read (docs/coordinates.md §5)
+    geometry = dict(rows=read_pose_table(args.poses), size=(H, W), pixel=pixel if len(pixel) == 2 else pixel[0],
+                    dso=args.dso, dsd=args.dsd, offset=numbers(args.offset, "--offset", (2,)),
+                    isocentre=(0.0, 0.0, 0.0) if centre else numbers(args.isocentre, "--isocentre", (3,)))
+    cameras = poses(**geometry)  # every pose checked before the input is read
     if out.suffix.lower() == ".png" and len(cameras) != 1:
         raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy")
     device_memory = parse_device_memory(args)
     wv, _ = build_model(args)
     if wv.channels != 1:
         raise InputError("radiographs need a one-channel (attenuation) volume; do not classify it (--tf)")
+    if centre:
+        cameras = poses(**dict(geometry, isocentre=tuple(float(c) for c in wv.origin)))
     if below_zero(wv) and not args.signed:  # refused as render refuses a blank image (docs/coordinates.md §5)
         raise InputError(NOT_ATTENUATION.format(
             what=f"the model of {args.input} is", fix="read the CT with --hu-to-mu (a .clw: compress it again with "
@@ -91,11 +93,16 @@ def run(args):
         cb.view(wv)
     start = time.perf_counter()
 
-    def image(res):
+    blank = []  # the poses (from 1) whose detector sees nothing of the model
+
+    def image(i, res):
+        if not np.any(res.image):
+            blank.append(i + 1)
         return transmitted(res.image[..., 0]) if args.intensity else res.image[..., 0]
 
     if out.suffix.lower() == ".png":
         res = render(cameras[0])
+        image(0, res)
         # an intensity is shown as radiographs are: the detector's log response, bone bright (coordinates.md §5)
         picture = np.maximum(res.image, 0.0) if args.intensity else res.image
         RenderResult(picture, res.meta).save(out, window=window, overwrite=args.force)
@@ -103,11 +110,16 @@ def run(args):
         def write(fh):  # the .npy header, then each radiograph as it is rendered
             np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
                                                           shape=(len(cameras), H, W)))
-            for cb in cameras:
-                fh.write(np.ascontiguousarray(image(render(cb)), "<f4").tobytes())
+            for i, cb in enumerate(cameras):
+                fh.write(np.ascontiguousarray(image(i, render(cb)), "<f4").tobytes())
 
         write_atomic(out, write, args.force)
     seconds = time.perf_counter() - start
+    if blank:
+        import sys
+        print(f"clwave drr: warning: pose(s) {', '.join(map(str, blank[:10]))}{' ...' if len(blank) > 10 else ''} "
+              f"see nothing of the model (it lies outside their cone): check --isocentre (default the volume's "
+              f"centre) and the pose table", file=sys.stderr)
     kind = "transmitted intensities" if args.intensity else "line integrals"
     how = f"ray traced, tolerance {tolerance:g}" if args.method == "raytrace" else "splatted"
     print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) in {seconds:.2f} s, {seconds / len(cameras):.3f} s "
@@ -144,7 +156,8 @@ def add_parser(sub):
     g.add_argument("--dso", type=float, default=1000.0, help="source-to-isocentre distance (default 1000)")
     g.add_argument("--dsd", type=float, default=1500.0, help="source-to-detector distance (default 1500)")
     g.add_argument("--offset", default="0,0", help="principal point A,B from the detector's centre (default 0,0)")
-    g.add_argument("--isocentre", default="0,0,0", help="world X,Y,Z the principal ray passes (default 0,0,0)")
+    g.add_argument("--isocentre", help="world X,Y,Z the principal ray passes (default: the volume's centre, its "
+                   "world origin; a pose table's isocentre_x/_y/_z columns override it)")
     g.add_argument("--intensity", action="store_true", help="Beer-Lambert transmitted intensity exp(-line "
                    "integral) instead of the line integrals (a --hu-to-mu CT: mu per mm); a .png shows it as "
                    "radiographs are, -ln I windowed (bone bright; --window LO,HI in intensities, LO white)")
