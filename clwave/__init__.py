@@ -8,6 +8,7 @@ from .errors import (ClwaveError, DeviceMemoryError, DeviceNotFoundError, FileFo
                      InputError, KernelBuildError, OutputError, OutputExistsError)
 from .model.volume import Volume
 from .device.context import ComputeContext, list_devices, select_device
+from .device.memory import HostMemoryError
 from .io.loaders import load
 from .io.phantoms import phantom
 from .model.transfer import TransferFunction
@@ -27,7 +28,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ClwaveError", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
-    "KernelBuildError", "OutputError", "OutputExistsError", "Volume", "ComputeContext", "list_devices",
+    "KernelBuildError", "OutputError", "OutputExistsError", "HostMemoryError", "Volume", "ComputeContext",
+    "list_devices",
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "ConeBeam", "RenderResult",
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
     "Detail",
