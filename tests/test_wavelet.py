@@ -167,6 +167,15 @@ def test_threshold_keeps_exact_count_and_approximation_first(keep, rng):
         assert np.count_nonzero(imp > kept_min) <= n - n_approx
 
 
+def test_top_breaks_ties_at_the_cut_by_lowest_index(rng):
+    from clwave.model.wavelet import _top
+
+    importance = rng.integers(0, 5, 200).astype(np.float32)  # classes of 40 equal values
+    for count in (0, 1, 39, 40, 41, 117, 199, 200, 250):
+        oracle = np.sort(np.lexsort((np.arange(200), -importance))[:count])  # value descending, then index
+        assert np.array_equal(_top(importance, count), oracle)
+
+
 def test_threshold_by_value_and_ranked_order(rng):
     vol = Volume(rng.random((16, 16, 16, 2)).astype(np.float32))
     wv = WaveletVolume.from_volume(vol, "linear", levels=2)

@@ -510,11 +510,17 @@ def band_importance(wavelet, band, values, index, focus, frame) -> np.ndarray:
 
 
 def _top(importance, count) -> np.ndarray:
-    """Indices of the ``count`` largest values (exact count)."""
+    """Indices of the ``count`` largest values (exact count), ascending; of the values tied at the cut, the
+    lowest indices.  Every caller passes importances in position order, so ties go to the lowest positions
+    whatever order the coefficients were computed in (docs/chunked.md §3)."""
     if count >= len(importance):
         return np.arange(len(importance))
     if count <= 0:
         return np.zeros(0, dtype=np.int64)
-    return np.argpartition(-importance, count - 1)[:count]
+    cut = np.partition(importance, len(importance) - count)[len(importance) - count]  # the count-th largest
+    above = importance > cut
+    tied = np.flatnonzero(importance == cut)[:count - int(np.count_nonzero(above))]
+    above[tied] = True
+    return np.flatnonzero(above)
 
 
