@@ -1,4 +1,5 @@
-"""Folders of DICOM slices: one image series, sorted along its normal, rescaled, in RAS+."""
+"""Folders of DICOM slices: one image series, sorted along its normal, checked to be a straight stack of even
+slices, rescaled, in RAS+."""
 
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSp
 
 
 def read_dicom_folder(folder, series, progress_bar, fits=None):
-    """One DICOM series: slices sorted along their normal, rescaled, in RAS."""
+    """One DICOM series: slices sorted along their normal, rescaled, in RAS; refused unless they form a
+    straight stack of evenly spaced slices (:func:`_check_straight`, :func:`_even_spacing`)."""
     uid, headers = _pick_series(folder, _dicom_image_series(folder), series)
     if len(headers) < 2:
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
