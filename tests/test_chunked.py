@@ -226,3 +226,26 @@ def test_command_line_refuses_bad_chunked_options(rng, tmp_path, capsys, argv, n
     err = capsys.readouterr().err
     assert needle in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.clw").exists()
+
+
+def test_ties_at_the_cut_go_to_the_lowest_positions_whatever_the_block_order(rng):
+    # a piecewise-constant volume (a checkerboard of 4-voxel cubes): classes of equal importances
+    data = ((np.indices(SHAPE) // 4).sum(axis=0) % 2).astype(np.float32)
+    vol, dvol = clwave.Volume(data), clwave.Volume(da.from_array(data, chunks=CHUNKS))
+    full = clwave.WaveletVolume.from_volume(vol, "cubic", levels=2)
+    keep = 0.4  # the cut falls in a class of 365 equal importances, and keeps 53 of them
+    ref = full.threshold(keep=keep)
+    g = full.groups[0]
+    imp = full.importance(g)
+    live = np.flatnonzero(np.any(g.values != 0, axis=0))
+    detail = live[live >= g.band_slices()[0].stop]
+    take = int(round(keep * data.size)) - (len(live) - len(detail))
+    # the oracle: importance descending, then position ascending
+    expected = np.sort(detail[np.lexsort((detail, -imp[detail]))[:take]])
+    cut = imp[expected].min()
+    assert np.count_nonzero(imp[detail] == cut) > np.count_nonzero(imp[expected] == cut) > 0  # a tie split by the cut
+    kept = np.setdiff1d(ref.groups[0].positions, live[live < g.band_slices()[0].stop])
+    assert np.array_equal(kept, g.all_positions()[expected])
+    model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2)
+    for _ in range(3):  # the blocks' results arrive in the order the threads finish them
+        assert_same(ref, model.threshold(keep=keep).compute())

@@ -156,6 +156,23 @@ def test_nrrd_lps_space_directions_land_in_ras(tmp_path, data_ijk):
     np.testing.assert_allclose(vol.origin, affine_ras[:3, :3] @ [2, 2.5, 3] + affine_ras[:3, 3])
 
 
+def test_nrrd_left_handed_space_is_not_mirrored(tmp_path, data_ijk):
+    directions = np.diag([1.0, 2.0, 0.5])
+    for space in ("3D-left-handed", "3D-right-handed"):
+        nrrd.write(str(tmp_path / f"{space}.nrrd"), data_ijk, {"space": space, "space directions": directions,
+                                                               "space origin": np.array([1.0, 2.0, 3.0])})
+    left, right = load(tmp_path / "3D-left-handed.nrrd"), load(tmp_path / "3D-right-handed.nrrd")
+    # left-handed coordinates read as RAS (as the right-handed file is) give the mirror image; with the third
+    # axis reversed the object is itself again, turned: x and y kept
+    affine_ras = np.eye(4)
+    affine_ras[:3, :3] = np.diag([1, 1, -1]) @ directions.T
+    affine_ras[:3, 3] = [1.0, 2.0, -3.0]
+    np.testing.assert_array_equal(left.data, place_in_ras(data_ijk, affine_ras))
+    np.testing.assert_array_equal(left.data, right.data[::-1])
+    assert left.spacing == right.spacing == (0.5, 2.0, 1.0)
+    np.testing.assert_allclose(left.origin, np.array(right.origin) * (1, 1, -1))
+
+
 def test_nrrd_rgb_axis_becomes_channels(tmp_path, rng):
     rgb_cijk = rng.integers(0, 256, (3,) + SHAPE_IJK).astype(np.uint8)
     header = {"space": "right-anterior-superior",
@@ -190,6 +207,21 @@ def test_tiff_stack_round_trip(tmp_path, rng):
     vol = load(tmp_path / "v.tif")
     np.testing.assert_array_equal(vol.data, arr)
     assert vol.spacing == (1.0, 1.0, 1.0)
+
+
+def test_imagej_tiff_spacing_is_read(tmp_path, rng):
+    arr = rng.integers(0, 60000, (5, 6, 7)).astype(np.uint16)
+    # 4 pixels per micron along x, 2 along y, slices 2 microns apart: voxels of 2 x 0.5 x 0.25 (z, y, x)
+    tifffile.imwrite(tmp_path / "ij.tif", arr, imagej=True, resolution=(4.0, 2.0),
+                     metadata={"axes": "ZYX", "spacing": 2.0, "unit": "um"})
+    vol = load(tmp_path / "ij.tif")
+    np.testing.assert_array_equal(vol.data, arr)
+    assert vol.spacing == (2.0, 0.5, 0.25)
+    assert load(tmp_path / "ij.tif", spacing=1.0).spacing == (1.0, 1.0, 1.0)
+    # a plain TIFF's resolution is a print density (dots per inch), not a voxel size: spacing 1
+    tifffile.imwrite(tmp_path / "plain.tif", arr, photometric="minisblack", resolution=(72.0, 72.0),
+                     resolutionunit="INCH")
+    assert load(tmp_path / "plain.tif").spacing == (1.0, 1.0, 1.0)
 
 
 def test_rgb_tiff_stack_is_4d(tmp_path, rng):
@@ -346,6 +378,39 @@ def test_dicom_duplicate_positions_refused(tmp_path, rng):
         load(tmp_path)
     assert_one_line_error(excinfo)
     assert "position" in str(excinfo.value)
+
+
+def test_dicom_gantry_tilt_refused_with_its_angle(tmp_path, rng):
+    # each slice 0.5 mm further posterior (LPS +y) per mm along z: a gantry tilt of atan(0.5) = 26.6 degrees
+    write_series(tmp_path, rng, [(-20.0, 30.0 + 0.5 * z, z) for z in range(4)], generate_uid(), ["a", "b", "c", "d"])
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path)
+    message = str(excinfo.value)
+    assert "1.5 mm sideways over 3 mm" in message and "26.6 degrees" in message and "dcm2niix" in message
+    assert "\n" not in message
+
+
+def test_dicom_positions_rounded_in_the_file_still_load(tmp_path, rng):
+    # an oblique series (rotated 30 degrees about z) whose positions are written to 2 decimals: strays far below
+    # a tenth of a pixel sideways and of a slice along the normal
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    normal = np.cross((c, s, 0), (-s, c, 0))
+    positions = [np.round(np.array([-20.0, 30.0, 0.0]) + 0.625 * k * normal, 2) for k in range(5)]
+    write_series(tmp_path, rng, positions, generate_uid(), list("abcde"), orientation=(c, s, 0, -s, c, 0))
+    assert load(tmp_path).spacing[0] == pytest.approx(0.625, abs=0.01)
+
+
+@pytest.mark.parametrize("z, needle", [
+    ((0.0, 1.0, 2.0, 3.0, 5.0, 6.0, 7.0), "slices at 3 and 5 mm along the normal are 2 mm apart where the median "
+                                          "gap is 1 mm"),  # one slice missing
+    ((0.0, 1.0, 2.0, 4.0, 5.0, 6.0, 9.0), "gaps range from 1 to 3 mm"),
+])
+def test_dicom_missing_or_uneven_slices_refused(tmp_path, rng, z, needle):
+    write_series(tmp_path, rng, axial(*z), generate_uid(), [f"s{i}" for i in range(len(z))])
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path)
+    message = str(excinfo.value)
+    assert needle in message and "supply the complete series" in message and "\n" not in message
 
 
 # --------------------------------------------------------------------------- bad input

@@ -167,6 +167,32 @@ def test_threshold_keeps_exact_count_and_approximation_first(keep, rng):
         assert np.count_nonzero(imp > kept_min) <= n - n_approx
 
 
+def test_default_levels_capped_by_the_shortest_axis_and_said():
+    from clwave.model.wavelet import default_levels
+
+    assert default_levels((96, 96, 96)) == (3, None) and default_levels((8, 9, 10), levels=2) == (2, None)
+    levels, note = default_levels((96, 4, 96, 3))
+    assert levels == 1 and "--keep" not in note
+    assert note.startswith("1 decomposition level instead of the default 3: the y axis of 4 voxels allows no more")
+    levels, note = default_levels((96, 96, 3))
+    assert levels == 0 and "x axis of 3 voxels" in note and "--keep drops voxels: give --keep 1" in note
+    assert "--keep" not in default_levels((96, 96, 3), thresholded=False)[1]
+    for shape in ((96, 96, 3), (96, 4, 96), (7, 16, 17)):  # the levels given are the most the model takes
+        levels = default_levels(shape)[0]
+        WaveletVolume.from_volume(np.ones(shape, np.float32), "haar", levels=levels)
+        with pytest.raises(InputError):
+            WaveletVolume.from_volume(np.ones(shape, np.float32), "haar", levels=levels + 1)
+
+
+def test_top_breaks_ties_at_the_cut_by_lowest_index(rng):
+    from clwave.model.wavelet import _top
+
+    importance = rng.integers(0, 5, 200).astype(np.float32)  # classes of 40 equal values
+    for count in (0, 1, 39, 40, 41, 117, 199, 200, 250):
+        oracle = np.sort(np.lexsort((np.arange(200), -importance))[:count])  # value descending, then index
+        assert np.array_equal(_top(importance, count), oracle)
+
+
 def test_threshold_by_value_and_ranked_order(rng):
     vol = Volume(rng.random((16, 16, 16, 2)).astype(np.float32))
     wv = WaveletVolume.from_volume(vol, "linear", levels=2)

@@ -94,8 +94,8 @@ class ChunkedWaveletVolume:
     """The wavelet model of a chunked :class:`Volume`, never held whole (docs/chunked.md).
 
     Made by :meth:`WaveletVolume.from_volume` for a chunked volume.  :meth:`threshold` selects exactly
-    the coefficients the in-memory model would (ties aside); :meth:`compute` gathers the selection into
-    a :class:`WaveletVolume`; :meth:`save` streams it into a ``.clw`` file.  Every pass runs on
+    the coefficients the in-memory model would (ties too: to the lowest positions); :meth:`compute` gathers
+    the selection into a :class:`WaveletVolume`; :meth:`save` streams it into a ``.clw`` file.  Every pass runs on
     ``scheduler`` (:mod:`clwave.schedulers`).
     """
 
@@ -222,7 +222,8 @@ class ChunkedWaveletVolume:
                 if not mine:
                     continue
                 pos, values, tier, imp = (np.concatenate([x[i] for x in mine], axis=-1) for i in range(4))
-                chosen = np.sort(_top(imp, rule.take))
+                by_position = np.argsort(pos)  # _top breaks ties by index: by position, not by arrival order
+                chosen = by_position[_top(imp[by_position], rule.take)]
                 counts[-1] += len(chosen)
                 out = (pos[chosen], values[:, chosen], tier[chosen])
                 yield (gi,) + (out if tiers else out[:2])

@@ -446,6 +446,24 @@ def _channel_wavelets(wavelet, channels) -> list:
     return [wavelet_for(wavelet)] * channels
 
 
+def default_levels(shape, levels=3, thresholded=True) -> tuple:
+    """``(levels, note)`` for a volume of ``shape`` (z, y, x[, c]) given no levels: ``levels``, or as many as its
+    shortest axis allows (:func:`max_levels`: every level halves every axis), with a one-line note in the
+    command line's words when the axis caps them (None otherwise).  At 0 levels the model is the voxels
+    themselves, so a ``thresholded`` one (``--keep`` below 1) drops voxels: the note says so, and what helps."""
+    spatial = tuple(shape[:3])
+    top = max_levels(spatial)
+    if top >= levels:
+        return levels, None
+    axis = int(np.argmin(spatial))
+    note = (f"{top} decomposition level{'s' if top != 1 else ''} instead of the default {levels}: the "
+            f"{'zyx'[axis]} axis of {spatial[axis]} voxels allows no more (every level halves every axis)")
+    if top == 0 and thresholded:
+        note += ("; with no levels the model is the voxels themselves, and --keep drops voxels: give --keep 1, or "
+                 "a volume at least 4 voxels thick for 1 level")
+    return top, note
+
+
 def _check_levels(levels, shape) -> int:
     top = max_levels(shape)
     if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or not 0 <= levels <= top:
@@ -510,11 +528,17 @@ def band_importance(wavelet, band, values, index, focus, frame) -> np.ndarray:
 
 
 def _top(importance, count) -> np.ndarray:
-    """Indices of the ``count`` largest values (exact count)."""
+    """Indices of the ``count`` largest values (exact count), ascending; of the values tied at the cut, the
+    lowest indices.  Every caller passes importances in position order, so ties go to the lowest positions
+    whatever order the coefficients were computed in (docs/chunked.md §3)."""
     if count >= len(importance):
         return np.arange(len(importance))
     if count <= 0:
         return np.zeros(0, dtype=np.int64)
-    return np.argpartition(-importance, count - 1)[:count]
+    cut = np.partition(importance, len(importance) - count)[len(importance) - count]  # the count-th largest
+    above = importance > cut
+    tied = np.flatnonzero(importance == cut)[:count - int(np.count_nonzero(above))]
+    above[tied] = True
+    return np.flatnonzero(above)
 
 

@@ -140,7 +140,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         elif kind == "nrrd":
             data, file_spacing, origin = nrrd.read_nrrd(path, fits, spacing is None)
         elif kind == "tiff":
-            data, file_spacing, origin = tiff.read_tiff(path, fits), None, None
+            (data, file_spacing), origin = tiff.read_tiff(path, fits), None
         elif kind == "tiff-folder":
             data, file_spacing, origin = tiff.read_tiff_folder(path, progress_bar, fits), None, None
         else:

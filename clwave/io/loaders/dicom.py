@@ -1,4 +1,5 @@
-"""Folders of DICOM slices: one image series, sorted along its normal, rescaled, in RAS+."""
+"""Folders of DICOM slices: one image series, sorted along its normal, checked to be a straight stack of even
+slices, rescaled, in RAS+."""
 
 from __future__ import annotations
 
@@ -7,17 +8,22 @@ from collections import defaultdict
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import SUPPORTED, folder_files, log, read_slices, reading, to_canonical
+from .shared import SUPPORTED, folder_files, read_slices, reading, to_canonical
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
+# A series is refused when a slice strays from a straight stack of even spacing by more than these fractions
+# of a pixel (sideways: a gantry tilt) or of a slice gap (along the normal: a missing slice); below them the
+# strays are rounding in the files' decimal positions, and the volume is misplaced by less than a tenth of a voxel
+STRAY_PIXELS, STRAY_SLICES = 0.1, 0.1
 # Attributes every slice of a DICOM image series needs
 _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSpacing",
                      "Rows", "Columns", "PixelData")
 
 
 def read_dicom_folder(folder, series, progress_bar, fits=None):
-    """One DICOM series: slices sorted along their normal, rescaled, in RAS."""
+    """One DICOM series: slices sorted along their normal, rescaled, in RAS; refused unless they form a
+    straight stack of evenly spaced slices (:func:`_check_straight`, :func:`_even_spacing`)."""
     uid, headers = _pick_series(folder, _dicom_image_series(folder), series)
     if len(headers) < 2:
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
@@ -38,11 +44,10 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
         raise FileFormatError(
             f"DICOM slices {first} and {second} of series {uid} share one position; the series may "
             "hold several acquisitions (echoes, phases, times): split them into separate folders")
-    dz = float(np.median(gaps))
-    if np.ptp(gaps) > 0.01 * dz:
-        log.warning("DICOM series %s: slice gaps range from %.4g to %.4g mm; the volume uses "
-                    "the median %.4g mm (is a slice missing?)", uid, gaps.min(), gaps.max(), dz)
     dy, dx = (float(s) for s in headers[order[0]][1].PixelSpacing)  # row spacing, column spacing
+    where = f"DICOM series {uid} in {folder}"
+    _check_straight(where, positions[order], distance[order], normal, min(dx, dy))
+    dz = _even_spacing(where, distance[order])
 
     data_zyx = read_slices([headers[i][0] for i in order], _dicom_pixels,
                             "reading DICOM slices", progress_bar, fits)
@@ -52,6 +57,37 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     affine_lps[:3, 3] = positions[order[0]]
     data_ijk = data_zyx.transpose((2, 1, 0) + tuple(range(3, data_zyx.ndim)))
     return to_canonical(data_ijk, _LPS_TO_RAS @ affine_lps)
+
+
+def _check_straight(where, positions, distance, normal, pixel):
+    """Refuse slices (sorted along ``normal``) whose positions shift sideways: a gantry tilt, which a
+    straight stack of them would misplace (each slice the further, the further it is from the first)."""
+    sideways = positions - np.outer(distance, normal)
+    drift = np.linalg.norm(sideways - sideways[0], axis=1)
+    if drift.max() > STRAY_PIXELS * pixel:
+        span = distance[-1] - distance[0]
+        raise FileFormatError(
+            f"{where} is tilted: its slices shift {drift.max():.4g} mm sideways over {span:.4g} mm along their "
+            f"normal (a gantry tilt of {np.degrees(np.arctan2(drift.max(), span)):.3g} degrees), and clwave stacks "
+            "slices straight; resample the series onto a straight grid first, e.g. with dcm2niix (it corrects "
+            "gantry tilt) or 3D Slicer")
+
+
+def _even_spacing(where, distance) -> float:
+    """The slice gap of slices at ``distance`` (sorted) along the normal, refused unless every slice lies
+    within :data:`STRAY_SLICES` of a gap of the evenly spaced grid from the first to the last."""
+    dz = (distance[-1] - distance[0]) / (len(distance) - 1)
+    stray = np.abs(distance - distance[0] - dz * np.arange(len(distance))).max() / dz
+    if stray > STRAY_SLICES:
+        gaps = np.diff(distance)
+        median = float(np.median(gaps))
+        i = int(np.argmax(np.abs(gaps - median)))
+        raise FileFormatError(
+            f"{where} is not evenly spaced: its slice gaps range from {gaps.min():.4g} to {gaps.max():.4g} mm, the "
+            f"slices at {distance[i]:.4g} and {distance[i + 1]:.4g} mm along the normal are {gaps[i]:.4g} mm apart "
+            f"where the median gap is {median:.4g} mm (a missing slice?); supply the complete series, or resample "
+            "it onto even slices first (e.g. with 3D Slicer)")
+    return float(dz)
 
 
 def _dicom_image_series(folder):

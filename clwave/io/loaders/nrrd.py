@@ -13,6 +13,9 @@ _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
     "left-anterior-superior": (-1, 1, 1), "las": (-1, 1, 1),
     "left-posterior-superior": (-1, -1, 1), "lps": (-1, -1, 1),
+    # a left-handed frame taken as RAS would mirror the object; its third axis is reversed instead (as a
+    # left-handed screen frame, z into the screen, becomes OpenGL's right-handed one): x and y kept
+    "3d-left-handed": (1, 1, -1),
 }
 
 
@@ -54,7 +57,7 @@ def read_nrrd(path, fits=None, warn_spacing=True):
             log.warning("%s: its spacing (dz, dy, dx) %s is unknown (nan) on some axes; taken as 1 there: give "
                         "spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(map(str, spacings[::-1])))
         affine[:3, :3] = np.diag(np.where(np.isfinite(spacings), spacings, 1.0))
-    # other spaces (scanner-xyz, 3D-right-handed, none) are taken as RAS
+    # other spaces (scanner-xyz, 3D-right-handed, none) are right-handed: taken as RAS
     signs = _NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1))
     return to_canonical(data, np.diag(signs + (1,)) @ affine)
 

@@ -15,8 +15,9 @@ def tiff_files(folder):
 
 
 def read_tiff(path, fits=None, stack=True):
-    """A TIFF stack as ``(pages, y, x[, samples])``; without ``stack`` (a slice of a folder) one page gives one
-    slice, with it one 2-D image is refused.  With ``stack``, one page of 3 or 4
+    """``(data, spacing)``: a TIFF stack as ``(pages, y, x[, samples])`` and its spacing ``(dz, dy, dx)`` where
+    it is an ImageJ stack (:func:`_imagej_spacing`), else None; without ``stack`` (a slice of a folder) one
+    page gives one slice, with it one 2-D image is refused.  With ``stack``, one page of 3 or 4
     planar samples that tifffile wrote from a 3-D array of that shape (``tifffile.imwrite`` of a 3 or 4 x Y x X
     stack stores it as an RGB(A) image) is read as that many slices, with a warning: a 2-D image is no volume.
     The series' declared size is weighed (:func:`check_whole`) before its pages are read."""
@@ -48,15 +49,33 @@ def read_tiff(path, fits=None, stack=True):
                                   f"tifffile.imwrite(path, volume, photometric='minisblack')")
         check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
         data = tif.asarray(key=range(len(tif.pages))) if pages else series.asarray()
+        spacing = _imagej_spacing(tif, path)
     if "S" in axes:
         data = np.moveaxis(data, axes.index("S"), -1)
-    return data if len(spatial) == 3 else data[np.newaxis]
+    return (data if len(spatial) == 3 else data[np.newaxis]), spacing
+
+
+def _imagej_spacing(tif, path):
+    """``(dz, dy, dx)`` of an ImageJ stack in its ``unit`` (e.g. micron, no conversion): ``spacing=`` of its
+    metadata along z and the inverse of its X/YResolution (pixels per unit) along x and y; None for other
+    TIFF files, whose resolution tags are print densities (dots per inch), not voxel sizes."""
+    meta = tif.imagej_metadata
+    if not meta:
+        return None
+    per_unit = np.array(tif.pages[0].get_resolution()[::-1], float)  # (y, x)
+    with np.errstate(divide="ignore"):
+        spacing = (float(meta.get("spacing", 1.0)),) + tuple(float(d) for d in 1 / per_unit)
+    if not all(np.isfinite(d) and d > 0 for d in spacing):
+        log.warning("%s: its ImageJ spacing (dz, dy, dx) %s is not positive and finite; taken as 1: give "
+                    "spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(f"{d:g}" for d in spacing))
+        return None
+    return spacing
 
 
 def read_tiff_folder(folder, progress_bar, fits=None):
     """One 2-D TIFF per slice, stacked along z in natural name order."""
     def read_slice(path):
-        pages = read_tiff(path, stack=False)
+        pages = read_tiff(path, stack=False)[0]
         if len(pages) != 1:
             raise FileFormatError(f"{path} holds {len(pages)} pages, but a folder of TIFF "
                                   "slices needs one 2-D image per file")
