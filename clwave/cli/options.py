@@ -144,11 +144,13 @@ def _method_options(args):
     that were not given their defaults (``add_raytrace_options`` leaves them None, so that a given one is told)."""
     other = [n for n, _ in RAYTRACE_ONLY] if args.method == "splat" else SPLAT_ONLY
     given = [_flag(n) for n in other if getattr(args, n, None) not in (None, False)]
+    if given and args.method != "splat":
+        raise InputError("--coarse and --omega-s are for --method splat; ray tracing controls its error with "
+                         "--tolerance")
     if given:
         named, verb, them = ", ".join(given), *(("is", "it") if len(given) == 1 else ("are", "them"))
         raise InputError(f"{named} {verb} for --method raytrace; splatting ignores {them}: add --method raytrace, or "
-                         f"leave {them} out" if args.method == "splat" else
-                         f"{named} {verb} for --method splat; ray tracing controls its error with --tolerance")
+                         f"leave {them} out")
     if hasattr(args, "xray"):  # the options of add_raytrace_options
         for name, default in RAYTRACE_ONLY:
             if getattr(args, name) is None:
