@@ -528,3 +528,23 @@ def test_compress_of_an_all_zero_volume_gives_no_psnr(tmp_path, capsys):
     code, out, err = run(capsys, "compress", str(tmp_path / "zeros.npy"), "--levels", "1", "-o",
                          str(tmp_path / "z.clw"))
     assert code == 0 and "0 coefficients" in out and "the volume is zero everywhere" in out and "PSNR" not in out
+
+
+def test_a_thin_volume_is_told_its_levels_and_what_keep_then_drops(tmp_path, capsys):
+    """Without --levels a thin volume's shortest axis caps the levels (wavelet.default_levels): one warning line,
+    at 0 levels saying that --keep drops voxels; none with --levels or --keep 1."""
+    np.save(tmp_path / "thin3.npy", np.ones((3, 16, 16), np.float32))
+    np.save(tmp_path / "thin4.npy", np.ones((4, 16, 16), np.float32))
+    code, out, err = run(capsys, "compress", str(tmp_path / "thin3.npy"), "-o", str(tmp_path / "a.clw"))
+    assert code == 0 and err == ("clwave: warning: 0 decomposition levels instead of the default 3: the z axis of 3 "
+                                 "voxels allows no more (every level halves every axis); with no levels the model is "
+                                 "the voxels themselves, and --keep drops voxels: give --keep 1, or a volume at "
+                                 "least 4 voxels thick for 1 level\n")
+    code, out, err = run(capsys, "compress", str(tmp_path / "thin3.npy"), "--keep", "1", "-o", str(tmp_path / "b.clw"))
+    assert code == 0 and "0 decomposition levels" in err and "--keep drops" not in err
+    code, out, err = run(capsys, "compress", str(tmp_path / "thin4.npy"), "-o", str(tmp_path / "c.clw"))
+    assert code == 0 and err.startswith("clwave: warning: 1 decomposition level instead of the default 3: the z axis "
+                                        "of 4 voxels") and err.count("\n") == 1 and "--keep drops" not in err
+    code, out, err = run(capsys, "compress", str(tmp_path / "thin4.npy"), "--levels", "1", "-o",
+                         str(tmp_path / "d.clw"))
+    assert code == 0 and err == ""

@@ -262,9 +262,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
     instead of the model read (``clwave view`` opens it by its prefix first).
     """
-    from ..model.bspline import max_levels
     from ..model.transfer import TransferFunction
-    from ..model.wavelet import WaveletVolume, check_decomposition
+    from ..model.wavelet import WaveletVolume, check_decomposition, default_levels
 
     thresholding = _thresholding(args)
     scheduler = parse_scheduler(args)
@@ -305,7 +304,11 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         raise _needs_rgba(args.input, vol.channels, f"classify it with --tf PRESET ({presets})")
     wavelet = args.wavelet or DEFAULT_WAVELET
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
-    levels = min(DEFAULT_LEVELS, max_levels(vol.shape)) if args.levels is None else args.levels
+    levels = args.levels
+    if levels is None:  # a thin volume's shortest axis caps them: said, with what --keep then does
+        levels, note = default_levels(vol.shape, DEFAULT_LEVELS, thresholded=args.keep != 1)
+        if note:
+            print(f"clwave: warning: {note}", file=sys.stderr)
     wavelet, levels = check_decomposition(vol.shape, 4 if tf and not post else vol.channels, wavelet, levels)
     if vol.chunked and args.interpolate:
         raise InputError("--interpolate needs the whole volume in memory (its prefilter is global); leave it out "
