@@ -43,6 +43,10 @@ class InputError(ClwaveError, ValueError):
     """A bad argument or a bad volume (NaN voxels, wrong shape, bad levels...)."""
 
 
+class NothingVisibleError(InputError):
+    """A transfer function that gives no voxel of a volume any opacity: every image of it would be blank."""
+
+
 class FileFormatError(ClwaveError):
     """A file that cannot be read: unknown extension, truncated or corrupt."""
 

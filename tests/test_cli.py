@@ -332,6 +332,19 @@ EARLY_MISTAKES = [
     (["view", "--device", "no-such-device"], "no-such-device"),
     (["view", "--tolerance", "0"], "--tolerance 0"),
     (["view", "--tf", "bone"], "bone"),
+    # the options of the other --method, silently ignored once
+    (["render", "--tolerance", "1e-5"], "--tolerance is for --method raytrace; splatting ignores it"),
+    (["render", "--xray", "--light", "30,40"], "--light, --xray are for --method raytrace"),
+    (["render", "--field", "wavelet"], "--field is for --method raytrace"),
+    (["render", "--light", "-30,20"], "--light is for --method raytrace"),
+    (["progressive", "--no-shading", "--background", "1,1,1"], "--no-shading, --background are for --method raytrace"),
+    (["drr", "--tolerance", "1e-3"], "--tolerance is for --method raytrace"),
+    (["render", "--method", "raytrace", "--omega-s", "3"], "--coarse and --omega-s are for --method splat"),
+    (["progressive", "--method", "raytrace", "--coarse", "1e-2"], "--coarse and --omega-s are for --method splat"),
+    (["render", "--method", "raytrace", "--background", "2,0,0"], "--background 2,0,0 must be a colour R,G,B with each "
+                                                                   "in 0..1"),
+    (["render", "--coarse", "0"], "--coarse 0 must be"),
+    (["render", "-o", "x.npy"], "-o x.npy must end in .png; --raw OUT.npy also writes the float32 image"),
 ]
 #: options a .clw input refuses anyway (a model already)
 VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")
@@ -432,3 +445,106 @@ def test_a_large_declared_nifti_is_refused_before_its_data_are_read(tmp_path, ca
     assert "gunzip a .nii.gz first" in err and not (tmp_path / "o.clw").exists()
     code, out, err = run(capsys, "compress", str(path), "--tf", "grey", "--levels", "1", "-o", str(tmp_path / "o.clw"))
     assert code == 2 and "decomposing this volume" in err and not reads  # classified: four channels a voxel
+
+
+@pytest.mark.parametrize("argv, option, value", [
+    (["render", "--tf", "ct-bone", "--tf-window", "-200,300"], "tf_window", "-200,300"),
+    (["render", "--window", "-5000,100"], "display_window", "-5000,100"),
+    (["render", "--method", "raytrace", "--light", "-30,20", "--light", "-.5,-1e-2"], "light",
+     ["-30,20", "-.5,-1e-2"]),
+    (["render", "--focus", "-5,0,0", "--sigma", "2"], "focus", "-5,0,0"),
+    (["drr", "--poses", "p.csv", "--isocentre", "-181,-231,-565"], "isocentre", "-181,-231,-565"),
+    (["drr", "--poses", "p.csv", "--offset", "-5,0"], "offset", "-5,0"),
+    (["drr", "--poses", "p.csv", "--window", "-0.5,2"], "display_window", "-0.5,2"),
+])
+def test_a_comma_list_may_start_with_a_negative_number(argv, option, value):
+    """``--tf-window -200,300`` is the value of --tf-window, as ``--tf-window=-200,300`` (argparse took it for an
+    option: "expected one argument")."""
+    from clwave.cli import make_parser
+
+    args = make_parser().parse_args([argv[0], "v.npy", "-o", "x.png", *argv[1:]])
+    assert getattr(args, option) == value
+
+
+def test_a_transfer_function_that_shows_nothing_is_refused_before_the_transform(tmp_path, capsys, monkeypatch):
+    """A HU preset on a volume --hu-to-mu turned into attenuation per mm gives no voxel any opacity: every command
+    refuses it in one line naming the volume's values, --hu-to-mu and --tf-window, before the transform (it wrote a
+    blank image, a .clw of 0 coefficients, and the viewer spun), for splatting and ray tracing alike."""
+    ct = np.full((16, 16, 16), -1000, np.int16)
+    ct[4:12, 4:12, 4:12] = 1000  # a bone cube in air, HU
+    np.save(tmp_path / "ct.npy", ct)
+
+    def no_transform(*args, **kwargs):
+        raise AssertionError("the volume was transformed")
+
+    monkeypatch.setattr(WaveletVolume, "from_volume", no_transform)
+    out = {"compress": "o.clw", "render": "o.png", "progressive": "o.gif", "view": None}
+    for command, method in (("render", "splat"), ("render", "raytrace"), ("progressive", "raytrace"),
+                            ("compress", None), ("view", None)):
+        options = [] if method is None else ["--method", method]
+        options += [] if out[command] is None else ["-o", str(tmp_path / out[command])]
+        code, _, err = run(capsys, command, str(tmp_path / "ct.npy"), "--tf", "ct-bone", "--hu-to-mu", "--levels",
+                           "1", *options)
+        assert code == 2 and err.count("\n") == 1, err
+        assert err == ("clwave: error: the transfer function ct-bone gives no voxel of this volume any opacity: its "
+                       "points span -1000 .. 2000 and the volume's values lie within 0 .. 0.0386; give a window in the "
+                       "volume's units (--tf-window LO,HI) or another preset (--hu-to-mu turned HU into attenuation "
+                       "per mm)\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ct.npy"]  # nothing written
+
+
+@pytest.mark.parametrize("make, argv, needle, api", [
+    (lambda p: np.save(p / "v.npy", np.ones((8, 8, 8, 3), np.float32)), ["compress", "v.npy", "--hu-to-mu"],
+     "--hu-to-mu converts scalar CT volumes, but this one has 3 channels; leave --hu-to-mu out", "hu_to_mu"),
+    (lambda p: (p / "v.raw").write_bytes(bytes(128)), ["compress", "v.raw"],
+     "v.raw: a .raw file has no header; give --shape Z,Y,X (or Z,Y,X,C) and --dtype (e.g. uint16)", "shape="),
+    (lambda p: (p / "v.raw").write_bytes(bytes(128)), ["compress", "v.raw", "--shape", "4,4,8", "--dtype", "uint16"],
+     "has 128 bytes but 4 x 4 x 8 values of uint16 need 256 bytes; check --shape and --dtype", "shape="),
+    (lambda p: (p / "v.raw").write_bytes(bytes(128)), ["compress", "v.raw", "--shape", "4,4,4", "--dtype", "nope"],
+     "bad --dtype nope for v.raw; give a numpy dtype", "dtype="),
+    (lambda p: np.save(p / "v.npy", np.full((8, 8, 8), 1e300)), ["compress", "v.npy"],
+     "holds values up to 1e+300, beyond float32's range", None),
+])
+def test_refusals_in_the_command_lines_words(tmp_path, capsys, monkeypatch, make, argv, needle, api):
+    """A refusal raised in the API's words (``hu_to_mu``, ``shape=``) says the option on the command line."""
+    make(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run(capsys, *argv, "-o", "o.clw")
+    assert code == 2 and err.count("\n") == 1 and needle in err and (api is None or api not in err), err
+    assert "RuntimeWarning" not in err and not (tmp_path / "o.clw").exists()
+
+
+def test_a_device_chosen_by_the_environment_is_named_when_it_matches_nothing(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("CLWAVE_DEVICE", "no-such-device")
+    code, _, err = run(capsys, "render", "phantom:hydrogen:8", "-o", str(tmp_path / "o.png"))
+    assert code == 2 and "no OpenCL device matches 'no-such-device' (the environment variable CLWAVE_DEVICE: " \
+                         "change or unset it)" in err
+    code, _, err = run(capsys, "render", "phantom:hydrogen:8", "--device", "other", "-o", str(tmp_path / "o.png"))
+    assert code == 2 and "'other'; available" in err  # a --device given is its own
+
+
+def test_compress_of_an_all_zero_volume_gives_no_psnr(tmp_path, capsys):
+    np.save(tmp_path / "zeros.npy", np.zeros((8, 8, 8), np.float32))
+    code, out, err = run(capsys, "compress", str(tmp_path / "zeros.npy"), "--levels", "1", "-o",
+                         str(tmp_path / "z.clw"))
+    assert code == 0 and "0 coefficients" in out and "the volume is zero everywhere" in out and "PSNR" not in out
+
+
+def test_a_thin_volume_is_told_its_levels_and_what_keep_then_drops(tmp_path, capsys):
+    """Without --levels a thin volume's shortest axis caps the levels (wavelet.default_levels): one warning line,
+    at 0 levels saying that --keep drops voxels; none with --levels or --keep 1."""
+    np.save(tmp_path / "thin3.npy", np.ones((3, 16, 16), np.float32))
+    np.save(tmp_path / "thin4.npy", np.ones((4, 16, 16), np.float32))
+    code, out, err = run(capsys, "compress", str(tmp_path / "thin3.npy"), "-o", str(tmp_path / "a.clw"))
+    assert code == 0 and err == ("clwave: warning: 0 decomposition levels instead of the default 3: the z axis of 3 "
+                                 "voxels allows no more (every level halves every axis); with no levels the model is "
+                                 "the voxels themselves, and --keep drops voxels: give --keep 1, or a volume at "
+                                 "least 4 voxels thick for 1 level\n")
+    code, out, err = run(capsys, "compress", str(tmp_path / "thin3.npy"), "--keep", "1", "-o", str(tmp_path / "b.clw"))
+    assert code == 0 and "0 decomposition levels" in err and "--keep drops" not in err
+    code, out, err = run(capsys, "compress", str(tmp_path / "thin4.npy"), "-o", str(tmp_path / "c.clw"))
+    assert code == 0 and err.startswith("clwave: warning: 1 decomposition level instead of the default 3: the z axis "
+                                        "of 4 voxels") and err.count("\n") == 1 and "--keep drops" not in err
+    code, out, err = run(capsys, "compress", str(tmp_path / "thin4.npy"), "--levels", "1", "-o",
+                         str(tmp_path / "d.clw"))
+    assert code == 0 and err == ""

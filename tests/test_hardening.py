@@ -367,9 +367,12 @@ def test_a_nrrd_header_declaring_more_than_its_data_is_refused_before_reading(tm
     text = path.read_bytes()
     path.write_bytes(text.replace(b"sizes: 4 4 4", b"sizes: 4000 4000 4000"))  # 256 GB declared
     start = time.perf_counter()
-    with pytest.raises(FileFormatError, match="declares 4000 x 4000 x 4000 voxels"):
+    with pytest.raises(FileFormatError, match="declares 4000 x 4000 x 4000 voxels") as exc:
         clwave.load(path)
     assert time.perf_counter() - start < 1.0
+    # the bytes it holds: a gzip stream's uncompressed length (its header is outside it), else after the header
+    held = "its gzip stream holds 256 bytes;" if encoding == "gzip" else "the file holds 256 bytes after its"
+    assert held in str(exc.value) and ("byte header" in str(exc.value)) == (encoding == "raw")
 
 
 def test_ctrl_c_stops_a_long_splat_within_a_second(tmp_path):
@@ -551,3 +554,14 @@ def test_an_image_over_the_device_memory_cap_names_a_larger_cap(tmp_path, capsys
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err and not out.exists()
     assert "more than --device-memory 2MiB allows; give --device-memory 2.8MiB or more" in err
+
+
+def test_an_array_beyond_float32_is_named_so_not_as_nan():
+    """Finite float64 values that float32 cannot hold turn into inf when converted: the refusal says which (no
+    RuntimeWarning of the cast first)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError, match="non-finite voxel value.*or beyond float32's range of \\+-3.4e38"):
+            clwave.Volume(np.full((4, 4, 4), 1e300))

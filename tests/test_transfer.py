@@ -197,6 +197,36 @@ def test_rgb_volume_classification():
                                atol=1e-9)
 
 
+def test_classifying_a_volume_all_transparent_is_refused():
+    """A transfer function that gives no voxel any opacity (HU ct-bone on attenuation per mm, on an all-zero volume,
+    a colour volume darker than its opacity ramp starts) raises NothingVisibleError, an InputError, in the API's
+    words and in the command line's (cli); opacity at one voxel is enough to classify."""
+    from clwave.errors import NothingVisibleError
+
+    mu = np.zeros((4, 4, 4), np.float32)
+    mu[1:3, 1:3, 1:3] = 0.0386  # 1000 HU as attenuation per mm
+    bone = TransferFunction.preset("ct-bone")
+    with pytest.raises(NothingVisibleError) as exc:
+        bone.classify(Volume(mu))
+    assert isinstance(exc.value, InputError)
+    line = ("the transfer function ct-bone gives no voxel of this volume any opacity: its points span -1000 .. 2000 "
+            "and the volume's values lie within 0 .. 0.0386; give a window in the volume's units")
+    assert str(exc.value) == f"{line} (window=(lo, hi)) or another function"
+    assert exc.value.cli_message() == f"{line} (--tf-window LO,HI) or another preset"
+    rgba = bone.classify(Volume(mu), window=(-0.02, 0.04))  # the window in the volume's units: 0.0386 is bone
+    assert rgba.data[..., 3].max() > 0.4 and rgba.data[0, 0, 0, 3] == 0
+    with pytest.raises(NothingVisibleError, match="values lie within 0 .. 0;"):
+        bone.classify(Volume(np.zeros((4, 4, 4))))
+    ramp = TransferFunction([(0.0, 1, 1, 1, 0.0), (0.5, 1, 1, 1, 0.0), (1.0, 1, 1, 1, 1.0)])  # no name
+    dark = np.full((4, 4, 4, 3), 60, np.uint8)
+    with pytest.raises(NothingVisibleError, match=r"^the transfer function gives .* points span 0 .. 1 and the "
+                                                  r"volume's luminance \(0 .. 1\) lie within 0.2353 .. 0.2353"):
+        ramp.classify(Volume(dark))
+    one = np.zeros((4, 4, 4), np.float32)
+    one[2, 2, 2] = 2000.0
+    assert np.count_nonzero(bone.classify(Volume(one)).data[..., 3]) == 1
+
+
 def test_docstrings_state_pre_classification():
     for doc in (TransferFunction.__doc__, TransferFunction.classify.__doc__):
         assert "new wavelet transform" in " ".join(doc.split())

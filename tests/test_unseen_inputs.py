@@ -143,7 +143,7 @@ CUBE = np.arange(216, dtype=np.float32).reshape(6, 6, 6)
     (CUBE, {"sform_code": 1, "srow_x": (0, np.nan)}, "affine (sform, qform or pixdim) is not finite or not invertible"),
     (CUBE, {"sform_code": 0, "qform_code": 1, "pixdim": (1, np.inf)}, "is not finite or not invertible"),
     (CUBE, {"sform_code": 0, "qform_code": 0, "pixdim": (1, np.nan)}, "is not finite or not invertible"),
-    (CUBE, {"vox_offset": 1e9}, "holds 0 after its 1,000,000,000-byte header"),
+    (CUBE, {"vox_offset": 1e9}, "holds 0 bytes after its 1,000,000,000-byte header"),
     (CUBE, {"datatype": 999}, "data code 999 not recognized"),
 ])
 def test_forged_nifti_headers_are_one_line_before_any_voxel_is_read(tmp_path, capfd, data, fields, needle):

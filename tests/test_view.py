@@ -273,6 +273,31 @@ def test_still_frames_double_the_coefficients_and_end_at_the_kept_set(viewer):
         xray.rate = rate
 
 
+def test_a_model_without_coefficients_has_one_blank_final_frame_a_view():
+    """An all-zero volume (no coefficients): each still view ends in a final frame, blank, with a note for the
+    status line, after a bounded number of frames (it once spun without end, a thousand frames a second); the shaded
+    view of it ends too."""
+    from clwave.view.frames import NO_COEFFICIENTS
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            hello = await ws.receive_json()
+            views = []
+            for seq, change in enumerate((dict(), dict(azimuth=90.0), dict(mode="shaded")), 1):
+                await ws.send_str(json.dumps(dict(BASE, seq=seq, **change)))
+                views.append(await asyncio.wait_for(frames_until_final(ws, seq), 60))  # else it spins without end
+            return hello, views
+    with view(np.zeros((16, 16, 16), np.float32), size=32) as v:
+        hello, views = run(go(v))
+    assert hello["model"]["coefficients"] == 0 and hello["modes"] == ["xray", "shaded"]
+    assert [len(frames) for frames in views[:2]] == [2, 2]  # a view without a drag frame: one, then the final one
+    assert len(views[2]) <= 8  # shaded: its details, coarse to full
+    for frames in views:
+        assert frames[-1][0]["final"] and decode(frames[-1][1]).max() == 0
+    assert all(f["note"] == NO_COEFFICIENTS and f["coefficients"] == 0 for frames in views[:2] for f, _ in frames)
+
+
 def test_shaded_frames_of_an_rgba_model_refine_in_detail_to_the_ray_traced_view():
     """An RGBA model: a drag frame at a reduced size and coarse detail; when still, RayTracer.refine's frames,
     coarse detail on a reduced image to full detail, with error estimates, the last clwave.raytrace of the view."""
@@ -386,8 +411,12 @@ def test_a_volume_classified_post_stays_scalar_with_its_transfer_function():
 
 
 def test_view_refuses_what_it_cannot_show():
-    with pytest.raises(clwave.InputError, match="WaveletVolume, a clwave.Volume, an array or a .clw"):
+    with pytest.raises(clwave.InputError, match=r"volume file first .*clwave.view\(clwave.load\('volume.npy'\)\)"):
         view("volume.npy")
+    with pytest.raises(clwave.InputError, match="WaveletVolume, a clwave.Volume, an array or a .clw"):
+        view([1, 2])
+    with pytest.raises(clwave.InputError, match=r"no voxel of this volume any opacity.*\(window=\(lo, hi\)\)"):
+        view(np.full((8, 8, 8), 0.02, np.float32), tf="ct-bone")  # attenuation under a HU preset: nothing to see
     rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", n=8))
     with pytest.raises(clwave.InputError, match="4 channels .classified already.: leave tf out"):
         view(clwave.WaveletVolume.from_volume(rgba, levels=1), tf="hydrogen")

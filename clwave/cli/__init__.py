@@ -7,6 +7,7 @@ code 2; an existing output file is never replaced without ``--force``.
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 import threading
@@ -19,7 +20,14 @@ EXIT_USAGE = 2
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (its default prints the whole usage first)."""
+    """argparse with one-line errors (its default prints the whole usage first), taking a value that starts with a
+    negative number as a value: ``--tf-window -200,300`` as ``--tf-window=-200,300``."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # Python 3.11's argparse takes "-200" for a number but "-200,300" for an option; 3.13 matches the start
+        # alone, as here (no clwave option starts with "-" and a digit)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message):
         raise InputError(f"{message} (see `{self.prog} --help`)")

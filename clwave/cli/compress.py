@@ -38,9 +38,12 @@ def run(args):
     if reference is not None:
         stored = wv if quantise is None else read_clw(out)  # the rounded values, as the file holds them
         error = np.sqrt(np.mean((stored.reconstruct().data - reference.data) ** 2))
-        peak = max(float(np.max(np.abs(reference.data))), np.finfo(np.float32).tiny)
-        print(f"error                 RMS over the voxels {error / peak:.2e} of the largest value "
-              f"(PSNR {20 * np.log10(peak / max(error, 1e-30)):.1f} dB)")
+        peak = float(np.max(np.abs(reference.data)))
+        if peak == 0:  # no relative error, no PSNR
+            print(f"error                 RMS over the voxels {error:.2e}: the volume is zero everywhere")
+        else:
+            print(f"error                 RMS over the voxels {error / peak:.2e} of the largest value "
+                  f"(PSNR {20 * np.log10(peak / max(error, 1e-30)):.1f} dB)")
     elif not args.input.lower().endswith(".clw"):
         print("error                 not measured: the input was read chunk by chunk (the error needs it whole)")
     return 0

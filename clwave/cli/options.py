@@ -82,7 +82,8 @@ def check_options(args):
     opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): the input's
     spacing and chunks, the model's wavelets, levels, thresholding, transfer function and classification, the
     scheduler, and the view's device, display window, footprint band, coarse tolerance, device memory, ray tracing
-    tolerance and lights.  An option a command does not have is not looked at."""
+    tolerance, lights and background, and the options of the --method not chosen.  An option a command does not have
+    is not looked at."""
     from ..model.bspline import wavelet_for
 
     if getattr(args, "input", None) is None:  # clwave info: no input to spare
@@ -121,10 +122,39 @@ def check_options(args):
         raise InputError(f"--coarse {args.coarse:g} must be a tolerance between 0 and 1, e.g. 1e-2")
     if hasattr(args, "device_memory"):
         parse_device_memory(args)
+    if hasattr(args, "method"):
+        _method_options(args)
     if getattr(args, "tolerance", None) is not None and not (np.isfinite(args.tolerance) and args.tolerance > 0):
         raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
     if getattr(args, "light", None) is not None:
         parse_lights(args)
+    if hasattr(args, "background"):
+        parse_background(args)
+
+
+#: options of one --method only, refused with the other (a command has some of them: drr has no --light);
+#: (option, what it is given when not given: None where the command leaves it None)
+RAYTRACE_ONLY = (("tolerance", 1e-3), ("light", None), ("no_shading", None), ("xray", None), ("field", "bspline"),
+                 ("background", "0,0,0"))
+SPLAT_ONLY = ("coarse", "omega_s")
+
+
+def _method_options(args):
+    """Refuse the options of the --method not chosen (silently ignored otherwise), then give those of ray tracing
+    that were not given their defaults (``add_raytrace_options`` leaves them None, so that a given one is told)."""
+    other = [n for n, _ in RAYTRACE_ONLY] if args.method == "splat" else SPLAT_ONLY
+    given = [_flag(n) for n in other if getattr(args, n, None) not in (None, False)]
+    if given and args.method != "splat":
+        raise InputError("--coarse and --omega-s are for --method splat; ray tracing controls its error with "
+                         "--tolerance")
+    if given:
+        named, verb, them = ", ".join(given), *(("is", "it") if len(given) == 1 else ("are", "them"))
+        raise InputError(f"{named} {verb} for --method raytrace; splatting ignores {them}: add --method raytrace, or "
+                         f"leave {them} out")
+    if hasattr(args, "xray"):  # the options of add_raytrace_options
+        for name, default in RAYTRACE_ONLY:
+            if getattr(args, name) is None:
+                setattr(args, name, default)
 
 
 def is_clw(args) -> bool:
@@ -232,9 +262,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
     instead of the model read (``clwave view`` opens it by its prefix first).
     """
-    from ..model.bspline import max_levels
     from ..model.transfer import TransferFunction
-    from ..model.wavelet import WaveletVolume, check_decomposition
+    from ..model.wavelet import WaveletVolume, check_decomposition, default_levels
 
     thresholding = _thresholding(args)
     scheduler = parse_scheduler(args)
@@ -275,14 +304,18 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         raise _needs_rgba(args.input, vol.channels, f"classify it with --tf PRESET ({presets})")
     wavelet = args.wavelet or DEFAULT_WAVELET
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
-    levels = min(DEFAULT_LEVELS, max_levels(vol.shape)) if args.levels is None else args.levels
+    levels = args.levels
+    if levels is None:  # a thin volume's shortest axis caps them: said, with what --keep then does
+        levels, note = default_levels(vol.shape, DEFAULT_LEVELS, thresholded=args.keep != 1)
+        if note:
+            print(f"clwave: warning: {note}", file=sys.stderr)
     wavelet, levels = check_decomposition(vol.shape, 4 if tf and not post else vol.channels, wavelet, levels)
     if vol.chunked and args.interpolate:
         raise InputError("--interpolate needs the whole volume in memory (its prefilter is global); leave it out "
                          "for a chunked input, or read the input whole with --chunks off")
     if tf is not None:
         tf = tf.resolved(vol)  # records an "auto" window
-        vol = vol if post else tf.classify(vol)  # post: the scalar, and tf as its default for ray tracing
+        vol = vol if post else _classified(args, tf, vol)  # post: the scalar, and tf as its default for ray tracing
     start = time.perf_counter()
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
                                    transfer_function=tf, scheduler=scheduler)
@@ -294,6 +327,20 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     if not vol.chunked:
         return wv, vol
     return (wv.compute() if gather else wv), None
+
+
+def _classified(args, tf, vol):
+    """``vol`` classified by ``tf``; a classification without opacity anywhere is refused before the transform, where
+    --hu-to-mu is the likely cause (a HU preset on attenuation) saying so."""
+    from ..errors import NothingVisibleError
+
+    try:
+        return tf.classify(vol)
+    except NothingVisibleError as exc:
+        if not args.hu_to_mu:
+            raise
+        raise NothingVisibleError(str(exc), cli=f"{exc.cli_message()} (--hu-to-mu turned HU into attenuation per "
+                                                f"mm)") from None
 
 
 def note_stored(args, wv):
@@ -344,17 +391,18 @@ def _preset_window(text):
 
 
 def check_outputs(force, *outputs) -> list:
-    """The paths of a command's outputs ``(path or None, option, suffixes)``, each checked before any work:
-    it ends in one of ``suffixes``, its folder exists, it is no folder, it exists only with ``--force``;
-    and no two name one file.  None where an output is not asked for."""
+    """The paths of a command's outputs ``(path or None, option, suffixes[, hint])``, each checked before any work:
+    it ends in one of ``suffixes`` (else refused with ``hint``, the option that writes other files), its folder
+    exists, it is no folder, it exists only with ``--force``; and no two name one file.  None where an output is not
+    asked for."""
     paths, seen = [], {}
-    for path, option, suffixes in outputs:
+    for path, option, suffixes, *hint in outputs:
         if path is None:
             paths.append(None)
             continue
         path = Path(path)
         if path.suffix.lower() not in suffixes:
-            raise InputError(f"{option} {path} must end in {' or '.join(suffixes)}")
+            raise InputError(f"{option} {path} must end in {' or '.join(suffixes)}{''.join('; ' + h for h in hint)}")
         if path.is_dir():
             raise InputError(f"{option} {path} is a folder; name a file")
         if not path.parent.is_dir():
@@ -407,15 +455,15 @@ def add_device_options(g):
 
 def add_raytrace_options(p):
     g = p.add_argument_group("ray tracing (--method raytrace)")
-    g.add_argument("--tolerance", type=float, default=1e-3, help="absolute error per output value (default 1e-3)")
+    g.add_argument("--tolerance", type=float, help="absolute error per output value (default 1e-3)")
     g.add_argument("--light", action="append", help="directional light AZ,EL in degrees; repeat for more; "
                    "'none' for ambient only (default: a headlight)")
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
-    g.add_argument("--background", default="0,0,0", help="PNG: colour R,G,B in 0..1 behind the volume")
-    g.add_argument("--field", choices=("bspline", "wavelet"), default="bspline",
-                   help="evaluate the field from fine B-spline grids (fast) or from the wavelet coefficients "
-                        "with per-ray active lists (the paper's reference)")
+    g.add_argument("--background", help="PNG: colour R,G,B in 0..1 behind the volume (default 0,0,0, black)")
+    g.add_argument("--field", choices=("bspline", "wavelet"),
+                   help="evaluate the field from fine B-spline grids (fast, the default) or from the wavelet "
+                        "coefficients with per-ray active lists (the paper's reference)")
 
 
 def make_camera(args):
@@ -434,6 +482,15 @@ def parse_lights(args):
     if args.light == ["none"]:
         return []
     return [tuple(numbers(spec, "--light", (2,))) for spec in args.light]
+
+
+def parse_background(args):
+    """The colour (R, G, B) of ``--background``, each in 0..1."""
+    colour = numbers(args.background, "--background", (3,))
+    if not all(0 <= c <= 1 for c in colour):
+        raise InputError(f"--background {args.background} must be a colour R,G,B with each in 0..1, e.g. 1,1,1 for "
+                         f"white")
+    return colour
 
 
 def parse_window(args):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, make_camera,
-                      numbers, parse_device_memory, parse_lights, parse_window, post_transfer_function,
+                      parse_background, parse_device_memory, parse_lights, parse_window, post_transfer_function,
                       write_gif)
 
 
@@ -28,8 +28,6 @@ def run(args):
     check_error(args.error)
     raytrace = args.method == "raytrace"
     if raytrace:
-        if args.coarse is not None:
-            raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
         if args.field != "bspline":
             raise InputError("progressive ray tracing takes the B-spline field; leave out --field")
         if (args.steps, args.budget) != (None, None):  # else every frame of its schedule
@@ -41,7 +39,7 @@ def run(args):
         steps = 8 if args.steps is None and args.budget is None else args.steps
         check_schedule(steps, args.budget)
         options = dict(omega_s=args.omega_s, coarse=args.coarse)
-    background = numbers(args.background, "--background", (3,))
+    background = parse_background(args)
     device_memory, window = parse_device_memory(args), parse_window(args)
     wv, _ = build_model(args, rgba=raytrace and not args.xray)
     if raytrace and not args.xray:

@@ -7,9 +7,9 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .options import (add_command, add_raytrace_options, build_model, check_outputs, is_clw, make_camera, numbers,
-                      parse_device_memory, parse_lights, parse_scheduler, parse_window, post_transfer_function,
-                      write_gif)
+from .options import (add_command, add_raytrace_options, build_model, check_outputs, is_clw, make_camera,
+                      parse_background, parse_device_memory, parse_lights, parse_scheduler, parse_window,
+                      post_transfer_function, write_gif)
 
 
 def run(args):
@@ -21,12 +21,12 @@ def run(args):
 
     if args.turntable is not None and args.turntable < 1:
         raise InputError("--turntable N needs N >= 1")
-    out, raw, stats = check_outputs(args.force, (args.output, "-o", (".png",) if args.turntable is None else (".gif",)),
-                                    (args.raw, "--raw", (".npy",)), (args.stats, "--stats", (".json",)))
-    background = numbers(args.background, "--background", (3,))
+    picture = (".png",) if args.turntable is None else (".gif",)
+    out, raw, stats = check_outputs(args.force, (args.output, "-o", picture, "--raw OUT.npy also writes the float32 "
+                                                 "image"), (args.raw, "--raw", (".npy",)),
+                                    (args.stats, "--stats", (".json",)))
+    background = parse_background(args)
     camera = make_camera(args)
-    if args.method == "raytrace" and args.coarse is not None:
-        raise InputError("--coarse is for --method splat; ray tracing controls its error with --tolerance")
     device_memory = parse_device_memory(args)
     lights, window = parse_lights(args), parse_window(args)
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)

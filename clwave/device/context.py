@@ -99,19 +99,24 @@ def _auto_rank(info: DeviceInfo):
 
 def requested_device(request=None) -> str:
     """The effective request string after the environment variables."""
+    return _request(request)[0]
+
+
+def _request(request):
+    """(the effective request, the environment variable it came from or None)."""
     if request is None or str(request).strip().lower() in ("", "auto"):
         for var in ("CLWAVE_DEVICE", "PYOPENCL_CTX"):
             value = os.environ.get(var, "").strip()
             if value:
-                return value
-        return "auto"
-    return str(request).strip()
+                return value, var
+        return "auto", None
+    return str(request).strip(), None
 
 
 def select_device(request=None, devices=None) -> DeviceInfo:
     """Resolve a device request (see module docstring) to one :class:`DeviceInfo`."""
     devices = list_devices() if devices is None else devices
-    req = requested_device(request)
+    req, var = _request(request)
     key = req.lower()
     if key == "auto":
         return min(devices, key=_auto_rank)
@@ -126,7 +131,8 @@ def select_device(request=None, devices=None) -> DeviceInfo:
         matches = [d for d in devices if key in f"{d.platform} {d.name}".lower()]
     if not matches:
         known = "; ".join(f"{d.id} {d.platform} / {d.name} ({d.kind})" for d in devices)
-        raise DeviceNotFoundError(f"no OpenCL device matches {req!r}; available: {known}")
+        given = "" if var is None else f" (the environment variable {var}: change or unset it)"
+        raise DeviceNotFoundError(f"no OpenCL device matches {req!r}{given}; available: {known}")
     return min(matches, key=_auto_rank)
 
 

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, NothingVisibleError
 from ..threads import cores, thread_map
 from .volume import Volume, is_dask
 
@@ -233,17 +233,44 @@ class TransferFunction:
         -------
         Volume
             4 channels, float32, same spacing and origin.
+
+        Raises
+        ------
+        NothingVisibleError
+            (an InputError) where no voxel gets any opacity, most often a
+            window in other units than the volume's (a HU preset on a volume
+            of attenuation): every model and image of it would be blank.  Not
+            checked for a chunked volume, classified only as it is read.
         """
         if not isinstance(vol, Volume):
             raise InputError(f"classify needs a clwave.Volume, got {type(vol).__name__}; "
                              "wrap arrays with clwave.Volume(array, spacing=...)")
-        paint = self._painter(vol.channels, *self._statistics(vol, window))
+        window, scale = self._statistics(vol, window)
+        paint = self._painter(vol.channels, window, scale)
         if vol.chunked:  # each chunk classified when it is read: the values classify gives in memory
             data = vol.data if vol.data.ndim == 4 else vol.data[..., None]
             rgba = data.map_blocks(_classified, paint, False, chunks=data.chunks[:3] + ((4,),), dtype=np.float32)
         else:
             rgba = _classified(vol.data, paint, True)
+            if not rgba[..., 3].any():
+                raise self._nothing_visible(vol, window, scale)
         return Volume(rgba, spacing=vol.spacing, origin=vol.origin)
+
+    def _nothing_visible(self, vol, window, scale) -> NothingVisibleError:
+        """The refusal of a classification without opacity anywhere, naming the function's span and the values it
+        met (a colour volume's luminance); its ``cli`` names ``--tf-window`` (docs/known-gaps.md §15)."""
+        lo, hi = self.data_points(window)[[0, -1]]
+        data = vol.data.reshape(-1, vol.channels)
+        if vol.channels == 1:
+            what, values = "values", data[:, 0]
+        else:
+            what, values = "luminance (0 .. 1)", _luminance(data[:, :3].astype(np.float64) / scale)
+        name = f" {self.name}" if self.name else ""
+        line = (f"the transfer function{name} gives no voxel of this volume any opacity: its points span "
+                f"{lo:.4g} .. {hi:.4g} and the volume's {what} lie within {np.nanmin(values):.4g} .. "
+                f"{np.nanmax(values):.4g}; give a window in the volume's units")
+        return NothingVisibleError(f"{line} (window=(lo, hi)) or another function",
+                                   cli=f"{line} (--tf-window LO,HI) or another preset")
 
     def resolved(self, vol: Volume, window=...) -> "TransferFunction":
         """This function with the window :meth:`classify` would use on ``vol`` made concrete.

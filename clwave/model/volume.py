@@ -64,7 +64,8 @@ class Volume:
         if lazy:  # each chunk is converted and checked when it is read (checked_block)
             arr = (arr if arr.ndim == 3 else arr.rechunk({3: -1})).astype(np.float32).map_blocks(checked_block)
         else:
-            arr = checked_block(np.ascontiguousarray(arr, dtype=np.float32))
+            with np.errstate(over="ignore"):  # a value beyond float32's range becomes inf: checked_block names it
+                arr = checked_block(np.ascontiguousarray(arr, dtype=np.float32))
         self.data = arr
         self.spacing = _triple(spacing, "spacing")
         if min(self.spacing) <= 0:
@@ -146,8 +147,8 @@ def checked_block(block: np.ndarray) -> np.ndarray:
     if not finite.all():
         bad = int(block.size - np.count_nonzero(finite))
         raise InputError(
-            f"volume has {bad} non-finite voxel value(s) (NaN/Inf); replace them first, "
-            "e.g. numpy.nan_to_num(data)")
+            f"volume has {bad} non-finite voxel value(s) (NaN/Inf, or beyond float32's range of +-3.4e38, which "
+            "clwave computes in); replace them first, e.g. numpy.nan_to_num(data), or rescale the values")
     return block
 
 

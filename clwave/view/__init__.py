@@ -53,6 +53,9 @@ def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3, cla
         return model_or_volume
     if isinstance(model_or_volume, np.ndarray):
         model_or_volume = Volume(model_or_volume)
+    if isinstance(model_or_volume, (str, PathLike)):  # a path other than a .clw file's: a volume file
+        raise InputError(f"view() reads a .clw file by its path; read a volume file first (its options, e.g. "
+                         f"spacing= or hu_to_mu=, are load's): clwave.view(clwave.load({str(model_or_volume)!r}))")
     if not isinstance(model_or_volume, Volume):
         raise InputError(f"view() takes a clwave.WaveletVolume, a clwave.Volume, an array or a .clw file, not "
                          f"{type(model_or_volume).__name__}")

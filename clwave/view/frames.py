@@ -35,6 +35,11 @@ WINDOW_SIZE = 128
 WINDOW_COEFFICIENTS = 1 << 18
 
 
+#: a model without coefficients (an all-zero volume) has one
+#: blank final frame a view, and says so
+NO_COEFFICIENTS = "nothing to show: the model has no coefficients (the volume is zero everywhere)"
+
+
 @dataclass(frozen=True)
 class ViewState:
     """What one tab asks to see (checked by :func:`clwave.view.protocol.parse_view`)."""
@@ -163,7 +168,7 @@ class XraySource(Source):
         start = time.perf_counter()
         r, complete = self.r, self.complete  # a swap meanwhile does not change a view under way
         total = r.count
-        limit = max(1, min(total, round(state.detail * total)))
+        limit = min(total, max(1, round(state.detail * total)))  # 0 for a model without coefficients
         window = state.window or self.auto_window
         here = (state.azimuth, state.elevation, state.zoom)
         # a drag frame while moving, and first for a still view the page has no drag frame of (a page's first, a
@@ -185,18 +190,20 @@ class XraySource(Source):
         # never a worse frame than the page shows: the same view again (the whole model swapped in) starts from as
         # many coefficients as its last still frame
         least = pace.still[1] if pace.still[0] == (here, state.detail) else 0
-        while done < limit:
+        while True:  # at least one frame, the last with all of ``limit`` (none: a blank final frame)
             stage = time.perf_counter()
-            count = max(self._still_count(done, limit, pace.drag_count), min(least, limit))
+            count = min(limit, max(done + 1, self._still_count(done, limit, pace.drag_count), least))
             acc.splat(done, count - done)
             image = acc.image()
             done, seconds = count, time.perf_counter() - stage
             busy += seconds
-            if done == limit:
+            if done == limit and limit:
                 self.rate = busy / limit
             pace.still = ((here, state.detail), done)
             yield self._xray_frame(state, r, complete, image, done, window, complete and done == limit, seconds,
                                    start)
+            if done == limit:
+                return
 
     @staticmethod
     def _pace(pace: XrayPace, total, count, seconds):
@@ -229,4 +236,6 @@ class XraySource(Source):
                        # the coefficient energy not yet splatted: the relative L2 error of the model drawn
                        error=float(np.sqrt(max(0.0, 1.0 - captured))), error_kind="relative L2 (coefficients left)",
                        window=list(window), seconds=seconds)
+        if not r.count:  # the page's status line says why the image is blank
+            figures["note"] = NO_COEFFICIENTS
         return self._frame(state, picture, final or not state.moving, figures, start)

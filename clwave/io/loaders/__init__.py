@@ -150,8 +150,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = np.asarray(data)
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
         if hu_to_mu and data.ndim != 3:
-            raise InputError(f"hu_to_mu converts scalar CT volumes, but this one has "
-                             f"{data.shape[3]} channels; leave hu_to_mu off")
+            channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
+            raise InputError(f"hu_to_mu converts {channels}; leave hu_to_mu off",
+                             cli=f"--hu-to-mu converts {channels}; leave --hu-to-mu out")
         convert = partial(to_float32, path=path, mu_water=mu_water if hu_to_mu else None, background=background)
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     return Volume(data,

@@ -14,16 +14,19 @@ from .shared import OnDemand, as_array
 def read_raw(path, shape, dtype, byte_order, chunks, fits=None):
     """Headerless samples, C order (x fastest); the file size must match exactly."""
     if shape is None or dtype is None:
-        raise InputError(f"{path.name}: a .raw file has no header; give shape=(Z, Y, X) or "
-                         "(Z, Y, X, C) and dtype= (e.g. 'uint16')")
+        raise InputError(f"{path.name}: a .raw file has no header; give shape=(Z, Y, X) or (Z, Y, X, C) and dtype= "
+                         "(e.g. 'uint16')", cli=f"{path.name}: a .raw file has no header; give --shape Z,Y,X (or "
+                                                "Z,Y,X,C) and --dtype (e.g. uint16)")
     try:
         shape = tuple(int(n) for n in shape)
         dt = np.dtype(dtype)
     except (TypeError, ValueError):
-        raise InputError(f"bad shape={shape!r} or dtype={dtype!r} for {path.name}; give "
-                         "shape=(Z, Y, X) and a numpy dtype such as 'uint16'") from None
+        raise InputError(f"bad shape={shape!r} or dtype={dtype!r} for {path.name}; give shape=(Z, Y, X) and a numpy "
+                         f"dtype such as 'uint16'", cli=f"bad --dtype {dtype} for {path.name}; give a numpy dtype "
+                                                        f"such as uint16, float32 or >i2") from None
     if len(shape) not in (3, 4) or min(shape) < 1:
-        raise InputError(f"shape={shape} must be (Z, Y, X) or (Z, Y, X, C) with positive sizes")
+        raise InputError(f"shape={shape} must be (Z, Y, X) or (Z, Y, X, C) with positive sizes",
+                         cli=f"--shape {','.join(map(str, shape))} must be Z,Y,X or Z,Y,X,C with positive sizes")
     if byte_order not in (None, "<", ">"):
         raise InputError(f"byte_order={byte_order!r} must be '<' (little endian) or '>' "
                          "(big endian)")
@@ -32,9 +35,10 @@ def read_raw(path, shape, dtype, byte_order, chunks, fits=None):
     expected = int(np.prod(shape)) * dt.itemsize
     actual = os.path.getsize(path)
     if actual != expected:
-        raise FileFormatError(
-            f"{path} has {actual} bytes but shape {shape} of {dt.name} needs {expected} bytes; "
-            "check shape= and dtype=, or the file is truncated")
+        values = " x ".join(map(str, shape))
+        needs = f"{path} has {actual:,} bytes but {values} values of {dt.name} need {expected:,} bytes"
+        raise FileFormatError(f"{needs}; check shape= and dtype=, or the file is truncated",
+                              cli=f"{needs}; check --shape and --dtype, or the file is truncated")
     return as_array(OnDemand(partial(_read_memmap, str(path), dt, shape, 0, "C"), shape, dt), chunks, fits=fits,
                     path=path), None, None
 

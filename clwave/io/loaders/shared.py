@@ -259,7 +259,8 @@ def check_declared_size(path, offset, nbytes, shape, gzip=None):
     """Refuse a header that declares more data than the file holds, before anything is allocated
     (gzip, by default for a ``.gz`` name: its trailer's size of the uncompressed stream, modulo 2^32)."""
     path = Path(path)
-    if gzip if gzip is not None else path.name.lower().endswith(".gz"):
+    gzip = path.name.lower().endswith(".gz") if gzip is None else gzip
+    if gzip:
         with open(path, "rb") as fh:
             fh.seek(-4, os.SEEK_END)
             present = int.from_bytes(fh.read(4), "little")
@@ -268,6 +269,8 @@ def check_declared_size(path, offset, nbytes, shape, gzip=None):
         present = path.stat().st_size
         lies = offset + nbytes > present
     if lies:
+        holds = "its gzip stream holds" if gzip else "the file holds"
+        after = f" after its {offset:,}-byte header" if offset else ""
         raise FileFormatError(f"{path}: its header declares {' x '.join(map(str, shape))} voxels ({nbytes:,} bytes) "
-                              f"but the file holds {max(present - offset, 0):,} after its {offset:,}-byte header; "
-                              "it is truncated or its header is wrong")
+                              f"but {holds} {max(present - offset, 0):,} bytes{after}; it is truncated or its header "
+                              "is wrong")

@@ -227,7 +227,7 @@
       return tr;
     }));
     status.classList.remove("error");
-    status.textContent = f.final ? "refined" : state.moving ? "moving" : f.prefix ? "refined from the file's most " +
+    status.textContent = f.note ? f.note : f.final ? "refined" : state.moving ? "moving" : f.prefix ? "refined from the file's most " +
       "important part; the rest is being read…" : "refining…";
     $("save").disabled = !(f.final && f.mime === "image/png");
   }
