@@ -286,3 +286,22 @@ def test_drr_turns_about_the_volumes_centre_by_default(tmp_path, capsys):
     for name in ("far", "far, given"):
         assert np.abs(images[name] - images["near"]).max() <= 1e-4 * images["near"].max(), name
     assert np.abs(images["far, origin"]).max() == 0  # about the world origin, 700 mm away: nothing on the detector
+
+
+def test_drr_refuses_what_it_would_ignore_or_misname(tmp_path, capsys):
+    """--window on a .npy stack (a .png's grey levels) is refused; a colour volume given without --tf is not told
+    to leave --tf out; --subtract applies to a phantom as to a file (a Shepp-Logan head less 5 is below 0 on the
+    whole, refused naming --hu-to-mu, as the same volume saved as .npy is)."""
+    (tmp_path / "poses.csv").write_text("azimuth\n0\n")
+    base = ["--poses", str(tmp_path / "poses.csv"), "--size", "16", "--levels", "1", "-o", str(tmp_path / "d.npy")]
+    assert main(["drr", "phantom:shepp-logan:16", "--window", "0,1", *base]) == 2
+    assert "--window sets a .png's grey levels" in capsys.readouterr().err
+    np.save(tmp_path / "rgb.npy", np.random.default_rng(0).random((8, 8, 8, 3)).astype(np.float32))
+    assert main(["drr", str(tmp_path / "rgb.npy"), *base]) == 2
+    err = capsys.readouterr().err
+    assert "has 3 channels: give its attenuation as one channel" in err and "--tf" not in err
+    np.save(tmp_path / "sl.npy", clwave.phantom("shepp-logan", 16).data)
+    for source in ("phantom:shepp-logan:16", str(tmp_path / "sl.npy")):
+        assert main(["drr", source, "--subtract", "5", *base]) == 2, source
+        assert "--hu-to-mu" in capsys.readouterr().err
+    assert not (tmp_path / "d.npy").exists()

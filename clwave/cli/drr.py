@@ -49,16 +49,13 @@ def run(args):
     from ..raytrace.tracer import RayTracer
     from ..splat.renderer import SplatRenderer
 
-    if args.method == "splat" and args.tolerance is not None:
-        raise InputError("--tolerance is for --method raytrace; splatting controls its error with --coarse")
-    if args.method == "raytrace" and (args.coarse, args.omega_s) != (None, None):
-        raise InputError("--coarse and --omega-s are for --method splat; ray tracing controls its error with "
-                         "--tolerance")
     if args.signed and args.intensity:
         raise InputError("--signed writes the line integrals of values below 0 as they are; --intensity needs "
                          "attenuation (mu >= 0): leave one out")
     tolerance = 1e-3 if args.tolerance is None else args.tolerance  # its value is checked with every command's
     out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png")))
+    if args.display_window != "auto" and out.suffix.lower() == ".npy":
+        raise InputError("--window sets a .png's grey levels; a .npy holds the values themselves: leave it out")
     window = log_window(parse_window(args)) if args.intensity else parse_window(args)
     H, W = (int(v) for v in (numbers(args.size, "--size", (1, 2), int, "x") * 2)[:2])
     pixel = numbers(args.pixel, "--pixel", (1, 2))
@@ -72,7 +69,9 @@ def run(args):
     device_memory = parse_device_memory(args)
     wv, _ = build_model(args)
     if wv.channels != 1:
-        raise InputError("radiographs need a one-channel (attenuation) volume; do not classify it (--tf)")
+        raise InputError(f"radiographs need a one-channel (attenuation) volume; {args.input} has {wv.channels} "
+                         f"channels" + (" (classified by --tf: leave it out)" if getattr(args, "tf", None) else
+                                        ": give its attenuation as one channel"))
     if centre:
         cameras = poses(**dict(geometry, isocentre=tuple(float(c) for c in wv.origin)))
     if below_zero(wv) and not args.signed:  # refused as render refuses a blank image (docs/coordinates.md §5)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CommandWords, InputError, OutputExistsError
+from ..errors import CommandWords, InputError, OutputExistsError, finite_number
 from ..device.memory import check_fits
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
@@ -181,7 +181,11 @@ def read_volume(args):
         n = int(parts[2]) if len(parts) == 3 else 128
         check_model_fits(args, n ** 3, 1, f"decomposing a {n}^3 phantom", "choose a smaller N")
         vol = phantom(parts[1], n=n)
-        return vol if spacing is None else Volume(vol.data, spacing=spacing)
+        if spacing is None and not args.subtract:
+            return vol
+        subtract = finite_number(args.subtract or 0.0, "--subtract")  # as load(background=) subtracts it
+        data = vol.data - vol.data.dtype.type(subtract)
+        return Volume(data, spacing=vol.spacing if spacing is None else spacing)
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     series = args.series
     if series is not None and series.isdigit():
