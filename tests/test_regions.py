@@ -51,6 +51,11 @@ def test_slab_images_composited_in_ray_order_equal_the_whole_image(model, precis
         assert np.max(np.abs(got - want)) <= tolerance + np.abs(want).max() * 2.0 ** -23  # images are float32
 
 
+def worker_devices(client) -> list:
+    """The device memory each worker process's OpenCL device reports (the one it rendered on)."""
+    return list(client.run(lambda: clwave.ComputeContext.get(None).info.global_mem).values())
+
+
 def test_on_a_local_cluster_of_two_worker_processes(model):
     """clwave.raytrace(scheduler=client): the one-machine image within the tolerance, for every kind of view;
     clwave.splat(scheduler=client): the sum of the workers' shares of the coefficients, the one-machine image
@@ -64,14 +69,15 @@ def test_on_a_local_cluster_of_two_worker_processes(model):
             got = clwave.raytrace(model, cam, tolerance=1e-3, scheduler=client, **kw)
             assert got.meta["workers"] == 2 and len(got.meta["slabs"]) == 2
             assert np.abs(want.image).max() > 0.5 and np.max(np.abs(got.image - want.image)) <= 1e-3
-            # two workers on this machine: each plans for half the device (PoCL's is this machine's memory)
+            # two workers on this machine: each plans for half the device as the workers see it (PoCL's is this
+            # machine's memory, of which it reports a part that changes with what is free when a process starts)
             assert len(got.meta["device_budget"]) == 2
-            assert max(got.meta["device_budget"]) <= 0.6 * want.meta["device_budget"]
+            assert max(got.meta["device_budget"]) <= max(worker_devices(client)) // 2
         for cam, kw in ((clwave.Camera(30, 20, size=40), {}), (clwave.Camera(-70, 10, size=64), dict(coarse=2e-2))):
             want = clwave.splat(model, cam, **kw)
             got = clwave.splat(model, cam, scheduler=client, **kw)
             assert got.meta["workers"] == 2 and got.meta["coefficients"] == want.meta["coefficients"]
-            assert max(got.meta["device_budget"]) <= 0.6 * want.meta["device_budget"]
+            assert max(got.meta["device_budget"]) <= max(worker_devices(client)) // 2
             assert np.max(np.abs(got.image - want.image)) <= 1e-5 * np.abs(want.image).max()
         assert client.status == "running"
 
