@@ -296,6 +296,7 @@ def test_a_model_without_coefficients_has_one_blank_final_frame_a_view():
     for frames in views:
         assert frames[-1][0]["final"] and decode(frames[-1][1]).max() == 0
     assert all(f["note"] == NO_COEFFICIENTS and f["coefficients"] == 0 for frames in views[:2] for f, _ in frames)
+    assert all(f["note"] == NO_COEFFICIENTS for f, _ in views[2])
 
 
 def test_shaded_frames_of_an_rgba_model_refine_in_detail_to_the_ray_traced_view():
@@ -361,6 +362,25 @@ def test_a_scalar_model_is_shaded_through_the_tabs_transfer_function_built_off_t
     expect = clwave.raytrace(wv, clwave.Camera(50.0, 20.0, 32, extent=figures[-1]["extent"]), tolerance=2e-2,
                              transfer_function=tf).to_uint8(background=(0.0, 0.0, 0.0))
     assert expect.std() > 5 and np.abs(decode(frames[-1][1]).astype(int) - expect).max() <= 1
+
+
+def test_a_transfer_function_that_shows_nothing_ends_blank_with_a_note():
+    """A scalar model's shaded view through a window beyond its values (the editor's window moved off the data):
+    the frames end, blank, and the status line says why."""
+    from clwave.view.frames import NOTHING_VISIBLE
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", tf=dict(TF, centre=2.0, width=0.02))))
+            return await asyncio.wait_for(frames_until_final(ws, 1), 60)
+    with view(wv, size=16) as v:
+        frames = run(go(v))
+    assert frames[-1][0]["final"] and decode(frames[-1][1]).max() == 0
+    assert all(f["note"] == NOTHING_VISIBLE for f, _ in frames)
 
 
 def test_a_scalar_model_is_classified_by_the_transfer_function_given_from_the_first_frame(monkeypatch):

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
-from .frames import Frame, Source, ViewState, check_tolerance
+from .frames import NO_COEFFICIENTS, NOTHING_VISIBLE, Frame, Source, ViewState, check_tolerance
 
 #: shaded frames while dragging aim at this many seconds of ray tracing (5 frames a second with the round trip)
 DRAG_SECONDS = 0.12
@@ -202,9 +202,12 @@ class ShadedSource(Source):
 
     def _shaded(self, state, result: RenderResult, final, figures, seconds, start) -> Frame:
         picture = result.to_uint8(background=(state.background,) * 3)
+        # the page's status line says why an image is blank
+        note = NO_COEFFICIENTS if not self.wv.kept else NOTHING_VISIBLE if result.meta.get("nothing_visible") else None
         return self._frame(state, picture, final or not state.moving,
                            dict(figures, final=final, seconds=seconds,
-                                error_kind="relative RMS, estimated from the last step"), start)
+                                error_kind="relative RMS, estimated from the last step",
+                                **({} if note is None else dict(note=note))), start)
 
 
 def _number(x):
