@@ -91,6 +91,17 @@ def test_slope_steps_follow_the_voxels_depth(monkeypatch):
     assert np.abs(clwave.splat(wv, cam).image - exact).max() > 2 * BOUND * exact.max()
 
 
+def test_thick_voxels_beyond_the_texel_cap_are_refused_naming_the_ray_tracer():
+    # seen along slices 10x thicker than their pixels, a 12-degree cone needs 42 x 42 slope nodes (docs/splatting.md
+    # §8 "Thick voxels"): past the device's texels, refused in one line before any footprint is made
+    wv = _model((12, 12, 12), (5.0, 0.5, 0.5), levels=2, seed=11)
+    with pytest.raises(clwave.DeviceMemoryError, match=r"1764 ray slopes .* a narrower cone .*, or ray-trace it "
+                                                       r"\(clwave\.RayTracer\(wv, content_clamp=False\)") as err:
+        clwave.splat(wv, _thick_cone(wv, 0, 90, 12.0))
+    assert "\n" not in str(err.value)
+    assert err.value.cli_message(CommandWords("N", "D", "T")).endswith(", or ray-trace it (T)")
+
+
 def test_thick_box_integrates_to_its_path_length():
     # a box of ones 8 voxels of 4 deep, every coefficient: the spline is 1 on its plateau (a partition of unity
     # across, each B-spline integrating to its spacing along), so a ray through the plateau integrates to

@@ -446,13 +446,17 @@ class ConeTables:
         if cache is not None and key in cache:
             packed = cache[key]
         else:
-            textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
-                                          TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
-                                          quasi=wav.order >= 3, work=work)
-            spare = None  # the nodes' array of the view that leaves the cache, to write over
-            while cache is not None and len(cache) >= FOOTPRINT_CACHE:
-                spare = cache.pop(next(iter(cache)))["nodes"]
-            packed = pack_nodes(g, textures, layer_of, len(layers), count, max_texels, spare)
+            try:
+                textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
+                                              TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
+                                              quasi=wav.order >= 3, work=work)
+                spare = None  # the nodes' array of the view that leaves the cache, to write over
+                while cache is not None and len(cache) >= FOOTPRINT_CACHE:
+                    spare = cache.pop(next(iter(cache)))["nodes"]
+                packed = pack_nodes(g, textures, layer_of, len(layers), count, max_texels, spare)
+            except DeviceMemoryError as err:  # the texel cap: the ray tracer draws any cone, thick voxels' too
+                template = str(err).replace("{", "{{").replace("}", "}}") + ", or ray-trace it ({tracer})"
+                raise DeviceMemoryError(template.format_map(asdict(words)), cli=template, worded=True) from None
             if cache is not None:
                 cache[key] = packed
         if packed["texels"] is None:  # the slope cells on the device, quasi-interpolants along the slope nodes too
