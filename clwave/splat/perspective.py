@@ -6,8 +6,8 @@ detector, at ``X + w`` with ``w = z_c (s - s_c)`` (z_c the centre's depth, s_c i
 no approximation.  Its integral over the basis function is ``sqrt(1 + |s|^2) G_s(w)`` with the sheared
 footprint ``G_s(w) = ∫ B(X + w + t (n - s_u u - s_v v)) dt``, whose spectrum is the slice of the 3-D one
 along ``u + s_u n`` and ``v + s_v n`` (:func:`sheared_footprints`).  G_s depends on s smoothly: it is
-sampled at nodes :data:`SLOPE_STEP` apart covering every pixel's slope, and each pixel interpolates
-between the four around its own.
+sampled at nodes :data:`SLOPE_STEP` apart (closer for voxels deep along the view, :func:`slope_steps`) covering
+every pixel's slope, and each pixel interpolates between the four around its own.
 """
 
 from __future__ import annotations
@@ -51,9 +51,10 @@ CONE_TABLES = ("band_tex", "band_world", "band_step", "tex_box", "tex_layer", "l
                "tex_int", "tex_map", "texels")
 
 
-def slope_grid(views) -> tuple:
-    """``(lo, step, count)``, each (u, v): nodes ``lo + i step``, ``i < count``, at most
-    :data:`SLOPE_STEP` apart, covering the slopes of every pixel centre of ``views`` (two at least)."""
+def slope_grid(views, most=SLOPE_STEP) -> tuple:
+    """``(lo, step, count)``, each (u, v): nodes ``lo + i step``, ``i < count``, at most ``most`` apart (a float or
+    one along u and one along v; :func:`slope_steps`), covering the slopes of every pixel centre of ``views`` (two
+    at least)."""
     ends = []  # the slopes of each view's first and last column and row, as View.slopes makes them: the extremes
     for view in views:
         (H, W), p, sigma = view.size, view.principal, view.slope
@@ -61,9 +62,28 @@ def slope_grid(views) -> tuple:
                               p[1] + (H / 2.0 - np.array([0, H - 1]) - 0.5) * sigma[1]], axis=1))
     s = np.concatenate(ends)
     lo, hi = s.min(axis=0), s.max(axis=0)
-    count = np.maximum(2, np.ceil((hi - lo) / SLOPE_STEP - 1e-9).astype(int) + 1)
-    step = np.where(hi > lo, (hi - lo) / (count - 1), SLOPE_STEP)
+    most = np.broadcast_to(np.asarray(most, float), 2)
+    count = np.maximum(2, np.ceil((hi - lo) / most - 1e-9).astype(int) + 1)
+    step = np.where(hi > lo, (hi - lo) / (count - 1), most)
     return lo, step, count
+
+
+def slope_steps(n, d_xyz, scale) -> tuple:
+    """``(step_u, step_v)``: the slope grid's spacing along u and v for a view along ``n`` of voxels ``d_xyz``
+    (x y z) whose footprints vary on ``scale`` (:func:`texel_scale`) along the texture axes, ``SLOPE_STEP`` times
+    ``c / depth`` where that is below 1, ``depth`` the voxels' spacing along ``n`` (``Σ|n_k| d_k / Σ|n_k|``).  A
+    slope step ``Δ`` moves a ray across a support ``depth`` deep by ``Δ depth`` at its far ends, which the footprint
+    feels on the scale ``c``: the slope interpolation's bound (docs/splatting.md §8 "Error") grows as
+    ``(Δ depth / c)^2``, so these steps keep isotropic voxels' (where ``c = depth``) for any spacing."""
+    n = np.abs(np.asarray(n, float))
+    depth = float(n @ np.asarray(d_xyz, float) / n.sum())
+    return tuple(SLOPE_STEP * min(1.0, c / depth) for c in scale)
+
+
+def grid_nodes(lo, step, count) -> np.ndarray:
+    """(K, 2): the slopes (u, v) of :func:`slope_grid`'s nodes, u fastest."""
+    return np.stack(np.meshgrid(lo[0] + step[0] * np.arange(count[0]), lo[1] + step[1] * np.arange(count[1])),
+                    -1).reshape(-1, 2)
 
 
 def camera_words(camera) -> CommandWords:
@@ -377,12 +397,12 @@ class ConeTables:
         sampling = ("fft" if wav.order >= 3 else "spatial") if sampling == "auto" else sampling
         view0 = layers[0][0]
         d_xyz = np.array(wv.spacing[::-1], float)
-        lo, step, count = slope_grid([view for view, _ in layers])
+        steps = slope_steps(view0.n, d_xyz, texel_scale(view0.u[None], view0.v[None], d_xyz))  # at the view's axis
+        lo, step, count = slope_grid([view for view, _ in layers], steps)
         drawn = [(b.level, b.key) for b in g.bands if any(bands is None or (b.level, b.key) in bands
                                                           for _, bands in layers)]
         check_slope_grid(lo, step, count, len(drawn), words)
-        nodes = np.stack(np.meshgrid(lo[0] + step[0] * np.arange(count[0]), lo[1] + step[1] * np.arange(count[1])),
-                         -1).reshape(-1, 2)
+        nodes = grid_nodes(lo, step, count)
         self.cone = np.zeros((6, 4), np.float32)
         self.cone[0, :3], self.cone[1, :3], self.cone[2, :3], self.cone[3, :3] = view0.eye, view0.n, view0.u, view0.v
         self.cone[4] = (*view0.principal, *lo)
@@ -426,13 +446,17 @@ class ConeTables:
         if cache is not None and key in cache:
             packed = cache[key]
         else:
-            textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
-                                          TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
-                                          quasi=wav.order >= 3, work=work)
-            spare = None  # the nodes' array of the view that leaves the cache, to write over
-            while cache is not None and len(cache) >= FOOTPRINT_CACHE:
-                spare = cache.pop(next(iter(cache)))["nodes"]
-            packed = pack_nodes(g, textures, layer_of, len(layers), count, max_texels, spare)
+            try:
+                textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
+                                              TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
+                                              quasi=wav.order >= 3, work=work)
+                spare = None  # the nodes' array of the view that leaves the cache, to write over
+                while cache is not None and len(cache) >= FOOTPRINT_CACHE:
+                    spare = cache.pop(next(iter(cache)))["nodes"]
+                packed = pack_nodes(g, textures, layer_of, len(layers), count, max_texels, spare)
+            except DeviceMemoryError as err:  # the texel cap: the ray tracer draws any cone, thick voxels' too
+                template = str(err).replace("{", "{{").replace("}", "}}") + ", or ray-trace it ({tracer})"
+                raise DeviceMemoryError(template.format_map(asdict(words)), cli=template, worded=True) from None
             if cache is not None:
                 cache[key] = packed
         if packed["texels"] is None:  # the slope cells on the device, quasi-interpolants along the slope nodes too
