@@ -99,7 +99,8 @@ def test_thick_voxels_beyond_the_texel_cap_are_refused_naming_the_ray_tracer():
                                                        r"\(clwave\.RayTracer\(wv, content_clamp=False\)") as err:
         clwave.splat(wv, _thick_cone(wv, 0, 90, 12.0))
     assert "\n" not in str(err.value)
-    assert err.value.cli_message(CommandWords("N", "D", "T")).endswith(", or ray-trace it (T)")
+    cli = err.value.cli_message(CommandWords("N", "D", "T"))
+    assert cli.endswith("a lower --omega-s, or ray-trace it (T)") and "omega_s" in str(err.value)
 
 
 def test_thick_box_integrates_to_its_path_length():

@@ -456,7 +456,8 @@ class ConeTables:
                 packed = pack_nodes(g, textures, layer_of, len(layers), count, max_texels, spare)
             except DeviceMemoryError as err:  # the texel cap: the ray tracer draws any cone, thick voxels' too
                 template = str(err).replace("{", "{{").replace("}", "}}") + ", or ray-trace it ({tracer})"
-                raise DeviceMemoryError(template.format_map(asdict(words)), cli=template, worded=True) from None
+                raise DeviceMemoryError(template.format_map(asdict(words)), worded=True,
+                                        cli=template.replace("omega_s", "--omega-s")) from None
             if cache is not None:
                 cache[key] = packed
         if packed["texels"] is None:  # the slope cells on the device, quasi-interpolants along the slope nodes too
