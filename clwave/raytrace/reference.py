@@ -4,12 +4,15 @@ The same algorithm, written independently of the kernel: the field comes from
 :meth:`WaveletVolume.evaluate` / :meth:`~WaveletVolume.gradient` (closed-form wavelet
 bases) instead of the device's fine B-spline grids; segments are the knot planes of
 the lattice; alpha's exact Chebyshev series gives ``A``; ``∫ q e^{-A}`` comes from
-recursive adaptive Simpson with two initial panels and the normal's resolution test (docs/raytracing.md §2);
-early termination and the skipping of nearly empty blocks as in the kernel.  Slow (Python per segment): tiny
-volumes and images only.
+adaptive Simpson with two initial panels and the normal's resolution test (docs/raytracing.md §2), a ray's panels of
+one depth at once; early termination and the skipping of nearly empty blocks as in the kernel.  Slow (Python per
+segment for the march): tiny volumes and images only.  :class:`Field` renders another field than the model's, e.g.
+a coarser detail's (docs/raytracing.md §8).
 """
 
 from __future__ import annotations
+
+from typing import Callable, NamedTuple
 
 import numpy as np
 from numpy.polynomial import chebyshev
@@ -22,11 +25,22 @@ from .quadrature import sample_points
 from .tracer import SIMPSON_DEPTH, Phong, RayTracer, light_direction
 
 
+class Field(NamedTuple):
+    """A field for :func:`raytrace_reference` other than the model's."""
+
+    evaluate: Callable  # f(world points (N, 3), derivative): the values (N, C), or world gradients (N, C, 3)
+    box: tuple  # (lo, hi) (x, y, z) in grid-0 fine coordinates: the field is zero outside
+    grad_floor: float  # the render's flat gradients (RayTracer.grad_floor of the field's q_bound)
+    knots: tuple  # where its polynomial pieces meet: planes at + h k (grid-0 fine) on every axis, per (h, at)
+
+
 def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
-                       tracer: RayTracer | None = None) -> np.ndarray:
+                       tracer: RayTracer | None = None, field: Field | None = None) -> np.ndarray:
     """(H, W, 4) float64 image as :func:`clwave.raytrace` computes it, or (H, W, C) line integrals.
 
-    ``tracer`` supplies the clip box, occupancy lattice and emission bound the kernel used.
+    ``tracer`` supplies the clip box, occupancy lattice and emission bound the kernel used.  ``field``: a
+    :class:`Field` other than the model's (a coarser detail's, docs/raytracing.md §8); the tracer's bounds are not
+    its bounds, so nothing is skipped and no ray stops early.
     """
     tr = tracer or RayTracer(wv)
     view = camera.view(wv)
@@ -38,8 +52,9 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
         phong = None
     light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
     gain = (phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0
-    regions = _Regions(tr.block_bound.get(), tr.occ_origin, tr.super_bound_host, tr.super_origin,
-                       tr.coarse_bound(tolerance))
+    regions = None if field else _Regions(tr.block_bound.get(), tr.occ_origin, tr.super_bound_host, tr.super_origin,
+                                          tr.coarse_bound(tolerance))
+    box, lattices = (field.box, field.knots) if field else (tr.box, [(h, 0.0)])
     scale, offset = world_to_fine_affine(orders[0], wv.shape, wv.spacing, wv.origin)
     # the kernel's points (the field is the same polynomial), a hair inside the segment's ends: there a Haar channel
     # takes its value from inside the segment, as the kernel's one piece per segment does (docs/raytracing.md §3)
@@ -49,34 +64,37 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     rays = []
     for r, c in np.ndindex(H, W):
         p, w = _ray(view, r, c)
-        t0, t1 = _clip(p * scale + offset, w * scale, tr.box, view.perspective)
+        t0, t1 = _clip(p * scale + offset, w * scale, box, view.perspective)
         if t1 > t0:
-            knots = _knots(p * scale + offset, w * scale, t0, t1, h)
+            knots = np.unique(np.concatenate([_knots(p * scale + offset, w * scale, t0, t1, *lattice)
+                                              for lattice in lattices]))
             lo, hi = knots[:-1][knots[1:] > knots[:-1]], knots[1:][knots[1:] > knots[:-1]]
             rays.append((r, c, w, p * scale + offset, (lo + hi) / 2, (hi - lo) / 2, t0, t1,
                          p + ((lo + hi)[:, None] / 2 + (hi - lo)[:, None] / 2 * xi).reshape(-1, 1) * w))
     if not rays:
         return out
     points = np.concatenate([ray[-1] for ray in rays])  # one evaluation for every sample of every ray
-    evaluate = _content_field(wv) if tr.field == "bspline" and wv.content_mask is not None else _model_field(wv)
+    evaluate = field.evaluate if field else \
+        _content_field(wv) if tr.field == "bspline" and wv.content_mask is not None else _model_field(wv)
     fields = np.split(evaluate(points, False), np.cumsum([len(ray[-1]) for ray in rays])[:-1])
     grads = np.split(evaluate(points, True)[:, 3, :], len(fields) and np.cumsum([len(f) for f in fields])[:-1]) \
         if phong else [None] * len(rays)
-    for (r, c, w, x0, mid, rad, t0, t1, _), field, grad in zip(rays, fields, grads):
-        field = field.reshape(len(mid), n_samples, -1)
+    floor = field.grad_floor if field else tr.grad_floor()
+    for (r, c, w, x0, mid, rad, t0, t1, _), values, grad in zip(rays, fields, grads):
+        values = values.reshape(len(mid), n_samples, -1)
         grad = None if grad is None else grad.reshape(len(mid), n_samples, 3)
         empty = ~_reached(tr, x0 + mid[:, None] * (w * scale))  # segments no content reaches: empty
-        field[empty] = 0.0
+        values[empty] = 0.0
         if grad is not None:
             grad[empty] = 0.0
-        blocks = _BlockSkip(regions, x0, w * scale, t0, t1, absorption, tolerance, gain)
+        blocks = _BlockSkip(regions, x0, w * scale, t0, t1, absorption, tolerance, gain) if regions else _NoSkip()
         if not absorption:
             keep = [s for s in range(len(mid)) if not blocks.skip(mid[s] - rad[s], mid[s] + rad[s], 1.0)]
-            out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(field[keep], xi)))
+            out[r, c] = np.einsum("s,sc->c", rad[keep], _integral(_fit(values[keep], xi)))
             continue
-        field[..., 3] = np.maximum(field[..., 3], 0.0)  # alpha clamped at the samples, q where it is used
-        out[r, c] = _emission_absorption(field, grad, xi, mid, rad, t1 - t0, tolerance, gain,
-                                         phong, light_dirs, w, blocks, tr.grad_floor())
+        values[..., 3] = np.maximum(values[..., 3], 0.0)  # alpha clamped at the samples, q where it is used
+        out[r, c] = _emission_absorption(values, grad, xi, mid, rad, t1 - t0, tolerance, gain,
+                                         phong, light_dirs, w, blocks, floor)
     return out
 
 
@@ -142,6 +160,16 @@ class _BlockSkip:
         return max(self.total - self.consumed, 0.0) + self.slack
 
 
+class _NoSkip:
+    """No bounds: nothing skipped, no ray stopped early."""
+
+    def skip(self, a, b, T) -> bool:
+        return False
+
+    def passed(self, a, b) -> float:
+        return np.inf
+
+
 def _model_field(wv):
     """The field from the closed-form wavelet bases: ``f(points, derivative)``."""
     return lambda points, derivative: wv.gradient(points) if derivative else wv.evaluate(points)
@@ -161,12 +189,20 @@ def _content_field(wv, level=0):
                                                          if b.key == "aaa" or b.level > level]))
             if wv.content_mask is not None:
                 coeffs = coeffs * occupancy(wv.content_mask, g.wavelet, level, start, coeffs.shape[:3])[..., None]
-        parts.append((g, coeffs, 2.0 ** level * np.array(start, float)))
+        parts.append((g, coeffs, start))
+    return spline_field(wv, parts, level)
 
+
+def spline_field(wv, parts, level=0):
+    """The field of B-spline coefficients on the level-``level`` lattice, in closed form: ``parts`` holds per group
+    ``(group, coefficients (Z, Y, X, channels), start)``, coefficient k's B-spline on that lattice's cells
+    ``start + k ..`` (the lattice of :func:`clwave.model.transform.synthesize`).  Returns ``f(points, derivative)``:
+    at world points (N, 3), the values (N, C), or the world gradients (N, C, 3) (x, y, z)."""
     def field(points, derivative):
         out = np.zeros((len(points), wv.channels, 3) if derivative else (len(points), wv.channels))
         for g, coeffs, start in parts:
-            fine = world_to_fine(points, g.wavelet.order, wv.shape, wv.spacing, wv.origin) - start
+            fine = world_to_fine(points, g.wavelet.order, wv.shape, wv.spacing, wv.origin) - 2.0 ** level * np.array(
+                start, float)
             value = band_sum(g.wavelet, Band(level, "aaa", coeffs.shape[:3], 0), coeffs, fine, derivative)
             out[:, list(g.channels)] = value[..., ::-1] / np.asarray(wv.spacing)[::-1] if derivative else value
         return out
@@ -206,12 +242,13 @@ def _clip(x0, d, box, perspective):
     return t0, t1
 
 
-def _knots(x0, d, t0, t1, h):
+def _knots(x0, d, t0, t1, h, at=0.0):
+    """The ray parameters in [t0, t1] of the ray x0 + t d where it meets the planes at + h k, and t0, t1."""
     ts = [np.array([t0, t1])]
     for a in range(3):
         if d[a] != 0:
-            ends = sorted([(x0[a] + t0 * d[a]) / h, (x0[a] + t1 * d[a]) / h])
-            planes = np.arange(np.floor(ends[0]), np.ceil(ends[1]) + 1) * h
+            ends = sorted([(x0[a] + t0 * d[a] - at) / h, (x0[a] + t1 * d[a] - at) / h])
+            planes = np.arange(np.floor(ends[0]), np.ceil(ends[1]) + 1) * h + at
             t = (planes - x0[a]) / d[a]
             ts.append(t[(t > t0) & (t < t1)])
     return np.unique(np.concatenate(ts))
@@ -230,51 +267,64 @@ def _integral(series):
     return np.einsum("smc,m->sc", series, weights)
 
 
-def _emission_absorption(field, grad, xi, mid, rad, total, tol, gain, phong, lights, w, blocks, floor):
-    series = _fit(field, xi)
-    grad_series = _fit(grad, xi) if grad is not None else None
+def _emission_absorption(values, grad, xi, mid, rad, total, tol, gain, phong, lights, w, blocks, floor):
+    """One ray's colour and opacity from its segments' samples (values: alpha clamped; grad: alpha's gradient)."""
+    series = _fit(values, xi)  # (S, n, 4)
+    n = series.shape[1]
+    A = chebyshev.chebint(series[..., 3], lbnd=-1, axis=1)  # (S, n + 1): alpha's antiderivative, 0 at xi = -1
+    # the field's, the gradient's and the optical depth's series, summed at once where Simpson needs them
+    stacked = np.zeros((len(rad), n + 1, 8))
+    stacked[:, :n, :4], stacked[:, :, 7] = series, A
+    if grad is not None:
+        stacked[:, :n, 4:7] = _fit(grad, xi)
     T, color = 1.0, np.zeros(3)
     shade_budget = tol * 3 / 8  # when shading: three quarters of the quadrature's half
     quadrature_share = tol / 8 if phong is not None else tol / 2
-    quarters = -1.0 + np.arange(9) / 4.0
+    if phong is not None:  # the midpoint of the shading range, when its error fits the shading budget
+        u = _at(stacked, -1.0 + np.arange(9) / 4.0)  # (S, 9, 8) at the quarter points
+        unshaded = np.maximum(u[..., :4], 0.0) * np.exp(-rad[:, None, None] * u[..., 7:])  # q_RGB, alpha
+        s4 = (unshaded[:, 0] + 4 * unshaded[:, 1:8:2].sum(1) + 2 * unshaded[:, 2:8:2].sum(1) + unshaded[:, 8]) / 12
+        s2 = (unshaded[:, 0] + 4 * unshaded[:, 2] + 2 * unshaded[:, 4] + 4 * unshaded[:, 6] + unshaded[:, 8]) / 6
+        ds, nl = np.abs(s4 - s2), len(lights)
+        diffuse_mid, specular_mid = phong.ambient + phong.diffuse * nl / 2, phong.specular * nl / 2
+        err = (phong.diffuse * nl / 2 * (s4[:, :3] + ds[:, :3]) + specular_mid * (s4[:, 3:] + ds[:, 3:])
+               + diffuse_mid * ds[:, :3] + specular_mid * ds[:, 3:]).max(axis=1)
+        midpoint = diffuse_mid * s4[:, :3] + specular_mid * s4[:, 3:]
+    whole = []  # the segments Simpson integrates: (segment, T radius, tolerance per unit of xi)
     for s in range(len(rad)):
         if blocks.skip(mid[s] - rad[s], mid[s] + rad[s], T):
             continue
-        A = chebyshev.chebint(series[s, :, 3], lbnd=-1)
-        if phong is not None:  # the midpoint of the shading range, when its error fits the shading budget
-            unshaded = np.maximum(chebyshev.chebval(quarters, series[s]).T, 0.0) \
-                * np.exp(-rad[s] * chebyshev.chebval(quarters, A))[:, None]  # (9, 4): q_RGB, alpha
-            s4 = (unshaded[0] + 4 * unshaded[1:8:2].sum(0) + 2 * unshaded[2:8:2].sum(0) + unshaded[8]) / 12
-            s2 = (unshaded[0] + 4 * unshaded[2] + 2 * unshaded[4] + 4 * unshaded[6] + unshaded[8]) / 6
-            ds, n = np.abs(s4 - s2), len(lights)
-            diffuse_mid, specular_mid = phong.ambient + phong.diffuse * n / 2, phong.specular * n / 2
-            err = (phong.diffuse * n / 2 * (s4[:3] + ds[:3]) + specular_mid * (s4[3] + ds[3])
-                   + diffuse_mid * ds[:3] + specular_mid * ds[3])
-            cost = T * rad[s] * err.max()
-            if cost <= shade_budget:
-                shade_budget -= cost
-                color += T * rad[s] * (diffuse_mid * s4[:3] + specular_mid * s4[3])
-                T, done = _passed(T, rad[s], A, blocks, mid[s], gain, tol)
-                if done:
-                    break
-                continue
-
-        def integrand(x, s=s, A=A):
-            f = chebyshev.chebval(x, series[s])
-            q = np.maximum(f[:3], 0.0)
-            if phong is not None:
-                q = _shade(q, max(f[3], 0.0), chebyshev.chebval(x, grad_series[s]), phong, lights, w, floor)
-            return q * np.exp(-rad[s] * chebyshev.chebval(x, A))
-
-        def turns(a, b, s=s):
-            return phong is not None and _normal_turns(chebyshev.chebval(np.linspace(a, b, 5), grad_series[s]).T, floor)
-
-        seg_tol = quadrature_share * (2 * rad[s]) / total / T
-        color += T * rad[s] * _simpson(integrand, seg_tol / rad[s], turns)
-        T, done = _passed(T, rad[s], A, blocks, mid[s], gain, tol)
+        if phong is not None and T * rad[s] * err[s] <= shade_budget:
+            shade_budget -= T * rad[s] * err[s]
+            color += T * rad[s] * midpoint[s]
+        elif series[s].any():  # (where the field is zero, so is the integrand)
+            whole.append((s, T * rad[s], quadrature_share * 2 / total / T))
+        T, done = _passed(T, rad[s], A[s], blocks, mid[s], gain, tol)
         if done:
             break
+    if whole:
+        segments, weight, seg_tol = (np.array(v) for v in zip(*whole))
+
+        def integrand(k, x):
+            """q e^{-A} (len(k), 3) of segment k[i] at x[i]."""
+            f = _at(stacked[k], x[:, None])[:, 0]
+            q = np.maximum(f[:, :3], 0.0)
+            if phong is not None:
+                q = _shade(q, np.maximum(f[:, 3], 0.0), f[:, 4:7], phong, lights, w, floor)
+            return q * np.exp(-rad[k] * f[:, 7])[:, None]
+
+        def turns(k, a, b):
+            if phong is None:
+                return np.zeros(len(k), bool)
+            return _normal_turns(_at(stacked[k], np.linspace(a, b, 5, axis=1))[..., 4:7], floor)
+
+        color += weight @ _simpson(integrand, seg_tol, turns, segments)
     return np.append(color, 1.0 - T)
+
+
+def _at(series, x):
+    """Chebyshev series (..., m, C) at points x (P,), or per series (..., P): (..., P, C)."""
+    return np.einsum("...pm,...mc->...pc", chebyshev.chebvander(x, series.shape[-2] - 1), series)
 
 
 def _passed(T, rad, A, blocks, mid, gain, tol):
@@ -285,47 +335,57 @@ def _passed(T, rad, A, blocks, mid, gain, tol):
 
 
 def _shade(q, alpha, grad, phong, lights, w, floor):
-    """Phong's eq. 4 with the outward normal -grad/|grad| (world gradient of alpha); unlit at |grad| <= floor."""
-    length = np.linalg.norm(grad)
-    diffuse = specular = 0.0
-    if length > floor:
-        n = -grad / length
-        for light in lights:
-            halfway = (light - w) / np.linalg.norm(light - w)
-            diffuse += max(n @ light, 0.0)
-            specular += max(n @ halfway, 0.0) ** phong.shininess
-    return q * (phong.ambient + phong.diffuse * diffuse) + phong.specular * alpha * specular
+    """Phong's eq. 4 with the outward normal -grad/|grad| (world gradient of alpha); unlit at |grad| <= floor.
+    At one point or several: q (..., 3), alpha (...), grad (..., 3)."""
+    length = np.linalg.norm(grad, axis=-1)
+    lit = length > floor
+    n = -grad / np.where(lit, length, 1.0)[..., None]
+    diffuse = specular = np.zeros_like(length)
+    for light in lights:
+        halfway = (light - w) / np.linalg.norm(light - w)
+        diffuse = diffuse + np.where(lit, np.maximum(n @ light, 0.0), 0.0)
+        specular = specular + np.where(lit, np.maximum(n @ halfway, 0.0) ** phong.shininess, 0.0)
+    return q * (phong.ambient + phong.diffuse * diffuse)[..., None] + phong.specular * (alpha * specular)[..., None]
 
 
 NORMAL_CHORD = 0.125  # the kernel's (cl/raytrace/quadrature.h)
 
 
-def _normal_turns(grads, floor) -> bool:
+def _normal_turns(grads, floor) -> np.ndarray:
     """Whether the normal -grad/|grad| moves by more than NORMAL_CHORD between neighbouring rows of ``grads``
-    (world gradients at a panel's points) where neither is flat (docs/raytracing.md §2)."""
-    length = np.linalg.norm(grads, axis=1)
-    normals = grads / np.maximum(length, np.finfo(float).tiny)[:, None]
-    chords = np.linalg.norm(np.diff(normals, axis=0), axis=1)
-    return bool(np.any((np.minimum(length[:-1], length[1:]) > floor) & (chords > NORMAL_CHORD)))
+    (..., P, 3) (world gradients at a panel's points) where neither is flat (docs/raytracing.md §2): (...) bool."""
+    length = np.linalg.norm(grads, axis=-1)
+    normals = grads / np.maximum(length, np.finfo(float).tiny)[..., None]
+    chords = np.linalg.norm(np.diff(normals, axis=-2), axis=-1)
+    return np.any((np.minimum(length[..., :-1], length[..., 1:]) > floor) & (chords > NORMAL_CHORD), axis=-1)
 
 
-def _simpson(f, tol, turns):
-    """∫_{-1}^{1} f by recursive adaptive Simpson from the panels [-1, 0] and [0, 1]; a panel across which the
-    normal ``turns(a, b)`` counts at least its width times its largest value as its error."""
-    def panel(a, b, fa, fm, fb, tol, depth):
+def _simpson(f, tol, turns, segments):
+    """∫_{-1}^{1} of the integrands of ``segments`` (k,) by adaptive Simpson from the panels [-1, 0] and [0, 1],
+    each to its tolerance ``tol`` (k,): (k, 3).  ``f(segments, x)`` is the integrand of segments[i] at x[i];
+    ``turns(segments, a, b)`` whether the normal turns across panel [a[i], b[i]] of segments[i], where a panel counts
+    at least its width times its largest value as its error.  The panels of one depth are taken at once."""
+    k = np.arange(len(segments))
+    f5 = f(np.repeat(segments, 5), np.tile([-1.0, -0.5, 0.0, 0.5, 1.0], len(k))).reshape(len(k), 5, -1)
+    which, a, b = np.repeat(k, 2), np.tile([-1.0, 0.0], len(k)), np.tile([0.0, 1.0], len(k))
+    fa, fm, fb = (f5[:, [i, i + 2]].reshape(2 * len(k), -1) for i in (0, 1, 2))  # panels' ends and midpoints
+    tol, total, depth = np.repeat(tol / 2, 2), np.zeros((len(k), f5.shape[2])), 1
+    while len(which):
         m = (a + b) / 2
-        flm, fmr = f((a + m) / 2), f((m + b) / 2)
-        s1 = (b - a) / 6 * (fa + 4 * fm + fb)
-        s2 = (b - a) / 12 * (fa + 4 * flm + 2 * fm + 4 * fmr + fb)
-        err = np.max(np.abs(s2 - s1))
-        if turns(a, b):
-            err = max(err, (b - a) * np.max(np.abs([fa, flm, fm, fmr, fb])))
-        if err <= 15 * tol or depth >= SIMPSON_DEPTH:
-            return s2 + (s2 - s1) / 15
-        return panel(a, m, fa, flm, fm, tol / 2, depth + 1) + panel(m, b, fm, fmr, fb, tol / 2, depth + 1)
-
-    f0, f1, f2, f3, f4 = (f(x) for x in (-1.0, -0.5, 0.0, 0.5, 1.0))
-    return panel(-1.0, 0.0, f0, f1, f2, tol / 2, 1) + panel(0.0, 1.0, f2, f3, f4, tol / 2, 1)
+        flm, fmr = np.split(f(np.tile(segments[which], 2), np.concatenate([(a + m) / 2, (m + b) / 2])), 2)
+        s1 = (b - a)[:, None] / 6 * (fa + 4 * fm + fb)
+        s2 = (b - a)[:, None] / 12 * (fa + 4 * flm + 2 * fm + 4 * fmr + fb)
+        err = np.abs(s2 - s1).max(axis=1)
+        big = (b - a) * np.abs(np.stack([fa, flm, fm, fmr, fb])).max(axis=(0, 2))
+        err = np.where(turns(segments[which], a, b), np.maximum(err, big), err)
+        done = (err <= 15 * tol) | (depth >= SIMPSON_DEPTH)
+        np.add.at(total, which[done], (s2 + (s2 - s1) / 15)[done])
+        go = ~done  # the rest halve: left halves, then right halves
+        which, tol = np.tile(which[go], 2), np.tile(tol[go] / 2, 2)
+        a, b = np.concatenate([a[go], m[go]]), np.concatenate([m[go], b[go]])
+        fa, fm, fb = (np.concatenate(pair) for pair in ((fa[go], fm[go]), (flm[go], fmr[go]), (fm[go], fb[go])))
+        depth += 1
+    return total
 
 
 def classified_reference(wv, camera, transfer_function, lights=None, shading=True,
