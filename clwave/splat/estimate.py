@@ -26,7 +26,7 @@ GRID = 64  # cells per side, at most, of the estimate's maps (an image larger th
 #            docs/splatting.md §5 has the rates at 64 and 256)
 CHUNK = 1 << 18  # coefficients placed at once
 DETAIL_WIDTH = 0.5  # the standard deviation of a level-m detail footprint's square, in 2^m voxels along u or v
-DIFFERENCE = 0.05  # the step of the footprints' central differences in the log of magnification and in the slopes
+DIFFERENCE = 0.05  # the step of the footprints' differences in the log of magnification and in the slopes
 SIGNED_SHARE = 0.25  # a detail band is drawn signed where the cells resolve at least this share of its energy (the
 #                      rest of its energy as a density; below it, all of it: a band's signed map costs an FFT a frame)
 
@@ -168,8 +168,8 @@ class SplatEstimate:
             kernels.append(kernel())
             if self.view.perspective:  # its derivatives in the log of the magnification and in the ray's slopes
                 h = DIFFERENCE
-                kernels += [(kernel(w=width * np.exp(h)) - kernel(w=width * np.exp(-h))) / (2 * h),
-                            (kernel(su=h) - kernel(su=-h)) / (2 * h), (kernel(sv=h) - kernel(sv=-h)) / (2 * h)]
+                kernels += [(kernel(w=width * np.exp(h)) - kernels[-1]) / h, (kernel(su=h) - kernels[-1]) / h,
+                            (kernel(sv=h) - kernels[-1]) / h]
         gr["kernels"] = np.array(kernels).reshape(len(kernels), rows, cols // 2 + 1)
         per_voxel = self.reach / width
         ones = np.ones((rows, cols // 2 + 1))
