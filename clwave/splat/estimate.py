@@ -77,15 +77,16 @@ class SplatEstimate:
     """The error of each splatting frame against the final image, from the coefficients still to splat
     (docs/splatting.md §5).
 
-    The rest's image is predicted as ``S + D``: ``S`` the approximation band's footprints and the resolved part of
-    each detail band's, drawn signed on the cells (each band's rest convolved with its projected footprint); ``D``
-    the detail bands' unresolved part as an energy density ``V`` per channel (each footprint's energy,
-    :func:`band_energies`, times the share beyond the cells' band limit, times the coefficient's value in that
-    channel squared, spread as a Gaussian of :data:`DETAIL_WIDTH` ``2^m`` voxels).  The relative RMS is
+    The rest's image is predicted as ``S + D``: ``S`` drawn signed on the cells, each band's rest convolved with its
+    projected footprint as far as the cells resolve it (the approximation always, a detail band where they resolve
+    :data:`SIGNED_SHARE` of its energy); ``D`` the rest of the energy as a density ``V`` per channel (each
+    footprint's energy, :func:`band_energies`, beyond the cells' band limit or whole, times the coefficient's value
+    in that channel squared, spread as a Gaussian of :data:`DETAIL_WIDTH` ``2^m`` voxels).  The relative RMS is
     ``sqrt(mean(S^2 + V))`` and the relative maximum ``max(|S| + CREST sqrt(V))`` (a field of many oscillating
     footprints peaks near three of its local RMS), both over the largest magnitude of ``frame + S``, the final image
     as predicted; times margins (docs/splatting.md §5 has their measured rates).  A perspective view magnifies each
-    coefficient by its depth (its energy; its signed footprint is drawn at the mean magnification).
+    coefficient by its depth: its energy so, its signed footprint to first order in the log of that magnification
+    and in its ray's slopes.
     """
 
     RMS_MARGIN, MAX_MARGIN, CREST = 2.0, 1.7, 3.0
@@ -141,35 +142,25 @@ class SplatEstimate:
             self._deposit(gr, 0, gr["count"], +1.0)
 
     def _filters(self, gr, spacing, shape):
-        """A group's signed bands (each band code's layer, -1 where none) with their footprints' spectra on the
-        cells, and each detail band's energy beyond the cells' band limit; the energy density's Gaussians."""
+        """A group's signed bands (each band code's first layer, -1 where none) with their footprints' spectra on
+        the cells, and the density's energy of each band with its Gaussians."""
         rows, cols = shape
-        # the bilinear deposit's own transform, a tent of one cell each way, divided out of the footprints
-        tent = (np.sinc(np.fft.fftfreq(rows))[:, None] * np.sinc(np.fft.rfftfreq(cols))[None, :]) ** 2
         width = self.scale * self.cell  # world units per cell
         share = resolved_shares(gr["wavelet"], spacing, self.view, np.pi / width)
         present = np.unique(gr["band"])
         signed = [int(b) for b in present if b % 8 == 0 or share[b] >= SIGNED_SHARE]
         gr["layer"] = np.full(8 * MAX_LEVELS, -1)
         gr["layer"][signed] = np.arange(len(signed)) * (4 if self.view.perspective else 1)
-        gr["energy"] = gr["energy"] * np.where(gr["layer"] >= 0, 1.0 - share, 1.0)
-        gr["energy"][::8] = 0.0  # the approximation is drawn signed whole
-        kernels = []
+        # the density's energies: a signed band's beyond the cells' band limit, all of an unsigned one's
+        gr["density"] = gr["energy"] * np.where(gr["layer"] >= 0, 1.0 - share, 1.0)
+        kernels, d_xyz, h = [], spacing_xyz(spacing), DIFFERENCE
         for b in signed:
-            key = "".join("ad"[b % 8 >> s & 1] for s in (2, 1, 0))
-
-            def kernel(w=width, su=0.0, sv=0.0):  # the band's footprint on cells of world width w along rays of
-                # slopes (su, sv), over the deposit's tent
-                n = self.view.n
-                texture = fft_texture(gr["wavelet"], key, b // 8, spacing_xyz(spacing), self.view.u + su * n,
-                                      self.view.v + sv * n, cols, rows, cols * w, rows * w)
-                return np.fft.rfft2(np.roll(texture[::-1], 1, axis=0)) / tent  # rows run along -v
-
-            kernels.append(kernel())
+            base = _footprint(gr["wavelet"], b, d_xyz, self.view, shape, width)
+            kernels.append(base)
             if self.view.perspective:  # its derivatives in the log of the magnification and in the ray's slopes
-                h = DIFFERENCE
-                kernels += [(kernel(w=width * np.exp(h)) - kernels[-1]) / h, (kernel(su=h) - kernels[-1]) / h,
-                            (kernel(sv=h) - kernels[-1]) / h]
+                kernels += [(_footprint(gr["wavelet"], b, d_xyz, self.view, shape, width * np.exp(h)) - base) / h,
+                            (_footprint(gr["wavelet"], b, d_xyz, self.view, shape, width, (h, 0.0)) - base) / h,
+                            (_footprint(gr["wavelet"], b, d_xyz, self.view, shape, width, (0.0, h)) - base) / h]
         gr["kernels"] = np.array(kernels).reshape(len(kernels), rows, cols // 2 + 1)
         per_voxel = self.reach / width
         ones = np.ones((rows, cols // 2 + 1))
@@ -213,7 +204,7 @@ class SplatEstimate:
                                                            px[signed])):
                     _bilinear(gr["signed"], layer[signed] + 1 + i, row[signed], col[signed],
                               sign * values[signed] * term[:, None])
-            energy = gr["energy"][band] / px ** 2  # in pixels: each pixel's energy
+            energy = gr["density"][band] / px ** 2  # in pixels: each pixel's energy
             spread = energy > 0  # each channel's own energy: their details differ
             _bilinear(gr["detail"], band[spread] // 8, row[spread], col[spread],
                       sign * energy[spread, None] * values[spread] ** 2)
@@ -264,6 +255,18 @@ def _bilinear(stacks, layer, row, col, weights):
     flat = ((np.tile(np.broadcast_to(layer, r0.shape), 4) * rows + r) * cols + c)[ok]
     for stack, weight in zip(stacks, weights.T):
         stack += np.bincount(flat, (share * np.tile(weight, 4))[ok], minlength=stack.size).reshape(stack.shape)
+
+
+def _footprint(wavelet, band, d_xyz, view, shape, width, slopes=(0.0, 0.0)) -> np.ndarray:
+    """The real FFT of band code ``band``'s footprint on a grid of ``shape`` cells of world width ``width``, along
+    rays of ``slopes`` (s_u, s_v) (a cone beam's, :mod:`clwave.splat.perspective`), over the bilinear deposit's own
+    transform (a tent of one cell each way)."""
+    rows, cols = shape
+    key = "".join("ad"[band % 8 >> s & 1] for s in (2, 1, 0))
+    texture = fft_texture(wavelet, key, band // 8, d_xyz, view.u + slopes[0] * view.n, view.v + slopes[1] * view.n,
+                          cols, rows, cols * width, rows * width)
+    tent = (np.sinc(np.fft.fftfreq(rows))[:, None] * np.sinc(np.fft.rfftfreq(cols))[None, :]) ** 2
+    return np.fft.rfft2(np.roll(texture[::-1], 1, axis=0)) / tent  # rows run along -v
 
 
 def _filtered(grids, filters) -> np.ndarray:
