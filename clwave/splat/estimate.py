@@ -84,9 +84,9 @@ class SplatEstimate:
     in that channel squared, spread as a Gaussian of :data:`DETAIL_WIDTH` ``2^m`` voxels).  The relative RMS is
     ``sqrt(mean(S^2 + V))`` and the relative maximum ``max(|S| + CREST sqrt(V))`` (a field of many oscillating
     footprints peaks near three of its local RMS), both over the largest magnitude of ``frame + S``, the final image
-    as predicted; times margins (docs/splatting.md §5 has their measured rates).  A perspective view magnifies each
-    coefficient by its depth: its energy so, its signed footprint to first order in the log of that magnification
-    and in its ray's slopes.
+    as predicted at the cells (the frame's mean over each); times margins (docs/splatting.md §5 has their measured
+    rates).  A perspective view magnifies each coefficient by its depth: its energy so, its signed footprint to
+    first order in the log of that magnification and in its ray's slopes.
     """
 
     RMS_MARGIN, MAX_MARGIN, CREST = 2.0, 1.7, 3.0
@@ -215,11 +215,19 @@ class SplatEstimate:
             self._deposit(gr, min(self.done, gr["count"]), min(done, gr["count"]), -1.0)
         self.done = done
         signed, variance = self.maps()
-        whole = np.repeat(np.repeat(signed, self.cell, 0), self.cell, 1)[: image.shape[0], : image.shape[1]]
-        peak = max(float(np.max(np.abs(image + whole), initial=0.0)), np.finfo(np.float32).tiny)
+        # the final image as predicted, at the cells: at the pixels, the frame's own fine overshoot, which the rest's
+        # unresolved details take back, stayed in its peak (docs/splatting.md §5)
+        peak = max(float(np.max(np.abs(self._cell_means(image) + signed), initial=0.0)), np.finfo(np.float32).tiny)
         rms = np.sqrt(np.mean(signed ** 2 + variance))
         top = float(np.max(np.abs(signed) + self.CREST * np.sqrt(variance), initial=0.0))
         return self.RMS_MARGIN * float(rms) / peak, self.MAX_MARGIN * top / peak
+
+    def _cell_means(self, image) -> np.ndarray:
+        """The image's mean over each cell (those of the last row and column cut short where the image ends)."""
+        starts = [np.arange(0, side, self.cell) for side in image.shape[:2]]
+        sums = np.add.reduceat(np.add.reduceat(image, starts[0], axis=0), starts[1], axis=1)
+        counts = np.multiply.outer(*(np.diff(np.append(s, side)) for s, side in zip(starts, image.shape[:2])))
+        return sums / counts[..., None]
 
     def maps(self) -> tuple:
         """The rest's image as drawn signed and its energy density, per pixel at each cell (rows, cols, channels)."""
