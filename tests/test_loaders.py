@@ -400,6 +400,19 @@ def test_dicom_positions_rounded_in_the_file_still_load(tmp_path, rng):
     assert load(tmp_path).spacing[0] == pytest.approx(0.625, abs=0.01)
 
 
+@pytest.mark.parametrize("decimals, pixel, gap", [(1, 0.5, 1.0), (1, 0.9, 3.0), (2, 0.15, 0.5)])
+def test_a_double_oblique_series_rounded_in_the_file_loads(tmp_path, rng, decimals, pixel, gap):
+    """Its normal 20 degrees off z, positions written to a decimal or two: their rounding scatters about a straight,
+    even stack (as far as a tenth of a pixel sideways, of a slice along the normal) and is no tilt or gap; the
+    fitted drift and grid are what the checks weigh."""
+    t = np.radians(20)
+    row, col = np.array([1.0, 0.0, 0.0]), np.array([0.0, np.cos(t), np.sin(t)])
+    positions = [np.round(np.array([-100.0, 37.3, 12.1]) + gap * k * np.cross(row, col), decimals) for k in range(40)]
+    write_series(tmp_path, rng, positions, generate_uid(), [f"s{k:02d}" for k in range(40)], orientation=(*row, *col),
+                 pixel_spacing=(pixel, pixel))
+    assert load(tmp_path).spacing == pytest.approx((gap, pixel, pixel), rel=1e-3)
+
+
 @pytest.mark.parametrize("z, needle", [
     ((0.0, 1.0, 2.0, 3.0, 5.0, 6.0, 7.0), "slices at 3 and 5 mm along the normal are 2 mm apart where the median "
                                           "gap is 1 mm"),  # one slice missing

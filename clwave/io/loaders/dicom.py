@@ -63,21 +63,26 @@ def _check_straight(where, positions, distance, normal, pixel):
     """Refuse slices (sorted along ``normal``) whose positions shift sideways: a gantry tilt, which a
     straight stack of them would misplace (each slice the further, the further it is from the first)."""
     sideways = positions - np.outer(distance, normal)
-    drift = np.linalg.norm(sideways - sideways[0], axis=1)
-    if drift.max() > STRAY_PIXELS * pixel:
-        span = distance[-1] - distance[0]
+    # a tilt is a drift linear along the normal; the positions' rounding in the files scatters about it
+    t = distance - distance.mean()
+    slope = t @ (sideways - sideways.mean(axis=0)) / max(float(t @ t), 1e-30)
+    span = distance[-1] - distance[0]
+    shift = float(np.linalg.norm(slope)) * span
+    scatter = np.sqrt(np.mean((sideways - sideways.mean(axis=0) - np.outer(t, slope)) ** 2) * 3)
+    if shift > STRAY_PIXELS * pixel and shift > 4 * scatter:
         raise FileFormatError(
-            f"{where} is tilted: its slices shift {drift.max():.4g} mm sideways over {span:.4g} mm along their "
-            f"normal (a gantry tilt of {np.degrees(np.arctan2(drift.max(), span)):.3g} degrees), and clwave stacks "
+            f"{where} is tilted: its slices shift {shift:.4g} mm sideways over {span:.4g} mm along their "
+            f"normal (a gantry tilt of {np.degrees(np.arctan2(shift, span)):.3g} degrees), and clwave stacks "
             "slices straight; resample the series onto a straight grid first, e.g. with dcm2niix (it corrects "
             "gantry tilt) or 3D Slicer")
 
 
 def _even_spacing(where, distance) -> float:
     """The slice gap of slices at ``distance`` (sorted) along the normal, refused unless every slice lies
-    within :data:`STRAY_SLICES` of a gap of the evenly spaced grid from the first to the last."""
-    dz = (distance[-1] - distance[0]) / (len(distance) - 1)
-    stray = np.abs(distance - distance[0] - dz * np.arange(len(distance))).max() / dz
+    within :data:`STRAY_SLICES` of a gap of the evenly spaced grid fitted to them (least squares)."""
+    k = np.arange(len(distance)) - (len(distance) - 1) / 2  # the grid fitted, the files' rounding about it
+    dz = float(k @ (distance - distance.mean()) / (k @ k))
+    stray = np.abs(distance - distance.mean() - dz * k).max() / dz
     if stray > STRAY_SLICES:
         gaps = np.diff(distance)
         median = float(np.median(gaps))
