@@ -222,6 +222,10 @@ def test_imagej_tiff_spacing_is_read(tmp_path, rng):
     tifffile.imwrite(tmp_path / "plain.tif", arr, photometric="minisblack", resolution=(72.0, 72.0),
                      resolutionunit="INCH")
     assert load(tmp_path / "plain.tif").spacing == (1.0, 1.0, 1.0)
+    # a bad z spacing (ImageJ writes what it is given) is 1 along z alone, with a warning; y and x stay
+    tifffile.imwrite(tmp_path / "ij0.tif", arr, imagej=True, resolution=(4.0, 2.0),
+                     metadata={"axes": "ZYX", "spacing": -2.0, "unit": "um"})
+    assert load(tmp_path / "ij0.tif").spacing == (1.0, 0.5, 0.25)
 
 
 def test_rgb_tiff_stack_is_4d(tmp_path, rng):

@@ -177,6 +177,7 @@ def test_default_levels_capped_by_the_shortest_axis_and_said():
     levels, note = default_levels((96, 96, 3))
     assert levels == 0 and "x axis of 3 voxels" in note and "--keep drops voxels: give --keep 1" in note
     assert "--keep" not in default_levels((96, 96, 3), thresholded=False)[1]
+    assert default_levels((1, 64, 64))[0] == 0  # an axis of one voxel: no level, not -1
     for shape in ((96, 96, 3), (96, 4, 96), (7, 16, 17)):  # the levels given are the most the model takes
         levels = default_levels(shape)[0]
         WaveletVolume.from_volume(np.ones(shape, np.float32), "haar", levels=levels)

@@ -355,8 +355,9 @@ def note_stored(args, wv):
     stored = min(g.kept for g in wv.groups)
     if asked is not None and stored < asked:
         print(f"clwave: warning: --keep {args.keep:g} asks for {asked:,} coefficients, and {args.input} stores "
-              f"{stored:,} ({100 * stored / wv.n_voxels:.2f} % of the voxels): all of them are used; for more detail, "
-              f"compress the original volume again with a larger --keep", file=sys.stderr)
+              f"{stored:,} ({100 * stored / wv.n_voxels:.2f} % of the voxels): all of them are used (a file keeps no "
+              f"zero coefficients, so it may hold fewer than its own --keep; if it was compressed with a smaller "
+              f"--keep, compress again with a larger one for more detail)", file=sys.stderr)
 
 
 def _preset(args):

@@ -452,7 +452,7 @@ def default_levels(shape, levels=3, thresholded=True) -> tuple:
     command line's words when the axis caps them (None otherwise).  At 0 levels the model is the voxels
     themselves, so a ``thresholded`` one (``--keep`` below 1) drops voxels: the note says so, and what helps."""
     spatial = tuple(shape[:3])
-    top = max_levels(spatial)
+    top = max(0, max_levels(spatial))  # an axis of 1 voxel (max_levels -1) allows no level either
     if top >= levels:
         return levels, None
     axis = int(np.argmin(spatial))

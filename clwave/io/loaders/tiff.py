@@ -65,11 +65,12 @@ def _imagej_spacing(tif, path):
     per_unit = np.array(tif.pages[0].get_resolution()[::-1], float)  # (y, x)
     with np.errstate(divide="ignore"):
         spacing = (float(meta.get("spacing", 1.0)),) + tuple(float(d) for d in 1 / per_unit)
-    if not all(np.isfinite(d) and d > 0 for d in spacing):
-        log.warning("%s: its ImageJ spacing (dz, dy, dx) %s is not positive and finite; taken as 1: give "
-                    "spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(f"{d:g}" for d in spacing))
-        return None
-    return spacing
+    bad = [a for a, d in zip("zyx", spacing) if not (np.isfinite(d) and d > 0)]
+    if bad:  # each axis on its own: a bad z spacing leaves the resolution's y and x
+        log.warning("%s: its ImageJ spacing along %s (dz, dy, dx = %s) is not positive and finite; taken as 1 there: "
+                    "give spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(bad),
+                    ", ".join(f"{d:g}" for d in spacing))
+    return tuple(1.0 if a in bad else d for a, d in zip("zyx", spacing))
 
 
 def read_tiff_folder(folder, progress_bar, fits=None):
