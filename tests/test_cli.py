@@ -393,7 +393,7 @@ def test_a_clw_keep_above_what_it_stores_is_told_in_one_line(tmp_path, capsys):
                          "--raw", str(raw))
     assert code == 0 and err.count("\n") == 1
     assert err.startswith("clwave: warning: --keep 0.2 asks for 819 coefficients") and \
-        f"stores {stored:,} (5.00 % of the voxels)" in err and "again with a larger --keep" in err
+        f"stores {stored:,} (5.00 % of the voxels)" in err and "compress again with a larger one" in err
     everything = tmp_path / "all.npy"
     code, out, err = run(capsys, "render", str(model), "--size", "8", "-o", str(tmp_path / "b.png"), "--raw",
                          str(everything))
