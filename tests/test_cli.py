@@ -314,6 +314,8 @@ EARLY_MISTAKES = [
     (["compress", "-o", "x.txt"], "must end in .clw"),
     (["render", "--device", "no-such-device"], "no OpenCL device matches 'no-such-device'"),
     (["render", "--window", "1"], "--window"),
+    (["render", "--window", "2,1"], "--window 2,1 must be two finite numbers LO,HI with LO < HI"),
+    (["progressive", "--window", "nan,1"], "--window nan,1 must be two finite"),
     (["render", "--omega-s", "0"], "--omega-s 0"),
     (["render", "--coarse", "2"], "--coarse 2"),
     (["render", "--device-memory", "2GB"], "--device-memory 2GB"),

@@ -499,7 +499,13 @@ def parse_background(args):
 
 
 def parse_window(args):
-    return "auto" if args.display_window == "auto" else numbers(args.display_window, "--window", (2,))
+    """``--window auto|LO,HI``: "auto", or two finite numbers LO < HI (checked before any work)."""
+    if args.display_window == "auto":
+        return "auto"
+    lo, hi = numbers(args.display_window, "--window", (2,))
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise InputError(f"--window {args.display_window} must be two finite numbers LO,HI with LO < HI, e.g. 0,1")
+    return lo, hi
 
 
 def parse_device_memory(args):
