@@ -142,7 +142,7 @@ def test_drr_command_ray_traces(tmp_path, capsys):
     for extra, words in ((["--tolerance", "1e-3"], "--tolerance is for --method raytrace"),
                          (["--method", "raytrace", "--tolerance", "0"], "must be a positive absolute error"),
                          (["--method", "raytrace", "--tolerance", "nan"], "must be a positive absolute error"),
-                         (["--method", "raytrace", "--coarse", "1e-2"], "are for --method splat"),
+                         (["--method", "raytrace", "--coarse", "1e-2"], "is for --method splat"),
                          (["--dso", "9", "--dsd", "20"], "clwave drr --method raytrace")):
         assert main(args + extra + ["-o", str(tmp_path / "bad.npy")]) == 2
         err = capsys.readouterr().err

@@ -144,11 +144,13 @@ def _method_options(args):
     that were not given their defaults (``add_raytrace_options`` leaves them None, so that a given one is told)."""
     other = [n for n, _ in RAYTRACE_ONLY] if args.method == "splat" else SPLAT_ONLY
     given = [_flag(n) for n in other if getattr(args, n, None) not in (None, False)]
+    named, verb, them = ", ".join(given), *(("is", "it") if len(given) == 1 else ("are", "them"))
     if given and args.method != "splat":
-        raise InputError("--coarse and --omega-s are for --method splat; ray tracing controls its error with "
-                         "--tolerance")
+        raise InputError(f"{named} {verb} for --method splat; ray tracing controls its error with --tolerance")
+    if getattr(args, "xray", False) and getattr(args, "background", None) is not None:
+        raise InputError("--background is the colour behind a shaded volume; an X-ray (--xray) is line integrals, "
+                         "shown through --window: leave it out")
     if given:
-        named, verb, them = ", ".join(given), *(("is", "it") if len(given) == 1 else ("are", "them"))
         raise InputError(f"{named} {verb} for --method raytrace; splatting ignores {them}: add --method raytrace, or "
                          f"leave {them} out")
     if hasattr(args, "xray"):  # the options of add_raytrace_options
