@@ -496,6 +496,19 @@ def test_a_transfer_function_that_shows_nothing_is_refused_before_the_transform(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ct.npy"]  # nothing written
 
 
+def test_a_chunked_volume_that_shows_nothing_is_refused_before_anything_is_written(tmp_path, capsys):
+    """Read chunk by chunk, a volume is classified as each chunk is read; its content pass (the first read) finds no
+    voxel with any opacity, and the command refuses then, before the selection and the file (it wrote a .clw of 0
+    coefficients, or a blank image, with exit 0)."""
+    np.save(tmp_path / "ct.npy", np.full((16, 16, 16), -950, np.float32))  # air and fat in HU: no bone
+    for command, out in (("compress", "o.clw"), ("render", "o.png")):
+        code, _, err = run(capsys, command, str(tmp_path / "ct.npy"), "--tf", "ct-bone", "--chunks", "8", "--levels",
+                           "1", "-o", str(tmp_path / out))
+        assert code == 2 and err.count("\n") == 1, err
+        assert "the transfer function ct-bone gives no voxel of this volume (read chunk by chunk) any opacity" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ct.npy"]
+
+
 @pytest.mark.parametrize("make, argv, needle, api", [
     (lambda p: np.save(p / "v.npy", np.ones((8, 8, 8, 3), np.float32)), ["compress", "v.npy", "--hu-to-mu"],
      "--hu-to-mu converts scalar CT volumes, but this one has 3 channels; leave --hu-to-mu out", "hu_to_mu"),

@@ -327,6 +327,11 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                                    transfer_function=tf, scheduler=scheduler)
     log(f"{'read (content) of' if vol.chunked else 'decomposed'} {' x '.join(map(str, vol.shape[::-1]))} voxels "
         f"(x, y, z), {vol.channels} channel(s), in {time.perf_counter() - start:.2f} s")
+    if tf is not None and not post and vol.chunked and wv.content is None:  # classified as read: its content pass
+        from ..errors import NothingVisibleError                            # found no voxel with any opacity
+        why = (f"the transfer function{f' {tf.name}' if tf.name else ''} gives no voxel of this volume (read chunk by "
+               f"chunk) any opacity; give a window in the volume's units (--tf-window LO,HI) or another preset")
+        raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
     if args.keep is None and args.threshold is None:
         thresholding["keep"] = DEFAULT_KEEP
     wv = wv.threshold(**thresholding)
