@@ -20,9 +20,10 @@ from pyopencl import cltypes
 from scipy.special import comb
 
 from ..device import programs
-from ..device.constants import SUPER
+from ..device.constants import BRICK, SUPER
 from ..device.kernels import BUFFER, Kernel
 from ..errors import InputError
+from ..model.bspline import bspline
 from ..model.transfer import TransferFunction, auto_window
 
 _RANGE = Kernel("scalar_range", ("out", BUFFER), ("origin", cltypes.int4), ("coef", BUFFER), ("bricks", BUFFER),
@@ -31,8 +32,8 @@ _BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf
                  ("n", np.int32))
 _SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound", BUFFER), ("nb", cltypes.int4))
 GROUP = 256  #: work-group of classified_bounds
-#: how many of the pool's coefficients a window "auto" looks at
-AUTO_COEFFICIENTS = 1 << 20
+#: at how many lattice points of the pool's field a window "auto" looks
+AUTO_VALUES = 1 << 16
 #: a tracer keeps the ranges per block of this many details (each picks its own bricks, docs/raytracing.md §8)
 RANGES_KEPT = 8
 #: a block's range is widened by this much of the scalar's largest magnitude (the kernels' float32 rounding)
@@ -127,7 +128,7 @@ class ScalarRange:
                    boxes=tables["boxes"], order=f.orders[0])
             scalar = f.pool.get()  # one float a coefficient (bricks.build's scalar)
             full = full_detail_slots(f)
-            self.sample = _sample(scalar, f.boxes[:, 0], full if full.any() else ~full)
+            self.sample = _sample(scalar, f.boxes[:, 0], full if full.any() else ~full, f.orders[0], f.levels)
             words, quant = pack(scalar, f.boxes[:, 0], full)
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half their step of the floats
@@ -154,8 +155,8 @@ class ScalarRange:
         return self.ranges[key]
 
     def window(self, tf: TransferFunction):
-        """``tf``'s window in data units; "auto" from the percentiles of the full-detail slots' coefficients
-        (docs/raytracing.md §10), the same with level of detail or without."""
+        """``tf``'s window in data units; "auto" from the percentiles of the full-detail slots' field values at lattice
+        points (docs/raytracing.md §10), the same with level of detail or without, and whatever the order."""
         if tf.window != "auto":
             return tf.window
         if self.sample is None:
@@ -214,18 +215,41 @@ def full_detail_slots(field) -> np.ndarray:
     return full
 
 
-def _sample(scalar, boxes, slots) -> np.ndarray:
-    """At most AUTO_COEFFICIENTS of the coefficients of the slots ``slots`` (bool) picks (one after another in slot
-    order, every k-th), for window "auto": the same wherever the pool holds those slots (a copy, not a view)."""
-    sizes = np.prod(boxes[slots, :3].astype(np.int64), axis=1)
-    total = int(sizes.sum())
-    if not total:
+def _sample(scalar, boxes, slots, order, levels) -> np.ndarray:
+    """At most AUTO_VALUES values of the field the slots ``slots`` (bool) pick hold, for window "auto": at lattice
+    points spread evenly over the bricks those slots fill (a level-l slot's lattice point stands for 8^l fine cells,
+    and a slot's halo, the supports reaching in from its neighbours, is left out: coarse bricks count as much as the
+    space they fill), each the sum of the (j - 1)^3 coefficients around it weighted by the B-spline's values at the
+    integers, N_j(1) .. N_j(j - 1) per axis.  The field's values, not its coefficients, whose spread grows with the
+    order (a quintic's exceed the data by far): about the same window whatever the wavelet, and wherever the pool
+    holds those slots (docs/raytracing.md §10)."""
+    taps = bspline(order, np.arange(1, order)) if order > 1 else np.ones(1)
+    w = len(taps)
+    box = boxes[slots].astype(np.int64)
+    lv = np.asarray(levels, np.int64)[slots]
+    # the lattice points of each slot's own brick: windows inside the slot, at most the brick's cells a side
+    side = np.maximum(np.minimum(box[:, :3] - w + 1, (BRICK >> lv)[:, None]), 1)
+    skip = (box[:, :3] - w + 1 - side) // 2  # the halo before them
+    space = np.cumsum(np.prod(side, axis=1) * 8.0 ** lv)
+    if not len(space) or not space[-1]:
         return np.zeros(1, np.float32)
-    n = min(AUTO_COEFFICIENTS, total)
-    at = np.arange(n, dtype=np.int64) * (total // n)  # place among the picked slots' coefficients
-    ends = np.cumsum(sizes)
-    k = np.searchsorted(ends, at, side="right")
-    return scalar[boxes[slots, 3].astype(np.int64)[k] + at - (ends[k] - sizes[k])]
+    n = min(AUTO_VALUES, int(np.prod(side, axis=1).sum()))
+    at = (np.arange(n) + 0.5) * (space[-1] / n)  # evenly over the space the bricks fill
+    k = np.searchsorted(space, at, side="right")
+    box, side, skip = box[k], side[k], skip[k]
+    i = np.floor((at - space[k]) / 8.0 ** lv[k]).astype(np.int64) + np.prod(side, axis=1)  # its point in the brick
+    corner = [np.clip(skip[:, 0] + i % side[:, 0], 0, None),  # its window's first coefficient in the slot (x, y, z)
+              np.clip(skip[:, 1] + i // side[:, 0] % side[:, 1], 0, None),
+              np.clip(skip[:, 2] + i // (side[:, 0] * side[:, 1]), 0, None)]
+    last = box[:, 3] + np.prod(box[:, :3], axis=1) - 1  # a slot narrower than the window: its last coefficient
+    values = np.zeros(n)                                 # repeats
+    for dz in range(w):
+        for dy in range(w):
+            row = box[:, 3] + ((corner[2] + dz) * box[:, 1] + corner[1] + dy) * box[:, 0] + corner[0]
+            weight = taps[dz] * taps[dy]
+            for dx in range(w):
+                values += weight * taps[dx] * scalar[np.minimum(row + dx, last)]
+    return values.astype(np.float32)
 
 
 def pack(scalar, boxes, full=None) -> tuple:
