@@ -496,6 +496,20 @@ def test_a_transfer_function_that_shows_nothing_is_refused_before_the_transform(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ct.npy"]  # nothing written
 
 
+def test_a_scalar_kept_for_a_transfer_function_that_shows_nothing_is_refused_at_compress(tmp_path, capsys):
+    """--classify post keeps the scalar and the function for the renders of the file; one that gives no value any
+    opacity (a HU preset on --hu-to-mu attenuation) is refused at compress, as --classify pre is, not by the first
+    render of a file written with exit 0 (TransferFunction.check_visible: the opacity is linear between points)."""
+    ct = np.full((16, 16, 16), -1000, np.int16)
+    ct[4:12, 4:12, 4:12] = 1000
+    np.save(tmp_path / "ct.npy", ct)
+    argv = ["compress", str(tmp_path / "ct.npy"), "--tf", "ct-bone", "--classify", "post", "--levels", "1", "-o"]
+    code, _, err = run(capsys, *argv, str(tmp_path / "mu.clw"), "--hu-to-mu")
+    assert code == 2 and err.count("\n") == 1 and "--hu-to-mu turned HU into attenuation" in err, err
+    assert not (tmp_path / "mu.clw").exists()
+    assert run(capsys, *argv, str(tmp_path / "hu.clw"))[0] == 0  # in its own units: bone is seen
+
+
 def test_a_chunked_volume_that_shows_nothing_is_refused_before_anything_is_written(tmp_path, capsys):
     """Read chunk by chunk, a volume is classified as each chunk is read; its content pass (the first read) finds no
     voxel with any opacity, and the command refuses then, before the selection and the file (it wrote a .clw of 0

@@ -293,3 +293,26 @@ def test_resolved_records_the_window_classify_used(rng):
     rgb = Volume(rng.integers(0, 256, (4, 5, 6, 3)).astype(np.float32))
     np.testing.assert_array_equal(tf.resolved(rgb).classify(rgb).data, tf.classify(rgb).data)
     assert TransferFunction.preset("ct-bone").resolved(Volume(data)).window == (-1000.0, 2000.0)
+
+
+def test_check_visible_refuses_exactly_what_classify_refuses():
+    """``check_visible`` (min, max and the points between; no classification) against ``classify`` itself, over
+    random scalar volumes and windows of a preset, those that miss the values included."""
+    from clwave.errors import NothingVisibleError
+
+    rng = np.random.default_rng(5)
+    tf = TransferFunction.preset("ct-bone")
+    outcomes = []
+    for _ in range(60):
+        lo = rng.uniform(-3000, 3000)
+        vol = Volume(rng.uniform(lo, lo + rng.uniform(1, 800), (6, 6, 6)).astype(np.float32))
+        refused = []
+        for check in (tf.check_visible, tf.classify):
+            try:
+                check(vol)
+                refused.append(False)
+            except NothingVisibleError:
+                refused.append(True)
+        assert refused[0] == refused[1]
+        outcomes.append(refused[0])
+    assert 5 < sum(outcomes) < 55  # both kinds met

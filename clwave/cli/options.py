@@ -322,6 +322,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     if tf is not None:
         tf = tf.resolved(vol)  # records an "auto" window
         vol = vol if post else _classified(args, tf, vol)  # post: the scalar, and tf as its default for ray tracing
+        if post and not vol.chunked:  # refused now, as classifying first would, not by the first render of the file
+            _classified(args, tf, vol, check=True)
     start = time.perf_counter()
     wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, interpolate=args.interpolate,
                                    transfer_function=tf, scheduler=scheduler)
@@ -340,13 +342,14 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     return (wv.compute() if gather else wv), None
 
 
-def _classified(args, tf, vol):
-    """``vol`` classified by ``tf``; a classification without opacity anywhere is refused before the transform, where
-    --hu-to-mu is the likely cause (a HU preset on attenuation) saying so."""
+def _classified(args, tf, vol, check=False):
+    """``vol`` classified by ``tf`` (``check``: only checked, a scalar kept to classify while rendering); a
+    classification without opacity anywhere is refused before the transform, where --hu-to-mu is the likely cause (a
+    HU preset on attenuation) saying so."""
     from ..errors import NothingVisibleError
 
     try:
-        return tf.classify(vol)
+        return tf.check_visible(vol) if check else tf.classify(vol)
     except NothingVisibleError as exc:
         if not args.hu_to_mu:
             raise

@@ -272,6 +272,17 @@ class TransferFunction:
         return NothingVisibleError(f"{line} (window=(lo, hi)) or another function",
                                    cli=f"{line} (--tf-window LO,HI) or another preset")
 
+    def check_visible(self, vol: Volume):
+        """Raise :class:`NothingVisibleError` where this function gives no value of the scalar in-memory ``vol`` any
+        opacity, as :meth:`classify` would find, without classifying it: the opacity is linear between the points,
+        so it is 0 over the volume's values exactly where it is 0 at their least and largest and at every point
+        between (a scalar kept for classifying while rendering, ``classify="post"``)."""
+        window, scale = self._statistics(vol, ...)
+        lo, hi = float(np.nanmin(vol.data)), float(np.nanmax(vol.data))
+        at = self.data_points(window)
+        if not np.any(self(np.concatenate([[lo, hi], at[(at > lo) & (at < hi)]]), window)[1]):
+            raise self._nothing_visible(vol, window, scale)
+
     def resolved(self, vol: Volume, window=...) -> "TransferFunction":
         """This function with the window :meth:`classify` would use on ``vol`` made concrete.
 
