@@ -758,3 +758,13 @@ def test_the_auto_window_at_render_time_is_about_the_same_whatever_the_order():
             .meta["tf_window"])
     span = windows["cubic"][1] - windows["cubic"][0]
     assert np.abs(windows["quintic"] - windows["cubic"]).max() <= 0.1 * span, windows  # measured 0.074
+
+
+def test_a_function_of_no_opacity_anywhere_is_told_so():
+    """A transfer function whose every point has opacity 0 draws nothing whatever the window: its note says that,
+    not to move a window (and names no function where it has no name)."""
+    wv = WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1)
+    meta = clwave.RayTracer(wv).render(clwave.Camera(30, 20, 8), transfer_function=clwave.TransferFunction(
+        [(0, 1, 1, 1, 0), (1, 1, 1, 1, 0)])).meta
+    assert meta["nothing_visible"] == ("the transfer function has opacity 0 at every point: give it some opacity (or "
+                                       "another function)")

@@ -169,12 +169,14 @@ class ScalarRange:
         window in other units than the model's, HU on a model of attenuation), in a line naming the fix; else None."""
         if post.opacity > 0:
             return None
+        name = f"the transfer function{f' {post.tf.name}' if post.tf.name else ''}"
+        if not np.any(post.tf.points[:, 4]):
+            return f"{name} has opacity 0 at every point: give it some opacity (or another function)"
         lo, hi = post.tf.data_points(post.window)[[0, -1]]
         values = None if self.slot_range is None else (self.slot_range[..., 0].min(), self.slot_range[..., 1].max())
         held = "" if values is None else f"; this model's values lie within {values[0]:.4g} .. {values[1]:.4g}"
-        return (f"the transfer function {post.tf.name or ''} gives no value of this model any opacity (its points "
-                f"span {lo:.4g} .. {hi:.4g}{held}): give a window in the model's units (--tf-window LO,HI) or another "
-                f"function")
+        return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
+                f"a window in the model's units (--tf-window LO,HI) or another function")
 
     def classify(self, tf, cc, real, at=None) -> Classification:
         """The kernel arguments of ``tf`` at the detail of ``at`` (default full detail), reused while the transfer
