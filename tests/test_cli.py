@@ -343,7 +343,9 @@ EARLY_MISTAKES = [
     (["drr", "--tolerance", "1e-3"], "--tolerance is for --method raytrace"),
     (["render", "--method", "raytrace", "--omega-s", "3"], "--omega-s is for --method splat"),
     (["progressive", "--method", "raytrace", "--coarse", "1e-2"], "--coarse is for --method splat"),
-    (["render", "--method", "raytrace", "--xray", "--background", "1,1,1"], "--background is the colour behind"),
+    (["render", "--method", "raytrace", "--xray", "--background", "1,1,1"], "--background is for a shaded volume"),
+    (["render", "--method", "raytrace", "--xray", "--light", "10,10", "--no-shading"],
+     "--light, --no-shading are for a shaded volume; an X-ray (--xray) is line integrals"),
     (["render", "--method", "raytrace", "--background", "2,0,0"], "--background 2,0,0 must be a colour R,G,B with each "
                                                                    "in 0..1"),
     (["render", "--coarse", "0"], "--coarse 0 must be"),

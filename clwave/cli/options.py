@@ -147,9 +147,11 @@ def _method_options(args):
     named, verb, them = ", ".join(given), *(("is", "it") if len(given) == 1 else ("are", "them"))
     if given and args.method != "splat":
         raise InputError(f"{named} {verb} for --method splat; ray tracing controls its error with --tolerance")
-    if getattr(args, "xray", False) and getattr(args, "background", None) is not None:
-        raise InputError("--background is the colour behind a shaded volume; an X-ray (--xray) is line integrals, "
-                         "shown through --window: leave it out")
+    shaded = [_flag(n) for n in ("background", "light", "no_shading") if getattr(args, n, None) not in (None, False)]
+    if getattr(args, "xray", False) and shaded and args.method != "splat":
+        verb, it = ("are", "them") if len(shaded) > 1 else ("is", "it")
+        raise InputError(f"{', '.join(shaded)} {verb} for a shaded volume; an X-ray (--xray) is line integrals, shown "
+                         f"through --window: leave {it} out")
     if given:
         raise InputError(f"{named} {verb} for --method raytrace; splatting ignores {them}: add --method raytrace, or "
                          f"leave {them} out")
@@ -279,6 +281,10 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                  and not ((rgba or post) and name in ("tf", "tf_window"))]  # a scalar .clw: classified while rendering
         if given:
             them = 'them' if len(given) > 1 else 'it'
+            if set(given) <= {"--tf", "--tf-window"} and getattr(args, "xray", False):
+                raise InputError(f"{', '.join(given)} {'classify' if len(given) > 1 else 'classifies'} a scalar .clw "
+                                 f"for shaded ray tracing; --xray draws the line integrals of the model as it is: "
+                                 f"leave {them} or --xray out")
             if set(given) <= {"--tf", "--tf-window"} and hasattr(args, "xray") and args.method == "splat":
                 # render and progressive: a scalar .clw takes them while ray tracing
                 verb = 'classify' if len(given) > 1 else 'classifies'
