@@ -415,24 +415,33 @@ def launched(queue, launch, *args, **kwargs):
 def interrupted(script: str, stopped: bytes) -> tuple:
     """Run ``script`` in a Python process of its own, send SIGINT as soon as it prints "launched" (a launch of its
     long work running, LAUNCHED), and return (seconds from the signal to the line holding ``stopped`` on its stderr:
-    the work given up, not counting the interpreter's own exit, which load stretches; exit code, stdout, stderr)."""
+    the work given up, not counting the interpreter's own exit, which load stretches; exit code, stdout, stderr).
+    Its stderr is read on a thread of its own from the start, so that neither pipe can fill and block the other."""
     with subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                           env=dict(os.environ, PYTHONPATH=str(ROOT))) as proc:
+        err, seen = [], threading.Event()
+
+        def read_stderr():
+            for line in proc.stderr:
+                err.append(line)
+                if stopped in line:
+                    seen.set()  # time.perf_counter() below: the moment this thread sees it
+
+        reader = threading.Thread(target=read_stderr, daemon=True)
+        reader.start()
         for line in proc.stdout:
             if line.startswith(b"launched"):
                 break
         else:
-            pytest.fail(f"the work ended before it was interrupted: {proc.stderr.read().decode()[-2000:]}")
+            reader.join(timeout=60)
+            pytest.fail(f"the work ended before it was interrupted: {b''.join(err).decode()[-2000:]}")
         start = time.perf_counter()
         proc.send_signal(signal.SIGINT)
-        err = b""
-        for line in proc.stderr:
-            err += line
-            if stopped in line:
-                break
+        seen.wait(timeout=60)
         seconds = time.perf_counter() - start
-        proc.wait(timeout=60)  # then the rest, from the same buffered files (communicate would miss what they hold)
-        return seconds, proc.returncode, proc.stdout.read(), err + proc.stderr.read()
+        proc.wait(timeout=60)
+        reader.join(timeout=60)
+        return seconds, proc.returncode, proc.stdout.read(), b"".join(err)
 
 
 def test_a_disk_filling_while_a_clw_is_written_is_one_line_and_leaves_nothing(tmp_path):
