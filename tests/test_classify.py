@@ -715,26 +715,28 @@ def test_level_of_detail_keeps_full_detail_bit_for_bit(case, monkeypatch):
     np.testing.assert_array_equal(frames[-1].image, want.image)
 
 
-@pytest.mark.parametrize("order", [1, 2, 4, 6])
-def test_the_auto_windows_sample_is_the_field_at_lattice_points_over_the_space_it_fills(order):
+@pytest.mark.parametrize("wavelet", ["haar", "linear", "quadratic", "cubic", "quintic"])
+def test_the_auto_windows_sample_is_the_field_at_voxel_centres_over_the_space_it_fills(wavelet):
     """``_sample`` (window "auto" at render time) takes the field's values, not its coefficients: a constant's
-    coefficients give that constant (the B-splines' partition of unity), a ramp's the ramp at the lattice points
-    (they reproduce linear functions: sum_m N_j(m + 1) m = j/2 - 1), at distinct points of the brick, its halo left
-    out; and a level-1 brick counts as much as the space it fills (8 fine cells a point): two bricks of one volume
-    each give half the points."""
+    coefficients give that constant (the B-splines' partition of unity), a ramp's the ramp at the voxel centres
+    (they reproduce linear functions: the sampling kernel's 2h + 1 weights sum s w_s to h), at distinct points of
+    the brick, its halo left out; and a level-1 brick counts as much as the space it fills (8 fine cells a point):
+    two bricks of one volume each give half the points."""
+    from clwave.model.bspline import wavelet_for
     from clwave.raytrace.classified import _sample
 
-    w = max(order - 1, 1)
+    half = (wavelet_for(wavelet).order - 1) // 2
+    w = 2 * half + 1  # the sampling kernel's weights
     fine, coarse = 16 + w - 1 + 2, 8 + w - 1 + 2  # a brick's cells a side, its window, a halo of 2
     x = np.arange(fine)
     ramp = (x[None, None, :] + 100 * x[None, :, None] + 10000 * x[:, None, None]).astype(np.float32).ravel()
     boxes = np.array([[fine, fine, fine, 0], [coarse, coarse, coarse, fine ** 3]])
     scalar = np.concatenate([ramp, np.full(coarse ** 3, -7.0, np.float32)])
-    values = _sample(scalar, boxes, np.array([True, True]), order, np.array([0, 1]))
+    values = _sample(scalar, boxes, np.array([True, True]), wavelet_for(wavelet), np.array([0, 1]))
     assert len(values) == 16 ** 3 + 8 ** 3  # as many as the bricks' own lattice points, spread by the space they fill
     constant = values == np.float32(-7.0)
     assert constant.sum() == len(values) // 2  # 16^3 fine cells each
-    shift = (order - 2) / 2 * 10101 if order > 1 else 0.0  # sum_m N_j(m + 1) m, along each axis
+    shift = half * 10101  # sum_s w_s s along each axis
     points = values[~constant] - shift
     digits = np.round(points).astype(np.int64)
     assert np.abs(points - digits).max() < 1e-2  # on the lattice (float32 sums of values up to 2e5)

@@ -59,7 +59,7 @@ def band_layout(wavelet: SplineWavelet, shape, levels) -> list:
 
 def prefilter(data: np.ndarray, wavelet: SplineWavelet) -> np.ndarray:
     """B-spline coefficients whose model interpolates ``data`` at voxel centres (zero extension)."""
-    w = _sampling_kernel(wavelet)
+    w = sampling_kernel(wavelet)
     half = len(w) // 2
     if half == 0:
         return data
@@ -74,7 +74,7 @@ def prefilter(data: np.ndarray, wavelet: SplineWavelet) -> np.ndarray:
     return out
 
 
-def _sampling_kernel(wavelet: SplineWavelet) -> np.ndarray:
+def sampling_kernel(wavelet: SplineWavelet) -> np.ndarray:
     """Weights w_s with f(i + j/2) = sum_s w_s c_{i-s} (docs/model.md §1)."""
     j = wavelet.order
     half = (j - 1) // 2
@@ -83,7 +83,7 @@ def _sampling_kernel(wavelet: SplineWavelet) -> np.ndarray:
 
 
 def apply_sampling_filter(coeffs, start, wavelet):
-    w = _sampling_kernel(wavelet)
+    w = sampling_kernel(wavelet)
     half = len(w) // 2
     if half == 0:
         return coeffs, start

@@ -23,8 +23,8 @@ from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.kernels import BUFFER, Kernel
 from ..errors import InputError
-from ..model.bspline import bspline
 from ..model.transfer import TransferFunction, auto_window
+from ..model.transform import sampling_kernel
 
 _RANGE = Kernel("scalar_range", ("out", BUFFER), ("origin", cltypes.int4), ("coef", BUFFER), ("bricks", BUFFER),
                 ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
@@ -32,7 +32,7 @@ _BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf
                  ("n", np.int32))
 _SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound", BUFFER), ("nb", cltypes.int4))
 GROUP = 256  #: work-group of classified_bounds
-#: at how many lattice points of the pool's field a window "auto" looks
+#: at how many voxel centres of the pool's field a window "auto" looks
 AUTO_VALUES = 1 << 16
 #: a tracer keeps the ranges per block of this many details (each picks its own bricks, docs/raytracing.md §8)
 RANGES_KEPT = 8
@@ -128,7 +128,8 @@ class ScalarRange:
                    boxes=tables["boxes"], order=f.orders[0])
             scalar = f.pool.get()  # one float a coefficient (bricks.build's scalar)
             full = full_detail_slots(f)
-            self.sample = _sample(scalar, f.boxes[:, 0], full if full.any() else ~full, f.orders[0], f.levels)
+            self.sample = _sample(scalar, f.boxes[:, 0], full if full.any() else ~full, tracer.wv.groups[0].wavelet,
+                                  f.levels)
             words, quant = pack(scalar, f.boxes[:, 0], full)
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half their step of the floats
@@ -217,29 +218,30 @@ def full_detail_slots(field) -> np.ndarray:
     return full
 
 
-def _sample(scalar, boxes, slots, order, levels) -> np.ndarray:
-    """At most AUTO_VALUES values of the field the slots ``slots`` (bool) pick hold, for window "auto": at lattice
-    points spread evenly over the bricks those slots fill (a level-l slot's lattice point stands for 8^l fine cells,
-    and a slot's halo, the supports reaching in from its neighbours, is left out: coarse bricks count as much as the
-    space they fill), each the sum of the (j - 1)^3 coefficients around it weighted by the B-spline's values at the
-    integers, N_j(1) .. N_j(j - 1) per axis.  The field's values, not its coefficients, whose spread grows with the
-    order (a quintic's exceed the data by far): about the same window whatever the wavelet, and wherever the pool
-    holds those slots (docs/raytracing.md §10)."""
-    taps = bspline(order, np.arange(1, order)) if order > 1 else np.ones(1)
+def _sample(scalar, boxes, slots, wavelet, levels) -> np.ndarray:
+    """At most AUTO_VALUES values of the field the slots ``slots`` (bool) pick hold, for window "auto": at the voxel
+    centres of the bricks those slots fill (a level-l slot's point stands for 8^l fine cells, and a slot's halo, the
+    supports reaching in from its neighbours, is left out: coarse bricks count as much as the space they fill), each
+    from the coefficients around it by the model's sampling kernel per axis (``sampling_kernel``, docs/model.md §1).
+    The field's values, not its coefficients, whose spread grows with the order (a quintic's exceed the data by far):
+    about the same window whatever the wavelet, and wherever the pool holds those slots (docs/raytracing.md §10)."""
+    taps = sampling_kernel(wavelet)
     w = len(taps)
     box = boxes[slots].astype(np.int64)
     lv = np.asarray(levels, np.int64)[slots]
-    # the lattice points of each slot's own brick: windows inside the slot, at most the brick's cells a side
+    cell = 8.0 ** lv  # fine cells a point of each slot stands for
+    # the points of each slot's own brick: windows inside the slot, at most the brick's cells a side
     side = np.maximum(np.minimum(box[:, :3] - w + 1, (BRICK >> lv)[:, None]), 1)
     skip = (box[:, :3] - w + 1 - side) // 2  # the halo before them
-    space = np.cumsum(np.prod(side, axis=1) * 8.0 ** lv)
+    points = np.prod(side, axis=1)
+    space = np.cumsum(points * cell)
     if not len(space) or not space[-1]:
         return np.zeros(1, np.float32)
-    n = min(AUTO_VALUES, int(np.prod(side, axis=1).sum()))
+    n = min(AUTO_VALUES, int(points.sum()))
     at = (np.arange(n) + 0.5) * (space[-1] / n)  # evenly over the space the bricks fill
     k = np.searchsorted(space, at, side="right")
     box, side, skip = box[k], side[k], skip[k]
-    i = np.floor((at - space[k]) / 8.0 ** lv[k]).astype(np.int64) + np.prod(side, axis=1)  # its point in the brick
+    i = np.floor((at - space[k]) / cell[k]).astype(np.int64) + points[k]  # its point in the brick
     corner = [np.clip(skip[:, 0] + i % side[:, 0], 0, None),  # its window's first coefficient in the slot (x, y, z)
               np.clip(skip[:, 1] + i // side[:, 0] % side[:, 1], 0, None),
               np.clip(skip[:, 2] + i // (side[:, 0] * side[:, 1]), 0, None)]
