@@ -52,7 +52,7 @@ def run(args):
     if args.signed and args.intensity:
         raise InputError("--signed writes the line integrals of values below 0 as they are; --intensity needs "
                          "attenuation (mu >= 0): leave one out")
-    tolerance = 1e-3 if args.tolerance is None else args.tolerance  # its value is checked with every command's
+    tolerance = args.tolerance  # checked, and its default given, with every command's (options.check_options)
     out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png")))
     if args.display_window != "auto" and out.suffix.lower() == ".npy":
         raise InputError("--window sets a .png's grey levels; a .npy holds the values themselves: leave it out")

@@ -141,7 +141,7 @@ SPLAT_ONLY = ("coarse", "omega_s")
 
 def _method_options(args):
     """Refuse the options of the --method not chosen (silently ignored otherwise), then give those of ray tracing
-    that were not given their defaults (``add_raytrace_options`` leaves them None, so that a given one is told)."""
+    that were not given their defaults (their parsers leave them None, so that a given one is told)."""
     other = [n for n, _ in RAYTRACE_ONLY] if args.method == "splat" else SPLAT_ONLY
     given = [_flag(n) for n in other if getattr(args, n, None) not in (None, False)]
     named, verb, them = ", ".join(given), *(("is", "it") if len(given) == 1 else ("are", "them"))
@@ -155,10 +155,9 @@ def _method_options(args):
     if given:
         raise InputError(f"{named} {verb} for --method raytrace; splatting ignores {them}: add --method raytrace, or "
                          f"leave {them} out")
-    if hasattr(args, "xray"):  # the options of add_raytrace_options
-        for name, default in RAYTRACE_ONLY:
-            if getattr(args, name) is None:
-                setattr(args, name, default)
+    for name, default in RAYTRACE_ONLY:  # those the command has (add_raytrace_options, drr's --tolerance)
+        if hasattr(args, name) and getattr(args, name) is None:
+            setattr(args, name, default)
 
 
 def is_clw(args) -> bool:
