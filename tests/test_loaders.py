@@ -6,6 +6,8 @@ voxel to the grid position of its world coordinate: neither uses the loader's
 orientation code.
 """
 
+import logging
+
 import nibabel as nib
 import nrrd
 import numpy as np
@@ -228,6 +230,25 @@ def test_imagej_tiff_spacing_is_read(tmp_path, rng):
     assert load(tmp_path / "ij0.tif").spacing == (1.0, 0.5, 0.25)
 
 
+def test_ome_tiff_spacing_is_read_in_micrometres(tmp_path, rng, caplog):
+    arr = rng.integers(0, 60000, (5, 6, 7)).astype(np.uint16)
+    # x in micrometres (OME's default unit), y in nanometres, z in millimetres: (2000, 0.25, 0.5) micrometres
+    tifffile.imwrite(tmp_path / "v.ome.tif", arr, ome=True,
+                     metadata={"axes": "ZYX", "PhysicalSizeX": 0.5, "PhysicalSizeY": 250.0, "PhysicalSizeYUnit": "nm",
+                               "PhysicalSizeZ": 2.0, "PhysicalSizeZUnit": "mm"})
+    vol = load(tmp_path / "v.ome.tif")
+    np.testing.assert_array_equal(vol.data, arr)
+    assert vol.spacing == pytest.approx((2000.0, 0.25, 0.5))
+    assert load(tmp_path / "v.ome.tif", spacing=1.0).spacing == (1.0, 1.0, 1.0)
+    # a size in a unit that is no length (OME allows only lengths; a file may still say anything) is 1 there alone,
+    # with a warning naming the axis; a missing size is 1
+    tifffile.imwrite(tmp_path / "odd.ome.tif", arr, ome=True,
+                     metadata={"axes": "ZYX", "PhysicalSizeX": 0.5, "PhysicalSizeY": 3.0, "PhysicalSizeYUnit": "s"})
+    with caplog.at_level(logging.WARNING, logger="clwave"):
+        assert load(tmp_path / "odd.ome.tif").spacing == pytest.approx((1.0, 1.0, 0.5))
+    assert "along y" in caplog.text and "--spacing" in caplog.text and "along z" not in caplog.text
+
+
 def test_rgb_tiff_stack_is_4d(tmp_path, rng):
     arr = rng.integers(0, 256, (5, 6, 7, 3)).astype(np.uint8)
     tifffile.imwrite(tmp_path / "rgb.tiff", arr, photometric="rgb")
@@ -384,14 +405,51 @@ def test_dicom_duplicate_positions_refused(tmp_path, rng):
     assert "position" in str(excinfo.value)
 
 
-def test_dicom_gantry_tilt_refused_with_its_angle(tmp_path, rng):
-    # each slice 0.5 mm further posterior (LPS +y) per mm along z: a gantry tilt of atan(0.5) = 26.6 degrees
-    write_series(tmp_path, rng, [(-20.0, 30.0 + 0.5 * z, z) for z in range(4)], generate_uid(), ["a", "b", "c", "d"])
+@pytest.mark.parametrize("drift, degrees, shift, shape", [
+    ((0.0, 0.5), "26.6", "1.5", (4, 10, 6)),      # 0.5 mm further posterior (LPS +y) per mm along z
+    ((-0.25, 0.5), "29.2", "1.677", (4, 10, 7)),  # and 0.25 mm further right (LPS -x): a margin before the first slice
+])
+def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, caplog, drift, degrees, shift, shape):
+    """Slices shifted sideways in proportion to their distance along the normal: a gantry tilt.  They hold a linear
+    function of the LPS position, which linear interpolation keeps exactly: every voxel of the straight stack that a
+    slice covers holds that function at its own RAS position (from the volume's spacing and origin alone), and the
+    margins the shift opens hold the series' least value."""
+    uid, rows, columns, (a, b) = generate_uid(), 8, 6, drift
+    j, i = np.mgrid[:rows, :columns]
+    least = np.inf
+    for z in range(4):  # axial: a row runs along LPS x, a column along LPS y; pixels of 1 mm
+        corner = np.array([-20.0 + a * z, 30.0 + b * z, z])
+        lps = corner[:, None, None] + np.stack([i, j, np.zeros_like(i)])
+        stored = np.round(4 * (3 * lps[0] - 2 * lps[1] + 4 * lps[2] + 500))  # whole numbers: the file's uint16
+        least = min(least, 2 * stored.min() - 1024)  # rescale slope 2, intercept -1024
+        write_dicom_slice(tmp_path / f"s{z}", stored, corner, uid, pixel_spacing=(1.0, 1.0))
+    with caplog.at_level(logging.WARNING, logger="clwave"):
+        vol = load(tmp_path)
+    assert f"gantry tilt of {degrees} degrees" in caplog.text and f"{shift} mm sideways over 3 mm" in caplog.text
+    assert vol.data.shape == shape and vol.spacing == pytest.approx((1.0, 1.0, 1.0))
+    n = np.array(vol.data.shape[::-1])
+    kx, ky, kz = np.meshgrid(*(np.arange(m) for m in n), indexing="ij")
+    ras = np.asarray(vol.origin)[:, None, None, None] + (np.stack([kx, ky, kz]) - (n[:, None, None, None] - 1) / 2)
+    x, y, z = -ras[0], -ras[1], ras[2]  # LPS
+    x0, y0 = -20.0 + a * z, 30.0 + b * z  # each slice's first pixel
+    e = 1e-9
+    covered = (x >= x0 - e) & (x <= x0 + columns - 1 + e) & (y >= y0 - e) & (y <= y0 + rows - 1 + e)
+    value = vol.data.transpose(2, 1, 0)  # (x, y, z) like the grid above
+    assert covered.sum() >= 4 * (rows - 1) * (columns - 1)
+    np.testing.assert_allclose(value[covered], (2 * 4 * (3 * x - 2 * y + 4 * z + 500) - 1024)[covered], atol=1e-2)
+    margin = (x < x0 - 1 + e) | (x > x0 + columns - e) | (y < y0 - 1 + e) | (y > y0 + rows - e)  # a pixel beyond
+    assert margin.sum() > 0 and np.all(value[margin] == least) and value.min() == least
+
+
+def test_dicom_slices_off_any_line_refused(tmp_path, rng):
+    # one slice 2 mm sideways of a straight stack (pixels of 0.7 and 0.9 mm): no tilt moves one slice alone
+    positions = axial(0.0, 1.0, 2.0, 3.0, 4.0)
+    positions[2] = (-18.0, 30.0, 2.0)
+    write_series(tmp_path, rng, positions, generate_uid(), list("abcde"))
     with pytest.raises(FileFormatError) as excinfo:
         load(tmp_path)
     message = str(excinfo.value)
-    assert "1.5 mm sideways over 3 mm" in message and "26.6 degrees" in message and "dcm2niix" in message
-    assert "\n" not in message
+    assert "does not lie on a line" in message and "at 2 mm along the normal" in message and "\n" not in message
 
 
 def test_dicom_positions_rounded_in_the_file_still_load(tmp_path, rng):

@@ -1,5 +1,5 @@
-"""Folders of DICOM slices: one image series, sorted along its normal, checked to be a straight stack of even
-slices, rescaled, in RAS+."""
+"""Folders of DICOM slices: one image series, sorted along its normal, checked to be a stack of even slices (a
+gantry tilt resampled onto a straight one), rescaled, in RAS+."""
 
 from __future__ import annotations
 
@@ -8,22 +8,24 @@ from collections import defaultdict
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import SUPPORTED, folder_files, read_slices, reading, to_canonical
+from .shared import SUPPORTED, check_whole, folder_files, log, read_slices, reading, to_canonical
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
-# A series is refused when a slice strays from a straight stack of even spacing by more than these fractions
-# of a pixel (sideways: a gantry tilt) or of a slice gap (along the normal: a missing slice); below them the
-# strays are rounding in the files' decimal positions, and the volume is misplaced by less than a tenth of a voxel
-STRAY_PIXELS, STRAY_SLICES = 0.1, 0.1
+# A series whose slices drift sideways along the normal by more than STRAY_PIXELS of a pixel is tilted (resampled),
+# and one whose slices stray from an even spacing by more than STRAY_SLICES of a gap misses a slice (refused); below
+# them the strays are rounding in the files' decimal positions, and the volume is misplaced by less than a tenth of
+# a voxel.  Slices that scatter about their drift by more than SCATTER_PIXELS of a pixel lie on no line: refused.
+STRAY_PIXELS, STRAY_SLICES, SCATTER_PIXELS = 0.1, 0.1, 0.5
 # Attributes every slice of a DICOM image series needs
 _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSpacing",
                      "Rows", "Columns", "PixelData")
 
 
 def read_dicom_folder(folder, series, progress_bar, fits=None):
-    """One DICOM series: slices sorted along their normal, rescaled, in RAS; refused unless they form a
-    straight stack of evenly spaced slices (:func:`_check_straight`, :func:`_even_spacing`)."""
+    """One DICOM series: slices sorted along their normal, rescaled, in RAS; refused unless they are evenly
+    spaced along it (:func:`_even_spacing`) and lie on a line (:func:`_drift`); a gantry tilt (slices shifted
+    sideways in proportion to their distance) is resampled onto a straight stack (:func:`_untilt`)."""
     uid, headers = _pick_series(folder, _dicom_image_series(folder), series)
     if len(headers) < 2:
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
@@ -46,35 +48,67 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
             "hold several acquisitions (echoes, phases, times): split them into separate folders")
     dy, dx = (float(s) for s in headers[order[0]][1].PixelSpacing)  # row spacing, column spacing
     where = f"DICOM series {uid} in {folder}"
-    _check_straight(where, positions[order], distance[order], normal, min(dx, dy))
+    drift = _drift(where, positions[order], distance[order], normal, min(dx, dy))
     dz = _even_spacing(where, distance[order])
+    # the shift of each slice from the first, in pixels (along a row, along a column) per slice
+    step = np.array([drift @ row_dir / dx, drift @ col_dir / dy]) * dz
+    shifts = np.arange(len(order))[:, None] * step
+    lo, hi = np.floor(np.minimum(shifts.min(axis=0), 0)), np.ceil(np.maximum(shifts.max(axis=0), 0))
+    tilted = bool(np.any(step))
+    if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
+        rows, columns = int(headers[order[0]][1].Rows), int(headers[order[0]][1].Columns)
+        check_whole(folder, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits)
 
     data_zyx = read_slices([headers[i][0] for i in order], _dicom_pixels,
                             "reading DICOM slices", progress_bar, fits)
-    # index (column, row, slice) -> LPS patient coordinates (mm)
+    if tilted:
+        log.warning("%s has a gantry tilt of %.3g degrees (its slices shift %.4g mm sideways over %.4g mm along their "
+                    "normal): resampled onto a straight stack, linearly, the new margins filled with its least value",
+                    where, np.degrees(np.arctan(np.linalg.norm(drift))), np.linalg.norm(drift) * (distance.max() -
+                    distance.min()), distance.max() - distance.min())
+        data_zyx = _untilt(data_zyx, shifts - lo, (hi - lo).astype(int))
+    # index (column, row, slice) -> LPS patient coordinates (mm); the first slice's corner moved by the margin
     affine_lps = np.eye(4)
     affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, normal * dz])
-    affine_lps[:3, 3] = positions[order[0]]
+    affine_lps[:3, 3] = positions[order[0]] + lo[0] * dx * row_dir + lo[1] * dy * col_dir
     data_ijk = data_zyx.transpose((2, 1, 0) + tuple(range(3, data_zyx.ndim)))
     return to_canonical(data_ijk, _LPS_TO_RAS @ affine_lps)
 
 
-def _check_straight(where, positions, distance, normal, pixel):
-    """Refuse slices (sorted along ``normal``) whose positions shift sideways: a gantry tilt, which a
-    straight stack of them would misplace (each slice the further, the further it is from the first)."""
+def _drift(where, positions, distance, normal, pixel) -> np.ndarray:
+    """The sideways drift (mm per mm along ``normal``) of slices sorted along it: a gantry tilt, 0 where it is
+    the rounding of the files' positions.  Slices that scatter about a line by more than
+    :data:`SCATTER_PIXELS` of a ``pixel`` are refused: no straight stack, tilted or not, holds them."""
     sideways = positions - np.outer(distance, normal)
     # a tilt is a drift linear along the normal; the positions' rounding in the files scatters about it
     t = distance - distance.mean()
     slope = t @ (sideways - sideways.mean(axis=0)) / max(float(t @ t), 1e-30)
     span = distance[-1] - distance[0]
     shift = float(np.linalg.norm(slope)) * span
-    scatter = np.sqrt(np.mean((sideways - sideways.mean(axis=0) - np.outer(t, slope)) ** 2) * 3)
-    if shift > STRAY_PIXELS * pixel and shift > 4 * scatter:
+    off = np.linalg.norm(sideways - sideways.mean(axis=0) - np.outer(t, slope), axis=1)
+    if off.max() > SCATTER_PIXELS * pixel:
         raise FileFormatError(
-            f"{where} is tilted: its slices shift {shift:.4g} mm sideways over {span:.4g} mm along their "
-            f"normal (a gantry tilt of {np.degrees(np.arctan2(shift, span)):.3g} degrees), and clwave stacks "
-            "slices straight; resample the series onto a straight grid first, e.g. with dcm2niix (it corrects "
-            "gantry tilt) or 3D Slicer")
+            f"{where} does not lie on a line: the slice at {distance[np.argmax(off)]:.4g} mm along the normal is "
+            f"{off.max():.4g} mm sideways off the line through the others (pixels of {pixel:.4g} mm); the folder may "
+            "mix series or acquisitions: move the odd slices out of it")
+    scatter = np.sqrt(np.mean(off ** 2) * 3)
+    return slope if shift > STRAY_PIXELS * pixel and shift > 4 * scatter else np.zeros(3)
+
+
+def _untilt(data_zyx, shifts, margin):
+    """Slices ``data_zyx[k]`` moved by ``shifts[k]`` pixels (along a row, along a column) into a stack wider by
+    ``margin`` (columns, rows): linear interpolation, which never overshoots, the margins and what no slice
+    covers filled with the least value (air in a CT)."""
+    from scipy.ndimage import shift
+
+    k, rows, columns = data_zyx.shape[:3]
+    fill = float(data_zyx.min())
+    out = np.full((k, rows + margin[1], columns + margin[0]) + data_zyx.shape[3:], fill, np.float32)
+    for z in range(k):
+        out[z, :rows, :columns] = data_zyx[z]
+        move = (shifts[z, 1], shifts[z, 0]) + (0,) * (data_zyx.ndim - 3)
+        out[z] = shift(out[z], move, order=1, mode="constant", cval=fill)
+    return out
 
 
 def _even_spacing(where, distance) -> float:

@@ -8,6 +8,8 @@ from ...errors import FileFormatError
 from .shared import check_whole, folder_files, log, read_slices
 
 TIFF_SUFFIXES = (".tif", ".tiff")
+#: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
+OME_MICROMETRES = {"pm": 1e-6, "Å": 1e-4, "nm": 1e-3, "µm": 1.0, "um": 1.0, "mm": 1e3, "cm": 1e4, "m": 1e6}
 
 
 def tiff_files(folder):
@@ -16,10 +18,11 @@ def tiff_files(folder):
 
 def read_tiff(path, fits=None, stack=True):
     """``(data, spacing)``: a TIFF stack as ``(pages, y, x[, samples])`` and its spacing ``(dz, dy, dx)`` where
-    it is an ImageJ stack (:func:`_imagej_spacing`), else None; without ``stack`` (a slice of a folder) one
-    page gives one slice, with it one 2-D image is refused.  With ``stack``, one page of 3 or 4
-    planar samples that tifffile wrote from a 3-D array of that shape (``tifffile.imwrite`` of a 3 or 4 x Y x X
-    stack stores it as an RGB(A) image) is read as that many slices, with a warning: a 2-D image is no volume.
+    it is an OME-TIFF (:func:`_ome_spacing`) or an ImageJ stack (:func:`_imagej_spacing`), else None; without
+    ``stack`` (a slice of a folder) one page gives one slice, with it one 2-D image is refused.  With ``stack``,
+    one page of 3 or 4 planar samples that tifffile wrote from a 3-D array of that shape (``tifffile.imwrite`` of a
+    3 or 4 x Y x X stack stores it as an RGB(A) image) is read as that many slices, with a warning: a 2-D image is
+    no volume.
     The series' declared size is weighed (:func:`check_whole`) before its pages are read."""
     import tifffile
 
@@ -49,10 +52,38 @@ def read_tiff(path, fits=None, stack=True):
                                   f"tifffile.imwrite(path, volume, photometric='minisblack')")
         check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
         data = tif.asarray(key=range(len(tif.pages))) if pages else series.asarray()
-        spacing = _imagej_spacing(tif, path)
+        spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)
     if "S" in axes:
         data = np.moveaxis(data, axes.index("S"), -1)
     return (data if len(spatial) == 3 else data[np.newaxis]), spacing
+
+
+def _ome_spacing(tif, path):
+    """``(dz, dy, dx)`` in micrometres of an OME-TIFF's first image: its ``PhysicalSizeZ/Y/X``, each in its own unit
+    (``PhysicalSize*Unit``, micrometres where none is given); an axis without a size is 1 (logged), one whose
+    size or unit is no length clwave knows is 1 with a warning."""
+    import tifffile
+
+    image = tifffile.xml2dict(tif.ome_metadata).get("OME", {}).get("Image", {})
+    pixels = (image[0] if isinstance(image, list) else image).get("Pixels", {})
+    spacing, bad = [], []
+    for axis in "ZYX":
+        size, unit = pixels.get(f"PhysicalSize{axis}"), pixels.get(f"PhysicalSize{axis}Unit", "µm")
+        try:
+            d = float(size) * OME_MICROMETRES[unit] if size is not None else 1.0
+        except (KeyError, TypeError, ValueError):
+            d = np.nan
+        if not (np.isfinite(d) and d > 0):
+            bad.append(f"{axis.lower()} ({size!r} {unit!r})")
+            d = 1.0
+        elif size is None:
+            log.info("%s: its OME metadata gives no PhysicalSize%s; taken as 1 micrometre", path, axis)
+        spacing.append(d)
+    if bad:
+        log.warning("%s: its OME PhysicalSize along %s is not a positive length in %s; taken as 1 micrometre there: "
+                    "give spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(bad),
+                    ", ".join(OME_MICROMETRES))
+    return tuple(spacing)
 
 
 def _imagej_spacing(tif, path):
