@@ -18,7 +18,8 @@ from .model.conebeam import ConeBeam
 from .io.result import RenderResult
 from .splat.renderer import SplatRenderer, splat
 from .progressive import progressive
-from .raytrace.tracer import Phong, RayTracer, raytrace
+from .raytrace.shading import Phong
+from .raytrace.tracer import RayTracer, raytrace
 from .raytrace.lod import Detail
 from .model.chunked import ChunkedWaveletVolume
 from .io import clw as _clw  # noqa: F401  (WaveletVolume.save and .open: the model does not import its file format)

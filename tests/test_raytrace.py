@@ -12,7 +12,8 @@ from clwave.device.constants import SUPER
 from clwave.model.geometry import world_to_fine
 from clwave.raytrace.bounds import content_cells, superblocks
 from clwave.raytrace.quadrature import gradient_samples, sample_points, sample_tables
-from clwave.raytrace.tracer import Phong, RayTracer
+from clwave.raytrace.shading import Phong
+from clwave.raytrace.tracer import RayTracer
 from clwave.splat.reference import exact_xray
 from test_hardening import LAUNCHED, interrupted
 

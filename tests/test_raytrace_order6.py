@@ -12,7 +12,8 @@ from clwave import TransferFunction, WaveletVolume
 from clwave.device.constants import BLOCK, SUPER
 from clwave.model.geometry import fine_to_world
 from clwave.raytrace.reference import _content_field, classified_reference, raytrace_reference
-from clwave.raytrace.tracer import Phong, RayTracer
+from clwave.raytrace.shading import Phong
+from clwave.raytrace.tracer import RayTracer
 
 pytestmark = pytest.mark.opencl
 QUINTIC_HAAR = ["quintic", "quintic", "quintic", "haar"]

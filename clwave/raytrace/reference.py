@@ -22,7 +22,8 @@ from ..model.geometry import world_to_fine, world_to_fine_affine
 from ..model.transform import Band, band_sum, synthesize
 from .lod import occupancy
 from .quadrature import sample_points
-from .tracer import SIMPSON_DEPTH, Phong, RayTracer, light_direction
+from .shading import Phong, light_direction
+from .tracer import SIMPSON_DEPTH, RayTracer
 
 
 class Field(NamedTuple):

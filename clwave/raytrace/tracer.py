@@ -10,7 +10,6 @@ per-ray active lists, the paper's reference) and its bounds for empty-space skip
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 import pyopencl.array as cla
@@ -20,7 +19,7 @@ from ..device import programs
 from ..device.constants import BLOCK, MAX_LIGHTS, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
 from ..model.bspline import piece_polynomials
-from ..model.geometry import band_lattice, view_frame, world_to_fine_affine
+from ..model.geometry import band_lattice, world_to_fine_affine
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..device.context import ComputeContext
@@ -33,35 +32,11 @@ from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import QUANT, ScalarRange, check_post, post_nodes
 from .progressive import frames
 from .quadrature import sample_tables
+from .shading import Phong, light_direction
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume
 
-
-
-@dataclass(frozen=True)
-class Phong:
-    """Phong local illumination (paper eq. 4): ambient, diffuse, specular weights and exponent.
-
-    The ambient and diffuse terms scale the classified emission q; the specular term adds
-    white light in proportion to the opacity, so highlights sit on surfaces.
-    """
-
-    ambient: float = 0.3
-    diffuse: float = 0.7
-    specular: float = 0.3
-    shininess: float = 20.0
-
-    def __post_init__(self):
-        for name in ("ambient", "diffuse", "specular", "shininess"):
-            value = finite_number(getattr(self, name), name)
-            if value < 0:
-                raise InputError(f"Phong {name}={value} must not be negative")
-
-
-def light_direction(azimuth, elevation) -> np.ndarray:
-    """Unit vector towards a light at (azimuth, elevation) degrees, as paper eq. 31's n."""
-    return view_frame(finite_number(azimuth, "light azimuth"), finite_number(elevation, "light elevation"))[0]
 
 
 FIELDS = ("bspline", "wavelet")
