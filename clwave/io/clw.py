@@ -301,13 +301,13 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
     path = Path(path)
     if keep is not None:
         keep = check_thresholding(keep, None, None)[0]
-    with _reading(path) as (h5, header):
-        shape, levels, channels, groups_header = _checked_header(header)
+    with open_clw(path) as (h5, header):
+        shape, levels, channels, groups_header = checked_header(header)
         budget = None if keep is None else max(1, int(round(keep * int(np.prod(shape)))))
         frame = (shape, tuple(header["spacing"]), tuple(header["origin"]))
         data = h5.get("content_mask")
         if data is not None:
-            _check_dataset(data, shape, np.uint8)
+            check_dataset(data, shape, np.uint8)
         groups = [_read_group(h5, gi, gh, shape, levels, budget, frame, approximation)
                   for gi, gh in enumerate(groups_header)]
         mask = None if data is None else FileMask(path, shape)
@@ -325,15 +325,15 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
 def read_header(path) -> dict:
     """The header of a ``.clw`` file (shape, spacing, origin, levels, channels, groups, ...), checked as
     :func:`read_clw` checks it, without reading a coefficient: what a reader needs to plan its reading."""
-    with _reading(path) as (_, header):
-        _checked_header(header)
+    with open_clw(path) as (_, header):
+        checked_header(header)
     return header
 
 
 @contextmanager
-def _reading(path):
-    """The open HDF5 file of a ``.clw`` and its header: any failure to read it, there or in the ``with`` block,
-    one line naming the file (a :class:`FileFormatError`; too little memory an :class:`InputError`)."""
+def open_clw(path):
+    """The open HDF5 file of a ``.clw`` and its header, for each reader of it (also :mod:`.summary`): any failure,
+    there or in the ``with`` block, one line naming the file (:class:`FileFormatError`; out of memory InputError)."""
     import h5py
     import hdf5plugin  # noqa: F401  (registers the Zstandard filter of quantised files)
 
@@ -445,9 +445,9 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
     bands = band_layout(wav, shape, levels)
     total, n_approx, c = bands[-1].start + bands[-1].size, bands[0].size, len(gh["channels"])
     runs, stored, stored_values = (h5.get(f"g{gi}/{name}") for name in ("runs", "positions", "values"))
-    _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
+    check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
     n = stored.shape[0] if stored is not None else -1
-    _check_dataset(stored, (n,), np.int64)
+    check_dataset(stored, (n,), np.int64)
     step = _check_values(stored_values, (n, c))
     runs = runs[...]
     by_start = runs[np.lexsort((runs[:, 2], runs[:, 1]))]  # an empty run (a tier of whole chunks) before its peer
@@ -521,7 +521,7 @@ def _check_values(dataset, shape):
     import h5py
 
     if not (isinstance(dataset, h5py.Dataset) and "step" in dataset.attrs):
-        _check_dataset(dataset, shape, np.float32)
+        check_dataset(dataset, shape, np.float32)
         return None
     stored = dataset.attrs.get_id("step")  # its shape and type before its value: an array is not read
     if stored.shape != () or stored.dtype.kind != "f":
@@ -530,11 +530,11 @@ def _check_values(dataset, shape):
     step = dataset.attrs["step"]
     if not (np.isfinite(step) and step > 0):
         raise ValueError(f"member {dataset.name} has a quantisation step {step!r}, not one finite number > 0")
-    _check_dataset(dataset, shape, np.int32)
+    check_dataset(dataset, shape, np.int32)
     return float(step)
 
 
-def _check_dataset(dataset, shape, dtype):
+def check_dataset(dataset, shape, dtype):
     """Refuse a member that is missing, of another shape or type, or chunked oddly (a decompression bomb
     cannot hide in a chunk larger than the file allows)."""
     import h5py
@@ -555,7 +555,7 @@ def _check_dataset(dataset, shape, dtype):
                          f"{'chunks' if dataset.chunks is not None else 'bytes'}")
 
 
-def _checked_header(header) -> tuple:
+def checked_header(header) -> tuple:
     """``(shape, levels, channels, groups)`` of a header, each checked (ValueError names what is wrong)."""
     shape = header.get("shape")
     if not (isinstance(shape, list) and len(shape) == 3 and all(isinstance(n, int) and 2 <= n <= 1 << 20

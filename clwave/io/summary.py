@@ -9,7 +9,7 @@ import numpy as np
 from ..model.bspline import SplineWavelet
 from ..model.chunked import TIER_SHIFT
 from ..model.transform import band_layout
-from .clw import _check_dataset, _checked_header, _reading
+from .clw import check_dataset, checked_header, open_clw
 
 
 def detail_energy(path) -> float:
@@ -18,10 +18,10 @@ def detail_energy(path) -> float:
     a tier holds importances within ``2^(1/8)`` of each other, each counted at the tier's geometric middle.  What
     the approximation alone leaves out (docs/raytracing.md §9)."""
     energy = 0.0
-    with _reading(path) as (h5, header):
-        for gi in range(len(_checked_header(header)[3])):
+    with open_clw(path) as (h5, header):
+        for gi in range(len(checked_header(header)[3])):
             runs = h5.get(f"g{gi}/runs")
-            _check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
+            check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
             runs = runs[...]
             runs = runs[(runs[:, 0] >= 0) & (runs[:, 0] < 1 << (32 - TIER_SHIFT - 1))]  # details, finite tiers
             lo = (runs[:, 0].astype(np.uint32) << TIER_SHIFT).view(np.float32).astype(np.float64)
@@ -34,12 +34,12 @@ def approximation_occupancy(path) -> list:
     """Per channel group of a ``.clw`` file, bool (the approximation band's shape): which coefficients of its
     coarsest approximation the content occupies (:class:`~clwave.io.occupancy.OccupancyGrid`), checked against the
     header; None where the file has no such summary (written before it, or without a content mask)."""
-    with _reading(path) as (h5, header):
-        shape, levels, _, groups = _checked_header(header)
+    with open_clw(path) as (h5, header):
+        shape, levels, _, groups = checked_header(header)
         out = []
         for gi, g in enumerate(groups):
             data, band = h5.get(f"g{gi}/occupancy"), band_layout(SplineWavelet(g["wavelet"]), shape, levels)[0].shape
             if data is not None:
-                _check_dataset(data, (*band[:2], -(-band[2] // 8)), np.uint8)
+                check_dataset(data, (*band[:2], -(-band[2] // 8)), np.uint8)
             out.append(None if data is None else np.unpackbits(data[...], axis=2, count=band[2]).view(bool))
     return out
