@@ -150,3 +150,35 @@ def test_shaded_with_the_transfer_function_editor(viewer, page):
     figures, data = browser.current_frame(page)
     assert figures["tolerance"] == 1e-2 and expect.std() > 5
     assert np.abs(decode(data).astype(int) - expect).max() <= 1
+
+
+def test_the_editor_adds_a_point_and_drags_it(viewer, page):
+    """The transfer-function editor's canvas (a scalar model, shaded), starting from the start function's points: a
+    press where there is no point adds one, dragging moves it (drag frames of the edited function meanwhile); let go,
+    the page's points are the start's and the new one, and the final frame, another image than before, is
+    clwave.raytrace of the view with TransferFunction(those points)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    browser.open_viewer(page, viewer.url)
+    page.execute_script('document.querySelector(\'input[value="shaded"]\').click();')
+    start = browser.wait_final(page)
+    before = decode(browser.current_frame(page)[1])
+    assert start["tf_points"] == np.column_stack([START.data_points(), START.points[:, 1:]]).tolist()
+    editor = page.find_element("id", "tf-editor")
+    page.execute_script("arguments[0].scrollIntoView({block: 'center'})", editor)
+    ActionChains(page, duration=0).move_to_element_with_offset(editor, 30, -25).click_and_hold().move_by_offset(
+        8, -8).pause(0.2).move_by_offset(8, -8).perform()  # held: on a spot with no point, a fifth of the way up
+    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {start['seq']} && "
+                                    f"f.tf_points.length === {len(START.points) + 1} && f")
+    assert not moving["final"] and moving["mime"] == "image/jpeg"
+    browser.release(page)
+    final = browser.wait_final(page)
+    points = page.execute_script("return window.clwave.state.tf.points")
+    new = [i for i, p in enumerate(points) if not np.isclose(p[0], START.data_points()).any()]
+    assert len(new) == 1 and final["tf_points"] == points  # the page sends them rounded to 10 digits
+    np.testing.assert_allclose(np.delete(points, new, axis=0), start["tf_points"], rtol=1e-9)
+    camera = clwave.Camera(final["azimuth"], final["elevation"], SIZE, extent=final["extent"])
+    expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=clwave.TransferFunction(
+        points)).to_uint8(background=(0.0, 0.0, 0.0))
+    got = decode(browser.current_frame(page)[1])
+    assert np.array_equal(got, expect) and np.abs(got.astype(int) - before).max() > 1
