@@ -309,6 +309,35 @@ def test_the_editors_points_classify_the_shaded_view_and_rebuild_nothing(monkeyp
     assert expect.std() > 5 and np.array_equal(got, expect) and np.abs(got.astype(int) - other).max() > 1
 
 
+def test_a_starting_function_without_a_window_is_widened_over_its_points_span():
+    """view(scalar model, tf=TransferFunction(points)) without a window (points in data units, as the editor's): the
+    hello names its points' span as its window (the hello once failed on it), its frames are classified by it, and
+    the editor's width doubled spreads its points over twice that span about its centre (the final frame
+    clwave.raytrace with those points, made here in data units; within a grey level of the viewer's, which
+    normalises them)."""
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
+    start, wide = dict(preset=None, centre=0.0, width=1.0, opacity=1.0), dict(preset=None, centre=0.0, width=2.0,
+                                                                              opacity=1.0)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            hello = await ws.receive_json()
+            out = []
+            for seq, tf in enumerate((start, wide), 1):
+                await ws.send_str(json.dumps(dict(BASE, seq=seq, mode="shaded", tf=tf)))
+                out.append((await frames_until_final(ws, seq))[-1])
+            return hello, out
+    with view(wv, size=24, tolerance=2e-2, tf=clwave.TransferFunction(POINTS)) as v:
+        hello, frames = run(go(v))
+    assert hello["tf"] == dict(name=None, window=[0.1, 0.9])
+    np.testing.assert_allclose([f["tf_window"] for f, _ in frames], [[0.1, 0.9], [-0.3, 1.3]], rtol=1e-15)
+    for (figures, data), points in zip(frames, (POINTS, [[0.5 + 2 * (p[0] - 0.5), *p[1:]] for p in POINTS])):
+        expect = clwave.raytrace(wv, clwave.Camera(30.0, 20.0, 24, extent=figures["extent"]), tolerance=2e-2,
+                                 transfer_function=clwave.TransferFunction(points)).to_uint8(background=(0, 0, 0))
+        assert figures["final"] and expect.std() > 5 and np.abs(decode(data).astype(int) - expect).max() <= 1
+
+
 def test_device_memory_is_shared_out_among_the_renderers():
     """``memory_shares``: halves for the X-ray and the shaded views where both are served, the X-ray half a quarter
     for a file's prefix and the rest for its whole model; never more than the cap together."""

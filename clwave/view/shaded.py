@@ -117,33 +117,35 @@ class ShadedSource(Source):
 
     def start_figures(self) -> dict | None:
         """The page's editor's start: the starting transfer function's name and window (``"auto"``: the pool's
-        percentiles, known once the tracer is made); None for an RGBA model."""
+        percentiles, known once the tracer is made; a function without one, its points' span); None for an RGBA
+        model."""
         if not self.scalar:
             return None
         window = self.start_tf.window
-        return dict(name=self.start_tf.name, window=window if window == "auto" else [float(v) for v in window])
+        return dict(name=self.start_tf.name, window=window if window == "auto" else _span(self.start_tf, window))
 
     def transfer_function(self, spec, tracer) -> tuple:
         """``(transfer function, its window in data units)`` of a tab's ``(preset, centre, width, opacity)``: the
         preset's points (preset None: the starting function's) with their opacity times ``opacity``, under its window
-        (the pool's percentiles where "auto") widened ``width`` times and moved by ``centre`` of its width; spec None,
-        or the starting function unchanged, is the starting function itself (its window as given, not recomputed);
-        an "auto" window is the pool of ``tracer``, the one that renders the frame (the whole file's once it is in).
-        A spec that is a TransferFunction (the editor's points, in data units: no window) is itself, its window its
-        points' span.  ``(None, None)`` for an RGBA model."""
+        (the pool's percentiles where "auto", the points' span where it has none: points in data units) widened
+        ``width`` times and moved by ``centre`` of its width; spec None, or the starting function unchanged, is the
+        starting function itself (its window as given, not recomputed); an "auto" window is the pool of ``tracer``,
+        the one that renders the frame (the whole file's once it is in).  A spec that is a TransferFunction (the
+        editor's points, in data units) is itself.  ``(None, None)`` for an RGBA model."""
         if not self.scalar:
             return None, None
         key = (spec, weakref.ref(tracer))  # not id(): a tracer let go may leave its id to the next
-        if self._tf[0] != key and isinstance(spec, TransferFunction):
-            self._tf = (key, spec, [float(v) for v in spec.points[[0, -1], 0]])
-        elif self._tf[0] != key:
-            name, *change = (None, 0.0, 1.0, 1.0) if spec is None else spec
-            tf = self.start_tf if name is None else TransferFunction.preset(name)
-            lo, hi = window = tracer.scalar.window(tf)
+        if self._tf[0] != key:
+            name, *change = (None, 0.0, 1.0, 1.0) if spec is None or isinstance(spec, TransferFunction) else spec
+            tf = spec if isinstance(spec, TransferFunction) else self.start_tf if name is None else \
+                TransferFunction.preset(name)
+            lo, hi = window = _span(tf, tracer.scalar.window(tf))
             if change != [0.0, 1.0, 1.0]:
                 centre, width, opacity = change
                 mid, half = (lo + hi) / 2 + centre * (hi - lo), (hi - lo) * width / 2
                 points = tf.points.copy()
+                if tf.window is None:  # points in data units: on the normalised axis of their span first
+                    points[:, 0] = (points[:, 0] - lo) / (hi - lo)
                 points[:, 4] *= opacity
                 window = (mid - half, mid + half)
                 tf = TransferFunction(points, window=window, name=tf.name)
@@ -236,6 +238,12 @@ class ShadedSource(Source):
                            dict(figures, final=final, seconds=seconds,
                                 error_kind="relative RMS, estimated from the last step",
                                 **({} if note is None else dict(note=note))), start)
+
+
+def _span(tf: TransferFunction, window) -> list:
+    """``window`` (lo, hi) in data units as a list, or for ``tf`` without one (window None: its points in data units)
+    the span of its points."""
+    return [float(v) for v in (tf.points[[0, -1], 0] if window is None else window)]
 
 
 def _number(x):

@@ -356,6 +356,8 @@
   const letGo = () => {
     if (!editor.drag) return;
     editor.drag = false;
+    // a point let go at the top (its top twentieth) doubles the opacity axis: room to raise it further
+    if (editor.points[editor.selected][4] > 0.95 * editor.top) editor.top *= 2;
     if (editor.changed) edited(false);
   };
   tfCanvas.addEventListener("pointerup", letGo);
