@@ -97,11 +97,11 @@ def _points(rows):
         tf = TransferFunction(points, name="edited")
     except InputError as exc:
         raise Refused(f"tf points: {exc}") from None
-    # the kernel's table maps the points' span to [0, 1] in float32 (raytrace.classified.tf_table): scale and shift
-    # stay finite
-    span, far = points[-1][0] - points[0][0], max(abs(points[0][0]), abs(points[-1][0]))
-    if not span >= max(1e-30, 1e-6 * far):
-        raise Refused(f"tf points span {span:g}, too narrow for their values: at least 1e-6 of the largest and 1e-30")
+    # the kernel's table maps the points' span to [0, 1] in float32 (raytrace.classified.tf_table): its scale, one over
+    # the span, stays finite (its shift, the first value over the span, does then: distinct doubles within 1e30)
+    span = points[-1][0] - points[0][0]
+    if not span >= 1e-30:
+        raise Refused(f"tf points span {span:g}: at least 1e-30, for the renderer's float32 table")
     return tf
 
 

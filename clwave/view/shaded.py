@@ -136,9 +136,11 @@ class ShadedSource(Source):
             return None, None
         key = (spec, weakref.ref(tracer))  # not id(): a tracer let go may leave its id to the next
         if self._tf[0] != key:
-            name, *change = (None, 0.0, 1.0, 1.0) if spec is None or isinstance(spec, TransferFunction) else spec
-            tf = spec if isinstance(spec, TransferFunction) else self.start_tf if name is None else \
-                TransferFunction.preset(name)
+            if isinstance(spec, TransferFunction):  # the editor's points
+                tf, change = spec, [0.0, 1.0, 1.0]
+            else:
+                name, *change = (None, 0.0, 1.0, 1.0) if spec is None else spec
+                tf = self.start_tf if name is None else TransferFunction.preset(name)
             lo, hi = window = _span(tf, tracer.scalar.window(tf))
             if change != [0.0, 1.0, 1.0]:
                 centre, width, opacity = change
