@@ -17,6 +17,8 @@ from clwave.view.protocol import BURST, MAX_MESSAGE, RateLimit, Refused, parse_v
 BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
             background=0.0, shading=True)
 TF = dict(preset="hydrogen", centre=0.1, width=2.0, opacity=2.0)
+#: the editor's own points (data units), for a scalar hydrogen model: a red shell at 0.3 and a yellow core
+POINTS = [[0.1, 0.2, 0.4, 1.0, 0.0], [0.3, 1.0, 0.1, 0.1, 0.08], [0.45, 1.0, 0.1, 0.1, 0.0], [0.9, 1.0, 0.9, 0.2, 0.2]]
 
 
 @pytest.fixture(scope="module")
@@ -33,15 +35,17 @@ def run(coroutine):
     return asyncio.run(coroutine)
 
 
-async def frames_until_final(ws, seq, until_seq=False):
+async def frames_until_final(ws, seq, until_seq=False, texts=None):
     """The frames of view ``seq`` up to its final one (others are dropped as a page drops them); ``until_seq``:
-    its first frame only (a view while moving has no final one).  A status message (what is being made) is
-    passed over."""
+    its first frame only (a view while moving has no final one).  A status message (what is being made) and the
+    histogram of a scalar model's values are passed over (into the list ``texts`` where given)."""
     out = []
     while True:
         msg = await ws.receive(timeout=60)
-        if msg.type == aiohttp.WSMsgType.TEXT and json.loads(msg.data)["type"] == "status":
-            continue  # what is being prepared
+        if msg.type == aiohttp.WSMsgType.TEXT and json.loads(msg.data)["type"] in ("status", "histogram"):
+            if texts is not None:
+                texts.append(json.loads(msg.data))
+            continue
         assert msg.type == aiohttp.WSMsgType.BINARY, msg
         figures, data = unpack_frame(msg.data)
         if figures["seq"] == seq:
@@ -60,6 +64,10 @@ def test_parse_view_takes_a_whole_view():
     state = parse_view(json.dumps(dict(BASE, seq=3, window=[0, 2.5])), 2, ("xray",))
     assert (state.seq, state.azimuth, state.window, state.moving, state.tf) == (3, 30.0, (0.0, 2.5), False, None)
     assert parse_view(json.dumps(dict(BASE, seq=3, tf=TF)), 2, ("xray",)).tf == ("hydrogen", 0.1, 2.0, 2.0)
+    edited = parse_view(json.dumps(dict(BASE, seq=3, tf=dict(points=POINTS))), 2, ("xray",))
+    assert edited.tf == clwave.TransferFunction(POINTS, name="edited") and edited.tf.window is None
+    assert (state.colour_map, parse_view(json.dumps(dict(BASE, seq=3, colour_map="magma")), 2, ("xray",)).colour_map
+            ) == ("grey", "magma")
 
 
 @pytest.mark.parametrize("change, words", [
@@ -69,6 +77,21 @@ def test_parse_view_takes_a_whole_view():
     (dict(moving=1), "moving"), (dict(path="/etc/passwd"), "unknown field"), (dict(type="run"), "type"),
     (dict(tf=[1]), "tf must be"), (dict(tf=dict(TF, preset="/etc/passwd")), "preset"),
     (dict(tf=dict(TF, opacity=-1)), "opacity"), (dict(tf=dict(TF, code="x")), "tf must be"),
+    (dict(tf=dict(points=POINTS, preset="grey")), "tf must be"), (dict(tf=dict(points=POINTS[:1])), "2 to 32 rows"),
+    (dict(tf=dict(points=[[v, 0, 0, 0, 0] for v in range(33)])), "2 to 32 rows"),
+    (dict(tf=dict(points=[p[:4] for p in POINTS])), "2 to 32 rows"), (dict(tf=dict(points="x")), "2 to 32 rows"),
+    (dict(tf=dict(points=[POINTS[0], [float("nan"), 0, 0, 0, 0]])), "tf point 1 value=nan"),
+    (dict(tf=dict(points=[POINTS[0], [float("inf"), 0, 0, 0, 0]])), "tf point 1 value=inf"),
+    (dict(tf=dict(points=[["0.1", 0, 0, 0, 0], POINTS[1]])), "tf point 0 value='0.1' must be a number"),
+    (dict(tf=dict(points=[POINTS[0], [0.3, True, 0, 0, 0]])), "tf point 1 r=True"),
+    (dict(tf=dict(points=[POINTS[0], [0.3, 0, 1.5, 0, 0]])), "tf point 1 g=1.5 must be a number from 0 to 1"),
+    (dict(tf=dict(points=[POINTS[0], [0.3, 0, 0, 0, -0.1]])), "tf point 1 opacity=-0.1"),
+    (dict(tf=dict(points=[POINTS[0], [0.3, 0, 0, 0, 1e4]])), "opacity=10000.0 must be a number from 0 to 1000"),
+    (dict(tf=dict(points=[POINTS[1], POINTS[0]])), "strictly increasing"),
+    (dict(tf=dict(points=[POINTS[0], POINTS[0]])), "strictly increasing"),
+    (dict(tf=dict(points=[[0.0, 0, 0, 0, 0], [1e-31, 0, 0, 0, 1]])), "span 1e-31: at least 1e-30"),
+    (dict(colour_map="jet"), "colour_map='jet' must be one of grey, bone, viridis, inferno, magma"),
+    (dict(colour_map=None), "colour_map=None"), (dict(colour_map=["grey"]), "colour_map"),
 ])
 def test_parse_view_refuses_what_is_not_a_view(change, words):
     with pytest.raises(Refused, match=words):
@@ -187,6 +210,131 @@ def test_still_xray_frames_refine_to_the_splat_of_the_view(viewer):
     got = decode(data)
     assert got.shape == expect.shape and expect.std() > 10
     assert np.abs(got.astype(int) - expect).max() <= 1
+
+
+def test_colour_maps_are_matplotlibs_tables_and_colour_the_grey_levels():
+    """The stored tables are matplotlib's sampled at their 256 entries, rounded to 8 bits; a grey ramp comes out as
+    the table, row for row."""
+    import matplotlib
+
+    from clwave.view import colours
+
+    ramp = np.arange(256, dtype=np.uint8).reshape(16, 16)
+    assert colours.NAMES[0] == "grey" and colours.apply(ramp, "grey") is ramp
+    for name in colours.NAMES[1:]:
+        expect = np.round(255 * matplotlib.colormaps[name](np.arange(256))[:, :3]).astype(np.uint8)
+        np.testing.assert_array_equal(colours.table(name), expect)
+        np.testing.assert_array_equal(colours.apply(ramp, name).reshape(256, 3), expect)
+
+
+def test_a_still_xray_frame_in_a_colour_map_is_the_splat_looked_up_in_its_table(viewer):
+    """An X-ray view in inferno (a scalar model): every pixel of the final frame is a row of the table, and its row
+    is the grey level of clwave.splat of the view under the same window (within one level, as the grey frames)."""
+    from clwave.view.colours import table
+
+    async def go():
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(viewer))
+            hello = await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, azimuth=60.0, window=[0.0, 0.4], colour_map="inferno")))
+            return hello, await frames_until_final(ws, 1)
+    hello, frames = run(go())
+    assert hello["colour_maps"] == ["grey", "bone", "viridis", "inferno", "magma"]
+    assert hello["capabilities"]["xray"]["colour_map"] is True
+    final, data = frames[-1]
+    assert all(f["colour_map"] == "inferno" for f, _ in frames)
+    got = decode(data)
+    assert got.shape == (48, 64, 3)
+    rows = table("inferno")
+    match = np.all(got[:, :, None, :] == rows[None, None], axis=-1)  # (H, W, 256): the rows each pixel equals
+    assert np.all(match.sum(axis=-1) == 1)  # every pixel one row of the table (inferno's rows are distinct)
+    expect = clwave.splat(viewer.server.wv, clwave.Camera(60.0, 20.0, (48, 64), extent=final["extent"])).to_uint8(
+        (0.0, 0.4))
+    assert expect.std() > 10 and np.abs(match.argmax(axis=-1) - expect.astype(int)).max() <= 1
+
+
+def test_the_editors_points_classify_the_shaded_view_and_rebuild_nothing(monkeypatch):
+    """A scalar model's shaded view through the editor's own points (``tf: {"points": ...}``, data units): the tab
+    hears the histogram of the values the "auto" window comes from before the first shaded frame; every frame carries
+    the points it was classified by and their span as its window; the final frame is clwave.raytrace of the view with
+    TransferFunction(points) bit for bit.  From a preset to points, and a point moved, no bricks, program or scalar
+    range is made (instrumented, as tests/test_classify.py): only the function's table and bounds."""
+    from clwave.raytrace import classified, tracer as traced
+    from clwave.raytrace.tracer import RayTracer
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.3)
+    moved = [p.copy() for p in POINTS]
+    moved[1][0], moved[1][4] = 0.25, 0.12  # the shell's point dragged left and up
+    metas, calls, render = [], [], RayTracer.render
+    monkeypatch.setattr(RayTracer, "render", lambda self, *a, **k: (lambda r: metas.append(r.meta) or r)(
+        render(self, *a, **k)))
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            await ws.receive_json()
+            texts = []
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", tf=TF)))
+            await frames_until_final(ws, 1, texts=texts)
+            tracer = v.server.sources["shaded"].tracer
+            monkeypatch.setattr(traced, "build", lambda *a, **k: calls.append("build"))
+            monkeypatch.setattr(classified.ScalarRange, "__init__", lambda *a, **k: calls.append("range"))
+            programs, metas[:] = dict(tracer.cc.programs), []
+            await ws.send_str(json.dumps(dict(BASE, seq=2, mode="shaded", tf=dict(points=POINTS), moving=True)))
+            frames = await frames_until_final(ws, 2, until_seq=True)
+            await ws.send_str(json.dumps(dict(BASE, seq=3, mode="shaded", tf=dict(points=moved), azimuth=50.0)))
+            frames += await frames_until_final(ws, 3, texts=texts)
+            assert calls == [] and dict(tracer.cc.programs) == programs and tracer.expansions == 1
+            return texts, frames, tracer.scalar.sample
+    with view(wv, size=32, tolerance=2e-2) as v:
+        texts, frames, sample = run(go(v))
+    monkeypatch.undo()  # the one-shot renders below make their own tracers
+    histogram = [t for t in texts if t["type"] == "histogram"]
+    assert len(histogram) == 1 and len(histogram[0]["counts"]) == 64 and sum(histogram[0]["counts"]) == sample.size
+    assert histogram[0]["range"] == [float(sample.min()), float(sample.max())] and sample.size > 1000
+    assert [f["tf_points"] for f, _ in frames] == [POINTS] + [moved] * (len(frames) - 1)
+    assert [f["tf_window"] for f, _ in frames] == [[0.1, 0.9]] * len(frames) and frames[-1][0]["final"]
+    # every render classified by the points sent, a change paying its table and bounds only (0.5-0.7 ms here; the
+    # bricks and programs cost seconds)
+    sent = [clwave.TransferFunction(p, name="edited").to_dict() for p in (POINTS, moved)]
+    assert [m["transfer_function"] for m in metas] == sorted((m["transfer_function"] for m in metas), key=sent.index)
+    assert {json.dumps(m["transfer_function"]) for m in metas} == set(map(json.dumps, sent))
+    assert 0 < max(m["classify_seconds"] for m in metas) < 0.25
+    expect = clwave.raytrace(wv, clwave.Camera(50.0, 20.0, 32, extent=frames[-1][0]["extent"]), tolerance=2e-2,
+                             transfer_function=clwave.TransferFunction(moved)).to_uint8(background=(0.0, 0.0, 0.0))
+    other = clwave.raytrace(wv, clwave.Camera(50.0, 20.0, 32, extent=frames[-1][0]["extent"]), tolerance=2e-2,
+                            transfer_function=clwave.TransferFunction(POINTS)).to_uint8(background=(0.0, 0.0, 0.0))
+    got = decode(frames[-1][1])
+    assert expect.std() > 5 and np.array_equal(got, expect) and np.abs(got.astype(int) - other).max() > 1
+
+
+def test_a_starting_function_without_a_window_is_widened_over_its_points_span():
+    """view(scalar model, tf=TransferFunction(points)) without a window (points in data units, as the editor's): the
+    hello names its points' span as its window (the hello once failed on it), its frames are classified by it, and
+    the editor's width doubled spreads its points over twice that span about its centre (the final frame
+    clwave.raytrace with those points, made here in data units; within a grey level of the viewer's, which
+    normalises them)."""
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
+    start, wide = dict(preset=None, centre=0.0, width=1.0, opacity=1.0), dict(preset=None, centre=0.0, width=2.0,
+                                                                              opacity=1.0)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            hello = await ws.receive_json()
+            out = []
+            for seq, tf in enumerate((start, wide), 1):
+                await ws.send_str(json.dumps(dict(BASE, seq=seq, mode="shaded", tf=tf)))
+                out.append((await frames_until_final(ws, seq))[-1])
+            return hello, out
+    with view(wv, size=24, tolerance=2e-2, tf=clwave.TransferFunction(POINTS)) as v:
+        hello, frames = run(go(v))
+    assert hello["tf"] == dict(name=None, window=[0.1, 0.9])
+    np.testing.assert_allclose([f["tf_window"] for f, _ in frames], [[0.1, 0.9], [-0.3, 1.3]], rtol=1e-15)
+    for (figures, data), points in zip(frames, (POINTS, [[0.5 + 2 * (p[0] - 0.5), *p[1:]] for p in POINTS])):
+        expect = clwave.raytrace(wv, clwave.Camera(30.0, 20.0, 24, extent=figures["extent"]), tolerance=2e-2,
+                                 transfer_function=clwave.TransferFunction(points)).to_uint8(background=(0, 0, 0))
+        assert figures["final"] and expect.std() > 5 and np.abs(decode(data).astype(int) - expect).max() <= 1
 
 
 def test_device_memory_is_shared_out_among_the_renderers():
@@ -316,6 +464,7 @@ def test_shaded_frames_of_an_rgba_model_refine_in_detail_to_the_ray_traced_view(
     with view(wv, size=128, tolerance=2e-2) as v:  # a first frame on 32^2 (MIN_SIDE)
         hello, drag, frames = run(go(v))
     assert hello["modes"] == ["xray", "shaded"] and hello["capabilities"]["shaded"]["tf"] is False
+    assert hello["capabilities"]["xray"]["colour_map"] is False  # its X-ray is in its own colours
     assert drag[0][0]["width"] < 128 and not drag[0][0]["final"]
     figures = [f for f, _ in frames]
     assert [f["detail"] for f in figures] == sorted(f["detail"] for f in figures)[::-1] and figures[-1]["detail"] == 0

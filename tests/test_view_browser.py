@@ -1,6 +1,6 @@
 """The viewer's page in a real headless browser (Debian's chromium through Selenium; docs/viewer.md §5):
 first image, orbit by dragging, the final X-ray frame against clwave.splat, a wrong token, two tabs, superseded
-frames, a hostile socket beside a working page."""
+frames, a hostile socket beside a working page, the transfer-function editor's presets, sliders and points."""
 
 import io
 import sys
@@ -150,3 +150,38 @@ def test_shaded_with_the_transfer_function_editor(viewer, page):
     figures, data = browser.current_frame(page)
     assert figures["tolerance"] == 1e-2 and expect.std() > 5
     assert np.abs(decode(data).astype(int) - expect).max() <= 1
+
+
+def test_the_editor_adds_a_point_and_drags_it(viewer, page):
+    """The transfer-function editor's canvas (a scalar model, shaded), starting from the start function's points: a
+    press where there is no point adds one, dragging moves it (drag frames of the edited function meanwhile); let go,
+    the page's points are the start's and the new one, and the final frame, another image than before, is
+    clwave.raytrace of the view with TransferFunction(those points); a double-click on the point removes it."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    browser.open_viewer(page, viewer.url)
+    page.execute_script('document.querySelector(\'input[value="shaded"]\').click();')
+    start = browser.wait_final(page)
+    before = decode(browser.current_frame(page)[1])
+    assert start["tf_points"] == np.column_stack([START.data_points(), START.points[:, 1:]]).tolist()
+    editor = page.find_element("id", "tf-editor")
+    page.execute_script("arguments[0].scrollIntoView({block: 'center'})", editor)
+    ActionChains(page, duration=0).move_to_element_with_offset(editor, 30, -25).click_and_hold().move_by_offset(
+        8, -4).pause(0.2).move_by_offset(8, -4).perform()  # held: from a spot with no point, up to 0.8 of the axis
+    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {start['seq']} && "
+                                    f"f.tf_points.length === {len(START.points) + 1} && f")
+    assert not moving["final"] and moving["mime"] == "image/jpeg"
+    browser.release(page)
+    final = browser.wait_final(page)
+    points = page.execute_script("return window.clwave.state.tf.points")
+    new = [i for i, p in enumerate(points) if not np.isclose(p[0], START.data_points()).any()]
+    assert len(new) == 1 and final["tf_points"] == points  # the page sends them rounded to 10 digits
+    np.testing.assert_allclose(np.delete(points, new, axis=0), start["tf_points"], rtol=1e-9)
+    camera = clwave.Camera(final["azimuth"], final["elevation"], SIZE, extent=final["extent"])
+    expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=clwave.TransferFunction(
+        points)).to_uint8(background=(0.0, 0.0, 0.0))
+    got = decode(browser.current_frame(page)[1])
+    assert np.array_equal(got, expect) and np.abs(got.astype(int) - before).max() > 1
+    ActionChains(page, duration=0).double_click().perform()  # on the point, where the drag left it: removed
+    browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {final['seq']} && f.final && "
+                           f"f.tf_points.length === {len(START.points)}")

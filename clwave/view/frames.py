@@ -18,7 +18,9 @@ import numpy as np
 from ..errors import InputError, finite_number
 from ..io.result import RenderResult, resolve_window
 from ..model.camera import Camera
+from ..model.transfer import TransferFunction
 from ..splat.renderer import SplatRenderer
+from . import colours
 
 #: X-ray frames while dragging aim at this many seconds of rendering: the coefficient prefix adapts to the measured
 #: time, and below DRAG_LEAST coefficients the image shrinks instead, through DRAG_SCALES of the full size
@@ -57,7 +59,10 @@ class ViewState:
     moving: bool
     background: float  # shaded: grey level behind the volume, 0..1
     shading: bool  # shaded: Phong lighting (a headlight) or unlit emission
-    tf: tuple | None = None  # shaded, scalar model: (preset, centre, width, opacity), see shaded.transfer_function
+    # shaded, scalar model: (preset, centre, width, opacity) or the editor's points' TransferFunction, see
+    # shaded.transfer_function
+    tf: tuple | TransferFunction | None = None
+    colour_map: str = "grey"  # X-ray, scalar model: one of colours.NAMES
 
 
 @dataclass
@@ -114,6 +119,9 @@ class Source:
     def pacing(self):
         """A tab's pacing state of this source's frames (passed to :meth:`frames`)."""
 
+    def histogram(self) -> dict | None:
+        """The values behind the page's transfer-function editor (``range``, ``counts``), where the source has them."""
+
     def frames(self, state: ViewState, pace):
         raise NotImplementedError
 
@@ -148,10 +156,10 @@ class XraySource(Source):
     final, and :meth:`swap` puts the whole model in (docs/viewer.md §2)."""
 
     mode = "xray"
-    capabilities = dict(detail=True, window=True)
 
     def __init__(self, wv, size, renderer: SplatRenderer, complete=True):
         super().__init__(wv, size)
+        self.capabilities = dict(detail=True, window=True, colour_map=wv.channels == 1)  # an RGBA model's is colour
         self.r, self.complete = renderer, complete
         self.rate = None  # seconds per coefficient of the last still view (its footprints included)
         n = min(renderer.count, WINDOW_COEFFICIENTS)
@@ -234,7 +242,10 @@ class XraySource(Source):
         energy = r.energy
         captured = float(energy[count - 1] / energy[-1]) if count and energy[-1] > 0 else 1.0
         picture = RenderResult(image, dict(mode="xray")).to_uint8(window)
-        figures = dict(final=final, coefficients=count, fraction=count / max(r.count, 1),
+        colour_map = state.colour_map if self.capabilities["colour_map"] else None  # an RGBA model's is its colours
+        if colour_map:
+            picture = colours.apply(picture, colour_map)
+        figures = dict(final=final, colour_map=colour_map, coefficients=count, fraction=count / max(r.count, 1),
                        voxel_fraction=count / self.wv.n_voxels, prefix=not complete,
                        # the coefficient energy not yet splatted: the relative L2 error of the model drawn
                        error=float(np.sqrt(max(0.0, 1.0 - captured))), error_kind="relative L2 (coefficients left)",

@@ -13,9 +13,10 @@ import math
 import struct
 import time
 
+from . import colours
 from .frames import ViewState
 
-#: the largest message a page may send (a view is about 250 bytes)
+#: the largest message a page may send (a view is about 250 bytes; with 32 transfer-function points, at most 2 KB)
 MAX_MESSAGE = 4096
 #: messages per second a page may send on average, and in a burst (the page sends at most one per
 #: animation frame, 60 a second)
@@ -35,7 +36,10 @@ class Refused(Exception):
 
 
 def _number(msg, name, lo, hi) -> float:
-    value = msg.get(name)
+    return _value(msg.get(name), name, lo, hi)
+
+
+def _value(value, name, lo, hi) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
             or not lo <= value <= hi:
         raise Refused(f"{name}={value!r} must be a number from {lo:g} to {hi:g}")
@@ -50,25 +54,55 @@ def _flag(msg, name) -> bool:
 
 
 FIELDS = {"type", "seq", "azimuth", "elevation", "zoom", "mode", "detail", "window", "moving", "background",
-          "shading", "tf"}
+          "shading", "tf", "colour_map"}
 #: a transfer function from the page's editor: a preset, its window's centre moved by this many of its widths, its
 #: width times this, its opacity times this (clwave.view.shaded.ShadedSource.transfer_function)
 TF_RANGES = dict(centre=(-2.0, 2.0), width=(0.02, 50.0), opacity=(1e-3, 1e3))
+#: or its own points: at most this many rows (value, r, g, b, opacity), each number within its span (a value in data
+#: units, an opacity per unit length: the presets' are at most 0.5)
+TF_POINTS = 32
+POINT_RANGES = dict(value=(-1e30, 1e30), r=(0.0, 1.0), g=(0.0, 1.0), b=(0.0, 1.0), opacity=(0.0, 1e3))
 
 
 def _tf(value):
     """``(preset, centre, width, opacity)`` of a page's ``tf`` field (preset None: the starting transfer function,
-    the one the server was given, the model's own or grey), or None (the starting function as it is)."""
+    the one the server was given, the model's own or grey), a TransferFunction of its ``points`` (in data units), or
+    None (the starting function as it is)."""
     from ..model.transfer import TransferFunction
 
     if value is None:
         return None
+    if isinstance(value, dict) and set(value) == {"points"}:
+        return _points(value["points"])
     if not isinstance(value, dict) or set(value) != {"preset", *TF_RANGES}:
-        raise Refused(f"tf must be null or {{\"preset\", {', '.join(map(repr, TF_RANGES))}}}")
+        raise Refused(f"tf must be null, {{\"points\"}} or {{\"preset\", {', '.join(map(repr, TF_RANGES))}}}")
     if value["preset"] is not None and value["preset"] not in TransferFunction.PRESETS:
         raise Refused(f"tf preset={value['preset']!r} must be null (the starting one) or one of "
                       f"{', '.join(TransferFunction.PRESETS)}")
     return (value["preset"], *(_number(value, name, *span) for name, span in TF_RANGES.items()))
+
+
+def _points(rows):
+    """The TransferFunction of the editor's points ``[[value, r, g, b, opacity], ...]``, values in data units (its
+    own checks: values strictly increasing), or :class:`Refused`."""
+    from ..errors import InputError
+    from ..model.transfer import TransferFunction
+
+    if not isinstance(rows, list) or not 2 <= len(rows) <= TF_POINTS or \
+            not all(isinstance(row, list) and len(row) == len(POINT_RANGES) for row in rows):
+        raise Refused(f"tf points must be 2 to {TF_POINTS} rows [value, r, g, b, opacity]")
+    points = [[_value(x, f"tf point {i} {name}", *span) for x, (name, span) in zip(row, POINT_RANGES.items())]
+              for i, row in enumerate(rows)]
+    try:
+        tf = TransferFunction(points, name="edited")
+    except InputError as exc:
+        raise Refused(f"tf points: {exc}") from None
+    # the kernel's table maps the points' span to [0, 1] in float32 (raytrace.classified.tf_table): its scale, one over
+    # the span, stays finite (its shift, the first value over the span, does then: distinct doubles within 1e30)
+    span = points[-1][0] - points[0][0]
+    if not span >= 1e-30:
+        raise Refused(f"tf points span {span:g}: at least 1e-30, for the renderer's float32 table")
+    return tf
 
 
 def parse_view(text: str, last_seq: int, modes) -> ViewState:
@@ -93,13 +127,16 @@ def parse_view(text: str, last_seq: int, modes) -> ViewState:
     if window is not None:
         if not isinstance(window, list) or len(window) != 2:
             raise Refused(f"window={window!r} must be null (auto) or [lo, hi]")
-        window = (_number({"lo": window[0]}, "lo", -1e30, 1e30), _number({"hi": window[1]}, "hi", -1e30, 1e30))
+        window = (_value(window[0], "lo", -1e30, 1e30), _value(window[1], "hi", -1e30, 1e30))
         if not window[0] < window[1]:
             raise Refused(f"window {list(window)} must have lo < hi")
+    colour_map = msg.get("colour_map", "grey")
+    if colour_map not in colours.NAMES:
+        raise Refused(f"colour_map={colour_map!r} must be one of {', '.join(colours.NAMES)}")
     return ViewState(seq=seq, azimuth=_number(msg, "azimuth", -1e6, 1e6), elevation=_number(msg, "elevation", -90, 90),
                      zoom=_number(msg, "zoom", *ZOOM), mode=msg["mode"], detail=_number(msg, "detail", 1e-6, 1.0),
                      window=window, moving=_flag(msg, "moving"), background=_number(msg, "background", 0.0, 1.0),
-                     shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")))
+                     shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")), colour_map=colour_map)
 
 
 class RateLimit:

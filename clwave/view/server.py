@@ -23,6 +23,7 @@ from aiohttp import WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError
+from . import colours
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
 from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, pack_frame, parse_view
@@ -273,7 +274,8 @@ class ViewServer:
 
         shaded = self.sources.get("shaded")
         return dict(type="hello", modes=list(self.sources), size=list(xray.size), window=list(xray.auto_window),
-                    presets=list(TransferFunction.PRESETS), tf=shaded.start_figures() if shaded else None,
+                    presets=list(TransferFunction.PRESETS), colour_maps=list(colours.NAMES),
+                    tf=shaded.start_figures() if shaded else None,
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model())
 
     def model(self) -> dict:
@@ -295,6 +297,7 @@ class Session:
         self.paces = {}  # mode -> this tab's pacing of its frames (frames.XrayPace, shaded.ShadedPace)
         self.news = set()  # modes whose source has a better model since this tab's last view began
         self.rendered, self.final = None, False  # the last view rendered, and whether its final frame was sent
+        self.histogram = None  # the last histogram of the model's values sent
 
     def upgraded(self, mode):
         """The ``mode`` source has a better model (a file's whole, swapped in for its prefix)."""
@@ -373,6 +376,10 @@ class Session:
                 continue
             if state.mode not in self.paces:
                 self.paces[state.mode] = source.pacing()
+            values = source.histogram()  # the page's editor draws it: sent once a tracer
+            if values is not None and values is not self.histogram:
+                self.histogram = values
+                await self.ws.send_json(dict(type="histogram", **values))
             frames = source.frames(state, self.paces[state.mode])
             try:
                 while self.state is state:

@@ -5,8 +5,8 @@ The model is traced with every detail's bricks (``lod=True``, docs/raytracing.md
 image at a coarse detail and a looser tolerance, paced to the measured time; when still,
 :meth:`~clwave.RayTracer.refine` (§9), full detail on reduced images to the full size at the tolerance, each
 frame with its error estimate.  A scalar model is classified while rendering by the tab's transfer function
-(``transfer_function=``, §10, at every detail): a preset, its window moved and widened, its opacity scaled,
-from the page's editor.
+(``transfer_function=``, §10, at every detail): a preset, its window moved and widened, its opacity scaled, or
+points of its own, from the page's editor.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ DRAG_SECONDS = 0.12
 LOOSEN = 10.0
 #: frames while dragging, cheapest first: (image scale, detail)
 DRAG_STEPS = ((0.0625, 3), (0.125, 2), (0.1875, 2), (0.25, 1), (0.375, 1), (0.5, 1), (0.5, 0))
+#: bins of the histogram of a scalar model's values behind the page's transfer-function editor
+HISTOGRAM_BINS = 64
 
 
 @dataclass
@@ -64,6 +66,7 @@ class ShadedSource(Source):
         self.start_tf = None if not self.scalar else transfer_function or (
             TransferFunction.from_dict(own) if own else TransferFunction.preset("grey"))
         self._tf = (None, None, None)  # the last (key, transfer function, window): the tracer reuses its table
+        self._histogram = (None, None)  # (the tracer's weak reference, its histogram)
 
     def ready(self) -> bool:
         return self.tracer is not None or self.staged is not None
@@ -114,44 +117,73 @@ class ShadedSource(Source):
 
     def start_figures(self) -> dict | None:
         """The page's editor's start: the starting transfer function's name and window (``"auto"``: the pool's
-        percentiles, known once the tracer is made); None for an RGBA model."""
+        percentiles, known once the tracer is made; a function without one, its points' span); None for an RGBA
+        model."""
         if not self.scalar:
             return None
         window = self.start_tf.window
-        return dict(name=self.start_tf.name, window=window if window == "auto" else [float(v) for v in window])
+        return dict(name=self.start_tf.name, window=window if window == "auto" else _span(self.start_tf, window))
 
     def transfer_function(self, spec, tracer) -> tuple:
         """``(transfer function, its window in data units)`` of a tab's ``(preset, centre, width, opacity)``: the
         preset's points (preset None: the starting function's) with their opacity times ``opacity``, under its window
-        (the pool's percentiles where "auto") widened ``width`` times and moved by ``centre`` of its width; spec None,
-        or the starting function unchanged, is the starting function itself (its window as given, not recomputed);
-        an "auto" window is the pool of ``tracer``, the one that renders the frame (the whole file's once it is in).
-        ``(None, None)`` for an RGBA model."""
+        (the pool's percentiles where "auto", the points' span where it has none: points in data units) widened
+        ``width`` times and moved by ``centre`` of its width; spec None, or the starting function unchanged, is the
+        starting function itself (its window as given, not recomputed); an "auto" window is the pool of ``tracer``,
+        the one that renders the frame (the whole file's once it is in).  A spec that is a TransferFunction (the
+        editor's points, in data units) is itself.  ``(None, None)`` for an RGBA model."""
         if not self.scalar:
             return None, None
         key = (spec, weakref.ref(tracer))  # not id(): a tracer let go may leave its id to the next
         if self._tf[0] != key:
-            name, *change = (None, 0.0, 1.0, 1.0) if spec is None else spec
-            tf = self.start_tf if name is None else TransferFunction.preset(name)
-            lo, hi = window = tracer.scalar.window(tf)
+            if isinstance(spec, TransferFunction):  # the editor's points
+                tf, change = spec, [0.0, 1.0, 1.0]
+            else:
+                name, *change = (None, 0.0, 1.0, 1.0) if spec is None else spec
+                tf = self.start_tf if name is None else TransferFunction.preset(name)
+            lo, hi = window = _span(tf, tracer.scalar.window(tf))
             if change != [0.0, 1.0, 1.0]:
                 centre, width, opacity = change
                 mid, half = (lo + hi) / 2 + centre * (hi - lo), (hi - lo) * width / 2
                 points = tf.points.copy()
+                if tf.window is None:  # points in data units: on the normalised axis of their span first
+                    points[:, 0] = (points[:, 0] - lo) / (hi - lo)
                 points[:, 4] *= opacity
                 window = (mid - half, mid + half)
                 tf = TransferFunction(points, window=window, name=tf.name)
             self._tf = (key, tf, [float(v) for v in window])
         return self._tf[1:]
 
+    def _stage(self, tracer):
+        """The tracer that renders now: ``tracer`` (the whole model's), else a file's coarse stage."""
+        return tracer or self.staged.coarse or self.staged.full
+
+    def histogram(self) -> dict | None:
+        """The values behind the page's transfer-function editor: a histogram (:data:`HISTOGRAM_BINS`, from the least
+        value to the greatest) of the field values that the tracer rendering now takes an "auto" window from
+        (``ScalarRange.sample``, docs/raytracing.md §10; at most 2^16), made once a tracer; None for an RGBA model, or
+        bricks in a scratch file (no sample)."""
+        stage = self._stage(self.tracer) if self.scalar and self.ready() else None
+        sample = None if stage is None else stage.scalar.sample
+        if sample is None:
+            return None
+        if self._histogram[0] is None or self._histogram[0]() is not stage:
+            counts, edges = np.histogram(sample, bins=HISTOGRAM_BINS)
+            self._histogram = (weakref.ref(stage), dict(range=[float(edges[0]), float(edges[-1])],
+                                                        counts=counts.tolist()))
+        return self._histogram[1]
+
     def frames(self, state: ViewState, pace: ShadedPace):
         start = time.perf_counter()
         tracer = self.tracer  # None while a file's whole tracer is being set up: its coarse stage
-        options, classified = dict(shading=state.shading), {}  # a scalar model's: its window, a figure of each frame
+        # a scalar model's: its window and points in data units, figures of each frame (the page's editor draws them)
+        options, classified = dict(shading=state.shading), {}
         if self.scalar:
             # the tracer read once: another thread sets self.tracer when the whole file's is ready
-            stage = tracer or self.staged.coarse or self.staged.full
-            options["transfer_function"], classified["tf_window"] = self.transfer_function(state.tf, stage)
+            tf, window = self.transfer_function(state.tf, self._stage(tracer))
+            values = tf.data_points(None if tf.window is None else window)
+            options["transfer_function"] = tf
+            classified = dict(tf_window=window, tf_points=np.column_stack([values, tf.points[:, 1:]]).tolist())
         if state.moving:
             scale, detail = self.steps[pace.step]
             if tracer is None:
@@ -208,6 +240,12 @@ class ShadedSource(Source):
                            dict(figures, final=final, seconds=seconds,
                                 error_kind="relative RMS, estimated from the last step",
                                 **({} if note is None else dict(note=note))), start)
+
+
+def _span(tf: TransferFunction, window) -> list:
+    """``window`` (lo, hi) in data units as a list, or for ``tf`` without one (window None: its points in data units)
+    the span of its points."""
+    return [float(v) for v in (tf.points[[0, -1], 0] if window is None else window)]
 
 
 def _number(x):

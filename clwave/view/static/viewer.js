@@ -6,7 +6,7 @@
   const canvas = $("image"), ctx = canvas.getContext("2d"), status = $("status");
   const HOME = { azimuth: 30, elevation: 20, zoom: 1 };
   const state = { ...HOME, mode: "xray", detail: 1, window: null, moving: false, background: 0, shading: true,
-                  tf: null };
+                  tf: null, colour_map: "grey" };
   let sentSeq = 0, hello = null, current = null, pending = false, idleTimer = null;
   // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
   const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, tfInput: null, frames: [] };
@@ -41,6 +41,7 @@
   function onText(msg) {
     if (msg.type === "hello") { hello = msg; setup(); request(); }
     else if (msg.type === "model") { hello.model = msg.model; showModel(); }  // a file's whole model is in
+    else if (msg.type === "histogram") { editor.histogram = msg; drawEditor(); }  // a scalar model's values
     else if (msg.type === "status" && msg.seq === sentSeq) status.textContent = msg.message;
     else if (msg.type === "error" && msg.seq === sentSeq) {
       status.textContent = msg.message; status.classList.add("error");
@@ -87,10 +88,12 @@
     // the first entry is the transfer function the server starts from (given with --tf/--tf-window, the model's
     // own, or grey; preset null), then the presets with their own windows
     const start = hello.tf || { name: "grey", window: "auto" };
-    $("tf-preset").replaceChildren(...[null, ...hello.presets].map((name) => {
+    $("tf-preset").replaceChildren(...[null, ...hello.presets, EDITED].map((name) => {
       const option = document.createElement("option");
       option.value = name || "";
-      option.textContent = name || `${start.name || "custom"}, window ${showRange(start.window)} (start)`;
+      option.textContent = name === EDITED ? "edited points" :
+        name || `${start.name || "custom"}, window ${showRange(start.window)} (start)`;
+      option.hidden = name === EDITED;
       return option;
     }));
     const tf = shaded && hello.capabilities.shaded.tf;
@@ -98,7 +101,14 @@
     $("tf-note").textContent = tf ? "classified while rendering" : "the model was classified before its " +
       "transform (RGBA): lighting and background act";
     $("tf-range").textContent = showRange(start.window);
-    if (tf) { state.tf = { preset: null, centre: 0, width: 1, opacity: 1 }; showTf(); }
+    if (tf) { state.tf = { ...tfPreset }; showTf(); }
+    $("colour-map").replaceChildren(...hello.colour_maps.map((name) => {
+      const option = document.createElement("option");
+      option.value = option.textContent = name;
+      return option;
+    }));
+    $("colour-map").disabled = !hello.capabilities.xray.colour_map;
+    drawEditor();
     syncMode();
     showDetail(); showWindow();
   }
@@ -183,27 +193,187 @@
   $("lo").addEventListener("input", moveWindow);
   $("hi").addEventListener("input", moveWindow);
   $("auto-window").addEventListener("click", () => { state.window = null; showWindow(); request(); });
+  $("colour-map").addEventListener("change", (ev) => { state.colour_map = ev.target.value; request(); });
   $("shading").addEventListener("change", (ev) => { state.shading = ev.target.checked; request(); });
-  // transfer function (a scalar model, classified while rendering): a slider being moved asks for the cheap
-  // frames of a drag, its release for the refined view
+  // transfer function (a scalar model, classified while rendering): a preset (null: the starting function), its
+  // window moved and widened, its opacity scaled; or the editor's points (below), which a preset or a slider replaces.
+  // A slider being moved asks for the cheap frames of a drag, its release for the refined view
+  const tfPreset = { preset: null, centre: 0, width: 1, opacity: 1 };
   const TF_SLIDERS = { "tf-window": ["centre", (v) => (v - 50) / 50], "tf-width": ["width", (v) => 10 ** ((v - 50) / 50)],
                        "tf-opacity": ["opacity", (v) => 10 ** ((v - 50) / 25)] };
   function showTf() {
-    for (const [id, [key]] of Object.entries(TF_SLIDERS)) $(id + "-out").textContent = state.tf[key].toPrecision(2);
+    for (const [id, [key]] of Object.entries(TF_SLIDERS)) $(id + "-out").textContent = tfPreset[key].toPrecision(2);
+    $("tf-preset").value = tfPreset.preset || "";
   }
   for (const [id, [key, of]] of Object.entries(TF_SLIDERS)) {
     $(id).addEventListener("input", (ev) => {
-      state.tf = { ...state.tf, [key]: of(+ev.target.value) }; state.moving = true; showTf(); request();
+      tfPreset[key] = of(+ev.target.value); state.tf = { ...tfPreset }; state.moving = true; showTf(); request();
       if (stats.tfInput === null) stats.tfInput = performance.now();
     });
     $(id).addEventListener("change", () => { state.moving = false; request(); });
   }
   $("tf-preset").addEventListener("change", (ev) => {
-    state.tf = { ...state.tf, preset: ev.target.value || null }; request();
+    if (ev.target.value === EDITED) return;  // chosen by editing only
+    tfPreset.preset = ev.target.value || null; state.tf = { ...tfPreset }; request();
   });
   $("background").addEventListener("input", (ev) => {
     state.background = ev.target.value / 100; $("background-out").textContent = state.background.toFixed(2); request();
   });
+
+  // ---------------------------------------------------------------- transfer-function points
+  // The canvas shows the opacity over the scalar's values (their histogram behind it, log counts): the points of the
+  // function of the last shaded frame, in data units, until the user edits them (click: add, drag: move, double-click
+  // or Delete: remove, the colour input: the selected point's colour); then the page sends those points (tf.points)
+  // and keeps its axes. Values stay strictly increasing, GAP of the axis apart.
+  const EDITED = "edited", MAX_POINTS = 32, GAP = 1e-3, PAD = 5, HIT = 7;
+  const tfCanvas = $("tf-editor"), tfCtx = tfCanvas.getContext("2d");
+  const editor = { points: null, axis: [0, 1], top: 1, selected: -1, drag: false, changed: false, histogram: null };
+  const xOf = (v) => PAD + (v - editor.axis[0]) / (editor.axis[1] - editor.axis[0]) * (tfCanvas.width - 2 * PAD);
+  const yOf = (a) => tfCanvas.height - PAD - a / editor.top * (tfCanvas.height - 2 * PAD);
+  const valueOf = (x) => editor.axis[0] + Math.min(1, Math.max(0, (x - PAD) / (tfCanvas.width - 2 * PAD))) *
+    (editor.axis[1] - editor.axis[0]);
+  const opacityOf = (y) => editor.top * Math.min(1, Math.max(0, (tfCanvas.height - PAD - y) / (tfCanvas.height - 2 * PAD)));
+  const css = (p) => `rgb(${p.slice(1, 4).map((c) => Math.round(255 * c)).join(",")})`;
+
+  function rebaseEditor(points) {  // the function a frame was classified by, on axes that hold it and the values
+    if (editor.drag) return;
+    editor.points = points.map((p) => p.slice());
+    const h = editor.histogram ? editor.histogram.range : [points[0][0], points[points.length - 1][0]];
+    editor.axis = [Math.min(h[0], points[0][0]), Math.max(h[1], points[points.length - 1][0])];
+    if (!(editor.axis[1] > editor.axis[0])) editor.axis = [editor.axis[0] - 0.5, editor.axis[0] + 0.5];
+    editor.top = 2 * Math.max(...points.map((p) => p[4])) || 1;  // room to raise the opacity twofold
+    editor.selected = Math.min(editor.selected, points.length - 1);
+    drawEditor();
+  }
+
+  function drawEditor() {
+    const W = tfCanvas.width, H = tfCanvas.height, c = tfCtx, pts = editor.points;
+    c.clearRect(0, 0, W, H);
+    if (!pts) {
+      c.fillStyle = "#8a939d"; c.font = "11px system-ui, sans-serif";
+      c.fillText("the points come with the first shaded frame", PAD, H / 2);
+      return;
+    }
+    const hist = editor.histogram;
+    if (hist) {
+      const [lo, hi] = hist.range, n = hist.counts.length, most = Math.log1p(Math.max(...hist.counts)) || 1;
+      c.fillStyle = "#3a3f46";
+      hist.counts.forEach((count, i) => {
+        const x0 = xOf(lo + (hi - lo) * i / n), x1 = xOf(lo + (hi - lo) * (i + 1) / n);
+        const h = Math.log1p(count) / most * (H - 2 * PAD);
+        c.fillRect(x0, H - PAD - h, Math.max(1, x1 - x0), h);
+      });
+    }
+    const first = xOf(pts[0][0]), last = xOf(pts[pts.length - 1][0]);
+    const colours = c.createLinearGradient(first, 0, Math.max(last, first + 1), 0);
+    for (const p of pts) colours.addColorStop(Math.min(1, Math.max(0, (xOf(p[0]) - first) / (last - first || 1))), css(p));
+    c.beginPath();  // outside the points the end rows hold
+    c.moveTo(0, yOf(pts[0][4]));
+    for (const p of pts) c.lineTo(xOf(p[0]), yOf(p[4]));
+    c.lineTo(W, yOf(pts[pts.length - 1][4]));
+    c.strokeStyle = "#dde1e6"; c.lineWidth = 1.5; c.stroke();
+    c.lineTo(W, H - PAD); c.lineTo(0, H - PAD); c.closePath();
+    c.globalAlpha = 0.6; c.fillStyle = colours; c.fill(); c.globalAlpha = 1;
+    pts.forEach((p, i) => {
+      c.beginPath(); c.arc(xOf(p[0]), yOf(p[4]), i === editor.selected ? 5 : 4, 0, 2 * Math.PI);
+      c.fillStyle = css(p); c.fill();
+      c.strokeStyle = i === editor.selected ? "#ffffff" : "#8a939d"; c.lineWidth = i === editor.selected ? 2 : 1;
+      c.stroke();
+    });
+  }
+
+  function edited(moving) {  // the page sends the edited points (rounded: a message stays far under 4 KiB)
+    state.tf = { points: editor.points.map((p) => [+p[0].toPrecision(10), ...p.slice(1, 4).map((x) => +x.toFixed(4)),
+                                                   +p[4].toPrecision(6)]) };
+    state.moving = moving;
+    $("tf-preset").value = EDITED;
+    if (stats.tfInput === null) stats.tfInput = performance.now();
+    drawEditor();
+    request();
+  }
+
+  function select(i) {
+    editor.selected = i;
+    const p = editor.points && editor.points[i];
+    $("tf-colour").disabled = !p;
+    if (p) $("tf-colour").value = "#" + p.slice(1, 4).map((x) => Math.round(255 * x).toString(16).padStart(2, "0")).join("");
+    drawEditor();
+  }
+
+  function canvasAt(ev) {  // the pointer in canvas pixels (the canvas is scaled to the panel's width)
+    const r = tfCanvas.getBoundingClientRect();
+    return [(ev.clientX - r.left) * tfCanvas.width / r.width, (ev.clientY - r.top) * tfCanvas.height / r.height];
+  }
+
+  function hit(x, y) {  // the point within HIT pixels, nearest first; -1 for none
+    let best = -1, near = HIT * HIT;
+    (editor.points || []).forEach((p, i) => {
+      const d = (xOf(p[0]) - x) ** 2 + (yOf(p[4]) - y) ** 2;
+      if (d <= near) { best = i; near = d; }
+    });
+    return best;
+  }
+
+  function add(value, opacity) {  // a new point, coloured as the function is there; its index, or -1 (too near one)
+    const pts = editor.points, gap = GAP * (editor.axis[1] - editor.axis[0]);
+    const k = pts.findIndex((p) => p[0] > value), at = k < 0 ? pts.length : k;
+    if (pts.length >= MAX_POINTS || (at > 0 && value - pts[at - 1][0] < gap) ||
+        (at < pts.length && pts[at][0] - value < gap)) return -1;
+    const a = pts[Math.max(0, at - 1)], b = pts[Math.min(pts.length - 1, at)];
+    const t = b[0] > a[0] ? (value - a[0]) / (b[0] - a[0]) : 0;
+    pts.splice(at, 0, [value, ...[1, 2, 3].map((j) => a[j] + t * (b[j] - a[j])), opacity]);
+    return at;
+  }
+
+  function remove(i) {
+    if (i < 0 || editor.points.length <= 2) return;
+    editor.points.splice(i, 1);
+    select(-1);
+    edited(false);
+  }
+
+  tfCanvas.addEventListener("pointerdown", (ev) => {
+    if (!editor.points || tfCanvas.closest("fieldset:disabled")) return;
+    const [x, y] = canvasAt(ev);
+    let i = hit(x, y);
+    editor.changed = i < 0;
+    if (i < 0 && (i = add(valueOf(x), opacityOf(y))) < 0) return;
+    select(i);
+    editor.drag = true;
+    tfCanvas.setPointerCapture(ev.pointerId);
+    if (editor.changed) edited(true);
+  });
+  tfCanvas.addEventListener("pointermove", (ev) => {
+    if (!editor.drag) return;
+    const [x, y] = canvasAt(ev), pts = editor.points, i = editor.selected;
+    const gap = GAP * (editor.axis[1] - editor.axis[0]);
+    const lo = i > 0 ? pts[i - 1][0] + gap : editor.axis[0], hi = i < pts.length - 1 ? pts[i + 1][0] - gap : editor.axis[1];
+    pts[i][0] = Math.min(hi, Math.max(lo, valueOf(x)));  // between its neighbours: the order never changes
+    pts[i][4] = opacityOf(y);
+    editor.changed = true;
+    edited(true);
+  });
+  const letGo = () => {
+    if (!editor.drag) return;
+    editor.drag = false;
+    // a point let go at the top (its top twentieth) doubles the opacity axis: room to raise it further
+    if (editor.points[editor.selected][4] > 0.95 * editor.top) editor.top *= 2;
+    if (editor.changed) edited(false);
+  };
+  tfCanvas.addEventListener("pointerup", letGo);
+  tfCanvas.addEventListener("pointercancel", letGo);
+  tfCanvas.addEventListener("dblclick", (ev) => remove(hit(...canvasAt(ev))));
+  tfCanvas.addEventListener("keydown", (ev) => {
+    if (ev.key === "Delete" || ev.key === "Backspace") { ev.preventDefault(); remove(editor.selected); }
+  });
+  $("tf-colour").addEventListener("input", (ev) => {
+    const p = editor.points && editor.points[editor.selected];
+    if (!p) return;
+    const hex = ev.target.value;
+    [1, 2, 3].forEach((j) => { p[j] = parseInt(hex.slice(2 * j - 1, 2 * j + 1), 16) / 255; });
+    edited(true);
+  });
+  $("tf-colour").addEventListener("change", () => { if (state.tf && state.tf.points) { state.moving = false; request(); } });
 
   // ---------------------------------------------------------------- figures and saving
   const fmt = (x, d = 3) => (typeof x === "number" ? x.toPrecision(d) : String(x));
@@ -218,6 +388,7 @@
                  (f.reduction > 1 ? `, 1/${f.reduction} size` : "")]);
       if (f.error !== null) rows.push(["error estimate", `${fmt(f.error)} (${f.error_kind})`]);
       if (f.tf_window) $("tf-range").textContent = showRange(f.tf_window);  // the window this frame was classified by
+      if (f.tf_points && !(state.tf && state.tf.points)) rebaseEditor(f.tf_points);  // the function it was classified by
     }
     rows.push(["frame", `${(1000 * f.seconds).toFixed(0)} ms render, ${(1000 * f.elapsed).toFixed(0)} ms since view`]);
     const table = $("figures");
