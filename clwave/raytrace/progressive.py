@@ -74,11 +74,12 @@ def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:
     return image.astype(np.float32, copy=False)
 
 
-def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=None, error=None, final=None):
+def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=None, error=None, final=None,
+           previous=None):
     """The frames of :func:`clwave.progressive.raytrace_progressive` from a :class:`~clwave.RayTracer` (its
     :meth:`~clwave.RayTracer.refine`, and a staged tracer's once its full stage is ready), arguments checked first.
     ``final``: the :class:`~clwave.frames.FinalImage` the frames measure against (one of ``tracer``'s renders of
-    ``camera`` with ``options``), where frames made before these share it."""
+    ``camera`` with ``options``), where frames made before these share it; ``previous``: the last of those frames."""
     check_error(error)
     if steps is not None and (not whole_number(steps) or steps < 1):
         raise InputError(f"steps={steps!r} must be a whole number of frames, at least 1",
@@ -88,13 +89,13 @@ def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=
                          cli=f"--budget {budget:g} must be a positive number of seconds")
     check_camera(camera)
     final = final or FinalImage(lambda: tracer.render(camera, **options).image)
-    return _frames(tracer, camera, options, steps, budget, error, final)
+    return _frames(tracer, camera, options, steps, budget, error, final, previous)
 
 
-def _frames(tracer, camera, options, steps, budget, error, final):
+def _frames(tracer, camera, options, steps, budget, error, final, shown):
     view = camera.view(tracer.wv)
     plan = schedule(view.size, tracer.details, steps)
-    start, steps_made, last = time.perf_counter(), ErrorEstimate(), None
+    start, steps_made, last, made = time.perf_counter(), ErrorEstimate(), None, 0
 
     def render(detail, reduction):  # the tracer's render of an image reduction times smaller per side
         res = tracer.render(camera if reduction == 1 else camera.reduced(reduction, view), detail=detail,
@@ -110,18 +111,22 @@ def _frames(tracer, camera, options, steps, budget, error, final):
         if index == 0 and reduction > 1:  # the first frame's pilot: the step from an image half its size (§9)
             steps_made.add(render(detail, 2 * reduction)[0])
         image, meta = render(detail, reduction)
+        frame = RaytraceFrame(index=made, image=image, seconds=0.0, estimated_relative_rms_error=0.0,
+                              estimated_relative_max_error=0.0, meta=meta, _final=final, detail=detail,
+                              reduction=reduction)
+        last = time.perf_counter() - t0
         if (detail, reduction) == plan[-1]:
-            final.image, rms, top = image, 0.0, 0.0
-        elif reduction == 1:  # a coarser detail on the full image: its step from the final image, made first (§9)
-            steps_made.last = final.get()
-            rms, top = steps_made.add(image)
+            final.image = image
+        elif reduction == 1:  # a coarser detail on the full image: measured against the final image, rendered first,
+            # and shown where it halves the error of the frame before (docs/raytracing.md §9)
+            frame.estimated_relative_rms_error = frame.relative_rms_error
+            frame.estimated_relative_max_error = frame.relative_max_error
+            if shown is not None and frame.relative_rms_error > shown.relative_rms_error / 2:
+                continue
         else:  # docs/raytracing.md §9: the step from the frame before, at half this frame's size
             rms, top = steps_made.add(image)
-            top *= MAX_MARGIN
-        last = time.perf_counter() - t0
-        frame = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
-                              estimated_relative_rms_error=rms, estimated_relative_max_error=top, meta=meta,
-                              _final=final, detail=detail, reduction=reduction)
+            frame.estimated_relative_rms_error, frame.estimated_relative_max_error = rms, top * MAX_MARGIN
+        frame.seconds, made, shown = time.perf_counter() - start, made + 1, frame
         yield frame
         if reached(frame, error):
             return
