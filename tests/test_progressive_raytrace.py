@@ -121,7 +121,7 @@ def test_small_images_show_the_coarser_details_that_halve_the_error():
             cam = clwave.Camera(30, 20, size=size)
             frames = list(tracer.refine(cam, tolerance=1e-2, absorption=absorption))
             figures = [f.figures() for f in frames]
-            assert figures[0]["detail"] == 3 and len(figures) >= 3, figures  # the coarsest first, another before the last
+            assert figures[0]["detail"] == 3 and len(figures) >= 3, figures  # coarsest first, one more
             errors = [f["relative_rms_error"] for f in figures]
             assert all(b <= a / 2 for a, b in zip(errors, errors[1:])), (name, keep, size, errors)
             for f in figures[:-1]:
