@@ -3,8 +3,8 @@ smaller per side, each twice the side of the one before, then the full image at 
 the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error against the final image, the
 step from the frame before (or from a pilot at half its size); the last preview has 1/16 of the final image's rays,
 so the previews cost about 1/12 of the final render.  An image too small to reduce gets the tracer's coarser
-details instead.  :meth:`RayTracer.refine` is the same sequence for a viewer, which stops iterating when the view
-changes.
+details instead, each shown where it halves the error of the frame before.  :meth:`RayTracer.refine` is the same
+sequence for a viewer, which stops iterating when the view changes.
 """
 
 from __future__ import annotations
@@ -49,7 +49,8 @@ def schedule(size, details=(0,), steps=None) -> list:
     holds coarser ones only) on images ``2^top, ..., 8, 4`` times smaller per side (the largest reduction leaves sides
     of :data:`MIN_SIDE` at least; an image under ``4 MIN_SIDE`` a side gets the one it allows), then on the full image
     (docs/raytracing.md §9).  An image too small to reduce gets a frame per coarser detail the tracer holds, coarsest
-    first, on the full image.  ``steps`` keeps the last that many."""
+    first, on the full image (shown where it halves the error of the frame before).  ``steps`` keeps the last that
+    many."""
     finest = min(details)
     top = int(np.floor(np.log2(max(1, min(size) / MIN_SIDE))))
     last = min(top, int(np.log2(LAST_REDUCTION)))
