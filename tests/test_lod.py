@@ -56,10 +56,10 @@ def brute_occupancy(mask, wavelet, level, start, shape):
     return out
 
 
-def coarse_fields(wv, detail, clamp=True):
+def coarse_fields(wv, detail):
     """The field at ``detail``, host side, per lattice level l >= detail its bricks may have: every group's
     level-l coefficients from the host's real-line synthesis of the bands above l, zeroed where not occupied
-    (brute force), alpha clamped at 0 (unless not ``clamp``), summed in closed form.  Returns
+    (brute force), summed in closed form (alpha not clamped: docs/raytracing.md §8).  Returns
     ``field(points, level, derivative=False)`` (the values, or world gradients: reference.spline_field)."""
     fields = {}
     for level in range(detail, wv.levels + 1):
@@ -70,9 +70,6 @@ def coarse_fields(wv, detail, clamp=True):
             coeffs, start = synthesize(g.wavelet, bands, dense)
             if wv.content_mask is not None:
                 coeffs = coeffs * brute_occupancy(wv.content_mask, g.wavelet, level, start, coeffs.shape[:3])[..., None]
-            if clamp and 3 in g.channels:
-                alpha = g.channels.index(3)
-                coeffs[..., alpha] = np.maximum(coeffs[..., alpha], 0)
             parts.append((g, coeffs, start))
         fields[level] = spline_field(wv, parts, level)
     return lambda points, level, derivative=False: fields[level](points, derivative)
@@ -223,7 +220,7 @@ def test_coarse_details_render_the_oracle_of_the_coarser_model(content):
         assert np.max(np.abs(coarse.image - full.image)) > 1e-2  # the details dropped show
     # alpha's clamp matters: unclamped, the coarsest detail's alpha dips below 0 by 11-15 % of its largest value
     x0 = np.stack(np.meshgrid(*[np.linspace(0, 50, 24)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    alpha = coarse_fields(wv, wv.levels, clamp=False)(fine_to_world(x0, 4, wv.shape, wv.spacing, wv.origin),
+    alpha = coarse_fields(wv, wv.levels)(fine_to_world(x0, 4, wv.shape, wv.spacing, wv.origin),
                                                        wv.levels)[:, 3]
     assert alpha.min() < -0.05 * alpha.max()
 

@@ -274,6 +274,24 @@ def test_a_full_stage_ready_during_refine_continues_with_its_previews(model_file
     assert np.array_equal(made[-1].image, direct.image)
 
 
+def test_a_small_staged_refinement_halves_the_error_from_the_coarse_frame_on(tmp_path):
+    """An image too small to reduce (48^2) of a lod=True staged tracer ready after its coarse frame: the full stage's
+    coarser details follow it only where they halve the error of the frame before, the coarse frame's included
+    (docs/raytracing.md §9); the last frame the direct render."""
+    for name in ("hydrogen", "marschner-lobb"):
+        path = tmp_path / f"{name}.clw"
+        model(name, n=32).save(path)
+        staged, cam = RayTracer.open(path, lod=True), clwave.Camera(30, 20, size=48)
+        frames = staged.refine(cam, tolerance=1e-2)
+        made = [next(frames)]
+        staged.wait()
+        made += list(frames)
+        assert made[0].meta["stage"] == "coarse" and len(made) >= 3 and {f.reduction for f in made} == {1}
+        errors = [f.figures()["relative_rms_error"] for f in made]
+        assert all(b <= a / 2 for a, b in zip(errors, errors[1:])), (name, errors)
+        assert np.array_equal(made[-1].image, RayTracer(WaveletVolume.open(path)).render(cam, tolerance=1e-2).image)
+
+
 @pytest.mark.parametrize("model_file", ["cubic"], indirect=True)  # the refinement is the same for both
 def test_an_abandoned_staged_refinement_leaves_the_tracer_usable(model_file):
     """A viewer stops iterating when the view changes: during the coarse frames (the set-up goes on) and during the

@@ -503,7 +503,8 @@ def test_a_scalar_model_is_shaded_through_the_tabs_transfer_function_built_off_t
     assert hello["capabilities"]["shaded"]["tf"] is True and status["type"] == "status"
     assert xray[-1][0]["mode"] == "xray" and xray[-1][0]["final"]
     figures = [f for f, _ in frames]
-    assert [f["reduction"] for f in figures] == [1, 1, 1] and figures[-1]["tolerance"] == 2e-2  # 32^2: not reduced
+    # 32^2: not reduced, the coarser details that halve the error (docs/raytracing.md §9), then the final frame
+    assert len(figures) >= 2 and {f["reduction"] for f in figures} == {1} and figures[-1]["tolerance"] == 2e-2
     # hydrogen's window (0, 1): centre moved 0.1 of its width, twice as wide; opacity doubled
     points = clwave.TransferFunction.preset("hydrogen").points.copy()
     points[:, 4] *= 2.0

@@ -54,11 +54,10 @@ __kernel void scatter_band(__global float *out, const int4 out_start, const int4
  *   boxes        per brick (nx, ny, nz, first pool element)
  *   depth        the largest nz: work-items depth * b .. depth * (b + 1) - 1 along axis 2 copy brick b
  *   scale        2^(-3 l / 2): the level-l B-splines' normalisation (docs/model.md §4)
- *   nonneg       clamp the w lane (alpha) at 0: bricks of the coarser details (docs/raytracing.md §8)
  * Grid: global (max nx, max ny, depth * bricks). */
 __kernel void gather_bricks(__global pool_coef *pool, __global const float *src, const int4 src_start,
                             const int4 src_shape, __global const int4 *starts, __global const int4 *boxes,
-                            const int depth, const float scale, const int nonneg, const int lane)
+                            const int depth, const float scale, const int lane)
 {
     const int b = get_global_id(2) / depth;
     const int4 at = (int4)(get_global_id(0), get_global_id(1), get_global_id(2) % depth, 0), box = boxes[b];
@@ -69,8 +68,6 @@ __kernel void gather_bricks(__global pool_coef *pool, __global const float *src,
     const size_t i = inside ? ((size_t)p.z * src_shape.y + p.y) * src_shape.x + p.x : 0;
     float4 v = lane < 0 ? vload4(i, src) : select((float4)(0.0f), (float4)(src[i]), (int4)(0, 1, 2, 3) == lane);
     v = inside ? v : (float4)(0.0f);
-    if (nonneg)
-        v.w = fmax(v.w, 0.0f);
     const size_t out = box.w + ((size_t)at.z * box.y + at.y) * box.x + at.x;
 #ifdef CLW_POOL_SCALAR
     pool[out] = scale * v.x;

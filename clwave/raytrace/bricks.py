@@ -40,7 +40,7 @@ ABSENT = -1            #: the level of a brick that no kept support reaches, or 
 
 _GATHER = Kernel("gather_bricks", ("pool", BUFFER), ("src", BUFFER), ("src_start", cltypes.int4),
                  ("src_shape", cltypes.int4), ("starts", BUFFER), ("boxes", BUFFER), ("depth", np.int32),
-                 ("scale", np.float32), ("nonneg", np.int32), ("lane", np.int32))
+                 ("scale", np.float32), ("lane", np.int32))
 _SCATTER = Kernel("scatter_band", ("out", BUFFER), ("out_start", cltypes.int4), ("out_shape", cltypes.int4),
                   ("positions", BUFFER), ("band_start", np.int64), ("band_shape", cltypes.int4), ("values", BUFFER),
                   ("n", np.int32), ("slots", cltypes.int4), ("channels", np.int32), ("lanes", np.int32))
@@ -63,7 +63,7 @@ class Plan:
 
     def slots(self) -> tuple:
         """The distinct bricks over every detail, in brick order: (bricks (n, 3) z, y, x, levels (n,), clamped
-        (n,), coarse (n,): serving the coarser details, whose alpha coefficients are clamped at 0, pages
+        (n,), coarse (n,): serving the coarser details, whose segments stay on their level's lattice, pages
         (details, Z, Y, X) int32: each detail's slot of each brick, -1 for none, alt (n,): a mixed brick's coarse
         slot, unclamped at its own level, -1 for none).  An unclamped brick at level l is one slot for every
         coarser detail that has it: its coefficients come from the bands above l alone."""
@@ -372,8 +372,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
         first, last = int(lay["ends"][slots[0]]), int(lay["ends"][slots[-1] + 1])
         target, base = (pool, 0) if resident else (cla.empty(q, (last - first, 4), np.float32), first)
         for gi in range(G):
-            _expand_slab(wv, gi, lay, slots, clamped[slots], coarse[slots] & (gi == alpha), cc, synth, kernels,
-                         target, base, clamp, hold)
+            _expand_slab(wv, gi, lay, slots, clamped[slots], cc, synth, kernels, target, base, clamp, hold)
         local = boxes[slots].copy()
         local[..., 3] -= base
         local = _send(q, local, hold)
@@ -401,7 +400,9 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     selfish = below[~coarse[below] & ~clamped[below] & (levels[below] > 0) & ~np.isin(below, alt)]
     selfish = selfish[level_lattices[levels[selfish], 3] == 2.0 ** levels[selfish]]  # the groups share the level
     alt[selfish] = selfish
-    lattices[below[~np.isin(below, alt)]] = level_lattices[0]  # the others: fine segments (docs/raytracing.md §3)
+    # the others of full detail: fine segments (docs/raytracing.md §3); the coarser details' keep their level's, alpha
+    # clamped at the samples (§8, "Alpha at coarser details")
+    lattices[below[~np.isin(below, alt) & ~coarse[below]]] = level_lattices[0]
     mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill)
     bounds = bounds.get()[:n]
     cut = np.flatnonzero(clamped & (lay["levels"] == wv.levels))  # the coarsest detail's (docs/raytracing.md §8)
@@ -486,10 +487,9 @@ def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) ->
     return Part(out, lo, shape)
 
 
-def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, base, clamp, hold):
+def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, clamp, hold):
     """One group's bricks of one slab into ``pool``, whose first element is pool element ``base``; per slot,
-    ``clamped``: coefficients zeroed where unoccupied, ``nonneg``: alpha coefficients clamped at 0
-    (docs/raytracing.md §8)."""
+    ``clamped``: coefficients zeroed where unoccupied (docs/raytracing.md §8)."""
     g, q = wv.groups[gi], cc.queue
     wav = g.wavelet
     taps = {"a": (wav.p / np.sqrt(2.0)).astype(np.float32), "d": (wav.q / np.sqrt(2.0)).astype(np.float32)}
@@ -509,18 +509,15 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
 
     def gather(level, src):
         here = levels == level
-        for floor in (False, True):
-            if np.any(sel := here & ~clamped & (nonneg == floor)):
-                copy(slots[sel], level, src, floor)
+        if np.any(sel := here & ~clamped):
+            copy(slots[sel], level, src)
         if np.any(here & clamped):  # docs/raytracing.md §8; at the finest level the synthesis is done with
             data = src.data.copy() if level > min(own) else src.data
             keep = occupancy(wv.content_mask, wav, level, src.start, src.shape).view(np.uint8)
             clamp(data.reshape(-1), _send(q, keep, hold), lanes(g))
-            for floor in (False, True):
-                if np.any(sel := here & clamped & (nonneg == floor)):
-                    copy(slots[sel], level, Part(data, src.start, src.shape), floor)
+            copy(slots[here & clamped], level, Part(data, src.start, src.shape))
 
-    def copy(sel, level, src, floor):
+    def copy(sel, level, src):
         starts = np.zeros((len(sel), 4), np.int32)
         starts[:, :3] = lay["base"][sel, gi][:, ::-1]
         boxes = np.zeros((len(sel), 4), np.int32)
@@ -529,7 +526,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, nonneg, cc, synth, kernels, pool, 
         n = boxes[:, :3].max(axis=0)
         _GATHER(kernels, q, whole_groups((int(n[0]), int(n[1]), int(n[2]) * len(sel))), GROUP, pool=pool, src=src.data,
                 src_start=src.start[::-1], src_shape=src.shape[::-1], starts=_send(q, starts, hold),
-                boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level), nonneg=int(floor),
+                boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level),
                 lane=-1 if lanes(g) == 4 else g.channels[0])
 
     approx = part(0, need[wv.levels]) or Part(cla.zeros(q, (1, 1, 1, lanes(g)), np.float32), need[wv.levels][0],

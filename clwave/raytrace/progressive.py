@@ -3,8 +3,8 @@ smaller per side, each twice the side of the one before, then the full image at 
 the image ``RayTracer.render`` gives.  Each frame carries the estimate of its error against the final image, the
 step from the frame before (or from a pilot at half its size); the last preview has 1/16 of the final image's rays,
 so the previews cost about 1/12 of the final render.  An image too small to reduce gets the tracer's coarser
-details instead.  :meth:`RayTracer.refine` is the same sequence for a viewer, which stops iterating when the view
-changes.
+details instead, each shown where it halves the error of the frame before.  :meth:`RayTracer.refine` is the same
+sequence for a viewer, which stops iterating when the view changes.
 """
 
 from __future__ import annotations
@@ -49,7 +49,8 @@ def schedule(size, details=(0,), steps=None) -> list:
     holds coarser ones only) on images ``2^top, ..., 8, 4`` times smaller per side (the largest reduction leaves sides
     of :data:`MIN_SIDE` at least; an image under ``4 MIN_SIDE`` a side gets the one it allows), then on the full image
     (docs/raytracing.md §9).  An image too small to reduce gets a frame per coarser detail the tracer holds, coarsest
-    first, on the full image.  ``steps`` keeps the last that many."""
+    first, on the full image (shown where it halves the error of the frame before).  ``steps`` keeps the last that
+    many."""
     finest = min(details)
     top = int(np.floor(np.log2(max(1, min(size) / MIN_SIDE))))
     last = min(top, int(np.log2(LAST_REDUCTION)))
@@ -74,11 +75,12 @@ def upsample(image: np.ndarray, size, reduction: int) -> np.ndarray:
     return image.astype(np.float32, copy=False)
 
 
-def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=None, error=None, final=None):
+def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=None, error=None, final=None,
+           previous=None):
     """The frames of :func:`clwave.progressive.raytrace_progressive` from a :class:`~clwave.RayTracer` (its
     :meth:`~clwave.RayTracer.refine`, and a staged tracer's once its full stage is ready), arguments checked first.
     ``final``: the :class:`~clwave.frames.FinalImage` the frames measure against (one of ``tracer``'s renders of
-    ``camera`` with ``options``), where frames made before these share it."""
+    ``camera`` with ``options``), where frames made before these share it; ``previous``: the last of those frames."""
     check_error(error)
     if steps is not None and (not whole_number(steps) or steps < 1):
         raise InputError(f"steps={steps!r} must be a whole number of frames, at least 1",
@@ -88,13 +90,13 @@ def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=
                          cli=f"--budget {budget:g} must be a positive number of seconds")
     check_camera(camera)
     final = final or FinalImage(lambda: tracer.render(camera, **options).image)
-    return _frames(tracer, camera, options, steps, budget, error, final)
+    return _frames(tracer, camera, options, steps, budget, error, final, previous)
 
 
-def _frames(tracer, camera, options, steps, budget, error, final):
+def _frames(tracer, camera, options, steps, budget, error, final, shown):
     view = camera.view(tracer.wv)
     plan = schedule(view.size, tracer.details, steps)
-    start, steps_made, last = time.perf_counter(), ErrorEstimate(), None
+    start, steps_made, last, made = time.perf_counter(), ErrorEstimate(), None, 0
 
     def render(detail, reduction):  # the tracer's render of an image reduction times smaller per side
         res = tracer.render(camera if reduction == 1 else camera.reduced(reduction, view), detail=detail,
@@ -110,18 +112,22 @@ def _frames(tracer, camera, options, steps, budget, error, final):
         if index == 0 and reduction > 1:  # the first frame's pilot: the step from an image half its size (§9)
             steps_made.add(render(detail, 2 * reduction)[0])
         image, meta = render(detail, reduction)
+        frame = RaytraceFrame(index=made, image=image, seconds=0.0, estimated_relative_rms_error=0.0,
+                              estimated_relative_max_error=0.0, meta=meta, _final=final, detail=detail,
+                              reduction=reduction)
+        last = time.perf_counter() - t0
         if (detail, reduction) == plan[-1]:
-            final.image, rms, top = image, 0.0, 0.0
-        elif reduction == 1:  # a coarser detail on the full image: its step from the final image, made first (§9)
-            steps_made.last = final.get()
-            rms, top = steps_made.add(image)
+            final.image = image
+        elif reduction == 1:  # a coarser detail on the full image: measured against the final image, rendered first,
+            # and shown where it halves the error of the frame before (docs/raytracing.md §9)
+            frame.estimated_relative_rms_error = frame.relative_rms_error
+            frame.estimated_relative_max_error = frame.relative_max_error
+            if shown is not None and frame.relative_rms_error > shown.relative_rms_error / 2:
+                continue
         else:  # docs/raytracing.md §9: the step from the frame before, at half this frame's size
             rms, top = steps_made.add(image)
-            top *= MAX_MARGIN
-        last = time.perf_counter() - t0
-        frame = RaytraceFrame(index=index, image=image, seconds=time.perf_counter() - start,
-                              estimated_relative_rms_error=rms, estimated_relative_max_error=top, meta=meta,
-                              _final=final, detail=detail, reduction=reduction)
+            frame.estimated_relative_rms_error, frame.estimated_relative_max_error = rms, top * MAX_MARGIN
+        frame.seconds, made, shown = time.perf_counter() - start, made + 1, frame
         yield frame
         if reached(frame, error):
             return

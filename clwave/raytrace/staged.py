@@ -153,16 +153,16 @@ class StagedTracer:
     def _frames(self, camera, options, error):
         view, start = camera.view((self.coarse or self.full).wv), time.perf_counter()
         final = FinalImage(lambda: self.wait().render(camera, **options).image)
-        index, shown = 0, None  # shown: the last coarse frame's reduction
+        index, shown = 0, None  # shown: the last coarse frame
         for made in self._coarse_frames(camera, view, options, final, start):
-            made.index, index, shown = index, index + 1, made.reduction
+            made.index, index, shown = index, index + 1, made
             yield made
             if reached(made, error):
                 return
         full = self.wait()
         plan = schedule(view.size, full.details)  # after a coarse frame, images at least as large as its (§8)
-        steps = None if shown is None else sum(reduction <= shown for _, reduction in plan)
-        for made in frames(full, camera, options, steps=steps, error=error, final=final):  # docs/raytracing.md §9
+        steps = None if shown is None else sum(reduction <= shown.reduction for _, reduction in plan)
+        for made in frames(full, camera, options, steps=steps, error=error, final=final, previous=shown):  # §9
             made.index, made.seconds, made.meta["stage"] = index, time.perf_counter() - start, "full"
             index += 1
             yield made
