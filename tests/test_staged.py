@@ -21,6 +21,7 @@ from clwave.io.occupancy import OccupancyGrid, mass_on_occupied
 from clwave.io.summary import approximation_occupancy, detail_energy
 from clwave.model.wavelet import importance_of
 from clwave.raytrace import passes
+from clwave.raytrace.coarse_estimate import autocorrelation, detail_share, field_energy, projected_energy
 from clwave.raytrace.staged import StagedTracer, coarse_volume
 from clwave.raytrace.tracer import RayTracer
 from test_bricks import out_of_core_model, smooth_rgba, smooth_volume
@@ -362,3 +363,57 @@ def test_a_render_in_passes_returns_the_freed_memory_before_its_first_region(mon
     calls.clear()
     meta = tracer.render(clwave.Camera(60, 10, size=32), tolerance=1e-2).meta
     assert calls == ["region"] * meta["passes"]
+
+
+def line_energies(coefficients, prototypes, direction, h=1 / 6) -> tuple:
+    """NumPy oracle of a field ``sum_k c_k prod over axes of f_axis(y_axis - k_axis)`` (``prototypes``: one closed
+    form and its support (lo, hi) per axis, z y x): its energy by a midpoint sum over the support, and the energy of
+    its line integrals along ``direction`` by midpoint sums over a plane across it and along each line."""
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    lo = np.array([p[1][0] for p in prototypes], float)
+    hi = np.array([p[1][1] for p in prototypes], float) + np.array(coefficients.shape) - 1
+    centre, radius = (lo + hi) / 2, np.linalg.norm(hi - lo) / 2
+
+    def field(points):  # (..., 3)
+        out = np.zeros(points.shape[:-1])
+        for k in np.ndindex(*coefficients.shape):
+            out += coefficients[k] * np.prod([f(points[..., a] - k[a]) for a, (f, _) in enumerate(prototypes)], axis=0)
+        return out
+
+    axes = [np.arange(a + h / 2, b, h) for a, b in zip(lo, hi)]
+    energy = float(np.sum(field(np.stack(np.meshgrid(*axes, indexing="ij"), -1)) ** 2)) * h ** 3
+    e1 = np.cross(d, np.eye(3)[np.argmin(np.abs(d))])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(d, e1)
+    s = np.arange(-radius + h / 2, radius, h)
+    u, v, t = np.meshgrid(s, s, s, indexing="ij")
+    points = centre + u[..., None] * e1 + v[..., None] * e2 + t[..., None] * d
+    projection = field(points).sum(axis=2) * h
+    return energy, float(np.sum(projection ** 2)) * h ** 2
+
+
+@pytest.mark.parametrize("direction", [(1, 0, 0), (0.3, -0.5, 0.81)])
+def test_the_approximations_field_and_line_integral_energies_are_their_quadratures(direction):
+    """field_energy and projected_energy (closed-form sums over the coefficients' autocorrelation) against midpoint
+    sums of the cubic B-spline field itself and of its line integrals, on random coefficients."""
+    wav = clwave.model.bspline.SplineWavelet(4)
+    c = np.random.default_rng(7).normal(0.5, 1.0, (3, 4, 2))
+    autocorr = autocorrelation(c[None])
+    energy, projected = line_energies(c, [(wav.phi, (0, 4))] * 3, direction)
+    assert field_energy(autocorr, 4) == pytest.approx(energy, rel=2e-3)
+    assert projected_energy(autocorr, 4, direction) == pytest.approx(projected, rel=5e-3)
+
+
+def test_a_white_detail_band_keeps_the_share_its_wavelets_line_integrals_keep():
+    """detail_share: the largest over the seven coarsest-level types of a wavelet's line-integral energy over its
+    energy (the quadrature oracle on one function), and nothing of a type whose wavelet lies along the ray."""
+    wav = clwave.model.bspline.SplineWavelet(4)
+    support = dict(a=(wav.phi, (0, 4)), d=(wav.psi, (0, 7)))
+    direction = (0.3, -0.5, 0.81)
+    shares = []
+    for key in ("aad", "ada", "daa", "add", "dad", "dda", "ddd"):
+        energy, projected = line_energies(np.ones((1, 1, 1)), [support[letter] for letter in key], direction)
+        shares.append(projected / energy)
+    assert detail_share(wav, direction) == pytest.approx(max(shares), rel=5e-3)
+    energy, projected = line_energies(np.ones((1, 1, 1)), [support[letter] for letter in "daa"], (1, 0, 0))
+    assert projected <= 1e-6 * energy  # psi along the ray: its vanishing moment
