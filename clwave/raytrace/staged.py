@@ -40,8 +40,10 @@ class StagedTracer:
     image (:meth:`start`, :attr:`ready`, :meth:`wait`); at the interpreter's exit a set-up still running is
     given up (:func:`_abandon`); ``whole``, where given, a callable giving that whole model, read from the file
     where not (the viewer holds the model, or reads it anyway: docs/viewer.md §2).  ``missing``: the relative size
-    of the details the coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))``; ``outside``: that of
-    the approximation's field off the content, which the full stage's content clamp removes, from the file's
+    of the details the coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` with the details'
+    energy from the file's tiers and the approximation's field energy (its B-splines overlap; in X-ray frames
+    :meth:`missing_in_line_integrals` instead); ``outside``: that of the approximation's field off the content,
+    which the full stage's content clamp removes, from the file's
     occupancy of the approximation (0 for a file without it; docs/raytracing.md §9).  Use from one thread at a
     time.
     """
