@@ -25,6 +25,7 @@ from ..io.clw import Abandoned, FileMask
 from ..io.occupancy import mass_on_occupied
 from ..io.summary import approximation_occupancy, detail_energy
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
+from .coarse_estimate import approximation_grid, autocorrelation, detail_share, field_energy, projected_energy
 from .progressive import MIN_SIDE, RaytraceFrame, frames, schedule, upsample
 
 
@@ -39,8 +40,10 @@ class StagedTracer:
     image (:meth:`start`, :attr:`ready`, :meth:`wait`); at the interpreter's exit a set-up still running is
     given up (:func:`_abandon`); ``whole``, where given, a callable giving that whole model, read from the file
     where not (the viewer holds the model, or reads it anyway: docs/viewer.md §2).  ``missing``: the relative size
-    of the details the coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))``; ``outside``: that of
-    the approximation's field off the content, which the full stage's content clamp removes, from the file's
+    of the details the coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` with the details'
+    energy from the file's tiers and the approximation's field energy (its B-splines overlap; in X-ray frames
+    :meth:`missing_in_line_integrals` instead); ``outside``: that of the approximation's field off the content,
+    which the full stage's content clamp removes, from the file's
     occupancy of the approximation (0 for a file without it; docs/raytracing.md §9).  Use from one thread at a
     time.
     """
@@ -58,8 +61,17 @@ class StagedTracer:
             if occupied is not None:
                 share = mass_on_occupied(occupied, g.wavelet, self.levels).reshape(-1)[g.all_positions()]
                 outside += float(np.sum(e * (1 - share)))
-        total = read + unread
-        self.missing, self.outside = (float(np.sqrt(e / total)) if total > 0 else 0.0 for e in (unread, outside))
+        # per group (§9): its wavelet, the autocorrelation of its approximation's coefficients and its importance
+        # energy over theirs (channels summed: importances take the largest channel)
+        self._parts = []
+        for e, g in zip(energies, approximation.groups):
+            grid = approximation_grid(g)
+            plain = float(np.sum(grid ** 2)) * g.wavelet.norm_phi ** 6
+            self._parts.append((g.wavelet, autocorrelation(grid), float(np.sum(e)) / plain if plain > 0 else 0.0))
+        self._unread = unread
+        field = sum(scale * field_energy(a, w.order) for w, a, scale in self._parts)
+        self.missing = float(np.sqrt(unread / (field + unread))) if field + unread > 0 else 0.0
+        self.outside = float(np.sqrt(outside / (read + unread))) if read + unread > 0 else 0.0
         if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
             self.coarse = tracer_class(coarse_volume(approximation), device=device, device_memory=device_memory)
         else:  # the groups' lattices shift by half cells of the fine lattice: bricks of the coarsest detail
@@ -167,6 +179,16 @@ class StagedTracer:
             index += 1
             yield made
 
+    def missing_in_line_integrals(self, view) -> float:
+        """:attr:`missing` in an X-ray image of ``view`` (along its central ray): each part's field energy times
+        the share of it that survives the line integrals, the approximation's from its coefficients, the
+        details' bounded by that of white coefficients at the coarsest level (:mod:`~clwave.raytrace.coarse_estimate`,
+        docs/raytracing.md §9)."""
+        direction = view.n[::-1] / np.asarray((self.coarse or self.full).wv.spacing)  # (z, y, x) lattice units
+        seen = sum(scale * projected_energy(a, w.order, direction) for w, a, scale in self._parts)
+        unseen = self._unread * max(detail_share(w, direction) for w, _, _ in self._parts)
+        return float(np.sqrt(unseen / (seen + unseen))) if seen + unseen > 0 else 0.0
+
     def _coarse_frames(self, camera, view, options, final, start):
         """The coarse stage's frames while the full stage is not ready (:meth:`refine`)."""
         # the coarse stage held here: a wait() from another thread (the viewer's) lets it go
@@ -180,6 +202,7 @@ class StagedTracer:
             res = coarse.render(cam, detail=detail, **options)
             return upsample(res.image, view.size, reduction), res
 
+        missing = self.missing if options["absorption"] else self.missing_in_line_integrals(view)
         smallest = 2 ** max(0, min(self.levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
         steps.add(render(2 * smallest)[0])  # the first frame's step: a pilot
         for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):
@@ -188,7 +211,7 @@ class StagedTracer:
             image, res = render(reduction)
             rms, top = steps.add(image)
             peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
-            lacks = float(np.hypot(self.missing, self.outside))  # the details and the clamp it lacks (§9)
+            lacks = float(np.hypot(missing, self.outside))  # the details and the clamp it lacks (§9)
             rms += lacks * float(np.sqrt(np.mean(image ** 2))) / peak
             self.start()
             yield RaytraceFrame(index=0, image=image, seconds=time.perf_counter() - start,
@@ -225,4 +248,5 @@ def coarse_volume(approximation: WaveletVolume) -> WaveletVolume:
               for g in approximation.groups]
     return WaveletVolume(shape, spacing[::-1], origin, 0, groups, wv.channels, interpolate=wv.interpolate,
                          transfer_function=wv.transfer_function, content=content)
+
 

@@ -1,0 +1,105 @@
+"""The staged tracer's coarse frames: their error estimate against their measured error (docs/raytracing.md §9,
+docs/benchmarks.md §16).  The protocol of the docs' 96-frame table: the test volumes at 48³ (hydrogen,
+Marschner–Lobb, a random smooth volume, the MNI152 MRI; ``model`` of tests/test_progressive_raytrace.py) saved as
+``.clw``, 5 % and 0.5 % kept, two views at 128² and one at 256², shaded and X-ray, tolerance 1e-2, both coarse
+frames of each refinement (the full stage held back until they are made), each measured against the whole file's
+direct render.  ``--file PATH --size 512`` measures one file instead (hydrogen 256³ → 512²: one view, shaded).
+
+    PYTHONPATH=$PWD .venv/bin/python tools/staged_estimate.py [--json out.json]
+
+Prints a line per frame and the share of frames whose RMS and max estimates are at least their error and at most
+4x it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # run from a checkout: the tests' models
+
+import clwave  # noqa: E402
+from clwave.raytrace.staged import StagedTracer  # noqa: E402
+from test_progressive_raytrace import model  # noqa: E402
+
+MODELS = ("hydrogen", "marschner-lobb", "random", "mri")
+KEEPS = (0.05, 0.005)
+VIEWS = (dict(azimuth=30, elevation=20, size=128), dict(azimuth=-60, elevation=35, size=128),
+         dict(azimuth=120, elevation=-25, size=256))
+
+
+def coarse_frames(path, camera, absorption) -> list:
+    """The figures of both coarse frames of ``camera`` (the full stage reported not ready until they are made)."""
+    ready = StagedTracer.ready
+    StagedTracer.ready = property(lambda self: False)
+    try:
+        tracer = clwave.RayTracer.open(path)
+        return [dict(f.figures(), reduction=f.reduction) for f in tracer.refine(camera, tolerance=1e-2,
+                                                                                 absorption=absorption)
+                if f.meta["stage"] == "coarse"]
+    finally:
+        StagedTracer.ready = ready
+
+
+def rows(cases) -> list:
+    """Per case (label, path, camera keywords), both modes' coarse frames: label, mode, size, reduction, the
+    measured and estimated relative errors and their ratios."""
+    out = []
+    for label, path, views in cases:
+        for view in views:
+            for absorption in (True, False):
+                for f in coarse_frames(path, clwave.Camera(**view), absorption):
+                    row = dict(case=label, mode="shaded" if absorption else "xray", view=view,
+                               reduction=f["reduction"])
+                    for n in ("rms", "max"):
+                        est, err = f[f"estimated_relative_{n}_error"], f[f"relative_{n}_error"]
+                        row.update({f"{n}_error": err, f"{n}_estimate": est, f"{n}_ratio": est / err})
+                    out.append(row)
+                    print(f"{label:24s} {row['mode']:6s} {view['size']:4d}² /{row['reduction']:<2d} "
+                          f"rms {row['rms_error']:.2e} est {row['rms_estimate']:.2e} ({row['rms_ratio']:5.2f}x)  "
+                          f"max {row['max_error']:.2e} est {row['max_estimate']:.2e} ({row['max_ratio']:5.2f}x)",
+                          flush=True)
+    return out
+
+
+def summary(out) -> dict:
+    def share(n, lo, hi):
+        return sum(lo <= r[f"{n}_ratio"] <= hi for r in out)
+    figures = {}
+    for n in ("rms", "max"):
+        ratios = [r[f"{n}_ratio"] for r in out]
+        figures[n] = dict(frames=len(out), at_least=share(n, 1, float("inf")), within_1_4=share(n, 1, 4),
+                          lowest=min(ratios), highest=max(ratios))
+        print(f"{n}: estimate >= error on {figures[n]['at_least']}/{len(out)}, within [1, 4] on "
+              f"{figures[n]['within_1_4']}/{len(out)}, ratios {min(ratios):.2f}-{max(ratios):.2f}")
+    return figures
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--file", help="one .clw file instead of the 48³ test models")
+    parser.add_argument("--size", type=int, default=512, help="its image side (with --file)")
+    parser.add_argument("--models", nargs="+", default=MODELS, choices=MODELS)
+    parser.add_argument("--json", help="write the rows and the summary here")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.file:
+            cases = [(Path(args.file).name, args.file, [dict(azimuth=30, elevation=20, size=args.size)])]
+        else:
+            cases = []
+            for name in args.models:
+                for keep in KEEPS:
+                    path = Path(tmp) / f"{name}_{keep}.clw"
+                    model(name, keep=keep).save(path)
+                    cases.append((f"{name} {keep:.1%}", path, VIEWS))
+        out = rows(cases)
+    figures = summary(out)
+    if args.json:
+        Path(args.json).write_text(json.dumps(dict(rows=out, summary=figures), indent=1))
+
+
+if __name__ == "__main__":
+    main()
