@@ -454,10 +454,12 @@ class ConeTables:
             try:
                 textures = {}
                 for r in sorted(set(refine.values())):  # each refinement's bands on its own nodes
+                    chosen = {band: h for band, h in texels.items() if refine[band] == r}
                     textures.update(sheared_footprints(
-                        wav, wv.spacing, view0.n, view0.u, view0.v, {b: h for b, h in texels.items() if refine[b] == r},
-                        grid_nodes(lo, step / r, (count - 1) * r + 1), sampling, TEXTURE_TOL if wav.order == 4 else 0.0,
-                        device, max_texels, quasi=wav.order >= 3, work=None if work is None else work.setdefault(r, {})))
+                        wav, wv.spacing, view0.n, view0.u, view0.v, chosen,
+                        grid_nodes(lo, step / r, (count - 1) * r + 1), sampling,
+                        TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels, quasi=wav.order >= 3,
+                        work=None if work is None else work.setdefault(r, {})))
                 spare = None  # the nodes' array of the view that leaves the cache, to write over
                 while cache is not None and len(cache) >= FOOTPRINT_CACHE:
                     spare = cache.pop(next(iter(cache)))["nodes"]
