@@ -27,7 +27,7 @@ TEXEL_ERROR = 0.2
 #: the share of the accuracy target (1e-2 of the image maximum, issue #33) that each level's bands may take with
 #: their predicted interpolation errors before they are refined (the levels' errors peak at different pixels and
 #: partly cancel: the whole image's came out 0.6 of their sum)
-LEVEL_SHARE = 4e-3
+LEVEL_SHARE = 5e-3
 MAX_REFINE = 4  # the most a band's slope step is divided by (its nodes grow as the square)
 TEXEL_GAINS = (1.0, 2.0 ** 0.5, 2.0, 2.0 ** 1.5)  # the factors a band's texels may be made finer by
 
