@@ -1,7 +1,8 @@
 """Each cone-beam kernel stage (cl/splat/cone.cl, docs/splatting.md §8) against its NumPy oracle
 (clwave.splat.reference: slope_cells, project_cone, records, accumulate_cone) on a small random scene: two layers
-(framebuffers), a rotated frame, splats behind the eye and beyond the slope grid; each stage gets its inputs
-from the oracles of the stages before it, as tests/test_splat_kernels.py does for orthographic views."""
+(framebuffers), a rotated frame, splats behind the eye and beyond the slope grid, textures on the grid's nodes and on
+nodes 2 and 3 times closer (refined bands, docs/splatting.md §8); each stage gets its inputs from the oracles of the
+stages before it, as tests/test_splat_kernels.py does for orthographic views."""
 
 from types import SimpleNamespace
 
@@ -19,6 +20,7 @@ LAYERS = np.array([(45, 37, 0, 0), (29, 21, 9, 45 * 37)], np.int32)  # as test_s
 TILES, PIXELS = 13, 45 * 37 + 29 * 21
 TEX_LAYER = np.array([(0, 0), (0, 1), (0, 2), (0, 3), (0, 4), (1, 0), (1, 1), (1, 2)], np.int32)
 COUNT = (5, 4)  # slope nodes along u, v
+REFINE = (1, 2, 1, 3, 1, 1, 2, 1)  # each texture's slope refinement: its nodes r to the grid's step
 
 
 def cone_scene(rng, n=300):
@@ -45,13 +47,14 @@ def cone_scene(rng, n=300):
     band_step = np.zeros((64, 4), np.float32)
     band_step[:, :3] = rng.uniform(0.3, 1.6, (64, 3))
     textures, boxes, ints, maps, pool, offset = [], [], [], [], [np.zeros(POOL_GUARD)], POOL_GUARD
-    for _ in TEX_LAYER:
+    for r in REFINE:
         nu, nv = rng.integers(2, 24, 2)
-        nodes = rng.standard_normal((COUNT[0] * COUNT[1], nv, nu)).astype(np.float32)
+        count = [(k - 1) * r + 1 for k in COUNT]
+        nodes = rng.standard_normal((count[0] * count[1], nv, nu)).astype(np.float32)
         cu, cv, h_u, h_v = rng.uniform(0, nu - 1), rng.uniform(0, nv - 1), *rng.uniform(0.05, 0.8, 2)
-        cells = reference.slope_cells(nodes, COUNT)[0]
+        cells = reference.slope_cells(nodes, count)[0]
         boxes.append((-cu * h_u, (nu - 1 - cu) * h_u, -cv * h_v, (nv - 1 - cv) * h_v))
-        ints.append((offset, nu + 2, cells[0].size, nv + 2))
+        ints.append((offset, nu + 2, r, nv + 2))
         maps.append((cu, cv, 1.0 / h_u, 1.0 / h_v))
         pool.append(cells.ravel())
         offset += cells.size
@@ -128,9 +131,15 @@ def test_accumulate_cone(cc, scene, variant, channels):
                                                  channels))
     fb = cla.to_device(q, np.full((PIXELS, 4), 0.5, np.float32))
     st.accumulate(TILES, len(LAYERS), d, cla.to_device(q, scene["ranges"]), records, fb)
-    expected = 0.5 + reference.accumulate_cone(scene["ranges"], scene["vals"], scene["first"], scene["centre"],
-                                               scene["bbox"], scene["stex"], scene["values"], scene["textures"],
-                                               scene["layers"], scene["layer_slope"], scene["cone"], channels)
+    expected = 0.5
+    for r in set(REFINE):  # the oracle's slope grid is each refinement's (r times the nodes), the others' textures 0
+        cone = scene["cone"].copy()
+        cone[5] = (*(r * cone[5, :2]), *((cone[5, 2:] - 1) * r + 1))
+        textures = [t if own == r else (np.zeros((int(cone[5, 2] * cone[5, 3]), 1, 1)), 0, 0, 1, 1)
+                    for t, own in zip(scene["textures"], REFINE)]
+        expected = expected + reference.accumulate_cone(
+            scene["ranges"], scene["vals"], scene["first"], scene["centre"], scene["bbox"], scene["stex"],
+            scene["values"], textures, scene["layers"], scene["layer_slope"], cone, channels)
     assert np.abs(expected - 0.5).max() > 1  # splats did land
     got = fb.get()
     assert np.abs(got - expected).max() <= 1e-5 * np.abs(expected).max()
@@ -141,18 +150,22 @@ def test_accumulate_cone(cc, scene, variant, channels):
 @pytest.mark.parametrize("count, quasi, spare", [((5, 4), True, False), ((5, 4), False, False), ((2, 3), True, True)])
 def test_cone_cells(cc, rng, count, quasi, spare):
     # the texel pool made on the device from each texture's nodes (cl/splat/cone_cells.cl), textures of two layers
-    # and a band not drawn, against the oracle: the cells, their guards of zeros, each node's largest magnitude;
-    # written over a spare node array and pool of an earlier view (NaNs here) too
+    # (one refined twice, one three times: their nodes r to the grid's step) and a band not drawn, against the
+    # oracle: the cells, their guards of zeros, each node's largest magnitude and the grid cells' bounds; written
+    # over a spare node array and pool of an earlier view (NaNs here) too
     bands = [SimpleNamespace(level=level, key=key, code=code) for level, key, code in
              ((2, "aaa", 0), (2, "aad", 1), (1, "dda", 6), (1, "ddd", 7), (1, "add", 3))]
     layer_of = {(2, "aaa"): 1, (2, "aad"): 0, (1, "dda"): 0, (1, "ddd"): 1}
+    refine = {(1, "dda"): 2, (2, "aaa"): 3}
     textures = {}
     for b in bands:
         nu, nv = rng.integers(1, 30, 2)
-        nodes = rng.standard_normal((count[0] * count[1], nv + 3, nu + 2)).astype(np.float32)[:, 2:-1, 1:-1]  # a view
-        textures[(b.level, b.key)] = SimpleNamespace(data=nodes, centre_u=nu / 2, centre_v=nv / 2, h_u=0.5, h_v=0.25)
+        r = refine.get((b.level, b.key), 1)
+        nodes = rng.standard_normal((((count[0] - 1) * r + 1) * ((count[1] - 1) * r + 1), nv + 3, nu + 2))
+        textures[(b.level, b.key)] = SimpleNamespace(data=nodes.astype(np.float32)[:, 2:-1, 1:-1], centre_u=nu / 2,
+                                                     centre_v=nv / 2, h_u=0.5, h_v=0.25)  # a view, as the host's
     old = np.full(10**5, np.nan, np.float32) if spare else None
-    packed = pack_nodes(SimpleNamespace(bands=bands), textures, layer_of, 2, count, None, old)
+    packed = pack_nodes(SimpleNamespace(bands=bands), textures, layer_of, 2, count, None, old, refine)
     assert (packed["nodes"] is old) == spare
     pool = cl.Buffer(cc.ctx, cl.mem_flags.READ_WRITE | cl.mem_flags.COPY_HOST_PTR, hostbuf=old) if spare else None
     pool, cell_peaks = slope_cells(cc, packed, count, quasi, pool)
@@ -160,13 +173,15 @@ def test_cone_cells(cc, rng, count, quasi, spare):
     cl.enqueue_copy(cc.queue, got, pool)
     order = [(2, "aad"), (1, "dda"), (2, "aaa"), (1, "ddd")]  # each layer's bands in the group's order
     assert np.array_equal(packed["tex_layer"], [(0, 0), (0, 1), (1, 0), (1, 1)])
-    peaks = []
-    for band, (offset, _, size, _) in zip(order, packed["tex_int"]):
-        cells, node_peaks = reference.slope_cells(textures[band].data, count, quasi)
-        assert np.array_equal(got[offset:offset + cells.size], cells.ravel())
-        peaks.append(node_peaks)
-    end = packed["tex_int"][-1, 0] + packed["tex_int"][-1, 2] * (count[0] - 1) * (count[1] - 1)
+    assert np.array_equal(packed["tex_int"][:, 2], [1, 2, 3, 1])
+    end = POOL_GUARD
+    for t, (band, (offset, _, r, _)) in enumerate(zip(order, packed["tex_int"])):
+        own = [(k - 1) * r + 1 for k in count]
+        cells, node_peaks = reference.slope_cells(textures[band].data, own, quasi)
+        assert offset == end and np.array_equal(got[offset:offset + cells.size], cells.ravel())
+        end = offset + cells.size
+        node_peaks = node_peaks.reshape(own[1], own[0])
+        assert np.array_equal(cell_peaks[t, 0, -1, 0, -1], node_peaks.max())
+        assert np.array_equal(cell_peaks[t, -1, -1, -1, -1], node_peaks[-r - 1:, -r - 1:].max())
+        assert np.array_equal(cell_peaks[t, 0, 0, 0, 0], node_peaks[:r + 1, :r + 1].max())
     assert not np.any(got[:POOL_GUARD]) and not np.any(got[end:end + 2 * POOL_GUARD])  # the guards of zeros
-    node_peaks = np.array(peaks).reshape(4, count[1], count[0])
-    assert np.array_equal(cell_peaks[:, 0, -1, 0, -1], node_peaks.max(axis=(1, 2)))
-    assert np.array_equal(cell_peaks[:, -1, -1, -1, -1], node_peaks[:, -2:, -2:].max(axis=(1, 2)))

@@ -13,11 +13,12 @@
  *   band_step   (64,) float4: world step per unit k_x, k_y, k_z (2^m d_x, 2^m d_y, 2^m d_z)
  *   band_tex    (64,) int: texture of each band, -1 when it is not drawn
  *   tex_box     (T,) float4: texture box in world units about the centre (a_min, a_max, b_min, b_max)
- *   tex_int     (T,) int4: (offset of cell 0's first texel, row stride in texels, cell stride in floats,
- *               rows).  A cell of the slope grid (its first node (i_u, i_v); cells row-major by v) is
- *               (rows, row stride) texels of 4 floats, its four nodes' samples (i_u, i_v), (i_u + 1, i_v),
- *               (i_u, i_v + 1), (i_u + 1, i_v + 1): a pixel's 16 reads are 2 runs of 8 floats.  Every node has a
- *               zero margin of one texel all round
+ *   tex_int     (T,) int4: (offset of cell 0's first texel, row stride in texels, slope refinement r, rows).
+ *               The texture's nodes are the slope grid's with r steps to each of its steps ((k_u - 1) r + 1 by
+ *               (k_v - 1) r + 1; docs/splatting.md §8 "Refined bands").  A cell of its nodes (its first node
+ *               (i_u, i_v); cells row-major by v) is (rows, row stride) texels of 4 floats, its four nodes' samples
+ *               (i_u, i_v), (i_u + 1, i_v), (i_u, i_v + 1), (i_u + 1, i_v + 1): a pixel's 16 reads are 2 runs of 8
+ *               floats.  Every node has a zero margin of one texel all round
  *   tex_map     (T,) float4: (centre_u, centre_v) in texels of the unpadded texture, 1/h_u, 1/h_v
  *   tex_layer, layers: as bin.cl
  *   layer_slope (L,) float4: slope per pixel (sigma_u, sigma_v) of each layer
@@ -87,17 +88,30 @@ __kernel void splat_project_cone(const uint n, const uint first, __global const 
     count[i] = cnt;
 }
 
-/* The node cell of the slope grid for slope s along one axis: its first node (returned) and the weight of
- * the next (slopes beyond the grid take its edge).  lo, inv: the first node's slope and 1 / step. */
-inline int cone_cell(const float s, const float lo, const float inv, const int nodes, float *w)
+/* Slope s's position along one axis of the slope grid, in steps from its first node (slopes beyond the grid take
+ * its edge).  lo, inv: the first node's slope and 1 / step; nodes: the grid's along that axis. */
+inline float cone_grid(const float s, const float lo, const float inv, const int nodes)
 {
-    const float g = clamp((s - lo) * inv, 0.0f, (float)(nodes - 1));
-    const int i = min((int)g, nodes - 2);
-    *w = g - (float)i;
+    return clamp((s - lo) * inv, 0.0f, (float)(nodes - 1));
+}
+
+/* The cell of a texture refined r times (tex_int.z) at grid position g along one axis: its first node (returned)
+ * and the weight of the next. */
+inline int cone_cell(const float g, const int r, const int nodes, float *w)
+{
+    const float gr = g * (float)r;
+    const int i = min((int)gr, (nodes - 1) * r - 1);
+    *w = gr - (float)i;
     return i;
 }
 
-/* A splat's sample at texel (tu, tv) of slope cell ci (its four nodes interleaved, see the tables above) with
+/* The floats of one cell of a texture (tex_int ti): (rows, row stride) texels of 4 floats */
+inline int cone_cell_floats(const int4 ti)
+{
+    return 4 * ti.y * ti.w;
+}
+
+/* A splat's sample at texel (tu, tv) of its texture's cell ci (its four nodes interleaved, see the tables above) with
  * slope weights (wu, wv); ti: the texture's tex_int.  Clamped onto the zero margin (index -1 .. size - 1 of the
  * unpadded texture, +1 for the margin).  Two reads of 8 floats: texels iu and iu + 1 of rows iv and iv + 1. */
 inline float cone_sample(__global const float *texels, const int4 ti, const int ci, const float tu, const float tv,
@@ -106,7 +120,7 @@ inline float cone_sample(__global const float *texels, const int4 ti, const int 
     const float fiu = floor(tu), fiv = floor(tv);
     const int iu = clamp((int)fiu, -1, ti.y - 3), iv = clamp((int)fiv, -1, ti.w - 3);
     const float fu = tu - fiu, fv = tv - fiv;
-    __global const float *t = texels + ti.x + ci * ti.z + 4 * ((iv + 1) * ti.y + iu + 1);
+    __global const float *t = texels + ti.x + ci * cone_cell_floats(ti) + 4 * ((iv + 1) * ti.y + iu + 1);
     const float8 top = vload8(0, t), bottom = vload8(0, t + 4 * ti.y);
     const float4 w = (float4)((1.0f - wu) * (1.0f - wv), wu * (1.0f - wv), (1.0f - wu) * wv, wu * wv);
     const float s00 = dot(top.lo, w), s01 = dot(top.hi, w), s10 = dot(bottom.lo, w), s11 = dot(bottom.hi, w);
@@ -136,7 +150,8 @@ inline float16 cone_row(__global const float *texels, const int *at, const int b
 /* splat_accumulate_cone: add every tile's records to the framebuffers.
  *   ranges, records, layers, fb: as cl/splat/raster.h (records sorted by tile, texture, importance)
  *   tex_int, tex_map, texels, layer_slope, cone: the tables above (texels with 16 zeros before)
- * A pixel's slope sets its cell in the node grid (4 nodes, bilinear weights); per splat its texel
+ * A pixel's slope sets its position in the slope grid, and per splat its cell of the splat's texture's nodes (4
+ * nodes, bilinear weights; a refined texture has r nodes to the grid's step); per splat its texel
  * position is w / h = depth * sigma * (pixel - centre) / h, and it reads 2 x 2 texels of each node (the
  * cell's 4 nodes are interleaved per texel).
  * Grid, -DCLW_CONE_TILE (CPUs): a work-item per tile, a row of 16 pixels a float16 (each lane's texels
@@ -162,20 +177,17 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
     const int ku = (int)cells.z, kv = (int)cells.w;
     const uint2 r = ranges[tile];
 #ifdef CLW_CONE_TILE
-    /* a row of the tile is 16 lanes: each lane's slope cell and weight along u once per tile, each row's along
-     * v; per splat and row, each lane reads its cell's four nodes at its 2 x 2 texels, 8 floats a read
-     * (cone_row), and the arithmetic is in vectors */
+    /* a row of the tile is 16 lanes: each lane's position in the slope grid along u once per tile, each row's
+     * along v; per splat, each lane's cell of its texture's nodes and weight (cone_cell), and per row, each lane
+     * reads its cell's four nodes at its 2 x 2 texels, 8 floats a read (cone_row); the arithmetic is in vectors */
     const float16 lane = (float16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     const float16 gu = clamp((grid.x + ((float)corner.x + 0.5f - 0.5f * (float)layer.x + lane) * sigma.x - grid.z)
                              * cells.x, 0.0f, (float)(ku - 1));
-    const int16 ccol = min(convert_int16(gu), (int16)(ku - 2));
-    const float16 wu = gu - convert_float16(ccol);
-    int crow[CLW_TILE];
-    float wrow[CLW_TILE];
+    float grow[CLW_TILE];
     float16 acc[CLW_CHANNELS][CLW_TILE];
     for (int i = 0; i < CLW_TILE; ++i) {
-        crow[i] = cone_cell(grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y, grid.w,
-                            cells.y, kv, &wrow[i]) * (ku - 1);
+        grow[i] = cone_grid(grid.y + (0.5f * (float)layer.y - (float)(corner.y + i) - 0.5f) * sigma.y, grid.w,
+                            cells.y, kv);
         for (int ch = 0; ch < CLW_CHANNELS; ++ch)
             acc[ch][i] = 0.0f;
     }
@@ -186,20 +198,26 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
         const float c[4] = {w.x, w.y, w.z, w.w};
         const int4 ti = tex_int[tex];
         const float4 tm = tex_map[tex];
+        const int cell = cone_cell_floats(ti), cells_u = (ku - 1) * ti.z;  /* the texture's cells along u */
+        const float16 gr = gu * (float)ti.z;
+        const int16 ccol = min(convert_int16(gr), (int16)(cells_u - 1));
+        const float16 wu = gr - convert_float16(ccol);
         const float ru = cen.z * sigma.x * tm.z, rv = cen.z * sigma.y * tm.w;  /* texels per pixel */
         const float16 tu = tm.x + ((float)corner.x - cen.x + lane) * ru;
         const float16 fiu = floor(tu), fu = tu - fiu;
         const int16 iu = clamp(convert_int16(fiu), (int16)(-1), (int16)(ti.y - 3));
-        const int16 col = ti.x + 4 * (iu + 1) + ccol * ti.z;
+        const int16 col = ti.x + 4 * (iu + 1) + ccol * cell;
         const float16 mask = select((float16)(0.0f), (float16)(1.0f),
                                     isgreaterequal(lane, (float16)(bx.x)) & islessequal(lane, (float16)(bx.z)));
         for (int y = bx.y; y <= bx.w; ++y) {
             const float tv = tm.y + (cen.y - (float)(corner.y + y)) * rv;
             const float fiv = floor(tv), fv = tv - fiv;
-            const int16 at = col + (crow[y] * ti.z + 4 * (clamp((int)fiv, -1, ti.w - 3) + 1) * ti.y);
+            float wv;
+            const int crow = cone_cell(grow[y], ti.z, kv, &wv) * cells_u;
+            const int16 at = col + (crow * cell + 4 * (clamp((int)fiv, -1, ti.w - 3) + 1) * ti.y);
             int ats[16];
             vstore16(at, 0, ats);
-            const float16 sample = mask * cone_row(texels, ats, 4 * ti.y, fv, 1.0f - wrow[y], wrow[y], fu, wu);
+            const float16 sample = mask * cone_row(texels, ats, 4 * ti.y, fv, 1.0f - wv, wv, fu, wu);
             for (int ch = 0; ch < CLW_CHANNELS; ++ch)
                 acc[ch][y] += c[ch] * sample;
         }
@@ -213,9 +231,8 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
     }
 #else
     const int x = corner.x + lx, y = corner.y + ly;
-    float wu, wv;
-    const int nu = cone_cell(grid.x + ((float)x + 0.5f - 0.5f * (float)layer.x) * sigma.x, grid.z, cells.x, ku, &wu);
-    const int nv = cone_cell(grid.y + (0.5f * (float)layer.y - (float)y - 0.5f) * sigma.y, grid.w, cells.y, kv, &wv);
+    const float gu = cone_grid(grid.x + ((float)x + 0.5f - 0.5f * (float)layer.x) * sigma.x, grid.z, cells.x, ku);
+    const float gv = cone_grid(grid.y + (0.5f * (float)layer.y - (float)y - 0.5f) * sigma.y, grid.w, cells.y, kv);
     float4 acc = (float4)(0.0f);
     for (uint k = r.x; k < r.y; ++k) {
         int4 bx;
@@ -224,9 +241,12 @@ __kernel void splat_accumulate_cone(const int layer_count, __global const int4 *
         if (lx < bx.x || lx > bx.z || ly < bx.y || ly > bx.w)
             continue;
         const float4 tm = tex_map[tex];
+        const int4 ti = tex_int[tex];
+        float wu, wv;
+        const int nu = cone_cell(gu, ti.z, ku, &wu), nv = cone_cell(gv, ti.z, kv, &wv);
         const float tu = tm.x + ((float)x - cen.x) * cen.z * sigma.x * tm.z;
         const float tv = tm.y + (cen.y - (float)y) * cen.z * sigma.y * tm.w;
-        acc += c * cone_sample(texels, tex_int[tex], nv * (ku - 1) + nu, tu, tv, wu, wv);
+        acc += c * cone_sample(texels, ti, nv * (ku - 1) * ti.z + nu, tu, tv, wu, wv);
     }
     /* records hold every channel: the framebuffer's others keep their values */
     acc *= (float4)(1.0f, CLW_CHANNELS > 1 ? 1.0f : 0.0f, CLW_CHANNELS > 2 ? 1.0f : 0.0f,

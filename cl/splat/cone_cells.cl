@@ -2,13 +2,14 @@
  * device from its footprints at the slope nodes, docs/splatting.md §8 "Cost".  NumPy oracle:
  * clwave.splat.reference.slope_cells.
  *
- * The host uploads each texture's nodes, (K, nv, nu) float32 with K = ku kv row-major by v; a cell of the slope
- * grid is one block of (nv + 2, nu + 2) texels of 4 floats (its four nodes interleaved, a zero margin all round:
+ * The host uploads each texture's nodes, (K, nv, nu) float32 with K = ku kv row-major by v (a texture refined r
+ * times, cone.cl's tex_int.z, has ku = (k_u - 1) r + 1 of the grid's k_u, and so along v); a cell of its nodes is
+ * one block of (nv + 2, nu + 2) texels of 4 floats (its four nodes interleaved, a zero margin all round:
  * cone.cl's tex_int), 4 (ku - 1)(kv - 1) / (ku kv) times the nodes' floats, so the pool is written here rather
  * than uploaded.  With quasi != 0 each node's value is stored less 1/16 of its second differences along the slope
  * axes of three nodes or more (at either end the nearest one's; clwave.splat.perspective.quasi_interpolant, the
- * same float32 operations in the same order).  peaks[t K + k]: the largest magnitude of texture t's stored values
- * at node k (float bits; cells' bounds for dropped splats). */
+ * same float32 operations in the same order).  peaks[first + k]: the largest magnitude of texture t's stored values
+ * at its node k (float bits; cells' bounds for dropped splats), first its tex_nodes.z. */
 #include "common/clw_common.h"
 
 /* The rows a node's stored value is made of: its own, and the three of its second difference along v and along u
@@ -50,17 +51,19 @@ inline float stored(const node_rows r, const int i)
  *
  * Parameters
  *   textures   in  the number of textures
- *   ku, kv     in  slope nodes along u, v
+ *   ku, kv     in  the slope grid's nodes along u, v
  *   quasi      in  store quasi-interpolants along the slope axes (smooth footprints)
- *   tex_int    in  (T,) int4: cone.cl's (offset of cell 0's first texel in floats, row stride nu + 2, cell stride
- *                  in floats, rows nv + 2)
- *   tex_nodes  in  (T,) int2: (the texture's first work-item, the offset of its nodes in floats)
+ *   tex_int    in  (T,) int4: cone.cl's (offset of cell 0's first texel in floats, row stride nu + 2, slope
+ *                  refinement r, rows nv + 2)
+ *   tex_nodes  in  (T,) int4: (the texture's first work-item, the offset of its nodes in floats, of its first
+ *                  node's peak, 0)
  *   nodes      in  every texture's nodes
  *   texels     out the pool (its guards are the host's)
- *   peaks      in/out (T K,) uint: zeros in; each node's largest magnitude (float bits) out
- * Grid: a work-item per row of a cell, (ku - 1)(kv - 1)(nv + 2) a texture in order, rounded up to whole groups. */
-__kernel void cone_cells(const int textures, const int ku, const int kv, const int quasi,
-                         __global const int4 *tex_int, __global const int2 *tex_nodes,
+ *   peaks      in/out uint: zeros in; each node's largest magnitude (float bits) out, each texture's K in order
+ * Grid: a work-item per row of a cell, (ku - 1)(kv - 1)(nv + 2) a texture (its own ku, kv) in order, rounded up to
+ * whole groups. */
+__kernel void cone_cells(const int textures, const int grid_u, const int grid_v, const int quasi,
+                         __global const int4 *tex_int, __global const int4 *tex_nodes,
                          __global const float *restrict nodes, __global float *restrict texels,
                          __global uint *restrict peaks)
 {
@@ -69,12 +72,13 @@ __kernel void cone_cells(const int textures, const int ku, const int kv, const i
     while (t + 1 < textures && tex_nodes[t + 1].x <= item)
         ++t;
     const int4 ti = tex_int[t];
+    const int ku = (grid_u - 1) * ti.z + 1, kv = (grid_v - 1) * ti.z + 1;  /* its own nodes */
     const int r = item - tex_nodes[t].x;
     if (r >= (ku - 1) * (kv - 1) * ti.w)
         return;
     const int nu = ti.y - 2, nv = ti.w - 2, cell = r / ti.w, iv = r - cell * ti.w - 1;
     const int cv = cell / (ku - 1), cu = cell - cv * (ku - 1);
-    __global float4 *out = (__global float4 *)(texels + ti.x + cell * ti.z) + (iv + 1) * ti.y;
+    __global float4 *out = (__global float4 *)(texels + ti.x + cell * 4 * ti.y * ti.w) + (iv + 1) * ti.y;
     out[0] = out[nu + 1] = (float4)(0.0f);
     if (iv < 0 || iv >= nv) {
         for (int i = 1; i <= nu; ++i)
@@ -93,7 +97,7 @@ __kernel void cone_cells(const int textures, const int ku, const int kv, const i
         out[i + 1] = v;
         most = fmax(most, fabs(v));
     }
-    __global uint *p = peaks + t * ku * kv + cv * ku + cu;
+    __global uint *p = peaks + tex_nodes[t].z + cv * ku + cu;
     atomic_max(p, as_uint(most.x));
     atomic_max(p + 1, as_uint(most.y));
     atomic_max(p + ku, as_uint(most.z));

@@ -25,6 +25,7 @@ from ..model.bspline import wavelet_for
 from ..model.conebeam import ConeBeam
 from ..model.geometry import check_key, fine_to_world, spacing_xyz, support_centres, support_extent
 from ..threads import cores, thread_map
+from .cone_budget import refined_bands
 from .cone_cells import idle_pool, pack_nodes, slope_cells
 from .spatial import exact_samples
 from .spectral import SPECTRUM_BLOCK, WORK_ROOM, device_spectra, fft_texture, slice_plan
@@ -421,6 +422,10 @@ class ConeTables:
                 layer_of[band] = li
                 texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, scale)
                 self.omega_s = self.omega_s or omega
+        # bands whose images are large get closer slope nodes and finer texels (docs/splatting.md §8 "Refined bands")
+        self.refined = refined_bands(wv, group, view0, texels, scale, step, steps)
+        texels = {band: tuple(np.broadcast_to(h, 2) / self.refined[band][1]) for band, h in texels.items()}
+        refine = {band: r for band, (r, _) in self.refined.items()}
         self.samplings = [sampling]
         self.band_tex = np.full(8 * MAX_LEVELS, -1, np.int32)
         self.band_world = np.zeros((8 * MAX_LEVELS, 4), np.float32)
@@ -439,7 +444,7 @@ class ConeTables:
                 self.band_world[b.level * 8 + b.code, :3] = fine_to_world(
                     support_centres(wav, b.key, b.level, (0, 0, 0)), wav.order, wv.shape, wv.spacing, wv.origin)
                 self.band_step[b.level * 8 + b.code, :3] = 2.0 ** b.level * d_xyz
-        key = (group, sampling, max_texels, tuple(sorted(layer_of.items())),
+        key = (group, sampling, max_texels, tuple(sorted(layer_of.items())), tuple(sorted(refine.items())),
                tuple(sorted((band, tuple(np.broadcast_to(h, 2).tolist())) for band, h in texels.items())),
                *(np.asarray(x, np.float64).tobytes() for x in (view0.n, view0.u, view0.v, nodes)))
         start = time.perf_counter()
@@ -447,13 +452,18 @@ class ConeTables:
             packed = cache[key]
         else:
             try:
-                textures = sheared_footprints(wav, wv.spacing, view0.n, view0.u, view0.v, texels, nodes, sampling,
-                                              TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels,
-                                              quasi=wav.order >= 3, work=work)
+                textures = {}
+                for r in sorted(set(refine.values())):  # each refinement's bands on its own nodes
+                    chosen = {band: h for band, h in texels.items() if refine[band] == r}
+                    textures.update(sheared_footprints(
+                        wav, wv.spacing, view0.n, view0.u, view0.v, chosen,
+                        grid_nodes(lo, step / r, (count - 1) * r + 1), sampling,
+                        TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels, quasi=wav.order >= 3,
+                        work=None if work is None else work.setdefault(r, {})))
                 spare = None  # the nodes' array of the view that leaves the cache, to write over
                 while cache is not None and len(cache) >= FOOTPRINT_CACHE:
                     spare = cache.pop(next(iter(cache)))["nodes"]
-                packed = pack_nodes(g, textures, layer_of, len(layers), count, max_texels, spare)
+                packed = pack_nodes(g, textures, layer_of, len(layers), count, max_texels, spare, refine)
             except DeviceMemoryError as err:  # the texel cap: the ray tracer draws any cone, thick voxels' too
                 template = str(err).replace("{", "{{").replace("}", "}}") + ", or ray-trace it ({tracer})"
                 raise DeviceMemoryError(template.format_map(asdict(words)), worded=True,
