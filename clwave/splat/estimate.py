@@ -88,8 +88,8 @@ class SplatEstimate:
     ``sqrt(mean(S^2 + V))`` and the relative maximum ``max(|S| + CREST sqrt(V))`` (a field of many oscillating
     footprints peaks near three of its local RMS), both at the cells, over the largest magnitude of ``frame + S``,
     the final image as predicted at the cells split :attr:`split` times (the frame's mean over each); times margins
-    (docs/splatting.md §5 has their measured rates).  A perspective view magnifies each coefficient by its depth: its energy so, its signed footprint to
-    first order in the log of that magnification and in its ray's slopes.
+    (docs/splatting.md §5 has their measured rates).  A perspective view magnifies each coefficient by its depth: its
+    energy so, its signed footprint to first order in the log of that magnification and in its ray's slopes.
     """
 
     RMS_MARGIN, MAX_MARGIN, CREST = 2.0, 1.7, 3.0
