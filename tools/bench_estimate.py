@@ -1,4 +1,4 @@
-"""Splatting's progressive error estimate against the measured error (docs/splatting.md §5, docs/benchmarks.md §17):
+"""Splatting's progressive error estimate against the measured error (docs/splatting.md §5, docs/benchmarks.md §15):
 issue #30's bar, the estimate ``>=`` the measured relative RMS and max error on 95 % of the intermediate frames and
 ``<= 4x`` it on 95 %, over a sweep of volumes, views and thresholds, with the estimate's share of each view.
 
