@@ -29,6 +29,8 @@ DETAIL_WIDTH = 0.5  # the standard deviation of a level-m detail footprint's squ
 DIFFERENCE = 0.05  # the step of the footprints' differences in the log of magnification and in the slopes
 SIGNED_SHARE = 0.25  # a detail band is drawn signed where the cells resolve at least this share of its energy (the
 #                      rest of its energy as a density; below it, all of it: a band's signed map costs an FFT a frame)
+LATTICE_CELLS = 2.0  # the signed maps' cells per lattice step of the approximation, at least (the image's cells split
+FINE = 4             # up to FINE times a side where they are coarser; docs/splatting.md §5)
 
 
 def _slice_power(wavelet, spacing, view) -> tuple:
@@ -79,14 +81,15 @@ class SplatEstimate:
 
     The rest's image is predicted as ``S + D``: ``S`` drawn signed on the cells, each band's rest convolved with its
     projected footprint as far as the cells resolve it (the approximation always, a detail band where they resolve
-    :data:`SIGNED_SHARE` of its energy); ``D`` the rest of the energy as a density ``V`` per channel (each
+    :data:`SIGNED_SHARE` of its energy), on cells split :attr:`fine` times a side where the approximation's lattice
+    is finer than :data:`LATTICE_CELLS` cells; ``D`` the rest of the energy as a density ``V`` per channel (each
     footprint's energy, :func:`band_energies`, beyond the cells' band limit or whole, times the coefficient's value
     in that channel squared, spread as a Gaussian of :data:`DETAIL_WIDTH` ``2^m`` voxels).  The relative RMS is
     ``sqrt(mean(S^2 + V))`` and the relative maximum ``max(|S| + CREST sqrt(V))`` (a field of many oscillating
-    footprints peaks near three of its local RMS), both over the largest magnitude of ``frame + S``, the final image
-    as predicted at the cells (the frame's mean over each); times margins (docs/splatting.md §5 has their measured
-    rates).  A perspective view magnifies each coefficient by its depth: its energy so, its signed footprint to
-    first order in the log of that magnification and in its ray's slopes.
+    footprints peaks near three of its local RMS), both at the cells, over the largest magnitude of ``frame + S``,
+    the final image as predicted at the cells split :attr:`split` times (the frame's mean over each); times margins
+    (docs/splatting.md §5 has their measured rates).  A perspective view magnifies each coefficient by its depth: its
+    energy so, its signed footprint to first order in the log of that magnification and in its ray's slopes.
     """
 
     RMS_MARGIN, MAX_MARGIN, CREST = 2.0, 1.7, 3.0
@@ -135,9 +138,17 @@ class SplatEstimate:
                           for n, side in ((self.rows, H), (self.cols, W)))
             self.obliquity = view.obliquity()[np.ix_(rows, cols)][..., None]
         shape = (self.rows + 2 * self.pad, self.cols + 2 * self.pad)
+        # the signed maps on cells split `fine` times a side where the approximation's lattice step spans fewer than
+        # LATTICE_CELLS cells: deposited bilinearly on coarser cells, its large coefficients of both signs, which
+        # cancel in the image, aliased into the footprints' passband (docs/splatting.md §5); the final peak predicted
+        # on the finest cells of whole pixels among them
+        step = 2.0 ** r.wv.levels * float(np.min(self.reach)) / (self.scale * self.cell)
+        self.fine = int(np.clip(np.ceil(LATTICE_CELLS / step), 1, FINE))
+        self.split = max(p for p in range(1, self.fine + 1) if self.fine % p == 0 and self.cell % p == 0)
         for gr in self.groups:
             self._filters(gr, r.wv.spacing, shape)
-            gr["signed"] = np.zeros((len(gr["channels"]), len(gr["kernels"])) + shape)
+            gr["signed"] = np.zeros((len(gr["channels"]), len(gr["kernels"]), shape[0] * self.fine,
+                                     shape[1] * self.fine))
             gr["detail"] = np.zeros((len(gr["channels"]), MAX_LEVELS) + shape)  # per channel: docs/splatting.md §5
             self._deposit(gr, 0, gr["count"], +1.0)
 
@@ -154,14 +165,15 @@ class SplatEstimate:
         # the density's energies: a signed band's beyond the cells' band limit, all of an unsigned one's
         gr["density"] = gr["energy"] * np.where(gr["layer"] >= 0, 1.0 - share, 1.0)
         kernels, d_xyz, h = [], spacing_xyz(spacing), DIFFERENCE
+        fshape, fwidth = (rows * self.fine, cols * self.fine), width / self.fine
         for b in signed:
-            base = _footprint(gr["wavelet"], b, d_xyz, self.view, shape, width)
+            base = _footprint(gr["wavelet"], b, d_xyz, self.view, fshape, fwidth)
             kernels.append(base)
             if self.view.perspective:  # its derivatives in the log of the magnification and in the ray's slopes
-                kernels += [(_footprint(gr["wavelet"], b, d_xyz, self.view, shape, width * np.exp(h)) - base) / h,
-                            (_footprint(gr["wavelet"], b, d_xyz, self.view, shape, width, (h, 0.0)) - base) / h,
-                            (_footprint(gr["wavelet"], b, d_xyz, self.view, shape, width, (0.0, h)) - base) / h]
-        gr["kernels"] = np.array(kernels).reshape(len(kernels), rows, cols // 2 + 1)
+                kernels += [(_footprint(gr["wavelet"], b, d_xyz, self.view, fshape, fwidth * np.exp(h)) - base) / h,
+                            (_footprint(gr["wavelet"], b, d_xyz, self.view, fshape, fwidth, (h, 0.0)) - base) / h,
+                            (_footprint(gr["wavelet"], b, d_xyz, self.view, fshape, fwidth, (0.0, h)) - base) / h]
+        gr["kernels"] = np.array(kernels).reshape(len(kernels), fshape[0], fshape[1] // 2 + 1)
         per_voxel = self.reach / width
         ones = np.ones((rows, cols // 2 + 1))
         gr["blurs"] = np.array([fourier_gaussian(ones, tuple(DETAIL_WIDTH * 2.0 ** m * per_voxel), n=cols)
@@ -198,11 +210,12 @@ class SplatEstimate:
             values = np.asarray(gr["table"].values[start:end], np.float64)
             layer = gr["layer"][band]
             signed = layer >= 0
-            _bilinear(gr["signed"], layer[signed], row[signed], col[signed], sign * values[signed])
+            frow, fcol = ((row[signed] + 0.5) * self.fine - 0.5, (col[signed] + 0.5) * self.fine - 0.5)
+            _bilinear(gr["signed"], layer[signed], frow, fcol, sign * values[signed])
             if self.view.perspective:  # each footprint magnified by its depth and sheared by its ray: to first order
                 for i, term in enumerate(self._perspective(row[signed] - self.pad, col[signed] - self.pad,
                                                            px[signed])):
-                    _bilinear(gr["signed"], layer[signed] + 1 + i, row[signed], col[signed],
+                    _bilinear(gr["signed"], layer[signed] + 1 + i, frow, fcol,
                               sign * values[signed] * term[:, None])
             energy = gr["density"][band] / px ** 2  # in pixels: each pixel's energy
             spread = energy > 0  # each channel's own energy: their details differ
@@ -214,34 +227,56 @@ class SplatEstimate:
         for gr in self.groups:
             self._deposit(gr, min(self.done, gr["count"]), min(done, gr["count"]), -1.0)
         self.done = done
-        signed, variance = self.maps()
-        # the final image as predicted, at the cells: at the pixels, the frame's own fine overshoot, which the rest's
-        # unresolved details take back, stayed in its peak (docs/splatting.md §5)
-        peak = max(float(np.max(np.abs(self._cell_means(image) + signed), initial=0.0)), np.finfo(np.float32).tiny)
+        split, variance = self.split_maps()
+        signed = _block_means(split, self.split)
+        # the final image as predicted, at the cells (or the finest cells of whole pixels the signed maps resolve): at
+        # the pixels, the frame's own fine overshoot, which the rest's unresolved details take back, stayed in its
+        # peak; at coarse cells, a narrow peak is lost in its cell's mean (docs/splatting.md §5)
+        means = self._cell_means(image, self.cell // self.split)
+        peak = max(float(np.max(np.abs(means + split[:len(means), :means.shape[1]]), initial=0.0)),
+                   np.finfo(np.float32).tiny)
         rms = np.sqrt(np.mean(signed ** 2 + variance))
         top = float(np.max(np.abs(signed) + self.CREST * np.sqrt(variance), initial=0.0))
         return self.RMS_MARGIN * float(rms) / peak, self.MAX_MARGIN * top / peak
 
-    def _cell_means(self, image) -> np.ndarray:
-        """The image's mean over each cell (those of the last row and column cut short where the image ends)."""
-        starts = [np.arange(0, side, self.cell) for side in image.shape[:2]]
+    def _cell_means(self, image, cell) -> np.ndarray:
+        """The image's mean over each cell of ``cell`` pixels a side (those of the last row and column cut short
+        where the image ends)."""
+        starts = [np.arange(0, side, cell) for side in image.shape[:2]]
         sums = np.add.reduceat(np.add.reduceat(image, starts[0], axis=0), starts[1], axis=1)
         counts = np.multiply.outer(*(np.diff(np.append(s, side)) for s, side in zip(starts, image.shape[:2])))
         return sums / counts[..., None]
 
     def maps(self) -> tuple:
         """The rest's image as drawn signed and its energy density, per pixel at each cell (rows, cols, channels)."""
-        signed = np.zeros((self.rows, self.cols, self.channels))
-        variance = np.zeros_like(signed)
+        split, variance = self.split_maps()
+        return _block_means(split, self.split), variance
+
+    def split_maps(self) -> tuple:
+        """The rest's image as drawn signed, at each cell split :attr:`split` times a side, and its energy density at
+        each cell (rows, cols, channels)."""
+        k, p = self.fine, self.split
+        signed = np.zeros((self.rows * p, self.cols * p, self.channels))
+        variance = np.zeros((self.rows, self.cols, self.channels))
         inside = (slice(self.pad, self.pad + self.rows), slice(self.pad, self.pad + self.cols))
+        split = (slice(self.pad * p, (self.pad + self.rows) * p), slice(self.pad * p, (self.pad + self.cols) * p))
         for gr in self.groups:
             for i, ch in enumerate(gr["channels"]):
-                signed[..., ch] = _filtered(gr["signed"][i], gr["kernels"])[inside]
+                signed[..., ch] = _block_means(_filtered(gr["signed"][i], gr["kernels"]), k // p)[split]
                 variance[..., ch] = np.maximum(_filtered(gr["detail"][i], gr["blurs"])[inside], 0.0)
         variance /= self.cell ** 2  # per cell -> per pixel
         if self.view.perspective:  # the path length per unit depth of each pixel's ray, as the image
-            signed, variance = signed * self.obliquity, variance * self.obliquity ** 2
+            signed = signed * np.repeat(np.repeat(self.obliquity, p, 0), p, 1)
+            variance = variance * self.obliquity ** 2
         return signed, variance
+
+
+def _block_means(grid, k) -> np.ndarray:
+    """The means of a grid's k x k blocks (its sides multiples of k)."""
+    if k == 1:
+        return grid
+    rows, cols = grid.shape[:2]
+    return grid.reshape((rows // k, k, cols // k, k) + grid.shape[2:]).mean(axis=(1, 3))
 
 
 def _lattices(wav) -> tuple:
