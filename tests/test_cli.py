@@ -191,6 +191,13 @@ def test_progressive_gif_folder_and_stats(tmp_path, capsys):
     code, out, err = run(capsys, "progressive", "phantom:hydrogen:16", "--levels", "1", "--size", "16", "--steps", "2",
                          "-o", str(folder))
     assert code == 0 and sorted(p.name for p in folder.iterdir()) == ["frame_000.png", "frame_001.png"]
+    # --force into a folder of a longer run: this run's frames alone, other files kept
+    (folder / "frame_002.png").write_bytes(b"old"), (folder / "frame_017.png").write_bytes(b"old")
+    (folder / "notes.txt").write_text("mine")
+    code, out, err = run(capsys, "progressive", "phantom:hydrogen:16", "--levels", "1", "--size", "16", "--steps", "1",
+                         "-o", str(folder), "--force")
+    assert code == 0, err
+    assert sorted(p.name for p in folder.iterdir()) == ["frame_000.png", "notes.txt"]
 
 
 @pytest.mark.parametrize("argv, needle", [

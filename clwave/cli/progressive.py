@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 from ..errors import InputError
@@ -57,8 +58,12 @@ def run(args):
     pictures = [f.result().to_uint8(window, background) for f in frames]
     if as_folder:
         out.mkdir(parents=True, exist_ok=True)
+        names = {f"frame_{f.index:03d}.png" for f in frames}
         for f in frames:
             f.save(out / f"frame_{f.index:03d}.png", window=window, background=background, overwrite=True)
+        for old in out.glob("frame_*.png"):  # an earlier run's frames (--force): the folder holds this run's alone
+            if re.fullmatch(r"frame_\d{3,}\.png", old.name) and old.name not in names:
+                old.unlink()
     else:
         write_gif(out, pictures, 0.5, args.force)
     figures = [f.figures() for f in frames]
