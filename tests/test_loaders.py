@@ -304,7 +304,7 @@ def test_tiff_folder_of_planar_rgb_slices(tmp_path, rng):
 # --------------------------------------------------------------------------- DICOM
 
 def write_dicom_slice(path, pixels, position, series_uid, *, orientation=(1, 0, 0, 0, 1, 0),
-                      pixel_spacing=(0.7, 0.9), description="", number=1):
+                      pixel_spacing=(0.7, 0.9), description="", number=1, rescale=(2, -1024)):
     meta = FileMetaDataset()
     meta.MediaStorageSOPClassUID = CTImageStorage
     meta.MediaStorageSOPInstanceUID = generate_uid()
@@ -317,7 +317,7 @@ def write_dicom_slice(path, pixels, position, series_uid, *, orientation=(1, 0, 
     ds.ImagePositionPatient = [float(p) for p in position]
     ds.ImageOrientationPatient = [float(c) for c in orientation]
     ds.PixelSpacing = list(pixel_spacing)
-    ds.RescaleSlope, ds.RescaleIntercept = 2, -1024
+    ds.RescaleSlope, ds.RescaleIntercept = rescale
     ds.Rows, ds.Columns = pixels.shape
     ds.SamplesPerPixel, ds.PhotometricInterpretation = 1, "MONOCHROME2"
     ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 0
@@ -403,6 +403,24 @@ def test_dicom_duplicate_positions_refused(tmp_path, rng):
         load(tmp_path)
     assert_one_line_error(excinfo)
     assert "position" in str(excinfo.value)
+
+
+@pytest.mark.parametrize("kwargs, needle", [
+    (dict(rescale=(0, -1024)), "RescaleSlope 0"),
+    (dict(rescale=(float("nan"), 0)), "non-finite RescaleSlope"),
+    (dict(rescale=(1, float("inf"))), "non-finite RescaleIntercept"),
+    (dict(pixel_spacing=(float("nan"), 1.0)), "non-finite PixelSpacing"),
+    (dict(orientation=(1, 0, 0, 0, float("inf"), 0)), "non-finite ImageOrientationPatient"),
+    (dict(position=(float("nan"), 0.0, 2.0)), "non-finite ImagePositionPatient"),
+])
+def test_dicom_degenerate_rescale_and_geometry_refused(tmp_path, rng, kwargs, needle):
+    uid, position = generate_uid(), kwargs.pop("position", None)
+    write_series(tmp_path, rng, axial(0.0, 1.0), uid, ["s1", "s2"])
+    write_dicom_slice(tmp_path / "odd", rng.integers(0, 9, (6, 5)), position or axial(2.0)[0], uid, **kwargs)
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path, progress_bar=False)
+    assert_one_line_error(excinfo)
+    assert needle in str(excinfo.value) and "odd" in str(excinfo.value)
 
 
 @pytest.mark.parametrize("drift, degrees, shift, shape", [

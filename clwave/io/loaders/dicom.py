@@ -30,6 +30,9 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     if len(headers) < 2:
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
                               "at least 2")
+    for tag in ("ImageOrientationPatient", "ImagePositionPatient", "PixelSpacing"):
+        for path, h in headers:
+            _check_finite(path, tag, np.array(h.get(tag), float))
     cosines = np.array([h.ImageOrientationPatient for _, h in headers], float)
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"DICOM series {uid} in {folder} mixes slice orientations "
@@ -197,7 +200,20 @@ def _dicom_pixels(path):
     if int(getattr(ds, "NumberOfFrames", 1) or 1) > 1:
         raise FileFormatError(f"{path} is a multi-frame DICOM file; clwave reads folders of "
                               "single-frame slices")
-    pixels = ds.pixel_array.astype(np.float32)
     slope = float(getattr(ds, "RescaleSlope", 1.0))
     intercept = float(getattr(ds, "RescaleIntercept", 0.0))
+    _check_finite(path, "RescaleSlope", slope)
+    _check_finite(path, "RescaleIntercept", intercept)
+    if slope == 0:  # every voxel would be the intercept
+        raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; "
+                              "the file is corrupt: correct its RescaleSlope (e.g. 1) or move it out of the folder")
+    pixels = ds.pixel_array.astype(np.float32)
     return pixels * np.float32(slope) + np.float32(intercept)
+
+
+def _check_finite(path, tag, values):
+    """Refuse a DICOM attribute holding nan or inf: no volume can be placed or scaled by it."""
+    if not np.all(np.isfinite(values)):
+        raise FileFormatError(f"DICOM file {path} has a non-finite {tag} "
+                              f"({', '.join(map(str, np.atleast_1d(values)))}); the file is corrupt: correct its "
+                              f"{tag} or move it out of the folder")
