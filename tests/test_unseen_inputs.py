@@ -1,6 +1,8 @@
 """Issues #30, #31 and #33 on inputs the other tests do not use: odd sizes, tiny volumes, post-classified
 progressive frames, pose tables as spreadsheets write them.  Each test pins a case that once broke."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -171,6 +173,43 @@ def test_a_nrrd_axis_of_no_voxels_is_named(tmp_path):
     path.write_bytes(path.read_bytes().replace(b"sizes: 6 6 6", b"sizes: 6 0 6"))
     with pytest.raises(clwave.FileFormatError, match="declares sizes 6 0 6; every axis needs at least one voxel"):
         clwave.load(path)
+
+
+@pytest.mark.parametrize("fields, needle", [
+    ("space dimension: 3\nspace directions: (nan,0,0) (0,1,0) (0,0,inf)\n",
+     "space directions (nan,0,0) (0,1,0) (0,0,inf) hold nan or inf"),
+    ("space dimension: 3\nspace directions: (1,0,0) (0,1,0) (0,0,1)\nspace origin: (0,nan,0)\n",
+     "space origin (0,nan,0) hold nan or inf"),
+    ("space dimension: 3\nspace directions: (1,0,0) (0,0,0) (0,0,1)\n", "are singular"),
+    ("space dimension: 3\nspace directions: (1,0,0) (0,2,0) (0,1,0)\n", "are singular"),
+    ("data file: LIST\nv.raw\n", "spreads its data over several files (data file: LIST)"),
+    ("data file: v%03d.raw 1 4 1\n", "spreads its data over several files"),
+    ("data file: {outside}\n", "outside the header's folder"),
+    ("data file: ../v.raw\n", "outside the header's folder"),
+])
+def test_a_nrrd_header_of_broken_geometry_or_data_files_is_named(tmp_path, fields, needle):
+    # they once said "OrientationError", "not enough values to unpack", contradicted themselves, or read any file
+    # the header named (/etc/passwd): an untrusted header reads nothing outside its folder
+    (tmp_path / "v.raw").write_bytes(bytes(64))
+    (tmp_path / "h").mkdir()
+    header = tmp_path / "h" / "v.nhdr"
+    attached = "data file" not in fields
+    text = "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n" + fields.format(
+        outside=tmp_path / "v.raw") + "\n"
+    header.write_bytes(text.encode() + (bytes(64) if attached else b""))
+    with pytest.raises(clwave.FileFormatError, match=re.escape(needle)) as excinfo:
+        clwave.load(header)
+    assert "\n" not in str(excinfo.value)
+    assert main(["compress", str(header), "-o", str(tmp_path / "o.clw")]) == 2 and not (tmp_path / "o.clw").exists()
+
+
+def test_a_nrrd_data_file_beside_its_header_is_read(tmp_path):
+    data = np.arange(24, dtype=np.uint8).reshape(2, 3, 4)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "v.raw").write_bytes(data.tobytes())
+    header = tmp_path / "v.nhdr"
+    header.write_text("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 3 2\nencoding: raw\ndata file: sub/v.raw\n\n")
+    np.testing.assert_array_equal(clwave.load(header).data, data)
 
 
 def test_a_non_finite_spacing_is_named_in_numbers():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -26,12 +27,13 @@ def read_nrrd(path, fits=None, warn_spacing=True):
     import nrrd
 
     with open(path, "rb") as fh:
-        header = nrrd.read_header(fh)
+        header = _read_header(path, fh)
         _check_nrrd_size(path, header, fh.tell())
         sizes = [int(n) for n in header["sizes"]]
         directions = header.get("space directions")
         if directions is not None:
             directions = np.asarray(directions, float)
+            _check_directions(path, directions, header.get("space origin"))
             spatial = [a for a in range(len(sizes)) if np.all(np.isfinite(directions[a]))]
         elif "kinds" in header:
             spatial = [a for a, kind in enumerate(header["kinds"]) if kind.lower() in ("domain", "space")]
@@ -43,6 +45,10 @@ def read_nrrd(path, fits=None, warn_spacing=True):
             raise FileFormatError(
                 f"{path} has {len(sizes)} axes of sizes {tuple(sizes)} in a {width}-D space; clwave "
                 "reads 3 spatial axes in 3-D space plus at most one channel axis")
+        if directions is not None and abs(np.linalg.det(directions[spatial])) <= 1e-9 * np.prod(
+                np.linalg.norm(directions[spatial], axis=1)):
+            raise FileFormatError(f"{path}: its space directions {_rows(directions[spatial])} are singular (a zero or "
+                                  "repeated direction) and span no 3-D grid; correct the header's space directions")
         check_whole(path, [sizes[a] for a in spatial + others], nrrd.reader._determine_datatype(header), fits)
         data = nrrd.read_data(header, fh, str(path))  # index_order 'F': axes in file order, fastest first
     data = np.moveaxis(data, others, list(range(3, data.ndim)))
@@ -62,6 +68,55 @@ def read_nrrd(path, fits=None, warn_spacing=True):
     return to_canonical(data, np.diag(signs + (1,)) @ affine)
 
 
+def _read_header(path, fh):
+    """pynrrd's header; one naming its data files line by line (``data file: LIST``) is refused by name."""
+    import nrrd
+
+    try:
+        return nrrd.read_header(fh)
+    except ValueError:  # pynrrd reads the list's file names as broken fields
+        fh.seek(0)
+        if re.search(rb"^data ?file: *LIST", fh.read(1 << 16), re.M):
+            raise FileFormatError(f"{path} spreads its data over several files (data file: LIST); clwave reads one "
+                                  "data file: join them into one raw file and name it in the header") from None
+        raise
+
+
+def _rows(directions) -> str:
+    return " ".join("(" + ",".join(f"{v:g}" for v in row) + ")" for row in directions)
+
+
+def _check_directions(path, directions, origin):
+    """Refuse ``space directions`` with nan or inf in a spatial axis (a channel axis is all ``none``, read as nan)
+    and a non-finite ``space origin``."""
+    broken = ~np.isfinite(directions).all(axis=1) & ~np.isnan(directions).all(axis=1)
+    if broken.any() or (origin is not None and not np.all(np.isfinite(origin))):
+        found = f"space directions {_rows(directions)}" if broken.any() else f"space origin {_rows([origin])}"
+        raise FileFormatError(f"{path}: its {found} hold nan or inf; each spatial axis needs a finite direction and "
+                              "origin (a channel axis: none): correct the header")
+
+
+def data_file(path, header):
+    """The detached data file a NRRD header names (``data file``), or None where the data follows the header.  An
+    untrusted header must not read other files: one resolving outside the header's folder is refused, and so are
+    a ``%d`` pattern of several files, which pynrrd does not read."""
+    name = header.get("data file", header.get("datafile"))
+    if name is None:
+        return None
+    name = str(name)
+    words = name.split()
+    if len(words) >= 4 and "%" in words[0]:
+        raise FileFormatError(f"{path} spreads its data over several files (data file: {name}); clwave reads one "
+                              "data file: join them into one raw file and name it in the header")
+    folder = Path(path).resolve().parent
+    target = (folder / name).resolve()
+    if not target.is_relative_to(folder):
+        raise FileFormatError(f"{path} names the data file {name}, outside the header's folder {folder}; clwave "
+                              "reads no files elsewhere for an untrusted header: put the data file beside the header "
+                              "and name it there")
+    return target
+
+
 def _check_nrrd_size(path, header, offset):
     """A NRRD header that declares more voxels than its raw or gzip data holds (attached data starting at
     ``offset``) is refused before pynrrd allocates them (other encodings, and a missing detached data file, are
@@ -69,8 +124,9 @@ def _check_nrrd_size(path, header, offset):
     import nrrd
 
     encoding = str(header.get("encoding", "raw")).lower()
-    if "data file" in header:  # a detached header: the data is a file of its own
-        path, offset = Path(Path(path).parent, str(header["data file"])), 0
+    detached = data_file(path, header)
+    if detached is not None:  # a detached header: the data is a file of its own
+        path, offset = detached, 0
     if encoding not in ("raw", "gzip", "gz") or not Path(path).is_file():
         return
     if encoding != "raw":  # the gzip stream starts after the header; its trailer counts the stream alone
