@@ -375,6 +375,30 @@ def test_a_nrrd_header_declaring_more_than_its_data_is_refused_before_reading(tm
     assert held in str(exc.value) and ("byte header" in str(exc.value)) == (encoding == "raw")
 
 
+def test_a_npy_header_declaring_more_than_its_data_is_refused_before_mapping(tmp_path):
+    np.save(tmp_path / "v.npy", np.zeros((4, 4, 4), np.float32))
+    path = tmp_path / "liar.npy"  # once "mmap length is greater than file size"
+    path.write_bytes((tmp_path / "v.npy").read_bytes().replace(b"(4, 4, 4), }", b"(4000,4,4),}"))
+    with pytest.raises(FileFormatError, match=r"declares 4000 x 4 x 4 voxels \(256,000 bytes\) but the file holds "
+                                              r"256 bytes after its 128-byte header"):
+        clwave.load(path)
+
+
+def test_a_volume_too_big_for_any_chunking_names_its_bytes(tmp_path, capsys):
+    import h5py
+
+    with h5py.File(tmp_path / "huge.h5", "w") as fh:  # 4 PB declared, nothing written
+        fh.create_dataset("v", shape=(100000,) * 3, dtype="f4", chunks=(64, 64, 64))
+    with pytest.raises(InputError, match=r"100000 x 100000 x 100000 volume \(4,000,000,000,000,000 bytes as "
+                                         r"float32\), too big for this machine") as excinfo:
+        clwave.load(tmp_path / "huge.h5")
+    assert "chunk edge" not in str(excinfo.value)
+    from clwave.cli import main
+    assert main(["compress", str(tmp_path / "huge.h5"), "-o", str(tmp_path / "o.clw")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "too big for this machine" in err
+
+
 def test_ctrl_c_stops_a_long_splat_within_a_second(tmp_path):
     """A 1000^2 splat of every coefficient of 32^3 accumulates for half a minute on 2 cores; its launches
     are bounded (docs/splatting.md §6), so the command line takes Ctrl-C within a second of the signal, sent while a

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 import os
 from functools import partial
 
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import OnDemand, as_array
+from .shared import OnDemand, as_array, check_declared_size
 
 
 def read_raw(path, shape, dtype, byte_order, chunks, fits=None):
@@ -44,7 +45,12 @@ def read_raw(path, shape, dtype, byte_order, chunks, fits=None):
 
 
 def read_npy(path, chunks, fits=None):
-    """A .npy file, memory-mapped (C or Fortran order)."""
+    """A .npy file, memory-mapped (C or Fortran order); a header declaring more than the file holds is refused."""
+    fmt = np.lib.format
+    with open(path, "rb") as fh:
+        version = fmt.read_magic(fh)
+        shape, _, dtype = (fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0)(fh)
+        check_declared_size(path, fh.tell(), math.prod(shape) * dtype.itemsize, shape, gzip=False)
     mapped = np.load(path, mmap_mode="r", allow_pickle=False)  # reads the header only
     order = "F" if mapped.flags.f_contiguous and not mapped.flags.c_contiguous else "C"
     return as_array(OnDemand(partial(_read_memmap, str(path), mapped.dtype, mapped.shape, mapped.offset, order),

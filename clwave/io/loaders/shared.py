@@ -158,6 +158,10 @@ def as_array(source, chunks, roles=None, fits=None, path=None):
     edges = tuple({"t": 1, "c": -1}.get(r, edge) for r, edge in zip(roles, edges))
     blocks = normalize_chunks(edges, shape, limit=CHUNK_BYTES, dtype=np.float32, previous_chunks=own)
     count = math.prod(len(b) for b in blocks)
+    if count > MAX_CHUNKS and (chunks == "auto" or 4 * math.prod(shape) > MAX_CHUNKS * CHUNK_BYTES):
+        raise InputError(f"{path} holds a {' x '.join(map(str, shape))} volume ({4 * math.prod(shape):,} bytes as "
+                         f"float32), too big for this machine: even in chunks of {CHUNK_BYTES:,} bytes Dask's task "
+                         f"graph would exceed {MAX_CHUNKS:,} chunks; crop or downsample it first")
     if count > MAX_CHUNKS:
         problem = (f"cut the {' x '.join(map(str, shape))} volume into {count:,} chunks; more than {MAX_CHUNKS:,} "
                    "make Dask's task graph too big: give a bigger chunk edge")
