@@ -243,6 +243,11 @@ def test_model_options_on_a_clw_input_are_errors_that_name_them(tmp_path, capsys
                          str(tmp_path / "x.png"))
     assert code == 2 and "3 channel" in err and "compress the original volume with --tf" in err
     assert "classify it while rendering" not in err
+    # --tf on it: neither "classified already" nor a preset classifies it; line integrals do
+    code, out, err = run(capsys, "render", str(tmp_path / "rgb.clw"), "--method", "raytrace", "--tf", "grey", "-o",
+                         str(tmp_path / "x.png"))
+    assert code == 2 and err.count("\n") == 1 and "is a 3-channel model" in err and "--xray or --method splat" in err
+    assert "classified already" not in err
 
 
 @pytest.mark.parametrize("argv, needle", [
@@ -357,6 +362,7 @@ EARLY_MISTAKES = [
                                                                    "in 0..1"),
     (["render", "--coarse", "0"], "--coarse 0 must be"),
     (["render", "-o", "x.npy"], "-o x.npy must end in .png; --raw OUT.npy also writes the float32 image"),
+    (["render", "--turntable", "4", "-o", "x.png"], "-o x.png must end in .gif; --turntable writes a GIF"),
 ]
 #: options a .clw input refuses anyway (a model already)
 VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")

@@ -394,9 +394,14 @@ def post_transfer_function(args, wv):
 
     clw = is_clw(args)
     if wv.channels != 1:
+        if clw and (args.tf or args.tf_window) and wv.channels == 4:
+            raise InputError(f"--tf and --tf-window classify a scalar model; {args.input} has 4 channels (classified "
+                             "already): leave them out")
         if clw and (args.tf or args.tf_window):
-            raise InputError(f"--tf and --tf-window classify a scalar model; {args.input} has {wv.channels} "
-                             f"channels (classified already): leave them out")
+            raise InputError(f"--tf and --tf-window classify a scalar model; {args.input} is a {wv.channels}-channel "
+                             "model, which they do not classify and shaded ray tracing cannot draw: render its line "
+                             "integrals with --xray or --method splat, or compress the original volume with --tf "
+                             "PRESET")
         return None
     if clw and (args.tf or wv.transfer_function is None):
         return _preset(args)

@@ -22,8 +22,8 @@ def run(args):
     if args.turntable is not None and args.turntable < 1:
         raise InputError("--turntable N needs N >= 1")
     picture = (".png",) if args.turntable is None else (".gif",)
-    out, raw, stats = check_outputs(args.force, (args.output, "-o", picture, "--raw OUT.npy also writes the float32 "
-                                                 "image"), (args.raw, "--raw", (".npy",)),
+    hint = "--raw OUT.npy also writes the float32 image" if args.turntable is None else "--turntable writes a GIF"
+    out, raw, stats = check_outputs(args.force, (args.output, "-o", picture, hint), (args.raw, "--raw", (".npy",)),
                                     (args.stats, "--stats", (".json",)))
     background = parse_background(args)
     camera = make_camera(args)
