@@ -31,6 +31,22 @@ def test_progressive_ray_tracing_classifies_a_scalar_model(scalar_model, tmp_pat
     assert "frame 0: detail 0" in capsys.readouterr().out and (tmp_path / "p.gif").stat().st_size > 0
 
 
+def test_progressive_ray_tracing_says_how_many_frames_a_small_image_allows(scalar_model, tmp_path, capsys):
+    # --steps 5 on a 16x16 image once gave one frame silently: its schedule reduces no image under 4 MIN_SIDE a side
+    from clwave.raytrace.progressive import MIN_SIDE
+
+    path = tmp_path / "s.clw"
+    scalar_model.save(path)
+    args = ["progressive", str(path), "--method", "raytrace", "--xray", "-o", str(tmp_path / "p.gif"), "--force"]
+    assert main(args + ["--size", str(2 * MIN_SIDE), "--steps", "5"]) == 0
+    out, err = capsys.readouterr()
+    assert out.count("frame ") == 2 and err == (f"clwave: note: a {2 * MIN_SIDE}x{2 * MIN_SIDE} image allows 2 "
+                                                "progressive ray-tracing frames, not --steps 5; a bigger --size "
+                                                "allows more\n")
+    assert main(args + ["--size", str(2 * MIN_SIDE), "--steps", "2"]) == 0
+    assert capsys.readouterr().err == ""
+
+
 def test_small_volumes_take_the_levels_they_allow(tmp_path, capsys):
     # the default --levels 3 refused any volume with an axis under 16 voxels, naming an option not given
     np.save(tmp_path / "v.npy", np.random.default_rng(0).random((9, 10, 11)).astype(np.float32))
