@@ -250,6 +250,22 @@ def test_model_options_on_a_clw_input_are_errors_that_name_them(tmp_path, capsys
     assert "classified already" not in err
 
 
+def test_a_ct_in_hounsfield_units_compressed_as_it_is_gets_a_hint(tmp_path, capsys):
+    ct = np.full((8, 12, 10), -1000.0, np.float32)  # air about a body of soft tissue and bone
+    ct[2:6, 3:9, 2:8], ct[3:5, 5:7, 4:6] = 40.0, 1200.0
+    ct[0, :4] = -1024  # padding, near air too
+    np.save(tmp_path / "ct.npy", ct)
+    np.save(tmp_path / "mri.npy", ct + 1024)  # the same, its background at 0: no CT in HU
+    hint = "looks like CT in Hounsfield units (most border voxels near -1000, air)"
+    for name, extra, said in (("ct", [], True), ("ct", ["--subtract", "-1000"], False),
+                              ("ct", ["--hu-to-mu"], False), ("mri", [], False)):
+        code, out, err = run(capsys, "compress", str(tmp_path / f"{name}.npy"), "--levels", "1", *extra, "-o",
+                             str(tmp_path / "o.clw"), "--force")
+        assert code == 0 and (hint in err) == said, (name, extra, err)
+    from clwave.io.loaders.shared import air_in_hounsfield
+    assert not air_in_hounsfield(np.full((4, 4, 4), -1000.0)[..., None])  # channels: no CT
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["--keep", "5"], "--keep"),
     (["--levels", "9"], "--levels 9"),

@@ -87,6 +87,17 @@ def to_float32(block, path, mu_water, background, copy=True):
     return data
 
 
+def air_in_hounsfield(data) -> bool:
+    """Whether a scalar volume in memory looks like CT in Hounsfield units: most voxels of its six faces near air's
+    -1000 HU (-1024 padding included); its wavelet model then spends coefficients on that offset (docs/coordinates.md
+    §4)."""
+    if not isinstance(data, np.ndarray) or data.ndim != 3:
+        return False
+    faces = np.concatenate([np.ravel(data[index]) for axis in range(3) for index in
+                            ((slice(None),) * axis + (0,), (slice(None),) * axis + (-1,))])
+    return bool(np.mean((faces >= -1100) & (faces <= -900)) > 0.5)
+
+
 def check_chunks(chunks, kind, path):
     """``chunks`` validated for a ``kind`` input: None (by size), False (whole), "auto" or a cube edge."""
     edge = isinstance(chunks, (int, np.integer)) and not isinstance(chunks, (bool, np.bool_)) and chunks >= 1
