@@ -77,9 +77,13 @@ def _read_header(path, fh):
     except ValueError:  # pynrrd reads the list's file names as broken fields
         fh.seek(0)
         if re.search(rb"^data ?file: *LIST", fh.read(1 << 16), re.M):
-            raise FileFormatError(f"{path} spreads its data over several files (data file: LIST); clwave reads one "
-                                  "data file: join them into one raw file and name it in the header") from None
+            raise _several_files(path, "LIST") from None
         raise
+
+
+def _several_files(path, name) -> FileFormatError:
+    return FileFormatError(f"{path} spreads its data over several files (data file: {name}); clwave reads one data "
+                           "file: join them into one raw file and name it in the header")
 
 
 def _rows(directions) -> str:
@@ -106,8 +110,7 @@ def data_file(path, header):
     name = str(name)
     words = name.split()
     if len(words) >= 4 and "%" in words[0]:
-        raise FileFormatError(f"{path} spreads its data over several files (data file: {name}); clwave reads one "
-                              "data file: join them into one raw file and name it in the header")
+        raise _several_files(path, name)
     folder = Path(path).resolve().parent
     target = (folder / name).resolve()
     if not target.is_relative_to(folder):
