@@ -397,6 +397,10 @@ def test_a_volume_too_big_for_any_chunking_names_its_bytes(tmp_path, capsys):
     assert main(["compress", str(tmp_path / "huge.h5"), "-o", str(tmp_path / "o.clw")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "too big for this machine" in err
+    # an edge of few chunks, each too big for memory: weighed before a chunk is read
+    with pytest.raises(clwave.HostMemoryError, match=r"a 20000 x 20000 x 20000 chunk of .* as float32 needs about "
+                                                     r".*; give a smaller chunk edge"):
+        clwave.load(tmp_path / "huge.h5", chunks=20000)
 
 
 def test_ctrl_c_stops_a_long_splat_within_a_second(tmp_path):

@@ -221,11 +221,15 @@ def test_a_nrrd_header_of_broken_geometry_or_data_files_is_named(tmp_path, field
 
 def test_a_nrrd_data_file_beside_its_header_is_read(tmp_path):
     data = np.arange(24, dtype=np.uint8).reshape(2, 3, 4)
-    (tmp_path / "sub").mkdir()
-    (tmp_path / "sub" / "v.raw").write_bytes(data.tobytes())
-    header = tmp_path / "v.nhdr"
+    (tmp_path / "h" / "sub").mkdir(parents=True)
+    (tmp_path / "h" / "sub" / "v.raw").write_bytes(data.tobytes())
+    header = tmp_path / "h" / "v.nhdr"
     header.write_text("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 3 2\nencoding: raw\ndata file: sub/v.raw\n\n")
     np.testing.assert_array_equal(clwave.load(header).data, data)
+    (tmp_path / "h" / "sub" / "v.raw").rename(tmp_path / "out.raw")  # a link in the folder, leading out of it
+    (tmp_path / "h" / "sub" / "v.raw").symlink_to(tmp_path / "out.raw")
+    with pytest.raises(clwave.FileFormatError, match="outside the header's folder"):
+        clwave.load(header)
 
 
 def test_a_non_finite_spacing_is_named_in_numbers():

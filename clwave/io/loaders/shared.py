@@ -177,6 +177,9 @@ def as_array(source, chunks, roles=None, fits=None, path=None):
         problem = (f"cut the {' x '.join(map(str, shape))} volume into {count:,} chunks; more than {MAX_CHUNKS:,} "
                    "make Dask's task graph too big: give a bigger chunk edge")
         raise InputError(f"chunks={chunks!r} {problem}", cli=f"--chunks {chunks} {problem}")
+    edge = [max(b) for b in blocks]  # a chunk is read whole (and as float32) before it is transformed
+    check_fits(4 * math.prod(edge), f"a {' x '.join(map(str, edge))} chunk of {path} as float32",
+               "give a smaller chunk edge")
     return da.from_array(source, chunks=blocks, meta=np.empty((0,) * len(shape), source.dtype))
 
 
