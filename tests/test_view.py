@@ -616,6 +616,20 @@ def test_cli_view_refuses_bad_options_before_any_work(capsys, tmp_path):
         assert words in capsys.readouterr().err, argv
 
 
+def test_cli_view_refuses_a_device_memory_too_small_for_its_size_at_start(capsys, tmp_path):
+    """``clwave view --size 256 --device-memory 120MiB``: the X-ray views' 60 MiB hold the 128x128 auto-window image and
+    the drag frames, not the still 256x256 view (187 MiB, SplatRenderer's plan): refused at start-up in one line in
+    the command line's words, not on the page at every still view."""
+    from clwave.cli import main
+
+    path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16)).save(tmp_path / "h.clw")
+    assert main(["view", str(path), "--size", "256", "--device-memory", "120MiB"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and re.fullmatch(r"clwave: error: --device-memory 120 MiB is too small for this viewer: its "
+                                          r"X-ray views get 60 MiB of it \(docs/viewer.md §1\), and a 256x256 view "
+                                          r"needs at least 187 MiB .*; give more or a smaller --size", err[0]), err
+
+
 def test_cli_view_of_a_volume_classified_post_starts_from_its_transfer_function(monkeypatch):
     """``clwave view VOLUME --tf P --tf-window LO,HI --classify post``: the server gets the scalar model and starts its
     shaded views from that function (the model's own, as `render` takes it); without --classify, an RGBA model."""

@@ -114,6 +114,9 @@ class ViewServer:
                           complete=self.whole is None)
         for _ in xray.frames(self.initial_view(xray, moving=True), xray.pacing()):  # the kernels built (one build
             pass                                                                   # serves every size, stages.py)
+        # the largest X-ray image served, a still view at ``size`` (the frames above are smaller): refused now, not
+        # on the page (the 128x128 auto-window image is checked as XraySource makes it)
+        xray.r.begin(xray.camera(self.initial_view(xray)))
         sources = dict(xray=xray)
         if wv.channels in (1, 4):  # a scalar model through a transfer function at render time, or RGBA
             # a whole file (not a part of it, keep=) is traced in stages: its coarse stage at once, read from the file;
@@ -189,7 +192,8 @@ class ViewServer:
         if small:
             words = f"too small for this viewer: its {views} views get {given.partition('=')[2]} of it " \
                     f"(docs/viewer.md §1), and {why}"
-            return DeviceMemoryError(f"device_memory={total} is {words}", cli=f"--device-memory {total} is {words}")
+            cli = words.replace("render a smaller image", "a smaller --size")
+            return DeviceMemoryError(f"device_memory={total} is {words}", cli=f"--device-memory {total} is {cli}")
         share = f"the {views} views' share of it (docs/viewer.md §1)"
         return DeviceMemoryError(f"{exc} (within {share}: device_memory={total})",
                                  cli=f"{exc.cli_message()} (within {share}: --device-memory {total})")
