@@ -488,7 +488,8 @@ def add_raytrace_options(p):
     g.add_argument("--background", help="PNG: colour R,G,B in 0..1 behind the volume (default 0,0,0, black)")
     g.add_argument("--field", choices=("bspline", "wavelet"),
                    help="evaluate the field from fine B-spline grids (fast, the default) or from the wavelet "
-                        "coefficients with per-ray active lists (the paper's reference)")
+                        "coefficients with per-ray active lists (the paper's reference, of the model without the "
+                        "content clamp: docs/raytracing.md §4)")
 
 
 def make_camera(args):
