@@ -379,6 +379,9 @@ EARLY_MISTAKES = [
     (["render", "--coarse", "0"], "--coarse 0 must be"),
     (["render", "-o", "x.npy"], "-o x.npy must end in .png; --raw OUT.npy also writes the float32 image"),
     (["render", "--turntable", "4", "-o", "x.png"], "-o x.png must end in .gif; --turntable writes a GIF"),
+    (["render", "--method", "raytrace", "--detail", "-1"], "--detail -1 must be a level of detail"),
+    (["render", "--method", "raytrace", "--detail", "1", "--field", "wavelet"], "--detail renders with the B-spline"),
+    (["render", "--detail", "1"], "--detail is for --method raytrace"),
 ]
 #: options a .clw input refuses anyway (a model already)
 VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")
@@ -609,3 +612,25 @@ def test_a_thin_volume_is_told_its_levels_and_what_keep_then_drops(tmp_path, cap
     code, out, err = run(capsys, "compress", str(tmp_path / "thin4.npy"), "--levels", "1", "-o",
                          str(tmp_path / "d.clw"))
     assert code == 0 and err == ""
+
+
+def test_render_at_a_coarser_detail(tmp_path, capsys):
+    """``render --method raytrace --detail L`` is the API's tracer of that detail (``RayTracer(wv, lod=(L,))``,
+    ``render(detail=L)``) bit for bit, a coarser image than full detail; a level beyond the model's is refused."""
+    import clwave
+
+    model = tmp_path / "m.clw"
+    assert main(["compress", "phantom:hydrogen:24", "--tf", "hydrogen", "--levels", "2", "-o", str(model)]) == 0
+    view = ["--method", "raytrace", "--size", "24", "--azimuth", "30", "--elevation", "20", "--tolerance", "1e-2"]
+    for detail in ("2", "0"):
+        assert main(["render", str(model), *view, "--detail", detail, "-o", str(tmp_path / f"d{detail}.png"),
+                     "--raw", str(tmp_path / f"d{detail}.npy")]) == 0
+    capsys.readouterr()
+    wv = clwave.WaveletVolume.open(model)
+    expect = clwave.RayTracer(wv, lod=(2,)).render(clwave.Camera(30, 20, size=24), tolerance=1e-2, detail=2).image
+    coarse, full = np.load(tmp_path / "d2.npy"), np.load(tmp_path / "d0.npy")
+    np.testing.assert_array_equal(coarse, expect)
+    assert np.abs(coarse - full).max() > 1e-2  # a coarser image, not the full one
+    code, _, err = run(capsys, "render", str(model), *view, "--detail", "3", "-o", str(tmp_path / "d3.png"))
+    assert code == 2 and err.count("\n") == 1 and "--detail 3 must be a level from 0 (full detail) to 2" in err
+    assert not (tmp_path / "d3.png").exists()

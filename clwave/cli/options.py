@@ -116,6 +116,12 @@ def check_options(args):
         select_device(args.device)
     if hasattr(args, "display_window"):
         parse_window(args)
+    if getattr(args, "detail", None) is not None:  # the levels the model has are known once it is read
+        if args.detail < 0:
+            raise InputError(f"--detail {args.detail} must be a level of detail: 0 (full) up to the model's levels")
+        if args.detail and (args.field == "wavelet" or (args.workers, args.scheduler) != (None, None)):
+            raise InputError("--detail renders with the B-spline field on one machine: leave out --field wavelet "
+                             "and --workers/--scheduler, or --detail")
     if getattr(args, "omega_s", None) is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
         raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
     if getattr(args, "coarse", None) is not None and not 0 < args.coarse < 1:
@@ -135,7 +141,7 @@ def check_options(args):
 #: options of one --method only, refused with the other (a command has some of them: drr has no --light);
 #: (option, what it is given when not given: None where the command leaves it None)
 RAYTRACE_ONLY = (("tolerance", 1e-3), ("light", None), ("no_shading", None), ("xray", None), ("field", "bspline"),
-                 ("background", "0,0,0"))
+                 ("background", "0,0,0"), ("detail", None))
 SPLAT_ONLY = ("coarse", "omega_s")
 
 

@@ -39,6 +39,9 @@ def run(args):
         else:
             check_model_file(wv, "splatting")
     cluster = cluster_client(parse_scheduler(args)) if on_cluster else contextlib.nullcontext()
+    if args.detail and args.detail > wv.levels:  # docs/raytracing.md §8: the bricks of that detail alone
+        raise InputError(f"--detail {args.detail} must be a level from 0 (full detail) to {wv.levels}, the model's "
+                         f"coarsest")
     if args.method == "raytrace":
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
                        absorption=not args.xray,
@@ -47,11 +50,13 @@ def run(args):
             options.update(device=args.device, field=args.field, device_memory=device_memory)
         else:
             # --xray: line integrals of the whole model, as splatting draws them (docs/raytracing.md §1)
-            options["tracer"] = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory,
-                                          content_clamp=not args.xray)
+            tracer = RayTracer(wv, device=args.device, field=args.field, device_memory=device_memory,
+                               content_clamp=not args.xray, lod=(args.detail,) if args.detail else False)
 
         def render(cam):
-            return raytrace(wv, cam, scheduler=client, **options)
+            if on_cluster:
+                return raytrace(wv, cam, scheduler=client, **options)
+            return tracer.render(cam, detail=args.detail, **options)
     else:
         options = dict(device=args.device, omega_s=args.omega_s, coarse=args.coarse, device_memory=device_memory)
         if not on_cluster:
@@ -108,6 +113,8 @@ def add_parser(sub):
                         "classified model: --tf, or a .clw compressed with it; a scalar .clw takes --tf to classify "
                         "while rendering; or --xray)")
     add_raytrace_options(p)
+    p.add_argument("--detail", type=int, help="ray tracing: the level of detail, 0 (full, the default) up to the "
+                                              "model's levels (the coarsest: its approximation alone, fastest)")
     p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
     p.add_argument("--raw", help="also write the float32 image as .npy")
     p.add_argument("--stats", help="also write the figures as .json")
