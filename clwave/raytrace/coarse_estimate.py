@@ -3,8 +3,9 @@ energy and its share that survives a view's line integration, from the approxima
 the coarse stage), against the same share for the details, which are not read.
 
 Both from the coefficients' autocorrelation ``A(m) = sum over k and channels of c_k c_(k+m)``, in units of the
-approximation's lattice: the field ``f = sum c_k phi(y - k)`` has energy ``sum_m A(m) G(m)``, with the
-B-splines' overlap ``G(m) = prod over axes of N_2j(j + m_axis)`` (their autocorrelation), and its line integrals
+approximation's lattice: the field ``f = sum c_k phi(y - k)`` has energy ``sum_m A(m) G(m) = <c, c * G>``, with
+the B-splines' overlap ``G(m) = prod over axes of N_2j(j + m_axis)`` (their autocorrelation, separable and zero
+beyond ``|m| < j``: a filter of 2j - 1 taps per axis, no autocorrelation needed), and its line integrals
 along a unit direction d have energy ``sum_m A(m) R_d(m)``, ``R_d(m) = integral of G(m + t d) dt`` (the integral
 of the projection's square: the projections of phi(y - k) and phi(y - k') overlap as the autocorrelation's line
 integral through their offset, the Fourier slice theorem in space).
@@ -13,6 +14,8 @@ integral through their offset, the Fourier slice theorem in space).
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft
+from scipy.ndimage import correlate1d
 
 from ..model.bspline import bspline
 from ..model.wavelet import ChannelGroup
@@ -30,23 +33,25 @@ def approximation_grid(group: ChannelGroup) -> np.ndarray:
 
 def autocorrelation(grid: np.ndarray) -> np.ndarray:
     """``A(m)`` of coefficients (C, z, y, x), summed over their channels, offsets ``m`` from ``-(n - 1)`` to
-    ``n - 1`` per axis (index ``m + n - 1``)."""
-    size = [2 * n - 1 for n in grid.shape[1:]]
-    spectrum = np.fft.rfftn(grid, size, axes=(1, 2, 3))
-    out = np.fft.irfftn(np.sum(np.abs(spectrum) ** 2, axis=0), size, axes=(0, 1, 2))
-    return np.fft.fftshift(out)  # offset 0 in the middle
+    ``n - 1`` per axis (index ``m + n - 1``): a channel's power spectrum at a time, on transform sizes of small
+    primes at least ``2n - 1`` (no periodic copy reaches those offsets)."""
+    size = [scipy.fft.next_fast_len(2 * n - 1, real=True) for n in grid.shape[1:]]
+    power = 0.0
+    for channel in grid:
+        spectrum = scipy.fft.rfftn(channel, size, workers=-1)
+        power = power + (spectrum.real ** 2 + spectrum.imag ** 2)
+    out = scipy.fft.irfftn(power, size, workers=-1)
+    return out[np.ix_(*(np.arange(-(n - 1), n) % s for n, s in zip(grid.shape[1:], size)))]
 
 
-def field_energy(autocorr: np.ndarray, order: int) -> float:
-    """``sum_m A(m) G(m)``: the energy of the approximation's field (channels summed)."""
-    centre = [(n - 1) // 2 for n in autocorr.shape]
-    out = autocorr
-    for axis, c in enumerate(centre):  # G is separable and zero beyond |m| < j
-        m = np.arange(autocorr.shape[axis]) - c
-        shape = [1, 1, 1]
-        shape[axis] = -1
-        out = out * bspline(2 * order, order + m).reshape(shape)
-    return float(np.sum(out))
+def field_energy(grid: np.ndarray, order: int) -> float:
+    """``<c, c * G>``: the energy of the approximation's field from its coefficients (C, z, y, x), channels
+    summed."""
+    taps = bspline(2 * order, order + np.arange(1 - order, order))
+    smooth = grid
+    for axis in (1, 2, 3):
+        smooth = correlate1d(smooth, taps, axis=axis, mode="constant")
+    return float(np.sum(grid * smooth))
 
 
 def projected_energy(autocorr: np.ndarray, order: int, direction) -> float:

@@ -61,15 +61,15 @@ class StagedTracer:
             if occupied is not None:
                 share = mass_on_occupied(occupied, g.wavelet, self.levels).reshape(-1)[g.all_positions()]
                 outside += float(np.sum(e * (1 - share)))
-        # per group (§9): its wavelet, the autocorrelation of its approximation's coefficients and its importance
-        # energy over theirs (channels summed: importances take the largest channel)
-        self._parts = []
+        # per group (§9): its wavelet, its approximation's coefficients and its importance energy over theirs
+        # (channels summed: importances take the largest channel); their autocorrelation when an X-ray frame asks
+        self._parts, self._autocorrelations = [], None
         for e, g in zip(energies, approximation.groups):
             grid = approximation_grid(g)
             plain = float(np.sum(grid ** 2)) * g.wavelet.norm_phi ** 6
-            self._parts.append((g.wavelet, autocorrelation(grid), float(np.sum(e)) / plain if plain > 0 else 0.0))
+            self._parts.append((g.wavelet, grid, float(np.sum(e)) / plain if plain > 0 else 0.0))
         self._unread = unread
-        field = sum(scale * field_energy(a, w.order) for w, a, scale in self._parts)
+        field = sum(scale * field_energy(grid, w.order) for w, grid, scale in self._parts)
         self.missing = float(np.sqrt(unread / (field + unread))) if field + unread > 0 else 0.0
         self.outside = float(np.sqrt(outside / (read + unread))) if read + unread > 0 else 0.0
         if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
@@ -185,7 +185,10 @@ class StagedTracer:
         details' bounded by that of white coefficients at the coarsest level (:mod:`~clwave.raytrace.coarse_estimate`,
         docs/raytracing.md §9)."""
         direction = view.n[::-1] / np.asarray((self.coarse or self.full).wv.spacing)  # (z, y, x) lattice units
-        seen = sum(scale * projected_energy(a, w.order, direction) for w, a, scale in self._parts)
+        if self._autocorrelations is None:  # made once, for the first X-ray frame
+            self._autocorrelations = [autocorrelation(grid) for _, grid, _ in self._parts]
+        seen = sum(scale * projected_energy(a, w.order, direction)
+                   for (w, _, scale), a in zip(self._parts, self._autocorrelations))
         unseen = self._unread * max(detail_share(w, direction) for w, _, _ in self._parts)
         return float(np.sqrt(unseen / (seen + unseen))) if seen + unseen > 0 else 0.0
 
