@@ -64,9 +64,9 @@ def run(args):
     pictures = [f.result().to_uint8(window, background) for f in frames]
     if as_folder:
         out.mkdir(parents=True, exist_ok=True)
-        names = {f"frame_{f.index:03d}.png" for f in frames}
-        for f in frames:
-            f.save(out / f"frame_{f.index:03d}.png", window=window, background=background, overwrite=True)
+        names = [f"frame_{f.index:03d}.png" for f in frames]
+        for f, name in zip(frames, names):
+            f.save(out / name, window=window, background=background, overwrite=True)
         for old in out.glob("frame_*.png"):  # an earlier run's frames (--force): the folder holds this run's alone
             if re.fullmatch(r"frame_\d{3,}\.png", old.name) and old.name not in names:
                 old.unlink()

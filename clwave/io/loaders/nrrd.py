@@ -100,7 +100,7 @@ def _check_directions(path, directions, origin):
                               "origin (a channel axis: none): correct the header")
 
 
-def data_file(path, header):
+def _data_file(path, header):
     """The detached data file a NRRD header names (``data file``), or None where the data follows the header.  An
     untrusted header must not read other files: one resolving outside the header's folder is refused, and so are
     a ``%d`` pattern of several files, which pynrrd does not read."""
@@ -127,7 +127,7 @@ def _check_nrrd_size(path, header, offset):
     import nrrd
 
     encoding = str(header.get("encoding", "raw")).lower()
-    detached = data_file(path, header)
+    detached = _data_file(path, header)
     if detached is not None:  # a detached header: the data is a file of its own
         path, offset = detached, 0
     if encoding not in ("raw", "gzip", "gz") or not Path(path).is_file():
