@@ -239,7 +239,7 @@ def test_a_still_xray_frame_in_a_colour_map_is_the_splat_looked_up_in_its_table(
             await ws.send_str(json.dumps(dict(BASE, seq=1, azimuth=60.0, window=[0.0, 0.4], colour_map="inferno")))
             return hello, await frames_until_final(ws, 1)
     hello, frames = run(go())
-    assert hello["colour_maps"] == ["grey", "bone", "viridis", "inferno", "magma"]
+    assert list(hello["colour_maps"]) == ["grey", "bone", "viridis", "inferno", "magma"]
     assert hello["capabilities"]["xray"]["colour_map"] is True
     final, data = frames[-1]
     assert all(f["colour_map"] == "inferno" for f, _ in frames)
