@@ -159,14 +159,15 @@ def latest_final(page, after):
     return browser.wait_final(page), decode(browser.current_frame(page)[1])
 
 
-def test_the_editor_adds_a_point_drags_it_widens_it_and_undoes(viewer, page):
-    """The transfer-function editor's canvas (a scalar model, shaded), starting from the start function's points: a
-    press where there is no point adds one, dragging moves it (drag frames of the edited function meanwhile); let go,
-    the page's points are the start's and the new one, and the final frame, another image than before, is
-    clwave.raytrace of the view with TransferFunction(those points).  The width slider dragged then widens those
-    points about the start's window (the final frame clwave.raytrace of them); Ctrl+Z undoes the whole drag (the frame
-    before it, pixel for pixel); a double-click on the point removes it, the undo button brings it back, Ctrl+Shift+Z
-    removes it again."""
+def test_the_editor_and_the_sliders_act_on_the_same_points_and_undo(viewer, page):
+    """The transfer-function editor (a scalar model, shaded) from the start function: the width slider dragged (three
+    steps) widens the start's window 10^0.5 times; a press on the canvas where there is no point adds one, dragging
+    moves it (drag frames of the edited function meanwhile); let go, the page's points are the widened start's and the
+    new one, and the final frame, another image than before, is clwave.raytrace of the view with
+    TransferFunction(those points).  The width slider back at its middle narrows all of them back about the window's
+    middle: the start's points where they began (the final frame clwave.raytrace of them).  Ctrl+Z undoes that drag
+    (the frame before it, pixel for pixel); a double-click on the point removes it, the undo button brings it back,
+    Ctrl+Shift+Z removes it again."""
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.keys import Keys
 
@@ -179,47 +180,53 @@ def test_the_editor_adds_a_point_drags_it_widens_it_and_undoes(viewer, page):
             chain.key_up(k)
         chain.perform()
 
+    def width(*values):  # the width slider dragged through these positions, then let go
+        page.execute_script("const e = document.getElementById('tf-width'); for (const v of arguments[0]) { "
+                            "e.value = v; e.dispatchEvent(new Event('input')); } e.dispatchEvent(new Event('change'))",
+                            values)
+
+    def raytrace(fig, points):
+        camera = clwave.Camera(fig["azimuth"], fig["elevation"], SIZE, extent=fig["extent"])
+        return clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=clwave.TransferFunction(
+            points)).to_uint8(background=(0.0, 0.0, 0.0))
+
     browser.open_viewer(page, viewer.url)
     page.execute_script('document.querySelector(\'input[value="shaded"]\').click();')
     start = browser.wait_final(page)
-    before = decode(browser.current_frame(page)[1])
     assert start["tf_points"] == np.column_stack([START.data_points(), START.points[:, 1:]]).tolist()
+    width(60, 70, 75)
+    wide, before = latest_final(page, start)
+    mid, k = sum(start["tf_window"]) / 2, 10 ** 0.5
+    widened = np.array(start["tf_points"])
+    widened[:, 0] = mid + (widened[:, 0] - mid) * k
+    np.testing.assert_allclose(wide["tf_points"], widened, rtol=1e-12)
     editor = page.find_element("id", "tf-editor")
     page.execute_script("arguments[0].scrollIntoView({block: 'center'})", editor)
     ActionChains(page, duration=0).move_to_element_with_offset(editor, 30, -25).click_and_hold().move_by_offset(
         8, -4).pause(0.2).move_by_offset(8, -4).perform()  # held: from a spot with no point, up to 0.8 of the axis
-    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {start['seq']} && "
+    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {wide['seq']} && "
                                     f"f.tf_points.length === {len(START.points) + 1} && f")
     assert not moving["final"] and moving["mime"] == "image/jpeg"
     browser.release(page)
     final = browser.wait_final(page)
     points = page.execute_script("return window.clwave.state.tf.points")
-    new = [i for i, p in enumerate(points) if not np.isclose(p[0], START.data_points()).any()]
+    new = [i for i, p in enumerate(points) if not np.isclose(p[0], widened[:, 0]).any()]
     assert len(new) == 1 and final["tf_points"] == points  # the page sends them rounded to 10 digits
-    np.testing.assert_allclose(np.delete(points, new, axis=0), start["tf_points"], rtol=1e-9)
-    camera = clwave.Camera(final["azimuth"], final["elevation"], SIZE, extent=final["extent"])
-    expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=clwave.TransferFunction(
-        points)).to_uint8(background=(0.0, 0.0, 0.0))
+    np.testing.assert_allclose(np.delete(points, new, axis=0), widened, rtol=1e-9)
     got = decode(browser.current_frame(page)[1])
-    assert np.array_equal(got, expect) and np.abs(got.astype(int) - before).max() > 1
+    assert np.array_equal(got, raytrace(final, points)) and np.abs(got.astype(int) - before).max() > 1
 
-    # the width slider dragged to 75 (three steps): the points 10^0.5 times as far from the window's middle
-    page.execute_script("const e = document.getElementById('tf-width'); for (const v of [60, 70, 75]) "
-                        "{ e.value = v; e.dispatchEvent(new Event('input')); } e.dispatchEvent(new Event('change'))")
-    wide, picture = latest_final(page, final)
+    width(60, 50)  # the edited points narrowed back about the window's middle: the start's where they began
+    narrow, picture = latest_final(page, final)
     sent = page.execute_script("return window.clwave.state.tf.points")
-    mid = sum(start["tf_window"]) / 2
-    expect_points = np.array(points)
-    expect_points[:, 0] = mid + (expect_points[:, 0] - mid) * 10 ** 0.5
-    np.testing.assert_allclose(sent, expect_points, rtol=1e-9)
-    assert wide["tf_points"] == sent
-    camera = clwave.Camera(wide["azimuth"], wide["elevation"], SIZE, extent=wide["extent"])
-    expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=clwave.TransferFunction(
-        sent)).to_uint8(background=(0.0, 0.0, 0.0))
-    assert np.array_equal(picture, expect) and np.abs(picture.astype(int) - got).max() > 1
+    expect = np.array(points)
+    expect[:, 0] = mid + (expect[:, 0] - mid) / k
+    np.testing.assert_allclose(sent, expect, rtol=1e-9)
+    np.testing.assert_allclose(np.delete(sent, new, axis=0), start["tf_points"], rtol=1e-9)
+    assert narrow["tf_points"] == sent and np.array_equal(picture, raytrace(narrow, sent))
 
     keys(Keys.CONTROL, key="z")  # the slider's drag, one step
-    undone, picture = latest_final(page, wide)
+    undone, picture = latest_final(page, narrow)
     assert undone["tf_points"] == points and np.array_equal(picture, got)
     ActionChains(page, duration=0).double_click().perform()  # on the point, where the drag left it: removed
     removed, without = latest_final(page, undone)
