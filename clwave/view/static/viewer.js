@@ -259,11 +259,12 @@
 
   // ---------------------------------------------------------------- undo, redo
   // Transfer-function edits: a gesture (a slider's or a point's drag, a colour picked, a preset) is one step, the
-  // last HISTORY kept, with the editor's axes as they were (a step back shows the function as it was seen); Ctrl+Z
-  // undoes, Ctrl+Shift+Z or Ctrl+Y redoes (as the buttons), while the editor acts.
+  // last HISTORY kept, with the editor as it was (its axes, and a preset's points and window: a step back shows the
+  // function as it was seen); Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes (as the buttons), while the editor acts.
   const HISTORY = 100, done = [], undone = [];
   let before = null;  // the function as a gesture under way found it
-  const seen = () => ({ tf: JSON.stringify(tf), axis: editor.axis, top: editor.top });
+  const seen = () => ({ tf: JSON.stringify(tf), axis: editor.axis, top: editor.top, window: editor.window,
+                        points: editor.points && editor.points.map((p) => p.slice()) });  // (edits change them in place)
   const begin = () => { if (before === null) before = seen(); };
   function commit() {
     if (before !== null && before.tf !== JSON.stringify(tf)) {
@@ -278,7 +279,8 @@
     if (!from.length || before !== null || tfCanvas.closest("fieldset:disabled")) return;
     to.push(seen());
     const back = from.pop();
-    tf = JSON.parse(back.tf); editor.axis = back.axis; editor.top = back.top;
+    tf = JSON.parse(back.tf);
+    Object.assign(editor, { axis: back.axis, top: back.top, window: back.window, points: back.points });
     select(-1); sendTf(false); showHistory();
   }
   $("tf-undo").addEventListener("click", () => step(done, undone));
@@ -479,7 +481,8 @@
                  (f.reduction > 1 ? `, 1/${f.reduction} size` : "")]);
       if (f.error !== null) rows.push(["error estimate", `${fmt(f.error)} (${f.error_kind})`]);
       if (f.tf_window) $("tf-range").textContent = showRange(f.tf_window);  // the window this frame was classified by
-      if (f.tf_points && !tf.base.points) framePoints(f.tf_points, f.tf_window);  // the function it was classified by
+      // the function it was classified by, where that is the function now (not one left since it was sent)
+      if (f.tf_points && !tf.base.points && f.seq === sentSeq && !pending) framePoints(f.tf_points, f.tf_window);
     }
     rows.push(["frame", `${(1000 * f.seconds).toFixed(0)} ms render, ${(1000 * f.elapsed).toFixed(0)} ms since view`]);
     const table = $("figures");
