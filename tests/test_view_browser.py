@@ -211,7 +211,7 @@ def test_the_editor_and_the_sliders_act_on_the_same_points_and_undo(viewer, page
     final = browser.wait_final(page)
     points = page.execute_script("return window.clwave.state.tf.points")
     new = [i for i, p in enumerate(points) if not np.isclose(p[0], widened[:, 0]).any()]
-    assert len(new) == 1 and final["tf_points"] == points  # the page sends them rounded to 10 digits
+    assert len(new) == 1 and final["tf_points"] == points  # the page's values, as the server got them
     np.testing.assert_allclose(np.delete(points, new, axis=0), widened, rtol=1e-9)
     got = decode(browser.current_frame(page)[1])
     assert np.array_equal(got, raytrace(final, points)) and np.abs(got.astype(int) - before).max() > 1

@@ -227,12 +227,14 @@
     return points.map(([v, r, g, b, a]) => (back ? [mid + (v - mid - shift) / k, r, g, b, a / o] :
                                                    [mid + shift + (v - mid) * k, r, g, b, Math.min(MAX_OPACITY, a * o)]));
   }
-  function sendTf(moving) {  // the function as the server gets it (points rounded: a message stays far under 4 KiB)
+  function sendTf(moving) {  // the function as the server gets it
     const base = tf.base;
     if (base.points) {
       editor.points = through(base.points, base.anchor);
       fitEditor(editor.fresh);
-      state.tf = { points: editor.points.map((p) => [+p[0].toPrecision(10), ...p.slice(1, 4).map((x) => +x.toFixed(4)),
+      // colours and opacities rounded (a message stays far under 4 KiB); values as they are, whose order rounding to
+      // fewer digits could break where they lie close together far from zero (a refused message closes the socket)
+      state.tf = { points: editor.points.map((p) => [p[0], ...p.slice(1, 4).map((x) => +x.toFixed(4)),
                                                      +p[4].toPrecision(6)]) };
     } else {
       state.tf = { preset: base.preset, centre: slider("tf-window"), width: slider("tf-width"),
