@@ -214,7 +214,9 @@ def test_still_xray_frames_refine_to_the_splat_of_the_view(viewer):
 
 def test_colour_maps_are_matplotlibs_tables_and_colour_the_grey_levels():
     """The stored tables are matplotlib's sampled at their 256 entries, rounded to 8 bits; a grey ramp comes out as
-    the table, row for row."""
+    the table, row for row; the page gets the same rows."""
+    import base64
+
     import matplotlib
 
     from clwave.view import colours
@@ -225,6 +227,11 @@ def test_colour_maps_are_matplotlibs_tables_and_colour_the_grey_levels():
         expect = np.round(255 * matplotlib.colormaps[name](np.arange(256))[:, :3]).astype(np.uint8)
         np.testing.assert_array_equal(colours.table(name), expect)
         np.testing.assert_array_equal(colours.apply(ramp, name).reshape(256, 3), expect)
+    tables = colours.page_tables()  # what the page draws its colour bar from: the same rows, grey's the ramp
+    assert list(tables) == list(colours.NAMES)
+    for name, rows in tables.items():
+        expect = np.column_stack([ramp.ravel()] * 3) if name == "grey" else colours.table(name)
+        np.testing.assert_array_equal(np.frombuffer(base64.b64decode(rows), np.uint8).reshape(256, 3), expect)
 
 
 def test_a_still_xray_frame_in_a_colour_map_is_the_splat_looked_up_in_its_table(viewer):
@@ -239,7 +246,7 @@ def test_a_still_xray_frame_in_a_colour_map_is_the_splat_looked_up_in_its_table(
             await ws.send_str(json.dumps(dict(BASE, seq=1, azimuth=60.0, window=[0.0, 0.4], colour_map="inferno")))
             return hello, await frames_until_final(ws, 1)
     hello, frames = run(go())
-    assert hello["colour_maps"] == ["grey", "bone", "viridis", "inferno", "magma"]
+    assert list(hello["colour_maps"]) == ["grey", "bone", "viridis", "inferno", "magma"]
     assert hello["capabilities"]["xray"]["colour_map"] is True
     final, data = frames[-1]
     assert all(f["colour_map"] == "inferno" for f, _ in frames)

@@ -1,6 +1,7 @@
 """The viewer's page in a real headless browser (Debian's chromium through Selenium; docs/viewer.md §5):
 first image, orbit by dragging, the final X-ray frame against clwave.splat, a wrong token, two tabs, superseded
-frames, a hostile socket beside a working page, the transfer-function editor's presets, sliders and points."""
+frames, a hostile socket beside a working page, the transfer-function editor's presets, sliders, points and undo, the
+X-ray colour bar."""
 
 import io
 import sys
@@ -152,36 +153,114 @@ def test_shaded_with_the_transfer_function_editor(viewer, page):
     assert np.abs(decode(data).astype(int) - expect).max() <= 1
 
 
-def test_the_editor_adds_a_point_and_drags_it(viewer, page):
-    """The transfer-function editor's canvas (a scalar model, shaded), starting from the start function's points: a
-    press where there is no point adds one, dragging moves it (drag frames of the edited function meanwhile); let go,
-    the page's points are the start's and the new one, and the final frame, another image than before, is
-    clwave.raytrace of the view with TransferFunction(those points); a double-click on the point removes it."""
+def latest_final(page, after):
+    """The figures of the final frame of the page's latest view, a view after the frame ``after``; its picture."""
+    browser.wait_for(page, f"const c = window.clwave.current(); return c && c.fig.seq > {after['seq']}")
+    return browser.wait_final(page), decode(browser.current_frame(page)[1])
+
+
+def test_the_editor_and_the_sliders_act_on_the_same_points_and_undo(viewer, page):
+    """The transfer-function editor (a scalar model, shaded) from the start function: the width slider dragged (three
+    steps) widens the start's window 10^0.5 times; a press on the canvas where there is no point adds one, dragging
+    moves it (drag frames of the edited function meanwhile); let go, the page's points are the widened start's and the
+    new one, and the final frame, another image than before, is clwave.raytrace of the view with
+    TransferFunction(those points).  The width slider back at its middle narrows all of them back about the window's
+    middle: the start's points where they began (the final frame clwave.raytrace of them).  Ctrl+Z undoes that drag
+    (the frame before it, pixel for pixel); a double-click on the point removes it, the undo button brings it back,
+    Ctrl+Shift+Z removes it again."""
     from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.keys import Keys
+
+    def keys(*held, key):
+        chain = ActionChains(page)
+        for k in held:
+            chain.key_down(k)
+        chain.send_keys(key)
+        for k in held:
+            chain.key_up(k)
+        chain.perform()
+
+    def width(*values):  # the width slider dragged through these positions, then let go
+        page.execute_script("const e = document.getElementById('tf-width'); for (const v of arguments[0]) { "
+                            "e.value = v; e.dispatchEvent(new Event('input')); } e.dispatchEvent(new Event('change'))",
+                            values)
+
+    def raytrace(fig, points):
+        camera = clwave.Camera(fig["azimuth"], fig["elevation"], SIZE, extent=fig["extent"])
+        return clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=clwave.TransferFunction(
+            points)).to_uint8(background=(0.0, 0.0, 0.0))
 
     browser.open_viewer(page, viewer.url)
     page.execute_script('document.querySelector(\'input[value="shaded"]\').click();')
     start = browser.wait_final(page)
-    before = decode(browser.current_frame(page)[1])
     assert start["tf_points"] == np.column_stack([START.data_points(), START.points[:, 1:]]).tolist()
+    width(60, 70, 75)
+    wide, before = latest_final(page, start)
+    mid, k = sum(start["tf_window"]) / 2, 10 ** 0.5
+    widened = np.array(start["tf_points"])
+    widened[:, 0] = mid + (widened[:, 0] - mid) * k
+    np.testing.assert_allclose(wide["tf_points"], widened, rtol=1e-12)
     editor = page.find_element("id", "tf-editor")
     page.execute_script("arguments[0].scrollIntoView({block: 'center'})", editor)
     ActionChains(page, duration=0).move_to_element_with_offset(editor, 30, -25).click_and_hold().move_by_offset(
         8, -4).pause(0.2).move_by_offset(8, -4).perform()  # held: from a spot with no point, up to 0.8 of the axis
-    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {start['seq']} && "
+    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {wide['seq']} && "
                                     f"f.tf_points.length === {len(START.points) + 1} && f")
     assert not moving["final"] and moving["mime"] == "image/jpeg"
     browser.release(page)
     final = browser.wait_final(page)
     points = page.execute_script("return window.clwave.state.tf.points")
-    new = [i for i, p in enumerate(points) if not np.isclose(p[0], START.data_points()).any()]
-    assert len(new) == 1 and final["tf_points"] == points  # the page sends them rounded to 10 digits
-    np.testing.assert_allclose(np.delete(points, new, axis=0), start["tf_points"], rtol=1e-9)
-    camera = clwave.Camera(final["azimuth"], final["elevation"], SIZE, extent=final["extent"])
-    expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=clwave.TransferFunction(
-        points)).to_uint8(background=(0.0, 0.0, 0.0))
+    new = [i for i, p in enumerate(points) if not np.isclose(p[0], widened[:, 0]).any()]
+    assert len(new) == 1 and final["tf_points"] == points  # the page's values, as the server got them
+    np.testing.assert_allclose(np.delete(points, new, axis=0), widened, rtol=1e-9)
     got = decode(browser.current_frame(page)[1])
-    assert np.array_equal(got, expect) and np.abs(got.astype(int) - before).max() > 1
+    assert np.array_equal(got, raytrace(final, points)) and np.abs(got.astype(int) - before).max() > 1
+
+    width(60, 50)  # the edited points narrowed back about the window's middle: the start's where they began
+    narrow, picture = latest_final(page, final)
+    sent = page.execute_script("return window.clwave.state.tf.points")
+    expect = np.array(points)
+    expect[:, 0] = mid + (expect[:, 0] - mid) / k
+    np.testing.assert_allclose(sent, expect, rtol=1e-9)
+    np.testing.assert_allclose(np.delete(sent, new, axis=0), start["tf_points"], rtol=1e-9)
+    assert narrow["tf_points"] == sent and np.array_equal(picture, raytrace(narrow, sent))
+
+    keys(Keys.CONTROL, key="z")  # the slider's drag, one step
+    undone, picture = latest_final(page, narrow)
+    assert undone["tf_points"] == points and np.array_equal(picture, got)
     ActionChains(page, duration=0).double_click().perform()  # on the point, where the drag left it: removed
-    browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {final['seq']} && f.final && "
-                           f"f.tf_points.length === {len(START.points)}")
+    removed, without = latest_final(page, undone)
+    assert len(removed["tf_points"]) == len(START.points)
+    page.find_element("id", "tf-undo").click()
+    back, picture = latest_final(page, removed)
+    assert back["tf_points"] == points and np.array_equal(picture, got)
+    keys(Keys.CONTROL, Keys.SHIFT, key="z")
+    again, picture = latest_final(page, back)
+    assert again["tf_points"] == removed["tf_points"] and np.array_equal(picture, without)
+
+
+def test_the_colour_bar_shows_the_map_over_the_window(viewer, page):
+    """X-ray views in inferno: the bar under the image is the table's 256 rows, labelled with the window's low,
+    middle and high values (three digits), which follow the window's sliders and the auto window."""
+    from clwave.view.colours import table
+
+    browser.open_viewer(page, viewer.url)
+    page.execute_script("const m = document.getElementById('colour-map'); m.value = 'inferno';"
+                        "m.dispatchEvent(new Event('change'));"
+                        "const e = document.getElementById('hi'); e.value = 300; e.dispatchEvent(new Event('input'));")
+    final = browser.wait_for(page, "const c = window.clwave.current(); return c.fig.colour_map === 'inferno' && "
+                                   "c.fig.final && c.fig.seq === window.clwave.latest() && c.fig")
+    bar = page.execute_script("return Array.from(document.getElementById('colour-bar').getContext('2d')"
+                              ".getImageData(0, 0, 256, 1).data)")
+    np.testing.assert_array_equal(np.reshape(bar, (256, 4))[:, :3], table("inferno"))
+
+    def labels():
+        return [float(page.find_element("id", name).text) for name in ("bar-lo", "bar-mid", "bar-hi")]
+    assert page.find_element("id", "colour-bar").is_displayed()
+    lo, hi = final["window"]
+    np.testing.assert_allclose(labels(), [lo, (lo + hi) / 2, hi], rtol=5e-3)
+    page.find_element("id", "auto-window").click()
+    auto = browser.wait_final(page)
+    lo, hi = page.execute_script("return window.clwave.state.window") or viewer.server.sources["xray"].auto_window
+    assert auto["window"] == [lo, hi] and hi > final["window"][1] * 1.01
+    np.testing.assert_allclose(labels(), [lo, (lo + hi) / 2, hi], rtol=5e-3)

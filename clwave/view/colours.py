@@ -4,7 +4,8 @@ windowed line integrals (:func:`apply`).
 ``grey`` is the grey level itself; the others are matplotlib's tables (3.11: viridis, inferno and magma by van der Walt
 and Smith, CC0; bone after MATLAB's), sampled once at their 256 entries and rounded to 8 bits,
 ``np.round(255 * matplotlib.colormaps[name](np.arange(256))[:, :3])``, stored here as base64 of the (256, 3) uint8
-rows: matplotlib is no dependency of clwave (tests/test_view.py compares them with it where it is installed).
+rows (the page's colour bar gets them so, :func:`page_tables`): matplotlib is no dependency of clwave
+(tests/test_view.py compares them with it where it is installed).
 """
 
 from __future__ import annotations
@@ -76,6 +77,12 @@ NAMES = ("grey", *_TABLES)
 def table(name: str) -> np.ndarray:
     """The (256, 3) uint8 colours of ``name`` (one of :data:`NAMES` but grey), read-only."""
     return np.frombuffer(base64.b64decode(_TABLES[name]), np.uint8).reshape(256, 3)
+
+
+def page_tables() -> dict:
+    """Each map's 256 colours as the page draws its colour bar from them (the hello's ``colour_maps``, docs/viewer.md
+    §3): name to base64 of the (256, 3) uint8 rows, grey first."""
+    return {"grey": base64.b64encode(np.repeat(np.arange(256, dtype=np.uint8), 3)).decode(), **_TABLES}
 
 
 def apply(picture: np.ndarray, name: str) -> np.ndarray:

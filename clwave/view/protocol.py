@@ -16,7 +16,7 @@ import time
 from . import colours
 from .frames import ViewState
 
-#: the largest message a page may send (a view is about 250 bytes; with 32 transfer-function points, at most 2 KB)
+#: the largest message a page may send (a view is about 250 bytes; with 32 transfer-function points, at most 2.3 KB)
 MAX_MESSAGE = 4096
 #: messages per second a page may send on average, and in a burst (the page sends at most one per
 #: animation frame, 60 a second)

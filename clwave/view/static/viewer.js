@@ -96,19 +96,21 @@
       option.hidden = name === EDITED;
       return option;
     }));
-    const tf = shaded && hello.capabilities.shaded.tf;
-    $("tf").disabled = !tf;
-    $("tf-note").textContent = tf ? "classified while rendering" : "the model was classified before its " +
+    const editable = shaded && hello.capabilities.shaded.tf;
+    $("tf").disabled = !editable;
+    $("tf-note").textContent = editable ? "classified while rendering" : "the model was classified before its " +
       "transform (RGBA): lighting and background act";
     $("tf-range").textContent = showRange(start.window);
-    if (tf) { state.tf = { ...tfPreset }; showTf(); }
-    $("colour-map").replaceChildren(...hello.colour_maps.map((name) => {
+    if (editable) sendTf(false);
+    $("colour-map").replaceChildren(...Object.keys(hello.colour_maps).map((name) => {
       const option = document.createElement("option");
       option.value = option.textContent = name;
       return option;
     }));
     $("colour-map").disabled = !hello.capabilities.xray.colour_map;
+    showHistory();
     drawEditor();
+    drawColourBar();
     syncMode();
     showDetail(); showWindow();
   }
@@ -167,6 +169,7 @@
   const syncMode = () => {
     $("xray-controls").disabled = state.mode !== "xray";
     $("shaded-controls").disabled = state.mode !== "shaded";
+    $("colour-scale").hidden = state.mode !== "xray" || !hello.capabilities.xray.colour_map;
   };
   document.querySelectorAll('input[name="mode"]').forEach((r) => r.addEventListener("change", () => {
     state.mode = r.value; syncMode(); request();
@@ -181,10 +184,21 @@
   $("detail").addEventListener("input", () => { state.detail = showDetail(); request(); });
   // window sliders span 0 .. 2 x the auto window's top
   const span = () => 2 * Math.max(hello.window[1], 1e-30);
-  function showWindow() {
+  function showWindow() {  // the sliders, their figures and the colour bar's labels
     const [lo, hi] = state.window || hello.window;
     $("lo").value = Math.round(1000 * lo / span()); $("hi").value = Math.round(1000 * hi / span());
-    $("lo-out").textContent = lo.toPrecision(3); $("hi-out").textContent = hi.toPrecision(3);
+    $("lo-out").textContent = $("bar-lo").textContent = lo.toPrecision(3);
+    $("hi-out").textContent = $("bar-hi").textContent = hi.toPrecision(3);
+    $("bar-mid").textContent = ((lo + hi) / 2).toPrecision(3);
+  }
+  function drawColourBar() {  // the colour map's 256 rows (the hello's, base64 of RGB bytes) from low to high
+    const rows = atob(hello.colour_maps[state.colour_map]), c = $("colour-bar").getContext("2d");
+    const image = c.createImageData(256, 1);
+    for (let i = 0; i < 256; i++) {
+      for (let j = 0; j < 3; j++) image.data[4 * i + j] = rows.charCodeAt(3 * i + j);
+      image.data[4 * i + 3] = 255;
+    }
+    c.putImageData(image, 0, 0);
   }
   const moveWindow = () => {
     const lo = span() * $("lo").value / 1000, hi = span() * $("hi").value / 1000;
@@ -193,28 +207,93 @@
   $("lo").addEventListener("input", moveWindow);
   $("hi").addEventListener("input", moveWindow);
   $("auto-window").addEventListener("click", () => { state.window = null; showWindow(); request(); });
-  $("colour-map").addEventListener("change", (ev) => { state.colour_map = ev.target.value; request(); });
+  $("colour-map").addEventListener("change", (ev) => { state.colour_map = ev.target.value; drawColourBar(); request(); });
   $("shading").addEventListener("change", (ev) => { state.shading = ev.target.checked; request(); });
-  // transfer function (a scalar model, classified while rendering): a preset (null: the starting function), its
-  // window moved and widened, its opacity scaled; or the editor's points (below), which a preset or a slider replaces.
-  // A slider being moved asks for the cheap frames of a drag, its release for the refined view
-  const tfPreset = { preset: null, centre: 0, width: 1, opacity: 1 };
-  const TF_SLIDERS = { "tf-window": ["centre", (v) => (v - 50) / 50], "tf-width": ["width", (v) => 10 ** ((v - 50) / 50)],
-                       "tf-opacity": ["opacity", (v) => 10 ** ((v - 50) / 25)] };
-  function showTf() {
-    for (const [id, [key]] of Object.entries(TF_SLIDERS)) $(id + "-out").textContent = tfPreset[key].toPrecision(2);
-    $("tf-preset").value = tfPreset.preset || "";
+  // transfer function (a scalar model, classified while rendering): a base, a preset (null: the starting function,
+  // whose window the server holds) or the editor's points (data units, with the window `anchor` they are scaled about),
+  // seen through the sliders: the window centre and width move and widen the base's window, so its points move and
+  // scale together; the opacity scale multiplies their opacities. A preset base goes to the server as such (it applies
+  // the sliders alike, ShadedSource.transfer_function), points go through them. Editing the points shown makes them the
+  // base (through the sliders backwards: the sliders stay and go on acting); a preset replaces the base, sliders centred.
+  // A slider being moved asks for the cheap frames of a drag, its release for the refined view.
+  const TF_SLIDERS = { "tf-window": (v) => (v - 50) / 50, "tf-width": (v) => 10 ** ((v - 50) / 50),
+                       "tf-opacity": (v) => 10 ** ((v - 50) / 25) };
+  const CENTRED = { "tf-window": 50, "tf-width": 50, "tf-opacity": 50 }, MAX_OPACITY = 1000;  // protocol.POINT_RANGES
+  let tf = { base: { preset: null }, sliders: { ...CENTRED } };
+  const slider = (id) => TF_SLIDERS[id](tf.sliders[id]);
+  function through(points, anchor, back) {  // points seen through the sliders (back: the points seen, through them back)
+    const mid = (anchor[0] + anchor[1]) / 2, shift = slider("tf-window") * (anchor[1] - anchor[0]);
+    const k = slider("tf-width"), o = slider("tf-opacity");
+    return points.map(([v, r, g, b, a]) => (back ? [mid + (v - mid - shift) / k, r, g, b, a / o] :
+                                                   [mid + shift + (v - mid) * k, r, g, b, Math.min(MAX_OPACITY, a * o)]));
   }
-  for (const [id, [key, of]] of Object.entries(TF_SLIDERS)) {
+  function sendTf(moving) {  // the function as the server gets it
+    const base = tf.base;
+    if (base.points) {
+      editor.points = through(base.points, base.anchor);
+      fitEditor(editor.fresh);
+      // colours and opacities rounded (a message stays far under 4 KiB); values as they are, whose order rounding to
+      // fewer digits could break where they lie close together far from zero (a refused message closes the socket)
+      state.tf = { points: editor.points.map((p) => [p[0], ...p.slice(1, 4).map((x) => +x.toFixed(4)),
+                                                     +p[4].toPrecision(6)]) };
+    } else {
+      state.tf = { preset: base.preset, centre: slider("tf-window"), width: slider("tf-width"),
+                   opacity: slider("tf-opacity") };
+    }
+    for (const id in TF_SLIDERS) { $(id).value = tf.sliders[id]; $(id + "-out").textContent = slider(id).toPrecision(2); }
+    $("tf-preset").value = base.points ? EDITED : base.preset || "";
+    state.moving = moving;
+    drawEditor();
+    request();
+  }
+  for (const id in TF_SLIDERS) {
     $(id).addEventListener("input", (ev) => {
-      tfPreset[key] = of(+ev.target.value); state.tf = { ...tfPreset }; state.moving = true; showTf(); request();
+      begin(); tf.sliders[id] = +ev.target.value; sendTf(true);
       if (stats.tfInput === null) stats.tfInput = performance.now();
     });
-    $(id).addEventListener("change", () => { state.moving = false; request(); });
+    $(id).addEventListener("change", () => { commit(); state.moving = false; request(); });
   }
   $("tf-preset").addEventListener("change", (ev) => {
     if (ev.target.value === EDITED) return;  // chosen by editing only
-    tfPreset.preset = ev.target.value || null; state.tf = { ...tfPreset }; request();
+    begin(); tf = { base: { preset: ev.target.value || null }, sliders: { ...CENTRED } }; editor.fresh = true;
+    sendTf(false); commit();
+  });
+
+  // ---------------------------------------------------------------- undo, redo
+  // Transfer-function edits: a gesture (a slider's or a point's drag, a colour picked, a preset) is one step, the
+  // last HISTORY kept, with the editor as it was (its axes, and a preset's points and window: a step back shows the
+  // function as it was seen); Ctrl+Z undoes, Ctrl+Shift+Z or Ctrl+Y redoes (as the buttons), while the editor acts.
+  const HISTORY = 100, done = [], undone = [];
+  let before = null;  // the function as a gesture under way found it
+  const seen = () => ({ tf: JSON.stringify(tf), axis: editor.axis, top: editor.top, window: editor.window,
+                        points: editor.points && editor.points.map((p) => p.slice()) });  // (edits change them in place)
+  const begin = () => { if (before === null) before = seen(); };
+  function commit() {
+    if (before !== null && before.tf !== JSON.stringify(tf)) {
+      done.push(before); undone.length = 0;
+      if (done.length > HISTORY) done.shift();
+    }
+    before = null;
+    showHistory();
+  }
+  function showHistory() { $("tf-undo").disabled = !done.length; $("tf-redo").disabled = !undone.length; }
+  function step(from, to) {
+    if (!from.length || before !== null || tfCanvas.closest("fieldset:disabled")) return;
+    to.push(seen());
+    const back = from.pop();
+    tf = JSON.parse(back.tf);
+    Object.assign(editor, { axis: back.axis, top: back.top, window: back.window, points: back.points });
+    select(-1); sendTf(false); showHistory();
+  }
+  $("tf-undo").addEventListener("click", () => step(done, undone));
+  $("tf-redo").addEventListener("click", () => step(undone, done));
+  document.addEventListener("keydown", (ev) => {
+    if (!(ev.ctrlKey || ev.metaKey) || ev.altKey) return;
+    const key = ev.key.toLowerCase();
+    if (key === "z" && !ev.shiftKey) step(done, undone);
+    else if (key === "y" || key === "z") step(undone, done);
+    else return;
+    ev.preventDefault();
   });
   $("background").addEventListener("input", (ev) => {
     state.background = ev.target.value / 100; $("background-out").textContent = state.background.toFixed(2); request();
@@ -222,12 +301,14 @@
 
   // ---------------------------------------------------------------- transfer-function points
   // The canvas shows the opacity over the scalar's values (their histogram behind it, log counts): the points of the
-  // function of the last shaded frame, in data units, until the user edits them (click: add, drag: move, double-click
-  // or Delete: remove, the colour input: the selected point's colour); then the page sends those points (tf.points)
-  // and keeps its axes. Values stay strictly increasing, GAP of the axis apart.
+  // function (in data units): a preset's as the last shaded frame was classified by them (and its window), the
+  // base's through the sliders once the user edits them (click: add, drag: move, double-click or Delete: remove, the
+  // colour input: the selected point's colour). Values stay strictly increasing, GAP of the axis apart. The axes hold
+  // the values and the points: made anew with a preset (`fresh`), else only widened (an undo restores them).
   const EDITED = "edited", MAX_POINTS = 32, GAP = 1e-3, PAD = 5, HIT = 7;
   const tfCanvas = $("tf-editor"), tfCtx = tfCanvas.getContext("2d");
-  const editor = { points: null, axis: [0, 1], top: 1, selected: -1, drag: false, changed: false, histogram: null };
+  const editor = { points: null, window: null, axis: [0, 1], top: 1, fresh: true, selected: -1, drag: false,
+                   changed: false, histogram: null };
   const xOf = (v) => PAD + (v - editor.axis[0]) / (editor.axis[1] - editor.axis[0]) * (tfCanvas.width - 2 * PAD);
   const yOf = (a) => tfCanvas.height - PAD - a / editor.top * (tfCanvas.height - 2 * PAD);
   const valueOf = (x) => editor.axis[0] + Math.min(1, Math.max(0, (x - PAD) / (tfCanvas.width - 2 * PAD))) *
@@ -235,15 +316,23 @@
   const opacityOf = (y) => editor.top * Math.min(1, Math.max(0, (tfCanvas.height - PAD - y) / (tfCanvas.height - 2 * PAD)));
   const css = (p) => `rgb(${p.slice(1, 4).map((c) => Math.round(255 * c)).join(",")})`;
 
-  function rebaseEditor(points) {  // the function a frame was classified by, on axes that hold it and the values
+  function framePoints(points, window) {  // a preset's points and window as a frame was classified by them
     if (editor.drag) return;
     editor.points = points.map((p) => p.slice());
-    const h = editor.histogram ? editor.histogram.range : [points[0][0], points[points.length - 1][0]];
-    editor.axis = [Math.min(h[0], points[0][0]), Math.max(h[1], points[points.length - 1][0])];
-    if (!(editor.axis[1] > editor.axis[0])) editor.axis = [editor.axis[0] - 0.5, editor.axis[0] + 0.5];
-    editor.top = 2 * Math.max(...points.map((p) => p[4])) || 1;  // room to raise the opacity twofold
+    editor.window = window;
+    fitEditor(editor.fresh);
     editor.selected = Math.min(editor.selected, points.length - 1);
     drawEditor();
+  }
+
+  function fitEditor(fresh) {
+    const pts = editor.points, h = editor.histogram ? editor.histogram.range : [pts[0][0], pts[pts.length - 1][0]];
+    let lo = Math.min(h[0], pts[0][0]), hi = Math.max(h[1], pts[pts.length - 1][0]);
+    if (!fresh) { lo = Math.min(lo, editor.axis[0]); hi = Math.max(hi, editor.axis[1]); }
+    editor.axis = hi > lo ? [lo, hi] : [lo - 0.5, lo + 0.5];
+    const most = Math.max(...pts.map((p) => p[4]));
+    if (fresh || most > editor.top) editor.top = 2 * most || 1;  // room to raise the opacity twofold
+    editor.fresh = false;
   }
 
   function drawEditor() {
@@ -282,14 +371,15 @@
     });
   }
 
-  function edited(moving) {  // the page sends the edited points (rounded: a message stays far under 4 KiB)
-    state.tf = { points: editor.points.map((p) => [+p[0].toPrecision(10), ...p.slice(1, 4).map((x) => +x.toFixed(4)),
-                                                   +p[4].toPrecision(6)]) };
-    state.moving = moving;
-    $("tf-preset").value = EDITED;
+  function edited(moving) {  // the points shown, edited, are the base through the sliders backwards
+    let anchor = tf.base.anchor;
+    if (!anchor) {  // a preset's: the window its frame was classified by, without the sliders
+      const [lo, hi] = editor.window, w = (hi - lo) / slider("tf-width"), mid = (lo + hi) / 2 - slider("tf-window") * w;
+      anchor = [mid - w / 2, mid + w / 2];
+    }
+    tf.base = { points: through(editor.points, anchor, true), anchor };
     if (stats.tfInput === null) stats.tfInput = performance.now();
-    drawEditor();
-    request();
+    sendTf(moving);
   }
 
   function select(i) {
@@ -327,17 +417,20 @@
 
   function remove(i) {
     if (i < 0 || editor.points.length <= 2) return;
+    begin();
     editor.points.splice(i, 1);
     select(-1);
     edited(false);
+    commit();
   }
 
   tfCanvas.addEventListener("pointerdown", (ev) => {
     if (!editor.points || tfCanvas.closest("fieldset:disabled")) return;
     const [x, y] = canvasAt(ev);
     let i = hit(x, y);
+    begin();
     editor.changed = i < 0;
-    if (i < 0 && (i = add(valueOf(x), opacityOf(y))) < 0) return;
+    if (i < 0 && (i = add(valueOf(x), opacityOf(y))) < 0) { commit(); return; }
     select(i);
     editor.drag = true;
     tfCanvas.setPointerCapture(ev.pointerId);
@@ -359,6 +452,7 @@
     // a point let go at the top (its top twentieth) doubles the opacity axis: room to raise it further
     if (editor.points[editor.selected][4] > 0.95 * editor.top) editor.top *= 2;
     if (editor.changed) edited(false);
+    commit();
   };
   tfCanvas.addEventListener("pointerup", letGo);
   tfCanvas.addEventListener("pointercancel", letGo);
@@ -370,10 +464,11 @@
     const p = editor.points && editor.points[editor.selected];
     if (!p) return;
     const hex = ev.target.value;
+    begin();
     [1, 2, 3].forEach((j) => { p[j] = parseInt(hex.slice(2 * j - 1, 2 * j + 1), 16) / 255; });
     edited(true);
   });
-  $("tf-colour").addEventListener("change", () => { if (state.tf && state.tf.points) { state.moving = false; request(); } });
+  $("tf-colour").addEventListener("change", () => { commit(); if (tf.base.points) { state.moving = false; request(); } });
 
   // ---------------------------------------------------------------- figures and saving
   const fmt = (x, d = 3) => (typeof x === "number" ? x.toPrecision(d) : String(x));
@@ -388,7 +483,8 @@
                  (f.reduction > 1 ? `, 1/${f.reduction} size` : "")]);
       if (f.error !== null) rows.push(["error estimate", `${fmt(f.error)} (${f.error_kind})`]);
       if (f.tf_window) $("tf-range").textContent = showRange(f.tf_window);  // the window this frame was classified by
-      if (f.tf_points && !(state.tf && state.tf.points)) rebaseEditor(f.tf_points);  // the function it was classified by
+      // the function it was classified by, where that is the function now (not one left since it was sent)
+      if (f.tf_points && !tf.base.points && f.seq === sentSeq && !pending) framePoints(f.tf_points, f.tf_window);
     }
     rows.push(["frame", `${(1000 * f.seconds).toFixed(0)} ms render, ${(1000 * f.elapsed).toFixed(0)} ms since view`]);
     const table = $("figures");
