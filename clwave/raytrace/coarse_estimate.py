@@ -13,6 +13,7 @@ the plane across the rays, is the sum of the image's squares times a pixel's are
 from __future__ import annotations
 
 import numpy as np
+import scipy.special
 from scipy.ndimage import correlate1d
 
 from ..model.bspline import bspline
@@ -20,21 +21,22 @@ from ..model.wavelet import ChannelGroup
 
 
 def approximation_grid(group: ChannelGroup) -> np.ndarray:
-    """A group's approximation band as a dense (C, z, y, x) float64 array (the coefficients not kept 0)."""
+    """A group's approximation band as a dense (C, z, y, x) array of its values' type (the coefficients not kept
+    0)."""
     band, sl = group.bands[0], group.band_slices()[0]
-    grid = np.zeros((group.values.shape[0], band.size))
+    grid = np.zeros((group.values.shape[0], band.size), group.values.dtype)
     grid[:, group.all_positions()[sl] - band.start] = group.values[:, sl]
     return grid.reshape(-1, *band.shape)
 
 
 def field_energy(grid: np.ndarray, order: int) -> float:
     """``<c, c * G>``: the energy of the approximation's field from its coefficients (C, z, y, x), channels
-    summed."""
+    summed (filtered in their type, float32 from a file, and summed in float64)."""
     taps = bspline(2 * order, order + np.arange(1 - order, order))
     smooth = grid
     for axis in (1, 2, 3):
         smooth = correlate1d(smooth, taps, axis=axis, mode="constant")
-    return float(np.sum(grid * smooth))
+    return float(np.sum(grid * smooth, dtype=np.float64))
 
 
 def line_energy(image: np.ndarray, view, lattice, levels: int) -> float:
@@ -69,7 +71,7 @@ def detail_share(wavelet, direction) -> float:
 
     d = np.asarray(direction, float) / np.linalg.norm(direction)
     reach = (2 * j - 1) / np.max(np.abs(d))  # beyond it every factor along the ray is 0
-    nodes, gauss = np.polynomial.legendre.leggauss(256)
+    nodes, gauss = scipy.special.roots_legendre(256)  # numpy's leggauss solves a dense eigenproblem
     t = reach * nodes
     best = 0.0
     for key in ("aad", "ada", "daa", "add", "dad", "dda", "ddd"):

@@ -66,7 +66,7 @@ class StagedTracer:
         self._parts, field = [], 0.0
         for e, g in zip(energies, approximation.groups):
             grid = approximation_grid(g)
-            plain = float(np.sum(grid ** 2)) * g.wavelet.norm_phi ** 6
+            plain = float(np.sum(grid ** 2, dtype=np.float64)) * g.wavelet.norm_phi ** 6
             scale = float(np.sum(e)) / plain if plain > 0 else 0.0
             self._parts.append((g.wavelet, g.channels, scale))
             field += scale * field_energy(grid, g.wavelet.order)
