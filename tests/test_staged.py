@@ -219,6 +219,23 @@ def test_the_coarse_frames_estimate_bounds_their_error(tmp_path, monkeypatch, ke
     assert all(1 <= rms <= bound and top_ >= top for rms, top_, bound, _ in ratios), ratios
 
 
+def test_xray_coarse_frames_of_other_geometries_bound_their_error(tmp_path, monkeypatch):
+    """The X-ray estimate takes the approximation's line-integral energy from the frame's own image: a perspective
+    camera (its pixels' area at the target), a cone beam of rectangular pixels and a view cropping the volume (the
+    part in view against all the details) keep their coarse frames' estimates at least their errors, within the
+    5 % models' bound (hydrogen 48^3)."""
+    path = tmp_path / "hydrogen.clw"
+    model("hydrogen", keep=0.05).save(path)
+    cameras = (clwave.Camera(30, 20, size=128, perspective=True), clwave.Camera(30, 20, size=128, extent=30.0),
+               clwave.ConeBeam(150.0, 225.0, (128, 112), pixel=(0.9, 0.75), azimuth=30, elevation=20))
+    for cam in cameras:
+        frames = coarse_figures(path, cam, monkeypatch, absorption=False)
+        assert len(frames) == 2
+        for f in frames:
+            assert 1 <= f["estimated_relative_rms_error"] / f["relative_rms_error"] <= 6.5, (cam, f)
+            assert f["estimated_relative_max_error"] >= f["relative_max_error"], (cam, f)
+
+
 def test_a_file_without_the_occupancy_opens_and_renders_as_before(tmp_path, monkeypatch):
     """A file written before the occupancy: the coarse stage the same, its estimate without the clamp's term, the
     last frame the direct render."""
