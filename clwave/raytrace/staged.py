@@ -25,7 +25,7 @@ from ..io.clw import Abandoned, FileMask
 from ..io.occupancy import mass_on_occupied
 from ..io.summary import approximation_occupancy, detail_energy
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
-from .coarse_estimate import approximation_grid, autocorrelation, detail_share, field_energy, projected_energy
+from .coarse_estimate import approximation_grid, detail_share, field_energy, line_energy
 from .progressive import MIN_SIDE, RaytraceFrame, frames, schedule, upsample
 
 
@@ -61,15 +61,16 @@ class StagedTracer:
             if occupied is not None:
                 share = mass_on_occupied(occupied, g.wavelet, self.levels).reshape(-1)[g.all_positions()]
                 outside += float(np.sum(e * (1 - share)))
-        # per group (§9): its wavelet, its approximation's coefficients and its importance energy over theirs
-        # (channels summed: importances take the largest channel); their autocorrelation when an X-ray frame asks
-        self._parts, self._autocorrelations = [], None
+        # per group (§9): its wavelet, its channels and its importance energy over its coefficients' (channels
+        # summed: importances take the largest channel), which scales its field's energies to the importances'
+        self._parts, field = [], 0.0
         for e, g in zip(energies, approximation.groups):
             grid = approximation_grid(g)
-            plain = float(np.sum(grid ** 2)) * g.wavelet.norm_phi ** 6
-            self._parts.append((g.wavelet, grid, float(np.sum(e)) / plain if plain > 0 else 0.0))
-        self._unread = unread
-        field = sum(scale * field_energy(grid, w.order) for w, grid, scale in self._parts)
+            plain = float(np.sum(grid ** 2, dtype=np.float64)) * g.wavelet.norm_phi ** 6
+            scale = float(np.sum(e)) / plain if plain > 0 else 0.0
+            self._parts.append((g.wavelet, g.channels, scale))
+            field += scale * field_energy(grid, g.wavelet.order)
+        self._unread, self._lattice = unread, np.asarray(approximation.spacing) * 2 ** self.levels  # z, y, x
         self.missing = float(np.sqrt(unread / (field + unread))) if field + unread > 0 else 0.0
         self.outside = float(np.sqrt(outside / (read + unread))) if read + unread > 0 else 0.0
         if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
@@ -179,16 +180,14 @@ class StagedTracer:
             index += 1
             yield made
 
-    def missing_in_line_integrals(self, view) -> float:
-        """:attr:`missing` in an X-ray image of ``view`` (along its central ray): each part's field energy times
-        the share of it that survives the line integrals, the approximation's from its coefficients, the
-        details' bounded by that of white coefficients at the coarsest level (:mod:`~clwave.raytrace.coarse_estimate`,
-        docs/raytracing.md §9)."""
-        direction = view.n[::-1] / np.asarray((self.coarse or self.full).wv.spacing)  # (z, y, x) lattice units
-        if self._autocorrelations is None:  # made once, for the first X-ray frame
-            self._autocorrelations = [autocorrelation(grid) for _, grid, _ in self._parts]
-        seen = sum(scale * projected_energy(a, w.order, direction)
-                   for (w, _, scale), a in zip(self._parts, self._autocorrelations))
+    def missing_in_line_integrals(self, image, view) -> float:
+        """:attr:`missing` in the coarse stage's X-ray ``image`` (H, W, C) of ``view`` (its own, reduced view; along
+        its central ray): each part's energy in the line integrals, the approximation's from that image, the
+        details' their energy times the share that white coefficients at the coarsest level keep
+        (:mod:`~clwave.raytrace.coarse_estimate`, docs/raytracing.md §9)."""
+        direction = view.n[::-1] / self._lattice  # (z, y, x) lattice units
+        seen = sum(scale * line_energy(image[..., list(channels)], view, self._lattice, self.levels)
+                   for _, channels, scale in self._parts)
         unseen = self._unread * max(detail_share(w, direction) for w, _, _ in self._parts)
         return float(np.sqrt(unseen / (seen + unseen))) if seen + unseen > 0 else 0.0
 
@@ -203,15 +202,16 @@ class StagedTracer:
         def render(reduction):
             cam = camera if reduction == 1 else camera.reduced(reduction, view)
             res = coarse.render(cam, detail=detail, **options)
-            return upsample(res.image, view.size, reduction), res
+            return upsample(res.image, view.size, reduction), res, cam
 
-        missing = self.missing if options["absorption"] else self.missing_in_line_integrals(view)
         smallest = 2 ** max(0, min(self.levels, int(np.log2(max(1, min(view.size) / MIN_SIDE)))))
         steps.add(render(2 * smallest)[0])  # the first frame's step: a pilot
         for reduction in sorted({smallest, max(smallest // 2, 1)}, reverse=True):
             if self.ready:
                 return
-            image, res = render(reduction)
+            image, res, cam = render(reduction)
+            missing = (self.missing if options["absorption"]  # an X-ray frame's from its own image
+                       else self.missing_in_line_integrals(res.image, cam.view(coarse.wv)))
             rms, top = steps.add(image)
             peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
             lacks = float(np.hypot(missing, self.outside))  # the details and the clamp it lacks (§9)
