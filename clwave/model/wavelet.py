@@ -524,6 +524,10 @@ def band_importance(wavelet, band, values, index, focus, frame) -> np.ndarray:
     return imp
 
 
+#: rows :func:`ranked_table` makes at a time
+RANK_ROWS = 1 << 22
+
+
 def by_importance(importance) -> np.ndarray:
     """Indices of ``importance`` (a group's, in its ascending position order) by decreasing importance, ties by
     position (a stable sort): the importance order of :meth:`WaveletVolume.ranked`."""
@@ -532,12 +536,21 @@ def by_importance(importance) -> np.ndarray:
 
 def ranked_table(group: ChannelGroup, importance, order) -> CoefficientTable:
     """The group's kept coefficients ``order`` (indices into its ascending positions) as a
-    :class:`CoefficientTable` in that order; ``importance`` of each kept position."""
-    band_no, index = group.locate(group.all_positions()[order])
+    :class:`CoefficientTable` in that order; ``importance`` of each kept position.  Made :data:`RANK_ROWS` rows at
+    a time, so that the band lookup's int64 work arrays stay small beside the table."""
+    n, channels = len(order), len(group.channels)
     levels = np.array([b.level for b in group.bands], dtype=np.int8)
     codes = np.array([b.code for b in group.bands], dtype=np.uint8)
-    return CoefficientTable(levels[band_no], codes[band_no], index.astype(np.int32),
-                            np.ascontiguousarray(group.values[:, order].T), importance[order].astype(np.float32))
+    table = CoefficientTable(np.empty(n, np.int8), np.empty(n, np.uint8), np.empty((n, 3), np.int32),
+                             np.empty((n, channels), np.float32), np.take(importance, order).astype(np.float32))
+    positions = group.all_positions()
+    for lo in range(0, n, RANK_ROWS):
+        part = order[lo:lo + RANK_ROWS]
+        band_no, table.index[lo:lo + len(part)] = group.locate(positions[part])
+        table.level[lo:lo + len(part)], table.key_code[lo:lo + len(part)] = levels[band_no], codes[band_no]
+        for ch in range(channels):
+            table.values[lo:lo + len(part), ch] = np.take(group.values[ch], part)
+    return table
 
 
 def _top(importance, count) -> np.ndarray:

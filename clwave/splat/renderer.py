@@ -545,18 +545,22 @@ def ranked_groups(wv: WaveletVolume, tables=None) -> list:
     groups = []
     for gi, g in enumerate(wv.groups):
         table = wv.ranked(gi) if tables is None else tables[gi]
-        codes, firsts = np.unique(table.level.astype(np.int32) * 8 + table.key_code, return_index=True)
-        first_of = dict(zip(codes.tolist(), firsts.tolist()))
-        present = {(b.level, b.key): first_of[b.level * 8 + b.code] for b in g.bands
-                   if b.level * 8 + b.code in first_of}
+        ids = table.level.astype(np.uint8) * np.uint8(8) + table.key_code  # band ids, < 64 (tables.MAX_LEVELS)
+        counts = np.bincount(ids, minlength=64)
+        present = {(b.level, b.key): int(np.argmax(ids == b.level * 8 + b.code)) for b in g.bands
+                   if counts[b.level * 8 + b.code]}
         groups.append(dict(table=table, count=len(table.level), channels=len(g.channels), present=present,
                            energy=_energy_prefix(table.values)))
     return groups
 
 
 def _energy_prefix(values) -> np.ndarray:
-    """Cumulative coefficient energy sum c^2 over channels, in importance order."""
-    return np.cumsum(np.sum(np.asarray(values, np.float64) ** 2, axis=1))
+    """Cumulative coefficient energy sum c^2 over channels, in importance order (a channel at a time: no float64
+    copy of the (K, C) values)."""
+    energy = np.zeros(len(values))
+    for channel in np.asarray(values).T:
+        energy += np.square(channel, dtype=np.float64)
+    return np.cumsum(energy, out=energy)
 
 
 def _bytes(table) -> int:

@@ -178,7 +178,10 @@ class ViewServer:
                 log.error("making the whole model for %s views failed: %s", mode, failure)
             return
         if self.loop is not None:
-            self.loop.call_soon_threadsafe(lambda: [s.upgraded(mode) for s in list(self.sessions.values())])
+            try:
+                self.loop.call_soon_threadsafe(lambda: [s.upgraded(mode) for s in list(self.sessions.values())])
+            except RuntimeError:  # the server has stopped meanwhile (its loop closed): no tab to tell
+                pass
 
     def explain(self, exc: ClwaveError, mode: str) -> ClwaveError:
         """``exc`` as the page (or the caller) should read it: a renderer refusing within its share of the viewer's
