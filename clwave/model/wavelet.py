@@ -105,10 +105,8 @@ class ChannelGroup:
         band_no = np.searchsorted(starts, positions, side="right") - 1
         index = np.empty((len(positions), 3), dtype=np.int64)
         rest = positions - starts[band_no]
-        for axis in (2, 1):  # x, then y: the remainder is the z index
-            size = shapes[band_no, axis]
-            np.remainder(rest, size, out=index[:, axis])
-            rest //= size
+        for axis in (2, 1):  # x, then y: the quotient left is the z index
+            rest, index[:, axis] = np.divmod(rest, shapes[band_no, axis])
         index[:, 0] = rest
         return band_no, index
 
@@ -529,9 +527,17 @@ RANK_ROWS = 1 << 22
 
 
 def by_importance(importance) -> np.ndarray:
-    """Indices of ``importance`` (a group's, in its ascending position order) by decreasing importance, ties by
-    position (a stable sort): the importance order of :meth:`WaveletVolume.ranked`."""
-    return np.argsort(-importance, kind="stable")
+    """Indices of ``importance`` (float32 >= 0, a group's in its ascending position order) by decreasing
+    importance, ties by position: the importance order of :meth:`WaveletVolume.ranked`.  One sort of 64-bit keys,
+    the importance's bits inverted (a float >= 0 orders as its bits) over the index: NumPy sorts those with its
+    vector sort, 6 times faster than a stable argsort of the importance (docs/viewer.md §2)."""
+    n = len(importance)
+    if n >= 1 << 32:
+        raise InputError(f"a group of {n:,} coefficients is more than ranking takes (2^32)")
+    keys = (~np.asarray(importance, np.float32).view(np.uint32)).astype(np.uint64) << np.uint64(32)
+    keys |= np.arange(n, dtype=np.uint64)
+    keys.sort()
+    return (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
 
 
 def ranked_table(group: ChannelGroup, importance, order) -> CoefficientTable:
@@ -542,7 +548,8 @@ def ranked_table(group: ChannelGroup, importance, order) -> CoefficientTable:
     levels = np.array([b.level for b in group.bands], dtype=np.int8)
     codes = np.array([b.code for b in group.bands], dtype=np.uint8)
     table = CoefficientTable(np.empty(n, np.int8), np.empty(n, np.uint8), np.empty((n, 3), np.int32),
-                             np.empty((n, channels), np.float32), np.take(importance, order).astype(np.float32))
+                             np.empty((n, channels), np.float32),
+                             np.take(importance, order).astype(np.float32, copy=False))
     positions = group.all_positions()
     for lo in range(0, n, RANK_ROWS):
         part = order[lo:lo + RANK_ROWS]
