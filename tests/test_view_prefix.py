@@ -138,6 +138,30 @@ def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
     assert np.array_equal(decode(rest[-1].data), clwave.splat(prefix, camera).to_uint8(xray.auto_window))
 
 
+def test_ranking_is_the_numpy_oracles_order_and_bands(clw):
+    """``WaveletVolume.ranked`` (keys sorted, bands by arithmetic) against a plain NumPy oracle: a lexsort by
+    decreasing importance then position, and each band's ``np.unravel_index``; on the file's model and on one whose
+    values are all alike (importance ties everywhere within a band, so the positions decide)."""
+    model = clwave.WaveletVolume.open(clw)
+    g = model.groups[0]
+    alike = clwave.WaveletVolume(model.shape, model.spacing, model.origin, model.levels, [ChannelGroup(
+        g.wavelet, g.channels, g.bands, g.positions, np.ones_like(g.values))], model.channels)
+    for wv in (model, alike):
+        g = wv.groups[0]
+        positions, importance = g.all_positions(), wv.importance(g)
+        order = np.lexsort((positions, -importance))
+        starts = np.array([b.start for b in g.bands])
+        band = np.searchsorted(starts, positions[order], side="right") - 1
+        index = np.array([np.unravel_index(p - g.bands[b].start, g.bands[b].shape)
+                          for p, b in zip(positions[order], band)])
+        table = wv.ranked(0)
+        assert wv is model or len(np.unique(importance)) < len(g.bands)  # ties: one importance a band
+        assert np.array_equal(table.index, index) and np.array_equal(table.values, g.values[:, order].T)
+        assert np.array_equal(table.level, [g.bands[b].level for b in band])
+        assert np.array_equal(table.key_code, [g.bands[b].code for b in band])
+        assert np.array_equal(table.importance, importance[order])
+
+
 def head(wv, count):
     """The model of the ``count`` first coefficients of ``wv.ranked()`` (of each group)."""
     groups = []
