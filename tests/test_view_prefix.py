@@ -115,6 +115,32 @@ def test_a_failed_reading_of_the_rest_is_logged_and_the_prefix_goes_on(clw, monk
     assert any("failed: damaged" in r.getMessage() for r in caplog.records)
 
 
+def test_a_ranking_that_does_not_extend_the_prefix_is_logged_and_the_prefix_goes_on(clw, monkeypatch, caplog):
+    """The whole model ranked by its own importance (not the prefix's first): the renderer refuses it, one logged
+    line, and the prefix goes on being served, marked."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    monkeypatch.setattr(view_prefix, "prefix_first", lambda whole, prefix: [whole.ranked(gi) for gi in
+                                                                            range(len(whole.groups))])
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await receive(ws)
+            await ws.send_str(json.dumps(dict(BASE, seq=1)))
+            kind, message = await receive(ws)
+            while (message["mime"], message["coefficients"]) != ("image/png", 2048):
+                kind, message = await receive(ws)
+            while v.server._reader.ident is None:
+                await asyncio.sleep(0.01)
+            v.server._reader.join(30)
+            v.server.pool.submit(lambda: None).result(30)  # the swap's turn on the render thread has come
+
+    with view(clw, size=SIZE) as v:
+        asyncio.run(go(v))
+        assert not v.server.sources["xray"].complete and v.server.sources["xray"].r.count == 2048
+    assert any("failed: the groups do not begin" in r.getMessage() for r in caplog.records)
+
+
 def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
     """Swapping the whole model in between two stages of a still view: that view's frames go on to the prefix's
     last coefficient, none final, the last the prefix's own image; the same view again refines to the whole

@@ -164,8 +164,12 @@ class ViewServer:
 
     def _swap(self, wv, groups):
         """On the render thread, between two stages: the whole model in place of the prefix."""
+        try:
+            self.sources["xray"].swap(wv, groups)
+        except ValueError as exc:  # a ranking that does not begin with the prefix's: logged, the prefix goes on
+            self.upgraded("xray", exc)
+            return
         self.wv = wv
-        self.sources["xray"].swap(wv, groups)
         log.info("serving the whole model")
         self.upgraded("xray")
 
