@@ -12,7 +12,8 @@ import pytest
 
 import clwave
 from clwave.model.wavelet import ChannelGroup, by_importance
-from clwave.splat.renderer import SplatRenderer, ranked_groups
+from clwave.splat.ranked import ranked_groups
+from clwave.splat.renderer import SplatRenderer
 from clwave.view import frames as view_frames
 from clwave.view import prefix as view_prefix
 from clwave.view import view

@@ -26,6 +26,7 @@ from ..io.result import RenderResult
 from ..model.conebeam import check_camera
 from ..model.wavelet import WaveletVolume
 from .coarse import Layer, coarse_factor
+from .ranked import ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
@@ -535,32 +536,6 @@ def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device
     return wv.shared(("splat", cc.info.id, omega_s, sampling, coarse, cap),
                      lambda: SplatRenderer(wv, device=cc, omega_s=omega_s, sampling=sampling, coarse=coarse,
                                            device_memory=cap))
-
-
-def ranked_groups(wv: WaveletVolume, tables=None) -> list:
-    """What a :class:`SplatRenderer` holds of each group of ``wv``: its coefficients ranked (``tables``, else
-    :meth:`WaveletVolume.ranked`), their count and channels, the present bands, each with its first coefficient in
-    that order (a prefix needs only the bands it reaches; at 1 % kept 8 of hydrogen's 22 have none), and the
-    cumulative energy."""
-    groups = []
-    for gi, g in enumerate(wv.groups):
-        table = wv.ranked(gi) if tables is None else tables[gi]
-        ids = table.level.astype(np.uint8) * np.uint8(8) + table.key_code  # band ids, < 64 (tables.MAX_LEVELS)
-        counts = np.bincount(ids, minlength=64)
-        present = {(b.level, b.key): int(np.argmax(ids == b.level * 8 + b.code)) for b in g.bands
-                   if counts[b.level * 8 + b.code]}
-        groups.append(dict(table=table, count=len(table.level), channels=len(g.channels), present=present,
-                           energy=_energy_prefix(table.values)))
-    return groups
-
-
-def _energy_prefix(values) -> np.ndarray:
-    """Cumulative coefficient energy sum c^2 over channels, in importance order (a channel at a time: no float64
-    copy of the (K, C) values)."""
-    energy = np.zeros(len(values))
-    for channel in np.asarray(values).T:
-        energy += np.square(channel, dtype=np.float64)
-    return np.cumsum(energy, out=energy)
 
 
 def _bytes(table) -> int:

@@ -141,7 +141,7 @@ class ViewServer:
     def _read_whole(self, opened):
         """On the reading thread: the whole model, ranked with the prefix's coefficients first, then put into the
         prefix's renderer on the render thread."""
-        from ..splat.renderer import ranked_groups
+        from ..splat.ranked import ranked_groups
         from .prefix import prefix_first
 
         start = time.perf_counter()
