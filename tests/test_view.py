@@ -345,17 +345,16 @@ def test_a_starting_function_without_a_window_is_widened_over_its_points_span():
 
 
 def test_device_memory_is_shared_out_among_the_renderers():
-    """``memory_shares``: halves for the X-ray and the shaded views where both are served, the X-ray half a quarter
-    for a file's prefix and the rest for its whole model; never more than the cap together."""
+    """``memory_shares``: halves for the X-ray and the shaded views where both are served (a file's prefix and its
+    whole model are one X-ray renderer, extended); never more than the cap together."""
     from clwave.view.server import memory_shares
 
-    assert memory_shares(None, True, True) == dict(prefix=None, whole=None, shaded=None)
-    assert memory_shares("1GiB", False, False) == dict(prefix=2**30, whole=2**30, shaded=None)
-    assert memory_shares(1000, True, False) == dict(prefix=500, whole=500, shaded=500)
+    assert memory_shares(None, True) == dict(xray=None, shaded=None)
+    assert memory_shares("1GiB", False) == dict(xray=2**30, shaded=None)
+    assert memory_shares(1000, True) == dict(xray=500, shaded=500)
     cap = 2**30 + 7
-    shares = memory_shares(cap, True, True)
-    assert shares == dict(prefix=(cap // 2) // 4, whole=cap // 2 - (cap // 2) // 4, shaded=cap - cap // 2)
-    assert shares["prefix"] + shares["whole"] + shares["shaded"] == cap
+    shares = memory_shares(cap, True)
+    assert shares == dict(xray=cap // 2, shaded=cap - cap // 2) and shares["xray"] + shares["shaded"] == cap
 
 
 def test_a_capped_viewer_streams_within_its_share_to_the_same_image():

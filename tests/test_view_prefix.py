@@ -11,12 +11,14 @@ import numpy as np
 import pytest
 
 import clwave
+from clwave.model.wavelet import ChannelGroup, by_importance
+from clwave.splat.ranked import ranked_groups
 from clwave.splat.renderer import SplatRenderer
 from clwave.view import frames as view_frames
 from clwave.view import prefix as view_prefix
 from clwave.view import view
 from clwave.view.frames import XraySource
-from clwave.view.prefix import PrefixFirst
+from clwave.view.prefix import PrefixFirst, prefix_first
 from clwave.view.protocol import unpack_frame
 
 PASS = 4096  # coefficients a still pass adds in the test of a swap under way
@@ -114,9 +116,36 @@ def test_a_failed_reading_of_the_rest_is_logged_and_the_prefix_goes_on(clw, monk
     assert any("failed: damaged" in r.getMessage() for r in caplog.records)
 
 
+def test_a_ranking_that_does_not_extend_the_prefix_is_logged_and_the_prefix_goes_on(clw, monkeypatch, caplog):
+    """The whole model ranked by its own importance (not the prefix's first): the renderer refuses it, one logged
+    line, and the prefix goes on being served, marked."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    monkeypatch.setattr(view_prefix, "prefix_first", lambda whole, prefix: [whole.ranked(gi) for gi in
+                                                                            range(len(whole.groups))])
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await receive(ws)
+            await ws.send_str(json.dumps(dict(BASE, seq=1)))
+            kind, message = await receive(ws)
+            while (message["mime"], message["coefficients"]) != ("image/png", 2048):
+                kind, message = await receive(ws)
+            while v.server._reader.ident is None:
+                await asyncio.sleep(0.01)
+            v.server._reader.join(30)
+            v.server.pool.submit(lambda: None).result(30)  # the swap's turn on the render thread has come
+
+    with view(clw, size=SIZE) as v:
+        asyncio.run(go(v))
+        assert not v.server.sources["xray"].complete and v.server.sources["xray"].r.count == 2048
+    assert any("failed: the groups do not begin" in r.getMessage() for r in caplog.records)
+
+
 def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
-    """Swapping the whole model in between two stages of a still view: that view's frames go on with the prefix's
-    renderer to the prefix's last coefficient, none final; the same view again refines to the whole model."""
+    """Swapping the whole model in between two stages of a still view: that view's frames go on to the prefix's
+    last coefficient, none final, the last the prefix's own image; the same view again refines to the whole
+    model."""
     prefix = clwave.WaveletVolume.open(clw, keep=3 * PASS / 40**3)
     model = clwave.WaveletVolume.open(clw)
     xray = XraySource(prefix, SIZE, SplatRenderer(prefix), complete=False)
@@ -125,13 +154,130 @@ def test_a_refinement_under_way_keeps_its_model_through_the_swap(clw):
     pace.dragged = (50.0, 10.0, 1.0)  # the page has this view's drag frame: still passes only
     under_way = xray.frames(state, pace)
     first = next(under_way)
-    xray.swap(model, SplatRenderer(model))
+    xray.swap(model, ranked_groups(model, prefix_first(model, prefix)))
     rest = [first] + list(under_way)
     counts = [f.figures["coefficients"] for f in rest]
     assert len(rest) > 1 and counts[-1] == 3 * PASS and not any(f.figures["final"] for f in rest)
     again = list(xray.frames(state, pace))
     assert again[0].figures["coefficients"] >= 3 * PASS and again[-1].figures["final"]
     assert again[-1].figures["coefficients"] == model.kept
+    camera = clwave.Camera(50.0, 10.0, SIZE, extent=rest[-1].figures["extent"])
+    assert np.array_equal(decode(rest[-1].data), clwave.splat(prefix, camera).to_uint8(xray.auto_window))
+
+
+def test_ranking_is_the_numpy_oracles_order_and_bands(clw):
+    """``WaveletVolume.ranked`` (keys sorted, bands by arithmetic) against a plain NumPy oracle: a lexsort by
+    decreasing importance then position, and each band's ``np.unravel_index``; on the file's model and on one whose
+    values are all alike (importance ties everywhere within a band, so the positions decide)."""
+    model = clwave.WaveletVolume.open(clw)
+    g = model.groups[0]
+    alike = clwave.WaveletVolume(model.shape, model.spacing, model.origin, model.levels, [ChannelGroup(
+        g.wavelet, g.channels, g.bands, g.positions, np.ones_like(g.values))], model.channels)
+    for wv in (model, alike):
+        g = wv.groups[0]
+        positions, importance = g.all_positions(), wv.importance(g)
+        order = np.lexsort((positions, -importance))
+        starts = np.array([b.start for b in g.bands])
+        band = np.searchsorted(starts, positions[order], side="right") - 1
+        index = np.array([np.unravel_index(p - g.bands[b].start, g.bands[b].shape)
+                          for p, b in zip(positions[order], band)])
+        table = wv.ranked(0)
+        assert wv is model or len(np.unique(importance)) < len(g.bands)  # ties: one importance a band
+        assert np.array_equal(table.index, index) and np.array_equal(table.values, g.values[:, order].T)
+        assert np.array_equal(table.level, [g.bands[b].level for b in band])
+        assert np.array_equal(table.key_code, [g.bands[b].code for b in band])
+        assert np.array_equal(table.importance, importance[order])
+
+
+def head(wv, count):
+    """The model of the ``count`` first coefficients of ``wv.ranked()`` (of each group)."""
+    groups = []
+    for g in wv.groups:
+        rows = np.sort(by_importance(wv.importance(g))[:count])
+        groups.append(ChannelGroup(g.wavelet, g.channels, g.bands, g.all_positions()[rows], g.values[:, rows]))
+    return clwave.WaveletVolume(wv.shape, wv.spacing, wv.origin, wv.levels, groups, wv.channels)
+
+
+CAMERAS = [clwave.Camera(30.0, 20.0, SIZE), clwave.Camera(-70.0, 55.0, (33, 20))]
+
+
+def test_a_renderer_extended_to_a_model_whose_ranking_it_heads_is_that_models_renderer(clw):
+    """``SplatRenderer.extend``: a renderer of the 3,000 most important coefficients, extended to the whole model
+    (its ranking begins with theirs), is the whole model's fresh renderer bit for bit: tables, energy, images and
+    counts, all on the device or streamed in chunks; a view begun before the extension ends as the head's view (the
+    same passes) does."""
+    model = clwave.WaveletVolume.open(clw)
+    part = head(model, 3000)
+    tables = prefix_first(model, part)
+    for table, whole in zip(tables, [model.ranked(gi) for gi in range(len(model.groups))]):
+        for field in ("level", "key_code", "index", "values", "importance"):
+            assert np.array_equal(getattr(table, field), getattr(whole, field))
+    for cap in (None, "2MiB"):  # 2 MiB: the head on the device, the whole streamed
+        r = SplatRenderer(part, device_memory=cap)
+        under_way = r.begin(CAMERAS[0])
+        under_way.splat(0, 1000)
+        r.extend(model, ranked_groups(model, tables))
+        under_way.splat(1000, 2000)
+        alone = SplatRenderer(part, device_memory=cap).begin(CAMERAS[0])
+        alone.splat(0, 1000)
+        alone.splat(1000, 2000)
+        assert np.array_equal(under_way.image(), alone.image())
+        fresh = SplatRenderer(model, device_memory=cap)
+        assert r.count == fresh.count == model.kept and np.array_equal(r.energy, fresh.energy)
+        for camera in CAMERAS:
+            got, want = r.render(camera), fresh.render(camera)
+            assert want.image.std() > 0 and np.array_equal(got.image, want.image)
+            for key in ("coefficients", "tile_pairs", "pixel_updates", "chunk_coefficients", "coefficient_chunks"):
+                assert got.meta[key] == want.meta[key], key
+        assert (cap is None) == (fresh.render(CAMERAS[0]).meta["chunk_coefficients"] is None)
+
+
+def test_a_files_prefix_extended_to_the_whole_file_is_its_splat_to_float_rounding(clw, monkeypatch):
+    """A file's prefix (``open(keep=)``: the approximation first) extended to the whole file: its ranking is the
+    prefix's, then the rest's, each by importance, so a view of every coefficient is the same float32 sum as the
+    fresh renderer's in another order; each pixel then differs by at most 2 gamma_(m-1) sum |t| (m terms t, any
+    order, gamma_k = k u / (1 - k u), u = 2^-24: Higham, Accuracy and Stability of Numerical Algorithms, §4.2),
+    with sum |t| rendered from |c| and |footprint texels| and m at most the coefficients.  Counts alike, energy to
+    float64 rounding of its sum."""
+    model = clwave.WaveletVolume.open(clw)
+    part = clwave.WaveletVolume.open(clw, keep=2048 / 40**3)
+    tables = prefix_first(model, part)
+    for gi, table in enumerate(tables):
+        assert np.array_equal(table.index[:2048], part.ranked(gi).index)
+        assert np.all(np.diff(table.importance[:2048]) <= 0) and np.all(np.diff(table.importance[2048:]) <= 0)
+        assert table.importance[2048:].max() > table.importance[:2048].min()  # not the whole's ranking
+    r = SplatRenderer(part)
+    r.render(CAMERAS[0])
+    r.extend(model, ranked_groups(model, tables))
+    fresh = SplatRenderer(model)
+    m = model.kept
+    gamma = (m - 1) * 2.0**-24 / (1 - (m - 1) * 2.0**-24)
+    assert np.isclose(r.energy[-1], fresh.energy[-1], rtol=2 * m * 2.0**-53, atol=0)
+    magnitude = clwave.WaveletVolume(model.shape, model.spacing, model.origin, model.levels, [
+        ChannelGroup(g.wavelet, g.channels, g.bands, g.positions, np.abs(g.values)) for g in model.groups],
+        model.channels)
+    for camera in CAMERAS:
+        got, want = r.render(camera), fresh.render(camera)
+        with monkeypatch.context() as patch:
+            patch.setattr(SplatRenderer, "texel_pools", lambda self, tables: [self.cc.upload(np.abs(t.texels))
+                                                                              for t in tables])
+            bound = SplatRenderer(magnitude).render(camera).image.astype(np.float64) * (1 + gamma)
+        assert want.image.std() > 0
+        assert np.all(np.abs(got.image.astype(np.float64) - want.image) <= 2 * gamma * bound)
+        for key in ("coefficients", "tile_pairs", "pixel_updates"):
+            assert got.meta[key] == want.meta[key], key
+
+
+def test_a_prefix_not_part_of_the_whole_is_refused(clw):
+    """A prefix that is not a part of the whole model read after it (the file replaced meanwhile): one line; a
+    renderer is not extended by a ranking that does not begin with its own (a file's prefix by the whole's)."""
+    model = clwave.WaveletVolume.open(clw)
+    other = head(model, 100)
+    other.groups[0].values[0, 0] += 1.0
+    with pytest.raises(clwave.FileFormatError, match="not a part of the whole file"):
+        prefix_first(model, other)
+    with pytest.raises(ValueError, match="do not begin with"):
+        SplatRenderer(clwave.WaveletVolume.open(clw, keep=2048 / 40**3)).extend(model, ranked_groups(model))
 
 
 @pytest.mark.parametrize("prefix", [None, 2048])

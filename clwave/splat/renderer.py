@@ -26,6 +26,7 @@ from ..io.result import RenderResult
 from ..model.conebeam import check_camera
 from ..model.wavelet import WaveletVolume
 from .coarse import Layer, coarse_factor
+from .ranked import ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
@@ -36,6 +37,8 @@ CONE_SPLAT_BYTES = 40  # perspective: the centre is float4 (col, row, depth, 0)
 #: streamed chunks hold at least this many coefficients: below it, a pass's work over every tile (count
 #: tables, ranges, framebuffer writes) outweighs its splats
 MIN_CHUNK = 1024
+#: coefficients packed and copied to the device at a time when all of them go there
+UPLOAD_ROWS = 1 << 20
 
 
 class SplatRenderer:
@@ -91,7 +94,6 @@ class SplatRenderer:
             self.cc.ctx, "int4 *bbox, uint *counts, const uchar *keep",
             "if (!keep[i]) { bbox[i] = (int4)(0, 0, -1, -1); counts[i] = 0; }", "mask_splats"))
         self.compile_seconds = time.perf_counter() - start
-        self.groups = []
         q = self.cc.queue
         # per-pass tables come from a pool that keeps its buffers, and the tile lists from one buffer grown as
         # needed, so a new view does not map (and the OS zero) fresh pages
@@ -103,16 +105,21 @@ class SplatRenderer:
         self._sizes = None  # the count tables' sizes of the last view
         self._cone_footprints = {}  # perspective views' texture tables, shared by poses of one direction
         self._spectra_work = {}  # their footprint spectra's arrays, written over by the next view's
-        for gi, g in enumerate(wv.groups):
-            table = wv.ranked(gi)
-            # bands without a kept coefficient get no texture (at 1 % kept, 8 of hydrogen's 22); each present band
-            # with its first coefficient in importance order (a prefix needs only the bands it reaches)
-            codes, firsts = np.unique(table.level.astype(np.int32) * 8 + table.key_code, return_index=True)
-            first_of = dict(zip(codes.tolist(), firsts.tolist()))
-            present = {(b.level, b.key): first_of[b.level * 8 + b.code] for b in g.bands
-                       if b.level * 8 + b.code in first_of}
-            self.groups.append(dict(table=table, count=len(table.level), channels=len(g.channels), present=present,
-                                    energy=_energy_prefix(table.values)))
+        self._grown = False  # extend() gave more coefficients than the device arrays hold
+        self.groups = ranked_groups(wv)
+
+    def extend(self, wv: WaveletVolume, groups: list):
+        """``wv`` in place of the model, and its :func:`ranked_groups` ``groups``, whose tables begin with this
+        renderer's coefficients in its order (a file's prefix, then the rest of it: docs/viewer.md §2).  A view
+        under way splats on from the device arrays it began with; the next view's :meth:`begin` puts them all
+        there."""
+        if len(groups) != len(self.groups) or any(
+                new["count"] < old["count"] or not all(np.array_equal(getattr(new["table"], f)[: old["count"]],
+                                                                      getattr(old["table"], f))
+                                                       for f in ("level", "key_code", "index", "values"))
+                for old, new in zip(self.groups, groups)):
+            raise ValueError("the groups do not begin with this renderer's coefficients")
+        self.wv, self.groups, self._grown = wv, groups, True
 
     def tile_lists(self, nbytes: int):
         """A device buffer of at least ``nbytes`` for the tile lists, kept between chunks and views."""
@@ -217,14 +224,14 @@ class SplatRenderer:
             self.scratch.free_held()
             self._sizes = sizes
         centre = 4 if isinstance(tables[0], ConeTables) else 2  # floats per splat centre
-        if chunk != self.chunk:  # from all on the device to streamed, or another chunk: the last buffers go
-            self._resident = self._work = None
-            self.chunk = chunk
+        if chunk != self.chunk or self._grown:  # from all on the device to streamed, another chunk, or more
+            self._resident = self._work = None                # coefficients: the last buffers go
+            self.chunk, self._grown = chunk, False
         if self._work is not None and self._work["centre"].shape[1] != centre:
             self._work = None
         q = self.cc.queue
         if chunk is None and self._resident is None:
-            self._resident = [tuple(cla.to_device(q, a) for a in _pack(g["table"], 0, g["count"])) for g in self.groups]
+            self._resident = [_upload(q, g["table"], g["count"]) for g in self.groups]
         if self._work is None:
             n = max(chunk or max(g["count"] for g in self.groups), 1)
             self._work = dict(centre=cla.empty(q, (n, centre), np.float32), bbox=cla.empty(q, (n, 4), np.int32),
@@ -531,14 +538,19 @@ def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device
                                            device_memory=cap))
 
 
-def _energy_prefix(values) -> np.ndarray:
-    """Cumulative coefficient energy sum c^2 over channels, in importance order."""
-    return np.cumsum(np.sum(np.asarray(values, np.float64) ** 2, axis=1))
-
-
 def _bytes(table) -> int:
     """A host table's bytes, or a device buffer's (a perspective view's texel pool, :class:`ConeTables`)."""
     return table.nbytes if isinstance(table, np.ndarray) else table.size
+
+
+def _upload(q, table, count: int) -> tuple:
+    """The first ``count`` coefficients of a ranked table on the device, as :func:`_pack` gives them, packed and
+    copied :data:`UPLOAD_ROWS` at a time (no host copy of them all)."""
+    coef, values = cla.empty(q, (count, 4), np.int32), cla.empty(q, (count, 4), np.float32)
+    for lo in range(0, count, UPLOAD_ROWS):
+        for device, host in zip((coef, values), _pack(table, lo, min(count, lo + UPLOAD_ROWS))):
+            cl.enqueue_copy(q, device.data, host, dst_offset=lo * 16)  # blocking: the host part goes with the loop
+    return coef, values
 
 
 def _pack(table, first: int, end: int) -> tuple:

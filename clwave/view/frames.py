@@ -153,7 +153,7 @@ class XraySource(Source):
     every :data:`STILL_SECONDS` (docs/viewer.md §2).
 
     ``complete``: False while the model is a prefix of a ``.clw`` file whose rest is being read; then no frame is
-    final, and :meth:`swap` puts the whole model in (docs/viewer.md §2)."""
+    final, and :meth:`swap` extends the renderer to the whole model (docs/viewer.md §2)."""
 
     mode = "xray"
 
@@ -170,14 +170,17 @@ class XraySource(Source):
     def pacing(self) -> XrayPace:
         return XrayPace(min(max(DRAG_LEAST, self.r.count // 100), self.r.count))
 
-    def swap(self, wv, renderer: SplatRenderer):
-        """The whole model and its renderer in place of the prefix's (on the render thread, between stages: frames
-        under way keep the renderer they began with)."""
-        self.wv, self.r, self.complete = wv, renderer, True
+    def swap(self, wv, groups: list):
+        """The whole model in place of the prefix, its ranked ``groups`` beginning with the prefix's coefficients
+        (``SplatRenderer.extend``; on the render thread, between stages): frames under way go on to the prefix's
+        last coefficient, from what they began with, and none of them is final."""
+        self.r.extend(wv, groups)
+        self.wv, self.complete = wv, True
 
     def frames(self, state: ViewState, pace: XrayPace):
         start = time.perf_counter()
-        r, complete = self.r, self.complete  # a swap meanwhile does not change a view under way
+        # a swap meanwhile does not change a view under way: its coefficients and figures stay the prefix's
+        r, complete, energy = self.r, self.complete, self.r.energy
         total = r.count
         limit = min(total, max(1, round(state.detail * total)))  # 0 for a model without coefficients
         window = state.window or self.auto_window
@@ -190,9 +193,9 @@ class XraySource(Source):
             acc.splat(0, count)
             image = acc.image()
             seconds = time.perf_counter() - start
-            self._pace(pace, r.count, count, seconds)
+            self._pace(pace, total, count, seconds)
             pace.dragged = here
-            yield self._xray_frame(state, r, complete, image, count, window, False, seconds, start)
+            yield self._xray_frame(state, energy, total, complete, image, count, window, False, seconds, start)
             if state.moving:
                 return
         stage = time.perf_counter()
@@ -211,8 +214,8 @@ class XraySource(Source):
             if done == limit and limit:
                 self.rate = busy / limit
             pace.still = ((here, state.detail), done)
-            yield self._xray_frame(state, r, complete, image, done, window, complete and done == limit, seconds,
-                                   start)
+            yield self._xray_frame(state, energy, total, complete, image, done, window, complete and done == limit,
+                                   seconds, start)
             if done == limit:
                 return
 
@@ -238,18 +241,17 @@ class XraySource(Source):
         step = STILL_SECONDS / self.rate
         return int(limit if limit - done <= 1.5 * step else min(limit, done + max(done, step)))
 
-    def _xray_frame(self, state, r, complete, image, count, window, final, seconds, start) -> Frame:
-        energy = r.energy
+    def _xray_frame(self, state, energy, total, complete, image, count, window, final, seconds, start) -> Frame:
         captured = float(energy[count - 1] / energy[-1]) if count and energy[-1] > 0 else 1.0
         picture = RenderResult(image, dict(mode="xray")).to_uint8(window)
         colour_map = state.colour_map if self.capabilities["colour_map"] else None  # an RGBA model's is its colours
         if colour_map:
             picture = colours.apply(picture, colour_map)
-        figures = dict(final=final, colour_map=colour_map, coefficients=count, fraction=count / max(r.count, 1),
+        figures = dict(final=final, colour_map=colour_map, coefficients=count, fraction=count / max(total, 1),
                        voxel_fraction=count / self.wv.n_voxels, prefix=not complete,
                        # the coefficient energy not yet splatted: the relative L2 error of the model drawn
                        error=float(np.sqrt(max(0.0, 1.0 - captured))), error_kind="relative L2 (coefficients left)",
                        window=list(window), seconds=seconds)
-        if not r.count:  # the page's status line says why the image is blank
+        if not total:  # the page's status line says why the image is blank
             figures["note"] = NO_COEFFICIENTS
         return self._frame(state, picture, final or not state.moving, figures, start)

@@ -3,7 +3,8 @@ important coefficients and reads the rest in the background.
 
 The file stores its coefficients by importance tier, the coarsest approximation first (docs/chunked.md §4), so the
 ``PREFIX`` most important of them (the approximation first) are a prefix of its reading
-(``WaveletVolume.open(path, keep=)``, the model ``open(path).threshold(keep=)``).
+(``WaveletVolume.open(path, keep=)``, the model ``open(path).threshold(keep=)``).  The whole model, once read, is
+ranked with the prefix's coefficients first (:func:`prefix_first`), so that the prefix's renderer extends to it.
 """
 
 from __future__ import annotations
@@ -12,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import FileFormatError
 from ..io.clw import read_header
-from ..model.wavelet import WaveletVolume, check_thresholding
+from ..model.wavelet import WaveletVolume, by_importance, check_thresholding, ranked_table
 
 #: coefficients (per channel group) the viewer serves from at once: at 1024^3 (5 % kept) about 2 % of the file,
 #: read in about a second, and enough for the display window (frames.WINDOW_COEFFICIENTS)
@@ -38,3 +40,29 @@ class PrefixFirst:
     def whole(self) -> WaveletVolume:
         """The whole model (the file, or its ``keep`` most important coefficients)."""
         return WaveletVolume.open(self.path, keep=self.keep)
+
+
+def prefix_first(whole: WaveletVolume, prefix: WaveletVolume) -> list:
+    """Per group, the coefficients of ``whole`` as a ranked table (:func:`~clwave.model.wavelet.ranked_table`):
+    those of ``prefix`` (a part of it, ``threshold(keep=)``) by importance, then the rest by importance.  Its first
+    rows are ``prefix.ranked()``'s, so that the prefix's renderer extends to it (``SplatRenderer.extend``).  It is
+    not ``whole.ranked()``: a prefix holds the approximation first (docs/model.md §2), and in importance order some
+    of it comes after the rest's most important (hydrogen 512³: 37,316 of the prefix's 2^20 rank beyond 2^20), so
+    an image of every coefficient is the same sum in another order (docs/viewer.md §2).  A prefix that is not a
+    part of ``whole`` (the file replaced meanwhile) is a FileFormatError."""
+    tables = []
+    for g, part in zip(whole.groups, prefix.groups):
+        positions, kept = g.all_positions(), part.all_positions()
+        rows = np.searchsorted(positions, kept)
+        if not (np.all(rows < len(positions)) and np.array_equal(positions[rows], kept)
+                and np.array_equal(g.values[:, rows], part.values)):
+            raise FileFormatError("the file's prefix is not a part of the whole file read after it (was the file "
+                                  "replaced meanwhile?); open it again")
+        importance = whole.importance(g)
+        importance[rows] = prefix.importance(part)  # as the prefix's renderer ranked them (without a file's focus)
+        rest = np.ones(len(positions), bool)
+        rest[rows] = False
+        rest = np.flatnonzero(rest)
+        order = np.concatenate([rows[by_importance(importance[rows])], rest[by_importance(importance[rest])]])
+        tables.append(ranked_table(g, importance, order))
+    return tables

@@ -41,16 +41,14 @@ HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Con
                                       "object-src 'none'; base-uri 'none'; form-action 'none'"}
 
 
-def memory_shares(device_memory, shaded: bool, prefix: bool) -> dict:
+def memory_shares(device_memory, shaded: bool) -> dict:
     """The device memory (bytes; None: the device's) each renderer of a server may hold, ``device_memory`` shared
-    out (docs/viewer.md §1): half to the X-ray views and half to the shaded ones where both are served; of the X-ray
-    half, a file's prefix renderer a quarter and its whole model's the rest (both hold buffers at the swap)."""
+    out (docs/viewer.md §1): half to the X-ray views and half to the shaded ones where both are served."""
     cap = parse_cap(device_memory)
     if cap is None:
-        return dict(prefix=None, whole=None, shaded=None)
+        return dict(xray=None, shaded=None)
     xray = cap // 2 if shaded else cap
-    return dict(prefix=xray // 4 if prefix else xray, whole=xray - xray // 4 if prefix else xray,
-                shaded=cap - xray if shaded else None)
+    return dict(xray=xray, shaded=cap - xray if shaded else None)
 
 
 def is_loopback(host: str) -> bool:
@@ -81,8 +79,7 @@ class ViewServer:
         self.wv = opened.prefix if opened else model
         self.host, self.port, self.device = host, int(port), device
         self.device_memory = parse_cap(device_memory)
-        self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4),
-                                    prefix=opened is not None and not opened.complete)
+        self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4))
         self.token = secrets.token_urlsafe(24)
         self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render")
         # what a source makes before its first frame (the ray tracer's bricks) is made here, so that the render
@@ -110,7 +107,7 @@ class ViewServer:
         """The sources, made on the render thread, with one frame of each kind drawn (kernels built, warm)."""
         from ..splat.renderer import SplatRenderer
 
-        xray = XraySource(wv, size, SplatRenderer(wv, device=self.device, device_memory=self.shares["prefix"]),
+        xray = XraySource(wv, size, SplatRenderer(wv, device=self.device, device_memory=self.shares["xray"]),
                           complete=self.whole is None)
         for _ in xray.frames(self.initial_view(xray, moving=True), xray.pacing()):  # the kernels built (one build
             pass                                                                   # serves every size, stages.py)
@@ -142,31 +139,37 @@ class ViewServer:
         return self.whole.result()
 
     def _read_whole(self, opened):
-        """On the reading thread: the whole model and its renderer, then swapped in on the render thread."""
-        from ..splat.renderer import SplatRenderer
+        """On the reading thread: the whole model, ranked with the prefix's coefficients first, then put into the
+        prefix's renderer on the render thread."""
+        from ..splat.ranked import ranked_groups
+        from .prefix import prefix_first
 
         start = time.perf_counter()
         try:
             wv = opened.whole()
             self.whole.set_result(wv)
             read = time.perf_counter() - start
-            renderer = SplatRenderer(wv, device=self.device, device_memory=self.shares["whole"])
+            groups = ranked_groups(wv, prefix_first(wv, opened.prefix))
         except Exception as exc:  # noqa: BLE001  (the prefix goes on being served)
             if not self.whole.done():
                 self.whole.set_exception(exc)
             self.upgraded("xray", exc)
             return
-        log.info("read the whole of %s in %.1f s (%s coefficients), its renderer in %.1f s", opened.path.name, read,
-                 f"{renderer.count:,}", time.perf_counter() - start - read)
+        log.info("read the whole of %s in %.1f s (%s coefficients), ranked it in %.1f s", opened.path.name, read,
+                 f"{groups[0]['count']:,}", time.perf_counter() - start - read)
         try:
-            self.pool.submit(self._swap, wv, renderer)
+            self.pool.submit(self._swap, wv, groups)
         except RuntimeError:  # the server has stopped meanwhile
             pass
 
-    def _swap(self, wv, renderer):
+    def _swap(self, wv, groups):
         """On the render thread, between two stages: the whole model in place of the prefix."""
+        try:
+            self.sources["xray"].swap(wv, groups)
+        except ValueError as exc:  # a ranking that does not begin with the prefix's: logged, the prefix goes on
+            self.upgraded("xray", exc)
+            return
         self.wv = wv
-        self.sources["xray"].swap(wv, renderer)
         log.info("serving the whole model")
         self.upgraded("xray")
 
@@ -179,7 +182,10 @@ class ViewServer:
                 log.error("making the whole model for %s views failed: %s", mode, failure)
             return
         if self.loop is not None:
-            self.loop.call_soon_threadsafe(lambda: [s.upgraded(mode) for s in list(self.sessions.values())])
+            try:
+                self.loop.call_soon_threadsafe(lambda: [s.upgraded(mode) for s in list(self.sessions.values())])
+            except RuntimeError:  # the server has stopped meanwhile (its loop closed): no tab to tell
+                pass
 
     def explain(self, exc: ClwaveError, mode: str) -> ClwaveError:
         """``exc`` as the page (or the caller) should read it: a renderer refusing within its share of the viewer's
