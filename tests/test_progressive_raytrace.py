@@ -6,6 +6,7 @@ was; splatting's frames carry the estimate."""
 
 import importlib.util
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -185,3 +186,22 @@ def test_command_line_progressive_ray_tracing(tmp_path, capsys):
     code = main(["progressive", "phantom:hydrogen:24", "--tf", "hydrogen", "--size", "24", "--method", "raytrace",
                  "--error", "3", "-o", str(tmp_path / "bad.gif")])
     assert code == 2 and "--error 3" in capsys.readouterr().err and not (tmp_path / "bad.gif").exists()
+
+
+def test_the_budget_predicts_the_next_frame_from_the_last_frames_own_render(monkeypatch):
+    """The first frame's pilot (an image half its size, made for the estimate) is not part of the frame's time that
+    the budget scales to predict the next frame: a slow pilot does not stop a refinement the budget allows."""
+    tr = RayTracer(model("hydrogen", n=32))
+    cam = clwave.Camera(30, 20, size=128)
+    assert [f.reduction for f in tr.refine(cam, tolerance=1e-2)] == [4, 1]  # the first frame's pilot is at 8
+    render, calls = tr.render, []
+
+    def slow_pilot(camera, **options):
+        calls.append(camera)
+        if len(calls) == 1:  # the pilot
+            time.sleep(0.5)
+        return render(camera, **options)
+
+    monkeypatch.setattr(tr, "render", slow_pilot)
+    frames = list(tr.refine(cam, tolerance=1e-2, budget=3.0))
+    assert [f.reduction for f in frames] == [4, 1]

@@ -108,10 +108,10 @@ def _frames(tracer, camera, options, steps, budget, error, final, shown):
             elapsed = time.perf_counter() - start
             if elapsed + last * (plan[index - 1][1] / reduction) ** 2 > budget:
                 return
-        t0 = time.perf_counter()
         if index == 0 and reduction > 1:  # the first frame's pilot: the step from an image half its size (§9)
             steps_made.add(render(detail, 2 * reduction)[0])
-        image, meta = render(detail, reduction)
+        t0 = time.perf_counter()  # the frame's own render, not its pilot's: the budget's prediction of the next
+        image, meta = render(detail, reduction)  # frame scales it
         frame = RaytraceFrame(index=made, image=image, seconds=0.0, estimated_relative_rms_error=0.0,
                               estimated_relative_max_error=0.0, meta=meta, _final=final, detail=detail,
                               reduction=reduction)
