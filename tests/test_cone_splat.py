@@ -554,3 +554,26 @@ def test_footprint_peaks_and_refinement_choice(monkeypatch):
         fits = [o for o in options if s / o[0] ** 2 + t / o[1] ** 2 <= share]
         assert (r, gain) in fits and r * r * gain * gain == pytest.approx(min(a * a * b * b for a, b in fits))
     assert choice[(1, "ddd")] == (1, 1.0) and choice[(3, "ddd")][0] > 1 and choice[(2, "ddd")][1] > 1
+
+
+def test_haar_is_refused_for_cone_beams_and_ray_traced_instead(tmp_path, capsys):
+    """Haar footprints' edges move with each ray's slope, so their slope interpolation errs far beyond 1e-2 (a box
+    1.3e-2 at 24^2, a new user's CT box up to 0.4): refused in one line naming the ray tracer, which draws them
+    exactly (docs/splatting.md §8 "Error")."""
+    from clwave.cli import main
+
+    box = np.zeros((16, 16, 16), np.float32)
+    box[4:12, 3:13, 5:11] = 1
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(box), wavelet="haar", levels=1)
+    for camera in (clwave.Camera(30, 20, 24, perspective=True, fov=30, distance=60), clwave.ConeBeam(60.0, 90.0, 16)):
+        with pytest.raises(InputError, match=r"Haar.*clwave\.RayTracer\(wv, content_clamp=False\)"):
+            clwave.splat(wv, camera)
+        traced = clwave.RayTracer(wv, content_clamp=False).render(camera, absorption=False).image
+        exact = exact_xray(wv.reconstruct().data, 1, wv.spacing, wv.origin, camera.view(wv))
+        assert np.abs(traced - exact).max() <= 1e-3 * exact.max()
+    (tmp_path / "poses.csv").write_text("azimuth\n30\n")
+    args = ["drr", "phantom:hydrogen:16", "--levels", "1", "--wavelet", "haar", "--poses", str(tmp_path / "poses.csv")]
+    assert main(args + ["-o", str(tmp_path / "s.npy")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "(clwave drr --method raytrace)" in err and not (tmp_path / "s.npy").exists()
+    assert main(args + ["--method", "raytrace", "-o", str(tmp_path / "r.npy")]) == 0

@@ -392,6 +392,11 @@ class ConeTables:
         words = words or camera_words(None)
         g = wv.groups[group]
         wav = g.wavelet
+        if wav.order == 1:  # docs/splatting.md §8 "Error": Haar footprints' edges move with each ray's slope
+            template = ("cone-beam splatting does not draw Haar wavelets within 1e-2 of the image maximum (their "
+                        "footprints' edges move with each ray's slope, docs/splatting.md §8): ray-trace the view "
+                        "({tracer}), exact for them, or use a smoother wavelet (linear, quadratic, cubic)")
+            raise InputError(template.format_map(asdict(words)), cli=template, worded=True)
         if sampling == "cells":
             raise InputError("footprint sampling 'cells' is for orthographic views; perspective views take "
                              "'auto', 'fft' or 'spatial'")
