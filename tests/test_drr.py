@@ -32,8 +32,14 @@ def test_a_batch_equals_single_renders(model, monkeypatch):
         assert np.array_equal(image, clwave.SplatRenderer(model).render(cam).image)
     out = np.empty_like(batch)
     assert r.render_many(cams, out=out) is out and np.array_equal(out, batch)
-    with pytest.raises(InputError, match="same size"):
+    made.clear()  # a wrong out or mixed sizes are refused before any view is rendered
+    with pytest.raises(InputError, match=r"2 image sizes \(8x8, 12x16\).*same size"):
         r.render_many(cams[:1] + [ConeBeam(60.0, 90.0, 8, pixel=2.5)])
+    for wrong in (np.empty(batch.shape, np.int16), np.empty(batch.shape, np.float64),
+                  np.empty((4, 12, 16, 2), np.float32)):
+        with pytest.raises(InputError, match=r"out is a .* the views need float32 \(4, 12, 16, 1\)"):
+            r.render_many(cams, out=wrong)
+    assert not made
 
 
 def test_pose_table_rows():

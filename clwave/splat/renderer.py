@@ -202,17 +202,23 @@ class SplatRenderer:
             yield self.render(camera)
 
     def render_many(self, cameras, out=None) -> np.ndarray:
-        """Images of many views (poses) of one size as an (N, H, W, C) float32 array, or into ``out`` (an
-        array of that shape, e.g. ``numpy.lib.format.open_memmap`` to stream them to a file)."""
+        """Images of many views (poses) of one size as an (N, H, W, C) float32 array, or into ``out`` (a float32
+        array of that shape, e.g. ``numpy.lib.format.open_memmap`` to stream them to a file); both checked before
+        the first view."""
         cameras = list(cameras)
+        sizes = sorted({tuple(camera.size) for camera in cameras})
+        if len(sizes) > 1:
+            named = ", ".join("x".join(map(str, size)) for size in sizes)
+            raise InputError(f"the views have {len(sizes)} image sizes ({named}): render_many takes views of the "
+                             "same size (render the others apart)")
+        shape = (len(cameras),) + (sizes[0] if sizes else (0, 0)) + (self.wv.channels,)
+        if out is None:
+            out = np.empty(shape, np.float32)
+        elif out.shape != shape or out.dtype != np.float32:
+            raise InputError(f"out is a {out.dtype} array of shape {out.shape}; the views need float32 {shape}")
         for i, res in enumerate(self.views(cameras)):
-            if out is None:
-                out = np.empty((len(cameras),) + res.image.shape, np.float32)
-            if out.shape != (len(cameras),) + res.image.shape:
-                raise InputError(f"out has shape {out.shape}, the views need {(len(cameras),) + res.image.shape} "
-                                 "(every view must have the same size)")
             out[i] = res.image
-        return np.zeros((0,), np.float32) if out is None else out
+        return out
 
     # -------------------------------------------------------------- device memory
     def _prepare(self, tables: list, size):
