@@ -114,8 +114,9 @@ def test_refined_bands_fit_the_share_at_least_cost(monkeypatch):
               (3, False): (np.zeros(50),) * 4, (3, True): (rng.normal(0, 1e-3, 50),) * 2 + (np.zeros(50),) * 2}
     monkeypatch.setattr(cone_budget, "level_errors", lambda *args: errors)
     bands = [(m, key) for m in (1, 2, 3) for key in ("aad", "ddd")] + [(3, "aaa")]
-    wv = SimpleNamespace(groups=[SimpleNamespace(wavelet=SplineWavelet(4))])
-    choice = cone_budget.refined_bands(wv, 0, None, dict.fromkeys(bands), None, None, None)
+    wv = SimpleNamespace(groups=[SimpleNamespace(wavelet=SplineWavelet(4))], spacing=(1.0, 1.0, 1.0))
+    view = SimpleNamespace(u=np.array([1.0, 0.0, 0.0]), v=np.array([0.0, 1.0, 0.0]))
+    choice = cone_budget.refined_bands(wv, 0, view, dict.fromkeys(bands, 0.3), None, None, (3, 4))
     levels = {(m, key == "aaa"): o for (m, key), o in choice.items()}
     assert cone_budget.predicted_error(errors, dict.fromkeys(errors, (1, 1.0))) > cone_budget.SHARE
     assert cone_budget.predicted_error(errors, levels) <= cone_budget.SHARE
