@@ -18,7 +18,7 @@ from the approximation band, ``max P_aaa ⊛ G_aaa``.  No constant is fitted to 
 from __future__ import annotations
 
 import numpy as np
-import scipy.signal
+import scipy.fft
 
 from ..model.geometry import fine_to_world, support_centres, support_extent
 
@@ -99,23 +99,29 @@ def level_errors(wv, group: int, view, texels, lo, step, count) -> dict:
     if (coarsest, "aaa") not in bands:
         return {}
     kernels = error_kernels(g.wavelet, wv.spacing, view, bands, pitch, lo, step, count)
+    # the convolutions of a level's bands summed as the products of their spectra: one inverse FFT an image
+    full = np.add(sums[bands[0]][0].shape[1:], kernels[bands[0]][0].shape) - 1
+    shape = [scipy.fft.next_fast_len(int(k), real=True) for k in full]
 
-    def conv(p, k):
-        return scipy.signal.fftconvolve(p, k[None], axes=(1, 2))
+    def spectrum(x):
+        return scipy.fft.rfft2(x, shape, axes=(-2, -1))
 
-    top = float(conv(sums[(coarsest, "aaa")][0], kernels[(coarsest, "aaa")][0]).max(initial=0.0))
+    def image(x):
+        return scipy.fft.irfft2(x, shape, axes=(-2, -1))[..., :full[0], :full[1]]
+
+    top = float(image(spectrum(sums[(coarsest, "aaa")][0]) * spectrum(kernels[(coarsest, "aaa")][0])).max(initial=0.0))
     if not top > 0:
         return {}
     parts = {}
     for band in bands:
         (signed, squares), (_, d_u, d_v, g_uu, g_vv) = sums[band], kernels[band]
         t_u, t_v = (h ** 2 * g for h, g in zip(np.broadcast_to(np.asarray(texels[band], float), 2), (g_uu, g_vv)))
+        p, q = spectrum(signed), spectrum(squares)
         images = parts.setdefault((band[0], band[1] == "aaa"), [0.0] * 4)
-        for i, (p, k) in enumerate(((signed, d_u + d_v), (signed, d_u - d_v), (signed, t_u + t_v),
-                                    (squares, t_u ** 2 + t_v ** 2))):
-            images[i] = images[i] + conv(p, k)
-    return {level: (s / (16.0 * top), s2 / (16.0 * top), t / (48.0 * top), t2 / (720.0 * top ** 2))
-            for level, (s, s2, t, t2) in parts.items()}
+        for i, (x, k) in enumerate(((p, d_u + d_v), (p, d_u - d_v), (p, t_u + t_v), (q, t_u ** 2 + t_v ** 2))):
+            images[i] = images[i] + x * spectrum(k)
+    return {level: (image(s) / (16.0 * top), image(s2) / (16.0 * top), image(t) / (48.0 * top),
+                    image(t2) / (720.0 * top ** 2)) for level, (s, s2, t, t2) in parts.items()}
 
 
 def predicted_error(errors, choice) -> float:
@@ -138,9 +144,9 @@ def refined_bands(wv, group: int, view, texels, lo, step, count) -> dict:
     fall as ``r^2``, texel errors as ``gain^2``), chosen greedily: while the largest of the levels' predicted errors
     summed at each point (:func:`predicted_error`) exceeds :data:`SHARE`, the step (``r`` one more, or the next
     gain) of one level that lowers it most for the texels it adds (its footprints' widths over their texels, times
-    ``gain^2`` and the nodes ``((k_u - 1) r + 1)((k_v - 1) r + 1)``), then the steps that later ones made needless taken back; ``(1, 1)`` for the levels never
-    refined, and for every band of other than cubic footprints (the order the rule was measured on,
-    docs/splatting.md §8)."""
+    ``gain^2`` and the nodes ``((k_u - 1) r + 1)((k_v - 1) r + 1)``), then the steps that later ones made needless
+    taken back; ``(1, 1)`` for the levels never refined, and for every band of other than cubic footprints (the
+    order the rule was measured on, docs/splatting.md §8)."""
     plain = {band: (1, 1.0) for band in texels}
     if wv.groups[group].wavelet.order != 4:
         return plain
