@@ -58,8 +58,9 @@ def test_projections_hold_each_bands_coefficients_at_their_centres():
             index = np.unravel_index(position - b.start, b.shape)
             centre = fine_to_world(support_centres(g.wavelet, b.key, b.level, index), 4, wv.shape, wv.spacing,
                                    wv.origin)
-            points.setdefault((b.level, b.key), []).append((round(centre @ view.v / pitch),
-                                                            round(centre @ view.u / pitch), float(value)))
+            offset = centre - np.asarray(wv.origin)
+            points.setdefault((b.level, b.key), []).append((round(offset @ view.v / pitch),
+                                                            round(offset @ view.u / pitch), float(value)))
     lo = np.min([(i, j) for band in points.values() for i, j, _ in band], axis=0)
     for band, kept in points.items():
         expected = np.zeros((2,) + sums[band][0].shape[1:])

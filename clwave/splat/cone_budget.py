@@ -21,6 +21,7 @@ import numpy as np
 import scipy.fft
 
 from ..model.geometry import fine_to_world, support_centres, support_extent
+from .spectral import fft_texture
 
 #: the largest predicted interpolation error (:func:`predicted_error`, relative to the image maximum) a view may have
 #: before a level is refined: issue #33's whole target, as the prediction is above the measured error (0.57-0.75 of
@@ -34,16 +35,16 @@ PITCH = 0.5  # the predictions' grid: this many of the finest drawn level's latt
 
 def projections(wv, group: int, view, pitch: float) -> dict:
     """``{(level, key): (P, Q)}``, each (C, N_v, N_u): the band's kept coefficients (``P``) and their squares (``Q``)
-    summed into the cell of a grid across ``view`` (``pitch`` world units; one grid for every band) that holds their
-    support centres' orthographic projection along the view's axis."""
+    summed into the cell of a grid across ``view`` (``pitch`` world units, from the model's centre; one grid for every
+    band) that holds their support centres' orthographic projection along the view's axis."""
     g = wv.groups[group]
-    axes = np.stack([view.u, view.v])
-    cells = {}
+    axes, origin = np.stack([view.u, view.v]), np.asarray(wv.origin, float)  # cells from the model's centre: the
+    cells = {}  # same predictions wherever the model is placed
     for b, part in zip(g.bands, g.band_slices()):
         index = np.stack(np.unravel_index(g.all_positions()[part] - b.start, b.shape), axis=1)
         centres = fine_to_world(support_centres(g.wavelet, b.key, b.level, index), g.wavelet.order, wv.shape,
                                 wv.spacing, wv.origin)
-        cells[(b.level, b.key)] = (np.rint(centres @ axes.T / pitch).astype(np.int64), g.values[:, part])
+        cells[(b.level, b.key)] = (np.rint((centres - origin) @ axes.T / pitch).astype(np.int64), g.values[:, part])
     kept = [ij for ij, _ in cells.values() if len(ij)]
     if not kept:
         return {}
@@ -62,26 +63,26 @@ def error_kernels(wav, spacing, view, bands, pitch: float, lo, step, count) -> d
     one box with its support centre at the same sample: each band's footprint ``G`` at the slope ``c`` one step in
     from the slope grid's (``lo``, ``step``, ``count``) node farthest from the view's axis (where footprints bend
     fastest), its second differences ``D_a`` over one slope step along a (``G(c + Δ_a) + G(c - Δ_a) - 2 G(c)``) and
-    its second derivatives along u and v."""
-    from .perspective import sheared_footprints  # imports this module
-
+    its second derivatives along u and v.  The footprints are the slices of the spectra along ``u + s_u n``,
+    ``v + s_v n`` (:func:`~clwave.splat.spectral.fft_texture`, as
+    :func:`~clwave.splat.perspective.sheared_footprints` makes them)."""
+    d_xyz = np.array(spacing[::-1], float)
     lo, step, count = (np.asarray(x, float) for x in (lo, step, count))
     hi = lo + step * (count - 1)
     c = np.where(np.abs(lo) > np.abs(hi), lo + step, hi - step)
-    du, dv = np.array([step[0], 0.0]), np.array([0.0, step[1]])
-    textures = sheared_footprints(wav, spacing, view.n, view.u, view.v, dict.fromkeys(bands, pitch),
-                                  np.stack([c, c + du, c - du, c + dv, c - dv]), "fft")
-    centre = {band: np.rint([tex.centre_v, tex.centre_u]).astype(int) for band, tex in textures.items()}
-    before = np.max(list(centre.values()), axis=0)
-    after = np.max([np.array(tex.data.shape[1:]) - 1 - centre[band] for band, tex in textures.items()], axis=0)
+    slopes = [c, c + [step[0], 0.0], c - [step[0], 0.0], c + [0.0, step[1]], c - [0.0, step[1]]]
+    axes = [(view.u + s_u * view.n, view.v + s_v * view.n) for s_u, s_v in slopes]
+    # one period for all, wider than every support's oblique projection: no footprint wraps around
+    nu, nv = (2 * int(np.ceil(max(float(np.abs(pair[i]) @ support_extent(wav, key, m, d_xyz))
+                                  for m, key in bands for pair in axes) / (2.0 * pitch))) + 4 for i in (0, 1))
     out = {}
-    for band, tex in textures.items():
-        pad = zip(before - centre[band], after - (np.array(tex.data.shape[1:]) - 1 - centre[band]))
-        g = np.pad(tex.data.astype(float), [(0, 0)] + list(pad))
+    for m, key in bands:
+        g = np.stack([np.fft.fftshift(fft_texture(wav, key, m, d_xyz, a_u, a_v, nu, nv, nu * pitch, nv * pitch, 1))
+                      for a_u, a_v in axes])
         g0 = np.pad(g[0], 1)
-        out[band] = (g[0], g[1] + g[2] - 2.0 * g[0], g[3] + g[4] - 2.0 * g[0],
-                     (g0[1:-1, 2:] + g0[1:-1, :-2] - 2.0 * g[0]) / pitch ** 2,
-                     (g0[2:, 1:-1] + g0[:-2, 1:-1] - 2.0 * g[0]) / pitch ** 2)
+        out[(m, key)] = (g[0], g[1] + g[2] - 2.0 * g[0], g[3] + g[4] - 2.0 * g[0],
+                         (g0[1:-1, 2:] + g0[1:-1, :-2] - 2.0 * g[0]) / pitch ** 2,
+                         (g0[2:, 1:-1] + g0[:-2, 1:-1] - 2.0 * g[0]) / pitch ** 2)
     return out
 
 
