@@ -1,18 +1,19 @@
-"""Refined bands of a perspective view (docs/splatting.md §8 "Refined bands"): a level whose image would take more
-than its share of the accuracy target with its footprints' interpolation errors (in slope between the nodes, in the
-texels) gets nodes ``r`` times closer and texels finer, so that nodes are spent only where the errors are.
+"""Refined bands of a perspective view (docs/splatting.md §8 "Refined bands"): levels whose footprints' interpolation
+errors (in slope between the nodes, in the texels) would take the view past the accuracy target get nodes ``r``
+times closer and texels finer, so that nodes are spent where the errors are.
 
-A level's errors are predicted from its coefficients and its footprints at the view before any texture is made.
-Its bands' coefficients are summed along the view onto a grid across it (:func:`projections`: ``P_b``, signed, and
-``|P|_b`` of ``|c|``), and their footprints made at five slopes about the grid's widest cell (:func:`error_kernels`).
-Every splat that reaches a pixel is read at that pixel's slope, at the same place in the same slope cell, so the
-slope interpolation's errors add with the coefficients' signs: a bilinear read of quasi-interpolants errs by
-``(±D_u ± D_v) / 16`` (:func:`~clwave.splat.perspective.quasi_interpolant`; ``D_a`` the footprint's second difference
-over one slope step along a; the signs where the read is at a node or a cell's centre along each axis), and the
-level's slope error is ``max |Σ_b P_b ⊛ (D_u ± D_v)| / 16``.  Each splat's texels sit at a phase of its own (its
-depth magnifies it), so the texel errors, ``(h_u^2 |G_uu| + h_v^2 |G_vv|) / 16`` a splat, are summed with ``|c|``:
-``max Σ_b |P|_b ⊛ (h_u^2 |G_uu| + h_v^2 |G_vv|) / 16``.  Both relative to the image maximum predicted the same way
-from the approximation band, ``max P_aaa ⊛ G_aaa``.  No constant is fitted to data.
+The errors are predicted as images across the view from the coefficients and the footprints at the view, before any
+texture is made, with no constant fitted to data.  Each band's coefficients are summed along the view onto one grid
+across it (:func:`projections`: ``P_b``, and ``Q_b`` of their squares), and its footprint made there at five slopes
+about the slope grid's node farthest from the view's axis (:func:`error_kernels`).  A pixel reads every splat at its
+own slope, at one place in one slope cell, where a bilinear read of quasi-interpolants
+(:func:`~clwave.splat.perspective.quasi_interpolant`) errs by between -1/16 and +1/16 of the footprint's second
+difference over a slope step along each axis, ``D_u`` and ``D_v``: so slope errors add with the coefficients' signs,
+``Σ_b P_b ⊛ (±D_u ± D_v) / 16``.  A splat's texels sit at a phase ``x`` of its own (its depth magnifies it), where
+the read errs by ``(x (1 - x) / 2 - 1/16) h^2 G''`` an axis: a mean ``h^2 G'' / 48`` that adds with the signs and a
+variance ``h^4 G''^2 / 720`` that adds in squares over the splats (:func:`level_errors`).  All relative to the image
+maximum predicted the same way from the approximation band, ``max P_aaa ⊛ G_aaa``; the levels are summed as their
+reads add (:func:`predicted_error`) and refined greedily per texel (:func:`refined_bands`).
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ def projections(wv, group: int, view, pitch: float) -> dict:
     summed into the cell of a grid across ``view`` (``pitch`` world units, from the model's centre; one grid for every
     band) that holds their support centres' orthographic projection along the view's axis."""
     g = wv.groups[group]
-    axes, origin = np.stack([view.u, view.v]), np.asarray(wv.origin, float)  # cells from the model's centre: the
-    cells = {}  # same predictions wherever the model is placed
+    # the cells counted from the model's centre: the same predictions wherever the model is placed
+    axes, origin, cells = np.stack([view.u, view.v]), np.asarray(wv.origin, float), {}
     for b, part in zip(g.bands, g.band_slices()):
         index = np.stack(np.unravel_index(g.all_positions()[part] - b.start, b.shape), axis=1)
         centres = fine_to_world(support_centres(g.wavelet, b.key, b.level, index), g.wavelet.order, wv.shape,
@@ -87,8 +88,10 @@ def error_kernels(wav, spacing, view, bands, pitch: float, lo, step, count) -> d
 
 
 def level_errors(wv, group: int, view, texels, lo, step, count) -> dict:
-    """``{(level, approximation): (slope, texel)}``: images (on one grid across the view, :func:`projections`) of the
-    predicted interpolation errors, relative to the image maximum (the module's doc), of each level's bands among
+    """``{(level, approximation): (slope_plus, slope_minus, texel_mean, texel_variance)}``: images (C, N_v, N_u) on one
+    grid across the view (:func:`projections`) of the predicted interpolation errors, relative to the image maximum
+    (the module's doc): the slope errors where a read's phases along u and v have like and unlike signs, the texel
+    errors' mean and variance (of the square's units), of each level's bands among
     ``texels`` (band -> texel (h_u, h_v), world units) of ``wv``'s group ``group`` in ``view`` (perspective) on the
     slope grid ``lo``, ``step``, ``count`` (u, v each), the approximation band apart.  Empty where no positive image
     is predicted."""
