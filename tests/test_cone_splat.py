@@ -3,6 +3,7 @@ same spline model (a NumPy oracle that integrates the fine spline along each pix
 X-ray mode, and the orthographic pipeline's other paths (streaming, coarse framebuffers, progressive)."""
 
 import re
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from clwave.io.phantoms import phantom
 from clwave.errors import CommandWords, InputError
 from clwave.model.bspline import SplineWavelet
 from clwave.model.geometry import view_frame
+from clwave.splat import cone_budget
 from clwave.splat.cone_cells import cell_range_peaks, grid_cell_peaks
 from clwave.splat.perspective import (SLOPE_STEP, drop_share, quasi_interpolant, select_drops, sheared_footprints,
                                       slope_steps)
@@ -89,12 +91,12 @@ def _exact_fine(wv, camera):
 def test_refined_bands_at_three_levels_match_exact_line_integrals(azimuth, elevation):
     # sharp data at three levels (docs/splatting.md §8 "Refined bands"): Shepp-Logan with every coefficient, whose
     # large coarse detail bands erred 1.20e-2 and 1.03e-2 here with the grid's slope nodes and the texel floor;
-    # the rule refines level 2 at both, level 3 at (10, 60) (tests/test_cone_budget.py: its prediction and choice)
+    # the rule refines the slope step of level 3 and the texels of level 2, and leaves level 1 alone
     wv = clwave.WaveletVolume.from_volume(phantom("shepp-logan", n=32), wavelet="cubic", levels=3)
     camera = clwave.Camera(azimuth, elevation, 32, perspective=True, fov=32, distance=2.4 * 32)
     renderer = clwave.SplatRenderer(wv)
     refined = renderer.begin(camera).tables[0].refined
-    assert refined[(2, "ddd")] != (1, 1.0) and (refined[(3, "ddd")] != (1, 1.0)) == (elevation == 60)
+    assert refined[(3, "ddd")][0] == 2 and refined[(2, "ddd")][1] > 1 and refined[(1, "ddd")] == (1, 1.0)
     exact = _exact_fine(wv, camera)
     assert np.abs(renderer.render(camera).image - exact).max() <= BOUND * exact.max()
 
@@ -111,9 +113,6 @@ def test_slope_steps_follow_the_voxels_depth(monkeypatch):
     cam = _thick_cone(wv, 0, 90, 3.0)
     exact = _exact(wv, cam)
     monkeypatch.setattr(perspective, "slope_steps", lambda n, d_xyz, scale: (SLOPE_STEP, SLOPE_STEP))
-    # (and no refined bands: their prediction sees that grid's errors and refines the slope step itself)
-    monkeypatch.setattr(perspective, "refined_bands", lambda wv, group, view, texels, *a: dict.fromkeys(texels,
-                                                                                                        (1, 1.0)))
     assert np.abs(clwave.splat(wv, cam).image - exact).max() > 2 * BOUND * exact.max()
 
 
@@ -529,6 +528,32 @@ def test_coarse_levels_near_the_source_name_their_fixes():
     assert clwave.splat(wv, clwave.ConeBeam(dso * (1 + 1e-3), **cone)).image.max() > 0
     two = clwave.WaveletVolume.from_volume(vol, levels=2)
     assert clwave.splat(two, clwave.ConeBeam(2 * 16 * np.sqrt(3), **cone)).image.max() > 0
+
+
+def test_footprint_peaks_and_refinement_choice(monkeypatch):
+    # the rule's inputs and choice (docs/splatting.md §8 "Refined bands"): each band's footprint peak along the view
+    # axis against exact line integrals on a fine grid, a coarser level's as the finest one's dilated; the least
+    # refinement r^2 gain^2 whose predicted error fits the level's share
+    wav, d_xyz = SplineWavelet(4), np.array([1.0, 0.75, 1.5])
+    n, u, v = view_frame(35.0, 25.0)
+    bands = {(1, "aad"): None, (2, "aad"): None, (1, "dda"): None, (3, "aaa"): None}
+    peaks = cone_budget.footprint_peaks(wav, bands, d_xyz, u, v)
+    for m, key in bands:
+        texel = 2.0 ** m * 0.1
+        exact = sheared_footprints(wav, d_xyz[::-1], n, u, v, {(m, key): texel}, [(0.0, 0.0)], "spatial")
+        assert peaks[(m, key)] == pytest.approx(np.abs(exact[(m, key)].data).max(), rel=1e-2)
+    errors = {(1, False): (1e-3, 1e-3), (2, False): (3e-3, 5e-3), (3, False): (2e-2, 1e-3), (3, True): (0.0, 0.0)}
+    monkeypatch.setattr(cone_budget, "level_errors", lambda *a: errors)
+    wv = SimpleNamespace(groups=[SimpleNamespace(wavelet=wav)])
+    choice = cone_budget.refined_bands(wv, 0, None, {(m, "ddd" if m < 3 else "aaa"): None for m in (1, 2, 3)} |
+                                       {(3, "ddd"): None}, None, None, None)
+    share = cone_budget.LEVEL_SHARE
+    options = [(r, g) for r in range(1, cone_budget.MAX_REFINE + 1) for g in cone_budget.TEXEL_GAINS]
+    for (m, key), (r, gain) in choice.items():
+        s, t = errors[(m, key == "aaa")]
+        fits = [o for o in options if s / o[0] ** 2 + t / o[1] ** 2 <= share]
+        assert (r, gain) in fits and r * r * gain * gain == pytest.approx(min(a * a * b * b for a, b in fits))
+    assert choice[(1, "ddd")] == (1, 1.0) and choice[(3, "ddd")][0] > 1 and choice[(2, "ddd")][1] > 1
 
 
 def test_haar_is_refused_for_cone_beams_and_ray_traced_instead(tmp_path, capsys):

@@ -428,7 +428,7 @@ class ConeTables:
                 texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, scale)
                 self.omega_s = self.omega_s or omega
         # bands whose images are large get closer slope nodes and finer texels (docs/splatting.md §8 "Refined bands")
-        self.refined = refined_bands(wv, group, view0, texels, lo, step, count)
+        self.refined = refined_bands(wv, group, view0, texels, scale, step, steps)
         texels = {band: tuple(np.broadcast_to(h, 2) / self.refined[band][1]) for band, h in texels.items()}
         refine = {band: r for band, (r, _) in self.refined.items()}
         self.samplings = [sampling]
