@@ -62,6 +62,20 @@ def test_existing_output_is_not_replaced(tmp_path, capsys):
     assert code == 0 and WaveletVolume.open(target).levels == 1
 
 
+def test_an_output_folder_that_takes_no_file_is_refused_before_the_input_is_read(tmp_path, capsys):
+    """``-o /proc/x.png`` (a folder no file can be made in) is one line before any work: the input, a file that is
+    no volume, is never opened; a writable folder is left as it was (the probe file removed)."""
+    junk = tmp_path / "junk.npy"
+    junk.write_bytes(b"not a volume")
+    for argv in (["render", str(junk), "-o", "/proc/x.png"], ["compress", str(junk), "-o", "/proc/x.clw"],
+                 ["render", str(junk), "-o", str(tmp_path / "ok.png"), "--raw", "/proc/x.npy"]):
+        code, out, err = run(capsys, *argv)
+        assert code == 2 and err.startswith("clwave: error: cannot write /proc/x.") and "junk" not in err, err
+    code, out, err = run(capsys, "render", str(junk), "-o", str(tmp_path / "ok.png"))
+    assert code == 2 and "junk.npy" in err  # a writable output: the input is read, and refused
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.npy"]
+
+
 def test_compress_a_clw_again(tmp_path, capsys):
     first, second = tmp_path / "a.clw", tmp_path / "b.clw"
     assert run(capsys, "compress", "phantom:shepp-logan:16", "--levels", "1", "-o", str(first))[0] == 0

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import CommandWords, InputError, OutputExistsError, finite_number
 from ..device.memory import check_fits
+from ..io.files import check_writable
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
@@ -424,7 +425,7 @@ def _preset_window(text):
 def check_outputs(force, *outputs) -> list:
     """The paths of a command's outputs ``(path or None, option, suffixes[, hint])``, each checked before any work:
     it ends in one of ``suffixes`` (else refused with ``hint``, the option that writes other files), its folder
-    exists, it is no folder, it exists only with ``--force``; and no two name one file.  None where an output is not
+    exists and takes a new file, it is no folder, it exists only with ``--force``; and no two name one file.  None where an output is not
     asked for."""
     paths, seen = [], {}
     for path, option, suffixes, *hint in outputs:
@@ -438,6 +439,7 @@ def check_outputs(force, *outputs) -> list:
             raise InputError(f"{option} {path} is a folder; name a file")
         if not path.parent.is_dir():
             raise InputError(f"the folder of {option} {path} does not exist; create it first")
+        check_writable(path)
         if path.exists() and not force:
             raise OutputExistsError(f"{path} exists; pass --force to replace it")
         same = seen.get(os.path.realpath(path))  # one file by two names, links included
