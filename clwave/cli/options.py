@@ -425,8 +425,8 @@ def _preset_window(text):
 def check_outputs(force, *outputs) -> list:
     """The paths of a command's outputs ``(path or None, option, suffixes[, hint])``, each checked before any work:
     it ends in one of ``suffixes`` (else refused with ``hint``, the option that writes other files), its folder
-    exists and takes a new file, it is no folder, it exists only with ``--force``; and no two name one file.  None where an output is not
-    asked for."""
+    exists and takes a new file, it is no folder, it exists only with ``--force``; and no two name one file.  None
+    where an output is not asked for."""
     paths, seen = [], {}
     for path, option, suffixes, *hint in outputs:
         if path is None:
