@@ -411,6 +411,8 @@ EARLY_MISTAKES = [
     (["render", "--method", "raytrace", "--detail", "-1"], "--detail -1 must be a level of detail"),
     (["render", "--method", "raytrace", "--detail", "1", "--field", "wavelet"], "--detail renders with the B-spline"),
     (["render", "--detail", "1"], "--detail is for --method raytrace"),
+    (["render", "--method", "raytrace", "--window", "0,1"], "--window 0,1 windows an X-ray's line integrals; a shaded"),
+    (["progressive", "--method", "raytrace", "--window", "-1,2"], "--window -1,2 windows an X-ray's line integrals"),
 ]
 #: options a .clw input refuses anyway (a model already)
 VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")

@@ -159,6 +159,9 @@ def _method_options(args):
         verb, it = ("are", "them") if len(shaded) > 1 else ("is", "it")
         raise InputError(f"{', '.join(shaded)} {verb} for a shaded volume; an X-ray (--xray) is line integrals, shown "
                          f"through --window: leave {it} out")
+    if getattr(args, "display_window", "auto") != "auto" and args.method != "splat" and not getattr(args, "xray", 0):
+        raise InputError(f"--window {args.display_window} windows an X-ray's line integrals; a shaded image is "
+                         f"written as its colours: add --xray, or leave --window out")
     if given:
         raise InputError(f"{named} {verb} for --method raytrace; splatting ignores {them}: add --method raytrace, or "
                          f"leave {them} out")
