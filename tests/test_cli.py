@@ -1,5 +1,6 @@
 """The command line: info, compress, and one-line errors with exit code 2."""
 
+import os
 import subprocess
 import sys
 
@@ -126,6 +127,35 @@ def test_console_entry_point_has_no_traceback(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "clwave", "compress", str(tmp_path / "missing.nii.gz"),
                            "-o", str(tmp_path / "x.clw")], capture_output=True, text=True)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv", [["info", "--json"], ["progressive", "phantom:hydrogen:16", "--levels", "1",
+                                                          "--size", "16", "--steps", "3"]])
+def test_a_reader_that_leaves_ends_the_command_quietly(tmp_path, argv):
+    """``clwave ... | head -1``: stdout's reader closes the pipe before the command writes; the command ends as one
+    the SIGPIPE signal ended (exit 141), with nothing on stderr (Python docs, "Note on SIGPIPE")."""
+    extra = ["-o", str(tmp_path / "p.gif")] if argv[0] == "progressive" else []
+    read, write = os.pipe()
+    os.close(read)  # the reader gone before the command starts: every write to its stdout fails
+    try:
+        proc = subprocess.run([sys.executable, "-m", "clwave", *argv, *extra], stdout=write, stderr=subprocess.PIPE,
+                              text=True, cwd=tmp_path, timeout=120)
+    finally:
+        os.close(write)
+    assert proc.returncode == 141 and proc.stderr.count("clwave:") == 0 and "Traceback" not in proc.stderr, \
+        proc.stderr
+
+
+def test_a_broken_pipe_elsewhere_stays_an_internal_error(capsys, monkeypatch):
+    """A broken pipe that is not stdout's reader leaving (a socket, a worker) is a bug to report, as before."""
+    from clwave.cli import info
+
+    def broken(args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(info, "run", broken)
+    code, out, err = run(capsys, "info")
+    assert code == 1 and "internal error (BrokenPipeError" in err
 
 
 def test_render_png_raw_stats_and_turntable(tmp_path, capsys):

@@ -7,6 +7,7 @@ code 2; an existing output file is never replaced without ``--force``.
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import signal
 import sys
@@ -17,6 +18,7 @@ from . import compress, drr, info, progressive, render, view
 from .options import check_options
 
 EXIT_USAGE = 2
+EXIT_PIPE = 128 + signal.SIGPIPE  # stdout's reader left (`| head`): as a program the signal ended, with no message
 
 
 class _Parser(argparse.ArgumentParser):
@@ -83,6 +85,8 @@ def main(argv=None) -> int:
               f"pixels, keep fewer coefficients or use a smaller volume", file=sys.stderr)
         return EXIT_USAGE
     except Exception as exc:  # a bug: one line, the traceback only when asked for
+        if isinstance(exc, BrokenPipeError) and _reader_gone():
+            return EXIT_PIPE
         if debug:
             raise
         print(f"clwave: internal error ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}); "
@@ -92,6 +96,24 @@ def main(argv=None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _reader_gone() -> bool:
+    """Whether stdout is a pipe its reader has closed (poll tells so with POLLERR on Linux), pointing stdout at
+    /dev/null if so, so that the interpreter's last flush says nothing either (Python docs, "Note on SIGPIPE"); a
+    broken pipe elsewhere (a socket) is no such end."""
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poll = select.poll()
+        poll.register(fd, select.POLLOUT)
+        if not any(events & select.POLLERR for _, events in poll.poll(0)):
+            return False
+        os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
+    except (OSError, ValueError):  # a stdout with no file descriptor (a test's capture)
+        return False
+    return True
 
 
 if __name__ == "__main__":
