@@ -405,6 +405,21 @@ def test_dicom_duplicate_positions_refused(tmp_path, rng):
     assert "position" in str(excinfo.value)
 
 
+def test_dicom_multi_frame_file_named_as_such(tmp_path, rng):
+    """A multi-frame DICOM file (pydicom's rtdose.dcm, 15 frames) alone in a folder is named for what it is, not a
+    series of 1 slice."""
+    import shutil
+
+    from pydicom.data import get_testdata_file
+
+    shutil.copy(get_testdata_file("rtdose.dcm"), tmp_path / "rtdose.dcm")
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path)
+    assert_one_line_error(excinfo)
+    assert "rtdose.dcm is a multi-frame DICOM file; clwave reads folders of single-frame slices" in \
+        str(excinfo.value)
+
+
 @pytest.mark.parametrize("kwargs, needle", [
     (dict(rescale=(0, -1024)), "RescaleSlope 0"),
     (dict(rescale=(float("nan"), 0)), "non-finite RescaleSlope"),
