@@ -158,6 +158,38 @@ def test_a_broken_pipe_elsewhere_stays_an_internal_error(capsys, monkeypatch):
     assert code == 1 and "internal error (BrokenPipeError" in err
 
 
+def test_a_keep_below_the_approximation_band_is_warned_naming_the_least_that_holds_it(tmp_path, capsys):
+    """48^3, 2 levels, --keep 0.05: 5,530 coefficients for an approximation band of ~8,000 (20^3 cubic): no detail
+    and part of the approximation; one line names the least --keep that keeps the band whole, and at it the band is
+    whole and nothing is said (the API warns the same, in its words)."""
+    import warnings
+
+    from clwave import phantom
+    from clwave.errors import ClwaveWarning
+
+    wv = WaveletVolume.from_volume(phantom("hydrogen", n=48), levels=2)
+    g = wv.groups[0]
+    band = int(np.count_nonzero(np.any(g.values[:, :g.band_slices()[0].stop] != 0, axis=0)))  # live ones
+    assert round(0.05 * 48 ** 3) < band
+    with pytest.warns(ClwaveWarning, match=rf"keep=0.05 keeps 5,530 coefficients, fewer than the {band:,} of the "
+                                           r"approximation band: .*; keep=(\S+) or more keeps it whole") as caught:
+        wv.threshold(keep=0.05)
+    least = float(str(caught[0].message).rsplit("keep=", 1)[1].split()[0])
+    assert least >= band / 48 ** 3 and float(f"{least:.3g}") - 1e-3 * least < band / 48 ** 3  # three digits, up
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ClwaveWarning)
+        whole = wv.threshold(keep=least)
+    assert whole.groups[0].kept >= band
+    code, out, err = run(capsys, "render", "phantom:hydrogen:48", "--levels", "2", "--keep", "0.05", "--size", "8",
+                         "-o", str(tmp_path / "k.png"))
+    assert code == 0 and err == (f"clwave: warning: --keep 0.05 keeps 5,530 coefficients, fewer than the {band:,} of "
+                                 f"the approximation band: no detail is kept and part of the approximation is "
+                                 f"dropped; --keep {least:g} or more keeps it whole\n"), err
+    code, out, err = run(capsys, "render", "phantom:hydrogen:48", "--levels", "2", "--keep", f"{least:g}", "--size",
+                         "8", "-o", str(tmp_path / "k.png"), "--force")
+    assert code == 0 and "warning" not in err, err
+
+
 def test_render_png_raw_stats_and_turntable(tmp_path, capsys):
     png, raw, stats = tmp_path / "h.png", tmp_path / "h.npy", tmp_path / "h.json"
     code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "2", "--keep", "0.2", "--size", "24x32",
@@ -484,7 +516,8 @@ def test_a_clw_keep_above_what_it_stores_is_told_in_one_line(tmp_path, capsys):
     rest were zero)."""
     model = tmp_path / "m.clw"
     assert main(["compress", "phantom:shepp-logan:16", "--levels", "2", "--keep", "0.05", "-o", str(model)]) == 0
-    stored = WaveletVolume.open(model).kept
+    assert "fewer than the 1,080 of the approximation band" in capsys.readouterr().err  # 16^3 at 2 levels: 5 % is
+    stored = WaveletVolume.open(model).kept                                            # less than the band
     assert stored == round(0.05 * 16 ** 3)
     raw = tmp_path / "r.npy"
     code, out, err = run(capsys, "render", str(model), "--keep", "0.2", "--size", "8", "-o", str(tmp_path / "a.png"),

@@ -12,8 +12,10 @@ import re
 import signal
 import sys
 import threading
+import warnings
+from functools import partial
 
-from ..errors import ClwaveError, InputError
+from ..errors import ClwaveError, ClwaveWarning, InputError
 from . import compress, drr, info, progressive, render, view
 from .options import check_options
 
@@ -63,6 +65,13 @@ def _terminate(signum, frame):
 
 
 def main(argv=None) -> int:
+    with warnings.catch_warnings():  # clwave's warnings each one line, every time; Python's settings restored after
+        warnings.simplefilter("always", ClwaveWarning)
+        warnings.showwarning = partial(_show_warning, shown=warnings.showwarning)
+        return _main(argv)
+
+
+def _main(argv) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() \
         else None
     debug = "--debug" in (sys.argv[1:] if argv is None else argv)
@@ -96,6 +105,15 @@ def main(argv=None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None, *, shown):
+    """clwave's warnings (:class:`ClwaveWarning`) as one line in the command line's words; others as Python shows
+    them."""
+    if isinstance(message, ClwaveWarning):
+        print(f"clwave: warning: {message.cli}", file=sys.stderr)
+    else:
+        shown(message, category, filename, lineno, file, line)
 
 
 def _reader_gone() -> bool:

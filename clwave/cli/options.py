@@ -5,12 +5,13 @@ from __future__ import annotations
 import os
 import sys
 import time
+import warnings
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import CommandWords, InputError, OutputExistsError, finite_number
+from ..errors import ClwaveWarning, CommandWords, InputError, OutputExistsError, finite_number
 from ..device.memory import check_fits
 from ..io.files import check_writable
 
@@ -354,9 +355,11 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         why = (f"the transfer function{f' {tf.name}' if tf.name else ''} gives no voxel of this volume (read chunk by "
                f"chunk) any opacity; give a window in the volume's units (--tf-window LO,HI) or another preset")
         raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
-    if args.keep is None and args.threshold is None:
-        thresholding["keep"] = DEFAULT_KEEP
-    wv = wv.threshold(**thresholding)
+    default = args.keep is None and args.threshold is None
+    with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
+        if default and args.focus is None:
+            warnings.simplefilter("ignore", ClwaveWarning)
+        wv = wv.threshold(**dict(thresholding, keep=DEFAULT_KEEP) if default else thresholding)
     if not vol.chunked:
         return wv, vol
     return (wv.compute() if gather else wv), None
