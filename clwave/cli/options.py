@@ -267,7 +267,8 @@ def _needs_rgba(name, channels, fix) -> InputError:
                       f"channel(s): {fix}, or render line integrals with --xray")
 
 
-def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None, post=False):
+def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None, post=False,
+                hu_hint=True):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
     ``post`` (implied by ``rgba``): a scalar ``.clw`` input takes ``--tf``/``--tf-window``, the transfer function
@@ -278,7 +279,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     reference, and with ``gather`` false a :class:`~clwave.model.chunked.ChunkedWaveletVolume`
     (thresholded, not gathered).  ``cluster_render``: a ``.clw`` input takes ``--workers``/``--scheduler``
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
-    instead of the model read (``clwave view`` opens it by its prefix first).
+    instead of the model read (``clwave view`` opens it by its prefix first).  ``hu_hint``: a volume read whole that
+    looks like CT in Hounsfield units gets a warning (docs/coordinates.md §1).
     """
     from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
@@ -318,7 +320,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         return wv, None
     vol = read_volume(args)
     tf = _preset(args)
-    if not (tf or args.subtract or getattr(args, "hu_to_mu", False)) and air_in_hounsfield(vol.data):
+    if hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False)) and air_in_hounsfield(vol.data):
         print(f"clwave: warning: {args.input} looks like CT in Hounsfield units (most border voxels air, -1000, or "
               f"padding below it); the model spends its coefficients on that offset: give --subtract -1000 (air to "
               f"0) or --hu-to-mu", file=sys.stderr)
