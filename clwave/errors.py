@@ -39,6 +39,15 @@ class ClwaveError(Exception):
         return self.cli or str(self)
 
 
+class ClwaveWarning(UserWarning):
+    """A result that is not what was asked for, said in one line, in the command line's words too (``cli``), which
+    the command line prints as ``clwave: warning: ...``."""
+
+    def __init__(self, message, *, cli=None):
+        super().__init__(message)
+        self.cli = cli or message
+
+
 class InputError(ClwaveError, ValueError):
     """A bad argument or a bad volume (NaN voxels, wrong shape, bad levels...)."""
 

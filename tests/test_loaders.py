@@ -7,6 +7,7 @@ orientation code.
 """
 
 import logging
+from pathlib import Path
 
 import nibabel as nib
 import nrrd
@@ -120,6 +121,35 @@ def test_nifti_permuted_affine_lands_in_ras(tmp_path, data_ijk):
     np.testing.assert_array_equal(vol.data, data_ijk[:, ::-1, :].transpose(0, 2, 1))
     np.testing.assert_array_equal(vol.data, place_in_ras(data_ijk, affine))
     assert vol.spacing == (2.0, 0.5, 3.0)
+
+
+def test_valid_files_that_are_no_volume_are_named_for_what_they_are(tmp_path):
+    """A CIFTI-2 file (nibabel's row_major.dconn.nii, a 10x10 matrix on grayordinates) and an object-dtype .npy are
+    valid files, not truncated or corrupt ones: the one line says what they are and that they are no volume."""
+    from nibabel.testing import data_path
+
+    np.save(tmp_path / "obj.npy", np.array([{"a": 1}, None, 3], dtype=object))
+    for path, words in ((Path(data_path) / "row_major.dconn.nii", "is a CIFTI-2 file of shape (10, 10), not a volume "
+                                                                   "clwave reads"),
+                        (tmp_path / "obj.npy", "is a NumPy array of Python objects (object), not of numbers: not a "
+                                               "volume clwave reads")):
+        with pytest.raises(FileFormatError) as excinfo:
+            load(path)
+        assert_one_line_error(excinfo)
+        assert words in str(excinfo.value) and "corrupt" not in str(excinfo.value)
+
+
+def test_an_oblique_nifti_warning_is_a_clwave_warning_line(tmp_path, capsys):
+    """The loaders' log lines (an oblique volume shown in the closest canonical orientation) are the command line's
+    `clwave: warning: ...` lines."""
+    from clwave.cli import main
+
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    affine = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+    nib.save(nib.Nifti1Image(np.ones((8, 8, 8), np.float32), affine), tmp_path / "obl.nii")
+    assert main(["compress", str(tmp_path / "obl.nii"), "--levels", "1", "-o", str(tmp_path / "o.clw")]) == 0
+    assert "clwave: warning: the volume is oblique by 30.00 degrees; it is shown in the closest canonical (RAS) " \
+        "orientation\n" in capsys.readouterr().err
 
 
 def test_nifti_rgb24_gives_three_channels(tmp_path, rng):
@@ -403,6 +433,21 @@ def test_dicom_duplicate_positions_refused(tmp_path, rng):
         load(tmp_path)
     assert_one_line_error(excinfo)
     assert "position" in str(excinfo.value)
+
+
+def test_dicom_multi_frame_file_named_as_such(tmp_path, rng):
+    """A multi-frame DICOM file (pydicom's rtdose.dcm, 15 frames) alone in a folder is named for what it is, not a
+    series of 1 slice."""
+    import shutil
+
+    from pydicom.data import get_testdata_file
+
+    shutil.copy(get_testdata_file("rtdose.dcm"), tmp_path / "rtdose.dcm")
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path)
+    assert_one_line_error(excinfo)
+    assert "rtdose.dcm is a multi-frame DICOM file; clwave reads folders of single-frame slices" in \
+        str(excinfo.value)
 
 
 @pytest.mark.parametrize("kwargs, needle", [

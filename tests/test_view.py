@@ -636,6 +636,30 @@ def test_cli_view_refuses_a_device_memory_too_small_for_its_size_at_start(capsys
                                           r"needs at least 187 MiB .*; give more or a smaller --size", err[0]), err
 
 
+def test_cli_view_refuses_a_size_beyond_the_device_before_reading_the_input(capsys, tmp_path):
+    """``clwave view IN --size N`` past the ray tracer's one-buffer limit (N*N*32 bytes over the device's largest
+    buffer, the rule `render --method raytrace` refuses by): one line naming the size asked, the limit and the fix,
+    before the input is read (a file that is not a volume is never opened)."""
+    from math import isqrt
+
+    from clwave.cli import main
+    from clwave.device.context import ComputeContext
+
+    info = ComputeContext.get(None).info
+    own = min(info.max_alloc, info.global_mem)
+    most = isqrt(own // 32)
+    junk = tmp_path / "junk.npy"
+    junk.write_bytes(b"not a volume")
+    for size in (f"{most + 1}", f"2x{own // 64 + 1}", "99999"):
+        assert main(["view", str(junk), "--size", size]) == 2, size
+        err = capsys.readouterr().err.strip().splitlines()
+        h, _, w = size.partition("x")
+        assert len(err) == 1 and f"the viewer's {h}x{w or h} shaded image needs" in err[0] and \
+            f"give a smaller --size (at most {most}x{most} on this device)" in err[0], err
+    assert main(["view", str(junk), "--size", str(most)]) == 2  # within the limit: the input is read, and refused
+    assert "junk.npy" in capsys.readouterr().err
+
+
 def test_cli_view_of_a_volume_classified_post_starts_from_its_transfer_function(monkeypatch):
     """``clwave view VOLUME --tf P --tf-window LO,HI --classify post``: the server gets the scalar model and starts its
     shaded views from that function (the model's own, as `render` takes it); without --classify, an RGBA model."""

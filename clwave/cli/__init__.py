@@ -7,16 +7,21 @@ code 2; an existing output file is never replaced without ``--force``.
 from __future__ import annotations
 
 import argparse
+import logging
+import os
 import re
 import signal
 import sys
 import threading
+import warnings
+from functools import partial
 
-from ..errors import ClwaveError, InputError
+from ..errors import ClwaveError, ClwaveWarning, InputError
 from . import compress, drr, info, progressive, render, view
 from .options import check_options
 
 EXIT_USAGE = 2
+EXIT_PIPE = 128 + signal.SIGPIPE  # stdout's reader left (`| head`): as a program the signal ended, with no message
 
 
 class _Parser(argparse.ArgumentParser):
@@ -61,6 +66,26 @@ def _terminate(signum, frame):
 
 
 def main(argv=None) -> int:
+    loaders = logging.getLogger("clwave.io")  # what the loaders log (an oblique volume, a gantry tilt) is a warning
+    handler = _WarningLine(logging.WARNING)
+    loaders.addHandler(handler)
+    try:
+        with warnings.catch_warnings():  # clwave's warnings each one line, every time; Python's settings restored
+            warnings.simplefilter("always", ClwaveWarning)
+            warnings.showwarning = partial(_show_warning, shown=warnings.showwarning)
+            return _main(argv)
+    finally:
+        loaders.removeHandler(handler)
+
+
+class _WarningLine(logging.Handler):
+    """A log record as ``clwave: warning: ...`` on the stderr of the moment (a test's capture included)."""
+
+    def emit(self, record):
+        print(f"clwave: warning: {record.getMessage()}", file=sys.stderr)
+
+
+def _main(argv) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() \
         else None
     debug = "--debug" in (sys.argv[1:] if argv is None else argv)
@@ -83,6 +108,8 @@ def main(argv=None) -> int:
               f"pixels, keep fewer coefficients or use a smaller volume", file=sys.stderr)
         return EXIT_USAGE
     except Exception as exc:  # a bug: one line, the traceback only when asked for
+        if isinstance(exc, BrokenPipeError) and _reader_gone():
+            return EXIT_PIPE
         if debug:
             raise
         print(f"clwave: internal error ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}); "
@@ -92,6 +119,33 @@ def main(argv=None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None, *, shown):
+    """clwave's warnings (:class:`ClwaveWarning`) as one line in the command line's words; others as Python shows
+    them."""
+    if isinstance(message, ClwaveWarning):
+        print(f"clwave: warning: {message.cli}", file=sys.stderr)
+    else:
+        shown(message, category, filename, lineno, file, line)
+
+
+def _reader_gone() -> bool:
+    """Whether stdout is a pipe its reader has closed (poll tells so with POLLERR on Linux), pointing stdout at
+    /dev/null if so, so that the interpreter's last flush says nothing either (Python docs, "Note on SIGPIPE"); a
+    broken pipe elsewhere (a socket) is no such end."""
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poll = select.poll()
+        poll.register(fd, select.POLLOUT)
+        if not any(events & select.POLLERR for _, events in poll.poll(0)):
+            return False
+        os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
+    except (OSError, ValueError):  # a stdout with no file descriptor (a test's capture)
+        return False
+    return True
 
 
 if __name__ == "__main__":

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -14,7 +13,6 @@ from .options import add_command, build_model, check_outputs
 def run(args):
     out, = check_outputs(args.force, (args.output, "-o", (".clw",)))
     from ..io.clw import check_quantise, read_clw
-    from ..io.loaders.shared import air_in_hounsfield
 
     quantise = args.quantise
     if quantise not in (None, "auto"):
@@ -48,10 +46,6 @@ def run(args):
                   f"(PSNR {20 * np.log10(peak / max(error, 1e-30)):.1f} dB)")
     elif not args.input.lower().endswith(".clw"):
         print("error                 not measured: the input was read chunk by chunk (the error needs it whole)")
-    if reference is not None and not (args.tf or args.subtract or args.hu_to_mu) and air_in_hounsfield(reference.data):
-        print(f"clwave: warning: {args.input} looks like CT in Hounsfield units (most border voxels near -1000, air); "
-              "the model spends its coefficients on that offset: give --subtract -1000 (air to 0) or --hu-to-mu",
-              file=sys.stderr)
     return 0
 
 

@@ -67,7 +67,7 @@ def run(args):
     if out.suffix.lower() == ".png" and len(cameras) != 1:
         raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy")
     device_memory = parse_device_memory(args)
-    wv, _ = build_model(args)
+    wv, _ = build_model(args, hu_hint=False)  # a model in HU is refused below, naming --hu-to-mu
     if wv.channels != 1:
         raise InputError(f"radiographs need a one-channel (attenuation) volume; {args.input} has {wv.channels} "
                          f"channels" + (" (classified by --tf: leave it out)" if getattr(args, "tf", None) else

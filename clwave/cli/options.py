@@ -5,13 +5,15 @@ from __future__ import annotations
 import os
 import sys
 import time
+import warnings
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import CommandWords, InputError, OutputExistsError, finite_number
+from ..errors import ClwaveWarning, CommandWords, InputError, OutputExistsError, finite_number
 from ..device.memory import check_fits
+from ..io.files import check_writable
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
@@ -158,6 +160,9 @@ def _method_options(args):
         verb, it = ("are", "them") if len(shaded) > 1 else ("is", "it")
         raise InputError(f"{', '.join(shaded)} {verb} for a shaded volume; an X-ray (--xray) is line integrals, shown "
                          f"through --window: leave {it} out")
+    if getattr(args, "display_window", "auto") != "auto" and args.method != "splat" and not getattr(args, "xray", 0):
+        raise InputError(f"--window {args.display_window} windows an X-ray's line integrals; a shaded image is "
+                         f"written as its colours: add --xray, or leave --window out")
     if given:
         raise InputError(f"{named} {verb} for --method raytrace; splatting ignores {them}: add --method raytrace, or "
                          f"leave {them} out")
@@ -262,7 +267,8 @@ def _needs_rgba(name, channels, fix) -> InputError:
                       f"channel(s): {fix}, or render line integrals with --xray")
 
 
-def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None, post=False):
+def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None, post=False,
+                hu_hint=True):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
     ``post`` (implied by ``rgba``): a scalar ``.clw`` input takes ``--tf``/``--tf-window``, the transfer function
@@ -273,8 +279,10 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     reference, and with ``gather`` false a :class:`~clwave.model.chunked.ChunkedWaveletVolume`
     (thresholded, not gathered).  ``cluster_render``: a ``.clw`` input takes ``--workers``/``--scheduler``
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
-    instead of the model read (``clwave view`` opens it by its prefix first).
+    instead of the model read (``clwave view`` opens it by its prefix first).  ``hu_hint``: a volume read whole that
+    looks like CT in Hounsfield units gets a warning (docs/coordinates.md §1).
     """
+    from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
     from ..model.wavelet import WaveletVolume, check_decomposition, default_levels
 
@@ -312,6 +320,10 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         return wv, None
     vol = read_volume(args)
     tf = _preset(args)
+    if hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False)) and air_in_hounsfield(vol.data):
+        print(f"clwave: warning: {args.input} looks like CT in Hounsfield units (most border voxels air, -1000, or "
+              f"padding below it); the model spends its coefficients on that offset: give --subtract -1000 (air to "
+              f"0) or --hu-to-mu", file=sys.stderr)
     post = tf is not None and args.classify == "post"
     if post and vol.channels != 1:
         raise InputError(f"--classify post keeps a scalar volume for ray tracing to classify; {args.input} has "
@@ -345,9 +357,11 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         why = (f"the transfer function{f' {tf.name}' if tf.name else ''} gives no voxel of this volume (read chunk by "
                f"chunk) any opacity; give a window in the volume's units (--tf-window LO,HI) or another preset")
         raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
-    if args.keep is None and args.threshold is None:
-        thresholding["keep"] = DEFAULT_KEEP
-    wv = wv.threshold(**thresholding)
+    default = args.keep is None and args.threshold is None
+    with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
+        if default and args.focus is None:
+            warnings.simplefilter("ignore", ClwaveWarning)
+        wv = wv.threshold(**dict(thresholding, keep=DEFAULT_KEEP) if default else thresholding)
     if not vol.chunked:
         return wv, vol
     return (wv.compute() if gather else wv), None
@@ -424,8 +438,8 @@ def _preset_window(text):
 def check_outputs(force, *outputs) -> list:
     """The paths of a command's outputs ``(path or None, option, suffixes[, hint])``, each checked before any work:
     it ends in one of ``suffixes`` (else refused with ``hint``, the option that writes other files), its folder
-    exists, it is no folder, it exists only with ``--force``; and no two name one file.  None where an output is not
-    asked for."""
+    exists and takes a new file, it is no folder, it exists only with ``--force``; and no two name one file.  None
+    where an output is not asked for."""
     paths, seen = [], {}
     for path, option, suffixes, *hint in outputs:
         if path is None:
@@ -438,6 +452,7 @@ def check_outputs(force, *outputs) -> list:
             raise InputError(f"{option} {path} is a folder; name a file")
         if not path.parent.is_dir():
             raise InputError(f"the folder of {option} {path} does not exist; create it first")
+        check_writable(path)
         if path.exists() and not force:
             raise OutputExistsError(f"{path} exists; pass --force to replace it")
         same = seen.get(os.path.realpath(path))  # one file by two names, links included

@@ -19,6 +19,7 @@ def run(args):
 
     size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
     size = Camera(size=size if len(size) == 2 else size[0]).size
+    check_size(size, args.device)
     device_memory = parse_device_memory(args)
     if not 0 <= args.port <= 65535:
         raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
@@ -63,6 +64,22 @@ def run(args):
     except KeyboardInterrupt:
         print("clwave view: stopped", file=sys.stderr)
     return 0
+
+
+def check_size(size, device):
+    """Refuse, before the input is read, an image size the viewer's ray tracer would refuse as it begins one: its
+    traced image in one device buffer (device/memory.py), the viewer's largest (the X-ray framebuffer takes less).
+    The shaded views are served for a scalar or an RGBA model; the channels are known once the input is read, so
+    every model is held to their limit."""
+    from math import isqrt
+
+    from ..device.context import ComputeContext
+    from ..device.memory import TRACED_PIXEL_BYTES, check_buffer
+
+    cc = ComputeContext.get(device)
+    (H, W), most = size, isqrt(min(cc.info.max_alloc, cc.info.global_mem) // TRACED_PIXEL_BYTES)
+    check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"the viewer's {H}x{W} shaded image",
+                 f"give a smaller --size (at most {most}x{most} on this device)")
 
 
 def add_parser(sub):

@@ -74,6 +74,13 @@ def device_budget(cc, device_memory=None) -> DeviceBudget:
     return DeviceBudget(total, min(info.max_alloc, total), cap)
 
 
+#: bytes per pixel of the device buffer a renderer holds for a whole image: the splatting framebuffer (RGBA float32,
+#: per layer) and the ray tracer's image with its statistics; each renderer checks its own with :func:`check_buffer`
+#: as it begins an image, and the viewer both before it reads its input (cli/view.py)
+FRAMEBUFFER_PIXEL_BYTES = 16
+TRACED_PIXEL_BYTES = 32
+
+
 def check_buffer(cc, nbytes: int, what: str, fix: str, budget: DeviceBudget | None = None, share: float = 1.0):
     """Refuse (a :class:`DeviceMemoryError`) one device buffer of ``nbytes`` over what one may take: the device's
     own limit per buffer, or within ``budget``, its most per buffer and ``share`` of its total.  The message names

@@ -48,12 +48,29 @@ def write_atomic(path, writer, overwrite=False) -> Path:
         raise OutputExistsError(f"{path} appeared while it was being written (another writer?); pass "
                                 f"overwrite=True (--force) to replace it") from None
     except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}; check the folder's permissions and "
-                          f"free space") from None
+        raise _cannot_write(path, exc) from None
     finally:
         if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def check_writable(path):
+    """Refuse (:class:`OutputError`) a ``path`` whose folder takes no new file (no permission, a read-only or
+    special filesystem such as /proc), found by opening a file there as :func:`write_atomic` does and removing it:
+    before any work, not after it."""
+    path = Path(path)
+    try:
+        fd, tmp = _open_unnamed(path.parent if str(path.parent) else Path("."), path.suffix)
+        os.close(fd)
+        if tmp is not None:
+            os.unlink(tmp)
+    except OSError as exc:
+        raise _cannot_write(path, exc) from None
+
+
+def _cannot_write(path, exc: OSError) -> OutputError:
+    return OutputError(f"cannot write {path}: {exc.strerror or exc}; check the folder's permissions and free space")
 
 
 def _open_unnamed(folder, suffix) -> tuple:

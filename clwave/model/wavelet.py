@@ -8,13 +8,14 @@ and a (channels, K) float32 value table.  Importance order is derived on demand.
 from __future__ import annotations
 
 import copy
+import warnings
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, finite_number
+from ..errors import ClwaveWarning, InputError, finite_number
 from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from . import geometry
@@ -281,6 +282,7 @@ class WaveletVolume:
                             transfer_function=self.transfer_function, content=self.content,
                             content_mask=self.content_mask)
         budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
+        short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
             positions = g.all_positions()
             imp = out.importance(g)
@@ -291,11 +293,19 @@ class WaveletVolume:
                 chosen = np.concatenate([approx, detail[imp[detail] > threshold]])
             elif budget <= len(approx):
                 chosen = approx[_top(imp[approx], budget)]
+                short = max(short, len(approx) if budget < len(approx) else 0)
             else:
                 chosen = np.concatenate([approx, detail[_top(imp[detail], budget - len(approx))]])
             chosen.sort()
             out.groups.append(ChannelGroup(g.wavelet, g.channels, g.bands, positions[chosen],
                                            np.ascontiguousarray(g.values[:, chosen])))
+        if short:  # the approximation band ranks first: no detail, and part of it dropped
+            e = 10.0 ** (np.floor(np.log10(short / self.n_voxels)) - 2)  # three digits, rounded up
+            least = f"{np.ceil(short / self.n_voxels / e) * e:.3g}"
+            said = (f"{{}}{keep:g} keeps {budget:,} coefficients, fewer than the {short:,} of the approximation band: "
+                    f"no detail is kept and part of the approximation is dropped; {{}}{least} or more keeps it whole")
+            warnings.warn(ClwaveWarning(said.format("keep=", "keep="), cli=said.format("--keep ", "--keep ")),
+                          stacklevel=2)
         return out
 
     # ------------------------------------------------------- upload views

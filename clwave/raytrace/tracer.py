@@ -25,7 +25,7 @@ from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
-from ..device.memory import check_buffer, device_budget, format_size, parse_cap
+from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .passes import on_device, passes as region_passes
@@ -304,7 +304,7 @@ class RayTracer:
             raise InputError(f"{cc.info.name} has no float64 support; use precision='single'")
         view = camera.view(wv)
         H, W = view.size
-        check_buffer(cc, H * W * 32, f"a {H}x{W} image", "render a smaller image", self.budget)
+        check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"a {H}x{W} image", "render a smaller image", self.budget)
         phong, shading_note = self._phong(shading, absorption)
         light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
         if len(light_dirs) > MAX_LIGHTS:

@@ -27,6 +27,9 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     spaced along it (:func:`_even_spacing`) and lie on a line (:func:`_drift`); a gantry tilt (slices shifted
     sideways in proportion to their distance) is resampled onto a straight stack (:func:`_untilt`)."""
     uid, headers = _pick_series(folder, _dicom_image_series(folder), series)
+    for path, h in headers:  # before counting them: one such file is a volume clwave does not read, not one slice
+        if int(getattr(h, "NumberOfFrames", 1) or 1) > 1:
+            raise FileFormatError(f"{path} is a multi-frame DICOM file; clwave reads folders of single-frame slices")
     if len(headers) < 2:
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
                               "at least 2")
@@ -193,13 +196,11 @@ def _pick_series(folder, groups, series):
 
 
 def _dicom_pixels(path):
-    """One slice's pixels as float32 with RescaleSlope/RescaleIntercept applied."""
+    """One slice's pixels (a single-frame file, read_dicom_folder checked) as float32 with RescaleSlope/RescaleIntercept
+    applied."""
     import pydicom
 
     ds = pydicom.dcmread(path)
-    if int(getattr(ds, "NumberOfFrames", 1) or 1) > 1:
-        raise FileFormatError(f"{path} is a multi-frame DICOM file; clwave reads folders of "
-                              "single-frame slices")
     slope = float(getattr(ds, "RescaleSlope", 1.0))
     intercept = float(getattr(ds, "RescaleIntercept", 0.0))
     _check_finite(path, "RescaleSlope", slope)

@@ -23,9 +23,13 @@ def read_nifti(path, chunks, fits=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             image = nibabel.load(path, mmap=False)
-            affine = image.affine
+            affine = getattr(image, "affine", None)
     finally:
         log.disabled = disabled
+    if affine is None:  # e.g. CIFTI-2: data on surfaces and grayordinates, with no voxel grid
+        kind = type(image).__name__.removesuffix("Image").replace("Cifti2", "CIFTI-2")
+        raise FileFormatError(f"{path} is a {kind} file of shape {image.shape}, not a volume clwave reads (a NIfTI-1/2 "
+                              f"image on a voxel grid)")
     if len(image.shape) < 3 or min(image.shape) < 1:
         raise FileFormatError(f"{path} holds a NIfTI image of shape {image.shape}; clwave reads 3-D volumes with at "
                               "least one voxel an axis (stack 2-D slices into one first)")

@@ -51,6 +51,9 @@ def read_npy(path, chunks, fits=None):
         version = fmt.read_magic(fh)
         shape, _, dtype = (fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0)(fh)
         check_declared_size(path, fh.tell(), math.prod(shape) * dtype.itemsize, shape, gzip=False)
+    if dtype.hasobject:
+        raise FileFormatError(f"{path} is a NumPy array of Python objects ({dtype}), not of numbers: not a volume "
+                              f"clwave reads; save it as numbers, e.g. np.save(path, volume.astype(np.float32))")
     mapped = np.load(path, mmap_mode="r", allow_pickle=False)  # reads the header only
     order = "F" if mapped.flags.f_contiguous and not mapped.flags.c_contiguous else "C"
     return as_array(OnDemand(partial(_read_memmap, str(path), mapped.dtype, mapped.shape, mapped.offset, order),
