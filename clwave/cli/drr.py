@@ -143,8 +143,8 @@ def add_parser(sub):
                     "output .npy (N, H, W) float32 stack, or .png for one pose")
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
                    help="splat (default): perspective wavelet splatting; raytrace: the ray tracer's X-ray mode, "
-                        "within --tolerance of the exact line integrals (near or wide cones and Haar models, which splatting "
-                        "refuses; on CPUs often as fast: docs/known-gaps.md §13)")
+                        "within --tolerance of the exact line integrals (near or wide cones and Haar models, which "
+                        "splatting refuses; on CPUs often as fast: docs/known-gaps.md §13)")
     p.add_argument("--tolerance", type=float, help="--method raytrace: absolute error per line integral "
                    "(default 1e-3)")
     p.add_argument("--poses", required=True, help="CSV pose table: a header line naming columns among azimuth, "
