@@ -249,3 +249,52 @@ def test_ties_at_the_cut_go_to_the_lowest_positions_whatever_the_block_order(rng
     model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2)
     for _ in range(3):  # the blocks' results arrive in the order the threads finish them
         assert_same(ref, model.threshold(keep=keep).compute())
+
+
+def test_chunked_inputs_get_the_hints_of_a_volume_read_whole(tmp_path, capsys):
+    """The HU hint (from the faces' chunks) and the --keep warning (from the histogram pass, before the selection)
+    say on a Zarr store and an HDF5 file what they say on the same volume read whole (docs/chunked.md §3,
+    docs/coordinates.md §1); a chunked compression with no reason for either prints nothing on stderr."""
+    import warnings
+
+    import zarr
+
+    from clwave.cli import main
+    from clwave.errors import ClwaveWarning
+
+    ct = np.full((22, 26, 18), -1000.0, np.float32)  # air about soft tissue and bone, in HU
+    ct[4:18, 6:20, 4:14], ct[8:12, 10:14, 7:11] = 40.0, 1200.0
+    np.save(tmp_path / "ct.npy", ct)
+    zarr.create_array(tmp_path / "ct.zarr", data=ct, chunks=(8, 8, 8))
+    with h5py.File(tmp_path / "ct.h5", "w") as fh:
+        fh.create_dataset("ct", data=ct, chunks=(7, 9, 5))
+    zarr.create_array(tmp_path / "mu.zarr", data=ct + 1000, chunks=(8, 8, 8))  # air at 0: no reason for a hint
+
+    def compress(source, *extra):
+        code = main(["compress", str(tmp_path / source), "--levels", "2", *extra, "-o", str(tmp_path / "o.clw"),
+                     "--force"])
+        return code, capsys.readouterr().err
+
+    code, whole = compress("ct.npy", "--keep", "0.005")
+    hu, keep = whole.splitlines()
+    assert code == 0 and "looks like CT in Hounsfield units" in hu and "--hu-to-mu" in hu
+    memory = clwave.WaveletVolume.from_volume(clwave.load(tmp_path / "ct.npy"), levels=2).groups[0]
+    band = int(np.count_nonzero(memory.values[:, :memory.band_slices()[0].stop]))  # live approximation coefficients
+    assert f"keeps {round(0.005 * ct.size):,} coefficients, fewer than the {band:,} of the approximation" in keep
+    for source, chunks in (("ct.zarr", []), ("ct.h5", []), ("ct.npy", ["--chunks", "8"])):
+        code, err = compress(source, "--keep", "0.005", *chunks)
+        assert code == 0 and err == whole.replace("ct.npy", source), err
+        code, err = compress(source, "--keep", "0.005", "--subtract", "-1000", *chunks)  # the hint's fix: it is gone
+        assert code == 0 and "Hounsfield" not in err, err
+    least = keep.rsplit("--keep ", 1)[1].split()[0]
+    for source, extra in (("mu.zarr", ["--keep", least]), ("mu.zarr", []), ("ct.zarr", ["--hu-to-mu"])):
+        code, err = compress(source, *extra)
+        assert code == 0 and err == "", (source, extra, err)
+    model = clwave.WaveletVolume.from_volume(clwave.load(tmp_path / "ct.zarr"), levels=2)
+    assert model.volume.chunked
+    with pytest.warns(ClwaveWarning, match=rf"keep=0.005 keeps {round(0.005 * ct.size):,} coefficients, fewer than "
+                                           rf"the {band:,} of the approximation band: .*; keep={least} or more"):
+        model.threshold(keep=0.005)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ClwaveWarning)
+        model.threshold(keep=float(least))

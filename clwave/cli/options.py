@@ -279,7 +279,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     reference, and with ``gather`` false a :class:`~clwave.model.chunked.ChunkedWaveletVolume`
     (thresholded, not gathered).  ``cluster_render``: a ``.clw`` input takes ``--workers``/``--scheduler``
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
-    instead of the model read (``clwave view`` opens it by its prefix first).  ``hu_hint``: a volume read whole that
+    instead of the model read (``clwave view`` opens it by its prefix first).  ``hu_hint``: a volume (chunked too) that
     looks like CT in Hounsfield units gets a warning (docs/coordinates.md §1).
     """
     from ..io.loaders.shared import air_in_hounsfield

@@ -24,7 +24,8 @@ from .bspline import SplineWavelet
 from .transform import KEYS, band_layout, check_coefficients
 from .volume import Volume, content_of
 from .mask import ContentMask
-from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding
+from .wavelet import (ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding,
+                      warn_short_budget)
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
 MAX_BLOCKS = 4096           # and into at most this many blocks a level
@@ -181,7 +182,11 @@ class ChunkedWaveletVolume:
             rules = [(Rule(), Rule(above=threshold))] * len(self.groups())
         else:
             budget = max(1, int(round(keep * self.n_voxels)))
-            rules = [_cut(hist, budget) for hist in self._histograms(focus)]
+            hists = self._histograms(focus)
+            short = max((n for n in (int(h[APPROX].sum()) for h in hists) if budget < n), default=0)
+            if short:  # told before the selection pass, as the in-memory model tells it
+                warn_short_budget(keep, budget, short, self.n_voxels)
+            rules = [_cut(hist, budget) for hist in hists]
         return ChunkedWaveletVolume(self.volume, self._wavelets, self.levels, transfer_function=self.transfer_function,
                                     focus=focus, rules=rules, content=self.content, scheduler=self.scheduler,
                                     progress_bar=self.progress_bar)

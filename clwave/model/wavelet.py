@@ -300,12 +300,7 @@ class WaveletVolume:
             out.groups.append(ChannelGroup(g.wavelet, g.channels, g.bands, positions[chosen],
                                            np.ascontiguousarray(g.values[:, chosen])))
         if short:  # the approximation band ranks first: no detail, and part of it dropped
-            e = 10.0 ** (np.floor(np.log10(short / self.n_voxels)) - 2)  # three digits, rounded up
-            least = f"{np.ceil(short / self.n_voxels / e) * e:.3g}"
-            said = (f"{{}}{keep:g} keeps {budget:,} coefficients, fewer than the {short:,} of the approximation band: "
-                    f"no detail is kept and part of the approximation is dropped; {{}}{least} or more keeps it whole")
-            warnings.warn(ClwaveWarning(said.format("keep=", "keep="), cli=said.format("--keep ", "--keep ")),
-                          stacklevel=2)
+            warn_short_budget(keep, budget, short, self.n_voxels)
         return out
 
     # ------------------------------------------------------- upload views
@@ -502,6 +497,16 @@ def check_thresholding(keep, threshold, focus) -> tuple:
                              cli="--focus X,Y,Z needs a finite centre and --sigma a positive world length")
         focus = (centre, sigma)
     return keep, threshold, focus
+
+
+def warn_short_budget(keep, budget, approx, n_voxels):
+    """Warn that ``keep=`` (``budget`` coefficients) is below the ``approx`` live coefficients of the approximation
+    band, which ranks first: no detail, part of the band dropped; names the least keep that keeps the band whole."""
+    e = 10.0 ** (np.floor(np.log10(approx / n_voxels)) - 2)  # three digits, rounded up
+    least = f"{np.ceil(approx / n_voxels / e) * e:.3g}"
+    said = (f"{{}}{keep:g} keeps {budget:,} coefficients, fewer than the {approx:,} of the approximation band: "
+            f"no detail is kept and part of the approximation is dropped; {{}}{least} or more keeps it whole")
+    warnings.warn(ClwaveWarning(said.format("keep=", "keep="), cli=said.format("--keep ", "--keep ")), stacklevel=3)
 
 
 def importance_of(group: ChannelGroup, focus, frame) -> np.ndarray:

