@@ -284,7 +284,7 @@ class WaveletVolume:
         budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
-            # one float32 per position (no index arrays of every position: the peak of compressing, docs/benchmarks.md)
+            # one float32 per position, no index array of them all (the peak of compressing, docs/benchmarks.md §2)
             imp = out.importance(g)
             zero = g.values[0] == 0
             for row in g.values[1:]:
