@@ -123,6 +123,38 @@ def test_nifti_permuted_affine_lands_in_ras(tmp_path, data_ijk):
     assert vol.spacing == (2.0, 0.5, 3.0)
 
 
+def _scaled_nifti(path, raw, slope, inter):
+    """``raw`` int16 saved as NIfTI-1 with ``scl_slope``/``scl_inter`` (nibabel resets them on save: written into
+    the header's bytes 112-119), gzipped for a ``.gz`` path."""
+    import gzip
+
+    plain = path.with_name("plain.nii")
+    nib.save(nib.Nifti1Image(raw, np.eye(4)), plain)
+    data = bytearray(plain.read_bytes())
+    data[112:120] = np.array([slope, inter], "<f4").tobytes()
+    path.write_bytes(gzip.compress(bytes(data)) if path.suffix == ".gz" else bytes(data))
+
+
+@pytest.mark.parametrize("name", ["s.nii", "s.nii.gz"])
+def test_scaled_integer_nifti_is_read_as_its_scaled_values(tmp_path, rng, monkeypatch, name):
+    """Integers with scl_slope/scl_inter are scaled a slab at a time into float32 (nibabel scales a whole read in
+    float64): every voxel is float32(raw * slope + inter) of the header's float32 slope and intercept, whole (several
+    slabs and a short last one) and in chunks; a slope past float32's range is refused by the largest value of any
+    slab."""
+    from clwave.io.loaders import nifti
+
+    raw = rng.integers(-2048, 3000, (6, 5, 7)).astype(np.int16)
+    raw[0, 0, 6] = 32767  # the largest value in the last (short) slab
+    _scaled_nifti(tmp_path / name, raw, 0.37, -1024.5)
+    expected = (raw * np.float64(np.float32(0.37)) - 1024.5).astype(np.float32).transpose(2, 1, 0)
+    monkeypatch.setattr(nifti._ScaledToFloat32, "SLAB_VOXELS", 2 * 6 * 5)  # slabs of 2 of the 7 slices
+    for chunks in (False,) if name.endswith(".gz") else (False, 3):  # gzip: read whole only
+        np.testing.assert_array_equal(np.asarray(load(tmp_path / name, chunks=chunks).data), expected)
+    _scaled_nifti(tmp_path / name, raw, 1e35, 0.0)
+    with pytest.raises(InputError, match=r"holds values up to 3\.28e\+39, beyond float32's range"):
+        load(tmp_path / name)
+
+
 def test_valid_files_that_are_no_volume_are_named_for_what_they_are(tmp_path):
     """A CIFTI-2 file (nibabel's row_major.dconn.nii, a 10x10 matrix on grayordinates) and an object-dtype .npy are
     valid files, not truncated or corrupt ones: the one line says what they are and that they are no volume."""

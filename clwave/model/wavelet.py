@@ -284,20 +284,28 @@ class WaveletVolume:
         budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
-            positions = g.all_positions()
+            # one float32 per position, no index array of them all (the peak of compressing, docs/benchmarks.md §2)
             imp = out.importance(g)
-            live = np.flatnonzero(np.any(g.values != 0, axis=0))  # a zero coefficient is never kept
-            in_approx = live < g.band_slices()[0].stop  # the approximation band ranks first
-            approx, detail = live[in_approx], live[~in_approx]
+            zero = g.values[0] == 0
+            for row in g.values[1:]:
+                zero &= row == 0
+            imp[zero] = -1  # a zero coefficient is never kept: below every importance (>= 0)
+            zero = None
+            stop = g.band_slices()[0].stop  # the approximation band ranks first
+            approx, detail = np.flatnonzero(imp[:stop] >= 0), imp[stop:]
             if budget is None:
-                chosen = np.concatenate([approx, detail[imp[detail] > threshold]])
+                chosen = np.concatenate([approx, stop + np.flatnonzero(detail > threshold)])
             elif budget <= len(approx):
                 chosen = approx[_top(imp[approx], budget)]
                 short = max(short, len(approx) if budget < len(approx) else 0)
             else:
-                chosen = np.concatenate([approx, detail[_top(imp[detail], budget - len(approx))]])
-            chosen.sort()
-            out.groups.append(ChannelGroup(g.wavelet, g.channels, g.bands, positions[chosen],
+                live, count = detail >= 0, budget - len(approx)  # below the live count, _top never reaches a -1
+                top = np.flatnonzero(live) if count >= np.count_nonzero(live) else _top(detail, count)
+                live = None
+                chosen = np.concatenate([approx, stop + top])
+            imp = detail = None
+            out.groups.append(ChannelGroup(g.wavelet, g.channels, g.bands,
+                                           chosen if g.positions is None else g.positions[chosen],
                                            np.ascontiguousarray(g.values[:, chosen])))
         if short:  # the approximation band ranks first: no detail, and part of it dropped
             warn_short_budget(keep, budget, short, self.n_voxels)

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import as_array, check_declared_size, to_canonical
+from .shared import as_array, check_declared_size, check_float32_range, largest_finite, to_canonical
 
 
 def read_nifti(path, chunks, fits=None):
@@ -47,7 +47,39 @@ def read_nifti(path, chunks, fits=None):
                 "volume (vector components on the 5th axis become channels): extract one "
                 "volume first, e.g. with nibabel.funcs.four_to_three")
         proxy = proxy.reshape(proxy.shape[:3] + proxy.shape[4:5])
-    data = as_array(proxy, chunks, fits=fits, path=path)
+    scaled = proxy.dtype.kind in "iu" and (float(proxy.slope), float(proxy.inter)) != (1.0, 0.0)
+    data = as_array(_ScaledToFloat32(proxy, path) if scaled else proxy, chunks, fits=fits, path=path)
     if data.dtype.names:  # RGB24 / RGBA32 structured samples
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
     return to_canonical(data, affine)
+
+
+class _ScaledToFloat32:
+    """A NIfTI proxy of integers with ``scl_slope``/``scl_inter`` whose whole read is scaled (nibabel's own
+    ``apply_read_scaling``, in float64) a slab of the last axis, the slowest on disk, at a time into float32: nibabel
+    scales a whole read at once, 8 bytes a voxel beside the integers and the float32 copy (docs/benchmarks.md §2).
+    A chunk read (Dask) is the proxy's own."""
+
+    SLAB_VOXELS = 1 << 22
+
+    def __init__(self, proxy, path):
+        self.proxy, self.path = proxy, path
+        self.shape, self.dtype, self.ndim = proxy.shape, proxy.dtype, proxy.ndim
+
+    def __getitem__(self, index):
+        if index is not Ellipsis:
+            return self.proxy[index]
+        from nibabel.volumeutils import apply_read_scaling
+
+        raw = self.proxy.get_unscaled()
+        out = np.empty(raw.shape, np.float32, order="F")
+        step = max(1, self.SLAB_VOXELS // max(1, int(np.prod(raw.shape[:-1]))))
+        top = 0.0
+        for k in range(0, raw.shape[-1], step):
+            part = apply_read_scaling(raw[..., k:k + step], np.asanyarray(self.proxy.slope),
+                                      np.asanyarray(self.proxy.inter))
+            top = max(top, largest_finite(part))
+            if top <= float(np.finfo(np.float32).max):  # past it, the read is refused below (by the largest value)
+                out[..., k:k + step] = part
+        check_float32_range(top, self.path)
+        return out

@@ -73,10 +73,7 @@ def to_float32(block, path, mu_water, background, copy=True):
     when ``mu_water`` is given (clipped at 0: air, -1000 HU, is exactly 0), minus ``background``; float64
     values beyond float32's range are refused.  ``copy``: never write into ``block`` (a Dask chunk)."""
     if block.dtype.kind == "f" and block.dtype.itemsize > 4 and block.size:
-        top = float(np.nanmax(np.abs(np.where(np.isfinite(block), block, 0.0))))
-        if top > float(np.finfo(np.float32).max):
-            raise InputError(f"{path} holds values up to {top:.3g}, beyond float32's range (3.4e38); rescale "
-                             f"the data first")
+        check_float32_range(largest_finite(block), path)
     data = np.array(block, np.float32, order="C") if copy else np.ascontiguousarray(block, np.float32)
     if mu_water is not None:
         data += 1000.0
@@ -85,6 +82,18 @@ def to_float32(block, path, mu_water, background, copy=True):
     if background:
         data -= np.float32(background)
     return data
+
+
+def largest_finite(block) -> float:
+    """The largest finite magnitude in ``block`` (0 for none)."""
+    return float(np.nanmax(np.abs(np.where(np.isfinite(block), block, 0.0)))) if block.size else 0.0
+
+
+def check_float32_range(top, path):
+    """Refuse a volume whose largest finite magnitude ``top`` is beyond float32's range."""
+    if top > float(np.finfo(np.float32).max):
+        raise InputError(f"{path} holds values up to {top:.3g}, beyond float32's range (3.4e38); rescale the data "
+                         f"first")
 
 
 def air_in_hounsfield(data) -> bool:
