@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import clwave
-from clwave.model.wavelet import ChannelGroup, by_importance
+from clwave.model.ranking import by_importance
+from clwave.model.wavelet import ChannelGroup
 from clwave.splat.ranked import ranked_groups
 from clwave.splat.renderer import SplatRenderer
 from clwave.view import frames as view_frames

@@ -15,7 +15,8 @@ import numpy as np
 
 from ..errors import FileFormatError
 from ..io.clw import read_header
-from ..model.wavelet import WaveletVolume, by_importance, check_thresholding, ranked_table
+from ..model.ranking import by_importance, ranked_table
+from ..model.wavelet import WaveletVolume, check_thresholding
 
 #: coefficients (per channel group) the viewer serves from at once: at 1024^3 (5 % kept) about 2 % of the file,
 #: read in about a second, and enough for the display window (frames.WINDOW_COEFFICIENTS)
@@ -43,7 +44,7 @@ class PrefixFirst:
 
 
 def prefix_first(whole: WaveletVolume, prefix: WaveletVolume) -> list:
-    """Per group, the coefficients of ``whole`` as a ranked table (:func:`~clwave.model.wavelet.ranked_table`):
+    """Per group, the coefficients of ``whole`` as a ranked table (:func:`~clwave.model.ranking.ranked_table`):
     those of ``prefix`` (a part of it, ``threshold(keep=)``) by importance, then the rest by importance.  Its first
     rows are ``prefix.ranked()``'s, so that the prefix's renderer extends to it (``SplatRenderer.extend``).  It is
     not ``whole.ranked()``: a prefix holds the approximation first (docs/model.md §2), and in importance order some
