@@ -4,14 +4,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import InputError
-
-if TYPE_CHECKING:
-    from .wavelet import ChannelGroup
 
 
 @dataclass
@@ -47,10 +43,11 @@ def by_importance(importance) -> np.ndarray:
     return (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
 
 
-def ranked_table(group: ChannelGroup, importance, order) -> CoefficientTable:
-    """The group's kept coefficients ``order`` (indices into its ascending positions) as a
-    :class:`CoefficientTable` in that order; ``importance`` of each kept position.  Made :data:`RANK_ROWS` rows at
-    a time, so that the band lookup's int64 work arrays stay small beside the table."""
+def ranked_table(group, importance, order) -> CoefficientTable:
+    """The kept coefficients ``order`` (indices into its ascending positions) of ``group`` (a
+    :class:`~clwave.model.wavelet.ChannelGroup`) as a :class:`CoefficientTable` in that order; ``importance`` of each
+    kept position.  Made :data:`RANK_ROWS` rows at a time, so that the band lookup's int64 work arrays stay small
+    beside the table."""
     n, channels = len(order), len(group.channels)
     levels = np.array([b.level for b in group.bands], dtype=np.int8)
     codes = np.array([b.code for b in group.bands], dtype=np.uint8)
