@@ -18,7 +18,7 @@ from functools import partial
 
 from ..errors import ClwaveError, ClwaveWarning, InputError
 from . import compress, drr, info, progressive, render, view
-from .options import check_options
+from .options import check_options, warn
 
 EXIT_USAGE = 2
 EXIT_PIPE = 128 + signal.SIGPIPE  # stdout's reader left (`| head`): as a program the signal ended, with no message
@@ -82,7 +82,7 @@ class _WarningLine(logging.Handler):
     """A log record as ``clwave: warning: ...`` on the stderr of the moment (a test's capture included)."""
 
     def emit(self, record):
-        print(f"clwave: warning: {record.getMessage()}", file=sys.stderr)
+        warn(record.getMessage())
 
 
 def _main(argv) -> int:
@@ -125,7 +125,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None, *, 
     """clwave's warnings (:class:`ClwaveWarning`) as one line in the command line's words; others as Python shows
     them."""
     if isinstance(message, ClwaveWarning):
-        print(f"clwave: warning: {message.cli}", file=sys.stderr)
+        warn(message.cli)
     else:
         shown(message, category, filename, lineno, file, line)
 

@@ -17,6 +17,11 @@ from ..io.files import check_writable
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
+
+
+def warn(text: str):
+    """One warning line on stderr, as every command says what it did other than asked (never a traceback)."""
+    print(f"clwave: warning: {text}", file=sys.stderr)
 #: host bytes per float32 value of the volume below which decomposing and thresholding it cannot run: the
 #: in-memory model peaks at 3 (RGBA) to 9 (scalar) times the volume; work beyond 4 times what is available
 #: is refused before it starts
@@ -321,9 +326,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     vol = read_volume(args)
     tf = _preset(args)
     if hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False)) and air_in_hounsfield(vol.data):
-        print(f"clwave: warning: {args.input} looks like CT in Hounsfield units (most border voxels air, -1000, or "
-              f"padding below it); the model spends its coefficients on that offset: give --subtract -1000 (air to "
-              f"0) or --hu-to-mu", file=sys.stderr)
+        warn(f"{args.input} looks like CT in Hounsfield units (most border voxels air, -1000, or padding below it); "
+             f"the model spends its coefficients on that offset: give --subtract -1000 (air to 0) or --hu-to-mu")
     post = tf is not None and args.classify == "post"
     if post and vol.channels != 1:
         raise InputError(f"--classify post keeps a scalar volume for ray tracing to classify; {args.input} has "
@@ -337,7 +341,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     if levels is None:  # a thin volume's shortest axis caps them: said, with what --keep then does
         levels, note = default_levels(vol.shape, DEFAULT_LEVELS, thresholded=args.keep != 1)
         if note:
-            print(f"clwave: warning: {note}", file=sys.stderr)
+            warn(note)
     wavelet, levels = check_decomposition(vol.shape, 4 if tf and not post else vol.channels, wavelet, levels)
     if vol.chunked and args.interpolate:
         raise InputError("--interpolate needs the whole volume in memory (its prefilter is global); leave it out "
@@ -389,10 +393,10 @@ def note_stored(args, wv):
     asked = None if args.keep is None or args.keep == 1 else max(1, round(args.keep * wv.n_voxels))
     stored = min(g.kept for g in wv.groups)
     if asked is not None and stored < asked:
-        print(f"clwave: warning: --keep {args.keep:g} asks for {asked:,} coefficients, and {args.input} stores "
-              f"{stored:,} ({100 * stored / wv.n_voxels:.2f} % of the voxels): all of them are used (a file keeps no "
-              f"zero coefficients, so it may hold fewer than its own --keep; if it was compressed with a smaller "
-              f"--keep, compress again with a larger one for more detail)", file=sys.stderr)
+        warn(f"--keep {args.keep:g} asks for {asked:,} coefficients, and {args.input} stores {stored:,} "
+             f"({100 * stored / wv.n_voxels:.2f} % of the voxels): all of them are used (a file keeps no zero "
+             f"coefficients, so it may hold fewer than its own --keep; if it was compressed with a smaller --keep, "
+             f"compress again with a larger one for more detail)")
 
 
 def _preset(args):

@@ -74,10 +74,10 @@ def check_size(size, device):
     from math import isqrt
 
     from ..device.context import ComputeContext
-    from ..device.memory import TRACED_PIXEL_BYTES, check_buffer
+    from ..device.memory import TRACED_PIXEL_BYTES, buffer_limit, check_buffer
 
     cc = ComputeContext.get(device)
-    (H, W), most = size, isqrt(min(cc.info.max_alloc, cc.info.global_mem) // TRACED_PIXEL_BYTES)
+    (H, W), most = size, isqrt(buffer_limit(cc) // TRACED_PIXEL_BYTES)
     check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"the viewer's {H}x{W} shaded image",
                  f"give a smaller --size (at most {most}x{most} on this device)")
 

@@ -81,12 +81,18 @@ FRAMEBUFFER_PIXEL_BYTES = 16
 TRACED_PIXEL_BYTES = 32
 
 
+def buffer_limit(cc, share: float = 1.0) -> int:
+    """The most one device buffer may take on ``cc``'s device, whatever the cap: its own limit per buffer, and
+    ``share`` of its memory."""
+    return min(cc.info.max_alloc, int(cc.info.global_mem * share))
+
+
 def check_buffer(cc, nbytes: int, what: str, fix: str, budget: DeviceBudget | None = None, share: float = 1.0):
     """Refuse (a :class:`DeviceMemoryError`) one device buffer of ``nbytes`` over what one may take: the device's
     own limit per buffer, or within ``budget``, its most per buffer and ``share`` of its total.  The message names
     the true fix: where the user's cap holds it back, the least cap that lets it be (``device_memory=``,
     ``--device-memory``); where the device does, ``fix`` (``what`` needs...; ``fix``: "render a smaller image")."""
-    own = min(cc.info.max_alloc, int(cc.info.global_mem * share))
+    own = buffer_limit(cc, share)
     room = own if budget is None else min(budget.max_alloc, int(budget.total * share))
     if nbytes <= room:
         return
