@@ -13,6 +13,7 @@ Layout (version 2)::
                     within a run and stored as differences (the first of a run as it is)
     g<i>/values     float32 (N, C); or, quantised, int32 q with attribute ``step``: the values are q * step
     g<i>/runs       int64 (R, 3): (tier, first row, rows) of each run of rows of one tier
+    g<i>/detail_field  float64 (2,): the details' energy as a field (levels > 0; absent in older files)
 
 A tier is -1 for the coarsest approximation, else :func:`~clwave.model.chunked.tiers_of` of the
 details' importance; a reader takes the runs of the approximation, then of the tiers from the most
@@ -41,6 +42,7 @@ from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from ..threads import background
 from .files import hdf5_target, write_atomic
+from .detail_field import DetailField
 from .hdf5_safety import check_self_contained
 from .occupancy import OccupancyGrid
 
@@ -173,7 +175,8 @@ def _write(model, fh, steps):
         h5.attrs.update(format=FILE_FORMAT, version=FILE_VERSION, header=text, header_crc32=zlib.crc32(text.encode()))
         filters = _filters(steps is not None)
         approximations = [band_layout(w, model.shape, model.levels)[0] for w, _ in groups]
-        tiers = _Tiers(h5, [a.size for a in approximations], [len(c) for _, c in groups], steps, filters, target.check)
+        tiers = _Tiers(h5, [a.size for a in approximations], [len(c) for _, c in groups], steps, filters, target.check,
+                       [DetailField(w, model.shape, model.levels) for w, _ in groups] if model.levels > 0 else None)
         # the summary of the content mask the staged tracer's coarse stage reads (docs/chunked.md §4)
         grids = [OccupancyGrid(w, model.levels, a.shape) for (w, _), a in zip(groups, approximations)] \
             if model.levels > 0 and (chunked or model.content_mask is not None) else []
@@ -225,10 +228,12 @@ def _mask_dataset(h5, shape, filters):
 class _Tiers:
     """Appends coefficients to their group's datasets in runs of one tier, whole chunks of :data:`ROWS`
     rows at a time (the rest waits in a buffer for more of its tier, or for :meth:`flush`); with ``steps``,
-    each group's values as integer multiples of its step; ``check`` raises a failed write (a full disk)."""
+    each group's values as integer multiples of its step; ``check`` raises a failed write (a full disk);
+    ``fields``: each group's :class:`~.detail_field.DetailField`, written with the runs."""
 
-    def __init__(self, h5, approx_sizes, channels, steps, filters, check):
+    def __init__(self, h5, approx_sizes, channels, steps, filters, check, fields):
         self.h5, self.approx_sizes, self.steps, self.filters, self.check = h5, approx_sizes, steps, filters, check
+        self.fields = fields
         self.buffers, self.runs = {}, {gi: [] for gi in range(len(channels))}
         for gi, c in enumerate(channels):
             h5.create_dataset(f"g{gi}/positions", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(ROWS,),
@@ -239,6 +244,8 @@ class _Tiers:
                 values.attrs["step"] = np.float64(steps[gi])
 
     def append(self, gi, positions, values, tiers):
+        if self.fields:
+            self.fields[gi].add(positions, values)
         if self.steps is not None:  # a value that rounds to zero adds nothing: it is not stored
             kept = np.any(np.rint(values / np.float64(self.steps[gi])) != 0, axis=0)
             positions, values, tiers = positions[kept], values[:, kept], tiers[kept]
@@ -262,6 +269,8 @@ class _Tiers:
             self._write(gi, [(t, self.buffers.pop((gi, t))) for t in tiers])
             self.h5.create_dataset(f"g{gi}/runs", data=np.array(self.runs[gi], dtype=np.int64).reshape(-1, 3),
                                    **self.filters["runs"])
+            if self.fields:
+                self.h5.create_dataset(f"g{gi}/detail_field", data=self.fields[gi].figure())
 
     def _write(self, gi, tier_parts):
         """Append runs ``[(tier, [(positions, values (C, n)), ...]), ...]`` in one write."""

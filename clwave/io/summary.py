@@ -1,6 +1,7 @@
 """What the staged tracer's coarse stage reads of a ``.clw`` file besides its approximation, without a coefficient
-more (docs/raytracing.md §8-§9, docs/chunked.md §4): the energy of the details it lacks, from the tiers' run tables,
-and the occupancy of the approximation's coefficients, the file's summary of the content mask."""
+more (docs/raytracing.md §8-§9, docs/chunked.md §4): the energy of the details it lacks, as a field (written with
+the file, :mod:`.detail_field`) or from the tiers' run tables (a file written before it), and the occupancy of the
+approximation's coefficients, the file's summary of the content mask."""
 
 from __future__ import annotations
 
@@ -28,6 +29,24 @@ def detail_energy(path) -> float:
             hi = ((runs[:, 0].astype(np.uint32) + 1) << TIER_SHIFT).view(np.float32).astype(np.float64)
             energy += float(np.sum(runs[:, 2] * lo * hi))
     return energy
+
+
+def detail_field(path) -> float | None:
+    """The energy of a ``.clw`` file's stored details as the staged tracer counts it: the tiers' importance energy
+    (:func:`detail_energy`) with the coarsest level's replaced by its field energy, both written with the file
+    (:mod:`.detail_field`); None where a group lacks that figure (a file written before it)."""
+    energy = detail_energy(path)
+    with open_clw(path) as (h5, header):
+        for gi in range(len(checked_header(header)[3])):
+            data = h5.get(f"g{gi}/detail_field")
+            if data is None:
+                return None
+            check_dataset(data, (2,), np.float64)
+            figure = data[...]
+            if not np.all(np.isfinite(figure) & (figure >= 0)):
+                raise ValueError(f"member {data.name} holds {figure.tolist()}, not two finite energies >= 0")
+            energy += figure[0] - figure[1]
+    return max(float(energy), 0.0)  # the tiers' sum less the coarsest level's, rounded: not below 0
 
 
 def approximation_occupancy(path) -> list:

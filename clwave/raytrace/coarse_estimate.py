@@ -55,11 +55,17 @@ def line_energy(image: np.ndarray, view, lattice, levels: int) -> float:
 
 def detail_share(wavelet, direction) -> float:
     """The largest, over the seven detail types of the coarsest level, of the share of a detail band's energy
-    that survives the line integrals along ``direction`` where its coefficients are uncorrelated (white): the line
-    integral through 0 of a wavelet's autocorrelation along the ray over its value at 0.  A finer level l keeps
-    ``2^(l - L)`` of the coarsest level's share (its functions ``2^(L - l)`` times shorter along the ray), so this
-    bounds every detail band of white coefficients; a type whose wavelet factor lies along the ray keeps none (its
-    vanishing moments)."""
+    that survives the line integrals along ``direction`` where its coefficients are uncorrelated (white)
+    (:func:`white_share`).  A finer level l keeps ``2^(l - L)`` of the coarsest level's share (its functions
+    ``2^(L - l)`` times shorter along the ray), so this bounds every detail band of white coefficients; a type
+    whose wavelet factor lies along the ray keeps none (its vanishing moments)."""
+    return max(white_share(wavelet, direction, key) for key in ("aad", "ada", "daa", "add", "dad", "dda", "ddd"))
+
+
+def white_share(wavelet, direction, key) -> float:
+    """The share of the energy of a band of type ``key`` (letters z y x, ``a`` for phi) that survives the line
+    integrals along ``direction`` (lattice units) where its coefficients are uncorrelated (white): the line integral
+    through 0 of its function's autocorrelation along the ray over its value at 0, in lattice cells."""
     j, q = wavelet.order, wavelet.q
     shifts = np.subtract.outer(np.arange(len(q)), np.arange(len(q))).reshape(-1)
     weights = np.outer(q, q).reshape(-1) / 2.0
@@ -73,9 +79,6 @@ def detail_share(wavelet, direction) -> float:
     reach = (2 * j - 1) / np.max(np.abs(d))  # beyond it every factor along the ray is 0
     nodes, gauss = scipy.special.roots_legendre(256)  # numpy's leggauss solves a dense eigenproblem
     t = reach * nodes
-    best = 0.0
-    for key in ("aad", "ada", "daa", "add", "dad", "dda", "ddd"):
-        along = np.prod([autocorr(letter, t * d[a]) for a, letter in enumerate(key)], axis=0)
-        at_zero = np.prod([autocorr(letter, np.zeros(1))[0] for letter in key])
-        best = max(best, float(np.sum(along * gauss)) * reach / at_zero)
-    return best
+    along = np.prod([autocorr(letter, t * d[a]) for a, letter in enumerate(key)], axis=0)
+    at_zero = np.prod([autocorr(letter, np.zeros(1))[0] for letter in key])
+    return float(np.sum(along * gauss)) * reach / at_zero

@@ -23,10 +23,14 @@ from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
 from ..io.clw import Abandoned, FileMask
 from ..io.occupancy import mass_on_occupied
-from ..io.summary import approximation_occupancy, detail_energy
+from ..io.summary import approximation_occupancy, detail_energy, detail_field
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
-from .coarse_estimate import approximation_grid, detail_share, field_energy, line_energy
+from .coarse_estimate import approximation_grid, detail_share, field_energy, line_energy, white_share
 from .progressive import MIN_SIDE, RaytraceFrame, frames, schedule, upsample
+
+#: a shaded coarse frame's max estimate takes the clamp's term times this: the clamp removes a haze that is
+#: brightest at the silhouette, where the max error is (fitted on the 96 frames of docs/raytracing.md §9)
+CLAMP_MAX_MARGIN = 1.4
 
 
 class StagedTracer:
@@ -41,11 +45,11 @@ class StagedTracer:
     given up (:func:`_abandon`); ``whole``, where given, a callable giving that whole model, read from the file
     where not (the viewer holds the model, or reads it anyway: docs/viewer.md §2).  ``missing``: the relative size
     of the details the coarse stage lacks, ``sqrt(E_details / (E_approximation + E_details))`` with the details'
-    energy from the file's tiers and the approximation's field energy (its B-splines overlap; in X-ray frames
-    :meth:`missing_in_line_integrals` instead); ``outside``: that of the approximation's field off the content,
-    which the full stage's content clamp removes, from the file's
-    occupancy of the approximation (0 for a file without it; docs/raytracing.md §9).  Use from one thread at a
-    time.
+    field energy written with the file (their importance energy from its tiers in a file written before it) and
+    the approximation's field energy (its B-splines overlap); ``outside``: that of the approximation's field off
+    the content, which the full stage's content clamp removes, from the file's occupancy of the approximation (0
+    for a file without it); in X-ray frames both from :meth:`lacks_in_line_integrals` instead
+    (docs/raytracing.md §9).  Use from one thread at a time.
     """
 
     def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False, whole=None):
@@ -55,7 +59,9 @@ class StagedTracer:
         self.levels = approximation.levels
         energies = [importance_of(g, None, approximation.frame).astype(np.float64) ** 2 for g in approximation.groups]
         read = sum(float(np.sum(e)) for e in energies)
-        unread = detail_energy(path)  # from the file's tiers: nothing more is read
+        unread = detail_field(path)  # the details' energy, the coarsest level's as a field: nothing more is read
+        if unread is None:  # a file written before that figure: their importance energy, from its tiers
+            unread = detail_energy(path)
         outside = 0.0  # the approximation's energy off its occupied blocks (a file without the occupancy: none)
         for e, g, occupied in zip(energies, approximation.groups, approximation_occupancy(path)):
             if occupied is not None:
@@ -73,6 +79,7 @@ class StagedTracer:
         self._unread, self._lattice = unread, np.asarray(approximation.spacing) * 2 ** self.levels  # z, y, x
         self.missing = float(np.sqrt(unread / (field + unread))) if field + unread > 0 else 0.0
         self.outside = float(np.sqrt(outside / (read + unread))) if read + unread > 0 else 0.0
+        self._off = outside
         if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
             self.coarse = tracer_class(coarse_volume(approximation), device=device, device_memory=device_memory)
         else:  # the groups' lattices shift by half cells of the fine lattice: bricks of the coarsest detail
@@ -180,16 +187,18 @@ class StagedTracer:
             index += 1
             yield made
 
-    def missing_in_line_integrals(self, image, view) -> float:
-        """:attr:`missing` in the coarse stage's X-ray ``image`` (H, W, C) of ``view`` (its own, reduced view; along
-        its central ray): each part's energy in the line integrals, the approximation's from that image, the
-        details' their energy times the share that white coefficients at the coarsest level keep
-        (:mod:`~clwave.raytrace.coarse_estimate`, docs/raytracing.md §9)."""
+    def lacks_in_line_integrals(self, image, view) -> float:
+        """What the coarse stage's X-ray ``image`` (H, W, C) of ``view`` (its own, reduced view; along its central
+        ray) lacks, relative to the line integrals of the whole field: each part's energy in the line integrals,
+        the approximation's from that image, the details' and the clamped-off field's their energy times the share
+        that white coefficients keep (the details' at the coarsest level, the approximation's B-splines';
+        :mod:`~clwave.raytrace.coarse_estimate`, docs/raytracing.md §9)."""
         direction = view.n[::-1] / self._lattice  # (z, y, x) lattice units
         seen = sum(scale * line_energy(image[..., list(channels)], view, self._lattice, self.levels)
                    for _, channels, scale in self._parts)
         unseen = self._unread * max(detail_share(w, direction) for w, _, _ in self._parts)
-        return float(np.sqrt(unseen / (seen + unseen))) if seen + unseen > 0 else 0.0
+        off = self._off * max(white_share(w, direction, "aaa") for w, _, _ in self._parts)
+        return float(np.sqrt((unseen + off) / (seen + unseen))) if seen + unseen > 0 else 0.0
 
     def _coarse_frames(self, camera, view, options, final, start):
         """The coarse stage's frames while the full stage is not ready (:meth:`refine`)."""
@@ -210,15 +219,18 @@ class StagedTracer:
             if self.ready:
                 return
             image, res, cam = render(reduction)
-            missing = (self.missing if options["absorption"]  # an X-ray frame's from its own image
-                       else self.missing_in_line_integrals(res.image, cam.view(coarse.wv)))
             rms, top = steps.add(image)
             peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
-            lacks = float(np.hypot(missing, self.outside))  # the details and the clamp it lacks (§9)
+            if options["absorption"]:  # the details and the clamp it lacks (§9); the clamp's max with a margin
+                lacks = float(np.hypot(self.missing, self.outside))
+                top += float(np.hypot(self.missing, CLAMP_MAX_MARGIN * self.outside))
+            else:  # an X-ray frame's from its own image
+                lacks = self.lacks_in_line_integrals(res.image, cam.view(coarse.wv))
+                top += lacks
             rms += lacks * float(np.sqrt(np.mean(image ** 2))) / peak
             self.start()
             yield RaytraceFrame(index=0, image=image, seconds=time.perf_counter() - start,
-                                estimated_relative_rms_error=rms, estimated_relative_max_error=top + lacks,
+                                estimated_relative_rms_error=rms, estimated_relative_max_error=top,
                                 meta=dict(res.meta, stage="coarse"), _final=final, detail=self.levels,
                                 reduction=reduction)
 

@@ -1,0 +1,67 @@
+"""The energy of a ``.clw`` file's coarsest details as a field, written with the file (``g<i>/detail_field``,
+docs/chunked.md §4) for the staged tracer's coarse frames, which read no detail (docs/raytracing.md §9).
+
+The tier table gives the details' importance energy ``sum |c|² ||psi||²``, the field's energy only where the
+functions are orthogonal; the CDF synthesis wavelets are not, and a model's details overlap and cancel (their field
+energy 0.06-0.6 of that sum on the test models).  The coarsest level's seven detail bands, 1/512 of the volume's
+coefficients at three levels and 74-99 % of the details' importance energy at 5 % kept, are held whole while the
+file is written and synthesized at the end to the approximation coefficients of level L - 1 (their field), whose
+energy is ``<c, c * G>`` (the B-splines' Gram filter, :func:`~clwave.raytrace.coarse_estimate.field_energy`); the
+finer levels, whose bands are as large as the volume, keep their importance energy from the tiers.  The figure per
+group is ``(field energy of level L's details, their importance energy as the tier table counts it)``, the first
+in the importances' convention (the largest channel: the field's energy, channels summed, times the bands'
+importance energy over their plain ``sum |c|² ||psi||²``), so that a reader takes the details' energy as the tier
+table's less the second plus the first.  Both depend on the stored coefficients alone, not on the order they come
+in: the in-memory and the streamed writers write the same file.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.bspline import SplineWavelet
+from ..model.chunked import TIER_SHIFT, tiers_of
+from ..model.transform import band_layout, synthesize
+from ..model.wavelet import band_importance
+from ..raytrace.coarse_estimate import field_energy
+
+
+class DetailField:
+    """Gathers a group's stored coefficients (:meth:`add`, a block at a time, in any order; each position once)
+    into its figure (:meth:`figure`): the coarsest level's details in a dense float32 array (C, 7 bands' size)."""
+
+    def __init__(self, wavelet: SplineWavelet, shape, levels: int):
+        self.wavelet, self.bands = wavelet, band_layout(wavelet, shape, levels)
+        self.coarsest = self.bands[1:8]  # level L's seven detail bands, contiguous in the layout
+        self.lo, self.hi = self.coarsest[0].start, self.coarsest[-1].start + self.coarsest[-1].size
+        self.dense = None
+
+    def add(self, positions, values):
+        """Stored coefficients ``positions`` (n,) of the group's layout and their ``values`` (C, n)."""
+        if self.dense is None:
+            self.dense = np.zeros((values.shape[0], self.hi - self.lo), np.float32)
+        coarsest = (positions >= self.lo) & (positions < self.hi)
+        self.dense[:, positions[coarsest] - self.lo] = values[:, coarsest]
+
+    def figure(self) -> np.ndarray:
+        """float64 (2,): the field energy of the coarsest level's details and their importance energy as the tier
+        table counts it (each at its tier's geometric middle, :func:`~clwave.io.summary.detail_energy`)."""
+        if self.dense is None:  # nothing stored
+            return np.zeros(2)
+        size, shape = self.coarsest[0].size, self.coarsest[0].shape
+        importance = plain = tiered = field = 0.0
+        for i, band in enumerate(self.coarsest):
+            part = self.dense[:, i * size:(i + 1) * size]
+            imp = band_importance(self.wavelet, band, part, None, None, None)
+            importance += float(np.sum(imp.astype(np.float64) ** 2))
+            tiers = tiers_of(imp[imp > 0]).astype(np.uint32)
+            tiered += float(np.sum((tiers << TIER_SHIFT).view(np.float32).astype(np.float64)
+                                   * ((tiers + 1) << TIER_SHIFT).view(np.float32)))
+            norm = np.prod([self.wavelet.norm(letter) for letter in band.key])
+            plain += float(np.sum(np.square(part, dtype=np.float64))) * norm ** 2
+        zero = np.zeros((*self.bands[0].shape, 1))
+        for channel in self.dense:  # a channel at a time: level L - 1's grid is 8 times the bands' size
+            parts = [channel[i * size:(i + 1) * size].reshape(*shape, 1).astype(np.float64) for i in range(7)]
+            grid, _ = synthesize(self.wavelet, self.bands[:8], [zero] + parts)
+            field += field_energy(np.moveaxis(grid, 3, 0), self.wavelet.order)
+        return np.array([field * importance / plain if plain > 0 else 0.0, tiered])
