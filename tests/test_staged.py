@@ -18,10 +18,10 @@ from clwave import WaveletVolume
 from clwave.device import memory
 from clwave.io.clw import MASK_CHUNK, FileMask
 from clwave.io.occupancy import OccupancyGrid, mass_on_occupied
-from clwave.io.summary import approximation_occupancy, detail_energy
+from clwave.io.summary import approximation_occupancy, detail_energy, detail_field
 from clwave.model.wavelet import importance_of
 from clwave.raytrace import passes
-from clwave.raytrace.coarse_estimate import approximation_grid, detail_share, field_energy, line_energy
+from clwave.raytrace.coarse_estimate import approximation_grid, detail_share, field_energy, line_energy, white_share
 from clwave.raytrace.staged import StagedTracer, coarse_volume
 from clwave.raytrace.tracer import RayTracer
 from test_bricks import out_of_core_model, smooth_rgba, smooth_volume
@@ -70,9 +70,10 @@ def test_the_coarse_volume_is_the_approximations_field(tmp_path, wavelet):
 
 def test_the_energy_of_the_details_is_read_from_the_tiers_alone(model_file):
     """detail_energy against the sum of the squared importances of the whole file's details (each tier spans
-    2^(1/8), so the two agree within that); StagedTracer.missing is their share of the details' and the
-    approximation's field energy, the latter the sum of squares of the approximation's field on the lattice
-    (reconstructed; scaled to the importances' largest channel as their sum over the coefficients)."""
+    2^(1/8), so the two agree within that); StagedTracer.missing is the share of the details' (detail_field: the
+    coarsest level's as a field, tests/test_detail_field.py) in theirs and the approximation's field energy, the
+    latter the sum of squares of the approximation's field on the lattice (reconstructed; scaled to the
+    importances' largest channel as their sum over the coefficients)."""
     whole = WaveletVolume.open(model_file)
     parts = [importance_of(g, None, whole.frame).astype(np.float64) ** 2 for g in whole.groups]
     details = sum(p.sum() - p[g.band_slices()[0]].sum() for p, g in zip(parts, whole.groups))
@@ -88,7 +89,7 @@ def test_the_energy_of_the_details_is_read_from_the_tiers_alone(model_file):
         importances = np.sum(importance_of(g, None, approximation.frame).astype(np.float64) ** 2)
         coefficients = np.sum(g.values.astype(np.float64) ** 2) * g.wavelet.norm_phi ** 6
         field += np.sum(voxels[:, list(g.channels)] ** 2) * step ** 3 * importances / coefficients
-    missing, unread = RayTracer.open(model_file).missing, detail_energy(model_file)
+    missing, unread = RayTracer.open(model_file).missing, detail_field(model_file)
     assert abs(missing ** 2 - unread / (unread + field)) <= 0.02 * missing ** 2
 
 
@@ -251,6 +252,26 @@ def test_a_file_without_the_occupancy_opens_and_renders_as_before(tmp_path, monk
     for n, o in zip(new_frames, old_frames, strict=True):
         assert n["relative_rms_error"] == o["relative_rms_error"]  # the same image
         assert o["estimated_relative_rms_error"] < n["estimated_relative_rms_error"]
+    last = list(RayTracer.open(old).refine(cam, tolerance=1e-2))[-1]
+    assert np.array_equal(last.image, RayTracer(WaveletVolume.open(path)).render(cam, tolerance=1e-2).image)
+
+
+def test_a_file_without_the_details_field_energy_opens_and_renders_as_before(tmp_path, monkeypatch):
+    """A file written before g<i>/detail_field: the details' importance energy from the tiers (the tenth session's
+    estimate, higher where the details cancel), the same coarse images, the last frame the direct render."""
+    path, old = tmp_path / "new.clw", tmp_path / "old.clw"
+    model("random", keep=0.05).save(path)
+    shutil.copy(path, old)
+    with h5py.File(old, "r+") as h5:
+        del h5["g0/detail_field"]
+    assert detail_field(old) is None and detail_field(path) < detail_energy(path)
+    staged = RayTracer.open(old)
+    field = (1 - staged.missing ** 2) / staged.missing ** 2 * detail_energy(old)  # from missing, as it was made
+    assert RayTracer.open(path).missing ** 2 == pytest.approx(detail_field(path) / (field + detail_field(path)))
+    cam = clwave.Camera(30, 20, size=64)
+    for n, o in zip(coarse_figures(path, cam, monkeypatch), coarse_figures(old, cam, monkeypatch), strict=True):
+        assert n["relative_rms_error"] == o["relative_rms_error"]  # the same image
+        assert n["estimated_relative_rms_error"] < o["estimated_relative_rms_error"]
     last = list(RayTracer.open(old).refine(cam, tolerance=1e-2))[-1]
     assert np.array_equal(last.image, RayTracer(WaveletVolume.open(path)).render(cam, tolerance=1e-2).image)
 
@@ -472,7 +493,8 @@ def test_an_xray_frame_holds_the_approximations_line_integral_energy(tmp_path, a
 
 def test_a_white_detail_band_keeps_the_share_its_wavelets_line_integrals_keep():
     """detail_share: the largest over the seven coarsest-level types of a wavelet's line-integral energy over its
-    energy (the quadrature oracle on one function), and nothing of a type whose wavelet lies along the ray."""
+    energy (the quadrature oracle on one function), and nothing of a type whose wavelet lies along the ray;
+    white_share of the approximation's B-splines (the clamped-off field's share in X-ray frames) the same."""
     wav = clwave.model.bspline.SplineWavelet(4)
     support = dict(a=(wav.phi, (0, 4)), d=(wav.psi, (0, 7)))
     direction = (0.3, -0.5, 0.81)
@@ -481,5 +503,7 @@ def test_a_white_detail_band_keeps_the_share_its_wavelets_line_integrals_keep():
         energy, projected = line_energies(np.ones((1, 1, 1)), [support[letter] for letter in key], direction)
         shares.append(projected / energy)
     assert detail_share(wav, direction) == pytest.approx(max(shares), rel=5e-3)
+    energy, projected = line_energies(np.ones((1, 1, 1)), [support["a"]] * 3, direction)
+    assert white_share(wav, direction, "aaa") == pytest.approx(projected / energy, rel=5e-3)
     energy, projected = line_energies(np.ones((1, 1, 1)), [support[letter] for letter in "daa"], (1, 0, 0))
     assert projected <= 1e-6 * energy  # psi along the ray: its vanishing moment
