@@ -200,31 +200,33 @@ def coarse_figures(path, camera, monkeypatch, **options) -> list:
                 if f.meta["stage"] == "coarse"]
 
 
-@pytest.mark.parametrize("keep, shaded, xray, top", [(0.005, 4, 6, 0.75), (0.05, 6, 6.5, 1)])
-def test_the_coarse_frames_estimate_bounds_their_error(tmp_path, monkeypatch, keep, shaded, xray, top):
-    """Over hydrogen, Marschner-Lobb, a random smooth volume and the MNI152 MRI (48^3) at 128^2, shaded and X-ray:
-    every coarse frame's RMS estimate at least its measured error and at most ``shaded`` / ``xray`` times it, the
-    max estimate at least ``top`` of the max error.  At 0.5 % kept no detail is missing: the error is the content
-    clamp the coarse stage goes without (without the file's occupancy the estimates read 0.06-0.46 of it); at 5 %
-    the details dominate, their size from the approximation's field energy and, in X-ray frames, the share the
-    line integrals keep (docs/raytracing.md §9: 9.4-10.9x on Marschner-Lobb X-ray before, 5.0-5.9x now)."""
+def test_the_coarse_frames_estimate_bounds_their_error(tmp_path, monkeypatch):
+    """Over hydrogen, Marschner-Lobb, a random smooth volume and the MNI152 MRI (48^3), 5 % and 0.5 % kept, at 128^2,
+    shaded and X-ray: every coarse frame's RMS and max estimates at least its measured error, and both at most 4
+    times it on at least 95 % of the 32 frames (31: Marschner-Lobb's X-ray frame at 5 % reads 4.03x in RMS).  At
+    0.5 % no detail is missing: the error is the content clamp the coarse stage goes without; at 5 % the details
+    dominate, their size from the coarsest level's field energy the file holds and the approximation's, in X-ray
+    frames both weighed by the share the line integrals keep (docs/raytracing.md §9: 49 of 96 frames in [1, 4]
+    before the field energy, 92 now)."""
     ratios = []
     for name in ("hydrogen", "marschner-lobb", "random", "mri"):
-        path = tmp_path / f"{name}.clw"
-        model(name, keep=keep).save(path)
-        for absorption, bound in ((True, shaded), (False, xray)):
-            for f in coarse_figures(path, clwave.Camera(30, 20, size=128), monkeypatch, absorption=absorption):
-                ratios.append((f["estimated_relative_rms_error"] / f["relative_rms_error"],
-                               f["estimated_relative_max_error"] / f["relative_max_error"], bound, name))
-    assert len(ratios) == 16
-    assert all(1 <= rms <= bound and top_ >= top for rms, top_, bound, _ in ratios), ratios
+        for keep in (0.05, 0.005):
+            path = tmp_path / f"{name}_{keep}.clw"
+            model(name, keep=keep).save(path)
+            for absorption in (True, False):
+                for f in coarse_figures(path, clwave.Camera(30, 20, size=128), monkeypatch, absorption=absorption):
+                    ratios.append((f["estimated_relative_rms_error"] / f["relative_rms_error"],
+                                   f["estimated_relative_max_error"] / f["relative_max_error"], name, keep))
+    assert len(ratios) == 32
+    assert all(rms >= 1 and top >= 1 for rms, top, _, _ in ratios), ratios
+    assert sum(rms <= 4 and top <= 4 for rms, top, _, _ in ratios) >= 31, ratios
 
 
 def test_xray_coarse_frames_of_other_geometries_bound_their_error(tmp_path, monkeypatch):
     """The X-ray estimate takes the approximation's line-integral energy from the frame's own image: a perspective
     camera (its pixels' area at the target), a cone beam of rectangular pixels and a view cropping the volume (the
-    part in view against all the details) keep their coarse frames' estimates at least their errors, within the
-    5 % models' bound (hydrogen 48^3)."""
+    part in view against all the details) keep their coarse frames' estimates at least their errors, the RMS
+    within 4 times it (hydrogen 48^3)."""
     path = tmp_path / "hydrogen.clw"
     model("hydrogen", keep=0.05).save(path)
     cameras = (clwave.Camera(30, 20, size=128, perspective=True), clwave.Camera(30, 20, size=128, extent=30.0),
@@ -233,7 +235,7 @@ def test_xray_coarse_frames_of_other_geometries_bound_their_error(tmp_path, monk
         frames = coarse_figures(path, cam, monkeypatch, absorption=False)
         assert len(frames) == 2
         for f in frames:
-            assert 1 <= f["estimated_relative_rms_error"] / f["relative_rms_error"] <= 6.5, (cam, f)
+            assert 1 <= f["estimated_relative_rms_error"] / f["relative_rms_error"] <= 4, (cam, f)
             assert f["estimated_relative_max_error"] >= f["relative_max_error"], (cam, f)
 
 

@@ -18,10 +18,11 @@ in: the in-memory and the streamed writers write the same file.
 from __future__ import annotations
 
 import numpy as np
+import pywt
 
 from ..model.bspline import SplineWavelet
 from ..model.chunked import TIER_SHIFT, tiers_of
-from ..model.transform import band_layout, synthesize
+from ..model.transform import band_layout
 from ..model.wavelet import band_importance
 from ..raytrace.coarse_estimate import field_energy
 
@@ -59,9 +60,13 @@ class DetailField:
                                    * ((tiers + 1) << TIER_SHIFT).view(np.float32)))
             norm = np.prod([self.wavelet.norm(letter) for letter in band.key])
             plain += float(np.sum(np.square(part, dtype=np.float64))) * norm ** 2
-        zero = np.zeros((*self.bands[0].shape, 1))
+        # pywt's synthesis (the model's, docs/model.md §4) crops (rec_len - 2) / 2 of its output at each end: zeros
+        # padded to the bands, half of rec_len on each side, so that it crops nothing of the field
+        half = self.wavelet.pywt.rec_len // 2
+        zero = np.zeros(np.add(shape, 2 * half))
         for channel in self.dense:  # a channel at a time: level L - 1's grid is 8 times the bands' size
-            parts = [channel[i * size:(i + 1) * size].reshape(*shape, 1).astype(np.float64) for i in range(7)]
-            grid, _ = synthesize(self.wavelet, self.bands[:8], [zero] + parts)
-            field += field_energy(np.moveaxis(grid, 3, 0), self.wavelet.order)
+            parts = {band.key: np.pad(channel[i * size:(i + 1) * size].reshape(shape).astype(np.float64), half)
+                     for i, band in enumerate(self.coarsest)}
+            grid = pywt.idwtn(dict(parts, aaa=zero), self.wavelet.pywt, mode="zero", axes=(0, 1, 2))
+            field += field_energy(grid[None], self.wavelet.order)
         return np.array([field * importance / plain if plain > 0 else 0.0, tiered])
