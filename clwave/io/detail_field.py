@@ -63,9 +63,9 @@ class DetailField:
         # pywt's synthesis (the model's, docs/model.md §4) crops (rec_len - 2) / 2 of its output at each end: zeros
         # padded to the bands, half of rec_len on each side, so that it crops nothing of the field
         half = self.wavelet.pywt.rec_len // 2
-        zero = np.zeros(np.add(shape, 2 * half))
-        for channel in self.dense:  # a channel at a time: level L - 1's grid is 8 times the bands' size
-            parts = {band.key: np.pad(channel[i * size:(i + 1) * size].reshape(shape).astype(np.float64), half)
+        zero = np.zeros(np.add(shape, 2 * half), np.float32)
+        for channel in self.dense:  # a channel at a time: level L - 1's grid is 8 times the bands' size; in float32,
+            parts = {band.key: np.pad(channel[i * size:(i + 1) * size].reshape(shape), half)  # summed in float64
                      for i, band in enumerate(self.coarsest)}
             grid = pywt.idwtn(dict(parts, aaa=zero), self.wavelet.pywt, mode="zero", axes=(0, 1, 2))
             field += field_energy(grid[None], self.wavelet.order)
