@@ -41,8 +41,8 @@ from ..model.mask import ContentMask
 from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from ..threads import background
-from .files import hdf5_target, write_atomic
 from .detail_field import DetailField
+from .files import hdf5_target, write_atomic
 from .hdf5_safety import check_self_contained
 from .occupancy import OccupancyGrid
 

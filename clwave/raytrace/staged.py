@@ -59,9 +59,9 @@ class StagedTracer:
         self.levels = approximation.levels
         energies = [importance_of(g, None, approximation.frame).astype(np.float64) ** 2 for g in approximation.groups]
         read = sum(float(np.sum(e)) for e in energies)
-        imp = detail_energy(path)  # the details' importance energy, from the tiers: nothing more is read
+        tiered = detail_energy(path)  # the details' importance energy, from the tiers: nothing more is read
         unread = detail_field(path)  # and as a field (the coarsest level's), written with the file
-        unread = imp if unread is None else unread  # a file written before that figure: the importance energy
+        unread = tiered if unread is None else unread  # a file written before that figure: the importance energy
         outside = 0.0  # the approximation's energy off its occupied blocks (a file without the occupancy: none)
         for e, g, occupied in zip(energies, approximation.groups, approximation_occupancy(path)):
             if occupied is not None:
@@ -78,7 +78,7 @@ class StagedTracer:
             field += scale * field_energy(grid, g.wavelet.order)
         self._unread, self._lattice = unread, np.asarray(approximation.spacing) * 2 ** self.levels  # z, y, x
         self.missing = float(np.sqrt(unread / (field + unread))) if field + unread > 0 else 0.0
-        self.outside = float(np.sqrt(outside / (read + imp))) if read + imp > 0 else 0.0  # importances both
+        self.outside = float(np.sqrt(outside / (read + tiered))) if read + tiered > 0 else 0.0  # importances both
         self._off = outside
         if len({g.wavelet.order for g in approximation.groups}) == 1:  # the same field on a lattice 2^levels coarser
             self.coarse = tracer_class(coarse_volume(approximation), device=device, device_memory=device_memory)
