@@ -46,13 +46,19 @@ def test_the_budget_is_the_device_or_less(cc):
 
 
 def test_streamed_chunks_equal_the_same_ranges_on_the_device(cc, wv, monkeypatch):
-    """Same coefficients, same order, same passes: bit for bit; and no host copy beyond a chunk."""
-    packed = []
-    pack = renderer_module._pack
-    monkeypatch.setattr(renderer_module, "_pack", lambda table, first, end: packed.append(end - first) or
-                        pack(table, first, end))
+    """Same coefficients, same order, same passes: bit for bit; and each chunk copied from the renderer's own
+    table (no host copy of it)."""
+    r, packed, copy = clwave.SplatRenderer(wv, device=cc, device_memory=CAP), [], renderer_module.cl.enqueue_copy
+    table = r.groups[0]["table"]
+
+    def counted(queue, dest, src, **kw):
+        if isinstance(src, np.ndarray) and np.shares_memory(src, table.coef):
+            packed.append(len(src))
+        return copy(queue, dest, src, **kw)
+
+    monkeypatch.setattr(renderer_module.cl, "enqueue_copy", counted)
     cam = clwave.Camera(30, 20, size=32)
-    streamed = clwave.splat(wv, cam, renderer=clwave.SplatRenderer(wv, device=cc, device_memory=CAP))
+    streamed = clwave.splat(wv, cam, renderer=r)
     chunk, chunks = streamed.meta["chunk_coefficients"], streamed.meta["coefficient_chunks"]
     assert chunks == -(-wv.kept // chunk) >= 3 and max(packed) == chunk and sum(packed) == wv.kept
     assert streamed.meta["device_budget"] == parse_size(CAP) and streamed.meta["coefficients"] == wv.kept

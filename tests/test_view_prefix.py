@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import clwave
-from clwave.model.ranking import by_importance
+from clwave.model.ranking import by_importance, ranked_table
 from clwave.model.wavelet import ChannelGroup
 from clwave.splat.ranked import ranked_groups
 from clwave.splat.renderer import SplatRenderer
@@ -121,8 +121,8 @@ def test_a_ranking_that_does_not_extend_the_prefix_is_logged_and_the_prefix_goes
     """The whole model ranked by its own importance (not the prefix's first): the renderer refuses it, one logged
     line, and the prefix goes on being served, marked."""
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
-    monkeypatch.setattr(view_prefix, "prefix_first", lambda whole, prefix: [whole.ranked(gi) for gi in
-                                                                            range(len(whole.groups))])
+    monkeypatch.setattr(view_prefix, "prefix_first", lambda whole, prefix: [by_importance(whole.importance(g))
+                                                                            for g in whole.groups])
 
     async def go(v):
         async with aiohttp.ClientSession() as s:
@@ -210,9 +210,8 @@ def test_a_renderer_extended_to_a_model_whose_ranking_it_heads_is_that_models_re
     model = clwave.WaveletVolume.open(clw)
     part = head(model, 3000)
     tables = prefix_first(model, part)
-    for table, whole in zip(tables, [model.ranked(gi) for gi in range(len(model.groups))]):
-        for field in ("level", "key_code", "index", "values", "importance"):
-            assert np.array_equal(getattr(table, field), getattr(whole, field))
+    for g, order in zip(model.groups, tables):
+        assert np.array_equal(order, by_importance(model.importance(g)))
     for cap in (None, "2MiB"):  # 2 MiB: the head on the device, the whole streamed
         r = SplatRenderer(part, device_memory=cap)
         under_way = r.begin(CAMERAS[0])
@@ -243,7 +242,8 @@ def test_a_files_prefix_extended_to_the_whole_file_is_its_splat_to_float_roundin
     model = clwave.WaveletVolume.open(clw)
     part = clwave.WaveletVolume.open(clw, keep=2048 / 40**3)
     tables = prefix_first(model, part)
-    for gi, table in enumerate(tables):
+    for gi, (g, order) in enumerate(zip(model.groups, tables)):
+        table = ranked_table(g, model.importance(g), order)
         assert np.array_equal(table.index[:2048], part.ranked(gi).index)
         assert np.all(np.diff(table.importance[:2048]) <= 0) and np.all(np.diff(table.importance[2048:]) <= 0)
         assert table.importance[2048:].max() > table.importance[:2048].min()  # not the whole's ranking

@@ -182,7 +182,7 @@ class SplatEstimate:
     def _place(self, gr, lo, hi) -> tuple:
         """Coefficients lo..hi of a group: their (row, col) in cells, band codes, and world units per pixel."""
         t = gr["table"]
-        band = t.level[lo:hi].astype(np.int64) * 8 + t.key_code[lo:hi]
+        band = t.band[lo:hi].astype(np.int64)
         offset, step, support = gr["lattice"]
         fine = offset[band] + step[band, None] * (t.index[lo:hi] + support[band] / 2.0)
         world = fine_to_world(fine, gr["wavelet"].order, *self.frame)

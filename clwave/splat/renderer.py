@@ -26,7 +26,7 @@ from ..io.result import RenderResult
 from ..model.conebeam import check_camera
 from ..model.wavelet import WaveletVolume
 from .coarse import Layer, coarse_factor
-from .ranked import ranked_groups
+from .ranked import on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
@@ -37,8 +37,10 @@ CONE_SPLAT_BYTES = 40  # perspective: the centre is float4 (col, row, depth, 0)
 #: streamed chunks hold at least this many coefficients: below it, a pass's work over every tile (count
 #: tables, ranges, framebuffer writes) outweighs its splats
 MIN_CHUNK = 1024
-#: coefficients packed and copied to the device at a time when all of them go there
-UPLOAD_ROWS = 1 << 20
+#: the most coefficients one pass splats where they are all on the device, so that its per-splat buffers (32-40
+#: bytes each, ``_work``) and tile lists stay small beside the coefficients (docs/splatting.md §6); a streamed chunk
+#: is one pass
+PASS_ROWS = 1 << 20
 
 
 class SplatRenderer:
@@ -116,7 +118,7 @@ class SplatRenderer:
         if len(groups) != len(self.groups) or any(
                 new["count"] < old["count"] or not all(np.array_equal(getattr(new["table"], f)[: old["count"]],
                                                                       getattr(old["table"], f))
-                                                       for f in ("level", "key_code", "index", "values"))
+                                                       for f in ("coef", "packed"))
                 for old, new in zip(self.groups, groups)):
             raise ValueError("the groups do not begin with this renderer's coefficients")
         self.wv, self.groups, self._grown = wv, groups, True
@@ -237,9 +239,9 @@ class SplatRenderer:
             self._work = None
         q = self.cc.queue
         if chunk is None and self._resident is None:
-            self._resident = [_upload(q, g["table"], g["count"]) for g in self.groups]
+            self._resident = [on_device(self.cc, g["table"]) for g in self.groups]
         if self._work is None:
-            n = max(chunk or max(g["count"] for g in self.groups), 1)
+            n = max(chunk or min(max(g["count"] for g in self.groups), PASS_ROWS), 1)
             self._work = dict(centre=cla.empty(q, (n, centre), np.float32), bbox=cla.empty(q, (n, 4), np.int32),
                               stex=cla.empty(q, (n,), np.int32), counts=cla.empty(q, (n,), np.uint32))
             if chunk is not None:
@@ -258,7 +260,7 @@ class SplatRenderer:
                     for t in tables)
         free = b.total - fixed - tile_list_bytes(b) - bin_table_bytes(runs, b)
         splat_bytes = CONE_SPLAT_BYTES if isinstance(tables[0], ConeTables) else SPLAT_BYTES
-        if COEFFICIENT_BYTES * sum(counts) + splat_bytes * most <= free and 16 * most <= b.max_alloc:
+        if COEFFICIENT_BYTES * sum(counts) + splat_bytes * min(most, PASS_ROWS) <= free and 16 * most <= b.max_alloc:
             return None
         chunk = min(free // (COEFFICIENT_BYTES + splat_bytes), b.max_alloc // 16, most)
         if chunk >= least and tile_list_bytes(b) >= one_splat:
@@ -311,19 +313,20 @@ class Accumulator:
 
     def _chunks(self, gi, first, n):
         """``(coef, values, offset, count)`` on the device for coefficients ``first .. first + n`` of group
-        ``gi``: where they are all on the device, that range of them; else chunk after chunk, each uploaded
-        in turn into the one chunk buffer (docs/splatting.md §6)."""
+        ``gi``, a pass each: where they are all on the device, that range of them, :data:`PASS_ROWS` at a time;
+        else chunk after chunk, each copied in turn into the one chunk buffer (docs/splatting.md §6)."""
         r = self.r
         if r.chunk is None:
-            if n:
-                yield (*r._resident[gi], first, n)
+            for lo in range(first, first + n, PASS_ROWS):
+                yield (*r._resident[gi], lo, min(PASS_ROWS, first + n - lo))
             return
         coef, values = r._work["coef"], r._work["values"]
+        table = r.groups[gi]["table"]
         for lo in range(first, first + n, r.chunk):
             m = min(r.chunk, first + n - lo)
             start = time.perf_counter()
-            for device, host in zip((coef, values), _pack(r.groups[gi]["table"], lo, lo + m)):
-                cl.enqueue_copy(r.cc.queue, device.data, host)  # blocking: the host chunk goes with the loop
+            for device, host in zip((coef, values), (table.coef[lo:lo + m], table.packed[lo:lo + m])):
+                cl.enqueue_copy(r.cc.queue, device.data, host)  # blocking
             self.stats["upload_seconds"] += time.perf_counter() - start
             self.stats["chunks"] += 1
             yield coef, values, 0, m
@@ -337,15 +340,13 @@ class Accumulator:
         r, obliquity = self.r, float(self.view.obliquity().max())
         plans = []
         for gi, g in enumerate(r.groups):
-            w, n = r._work, g["count"]
-            r.stage(g["channels"], True).project(n, 0, r._resident[gi][0], self.device_tables[gi], w["centre"],
-                                                 w["bbox"], w["stex"], w["counts"])
-            bbox, stex = w["bbox"][:n].get(), w["stex"][:n].get()
-            wavelet = np.flatnonzero((g["table"].key_code != 0) & (bbox[:, 2] >= bbox[:, 0]))
+            n = g["count"]
+            bbox, stex = self._projection(gi)
+            wavelet = np.flatnonzero(((g["table"].band & 7) != 0) & (bbox[:, 2] >= bbox[:, 0]))
             wavelet = wavelet[self.tables[gi].tex_layer[stex[wavelet], 0] == 0]  # drawn at the image's pixels
             bound = self.tables[gi].splat_bounds(self.view, bbox[wavelet], stex[wavelet], g["table"].values[wavelet])
             plans.append((wavelet, bbox[wavelet], bound))
-            self._draw(gi, wavelet, False, projected=True)  # the work arrays hold this projection still
+            self._draw(gi, wavelet, False, projected=n <= PASS_ROWS)  # one pass: the work arrays hold its projection
             self.stats["splats"] += n
         drops = [None] * len(plans)  # per group: (the candidates left undrawn, the largest sum of their bounds)
         while True:  # E L <= share (top - E L): the dropped splats' error within share of the finished image's maximum
@@ -377,14 +378,25 @@ class Accumulator:
             if drop.any():
                 self.dropped["bound"] = max(self.dropped["bound"], float(np.max(most * obliquity / top)))
 
+    def _projection(self, gi) -> tuple:
+        """The pixel box and texture of each splat of group ``gi`` (all on the device), a pass at a time."""
+        r, w, n = self.r, self.r._work, self.r.groups[gi]["count"]
+        bbox, stex = np.empty((n, 4), np.int32), np.empty(n, np.int32)
+        for coef, _, lo, m in self._chunks(gi, 0, n):
+            r.stage(r.groups[gi]["channels"], True).project(m, lo, coef, self.device_tables[gi], w["centre"],
+                                                            w["bbox"], w["stex"], w["counts"])
+            bbox[lo:lo + m], stex[lo:lo + m] = w["bbox"][:m].get(), w["stex"][:m].get()
+        return bbox, stex
+
     def _draw(self, gi, where, value: bool, projected=False):
-        """Splat group ``gi``'s coefficients at indices ``where`` (``value``) or all but those (not ``value``);
-        ``projected`` as for :meth:`_splat_group`."""
+        """Splat group ``gi``'s coefficients at indices ``where`` (``value``) or all but those (not ``value``), a
+        pass at a time; ``projected`` as for :meth:`_splat_group` (one pass)."""
         n = self.r.groups[gi]["count"]
         keep = np.full(n, not value)
         keep[where] = value
-        if keep.any():
-            self._splat_group(gi, *self.r._resident[gi], 0, n, keep=keep, projected=projected)
+        for coef, values, lo, m in self._chunks(gi, 0, n):
+            if keep[lo:lo + m].any():
+                self._splat_group(gi, coef, values, lo, m, keep=keep[lo:lo + m], projected=projected)
 
     def _splat_group(self, gi, coef, values, first, n, keep=None, projected=False):
         """Splat coefficients ``first .. first + n`` of the device arrays ``coef``, ``values`` of group ``gi``;
@@ -548,24 +560,3 @@ def _bytes(table) -> int:
     """A host table's bytes, or a device buffer's (a perspective view's texel pool, :class:`ConeTables`)."""
     return table.nbytes if isinstance(table, np.ndarray) else table.size
 
-
-def _upload(q, table, count: int) -> tuple:
-    """The first ``count`` coefficients of a ranked table on the device, as :func:`_pack` gives them, packed and
-    copied :data:`UPLOAD_ROWS` at a time (no host copy of them all)."""
-    coef, values = cla.empty(q, (count, 4), np.int32), cla.empty(q, (count, 4), np.float32)
-    for lo in range(0, count, UPLOAD_ROWS):
-        for device, host in zip((coef, values), _pack(table, lo, min(count, lo + UPLOAD_ROWS))):
-            cl.enqueue_copy(q, device.data, host, dst_offset=lo * 16)  # blocking: the host part goes with the loop
-    return coef, values
-
-
-def _pack(table, first: int, end: int) -> tuple:
-    """Coefficients ``first .. end`` of a ranked table as the kernels read them: (n, 4) int32
-    ``(k_x, k_y, k_z, band)`` with band = level * 8 + subband code (bit 0: psi along x), and (n, 4)
-    float32 values (channels beyond the group's are zero)."""
-    coef = np.zeros((end - first, 4), np.int32)
-    coef[:, :3] = table.index[first:end, ::-1]  # (k_x, k_y, k_z)
-    coef[:, 3] = table.level[first:end].astype(np.int32) * 8 + table.key_code[first:end]
-    values = np.zeros((end - first, 4), np.float32)
-    values[:, : table.values.shape[1]] = table.values[first:end]
-    return coef, values

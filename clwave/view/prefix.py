@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import FileFormatError
 from ..io.clw import read_header
-from ..model.ranking import by_importance, ranked_table
+from ..model.ranking import by_importance
 from ..model.wavelet import WaveletVolume, check_thresholding
 
 #: coefficients (per channel group) the viewer serves from at once: at 1024^3 (5 % kept) about 2 % of the file,
@@ -44,14 +44,15 @@ class PrefixFirst:
 
 
 def prefix_first(whole: WaveletVolume, prefix: WaveletVolume) -> list:
-    """Per group, the coefficients of ``whole`` as a ranked table (:func:`~clwave.model.ranking.ranked_table`):
-    those of ``prefix`` (a part of it, ``threshold(keep=)``) by importance, then the rest by importance.  Its first
-    rows are ``prefix.ranked()``'s, so that the prefix's renderer extends to it (``SplatRenderer.extend``).  It is
-    not ``whole.ranked()``: a prefix holds the approximation first (docs/model.md §2), and in importance order some
+    """Per group, the order of the coefficients of ``whole`` (indices into its ascending positions, for
+    :func:`~clwave.splat.ranked.ranked_groups`): those of ``prefix`` (a part of it, ``threshold(keep=)``) by
+    importance, then the rest by importance (one sort, :func:`~clwave.model.ranking.by_importance`).  Its first rows
+    are ``prefix.ranked()``'s, so that the prefix's renderer extends to it (``SplatRenderer.extend``).  It is not
+    ``whole.ranked()``'s: a prefix holds the approximation first (docs/model.md §2), and in importance order some
     of it comes after the rest's most important (hydrogen 512³: 37,316 of the prefix's 2^20 rank beyond 2^20), so
     an image of every coefficient is the same sum in another order (docs/viewer.md §2).  A prefix that is not a
     part of ``whole`` (the file replaced meanwhile) is a FileFormatError."""
-    tables = []
+    orders = []
     for g, part in zip(whole.groups, prefix.groups):
         positions, kept = g.all_positions(), part.all_positions()
         rows = np.searchsorted(positions, kept)
@@ -61,9 +62,5 @@ def prefix_first(whole: WaveletVolume, prefix: WaveletVolume) -> list:
                                   "replaced meanwhile?); open it again")
         importance = whole.importance(g)
         importance[rows] = prefix.importance(part)  # as the prefix's renderer ranked them (without a file's focus)
-        rest = np.ones(len(positions), bool)
-        rest[rows] = False
-        rest = np.flatnonzero(rest)
-        order = np.concatenate([rows[by_importance(importance[rows])], rest[by_importance(importance[rest])]])
-        tables.append(ranked_table(g, importance, order))
-    return tables
+        orders.append(by_importance(importance, first=rows))
+    return orders
