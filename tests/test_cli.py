@@ -185,6 +185,9 @@ def test_a_keep_below_the_approximation_band_is_warned_naming_the_least_that_hol
     assert code == 0 and err == (f"clwave: warning: --keep 0.05 keeps 5,530 coefficients, fewer than the {band:,} of "
                                  f"the approximation band: no detail is kept and part of the approximation is "
                                  f"dropped; --keep {least:g} or more keeps it whole\n"), err
+    code, out, err = run(capsys, "render", "phantom:hydrogen:48", "--levels", "2", "--size", "8", "-o",
+                         str(tmp_path / "d.png"))  # the default --keep, under levels the user chose: told too
+    assert code == 0 and err.startswith("clwave: warning: --keep 0.05 keeps 5,530 coefficients"), err
     code, out, err = run(capsys, "render", "phantom:hydrogen:48", "--levels", "2", "--keep", f"{least:g}", "--size",
                          "8", "-o", str(tmp_path / "k.png"), "--force")
     assert code == 0 and "warning" not in err, err

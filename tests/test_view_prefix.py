@@ -281,6 +281,25 @@ def test_a_prefix_not_part_of_the_whole_is_refused(clw):
         SplatRenderer(clwave.WaveletVolume.open(clw, keep=2048 / 40**3)).extend(model, ranked_groups(model))
 
 
+def test_a_replaced_file_gives_the_shaded_views_no_model(clw):
+    """The reading thread checks the prefix against the whole file before it hands the whole to the shaded views:
+    a file replaced meanwhile fails both modes alike, so no page shows two volumes."""
+    from concurrent.futures import Future
+    from types import SimpleNamespace
+
+    from clwave.view.server import ViewServer
+
+    model = clwave.WaveletVolume.open(clw)
+    other = head(model, 100)
+    other.groups[0].values[0, 0] += 1.0
+    told = []
+    state = SimpleNamespace(whole=Future(), upgraded=lambda mode, exc=None: told.append((mode, exc)))
+    ViewServer._read_whole(state, SimpleNamespace(whole=lambda: model, prefix=other, path=clw))
+    with pytest.raises(clwave.FileFormatError, match="not a part of the whole file"):
+        state.whole.result(timeout=0)
+    assert len(told) == 1 and told[0][0] == "xray" and isinstance(told[0][1], clwave.FileFormatError)
+
+
 @pytest.mark.parametrize("prefix", [None, 2048])
 def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(clw, monkeypatch, prefix):
     """A .clw file's shaded views come from a staged tracer: coarse-stage frames (not final) while the whole file is

@@ -142,7 +142,9 @@ def _reader_gone() -> bool:
         poll.register(fd, select.POLLOUT)
         if not any(events & select.POLLERR for _, events in poll.poll(0)):
             return False
-        os.dup2(os.open(os.devnull, os.O_WRONLY), fd)
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, fd)
+        os.close(null)
     except (OSError, ValueError):  # a stdout with no file descriptor (a test's capture)
         return False
     return True

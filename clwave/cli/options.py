@@ -17,15 +17,15 @@ from ..io.files import check_writable
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
+#: host bytes per float32 value of the volume below which decomposing and thresholding it cannot run: the
+#: in-memory model peaks at 3 (RGBA) to 9 (scalar) times the volume; work beyond 4 times what is available
+#: is refused before it starts
+MODEL_BYTES_PER_VALUE = 16
 
 
 def warn(text: str):
     """One warning line on stderr, as every command says what it did other than asked (never a traceback)."""
     print(f"clwave: warning: {text}", file=sys.stderr)
-#: host bytes per float32 value of the volume below which decomposing and thresholding it cannot run: the
-#: in-memory model peaks at 3 (RGBA) to 9 (scalar) times the volume; work beyond 4 times what is available
-#: is refused before it starts
-MODEL_BYTES_PER_VALUE = 16
 
 
 def numbers(text, name, counts, kind=float, sep=",") -> tuple:
@@ -362,8 +362,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                f"chunk) any opacity; give a window in the volume's units (--tf-window LO,HI) or another preset")
         raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
     default = args.keep is None and args.threshold is None
-    with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
-        if default and args.focus is None:
+    with warnings.catch_warnings():  # a budget below the approximation band is told where --keep, --focus or
+        if default and args.focus is None and args.levels is None:  # --levels chose it (default levels keep it)
             warnings.simplefilter("ignore", ClwaveWarning)
         wv = wv.threshold(**dict(thresholding, keep=DEFAULT_KEEP) if default else thresholding)
     if not vol.chunked:

@@ -29,7 +29,7 @@ def write_atomic(path, writer, overwrite=False) -> Path:
     path = Path(path)
     if path.exists() and not overwrite:
         raise OutputExistsError(f"{path} exists; pass overwrite=True (--force) to replace it")
-    folder = path.parent if str(path.parent) else Path(".")
+    folder = path.parent
     if not folder.is_dir():
         raise InputError(f"the folder of {path} does not exist; create it first")
     if path.is_dir():
@@ -61,7 +61,7 @@ def check_writable(path):
     before any work, not after it."""
     path = Path(path)
     try:
-        fd, tmp = _open_unnamed(path.parent if str(path.parent) else Path("."), path.suffix)
+        fd, tmp = _open_unnamed(path.parent, path.suffix)
         os.close(fd)
         if tmp is not None:
             os.unlink(tmp)

@@ -36,8 +36,8 @@ def by_importance(importance, first=None) -> np.ndarray:
     importance, ties by position: the importance order of :meth:`WaveletVolume.ranked`; with ``first`` (indices),
     those in that order, then the others in that order (a file's prefix first, docs/viewer.md §2).  One sort of
     64-bit keys, the importance's bits inverted (a float >= 0 orders as its bits) over the index: NumPy sorts those
-    with its vector sort, 6 times faster than a stable argsort of the importance.  The inverted bits of a float >= 0
-    have their top bit set; clearing it in the keys of ``first`` puts those before every other.  The keys are made
+    with its vector sort, faster than a stable argsort of the importance.  The inverted bits of a float >= 0 have
+    their top bit set; clearing it in the keys of ``first`` puts those before every other.  The keys are made
     and sorted in place: 12 bytes a coefficient at the most beside ``importance`` (docs/viewer.md §2)."""
     n = len(importance)
     if n >= 1 << 32:

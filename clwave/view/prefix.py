@@ -43,16 +43,10 @@ class PrefixFirst:
         return WaveletVolume.open(self.path, keep=self.keep)
 
 
-def prefix_first(whole: WaveletVolume, prefix: WaveletVolume) -> list:
-    """Per group, the order of the coefficients of ``whole`` (indices into its ascending positions, for
-    :func:`~clwave.splat.ranked.ranked_groups`): those of ``prefix`` (a part of it, ``threshold(keep=)``) by
-    importance, then the rest by importance (one sort, :func:`~clwave.model.ranking.by_importance`).  Its first rows
-    are ``prefix.ranked()``'s, so that the prefix's renderer extends to it (``SplatRenderer.extend``).  It is not
-    ``whole.ranked()``'s: a prefix holds the approximation first (docs/model.md §2), and in importance order some
-    of it comes after the rest's most important (hydrogen 512³: 37,316 of the prefix's 2^20 rank beyond 2^20), so
-    an image of every coefficient is the same sum in another order (docs/viewer.md §2).  A prefix that is not a
-    part of ``whole`` (the file replaced meanwhile) is a FileFormatError."""
-    orders = []
+def part_rows(whole: WaveletVolume, prefix: WaveletVolume) -> list:
+    """Per group, the rows of ``whole``'s ascending positions that hold ``prefix``'s coefficients; a prefix that is
+    not a part of ``whole`` (the file replaced meanwhile) is a FileFormatError."""
+    out = []
     for g, part in zip(whole.groups, prefix.groups):
         positions, kept = g.all_positions(), part.all_positions()
         rows = np.searchsorted(positions, kept)
@@ -60,6 +54,20 @@ def prefix_first(whole: WaveletVolume, prefix: WaveletVolume) -> list:
                 and np.array_equal(g.values[:, rows], part.values)):
             raise FileFormatError("the file's prefix is not a part of the whole file read after it (was the file "
                                   "replaced meanwhile?); open it again")
+        out.append(rows)
+    return out
+
+
+def prefix_first(whole: WaveletVolume, prefix: WaveletVolume) -> list:
+    """Per group, the order of the coefficients of ``whole`` (indices into its ascending positions, for
+    :func:`~clwave.splat.ranked.ranked_groups`): those of ``prefix`` (a part of it, ``threshold(keep=)``; checked by
+    :func:`part_rows`) by importance, then the rest by importance (one sort,
+    :func:`~clwave.model.ranking.by_importance`).  Its first rows are ``prefix.ranked()``'s, so that the prefix's
+    renderer extends to it (``SplatRenderer.extend``).  It is not ``whole.ranked()``'s: a prefix holds the
+    approximation first (docs/model.md §2), and in importance order some of it comes after the rest's most
+    important, so an image of every coefficient is the same sum in another order (docs/viewer.md §2)."""
+    orders = []
+    for g, part, rows in zip(whole.groups, prefix.groups, part_rows(whole, prefix)):
         importance = whole.importance(g)
         importance[rows] = prefix.importance(part)  # as the prefix's renderer ranked them (without a file's focus)
         orders.append(by_importance(importance, first=rows))

@@ -142,11 +142,12 @@ class ViewServer:
         """On the reading thread: the whole model, ranked with the prefix's coefficients first, then put into the
         prefix's renderer on the render thread."""
         from ..splat.ranked import ranked_groups
-        from .prefix import prefix_first
+        from .prefix import part_rows, prefix_first
 
         start = time.perf_counter()
         try:
             wv = opened.whole()
+            part_rows(wv, opened.prefix)  # the file replaced meanwhile: no view gets the new one (one volume a page)
             self.whole.set_result(wv)
             read = time.perf_counter() - start
             groups = ranked_groups(wv, prefix_first(wv, opened.prefix))
