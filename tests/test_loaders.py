@@ -777,3 +777,21 @@ def test_a_stack_of_slices_is_weighed_after_its_first_slice(tmp_path, monkeypatc
     with pytest.raises(Refused):
         load(tmp_path, fits=fits)
     assert declared == [(8 * 16 * 16, 1)] and [p.name for p in read] == ["s0.tif"]
+
+
+def test_a_scaled_vector_nifti_is_scaled_a_slab_of_z_at_a_time(tmp_path, rng, monkeypatch):
+    """A vector NIfTI (x, y, z, 1, channels) of scaled integers: slabs of z within every channel, as the bound says
+    (the last axis would be a whole channel volume a slab), and the values those of the scalar case."""
+    import nibabel.volumeutils
+
+    from clwave.io.loaders import nifti
+
+    raw = rng.integers(-2048, 3000, (6, 5, 7, 1, 3)).astype(np.int16)
+    _scaled_nifti(tmp_path / "v.nii", raw, 0.37, -1024.5)
+    slabs, scale = [], nibabel.volumeutils.apply_read_scaling
+    monkeypatch.setattr(nibabel.volumeutils, "apply_read_scaling", lambda a, *k: slabs.append(a.size) or scale(a, *k))
+    monkeypatch.setattr(nifti._ScaledToFloat32, "SLAB_VOXELS", 2 * 6 * 5 * 3)  # slabs of 2 of the 7 slices
+    got = np.asarray(load(tmp_path / "v.nii").data)
+    expected = (raw[:, :, :, 0] * np.float64(np.float32(0.37)) - 1024.5).astype(np.float32)  # x, y, z, channels
+    np.testing.assert_array_equal(got, expected.transpose(2, 1, 0, 3))
+    assert slabs and max(slabs) <= 2 * 6 * 5 * 3, slabs

@@ -56,9 +56,9 @@ def read_nifti(path, chunks, fits=None):
 
 class _ScaledToFloat32:
     """A NIfTI proxy of integers with ``scl_slope``/``scl_inter`` whose whole read is scaled (nibabel's own
-    ``apply_read_scaling``, in float64) a slab of the last axis, the slowest on disk, at a time into float32: nibabel
-    scales a whole read at once, 8 bytes a voxel beside the integers and the float32 copy (docs/benchmarks.md §2).
-    A chunk read (Dask) is the proxy's own."""
+    ``apply_read_scaling``, in float64) a slab of z at a time into float32 (z: the slowest axis of a volume, and
+    within each channel of a vector file): nibabel scales a whole read at once, 8 bytes a voxel beside the integers
+    and the float32 copy (docs/benchmarks.md §2).  A chunk read (Dask) is the proxy's own."""
 
     SLAB_VOXELS = 1 << 22
 
@@ -73,13 +73,14 @@ class _ScaledToFloat32:
 
         raw = self.proxy.get_unscaled()
         out = np.empty(raw.shape, np.float32, order="F")
-        step = max(1, self.SLAB_VOXELS // max(1, int(np.prod(raw.shape[:-1]))))
+        axis = min(2, raw.ndim - 1)  # z: a vector file's last axes are its channels, each a whole volume
+        step = max(1, self.SLAB_VOXELS * raw.shape[axis] // max(1, raw.size))
         top = 0.0
-        for k in range(0, raw.shape[-1], step):
-            part = apply_read_scaling(raw[..., k:k + step], np.asanyarray(self.proxy.slope),
-                                      np.asanyarray(self.proxy.inter))
+        for k in range(0, raw.shape[axis], step):
+            slab = (slice(None),) * axis + (slice(k, k + step),)
+            part = apply_read_scaling(raw[slab], np.asanyarray(self.proxy.slope), np.asanyarray(self.proxy.inter))
             top = max(top, largest_finite(part))
             if top <= float(np.finfo(np.float32).max):  # past it, the read is refused below (by the largest value)
-                out[..., k:k + step] = part
+                out[slab] = part
         check_float32_range(top, self.path)
         return out
