@@ -496,10 +496,16 @@ def warn_short_budget(keep, budget, approx, n_voxels):
     """Warn that ``keep=`` (``budget`` coefficients) is below the ``approx`` live coefficients of the approximation
     band, which ranks first: no detail, part of the band dropped; names the least keep that keeps the band whole."""
     e = 10.0 ** (np.floor(np.log10(approx / n_voxels)) - 2)  # three digits, rounded up
-    least = f"{np.ceil(approx / n_voxels / e) * e:.3g}"
+    least = np.ceil(approx / n_voxels / e) * e
     said = (f"{{}}{keep:g} keeps {budget:,} coefficients, fewer than the {approx:,} of the approximation band: "
-            f"no detail is kept and part of the approximation is dropped; {{}}{least} or more keeps it whole")
-    warnings.warn(ClwaveWarning(said.format("keep=", "keep="), cli=said.format("--keep ", "--keep ")), stacklevel=3)
+            f"no detail is kept and part of the approximation is dropped; ")
+    if least <= 1:
+        said += f"{{}}{least:.3g} or more keeps it whole"
+        api, cli = said.format("keep=", "keep="), said.format("--keep ", "--keep ")
+    else:  # the band (its B-splines reach past the volume) outnumbers the voxels: only fewer levels hold it
+        said += f"the band outnumbers the {n_voxels:,} voxels, so give fewer {{}}"
+        api, cli = said.format("keep=", "levels="), said.format("--keep ", "--levels")
+    warnings.warn(ClwaveWarning(api, cli=cli), stacklevel=3)
 
 
 def importance_of(group: ChannelGroup, focus, frame) -> np.ndarray:
