@@ -362,8 +362,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                f"chunk) any opacity; give a window in the volume's units (--tf-window LO,HI) or another preset")
         raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
     default = args.keep is None and args.threshold is None
-    with warnings.catch_warnings():  # a budget below the approximation band is told where --keep, --focus or
-        if default and args.focus is None and args.levels is None:  # --levels chose it (default levels keep it)
+    with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
+        if default and args.focus is None:
             warnings.simplefilter("ignore", ClwaveWarning)
         wv = wv.threshold(**dict(thresholding, keep=DEFAULT_KEEP) if default else thresholding)
     if not vol.chunked:
