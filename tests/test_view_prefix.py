@@ -121,8 +121,8 @@ def test_a_ranking_that_does_not_extend_the_prefix_is_logged_and_the_prefix_goes
     """The whole model ranked by its own importance (not the prefix's first): the renderer refuses it, one logged
     line, and the prefix goes on being served, marked."""
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
-    monkeypatch.setattr(view_prefix, "prefix_first", lambda whole, prefix: [by_importance(whole.importance(g))
-                                                                            for g in whole.groups])
+    monkeypatch.setattr(view_prefix, "prefix_first",
+                        lambda whole, prefix, rows=None: [by_importance(whole.importance(g)) for g in whole.groups])
 
     async def go(v):
         async with aiohttp.ClientSession() as s:

@@ -21,7 +21,7 @@ import numpy as np
 import pywt
 
 from ..model.bspline import SplineWavelet
-from ..model.chunked import TIER_SHIFT, tiers_of
+from ..model.chunked import tier_energy, tiers_of
 from ..model.transform import band_layout
 from ..model.wavelet import band_importance
 from ..raytrace.coarse_estimate import field_energy
@@ -55,9 +55,7 @@ class DetailField:
             part = self.dense[:, i * size:(i + 1) * size]
             imp = band_importance(self.wavelet, band, part, None, None, None)
             importance += float(np.sum(imp.astype(np.float64) ** 2))
-            tiers = tiers_of(imp[imp > 0]).astype(np.uint32)
-            tiered += float(np.sum((tiers << TIER_SHIFT).view(np.float32).astype(np.float64)
-                                   * ((tiers + 1) << TIER_SHIFT).view(np.float32)))
+            tiered += float(np.sum(tier_energy(tiers_of(imp[imp > 0]))))
             norm = np.prod([self.wavelet.norm(letter) for letter in band.key])
             plain += float(np.sum(np.square(part, dtype=np.float64))) * norm ** 2
         # pywt's synthesis (the model's, docs/model.md §4) crops (rec_len - 2) / 2 of its output at each end: zeros

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.bspline import SplineWavelet
-from ..model.chunked import TIER_SHIFT
+from ..model.chunked import TIER_SHIFT, tier_energy
 from ..model.transform import band_layout
 from .clw import check_dataset, checked_header, open_clw
 
@@ -25,17 +25,16 @@ def detail_energy(path) -> float:
             check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
             runs = runs[...]
             runs = runs[(runs[:, 0] >= 0) & (runs[:, 0] < 1 << (32 - TIER_SHIFT - 1))]  # details, finite tiers
-            lo = (runs[:, 0].astype(np.uint32) << TIER_SHIFT).view(np.float32).astype(np.float64)
-            hi = ((runs[:, 0].astype(np.uint32) + 1) << TIER_SHIFT).view(np.float32).astype(np.float64)
-            energy += float(np.sum(runs[:, 2] * lo * hi))
+            energy += float(np.sum(runs[:, 2] * tier_energy(runs[:, 0])))
     return energy
 
 
-def detail_field(path) -> float | None:
+def detail_field(path, tiered=None) -> float | None:
     """The energy of a ``.clw`` file's stored details as the staged tracer counts it: the tiers' importance energy
-    (:func:`detail_energy`) with the coarsest level's replaced by its field energy, both written with the file
-    (:mod:`.detail_field`); None where a group lacks that figure (a file written before it)."""
-    energy = detail_energy(path)
+    (``tiered``, :func:`detail_energy`'s, read where not given) with the coarsest level's replaced by its field
+    energy, both written with the file (:mod:`.detail_field`); None where a group lacks that figure (a file written
+    before it)."""
+    energy = detail_energy(path) if tiered is None else tiered
     with open_clw(path) as (h5, header):
         for gi in range(len(checked_header(header)[3])):
             data = h5.get(f"g{gi}/detail_field")

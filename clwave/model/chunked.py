@@ -44,6 +44,14 @@ def tiers_of(importance: np.ndarray) -> np.ndarray:
     return (importance_keys(importance) >> TIER_SHIFT).astype(np.int16)
 
 
+def tier_energy(tiers) -> np.ndarray:
+    """float64: the squared importance each tier (>= 0, finite) stands for, its geometric middle squared (the product
+    of its bounds, within ``2^(1/8)`` of each of its importances squared)."""
+    tiers = np.asarray(tiers).astype(np.uint32)
+    return ((tiers << TIER_SHIFT).view(np.float32).astype(np.float64)
+            * ((tiers + 1) << TIER_SHIFT).view(np.float32))
+
+
 @dataclass(frozen=True)
 class Rule:
     """Which coefficients of one class a pass keeps: ``every`` position (zeros too: the unthresholded

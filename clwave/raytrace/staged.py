@@ -60,7 +60,7 @@ class StagedTracer:
         energies = [importance_of(g, None, approximation.frame).astype(np.float64) ** 2 for g in approximation.groups]
         read = sum(float(np.sum(e)) for e in energies)
         tiered = detail_energy(path)  # the details' importance energy, from the tiers: nothing more is read
-        unread = detail_field(path)  # and as a field (the coarsest level's), written with the file
+        unread = detail_field(path, tiered)  # and as a field (the coarsest level's), written with the file
         unread = tiered if unread is None else unread  # a file written before that figure: the importance energy
         outside = 0.0  # the approximation's energy off its occupied blocks (a file without the occupancy: none)
         for e, g, occupied in zip(energies, approximation.groups, approximation_occupancy(path)):

@@ -58,17 +58,17 @@ def part_rows(whole: WaveletVolume, prefix: WaveletVolume) -> list:
     return out
 
 
-def prefix_first(whole: WaveletVolume, prefix: WaveletVolume) -> list:
+def prefix_first(whole: WaveletVolume, prefix: WaveletVolume, rows=None) -> list:
     """Per group, the order of the coefficients of ``whole`` (indices into its ascending positions, for
     :func:`~clwave.splat.ranked.ranked_groups`): those of ``prefix`` (a part of it, ``threshold(keep=)``; checked by
-    :func:`part_rows`) by importance, then the rest by importance (one sort,
+    :func:`part_rows`, or its ``rows`` where the caller has them) by importance, then the rest by importance (one sort,
     :func:`~clwave.model.ranking.by_importance`).  Its first rows are ``prefix.ranked()``'s, so that the prefix's
     renderer extends to it (``SplatRenderer.extend``).  It is not ``whole.ranked()``'s: a prefix holds the
     approximation first (docs/model.md §2), and in importance order some of it comes after the rest's most
     important, so an image of every coefficient is the same sum in another order (docs/viewer.md §2)."""
     orders = []
-    for g, part, rows in zip(whole.groups, prefix.groups, part_rows(whole, prefix)):
+    for g, part, kept in zip(whole.groups, prefix.groups, part_rows(whole, prefix) if rows is None else rows):
         importance = whole.importance(g)
-        importance[rows] = prefix.importance(part)  # as the prefix's renderer ranked them (without a file's focus)
-        orders.append(by_importance(importance, first=rows))
+        importance[kept] = prefix.importance(part)  # as the prefix's renderer ranked them (without a file's focus)
+        orders.append(by_importance(importance, first=kept))
     return orders

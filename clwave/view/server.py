@@ -147,10 +147,10 @@ class ViewServer:
         start = time.perf_counter()
         try:
             wv = opened.whole()
-            part_rows(wv, opened.prefix)  # the file replaced meanwhile: no view gets the new one (one volume a page)
+            rows = part_rows(wv, opened.prefix)  # a file replaced meanwhile: no view gets it (one volume a page)
             self.whole.set_result(wv)
             read = time.perf_counter() - start
-            groups = ranked_groups(wv, prefix_first(wv, opened.prefix))
+            groups = ranked_groups(wv, prefix_first(wv, opened.prefix, rows))
         except Exception as exc:  # noqa: BLE001  (the prefix goes on being served)
             if not self.whole.done():
                 self.whole.set_exception(exc)
