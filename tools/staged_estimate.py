@@ -7,8 +7,9 @@ direct render.  ``--file PATH --size 512`` measures one file instead (hydrogen 2
 
     PYTHONPATH=$PWD .venv/bin/python tools/staged_estimate.py [--json out.json]
 
-Prints a line per frame and the share of frames whose RMS and max estimates are at least their error and at most
-4x it."""
+Prints a line per frame, with the file's two terms (the details' ``rho``, ``StagedTracer.missing``, and the clamp's
+``kappa``, ``StagedTracer.outside``; also in the JSON rows), and the share of frames whose RMS and max estimates are
+at least their error and at most 4x it."""
 
 from __future__ import annotations
 
@@ -37,9 +38,8 @@ def coarse_frames(path, camera, absorption) -> list:
     StagedTracer.ready = property(lambda self: False)
     try:
         tracer = clwave.RayTracer.open(path)
-        return [dict(f.figures(), reduction=f.reduction) for f in tracer.refine(camera, tolerance=1e-2,
-                                                                                 absorption=absorption)
-                if f.meta["stage"] == "coarse"]
+        return [dict(f.figures(), reduction=f.reduction, missing=tracer.missing, outside=tracer.outside)
+                for f in tracer.refine(camera, tolerance=1e-2, absorption=absorption) if f.meta["stage"] == "coarse"]
     finally:
         StagedTracer.ready = ready
 
@@ -53,14 +53,15 @@ def rows(cases) -> list:
             for absorption in (True, False):
                 for f in coarse_frames(path, clwave.Camera(**view), absorption):
                     row = dict(case=label, mode="shaded" if absorption else "xray", view=view,
-                               reduction=f["reduction"])
+                               reduction=f["reduction"], missing=f["missing"], outside=f["outside"])
                     for n in ("rms", "max"):
                         est, err = f[f"estimated_relative_{n}_error"], f[f"relative_{n}_error"]
                         row.update({f"{n}_error": err, f"{n}_estimate": est, f"{n}_ratio": est / err})
                     out.append(row)
                     print(f"{label:24s} {row['mode']:6s} {view['size']:4d}² /{row['reduction']:<2d} "
                           f"rms {row['rms_error']:.2e} est {row['rms_estimate']:.2e} ({row['rms_ratio']:5.2f}x)  "
-                          f"max {row['max_error']:.2e} est {row['max_estimate']:.2e} ({row['max_ratio']:5.2f}x)",
+                          f"max {row['max_error']:.2e} est {row['max_estimate']:.2e} ({row['max_ratio']:5.2f}x)  "
+                          f"rho {row['missing']:.3f} kappa {row['outside']:.3f}",
                           flush=True)
     return out
 
