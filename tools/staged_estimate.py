@@ -4,6 +4,7 @@ Marschner–Lobb, a random smooth volume, the MNI152 MRI; ``model`` of tests/tes
 ``.clw``, 5 % and 0.5 % kept, two views at 128² and one at 256², shaded and X-ray, tolerance 1e-2, both coarse
 frames of each refinement (the full stage held back until they are made), each measured against the whole file's
 direct render.  ``--file PATH --size 512`` measures one file instead (hydrogen 256³ → 512²: one view, shaded).
+``--held-out`` measures the volumes held out from the estimate's choices instead (:func:`held_out`: 80 frames).
 
     PYTHONPATH=$PWD .venv/bin/python tools/staged_estimate.py [--json out.json]
 
@@ -24,12 +25,38 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # run from a checkout: the test
 
 import clwave  # noqa: E402
 from clwave.raytrace.staged import StagedTracer  # noqa: E402
-from test_progressive_raytrace import model  # noqa: E402
+from test_progressive_raytrace import mni152, model  # noqa: E402
 
 MODELS = ("hydrogen", "marschner-lobb", "random", "mri")
 KEEPS = (0.05, 0.005)
 VIEWS = (dict(azimuth=30, elevation=20, size=128), dict(azimuth=-60, elevation=35, size=128),
          dict(azimuth=120, elevation=-25, size=256))
+
+
+def held_out(tmp) -> list:
+    """The cases held out from the estimate's choices (docs/benchmarks.md §16), 5 % and 0.5 % kept, views (30°, 20°)
+    and (−60°, 35°): Shepp–Logan 64³ (``grey``) and hydrogen 128³ at 256² (thirteenth session), Marschner–Lobb 96³
+    (``hydrogen``) and the MNI152 MRI averaged over 2³ voxels (``mri``) at 256², and a random smooth volume 64³
+    (``grey``) at 192² (fourteenth session)."""
+    import numpy as np
+    from scipy.ndimage import gaussian_filter
+
+    noise = gaussian_filter(np.random.default_rng(7).random((64, 64, 64)), 2.7)
+    volumes = (("shepp-logan 64", clwave.phantom("shepp-logan", 64), "grey", 256),
+               ("hydrogen 128", clwave.phantom("hydrogen", 128), "hydrogen", 256),
+               ("marschner-lobb 96", clwave.phantom("marschner-lobb", n=96), "hydrogen", 256),
+               ("random 64", clwave.Volume(((noise - noise.min()) / np.ptp(noise)).astype(np.float32)), "grey", 192),
+               ("mri 2³", mni152(step=2), None, 256))
+    cases = []
+    for name, volume, preset, size in volumes:
+        rgba = volume if preset is None else clwave.TransferFunction.preset(preset).classify(volume)
+        full = clwave.WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3)
+        for keep in KEEPS:
+            path = Path(tmp) / f"{name.replace(' ', '_')}_{keep}.clw"
+            full.threshold(keep=keep).save(path)
+            cases.append((f"{name} {keep:.1%}", path, [dict(azimuth=30, elevation=20, size=size),
+                                                       dict(azimuth=-60, elevation=35, size=size)]))
+    return cases
 
 
 def coarse_frames(path, camera, absorption) -> list:
@@ -83,12 +110,15 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--file", help="one .clw file instead of the 48³ test models")
     parser.add_argument("--size", type=int, default=512, help="its image side (with --file)")
+    parser.add_argument("--held-out", action="store_true", help="the held-out volumes instead (held_out)")
     parser.add_argument("--models", nargs="+", default=MODELS, choices=MODELS)
     parser.add_argument("--json", help="write the rows and the summary here")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         if args.file:
             cases = [(Path(args.file).name, args.file, [dict(azimuth=30, elevation=20, size=args.size)])]
+        elif args.held_out:
+            cases = held_out(tmp)
         else:
             cases = []
             for name in args.models:
