@@ -195,3 +195,19 @@ def test_the_view_bench_drags_on_small_images():
                 assert driver.execute_script("return window.clwave.stats.released") is not None
                 assert np.isclose(final["azimuth"], (before[0] - 0.4 * dx) % 360)
                 assert np.isclose(final["elevation"], before[1] + 0.4 * dy)
+
+
+def test_staged_estimate_reports_each_frames_terms(tmp_path):
+    """tools/staged_estimate.py --file: per coarse frame its ratios (estimate over error) and the file's two terms,
+    the staged tracer's own."""
+    path = tmp_path / "h.clw"
+    rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", 32))
+    clwave.WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05).save(path)
+    run_tool("staged_estimate.py", "--file", path, "--size", 64, "--json", tmp_path / "out.json")
+    rows = json.loads((tmp_path / "out.json").read_text())["rows"]
+    tracer = clwave.RayTracer.open(path)
+    assert [r["mode"] for r in rows] == ["shaded", "shaded", "xray", "xray"]
+    for r in rows:
+        assert (r["missing"], r["outside"]) == (tracer.missing, tracer.outside) and tracer.outside > 0
+        assert r["rms_ratio"] == r["rms_estimate"] / r["rms_error"] > 0
+    assert rows[0]["reduction"] == 2 * rows[1]["reduction"]  # both coarse frames, the smaller first
