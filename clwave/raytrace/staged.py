@@ -221,8 +221,10 @@ class StagedTracer:
             image, res, cam = render(reduction)
             rms, top = steps.add(image)
             peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
-            if options["absorption"]:  # the details and the clamp it lacks (§9); the clamp's max with a margin
-                lacks = float(np.hypot(self.missing, self.outside))
+            if options["absorption"]:  # the details or the clamp it lacks, the larger: kept details cancel the
+                # approximation's haze off the content, which the clamp removes (§9); the max both, the clamp's with
+                # a margin
+                lacks = max(self.missing, self.outside)
                 top += float(np.hypot(self.missing, CLAMP_MAX_MARGIN * self.outside))
             else:  # an X-ray frame's from its own image
                 lacks = self.lacks_in_line_integrals(res.image, cam.view(coarse.wv))
