@@ -57,7 +57,7 @@ def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_s
     rendered again, from no fewer coefficients, to clwave.splat of the whole file within one grey level."""
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
     gate, whole = threading.Event(), PrefixFirst.whole
-    monkeypatch.setattr(PrefixFirst, "whole", lambda self: gate.wait(60) and whole(self))
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: gate.wait(60) and whole(self, **k))
     model = clwave.WaveletVolume.open(clw)
 
     async def go(v):
@@ -98,7 +98,8 @@ def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_s
 def test_a_failed_reading_of_the_rest_is_logged_and_the_prefix_goes_on(clw, monkeypatch, caplog):
     """Reading the rest failing (a file damaged past its prefix): one logged line, the prefix's frames go on."""
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
-    monkeypatch.setattr(PrefixFirst, "whole", lambda self: (_ for _ in ()).throw(clwave.FileFormatError("damaged")))
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: (_ for _ in ()).throw(
+        clwave.FileFormatError("damaged")))
 
     async def go(v):
         async with aiohttp.ClientSession() as s:
