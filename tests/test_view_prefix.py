@@ -3,6 +3,7 @@ the whole file is read, a refinement under way kept through the swap, the final 
 model."""
 
 import asyncio
+import contextlib
 import json
 import threading
 
@@ -15,6 +16,8 @@ from clwave.model.ranking import by_importance, ranked_table
 from clwave.model.wavelet import ChannelGroup
 from clwave.splat.ranked import ranked_groups
 from clwave.splat.renderer import SplatRenderer
+from clwave.io import clw as clw_io
+from clwave.io import summary
 from clwave.view import frames as view_frames
 from clwave.view import prefix as view_prefix
 from clwave.view import view
@@ -54,7 +57,7 @@ def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_s
     rendered again, from no fewer coefficients, to clwave.splat of the whole file within one grey level."""
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
     gate, whole = threading.Event(), PrefixFirst.whole
-    monkeypatch.setattr(PrefixFirst, "whole", lambda self: gate.wait(60) and whole(self))
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: gate.wait(60) and whole(self, **k))
     model = clwave.WaveletVolume.open(clw)
 
     async def go(v):
@@ -95,7 +98,8 @@ def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_s
 def test_a_failed_reading_of_the_rest_is_logged_and_the_prefix_goes_on(clw, monkeypatch, caplog):
     """Reading the rest failing (a file damaged past its prefix): one logged line, the prefix's frames go on."""
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
-    monkeypatch.setattr(PrefixFirst, "whole", lambda self: (_ for _ in ()).throw(clwave.FileFormatError("damaged")))
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: (_ for _ in ()).throw(
+        clwave.FileFormatError("damaged")))
 
     async def go(v):
         async with aiohttp.ClientSession() as s:
@@ -293,8 +297,9 @@ def test_a_replaced_file_gives_the_shaded_views_no_model(clw):
     other = head(model, 100)
     other.groups[0].values[0, 0] += 1.0
     told = []
-    state = SimpleNamespace(whole=Future(), upgraded=lambda mode, exc=None: told.append((mode, exc)))
-    ViewServer._read_whole(state, SimpleNamespace(whole=lambda: model, prefix=other, path=clw))
+    state = SimpleNamespace(whole=Future(), upgraded=lambda mode, exc=None: told.append((mode, exc)),
+                            coarse_first=False)
+    ViewServer._read_whole(state, SimpleNamespace(whole=lambda **k: model, prefix=other, path=clw))
     with pytest.raises(clwave.FileFormatError, match="not a part of the whole file"):
         state.whole.result(timeout=0)
     assert len(told) == 1 and told[0][0] == "xray" and isinstance(told[0][1], clwave.FileFormatError)
@@ -334,6 +339,63 @@ def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(c
     expect = clwave.raytrace(clwave.WaveletVolume.open(clw), clwave.Camera(10.0, 20.0, 32, extent=frames[-1]["extent"]),
                              tolerance=2e-2).to_uint8(background=(0.0, 0.0, 0.0))
     assert expect.std() > 5 and np.abs(decode(frames[-1]["data"]).astype(int) - expect).max() <= 1
+
+
+def test_a_shaded_view_asked_for_while_the_rest_is_read_does_not_wait_for_it(clw, monkeypatch):
+    """h5py serialises its calls, and the rest's reads take seconds each at 1024^3: the reading thread reads what the
+    shaded views' coarse stage reads of the file before the rest, and the coarse stage takes it, so a still shaded
+    view asked for while the rest is read has its first (coarse) frame meanwhile (docs/viewer.md §2).  Instrumented:
+    every opening of the file takes one lock, as h5py's calls do, which the rest's reading holds until that frame has
+    come; an opening that finds it held is recorded (and lets the rest go on, so that a failure is quick)."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    files, reading, release, waited = threading.RLock(), threading.Event(), threading.Event(), []
+    open_clw, open_ = clw_io.open_clw, clwave.WaveletVolume.open.__func__
+
+    @contextlib.contextmanager
+    def locked(path):
+        if not files.acquire(blocking=False):  # the rest's reading holds it: this read would wait for all of it
+            waited.append(threading.current_thread().name)
+            release.set()
+            files.acquire()
+        try:
+            with open_clw(path) as opened:
+                yield opened
+        finally:
+            files.release()
+
+    def open_model(cls, path, keep=None, **k):
+        if keep is not None or k.get("approximation"):
+            return open_(cls, path, keep, **k)
+        with files:  # the rest's reading
+            reading.set()
+            release.wait(60)
+            return open_(cls, path, keep, **k)
+
+    for module in (clw_io, summary):
+        monkeypatch.setattr(module, "open_clw", locked)
+    monkeypatch.setattr(clwave.WaveletVolume, "open", classmethod(open_model))
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1)))  # an X-ray view: its first frame starts the reading
+            while (await receive(ws))[0] != "frame":
+                pass
+            assert await asyncio.to_thread(reading.wait, 30)
+            await ws.send_str(json.dumps(dict(BASE, seq=2, mode="shaded")))
+            while True:
+                kind, message = await receive(ws)
+                if kind == "frame" and message["seq"] == 2:
+                    release.set()
+                    return message
+
+    try:
+        with view(clw, size=32, tolerance=2e-2) as v:
+            frame = asyncio.run(go(v))
+    finally:
+        release.set()
+    assert not waited and frame["prefix"] and not frame["final"]
 
 
 def test_tabs_pace_their_drag_frames_apart(clw, monkeypatch):

@@ -49,21 +49,19 @@ class StagedTracer:
     the approximation's field energy (its B-splines overlap); ``outside``: that of the approximation's field off
     the content, which the full stage's content clamp removes, from the file's occupancy of the approximation (0
     for a file without it); in X-ray frames both from :meth:`lacks_in_line_integrals` instead
-    (docs/raytracing.md §9).  Use from one thread at a time.
+    (docs/raytracing.md §9).  Use from one thread at a time.  ``coarse``, where given: :func:`read_coarse`'s
+    reading of the file (the viewer's, read before the rest), read here where not.
     """
 
-    def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False, whole=None):
+    def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False, whole=None, coarse=None):
         start = time.perf_counter()
-        approximation = WaveletVolume.open(path, approximation=True)
-        approximation.content_mask = None  # the coarse stage has no content clamp: the mask is not read for it
+        approximation, tiered, unread, occupancy = read_coarse(path) if coarse is None else coarse
         self.levels = approximation.levels
         energies = [importance_of(g, None, approximation.frame).astype(np.float64) ** 2 for g in approximation.groups]
         read = sum(float(np.sum(e)) for e in energies)
-        tiered = detail_energy(path)  # the details' importance energy, from the tiers: nothing more is read
-        unread = detail_field(path, tiered)  # and as a field (the coarsest level's), written with the file
         unread = tiered if unread is None else unread  # a file written before that figure: the importance energy
         outside = 0.0  # the approximation's energy off its occupied blocks (a file without the occupancy: none)
-        for e, g, occupied in zip(energies, approximation.groups, approximation_occupancy(path)):
+        for e, g, occupied in zip(energies, approximation.groups, occupancy):
             if occupied is not None:
                 share = mass_on_occupied(occupied, g.wavelet, self.levels).reshape(-1)[g.all_positions()]
                 outside += float(np.sum(e * (1 - share)))
@@ -235,6 +233,17 @@ class StagedTracer:
                                 estimated_relative_rms_error=rms, estimated_relative_max_error=top,
                                 meta=dict(res.meta, stage="coarse"), _final=final, detail=self.levels,
                                 reduction=reduction)
+
+
+def read_coarse(path) -> tuple:
+    """What the coarse stage of a ``.clw`` file reads of it (:class:`StagedTracer`'s ``coarse=``, where a caller has
+    read it already): its approximation (without the content mask: the coarse stage has no content clamp), the
+    details' importance energy from the tiers (nothing more is read), their energy as a field (the coarsest level's,
+    written with the file; None for a file written before it), and the file's occupancy of the approximation."""
+    approximation = WaveletVolume.open(path, approximation=True)
+    approximation.content_mask = None
+    tiered = detail_energy(path)
+    return approximation, tiered, detail_field(path, tiered), approximation_occupancy(path)
 
 
 def _abandon(event, thread):

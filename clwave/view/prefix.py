@@ -9,6 +9,7 @@ ranked with the prefix's coefficients first (:func:`prefix_first`), so that the 
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from ..errors import FileFormatError
 from ..io.clw import read_header
 from ..model.ranking import by_importance
 from ..model.wavelet import WaveletVolume, check_thresholding
+from ..raytrace.staged import read_coarse
 
 #: coefficients (per channel group) the viewer serves from at once: at 1024^3 (5 % kept) about 2 % of the file,
 #: read in about a second, and enough for the display window (frames.WINDOW_COEFFICIENTS)
@@ -37,10 +39,29 @@ class PrefixFirst:
         # every tier was read where a group holds fewer than the budget
         self.complete = (self.keep is not None and self.keep <= share) or share == 1.0 or all(
             g.kept < budget for g in self.prefix.groups)
+        self._coarse, self._taken, self._holding = None, False, threading.Lock()
 
-    def whole(self) -> WaveletVolume:
-        """The whole model (the file, or its ``keep`` most important coefficients)."""
-        return WaveletVolume.open(self.path, keep=self.keep)
+    def coarse(self) -> tuple:
+        """What a staged tracer's coarse stage reads of the file (:func:`~clwave.raytrace.staged.read_coarse`): the
+        reading :meth:`whole` holds (let go here), else read now (under the lock: :meth:`whole` starts the rest's
+        reading after it)."""
+        with self._holding:
+            held, self._coarse, self._taken = self._coarse, None, True
+            return read_coarse(self.path) if held is None else held
+
+    def whole(self, coarse_first=False) -> WaveletVolume:
+        """The whole model (the file, or its ``keep`` most important coefficients).  ``coarse_first``: the coarse
+        stage's reading (:meth:`coarse`, where not taken yet) is read before it and held until taken or the whole is
+        read: h5py serialises its calls, so a coarse stage asked for meanwhile would wait behind the whole's reads,
+        seconds each at 1024^3 (docs/viewer.md §2)."""
+        with self._holding:
+            if coarse_first and not self._taken:
+                self._coarse = read_coarse(self.path)
+        try:
+            return WaveletVolume.open(self.path, keep=self.keep)
+        finally:
+            with self._holding:
+                self._coarse = None  # not taken: a coarse stage made later reads the file alone
 
 
 def part_rows(whole: WaveletVolume, prefix: WaveletVolume) -> list:

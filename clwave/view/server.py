@@ -96,6 +96,7 @@ class ViewServer:
         self._reader = None if self.whole is None else threading.Thread(
             target=self._read_whole, args=(opened,), name="clwave-view-read", daemon=True)
         self._starting = threading.Lock()  # the reader is started from the event loop or the shaded set-up
+        self.coarse_first = False  # set by _prepare
         try:
             self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened, transfer_function).result()
         except DeviceMemoryError as exc:
@@ -119,9 +120,11 @@ class ViewServer:
             # a whole file (not a part of it, keep=) is traced in stages: its coarse stage at once, read from the file;
             # the full one from the model held (the prefix, where it is all of the file) or read for the X-ray views
             path = opened.path if opened is not None and opened.keep is None else None
+            self.coarse_first = path is not None  # the reading thread reads the coarse stage's share first
             sources["shaded"] = ShadedSource(wv, size, tolerance, device=self.device,
                                              device_memory=self.shares["shaded"], path=path,
                                              whole=None if self.whole is None else self.whole_model,
+                                             coarse=None if path is None else opened.coarse,
                                              upgraded=self.upgraded,
                                              transfer_function=transfer_function)
         return sources
@@ -146,7 +149,7 @@ class ViewServer:
 
         start = time.perf_counter()
         try:
-            wv = opened.whole()
+            wv = opened.whole(coarse_first=self.coarse_first)
             rows = part_rows(wv, opened.prefix)  # a file replaced meanwhile: no view gets it (one volume a page)
             self.whole.set_result(wv)
             read = time.perf_counter() - start

@@ -47,17 +47,19 @@ class ShadedSource(Source):
     background, when ``upgraded(mode, failure)`` (a callable, from that thread) is called: made from the model the
     viewer holds (``wv``, or ``whole()`` where given), not read again.  ``whole``: ``wv`` is a prefix of the model,
     and this callable gives the whole one (read meanwhile for the X-ray views), which the tracer waits for.
+    ``coarse``: a callable giving the coarse stage's reading of the file (``PrefixFirst.coarse``, read before the rest).
     ``transfer_function``: a scalar model's starting function (None: its own, or grey).  ``device_memory``: the
     tracer's cap (both stages of a file's together)."""
 
     mode = "shaded"
 
-    def __init__(self, wv, size, tolerance, device=None, path=None, whole=None, upgraded=None, transfer_function=None,
-                 device_memory=None):
+    def __init__(self, wv, size, tolerance, device=None, path=None, whole=None, coarse=None, upgraded=None,
+                 transfer_function=None, device_memory=None):
         super().__init__(wv, size)
         self.tolerance, self.device, self.tracer = check_tolerance(tolerance), device, None
         self.device_memory = device_memory
         self.path, self.whole, self.staged, self.upgraded, self._watch = path, whole, None, upgraded, None
+        self.coarse = coarse
         self.scalar = wv.channels == 1
         self.steps = [(s, d) for s, d in DRAG_STEPS if d <= wv.levels]
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
@@ -84,7 +86,8 @@ class ShadedSource(Source):
         warm = dict(transfer_function=self.start_tf) if self.scalar else {}
         if self.path is not None and self.staged is None:
             staged = StagedTracer(RayTracer, self.path, device=self.device, device_memory=self.device_memory, lod=True,
-                                  whole=self.whole or (lambda: self.wv))  # the model held, not read again
+                                  whole=self.whole or (lambda: self.wv),  # the model held, not read again
+                                  coarse=None if self.coarse is None else self.coarse())
             # the coarse stage's kernels; the whole file's set-up starts with the page's first frame (staged.render),
             # so that its reading does not delay that frame
             staged.coarse.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN,
