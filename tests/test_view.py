@@ -636,14 +636,18 @@ def test_cli_view_refuses_a_device_memory_too_small_for_its_size_at_start(capsys
                                           r"needs at least 187 MiB .*; give more or a smaller --size", err[0]), err
 
 
-def test_cli_view_refuses_a_size_beyond_the_device_before_reading_the_input(capsys, tmp_path):
+def test_cli_view_refuses_a_size_beyond_the_device_before_reading_the_input(capsys, tmp_path, monkeypatch):
     """``clwave view IN --size N`` past the ray tracer's one-buffer limit (N*N*32 bytes over the device's largest
     buffer, the rule `render --method raytrace` refuses by): one line naming the size asked, the limit and the fix,
-    before the input is read (a file that is not a volume is never opened)."""
+    before the input is read (a file that is not a volume is never opened).  The host's memory is made ample here:
+    its own rule is the next test's."""
     from math import isqrt
 
     from clwave.cli import main
+    from clwave.device import memory
     from clwave.device.context import ComputeContext
+
+    monkeypatch.setattr(memory, "available_bytes", lambda: 2**60)
 
     info = ComputeContext.get(None).info
     own = min(info.max_alloc, info.global_mem)
@@ -657,6 +661,37 @@ def test_cli_view_refuses_a_size_beyond_the_device_before_reading_the_input(caps
         assert len(err) == 1 and f"the viewer's {h}x{w or h} shaded image needs" in err[0] and \
             f"give a smaller --size (at most {most}x{most} on this device)" in err[0], err
     assert main(["view", str(junk), "--size", str(most)]) == 2  # within the limit: the input is read, and refused
+    assert "junk.npy" in capsys.readouterr().err
+
+
+def test_cli_view_refuses_a_size_whose_images_outgrow_host_memory_before_reading_the_input(capsys, tmp_path,
+                                                                                         monkeypatch):
+    """``clwave view IN --size N`` within the device's one-buffer limit whose images (``VIEW_PIXEL_BYTES`` a pixel)
+    need more host memory than the machine has available, on a CPU device (its memory the host's): one line naming
+    the need, what is available and the largest size that fits, before the input is read; that largest size is not
+    refused for it.  A device of its own is not held to it (the input is read)."""
+    from math import isqrt
+
+    from clwave.cli import main
+    from clwave.cli import view as cli_view
+    from clwave.device import memory
+    from clwave.device.context import ComputeContext
+
+    monkeypatch.setattr(memory, "available_bytes", lambda: 64 * 2**20)
+    most = isqrt(64 * 2**20 // cli_view.VIEW_PIXEL_BYTES)
+    junk = tmp_path / "junk.npy"
+    junk.write_bytes(b"not a volume")
+    if ComputeContext.get(None).info.kind != "CPU":
+        assert main(["view", str(junk), "--size", str(most + 1)]) == 2
+        assert "junk.npy" in capsys.readouterr().err
+        return
+    for size, (h, w) in ((f"{most + 1}", (most + 1, most + 1)), (f"{most}x{4 * most}", (most, 4 * most))):
+        assert main(["view", str(junk), "--size", size]) == 2, size
+        err = capsys.readouterr().err.strip().splitlines()
+        need = memory.format_size(h * w * cli_view.VIEW_PIXEL_BYTES)
+        assert len(err) == 1 and f"a viewer of {h}x{w} images needs about {need}, and this machine has 64 MiB " \
+            f"available; give a smaller --size (at most {most}x{most} here now)" in err[0], err
+    assert main(["view", str(junk), "--size", str(most)]) == 2  # within it: the input is read, and refused
     assert "junk.npy" in capsys.readouterr().err
 
 

@@ -9,6 +9,11 @@ from .options import (add_input_options, add_model_options, build_model, note_st
                       post_transfer_function)
 
 
+#: host memory the viewer holds a pixel of its --size on a CPU device at the least (its X-ray and shaded images, their
+#: device buffers, read-backs and encoding), a floor of its measured peak (docs/viewer.md §1)
+VIEW_PIXEL_BYTES = 200
+
+
 def run(args):
     import asyncio
     import logging
@@ -67,19 +72,26 @@ def run(args):
 
 
 def check_size(size, device):
-    """Refuse, before the input is read, an image size the viewer's ray tracer would refuse as it begins one: its
-    traced image in one device buffer (device/memory.py), the viewer's largest (the X-ray framebuffer takes less).
+    """Refuse, before the input is read, an image size the viewer could not hold: its ray tracer's traced image in
+    one device buffer (device/memory.py), the viewer's largest (the X-ray framebuffer takes less), and on a CPU device
+    (its memory the host's) its images' memory, :data:`VIEW_PIXEL_BYTES` a pixel, beyond what the host has available
+    (docs/viewer.md §1).
     The shaded views are served for a scalar or an RGBA model; the channels are known once the input is read, so
     every model is held to their limit."""
     from math import isqrt
 
     from ..device.context import ComputeContext
-    from ..device.memory import TRACED_PIXEL_BYTES, buffer_limit, check_buffer
+    from ..device.memory import TRACED_PIXEL_BYTES, available_bytes, buffer_limit, check_buffer, check_fits
 
     cc = ComputeContext.get(device)
     (H, W), most = size, isqrt(buffer_limit(cc) // TRACED_PIXEL_BYTES)
     check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"the viewer's {H}x{W} shaded image",
                  f"give a smaller --size (at most {most}x{most} on this device)")
+    if cc.info.kind != "CPU":  # a device of its own holds most of it (not measured)
+        return
+    fits = isqrt(available_bytes() // VIEW_PIXEL_BYTES)
+    check_fits(H * W * VIEW_PIXEL_BYTES, f"a viewer of {H}x{W} images",
+               f"give a smaller --size (at most {fits}x{fits} here now)")
 
 
 def add_parser(sub):
