@@ -94,7 +94,8 @@ def test_a_file_without_the_figure_reads_none(saved, tmp_path):
 @pytest.mark.parametrize("damage, said", [(np.array([np.nan, 1.0]), "not two finite energies"),
                                           (np.array([-1.0, 1.0]), "not two finite energies"),
                                           (np.ones(3), "expected (2,) float64"),
-                                          (np.ones(2, np.float32), "expected (2,) float64")])
+                                          (np.ones(2, np.float32), "expected (2,) float64"),
+                                          (np.array([0.0, 1e300]), "more energy than the file's tiers")])
 def test_a_damaged_figure_is_refused_in_one_line(saved, tmp_path, damage, said):
     bad = tmp_path / "bad.clw"
     bad.write_bytes(saved[0].read_bytes())

@@ -35,6 +35,7 @@ def detail_field(path, tiered=None) -> float | None:
     energy, both written with the file (:mod:`.detail_field`); None where a group lacks that figure (a file written
     before it)."""
     energy = detail_energy(path) if tiered is None else tiered
+    most, coarsest = energy * 2 ** 0.125, 0.0  # the tiers' rounding: a tier's energy within 2^(±1/8) of its values'
     with open_clw(path) as (h5, header):
         for gi in range(len(checked_header(header)[3])):
             data = h5.get(f"g{gi}/detail_field")
@@ -44,7 +45,11 @@ def detail_field(path, tiered=None) -> float | None:
             figure = data[...]
             if not np.all(np.isfinite(figure) & (figure >= 0)):
                 raise ValueError(f"member {data.name} holds {figure.tolist()}, not two finite energies >= 0")
+            coarsest += figure[1]
             energy += figure[0] - figure[1]
+            if coarsest > most * (1 + 1e-9) or not np.isfinite(energy):
+                raise ValueError(f"member {data.name} holds {figure.tolist()}, more energy than the file's tiers "
+                                 f"({most:.6g})")
     return max(float(energy), 0.0)  # the tiers' sum less the coarsest level's, rounded: not below 0
 
 
