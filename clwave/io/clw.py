@@ -244,11 +244,12 @@ class _Tiers:
                 values.attrs["step"] = np.float64(steps[gi])
 
     def append(self, gi, positions, values, tiers):
-        if self.fields:
-            self.fields[gi].add(positions, values)
         if self.steps is not None:  # a value that rounds to zero adds nothing: it is not stored
-            kept = np.any(np.rint(values / np.float64(self.steps[gi])) != 0, axis=0)
+            step = np.float64(self.steps[gi])
+            kept = np.any(np.rint(values / step) != 0, axis=0)
             positions, values, tiers = positions[kept], values[:, kept], tiers[kept]
+        if self.fields:  # the figure of what a reader gets back
+            self.fields[gi].add(positions, values if self.steps is None else np.rint(values / step) * step)
         names = np.where(positions < self.approx_sizes[gi], -1, tiers)  # the approximation: band 0 of the layout
         for tier in np.unique(names)[::-1]:
             sel = names == tier

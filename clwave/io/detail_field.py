@@ -2,17 +2,18 @@
 docs/chunked.md §4) for the staged tracer's coarse frames, which read no detail (docs/raytracing.md §9).
 
 The tier table gives the details' importance energy ``sum |c|² ||psi||²``, the field's energy only where the
-functions are orthogonal; the CDF synthesis wavelets are not, and a model's details overlap and cancel (their field
-energy 0.06-0.6 of that sum on the test models).  The coarsest level's seven detail bands, 1/512 of the volume's
-coefficients at three levels and 74-99 % of the details' importance energy at 5 % kept, are held whole while the
-file is written and synthesized at the end to the approximation coefficients of level L - 1 (their field), whose
-energy is ``<c, c * G>`` (the B-splines' Gram filter, :func:`~clwave.raytrace.coarse_estimate.field_energy`); the
-finer levels, whose bands are as large as the volume, keep their importance energy from the tiers.  The figure per
-group is ``(field energy of level L's details, their importance energy as the tier table counts it)``, the first
-in the importances' convention (the largest channel: the field's energy, channels summed, times the bands'
-importance energy over their plain ``sum |c|² ||psi||²``), so that a reader takes the details' energy as the tier
-table's less the second plus the first.  Both depend on the stored coefficients alone, not on the order they come
-in: the in-memory and the streamed writers write the same file.
+functions are orthogonal; the CDF synthesis wavelets are not, and a model's details overlap and cancel (measured in
+docs/known-gaps.md §9). The coarsest level's seven detail bands, each about 1/512 of the voxels at three levels
+(with the B-splines' margin, 1.7 % of them in all at 1024³) and most of the details' importance energy, are held
+whole while the file is written and synthesized at the end to the approximation coefficients of level L - 1 (their
+field), whose energy is ``<c, c * G>`` (the B-splines' Gram filter,
+:func:`~clwave.raytrace.coarse_estimate.field_energy`); the finer levels, whose bands are as large as the volume,
+keep their importance energy from the tiers. The figure per group is ``(field energy of level L's details, their
+importance energy as the tier table counts it)``, the first in the importances' convention (the largest channel: the
+field's energy, channels summed, times the bands' importance energy over their plain ``sum |c|² ||psi||²``), so that
+a reader takes the details' energy as the tier table's less the second plus the first. Both depend on the stored
+coefficients alone (quantised values as a reader gets them back), not on the order they come in: the in-memory and
+the streamed writers write the same file.
 """
 
 from __future__ import annotations
