@@ -281,6 +281,12 @@ def test_a_prefix_not_part_of_the_whole_is_refused(clw):
     other.groups[0].values[0, 0] += 1.0
     with pytest.raises(clwave.FileFormatError, match="not a part of the whole file"):
         prefix_first(model, other)
+    moved, fewer = head(model, 100), head(model, 100)  # the same coefficients in another frame; a group short
+    moved.spacing = tuple(2.0 * s for s in moved.spacing)
+    fewer.groups = fewer.groups[:-1]
+    for part in (moved, fewer):
+        with pytest.raises(clwave.FileFormatError, match="not a part of the whole file"):
+            prefix_first(model, part)
     with pytest.raises(ValueError, match="do not begin with"):
         SplatRenderer(clwave.WaveletVolume.open(clw, keep=2048 / 40**3)).extend(model, ranked_groups(model))
 

@@ -67,14 +67,19 @@ class PrefixFirst:
 def part_rows(whole: WaveletVolume, prefix: WaveletVolume) -> list:
     """Per group, the rows of ``whole``'s ascending positions that hold ``prefix``'s coefficients; a prefix that is
     not a part of ``whole`` (the file replaced meanwhile) is a FileFormatError."""
+    replaced = FileFormatError("the file's prefix is not a part of the whole file read after it (was the file "
+                               "replaced meanwhile?); open it again")
+    frame = lambda wv: (wv.shape, wv.spacing, wv.origin, wv.levels, wv.channels,  # noqa: E731
+                        [(g.wavelet.name, g.channels) for g in wv.groups])
+    if frame(whole) != frame(prefix):
+        raise replaced
     out = []
-    for g, part in zip(whole.groups, prefix.groups):
+    for g, part in zip(whole.groups, prefix.groups, strict=True):
         positions, kept = g.all_positions(), part.all_positions()
         rows = np.searchsorted(positions, kept)
         if not (np.all(rows < len(positions)) and np.array_equal(positions[rows], kept)
                 and np.array_equal(g.values[:, rows], part.values)):
-            raise FileFormatError("the file's prefix is not a part of the whole file read after it (was the file "
-                                  "replaced meanwhile?); open it again")
+            raise replaced
         out.append(rows)
     return out
 
