@@ -312,3 +312,14 @@ def test_chunked_inputs_get_the_hints_of_a_volume_read_whole(tmp_path, capsys):
     with warnings.catch_warnings():
         warnings.simplefilter("error", ClwaveWarning)
         model.threshold(keep=float(least))
+
+
+def test_a_chunked_model_given_to_a_renderer_is_told_to_be_saved_and_opened():
+    """splat/raytrace take an in-memory model: a chunked one is refused in one line naming save and open."""
+    x = da.from_array(np.random.default_rng(0).random((16, 16, 16), np.float32), chunks=8)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(x), levels=1)
+    assert isinstance(wv, ChunkedWaveletVolume)
+    for render in (clwave.splat, clwave.raytrace):
+        with pytest.raises(InputError, match=r"not a ChunkedWaveletVolume: save it .*WaveletVolume.open") as caught:
+            render(wv, clwave.Camera())
+        assert "\n" not in str(caught.value)

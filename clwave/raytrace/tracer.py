@@ -36,7 +36,7 @@ from .quadrature import sample_tables
 from .shading import Phong, light_direction
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
-from ..model.wavelet import WaveletVolume
+from ..model.wavelet import WaveletVolume, check_model
 
 
 
@@ -101,8 +101,7 @@ class RayTracer:
 
     def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,
                  region=None, lod=False, content_clamp=True):
-        if not isinstance(wv, WaveletVolume):
-            raise InputError("ray tracing needs a clwave.WaveletVolume")
+        check_model(wv, "ray tracing")
         if not isinstance(content_clamp, bool):
             raise InputError(f"content_clamp={content_clamp!r} must be True (the model within its content) or False")
         if not content_clamp and wv.content_mask is not None:
@@ -559,8 +558,7 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
         with client_for(scheduler) as client:  # which checks the scheduler before starting anything
             return raytrace_on_cluster(RayTracer, wv, camera, client, options, device, cap)
     if tracer is None:
-        if not isinstance(wv, WaveletVolume):
-            raise InputError("ray tracing needs a clwave.WaveletVolume")
+        check_model(wv, "ray tracing")
         tracer = shared_tracer(wv, device, field, device_memory)
     return tracer.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
                          precision=precision, transfer_function=transfer_function)

@@ -24,7 +24,7 @@ from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_buffer, device_budget
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera
-from ..model.wavelet import WaveletVolume
+from ..model.wavelet import WaveletVolume, check_model
 from .coarse import Layer, coarse_factor
 from .ranked import on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
@@ -74,8 +74,7 @@ class SplatRenderer:
 
     def __init__(self, wv: WaveletVolume, device=None, omega_s=None, sampling="auto", coarse=None,
                  device_memory=None):
-        if not isinstance(wv, WaveletVolume):
-            raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
+        check_model(wv, "splatting")
         if wv.levels >= MAX_LEVELS:
             raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
         if omega_s is not None and not finite_number(omega_s, "omega_s") > 0:
@@ -547,8 +546,7 @@ def _splat_share(renderer_of, share, device, options, camera) -> tuple:
 
 def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device_memory=None) -> SplatRenderer:
     """The :class:`SplatRenderer` that one-shot calls on ``wv`` with these options share."""
-    if not isinstance(wv, WaveletVolume):
-        raise InputError("splatting needs a clwave.WaveletVolume (WaveletVolume.from_volume(...))")
+    check_model(wv, "splatting")
     cc = ComputeContext.get(device)
     cap = parse_cap(device_memory)
     return wv.shared(("splat", cc.info.id, omega_s, sampling, coarse, cap),
