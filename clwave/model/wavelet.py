@@ -555,6 +555,7 @@ def check_model(wv, work: str):
     """An InputError naming ``work`` ("splatting") where ``wv`` is no :class:`WaveletVolume`: a chunked model (of a
     Dask array) is written to a file and opened first (docs/chunked.md)."""
     if not isinstance(wv, WaveletVolume):
-        fix = ("save it (.save('x.clw')) and render WaveletVolume.open('x.clw')" if type(wv).__name__ ==
-               "ChunkedWaveletVolume" else "make one with WaveletVolume.from_volume(...)")
+        chunked = WaveletVolume.chunked_model is not None and isinstance(wv, WaveletVolume.chunked_model)
+        fix = ("save it (.save('x.clw')) and render WaveletVolume.open('x.clw')" if chunked else
+               "make one with WaveletVolume.from_volume(...)")
         raise InputError(f"{work} needs a clwave.WaveletVolume, not a {type(wv).__name__}: {fix}")

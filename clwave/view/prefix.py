@@ -69,8 +69,10 @@ def part_rows(whole: WaveletVolume, prefix: WaveletVolume) -> list:
     not a part of ``whole`` (the file replaced meanwhile) is a FileFormatError."""
     replaced = FileFormatError("the file's prefix is not a part of the whole file read after it (was the file "
                                "replaced meanwhile?); open it again")
-    frame = lambda wv: (wv.shape, wv.spacing, wv.origin, wv.levels, wv.channels,  # noqa: E731
-                        [(g.wavelet.name, g.channels) for g in wv.groups])
+
+    def frame(wv):  # what a replaced file may change besides the coefficients
+        return wv.shape, wv.spacing, wv.origin, wv.levels, [(g.wavelet.name, g.channels) for g in wv.groups]
+
     if frame(whole) != frame(prefix):
         raise replaced
     out = []
