@@ -235,3 +235,23 @@ def test_a_nrrd_data_file_beside_its_header_is_read(tmp_path):
 def test_a_non_finite_spacing_is_named_in_numbers():
     with pytest.raises(clwave.InputError, match=r"^spacing \(nan, 1, 1\) must be finite$"):
         clwave.Volume(CUBE, spacing=(float("nan"), 1.0, 1.0))
+
+
+def test_a_two_channel_xray_picture_shows_both_channels(tmp_path):
+    # its PNG showed channel 0 alone, silently: now magenta (0) and green (1) under one window
+    import imageio.v3 as iio
+
+    ramp = np.linspace(0.0, 1.0, 5, dtype=np.float32)
+    image = np.stack(np.broadcast_arrays(ramp[None, :], ramp[:, None]), axis=-1)  # channel 0 along x, 1 along y
+    picture = clwave.RenderResult(image, {"mode": "xray"}).save(tmp_path / "two.png", window=(0.0, 1.0))
+    rgb = iio.imread(picture).astype(int)
+    assert np.array_equal(rgb[..., 0], np.round(255 * image[..., 0])) and np.array_equal(rgb[..., 0], rgb[..., 2])
+    assert np.array_equal(rgb[..., 1], np.round(255 * image[..., 1]))
+    # end to end: a box in channel 1 alone is drawn in green as its own one-channel model is drawn grey
+    data = np.zeros((12, 12, 12, 2), np.float32)
+    data[4:8, 3:6, 5:10, 1] = 1.0
+    cam, window = clwave.Camera(0, 0, (12, 12), extent=12.0), (0.0, 4.0)
+    both = clwave.splat(clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1), cam).to_uint8(window)
+    alone = clwave.splat(clwave.WaveletVolume.from_volume(clwave.Volume(data[..., 1]), levels=1), cam).to_uint8(window)
+    assert both.shape == (12, 12, 3) and both[..., 0].max() == 0 and alone.max() > 200
+    assert np.abs(both[..., 1].astype(int) - alone).max() <= 1

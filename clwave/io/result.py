@@ -31,11 +31,14 @@ class RenderResult:
         return self.meta.get("mode", "xray") == "xray"
 
     def to_uint8(self, window="auto", background=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """8-bit (H, W) grey or (H, W, 3) colour picture of the image."""
+        """8-bit (H, W) grey or (H, W, 3) colour picture of the image: an X-ray of one channel grey, of two
+        magenta (channel 0) and green (1), of three or four its first three as RGB; one window for all."""
         if self.is_xray:
-            picture = self.image[..., :3] if self.image.shape[-1] >= 3 else self.image[..., 0]
+            picture = self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
             lo, hi = resolve_window(picture, window)
             scaled = np.clip((picture - lo) / (hi - lo), 0.0, 1.0)
+            if self.image.shape[-1] == 2:  # a pair colour-blind eyes tell apart too
+                scaled = scaled[..., [0, 1, 0]]
         else:
             rgb, alpha = self.image[..., :3], self.image[..., 3:4]
             scaled = np.clip(rgb + (1.0 - alpha) * np.asarray(background, np.float32), 0.0, 1.0)
