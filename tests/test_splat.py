@@ -1,6 +1,8 @@
 """Wavelet splatting end to end: against exact line integrals of the same continuous model."""
 
 
+import time
+
 import numpy as np
 import pytest
 
@@ -209,6 +211,22 @@ def test_progressive_budget_returns_completed_frames(cc, data):
     frames = list(clwave.progressive(wv, clwave.Camera(30, 20, size=32), budget=1e-6, device=cc))
     assert len(frames) == 1 and 0 < frames[0].coefficients < wv.kept
     assert frames[0].rms_error > 0  # compared with the full image, rendered on demand
+
+
+def test_progressive_budget_does_not_count_the_set_up_as_splatting(cc, data, monkeypatch):
+    # the time to the first frame (the renderer's set-up, the view's) was counted as per-coefficient cost: a budget
+    # of set-up plus far more than the frames' own time gave one frame (trial16)
+    from clwave.splat.renderer import SplatRenderer
+
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2)
+    renderer, cam = clwave.SplatRenderer(wv, device=cc), clwave.Camera(30, 20, size=32)
+    start = time.perf_counter()
+    assert len(list(clwave.progressive(wv, cam, steps=8, renderer=renderer))) == 8
+    frames_alone = time.perf_counter() - start
+    begin = SplatRenderer.begin
+    monkeypatch.setattr(SplatRenderer, "begin", lambda *a, **k: (time.sleep(2.0), begin(*a, **k))[1])
+    frames = list(clwave.progressive(wv, cam, budget=2.0 + 4 * frames_alone + 1.0, renderer=renderer))
+    assert len(frames) == 8 and frames[-1].coefficients == wv.kept
 
 
 def test_scaling_functions_only_and_local_detail(cc, data):

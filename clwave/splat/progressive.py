@@ -71,7 +71,7 @@ def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, devi
         last frame holds every coefficient (it equals :func:`clwave.splat`).
     budget : float > 0
         Seconds: keep doubling while the next step is expected to finish within the
-        budget (estimated from the throughput so far); the last frame yielded is the
+        budget (from the last frame's own time per coefficient, set-up apart); the last frame yielded is the
         last one completed.  The first frame is always made.
     error : float in (0, 1)
         Stop at the first frame whose estimated relative RMS error is at most this (with ``steps``, or
@@ -102,19 +102,20 @@ def _frames(r: SplatRenderer, camera: Camera, steps, budget, error):
     acc = r.begin(camera)
     counts = schedule(total, int(steps) if steps is not None else 8)
     done, estimate = 0, SplatEstimate(r, acc.view)
+    per_coefficient = None  # the last frame's own seconds (splats, read-back, estimate) a coefficient it added
     for index, count in enumerate(counts):
-        if budget is not None and index > 0:
-            elapsed = time.perf_counter() - start
-            per_coefficient = elapsed / max(done, 1)
-            if elapsed + per_coefficient * (count - done) > budget:
+        if budget is not None and per_coefficient is not None:
+            if time.perf_counter() - start + per_coefficient * (count - done) > budget:
                 return
+        frame_start = time.perf_counter()
         acc.splat(done, count - done)
-        done = count
+        added, done = count - done, count
         image = acc.image()
         if done == total:  # the final image: no error
             final.image, rms, top = image, 0.0, 0.0
         else:
             rms, top = estimate.add(image, done)
+        per_coefficient = (time.perf_counter() - frame_start) / max(added, 1)
         frame = ProgressiveFrame(index=index, image=image, seconds=time.perf_counter() - start,
                                  estimated_relative_rms_error=rms, estimated_relative_max_error=top,
                                  meta=acc.meta(time.perf_counter() - start), _final=final, coefficients=done,
