@@ -710,7 +710,7 @@ def test_a_thin_volume_is_told_its_levels_and_what_keep_then_drops(tmp_path, cap
                          str(tmp_path / "e.clw"))  # the band outnumbers the voxels: no --keep holds it
     assert code == 0 and err == ("clwave: warning: --keep 0.05 keeps 51 coefficients, fewer than the 1,183 of the "
                                  "approximation band: no detail is kept and part of the approximation is dropped; the "
-                                 "band outnumbers the 1,024 voxels, so give fewer --levels\n"), err
+                                 "band outnumbers the 1,024 voxels, so give a smaller --levels\n"), err
 
 
 def test_render_at_a_coarser_detail(tmp_path, capsys):

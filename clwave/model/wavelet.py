@@ -503,8 +503,8 @@ def warn_short_budget(keep, budget, approx, n_voxels):
         said += f"{{}}{least:.3g} or more keeps it whole"
         api, cli = said.format("keep=", "keep="), said.format("--keep ", "--keep ")
     else:  # the band (its B-splines reach past the volume) outnumbers the voxels: only fewer levels hold it
-        said += f"the band outnumbers the {n_voxels:,} voxels, so give fewer {{}}"
-        api, cli = said.format("keep=", "levels="), said.format("--keep ", "--levels")
+        said += f"the band outnumbers the {n_voxels:,} voxels, so {{}}"
+        api, cli = said.format("keep=", "pass a smaller levels="), said.format("--keep ", "give a smaller --levels")
     warnings.warn(ClwaveWarning(api, cli=cli), stacklevel=3)
 
 

@@ -93,6 +93,7 @@ class CumulativeEnergy:
 
     def mark(self, lo, hi):
         """Take the sums of coefficients lo .. hi (lo a multiple of ENERGY_STEP; each block after the one before)."""
+        assert lo % ENERGY_STEP == 0 and (hi % ENERGY_STEP == 0 or hi == len(self)), (lo, hi)
         sums = self._sums(lo, hi, self.marks[lo // ENERGY_STEP - 1] if lo else 0.0)
         self.marks[lo // ENERGY_STEP: hi // ENERGY_STEP] = sums[ENERGY_STEP - 1::ENERGY_STEP]
 

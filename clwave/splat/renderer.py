@@ -26,7 +26,7 @@ from ..io.result import RenderResult
 from ..model.conebeam import check_camera
 from ..model.wavelet import WaveletVolume, check_model
 from .coarse import Layer, coarse_factor
-from .ranked import on_device, ranked_groups
+from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
@@ -136,8 +136,9 @@ class SplatRenderer:
         return self.groups[0]["count"] if self.groups else 0
 
     @property
-    def energy(self) -> np.ndarray:
-        """Cumulative coefficient energy (sum of c^2 over channels) of the first group, in importance order."""
+    def energy(self) -> CumulativeEnergy | np.ndarray:
+        """Cumulative coefficient energy (sum of c^2 over channels) of the first group, in importance order, indexed
+        like an array (a :class:`~clwave.splat.ranked.CumulativeEnergy`; zeros(1) without groups)."""
         return self.groups[0]["energy"] if self.groups else np.zeros(1)
 
     # -------------------------------------------------------------- drawing
