@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .options import add_command, build_model, check_outputs
+from .options import add_command, build_model, check_outputs, kept_words
 
 
 def run(args):
@@ -31,8 +31,8 @@ def run(args):
         if args.classify == "pre" else f", the scalar kept with --tf {args.tf} to classify while ray tracing"
     print(f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z)"
           f"{classified}{_on_disk(args.input)}")
-    print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} levels, "
-          f"{wv.kept:,} coefficients = {100 * wv.kept / voxels:.2f} % of the voxels")
+    print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} "
+          f"level{'s' * (wv.levels != 1)}, {kept_words(wv)}")
     print(f"file                  {out}: {_bytes(size)}, {raw / size:.1f}:1 against the volume as raw float32 "
           f"({_bytes(raw)}), written in {saved:.2f} s")
     if reference is not None:

@@ -200,7 +200,8 @@ def _reject_unused(kind, **options):
     """Refuse options the format ignores, so a mistaken call is not silently accepted."""
     given = [name for name, value in options.items() if value is not None]
     if given:
-        needs = _ONLY_FOR[given[0]]
-        raise InputError(f"{'=, '.join(given)}= only apply to {needs}; leave them out for a {kind} input",
-                         cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only apply to {needs}; "
-                             f"leave them out for a {kind} input")
+        needs, one = _ONLY_FOR[given[0]], len(given) == 1
+        verb, them = ("applies", "it") if one else ("apply", "them")
+        raise InputError(f"{'=, '.join(given)}= only {verb} to {needs}; leave {them} out for a {kind} input",
+                         cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only {verb} to {needs}; "
+                             f"leave {them} out for a {kind} input")
