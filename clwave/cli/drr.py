@@ -130,8 +130,8 @@ def run(args):
              f"(it lies outside their cone): check --isocentre (default the volume's centre) and the pose table")
     kind = "transmitted intensities" if args.intensity else "line integrals"
     how = f"ray traced, tolerance {tolerance:g}" if args.method == "raytrace" else "splatted"
-    print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) of {kept_words(wv)} in {seconds:.2f} s, "
-          f"{seconds / len(cameras):.3f} s each, on {renderer.cc.info.name}: {out}")
+    print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) of {kept_words(wv.kept, wv.n_voxels)} in "
+          f"{seconds:.2f} s, {seconds / len(cameras):.3f} s each, on {renderer.cc.info.name}: {out}")
     return 0
 
 

@@ -455,6 +455,14 @@ def add_command(sub, name, help, run, output_help, view=False):
     return p
 
 
-def kept_words(wv) -> str:
-    """The coefficients a model keeps and their share of its voxels, as the commands report them."""
-    return f"{wv.kept:,} coefficients ({100 * wv.kept / wv.n_voxels:.2f} % of the voxels)"
+def kept_words(kept, voxels) -> str:
+    """``kept`` coefficients and their share of a model's ``voxels``, as the commands report them."""
+    return f"{kept:,} coefficients ({100 * kept / voxels:.2f} % of the voxels)"
+
+
+def file_size(n) -> str:
+    """A file's size in decimal units, as the commands report it ("13.1 KB")."""
+    for unit in ("bytes", "KB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:,.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
