@@ -20,7 +20,7 @@ import numpy as np
 
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.volume import Volume, is_dask
-from . import dicom, hdf5, nifti, nrrd, raw, tiff, zarr
+from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, tiff, zarr
 from .shared import SUPPORTED, Declared, check_chunks, reading, to_float32
 
 __all__ = ["load", "describe", "SUPPORTED"]
@@ -45,7 +45,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         ``.npy``, ``.nii``, ``.nii.gz``, ``.nrrd``, ``.nhdr``, a multi-page
         ``.tif``/``.tiff``, a folder of 2-D TIFF slices (stacked in natural name
         order: ``slice2`` before ``slice10``), a folder of DICOM files (other files
-        in it are ignored), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
+        in it are ignored), a multi-frame DICOM file whose frames carry positions
+        (enhanced CT/MR, RT Dose), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
         or an HDF5 file ``.h5``/``.hdf5``/``.hdf``.  ``file.h5:/name`` and
         ``store.zarr:/name`` name an array inside; without a name the store's only
         3-D/4-D array is read (an OME-Zarr image: its ``level``).
@@ -162,6 +163,8 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
         return data, spacing, origin
     if kind == "tiff-folder":
         return tiff.read_tiff_folder(path, progress_bar, fits), None, None
+    if kind == "dicom-frames":
+        return dicom_frames.read_dicom_frames(path, fits)
     return dicom.read_dicom_folder(path, series, progress_bar, fits)
 
 
@@ -227,6 +230,9 @@ def _kind(path: Path) -> str:
         raise FileFormatError(f"{path} is a file, not a Zarr store; clwave reads Zarr stores that are folders "
                               "(unzip a zipped store first)")
     if suffix in (".dcm", ".ima"):
+        with reading(path):
+            if dicom_frames.frame_count(path) > 1:
+                return "dicom-frames"
         raise FileFormatError(f"{path} is one DICOM slice; pass the folder that holds the whole series "
                               f"({path.parent})")
     if suffix not in _FILE_KINDS:

@@ -18,8 +18,8 @@ from ..progress import progress
 
 log = logging.getLogger(__name__)
 
-SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of "
-             "2-D slices), a folder of DICOM files, .raw (with shape= and dtype=), a Zarr or OME-Zarr "
+SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of 2-D slices), a folder of "
+             "DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a Zarr or OME-Zarr "
              "store (folder), .h5/.hdf5 (file.h5:/dataset)")
 
 #: chunks=None reads .npy, .raw and .nii files whose volume takes at least this many bytes as float32 chunk
