@@ -53,6 +53,25 @@ def test_a_build_runs_under_pythons_own_sigint_handling():
         assert proc.stdout.strip() == "True [True, True]", (ignored, proc.stdout)
 
 
+def test_the_command_line_puts_pythons_handling_back_once_it_has_a_context(tmp_path):
+    """`clwave render` makes its context while checking its options (the image size against the device): by the
+    decomposition, before any build, SIGINT is Python's again (a build on a viewer's thread could not put it back)."""
+    script = SEEN_BY_BUILDS.split("cl.Program.build = build")[0] + f"""
+from clwave import cli
+from clwave.model.wavelet import WaveletVolume
+
+def decompose(*args, **kwargs):
+    print(handler() == python_handler, flush=True)
+    raise SystemExit(0)
+
+WaveletVolume.from_volume = decompose
+cli.main(["render", "phantom:marschner-lobb:16", "--size", "16", "-o", {str(tmp_path / 'o.png')!r}])
+"""
+    proc = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=300,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert proc.returncode == 0 and proc.stdout.strip() == "True", (proc.stdout, proc.stderr[-2000:])
+
+
 def test_ctrl_c_during_a_kernel_build_is_interrupted(tmp_path):
     """SIGINT sent while a kernel is built (empty caches, so that it compiles): "clwave: interrupted", code 130,
     nothing written, as every other Ctrl-C."""

@@ -164,9 +164,11 @@ def check_image_size(args):
 
     from ..device.context import ComputeContext
     from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, TRACED_PIXEL_BYTES, buffer_limit, check_buffer
+    from ..device.programs import python_sigint
 
     H, W = parse_size(args)
     cc = ComputeContext.get(args.device)
+    python_sigint()  # made the context: Ctrl-C Python's again before any build (pyopencl's own too)
     pixel = TRACED_PIXEL_BYTES if args.method == "raytrace" else FRAMEBUFFER_PIXEL_BYTES
     most = isqrt(buffer_limit(cc) // pixel)
     check_buffer(cc, H * W * pixel, f"a {H}x{W} image", f"give a smaller --size (at most {most}x{most} on this device)")
