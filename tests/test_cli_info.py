@@ -132,14 +132,19 @@ def test_info_of_a_bad_file_is_one_line(tmp_path, capsys, model_file):
 
 
 def test_the_commands_words(tmp_path, capsys):
-    """drr says how many coefficients it drew, as compress does; an option for another format is named in the
-    singular."""
+    """drr says how many coefficients it drew, as compress does, and names a refused pose by its number in the
+    table; an option for another format is named in the singular."""
     (tmp_path / "poses.csv").write_text("azimuth,elevation\n0,0\n")
     code, out, err = run(capsys, "drr", "phantom:hydrogen:16", "--levels", "1", "--keep", "0.2", "--poses",
                          str(tmp_path / "poses.csv"), "--size", "16", "-o", str(tmp_path / "d.npy"))
     kept = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1).threshold(keep=0.2).kept
     assert code == 0 and f"(line integrals, splatted) of {kept:,} coefficients ({100 * kept / 16 ** 3:.2f} % of " \
                          f"the voxels)" in out, out + err
+    (tmp_path / "bad.csv").write_text("azimuth,elevation,dso\n0,0,100\n10,0,-5\n")
+    code, _, err = run(capsys, "drr", "phantom:hydrogen:16", "--poses", str(tmp_path / "bad.csv"), "-o",
+                       str(tmp_path / "b.npy"))
+    assert code == 2 and err == f"clwave: error: pose table {tmp_path / 'bad.csv'}, pose 2: dso=-5.0 must be a " \
+                                f"positive source-to-isocentre distance\n"
     np.save(tmp_path / "v.npy", np.zeros((4, 4, 4), np.float32))
     code, _, err = run(capsys, "compress", str(tmp_path / "v.npy"), "--level", "1", "-o", str(tmp_path / "v.clw"))
     assert code == 2 and "--level only applies to OME-Zarr images; leave it out for a npy input" in err

@@ -74,7 +74,7 @@ def run(args):
     geometry = dict(rows=read_pose_table(args.poses), size=(H, W), pixel=pixel if len(pixel) == 2 else pixel[0],
                     dso=args.dso, dsd=args.dsd, offset=offset,
                     isocentre=(0.0, 0.0, 0.0) if centre else numbers(args.isocentre, "--isocentre", (3,)))
-    cameras = poses(**geometry)  # every pose checked before the input is read
+    cameras = table_poses(geometry, args.poses)  # every pose checked before the input is read
     if out.suffix.lower() == ".png" and len(cameras) != 1:
         raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy")
     device_memory = parse_device_memory(args)
@@ -133,6 +133,23 @@ def run(args):
     print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) of {kept_words(wv.kept, wv.n_voxels)} in "
           f"{seconds:.2f} s, {seconds / len(cameras):.3f} s each, on {renderer.cc.info.name}: {out}")
     return 0
+
+
+def table_poses(geometry, table) -> list:
+    """``poses(**geometry)`` of a pose table's rows; a pose it refuses is named by its number in ``table`` (the
+    names in the message, ``dso=`` and the like, are the table's columns)."""
+    from ..model.conebeam import poses
+
+    try:
+        return poses(**geometry)
+    except InputError:
+        for number, row in enumerate(geometry["rows"], 1):
+            try:
+                poses(**dict(geometry, rows=[row]))
+            except InputError as refused:  # a row alone is its pose 1
+                raise InputError(f"pose table {table}, pose {number}: {str(refused).removeprefix('pose 1: ')}") \
+                    from None
+        raise
 
 
 def log_window(window):
