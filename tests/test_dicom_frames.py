@@ -80,7 +80,7 @@ def test_an_enhanced_ct_file_is_its_frames_sorted_rescaled_and_placed(tmp_path, 
     assert main(["compress", str(path), "--levels", "1", "--keep", "1", "-o", str(tmp_path / "ct.clw")]) == 0
     capsys.readouterr()
     assert main(["info", str(path)]) == 0
-    assert "4 x 6 x 5 samples of int16" in capsys.readouterr().out
+    assert "4 x 6 x 5 samples of int16 as read" in capsys.readouterr().out
 
 
 def test_multi_frame_files_without_positions_are_refused_naming_dcm2niix(tmp_path, capsys):

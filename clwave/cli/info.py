@@ -98,8 +98,8 @@ def _clw_lines(f) -> list:
 def _volume_lines(f) -> list:
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
     if "stored_shape" in f:  # read whole: its axes and spacing come with its voxels
-        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']}, as the file "
-                                f"stores them (its axes and spacing are read with the voxels)"))
+        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read, "
+                                f"before the loader orders them (its axes and spacing come with the voxels)"))
         return lines
     z, y, x = f["shape"][:3]
     spacing = "" if f["spacing_in_file"] else " (none in the file)"
