@@ -18,11 +18,11 @@ NUMBERS = ("azimuth", "elevation", "fov", "distance", "extent", "keep", "thresho
 
 def check_options(args):
     """Every option the commands share whose validity does not depend on the input, checked before the input is
-    opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): the input's
-    spacing and chunks, the model's wavelets, levels, thresholding, transfer function and classification, the
-    scheduler, and the view's device, display window, footprint band, coarse tolerance, device memory, ray tracing
-    tolerance, lights and background, and the options of the --method not chosen.  An option a command does not have
-    is not looked at."""
+    opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): numbers that
+    are not finite, the input's spacing and chunks, the model's wavelets, levels, thresholding, transfer function and
+    classification, the scheduler, and the view's device, display window, footprint band, coarse tolerance, device
+    memory, ray tracing tolerance, lights and background, the options of the --method not chosen, and the image size
+    against the device (:func:`check_image_size`).  An option a command does not have is not looked at."""
     from ..model.bspline import wavelet_for
 
     if getattr(args, "input", None) is None:  # clwave info: no input to spare

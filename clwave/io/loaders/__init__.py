@@ -171,9 +171,9 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 def describe(path, *, series=None, level=None) -> dict:
     """What :func:`load` reads of a volume file (or folder) before its voxels (``clwave info FILE``): ``format``,
     the stored ``dtype``, ``bytes`` on disk, and ``shape`` (z, y, x[, c]), ``spacing`` (dz, dy, dx) and ``origin``
-    (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the ``stored_shape`` and
-    ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns, rescaled to float32) and
-    no spacing or origin: its loader finds those with the voxels.  A
+    (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the
+    ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
+    rescaled to float32) and no spacing or origin: its loader finds those with the voxels.  A
     ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
