@@ -31,7 +31,8 @@ def test_compress_phantom_report_and_file(tmp_path, capsys):
     assert {"input", "model", "file", "error"} <= set(lines)
     wv = WaveletVolume.open(target)
     assert wv.channels == 4 and wv.kept == round(0.05 * 32 ** 3) and wv.transfer_function["name"] == "hydrogen"
-    assert "32 x 32 x 32 voxels" in lines["input"] and f"{wv.kept:,} coefficients = 5.00 %" in lines["model"]
+    assert "32 x 32 x 32 voxels" in lines["input"]
+    assert lines["model"].endswith(f"2 levels, {wv.kept:,} coefficients (5.00 % of the voxels)")
     raw, size = 32 ** 3 * 4 * 4, target.stat().st_size  # the phantom's classified float32 RGBA
     assert f"{raw / size:.1f}:1 against the volume as raw float32" in lines["file"]
     assert "classified to 4 channels (--tf hydrogen)" in lines["input"]
@@ -475,6 +476,25 @@ EARLY_MISTAKES = [
     (["render", "--detail", "1"], "--detail is for --method raytrace"),
     (["render", "--method", "raytrace", "--window", "0,1"], "--window 0,1 windows an X-ray's line integrals; a shaded"),
     (["progressive", "--method", "raytrace", "--window", "-1,2"], "--window -1,2 windows an X-ray's line integrals"),
+    # an image beyond the device's one buffer (150 GiB of splatting framebuffer, 48 GiB of traced image), and lights,
+    # numbers and detectors that are not finite: refused before the input is read, in the command line's words
+    (["render", "--size", "100000"], "a 100000x100000 image needs 150 GiB in one device buffer"),
+    (["progressive", "--size", "100000x100000"], "give a smaller --size (at most "),
+    (["render", "--method", "raytrace", "--size", "40000"], "a 40000x40000 image needs 48 GiB"),
+    (["drr", "--size", "100000"], "a 100000x100000 image needs 150 GiB"),
+    (["drr", "--size", "0x5"], "--size 0x5 must be a positive number of pixels N or HxW"),
+    (["render", "--method", "raytrace", "--light", "nan,0"], "--light nan,0 must be two finite angles AZ,EL"),
+    (["progressive", "--method", "raytrace", "--light", "30,20", "--light", "0,inf"], "--light 0,inf must be two"),
+    (["render", "--azimuth", "nan"], "--azimuth nan must be a finite number"),
+    (["render", "--extent", "inf"], "--extent inf must be a finite number"),
+    (["compress", "--keep", "nan"], "--keep nan must be a finite number"),
+    (["compress", "--subtract", "nan"], "--subtract nan must be a finite number"),
+    (["progressive", "--error", "nan"], "--error nan must be a finite number"),
+    (["compress", "--tf", "grey", "--tf-window", "5,1"], "--tf-window 5,1 must be two finite numbers LO,HI"),
+    (["drr", "--dso", "-1"], "--dso -1 must be a positive source-to-isocentre distance"),
+    (["drr", "--dsd", "0"], "--dsd 0: the detector is behind the source"),
+    (["drr", "--pixel", "1,0"], "--pixel 1,0 must be a positive detector spacing"),
+    (["drr", "--offset", "nan,0"], "--offset nan,0 must be two finite numbers A,B"),
 ]
 #: options a .clw input refuses anyway (a model already)
 VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")

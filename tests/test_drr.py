@@ -286,7 +286,7 @@ def test_drr_turns_about_the_volumes_centre_by_default(tmp_path, capsys):
         source = tmp_path / ("near.npy" if name == "near" else "far.nii.gz")
         assert main(["drr", str(source), *extra, *common, "-o", str(tmp_path / f"{len(images)}.npy")]) == 0
         images[name] = np.load(tmp_path / f"{len(images)}.npy")
-        warned = "pose(s) 1, 2 see nothing of the model" in capsys.readouterr().err
+        warned = "clwave: warning: pose(s) 1, 2 see nothing of the model" in capsys.readouterr().err
         assert warned == (name == "far, origin"), name
     assert images["near"].max() > 10
     for name in ("far", "far, given"):

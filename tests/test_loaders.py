@@ -478,8 +478,8 @@ def test_dicom_multi_frame_file_named_as_such(tmp_path, rng):
     with pytest.raises(FileFormatError) as excinfo:
         load(tmp_path)
     assert_one_line_error(excinfo)
-    assert "rtdose.dcm is a multi-frame DICOM file; clwave reads folders of single-frame slices" in \
-        str(excinfo.value)
+    assert "rtdose.dcm is a multi-frame DICOM file; clwave reads a folder of single-frame slices, or a multi-frame " \
+           f"file named itself: give {tmp_path / 'rtdose.dcm'}" in str(excinfo.value)
 
 
 @pytest.mark.parametrize("kwargs, needle", [

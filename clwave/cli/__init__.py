@@ -18,7 +18,8 @@ from functools import partial
 
 from ..errors import ClwaveError, ClwaveWarning, InputError
 from . import compress, drr, info, progressive, render, view
-from .options import check_options, warn
+from .checks import check_options
+from .options import warn
 
 EXIT_USAGE = 2
 EXIT_PIPE = 128 + signal.SIGPIPE  # stdout's reader left (`| head`): as a program the signal ended, with no message

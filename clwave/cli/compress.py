@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .options import add_command, build_model, check_outputs
+from .options import add_command, build_model, check_outputs, file_size, kept_words
 
 
 def run(args):
@@ -31,10 +31,10 @@ def run(args):
         if args.classify == "pre" else f", the scalar kept with --tf {args.tf} to classify while ray tracing"
     print(f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z)"
           f"{classified}{_on_disk(args.input)}")
-    print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} levels, "
-          f"{wv.kept:,} coefficients = {100 * wv.kept / voxels:.2f} % of the voxels")
-    print(f"file                  {out}: {_bytes(size)}, {raw / size:.1f}:1 against the volume as raw float32 "
-          f"({_bytes(raw)}), written in {saved:.2f} s")
+    print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} "
+          f"level{'s' * (wv.levels != 1)}, {kept_words(wv.kept, wv.n_voxels)}")
+    print(f"file                  {out}: {file_size(size)}, {raw / size:.1f}:1 against the volume as raw float32 "
+          f"({file_size(raw)}), written in {saved:.2f} s")
     if reference is not None:
         stored = wv if quantise is None else read_clw(out)  # the rounded values, as the file holds them
         error = np.sqrt(np.mean((stored.reconstruct().data - reference.data) ** 2))
@@ -55,14 +55,7 @@ def _on_disk(spec) -> str:
     if spec.startswith("phantom:") or not path.exists():
         return ""
     files = [p for p in path.rglob("*") if p.is_file()] if path.is_dir() else [path]
-    return f", {_bytes(sum(p.stat().st_size for p in files))} on disk"
-
-
-def _bytes(n) -> str:
-    for unit in ("bytes", "KB", "MB", "GB"):
-        if n < 1000 or unit == "GB":
-            return f"{n:,.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
-        n /= 1000
+    return f", {file_size(sum(p.stat().st_size for p in files))} on disk"
 
 
 def add_parser(sub):

@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CommandWords, InputError
-from .options import (add_command, add_device_options, build_model, check_outputs, numbers, parse_device_memory,
-                      parse_window)
+from .checks import parse_size, parse_window
+from .options import (add_command, add_device_options, build_model, check_outputs, kept_words, numbers,
+                      parse_device_memory, warn)
 
 
 def read_pose_table(path) -> list:
@@ -57,13 +58,23 @@ def run(args):
     if args.display_window != "auto" and out.suffix.lower() == ".npy":
         raise InputError("--window sets a .png's grey levels; a .npy holds the values themselves: leave it out")
     window = log_window(parse_window(args)) if args.intensity else parse_window(args)
-    H, W = (int(v) for v in (numbers(args.size, "--size", (1, 2), int, "x") * 2)[:2])
-    pixel = numbers(args.pixel, "--pixel", (1, 2))
+    H, W = parse_size(args)
+    pixel, offset = numbers(args.pixel, "--pixel", (1, 2)), numbers(args.offset, "--offset", (2,))
+    # in the options' words (a pose table's own columns: poses() checks them)
+    if args.dso <= 0:
+        raise InputError(f"--dso {args.dso:g} must be a positive source-to-isocentre distance")
+    if args.dsd <= 0:
+        raise InputError(f"--dsd {args.dsd:g}: the detector is behind the source; give a positive source-to-detector "
+                         f"distance")
+    if not (all(np.isfinite(pixel)) and min(pixel) > 0):
+        raise InputError(f"--pixel {args.pixel} must be a positive detector spacing, or two (DV,DU)")
+    if not all(np.isfinite(offset)):
+        raise InputError(f"--offset {args.offset} must be two finite numbers A,B")
     centre = args.isocentre is None  # the volume's centre, known once it is read (docs/coordinates.md §5)
     geometry = dict(rows=read_pose_table(args.poses), size=(H, W), pixel=pixel if len(pixel) == 2 else pixel[0],
-                    dso=args.dso, dsd=args.dsd, offset=numbers(args.offset, "--offset", (2,)),
+                    dso=args.dso, dsd=args.dsd, offset=offset,
                     isocentre=(0.0, 0.0, 0.0) if centre else numbers(args.isocentre, "--isocentre", (3,)))
-    cameras = poses(**geometry)  # every pose checked before the input is read
+    cameras = table_poses(geometry, args.poses)  # every pose checked before the input is read
     if out.suffix.lower() == ".png" and len(cameras) != 1:
         raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy")
     device_memory = parse_device_memory(args)
@@ -115,15 +126,30 @@ def run(args):
         write_atomic(out, write, args.force)
     seconds = time.perf_counter() - start
     if blank:
-        import sys
-        print(f"clwave drr: warning: pose(s) {', '.join(map(str, blank[:10]))}{' ...' if len(blank) > 10 else ''} "
-              f"see nothing of the model (it lies outside their cone): check --isocentre (default the volume's "
-              f"centre) and the pose table", file=sys.stderr)
+        warn(f"pose(s) {', '.join(map(str, blank[:10]))}{' ...' if len(blank) > 10 else ''} see nothing of the model "
+             f"(it lies outside their cone): check --isocentre (default the volume's centre) and the pose table")
     kind = "transmitted intensities" if args.intensity else "line integrals"
     how = f"ray traced, tolerance {tolerance:g}" if args.method == "raytrace" else "splatted"
-    print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) in {seconds:.2f} s, {seconds / len(cameras):.3f} s "
-          f"each, on {renderer.cc.info.name}: {out}")
+    print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) of {kept_words(wv.kept, wv.n_voxels)} in "
+          f"{seconds:.2f} s, {seconds / len(cameras):.3f} s each, on {renderer.cc.info.name}: {out}")
     return 0
+
+
+def table_poses(geometry, table) -> list:
+    """``poses(**geometry)`` of a pose table's rows; a pose it refuses is named by its number in ``table`` (the
+    names in the message, ``dso=`` and the like, are the table's columns)."""
+    from ..model.conebeam import poses
+
+    try:
+        return poses(**geometry)
+    except InputError:
+        for number, row in enumerate(geometry["rows"], 1):
+            try:
+                poses(**dict(geometry, rows=[row]))
+            except InputError as refused:  # a row alone is its pose 1
+                raise InputError(f"pose table {table}, pose {number}: {str(refused).removeprefix('pose 1: ')}") \
+                    from None
+        raise
 
 
 def log_window(window):

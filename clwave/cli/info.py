@@ -1,11 +1,20 @@
-"""``clwave info``: the OpenCL platforms and devices, and the one chosen."""
+"""``clwave info``: the OpenCL platforms and devices, and the one chosen; ``clwave info FILE``: what a ``.clw`` file's
+header holds, or what a volume file's header declares, without reading a coefficient or a voxel."""
 
 from __future__ import annotations
 
 import json
 
+from ..errors import InputError
+from .options import file_size, kept_words
+
 
 def run(args):
+    if args.file is not None:
+        return describe(args)
+    if (args.series, args.level) != (None, None):
+        raise InputError("--series and --level choose what a FILE's header describes: give the FILE, or leave them "
+                         "out")
     from ..device.context import list_devices, requested_device, select_device
     from ..device.programs import selftest
 
@@ -34,9 +43,84 @@ def run(args):
     return 0
 
 
+def describe(args):
+    """``clwave info FILE``: the header of a ``.clw`` (io/clw_info.py) or of a volume file (``loaders.describe``)."""
+    if args.check or args.device is not None:
+        raise InputError("--check and --device are about the OpenCL devices; leave them out with a FILE")
+    if args.file.lower().endswith(".clw"):
+        from ..io.clw_info import describe_clw
+
+        if (args.series, args.level) != (None, None):
+            raise InputError(f"--series and --level choose within a DICOM folder or an OME-Zarr image; {args.file} "
+                             f"is a .clw file: leave them out")
+        facts = describe_clw(args.file)
+        lines = _clw_lines(facts)
+    else:
+        from ..io.loaders import describe as describe_volume
+
+        series = int(args.series) if args.series is not None and args.series.isdigit() else args.series
+        facts = describe_volume(args.file, series=series, level=args.level)
+        lines = _volume_lines(facts)
+    if args.json:
+        print(json.dumps(facts, indent=2))
+    else:
+        print("\n".join(f"{name:<10} {text}" for name, text in lines))
+    return 0
+
+
+def _clw_lines(f) -> list:
+    z, y, x = f["shape"]
+    lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, a wavelet model (.clw)"),
+             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_xyz(f['spacing'][::-1])} (x, y, z), origin "
+                        f"{_xyz(f['origin'])}"),
+             ("model", f"{f['levels']} level{'s' * (f['levels'] != 1)}, {f['channels']} channel"
+                       f"{'s' * (f['channels'] != 1)} in {len(f['groups'])} group{'s' * (len(f['groups']) != 1)}"
+                       f"{', interpolating' if f['interpolate'] else ''}")]
+    for gi, g in enumerate(f["groups"]):
+        values = "float32 values" if g["quantisation"] is None else f"quantised, step {g['quantisation']:.3g}"
+        which = f"channel{'s' * (len(g['channels']) != 1)} {', '.join(map(str, g['channels']))}"
+        lines.append((f"group {gi}", f"{which}: {g['wavelet']} wavelet (order {g['order']}), keeps "
+                                     f"{kept_words(g['kept'], x * y * z)}, {values}"))
+    if f["focus"] is not None:
+        lines.append(("focus", f"centre {_xyz(f['focus'][0])}, sigma {f['focus'][1]:g}"))
+    tf = f["transfer_function"]
+    if tf is not None:
+        window = tf.get("window")
+        window = " .. ".join(f"{v:g}" for v in window) if isinstance(window, list) else window or "auto"
+        when = "while rendering" if f["channels"] == 1 else "before the transform"
+        lines.append(("transfer", f"{tf.get('name') or 'unnamed'}, window {window}, {len(tf['points'])} points "
+                                  f"(classified {when})"))
+    if f.get("offset") is not None:  # recorded since the fifteenth session (--subtract)
+        lines.append(("offset", f"{f['offset']}"))
+    return lines
+
+
+def _volume_lines(f) -> list:
+    lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
+    if "stored_shape" in f:  # read whole: its axes and spacing come with its voxels
+        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read, "
+                                f"before the loader orders them (its axes and spacing come with the voxels)"))
+        return lines
+    z, y, x = f["shape"][:3]
+    spacing = "" if f["spacing_in_file"] else " (none in the file)"
+    lines += [("volume", f"{x} x {y} x {z} voxels (x, y, z), {f['channels']} channel{'s' * (f['channels'] != 1)} of "
+                         f"{f['dtype']}"),
+              ("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z){spacing}, origin {_xyz(f['origin'])}")]
+    return lines
+
+
+def _xyz(values) -> str:
+    return ", ".join(f"{v:g}" for v in values)
+
+
 def add_parser(sub):
-    p = sub.add_parser("info", help="list OpenCL platforms and devices, and the one chosen")
+    p = sub.add_parser("info", help="list OpenCL platforms and devices, and the one chosen; with FILE, what a .clw "
+                                    "file or a volume file's header holds")
+    p.add_argument("file", nargs="?", help="a .clw file, or a volume file or folder: its header, read without its "
+                                           "coefficients or voxels")
     p.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     p.add_argument("--check", action="store_true", help="also build and run a self-test kernel")
     p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--series", help="FILE a DICOM folder with several series: UID or 0-based index")
+    p.add_argument("--level", type=int, help="FILE an OME-Zarr image: the multiscale level (default 0)")
     p.set_defaults(run=run)

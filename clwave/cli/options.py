@@ -84,98 +84,6 @@ def add_model_options(p):
                         "input: --tf always classifies while rendering)")
 
 
-def check_options(args):
-    """Every option the commands share whose validity does not depend on the input, checked before the input is
-    opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): the input's
-    spacing and chunks, the model's wavelets, levels, thresholding, transfer function and classification, the
-    scheduler, and the view's device, display window, footprint band, coarse tolerance, device memory, ray tracing
-    tolerance, lights and background, and the options of the --method not chosen.  An option a command does not have
-    is not looked at."""
-    from ..model.bspline import wavelet_for
-
-    if getattr(args, "input", None) is None:  # clwave info: no input to spare
-        return
-    if getattr(args, "spacing", None) is not None:
-        spacing = numbers(args.spacing, "--spacing", (1, 3))
-        if not all(np.isfinite(spacing)) or min(spacing) <= 0:
-            raise InputError(f"--spacing {args.spacing} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
-    if getattr(args, "chunks", None) is not None:
-        _chunks(args.chunks)
-    if getattr(args, "wavelet", None) is not None:
-        for name in args.wavelet.split(","):
-            wavelet_for(name)
-    if getattr(args, "levels", None) is not None and args.levels < 0:
-        raise InputError(f"--levels {args.levels} must be 0 or more (at most floor(log2(shortest axis)) - 1)")
-    if hasattr(args, "keep"):
-        _thresholding(args)
-    if hasattr(args, "tf"):
-        if args.tf or not is_clw(args):  # a .clw's own transfer function takes --tf-window alone
-            _preset(args)
-        elif args.tf_window is not None:
-            _preset_window(args.tf_window)
-        if args.classify == "post" and not args.tf and not is_clw(args):
-            raise InputError("--classify post keeps the scalar for ray tracing to classify with the --tf preset: "
-                             "give --tf PRESET too")
-    if hasattr(args, "workers"):
-        parse_scheduler(args)
-    if hasattr(args, "device") and not (is_clw(args) and args.scheduler):  # a remote cluster's workers choose theirs
-        from ..device.context import select_device
-        select_device(args.device)
-    if hasattr(args, "display_window"):
-        parse_window(args)
-    if getattr(args, "detail", None) is not None:  # the levels the model has are known once it is read
-        if args.detail < 0:
-            raise InputError(f"--detail {args.detail} must be a level of detail: 0 (full) up to the model's levels")
-        if args.detail and (args.field == "wavelet" or (args.workers, args.scheduler) != (None, None)):
-            raise InputError("--detail renders with the B-spline field on one machine: leave out --field wavelet "
-                             "and --workers/--scheduler, or --detail")
-    if getattr(args, "omega_s", None) is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
-        raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
-    if getattr(args, "coarse", None) is not None and not 0 < args.coarse < 1:
-        raise InputError(f"--coarse {args.coarse:g} must be a tolerance between 0 and 1, e.g. 1e-2")
-    if hasattr(args, "device_memory"):
-        parse_device_memory(args)
-    if hasattr(args, "method"):
-        _method_options(args)
-    if getattr(args, "tolerance", None) is not None and not (np.isfinite(args.tolerance) and args.tolerance > 0):
-        raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
-    if getattr(args, "light", None) is not None:
-        parse_lights(args)
-    if hasattr(args, "background"):
-        parse_background(args)
-
-
-#: options of one --method only, refused with the other (a command has some of them: drr has no --light);
-#: (option, what it is given when not given: None where the command leaves it None)
-RAYTRACE_ONLY = (("tolerance", 1e-3), ("light", None), ("no_shading", None), ("xray", None), ("field", "bspline"),
-                 ("background", "0,0,0"), ("detail", None))
-SPLAT_ONLY = ("coarse", "omega_s")
-
-
-def _method_options(args):
-    """Refuse the options of the --method not chosen (silently ignored otherwise), then give those of ray tracing
-    that were not given their defaults (their parsers leave them None, so that a given one is told)."""
-    other = [n for n, _ in RAYTRACE_ONLY] if args.method == "splat" else SPLAT_ONLY
-    given = [_flag(n) for n in other if getattr(args, n, None) not in (None, False)]
-    named, verb, them = ", ".join(given), *(("is", "it") if len(given) == 1 else ("are", "them"))
-    if given and args.method != "splat":
-        raise InputError(f"{named} {verb} for --method splat; ray tracing controls its error with --tolerance")
-    shaded = [_flag(n) for n in ("background", "light", "no_shading") if getattr(args, n, None) not in (None, False)]
-    if getattr(args, "xray", False) and shaded and args.method != "splat":
-        verb, it = ("are", "them") if len(shaded) > 1 else ("is", "it")
-        raise InputError(f"{', '.join(shaded)} {verb} for a shaded volume; an X-ray (--xray) is line integrals, shown "
-                         f"through --window: leave {it} out")
-    if getattr(args, "display_window", "auto") != "auto" and args.method != "splat" and not getattr(args, "xray", 0):
-        raise InputError(f"--window {args.display_window} windows an X-ray's line integrals; a shaded image is "
-                         f"written as its colours: add --xray, or leave --window out")
-    if given:
-        raise InputError(f"{named} {verb} for --method raytrace; splatting ignores {them}: add --method raytrace, or "
-                         f"leave {them} out")
-    for name, default in RAYTRACE_ONLY:  # those the command has (add_raytrace_options, drr's --tolerance)
-        if hasattr(args, name) and getattr(args, name) is None:
-            setattr(args, name, default)
-
-
 def is_clw(args) -> bool:
     """Whether the input is a ``.clw`` file (a wavelet model already)."""
     return args.input.lower().endswith(".clw")
@@ -517,43 +425,6 @@ def add_raytrace_options(p):
                         "content clamp: docs/raytracing.md §4)")
 
 
-def make_camera(args):
-    from ..model.camera import Camera
-
-    size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
-    perspective = dict(perspective=True, distance=args.distance, fov=args.fov) \
-        if getattr(args, "perspective", False) else {}
-    return Camera(args.azimuth, args.elevation, size if len(size) == 2 else size[0], extent=args.extent,
-                  **perspective)
-
-
-def parse_lights(args):
-    if args.light is None:
-        return None
-    if args.light == ["none"]:
-        return []
-    return [tuple(numbers(spec, "--light", (2,))) for spec in args.light]
-
-
-def parse_background(args):
-    """The colour (R, G, B) of ``--background``, each in 0..1."""
-    colour = numbers(args.background, "--background", (3,))
-    if not all(0 <= c <= 1 for c in colour):
-        raise InputError(f"--background {args.background} must be a colour R,G,B with each in 0..1, e.g. 1,1,1 for "
-                         f"white")
-    return colour
-
-
-def parse_window(args):
-    """``--window auto|LO,HI``: "auto", or two finite numbers LO < HI (checked before any work)."""
-    if args.display_window == "auto":
-        return "auto"
-    lo, hi = numbers(args.display_window, "--window", (2,))
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise InputError(f"--window {args.display_window} must be two finite numbers LO,HI with LO < HI, e.g. 0,1")
-    return lo, hi
-
-
 def parse_device_memory(args):
     """``device_memory=`` from ``--device-memory SIZE``, checked before any work."""
     from ..device.memory import parse_cap
@@ -582,3 +453,16 @@ def add_command(sub, name, help, run, output_help, view=False):
     p.add_argument("--force", action="store_true", help="replace existing output files")
     p.set_defaults(run=run)
     return p
+
+
+def kept_words(kept, voxels) -> str:
+    """``kept`` coefficients and their share of a model's ``voxels``, as the commands report them."""
+    return f"{kept:,} coefficients ({100 * kept / voxels:.2f} % of the voxels)"
+
+
+def file_size(n) -> str:
+    """A file's size in decimal units, as the commands report it ("13.1 KB")."""
+    for unit in ("bytes", "KB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:,.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000

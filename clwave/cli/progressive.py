@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, make_camera,
-                      parse_background, parse_device_memory, parse_lights, parse_window, post_transfer_function,
-                      write_gif)
+from .checks import make_camera, parse_background, parse_lights, parse_window
+from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs,
+                      parse_device_memory, post_transfer_function, write_gif)
 
 
 def run(args):

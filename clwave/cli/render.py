@@ -7,9 +7,9 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .options import (add_command, add_raytrace_options, build_model, check_outputs, is_clw, make_camera,
-                      parse_background, parse_device_memory, parse_lights, parse_scheduler, parse_window,
-                      post_transfer_function, write_gif)
+from .checks import make_camera, parse_background, parse_lights, parse_window
+from .options import (add_command, add_raytrace_options, build_model, check_outputs, is_clw, parse_device_memory,
+                      parse_scheduler, post_transfer_function, write_gif)
 
 
 def run(args):

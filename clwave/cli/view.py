@@ -82,8 +82,10 @@ def check_size(size, device):
 
     from ..device.context import ComputeContext
     from ..device.memory import TRACED_PIXEL_BYTES, available_bytes, buffer_limit, check_buffer, check_fits
+    from ..device.programs import python_sigint
 
     cc = ComputeContext.get(device)
+    python_sigint()  # made the context: Ctrl-C Python's again, for the builds of the serving threads too
     (H, W), most = size, isqrt(buffer_limit(cc) // TRACED_PIXEL_BYTES)
     check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"the viewer's {H}x{W} shaded image",
                  f"give a smaller --size (at most {most}x{most} on this device)")

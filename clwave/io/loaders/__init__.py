@@ -20,10 +20,10 @@ import numpy as np
 
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.volume import Volume, is_dask
-from . import dicom, hdf5, nifti, nrrd, raw, tiff, zarr
-from .shared import SUPPORTED, check_chunks, reading, to_float32
+from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, tiff, zarr
+from .shared import SUPPORTED, Declared, check_chunks, reading, to_float32
 
-__all__ = ["load", "SUPPORTED"]
+__all__ = ["load", "describe", "SUPPORTED"]
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
@@ -45,7 +45,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         ``.npy``, ``.nii``, ``.nii.gz``, ``.nrrd``, ``.nhdr``, a multi-page
         ``.tif``/``.tiff``, a folder of 2-D TIFF slices (stacked in natural name
         order: ``slice2`` before ``slice10``), a folder of DICOM files (other files
-        in it are ignored), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
+        in it are ignored), a multi-frame DICOM file whose frames carry positions
+        (enhanced CT/MR, RT Dose), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
         or an HDF5 file ``.h5``/``.hdf5``/``.hdf``.  ``file.h5:/name`` and
         ``store.zarr:/name`` name an array inside; without a name the store's only
         3-D/4-D array is read (an OME-Zarr image: its ``level``).
@@ -127,25 +128,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     chunks = check_chunks(chunks, kind, path)
 
     with reading(path):
-        if kind == "zarr":
-            data, file_spacing, origin = zarr.read_zarr(path, inner, level, chunks, fits)
-        elif kind == "hdf5":
-            data, file_spacing, origin = hdf5.read_hdf5(path, inner, chunks, fits)
-        elif kind == "raw":
-            data, file_spacing, origin = raw.read_raw(path, shape, dtype, byte_order, chunks, fits)
-        elif kind == "npy":
-            data, file_spacing, origin = raw.read_npy(path, chunks, fits), None, None
-        elif kind == "nifti":
-            data, file_spacing, origin = nifti.read_nifti(path, chunks, fits)
-        elif kind == "nrrd":
-            data, file_spacing, origin = nrrd.read_nrrd(path, fits, spacing is None)
-        elif kind == "tiff":
-            (data, file_spacing), origin = tiff.read_tiff(path, fits), None
-        elif kind == "tiff-folder":
-            data, file_spacing, origin = tiff.read_tiff_folder(path, progress_bar, fits), None, None
-        else:
-            data, file_spacing, origin = dicom.read_dicom_folder(path, series, progress_bar, fits)
-
+        data, file_spacing, origin = _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks,
+                                           progress_bar, fits, spacing is None)
     if not is_dask(data):
         data = np.asarray(data)
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
@@ -158,6 +142,65 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
                   origin=origin if origin is not None else (0.0, 0.0, 0.0))
+
+
+def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
+    """``(data, spacing or None, origin or None)`` of a ``kind`` input as its loader reads it (not yet float32)."""
+    if kind == "zarr":
+        return zarr.read_zarr(path, inner, level, chunks, fits)
+    if kind == "hdf5":
+        return hdf5.read_hdf5(path, inner, chunks, fits)
+    if kind == "raw":
+        return raw.read_raw(path, shape, dtype, byte_order, chunks, fits)
+    if kind == "npy":
+        return raw.read_npy(path, chunks, fits), None, None
+    if kind == "nifti":
+        return nifti.read_nifti(path, chunks, fits)
+    if kind == "nrrd":
+        return nrrd.read_nrrd(path, fits, warn_spacing)
+    if kind == "tiff":
+        (data, spacing), origin = tiff.read_tiff(path, fits), None
+        return data, spacing, origin
+    if kind == "tiff-folder":
+        return tiff.read_tiff_folder(path, progress_bar, fits), None, None
+    if kind == "dicom-frames":
+        return dicom_frames.read_dicom_frames(path, fits)
+    return dicom.read_dicom_folder(path, series, progress_bar, fits)
+
+
+def describe(path, *, series=None, level=None) -> dict:
+    """What :func:`load` reads of a volume file (or folder) before its voxels (``clwave info FILE``): ``format``,
+    the stored ``dtype``, ``bytes`` on disk, and ``shape`` (z, y, x[, c]), ``spacing`` (dz, dy, dx) and ``origin``
+    (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the
+    ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
+    rescaled to float32) and no spacing or origin: its loader finds those with the voxels.  A
+    ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
+    path, inner = _split_inner(Path(path))
+    kind = _kind(path)
+    if kind == "raw":
+        raise FileFormatError(f"{path} is a .raw file: it has no header (its shape and type are given to read it, "
+                              f"shape= and dtype=)", cli=f"{path} is a .raw file: it has no header (its shape and type "
+                                                         f"are given to read it, --shape and --dtype)")
+    if kind != "dicom":
+        _reject_unused(kind, series=series)
+    if kind != "zarr":
+        _reject_unused(kind, level=level)
+    lazy = check_chunks(None, kind, path) is not False  # a Dask array over the file: nothing read until computed
+    size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) if path.is_dir() else path.stat().st_size
+    facts = dict(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size)
+    with reading(path):
+        try:
+            data, spacing, origin = _read(kind, path, inner, None, None, None, series, level,
+                                          "auto" if lazy else False, False, None if lazy else _declared, False)
+        except Declared as declared:
+            return dict(facts, stored_shape=list(declared.shape), dtype=str(declared.dtype))
+    volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))
+    return dict(facts, shape=list(data.shape), dtype=str(data.dtype), channels=volume.channels,
+                spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None)
+
+
+def _declared(voxels, channels):
+    raise Declared()
 
 
 def _split_inner(path):
@@ -188,6 +231,9 @@ def _kind(path: Path) -> str:
         raise FileFormatError(f"{path} is a file, not a Zarr store; clwave reads Zarr stores that are folders "
                               "(unzip a zipped store first)")
     if suffix in (".dcm", ".ima"):
+        with reading(path):
+            if dicom_frames.frame_count(path) > 1:
+                return "dicom-frames"
         raise FileFormatError(f"{path} is one DICOM slice; pass the folder that holds the whole series "
                               f"({path.parent})")
     if suffix not in _FILE_KINDS:
@@ -200,7 +246,8 @@ def _reject_unused(kind, **options):
     """Refuse options the format ignores, so a mistaken call is not silently accepted."""
     given = [name for name, value in options.items() if value is not None]
     if given:
-        needs = _ONLY_FOR[given[0]]
-        raise InputError(f"{'=, '.join(given)}= only apply to {needs}; leave them out for a {kind} input",
-                         cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only apply to {needs}; "
-                             f"leave them out for a {kind} input")
+        needs, one = _ONLY_FOR[given[0]], len(given) == 1
+        verb, them = ("applies", "it") if one else ("apply", "them")
+        raise InputError(f"{'=, '.join(given)}= only {verb} to {needs}; leave {them} out for a {kind} input",
+                         cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only {verb} to {needs}; "
+                             f"leave {them} out for a {kind} input")

@@ -29,7 +29,8 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     uid, headers = _pick_series(folder, _dicom_image_series(folder), series)
     for path, h in headers:  # before counting them: one such file is a volume clwave does not read, not one slice
         if int(getattr(h, "NumberOfFrames", 1) or 1) > 1:
-            raise FileFormatError(f"{path} is a multi-frame DICOM file; clwave reads folders of single-frame slices")
+            raise FileFormatError(f"{path} is a multi-frame DICOM file; clwave reads a folder of single-frame slices, "
+                                  f"or a multi-frame file named itself: give {path}")
     if len(headers) < 2:
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
                               "at least 2")
@@ -40,20 +41,34 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"DICOM series {uid} in {folder} mixes slice orientations "
                               "(e.g. a localizer); move the odd slices out of the folder")
-    # direction along a row (column index grows), along a column (row index grows)
-    row_dir, col_dir = cosines[0, :3], cosines[0, 3:]
-    normal = np.cross(row_dir, col_dir)
     positions = np.array([h.ImagePositionPatient for _, h in headers], float)
+    first = headers[0][1]
+    return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
+                        tuple(float(s) for s in first.PixelSpacing), (int(first.Rows), int(first.Columns)),
+                        [f"slice {path.name}" for path, _ in headers],
+                        lambda order: read_slices([headers[i][0] for i in order], _dicom_pixels,
+                                                  "reading DICOM slices", progress_bar, fits), fits)
+
+
+def place_slices(where, path, positions, cosines, pixel, size, names, read, fits):
+    """The volume of slices at ``positions`` (n x 3, LPS mm; ``names[i]`` names slice i in messages) with the
+    orientation ``cosines`` (a row's direction, then a column's), ``pixel`` spacing (between rows, between columns)
+    and ``size`` (rows, columns): sorted along their normal, refused unless evenly spaced along it
+    (:func:`_even_spacing`) and on a line (:func:`_drift`), a gantry tilt resampled onto a straight stack
+    (:func:`_untilt`); ``read(order)`` gives their pixels (n, rows, columns) in that order, once weighed
+    (``fits``, by ``path``).  In RAS+, with spacing and origin."""
+    # direction along a row (column index grows), along a column (row index grows)
+    row_dir, col_dir = cosines[:3], cosines[3:]
+    normal = np.cross(row_dir, col_dir)
     distance = positions @ normal
     order = np.argsort(distance, kind="stable")
     gaps = np.diff(distance[order])
     if np.any(gaps < 1e-4):
-        first, second = (headers[order[i]][0].name for i in (np.argmin(gaps), np.argmin(gaps) + 1))
+        first, second = (names[order[i]] for i in (np.argmin(gaps), np.argmin(gaps) + 1))
         raise FileFormatError(
-            f"DICOM slices {first} and {second} of series {uid} share one position; the series may "
+            f"{first} and {second} of {where} share one position; the series may "
             "hold several acquisitions (echoes, phases, times): split them into separate folders")
-    dy, dx = (float(s) for s in headers[order[0]][1].PixelSpacing)  # row spacing, column spacing
-    where = f"DICOM series {uid} in {folder}"
+    dy, dx = pixel  # row spacing, column spacing
     drift = _drift(where, positions[order], distance[order], normal, min(dx, dy))
     dz = _even_spacing(where, distance[order])
     # the shift of each slice from the first, in pixels (along a row, along a column) per slice
@@ -62,11 +77,10 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     lo, hi = np.floor(np.minimum(shifts.min(axis=0), 0)), np.ceil(np.maximum(shifts.max(axis=0), 0))
     tilted = bool(np.any(step))
     if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
-        rows, columns = int(headers[order[0]][1].Rows), int(headers[order[0]][1].Columns)
-        check_whole(folder, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits)
+        rows, columns = size
+        check_whole(path, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits)
 
-    data_zyx = read_slices([headers[i][0] for i in order], _dicom_pixels,
-                            "reading DICOM slices", progress_bar, fits)
+    data_zyx = read(order)
     if tilted:
         log.warning("%s has a gantry tilt of %.3g degrees (its slices shift %.4g mm sideways over %.4g mm along their "
                     "normal): resampled onto a straight stack, linearly, the new margins filled with its least value",

@@ -18,8 +18,8 @@ from ..progress import progress
 
 log = logging.getLogger(__name__)
 
-SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of "
-             "2-D slices), a folder of DICOM files, .raw (with shape= and dtype=), a Zarr or OME-Zarr "
+SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of 2-D slices), a folder of "
+             "DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a Zarr or OME-Zarr "
              "store (folder), .h5/.hdf5 (file.h5:/dataset)")
 
 #: chunks=None reads .npy, .raw and .nii files whose volume takes at least this many bytes as float32 chunk
@@ -132,6 +132,13 @@ def check_chunks(chunks, kind, path):
     return "auto" if chunks is None and kind in ("zarr", "hdf5") else chunks
 
 
+class Declared(Exception):
+    """Raised by a ``fits`` given to a loader to stop before any voxel is read; :func:`check_whole` gives it the
+    ``shape`` and ``dtype`` the header declares (``loaders.describe``)."""
+
+    shape, dtype = None, None
+
+
 class OnDemand:
     """A read-only array in a file that ``read(index)`` opens anew for each read: a Dask graph over it holds no
     open file and pickles small (for process-based schedulers)."""
@@ -153,7 +160,11 @@ def check_whole(path, shape, dtype, fits=None):
     voxels, samples = math.prod(shape[:3]), math.prod(shape[3:])
     channels = samples * (len(dtype.names) if dtype.names else 1)
     if fits is not None:
-        fits(voxels, channels)
+        try:
+            fits(voxels, channels)
+        except Declared as declared:  # describe(): what the header declares, and no voxel read
+            declared.shape, declared.dtype = tuple(shape), dtype
+            raise
     converted = 0 if dtype == np.float32 else 4 * channels  # float32 samples are used as they are read
     check_fits(voxels * (samples * dtype.itemsize + converted), f"reading {path} whole "
                f"({' x '.join(map(str, shape))} {dtype})", "read it chunk by chunk (chunks='auto'; Zarr, HDF5, .npy, "

@@ -39,13 +39,23 @@ def read_tiff(path, fits=None, stack=True):
         pages = len(tif.pages) > 1 and len(axes.replace("S", "")) == 2  # pages written one at a time: one series each
         if pages:
             shape, axes = (len(tif.pages),) + shape, "Q" + axes
-        if "S" in axes:  # samples per pixel (RGB/RGBA) go last, as channels
-            shape = tuple(n for n, a in zip(shape, axes) if a != "S") + (shape[axes.index("S")],)
-        spatial = axes.replace("S", "")
+        # samples per pixel (RGB/RGBA), or an OME-TIFF's channels, go last as the volume's channels
+        channel = "S" if "S" in axes else "C" if "C" in axes and "S" not in axes else None
+        if channel == "C" and shape[axes.index("C")] > 4:
+            raise FileFormatError(
+                f"{path} holds a TIFF series with axes {series.axes!r} and shape {series.shape}: "
+                f"{shape[axes.index('C')]} channels, where clwave models at most 4; write the channels you want "
+                f"(up to 4) to a TIFF of their own, e.g. tifffile.imwrite('part.ome.tif', "
+                f"tifffile.imread({str(path)!r})[:, :4], metadata={{'axes': {series.axes!r}}})")
+        if channel:
+            shape = tuple(n for n, a in zip(shape, axes) if a != channel) + (shape[axes.index(channel)],)
+        spatial = axes.replace(channel or "S", "")
         if len(spatial) > 3 or not spatial.endswith("YX"):
             raise FileFormatError(
                 f"{path} holds a TIFF series with axes {series.axes!r} and shape {series.shape}; "
-                "clwave reads one stack of 2-D pages (axes like 'ZYX', optionally with RGB samples)")
+                "clwave reads one stack of 2-D pages (axes like 'ZYX', optionally with RGB samples or up to 4 "
+                "channels, 'ZCYX'): save one such stack, e.g. with tifffile.imwrite(path, volume, "
+                "metadata={'axes': 'ZCYX'})")
         if stack and len(spatial) == 2:
             raise FileFormatError(f"{path} holds one 2-D image ({' x '.join(map(str, series.shape))}, axes "
                                   f"{series.axes!r}), not a stack of slices; write a volume one page a slice, e.g. "
@@ -53,8 +63,8 @@ def read_tiff(path, fits=None, stack=True):
         check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
         data = tif.asarray(key=range(len(tif.pages))) if pages else series.asarray()
         spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)
-    if "S" in axes:
-        data = np.moveaxis(data, axes.index("S"), -1)
+    if channel:
+        data = np.moveaxis(data, axes.index(channel), -1)
     return (data if len(spatial) == 3 else data[np.newaxis]), spacing
 
 

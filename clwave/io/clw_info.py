@@ -1,0 +1,63 @@
+"""What a ``.clw`` file holds, from its header and its members' sizes, without reading a coefficient (``clwave info
+FILE``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..model.bspline import WAVELET_ORDERS
+from ..model.transfer import TransferFunction
+from ..model.wavelet import check_thresholding
+from .clw import check_dataset, checked_header, open_clw
+
+_WAVELETS = {order: name for name, order in WAVELET_ORDERS.items()}
+
+
+def describe_clw(path) -> dict:
+    """The header of the ``.clw`` file ``path`` (shape, spacing, origin, levels, channels, interpolation, focus,
+    content box, transfer function, an ``offset`` where the file records one) with, per channel group, its wavelet,
+    channels, the coefficients it keeps and their share of the voxels, and its quantisation step (None: float32
+    values); and the file's size.  The header is checked as a read checks it; a member that does not match it is
+    refused (:class:`~clwave.errors.FileFormatError`, from :func:`~clwave.io.clw.open_clw`)."""
+    path = Path(path)
+    with open_clw(path) as (h5, header):
+        shape, levels, channels, groups = checked_header(header)
+        voxels = int(np.prod(shape))
+        described = []
+        for gi, g in enumerate(groups):
+            positions, values = h5.get(f"g{gi}/positions"), h5.get(f"g{gi}/values")
+            kept = positions.shape[0] if positions is not None and positions.ndim == 1 else -1
+            check_dataset(positions, (kept,), np.int64)
+            step = _step(values, (kept, len(g["channels"])))
+            described.append(dict(wavelet=_WAVELETS[g["wavelet"]], order=g["wavelet"], channels=g["channels"],
+                                  kept=kept, share=kept / voxels, quantisation=step))
+        tf = header.get("transfer_function")
+        try:  # as a read would use them
+            if tf is not None:
+                TransferFunction.from_dict(tf)
+            if header.get("focus") is not None:
+                check_thresholding(None, None, (tuple(header["focus"][0]), header["focus"][1]))
+        except InputError as exc:
+            raise ValueError(f"its header's transfer function or focus is not valid: {exc}") from None
+    facts = {name: header.get(name) for name in ("spacing", "origin", "interpolate", "focus", "content",
+                                                 "transfer_function")}
+    return dict(file=str(path), bytes=path.stat().st_size, shape=list(shape), levels=levels, channels=channels,
+                **facts, groups=described, **({"offset": header["offset"]} if "offset" in header else {}))
+
+
+def _step(values, shape):
+    """The quantisation step of a group's values (int32 with a ``step``), or None for float32 values."""
+    import h5py
+
+    if not (isinstance(values, h5py.Dataset) and "step" in values.attrs):
+        check_dataset(values, shape, np.float32)
+        return None
+    check_dataset(values, shape, np.int32)
+    stored = values.attrs.get_id("step")  # its shape before its value: an array is not read
+    step = values.attrs["step"] if stored.shape == () and stored.dtype.kind == "f" else None
+    if step is None or not (np.isfinite(step) and step > 0):
+        raise ValueError(f"member {values.name} has a quantisation step that is not one finite number > 0")
+    return float(step)

@@ -1,0 +1,105 @@
+"""Multi-frame DICOM files whose frames carry their positions: enhanced images (Enhanced CT, MR, ...) by their
+per-frame functional groups, RT Dose by its grid frame offsets; placed as the slices of a folder are
+(:func:`.dicom.place_slices`).  Other multi-frame files (ultrasound cines, secondary captures) are refused."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...errors import FileFormatError
+from .dicom import _check_finite, place_slices
+from .shared import check_whole
+
+#: what converts a multi-frame file clwave cannot place into a volume it reads
+CONVERTER = "convert it with dcm2niix (dcm2niix -o OUT_FOLDER FILE) and read the .nii"
+
+
+def frame_count(path) -> int:
+    """The frames of the DICOM file ``path`` (1 for a single-frame file), from its header."""
+    import pydicom
+
+    return int(pydicom.dcmread(path, stop_before_pixels=True).get("NumberOfFrames") or 1)
+
+
+def read_dicom_frames(path, fits=None):
+    """A multi-frame DICOM file's frames as slices, rescaled, in RAS (``(data, spacing, origin)``); refused (naming
+    dcm2niix) where its frames carry no positions, or several orientations."""
+    import pydicom
+    from pydicom.pixels.utils import pixel_dtype
+
+    ds = pydicom.dcmread(path, defer_size=1024)
+    frames, kind = int(ds.NumberOfFrames), getattr(ds.get("SOPClassUID"), "name", "DICOM")
+    if "PerFrameFunctionalGroupsSequence" in ds:
+        geometry = _enhanced(ds, frames)
+    elif "GridFrameOffsetVector" in ds and all(t in ds for t in ("ImagePositionPatient", "ImageOrientationPatient",
+                                                                 "PixelSpacing")):
+        geometry = _rt_dose(ds, frames)
+    else:
+        geometry = None
+    if geometry is None or int(ds.get("SamplesPerPixel") or 1) != 1:
+        why = "colour frames" if geometry is not None else "frames without positions (no per-frame functional " \
+                                                            "groups or grid frame offsets)"
+        raise FileFormatError(f"{path} is a multi-frame DICOM file ({kind}, {frames} frames) of {why}, not a volume "
+                              f"clwave places; {CONVERTER.replace('FILE', str(path))}")
+    positions, cosines, pixel, slopes, intercepts = geometry
+    for tag, values in (("ImagePositionPatient", positions), ("ImageOrientationPatient", cosines),
+                        ("PixelSpacing", pixel), ("RescaleSlope", slopes), ("RescaleIntercept", intercepts)):
+        _check_finite(path, tag, values)
+    if not np.allclose(cosines, cosines[0], atol=1e-4):
+        raise FileFormatError(f"{path} is a multi-frame DICOM file whose frames lie in several orientations; "
+                              f"{CONVERTER.replace('FILE', str(path))}")
+    if np.any(slopes == 0):
+        raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; the "
+                              f"file is corrupt")
+    size = (int(ds.Rows), int(ds.Columns))
+
+    def read(order):
+        check_whole(path, (frames, *size), pixel_dtype(ds), fits)
+        pixels = ds.pixel_array.reshape(frames, *size)
+        return pixels[order].astype(np.float32) * slopes[order, None, None] + intercepts[order, None, None]
+
+    return place_slices(f"multi-frame DICOM file {path}", path, positions, cosines[0], tuple(pixel), size,
+                        [f"frame {k + 1}" for k in range(frames)], read, fits)
+
+
+def _enhanced(ds, frames):
+    """``(positions, cosines, pixel spacing, slopes, intercepts)`` per frame from the functional groups (a frame's
+    own, else the shared ones), float32 rescale; None where a frame has no position, orientation or spacing."""
+    shared = ds.get("SharedFunctionalGroupsSequence") or [None]
+
+    def value(k, sequence, tag, default=None):
+        for groups in (ds.PerFrameFunctionalGroupsSequence[k], shared[0]):
+            items = None if groups is None else groups.get(sequence)
+            if items and tag in items[0]:
+                return items[0][tag].value
+        return ds.get(tag, default)
+
+    if len(ds.PerFrameFunctionalGroupsSequence) != frames:
+        raise ValueError(f"its per-frame functional groups number {len(ds.PerFrameFunctionalGroupsSequence)}, "
+                              f"not its {frames} frames")
+    rows = [(value(k, "PlanePositionSequence", "ImagePositionPatient"),
+             value(k, "PlaneOrientationSequence", "ImageOrientationPatient"),
+             value(k, "PixelMeasuresSequence", "PixelSpacing")) for k in range(frames)]
+    if any(v is None for row in rows for v in row):
+        return None
+    scale = np.array([(value(k, "PixelValueTransformationSequence", "RescaleSlope", 1.0),
+                       value(k, "PixelValueTransformationSequence", "RescaleIntercept", 0.0)) for k in range(frames)],
+                     float).astype(np.float32)
+    positions, cosines, pixel = (np.array([row[i] for row in rows], float) for i in range(3))
+    if not np.allclose(pixel, pixel[0]):
+        raise ValueError("its frames have several pixel spacings")
+    return positions, cosines, pixel[0], scale[:, 0], scale[:, 1]
+
+
+def _rt_dose(ds, frames):
+    """The same of an RT Dose grid: the first frame at ImagePositionPatient, the others along the normal by their
+    GridFrameOffsetVector (relative to the first, which its first offset is), scaled by DoseGridScaling."""
+    cosines = np.array(ds.ImageOrientationPatient, float)
+    offsets = np.array(ds.GridFrameOffsetVector, float)
+    if offsets.shape != (frames,):
+        raise ValueError(f"its GridFrameOffsetVector has {offsets.size} offsets, not its {frames} frames")
+    normal = np.cross(cosines[:3], cosines[3:])
+    positions = np.array(ds.ImagePositionPatient, float) + (offsets - offsets[0])[:, None] * normal
+    slopes = np.full(frames, float(ds.get("DoseGridScaling") or 1.0), np.float32)
+    return positions, np.tile(cosines, (frames, 1)), np.array(ds.PixelSpacing, float), slopes, np.zeros(frames,
+                                                                                                         np.float32)

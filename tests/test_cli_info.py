@@ -1,0 +1,150 @@
+"""`clwave info FILE`: a .clw's header and a volume file's, without reading a coefficient or a voxel; and the words of
+what the commands report (kept coefficients, levels, warnings)."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+import clwave
+from clwave.cli import main
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def unread(monkeypatch):
+    """Every HDF5 dataset read is recorded: a header's description reads none of the coefficients."""
+    read, getitem = [], h5py.Dataset.__getitem__
+
+    def recorded(self, index):
+        read.append(self.name)
+        return getitem(self, index)
+    monkeypatch.setattr(h5py.Dataset, "__getitem__", recorded)
+    return read
+
+
+@pytest.mark.parametrize("quantise", [None, 1e-3])
+def test_info_of_a_clw_is_its_header_and_kept_coefficients(tmp_path, capsys, unread, quantise):
+    """Two channel groups (colour cubic, opacity linear), 2 levels, 30 % kept, a transfer function: the JSON gives the
+    model's own shape, spacing, origin, levels, channels and each group's kept coefficients (as the model opened from
+    the file counts them) and quantisation; the text the same in lines; no coefficient is read."""
+    vol = clwave.Volume(np.random.default_rng(1).random((12, 14, 16, 4), np.float32), spacing=(2.0, 1.0, 0.5),
+                        origin=(1.0, -2.0, 3.0))
+    wv = clwave.WaveletVolume.from_volume(vol, wavelet=["cubic", "cubic", "cubic", "linear"], levels=2)
+    wv = wv.threshold(keep=0.3)
+    path = tmp_path / "m.clw"
+    wv.save(path, quantise=quantise)
+    code, out, err = run(capsys, "info", str(path), "--json")
+    assert code == 0 and err == "" and not unread, (err, unread)
+    facts = json.loads(out)
+    stored = clwave.WaveletVolume.open(path)
+    assert (facts["shape"], facts["spacing"], facts["origin"], facts["levels"], facts["channels"]) == \
+        ([12, 14, 16], [2.0, 1.0, 0.5], [1.0, -2.0, 3.0], 2, 4)
+    assert facts["bytes"] == path.stat().st_size
+    assert [(g["wavelet"], g["order"], g["channels"]) for g in facts["groups"]] == [("cubic", 4, [0, 1, 2]),
+                                                                                    ("linear", 2, [3])]
+    assert [g["kept"] for g in facts["groups"]] == [g.kept for g in stored.groups]
+    assert [g["share"] for g in facts["groups"]] == [g.kept / (12 * 14 * 16) for g in stored.groups]
+    assert all((g["quantisation"] is None) == (quantise is None) for g in facts["groups"])
+    if quantise is not None:
+        assert all(0 < g["quantisation"] <= quantise for g in facts["groups"])
+    code, out, _ = run(capsys, "info", str(path))
+    lines = dict(line.split(None, 1) for line in out.splitlines() if not line.startswith("group"))
+    assert code == 0 and lines["volume"] == "16 x 14 x 12 voxels (x, y, z), spacing 0.5, 1, 2 (x, y, z), origin 1, " \
+                                            "-2, 3"
+    assert lines["model"] == "2 levels, 4 channels in 2 groups"
+    kept = stored.groups[1].kept
+    assert f"group 1    channel 3: linear wavelet (order 2), keeps {kept:,} coefficients " \
+           f"({100 * kept / (12 * 14 * 16):.2f} % of the voxels)" in out
+
+
+def test_info_of_a_classified_clw_names_its_transfer_function(tmp_path, capsys):
+    path = tmp_path / "c.clw"
+    assert main(["compress", "phantom:hydrogen:16", "--tf", "hydrogen", "--levels", "1", "-o", str(path)]) == 0
+    capsys.readouterr()
+    code, out, _ = run(capsys, "info", str(path))
+    assert code == 0 and "transfer   hydrogen, window 0 .. 1, 5 points (classified before the transform)" in out
+    assert "model      1 level, 4 channels in 1 group" in out  # one level, not "1 levels"
+
+
+def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsys, monkeypatch):
+    """.npy, .nii and HDF5: the shape, spacing and origin load() gives (its own Volume, read here first), the stored
+    dtype; the voxel reads of each format fail here, so none is made.  Formats read whole: the shape as stored."""
+    import nibabel
+    import tifffile
+
+    data = (np.arange(4 * 5 * 6).reshape(4, 5, 6) % 7).astype(np.int16)
+    np.save(tmp_path / "v.npy", data)
+    affine = np.diag([2.0, 3.0, 4.0, 1.0])
+    for name in ("v.nii", "v.nii.gz"):
+        nibabel.save(nibabel.Nifti1Image(data, affine), tmp_path / name)
+    with h5py.File(tmp_path / "v.h5", "w") as fh:
+        fh["inside/v"] = data
+    tifffile.imwrite(tmp_path / "v.tif", data, photometric="minisblack")
+    loaded = {name: clwave.load(tmp_path / name) for name in ("v.npy", "v.nii", "v.h5")}
+    import clwave.io.loaders.raw as raw
+    monkeypatch.setattr(raw, "_read_memmap", lambda *a: pytest.fail("a voxel of the .npy was read"))
+    monkeypatch.setattr(nibabel.arrayproxy.ArrayProxy, "__getitem__", lambda *a: pytest.fail("a NIfTI voxel read"))
+    monkeypatch.setattr(h5py.Dataset, "__getitem__", lambda *a: pytest.fail("an HDF5 voxel read"))
+    for name, vol in loaded.items():
+        code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
+        assert code == 0, err
+        facts = json.loads(out)
+        assert (tuple(facts["shape"]), tuple(facts["spacing"]), tuple(facts["origin"]), facts["dtype"]) == \
+            (vol.shape, vol.spacing, vol.origin, "int16"), name
+        assert facts["bytes"] == (tmp_path / name).stat().st_size and facts["spacing_in_file"] == (name == "v.nii")
+    code, out, _ = run(capsys, "info", str(tmp_path / "v.nii"))
+    assert out.splitlines()[1:] == ["volume     4 x 5 x 6 voxels (x, y, z), 1 channel of int16",
+                                    "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10"]
+    for name in ("v.nii.gz", "v.tif"):
+        code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
+        assert code == 0 and json.loads(out)["stored_shape"] == [4, 5, 6] and json.loads(out)["dtype"] == "int16"
+
+
+def test_info_of_a_bad_file_is_one_line(tmp_path, capsys, model_file):
+    """A .raw (no header), a missing file, a truncated .clw, a .clw whose header's transfer function is no such
+    thing, and device options with a FILE: one line, exit 2."""
+    (tmp_path / "v.raw").write_bytes(bytes(64))
+    (tmp_path / "cut.clw").write_bytes(model_file.read_bytes()[:3000])
+    forged = tmp_path / "forged.clw"
+    forged.write_bytes(model_file.read_bytes())
+    with h5py.File(forged, "r+") as fh:
+        header = json.loads(fh.attrs["header"])
+        header["transfer_function"] = {"points": "none"}
+        import zlib
+        text = json.dumps(header)
+        fh.attrs.update(header=text, header_crc32=zlib.crc32(text.encode()))
+    for argv, needle in (([str(tmp_path / "v.raw")], "is a .raw file: it has no header"),
+                         ([str(tmp_path / "none.clw")], "does not exist"),
+                         ([str(tmp_path / "cut.clw")], "the file may be truncated or corrupt"),
+                         ([str(forged)], "transfer function or focus is not valid"),
+                         ([str(model_file), "--check"], "--check and --device are about the OpenCL devices"),
+                         (["--level", "1"], "give the FILE")):
+        code, out, err = run(capsys, "info", *argv)
+        assert code == 2 and out == "" and err.startswith("clwave: error:") and err.count("\n") == 1, err
+        assert needle in err, err
+
+
+def test_the_commands_words(tmp_path, capsys):
+    """drr says how many coefficients it drew, as compress does, and names a refused pose by its number in the
+    table; an option for another format is named in the singular."""
+    (tmp_path / "poses.csv").write_text("azimuth,elevation\n0,0\n")
+    code, out, err = run(capsys, "drr", "phantom:hydrogen:16", "--levels", "1", "--keep", "0.2", "--poses",
+                         str(tmp_path / "poses.csv"), "--size", "16", "-o", str(tmp_path / "d.npy"))
+    kept = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1).threshold(keep=0.2).kept
+    assert code == 0 and f"(line integrals, splatted) of {kept:,} coefficients ({100 * kept / 16 ** 3:.2f} % of " \
+                         f"the voxels)" in out, out + err
+    (tmp_path / "bad.csv").write_text("azimuth,elevation,dso\n0,0,100\n10,0,-5\n")
+    code, _, err = run(capsys, "drr", "phantom:hydrogen:16", "--poses", str(tmp_path / "bad.csv"), "-o",
+                       str(tmp_path / "b.npy"))
+    assert code == 2 and err == f"clwave: error: pose table {tmp_path / 'bad.csv'}, pose 2: dso=-5.0 must be a " \
+                                f"positive source-to-isocentre distance\n"
+    np.save(tmp_path / "v.npy", np.zeros((4, 4, 4), np.float32))
+    code, _, err = run(capsys, "compress", str(tmp_path / "v.npy"), "--level", "1", "-o", str(tmp_path / "v.clw"))
+    assert code == 2 and "--level only applies to OME-Zarr images; leave it out for a npy input" in err

@@ -1,0 +1,98 @@
+"""Multi-frame DICOM files given as the input: frames with positions (enhanced images' per-frame functional groups,
+RT Dose's grid frame offsets) read as slices; others refused naming dcm2niix."""
+
+import numpy as np
+import pytest
+from pydicom.data import get_testdata_file
+
+import clwave
+from clwave.errors import FileFormatError
+from clwave.cli import main
+
+
+def test_an_rt_dose_file_is_its_frames_placed_by_their_offsets():
+    """pydicom's rtdose.dcm: 15 frames of 10 x 10, LPS axes (identity orientation), 10 mm pixels, frames 5 mm apart
+    from ImagePositionPatient, scaled by DoseGridScaling: in RAS the rows and columns are reversed, the frames kept;
+    the centre is the first pixel's position (LPS -> RAS) plus half the grid."""
+    import pydicom
+
+    path = get_testdata_file("rtdose.dcm")
+    ds = pydicom.dcmread(path)
+    vol = clwave.load(path)
+    expected = ds.pixel_array.astype(np.float32) * np.float32(ds.DoseGridScaling)
+    np.testing.assert_array_equal(vol.data, expected[:, ::-1, ::-1])
+    assert vol.spacing == (5.0, 10.0, 10.0)
+    x, y, z = (float(v) for v in ds.ImagePositionPatient)
+    np.testing.assert_allclose(vol.origin, (-x - 45.0, -y - 45.0, z + 35.0))
+
+
+def enhanced_ct(path, order, rescale=True):
+    """An Enhanced CT file of 4 frames of 6 x 5 (rows x columns), axial, 2 mm apart, written in ``order`` of their
+    positions (frame k holds the value 100 k + pixel index); per-frame rescale slope k + 1 and intercept -1024, the
+    orientation and the pixel spacing (0.5, 0.75) in the shared groups."""
+    from pydicom.dataset import Dataset, FileMetaDataset
+    from pydicom.sequence import Sequence
+    from pydicom.uid import EnhancedCTImageStorage, ExplicitVRLittleEndian, generate_uid
+
+    def item(**attributes):
+        ds = Dataset()
+        for name, value in attributes.items():
+            setattr(ds, name, value)
+        return ds
+
+    ds = Dataset()
+    ds.file_meta = FileMetaDataset()
+    ds.file_meta.TransferSyntaxUID, ds.file_meta.MediaStorageSOPClassUID = ExplicitVRLittleEndian, \
+        EnhancedCTImageStorage
+    ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID = generate_uid()
+    ds.SOPClassUID, ds.SeriesInstanceUID, ds.Modality = EnhancedCTImageStorage, generate_uid(), "CT"
+    ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel = 6, 5, 4, 1
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 1
+    ds.PhotometricInterpretation = "MONOCHROME2"
+    ds.SharedFunctionalGroupsSequence = Sequence([item(
+        PlaneOrientationSequence=Sequence([item(ImageOrientationPatient=[1, 0, 0, 0, 1, 0])]),
+        PixelMeasuresSequence=Sequence([item(PixelSpacing=[0.5, 0.75], SliceThickness=2.0)]))])
+    frames = []
+    for k in order:
+        groups = item(PlanePositionSequence=Sequence([item(ImagePositionPatient=[10.0, 20.0, 30.0 + 2.0 * k])]))
+        if rescale:
+            groups.PixelValueTransformationSequence = Sequence([item(RescaleSlope=k + 1, RescaleIntercept=-1024,
+                                                                     RescaleType="HU")])
+        frames.append(groups)
+    ds.PerFrameFunctionalGroupsSequence = Sequence(frames)
+    pixels = np.stack([100 * k + np.arange(30).reshape(6, 5) for k in order]).astype(np.int16)
+    ds.PixelData = pixels.tobytes()
+    ds.save_as(path, enforce_file_format=True)
+    return pixels
+
+
+def test_an_enhanced_ct_file_is_its_frames_sorted_rescaled_and_placed(tmp_path, capsys):
+    """Frames written out of order come back sorted along the normal (superior last), each rescaled by its own
+    slope; rows and columns reversed (LPS -> RAS); spacing (2, 0.5, 0.75), the centre from the first position."""
+    path = tmp_path / "ct.dcm"
+    enhanced_ct(path, [2, 0, 3, 1])
+    vol = clwave.load(path)
+    k = np.arange(4)[:, None, None]
+    stored = 100 * k + np.arange(30).reshape(6, 5)
+    np.testing.assert_array_equal(vol.data, ((k + 1) * stored - 1024.0)[:, ::-1, ::-1])
+    assert vol.spacing == (2.0, 0.5, 0.75)
+    np.testing.assert_allclose(vol.origin, (-10.0 - 2 * 0.75, -20.0 - 2.5 * 0.5, 30.0 + 3.0))
+    assert main(["compress", str(path), "--levels", "1", "--keep", "1", "-o", str(tmp_path / "ct.clw")]) == 0
+    capsys.readouterr()
+    assert main(["info", str(path)]) == 0
+    assert "4 x 6 x 5 samples of int16 as read" in capsys.readouterr().out
+
+
+def test_multi_frame_files_without_positions_are_refused_naming_dcm2niix(tmp_path, capsys):
+    """An ultrasound cine and a secondary capture (pydicom's) have frames but no positions: one line naming the file
+    as multi-frame and dcm2niix; a single-frame file still points to its folder."""
+    for name in ("examples_ybr_color.dcm", "SC_rgb_rle_2frame.dcm"):
+        with pytest.raises(FileFormatError, match=r"is a multi-frame DICOM file \(.*frames\) of frames without "
+                                                  r"positions .* convert it with dcm2niix"):
+            clwave.load(get_testdata_file(name))
+    assert main(["compress", get_testdata_file("examples_ybr_color.dcm"), "-o", str(tmp_path / "o.clw")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "dcm2niix" in err and "one DICOM slice" not in err
+    single = get_testdata_file("CT_small.dcm")
+    with pytest.raises(FileFormatError, match="is one DICOM slice; pass the folder"):
+        clwave.load(single)
