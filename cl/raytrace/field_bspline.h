@@ -117,18 +117,24 @@ inline bool field_continues(const Field G, const real3 x, const real4 lat)
 /* whether the ray is in a mixed brick */
 inline bool field_mixed(const Active *A) { return A->coarse >= 0; }
 
-/* In a mixed brick: the flag of the piece holding x (PIECE_FINE, PIECE_COARSE: marched on that slot; PIECE_EMPTY:
- * no content voxel reaches it, the clamped field is 0 there).  The brick's pieces start with the first coarse
- * cell holding one of its cells. */
+/* In a mixed brick: the piece holding x, by its (x, y, z) index among the brick's pieces, which start with the first
+ * coarse cell holding one of its cells; the march steps it from piece to piece */
+inline int3 piece_index(const real3 x, const Active *A)
+{
+    const real3 o = A->coarse_lat.xyz, first = floor(x / FIELD_BRICK) * FIELD_BRICK;
+    return convert_int3(floor((x - o) / A->piece_lat.w)) -
+           convert_int3(floor((first - o) / A->coarse_lat.w)) * A->parts;
+}
+
+/* the flag of piece k (PIECE_FINE, PIECE_COARSE: marched on that slot; PIECE_EMPTY: no content voxel reaches it, the
+ * clamped field is 0 there); k is clamped to the brick's pieces */
 #define PIECE_FINE 0
 #define PIECE_COARSE 1
 #define PIECE_EMPTY 2
-inline int field_piece(const Field G, const real3 x, const Active *A)
+inline int field_piece(const Field G, const int3 k, const Active *A)
 {
-    const real3 o = A->coarse_lat.xyz, first = floor(x / FIELD_BRICK) * FIELD_BRICK;
-    const int3 k = clamp(convert_int3(floor((x - o) / A->piece_lat.w)) -
-                         convert_int3(floor((first - o) / A->coarse_lat.w)) * A->parts, 0, A->n - 1);
-    return G.pieces[A->table + (k.z * A->n + k.y) * A->n + k.x];
+    const int3 c = clamp(k, 0, A->n - 1);
+    return G.pieces[A->table + (c.z * A->n + c.y) * A->n + c.x];
 }
 
 /* In a mixed brick: a run of pieces with one flag, read from the coarse slot or from the fine one; its knot planes */

@@ -248,11 +248,14 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
         if (!(t < piece_end)) { /* a mixed brick's next run of pieces with one flag: the coarse slot or the fine one */
             Planes cuts = next_planes(x0, dd, inv, t, active.piece_lat);
             piece_end = fmin(brick_end, nearest(&cuts));
-            const int flag = field_piece(G, X0 + (t + piece_end) / 2 * D, &active);
+            /* the next piece's index steps with the cut planes the ray crosses (no floors or divisions per piece) */
+            int3 piece = piece_index(X0 + (t + piece_end) / 2 * D, &active);
+            const int flag = field_piece(G, piece, &active);
             while (piece_end < brick_end) {
+                piece += step & convert_int3(cuts.t <= piece_end);
                 step_planes(X0, inv3, step, piece_end, active.piece_lat, &cuts);
                 const real next = fmin(brick_end, nearest(&cuts));
-                if (field_piece(G, X0 + (piece_end + next) / 2 * D, &active) != flag)
+                if (field_piece(G, piece, &active) != flag)
                     break;
                 piece_end = next;
             }
