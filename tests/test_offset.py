@@ -5,6 +5,7 @@ and classify it alike (docs/coordinates.md §1, docs/model.md §5)."""
 import json
 import zlib
 
+import dask.array as da
 import h5py
 import numpy as np
 import pytest
@@ -56,7 +57,8 @@ def test_points_without_a_window_and_an_auto_window_are_the_files_too():
     assert TransferFunction.preset("ct-bone").shifted(AIR).window == (0.0, 3000.0)
     grey = TransferFunction.preset("grey")  # "auto": the percentiles of the stored values, not shifted
     assert grey.shifted(AIR) is grey
-    np.testing.assert_array_equal(grey.classify(Volume(ct - AIR, offset=AIR)).data, grey.classify(Volume(ct - AIR)).data)
+    stored = ct - AIR
+    np.testing.assert_array_equal(grey.classify(Volume(stored, offset=AIR)).data, grey.classify(Volume(stored)).data)
     # recorded in the input's units: the same window with or without the offset
     lo, hi = auto_window(ct)
     np.testing.assert_allclose(grey.resolved(Volume(ct - AIR, offset=AIR)).window, (lo, hi), rtol=1e-12)
@@ -76,7 +78,7 @@ def test_the_offset_goes_through_the_model_and_its_file(tmp_path):
     assert wv.offset == AIR and wv.threshold(keep=0.5).offset == AIR and wv.reconstruct().offset == AIR
     path = wv.threshold(keep=0.5).save(tmp_path / "m.clw")
     assert clwave.WaveletVolume.open(path).offset == AIR
-    chunked = Volume(__import__("dask.array").array.from_array(vol.data, chunks=8), offset=AIR)
+    chunked = Volume(da.from_array(vol.data, chunks=8), offset=AIR)
     model = clwave.WaveletVolume.from_volume(chunked, "cubic", levels=1)
     assert model.offset == AIR and model.threshold(keep=0.5).compute().offset == AIR
     assert clwave.WaveletVolume.open(model.save(tmp_path / "c.clw")).offset == AIR
@@ -141,3 +143,33 @@ def test_subtract_and_a_ct_preset_on_the_command_line_pre_and_post_classified(ct
     code, _, err = run(capsys, "render", str(tmp_path / "shifted-s.clw"), "--method", "raytrace", "--tf", "ct-bone",
                        "--tf-window", "1500,3000", "--size", "8", "-o", str(tmp_path / "e.png"))
     assert code == 2 and "span 1500 .. 3000" in err and "-1000 .. 7" in err, err  # the file's HU, not HU + 1000
+
+
+def test_the_viewers_editor_shows_the_files_units():
+    """A scalar model with an offset in the viewer: the histogram behind the editor, and the window each frame carries
+    (an "auto" one: the pool's percentiles), are in the input's units, the stored values plus the offset; the final
+    frame is clwave.raytrace with that window (given in the input's units)."""
+    from test_view import BASE, decode, frames_until_final, run as run_async, socket_url
+
+    import aiohttp
+
+    from clwave.view import view
+
+    wv = clwave.WaveletVolume.from_volume(Volume(clwave.phantom("hydrogen", 16).data, offset=-1.0), levels=1)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            await ws.receive_json()
+            texts = []
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded")))
+            return texts, await frames_until_final(ws, 1, texts=texts), v.server.sources["shaded"].tracer.scalar.sample
+    with view(wv, size=24, tolerance=2e-2, tf=TransferFunction.preset("grey")) as v:
+        texts, frames, sample = run_async(go(v))
+    histogram = [t for t in texts if t["type"] == "histogram"][0]
+    np.testing.assert_allclose(histogram["range"], [sample.min() - 1.0, sample.max() - 1.0], rtol=1e-12)
+    window = [w - 1.0 for w in auto_window(sample)]
+    np.testing.assert_allclose(frames[-1][0]["tf_window"], window, rtol=1e-12)
+    expect = clwave.raytrace(wv, clwave.Camera(30.0, 20.0, 24, extent=frames[-1][0]["extent"]), tolerance=2e-2,
+                             transfer_function=TransferFunction.preset("grey", window=window))
+    assert np.abs(decode(frames[-1][1]).astype(int) - expect.to_uint8(background=(0, 0, 0))).max() <= 1
