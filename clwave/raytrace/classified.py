@@ -167,6 +167,11 @@ class ScalarRange:
                              "give the window (lo, hi) (--tf-window LO,HI)")
         return tuple(w + self.offset for w in auto_window(self.sample))
 
+    def stored(self, tf: TransferFunction) -> TransferFunction:
+        """``tf`` on the model's values, the input's minus its offset (:meth:`TransferFunction.shifted`), under
+        :meth:`window`."""
+        return TransferFunction(tf.points, self.window(tf)).shifted(self.offset)
+
     def invisible(self, post: Classification) -> str | None:
         """Why ``post`` draws nothing (its transfer function gives no block of the model any opacity: most often a
         window in other units than the model's, HU on a model of attenuation), in a line naming the fix; else None."""
@@ -190,8 +195,7 @@ class ScalarRange:
         last, ranges = self.last, self.range(at)
         if last is not None and last.tf == tf and last.table.dtype == real and last.range is ranges:
             return replace(last, seconds=0.0)  # nothing changed: this render pays nothing for it
-        window = self.window(tf)
-        stored = TransferFunction(tf.points, window).shifted(self.offset)  # on the model's values
+        window, stored = self.window(tf), self.stored(tf)
         table, q = tf_table(stored, stored.window), cc.queue
         bound = cla.empty(q, ranges.shape[:3], np.float32)
         super_bound = cla.empty(q, at.super_bound.shape, np.float32)
