@@ -49,7 +49,8 @@ def add_input_options(p):
     g.add_argument("--byte-order", choices=["<", ">"], help=".raw only: little (<) or big (>) endian")
     g.add_argument("--spacing", help="voxel spacing DZ,DY,DX (or one number); overrides the file")
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
-    g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water)")
+    g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water; CT in HU: -1000); "
+                   "recorded, so --tf and --tf-window stay in the file's units")
     g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
     g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
     g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
@@ -77,7 +78,8 @@ def add_model_options(p):
     g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
     g.add_argument("--tf", help="classify with a transfer-function preset first: "
                                 + ", ".join(TransferFunction.PRESETS))
-    g.add_argument("--tf-window", help="transfer-function window: auto or LO,HI")
+    g.add_argument("--tf-window", help="transfer-function window: auto (percentiles of the values) or LO,HI in "
+                   "the file's units (HU for CT, with or without --subtract)")
     g.add_argument("--classify", choices=("pre", "post"), default="pre",
                    help="with --tf: pre (default) classifies the volume before the transform; post keeps the "
                         "scalar and the transfer function for ray tracing to classify while rendering (a .clw "
@@ -112,7 +114,7 @@ def read_volume(args):
             return vol
         subtract = finite_number(args.subtract or 0.0, "--subtract")  # as load(background=) subtracts it
         data = vol.data - vol.data.dtype.type(subtract)
-        return Volume(data, spacing=vol.spacing if spacing is None else spacing)
+        return Volume(data, spacing=vol.spacing if spacing is None else spacing, offset=subtract)
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     series = args.series
     if series is not None and series.isdigit():

@@ -4,7 +4,7 @@ chunked model can write a block at a time.
 
 Layout (version 2)::
 
-    attrs           format, version, header (JSON: shape, spacing, origin, levels, channels, groups, ...),
+    attrs           format, version, header (JSON: shape, spacing, origin, offset, levels, channels, groups, ...),
                     header_crc32 (zlib's CRC-32 of the header's UTF-8 bytes)
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
     g<i>/occupancy  uint8, bits packed along x: which coarsest-approximation coefficients the content occupies
@@ -35,22 +35,21 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ClwaveError, FileFormatError, InputError, finite_number
-from ..model.bspline import WAVELET_ORDERS, SplineWavelet, max_levels
+from ..model.bspline import SplineWavelet
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from ..threads import background
+from .clw_header import (FILE_FORMAT, FILE_VERSION, MAX_HEADER, check_dataset, checked_header, checked_values,
+                         parsed_header)
 from .detail_field import DetailField
 from .files import hdf5_target, write_atomic
 from .hdf5_safety import check_self_contained
 from .occupancy import OccupancyGrid
 
-FILE_FORMAT = "clwave-wavelet-volume"
-FILE_VERSION = 2
 ROWS = 1 << 14               # coefficients a dataset chunk holds, and a tier's buffer before it is written
 MASK_CHUNK = (64, 64, 64)
-MAX_HEADER = 1 << 20
 FILTERS = dict(compression="gzip", compression_opts=4, shuffle=True, fletcher32=True)
 ZSTD_LEVEL = 19              # quantised files: Zstandard's strongest ordinary level (docs/codecs.md §2)
 INT32_LIMIT = 2 ** 31 - 1
@@ -165,8 +164,8 @@ def _write(model, fh, steps):
 
     chunked = isinstance(model, ChunkedWaveletVolume)
     groups = [(w, c) for w, c in model.groups()] if chunked else [(g.wavelet, g.channels) for g in model.groups]
-    header = dict(shape=model.shape, spacing=model.spacing, origin=model.origin, levels=model.levels,
-                  channels=model.channels, interpolate=not chunked and model.interpolate,
+    header = dict(shape=model.shape, spacing=model.spacing, origin=model.origin, offset=model.offset,
+                  levels=model.levels, channels=model.channels, interpolate=not chunked and model.interpolate,
                   focus=None if model.focus is None else [list(model.focus[0]), model.focus[1]],
                   transfer_function=model.transfer_function, content=model.content,
                   groups=[dict(wavelet=w.order, channels=list(c)) for w, c in groups])
@@ -324,7 +323,7 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
     focus = header["focus"] if keep is None else None  # as threshold(keep=) without a focus
     try:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, channels,
-                             interpolate=bool(header["interpolate"]),
+                             interpolate=bool(header["interpolate"]), offset=header.get("offset", 0.0),
                              focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
                              transfer_function=header["transfer_function"], content=header.get("content"),
                              content_mask=mask)
@@ -356,7 +355,7 @@ def open_clw(path):
     try:
         with h5py.File(path, "r") as h5:
             check_self_contained(h5, path, MAX_HEADER)  # nothing outside the file, nothing unbounded
-            yield h5, _header(h5, path)
+            yield h5, parsed_header(h5, path)
     except ClwaveError:
         raise
     except MemoryError:
@@ -428,25 +427,6 @@ def _file_mask(path, shape, bits, read) -> FileMask:
     return mask
 
 
-def _header(h5, path) -> dict:
-    fmt, version = h5.attrs.get("format"), h5.attrs.get("version")
-    version = version.item() if isinstance(version, np.generic) else version
-    if fmt != FILE_FORMAT:
-        raise FileFormatError(f"{path} is an HDF5 file but not a clwave wavelet volume (format {fmt!r})")
-    if version != FILE_VERSION:
-        raise FileFormatError(f"{path} is a .clw file of format version {version!r}; this clwave reads version "
-                              f"{FILE_VERSION}: use the clwave that wrote it, or compress the volume again")
-    text = h5.attrs.get("header")
-    if not isinstance(text, str) or len(text) > MAX_HEADER:
-        raise ValueError("the header is missing or too long")
-    if h5.attrs.get("header_crc32") != zlib.crc32(text.encode()):  # HDF5 checksums datasets, not attributes
-        raise ValueError("the header does not match its checksum")
-    header = json.loads(text)
-    if not isinstance(header, dict):
-        raise ValueError(f"the header is a JSON {type(header).__name__}, not an object")
-    return header
-
-
 def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -> ChannelGroup:
     """One channel group: every stored coefficient, or the ``budget`` most important (approximation first,
     then details tier by tier, the last tier cut by importance as :meth:`WaveletVolume.threshold` cuts), or
@@ -458,7 +438,7 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
     check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
     n = stored.shape[0] if stored is not None else -1
     check_dataset(stored, (n,), np.int64)
-    step = _check_values(stored_values, (n, c))
+    step = checked_values(stored_values, (n, c))
     runs = runs[...]
     by_start = runs[np.lexsort((runs[:, 2], runs[:, 1]))]  # an empty run (a tier of whole chunks) before its peer
     if n > total or runs.shape[0] > n + 1 or np.any(runs[:, 2] < 0) or np.any(runs[:, 0] < -1) or \
@@ -524,76 +504,6 @@ def _tiers_to_read(sizes, budget) -> tuple:
             return i + 1, (None if done + n == budget else budget - done)
         done += n
     return len(sizes), None
-
-
-def _check_values(dataset, shape):
-    """A group's values: float32, or int32 with a finite positive scalar ``step`` attribute (returned)."""
-    import h5py
-
-    if not (isinstance(dataset, h5py.Dataset) and "step" in dataset.attrs):
-        check_dataset(dataset, shape, np.float32)
-        return None
-    stored = dataset.attrs.get_id("step")  # its shape and type before its value: an array is not read
-    if stored.shape != () or stored.dtype.kind != "f":
-        raise ValueError(f"member {dataset.name} has a quantisation step of shape {stored.shape} and type "
-                         f"{stored.dtype}, not one number")
-    step = dataset.attrs["step"]
-    if not (np.isfinite(step) and step > 0):
-        raise ValueError(f"member {dataset.name} has a quantisation step {step!r}, not one finite number > 0")
-    check_dataset(dataset, shape, np.int32)
-    return float(step)
-
-
-def check_dataset(dataset, shape, dtype):
-    """Refuse a member that is missing, of another shape or type, or chunked oddly (a decompression bomb
-    cannot hide in a chunk larger than the file allows)."""
-    import h5py
-
-    if not isinstance(dataset, h5py.Dataset):
-        raise ValueError("a member is missing or not a dataset")
-    if dataset.shape != tuple(shape) or dataset.dtype != dtype:
-        raise ValueError(f"member {dataset.name} is {dataset.shape} {dataset.dtype}, expected {tuple(shape)} "
-                         f"{np.dtype(dtype)}")
-    if dataset.chunks is not None and int(np.prod(dataset.chunks)) * dataset.dtype.itemsize > 1 << 26:
-        raise ValueError(f"member {dataset.name} has chunks of {dataset.chunks}, larger than a .clw writes")
-    # a .clw writes every chunk: a member whose chunks are not all stored would have the reader allocate
-    # for data the file does not hold
-    stored, whole = ((dataset.id.get_num_chunks(), int(np.prod([-(-n // c) for n, c in zip(shape, dataset.chunks)])))
-                     if dataset.chunks is not None else (dataset.id.get_storage_size(), dataset.nbytes))
-    if stored < whole:
-        raise ValueError(f"member {dataset.name} stores {stored} of its {whole} "
-                         f"{'chunks' if dataset.chunks is not None else 'bytes'}")
-
-
-def checked_header(header) -> tuple:
-    """``(shape, levels, channels, groups)`` of a header, each checked (ValueError names what is wrong)."""
-    shape = header.get("shape")
-    if not (isinstance(shape, list) and len(shape) == 3 and all(isinstance(n, int) and 2 <= n <= 1 << 20
-                                                                 for n in shape)):
-        raise ValueError(f"shape {shape!r} is not three whole numbers from 2 to 2^20")
-    shape = tuple(shape)
-    for name, positive in (("spacing", True), ("origin", False)):
-        value = header.get(name)
-        if not (isinstance(value, list) and len(value) == 3 and all(isinstance(v, (int, float)) for v in value)
-                and np.all(np.isfinite(value)) and (not positive or min(value) > 0)):
-            raise ValueError(f"{name} {value!r} is not three finite{' positive' if positive else ''} numbers")
-    levels, channels = header.get("levels"), header.get("channels")
-    if not (isinstance(levels, int) and 0 <= levels <= max_levels(shape)):
-        raise ValueError(f"levels {levels!r} is not possible for shape {shape}")
-    if not (isinstance(channels, int) and 1 <= channels <= 4):
-        raise ValueError(f"channels {channels!r} is not 1 to 4")
-    groups = header.get("groups")
-    if not (isinstance(groups, list) and groups):
-        raise ValueError("the file has no channel groups")
-    seen = []
-    for g in groups:
-        orders = sorted(WAVELET_ORDERS.values())
-        if not (isinstance(g, dict) and g.get("wavelet") in orders and isinstance(g.get("channels"), list)):
-            raise ValueError(f"channel group {g!r} is not a wavelet order {orders} with a list of channels")
-        seen += g["channels"]
-    if sorted(seen) != list(range(channels)):
-        raise ValueError(f"the groups hold channels {sorted(seen)}, not each of the {channels} once")
-    return shape, levels, channels, groups
 
 
 WaveletVolume.file_format = (read_clw, write_clw)

@@ -11,7 +11,8 @@ from ..errors import InputError
 from ..model.bspline import WAVELET_ORDERS
 from ..model.transfer import TransferFunction
 from ..model.wavelet import check_thresholding
-from .clw import check_dataset, checked_header, open_clw
+from .clw import open_clw
+from .clw_header import check_dataset, checked_header, checked_values
 
 _WAVELETS = {order: name for name, order in WAVELET_ORDERS.items()}
 
@@ -31,7 +32,7 @@ def describe_clw(path) -> dict:
             positions, values = h5.get(f"g{gi}/positions"), h5.get(f"g{gi}/values")
             kept = positions.shape[0] if positions is not None and positions.ndim == 1 else -1
             check_dataset(positions, (kept,), np.int64)
-            step = _step(values, (kept, len(g["channels"])))
+            step = checked_values(values, (kept, len(g["channels"])))
             described.append(dict(wavelet=_WAVELETS[g["wavelet"]], order=g["wavelet"], channels=g["channels"],
                                   kept=kept, share=kept / voxels, quantisation=step))
         tf = header.get("transfer_function")
@@ -47,17 +48,3 @@ def describe_clw(path) -> dict:
     return dict(file=str(path), bytes=path.stat().st_size, shape=list(shape), levels=levels, channels=channels,
                 **facts, groups=described, **({"offset": header["offset"]} if "offset" in header else {}))
 
-
-def _step(values, shape):
-    """The quantisation step of a group's values (int32 with a ``step``), or None for float32 values."""
-    import h5py
-
-    if not (isinstance(values, h5py.Dataset) and "step" in values.attrs):
-        check_dataset(values, shape, np.float32)
-        return None
-    check_dataset(values, shape, np.int32)
-    stored = values.attrs.get_id("step")  # its shape before its value: an array is not read
-    step = values.attrs["step"] if stored.shape == () and stored.dtype.kind == "f" else None
-    if step is None or not (np.isfinite(step) and step > 0):
-        raise ValueError(f"member {values.name} has a quantisation step that is not one finite number > 0")
-    return float(step)

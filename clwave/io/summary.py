@@ -10,7 +10,8 @@ import numpy as np
 from ..model.bspline import SplineWavelet
 from ..model.chunked import TIER_SHIFT, tier_energy
 from ..model.transform import band_layout
-from .clw import check_dataset, checked_header, open_clw
+from .clw import open_clw
+from .clw_header import check_dataset, checked_header
 
 
 def detail_energy(path) -> float:

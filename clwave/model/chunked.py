@@ -141,6 +141,7 @@ class ChunkedWaveletVolume:
     shape = property(lambda self: self.volume.shape)
     spacing = property(lambda self: self.volume.spacing)
     origin = property(lambda self: self.volume.origin)
+    offset = property(lambda self: self.volume.offset)
     channels = property(lambda self: self.volume.channels)
     n_voxels = property(lambda self: int(np.prod(self.shape)))
     frame = property(lambda self: (self.shape, self.spacing, self.origin))
@@ -271,7 +272,7 @@ class ChunkedWaveletVolume:
                for gi, (wavelet, channels) in enumerate(groups)]
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
-                             content_mask=mask)
+                             content_mask=mask, offset=self.offset)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import InputError, NothingVisibleError
 from ..threads import cores, thread_map
+from .tf_presets import PRESETS as _PRESETS
 from .volume import Volume, is_dask
 
 #: Percentiles of the finite values that ``window="auto"`` maps to 0 and 1.
@@ -28,60 +29,6 @@ LUMA = (0.299, 0.587, 0.114)
 _FORMAT = "clwave-transfer-function"
 _CHUNK = 1 << 16          # voxels per work item (the float64 temporaries stay in cache)
 _THREADED_MIN = 1 << 20   # below this many voxels classify runs in one thread
-
-
-def _hu(points, lo, hi):
-    """Preset rows written in data units -> the normalised axis of window (lo, hi)."""
-    return tuple(((v - lo) / (hi - lo), r, g, b, a) for v, r, g, b, a in points)
-
-
-# Presets: points on the normalised axis [0, 1] plus a default window (lo, hi) in
-# data units mapping 0 -> lo and 1 -> hi ("auto": 0.5/99.5 percentiles).  Opacities
-# are per world unit (mm for CT and MRI, a voxel for the phantoms).
-_PRESETS = {
-    # CT bone, Hounsfield units: transparent below +150 HU, 0.5/mm from 700 HU.
-    "ct-bone": dict(window=(-1000.0, 2000.0), points=_hu([
-        (-1000.0, 0.85, 0.55, 0.40, 0.0),
-        (150.0, 0.85, 0.55, 0.40, 0.0),
-        (300.0, 0.95, 0.82, 0.65, 0.1),
-        (700.0, 1.00, 0.95, 0.85, 0.5),
-        (2000.0, 1.00, 1.00, 1.00, 0.5),
-    ], -1000.0, 2000.0)),
-    # CT soft tissue: fat (-100 HU) yellow and faint, muscle/organs (+40 HU) red,
-    # bone (> +300 HU) white and denser; air and lung transparent below -200 HU.
-    "ct-soft-tissue": dict(window=(-1000.0, 1000.0), points=_hu([
-        (-1000.0, 0.95, 0.80, 0.55, 0.0),
-        (-200.0, 0.95, 0.80, 0.55, 0.0),
-        (-100.0, 0.95, 0.80, 0.55, 0.01),
-        (40.0, 0.85, 0.35, 0.30, 0.03),
-        (300.0, 0.95, 0.90, 0.85, 0.05),
-        (1000.0, 1.00, 1.00, 1.00, 0.3),
-    ], -1000.0, 1000.0)),
-    # MRI (arbitrary units, auto window): background noise transparent, then a
-    # warm grey ramp up to 0.06/mm at the 99.5th percentile.
-    "mri": dict(window="auto", points=(
-        (0.0, 0.60, 0.45, 0.40, 0.0),
-        (0.1, 0.60, 0.45, 0.40, 0.0),
-        (0.3, 0.75, 0.60, 0.55, 0.01),
-        (0.6, 0.95, 0.85, 0.75, 0.03),
-        (1.0, 1.00, 1.00, 1.00, 0.06),
-    )),
-    # Hydrogen phantom (max 1): low density transparent, blue -> yellow -> red,
-    # up to 0.1 per world unit.  A ray through one lobe (n = 128 .. 256, spacing 1)
-    # collects A = ∫alpha ≈ 2 .. 4; the torus (value 0.25) shows light blue.
-    "hydrogen": dict(window=(0.0, 1.0), points=(
-        (0.00, 0.05, 0.10, 0.60, 0.0),
-        (0.05, 0.10, 0.25, 1.00, 0.0),
-        (0.25, 0.20, 0.60, 1.00, 0.02),
-        (0.55, 1.00, 0.90, 0.20, 0.05),
-        (1.00, 1.00, 0.20, 0.05, 0.1),
-    )),
-    # Linear grey ramp, auto window: colour and opacity (0 .. 0.05/unit) rise together.
-    "grey": dict(window="auto", points=(
-        (0.0, 0.0, 0.0, 0.0, 0.0),
-        (1.0, 1.0, 1.0, 1.0, 0.05),
-    )),
-}
 
 
 class TransferFunction:
@@ -101,7 +48,11 @@ class TransferFunction:
         ``None``: point values are data values.  Otherwise point values live on
         a normalised axis that the window maps to data units, 0 -> lo and
         1 -> hi; ``"auto"`` takes (lo, hi) from the 0.5 and 99.5 percentiles of
-        the finite values being classified.
+        the finite values being classified.  Data units are the input's (HU
+        for CT): on a volume or model with an ``offset`` (values stored as the
+        input's minus it, ``load(background=)``) the function is applied
+        shifted by it (:meth:`shifted`), so the same function classifies alike
+        with or without ``background=``.
     name : str, optional
         A label (presets carry their name); kept by :meth:`to_dict`.
 
@@ -178,6 +129,23 @@ class TransferFunction:
         t = self._points[:, 0]
         return t.copy() if win is None else win[0] + t * (win[1] - win[0])
 
+    def shifted(self, offset) -> "TransferFunction":
+        """This function for values stored as the input's minus ``offset`` (:attr:`Volume.offset`): its window, or
+        its points where it has none, moved by -offset; a window "auto" (percentiles of the values met) stays."""
+        if not offset or self._window == "auto":
+            return self
+        if self._window is None:
+            points = self._points.copy()
+            points[:, 0] -= offset
+            return TransferFunction(points, name=self.name)
+        return TransferFunction(self._points, tuple(w - offset for w in self._window), self.name)
+
+    def _on(self, vol, window) -> "TransferFunction":
+        """This function under ``window`` (``...``: its own) in the units of ``vol``'s data: a scalar's shifted by its
+        offset (a colour volume's points are on luminance)."""
+        tf = self if window is ... else TransferFunction(self._points, window, self.name)
+        return tf.shifted(vol.offset) if vol.channels == 1 else tf
+
     # ----------------------------------------------------------------- evaluation
     def __call__(self, values, window=...):
         """Colour and opacity of scalar ``values``.
@@ -185,7 +153,8 @@ class TransferFunction:
         Parameters
         ----------
         values : array_like
-            Scalar data values, any shape.
+            Scalar data values, any shape, in the function's units (of values stored with an offset:
+            :meth:`shifted`).
         window : optional
             Overrides this function's window (None, "auto" or (lo, hi)); "auto"
             is resolved against ``values`` themselves.
@@ -218,7 +187,8 @@ class TransferFunction:
 
         A chunked volume (docs/chunked.md) gives a chunked result, each chunk
         classified when it is read, bit for bit as in memory; an "auto" window
-        and the RGB scale first take one pass over the volume.
+        and the RGB scale first take one pass over the volume.  A scalar volume with an ``offset`` is
+        classified by this function shifted by it (:meth:`shifted`).
 
         Parameters
         ----------
@@ -227,7 +197,7 @@ class TransferFunction:
         window : optional
             Overrides this function's window: None (point values are data
             values), "auto" (percentiles of this volume, of its luminance for
-            RGB) or (lo, hi).
+            RGB) or (lo, hi), in the input's units as the function's own.
 
         Returns
         -------
@@ -245,24 +215,27 @@ class TransferFunction:
         if not isinstance(vol, Volume):
             raise InputError(f"classify needs a clwave.Volume, got {type(vol).__name__}; "
                              "wrap arrays with clwave.Volume(array, spacing=...)")
-        window, scale = self._statistics(vol, window)
-        paint = self._painter(vol.channels, window, scale)
+        tf = self._on(vol, window)
+        window, scale = tf._statistics(vol)
+        paint = tf._painter(vol.channels, window, scale)
         if vol.chunked:  # each chunk classified when it is read: the values classify gives in memory
             data = vol.data if vol.data.ndim == 4 else vol.data[..., None]
             rgba = data.map_blocks(_classified, paint, False, chunks=data.chunks[:3] + ((4,),), dtype=np.float32)
         else:
             rgba = _classified(vol.data, paint, True)
             if not rgba[..., 3].any():
-                raise self._nothing_visible(vol, window, scale)
+                raise tf._nothing_visible(vol, window, scale)
         return Volume(rgba, spacing=vol.spacing, origin=vol.origin)
 
     def _nothing_visible(self, vol, window, scale) -> NothingVisibleError:
-        """The refusal of a classification without opacity anywhere, naming the function's span and the values it
-        met (a colour volume's luminance); its ``cli`` names ``--tf-window`` (docs/known-gaps.md §15)."""
-        lo, hi = self.data_points(window)[[0, -1]]
+        """The refusal of this function (in ``vol``'s data units: :meth:`_on`) without opacity anywhere, naming its span
+        and the values it met (a colour volume's luminance), a scalar's in the input's units; its ``cli`` names
+        ``--tf-window`` (docs/known-gaps.md §15)."""
+        shift = vol.offset if vol.channels == 1 else 0.0
+        lo, hi = self.data_points(window)[[0, -1]] + shift
         data = vol.data.reshape(-1, vol.channels)
         if vol.channels == 1:
-            what, values = "values", data[:, 0]
+            what, values = "values", data[:, 0] + shift
         else:
             what, values = "luminance (0 .. 1)", _luminance(data[:, :3].astype(np.float64) / scale)
         name = f" {self.name}" if self.name else ""
@@ -277,27 +250,32 @@ class TransferFunction:
         opacity, as :meth:`classify` would find, without classifying it: the opacity is linear between the points,
         so it is 0 over the volume's values exactly where it is 0 at their least and largest and at every point
         between (a scalar kept for classifying while rendering, ``classify="post"``)."""
-        window, scale = self._statistics(vol, ...)
+        tf = self._on(vol, ...)
+        window, scale = tf._statistics(vol)
         lo, hi = float(np.nanmin(vol.data)), float(np.nanmax(vol.data))
-        at = self.data_points(window)
-        if not np.any(self(np.concatenate([[lo, hi], at[(at > lo) & (at < hi)]]), window)[1]):
-            raise self._nothing_visible(vol, window, scale)
+        at = tf.data_points(window)
+        if not np.any(tf(np.concatenate([[lo, hi], at[(at > lo) & (at < hi)]]), window)[1]):
+            raise tf._nothing_visible(vol, window, scale)
 
     def resolved(self, vol: Volume, window=...) -> "TransferFunction":
         """This function with the window :meth:`classify` would use on ``vol`` made concrete.
 
         Use it to record exactly how a volume was classified (e.g. in a saved
-        file): an "auto" window becomes the (lo, hi) found in ``vol``.
+        file): an "auto" window becomes the (lo, hi) found in ``vol``, in the input's units as every window.
         """
         if not isinstance(vol, Volume):
             raise InputError(f"resolved needs a clwave.Volume, got {type(vol).__name__}")
-        return TransferFunction(self._points, window=self._statistics(vol, window)[0], name=self.name)
+        tf = self if window is ... else TransferFunction(self._points, window, self.name)
+        window = tf._statistics(vol)[0]
+        if tf.window == "auto" and vol.channels == 1:  # the percentiles of the stored values
+            window = tuple(w + vol.offset for w in window)
+        return TransferFunction(self._points, window, self.name)
 
-    def _statistics(self, vol, window):
+    def _statistics(self, vol):
         """(window, RGB scale) that :meth:`classify` uses on ``vol``: an "auto" window needs the strided
         subsample, RGB(A) the minimum and maximum, both found in one pass over a chunked volume."""
         c = _channels(vol)
-        win = self._window if window is ... else check_window(window)
+        win = self._window
         sample, lo, hi = _scan(vol.data, win == "auto", c > 1)
         scale = 1.0 if c == 1 else _rgb_scale(lo, hi)
         if win == "auto":

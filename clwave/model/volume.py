@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, finite_number
 from .geometry import fine_to_world, world_to_fine
 
 MAX_CHANNELS = 4
@@ -29,6 +29,10 @@ class Volume:
         Voxel size ``(dz, dy, dx)`` in world units (default 1.0).
     origin : 3 floats
         World position ``(x, y, z)`` of the volume centre (default 0).
+    offset : float
+        The value subtracted from the input's values to make ``data`` (``clwave.load(background=)``,
+        ``--subtract``; default 0): transfer functions are written in the input's units, and are applied to
+        ``data`` shifted by it (:meth:`TransferFunction.shifted`, docs/coordinates.md §1).
 
     Examples
     --------
@@ -37,7 +41,7 @@ class Volume:
     ((4, 5, 6), 1, (2.0, 1.0, 1.0))
     """
 
-    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0)):
+    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), offset=0.0):
         lazy = is_dask(data)
         try:
             arr = data if lazy else np.asarray(data)
@@ -74,6 +78,7 @@ class Volume:
         if not np.all(np.isfinite(origin)):
             raise InputError(f"origin {origin} must be finite (x, y, z)")
         self.origin = origin
+        self.offset = finite_number(offset, "offset")
 
     @property
     def shape(self) -> tuple:
@@ -133,7 +138,7 @@ class Volume:
 
     def __repr__(self):
         return (f"Volume(shape={self.shape}, channels={self.channels}, "
-                f"spacing={self.spacing}, origin={self.origin})")
+                f"spacing={self.spacing}, origin={self.origin}{f', offset={self.offset:g}' if self.offset else ''})")
 
 
 def is_dask(data) -> bool:

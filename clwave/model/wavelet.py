@@ -125,10 +125,11 @@ class WaveletVolume:
     file_format = None
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
-                 focus=None, transfer_function=None, content=None, content_mask=None):
+                 focus=None, transfer_function=None, content=None, content_mask=None, offset=0.0):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
+        self.offset = float(offset)  # the source volume's Volume.offset: its values are the input's minus it
         self.levels = int(levels)
         self.groups = list(groups)
         self.channels = int(channels)
@@ -193,7 +194,7 @@ class WaveletVolume:
             groups.append(ChannelGroup(wav, chans, bands, None, values))
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
                    interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask),
-                   content_mask=None if interpolate else ContentMask.of(mask))
+                   content_mask=None if interpolate else ContentMask.of(mask), offset=volume.offset)
 
     # ------------------------------------------------------------- properties
     @property
@@ -265,7 +266,7 @@ class WaveletVolume:
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
                             interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
-                            content_mask=self.content_mask)
+                            content_mask=self.content_mask, offset=self.offset)
         budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
@@ -375,7 +376,7 @@ class WaveletVolume:
                 continue
             for slot, channel in enumerate(g.channels):
                 data[..., channel] = reconstruct_channel(g, self._dense[gi], slot, self.shape, self.levels)
-        return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin)
+        return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.offset)
 
     def unmasked(self) -> "WaveletVolume":
         """The same coefficients without the content mask (nothing clamped, docs/raytracing.md §4), keeping no

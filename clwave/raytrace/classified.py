@@ -86,8 +86,8 @@ def tf_table(tf: TransferFunction, window) -> np.ndarray:
 class Classification:
     """One transfer function's kernel arguments: the table and the classified bounds."""
 
-    tf: TransferFunction
-    window: tuple | None
+    tf: TransferFunction    # as given, in the input's units
+    window: tuple | None    # its window in the input's units ("auto" resolved)
     table: cla.Array        # (rows, 4) real
     bound: cla.Array        # per block: the largest opacity
     super_bound: cla.Array  # per superblock
@@ -115,6 +115,7 @@ class ScalarRange:
         q = cc.queue
         self.cc, self.bricks, self.tracer = cc, f, tracer
         self.noise_floor, self.spacing = tracer.grad_floor("single"), min(tracer.wv.spacing)
+        self.offset = tracer.wv.offset  # the model's values are the input's minus it (Volume.offset)
         self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
         self.slot_range = None  # bricks in a scratch file: |s| <= the block bound
         self.sample = np.zeros(1, np.float32) if f.resident else None  # no bricks at all: s = 0 everywhere
@@ -156,14 +157,20 @@ class ScalarRange:
         return self.ranges[key]
 
     def window(self, tf: TransferFunction):
-        """``tf``'s window in data units; "auto" from the percentiles of the full-detail slots' field values at lattice
-        points (docs/raytracing.md §10), the same with level of detail or without, and whatever the order."""
+        """``tf``'s window in the input's units; "auto" from the percentiles of the full-detail slots' field values at
+        lattice points (docs/raytracing.md §10), the same with level of detail or without, and whatever the order, plus
+        the model's offset."""
         if tf.window != "auto":
             return tf.window
         if self.sample is None:
             raise InputError('a transfer function window "auto" at render time needs the bricks on the device; '
                              "give the window (lo, hi) (--tf-window LO,HI)")
-        return auto_window(self.sample)
+        return tuple(w + self.offset for w in auto_window(self.sample))
+
+    def stored(self, tf: TransferFunction) -> TransferFunction:
+        """``tf`` on the model's values, the input's minus its offset (:meth:`TransferFunction.shifted`), under
+        :meth:`window`."""
+        return TransferFunction(tf.points, self.window(tf)).shifted(self.offset)
 
     def invisible(self, post: Classification) -> str | None:
         """Why ``post`` draws nothing (its transfer function gives no block of the model any opacity: most often a
@@ -174,7 +181,8 @@ class ScalarRange:
         if not np.any(post.tf.points[:, 4]):
             return f"{name} has opacity 0 at every point: give it some opacity (or another function)"
         lo, hi = post.tf.data_points(post.window)[[0, -1]]
-        values = None if self.slot_range is None else (self.slot_range[..., 0].min(), self.slot_range[..., 1].max())
+        values = None if self.slot_range is None else (self.slot_range[..., 0].min() + self.offset,
+                                                       self.slot_range[..., 1].max() + self.offset)
         held = "" if values is None else f"; this model's values lie within {values[0]:.4g} .. {values[1]:.4g}"
         return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
                 f"a window in the model's units (--tf-window LO,HI) or another function")
@@ -187,8 +195,8 @@ class ScalarRange:
         last, ranges = self.last, self.range(at)
         if last is not None and last.tf == tf and last.table.dtype == real and last.range is ranges:
             return replace(last, seconds=0.0)  # nothing changed: this render pays nothing for it
-        window = self.window(tf)
-        table, q = tf_table(tf, window), cc.queue
+        window, stored = self.window(tf), self.stored(tf)
+        table, q = tf_table(stored, stored.window), cc.queue
         bound = cla.empty(q, ranges.shape[:3], np.float32)
         super_bound = cla.empty(q, at.super_bound.shape, np.float32)
         n = bound.size  # explicit work-groups: PoCL's default for this size was a tenth as fast
@@ -197,7 +205,7 @@ class ScalarRange:
         _SUPER(self.kernels, q, super_bound.shape[::-1], None, out=super_bound, ns=super_bound.shape[::-1],
                bound=bound, nb=bound.shape[::-1])
         # flat: below FLAT of the span per unit length, or the float32 field's rounding noise, in both precisions
-        values = tf.data_points(window)
+        values = stored.data_points()
         floor = max(self.noise_floor, FLAT * (values[-1] - values[0]) / self.spacing)
         self.last = Classification(tf, window, cla.to_device(q, table.astype(real)), bound, super_bound,
                                    at.super_origin, at.box, floor, 0.0, ranges,

@@ -411,7 +411,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     if tr.orders[0] == 1:
         phong = None
     light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
-    values = transfer_function.data_points(tr.scalar.window(transfer_function))
+    values = tr.scalar.stored(transfer_function).data_points()
     colour, opacity = transfer_function.points[:, 1:4], transfer_function.points[:, 4]
     scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)
     n = max(10, 3 * tr.orders[0] - 2)  # degree 3 (j - 1) at most on a knot segment

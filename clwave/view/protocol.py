@@ -66,8 +66,8 @@ POINT_RANGES = dict(value=(-1e30, 1e30), r=(0.0, 1.0), g=(0.0, 1.0), b=(0.0, 1.0
 
 def _tf(value):
     """``(preset, centre, width, opacity)`` of a page's ``tf`` field (preset None: the starting transfer function,
-    the one the server was given, the model's own or grey), a TransferFunction of its ``points`` (in data units), or
-    None (the starting function as it is)."""
+    the one the server was given, the model's own or grey), a TransferFunction of its ``points`` (in the
+    input's units), or None (the starting function as it is)."""
     from ..model.transfer import TransferFunction
 
     if value is None:
@@ -83,8 +83,8 @@ def _tf(value):
 
 
 def _points(rows):
-    """The TransferFunction of the editor's points ``[[value, r, g, b, opacity], ...]``, values in data units (its
-    own checks: values strictly increasing), or :class:`Refused`."""
+    """The TransferFunction of the editor's points ``[[value, r, g, b, opacity], ...]``, values in the input's
+    units (its own checks: values strictly increasing), or :class:`Refused`."""
     from ..errors import InputError
     from ..model.transfer import TransferFunction
 

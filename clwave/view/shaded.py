@@ -128,13 +128,13 @@ class ShadedSource(Source):
         return dict(name=self.start_tf.name, window=window if window == "auto" else _span(self.start_tf, window))
 
     def transfer_function(self, spec, tracer) -> tuple:
-        """``(transfer function, its window in data units)`` of a tab's ``(preset, centre, width, opacity)``: the
+        """``(transfer function, its window in the input's units)`` of a tab's ``(preset, centre, width, opacity)``: the
         preset's points (preset None: the starting function's) with their opacity times ``opacity``, under its window
-        (the pool's percentiles where "auto", the points' span where it has none: points in data units) widened
+        (the pool's percentiles where "auto", the points' span where it has none: points in the input's units) widened
         ``width`` times and moved by ``centre`` of its width; spec None, or the starting function unchanged, is the
         starting function itself (its window as given, not recomputed); an "auto" window is the pool of ``tracer``,
         the one that renders the frame (the whole file's once it is in).  A spec that is a TransferFunction (the
-        editor's points, in data units) is itself.  ``(None, None)`` for an RGBA model."""
+        editor's points, in the input's units) is itself.  ``(None, None)`` for an RGBA model."""
         if not self.scalar:
             return None, None
         key = (spec, weakref.ref(tracer))  # not id(): a tracer let go may leave its id to the next
@@ -149,7 +149,7 @@ class ShadedSource(Source):
                 centre, width, opacity = change
                 mid, half = (lo + hi) / 2 + centre * (hi - lo), (hi - lo) * width / 2
                 points = tf.points.copy()
-                if tf.window is None:  # points in data units: on the normalised axis of their span first
+                if tf.window is None:  # points in the input's units: on the normalised axis of their span first
                     points[:, 0] = (points[:, 0] - lo) / (hi - lo)
                 points[:, 4] *= opacity
                 window = (mid - half, mid + half)
@@ -172,6 +172,7 @@ class ShadedSource(Source):
             return None
         if self._histogram[0] is None or self._histogram[0]() is not stage:
             counts, edges = np.histogram(sample, bins=HISTOGRAM_BINS)
+            edges += stage.scalar.offset  # in the input's units, as the editor's window and points
             self._histogram = (weakref.ref(stage), dict(range=[float(edges[0]), float(edges[-1])],
                                                         counts=counts.tolist()))
         return self._histogram[1]
@@ -179,7 +180,8 @@ class ShadedSource(Source):
     def frames(self, state: ViewState, pace: ShadedPace):
         start = time.perf_counter()
         tracer = self.tracer  # None while a file's whole tracer is being set up: its coarse stage
-        # a scalar model's: its window and points in data units, figures of each frame (the page's editor draws them)
+        # a scalar model's: its window and points in the input's units, figures of each frame (the page's editor
+        # draws them)
         options, classified = dict(shading=state.shading), {}
         if self.scalar:
             # the tracer read once: another thread sets self.tracer when the whole file's is ready
@@ -246,8 +248,8 @@ class ShadedSource(Source):
 
 
 def _span(tf: TransferFunction, window) -> list:
-    """``window`` (lo, hi) in data units as a list, or for ``tf`` without one (window None: its points in data units)
-    the span of its points."""
+    """``window`` (lo, hi) in the input's units as a list, or for ``tf`` without one (window None: its points in the
+    input's units) the span of its points."""
     return [float(v) for v in (tf.points[[0, -1], 0] if window is None else window)]
 
 

@@ -72,7 +72,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         Chunked volumes hold a Dask array, read only when computed (docs/chunked.md).
     background : float
         Subtracted from every voxel (after ``hu_to_mu``), so that the data is ~0
-        outside the object.
+        outside the object; kept as the volume's ``offset``, so transfer functions
+        stay in the file's units (e.g. HU).
     hu_to_mu : bool
         Convert CT Hounsfield units to linear attenuation
         ``mu = mu_water * (1 + HU / 1000)``, clipped at 0 (air -> 0).
@@ -141,7 +142,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
-                  origin=origin if origin is not None else (0.0, 0.0, 0.0))
+                  origin=origin if origin is not None else (0.0, 0.0, 0.0), offset=background)
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):

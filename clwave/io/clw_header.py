@@ -1,0 +1,110 @@
+"""The checks of a ``.clw`` file's header and members (docs/chunked.md §4), made before anything is allocated: the
+file is untrusted, and any failure is a ValueError naming what is wrong (:func:`clwave.io.clw.open_clw` turns it
+into one line naming the file)."""
+
+from __future__ import annotations
+
+import json
+import zlib
+
+import numpy as np
+
+from ..errors import FileFormatError
+from ..model.bspline import WAVELET_ORDERS, max_levels
+
+FILE_FORMAT = "clwave-wavelet-volume"
+FILE_VERSION = 2
+MAX_HEADER = 1 << 20
+
+
+def parsed_header(h5, path) -> dict:
+    """The JSON header of an open ``.clw`` (a format or version not this clwave's: FileFormatError)."""
+    fmt, version = h5.attrs.get("format"), h5.attrs.get("version")
+    version = version.item() if isinstance(version, np.generic) else version
+    if fmt != FILE_FORMAT:
+        raise FileFormatError(f"{path} is an HDF5 file but not a clwave wavelet volume (format {fmt!r})")
+    if version != FILE_VERSION:
+        raise FileFormatError(f"{path} is a .clw file of format version {version!r}; this clwave reads version "
+                              f"{FILE_VERSION}: use the clwave that wrote it, or compress the volume again")
+    text = h5.attrs.get("header")
+    if not isinstance(text, str) or len(text) > MAX_HEADER:
+        raise ValueError("the header is missing or too long")
+    if h5.attrs.get("header_crc32") != zlib.crc32(text.encode()):  # HDF5 checksums datasets, not attributes
+        raise ValueError("the header does not match its checksum")
+    header = json.loads(text)
+    if not isinstance(header, dict):
+        raise ValueError(f"the header is a JSON {type(header).__name__}, not an object")
+    return header
+
+
+def checked_values(dataset, shape):
+    """A group's values: float32, or int32 with a finite positive scalar ``step`` attribute (returned)."""
+    import h5py
+
+    if not (isinstance(dataset, h5py.Dataset) and "step" in dataset.attrs):
+        check_dataset(dataset, shape, np.float32)
+        return None
+    stored = dataset.attrs.get_id("step")  # its shape and type before its value: an array is not read
+    if stored.shape != () or stored.dtype.kind != "f":
+        raise ValueError(f"member {dataset.name} has a quantisation step of shape {stored.shape} and type "
+                         f"{stored.dtype}, not one number")
+    step = dataset.attrs["step"]
+    if not (np.isfinite(step) and step > 0):
+        raise ValueError(f"member {dataset.name} has a quantisation step {step!r}, not one finite number > 0")
+    check_dataset(dataset, shape, np.int32)
+    return float(step)
+
+
+def check_dataset(dataset, shape, dtype):
+    """Refuse a member that is missing, of another shape or type, or chunked oddly (a decompression bomb
+    cannot hide in a chunk larger than the file allows)."""
+    import h5py
+
+    if not isinstance(dataset, h5py.Dataset):
+        raise ValueError("a member is missing or not a dataset")
+    if dataset.shape != tuple(shape) or dataset.dtype != dtype:
+        raise ValueError(f"member {dataset.name} is {dataset.shape} {dataset.dtype}, expected {tuple(shape)} "
+                         f"{np.dtype(dtype)}")
+    if dataset.chunks is not None and int(np.prod(dataset.chunks)) * dataset.dtype.itemsize > 1 << 26:
+        raise ValueError(f"member {dataset.name} has chunks of {dataset.chunks}, larger than a .clw writes")
+    # a .clw writes every chunk: a member whose chunks are not all stored would have the reader allocate
+    # for data the file does not hold
+    stored, whole = ((dataset.id.get_num_chunks(), int(np.prod([-(-n // c) for n, c in zip(shape, dataset.chunks)])))
+                     if dataset.chunks is not None else (dataset.id.get_storage_size(), dataset.nbytes))
+    if stored < whole:
+        raise ValueError(f"member {dataset.name} stores {stored} of its {whole} "
+                         f"{'chunks' if dataset.chunks is not None else 'bytes'}")
+
+
+def checked_header(header) -> tuple:
+    """``(shape, levels, channels, groups)`` of a header, each checked (ValueError names what is wrong)."""
+    shape = header.get("shape")
+    if not (isinstance(shape, list) and len(shape) == 3 and all(isinstance(n, int) and 2 <= n <= 1 << 20
+                                                                 for n in shape)):
+        raise ValueError(f"shape {shape!r} is not three whole numbers from 2 to 2^20")
+    shape = tuple(shape)
+    for name, positive in (("spacing", True), ("origin", False)):
+        value = header.get(name)
+        if not (isinstance(value, list) and len(value) == 3 and all(isinstance(v, (int, float)) for v in value)
+                and np.all(np.isfinite(value)) and (not positive or min(value) > 0)):
+            raise ValueError(f"{name} {value!r} is not three finite{' positive' if positive else ''} numbers")
+    offset = header.get("offset", 0.0)  # absent in older files: their values are the input's
+    if not (isinstance(offset, (int, float)) and not isinstance(offset, bool) and np.isfinite(offset)):
+        raise ValueError(f"offset {offset!r} is not one finite number")
+    levels, channels = header.get("levels"), header.get("channels")
+    if not (isinstance(levels, int) and 0 <= levels <= max_levels(shape)):
+        raise ValueError(f"levels {levels!r} is not possible for shape {shape}")
+    if not (isinstance(channels, int) and 1 <= channels <= 4):
+        raise ValueError(f"channels {channels!r} is not 1 to 4")
+    groups = header.get("groups")
+    if not (isinstance(groups, list) and groups):
+        raise ValueError("the file has no channel groups")
+    seen = []
+    for g in groups:
+        orders = sorted(WAVELET_ORDERS.values())
+        if not (isinstance(g, dict) and g.get("wavelet") in orders and isinstance(g.get("channels"), list)):
+            raise ValueError(f"channel group {g!r} is not a wavelet order {orders} with a list of channels")
+        seen += g["channels"]
+    if sorted(seen) != list(range(channels)):
+        raise ValueError(f"the groups hold channels {sorted(seen)}, not each of the {channels} once")
+    return shape, levels, channels, groups

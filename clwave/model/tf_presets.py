@@ -1,0 +1,57 @@
+"""The named transfer functions of :meth:`clwave.TransferFunction.preset` (docs/model.md §5), each a
+``(value, r, g, b, opacity)`` table and its default window; values in the input's units (HU for CT), however
+the volume stores them (:attr:`clwave.Volume.offset`)."""
+
+
+def _hu(points, lo, hi):
+    """Preset rows written in data units -> the normalised axis of window (lo, hi)."""
+    return tuple(((v - lo) / (hi - lo), r, g, b, a) for v, r, g, b, a in points)
+
+
+# Presets: points on the normalised axis [0, 1] plus a default window (lo, hi) in
+# data units mapping 0 -> lo and 1 -> hi ("auto": 0.5/99.5 percentiles).  Opacities
+# are per world unit (mm for CT and MRI, a voxel for the phantoms).
+PRESETS = {
+    # CT bone, Hounsfield units: transparent below +150 HU, 0.5/mm from 700 HU.
+    "ct-bone": dict(window=(-1000.0, 2000.0), points=_hu([
+        (-1000.0, 0.85, 0.55, 0.40, 0.0),
+        (150.0, 0.85, 0.55, 0.40, 0.0),
+        (300.0, 0.95, 0.82, 0.65, 0.1),
+        (700.0, 1.00, 0.95, 0.85, 0.5),
+        (2000.0, 1.00, 1.00, 1.00, 0.5),
+    ], -1000.0, 2000.0)),
+    # CT soft tissue: fat (-100 HU) yellow and faint, muscle/organs (+40 HU) red,
+    # bone (> +300 HU) white and denser; air and lung transparent below -200 HU.
+    "ct-soft-tissue": dict(window=(-1000.0, 1000.0), points=_hu([
+        (-1000.0, 0.95, 0.80, 0.55, 0.0),
+        (-200.0, 0.95, 0.80, 0.55, 0.0),
+        (-100.0, 0.95, 0.80, 0.55, 0.01),
+        (40.0, 0.85, 0.35, 0.30, 0.03),
+        (300.0, 0.95, 0.90, 0.85, 0.05),
+        (1000.0, 1.00, 1.00, 1.00, 0.3),
+    ], -1000.0, 1000.0)),
+    # MRI (arbitrary units, auto window): background noise transparent, then a
+    # warm grey ramp up to 0.06/mm at the 99.5th percentile.
+    "mri": dict(window="auto", points=(
+        (0.0, 0.60, 0.45, 0.40, 0.0),
+        (0.1, 0.60, 0.45, 0.40, 0.0),
+        (0.3, 0.75, 0.60, 0.55, 0.01),
+        (0.6, 0.95, 0.85, 0.75, 0.03),
+        (1.0, 1.00, 1.00, 1.00, 0.06),
+    )),
+    # Hydrogen phantom (max 1): low density transparent, blue -> yellow -> red,
+    # up to 0.1 per world unit.  A ray through one lobe (n = 128 .. 256, spacing 1)
+    # collects A = ∫alpha ≈ 2 .. 4; the torus (value 0.25) shows light blue.
+    "hydrogen": dict(window=(0.0, 1.0), points=(
+        (0.00, 0.05, 0.10, 0.60, 0.0),
+        (0.05, 0.10, 0.25, 1.00, 0.0),
+        (0.25, 0.20, 0.60, 1.00, 0.02),
+        (0.55, 1.00, 0.90, 0.20, 0.05),
+        (1.00, 1.00, 0.20, 0.05, 0.1),
+    )),
+    # Linear grey ramp, auto window: colour and opacity (0 .. 0.05/unit) rise together.
+    "grey": dict(window="auto", points=(
+        (0.0, 0.0, 0.0, 0.0, 0.0),
+        (1.0, 1.0, 1.0, 1.0, 0.05),
+    )),
+}

@@ -1,0 +1,175 @@
+"""A volume loaded with ``background=b`` (``--subtract b``) stores the input's values minus b and records b as its
+``offset`` (the model's, the ``.clw`` file's); transfer functions stay in the input's units (HU for the ct-* presets)
+and classify it alike (docs/coordinates.md §1, docs/model.md §5)."""
+
+import json
+import zlib
+
+import dask.array as da
+import h5py
+import numpy as np
+import pytest
+
+import clwave
+from clwave.errors import FileFormatError, NothingVisibleError
+from clwave.model.transfer import TransferFunction, auto_window
+from clwave.model.volume import Volume
+from test_cli import run
+
+AIR = -1000.0
+
+
+def ct_in_hu():
+    """Soft tissue (+40 HU) with a bone core (+700 HU) and a pocket of air (-1000 HU), 16^3: the tissue reaches every
+    face, so the default framing (the non-zero voxels' box) is the volume's with or without the offset."""
+    ct = np.full((16, 16, 16), 40.0, np.float32)
+    ct[3:13, 3:6, 3:13] = AIR
+    ct[6:10, 8:12, 6:10] = 700.0
+    return ct
+
+
+@pytest.fixture
+def ct_file(tmp_path):
+    np.save(tmp_path / "ct.npy", ct_in_hu())
+    return tmp_path / "ct.npy"
+
+
+def test_load_with_a_background_records_it_and_classifies_in_the_files_units(ct_file):
+    hu, shifted = clwave.load(ct_file), clwave.load(ct_file, background=AIR)
+    assert hu.offset == 0.0 and shifted.offset == AIR
+    np.testing.assert_array_equal(shifted.data, ct_in_hu() - AIR)  # stored: HU + 1000, air at 0
+    for tf in (TransferFunction.preset("ct-bone"), TransferFunction.preset("ct-soft-tissue"),
+               TransferFunction.preset("ct-bone", window=(-500.0, 1500.0))):
+        want, got = tf.classify(hu).data, tf.classify(shifted).data
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
+        assert tf.classify(shifted).offset == 0.0  # classified values are no longer the input's
+    bone = TransferFunction.preset("ct-bone").classify(shifted).data[..., 3]
+    assert bone[8, 10, 8] == 0.5 and bone[1, 1, 1] == 0.0  # the core is bone, the 40 HU tissue clear (not 1040 HU)
+
+
+def test_points_without_a_window_and_an_auto_window_are_the_files_too():
+    ct = ct_in_hu()
+    points = [(-1000.0, 0, 0, 0, 0.0), (0.0, 1, 0, 0, 0.0), (500.0, 1, 1, 1, 0.2)]  # values in HU, window None
+    tf = TransferFunction(points)
+    np.testing.assert_allclose(tf.classify(Volume(ct - AIR, offset=AIR)).data, tf.classify(Volume(ct)).data,
+                               rtol=1e-6, atol=1e-7)
+    np.testing.assert_array_equal(tf.shifted(AIR).points[:, 0], [0.0, 1000.0, 1500.0])
+    assert TransferFunction.preset("ct-bone").shifted(AIR).window == (0.0, 3000.0)
+    grey = TransferFunction.preset("grey")  # "auto": the percentiles of the stored values, not shifted
+    assert grey.shifted(AIR) is grey
+    stored = ct - AIR
+    np.testing.assert_array_equal(grey.classify(Volume(stored, offset=AIR)).data, grey.classify(Volume(stored)).data)
+    # recorded in the input's units: the same window with or without the offset
+    lo, hi = auto_window(ct)
+    np.testing.assert_allclose(grey.resolved(Volume(ct - AIR, offset=AIR)).window, (lo, hi), rtol=1e-12)
+
+
+def test_nothing_visible_quotes_the_files_units():
+    air = Volume(np.zeros((4, 4, 4)), offset=AIR)  # all air, stored as 0
+    for check in (TransferFunction.preset("ct-bone").classify, TransferFunction.preset("ct-bone").check_visible):
+        with pytest.raises(NothingVisibleError, match=r"span -1000 \.\. 2000 and the volume's values lie within "
+                                                      r"-1000 \.\. -1000;"):
+            check(air)
+
+
+def test_the_offset_goes_through_the_model_and_its_file(tmp_path):
+    vol = Volume(ct_in_hu() - AIR, offset=AIR)
+    wv = clwave.WaveletVolume.from_volume(vol, "cubic", levels=1)
+    assert wv.offset == AIR and wv.threshold(keep=0.5).offset == AIR and wv.reconstruct().offset == AIR
+    path = wv.threshold(keep=0.5).save(tmp_path / "m.clw")
+    assert clwave.WaveletVolume.open(path).offset == AIR
+    chunked = Volume(da.from_array(vol.data, chunks=8), offset=AIR)
+    model = clwave.WaveletVolume.from_volume(chunked, "cubic", levels=1)
+    assert model.offset == AIR and model.threshold(keep=0.5).compute().offset == AIR
+    assert clwave.WaveletVolume.open(model.save(tmp_path / "c.clw")).offset == AIR
+    np.testing.assert_array_equal(  # chunked classification shifted as in memory
+        TransferFunction.preset("ct-bone").classify(chunked).data.compute(),
+        TransferFunction.preset("ct-bone").classify(vol).data)
+    with h5py.File(path, "r+") as h5:  # a file written before the offset: its values are the input's
+        header = json.loads(h5.attrs["header"])
+        del header["offset"]
+        h5.attrs["header"] = json.dumps(header)
+        h5.attrs["header_crc32"] = zlib.crc32(h5.attrs["header"].encode())
+    assert clwave.WaveletVolume.open(path).offset == 0.0
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), "-1000", True, [1.0]])
+def test_a_hostile_offset_is_refused_in_one_line(tmp_path, capsys, value):
+    path = clwave.WaveletVolume.from_volume(Volume(ct_in_hu()), "cubic", levels=1).save(tmp_path / "m.clw")
+    with h5py.File(path, "r+") as h5:
+        header = json.loads(h5.attrs["header"])
+        header["offset"] = value
+        h5.attrs["header"] = json.dumps(header)
+        h5.attrs["header_crc32"] = zlib.crc32(h5.attrs["header"].encode())
+    with pytest.raises(FileFormatError, match="offset") as err:
+        clwave.WaveletVolume.open(path)
+    assert "\n" not in str(err.value)
+    code, _, err = run(capsys, "render", str(path), "--size", "8", "-o", str(tmp_path / "o.png"))
+    assert code == 2 and err.count("\n") == 1 and "offset" in err, err
+    assert not (tmp_path / "o.png").exists()
+
+
+def _image(capsys, tmp_path, name, *argv):
+    raw = tmp_path / f"{name}.npy"
+    code, _, err = run(capsys, *argv, "--size", "12", "--raw", str(raw), "-o", str(tmp_path / f"{name}.png"),
+                         "--force")
+    assert code == 0, err
+    return np.load(raw)
+
+
+def test_subtract_and_a_ct_preset_on_the_command_line_pre_and_post_classified(ct_file, tmp_path, capsys):
+    """--subtract -1000 --tf ct-bone: the same image as without --subtract, classified before the transform (splat,
+    ray tracing) or while ray tracing (a scalar .clw with --classify post, or --tf given at render)."""
+    common = ["--levels", "1", "--threshold", "0"]  # every coefficient (--keep 1 keeps as many as voxels)
+    for method in ("splat", "raytrace"):
+        want = _image(capsys, tmp_path, "a", "render", str(ct_file), "--tf", "ct-bone", "--method", method, *common)
+        got = _image(capsys, tmp_path, "b", "render", str(ct_file), "--tf", "ct-bone", "--method", method,
+                     "--subtract", "-1000", *common)
+        assert want[..., 3].max() > 0.1  # the bone core shows
+        np.testing.assert_allclose(got, want, atol=1e-5)
+    for name, extra in (("hu", []), ("shifted", ["--subtract", "-1000"])):
+        code, _, err = run(capsys, "compress", str(ct_file), "--tf", "ct-bone", "--classify", "post", *common, *extra,
+                           "-o", str(tmp_path / f"{name}.clw"))
+        assert code == 0, err
+        code, _, err = run(capsys, "compress", str(ct_file), *common, *extra, "-o", str(tmp_path / f"{name}-s.clw"))
+        assert code == 0, err
+    assert clwave.WaveletVolume.open(tmp_path / "shifted.clw").offset == AIR
+    assert clwave.WaveletVolume.open(tmp_path / "shifted.clw").transfer_function["window"] == [-1000.0, 2000.0]
+    want = _image(capsys, tmp_path, "c", "render", str(tmp_path / "hu.clw"), "--method", "raytrace")
+    assert want[..., 3].max() > 0.1
+    for argv in ([str(tmp_path / "shifted.clw")], [str(tmp_path / "shifted-s.clw"), "--tf", "ct-bone"]):
+        got = _image(capsys, tmp_path, "d", "render", *argv, "--method", "raytrace")
+        np.testing.assert_allclose(got, want, atol=1e-4)
+    code, _, err = run(capsys, "render", str(tmp_path / "shifted-s.clw"), "--method", "raytrace", "--tf", "ct-bone",
+                       "--tf-window", "1500,3000", "--size", "8", "-o", str(tmp_path / "e.png"))
+    assert code == 2 and "span 1500 .. 3000" in err and "-1000 .. 7" in err, err  # the file's HU, not HU + 1000
+
+
+def test_the_viewers_editor_shows_the_files_units():
+    """A scalar model with an offset in the viewer: the histogram behind the editor, and the window each frame carries
+    (an "auto" one: the pool's percentiles), are in the input's units, the stored values plus the offset; the final
+    frame is clwave.raytrace with that window (given in the input's units)."""
+    from test_view import BASE, decode, frames_until_final, run as run_async, socket_url
+
+    import aiohttp
+
+    from clwave.view import view
+
+    wv = clwave.WaveletVolume.from_volume(Volume(clwave.phantom("hydrogen", 16).data, offset=-1.0), levels=1)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            await ws.receive_json()
+            texts = []
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded")))
+            return texts, await frames_until_final(ws, 1, texts=texts), v.server.sources["shaded"].tracer.scalar.sample
+    with view(wv, size=24, tolerance=2e-2, tf=TransferFunction.preset("grey")) as v:
+        texts, frames, sample = run_async(go(v))
+    histogram = [t for t in texts if t["type"] == "histogram"][0]
+    np.testing.assert_allclose(histogram["range"], [sample.min() - 1.0, sample.max() - 1.0], rtol=1e-12)
+    window = [w - 1.0 for w in auto_window(sample)]
+    np.testing.assert_allclose(frames[-1][0]["tf_window"], window, rtol=1e-12)
+    expect = clwave.raytrace(wv, clwave.Camera(30.0, 20.0, 24, extent=frames[-1][0]["extent"]), tolerance=2e-2,
+                             transfer_function=TransferFunction.preset("grey", window=window))
+    assert np.abs(decode(frames[-1][1]).astype(int) - expect.to_uint8(background=(0, 0, 0))).max() <= 1
