@@ -54,6 +54,20 @@ def test_chunked_transform_and_threshold_equal_the_in_memory_ones(rng, wavelet):
     assert_same(ref.threshold(keep=0.07), model.threshold(keep=0.07).compute())
 
 
+def test_keep_one_keeps_every_coefficient_in_memory_chunked_and_from_a_file(rng, tmp_path):
+    # keep=1 kept as many coefficients as voxels, where a model has more (B-splines reach past the faces): not every
+    # coefficient, as --keep's help says (offset17)
+    vol, dvol = pair(rng)
+    ref = clwave.WaveletVolume.from_volume(vol, "cubic", levels=1)
+    live = int(np.count_nonzero(ref.groups[0].values[0]))
+    assert live > vol.data.size  # more than the voxels: what keep=1 cut
+    every = ref.threshold(keep=1)
+    assert every.kept == live and np.abs(every.reconstruct().data - vol.data).max() < 1e-5  # perfect reconstruction
+    assert_same(every, clwave.WaveletVolume.from_volume(dvol, "cubic", levels=1).threshold(keep=1).compute())
+    every.save(tmp_path / "m.clw")
+    assert_same(clwave.WaveletVolume.open(tmp_path / "m.clw", keep=1), clwave.WaveletVolume.open(tmp_path / "m.clw"))
+
+
 def test_rgba_mixed_orders_focus_and_every_rule(rng):
     vol, dvol = pair(rng, channels=4)
     wavelets = ["cubic", "cubic", "cubic", "haar"]  # cubic colour, Haar opacity (paper Fig. 14)

@@ -300,7 +300,9 @@ def note_stored(args, wv):
     """One line on stderr where a ``.clw`` input's ``--keep`` (below 1, "every coefficient") asks for more
     coefficients than the file stores: all it stores are used.  Not refused: a file holds fewer than its own
     ``--keep`` where the rest were zero, and the file cannot tell which."""
-    asked = None if args.keep is None or args.keep == 1 else max(1, round(args.keep * wv.n_voxels))
+    from ..model.wavelet import kept_count
+
+    asked = None if args.keep is None else kept_count(args.keep, wv.n_voxels)
     stored = min(g.kept for g in wv.groups)
     if asked is not None and stored < asked:
         warn(f"--keep {args.keep:g} asks for {asked:,} coefficients, and {args.input} stores {stored:,} "

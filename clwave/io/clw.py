@@ -39,7 +39,7 @@ from ..model.bspline import SplineWavelet
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
-from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
+from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of, kept_count
 from ..threads import background
 from .clw_header import (FILE_FORMAT, FILE_VERSION, MAX_HEADER, check_dataset, checked_header, checked_values,
                          parsed_header)
@@ -312,7 +312,7 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
         keep = check_thresholding(keep, None, None)[0]
     with open_clw(path) as (h5, header):
         shape, levels, channels, groups_header = checked_header(header)
-        budget = None if keep is None else max(1, int(round(keep * int(np.prod(shape)))))
+        budget = None if keep is None else kept_count(keep, int(np.prod(shape)))
         frame = (shape, tuple(header["spacing"]), tuple(header["origin"]))
         data = h5.get("content_mask")
         if data is not None:

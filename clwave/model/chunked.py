@@ -25,7 +25,7 @@ from .transform import KEYS, band_layout, check_coefficients
 from .volume import Volume, content_of
 from .mask import ContentMask
 from .wavelet import (ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding,
-                      warn_short_budget)
+                      kept_count, warn_short_budget)
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
 MAX_BLOCKS = 4096           # and into at most this many blocks a level
@@ -187,10 +187,10 @@ class ChunkedWaveletVolume:
         if not all(_keeps_every(rules) for rules in self.rules):
             raise InputError("this chunked model is thresholded already: threshold the model from_volume gave, or "
                              "compute() this one and threshold that")
-        if keep is None:
+        budget = None if keep is None else kept_count(keep, self.n_voxels)
+        if budget is None:  # a threshold, or keep=1: every live coefficient
             rules = [(Rule(), Rule(above=threshold))] * len(self.groups())
         else:
-            budget = max(1, int(round(keep * self.n_voxels)))
             hists = self._histograms(focus)
             short = max((n for n in (int(h[APPROX].sum()) for h in hists) if budget < n), default=0)
             if short:  # told before the selection pass, as the in-memory model tells it

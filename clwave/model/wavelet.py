@@ -250,7 +250,7 @@ class WaveletVolume:
         Parameters
         ----------
         keep : float in (0, 1]
-            Keep ``round(keep * number_of_voxels)`` positions: the coarsest
+            Keep ``round(keep * number_of_voxels)`` positions (1: every coefficient): the coarsest
             approximation band first (its largest coefficients if the budget is
             smaller), then details by ``|c| * ||basis||`` (max over channels).
         threshold : float >= 0
@@ -267,7 +267,7 @@ class WaveletVolume:
                             interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
                             content_mask=self.content_mask, offset=self.offset)
-        budget = None if keep is None else max(1, int(round(keep * self.n_voxels)))
+        budget = None if keep is None else kept_count(keep, self.n_voxels)
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
             # one float32 per position, no index array of them all (the peak of compressing, docs/benchmarks.md §2)
@@ -279,8 +279,9 @@ class WaveletVolume:
             zero = None
             stop = g.band_slices()[0].stop  # the approximation band ranks first
             approx, detail = np.flatnonzero(imp[:stop] >= 0), imp[stop:]
-            if budget is None:
-                chosen = np.concatenate([approx, stop + np.flatnonzero(detail > threshold)])
+            if budget is None:  # a threshold, or keep=1: every live coefficient (importance >= 0)
+                chosen = np.concatenate([approx, stop + np.flatnonzero(detail > threshold if keep is None
+                                                                       else detail >= 0)])
             elif budget <= len(approx):
                 chosen = approx[_top(imp[approx], budget)]
                 short = max(short, len(approx) if budget < len(approx) else 0)
@@ -464,6 +465,12 @@ def _check_levels(levels, shape) -> int:
         why = f"is not possible for shape {shape}: use an integer from 0 to {top} (floor(log2(shortest axis)) - 1)"
         raise InputError(f"levels={levels!r} {why}", cli=f"--levels {levels} {why}")
     return int(levels)
+
+
+def kept_count(keep, n_voxels) -> int | None:
+    """The coefficients ``keep=`` keeps: ``round(keep * n_voxels)``, at least 1; None (every coefficient) for
+    ``keep=1``, for a model has more coefficients than voxels (B-splines reach past the volume's faces)."""
+    return None if keep == 1 else max(1, int(round(keep * n_voxels)))
 
 
 def check_thresholding(keep, threshold, focus) -> tuple:
