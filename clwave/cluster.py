@@ -18,10 +18,9 @@ _LOCK = threading.Lock()
 def check_model_file(wv, what: str):
     """InputError unless ``wv`` was opened from a ``.clw`` file as it is there: the workers of a cluster open
     the file themselves (docs/raytracing.md §7); ``what`` names the rendering."""
-    from .model.wavelet import WaveletVolume
+    from .model.wavelet import check_model
 
-    if not isinstance(wv, WaveletVolume):
-        raise InputError(f"{what} needs a clwave.WaveletVolume")
+    check_model(wv, what)
     if wv.source is None:
         raise InputError(f"{what} on a Dask cluster needs a model opened from a .clw file, as it is (its workers "
                          "open the file themselves): save it (wv.save) and render WaveletVolume.open(path)",

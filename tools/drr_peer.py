@@ -155,6 +155,8 @@ def main(argv=None):
         print(f"drr_peer: skipped: {args.peer_python} cannot import diffdrr and torch (docs/peers.md §5)")
         return
     if args.rays:
+        if not args.rays.endswith(".npz"):  # numpy.savez would add it, past the check below
+            sys.exit(f"drr_peer: --rays {args.rays} must end in .npz")
         if os.path.exists(args.rays):
             sys.exit(f"drr_peer: {args.rays} exists; remove it or name another file")
         subprocess.run([args.peer_python, __file__, "--diffdrr-rays", args.rays], check=True)
