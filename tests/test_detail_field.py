@@ -1,15 +1,17 @@
 """The details' field energy a ``.clw`` file holds for the staged tracer's estimate (clwave/io/detail_field.py,
-docs/chunked.md §4, docs/raytracing.md §9): against a midpoint sum of the closed-form field, read back as the
-tiers' energy with the coarsest level's replaced, and refused in one line where the file's figure is damaged."""
+docs/chunked.md §4, docs/raytracing.md §9): against a midpoint sum of the closed-form field, its tier count against
+the file's run table (quantised files too), read back as the tiers' energy with the coarsest level's replaced, and
+refused in one line where the file's figure is damaged."""
 
 import h5py
 import numpy as np
 import pytest
 
-from clwave import WaveletVolume
+from clwave import RayTracer, TransferFunction, WaveletVolume, phantom
 from clwave.errors import FileFormatError
 from clwave.io.summary import detail_energy, detail_field
-from clwave.model.wavelet import importance_of
+from clwave.model.chunked import tier_energy, tiers_of
+from clwave.model.wavelet import band_importance, importance_of
 from test_bricks import smooth_volume
 
 
@@ -52,8 +54,8 @@ def coarsest_field_energy(group, level) -> float:
 def test_the_figure_is_the_coarsest_details_field_energy(saved):
     """The first figure against the energy of the field of level L's details from the closed-form functions
     (:func:`coarsest_field_energy`; the writer's synthesis in float32, summed in float64), scaled to the importances'
-    convention as the writer scales it; the second
-    within a tier's ``2^(1/8)`` of their squared importances."""
+    convention as the writer scales it; the second within a tier's ``9/8`` of their squared importances (3 mantissa
+    bits: an importance just under 1.125 is counted 1.125, 0.889 of its square)."""
     assert_figure_of(*saved)
 
 
@@ -76,11 +78,11 @@ def assert_figure_of(path, wv):
         field = coarsest_field_energy(g, wv.levels)
         assert importances > 0 and field > 0
         assert figure[0] == pytest.approx(field * importances / plain, rel=1e-6)  # synthesized in float32
-        assert 2 ** -0.125 <= figure[1] / importances <= 2 ** 0.125
+        assert 8 / 9 <= figure[1] / importances <= 9 / 8
 
 
 def test_the_details_energy_is_the_tiers_with_the_coarsest_levels_field(saved):
-    """detail_field: the finer levels' squared importances (within a tier's 2^(1/8)) plus the coarsest level's
+    """detail_field: the finer levels' squared importances (within a tier's 9/8) plus the coarsest level's
     field energy (here above their importance energy: smooth blobs' details add up, where the test models' cancel)."""
     path, wv = saved
     with h5py.File(path) as h5:
@@ -90,8 +92,64 @@ def test_the_details_energy_is_the_tiers_with_the_coarsest_levels_field(saved):
         imp = importance_of(g, None, wv.frame).astype(np.float64) ** 2
         finer += imp[g.band_slices()[8].start:].sum()
     assert finer > 0
-    assert 2 ** -0.125 <= (detail_field(path) - fields) / finer <= 2 ** 0.125
+    assert 8 / 9 <= (detail_field(path) - fields) / finer <= 9 / 8
     assert detail_field(path) > detail_energy(path)
+
+
+def run_table_energies(path, group) -> np.ndarray:
+    """NumPy oracle: the coarsest level's and the finer levels' details in a file's run table (``g<i>/runs``, each
+    run's positions its differences summed from 0), each row counted at its tier's bounds' product (the float32s
+    whose top 12 bits are the tier and the next), per group of the model ``group`` lists the bands of."""
+    out = []
+    with h5py.File(path) as h5:
+        for gi, bands in enumerate(group):
+            runs, deltas, energies = h5[f"g{gi}/runs"][...], h5[f"g{gi}/positions"][...], np.zeros(2)
+            for tier, start, rows in runs[runs[:, 0] >= 0]:
+                positions = np.cumsum(deltas[start:start + rows])
+                lo, hi = (np.array([tier, tier + 1], np.uint32) << 20).view(np.float32).astype(np.float64)
+                finer = positions >= bands[8].start  # level L's seven detail bands come before
+                energies += lo * hi * np.array([np.sum(~finer), np.sum(finer)])
+            out.append(energies)
+    return np.array(out)
+
+
+@pytest.fixture(scope="module")
+def hydrogen():
+    """Hydrogen 48^3 RGBA, cubic, 3 levels, 5 % kept."""
+    rgba = TransferFunction.preset("hydrogen").classify(phantom("hydrogen", 48))
+    return WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05)
+
+
+@pytest.mark.parametrize("quantise", [3.0, 5.0, 8.0])
+def test_a_quantised_files_tier_count_is_its_run_tables(hydrogen, tmp_path, quantise):
+    """The run table holds the tiers of the values before rounding, and rounding moves them across tiers (here the
+    rounded values' count of the coarsest level is 1.03-1.25 of the whole table's): the second figure is the table's
+    count of the coarsest level, so that detail_field is the table's finer levels plus the field, and the staged
+    tracer opens the file."""
+    path = hydrogen.save(tmp_path / "q.clw", quantise=quantise)
+    tables = run_table_energies(path, [g.bands for g in hydrogen.groups])
+    with h5py.File(path) as h5:
+        figures = np.array([h5[f"g{gi}/detail_field"][...] for gi in range(len(hydrogen.groups))])
+    assert np.all(tables > 0)
+    np.testing.assert_allclose(figures[:, 1], tables[:, 0], rtol=1e-12)
+    assert detail_field(path) == pytest.approx(tables[:, 1].sum() + figures[:, 0].sum(), rel=1e-12)
+    assert 0 < RayTracer.open(path).missing < 1
+
+
+def test_a_float_files_tier_count_is_unchanged(hydrogen, tmp_path):
+    """Unquantised, the run table's tiers are those of the stored values: the second figure is, bit for bit, their
+    tiers' count band by band as the figure was first written (from the values), and the table's."""
+    path = hydrogen.save(tmp_path / "f.clw")
+    read = WaveletVolume.open(path)
+    with h5py.File(path) as h5:
+        figures = np.array([h5[f"g{gi}/detail_field"][1] for gi in range(len(read.groups))])
+    for g, figure in zip(read.groups, figures, strict=True):
+        first = 0.0
+        for band, dense in zip(g.bands[1:8], g.dense_bands()[1:8]):
+            imp = band_importance(g.wavelet, band, dense.reshape(-1, dense.shape[-1]).T, None, None, None)
+            first += float(np.sum(tier_energy(tiers_of(imp[imp > 0]))))
+        assert figure == first > 0
+    np.testing.assert_allclose(figures, run_table_energies(path, [g.bands for g in read.groups])[:, 0], rtol=1e-12)
 
 
 def test_a_file_without_the_figure_reads_none(saved, tmp_path):

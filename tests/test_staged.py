@@ -69,15 +69,16 @@ def test_the_coarse_volume_is_the_approximations_field(tmp_path, wavelet):
 
 
 def test_the_energy_of_the_details_is_read_from_the_tiers_alone(model_file):
-    """detail_energy against the sum of the squared importances of the whole file's details (each tier spans
-    2^(1/8), so the two agree within that); StagedTracer.missing is the share of the details' (detail_field: the
-    coarsest level's as a field, tests/test_detail_field.py) in theirs and the approximation's field energy, the
-    latter the sum of squares of the approximation's field on the lattice (reconstructed; scaled to the
-    importances' largest channel as their sum over the coefficients)."""
+    """detail_energy against the sum of the squared importances of the whole file's details (a tier counts each
+    within 9/8 of its square: 3 mantissa bits, linear within an octave; so the two agree within that);
+    StagedTracer.missing is the share of the details' (detail_field: the coarsest level's as a field,
+    tests/test_detail_field.py) in theirs and the approximation's field energy, the latter the sum of squares of the
+    approximation's field on the lattice (reconstructed; scaled to the importances' largest channel as their sum over
+    the coefficients)."""
     whole = WaveletVolume.open(model_file)
     parts = [importance_of(g, None, whole.frame).astype(np.float64) ** 2 for g in whole.groups]
     details = sum(p.sum() - p[g.band_slices()[0]].sum() for p, g in zip(parts, whole.groups))
-    assert details > 0 and 2 ** -0.125 <= detail_energy(model_file) / details <= 2 ** 0.125
+    assert details > 0 and 8 / 9 <= detail_energy(model_file) / details <= 9 / 8
     approximation = WaveletVolume.open(model_file, approximation=True)
     approximation.content_mask = None
     step = 4  # the level-3 field is smooth at 8 cells: a midpoint sum of 4-cell steps, past the support
@@ -225,9 +226,9 @@ def test_the_coarse_frames_estimate_bounds_their_error(tmp_path, monkeypatch):
 def test_kept_details_and_the_clamp_are_not_counted_twice_in_a_shaded_frame(tmp_path, monkeypatch):
     """Where details are kept they cancel the approximation's haze off the content, which the clamp removes (the
     clamp alone changes hydrogen 256^3's 128^2 image at 5 % by 0.4 % of what the details do): a shaded coarse frame
-    takes the larger of the two terms, not both.  Hydrogen 128^3 at 5 % (rho 0.12, kappa 0.07) to 256^2, a set not
-    fitted on: both coarse frames within [1, 4] of their error (RMS 4.05x and more with both terms; docs/raytracing.md
-    §9)."""
+    takes the larger of the two terms, not both.  Hydrogen 128^3 at 5 % (rho 0.12, kappa 0.07) to 256^2: a case of
+    the held-out set the change was judged on (tools/staged_estimate.py --held-out), pinned here; both coarse frames
+    within [1, 4] of their error (RMS 4.05x and more with both terms; docs/raytracing.md §9)."""
     path = tmp_path / "hydrogen.clw"
     rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", n=128))
     WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.05).save(path)

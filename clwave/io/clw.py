@@ -247,8 +247,8 @@ class _Tiers:
             step = np.float64(self.steps[gi])
             kept = np.any(np.rint(values / step) != 0, axis=0)
             positions, values, tiers = positions[kept], values[:, kept], tiers[kept]
-        if self.fields:  # the figure of what a reader gets back
-            self.fields[gi].add(positions, values if self.steps is None else np.rint(values / step) * step)
+        if self.fields:  # the figure of what a reader gets back, and of the tiers the run table holds
+            self.fields[gi].add(positions, values if self.steps is None else np.rint(values / step) * step, tiers)
         names = np.where(positions < self.approx_sizes[gi], -1, tiers)  # the approximation: band 0 of the layout
         for tier in np.unique(names)[::-1]:
             sel = names == tier

@@ -17,8 +17,8 @@ from .clw_header import check_dataset, checked_header
 def detail_energy(path) -> float:
     """The sum of the squared importances (``|c| ||basis||``, :func:`~clwave.model.wavelet.band_importance`) of
     a ``.clw`` file's stored details, from its tiers' run tables alone (a few kilobytes, no coefficient read):
-    a tier holds importances within ``2^(1/8)`` of each other, each counted at the tier's geometric middle.  What
-    the approximation alone leaves out (docs/raytracing.md §9)."""
+    each counted at its tier's geometric middle squared, within ``9/8`` of its importance squared
+    (:func:`~clwave.model.chunked.tier_energy`).  What the approximation alone leaves out (docs/raytracing.md §9)."""
     energy = 0.0
     with open_clw(path) as (h5, header):
         for gi in range(len(checked_header(header)[3])):
@@ -36,7 +36,9 @@ def detail_field(path, tiered=None) -> float | None:
     energy, both written with the file (:mod:`.detail_field`); None where a group lacks that figure (a file written
     before it)."""
     energy = detail_energy(path) if tiered is None else tiered
-    most, coarsest = energy * 2 ** 0.125, 0.0  # the tiers' rounding: a tier's energy within 2^(±1/8) of its values'
+    # the figures count the coarsest level from the run table's own tiers (:mod:`.detail_field`): together at most
+    # the table's sum, the margin for float rounding only
+    most, coarsest = energy * (1 + 1e-9), 0.0
     with open_clw(path) as (h5, header):
         for gi in range(len(checked_header(header)[3])):
             data = h5.get(f"g{gi}/detail_field")
@@ -48,10 +50,10 @@ def detail_field(path, tiered=None) -> float | None:
                 raise ValueError(f"member {data.name} holds {figure.tolist()}, not two finite energies >= 0")
             coarsest += figure[1]
             energy += figure[0] - figure[1]
-            if coarsest > most * (1 + 1e-9) or not np.isfinite(energy):
+            if coarsest > most or not np.isfinite(energy):
                 raise ValueError(f"member {data.name} holds {figure.tolist()}, more energy than the file's tiers "
                                  f"({most:.6g})")
-    return max(float(energy), 0.0)  # the tiers' sum less the coarsest level's, rounded: not below 0
+    return max(float(energy), 0.0)  # the tiers' sum less the coarsest level's: not below 0 by float rounding
 
 
 def approximation_occupancy(path) -> list:

@@ -45,8 +45,9 @@ def tiers_of(importance: np.ndarray) -> np.ndarray:
 
 
 def tier_energy(tiers) -> np.ndarray:
-    """float64: the squared importance each tier (>= 0, finite) stands for, its geometric middle squared (the product
-    of its bounds, within ``2^(1/8)`` of each of its importances squared)."""
+    """float64: the squared importance each tier (>= 0, finite) stands for, its geometric middle squared: the product
+    of its bounds, within ``9/8`` of each of its importances squared (a tier is 3 mantissa bits, linear within an
+    octave: the bounds of an octave's k-th tier are ``(9 + k) / (8 + k)`` apart, at most 9/8)."""
     tiers = np.asarray(tiers).astype(np.uint32)
     return ((tiers << TIER_SHIFT).view(np.float32).astype(np.float64)
             * ((tiers + 1) << TIER_SHIFT).view(np.float32))
