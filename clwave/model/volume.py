@@ -51,6 +51,9 @@ class Volume:
             raise InputError(
                 f"volume dtype {arr.dtype} is not numeric; give integers or floats "
                 "(complex, object and string data cannot be rendered)")
+        if lazy and np.isnan(arr.shape).any():  # e.g. d[d[:, 0, 0] > 0]: its chunks are known once computed
+            raise InputError(f"this Dask array's shape {arr.shape} is unknown (chunks of unknown size, e.g. from a "
+                             f"boolean index); give dask_array.compute_chunk_sizes() first")
         if arr.ndim not in (3, 4):
             raise InputError(
                 f"volume must be 3-D (z, y, x) or 4-D (z, y, x, c), got shape {arr.shape}")
