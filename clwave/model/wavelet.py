@@ -18,7 +18,7 @@ from ..errors import ClwaveWarning, InputError, finite_number
 from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from . import geometry
-from .geometry import fine_to_world, world_to_fine
+from .geometry import fine_to_world, world_points, world_to_fine
 from .mask import ContentMask
 from .ranking import CoefficientTable, by_importance, ranked_table
 from .transform import (apply_sampling_filter, band_sum, crop_to_grid, decompose, reconstruct_channel,
@@ -331,9 +331,7 @@ class WaveletVolume:
         return self._evaluate(points, derivative=True)
 
     def _evaluate(self, points, derivative):
-        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise InputError(f"points must have shape (N, 3) as (x, y, z), got {np.shape(points)}")
+        pts = world_points(points)
         n_pts = len(pts)
         out = np.zeros((n_pts, self.channels, 3) if derivative else (n_pts, self.channels))
         for g, bands in zip(self.groups, self._dense):
