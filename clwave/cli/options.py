@@ -422,7 +422,8 @@ def add_raytrace_options(p):
                    "'none' for ambient only (default: a headlight)")
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
-    g.add_argument("--background", help="PNG: colour R,G,B in 0..1 behind the volume (default 0,0,0, black)")
+    g.add_argument("--background", help="PNG: colour R,G,B behind the volume, linear RGB in 0..1, composited before "
+                                        "the sRGB encoding (0.5 is shown as 188; default 0,0,0, black)")
     g.add_argument("--field", choices=("bspline", "wavelet"),
                    help="evaluate the field from fine B-spline grids (fast, the default) or from the wavelet "
                         "coefficients with per-ray active lists (the paper's reference, of the model without the "
@@ -440,7 +441,9 @@ def write_gif(path, pictures, seconds_per_frame, force):
     import imageio.v3 as iio
 
     from ..io.files import write_atomic
-    write_atomic(path, lambda fh: iio.imwrite(fh, np.stack(pictures), extension=".gif",
+    frames = np.stack(pictures)  # every frame RGB: grey frames were written in modes some readers cannot read back
+    frames = np.repeat(frames[..., None], 3, axis=-1) if frames.ndim == 3 else frames
+    write_atomic(path, lambda fh: iio.imwrite(fh, frames, extension=".gif",
                                               is_batch=True, duration=int(1000 * seconds_per_frame), loop=0),
                  force)
 
