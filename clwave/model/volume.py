@@ -154,9 +154,11 @@ def checked_block(block: np.ndarray) -> np.ndarray:
     finite = np.isfinite(block)
     if not finite.all():
         bad = int(block.size - np.count_nonzero(finite))
-        raise InputError(
-            f"volume has {bad} non-finite voxel value(s) (NaN/Inf, or beyond float32's range of +-3.4e38, which "
-            "clwave computes in); replace them first, e.g. numpy.nan_to_num(data), or rescale the values")
+        what = (f"volume has {bad} non-finite voxel value(s) (NaN/Inf, or beyond float32's range of +-3.4e38, which "
+                f"clwave computes in)")
+        raise InputError(f"{what}; replace them first, e.g. numpy.nan_to_num(data), or rescale the values",
+                         cli=f"{what}; write the input again with finite values (NaN replaced, e.g. by the "
+                             f"background's value) in float32's range")
     return block
 
 
