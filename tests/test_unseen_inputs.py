@@ -299,3 +299,28 @@ def test_api_arguments_are_refused_in_one_line(scalar_model, tmp_path):
     assert not (tmp_path / "x.npy").exists()
     with pytest.raises(clwave.InputError, match=r"^cannot write .*r\.tif: use \.png, \.npy or \.json$"):
         xray.save(tmp_path / "r.tif")
+
+
+def test_opening_a_file_with_a_keep_above_what_it_stores_warns_as_the_command_line_does(tmp_path):
+    """WaveletVolume.open(path, keep=0.5) on a file storing 5 % returned all it held silently (the command line
+    warned): one ClwaveWarning from one home (model/budget.warn_stored), in the API's words and the CLI's."""
+    import warnings
+
+    from clwave.view.prefix import PrefixFirst
+
+    path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.05).save(
+        tmp_path / "h.clw")
+    stored = round(0.05 * 16 ** 3)
+    with pytest.warns(clwave.ClwaveWarning) as told:
+        wv = clwave.WaveletVolume.open(path, keep=0.5)
+    assert wv.kept == stored and len(told) == 1
+    assert str(told[0].message).startswith(f"keep=0.5 asks for 2,048 coefficients, and {path} stores {stored:,} "
+                                           f"(5.00 % of the voxels): all of them are used")
+    assert told[0].message.cli.startswith("--keep 0.5 asks for 2,048 coefficients")
+    with pytest.warns(clwave.ClwaveWarning, match="keep=0.5 asks for 2,048"):  # the viewer's reading: told once
+        PrefixFirst(path, keep=0.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for keep in (None, 0.05, 0.01, 1):  # within what it stores, or "every coefficient": nothing to tell
+            clwave.WaveletVolume.open(path, keep=keep)
+            PrefixFirst(path, keep=keep)

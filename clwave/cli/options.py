@@ -199,6 +199,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     """
     from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
+    from ..model.budget import warn_stored
     from ..model.wavelet import WaveletVolume, check_decomposition, default_levels
 
     thresholding = _thresholding(args)
@@ -231,7 +232,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                               "opacity of their luminance)")
         if args.threshold is not None or args.focus is not None:  # --keep alone: a prefix of the file
             wv = wv.threshold(**thresholding)
-        note_stored(args, wv)
+            warn_stored(wv, args.keep, args.input)  # as WaveletVolume.open(keep=) tells it
         return wv, None
     vol = read_volume(args)
     tf = _preset(args)
@@ -294,21 +295,6 @@ def _classified(args, tf, vol, check=False):
             raise
         raise NothingVisibleError(str(exc), cli=f"{exc.cli_message()} (--hu-to-mu turned HU into attenuation per "
                                                 f"mm)") from None
-
-
-def note_stored(args, wv):
-    """One line on stderr where a ``.clw`` input's ``--keep`` (below 1, "every coefficient") asks for more
-    coefficients than the file stores: all it stores are used.  Not refused: a file holds fewer than its own
-    ``--keep`` where the rest were zero, and the file cannot tell which."""
-    from ..model.wavelet import kept_count
-
-    asked = None if args.keep is None else kept_count(args.keep, wv.n_voxels)
-    stored = min(g.kept for g in wv.groups)
-    if asked is not None and stored < asked:
-        warn(f"--keep {args.keep:g} asks for {asked:,} coefficients, and {args.input} stores {stored:,} "
-             f"({100 * stored / wv.n_voxels:.2f} % of the voxels): all of them are used (a file keeps no zero "
-             f"coefficients, so it may hold fewer than its own --keep; if it was compressed with a smaller --keep, "
-             f"compress again with a larger one for more detail)")
 
 
 def _preset(args):

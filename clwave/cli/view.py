@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from .options import (add_input_options, add_model_options, build_model, note_stored, numbers, parse_device_memory,
+from .options import (add_input_options, add_model_options, build_model, numbers, parse_device_memory,
                       post_transfer_function)
 
 
@@ -29,8 +29,6 @@ def run(args):
     # a .clw file: its prefix now, the rest read while serving; a scalar model's shaded views are classified while
     # rendering by --tf [--tf-window] (a .clw input; a volume's with --classify post), checked as `render` checks them
     wv, _ = build_model(args, opener=PrefixFirst, post=True)
-    if isinstance(wv, PrefixFirst) and wv.complete:  # else how much the file stores is known once it is read
-        note_stored(args, wv.prefix)
     tf = post_transfer_function(args, wv.prefix if isinstance(wv, PrefixFirst) else wv)
     if isinstance(wv, PrefixFirst) and not wv.complete:
         print(f"clwave view: serving the {wv.prefix.kept:,} most important coefficients of {args.input} at once; "
