@@ -551,6 +551,7 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
             raise InputError('a transfer function window "auto" would be resolved by each worker on its own part; '
                              "give the window (lo, hi) to render on a cluster")
         tol, cap = _checked_view(camera, tolerance), parse_cap(device_memory)
+        light_directions(lights, None)  # checked before any worker starts
         options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision,
                        transfer_function=transfer_function)
         with client_for(scheduler) as client:  # which checks the scheduler before starting anything
