@@ -4,7 +4,7 @@ See README.md for the quick start; coordinates follow docs/coordinates.md (host 
 (z, y, x[, c]), spacing (dz, dy, dx), world points (x, y, z)).
 """
 
-from .errors import (ClwaveError, DeviceMemoryError, DeviceNotFoundError, FileFormatError,
+from .errors import (ClwaveError, ClwaveWarning, DeviceMemoryError, DeviceNotFoundError, FileFormatError,
                      InputError, KernelBuildError, OutputError, OutputExistsError)
 from .model.volume import Volume
 from .device.context import ComputeContext, list_devices, select_device
@@ -28,7 +28,7 @@ from .view import Viewer, view
 __version__ = "0.1.0"
 
 __all__ = [
-    "ClwaveError", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
+    "ClwaveError", "ClwaveWarning", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
     "KernelBuildError", "OutputError", "OutputExistsError", "HostMemoryError", "Volume", "ComputeContext",
     "list_devices",
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "ConeBeam", "RenderResult",

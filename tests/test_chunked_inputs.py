@@ -387,3 +387,14 @@ def test_make_zarr_ome_levels_and_integers(tmp_path):
                                   np.rint(phantom_block("hydrogen", (16, 12, 8)) * 65535.0).astype(np.float32))
     coarse = load(tmp_path / "o.zarr", level=1)     # the same box, half the voxels per axis
     assert coarse.shape == (8, 6, 4) and coarse.spacing == (4.0, 2.0, 1.0) and coarse.origin == vol.origin
+
+
+def test_a_dask_array_of_unknown_chunk_sizes_is_refused_at_volume():
+    """``d[d[:, 0, 0] > -1]`` has chunks (nan, ...): Volume() took it and its shape, or the transform, failed with
+    "cannot convert float NaN to integer"; refused at once, naming compute_chunk_sizes(), which makes it usable."""
+    d = da.from_array(np.arange(4 * 5 * 6, dtype=np.float32).reshape(4, 5, 6), chunks=2)
+    unknown = d[d[:, 0, 0] > -1]
+    with pytest.raises(InputError, match=r"^this Dask array's shape \(nan, 5, 6\) is unknown .*; give "
+                                         r"dask_array\.compute_chunk_sizes\(\) first$"):
+        Volume(unknown)
+    assert Volume(unknown.compute_chunk_sizes()).shape == (4, 5, 6)

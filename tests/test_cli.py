@@ -682,6 +682,9 @@ def test_a_chunked_volume_that_shows_nothing_is_refused_before_anything_is_writt
      "bad --dtype nope for v.raw; give a numpy dtype", "dtype="),
     (lambda p: np.save(p / "v.npy", np.full((8, 8, 8), 1e300)), ["compress", "v.npy"],
      "holds values up to 1e+300, beyond float32's range", None),
+    (lambda p: np.save(p / "v.npy", np.where(np.eye(8, dtype=bool), np.nan, 1.0)[None].repeat(8, 0)),
+     ["compress", "v.npy"], "volume has 64 non-finite voxel value(s) (NaN/Inf, or beyond float32's range of +-3.4e38, "
+     "which clwave computes in); write the input again with finite values", "numpy"),
 ])
 def test_refusals_in_the_command_lines_words(tmp_path, capsys, monkeypatch, make, argv, needle, api):
     """A refusal raised in the API's words (``hu_to_mu``, ``shape=``) says the option on the command line."""
@@ -753,3 +756,42 @@ def test_render_at_a_coarser_detail(tmp_path, capsys):
     code, _, err = run(capsys, "render", str(model), *view, "--detail", "3", "-o", str(tmp_path / "d3.png"))
     assert code == 2 and err.count("\n") == 1 and "--detail 3 must be a level from 0 (full detail) to 2" in err
     assert not (tmp_path / "d3.png").exists()
+
+
+def test_gif_frames_are_written_in_one_mode_and_read_back_exactly(tmp_path):
+    """Grey frames using all 256 levels were written as GIF frames that imageio could not read back ("No packer found
+    from P to L"): every frame is written RGB; grey and colour turntables read back as what was written."""
+    import imageio.v3 as iio
+
+    from clwave.cli.options import write_gif
+
+    ramp = np.tile(np.arange(256, dtype=np.uint8), (4, 1))
+    grey = [ramp, ramp[:, ::-1], ramp // 3]  # a first frame of 256 levels, then one of fewer: "P to L"
+    colour = [np.stack([ramp, ramp[:, ::-1], np.full_like(ramp, c)], axis=-1) // 16 * 16 for c in (0, 80)]
+    for name, frames, want in [("grey", grey, [np.repeat(f[..., None], 3, axis=-1) for f in grey]),
+                               ("colour", colour, colour)]:
+        write_gif(tmp_path / f"{name}.gif", frames, 0.1, False)
+        assert np.array_equal(iio.imread(tmp_path / f"{name}.gif", index=None), np.stack(want)), name
+
+
+def test_a_turntables_raw_output_holds_every_view(tmp_path, capsys):
+    """--turntable N --raw t.npy wrote the first view alone: it holds the N views, (N, H, W, C), each the API's image of
+    the camera turned by 360 i / N degrees; the GIF's frames are those views in one window; one view is "1 view"."""
+    import imageio.v3 as iio
+
+    import clwave
+
+    raw, gif = tmp_path / "t.npy", tmp_path / "t.gif"
+    code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "1", "--size", "12x10", "--turntable",
+                         "3", "--azimuth", "10", "-o", str(gif), "--raw", str(raw))
+    assert code == 0, err
+    wv = WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1).threshold(keep=0.05)
+    views = np.stack([clwave.splat(wv, clwave.Camera(10 + 120 * i, 20, size=(12, 10))).image for i in range(3)])
+    images = np.load(raw)
+    assert images.shape == (3, 12, 10, 1) and np.allclose(images, views, rtol=1e-5, atol=1e-6 * views.max())
+    lo, hi = np.percentile(images, (0.5, 99.5))
+    grey = np.round(255 * np.clip((images[..., 0] - lo) / (hi - lo), 0, 1))
+    assert np.abs(iio.imread(gif, index=None)[..., 0] - grey).max() <= 1
+    code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "--turntable", "1",
+                         "-o", str(tmp_path / "one.gif"), "--raw", str(tmp_path / "one.npy"))
+    assert code == 0 and "turntable of 1 view at" in out and np.load(tmp_path / "one.npy").shape == (1, 8, 8, 1)

@@ -101,7 +101,7 @@ def test_a_cluster_needs_a_model_opened_from_a_file(model, monkeypatch):
     monkeypatch.setattr(clwave.schedulers, "client_for", None)  # starting a cluster would fail the test
     with pytest.raises(InputError, match=r"\.clw file"):
         clwave.raytrace(model.threshold(keep=0.5), clwave.Camera(size=8), scheduler=1)
-    for bad in (dict(field="wavelet"), dict(tolerance=0), dict(device_memory="2GB")):
+    for bad in (dict(field="wavelet"), dict(tolerance=0), dict(device_memory="2GB"), dict(lights=(30, 40))):
         with pytest.raises(InputError):
             clwave.raytrace(model, clwave.Camera(size=8), scheduler=1, **bad)
 

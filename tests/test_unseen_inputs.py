@@ -255,3 +255,72 @@ def test_a_two_channel_xray_picture_shows_both_channels(tmp_path):
     alone = clwave.splat(clwave.WaveletVolume.from_volume(clwave.Volume(data[..., 1]), levels=1), cam).to_uint8(window)
     assert both.shape == (12, 12, 3) and both[..., 0].max() == 0 and alone.max() > 200
     assert np.abs(both[..., 1].astype(int) - alone).max() <= 1
+
+
+def test_api_arguments_are_refused_in_one_line(scalar_model, tmp_path):
+    """What a new user gave the API and got a raw AttributeError/TypeError, a NumPy warning, a silently ignored
+    argument or a file of the wrong format for: each refused with one InputError naming the form wanted."""
+    import warnings
+
+    from clwave.io.result import RenderResult
+
+    cam = clwave.Camera(20, 30, (4, 4))
+    renderer = clwave.SplatRenderer(scalar_model)
+    for poses, words in [([1, 2], "cameras[0] must be a clwave.Camera or a clwave.ConeBeam, not int"),
+                         ([cam, None], "cameras[1] must be a clwave.Camera or a clwave.ConeBeam, not NoneType")]:
+        with pytest.raises(clwave.InputError, match=f"^{re.escape(words)}$"):
+            renderer.render_many(poses)
+    form = re.escape("must be a list of (azimuth, elevation) pairs in degrees, [(az, el), ...], or [] for none")
+    for lights, words in [((30, 40), r"lights\[0\]=30 is not an \(azimuth, elevation\) pair: lights " + form +
+                           re.escape("; one light is [(30, 40)]")),
+                          ([(30,)], r"lights\[0\]=\(30,\) is not an \(azimuth, elevation\) pair: lights " + form),
+                          ("none", "lights='none' " + form)]:
+        with pytest.raises(clwave.InputError, match=f"^{words}$"):
+            clwave.raytrace(scalar_model, cam, lights=lights, transfer_function=clwave.TransferFunction.preset("grey"))
+    shaded = RenderResult(np.zeros((2, 2, 4), np.float32), dict(mode="ea"))  # transparent: the background alone
+    for background in [(1, 1), (2, -1, 0), (np.nan, 0, 0), "white"]:
+        with pytest.raises(clwave.InputError, match=r"must be a colour \(R, G, B\) with each in 0..1"):
+            shaded.save(tmp_path / "s.png", background=background)
+    assert not (tmp_path / "s.png").exists()
+    # linear light: 0.5 is sRGB 1.055 * 0.5^(1/2.4) - 0.055 = 0.7354, 187.5 of 255
+    assert (shaded.to_uint8(background=(0.5, 0.5, 0.5)) == 188).all() and (shaded.to_uint8() == 0).all()
+    xray = RenderResult(np.ones((2, 2, 1), np.float32), dict(mode="xray"))
+    with pytest.raises(clwave.InputError, match=r"an X-ray picture has no background .*: leave it out$"):
+        xray.save(tmp_path / "x.png", background=(1, 1, 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no NumPy warning on the way
+        for call, points, words in [("evaluate", "abc", "points must be numbers"),
+                                    ("evaluate", [[np.nan, 0, 0]], "1 of the 1 points are not finite"),
+                                    ("gradient", [[0, 0, 0], [np.inf, 0, 0]], "1 of the 2 points are not finite")]:
+            with pytest.raises(clwave.InputError, match=words):
+                getattr(scalar_model, call)(points)
+    with pytest.raises(clwave.InputError, match=r"^cannot write .*x\.npy: use \.clw$"):
+        scalar_model.save(tmp_path / "x.npy")  # it wrote HDF5 under a .npy name
+    assert not (tmp_path / "x.npy").exists()
+    with pytest.raises(clwave.InputError, match=r"^cannot write .*r\.tif: use \.png, \.npy or \.json$"):
+        xray.save(tmp_path / "r.tif")
+
+
+def test_opening_a_file_with_a_keep_above_what_it_stores_warns_as_the_command_line_does(tmp_path):
+    """WaveletVolume.open(path, keep=0.5) on a file storing 5 % returned all it held silently (the command line
+    warned): one ClwaveWarning from one home (model/budget.warn_stored), in the API's words and the CLI's."""
+    import warnings
+
+    from clwave.view.prefix import PrefixFirst
+
+    path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.05).save(
+        tmp_path / "h.clw")
+    stored = round(0.05 * 16 ** 3)
+    with pytest.warns(clwave.ClwaveWarning) as told:
+        wv = clwave.WaveletVolume.open(path, keep=0.5)
+    assert wv.kept == stored and len(told) == 1
+    assert str(told[0].message).startswith(f"keep=0.5 asks for 2,048 coefficients, and {path} stores {stored:,} "
+                                           f"(5.00 % of the voxels): all of them are used")
+    assert told[0].message.cli.startswith("--keep 0.5 asks for 2,048 coefficients")
+    with pytest.warns(clwave.ClwaveWarning, match="keep=0.5 asks for 2,048"):  # the viewer's reading: told once
+        PrefixFirst(path, keep=0.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for keep in (None, 0.05, 0.01, 1):  # within what it stores, or "every coefficient": nothing to tell
+            clwave.WaveletVolume.open(path, keep=keep)
+            PrefixFirst(path, keep=keep)

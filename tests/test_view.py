@@ -607,13 +607,57 @@ def test_view_refuses_what_it_cannot_show():
         view(wv, size=0)
 
 
+def test_view_returns_every_failure_to_start_to_its_caller(monkeypatch):
+    """``view(..., port=70000)`` (or -1, or a port in use) raised in the server's thread and left view() waiting
+    forever: a port out of range is refused before any work, and any failure of the server's start reaches the
+    caller (a busy port: one line naming another port or 0)."""
+    import socket
+    import threading
+
+    from clwave.view.server import ViewServer
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=8), levels=1)
+
+    def view_within(seconds=60, **kw):  # a hang fails the test instead of stopping it
+        outcome = []
+        thread = threading.Thread(target=lambda: outcome.append(_raised(view, wv, size=16, **kw)), daemon=True)
+        thread.start()
+        thread.join(seconds)
+        assert outcome, f"view({kw}) did not return"
+        return outcome[0]
+
+    for port in (70000, -1, 80.5, "80"):
+        assert re.fullmatch(rf"port={port!r} must be from 0 \(a free port\) to 65535", str(view_within(port=port)))
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        exc = view_within(port=port)
+        assert isinstance(exc, clwave.InputError) and re.fullmatch(
+            rf"cannot listen on 127.0.0.1:{port} \(.+\); choose another port=, or port=0 for a free one", str(exc))
+
+    async def fails(self):
+        raise RuntimeError("no loop")
+
+    monkeypatch.setattr(ViewServer, "start", fails)
+    assert str(view_within()) == "no loop"
+
+
+def _raised(call, *args, **kw):
+    """The exception ``call(*args, **kw)`` raised (its result closed if it returned)."""
+    try:
+        call(*args, **kw).close()
+    except Exception as exc:
+        return exc
+
+
 def test_cli_view_refuses_bad_options_before_any_work(capsys, tmp_path):
     """What `render` refuses of --tf/--tf-window, `view` refuses in the same words (one home, cli/options.py)."""
     from clwave.cli import main
 
     rgba = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(
         clwave.phantom("hydrogen", n=8)), levels=1).save(tmp_path / "rgba.clw")
-    for argv, words in [(["--port", "70000"], "--port 70000"), (["--tolerance", "0"], "--tolerance"),
+    for argv, words in [(["--port", "70000"], "--port 70000 must be from 0"), (["--tolerance", "0"], "--tolerance"),
                         (["--tf-window", "0,1"], "give --tf too"), (["--tf", "bone"], "bone"),
                         (["--tf", "hydrogen", "--tf-window", "1"], "--tf-window '1' must be 2"),
                         ([str(rgba), "--tf", "hydrogen"], "4 channels (classified already): leave them out"),

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from ..io.result import check_background
 from .options import (_chunks, _flag, _preset, _preset_window, _thresholding, is_clw, numbers, parse_device_memory,
                       parse_scheduler)
 
@@ -88,7 +89,7 @@ def check_options(args):
 #: options of one --method only, refused with the other (a command has some of them: drr has no --light);
 #: (option, what it is given when not given: None where the command leaves it None)
 RAYTRACE_ONLY = (("tolerance", 1e-3), ("light", None), ("no_shading", None), ("xray", None), ("field", "bspline"),
-                 ("background", "0,0,0"), ("detail", None))
+                 ("background", None), ("detail", None))
 SPLAT_ONLY = ("coarse", "omega_s")
 
 
@@ -129,12 +130,8 @@ def parse_lights(args):
 
 
 def parse_background(args):
-    """The colour (R, G, B) of ``--background``, each in 0..1."""
-    colour = numbers(args.background, "--background", (3,))
-    if not all(0 <= c <= 1 for c in colour):
-        raise InputError(f"--background {args.background} must be a colour R,G,B with each in 0..1, e.g. 1,1,1 for "
-                         f"white")
-    return colour
+    """The colour (R, G, B) of ``--background``, each in 0..1 (None: not given, the default black)."""
+    return None if args.background is None else check_background(numbers(args.background, "--background", (3,)))
 
 
 def parse_window(args):

@@ -199,6 +199,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     """
     from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
+    from ..model.budget import warn_stored
     from ..model.wavelet import WaveletVolume, check_decomposition, default_levels
 
     thresholding = _thresholding(args)
@@ -231,7 +232,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                               "opacity of their luminance)")
         if args.threshold is not None or args.focus is not None:  # --keep alone: a prefix of the file
             wv = wv.threshold(**thresholding)
-        note_stored(args, wv)
+            warn_stored(wv, args.keep, args.input)  # as WaveletVolume.open(keep=) tells it
         return wv, None
     vol = read_volume(args)
     tf = _preset(args)
@@ -294,21 +295,6 @@ def _classified(args, tf, vol, check=False):
             raise
         raise NothingVisibleError(str(exc), cli=f"{exc.cli_message()} (--hu-to-mu turned HU into attenuation per "
                                                 f"mm)") from None
-
-
-def note_stored(args, wv):
-    """One line on stderr where a ``.clw`` input's ``--keep`` (below 1, "every coefficient") asks for more
-    coefficients than the file stores: all it stores are used.  Not refused: a file holds fewer than its own
-    ``--keep`` where the rest were zero, and the file cannot tell which."""
-    from ..model.wavelet import kept_count
-
-    asked = None if args.keep is None else kept_count(args.keep, wv.n_voxels)
-    stored = min(g.kept for g in wv.groups)
-    if asked is not None and stored < asked:
-        warn(f"--keep {args.keep:g} asks for {asked:,} coefficients, and {args.input} stores {stored:,} "
-             f"({100 * stored / wv.n_voxels:.2f} % of the voxels): all of them are used (a file keeps no zero "
-             f"coefficients, so it may hold fewer than its own --keep; if it was compressed with a smaller --keep, "
-             f"compress again with a larger one for more detail)")
 
 
 def _preset(args):
@@ -422,7 +408,8 @@ def add_raytrace_options(p):
                    "'none' for ambient only (default: a headlight)")
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
-    g.add_argument("--background", help="PNG: colour R,G,B in 0..1 behind the volume (default 0,0,0, black)")
+    g.add_argument("--background", help="PNG: colour R,G,B behind the volume, linear RGB in 0..1, composited before "
+                                        "the sRGB encoding (0.5 is shown as 188; default 0,0,0, black)")
     g.add_argument("--field", choices=("bspline", "wavelet"),
                    help="evaluate the field from fine B-spline grids (fast, the default) or from the wavelet "
                         "coefficients with per-ray active lists (the paper's reference, of the model without the "
@@ -440,7 +427,9 @@ def write_gif(path, pictures, seconds_per_frame, force):
     import imageio.v3 as iio
 
     from ..io.files import write_atomic
-    write_atomic(path, lambda fh: iio.imwrite(fh, np.stack(pictures), extension=".gif",
+    frames = np.stack(pictures)  # every frame RGB: grey frames were written in modes some readers cannot read back
+    frames = np.repeat(frames[..., None], 3, axis=-1) if frames.ndim == 3 else frames
+    write_atomic(path, lambda fh: iio.imwrite(fh, frames, extension=".gif",
                                               is_batch=True, duration=int(1000 * seconds_per_frame), loop=0),
                  force)
 

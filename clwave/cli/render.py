@@ -14,7 +14,7 @@ from .options import (add_command, add_raytrace_options, build_model, check_outp
 
 def run(args):
     from ..raytrace.tracer import RayTracer, raytrace
-    from ..io.result import resolve_window
+    from ..io.result import RenderResult, resolve_window
     from ..splat.renderer import SplatRenderer, splat
     from ..cluster import check_model_file
     from ..schedulers import client_for as cluster_client
@@ -80,11 +80,14 @@ def run(args):
         result = results[0]
         result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
         seconds = result.meta["turntable_seconds"]
-        print(f"turntable of {len(results)} views at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
+        views = f"{len(results)} view{'s' if len(results) != 1 else ''}"
+        print(f"turntable of {views} at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
               f"({np.median(seconds):.3f} s a view, median); the first view:")
-    for extra in (raw, stats):
-        if extra is not None:
-            result.save(extra, overwrite=args.force)
+    if raw is not None:  # a turntable's views as one (N, H, W, C) array
+        images = result if args.turntable is None else RenderResult(np.stack([r.image for r in results]), result.meta)
+        images.save(raw, overwrite=args.force)
+    if stats is not None:
+        result.save(stats, overwrite=args.force)
     size = f"{camera.size[0]}x{camera.size[1]}"
     m = result.meta
     if args.method == "raytrace":
@@ -116,5 +119,6 @@ def add_parser(sub):
     p.add_argument("--detail", type=int, help="ray tracing: the level of detail, 0 (full, the default) up to the "
                                               "model's levels (the coarsest: its approximation alone, fastest)")
     p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
-    p.add_argument("--raw", help="also write the float32 image as .npy")
+    p.add_argument("--raw", help="also write the float32 image as .npy (with --turntable, its N views as one "
+                                 "(N, H, W, C) array)")
     p.add_argument("--stats", help="also write the figures as .json")

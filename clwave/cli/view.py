@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import InputError
-from .options import (add_input_options, add_model_options, build_model, note_stored, numbers, parse_device_memory,
+from .options import (add_input_options, add_model_options, build_model, numbers, parse_device_memory,
                       post_transfer_function)
 
 
@@ -20,19 +19,16 @@ def run(args):
 
     from ..model.camera import Camera
     from ..view.prefix import PrefixFirst
-    from ..view.server import ViewServer, is_loopback
+    from ..view.server import ViewServer, check_port, is_loopback
 
     size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
     size = Camera(size=size if len(size) == 2 else size[0]).size
     check_size(size, args.device)
     device_memory = parse_device_memory(args)
-    if not 0 <= args.port <= 65535:
-        raise InputError(f"--port {args.port} must be from 0 (a free port) to 65535")
+    check_port(args.port)
     # a .clw file: its prefix now, the rest read while serving; a scalar model's shaded views are classified while
     # rendering by --tf [--tf-window] (a .clw input; a volume's with --classify post), checked as `render` checks them
     wv, _ = build_model(args, opener=PrefixFirst, post=True)
-    if isinstance(wv, PrefixFirst) and wv.complete:  # else how much the file stores is known once it is read
-        note_stored(args, wv.prefix)
     tf = post_transfer_function(args, wv.prefix if isinstance(wv, PrefixFirst) else wv)
     if isinstance(wv, PrefixFirst) and not wv.complete:
         print(f"clwave view: serving the {wv.prefix.kept:,} most important coefficients of {args.input} at once; "
@@ -45,11 +41,7 @@ def run(args):
                         transfer_function=tf, device_memory=device_memory)
 
     async def serve():
-        try:
-            url = await server.start()
-        except OSError as exc:
-            raise InputError(f"cannot listen on {args.host}:{args.port} ({exc.strerror or exc}); choose another "
-                             f"--port, or leave it out for a free one") from None
+        url = await server.start()  # or an InputError: the port in use
         if not is_loopback(args.host):
             print(f"clwave view: warning: listening on {args.host}, not only on this machine: anyone who can reach "
                   f"it and learns the address with its token can see this volume", file=sys.stderr)

@@ -39,12 +39,13 @@ from ..model.bspline import SplineWavelet
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
-from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of, kept_count
+from ..model.budget import kept_count
+from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
 from ..threads import background
 from .clw_header import (FILE_FORMAT, FILE_VERSION, MAX_HEADER, check_dataset, checked_header, checked_values,
                          parsed_header)
 from .detail_field import DetailField
-from .files import hdf5_target, write_atomic
+from .files import check_suffix, hdf5_target, write_atomic
 from .hdf5_safety import check_self_contained
 from .occupancy import OccupancyGrid
 
@@ -75,7 +76,7 @@ def write_clw(model, path, overwrite=False, quantise=None) -> Path:
     refuses to replace a file unless ``overwrite``.  ``quantise``: None (exact float32 values), a bound on
     the change of any voxel of :meth:`~WaveletVolume.reconstruct`, or "auto" (:func:`quantisation_steps`)."""
     steps = quantisation_steps(model, quantise)
-    return write_atomic(path, lambda fh: _write(model, fh, steps), overwrite)
+    return write_atomic(check_suffix(path, (".clw",)), lambda fh: _write(model, fh, steps), overwrite)
 
 
 def check_quantise(quantise):

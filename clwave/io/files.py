@@ -20,6 +20,15 @@ from pathlib import Path
 from ..errors import InputError, OutputError, OutputExistsError
 
 
+def check_suffix(path, suffixes) -> Path:
+    """``path`` as a Path, or an InputError unless it ends in one of ``suffixes`` (".clw", ...)."""
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        named = ", ".join(suffixes[:-1]) + " or " + suffixes[-1] if len(suffixes) > 1 else suffixes[0]
+        raise InputError(f"cannot write {path}: use {named}")
+    return path
+
+
 def write_atomic(path, writer, overwrite=False) -> Path:
     """Call ``writer(binary_file)`` on a temporary file beside ``path``, then publish it there.
 

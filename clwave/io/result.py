@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .files import write_atomic
+from .files import check_suffix, write_atomic
 from ..model.transfer import AUTO_PERCENTILES, check_window
 
 
@@ -30,9 +30,14 @@ class RenderResult:
     def is_xray(self) -> bool:
         return self.meta.get("mode", "xray") == "xray"
 
-    def to_uint8(self, window="auto", background=(0.0, 0.0, 0.0)) -> np.ndarray:
+    def to_uint8(self, window="auto", background=None) -> np.ndarray:
         """8-bit (H, W) grey or (H, W, 3) colour picture of the image: an X-ray of one channel grey, of two
-        magenta (channel 0) and green (1), of three or four its first three as RGB; one window for all."""
+        magenta (channel 0) and green (1), of three or four its first three as RGB; one window for all.  A shaded
+        image is composited over ``background`` (linear RGB in 0..1, default black) before its sRGB encoding."""
+        if self.is_xray and background is not None:
+            raise InputError(f"background={background!r} is for a shaded image; an X-ray picture has no background "
+                             f"(its line integrals are shown through window=): leave it out")
+        background = check_background((0.0, 0.0, 0.0) if background is None else background)
         if self.is_xray:
             picture = self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
             lo, hi = resolve_window(picture, window)
@@ -45,11 +50,12 @@ class RenderResult:
             scaled = np.where(scaled <= 0.0031308, 12.92 * scaled, 1.055 * scaled ** (1 / 2.4) - 0.055)
         return np.round(255.0 * scaled).astype(np.uint8)
 
-    def save(self, path, *, window="auto", background=(0.0, 0.0, 0.0), overwrite=False) -> Path:
-        """Write ``.png`` (windowed or composited), ``.npy`` (raw float32) or ``.json`` (meta).
+    def save(self, path, *, window="auto", background=None, overwrite=False) -> Path:
+        """Write ``.png`` (windowed, or composited over ``background``: :meth:`to_uint8`), ``.npy`` (raw float32)
+        or ``.json`` (meta).
 
         An image with non-finite pixels is refused (nothing is written): it is never a picture."""
-        path = Path(path)
+        path = check_suffix(path, (".png", ".npy", ".json"))
         suffix = path.suffix.lower()
         bad = int(np.size(self.image) - np.count_nonzero(np.isfinite(self.image)))
         if bad and suffix in (".png", ".npy"):
@@ -64,7 +70,21 @@ class RenderResult:
         if suffix == ".json":
             text = json.dumps(self.meta, indent=2, default=_jsonable).encode()
             return write_atomic(path, lambda fh: fh.write(text), overwrite)
-        raise InputError(f"cannot write {path}: use .png, .npy or .json")
+
+
+def check_background(background) -> tuple:
+    """A background colour (R, G, B), linear light each in 0..1, as floats; one InputError (in the command line's
+    words too) otherwise."""
+    try:
+        colour = tuple(float(c) for c in background)
+    except (TypeError, ValueError):
+        colour = ()
+    if isinstance(background, (str, bytes)) or len(colour) != 3 or not all(0 <= c <= 1 for c in colour):
+        spec = ",".join(f"{c:g}" for c in colour) if colour else background
+        raise InputError(f"background={background!r} must be a colour (R, G, B) with each in 0..1, e.g. (1, 1, 1) "
+                         f"for white", cli=f"--background {spec} must be a colour R,G,B with each in 0..1, e.g. 1,1,1 "
+                                       f"for white")
+    return colour
 
 
 def resolve_window(values, window="auto") -> tuple:

@@ -24,8 +24,8 @@ from .bspline import SplineWavelet
 from .transform import KEYS, band_layout, check_coefficients
 from .volume import Volume, content_of
 from .mask import ContentMask
-from .wavelet import (ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding,
-                      kept_count, warn_short_budget)
+from .budget import kept_count, warn_short_budget
+from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
 MAX_BLOCKS = 4096           # and into at most this many blocks a level

@@ -244,10 +244,11 @@ class ConeBeam:
                 f"offset={self.offset})")
 
 
-def check_camera(camera):
-    """Refuse (one line) what is neither a :class:`Camera` nor a :class:`ConeBeam`."""
+def check_camera(camera, name="camera"):
+    """Refuse (one line, naming it ``name``, e.g. "views[2]") what is neither a :class:`Camera` nor a
+    :class:`ConeBeam`."""
     if not isinstance(camera, (Camera, ConeBeam)):
-        raise InputError("camera must be a clwave.Camera or a clwave.ConeBeam")
+        raise InputError(f"{name} must be a clwave.Camera or a clwave.ConeBeam, not {type(camera).__name__}")
 
 
 #: the columns of a pose table (:func:`poses`): ConeBeam's parameters, per row

@@ -53,6 +53,24 @@ def fine_to_world(fine_zyx, order: int, shape, spacing, origin) -> np.ndarray:
     return world_zyx[..., ::-1] + np.asarray(origin)
 
 
+def world_points(points) -> np.ndarray:
+    """World points (N, 3) as (x, y, z), float64 (one point may be given as 3 numbers); one InputError for another
+    shape, or for values that are not numbers or not finite."""
+    try:
+        pts = np.atleast_2d(np.asarray(points))
+    except ValueError:  # a ragged list
+        pts = np.empty(0, object)
+    if pts.dtype.kind not in "biuf":
+        raise InputError(f"points must be numbers, an (N, 3) array as (x, y, z), got {str(points)[:60]!r}")
+    pts = pts.astype(np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise InputError(f"points must have shape (N, 3) as (x, y, z), got {np.shape(points)}")
+    if not np.isfinite(pts).all():
+        bad = int(np.count_nonzero(~np.isfinite(pts).all(axis=1)))
+        raise InputError(f"{bad} of the {len(pts)} points are not finite (NaN or Inf): give finite (x, y, z)")
+    return pts
+
+
 def world_to_fine(points_xyz, order: int, shape, spacing, origin) -> np.ndarray:
     """Fine-voxel coordinates (..., 3) in (z, y, x) of world points (..., 3) as (x, y, z)."""
     p = np.asarray(points_xyz, float)[..., ::-1] - np.asarray(origin)[::-1]

@@ -51,6 +51,9 @@ class Volume:
             raise InputError(
                 f"volume dtype {arr.dtype} is not numeric; give integers or floats "
                 "(complex, object and string data cannot be rendered)")
+        if lazy and np.isnan(arr.shape).any():  # e.g. d[d[:, 0, 0] > 0]: its chunks are known once computed
+            raise InputError(f"this Dask array's shape {arr.shape} is unknown (chunks of unknown size, e.g. from a "
+                             f"boolean index); give dask_array.compute_chunk_sizes() first")
         if arr.ndim not in (3, 4):
             raise InputError(
                 f"volume must be 3-D (z, y, x) or 4-D (z, y, x, c), got shape {arr.shape}")
@@ -151,9 +154,11 @@ def checked_block(block: np.ndarray) -> np.ndarray:
     finite = np.isfinite(block)
     if not finite.all():
         bad = int(block.size - np.count_nonzero(finite))
-        raise InputError(
-            f"volume has {bad} non-finite voxel value(s) (NaN/Inf, or beyond float32's range of +-3.4e38, which "
-            "clwave computes in); replace them first, e.g. numpy.nan_to_num(data), or rescale the values")
+        what = (f"volume has {bad} non-finite voxel value(s) (NaN/Inf, or beyond float32's range of +-3.4e38, which "
+                f"clwave computes in)")
+        raise InputError(f"{what}; replace them first, e.g. numpy.nan_to_num(data), or rescale the values",
+                         cli=f"{what}; write the input again with finite values (NaN replaced, e.g. by the "
+                             f"background's value) in float32's range")
     return block
 
 

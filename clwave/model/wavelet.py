@@ -8,17 +8,17 @@ and a (channels, K) float32 value table.  Importance order is derived on demand.
 from __future__ import annotations
 
 import copy
-import warnings
 from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, finite_number
+from ..errors import InputError, finite_number
 from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
+from .budget import kept_count, warn_short_budget, warn_stored
 from . import geometry
-from .geometry import fine_to_world, world_to_fine
+from .geometry import fine_to_world, world_points, world_to_fine
 from .mask import ContentMask
 from .ranking import CoefficientTable, by_importance, ranked_table
 from .transform import (apply_sampling_filter, band_sum, crop_to_grid, decompose, reconstruct_channel,
@@ -331,9 +331,7 @@ class WaveletVolume:
         return self._evaluate(points, derivative=True)
 
     def _evaluate(self, points, derivative):
-        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise InputError(f"points must have shape (N, 3) as (x, y, z), got {np.shape(points)}")
+        pts = world_points(points)
         n_pts = len(pts)
         out = np.zeros((n_pts, self.channels, 3) if derivative else (n_pts, self.channels))
         for g, bands in zip(self.groups, self._dense):
@@ -420,6 +418,7 @@ class WaveletVolume:
         wv = WaveletVolume.file_format[0](path, keep, approximation)
         if not approximation:
             wv.source = (str(Path(path).resolve()), keep)  # workers of a Dask cluster open it themselves
+            warn_stored(wv, keep, path)
         return wv
 
 
@@ -467,12 +466,6 @@ def _check_levels(levels, shape) -> int:
     return int(levels)
 
 
-def kept_count(keep, n_voxels) -> int | None:
-    """The coefficients ``keep=`` keeps: ``round(keep * n_voxels)``, at least 1; None (every coefficient) for
-    ``keep=1``, for a model has more coefficients than voxels (B-splines reach past the volume's faces)."""
-    return None if keep == 1 else max(1, int(round(keep * n_voxels)))
-
-
 def check_thresholding(keep, threshold, focus) -> tuple:
     """``(keep, threshold, focus)`` of :meth:`WaveletVolume.threshold`, checked before any work (each
     message also in the command line's words)."""
@@ -498,22 +491,6 @@ def check_thresholding(keep, threshold, focus) -> tuple:
                              cli="--focus X,Y,Z needs a finite centre and --sigma a positive world length")
         focus = (centre, sigma)
     return keep, threshold, focus
-
-
-def warn_short_budget(keep, budget, approx, n_voxels):
-    """Warn that ``keep=`` (``budget`` coefficients) is below the ``approx`` live coefficients of the approximation
-    band, which ranks first: no detail, part of the band dropped; names the least keep that keeps the band whole."""
-    e = 10.0 ** (np.floor(np.log10(approx / n_voxels)) - 2)  # three digits, rounded up
-    least = np.ceil(approx / n_voxels / e) * e
-    said = (f"{{}}{keep:g} keeps {budget:,} coefficients, fewer than the {approx:,} of the approximation band: "
-            f"no detail is kept and part of the approximation is dropped; ")
-    if least <= 1:
-        said += f"{{}}{least:.3g} or more keeps it whole"
-        api, cli = said.format("keep=", "keep="), said.format("--keep ", "--keep ")
-    else:  # the band (its B-splines reach past the volume) outnumbers the voxels: only fewer levels hold it
-        said += f"the band outnumbers the {n_voxels:,} voxels, so {{}}"
-        api, cli = said.format("keep=", "pass a smaller levels="), said.format("--keep ", "give a smaller --levels")
-    warnings.warn(ClwaveWarning(api, cli=cli), stacklevel=3)
 
 
 def importance_of(group: ChannelGroup, focus, frame) -> np.ndarray:

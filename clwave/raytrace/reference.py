@@ -22,7 +22,7 @@ from ..model.geometry import world_to_fine, world_to_fine_affine
 from ..model.transform import Band, band_sum, synthesize
 from .lod import occupancy
 from .quadrature import sample_points
-from .shading import Phong, light_direction
+from .shading import Phong, light_directions
 from .tracer import SIMPSON_DEPTH, RayTracer
 
 
@@ -51,7 +51,7 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     phong = (shading if isinstance(shading, Phong) else Phong()) if shading else None
     if tr.orders[tr.alpha_group] == 1 or not absorption:
         phong = None
-    light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
+    light_dirs = light_directions(lights, view.n)
     gain = (phong.ambient + (phong.diffuse + phong.specular) * len(light_dirs)) if phong else 1.0
     regions = None if field else _Regions(tr.block_bound.get(), tr.occ_origin, tr.super_bound_host, tr.super_origin,
                                           tr.coarse_bound(tolerance))
@@ -410,7 +410,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     phong = (shading if isinstance(shading, Phong) else Phong()) if shading else None
     if tr.orders[0] == 1:
         phong = None
-    light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
+    light_dirs = light_directions(lights, view.n)
     values = tr.scalar.stored(transfer_function).data_points()
     colour, opacity = transfer_function.points[:, 1:4], transfer_function.points[:, 4]
     scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)

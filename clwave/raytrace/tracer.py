@@ -17,7 +17,7 @@ import pyopencl.array as cla
 from pyopencl import cltypes
 
 from ..device import programs
-from ..device.constants import BLOCK, MAX_LIGHTS, SUPER
+from ..device.constants import BLOCK, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
 from ..model.bspline import piece_polynomials
 from ..model.geometry import band_lattice, world_to_fine_affine
@@ -33,7 +33,7 @@ from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import QUANT, ScalarRange, check_post, post_nodes
 from .progressive import frames
 from .quadrature import sample_tables
-from .shading import Phong, light_direction
+from .shading import Phong, light_directions
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume, check_model
@@ -305,9 +305,7 @@ class RayTracer:
         H, W = view.size
         check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"a {H}x{W} image", "render a smaller image", self.budget)
         phong, shading_note = self._phong(shading, absorption)
-        light_dirs = [view.n] if lights is None else [light_direction(*lt) for lt in lights]
-        if len(light_dirs) > MAX_LIGHTS:
-            raise InputError(f"at most {MAX_LIGHTS} lights, got {len(light_dirs)}")
+        light_dirs = light_directions(lights, view.n)
 
         nodes, weights = sample_tables(3 * (max(self.orders) - 1))
         n_samples = len(weights)
@@ -553,6 +551,7 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
             raise InputError('a transfer function window "auto" would be resolved by each worker on its own part; '
                              "give the window (lo, hi) to render on a cluster")
         tol, cap = _checked_view(camera, tolerance), parse_cap(device_memory)
+        light_directions(lights, None)  # checked before any worker starts
         options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision,
                        transfer_function=transfer_function)
         with client_for(scheduler) as client:  # which checks the scheduler before starting anything

@@ -208,6 +208,8 @@ class SplatRenderer:
         array of that shape, e.g. ``numpy.lib.format.open_memmap`` to stream them to a file); both checked before
         the first view."""
         cameras = list(cameras)
+        for i, camera in enumerate(cameras):
+            check_camera(camera, f"cameras[{i}]")
         sizes = sorted({tuple(camera.size) for camera in cameras})
         if len(sizes) > 1:
             named = ", ".join("x".join(map(str, size)) for size in sizes)

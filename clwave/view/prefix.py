@@ -10,12 +10,14 @@ ranked with the prefix's coefficients first (:func:`prefix_first`), so that the 
 from __future__ import annotations
 
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import FileFormatError
+from ..errors import ClwaveWarning, FileFormatError
 from ..io.clw import read_header
+from ..model.budget import warn_stored
 from ..model.ranking import by_importance
 from ..model.wavelet import WaveletVolume, check_thresholding
 from ..raytrace.staged import read_coarse
@@ -34,11 +36,15 @@ class PrefixFirst:
         self.path, self.keep = Path(path), None if keep is None else check_thresholding(keep, None, None)[0]
         n = int(np.prod(read_header(path)["shape"]))  # the voxels, from the header alone
         share = min(1.0, PREFIX / n)
-        self.prefix = WaveletVolume.open(path, keep=share if self.keep is None else min(self.keep, share))
+        with warnings.catch_warnings():  # what the file stores is told of `keep`, not of the prefix's share
+            warnings.simplefilter("ignore", ClwaveWarning)
+            self.prefix = WaveletVolume.open(path, keep=share if self.keep is None else min(self.keep, share))
         budget = max(1, round(share * n))
         # every tier was read where a group holds fewer than the budget
         self.complete = (self.keep is not None and self.keep <= share) or share == 1.0 or all(
             g.kept < budget for g in self.prefix.groups)
+        if self.complete:  # else told when the whole is read (WaveletVolume.open)
+            warn_stored(self.prefix, self.keep, path)
         self._coarse, self._taken, self._holding = None, False, threading.Lock()
 
     def coarse(self) -> tuple:

@@ -22,7 +22,7 @@ from urllib.parse import urlsplit
 from aiohttp import WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
-from ..errors import ClwaveError, DeviceMemoryError
+from ..errors import ClwaveError, DeviceMemoryError, InputError, whole_number
 from . import colours
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
@@ -51,6 +51,14 @@ def memory_shares(device_memory, shaded: bool) -> dict:
     return dict(xray=xray, shaded=cap - xray if shaded else None)
 
 
+def check_port(port) -> int:
+    """``port`` as an int, or an :class:`InputError` unless it is a whole number from 0 (a free port) to 65535."""
+    if not (whole_number(port) and 0 <= port <= 65535):
+        raise InputError(f"port={port!r} must be from 0 (a free port) to 65535",
+                         cli=f"--port {port} must be from 0 (a free port) to 65535")
+    return int(port)
+
+
 def is_loopback(host: str) -> bool:
     if host == "localhost":
         return True
@@ -77,7 +85,7 @@ class ViewServer:
 
         opened = model if isinstance(model, PrefixFirst) else None
         self.wv = opened.prefix if opened else model
-        self.host, self.port, self.device = host, int(port), device
+        self.host, self.port, self.device = host, check_port(port), device
         self.device_memory = parse_cap(device_memory)
         self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4))
         self.token = secrets.token_urlsafe(24)
@@ -248,7 +256,13 @@ class ViewServer:
         self._runner = web.AppRunner(self.app(), access_log=None, handle_signals=False)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.port)
-        await site.start()
+        try:
+            await site.start()
+        except OSError as exc:  # a port in use, a host not of this machine
+            raise InputError(f"cannot listen on {self.host}:{self.port} ({exc.strerror or exc}); choose another port=, "
+                             f"or port=0 for a free one",
+                             cli=f"cannot listen on {self.host}:{self.port} ({exc.strerror or exc}); choose another "
+                                 f"--port, or leave it out for a free one") from None
         self.port = self._runner.addresses[0][1]
         return self.url
 
@@ -439,11 +453,13 @@ class BackgroundServer:
         self._error = None
         try:
             self.loop.run_until_complete(self.server.start())
-        except OSError as exc:
+        except Exception as exc:  # any failure to start reaches the caller, which waits on `started`
             self._error = exc
-            started.set()
+            self.loop.run_until_complete(self.server.stop())
+            self.loop.close()
             return
-        started.set()
+        finally:
+            started.set()
         self.loop.run_forever()
 
     def close(self):
