@@ -95,30 +95,48 @@ def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_s
     assert expect.std() > 10 and np.abs(got.astype(int) - expect).max() <= 1
 
 
-def test_a_failed_reading_of_the_rest_is_logged_and_the_prefix_goes_on(clw, monkeypatch, caplog):
-    """Reading the rest failing (a file damaged past its prefix): one logged line, the prefix's frames go on."""
+def test_a_failed_reading_of_the_rest_is_logged_and_told_and_the_prefix_goes_on(clw, monkeypatch, caplog):
+    """Reading the rest failing (a file damaged past its prefix): one logged line; the tab hears the model is no
+    longer being read, and the line on its status line (an error of its view); the prefix's frames go on."""
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
     monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: (_ for _ in ()).throw(
         clwave.FileFormatError("damaged")))
+
+    async def last_frame(ws, seq):  # the still view's last frame (all of the prefix); other messages kept
+        heard = {}
+        while True:
+            kind, message = await receive(ws)
+            if kind != "frame":
+                heard[kind] = message
+            elif (message["seq"], message["mime"], message["coefficients"]) == (seq, "image/png", 2048):
+                return message, heard
 
     async def go(v):
         async with aiohttp.ClientSession() as s:
             ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
             await receive(ws)
-            for seq in (1, 2):
-                await ws.send_str(json.dumps(dict(BASE, seq=seq, azimuth=30.0 + seq)))
+            await ws.send_str(json.dumps(dict(BASE, seq=1, azimuth=31.0)))
+            await last_frame(ws, 1)
+            while v.server._reader.ident is None:  # started just after the first frame is sent
+                await asyncio.sleep(0.01)
+            v.server._reader.join(30)
+            told = {}
+            while not {"model", "error"} <= set(told):
                 kind, message = await receive(ws)
-                while (message["seq"], message["mime"], message["coefficients"]) != (seq, "image/png", 2048):
-                    kind, message = await receive(ws)  # to the still view's last frame (all of the prefix)
-                while v.server._reader.ident is None:  # started just after the first frame is sent
-                    await asyncio.sleep(0.01)
-                v.server._reader.join(30)
-            return message
+                told[kind] = message
+            await ws.send_str(json.dumps(dict(BASE, seq=2, azimuth=32.0)))
+            last, heard = await last_frame(ws, 2)
+            return told, last, heard
 
     with view(clw, size=SIZE) as v:
-        last = asyncio.run(go(v))
-    assert last["prefix"] and not last["final"] and last["seq"] == 2
-    assert any("failed: damaged" in r.getMessage() for r in caplog.records)
+        told, last, heard = asyncio.run(go(v))
+    assert not told["model"]["model"]["reading"] and told["model"]["model"]["failure"] == "damaged"
+    assert told["model"]["model"]["coefficients"] == 2048
+    assert told["error"]["seq"] == 1 and told["error"]["message"].endswith("views failed (they go on with what they "
+                                                                           "have): damaged")
+    assert last["prefix"] and not last["final"] and last["seq"] == 2 and not heard
+    assert [r.getMessage() for r in caplog.records if "failed" in r.getMessage()] == [
+        "making the whole model for xray views failed: damaged"]
 
 
 def test_a_ranking_that_does_not_extend_the_prefix_is_logged_and_the_prefix_goes_on(clw, monkeypatch, caplog):
@@ -304,7 +322,7 @@ def test_a_replaced_file_gives_the_shaded_views_no_model(clw):
     other.groups[0].values[0, 0] += 1.0
     told = []
     state = SimpleNamespace(whole=Future(), upgraded=lambda mode, exc=None: told.append((mode, exc)),
-                            coarse_first=False)
+                            coarse_first=False, _stop=threading.Event())
     ViewServer._read_whole(state, SimpleNamespace(whole=lambda **k: model, prefix=other, path=clw))
     with pytest.raises(clwave.FileFormatError, match="not a part of the whole file"):
         state.whole.result(timeout=0)

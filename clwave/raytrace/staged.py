@@ -83,6 +83,8 @@ class StagedTracer:
         else:  # the groups' lattices shift by half cells of the fine lattice: bricks of the coarsest detail
             self.coarse = tracer_class(approximation, device=device, device_memory=device_memory,
                                        lod=(approximation.levels,))
+        # the ``detail=`` of the coarse stage's renders (None: its only one)
+        self.coarse_detail = None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
         self.coarse_seconds = time.perf_counter() - start
         self.full, self.full_seconds, self._failure, self._abandon = None, None, None, threading.Event()
         # the stages share the device-memory budget: the full stage's bricks beyond what the coarse one leaves go
@@ -90,11 +92,6 @@ class StagedTracer:
         left = self.coarse.budget.total - self.coarse.bricks.pool_bytes - 2 * self.coarse.block_bound.nbytes
         self._thread = threading.Thread(target=self._set_up, args=(tracer_class, path, max(left, 1), lod, whole),
                                         name="clwave-staged-setup", daemon=True)  # given up at exit: _abandon
-
-    @property
-    def coarse_detail(self):
-        """The ``detail=`` of the coarse stage's renders (None: its only one)."""
-        return None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
 
     def _set_up(self, tracer_class, path, device_memory, lod, whole):
         start, cc = time.perf_counter(), self.coarse.cc
@@ -122,6 +119,12 @@ class StagedTracer:
             atexit.register(_abandon, self._abandon, self._thread)
             self._thread.start()
 
+    def abandon(self):
+        """Give up the full stage's set-up (a viewer stopping): its thread stops after the file's reading or between
+        two slabs of the expansion, as at the interpreter's exit (:func:`_abandon`), and the full stage is never
+        ready (:meth:`wait` gives None once it has stopped)."""
+        self._abandon.set()
+
     @property
     def ready(self) -> bool:
         """Whether the full stage is set up (or its set-up failed: :meth:`wait` raises its error)."""
@@ -141,11 +144,14 @@ class StagedTracer:
     def render(self, camera: Camera | ConeBeam, **options):
         """One image from the best stage ready now: the full one (``options`` as :meth:`RayTracer.render`), or
         the coarse one at its coarsest detail (``detail=`` refused there).  ``meta["stage"]`` says which."""
+        # the coarse stage taken before ``ready`` is read: a wait() from another thread (the viewer's) lets it go
+        # once the full stage is ready, which this render then takes
+        coarse = self.coarse
         full = self.wait(0) if self.ready else None
         if full is None and options.get("detail") is not None:
             raise InputError("detail= needs the full stage: wait() for it first")
-        result = full.render(camera, **options) if full else self.coarse.render(camera, **options,
-                                                                                 detail=self.coarse_detail)
+        result = full.render(camera, **options) if full else coarse.render(camera, **options,
+                                                                            detail=self.coarse_detail)
         result.meta["stage"] = "full" if full is not None else "coarse"
         self.start()
         return result
@@ -201,7 +207,7 @@ class StagedTracer:
     def _coarse_frames(self, camera, view, options, final, start):
         """The coarse stage's frames while the full stage is not ready (:meth:`refine`)."""
         # the coarse stage held here: a wait() from another thread (the viewer's) lets it go
-        coarse, detail = self.coarse, self.coarse_detail if self.coarse is not None else None
+        coarse, detail = self.coarse, self.coarse_detail
         if coarse is None or self.ready:
             return
         steps = ErrorEstimate()  # the coarse frames' size term: the step from the last image

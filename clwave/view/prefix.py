@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, FileFormatError
-from ..io.clw import read_header
+from ..errors import ClwaveError, ClwaveWarning, FileFormatError
+from ..io.clw import Abandoned, read_header
 from ..model.budget import warn_stored
 from ..model.ranking import by_importance
 from ..model.wavelet import WaveletVolume, check_thresholding
@@ -50,19 +50,28 @@ class PrefixFirst:
     def coarse(self) -> tuple:
         """What a staged tracer's coarse stage reads of the file (:func:`~clwave.raytrace.staged.read_coarse`): the
         reading :meth:`whole` holds (let go here), else read now (under the lock: :meth:`whole` starts the rest's
-        reading after it)."""
+        reading after it); checked to be of the prefix's file (:func:`check_frame`: a file replaced meanwhile)."""
         with self._holding:
             held, self._coarse, self._taken = self._coarse, None, True
-            return read_coarse(self.path) if held is None else held
+            reading = read_coarse(self.path) if held is None else held
+        check_frame(reading[0], self.prefix)
+        return reading
 
-    def whole(self, coarse_first=False) -> WaveletVolume:
+    def whole(self, coarse_first=False, stop=None) -> WaveletVolume:
         """The whole model (the file, or its ``keep`` most important coefficients).  ``coarse_first``: the coarse
         stage's reading (:meth:`coarse`, where not taken yet) is read before it and held until taken or the whole is
         read: h5py serialises its calls, so a coarse stage asked for meanwhile would wait behind the whole's reads,
-        seconds each at 1024^3 (docs/viewer.md §2)."""
+        seconds each at 1024^3 (docs/viewer.md §2); that reading failing, nothing is held, and :meth:`coarse` reads
+        again (and fails for the shaded views alone).  ``stop`` (a ``threading.Event``): set once the coarse reading
+        is done, the whole is not read (:class:`~clwave.io.clw.Abandoned`)."""
         with self._holding:
             if coarse_first and not self._taken:
-                self._coarse = read_coarse(self.path)
+                try:
+                    self._coarse = read_coarse(self.path)
+                except ClwaveError:  # the coarse stage's parts of the file only (its summaries, docs/chunked.md)
+                    pass
+        if stop is not None and stop.is_set():
+            raise Abandoned(f"the reading of {self.path.name} was given up")
         try:
             return WaveletVolume.open(self.path, keep=self.keep)
         finally:
@@ -73,23 +82,32 @@ class PrefixFirst:
 def part_rows(whole: WaveletVolume, prefix: WaveletVolume) -> list:
     """Per group, the rows of ``whole``'s ascending positions that hold ``prefix``'s coefficients; a prefix that is
     not a part of ``whole`` (the file replaced meanwhile) is a FileFormatError."""
-    replaced = FileFormatError("the file's prefix is not a part of the whole file read after it (was the file "
-                               "replaced meanwhile?); open it again")
-
-    def frame(wv):  # what a replaced file may change besides the coefficients
-        return wv.shape, wv.spacing, wv.origin, wv.levels, [(g.wavelet.name, g.channels) for g in wv.groups]
-
-    if frame(whole) != frame(prefix):
-        raise replaced
+    check_frame(whole, prefix)
     out = []
     for g, part in zip(whole.groups, prefix.groups, strict=True):
         positions, kept = g.all_positions(), part.all_positions()
         rows = np.searchsorted(positions, kept)
         if not (np.all(rows < len(positions)) and np.array_equal(positions[rows], kept)
                 and np.array_equal(g.values[:, rows], part.values)):
-            raise replaced
+            raise _replaced()
         out.append(rows)
     return out
+
+
+def check_frame(read: WaveletVolume, prefix: WaveletVolume):
+    """A FileFormatError where ``read`` (a model read from the prefix's file after it: the whole, or the coarse
+    stage's approximation) has another frame, levels or channel groups than ``prefix`` (the file replaced meanwhile:
+    no page shows two volumes)."""
+    def frame(wv):  # what a replaced file may change besides the coefficients
+        return wv.shape, wv.spacing, wv.origin, wv.levels, [(g.wavelet.name, g.channels) for g in wv.groups]
+
+    if frame(read) != frame(prefix):
+        raise _replaced()
+
+
+def _replaced() -> FileFormatError:
+    return FileFormatError("the file's prefix is not a part of the whole file read after it (was the file replaced "
+                           "meanwhile?); open it again")
 
 
 def prefix_first(whole: WaveletVolume, prefix: WaveletVolume, rows=None) -> list:

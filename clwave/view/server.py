@@ -9,6 +9,7 @@ and a tab's work for a view it has left is dropped between stages and never sent
 from __future__ import annotations
 
 import asyncio
+import atexit
 import ipaddress
 import itertools
 import logging
@@ -23,6 +24,7 @@ from aiohttp import WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError, whole_number
+from ..io.clw import Abandoned
 from . import colours
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
@@ -104,7 +106,11 @@ class ViewServer:
         self._reader = None if self.whole is None else threading.Thread(
             target=self._read_whole, args=(opened,), name="clwave-view-read", daemon=True)
         self._starting = threading.Lock()  # the reader is started from the event loop or the shaded set-up
+        # set by stop() (or at the interpreter's exit): the reader stops between its steps, for a daemon thread
+        # stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it for ever
+        self._stop = threading.Event()
         self.coarse_first = False  # set by _prepare
+        self.failure = None  # why the rest of a file could not be served (the page's model figures say it)
         try:
             self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened, transfer_function).result()
         except DeviceMemoryError as exc:
@@ -140,8 +146,21 @@ class ViewServer:
     def read_whole(self):
         """Start reading the rest of a file opened by its prefix (once, from any thread; nothing to read otherwise)."""
         with self._starting:
-            if self._reader is not None and self._reader.ident is None:
+            if self._reader is not None and self._reader.ident is None and not self._stop.is_set():
+                atexit.register(self._stop_reading)
                 self._reader.start()
+
+    def _stop_reading(self):
+        """Stop reading the rest (by :meth:`stop`, or at the interpreter's exit): the reader stops after the read
+        under way (h5py's reads are bounded) and is waited for; the whole model, not read, is :class:`Abandoned`
+        for whoever waits for it (the shaded views' set-up)."""
+        self.stopping = True  # its Abandoned is no failure to log
+        with self._starting:
+            self._stop.set()
+        if self._reader is not None and self._reader.ident is not None:
+            self._reader.join()
+        if self.whole is not None and not self.whole.done():
+            self.whole.set_exception(Abandoned("the viewer stopped before the rest of the file was read"))
 
     def whole_model(self):
         """The whole model of a file opened by its prefix (its reading started if it has not been, and waited for):
@@ -155,13 +174,20 @@ class ViewServer:
         from ..splat.ranked import ranked_groups
         from .prefix import part_rows, prefix_first
 
+        def step():  # between two steps: stop() given
+            if self._stop.is_set():
+                raise Abandoned("the viewer stopped")
+
         start = time.perf_counter()
         try:
-            wv = opened.whole(coarse_first=self.coarse_first)
+            wv = opened.whole(coarse_first=self.coarse_first, stop=self._stop)
+            step()
             rows = part_rows(wv, opened.prefix)  # a file replaced meanwhile: no view gets it (one volume a page)
+            step()
             self.whole.set_result(wv)
             read = time.perf_counter() - start
             groups = ranked_groups(wv, prefix_first(wv, opened.prefix, rows))
+            step()
         except Exception as exc:  # noqa: BLE001  (the prefix goes on being served)
             if not self.whole.done():
                 self.whole.set_exception(exc)
@@ -187,15 +213,23 @@ class ViewServer:
 
     def upgraded(self, mode, failure=None):
         """A source has a better model now (from any thread): each tab hears it, and one whose still view of that
-        mode has had no final frame renders it again.  ``failure``: making it failed (logged, unless the server is
-        stopping meanwhile); the source goes on as it was."""
+        mode has had no final frame renders it again.  ``failure``: making it failed (logged, and each tab shown the
+        line, unless the server is stopping meanwhile); the source goes on as it was, and an X-ray one's file is no
+        longer being read (the page's model figures)."""
         if failure is not None:
-            if not self.stopping:
-                log.error("making the whole model for %s views failed: %s", mode, failure)
-            return
+            if self.stopping:
+                return
+            log.error("making the whole model for %s views failed: %s", mode, failure)
+            reason = str(failure) if isinstance(failure, ClwaveError) else \
+                f"internal error ({type(failure).__name__}); see the server's log"
+            failure = f"making the whole model for the {'X-ray' if mode == 'xray' else mode} views failed " \
+                      f"(they go on with what they have): {reason}"
+            if mode == "xray":
+                self.failure = reason
         if self.loop is not None:
             try:
-                self.loop.call_soon_threadsafe(lambda: [s.upgraded(mode) for s in list(self.sessions.values())])
+                self.loop.call_soon_threadsafe(
+                    lambda: [s.upgraded(mode, failure) for s in list(self.sessions.values())])
             except RuntimeError:  # the server has stopped meanwhile (its loop closed): no tab to tell
                 pass
 
@@ -267,13 +301,21 @@ class ViewServer:
         return self.url
 
     async def stop(self):
+        """Close every tab and the server; stop reading a file's rest (waited for) and give up the shaded views'
+        set-up of its full stage, so that no thread of the server outlives it by more than the step under way."""
         self.stopping = True
         for session in list(self.sessions.values()):
             await session.ws.close()
         if self._runner is not None:
             await self._runner.cleanup()
+        self._stop_reading()
+        atexit.unregister(self._stop_reading)
+        shaded = self.sources.get("shaded")
+        if shaded is not None:
+            shaded.stop()
         self.pool.shutdown(wait=False, cancel_futures=True)
         self.builder.shutdown(wait=False, cancel_futures=True)
+        self.sources = {}  # their renderers' memory let go with the last frame under way
 
     @property
     def url(self) -> str:
@@ -307,11 +349,13 @@ class ViewServer:
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model())
 
     def model(self) -> dict:
-        """The model's figures for the page; ``reading``: a file's prefix, the rest being read."""
+        """The model's figures for the page; ``reading``: a file's prefix, the rest being read; ``failure``: why the
+        rest's reading failed (None: it did not)."""
         wv, xray = self.wv, self.sources["xray"]
         return dict(shape=list(wv.shape), channels=wv.channels, coefficients=xray.r.count, voxels=wv.n_voxels,
                     levels=wv.levels, wavelets=sorted({g.wavelet.name for g in wv.groups}),
-                    transfer_function=(wv.transfer_function or {}).get("name"), reading=not xray.complete)
+                    transfer_function=(wv.transfer_function or {}).get("name"),
+                    reading=not xray.complete and self.failure is None, failure=self.failure)
 
 
 class Session:
@@ -324,12 +368,17 @@ class Session:
         self.sent = self.dropped = 0
         self.paces = {}  # mode -> this tab's pacing of its frames (frames.XrayPace, shaded.ShadedPace)
         self.news = set()  # modes whose source has a better model since this tab's last view began
+        self.failures = {}  # mode -> the line saying its better model could not be made (the page shows it)
         self.rendered, self.final = None, False  # the last view rendered, and whether its final frame was sent
         self.histogram = None  # the last histogram of the model's values sent
 
-    def upgraded(self, mode):
-        """The ``mode`` source has a better model (a file's whole, swapped in for its prefix)."""
-        self.news.add(mode)
+    def upgraded(self, mode, failure=None):
+        """The ``mode`` source has a better model (a file's whole, swapped in for its prefix), or ``failure`` (a line
+        for the page) says why it could not be made."""
+        if failure is None:
+            self.news.add(mode)
+        else:
+            self.failures[mode] = failure
         self.wake.set()
 
     async def run(self):
@@ -368,8 +417,10 @@ class Session:
             await self.ws.send_json(dict(type="status", seq=state.seq, message="preparing the ray tracer (its "
                                          "bricks) for the first shaded view…"))
             newer = asyncio.ensure_future(self.wake.wait())
-            await asyncio.wait({building, newer}, return_when=asyncio.FIRST_COMPLETED)
-            newer.cancel()
+            try:
+                await asyncio.wait({building, newer}, return_when=asyncio.FIRST_COMPLETED)
+            finally:  # the tab closed meanwhile too: no task left pending
+                newer.cancel()
             if not building.done():
                 return False
         if building.exception() is not None:
@@ -392,8 +443,11 @@ class Session:
             await self.wake.wait()
             self.wake.clear()
             news, self.news = self.news, set()
-            if "xray" in news:  # the whole model is in: the page's figures of it
+            failures, self.failures = self.failures, {}
+            if "xray" in news or "xray" in failures:  # the whole model is in, or will not be: the page's figures
                 await self.ws.send_json(dict(type="model", model=self.server.model()))
+            for failure in failures.values():  # on the page's status line, whatever view it shows
+                await self.ws.send_json(dict(type="error", seq=self.seq, message=failure))
             state = self.state
             # a wake by news alone renders the view again where its mode has news and it has had no final frame
             if state is None or state is self.rendered and (self.final or state.mode not in news):
@@ -464,6 +518,9 @@ class BackgroundServer:
 
     def close(self):
         if self.thread.is_alive():
-            asyncio.run_coroutine_threadsafe(self.server.stop(), self.loop).result(timeout=10)
+            # no time limit: the stop waits for the reading step under way (bounded, docs/viewer.md §1)
+            asyncio.run_coroutine_threadsafe(self.server.stop(), self.loop).result()
             self.loop.call_soon_threadsafe(self.loop.stop)
             self.thread.join(timeout=10)
+        if not self.thread.is_alive() and not self.loop.is_closed():
+            self.loop.close()

@@ -101,6 +101,12 @@ class ShadedSource(Source):
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
             self.tracer = tracer
 
+    def stop(self):
+        """The viewer stopping: a file's full stage still being set up is given up (its thread stops after the read
+        or the slab under way)."""
+        if self.staged is not None:
+            self.staged.abandon()
+
     def _watch_full_stage(self):
         """Once a coarse frame has started the whole file's set-up: a thread that waits for it (:meth:`_upgrade`)."""
         if self._watch.ident is None:

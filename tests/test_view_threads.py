@@ -1,0 +1,220 @@
+"""The viewer's threads (docs/viewer.md §1, §2): a stop (Ctrl-C, ``Viewer.close()``) stops reading a file's rest and
+gives up the shaded views' set-up, so that the process ends; a staged tracer's render races no other thread; a tab
+closed while the ray tracer is prepared leaves no task behind; a file damaged or replaced while served."""
+
+import asyncio
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import aiohttp
+import h5py
+import numpy as np
+import pytest
+
+import clwave
+from clwave.raytrace.staged import StagedTracer
+from clwave.view import prefix as view_prefix
+from clwave.view import view
+from clwave.view.prefix import PrefixFirst
+import test_view_prefix
+
+BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
+            background=0.0, shading=True)
+clw = test_view_prefix.clw  # the fixture: hydrogen 40^3 RGBA, 12,800 coefficients in the file
+THREADS = ("clwave-view-read", "clwave-staged-setup", "clwave-view-full-stage")
+
+
+
+def alive(names=THREADS) -> list:
+    return sorted(t.name for t in threading.enumerate() if t.name in names)
+
+
+def test_ctrl_c_while_the_rest_is_read_ends_the_process(clw, tmp_path):
+    """``clwave view FILE.clw`` interrupted while the rest is read: the reading holds h5py's lock for 3 s (as a long
+    read does); the server stops the reader and waits for it, so the process ends (a daemon reader stopped by the
+    interpreter inside the read would keep the lock, and the exit would wait for it for ever)."""
+    script = tmp_path / "slow_view.py"
+    script.write_text(textwrap.dedent("""
+        import sys, time
+        import h5py
+        from clwave.cli import main
+        from clwave.view import prefix, server
+
+        prefix.PREFIX, server.READ_AFTER = 2048, 0.1
+        whole = prefix.PrefixFirst.whole
+        def slow(self, *a, **k):
+            print("reading the rest", flush=True)
+            with h5py._objects.phil:
+                time.sleep(3.0)
+            return whole(self, *a, **k)
+        prefix.PrefixFirst.whole = slow
+        sys.exit(main(["view", sys.argv[1], "--size", "32"]))
+    """))
+    env = dict(os.environ, PYTHONPATH=str(Path(clwave.__file__).parents[1]))
+    p = subprocess.Popen([sys.executable, str(script), str(clw)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    watchdog = threading.Timer(120, p.kill)  # a line never printed: killed, the test fails below
+    watchdog.start()
+    try:
+        while (line := p.stdout.readline()) and "reading the rest" not in line:
+            pass
+        assert line, "clwave view ended before reading the rest"
+        time.sleep(0.5)
+        p.send_signal(signal.SIGINT)
+        start = time.perf_counter()
+        try:
+            p.wait(30)
+        except subprocess.TimeoutExpired:
+            pytest.fail("clwave view did not end within 30 s of Ctrl-C while the rest was read")
+        ended = time.perf_counter() - start
+    finally:
+        watchdog.cancel()
+        if p.poll() is None:
+            p.kill()
+        _, err = p.communicate()  # its pipes closed
+    assert p.returncode == 0 and "clwave view: stopped" in err and "Traceback" not in err, err
+    assert ended < 30
+
+
+def test_a_render_while_another_thread_lets_the_coarse_stage_go(clw, monkeypatch):
+    """The viewer's render thread in ``StagedTracer.render`` reads ``ready`` (False), then the full stage's set-up
+    ends and the viewer's watching thread's ``wait()`` lets the coarse stage go, forced in that order: the render
+    draws the coarse stage it took, the image the coarse stage of another tracer of the file draws."""
+    camera = clwave.Camera(30.0, 20.0, 24)
+    expect = clwave.RayTracer.open(clw).render(camera, tolerance=1e-1)
+    staged, ready = clwave.RayTracer.open(clw), StagedTracer.ready
+
+    def interleaved(self):
+        answer = ready.fget(self)
+        if not answer and self._thread.ident is not None:
+            self._thread.join(60)  # the set-up ends now
+            watch = threading.Thread(target=self.wait)  # the viewer's watching thread
+            watch.start()
+            watch.join(60)
+        return answer
+
+    staged.start()
+    monkeypatch.setattr(StagedTracer, "ready", property(interleaved))
+    result = staged.render(camera, tolerance=1e-1)
+    assert staged.coarse is None and staged.full is not None  # the interleaving happened
+    assert result.meta["stage"] == expect.meta["stage"] == "coarse"
+    assert np.array_equal(result.image, expect.image)
+
+
+def test_close_while_the_rest_is_read_stops_the_reader_and_the_full_stage_set_up(clw, monkeypatch):
+    """``Viewer.close()`` while the rest of a file is read (3 s, instrumented) and the shaded views' full stage
+    waits for it: the reader has stopped when close returns, and the set-up and its watching thread stop within a
+    second, the full stage never made (given up, not set up from a model read after the stop)."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    whole = PrefixFirst.whole
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: time.sleep(3.0) or whole(self, **k))
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await ws.receive_json()
+            await ws.send_str(view_message(seq=1, mode="shaded"))
+            while (await ws.receive(timeout=60)).type != aiohttp.WSMsgType.BINARY:
+                pass
+
+    v = view(clw, size=32, tolerance=2e-2)
+    try:
+        asyncio.run(asyncio.wait_for(go(v), 60))
+        staged = v.server.sources["shaded"].staged
+        deadline = time.monotonic() + 30
+        while "clwave-staged-setup" not in alive() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert v.server._reader.is_alive() and "clwave-staged-setup" in alive()  # both under way
+    finally:
+        v.close()
+    assert "clwave-view-read" not in alive()
+    deadline = time.monotonic() + 1.0
+    while alive() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not alive() and staged.full is None
+    assert v.server.sources == {}  # the renderers let go
+
+
+def test_a_tab_closed_while_the_ray_tracer_is_prepared_leaves_no_task(monkeypatch):
+    """A tab that closes while its first shaded view waits for the ray tracer (held by a gate): no task of it is left
+    pending on the server's loop (asyncio would report one destroyed while pending)."""
+    from clwave.view.shaded import ShadedSource
+
+    gate, prepare = threading.Event(), ShadedSource.prepare
+    monkeypatch.setattr(ShadedSource, "prepare", lambda self: gate.wait(60) and prepare(self))
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await ws.receive_json()
+            await ws.send_str(view_message(seq=1, mode="shaded"))
+            status = await ws.receive_json(timeout=60)
+            await ws.close()
+        deadline = time.monotonic() + 30
+        while v.server.sessions and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+        return status
+
+    async def tasks():
+        return [t.get_coro().__qualname__ for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+
+    try:
+        with view(wv, size=16) as v:
+            status = asyncio.run(asyncio.wait_for(go(v), 60))
+            time.sleep(0.1)  # the cancelled tasks run to their end
+            left = asyncio.run_coroutine_threadsafe(tasks(), v._background.loop).result(10)
+    finally:
+        gate.set()
+    assert status["type"] == "status" and "preparing" in status["message"]
+    assert not v.server.sessions and not [name for name in left if name.startswith("Event.")], left
+
+
+def test_a_damaged_coarse_share_fails_the_shaded_views_alone(clw, tmp_path, monkeypatch):
+    """A file whose coarse stage's summary is damaged (the details' field energy beyond the tiers'): reading it
+    ahead of the rest fails quietly, the whole model is read and served to the X-ray views, and only the shaded
+    views' coarse stage, reading it again, fails, with the file's one line."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    bad = tmp_path / "bad.clw"
+    shutil.copy(clw, bad)
+    with h5py.File(bad, "r+") as h5:
+        h5["g0/detail_field"][...] = np.array([0.0, 1e300])
+    kept = clwave.WaveletVolume.open(bad).kept
+    opened = PrefixFirst(bad)
+    assert opened.whole(coarse_first=True).kept == kept
+    with pytest.raises(clwave.FileFormatError, match="detail_field"):
+        opened.coarse()
+    with view(bad, size=32) as v:
+        v.server.read_whole()
+        deadline = time.monotonic() + 30
+        while not v.server.sources["xray"].complete and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert v.server.sources["xray"].complete and v.server.wv.kept == kept
+
+
+def test_a_file_replaced_while_served_is_refused_by_the_coarse_stage(clw, tmp_path, monkeypatch):
+    """The coarse stage's reading of a file is checked against the prefix as the whole's is: another volume in its
+    place (another size and levels) is the replaced file's one line, the file itself passes."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    served = tmp_path / "served.clw"
+    shutil.copy(clw, served)
+    opened = PrefixFirst(served)
+    assert opened.coarse()[0].shape == opened.prefix.shape  # the file itself
+    other = tmp_path / "other.clw"
+    clwave.WaveletVolume.from_volume(clwave.phantom("shepp-logan", 24), levels=3).threshold(keep=0.05).save(other)
+    os.replace(other, served)
+    with pytest.raises(clwave.FileFormatError, match="replaced meanwhile"):
+        opened.coarse()
+
+
+def view_message(**fields) -> str:
+    import json
+
+    return json.dumps(dict(BASE, **fields))
