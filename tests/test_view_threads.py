@@ -129,9 +129,13 @@ def test_close_while_the_rest_is_read_stops_the_reader_and_the_full_stage_set_up
         asyncio.run(asyncio.wait_for(go(v), 60))
         staged = v.server.sources["shaded"].staged
         deadline = time.monotonic() + 30
-        while "clwave-staged-setup" not in alive() and time.monotonic() < deadline:
+
+        def under_way():  # both: the set-up waits for the reader
+            return v.server._reader.is_alive() and "clwave-staged-setup" in alive()
+
+        while not under_way() and time.monotonic() < deadline:
             time.sleep(0.01)
-        assert v.server._reader.is_alive() and "clwave-staged-setup" in alive()  # both under way
+        assert under_way()
     finally:
         v.close()
     assert "clwave-view-read" not in alive()

@@ -158,6 +158,8 @@ class ViewServer:
         with self._starting:
             self._stop.set()
         if self._reader is not None and self._reader.ident is not None:
+            if self._reader.is_alive():
+                log.info("stopping: waiting for the step of the file's reading under way")
             self._reader.join()
         if self.whole is not None and not self.whole.done():
             self.whole.set_exception(Abandoned("the viewer stopped before the rest of the file was read"))
