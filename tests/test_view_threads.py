@@ -222,3 +222,28 @@ def view_message(**fields) -> str:
     import json
 
     return json.dumps(dict(BASE, **fields))
+
+
+def test_close_while_the_whole_is_ranked_does_not_wait_for_the_ranking(clw, monkeypatch):
+    """The reader is waited for while it reads the file only: once read, its ranking (seconds at 1024^3) holds no
+    lock of h5py's, and ``close()`` returns without waiting for it (the daemon reader then stops by itself)."""
+    from clwave.splat import ranked
+
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    ranking, release, rank = threading.Event(), threading.Event(), ranked.ranked_groups
+
+    def slow(*a, **k):
+        ranking.set()
+        release.wait(60)
+        return rank(*a, **k)
+
+    monkeypatch.setattr(ranked, "ranked_groups", slow)
+    v = view(clw, size=32, tolerance=2e-2)
+    try:
+        v.server.read_whole()
+        assert ranking.wait(60), "the reader never ranked"
+        start = time.perf_counter()
+        v.close()
+        assert time.perf_counter() - start < 5.0
+    finally:
+        release.set()

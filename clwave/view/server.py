@@ -109,6 +109,7 @@ class ViewServer:
         # set by stop() (or at the interpreter's exit): the reader stops between its steps, for a daemon thread
         # stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it for ever
         self._stop = threading.Event()
+        self._in_file = threading.Event()  # set from the reader's start until it has done with the file (h5py)
         self.coarse_first = False  # set by _prepare
         self.failure = None  # why the rest of a file could not be served (the page's model figures say it)
         try:
@@ -148,18 +149,19 @@ class ViewServer:
         with self._starting:
             if self._reader is not None and self._reader.ident is None and not self._stop.is_set():
                 atexit.register(self._stop_reading)
+                self._in_file.set()
                 self._reader.start()
 
     def _stop_reading(self):
-        """Stop reading the rest (by :meth:`stop`, or at the interpreter's exit): the reader stops after the read
-        under way (h5py's reads are bounded) and is waited for; the whole model, not read, is :class:`Abandoned`
-        for whoever waits for it (the shaded views' set-up)."""
+        """Stop reading the rest (by :meth:`stop`, or at the interpreter's exit): the reader stops after the step
+        under way, waited for while it reads the file (h5py's reads are bounded: a daemon thread stopped inside
+        one would keep h5py's lock), not while it ranks what it read; the whole model, not read, is
+        :class:`Abandoned` for whoever waits for it (the shaded views' set-up)."""
         self.stopping = True  # its Abandoned is no failure to log
         with self._starting:
             self._stop.set()
-        if self._reader is not None and self._reader.ident is not None:
-            if self._reader.is_alive():
-                log.info("stopping: waiting for the step of the file's reading under way")
+        if self._reader is not None and self._in_file.is_set():
+            log.info("stopping: waiting for the read of the file under way")
             self._reader.join()
         if self.whole is not None and not self.whole.done():
             self.whole.set_exception(Abandoned("the viewer stopped before the rest of the file was read"))
@@ -182,7 +184,10 @@ class ViewServer:
 
         start = time.perf_counter()
         try:
-            wv = opened.whole(coarse_first=self.coarse_first, stop=self._stop)
+            try:
+                wv = opened.whole(coarse_first=self.coarse_first, stop=self._stop)
+            finally:
+                self._in_file.clear()  # nothing after this reads the file
             step()
             rows = part_rows(wv, opened.prefix)  # a file replaced meanwhile: no view gets it (one volume a page)
             step()
