@@ -207,7 +207,8 @@ FINEST_PIXEL = 0.25
 def default_omega_s(pixel, min_spacing, order=4) -> float:
     """Texture band: the paper's 14, finer when pixels are small (texel <= pixel / 4, down to pixels of
     :data:`FINEST_PIXEL` voxel); twice that for order 6."""
-    return max(14.0, 4.0 * np.pi * min_spacing / max(pixel, FINEST_PIXEL * min_spacing)) * OMEGA_S_FACTOR.get(order, 1.0)
+    finest = max(pixel, FINEST_PIXEL * min_spacing)
+    return max(14.0, 4.0 * np.pi * min_spacing / finest) * OMEGA_S_FACTOR.get(order, 1.0)
 
 
 MAX_LEVELS = 8  # band id = level * 8 + subband code must fit the 64-entry table
