@@ -466,5 +466,20 @@ def test_textures_over_the_texel_cap_are_refused_before_any_is_made():
     made = footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands)
     texels = sum(t.data.size for t in made.values())
     assert footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands, max_texels=texels).keys() == made.keys()
-    with pytest.raises(DeviceMemoryError, match=f"need {texels:,} texels .* render a wider extent"):
+    with pytest.raises(DeviceMemoryError, match=f"need {texels:,} texels .*--method raytrace"):
         footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands, max_texels=texels - 1)
+
+
+def test_textures_over_the_host_memory_are_refused_before_any_is_made(monkeypatch):
+    """Within the device cap but more than the host could hold while making them: a HostMemoryError in one line."""
+    from clwave.device import memory
+    from clwave.splat.textures import HOST_TEXEL_BYTES
+
+    n, u, v = view_frame(30.0, 20.0)
+    bands = {(0, "aaa"): 0.05, (1, "dda"): 0.1}
+    texels = sum(t.data.size for t in footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands).values())
+    monkeypatch.setattr(memory, "available_bytes", lambda: HOST_TEXEL_BYTES * texels)
+    assert footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands, max_texels=texels)
+    monkeypatch.setattr(memory, "available_bytes", lambda: HOST_TEXEL_BYTES * texels - 1)
+    with pytest.raises(memory.HostMemoryError, match=f"{texels:,} texels.* available; .*--method raytrace"):
+        footprints("cubic", (1.0, 1.0, 1.0), n, u, v, bands, max_texels=texels)

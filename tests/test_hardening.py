@@ -307,7 +307,6 @@ def test_options_that_do_not_apply_to_a_phantom_are_errors(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("option, needle", [
-    (["--extent", "1e-6"], "footprint textures"),
     (["--extent", "1e12"], "texel pool"),
     (["--omega-s", "nan"], "--omega-s"),
     (["--omega-s", "1e9"], "footprint textures"),
@@ -321,6 +320,17 @@ def test_extreme_geometry_is_one_line_before_any_texture_is_made(tmp_path, capsy
     err = capsys.readouterr().err
     assert code == 2 and needle in err and err.count("\n") == 1 and not list(tmp_path.iterdir())
     assert time.perf_counter() - start < 10
+
+
+def test_an_extreme_zoom_renders_from_textures_of_the_band(tmp_path):
+    """``--extent 1e-6`` (a millionth of a voxel): splatting's textures stop at the band's texel (docs/splatting.md
+    §2, magnified views), so the view is drawn in seconds rather than refused (the magnified images' accuracy:
+    tests/test_splat.py)."""
+    from clwave.cli import main
+    start = time.perf_counter()
+    out = tmp_path / "x.png"
+    assert main(["render", "phantom:hydrogen:16", "--levels", "1", "--extent", "1e-6", "-o", str(out)]) == 0
+    assert out.exists() and time.perf_counter() - start < 10
 
 
 @pytest.mark.parametrize("argv, needle", [

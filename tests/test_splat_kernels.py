@@ -11,19 +11,22 @@ import pytest
 from clwave.device.memory import device_budget
 from clwave.splat import reference
 from clwave.splat.stages import Stages, bin_chunks
-from clwave.splat.tables import LINEAR_U, LINEAR_V, pack_texture
+from clwave.splat.tables import GATHER_U, LINEAR_U, LINEAR_V, pack_texture
 
 #: two framebuffers (width, height, first tile, first pixel), sizes not multiples of the 16-pixel
 #: tile: 3 x 3 tiles, then 2 x 2
 LAYERS = np.array([(45, 37, 0, 0), (29, 21, 9, 45 * 37)], np.int32)
 TILES, PIXELS = 13, 45 * 37 + 29 * 21
-TEX_LAYER = np.array([(0, 0), (0, 1), (0, 2), (0, 3), (0, 4), (1, 0), (1, 1), (1, 2)], np.int32)
+TEX_LAYER = np.array([(0, 0), (0, 1), (0, 2), (0, 3), (0, 4), (1, 0), (1, 1), (1, 2), (0, 5), (1, 3), (0, 6), (1, 4)],
+                     np.int32)
 
 
-LOOKUPS = (0, LINEAR_U, LINEAR_V, LINEAR_U | LINEAR_V)  # cells, u linear / v cells, u cells / v linear, bilinear
+#: cells, u linear / v cells, u cells / v linear, bilinear; u texels coarser than the pixel (a magnified view)
+#: with v linear, and with v cells
+LOOKUPS = (0, LINEAR_U, LINEAR_V, LINEAR_U | LINEAR_V, GATHER_U | LINEAR_V, GATHER_U)
 
 
-def random_scene(rng, n=400, n_tex=8):
+def random_scene(rng, n=400, n_tex=12):
     coef = np.zeros((n + 7, 4), np.int32)
     coef[:, :3] = rng.integers(-3, 12, (n + 7, 3))
     coef[:, 3] = rng.integers(0, 3, n + 7) * 8 + rng.integers(0, 8, n + 7)
@@ -36,14 +39,15 @@ def random_scene(rng, n=400, n_tex=8):
         nu, nv = rng.integers(2, 30, 2)
         cu, cv = rng.uniform(0, nu - 1), rng.uniform(0, nv - 1)
         data = rng.standard_normal((nv, nu)).astype(np.float32)
-        lookup = LOOKUPS[i % 4]
-        # along a linear axis texels are 1/P pixel (u: P phase planes), along a cell axis any step
-        # with nearest lookup, the box reaching half a texel beyond the first and last
+        lookup = LOOKUPS[i % len(LOOKUPS)]
+        # along a linear axis texels are 1/P pixel (u: P phase planes) or, along u gathered, coarser than the
+        # pixel; along a cell axis any step with nearest lookup, the box reaching half a texel beyond the first
+        # and last
         P = int(rng.integers(1, 6))
-        su = float(P) if lookup & LINEAR_U else rng.uniform(0.2, 3.0)
+        su = float(P) if lookup & LINEAR_U else rng.uniform(0.2, 1.99) if lookup & GATHER_U else rng.uniform(0.2, 3.0)
         sv = float(P) if lookup == LINEAR_U | LINEAR_V else rng.uniform(0.2, 3.0)
         planes = pack_texture(data, P if lookup & LINEAR_U else 1)
-        ru, rv = (0.0 if lookup & LINEAR_U else 0.5), (0.0 if lookup & LINEAR_V else 0.5)
+        ru, rv = (0.0 if lookup & (LINEAR_U | GATHER_U) else 0.5), (0.0 if lookup & LINEAR_V else 0.5)
         boxes.append((-(cu + ru) / su, (nu - 1 + ru - cu) / su, -(cv + rv) / sv, (nv - 1 + rv - cv) / sv))
         ints.append((off, planes.shape[2], planes.shape[1], lookup))
         maps.append((cu, cv, su, sv))

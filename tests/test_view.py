@@ -212,6 +212,32 @@ def test_still_xray_frames_refine_to_the_splat_of_the_view(viewer):
     assert np.abs(got.astype(int) - expect).max() <= 1
 
 
+def test_the_largest_zoom_is_drawn_and_a_view_refused_is_told_on_the_page(viewer, monkeypatch):
+    """At the page's largest zoom the still frames end at the splat of the view; a view whose footprints the host
+    could not make is refused before any is made, its one line (naming the fix) sent to the page as an error, and
+    the tab goes on."""
+    from clwave.splat import textures
+    from clwave.view.protocol import ZOOM
+
+    async def go(seq, azimuth):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(viewer))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=seq, azimuth=azimuth, zoom=ZOOM[1])))
+            while True:
+                msg = await ws.receive(timeout=60)
+                if msg.type == aiohttp.WSMsgType.TEXT and json.loads(msg.data)["type"] == "error":
+                    return json.loads(msg.data)
+                if msg.type == aiohttp.WSMsgType.BINARY and unpack_frame(msg.data)[0]["final"]:
+                    return unpack_frame(msg.data)[0]
+    assert run(go(1, 41.0))["extent"] == pytest.approx(viewer.server.sources["xray"].base_extent / ZOOM[1])
+    monkeypatch.setattr(textures, "HOST_TEXEL_BYTES", 2**50)  # no footprint fits the host now
+    error = run(go(2, 42.0))
+    assert error["seq"] == 2 and "available" in error["message"] and "--method raytrace" in error["message"]
+    monkeypatch.undo()
+    assert run(go(3, 43.0))["final"]
+
+
 def test_colour_maps_are_matplotlibs_tables_and_colour_the_grey_levels():
     """The stored tables are matplotlib's sampled at their 256 entries, rounded to 8 bits; a grey ramp comes out as
     the table, row for row; the page gets the same rows."""
@@ -667,17 +693,18 @@ def test_cli_view_refuses_bad_options_before_any_work(capsys, tmp_path):
 
 
 def test_cli_view_refuses_a_device_memory_too_small_for_its_size_at_start(capsys, tmp_path):
-    """``clwave view --size 256 --device-memory 120MiB``: the X-ray views' 60 MiB hold the 128x128 auto-window image and
-    the drag frames, not the still 256x256 view (187 MiB, SplatRenderer's plan): refused at start-up in one line in
-    the command line's words, not on the page at every still view."""
+    """``clwave view --size 2048 --device-memory 120MiB``: the X-ray views' 60 MiB hold the 128x128 auto-window image
+    and the drag frames, not the still 2048x2048 view (125 MiB, SplatRenderer's plan): refused at start-up in one line
+    in the command line's words, not on the page at every still view.  (A 256x256 view of this 16^3 model needed
+    187 MiB while splatting's textures grew with the magnification; now about as much as a 128x128 one.)"""
     from clwave.cli import main
 
     path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16)).save(tmp_path / "h.clw")
-    assert main(["view", str(path), "--size", "256", "--device-memory", "120MiB"]) == 2
+    assert main(["view", str(path), "--size", "2048", "--device-memory", "120MiB"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and re.fullmatch(r"clwave: error: --device-memory 120 MiB is too small for this viewer: its "
-                                          r"X-ray views get 60 MiB of it \(docs/viewer.md §1\), and a 256x256 view "
-                                          r"needs at least 187 MiB .*; give more or a smaller --size", err[0]), err
+                                          r"X-ray views get 60 MiB of it \(docs/viewer.md §1\), and a 2048x2048 view "
+                                          r"needs at least 125 MiB .*; give more or a smaller --size", err[0]), err
 
 
 def test_cli_view_refuses_a_size_beyond_the_device_before_reading_the_input(capsys, tmp_path, monkeypatch):

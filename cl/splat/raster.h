@@ -7,7 +7,9 @@
  * of pixels reads four contiguous runs of memory: the loop over x vectorises.  Along an axis
  * where a footprint is piecewise constant (Haar along a world axis) the texels are instead its
  * cells, looked up by nearest sample at any step (lookup bits of tex_int): cells along v pick
- * one texel row (weight 0 on the next), cells along u give each pixel its nearest column.
+ * one texel row (weight 0 on the next), cells along u give each pixel its nearest column.  In a
+ * magnified view, texels of more than half a pixel (s_u < 2) are interpolated linearly per pixel from
+ * one plane (lookup bit 2), so that textures need not grow with the magnification.
  *
  * splat_accumulate
  *   ranges   in  (tiles,) uint2: [start, end) into records
@@ -23,7 +25,9 @@
  *                of a row); clear, they are cells at any texel step, looked up by nearest
  *                sample (along u gathered per pixel from one plane; clwave.splat.textures "cells"):
  *                exact for Haar footprints along a world axis, whose jumps lie on the cell
- *                edges, where linear interpolation would smear each jump over a texel
+ *                edges, where linear interpolation would smear each jump over a texel.  Bit 2
+ *                (with bit 0 clear): along u, samples of more than half a pixel (s_u < 2), gathered
+ *                per pixel from one plane and interpolated linearly (a magnified view)
  *   tex_map  in  (T,) float4: (centre_u, centre_v) in texels of the unpadded texture, and the
  *                texel steps per pixel (s_u, s_v); s_u = P for phase planes, and s_v = P too
  *                when both axes are linear (lookup 3), so the v weight is the same on every
@@ -47,9 +51,9 @@
 
 /* Per splat, what does not depend on the pixel.  a: the lookup bits in a.w and the row stride
  * a.z; u from phase planes: the texel offsets of pixel 0 in the two phase planes (a.x, a.y; row
- * 0 of the padded plane) and the column weight f.x; u cells: a.x the start of row 0, a.y the
- * column count (columns -1 and a.y are the zero margin), f.x = centre_u + 1/2 and cell = (centre
- * column, s_u).  f.y, f.z, f.w = centre row, texture centre row (+ 1/2 for v cells: floor gives
+ * 0 of the padded plane) and the column weight f.x; u from one plane (cells, or bit 2: coarse
+ * texels): a.x the start of row 0, a.y the column count (columns -1 and a.y are the zero margin),
+ * f.x = centre_u (+ 1/2 for cells) and cell = (centre column, s_u).  f.y, f.z, f.w = centre row, texture centre row (+ 1/2 for v cells: floor gives
  * the nearest texel), s_v, from which each row finds its texel row. */
 inline void splat_lookup(const int4 t, const float4 m, const float2 c, int4 *a, float4 *f, float2 *cell)
 {
@@ -67,9 +71,9 @@ inline void splat_lookup(const int4 t, const float4 m, const float2 c, int4 *a, 
         /* +1: the zero margin of the columns; the row margin is added per row */
         *a = (int4)(t.x + p0 * t.z * t.y + q0 + 1, t.x + p1 * t.z * t.y + q1 + 1, t.y, t.w);
         fx = base - fib;
-    } else {  /* +1/2: floor gives the nearest texel */
+    } else {  /* one plane, gathered per pixel; cells: +1/2, floor gives the nearest texel */
         *a = (int4)(t.x + 1, t.y - 2, t.y, t.w);
-        fx = m.x + 0.5f;
+        fx = (t.w & 4) ? m.x : m.x + 0.5f;
     }
     *f = (float4)(fx, c.y, (t.w & 2) ? m.y : m.y + 0.5f, m.w);
     *cell = (float2)(c.x, m.z);

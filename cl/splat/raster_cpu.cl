@@ -50,7 +50,7 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
             }
             continue;
         }
-        for (int y = y0; y <= y1; ++y) {  /* a cell axis (Haar along a world axis) */
+        for (int y = y0; y <= y1; ++y) {  /* a cell axis (Haar along a world axis), or u coarser than the pixel */
             const int row = splat_row(a, f, y, &fv);
             __global const float *r00 = texels + a.x + row;
             float16 sample;
@@ -58,6 +58,17 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
                 __global const float *r01 = texels + a.y + row;
                 sample = (1.0f - fv) * ((1.0f - f.x) * vload16(0, r00 + xbase) + f.x * vload16(0, r01 + xbase))
                        + fv * ((1.0f - f.x) * vload16(0, r00 + xbase + a.z) + f.x * vload16(0, r01 + xbase + a.z));
+            } else if (a.w & 4) {  /* u texels of more than half a pixel (s_u < 2): 16 lanes span at most 32
+                                    * texels, so each lane's two are shuffled out of 32 consecutive ones of each
+                                    * texel row; lanes off the texture read the margin or a neighbour, masked */
+                const float16 tu = f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y, fl = floor(tu), fu = tu - fl;
+                const int16 col = clamp(convert_int16(fl), -1, a.y - 1);
+                const int c0 = col.s0;
+                const uint16 i0 = convert_uint16(col - c0), i1 = i0 + 1;
+                __global const float *p0 = r00 + c0, *p1 = r00 + c0 + a.z;
+                const float16 t00 = vload16(0, p0), t01 = vload16(1, p0), t10 = vload16(0, p1), t11 = vload16(1, p1);
+                sample = (1.0f - fv) * ((1.0f - fu) * shuffle2(t00, t01, i0) + fu * shuffle2(t00, t01, i1))
+                       + fv * ((1.0f - fu) * shuffle2(t10, t11, i0) + fu * shuffle2(t10, t11, i1));
             } else {  /* u cells: each lane takes its nearest column (a.y of them, a handful: 2 for
                        * footprints), by selects rather than gathers; lanes off the texture keep 0 */
                 const int16 col = convert_int16(floor(f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y));

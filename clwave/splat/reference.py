@@ -12,7 +12,7 @@ import numpy as np
 from ..device.constants import TILE
 from ..model.geometry import world_to_fine
 from .perspective import quasi_interpolant
-from .tables import LINEAR_U, LINEAR_V
+from .tables import GATHER_U, LINEAR_U, LINEAR_V
 
 
 def project(coef, first, band_tex, band_origin, step_col, step_row, tex_box, tex_layer, layers, n):
@@ -135,8 +135,8 @@ def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, layers
     into the framebuffers of ``layers`` one after the other, (pixels, 4).
 
     ``textures`` are ``(data (nv, nu), centre_u, centre_v, lookup, s_u, s_v)``: per axis, s
-    texels per pixel; linear interpolation where the axis' lookup bit is set, nearest sample
-    where it is clear.  Image rows go down while v goes up.
+    texels per pixel; linear interpolation where the axis' lookup bit is set (u: ``LINEAR_U`` or
+    ``GATHER_U``), nearest sample where it is clear.  Image rows go down while v goes up.
     """
     fbs = [np.zeros((h, w, 4)) for w, h, _, _ in layers]
     for layer, s, xs, ys in _tile_pixels(ranges, vals, bbox, layers):
@@ -144,7 +144,7 @@ def accumulate(ranges, vals, first, centre, bbox, stex, values, textures, layers
         nv, nu = data.shape
         tex = np.zeros((nv + 2, nu + 2))  # one ring of zeros outside
         tex[1:-1, 1:-1] = data
-        iu0, iu1, fu = _axis_lookup(xs, centre[s, 0], cu, su, nu, lookup & LINEAR_U)
+        iu0, iu1, fu = _axis_lookup(xs, centre[s, 0], cu, su, nu, lookup & (LINEAR_U | GATHER_U))
         # rows: offset (centre - y) along v, i.e. the same lookup of -y about -centre
         iv0, iv1, fv = _axis_lookup(-ys, -centre[s, 1], cv, sv, nv, lookup & LINEAR_V)
         top = tex[iv0[:, None], iu0] * (1 - fu) + tex[iv0[:, None], iu1] * fu

@@ -39,7 +39,10 @@ CELL_REFINE = 8
 TEXTURE_TOL = 1e-4
 
 
-LINEAR_U, LINEAR_V = 1, 2  # lookup bits of a texture (cl/splat/raster.h); clear: cells, nearest sample
+#: lookup bits of a texture (cl/splat/raster.h): u (v) samples interpolated linearly, u from P phase planes; both
+#: clear: cells, nearest sample; GATHER_U: u samples of more than half a pixel (a magnified view), interpolated linearly
+#: per pixel from one plane
+LINEAR_U, LINEAR_V, GATHER_U = 1, 2, 4
 
 
 class ViewTables:
@@ -74,11 +77,12 @@ class ViewTables:
                 band = (b.level, b.key)
                 if band in self.layer_of or (bands is not None and band not in bands):
                     continue
-                # texels of exactly 1/P pixel (cl/splat/raster.h)
-                P = texels_per_pixel(wav.order, b.level, omega, view.pixel, min(wv.spacing))
+                # texels of exactly 1/P pixel, or coarser than the pixel in a magnified view (cl/splat/raster.h)
+                s = texels_per_pixel(wav.order, b.level, omega, view.pixel, min(wv.spacing),
+                                     CELL_REFINE if sampling == "cells" else 1)
                 self.layer_of[band] = li
-                self.texels_per_pixel[band] = P * (CELL_REFINE if sampling == "cells" else 1)
-                texel[band] = view.pixel / self.texels_per_pixel[band]
+                self.texels_per_pixel[band] = s
+                texel[band] = view.pixel / s
         start = time.perf_counter()
         self.textures = footprints(wav, wv.spacing, image_view.n, image_view.u, image_view.v, list(self.layer_of),
                                    omega_s=self.omega_s, sampling=sampling, tol=TEXTURE_TOL if wav.order >= 4 else 0.0,
@@ -114,20 +118,22 @@ class ViewTables:
                     continue
                 self.band_tex[bid] = len(ints)
                 tex_layer.append((li, len(ints) - first_tex))
-                # per axis: texels at 1/P pixel, bilinear (u from P phase planes), or cells at s texels
-                # per pixel, nearest sample (u gathered per pixel from one plane); cl/splat/raster.h
-                P = self.texels_per_pixel[(m, band.key)]
+                # per axis: texels at 1/P pixel, bilinear (u from P phase planes), texels coarser than the
+                # pixel (u gathered per pixel from one plane), or cells at s texels per pixel, nearest sample
+                # (u gathered per pixel from one plane); cl/splat/raster.h
+                s = self.texels_per_pixel[(m, band.key)]
                 cell_u, cell_v = tex.cells
-                su, sv = (view.pixel / h if cell else float(P) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
-                pool_texels = offset + (1 if cell_u else P) * (tex.data.shape[0] + 3) * (-(-tex.data.shape[1] // P) + 2)
+                P = s if isinstance(s, int) and not cell_u else 1  # phase planes
+                su, sv = (view.pixel / h if cell else float(s) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
+                pool_texels = offset + P * (tex.data.shape[0] + 3) * (-(-tex.data.shape[1] // P) + 2)
                 if max_texels is not None and pool_texels > max_texels:
                     raise DeviceMemoryError(
                         f"the texel pool of this view needs more than {4 * max_texels / 2**20:,.0f} MiB: a pixel "
-                        f"({view.pixel:.3g} world units) spans {P:,} texels; render a smaller extent or more pixels")
-                planes = pack_texture(tex.data, 1 if cell_u else P)
+                        f"({view.pixel:.3g} world units) spans {s:,} texels; render a smaller extent or more pixels")
+                planes = pack_texture(tex.data, P)
                 nv, nu = tex.data.shape
                 boxes.append(_axis_box(nu, tex.centre_u, su, cell_u) + _axis_box(nv, tex.centre_v, sv, cell_v))
-                lookup = (0 if cell_u else LINEAR_U) | (0 if cell_v else LINEAR_V)
+                lookup = (0 if cell_u else LINEAR_U if P > 1 else GATHER_U) | (0 if cell_v else LINEAR_V)
                 ints.append((offset, planes.shape[2], planes.shape[1], lookup))
                 maps.append((tex.centre_u, tex.centre_v, su, sv))
                 pool.append(planes.ravel())
@@ -170,12 +176,20 @@ def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
     return np.ascontiguousarray(rows.reshape(nv + 3, cols, P).transpose(2, 0, 1))
 
 
-def texels_per_pixel(order: int, level: int, omega: float, pixel: float, d_min: float) -> int:
-    """P, the texels per pixel of a band's texture (docs/splatting.md §2): at least the band ``omega`` of
-    eq. 36 and the least band of the level's own prototype (:data:`DEFAULT_OMEGA_MIN`); Haar and linear
-    footprints have kinks (Haar: jumps), so bilinear resampling needs fine texels at every level."""
+def texels_per_pixel(order: int, level: int, omega: float, pixel: float, d_min: float, refine: int = 1):
+    """The texels per pixel of a band's texture (docs/splatting.md §2): at least the band ``omega`` of
+    eq. 36 and the least band of the level's own prototype (:data:`DEFAULT_OMEGA_MIN`), times ``refine``
+    (:data:`CELL_REFINE`); Haar and linear footprints have kinks (Haar: jumps), so bilinear resampling needs
+    fine texels at every level.  An integer P >= 2 (texels of exactly 1/P pixel, phase planes) where the band
+    asks for at least two texels a pixel; else, in a magnified view, the float below 2 that the band asks for,
+    read by per-pixel interpolation (rounding it up to 2 would make up to 4 times the texels), so that the
+    texture does not grow with the magnification."""
     least = DEFAULT_OMEGA_MIN[order] / 2.0 ** level if order >= 3 else KINKED_OMEGA_MIN
-    return max(2, int(np.ceil(max(omega, least) * pixel / (np.pi * d_min) - 1e-9)))
+    s = max(omega, least) * pixel / (np.pi * d_min)
+    if s >= 2.0:
+        return int(np.ceil(s - 1e-9)) * refine
+    s *= refine
+    return int(np.ceil(s - 1e-9)) if s >= 2.0 else float(s)
 
 
 #: Texture band factor per order: order-6 wavelets (condition 34.6, docs/model.md §2) cancel more, so the
@@ -184,9 +198,17 @@ def texels_per_pixel(order: int, level: int, omega: float, pixel: float, d_min: 
 OMEGA_S_FACTOR = {6: 2.0}
 
 
+#: The quarter-pixel rule of :func:`default_omega_s` holds down to pixels of this fraction of the finest voxel
+#: spacing: a magnified view's finer pixels keep that texel (1/16 voxel) and interpolate between texels, so
+#: its textures do not grow with the magnification (docs/splatting.md §2)
+FINEST_PIXEL = 0.25
+
+
 def default_omega_s(pixel, min_spacing, order=4) -> float:
-    """Texture band: the paper's 14, finer when pixels are small (texel <= pixel / 4); twice that for order 6."""
-    return max(14.0, 4.0 * np.pi * min_spacing / pixel) * OMEGA_S_FACTOR.get(order, 1.0)
+    """Texture band: the paper's 14, finer when pixels are small (texel <= pixel / 4, down to pixels of
+    :data:`FINEST_PIXEL` voxel); twice that for order 6."""
+    finest = max(pixel, FINEST_PIXEL * min_spacing)
+    return max(14.0, 4.0 * np.pi * min_spacing / finest) * OMEGA_S_FACTOR.get(order, 1.0)
 
 
 MAX_LEVELS = 8  # band id = level * 8 + subband code must fit the 64-entry table

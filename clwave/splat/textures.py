@@ -25,6 +25,7 @@ from math import ceil
 import numpy as np
 import scipy.fft
 
+from ..device.memory import check_fits
 from ..errors import DeviceMemoryError, InputError
 from ..threads import cores, thread_map
 from ..model.bspline import wavelet_for
@@ -200,6 +201,13 @@ def _axis_samples(count, cell) -> int:
     return 2 if cell else count + 1
 
 
+#: Host bytes a texel takes at the peak of making an orthographic view's textures (a perspective view's are made on
+#: the device, docs/splatting.md §8): its half-spectrum (complex128, 8 bytes a
+#: texel), the inverse FFT's float64 period (8), the centred and trimmed float32 copies (8) and the packed pool
+#: with its concatenation (8)
+HOST_TEXEL_BYTES = 32
+
+
 def check_texels(texels: int, max_texels: int | None, what: str, fix: str) -> None:
     """Refuse footprint textures of more than ``max_texels`` float texels (the device budget of
     docs/splatting.md §6) in one line: ``what`` needs so many, and ``fix``."""
@@ -290,9 +298,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
                                      for w, cell in ((u, cells[0]), (v, cells[1]))))
     texels = sum(_axis_samples(nu, cell_u) * _axis_samples(nv, cell_v)
                  for _, _, (nu, _, cell_u), (nv, _, cell_v) in jobs)
-    check_texels(texels, max_texels, "the footprint textures of this view",
-                 "the pixels are far smaller than the voxels (or the spacing is very uneven); render a wider "
-                 "extent, fewer pixels, or a lower omega_s")
+    fix = ("the voxel spacing is very uneven or omega_s high; give a lower omega_s (--omega-s), or render with the "
+           "ray tracer (--method raytrace)")
+    check_texels(texels, max_texels, "the footprint textures of this view", fix)
+    check_fits(HOST_TEXEL_BYTES * texels, f"making the footprint textures of this view ({texels:,} texels)", fix)
     spectra = {}
     if sampling == "fft" and device is not None:
         # 2-D spectra on the device; at axis-aligned views (every axis along u or v) the texture
