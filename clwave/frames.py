@@ -15,6 +15,7 @@ import numpy as np
 from .errors import InputError, finite_number
 from .io.result import RenderResult
 
+
 class ErrorEstimate:
     """The error of each frame against the final one, from the step that made it (docs/raytracing.md §9).
 

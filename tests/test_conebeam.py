@@ -88,7 +88,6 @@ def test_bad_geometry_is_one_line(make, words):
     assert words in str(err.value) and "\n" not in str(err.value)
 
 
-
 def test_tigre_round_trip_and_layout():
     geo = dict(DSO=1000.0, DSD=1536.0, nDetector=np.array([6, 8]), dDetector=np.array([0.8, 0.6]),
                offDetector=np.array([2.0, -1.0]), offOrigin=np.array([5.0, 0.0, -3.0]))

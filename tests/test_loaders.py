@@ -675,7 +675,6 @@ def test_hu_to_mu_and_background(tmp_path):
     np.testing.assert_array_equal(raw.data, hu + 1000)
 
 
-
 # --------------------------------------------------------------------------- declared sizes
 
 

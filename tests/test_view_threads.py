@@ -31,7 +31,6 @@ clw = test_view_prefix.clw  # the fixture: hydrogen 40^3 RGBA, 12,800 coefficien
 THREADS = ("clwave-view-read", "clwave-staged-setup", "clwave-view-full-stage")
 
 
-
 def alive(names=THREADS) -> list:
     return sorted(t.name for t in threading.enumerate() if t.name in names)
 

@@ -237,7 +237,6 @@ def run_numpy(case):
     return dict(prepare=0.0, seconds=seconds, images=images)
 
 
-
 def run_fourier(case):
     vol = clwave.phantom(case["phantom"], case["n"])
     start = time.perf_counter()

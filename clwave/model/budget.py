@@ -16,7 +16,6 @@ def kept_count(keep, n_voxels) -> int | None:
     return None if keep == 1 else max(1, int(round(keep * n_voxels)))
 
 
-
 def warn_short_budget(keep, budget, approx, n_voxels):
     """Warn that ``keep=`` (``budget`` coefficients) is below the ``approx`` live coefficients of the approximation
     band, which ranks first: no detail, part of the band dropped; names the least keep that keeps the band whole."""

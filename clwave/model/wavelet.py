@@ -26,8 +26,6 @@ from .transform import (apply_sampling_filter, band_sum, crop_to_grid, decompose
 from .volume import Volume
 
 
-
-
 class ChannelGroup:
     """Channels sharing one wavelet, bands and index set."""
 

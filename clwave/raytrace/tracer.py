@@ -39,7 +39,6 @@ from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume, check_model
 
 
-
 FIELDS = ("bspline", "wavelet")
 B, I32, INT4, FLOAT4 = BUFFER, np.int32, cltypes.int4, cltypes.float4
 #: the arguments of each field backend (FIELD_PARAMS of cl/raytrace/field_*.h)
@@ -70,6 +69,8 @@ def raytrace_kernel(field: str) -> Kernel:
                   ("weights", B), ("tol", REAL), ("shade_gain", REAL), ("grad_floor", REAL), ("lights", B),
                   ("nlights", I32), ("phong", FLOAT4), ("tf", B), ("passes", I32), ("pass_lo", FLOAT4),
                   ("pass_hi", FLOAT4), ("carry", B), ("ledger", B), ("resume", B))
+
+
 REAL4 = {np.float32: cltypes.float4, np.float64: cltypes.double4}
 GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)

@@ -234,6 +234,7 @@ def accumulate_cone(ranges, vals, first, centre, bbox, stex, values, textures, l
     def bilinear(tex, tu, tv):  # tex with a ring of zeros; tu (X,), tv (Y,) in unpadded texels
         iu, iv = np.floor(tu).astype(int), np.floor(tv).astype(int)
         fu, fv = tu - iu, tv - iv
+
         def at(r, q):  # texel rows r, columns q; the ring beyond
             return tex[np.clip(r + 1, 0, tex.shape[0] - 1)[:, None], np.clip(q + 1, 0, tex.shape[1] - 1)]
 

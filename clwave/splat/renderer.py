@@ -282,7 +282,6 @@ class SplatRenderer:
         raise DeviceMemoryError(f"{self.cc.info.name} has {format_size(b.total)}, and {what}; render a smaller image")
 
 
-
 class Accumulator:
     """One image being accumulated: splat coefficient ranges in importance order into the
     framebuffers (layers) of each channel group, all layers in one pass."""

@@ -15,7 +15,6 @@ from ..model.wavelet import WaveletVolume
 from .textures import DEFAULT_OMEGA_MIN, cell_axes, footprints
 
 
-
 KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
 
 

@@ -102,7 +102,6 @@ class Texture:
         return float(a[0]), float(a[-1]), float(b[0]), float(b[-1])
 
 
-
 def sample_count(order: int, m: int, omega_s: float = 14.0, width=None) -> int:
     """Paper eq. 33/36: ``N(m) = ceil(2^(m+1) omega_s / dw_0 + 1)``, ``dw_0 = 2 pi / width``.
 
@@ -125,7 +124,6 @@ def _fast_even(n: int) -> int:
     return n
 
 
-
 def cell_axes(wavelet, u, v) -> tuple:
     """``(along u, along v)``: where the ``"cells"`` lookup is exact, i.e. Haar and the image
     axis along a world axis (the footprint is piecewise constant along it, 2 cells).
@@ -137,9 +135,6 @@ def cell_axes(wavelet, u, v) -> tuple:
     """
     haar = wavelet_for(wavelet).order == 1
     return tuple(bool(haar and np.max(np.abs(np.asarray(w, float))) > 1.0 - 1e-12) for w in (u, v))
-
-
-
 
 
 # ----------------------------------------------------------------------------- textures
