@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import sys
 
-from .options import (add_input_options, add_model_options, build_model, numbers, parse_device_memory,
+from .checks import parse_size
+from .options import (add_input_options, add_model_options, build_model, parse_device_memory,
                       post_transfer_function)
 
 
@@ -17,12 +18,10 @@ def run(args):
     import asyncio
     import logging
 
-    from ..model.camera import Camera
     from ..view.prefix import PrefixFirst
     from ..view.server import ViewServer, check_port, is_loopback
 
-    size = numbers(args.size.lower(), "--size", (1, 2), int, sep="x")
-    size = Camera(size=size if len(size) == 2 else size[0]).size
+    size = tuple(parse_size(args))
     check_size(size, args.device)
     device_memory = parse_device_memory(args)
     check_port(args.port)
