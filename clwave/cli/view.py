@@ -6,7 +6,7 @@ import sys
 
 from .checks import parse_size
 from .options import (add_input_options, add_model_options, build_model, parse_device_memory,
-                      post_transfer_function)
+                      post_transfer_function, warn)
 
 
 #: host memory the viewer holds a pixel of its --size on a CPU device at the least (its X-ray and shaded images, their
@@ -42,8 +42,8 @@ def run(args):
     async def serve():
         url = await server.start()  # or an InputError: the port in use
         if not is_loopback(args.host):
-            print(f"clwave view: warning: listening on {args.host}, not only on this machine: anyone who can reach "
-                  f"it and learns the address with its token can see this volume", file=sys.stderr)
+            warn(f"listening on {args.host}, not only on this machine: anyone who can reach it and learns the "
+                 f"address with its token can see this volume")
         print(f"clwave view: open {url}", flush=True)
         print("clwave view: Ctrl-C stops the server", file=sys.stderr, flush=True)
         if args.open:
