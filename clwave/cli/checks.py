@@ -83,7 +83,10 @@ def check_options(args):
     if hasattr(args, "background"):
         parse_background(args)
     if hasattr(args, "method") and not (is_clw(args) and (args.workers, args.scheduler) != (None, None)):
-        check_image_size(args)  # render, progressive and drr; a cluster's workers hold their images
+        from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, TRACED_PIXEL_BYTES
+        # render, progressive and drr; a cluster's workers hold their images
+        check_image_size(parse_size(args), args.device,
+                         TRACED_PIXEL_BYTES if args.method == "raytrace" else FRAMEBUFFER_PIXEL_BYTES)
 
 
 #: options of one --method only, refused with the other (a command has some of them: drr has no --light);
@@ -152,23 +155,24 @@ def parse_size(args) -> tuple:
     return size * 2 if len(size) == 1 else size
 
 
-def check_image_size(args):
-    """Refuse an image beyond the device's own limit on the one buffer its renderer holds for it (device/memory.py:
-    splatting's framebuffer, ``FRAMEBUFFER_PIXEL_BYTES`` a pixel; the ray tracer's image, ``TRACED_PIXEL_BYTES``),
-    naming the largest square that fits.  What depends on the model is the renderer's to check: ``--coarse``'s extra
-    framebuffers, and the least ``--device-memory`` (the ray tracer's bricks with the image)."""
+def check_image_size(size, device, pixel_bytes, image="a {} image"):
+    """Refuse an image of ``size`` (H, W) beyond the device's own limit on the one buffer its renderer holds for it,
+    ``pixel_bytes`` a pixel (device/memory.py: splatting's framebuffer, ``FRAMEBUFFER_PIXEL_BYTES``; the ray tracer's
+    image, ``TRACED_PIXEL_BYTES``), naming the largest square that fits; ``image``: what the message calls it, "HxW"
+    in its braces.  What depends on the model is the renderer's to check: ``--coarse``'s extra framebuffers, and the
+    least ``--device-memory`` (the ray tracer's bricks with the image).  Returns the device's context, made here."""
     from math import isqrt
 
     from ..device.context import ComputeContext
-    from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, TRACED_PIXEL_BYTES, buffer_limit, check_buffer
+    from ..device.memory import buffer_limit, check_buffer
     from ..device.programs import python_sigint
 
-    H, W = parse_size(args)
-    cc = ComputeContext.get(args.device)
+    (H, W), cc = size, ComputeContext.get(device)
     python_sigint()  # made the context: Ctrl-C Python's again before any build (pyopencl's own too)
-    pixel = TRACED_PIXEL_BYTES if args.method == "raytrace" else FRAMEBUFFER_PIXEL_BYTES
-    most = isqrt(buffer_limit(cc) // pixel)
-    check_buffer(cc, H * W * pixel, f"a {H}x{W} image", f"give a smaller --size (at most {most}x{most} on this device)")
+    most = isqrt(buffer_limit(cc) // pixel_bytes)
+    check_buffer(cc, H * W * pixel_bytes, image.format(f"{H}x{W}"),
+                 f"give a smaller --size (at most {most}x{most} on this device)")
+    return cc
 
 
 def make_camera(args):
