@@ -7,8 +7,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.result import check_background
-from .options import (_chunks, _flag, _preset, _preset_window, _thresholding, is_clw, numbers, parse_device_memory,
-                      parse_scheduler)
+from .options import (GIF_FRAME_SECONDS, _chunks, _flag, _preset, _preset_window, _thresholding, is_clw, numbers,
+                      parse_device_memory, parse_scheduler)
 
 
 #: the options given as one number (argparse's ``type=float``) whose own checks (below, or in the model's API words)
@@ -21,9 +21,10 @@ def check_options(args):
     """Every option the commands share whose validity does not depend on the input, checked before the input is
     opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): numbers that
     are not finite, the input's spacing and chunks, the model's wavelets, levels, thresholding, transfer function and
-    classification, the scheduler, and the view's device, display window, footprint band, coarse tolerance, device
-    memory, ray tracing tolerance, lights and background, the options of the --method not chosen, and the image size
-    against the device (:func:`check_image_size`).  An option a command does not have is not looked at."""
+    classification, the scheduler, and the view's device, display window, footprint band, coarse tolerance, a
+    turntable's frame time, device memory, ray tracing tolerance, lights and background, the options of the --method
+    not chosen, and the image size against the device (:func:`check_image_size`).  An option a command does not have
+    is not looked at."""
     from ..model.bspline import wavelet_for
 
     if getattr(args, "input", None) is None:  # clwave info: no input to spare
@@ -70,6 +71,8 @@ def check_options(args):
                              "and --workers/--scheduler, or --detail")
     if getattr(args, "omega_s", None) is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
         raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
+    if getattr(args, "frame_time", None) is not None:
+        _frame_time(args)
     if getattr(args, "coarse", None) is not None and not 0 < args.coarse < 1:
         raise InputError(f"--coarse {args.coarse:g} must be a tolerance between 0 and 1, e.g. 1e-2")
     if hasattr(args, "device_memory"):
@@ -118,6 +121,16 @@ def _method_options(args):
     for name, default in RAYTRACE_ONLY:  # those the command has (add_raytrace_options, drr's --tolerance)
         if hasattr(args, name) and getattr(args, name) is None:
             setattr(args, name, default)
+
+
+def _frame_time(args):
+    """``--frame-time SECONDS``: a turntable GIF's, within what a GIF holds and browsers show (NaN fails both)."""
+    lo, hi = GIF_FRAME_SECONDS
+    if not lo <= args.frame_time <= hi:
+        raise InputError(f"--frame-time {args.frame_time:g} must be the seconds each frame is shown, from {lo:g} "
+                         f"(browsers show a shorter frame for 0.1 s) to {hi:g} (a GIF's longest), e.g. 0.1")
+    if args.turntable is None:
+        raise InputError("--frame-time is for a --turntable GIF: add --turntable N, or leave it out")
 
 
 def parse_lights(args):
