@@ -17,7 +17,7 @@ from clwave.io import loaders
 from clwave.io.loaders import shared
 from clwave.io.loaders import load
 from clwave.io.phantoms import NAMES, phantom, phantom_block
-from clwave.model import transfer
+from clwave.model import tf_passes
 from clwave.model.transfer import TransferFunction
 from clwave.model.volume import Volume
 
@@ -323,7 +323,7 @@ def _chunked(data, chunks):
 
 @pytest.mark.parametrize("channels, window", [(1, (-1.0, 2.5)), (1, "auto"), (3, None), (4, "auto")])
 def test_chunked_classification_is_bit_identical(rng, monkeypatch, channels, window):
-    monkeypatch.setattr(transfer, "AUTO_SAMPLES", 500)   # the auto window's strided subsample at work
+    monkeypatch.setattr(tf_passes, "AUTO_SAMPLES", 500)   # the auto window's strided subsample at work
     shape = (13, 17, 19) + ((channels,) if channels > 1 else ())
     data = rng.normal(size=shape) if channels == 1 else rng.integers(0, 256, shape).astype(np.uint8)
     tf = TransferFunction.preset("hydrogen", window=window)
@@ -337,10 +337,10 @@ def test_chunked_classification_is_bit_identical(rng, monkeypatch, channels, win
 def test_strided_subsample_of_chunks_is_the_flat_stride(rng):
     data = rng.normal(size=(11, 12, 13, 3))
     for step in (1, 5, 29, 2000):
-        blocks = [transfer._sampled(data[a:b, c:d, e:f], (a, c, e), data.shape[:3], step)
+        blocks = [tf_passes.sampled(data[a:b, c:d, e:f], (a, c, e), data.shape[:3], step)
                   for a, b in ((0, 4), (4, 11)) for c, d in ((0, 7), (7, 12)) for e, f in ((0, 13),)]
         expected = data.reshape(-1, 3)[::step]
-        np.testing.assert_array_equal(transfer._sampled(data, (0, 0, 0), data.shape[:3], step), expected)
+        np.testing.assert_array_equal(tf_passes.sampled(data, (0, 0, 0), data.shape[:3], step), expected)
         np.testing.assert_array_equal(np.sort(np.concatenate(blocks), axis=0), np.sort(expected, axis=0))
 
 

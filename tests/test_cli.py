@@ -471,6 +471,12 @@ EARLY_MISTAKES = [
     (["render", "--coarse", "0"], "--coarse 0 must be"),
     (["render", "-o", "x.npy"], "-o x.npy must end in .png; --raw OUT.npy also writes the float32 image"),
     (["render", "--turntable", "4", "-o", "x.png"], "-o x.png must end in .gif; --turntable writes a GIF"),
+    (["render", "--turntable", "4", "--frame-time", "0"], "--frame-time 0 must be the seconds each frame is shown, "
+                                                          "from 0.02 (browsers show a shorter frame for 0.1 s)"),
+    (["render", "--turntable", "4", "--frame-time", "-1"], "--frame-time -1 must be the seconds"),
+    (["render", "--turntable", "4", "--frame-time", "nan"], "--frame-time nan must be the seconds"),
+    (["render", "--turntable", "4", "--frame-time", "1000"], "to 655.35 (a GIF's longest)"),
+    (["render", "--frame-time", "0.5"], "--frame-time is for a --turntable GIF: add --turntable N, or leave it out"),
     (["render", "--method", "raytrace", "--detail", "-1"], "--detail -1 must be a level of detail"),
     (["render", "--method", "raytrace", "--detail", "1", "--field", "wavelet"], "--detail renders with the B-spline"),
     (["render", "--detail", "1"], "--detail is for --method raytrace"),
@@ -772,6 +778,21 @@ def test_gif_frames_are_written_in_one_mode_and_read_back_exactly(tmp_path):
                                ("colour", colour, colour)]:
         write_gif(tmp_path / f"{name}.gif", frames, 0.1, False)
         assert np.array_equal(iio.imread(tmp_path / f"{name}.gif", index=None), np.stack(want)), name
+
+
+def test_a_turntables_frame_time_is_each_frames_duration_in_the_gif(tmp_path, capsys):
+    """--frame-time SECONDS: every frame of the turntable GIF reads back (Pillow) as shown that long, in the format's
+    hundredths (2.01 s: its whole milliseconds, 2009, would be stored as 2 s); 0.1 s without it."""
+    from PIL import Image, ImageSequence
+
+    argv = ["render", "phantom:shepp-logan:16", "--levels", "1", "--size", "12", "--turntable", "3"]
+    for given, want in ((["--frame-time", "2.01"], 2010), (["--frame-time", "0.02"], 20), ([], 100)):
+        gif = tmp_path / f"t{want}.gif"
+        code, _, err = run(capsys, *argv, *given, "-o", str(gif))
+        assert code == 0, err
+        with Image.open(gif) as picture:
+            durations = [frame.info["duration"] for frame in ImageSequence.Iterator(picture)]
+        assert durations == [want] * 3, (given, durations)
 
 
 def test_a_turntables_raw_output_holds_every_view(tmp_path, capsys):

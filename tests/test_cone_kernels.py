@@ -11,6 +11,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 import pytest
 
+from clwave.model.transform import Band
 from clwave.splat import reference
 from clwave.splat.cone_cells import pack_nodes, slope_cells
 from clwave.splat.stages import Stages
@@ -153,8 +154,8 @@ def test_cone_cells(cc, rng, count, quasi, spare):
     # (one refined twice, one three times: their nodes r to the grid's step) and a band not drawn, against the
     # oracle: the cells, their guards of zeros, each node's largest magnitude and the grid cells' bounds; written
     # over a spare node array and pool of an earlier view (NaNs here) too
-    bands = [SimpleNamespace(level=level, key=key, code=code) for level, key, code in
-             ((2, "aaa", 0), (2, "aad", 1), (1, "dda", 6), (1, "ddd", 7), (1, "add", 3))]
+    bands = [Band(level, key, (1, 1, 1), 0)
+             for level, key in ((2, "aaa"), (2, "aad"), (1, "dda"), (1, "ddd"), (1, "add"))]
     layer_of = {(2, "aaa"): 1, (2, "aad"): 0, (1, "dda"): 0, (1, "ddd"): 1}
     refine = {(1, "dda"): 2, (2, "aaa"): 3}
     textures = {}

@@ -12,7 +12,8 @@ import pytest
 
 import clwave
 from clwave.errors import FileFormatError, NothingVisibleError
-from clwave.model.transfer import TransferFunction, auto_window
+from clwave.model.tf_passes import auto_window
+from clwave.model.transfer import TransferFunction
 from clwave.model.volume import Volume
 from test_cli import run
 

@@ -7,7 +7,8 @@ import pytest
 
 from clwave.errors import InputError
 from clwave.io.phantoms import analytic
-from clwave.model.transfer import TransferFunction, auto_window
+from clwave.model.tf_passes import auto_window
+from clwave.model.transfer import TransferFunction
 from clwave.model.volume import Volume
 
 THREE = [(0.0, 0.0, 0.0, 1.0, 0.0),

@@ -207,8 +207,7 @@ def test_ranking_is_the_numpy_oracles_order_and_bands(clw):
         table = wv.ranked(0)
         assert wv is model or len(np.unique(importance)) < len(g.bands)  # ties: one importance a band
         assert np.array_equal(table.index, index) and np.array_equal(table.values, g.values[:, order].T)
-        assert np.array_equal(table.level, [g.bands[b].level for b in band])
-        assert np.array_equal(table.key_code, [g.bands[b].code for b in band])
+        assert np.array_equal(table.band, [g.bands[b].level * 8 + g.bands[b].code for b in band])
         assert np.array_equal(table.importance, importance[order])
 
 
@@ -265,7 +264,7 @@ def test_a_files_prefix_extended_to_the_whole_file_is_its_splat_to_float_roundin
     part = clwave.WaveletVolume.open(clw, keep=2048 / 40**3)
     tables = prefix_first(model, part)
     for gi, (g, order) in enumerate(zip(model.groups, tables)):
-        table = ranked_table(g, model.importance(g), order)
+        table = ranked_table(g, order, importance=model.importance(g))
         assert np.array_equal(table.index[:2048], part.ranked(gi).index)
         assert np.all(np.diff(table.importance[:2048]) <= 0) and np.all(np.diff(table.importance[2048:]) <= 0)
         assert table.importance[2048:].max() > table.importance[:2048].min()  # not the whole's ranking

@@ -204,7 +204,7 @@ def test_threshold_by_value_and_ranked_order(rng):
     assert np.all(imp[n_approx:] > 0.05)
     assert np.count_nonzero(wv.importance(wv.groups[0])[n_approx:] > 0.05) == th.kept - n_approx
     table = th.ranked()  # by importance across all bands: the approximation band is not simply first
-    assert np.all(np.diff(table.importance) <= 0) and set(table.level[:n_approx]) == {1, 2}
+    assert np.all(np.diff(table.importance) <= 0) and set(table.band[:n_approx] // 8) == {1, 2}
     assert table.values.shape == (th.kept, 2)
     per_band = th.bands()
     assert sum(len(idx) for _, idx, _ in per_band) == th.kept

@@ -7,8 +7,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.result import check_background
-from .options import (_chunks, _flag, _preset, _preset_window, _thresholding, is_clw, numbers, parse_device_memory,
-                      parse_scheduler)
+from .options import (GIF_FRAME_SECONDS, _chunks, _flag, _preset, _preset_window, _thresholding, is_clw, numbers,
+                      parse_device_memory, parse_scheduler)
 
 
 #: the options given as one number (argparse's ``type=float``) whose own checks (below, or in the model's API words)
@@ -21,9 +21,10 @@ def check_options(args):
     """Every option the commands share whose validity does not depend on the input, checked before the input is
     opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): numbers that
     are not finite, the input's spacing and chunks, the model's wavelets, levels, thresholding, transfer function and
-    classification, the scheduler, and the view's device, display window, footprint band, coarse tolerance, device
-    memory, ray tracing tolerance, lights and background, the options of the --method not chosen, and the image size
-    against the device (:func:`check_image_size`).  An option a command does not have is not looked at."""
+    classification, the scheduler, and the view's device, display window, footprint band, coarse tolerance, a
+    turntable's frame time, device memory, ray tracing tolerance, lights and background, the options of the --method
+    not chosen, and the image size against the device (:func:`check_image_size`).  An option a command does not have
+    is not looked at."""
     from ..model.bspline import wavelet_for
 
     if getattr(args, "input", None) is None:  # clwave info: no input to spare
@@ -70,6 +71,8 @@ def check_options(args):
                              "and --workers/--scheduler, or --detail")
     if getattr(args, "omega_s", None) is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
         raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
+    if getattr(args, "frame_time", None) is not None:
+        _frame_time(args)
     if getattr(args, "coarse", None) is not None and not 0 < args.coarse < 1:
         raise InputError(f"--coarse {args.coarse:g} must be a tolerance between 0 and 1, e.g. 1e-2")
     if hasattr(args, "device_memory"):
@@ -83,7 +86,10 @@ def check_options(args):
     if hasattr(args, "background"):
         parse_background(args)
     if hasattr(args, "method") and not (is_clw(args) and (args.workers, args.scheduler) != (None, None)):
-        check_image_size(args)  # render, progressive and drr; a cluster's workers hold their images
+        from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, TRACED_PIXEL_BYTES
+        # render, progressive and drr; a cluster's workers hold their images
+        check_image_size(parse_size(args), args.device,
+                         TRACED_PIXEL_BYTES if args.method == "raytrace" else FRAMEBUFFER_PIXEL_BYTES)
 
 
 #: options of one --method only, refused with the other (a command has some of them: drr has no --light);
@@ -115,6 +121,16 @@ def _method_options(args):
     for name, default in RAYTRACE_ONLY:  # those the command has (add_raytrace_options, drr's --tolerance)
         if hasattr(args, name) and getattr(args, name) is None:
             setattr(args, name, default)
+
+
+def _frame_time(args):
+    """``--frame-time SECONDS``: a turntable GIF's, within what a GIF holds and browsers show (NaN fails both)."""
+    lo, hi = GIF_FRAME_SECONDS
+    if not lo <= args.frame_time <= hi:
+        raise InputError(f"--frame-time {args.frame_time:g} must be the seconds each frame is shown, from {lo:g} "
+                         f"(browsers show a shorter frame for 0.1 s) to {hi:g} (a GIF's longest), e.g. 0.1")
+    if args.turntable is None:
+        raise InputError("--frame-time is for a --turntable GIF: add --turntable N, or leave it out")
 
 
 def parse_lights(args):
@@ -152,23 +168,24 @@ def parse_size(args) -> tuple:
     return size * 2 if len(size) == 1 else size
 
 
-def check_image_size(args):
-    """Refuse an image beyond the device's own limit on the one buffer its renderer holds for it (device/memory.py:
-    splatting's framebuffer, ``FRAMEBUFFER_PIXEL_BYTES`` a pixel; the ray tracer's image, ``TRACED_PIXEL_BYTES``),
-    naming the largest square that fits.  What depends on the model is the renderer's to check: ``--coarse``'s extra
-    framebuffers, and the least ``--device-memory`` (the ray tracer's bricks with the image)."""
+def check_image_size(size, device, pixel_bytes, image="a {} image"):
+    """Refuse an image of ``size`` (H, W) beyond the device's own limit on the one buffer its renderer holds for it,
+    ``pixel_bytes`` a pixel (device/memory.py: splatting's framebuffer, ``FRAMEBUFFER_PIXEL_BYTES``; the ray tracer's
+    image, ``TRACED_PIXEL_BYTES``), naming the largest square that fits; ``image``: what the message calls it, "HxW"
+    in its braces.  What depends on the model is the renderer's to check: ``--coarse``'s extra framebuffers, and the
+    least ``--device-memory`` (the ray tracer's bricks with the image).  Returns the device's context, made here."""
     from math import isqrt
 
     from ..device.context import ComputeContext
-    from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, TRACED_PIXEL_BYTES, buffer_limit, check_buffer
+    from ..device.memory import buffer_limit, check_buffer
     from ..device.programs import python_sigint
 
-    H, W = parse_size(args)
-    cc = ComputeContext.get(args.device)
+    (H, W), cc = size, ComputeContext.get(device)
     python_sigint()  # made the context: Ctrl-C Python's again before any build (pyopencl's own too)
-    pixel = TRACED_PIXEL_BYTES if args.method == "raytrace" else FRAMEBUFFER_PIXEL_BYTES
-    most = isqrt(buffer_limit(cc) // pixel)
-    check_buffer(cc, H * W * pixel, f"a {H}x{W} image", f"give a smaller --size (at most {most}x{most} on this device)")
+    most = isqrt(buffer_limit(cc) // pixel_bytes)
+    check_buffer(cc, H * W * pixel_bytes, image.format(f"{H}x{W}"),
+                 f"give a smaller --size (at most {most}x{most} on this device)")
+    return cc
 
 
 def make_camera(args):

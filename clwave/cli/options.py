@@ -423,14 +423,21 @@ def parse_device_memory(args):
     return parse_cap(args.device_memory)
 
 
+#: the seconds a GIF frame may be shown: stored in hundredths of a second, 16 bits (655.35 s at most); browsers show
+#: a frame of less than 0.02 s for 0.1 s
+GIF_FRAME_SECONDS = (0.02, 655.35)
+
+
 def write_gif(path, pictures, seconds_per_frame, force):
+    """A looping GIF of ``pictures``, each shown ``seconds_per_frame`` (to the hundredth, the format's unit)."""
     import imageio.v3 as iio
 
     from ..io.files import write_atomic
     frames = np.stack(pictures)  # every frame RGB: grey frames were written in modes some readers cannot read back
     frames = np.repeat(frames[..., None], 3, axis=-1) if frames.ndim == 3 else frames
-    write_atomic(path, lambda fh: iio.imwrite(fh, frames, extension=".gif",
-                                              is_batch=True, duration=int(1000 * seconds_per_frame), loop=0),
+    # whole milliseconds, which Pillow truncates to hundredths: int(1000 * 2.01) is 2009, stored as 2 s
+    duration = 10 * round(100 * seconds_per_frame)
+    write_atomic(path, lambda fh: iio.imwrite(fh, frames, extension=".gif", is_batch=True, duration=duration, loop=0),
                  force)
 
 

@@ -76,7 +76,7 @@ def run(args):
     else:
         if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
             window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
-        write_gif(out, [r.to_uint8(window, background) for r in results], 0.1, args.force)
+        write_gif(out, [r.to_uint8(window, background) for r in results], args.frame_time or 0.1, args.force)
         result = results[0]
         result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
         seconds = result.meta["turntable_seconds"]
@@ -119,6 +119,9 @@ def add_parser(sub):
     p.add_argument("--detail", type=int, help="ray tracing: the level of detail, 0 (full, the default) up to the "
                                               "model's levels (the coarsest: its approximation alone, fastest)")
     p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF")
+    p.add_argument("--frame-time", type=float, metavar="SECONDS",
+                   help="with --turntable: the seconds each frame is shown, 0.02 to 655.35, to the hundredth "
+                        "(default 0.1)")
     p.add_argument("--raw", help="also write the float32 image as .npy (with --turntable, its N views as one "
                                  "(N, H, W, C) array)")
     p.add_argument("--stats", help="also write the figures as .json")

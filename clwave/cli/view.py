@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from .checks import parse_size
+from .checks import check_image_size, parse_size
 from .options import (add_input_options, add_model_options, build_model, parse_device_memory,
                       post_transfer_function, warn)
 
@@ -64,25 +64,20 @@ def run(args):
 
 def check_size(size, device):
     """Refuse, before the input is read, an image size the viewer could not hold: its ray tracer's traced image in
-    one device buffer (device/memory.py), the viewer's largest (the X-ray framebuffer takes less), and on a CPU device
-    (its memory the host's) its images' memory, :data:`VIEW_PIXEL_BYTES` a pixel, beyond what the host has available
-    (docs/viewer.md §1).
+    one device buffer (:func:`~.checks.check_image_size`, the other commands' check), the viewer's largest (the X-ray
+    framebuffer takes less), and on a CPU device (its memory the host's) its images' memory, :data:`VIEW_PIXEL_BYTES`
+    a pixel, beyond what the host has available (docs/viewer.md §1): a server holds more a pixel than its one buffer
+    (both views' images, their read-backs and encodings), so this second check is the viewer's own.
     The shaded views are served for a scalar or an RGBA model; the channels are known once the input is read, so
     every model is held to their limit."""
     from math import isqrt
 
-    from ..device.context import ComputeContext
-    from ..device.memory import TRACED_PIXEL_BYTES, available_bytes, buffer_limit, check_buffer, check_fits
-    from ..device.programs import python_sigint
+    from ..device.memory import TRACED_PIXEL_BYTES, available_bytes, check_fits
 
-    cc = ComputeContext.get(device)
-    python_sigint()  # made the context: Ctrl-C Python's again, for the builds of the serving threads too
-    (H, W), most = size, isqrt(buffer_limit(cc) // TRACED_PIXEL_BYTES)
-    check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"the viewer's {H}x{W} shaded image",
-                 f"give a smaller --size (at most {most}x{most} on this device)")
+    cc = check_image_size(size, device, TRACED_PIXEL_BYTES, "the viewer's {} shaded image")
     if cc.info.kind != "CPU":  # a device of its own holds most of it (not measured)
         return
-    fits = isqrt(available_bytes() // VIEW_PIXEL_BYTES)
+    (H, W), fits = size, isqrt(available_bytes() // VIEW_PIXEL_BYTES)
     check_fits(H * W * VIEW_PIXEL_BYTES, f"a viewer of {H}x{W} images",
                f"give a smaller --size (at most {fits}x{fits} here now)")
 

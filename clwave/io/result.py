@@ -16,7 +16,8 @@ import numpy as np
 
 from ..errors import InputError
 from .files import check_suffix, write_atomic
-from ..model.transfer import AUTO_PERCENTILES, check_window
+from ..model.tf_passes import AUTO_PERCENTILES
+from ..model.transfer import check_window
 
 
 @dataclass

@@ -1,5 +1,6 @@
 """Coefficients in importance order (the paper's §5.2 ranking): the order :meth:`WaveletVolume.ranked
-<clwave.model.wavelet.WaveletVolume.ranked>` gives and the tables made in it, a block of rows at a time."""
+<clwave.model.wavelet.WaveletVolume.ranked>` gives and the splat renderer draws in, and the one table made in it, a
+block of rows at a time."""
 
 from __future__ import annotations
 
@@ -11,22 +12,37 @@ from ..errors import InputError
 
 
 @dataclass
-class CoefficientTable:
-    """Coefficients of one group in importance order, ready for upload.
+class RankedTable:
+    """A group's coefficients in an order (by importance, or a prefix's first: :func:`by_importance`), packed as the
+    splatting kernels read them (``cl/splat/bin.cl``), so that the renderer holds one table for the host and the
+    device (docs/splatting.md §6): ``coef`` (K, 4) int32 ``(k_x, k_y, k_z, band)``, band the :attr:`Band.id
+    <clwave.model.transform.Band.id>`, and ``packed`` (K, 4) float32 values, the channels beyond the group's
+    ``channels`` zero; ``importance`` (K,) float32 of each row where it was asked for
+    (:meth:`~clwave.model.wavelet.WaveletVolume.ranked`), else None (the kernels do not read it)."""
 
-    ``index`` is the pywt index in array order ``(k_z, k_y, k_x)``; ``key_code`` is the
-    band's :attr:`Band.code`.
-    """
+    coef: np.ndarray
+    packed: np.ndarray
+    channels: int
+    importance: np.ndarray | None = None
 
-    level: np.ndarray       # (K,) int8
-    key_code: np.ndarray    # (K,) uint8
-    index: np.ndarray       # (K, 3) int32
-    values: np.ndarray      # (K, C) float32
-    importance: np.ndarray  # (K,) float32
+    @property
+    def index(self) -> np.ndarray:
+        """(K, 3) ``(k_z, k_y, k_x)``, the pywt index in array order, a view."""
+        return self.coef[:, 2::-1]
+
+    @property
+    def band(self) -> np.ndarray:
+        """(K,) band ids, level * 8 + subband code (0: the approximation), a view."""
+        return self.coef[:, 3]
+
+    @property
+    def values(self) -> np.ndarray:
+        """(K, C) the group's channels, a view."""
+        return self.packed[:, :self.channels]
 
 
-#: rows :func:`ranked_rows` gives at a time: the band lookup's int64 work arrays (about 60 bytes a row) stay small
-#: beside the tables made from them
+#: rows :func:`ranked_table` makes at a time: the band lookup's int64 work arrays (about 60 bytes a row) stay small
+#: beside the table made from them
 RANK_ROWS = 1 << 20
 _LOW = np.uint64(0xFFFFFFFF)
 
@@ -54,30 +70,24 @@ def by_importance(importance, first=None) -> np.ndarray:
     return keys.astype(np.uint32)
 
 
-def ranked_rows(group, order):
-    """``(lo, hi, band_no, index)`` for each block of :data:`RANK_ROWS` rows of ``order`` (indices into the
-    ascending positions of ``group``, a :class:`~clwave.model.wavelet.ChannelGroup`): the rows' band numbers and
-    (k_z, k_y, k_x) indices (:meth:`~clwave.model.wavelet.ChannelGroup.locate`), the one home of the walk every
-    ranked table is made by."""
-    positions = group.all_positions()
-    for lo in range(0, len(order), RANK_ROWS):
-        hi = min(len(order), lo + RANK_ROWS)
-        yield (lo, hi, *group.locate(positions[order[lo:hi]]))
-
-
-def ranked_table(group, importance, order) -> CoefficientTable:
+def ranked_table(group, order, importance=None, each_block=None) -> RankedTable:
     """The kept coefficients ``order`` (indices into its ascending positions) of ``group`` (a
-    :class:`~clwave.model.wavelet.ChannelGroup`) as a :class:`CoefficientTable` in that order; ``importance`` of each
-    kept position."""
+    :class:`~clwave.model.wavelet.ChannelGroup`) as a :class:`RankedTable` in that order, with the ``importance`` of
+    each of its positions where given.  Made a block of :data:`RANK_ROWS` rows at a time (the band numbers and
+    indices of :meth:`~clwave.model.wavelet.ChannelGroup.locate`): no table but this one, and no float64 copy of the
+    values; ``each_block(lo, band_no)``, where given, is called once the block of rows from lo is filled, with their
+    band numbers."""
     n, channels = len(order), len(group.channels)
-    levels = np.array([b.level for b in group.bands], dtype=np.int8)
-    codes = np.array([b.code for b in group.bands], dtype=np.uint8)
-    table = CoefficientTable(np.empty(n, np.int8), np.empty(n, np.uint8), np.empty((n, 3), np.int32),
-                             np.empty((n, channels), np.float32),
-                             np.take(importance, order).astype(np.float32, copy=False))
-    for lo, hi, band_no, index in ranked_rows(group, order):
-        table.index[lo:hi] = index
-        table.level[lo:hi], table.key_code[lo:hi] = levels[band_no], codes[band_no]
+    ids = np.array([b.id for b in group.bands], np.int32)
+    table = RankedTable(np.empty((n, 4), np.int32), np.zeros((n, 4), np.float32), channels,
+                        None if importance is None else np.take(importance, order).astype(np.float32, copy=False))
+    positions = group.all_positions()
+    for lo in range(0, n, RANK_ROWS):
+        hi = min(n, lo + RANK_ROWS)
+        band_no, index = group.locate(positions[order[lo:hi]])
+        table.coef[lo:hi, :3], table.coef[lo:hi, 3] = index[:, ::-1], ids[band_no]
         for ch in range(channels):
-            table.values[lo:hi, ch] = np.take(group.values[ch], order[lo:hi])
+            table.packed[lo:hi, ch] = np.take(group.values[ch], order[lo:hi])
+        if each_block is not None:
+            each_block(lo, band_no)
     return table

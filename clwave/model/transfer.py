@@ -9,26 +9,19 @@ wavelet transform (paper §2.2, docs/model.md §5), so a new transfer function m
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 
 from ..errors import InputError, NothingVisibleError
-from ..threads import cores, thread_map
+from .tf_passes import auto_window, classified, rgb_scale, scan
 from .tf_presets import PRESETS as _PRESETS
-from .volume import Volume, is_dask
+from .volume import Volume
 
-#: Percentiles of the finite values that ``window="auto"`` maps to 0 and 1.
-AUTO_PERCENTILES = (0.5, 99.5)
-#: ``window="auto"`` looks at a strided subsample of at most this many values.
-AUTO_SAMPLES = 1 << 21
 #: Rec. 601 luma weights used for the opacity of RGB(A) volumes.
 LUMA = (0.299, 0.587, 0.114)
 
 _FORMAT = "clwave-transfer-function"
-_CHUNK = 1 << 16          # voxels per work item (the float64 temporaries stay in cache)
-_THREADED_MIN = 1 << 20   # below this many voxels classify runs in one thread
 
 
 class TransferFunction:
@@ -220,9 +213,9 @@ class TransferFunction:
         paint = tf._painter(vol.channels, window, scale)
         if vol.chunked:  # each chunk classified when it is read: the values classify gives in memory
             data = vol.data if vol.data.ndim == 4 else vol.data[..., None]
-            rgba = data.map_blocks(_classified, paint, False, chunks=data.chunks[:3] + ((4,),), dtype=np.float32)
+            rgba = data.map_blocks(classified, paint, False, chunks=data.chunks[:3] + ((4,),), dtype=np.float32)
         else:
-            rgba = _classified(vol.data, paint, True)
+            rgba = classified(vol.data, paint, True)
             if not rgba[..., 3].any():
                 raise tf._nothing_visible(vol, window, scale)
         return Volume(rgba, spacing=vol.spacing, origin=vol.origin)
@@ -276,8 +269,8 @@ class TransferFunction:
         subsample, RGB(A) the minimum and maximum, both found in one pass over a chunked volume."""
         c = _channels(vol)
         win = self._window
-        sample, lo, hi = _scan(vol.data, win == "auto", c > 1)
-        scale = 1.0 if c == 1 else _rgb_scale(lo, hi)
+        sample, lo, hi = scan(vol.data, win == "auto", c > 1)
+        scale = 1.0 if c == 1 else rgb_scale(lo, hi)
         if win == "auto":
             win = auto_window(sample if c == 1 else _luminance(sample[:, :3].astype(np.float64) / scale))
         return win, scale
@@ -407,26 +400,6 @@ class _PiecewiseLinear:
         return self.f0[c].tobytes()
 
 
-def auto_window(values) -> tuple:
-    """(lo, hi) = 0.5 and 99.5 percentiles of the finite values (strided subsample).
-
-    Falls back to (min, max) when those percentiles coincide, and to
-    (v - 0.5, v + 0.5) for a constant input.
-    """
-    v = np.asarray(values).reshape(-1)
-    if v.size > AUTO_SAMPLES:
-        v = v[::math.ceil(v.size / AUTO_SAMPLES)]
-    v = v[np.isfinite(v)].astype(np.float64)
-    if v.size == 0:
-        raise InputError('window "auto" found no finite values; give a window (lo, hi)')
-    lo, hi = (float(p) for p in np.percentile(v, AUTO_PERCENTILES))
-    if not hi > lo:
-        lo, hi = float(v.min()), float(v.max())
-    if not hi > lo:
-        lo, hi = lo - 0.5, lo + 0.5
-    return (lo, hi)
-
-
 def _channels(vol) -> int:
     c = vol.channels
     if c not in (1, 3, 4):
@@ -437,87 +410,6 @@ def _channels(vol) -> int:
 
 def _luminance(rgb):
     return rgb[:, 0] * LUMA[0] + rgb[:, 1] * LUMA[1] + rgb[:, 2] * LUMA[2]
-
-
-def _rgb_scale(lo, hi) -> float:
-    """1, 255 or 65535: the range of colour channels whose values span (lo, hi)."""
-    lo, hi = float(lo), float(hi)
-    if lo < 0:
-        raise InputError(f"RGB(A) volume has negative values (min {lo:g}); colour channels "
-                         "must lie in [0, 1], [0, 255] or [0, 65535]")
-    if hi <= 1.0:
-        return 1.0
-    if hi <= 255.0:
-        return 255.0
-    if hi <= 65535.0:
-        return 65535.0
-    raise InputError(f"RGB(A) volume values reach {hi:g}; colour channels must lie in "
-                     "[0, 1], [0, 255] or [0, 65535]")
-
-
-def _classified(data, paint, threads):
-    """(z, y, x, 4) float32: ``paint`` over the voxels of ``data`` (z, y, x[, c]), _CHUNK at a time."""
-    n = math.prod(data.shape[:3])
-    values = data.reshape(n, -1)
-    out = np.empty((n, 4), dtype=np.float32)
-    _run_chunks(n, lambda s, e: paint(values[s:e], out[s:e]), threads)
-    return out.reshape(data.shape[:3] + (4,))
-
-
-def _scan(data, sample, extrema):
-    """(strided subsample or None, minimum or None, maximum or None) of ``data`` (z, y, x[, c]): the subsample
-    is the voxels whose flat index is a multiple of ceil(voxels / AUTO_SAMPLES), as ``data.reshape(n, c)[::step]``
-    (in another order for a Dask array, which is read once, chunk by chunk)."""
-    if not (sample or extrema):
-        return None, None, None
-    shape = data.shape[:3]
-    step = math.ceil(math.prod(shape) / AUTO_SAMPLES)
-
-    def scan(block, start):
-        return (_sampled(block, start, shape, step) if sample else None,
-                block.min() if extrema else None, block.max() if extrema else None)
-
-    if is_dask(data):
-        import dask
-
-        starts = itertools.product(*(np.cumsum((0,) + c[:-1]) for c in data.chunks[:3]))
-        found = dask.compute(*(dask.delayed(scan)(block, start)
-                               for block, start in zip(data.to_delayed().ravel(), starts)))
-    else:
-        found = [scan(data, (0, 0, 0))]
-    samples, lows, highs = zip(*found)
-    return (np.concatenate(samples) if sample else None,
-            min(lows) if extrema else None, max(highs) if extrema else None)
-
-
-def _sampled(block, start, shape, step):
-    """The voxels of ``block`` (z, y, x[, c]), whose first voxel is ``start`` in a grid of ``shape``, with a flat
-    (C order) index in the grid that is a multiple of ``step``, in flat order."""
-    nz, ny, nx = block.shape[:3]
-    z = np.arange(start[0], start[0] + nz)[:, None, None]
-    y = np.arange(start[1], start[1] + ny)[None, :, None]
-    row = (z * shape[1] + y) * shape[2] + start[2]      # flat index of each row's first voxel
-    x = (-row) % step + np.arange(0, nx, step)          # the row's multiples of step, and some past its end
-    iz, iy, ix = np.nonzero(x < nx)
-    return block[iz, iy, x[iz, iy, ix]]
-
-
-def _run_chunks(n, work, threads=True):
-    """work(start, stop) over chunks of _CHUNK voxels, in threads (numpy drops the GIL) unless ``threads`` is
-    False (a Dask chunk: Dask runs chunks in threads of its own)."""
-    starts = range(0, n, _CHUNK)
-    if n < _THREADED_MIN or not threads:
-        for s in starts:
-            work(s, min(s + _CHUNK, n))
-        return
-    # contiguous runs of chunks per task keep the writes of one thread together
-    per = math.ceil(len(starts) / (4 * cores()))
-
-    def task(i):
-        for s in starts[i:i + per]:
-            work(s, min(s + _CHUNK, n))
-
-    thread_map(task, range(0, len(starts), per))
 
 
 def _check_points(points) -> np.ndarray:

@@ -40,6 +40,11 @@ class Band:
         """Subband code: bit 0 set for 'd' (psi) along x, bit 1 along y, bit 2 along z."""
         return sum(1 << (2 - a) for a, ch in enumerate(self.key) if ch == "d")
 
+    @property
+    def id(self) -> int:
+        """``level * 8 + code``: the band in the splatting kernels' tables (a coefficient's ``RankedTable.band``)."""
+        return self.level * 8 + self.code
+
 
 def band_layout(wavelet: SplineWavelet, shape, levels) -> list:
     """Bands of a pywt mode='zero' decomposition, coarsest approximation first."""

@@ -20,7 +20,7 @@ from .budget import kept_count, warn_short_budget, warn_stored
 from . import geometry
 from .geometry import fine_to_world, world_points, world_to_fine
 from .mask import ContentMask
-from .ranking import CoefficientTable, by_importance, ranked_table
+from .ranking import RankedTable, by_importance, ranked_table
 from .transform import (apply_sampling_filter, band_sum, crop_to_grid, decompose, reconstruct_channel,
                         synthesize)
 from .volume import Volume
@@ -297,9 +297,10 @@ class WaveletVolume:
         return out
 
     # ------------------------------------------------------- upload views
-    def ranked(self, group: int = 0) -> CoefficientTable:
-        """The group's coefficients by decreasing importance across all bands, ties by position: the
-        order splatting draws them in and progressive refinement adds them."""
+    def ranked(self, group: int = 0) -> RankedTable:
+        """The group's coefficients by decreasing importance across all bands, ties by position, with their
+        importance: the order splatting draws them in and progressive refinement adds them, in the table the splat
+        renderer holds."""
         return self._ranked[group]
 
     @cached_property
@@ -307,7 +308,7 @@ class WaveletVolume:
         tables = []
         for g in self.groups:
             imp = self.importance(g)
-            tables.append(ranked_table(g, imp, by_importance(imp)))
+            tables.append(ranked_table(g, by_importance(imp), importance=imp))
         return tables
 
     def bands(self, group: int = 0):
@@ -315,7 +316,7 @@ class WaveletVolume:
         table, g = self.ranked(group), self.groups[group]
         out = []
         for band in g.bands:
-            sel = (table.level == band.level) & (table.key_code == band.code)
+            sel = table.band == band.id
             out.append((band, table.index[sel], table.values[sel]))
         return out
 

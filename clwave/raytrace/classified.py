@@ -23,7 +23,8 @@ from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.kernels import BUFFER, Kernel
 from ..errors import InputError
-from ..model.transfer import TransferFunction, auto_window
+from ..model.tf_passes import auto_window
+from ..model.transfer import TransferFunction
 from ..model.transform import sampling_kernel
 
 _RANGE = Kernel("scalar_range", ("out", BUFFER), ("origin", cltypes.int4), ("coef", BUFFER), ("bricks", BUFFER),

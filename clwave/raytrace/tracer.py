@@ -19,15 +19,14 @@ from pyopencl import cltypes
 from ..device import programs
 from ..device.constants import BLOCK, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
-from ..model.bspline import piece_polynomials
-from ..model.geometry import band_lattice, world_to_fine_affine
+from ..model.geometry import world_to_fine_affine
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
-from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import ABSENT, BRICK, build, group_defines, plan
+from .wavelet_field import WaveletField
 from .passes import on_device, passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import QUANT, ScalarRange, check_post, post_nodes
@@ -75,7 +74,6 @@ REAL4 = {np.float32: cltypes.float4, np.float64: cltypes.double4}
 GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
 ACTIVE = 1024    # entries of a ray's active list (wavelet field); more fall back to visiting every index
-WAVELET_GROUP = 8  # rays per work-group with the wavelet field
 DETAILS_KEPT = 8   # a tracer keeps the bounds of this many details (docs/raytracing.md §8)
 #: single-precision builds may reassociate sums and flush denormals (2-3 % of a render, results moved within the
 #: arithmetic's rounding); float64 references are built as written
@@ -128,10 +126,8 @@ class RayTracer:
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
         if field == "bspline":
             self._expand()
-        else:
-            self._bands([g.dense_bands() for g in wv.groups])
-            self.super_bound_host, self.super_origin = superblocks(self.block_bound.get(), self.occ_origin)
-            self.super_bound = cla.to_device(self.cc.queue, self.super_bound_host)
+        else:  # its tables, bounds and build options are the tracer's, as the B-spline field's are (_expand)
+            vars(self).update(vars(WaveletField(wv, self.cc, self.budget, self.active, self.orders)))
         # a scalar model: its range per block, for transfer functions at render time (docs/raytracing.md §10)
         self.scalar = ScalarRange(self) if wv.channels == 1 and field == "bspline" else None
 
@@ -197,72 +193,6 @@ class RayTracer:
             caps = caps.reshape(f.shape)
             return self.field_at(caps), [int(caps.min()), int(caps.max())]
         return self.field_at(caps), caps
-
-    def _bands(self, dense):
-        """Wavelet field: the dense bands and their tables (cl/raytrace/field_wavelet.h), bounds from the coefficients.
-
-        A block's bound is the sum over the coefficients whose supports meet it of
-        |c| 2^{-3m/2} times the product of the prototypes' maxima along the axes (N_j
-        peaks at j/2; |psi| <= max |q_k| by the partition of unity), so it bounds every
-        channel of the field there.
-        """
-        wv, q, start = self.wv, self.cc.queue, time.perf_counter()
-        j0 = self.orders[0]
-        values, info, shape, lo, weights, offset = [], [], [], [], [], 0
-        for g, group_dense in zip(wv.groups, dense):
-            wav = g.wavelet
-            shift = (j0 - wav.order) / 2.0  # grid-0 fine coordinates (docs/raytracing.md §3: lattices of both parities)
-            peak = {"a": float(wav.phi(wav.order / 2.0)), "d": float(np.max(np.abs(wav.q)))}
-            for band, arr in zip(g.bands, group_dense):
-                key_xyz = band.key[::-1]
-                flat = np.zeros(arr.shape[:3] + (4,), np.float32)
-                flat[..., list(g.channels)] = arr * 2.0 ** (-1.5 * band.level)
-                values.append(flat.reshape(-1, 4))
-                psi_bits = sum(1 << a for a, letter in enumerate(key_xyz) if letter == "d")
-                info.append((band.level, psi_bits, wav.order, offset))
-                shape.append((*arr.shape[2::-1], 0))
-                band_offset, step, _ = band_lattice(wav, band.key, band.level)
-                lo.append([*(band_offset[::-1] + shift), step])
-                weights.append(np.abs(flat).max(axis=3) * np.prod([peak[letter] for letter in band.key]))
-                offset += arr[..., 0].size
-        if offset >= 2 ** 31:
-            raise DeviceMemoryError(f"{offset} wavelet coefficients are more than the wavelet field indexes "
-                                    f"(2^31); use field='bspline'")
-        coef = np.concatenate(values)
-        check_buffer(self.cc, coef.nbytes, "the dense bands", "use field='bspline' or a smaller volume", self.budget,
-                     share=0.5)
-        self.coef = cla.to_device(q, coef)
-        bound, self.occ_origin, _ = block_sums(wv, weights)
-        bound = self._empty_space(bound)
-        self.block_bound = cla.to_device(q, bound.astype(np.float32))
-        self.q_bound = float(bound.max())
-        self.occupied_fraction = float(np.mean(bound > 0))
-        self.poly = piece_polynomials()
-        self.tables = dict(info=cla.to_device(q, np.array(info, np.int32)),
-                           shape=cla.to_device(q, np.array(shape, np.int32)),
-                           lo=cla.to_device(q, np.array(lo, np.float32)))
-        self.field_tables = dict(coef=self.coef, info=self.tables["info"], shape=self.tables["shape"],
-                                 band_lo=self.tables["lo"])
-        self.defines = dict(CLW_WAVELET=None, CLW_BANDS=len(info), CLW_ACTIVE=self.active,
-                            **group_defines(self.orders))
-        # PoCL keeps a work-group's private active lists on one thread's stack: small groups
-        self.local_size = (WAVELET_GROUP, 1)
-        self.setup_seconds = time.perf_counter() - start
-
-    def _empty_space(self, blocks):
-        """Clear the blocks (bounds or occupancy) that no content of the source volume reaches, keep the
-        reached cells for the march (``self.content``, per grid-0 cell of the blocks' box), and set the
-        clip box (docs/raytracing.md §4)."""
-        origin, shape = np.asarray(self.occ_origin) * BLOCK, np.array(blocks.shape) * BLOCK
-        cells = content_cells(self.wv, origin, shape)
-        if cells is not None:
-            blocks = blocks * cell_blocks(cells).astype(blocks.dtype)
-        self.box = clip_box(blocks, self.occ_origin)
-        self.content_origin = origin
-        self.content_cells = cells
-        self.content = cla.to_device(self.cc.queue, np.ones(1, np.uint8) if cells is None else cells)
-        self.content_shape = np.zeros(3, np.int64) if cells is None else shape  # 0: no content cells
-        return blocks
 
     def coarse_bound(self, tol) -> float:
         """Superblocks bounded by at most this are one region for skipping (``cl/raytrace/raytrace.cl``): what

@@ -45,7 +45,7 @@ def pack_nodes(g, textures, layer_of, layer_count, count, max_texels, spare=None
                 raise DeviceMemoryError(
                     f"the footprints of this perspective view need more than {4 * max_texels / 2**20:,.0f} MiB "
                     f"({K} ray slopes a band); render fewer pixels, a narrower cone or a lower omega_s")
-            band_tex[b.level * 8 + b.code] = len(ints)
+            band_tex[b.id] = len(ints)
             tex_layer.append((li, len(ints) - first_tex))
             boxes.append((-tex.centre_u * tex.h_u, (nu - 1 - tex.centre_u) * tex.h_u,
                           -tex.centre_v * tex.h_v, (nv - 1 - tex.centre_v) * tex.h_v))

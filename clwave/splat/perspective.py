@@ -446,9 +446,9 @@ class ConeTables:
             self.pixels += H * W
         for b in g.bands:
             if (b.level, b.key) in layer_of:  # world centre of coefficient k = 0 (docs/model.md §4) and its steps
-                self.band_world[b.level * 8 + b.code, :3] = fine_to_world(
+                self.band_world[b.id, :3] = fine_to_world(
                     support_centres(wav, b.key, b.level, (0, 0, 0)), wav.order, wv.shape, wv.spacing, wv.origin)
-                self.band_step[b.level * 8 + b.code, :3] = 2.0 ** b.level * d_xyz
+                self.band_step[b.id, :3] = 2.0 ** b.level * d_xyz
         key = (group, sampling, max_texels, tuple(sorted(layer_of.items())), tuple(sorted(refine.items())),
                tuple(sorted((band, tuple(np.broadcast_to(h, 2).tolist())) for band, h in texels.items())),
                *(np.asarray(x, np.float64).tobytes() for x in (view0.n, view0.u, view0.v, nodes)))

@@ -5,66 +5,39 @@ the viewer's error figures come from (docs/splatting.md §6, docs/viewer.md §2)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
-from ..model.ranking import by_importance, ranked_rows
+from ..model import ranking
+from ..model.ranking import RankedTable, by_importance, ranked_table
 from ..model.wavelet import WaveletVolume
-
-
-@dataclass
-class PackedTable:
-    """A group's coefficients in importance order as the splatting kernels read them (``cl/splat/bin.cl``):
-    ``coef`` (K, 4) int32 ``(k_x, k_y, k_z, band)`` with band = level * 8 + subband code (bit 0: psi along x), and
-    ``packed`` (K, 4) float32 values, the channels beyond the group's ``channels`` zero."""
-
-    coef: np.ndarray
-    packed: np.ndarray
-    channels: int
-
-    @property
-    def index(self) -> np.ndarray:
-        """(K, 3) ``(k_z, k_y, k_x)``, a view."""
-        return self.coef[:, 2::-1]
-
-    @property
-    def band(self) -> np.ndarray:
-        """(K,) band ids, level * 8 + subband code (0: the approximation), a view."""
-        return self.coef[:, 3]
-
-    @property
-    def values(self) -> np.ndarray:
-        """(K, C) the group's channels, a view."""
-        return self.packed[:, :self.channels]
 
 
 def ranked_groups(wv: WaveletVolume, orders=None) -> list:
     """Per group of ``wv``, what a renderer holds: its coefficients ranked (``orders``: per group, indices into its
     ascending positions, e.g. :func:`~clwave.view.prefix.prefix_first`'s; else by importance,
-    :func:`~clwave.model.ranking.by_importance`) as a :class:`PackedTable`, their count and channels, the present
-    bands, each with its first coefficient in that order (a prefix needs only the bands it reaches; at 1 % kept 8 of
-    hydrogen's 22 have none), and the cumulative energy (:class:`CumulativeEnergy`).  Made a block of rows at a time
-    (:func:`~clwave.model.ranking.ranked_rows`): no table but the packed one, and no float64 copy of the values."""
+    :func:`~clwave.model.ranking.by_importance`) as a :class:`~clwave.model.ranking.RankedTable`, their count and
+    channels, the present bands, each with its first coefficient in that order (a prefix needs only the bands it
+    reaches; at 1 % kept 8 of hydrogen's 22 have none), and the cumulative energy (:class:`CumulativeEnergy`)."""
     groups = []
     for gi, g in enumerate(wv.groups):
         order = by_importance(wv.importance(g)) if orders is None else orders[gi]
-        n, channels = len(order), len(g.channels)
-        ids = np.array([b.level * 8 + b.code for b in g.bands], np.int32)
-        table = PackedTable(np.empty((n, 4), np.int32), np.zeros((n, 4), np.float32), channels)
-        energy, first = CumulativeEnergy(table), np.full(len(g.bands), -1)
-        for lo, hi, band_no, index in ranked_rows(g, order):
-            table.coef[lo:hi, :3], table.coef[lo:hi, 3] = index[:, ::-1], ids[band_no]
-            for ch in range(channels):
-                table.packed[lo:hi, ch] = np.take(g.values[ch], order[lo:hi])
-            energy.mark(lo, hi)
-            for b in np.flatnonzero((first < 0) & (np.bincount(band_no, minlength=len(g.bands)) > 0)):
-                first[b] = lo + np.argmax(band_no == b)
+        first = np.full(len(g.bands), -1)  # each band's first row (-1: none yet)
+        table = ranked_table(g, order, each_block=partial(_first_rows, first))
         present = {(b.level, b.key): int(f) for b, f in zip(g.bands, first) if f >= 0}
-        groups.append(dict(table=table, count=n, channels=channels, present=present, energy=energy))
+        groups.append(dict(table=table, count=len(order), channels=table.channels, present=present,
+                           energy=CumulativeEnergy(table)))
     return groups
+
+
+def _first_rows(first, lo, band_no):
+    """Note in ``first`` (per band, -1: not seen) the first row of each band not seen before the rows from ``lo``,
+    whose band numbers are ``band_no``."""
+    for b in np.flatnonzero((first < 0) & (np.bincount(band_no, minlength=len(first)) > 0)):
+        first[b] = lo + np.argmax(band_no == b)
 
 
 #: coefficients between two sums a :class:`CumulativeEnergy` holds (a divisor of ranking.RANK_ROWS, the blocks it
@@ -73,14 +46,17 @@ ENERGY_STEP = 1024
 
 
 class CumulativeEnergy:
-    """The cumulative coefficient energy of a :class:`PackedTable`: ``energy[i]`` is the sum of c^2 over the channels
+    """The cumulative coefficient energy of a :class:`RankedTable`: ``energy[i]`` is the sum of c^2 over the channels
     of its first i + 1 coefficients, in float64, bit for bit ``np.cumsum`` of each coefficient's sum (a channel at a
     time).  It holds that sum at every :data:`ENERGY_STEP`-th coefficient only, and adds the few after it from the
     table when asked: 8 bytes a coefficient less (0.4 GiB at 1024^3, 5 %: docs/viewer.md §2)."""
 
-    def __init__(self, table: PackedTable):
+    def __init__(self, table: RankedTable):
         self.table = table
         self.marks = np.zeros(len(table.coef) // ENERGY_STEP)  # the sum to coefficient (k + 1) ENERGY_STEP - 1
+        n = len(self)
+        for lo in range(0, n, ranking.RANK_ROWS):  # no float64 sum of every coefficient at once
+            self._mark(lo, min(n, lo + ranking.RANK_ROWS))
 
     def _sums(self, lo, hi, start) -> np.ndarray:
         """The cumulative sums of coefficients lo .. hi, from ``start``, the sum before lo (np.cumsum is sequential:
@@ -91,7 +67,7 @@ class CumulativeEnergy:
         energy[:1] += start
         return np.cumsum(energy, out=energy)
 
-    def mark(self, lo, hi):
+    def _mark(self, lo, hi):
         """Take the sums of coefficients lo .. hi (lo a multiple of ENERGY_STEP; each block after the one before)."""
         assert lo % ENERGY_STEP == 0 and (hi % ENERGY_STEP == 0 or hi == len(self)), (lo, hi)
         sums = self._sums(lo, hi, self.marks[lo // ENERGY_STEP - 1] if lo else 0.0)
@@ -115,7 +91,7 @@ class CumulativeEnergy:
         return out if dtype is None else out.astype(dtype)
 
 
-def on_device(cc, table: PackedTable) -> tuple:
+def on_device(cc, table: RankedTable) -> tuple:
     """``(coef, values)``, the device arrays of ``table``: on a device that shares the host's memory (PoCL on the
     CPU) the host's arrays themselves (``USE_HOST_PTR``: no copy), elsewhere a copy (docs/splatting.md §6)."""
     q = cc.queue

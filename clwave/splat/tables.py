@@ -106,7 +106,7 @@ class ViewTables:
             for band in g.bands:
                 if self.layer_of.get((band.level, band.key)) != li:
                     continue
-                m, bid, scale = band.level, band.level * 8 + band.code, 2.0 ** band.level
+                m, bid, scale = band.level, band.id, 2.0 ** band.level
                 # world centre of coefficient k = 0 (docs/model.md §4: X = o + 2^m (k + c0)), in (x, y, z)
                 origins[bid] = fine_to_world(support_centres(wav, band.key, m, (0, 0, 0)), wav.order, wv.shape,
                                              wv.spacing, wv.origin)

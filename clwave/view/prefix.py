@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ClwaveError, ClwaveWarning, FileFormatError
 from ..io.clw import Abandoned, read_header
-from ..model.budget import warn_stored
+from ..model.budget import kept_count, warn_stored
 from ..model.ranking import by_importance
 from ..model.wavelet import WaveletVolume, check_thresholding
 from ..raytrace.staged import read_coarse
@@ -39,9 +39,9 @@ class PrefixFirst:
         with warnings.catch_warnings():  # what the file stores is told of `keep`, not of the prefix's share
             warnings.simplefilter("ignore", ClwaveWarning)
             self.prefix = WaveletVolume.open(path, keep=share if self.keep is None else min(self.keep, share))
-        budget = max(1, round(share * n))
+        budget = kept_count(share, n)  # the prefix's coefficients a group, as the file is read (None: all of them)
         # every tier was read where a group holds fewer than the budget
-        self.complete = (self.keep is not None and self.keep <= share) or share == 1.0 or all(
+        self.complete = budget is None or (self.keep is not None and self.keep <= share) or all(
             g.kept < budget for g in self.prefix.groups)
         if self.complete:  # else told when the whole is read (WaveletVolume.open)
             warn_stored(self.prefix, self.keep, path)
