@@ -178,10 +178,8 @@ def check_image_size(size, device, pixel_bytes, image="a {} image"):
 
     from ..device.context import ComputeContext
     from ..device.memory import buffer_limit, check_buffer
-    from ..device.programs import python_sigint
 
     (H, W), cc = size, ComputeContext.get(device)
-    python_sigint()  # made the context: Ctrl-C Python's again before any build (pyopencl's own too)
     most = isqrt(buffer_limit(cc) // pixel_bytes)
     check_buffer(cc, H * W * pixel_bytes, image.format(f"{H}x{W}"),
                  f"give a smaller --size (at most {most}x{most} on this device)")

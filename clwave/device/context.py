@@ -11,6 +11,8 @@ nothing ever prompts.  ``auto`` prefers a GPU, then any accelerator, then a CPU
 from __future__ import annotations
 
 import os
+import signal
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -170,6 +172,7 @@ class ComputeContext:
         info = select_device(device)
         if info not in cls._shared:
             cls._shared[info] = cls(info)
+            python_sigint()
         return cls._shared[info]
 
     def generated(self, name: str, make):
@@ -191,3 +194,15 @@ class ComputeContext:
 
     def __repr__(self):
         return f"ComputeContext({self.info.id} {self.info.platform} / {self.info.name})"
+
+
+def python_sigint():
+    """Put Python's own SIGINT handling back (what ``signal.getsignal`` says it is: Ctrl-C as KeyboardInterrupt, or
+    ignored), at the C level.  PoCL's LLVM installs a handler of its own when a context is made, which deletes the
+    files of a build under way before it passes the signal on: a Ctrl-C during a build could fail it (an internal error
+    where every other Ctrl-C ends "interrupted"), and so could a SIGINT the process ignores.  A handler is the
+    process's, for every thread, but Python sets one from its main thread only: a build on another thread relies on
+    the call :meth:`ComputeContext.get` makes when it makes the context on the main thread (the command line's)."""
+    handler = signal.getsignal(signal.SIGINT)
+    if handler is not None and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, handler)

@@ -11,8 +11,6 @@ fetches each one once.
 from __future__ import annotations
 
 import hashlib
-import signal
-import threading
 import time
 import warnings
 from functools import lru_cache
@@ -20,7 +18,7 @@ from pathlib import Path
 
 from . import constants
 from .kernels import BUFFER, Kernel
-from .context import INSTALL_HINT, ComputeContext
+from .context import INSTALL_HINT, ComputeContext, python_sigint
 from ..errors import KernelBuildError
 
 
@@ -92,18 +90,6 @@ def build(cc: ComputeContext, files, defines=None, options=()) -> KernelSet:
     ks = KernelSet(program, time.perf_counter() - start, options)
     cc.programs[key] = ks
     return ks
-
-
-def python_sigint():
-    """Put Python's own SIGINT handling back (what ``signal.getsignal`` says it is: Ctrl-C as KeyboardInterrupt, or
-    ignored), at the C level.  PoCL's LLVM installs a handler of its own when a context is made, which deletes the
-    files of a build under way before it passes the signal on: a Ctrl-C during a build could fail it (an internal error
-    where every other Ctrl-C ends "interrupted"), and so could a SIGINT the process ignores.  A handler is the
-    process's, for every thread, but Python sets one from its main thread only: a build on another thread relies on
-    a call from the main thread since its context was made (the command line's, cli/checks.py and cli/view.py)."""
-    handler = signal.getsignal(signal.SIGINT)
-    if handler is not None and threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, handler)
 
 
 SELFTEST = Kernel("selftest_axpy", ("alpha", "float32"), ("a", BUFFER), ("b", BUFFER), ("out", BUFFER))
