@@ -22,8 +22,8 @@ from ..model.ranking import by_importance
 from ..model.wavelet import WaveletVolume, check_thresholding
 from ..raytrace.staged import read_coarse
 
-#: coefficients (per channel group) the viewer serves from at once: at 1024^3 (5 % kept) about 2 % of the file,
-#: read in about a second, and enough for the display window (frames.WINDOW_COEFFICIENTS)
+#: coefficients (per channel group) the viewer serves from at once: at 1024^3 (5 % kept) about 2 % of the file
+#: (its reading time: docs/viewer.md §2), and enough for the display window (frames.WINDOW_COEFFICIENTS)
 PREFIX = 1 << 20
 
 
@@ -60,8 +60,8 @@ class PrefixFirst:
     def whole(self, coarse_first=False, stop=None) -> WaveletVolume:
         """The whole model (the file, or its ``keep`` most important coefficients).  ``coarse_first``: the coarse
         stage's reading (:meth:`coarse`, where not taken yet) is read before it and held until taken or the whole is
-        read: h5py serialises its calls, so a coarse stage asked for meanwhile would wait behind the whole's reads,
-        seconds each at 1024^3 (docs/viewer.md §2); that reading failing, nothing is held, and :meth:`coarse` reads
+        read: h5py serialises its calls, so a coarse stage asked for meanwhile would wait behind the whole's reads
+        (their times: docs/viewer.md §2); that reading failing, nothing is held, and :meth:`coarse` reads
         again (and fails for the shaded views alone).  ``stop`` (a ``threading.Event``): set once the coarse reading
         is done, the whole is not read (:class:`~clwave.io.clw.Abandoned`)."""
         with self._holding:
