@@ -20,7 +20,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from importlib import resources
 from urllib.parse import urlsplit
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError, whole_number
@@ -312,8 +312,8 @@ class ViewServer:
         waited for), and give up the set-up of a file's full stage, so that no thread of the server outlives it by
         more than the step under way."""
         self.stopping = True
-        for session in list(self.sessions.values()):
-            await session.ws.close()
+        for session in list(self.sessions.values()):  # the page says the server is gone (viewer.js, disconnected)
+            await session.ws.close(code=WSCloseCode.GOING_AWAY, message=b"the viewer stopped")
         if self._runner is not None:
             await self._runner.cleanup()
         self._stop_reading()
