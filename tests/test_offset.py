@@ -65,6 +65,22 @@ def test_points_without_a_window_and_an_auto_window_are_the_files_too():
     np.testing.assert_allclose(grey.resolved(Volume(ct - AIR, offset=AIR)).window, (lo, hi), rtol=1e-12)
 
 
+def test_values_the_offset_would_merge_are_refused_naming_how_far_apart_to_set_them():
+    """Points (or a window's ends) 1e-14 apart near 0 HU, shifted by an offset of -1000 to near 1000, where float64's
+    spacing is 1.1e-13: one line naming the least distance that stays distinct (twice that spacing), not the
+    "not increasing" of the merged points; set that far apart, they stay distinct."""
+    grey = [(0.0, 0, 0, 0, 0.0), (1e-14, 1, 1, 1, 0.1), (1.0, 1, 1, 1, 0.1)]
+    with pytest.raises(clwave.InputError, match=r"^transfer function values 0 and 1e-14 merge on the model's values, "
+                                                r"stored as the input's minus its offset -1000; set them at least "
+                                                r"2\.3e-13 apart$"):
+        TransferFunction(grey).shifted(AIR)
+    with pytest.raises(clwave.InputError, match=r"^transfer function window 0 and 1e-14 merge .* 2\.3e-13 apart$"):
+        TransferFunction.preset("hydrogen", window=(0.0, 1e-14)).shifted(AIR)
+    apart = 2 * np.spacing(1000.0)
+    assert np.all(np.diff(TransferFunction([grey[0], (apart, *grey[1][1:]), grey[2]]).shifted(AIR).points[:, 0]) > 0)
+    assert np.diff(TransferFunction.preset("hydrogen", window=(0.0, apart)).shifted(AIR).window)[0] > 0
+
+
 def test_nothing_visible_quotes_the_files_units():
     air = Volume(np.zeros((4, 4, 4)), offset=AIR)  # all air, stored as 0
     for check in (TransferFunction.preset("ct-bone").classify, TransferFunction.preset("ct-bone").check_visible):

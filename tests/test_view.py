@@ -567,6 +567,34 @@ def test_a_transfer_function_that_shows_nothing_ends_blank_with_a_note():
     assert all(f["note"] == NOTHING_VISIBLE for f, _ in frames)
 
 
+def test_editor_points_the_models_offset_would_merge_are_refused_in_one_line_and_the_tab_goes_on():
+    """A scalar model stored with an offset of -1000 (values near 0 kept as 1000 + v): the editor's points 1e-14
+    apart, distinct in the input's units, would merge where the offset moves them (float64 spacing 1.1e-13 at 1000):
+    the page hears one line naming how far apart to set them, not the renderer's "not increasing", and the tab's
+    next view, its points apart, ends at a final frame."""
+    from clwave.model.volume import Volume
+
+    vol = Volume(np.asarray(clwave.phantom("hydrogen", n=16).data) + 1000.0, offset=-1000.0)
+    wv = clwave.WaveletVolume.from_volume(vol, levels=1).threshold(keep=0.6)
+    close = [[0.0, 0.0, 0.0, 0.0, 0.0], [1e-14, 1.0, 1.0, 1.0, 0.2], [1.0, 1.0, 1.0, 1.0, 0.2]]
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", tf=dict(points=close))))
+            while (message := await ws.receive_json(timeout=60))["type"] != "error":
+                pass
+            await ws.send_str(json.dumps(dict(BASE, seq=2, mode="shaded", tf=dict(points=POINTS))))
+            return message, await asyncio.wait_for(frames_until_final(ws, 2), 60)
+    with view(wv, size=16) as v:
+        error, frames = run(go(v))
+    assert error["seq"] == 1 and error["message"] == ("transfer function values 0 and 1e-14 merge on the model's "
+                                                      "values, stored as the input's minus its offset -1000; set them "
+                                                      "at least 2.3e-13 apart")
+    assert frames[-1][0]["final"] and frames[-1][0]["tf_points"] == POINTS
+
+
 def test_a_scalar_model_is_classified_by_the_transfer_function_given_from_the_first_frame(monkeypatch):
     """view(scalar model, tf=) (what `clwave view scalar.clw --tf P --tf-window LO,HI` serves): the hello names the
     function for the page's editor, every render of the shaded source (its warm-up, the drag frame, each still frame)

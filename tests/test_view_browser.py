@@ -11,13 +11,17 @@ import numpy as np
 import pytest
 
 import clwave
+from clwave.view import prefix as view_prefix
 from clwave.view import view
+from clwave.view.prefix import PrefixFirst
+import test_view_prefix
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 import browser  # noqa: E402  (tools/browser.py)
 
 pytestmark = pytest.mark.skipif(browser.executables() is None, reason=browser.SETUP)
 SIZE = (64, 80)
+clw = test_view_prefix.clw  # the fixture: hydrogen 40^3 RGBA, 12,800 coefficients in the file
 
 
 #: the scalar model's transfer function (classified while rendering), where the page's editor starts
@@ -264,3 +268,53 @@ def test_the_colour_bar_shows_the_map_over_the_window(viewer, page):
     lo, hi = page.execute_script("return window.clwave.state.window") or viewer.server.sources["xray"].auto_window
     assert auto["window"] == [lo, hi] and hi > final["window"][1] * 1.01
     np.testing.assert_allclose(labels(), [lo, (lo + hi) / 2, hi], rtol=5e-3)
+
+
+def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(page):
+    """The server stops under an open page: the status line says so and what to do, every control that sends is
+    disabled (the mode, the X-ray and the shaded boxes), a drag, the wheel and a double-click on the image change
+    nothing, and the last image stays, still to be saved.  The server started again on the same port: the page
+    reloaded at its old address is refused (a new token, 403), the new address works."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.6)
+    image = "return document.getElementById('image').toDataURL()"
+    with view(wv, size=SIZE) as v:
+        browser.open_viewer(page, v.url)
+        browser.wait_final(page)
+        before, port = page.execute_script(image), v.server.port
+    status = browser.wait_for(page, "const s = document.getElementById('status'); "
+                                    "return s.classList.contains('error') && s.textContent", timeout=30)
+    assert status == ("disconnected: the viewer's server has stopped or cannot be reached (1001: the viewer stopped); "
+                      "restart clwave view … (or clwave.view) and open the address it prints, whose token is new. "
+                      "This image is the last it sent.")
+    sending = ", ".join(f"#{box} {kind}" for box in ("mode", "xray-controls", "shaded-controls")
+                        for kind in ("input", "select", "button"))
+    controls = page.execute_script(f"return Array.from(document.querySelectorAll('{sending}'))"
+                                   ".map(e => e.matches(':disabled'))")
+    assert len(controls) == 16 and all(controls)  # 2 modes, 5 X-ray controls, 9 shaded ones
+    state, shown = page.execute_script("return JSON.stringify(window.clwave.state)"), browser.shown(page)
+    browser.drag(page, 30, 10, steps=3, hold=False)
+    ActionChains(page).scroll_to_element(page.find_element("id", "image")).double_click(
+        page.find_element("id", "image")).perform()
+    page.execute_script("document.getElementById('image').dispatchEvent(new WheelEvent('wheel', {deltaY: -300}))")
+    assert page.execute_script("return JSON.stringify(window.clwave.state)") == state and browser.shown(page) == shown
+    assert page.execute_script(image) == before and page.find_element("id", "save").is_enabled()
+    with view(wv, size=SIZE, port=port) as again:
+        page.refresh()
+        assert "403" in page.find_element("tag name", "body").text
+        assert browser.open_viewer(page, again.url) > 0
+
+
+def test_a_files_rest_that_cannot_be_read_is_said_on_the_model_line(clw, page, monkeypatch):
+    """A ``.clw`` file served from its prefix whose rest fails to read: the page's model line says that the view holds
+    the file's most important coefficients only, and why (the ``model`` message's ``failure``), not "kept"."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: (_ for _ in ()).throw(
+        clwave.FileFormatError("damaged past its prefix")))
+    with view(clw, size=SIZE) as v:
+        browser.open_viewer(page, v.url)
+        line = browser.wait_for(page, "const m = document.getElementById('model').textContent; "
+                                      "return !m.includes('reading') && m")
+    assert line == ("40 × 40 × 40 voxels, 4 channel(s), cubic, 2,048 coefficients (the file's most important only: "
+                    "the rest could not be read, damaged past its prefix)")

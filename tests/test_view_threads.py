@@ -156,10 +156,7 @@ def test_a_tab_closed_while_the_ray_tracer_is_prepared_leaves_no_task(monkeypatc
 
     async def go(v):
         async with aiohttp.ClientSession() as s:
-            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
-            await ws.receive_json()
-            await ws.send_str(view_message(seq=1, mode="shaded"))
-            status = await ws.receive_json(timeout=60)
+            ws, status = await shaded_view(s, v)
             await ws.close()
         deadline = time.monotonic() + 30
         while v.server.sessions and time.monotonic() < deadline:
@@ -174,6 +171,7 @@ def test_a_tab_closed_while_the_ray_tracer_is_prepared_leaves_no_task(monkeypatc
             status = asyncio.run(asyncio.wait_for(go(v), 60))
             time.sleep(0.1)  # the cancelled tasks run to their end
             left = asyncio.run_coroutine_threadsafe(tasks(), v._background.loop).result(10)
+            gate.set()  # the set-up goes on (the stop waits for it)
     finally:
         gate.set()
     assert status["type"] == "status" and "preparing" in status["message"]
@@ -223,6 +221,15 @@ def view_message(**fields) -> str:
     return json.dumps(dict(BASE, **fields))
 
 
+async def shaded_view(session, v) -> tuple:
+    """A socket of ``session`` to the viewer ``v`` that has asked for a shaded view, and the first message it heard
+    back after the hello."""
+    ws = await session.ws_connect(v.url.replace("/?", "/ws?"))
+    await ws.receive_json()
+    await ws.send_str(view_message(seq=1, mode="shaded"))
+    return ws, await ws.receive_json(timeout=60)
+
+
 def test_close_while_the_whole_is_ranked_does_not_wait_for_the_ranking(clw, monkeypatch):
     """The reader is waited for while it reads the file only: once read, its ranking (seconds at 1024^3) holds no
     lock of h5py's, and ``close()`` returns without waiting for it (the daemon reader then stops by itself)."""
@@ -246,3 +253,50 @@ def test_close_while_the_whole_is_ranked_does_not_wait_for_the_ranking(clw, monk
         assert time.perf_counter() - start < 5.0
     finally:
         release.set()
+
+
+def test_close_during_the_shaded_tracers_build_of_a_model_in_memory_stops_it_at_a_slab(monkeypatch):
+    """``Viewer.close()`` while the shaded views' ray tracer of a model held in memory is built (its first slab held
+    until the viewer stops, each later one until the test ends, as a long build would be): the build stops at the
+    next box its expansion asks of the content mask, and close returns with no build thread left (the exit waited for
+    the whole build before)."""
+    from clwave.raytrace import bricks
+    from clwave.view.shaded import ShadedSource
+
+    building, stopping, release = threading.Event(), threading.Event(), threading.Event()
+    expand, stop, slabs = bricks._expand_slab, ShadedSource.stop, []
+
+    def slow(*args, **kwargs):
+        slabs.append(1)
+        if len(slabs) == 1:
+            building.set()
+            stopping.wait(60)
+        else:
+            release.wait(60)
+        return expand(*args, **kwargs)
+
+    monkeypatch.setattr(bricks, "_expand_slab", slow)
+    monkeypatch.setattr(ShadedSource, "stop", lambda self: stop(self) or stopping.set())
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=32), levels=2).threshold(keep=0.2)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            return (await shaded_view(s, v))[1]
+
+    def builders():
+        return [t.name for t in threading.enumerate() if t.name.startswith("clwave-view-build")]
+
+    v = view(wv, size=16)
+    try:
+        status = asyncio.run(asyncio.wait_for(go(v), 60))
+        assert building.wait(60), "the tracer's build never began"
+        shaded = v.server.sources["shaded"]
+        start = time.perf_counter()
+        v.close()
+        closed = time.perf_counter() - start
+        left = builders()
+    finally:
+        release.set()
+        v.close()
+    assert "preparing the ray tracer" in status["message"]
+    assert closed < 30 and not left and len(slabs) == 1 and shaded.tracer is None, (closed, left, len(slabs))

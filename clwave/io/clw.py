@@ -368,25 +368,19 @@ def open_clw(path):
                               "the file may be truncated or corrupt") from None
 
 
-class Abandoned(Exception):
-    """A :class:`FileMask` asked for a box after its reader gave it up (``abandon`` set)."""
-
-
 class FileMask(ContentMask):
     """The content mask of a ``.clw`` file, read when a box of it is first asked for, a layer of the file's
     chunks at a time (packed to bits as it comes): an image that needs a part of the mask, or none of it (a
-    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §8).  Thread-safe.  ``abandon``
-    (a ``threading.Event``, or None): once set, asking for a box raises :class:`Abandoned` (a set-up given up
-    between two slabs of its expansion)."""
+    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §8).  Thread-safe.  ``abandon`` as
+    :class:`ContentMask`'s: a set-up given up reads no more of the file."""
 
     def __init__(self, path, shape):
         super().__init__(shape)  # zeroed pages: no memory until a layer is read
         self.path, self.read = Path(path), np.zeros(-(-self.shape[0] // MASK_CHUNK[0]), bool)
-        self.lock, self.abandon = threading.Lock(), None
+        self.lock = threading.Lock()
 
     def box(self, start, shape) -> np.ndarray:
-        if self.abandon is not None and self.abandon.is_set():
-            raise Abandoned(f"the set-up reading the content mask of {self.path} was given up")
+        self.checkpoint()  # before the file is read
         lo, hi = max(int(start[0]), 0), min(int(start[0]) + int(shape[0]), self.shape[0])
         self.load(lo, hi)
         return super().box(start, shape)

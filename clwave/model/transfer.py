@@ -127,11 +127,17 @@ class TransferFunction:
         its points where it has none, moved by -offset; a window "auto" (percentiles of the values met) stays."""
         if not offset or self._window == "auto":
             return self
+        given = self._points[:, 0] if self._window is None else np.array(self._window)
+        moved = given - offset
+        merged = np.flatnonzero(np.diff(moved) <= 0)  # closer than float64 tells apart where the offset moves them
+        if merged.size:
+            i = int(merged[0])
+            raise InputError(f"transfer function {'values' if self._window is None else 'window'} {given[i]:g} and "
+                             f"{given[i + 1]:g} merge on the model's values, stored as the input's minus its offset "
+                             f"{offset:g}; set them at least {2 * np.spacing(np.abs(moved[i:i + 2]).max()):.2g} apart")
         if self._window is None:
-            points = self._points.copy()
-            points[:, 0] -= offset
-            return TransferFunction(points, name=self.name)
-        return TransferFunction(self._points, tuple(w - offset for w in self._window), self.name)
+            return TransferFunction(np.column_stack([moved, self._points[:, 1:]]), name=self.name)
+        return TransferFunction(self._points, tuple(moved), self.name)
 
     def _on(self, vol, window) -> "TransferFunction":
         """This function under ``window`` (``...``: its own) in the units of ``vol``'s data: a scalar's shifted by its

@@ -10,7 +10,6 @@ tracer's ``render`` gives.
 from __future__ import annotations
 
 import atexit
-import copy
 import threading
 import time
 
@@ -20,8 +19,8 @@ from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
+from ..model.mask import Abandoned, abandonable
 from ..model.transform import band_layout
-from ..io.clw import Abandoned, FileMask
 from ..io.occupancy import mass_on_occupied
 from ..io.summary import approximation_occupancy, detail_energy, detail_field
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
@@ -99,11 +98,8 @@ class StagedTracer:
             wv = WaveletVolume.open(path) if whole is None else whole()
             if self._abandon.is_set():
                 return
-            if isinstance(wv.content_mask, FileMask):  # the expansion asks it for boxes slab by slab: this set-up's
-                mask = copy.copy(wv.content_mask)  # own view (bits, reading and lock shared), for the mask may be the
-                mask.abandon = self._abandon       # caller's too (whole=), whose other users read on
-                wv = wv.masked(mask)
-            full = tracer_class(wv, device=cc, device_memory=device_memory, lod=lod)
+            # the expansion asks the content mask for boxes slab by slab: this set-up's own view of it stops there
+            full = tracer_class(abandonable(wv, self._abandon), device=cc, device_memory=device_memory, lod=lod)
         except Abandoned:
             return
         except BaseException as exc:  # raised again where the caller waits for the full stage

@@ -20,11 +20,11 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from importlib import resources
 from urllib.parse import urlsplit
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError, whole_number
-from ..io.clw import Abandoned
+from ..model.mask import Abandoned
 from . import colours
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
@@ -308,11 +308,12 @@ class ViewServer:
         return self.url
 
     async def stop(self):
-        """Close every tab and the server; stop reading a file's rest (waited for) and give up the shaded views'
-        set-up of its full stage, so that no thread of the server outlives it by more than the step under way."""
+        """Close every tab and the server; stop reading a file's rest and building the shaded views' tracer (both
+        waited for), and give up the set-up of a file's full stage, so that no thread of the server outlives it by
+        more than the step under way."""
         self.stopping = True
-        for session in list(self.sessions.values()):
-            await session.ws.close()
+        for session in list(self.sessions.values()):  # the page says the server is gone (viewer.js, disconnected)
+            await session.ws.close(code=WSCloseCode.GOING_AWAY, message=b"the viewer stopped")
         if self._runner is not None:
             await self._runner.cleanup()
         self._stop_reading()
@@ -321,7 +322,8 @@ class ViewServer:
         if shaded is not None:
             shaded.stop()
         self.pool.shutdown(wait=False, cancel_futures=True)
-        self.builder.shutdown(wait=False, cancel_futures=True)
+        # the shaded views' set-up under way stops at its next slab (ShadedSource.stop): waited for, as the reader is
+        self.builder.shutdown(wait=True, cancel_futures=True)
         self.sources = {}  # their renderers' memory let go with the last frame under way
 
     @property

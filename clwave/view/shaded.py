@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..io.result import RenderResult
+from ..model.mask import Abandoned, abandonable
 from ..model.transfer import TransferFunction
 from .frames import NO_COEFFICIENTS, NOTHING_VISIBLE, Frame, Source, ViewState, check_tolerance
 
@@ -60,6 +61,7 @@ class ShadedSource(Source):
         self.device_memory = device_memory
         self.path, self.whole, self.staged, self.upgraded, self._watch = path, whole, None, upgraded, None
         self.coarse = coarse
+        self._abandon = threading.Event()  # set by stop()
         self.scalar = wv.channels == 1
         self.steps = [(s, d) for s, d in DRAG_STEPS if d <= wv.levels]
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
@@ -95,15 +97,21 @@ class ShadedSource(Source):
             self.staged = staged
             self._watch = threading.Thread(target=self._upgrade, name="clwave-view-full-stage", daemon=True)
         elif self.path is None and self.tracer is None:
-            if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
-                self.wv = self.whole()
-            tracer = RayTracer(self.wv, device=self.device, device_memory=self.device_memory, lod=True)
+            try:
+                if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
+                    self.wv = self.whole()
+                # a model held in memory: the build stops at its next slab once the viewer stops (:meth:`stop`)
+                tracer = RayTracer(abandonable(self.wv, self._abandon), device=self.device,
+                                   device_memory=self.device_memory, lod=True)
+            except Abandoned:  # the viewer stopped: no tracer
+                return
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
             self.tracer = tracer
 
     def stop(self):
-        """The viewer stopping: a file's full stage still being set up is given up (its thread stops after the read
-        or the slab under way)."""
+        """The viewer stopping: the tracer of a model held in memory, or a file's full stage, still being set up is
+        given up (its thread stops after the read or the slab under way)."""
+        self._abandon.set()
         if self.staged is not None:
             self.staged.abandon()
 

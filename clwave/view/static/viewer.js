@@ -7,7 +7,7 @@
   const HOME = { azimuth: 30, elevation: 20, zoom: 1 };
   const state = { ...HOME, mode: "xray", detail: 1, window: null, moving: false, background: 0, shading: true,
                   tf: null, colour_map: "grey" };
-  let sentSeq = 0, hello = null, current = null, pending = false, idleTimer = null;
+  let sentSeq = 0, hello = null, current = null, pending = false, idleTimer = null, closed = false;
   // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
   const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, tfInput: null, frames: [] };
   window.clwave = { state, stats, send: () => request(), current: () => current,
@@ -16,8 +16,7 @@
   const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws?token=` +
                            encodeURIComponent(token));
   ws.binaryType = "arraybuffer";
-  ws.onclose = (ev) => { status.textContent = `disconnected (${ev.code}${ev.reason ? ": " + ev.reason : ""})`;
-                         status.classList.add("error"); };
+  ws.onclose = disconnected;
   ws.onmessage = (ev) => (typeof ev.data === "string" ? onText(JSON.parse(ev.data)) : onFrame(ev.data));
 
   // While dragging, one view at a time is on its way: the next is sent when its frame arrives (or after a
@@ -33,6 +32,21 @@
     awaiting = state.moving ? sentSeq : 0;
     since = performance.now();
     ws.send(JSON.stringify({ type: "view", seq: sentSeq, ...state }));
+  }
+  // The socket closed: the server refused a message of this page (policy, size: the page may be reloaded), or it
+  // stopped or cannot be reached. Nothing answers any more: every control that sends is disabled (greyed), the last
+  // image stays (and can still be saved), and the status line says what happened and what to do.
+  const REFUSED = [1008, 1009];  // protocol.POLICY, TOO_BIG
+  function disconnected(ev) {
+    closed = true;
+    for (const id of ["mode", "xray-controls", "shaded-controls"]) $(id).disabled = true;
+    canvas.classList.add("offline");
+    const why = `${ev.code}${ev.reason ? ": " + ev.reason : ""}`;
+    status.textContent = REFUSED.includes(ev.code) ?
+      `disconnected: the server refused a message of this page (${why}); reload the page` :
+      `disconnected: the viewer's server has stopped or cannot be reached (${why}); restart clwave view … (or ` +
+      "clwave.view) and open the address it prints, whose token is new. This image is the last it sent.";
+    status.classList.add("error");
   }
   function request() {  // at most one message per 16 ms: the latest state then
     if (!pending) { pending = true; setTimeout(send, 16); }
@@ -123,13 +137,15 @@
     const m = hello.model;
     $("model").textContent = `${m.shape.slice().reverse().join(" × ")} voxels, ${m.channels} channel(s), ` +
       `${m.wavelets.join(", ")}, ${m.coefficients.toLocaleString()} coefficients ` +
-      (m.reading ? "(the file's most important; reading the rest…)" : "kept") +
+      (m.reading ? "(the file's most important; reading the rest…)" : m.failure ? "(the file's most important " +
+       `only: the rest could not be read, ${m.failure})` : "kept") +
       (m.transfer_function ? `, classified with ${m.transfer_function}` : "");
   }
 
   // ---------------------------------------------------------------- orbit, zoom, reset
   let drag = null;
   canvas.addEventListener("pointerdown", (ev) => {
+    if (closed) return;
     drag = { x: ev.clientX, y: ev.clientY };
     canvas.setPointerCapture(ev.pointerId);
     canvas.classList.add("dragging");
@@ -157,13 +173,14 @@
   canvas.addEventListener("pointercancel", release);
   canvas.addEventListener("wheel", (ev) => {
     ev.preventDefault();
+    if (closed) return;
     state.zoom = Math.max(0.1, Math.min(50, state.zoom * Math.exp(-0.0015 * ev.deltaY)));
     state.moving = true;
     request();
     clearTimeout(idleTimer);
     idleTimer = setTimeout(() => { state.moving = false; request(); }, 200);
   }, { passive: false });
-  canvas.addEventListener("dblclick", () => { Object.assign(state, HOME, { moving: false }); request(); });
+  canvas.addEventListener("dblclick", () => { if (!closed) { Object.assign(state, HOME, { moving: false }); request(); } });
 
   // ---------------------------------------------------------------- controls
   const syncMode = () => {
@@ -416,7 +433,7 @@
   }
 
   function remove(i) {
-    if (i < 0 || editor.points.length <= 2) return;
+    if (i < 0 || editor.points.length <= 2 || tfCanvas.closest("fieldset:disabled")) return;
     begin();
     editor.points.splice(i, 1);
     select(-1);
@@ -493,10 +510,11 @@
       for (const text of [k, v]) { const td = document.createElement("td"); td.textContent = text; tr.append(td); }
       return tr;
     }));
+    $("save").disabled = !(f.final && f.mime === "image/png");
+    if (closed) return;  // a frame decoded after the socket closed: the status line still says so
     status.classList.remove("error");
     status.textContent = f.note ? f.note : f.final ? "refined" : state.moving ? "moving" : f.prefix ? "refined from the file's most " +
       "important part; the rest is being read…" : "refining…";
-    $("save").disabled = !(f.final && f.mime === "image/png");
   }
   $("save").addEventListener("click", () => {
     if (!current || !current.fig.final) return;
