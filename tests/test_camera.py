@@ -1,5 +1,7 @@
 """Camera conventions (docs/coordinates.md §2) and bad views."""
 
+from itertools import product
+
 import numpy as np
 import pytest
 
@@ -36,7 +38,8 @@ def test_pixel_centres_and_default_extent():
 
 @pytest.mark.parametrize("kwargs", [dict(azimuth=float("nan")), dict(elevation=float("inf")), dict(size=0),
                                     dict(size=(-3, 4)), dict(size=2.5), dict(size="big"), dict(extent=0),
-                                    dict(target=(0, 0)), dict(fov=180)])
+                                    dict(target=(0, 0)), dict(fov=180), dict(fit="cube"),
+                                    dict(fit="box", extent=3.0), dict(fit="box", perspective=True, distance=9.0)])
 def test_bad_views_are_one_line_errors(kwargs):
     with pytest.raises(InputError) as err:
         Camera(**kwargs)
@@ -80,3 +83,25 @@ def test_a_reduced_camera_is_the_same_view_with_larger_pixels(kwargs):
         full = cam.view(vol).to_pixels(points) - (np.array([W, H]) / 2.0 - 0.5)  # from the image's centre
         np.testing.assert_allclose(small.view(vol).to_pixels(points) - (np.array([w, h]) / 2.0 - 0.5), full / 4,
                                    rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("perspective", [False, True])
+def test_a_box_fit_brings_the_content_box_to_the_image_edge(perspective):
+    """fit="box": every corner of the content box projects inside the image (pixel centres -0.5 .. W - 0.5 are its
+    edges), and the farthest touches an edge (1e-9 pixel), at any view and for either image side the longer; a
+    slab 32 times longer than wide, seen from its side in a tall image, spans its height where its bounding
+    sphere, across the width, spans an eighth of it."""
+    data = np.zeros((8, 20, 12), np.float32)
+    data[1:7, 3:19, 2:5] = 1.0
+    vol = Volume(data, spacing=(1.0, 0.5, 2.0), origin=(1.0, -2.0, 3.0))
+    corners = np.array(list(product(*zip(*vol.content_box()))))
+    for az, el, size in ((0, 0, (20, 30)), (33, 25, (30, 20)), (200, -60, 17), (90, 90, (8, 64))):
+        view = Camera(az, el, size, fit="box", perspective=perspective).view(vol)
+        (H, W), px = view.size, view.to_pixels(corners)
+        assert px.min() >= -0.5 - 1e-9 and px[:, 0].max() <= W - 0.5 + 1e-9 and px[:, 1].max() <= H - 0.5 + 1e-9
+        assert min(px.min() + 0.5, W - 0.5 - px[:, 0].max(), H - 0.5 - px[:, 1].max()) < 1e-9
+    slab = Volume(np.ones((64, 2, 2), np.float32))  # z 64 voxels long, seen along x: z up the image
+    rows = [np.ptp(Camera(0, 0, (512, 64), fit=fit).view(slab).to_pixels(
+        np.array(list(product(*zip(*slab.content_box())))))[:, 1]) for fit in ("sphere", "box")]
+    assert rows[1] == pytest.approx(512) and rows[0] == pytest.approx(64 * 64 / np.sqrt(64 ** 2 + 8))
+    assert Camera(0, 0, 16, fit="sphere").view(vol).pixel == Camera(0, 0, 16).view(vol).pixel  # the default

@@ -290,11 +290,29 @@ def test_progressive_gif_folder_and_stats(tmp_path, capsys):
     (["render", "phantom:hydrogen:16", "--coarse", "2"], "coarse"),
     (["render", "phantom:hydrogen:16", "--tf", "hydrogen", "--method", "raytrace", "--coarse", "1e-2"], "--tolerance"),
     (["render", "phantom:hydrogen:16", "--method", "raytrace", "--light", "10"], "--light"),
+    (["render", "phantom:hydrogen:16", "--fit", "box", "--extent", "3"], "--fit box sets the --extent"),
 ])
 def test_render_mistakes(tmp_path, capsys, argv, needle):
     target = tmp_path / ("o.png" if argv[0] == "render" else "o.gif")
     code, out, err = run(capsys, *argv, "-o", str(target))
     assert code == 2 and err.count("\n") == 1 and needle in err and not target.exists()
+
+
+def test_fit_box_frames_a_rod_seen_from_its_side(tmp_path, capsys):
+    """--fit box: a rod 12 times longer than wide, seen from its side in a 32 x 8 image, spans every row (its X-ray
+    in the top and bottom rows at least half of the middle's), where the default sphere leaves the top rows empty."""
+    rod = tmp_path / "rod.npy"
+    np.save(rod, np.ones((48, 4, 4), np.float32))
+    rows = {}
+    for fit in ("sphere", "box"):
+        raw = tmp_path / f"{fit}.npy"
+        code, out, err = run(capsys, "render", str(rod), "--levels", "1", "--keep", "1", "--azimuth", "0",
+                             "--elevation", "0", "--size", "32x8", "--fit", fit, "-o", str(tmp_path / f"{fit}.png"),
+                             "--raw", str(raw))
+        assert code == 0, err
+        rows[fit] = np.load(raw)[..., 0].max(axis=1)  # per row, z up the image
+    for fit, want in (("box", True), ("sphere", False)):
+        assert (min(rows[fit][0], rows[fit][-1]) >= 0.5 * rows[fit][16]) == want, rows[fit]
 
 
 def test_model_options_on_a_clw_input_are_errors_that_name_them(tmp_path, capsys):

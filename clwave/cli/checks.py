@@ -191,4 +191,4 @@ def make_camera(args):
 
     perspective = dict(perspective=True, distance=args.distance, fov=args.fov) \
         if getattr(args, "perspective", False) else {}
-    return Camera(args.azimuth, args.elevation, parse_size(args), extent=args.extent, **perspective)
+    return Camera(args.azimuth, args.elevation, parse_size(args), extent=args.extent, fit=args.fit, **perspective)

@@ -376,6 +376,8 @@ def check_frames_folder(path, force) -> Path:
 
 
 def add_camera_options(p):
+    from ..model.camera import FITS
+
     g = p.add_argument_group("view")
     g.add_argument("--azimuth", type=float, default=30.0, help="degrees (default 30)")
     g.add_argument("--elevation", type=float, default=20.0, help="degrees (default 20)")
@@ -383,8 +385,10 @@ def add_camera_options(p):
     g.add_argument("--fov", type=float, default=30.0, help="perspective: vertical field of view, degrees")
     g.add_argument("--distance", type=float, help="perspective: eye distance from the target (world units)")
     g.add_argument("--size", default="512", help="image size: N or HxW, e.g. 512 or 300x400 (default 512)")
-    g.add_argument("--extent", type=float, help="world width of the image (default: the bounding sphere of the "
-                                                 "non-empty voxels spans the image, the same at every view)")
+    g.add_argument("--extent", type=float, help="world width of the image (default: by --fit)")
+    g.add_argument("--fit", choices=FITS, default="sphere", help="default framing: sphere (the bounding sphere of "
+                   "the non-empty voxels spans the image, the same at every view) or box (their box's projection "
+                   "for this view fills the image: an elongated volume seen from its side)")
     add_device_options(g)
 
 

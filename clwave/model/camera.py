@@ -18,6 +18,8 @@ import numpy as np
 from ..errors import InputError, finite_number
 from .geometry import view_frame
 
+FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
+
 
 @dataclass(frozen=True)
 class View:
@@ -93,12 +95,17 @@ class Camera:
     target : (x, y, z), optional
         World point at the image centre; default the centre of the content's bounding sphere.
     extent : float, optional
-        World width of the image; default the content's bounding sphere fills the image's
-        shorter side, the same at every view (a turntable keeps its framing).  The content is
-        where the model (or volume) is non-zero (``content_box()``), else its voxel box.
+        World width of the image; default by ``fit``.  The content is where the model (or volume)
+        is non-zero (``content_box()``), else its voxel box.
+    fit : ``"sphere"`` or ``"box"``
+        The default framing: ``"sphere"`` (default), the content's bounding sphere fills the image's
+        shorter side, the same at every view (a turntable keeps its framing); ``"box"``, the content
+        box's projection for this view fills the image, touching its edge (an elongated volume seen
+        from its side fills the image, where the sphere leaves most of it empty).
     perspective, distance, fov :
         Perspective projection: eye at ``target + distance * n``, vertical field of view ``fov``
         degrees (a cone beam whose detector is centred on the axis; :class:`clwave.ConeBeam` for others).
+        With ``fit="box"`` the default distance is the least at which the box's corners are in view.
 
     Examples
     --------
@@ -108,7 +115,7 @@ class Camera:
     """
 
     def __init__(self, azimuth=30.0, elevation=20.0, size=512, *, target=None, extent=None,
-                 perspective=False, distance=None, fov=30.0):
+                 perspective=False, distance=None, fov=30.0, fit="sphere"):
         self.azimuth = finite_number(azimuth, "azimuth")
         self.elevation = finite_number(elevation, "elevation")
         self.size = _size(size)
@@ -126,6 +133,13 @@ class Camera:
             raise InputError(f"fov={fov!r} must be between 0 and 180 degrees",
                              cli=f"--fov {fov} must be between 0 and 180 degrees")
         self.fov = float(fov)
+        if fit not in FITS:
+            raise InputError(f"fit={fit!r} must be 'sphere' or 'box'", cli=f"--fit {fit} must be sphere or box")
+        given = "distance" if perspective and distance is not None else "extent" if extent is not None else None
+        if fit == "box" and given:
+            raise InputError(f"fit='box' sets the {given} that {given}= sets: give one of them",
+                             cli=f"--fit box sets the --{given}: give one of them")
+        self.fit = fit
 
     def basis(self):
         """``(n, u, v)`` of paper eq. 31 as float64 arrays."""
@@ -139,14 +153,20 @@ class Camera:
         H, W = self.size
         lo, hi = _content_box(volume)
         target = (lo + hi) / 2.0 if self.target is None else np.asarray(self.target)
-        # the sphere about the target holding the content box, across the image's shorter side
-        corners = np.array(list(product(*zip(lo, hi))))
-        radius = float(np.max(np.linalg.norm(corners - target, axis=1)))
-        extent = self.extent or 2.0 * radius * W / min(H, W)
-        distance = self.distance or 2.0 * extent
+        corners = np.array(list(product(*zip(lo, hi)))) - target
+        slope = 2.0 * np.tan(np.radians(self.fov) / 2.0) / H  # perspective: square pixels, the centre on the axis
+        if self.fit == "box":  # the corners' farthest projections on the image edges (docs/coordinates.md §2)
+            across = np.abs(corners @ np.stack([u, v], axis=1)) / np.array([W, H])  # per corner, per image pixel
+            extent = 2.0 * W * float(across.max())
+            # perspective: corner c, at depth D - c.n from the eye, is in view while |c.u| / (D - c.n) <= slope W / 2
+            # and |c.v| / (D - c.n) <= slope H / 2; the least such D over the corners
+            distance = float(np.max(corners @ n + 2.0 * across.max(axis=1) / slope)) if self.perspective \
+                else 2.0 * extent
+        else:  # the sphere about the target holding the content box, across the image's shorter side
+            extent = self.extent or 2.0 * float(np.max(np.linalg.norm(corners, axis=1))) * W / min(H, W)
+            distance = self.distance or 2.0 * extent
         if not self.perspective:
             return View(n, u, v, target, (H, W), extent / W, False, target + distance * n, self.fov)
-        slope = 2.0 * np.tan(np.radians(self.fov) / 2.0) / H  # square pixels, the centre on the axis
         return View(n, u, v, target, (H, W), slope * distance, True, target + distance * n, self.fov,
                     (slope, slope), (0.0, 0.0))
 

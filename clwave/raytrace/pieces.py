@@ -31,6 +31,9 @@ from .lod import any_blocks
 #: (docs/raytracing.md §3)
 PIECE = 2
 
+#: the most cells whose floors are found at once (their Bernstein coefficients held as float64: j^3 each)
+CELLS = 8192
+
 #: the most mixed bricks whose pieces are counted at once (their cells held as bytes: up to 24^3 each at level 3)
 CHUNK = 512
 
@@ -53,26 +56,46 @@ def alpha_floors(coef, wavelet, parts: int = 1, where=None) -> np.ndarray:
     of the whole cell's (subdivision), so only a cell whose own floor is negative is cut, and only where ``where``
     (..., n, n, n) is set (elsewhere its parts get the cell's floor)."""
     j = wavelet.order
-    coef = np.asarray(coef, np.float64)
-    cells = np.lib.stride_tricks.sliding_window_view(coef, (j, j, j), axis=(-3, -2, -1))  # (..., n, n, n, j, j, j)
-    lead = cells.shape[:-3]
-    cells = cells.reshape(-1, j, j, j)
-
-    def floors(rows, m):  # per cell and part (m: per part, its matrix by window position), one axis at a time
-        x = np.einsum("nijk,rck->nrijc", rows, m)
-        x = np.einsum("nrijc,qbj->nqribc", x, m)
-        x = np.einsum("nqribc,pai->npqrabc", x, m)
-        return x.reshape(len(rows), len(m) ** 3, -1).min(axis=2)  # the least coefficient of each part
-
-    out = np.repeat(floors(cells, bernstein(j)[None, :, ::-1]), parts ** 3, axis=1)
+    boxes = np.asarray(coef, np.float64).reshape(-1, *np.shape(coef)[-3:])
+    per = max(1, CELLS // int(np.prod(np.subtract(boxes.shape[1:], j - 1))))  # boxes at once
+    out = np.concatenate([_box_floors(boxes[s:s + per], bernstein(j)[:, ::-1]) for s in range(0, len(boxes), per)])
+    lead = np.shape(coef)[:-3] + out.shape[1:]
+    out = np.repeat(out.reshape(-1, 1), parts ** 3, axis=1)
     if parts > 1:
         cut = np.stack([bernstein(j, q, parts)[:, ::-1] for q in range(parts)])
+        cells = np.lib.stride_tricks.sliding_window_view(boxes, (j, j, j), axis=(1, 2, 3))  # (boxes, n, n, n, j, j, j)
         dips = np.flatnonzero((out[:, 0] < 0) & (True if where is None else np.ravel(where)))
         for start in range(0, len(dips), 4096):
-            out[dips[start:start + 4096]] = floors(cells[dips[start:start + 4096]], cut)
+            at = np.unravel_index(dips[start:start + 4096], cells.shape[:4])
+            out[dips[start:start + 4096]] = _cell_floors(cells[at], cut)
     b = len(lead) - 3
     out = out.reshape(lead + (parts,) * 3).transpose(*range(b), b, b + 3, b + 1, b + 4, b + 2, b + 5)
     return out.reshape(lead[:b] + tuple(n * parts for n in lead[b:]))
+
+
+def _box_floors(boxes, m) -> np.ndarray:
+    """(boxes, n, n, n): per cell of each box (boxes, n + j - 1 per axis) the least Bernstein coefficient of its
+    polynomial (m: (j, j), row c coefficient c by window position).  One axis at a time, x, y then z, over the
+    box's windows along it: a window's sums are shared by the cells holding it, not redone per cell; each sum runs
+    over the window in order, the arithmetic of :func:`_cell_floors`."""
+    x = boxes[..., None]  # last axis: the coefficients so far, per axis done
+    for axis in (3, 2, 1):
+        n = x.shape[axis] - len(m) + 1
+        window = [x[(slice(None),) * axis + (slice(k, k + n),)][..., None] for k in range(len(m))]
+        acc = window[0] * m[:, 0]
+        for k in range(1, len(m)):
+            acc = acc + window[k] * m[:, k]
+        x = acc.reshape(*acc.shape[:-2], -1)
+    return x.min(axis=-1)
+
+
+def _cell_floors(cells, m) -> np.ndarray:
+    """(cells, p^3): per cell (cells, j, j, j) and part the least Bernstein coefficient (m: (p, j, j) per part its
+    matrix by window position), one axis at a time."""
+    x = np.einsum("nijk,rck->nrijc", cells, m)
+    x = np.einsum("nrijc,qbj->nqribc", x, m)
+    x = np.einsum("nqribc,pai->npqrabc", x, m)
+    return x.reshape(len(cells), len(m) ** 3, -1).min(axis=2)
 
 
 def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
