@@ -153,7 +153,8 @@ class XraySource(Source):
     every :data:`STILL_SECONDS` (docs/viewer.md §2).
 
     ``complete``: False while the model is a prefix of a ``.clw`` file whose rest is being read; then no frame is
-    final, and :meth:`swap` extends the renderer to the whole model (docs/viewer.md §2)."""
+    final, and :meth:`swap` extends the renderer to the whole model (docs/viewer.md §2); where the rest cannot be
+    read the server sets it, the prefix being the model served."""
 
     mode = "xray"
 

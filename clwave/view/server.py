@@ -231,8 +231,8 @@ class ViewServer:
                 f"internal error ({type(failure).__name__}); see the server's log"
             failure = f"making the whole model for the {'X-ray' if mode == 'xray' else mode} views failed " \
                       f"(they go on with what they have): {reason}"
-            if mode == "xray":
-                self.failure = reason
+            if mode == "xray":  # the prefix is the model served from now on: its still views end final
+                self.failure, self.sources["xray"].complete = reason, True
         if self.loop is not None:
             try:
                 self.loop.call_soon_threadsafe(
@@ -455,8 +455,8 @@ class Session:
             failures, self.failures = self.failures, {}
             if "xray" in news or "xray" in failures:  # the whole model is in, or will not be: the page's figures
                 await self.ws.send_json(dict(type="model", model=self.server.model()))
-            for failure in failures.values():  # on the page's status line, whatever view it shows
-                await self.ws.send_json(dict(type="error", seq=self.seq, message=failure))
+            for failure in failures.values():  # on the page's status line, whatever view it shows (no seq: a view
+                await self.ws.send_json(dict(type="error", message=failure))  # moved to meanwhile shows it too)
             state = self.state
             # a wake by news alone renders the view again where its mode has news and it has had no final frame
             if state is None or state is self.rendered and (self.final or state.mode not in news):

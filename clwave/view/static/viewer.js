@@ -57,7 +57,7 @@
     else if (msg.type === "model") { hello.model = msg.model; showModel(); }  // a file's whole model is in
     else if (msg.type === "histogram") { editor.histogram = msg; drawEditor(); }  // a scalar model's values
     else if (msg.type === "status" && msg.seq === sentSeq) status.textContent = msg.message;
-    else if (msg.type === "error" && msg.seq === sentSeq) {
+    else if (msg.type === "error" && (msg.seq === undefined || msg.seq === sentSeq)) {  // no seq: the server's, not a view's
       status.textContent = msg.message; status.classList.add("error");
       next(msg);
     }
