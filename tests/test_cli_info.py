@@ -9,6 +9,7 @@ import pytest
 
 import clwave
 from clwave.cli import main
+from test_hardening import crafted, setter
 
 
 def run(capsys, *argv):
@@ -123,12 +124,29 @@ def test_info_of_a_bad_file_is_one_line(tmp_path, capsys, model_file):
     for argv, needle in (([str(tmp_path / "v.raw")], "is a .raw file: it has no header"),
                          ([str(tmp_path / "none.clw")], "does not exist"),
                          ([str(tmp_path / "cut.clw")], "the file may be truncated or corrupt"),
-                         ([str(forged)], "transfer function or focus is not valid"),
+                         ([str(forged)], "its transfer function is not valid"),
                          ([str(model_file), "--check"], "--check and --device are about the OpenCL devices"),
                          (["--level", "1"], "give the FILE")):
         code, out, err = run(capsys, "info", *argv)
         assert code == 2 and out == "" and err.startswith("clwave: error:") and err.count("\n") == 1, err
         assert needle in err, err
+
+
+@pytest.mark.parametrize("key, value, needle", [
+    ("focus", [], "focus [] is not [[x, y, z], sigma]"), ("focus", [[1, 2, 3]], "focus [[1, 2, 3]] is not"),
+    ("focus", [[0, 0, 0], -1], "a sigma > 0"), ("content", [1], "content [1] is not two corners"),
+    ("transfer_function", [1, 2], "its transfer function is not valid"),
+    ("interpolate", "yes", "interpolate 'yes' is not true or false")])
+def test_a_forged_header_is_the_same_one_line_in_info_and_render(tmp_path, capsys, model_file, key, value, needle):
+    """A header value that a render would use is checked where info checks it (io/clw_header.py): each command
+    refuses the file in one line naming the value, exit 2."""
+    path = crafted(model_file, tmp_path, setter(key, value))
+    image = str(tmp_path / "r.png")
+    for argv in (["info", str(path)], ["render", str(path), "--size", "8", "-o", image],
+                 ["render", str(path), "--method", "raytrace", "--xray", "--size", "8", "-o", image]):
+        code, out, err = run(capsys, *argv)
+        assert code == 2 and err.startswith(f"clwave: error: cannot read {path}") and err.count("\n") == 1, err
+        assert needle in err and not (tmp_path / "r.png").exists(), err
 
 
 def test_the_commands_words(tmp_path, capsys):

@@ -57,6 +57,14 @@ def setter(key, value):
     (setter("levels", 9), "levels"),
     (setter("version", 99), "format version 99"),
     (lambda h: h["groups"][0].__setitem__("wavelet", 7), "wavelet order"),
+    (setter("focus", []), "focus [] is not"),
+    (setter("focus", [[1, 2, 3]]), "focus [[1, 2, 3]] is not"),
+    (setter("focus", [[float("nan"), 0, 0], 1]), "focus [[nan, 0, 0], 1] is not"),
+    (setter("focus", [[0, 0, 0], 0]), "sigma > 0"),
+    (setter("content", [1]), "content [1] is not"),
+    (setter("content", [[1, 0, 0], [0, 1, 1]]), "low then high"),
+    (setter("transfer_function", [1, 2]), "transfer function is not valid"),
+    (setter("interpolate", "yes"), "interpolate 'yes' is not true or false"),
 ])
 def test_crafted_clw_headers_are_refused_before_anything_is_allocated(model_file, tmp_path, edit, needle):
     path = crafted(model_file, tmp_path, edit)

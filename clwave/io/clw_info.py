@@ -7,10 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
 from ..model.bspline import WAVELET_ORDERS
-from ..model.transfer import TransferFunction
-from ..model.wavelet import check_thresholding
 from .clw import open_clw
 from .clw_header import check_dataset, checked_header, checked_values
 
@@ -35,14 +32,6 @@ def describe_clw(path) -> dict:
             step = checked_values(values, (kept, len(g["channels"])))
             described.append(dict(wavelet=_WAVELETS[g["wavelet"]], order=g["wavelet"], channels=g["channels"],
                                   kept=kept, share=kept / voxels, quantisation=step))
-        tf = header.get("transfer_function")
-        try:  # as a read would use them
-            if tf is not None:
-                TransferFunction.from_dict(tf)
-            if header.get("focus") is not None:
-                check_thresholding(None, None, (tuple(header["focus"][0]), header["focus"][1]))
-        except InputError as exc:
-            raise ValueError(f"its header's transfer function or focus is not valid: {exc}") from None
     facts = {name: header.get(name) for name in ("spacing", "origin", "interpolate", "focus", "content",
                                                  "transfer_function")}
     return dict(file=str(path), bytes=path.stat().st_size, shape=list(shape), levels=levels, channels=channels,
