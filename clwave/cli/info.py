@@ -86,12 +86,15 @@ def _clw_lines(f) -> list:
     tf = f["transfer_function"]
     if tf is not None:
         window = tf.get("window")
-        window = " .. ".join(f"{v:g}" for v in window) if isinstance(window, list) else window or "auto"
+        values = [row[0] for row in tf["points"]]
+        window = (" .. ".join(f"{v:g}" for v in window) if isinstance(window, list) else window
+                  or f"none (points are values, {min(values):g} .. {max(values):g})")
         when = "while rendering" if f["channels"] == 1 else "before the transform"
         lines.append(("transfer", f"{tf.get('name') or 'unnamed'}, window {window}, {len(tf['points'])} points "
                                   f"(classified {when})"))
-    if f.get("offset") is not None:  # recorded since the fifteenth session (--subtract)
-        lines.append(("offset", f"{f['offset']}"))
+    if f["offset"]:
+        lines.append(("offset", f"{f['offset']:g} subtracted from the input's values (--subtract; transfer functions "
+                                f"in the input's units)"))
     return lines
 
 

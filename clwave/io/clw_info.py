@@ -16,10 +16,11 @@ _WAVELETS = {order: name for name, order in WAVELET_ORDERS.items()}
 
 def describe_clw(path) -> dict:
     """The header of the ``.clw`` file ``path`` (shape, spacing, origin, levels, channels, interpolation, focus,
-    content box, transfer function, an ``offset`` where the file records one) with, per channel group, its wavelet,
-    channels, the coefficients it keeps and their share of the voxels, and its quantisation step (None: float32
-    values); and the file's size.  The header is checked as a read checks it; a member that does not match it is
-    refused (:class:`~clwave.errors.FileFormatError`, from :func:`~clwave.io.clw.open_clw`)."""
+    content box, transfer function, the ``offset`` subtracted from the input's values: 0 where the file records none)
+    with, per channel group, its wavelet, channels, the coefficients it keeps and their share of the voxels, and its
+    quantisation step (None: float32 values); and the file's size.  The header is checked as a read checks it
+    (:func:`~clwave.io.clw_header.checked_header`); a member that does not match it is refused
+    (:class:`~clwave.errors.FileFormatError`, from :func:`~clwave.io.clw.open_clw`)."""
     path = Path(path)
     with open_clw(path) as (h5, header):
         shape, levels, channels, groups = checked_header(header)
@@ -35,5 +36,4 @@ def describe_clw(path) -> dict:
     facts = {name: header.get(name) for name in ("spacing", "origin", "interpolate", "focus", "content",
                                                  "transfer_function")}
     return dict(file=str(path), bytes=path.stat().st_size, shape=list(shape), levels=levels, channels=channels,
-                **facts, groups=described, **({"offset": header["offset"]} if "offset" in header else {}))
-
+                **facts, offset=header.get("offset", 0.0), groups=described)
