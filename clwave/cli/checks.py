@@ -50,7 +50,7 @@ def check_options(args):
         window = None if args.tf_window in (None, "auto") else _preset_window(args.tf_window)
         if window is not None and not (np.all(np.isfinite(window)) and window[0] < window[1]):
             raise InputError(f"--tf-window {args.tf_window} must be two finite numbers LO,HI with LO < HI, in the "
-                             f"volume's units")
+                             f"input's units")
         if args.tf or not is_clw(args):  # a .clw's own transfer function takes --tf-window alone
             _preset(args)
         if args.classify == "post" and not args.tf and not is_clw(args):

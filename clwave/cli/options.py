@@ -50,7 +50,7 @@ def add_input_options(p):
     g.add_argument("--spacing", help="voxel spacing DZ,DY,DX (or one number); overrides the file")
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
     g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water; CT in HU: -1000); "
-                   "recorded, so --tf and --tf-window stay in the file's units")
+                   "recorded, so --tf and --tf-window stay in the input's units")
     g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
     g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
     g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
@@ -79,7 +79,7 @@ def add_model_options(p):
     g.add_argument("--tf", help="classify with a transfer-function preset first: "
                                 + ", ".join(TransferFunction.PRESETS))
     g.add_argument("--tf-window", help="transfer-function window: auto (percentiles of the values) or LO,HI in "
-                   "the file's units (HU for CT, with or without --subtract)")
+                   "the input's units (HU for CT, attenuation per mm with --hu-to-mu; with or without --subtract)")
     g.add_argument("--classify", choices=("pre", "post"), default="pre",
                    help="with --tf: pre (default) classifies the volume before the transform; post keeps the "
                         "scalar and the transfer function for ray tracing to classify while rendering (a .clw "
@@ -270,7 +270,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     if tf is not None and not post and vol.chunked and wv.content is None:  # classified as read: its content pass
         from ..errors import NothingVisibleError                            # found no voxel with any opacity
         why = (f"the transfer function{f' {tf.name}' if tf.name else ''} gives no voxel of this volume (read chunk by "
-               f"chunk) any opacity; give a window in the volume's units (--tf-window LO,HI) or another preset")
+               f"chunk) any opacity; give a window in the input's units (--tf-window LO,HI) or another preset")
         raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
     default = args.keep is None and args.threshold is None
     with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it

@@ -240,7 +240,7 @@ class TransferFunction:
         name = f" {self.name}" if self.name else ""
         line = (f"the transfer function{name} gives no voxel of this volume any opacity: its points span "
                 f"{lo:.4g} .. {hi:.4g} and the volume's {what} lie within {np.nanmin(values):.4g} .. "
-                f"{np.nanmax(values):.4g}; give a window in the volume's units")
+                f"{np.nanmax(values):.4g}; give a window in the input's units")
         return NothingVisibleError(f"{line} (window=(lo, hi)) or another function",
                                    cli=f"{line} (--tf-window LO,HI) or another preset")
 

@@ -73,7 +73,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     background : float
         Subtracted from every voxel (after ``hu_to_mu``), so that the data is ~0
         outside the object; kept as the volume's ``offset``, so transfer functions
-        stay in the file's units (e.g. HU).
+        stay in the input's units (HU for CT, attenuation with ``hu_to_mu``).
     hu_to_mu : bool
         Convert CT Hounsfield units to linear attenuation
         ``mu = mu_water * (1 + HU / 1000)``, clipped at 0 (air -> 0).
