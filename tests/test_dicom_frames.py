@@ -26,10 +26,10 @@ def test_an_rt_dose_file_is_its_frames_placed_by_their_offsets():
     np.testing.assert_allclose(vol.origin, (-x - 45.0, -y - 45.0, z + 35.0))
 
 
-def enhanced_ct(path, order, rescale=True):
-    """An Enhanced CT file of 4 frames of 6 x 5 (rows x columns), axial, 2 mm apart, written in ``order`` of their
-    positions (frame k holds the value 100 k + pixel index); per-frame rescale slope k + 1 and intercept -1024, the
-    orientation and the pixel spacing (0.5, 0.75) in the shared groups."""
+def enhanced_ct(path, order, rescale=True, size=(6, 5)):
+    """An Enhanced CT file of 4 frames of 6 x 5 (rows x columns; ``size``), axial, 2 mm apart, written in ``order`` of
+    their positions (frame k holds the value 100 k + pixel index); per-frame rescale slope k + 1 and intercept -1024,
+    the orientation and the pixel spacing (0.5, 0.75) in the shared groups."""
     from pydicom.dataset import Dataset, FileMetaDataset
     from pydicom.sequence import Sequence
     from pydicom.uid import EnhancedCTImageStorage, ExplicitVRLittleEndian, generate_uid
@@ -46,7 +46,7 @@ def enhanced_ct(path, order, rescale=True):
         EnhancedCTImageStorage
     ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID = generate_uid()
     ds.SOPClassUID, ds.SeriesInstanceUID, ds.Modality = EnhancedCTImageStorage, generate_uid(), "CT"
-    ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel = 6, 5, 4, 1
+    ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel = *size, len(order), 1
     ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 1
     ds.PhotometricInterpretation = "MONOCHROME2"
     ds.SharedFunctionalGroupsSequence = Sequence([item(
@@ -60,7 +60,7 @@ def enhanced_ct(path, order, rescale=True):
                                                                      RescaleType="HU")])
         frames.append(groups)
     ds.PerFrameFunctionalGroupsSequence = Sequence(frames)
-    pixels = np.stack([100 * k + np.arange(30).reshape(6, 5) for k in order]).astype(np.int16)
+    pixels = np.stack([100 * k + np.arange(size[0] * size[1]).reshape(size) for k in order]).astype(np.int16)
     ds.PixelData = pixels.tobytes()
     ds.save_as(path, enforce_file_format=True)
     return pixels
@@ -81,6 +81,31 @@ def test_an_enhanced_ct_file_is_its_frames_sorted_rescaled_and_placed(tmp_path, 
     capsys.readouterr()
     assert main(["info", str(path)]) == 0
     assert "4 x 6 x 5 samples of int16 as read" in capsys.readouterr().out
+
+
+def test_the_frames_are_read_into_one_float32_volume_as_weighed(tmp_path, monkeypatch):
+    """32 frames of 128 x 128 int16 (1 MiB stored, 4 MiB as float32), out of order: read a frame at a time into the
+    float32 volume, what reading holds at its peak (traced) is what it weighs first (check_whole), to a frame and
+    pydicom's buffers; not the pixels as stored, a sorted copy and the float32 temporaries besides."""
+    import tracemalloc
+
+    from clwave.io.loaders import shared
+    from clwave.io.loaders.dicom_frames import read_dicom_frames
+
+    path, order = tmp_path / "ct.dcm", np.random.default_rng(3).permutation(32)
+    enhanced_ct(path, order, size=(128, 128))
+    read_dicom_frames(path)  # the imports it makes, once
+    weighed, check_fits = [], shared.check_fits
+    monkeypatch.setattr(shared, "check_fits", lambda nbytes, *a: (weighed.append(nbytes), check_fits(nbytes, *a)))
+    tracemalloc.start()
+    try:
+        data = read_dicom_frames(path)[0]
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert weighed == [32 * 128 * 128 * 4] and data.dtype == np.float32 and data.nbytes == weighed[0]
+    assert weighed[0] <= peak <= weighed[0] + (1 << 20), (peak, weighed)
+    assert data[5, 0, 0] == (5 + 1) * (100 * 5 + 128 * 128 - 1) - 1024.0  # frame 5 by its slope, axes reversed
 
 
 def test_multi_frame_files_without_positions_are_refused_naming_dcm2niix(tmp_path, capsys):

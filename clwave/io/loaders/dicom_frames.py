@@ -25,9 +25,10 @@ def read_dicom_frames(path, fits=None):
     """A multi-frame DICOM file's frames as slices, rescaled, in RAS (``(data, spacing, origin)``); refused (naming
     dcm2niix) where its frames carry no positions, or several orientations."""
     import pydicom
+    from pydicom.pixels import iter_pixels
     from pydicom.pixels.utils import pixel_dtype
 
-    ds = pydicom.dcmread(path, defer_size=1024)
+    ds = pydicom.dcmread(path, defer_size=1024)  # the pixels stay in the file: read by iter_pixels
     frames, kind = int(ds.NumberOfFrames), getattr(ds.get("SOPClassUID"), "name", "DICOM")
     if "PerFrameFunctionalGroupsSequence" in ds:
         geometry = _enhanced(ds, frames)
@@ -54,9 +55,13 @@ def read_dicom_frames(path, fits=None):
     size = (int(ds.Rows), int(ds.Columns))
 
     def read(order):
-        check_whole(path, (frames, *size), pixel_dtype(ds), fits)
-        pixels = ds.pixel_array.reshape(frames, *size)
-        return pixels[order].astype(np.float32) * slopes[order, None, None] + intercepts[order, None, None]
+        check_whole(path, (frames, *size), pixel_dtype(ds), fits, streamed=True)
+        data, rank = np.empty((frames, *size), np.float32), np.argsort(order)
+        for k, frame in enumerate(iter_pixels(path)):  # from the file a frame at a time: one float32 copy is held
+            data[rank[k]] = frame.reshape(size)
+            data[rank[k]] *= slopes[k]
+            data[rank[k]] += intercepts[k]
+        return data
 
     return place_slices(f"multi-frame DICOM file {path}", path, positions, cosines[0], tuple(pixel), size,
                         [f"frame {k + 1}" for k in range(frames)], read, fits)
