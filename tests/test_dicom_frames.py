@@ -121,3 +121,46 @@ def test_multi_frame_files_without_positions_are_refused_naming_dcm2niix(tmp_pat
     single = get_testdata_file("CT_small.dcm")
     with pytest.raises(FileFormatError, match="is one DICOM slice; pass the folder"):
         clwave.load(single)
+
+
+def _groups_short(ds):
+    del ds.PerFrameFunctionalGroupsSequence[-1]
+
+
+def _spacings_differ(ds):
+    from pydicom.dataset import Dataset
+    from pydicom.sequence import Sequence
+
+    measures = Dataset()
+    measures.PixelSpacing = [0.6, 0.75]
+    ds.PerFrameFunctionalGroupsSequence[1].PixelMeasuresSequence = Sequence([measures])
+
+
+def _offsets_short(ds):
+    ds.GridFrameOffsetVector = list(ds.GridFrameOffsetVector)[:-2]
+
+
+@pytest.mark.parametrize("source, change, needle", [
+    ("enhanced", _groups_short, "is a multi-frame DICOM file of 4 frames with 3 per-frame functional groups; the file "
+                                "is corrupt"),
+    ("enhanced", _spacings_differ, "is a multi-frame DICOM file whose frames have several pixel spacings; convert it "
+                                   "with dcm2niix"),
+    ("rtdose.dcm", _offsets_short, "is an RT Dose file of 15 frames with 13 grid frame offsets; the file is corrupt")])
+def test_frames_at_odds_with_their_geometry_are_named_with_the_file(tmp_path, capsys, source, change, needle):
+    """Functional groups or grid offsets that do not match the frames: one line naming the file, not the ValueError
+    of a reader's internals."""
+    import pydicom
+
+    path = tmp_path / "f.dcm"
+    if source == "enhanced":
+        enhanced_ct(path, [0, 1, 2, 3])
+    else:
+        pydicom.dcmread(get_testdata_file(source)).save_as(path)
+    ds = pydicom.dcmread(path)
+    change(ds)
+    ds.save_as(path)
+    with pytest.raises(FileFormatError) as err:
+        clwave.load(path)
+    assert str(err.value).startswith(f"{path} {needle}"), str(err.value)
+    assert main(["compress", str(path), "-o", str(tmp_path / "o.clw")]) == 2
+    assert capsys.readouterr().err == f"clwave: error: {err.value}\n"

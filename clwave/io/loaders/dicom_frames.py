@@ -31,10 +31,10 @@ def read_dicom_frames(path, fits=None):
     ds = pydicom.dcmread(path, defer_size=1024)  # the pixels stay in the file: read by iter_pixels
     frames, kind = int(ds.NumberOfFrames), getattr(ds.get("SOPClassUID"), "name", "DICOM")
     if "PerFrameFunctionalGroupsSequence" in ds:
-        geometry = _enhanced(ds, frames)
+        geometry = _enhanced(path, ds, frames)
     elif "GridFrameOffsetVector" in ds and all(t in ds for t in ("ImagePositionPatient", "ImageOrientationPatient",
                                                                  "PixelSpacing")):
-        geometry = _rt_dose(ds, frames)
+        geometry = _rt_dose(path, ds, frames)
     else:
         geometry = None
     if geometry is None or int(ds.get("SamplesPerPixel") or 1) != 1:
@@ -67,7 +67,7 @@ def read_dicom_frames(path, fits=None):
                         [f"frame {k + 1}" for k in range(frames)], read, fits)
 
 
-def _enhanced(ds, frames):
+def _enhanced(path, ds, frames):
     """``(positions, cosines, pixel spacing, slopes, intercepts)`` per frame from the functional groups (a frame's
     own, else the shared ones), float32 rescale; None where a frame has no position, orientation or spacing."""
     shared = ds.get("SharedFunctionalGroupsSequence") or [None]
@@ -80,8 +80,9 @@ def _enhanced(ds, frames):
         return ds.get(tag, default)
 
     if len(ds.PerFrameFunctionalGroupsSequence) != frames:
-        raise ValueError(f"its per-frame functional groups number {len(ds.PerFrameFunctionalGroupsSequence)}, "
-                              f"not its {frames} frames")
+        raise FileFormatError(f"{path} is a multi-frame DICOM file of {frames} frames with "
+                              f"{len(ds.PerFrameFunctionalGroupsSequence)} per-frame functional groups; the file is "
+                              f"corrupt")
     rows = [(value(k, "PlanePositionSequence", "ImagePositionPatient"),
              value(k, "PlaneOrientationSequence", "ImageOrientationPatient"),
              value(k, "PixelMeasuresSequence", "PixelSpacing")) for k in range(frames)]
@@ -92,17 +93,19 @@ def _enhanced(ds, frames):
                      float).astype(np.float32)
     positions, cosines, pixel = (np.array([row[i] for row in rows], float) for i in range(3))
     if not np.allclose(pixel, pixel[0]):
-        raise ValueError("its frames have several pixel spacings")
+        raise FileFormatError(f"{path} is a multi-frame DICOM file whose frames have several pixel spacings; "
+                              f"{CONVERTER.replace('FILE', str(path))}")
     return positions, cosines, pixel[0], scale[:, 0], scale[:, 1]
 
 
-def _rt_dose(ds, frames):
+def _rt_dose(path, ds, frames):
     """The same of an RT Dose grid: the first frame at ImagePositionPatient, the others along the normal by their
     GridFrameOffsetVector (relative to the first, which its first offset is), scaled by DoseGridScaling."""
     cosines = np.array(ds.ImageOrientationPatient, float)
     offsets = np.array(ds.GridFrameOffsetVector, float)
     if offsets.shape != (frames,):
-        raise ValueError(f"its GridFrameOffsetVector has {offsets.size} offsets, not its {frames} frames")
+        raise FileFormatError(f"{path} is an RT Dose file of {frames} frames with {offsets.size} grid frame offsets; "
+                              f"the file is corrupt")
     normal = np.cross(cosines[:3], cosines[3:])
     positions = np.array(ds.ImagePositionPatient, float) + (offsets - offsets[0])[:, None] * normal
     slopes = np.full(frames, float(ds.get("DoseGridScaling") or 1.0), np.float32)
