@@ -164,3 +164,15 @@ def test_frames_at_odds_with_their_geometry_are_named_with_the_file(tmp_path, ca
     assert str(err.value).startswith(f"{path} {needle}"), str(err.value)
     assert main(["compress", str(path), "-o", str(tmp_path / "o.clw")]) == 2
     assert capsys.readouterr().err == f"clwave: error: {err.value}\n"
+
+
+def test_frames_sharing_a_position_name_the_converter_not_folders(tmp_path):
+    """Two frames of one file at one position (a multi-phase or multi-echo enhanced image): the fix is dcm2niix, which
+    separates the acquisitions; a file cannot be split into folders."""
+    path = tmp_path / "phases.dcm"
+    enhanced_ct(path, [0, 1, 1, 2])
+    with pytest.raises(FileFormatError) as err:
+        clwave.load(path)
+    assert str(err.value) == (f"frame 2 and frame 3 of multi-frame DICOM file {path} share one position; the file "
+                              f"may hold several acquisitions (echoes, phases, times), which dcm2niix separates: "
+                              f"convert it with dcm2niix (dcm2niix -o OUT_FOLDER {path}) and read the .nii")

@@ -464,7 +464,9 @@ def test_dicom_duplicate_positions_refused(tmp_path, rng):
     with pytest.raises(FileFormatError) as excinfo:
         load(tmp_path)
     assert_one_line_error(excinfo)
-    assert "position" in str(excinfo.value)
+    assert "slice s2 and slice s3 of DICOM series" in str(excinfo.value)
+    assert str(excinfo.value).endswith("share one position; the series may hold several acquisitions (echoes, phases, "
+                                       "times): split them into separate folders")
 
 
 def test_dicom_multi_frame_file_named_as_such(tmp_path, rng):

@@ -47,16 +47,19 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
                         tuple(float(s) for s in first.PixelSpacing), (int(first.Rows), int(first.Columns)),
                         [f"slice {path.name}" for path, _ in headers],
                         lambda order: read_slices([headers[i][0] for i in order], _dicom_pixels,
-                                                  "reading DICOM slices", progress_bar, fits), fits)
+                                                  "reading DICOM slices", progress_bar, fits), fits,
+                        "the series may hold several acquisitions (echoes, phases, times): split them into separate "
+                        "folders")
 
 
-def place_slices(where, path, positions, cosines, pixel, size, names, read, fits):
+def place_slices(where, path, positions, cosines, pixel, size, names, read, fits, shared):
     """The volume of slices at ``positions`` (n x 3, LPS mm; ``names[i]`` names slice i in messages) with the
     orientation ``cosines`` (a row's direction, then a column's), ``pixel`` spacing (between rows, between columns)
     and ``size`` (rows, columns): sorted along their normal, refused unless evenly spaced along it
     (:func:`_even_spacing`) and on a line (:func:`_drift`), a gantry tilt resampled onto a straight stack
     (:func:`_untilt`); ``read(order)`` gives their pixels (n, rows, columns) in that order, once weighed
-    (``fits``, by ``path``).  In RAS+, with spacing and origin."""
+    (``fits``, by ``path``); ``shared``: why two slices may share a position, and the fix, for the caller's kind of
+    input.  In RAS+, with spacing and origin."""
     # direction along a row (column index grows), along a column (row index grows)
     row_dir, col_dir = cosines[:3], cosines[3:]
     normal = np.cross(row_dir, col_dir)
@@ -65,9 +68,7 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     gaps = np.diff(distance[order])
     if np.any(gaps < 1e-4):
         first, second = (names[order[i]] for i in (np.argmin(gaps), np.argmin(gaps) + 1))
-        raise FileFormatError(
-            f"{first} and {second} of {where} share one position; the series may "
-            "hold several acquisitions (echoes, phases, times): split them into separate folders")
+        raise FileFormatError(f"{first} and {second} of {where} share one position; {shared}")
     dy, dx = pixel  # row spacing, column spacing
     drift = _drift(where, positions[order], distance[order], normal, min(dx, dy))
     dz = _even_spacing(where, distance[order])

@@ -64,7 +64,9 @@ def read_dicom_frames(path, fits=None):
         return data
 
     return place_slices(f"multi-frame DICOM file {path}", path, positions, cosines[0], tuple(pixel), size,
-                        [f"frame {k + 1}" for k in range(frames)], read, fits)
+                        [f"frame {k + 1}" for k in range(frames)], read, fits,
+                        f"the file may hold several acquisitions (echoes, phases, times), which dcm2niix separates: "
+                        f"{CONVERTER.replace('FILE', str(path))}")
 
 
 def _enhanced(path, ds, frames):
