@@ -502,6 +502,7 @@ EARLY_MISTAKES = [
     (["drr", "--dsd", "0"], "--dsd 0: the detector is behind the source"),
     (["drr", "--pixel", "1,0"], "--pixel 1,0 must be a positive detector spacing"),
     (["drr", "--offset", "nan,0"], "--offset nan,0 must be two finite numbers A,B"),
+    (["drr", "--isocentre", "nan,0,0"], "error: --isocentre nan,0,0 must be three finite numbers X,Y,Z\n"),
 ]
 #: options a .clw input refuses anyway (a model already)
 VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")
