@@ -176,3 +176,23 @@ def test_frames_sharing_a_position_name_the_converter_not_folders(tmp_path):
     assert str(err.value) == (f"frame 2 and frame 3 of multi-frame DICOM file {path} share one position; the file "
                               f"may hold several acquisitions (echoes, phases, times), which dcm2niix separates: "
                               f"convert it with dcm2niix (dcm2niix -o OUT_FOLDER {path}) and read the .nii")
+
+
+def test_dicom_files_without_an_extension_are_known_by_their_preamble(tmp_path, capsys):
+    """IM0001 (no extension) and a UID-like name (an extension of digits): the multi-frame file is read as its .dcm
+    twin is, a single-frame one points to its folder, and a file of another kind without an extension is still an
+    unknown file type."""
+    import shutil
+
+    for name in ("IM0001", "1.2.840.10008.99"):
+        shutil.copy(get_testdata_file("rtdose.dcm"), tmp_path / name)
+        np.testing.assert_array_equal(clwave.load(tmp_path / name).data, clwave.load(get_testdata_file("rtdose.dcm"))
+                                      .data)
+    shutil.copy(get_testdata_file("CT_small.dcm"), tmp_path / "IM0002")
+    with pytest.raises(FileFormatError, match="IM0002 is one DICOM slice; pass the folder"):
+        clwave.load(tmp_path / "IM0002")
+    (tmp_path / "notes").write_bytes(bytes(300))
+    with pytest.raises(FileFormatError, match=r"unknown file type '\(no extension\)'"):
+        clwave.load(tmp_path / "notes")
+    assert main(["info", str(tmp_path / "IM0001")]) == 0
+    assert "samples of uint32 as read" in capsys.readouterr().out

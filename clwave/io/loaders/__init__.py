@@ -231,7 +231,7 @@ def _kind(path: Path) -> str:
     if zarr_named:
         raise FileFormatError(f"{path} is a file, not a Zarr store; clwave reads Zarr stores that are folders "
                               "(unzip a zipped store first)")
-    if suffix in (".dcm", ".ima"):
+    if suffix in (".dcm", ".ima") or suffix not in _FILE_KINDS and _is_dicom(path):  # IM0001, 1.2.840....
         with reading(path):
             if dicom_frames.frame_count(path) > 1:
                 return "dicom-frames"
@@ -241,6 +241,14 @@ def _kind(path: Path) -> str:
         raise FileFormatError(f"unknown file type {suffix or '(no extension)'!r} of {path}; "
                               f"supported inputs: {SUPPORTED}")
     return _FILE_KINDS[suffix]
+
+
+def _is_dicom(path) -> bool:
+    """Whether ``path`` begins as a DICOM file does (a preamble, then "DICM"): DICOM files often have no extension."""
+    from pydicom.misc import is_dicom
+
+    with reading(path):
+        return is_dicom(path)
 
 
 def _reject_unused(kind, **options):
