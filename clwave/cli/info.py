@@ -101,8 +101,10 @@ def _clw_lines(f) -> list:
 def _volume_lines(f) -> list:
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
     if "stored_shape" in f:  # read whole: its axes and spacing come with its voxels
-        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read, "
-                                f"before the loader orders them (its axes and spacing come with the voxels)"))
+        resampled = ", a gantry tilt resampled onto a straight stack wider by its shifts" if f["resampled"] else ""
+        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read"
+                                f"{resampled}, before the loader orders them (its axes and spacing come with the "
+                                f"voxels)"))
         return lines
     z, y, x = f["shape"][:3]
     spacing = "" if f["spacing_in_file"] else " (none in the file)"

@@ -174,7 +174,8 @@ def describe(path, *, series=None, level=None) -> dict:
     the stored ``dtype``, ``bytes`` on disk, and ``shape`` (z, y, x[, c]), ``spacing`` (dz, dy, dx) and ``origin``
     (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the
     ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
-    rescaled to float32) and no spacing or origin: its loader finds those with the voxels.  A
+    rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's straight
+    stack, wider by its shifts), and no spacing or origin: its loader finds those with the voxels.  A
     ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
@@ -194,7 +195,8 @@ def describe(path, *, series=None, level=None) -> dict:
             data, spacing, origin = _read(kind, path, inner, None, None, None, series, level,
                                           "auto" if lazy else False, False, None if lazy else _declared, False)
         except Declared as declared:
-            return dict(facts, stored_shape=list(declared.shape), dtype=str(declared.dtype))
+            return dict(facts, stored_shape=list(declared.shape), dtype=str(declared.dtype),
+                        resampled=declared.resampled)
     volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))
     return dict(facts, shape=list(data.shape), dtype=str(data.dtype), channels=volume.channels,
                 spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None)

@@ -43,11 +43,15 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
                               "(e.g. a localizer); move the odd slices out of the folder")
     positions = np.array([h.ImagePositionPatient for _, h in headers], float)
     first = headers[0][1]
+    size = (int(first.Rows), int(first.Columns))
+
+    def read(order):  # weighed from the headers, before a pixel is read (the slices rescaled to float32)
+        check_whole(folder, (len(order), *size), np.float32, fits)
+        return read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
+
     return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
-                        tuple(float(s) for s in first.PixelSpacing), (int(first.Rows), int(first.Columns)),
-                        [f"slice {path.name}" for path, _ in headers],
-                        lambda order: read_slices([headers[i][0] for i in order], _dicom_pixels,
-                                                  "reading DICOM slices", progress_bar, fits), fits,
+                        tuple(float(s) for s in first.PixelSpacing), size,
+                        [f"slice {path.name}" for path, _ in headers], read, fits,
                         "the series may hold several acquisitions (echoes, phases, times): split them into separate "
                         "folders")
 
@@ -79,7 +83,8 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     tilted = bool(np.any(step))
     if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
         rows, columns = size
-        check_whole(path, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits)
+        check_whole(path, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits,
+                    resampled=True)
 
     data_zyx = read(order)
     if tilted:

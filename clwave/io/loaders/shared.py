@@ -134,9 +134,10 @@ def check_chunks(chunks, kind, path):
 
 class Declared(Exception):
     """Raised by a ``fits`` given to a loader to stop before any voxel is read; :func:`check_whole` gives it the
-    ``shape`` and ``dtype`` the header declares (``loaders.describe``)."""
+    ``shape`` and ``dtype`` the header declares, and whether they are a resampling of what is stored
+    (``loaders.describe``)."""
 
-    shape, dtype = None, None
+    shape, dtype, resampled = None, None, False
 
 
 class OnDemand:
@@ -151,12 +152,13 @@ class OnDemand:
         return self.read(index)
 
 
-def check_whole(path, shape, dtype, fits=None, streamed=False):
+def check_whole(path, shape, dtype, fits=None, streamed=False, resampled=False):
     """Refuse, before a voxel is read, a volume read whole whose declared ``shape`` (3 spatial axes, then any
     channel axes) of ``dtype`` samples (a structured one: a channel a field) would not fit in memory: by the
     caller's rule ``fits(voxels, channels)`` first (the command line weighs the model it makes of it), then by what
     reading it takes (the samples as stored, and a float32 copy of other types; ``streamed``, the samples converted
-    into a float32 volume a slice at a time as they are read: that volume alone)."""
+    into a float32 volume a slice at a time as they are read: that volume alone).  ``resampled``: the volume is not
+    the samples as stored but their resampling (a gantry tilt's straight stack), as :class:`Declared` says."""
     dtype = np.dtype(dtype)
     voxels, samples = math.prod(shape[:3]), math.prod(shape[3:])
     channels = samples * (len(dtype.names) if dtype.names else 1)
@@ -164,7 +166,7 @@ def check_whole(path, shape, dtype, fits=None, streamed=False):
         try:
             fits(voxels, channels)
         except Declared as declared:  # describe(): what the header declares, and no voxel read
-            declared.shape, declared.dtype = tuple(shape), dtype
+            declared.shape, declared.dtype, declared.resampled = tuple(shape), dtype, resampled
             raise
     stored = 0 if streamed else samples * dtype.itemsize
     converted = 0 if dtype == np.float32 and not streamed else 4 * channels  # float32 samples used as they are read
