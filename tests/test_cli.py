@@ -496,8 +496,10 @@ EARLY_MISTAKES = [
     (["compress", "--keep", "nan"], "--keep nan must be a finite number"),
     (["compress", "--subtract", "nan"], "--subtract nan must be a finite number"),
     (["progressive", "--error", "nan"], "--error nan must be a finite number"),
-    (["compress", "--tf", "grey", "--tf-window", "5,1"], "--tf-window 5,1 must be two finite numbers LO,HI with "
-                                                       "LO < HI, in the input's units"),
+    (["compress", "--tf", "grey", "--tf-window", "5,1"], "error: --tf-window 5,1 must be two finite numbers LO,HI "
+                                                       "with LO < HI\n"),
+    (["compress", "--tf", "grey", "--tf-window", "nan,1"], "error: --tf-window nan,1 must be two finite numbers"),
+    (["render", "--window", "0,inf"], "error: --window 0,inf must be two finite numbers LO,HI with LO < HI\n"),
     (["drr", "--dso", "-1"], "--dso -1 must be a positive source-to-isocentre distance"),
     (["drr", "--dsd", "0"], "--dsd 0: the detector is behind the source"),
     (["drr", "--pixel", "1,0"], "--pixel 1,0 must be a positive detector spacing"),

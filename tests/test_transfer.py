@@ -269,6 +269,9 @@ def test_bad_preset_window_and_volume_errors():
     tf = TransferFunction(THREE)
     with pytest.raises(InputError, match="lo < hi"):
         tf.classify(Volume(np.zeros((2, 2, 2))), window=(3, -3))
+    with pytest.raises(InputError) as err:  # not finite: the same words
+        TransferFunction(THREE, window=(0, float("inf")))
+    assert str(err.value) == "window (0, inf) must be two finite numbers (lo, hi) with lo < hi"
     with pytest.raises(InputError, match="Volume"):
         tf.classify(np.zeros((2, 2, 2)))
     with pytest.raises(InputError, match="2-channel"):

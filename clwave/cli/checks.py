@@ -7,6 +7,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.result import check_background
+from ..model.transfer import check_window
 from .options import (GIF_FRAME_SECONDS, _chunks, _flag, _preset, _preset_window, _thresholding, is_clw, numbers,
                       parse_device_memory, parse_scheduler)
 
@@ -47,10 +48,8 @@ def check_options(args):
     if hasattr(args, "keep"):
         _thresholding(args)
     if hasattr(args, "tf"):
-        window = None if args.tf_window in (None, "auto") else _preset_window(args.tf_window)
-        if window is not None and not (np.all(np.isfinite(window)) and window[0] < window[1]):
-            raise InputError(f"--tf-window {args.tf_window} must be two finite numbers LO,HI with LO < HI, in the "
-                             f"input's units")
+        if args.tf_window is not None:
+            check_window(_preset_window(args.tf_window), "--tf-window")
         if args.tf or not is_clw(args):  # a .clw's own transfer function takes --tf-window alone
             _preset(args)
         if args.classify == "post" and not args.tf and not is_clw(args):
@@ -152,12 +151,8 @@ def parse_background(args):
 
 def parse_window(args):
     """``--window auto|LO,HI``: "auto", or two finite numbers LO < HI (checked before any work)."""
-    if args.display_window == "auto":
-        return "auto"
-    lo, hi = numbers(args.display_window, "--window", (2,))
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise InputError(f"--window {args.display_window} must be two finite numbers LO,HI with LO < HI, e.g. 0,1")
-    return lo, hi
+    return check_window(args.display_window if args.display_window == "auto" else
+                        numbers(args.display_window, "--window", (2,)), "--window")
 
 
 def parse_size(args) -> tuple:

@@ -451,8 +451,10 @@ def _check_points(points) -> np.ndarray:
     return p
 
 
-def check_window(window):
-    """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError."""
+def check_window(window, option=None):
+    """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError, in the words of the
+    command line's ``option`` too (e.g. "--tf-window", whose text gave the window): the one home of the check of
+    every window, transfer functions' and displays'."""
     if window is None:
         return None
     if isinstance(window, str):
@@ -463,8 +465,7 @@ def check_window(window):
         lo, hi = (float(w) for w in window)
     except (TypeError, ValueError):
         raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise InputError(f"window ({lo:g}, {hi:g}) must be finite")
-    if not lo < hi:
-        raise InputError(f"window (lo, hi) needs lo < hi, got ({lo:g}, {hi:g})")
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise InputError(f"window ({lo:g}, {hi:g}) must be two finite numbers (lo, hi) with lo < hi",
+                         cli=option and f"{option} {lo:g},{hi:g} must be two finite numbers LO,HI with LO < HI")
     return (lo, hi)
