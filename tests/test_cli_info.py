@@ -130,6 +130,19 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
         assert code == 0 and json.loads(out)["stored_shape"] == [4, 5, 6] and json.loads(out)["dtype"] == "int16"
 
 
+def test_a_header_declared_passes_every_handler_of_read_errors(tmp_path):
+    """describe's stop before the voxels (shared.Declared) is no error: a loader's ``except Exception`` (reading(),
+    which turns a library's error into a FileFormatError) lets it through, its shape and type with it."""
+    from clwave.io.loaders.shared import Declared, check_whole, reading
+
+    def declared(voxels, channels):
+        raise Declared()
+    with pytest.raises(Declared) as stop:
+        with reading(tmp_path / "v.dcm"):
+            check_whole(tmp_path / "v.dcm", (4, 5, 6), np.int16, declared)
+    assert (stop.value.shape, stop.value.dtype, stop.value.resampled) == ((4, 5, 6), np.int16, False)
+
+
 def test_info_of_a_bad_file_is_one_line(tmp_path, capsys, model_file):
     """A .raw (no header), a missing file, a truncated .clw, a .clw whose header's transfer function is no such
     thing, and device options with a FILE: one line, exit 2."""

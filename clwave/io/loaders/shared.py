@@ -132,10 +132,11 @@ def check_chunks(chunks, kind, path):
     return "auto" if chunks is None and kind in ("zarr", "hdf5") else chunks
 
 
-class Declared(Exception):
-    """Raised by a ``fits`` given to a loader to stop before any voxel is read; :func:`check_whole` gives it the
-    ``shape`` and ``dtype`` the header declares, and whether they are a resampling of what is stored
-    (``loaders.describe``)."""
+class Declared(BaseException):
+    """Raised by a ``fits`` given to a loader to stop before any voxel is read (``loaders.describe``);
+    :func:`check_whole` gives it the ``shape`` and ``dtype`` the header declares, and whether they are a resampling of
+    what is stored.  A BaseException, as KeyboardInterrupt is: no ``except Exception`` on its way (:func:`reading`'s)
+    takes it for a failure to read."""
 
     shape, dtype, resampled = None, None, False
 
