@@ -454,6 +454,9 @@ def test_dicom_two_series_need_series_argument(tmp_path, rng, capsys):
     assert main(["compress", str(tmp_path), "-o", str(tmp_path / "out.clw")]) == 2
     err = capsys.readouterr().err
     assert "--series INDEX" in err and "series=" not in err and err.count("\n") == 1
+    for series, slices in (("1", 3), (uid_a, 4)):  # info reads --series as compress does: an index, or a UID
+        assert main(["info", str(tmp_path), "--series", series]) == 0
+        assert f"volume     {slices} x 6 x 5 samples" in capsys.readouterr().out
     (tmp_path / "a1").rename(tmp_path / "a1.dcm")
     assert main(["compress", str(tmp_path / "a1.dcm"), "-o", str(tmp_path / "out.clw")]) == 2
     assert "pass the folder" in capsys.readouterr().err

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 from ..errors import InputError
-from .options import file_size, kept_words
+from .options import file_size, kept_words, parse_series
 
 
 def run(args):
@@ -58,8 +58,7 @@ def describe(args):
     else:
         from ..io.loaders import describe as describe_volume
 
-        series = int(args.series) if args.series is not None and args.series.isdigit() else args.series
-        facts = describe_volume(args.file, series=series, level=args.level)
+        facts = describe_volume(args.file, series=parse_series(args.series), level=args.level)
         lines = _volume_lines(facts)
     if args.json:
         print(json.dumps(facts, indent=2))

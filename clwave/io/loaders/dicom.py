@@ -36,7 +36,7 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
                               "at least 2")
     for tag in ("ImageOrientationPatient", "ImagePositionPatient", "PixelSpacing"):
         for path, h in headers:
-            _check_finite(path, tag, np.array(h.get(tag), float))
+            check_finite(path, tag, np.array(h.get(tag), float))
     cosines = np.array([h.ImageOrientationPatient for _, h in headers], float)
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"DICOM series {uid} in {folder} mixes slice orientations "
@@ -223,8 +223,8 @@ def _dicom_pixels(path):
     ds = pydicom.dcmread(path)
     slope = float(getattr(ds, "RescaleSlope", 1.0))
     intercept = float(getattr(ds, "RescaleIntercept", 0.0))
-    _check_finite(path, "RescaleSlope", slope)
-    _check_finite(path, "RescaleIntercept", intercept)
+    check_finite(path, "RescaleSlope", slope)
+    check_finite(path, "RescaleIntercept", intercept)
     if slope == 0:  # every voxel would be the intercept
         raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; "
                               "the file is corrupt: correct its RescaleSlope (e.g. 1) or move it out of the folder")
@@ -232,7 +232,7 @@ def _dicom_pixels(path):
     return pixels * np.float32(slope) + np.float32(intercept)
 
 
-def _check_finite(path, tag, values):
+def check_finite(path, tag, values):
     """Refuse a DICOM attribute holding nan or inf: no volume can be placed or scaled by it."""
     if not np.all(np.isfinite(values)):
         raise FileFormatError(f"DICOM file {path} has a non-finite {tag} "

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .dicom import _check_finite, place_slices
+from .dicom import check_finite, place_slices
 from .shared import check_whole
 
 #: what converts a multi-frame file clwave cannot place into a volume it reads
@@ -45,7 +45,7 @@ def read_dicom_frames(path, fits=None):
     positions, cosines, pixel, slopes, intercepts = geometry
     for tag, values in (("ImagePositionPatient", positions), ("ImageOrientationPatient", cosines),
                         ("PixelSpacing", pixel), ("RescaleSlope", slopes), ("RescaleIntercept", intercepts)):
-        _check_finite(path, tag, values)
+        check_finite(path, tag, values)
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"{path} is a multi-frame DICOM file whose frames lie in several orientations; "
                               f"{CONVERTER.replace('FILE', str(path))}")
