@@ -616,7 +616,8 @@ def test_command_line(tmp_path, capsys):
     assert not (tmp_path / "x.png").exists()
     code, out, err = run("progressive", scalar, "--method", "raytrace", "--tf", "ct-bone", "--size", "8",
                          "-o", tmp_path / "x.gif")
-    assert code == 2 and "no value of this model any opacity" in err and not (tmp_path / "x.gif").exists()
+    assert code == 2 and "no value of this model any opacity" in err and "a window in the input's units" in err
+    assert not (tmp_path / "x.gif").exists()
 
 
 def test_slabs_composite_to_the_whole_image(hydrogen):

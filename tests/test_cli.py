@@ -514,11 +514,15 @@ EARLY_MISTAKES = [
     (["compress", "--keep", "nan"], "--keep nan must be a finite number"),
     (["compress", "--subtract", "nan"], "--subtract nan must be a finite number"),
     (["progressive", "--error", "nan"], "--error nan must be a finite number"),
-    (["compress", "--tf", "grey", "--tf-window", "5,1"], "--tf-window 5,1 must be two finite numbers LO,HI"),
+    (["compress", "--tf", "grey", "--tf-window", "5,1"], "error: --tf-window 5,1 must be two finite numbers LO,HI "
+                                                       "with LO < HI\n"),
+    (["compress", "--tf", "grey", "--tf-window", "nan,1"], "error: --tf-window nan,1 must be two finite numbers"),
+    (["render", "--window", "0,inf"], "error: --window 0,inf must be two finite numbers LO,HI with LO < HI\n"),
     (["drr", "--dso", "-1"], "--dso -1 must be a positive source-to-isocentre distance"),
     (["drr", "--dsd", "0"], "--dsd 0: the detector is behind the source"),
     (["drr", "--pixel", "1,0"], "--pixel 1,0 must be a positive detector spacing"),
     (["drr", "--offset", "nan,0"], "--offset nan,0 must be two finite numbers A,B"),
+    (["drr", "--isocentre", "nan,0,0"], "error: --isocentre nan,0,0 must be three finite numbers X,Y,Z\n"),
 ]
 #: options a .clw input refuses anyway (a model already)
 VOLUME_ONLY = ("--tf-window", "--classify", "--wavelet", "--levels", "--spacing", "--chunks")
@@ -663,7 +667,7 @@ def test_a_transfer_function_that_shows_nothing_is_refused_before_the_transform(
         assert code == 2 and err.count("\n") == 1, err
         assert err == ("clwave: error: the transfer function ct-bone gives no voxel of this volume any opacity: its "
                        "points span -1000 .. 2000 and the volume's values lie within 0 .. 0.0386; give a window in the "
-                       "volume's units (--tf-window LO,HI) or another preset (--hu-to-mu turned HU into attenuation "
+                       "input's units (--tf-window LO,HI) or another preset (--hu-to-mu turned HU into attenuation "
                        "per mm)\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ct.npy"]  # nothing written
 
@@ -692,6 +696,7 @@ def test_a_chunked_volume_that_shows_nothing_is_refused_before_anything_is_writt
                            "1", "-o", str(tmp_path / out))
         assert code == 2 and err.count("\n") == 1, err
         assert "the transfer function ct-bone gives no voxel of this volume (read chunk by chunk) any opacity" in err
+        assert "give a window in the input's units (--tf-window LO,HI)" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ct.npy"]
 
 

@@ -9,6 +9,7 @@ import pytest
 
 import clwave
 from clwave.cli import main
+from test_hardening import crafted, setter
 
 
 def run(capsys, *argv):
@@ -73,6 +74,28 @@ def test_info_of_a_classified_clw_names_its_transfer_function(tmp_path, capsys):
     assert "model      1 level, 4 channels in 1 group" in out  # one level, not "1 levels"
 
 
+def test_info_names_a_windowless_transfer_function_and_the_offset(tmp_path, capsys):
+    """A transfer function without a window (its points are values, model.md §5) is no "window auto"; the offset
+    subtracted (--subtract) is a line of words where it is not 0, and a JSON key always (0 where none is recorded)."""
+    tf = clwave.TransferFunction([[-100, 0, 0, 0, 0], [40, 1, 1, 1, 0.5], [500, 1, 1, 1, 1]], name="mine")
+    vol = clwave.Volume(np.random.default_rng(2).random((8, 8, 8), np.float32) * 600 - 100)
+    plain, moved = tmp_path / "plain.clw", tmp_path / "moved.clw"
+    clwave.WaveletVolume.from_volume(vol, levels=1, transfer_function=tf).save(plain)
+    clwave.WaveletVolume.from_volume(clwave.Volume(vol.data + 1024, offset=-1024.0), levels=1).save(moved)
+    code, out, _ = run(capsys, "info", str(plain))
+    assert code == 0 and "transfer   mine, window none (points are values, -100 .. 500), 3 points (classified while " \
+                         "rendering)" in out and "offset" not in out, out
+    code, out, _ = run(capsys, "info", str(moved))
+    assert code == 0 and "offset     -1024 subtracted from the input's values (--subtract; transfer functions in the " \
+                         "input's units)" in out, out
+    for path, offset in ((plain, 0.0), (moved, -1024.0)):
+        code, out, _ = run(capsys, "info", str(path), "--json")
+        assert code == 0 and json.loads(out)["offset"] == offset
+    older = crafted(plain, tmp_path, lambda header: header.pop("offset"))  # a file of before the fifteenth session
+    code, out, _ = run(capsys, "info", str(older), "--json")
+    assert code == 0 and json.loads(out)["offset"] == 0.0
+
+
 def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsys, monkeypatch):
     """.npy, .nii and HDF5: the shape, spacing and origin load() gives (its own Volume, read here first), the stored
     dtype; the voxel reads of each format fail here, so none is made.  Formats read whole: the shape as stored."""
@@ -107,6 +130,19 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
         assert code == 0 and json.loads(out)["stored_shape"] == [4, 5, 6] and json.loads(out)["dtype"] == "int16"
 
 
+def test_a_header_declared_passes_every_handler_of_read_errors(tmp_path):
+    """describe's stop before the voxels (shared.Declared) is no error: a loader's ``except Exception`` (reading(),
+    which turns a library's error into a FileFormatError) lets it through, its shape and type with it."""
+    from clwave.io.loaders.shared import Declared, check_whole, reading
+
+    def declared(voxels, channels):
+        raise Declared()
+    with pytest.raises(Declared) as stop:
+        with reading(tmp_path / "v.dcm"):
+            check_whole(tmp_path / "v.dcm", (4, 5, 6), np.int16, declared)
+    assert (stop.value.shape, stop.value.dtype, stop.value.resampled) == ((4, 5, 6), np.int16, False)
+
+
 def test_info_of_a_bad_file_is_one_line(tmp_path, capsys, model_file):
     """A .raw (no header), a missing file, a truncated .clw, a .clw whose header's transfer function is no such
     thing, and device options with a FILE: one line, exit 2."""
@@ -123,12 +159,29 @@ def test_info_of_a_bad_file_is_one_line(tmp_path, capsys, model_file):
     for argv, needle in (([str(tmp_path / "v.raw")], "is a .raw file: it has no header"),
                          ([str(tmp_path / "none.clw")], "does not exist"),
                          ([str(tmp_path / "cut.clw")], "the file may be truncated or corrupt"),
-                         ([str(forged)], "transfer function or focus is not valid"),
+                         ([str(forged)], "its transfer function is not valid"),
                          ([str(model_file), "--check"], "--check and --device are about the OpenCL devices"),
                          (["--level", "1"], "give the FILE")):
         code, out, err = run(capsys, "info", *argv)
         assert code == 2 and out == "" and err.startswith("clwave: error:") and err.count("\n") == 1, err
         assert needle in err, err
+
+
+@pytest.mark.parametrize("key, value, needle", [
+    ("focus", [], "focus [] is not [[x, y, z], sigma]"), ("focus", [[1, 2, 3]], "focus [[1, 2, 3]] is not"),
+    ("focus", [[0, 0, 0], -1], "a sigma > 0"), ("content", [1], "content [1] is not two corners"),
+    ("transfer_function", [1, 2], "its transfer function is not valid"),
+    ("interpolate", "yes", "interpolate 'yes' is not true or false")])
+def test_a_forged_header_is_the_same_one_line_in_info_and_render(tmp_path, capsys, model_file, key, value, needle):
+    """A header value that a render would use is checked where info checks it (io/clw_header.py): each command
+    refuses the file in one line naming the value, exit 2."""
+    path = crafted(model_file, tmp_path, setter(key, value))
+    image = str(tmp_path / "r.png")
+    for argv in (["info", str(path)], ["render", str(path), "--size", "8", "-o", image],
+                 ["render", str(path), "--method", "raytrace", "--xray", "--size", "8", "-o", image]):
+        code, out, err = run(capsys, *argv)
+        assert code == 2 and err.startswith(f"clwave: error: cannot read {path}") and err.count("\n") == 1, err
+        assert needle in err and not (tmp_path / "r.png").exists(), err
 
 
 def test_the_commands_words(tmp_path, capsys):

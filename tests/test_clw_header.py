@@ -34,6 +34,7 @@ def other_hdf5(h5):
 @pytest.mark.parametrize("edit, change", [
     (setter("shape", [-16, 16, 16]), None), (setter("groups", []), None), (setter("channels", 3), None),
     (setter("spacing", [0, 1, 1]), None), (setter("levels", 9), None), (setter("version", 99), None),
+    (setter("focus", [[1, 2, 3]]), None), (setter("transfer_function", [1, 2]), None),
     (None, flip), (None, other_hdf5)])
 def test_a_bad_header_is_the_error_read_clw_gives(model_file, tmp_path, edit, change):
     path = crafted(model_file, tmp_path, edit, change)

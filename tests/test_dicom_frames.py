@@ -26,10 +26,10 @@ def test_an_rt_dose_file_is_its_frames_placed_by_their_offsets():
     np.testing.assert_allclose(vol.origin, (-x - 45.0, -y - 45.0, z + 35.0))
 
 
-def enhanced_ct(path, order, rescale=True):
-    """An Enhanced CT file of 4 frames of 6 x 5 (rows x columns), axial, 2 mm apart, written in ``order`` of their
-    positions (frame k holds the value 100 k + pixel index); per-frame rescale slope k + 1 and intercept -1024, the
-    orientation and the pixel spacing (0.5, 0.75) in the shared groups."""
+def enhanced_ct(path, order, rescale=True, size=(6, 5)):
+    """An Enhanced CT file of 4 frames of 6 x 5 (rows x columns; ``size``), axial, 2 mm apart, written in ``order`` of
+    their positions (frame k holds the value 100 k + pixel index); per-frame rescale slope k + 1 and intercept -1024,
+    the orientation and the pixel spacing (0.5, 0.75) in the shared groups."""
     from pydicom.dataset import Dataset, FileMetaDataset
     from pydicom.sequence import Sequence
     from pydicom.uid import EnhancedCTImageStorage, ExplicitVRLittleEndian, generate_uid
@@ -46,7 +46,7 @@ def enhanced_ct(path, order, rescale=True):
         EnhancedCTImageStorage
     ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID = generate_uid()
     ds.SOPClassUID, ds.SeriesInstanceUID, ds.Modality = EnhancedCTImageStorage, generate_uid(), "CT"
-    ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel = 6, 5, 4, 1
+    ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel = *size, len(order), 1
     ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 1
     ds.PhotometricInterpretation = "MONOCHROME2"
     ds.SharedFunctionalGroupsSequence = Sequence([item(
@@ -60,7 +60,7 @@ def enhanced_ct(path, order, rescale=True):
                                                                      RescaleType="HU")])
         frames.append(groups)
     ds.PerFrameFunctionalGroupsSequence = Sequence(frames)
-    pixels = np.stack([100 * k + np.arange(30).reshape(6, 5) for k in order]).astype(np.int16)
+    pixels = np.stack([100 * k + np.arange(size[0] * size[1]).reshape(size) for k in order]).astype(np.int16)
     ds.PixelData = pixels.tobytes()
     ds.save_as(path, enforce_file_format=True)
     return pixels
@@ -83,6 +83,31 @@ def test_an_enhanced_ct_file_is_its_frames_sorted_rescaled_and_placed(tmp_path, 
     assert "4 x 6 x 5 samples of int16 as read" in capsys.readouterr().out
 
 
+def test_the_frames_are_read_into_one_float32_volume_as_weighed(tmp_path, monkeypatch):
+    """32 frames of 128 x 128 int16 (1 MiB stored, 4 MiB as float32), out of order: read a frame at a time into the
+    float32 volume, what reading holds at its peak (traced) is what it weighs first (check_whole), to a frame and
+    pydicom's buffers; not the pixels as stored, a sorted copy and the float32 temporaries besides."""
+    import tracemalloc
+
+    from clwave.io.loaders import shared
+    from clwave.io.loaders.dicom_frames import read_dicom_frames
+
+    path, order = tmp_path / "ct.dcm", np.random.default_rng(3).permutation(32)
+    enhanced_ct(path, order, size=(128, 128))
+    read_dicom_frames(path)  # the imports it makes, once
+    weighed, check_fits = [], shared.check_fits
+    monkeypatch.setattr(shared, "check_fits", lambda nbytes, *a: (weighed.append(nbytes), check_fits(nbytes, *a)))
+    tracemalloc.start()
+    try:
+        data = read_dicom_frames(path)[0]
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert weighed == [32 * 128 * 128 * 4] and data.dtype == np.float32 and data.nbytes == weighed[0]
+    assert weighed[0] <= peak <= weighed[0] + (1 << 20), (peak, weighed)
+    assert data[5, 0, 0] == (5 + 1) * (100 * 5 + 128 * 128 - 1) - 1024.0  # frame 5 by its slope, axes reversed
+
+
 def test_multi_frame_files_without_positions_are_refused_naming_dcm2niix(tmp_path, capsys):
     """An ultrasound cine and a secondary capture (pydicom's) have frames but no positions: one line naming the file
     as multi-frame and dcm2niix; a single-frame file still points to its folder."""
@@ -96,3 +121,78 @@ def test_multi_frame_files_without_positions_are_refused_naming_dcm2niix(tmp_pat
     single = get_testdata_file("CT_small.dcm")
     with pytest.raises(FileFormatError, match="is one DICOM slice; pass the folder"):
         clwave.load(single)
+
+
+def _groups_short(ds):
+    del ds.PerFrameFunctionalGroupsSequence[-1]
+
+
+def _spacings_differ(ds):
+    from pydicom.dataset import Dataset
+    from pydicom.sequence import Sequence
+
+    measures = Dataset()
+    measures.PixelSpacing = [0.6, 0.75]
+    ds.PerFrameFunctionalGroupsSequence[1].PixelMeasuresSequence = Sequence([measures])
+
+
+def _offsets_short(ds):
+    ds.GridFrameOffsetVector = list(ds.GridFrameOffsetVector)[:-2]
+
+
+@pytest.mark.parametrize("source, change, needle", [
+    ("enhanced", _groups_short, "is a multi-frame DICOM file of 4 frames with 3 per-frame functional groups; the file "
+                                "is corrupt"),
+    ("enhanced", _spacings_differ, "is a multi-frame DICOM file whose frames have several pixel spacings; convert it "
+                                   "with dcm2niix"),
+    ("rtdose.dcm", _offsets_short, "is an RT Dose file of 15 frames with 13 grid frame offsets; the file is corrupt")])
+def test_frames_at_odds_with_their_geometry_are_named_with_the_file(tmp_path, capsys, source, change, needle):
+    """Functional groups or grid offsets that do not match the frames: one line naming the file, not the ValueError
+    of a reader's internals."""
+    import pydicom
+
+    path = tmp_path / "f.dcm"
+    if source == "enhanced":
+        enhanced_ct(path, [0, 1, 2, 3])
+    else:
+        pydicom.dcmread(get_testdata_file(source)).save_as(path)
+    ds = pydicom.dcmread(path)
+    change(ds)
+    ds.save_as(path)
+    with pytest.raises(FileFormatError) as err:
+        clwave.load(path)
+    assert str(err.value).startswith(f"{path} {needle}"), str(err.value)
+    assert main(["compress", str(path), "-o", str(tmp_path / "o.clw")]) == 2
+    assert capsys.readouterr().err == f"clwave: error: {err.value}\n"
+
+
+def test_frames_sharing_a_position_name_the_converter_not_folders(tmp_path):
+    """Two frames of one file at one position (a multi-phase or multi-echo enhanced image): the fix is dcm2niix, which
+    separates the acquisitions; a file cannot be split into folders."""
+    path = tmp_path / "phases.dcm"
+    enhanced_ct(path, [0, 1, 1, 2])
+    with pytest.raises(FileFormatError) as err:
+        clwave.load(path)
+    assert str(err.value) == (f"frame 2 and frame 3 of multi-frame DICOM file {path} share one position; the file "
+                              f"may hold several acquisitions (echoes, phases, times), which dcm2niix separates: "
+                              f"convert it with dcm2niix (dcm2niix -o OUT_FOLDER {path}) and read the .nii")
+
+
+def test_dicom_files_without_an_extension_are_known_by_their_preamble(tmp_path, capsys):
+    """IM0001 (no extension) and a UID-like name (an extension of digits): the multi-frame file is read as its .dcm
+    twin is, a single-frame one points to its folder, and a file of another kind without an extension is still an
+    unknown file type."""
+    import shutil
+
+    for name in ("IM0001", "1.2.840.10008.99"):
+        shutil.copy(get_testdata_file("rtdose.dcm"), tmp_path / name)
+        np.testing.assert_array_equal(clwave.load(tmp_path / name).data, clwave.load(get_testdata_file("rtdose.dcm"))
+                                      .data)
+    shutil.copy(get_testdata_file("CT_small.dcm"), tmp_path / "IM0002")
+    with pytest.raises(FileFormatError, match="IM0002 is one DICOM slice; pass the folder"):
+        clwave.load(tmp_path / "IM0002")
+    (tmp_path / "notes").write_bytes(bytes(300))
+    with pytest.raises(FileFormatError, match=r"unknown file type '\(no extension\)'"):
+        clwave.load(tmp_path / "notes")
+    assert main(["info", str(tmp_path / "IM0001")]) == 0
+    assert "samples of uint32 as read" in capsys.readouterr().out

@@ -454,6 +454,9 @@ def test_dicom_two_series_need_series_argument(tmp_path, rng, capsys):
     assert main(["compress", str(tmp_path), "-o", str(tmp_path / "out.clw")]) == 2
     err = capsys.readouterr().err
     assert "--series INDEX" in err and "series=" not in err and err.count("\n") == 1
+    for series, slices in (("1", 3), (uid_a, 4)):  # info reads --series as compress does: an index, or a UID
+        assert main(["info", str(tmp_path), "--series", series]) == 0
+        assert f"volume     {slices} x 6 x 5 samples" in capsys.readouterr().out
     (tmp_path / "a1").rename(tmp_path / "a1.dcm")
     assert main(["compress", str(tmp_path / "a1.dcm"), "-o", str(tmp_path / "out.clw")]) == 2
     assert "pass the folder" in capsys.readouterr().err
@@ -464,7 +467,9 @@ def test_dicom_duplicate_positions_refused(tmp_path, rng):
     with pytest.raises(FileFormatError) as excinfo:
         load(tmp_path)
     assert_one_line_error(excinfo)
-    assert "position" in str(excinfo.value)
+    assert "slice s2 and slice s3 of DICOM series" in str(excinfo.value)
+    assert str(excinfo.value).endswith("share one position; the series may hold several acquisitions (echoes, phases, "
+                                       "times): split them into separate folders")
 
 
 def test_dicom_multi_frame_file_named_as_such(tmp_path, rng):
@@ -504,7 +509,8 @@ def test_dicom_degenerate_rescale_and_geometry_refused(tmp_path, rng, kwargs, ne
     ((0.0, 0.5), "26.6", "1.5", (4, 10, 6)),      # 0.5 mm further posterior (LPS +y) per mm along z
     ((-0.25, 0.5), "29.2", "1.677", (4, 10, 7)),  # and 0.25 mm further right (LPS -x): a margin before the first slice
 ])
-def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, caplog, drift, degrees, shift, shape):
+def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, caplog, monkeypatch, drift, degrees, shift,
+                                                           shape):
     """Slices shifted sideways in proportion to their distance along the normal: a gantry tilt.  They hold a linear
     function of the LPS position, which linear interpolation keeps exactly: every voxel of the straight stack that a
     slice covers holds that function at its own RAS position (from the volume's spacing and origin alone), and the
@@ -534,6 +540,22 @@ def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, caplog, dri
     np.testing.assert_allclose(value[covered], (2 * 4 * (3 * x - 2 * y + 4 * z + 500) - 1024)[covered], atol=1e-2)
     margin = (x < x0 - 1 + e) | (x > x0 + columns - e) | (y < y0 - 1 + e) | (y > y0 + rows - e)  # a pixel beyond
     assert margin.sum() > 0 and np.all(value[margin] == least) and value.min() == least
+    from clwave.io.loaders import describe, dicom  # what info says of it: the straight stack, named so, unread
+    monkeypatch.setattr(dicom, "_dicom_pixels", lambda path: pytest.fail(f"{path}'s pixels were read"))
+    facts = describe(tmp_path)
+    assert facts["stored_shape"] == list(shape) and facts["resampled"] and facts["dtype"] == "float32"
+
+
+def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsys):
+    """The stack is weighed from the slices' headers (their rows and columns), before the first slice's pixels."""
+    from clwave.cli import main
+    from clwave.io.loaders import dicom
+
+    write_series(tmp_path, rng, axial(0.0, 1.0, 2.0), generate_uid(), ["s1", "s2", "s3"])
+    monkeypatch.setattr(dicom, "_dicom_pixels", lambda path: pytest.fail(f"{path}'s pixels were read"))
+    assert main(["info", str(tmp_path)]) == 0
+    assert capsys.readouterr().out.splitlines()[1] == ("volume     3 x 6 x 5 samples of float32 as read, before the "
+                                                       "loader orders them (its axes and spacing come with the voxels)")
 
 
 def test_dicom_slices_off_any_line_refused(tmp_path, rng):

@@ -110,6 +110,18 @@ def test_the_offset_goes_through_the_model_and_its_file(tmp_path):
     assert clwave.WaveletVolume.open(path).offset == 0.0
 
 
+def test_the_model_evaluates_the_stored_values():
+    """evaluate and gradient give the stored values, the input's minus the offset (their docstrings): an interpolating
+    model at a voxel's centre is that voxel's stored value, 40 HU tissue stored as 1040."""
+    vol = Volume(ct_in_hu() - AIR, offset=AIR)
+    wv = clwave.WaveletVolume.from_volume(vol, "cubic", levels=1, interpolate=True)
+    centres = vol.voxel_to_world(np.array([[1, 1, 1], [8, 10, 8], [4, 4, 4]]))
+    np.testing.assert_allclose(wv.evaluate(centres)[:, 0], [1040.0, 1700.0, 0.0], atol=1e-2)
+    h = 1e-3  # the gradient of the same stored values: central differences of evaluate
+    steps = [(wv.evaluate(centres + h * e)[:, 0] - wv.evaluate(centres - h * e)[:, 0]) / (2 * h) for e in np.eye(3)]
+    np.testing.assert_allclose(wv.gradient(centres)[:, 0], np.column_stack(steps), rtol=1e-4, atol=1e-2)
+
+
 @pytest.mark.parametrize("value", [float("nan"), float("inf"), "-1000", True, [1.0]])
 def test_a_hostile_offset_is_refused_in_one_line(tmp_path, capsys, value):
     path = clwave.WaveletVolume.from_volume(Volume(ct_in_hu()), "cubic", levels=1).save(tmp_path / "m.clw")
@@ -137,7 +149,7 @@ def _image(capsys, tmp_path, name, *argv):
 def test_subtract_and_a_ct_preset_on_the_command_line_pre_and_post_classified(ct_file, tmp_path, capsys):
     """--subtract -1000 --tf ct-bone: the same image as without --subtract, classified before the transform (splat,
     ray tracing) or while ray tracing (a scalar .clw with --classify post, or --tf given at render)."""
-    common = ["--levels", "1", "--threshold", "0"]  # every coefficient (--keep 1 keeps as many as voxels)
+    common = ["--levels", "1", "--threshold", "0"]  # every coefficient
     for method in ("splat", "raytrace"):
         want = _image(capsys, tmp_path, "a", "render", str(ct_file), "--tf", "ct-bone", "--method", method, *common)
         got = _image(capsys, tmp_path, "b", "render", str(ct_file), "--tf", "ct-bone", "--method", method,

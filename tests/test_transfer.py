@@ -211,10 +211,10 @@ def test_classifying_a_volume_all_transparent_is_refused():
         bone.classify(Volume(mu))
     assert isinstance(exc.value, InputError)
     line = ("the transfer function ct-bone gives no voxel of this volume any opacity: its points span -1000 .. 2000 "
-            "and the volume's values lie within 0 .. 0.0386; give a window in the volume's units")
+            "and the volume's values lie within 0 .. 0.0386; give a window in the input's units")
     assert str(exc.value) == f"{line} (window=(lo, hi)) or another function"
     assert exc.value.cli_message() == f"{line} (--tf-window LO,HI) or another preset"
-    rgba = bone.classify(Volume(mu), window=(-0.02, 0.04))  # the window in the volume's units: 0.0386 is bone
+    rgba = bone.classify(Volume(mu), window=(-0.02, 0.04))  # the window in the input's units: 0.0386 is bone
     assert rgba.data[..., 3].max() > 0.4 and rgba.data[0, 0, 0, 3] == 0
     with pytest.raises(NothingVisibleError, match="values lie within 0 .. 0;"):
         bone.classify(Volume(np.zeros((4, 4, 4))))
@@ -269,6 +269,9 @@ def test_bad_preset_window_and_volume_errors():
     tf = TransferFunction(THREE)
     with pytest.raises(InputError, match="lo < hi"):
         tf.classify(Volume(np.zeros((2, 2, 2))), window=(3, -3))
+    with pytest.raises(InputError) as err:  # not finite: the same words
+        TransferFunction(THREE, window=(0, float("inf")))
+    assert str(err.value) == "window (0, inf) must be two finite numbers (lo, hi) with lo < hi"
     with pytest.raises(InputError, match="Volume"):
         tf.classify(np.zeros((2, 2, 2)))
     with pytest.raises(InputError, match="2-channel"):

@@ -7,8 +7,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.result import check_background
-from .options import (GIF_FRAME_SECONDS, _chunks, _flag, _preset, _preset_window, _thresholding, is_clw, numbers,
-                      parse_device_memory, parse_scheduler)
+from ..model.transfer import check_window
+from .options import (GIF_FRAME_SECONDS, flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler,
+                      parse_tf_window, parse_thresholding, preset_transfer_function)
 
 
 #: the options given as one number (argparse's ``type=float``) whose own checks (below, or in the model's API words)
@@ -32,27 +33,25 @@ def check_options(args):
     for name in NUMBERS:
         value = getattr(args, name, None)
         if value is not None and not np.isfinite(value):
-            raise InputError(f"{_flag(name)} {value:g} must be a finite number")
+            raise InputError(f"{flag(name)} {value:g} must be a finite number")
     if getattr(args, "spacing", None) is not None:
         spacing = numbers(args.spacing, "--spacing", (1, 3))
         if not all(np.isfinite(spacing)) or min(spacing) <= 0:
             raise InputError(f"--spacing {args.spacing} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
     if getattr(args, "chunks", None) is not None:
-        _chunks(args.chunks)
+        parse_chunks(args.chunks)
     if getattr(args, "wavelet", None) is not None:
         for name in args.wavelet.split(","):
             wavelet_for(name)
     if getattr(args, "levels", None) is not None and args.levels < 0:
         raise InputError(f"--levels {args.levels} must be 0 or more (at most floor(log2(shortest axis)) - 1)")
     if hasattr(args, "keep"):
-        _thresholding(args)
+        parse_thresholding(args)
     if hasattr(args, "tf"):
-        window = None if args.tf_window in (None, "auto") else _preset_window(args.tf_window)
-        if window is not None and not (np.all(np.isfinite(window)) and window[0] < window[1]):
-            raise InputError(f"--tf-window {args.tf_window} must be two finite numbers LO,HI with LO < HI, in the "
-                             f"volume's units")
+        if args.tf_window is not None:
+            check_window(parse_tf_window(args.tf_window), "--tf-window")
         if args.tf or not is_clw(args):  # a .clw's own transfer function takes --tf-window alone
-            _preset(args)
+            preset_transfer_function(args)
         if args.classify == "post" and not args.tf and not is_clw(args):
             raise InputError("--classify post keeps the scalar for ray tracing to classify with the --tf preset: "
                              "give --tf PRESET too")
@@ -103,11 +102,11 @@ def _method_options(args):
     """Refuse the options of the --method not chosen (silently ignored otherwise), then give those of ray tracing
     that were not given their defaults (their parsers leave them None, so that a given one is told)."""
     other = [n for n, _ in RAYTRACE_ONLY] if args.method == "splat" else SPLAT_ONLY
-    given = [_flag(n) for n in other if getattr(args, n, None) not in (None, False)]
+    given = [flag(n) for n in other if getattr(args, n, None) not in (None, False)]
     named, verb, them = ", ".join(given), *(("is", "it") if len(given) == 1 else ("are", "them"))
     if given and args.method != "splat":
         raise InputError(f"{named} {verb} for --method splat; ray tracing controls its error with --tolerance")
-    shaded = [_flag(n) for n in ("background", "light", "no_shading") if getattr(args, n, None) not in (None, False)]
+    shaded = [flag(n) for n in ("background", "light", "no_shading") if getattr(args, n, None) not in (None, False)]
     if getattr(args, "xray", False) and shaded and args.method != "splat":
         verb, it = ("are", "them") if len(shaded) > 1 else ("is", "it")
         raise InputError(f"{', '.join(shaded)} {verb} for a shaded volume; an X-ray (--xray) is line integrals, shown "
@@ -152,12 +151,8 @@ def parse_background(args):
 
 def parse_window(args):
     """``--window auto|LO,HI``: "auto", or two finite numbers LO < HI (checked before any work)."""
-    if args.display_window == "auto":
-        return "auto"
-    lo, hi = numbers(args.display_window, "--window", (2,))
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise InputError(f"--window {args.display_window} must be two finite numbers LO,HI with LO < HI, e.g. 0,1")
-    return lo, hi
+    return check_window(args.display_window if args.display_window == "auto" else
+                        numbers(args.display_window, "--window", (2,)), "--window")
 
 
 def parse_size(args) -> tuple:

@@ -71,9 +71,11 @@ def run(args):
     if not all(np.isfinite(offset)):
         raise InputError(f"--offset {args.offset} must be two finite numbers A,B")
     centre = args.isocentre is None  # the volume's centre, known once it is read (docs/coordinates.md §5)
+    isocentre = (0.0, 0.0, 0.0) if centre else numbers(args.isocentre, "--isocentre", (3,))
+    if not all(np.isfinite(isocentre)):
+        raise InputError(f"--isocentre {args.isocentre} must be three finite numbers X,Y,Z")
     geometry = dict(rows=read_pose_table(args.poses), size=(H, W), pixel=pixel if len(pixel) == 2 else pixel[0],
-                    dso=args.dso, dsd=args.dsd, offset=offset,
-                    isocentre=(0.0, 0.0, 0.0) if centre else numbers(args.isocentre, "--isocentre", (3,)))
+                    dso=args.dso, dsd=args.dsd, offset=offset, isocentre=isocentre)
     cameras = table_poses(geometry, args.poses)  # every pose checked before the input is read
     if out.suffix.lower() == ".png" and len(cameras) != 1:
         raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy")

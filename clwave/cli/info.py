@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 from ..errors import InputError
-from .options import file_size, kept_words
+from .options import file_size, kept_words, parse_series
 
 
 def run(args):
@@ -58,8 +58,7 @@ def describe(args):
     else:
         from ..io.loaders import describe as describe_volume
 
-        series = int(args.series) if args.series is not None and args.series.isdigit() else args.series
-        facts = describe_volume(args.file, series=series, level=args.level)
+        facts = describe_volume(args.file, series=parse_series(args.series), level=args.level)
         lines = _volume_lines(facts)
     if args.json:
         print(json.dumps(facts, indent=2))
@@ -86,20 +85,25 @@ def _clw_lines(f) -> list:
     tf = f["transfer_function"]
     if tf is not None:
         window = tf.get("window")
-        window = " .. ".join(f"{v:g}" for v in window) if isinstance(window, list) else window or "auto"
+        values = [row[0] for row in tf["points"]]
+        window = (" .. ".join(f"{v:g}" for v in window) if isinstance(window, list) else window
+                  or f"none (points are values, {min(values):g} .. {max(values):g})")
         when = "while rendering" if f["channels"] == 1 else "before the transform"
         lines.append(("transfer", f"{tf.get('name') or 'unnamed'}, window {window}, {len(tf['points'])} points "
                                   f"(classified {when})"))
-    if f.get("offset") is not None:  # recorded since the fifteenth session (--subtract)
-        lines.append(("offset", f"{f['offset']}"))
+    if f["offset"]:
+        lines.append(("offset", f"{f['offset']:g} subtracted from the input's values (--subtract; transfer functions "
+                                f"in the input's units)"))
     return lines
 
 
 def _volume_lines(f) -> list:
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
     if "stored_shape" in f:  # read whole: its axes and spacing come with its voxels
-        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read, "
-                                f"before the loader orders them (its axes and spacing come with the voxels)"))
+        resampled = ", a gantry tilt resampled onto a straight stack wider by its shifts" if f["resampled"] else ""
+        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read"
+                                f"{resampled}, before the loader orders them (its axes and spacing come with the "
+                                f"voxels)"))
         return lines
     z, y, x = f["shape"][:3]
     spacing = "" if f["spacing_in_file"] else " (none in the file)"

@@ -50,7 +50,7 @@ def add_input_options(p):
     g.add_argument("--spacing", help="voxel spacing DZ,DY,DX (or one number); overrides the file")
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
     g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water; CT in HU: -1000); "
-                   "recorded, so --tf and --tf-window stay in the file's units")
+                   "recorded, so --tf and --tf-window stay in the input's units")
     g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
     g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
     g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
@@ -79,7 +79,7 @@ def add_model_options(p):
     g.add_argument("--tf", help="classify with a transfer-function preset first: "
                                 + ", ".join(TransferFunction.PRESETS))
     g.add_argument("--tf-window", help="transfer-function window: auto (percentiles of the values) or LO,HI in "
-                   "the file's units (HU for CT, with or without --subtract)")
+                   "the input's units (HU for CT, attenuation per mm with --hu-to-mu; with or without --subtract)")
     g.add_argument("--classify", choices=("pre", "post"), default="pre",
                    help="with --tf: pre (default) classifies the volume before the transform; post keeps the "
                         "scalar and the transfer function for ray tracing to classify while rendering (a .clw "
@@ -100,7 +100,7 @@ def read_volume(args):
     spec = args.input
     spacing = None if args.spacing is None else numbers(args.spacing, "--spacing", (1, 3))
     if spec.startswith("phantom:"):
-        given = [_flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu", "level", "chunks")
+        given = [flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu", "level", "chunks")
                  if getattr(args, n, None) is not None and getattr(args, n) is not False]
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {spec}: a phantom is not read from a file")
@@ -116,16 +116,13 @@ def read_volume(args):
         data = vol.data - vol.data.dtype.type(subtract)
         return Volume(data, spacing=vol.spacing if spacing is None else spacing, offset=subtract)
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
-    series = args.series
-    if series is not None and series.isdigit():
-        series = int(series)
     # weighed by the size the file declares, before its voxels are read
     fits = partial(check_model_fits, args, what="decomposing this volume",
                    hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii; gunzip a .nii.gz "
                         "first), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
-                series=series, level=args.level, chunks=_chunks(args.chunks), background=args.subtract or 0.0,
-                hu_to_mu=args.hu_to_mu, fits=fits)
+                series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),
+                background=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits)
 
 
 def check_model_fits(args, voxels, channels, what, hint):
@@ -135,7 +132,7 @@ def check_model_fits(args, voxels, channels, what, hint):
     check_fits(MODEL_BYTES_PER_VALUE * voxels * (4 if classified else channels), what, hint)
 
 
-def _chunks(text):
+def parse_chunks(text):
     """``load``'s ``chunks=`` from ``--chunks auto|off|N``."""
     if text is None or text == "auto":
         return text
@@ -144,6 +141,11 @@ def _chunks(text):
     if not text.isdigit() or int(text) < 2:
         raise InputError(f"--chunks {text} must be auto, off or a chunk edge N >= 2 (voxels)")
     return int(text)
+
+
+def parse_series(text):
+    """``load``'s ``series=`` from ``--series UID|INDEX``: a 0-based index where all digits, else a UID (or None)."""
+    return int(text) if text is not None and text.isdigit() else text
 
 
 def parse_scheduler(args):
@@ -158,11 +160,12 @@ VOLUME_ONLY = ("tf", "tf_window", "wavelet", "levels", "interpolate", "spacing",
                "series", "subtract", "hu_to_mu", "level", "chunks", "workers", "scheduler")
 
 
-def _flag(name: str) -> str:
+def flag(name: str) -> str:
+    """The command line's option of an ``args`` attribute: ``hu_to_mu`` -> ``--hu-to-mu``."""
     return "--" + name.replace("_", "-")
 
 
-def _thresholding(args) -> dict:
+def parse_thresholding(args) -> dict:
     """``threshold()`` arguments from ``--keep``, ``--threshold``, ``--focus``/``--sigma``, checked before any work."""
     from ..model.wavelet import check_thresholding
 
@@ -202,10 +205,10 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     from ..model.budget import warn_stored
     from ..model.wavelet import WaveletVolume, check_decomposition, default_levels
 
-    thresholding = _thresholding(args)
+    thresholding = parse_thresholding(args)
     scheduler = parse_scheduler(args)
     if is_clw(args):
-        given = [_flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
+        given = [flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
                  and not (cluster_render and name in ("workers", "scheduler"))
                  and not ((rgba or post) and name in ("tf", "tf_window"))]  # a scalar .clw: classified while rendering
         if given:
@@ -235,7 +238,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
             warn_stored(wv, args.keep, args.input)  # as WaveletVolume.open(keep=) tells it
         return wv, None
     vol = read_volume(args)
-    tf = _preset(args)
+    tf = preset_transfer_function(args)
     if hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False)) and air_in_hounsfield(vol.data):
         warn(f"{args.input} looks like CT in Hounsfield units (most border voxels air, -1000, or padding below it); "
              f"the model spends its coefficients on that offset: give --subtract -1000 (air to 0) or --hu-to-mu")
@@ -270,7 +273,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     if tf is not None and not post and vol.chunked and wv.content is None:  # classified as read: its content pass
         from ..errors import NothingVisibleError                            # found no voxel with any opacity
         why = (f"the transfer function{f' {tf.name}' if tf.name else ''} gives no voxel of this volume (read chunk by "
-               f"chunk) any opacity; give a window in the volume's units (--tf-window LO,HI) or another preset")
+               f"chunk) any opacity; give a window in the input's units (--tf-window LO,HI) or another preset")
         raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
     default = args.keep is None and args.threshold is None
     with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
@@ -297,7 +300,7 @@ def _classified(args, tf, vol, check=False):
                                                 f"mm)") from None
 
 
-def _preset(args):
+def preset_transfer_function(args):
     """The transfer function of ``--tf PRESET [--tf-window auto|LO,HI]``, or None without ``--tf``."""
     from ..model.transfer import TransferFunction
 
@@ -305,7 +308,7 @@ def _preset(args):
         if args.tf_window is not None:
             raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
         return None
-    return TransferFunction.preset(args.tf, window=None if args.tf_window is None else _preset_window(args.tf_window))
+    return TransferFunction.preset(args.tf, window=None if args.tf_window is None else parse_tf_window(args.tf_window))
 
 
 def post_transfer_function(args, wv):
@@ -326,14 +329,15 @@ def post_transfer_function(args, wv):
                              "PRESET")
         return None
     if clw and (args.tf or wv.transfer_function is None):
-        return _preset(args)
+        return preset_transfer_function(args)
     tf = None if wv.transfer_function is None else TransferFunction.from_dict(wv.transfer_function)
     if tf is not None and clw and args.tf_window is not None:
-        tf = TransferFunction(tf.points, window=_preset_window(args.tf_window), name=tf.name)
+        tf = TransferFunction(tf.points, window=parse_tf_window(args.tf_window), name=tf.name)
     return tf
 
 
-def _preset_window(text):
+def parse_tf_window(text):
+    """``--tf-window``'s "auto", or its two numbers (checked by :func:`~clwave.model.transfer.check_window`)."""
     return text if text == "auto" else numbers(text, "--tf-window", (2,))
 
 

@@ -324,11 +324,11 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
     focus = header["focus"] if keep is None else None  # as threshold(keep=) without a focus
     try:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, channels,
-                             interpolate=bool(header["interpolate"]), offset=header.get("offset", 0.0),
+                             interpolate=header["interpolate"], offset=header.get("offset", 0.0),
                              focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
                              transfer_function=header["transfer_function"], content=header.get("content"),
                              content_mask=mask)
-    except (KeyError, ValueError, TypeError, InputError) as exc:
+    except (LookupError, ValueError, TypeError) as exc:  # a backstop: checked_header checked what is used here
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None
 
 
@@ -362,7 +362,7 @@ def open_clw(path):
     except MemoryError:
         raise InputError(f"{path} holds more than this machine's memory can take; open a part of it "
                          "(keep=, --keep: its most important coefficients)") from None
-    except (OSError, ValueError, KeyError, TypeError, RuntimeError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError, LookupError, TypeError, RuntimeError) as exc:  # JSONDecodeError: a ValueError
         raise FileFormatError(f"cannot read {path} as a .clw file ({type(exc).__name__}: "
                               f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
                               "the file may be truncated or corrupt") from None

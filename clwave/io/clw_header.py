@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import FileFormatError
 from ..model.bspline import WAVELET_ORDERS, max_levels
+from ..model.transfer import TransferFunction
 
 FILE_FORMAT = "clwave-wavelet-volume"
 FILE_VERSION = 2
@@ -77,7 +78,8 @@ def check_dataset(dataset, shape, dtype):
 
 
 def checked_header(header) -> tuple:
-    """``(shape, levels, channels, groups)`` of a header, each checked (ValueError names what is wrong)."""
+    """``(shape, levels, channels, groups)`` of a header, each checked, and the rest of the header as the model opened
+    from it uses it (:func:`check_properties`); ValueError names what is wrong."""
     shape = header.get("shape")
     if not (isinstance(shape, list) and len(shape) == 3 and all(isinstance(n, int) and 2 <= n <= 1 << 20
                                                                  for n in shape)):
@@ -85,11 +87,10 @@ def checked_header(header) -> tuple:
     shape = tuple(shape)
     for name, positive in (("spacing", True), ("origin", False)):
         value = header.get(name)
-        if not (isinstance(value, list) and len(value) == 3 and all(isinstance(v, (int, float)) for v in value)
-                and np.all(np.isfinite(value)) and (not positive or min(value) > 0)):
+        if not (_numbers(value, 3) and (not positive or min(value) > 0)):
             raise ValueError(f"{name} {value!r} is not three finite{' positive' if positive else ''} numbers")
     offset = header.get("offset", 0.0)  # absent in older files: their values are the input's
-    if not (isinstance(offset, (int, float)) and not isinstance(offset, bool) and np.isfinite(offset)):
+    if not _numbers([offset], 1):
         raise ValueError(f"offset {offset!r} is not one finite number")
     levels, channels = header.get("levels"), header.get("channels")
     if not (isinstance(levels, int) and 0 <= levels <= max_levels(shape)):
@@ -107,4 +108,33 @@ def checked_header(header) -> tuple:
         seen += g["channels"]
     if sorted(seen) != list(range(channels)):
         raise ValueError(f"the groups hold channels {sorted(seen)}, not each of the {channels} once")
+    check_properties(header)
     return shape, levels, channels, groups
+
+
+def check_properties(header):
+    """The header's interpolation, focus, content box and transfer function, checked as the model opened from the
+    file uses them (``clwave info`` shows them): ValueError names what is wrong."""
+    interpolate, focus, content = header.get("interpolate"), header.get("focus"), header.get("content")
+    if not isinstance(interpolate, bool):
+        raise ValueError(f"interpolate {interpolate!r} is not true or false")
+    if focus is not None and not (isinstance(focus, list) and len(focus) == 2 and _numbers(focus[0], 3)
+                                  and _numbers(focus[1:], 1) and focus[1] > 0):
+        raise ValueError(f"focus {focus!r} is not [[x, y, z], sigma]: a finite centre and a sigma > 0")
+    if content is not None and not (isinstance(content, list) and len(content) == 2
+                                    and all(_numbers(corner, 3) for corner in content)
+                                    and np.all(np.less_equal(*content))):
+        raise ValueError(f"content {content!r} is not two corners [x, y, z] of finite numbers, low then high")
+    tf = header.get("transfer_function")
+    if tf is not None:
+        try:
+            TransferFunction.from_dict(tf)
+        except (TypeError, ValueError) as exc:  # InputError is a ValueError: said here as the file's fault
+            raise ValueError(f"its transfer function is not valid: {exc}") from None
+
+
+def _numbers(value, count) -> bool:
+    """Whether ``value`` is a JSON list of ``count`` finite numbers (no booleans)."""
+    return (isinstance(value, list) and len(value) == count
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            and bool(np.all(np.isfinite(value))))

@@ -7,10 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
 from ..model.bspline import WAVELET_ORDERS
-from ..model.transfer import TransferFunction
-from ..model.wavelet import check_thresholding
 from .clw import open_clw
 from .clw_header import check_dataset, checked_header, checked_values
 
@@ -19,10 +16,11 @@ _WAVELETS = {order: name for name, order in WAVELET_ORDERS.items()}
 
 def describe_clw(path) -> dict:
     """The header of the ``.clw`` file ``path`` (shape, spacing, origin, levels, channels, interpolation, focus,
-    content box, transfer function, an ``offset`` where the file records one) with, per channel group, its wavelet,
-    channels, the coefficients it keeps and their share of the voxels, and its quantisation step (None: float32
-    values); and the file's size.  The header is checked as a read checks it; a member that does not match it is
-    refused (:class:`~clwave.errors.FileFormatError`, from :func:`~clwave.io.clw.open_clw`)."""
+    content box, transfer function, the ``offset`` subtracted from the input's values: 0 where the file records none)
+    with, per channel group, its wavelet, channels, the coefficients it keeps and their share of the voxels, and its
+    quantisation step (None: float32 values); and the file's size.  The header is checked as a read checks it
+    (:func:`~clwave.io.clw_header.checked_header`); a member that does not match it is refused
+    (:class:`~clwave.errors.FileFormatError`, from :func:`~clwave.io.clw.open_clw`)."""
     path = Path(path)
     with open_clw(path) as (h5, header):
         shape, levels, channels, groups = checked_header(header)
@@ -35,16 +33,7 @@ def describe_clw(path) -> dict:
             step = checked_values(values, (kept, len(g["channels"])))
             described.append(dict(wavelet=_WAVELETS[g["wavelet"]], order=g["wavelet"], channels=g["channels"],
                                   kept=kept, share=kept / voxels, quantisation=step))
-        tf = header.get("transfer_function")
-        try:  # as a read would use them
-            if tf is not None:
-                TransferFunction.from_dict(tf)
-            if header.get("focus") is not None:
-                check_thresholding(None, None, (tuple(header["focus"][0]), header["focus"][1]))
-        except InputError as exc:
-            raise ValueError(f"its header's transfer function or focus is not valid: {exc}") from None
     facts = {name: header.get(name) for name in ("spacing", "origin", "interpolate", "focus", "content",
                                                  "transfer_function")}
     return dict(file=str(path), bytes=path.stat().st_size, shape=list(shape), levels=levels, channels=channels,
-                **facts, groups=described, **({"offset": header["offset"]} if "offset" in header else {}))
-
+                **facts, offset=header.get("offset", 0.0), groups=described)

@@ -12,7 +12,7 @@ from ..errors import ClwaveWarning
 
 def kept_count(keep, n_voxels) -> int | None:
     """The coefficients ``keep=`` keeps: ``round(keep * n_voxels)``, at least 1; None (every coefficient) for
-    ``keep=1``, for a model has more coefficients than voxels (B-splines reach past the volume's faces)."""
+    ``keep=1``, since a model has more coefficients than voxels (B-splines reach past the volume's faces)."""
     return None if keep == 1 else max(1, int(round(keep * n_voxels)))
 
 

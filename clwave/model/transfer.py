@@ -240,7 +240,7 @@ class TransferFunction:
         name = f" {self.name}" if self.name else ""
         line = (f"the transfer function{name} gives no voxel of this volume any opacity: its points span "
                 f"{lo:.4g} .. {hi:.4g} and the volume's {what} lie within {np.nanmin(values):.4g} .. "
-                f"{np.nanmax(values):.4g}; give a window in the volume's units")
+                f"{np.nanmax(values):.4g}; give a window in the input's units")
         return NothingVisibleError(f"{line} (window=(lo, hi)) or another function",
                                    cli=f"{line} (--tf-window LO,HI) or another preset")
 
@@ -451,8 +451,10 @@ def _check_points(points) -> np.ndarray:
     return p
 
 
-def check_window(window):
-    """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError."""
+def check_window(window, option=None):
+    """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError, in the words of the
+    command line's ``option`` too (e.g. "--tf-window", whose text gave the window): the one home of the check of
+    every window, transfer functions' and displays'."""
     if window is None:
         return None
     if isinstance(window, str):
@@ -463,8 +465,7 @@ def check_window(window):
         lo, hi = (float(w) for w in window)
     except (TypeError, ValueError):
         raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise InputError(f"window ({lo:g}, {hi:g}) must be finite")
-    if not lo < hi:
-        raise InputError(f"window (lo, hi) needs lo < hi, got ({lo:g}, {hi:g})")
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise InputError(f"window ({lo:g}, {hi:g}) must be two finite numbers (lo, hi) with lo < hi",
+                         cli=option and f"{option} {lo:g},{hi:g} must be two finite numbers LO,HI with LO < HI")
     return (lo, hi)

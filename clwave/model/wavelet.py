@@ -322,11 +322,13 @@ class WaveletVolume:
 
     # -------------------------------------------------------- evaluation
     def evaluate(self, points) -> np.ndarray:
-        """The continuous model at world points (N, 3) as (x, y, z); returns (N, C)."""
+        """The continuous model at world points (N, 3) as (x, y, z); returns (N, C), in the stored values: the input's
+        minus :attr:`offset` (a 40 HU voxel of a CT loaded with ``background=-1000`` is 1040 here, model.md §5)."""
         return self._evaluate(points, derivative=False)
 
     def gradient(self, points) -> np.ndarray:
-        """Analytic gradient (paper eq. 14-16, docs/model.md §4) at world points: (N, C, 3) as d/dx, d/dy, d/dz."""
+        """Analytic gradient (paper eq. 14-16, docs/model.md §4) at world points: (N, C, 3) as d/dx, d/dy, d/dz, of the
+        stored values (:meth:`evaluate`; the offset, a constant, moves no gradient)."""
         return self._evaluate(points, derivative=True)
 
     def _evaluate(self, points, derivative):

@@ -186,7 +186,7 @@ class ScalarRange:
                                                        self.slot_range[..., 1].max() + self.offset)
         held = "" if values is None else f"; this model's values lie within {values[0]:.4g} .. {values[1]:.4g}"
         return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
-                f"a window in the model's units (--tf-window LO,HI) or another function")
+                f"a window in the input's units (--tf-window LO,HI) or another function")
 
     def classify(self, tf, cc, real, at=None) -> Classification:
         """The kernel arguments of ``tf`` at the detail of ``at`` (default full detail), reused while the transfer

@@ -73,7 +73,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     background : float
         Subtracted from every voxel (after ``hu_to_mu``), so that the data is ~0
         outside the object; kept as the volume's ``offset``, so transfer functions
-        stay in the file's units (e.g. HU).
+        stay in the input's units (HU for CT, attenuation with ``hu_to_mu``).
     hu_to_mu : bool
         Convert CT Hounsfield units to linear attenuation
         ``mu = mu_water * (1 + HU / 1000)``, clipped at 0 (air -> 0).
@@ -174,7 +174,8 @@ def describe(path, *, series=None, level=None) -> dict:
     the stored ``dtype``, ``bytes`` on disk, and ``shape`` (z, y, x[, c]), ``spacing`` (dz, dy, dx) and ``origin``
     (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the
     ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
-    rescaled to float32) and no spacing or origin: its loader finds those with the voxels.  A
+    rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's straight
+    stack, wider by its shifts), and no spacing or origin: its loader finds those with the voxels.  A
     ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
@@ -194,7 +195,8 @@ def describe(path, *, series=None, level=None) -> dict:
             data, spacing, origin = _read(kind, path, inner, None, None, None, series, level,
                                           "auto" if lazy else False, False, None if lazy else _declared, False)
         except Declared as declared:
-            return dict(facts, stored_shape=list(declared.shape), dtype=str(declared.dtype))
+            return dict(facts, stored_shape=list(declared.shape), dtype=str(declared.dtype),
+                        resampled=declared.resampled)
     volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))
     return dict(facts, shape=list(data.shape), dtype=str(data.dtype), channels=volume.channels,
                 spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None)
@@ -231,7 +233,7 @@ def _kind(path: Path) -> str:
     if zarr_named:
         raise FileFormatError(f"{path} is a file, not a Zarr store; clwave reads Zarr stores that are folders "
                               "(unzip a zipped store first)")
-    if suffix in (".dcm", ".ima"):
+    if suffix in (".dcm", ".ima") or suffix not in _FILE_KINDS and _is_dicom(path):  # IM0001, 1.2.840....
         with reading(path):
             if dicom_frames.frame_count(path) > 1:
                 return "dicom-frames"
@@ -241,6 +243,14 @@ def _kind(path: Path) -> str:
         raise FileFormatError(f"unknown file type {suffix or '(no extension)'!r} of {path}; "
                               f"supported inputs: {SUPPORTED}")
     return _FILE_KINDS[suffix]
+
+
+def _is_dicom(path) -> bool:
+    """Whether ``path`` begins as a DICOM file does (a preamble, then "DICM"): DICOM files often have no extension."""
+    from pydicom.misc import is_dicom
+
+    with reading(path):
+        return is_dicom(path)
 
 
 def _reject_unused(kind, **options):

@@ -36,27 +36,34 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
                               "at least 2")
     for tag in ("ImageOrientationPatient", "ImagePositionPatient", "PixelSpacing"):
         for path, h in headers:
-            _check_finite(path, tag, np.array(h.get(tag), float))
+            check_finite(path, tag, np.array(h.get(tag), float))
     cosines = np.array([h.ImageOrientationPatient for _, h in headers], float)
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"DICOM series {uid} in {folder} mixes slice orientations "
                               "(e.g. a localizer); move the odd slices out of the folder")
     positions = np.array([h.ImagePositionPatient for _, h in headers], float)
     first = headers[0][1]
+    size = (int(first.Rows), int(first.Columns))
+
+    def read(order):  # weighed from the headers, before a pixel is read (the slices rescaled to float32)
+        check_whole(folder, (len(order), *size), np.float32, fits)
+        return read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
+
     return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
-                        tuple(float(s) for s in first.PixelSpacing), (int(first.Rows), int(first.Columns)),
-                        [f"slice {path.name}" for path, _ in headers],
-                        lambda order: read_slices([headers[i][0] for i in order], _dicom_pixels,
-                                                  "reading DICOM slices", progress_bar, fits), fits)
+                        tuple(float(s) for s in first.PixelSpacing), size,
+                        [f"slice {path.name}" for path, _ in headers], read, fits,
+                        "the series may hold several acquisitions (echoes, phases, times): split them into separate "
+                        "folders")
 
 
-def place_slices(where, path, positions, cosines, pixel, size, names, read, fits):
+def place_slices(where, path, positions, cosines, pixel, size, names, read, fits, shared):
     """The volume of slices at ``positions`` (n x 3, LPS mm; ``names[i]`` names slice i in messages) with the
     orientation ``cosines`` (a row's direction, then a column's), ``pixel`` spacing (between rows, between columns)
     and ``size`` (rows, columns): sorted along their normal, refused unless evenly spaced along it
     (:func:`_even_spacing`) and on a line (:func:`_drift`), a gantry tilt resampled onto a straight stack
     (:func:`_untilt`); ``read(order)`` gives their pixels (n, rows, columns) in that order, once weighed
-    (``fits``, by ``path``).  In RAS+, with spacing and origin."""
+    (``fits``, by ``path``); ``shared``: why two slices may share a position, and the fix, for the caller's kind of
+    input.  In RAS+, with spacing and origin."""
     # direction along a row (column index grows), along a column (row index grows)
     row_dir, col_dir = cosines[:3], cosines[3:]
     normal = np.cross(row_dir, col_dir)
@@ -65,9 +72,7 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     gaps = np.diff(distance[order])
     if np.any(gaps < 1e-4):
         first, second = (names[order[i]] for i in (np.argmin(gaps), np.argmin(gaps) + 1))
-        raise FileFormatError(
-            f"{first} and {second} of {where} share one position; the series may "
-            "hold several acquisitions (echoes, phases, times): split them into separate folders")
+        raise FileFormatError(f"{first} and {second} of {where} share one position; {shared}")
     dy, dx = pixel  # row spacing, column spacing
     drift = _drift(where, positions[order], distance[order], normal, min(dx, dy))
     dz = _even_spacing(where, distance[order])
@@ -78,7 +83,8 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     tilted = bool(np.any(step))
     if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
         rows, columns = size
-        check_whole(path, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits)
+        check_whole(path, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits,
+                    resampled=True)
 
     data_zyx = read(order)
     if tilted:
@@ -217,8 +223,8 @@ def _dicom_pixels(path):
     ds = pydicom.dcmread(path)
     slope = float(getattr(ds, "RescaleSlope", 1.0))
     intercept = float(getattr(ds, "RescaleIntercept", 0.0))
-    _check_finite(path, "RescaleSlope", slope)
-    _check_finite(path, "RescaleIntercept", intercept)
+    check_finite(path, "RescaleSlope", slope)
+    check_finite(path, "RescaleIntercept", intercept)
     if slope == 0:  # every voxel would be the intercept
         raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; "
                               "the file is corrupt: correct its RescaleSlope (e.g. 1) or move it out of the folder")
@@ -226,7 +232,7 @@ def _dicom_pixels(path):
     return pixels * np.float32(slope) + np.float32(intercept)
 
 
-def _check_finite(path, tag, values):
+def check_finite(path, tag, values):
     """Refuse a DICOM attribute holding nan or inf: no volume can be placed or scaled by it."""
     if not np.all(np.isfinite(values)):
         raise FileFormatError(f"DICOM file {path} has a non-finite {tag} "

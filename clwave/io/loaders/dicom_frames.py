@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .dicom import _check_finite, place_slices
+from .dicom import check_finite, place_slices
 from .shared import check_whole
 
 #: what converts a multi-frame file clwave cannot place into a volume it reads
@@ -25,15 +25,16 @@ def read_dicom_frames(path, fits=None):
     """A multi-frame DICOM file's frames as slices, rescaled, in RAS (``(data, spacing, origin)``); refused (naming
     dcm2niix) where its frames carry no positions, or several orientations."""
     import pydicom
+    from pydicom.pixels import iter_pixels
     from pydicom.pixels.utils import pixel_dtype
 
-    ds = pydicom.dcmread(path, defer_size=1024)
+    ds = pydicom.dcmread(path, defer_size=1024)  # the pixels stay in the file: read by iter_pixels
     frames, kind = int(ds.NumberOfFrames), getattr(ds.get("SOPClassUID"), "name", "DICOM")
     if "PerFrameFunctionalGroupsSequence" in ds:
-        geometry = _enhanced(ds, frames)
+        geometry = _enhanced(path, ds, frames)
     elif "GridFrameOffsetVector" in ds and all(t in ds for t in ("ImagePositionPatient", "ImageOrientationPatient",
                                                                  "PixelSpacing")):
-        geometry = _rt_dose(ds, frames)
+        geometry = _rt_dose(path, ds, frames)
     else:
         geometry = None
     if geometry is None or int(ds.get("SamplesPerPixel") or 1) != 1:
@@ -44,7 +45,7 @@ def read_dicom_frames(path, fits=None):
     positions, cosines, pixel, slopes, intercepts = geometry
     for tag, values in (("ImagePositionPatient", positions), ("ImageOrientationPatient", cosines),
                         ("PixelSpacing", pixel), ("RescaleSlope", slopes), ("RescaleIntercept", intercepts)):
-        _check_finite(path, tag, values)
+        check_finite(path, tag, values)
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"{path} is a multi-frame DICOM file whose frames lie in several orientations; "
                               f"{CONVERTER.replace('FILE', str(path))}")
@@ -54,15 +55,21 @@ def read_dicom_frames(path, fits=None):
     size = (int(ds.Rows), int(ds.Columns))
 
     def read(order):
-        check_whole(path, (frames, *size), pixel_dtype(ds), fits)
-        pixels = ds.pixel_array.reshape(frames, *size)
-        return pixels[order].astype(np.float32) * slopes[order, None, None] + intercepts[order, None, None]
+        check_whole(path, (frames, *size), pixel_dtype(ds), fits, streamed=True)
+        data, rank = np.empty((frames, *size), np.float32), np.argsort(order)
+        for k, frame in enumerate(iter_pixels(path)):  # from the file a frame at a time: one float32 copy is held
+            data[rank[k]] = frame.reshape(size)
+            data[rank[k]] *= slopes[k]
+            data[rank[k]] += intercepts[k]
+        return data
 
     return place_slices(f"multi-frame DICOM file {path}", path, positions, cosines[0], tuple(pixel), size,
-                        [f"frame {k + 1}" for k in range(frames)], read, fits)
+                        [f"frame {k + 1}" for k in range(frames)], read, fits,
+                        f"the file may hold several acquisitions (echoes, phases, times), which dcm2niix separates: "
+                        f"{CONVERTER.replace('FILE', str(path))}")
 
 
-def _enhanced(ds, frames):
+def _enhanced(path, ds, frames):
     """``(positions, cosines, pixel spacing, slopes, intercepts)`` per frame from the functional groups (a frame's
     own, else the shared ones), float32 rescale; None where a frame has no position, orientation or spacing."""
     shared = ds.get("SharedFunctionalGroupsSequence") or [None]
@@ -75,8 +82,9 @@ def _enhanced(ds, frames):
         return ds.get(tag, default)
 
     if len(ds.PerFrameFunctionalGroupsSequence) != frames:
-        raise ValueError(f"its per-frame functional groups number {len(ds.PerFrameFunctionalGroupsSequence)}, "
-                              f"not its {frames} frames")
+        raise FileFormatError(f"{path} is a multi-frame DICOM file of {frames} frames with "
+                              f"{len(ds.PerFrameFunctionalGroupsSequence)} per-frame functional groups; the file is "
+                              f"corrupt")
     rows = [(value(k, "PlanePositionSequence", "ImagePositionPatient"),
              value(k, "PlaneOrientationSequence", "ImageOrientationPatient"),
              value(k, "PixelMeasuresSequence", "PixelSpacing")) for k in range(frames)]
@@ -87,17 +95,19 @@ def _enhanced(ds, frames):
                      float).astype(np.float32)
     positions, cosines, pixel = (np.array([row[i] for row in rows], float) for i in range(3))
     if not np.allclose(pixel, pixel[0]):
-        raise ValueError("its frames have several pixel spacings")
+        raise FileFormatError(f"{path} is a multi-frame DICOM file whose frames have several pixel spacings; "
+                              f"{CONVERTER.replace('FILE', str(path))}")
     return positions, cosines, pixel[0], scale[:, 0], scale[:, 1]
 
 
-def _rt_dose(ds, frames):
+def _rt_dose(path, ds, frames):
     """The same of an RT Dose grid: the first frame at ImagePositionPatient, the others along the normal by their
     GridFrameOffsetVector (relative to the first, which its first offset is), scaled by DoseGridScaling."""
     cosines = np.array(ds.ImageOrientationPatient, float)
     offsets = np.array(ds.GridFrameOffsetVector, float)
     if offsets.shape != (frames,):
-        raise ValueError(f"its GridFrameOffsetVector has {offsets.size} offsets, not its {frames} frames")
+        raise FileFormatError(f"{path} is an RT Dose file of {frames} frames with {offsets.size} grid frame offsets; "
+                              f"the file is corrupt")
     normal = np.cross(cosines[:3], cosines[3:])
     positions = np.array(ds.ImagePositionPatient, float) + (offsets - offsets[0])[:, None] * normal
     slopes = np.full(frames, float(ds.get("DoseGridScaling") or 1.0), np.float32)

@@ -132,11 +132,13 @@ def check_chunks(chunks, kind, path):
     return "auto" if chunks is None and kind in ("zarr", "hdf5") else chunks
 
 
-class Declared(Exception):
-    """Raised by a ``fits`` given to a loader to stop before any voxel is read; :func:`check_whole` gives it the
-    ``shape`` and ``dtype`` the header declares (``loaders.describe``)."""
+class Declared(BaseException):
+    """Raised by a ``fits`` given to a loader to stop before any voxel is read (``loaders.describe``);
+    :func:`check_whole` gives it the ``shape`` and ``dtype`` the header declares, and whether they are a resampling of
+    what is stored.  A BaseException, as KeyboardInterrupt is: no ``except Exception`` on its way (:func:`reading`'s)
+    takes it for a failure to read."""
 
-    shape, dtype = None, None
+    shape, dtype, resampled = None, None, False
 
 
 class OnDemand:
@@ -151,11 +153,13 @@ class OnDemand:
         return self.read(index)
 
 
-def check_whole(path, shape, dtype, fits=None):
+def check_whole(path, shape, dtype, fits=None, streamed=False, resampled=False):
     """Refuse, before a voxel is read, a volume read whole whose declared ``shape`` (3 spatial axes, then any
     channel axes) of ``dtype`` samples (a structured one: a channel a field) would not fit in memory: by the
     caller's rule ``fits(voxels, channels)`` first (the command line weighs the model it makes of it), then by what
-    reading it takes (the samples as stored, and a float32 copy of other types)."""
+    reading it takes (the samples as stored, and a float32 copy of other types; ``streamed``, the samples converted
+    into a float32 volume a slice at a time as they are read: that volume alone).  ``resampled``: the volume is not
+    the samples as stored but their resampling (a gantry tilt's straight stack), as :class:`Declared` says."""
     dtype = np.dtype(dtype)
     voxels, samples = math.prod(shape[:3]), math.prod(shape[3:])
     channels = samples * (len(dtype.names) if dtype.names else 1)
@@ -163,10 +167,11 @@ def check_whole(path, shape, dtype, fits=None):
         try:
             fits(voxels, channels)
         except Declared as declared:  # describe(): what the header declares, and no voxel read
-            declared.shape, declared.dtype = tuple(shape), dtype
+            declared.shape, declared.dtype, declared.resampled = tuple(shape), dtype, resampled
             raise
-    converted = 0 if dtype == np.float32 else 4 * channels  # float32 samples are used as they are read
-    check_fits(voxels * (samples * dtype.itemsize + converted), f"reading {path} whole "
+    stored = 0 if streamed else samples * dtype.itemsize
+    converted = 0 if dtype == np.float32 and not streamed else 4 * channels  # float32 samples used as they are read
+    check_fits(voxels * (stored + converted), f"reading {path} whole "
                f"({' x '.join(map(str, shape))} {dtype})", "read it chunk by chunk (chunks='auto'; Zarr, HDF5, .npy, "
                ".raw, .nii), or crop it")
 

@@ -40,13 +40,14 @@ def read_tiff(path, fits=None, stack=True):
         if pages:
             shape, axes = (len(tif.pages),) + shape, "Q" + axes
         # samples per pixel (RGB/RGBA), or an OME-TIFF's channels, go last as the volume's channels
-        channel = "S" if "S" in axes else "C" if "C" in axes and "S" not in axes else None
+        channel = "S" if "S" in axes else "C" if "C" in axes else None
         if channel == "C" and shape[axes.index("C")] > 4:
+            first_four = ":, " * series.axes.index("C") + ":4"  # the C axis of what imread returns, wherever it is
             raise FileFormatError(
                 f"{path} holds a TIFF series with axes {series.axes!r} and shape {series.shape}: "
                 f"{shape[axes.index('C')]} channels, where clwave models at most 4; write the channels you want "
                 f"(up to 4) to a TIFF of their own, e.g. tifffile.imwrite('part.ome.tif', "
-                f"tifffile.imread({str(path)!r})[:, :4], metadata={{'axes': {series.axes!r}}})")
+                f"tifffile.imread({str(path)!r})[{first_four}], metadata={{'axes': {series.axes!r}}})")
         if channel:
             shape = tuple(n for n, a in zip(shape, axes) if a != channel) + (shape[axes.index(channel)],)
         spatial = axes.replace(channel or "S", "")
