@@ -1,5 +1,6 @@
 """WaveletVolume: perfect reconstruction, the continuous model, thresholding, LOD and .clw files."""
 
+import dask.array as da
 import numpy as np
 import pytest
 import pywt
@@ -241,7 +242,8 @@ def test_clw_round_trip_is_exact_and_small(tmp_path, channels, wavelet, rng):
     blob = np.exp(-4 * (x * x + 2 * y * y + 3 * z * z)) + 0.05 * rng.random(shape)
     data = np.stack([blob * (c + 1) for c in range(channels)], -1)
     vol = Volume(data.astype(np.float32), spacing=(1.2, 1.0, 0.8), origin=(1, 2, 3))
-    wv = WaveletVolume.from_volume(vol, wavelet, levels=3, transfer_function={"points": [[0, 1, 1, 1, 0.5]]})
+    wv = WaveletVolume.from_volume(vol, wavelet, levels=3,
+                                   transfer_function={"points": [[0, 1, 1, 1, 0.5], [1, 1, 1, 1, 0.5]]})
     th = wv.threshold(keep=0.05, focus=((0.0, 0.0, 0.0), 20.0))
     path = th.save(tmp_path / "v.clw")
     assert path.stat().st_size <= 0.10 * vol.data.nbytes
@@ -333,3 +335,14 @@ def test_content_mask_boxes_and_blocks_equal_the_byte_mask(rng, shape):
     assert np.array_equal(built.bits, mask.bits) and np.array_equal(np.asarray(built), dense)
     with pytest.raises(ValueError, match="outside the mask"):
         built.put((0, 0, shape[2] - 1), np.ones((1, 1, 2), bool))
+
+
+def test_a_transfer_function_a_file_could_not_hold_is_refused_when_the_model_is_made():
+    """A model stores its transfer function as its file's reader checks it (TransferFunction.stored): one point,
+    or a dict without points, is refused by ``from_volume`` (in memory and chunked), not written into a file that
+    no reader opens."""
+    vol = Volume(np.ones((8, 8, 8), np.float32))
+    for tf in ({"points": [[0, 1, 1, 1, 0.5]]}, {"window": [0, 1]}):
+        for v in (vol, Volume(da.from_array(vol.data, chunks=4))):
+            with pytest.raises(InputError):
+                WaveletVolume.from_volume(v, "linear", levels=1, transfer_function=tf)

@@ -22,6 +22,7 @@ from ..schedulers import client_for, stream
 from ..errors import InputError
 from .bspline import SplineWavelet
 from .transform import KEYS, band_layout, check_coefficients
+from .transfer import TransferFunction
 from .volume import Volume, content_of
 from .mask import ContentMask
 from .budget import kept_count, warn_short_budget
@@ -132,7 +133,7 @@ class ChunkedWaveletVolume:
                              "chunked volume takes the approximating model (interpolate=False)",
                              cli="--interpolate needs the whole volume in memory; leave it out for a chunked input")
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
-        tf = transfer_function.to_dict() if hasattr(transfer_function, "to_dict") else transfer_function
+        tf = TransferFunction.stored(transfer_function)
         with client_for(scheduler) as client, client.as_current():
             content = volume.content_box()
         return cls(volume, wavelets, levels, transfer_function=tf, scheduler=scheduler, progress_bar=progress_bar,

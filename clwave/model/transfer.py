@@ -340,6 +340,14 @@ class TransferFunction:
                              f"version {d.get('version')!r}; expected {_FORMAT!r} version 1")
         return cls(d["points"], window=d.get("window"), name=d.get("name"))
 
+    @classmethod
+    def stored(cls, transfer_function) -> dict | None:
+        """``transfer_function`` (a :class:`TransferFunction`, a dict of :meth:`to_dict`, or None) as a model stores
+        it: checked here as a file's reader checks it (io/clw_header.py), so that every model saved can be read."""
+        if transfer_function is None:
+            return None
+        return (transfer_function if isinstance(transfer_function, cls) else cls.from_dict(transfer_function)).to_dict()
+
     def __eq__(self, other):
         if not isinstance(other, TransferFunction):
             return NotImplemented

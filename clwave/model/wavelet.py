@@ -23,6 +23,7 @@ from .mask import ContentMask
 from .ranking import RankedTable, by_importance, ranked_table
 from .transform import (apply_sampling_filter, band_sum, crop_to_grid, decompose, reconstruct_channel,
                         synthesize)
+from .transfer import TransferFunction
 from .volume import Volume
 
 
@@ -183,7 +184,7 @@ class WaveletVolume:
                                                            transfer_function=transfer_function,
                                                            scheduler=scheduler, progress_bar=progress_bar)
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
-        tf = transfer_function.to_dict() if hasattr(transfer_function, "to_dict") else transfer_function
+        tf = TransferFunction.stored(transfer_function)
         mask = volume.content_mask()
         groups = []
         for wav in dict.fromkeys(wavelets):
