@@ -118,11 +118,12 @@ def _slabs(cell, j, channels, reach):
 
 def _pays(group, n_points, region) -> bool:
     """Whether synthesising ``region`` and reading j³ fine coefficients a point costs less than the band sum of
-    ``n_points``, sum over bands of prod S reads each (:data:`SYNTHESIS_PRICE`; the channels count alike on both
-    sides).  It prices this call alone: what the next call reuses is a gain it does not count."""
+    ``n_points``: prod S reads a point in each band that keeps something (:data:`SYNTHESIS_PRICE`; the channels
+    count alike on both sides).  It prices this call alone: what the next call reuses is a gain it leaves out."""
     wav = group.wavelet
     synthesis = SYNTHESIS_PRICE * sum(int(np.prod(hi - lo)) for lo, hi in synthesis_boxes(wav, group.bands, region))
-    per_point = sum(int(np.prod([wav.support(letter) for letter in b.key])) for b in group.bands)
+    per_point = sum(int(np.prod([wav.support(letter) for letter in b.key]))
+                    for b, span in zip(group.bands, group.band_slices()) if span.stop > span.start)
     return synthesis + n_points * wav.order ** 3 < n_points * per_point
 
 
