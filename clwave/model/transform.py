@@ -230,8 +230,8 @@ def synthesize(wavelet: SplineWavelet, bands, coefficients, region=None) -> tupl
         parts.update({b.key: box(i, lo, hi) for i, b in enumerate(bands) if i and b.level == m})
         for axis in range(3):  # keys lose their leading letter per axis done
             merged = {}
-            for key, arr in parts.items():
-                up = upfirdn(filters[key[0]], arr, up=2, axis=axis)
+            for key in list(parts):  # each part freed once filtered (the peak: docs/model.md §4)
+                up = upfirdn(filters[key[0]], parts.pop(key), up=2, axis=axis)
                 shape = list(up.shape)
                 shape[axis] = child_hi[axis] - child_lo[axis]
                 acc = merged.setdefault(key[1:], np.zeros(shape))
@@ -241,6 +241,7 @@ def synthesize(wavelet: SplineWavelet, bands, coefficients, region=None) -> tupl
                     dst, src = [slice(None)] * acc.ndim, [slice(None)] * acc.ndim
                     dst[axis], src[axis] = slice(a, b), slice(a - first, b - first)
                     acc[tuple(dst)] += up[tuple(src)]
+                del up
             parts = merged
         approx = parts[""]
     return approx, tuple(int(s) for s in boxes[-1][0])
