@@ -22,8 +22,8 @@ from .transform import Band, band_sum, synthesis_boxes, synthesize
 METHODS = ("auto", "bands", "fine")
 
 #: the most bytes of fine coefficients (float64, each channel of the group) one synthesis makes and the model
-#: keeps a group; the points of a larger region go through in slabs along z, each made in turn (its synthesis
-#: peaks at a few times this, docs/benchmarks.md §17)
+#: keeps a group; the points of a larger region go through in slabs along z of at least 8 cells, each made in
+#: turn (its synthesis peaks at a few times its size, docs/model.md §4)
 REGION_BYTES = 128 << 20
 
 #: regions are whole multiples of this many fine indices per axis: points near those of a call before reuse
@@ -32,8 +32,7 @@ REGION_STEP = 8
 
 #: the cost rule's price of synthesising, per coefficient of each level's box (:func:`synthesis_boxes`), in reads of
 #: the band sum (one basis function's value at one point, a stored coefficient found among the kept ones); a read of
-#: the fine coefficients is priced one too (measured: synthesis 105-150 ns a box coefficient, the band sum 32-39 ns
-#: a read, the fine path 25 ns a read, orders 2-6, docs/benchmarks.md §17)
+#: the fine coefficients is priced one too (measured on orders 2-6, docs/benchmarks.md §17)
 SYNTHESIS_PRICE = 3.5
 
 
@@ -58,7 +57,7 @@ def _band_total(group, fine, derivative) -> np.ndarray:
     acc = np.zeros((len(fine), len(group.channels), 3) if derivative else (len(fine), len(group.channels)))
     for number, (band, span) in enumerate(zip(group.bands, group.band_slices())):
         if span.stop > span.start:  # a band with nothing kept adds nothing
-                acc += band_sum(group.wavelet, band, SparseBand(group, number), fine, derivative)
+            acc += band_sum(group.wavelet, band, SparseBand(group, number), fine, derivative)
     return acc
 
 
@@ -91,9 +90,9 @@ def _holds(kept, region) -> bool:
 
 
 def _slabs(cell, j, channels, reach):
-    """``(selection, region)`` per slab of the points' cells (n, 3), ``region`` the (lo, hi) of fine indices its
-    points read, cut to the model's ``reach``, in whole :data:`REGION_STEP` s: one slab where that holds at
-    most :data:`REGION_BYTES`, else slabs along z of that size."""
+    """``(selection, region)`` per slab of the points' cells (n, 3), ``region`` the (lo, hi) of the fine indices its
+    points read, rounded out to multiples of :data:`REGION_STEP` and cut to the model's ``reach``: one slab where
+    that region holds at most :data:`REGION_BYTES`, else slabs along z whose regions do (at least a step thick)."""
     if not len(cell):
         return
     step = REGION_STEP
