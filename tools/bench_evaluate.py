@@ -20,7 +20,7 @@ def bench_evaluate(args) -> dict:
     ``--bands-max-points``."""
     wv = WaveletVolume.from_volume(phantom("hydrogen", n=args.size), "cubic", levels=3).threshold(keep=0.05)
     half = np.array(wv.shape[::-1]) * np.array(wv.spacing[::-1]) / 2
-    wv.evaluate(np.array(wv.origin)[None], "fine")  # warm-up: the synthesis' first import of scipy.signal
+    wv.evaluate(np.array(wv.origin)[None], "fine")  # warm-up, untimed (docs/benchmarks.md §1)
     out = {}
     for count in args.points:
         pts = np.array(wv.origin) + np.random.default_rng(count).uniform(-1, 1, (count, 3)) * half

@@ -69,17 +69,21 @@ def _fine_total(wv, gi, fine, derivative, always) -> np.ndarray:
     reach = synthesis_boxes(g.wavelet, g.bands)[-1]
     cell = np.floor(fine).astype(np.int64)  # a point reads the coefficients cell - j + 1 .. cell per axis
     live = np.flatnonzero(np.all((cell >= reach[0]) & (cell - (j - 1) < reach[1]), axis=1))  # elsewhere zero
+    summed = []  # the points of the slabs that take the band sum, summed in one pass (each pass sets up every band)
     for chosen, region in _slabs(cell[live], j, channels, reach):
         points = live[chosen]
         kept = wv._fine.get(gi)
         if kept is None or not _holds(kept, region):
             if not (always or _pays(g, len(points), region)):
-                acc[points] = _band_total(g, fine[points], derivative)
+                summed.append(points)
                 continue
             kept = wv._fine[gi] = synthesize(g.wavelet, g.bands, partial(group_box, g), region)
         coeffs, start = kept
         acc[points] = band_sum(g.wavelet, Band(0, "aaa", coeffs.shape[:3], 0), coeffs, fine[points] - start,
                                derivative)
+    if summed:
+        points = np.concatenate(summed)
+        acc[points] = _band_total(g, fine[points], derivative)
     return acc
 
 

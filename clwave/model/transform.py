@@ -218,9 +218,6 @@ def synthesize(wavelet: SplineWavelet, bands, coefficients, region=None) -> tupl
     = 1 - A or 1 - B: from the offsets oA_m, oD_m of docs/model.md §4 and the two-scale relations
     phi = sum p_i phi(2x - i), psi = sum q_i phi(2x - i), with filters h = p/sqrt2, g = q/sqrt2.
     """
-    # imported here: scipy.signal brings scipy.stats, a second of every start-up, and only reconstruction needs it
-    from scipy.signal import upfirdn
-
     box = coefficients if callable(coefficients) else partial(_dense_box, coefficients)
     filters = {"a": wavelet.p / np.sqrt(2.0), "d": wavelet.q / np.sqrt(2.0)}
     boxes = synthesis_boxes(wavelet, bands, region)
@@ -231,20 +228,30 @@ def synthesize(wavelet: SplineWavelet, bands, coefficients, region=None) -> tupl
         for axis in range(3):  # keys lose their leading letter per axis done
             merged = {}
             for key in list(parts):  # each part freed once filtered (the peak: docs/model.md §4)
-                up = upfirdn(filters[key[0]], parts.pop(key), up=2, axis=axis)
-                shape = list(up.shape)
+                part = parts.pop(key)
+                shape = list(part.shape)
                 shape[axis] = child_hi[axis] - child_lo[axis]
                 acc = merged.setdefault(key[1:], np.zeros(shape))
-                first = 2 * lo[axis] + wavelet.synthesis_shift(key[0]) - child_lo[axis]  # up[0]'s place in acc
-                a, b = max(first, 0), min(first + up.shape[axis], shape[axis])
-                if b > a:
-                    dst, src = [slice(None)] * acc.ndim, [slice(None)] * acc.ndim
-                    dst[axis], src[axis] = slice(a, b), slice(a - first, b - first)
-                    acc[tuple(dst)] += up[tuple(src)]
-                del up
+                first = 2 * lo[axis] + wavelet.synthesis_shift(key[0]) - child_lo[axis]  # part[0]'s children in acc
+                _upsample_into(acc, part, filters[key[0]], first, axis)
             parts = merged
         approx = parts[""]
     return approx, tuple(int(s) for s in boxes[-1][0])
+
+
+def _upsample_into(acc, part, taps, first, axis):
+    """Add each parent k of ``part`` (along ``axis``) times tap i to ``acc`` at ``first + 2k + i``, the children
+    inside ``acc`` alone: a box a few indices thick along an axis computes no more children there than it keeps
+    (scipy.signal.upfirdn makes all 2n + F - 2 of them, several times as many on a slice's box)."""
+    n, size = part.shape[axis], acc.shape[axis]
+    for i, tap in enumerate(taps):
+        k0 = max(0, -((first + i) // 2))  # the parents whose child first + 2k + i lies in [0, size)
+        k1 = min(n, (size - 1 - first - i) // 2 + 1)
+        if k1 > k0:
+            dst, src = [slice(None)] * acc.ndim, [slice(None)] * acc.ndim
+            dst[axis] = slice(first + i + 2 * k0, first + i + 2 * (k1 - 1) + 1, 2)
+            src[axis] = slice(k0, k1)
+            acc[tuple(dst)] += tap * part[tuple(src)]
 
 
 def synthesis_boxes(wavelet: SplineWavelet, bands, region=None) -> list:
