@@ -170,7 +170,7 @@ def band_sum(wavelet, band, coeffs, fine_zyx, derivative) -> np.ndarray:
     """Sum of one band's basis functions at fine points (N, 3), (N, C) or (N, C, 3) in (z, y, x).
 
     ``coeffs``: the band's (nz, ny, nx, C) array, or an object of that ``shape`` whose ``[iz, iy, ix]`` (broadcast
-    index arrays) reads it (``ChannelGroup.sparse_band``).  An index beyond the band reads nothing (its weight is
+    index arrays) reads it (``evaluation.SparseBand``).  An index beyond the band reads nothing (its weight is
     zero).  The points go through in chunks of at most :data:`GATHER_BYTES` of reads."""
     C = coeffs.shape[3]
     out = np.empty((len(fine_zyx), C, 3) if derivative else (len(fine_zyx), C))
@@ -210,7 +210,7 @@ def synthesize(wavelet: SplineWavelet, bands, coefficients, region=None) -> tupl
     start)``, ``coeffs[i, j, k]`` the coefficient of index ``start + (i, j, k)`` on that level's lattice.
 
     ``coefficients``: the bands' dense arrays, or a function ``(band number, lo, hi)`` giving that band's
-    coefficients on the index box [lo, hi) per axis, zeros beyond the band (``ChannelGroup.box``).  ``region``:
+    coefficients on the index box [lo, hi) per axis, zeros beyond the band (``evaluation.group_box``).  ``region``:
     ``(lo, hi)``, the output indices wanted (default: all the model reaches); each level reads and filters only
     its coefficients that reach them (:func:`synthesis_boxes`), so a region costs about its own size.
 
