@@ -124,7 +124,7 @@ class ChunkedWaveletVolume:
         self.kept = None  # coefficient positions kept (the largest group's count), known after a selection pass
 
     @classmethod
-    def from_volume(cls, volume: Volume, wavelet="cubic", levels=3, *, interpolate=False, transfer_function=None,
+    def from_volume(cls, volume: Volume, wavelet="cubic", levels=None, *, interpolate=False, transfer_function=None,
                     scheduler=None, progress_bar=None) -> "ChunkedWaveletVolume":
         """The model of a chunked volume; reads it once, for its content (the default framing), here."""
         if interpolate:
