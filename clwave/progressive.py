@@ -14,7 +14,12 @@ def progressive(wv, camera, steps=None, budget=None, device=None, *, method="spl
     """Yield frames from cheap to exact: :func:`clwave.splat.progressive.progressive` (``method="splat"``,
     :class:`~clwave.splat.progressive.ProgressiveFrame` s) or :func:`raytrace_progressive`
     (``method="raytrace"``, :class:`~clwave.raytrace.progressive.RaytraceFrame` s); ``options`` are the method's.
-    ``error``: stop at the first frame whose estimated relative RMS error is at most that."""
+    ``steps`` (a whole number, at least 1; both stop earlier at ``budget`` seconds or at ``error``): splatting makes
+    that many frames, the coefficient count doubling from one to the next (it takes ``steps`` or ``budget``, one
+    of them; 8 steps with ``error`` alone); ray tracing keeps the last ``steps`` frames of its schedule, full
+    detail on images halving in size down to a least side, then the full image (default: every one; an image too
+    small for that many gives all it allows, with a :class:`~clwave.ClwaveWarning`).  ``error``: stop at the first
+    frame whose estimated relative RMS error is at most that."""
     if method == "splat":
         run = splat_progressive
     elif method == "raytrace":

@@ -198,6 +198,8 @@ def test_bad_chunked_inputs(rng, monkeypatch):
     huge = clwave.Volume(da.full((20, 20, 20), 3.0e38, chunks=10, dtype=np.float32))
     with pytest.raises(InputError, match="overflows float32"):  # raised in a block task, told in one line
         clwave.WaveletVolume.from_volume(huge, "cubic", levels=1).threshold(keep=0.1)
+    with pytest.raises(InputError, match="line integrals of this volume overflow float32"):  # 0 levels: the voxels
+        clwave.WaveletVolume.from_volume(huge, "cubic", levels=0).threshold(keep=0.1)
     with pytest.raises(InputError, match="thresholded already"):
         clwave.WaveletVolume.from_volume(dvol, "haar", levels=1).threshold(threshold=0.5).threshold(keep=0.1)
     with pytest.raises(InputError, match="not a Dask scheduler"):

@@ -7,7 +7,7 @@ import pytest
 
 from clwave.device import programs
 from clwave.device.context import ComputeContext, DeviceInfo, select_device
-from clwave.errors import DeviceNotFoundError, KernelBuildError
+from clwave.errors import DeviceNotFoundError, InputError, KernelBuildError
 
 FAKE = [
     DeviceInfo(0, 0, "Portable Computing Language", "pthread-cpu", "CPU", 8 << 30, 2 << 30, 1 << 20, 2, "OpenCL 3.0"),
@@ -36,6 +36,17 @@ def test_environment_is_honoured_and_argument_wins(monkeypatch):
     monkeypatch.setenv("CLWAVE_DEVICE", "t4")
     assert select_device("auto", FAKE).id == "1:1"
     assert select_device("cpu", FAKE).id == "0:0"
+
+
+def test_an_int_is_a_platform_index_and_an_empty_request_is_refused():
+    """device=1 is "1" (the trial read device=5's "no OpenCL device matches '5'" as ints refused: there is no
+    platform 5); "" silently meant auto, and True or 0.0 were looked up as names: each refused in one line."""
+    assert select_device(1, FAKE).id == "1:0" and select_device(np.int64(0), FAKE).id == "0:0"
+    for bad in ("", "  ", True, 0.0):
+        with pytest.raises(InputError, match=f"^device={bad!r} names no device: give 'auto'"):
+            select_device(bad, FAKE)
+    with pytest.raises(DeviceNotFoundError, match="no OpenCL device matches '5'"):
+        select_device(5, FAKE)
 
 
 @pytest.mark.parametrize("bad", ["2:0", "gpu-that-is-not-there", "0:5"])

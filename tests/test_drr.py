@@ -39,6 +39,8 @@ def test_a_batch_equals_single_renders(model, monkeypatch):
                   np.empty((4, 12, 16, 2), np.float32)):
         with pytest.raises(InputError, match=r"out is a .* the views need float32 \(4, 12, 16, 1\)"):
             r.render_many(cams, out=wrong)
+    with pytest.raises(InputError, match="^render_many got no views: give at least one camera$"):
+        r.render_many([])  # was an array of shape (0, 0, 0, 1): no image size to give it
     assert not made
 
 

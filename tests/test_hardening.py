@@ -160,10 +160,19 @@ def test_a_flipped_bit_in_the_header_fails_its_checksum(model_file, tmp_path):
         clwave.WaveletVolume.open(crafted(model_file, tmp_path, change=flip))
 
 
-def test_voxels_near_the_float32_limit_are_refused_not_rendered():
+@pytest.mark.parametrize("levels", [0, 1])
+def test_voxels_near_the_float32_limit_are_refused_not_rendered(levels):
+    """At 0 levels too (the model is the voxels, finite, but a splat of 3e38 through 8 voxels was inf): the model is
+    at most its largest voxel, so a line integral is at most that times the diagonal (13.9 for 8^3)."""
     data = np.full((8, 8, 8), 3.0e38, np.float32)
-    with pytest.raises(InputError, match="overflows float32"):
-        clwave.WaveletVolume.from_volume(data, "cubic", levels=1)
+    with pytest.raises(InputError, match=r"line integrals of this volume overflow float32 \(its largest value 3e\+38 "
+                                         r"times its diagonal 13.9"):
+        clwave.WaveletVolume.from_volume(data, "cubic", levels=levels)
+    with pytest.raises(InputError, match="its diagonal 1.39e\\+39 passes 3.4e38.*or its spacing"):
+        clwave.WaveletVolume.from_volume(clwave.Volume(np.ones((8, 8, 8)), spacing=1e38), "cubic", levels=levels)
+    huge = clwave.WaveletVolume.from_volume(data / 100, "cubic", levels=levels)  # 3e36 x 13.9: taken, finite
+    image = clwave.splat(huge, clwave.Camera(0, 0, size=8)).image
+    assert np.isclose(image.max(), 8 * 3e36, rtol=1e-3)  # the constant's integral through 8 unit voxels
 
 
 def test_a_damaged_chunk_fails_its_checksum(model_file, tmp_path):

@@ -6,7 +6,7 @@ voxel to the grid position of its world coordinate: neither uses the loader's
 orientation code.
 """
 
-import logging
+import warnings
 from pathlib import Path
 
 import nibabel as nib
@@ -17,7 +17,7 @@ import tifffile
 from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, generate_uid
 
-from clwave.errors import ClwaveError, FileFormatError, InputError
+from clwave.errors import ClwaveError, ClwaveWarning, FileFormatError, InputError
 from clwave.io.loaders import load
 
 SHAPE_IJK = (5, 6, 7)
@@ -172,16 +172,19 @@ def test_valid_files_that_are_no_volume_are_named_for_what_they_are(tmp_path):
 
 
 def test_an_oblique_nifti_warning_is_a_clwave_warning_line(tmp_path, capsys):
-    """The loaders' log lines (an oblique volume shown in the closest canonical orientation) are the command line's
-    `clwave: warning: ...` lines."""
+    """The loaders' notes (an oblique volume shown in the closest canonical orientation) are ClwaveWarnings, which a
+    pipeline catching warnings sees (they were log records), and the command line's `clwave: warning: ...` lines,
+    once."""
     from clwave.cli import main
 
     c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
     affine = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
     nib.save(nib.Nifti1Image(np.ones((8, 8, 8), np.float32), affine), tmp_path / "obl.nii")
     assert main(["compress", str(tmp_path / "obl.nii"), "--levels", "1", "-o", str(tmp_path / "o.clw")]) == 0
-    assert "clwave: warning: the volume is oblique by 30.00 degrees; it is shown in the closest canonical (RAS) " \
-        "orientation\n" in capsys.readouterr().err
+    assert capsys.readouterr().err.count("clwave: warning: the volume is oblique by 30.00 degrees; it is shown in "
+                                         "the closest canonical (RAS) orientation\n") == 1
+    with pytest.warns(ClwaveWarning, match=r"^the volume is oblique by 30.00 degrees"):
+        load(tmp_path / "obl.nii")
 
 
 def test_nifti_rgb24_gives_three_channels(tmp_path, rng):
@@ -247,20 +250,19 @@ def test_nrrd_rgb_axis_becomes_channels(tmp_path, rng):
     np.testing.assert_array_equal(vol.data, rgb_cijk.transpose(3, 2, 1, 0))
 
 
-def test_nrrd_unknown_spacing_is_taken_as_one_and_said(tmp_path, data_ijk, caplog):
+def test_nrrd_unknown_spacing_is_taken_as_one_and_said(tmp_path, data_ijk):
     """NRRD's ``spacings: nan`` is "unknown": 1 on that axis, with a warning naming spacing= (none when given)."""
     nrrd.write(str(tmp_path / "v.nrrd"), data_ijk, {"spacings": [np.nan, 2.0, 3.0]})
     assert "spacings: nan 2 3" in (tmp_path / "v.nrrd").read_bytes().decode("latin-1")
-    with caplog.at_level("WARNING", logger="clwave.io.loaders.shared"):
+    with pytest.warns(ClwaveWarning) as told:
         vol = load(tmp_path / "v.nrrd")
     assert vol.spacing == (3.0, 2.0, 1.0)  # (z, y, x): the file's x axis unknown
-    [record] = caplog.records
-    assert "spacing (dz, dy, dx) 3.0, 2.0, nan is unknown (nan) on some axes; taken as 1 there" in record.getMessage()
-    assert "--spacing DZ,DY,DX" in record.getMessage()
-    caplog.clear()
-    with caplog.at_level("WARNING", logger="clwave.io.loaders.shared"):
+    [record] = told
+    assert "spacing (dz, dy, dx) 3.0, 2.0, nan is unknown (nan) on some axes; taken as 1 there" in str(record.message)
+    assert "--spacing DZ,DY,DX" in str(record.message)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         assert load(tmp_path / "v.nrrd", spacing=(3.0, 2.0, 0.5)).spacing == (3.0, 2.0, 0.5)
-    assert not caplog.records
 
 
 # --------------------------------------------------------------------------- TIFF
@@ -292,7 +294,7 @@ def test_imagej_tiff_spacing_is_read(tmp_path, rng):
     assert load(tmp_path / "ij0.tif").spacing == (1.0, 0.5, 0.25)
 
 
-def test_ome_tiff_spacing_is_read_in_micrometres(tmp_path, rng, caplog):
+def test_ome_tiff_spacing_is_read_in_micrometres(tmp_path, rng):
     arr = rng.integers(0, 60000, (5, 6, 7)).astype(np.uint16)
     # x in micrometres (OME's default unit), y in nanometres, z in millimetres: (2000, 0.25, 0.5) micrometres
     tifffile.imwrite(tmp_path / "v.ome.tif", arr, ome=True,
@@ -306,9 +308,10 @@ def test_ome_tiff_spacing_is_read_in_micrometres(tmp_path, rng, caplog):
     # with a warning naming the axis; a missing size is 1
     tifffile.imwrite(tmp_path / "odd.ome.tif", arr, ome=True,
                      metadata={"axes": "ZYX", "PhysicalSizeX": 0.5, "PhysicalSizeY": 3.0, "PhysicalSizeYUnit": "s"})
-    with caplog.at_level(logging.WARNING, logger="clwave"):
+    with pytest.warns(ClwaveWarning) as told:
         assert load(tmp_path / "odd.ome.tif").spacing == pytest.approx((1.0, 1.0, 0.5))
-    assert "along y" in caplog.text and "--spacing" in caplog.text and "along z" not in caplog.text
+    [said] = [str(w.message) for w in told]
+    assert "along y" in said and "--spacing" in said and "along z" not in said
 
 
 def test_rgb_tiff_stack_is_4d(tmp_path, rng):
@@ -330,7 +333,7 @@ def test_tiff_folder_stacks_in_natural_order(tmp_path, rng):
 
 
 @pytest.mark.parametrize("depth", [3, 4])
-def test_a_small_stack_tifffile_wrote_as_planar_samples_is_a_volume(tmp_path, rng, depth, caplog):
+def test_a_small_stack_tifffile_wrote_as_planar_samples_is_a_volume(tmp_path, rng, depth):
     """``tifffile.imwrite`` of a 3 or 4 x Y x X array writes one RGB(A) page of planar samples; its own metadata
     says the array's shape, and it is read as that many slices, with a warning."""
     arr = rng.integers(0, 60000, (depth, 6, 7)).astype(np.uint16)
@@ -338,10 +341,10 @@ def test_a_small_stack_tifffile_wrote_as_planar_samples_is_a_volume(tmp_path, rn
         tifffile.imwrite(tmp_path / "v.tif", arr)
     with tifffile.TiffFile(tmp_path / "v.tif") as tif:
         assert len(tif.pages) == 1 and tif.series[0].axes == "SYX"
-    with caplog.at_level("WARNING", logger="clwave.io.loaders.shared"):
+    with pytest.warns(ClwaveWarning, match=f"read as {depth} slices"):
         vol = load(tmp_path / "v.tif")
     np.testing.assert_array_equal(vol.data, arr)
-    assert vol.channels == 1 and f"read as {depth} slices" in caplog.records[0].getMessage()
+    assert vol.channels == 1
 
 
 def test_one_tiff_image_is_refused_as_not_a_stack(tmp_path, rng):
@@ -509,8 +512,7 @@ def test_dicom_degenerate_rescale_and_geometry_refused(tmp_path, rng, kwargs, ne
     ((0.0, 0.5), "26.6", "1.5", (4, 10, 6)),      # 0.5 mm further posterior (LPS +y) per mm along z
     ((-0.25, 0.5), "29.2", "1.677", (4, 10, 7)),  # and 0.25 mm further right (LPS -x): a margin before the first slice
 ])
-def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, caplog, monkeypatch, drift, degrees, shift,
-                                                           shape):
+def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, monkeypatch, drift, degrees, shift, shape):
     """Slices shifted sideways in proportion to their distance along the normal: a gantry tilt.  They hold a linear
     function of the LPS position, which linear interpolation keeps exactly: every voxel of the straight stack that a
     slice covers holds that function at its own RAS position (from the volume's spacing and origin alone), and the
@@ -524,9 +526,8 @@ def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, caplog, mon
         stored = np.round(4 * (3 * lps[0] - 2 * lps[1] + 4 * lps[2] + 500))  # whole numbers: the file's uint16
         least = min(least, 2 * stored.min() - 1024)  # rescale slope 2, intercept -1024
         write_dicom_slice(tmp_path / f"s{z}", stored, corner, uid, pixel_spacing=(1.0, 1.0))
-    with caplog.at_level(logging.WARNING, logger="clwave"):
+    with pytest.warns(ClwaveWarning, match=f"gantry tilt of {degrees} degrees .*{shift} mm sideways over 3 mm"):
         vol = load(tmp_path)
-    assert f"gantry tilt of {degrees} degrees" in caplog.text and f"{shift} mm sideways over 3 mm" in caplog.text
     assert vol.data.shape == shape and vol.spacing == pytest.approx((1.0, 1.0, 1.0))
     n = np.array(vol.data.shape[::-1])
     kx, ky, kz = np.meshgrid(*(np.arange(m) for m in n), indexing="ij")

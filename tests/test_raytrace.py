@@ -198,6 +198,26 @@ def test_xray_mode_matches_splatting():
         assert np.max(np.abs(ray.image - spl.image)) <= 5e-3 * spl.image.max()
 
 
+def test_a_tolerance_above_every_line_integral_is_told_with_one_that_draws():
+    """Micrometre voxels of 1: every line integral is at most 1e-6 x the diagonal (13.9e-6), below the default
+    absolute tolerance, and skipping passed every block (a black image, silently). Told once per tracer and
+    tolerance, naming a tolerance that draws the closed form: 8 voxels of 1e-6 through the centre, 8e-6."""
+    import warnings
+    from clwave.errors import ClwaveWarning
+
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(np.ones((8, 8, 8)), spacing=1e-6), "linear", levels=1)
+    tracer, camera = RayTracer(wv), clwave.Camera(0, 0, size=16)
+    with pytest.warns(ClwaveWarning, match=r"at most 1.39e-05 .* below the absolute tolerance 0.001, so the image may "
+                                           r"be black: give a tolerance well below it, e.g. tolerance=1e-08") as told:
+        tracer.render(camera, tolerance=1e-3, absorption=False)
+    assert told[0].message.cli.endswith("e.g. --tolerance 1e-08")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # said once per tracer and tolerance; a tolerance below the bound: silent
+        tracer.render(camera, tolerance=1e-3, absorption=False)
+        image = tracer.render(camera, tolerance=1e-8, absorption=False).image
+    assert np.isclose(image.max(), 8e-6, rtol=1e-5)
+
+
 @pytest.mark.parametrize("origin", [(0, 0, 0), (-3, 5, -9)])
 def test_superblocks_hold_the_largest_block_bound(origin):
     """Each superblock's bound against the largest bound of the blocks inside it, block by block."""

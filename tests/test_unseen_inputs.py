@@ -40,11 +40,17 @@ def test_progressive_ray_tracing_says_how_many_frames_a_small_image_allows(scala
     args = ["progressive", str(path), "--method", "raytrace", "--xray", "-o", str(tmp_path / "p.gif"), "--force"]
     assert main(args + ["--size", str(2 * MIN_SIDE), "--steps", "5"]) == 0
     out, err = capsys.readouterr()
-    assert out.count("frame ") == 2 and err == (f"clwave: note: a {2 * MIN_SIDE}x{2 * MIN_SIDE} image allows 2 "
+    assert out.count("frame ") == 2 and err == (f"clwave: warning: a {2 * MIN_SIDE}x{2 * MIN_SIDE} image allows 2 "
                                                 "progressive ray-tracing frames, not --steps 5; a bigger --size "
                                                 "allows more\n")
     assert main(args + ["--size", str(2 * MIN_SIDE), "--steps", "2"]) == 0
     assert capsys.readouterr().err == ""
+    # the API says so too (it gave fewer frames than asked without a word), in its own words
+    with pytest.warns(clwave.ClwaveWarning, match=f"^a {2 * MIN_SIDE}x{2 * MIN_SIDE} image allows 2 progressive "
+                                                  f"ray-tracing frames, not steps=5; a bigger image allows more$"):
+        made = list(clwave.progressive(scalar_model, clwave.Camera(0, 0, size=2 * MIN_SIDE), steps=5,
+                                       method="raytrace", absorption=False))
+    assert len(made) == 2
 
 
 def test_small_volumes_take_the_levels_they_allow(tmp_path, capsys):

@@ -1,5 +1,7 @@
 """WaveletVolume: perfect reconstruction, the continuous model, thresholding, LOD and .clw files."""
 
+import warnings
+
 import dask.array as da
 import numpy as np
 import pytest
@@ -185,6 +187,24 @@ def test_default_levels_capped_by_the_shortest_axis_and_said():
         WaveletVolume.from_volume(np.ones(shape, np.float32), "haar", levels=levels)
         with pytest.raises(InputError):
             WaveletVolume.from_volume(np.ones(shape, np.float32), "haar", levels=levels + 1)
+
+
+def test_default_levels_lowered_by_the_api_with_a_warning_as_by_the_command_line():
+    """Without levels= the API takes the default (3) as the command line does: lowered where the shortest axis allows
+    fewer, with a ClwaveWarning saying so, in memory and chunked; an explicit levels=3 is still refused."""
+    import dask.array as da
+    from clwave.errors import ClwaveWarning
+
+    data = np.ones((8, 8, 8), np.float32)
+    for volume in (Volume(data), Volume(da.from_array(data, chunks=4))):
+        with pytest.warns(ClwaveWarning, match="^2 decomposition levels instead of the default 3: the z axis of 8 "):
+            wv = WaveletVolume.from_volume(volume)
+        assert wv.levels == 2
+        with pytest.raises(InputError, match=r"levels=3 is not possible for shape \(8, 8, 8\)"):
+            WaveletVolume.from_volume(volume, levels=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a volume that allows the default: said nothing
+        assert WaveletVolume.from_volume(np.ones((16, 16, 16), np.float32), "haar").levels == 3
 
 
 def test_top_breaks_ties_at_the_cut_by_lowest_index(rng):

@@ -7,7 +7,6 @@ code 2; an existing output file is never replaced without ``--force``.
 from __future__ import annotations
 
 import argparse
-import logging
 import os
 import re
 import signal
@@ -67,23 +66,10 @@ def _terminate(signum, frame):
 
 
 def main(argv=None) -> int:
-    loaders = logging.getLogger("clwave.io")  # what the loaders log (an oblique volume, a gantry tilt) is a warning
-    handler = _WarningLine(logging.WARNING)
-    loaders.addHandler(handler)
-    try:
-        with warnings.catch_warnings():  # clwave's warnings each one line, every time; Python's settings restored
-            warnings.simplefilter("always", ClwaveWarning)
-            warnings.showwarning = partial(_show_warning, shown=warnings.showwarning)
-            return _main(argv)
-    finally:
-        loaders.removeHandler(handler)
-
-
-class _WarningLine(logging.Handler):
-    """A log record as ``clwave: warning: ...`` on the stderr of the moment (a test's capture included)."""
-
-    def emit(self, record):
-        warn(record.getMessage())
+    with warnings.catch_warnings():  # clwave's warnings each one line, every time; Python's settings restored
+        warnings.simplefilter("always", ClwaveWarning)
+        warnings.showwarning = partial(_show_warning, shown=warnings.showwarning)
+        return _main(argv)
 
 
 def _main(argv) -> int:

@@ -14,9 +14,10 @@ import numpy as np
 from ..errors import ClwaveWarning, CommandWords, InputError, OutputExistsError, finite_number
 from ..device.memory import check_fits
 from ..io.files import check_writable
+from ..model.wavelet import DEFAULT_LEVELS
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
-DEFAULT_WAVELET, DEFAULT_LEVELS = "cubic", 3
+DEFAULT_WAVELET = "cubic"
 #: host bytes per float32 value of the volume below which decomposing and thresholding it cannot run: the
 #: in-memory model peaks at 3 (RGBA) to 9 (scalar) times the volume; work beyond 4 times what is available
 #: is refused before it starts
@@ -253,7 +254,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
     levels = args.levels
     if levels is None:  # a thin volume's shortest axis caps them: said, with what --keep then does
-        levels, note = default_levels(vol.shape, DEFAULT_LEVELS, thresholded=args.keep != 1)
+        levels, note = default_levels(vol.shape, thresholded=args.keep != 1)
         if note:
             warn(note)
     wavelet, levels = check_decomposition(vol.shape, 4 if tf and not post else vol.channels, wavelet, levels)

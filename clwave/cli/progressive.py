@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import re
-import sys
 from pathlib import Path
 
 from ..errors import InputError
@@ -52,11 +51,6 @@ def run(args):
         options["tracer"] = RayTracer(wv, device=args.device, device_memory=device_memory, content_clamp=False)
     frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device, method=args.method,
                               error=args.error, device_memory=device_memory, **options))
-    if raytrace and args.steps is not None and args.error is None and len(frames) < args.steps:
-        # the schedule halves the image per frame down to a least side (docs/raytracing.md §9)
-        print(f"clwave: note: a {camera.size[0]}x{camera.size[1]} image allows {len(frames)} progressive ray-tracing "
-              f"frame{'s' if len(frames) != 1 else ''}, not --steps {args.steps}; a bigger --size allows more",
-              file=sys.stderr)
     if frames[-1].meta.get("nothing_visible"):  # every frame blank: not what was asked for (docs/raytracing.md §10)
         raise InputError(frames[-1].meta["nothing_visible"])
     if window == "auto" and frames[-1].result().is_xray:  # the final image's window for every frame

@@ -1,8 +1,8 @@
 """OpenCL device choice and the one context holder used everywhere.
 
 ``device=`` (API) and ``--device`` (CLI) accept ``auto``, ``cpu``, ``gpu``,
-``P:D`` platform/device indices, ``P`` (first device of platform P) or a
-case-insensitive substring of "platform device" names.  When the request is
+``P:D`` platform/device indices, ``P`` (first device of platform P; an int too) or a
+case-insensitive substring of "platform device" names; an empty string is refused.  When the request is
 ``None`` or ``auto``, ``CLWAVE_DEVICE`` and then ``PYOPENCL_CTX`` are honoured;
 nothing ever prompts.  ``auto`` prefers a GPU, then any accelerator, then a CPU
 (PoCL first).
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import DeviceNotFoundError
+from ..errors import DeviceNotFoundError, InputError
 
 INSTALL_HINT = ("install an OpenCL driver, e.g. Debian's `apt-get install pocl-opencl-icd`, "
                 "or run tools/setup.sh")
@@ -106,7 +106,13 @@ def requested_device(request=None) -> str:
 
 def _request(request):
     """(the effective request, the environment variable it came from or None)."""
-    if request is None or str(request).strip().lower() in ("", "auto"):
+    if isinstance(request, (int, np.integer)) and not isinstance(request, bool):
+        request = str(int(request))  # a platform index, as "P"
+    elif request is not None and not (isinstance(request, str) and request.strip()):
+        raise InputError(f"device={request!r} names no device: give 'auto' (or None), 'cpu', 'gpu', 'P:D' platform "
+                         f"and device indices, a platform index P, or part of a device's name",
+                         cli=f"--device {request!r} names no device: give auto, cpu, gpu, P:D, P or part of a name")
+    if request is None or request.strip().lower() == "auto":
         for var in ("CLWAVE_DEVICE", "PYOPENCL_CTX"):
             value = os.environ.get(var, "").strip()
             if value:

@@ -125,7 +125,7 @@ class ChunkedWaveletVolume:
         self.kept = None  # coefficient positions kept (the largest group's count), known after a selection pass
 
     @classmethod
-    def from_volume(cls, volume: Volume, wavelet="cubic", levels=3, *, interpolate=False, transfer_function=None,
+    def from_volume(cls, volume: Volume, wavelet="cubic", levels=None, *, interpolate=False, transfer_function=None,
                     scheduler=None, progress_bar=None) -> "ChunkedWaveletVolume":
         """The model of a chunked volume; reads it once, for its content (the default framing), here."""
         if interpolate:
@@ -396,7 +396,7 @@ class _Entries:
         coeffs = stack[KEYS.index(key) if level else 0]
         self.shape, self.offsets = coeffs.shape[:3], np.array(offsets)[:, None]
         values = np.moveaxis(coeffs, 3, 0).reshape(coeffs.shape[3], -1)
-        check_coefficients(values)
+        check_coefficients(values, plan.frame[:2] if plan.levels == 0 else None)  # 0 levels: the voxels
         self.flat = np.flatnonzero(np.any(values != 0, axis=0)) if live_only else np.arange(values.shape[1])
         self.values = values[:, self.flat] if live_only else values
         index = None if plan.focus is None else self.index(slice(None))

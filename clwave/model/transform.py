@@ -125,6 +125,7 @@ def decompose(volume, wavelet, channels, levels, interpolate, progress_bar) -> t
         data = volume.channel(channel)
         if interpolate:
             data = prefilter(data, wavelet).astype(np.float32)
+        check_coefficients(data, (volume.shape, volume.spacing))  # the voxels' B-spline coefficients
         if levels == 0:
             values[slot] = data.ravel()
             return
@@ -142,12 +143,22 @@ def decompose(volume, wavelet, channels, levels, interpolate, progress_bar) -> t
     return bands, values
 
 
-def check_coefficients(values):
+def check_coefficients(values, frame=None):
     """Refuse coefficients that overflowed float32 (voxels near its largest value, 3.4e38): nothing
-    non-finite may reach a kernel or an image."""
+    non-finite may reach a kernel or an image.  With ``frame`` (shape, spacing), the values are the voxels' own
+    B-spline coefficients (the model at 0 levels, or the volume before its transform): as the B-splines sum to 1,
+    the model is at most their largest value, so no line integral through the volume passes it times the volume's
+    diagonal, which must be finite in float32 too (a splat or ray-traced image would be inf)."""
     if not np.all(np.isfinite(values)):
         raise InputError("the wavelet transform of this volume overflows float32 (its values come too close to "
                          "3.4e38); rescale the volume first, e.g. to [0, 1]")
+    if frame is not None and np.size(values):
+        diagonal = float(np.linalg.norm(np.multiply(frame[0], frame[1])))
+        largest = float(np.abs(values).max())
+        if not largest * diagonal < float(np.finfo(np.float32).max):
+            raise InputError(f"the line integrals of this volume overflow float32 (its largest value {largest:.3g} "
+                             f"times its diagonal {diagonal:.3g} passes 3.4e38); rescale its values first, e.g. "
+                             f"to [0, 1], or its spacing")
 
 
 def reconstruct_channel(group, dense, slot, shape, levels) -> np.ndarray:

@@ -8,12 +8,13 @@ and a (channels, K) float32 value table.  Importance order is derived on demand.
 from __future__ import annotations
 
 import copy
+import warnings
 from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, finite_number
+from ..errors import ClwaveWarning, InputError, finite_number
 from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import kept_count, warn_short_budget, warn_stored
@@ -146,7 +147,7 @@ class WaveletVolume:
 
     # ------------------------------------------------------------------ build
     @classmethod
-    def from_volume(cls, volume: Volume, wavelet="cubic", levels=3, *, interpolate=False,
+    def from_volume(cls, volume: Volume, wavelet="cubic", levels=None, *, interpolate=False,
                     transfer_function=None, scheduler=None, progress_bar=None):
         """Decompose every channel of ``volume`` (paper Fig. 1).
 
@@ -155,8 +156,9 @@ class WaveletVolume:
         wavelet : str or sequence of str
             'haar', 'linear', 'quadratic' or 'cubic'; one per channel to mix orders
             (e.g. cubic RGB with Haar opacity, paper Fig. 14).
-        levels : int
-            0 (the voxels' own B-splines) up to ``floor(log2(min axis)) - 1``.
+        levels : int, optional
+            0 (the voxels' own B-splines) up to ``floor(log2(min axis)) - 1``.  Default: 3, or as many as
+            the shortest axis allows, with a :class:`~clwave.ClwaveWarning` saying so (:func:`default_levels`).
         interpolate : bool
             False (default): the samples are the B-spline coefficients (paper eq. 8,
             approximating, mass preserving).  True: prefilter so the model passes
@@ -423,9 +425,18 @@ class WaveletVolume:
 # ---------------------------------------------------------------- helpers
 
 
+#: decomposition levels of a model made without ``levels`` (fewer where the volume's shortest axis allows fewer)
+DEFAULT_LEVELS = 3
+
+
 def check_decomposition(shape, channels, wavelet, levels) -> tuple:
     """``(wavelet of each channel, levels)``, checked for a volume of ``shape`` and ``channels``
-    before any work (:meth:`WaveletVolume.from_volume` takes the same arguments)."""
+    before any work (:meth:`WaveletVolume.from_volume` takes the same arguments); ``levels`` None is the
+    default, lowered with a :class:`ClwaveWarning` where the shape allows fewer (:func:`default_levels`)."""
+    if levels is None:
+        levels, note = default_levels(shape, thresholded=False)
+        if note:
+            warnings.warn(ClwaveWarning(note), stacklevel=3)
     return _channel_wavelets(wavelet, channels), _check_levels(levels, shape)
 
 
@@ -438,7 +449,7 @@ def _channel_wavelets(wavelet, channels) -> list:
     return [wavelet_for(wavelet)] * channels
 
 
-def default_levels(shape, levels=3, thresholded=True) -> tuple:
+def default_levels(shape, levels=DEFAULT_LEVELS, thresholded=True) -> tuple:
     """``(levels, note)`` for a volume of ``shape`` (z, y, x[, c]) given no levels: ``levels``, or as many as its
     shortest axis allows (:func:`max_levels`: every level halves every axis), with a one-line note in the
     command line's words when the axis caps them (None otherwise).  At 0 levels the model is the voxels

@@ -4,10 +4,13 @@ them, and their maxima per superblock."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from ..device.constants import BLOCK, SUPER
 from ..model.geometry import band_lattice
+from ..errors import ClwaveWarning
 from ..model.wavelet import WaveletVolume
 
 
@@ -134,3 +137,18 @@ def reached_blocks(wv: WaveletVolume, bricks) -> np.ndarray | None:
         per = blocks.reshape(count[0], SUPER, count[1], SUPER, count[2], SUPER).transpose(0, 2, 4, 1, 3, 5)
         out[sel] = per[tuple((bricks[sel] - lo).T)]
     return out
+
+
+def warn_below_tolerance(wv: WaveletVolume, bound: float, tol: float, told: set):
+    """Warn when no line integral through the model can reach the absolute tolerance ``tol``: ``bound`` bounds
+    what a ray integrates per world unit (the field's largest block bound, times what shading can add), so no ray
+    gathers more than it times the volume's diagonal, and skipping may then pass every block of every ray (a black
+    image, e.g. micrometre spacing at the default 1e-3).  Once per tolerance in ``told`` (a tracer's)."""
+    limit = bound * float(np.linalg.norm(np.multiply(wv.shape, wv.spacing)))
+    if not 0 < limit < tol or tol in told:
+        return
+    told.add(tol)
+    why = (f"every line integral of this model is at most {limit:.3g} (its largest value times its diagonal), below "
+           f"the absolute tolerance {tol:g}, so the image may be black: give a tolerance well below it, e.g. ")
+    smaller = f"{limit * 1e-3:.1g}"
+    warnings.warn(ClwaveWarning(f"{why}tolerance={smaller}", cli=f"{why}--tolerance {smaller}"), stacklevel=3)

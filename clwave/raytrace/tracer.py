@@ -25,6 +25,7 @@ from ..model.conebeam import ConeBeam, check_camera
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
+from .bounds import warn_below_tolerance
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .wavelet_field import WaveletField
 from .passes import on_device, passes as region_passes
@@ -120,6 +121,7 @@ class RayTracer:
         self.wv, self.field, self.active, self.region = wv, field, int(active), region
         self.lod = self.details != (0,)
         self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
+        self._told = set()  # the tolerances warned about (bounds.warn_below_tolerance)
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
         self.orders = [g.wavelet.order for g in wv.groups]
@@ -283,6 +285,7 @@ class RayTracer:
             light_buf[: len(light_dirs), :3] = light_dirs
         p = phong or Phong()
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
+        warn_below_tolerance(wv, (post.opacity if post else at.q_bound) * shade_gain, tol, self._told)
         per_pixel = H * W * (48 + 9 * np.dtype(real).itemsize)  # image, two stats; carry, ledger, resume
         passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
         if self.field == "bspline" and self.bricks.resident:

@@ -68,7 +68,7 @@ def progressive(wv: WaveletVolume, camera: Camera, steps=None, budget=None, devi
     ----------
     steps : int >= 1
         Number of frames; the coefficient count doubles from frame to frame and the
-        last frame holds every coefficient (it equals :func:`clwave.splat`).
+        last frame holds every coefficient (it equals :func:`clwave.splat` to float32 rounding, docs/splatting.md §5).
     budget : float > 0
         Seconds: keep doubling while the next step is expected to finish within the
         budget (from the last frame's own time per coefficient, set-up apart); the last frame yielded is the

@@ -208,6 +208,8 @@ class SplatRenderer:
         array of that shape, e.g. ``numpy.lib.format.open_memmap`` to stream them to a file); both checked before
         the first view."""
         cameras = list(cameras)
+        if not cameras:  # no view gives no image size to make an (N, H, W, C) array of
+            raise InputError("render_many got no views: give at least one camera")
         for i, camera in enumerate(cameras):
             check_camera(camera, f"cameras[{i}]")
         sizes = sorted({tuple(camera.size) for camera in cameras})
@@ -215,7 +217,7 @@ class SplatRenderer:
             named = ", ".join("x".join(map(str, size)) for size in sizes)
             raise InputError(f"the views have {len(sizes)} image sizes ({named}): render_many takes views of the "
                              "same size (render the others apart)")
-        shape = (len(cameras),) + (sizes[0] if sizes else (0, 0)) + (self.wv.channels,)
+        shape = (len(cameras),) + sizes[0] + (self.wv.channels,)
         if out is None:
             out = np.empty(shape, np.float32)
         elif out.shape != shape or out.dtype != np.float32:

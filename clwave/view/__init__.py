@@ -41,7 +41,7 @@ class Viewer:
                 f'style="border: 0"></iframe>')
 
 
-def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=3, classify="pre"):
+def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=None, classify="pre"):
     """A thresholded :class:`~clwave.WaveletVolume` from a model (as it is), a :class:`~clwave.Volume` or an
     array ``(z, y, x[, c])``: classified with ``tf`` (a preset name or a TransferFunction) first, or with
     ``classify="post"`` the scalar kept with ``tf`` as its transfer function, classified while rendering

@@ -8,7 +8,7 @@ from collections import defaultdict
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import SUPPORTED, check_whole, folder_files, log, read_slices, reading, to_canonical
+from .shared import SUPPORTED, check_whole, folder_files, note, read_slices, reading, to_canonical
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -88,10 +88,10 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
 
     data_zyx = read(order)
     if tilted:
-        log.warning("%s has a gantry tilt of %.3g degrees (its slices shift %.4g mm sideways over %.4g mm along their "
-                    "normal): resampled onto a straight stack, linearly, the new margins filled with its least value",
-                    where, np.degrees(np.arctan(np.linalg.norm(drift))), np.linalg.norm(drift) * (distance.max() -
-                    distance.min()), distance.max() - distance.min())
+        depth = distance.max() - distance.min()
+        note(f"{where} has a gantry tilt of {np.degrees(np.arctan(np.linalg.norm(drift))):.3g} degrees (its slices "
+             f"shift {np.linalg.norm(drift) * depth:.4g} mm sideways over {depth:.4g} mm along their normal): "
+             f"resampled onto a straight stack, linearly, the new margins filled with its least value")
         data_zyx = _untilt(data_zyx, shifts - lo, (hi - lo).astype(int))
     # index (column, row, slice) -> LPS patient coordinates (mm); the first slice's corner moved by the margin
     affine_lps = np.eye(4)

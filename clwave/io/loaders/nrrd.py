@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_declared_size, check_whole, log, to_canonical
+from .shared import check_declared_size, check_whole, note, to_canonical
 
 _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
@@ -60,8 +60,8 @@ def read_nrrd(path, fits=None, warn_spacing=True):
     else:
         spacings = np.asarray(header.get("spacings", np.ones(len(sizes))), float)[spatial]
         if warn_spacing and not np.all(np.isfinite(spacings)):
-            log.warning("%s: its spacing (dz, dy, dx) %s is unknown (nan) on some axes; taken as 1 there: give "
-                        "spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(map(str, spacings[::-1])))
+            note(f"{path}: its spacing (dz, dy, dx) {', '.join(map(str, spacings[::-1]))} is unknown (nan) on some "
+                 f"axes; taken as 1 there: give spacing= (--spacing DZ,DY,DX) for the true one")
         affine[:3, :3] = np.diag(np.where(np.isfinite(spacings), spacings, 1.0))
     # other spaces (scanner-xyz, 3D-right-handed, none) are right-handed: taken as RAS
     signs = _NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1))

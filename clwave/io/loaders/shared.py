@@ -7,16 +7,24 @@ import logging
 import math
 import os
 import re
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from ...device.memory import check_fits
-from ...errors import ClwaveError, FileFormatError, InputError
+from ...errors import ClwaveError, ClwaveWarning, FileFormatError, InputError
 from ..progress import progress
 
-log = logging.getLogger(__name__)
+log = logging.getLogger(__name__)  # notes below a warning (an OME size not given: 1 micrometre, as OME says)
+
+
+def note(text: str):
+    """What a reading did other than the file says (an oblique volume turned, a spacing taken as 1, a gantry tilt
+    resampled) as a :class:`~clwave.ClwaveWarning`, as the model's warnings are: a pipeline catching warnings sees
+    it, and the command line prints it as ``clwave: warning: ...``."""
+    warnings.warn(ClwaveWarning(text), stacklevel=3)
 
 SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of 2-D slices), a folder of "
              "DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a Zarr or OME-Zarr "
@@ -270,8 +278,7 @@ def to_canonical(array_ijk, affine_ras):
     affine_xyz = affine_ras @ inv_ornt_aff(ornt, array_ijk.shape[:3])
     tilt = np.degrees(np.abs(obliquity(affine_xyz)).max())
     if tilt > 0.01:
-        log.warning("the volume is oblique by %.2f degrees; it is shown in the closest "
-                    "canonical (RAS) orientation", tilt)
+        note(f"the volume is oblique by {tilt:.2f} degrees; it is shown in the closest canonical (RAS) orientation")
     spacing_xyz = np.linalg.norm(affine_xyz[:3, :3], axis=0)
     centre = affine_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
     array_zyx = array_xyz.transpose((2, 1, 0) + tuple(range(3, array_xyz.ndim)))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_whole, folder_files, log, read_slices
+from .shared import check_whole, folder_files, log, note, read_slices
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
@@ -32,9 +32,9 @@ def read_tiff(path, fits=None, stack=True):
         written = tif.shaped_metadata[0].get("shape") if tif.is_shaped and tif.shaped_metadata else None
         planes = stack and len(tif.pages) == 1 and axes == "SYX" and list(shape) == written
         if planes:
-            log.warning("%s is one TIFF page of %d planar samples, as tifffile.imwrite writes a %s array: read as "
-                        "%d slices (write a stack with photometric='minisblack' to say so)", path, shape[0],
-                        " x ".join(map(str, shape)), shape[0])
+            note(f"{path} is one TIFF page of {shape[0]} planar samples, as tifffile.imwrite writes a "
+                 f"{' x '.join(map(str, shape))} array: read as {shape[0]} slices (write a stack with "
+                 f"photometric='minisblack' to say so)")
             axes = "QYX"
         pages = len(tif.pages) > 1 and len(axes.replace("S", "")) == 2  # pages written one at a time: one series each
         if pages:
@@ -91,9 +91,9 @@ def _ome_spacing(tif, path):
             log.info("%s: its OME metadata gives no PhysicalSize%s; taken as 1 micrometre", path, axis)
         spacing.append(d)
     if bad:
-        log.warning("%s: its OME PhysicalSize along %s is not a positive length in %s; taken as 1 micrometre there: "
-                    "give spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(bad),
-                    ", ".join(OME_MICROMETRES))
+        note(f"{path}: its OME PhysicalSize along {', '.join(bad)} is not a positive length in "
+             f"{', '.join(OME_MICROMETRES)}; taken as 1 micrometre there: give spacing= (--spacing DZ,DY,DX) for the "
+             f"true one")
     return tuple(spacing)
 
 
@@ -109,9 +109,8 @@ def _imagej_spacing(tif, path):
         spacing = (float(meta.get("spacing", 1.0)),) + tuple(float(d) for d in 1 / per_unit)
     bad = [a for a, d in zip("zyx", spacing) if not (np.isfinite(d) and d > 0)]
     if bad:  # each axis on its own: a bad z spacing leaves the resolution's y and x
-        log.warning("%s: its ImageJ spacing along %s (dz, dy, dx = %s) is not positive and finite; taken as 1 there: "
-                    "give spacing= (--spacing DZ,DY,DX) for the true one", path, ", ".join(bad),
-                    ", ".join(f"{d:g}" for d in spacing))
+        note(f"{path}: its ImageJ spacing along {', '.join(bad)} (dz, dy, dx = {', '.join(f'{d:g}' for d in spacing)})"
+             f" is not positive and finite; taken as 1 there: give spacing= (--spacing DZ,DY,DX) for the true one")
     return tuple(1.0 if a in bad else d for a, d in zip("zyx", spacing))
 
 
