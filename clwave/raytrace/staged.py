@@ -123,8 +123,15 @@ class StagedTracer:
 
     @property
     def ready(self) -> bool:
-        """Whether the full stage is set up (or its set-up failed: :meth:`wait` raises its error)."""
+        """Whether the full stage's set-up has ended: the stage set up, its set-up failed (:attr:`failed`) or given
+        up (:meth:`abandon`)."""
         return self._thread.ident is not None and not self._thread.is_alive()
+
+    @property
+    def failed(self) -> bool:
+        """Whether the full stage's set-up failed: :meth:`render` goes on with the coarse stage, :meth:`wait` and
+        :meth:`refine` raise its error."""
+        return self.ready and self._failure is not None
 
     def wait(self, timeout=None):
         """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first); the
@@ -139,11 +146,12 @@ class StagedTracer:
 
     def render(self, camera: Camera | ConeBeam, **options):
         """One image from the best stage ready now: the full one (``options`` as :meth:`RayTracer.render`), or
-        the coarse one at its coarsest detail (``detail=`` refused there).  ``meta["stage"]`` says which."""
+        the coarse one at its coarsest detail (``detail=`` refused there), for good where the full stage's set-up
+        failed or was given up.  ``meta["stage"]`` says which."""
         # the coarse stage taken before ``ready`` is read: a wait() from another thread (the viewer's) lets it go
         # once the full stage is ready, which this render then takes
         coarse = self.coarse
-        full = self.wait(0) if self.ready else None
+        full = self.wait(0) if self.ready and not self.failed else None
         if full is None and options.get("detail") is not None:
             raise InputError("detail= needs the full stage: wait() for it first")
         result = full.render(camera, **options) if full else coarse.render(camera, **options,
