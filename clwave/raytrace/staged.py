@@ -134,8 +134,8 @@ class StagedTracer:
         return self.ready and self._failure is not None
 
     def wait(self, timeout=None):
-        """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first); the
-        coarse stage is let go then (its memory)."""
+        """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first, or once
+        the set-up has been given up: :meth:`abandon`); the coarse stage is let go then (its memory)."""
         self.start()
         self._thread.join(timeout)
         if self._failure is not None:
@@ -171,7 +171,9 @@ class StagedTracer:
         bit its ``render``, from the image as large as the last coarse frame's (each frame at least the size and
         detail of the one before, docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`;
         ``transfer_function``: as :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.
-        ``meta["stage"]`` says which stage made a frame."""
+        ``meta["stage"]`` says which stage made a frame.  The full stage's set-up failed: its error; given up
+        (:meth:`abandon`): :class:`~clwave.io.clw.Abandoned`, where the full stage's frames would begin, as from a
+        coarse frame's ``final_image()``."""
         check_error(error)
         check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
@@ -180,20 +182,27 @@ class StagedTracer:
 
     def _frames(self, camera, options, error):
         view, start = camera.view((self.coarse or self.full).wv), time.perf_counter()
-        final = FinalImage(lambda: self.wait().render(camera, **options).image)
+        final = FinalImage(lambda: self._full_stage().render(camera, **options).image)
         index, shown = 0, None  # shown: the last coarse frame
         for made in self._coarse_frames(camera, view, options, final, start):
             made.index, index, shown = index, index + 1, made
             yield made
             if reached(made, error):
                 return
-        full = self.wait()
+        full = self._full_stage()
         plan = schedule(view.size, full.details)  # after a coarse frame, images at least as large as its (§8)
         steps = None if shown is None else sum(reduction <= shown.reduction for _, reduction in plan)
         for made in frames(full, camera, options, steps=steps, error=error, final=final, previous=shown):  # §9
             made.index, made.seconds, made.meta["stage"] = index, time.perf_counter() - start, "full"
             index += 1
             yield made
+
+    def _full_stage(self):
+        """:meth:`wait` for the full stage, :class:`~clwave.io.clw.Abandoned` where it was given up."""
+        full = self.wait()
+        if full is None:
+            raise Abandoned("the full stage was given up (StagedTracer.abandon): nothing to refine to")
+        return full
 
     def lacks_in_line_integrals(self, image, view) -> float:
         """What the coarse stage's X-ray ``image`` (H, W, C) of ``view`` (its own, reduced view; along its central
