@@ -373,3 +373,58 @@ def test_close_during_the_shaded_tracers_build_of_a_model_in_memory_stops_it_at_
         v.close()
     assert "preparing the ray tracer" in status["message"]
     assert closed < 30 and not left and len(slabs) == 1 and shaded.tracer is None, (closed, left, len(slabs))
+
+
+@pytest.mark.parametrize("first", ["stop", "reader"])
+def test_a_stop_and_the_reader_settle_the_whole_model_once_in_either_order(clw, monkeypatch, first):
+    """The whole model's Future is the reader's to settle once it has started: a stop that looks at it just before
+    the reader sets it (forced: the reader's set waits for the stop's look, where the stop looks) or just after,
+    neither fails; the Future holds the reader's model, and the reader ends."""
+    from concurrent.futures import Future
+
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    setting, looked, settled = threading.Event(), threading.Event(), threading.Event()
+
+    class Interleaved(Future):
+        def set_result(self, result):  # the reader's set: after the stop's look, where the order is "stop"
+            setting.set()
+            looked.wait(60)
+            super().set_result(result)
+            settled.set()
+
+        def done(self):
+            answer = super().done()
+            if threading.current_thread().name != "clwave-view-read" and not looked.is_set():  # the stop's look
+                looked.set()
+                settled.wait(60)  # the reader sets it now
+            return answer
+
+    v = view(clw, size=32, tolerance=2e-2)
+    v.server.whole = whole = Interleaved()
+    if first == "reader":
+        looked.set()
+    v.server.read_whole()
+    assert (settled if first == "reader" else setting).wait(60)
+    v.close()  # the reader was done with the file: not waited for
+    looked.set()  # where the stop did not look, the reader goes on
+    v.server._reader.join(60)
+    assert "clwave-view-read" not in alive() and whole.result(0).kept == clwave.WaveletVolume.open(clw).kept
+
+
+def test_a_failing_stop_leaves_close_returning_and_the_loop_closed(monkeypatch, caplog):
+    """``Viewer.close()`` when the server's stop raises (a bug): logged, and the loop still stopped and closed, its
+    thread ended, close returning."""
+    from clwave.view.server import ViewServer
+
+    stop = ViewServer.stop
+
+    async def failing(self):
+        await stop(self)
+        raise RuntimeError("a bug in the stop")
+
+    monkeypatch.setattr(ViewServer, "stop", failing)
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
+    v = view(wv, size=16)
+    v.close()
+    assert not v._background.thread.is_alive() and v._background.loop.is_closed()
+    assert any(r.getMessage() == "stopping the viewer failed" and r.exc_info for r in caplog.records)
