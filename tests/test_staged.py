@@ -16,7 +16,8 @@ import pytest
 import clwave
 from clwave import WaveletVolume
 from clwave.device import memory
-from clwave.io.clw import MASK_CHUNK, Abandoned, FileMask
+from clwave.io.clw import MASK_CHUNK, FileMask
+from clwave.model.mask import Abandoned
 from clwave.io.occupancy import OccupancyGrid, mass_on_occupied
 from clwave.io.summary import approximation_occupancy, detail_energy, detail_field
 from clwave.model.wavelet import importance_of

@@ -172,7 +172,7 @@ class StagedTracer:
         detail of the one before, docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`;
         ``transfer_function``: as :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.
         ``meta["stage"]`` says which stage made a frame.  The full stage's set-up failed: its error; given up
-        (:meth:`abandon`): :class:`~clwave.io.clw.Abandoned`, where the full stage's frames would begin, as from a
+        (:meth:`abandon`): :class:`~clwave.model.mask.Abandoned`, where the full stage's frames would begin, as from a
         coarse frame's ``final_image()``."""
         check_error(error)
         check_camera(camera)
@@ -198,7 +198,7 @@ class StagedTracer:
             yield made
 
     def _full_stage(self):
-        """:meth:`wait` for the full stage, :class:`~clwave.io.clw.Abandoned` where it was given up."""
+        """:meth:`wait` for the full stage, :class:`~clwave.model.mask.Abandoned` where it was given up."""
         full = self.wait()
         if full is None:
             raise Abandoned("the full stage was given up (StagedTracer.abandon): nothing to refine to")
