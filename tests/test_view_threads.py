@@ -180,8 +180,9 @@ def test_a_tab_closed_while_the_ray_tracer_is_prepared_leaves_no_task(monkeypatc
 
 def test_shaded_views_go_on_with_the_coarse_stage_after_the_full_stages_set_up_fails(clw, monkeypatch):
     """Reading the rest failing fails the shaded views' full stage (it waits for that model): each tab hears it once,
-    and the shaded views go on with the coarse stage, a still view's whole image the coarse stage's (another tracer
-    of the file's, within one grey level) and a drag frame drawn, no error for either; X-ray views go on too."""
+    and the shaded views go on with the coarse stage, the model served from then on: a still view's whole image the
+    coarse stage's (another tracer of the file's, within one grey level) and final, no frame of it a prefix, and a
+    drag frame drawn, no error for either; X-ray views go on too."""
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
     monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: (_ for _ in ()).throw(
         clwave.FileFormatError("damaged")))
@@ -223,6 +224,7 @@ def test_shaded_views_go_on_with_the_coarse_stage_after_the_full_stages_set_up_f
         "making the whole model for the X-ray", "making the whole model for the shaded"]
     assert (still_error, drag_error, xray_error) == (None, None, None)
     assert len(drag) == 1 and xray[-1]["seq"] == 4
+    assert [(f["reduction"], f["final"], f["prefix"]) for f in still] == [(4, False, False), (1, True, False)]
     assert shaded.staged.failed and shaded.tracer is None
     camera = clwave.Camera(40.0, 20.0, 32, extent=still[-1]["extent"])
     expect = clwave.RayTracer.open(clw).render(camera, tolerance=2e-2)
