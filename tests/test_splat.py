@@ -359,3 +359,26 @@ def test_magnified_views_equal_exact_line_integrals_from_textures_that_do_not_gr
         assert pools[1] <= 1.5 * pools[0]
     else:
         assert pools[0] == pools[1]
+
+
+@pytest.mark.parametrize("kind", [float, lambda s: np.int64(s) if isinstance(s, int) else np.float64(s)],
+                         ids=["float", "numpy"])
+def test_the_texture_lookup_follows_the_texels_per_pixel_by_value(cc, data, monkeypatch, kind):
+    """A band's texels per pixel set its lookup by value (phase planes from 2, gathered per pixel below it, in a
+    magnified view), not by type: the same numbers as another type give the same tables and images bit for bit."""
+    from clwave.splat import tables
+
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "linear", levels=2)
+    cameras = [clwave.Camera(30, 20, size=32), clwave.Camera(30, 20, size=32, extent=0.25)]
+
+    def drawn(cam):
+        t = tables.ViewTables(wv, 0, [(cam.view(wv), None)])
+        return t.tex_int, t.texels, clwave.splat(wv, cam, device=cc).image
+
+    expect = [drawn(cam) for cam in cameras]
+    assert [{lookup & (tables.LINEAR_U | tables.GATHER_U) for lookup in ints[:, 3]} for ints, _, _ in expect] == [
+        {tables.LINEAR_U}, {tables.GATHER_U}]  # both modes
+    per_pixel = tables.texels_per_pixel
+    monkeypatch.setattr(tables, "texels_per_pixel", lambda *a, **k: kind(per_pixel(*a, **k)))
+    for cam, want in zip(cameras, expect):
+        assert all(np.array_equal(got, w) for got, w in zip(drawn(cam), want))

@@ -26,7 +26,10 @@ TEX_LAYER = np.array([(0, 0), (0, 1), (0, 2), (0, 3), (0, 4), (1, 0), (1, 1), (1
 LOOKUPS = (0, LINEAR_U, LINEAR_V, LINEAR_U | LINEAR_V, GATHER_U | LINEAR_V, GATHER_U)
 
 
-def random_scene(rng, n=400, n_tex=12):
+def random_scene(rng, n=400, n_tex=12, beyond=0.0):
+    """Random splats of random textures; ``beyond``: the boxes of textures gathered along u (``GATHER_U``) reach
+    that many pixels beyond their first and last texel, where the kernels read zeros (the kernels' boxes round
+    inward, so only this scene reaches there)."""
     coef = np.zeros((n + 7, 4), np.int32)
     coef[:, :3] = rng.integers(-3, 12, (n + 7, 3))
     coef[:, 3] = rng.integers(0, 3, n + 7) * 8 + rng.integers(0, 8, n + 7)
@@ -48,7 +51,9 @@ def random_scene(rng, n=400, n_tex=12):
         sv = float(P) if lookup == LINEAR_U | LINEAR_V else rng.uniform(0.2, 3.0)
         planes = pack_texture(data, P if lookup & LINEAR_U else 1)
         ru, rv = (0.0 if lookup & (LINEAR_U | GATHER_U) else 0.5), (0.0 if lookup & LINEAR_V else 0.5)
-        boxes.append((-(cu + ru) / su, (nu - 1 + ru - cu) / su, -(cv + rv) / sv, (nv - 1 + rv - cv) / sv))
+        reach = beyond if lookup & GATHER_U else 0.0
+        boxes.append((-(cu + ru) / su - reach, (nu - 1 + ru - cu) / su + reach, -(cv + rv) / sv,
+                      (nv - 1 + rv - cv) / sv))
         ints.append((off, planes.shape[2], planes.shape[1], lookup))
         maps.append((cu, cv, su, sv))
         pool.append(planes.ravel())
@@ -68,7 +73,11 @@ VARIANTS = [("cpu", 4), ("cpu", 1), ("gpu", 4), ("gpu", 1)]  # accumulation kern
 @pytest.fixture
 def scene(rng):
     """A random scene and every stage's oracle output, in pipeline order."""
-    s = random_scene(rng)
+    return with_oracles(random_scene(rng))
+
+
+def with_oracles(s):
+    """Scene ``s`` with every stage's oracle output, in pipeline order."""
     n, first = s["n"], s["first"]
     s["centre"], s["bbox"], s["stex"], s["count"] = reference.project(
         s["coef"], first, s["band_tex"], s["band_origin"], s["step_col"], s["step_row"], s["tex_box"],
@@ -189,8 +198,12 @@ def test_place(cc, scene, channels):
         assert np.array_equal(records.get(), expected)
 
 
+@pytest.mark.parametrize("beyond", [0.0, 3.0])
 @pytest.mark.parametrize("variant, channels", VARIANTS)
-def test_accumulate(cc, scene, variant, channels):
+def test_accumulate(cc, rng, variant, channels, beyond):
+    """The image against the oracle's; ``beyond``: boxes of gathered textures reaching 3 pixels beyond their texels,
+    read as zeros (the oracle's ring) where they once weighted the edge texel by the position's fraction."""
+    scene = with_oracles(random_scene(rng, beyond=beyond))
     st, q = Stages(cc, channels, variant), cc.queue
     d = upload(q, scene)
     records = cla.to_device(q, reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"],

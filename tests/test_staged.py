@@ -17,6 +17,7 @@ import clwave
 from clwave import WaveletVolume
 from clwave.device import memory
 from clwave.io.clw import MASK_CHUNK, FileMask
+from clwave.model.mask import Abandoned
 from clwave.io.occupancy import OccupancyGrid, mass_on_occupied
 from clwave.io.summary import approximation_occupancy, detail_energy, detail_field
 from clwave.model.wavelet import importance_of
@@ -380,6 +381,30 @@ def test_an_abandoned_staged_refinement_leaves_the_tracer_usable(model_file):
     last = list(staged.refine(cam, tolerance=1e-3))[-1]
     assert staged.full.expansions == 1  # nothing set up again
     assert np.array_equal(last.image, RayTracer(WaveletVolume.open(model_file)).render(cam, tolerance=1e-3).image)
+
+
+@pytest.mark.parametrize("model_file", ["cubic"], indirect=True)
+def test_a_refinement_after_the_set_up_is_given_up_raises_abandoned(model_file):
+    """``abandon()`` (a viewer stopping) before the set-up starts: ``refine`` yields the coarse frames, then raises
+    ``Abandoned`` where the full stage's would begin, as does a coarse frame's final image; ``wait()`` gives None and
+    ``render`` the coarse stage, the image another tracer's coarse stage gives."""
+    camera = clwave.Camera(30, 20, size=64)
+    staged = RayTracer.open(model_file)
+    staged.abandon()
+    frames = []
+    with pytest.raises(Abandoned, match="given up"):
+        for frame in staged.refine(camera, tolerance=1e-2):
+            frames.append(frame)
+    assert frames and all(f.meta["stage"] == "coarse" for f in frames)
+    with pytest.raises(Abandoned, match="given up"):
+        frames[0].final_image()
+    assert staged.wait() is None and not staged.failed
+    with pytest.raises(Abandoned, match="given up"):
+        next(staged.refine(camera, tolerance=1e-2))  # set-up over: no coarse frame first
+    result, other = staged.render(camera, tolerance=1e-2), RayTracer.open(model_file)
+    expect = other.render(camera, tolerance=1e-2)  # its first image: the coarse stage's
+    other.wait()  # its set-up, which that image started, not left running into the next test
+    assert result.meta["stage"] == expect.meta["stage"] == "coarse" and np.array_equal(result.image, expect.image)
 
 
 def test_a_set_up_given_up_stops_between_two_slabs_of_its_expansion(model_file, monkeypatch):

@@ -178,10 +178,80 @@ def test_a_tab_closed_while_the_ray_tracer_is_prepared_leaves_no_task(monkeypatc
     assert not v.server.sessions and not [name for name in left if name.startswith("Event.")], left
 
 
+def test_shaded_views_go_on_with_the_coarse_stage_after_the_full_stages_set_up_fails(clw, monkeypatch):
+    """Reading the rest failing fails the shaded views' full stage (it waits for that model): each tab hears it once,
+    and the shaded views go on with the coarse stage, the model served from then on: a still view's whole image the
+    coarse stage's (another tracer of the file's, within one grey level) and final, no frame of it a prefix, and a
+    drag frame drawn, no error for either; X-ray views go on too."""
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    monkeypatch.setattr(PrefixFirst, "whole", lambda self, **k: (_ for _ in ()).throw(
+        clwave.FileFormatError("damaged")))
+    receive = test_view_prefix.receive
+
+    async def drawn(ws, seq, last):  # the view's frames until one that ``last`` says is its last, or its error
+        frames = []
+        while True:
+            kind, message = await receive(ws)
+            if kind == "error":
+                return frames, message["message"]
+            if kind == "frame" and message["seq"] == seq:
+                frames.append(message)
+                if last(message):
+                    return frames, None
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await receive(ws)
+            await ws.send_str(view_message(seq=1, mode="shaded"))
+            told = []
+            while len(told) < 2:  # the X-ray views' line and the shaded views'; any other error fails below
+                kind, message = await receive(ws)
+                if kind == "error":
+                    told.append(message["message"])
+            await ws.send_str(view_message(seq=2, mode="shaded", azimuth=40.0))
+            still = await drawn(ws, 2, lambda f: f["reduction"] == 1)
+            await ws.send_str(view_message(seq=3, mode="shaded", azimuth=50.0, moving=True))
+            drag = await drawn(ws, 3, lambda f: True)
+            await ws.send_str(view_message(seq=4, azimuth=60.0))
+            xray = await drawn(ws, 4, lambda f: f["mime"] == "image/png" and f["coefficients"] == 2048)
+            return told, still, drag, xray
+
+    with view(clw, size=32, tolerance=2e-2) as v:
+        told, (still, still_error), (drag, drag_error), (xray, xray_error) = asyncio.run(asyncio.wait_for(go(v), 120))
+        shaded = v.server.sources["shaded"]
+    assert sorted(m.partition(" views failed")[0] for m in told) == [
+        "making the whole model for the X-ray", "making the whole model for the shaded"]
+    assert (still_error, drag_error, xray_error) == (None, None, None)
+    assert len(drag) == 1 and xray[-1]["seq"] == 4
+    assert [(f["reduction"], f["final"], f["prefix"]) for f in still] == [(4, False, False), (1, True, False)]
+    assert shaded.staged.failed and shaded.tracer is None
+    camera = clwave.Camera(40.0, 20.0, 32, extent=still[-1]["extent"])
+    expect = clwave.RayTracer.open(clw).render(camera, tolerance=2e-2)
+    assert expect.meta["stage"] == "coarse"
+    expect = expect.to_uint8(background=(0.0, 0.0, 0.0))
+    assert expect.std() > 5 and np.abs(test_view_prefix.decode(still[-1]["data"]).astype(int) - expect).max() <= 1
+
+
 def test_a_damaged_coarse_share_fails_the_shaded_views_alone(clw, tmp_path, monkeypatch):
     """A file whose coarse stage's summary is damaged (the details' field energy beyond the tiers'): reading it
     ahead of the rest fails quietly, the whole model is read and served to the X-ray views, and only the shaded
-    views' coarse stage, reading it again, fails, with the file's one line."""
+    views' coarse stage, reading it again, fails, with the file's one line (a shaded view's error, the X-ray views
+    drawing on)."""
+    receive = test_view_prefix.receive
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await receive(ws)
+            await ws.send_str(view_message(seq=1, mode="shaded"))
+            while (answer := await receive(ws))[0] == "status":  # "preparing the ray tracer"
+                pass
+            await ws.send_str(view_message(seq=2))
+            while (drawn := await receive(ws))[0] != "frame":
+                pass
+            return answer, drawn
+
     monkeypatch.setattr(view_prefix, "PREFIX", 2048)
     bad = tmp_path / "bad.clw"
     shutil.copy(clw, bad)
@@ -198,6 +268,9 @@ def test_a_damaged_coarse_share_fails_the_shaded_views_alone(clw, tmp_path, monk
         while not v.server.sources["xray"].complete and time.monotonic() < deadline:
             time.sleep(0.01)
         assert v.server.sources["xray"].complete and v.server.wv.kept == kept
+        (kind, answer), (_, drawn) = asyncio.run(asyncio.wait_for(go(v), 60))
+    assert kind == "error" and answer["seq"] == 1 and "detail_field" in answer["message"]
+    assert "\n" not in answer["message"] and drawn["seq"] == 2
 
 
 def test_a_file_replaced_while_served_is_refused_by_the_coarse_stage(clw, tmp_path, monkeypatch):
@@ -253,6 +326,8 @@ def test_close_while_the_whole_is_ranked_does_not_wait_for_the_ranking(clw, monk
         assert time.perf_counter() - start < 5.0
     finally:
         release.set()
+    v.server._reader.join(30)  # the daemon reader, released, ends by itself
+    assert "clwave-view-read" not in alive()
 
 
 def test_close_during_the_shaded_tracers_build_of_a_model_in_memory_stops_it_at_a_slab(monkeypatch):
@@ -300,3 +375,58 @@ def test_close_during_the_shaded_tracers_build_of_a_model_in_memory_stops_it_at_
         v.close()
     assert "preparing the ray tracer" in status["message"]
     assert closed < 30 and not left and len(slabs) == 1 and shaded.tracer is None, (closed, left, len(slabs))
+
+
+@pytest.mark.parametrize("first", ["stop", "reader"])
+def test_a_stop_and_the_reader_settle_the_whole_model_once_in_either_order(clw, monkeypatch, first):
+    """The whole model's Future is the reader's to settle once it has started: a stop that looks at it just before
+    the reader sets it (forced: the reader's set waits for the stop's look, where the stop looks) or just after,
+    neither fails; the Future holds the reader's model, and the reader ends."""
+    from concurrent.futures import Future
+
+    monkeypatch.setattr(view_prefix, "PREFIX", 2048)
+    setting, looked, settled = threading.Event(), threading.Event(), threading.Event()
+
+    class Interleaved(Future):
+        def set_result(self, result):  # the reader's set: after the stop's look, where the order is "stop"
+            setting.set()
+            looked.wait(60)
+            super().set_result(result)
+            settled.set()
+
+        def done(self):
+            answer = super().done()
+            if threading.current_thread().name != "clwave-view-read" and not looked.is_set():  # the stop's look
+                looked.set()
+                settled.wait(60)  # the reader sets it now
+            return answer
+
+    v = view(clw, size=32, tolerance=2e-2)
+    v.server.whole = whole = Interleaved()
+    if first == "reader":
+        looked.set()
+    v.server.read_whole()
+    assert (settled if first == "reader" else setting).wait(60)
+    v.close()  # the reader was done with the file: not waited for
+    looked.set()  # where the stop did not look, the reader goes on
+    v.server._reader.join(60)
+    assert "clwave-view-read" not in alive() and whole.result(0).kept == clwave.WaveletVolume.open(clw).kept
+
+
+def test_a_failing_stop_leaves_close_returning_and_the_loop_closed(monkeypatch, caplog):
+    """``Viewer.close()`` when the server's stop raises (a bug): logged, and the loop still stopped and closed, its
+    thread ended, close returning."""
+    from clwave.view.server import ViewServer
+
+    stop = ViewServer.stop
+
+    async def failing(self):
+        await stop(self)
+        raise RuntimeError("a bug in the stop")
+
+    monkeypatch.setattr(ViewServer, "stop", failing)
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
+    v = view(wv, size=16)
+    v.close()
+    assert not v._background.thread.is_alive() and v._background.loop.is_closed()
+    assert any(r.getMessage() == "stopping the viewer failed" and r.exc_info for r in caplog.records)

@@ -248,14 +248,14 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
         if (!(t < piece_end)) { /* a mixed brick's next run of pieces with one flag: the coarse slot or the fine one */
             Planes cuts = next_planes(x0, dd, inv, t, active.piece_lat);
             piece_end = fmin(brick_end, nearest(&cuts));
-            /* the next piece's index steps with the cut planes the ray crosses (no floors or divisions per piece) */
-            int3 piece = piece_index(X0 + (t + piece_end) / 2 * D, &active);
-            const int flag = field_piece(G, piece, &active);
+            /* a piece's index is that of the cut planes ahead of it (stepped by step_planes as the ray crosses
+             * them) less a constant of the run: no floors or divisions per piece */
+            const int3 from_cuts = piece_index(X0 + (t + piece_end) / 2 * D, &active) - cuts.k;
+            const int flag = field_piece(G, cuts.k + from_cuts, &active);
             while (piece_end < brick_end) {
-                piece += step & convert_int3(cuts.t <= piece_end);
                 step_planes(X0, inv3, step, piece_end, active.piece_lat, &cuts);
                 const real next = fmin(brick_end, nearest(&cuts));
-                if (field_piece(G, piece, &active) != flag)
+                if (field_piece(G, cuts.k + from_cuts, &active) != flag)
                     break;
                 piece_end = next;
             }

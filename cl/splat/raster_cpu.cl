@@ -60,9 +60,12 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
                        + fv * ((1.0f - f.x) * vload16(0, r00 + xbase + a.z) + f.x * vload16(0, r01 + xbase + a.z));
             } else if (a.w & 4) {  /* u texels of more than half a pixel (s_u < 2): 16 lanes span at most 32
                                     * texels, so each lane's two are shuffled out of 32 consecutive ones of each
-                                    * texel row; lanes off the texture read the margin or a neighbour, masked */
-                const float16 tu = f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y, fl = floor(tu), fu = tu - fl;
-                const int16 col = clamp(convert_int16(fl), -1, a.y - 1);
+                                    * texel row; lanes off the texture read the margin or a neighbour, masked.
+                                    * Positions clamped to the margins [-1, a.y] first, the weight from the
+                                    * clamped column: beyond them a lane reads zeros, not the edge texel */
+                const float16 tu = clamp(f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y, -1.0f, (float)a.y);
+                const int16 col = min(convert_int16(floor(tu)), (int16)(a.y - 1));
+                const float16 fu = tu - convert_float16(col);
                 const int c0 = col.s0;
                 const uint16 i0 = convert_uint16(col - c0), i1 = i0 + 1;
                 __global const float *p0 = r00 + c0, *p1 = r00 + c0 + a.z;

@@ -65,9 +65,11 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
                 if (a.w & 1) {
                     sample = (1.0f - fv) * ((1.0f - f.x) * r00[x] + f.x * r01[x])
                            + fv * ((1.0f - f.x) * r00[x + a.z] + f.x * r01[x + a.z]);
-                } else if (a.w & 4) {  /* u coarser than the pixel: this pixel's two texels */
-                    const float tu = f.x + ((float)x - cs.x) * cs.y, fl = floor(tu), fu = tu - fl;
-                    const int col = clamp((int)fl, -1, a.y - 1);
+                } else if (a.w & 4) {  /* u coarser than the pixel: this pixel's two texels, the position
+                                        * clamped to the margins first (raster_cpu.cl) */
+                    const float tu = clamp(f.x + ((float)x - cs.x) * cs.y, -1.0f, (float)a.y);
+                    const int col = min((int)floor(tu), a.y - 1);
+                    const float fu = tu - (float)col;
                     sample = (1.0f - fv) * ((1.0f - fu) * r00[col] + fu * r00[col + 1])
                            + fv * ((1.0f - fu) * r00[col + a.z] + fu * r00[col + 1 + a.z]);
                 } else {

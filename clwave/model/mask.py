@@ -14,7 +14,8 @@ import numpy as np
 
 class Abandoned(Exception):
     """Work given up from another thread: a :class:`ContentMask` asked for a box after its set-up was given up
-    (``abandon`` set), or a file's reading stopped (the viewer's)."""
+    (``abandon`` set), a file's reading stopped (the viewer's: its reader, and the whole model that the shaded views
+    wait for), or a staged tracer's refinement after its full stage was given up (``StagedTracer.abandon``)."""
 
 
 class ContentMask:

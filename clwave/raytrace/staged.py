@@ -123,12 +123,19 @@ class StagedTracer:
 
     @property
     def ready(self) -> bool:
-        """Whether the full stage is set up (or its set-up failed: :meth:`wait` raises its error)."""
+        """Whether the full stage's set-up has ended: the stage set up, its set-up failed (:attr:`failed`) or given
+        up (:meth:`abandon`)."""
         return self._thread.ident is not None and not self._thread.is_alive()
 
+    @property
+    def failed(self) -> bool:
+        """Whether the full stage's set-up failed: :meth:`render` goes on with the coarse stage, :meth:`wait` and
+        :meth:`refine` raise its error."""
+        return self.ready and self._failure is not None
+
     def wait(self, timeout=None):
-        """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first); the
-        coarse stage is let go then (its memory)."""
+        """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first, or once
+        the set-up has been given up: :meth:`abandon`); the coarse stage is let go then (its memory)."""
         self.start()
         self._thread.join(timeout)
         if self._failure is not None:
@@ -139,11 +146,12 @@ class StagedTracer:
 
     def render(self, camera: Camera | ConeBeam, **options):
         """One image from the best stage ready now: the full one (``options`` as :meth:`RayTracer.render`), or
-        the coarse one at its coarsest detail (``detail=`` refused there).  ``meta["stage"]`` says which."""
+        the coarse one at its coarsest detail (``detail=`` refused there), for good where the full stage's set-up
+        failed or was given up.  ``meta["stage"]`` says which."""
         # the coarse stage taken before ``ready`` is read: a wait() from another thread (the viewer's) lets it go
         # once the full stage is ready, which this render then takes
         coarse = self.coarse
-        full = self.wait(0) if self.ready else None
+        full = self.wait(0) if self.ready and not self.failed else None
         if full is None and options.get("detail") is not None:
             raise InputError("detail= needs the full stage: wait() for it first")
         result = full.render(camera, **options) if full else coarse.render(camera, **options,
@@ -163,7 +171,9 @@ class StagedTracer:
         bit its ``render``, from the image as large as the last coarse frame's (each frame at least the size and
         detail of the one before, docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`;
         ``transfer_function``: as :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.
-        ``meta["stage"]`` says which stage made a frame."""
+        ``meta["stage"]`` says which stage made a frame.  The full stage's set-up failed: its error; given up
+        (:meth:`abandon`): :class:`~clwave.model.mask.Abandoned`, where the full stage's frames would begin, as from a
+        coarse frame's ``final_image()``."""
         check_error(error)
         check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
@@ -172,20 +182,27 @@ class StagedTracer:
 
     def _frames(self, camera, options, error):
         view, start = camera.view((self.coarse or self.full).wv), time.perf_counter()
-        final = FinalImage(lambda: self.wait().render(camera, **options).image)
+        final = FinalImage(lambda: self._full_stage().render(camera, **options).image)
         index, shown = 0, None  # shown: the last coarse frame
         for made in self._coarse_frames(camera, view, options, final, start):
             made.index, index, shown = index, index + 1, made
             yield made
             if reached(made, error):
                 return
-        full = self.wait()
+        full = self._full_stage()
         plan = schedule(view.size, full.details)  # after a coarse frame, images at least as large as its (§8)
         steps = None if shown is None else sum(reduction <= shown.reduction for _, reduction in plan)
         for made in frames(full, camera, options, steps=steps, error=error, final=final, previous=shown):  # §9
             made.index, made.seconds, made.meta["stage"] = index, time.perf_counter() - start, "full"
             index += 1
             yield made
+
+    def _full_stage(self):
+        """:meth:`wait` for the full stage, :class:`~clwave.model.mask.Abandoned` where it was given up."""
+        full = self.wait()
+        if full is None:
+            raise Abandoned("the full stage was given up (StagedTracer.abandon): nothing to refine to")
+        return full
 
     def lacks_in_line_integrals(self, image, view) -> float:
         """What the coarse stage's X-ray ``image`` (H, W, C) of ``view`` (its own, reduced view; along its central

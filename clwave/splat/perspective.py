@@ -306,7 +306,9 @@ def band_texel(order: int, level: int, omega_s, pixel: float, d_xyz, scale) -> t
     14 (doubled for order 6) or ``omega_s``, whatever the pixel, and ``c`` (``scale``) the spacing the footprint
     varies on along that axis (:data:`QUASI_GAIN`: they are stored as quasi-interpolants).
     Kinked footprints (orders 1, 2) keep the orthographic rule at the nearest pixel (``pixel``): a fraction of
-    it, so that bilinear reads place their kinks within a fraction of a pixel."""
+    it where that pixel is at least about pi/28 voxel (two texels a pixel), so that bilinear reads place their kinks
+    within a fraction of a pixel; at finer pixels a texel of pi/56 voxel (:func:`texels_per_pixel`), several
+    pixels wide at a pixel of 0.01 voxel."""
     d_min = float(np.min(d_xyz))
     if order >= 3:
         omega = omega_s if omega_s is not None else default_omega_s(np.inf, d_min, order)

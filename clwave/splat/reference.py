@@ -117,14 +117,15 @@ def records(ranges, vals, first, centre, bbox, stex, values, layers, channels):
 def _axis_lookup(pixels, centre_px, centre_tex, steps, count, linear):
     """Texel indices (into the texture with one ring of zeros) and the weight of the second, per pixel.
 
-    Linear: ``t = centre_tex + offset * steps`` in float64, texels floor(t) and floor(t) + 1.
+    Linear: ``t = centre_tex + offset * steps`` in float64, clamped to the zero ring [-1, count], texels i and
+    i + 1 with i = min(floor(t), count - 1), the weight of the second t - i (beyond the ring: zeros).
     Nearest: the kernel's float32 ``(centre_tex + 1/2) + offset * steps``, floored, so a pixel
     within rounding of a cell edge picks the same cell; weight 0 on the second."""
     f32 = np.float32
     if linear:
-        t = centre_tex + (pixels - np.float64(centre_px)) * steps
-        i = np.floor(t).astype(int)
-        return np.clip(i + 1, 0, count + 1), np.clip(i + 2, 0, count + 1), t - i
+        t = np.clip(centre_tex + (pixels - np.float64(centre_px)) * steps, -1, count)
+        i = np.minimum(np.floor(t).astype(int), count - 1)
+        return i + 1, i + 2, t - i
     t = (f32(centre_tex) + f32(0.5)) + (pixels.astype(f32) - f32(centre_px)) * f32(steps)
     i = np.clip(np.floor(t).astype(int), -1, count) + 1
     return i, i, np.zeros(len(pixels))

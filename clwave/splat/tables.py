@@ -21,8 +21,9 @@ KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel
 POOL_GUARD = 16  # zeros around the texel pool: the CPU kernel reads whole 16-pixel rows
 
 
-#: Haar textures with a cell axis are sampled CELL_REFINE times finer (texels of 1/(CELL_REFINE P)
-#: pixel) along their other axis: they are one column or row of samples (2 x N texels), so this is
+#: Haar textures with a cell axis are sampled CELL_REFINE times finer along their other axis (texels of
+#: 1/(CELL_REFINE P) pixel; in a magnified view CELL_REFINE times the band's texels per pixel, rounded up from 2,
+#: gathered below: texels_per_pixel): they are one column or row of samples (2 x N texels), so this is
 #: cheap, and it takes the bilinear error at the kinks along that axis from 1e-3..3.4e-3 to <= 2.1e-4
 #: of the line length (box of ones, pixel 1.0012 voxel, azimuth / elevation 0 / 10, 90 / 25, 30 / 0)
 CELL_REFINE = 8
@@ -122,13 +123,14 @@ class ViewTables:
                 # (u gathered per pixel from one plane); cl/splat/raster.h
                 s = self.texels_per_pixel[(m, band.key)]
                 cell_u, cell_v = tex.cells
-                P = s if isinstance(s, int) and not cell_u else 1  # phase planes
+                P = int(s) if s >= 2 and not cell_u else 1  # phase planes (texels_per_pixel: an integer from 2)
                 su, sv = (view.pixel / h if cell else float(s) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
                 pool_texels = offset + P * (tex.data.shape[0] + 3) * (-(-tex.data.shape[1] // P) + 2)
                 if max_texels is not None and pool_texels > max_texels:
                     raise DeviceMemoryError(
                         f"the texel pool of this view needs more than {4 * max_texels / 2**20:,.0f} MiB: a pixel "
-                        f"({view.pixel:.3g} world units) spans {s:,} texels; render a smaller extent or more pixels")
+                        f"({view.pixel:.3g} world units) spans {round(s, 2):,g} texels; render a smaller extent or "
+                        "more pixels")
                 planes = pack_texture(tex.data, P)
                 nv, nu = tex.data.shape
                 boxes.append(_axis_box(nu, tex.centre_u, su, cell_u) + _axis_box(nv, tex.centre_v, sv, cell_v))
@@ -180,9 +182,10 @@ def texels_per_pixel(order: int, level: int, omega: float, pixel: float, d_min: 
     eq. 36 and the least band of the level's own prototype (:data:`DEFAULT_OMEGA_MIN`), times ``refine``
     (:data:`CELL_REFINE`); Haar and linear footprints have kinks (Haar: jumps), so bilinear resampling needs
     fine texels at every level.  An integer P >= 2 (texels of exactly 1/P pixel, phase planes) where the band
-    asks for at least two texels a pixel; else, in a magnified view, the float below 2 that the band asks for,
+    asks for at least two texels a pixel; else, in a magnified view, the number below 2 that the band asks for,
     read by per-pixel interpolation (rounding it up to 2 would make up to 4 times the texels), so that the
-    texture does not grow with the magnification."""
+    texture does not grow with the magnification.  The lookup follows the value (from 2: phase planes), not its
+    type."""
     least = DEFAULT_OMEGA_MIN[order] / 2.0 ** level if order >= 3 else KINKED_OMEGA_MIN
     s = max(omega, least) * pixel / (np.pi * d_min)
     if s >= 2.0:
@@ -198,8 +201,9 @@ OMEGA_S_FACTOR = {6: 2.0}
 
 
 #: The quarter-pixel rule of :func:`default_omega_s` holds down to pixels of this fraction of the finest voxel
-#: spacing: a magnified view's finer pixels keep that texel (1/16 voxel) and interpolate between texels, so
-#: its textures do not grow with the magnification (docs/splatting.md §2)
+#: spacing: a magnified view's finer pixels keep that texel (cubic 1/16 voxel, order 6 1/32; Haar and linear keep
+#: pi/56 voxel, KINKED_OMEGA_MIN) and interpolate between texels, so its textures do not grow with the
+#: magnification (docs/splatting.md §2)
 FINEST_PIXEL = 0.25
 
 

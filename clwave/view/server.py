@@ -156,14 +156,16 @@ class ViewServer:
         """Stop reading the rest (by :meth:`stop`, or at the interpreter's exit): the reader stops after the step
         under way, waited for while it reads the file (h5py's reads are bounded: a daemon thread stopped inside
         one would keep h5py's lock), not while it ranks what it read; the whole model, not read, is
-        :class:`Abandoned` for whoever waits for it (the shaded views' set-up)."""
+        :class:`Abandoned` for whoever waits for it (the shaded views' set-up): the reader's to settle, or this
+        stop's where the reader never starts (one side only: a check and a set from each raced)."""
         self.stopping = True  # its Abandoned is no failure to log
-        with self._starting:
+        with self._starting:  # read_whole starts no reader after this
             self._stop.set()
-        if self._reader is not None and self._in_file.is_set():
+            started = self._reader is not None and self._reader.ident is not None
+        if started and self._in_file.is_set():
             log.info("stopping: waiting for the read of the file under way")
             self._reader.join()
-        if self.whole is not None and not self.whole.done():
+        if self.whole is not None and not started and not self.whole.done():
             self.whole.set_exception(Abandoned("the viewer stopped before the rest of the file was read"))
 
     def whole_model(self):
@@ -528,7 +530,10 @@ class BackgroundServer:
     def close(self):
         if self.thread.is_alive():
             # no time limit: the stop waits for the reading step under way (bounded, docs/viewer.md §1)
-            asyncio.run_coroutine_threadsafe(self.server.stop(), self.loop).result()
+            try:
+                asyncio.run_coroutine_threadsafe(self.server.stop(), self.loop).result()
+            except Exception:  # noqa: BLE001  (a bug in the stop: logged, and the loop stopped and closed all the same)
+                log.exception("stopping the viewer failed")
             self.loop.call_soon_threadsafe(self.loop.stop)
             self.thread.join(timeout=10)
         if not self.thread.is_alive() and not self.loop.is_closed():

@@ -233,14 +233,16 @@ class ShadedSource(Source):
 
     def _coarse(self, state, options, classified, start):
         """A still view while a file's whole tracer is set up: its coarse stage on a quarter and on the whole
-        image, neither final (the view is traced again when the whole file is in)."""
+        image, neither final (the view is traced again when the whole file is in); once that set-up has failed, the
+        coarse stage is the model served from then on (as the X-ray views' prefix): the whole image final."""
         for reduction in (4, 1):
             stage = time.perf_counter()
             result = self.staged.render(self.camera(state, 1 / reduction), tolerance=self.tolerance, **options)
             self._watch_full_stage()
-            yield self._shaded(state, result, False, dict(tolerance=self.tolerance, detail=self.wv.levels,
-                                                          reduction=reduction, error=None, prefix=True,
-                                                          **classified),
+            served = self.staged.failed  # read after the render, which then drew the coarse stage
+            yield self._shaded(state, result, served and reduction == 1,
+                               dict(tolerance=self.tolerance, detail=self.wv.levels, reduction=reduction, error=None,
+                                    prefix=not served, **classified),
                                time.perf_counter() - stage, start)
 
     def _pace(self, pace: ShadedPace, seconds):
