@@ -196,3 +196,23 @@ def test_dicom_files_without_an_extension_are_known_by_their_preamble(tmp_path, 
         clwave.load(tmp_path / "notes")
     assert main(["info", str(tmp_path / "IM0001")]) == 0
     assert "samples of uint32 as read" in capsys.readouterr().out
+
+
+def test_a_file_holding_fewer_frames_than_it_declares_is_refused(tmp_path, capsys):
+    """RLE pixel data short of a frame (its last fragment gone): pydicom yields the frames there are, and the slice
+    left would hold whatever memory it was given; refused in one line naming the file, the API and the CLI."""
+    import pydicom
+    from pydicom.encaps import encapsulate, generate_frames
+    from pydicom.uid import RLELossless
+
+    path = tmp_path / "short.dcm"
+    enhanced_ct(path, [0, 1, 2, 3], size=(16, 16))
+    ds = pydicom.dcmread(path)
+    ds.compress(RLELossless)
+    ds.PixelData = encapsulate(list(generate_frames(ds.PixelData, number_of_frames=4))[:-1])
+    ds.save_as(path)
+    with pytest.raises(FileFormatError, match="holds 3 frames of pixel data where it declares 4"):
+        clwave.load(path)
+    assert main(["render", str(path), "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "truncated or corrupt" in err and not (tmp_path / "x.png").exists()

@@ -56,11 +56,18 @@ def read_dicom_frames(path, fits=None):
 
     def read(order):
         check_whole(path, (frames, *size), pixel_dtype(ds), fits, streamed=True)
-        data, rank = np.empty((frames, *size), np.float32), np.argsort(order)
-        for k, frame in enumerate(iter_pixels(path)):  # from the file a frame at a time: one float32 copy is held
+        data, rank, count = np.empty((frames, *size), np.float32), np.argsort(order), 0
+        for count, frame in enumerate(iter_pixels(path), 1):  # a frame at a time: one float32 copy is held
+            if count > frames:
+                break
+            k = count - 1
             data[rank[k]] = frame.reshape(size)
             data[rank[k]] *= slopes[k]
             data[rank[k]] += intercepts[k]
+        if count != frames:  # pydicom yields what the pixel data holds: a short file leaves slices unwritten
+            held = count if count < frames else f"more than {frames}"
+            raise FileFormatError(f"{path} holds {held} frames of pixel data where it declares {frames} "
+                                  f"(NumberOfFrames); the file is truncated or corrupt")
         return data
 
     return place_slices(f"multi-frame DICOM file {path}", path, positions, cosines[0], tuple(pixel), size,
