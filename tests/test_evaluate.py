@@ -35,7 +35,7 @@ def probe_points(wv, rng, n=150) -> np.ndarray:
     knots = [fine_to_world(rng.integers(-3, np.array(wv.shape) + 6, (n // 6, 3)).astype(float), parity, wv.shape,
                            wv.spacing, wv.origin) for parity in (0, 1)]
     near = origin + rng.uniform(-1, 1, (n // 3, 3)) * (half + 6 * np.array(wv.spacing[::-1]))
-    far = origin + np.array([[1e4, 0, 0], [0, -3e3, 0], [0, 0, 5e3]])
+    far = origin + np.array([[1e4, 0, 0], [0, -3e3, 0], [0, 0, 5e3], [1e19, 0, 0], [0, -1e300, 0]])
     return np.concatenate([inside, *knots, near, far])
 
 

@@ -67,7 +67,9 @@ def _fine_total(wv, gi, fine, derivative, always) -> np.ndarray:
     j, channels = g.wavelet.order, len(g.channels)
     acc = np.zeros((len(fine), channels, 3) if derivative else (len(fine), channels))
     reach = synthesis_boxes(g.wavelet, g.bands)[-1]
-    cell = np.floor(fine).astype(np.int64)  # a point reads the coefficients cell - j + 1 .. cell per axis
+    # a point reads the coefficients cell - j + 1 .. cell per axis; one far beyond the reach is clipped to just
+    # outside it first (its floor may not fit an int64)
+    cell = np.floor(np.clip(fine, np.asarray(reach[0]) - j, np.asarray(reach[1]) + j)).astype(np.int64)
     live = np.flatnonzero(np.all((cell >= reach[0]) & (cell - (j - 1) < reach[1]), axis=1))  # elsewhere zero
     summed = []  # the points of the slabs that take the band sum, summed in one pass (each pass sets up every band)
     for chosen, region in _slabs(cell[live], j, channels, reach):
