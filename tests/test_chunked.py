@@ -196,8 +196,13 @@ def test_bad_chunked_inputs(rng, monkeypatch):
     with pytest.raises(InputError, match="non-finite"):  # found in the first pass, before any long work
         clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2)
     huge = clwave.Volume(da.full((20, 20, 20), 3.0e38, chunks=10, dtype=np.float32))
-    with pytest.raises(InputError, match="overflows float32"):  # raised in a block task, told in one line
-        clwave.WaveletVolume.from_volume(huge, "cubic", levels=1).threshold(keep=0.1)
+    with pytest.raises(InputError, match="line integrals of this volume overflow float32"):  # a first-level block
+        clwave.WaveletVolume.from_volume(huge, "cubic", levels=1).threshold(keep=0.1)  # task: its voxels, one line
+    spiked = np.zeros((16, 16, 16), np.float32)
+    spiked[4:8, 4:8, 4:8] = 1e37  # coefficients finite, line integrals not (1e37 x 2.77e3): refused as in memory
+    for data in (spiked, da.from_array(spiked, chunks=8)):
+        with pytest.raises(InputError, match="line integrals of this volume overflow float32"):
+            clwave.WaveletVolume.from_volume(clwave.Volume(data, spacing=100.0), "cubic", levels=2).threshold(keep=0.1)
     with pytest.raises(InputError, match="line integrals of this volume overflow float32"):  # 0 levels: the voxels
         clwave.WaveletVolume.from_volume(huge, "cubic", levels=0).threshold(keep=0.1)
     with pytest.raises(InputError, match="thresholded already"):

@@ -173,6 +173,13 @@ def test_voxels_near_the_float32_limit_are_refused_not_rendered(levels):
     huge = clwave.WaveletVolume.from_volume(data / 100, "cubic", levels=levels)  # 3e36 x 13.9: taken, finite
     image = clwave.splat(huge, clwave.Camera(0, 0, size=8)).image
     assert np.isclose(image.max(), 8 * 3e36, rtol=1e-3)  # the constant's integral through 8 unit voxels
+    # a thin volume: its integrals are small, but the ray tracer's quadrature sums 12 samples' worth (Simpson's pair)
+    thin = clwave.Volume(data / 10, spacing=1e-3)  # 3e37 x 12 passes 3.4e38
+    with pytest.raises(InputError, match=r"3e\+37 times the ray tracer's quadrature weights 12 \(its diagonal is"):
+        clwave.WaveletVolume.from_volume(thin, "cubic", levels=levels)
+    taken = clwave.WaveletVolume.from_volume(clwave.Volume(data / 20, spacing=1e-3), "cubic", levels=levels)
+    traced = clwave.raytrace(taken, clwave.Camera(0, 0, size=8), absorption=False).image
+    assert np.all(np.isfinite(traced)) and np.isclose(traced.max(), 8e-3 * 1.5e37, rtol=1e-2)
 
 
 def test_a_damaged_chunk_fails_its_checksum(model_file, tmp_path):

@@ -173,7 +173,8 @@ class ChunkedWaveletVolume:
 
         source = self.volume.data if self.volume.data.ndim == 4 else self.volume.data[..., None]
         tasks = []
-        for level, stack, starts in level_stacks(source[..., channels], wavelet, self.levels, plan.bands):
+        for level, stack, starts in level_stacks(source[..., channels], wavelet, self.levels, plan.bands,
+                                                 plan.frame[:2]):
             for index, block in np.ndenumerate(stack.to_delayed()[0, ..., 0]):
                 offsets = tuple(int(s[i]) for s, i in zip(starts, index))
                 tasks.append(dask.delayed(fn)(block, level, offsets, plan))
@@ -285,7 +286,7 @@ class ChunkedWaveletVolume:
 # ---------------------------------------------------------------- the graph
 
 
-def level_stacks(source, wavelet: SplineWavelet, levels: int, bands):
+def level_stacks(source, wavelet: SplineWavelet, levels: int, bands, frame):
     """Yield ``(level, stack, starts)`` for the levels that hold coefficients: ``stack`` a Dask array
     (8, nz, ny, nx, C) of the level's subbands in :data:`KEYS` order (1, ...) of the voxels for
     ``levels = 0``), ``starts`` per axis the band index where each block begins.
@@ -295,7 +296,8 @@ def level_stacks(source, wavelet: SplineWavelet, levels: int, bands):
     which depend on the input [a + 2 - L, b) (output k reads x[2k + 2 - L .. 2k + 1], L the filter
     length), so each block takes L - 2 samples of halo from its lower neighbours (:func:`_with_halo`)
     and starts at an even a: then PyWavelets (mode 'zero') on the block gives bit for bit the
-    coefficients of the whole.
+    coefficients of the whole.  ``frame`` (shape, spacing): the first level's blocks check their voxels against it
+    (:func:`~clwave.model.transform.check_coefficients`; at 0 levels the coefficients are the voxels, checked there).
     """
     if levels == 0:
         x = _even_chunks(source, 0)
@@ -311,7 +313,8 @@ def level_stacks(source, wavelet: SplineWavelet, levels: int, bands):
         starts = [np.cumsum((0,) + c)[:-1] for c in x.chunks[:3]]
         out_chunks = [tuple(np.diff(np.append(s // 2, n))) for s, n in zip(starts, n_out)]
         stack = da.map_blocks(_transform_block, _with_halo(x, halo) if halo else x, starts=starts, halo=halo,
-                              n_out=n_out, order=wavelet.order, new_axis=0, dtype=np.float32,
+                              n_out=n_out, order=wavelet.order, frame=frame if level == 1 else None, new_axis=0,
+                              dtype=np.float32,
                               chunks=((8,),) + tuple(out_chunks) + (x.chunks[3],), meta=np.empty((0,) * 5, np.float32))
         yield level, stack, [s // 2 for s in starts]
         x = stack[0].map_blocks(np.copy)  # a copy: a view would keep the whole stack alive for the next level
@@ -344,8 +347,11 @@ def _copy(block, cut):
     return block[cut].copy()
 
 
-def _transform_block(block, starts, halo, n_out, order, block_id=None):
-    """The 8 subbands (8, ...) of the block ``block_id`` of a level's input, ``block`` with its halo."""
+def _transform_block(block, starts, halo, n_out, order, frame=None, block_id=None):
+    """The 8 subbands (8, ...) of the block ``block_id`` of a level's input, ``block`` with its halo; ``frame``:
+    the input is the voxels, checked as the in-memory transform checks them."""
+    if frame is not None:
+        check_coefficients(block, frame)
     index = block_id[1:4]  # the output's block: (subband, z, y, x, channel)
     a = [int(s[i]) for s, i in zip(starts, index)]
     lo_halo = [min(halo, ai) for ai in a]  # no halo before the first block (boundary 'none')

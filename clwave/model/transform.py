@@ -143,22 +143,30 @@ def decompose(volume, wavelet, channels, levels, interpolate, progress_bar) -> t
     return bands, values
 
 
+#: the largest sum of quadrature weights times samples the ray tracer forms before it scales by the step
+#: (cl/raytrace/quadrature.h: Simpson's pair, 1 + 4 + 2 + 4 + 1)
+QUADRATURE_WEIGHTS = 12.0
+
+
 def check_coefficients(values, frame=None):
     """Refuse coefficients that overflowed float32 (voxels near its largest value, 3.4e38): nothing
     non-finite may reach a kernel or an image.  With ``frame`` (shape, spacing), the values are the voxels' own
     B-spline coefficients (the model at 0 levels, or the volume before its transform): as the B-splines sum to 1,
     the model is at most their largest value, so no line integral through the volume passes it times the volume's
-    diagonal, which must be finite in float32 too (a splat or ray-traced image would be inf)."""
+    diagonal, which must be finite in float32 too (a splat or ray-traced image would be inf), as must the ray
+    tracer's quadrature sums of samples on the way (:data:`QUADRATURE_WEIGHTS` times a sample)."""
     if not np.all(np.isfinite(values)):
         raise InputError("the wavelet transform of this volume overflows float32 (its values come too close to "
                          "3.4e38); rescale the volume first, e.g. to [0, 1]")
     if frame is not None and np.size(values):
         diagonal = float(np.linalg.norm(np.multiply(frame[0], frame[1])))
         largest = float(np.abs(values).max())
-        if not largest * diagonal < float(np.finfo(np.float32).max):
+        if not largest * max(diagonal, QUADRATURE_WEIGHTS) < float(np.finfo(np.float32).max):
+            times = f"its diagonal {diagonal:.3g}" if diagonal >= QUADRATURE_WEIGHTS else \
+                f"the ray tracer's quadrature weights {QUADRATURE_WEIGHTS:g} (its diagonal is {diagonal:.3g})"
             raise InputError(f"the line integrals of this volume overflow float32 (its largest value {largest:.3g} "
-                             f"times its diagonal {diagonal:.3g} passes 3.4e38); rescale its values first, e.g. "
-                             f"to [0, 1], or its spacing")
+                             f"times {times} passes 3.4e38); rescale its values first, e.g. to [0, 1], or its "
+                             f"spacing")
 
 
 def reconstruct_channel(group, dense, slot, shape, levels) -> np.ndarray:
