@@ -95,6 +95,7 @@ def test_a_box_fit_brings_the_content_box_to_the_image_edge(perspective):
     data[1:7, 3:19, 2:5] = 1.0
     vol = Volume(data, spacing=(1.0, 0.5, 2.0), origin=(1.0, -2.0, 3.0))
     corners = np.array(list(product(*zip(*vol.content_box()))))
+    assert repr(Camera(0, 0, 8, fit="box")).endswith("fit='box')") and "fit" not in repr(Camera(0, 0, 8))
     for az, el, size in ((0, 0, (20, 30)), (33, 25, (30, 20)), (200, -60, 17), (90, 90, (8, 64))):
         view = Camera(az, el, size, fit="box", perspective=perspective).view(vol)
         (H, W), px = view.size, view.to_pixels(corners)

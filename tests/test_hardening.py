@@ -62,7 +62,8 @@ def setter(key, value):
     (setter("focus", [[float("nan"), 0, 0], 1]), "focus [[nan, 0, 0], 1] is not"),
     (setter("focus", [[0, 0, 0], 0]), "sigma > 0"),
     (setter("content", [1]), "content [1] is not"),
-    (setter("content", [[1, 0, 0], [0, 1, 1]]), "low then high"),
+    (setter("content", [[1, 0, 0], [0, 1, 1]]), "low below high"),
+    (setter("content", [[1, 1, 1], [1, 1, 1]]), "low below high"),  # an empty box: the fits divided by its size
     (setter("transfer_function", [1, 2]), "transfer function is not valid"),
     (setter("interpolate", "yes"), "interpolate 'yes' is not true or false"),
 ])

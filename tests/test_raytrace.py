@@ -216,6 +216,8 @@ def test_a_tolerance_above_every_line_integral_is_told_with_one_that_draws():
         tracer.render(camera, tolerance=1e-3, absorption=False)
         image = tracer.render(camera, tolerance=1e-8, absorption=False).image
     assert np.isclose(image.max(), 8e-6, rtol=1e-5)
+    with pytest.warns(ClwaveWarning, match="below the absolute tolerance 0.001"):  # another bound: told again
+        tracer.render(camera, tolerance=1e-3, transfer_function=clwave.TransferFunction.preset("grey"))
 
 
 @pytest.mark.parametrize("origin", [(0, 0, 0), (-3, 5, -9)])

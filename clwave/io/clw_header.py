@@ -123,8 +123,8 @@ def check_properties(header):
         raise ValueError(f"focus {focus!r} is not [[x, y, z], sigma]: a finite centre and a sigma > 0")
     if content is not None and not (isinstance(content, list) and len(content) == 2
                                     and all(_numbers(corner, 3) for corner in content)
-                                    and np.all(np.less_equal(*content))):
-        raise ValueError(f"content {content!r} is not two corners [x, y, z] of finite numbers, low then high")
+                                    and np.all(np.less(*content))):  # whole voxels: never empty
+        raise ValueError(f"content {content!r} is not two corners [x, y, z] of finite numbers, low below high")
     tf = header.get("transfer_function")
     if tf is not None:
         try:

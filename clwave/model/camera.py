@@ -192,7 +192,8 @@ class Camera:
 
     def __repr__(self):
         kind = f", perspective fov={self.fov}" if self.perspective else ""
-        return f"Camera(azimuth={self.azimuth}, elevation={self.elevation}, size={self.size}{kind})"
+        fit = f", fit={self.fit!r}" if self.fit != "sphere" else ""
+        return f"Camera(azimuth={self.azimuth}, elevation={self.elevation}, size={self.size}{kind}{fit})"
 
 
 def _size(size) -> tuple:

@@ -143,11 +143,13 @@ def warn_below_tolerance(wv: WaveletVolume, bound: float, tol: float, told: set)
     """Warn when no line integral through the model can reach the absolute tolerance ``tol``: ``bound`` bounds
     what a ray integrates per world unit (the field's largest block bound, times what shading can add), so no ray
     gathers more than it times the volume's diagonal, and skipping may then pass every block of every ray (a black
-    image, e.g. micrometre spacing at the default 1e-3).  Once per tolerance in ``told`` (a tracer's)."""
+    image, e.g. micrometre spacing at the default 1e-3).  Once per tolerance and bound in ``told`` (a tracer's: a
+    render of another transfer function, shading or detail has its own bound)."""
     limit = bound * float(np.linalg.norm(np.multiply(wv.shape, wv.spacing)))
-    if not 0 < limit < tol or tol in told:
+    key = (tol, float(f"{limit:.3g}"))
+    if not 0 < limit < tol or key in told:
         return
-    told.add(tol)
+    told.add(key)
     why = (f"every line integral of this model is at most {limit:.3g} (its largest value times its diagonal), below "
            f"the absolute tolerance {tol:g}, so the image may be black: give a tolerance well below it, e.g. ")
     smaller = f"{limit * 1e-3:.1g}"

@@ -121,7 +121,7 @@ class RayTracer:
         self.wv, self.field, self.active, self.region = wv, field, int(active), region
         self.lod = self.details != (0,)
         self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
-        self._told = set()  # the tolerances warned about (bounds.warn_below_tolerance)
+        self._told = set()  # the tolerances and bounds warned about (bounds.warn_below_tolerance)
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
         self.orders = [g.wavelet.order for g in wv.groups]
