@@ -123,6 +123,11 @@ def test_cost_rule_and_the_coefficients_kept(rng, monkeypatch):
     close(wv.gradient(pts, "fine"), wv.gradient(pts, "bands"))
     kept = wv._fine[0][0]
     assert kept.nbytes <= 1 << 20 and kept.shape[0] <= 2 * evaluation.REGION_STEP  # the last slab's
+    # a slab (at least 8 z layers) still over the bound: "auto" sums the bands there, keeping nothing over it
+    wv.release()
+    monkeypatch.setattr(evaluation, "REGION_BYTES", 1 << 12)
+    close(wv.evaluate(pts), expected)
+    assert all(c.nbytes <= 1 << 12 for c, _ in wv._fine.values())
 
 
 def test_bad_method_and_no_points(rng):

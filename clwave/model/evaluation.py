@@ -23,7 +23,8 @@ METHODS = ("auto", "bands", "fine")
 
 #: the most bytes of fine coefficients (float64, each channel of the group) one synthesis makes and the model
 #: keeps a group; the points of a larger region go through in slabs along z of at least 8 cells, each made in
-#: turn (its synthesis peaks at a few times its size, docs/model.md §4)
+#: turn (its synthesis peaks at a few times its size, docs/model.md §4), and with ``method="auto"`` a slab still
+#: larger (a region wider than 1,024² in y-x for one channel) takes the band sum
 REGION_BYTES = 128 << 20
 
 #: regions are whole multiples of this many fine indices per axis: points near those of a call before reuse
@@ -76,7 +77,8 @@ def _fine_total(wv, gi, fine, derivative, always) -> np.ndarray:
         points = live[chosen]
         kept = wv._fine.get(gi)
         if kept is None or not _holds(kept, region):
-            if not (always or _pays(g, len(points), region)):
+            over = int(np.prod(region[1] - region[0])) * channels * 8 > REGION_BYTES  # a slab wider than the bound
+            if not always and (over or not _pays(g, len(points), region)):
                 summed.append(points)
                 continue
             kept = wv._fine[gi] = synthesize(g.wavelet, g.bands, partial(group_box, g), region)

@@ -334,8 +334,10 @@ class WaveletVolume:
         every band's basis functions at each point (nothing made beforehand; the ray tracer's float64 oracle);
         ``"fine"`` synthesises the fine B-spline coefficients of the region the points read and reads those
         (docs/model.md §4); ``"auto"`` (default) takes the fine path where the points repay the region's synthesis.
-        The fine coefficients last made are kept for the next call, at most 128 MiB a channel group (float64,
-        :data:`~clwave.model.evaluation.REGION_BYTES`; a larger region goes in slabs); :meth:`release` frees them.
+        The fine coefficients last made are kept for the next call, at most 128 MiB a channel group with ``"auto"``
+        (float64, :data:`~clwave.model.evaluation.REGION_BYTES`; a larger region goes in slabs, and a slab still
+        larger takes the band sum; ``"fine"`` makes every slab, 16 z layers of the region at most);
+        :meth:`release` frees them.
         """
         return evaluation.evaluate(self, points, False, method)
 
