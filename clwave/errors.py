@@ -6,6 +6,9 @@ any :class:`ClwaveError`; library users can catch the specific subclasses.
 
 from __future__ import annotations
 
+import os
+import sys
+import warnings
 from dataclasses import asdict, dataclass
 
 
@@ -46,6 +49,18 @@ class ClwaveWarning(UserWarning):
     def __init__(self, message, *, cli=None):
         super().__init__(message)
         self.cli = cli or message
+
+
+def warn_outside(warning) -> None:
+    """Warn with ``warning`` (a :class:`ClwaveWarning`, or any warning or message) attributed to the first caller
+    outside the clwave package: the user's line, however deep inside clwave the warning is given (a fixed
+    ``stacklevel`` points inside clwave where the call comes through another of its functions).  What Python 3.12's
+    ``skip_file_prefixes`` does, by hand for 3.11."""
+    package = os.path.dirname(__file__) + os.sep  # the form every module of the package has as co_filename
+    frame, level = sys._getframe(1), 2  # level 2: warn_outside's caller
+    while frame is not None and frame.f_code.co_filename.startswith(package):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(warning, stacklevel=level)
 
 
 class InputError(ClwaveError, ValueError):

@@ -10,6 +10,7 @@ import pywt
 from clwave.model.bspline import SplineWavelet, bspline
 from clwave.model.geometry import fine_to_world, support_centres
 from clwave.errors import FileFormatError, InputError, OutputExistsError
+from clwave.model.transform import band_code, band_key, band_layout, band_level
 from clwave.model.volume import Volume
 from clwave.model.wavelet import WaveletVolume
 
@@ -216,6 +217,19 @@ def test_top_breaks_ties_at_the_cut_by_lowest_index(rng):
         assert np.array_equal(_top(importance, count), oracle)
 
 
+def test_band_ids_decode_to_their_bands():
+    """band_level, band_code and band_key invert Band.id, one id or an array: each band of a layout read back, its
+    key's letters against the code's bits as Band.code documents them (bit 0: 'd' along x, bit 2: along z)."""
+    bands = band_layout(SplineWavelet(4), SHAPE, 3)
+    ids = np.array([b.id for b in bands])
+    assert len(set(ids)) == len(bands) == 1 + 7 * 3
+    assert [(band_level(i), band_code(i), band_key(i)) for i in ids] == [(b.level, b.code, b.key) for b in bands]
+    assert np.array_equal(band_level(ids), [b.level for b in bands])
+    assert np.array_equal(band_code(ids), [b.code for b in bands])
+    for code in range(8):
+        assert [letter == "d" for letter in band_key(5 * 8 + code)] == [bool(code & 4), bool(code & 2), bool(code & 1)]
+
+
 def test_threshold_by_value_and_ranked_order(rng):
     vol = Volume(rng.random((16, 16, 16, 2)).astype(np.float32))
     wv = WaveletVolume.from_volume(vol, "linear", levels=2)
@@ -225,7 +239,7 @@ def test_threshold_by_value_and_ranked_order(rng):
     assert np.all(imp[n_approx:] > 0.05)
     assert np.count_nonzero(wv.importance(wv.groups[0])[n_approx:] > 0.05) == th.kept - n_approx
     table = th.ranked()  # by importance across all bands: the approximation band is not simply first
-    assert np.all(np.diff(table.importance) <= 0) and set(table.band[:n_approx] // 8) == {1, 2}
+    assert np.all(np.diff(table.importance) <= 0) and set(band_level(table.band[:n_approx])) == {1, 2}
     assert table.values.shape == (th.kept, 2)
     per_band = th.bands()
     assert sum(len(idx) for _, idx, _ in per_band) == th.kept

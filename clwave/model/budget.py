@@ -3,11 +3,9 @@ one home for the API and the command line, which prints them in its own words (:
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
-from ..errors import ClwaveWarning
+from ..errors import ClwaveWarning, warn_outside
 
 
 def kept_count(keep, n_voxels) -> int | None:
@@ -29,7 +27,7 @@ def warn_short_budget(keep, budget, approx, n_voxels):
     else:  # the band (its B-splines reach past the volume) outnumbers the voxels: only fewer levels hold it
         said += f"the band outnumbers the {n_voxels:,} voxels, so {{}}"
         api, cli = said.format("keep=", "pass a smaller levels="), said.format("--keep ", "give a smaller --levels")
-    warnings.warn(ClwaveWarning(api, cli=cli), stacklevel=3)
+    warn_outside(ClwaveWarning(api, cli=cli))
 
 
 def warn_stored(wv, keep, source):
@@ -44,5 +42,4 @@ def warn_stored(wv, keep, source):
             f"({100 * stored / wv.n_voxels:.2f} % of the voxels): all of them are used (a file keeps no zero "
             f"coefficients, so it may hold fewer than its own {{}}; if it was compressed with a smaller {{}}, "
             f"compress again with a larger one for more detail)")
-    warnings.warn(ClwaveWarning(said.format("keep=", "keep", "keep"), cli=said.format("--keep ", "--keep", "--keep")),
-                  stacklevel=3)
+    warn_outside(ClwaveWarning(said.format("keep=", "keep", "keep"), cli=said.format("--keep ", "--keep", "--keep")))

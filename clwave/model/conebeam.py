@@ -17,12 +17,10 @@ detector's matrix is that of a source facing away: :meth:`ConeBeam.view` names i
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import scipy.linalg
 
-from ..errors import InputError, finite_number
+from ..errors import InputError, finite_number, warn_outside
 from .camera import Camera, View, _content_box, _size, _vector
 from .geometry import view_frame
 
@@ -309,6 +307,6 @@ def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
     ``hu_to_mu=True``)."""
     integrals = np.asarray(line_integrals, np.float64)
     if integrals.ndim >= 2 and np.sum(integrals) < 0:
-        warnings.warn(NOT_ATTENUATION.format(what=f"these line integrals (sum {np.sum(integrals):.4g}) are",
-                                             fix="load it with clwave.load(..., hu_to_mu=True)"), stacklevel=2)
+        warn_outside(NOT_ATTENUATION.format(what=f"these line integrals (sum {np.sum(integrals):.4g}) are",
+                                            fix="load it with clwave.load(..., hu_to_mu=True)"))
     return (i0 * np.exp(-np.maximum(integrals, 0.0))).astype(np.float32)

@@ -32,7 +32,8 @@ class RankedTable:
 
     @property
     def band(self) -> np.ndarray:
-        """(K,) band ids, level * 8 + subband code (0: the approximation), a view."""
+        """(K,) band ids, level * 8 + subband code (code 0: the approximation), :attr:`Band.id
+        <clwave.model.transform.Band.id>`, a view."""
         return self.coef[:, 3]
 
     @property

@@ -43,8 +43,24 @@ class Band:
 
     @property
     def id(self) -> int:
-        """``level * 8 + code``: the band in the splatting kernels' tables (a coefficient's ``RankedTable.band``)."""
+        """``level * 8 + code``: the band in the splatting kernels' tables (a coefficient's ``RankedTable.band``);
+        :func:`band_level`, :func:`band_code` and :func:`band_key` read it back."""
         return self.level * 8 + self.code
+
+
+def band_level(band_id):
+    """The level m of a :attr:`Band.id` (an int, or an integer array of them)."""
+    return band_id // 8
+
+
+def band_code(band_id):
+    """The subband code of a :attr:`Band.id` (an int, or an integer array of them): 0 for the approximation."""
+    return band_id % 8
+
+
+def band_key(band_id) -> str:
+    """The (z, y, x) letters of a :attr:`Band.id`'s subband (the inverse of :attr:`Band.code`), e.g. "aad"."""
+    return "".join("ad"[band_code(band_id) >> (2 - a) & 1] for a in range(3))
 
 
 def band_layout(wavelet: SplineWavelet, shape, levels) -> list:

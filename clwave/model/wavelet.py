@@ -8,13 +8,12 @@ and a (channels, K) float32 value table.  Importance order is derived on demand.
 from __future__ import annotations
 
 import copy
-import warnings
 from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, finite_number
+from ..errors import ClwaveWarning, InputError, finite_number, warn_outside
 from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import kept_count, warn_short_budget, warn_stored
@@ -438,7 +437,7 @@ def check_decomposition(shape, channels, wavelet, levels) -> tuple:
     if levels is None:
         levels, note = default_levels(shape, thresholded=False)
         if note:
-            warnings.warn(ClwaveWarning(note), stacklevel=3)
+            warn_outside(ClwaveWarning(note))
     return _channel_wavelets(wavelet, channels), _check_levels(levels, shape)
 
 

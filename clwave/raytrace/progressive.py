@@ -10,12 +10,11 @@ sequence for a viewer, which stops iterating when the view changes.
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, whole_number
+from ..errors import ClwaveWarning, InputError, warn_outside, whole_number
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..frames import ErrorEstimate, FinalImage, Frame, check_error, reached
@@ -99,9 +98,9 @@ def _frames(tracer, camera, options, steps, budget, error, final, shown):
     plan = schedule(view.size, tracer.details, steps)
     if steps is not None and len(plan) < steps:  # the schedule halves the image per frame down to a least side
         (h, w), many = view.size, f"{len(plan)} progressive ray-tracing frame{'s' if len(plan) != 1 else ''}"
-        warnings.warn(ClwaveWarning(f"a {w}x{h} image allows {many}, not steps={steps}; a bigger image allows more",
-                                    cli=f"a {w}x{h} image allows {many}, not --steps {steps}; a bigger --size "
-                                        f"allows more"), stacklevel=2)
+        warn_outside(ClwaveWarning(f"a {w}x{h} image allows {many}, not steps={steps}; a bigger image allows more",
+                                   cli=f"a {w}x{h} image allows {many}, not --steps {steps}; a bigger --size "
+                                       f"allows more"))
     start, steps_made, last, made = time.perf_counter(), ErrorEstimate(), None, 0
 
     def render(detail, reduction):  # the tracer's render of an image reduction times smaller per side

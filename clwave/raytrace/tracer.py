@@ -40,6 +40,10 @@ from ..model.wavelet import WaveletVolume, check_model
 
 
 FIELDS = ("bspline", "wavelet")
+#: what a tracer holds of its field at the default detail, the bounds and tables a render reads through its
+#: ``at`` (:meth:`RayTracer._detail`): the finest FieldAt's (B-spline field), or the WaveletField's
+AT_DEFAULT = ("box", "block_bound", "q_bound", "occupied_fraction", "field_tables", "super_bound", "super_bound_host",
+              "super_origin")
 B, I32, INT4, FLOAT4 = BUFFER, np.int32, cltypes.int4, cltypes.float4
 #: the arguments of each field backend (FIELD_PARAMS of cl/raytrace/field_*.h)
 FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("page_shape", INT4), ("frames", B),
@@ -128,8 +132,8 @@ class RayTracer:
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
         if field == "bspline":
             self._expand()
-        else:  # its tables, bounds and build options are the tracer's, as the B-spline field's are (_expand)
-            vars(self).update(vars(WaveletField(wv, self.cc, self.budget, self.active, self.orders)))
+        else:
+            self._wavelet()
         # a scalar model: its range per block, for transfer functions at render time (docs/raytracing.md §10)
         self.scalar = ScalarRange(self) if wv.channels == 1 and field == "bspline" else None
 
@@ -144,8 +148,7 @@ class RayTracer:
         self.setup_seconds = self.bricks.seconds
         self.occ_origin = self.bricks.origin * SUPER
         full = self.field_at(self.details[0])  # the finest; other details pick other slots (docs/raytracing.md §8)
-        for name in ("box", "block_bound", "q_bound", "occupied_fraction", "field_tables", "super_bound",
-                     "super_bound_host", "super_origin"):
+        for name in AT_DEFAULT:
             setattr(self, name, getattr(full, name))
         self.content_origin, self.content_cells = self.occ_origin * BLOCK, None  # the bricks clamp to content
         self.content = cla.to_device(self.cc.queue, np.ones(1, np.uint8))
@@ -155,6 +158,17 @@ class RayTracer:
         self.local_size = (8, 8)
         self.defines = group_defines(self.orders)
         self.quant = cla.zeros(self.cc.queue, 1, QUANT)  # a packed scalar pool's Quant per slot (classified.pack)
+
+    def _wavelet(self):
+        """Wavelet field: the dense bands' tables, bounds, content cells and build options
+        (:mod:`clwave.raytrace.wavelet_field`), held as the B-spline field's are (:meth:`_expand`)."""
+        w = WaveletField(self.wv, self.cc, self.budget, self.active, self.orders)
+        for name in AT_DEFAULT:
+            setattr(self, name, getattr(w, name))
+        self.setup_seconds, self.occ_origin, self.poly = w.setup_seconds, w.occ_origin, w.poly
+        self.content, self.content_origin, self.content_cells, self.content_shape = (
+            w.content, w.content_origin, w.content_cells, w.content_shape)
+        self.defines, self.local_size = w.defines, w.local_size
 
     def field_at(self, caps) -> FieldAt:
         """The B-spline field at detail ``caps`` (one level, or one per brick): made once per detail from the

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.ndimage import fourier_gaussian
 
 from ..model.geometry import band_lattice, fine_to_world, projected_halfwidths, spacing_xyz
+from ..model.transform import band_code, band_key, band_level
 from .spectral import centred_fourier, fft_texture
 from .tables import MAX_LEVELS
 
@@ -43,12 +44,12 @@ def _slice_power(wavelet, spacing, view) -> tuple:
     U, V = np.meshgrid(grid, grid)
     power = [{letter: np.abs(centred_fourier(wavelet, letter, d_xyz[a] * (U * view.u[a] + V * view.v[a]))) ** 2
               for letter in "ad"} for a in range(3)]
-    return grid, np.array([power[0]["ad"[code & 1]] * power[1]["ad"[code >> 1 & 1]] * power[2]["ad"[code >> 2 & 1]]
+    return grid, np.array([np.prod([power[a][letter] for a, letter in enumerate(band_key(code)[::-1])], axis=0)
                            for code in range(8)])
 
 
 def band_energies(wavelet, spacing, view) -> np.ndarray:
-    """Image energy of a unit coefficient of each band code ``level * 8 + code`` (in world units at unit spacing;
+    """Image energy of a unit coefficient of each band id ``level * 8 + code`` (in world units at unit spacing;
     otherwise up to the factor ``(dx dy dz)^2``).
 
     Splatting is linear and a footprint is the projection of its function, so by the slice theorem a unit
@@ -63,7 +64,7 @@ def band_energies(wavelet, spacing, view) -> np.ndarray:
 
 
 def resolved_shares(wavelet, spacing, view, limit) -> np.ndarray:
-    """The share of each band code's footprint energy at world frequencies ``|U|, |V| <= limit`` (a grid's band
+    """The share of each band id's footprint energy at world frequencies ``|U|, |V| <= limit`` (a grid's band
     limit, pi over its cell's width): level m's footprint spectrum is level 0's at 2^m times the frequency."""
     grid, power = _slice_power(wavelet, spacing, view)
     total = power.sum(axis=(1, 2))
@@ -153,13 +154,13 @@ class SplatEstimate:
             self._deposit(gr, 0, gr["count"], +1.0)
 
     def _filters(self, gr, spacing, shape):
-        """A group's signed bands (each band code's first layer, -1 where none) with their footprints' spectra on
+        """A group's signed bands (each band id's first layer, -1 where none) with their footprints' spectra on
         the cells, and the density's energy of each band with its Gaussians."""
         rows, cols = shape
         width = self.scale * self.cell  # world units per cell
         share = resolved_shares(gr["wavelet"], spacing, self.view, np.pi / width)
         present = np.unique(gr["band"])
-        signed = [int(b) for b in present if b % 8 == 0 or share[b] >= SIGNED_SHARE]
+        signed = [int(b) for b in present if band_code(b) == 0 or share[b] >= SIGNED_SHARE]
         gr["layer"] = np.full(8 * MAX_LEVELS, -1)
         gr["layer"][signed] = np.arange(len(signed)) * (4 if self.view.perspective else 1)
         # the density's energies: a signed band's beyond the cells' band limit, all of an unsigned one's
@@ -180,7 +181,7 @@ class SplatEstimate:
                                 for m in range(MAX_LEVELS)])
 
     def _place(self, gr, lo, hi) -> tuple:
-        """Coefficients lo..hi of a group: their (row, col) in cells, band codes, and world units per pixel."""
+        """Coefficients lo..hi of a group: their (row, col) in cells, band ids, and world units per pixel."""
         t = gr["table"]
         band = t.band[lo:hi].astype(np.int64)
         offset, step, support = gr["lattice"]
@@ -219,7 +220,7 @@ class SplatEstimate:
                               sign * values[signed] * term[:, None])
             energy = gr["density"][band] / px ** 2  # in pixels: each pixel's energy
             spread = energy > 0  # each channel's own energy: their details differ
-            _bilinear(gr["detail"], band[spread] // 8, row[spread], col[spread],
+            _bilinear(gr["detail"], band_level(band[spread]), row[spread], col[spread],
                       sign * energy[spread, None] * values[spread] ** 2)
 
     def add(self, image: np.ndarray, done: int) -> tuple:
@@ -280,9 +281,8 @@ def _block_means(grid, k) -> np.ndarray:
 
 
 def _lattices(wav) -> tuple:
-    """:func:`band_lattice` of every band code ``level * 8 + code``: offsets and supports (8 MAX_LEVELS, 3), steps."""
-    bands = [band_lattice(wav, "".join("ad"[code >> s & 1] for s in (2, 1, 0)), level)
-             for level in range(MAX_LEVELS) for code in range(8)]
+    """:func:`band_lattice` of every band id ``level * 8 + code``: offsets and supports (8 MAX_LEVELS, 3), steps."""
+    bands = [band_lattice(wav, band_key(b), band_level(b)) for b in range(8 * MAX_LEVELS)]
     return tuple(np.array([b[i] for b in bands]) for i in range(3))
 
 
@@ -301,13 +301,12 @@ def _bilinear(stacks, layer, row, col, weights):
 
 
 def _footprint(wavelet, band, d_xyz, view, shape, width, slopes=(0.0, 0.0)) -> np.ndarray:
-    """The real FFT of band code ``band``'s footprint on a grid of ``shape`` cells of world width ``width``, along
+    """The real FFT of band id ``band``'s footprint on a grid of ``shape`` cells of world width ``width``, along
     rays of ``slopes`` (s_u, s_v) (a cone beam's, :mod:`clwave.splat.perspective`), over the bilinear deposit's own
     transform (a tent of one cell each way)."""
     rows, cols = shape
-    key = "".join("ad"[band % 8 >> s & 1] for s in (2, 1, 0))
-    texture = fft_texture(wavelet, key, band // 8, d_xyz, view.u + slopes[0] * view.n, view.v + slopes[1] * view.n,
-                          cols, rows, cols * width, rows * width)
+    texture = fft_texture(wavelet, band_key(band), band_level(band), d_xyz, view.u + slopes[0] * view.n,
+                          view.v + slopes[1] * view.n, cols, rows, cols * width, rows * width)
     tent = (np.sinc(np.fft.fftfreq(rows))[:, None] * np.sinc(np.fft.rfftfreq(cols))[None, :]) ** 2
     return np.fft.rfft2(np.roll(texture[::-1], 1, axis=0)) / tent  # rows run along -v
 

@@ -24,6 +24,7 @@ from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_buffer, device_budget
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera
+from ..model.transform import band_code
 from ..model.wavelet import WaveletVolume, check_model
 from .coarse import Layer, coarse_factor
 from .ranked import CumulativeEnergy, on_device, ranked_groups
@@ -345,7 +346,7 @@ class Accumulator:
         for gi, g in enumerate(r.groups):
             n = g["count"]
             bbox, stex = self._projection(gi)
-            wavelet = np.flatnonzero(((g["table"].band & 7) != 0) & (bbox[:, 2] >= bbox[:, 0]))
+            wavelet = np.flatnonzero((band_code(g["table"].band) != 0) & (bbox[:, 2] >= bbox[:, 0]))
             wavelet = wavelet[self.tables[gi].tex_layer[stex[wavelet], 0] == 0]  # drawn at the image's pixels
             bound = self.tables[gi].splat_bounds(self.view, bbox[wavelet], stex[wavelet], g["table"].values[wavelet])
             plans.append((wavelet, bbox[wavelet], bound))

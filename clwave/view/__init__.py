@@ -6,7 +6,7 @@ from os import PathLike
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, warn_outside
 
 
 class Viewer:
@@ -126,9 +126,8 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
         raise InputError(f"tf= classifies a scalar model while rendering; this model has {model.channels} channels "
                          f"(classified already): leave tf out")
     if not is_loopback(host):
-        import warnings
-        warnings.warn(f"the viewer listens on {host}: anyone who can reach it and learns the address with its token "
-                      f"can see this volume", stacklevel=2)
+        warn_outside(f"the viewer listens on {host}: anyone who can reach it and learns the address with its token "
+                     f"can see this volume")
     server = ViewServer(wv, size, tolerance=tolerance, device=device, host=host, port=port,
                         transfer_function=None if model is None else tf, device_memory=device_memory)
     viewer = Viewer(BackgroundServer(server))

@@ -7,14 +7,13 @@ import logging
 import math
 import os
 import re
-import warnings
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from ...device.memory import check_fits
-from ...errors import ClwaveError, ClwaveWarning, FileFormatError, InputError
+from ...errors import ClwaveError, ClwaveWarning, FileFormatError, InputError, warn_outside
 from ..progress import progress
 
 log = logging.getLogger(__name__)  # notes below a warning (an OME size not given: 1 micrometre, as OME says)
@@ -24,7 +23,7 @@ def note(text: str):
     """What a reading did other than the file says (an oblique volume turned, a spacing taken as 1, a gantry tilt
     resampled) as a :class:`~clwave.ClwaveWarning`, as the model's warnings are: a pipeline catching warnings sees
     it, and the command line prints it as ``clwave: warning: ...``."""
-    warnings.warn(ClwaveWarning(text), stacklevel=3)
+    warn_outside(ClwaveWarning(text))
 
 SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of 2-D slices), a folder of "
              "DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a Zarr or OME-Zarr "
