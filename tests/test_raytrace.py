@@ -210,7 +210,7 @@ def test_a_tolerance_above_every_line_integral_is_told_with_one_that_draws():
     with pytest.warns(ClwaveWarning, match=r"at most 1.39e-05 .* below the absolute tolerance 0.001, so the image may "
                                            r"be black: give a tolerance well below it, e.g. tolerance=1e-08") as told:
         tracer.render(camera, tolerance=1e-3, absorption=False)
-    assert told[0].message.cli.endswith("e.g. --tolerance 1e-08")
+    assert told[0].message.cli.endswith("e.g. --tolerance 1e-08") and told[0].filename == __file__  # the caller's
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # said once per tracer and tolerance; a tolerance below the bound: silent
         tracer.render(camera, tolerance=1e-3, absorption=False)

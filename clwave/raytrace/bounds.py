@@ -4,13 +4,11 @@ them, and their maxima per superblock."""
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from ..device.constants import BLOCK, SUPER
 from ..model.geometry import band_lattice
-from ..errors import ClwaveWarning
+from ..errors import ClwaveWarning, warn_outside
 from ..model.wavelet import WaveletVolume
 
 
@@ -153,4 +151,4 @@ def warn_below_tolerance(wv: WaveletVolume, bound: float, tol: float, told: set)
     why = (f"every line integral of this model is at most {limit:.3g} (its largest value times its diagonal), below "
            f"the absolute tolerance {tol:g}, so the image may be black: give a tolerance well below it, e.g. ")
     smaller = f"{limit * 1e-3:.1g}"
-    warnings.warn(ClwaveWarning(f"{why}tolerance={smaller}", cli=f"{why}--tolerance {smaller}"), stacklevel=3)
+    warn_outside(ClwaveWarning(f"{why}tolerance={smaller}", cli=f"{why}--tolerance {smaller}"))
