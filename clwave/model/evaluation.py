@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import InputError
 from .geometry import world_points, world_to_fine
-from .transform import Band, band_sum, synthesis_boxes, synthesize
+from .transform import Band, band_sum, crop_to_grid, synthesis_boxes, synthesize
 
 METHODS = ("auto", "bands", "fine")
 
@@ -139,14 +139,10 @@ def group_box(group, number, lo, hi) -> np.ndarray:
     kept or beyond the band (what :func:`synthesize` reads)."""
     band = group.bands[number]
     lo, hi = np.asarray(lo, np.int64), np.asarray(hi, np.int64)
+    if group.positions is None:  # every coefficient stored: the band's block of the value table, cut to the box
+        values = np.moveaxis(group.values[:, band.start:band.start + band.size].reshape((-1,) + band.shape), 0, -1)
+        return crop_to_grid(values, tuple(-lo), tuple(hi - lo)).astype(np.float64)
     out = np.zeros(tuple(hi - lo) + (len(group.channels),))
-    if group.positions is None:
-        values = group.values[:, band.start:band.start + band.size].reshape((-1,) + band.shape)
-        a, b = np.maximum(lo, 0), np.minimum(hi, band.shape)
-        if np.all(b > a):
-            out[tuple(slice(x - y, z - y) for x, z, y in zip(a, b, lo))] = \
-                np.moveaxis(values[(slice(None),) + tuple(slice(x, z) for x, z in zip(a, b))], 0, -1)
-        return out
     span = group.band_slices()[number]
     index = np.column_stack(np.unravel_index(group.positions[span] - band.start, band.shape))
     inside = np.flatnonzero(np.all((index >= lo) & (index < hi), axis=1))

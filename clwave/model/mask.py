@@ -87,4 +87,3 @@ def abandonable(wv, abandon):
     mask = copy.copy(wv.content_mask)
     mask.abandon = abandon
     return wv.masked(mask)
-
