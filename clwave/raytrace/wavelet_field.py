@@ -58,18 +58,15 @@ class WaveletField:
                                     f"(2^31); use field='bspline'")
         coef = np.concatenate(values)
         check_buffer(cc, coef.nbytes, "the dense bands", "use field='bspline' or a smaller volume", budget, share=0.5)
-        self.coef = cla.to_device(q, coef)
         bound, self.occ_origin, _ = block_sums(wv, weights)
         bound = self._empty_space(wv, cc, bound)
         self.block_bound = cla.to_device(q, bound.astype(np.float32))
         self.q_bound = float(bound.max())
         self.occupied_fraction = float(np.mean(bound > 0))
         self.poly = piece_polynomials()
-        self.tables = dict(info=cla.to_device(q, np.array(info, np.int32)),
-                           shape=cla.to_device(q, np.array(shape, np.int32)),
-                           lo=cla.to_device(q, np.array(lo, np.float32)))
-        self.field_tables = dict(coef=self.coef, info=self.tables["info"], shape=self.tables["shape"],
-                                 band_lo=self.tables["lo"])
+        self.field_tables = dict(coef=cla.to_device(q, coef), info=cla.to_device(q, np.array(info, np.int32)),
+                                 shape=cla.to_device(q, np.array(shape, np.int32)),
+                                 band_lo=cla.to_device(q, np.array(lo, np.float32)))
         self.defines = dict(CLW_WAVELET=None, CLW_BANDS=len(info), CLW_ACTIVE=active, **group_defines(orders))
         # PoCL keeps a work-group's private active lists on one thread's stack: small groups
         self.local_size = (WAVELET_GROUP, 1)
