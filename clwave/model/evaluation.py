@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import InputError
 from .geometry import world_points, world_to_fine
-from .transform import Band, band_sum, crop_to_grid, synthesis_boxes, synthesize
+from .transform import Band, band_reads, band_sum, crop_to_grid, synthesis_boxes, synthesize
 
 METHODS = ("auto", "bands", "fine")
 
@@ -129,8 +129,7 @@ def _pays(group, n_points, region) -> bool:
     count alike on both sides).  It prices this call alone: what the next call reuses is a gain it leaves out."""
     wav = group.wavelet
     synthesis = SYNTHESIS_PRICE * sum(int(np.prod(hi - lo)) for lo, hi in synthesis_boxes(wav, group.bands, region))
-    per_point = sum(int(np.prod([wav.support(letter) for letter in b.key]))
-                    for b, span in zip(group.bands, group.band_slices()) if span.stop > span.start)
+    per_point = sum(band_reads(wav, b) for b, span in zip(group.bands, group.band_slices()) if span.stop > span.start)
     return synthesis + n_points * wav.order ** 3 < n_points * per_point
 
 

@@ -209,10 +209,16 @@ def band_sum(wavelet, band, coeffs, fine_zyx, derivative) -> np.ndarray:
     zero).  The points go through in chunks of at most :data:`GATHER_BYTES` of reads."""
     C = coeffs.shape[3]
     out = np.empty((len(fine_zyx), C, 3) if derivative else (len(fine_zyx), C))
-    chunk = max(1, GATHER_BYTES // (int(np.prod([wavelet.support(letter) for letter in band.key])) * C * 8))
+    chunk = max(1, GATHER_BYTES // (band_reads(wavelet, band) * C * 8))
     for lo in range(0, len(fine_zyx), chunk):
         out[lo:lo + chunk] = _band_sum(wavelet, band, coeffs, fine_zyx[lo:lo + chunk], derivative)
     return out
+
+
+def band_reads(wavelet, band) -> int:
+    """The coefficients of ``band`` whose basis functions reach a point: the product of the supports along the
+    axes (what :func:`band_sum` reads a point)."""
+    return int(np.prod([wavelet.support(letter) for letter in band.key]))
 
 
 def _band_sum(wavelet, band, coeffs, fine_zyx, derivative) -> np.ndarray:
