@@ -4,7 +4,7 @@
 #   bash tools/setup.sh            install only
 #   bash tools/setup.sh --demo     install, then compress and render the built-in hydrogen phantom
 #   bash tools/setup.sh --test     install (and Debian's chromium with its driver, for the viewer's browser
-#                                  tests), then run the test suite
+#                                  tests, and clang, for the kernels' portability tests), then run the tests
 #   bash tools/setup.sh --peers    also install the peers and figures extras (VTK, matplotlib, nilearn)
 #                                  and the Mesa EGL libraries VTK renders offscreen with, for
 #                                  tools/compare_peers.py and tools/figures.py; and DiffDRR on Debian's
@@ -69,6 +69,10 @@ case "$mode" in
         if ! command -v chromedriver >/dev/null || ! { command -v chromium >/dev/null || command -v chromium-browser >/dev/null; }; then
             say "installing Debian's chromium and chromium-driver (the viewer's tests drive the page in it)"
             apt_install chromium chromium-driver || echo "clwave setup: without chromium the viewer's browser tests are skipped" >&2
+        fi
+        if ! compgen -c clang | grep -qE '^clang(-[0-9]+)?$'; then
+            say "installing Debian's clang (the kernels' portability tests compile them for GPUs with it)"
+            apt_install clang || echo "clwave setup: without clang the kernels' portability tests are skipped" >&2
         fi
         say "running the tests"
         "$VENV/bin/python" -m pytest -q

@@ -487,6 +487,7 @@ inline void sample_segment(const Field G, Active *A, const real t_mid, const rea
 }
 #endif
 
+#ifdef CLW_SHADE /* a gradient is for shading: an X-ray render of a model without alpha has CLW_ALPHA -1 */
 /* alpha's fine gradient in the lanes of (gx, gy, gz), only for segments shaded point by point:
  * lanes 0..7 (real8), and the tail lanes 8.. (realt) unless lane P0 comes from the last segment and is the
  * only one there (NS < 16) */
@@ -521,4 +522,5 @@ inline void sample_gradient(const Basis *basis, const bool all, realv *gx, realv
     if (all || NS > 12)
         GRADIENT_LANES(wt, realt, bspline_derivatives_tail, group_gradient_tail, ut, TAIL_LANES)
 }
+#endif
 #endif
