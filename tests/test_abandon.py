@@ -1,9 +1,9 @@
 """A ray tracer's set-up given up from another thread (``RayTracer(..., abandon=)``, clwave/threads.py,
 docs/raytracing.md §8): once the event is set, each step of the set-up stops at its next checkpoint (a band of the
 plan, a brick row of the content's windows, a slab of the expansion, a brick layer of the mixed bricks' pieces, a
-chunk of the scalar pool's packing, a band of the wavelet field) with ``Abandoned``, whether or not the model has a
-content mask.  Counted in units of work run after the event, not in wall time.  A tracer set up with an event never
-set is bit for bit the one set up without."""
+band of slots of a scalar model's ranges, a chunk of its pool's packing, a band of the wavelet field) with
+``Abandoned``, whether or not the model has a content mask.  Counted in units of work run after the event, not in
+wall time.  A tracer set up with an event never set is bit for bit the one set up without."""
 
 import threading
 
@@ -42,6 +42,7 @@ STEPS = {
     "slabs, X-ray (mask dropped)": (bricks, "_expand_slab", lambda: hydrogen(False), dict(content_clamp=False), 1),
     "slabs, two groups": (bricks, "_expand_slab", lambda: rgba(MIXED), dict(lod=True), 2),
     "mixed bricks' layers": (pieces, "content_cells", mixed_model, {}, 2),  # two layers of them
+    "scalar ranges' bands, no mask": (classified, "_RANGE", lambda: hydrogen(True), dict(lod=True), 1),
     "scalar pool's chunks, no mask": (classified, "_pack_slots", lambda: hydrogen(True), dict(lod=True), 1),
     "wavelet field's bands": (wavelet_field, "band_lattice", lambda: hydrogen(True), dict(field="wavelet"), 1),
 }

@@ -21,7 +21,7 @@ from scipy.special import comb
 
 from ..device import programs
 from ..device.constants import BRICK, SUPER
-from ..device.kernels import BUFFER, Kernel
+from ..device.kernels import BUFFER, Kernel, in_row_bands
 from ..errors import InputError
 from ..model.tf_passes import auto_window
 from ..model.transfer import TransferFunction
@@ -110,7 +110,8 @@ class ScalarRange:
     with 0 to 16 bits a coefficient, a width and base per tile, an offset and a step per slot (:func:`pack`: the
     full-detail slots packed as without level of detail; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the
     ranges are widened by half each slot's step, so they hold the float model and the one rendered.  ``abandon``:
-    the tracer's set-up given up between two chunks of the packing (:func:`pack`).
+    the tracer's set-up given up between two bands of slots of the ranges, and two chunks of the packing
+    (:func:`pack`).
     """
 
     def __init__(self, tracer, abandon=None):
@@ -127,9 +128,15 @@ class ScalarRange:
             slot_range = cla.empty(q, (len(f.levels), SUPER, SUPER, SUPER, 2), np.float32)
             at = np.zeros((len(f.bricks), 4), np.int32)
             at[:, :3] = (f.bricks - f.origin)[:, ::-1]
-            _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=slot_range,
-                   origin=f.origin[::-1], coef=tables["coef"], bricks=cla.to_device(q, at), frames=tables["frames"],
-                   boxes=tables["boxes"], order=f.orders[0])
+            at = cla.to_device(q, at)
+
+            def ranges(size, first):  # in bands of slots, the set-up given up between two
+                checkpoint(abandon)
+                _RANGE(self.kernels, q, size, (SUPER ** 3, 1), global_offset=first, out=slot_range,
+                       origin=f.origin[::-1], coef=tables["coef"], bricks=at, frames=tables["frames"],
+                       boxes=tables["boxes"], order=f.orders[0])
+
+            in_row_bands(q, ranges, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1))
             scalar = f.pool.get()  # one float a coefficient (bricks.build's scalar)
             full = full_detail_slots(f)
             self.sample = _sample(scalar, f.boxes[:, 0], full if full.any() else ~full, tracer.wv.groups[0].wavelet,

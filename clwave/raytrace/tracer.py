@@ -102,7 +102,7 @@ class RayTracer:
     renders the whole model, its ringing beyond the source's non-zero voxels included, where the default clamps it
     to them (docs/raytracing.md §4): the line integrals splatting computes, for X-ray images that match it.
     ``abandon`` (a ``threading.Event``): once another thread sets it, the set-up stops at its next checkpoint (a
-    slab of the expansion, a brick row of the plan, a chunk of the scalar pool's packing) with
+    slab of the expansion, a brick row of the plan, a band of a scalar model's ranges) with
     :class:`~clwave.threads.Abandoned`, whatever the model (docs/raytracing.md §8, "At the interpreter's exit").
     """
 
