@@ -18,7 +18,7 @@ class Abandoned(Exception):
 
 def checkpoint(abandon) -> None:
     """:class:`Abandoned` once ``abandon`` (a ``threading.Event``, or None: never) is set: called by a ray tracer's
-    set-up between two steps of its work (docs/raytracing.md §8, "At the interpreter's exit")."""
+    set-up between two units of each step of its work (docs/raytracing.md §8)."""
     if abandon is not None and abandon.is_set():
         raise Abandoned("the ray tracer's set-up was given up")
 

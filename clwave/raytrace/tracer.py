@@ -103,7 +103,7 @@ class RayTracer:
     to them (docs/raytracing.md §4): the line integrals splatting computes, for X-ray images that match it.
     ``abandon`` (a ``threading.Event``): once another thread sets it, the set-up stops at its next checkpoint (a
     slab of the expansion, a brick row of the plan, a band of a scalar model's ranges) with
-    :class:`~clwave.threads.Abandoned`, whatever the model (docs/raytracing.md §8, "At the interpreter's exit").
+    :class:`~clwave.threads.Abandoned`, whatever the model (docs/raytracing.md §8).
     """
 
     def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,

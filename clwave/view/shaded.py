@@ -110,7 +110,7 @@ class ShadedSource(Source):
 
     def stop(self):
         """The viewer stopping: the tracer of a model held in memory, or a file's full stage, still being set up is
-        given up (its thread stops after the read or the slab under way)."""
+        given up (its thread stops after the read, or the slab or band of its set-up under way)."""
         self._abandon.set()
         if self.staged is not None:
             self.staged.abandon()
