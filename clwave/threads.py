@@ -1,12 +1,26 @@
 """Host threads: one process-wide pool, one thread per core the process may use, for the NumPy and
 SciPy work that releases the GIL (per-channel transforms, classification chunks, footprint textures).
-Threads are started once, not per call (starting them cost more than a small view's FFTs)."""
+Threads are started once, not per call (starting them cost more than a small view's FFTs).  Work that another
+thread may give up (a ray tracer's set-up, a file's reading) stops with :class:`Abandoned` (:func:`checkpoint`)."""
 
 from __future__ import annotations
 
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from functools import lru_cache
+
+
+class Abandoned(Exception):
+    """Work given up from another thread: a ray tracer's set-up after its ``abandon`` event was set
+    (:func:`checkpoint`), a file's reading stopped (the viewer's: its reader, and the whole model that the shaded views
+    wait for), or a staged tracer's refinement after its full stage was given up (``StagedTracer.abandon``)."""
+
+
+def checkpoint(abandon) -> None:
+    """:class:`Abandoned` once ``abandon`` (a ``threading.Event``, or None: never) is set: called by a ray tracer's
+    set-up between two units of each step of its work (docs/raytracing.md §8)."""
+    if abandon is not None and abandon.is_set():
+        raise Abandoned("the ray tracer's set-up was given up")
 
 
 def cores() -> int:

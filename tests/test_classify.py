@@ -382,10 +382,10 @@ def test_packed_pool_within_half_a_step(monkeypatch):
 
     seen, pack = {}, classified.pack
 
-    def spy(scalar, boxes, full):
+    def spy(scalar, boxes, full, abandon):
         seen["float"], seen["boxes"] = scalar.copy(), np.array(boxes, np.int64)
         assert np.all(full)  # a tracer of full detail alone: one step for the pool
-        return pack(scalar, boxes, full)
+        return pack(scalar, boxes, full, abandon)
 
     monkeypatch.setattr(classified, "pack", spy)
     vol = clwave.phantom("hydrogen", n=20)

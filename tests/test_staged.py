@@ -16,15 +16,15 @@ import pytest
 import clwave
 from clwave import WaveletVolume
 from clwave.device import memory
-from clwave.io.clw import MASK_CHUNK, FileMask
-from clwave.model.mask import Abandoned
+from clwave.io.clw import MASK_CHUNK
 from clwave.io.occupancy import OccupancyGrid, mass_on_occupied
 from clwave.io.summary import approximation_occupancy, detail_energy, detail_field
 from clwave.model.wavelet import importance_of
-from clwave.raytrace import passes
+from clwave.raytrace import bricks, passes
 from clwave.raytrace.coarse_estimate import approximation_grid, detail_share, field_energy, line_energy, white_share
 from clwave.raytrace.staged import StagedTracer, coarse_volume
 from clwave.raytrace.tracer import RayTracer
+from clwave.threads import Abandoned
 from test_bricks import out_of_core_model, smooth_rgba, smooth_volume
 from test_progressive_raytrace import model
 
@@ -408,26 +408,23 @@ def test_a_refinement_after_the_set_up_is_given_up_raises_abandoned(model_file):
 
 
 def test_a_set_up_given_up_stops_between_two_slabs_of_its_expansion(model_file, monkeypatch):
-    """At exit (staged._abandon) the full stage's thread stops at the content mask's next box, leaving no full stage
-    and no failure, so that the interpreter does not wait for the whole set-up."""
-    staged, asked, box = RayTracer.open(model_file), [], FileMask.box
+    """At exit (staged._abandon) the full stage's thread stops before the next slab of its expansion (the tracer's
+    ``abandon``), leaving no full stage and no failure, so that the interpreter does not wait for the whole set-up;
+    the model a caller holds (``whole=``, the viewer's) is left as it was, its mask read on."""
+    expand = bricks._expand_slab
+    for whole in (None, WaveletVolume.open(model_file)):
+        staged, slabs = StagedTracer(RayTracer, model_file, whole=None if whole is None else lambda: whole), []
 
-    def give_up_after_one(mask, *args):
-        asked.append(args)
-        part = box(mask, *args)
-        staged._abandon.set()  # as the interpreter's exit does
-        return part
+        def give_up_in_the_first(wv, gi, lay, slots, *args):
+            slabs.append(int(slots[0]))  # each slab's first slot, once per group
+            staged._abandon.set()  # as the interpreter's exit does
+            return expand(wv, gi, lay, slots, *args)
 
-    monkeypatch.setattr(FileMask, "box", give_up_after_one)
-    staged.start()
-    assert staged.wait() is None and len(asked) == 2 and staged._failure is None
-    # the model a caller holds (whole=, the viewer's): the set-up given up, the caller's mask still reads
-    held = WaveletVolume.open(model_file)
-    staged = StagedTracer(RayTracer, model_file, whole=lambda: held)
-    staged.start()
-    assert staged.wait() is None and staged._failure is None and held.content_mask.abandon is None
-    monkeypatch.setattr(FileMask, "box", box)
-    assert held.content_mask.box((0, 0, 0), (2, 2, 2)).shape == (2, 2, 2)
+        monkeypatch.setattr(bricks, "_expand_slab", give_up_in_the_first)
+        staged.start()
+        assert staged.wait() is None and staged._failure is None
+        assert len(set(slabs)) == 1 and len(slabs) == len(staged.coarse.wv.groups), slabs  # its groups, no other slab
+    assert whole.content_mask.box((0, 0, 0), (2, 2, 2)).shape == (2, 2, 2)
 
 
 def test_a_tracer_of_chosen_details_refuses_others_in_one_line():

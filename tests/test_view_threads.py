@@ -330,11 +330,13 @@ def test_close_while_the_whole_is_ranked_does_not_wait_for_the_ranking(clw, monk
     assert "clwave-view-read" not in alive()
 
 
-def test_close_during_the_shaded_tracers_build_of_a_model_in_memory_stops_it_at_a_slab(monkeypatch):
+@pytest.mark.parametrize("interpolate", [False, True], ids=["content mask", "interpolating, no mask"])
+def test_close_during_the_shaded_tracers_build_of_a_model_in_memory_stops_it_at_a_slab(monkeypatch, interpolate):
     """``Viewer.close()`` while the shaded views' ray tracer of a model held in memory is built (its first slab held
-    until the viewer stops, each later one until the test ends, as a long build would be): the build stops at the
-    next box its expansion asks of the content mask, and close returns with no build thread left (the exit waited for
-    the whole build before)."""
+    until the viewer stops, each later one until the test ends, as a long build would be): the build stops before
+    its next slab (the tracer's ``abandon``), with a content mask or without (an interpolating model: until the
+    seventeenth session nothing stopped its build), and close returns with no build thread left (the exit waited
+    for the whole build before)."""
     from clwave.raytrace import bricks
     from clwave.view.shaded import ShadedSource
 
@@ -352,7 +354,9 @@ def test_close_during_the_shaded_tracers_build_of_a_model_in_memory_stops_it_at_
 
     monkeypatch.setattr(bricks, "_expand_slab", slow)
     monkeypatch.setattr(ShadedSource, "stop", lambda self: stop(self) or stopping.set())
-    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=32), levels=2).threshold(keep=0.2)
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=32), levels=2,
+                                          interpolate=interpolate).threshold(keep=0.2)
+    assert (wv.content_mask is None) == interpolate
 
     async def go(v):
         async with aiohttp.ClientSession() as s:

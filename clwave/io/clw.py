@@ -371,8 +371,7 @@ def open_clw(path):
 class FileMask(ContentMask):
     """The content mask of a ``.clw`` file, read when a box of it is first asked for, a layer of the file's
     chunks at a time (packed to bits as it comes): an image that needs a part of the mask, or none of it (a
-    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §8).  Thread-safe.  ``abandon`` as
-    :class:`ContentMask`'s: a set-up given up reads no more of the file."""
+    splat, the coarsest detail), does not wait for the whole (docs/raytracing.md §8).  Thread-safe."""
 
     def __init__(self, path, shape):
         super().__init__(shape)  # zeroed pages: no memory until a layer is read
@@ -380,7 +379,6 @@ class FileMask(ContentMask):
         self.lock = threading.Lock()
 
     def box(self, start, shape) -> np.ndarray:
-        self.checkpoint()  # before the file is read
         lo, hi = max(int(start[0]), 0), min(int(start[0]) + int(shape[0]), self.shape[0])
         self.load(lo, hi)
         return super().box(start, shape)

@@ -7,21 +7,11 @@ voxel reaches as empty; it reads the mask a box at a time (a slab of bricks, a b
 
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 
 
-class Abandoned(Exception):
-    """Work given up from another thread: a :class:`ContentMask` asked for a box after its set-up was given up
-    (``abandon`` set), a file's reading stopped (the viewer's: its reader, and the whole model that the shaded views
-    wait for), or a staged tracer's refinement after its full stage was given up (``StagedTracer.abandon``)."""
-
-
 class ContentMask:
-    """The non-zero voxels of a volume of ``shape`` (nz, ny, nx), as bits packed along x.  ``abandon`` (a
-    ``threading.Event``, or None): once set, asking for a box raises :class:`Abandoned`, which stops a ray tracer's
-    set-up between two slabs of its expansion (:func:`abandonable`)."""
+    """The non-zero voxels of a volume of ``shape`` (nz, ny, nx), as bits packed along x."""
 
     def __init__(self, shape, bits: np.ndarray | None = None):
         self.shape = tuple(int(n) for n in shape)
@@ -30,7 +20,6 @@ class ContentMask:
         if self.bits.shape != packed or self.bits.dtype != np.uint8:
             raise ValueError(f"packed bits of shape {self.bits.shape} and type {self.bits.dtype} do not make "
                              f"a mask of shape {self.shape}")
-        self.abandon = None
 
     @classmethod
     def of(cls, mask) -> "ContentMask":
@@ -50,14 +39,8 @@ class ContentMask:
         rows[..., x0 - 8 * first:x1 - 8 * first] = block
         self.bits[z0:z1, y0:y1, first:last] = np.packbits(rows, axis=2)
 
-    def checkpoint(self):
-        """:class:`Abandoned` once ``abandon`` is set."""
-        if self.abandon is not None and self.abandon.is_set():
-            raise Abandoned("the set-up reading the content mask was given up")
-
     def box(self, start, shape) -> np.ndarray:
         """Bool (``shape``): whether voxel ``start + index`` is non-zero; False beyond the volume."""
-        self.checkpoint()
         out = np.zeros(tuple(int(n) for n in shape), bool)
         lo = np.maximum(start, 0)
         hi = np.minimum(np.add(start, shape), self.shape)
@@ -76,14 +59,3 @@ class ContentMask:
         whole = self.box((0, 0, 0), self.shape)
         return whole if dtype is None else whole.astype(dtype)
 
-
-def abandonable(wv, abandon):
-    """``wv`` (a WaveletVolume) with its own view of its content mask (bits, and a file's reading and lock, shared)
-    that raises :class:`Abandoned` once the ``threading.Event`` ``abandon`` is set: a ray tracer's set-up of it stops
-    at the next box its expansion asks for (per slab of bricks), while the caller's model, whose other users read on,
-    is not touched.  A model without a mask is ``wv`` itself: nothing asks, nothing stops it."""
-    if wv.content_mask is None:
-        return wv
-    mask = copy.copy(wv.content_mask)
-    mask.abandon = abandon
-    return wv.masked(mask)

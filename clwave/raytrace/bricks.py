@@ -29,6 +29,7 @@ from ..device.kernels import BUFFER, Kernel
 from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
+from ..threads import checkpoint
 from .bounds import reached_blocks
 from .lod import content_windows, occupancy
 from .pieces import mixed_pieces
@@ -84,9 +85,10 @@ class Plan:
                 (unique % 2).astype(bool), pages, alt)
 
 
-def plan(wv, details=None) -> Plan:
+def plan(wv, details=None, abandon=None) -> Plan:
     """The bricks of a model and their levels at the detail levels ``details`` (default: every one, 0 .. levels;
-    the others have no bricks).
+    the others have no bricks); given up (``abandon``, :func:`~clwave.threads.checkpoint`) between two bands, or two
+    brick rows of the content's windows.
 
     A brick exists where a kept coefficient's support reaches and (for a model that knows its content) some
     occupied coefficient does (:func:`clwave.raytrace.lod.occupancy`); its level is the coarsest lattice that
@@ -108,6 +110,7 @@ def plan(wv, details=None) -> Plan:
     shape = tuple(np.max([[hi[-1] for _, hi in axes] for *_, axes in bands], axis=0) - origin + 1)
     reach_by = {}  # per band level (levels + 1: the approximation) the bricks its kept supports reach
     for g, band, sl, axes in bands:  # one band at a time: no per-coefficient array of the whole model
+        checkpoint(abandon)
         positions = g.all_positions()[sl] - band.start
         if not len(positions):
             continue
@@ -127,7 +130,7 @@ def plan(wv, details=None) -> Plan:
                     level[reach] = m - 1
         level[~present] = ABSENT
         if wv.content_mask is not None:
-            empty, mixed_windows = content_windows(wv, detail, origin, shape)
+            empty, mixed_windows = content_windows(wv, detail, origin, shape, abandon)
             level[empty] = ABSENT
             clamps[detail] = mixed_windows & (level != ABSENT)
             if detail == 0:  # mixed bricks: the clamped ones whose own level is coarser (pieces.py)
@@ -312,7 +315,8 @@ def lattice_of_levels(wv) -> np.ndarray:
     return np.array(out, np.float32)
 
 
-def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, scalar=False) -> BrickField:
+def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, scalar=False,
+          abandon=None) -> BrickField:
     """Expand the model's bricks on the device, slab of bricks (one brick row along z) by slab.
 
     Per slab and group the real-line synthesis (``cl/raytrace/expand.cl``) runs from the approximation
@@ -322,7 +326,9 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     fits the budget with the bounds, else each slab's bricks go to a scratch file (:class:`Spill`).  Raises
     :class:`DeviceMemoryError` before allocating when one slab's work does not fit.  ``scalar``: a model of one
     channel's pool, when it stays on the device, holds one float a coefficient, the channel alone (``CLW_POOL_SCALAR``
-    of ``cl/raytrace/bricks.cl``), for post-classification to pack (:class:`~.classified.ScalarRange`).
+    of ``cl/raytrace/bricks.cl``), for post-classification to pack (:class:`~.classified.ScalarRange`).  ``abandon``
+    (a ``threading.Event``): once set, :class:`~clwave.threads.Abandoned` before the next slab (or brick layer of
+    the mixed bricks' pieces).
     """
     if scalar and wv.channels != 1:
         raise ValueError(f"a scalar pool is for a model of one channel, not {wv.channels}")
@@ -368,6 +374,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
             spill.write(*staged)
 
     for bz in np.unique(slabs):
+        checkpoint(abandon)
         slots, hold = np.flatnonzero(slabs == bz), []
         first, last = int(lay["ends"][slots[0]]), int(lay["ends"][slots[-1] + 1])
         target, base = (pool, 0) if resident else (cla.empty(q, (last - first, 4), np.float32), first)
@@ -403,7 +410,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     # the others of full detail: fine segments (docs/raytracing.md §3); the coarser details' keep their level's, alpha
     # clamped at the samples (§8, "Alpha at coarser details")
     lattices[below[~np.isin(below, alt) & ~coarse[below]]] = level_lattices[0]
-    mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill)
+    mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill, abandon)
     bounds = bounds.get()[:n]
     cut = np.flatnonzero(clamped & (lay["levels"] == wv.levels))  # the coarsest detail's (docs/raytracing.md §8)
     if len(cut) and (reached := reached_blocks(wv, lay["bricks"][cut])) is not None:

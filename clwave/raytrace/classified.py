@@ -21,11 +21,12 @@ from scipy.special import comb
 
 from ..device import programs
 from ..device.constants import BRICK, SUPER
-from ..device.kernels import BUFFER, Kernel
+from ..device.kernels import BUFFER, Kernel, in_row_bands
 from ..errors import InputError
 from ..model.tf_passes import auto_window
 from ..model.transfer import TransferFunction
 from ..model.transform import sampling_kernel
+from ..threads import checkpoint
 
 _RANGE = Kernel("scalar_range", ("out", BUFFER), ("origin", cltypes.int4), ("coef", BUFFER), ("bricks", BUFFER),
                 ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
@@ -108,10 +109,12 @@ class ScalarRange:
     Made, the pool on the device (expanded one float a coefficient: :func:`~.bricks.build`'s ``scalar``) is packed
     with 0 to 16 bits a coefficient, a width and base per tile, an offset and a step per slot (:func:`pack`: the
     full-detail slots packed as without level of detail; ``CLW_SCALAR_POOL`` in ``cl/raytrace/field_bspline.h``); the
-    ranges are widened by half each slot's step, so they hold the float model and the one rendered.
+    ranges are widened by half each slot's step, so they hold the float model and the one rendered.  ``abandon``:
+    the tracer's set-up given up between two bands of slots of the ranges, and two chunks of the packing
+    (:func:`pack`).
     """
 
-    def __init__(self, tracer):
+    def __init__(self, tracer, abandon=None):
         f, cc = tracer.bricks, tracer.cc
         q = cc.queue
         self.cc, self.bricks, self.tracer = cc, f, tracer
@@ -125,14 +128,20 @@ class ScalarRange:
             slot_range = cla.empty(q, (len(f.levels), SUPER, SUPER, SUPER, 2), np.float32)
             at = np.zeros((len(f.bricks), 4), np.int32)
             at[:, :3] = (f.bricks - f.origin)[:, ::-1]
-            _RANGE(self.kernels, q, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1), out=slot_range,
-                   origin=f.origin[::-1], coef=tables["coef"], bricks=cla.to_device(q, at), frames=tables["frames"],
-                   boxes=tables["boxes"], order=f.orders[0])
+            at = cla.to_device(q, at)
+
+            def ranges(size, first):  # in bands of slots, the set-up given up between two
+                checkpoint(abandon)
+                _RANGE(self.kernels, q, size, (SUPER ** 3, 1), global_offset=first, out=slot_range,
+                       origin=f.origin[::-1], coef=tables["coef"], bricks=at, frames=tables["frames"],
+                       boxes=tables["boxes"], order=f.orders[0])
+
+            in_row_bands(q, ranges, (SUPER ** 3, len(f.bricks)), (SUPER ** 3, 1))
             scalar = f.pool.get()  # one float a coefficient (bricks.build's scalar)
             full = full_detail_slots(f)
             self.sample = _sample(scalar, f.boxes[:, 0], full if full.any() else ~full, tracer.wv.groups[0].wavelet,
                                   f.levels)
-            words, quant = pack(scalar, f.boxes[:, 0], full)
+            words, quant = pack(scalar, f.boxes[:, 0], full, abandon)
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half their step of the floats
             self.slot_range += (quant["step"][:, None] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]
@@ -265,7 +274,7 @@ def _sample(scalar, boxes, slots, wavelet, levels) -> np.ndarray:
     return values.astype(np.float32)
 
 
-def pack(scalar, boxes, full=None) -> tuple:
+def pack(scalar, boxes, full=None, abandon=None) -> tuple:
     """(words, quant): the pool's coefficients ``scalar`` (float32; slot s a box ``boxes[s]`` = (nx, ny, nz, first) of
     coefficients, x fastest) packed for ``cl/raytrace/scalar_pool.h`` (docs/raytracing.md §10).  A step S for the
     slots a full-detail render reads (``full``, (slots,) bool; default every slot) and one for the others (a tracer's
@@ -275,7 +284,8 @@ def pack(scalar, boxes, full=None) -> tuple:
     S / 2 of each coefficient.  Each tile (TILE x TILE of a slot's x rows in y and z) holds its q - base in the fewest
     bits b (0..14, 16) covering its q, base its least q.  Slot s's words from ``quant["word"][s]``: per tile (z, y
     order) its entry (its first word, base | b << 16), then the tiles' words, each tile's rows (z, y order) one after
-    another from a whole word; then POOL_PAD spare words.  ``quant`` is (slots,) QUANT."""
+    another from a whole word; then POOL_PAD spare words.  ``quant`` is (slots,) QUANT.  Given up between two chunks
+    (``abandon``, :func:`~clwave.threads.checkpoint`)."""
     boxes = np.asarray(boxes, np.int64).reshape(-1, 4)
     sizes = np.prod(boxes[:, :3], axis=1)
     quant = np.zeros(max(len(boxes), 1), QUANT)
@@ -295,6 +305,7 @@ def pack(scalar, boxes, full=None) -> tuple:
         slots = np.flatnonzero(np.all(boxes[:, :3] == shape, axis=1))
         per = max(Q_CHUNK // int(np.prod(shape)), 1)
         for k in range(0, len(slots), per):
+            checkpoint(abandon)
             chunk = slots[k:k + per]
             words, start = _pack_slots(scalar, shape, starts[chunk], lo[chunk].astype(np.float64), inverse[chunk],
                                         at)

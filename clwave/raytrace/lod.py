@@ -19,6 +19,7 @@ import pyopencl.array as cla
 from ..device.constants import BRICK, SUPER
 from ..errors import InputError, finite_number
 from ..io.occupancy import any_blocks, central_start
+from ..threads import checkpoint
 from .bounds import clip_box, superblocks
 
 
@@ -37,12 +38,13 @@ def occupancy(mask, wavelet, level: int, start, shape) -> np.ndarray:
     return any_blocks(mask.box(central_start(wavelet, level) + step * start, step * shape), step)
 
 
-def content_windows(wv, level: int, origin, shape) -> tuple:
+def content_windows(wv, level: int, origin, shape, abandon=None) -> tuple:
     """Per brick of the grid at ``origin`` (brick index, z, y, x) of ``shape``: (no group's window holds an
     occupied level-``level`` coefficient, some group's window holds an unoccupied one).
 
     Group g's window in brick b is its level-L coefficients whose B-splines reach the brick (as
-    :func:`clwave.raytrace.bricks.layout` counts them); counted separably a brick row at a time.
+    :func:`clwave.raytrace.bricks.layout` counts them); counted separably a brick row at a time, given up between
+    two (``abandon``, :func:`~clwave.threads.checkpoint`).
     """
 
     j0, mask = wv.groups[0].wavelet.order, wv.content_mask
@@ -59,6 +61,7 @@ def content_windows(wv, level: int, origin, shape) -> tuple:
         (zlo, zhi), (ylo, yhi), (xlo, xhi) = windows
         rows_any, rows_all = [], []
         for bz in range(shape[0]):  # a brick row at a time: its layers of the level's occupancy
+            checkpoint(abandon)
             occ = occupancy(mask, wav, level, (zlo[bz], ylo[0], xlo[0]), (zhi[bz] - zlo[bz], yhi[-1] - ylo[0],
                                                                           xhi[-1] - xlo[0]))
             full = occ.all(axis=0, keepdims=True)

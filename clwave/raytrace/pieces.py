@@ -22,6 +22,7 @@ import pyopencl.array as cla
 
 from ..device.constants import BRICK
 from ..model.bspline import bspline
+from ..threads import checkpoint
 from .bounds import content_cells
 from .classified import bernstein_matrix
 from .lod import any_blocks
@@ -98,7 +99,7 @@ def _cell_floors(cells, m) -> np.ndarray:
     return x.reshape(len(cells), len(m) ** 3, -1).min(axis=2)
 
 
-def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
+def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill, abandon=None) -> tuple:
     """Per slot (int32 (slots, 4)): its coarse slot, the first of its pieces' flags, the pieces per axis and a
     piece's side in fine cells (-1, 0, 0, 0 where the slot is not a mixed brick's fine slot), and the flags (uint8,
     1: the piece is marched on the coarse slot; 2: no content voxel reaches it, so that the clamped field is 0 there
@@ -108,7 +109,8 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
 
     ``lay``: :func:`clwave.raytrace.bricks.layout`; ``lattices``: per level its knot lattice; ``alpha``: the
     group holding alpha (None: none); the pool on the device, or the scratch file (:class:`~.passes.Spill`).
-    Counted a brick layer at a time (the content mask read a layer of bricks' cells at once).
+    Counted a brick layer at a time (the content mask read a layer of bricks' cells at once), given up between two
+    (``abandon``, :func:`~clwave.threads.checkpoint`).
     """
     mixes = np.zeros((len(alt), 4), np.int32)
     mixes[:, 0] = -1
@@ -126,6 +128,7 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill) -> tuple:
     mixes[fine] = np.stack([coarse, np.cumsum(k ** 3) - k ** 3, k, side], axis=1)
     flags, empty = [None] * len(fine), [None] * len(fine)
     for bz in np.unique(bricks[fine, 0]):  # a brick layer at a time: the content mask read for its cells at once
+        checkpoint(abandon)
         layer = np.flatnonzero(bricks[fine, 0] == bz)
         lo = bricks[fine[layer]].min(axis=0)
         count = bricks[fine[layer]].max(axis=0) - lo + 1

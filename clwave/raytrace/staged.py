@@ -19,12 +19,12 @@ from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
-from ..model.mask import Abandoned, abandonable
 from ..model.transform import band_layout
 from ..io.occupancy import mass_on_occupied
 from ..io.summary import approximation_occupancy, detail_energy, detail_field
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
 from .coarse_estimate import approximation_grid, detail_share, field_energy, line_energy, white_share
+from ..threads import Abandoned
 from .progressive import MIN_SIDE, RaytraceFrame, frames, schedule, upsample
 
 #: a shaded coarse frame's max estimate takes the clamp's term times this: the clamp removes a haze that is
@@ -96,10 +96,7 @@ class StagedTracer:
         start, cc = time.perf_counter(), self.coarse.cc
         try:
             wv = WaveletVolume.open(path) if whole is None else whole()
-            if self._abandon.is_set():
-                return
-            # the expansion asks the content mask for boxes slab by slab: this set-up's own view of it stops there
-            full = tracer_class(abandonable(wv, self._abandon), device=cc, device_memory=device_memory, lod=lod)
+            full = tracer_class(wv, device=cc, device_memory=device_memory, lod=lod, abandon=self._abandon)
         except Abandoned:
             return
         except BaseException as exc:  # raised again where the caller waits for the full stage
@@ -116,9 +113,10 @@ class StagedTracer:
             self._thread.start()
 
     def abandon(self):
-        """Give up the full stage's set-up (a viewer stopping): its thread stops after the file's reading or between
-        two slabs of the expansion, as at the interpreter's exit (:func:`_abandon`), and the full stage is never
-        ready (:meth:`wait` gives None once it has stopped)."""
+        """Give up the full stage's set-up (a viewer stopping): its thread stops after the file's reading or at the
+        tracer's next checkpoint (between two slabs of the expansion, ``RayTracer``'s ``abandon``), as at the
+        interpreter's exit (:func:`_abandon`), and the full stage is never ready (:meth:`wait` gives None once it
+        has stopped)."""
         self._abandon.set()
 
     @property
@@ -172,7 +170,7 @@ class StagedTracer:
         detail of the one before, docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`;
         ``transfer_function``: as :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.
         ``meta["stage"]`` says which stage made a frame.  The full stage's set-up failed: its error; given up
-        (:meth:`abandon`): :class:`~clwave.model.mask.Abandoned`, where the full stage's frames would begin, as from a
+        (:meth:`abandon`): :class:`~clwave.threads.Abandoned`, where the full stage's frames would begin, as from a
         coarse frame's ``final_image()``."""
         check_error(error)
         check_camera(camera)
@@ -198,7 +196,7 @@ class StagedTracer:
             yield made
 
     def _full_stage(self):
-        """:meth:`wait` for the full stage, :class:`~clwave.model.mask.Abandoned` where it was given up."""
+        """:meth:`wait` for the full stage, :class:`~clwave.threads.Abandoned` where it was given up."""
         full = self.wait()
         if full is None:
             raise Abandoned("the full stage was given up (StagedTracer.abandon): nothing to refine to")
@@ -267,7 +265,8 @@ def read_coarse(path) -> tuple:
 
 def _abandon(event, thread):
     """At exit: give up a full stage still being set up, and wait for its thread to stop, which it does after the
-    file's reading or between two slabs of the expansion (the content mask raises ``Abandoned``).  A daemon
+    file's reading or at the tracer's next checkpoint (``RayTracer``'s ``abandon``: between two slabs of the
+    expansion).  A daemon
     thread stopped by the interpreter instead would keep h5py's lock, or abort inside OpenCL calls."""
     event.set()
     thread.join()

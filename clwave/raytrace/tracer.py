@@ -101,10 +101,13 @@ class RayTracer:
     up from a ``.clw`` file in stages, the coarsest detail first (docs/raytracing.md §8).  ``content_clamp=False``
     renders the whole model, its ringing beyond the source's non-zero voxels included, where the default clamps it
     to them (docs/raytracing.md §4): the line integrals splatting computes, for X-ray images that match it.
+    ``abandon`` (a ``threading.Event``): once another thread sets it, the set-up stops at its next checkpoint (a
+    slab of the expansion, a brick row of the plan, a band of a scalar model's ranges) with
+    :class:`~clwave.threads.Abandoned`, whatever the model (docs/raytracing.md §8).
     """
 
     def __init__(self, wv: WaveletVolume, device=None, field="bspline", active=ACTIVE, device_memory=None,
-                 region=None, lod=False, content_clamp=True):
+                 region=None, lod=False, content_clamp=True, abandon=None):
         check_model(wv, "ray tracing")
         if not isinstance(content_clamp, bool):
             raise InputError(f"content_clamp={content_clamp!r} must be True (the model within its content) or False")
@@ -131,19 +134,20 @@ class RayTracer:
         self.orders = [g.wavelet.order for g in wv.groups]
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
         if field == "bspline":
-            self._expand()
+            self._expand(abandon)
         else:
-            self._wavelet()
+            self._wavelet(abandon)
         # a scalar model: its range per block, for transfer functions at render time (docs/raytracing.md §10)
-        self.scalar = ScalarRange(self) if wv.channels == 1 and field == "bspline" else None
+        self.scalar = ScalarRange(self, abandon) if wv.channels == 1 and field == "bspline" else None
 
-    def _expand(self):
+    def _expand(self, abandon):
         """B-spline field: the bricks (:mod:`clwave.raytrace.bricks`), and their per-block maxima as bounds."""
-        p = plan(self.wv, self.details)
+        p = plan(self.wv, self.details, abandon)
         if self.region is not None:  # the bricks of the region's layers only
             layers = p.origin[0] + np.arange(p.level.shape[1])
             p.level[:, (layers < self.region[0]) | (layers >= self.region[1])] = ABSENT
-        self.bricks = build(self.wv, self.cc, self.budget, p, scalar=self.wv.channels == 1)  # ScalarRange packs it
+        self.bricks = build(self.wv, self.cc, self.budget, p, scalar=self.wv.channels == 1,  # ScalarRange packs it
+                            abandon=abandon)
         self.expansions += 1
         self.setup_seconds = self.bricks.seconds
         self.occ_origin = self.bricks.origin * SUPER
@@ -159,10 +163,10 @@ class RayTracer:
         self.defines = group_defines(self.orders)
         self.quant = cla.zeros(self.cc.queue, 1, QUANT)  # a packed scalar pool's Quant per slot (classified.pack)
 
-    def _wavelet(self):
+    def _wavelet(self, abandon):
         """Wavelet field: the dense bands' tables, bounds, content cells and build options
         (:mod:`clwave.raytrace.wavelet_field`), held as the B-spline field's are (:meth:`_expand`)."""
-        w = WaveletField(self.wv, self.cc, self.budget, self.active, self.orders)
+        w = WaveletField(self.wv, self.cc, self.budget, self.active, self.orders, abandon)
         for name in AT_DEFAULT:
             setattr(self, name, getattr(w, name))
         self.setup_seconds, self.occ_origin, self.poly = w.setup_seconds, w.occ_origin, w.poly

@@ -14,6 +14,7 @@ from ..device.memory import check_buffer
 from ..errors import DeviceMemoryError
 from ..model.bspline import piece_polynomials
 from ..model.geometry import band_lattice
+from ..threads import checkpoint
 from .bounds import block_sums, cell_blocks, clip_box, content_cells, superblocks
 from .bricks import group_defines
 
@@ -25,14 +26,14 @@ class WaveletField:
     ``cc`` (within ``budget``): the dense bands and their tables (``field_tables``), the block bounds and their
     superblocks, the clip box and the content cells the march is clamped to, and the build options (``defines``,
     ``local_size``) for a ray's ``active`` list of at most that many entries; ``orders``, each group's B-spline
-    order.
+    order.  ``abandon``: given up between two bands (:func:`~clwave.threads.checkpoint`).
 
     A block's bound is the sum over the coefficients whose supports meet it of |c| 2^{-3m/2} times the product of
     the prototypes' maxima along the axes (N_j peaks at j/2; |psi| <= max |q_k| by the partition of unity), so it
     bounds every channel of the field there.
     """
 
-    def __init__(self, wv, cc, budget, active, orders):
+    def __init__(self, wv, cc, budget, active, orders, abandon=None):
         dense = [g.dense_bands() for g in wv.groups]
         q, start = cc.queue, time.perf_counter()
         j0 = orders[0]
@@ -42,6 +43,7 @@ class WaveletField:
             shift = (j0 - wav.order) / 2.0  # grid-0 fine coordinates (docs/raytracing.md §3: lattices of both parities)
             peak = {"a": float(wav.phi(wav.order / 2.0)), "d": float(np.max(np.abs(wav.q)))}
             for band, arr in zip(g.bands, group_dense):
+                checkpoint(abandon)
                 key_xyz = band.key[::-1]
                 flat = np.zeros(arr.shape[:3] + (4,), np.float32)
                 flat[..., list(g.channels)] = arr * 2.0 ** (-1.5 * band.level)

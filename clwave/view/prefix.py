@@ -18,10 +18,10 @@ import numpy as np
 from ..errors import ClwaveError, ClwaveWarning, FileFormatError
 from ..io.clw import read_header
 from ..model.budget import kept_count, warn_stored
-from ..model.mask import Abandoned
 from ..model.ranking import by_importance
 from ..model.wavelet import WaveletVolume, check_thresholding
 from ..raytrace.staged import read_coarse
+from ..threads import Abandoned
 
 #: coefficients (per channel group) the viewer serves from at once: at 1024^3 (5 % kept) about 2 % of the file
 #: (its reading time: docs/viewer.md §2), and enough for the display window (frames.WINDOW_COEFFICIENTS)
@@ -64,7 +64,7 @@ class PrefixFirst:
         read: h5py serialises its calls, so a coarse stage asked for meanwhile would wait behind the whole's reads
         (their times: docs/viewer.md §2); that reading failing, nothing is held, and :meth:`coarse` reads
         again (and fails for the shaded views alone).  ``stop`` (a ``threading.Event``): set once the coarse reading
-        is done, the whole is not read (:class:`~clwave.model.mask.Abandoned`)."""
+        is done, the whole is not read (:class:`~clwave.threads.Abandoned`)."""
         with self._holding:
             if coarse_first and not self._taken:
                 try:

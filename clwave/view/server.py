@@ -24,7 +24,7 @@ from aiohttp import WSCloseCode, WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError, whole_number
-from ..model.mask import Abandoned
+from ..threads import Abandoned
 from . import colours
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource

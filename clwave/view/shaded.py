@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..io.result import RenderResult
-from ..model.mask import Abandoned, abandonable
 from ..model.transfer import TransferFunction
+from ..threads import Abandoned
 from .frames import NO_COEFFICIENTS, NOTHING_VISIBLE, Frame, Source, ViewState, check_tolerance
 
 #: shaded frames while dragging aim at this many seconds of ray tracing (5 frames a second with the round trip)
@@ -101,8 +101,8 @@ class ShadedSource(Source):
                 if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
                     self.wv = self.whole()
                 # a model held in memory: the build stops at its next slab once the viewer stops (:meth:`stop`)
-                tracer = RayTracer(abandonable(self.wv, self._abandon), device=self.device,
-                                   device_memory=self.device_memory, lod=True)
+                tracer = RayTracer(self.wv, device=self.device, device_memory=self.device_memory, lod=True,
+                                   abandon=self._abandon)
             except Abandoned:  # the viewer stopped: no tracer
                 return
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
@@ -110,7 +110,7 @@ class ShadedSource(Source):
 
     def stop(self):
         """The viewer stopping: the tracer of a model held in memory, or a file's full stage, still being set up is
-        given up (its thread stops after the read or the slab under way)."""
+        given up (its thread stops after the read, or the slab or band of its set-up under way)."""
         self._abandon.set()
         if self.staged is not None:
             self.staged.abandon()
