@@ -97,3 +97,9 @@ def test_a_tracer_with_an_event_never_set_is_the_tracer_without(make, options, v
     assert np.array_equal(plain.bricks.bounds, watched.bricks.bounds)
     image = plain.render(camera, **view).image
     assert np.array_equal(image, watched.render(camera, **view).image) and image.any()
+
+
+def test_abandon_must_be_an_event():
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1)
+    with pytest.raises(clwave.InputError, match="threading.Event"):
+        clwave.RayTracer(wv, abandon=True)

@@ -111,6 +111,8 @@ class RayTracer:
         check_model(wv, "ray tracing")
         if not isinstance(content_clamp, bool):
             raise InputError(f"content_clamp={content_clamp!r} must be True (the model within its content) or False")
+        if abandon is not None and not callable(getattr(abandon, "is_set", None)):
+            raise InputError(f"abandon={abandon!r} must be a threading.Event (set to give the set-up up) or None")
         if not content_clamp and wv.content_mask is not None:
             wv = wv.unmasked()
         if field not in FIELDS:
