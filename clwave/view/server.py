@@ -13,6 +13,7 @@ import atexit
 import ipaddress
 import itertools
 import logging
+import re
 import secrets
 import threading
 import time
@@ -22,6 +23,7 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSCloseCode, WSMsgType, web
 
+from ..device.kernels import stop_on
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError, whole_number
 from ..threads import Abandoned
@@ -76,6 +78,13 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def host_name(host: str) -> str:
+    """The name or address of a ``Host`` header, ``name[:port]`` or ``[v6][:port]`` (lower case), "" for anything else
+    (read here, not by yarl, which takes ``a@b`` for a user at b and raises on a port past 65535 or a bad IDNA name)."""
+    match = re.fullmatch(r"\[([0-9a-fA-F:.]+)\](?::\d+)?|([^:\[\]@]+)(?::\d+)?", host)
+    return (match[1] or match[2]).lower() if match else ""
+
+
 class ViewServer:
     """Serves views of one wavelet model: the X-ray source always, the shaded one for a scalar or an RGBA model.
 
@@ -98,10 +107,16 @@ class ViewServer:
         self.device_memory = parse_cap(device_memory)
         self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4))
         self.token = secrets.token_urlsafe(24)
-        self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render")
+        # set by stop() (or at the interpreter's exit): the reader stops between its steps, for a daemon thread
+        # stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it for ever;
+        # the render and build threads' kernel launches stop between two bands (stop_on)
+        self._stop = threading.Event()
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render", initializer=stop_on,
+                                       initargs=(self._stop,))
         # what a source makes before its first frame (the ray tracer's bricks) is made here, so that the render
         # thread goes on serving every tab meanwhile
-        self.builder = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-build")
+        self.builder = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-build", initializer=stop_on,
+                                          initargs=(self._stop,))
         self._builds = {}  # mode -> the Future of its source's prepare()
         self.sessions = {}  # id -> Session, the open sockets
         self._ids = itertools.count(1)
@@ -113,9 +128,6 @@ class ViewServer:
         self._reader = None if self.whole is None else threading.Thread(
             target=self._read_whole, args=(opened,), name="clwave-view-read", daemon=True)
         self._starting = threading.Lock()  # the reader is started from the event loop or the shaded set-up
-        # set by stop() (or at the interpreter's exit): the reader stops between its steps, for a daemon thread
-        # stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it for ever
-        self._stop = threading.Event()
         self._in_file = threading.Event()  # set from the reader's start until it has done with the file (h5py)
         self.coarse_first = False  # set by _prepare
         self.failure = None  # why the rest of a file could not be served (the page's model figures say it)
@@ -285,7 +297,7 @@ class ViewServer:
             log.warning("refused %s %s from %s: no valid token", request.method, request.path, request.remote)
             raise web.HTTPForbidden(text="403: open the address clwave printed, with its ?token=...\n")
         # a page of another site whose name was made to point here (DNS rebinding) names that site (as Jupyter checks)
-        if self.local and not is_loopback(request.url.host or ""):
+        if self.local and not is_loopback(host_name(request.host)):
             log.warning("refused %s %s from %s: Host %r is not this machine", request.method, request.path,
                         request.remote, request.host)
             raise web.HTTPForbidden(text="403: open the address clwave printed (127.0.0.1, ::1 or localhost)\n")
