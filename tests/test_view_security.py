@@ -75,8 +75,9 @@ def test_tabs_past_the_most_are_closed_at_once_with_a_line(viewer):  # noqa: F81
 def deaf_tab(server, rcvbuf=4096):
     """A tab that sends views and never reads (a frozen page, a stalled network): a socket of its own with a small
     receive buffer, the WebSocket handshake written by hand and its answer never read."""
-    sock = socket.create_connection(("127.0.0.1", server.port))
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)  # before the connection: its window stays small
+    sock.connect(("127.0.0.1", server.port))
     key = base64.b64encode(os.urandom(16)).decode()
     sock.sendall(f"GET /ws?token={server.token} HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\nUpgrade: websocket\r\n"
                  f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
