@@ -92,6 +92,9 @@ def test_parse_view_takes_a_whole_view():
     (dict(tf=dict(points=[[0.0, 0, 0, 0, 0], [1e-31, 0, 0, 0, 1]])), "span 1e-31: at least 1e-30"),
     (dict(colour_map="jet"), "colour_map='jet' must be one of grey, bone, viridis, inferno, magma"),
     (dict(colour_map=None), "colour_map=None"), (dict(colour_map=["grey"]), "colour_map"),
+    # JSON's whole numbers have no bound: 400 digits overflow a float (math.isfinite raised OverflowError)
+    (dict(azimuth=10 ** 400), "azimuth=1000.* must be a number"), (dict(window=[0, -10 ** 400]), "hi="),
+    (dict(tf=dict(points=[POINTS[0], [10 ** 400, 0, 0, 0, 0]])), "tf point 1 value="),
 ])
 def test_parse_view_refuses_what_is_not_a_view(change, words):
     with pytest.raises(Refused, match=words):
@@ -101,6 +104,8 @@ def test_parse_view_refuses_what_is_not_a_view(change, words):
     with pytest.raises(Refused, match="more than") as exc:
         parse_view(" " * (MAX_MESSAGE + 1), 2, ("xray",))
     assert exc.value.code == 1009
+    with pytest.raises(Refused, match="nested too deep"):  # 4 KiB of brackets: past the recursion limit
+        parse_view("[" * 2000 + "]" * 2000, 2, ("xray",))
 
 
 def test_rate_limit_allows_a_burst_then_the_rate():
@@ -140,7 +145,10 @@ def test_binds_loopback_only_by_default(viewer):
 
 
 @pytest.mark.parametrize("hostile", ["not json", json.dumps(dict(BASE, seq=1, path="/etc/passwd")),
-                                     b"\x00binary", "x" * (2 * MAX_MESSAGE), "flood"])
+                                     b"\x00binary", "x" * (2 * MAX_MESSAGE), "flood", "[" * 2000 + "]" * 2000,
+                                     json.dumps(dict(BASE, seq=1, azimuth=10 ** 400)),
+                                     # a reason whose 120th byte is inside a character: cut before it, valid UTF-8
+                                     json.dumps(dict(BASE, seq=1, colour_map="a" + "é" * 100), ensure_ascii=False)])
 def test_a_hostile_message_closes_only_its_connection(viewer, hostile, caplog):
     async def go():
         async with aiohttp.ClientSession() as s:
@@ -157,7 +165,7 @@ def test_a_hostile_message_closes_only_its_connection(viewer, hostile, caplog):
             closing = asyncio.get_running_loop().time() + 60  # the server's pings keep each receive waiting
             while (await bad.receive(timeout=60)).type not in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED):
                 assert asyncio.get_running_loop().time() < closing, "the hostile tab was not closed within 60 s"
-            assert bad.close_code in (1008, 1009)
+            assert bad.close_code in (1008, 1009) and bad.exception() is None  # a close, not a failed connection
             await good.send_str(json.dumps(dict(BASE, seq=1)))
             frames = await asyncio.wait_for(frames_until_final(good, 1), 60)  # a bound: it hung once in CI (flood)
             assert frames[-1][0]["final"]

@@ -270,6 +270,19 @@ def test_the_colour_bar_shows_the_map_over_the_window(viewer, page):
     np.testing.assert_allclose(labels(), [lo, (lo + hi) / 2, hi], rtol=5e-3)
 
 
+def test_a_tab_past_the_most_is_told_what_to_do(viewer, page, monkeypatch):
+    """A page whose socket the server refuses for having as many tabs as it serves (here none: MAX_TABS 0) says so
+    with the server's line, not that the server has gone, and its sending controls are disabled."""
+    from clwave.view import server as view_server
+
+    monkeypatch.setattr(view_server, "MAX_TABS", 0)
+    page.get(viewer.url)
+    status = browser.wait_for(page, "const s = document.getElementById('status'); "
+                                    "return s.classList.contains('error') && s.textContent", timeout=30)
+    assert status == "not connected (1013: 0 tabs have this viewer open already: close one, then reload this page)"
+    assert page.execute_script("return document.getElementById('mode').disabled")
+
+
 def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(page):
     """The server stops under an open page: the status line says so and what to do, every control that sends is
     disabled (the mode, the X-ray and the shaded boxes), a drag, the wheel and a double-click on the image change

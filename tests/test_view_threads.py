@@ -434,3 +434,33 @@ def test_a_failing_stop_leaves_close_returning_and_the_loop_closed(monkeypatch, 
     v.close()
     assert not v._background.thread.is_alive() and v._background.loop.is_closed()
     assert any(r.getMessage() == "stopping the viewer failed" and r.exc_info for r in caplog.records)
+
+
+def test_a_stop_ends_the_render_under_way_within_a_launch():
+    """The render and build threads take no KeyboardInterrupt: a stop ends their kernel launches between two bands
+    (``kernels.stop_on``), so that a long stage (a shaded still frame of seconds to minutes) does not hold the exit.
+    A render of 5,000 items paced at 0.01 s each (50 s whole), on the server's render thread, ends within seconds of
+    ``close()``; the main thread's own launches know no stop."""
+    from clwave.device import kernels
+    from clwave.threads import Abandoned
+
+    class Queue:
+        def finish(self):
+            pass
+
+    def launch(first, count):
+        launched.append(count)
+        time.sleep(0.01 * count)
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
+    v = view(wv, size=16)
+    launched = []
+    render = v.server.pool.submit(kernels.in_bands, Queue(), launch, 5000)
+    while not launched:
+        time.sleep(0.01)
+    start = time.monotonic()
+    v.close()
+    with pytest.raises(Abandoned, match="stopped between two launches"):
+        render.result(timeout=10)
+    assert time.monotonic() - start < 10 and sum(launched) < 5000
+    kernels.in_bands(Queue(), lambda first, count: None, 100)  # this thread has no stop event

@@ -9,7 +9,6 @@ is a view or it is refused, and a refused message closes its connection (:class:
 from __future__ import annotations
 
 import json
-import math
 import struct
 import time
 
@@ -25,6 +24,8 @@ MODES = ("xray", "shaded")
 ZOOM = (0.1, 50.0)
 #: close codes (RFC 6455 §7.4.1): policy violation, message too big
 POLICY, TOO_BIG = 1008, 1009
+#: a close frame's reason: at most 123 bytes of UTF-8 (RFC 6455 §5.5), or the page's browser fails the connection
+REASON_BYTES = 120
 
 
 class Refused(Exception):
@@ -40,8 +41,9 @@ def _number(msg, name, lo, hi) -> float:
 
 
 def _value(value, name, lo, hi) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or not lo <= value <= hi:
+    # compared, not converted: NaN fails the comparison, +-Infinity lie outside every span, and a whole number of 400
+    # digits (on which float() and math.isfinite raise OverflowError) is compared exactly
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
         raise Refused(f"{name}={value!r} must be a number from {lo:g} to {hi:g}")
     return float(value)
 
@@ -113,6 +115,8 @@ def parse_view(text: str, last_seq: int, modes) -> ViewState:
         msg = json.loads(text)
     except ValueError:
         raise Refused("a message that is not JSON") from None
+    except RecursionError:  # 4 KiB hold 2,000 nested arrays, past the interpreter's recursion limit
+        raise Refused("a message nested too deep") from None
     if not isinstance(msg, dict) or msg.get("type") != "view":
         raise Refused("a message that is not {\"type\": \"view\", ...}")
     unknown = sorted(set(msg) - FIELDS)
@@ -153,6 +157,11 @@ class RateLimit:
         if self.tokens < 1.0:
             raise Refused(f"more than {self.rate:g} messages a second (a burst of {self.burst})")
         self.tokens -= 1.0
+
+
+def close_reason(text: str) -> bytes:
+    """``text`` as a close frame's reason: its first :data:`REASON_BYTES` bytes of UTF-8, cut between characters."""
+    return text.encode()[:REASON_BYTES].decode(errors="ignore").encode()
 
 
 def pack_frame(figures: dict, data: bytes, mime: str) -> bytes:

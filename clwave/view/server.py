@@ -1,9 +1,9 @@
 """The viewer's web server (docs/viewer.md §1): aiohttp, one page, one WebSocket per tab.
 
-Every request and socket needs the random token of the printed address (403 without); the routes are a
-fixed set, so a page can never name a file or run anything.  Each tab's socket holds its own view; frames
-are rendered one stage at a time on a single render thread (OpenCL work is serialised and tabs take turns),
-and a tab's work for a view it has left is dropped between stages and never sent.
+Every request and socket needs the random token of the printed address (403 without), and on a loopback address a
+Host naming this machine; the routes are a fixed set, so a page can never name a file or run anything.  Each tab's
+socket holds its own view; frames are rendered one stage at a time on a single render thread (OpenCL work is
+serialised and tabs take turns), and a tab's work for a view it has left is dropped between stages and never sent.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import atexit
 import ipaddress
 import itertools
 import logging
+import re
 import secrets
 import threading
 import time
@@ -22,13 +23,14 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSCloseCode, WSMsgType, web
 
+from ..device.kernels import stop_on
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError, whole_number
 from ..threads import Abandoned
 from . import colours
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
-from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, pack_frame, parse_view
+from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, pack_frame, parse_view
 
 log = logging.getLogger("clwave.view")
 
@@ -38,6 +40,12 @@ STATIC = {"/": ("index.html", "text/html"), "/viewer.js": ("viewer.js", "text/ja
 #: a file's rest is read from the first frame sent (its reading shares the cores and the interpreter with that
 #: frame), or this many seconds after the server starts, whichever is first
 READ_AFTER = 5.0
+#: tabs open at once: each still view under way holds its own image's framebuffers and footprint tables (docs/viewer.md
+#: §1), so a socket past these is closed at once (1013, try again later)
+MAX_TABS = 8
+#: seconds a tab's socket is given to close (the server stopping, a message refused); a tab that does not read (its
+#: buffers full) would hold the close for ever, and is dropped after them
+CLOSE_SECONDS = 2.0
 HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Content-Type-Options": "nosniff",
            "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
                                       "object-src 'none'; base-uri 'none'; form-action 'none'"}
@@ -70,6 +78,13 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def host_name(host: str) -> str:
+    """The name or address of a ``Host`` header, ``name[:port]`` or ``[v6][:port]`` (lower case), "" for anything else
+    (read here, not by yarl, which takes ``a@b`` for a user at b and raises on a port past 65535 or a bad IDNA name)."""
+    match = re.fullmatch(r"\[([0-9a-fA-F:.]+)\](?::\d+)?|([^:\[\]@]+)(?::\d+)?", host)
+    return (match[1] or match[2]).lower() if match else ""
+
+
 class ViewServer:
     """Serves views of one wavelet model: the X-ray source always, the shaded one for a scalar or an RGBA model.
 
@@ -88,13 +103,20 @@ class ViewServer:
         opened = model if isinstance(model, PrefixFirst) else None
         self.wv = opened.prefix if opened else model
         self.host, self.port, self.device = host, check_port(port), device
+        self.local = is_loopback(host)  # then a request's Host must name this machine too (DNS rebinding)
         self.device_memory = parse_cap(device_memory)
         self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4))
         self.token = secrets.token_urlsafe(24)
-        self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render")
+        # set by stop() (or at the interpreter's exit): the reader stops between its steps, for a daemon thread
+        # stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it for ever;
+        # the render and build threads' kernel launches stop between two bands (stop_on)
+        self._stop = threading.Event()
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render", initializer=stop_on,
+                                       initargs=(self._stop,))
         # what a source makes before its first frame (the ray tracer's bricks) is made here, so that the render
         # thread goes on serving every tab meanwhile
-        self.builder = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-build")
+        self.builder = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-build", initializer=stop_on,
+                                          initargs=(self._stop,))
         self._builds = {}  # mode -> the Future of its source's prepare()
         self.sessions = {}  # id -> Session, the open sockets
         self._ids = itertools.count(1)
@@ -106,9 +128,6 @@ class ViewServer:
         self._reader = None if self.whole is None else threading.Thread(
             target=self._read_whole, args=(opened,), name="clwave-view-read", daemon=True)
         self._starting = threading.Lock()  # the reader is started from the event loop or the shaded set-up
-        # set by stop() (or at the interpreter's exit): the reader stops between its steps, for a daemon thread
-        # stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it for ever
-        self._stop = threading.Event()
         self._in_file = threading.Event()  # set from the reader's start until it has done with the file (h5py)
         self.coarse_first = False  # set by _prepare
         self.failure = None  # why the rest of a file could not be served (the page's model figures say it)
@@ -277,6 +296,11 @@ class ViewServer:
         if not secrets.compare_digest(given.encode(), self.token.encode()):
             log.warning("refused %s %s from %s: no valid token", request.method, request.path, request.remote)
             raise web.HTTPForbidden(text="403: open the address clwave printed, with its ?token=...\n")
+        # a page of another site whose name was made to point here (DNS rebinding) names that site (as Jupyter checks)
+        if self.local and not is_loopback(host_name(request.host)):
+            log.warning("refused %s %s from %s: Host %r is not this machine", request.method, request.path,
+                        request.remote, request.host)
+            raise web.HTTPForbidden(text="403: open the address clwave printed (127.0.0.1, ::1 or localhost)\n")
         response = await handler(request)
         response.headers.update(HEADERS)
         return response
@@ -314,8 +338,9 @@ class ViewServer:
         waited for), and give up the set-up of a file's full stage, so that no thread of the server outlives it by
         more than the step under way."""
         self.stopping = True
-        for session in list(self.sessions.values()):  # the page says the server is gone (viewer.js, disconnected)
-            await session.ws.close(code=WSCloseCode.GOING_AWAY, message=b"the viewer stopped")
+        # the page says the server is gone (viewer.js, disconnected); all at once, each within CLOSE_SECONDS
+        await asyncio.gather(*(session.close(WSCloseCode.GOING_AWAY, "the viewer stopped")
+                               for session in list(self.sessions.values())))
         if self._runner is not None:
             await self._runner.cleanup()
         self._stop_reading()
@@ -341,7 +366,12 @@ class ViewServer:
             raise web.HTTPForbidden(text="403: another origin\n")
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=30.0)
         await ws.prepare(request)
-        session = Session(self, ws, f"tab {next(self._ids)} ({request.remote})")
+        session = Session(self, ws, f"tab {next(self._ids)} ({request.remote})", request.transport)
+        if len(self.sessions) >= MAX_TABS:
+            log.warning("refused %s: %d tabs are open", session.name, MAX_TABS)
+            await session.close(WSCloseCode.TRY_AGAIN_LATER, f"{MAX_TABS} tabs have this viewer open already: close "
+                                                             f"one, then reload this page")
+            return ws
         self.sessions[id(session)] = session
         try:
             await session.run()
@@ -372,8 +402,8 @@ class ViewServer:
 class Session:
     """One tab: its latest view, and the loop that renders it stage by stage while it stays the latest."""
 
-    def __init__(self, server: ViewServer, ws, name: str):
-        self.server, self.ws, self.name = server, ws, name
+    def __init__(self, server: ViewServer, ws, name: str, transport):
+        self.server, self.ws, self.name, self.transport = server, ws, name, transport
         self.state, self.seq, self.limit = None, -1, RateLimit()
         self.wake = asyncio.Event()
         self.sent = self.dropped = 0
@@ -403,12 +433,12 @@ class Session:
                         self.limit.take()
                         self.state = parse_view(msg.data, self.seq, modes)
                     except Refused as refused:
-                        await self._close(refused)
+                        await self.refuse(refused)
                         break
                     self.seq = self.state.seq
                     self.wake.set()
                 elif msg.type == WSMsgType.BINARY:
-                    await self._close(Refused("a binary message (a page sends JSON text only)"))
+                    await self.refuse(Refused("a binary message (a page sends JSON text only)"))
                     break
                 elif msg.type == WSMsgType.ERROR:
                     exc = ws.exception()
@@ -444,9 +474,18 @@ class Session:
             return False
         return self.state is state  # else the newer view is waiting (wake is set)
 
-    async def _close(self, refused: Refused):
+    async def refuse(self, refused: Refused):
         log.warning("closed %s: %s", self.name, refused)
-        await self.ws.close(code=refused.code, message=str(refused).encode()[:120])
+        await self.close(refused.code, str(refused))
+
+    async def close(self, code: int, reason: str):
+        """Close the socket with ``code`` and ``reason``, or drop it where its close is not done within
+        :data:`CLOSE_SECONDS` (a tab that does not read, its buffers full, would hold the close for ever)."""
+        try:
+            await asyncio.wait_for(self.ws.close(code=code, message=close_reason(reason)), CLOSE_SECONDS)
+        except asyncio.TimeoutError:
+            log.warning("dropped %s: its close was not read within %g s", self.name, CLOSE_SECONDS)
+            self.transport.abort()
 
     async def _render(self):
         loop, pool = asyncio.get_running_loop(), self.server.pool

@@ -33,16 +33,16 @@
     since = performance.now();
     ws.send(JSON.stringify({ type: "view", seq: sentSeq, ...state }));
   }
-  // The socket closed: the server refused a message of this page (policy, size: the page may be reloaded), or it
-  // stopped or cannot be reached. Nothing answers any more: every control that sends is disabled (greyed), the last
+  // The socket closed: the server refused a message of this page (policy, size: the page may be reloaded) or this
+  // tab (as many are open as it serves), or it stopped or cannot be reached. Nothing answers any more: every control that sends is disabled (greyed), the last
   // image stays (and can still be saved), and the status line says what happened and what to do.
-  const REFUSED = [1008, 1009];  // protocol.POLICY, TOO_BIG
+  const REFUSED = [1008, 1009], BUSY = 1013;  // protocol.POLICY, TOO_BIG; server.MAX_TABS open (its reason says)
   function disconnected(ev) {
     closed = true;
     for (const id of ["mode", "xray-controls", "shaded-controls"]) $(id).disabled = true;
     canvas.classList.add("offline");
     const why = `${ev.code}${ev.reason ? ": " + ev.reason : ""}`;
-    status.textContent = REFUSED.includes(ev.code) ?
+    status.textContent = ev.code === BUSY ? `not connected (${why})` : REFUSED.includes(ev.code) ?
       `disconnected: the server refused a message of this page (${why}); reload the page` :
       `disconnected: the viewer's server has stopped or cannot be reached (${why}); restart clwave view … (or ` +
       "clwave.view) and open the address it prints, whose token is new. This image is the last it sent.";
