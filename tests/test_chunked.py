@@ -345,3 +345,57 @@ def test_a_chunked_model_given_to_a_renderer_is_told_to_be_saved_and_opened():
             with pytest.raises(InputError, match=r"not a ChunkedWaveletVolume: save it .*WaveletVolume.open") as err:
                 render(wv, clwave.Camera(), **cluster)
             assert "\n" not in str(err.value)
+
+
+def _damage_zarr(path):
+    chunk = sorted(p for p in (path / "c").rglob("*") if p.is_file())[5]
+    with open(chunk, "r+b") as fh:
+        fh.seek(10)
+        fh.write(b"\xff" * 20)  # its Zstandard frame no longer decodes
+
+
+def _damage_hdf5(path):
+    with h5py.File(path) as fh:
+        info = fh["v"].id.get_chunk_info(5)
+    with open(path, "r+b") as fh:
+        fh.seek(info.byte_offset + 4)
+        fh.write(b"\xff" * 20)  # its deflate stream no longer inflates
+
+
+def _cut_npy(path):
+    with open(path, "r+b") as fh:
+        fh.truncate(path.stat().st_size // 2)  # the memory map of the later chunks fails
+
+
+@pytest.mark.parametrize("name, damage", [("v.zarr", _damage_zarr), ("v.h5", _damage_hdf5), ("v.npy", _cut_npy)])
+def test_a_chunk_that_cannot_be_read_mid_way_is_one_line_and_no_file(rng, tmp_path, capsys, name, damage):
+    """A chunk damaged (or a file cut) after the content pass read it: the selection pass that reads it again stops
+    with the one-line FileFormatError a whole read gives, naming the file, and leaves no .clw (the one there kept);
+    on the command line (which finds the cut .npy at its open), one line and exit code 2 (was: the library's own
+    exception, 'internal error ... a bug in clwave', exit code 1)."""
+    import zarr
+
+    from clwave.cli import main
+    from clwave.errors import FileFormatError
+
+    data = rng.random((24, 26, 28), dtype=np.float32)
+    source = tmp_path / name
+    if name.endswith(".zarr"):
+        zarr.create_array(source, data=data, chunks=(8, 8, 8))
+    elif name.endswith(".h5"):
+        with h5py.File(source, "w") as fh:
+            fh.create_dataset("v", data=data, chunks=(8, 8, 8), compression="gzip")
+    else:
+        np.save(source, data)
+    model = clwave.WaveletVolume.from_volume(clwave.load(source, chunks=8), levels=2).threshold(threshold=0.1)
+    damage(source)
+    (tmp_path / "o.clw").write_bytes(b"old")
+    with pytest.raises(FileFormatError, match=rf"^cannot read {source}.*the file may be truncated or corrupt$") as err:
+        model.save(tmp_path / "o.clw", overwrite=True)
+    assert "\n" not in str(err.value)
+    assert (tmp_path / "o.clw").read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([name, "o.clw"])  # no temporary file left
+    assert main(["compress", str(source), "--chunks", "8", "--levels", "2", "-o", str(tmp_path / "x.clw")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("clwave: error: ") and str(source) in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "x.clw").exists()
