@@ -2,6 +2,7 @@
 model's, on odd shapes with chunkings that do not divide them."""
 
 import io
+import os
 import time
 
 import dask.array as da
@@ -399,3 +400,33 @@ def test_a_chunk_that_cannot_be_read_mid_way_is_one_line_and_no_file(rng, tmp_pa
     err = capsys.readouterr().err
     assert err.startswith("clwave: error: ") and str(source) in err and len(err.splitlines()) == 1, err
     assert not (tmp_path / "x.clw").exists()
+
+
+class _DiesInAWorker:
+    """An array whose chunks a Dask worker process cannot read: reading one there ends the process, as the kernel
+    ends a worker out of memory."""
+
+    def __init__(self, data):
+        self.data, self.parent = data, os.getpid()
+        self.shape, self.dtype, self.ndim = data.shape, data.dtype, data.ndim
+
+    def __getitem__(self, index):
+        if os.getpid() != self.parent:
+            os._exit(1)
+        return self.data[index]
+
+
+def test_workers_that_die_end_the_work_in_one_line(rng, tmp_path):
+    """Every worker that takes a task dies (Dask gives up after four): a WorkerLostError line naming fewer workers
+    and smaller chunks, the command line's words too, and no .clw (was: distributed's KilledWorker, which the command
+    line called an internal error, a bug of clwave)."""
+    from clwave.errors import WorkerLostError
+
+    data = da.from_array(_DiesInAWorker(rng.random((16, 18, 20), dtype=np.float32)), chunks=8,
+                         meta=np.empty((0, 0, 0), np.float32))
+    model = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1).threshold(threshold=0.1)  # on threads
+    model.scheduler = 2  # two worker processes
+    with pytest.raises(WorkerLostError, match=r"the Dask workers died .*give fewer workers, smaller chunks") as err:
+        model.save(tmp_path / "o.clw")
+    assert "\n" not in str(err.value) and "give fewer --workers, a smaller --chunks edge" in err.value.cli_message()
+    assert list(tmp_path.iterdir()) == []
