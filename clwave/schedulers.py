@@ -80,8 +80,9 @@ def _client(scheduler):
     if scheduler is None:
         cluster = LocalCluster(processes=False, n_workers=1, threads_per_worker=cores(),
                                dashboard_address=":0", memory_limit=0)
-    else:
-        cluster = LocalCluster(n_workers=scheduler, threads_per_worker=1, dashboard_address=":0")
+    else:  # silence_logs: the worker processes' logs too (a task cancelled by a SIGTERM is one such line)
+        cluster = LocalCluster(n_workers=scheduler, threads_per_worker=1, dashboard_address=":0",
+                               silence_logs=logging.CRITICAL)
     with cluster, Client(cluster) as client:
         yield client
 

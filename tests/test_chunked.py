@@ -416,7 +416,7 @@ class _DiesInAWorker:
         return self.data[index]
 
 
-def test_workers_that_die_end_the_work_in_one_line(rng, tmp_path):
+def test_workers_that_die_end_the_work_in_one_line(rng, tmp_path, capfd):
     """Every worker that takes a task dies (Dask gives up after four): a WorkerLostError line naming fewer workers
     and smaller chunks, the command line's words too, and no .clw (was: distributed's KilledWorker, which the command
     line called an internal error, a bug of clwave)."""
@@ -430,3 +430,19 @@ def test_workers_that_die_end_the_work_in_one_line(rng, tmp_path):
         model.save(tmp_path / "o.clw")
     assert "\n" not in str(err.value) and "give fewer --workers, a smaller --chunks edge" in err.value.cli_message()
     assert list(tmp_path.iterdir()) == []
+    assert capfd.readouterr().err == ""  # nor the workers' logs of their lost connections
+
+
+def test_worker_processes_log_nothing_of_a_failed_task(rng, tmp_path, capfd):
+    """A task that fails in a worker process of scheduler=N (a damaged chunk) is raised here, in one line: the
+    workers' own logs stay quiet (were: 'distributed.worker - ERROR - Compute Failed' and the task on stderr)."""
+    import zarr
+
+    from clwave.errors import FileFormatError
+
+    zarr.create_array(tmp_path / "v.zarr", data=rng.random((24, 26, 28), dtype=np.float32), chunks=(8, 8, 8))
+    _damage_zarr(tmp_path / "v.zarr")
+    capfd.readouterr()
+    with pytest.raises(FileFormatError, match="cannot read"):
+        clwave.WaveletVolume.from_volume(clwave.load(tmp_path / "v.zarr", chunks=8), levels=2, scheduler=2)
+    assert capfd.readouterr().err == ""
