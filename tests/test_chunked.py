@@ -446,3 +446,17 @@ def test_worker_processes_log_nothing_of_a_failed_task(rng, tmp_path, capfd):
     with pytest.raises(FileFormatError, match="cannot read"):
         clwave.WaveletVolume.from_volume(clwave.load(tmp_path / "v.zarr", chunks=8), levels=2, scheduler=2)
     assert capfd.readouterr().err == ""
+
+
+def test_values_beyond_float32_are_refused_alike_with_no_numpy_warning():
+    """float64 voxels beyond float32's range: the chunked volume gives the in-memory volume's one InputError line and,
+    as it, no NumPy 'overflow encountered in cast' RuntimeWarning (which Dask's astype printed, once a process)."""
+    import warnings
+
+    data = np.ones((8, 8, 8))
+    data[3, 3, 3] = 1e39
+    for source in (data, da.from_array(data, chunks=4)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(InputError, match="1 non-finite voxel value.*beyond float32's range"):
+                clwave.WaveletVolume.from_volume(clwave.Volume(source), levels=1)
