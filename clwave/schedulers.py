@@ -75,6 +75,13 @@ def _client(scheduler):
                              cli=f"--scheduler {scheduler}: no Dask scheduler answers there; start one "
                                  "(`dask scheduler`, then `dask worker ADDRESS`) or check the address") from None
         with client:
+            try:  # a scheduler without workers takes the tasks and runs none: the work would wait for ever
+                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+            except TimeoutError:
+                raise InputError(f"the Dask scheduler at {scheduler} has no workers (none joined within "
+                                 f"{CONNECT_TIMEOUT}); start some (`dask worker {scheduler}`)",
+                                 cli=f"--scheduler {scheduler}: the Dask scheduler there has no workers (none joined "
+                                     f"within {CONNECT_TIMEOUT}); start some (`dask worker {scheduler}`)") from None
             yield client
         return
     if scheduler is None:

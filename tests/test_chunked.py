@@ -460,3 +460,22 @@ def test_values_beyond_float32_are_refused_alike_with_no_numpy_warning():
             warnings.simplefilter("error")
             with pytest.raises(InputError, match="1 non-finite voxel value.*beyond float32's range"):
                 clwave.WaveletVolume.from_volume(clwave.Volume(source), levels=1)
+
+
+def test_a_scheduler_address_without_workers_is_one_line_then_with_one_the_in_memory_model(rng, monkeypatch):
+    """scheduler="tcp://..." of a scheduler that has no workers: one InputError line naming `dask worker`, after
+    CONNECT_TIMEOUT (was: the work submitted and waiting for ever); once a worker joins, the model equals the
+    in-memory one."""
+    from distributed import LocalCluster
+
+    monkeypatch.setattr(clwave.schedulers, "CONNECT_TIMEOUT", "1s")
+    vol, dvol = pair(rng)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster:
+        address = cluster.scheduler_address
+        start = time.perf_counter()
+        with pytest.raises(InputError, match=rf"^the Dask scheduler at {address} has no workers .*`dask worker "):
+            clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=address)
+        assert time.perf_counter() - start < 10
+        cluster.scale(1)
+        model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=address).threshold(keep=0.05)
+        assert_same(clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.05), model.compute())
