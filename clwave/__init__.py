@@ -5,7 +5,7 @@ See README.md for the quick start; coordinates follow docs/coordinates.md (host 
 """
 
 from .errors import (ClwaveError, ClwaveWarning, DeviceMemoryError, DeviceNotFoundError, FileFormatError,
-                     InputError, KernelBuildError, OutputError, OutputExistsError)
+                     InputError, KernelBuildError, OutputError, OutputExistsError, WorkerLostError)
 from .model.volume import Volume
 from .device.context import ComputeContext, list_devices, select_device
 from .device.memory import HostMemoryError
@@ -29,7 +29,8 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ClwaveError", "ClwaveWarning", "DeviceMemoryError", "DeviceNotFoundError", "FileFormatError", "InputError",
-    "KernelBuildError", "OutputError", "OutputExistsError", "HostMemoryError", "Volume", "ComputeContext",
+    "KernelBuildError", "OutputError", "OutputExistsError", "HostMemoryError", "WorkerLostError", "Volume",
+    "ComputeContext",
     "list_devices",
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "ConeBeam", "RenderResult",
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",

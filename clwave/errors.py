@@ -83,6 +83,11 @@ class OutputError(ClwaveError, OSError):
     """An output that cannot be written: permissions, a read-only or full filesystem."""
 
 
+class WorkerLostError(ClwaveError, RuntimeError):
+    """Chunked or cluster work that cannot finish: the Dask workers died running one of its tasks (docs/chunked.md
+    §5)."""
+
+
 class DeviceNotFoundError(ClwaveError):
     """No OpenCL platform, or no device matching the ``device`` request."""
 

@@ -13,7 +13,7 @@ import contextlib
 import logging
 import warnings
 
-from .errors import InputError
+from .errors import InputError, WorkerLostError
 from .io.progress import progress
 from .threads import cores
 
@@ -39,8 +39,26 @@ def check_scheduler(scheduler):
 
 @contextlib.contextmanager
 def client_for(scheduler=None):
-    """A ``distributed.Client`` for ``scheduler`` (see the module), closed on leaving unless it was given."""
-    scheduler = check_scheduler(scheduler)
+    """A ``distributed.Client`` for ``scheduler`` (see the module), closed on leaving unless it was given.  A task
+    whose workers all died running it (Dask gives up after a few, ``KilledWorker``) ends the work with a
+    :class:`WorkerLostError` line rather than Dask's exception, which the command line took for a bug of clwave."""
+    from distributed import KilledWorker
+
+    with _client(check_scheduler(scheduler)) as client:
+        try:
+            yield client
+        except KilledWorker:
+            why = ("the Dask workers died running one of this work's tasks, each worker that took it in turn (most "
+                   "often out of memory: a worker is stopped at 95 % of its memory limit); give fewer ")
+            raise WorkerLostError(why + "workers, smaller chunks (load(chunks=)) or workers with more memory, and "
+                                        "see the workers' logs",
+                                  cli=why + "--workers, a smaller --chunks edge or workers with more memory, and see "
+                                            "the workers' logs") from None
+
+
+@contextlib.contextmanager
+def _client(scheduler):
+    """The client of a checked ``scheduler``: the one given, one connected to an address, or a local cluster's."""
     if _is_client(scheduler):
         yield scheduler
         return
@@ -57,13 +75,21 @@ def client_for(scheduler=None):
                              cli=f"--scheduler {scheduler}: no Dask scheduler answers there; start one "
                                  "(`dask scheduler`, then `dask worker ADDRESS`) or check the address") from None
         with client:
+            try:  # a scheduler without workers takes the tasks and runs none: the work would wait for ever
+                client.wait_for_workers(1, timeout=CONNECT_TIMEOUT)
+            except TimeoutError:
+                raise InputError(f"the Dask scheduler at {scheduler} has no workers (none joined within "
+                                 f"{CONNECT_TIMEOUT}); start some (`dask worker {scheduler}`)",
+                                 cli=f"--scheduler {scheduler}: the Dask scheduler there has no workers (none joined "
+                                     f"within {CONNECT_TIMEOUT}); start some (`dask worker {scheduler}`)") from None
             yield client
         return
     if scheduler is None:
         cluster = LocalCluster(processes=False, n_workers=1, threads_per_worker=cores(),
                                dashboard_address=":0", memory_limit=0)
-    else:
-        cluster = LocalCluster(n_workers=scheduler, threads_per_worker=1, dashboard_address=":0")
+    else:  # silence_logs: the worker processes' logs too (a task cancelled by a SIGTERM is one such line)
+        cluster = LocalCluster(n_workers=scheduler, threads_per_worker=1, dashboard_address=":0",
+                               silence_logs=logging.CRITICAL)
     with cluster, Client(cluster) as client:
         yield client
 

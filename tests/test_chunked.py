@@ -2,6 +2,7 @@
 model's, on odd shapes with chunkings that do not divide them."""
 
 import io
+import os
 import time
 
 import dask.array as da
@@ -345,3 +346,136 @@ def test_a_chunked_model_given_to_a_renderer_is_told_to_be_saved_and_opened():
             with pytest.raises(InputError, match=r"not a ChunkedWaveletVolume: save it .*WaveletVolume.open") as err:
                 render(wv, clwave.Camera(), **cluster)
             assert "\n" not in str(err.value)
+
+
+def _damage_zarr(path):
+    chunk = sorted(p for p in (path / "c").rglob("*") if p.is_file())[5]
+    with open(chunk, "r+b") as fh:
+        fh.seek(10)
+        fh.write(b"\xff" * 20)  # its Zstandard frame no longer decodes
+
+
+def _damage_hdf5(path):
+    with h5py.File(path) as fh:
+        info = fh["v"].id.get_chunk_info(5)
+    with open(path, "r+b") as fh:
+        fh.seek(info.byte_offset + 4)
+        fh.write(b"\xff" * 20)  # its deflate stream no longer inflates
+
+
+def _cut_npy(path):
+    with open(path, "r+b") as fh:
+        fh.truncate(path.stat().st_size // 2)  # the memory map of the later chunks fails
+
+
+@pytest.mark.parametrize("name, damage", [("v.zarr", _damage_zarr), ("v.h5", _damage_hdf5), ("v.npy", _cut_npy)])
+def test_a_chunk_that_cannot_be_read_mid_way_is_one_line_and_no_file(rng, tmp_path, capsys, name, damage):
+    """A chunk damaged (or a file cut) after the content pass read it: the selection pass that reads it again stops
+    with the one-line FileFormatError a whole read gives, naming the file, and leaves no .clw (the one there kept);
+    on the command line (which finds the cut .npy at its open), one line and exit code 2 (was: the library's own
+    exception, 'internal error ... a bug in clwave', exit code 1)."""
+    import zarr
+
+    from clwave.cli import main
+    from clwave.errors import FileFormatError
+
+    data = rng.random((24, 26, 28), dtype=np.float32)
+    source = tmp_path / name
+    if name.endswith(".zarr"):
+        zarr.create_array(source, data=data, chunks=(8, 8, 8))
+    elif name.endswith(".h5"):
+        with h5py.File(source, "w") as fh:
+            fh.create_dataset("v", data=data, chunks=(8, 8, 8), compression="gzip")
+    else:
+        np.save(source, data)
+    model = clwave.WaveletVolume.from_volume(clwave.load(source, chunks=8), levels=2).threshold(threshold=0.1)
+    damage(source)
+    (tmp_path / "o.clw").write_bytes(b"old")
+    with pytest.raises(FileFormatError, match=rf"^cannot read {source}.*the file may be truncated or corrupt$") as err:
+        model.save(tmp_path / "o.clw", overwrite=True)
+    assert "\n" not in str(err.value)
+    assert (tmp_path / "o.clw").read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([name, "o.clw"])  # no temporary file left
+    assert main(["compress", str(source), "--chunks", "8", "--levels", "2", "-o", str(tmp_path / "x.clw")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("clwave: error: ") and str(source) in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "x.clw").exists()
+
+
+class _DiesInAWorker:
+    """An array whose chunks a Dask worker process cannot read: reading one there ends the process, as the kernel
+    ends a worker out of memory."""
+
+    def __init__(self, data):
+        self.data, self.parent = data, os.getpid()
+        self.shape, self.dtype, self.ndim = data.shape, data.dtype, data.ndim
+
+    def __getitem__(self, index):
+        if os.getpid() != self.parent:
+            os._exit(1)
+        return self.data[index]
+
+
+def test_workers_that_die_end_the_work_in_one_line(rng, tmp_path, capfd):
+    """Every worker that takes a task dies (Dask gives up after four): a WorkerLostError line naming fewer workers
+    and smaller chunks, the command line's words too, and no .clw (was: distributed's KilledWorker, which the command
+    line called an internal error, a bug of clwave)."""
+    from clwave.errors import WorkerLostError
+
+    data = da.from_array(_DiesInAWorker(rng.random((16, 18, 20), dtype=np.float32)), chunks=8,
+                         meta=np.empty((0, 0, 0), np.float32))
+    model = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1).threshold(threshold=0.1)  # on threads
+    model.scheduler = 2  # two worker processes
+    with pytest.raises(WorkerLostError, match=r"the Dask workers died .*give fewer workers, smaller chunks") as err:
+        model.save(tmp_path / "o.clw")
+    assert "\n" not in str(err.value) and "give fewer --workers, a smaller --chunks edge" in err.value.cli_message()
+    assert list(tmp_path.iterdir()) == []
+    assert capfd.readouterr().err == ""  # nor the workers' logs of their lost connections
+
+
+def test_worker_processes_log_nothing_of_a_failed_task(rng, tmp_path, capfd):
+    """A task that fails in a worker process of scheduler=N (a damaged chunk) is raised here, in one line: the
+    workers' own logs stay quiet (were: 'distributed.worker - ERROR - Compute Failed' and the task on stderr)."""
+    import zarr
+
+    from clwave.errors import FileFormatError
+
+    zarr.create_array(tmp_path / "v.zarr", data=rng.random((24, 26, 28), dtype=np.float32), chunks=(8, 8, 8))
+    _damage_zarr(tmp_path / "v.zarr")
+    capfd.readouterr()
+    with pytest.raises(FileFormatError, match="cannot read"):
+        clwave.WaveletVolume.from_volume(clwave.load(tmp_path / "v.zarr", chunks=8), levels=2, scheduler=2)
+    assert capfd.readouterr().err == ""
+
+
+def test_values_beyond_float32_are_refused_alike_with_no_numpy_warning():
+    """float64 voxels beyond float32's range: the chunked volume gives the in-memory volume's one InputError line and,
+    as it, no NumPy 'overflow encountered in cast' RuntimeWarning (which Dask's astype printed, once a process)."""
+    import warnings
+
+    data = np.ones((8, 8, 8))
+    data[3, 3, 3] = 1e39
+    for source in (data, da.from_array(data, chunks=4)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(InputError, match="1 non-finite voxel value.*beyond float32's range"):
+                clwave.WaveletVolume.from_volume(clwave.Volume(source), levels=1)
+
+
+def test_a_scheduler_address_without_workers_is_one_line_then_with_one_the_in_memory_model(rng, monkeypatch):
+    """scheduler="tcp://..." of a scheduler that has no workers: one InputError line naming `dask worker`, after
+    CONNECT_TIMEOUT (was: the work submitted and waiting for ever); once a worker joins, the model equals the
+    in-memory one."""
+    from distributed import LocalCluster
+
+    monkeypatch.setattr(clwave.schedulers, "CONNECT_TIMEOUT", "1s")
+    vol, dvol = pair(rng)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster:
+        address = cluster.scheduler_address
+        start = time.perf_counter()
+        with pytest.raises(InputError, match=rf"^the Dask scheduler at {address} has no workers .*`dask worker "):
+            clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=address)
+        assert time.perf_counter() - start < 10
+        cluster.scale(1)
+        model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=address).threshold(keep=0.05)
+        assert_same(clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.05), model.compute())

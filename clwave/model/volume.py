@@ -68,11 +68,10 @@ class Volume:
                 "every axis needs at least 2 voxels")
         if arr.ndim == 4 and arr.shape[3] == 1:
             arr = arr[..., 0]
-        if lazy:  # each chunk is converted and checked when it is read (checked_block)
-            arr = (arr if arr.ndim == 3 else arr.rechunk({3: -1})).astype(np.float32).map_blocks(checked_block)
+        if lazy:  # each chunk is converted and checked when it is read
+            arr = (arr if arr.ndim == 3 else arr.rechunk({3: -1})).map_blocks(checked_float32, dtype=np.float32)
         else:
-            with np.errstate(over="ignore"):  # a value beyond float32's range becomes inf: checked_block names it
-                arr = checked_block(np.ascontiguousarray(arr, dtype=np.float32))
+            arr = checked_float32(arr)
         self.data = arr
         self.spacing = _triple(spacing, "spacing")
         if min(self.spacing) <= 0:
@@ -147,6 +146,13 @@ class Volume:
 def is_dask(data) -> bool:
     """True for a Dask array (without importing Dask when it is not in use)."""
     return type(data).__module__.startswith("dask.")
+
+
+def checked_float32(block) -> np.ndarray:
+    """``block`` (the volume, or a chunk of it) as C-ordered float32, checked finite (:func:`checked_block`): a value
+    beyond float32's range becomes inf there, and is named, not warned about by NumPy's cast."""
+    with np.errstate(over="ignore"):
+        return checked_block(np.ascontiguousarray(block, dtype=np.float32))
 
 
 def checked_block(block: np.ndarray) -> np.ndarray:

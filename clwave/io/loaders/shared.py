@@ -8,6 +8,7 @@ import math
 import os
 import re
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -220,7 +221,15 @@ def as_array(source, chunks, roles=None, fits=None, path=None):
     edge = [max(b) for b in blocks]  # a chunk is read whole (and as float32) before it is transformed
     check_fits(4 * math.prod(edge), f"a {' x '.join(map(str, edge))} chunk of {path} as float32",
                "give a smaller chunk edge")
-    return da.from_array(source, chunks=blocks, meta=np.empty((0,) * len(shape), source.dtype))
+    return da.from_array(OnDemand(partial(_read_chunk, source, path), shape, source.dtype), chunks=blocks,
+                         meta=np.empty((0,) * len(shape), source.dtype))
+
+
+def _read_chunk(source, path, index):
+    """``source[index]``, one chunk, read as a whole read is (:func:`reading`): a damaged chunk or a file gone since
+    it was opened is the whole read's one-line FileFormatError, raised by the pass that reads it."""
+    with reading(path):
+        return source[index]
 
 
 def _listing(arrays, most=8) -> str:
