@@ -369,7 +369,7 @@ def test_tiff_folder_of_planar_rgb_slices(tmp_path, rng):
 # --------------------------------------------------------------------------- DICOM
 
 def write_dicom_slice(path, pixels, position, series_uid, *, orientation=(1, 0, 0, 0, 1, 0),
-                      pixel_spacing=(0.7, 0.9), description="", number=1, rescale=(2, -1024)):
+                      pixel_spacing=(0.7, 0.9), description="", number=1, rescale=(2, -1024), **attributes):
     meta = FileMetaDataset()
     meta.MediaStorageSOPClassUID = CTImageStorage
     meta.MediaStorageSOPInstanceUID = generate_uid()
@@ -387,6 +387,8 @@ def write_dicom_slice(path, pixels, position, series_uid, *, orientation=(1, 0, 
     ds.SamplesPerPixel, ds.PhotometricInterpretation = 1, "MONOCHROME2"
     ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 0
     ds.PixelData = pixels.astype(np.uint16).tobytes()
+    for name, value in attributes.items():
+        setattr(ds, name, value)
     ds.save_as(path, enforce_file_format=True)
 
 
@@ -415,6 +417,38 @@ def test_dicom_series_sorted_rescaled_in_ras(tmp_path, rng):
     assert vol.spacing == pytest.approx((2.5, 0.7, 0.9))  # slice gap, row, column spacing
     # centre in RAS: x = -(-20 + 0.9 * 2), y = -(30 + 0.7 * 2.5), z = (10 + 17.5) / 2
     np.testing.assert_allclose(vol.origin, (18.2, -31.75, 13.75))
+
+
+@pytest.mark.parametrize("attributes, padded", [
+    (dict(PixelPaddingValue=0), lambda stored: stored == 0),
+    (dict(PixelPaddingValue=3, PixelPaddingRangeLimit=0), lambda stored: stored <= 3),  # a range, either way round
+    (dict(PixelPaddingValue=0, PixelPaddingRangeLimit=3), lambda stored: stored <= 3),
+], ids=["value", "range-down", "range-up"])
+def test_dicom_padding_is_the_series_least_other_value(tmp_path, rng, capsys, attributes, padded):
+    """PixelPaddingValue (and PixelPaddingRangeLimit) mark stored values outside the patient (PS3.3 C.7.5.1.1.2):
+    they become the least other value of the whole series after the rescale (air in a CT), not the rescaled padding
+    (-1024 HU here, -3024 HU in a scanner's), which an X-ray would integrate as a dense shell."""
+    stored = rng.integers(0, 8, (3, 6, 5))  # slices 0 and 1, and 2, hold padding; the least other value is in one
+    stored[:, 0, :] = 0
+    write_series_of(tmp_path, stored, axial(0.0, 1.0, 2.0), generate_uid(), **attributes)
+    hu = stored * 2.0 - 1024
+    hu[padded(stored)] = hu[~padded(stored)].min()
+    with pytest.warns(ClwaveWarning, match=r"marks \d.* % of its voxels as padding .*least other value, -10"):
+        vol = load(tmp_path, progress_bar=False)
+    np.testing.assert_array_equal(vol.data, hu[:, ::-1, ::-1])
+    stored[:] = 0  # every pixel padding: no image, refused in one line
+    write_series_of(tmp_path, stored, axial(0.0, 1.0, 2.0), generate_uid(), number=2, **attributes)
+    with pytest.raises(InputError):  # two series now: the second named
+        load(tmp_path)
+    with pytest.raises(FileFormatError, match="marks every pixel as padding") as excinfo:
+        load(tmp_path, series=1, progress_bar=False)
+    assert_one_line_error(excinfo)
+
+
+def write_series_of(folder, stored, positions, series_uid, **kwargs):
+    """Write the slices ``stored`` at ImagePositionPatient ``positions``, named by series and index."""
+    for k, (pixels, position) in enumerate(zip(stored, positions)):
+        write_dicom_slice(folder / f"{series_uid[-6:]}_{k}", pixels, position, series_uid, **kwargs)
 
 
 def test_dicom_sagittal_series_lands_in_ras(tmp_path, rng):

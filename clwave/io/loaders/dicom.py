@@ -47,7 +47,8 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
 
     def read(order):  # weighed from the headers, before a pixel is read (the slices rescaled to float32)
         check_whole(folder, (len(order), *size), np.float32, fits)
-        return read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
+        data = read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
+        return fill_padding(data, f"DICOM series {uid} in {folder}")
 
     return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
                         tuple(float(s) for s in first.PixelSpacing), size,
@@ -215,9 +216,46 @@ def _pick_series(folder, groups, series):
                      cli=f"--series {series} matches none of the DICOM series in {folder}: {listing}")
 
 
+def padding(ds):
+    """``(least, greatest)`` stored value of the pixels ``ds`` marks as padding (outside the patient), or None: its
+    PixelPaddingValue alone, or the range between it and PixelPaddingRangeLimit (PS3.3 C.7.5.1.1.2).  They are
+    stored values, before the rescale."""
+    if ds.get("PixelPaddingValue") is None:
+        return None
+    value, limit = int(ds.PixelPaddingValue), ds.get("PixelPaddingRangeLimit")
+    limit = value if limit is None else int(limit)
+    return min(value, limit), max(value, limit)
+
+
+def mark_padding(stored, rescaled, marks):
+    """``rescaled`` (float32) with NaN where ``stored`` lies in the padding range ``marks`` (:func:`padding`; None:
+    none), for :func:`fill_padding`: a file with a padding value stores integers, so NaN marks nothing else."""
+    if marks is not None:
+        rescaled[(stored >= marks[0]) & (stored <= marks[1])] = np.nan
+    return rescaled
+
+
+def fill_padding(data, where):
+    """``data`` (float32, rescaled) with its padding (the NaN :func:`mark_padding` left) set to the least other value
+    of the series, in place: for a CT that is air, or near it, where the padding value (often -2000 or -3024 HU
+    after the rescale) would be a shell denser than vacuum's negative, which an X-ray integrates (docs/
+    coordinates.md §1).  A series all padding is refused."""
+    padded = np.isnan(data)
+    count = int(np.count_nonzero(padded))
+    if count == data.size:
+        raise FileFormatError(f"{where} marks every pixel as padding (PixelPaddingValue: outside the patient); it "
+                              "holds no image: check its PixelPaddingValue and PixelPaddingRangeLimit")
+    if count:
+        least = float(np.min(data, initial=np.inf, where=~padded))
+        data[padded] = least
+        note(f"{where} marks {100 * count / data.size:.3g} % of its voxels as padding (outside the patient: "
+             f"PixelPaddingValue): set to its least other value, {least:.6g}")
+    return data
+
+
 def _dicom_pixels(path):
     """One slice's pixels (a single-frame file, read_dicom_folder checked) as float32 with RescaleSlope/RescaleIntercept
-    applied."""
+    applied, its padding NaN (:func:`mark_padding`)."""
     import pydicom
 
     ds = pydicom.dcmread(path)
@@ -228,8 +266,8 @@ def _dicom_pixels(path):
     if slope == 0:  # every voxel would be the intercept
         raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; "
                               "the file is corrupt: correct its RescaleSlope (e.g. 1) or move it out of the folder")
-    pixels = ds.pixel_array.astype(np.float32)
-    return pixels * np.float32(slope) + np.float32(intercept)
+    stored = ds.pixel_array
+    return mark_padding(stored, stored.astype(np.float32) * np.float32(slope) + np.float32(intercept), padding(ds))
 
 
 def check_finite(path, tag, values):

