@@ -451,6 +451,21 @@ def write_series_of(folder, stored, positions, series_uid, **kwargs):
         write_dicom_slice(folder / f"{series_uid[-6:]}_{k}", pixels, position, series_uid, **kwargs)
 
 
+@pytest.mark.parametrize("odd", [0, 2, 4])
+def test_dicom_series_of_mixed_pixel_spacing_refused(tmp_path, rng, odd):
+    """One slice of another PixelSpacing (first, in the middle, last) is named in one line, as mixed orientations
+    are; the first slice's spacing was once used for all."""
+    uid = generate_uid()
+    for k, position in enumerate(axial(0.0, 1.0, 2.0, 3.0, 4.0)):
+        write_dicom_slice(tmp_path / f"s{k}", rng.integers(0, 9, (6, 5)), position, uid,
+                          pixel_spacing=(0.7, 0.8) if k == odd else (0.7, 0.9))
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path, progress_bar=False)
+    assert_one_line_error(excinfo)
+    assert f"mixes pixel spacings: s{odd} has PixelSpacing 0.7, 0.8 mm where 4 of its 5 slices have 0.7, 0.9" in \
+        str(excinfo.value)
+
+
 def test_dicom_sagittal_series_lands_in_ras(tmp_path, rng):
     # the column index grows Posterior (+y in LPS), the row index Inferior (-z): the
     # normal is (0, 1, 0) x (0, 0, -1) = (-1, 0, 0), to the patient's Right

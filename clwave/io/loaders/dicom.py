@@ -41,6 +41,7 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"DICOM series {uid} in {folder} mixes slice orientations "
                               "(e.g. a localizer); move the odd slices out of the folder")
+    _one_spacing(f"DICOM series {uid} in {folder}", headers)
     positions = np.array([h.ImagePositionPatient for _, h in headers], float)
     first = headers[0][1]
     size = (int(first.Rows), int(first.Columns))
@@ -55,6 +56,20 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
                         [f"slice {path.name}" for path, _ in headers], read, fits,
                         "the series may hold several acquisitions (echoes, phases, times): split them into separate "
                         "folders")
+
+
+def _one_spacing(where, headers):
+    """Refuse slices of several PixelSpacings (to a 1e-4 of it: the files' decimals), naming the first slice
+    that differs from the most common: stacked, it would be drawn at the others' scale."""
+    spacings = np.array([h.PixelSpacing for _, h in headers], float)
+    kinds, counts = np.unique(spacings, axis=0, return_counts=True)
+    common = kinds[np.argmax(counts)]
+    odd = np.flatnonzero(~np.all(np.isclose(spacings, common, rtol=1e-4, atol=0), axis=1))
+    if odd.size:
+        path, shown = headers[odd[0]][0], ", ".join(f"{v:g}" for v in spacings[odd[0]])
+        raise FileFormatError(f"{where} mixes pixel spacings: {path.name} has PixelSpacing {shown} mm where "
+                              f"{counts.max()} of its {len(headers)} slices have {', '.join(f'{v:g}' for v in common)};"
+                              f" move the odd slices out of the folder (or resample them first)")
 
 
 def place_slices(where, path, positions, cosines, pixel, size, names, read, fits, shared):
