@@ -296,6 +296,35 @@ def test_drr_turns_about_the_volumes_centre_by_default(tmp_path, capsys):
     assert np.abs(images["far, origin"]).max() == 0  # about the world origin, 700 mm away: nothing on the detector
 
 
+def test_an_lps_isocentre_is_given_with_x_and_y_negated(tmp_path, capsys):
+    """--isocentre is RAS+ millimetres (docs/coordinates.md §5): a bead of a DICOM series at LPS (-16, 33, 5), as an RT
+    Plan's IsocenterPosition gives it, is imaged at the detector's centre with --isocentre 16,-33,5, not with the LPS
+    numbers as they are."""
+    from pydicom.uid import generate_uid
+    from test_loaders import write_dicom_slice
+
+    uid = generate_uid()
+    for k in range(8):  # 8 axial slices of 8 x 8 pixels of 1 mm, the corner pixel at LPS (-20, 30, k)
+        pixels = np.zeros((8, 8), np.uint16)
+        if k == 5:
+            pixels[3, 4] = 1000  # row 3 (LPS y 30 + 3), column 4 (LPS x -20 + 4)
+        write_dicom_slice(tmp_path / f"s{k}", pixels, (-20.0, 30.0, float(k)), uid, pixel_spacing=(1.0, 1.0),
+                          rescale=(1, 0))
+    (tmp_path / "poses.csv").write_text("azimuth,elevation\n0,0\n90,0\n")
+    common = ["--levels", "1", "--threshold", "0", "--poses", str(tmp_path / "poses.csv"), "--size", "9", "--pixel",
+              "1.5", "--dso", "100", "--dsd", "150"]
+    for isocentre, centred in (("16,-33,5", True), ("-16,33,5", False)):
+        assert main(["drr", str(tmp_path), *common, "--isocentre", isocentre, "-o", str(tmp_path / "d.npy"),
+                     "--force"]) == 0
+        for image in np.load(tmp_path / "d.npy"):
+            assert (np.unravel_index(np.argmax(image), image.shape) == (4, 4)) == centred, isocentre
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["drr", "--help"])
+    said = " ".join(capsys.readouterr().out.split())
+    assert "RAS+ millimetres" in said and "DICOM's LPS, e.g. an RT Plan's IsocenterPosition: X and Y negated" in said
+
+
 def test_drr_refuses_what_it_would_ignore_or_misname(tmp_path, capsys):
     """--window on a .npy stack (a .png's grey levels) is refused; a colour volume given without --tf is not told
     to leave --tf out; --subtract applies to a phantom as to a file (a Shepp-Logan head less 5 is below 0 on the
