@@ -182,7 +182,8 @@ def test_an_oblique_nifti_warning_is_a_clwave_warning_line(tmp_path, capsys):
     nib.save(nib.Nifti1Image(np.ones((8, 8, 8), np.float32), affine), tmp_path / "obl.nii")
     assert main(["compress", str(tmp_path / "obl.nii"), "--levels", "1", "-o", str(tmp_path / "o.clw")]) == 0
     assert capsys.readouterr().err.count("clwave: warning: the volume is oblique by 30.00 degrees; it is shown in "
-                                         "the closest canonical (RAS) orientation\n") == 1
+                                         "the closest canonical (RAS) orientation, its axes taken as the world's "
+                                         "(recorded in a .clw: a cone beam's pose is relative to them)\n") == 1
     with pytest.warns(ClwaveWarning, match=r"^the volume is oblique by 30.00 degrees"):
         load(tmp_path / "obl.nii")
 

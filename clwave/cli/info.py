@@ -94,7 +94,14 @@ def _clw_lines(f) -> list:
     if f["offset"]:
         lines.append(("offset", f"{f['offset']:g} subtracted from the input's values (--subtract; transfer functions "
                                 f"in the input's units)"))
+    if f["obliquity"]:
+        lines.append(("oblique", _oblique(f["obliquity"])))
     return lines
+
+
+def _oblique(degrees) -> str:
+    return (f"{degrees:.2f} degrees to its scanner's axes, kept on its own grid: world axes and cone-beam poses are "
+            f"the volume's, not the scanner's (docs/coordinates.md §1)")
 
 
 def _volume_lines(f) -> list:
@@ -110,6 +117,8 @@ def _volume_lines(f) -> list:
     lines += [("volume", f"{x} x {y} x {z} voxels (x, y, z), {f['channels']} channel{'s' * (f['channels'] != 1)} of "
                          f"{f['dtype']}"),
               ("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z){spacing}, origin {_xyz(f['origin'])}")]
+    if f["obliquity"]:
+        lines.append(("oblique", _oblique(f["obliquity"])))
     return lines
 
 

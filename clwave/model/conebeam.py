@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ..errors import InputError, finite_number, warn_outside
+from ..errors import ClwaveWarning, InputError, finite_number, warn_outside
 from .camera import Camera, View, _content_box, _size, _vector
 from .geometry import view_frame
 
@@ -206,7 +206,13 @@ class ConeBeam:
     # ----------------------------------------------------------------- rendering
     def view(self, volume) -> View:
         """Resolve against a volume-like object (``shape``, ``spacing``, ``origin``): refuses a source
-        inside the volume's box or a volume wholly behind the source."""
+        inside the volume's box or a volume wholly behind the source; warns (once a call site, as warnings are)
+        where the volume is oblique (its ``obliquity``, degrees): the pose is in its axes, not the scanner's."""
+        tilt = getattr(volume, "obliquity", 0.0)
+        if tilt:
+            warn_outside(ClwaveWarning(f"the volume is oblique by {tilt:.2f} degrees to its scanner's axes, kept on "
+                                       f"its own grid (docs/coordinates.md §1): this cone beam's pose is relative to "
+                                       f"the volume's axes, not the scanner's"))
         lo, hi = _content_box(volume)
         half = np.array(volume.shape[:3][::-1], float) * np.array(volume.spacing[::-1], float) / 2.0
         box_lo, box_hi = np.asarray(volume.origin, float) - half, np.asarray(volume.origin, float) + half

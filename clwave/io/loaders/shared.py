@@ -268,6 +268,9 @@ def to_canonical(array_ijk, affine_ras):
         ``(dz, dy, dx)``, the lengths of the reoriented affine's columns.
     origin_xyz : tuple of float
         RAS position of the volume centre.
+    obliquity : float
+        Degrees between the array's axes and RAS's (nibabel's ``obliquity``, its largest), 0 below 0.01 (the
+        rounding of the affine's numbers); an oblique volume is kept on its grid, with a warning.
     """
     from nibabel.affines import obliquity
     from nibabel.orientations import inv_ornt_aff, io_orientation
@@ -277,13 +280,16 @@ def to_canonical(array_ijk, affine_ras):
     flips = tuple(slice(None, None, -1) if flip < 0 else slice(None) for flip in ornt[:, 1])
     array_xyz = array_ijk[flips].transpose(tuple(np.argsort(ornt[:, 0])) + tuple(range(3, array_ijk.ndim)))
     affine_xyz = affine_ras @ inv_ornt_aff(ornt, array_ijk.shape[:3])
-    tilt = np.degrees(np.abs(obliquity(affine_xyz)).max())
+    tilt = float(np.degrees(np.abs(obliquity(affine_xyz)).max()))
     if tilt > 0.01:
-        note(f"the volume is oblique by {tilt:.2f} degrees; it is shown in the closest canonical (RAS) orientation")
+        note(f"the volume is oblique by {tilt:.2f} degrees; it is shown in the closest canonical (RAS) orientation, "
+             f"its axes taken as the world's (recorded in a .clw: a cone beam's pose is relative to them)")
+    else:
+        tilt = 0.0
     spacing_xyz = np.linalg.norm(affine_xyz[:3, :3], axis=0)
     centre = affine_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
     array_zyx = array_xyz.transpose((2, 1, 0) + tuple(range(3, array_xyz.ndim)))
-    return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3])
+    return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3]), tilt
 
 
 def read_slices(paths, read_slice, desc, progress_bar, fits=None):
