@@ -595,6 +595,7 @@ def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, monkeypatch
     monkeypatch.setattr(dicom, "_dicom_pixels", lambda path: pytest.fail(f"{path}'s pixels were read"))
     facts = describe(tmp_path)
     assert facts["stored_shape"] == list(shape) and facts["resampled"] and facts["dtype"] == "float32"
+    assert facts["spacing"] == pytest.approx(vol.spacing) and facts["origin"] == pytest.approx(vol.origin)
 
 
 def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsys):
@@ -602,11 +603,17 @@ def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsy
     from clwave.cli import main
     from clwave.io.loaders import dicom
 
-    write_series(tmp_path, rng, axial(0.0, 1.0, 2.0), generate_uid(), ["s1", "s2", "s3"])
+    write_series(tmp_path, rng, axial(0.0, 1.0, 2.0), generate_uid(), ["s1", "s2", "s3"], PixelPaddingValue=0)
+    vol = load(tmp_path)
     monkeypatch.setattr(dicom, "_dicom_pixels", lambda path: pytest.fail(f"{path}'s pixels were read"))
     assert main(["info", str(tmp_path)]) == 0
-    assert capsys.readouterr().out.splitlines()[1] == ("volume     3 x 6 x 5 samples of float32 as read, before the "
-                                                       "loader orders them (its axes and spacing come with the voxels)")
+    # the stored type, the place load gives it (spacing, RAS origin), the rescale and the padding, from the headers
+    assert capsys.readouterr().out.splitlines()[1:] == [
+        "volume     3 x 6 x 5 samples of float32 as read (stored as uint16), before the loader orders them",
+        "spacing    0.9, 0.7, 1 (x, y, z), origin 18.2, -31.75, 1 (RAS+ mm, as loaded)",
+        "rescale    slope 2, intercept -1024",
+        "padding    stored 0 (outside the patient): set to the series' least other value when read"]
+    assert vol.spacing == pytest.approx((1.0, 0.7, 0.9)) and vol.origin == pytest.approx((18.2, -31.75, 1.0))
 
 
 def test_dicom_slices_off_any_line_refused(tmp_path, rng):

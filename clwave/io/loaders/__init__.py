@@ -177,8 +177,10 @@ def describe(path, *, series=None, level=None) -> dict:
     (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the
     ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
     rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's straight
-    stack, wider by its shifts), and no spacing or origin: its loader finds those with the voxels.  A
-    ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
+    stack, wider by its shifts), and the ``spacing``, ``origin`` and ``obliquity`` ``load`` gives where its header
+    places the volume (``.nii.gz``, DICOM; NRRD and TIFF give none, their loaders finding them with the voxels); a
+    DICOM series also its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
+    (stored values, or None).  A ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
     if kind == "raw":
@@ -198,8 +200,13 @@ def describe(path, *, series=None, level=None) -> dict:
                                                      "auto" if lazy else False, False, None if lazy else _declared,
                                                      False)
         except Declared as declared:
-            return dict(facts, stored_shape=list(declared.shape), dtype=str(declared.dtype),
-                        resampled=declared.resampled)
+            facts.update(stored_shape=list(declared.shape), dtype=str(declared.dtype), resampled=declared.resampled,
+                         **declared.facts)
+            if declared.placed is not None:
+                spacing, origin, obliquity = declared.placed
+                facts.update(spacing=[float(s) for s in spacing], origin=[float(o) for o in origin],
+                             obliquity=obliquity)
+            return facts
     volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))
     return dict(facts, shape=list(data.shape), dtype=str(data.dtype), channels=volume.channels,
                 spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None,

@@ -8,7 +8,7 @@ from collections import defaultdict
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import SUPPORTED, check_whole, folder_files, note, read_slices, reading, to_canonical
+from .shared import SUPPORTED, Declared, check_whole, folder_files, note, read_slices, reading, to_canonical
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -47,7 +47,11 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     size = (int(first.Rows), int(first.Columns))
 
     def read(order):  # weighed from the headers, before a pixel is read (the slices rescaled to float32)
-        check_whole(folder, (len(order), *size), np.float32, fits)
+        try:
+            check_whole(folder, (len(order), *size), np.float32, fits)
+        except Declared as declared:  # describe(): what the headers say of the samples
+            declared.facts = _header_facts([h for _, h in headers])
+            raise
         data = read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
         return fill_padding(data, f"DICOM series {uid} in {folder}")
 
@@ -97,24 +101,37 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     shifts = np.arange(len(order))[:, None] * step
     lo, hi = np.floor(np.minimum(shifts.min(axis=0), 0)), np.ceil(np.maximum(shifts.max(axis=0), 0))
     tilted = bool(np.any(step))
-    if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
-        rows, columns = size
-        check_whole(path, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits,
-                    resampled=True)
-
-    data_zyx = read(order)
+    # index (column, row, slice) -> LPS patient coordinates (mm); the first slice's corner moved by the margin
+    affine_lps = np.eye(4)
+    affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, normal * dz])
+    affine_lps[:3, 3] = positions[order[0]] + lo[0] * dx * row_dir + lo[1] * dy * col_dir
+    rows, columns = size[0] + int(hi[1] - lo[1]), size[1] + int(hi[0] - lo[0])  # the straight stack's, if tilted
+    try:
+        if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
+            check_whole(path, (len(order), rows, columns), np.float32, fits, resampled=True)
+        data_zyx = read(order)
+    except Declared as declared:  # describe(): its place from the headers
+        declared.place((columns, rows, len(order)), _LPS_TO_RAS @ affine_lps)
+        raise
     if tilted:
         depth = distance.max() - distance.min()
         note(f"{where} has a gantry tilt of {np.degrees(np.arctan(np.linalg.norm(drift))):.3g} degrees (its slices "
              f"shift {np.linalg.norm(drift) * depth:.4g} mm sideways over {depth:.4g} mm along their normal): "
              f"resampled onto a straight stack, linearly, the new margins filled with its least value")
         data_zyx = _untilt(data_zyx, shifts - lo, (hi - lo).astype(int))
-    # index (column, row, slice) -> LPS patient coordinates (mm); the first slice's corner moved by the margin
-    affine_lps = np.eye(4)
-    affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, normal * dz])
-    affine_lps[:3, 3] = positions[order[0]] + lo[0] * dx * row_dir + lo[1] * dy * col_dir
     data_ijk = data_zyx.transpose((2, 1, 0) + tuple(range(3, data_zyx.ndim)))
     return to_canonical(data_ijk, _LPS_TO_RAS @ affine_lps)
+
+
+def _header_facts(headers) -> dict:
+    """What ``clwave info`` says of a series' samples from their headers: the type stored, the rescales (slope,
+    intercept; each distinct pair, in slice order) and the padding range (:func:`padding`, stored values)."""
+    from pydicom.pixels.utils import pixel_dtype
+
+    rescales = [(float(getattr(h, "RescaleSlope", 1.0)), float(getattr(h, "RescaleIntercept", 0.0))) for h in headers]
+    marks = padding(headers[0])
+    return dict(stored_dtype=str(pixel_dtype(headers[0])), rescale=[list(r) for r in dict.fromkeys(rescales)],
+                padding=None if marks is None else list(marks))
 
 
 def _drift(where, positions, distance, normal, pixel) -> np.ndarray:

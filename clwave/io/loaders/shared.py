@@ -145,9 +145,15 @@ class Declared(BaseException):
     """Raised by a ``fits`` given to a loader to stop before any voxel is read (``loaders.describe``);
     :func:`check_whole` gives it the ``shape`` and ``dtype`` the header declares, and whether they are a resampling of
     what is stored.  A BaseException, as KeyboardInterrupt is: no ``except Exception`` on its way (:func:`reading`'s)
-    takes it for a failure to read."""
+    takes it for a failure to read.  A loader that knows the volume's place from its header alone gives it too
+    (:meth:`place`), and may add ``facts`` of its own (a DICOM series' stored type, rescale and padding)."""
 
-    shape, dtype, resampled = None, None, False
+    shape, dtype, resampled, placed, facts = None, None, False, None, {}
+
+    def place(self, shape_ijk, affine_ras):
+        """``placed``: the ``(spacing, origin, obliquity)`` :func:`to_canonical` gives a volume of ``shape_ijk`` with
+        that affine, from a stand-in of that shape that holds no voxel."""
+        self.placed = to_canonical(np.broadcast_to(np.float32(0), tuple(shape_ijk)), affine_ras)[1:]
 
 
 class OnDemand:
