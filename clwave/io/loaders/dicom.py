@@ -47,19 +47,19 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     size = (int(first.Rows), int(first.Columns))
 
     def read(order):  # weighed from the headers, before a pixel is read (the slices rescaled to float32)
-        try:
-            check_whole(folder, (len(order), *size), np.float32, fits)
-        except Declared as declared:  # describe(): what the headers say of the samples
-            declared.facts = _header_facts([h for _, h in headers])
-            raise
+        check_whole(folder, (len(order), *size), np.float32, fits)
         data = read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
         return fill_padding(data, f"DICOM series {uid} in {folder}")
 
-    return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
-                        tuple(float(s) for s in first.PixelSpacing), size,
-                        [f"slice {path.name}" for path, _ in headers], read, fits,
-                        "the series may hold several acquisitions (echoes, phases, times): split them into separate "
-                        "folders")
+    try:
+        return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
+                            tuple(float(s) for s in first.PixelSpacing), size,
+                            [f"slice {path.name}" for path, _ in headers], read, fits,
+                            "the series may hold several acquisitions (echoes, phases, times): split them into "
+                            "separate folders")
+    except Declared as declared:  # describe(): what the headers say of the samples too
+        declared.facts = _header_facts([h for _, h in headers])
+        raise
 
 
 def _one_spacing(where, headers):
