@@ -370,6 +370,8 @@ def test_a_ct_in_hounsfield_units_compressed_as_it_is_gets_a_hint(tmp_path, caps
         code, out, err = run(capsys, "compress", str(tmp_path / f"{name}.npy"), "--levels", "1", *extra, "-o",
                              str(tmp_path / "o.clw"), "--force")
         assert code == 0 and (hint in err) == said, (name, extra, err)
+        # padding below air stays negative with --subtract -1000: the hint names --hu-to-mu alone then
+        assert ("padding down to -3024 that --subtract -1000 leaves negative" in err) == (said and name == "padded")
     code, out, err = run(capsys, "render", str(tmp_path / "padded.npy"), "--levels", "1", "--size", "16", "-o",
                          str(tmp_path / "o.png"))
     assert code == 0 and hint in err, err  # render reads the volume the same way (cli/options.build_model)

@@ -107,6 +107,7 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
     affine = np.diag([2.0, 3.0, 4.0, 1.0])
     for name in ("v.nii", "v.nii.gz"):
         nibabel.save(nibabel.Nifti1Image(data, affine), tmp_path / name)
+    nii_gz = clwave.load(tmp_path / "v.nii.gz")  # placed from its header too, as load places it
     with h5py.File(tmp_path / "v.h5", "w") as fh:
         fh["inside/v"] = data
     tifffile.imwrite(tmp_path / "v.tif", data, photometric="minisblack")
@@ -128,6 +129,11 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
     for name in ("v.nii.gz", "v.tif"):
         code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
         assert code == 0 and json.loads(out)["stored_shape"] == [4, 5, 6] and json.loads(out)["dtype"] == "int16"
+        placed = (tuple(json.loads(out)["spacing"]), tuple(json.loads(out)["origin"])) if name == "v.nii.gz" else None
+        assert placed == (None if name == "v.tif" else (nii_gz.spacing, nii_gz.origin)), name  # a TIFF: no place
+    code, out, _ = run(capsys, "info", str(tmp_path / "v.nii.gz"))
+    assert out.splitlines()[1:] == ["volume     4 x 5 x 6 samples of int16 as read, before the loader orders them",
+                                    "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10 (RAS+ mm, as loaded)"]
 
 
 def test_a_header_declared_passes_every_handler_of_read_errors(tmp_path):

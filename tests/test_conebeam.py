@@ -95,13 +95,45 @@ def test_tigre_round_trip_and_layout():
     # TIGRE: the source starts on +x and turns about z; the volume's centre is offOrigin from the isocentre
     assert np.allclose(cb.source, cb.isocentre + [0.0, 1000.0, 0.0]) and np.allclose(cb.isocentre, [-4.0, 2.0, 6.0])
     # its detector: u along +y at angle 0 (here -x), v along +z, shifted by offDetector from the principal ray
-    assert np.allclose(cb.u, [-1, 0, 0]) and np.allclose(cb.v, [0, 0, 1]) and cb.offset == (-2.0, 1.0)
+    assert np.allclose(cb.u, [-1, 0, 0]) and np.allclose(cb.v, [0, 0, 1]) and cb.offset == (2.0, -1.0)
     back, angle = cb.to_tigre(volume_origin=(1.0, 2.0, 3.0))
     assert angle == pytest.approx(np.pi / 2)
     for key, value in geo.items():
         assert np.allclose(back[key], value), key
     with pytest.raises(InputError, match="about z"):
         ConeBeam(100, 150, 8, elevation=10).to_tigre()
+
+
+def test_offset_shifts_the_detector_as_tigres_off_detector_does():
+    """``offset`` (30, 20) puts the detector's centre 30 mm along u and 20 up v from the principal point, as TIGRE's
+    offDetector moves its detector (its Siddon projector: pixel column 0 at -sDetecU/2 + dDetecU/2 + offDetecU along
+    u): a bead at the isocentre, on the principal ray, lands at column 32 - 0.5 - 30 = 1.5 and row 24 - 0.5 + 20 =
+    43.5 of the 48 x 64 detector of 1 mm pixels.  The image, splatted, is symmetric about that pixel corner."""
+    import clwave
+
+    data = np.zeros((9, 9, 9), np.float32)
+    data[3:6, 3:6, 3:6] = 1.0  # a 3 mm bead about the world origin, the isocentre
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
+    geo = dict(DSO=1000.0, DSD=1500.0, nDetector=[48, 64], dDetector=[1.0, 1.0], offDetector=[30.0, 20.0])
+    for cb in (ConeBeam(1000, 1500, (48, 64), 1.0, azimuth=90, offset=(30, 20)), ConeBeam.from_tigre(geo, np.pi / 2)):
+        image = clwave.splat(wv, cb).image[..., 0]
+        row, col = np.unravel_index(np.argmax(image), image.shape)
+        assert row in (43, 44) and col in (1, 2), (row, col)
+        np.testing.assert_allclose(image[40:48, 0:2], image[40:48, 2:4][:, ::-1], rtol=1e-3, atol=1e-3 * image.max())
+        np.testing.assert_allclose(image[40:44, 0:4], image[44:48, 0:4][::-1], rtol=1e-3, atol=1e-3 * image.max())
+        assert image[:, 8:].max() < 1e-3 * image.max() and image[:36].max() < 1e-3 * image.max()  # nothing at 61.5
+        np.testing.assert_allclose(cb.view(wv).to_pixels(np.zeros((1, 3))), [[1.5, 43.5]], atol=1e-9)
+
+
+def test_diffdrr_principal_point_is_the_offset_turned_along_u():
+    """DiffDRR 0.6.1's ``DRR(..., sdd=1020, height=8, width=10, delx=2.0, x0=30, y0=20)`` at its README pose moves
+    its pixel centres by +30 mm along its detector's x, world +x here, against its columns (u = -x), and 20 mm up v
+    (world +z): offset (-30, 20) at its detector, (-25, 16.67) at the isocentre 850 mm from the source."""
+    rows, cols = np.divmod(np.arange(80), 10)
+    ray = np.stack([9.0 - 2.0 * cols + 30.0, np.full(80, -170.0), 7.0 - 2.0 * rows + 20.0], 1)
+    cb = ConeBeam.from_diffdrr([0.0, 850.0, 0.0], ray, (8, 10))
+    assert np.allclose(cb.offset, (-30.0 * 850 / 1020, 20.0 * 850 / 1020))
+    np.testing.assert_allclose(cb.view(VOL).to_pixels(np.zeros((1, 3))), [[4.5 + 15, 3.5 + 10]], atol=1e-9)
 
 
 def test_diffdrr_round_trip_and_layout():

@@ -83,6 +83,26 @@ def test_an_enhanced_ct_file_is_its_frames_sorted_rescaled_and_placed(tmp_path, 
     assert "4 x 6 x 5 samples of int16 as read" in capsys.readouterr().out
 
 
+def test_an_enhanced_ct_file_s_padding_is_its_least_other_value(tmp_path):
+    """Frames mark padding by their stored values as a folder's slices do (PS3.3 C.7.5.1.1.2): stored 0 to 3 (frame
+    0's first four pixels) become the least other value after each frame's rescale, frame 0's pixel 4: 4 - 1024."""
+    import pydicom
+
+    path = tmp_path / "ct.dcm"
+    enhanced_ct(path, [2, 0, 3, 1])
+    ds = pydicom.dcmread(path)
+    ds.add_new("PixelPaddingValue", "SS", 3)  # its VR (US or SS) is the pixels' (signed here)
+    ds.add_new("PixelPaddingRangeLimit", "SS", 0)
+    ds.save_as(path)
+    with pytest.warns(clwave.ClwaveWarning, match=r"marks 3.33 % of its voxels as padding"):
+        vol = clwave.load(path)
+    k = np.arange(4)[:, None, None]
+    stored = 100 * k + np.arange(30).reshape(6, 5)
+    expected = (k + 1) * stored - 1024.0
+    expected[stored <= 3] = 4 - 1024.0
+    np.testing.assert_array_equal(vol.data, expected[:, ::-1, ::-1])
+
+
 def test_the_frames_are_read_into_one_float32_volume_as_weighed(tmp_path, monkeypatch):
     """32 frames of 128 x 128 int16 (1 MiB stored, 4 MiB as float32), out of order: read a frame at a time into the
     float32 volume, what reading holds at its peak (traced) is what it weighs first (check_whole), to a frame and

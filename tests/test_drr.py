@@ -296,6 +296,67 @@ def test_drr_turns_about_the_volumes_centre_by_default(tmp_path, capsys):
     assert np.abs(images["far, origin"]).max() == 0  # about the world origin, 700 mm away: nothing on the detector
 
 
+def test_an_lps_isocentre_is_given_with_x_and_y_negated(tmp_path, capsys):
+    """--isocentre is RAS+ millimetres (docs/coordinates.md §5): a bead of a DICOM series at LPS (-16, 33, 5), as an RT
+    Plan's IsocenterPosition gives it, is imaged at the detector's centre with --isocentre 16,-33,5, not with the LPS
+    numbers as they are."""
+    from pydicom.uid import generate_uid
+    from test_loaders import write_dicom_slice
+
+    uid = generate_uid()
+    for k in range(8):  # 8 axial slices of 8 x 8 pixels of 1 mm, the corner pixel at LPS (-20, 30, k)
+        pixels = np.zeros((8, 8), np.uint16)
+        if k == 5:
+            pixels[3, 4] = 1000  # row 3 (LPS y 30 + 3), column 4 (LPS x -20 + 4)
+        write_dicom_slice(tmp_path / f"s{k}", pixels, (-20.0, 30.0, float(k)), uid, pixel_spacing=(1.0, 1.0),
+                          rescale=(1, 0))
+    (tmp_path / "poses.csv").write_text("azimuth,elevation\n0,0\n90,0\n")
+    common = ["--levels", "1", "--threshold", "0", "--poses", str(tmp_path / "poses.csv"), "--size", "9", "--pixel",
+              "1.5", "--dso", "100", "--dsd", "150"]
+    for isocentre, centred in (("16,-33,5", True), ("-16,33,5", False)):
+        assert main(["drr", str(tmp_path), *common, "--isocentre", isocentre, "-o", str(tmp_path / "d.npy"),
+                     "--force"]) == 0
+        for image in np.load(tmp_path / "d.npy"):
+            assert (np.unravel_index(np.argmax(image), image.shape) == (4, 4)) == centred, isocentre
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["drr", "--help"])
+    said = " ".join(capsys.readouterr().out.split())
+    assert "RAS+ millimetres" in said and "DICOM's LPS, e.g. an RT Plan's IsocenterPosition: X and Y negated" in said
+
+
+def test_an_oblique_volume_s_poses_are_said_to_be_in_its_axes(tmp_path, capsys):
+    """A volume oblique to its scanner's axes is kept on its grid (docs/coordinates.md §1): its .clw records by how
+    much, info says it, and a cone beam's view of it (drr, the API's splat and ray tracing) warns once, in one line,
+    that the pose is relative to the volume's axes; a file without the record (older) reads as axis-aligned."""
+    import nibabel as nib
+    from test_hardening import crafted
+
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    affine = np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+    data = np.zeros((8, 8, 8), np.float32)
+    data[2:6, 2:6, 2:6] = 1.0
+    nib.save(nib.Nifti1Image(data, affine), tmp_path / "obl.nii")
+    assert main(["compress", str(tmp_path / "obl.nii"), "--levels", "1", "-o", str(tmp_path / "obl.clw")]) == 0
+    assert clwave.WaveletVolume.open(tmp_path / "obl.clw").obliquity == pytest.approx(30.0)
+    (tmp_path / "poses.csv").write_text("azimuth,elevation\n0,0\n90,0\n")
+    said = ("clwave: warning: the volume is oblique by 30.00 degrees to its scanner's axes, kept on its own grid "
+            "(docs/coordinates.md §1): this cone beam's pose is relative to the volume's axes, not the scanner's\n")
+    old = crafted(tmp_path / "obl.clw", tmp_path, lambda header: header.pop("obliquity"))
+    capsys.readouterr()
+    for path, oblique in ((tmp_path / "obl.clw", True), (old, False)):
+        assert main(["drr", str(path), "--poses", str(tmp_path / "poses.csv"), "--size", "8", "-o",
+                     str(tmp_path / "d.npy"), "--force"]) == 0
+        assert capsys.readouterr().err.count(said) == oblique  # once for both poses
+        assert main(["info", str(path)]) == 0
+        assert ("oblique    30.00 degrees to its scanner's axes" in capsys.readouterr().out) == oblique
+    wv = clwave.WaveletVolume.open(tmp_path / "obl.clw")
+    for render in (lambda cb: clwave.splat(wv, cb), lambda cb: clwave.RayTracer(wv).render(cb, absorption=False)):
+        with pytest.warns(clwave.ClwaveWarning, match=r"^the volume is oblique by 30.00 degrees .* relative to the "
+                                                      r"volume's axes, not the scanner's$"):
+            render(ConeBeam(100, 150, 8))
+
+
 def test_drr_refuses_what_it_would_ignore_or_misname(tmp_path, capsys):
     """--window on a .npy stack (a .png's grey levels) is refused; a colour volume given without --tf is not told
     to leave --tf out; --subtract applies to a phantom as to a file (a Shepp-Logan head less 5 is below 0 on the

@@ -66,6 +66,9 @@ def setter(key, value):
     (setter("content", [[1, 1, 1], [1, 1, 1]]), "low below high"),  # an empty box: the fits divided by its size
     (setter("transfer_function", [1, 2]), "transfer function is not valid"),
     (setter("interpolate", "yes"), "interpolate 'yes' is not true or false"),
+    (setter("obliquity", -1), "obliquity -1 is not one number of degrees from 0 to 90"),
+    (setter("obliquity", "20"), "obliquity '20' is not"),
+    (setter("obliquity", float("nan")), "obliquity nan is not"),
 ])
 def test_crafted_clw_headers_are_refused_before_anything_is_allocated(model_file, tmp_path, edit, needle):
     path = crafted(model_file, tmp_path, edit)

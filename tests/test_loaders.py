@@ -182,7 +182,8 @@ def test_an_oblique_nifti_warning_is_a_clwave_warning_line(tmp_path, capsys):
     nib.save(nib.Nifti1Image(np.ones((8, 8, 8), np.float32), affine), tmp_path / "obl.nii")
     assert main(["compress", str(tmp_path / "obl.nii"), "--levels", "1", "-o", str(tmp_path / "o.clw")]) == 0
     assert capsys.readouterr().err.count("clwave: warning: the volume is oblique by 30.00 degrees; it is shown in "
-                                         "the closest canonical (RAS) orientation\n") == 1
+                                         "the closest canonical (RAS) orientation, its axes taken as the world's "
+                                         "(recorded in a .clw: a cone beam's pose is relative to them)\n") == 1
     with pytest.warns(ClwaveWarning, match=r"^the volume is oblique by 30.00 degrees"):
         load(tmp_path / "obl.nii")
 
@@ -369,7 +370,7 @@ def test_tiff_folder_of_planar_rgb_slices(tmp_path, rng):
 # --------------------------------------------------------------------------- DICOM
 
 def write_dicom_slice(path, pixels, position, series_uid, *, orientation=(1, 0, 0, 0, 1, 0),
-                      pixel_spacing=(0.7, 0.9), description="", number=1, rescale=(2, -1024)):
+                      pixel_spacing=(0.7, 0.9), description="", number=1, rescale=(2, -1024), **attributes):
     meta = FileMetaDataset()
     meta.MediaStorageSOPClassUID = CTImageStorage
     meta.MediaStorageSOPInstanceUID = generate_uid()
@@ -387,6 +388,8 @@ def write_dicom_slice(path, pixels, position, series_uid, *, orientation=(1, 0, 
     ds.SamplesPerPixel, ds.PhotometricInterpretation = 1, "MONOCHROME2"
     ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 0
     ds.PixelData = pixels.astype(np.uint16).tobytes()
+    for name, value in attributes.items():
+        setattr(ds, name, value)
     ds.save_as(path, enforce_file_format=True)
 
 
@@ -415,6 +418,53 @@ def test_dicom_series_sorted_rescaled_in_ras(tmp_path, rng):
     assert vol.spacing == pytest.approx((2.5, 0.7, 0.9))  # slice gap, row, column spacing
     # centre in RAS: x = -(-20 + 0.9 * 2), y = -(30 + 0.7 * 2.5), z = (10 + 17.5) / 2
     np.testing.assert_allclose(vol.origin, (18.2, -31.75, 13.75))
+
+
+@pytest.mark.parametrize("attributes, padded", [
+    (dict(PixelPaddingValue=0), lambda stored: stored == 0),
+    (dict(PixelPaddingValue=3, PixelPaddingRangeLimit=0), lambda stored: stored <= 3),  # a range, either way round
+    (dict(PixelPaddingValue=0, PixelPaddingRangeLimit=3), lambda stored: stored <= 3),
+], ids=["value", "range-down", "range-up"])
+def test_dicom_padding_is_the_series_least_other_value(tmp_path, rng, capsys, attributes, padded):
+    """PixelPaddingValue (and PixelPaddingRangeLimit) mark stored values outside the patient (PS3.3 C.7.5.1.1.2):
+    they become the least other value of the whole series after the rescale (air in a CT), not the rescaled padding
+    (-1024 HU here, -3024 HU in a scanner's), which an X-ray would integrate as a dense shell."""
+    stored = rng.integers(0, 8, (3, 6, 5))  # slices 0 and 1, and 2, hold padding; the least other value is in one
+    stored[:, 0, :] = 0
+    write_series_of(tmp_path, stored, axial(0.0, 1.0, 2.0), generate_uid(), **attributes)
+    hu = stored * 2.0 - 1024
+    hu[padded(stored)] = hu[~padded(stored)].min()
+    with pytest.warns(ClwaveWarning, match=r"marks \d.* % of its voxels as padding .*least other value, -10"):
+        vol = load(tmp_path, progress_bar=False)
+    np.testing.assert_array_equal(vol.data, hu[:, ::-1, ::-1])
+    stored[:] = 0  # every pixel padding: no image, refused in one line
+    write_series_of(tmp_path, stored, axial(0.0, 1.0, 2.0), generate_uid(), number=2, **attributes)
+    with pytest.raises(InputError):  # two series now: the second named
+        load(tmp_path)
+    with pytest.raises(FileFormatError, match="marks every pixel as padding") as excinfo:
+        load(tmp_path, series=1, progress_bar=False)
+    assert_one_line_error(excinfo)
+
+
+def write_series_of(folder, stored, positions, series_uid, **kwargs):
+    """Write the slices ``stored`` at ImagePositionPatient ``positions``, named by series and index."""
+    for k, (pixels, position) in enumerate(zip(stored, positions)):
+        write_dicom_slice(folder / f"{series_uid[-6:]}_{k}", pixels, position, series_uid, **kwargs)
+
+
+@pytest.mark.parametrize("odd", [0, 2, 4])
+def test_dicom_series_of_mixed_pixel_spacing_refused(tmp_path, rng, odd):
+    """One slice of another PixelSpacing (first, in the middle, last) is named in one line, as mixed orientations
+    are; the first slice's spacing was once used for all."""
+    uid = generate_uid()
+    for k, position in enumerate(axial(0.0, 1.0, 2.0, 3.0, 4.0)):
+        write_dicom_slice(tmp_path / f"s{k}", rng.integers(0, 9, (6, 5)), position, uid,
+                          pixel_spacing=(0.7, 0.8) if k == odd else (0.7, 0.9))
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path, progress_bar=False)
+    assert_one_line_error(excinfo)
+    assert f"mixes pixel spacings: s{odd} has PixelSpacing 0.7, 0.8 mm where 4 of its 5 slices have 0.7, 0.9" in \
+        str(excinfo.value)
 
 
 def test_dicom_sagittal_series_lands_in_ras(tmp_path, rng):
@@ -545,6 +595,8 @@ def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, monkeypatch
     monkeypatch.setattr(dicom, "_dicom_pixels", lambda path: pytest.fail(f"{path}'s pixels were read"))
     facts = describe(tmp_path)
     assert facts["stored_shape"] == list(shape) and facts["resampled"] and facts["dtype"] == "float32"
+    assert facts["spacing"] == pytest.approx(vol.spacing) and facts["origin"] == pytest.approx(vol.origin)
+    assert (facts["stored_dtype"], facts["rescale"], facts["padding"]) == ("uint16", [[2.0, -1024.0]], None)
 
 
 def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsys):
@@ -552,11 +604,17 @@ def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsy
     from clwave.cli import main
     from clwave.io.loaders import dicom
 
-    write_series(tmp_path, rng, axial(0.0, 1.0, 2.0), generate_uid(), ["s1", "s2", "s3"])
+    write_series(tmp_path, rng, axial(0.0, 1.0, 2.0), generate_uid(), ["s1", "s2", "s3"], PixelPaddingValue=0)
+    vol = load(tmp_path)
     monkeypatch.setattr(dicom, "_dicom_pixels", lambda path: pytest.fail(f"{path}'s pixels were read"))
     assert main(["info", str(tmp_path)]) == 0
-    assert capsys.readouterr().out.splitlines()[1] == ("volume     3 x 6 x 5 samples of float32 as read, before the "
-                                                       "loader orders them (its axes and spacing come with the voxels)")
+    # the stored type, the place load gives it (spacing, RAS origin), the rescale and the padding, from the headers
+    assert capsys.readouterr().out.splitlines()[1:] == [
+        "volume     3 x 6 x 5 samples of float32 as read (stored as uint16), before the loader orders them",
+        "spacing    0.9, 0.7, 1 (x, y, z), origin 18.2, -31.75, 1 (RAS+ mm, as loaded)",
+        "rescale    slope 2, intercept -1024",
+        "padding    stored 0 (outside the patient): set to the series' least other value when read"]
+    assert vol.spacing == pytest.approx((1.0, 0.7, 0.9)) and vol.origin == pytest.approx((18.2, -31.75, 1.0))
 
 
 def test_dicom_slices_off_any_line_refused(tmp_path, rng):

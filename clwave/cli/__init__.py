@@ -66,9 +66,9 @@ def _terminate(signum, frame):
 
 
 def main(argv=None) -> int:
-    with warnings.catch_warnings():  # clwave's warnings each one line, every time; Python's settings restored
+    with warnings.catch_warnings():  # clwave's warnings each one line, once a run; Python's settings restored
         warnings.simplefilter("always", ClwaveWarning)
-        warnings.showwarning = partial(_show_warning, shown=warnings.showwarning)
+        warnings.showwarning = partial(_show_warning, shown=warnings.showwarning, said=set())
         return _main(argv)
 
 
@@ -108,11 +108,13 @@ def _main(argv) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
-def _show_warning(message, category, filename, lineno, file=None, line=None, *, shown):
-    """clwave's warnings (:class:`ClwaveWarning`) as one line in the command line's words; others as Python shows
-    them."""
+def _show_warning(message, category, filename, lineno, file=None, line=None, *, shown, said):
+    """clwave's warnings (:class:`ClwaveWarning`) as one line in the command line's words, each line once (``said``:
+    those printed, e.g. an oblique volume's, which every pose's view gives); others as Python shows them."""
     if isinstance(message, ClwaveWarning):
-        warn(message.cli)
+        if message.cli not in said:
+            said.add(message.cli)
+            warn(message.cli)
     else:
         shown(message, category, filename, lineno, file, line)
 

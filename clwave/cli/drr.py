@@ -183,9 +183,12 @@ def add_parser(sub):
     g.add_argument("--pixel", default="1.0", help="detector pixel spacing, or DV,DU (world units; default 1)")
     g.add_argument("--dso", type=float, default=1000.0, help="source-to-isocentre distance (default 1000)")
     g.add_argument("--dsd", type=float, default=1500.0, help="source-to-detector distance (default 1500)")
-    g.add_argument("--offset", default="0,0", help="principal point A,B from the detector's centre (default 0,0)")
-    g.add_argument("--isocentre", help="world X,Y,Z the principal ray passes (default: the volume's centre, its "
-                   "world origin; a pose table's isocentre_x/_y/_z columns override it)")
+    g.add_argument("--offset", default="0,0", help="the detector's shift A,B along its columns (u) and up its "
+                   "rows (v): its centre's position from the principal point, which lies at -A,-B from the centre "
+                   "(TIGRE's offDetector; default 0,0)")
+    g.add_argument("--isocentre", help="world X,Y,Z the principal ray passes, RAS+ millimetres for medical files "
+                   "(DICOM's LPS, e.g. an RT Plan's IsocenterPosition: X and Y negated) (default: the volume's "
+                   "centre, its world origin; a pose table's isocentre_x/_y/_z columns override it)")
     g.add_argument("--intensity", action="store_true", help="Beer-Lambert transmitted intensity exp(-line "
                    "integral) instead of the line integrals (a --hu-to-mu CT: mu per mm); a .png shows it as "
                    "radiographs are, -ln I windowed (bone bright; --window LO,HI in intensities, LO white)")

@@ -94,22 +94,46 @@ def _clw_lines(f) -> list:
     if f["offset"]:
         lines.append(("offset", f"{f['offset']:g} subtracted from the input's values (--subtract; transfer functions "
                                 f"in the input's units)"))
+    if f["obliquity"]:
+        lines.append(("oblique", _oblique(f["obliquity"])))
     return lines
+
+
+def _oblique(degrees) -> str:
+    return (f"{degrees:.2f} degrees to its scanner's axes, kept on its own grid: world axes and cone-beam poses are "
+            f"the volume's, not the scanner's (docs/coordinates.md §1)")
 
 
 def _volume_lines(f) -> list:
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
     if "stored_shape" in f:  # read whole: its axes and spacing come with its voxels
         resampled = ", a gantry tilt resampled onto a straight stack wider by its shifts" if f["resampled"] else ""
-        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read"
-                                f"{resampled}, before the loader orders them (its axes and spacing come with the "
-                                f"voxels)"))
+        placed = "spacing" in f  # its header places it: spacing and origin as the loader gives them
+        stored = f" (stored as {f['stored_dtype']})" if "stored_dtype" in f else ""
+        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read{stored}"
+                                f"{resampled}, before the loader orders them"
+                                f"{'' if placed else ' (its axes and spacing come with the voxels)'}"))
+        if placed:
+            lines.append(("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z), origin {_xyz(f['origin'])} (RAS+ mm, "
+                                     f"as loaded)"))
+        if f.get("rescale"):
+            (slope, intercept), more = f["rescale"][0], len(f["rescale"]) - 1
+            lines.append(("rescale", f"slope {slope:g}, intercept {intercept:g}"
+                                     f"{f' ({more + 1} different pairs across its slices)' if more else ''}"))
+        if "padding" in f:
+            lines.append(("padding", "none" if f["padding"] is None else
+                          f"stored {' .. '.join(map(str, dict.fromkeys(f['padding'])))} (outside the patient): set to "
+                          f"the series' least other value when read"))
+        if f.get("obliquity"):
+            lines.append(("oblique", _oblique(f["obliquity"])))
         return lines
     z, y, x = f["shape"][:3]
     spacing = "" if f["spacing_in_file"] else " (none in the file)"
     lines += [("volume", f"{x} x {y} x {z} voxels (x, y, z), {f['channels']} channel{'s' * (f['channels'] != 1)} of "
                          f"{f['dtype']}"),
               ("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z){spacing}, origin {_xyz(f['origin'])}")]
+    if f["obliquity"]:
+        lines.append(("oblique", _oblique(f["obliquity"])))
     return lines
 
 

@@ -240,9 +240,14 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         return wv, None
     vol = read_volume(args)
     tf = preset_transfer_function(args)
-    if hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False)) and air_in_hounsfield(vol.data):
+    hinted = hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False))
+    least = air_in_hounsfield(vol.data) if hinted else None
+    if least is not None:  # padding below air stays negative with --subtract -1000; --hu-to-mu clips it to air
+        padding = (f", and padding down to {least:.6g} that --subtract -1000 leaves negative (an X-ray integrates it): "
+                   f"give --hu-to-mu (padding to 0 with air)" if least < -1100 else
+                   ": give --subtract -1000 (air to 0) or --hu-to-mu")
         warn(f"{args.input} looks like CT in Hounsfield units (most border voxels air, -1000, or padding below it); "
-             f"the model spends its coefficients on that offset: give --subtract -1000 (air to 0) or --hu-to-mu")
+             f"the model spends its coefficients on that offset{padding}")
     post = tf is not None and args.classify == "post"
     if post and vol.channels != 1:
         raise InputError(f"--classify post keeps a scalar volume for ray tracing to classify; {args.input} has "

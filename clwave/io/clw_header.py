@@ -92,6 +92,9 @@ def checked_header(header) -> tuple:
     offset = header.get("offset", 0.0)  # absent in older files: their values are the input's
     if not _numbers([offset], 1):
         raise ValueError(f"offset {offset!r} is not one finite number")
+    obliquity = header.get("obliquity", 0.0)  # absent in older files: read as axis-aligned
+    if not (_numbers([obliquity], 1) and 0 <= obliquity <= 90):
+        raise ValueError(f"obliquity {obliquity!r} is not one number of degrees from 0 to 90")
     levels, channels = header.get("levels"), header.get("channels")
     if not (isinstance(levels, int) and 0 <= levels <= max_levels(shape)):
         raise ValueError(f"levels {levels!r} is not possible for shape {shape}")

@@ -144,6 +144,7 @@ class ChunkedWaveletVolume:
     spacing = property(lambda self: self.volume.spacing)
     origin = property(lambda self: self.volume.origin)
     offset = property(lambda self: self.volume.offset)
+    obliquity = property(lambda self: self.volume.obliquity)
     channels = property(lambda self: self.volume.channels)
     n_voxels = property(lambda self: int(np.prod(self.shape)))
     frame = property(lambda self: (self.shape, self.spacing, self.origin))
@@ -275,7 +276,7 @@ class ChunkedWaveletVolume:
                for gi, (wavelet, channels) in enumerate(groups)]
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
-                             content_mask=mask, offset=self.offset)
+                             content_mask=mask, offset=self.offset, obliquity=self.obliquity)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ..errors import InputError, finite_number, warn_outside
+from ..errors import ClwaveWarning, InputError, finite_number, warn_outside
 from .camera import Camera, View, _content_box, _size, _vector
 from .geometry import view_frame
 
@@ -37,9 +37,9 @@ class ConeBeam:
     pixel : float or (dv, du)
         Detector pixel spacing, world units: one number for square pixels, or (row, column) spacing.
     offset : (a, b)
-        Principal-point offset: where the source's perpendicular meets the detector, in world units from
-        the detector's centre along u and v (TIGRE's ``offDetector`` with the sign turned, see
-        :meth:`from_tigre`).
+        The detector's shift: its centre's position along u and v, in world units, from the principal point
+        (where the source's perpendicular meets it), which so lies at ``(-a, -b)`` from the centre; the image
+        centre's ray has slopes ``(a, b) / dsd``.  TIGRE's ``offDetector`` as it is (:meth:`from_tigre`).
     azimuth, elevation, roll : float
         Gantry angles in degrees: the direction from the isocentre to the source (paper eq. 31), and a turn
         of the detector about that axis (u towards v).
@@ -144,13 +144,14 @@ class ConeBeam:
         ``nDetector`` (v, u), ``dDetector`` (v, u) and optionally ``offDetector`` (u, v) and ``offOrigin``
         (x, y, z)) at gantry ``angle`` (radians, about z) for a volume centred at ``volume_origin`` in
         clwave's world (docs/coordinates.md §5: TIGRE's source starts on +x, its detector u along +y and v
-        along +z, and the volume's centre sits at ``offOrigin`` from its isocentre)."""
+        along +z, shifted by ``offDetector`` as ``offset`` shifts clwave's, and the volume's centre sits at
+        ``offOrigin`` from its isocentre)."""
         get = geo.get if isinstance(geo, dict) else lambda name, default=None: getattr(geo, name, default)
         nv, nu = (int(x) for x in np.asarray(get("nDetector")).reshape(2))
         dv, du = (float(x) for x in np.asarray(get("dDetector")).reshape(2))
         off_u, off_v = (float(x) for x in np.asarray(get("offDetector", (0.0, 0.0))).reshape(2))
         iso = np.asarray(volume_origin, float) - np.asarray(get("offOrigin", (0.0, 0.0, 0.0)), float).reshape(3)
-        return cls(float(get("DSO")), float(get("DSD")), (nv, nu), (dv, du), offset=(-off_u, -off_v),
+        return cls(float(get("DSO")), float(get("DSD")), (nv, nu), (dv, du), offset=(off_u, off_v),
                    azimuth=float(np.degrees(angle)), isocentre=iso)
 
     def to_tigre(self, volume_origin=(0.0, 0.0, 0.0)) -> tuple:
@@ -161,7 +162,7 @@ class ConeBeam:
             raise InputError("TIGRE's circular orbit is about z: this view has an elevation or roll")
         H, W = self.size
         geo = dict(DSO=self.dso, DSD=self.dsd, nDetector=np.array([H, W]), dDetector=np.array(self.pixel),
-                   offDetector=-np.array(self.offset), offOrigin=np.asarray(volume_origin, float) - self.isocentre)
+                   offDetector=np.array(self.offset), offOrigin=np.asarray(volume_origin, float) - self.isocentre)
         return geo, float(np.arctan2(self.n[1], self.n[0]))
 
     # ----------------------------------------------------------------- DiffDRR
@@ -205,7 +206,13 @@ class ConeBeam:
     # ----------------------------------------------------------------- rendering
     def view(self, volume) -> View:
         """Resolve against a volume-like object (``shape``, ``spacing``, ``origin``): refuses a source
-        inside the volume's box or a volume wholly behind the source."""
+        inside the volume's box or a volume wholly behind the source; warns (once a call site, as warnings are)
+        where the volume is oblique (its ``obliquity``, degrees): the pose is in its axes, not the scanner's."""
+        tilt = getattr(volume, "obliquity", 0.0)
+        if tilt:
+            warn_outside(ClwaveWarning(f"the volume is oblique by {tilt:.2f} degrees to its scanner's axes, kept on "
+                                       f"its own grid (docs/coordinates.md §1): this cone beam's pose is relative to "
+                                       f"the volume's axes, not the scanner's"))
         lo, hi = _content_box(volume)
         half = np.array(volume.shape[:3][::-1], float) * np.array(volume.spacing[::-1], float) / 2.0
         box_lo, box_hi = np.asarray(volume.origin, float) - half, np.asarray(volume.origin, float) + half

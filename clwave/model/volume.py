@@ -33,6 +33,10 @@ class Volume:
         The value subtracted from the input's values to make ``data`` (``clwave.load(background=)``,
         ``--subtract``; default 0): transfer functions are written in the input's units, and are applied to
         ``data`` shifted by it (:meth:`TransferFunction.shifted`, docs/coordinates.md §1).
+    obliquity : float
+        Degrees between the volume's axes and the scanner's of the file it was read from (default 0): an oblique
+        acquisition is kept on its voxel grid, its axes taken as the world's (docs/coordinates.md §1), so a pose
+        is relative to them; a cone beam's view of it warns (:meth:`clwave.ConeBeam.view`).
 
     Examples
     --------
@@ -41,7 +45,7 @@ class Volume:
     ((4, 5, 6), 1, (2.0, 1.0, 1.0))
     """
 
-    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), offset=0.0):
+    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), offset=0.0, obliquity=0.0):
         lazy = is_dask(data)
         try:
             arr = data if lazy else np.asarray(data)
@@ -81,6 +85,9 @@ class Volume:
             raise InputError(f"origin {origin} must be finite (x, y, z)")
         self.origin = origin
         self.offset = finite_number(offset, "offset")
+        self.obliquity = finite_number(obliquity, "obliquity")
+        if not 0 <= self.obliquity <= 90:
+            raise InputError(f"obliquity={obliquity!r} must be degrees from 0 to 90")
 
     @property
     def shape(self) -> tuple:

@@ -124,11 +124,12 @@ class WaveletVolume:
     file_format = None
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
-                 focus=None, transfer_function=None, content=None, content_mask=None, offset=0.0):
+                 focus=None, transfer_function=None, content=None, content_mask=None, offset=0.0, obliquity=0.0):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
         self.offset = float(offset)  # the source volume's Volume.offset: its values are the input's minus it
+        self.obliquity = float(obliquity)  # the source volume's Volume.obliquity: degrees off the scanner's axes
         self.levels = int(levels)
         self.groups = list(groups)
         self.channels = int(channels)
@@ -195,7 +196,8 @@ class WaveletVolume:
             groups.append(ChannelGroup(wav, chans, bands, None, values))
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
                    interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask),
-                   content_mask=None if interpolate else ContentMask.of(mask), offset=volume.offset)
+                   content_mask=None if interpolate else ContentMask.of(mask), offset=volume.offset,
+                   obliquity=volume.obliquity)
 
     # ------------------------------------------------------------- properties
     @property
@@ -267,7 +269,7 @@ class WaveletVolume:
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
                             interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
-                            content_mask=self.content_mask, offset=self.offset)
+                            content_mask=self.content_mask, offset=self.offset, obliquity=self.obliquity)
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
@@ -374,7 +376,8 @@ class WaveletVolume:
             dense = g.dense_bands()
             for slot, channel in enumerate(g.channels):
                 data[..., channel] = reconstruct_channel(g, dense, slot, self.shape, self.levels)
-        return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.offset)
+        return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.offset,
+                      self.obliquity)
 
     def unmasked(self) -> "WaveletVolume":
         """The same coefficients without the content mask (nothing clamped, docs/raytracing.md §4), keeping no

@@ -129,8 +129,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     chunks = check_chunks(chunks, kind, path)
 
     with reading(path):
-        data, file_spacing, origin = _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks,
-                                           progress_bar, fits, spacing is None)
+        data, file_spacing, origin, obliquity = _read(kind, path, inner, shape, dtype, byte_order, series, level,
+                                                      chunks, progress_bar, fits, spacing is None)
     if not is_dask(data):
         data = np.asarray(data)
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
@@ -142,28 +142,30 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
-                  origin=origin if origin is not None else (0.0, 0.0, 0.0), offset=background)
+                  origin=origin if origin is not None else (0.0, 0.0, 0.0), offset=background, obliquity=obliquity)
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
-    """``(data, spacing or None, origin or None)`` of a ``kind`` input as its loader reads it (not yet float32)."""
+    """``(data, spacing or None, origin or None, obliquity)`` of a ``kind`` input as its loader reads it (not yet
+    float32); the obliquity (degrees off the scanner's axes, :func:`.shared.to_canonical`) is 0 but for medical
+    formats."""
     if kind == "zarr":
-        return zarr.read_zarr(path, inner, level, chunks, fits)
+        return (*zarr.read_zarr(path, inner, level, chunks, fits), 0.0)
     if kind == "hdf5":
-        return hdf5.read_hdf5(path, inner, chunks, fits)
+        return (*hdf5.read_hdf5(path, inner, chunks, fits), 0.0)
     if kind == "raw":
-        return raw.read_raw(path, shape, dtype, byte_order, chunks, fits)
+        return (*raw.read_raw(path, shape, dtype, byte_order, chunks, fits), 0.0)
     if kind == "npy":
-        return raw.read_npy(path, chunks, fits), None, None
+        return raw.read_npy(path, chunks, fits), None, None, 0.0
     if kind == "nifti":
         return nifti.read_nifti(path, chunks, fits)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "tiff":
-        (data, spacing), origin = tiff.read_tiff(path, fits), None
-        return data, spacing, origin
+        data, spacing = tiff.read_tiff(path, fits)
+        return data, spacing, None, 0.0
     if kind == "tiff-folder":
-        return tiff.read_tiff_folder(path, progress_bar, fits), None, None
+        return tiff.read_tiff_folder(path, progress_bar, fits), None, None, 0.0
     if kind == "dicom-frames":
         return dicom_frames.read_dicom_frames(path, fits)
     return dicom.read_dicom_folder(path, series, progress_bar, fits)
@@ -175,8 +177,10 @@ def describe(path, *, series=None, level=None) -> dict:
     (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the
     ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
     rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's straight
-    stack, wider by its shifts), and no spacing or origin: its loader finds those with the voxels.  A
-    ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
+    stack, wider by its shifts), and the ``spacing``, ``origin`` and ``obliquity`` ``load`` gives where its header
+    places the volume (``.nii.gz``, DICOM; NRRD and TIFF give none, their loaders finding them with the voxels); a
+    DICOM series also its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
+    (stored values, or None).  A ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
     if kind == "raw":
@@ -192,14 +196,21 @@ def describe(path, *, series=None, level=None) -> dict:
     facts = dict(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size)
     with reading(path):
         try:
-            data, spacing, origin = _read(kind, path, inner, None, None, None, series, level,
-                                          "auto" if lazy else False, False, None if lazy else _declared, False)
+            data, spacing, origin, obliquity = _read(kind, path, inner, None, None, None, series, level,
+                                                     "auto" if lazy else False, False, None if lazy else _declared,
+                                                     False)
         except Declared as declared:
-            return dict(facts, stored_shape=list(declared.shape), dtype=str(declared.dtype),
-                        resampled=declared.resampled)
+            facts.update(stored_shape=list(declared.shape), dtype=str(declared.dtype), resampled=declared.resampled,
+                         **declared.facts)
+            if declared.placed is not None:
+                spacing, origin, obliquity = declared.placed
+                facts.update(spacing=[float(s) for s in spacing], origin=[float(o) for o in origin],
+                             obliquity=obliquity)
+            return facts
     volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))
     return dict(facts, shape=list(data.shape), dtype=str(data.dtype), channels=volume.channels,
-                spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None)
+                spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None,
+                obliquity=obliquity)
 
 
 def _declared(voxels, channels):

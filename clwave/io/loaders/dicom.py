@@ -8,7 +8,7 @@ from collections import defaultdict
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import SUPPORTED, check_whole, folder_files, note, read_slices, reading, to_canonical
+from .shared import SUPPORTED, Declared, check_whole, folder_files, note, read_slices, reading, to_canonical
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -41,19 +41,39 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"DICOM series {uid} in {folder} mixes slice orientations "
                               "(e.g. a localizer); move the odd slices out of the folder")
+    _one_spacing(f"DICOM series {uid} in {folder}", headers)
     positions = np.array([h.ImagePositionPatient for _, h in headers], float)
     first = headers[0][1]
     size = (int(first.Rows), int(first.Columns))
 
     def read(order):  # weighed from the headers, before a pixel is read (the slices rescaled to float32)
         check_whole(folder, (len(order), *size), np.float32, fits)
-        return read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
+        data = read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
+        return fill_padding(data, f"DICOM series {uid} in {folder}")
 
-    return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
-                        tuple(float(s) for s in first.PixelSpacing), size,
-                        [f"slice {path.name}" for path, _ in headers], read, fits,
-                        "the series may hold several acquisitions (echoes, phases, times): split them into separate "
-                        "folders")
+    try:
+        return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
+                            tuple(float(s) for s in first.PixelSpacing), size,
+                            [f"slice {path.name}" for path, _ in headers], read, fits,
+                            "the series may hold several acquisitions (echoes, phases, times): split them into "
+                            "separate folders")
+    except Declared as declared:  # describe(): what the headers say of the samples too
+        declared.facts = _header_facts([h for _, h in headers])
+        raise
+
+
+def _one_spacing(where, headers):
+    """Refuse slices of several PixelSpacings (to a 1e-4 of it: the files' decimals), naming the first slice
+    that differs from the most common: stacked, it would be drawn at the others' scale."""
+    spacings = np.array([h.PixelSpacing for _, h in headers], float)
+    kinds, counts = np.unique(spacings, axis=0, return_counts=True)
+    common = kinds[np.argmax(counts)]
+    odd = np.flatnonzero(~np.all(np.isclose(spacings, common, rtol=1e-4, atol=0), axis=1))
+    if odd.size:
+        path, shown = headers[odd[0]][0], ", ".join(f"{v:g}" for v in spacings[odd[0]])
+        raise FileFormatError(f"{where} mixes pixel spacings: {path.name} has PixelSpacing {shown} mm where "
+                              f"{counts.max()} of its {len(headers)} slices have {', '.join(f'{v:g}' for v in common)};"
+                              f" move the odd slices out of the folder (or resample them first)")
 
 
 def place_slices(where, path, positions, cosines, pixel, size, names, read, fits, shared):
@@ -81,24 +101,37 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     shifts = np.arange(len(order))[:, None] * step
     lo, hi = np.floor(np.minimum(shifts.min(axis=0), 0)), np.ceil(np.maximum(shifts.max(axis=0), 0))
     tilted = bool(np.any(step))
-    if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
-        rows, columns = size
-        check_whole(path, (len(order), rows + int(hi[1] - lo[1]), columns + int(hi[0] - lo[0])), np.float32, fits,
-                    resampled=True)
-
-    data_zyx = read(order)
+    # index (column, row, slice) -> LPS patient coordinates (mm); the first slice's corner moved by the margin
+    affine_lps = np.eye(4)
+    affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, normal * dz])
+    affine_lps[:3, 3] = positions[order[0]] + lo[0] * dx * row_dir + lo[1] * dy * col_dir
+    rows, columns = size[0] + int(hi[1] - lo[1]), size[1] + int(hi[0] - lo[0])  # the straight stack's, if tilted
+    try:
+        if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
+            check_whole(path, (len(order), rows, columns), np.float32, fits, resampled=True)
+        data_zyx = read(order)
+    except Declared as declared:  # describe(): its place from the headers
+        declared.place((columns, rows, len(order)), _LPS_TO_RAS @ affine_lps)
+        raise
     if tilted:
         depth = distance.max() - distance.min()
         note(f"{where} has a gantry tilt of {np.degrees(np.arctan(np.linalg.norm(drift))):.3g} degrees (its slices "
              f"shift {np.linalg.norm(drift) * depth:.4g} mm sideways over {depth:.4g} mm along their normal): "
              f"resampled onto a straight stack, linearly, the new margins filled with its least value")
         data_zyx = _untilt(data_zyx, shifts - lo, (hi - lo).astype(int))
-    # index (column, row, slice) -> LPS patient coordinates (mm); the first slice's corner moved by the margin
-    affine_lps = np.eye(4)
-    affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, normal * dz])
-    affine_lps[:3, 3] = positions[order[0]] + lo[0] * dx * row_dir + lo[1] * dy * col_dir
     data_ijk = data_zyx.transpose((2, 1, 0) + tuple(range(3, data_zyx.ndim)))
     return to_canonical(data_ijk, _LPS_TO_RAS @ affine_lps)
+
+
+def _header_facts(headers) -> dict:
+    """What ``clwave info`` says of a series' samples from their headers: the type stored, the rescales (slope,
+    intercept; each distinct pair, in slice order) and the padding range (:func:`padding`, stored values)."""
+    from pydicom.pixels.utils import pixel_dtype
+
+    rescales = [(float(getattr(h, "RescaleSlope", 1.0)), float(getattr(h, "RescaleIntercept", 0.0))) for h in headers]
+    marks = padding(headers[0])
+    return dict(stored_dtype=str(pixel_dtype(headers[0])), rescale=[list(r) for r in dict.fromkeys(rescales)],
+                padding=None if marks is None else list(marks))
 
 
 def _drift(where, positions, distance, normal, pixel) -> np.ndarray:
@@ -215,9 +248,46 @@ def _pick_series(folder, groups, series):
                      cli=f"--series {series} matches none of the DICOM series in {folder}: {listing}")
 
 
+def padding(ds):
+    """``(least, greatest)`` stored value of the pixels ``ds`` marks as padding (outside the patient), or None: its
+    PixelPaddingValue alone, or the range between it and PixelPaddingRangeLimit (PS3.3 C.7.5.1.1.2).  They are
+    stored values, before the rescale."""
+    if ds.get("PixelPaddingValue") is None:
+        return None
+    value, limit = int(ds.PixelPaddingValue), ds.get("PixelPaddingRangeLimit")
+    limit = value if limit is None else int(limit)
+    return min(value, limit), max(value, limit)
+
+
+def mark_padding(stored, rescaled, marks):
+    """``rescaled`` (float32) with NaN where ``stored`` lies in the padding range ``marks`` (:func:`padding`; None:
+    none), for :func:`fill_padding`: a file with a padding value stores integers, so NaN marks nothing else."""
+    if marks is not None:
+        rescaled[(stored >= marks[0]) & (stored <= marks[1])] = np.nan
+    return rescaled
+
+
+def fill_padding(data, where):
+    """``data`` (float32, rescaled) with its padding (the NaN :func:`mark_padding` left) set to the least other value
+    of the series, in place: for a CT that is air, or near it, where the padding value (often -2000 or -3024 HU
+    after the rescale) would be a shell denser than vacuum's negative, which an X-ray integrates (docs/
+    coordinates.md §1).  A series all padding is refused."""
+    padded = np.isnan(data)
+    count = int(np.count_nonzero(padded))
+    if count == data.size:
+        raise FileFormatError(f"{where} marks every pixel as padding (PixelPaddingValue: outside the patient); it "
+                              "holds no image: check its PixelPaddingValue and PixelPaddingRangeLimit")
+    if count:
+        least = float(np.min(data, initial=np.inf, where=~padded))
+        data[padded] = least
+        note(f"{where} marks {100 * count / data.size:.3g} % of its voxels as padding (outside the patient: "
+             f"PixelPaddingValue): set to its least other value, {least:.6g}")
+    return data
+
+
 def _dicom_pixels(path):
     """One slice's pixels (a single-frame file, read_dicom_folder checked) as float32 with RescaleSlope/RescaleIntercept
-    applied."""
+    applied, its padding NaN (:func:`mark_padding`)."""
     import pydicom
 
     ds = pydicom.dcmread(path)
@@ -228,8 +298,8 @@ def _dicom_pixels(path):
     if slope == 0:  # every voxel would be the intercept
         raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; "
                               "the file is corrupt: correct its RescaleSlope (e.g. 1) or move it out of the folder")
-    pixels = ds.pixel_array.astype(np.float32)
-    return pixels * np.float32(slope) + np.float32(intercept)
+    stored = ds.pixel_array
+    return mark_padding(stored, stored.astype(np.float32) * np.float32(slope) + np.float32(intercept), padding(ds))
 
 
 def check_finite(path, tag, values):

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .dicom import check_finite, place_slices
+from .dicom import check_finite, fill_padding, mark_padding, padding, place_slices
 from .shared import check_whole
 
 #: what converts a multi-frame file clwave cannot place into a volume it reads
@@ -22,8 +22,9 @@ def frame_count(path) -> int:
 
 
 def read_dicom_frames(path, fits=None):
-    """A multi-frame DICOM file's frames as slices, rescaled, in RAS (``(data, spacing, origin)``); refused (naming
-    dcm2niix) where its frames carry no positions, or several orientations."""
+    """A multi-frame DICOM file's frames as slices, rescaled, its padding filled (:func:`.dicom.fill_padding`), in
+    RAS (``(data, spacing, origin)``); refused (naming dcm2niix) where its frames carry no positions, or several
+    orientations."""
     import pydicom
     from pydicom.pixels import iter_pixels
     from pydicom.pixels.utils import pixel_dtype
@@ -52,7 +53,7 @@ def read_dicom_frames(path, fits=None):
     if np.any(slopes == 0):
         raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; the "
                               f"file is corrupt")
-    size = (int(ds.Rows), int(ds.Columns))
+    size, marks = (int(ds.Rows), int(ds.Columns)), padding(ds)
 
     def read(order):
         check_whole(path, (frames, *size), pixel_dtype(ds), fits, streamed=True)
@@ -64,11 +65,12 @@ def read_dicom_frames(path, fits=None):
             data[rank[k]] = frame.reshape(size)
             data[rank[k]] *= slopes[k]
             data[rank[k]] += intercepts[k]
+            mark_padding(frame.reshape(size), data[rank[k]], marks)
         if count != frames:  # pydicom yields what the pixel data holds: a short file leaves slices unwritten
             held = count if count < frames else f"more than {frames}"
             raise FileFormatError(f"{path} holds {held} frames of pixel data where it declares {frames} "
                                   f"(NumberOfFrames); the file is truncated or corrupt")
-        return data
+        return fill_padding(data, f"multi-frame DICOM file {path}")
 
     return place_slices(f"multi-frame DICOM file {path}", path, positions, cosines[0], tuple(pixel), size,
                         [f"frame {k + 1}" for k in range(frames)], read, fits,

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import as_array, check_declared_size, check_float32_range, largest_finite, to_canonical
+from .shared import Declared, as_array, check_declared_size, check_float32_range, largest_finite, to_canonical
 
 
 def read_nifti(path, chunks, fits=None):
@@ -48,7 +48,11 @@ def read_nifti(path, chunks, fits=None):
                 "volume first, e.g. with nibabel.funcs.four_to_three")
         proxy = proxy.reshape(proxy.shape[:3] + proxy.shape[4:5])
     scaled = proxy.dtype.kind in "iu" and (float(proxy.slope), float(proxy.inter)) != (1.0, 0.0)
-    data = as_array(_ScaledToFloat32(proxy, path) if scaled else proxy, chunks, fits=fits, path=path)
+    try:
+        data = as_array(_ScaledToFloat32(proxy, path) if scaled else proxy, chunks, fits=fits, path=path)
+    except Declared as declared:  # describe(): its place from the header (a .nii.gz's, read whole)
+        declared.place(proxy.shape[:3], affine)
+        raise
     if data.dtype.names:  # RGB24 / RGBA32 structured samples
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
     return to_canonical(data, affine)

