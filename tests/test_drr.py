@@ -304,6 +304,11 @@ def test_drr_refuses_what_it_would_ignore_or_misname(tmp_path, capsys):
     base = ["--poses", str(tmp_path / "poses.csv"), "--size", "16", "--levels", "1", "-o", str(tmp_path / "d.npy")]
     assert main(["drr", "phantom:shepp-logan:16", "--window", "0,1", *base]) == 2
     assert "--window sets a .png's grey levels" in capsys.readouterr().err
+    for classify in (["--tf", "ct-bone"], ["--tf-window", "0,1"], ["--classify", "post"]):
+        # a radiograph integrates the scalar: drr has no transfer function's options (they did nothing, or were
+        # refused once the volume was read and transformed)
+        assert main(["drr", str(tmp_path / "missing.nii"), *classify, *base]) == 2
+        assert f"unrecognized arguments: {' '.join(classify)}" in capsys.readouterr().err
     np.save(tmp_path / "rgb.npy", np.random.default_rng(0).random((8, 8, 8, 3)).astype(np.float32))
     assert main(["drr", str(tmp_path / "rgb.npy"), *base]) == 2
     err = capsys.readouterr().err

@@ -83,8 +83,7 @@ def run(args):
     wv, _ = build_model(args, hu_hint=False)  # a model in HU is refused below, naming --hu-to-mu
     if wv.channels != 1:
         raise InputError(f"radiographs need a one-channel (attenuation) volume; {args.input} has {wv.channels} "
-                         f"channels" + (" (classified by --tf: leave it out)" if getattr(args, "tf", None) else
-                                        ": give its attenuation as one channel"))
+                         f"channels: give its attenuation as one channel")
     if centre:
         cameras = poses(**dict(geometry, isocentre=tuple(float(c) for c in wv.origin)))
     if below_zero(wv) and not args.signed:  # refused as render refuses a blank image (docs/coordinates.md §5)
@@ -167,8 +166,9 @@ def log_window(window):
 
 
 def add_parser(sub):
+    # no --tf, --tf-window or --classify: a radiograph is line integrals of the scalar (or mu), never of colours
     p = add_command(sub, "drr", "digitally reconstructed radiographs: cone-beam X-rays of many poses", run,
-                    "output .npy (N, H, W) float32 stack, or .png for one pose")
+                    "output .npy (N, H, W) float32 stack, or .png for one pose", classify=False)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
                    help="splat (default): perspective wavelet splatting; raytrace: the ray tracer's X-ray mode, "
                         "within --tolerance of the exact line integrals (near or wide cones and Haar models, which "
