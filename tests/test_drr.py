@@ -52,6 +52,40 @@ def test_pose_table_rows():
     assert np.allclose(b.matrix(), ConeBeam(80, 120, 8, azimuth=20).matrix())
     with pytest.raises(InputError, match="unknown column"):
         poses([dict(azimuth=0, tilt=3)], 8)
+    matrix = {f"p{i}{j}": v for (i, j), v in np.ndenumerate(ConeBeam(80, 120, 8).matrix())}
+    with pytest.raises(InputError, match=r"^pose 1: projection-matrix columns \(p00, p01, ...\) beside pose columns "
+                                         r"\(azimuth\); a matrix fixes the whole pose"):
+        poses([dict(matrix, azimuth=3)], 8)
+    with pytest.raises(InputError, match=r"^pose 2: a partial projection matrix \(2 of its 12 values\); give every "
+                                         r"one of p00..p23 \(missing p02, "):
+        poses([matrix, dict(p00=1, p01=2)], 8)
+
+
+@pytest.mark.parametrize("table, words", [
+    ("p00,p01\n1,2\n", "header: a partial projection matrix (2 of its 12 values)"),
+    ("azimuth,p00,p01,p02,p03,p10,p11,p12,p13,p20,p21,p22,p23\n" + "1," * 12 + "1\n",
+     "header: projection-matrix columns (p00, p01, ...) beside pose columns (azimuth)"),
+    ("azimuth,elevatoin\n0,0\n", "header: unknown column(s) elevatoin; use azimuth, "),
+    ("# gantry\nazimuth,elevation\n# first\n0,0\n0,x\n", ", line 5: every value must be a number"),
+    ("azimuth,dso\n0,1000\n0,5\n", "pose 2: the X-ray source [5.0, 0.0, 0.0] is inside the volume"),
+    ("azimuth,dso,dsd\n0,1000,1500\n0,10,40\n", "pose 2: the eye (X-ray source) is inside the model or too near "
+     "it for splatting: its level-1 basis functions reach behind the eye; use a dso in its row above "),
+])
+def test_a_pose_tables_refusal_names_the_pose_or_the_header(tmp_path, capsys, table, words):
+    """A table's column names are checked once, as its header's (a misspelt one, a partial matrix, a matrix beside
+    angles: what is wrong, not "unknown p00"); ``#`` lines are comments (their lines counted); a pose refused once
+    the volume is read (its source inside the volume, or too near it for splatting) is named, and a dso of its own
+    row is the fix, not --dso, which does not override it."""
+    (tmp_path / "t.csv").write_text(table)
+    argv = ["drr", "phantom:shepp-logan:16", "--levels", "1", "--poses", str(tmp_path / "t.csv"), "--size", "8",
+            "-o", str(tmp_path / "d.npy")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"clwave: error: pose table {tmp_path / 't.csv'}" if "line" not in words else
+                          f"clwave: error: {tmp_path / 't.csv'}") and words in err and err.count("\n") == 1, err
+    assert "--dso" not in err and not (tmp_path / "d.npy").exists()
+    (tmp_path / "t.csv").write_text("# gantry\nazimuth,elevation\n# first\n0,0\n")
+    assert main(argv) == 0 and np.load(tmp_path / "d.npy").shape == (1, 8, 8)
 
 
 def test_beer_lambert():
