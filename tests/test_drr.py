@@ -15,7 +15,7 @@ def model():
     return clwave.WaveletVolume.from_volume(vol, levels=1)
 
 
-def test_a_batch_equals_single_renders(model, monkeypatch):
+def test_a_batch_equals_single_renders(model, monkeypatch, tmp_path):
     from clwave.splat import perspective
 
     made = []  # footprints are made once per direction: the translated pose (a registration step) reuses them
@@ -38,6 +38,11 @@ def test_a_batch_equals_single_renders(model, monkeypatch):
     for wrong in (np.empty(batch.shape, np.int16), np.empty(batch.shape, np.float64),
                   np.empty((4, 12, 16, 2), np.float32)):
         with pytest.raises(InputError, match=r"out is a .* the views need float32 \(4, 12, 16, 1\)"):
+            r.render_many(cams, out=wrong)
+    np.save(tmp_path / "ro.npy", np.zeros(batch.shape, np.float32))  # of the right dtype and shape, but read-only
+    for wrong in (np.load(tmp_path / "ro.npy", mmap_mode="r"), np.empty_like(batch)):
+        wrong.flags.writeable = False
+        with pytest.raises(InputError, match=r"^out is read-only \(a memmap opened with mode 'r'\?\): give a writable"):
             r.render_many(cams, out=wrong)
     with pytest.raises(InputError, match="^render_many got no views: give at least one camera$"):
         r.render_many([])  # was an array of shape (0, 0, 0, 1): no image size to give it
