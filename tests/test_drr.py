@@ -94,7 +94,16 @@ def test_a_pose_tables_refusal_names_the_pose_or_the_header(tmp_path, capsys, ta
 
 
 def test_beer_lambert():
+    assert clwave.transmitted is transmitted  # the API (docs/coordinates.md §5)
     assert np.allclose(transmitted([0.0, np.log(2.0), np.inf], i0=3.0), [3.0, 1.5, 0.0])
+    for i0 in (0.0, -1.0):
+        with pytest.raises(InputError, match=r"^i0=.* must be the source's intensity, above 0"):
+            transmitted([1.0], i0=i0)
+    for i0 in (np.nan, np.inf):
+        with pytest.raises(InputError, match=r"^i0=.* must be finite$"):
+            transmitted([1.0], i0=i0)
+    with pytest.raises(InputError, match=r"^line_integrals hold NaN \(1 of 3\); a radiograph's line integrals are "):
+        transmitted([[0.0, np.nan, 1.0]])
 
 
 def test_drr_command(tmp_path, capsys, model):
@@ -230,8 +239,9 @@ def test_a_drr_of_hounsfield_units_is_refused_naming_hu_to_mu(hounsfield, tmp_pa
     assert mu.max() > 1.0 and np.sum(mu) > 0
     # through the API: the intensity of such an image warns naming hu_to_mu, of an attenuation's does not
     # (filterwarnings=error); a single ray's integral says nothing of a detector's total
-    with pytest.warns(UserWarning, match="hu_to_mu=True"):
+    with pytest.warns(clwave.ClwaveWarning, match="hu_to_mu=True") as caught:  # warnings.warn_outside's class
         intensity = transmitted(signed)
+    assert "--hu-to-mu" in caught[0].message.cli
     assert np.mean(intensity == 1.0) > 0.5  # air outweighs tissue: the source's intensity, no radiograph
     assert np.array_equal(transmitted(mu), np.exp(-np.maximum(mu.astype(np.float64), 0.0)).astype(np.float32))
     assert np.all(transmitted(signed[:, 0]) == 1.0)  # rays (1-D), not an image: not checked, as before

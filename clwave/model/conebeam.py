@@ -17,10 +17,12 @@ detector's matrix is that of a source facing away: :meth:`ConeBeam.view` names i
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import scipy.linalg
 
-from ..errors import InputError, finite_number, warn_outside
+from ..errors import ClwaveWarning, InputError, finite_number, warn_outside
 from .camera import Camera, View, _content_box, _size, _vector
 from .geometry import view_frame
 
@@ -314,15 +316,24 @@ def below_zero(wv) -> bool:
 
 def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
     """Beer-Lambert: the intensity ``i0 exp(-∫mu)`` reaching the detector from attenuation line integrals
-    (``--hu-to-mu`` CTs: mu per mm, integrals over mm).  Integrals below 0 (a thresholded model rings) count as 0:
-    mu >= 0, so that is nearer the truth, and no pixel gets more than ``i0``.
+    (``--hu-to-mu`` CTs: mu per mm, integrals over mm), ``i0`` the source's (finite, above 0).  Integrals below 0 (a
+    thresholded model rings) count as 0: mu >= 0, so that is nearer the truth, and no pixel gets more than ``i0``;
+    +inf (an opaque ray) gives 0, NaN is refused.
 
-    Warns (``UserWarning``) when an image's integrals (an ``(H, W)`` image, or a stack of them) sum to below 0: a
-    detector's total is the attenuation it sees, above 0 for any attenuation, ringing included, and far below 0 for a CT
-    left in Hounsfield units, whose intensity would be ``i0`` wherever air outweighs tissue (load it with
-    ``hu_to_mu=True``)."""
+    Warns (:class:`~clwave.errors.ClwaveWarning`) when an image's integrals (an ``(H, W)`` image, or a stack of them)
+    sum to below 0: a detector's total is the attenuation it sees, above 0 for any attenuation, ringing included, and
+    far below 0 for a CT left in Hounsfield units, whose intensity would be ``i0`` wherever air outweighs tissue (load
+    it with ``hu_to_mu=True``)."""
+    i0 = finite_number(i0, "i0")
+    if i0 <= 0:
+        raise InputError(f"i0={i0:g} must be the source's intensity, above 0 (e.g. 1: the intensities are then "
+                         f"fractions of it)")
     integrals = np.asarray(line_integrals, np.float64)
+    if np.isnan(integrals).any():
+        raise InputError(f"line_integrals hold NaN ({np.count_nonzero(np.isnan(integrals))} of {integrals.size}); "
+                         f"a radiograph's line integrals are numbers (+inf for an opaque ray)")
     if integrals.ndim >= 2 and np.sum(integrals) < 0:
-        warn_outside(NOT_ATTENUATION.format(what=f"these line integrals (sum {np.sum(integrals):.4g}) are",
-                                            fix="load it with clwave.load(..., hu_to_mu=True)"))
+        said = partial(NOT_ATTENUATION.format, what=f"these line integrals (sum {np.sum(integrals):.4g}) are")
+        warn_outside(ClwaveWarning(said(fix="load it with clwave.load(..., hu_to_mu=True)"),
+                                   cli=said(fix="read the CT with --hu-to-mu")))
     return (i0 * np.exp(-np.maximum(integrals, 0.0))).astype(np.float32)
