@@ -15,7 +15,7 @@ def model():
     return clwave.WaveletVolume.from_volume(vol, levels=1)
 
 
-def test_a_batch_equals_single_renders(model, monkeypatch):
+def test_a_batch_equals_single_renders(model, monkeypatch, tmp_path):
     from clwave.splat import perspective
 
     made = []  # footprints are made once per direction: the translated pose (a registration step) reuses them
@@ -39,6 +39,11 @@ def test_a_batch_equals_single_renders(model, monkeypatch):
                   np.empty((4, 12, 16, 2), np.float32)):
         with pytest.raises(InputError, match=r"out is a .* the views need float32 \(4, 12, 16, 1\)"):
             r.render_many(cams, out=wrong)
+    np.save(tmp_path / "ro.npy", np.zeros(batch.shape, np.float32))  # of the right dtype and shape, but read-only
+    for wrong in (np.load(tmp_path / "ro.npy", mmap_mode="r"), np.empty_like(batch)):
+        wrong.flags.writeable = False
+        with pytest.raises(InputError, match=r"^out is read-only \(a memmap opened with mode 'r'\?\): give a writable"):
+            r.render_many(cams, out=wrong)
     with pytest.raises(InputError, match="^render_many got no views: give at least one camera$"):
         r.render_many([])  # was an array of shape (0, 0, 0, 1): no image size to give it
     assert not made
@@ -52,10 +57,53 @@ def test_pose_table_rows():
     assert np.allclose(b.matrix(), ConeBeam(80, 120, 8, azimuth=20).matrix())
     with pytest.raises(InputError, match="unknown column"):
         poses([dict(azimuth=0, tilt=3)], 8)
+    matrix = {f"p{i}{j}": v for (i, j), v in np.ndenumerate(ConeBeam(80, 120, 8).matrix())}
+    with pytest.raises(InputError, match=r"^pose 1: projection-matrix columns \(p00, p01, ...\) beside pose columns "
+                                         r"\(azimuth\); a matrix fixes the whole pose"):
+        poses([dict(matrix, azimuth=3)], 8)
+    with pytest.raises(InputError, match=r"^pose 2: a partial projection matrix \(2 of its 12 values\); give every "
+                                         r"one of p00..p23 \(missing p02, "):
+        poses([matrix, dict(p00=1, p01=2)], 8)
+
+
+@pytest.mark.parametrize("table, words", [
+    ("p00,p01\n1,2\n", "header: a partial projection matrix (2 of its 12 values)"),
+    ("azimuth,p00,p01,p02,p03,p10,p11,p12,p13,p20,p21,p22,p23\n" + "1," * 12 + "1\n",
+     "header: projection-matrix columns (p00, p01, ...) beside pose columns (azimuth)"),
+    ("azimuth,elevatoin\n0,0\n", "header: unknown column(s) elevatoin; use azimuth, "),
+    ("# gantry\nazimuth,elevation\n# first\n0,0\n0,x\n", ", line 5: every value must be a number"),
+    ("azimuth,dso\n0,1000\n0,5\n", "pose 2: the X-ray source [5.0, 0.0, 0.0] is inside the volume"),
+    ("azimuth,dso,dsd\n0,1000,1500\n0,10,40\n", "pose 2: the eye (X-ray source) is inside the model or too near "
+     "it for splatting: its level-1 basis functions reach behind the eye; use a dso in its row above "),
+])
+def test_a_pose_tables_refusal_names_the_pose_or_the_header(tmp_path, capsys, table, words):
+    """A table's column names are checked once, as its header's (a misspelt one, a partial matrix, a matrix beside
+    angles: what is wrong, not "unknown p00"); ``#`` lines are comments (their lines counted); a pose refused once
+    the volume is read (its source inside the volume, or too near it for splatting) is named, and a dso of its own
+    row is the fix, not --dso, which does not override it."""
+    (tmp_path / "t.csv").write_text(table)
+    argv = ["drr", "phantom:shepp-logan:16", "--levels", "1", "--poses", str(tmp_path / "t.csv"), "--size", "8",
+            "-o", str(tmp_path / "d.npy")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"clwave: error: pose table {tmp_path / 't.csv'}" if "line" not in words else
+                          f"clwave: error: {tmp_path / 't.csv'}") and words in err and err.count("\n") == 1, err
+    assert "--dso" not in err and not (tmp_path / "d.npy").exists()
+    (tmp_path / "t.csv").write_text("# gantry\nazimuth,elevation\n# first\n0,0\n")
+    assert main(argv) == 0 and np.load(tmp_path / "d.npy").shape == (1, 8, 8)
 
 
 def test_beer_lambert():
+    assert clwave.transmitted is transmitted  # the API (docs/coordinates.md §5)
     assert np.allclose(transmitted([0.0, np.log(2.0), np.inf], i0=3.0), [3.0, 1.5, 0.0])
+    for i0 in (0.0, -1.0):
+        with pytest.raises(InputError, match=r"^i0=.* must be the source's intensity, above 0"):
+            transmitted([1.0], i0=i0)
+    for i0 in (np.nan, np.inf):
+        with pytest.raises(InputError, match=r"^i0=.* must be finite$"):
+            transmitted([1.0], i0=i0)
+    with pytest.raises(InputError, match=r"^line_integrals hold NaN \(1 of 3\); a radiograph's line integrals are "):
+        transmitted([[0.0, np.nan, 1.0]])
 
 
 def test_drr_command(tmp_path, capsys, model):
@@ -191,8 +239,9 @@ def test_a_drr_of_hounsfield_units_is_refused_naming_hu_to_mu(hounsfield, tmp_pa
     assert mu.max() > 1.0 and np.sum(mu) > 0
     # through the API: the intensity of such an image warns naming hu_to_mu, of an attenuation's does not
     # (filterwarnings=error); a single ray's integral says nothing of a detector's total
-    with pytest.warns(UserWarning, match="hu_to_mu=True"):
+    with pytest.warns(clwave.ClwaveWarning, match="hu_to_mu=True") as caught:  # warnings.warn_outside's class
         intensity = transmitted(signed)
+    assert "--hu-to-mu" in caught[0].message.cli
     assert np.mean(intensity == 1.0) > 0.5  # air outweighs tissue: the source's intensity, no radiograph
     assert np.array_equal(transmitted(mu), np.exp(-np.maximum(mu.astype(np.float64), 0.0)).astype(np.float32))
     assert np.all(transmitted(signed[:, 0]) == 1.0)  # rays (1-D), not an image: not checked, as before
@@ -365,6 +414,11 @@ def test_drr_refuses_what_it_would_ignore_or_misname(tmp_path, capsys):
     base = ["--poses", str(tmp_path / "poses.csv"), "--size", "16", "--levels", "1", "-o", str(tmp_path / "d.npy")]
     assert main(["drr", "phantom:shepp-logan:16", "--window", "0,1", *base]) == 2
     assert "--window sets a .png's grey levels" in capsys.readouterr().err
+    for classify in (["--tf", "ct-bone"], ["--tf-window", "0,1"], ["--classify", "post"]):
+        # a radiograph integrates the scalar: drr has no transfer function's options (they did nothing, or were
+        # refused once the volume was read and transformed)
+        assert main(["drr", str(tmp_path / "missing.nii"), *classify, *base]) == 2
+        assert f"unrecognized arguments: {' '.join(classify)}" in capsys.readouterr().err
     np.save(tmp_path / "rgb.npy", np.random.default_rng(0).random((8, 8, 8, 3)).astype(np.float32))
     assert main(["drr", str(tmp_path / "rgb.npy"), *base]) == 2
     err = capsys.readouterr().err

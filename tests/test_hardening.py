@@ -167,23 +167,62 @@ def test_a_flipped_bit_in_the_header_fails_its_checksum(model_file, tmp_path):
 @pytest.mark.parametrize("levels", [0, 1])
 def test_voxels_near_the_float32_limit_are_refused_not_rendered(levels):
     """At 0 levels too (the model is the voxels, finite, but a splat of 3e38 through 8 voxels was inf): the model is
-    at most its largest voxel, so a line integral is at most that times the diagonal (13.9 for 8^3)."""
+    at most its largest voxel, so a line integral is at most that times the diagonal (13.9 for 8^3), which must stay
+    below 1.8e19, the root of float32's largest value, so that the energies (sums of squares) of images are finite
+    too (a NIfTI's scl_slope of 1e30 gave inf energies, numpy's overflow warnings and an inf error, exit 0)."""
     data = np.full((8, 8, 8), 3.0e38, np.float32)
-    with pytest.raises(InputError, match=r"line integrals of this volume overflow float32 \(its largest value 3e\+38 "
-                                         r"times its diagonal 13.9"):
+    with pytest.raises(InputError, match=r"line integrals of this volume overflow float32 once squared \(its largest "
+                                         r"value 3e\+38 times its diagonal 13.9 passes 1.8e19"):
         clwave.WaveletVolume.from_volume(data, "cubic", levels=levels)
-    with pytest.raises(InputError, match="its diagonal 1.39e\\+39 passes 3.4e38.*or its spacing"):
+    with pytest.raises(InputError, match="its diagonal 1.39e\\+39 passes 1.8e19.*or its spacing"):
         clwave.WaveletVolume.from_volume(clwave.Volume(np.ones((8, 8, 8)), spacing=1e38), "cubic", levels=levels)
-    huge = clwave.WaveletVolume.from_volume(data / 100, "cubic", levels=levels)  # 3e36 x 13.9: taken, finite
-    image = clwave.splat(huge, clwave.Camera(0, 0, size=8)).image
-    assert np.isclose(image.max(), 8 * 3e36, rtol=1e-3)  # the constant's integral through 8 unit voxels
+    with pytest.raises(InputError, match=r"its largest value 1.4e\+18 times its diagonal 13.9 passes 1.8e19"):
+        clwave.WaveletVolume.from_volume(np.full((8, 8, 8), 1.4e18, np.float32), "cubic", levels=levels)
+    huge = clwave.WaveletVolume.from_volume(np.full((8, 8, 8), 1.3e18, np.float32), "cubic", levels=levels)
+    image = clwave.splat(huge, clwave.Camera(0, 0, size=8)).image  # 1.3e18 x 13.9 = 1.8e19: taken, finite
+    assert np.isclose(image.max(), 8 * 1.3e18, rtol=1e-3)  # the constant's integral through 8 unit voxels
     # a thin volume: its integrals are small, but the ray tracer's quadrature sums 12 samples' worth (Simpson's pair)
-    thin = clwave.Volume(data / 10, spacing=1e-3)  # 3e37 x 12 passes 3.4e38
-    with pytest.raises(InputError, match=r"3e\+37 times the ray tracer's quadrature weights 12 \(its diagonal is"):
+    thin = clwave.Volume(np.full((8, 8, 8), 1.6e18, np.float32), spacing=1e-3)  # 1.6e18 x 12 passes 1.8e19
+    with pytest.raises(InputError, match=r"1.6e\+18 times the ray tracer's quadrature weights 12 \(its diagonal is"):
         clwave.WaveletVolume.from_volume(thin, "cubic", levels=levels)
-    taken = clwave.WaveletVolume.from_volume(clwave.Volume(data / 20, spacing=1e-3), "cubic", levels=levels)
+    taken = clwave.WaveletVolume.from_volume(clwave.Volume(np.full((8, 8, 8), 1.5e18, np.float32), spacing=1e-3),
+                                             "cubic", levels=levels)
     traced = clwave.raytrace(taken, clwave.Camera(0, 0, size=8), absorption=False).image
-    assert np.all(np.isfinite(traced)) and np.isclose(traced.max(), 8e-3 * 1.5e37, rtol=1e-2)
+    assert np.all(np.isfinite(traced)) and np.isclose(traced.max(), 8e-3 * 1.5e18, rtol=1e-2)
+
+
+def test_a_huge_nifti_scale_is_refused_before_anything_is_written(tmp_path, capsys):
+    """A NIfTI whose scl_slope makes its values 2.5e32 (within float32's range): refused in one line before the
+    file is written (was written, with numpy's overflow warnings and "RMS ... inf (PSNR -inf dB)", exit 0); the
+    largest scale taken reports a finite error (its squares measured relative to the largest value)."""
+    import nibabel as nib
+    from clwave.cli import main
+
+    data = np.random.default_rng(0).integers(0, 256, (12, 12, 12), dtype=np.uint8)
+    for slope, code in ((1e30, 2), (2e15, 0)):  # 255 x 2e15 x the diagonal 20.8 = 1.1e19, below 1.8e19
+        image = nib.Nifti1Image(data, np.eye(4))
+        image.header.set_slope_inter(slope, 0.0)
+        nib.save(image, tmp_path / "v.nii")
+        argv = ["compress", str(tmp_path / "v.nii"), "--levels", "0", "-o", str(tmp_path / f"{code}.clw")]
+        assert main(argv) == code  # filterwarnings=error: no numpy warning either
+        out, err = capsys.readouterr()
+        assert (tmp_path / f"{code}.clw").exists() == (code == 0)
+        if code:
+            assert err.startswith("clwave: error: the line integrals of this volume overflow float32 once squared ("
+                                  "its largest value 2.55e+32") and err.count("\n") == 1
+        else:
+            assert "RMS over the voxels" in out and "inf" not in out and "nan" not in out
+
+
+def test_coefficients_whose_squares_overflow_are_refused():
+    """A wavelet coefficient's square must be finite in float32 too (the energies that threshold a model and estimate
+    its error sum them): refused past 1.8e19, the root of 3.4e38, as the transform's own overflow is."""
+    from clwave.model.transform import check_coefficients
+
+    check_coefficients(np.array([1.8e19, -1.8e19], np.float32))
+    with pytest.raises(InputError, match=r"^the energies of this volume overflow float32 \(its largest wavelet "
+                                         r"coefficient 1.9e\+19 squared passes 3.4e38\); rescale"):
+        check_coefficients(np.array([1.0, -1.9e19], np.float32))
 
 
 def test_a_damaged_chunk_fails_its_checksum(model_file, tmp_path):

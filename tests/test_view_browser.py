@@ -258,9 +258,11 @@ def test_the_colour_bar_shows_the_map_over_the_window(viewer, page):
                               ".getImageData(0, 0, 256, 1).data)")
     np.testing.assert_array_equal(np.reshape(bar, (256, 4))[:, :3], table("inferno"))
 
-    def labels():
-        return [float(page.find_element("id", name).text) for name in ("bar-lo", "bar-mid", "bar-hi")]
+    def labels():  # under an image narrower than 200 px (80 here) the middle label is hidden, its text kept
+        return [float(page.find_element("id", name).get_attribute("textContent")) for name in
+                ("bar-lo", "bar-mid", "bar-hi")]
     assert page.find_element("id", "colour-bar").is_displayed()
+    assert not page.find_element("id", "bar-mid").is_displayed()
     lo, hi = final["window"]
     np.testing.assert_allclose(labels(), [lo, (lo + hi) / 2, hi], rtol=5e-3)
     page.find_element("id", "auto-window").click()
@@ -281,6 +283,34 @@ def test_a_tab_past_the_most_is_told_what_to_do(viewer, page, monkeypatch):
                                     "return s.classList.contains('error') && s.textContent", timeout=30)
     assert status == "not connected (1013: 0 tabs have this viewer open already: close one, then reload this page)"
     assert page.execute_script("return document.getElementById('mode').disabled")
+
+
+def test_the_colour_bars_labels_never_run_together(page):
+    """Line integrals in the thousands, below 0 too, under a 96 px image: the labels ran together
+    ("-1883.12e+36.43e+3"); they are short (no "+", no trailing zeros), the middle one hidden under 200 px, and the
+    high one wraps below the low one where the two do not fit side by side."""
+    vol = clwave.phantom("hydrogen", n=24)
+    scaled = clwave.Volume(vol.data * 3e4 - 600.0, spacing=vol.spacing)
+    with view(scaled, size=96, keep=0.2) as v:
+        browser.open_viewer(page, v.url)
+        page.execute_script("const m = document.getElementById('colour-map'); m.value = 'inferno';"
+                            "m.dispatchEvent(new Event('change'));")
+        browser.wait_for(page, "const c = window.clwave.current(); return c.fig.colour_map === 'inferno' && "
+                               "c.fig.final && c.fig")
+        shown = page.execute_script("return ['bar-lo', 'bar-mid', 'bar-hi'].map((id) => document.getElementById(id))"
+                                    ".filter((e) => !e.hidden).map((e) => [e.textContent, "
+                                    "e.getBoundingClientRect().toJSON()])")
+        lo, hi = v.server.sources["xray"].auto_window
+    assert [text for text, _ in shown] == [page_number(lo), page_number(hi)] and lo < -100 and hi > 1000, shown
+    assert all("+" not in text and len(text) <= 7 for text, _ in shown)
+    (_, a), (_, b) = shown
+    assert a["right"] <= b["left"] or a["bottom"] <= b["top"], shown
+
+
+def page_number(x) -> str:
+    """The colour bar's label of ``x`` (at least 1e-6 in magnitude, where JavaScript's toPrecision and Python's "g"
+    agree but for the exponent's form) as the page writes it: three digits, no "+", no trailing zeros."""
+    return f"{x:.3g}".replace("e+0", "e").replace("e-0", "e-").replace("e+", "e")
 
 
 def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(page):

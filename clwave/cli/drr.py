@@ -6,25 +6,34 @@ from __future__ import annotations
 
 import csv
 import time
+from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import CommandWords, InputError
+from ..errors import ClwaveError, CommandWords, InputError
 from .checks import parse_size, parse_window
 from .options import (add_command, add_device_options, build_model, check_outputs, kept_words, numbers,
                       parse_device_memory, warn)
 
 
 def read_pose_table(path) -> list:
-    """The rows of a CSV pose table (a header of column names, then numbers) as dicts."""
+    """The rows of a CSV pose table (a header of column names, then numbers; lines starting with ``#`` are comments)
+    as dicts, the header's columns checked (:func:`~clwave.model.conebeam.matrix_columns`) before any row."""
+    from ..model.conebeam import matrix_columns
+
     path = Path(path)
     if not path.is_file():
         raise InputError(f"pose table {path} does not exist")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:  # -sig: a spreadsheet's byte-order mark
-            reader = csv.DictReader(fh)
-            rows = [_pose_row(path, reader.line_num, row, len(reader.fieldnames)) for row in reader]
+            numbers = [n for n, line in enumerate(fh, 1) if not line.lstrip().startswith("#")]  # the file's lines
+            fh.seek(0)
+            reader = csv.DictReader(line for line in fh if not line.lstrip().startswith("#"))
+            if reader.fieldnames:
+                matrix_columns((name.strip() for name in reader.fieldnames), f"pose table {path}, header")
+            rows = [_pose_row(path, numbers[reader.line_num - 1], row, len(reader.fieldnames)) for row in reader]
     except (UnicodeDecodeError, csv.Error) as e:
         raise InputError(f"pose table {path} is not a CSV text file ({e})") from None
     if not rows:
@@ -83,8 +92,7 @@ def run(args):
     wv, _ = build_model(args, hu_hint=False)  # a model in HU is refused below, naming --hu-to-mu
     if wv.channels != 1:
         raise InputError(f"radiographs need a one-channel (attenuation) volume; {args.input} has {wv.channels} "
-                         f"channels" + (" (classified by --tf: leave it out)" if getattr(args, "tf", None) else
-                                        ": give its attenuation as one channel"))
+                         f"channels: give its attenuation as one channel")
     if centre:
         cameras = poses(**dict(geometry, isocentre=tuple(float(c) for c in wv.origin)))
     if below_zero(wv) and not args.signed:  # refused as render refuses a blank image (docs/coordinates.md §5)
@@ -95,14 +103,19 @@ def run(args):
         # beyond the content included (no content clamp, docs/raytracing.md §1)
         renderer = RayTracer(wv, device=args.device, device_memory=device_memory, content_clamp=False)
 
-        def render(cb):
-            return renderer.render(cb, tolerance=tolerance, absorption=False)
+        draw = partial(renderer.render, tolerance=tolerance, absorption=False)
     else:
         renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse,
                                  device_memory=device_memory)
-        render = renderer.render
-    for cb in cameras:  # every pose checked before the first is rendered
-        cb.view(wv)
+        draw = renderer.render
+
+    def render(i):  # pose i's radiograph
+        with pose_named(args.poses, i + 1, geometry["rows"][i]):
+            return draw(cameras[i])
+
+    for i, cb in enumerate(cameras):  # every pose checked before the first is rendered
+        with pose_named(args.poses, i + 1, geometry["rows"][i]):
+            cb.view(wv)
     start = time.perf_counter()
 
     blank = []  # the poses (from 1) whose detector sees nothing of the model
@@ -113,7 +126,7 @@ def run(args):
         return transmitted(res.image[..., 0]) if args.intensity else res.image[..., 0]
 
     if out.suffix.lower() == ".png":
-        res = render(cameras[0])
+        res = render(0)
         image(0, res)
         # an intensity is shown as radiographs are: the detector's log response, bone bright (coordinates.md §5)
         picture = np.maximum(res.image, 0.0) if args.intensity else res.image
@@ -122,8 +135,8 @@ def run(args):
         def write(fh):  # the .npy header, then each radiograph as it is rendered
             np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
                                                           shape=(len(cameras), H, W)))
-            for i, cb in enumerate(cameras):
-                fh.write(np.ascontiguousarray(image(i, render(cb)), "<f4").tobytes())
+            for i in range(len(cameras)):
+                fh.write(np.ascontiguousarray(image(i, render(i)), "<f4").tobytes())
 
         write_atomic(out, write, args.force)
     seconds = time.perf_counter() - start
@@ -154,6 +167,24 @@ def table_poses(geometry, table) -> list:
         raise
 
 
+@contextmanager
+def pose_named(table, number, row):
+    """A refusal of pose ``number`` (from 1) of pose table ``table`` (its view, or splatting it) named by them, its
+    fixes in that pose's words: the dso, dsd or projection matrix of its ``row`` where the row gives them, which the
+    command's --dso, --dsd and --pixel do not override."""
+    try:
+        yield
+    except ClwaveError as exc:
+        if "p00" in row:  # the header's columns are a matrix's or a pose's (matrix_columns)
+            narrow, distance = "--size, or its row's matrix", "a matrix in its row whose source distance is"
+        else:
+            narrow = "--size, --pixel or " + ("the dsd in its row" if "dsd" in row else "--dsd")
+            distance = "a dso in its row" if "dso" in row else "--dso"
+        words = CommandWords(narrow, distance, "clwave drr --method raytrace")
+        exc.cli, exc.worded = f"pose table {table}, pose {number}: {exc.cli_message(words)}", False
+        raise
+
+
 def log_window(window):
     """The window on ``-ln I`` (the line integrals, at least 0) of an ``--intensity`` picture's ``--window LO,HI`` of
     intensities (LO white, HI black); "auto" stays the percentiles (of ``-ln I``, so of ``I``)."""
@@ -167,8 +198,9 @@ def log_window(window):
 
 
 def add_parser(sub):
+    # no --tf, --tf-window or --classify: a radiograph is line integrals of the scalar (or mu), never of colours
     p = add_command(sub, "drr", "digitally reconstructed radiographs: cone-beam X-rays of many poses", run,
-                    "output .npy (N, H, W) float32 stack, or .png for one pose")
+                    "output .npy (N, H, W) float32 stack, or .png for one pose", classify=False)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
                    help="splat (default): perspective wavelet splatting; raytrace: the ray tracer's X-ray mode, "
                         "within --tolerance of the exact line integrals (near or wide cones and Haar models, which "
@@ -177,7 +209,8 @@ def add_parser(sub):
                    "(default 1e-3)")
     p.add_argument("--poses", required=True, help="CSV pose table: a header line naming columns among azimuth, "
                    "elevation, roll, dso, dsd, offset_u, offset_v, isocentre_x/_y/_z (degrees, world units), or "
-                   "p00..p23 (a 3x4 projection matrix), then one pose a line (docs/coordinates.md §5)")
+                   "p00..p23 (a 3x4 projection matrix), then one pose a line; # starts a comment line "
+                   "(docs/coordinates.md §5)")
     g = p.add_argument_group("detector (defaults for every pose)")
     g.add_argument("--size", default="512", help="detector pixels N or HxW (default 512)")
     g.add_argument("--pixel", default="1.0", help="detector pixel spacing, or DV,DU (world units; default 1)")

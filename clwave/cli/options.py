@@ -62,7 +62,9 @@ def add_input_options(p):
     w.add_argument("--scheduler", help="address tcp://HOST:PORT of a running Dask scheduler")
 
 
-def add_model_options(p):
+def add_model_options(p, classify=True):
+    """The options that make a wavelet model of a volume; ``classify``: with the transfer function's (``--tf``,
+    ``--tf-window``, ``--classify``), which ``drr`` has not (a radiograph integrates the scalar itself)."""
     from ..model.transfer import TransferFunction
 
     g = p.add_argument_group("wavelet model (from a volume; a .clw input is a model already)")
@@ -77,6 +79,8 @@ def add_model_options(p):
     g.add_argument("--focus", help="local level of detail: world centre X,Y,Z (needs --sigma)")
     g.add_argument("--sigma", type=float, help="local level of detail: Gaussian width (world units)")
     g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
+    if not classify:
+        return
     g.add_argument("--tf", help="classify with a transfer-function preset first: "
                                 + ", ".join(TransferFunction.PRESETS))
     g.add_argument("--tf-window", help="transfer-function window: auto (percentiles of the values) or LO,HI in "
@@ -310,8 +314,8 @@ def preset_transfer_function(args):
     """The transfer function of ``--tf PRESET [--tf-window auto|LO,HI]``, or None without ``--tf``."""
     from ..model.transfer import TransferFunction
 
-    if not args.tf:
-        if args.tf_window is not None:
+    if not getattr(args, "tf", None):  # drr has no --tf
+        if getattr(args, "tf_window", None) is not None:
             raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
         return None
     return TransferFunction.preset(args.tf, window=None if args.tf_window is None else parse_tf_window(args.tf_window))
@@ -455,11 +459,12 @@ def write_gif(path, pictures, seconds_per_frame, force):
                  force)
 
 
-def add_command(sub, name, help, run, output_help, view=False):
-    """A subcommand reading a volume into a wavelet model and writing ``-o`` (``--force`` to replace)."""
+def add_command(sub, name, help, run, output_help, view=False, classify=True):
+    """A subcommand reading a volume into a wavelet model and writing ``-o`` (``--force`` to replace); ``classify``:
+    with the transfer function's options (:func:`add_model_options`)."""
     p = sub.add_parser(name, help=help)
     add_input_options(p)
-    add_model_options(p)
+    add_model_options(p, classify)
     if view:  # a perspective camera's fixes, in this command's options (errors.CommandWords)
         add_camera_options(p)
         p.set_defaults(words=CommandWords("--fov or --size", "--distance", f"clwave {name} --method raytrace --xray"))

@@ -17,6 +17,8 @@ detector's matrix is that of a source facing away: :meth:`ConeBeam.view` names i
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import scipy.linalg
 
@@ -266,21 +268,16 @@ MATRIX_COLUMNS = tuple(f"p{r}{c}" for r in range(3) for c in range(4))
 def poses(rows, size, pixel=1.0, dso=1000.0, dsd=1500.0, offset=(0.0, 0.0), isocentre=(0.0, 0.0, 0.0)) -> list:
     """:class:`ConeBeam` of each row (a mapping of column name to number) of a pose table: gantry angles and
     any of the other :data:`POSE_COLUMNS` overriding the defaults given here, or the 12 :data:`MATRIX_COLUMNS`
-    of a projection matrix (``size`` pixels).  Refused with one line: unknown or missing columns.
+    of a projection matrix (``size`` pixels).  Refused with one line: columns :func:`matrix_columns` refuses.
 
     >>> [cb.source.round(6).tolist() for cb in poses([dict(azimuth=90), dict(azimuth=0, dso=500)], 8)]
     [[0.0, 1000.0, 0.0], [500.0, 0.0, 0.0]]
     """
     out = []
     for i, row in enumerate(rows, 1):
-        names = set(row)
-        if names >= set(MATRIX_COLUMNS) and names <= set(MATRIX_COLUMNS):
+        if matrix_columns(row, f"pose {i}"):
             out.append(ConeBeam.from_matrix(np.array([row[c] for c in MATRIX_COLUMNS], float).reshape(3, 4), size))
             continue
-        unknown = sorted(names - set(POSE_COLUMNS))
-        if unknown:
-            raise InputError(f"pose {i}: unknown column(s) {', '.join(unknown)}; use {', '.join(POSE_COLUMNS)} or "
-                             f"p00..p23 (a projection matrix)")
         g = row.get
         out.append(ConeBeam(g("dso", dso), g("dsd", dsd), size, pixel,
                             offset=(g("offset_u", offset[0]), g("offset_v", offset[1])),
@@ -288,6 +285,27 @@ def poses(rows, size, pixel=1.0, dso=1000.0, dsd=1500.0, offset=(0.0, 0.0), isoc
                             isocentre=(g("isocentre_x", isocentre[0]), g("isocentre_y", isocentre[1]),
                                        g("isocentre_z", isocentre[2]))))
     return out
+
+
+def matrix_columns(names, where: str) -> bool:
+    """Whether the column ``names`` of a pose (``where``, e.g. "pose 3", begins the refusal) are a projection
+    matrix's (all 12 :data:`MATRIX_COLUMNS`) rather than :data:`POSE_COLUMNS`; refused with one line: names of
+    neither, a matrix's columns beside a pose's, some of a matrix's only."""
+    names = set(names)
+    unknown = sorted(names - set(POSE_COLUMNS) - set(MATRIX_COLUMNS))
+    if unknown:
+        raise InputError(f"{where}: unknown column(s) {', '.join(unknown)}; use {', '.join(POSE_COLUMNS)} or "
+                         f"p00..p23 (a projection matrix)")
+    matrix, pose = [c for c in MATRIX_COLUMNS if c in names], [c for c in POSE_COLUMNS if c in names]
+    if matrix and pose:
+        raise InputError(f"{where}: projection-matrix columns ({', '.join(matrix[:2])}{', ...' * (len(matrix) > 2)}) "
+                         f"beside pose columns ({', '.join(pose)}); a matrix fixes the whole pose: give p00..p23 "
+                         f"alone, or the pose columns alone")
+    if matrix and len(matrix) < len(MATRIX_COLUMNS):
+        missing = [c for c in MATRIX_COLUMNS if c not in names]
+        raise InputError(f"{where}: a partial projection matrix ({len(matrix)} of its 12 values); give every one of "
+                         f"p00..p23 (missing {', '.join(missing)})")
+    return bool(matrix)
 
 
 #: why a radiograph of values below 0 on the whole is wrong: Beer-Lambert needs mu >= 0 (``{what}``, ``{fix}``)
@@ -305,15 +323,24 @@ def below_zero(wv) -> bool:
 
 def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
     """Beer-Lambert: the intensity ``i0 exp(-∫mu)`` reaching the detector from attenuation line integrals
-    (``--hu-to-mu`` CTs: mu per mm, integrals over mm).  Integrals below 0 (a thresholded model rings) count as 0:
-    mu >= 0, so that is nearer the truth, and no pixel gets more than ``i0``.
+    (``--hu-to-mu`` CTs: mu per mm, integrals over mm), ``i0`` the source's (finite, above 0).  Integrals below 0 (a
+    thresholded model rings) count as 0: mu >= 0, so that is nearer the truth, and no pixel gets more than ``i0``;
+    +inf (an opaque ray) gives 0, NaN is refused.
 
-    Warns (``UserWarning``) when an image's integrals (an ``(H, W)`` image, or a stack of them) sum to below 0: a
-    detector's total is the attenuation it sees, above 0 for any attenuation, ringing included, and far below 0 for a CT
-    left in Hounsfield units, whose intensity would be ``i0`` wherever air outweighs tissue (load it with
-    ``hu_to_mu=True``)."""
+    Warns (:class:`~clwave.errors.ClwaveWarning`) when an image's integrals (an ``(H, W)`` image, or a stack of them)
+    sum to below 0: a detector's total is the attenuation it sees, above 0 for any attenuation, ringing included, and
+    far below 0 for a CT left in Hounsfield units, whose intensity would be ``i0`` wherever air outweighs tissue (load
+    it with ``hu_to_mu=True``)."""
+    i0 = finite_number(i0, "i0")
+    if i0 <= 0:
+        raise InputError(f"i0={i0:g} must be the source's intensity, above 0 (e.g. 1: the intensities are then "
+                         f"fractions of it)")
     integrals = np.asarray(line_integrals, np.float64)
+    if np.isnan(integrals).any():
+        raise InputError(f"line_integrals hold NaN ({np.count_nonzero(np.isnan(integrals))} of {integrals.size}); "
+                         f"a radiograph's line integrals are numbers (+inf for an opaque ray)")
     if integrals.ndim >= 2 and np.sum(integrals) < 0:
-        warn_outside(NOT_ATTENUATION.format(what=f"these line integrals (sum {np.sum(integrals):.4g}) are",
-                                            fix="load it with clwave.load(..., hu_to_mu=True)"))
+        said = partial(NOT_ATTENUATION.format, what=f"these line integrals (sum {np.sum(integrals):.4g}) are")
+        warn_outside(ClwaveWarning(said(fix="load it with clwave.load(..., hu_to_mu=True)"),
+                                   cli=said(fix="read the CT with --hu-to-mu")))
     return (i0 * np.exp(-np.maximum(integrals, 0.0))).astype(np.float32)

@@ -165,24 +165,31 @@ QUADRATURE_WEIGHTS = 12.0
 
 
 def check_coefficients(values, frame=None):
-    """Refuse coefficients that overflowed float32 (voxels near its largest value, 3.4e38): nothing
-    non-finite may reach a kernel or an image.  With ``frame`` (shape, spacing), the values are the voxels' own
-    B-spline coefficients (the model at 0 levels, or the volume before its transform): as the B-splines sum to 1,
-    the model is at most their largest value, so no line integral through the volume passes it times the volume's
-    diagonal, which must be finite in float32 too (a splat or ray-traced image would be inf), as must the ray
-    tracer's quadrature sums of samples on the way (:data:`QUADRATURE_WEIGHTS` times a sample)."""
+    """Refuse coefficients that overflowed float32 (voxels near its largest value, 3.4e38), or whose squares would:
+    nothing non-finite may reach a kernel or an image, nor the energies (sums of squares) that threshold a model,
+    estimate a view's error and measure a compressed file's, so no coefficient may pass 1.8e19, the root of 3.4e38.
+    With ``frame`` (shape, spacing), the values are the voxels' own B-spline coefficients (the model at 0 levels,
+    or the volume before its transform): as the B-splines sum to 1, the model is at most their largest value, so no
+    line integral through the volume passes it times the volume's diagonal, nor the ray tracer's quadrature sums of
+    samples on the way :data:`QUADRATURE_WEIGHTS` times a sample; the larger of the two must stay below 1.8e19 too,
+    so that an image's squares (its energy, a progressive frame's error) are finite in float32."""
     if not np.all(np.isfinite(values)):
         raise InputError("the wavelet transform of this volume overflows float32 (its values come too close to "
                          "3.4e38); rescale the volume first, e.g. to [0, 1]")
-    if frame is not None and np.size(values):
+    if not np.size(values):
+        return
+    root, largest = float(np.sqrt(np.finfo(np.float32).max)), float(np.abs(values).max())
+    if frame is None and not largest < root:
+        raise InputError(f"the energies of this volume overflow float32 (its largest wavelet coefficient "
+                         f"{largest:.3g} squared passes 3.4e38); rescale its values first, e.g. to [0, 1]")
+    if frame is not None:
         diagonal = float(np.linalg.norm(np.multiply(frame[0], frame[1])))
-        largest = float(np.abs(values).max())
-        if not largest * max(diagonal, QUADRATURE_WEIGHTS) < float(np.finfo(np.float32).max):
+        if not largest * max(diagonal, QUADRATURE_WEIGHTS) < root:
             times = f"its diagonal {diagonal:.3g}" if diagonal >= QUADRATURE_WEIGHTS else \
                 f"the ray tracer's quadrature weights {QUADRATURE_WEIGHTS:g} (its diagonal is {diagonal:.3g})"
-            raise InputError(f"the line integrals of this volume overflow float32 (its largest value {largest:.3g} "
-                             f"times {times} passes 3.4e38); rescale its values first, e.g. to [0, 1], or its "
-                             f"spacing")
+            raise InputError(f"the line integrals of this volume overflow float32 once squared (its largest value "
+                             f"{largest:.3g} times {times} passes 1.8e19, the root of 3.4e38: their squares, summed "
+                             f"as energies, would be inf); rescale its values first, e.g. to [0, 1], or its spacing")
 
 
 def reconstruct_channel(group, dense, slot, shape, levels) -> np.ndarray:

@@ -206,8 +206,8 @@ class SplatRenderer:
 
     def render_many(self, cameras, out=None) -> np.ndarray:
         """Images of many views (poses) of one size as an (N, H, W, C) float32 array, or into ``out`` (a float32
-        array of that shape, e.g. ``numpy.lib.format.open_memmap`` to stream them to a file); both checked before
-        the first view."""
+        array of that shape, writable, e.g. ``numpy.lib.format.open_memmap`` to stream them to a file); both checked
+        before the first view."""
         cameras = list(cameras)
         if not cameras:  # no view gives no image size to make an (N, H, W, C) array of
             raise InputError("render_many got no views: give at least one camera")
@@ -223,6 +223,9 @@ class SplatRenderer:
             out = np.empty(shape, np.float32)
         elif out.shape != shape or out.dtype != np.float32:
             raise InputError(f"out is a {out.dtype} array of shape {out.shape}; the views need float32 {shape}")
+        elif not out.flags.writeable:  # else numpy's "assignment destination is read-only" after the first view
+            raise InputError("out is read-only (a memmap opened with mode 'r'?): give a writable array, e.g. "
+                             "numpy.lib.format.open_memmap(path, mode='w+', dtype=numpy.float32, shape=...)")
         for i, res in enumerate(self.views(cameras)):
             out[i] = res.image
         return out

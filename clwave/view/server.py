@@ -504,8 +504,12 @@ class Session:
                 continue
             self.rendered, self.final = state, False
             source = self.server.sources[state.mode]
-            if not source.ready() and not await self._prepared(source, state):
-                continue
+            waited = 0.0  # seconds the view waited for its source's build (the shaded tracer's bricks)
+            if not source.ready():
+                began = time.perf_counter()
+                if not await self._prepared(source, state):
+                    continue
+                waited = time.perf_counter() - began
             if state.mode not in self.paces:
                 self.paces[state.mode] = source.pacing()
             values = source.histogram()  # the page's editor draws it: sent once a tracer
@@ -521,7 +525,9 @@ class Session:
                     if self.state is not state:  # the tab has moved on while this stage rendered
                         self.dropped += 1
                         break
-                    await self.ws.send_bytes(pack_frame(frame.figures, frame.data, frame.mime))
+                    # the time since the view counts the build it waited for, said apart (build_seconds)
+                    figures = dict(frame.figures, elapsed=frame.figures["elapsed"] + waited, build_seconds=waited)
+                    await self.ws.send_bytes(pack_frame(figures, frame.data, frame.mime))
                     self.sent += 1
                     self.final = frame.figures["final"]
                     self.server.read_whole()  # a file's rest, once the first frame is out

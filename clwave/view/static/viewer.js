@@ -201,12 +201,18 @@
   $("detail").addEventListener("input", () => { state.detail = showDetail(); request(); });
   // window sliders span 0 .. 2 x the auto window's top
   const span = () => 2 * Math.max(hello.window[1], 1e-30);
+  // a colour bar's label: three digits, an exponent without its "+" and a mantissa without trailing zeros
+  const short = (x) => x.toPrecision(3).replace(/(\.\d*?)0+(?=e|$)/, "$1").replace(/\.(?=e|$)/, "").replace("e+", "e");
   function showWindow() {  // the sliders, their figures and the colour bar's labels
     const [lo, hi] = state.window || hello.window;
     $("lo").value = Math.round(1000 * lo / span()); $("hi").value = Math.round(1000 * hi / span());
-    $("lo-out").textContent = $("bar-lo").textContent = lo.toPrecision(3);
-    $("hi-out").textContent = $("bar-hi").textContent = hi.toPrecision(3);
-    $("bar-mid").textContent = ((lo + hi) / 2).toPrecision(3);
+    $("lo-out").textContent = lo.toPrecision(3);
+    $("hi-out").textContent = hi.toPrecision(3);
+    $("bar-lo").textContent = short(lo); $("bar-hi").textContent = short(hi);
+    $("bar-mid").textContent = short((lo + hi) / 2);
+    // three labels of up to 7 characters need about 150 px: under the bar of a smaller image, the low and high alone
+    // (which wrap, never run together, under a bar narrower than two)
+    $("bar-mid").hidden = hello.size[1] < 200;
   }
   function drawColourBar() {  // the colour map's 256 rows (the hello's, base64 of RGB bytes) from low to high
     const rows = atob(hello.colour_maps[state.colour_map]), c = $("colour-bar").getContext("2d");
@@ -503,7 +509,8 @@
       // the function it was classified by, where that is the function now (not one left since it was sent)
       if (f.tf_points && !tf.base.points && f.seq === sentSeq && !pending) framePoints(f.tf_points, f.tf_window);
     }
-    rows.push(["frame", `${(1000 * f.seconds).toFixed(0)} ms render, ${(1000 * f.elapsed).toFixed(0)} ms since view`]);
+    rows.push(["frame", `${(1000 * f.seconds).toFixed(0)} ms render, ${(1000 * f.elapsed).toFixed(0)} ms since view` +
+               (f.build_seconds ? ` (${(1000 * f.build_seconds).toFixed(0)} ms waiting for the ray tracer's build)` : "")]);
     const table = $("figures");
     table.replaceChildren(...rows.map(([k, v]) => {
       const tr = document.createElement("tr");
