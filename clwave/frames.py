@@ -16,6 +16,12 @@ from .errors import InputError, finite_number
 from .io.result import RenderResult
 
 
+def root_mean_square(image) -> float:
+    """The root mean square of ``image``, its squares summed in float64: a float32 image's squares may each be
+    finite and their sum not (line integrals up to 1.8e19, docs/coordinates.md §3)."""
+    return float(np.sqrt(np.mean(np.square(image, dtype=np.float64))))
+
+
 class ErrorEstimate:
     """The error of each frame against the final one, from the step that made it (docs/raytracing.md §9).
 
@@ -36,7 +42,7 @@ class ErrorEstimate:
             return float("nan"), float("nan")
         step = image - last
         peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
-        return float(np.sqrt(np.mean(step ** 2))) / peak, float(np.max(np.abs(step), initial=0.0)) / peak
+        return root_mean_square(step) / peak, float(np.max(np.abs(step), initial=0.0)) / peak
 
 
 class FinalImage:
@@ -76,7 +82,7 @@ class Frame:
 
     @property
     def rms_error(self) -> float:
-        return float(np.sqrt(np.mean(self.error_image() ** 2)))
+        return root_mean_square(self.error_image())
 
     @property
     def max_error(self) -> float:
@@ -101,9 +107,9 @@ class Frame:
     def figures(self) -> dict:
         """The per-frame figures as plain numbers (JSON-ready), measured errors against the final image."""
         error, peak = self.error_image(), self._final_peak()
-        rms, top = float(np.sqrt(np.mean(error ** 2))), float(np.max(np.abs(error)))
-        return dict(index=self.index, **self.own_figures(), seconds=self.seconds, rms_error=rms, max_error=top,
-                    relative_rms_error=rms / peak, relative_max_error=top / peak,
+        rms_error, top = root_mean_square(error), float(np.max(np.abs(error)))
+        return dict(index=self.index, **self.own_figures(), seconds=self.seconds, rms_error=rms_error, max_error=top,
+                    relative_rms_error=rms_error / peak, relative_max_error=top / peak,
                     estimated_relative_rms_error=self.estimated_relative_rms_error,
                     estimated_relative_max_error=self.estimated_relative_max_error)
 

@@ -191,6 +191,22 @@ def test_voxels_near_the_float32_limit_are_refused_not_rendered(levels):
     assert np.all(np.isfinite(traced)) and np.isclose(traced.max(), 8e-3 * 1.5e18, rtol=1e-2)
 
 
+def test_frames_of_line_integrals_near_the_bound_have_finite_errors():
+    """Line integrals up to 1.8e19 are taken (above): their squares are finite one by one, not summed in float32, so
+    a frame's estimate (the step from the frame before) and its measured errors sum them in float64 (an 8^2 step of
+    1e19 gave inf)."""
+    from clwave.frames import ErrorEstimate, FinalImage, Frame
+
+    final = np.full((8, 8, 1), 1.8e19, np.float32)
+    first = np.zeros_like(final)
+    steps = ErrorEstimate()
+    steps.add(first)
+    assert steps.add(final) == pytest.approx((1.0, 1.0))  # relative RMS and max of the step
+    frame = Frame(0, first, 0.0, 1.0, 1.0, _final=FinalImage(lambda: final))
+    figures = frame.figures()
+    assert frame.rms_error == pytest.approx(1.8e19, rel=1e-6) and figures["relative_rms_error"] == pytest.approx(1.0)
+
+
 def test_a_huge_nifti_scale_is_refused_before_anything_is_written(tmp_path, capsys):
     """A NIfTI whose scl_slope makes its values 2.5e32 (within float32's range): refused in one line before the
     file is written (was written, with numpy's overflow warnings and "RMS ... inf (PSNR -inf dB)", exit 0); the

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from ..errors import InputError
-from ..frames import ErrorEstimate, FinalImage, check_error, reached
+from ..frames import ErrorEstimate, FinalImage, check_error, reached, root_mean_square
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
@@ -244,7 +244,7 @@ class StagedTracer:
             else:  # an X-ray frame's from its own image
                 lacks = self.lacks_in_line_integrals(res.image, cam.view(coarse.wv))
                 top += lacks
-            rms += lacks * float(np.sqrt(np.mean(image ** 2))) / peak
+            rms += lacks * root_mean_square(image) / peak
             self.start()
             yield RaytraceFrame(index=0, image=image, seconds=time.perf_counter() - start,
                                 estimated_relative_rms_error=rms, estimated_relative_max_error=top,
