@@ -715,7 +715,7 @@ def test_a_chunked_volume_that_shows_nothing_is_refused_before_anything_is_writt
      "holds values up to 1e+300, beyond float32's range", None),
     (lambda p: np.save(p / "v.npy", np.where(np.eye(8, dtype=bool), np.nan, 1.0)[None].repeat(8, 0)),
      ["compress", "v.npy"], "volume has 64 non-finite voxel value(s) (NaN/Inf, or beyond float32's range of +-3.4e38, "
-     "which clwave computes in); write the input again with finite values", "numpy"),
+     "which clwave computes in); give NaN voxels a value with --nan VALUE (no data, e.g. 0)", "numpy"),
 ])
 def test_refusals_in_the_command_lines_words(tmp_path, capsys, monkeypatch, make, argv, needle, api):
     """A refusal raised in the API's words (``hu_to_mu``, ``shape=``) says the option on the command line."""

@@ -14,8 +14,8 @@ from .options import (GIF_FRAME_SECONDS, flag, is_clw, numbers, parse_chunks, pa
 
 #: the options given as one number (argparse's ``type=float``) whose own checks (below, or in the model's API words)
 #: do not refuse what is not finite (argparse takes "nan" and "inf")
-NUMBERS = ("azimuth", "elevation", "fov", "distance", "extent", "keep", "threshold", "sigma", "subtract", "dso", "dsd",
-           "error")
+NUMBERS = ("azimuth", "elevation", "fov", "distance", "extent", "keep", "threshold", "sigma", "subtract", "nan", "dso",
+           "dsd", "error")
 
 
 def check_options(args):

@@ -53,6 +53,8 @@ def add_input_options(p):
     g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water; CT in HU: -1000); "
                    "recorded, so --tf and --tf-window stay in the input's units")
     g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
+    g.add_argument("--nan", type=float, metavar="VALUE", help="the value of NaN voxels (no data: FSL and SPM write "
+                   "NaN outside their masks), in the input's units, e.g. 0; without it NaN is refused")
     g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
     g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
                                     "edge N (default: Zarr and HDF5 always, .npy/.raw/.nii from 1 GiB)")
@@ -105,7 +107,7 @@ def read_volume(args):
     spec = args.input
     spacing = None if args.spacing is None else numbers(args.spacing, "--spacing", (1, 3))
     if spec.startswith("phantom:"):
-        given = [flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu", "level", "chunks")
+        given = [flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu", "nan", "level", "chunks")
                  if getattr(args, n, None) is not None and getattr(args, n) is not False]
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {spec}: a phantom is not read from a file")
@@ -127,7 +129,7 @@ def read_volume(args):
                         "first), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
                 series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),
-                background=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits)
+                nan=args.nan, background=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits)
 
 
 def check_model_fits(args, voxels, channels, what, hint):
@@ -162,7 +164,7 @@ def parse_scheduler(args):
 
 #: options that make a model from a volume, and so cannot apply to a .clw input (a model already)
 VOLUME_ONLY = ("tf", "tf_window", "wavelet", "levels", "interpolate", "spacing", "shape", "dtype", "byte_order",
-               "series", "subtract", "hu_to_mu", "level", "chunks", "workers", "scheduler")
+               "series", "subtract", "hu_to_mu", "nan", "level", "chunks", "workers", "scheduler")
 
 
 def flag(name: str) -> str:

@@ -169,9 +169,10 @@ def checked_block(block: np.ndarray) -> np.ndarray:
         bad = int(block.size - np.count_nonzero(finite))
         what = (f"volume has {bad} non-finite voxel value(s) (NaN/Inf, or beyond float32's range of +-3.4e38, which "
                 f"clwave computes in)")
-        raise InputError(f"{what}; replace them first, e.g. numpy.nan_to_num(data), or rescale the values",
-                         cli=f"{what}; write the input again with finite values (NaN replaced, e.g. by the "
-                             f"background's value) in float32's range")
+        raise InputError(f"{what}; replace them first (NaN as no data: load(path, nan=0.0); else e.g. "
+                         f"numpy.nan_to_num(data)), or rescale the values",
+                         cli=f"{what}; give NaN voxels a value with --nan VALUE (no data, e.g. 0), and write Inf or "
+                             f"values out of float32's range again")
     return block
 
 

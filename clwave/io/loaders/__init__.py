@@ -36,7 +36,8 @@ _ONLY_FOR = {"shape": ".raw files", "dtype": ".raw files", "byte_order": ".raw f
 
 
 def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
-         chunks=None, background=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None, fits=None) -> Volume:
+         chunks=None, nan=None, background=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None,
+         fits=None) -> Volume:
     """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
 
     Parameters
@@ -70,6 +71,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
         of the store's own.  An int: chunk by chunk, cubes of that edge in voxels.
         Chunked volumes hold a Dask array, read only when computed (docs/chunked.md).
+    nan : float, optional
+        The value of NaN voxels, in the file's units: "no data" (FSL and SPM write NaN outside their masks),
+        replaced before anything else.  Without it a volume holding NaN is refused.
     background : float
         Subtracted from every voxel (after ``hu_to_mu``), so that the data is ~0
         outside the object; kept as the volume's ``offset``, so transfer functions
@@ -114,6 +118,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         raise InputError(f"path must be a file or folder name (str or pathlib.Path), got {type(path).__name__}")
     path = Path(path)
     background = finite_number(background, "background")
+    nan = None if nan is None else finite_number(nan, "nan")
     mu_water = finite_number(mu_water, "mu_water")
     if hu_to_mu and mu_water <= 0:
         raise InputError(f"mu_water={mu_water} must be positive (attenuation of water per "
@@ -138,7 +143,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
             channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
             raise InputError(f"hu_to_mu converts {channels}; leave hu_to_mu off",
                              cli=f"--hu-to-mu converts {channels}; leave --hu-to-mu out")
-        convert = partial(to_float32, path=path, mu_water=mu_water if hu_to_mu else None, background=background)
+        convert = partial(to_float32, path=path, mu_water=mu_water if hu_to_mu else None, background=background,
+                          nan=nan)
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),

@@ -76,13 +76,16 @@ def _corrupt(path, exc) -> str:
     return f"cannot read {path}: {reason}; the file may be truncated or corrupt"
 
 
-def to_float32(block, path, mu_water, background, copy=True):
-    """``block`` (the whole volume, or one chunk as it is read) as float32: Hounsfield units -> attenuation
-    when ``mu_water`` is given (clipped at 0: air, -1000 HU, is exactly 0), minus ``background``; float64
-    values beyond float32's range are refused.  ``copy``: never write into ``block`` (a Dask chunk)."""
+def to_float32(block, path, mu_water, background, nan=None, copy=True):
+    """``block`` (the whole volume, or one chunk as it is read) as float32: NaN -> ``nan`` when it is given (the
+    file's "no data"), Hounsfield units -> attenuation when ``mu_water`` is given (clipped at 0: air, -1000 HU, is
+    exactly 0), minus ``background``; float64 values beyond float32's range are refused.  ``copy``: never write
+    into ``block`` (a Dask chunk)."""
     if block.dtype.kind == "f" and block.dtype.itemsize > 4 and block.size:
         check_float32_range(largest_finite(block), path)
     data = np.array(block, np.float32, order="C") if copy else np.ascontiguousarray(block, np.float32)
+    if nan is not None and data.dtype.kind == "f":
+        data[np.isnan(data)] = nan
     if mu_water is not None:
         data += 1000.0
         data *= np.float32(mu_water / 1000.0)

@@ -1,0 +1,54 @@
+"""NaN voxels as "no data" (FSL and SPM write NaN outside their masks): ``load(path, nan=VALUE)`` and ``--nan VALUE``
+give them a value, in the file's units, before anything else (docs/coordinates.md §1); without it they are
+refused in one line naming the option."""
+
+import nibabel as nib
+import numpy as np
+import pytest
+
+import clwave
+from clwave.cli import main
+from clwave.errors import InputError
+
+
+@pytest.fixture
+def masked(tmp_path):
+    """A float64 ball of values 50..100 with NaN outside it, as a .npy and a NIfTI (a statistical map's layout)."""
+    z, y, x = np.mgrid[:12, :12, :12] - 5.5
+    r = np.sqrt(x * x + y * y + z * z)
+    data = np.where(r < 5, 100.0 - 10 * r, np.nan)
+    np.save(tmp_path / "m.npy", data)
+    nib.save(nib.Nifti1Image(data.transpose(2, 1, 0).copy(), np.eye(4)), tmp_path / "m.nii")
+    return tmp_path, data
+
+
+def test_nan_voxels_take_the_value_given_before_the_background(masked):
+    folder, data = masked
+    with pytest.raises(InputError, match=r"non-finite voxel.*load\(path, nan=0.0\)"):
+        clwave.load(folder / "m.npy")
+    vol = clwave.load(folder / "m.npy", nan=-5.0, background=-5.0)  # NaN -> -5 in the file's units, then +5
+    expected = np.where(np.isnan(data), -5.0, data) + 5.0
+    np.testing.assert_array_equal(vol.data, expected.astype(np.float32))
+    assert vol.offset == -5.0 and np.count_nonzero(vol.data == 0) == np.count_nonzero(np.isnan(data))
+    chunked = clwave.load(folder / "m.npy", nan=-5.0, background=-5.0, chunks=5)  # the same, chunk by chunk
+    np.testing.assert_array_equal(np.asarray(chunked.data), vol.data)
+    nifti = clwave.load(folder / "m.nii", nan=0.0)  # RAS: the ball is symmetric, x flipped or not
+    assert np.isfinite(nifti.data).all() and np.count_nonzero(nifti.data) == np.count_nonzero(~np.isnan(data))
+    with pytest.raises(InputError, match="nan=inf must be finite"):
+        clwave.load(folder / "m.npy", nan=float("inf"))
+
+
+def test_nan_on_the_command_line(masked, capsys, monkeypatch):
+    folder, _ = masked
+    monkeypatch.chdir(folder)
+    assert main(["compress", "m.nii", "-o", "a.clw"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "give NaN voxels a value with --nan VALUE (no data, e.g. 0)" in err
+    assert main(["compress", "m.nii", "--nan", "0", "--levels", "1", "-o", "a.clw"]) == 0
+    assert clwave.WaveletVolume.open("a.clw").channels == 1
+    for argv, needle in ((["m.nii", "--nan", "nan"], "--nan"), (["phantom:hydrogen:16", "--nan", "0"],
+                                                                "--nan cannot apply to phantom:hydrogen:16")):
+        capsys.readouterr()
+        assert main(["compress", *argv, "-o", "b.clw"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and needle in err, err
