@@ -44,16 +44,22 @@ def client_for(scheduler=None):
     :class:`WorkerLostError` line rather than Dask's exception, which the command line took for a bug of clwave."""
     from distributed import KilledWorker
 
-    with _client(check_scheduler(scheduler)) as client:
+    scheduler = check_scheduler(scheduler)
+    with _client(scheduler) as client:
         try:
             yield client
         except KilledWorker:
             why = ("the Dask workers died running one of this work's tasks, each worker that took it in turn (most "
-                   "often out of memory: a worker is stopped at 95 % of its memory limit); give fewer ")
-            raise WorkerLostError(why + "workers, smaller chunks (load(chunks=)) or workers with more memory, and "
-                                        "see the workers' logs",
-                                  cli=why + "--workers, a smaller --chunks edge or workers with more memory, and see "
-                                            "the workers' logs") from None
+                   "often out of memory: a worker is stopped at 95 % of its memory limit); ")
+            if isinstance(scheduler, int):  # a local cluster of this process's (its workers' logs silenced)
+                raise WorkerLostError(why + "give fewer workers (each has a share of the memory) or smaller chunks "
+                                            "(load(chunks=))",
+                                      cli=why + "give fewer --workers (each has a share of the memory) or a smaller "
+                                                "--chunks edge") from None
+            raise WorkerLostError(why + "see the workers' logs, and give smaller chunks (load(chunks=)) or workers "
+                                        "with more memory",
+                                  cli=why + "see the workers' logs, and give a smaller --chunks edge or workers with "
+                                            "more memory") from None
 
 
 @contextlib.contextmanager

@@ -6,6 +6,7 @@ thread may give up (a ray tracer's set-up, a file's reading) stops with :class:`
 from __future__ import annotations
 
 import os
+import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from functools import lru_cache
 
@@ -16,11 +17,24 @@ class Abandoned(Exception):
     wait for), or a staged tracer's refinement after its full stage was given up (``StagedTracer.abandon``)."""
 
 
-def checkpoint(abandon) -> None:
-    """:class:`Abandoned` once ``abandon`` (a ``threading.Event``, or None: never) is set: called by a ray tracer's
-    set-up between two units of each step of its work (docs/raytracing.md §8)."""
-    if abandon is not None and abandon.is_set():
-        raise Abandoned("the ray tracer's set-up was given up")
+_thread = threading.local()  # .stop: the event of stop_on, where the thread has one
+
+
+def stop_on(event: threading.Event):
+    """This thread's work gives up at its next :func:`checkpoint` once ``event`` is set: a thread that is not the
+    main one (a viewer's render and build threads) takes no KeyboardInterrupt, and its stop then ends the work under
+    way within a kernel launch (:func:`clwave.device.kernels.in_bands`) or a slab of a set-up, not at its end
+    (docs/viewer.md §1)."""
+    _thread.stop = event
+
+
+def checkpoint(abandon=None) -> None:
+    """:class:`Abandoned` once ``abandon`` (a ``threading.Event``, or None) or this thread's :func:`stop_on` event is
+    set: called between two units of work that another thread may give up (a ray tracer's set-up, docs/raytracing.md
+    §8; a kernel's bands of launches)."""
+    for event in (abandon, getattr(_thread, "stop", None)):
+        if event is not None and event.is_set():
+            raise Abandoned("given up from another thread between two units of work")
 
 
 def cores() -> int:

@@ -426,9 +426,11 @@ def test_workers_that_die_end_the_work_in_one_line(rng, tmp_path, capfd):
                          meta=np.empty((0, 0, 0), np.float32))
     model = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1).threshold(threshold=0.1)  # on threads
     model.scheduler = 2  # two worker processes
-    with pytest.raises(WorkerLostError, match=r"the Dask workers died .*give fewer workers, smaller chunks") as err:
+    with pytest.raises(WorkerLostError, match=r"the Dask workers died .*give fewer workers \(each has a share of "
+                                              r"the memory\) or smaller chunks") as err:
         model.save(tmp_path / "o.clw")
-    assert "\n" not in str(err.value) and "give fewer --workers, a smaller --chunks edge" in err.value.cli_message()
+    cli = "give fewer --workers (each has a share of the memory) or a smaller --chunks edge"
+    assert "\n" not in str(err.value) and cli in err.value.cli_message() and "logs" not in str(err.value)
     assert list(tmp_path.iterdir()) == []
     assert capfd.readouterr().err == ""  # nor the workers' logs of their lost connections
 

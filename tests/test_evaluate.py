@@ -112,7 +112,7 @@ def test_cost_rule_and_the_coefficients_kept(rng, monkeypatch):
     assert coeffs.dtype == np.float64 and coeffs.nbytes <= evaluation.REGION_BYTES
     close(wv.evaluate(pts[:10]), expected[:10])  # then ten points read it
     assert wv._fine[0][0] is coeffs
-    assert wv.masked(None)._fine[0][0] is coeffs  # a copy with another mask shares it: evaluate ignores masks
+    assert wv.unmasked()._fine[0][0] is coeffs  # a copy without the mask shares it: evaluate ignores masks
     thresholded = wv.threshold(keep=0.02)  # a new model: nothing kept from this one's
     assert thresholded._fine == {}
     close(thresholded.evaluate(pts, "fine"), thresholded.evaluate(pts, "bands"))

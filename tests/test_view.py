@@ -884,7 +884,12 @@ def test_cli_view_serves_a_scalar_file_classified_by_tf_until_interrupted(tmp_pa
 
 
 def test_loopback_names():
-    from clwave.view.server import is_loopback
+    """This machine's loopback in every spelling a Host header may carry (review21: ``localhost.`` and an IPv4-mapped
+    127.0.0.1 were refused with 403), and nothing else."""
+    from clwave.view.address import host_name, is_loopback
 
-    assert all(map(is_loopback, ("127.0.0.1", "localhost", "::1", "127.1.2.3")))
-    assert not any(map(is_loopback, ("0.0.0.0", "192.168.1.4", "::", "example.org")))
+    assert all(map(is_loopback, ("127.0.0.1", "localhost", "localhost.", "::1", "127.1.2.3", "::ffff:127.0.0.1")))
+    assert not any(map(is_loopback, ("0.0.0.0", "192.168.1.4", "::", "example.org", "localhost..", "::ffff:10.0.0.1",
+                                     "localhost.example.org")))
+    assert [host_name(h) for h in ("localhost.:8080", "[::ffff:127.0.0.1]:80", "LOCALHOST")] == \
+        ["localhost.", "::ffff:127.0.0.1", "localhost"]

@@ -438,7 +438,7 @@ def test_a_failing_stop_leaves_close_returning_and_the_loop_closed(monkeypatch, 
 
 def test_a_stop_ends_the_render_under_way_within_a_launch():
     """The render and build threads take no KeyboardInterrupt: a stop ends their kernel launches between two bands
-    (``kernels.stop_on``), so that a long stage (a shaded still frame of seconds to minutes) does not hold the exit.
+    (``threads.stop_on``), so that a long stage (a shaded still frame of seconds to minutes) does not hold the exit.
     A render of 5,000 items paced at 0.01 s each (50 s whole), on the server's render thread, ends within seconds of
     ``close()``; the main thread's own launches know no stop."""
     from clwave.device import kernels
@@ -460,7 +460,31 @@ def test_a_stop_ends_the_render_under_way_within_a_launch():
         time.sleep(0.01)
     start = time.monotonic()
     v.close()
-    with pytest.raises(Abandoned, match="stopped between two launches"):
+    with pytest.raises(Abandoned, match="given up from another thread"):
         render.result(timeout=10)
     assert time.monotonic() - start < 10 and sum(launched) < 5000
     kernels.in_bands(Queue(), lambda first, count: None, 100)  # this thread has no stop event
+
+
+@pytest.mark.parametrize("from_file", [False, True])
+def test_a_shaded_source_prepared_after_the_stop_gives_up_quietly(from_file, tmp_path):
+    """The build thread's stop (threads.stop_on) reaches every step of ``prepare``: a file's coarse stage and the
+    warm-up render, not only a model's ``RayTracer`` (review21: the file's branch let ``Abandoned`` out into a Future
+    nobody reads, "Future exception was never retrieved" on Ctrl-C); it makes no tracer and raises nothing."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from clwave.threads import stop_on
+    from clwave.view.shaded import ShadedSource
+
+    rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydrogen", n=16))
+    wv = clwave.WaveletVolume.from_volume(rgba, levels=1).threshold(keep=0.3)
+    path = None
+    if from_file:
+        path = tmp_path / "m.clw"
+        wv.save(path)
+    source = ShadedSource(wv, (16, 16), 1e-2, path=path)
+    stop = threading.Event()
+    stop.set()
+    with ThreadPoolExecutor(1, initializer=stop_on, initargs=(stop,)) as builder:
+        assert builder.submit(source.prepare).result(timeout=60) is None
+    assert not source.ready()

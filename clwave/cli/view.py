@@ -19,7 +19,8 @@ def run(args):
     import logging
 
     from ..view.prefix import PrefixFirst
-    from ..view.server import ViewServer, check_port, is_loopback
+    from ..view.address import check_port, is_loopback
+    from ..view.server import ViewServer
 
     size = tuple(parse_size(args))
     check_size(size, args.device)

@@ -10,13 +10,12 @@ Constants that both sides use come from :mod:`clwave.device.constants` as build 
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Mapping
 
 import numpy as np
 
-from ..threads import Abandoned
+from ..threads import checkpoint
 
 BUFFER = "buffer"  #: a ``pyopencl`` buffer, or an array whose ``.data`` is one
 REAL = "real"      #: the kernel's ``real``: float32 or float64 by the build (``real_type=`` at launch)
@@ -67,14 +66,6 @@ class Kernel:
 
 
 LAUNCH_SECONDS = 0.2  #: what one launch of a long kernel aims at: Ctrl-C waits for the launch running
-_thread = threading.local()  # .stop: the event of stop_on, where the thread has one
-
-
-def stop_on(event: threading.Event):
-    """This thread's :func:`in_bands` raise :class:`~clwave.threads.Abandoned` between two bands once ``event``
-    is set: a thread that is not the main one (a viewer's render thread) takes no KeyboardInterrupt, and its stop
-    then ends the render under way within a launch, not at its end (docs/viewer.md §1)."""
-    _thread.stop = event
 
 
 class Pace:
@@ -100,11 +91,10 @@ def in_bands(queue, launch, total: int, step: int = 1, work=None, pace: Pace | N
         n = budget / (work or 1) if uniform else np.searchsorted(work, work[first] + budget, side="right") - 1 - first
         return max(step, int(n) // step * step)
 
-    done, stop = 0, getattr(_thread, "stop", None)
+    done = 0
     items = step if pace is None or not pace.rate else fit(0, pace.rate * LAUNCH_SECONDS / 2)
     while done < total:
-        if stop is not None and stop.is_set():
-            raise Abandoned("stopped between two launches (stop_on)")
+        checkpoint()  # a thread given a stop (threads.stop_on) gives up here
         count = min(items, total - done)
         start = time.perf_counter()
         launch(done, count)

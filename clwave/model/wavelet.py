@@ -381,14 +381,9 @@ class WaveletVolume:
 
     def unmasked(self) -> "WaveletVolume":
         """The same coefficients without the content mask (nothing clamped, docs/raytracing.md §4), keeping no
-        renderer of this model's."""
-        return self.masked(None)
-
-    def masked(self, content_mask) -> "WaveletVolume":
-        """The same coefficients with ``content_mask`` instead of this model's, keeping no renderer of this
-        model's (they may depend on the mask)."""
+        renderer of this model's (they may depend on the mask)."""
         out = copy.copy(self)
-        out.content_mask, out._shared = content_mask, {}
+        out.content_mask, out._shared = None, {}
         return out
 
     # ----------------------------------------------------------- renderers

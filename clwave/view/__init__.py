@@ -108,7 +108,8 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     from ..model.wavelet import WaveletVolume
     from .frames import check_tolerance
     from .prefix import PrefixFirst
-    from .server import BackgroundServer, ViewServer, check_port, is_loopback
+    from .address import check_port, is_loopback
+    from .server import BackgroundServer, ViewServer
 
     size = Camera(size=size).size
     check_port(port)

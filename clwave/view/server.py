@@ -10,10 +10,8 @@ from __future__ import annotations
 
 import asyncio
 import atexit
-import ipaddress
 import itertools
 import logging
-import re
 import secrets
 import threading
 import time
@@ -23,10 +21,10 @@ from urllib.parse import urlsplit
 
 from aiohttp import WSCloseCode, WSMsgType, web
 
-from ..device.kernels import stop_on
 from ..device.memory import format_size, parse_cap
-from ..errors import ClwaveError, DeviceMemoryError, InputError, whole_number
-from ..threads import Abandoned
+from ..errors import ClwaveError, DeviceMemoryError, InputError
+from ..threads import Abandoned, stop_on
+from .address import check_port, host_name, is_loopback
 from . import colours
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
@@ -61,30 +59,6 @@ def memory_shares(device_memory, shaded: bool) -> dict:
     return dict(xray=xray, shaded=cap - xray if shaded else None)
 
 
-def check_port(port) -> int:
-    """``port`` as an int, or an :class:`InputError` unless it is a whole number from 0 (a free port) to 65535."""
-    if not (whole_number(port) and 0 <= port <= 65535):
-        raise InputError(f"port={port!r} must be from 0 (a free port) to 65535",
-                         cli=f"--port {port} must be from 0 (a free port) to 65535")
-    return int(port)
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def host_name(host: str) -> str:
-    """The name or address of a ``Host`` header, ``name[:port]`` or ``[v6][:port]`` (lower case), "" for anything else
-    (read here, not by yarl, which takes ``a@b`` for a user at b and raises on a port past 65535 or a bad IDNA name)."""
-    match = re.fullmatch(r"\[([0-9a-fA-F:.]+)\](?::\d+)?|([^:\[\]@]+)(?::\d+)?", host)
-    return (match[1] or match[2]).lower() if match else ""
-
-
 class ViewServer:
     """Serves views of one wavelet model: the X-ray source always, the shaded one for a scalar or an RGBA model.
 
@@ -107,9 +81,10 @@ class ViewServer:
         self.device_memory = parse_cap(device_memory)
         self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4))
         self.token = secrets.token_urlsafe(24)
-        # set by stop() (or at the interpreter's exit): the reader stops between its steps, for a daemon thread
-        # stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it for ever;
-        # the render and build threads' kernel launches stop between two bands (stop_on)
+        # set by stop() (or, for the reader, at the interpreter's exit): the reader stops between its steps, for a
+        # daemon thread stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it
+        # for ever; the render and build threads' launches and set-ups stop at their next checkpoint (threads.stop_on)
+        # by stop() only: an exit joins pool threads before its atexit hooks (docs/viewer.md §1)
         self._stop = threading.Event()
         self.pool = ThreadPoolExecutor(1, thread_name_prefix="clwave-view-render", initializer=stop_on,
                                        initargs=(self._stop,))

@@ -80,7 +80,14 @@ class ShadedSource(Source):
 
     def prepare(self):
         """The ray tracer (of a file: its coarse stage), and its kernels built by a small image (on the build
-        thread, not the render thread)."""
+        thread, not the render thread); nothing once the viewer stops (:class:`Abandoned` at the set-up's or the
+        launches' next checkpoint: no tracer, and no error for a Future nobody reads)."""
+        try:
+            self._prepare()
+        except Abandoned:
+            pass
+
+    def _prepare(self):
         from ..model.camera import Camera
         from ..raytrace.staged import StagedTracer
         from ..raytrace.tracer import RayTracer
@@ -97,14 +104,11 @@ class ShadedSource(Source):
             self.staged = staged
             self._watch = threading.Thread(target=self._upgrade, name="clwave-view-full-stage", daemon=True)
         elif self.path is None and self.tracer is None:
-            try:
-                if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
-                    self.wv = self.whole()
-                # a model held in memory: the build stops at its next slab once the viewer stops (:meth:`stop`)
-                tracer = RayTracer(self.wv, device=self.device, device_memory=self.device_memory, lod=True,
-                                   abandon=self._abandon)
-            except Abandoned:  # the viewer stopped: no tracer
-                return
+            if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
+                self.wv = self.whole()
+            # a model held in memory: the build stops at its next slab once the viewer stops (:meth:`stop`)
+            tracer = RayTracer(self.wv, device=self.device, device_memory=self.device_memory, lod=True,
+                               abandon=self._abandon)
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
             self.tracer = tracer
 

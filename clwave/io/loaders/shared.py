@@ -7,13 +7,14 @@ import logging
 import math
 import os
 import re
+import threading
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from ...device.memory import check_fits
+from ...device.memory import HostMemoryError, check_fits
 from ...errors import ClwaveError, ClwaveWarning, FileFormatError, InputError, warn_outside
 from ..progress import progress
 
@@ -47,17 +48,39 @@ MAX_CHUNKS = 100_000
 _CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti")
 
 
+class _ReadsUnderWay(logging.Filter):
+    """Drops a reader's log records while a read is under way (:func:`reading`): counted, not a logger level saved
+    and restored, since chunks are read on several threads at once."""
+
+    def __init__(self):
+        super().__init__()
+        self.count, self.lock = 0, threading.Lock()
+
+    def filter(self, record) -> bool:
+        return self.count == 0
+
+    def add(self, n: int):
+        with self.lock:
+            self.count += n
+
+
+_QUIET = _ReadsUnderWay()
+logging.getLogger("tifffile").addFilter(_QUIET)
+
+
 @contextmanager
 def reading(path):
-    """Turn any library exception while reading ``path`` into a one-line FileFormatError; the readers'
-    own log lines (tifffile's on a cut file) are kept quiet, the error says what went wrong."""
-    quiet = logging.getLogger("tifffile")
-    level = quiet.level
-    quiet.setLevel(logging.CRITICAL)
+    """Turn any library exception while reading ``path`` into a one-line FileFormatError (running out of memory
+    into a :class:`HostMemoryError`); the readers' own log lines (tifffile's on a cut file) are kept quiet, the
+    error says what went wrong."""
+    _QUIET.add(1)
     try:
         yield
     except ClwaveError:
         raise
+    except MemoryError as exc:  # the machine's, not the file's: a chunk read in a worker of little memory
+        raise HostMemoryError(f"reading {path} ran out of memory ({exc or 'an allocation failed'}); read it in "
+                              "smaller chunks (chunks=N, --chunks N) or where more memory is free") from exc
     except OSError as exc:
         if exc.errno is None:  # e.g. gzip.BadGzipFile, not a system error
             raise FileFormatError(_corrupt(path, exc)) from exc
@@ -67,7 +90,7 @@ def reading(path):
     except Exception as exc:
         raise FileFormatError(_corrupt(path, exc)) from exc
     finally:
-        quiet.setLevel(level)
+        _QUIET.add(-1)
 
 
 def _corrupt(path, exc) -> str:

@@ -1,0 +1,37 @@
+"""Where the viewer listens and who may reach it (docs/viewer.md §1, "Security"): the port, and whether a host (the
+address it binds, or a request's ``Host``) is this machine's loopback, for the Host check against DNS rebinding."""
+
+from __future__ import annotations
+
+import ipaddress
+import re
+
+from ..errors import InputError, whole_number
+
+
+def check_port(port) -> int:
+    """``port`` as an int, or an :class:`InputError` unless it is a whole number from 0 (a free port) to 65535."""
+    if not (whole_number(port) and 0 <= port <= 65535):
+        raise InputError(f"port={port!r} must be from 0 (a free port) to 65535",
+                         cli=f"--port {port} must be from 0 (a free port) to 65535")
+    return int(port)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` names this machine's loopback: ``localhost`` (with DNS's trailing dot or not), 127.0.0.0/8,
+    ``::1``, or 127.x written as an IPv4-mapped IPv6 address (``::ffff:127.0.0.1``)."""
+    if host in ("localhost", "localhost."):
+        return True
+    try:
+        address = ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    mapped = getattr(address, "ipv4_mapped", None)
+    return address.is_loopback or (mapped is not None and mapped.is_loopback)
+
+
+def host_name(host: str) -> str:
+    """The name or address of a ``Host`` header, ``name[:port]`` or ``[v6][:port]`` (lower case), "" for anything else
+    (read here, not by yarl, which takes ``a@b`` for a user at b and raises on a port past 65535 or a bad IDNA name)."""
+    match = re.fullmatch(r"\[([0-9a-fA-F:.]+)\](?::\d+)?|([^:\[\]@]+)(?::\d+)?", host)
+    return (match[1] or match[2]).lower() if match else ""
