@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import FileFormatError
 from ..model.bspline import WAVELET_ORDERS, max_levels
+from ..model.volume import frame_problem
 from ..model.transfer import TransferFunction
 
 FILE_FORMAT = "clwave-wavelet-volume"
@@ -88,6 +89,9 @@ def checked_header(header) -> tuple:
         value = header.get(name)
         if not (_numbers(value, 3) and (not positive or min(value) > 0)):
             raise ValueError(f"{name} {value!r} is not three finite{' positive' if positive else ''} numbers")
+    problem = frame_problem(shape, header["spacing"], header["origin"])
+    if problem:
+        raise ValueError(problem)
     offset = header.get("offset", 0.0)  # absent in older files: their values are the input's
     if not _numbers([offset], 1):
         raise ValueError(f"offset {offset!r} is not one finite number")

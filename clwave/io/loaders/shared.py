@@ -316,19 +316,25 @@ def to_canonical(array_ijk, affine_ras):
     from nibabel.affines import obliquity
     from nibabel.orientations import inv_ornt_aff, io_orientation
 
-    ornt = io_orientation(affine_ras)
+    # the orientation, obliquity and voxel sizes at any scale (a huge one overflowed here; its size is Volume's check,
+    # WORLD_RANGE): of the affine's columns scaled to their largest component
+    scale = np.abs(affine_ras[:3, :3]).max(axis=0)
+    scale = np.append(np.where(scale > 0, scale, 1.0), 1.0)
+    ornt = io_orientation(affine_ras / scale)
     # nibabel's apply_orientation by slicing and transposing, so a Dask array stays lazy
     flips = tuple(slice(None, None, -1) if flip < 0 else slice(None) for flip in ornt[:, 1])
     array_xyz = array_ijk[flips].transpose(tuple(np.argsort(ornt[:, 0])) + tuple(range(3, array_ijk.ndim)))
-    affine_xyz = affine_ras @ inv_ornt_aff(ornt, array_ijk.shape[:3])
-    tilt = float(np.degrees(np.abs(obliquity(affine_xyz)).max()))
+    to_xyz = inv_ornt_aff(ornt, array_ijk.shape[:3])
+    unit_xyz = (affine_ras / scale) @ to_xyz
+    tilt = float(np.degrees(np.abs(obliquity(unit_xyz)).max()))
     if tilt > 0.01:
         note(f"the volume is oblique by {tilt:.2f} degrees; it is shown in the closest canonical (RAS) orientation, "
              f"its axes taken as the world's (recorded in a .clw: a cone beam's pose is relative to them)")
     else:
         tilt = 0.0
-    spacing_xyz = np.linalg.norm(affine_xyz[:3, :3], axis=0)
-    centre = affine_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: infinite, Volume names it
+        spacing_xyz = np.abs(to_xyz[:3, :3]).T @ scale[:3] * np.linalg.norm(unit_xyz[:3, :3], axis=0)
+        centre = affine_ras @ to_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
     array_zyx = array_xyz.transpose((2, 1, 0) + tuple(range(3, array_xyz.ndim)))
     return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3]), tilt
 

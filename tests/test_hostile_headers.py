@@ -1,0 +1,82 @@
+"""Headers whose numbers lie at the ends of their range, found by fuzzing every reader (harden20): each refused in one
+line naming the problem, with no Python warning beside it, before a voxel is read; and the ends of the world lengths
+clwave renders (:data:`~clwave.model.volume.WORLD_RANGE`) rendered as lengths of 1 are, scaled."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from clwave.errors import FileFormatError, InputError
+from clwave.io.loaders import describe, load
+from clwave.model.volume import WORLD_RANGE, Volume
+
+VOLUME = np.arange(8 * 9 * 10, dtype=np.float32).reshape(8, 9, 10)
+
+
+def nrrd_file(tmp_path, **fields):
+    """A raw little-endian float NRRD of VOLUME (x fastest) with its header's ``fields`` replaced."""
+    header = {"type": "float", "dimension": "3", "sizes": "10 9 8", "encoding": "raw", "endian": "little",
+              "space": "left-posterior-superior", "space directions": "(1,0,0) (0,1,0) (0,0,1)",
+              "space origin": "(0,0,0)"} | {k.replace("_", " "): v for k, v in fields.items()}
+    path = tmp_path / "v.nrrd"
+    text = "NRRD0004\n" + "".join(f"{k}: {v}\n" for k, v in header.items()) + "\n"
+    path.write_bytes(text.encode() + VOLUME.tobytes())
+    return path
+
+
+def refused(call, error, needle):
+    """``call()`` raises ``error`` of one line holding ``needle``, with no warning given."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(error) as caught:
+            call()
+    assert needle in str(caught.value) and "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("fields, needle", [
+    # pynrrd casts a size beyond int64 with a RuntimeWarning, to -2^63
+    (dict(sizes="99999999999999999999 9 8"), "a number beyond the range of its field"),
+    # directions of 1e308: their determinant overflowed (a warning, then 'singular'), as did nibabel's orientation
+    (dict(space_directions="(1e308,0,0) (0,1e308,0) (0,0,1e308)"), "outside the world lengths clwave renders"),
+    (dict(space_directions="(1e-300,0,0) (0,1e-300,0) (0,0,1e-300)"), "outside the world lengths clwave renders"),
+    (dict(space_origin="(1e308,1e308,1e308)"), "outside the world lengths clwave renders"),
+])
+def test_nrrd_numbers_beyond_their_range_are_one_line(tmp_path, fields, needle):
+    path = nrrd_file(tmp_path, **fields)
+    refused(lambda: load(path), (FileFormatError, InputError), needle)
+
+
+def test_nrrd_directions_at_any_scale_are_placed_as_at_one(tmp_path):
+    """The orientation, obliquity and voxel sizes of an affine scaled to its columns' largest component: a
+    direction of 1e16 and one of 1 give the same array, spacing and origin times 1e16."""
+    one = load(nrrd_file(tmp_path, space_directions="(0,-1,0) (2,0,0) (0,0,3)"))
+    (tmp_path / "big").mkdir()
+    big = load(nrrd_file(tmp_path / "big", space_directions="(0,-1e16,0) (2e16,0,0) (0,0,3e16)"))
+    assert np.array_equal(one.data, big.data)
+    assert np.allclose(np.array(big.spacing) / 1e16, one.spacing, rtol=1e-12)
+    assert np.allclose(np.array(big.origin) / 1e16, one.origin, rtol=1e-12)
+
+
+@pytest.mark.parametrize("spacing, origin", [(1e-19, 0.0), (2e17, 0.0), (1.0, (0.0, 0.0, 2e18))])
+def test_a_volume_outside_the_world_lengths_is_refused(spacing, origin):
+    """A spacing below WORLD_RANGE[0], an extent (10 voxels of 2e17) or an origin beyond WORLD_RANGE[1]: the renderers
+    divided by zero (1e-308) or overflowed float32 (internal errors)."""
+    refused(lambda: Volume(VOLUME, spacing=spacing, origin=origin), InputError, "outside the world lengths")
+
+
+def test_the_ends_of_the_world_lengths_render_as_lengths_of_one():
+    """X-ray line integrals of a volume at spacing WORLD_RANGE[0], and at an extent near WORLD_RANGE[1], are those at
+    spacing 1 times the spacing (float32's relative rounding), by splatting and by ray tracing."""
+    import clwave
+    from clwave.model.wavelet import WaveletVolume
+
+    images = {}
+    camera = clwave.Camera(30, 20, size=16)
+    for spacing in (1.0, WORLD_RANGE[0], WORLD_RANGE[1] / 10):
+        model = WaveletVolume.from_volume(Volume(VOLUME / VOLUME.max(), spacing=spacing), "linear", levels=1)
+        images[spacing] = [clwave.splat(model, camera).image,
+                           clwave.raytrace(model, camera, absorption=False, tolerance=1e-6 * spacing).image]
+    for spacing in (WORLD_RANGE[0], WORLD_RANGE[1] / 10):
+        for scaled, plain in zip(images[spacing], images[1.0]):
+            assert np.allclose(scaled / spacing, plain, rtol=1e-4, atol=1e-5 * np.abs(plain).max())
