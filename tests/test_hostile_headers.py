@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from clwave.errors import FileFormatError, InputError
-from clwave.io.loaders import describe, load
+from clwave.io.loaders import load
 from clwave.model.volume import WORLD_RANGE, Volume
 
 VOLUME = np.arange(8 * 9 * 10, dtype=np.float32).reshape(8, 9, 10)
@@ -80,3 +80,32 @@ def test_the_ends_of_the_world_lengths_render_as_lengths_of_one():
     for spacing in (WORLD_RANGE[0], WORLD_RANGE[1] / 10):
         for scaled, plain in zip(images[spacing], images[1.0]):
             assert np.allclose(scaled / spacing, plain, rtol=1e-4, atol=1e-5 * np.abs(plain).max())
+
+
+def test_a_decompression_bomb_is_weighed_against_the_address_space_limit(tmp_path):
+    """A gzip NRRD of 512^3 zero bytes (130 KB on disk, its trailer true) read whole under ``ulimit -v`` with 300 MiB
+    to spare: refused before reading as a HostMemoryError naming the room, not read until gzip's MemoryError (then
+    called a corrupt file) or the kill; available_bytes weighed the system's memory alone."""
+    import gzip
+    import subprocess
+    import sys
+
+    path = tmp_path / "bomb.nrrd"
+    path.write_bytes(b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 512 512 512\nencoding: gzip\n\n"
+                     + gzip.compress(bytes(512 ** 3), compresslevel=1))
+    script = f"""
+import resource
+from clwave.device.memory import available_bytes
+from clwave.device.memory import HostMemoryError
+from clwave.io.loaders import load
+mapped = next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith("VmSize:"))
+resource.setrlimit(resource.RLIMIT_AS, (mapped + (300 << 20), resource.RLIM_INFINITY))
+assert available_bytes() <= 300 << 20, available_bytes()
+try:
+    load({str(path)!r})
+except HostMemoryError as exc:
+    print("refused:", exc)
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("refused: reading") and "needs about 640 MiB" in done.stdout

@@ -88,7 +88,8 @@ class Volume:
         origin = tuple(float(o) for o in np.broadcast_to(np.asarray(origin, float), (3,)))
         problem = frame_problem(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
         if problem:
-            raise InputError(f"{problem}; give spacing= in other units", cli=f"{problem}; give --spacing in other units")
+            raise InputError(f"{problem}; give spacing= in other units",
+                             cli=f"{problem}; give --spacing in other units")
         if not np.all(np.isfinite(origin)):
             raise InputError(f"origin {origin} must be finite (x, y, z)")
         self.origin = origin
