@@ -109,3 +109,51 @@ except HostMemoryError as exc:
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("refused: reading") and "needs about 640 MiB" in done.stdout
+
+
+@pytest.mark.parametrize("name", ["v.npy", "v.nhdr"])
+def test_a_fifo_is_refused_not_waited_on(tmp_path, name):
+    """A FIFO named as a volume file, or as a detached NRRD header's data file: its reader waited for a writer that
+    never came (the fuzzer's 60 s timeout); refused in one line naming it."""
+    import os
+    import subprocess
+    import sys
+
+    if name == "v.nhdr":
+        (tmp_path / name).write_text("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n"
+                                     "data file: z.raw\n\n")
+    fifo = tmp_path / ("z.raw" if name == "v.nhdr" else name)
+    os.mkfifo(fifo)
+    script = f"from clwave.io.loaders import load\nload({str(tmp_path / name)!r})"
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    last = done.stderr.strip().splitlines()[-1]
+    assert last == (f"clwave.errors.FileFormatError: {fifo} is not a regular file (a FIFO, a socket or a device): "
+                    "clwave reads volumes from files; copy the data to a file first")
+
+
+def test_sigterm_while_reading_exits_143_not_as_a_corrupt_file(tmp_path):
+    """SIGTERM raises Terminated where the program is; in a loader that was inside ``reading()``, whose
+    ``except Exception`` made it 'cannot read ...: Terminated; the file may be truncated or corrupt' (exit 2)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    np.save(tmp_path / "v.npy", VOLUME)
+    script = f"""
+import sys, time
+from clwave import cli
+from clwave.io.loaders import raw
+def slow(*args):
+    print("reading", flush=True)
+    time.sleep(60)
+raw.read_npy = slow
+sys.exit(cli.main(["compress", {str(tmp_path / 'v.npy')!r}, "-o", {str(tmp_path / 'out.clw')!r}]))
+"""
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=dict(os.environ))
+    while b"reading" not in proc.stdout.readline():
+        assert proc.poll() is None
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143 and err.decode().strip() == "clwave: terminated"

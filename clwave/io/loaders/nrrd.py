@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_declared_size, check_whole, note, to_canonical
+from .shared import check_declared_size, check_whole, not_a_file, note, to_canonical
 
 _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
@@ -132,6 +132,8 @@ def _data_file(path, header):
         raise FileFormatError(f"{path} names the data file {name}, outside the header's folder {folder}; clwave "
                               "reads no files elsewhere for an untrusted header: put the data file beside the header "
                               "and name it there")
+    if target.exists() and not target.is_file():
+        raise not_a_file(target)
     return target
 
 

@@ -93,6 +93,13 @@ def reading(path):
         _QUIET.add(-1)
 
 
+def not_a_file(path) -> FileFormatError:
+    """The error for a ``path`` that is neither a regular file nor a folder: a FIFO, a socket or a device, whose
+    reading waits for a writer or never ends."""
+    return FileFormatError(f"{path} is not a regular file (a FIFO, a socket or a device): clwave reads volumes from "
+                           "files; copy the data to a file first")
+
+
 def _corrupt(path, exc) -> str:
     lines = str(exc).strip().splitlines()
     reason = type(exc).__name__ + (f": {lines[0][:200]}" if lines else "")
