@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from clwave.errors import FileFormatError, InputError
-from clwave.io.loaders import load
+from clwave.io.loaders import describe, load
 from clwave.model.volume import WORLD_RANGE, Volume
 
 VOLUME = np.arange(8 * 9 * 10, dtype=np.float32).reshape(8, 9, 10)
@@ -97,7 +97,7 @@ def test_a_decompression_bomb_is_weighed_against_the_address_space_limit(tmp_pat
 import resource
 from clwave.device.memory import available_bytes
 from clwave.device.memory import HostMemoryError
-from clwave.io.loaders import load
+from clwave.io.loaders import describe, load
 mapped = next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith("VmSize:"))
 resource.setrlimit(resource.RLIMIT_AS, (mapped + (300 << 20), resource.RLIM_INFINITY))
 assert available_bytes() <= 300 << 20, available_bytes()
@@ -157,3 +157,31 @@ sys.exit(cli.main(["compress", {str(tmp_path / 'v.npy')!r}, "-o", {str(tmp_path 
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=30)
     assert proc.returncode == 143 and err.decode().strip() == "clwave: terminated"
+
+
+@pytest.mark.parametrize("lie", ["rows", "frames"])
+def test_dicom_pixel_data_shorter_than_its_header_declares_is_refused_by_it(tmp_path, rng, lie):
+    """A slice declaring 65535 x 65535 pixels over 60 bytes, and an RT Dose file declaring 2^20 frames over its 15:
+    refused naming the bytes held and declared, before the declared volume is weighed (it was refused as one needing
+    hundreds of GiB, naming chunked reading, which a DICOM input has not) or read; ``clwave info`` says it too."""
+    import pydicom
+    from pydicom.data import get_testdata_file
+    from test_loaders import write_series
+
+    if lie == "rows":
+        folder = tmp_path / "series"
+        folder.mkdir()
+        write_series(folder, rng, [(0, 0, z) for z in range(3)], "1.2.3", ["a.dcm", "b.dcm", "c.dcm"])
+        ds = pydicom.dcmread(folder / "b.dcm")
+        ds.Rows = ds.Columns = 65535
+        ds.save_as(folder / "b.dcm")
+        path, needle = folder, "b.dcm holds 60 bytes of pixel data where its header declares 8,589,672,450 (Rows 65535"
+    else:
+        path = tmp_path / "dose.dcm"
+        ds = pydicom.dcmread(get_testdata_file("rtdose.dcm"))
+        ds.NumberOfFrames, ds.GridFrameOffsetVector = 1 << 20, list(range(1 << 20))
+        ds.save_as(path)
+        needle = "holds 6,000 bytes of pixel data where its header declares 419,430,400 (Rows 10, Columns 10, " \
+                 "NumberOfFrames 1048576, BitsAllocated 32)"
+    refused(lambda: load(path), FileFormatError, needle)
+    refused(lambda: describe(path), FileFormatError, needle)

@@ -34,6 +34,8 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     if len(headers) < 2:
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
                               "at least 2")
+    for path, h in headers:
+        check_pixel_length(path, h)
     for tag in ("ImageOrientationPatient", "ImagePositionPatient", "PixelSpacing"):
         for path, h in headers:
             check_finite(path, tag, np.array(h.get(tag), float))
@@ -300,6 +302,23 @@ def _dicom_pixels(path):
                               "the file is corrupt: correct its RescaleSlope (e.g. 1) or move it out of the folder")
     stored = ds.pixel_array
     return mark_padding(stored, stored.astype(np.float32) * np.float32(slope) + np.float32(intercept), padding(ds))
+
+
+def check_pixel_length(path, ds):
+    """Refuse a DICOM file ``ds`` (read with its pixel data deferred) of uncompressed pixel data shorter than its
+    Rows, Columns, frames, samples and BitsAllocated declare, before a volume is weighed or allocated by them."""
+    from pydicom.pixels.utils import get_expected_length
+
+    if ds.file_meta.get("TransferSyntaxUID") is None or ds.file_meta.TransferSyntaxUID.is_encapsulated:
+        return  # compressed frames: their decoder says what they hold
+    with reading(path):
+        element, expected = ds.get_item("PixelData", keep_deferred=True), get_expected_length(ds)
+    held = element.length if hasattr(element, "length") else len(element.value)
+    if held < expected:
+        raise FileFormatError(f"DICOM file {path} holds {held:,} bytes of pixel data where its header declares "
+                              f"{expected:,} (Rows {ds.Rows}, Columns {ds.Columns}, NumberOfFrames "
+                              f"{ds.get('NumberOfFrames') or 1}, BitsAllocated {ds.BitsAllocated}); the file is "
+                              f"truncated or its header is wrong")
 
 
 def check_finite(path, tag, values):
