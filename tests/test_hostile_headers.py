@@ -185,3 +185,31 @@ def test_dicom_pixel_data_shorter_than_its_header_declares_is_refused_by_it(tmp_
                  "NumberOfFrames 1048576, BitsAllocated 32)"
     refused(lambda: load(path), FileFormatError, needle)
     refused(lambda: describe(path), FileFormatError, needle)
+
+
+def test_a_dicom_rescale_past_float32_is_named_without_an_overflow_warning(tmp_path, rng):
+    """RescaleSlope 1e38 times pixels of 8: the float32 product overflowed with a RuntimeWarning, then the volume was
+    refused as holding non-finite voxels; rescaled in float64 a slice at a time, the file is named with its largest
+    value."""
+    from test_loaders import write_dicom_slice
+
+    for z in range(3):
+        write_dicom_slice(tmp_path / f"s{z}", np.full((6, 5), 8), (0.0, 0.0, float(z)), "1.2.3", rescale=(1e38, 0))
+    refused(lambda: load(tmp_path, progress_bar=False), InputError, "s0 holds values up to 8e+38, beyond float32's")
+
+
+def test_dicom_slices_with_bytes_past_their_frame_read_the_frame_their_header_declares(tmp_path, rng):
+    """A single-frame slice whose pixel data holds 10 frames' bytes: pydicom returned all 10 (with its warning), and
+    the stack was refused as a volume of 10 channels; the header's one frame is read, silently."""
+    import pydicom
+    from test_loaders import write_series
+
+    stored = write_series(tmp_path, rng, [(0.0, 0.0, float(z)) for z in range(3)], "1.2.3", ["a", "b", "c"])
+    ds = pydicom.dcmread(tmp_path / "b")
+    ds.PixelData = ds.PixelData * 10
+    ds.save_as(tmp_path / "b")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        volume = load(tmp_path, progress_bar=False)
+    assert volume.shape == (3, 6, 5) and volume.channels == 1
+    assert np.array_equal(volume.data[1], (stored[1] * 2.0 - 1024)[::-1, ::-1])  # rescale (2, -1024), RAS flips
