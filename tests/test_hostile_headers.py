@@ -213,3 +213,62 @@ def test_dicom_slices_with_bytes_past_their_frame_read_the_frame_their_header_de
         volume = load(tmp_path, progress_bar=False)
     assert volume.shape == (3, 6, 5) and volume.channels == 1
     assert np.array_equal(volume.data[1], (stored[1] * 2.0 - 1024)[::-1, ::-1])  # rescale (2, -1024), RAS flips
+
+
+def test_declared_sizes_past_2_to_the_64_are_counted_whole(tmp_path):
+    """numpy's product of a shape wraps at 2^64: a NIfTI-2 header of 2^40 voxels an axis declared 0 bytes (2^120 wraps
+    to 0) and passed the size check; a .raw of 2^32 x 2^32 x 1 float32 needed 0 bytes, as an empty file holds."""
+    import nibabel
+
+    image = nibabel.Nifti2Image(VOLUME, np.eye(4))
+    nibabel.save(image, tmp_path / "v.nii")
+    data = bytearray((tmp_path / "v.nii").read_bytes())
+    data[16:16 + 8 * 4] = np.array([3, 1 << 40, 1 << 40, 1 << 40], "<i8").tobytes()  # dim[0..3]
+    (tmp_path / "v.nii").write_bytes(bytes(data))
+    refused(lambda: load(tmp_path / "v.nii"), FileFormatError, "its header declares 1099511627776 x 1099511627776 x "
+                                                               "1099511627776 voxels")
+    (tmp_path / "e.raw").write_bytes(b"")
+    refused(lambda: load(tmp_path / "e.raw", shape=(1 << 32, 1 << 32, 1), dtype="float32"), FileFormatError,
+            "need 73,786,976,294,838,206,464 bytes")
+
+
+def test_a_store_of_2_to_the_40_voxels_an_axis_is_refused_before_dask_lists_its_chunks(tmp_path):
+    """A Zarr array's metadata declaring 2^40 voxels an axis (no chunk stored): Dask's normalize_chunks listed every
+    chunk's size, 2^34 an axis, and ran out of memory (a MemoryError called a corrupt file); refused by the count of
+    chunks first, under an address-space limit that the lists would pass."""
+    import json
+    import subprocess
+    import sys
+
+    import zarr
+
+    zarr.create_array(str(tmp_path / "v.zarr"), shape=(8, 9, 10), chunks=(4, 4, 4), dtype="f4")
+    meta = json.loads((tmp_path / "v.zarr" / "zarr.json").read_text())
+    meta["shape"] = [1 << 40] * 3
+    (tmp_path / "v.zarr" / "zarr.json").write_text(json.dumps(meta))
+    script = f"""
+import resource
+from clwave.io.loaders import load
+resource.setrlimit(resource.RLIMIT_AS, (3 << 30, resource.RLIM_INFINITY))
+try:
+    load({str(tmp_path / 'v.zarr')!r})
+except Exception as exc:
+    print(type(exc).__name__, exc)
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.stdout.startswith("InputError") and "too big for this machine" in done.stdout, done.stdout + done.stderr
+
+
+def test_dicom_pixel_data_declared_past_the_file_is_refused_before_it_is_read(tmp_path, rng):
+    """A slice whose PixelData element declares 4 GiB in a file of 700 bytes: pydicom allocated the 4 GiB to read it
+    (a MemoryError called a corrupt file, or the memory taken)."""
+    import struct
+
+    from test_loaders import write_series
+
+    write_series(tmp_path, rng, [(0.0, 0.0, float(z)) for z in range(3)], "1.2.3", ["a", "b", "c"])
+    data = bytearray((tmp_path / "b").read_bytes())
+    at = data.rfind(b"\xe0\x7f\x10\x00")  # (7FE0,0010) OW: tag, VR, 2 reserved bytes, the 4-byte length
+    struct.pack_into("<I", data, at + 8, 0xFFFFFFF0)
+    (tmp_path / "b").write_bytes(bytes(data))
+    refused(lambda: load(tmp_path, progress_bar=False), FileFormatError, "declares 4,294,967,280 bytes of pixel data")

@@ -3,6 +3,7 @@ gantry tilt resampled onto a straight one), rescaled, in RAS+."""
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections import defaultdict
 
@@ -317,7 +318,8 @@ def rescaled(path, pixels, slope, intercept):
 
 def check_pixel_length(path, ds):
     """Refuse a DICOM file ``ds`` (read with its pixel data deferred) of uncompressed pixel data shorter than its
-    Rows, Columns, frames, samples and BitsAllocated declare, before a volume is weighed or allocated by them."""
+    Rows, Columns, frames, samples and BitsAllocated declare, or declared longer than the file, before a volume is
+    weighed or allocated by them."""
     from pydicom.pixels.utils import get_expected_length
 
     if ds.file_meta.get("TransferSyntaxUID") is None or ds.file_meta.TransferSyntaxUID.is_encapsulated:
@@ -325,6 +327,10 @@ def check_pixel_length(path, ds):
     with reading(path):
         element, expected = ds.get_item("PixelData", keep_deferred=True), get_expected_length(ds)
     held = element.length if hasattr(element, "length") else len(element.value)
+    beyond = getattr(element, "value_tell", 0) + held - os.path.getsize(path)
+    if beyond > 0:  # pydicom would allocate the length the element declares, then read the file short
+        raise FileFormatError(f"DICOM file {path} declares {held:,} bytes of pixel data, {beyond:,} more than the file "
+                              f"holds; the file is truncated or its header is wrong")
     if held < expected:
         raise FileFormatError(f"DICOM file {path} holds {held:,} bytes of pixel data where its header declares "
                               f"{expected:,} (Rows {ds.Rows}, Columns {ds.Columns}, NumberOfFrames "

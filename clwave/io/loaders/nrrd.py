@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 import warnings
 from pathlib import Path
@@ -155,6 +156,6 @@ def _check_nrrd_size(path, header, offset):
     if min(sizes) < 1:
         raise FileFormatError(f"{path}: its header declares sizes {' '.join(map(str, sizes))}; every axis needs at "
                               "least one voxel")
-    nbytes = int(np.prod(sizes, dtype=np.float64)) * nrrd.reader._determine_datatype(header).itemsize
+    nbytes = math.prod(sizes) * nrrd.reader._determine_datatype(header).itemsize
     skip = max(int(header.get("byte skip", 0) or 0), 0)
     check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=encoding != "raw")

@@ -249,8 +249,14 @@ def as_array(source, chunks, roles=None, fits=None, path=None):
     if chunks == "auto" and 4 * math.prod(n for n, r in zip(own, roles) if r == "s") >= CHUNK_BYTES:
         edges = own  # the store's chunks are big already: one each (a Zarr chunk is decoded whole)
     edges = tuple({"t": 1, "c": -1}.get(r, edge) for r, edge in zip(roles, edges))
-    blocks = normalize_chunks(edges, shape, limit=CHUNK_BYTES, dtype=np.float32, previous_chunks=own)
-    count = math.prod(len(b) for b in blocks)
+    # the fewest chunks these edges cut the volume into, before Dask lists every chunk's size (a header of 2^40
+    # voxels an axis filled the memory with those lists)
+    count = math.prod(1 if edge in (-1, "auto") else -(-n // edge) for n, edge in zip(shape, edges))
+    if "auto" in edges:
+        count = max(count, 4 * math.prod(shape) // CHUNK_BYTES)
+    if count <= MAX_CHUNKS:
+        blocks = normalize_chunks(edges, shape, limit=CHUNK_BYTES, dtype=np.float32, previous_chunks=own)
+        count = math.prod(len(b) for b in blocks)
     if count > MAX_CHUNKS and (chunks == "auto" or 4 * math.prod(shape) > MAX_CHUNKS * CHUNK_BYTES):
         raise InputError(f"{path} holds a {' x '.join(map(str, shape))} volume ({4 * math.prod(shape):,} bytes as "
                          f"float32), too big for this machine: even in chunks of {CHUNK_BYTES:,} bytes Dask's task "
