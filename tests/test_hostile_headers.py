@@ -295,3 +295,24 @@ def test_hdf5_volumes_of_hdf5plugin_filters_are_read_and_unknown_ones_refused(tm
     monkeypatch.setattr(h5z, "filter_avail", lambda code: code != 32001 and available(code))
     refused(lambda: load(tmp_path / "v.h5"), FileFormatError, "v.h5:/v is filtered by 'blosc' (id 32001), which "
                                                               "neither HDF5 nor hdf5plugin decodes here")
+
+
+@pytest.mark.parametrize("plant", ["outside", "devzero", "fifo", "folder"])
+def test_a_zarr_store_reads_no_file_outside_it(tmp_path, plant):
+    """A chunk that is a link to a file outside the store (its bytes read as voxels: /etc/passwd was), to /dev/zero
+    (read until the memory ran out), a FIFO (waited on), or a link to a folder (a loop: the group walk recursed):
+    refused in one line naming it before the store is opened."""
+    import os
+
+    import zarr
+
+    store = tmp_path / "v.zarr"
+    zarr.create_array(str(store), shape=(8, 9, 10), chunks=(4, 4, 4), dtype="f4", compressors=None)[...] = VOLUME
+    chunk = store / "c" / "0" / "0" / "0"
+    (tmp_path / "secret").write_bytes(bytes(256))
+    if plant != "folder":
+        chunk.unlink()
+    {"outside": lambda: os.symlink(tmp_path / "secret", chunk), "devzero": lambda: os.symlink("/dev/zero", chunk),
+     "fifo": lambda: os.mkfifo(chunk), "folder": lambda: os.symlink(store, store / "loop")}[plant]()
+    needle = "is not a regular file" if plant == "fifo" else "a folder or a file outside the store"
+    refused(lambda: load(store), FileFormatError, needle)
