@@ -316,3 +316,25 @@ def test_a_zarr_store_reads_no_file_outside_it(tmp_path, plant):
      "fifo": lambda: os.mkfifo(chunk), "folder": lambda: os.symlink(store, store / "loop")}[plant]()
     needle = "is not a regular file" if plant == "fifo" else "a folder or a file outside the store"
     refused(lambda: load(store), FileFormatError, needle)
+
+
+def test_dicom_pixel_data_without_a_decoder_here_names_the_packages_that_decode_it(tmp_path, rng, monkeypatch):
+    """A series in JPEG-LS (pydicom decodes it with pylibjpeg or GDCM, neither installed here; taken as absent where
+    one is): it was 'Unable to decompress ... because all plugins are missing dependencies; the file may be truncated
+    or corrupt', read after the volume was weighed."""
+    import pydicom
+    from pydicom.encaps import encapsulate
+    from pydicom.pixels import get_decoder
+    from pydicom.uid import JPEGLSLossless
+    from test_loaders import write_series
+
+    monkeypatch.setattr(type(get_decoder(JPEGLSLossless)), "is_available", property(lambda decoder: False))
+    write_series(tmp_path, rng, [(0.0, 0.0, float(z)) for z in range(3)], "1.2.3", ["a", "b", "c"])
+    for name in "abc":
+        ds = pydicom.dcmread(tmp_path / name)
+        ds.file_meta.TransferSyntaxUID = JPEGLSLossless
+        ds.PixelData = encapsulate([bytes(60)])
+        ds.save_as(tmp_path / name, enforce_file_format=True)
+    refused(lambda: load(tmp_path, progress_bar=False), FileFormatError,
+            "holds pixel data in transfer syntax 1.2.840.10008.1.2.4.80 (JPEG-LS Lossless Image Compression), which no "
+            "decoder installed here reads (gdcm - requires gdcm")

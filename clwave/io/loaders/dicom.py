@@ -39,7 +39,7 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
                               "at least 2")
     for path, h in headers:
-        check_pixel_length(path, h)
+        check_pixel_data(path, h)
     for tag in ("ImageOrientationPatient", "ImagePositionPatient", "PixelSpacing"):
         for path, h in headers:
             check_attribute(path, tag, np.array(h.get(tag), float))
@@ -316,13 +316,27 @@ def rescaled(path, pixels, slope, intercept):
     return values.astype(np.float32)
 
 
-def check_pixel_length(path, ds):
-    """Refuse a DICOM file ``ds`` (read with its pixel data deferred) of uncompressed pixel data shorter than its
-    Rows, Columns, frames, samples and BitsAllocated declare, or declared longer than the file, before a volume is
-    weighed or allocated by them."""
+def check_pixel_data(path, ds):
+    """Refuse a DICOM file ``ds`` (read with its pixel data deferred) whose pixel data no decoder here reads (a
+    compressed transfer syntax without its plugin: named, with the packages that decode it), or, uncompressed, is
+    shorter than its Rows, Columns, frames, samples and BitsAllocated declare or declared longer than the file, before
+    a volume is weighed or allocated by them."""
+    from pydicom.pixels import get_decoder
     from pydicom.pixels.utils import get_expected_length
 
-    if ds.file_meta.get("TransferSyntaxUID") is None or ds.file_meta.TransferSyntaxUID.is_encapsulated:
+    syntax = ds.file_meta.get("TransferSyntaxUID")
+    if syntax is None:
+        return
+    try:
+        decoder = get_decoder(syntax)
+    except NotImplementedError:  # a private or unknown syntax
+        decoder = None
+    if decoder is None or not decoder.is_available:
+        needs = "; ".join(decoder.missing_dependencies) if decoder is not None else "a decoder pydicom does not know"
+        raise FileFormatError(f"DICOM file {path} holds pixel data in transfer syntax {syntax} ({syntax.name}), which "
+                              f"no decoder installed here reads ({needs}): install one (pip), or convert the series "
+                              f"with dcm2niix (dcm2niix -o OUT_FOLDER FOLDER) and read the .nii")
+    if syntax.is_encapsulated:
         return  # compressed frames: their decoder says what they hold
     with reading(path):
         element, expected = ds.get_item("PixelData", keep_deferred=True), get_expected_length(ds)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .dicom import check_attribute, check_pixel_length, fill_padding, mark_padding, padding, place_slices, rescaled
+from .dicom import check_attribute, check_pixel_data, fill_padding, mark_padding, padding, place_slices, rescaled
 from .shared import check_whole
 
 #: what converts a multi-frame file clwave cannot place into a volume it reads
@@ -43,7 +43,7 @@ def read_dicom_frames(path, fits=None):
                                                             "groups or grid frame offsets)"
         raise FileFormatError(f"{path} is a multi-frame DICOM file ({kind}, {frames} frames) of {why}, not a volume "
                               f"clwave places; {CONVERTER.replace('FILE', str(path))}")
-    check_pixel_length(path, ds)
+    check_pixel_data(path, ds)
     positions, cosines, pixel, slopes, intercepts = geometry
     for tag, values in (("ImagePositionPatient", positions), ("ImageOrientationPatient", cosines),
                         ("PixelSpacing", pixel), ("RescaleSlope", slopes), ("RescaleIntercept", intercepts)):
