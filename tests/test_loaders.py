@@ -547,12 +547,20 @@ def test_dicom_multi_frame_file_named_as_such(tmp_path, rng):
     (dict(pixel_spacing=(float("nan"), 1.0)), "non-finite PixelSpacing"),
     (dict(orientation=(1, 0, 0, 0, float("inf"), 0)), "non-finite ImageOrientationPatient"),
     (dict(position=(float("nan"), 0.0, 2.0)), "non-finite ImagePositionPatient"),
+    # found by fuzzing (harden20): overflow warnings beside the error, or an error naming something else
+    (dict(rescale=(1e308, 0)), "RescaleSlope (1e+308) beyond float32's range"),
+    (dict(pixel_spacing=(0.0, 0.0)), "PixelSpacing (0.0, 0.0) beyond the world lengths"),
+    (dict(pixel_spacing=(1.0,)), "PixelSpacing (1.0) of 1 values, not 2"),
+    (dict(orientation=(1, 0, 0, 1, 0, 0)), "not two perpendicular unit vectors"),
+    (dict(orientation=(1e308, 0, 0, 0, 1e308, 0)), "not two perpendicular unit vectors"),
+    (dict(position=(0.0, 0.0, 1e300)), "ImagePositionPatient (0.0, 0.0, 1e+300) beyond the world lengths"),
 ])
 def test_dicom_degenerate_rescale_and_geometry_refused(tmp_path, rng, kwargs, needle):
     uid, position = generate_uid(), kwargs.pop("position", None)
     write_series(tmp_path, rng, axial(0.0, 1.0), uid, ["s1", "s2"])
-    write_dicom_slice(tmp_path / "odd", rng.integers(0, 9, (6, 5)), position or axial(2.0)[0], uid, **kwargs)
-    with pytest.raises(FileFormatError) as excinfo:
+    write_dicom_slice(tmp_path / "odd", np.full((6, 5), 8), position or axial(2.0)[0], uid, **kwargs)
+    with pytest.raises(FileFormatError) as excinfo, warnings.catch_warnings():
+        warnings.simplefilter("error")  # no Python warning beside the one line
         load(tmp_path, progress_bar=False)
     assert_one_line_error(excinfo)
     assert needle in str(excinfo.value) and "odd" in str(excinfo.value)

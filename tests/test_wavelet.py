@@ -269,6 +269,25 @@ def test_focus_keeps_more_detail_near_it(rng):
     assert around(centre) < 0.5 * around((8.0, -4.0, -6.0))
 
 
+@pytest.mark.parametrize("centre, sigma, weight", [((0.0, 0.0, 0.0), 1e308, 1.0), ((1e308, 0.0, 0.0), 1.0, 0.0)])
+def test_a_focus_at_the_ends_of_the_float_range_weighs_without_overflow(rng, centre, sigma, weight):
+    """The focus weight exp(-d^2 / 2 sigma^2) at any finite sigma > 0 and centre: 1 where sigma dwarfs every
+    distance, 0 where the centre is beyond them all; sigma^2 overflowed a Python float (an internal error of a
+    .clw file's focus, harden20's fuzzing), and d^2 warned."""
+    from clwave.model.wavelet import band_importance
+
+    wv = WaveletVolume.from_volume(Volume(rng.random((8, 8, 8)).astype(np.float32)), "linear", levels=1)
+    g = wv.groups[0]
+    band = g.bands[1]
+    values = g.values[:, g.band_slices()[1]]
+    index = np.stack(np.unravel_index(np.arange(band.size), band.shape), axis=1)
+    plain = band_importance(g.wavelet, band, values, index, None, wv.frame)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        focused = band_importance(g.wavelet, band, values, index, (centre, sigma), wv.frame)
+    assert np.array_equal(focused, plain * np.float32(weight))
+
+
 @pytest.mark.parametrize("channels, wavelet", [(1, "cubic"), (4, "cubic"), (1, "quintic")])
 def test_clw_round_trip_is_exact_and_small(tmp_path, channels, wavelet, rng):
     shape = (48, 40, 44)

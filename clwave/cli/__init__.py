@@ -57,8 +57,10 @@ def _version():
     return f"clwave {__version__}"
 
 
-class Terminated(Exception):
-    """SIGTERM, raised where the program is, so that what it was writing is cleaned up on the way out."""
+class Terminated(BaseException):
+    """SIGTERM, raised where the program is, so that what it was writing is cleaned up on the way out.  A
+    BaseException, as KeyboardInterrupt is: a reader's ``except Exception`` (``loaders.shared.reading``) took it for a
+    corrupt file (exit 2, not 143)."""
 
 
 def _terminate(signum, frame):

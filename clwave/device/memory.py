@@ -123,15 +123,40 @@ class HostMemoryError(ClwaveError, MemoryError):
 
 
 def available_bytes() -> int:
-    """Memory the system could give this process now (Linux: MemAvailable), else the physical memory."""
+    """Memory this process could get now: the system's (Linux: MemAvailable, else the physical memory), no more than
+    its address-space limit leaves (``ulimit -v``: the limit less what is mapped already) nor its cgroup's
+    (``memory.max`` less ``memory.current``), which refuse an allocation the system's memory would take."""
     try:
         with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:  # pragma: no cover - not Linux
+            free = next(int(line.split()[1]) * 1024 for line in fh if line.startswith("MemAvailable:"))
+    except (OSError, StopIteration):  # pragma: no cover - not Linux
+        free = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    return min([free] + _limited_room())
+
+
+def _limited_room() -> list:
+    """Bytes this process may still map under its address-space limit and its cgroup v2's memory limit, where
+    they are set (Linux)."""
+    room = []
+    try:
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if limit != resource.RLIM_INFINITY:
+            with open("/proc/self/status") as fh:
+                mapped = next(int(line.split()[1]) * 1024 for line in fh if line.startswith("VmSize:"))
+            room.append(max(limit - mapped, 0))
+    except (ImportError, OSError, StopIteration):  # pragma: no cover - not Linux
         pass
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    try:
+        with open("/sys/fs/cgroup/memory.max") as fh:
+            limit = fh.read().strip()
+        if limit != "max":
+            with open("/sys/fs/cgroup/memory.current") as fh:
+                room.append(max(int(limit) - int(fh.read()), 0))
+    except (OSError, ValueError):  # no cgroup v2 at its usual place
+        pass
+    return room
 
 
 def return_freed() -> bool:

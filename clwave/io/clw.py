@@ -323,13 +323,13 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
         groups = [_read_group(h5, gi, gh, shape, levels, budget, frame, approximation)
                   for gi, gh in enumerate(groups_header)]
         mask = None if data is None else FileMask(path, shape)
-    focus = header["focus"] if keep is None else None  # as threshold(keep=) without a focus
+    focus = header.get("focus") if keep is None else None  # as threshold(keep=) without a focus
     try:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, channels,
                              interpolate=header["interpolate"], offset=header.get("offset", 0.0),
                              obliquity=header.get("obliquity", 0.0),
                              focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
-                             transfer_function=header["transfer_function"], content=header.get("content"),
+                             transfer_function=header.get("transfer_function"), content=header.get("content"),
                              content_mask=mask)
     except (LookupError, ValueError, TypeError) as exc:  # a backstop: checked_header checked what is used here
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None

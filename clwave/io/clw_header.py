@@ -11,6 +11,7 @@ import numpy as np
 
 from ..errors import FileFormatError
 from ..model.bspline import WAVELET_ORDERS, max_levels
+from ..model.volume import frame_problem
 from ..model.transfer import TransferFunction
 
 FILE_FORMAT = "clwave-wavelet-volume"
@@ -81,14 +82,16 @@ def checked_header(header) -> tuple:
     """``(shape, levels, channels, groups)`` of a header, each checked, and the rest of the header as the model opened
     from it uses it (:func:`check_properties`); ValueError names what is wrong."""
     shape = header.get("shape")
-    if not (isinstance(shape, list) and len(shape) == 3 and all(isinstance(n, int) and 2 <= n <= 1 << 20
-                                                                 for n in shape)):
+    if not (isinstance(shape, list) and len(shape) == 3 and all(_whole(n) and 2 <= n <= 1 << 20 for n in shape)):
         raise ValueError(f"shape {shape!r} is not three whole numbers from 2 to 2^20")
     shape = tuple(shape)
     for name, positive in (("spacing", True), ("origin", False)):
         value = header.get(name)
         if not (_numbers(value, 3) and (not positive or min(value) > 0)):
             raise ValueError(f"{name} {value!r} is not three finite{' positive' if positive else ''} numbers")
+    problem = frame_problem(shape, header["spacing"], header["origin"])
+    if problem:
+        raise ValueError(problem)
     offset = header.get("offset", 0.0)  # absent in older files: their values are the input's
     if not _numbers([offset], 1):
         raise ValueError(f"offset {offset!r} is not one finite number")
@@ -96,9 +99,9 @@ def checked_header(header) -> tuple:
     if not (_numbers([obliquity], 1) and 0 <= obliquity <= 90):
         raise ValueError(f"obliquity {obliquity!r} is not one number of degrees from 0 to 90")
     levels, channels = header.get("levels"), header.get("channels")
-    if not (isinstance(levels, int) and 0 <= levels <= max_levels(shape)):
+    if not (_whole(levels) and 0 <= levels <= max_levels(shape)):
         raise ValueError(f"levels {levels!r} is not possible for shape {shape}")
-    if not (isinstance(channels, int) and 1 <= channels <= 4):
+    if not (_whole(channels) and 1 <= channels <= 4):
         raise ValueError(f"channels {channels!r} is not 1 to 4")
     groups = header.get("groups")
     if not (isinstance(groups, list) and groups):
@@ -106,18 +109,20 @@ def checked_header(header) -> tuple:
     seen = []
     for g in groups:
         orders = sorted(WAVELET_ORDERS.values())
-        if not (isinstance(g, dict) and g.get("wavelet") in orders and isinstance(g.get("channels"), list)):
-            raise ValueError(f"channel group {g!r} is not a wavelet order {orders} with a list of channels")
+        if not (isinstance(g, dict) and _whole(g.get("wavelet")) and g["wavelet"] in orders
+                and isinstance(g.get("channels"), list) and all(_whole(c) for c in g["channels"])):
+            raise ValueError(f"channel group {g!r} is not a wavelet order {orders} with a list of channel numbers")
         seen += g["channels"]
     if sorted(seen) != list(range(channels)):
         raise ValueError(f"the groups hold channels {sorted(seen)}, not each of the {channels} once")
-    check_properties(header)
+    check_properties(header, shape)
     return shape, levels, channels, groups
 
 
-def check_properties(header):
-    """The header's interpolation, focus, content box and transfer function, checked as the model opened from the
-    file uses them (``clwave info`` shows them): ValueError names what is wrong."""
+def check_properties(header, shape):
+    """The header's interpolation, focus, content box (inside the volume's box, as a writer finds it) and transfer
+    function, checked as the model opened from the file uses them (``clwave info`` shows them); ``shape``, spacing and
+    origin checked already: ValueError names what is wrong."""
     interpolate, focus, content = header.get("interpolate"), header.get("focus"), header.get("content")
     if not isinstance(interpolate, bool):
         raise ValueError(f"interpolate {interpolate!r} is not true or false")
@@ -128,12 +133,24 @@ def check_properties(header):
                                     and all(_numbers(corner, 3) for corner in content)
                                     and np.all(np.less(*content))):  # whole voxels: never empty
         raise ValueError(f"content {content!r} is not two corners [x, y, z] of finite numbers, low below high")
+    if content is not None:  # the volume's box: its voxels' boxes about their centres (Volume.content_box)
+        half = np.array(shape[::-1]) * np.array(header["spacing"][::-1]) / 2
+        slack = np.array(header["spacing"][::-1]) / 2  # rounding: half a voxel, far above it
+        centre = np.array(header["origin"])
+        if np.any(np.array(content[0]) < centre - half - slack) or np.any(np.array(content[1]) > centre + half + slack):
+            raise ValueError(f"content {content!r} reaches outside the volume's box {(centre - half).tolist()} to "
+                             f"{(centre + half).tolist()}")
     tf = header.get("transfer_function")
     if tf is not None:
         try:
             TransferFunction.from_dict(tf)
         except (TypeError, ValueError) as exc:  # InputError is a ValueError: said here as the file's fault
             raise ValueError(f"its transfer function is not valid: {exc}") from None
+
+
+def _whole(value) -> bool:
+    """Whether ``value`` is a JSON whole number (an int, not a boolean or a float)."""
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _numbers(value, count) -> bool:

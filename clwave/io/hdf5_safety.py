@@ -122,6 +122,22 @@ def check_stored_inside(dataset, member) -> int:
     return layout
 
 
+def check_filters_available(dataset, member) -> None:
+    """Refuse (``ValueError``) a dataset (its low-level id) filtered by an HDF5 filter that neither HDF5 nor
+    hdf5plugin (Blosc, Zstandard, LZ4, bitshuffle, ...) decodes here: its chunks would fail one by one as they are
+    read, HDF5 looking for a plugin in its plugin folder for each (hdf5plugin's filters are optional ones: a writer
+    that had them filtered every chunk)."""
+    import hdf5plugin  # noqa: F401  (registers its filters with HDF5)
+    from h5py import h5z
+
+    plist = dataset.get_create_plist()
+    for i in range(plist.get_nfilters()):
+        code, _, _, label = plist.get_filter(i)
+        if not h5z.filter_avail(code):
+            raise ValueError(f"member {member} is filtered by {label.decode(errors='replace')!r} (id {code}), "
+                             "which neither HDF5 nor hdf5plugin decodes here")
+
+
 def _check_attributes(obj, member, max_bytes):
     """Refuse more than :data:`MAX_ATTRIBUTES` attributes, or one larger than ``max_bytes``, or not of
     numbers or strings (read by their headers: no value is read)."""

@@ -15,6 +15,11 @@ from ..errors import InputError, finite_number
 from .geometry import fine_to_world, world_to_fine
 
 MAX_CHANNELS = 4
+#: the world lengths clwave renders: a voxel's spacing at least WORLD_RANGE[0], the volume's extent (spacing times
+#: voxels) and its origin's coordinates at most WORLD_RANGE[1] in magnitude, so that lengths and their squares are
+#: normal float32 numbers in the renderers' arithmetic (1e-18 and 1e17 render as 1 does, scaled: docs/coordinates.md
+#: §1; 1e-308 divided by zero)
+WORLD_RANGE = (1e-18, 1e18)
 
 
 class Volume:
@@ -81,6 +86,10 @@ class Volume:
         if min(self.spacing) <= 0:
             raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
         origin = tuple(float(o) for o in np.broadcast_to(np.asarray(origin, float), (3,)))
+        problem = frame_problem(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
+        if problem:
+            raise InputError(f"{problem}; give spacing= in other units",
+                             cli=f"{problem}; give --spacing in other units")
         if not np.all(np.isfinite(origin)):
             raise InputError(f"origin {origin} must be finite (x, y, z)")
         self.origin = origin
@@ -179,6 +188,17 @@ def checked_block(block: np.ndarray) -> np.ndarray:
 def content_of(data):
     """(nz, ny, nx) bool of the voxels with a non-zero value in some channel of ``data`` (z, y, x[, c])."""
     return (data != 0).any(axis=3) if data.ndim == 4 else data != 0
+
+
+def frame_problem(shape, spacing, origin) -> str | None:
+    """What is wrong with a ``spacing`` (dz, dy, dx; positive) and ``origin`` (x, y, z; finite) of a ``shape``
+    (z, y, x) volume outside :data:`WORLD_RANGE`, or None."""
+    low, high = WORLD_RANGE
+    if min(spacing) < low or max(float(d) * n for d, n in zip(spacing, shape)) > high or max(map(abs, origin)) > high:
+        return (f"spacing {tuple(spacing)} (dz, dy, dx) and origin {tuple(origin)} (x, y, z) of a "
+                f"{' x '.join(map(str, shape))} volume lie outside the world lengths clwave renders (a voxel at least "
+                f"{low:g}, the volume's extent and its origin at most {high:g})")
+    return None
 
 
 def _triple(value, name) -> tuple:

@@ -525,7 +525,8 @@ def band_importance(wavelet, band, values, index, focus, frame) -> np.ndarray:
         centre, sigma = focus
         fine = geometry.support_centres(wavelet, band.key, band.level, index)
         world = fine_to_world(fine, wavelet.order, *frame)
-        imp *= np.exp(-np.sum((world - np.asarray(centre)) ** 2, axis=1) / (2.0 * sigma ** 2))
+        with np.errstate(over="ignore"):  # d / sigma beyond float range: a weight of 0 (any finite sigma > 0)
+            imp *= np.exp(-0.5 * np.sum(((world - np.asarray(centre)) / sigma) ** 2, axis=1))
     return imp
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, tiff, zarr
-from .shared import SUPPORTED, Declared, check_chunks, reading, to_float32
+from .shared import SUPPORTED, Declared, check_chunks, not_a_file, reading, to_float32
 
 __all__ = ["load", "describe", "SUPPORTED"]
 
@@ -247,6 +247,8 @@ def _kind(path: Path) -> str:
     suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
     if not path.exists():
         raise FileFormatError(f"no file or folder at {path}; supported inputs: {SUPPORTED}")
+    if not path.is_file():  # a reader of a FIFO waits for a writer, of a device for ever
+        raise not_a_file(path)
     if zarr_named:
         raise FileFormatError(f"{path} is a file, not a Zarr store; clwave reads Zarr stores that are folders "
                               "(unzip a zipped store first)")

@@ -3,12 +3,16 @@ gantry tilt resampled onto a straight one), rescaled, in RAS+."""
 
 from __future__ import annotations
 
+import os
+import warnings
 from collections import defaultdict
 
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import SUPPORTED, Declared, check_whole, folder_files, note, read_slices, reading, to_canonical
+from ...model.volume import WORLD_RANGE
+from .shared import (SUPPORTED, Declared, check_float32_range, check_whole, folder_files, largest_finite, note,
+                     read_slices, reading, to_canonical)
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -34,9 +38,11 @@ def read_dicom_folder(folder, series, progress_bar, fits=None):
     if len(headers) < 2:
         raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
                               "at least 2")
+    for path, h in headers:
+        check_pixel_data(path, h)
     for tag in ("ImageOrientationPatient", "ImagePositionPatient", "PixelSpacing"):
         for path, h in headers:
-            check_finite(path, tag, np.array(h.get(tag), float))
+            check_attribute(path, tag, np.array(h.get(tag), float))
     cosines = np.array([h.ImageOrientationPatient for _, h in headers], float)
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"DICOM series {uid} in {folder} mixes slice orientations "
@@ -293,18 +299,85 @@ def _dicom_pixels(path):
     ds = pydicom.dcmread(path)
     slope = float(getattr(ds, "RescaleSlope", 1.0))
     intercept = float(getattr(ds, "RescaleIntercept", 0.0))
-    check_finite(path, "RescaleSlope", slope)
-    check_finite(path, "RescaleIntercept", intercept)
-    if slope == 0:  # every voxel would be the intercept
-        raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; "
-                              "the file is corrupt: correct its RescaleSlope (e.g. 1) or move it out of the folder")
-    stored = ds.pixel_array
-    return mark_padding(stored, stored.astype(np.float32) * np.float32(slope) + np.float32(intercept), padding(ds))
+    check_attribute(path, "RescaleSlope", slope)
+    check_attribute(path, "RescaleIntercept", intercept)
+    ds.pixel_array_options(allow_excess_frames=False)  # the one frame its header declares (checked: a single frame)
+    with warnings.catch_warnings():  # pydicom's 2 lines on the bytes past it: the header's frame is what is read
+        warnings.filterwarnings("ignore", "The pixel data is .* bytes long, which indicates it contains .* excess")
+        stored = ds.pixel_array
+    return mark_padding(stored, rescaled(path, stored, slope, intercept), padding(ds))
 
 
-def check_finite(path, tag, values):
-    """Refuse a DICOM attribute holding nan or inf: no volume can be placed or scaled by it."""
-    if not np.all(np.isfinite(values)):
-        raise FileFormatError(f"DICOM file {path} has a non-finite {tag} "
-                              f"({', '.join(map(str, np.atleast_1d(values)))}); the file is corrupt: correct its "
-                              f"{tag} or move it out of the folder")
+def rescaled(path, pixels, slope, intercept):
+    """A slice's or frame's ``pixels`` times ``slope`` plus ``intercept`` as float32, refused (naming the file)
+    where a value passes float32's range: computed in float64, one slice at a time."""
+    values = pixels * float(slope) + float(intercept)
+    check_float32_range(largest_finite(values), path)
+    return values.astype(np.float32)
+
+
+def check_pixel_data(path, ds):
+    """Refuse a DICOM file ``ds`` (read with its pixel data deferred) whose pixel data no decoder here reads (a
+    compressed transfer syntax without its plugin: named, with the packages that decode it), or, uncompressed, is
+    shorter than its Rows, Columns, frames, samples and BitsAllocated declare or declared longer than the file, before
+    a volume is weighed or allocated by them."""
+    from pydicom.pixels import get_decoder
+    from pydicom.pixels.utils import get_expected_length
+
+    syntax = ds.file_meta.get("TransferSyntaxUID")
+    if syntax is None:
+        return
+    try:
+        decoder = get_decoder(syntax)
+    except NotImplementedError:  # a private or unknown syntax
+        decoder = None
+    if decoder is None or not decoder.is_available:
+        needs = "; ".join(decoder.missing_dependencies) if decoder is not None else "a decoder pydicom does not know"
+        raise FileFormatError(f"DICOM file {path} holds pixel data in transfer syntax {syntax} ({syntax.name}), which "
+                              f"no decoder installed here reads ({needs}): install one (pip), or convert the series "
+                              f"with dcm2niix (dcm2niix -o OUT_FOLDER FOLDER) and read the .nii")
+    if syntax.is_encapsulated:
+        return  # compressed frames: their decoder says what they hold
+    with reading(path):
+        element, expected = ds.get_item("PixelData", keep_deferred=True), get_expected_length(ds)
+    held = element.length if hasattr(element, "length") else len(element.value)
+    beyond = getattr(element, "value_tell", 0) + held - os.path.getsize(path)
+    if beyond > 0:  # pydicom would allocate the length the element declares, then read the file short
+        raise FileFormatError(f"DICOM file {path} declares {held:,} bytes of pixel data, {beyond:,} more than the file "
+                              f"holds; the file is truncated or its header is wrong")
+    if held < expected:
+        raise FileFormatError(f"DICOM file {path} holds {held:,} bytes of pixel data where its header declares "
+                              f"{expected:,} (Rows {ds.Rows}, Columns {ds.Columns}, NumberOfFrames "
+                              f"{ds.get('NumberOfFrames') or 1}, BitsAllocated {ds.BitsAllocated}); the file is "
+                              f"truncated or its header is wrong")
+
+
+def check_attribute(path, tag, values):
+    """Refuse a DICOM attribute no volume can be placed or scaled by: nan or inf; an ImageOrientationPatient that is
+    not two perpendicular unit vectors (a slice's row and column directions); a PixelSpacing or ImagePositionPatient
+    beyond the world lengths clwave renders (:data:`~clwave.model.volume.WORLD_RANGE`: the slices' gaps and drift
+    overflowed); a RescaleSlope or RescaleIntercept beyond float32's range, or a RescaleSlope of 0."""
+    values = np.atleast_1d(np.asarray(values, float))
+    shown, low, high = ", ".join(map(str, values[:12])), *WORLD_RANGE
+    count = {"ImageOrientationPatient": 6, "ImagePositionPatient": 3, "PixelSpacing": 2}.get(tag, 1)
+    if values.size == 0 or values.size % count:
+        problem = f"{tag} ({shown}) of {values.size} values, not {count}"
+    elif not np.all(np.isfinite(values)):
+        problem = f"a non-finite {tag} ({shown})"
+    elif tag == "ImageOrientationPatient":
+        rows = values.reshape(-1, 2, 3)
+        with np.errstate(over="ignore"):  # a huge one: not a unit vector
+            unit = np.allclose(np.linalg.norm(rows, axis=2), 1, atol=1e-3)
+            perpendicular = np.allclose(np.sum(rows[:, 0] * rows[:, 1], axis=1), 0, atol=1e-3)
+        problem = None if unit and perpendicular else f"{tag} ({shown}), not two perpendicular unit vectors"
+    elif tag in ("PixelSpacing", "ImagePositionPatient"):
+        inside = (values.min() >= low if tag == "PixelSpacing" else True) and np.abs(values).max() <= high
+        problem = None if inside else f"{tag} ({shown}) beyond the world lengths clwave renders ({low:g} to {high:g})"
+    elif tag == "RescaleSlope" and not np.all(values):
+        problem = "RescaleSlope 0, which maps every pixel to the intercept"
+    else:
+        inside = np.abs(values).max() <= np.finfo(np.float32).max
+        problem = None if inside else f"{tag} ({shown}) beyond float32's range"
+    if problem:
+        raise FileFormatError(f"DICOM file {path} has {problem}; the file is corrupt: correct its {tag} or move it "
+                              f"out of the folder")

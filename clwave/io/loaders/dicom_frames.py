@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .dicom import check_finite, fill_padding, mark_padding, padding, place_slices
+from .dicom import check_attribute, check_pixel_data, fill_padding, mark_padding, padding, place_slices, rescaled
 from .shared import check_whole
 
 #: what converts a multi-frame file clwave cannot place into a volume it reads
@@ -43,16 +43,14 @@ def read_dicom_frames(path, fits=None):
                                                             "groups or grid frame offsets)"
         raise FileFormatError(f"{path} is a multi-frame DICOM file ({kind}, {frames} frames) of {why}, not a volume "
                               f"clwave places; {CONVERTER.replace('FILE', str(path))}")
+    check_pixel_data(path, ds)
     positions, cosines, pixel, slopes, intercepts = geometry
     for tag, values in (("ImagePositionPatient", positions), ("ImageOrientationPatient", cosines),
                         ("PixelSpacing", pixel), ("RescaleSlope", slopes), ("RescaleIntercept", intercepts)):
-        check_finite(path, tag, values)
+        check_attribute(path, tag, values)
     if not np.allclose(cosines, cosines[0], atol=1e-4):
         raise FileFormatError(f"{path} is a multi-frame DICOM file whose frames lie in several orientations; "
                               f"{CONVERTER.replace('FILE', str(path))}")
-    if np.any(slopes == 0):
-        raise FileFormatError(f"DICOM file {path} has RescaleSlope 0, which maps every pixel to the intercept; the "
-                              f"file is corrupt")
     size, marks = (int(ds.Rows), int(ds.Columns)), padding(ds)
 
     def read(order):
@@ -62,9 +60,7 @@ def read_dicom_frames(path, fits=None):
             if count > frames:
                 break
             k = count - 1
-            data[rank[k]] = frame.reshape(size)
-            data[rank[k]] *= slopes[k]
-            data[rank[k]] += intercepts[k]
+            data[rank[k]] = rescaled(path, frame.reshape(size), slopes[k], intercepts[k])
             mark_padding(frame.reshape(size), data[rank[k]], marks)
         if count != frames:  # pydicom yields what the pixel data holds: a short file leaves slices unwritten
             held = count if count < frames else f"more than {frames}"

@@ -6,7 +6,7 @@ from __future__ import annotations
 from functools import partial
 
 from ...errors import FileFormatError
-from ..hdf5_safety import check_stored_inside
+from ..hdf5_safety import check_filters_available, check_stored_inside
 from .shared import OnDemand, as_array, pick_array
 
 
@@ -27,12 +27,17 @@ def read_hdf5(path, name, chunks, fits=None):
             check_stored_inside(dataset.id, f"{path}:/{name}")
         except ValueError as exc:
             raise FileFormatError(f"{exc}; clwave reads volumes stored in the file itself") from None
+        try:
+            check_filters_available(dataset.id, f"{path}:/{name}")
+        except ValueError as exc:
+            raise FileFormatError(f"{exc}; write it again without that filter, or with one of hdf5plugin's") from None
         source = OnDemand(partial(_read_dataset, str(path), name), dataset.shape, dataset.dtype, dataset.chunks)
     return as_array(source, chunks, fits=fits, path=f"{path}:/{name}"), None, None
 
 
 def _read_dataset(path, name, index):
     import h5py
+    import hdf5plugin  # noqa: F401  (its filters, in a worker process too)
 
     with h5py.File(path, "r") as fh:
         return fh[name][index]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import warnings
 
 import numpy as np
@@ -37,7 +38,7 @@ def read_nifti(path, chunks, fits=None):
         raise FileFormatError(f"{path}: its voxel-to-world affine (sform, qform or pixdim) is not finite or not "
                               "invertible; fix the header, e.g. with nibabel's set_sform and set_qform")
     check_declared_size(path, image.dataobj.offset,
-                        int(np.prod(image.shape)) * image.header.get_data_dtype().itemsize, image.shape)
+                        math.prod(image.shape) * image.header.get_data_dtype().itemsize, image.shape)
     proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
     if proxy.ndim > 3:
         # NIfTI keeps time on the 4th axis and vector components on the 5th

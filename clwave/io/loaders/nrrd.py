@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_declared_size, check_whole, note, to_canonical
+from .shared import check_declared_size, check_whole, not_a_file, note, to_canonical
 
 _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
@@ -45,8 +47,7 @@ def read_nrrd(path, fits=None, warn_spacing=True):
             raise FileFormatError(
                 f"{path} has {len(sizes)} axes of sizes {tuple(sizes)} in a {width}-D space; clwave "
                 "reads 3 spatial axes in 3-D space plus at most one channel axis")
-        if directions is not None and abs(np.linalg.det(directions[spatial])) <= 1e-9 * np.prod(
-                np.linalg.norm(directions[spatial], axis=1)):
+        if directions is not None and _singular(directions[spatial]):
             raise FileFormatError(f"{path}: its space directions {_rows(directions[spatial])} are singular (a zero or "
                                   "repeated direction) and span no 3-D grid; correct the header's space directions")
         check_whole(path, [sizes[a] for a in spatial + others], nrrd.reader._determine_datatype(header), fits)
@@ -73,7 +74,12 @@ def _read_header(path, fh):
     import nrrd
 
     try:
-        return nrrd.read_header(fh)
+        with warnings.catch_warnings():  # a number beyond int64 (sizes: 1e20) is cast with a warning, to nonsense
+            warnings.simplefilter("error", RuntimeWarning)
+            return nrrd.read_header(fh)
+    except RuntimeWarning as exc:
+        raise FileFormatError(f"{path}: its header holds a number beyond the range of its field ({exc}); correct the "
+                              "header") from None
     except ValueError:  # pynrrd reads the list's file names as broken fields
         fh.seek(0)
         if re.search(rb"^data ?file: *LIST", fh.read(1 << 16), re.M):
@@ -84,6 +90,16 @@ def _read_header(path, fh):
 def _several_files(path, name) -> FileFormatError:
     return FileFormatError(f"{path} spreads its data over several files (data file: {name}); clwave reads one data "
                            "file: join them into one raw file and name it in the header")
+
+
+def _singular(directions) -> bool:
+    """Whether three directions span no 3-D grid: a zero or repeated one, by the determinant of the directions scaled
+    to their largest component (at any scale: a huge one's determinant overflowed, and its size is Volume's check)."""
+    largest = np.abs(directions).max(axis=1, keepdims=True)
+    if not largest.all():
+        return True
+    scaled = directions / largest
+    return abs(np.linalg.det(scaled)) <= 1e-9 * np.prod(np.linalg.norm(scaled, axis=1))
 
 
 def _rows(directions) -> str:
@@ -117,6 +133,8 @@ def _data_file(path, header):
         raise FileFormatError(f"{path} names the data file {name}, outside the header's folder {folder}; clwave "
                               "reads no files elsewhere for an untrusted header: put the data file beside the header "
                               "and name it there")
+    if target.exists() and not target.is_file():
+        raise not_a_file(target)
     return target
 
 
@@ -138,6 +156,6 @@ def _check_nrrd_size(path, header, offset):
     if min(sizes) < 1:
         raise FileFormatError(f"{path}: its header declares sizes {' '.join(map(str, sizes))}; every axis needs at "
                               "least one voxel")
-    nbytes = int(np.prod(sizes, dtype=np.float64)) * nrrd.reader._determine_datatype(header).itemsize
+    nbytes = math.prod(sizes) * nrrd.reader._determine_datatype(header).itemsize
     skip = max(int(header.get("byte skip", 0) or 0), 0)
     check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=encoding != "raw")

@@ -33,7 +33,7 @@ def read_raw(path, shape, dtype, byte_order, chunks, fits=None):
                          "(big endian)")
     if byte_order is not None:
         dt = dt.newbyteorder(byte_order)
-    expected = int(np.prod(shape)) * dt.itemsize
+    expected = math.prod(shape) * dt.itemsize  # Python's ints: numpy's wrap at 2^64
     actual = os.path.getsize(path)
     if actual != expected:
         values = " x ".join(map(str, shape))

@@ -93,6 +93,13 @@ def reading(path):
         _QUIET.add(-1)
 
 
+def not_a_file(path) -> FileFormatError:
+    """The error for a ``path`` that is neither a regular file nor a folder: a FIFO, a socket or a device, whose
+    reading waits for a writer or never ends."""
+    return FileFormatError(f"{path} is not a regular file (a FIFO, a socket or a device): clwave reads volumes from "
+                           "files; copy the data to a file first")
+
+
 def _corrupt(path, exc) -> str:
     lines = str(exc).strip().splitlines()
     reason = type(exc).__name__ + (f": {lines[0][:200]}" if lines else "")
@@ -242,8 +249,14 @@ def as_array(source, chunks, roles=None, fits=None, path=None):
     if chunks == "auto" and 4 * math.prod(n for n, r in zip(own, roles) if r == "s") >= CHUNK_BYTES:
         edges = own  # the store's chunks are big already: one each (a Zarr chunk is decoded whole)
     edges = tuple({"t": 1, "c": -1}.get(r, edge) for r, edge in zip(roles, edges))
-    blocks = normalize_chunks(edges, shape, limit=CHUNK_BYTES, dtype=np.float32, previous_chunks=own)
-    count = math.prod(len(b) for b in blocks)
+    # the fewest chunks these edges cut the volume into, before Dask lists every chunk's size (a header of 2^40
+    # voxels an axis filled the memory with those lists)
+    count = math.prod(1 if edge in (-1, "auto") else -(-n // edge) for n, edge in zip(shape, edges))
+    if "auto" in edges:
+        count = max(count, 4 * math.prod(shape) // CHUNK_BYTES)
+    if count <= MAX_CHUNKS:
+        blocks = normalize_chunks(edges, shape, limit=CHUNK_BYTES, dtype=np.float32, previous_chunks=own)
+        count = math.prod(len(b) for b in blocks)
     if count > MAX_CHUNKS and (chunks == "auto" or 4 * math.prod(shape) > MAX_CHUNKS * CHUNK_BYTES):
         raise InputError(f"{path} holds a {' x '.join(map(str, shape))} volume ({4 * math.prod(shape):,} bytes as "
                          f"float32), too big for this machine: even in chunks of {CHUNK_BYTES:,} bytes Dask's task "
@@ -316,19 +329,25 @@ def to_canonical(array_ijk, affine_ras):
     from nibabel.affines import obliquity
     from nibabel.orientations import inv_ornt_aff, io_orientation
 
-    ornt = io_orientation(affine_ras)
+    # the orientation, obliquity and voxel sizes at any scale (a huge one overflowed here; its size is Volume's check,
+    # WORLD_RANGE): of the affine's columns scaled to their largest component
+    scale = np.abs(affine_ras[:3, :3]).max(axis=0)
+    scale = np.append(np.where(scale > 0, scale, 1.0), 1.0)
+    ornt = io_orientation(affine_ras / scale)
     # nibabel's apply_orientation by slicing and transposing, so a Dask array stays lazy
     flips = tuple(slice(None, None, -1) if flip < 0 else slice(None) for flip in ornt[:, 1])
     array_xyz = array_ijk[flips].transpose(tuple(np.argsort(ornt[:, 0])) + tuple(range(3, array_ijk.ndim)))
-    affine_xyz = affine_ras @ inv_ornt_aff(ornt, array_ijk.shape[:3])
-    tilt = float(np.degrees(np.abs(obliquity(affine_xyz)).max()))
+    to_xyz = inv_ornt_aff(ornt, array_ijk.shape[:3])
+    unit_xyz = (affine_ras / scale) @ to_xyz
+    tilt = float(np.degrees(np.abs(obliquity(unit_xyz)).max()))
     if tilt > 0.01:
         note(f"the volume is oblique by {tilt:.2f} degrees; it is shown in the closest canonical (RAS) orientation, "
              f"its axes taken as the world's (recorded in a .clw: a cone beam's pose is relative to them)")
     else:
         tilt = 0.0
-    spacing_xyz = np.linalg.norm(affine_xyz[:3, :3], axis=0)
-    centre = affine_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: infinite, Volume names it
+        spacing_xyz = np.abs(to_xyz[:3, :3]).T @ scale[:3] * np.linalg.norm(unit_xyz[:3, :3], axis=0)
+        centre = affine_ras @ to_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
     array_zyx = array_xyz.transpose((2, 1, 0) + tuple(range(3, array_xyz.ndim)))
     return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3]), tilt
 

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import as_array, pick_array
+from .shared import as_array, not_a_file, pick_array
 
 ZARR_METADATA = ("zarr.json", ".zarray", ".zgroup")  # v3, v2 array, v2 group
 
@@ -29,6 +31,7 @@ def read_zarr(path, name, level, chunks, fits=None):
         """{name from the store's top: array} of the arrays in ``group`` (at ``prefix``), at any depth."""
         return {prefix + n: a for n, a in group.members(max_depth=None) if isinstance(a, zarr.Array)}
 
+    _check_store_files(path)
     node = zarr.open(str(path), mode="r")
     if name is not None:
         if not isinstance(node, zarr.Group):
@@ -51,6 +54,30 @@ def read_zarr(path, name, level, chunks, fits=None):
                          "it out", cli=f"--level applies to OME-Zarr multiscale images, and {where} is a plain "
                                         "Zarr array; leave it out")
     return as_array(node, chunks, fits=fits, path=where), None, None
+
+
+def _check_store_files(store):
+    """Refuse a store (a folder) holding a link to a folder (a loop, or a tree elsewhere), a link to a file
+    outside it, or a FIFO, socket or device: its chunks would read other files' bytes (``/etc/passwd`` as voxels),
+    or ``/dev/zero`` until the memory ran out, or wait for ever.  One walk of the store's names (a link's target is
+    resolved, no file is read)."""
+    root = Path(store).resolve()
+    pending = [root]
+    while pending:
+        with os.scandir(pending.pop()) as entries:
+            for entry in entries:
+                if entry.is_symlink():
+                    target = Path(entry.path).resolve()
+                    if target.is_dir() or not target.is_relative_to(root):
+                        raise FileFormatError(f"{store} links {Path(entry.path).relative_to(root)} to {target}, "
+                                              "a folder or a file outside the store; clwave reads no files elsewhere "
+                                              "for an untrusted store: copy the data into the store")
+                    if not target.is_file():
+                        raise not_a_file(target)
+                elif entry.is_dir():
+                    pending.append(entry.path)
+                elif not entry.is_file():
+                    raise not_a_file(Path(entry.path))
 
 
 def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
@@ -122,5 +149,6 @@ def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
     data = data.transpose([names.index(a) for a in "zyxc" if a in names])
     shape = np.array(data.shape[:3])
     spacing = tuple(float(d) for d in scale[zyx])
-    origin = translation[zyx] + scale[zyx] * (shape - 1) / 2  # the volume's centre, (z, y, x)
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: infinite, Volume names the scale
+        origin = translation[zyx] + scale[zyx] * (shape - 1) / 2  # the volume's centre, (z, y, x)
     return data, spacing, tuple(float(o) for o in origin[::-1])
