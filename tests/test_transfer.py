@@ -320,3 +320,21 @@ def test_check_visible_refuses_exactly_what_classify_refuses():
         assert refused[0] == refused[1]
         outcomes.append(refused[0])
     assert 5 < sum(outcomes) < 55  # both kinds met
+
+
+def test_a_colour_volumes_window_in_sample_units_is_warned():
+    """A colour volume is classified on its luminance, 0 .. 1 whatever its sample type: a window in 8-bit units
+    (0 .. 100 on an RGB stack) left a new user's image at 0.2 % of its range, silently; it is told in one line, and a
+    window within 0 .. 1 (or "auto") is not."""
+    import warnings
+
+    from clwave.errors import ClwaveWarning
+
+    rgb = Volume(np.random.default_rng(0).integers(0, 255, (8, 8, 8, 3)).astype(np.uint8))
+    with pytest.warns(ClwaveWarning, match=r"window of 0 .. 100 puts all of it in 1.0% of the window; give one "
+                                           r"within 0 .. 1 \(window=\(lo, hi\)\)"):
+        TransferFunction.preset("grey", window=(0, 100)).classify(rgb)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for window in ((0, 0.4), "auto", (-0.5, 1.2)):
+            TransferFunction.preset("grey", window=window).classify(rgb)

@@ -86,7 +86,8 @@ def add_model_options(p, classify=True):
     g.add_argument("--tf", help="classify with a transfer-function preset first: "
                                 + ", ".join(TransferFunction.PRESETS))
     g.add_argument("--tf-window", help="transfer-function window: auto (percentiles of the values) or LO,HI in "
-                   "the input's units (HU for CT, attenuation per mm with --hu-to-mu; with or without --subtract)")
+                   "the input's units (HU for CT, attenuation per mm with --hu-to-mu; with or without --subtract); "
+                   "a colour volume's in its luminance, 0 .. 1 whatever its sample type")
     g.add_argument("--classify", choices=("pre", "post"), default="pre",
                    help="with --tf: pre (default) classifies the volume before the transform; post keeps the "
                         "scalar and the transfer function for ray tracing to classify while rendering (a .clw "

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..errors import InputError, NothingVisibleError
+from ..errors import ClwaveWarning, InputError, NothingVisibleError, warn_outside
 from .tf_passes import auto_window, classified, rgb_scale, scan
 from .tf_presets import PRESETS as _PRESETS
 from .volume import Volume
@@ -216,6 +216,8 @@ class TransferFunction:
                              "wrap arrays with clwave.Volume(array, spacing=...)")
         tf = self._on(vol, window)
         window, scale = tf._statistics(vol)
+        if vol.channels > 1 and window is not None and window[1] - window[0] > 2:
+            _warn_colour_window(window)
         paint = tf._painter(vol.channels, window, scale)
         if vol.chunked:  # each chunk classified when it is read: the values classify gives in memory
             data = vol.data if vol.data.ndim == 4 else vol.data[..., None]
@@ -234,13 +236,14 @@ class TransferFunction:
         lo, hi = self.data_points(window)[[0, -1]] + shift
         data = vol.data.reshape(-1, vol.channels)
         if vol.channels == 1:
-            what, values = "values", data[:, 0] + shift
+            what, values, units = "values", data[:, 0] + shift, "the input's units"
         else:
             what, values = "luminance (0 .. 1)", _luminance(data[:, :3].astype(np.float64) / scale)
+            units = "its luminance, 0 .. 1 whatever the sample type"
         name = f" {self.name}" if self.name else ""
         line = (f"the transfer function{name} gives no voxel of this volume any opacity: its points span "
                 f"{lo:.4g} .. {hi:.4g} and the volume's {what} lie within {np.nanmin(values):.4g} .. "
-                f"{np.nanmax(values):.4g}; give a window in the input's units")
+                f"{np.nanmax(values):.4g}; give a window in {units}")
         return NothingVisibleError(f"{line} (window=(lo, hi)) or another function",
                                    cli=f"{line} (--tf-window LO,HI) or another preset")
 
@@ -420,6 +423,16 @@ def _channels(vol) -> int:
         raise InputError(f"cannot classify a {c}-channel volume; give a scalar (1), "
                          "RGB (3) or RGBA (4) volume")
     return c
+
+
+def _warn_colour_window(window):
+    """A colour volume's window wider than twice its luminance's 0 .. 1 (sample units, 0 .. 255 say): nearly
+    transparent, or nothing but the window's first values (a new user's 0 .. 100 on an 8-bit stack drew 0.2 % of
+    the image's range)."""
+    lo, hi = window
+    line = (f"a colour volume is classified on its luminance, 0 .. 1 whatever its sample type, so a window of "
+            f"{lo:g} .. {hi:g} puts all of it in {1 / (hi - lo):.1%} of the window; give one within 0 .. 1")
+    warn_outside(ClwaveWarning(line + " (window=(lo, hi))", cli=line + " (--tf-window LO,HI)"))
 
 
 def _luminance(rgb):
