@@ -67,9 +67,11 @@ class Volume:
             raise InputError(
                 f"volume must be 3-D (z, y, x) or 4-D (z, y, x, c), got shape {arr.shape}")
         if arr.ndim == 4 and not 1 <= arr.shape[3] <= MAX_CHANNELS:
-            raise InputError(
-                f"volume has {arr.shape[3]} channels in its last axis; 1 to {MAX_CHANNELS} "
-                "are supported (scalar, RGB, RGBA); axis order is (z, y, x, c)")
+            what = (f"volume has {arr.shape[3]} channels in its last axis; 1 to {MAX_CHANNELS} are supported (scalar, "
+                    f"RGB, RGBA); axis order is (z, y, x, c), and a time series (t, z, y, x) is rendered one time "
+                    f"point at a time")
+            raise InputError(f"{what}: give one, e.g. data[t]", cli=f"{what}: write one to a file (or dataset) of "
+                                                                    f"its own")
         shape = arr.shape[:3]
         if min(shape) < 2:
             raise InputError(

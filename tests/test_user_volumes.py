@@ -1,6 +1,6 @@
-"""NaN voxels as "no data" (FSL and SPM write NaN outside their masks): ``load(path, nan=VALUE)`` and ``--nan VALUE``
-give them a value, in the file's units, before anything else (docs/coordinates.md §1); without it they are
-refused in one line naming the option."""
+"""Volumes as users hand them: NaN voxels as "no data" (FSL and SPM write NaN outside their masks), which
+``load(path, nan=VALUE)`` and ``--nan VALUE`` give a value in the file's units before anything else
+(docs/coordinates.md §1), else refused in one line naming the option; a time series told as one."""
 
 import nibabel as nib
 import numpy as np
@@ -52,3 +52,15 @@ def test_nan_on_the_command_line(masked, capsys, monkeypatch):
         assert main(["compress", *argv, "-o", "b.clw"]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and needle in err, err
+
+
+def test_a_time_series_is_told_as_one(tmp_path, capsys, monkeypatch):
+    """A (t, z, y, x) array read as (z, y, x, c) of 16 channels: the refusal names a time series and the way (trial21:
+    it spoke of channels only)."""
+    with pytest.raises(InputError, match=r"a time series \(t, z, y, x\) is rendered one time point at a time: give "
+                                         r"one, e.g. data\[t\]"):
+        clwave.Volume(np.zeros((5, 16, 16, 16), np.float32))
+    np.save(tmp_path / "ts.npy", np.zeros((5, 16, 16, 16), np.float32))
+    monkeypatch.chdir(tmp_path)
+    assert main(["compress", "ts.npy", "-o", "ts.clw"]) == 2
+    assert "one time point at a time: write one to a file (or dataset) of its own" in capsys.readouterr().err
