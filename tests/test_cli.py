@@ -841,3 +841,12 @@ def test_a_turntables_raw_output_holds_every_view(tmp_path, capsys):
     code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "--turntable", "1",
                          "-o", str(tmp_path / "one.gif"), "--raw", str(tmp_path / "one.npy"))
     assert code == 0 and "turntable of 1 view at" in out and np.load(tmp_path / "one.npy").shape == (1, 8, 8, 1)
+
+
+def test_an_output_ending_in_a_slash_is_refused(tmp_path, capsys, monkeypatch):
+    """``-o adir.png/`` names a folder: refused before any work (pathlib dropped the slash, and a file adir.png was
+    written; trial21)."""
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "1", "--size", "16", "-o", "adir.png/")
+    assert code == 2 and "-o adir.png/ ends in a slash, naming a folder; name a file" in err
+    assert list(tmp_path.iterdir()) == []

@@ -364,6 +364,8 @@ def check_outputs(force, *outputs) -> list:
         if path is None:
             paths.append(None)
             continue
+        if str(path).endswith(("/", os.sep)):  # Path() drops it: "a.png/" would write a.png
+            raise InputError(f"{option} {path} ends in a slash, naming a folder; name a file")
         path = Path(path)
         if path.suffix.lower() not in suffixes:
             raise InputError(f"{option} {path} must end in {' or '.join(suffixes)}{''.join('; ' + h for h in hint)}")
