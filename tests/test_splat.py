@@ -382,3 +382,15 @@ def test_the_texture_lookup_follows_the_texels_per_pixel_by_value(cc, data, monk
     monkeypatch.setattr(tables, "texels_per_pixel", lambda *a, **k: kind(per_pixel(*a, **k)))
     for cam, want in zip(cameras, expect):
         assert all(np.array_equal(got, w) for got, w in zip(drawn(cam), want))
+
+
+def test_more_progressive_steps_than_the_model_allows_are_told():
+    """Each splatting frame doubles the coefficients from one, so a model of N allows about log2(N) + 1 frames:
+    steps=40 gave 13 frames silently (trial21; ray tracing warned of its own limit already)."""
+    from clwave.errors import ClwaveWarning
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1).threshold(keep=0.6)
+    camera = clwave.Camera(30, 20, size=16)
+    with pytest.warns(ClwaveWarning, match=r"a model of 2,458 coefficients allows 13 progressive frames, each "
+                                           r"doubling them, not steps=40"):
+        assert len(list(clwave.progressive(wv, camera, steps=40))) == 13

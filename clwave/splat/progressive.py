@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.camera import Camera
-from ..errors import InputError, whole_number
+from ..errors import ClwaveWarning, InputError, warn_outside, whole_number
 from ..frames import FinalImage, Frame, check_error, reached
 from .renderer import SplatRenderer, shared_renderer
 from .estimate import SplatEstimate
@@ -101,6 +101,10 @@ def _frames(r: SplatRenderer, camera: Camera, steps, budget, error):
     start = time.perf_counter()
     acc = r.begin(camera)
     counts = schedule(total, int(steps) if steps is not None else 8)
+    if steps is not None and len(counts) < steps:  # each frame doubles the coefficients, from one
+        many = f"{len(counts)} progressive frame{'s' if len(counts) != 1 else ''}"
+        line = f"a model of {total:,} coefficients allows {many}, each doubling them, not "
+        warn_outside(ClwaveWarning(line + f"steps={steps}", cli=line + f"--steps {steps}"))
     done, estimate = 0, SplatEstimate(r, acc.view)
     per_coefficient = None  # the last frame's own seconds (splats, read-back, estimate) a coefficient it added
     for index, count in enumerate(counts):
