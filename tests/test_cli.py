@@ -850,3 +850,27 @@ def test_an_output_ending_in_a_slash_is_refused(tmp_path, capsys, monkeypatch):
     code, _, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "1", "--size", "16", "-o", "adir.png/")
     assert code == 2 and "-o adir.png/ ends in a slash, naming a folder; name a file" in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_gif_interrupted_while_written_leaves_nothing_and_no_late_error(tmp_path, monkeypatch):
+    """Ctrl-C while a progressive GIF is written: no file, and nothing written later (imageio's writer, interrupted,
+    wrote to the closed file from its __del__ at exit: "Exception ignored in PluginV3.__del__ ... write to closed
+    file"; trial21): the GIF is written by Pillow itself."""
+    import gc
+    import sys
+
+    from PIL import Image
+
+    from clwave.cli.options import write_gif
+
+    def interrupted(self, fp, *args, **kwargs):
+        fp.write(b"GIF89a")  # a frame begun
+        raise KeyboardInterrupt
+
+    unraisable = []
+    monkeypatch.setattr(sys, "unraisablehook", unraisable.append)
+    monkeypatch.setattr(Image.Image, "save", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_gif(tmp_path / "p.gif", [np.zeros((8, 8), np.uint8)] * 3, 0.5, False)
+    gc.collect()
+    assert list(tmp_path.iterdir()) == [] and unraisable == []
