@@ -96,6 +96,15 @@ def test_a_slice_of_another_size_mode_or_depth_is_refused_by_name(tmp_path, firs
     assert_one_line_error(excinfo)
 
 
+def test_a_tiff_slice_of_another_sample_type_is_refused_not_cast(tmp_path):
+    """Until photo21 a uint16 slice of 300 after a uint8 one was cast into uint8 (read as 44)."""
+    tifffile.imwrite(tmp_path / "s1.tif", np.zeros((4, 5), np.uint8))
+    tifffile.imwrite(tmp_path / "s2.tif", np.full((4, 5), 300, np.uint16))
+    with pytest.raises(FileFormatError,
+                       match=r"s2\.tif has shape \(4, 5\) of uint16 but s1\.tif has \(4, 5\) of uint8"):
+        load(tmp_path)
+
+
 def test_a_png_stack_is_weighed_after_its_first_slice(tmp_path, monkeypatch):
     """As a TIFF folder: the first slice and the number of files declare the stack, weighed before the rest."""
     from clwave.io.loaders import slices
