@@ -847,13 +847,13 @@ def test_float32_is_weighed_as_read(tmp_path, monkeypatch):
 
 def test_a_stack_of_slices_is_weighed_after_its_first_slice(tmp_path, monkeypatch):
     """A folder of slices declares its size by its first slice and its number of files: weighed before the rest."""
-    from clwave.io.loaders import tiff
+    from clwave.io.loaders import slices
 
     for z in range(8):
         tifffile.imwrite(tmp_path / f"s{z}.tif", np.zeros((16, 16), np.uint16))
     read, declared = [], []
-    real = tiff.read_tiff
-    monkeypatch.setattr(tiff, "read_tiff", lambda path, **kwargs: read.append(path) or real(path, **kwargs))
+    real = slices.read_tiff
+    monkeypatch.setattr(slices, "read_tiff", lambda path, **kwargs: read.append(path) or real(path, **kwargs))
 
     class Refused(ClwaveError):
         pass

@@ -5,8 +5,9 @@ The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; med
 millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
 stores, and large .npy, .raw and .nii files, are read chunk by chunk as Dask arrays (docs/chunked.md §1).
 
-One module per format family (``raw``: .raw and .npy; ``nifti``, ``nrrd``, ``tiff``, ``dicom``, ``hdf5``,
-``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared`` holds what they share.
+One module per format family (``raw``: .raw and .npy; ``nifti``, ``nrrd``, ``tiff``, ``slices``: folders of TIFF,
+PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared`` holds
+what they share.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.volume import Volume, is_dask
-from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, tiff, zarr
+from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import SUPPORTED, Declared, check_chunks, not_a_file, reading, to_float32
 
 __all__ = ["load", "describe", "SUPPORTED"]
@@ -28,6 +29,8 @@ __all__ = ["load", "describe", "SUPPORTED"]
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
                ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"}
+#: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
+_SLICE_FOLDERS = tuple(f"{name.lower()}-folder" for name in slices.SLICE_SUFFIXES)
 # 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
 _INNER_PATH = re.compile(r"(.*\.(?:h5|hdf5|hdf|zarr)):(.*)", re.IGNORECASE | re.DOTALL)
 # Options that apply to one kind of input only
@@ -44,9 +47,10 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     ----------
     path : str or os.PathLike
         ``.npy``, ``.nii``, ``.nii.gz``, ``.nrrd``, ``.nhdr``, a multi-page
-        ``.tif``/``.tiff``, a folder of 2-D TIFF slices (stacked in natural name
-        order: ``slice2`` before ``slice10``), a folder of DICOM files (other files
-        in it are ignored), a multi-frame DICOM file whose frames carry positions
+        ``.tif``/``.tiff``, a folder of 2-D TIFF, PNG or JPEG slices of one format
+        (grey, RGB or RGBA; stacked in natural name order: ``slice2`` before
+        ``slice10``), a folder of DICOM files (other files in it are ignored), a
+        multi-frame DICOM file whose frames carry positions
         (enhanced CT/MR, RT Dose), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
         or an HDF5 file ``.h5``/``.hdf5``/``.hdf``.  ``file.h5:/name`` and
         ``store.zarr:/name`` name an array inside; without a name the store's only
@@ -170,8 +174,8 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     if kind == "tiff":
         data, spacing = tiff.read_tiff(path, fits)
         return data, spacing, None, 0.0
-    if kind == "tiff-folder":
-        return tiff.read_tiff_folder(path, progress_bar, fits), None, None, 0.0
+    if kind in _SLICE_FOLDERS:
+        return slices.read_slice_folder(path, progress_bar, fits), None, None, 0.0
     if kind == "dicom-frames":
         return dicom_frames.read_dicom_frames(path, fits)
     return dicom.read_dicom_folder(path, series, progress_bar, fits)
@@ -242,7 +246,8 @@ def _kind(path: Path) -> str:
         if zarr_named:
             raise FileFormatError(f"{path} is not a Zarr store: it has no {', '.join(zarr.ZARR_METADATA)}; name the "
                                   "store's top folder (or one array or group folder inside it)")
-        return "tiff-folder" if tiff.tiff_files(path) else "dicom"
+        slice_format = slices.slice_files(path)[0]
+        return f"{slice_format.lower()}-folder" if slice_format else "dicom"
     name = path.name.lower()
     suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
     if not path.exists():

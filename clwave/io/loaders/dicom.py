@@ -222,7 +222,7 @@ def _dicom_image_series(folder):
               if any(all(tag in h for tag in _DICOM_SLICE_TAGS) for _, h in files)}
     if not images:
         raise FileFormatError(
-            f"folder {folder} holds no TIFF slices and no DICOM image slices (files with "
+            f"folder {folder} holds no TIFF, PNG or JPEG slices and no DICOM image slices (files with "
             f"{', '.join(_DICOM_SLICE_TAGS)}); supported inputs: {SUPPORTED}")
     for uid, files in images.items():
         for path, header in files:

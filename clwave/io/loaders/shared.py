@@ -27,9 +27,9 @@ def note(text: str):
     it, and the command line prints it as ``clwave: warning: ...``."""
     warn_outside(ClwaveWarning(text))
 
-SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page, or a folder of 2-D slices), a folder of "
-             "DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a Zarr or OME-Zarr "
-             "store (folder), .h5/.hdf5 (file.h5:/dataset)")
+SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page), a folder of 2-D TIFF, PNG or JPEG "
+             "slices, a folder of DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a "
+             "Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset)")
 
 #: chunks=None reads .npy, .raw and .nii files whose volume takes at least this many bytes as float32 chunk
 #: by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
@@ -362,10 +362,11 @@ def read_slices(paths, read_slice, desc, progress_bar, fits=None):
         if volume is None:
             check_whole(path.parent, (len(paths),) + image.shape, image.dtype, fits)
             volume = np.empty((len(paths),) + image.shape, image.dtype)
-        elif image.shape != volume.shape[1:]:
+        elif image.shape != volume.shape[1:] or image.dtype != volume.dtype:
             raise FileFormatError(
-                f"slice {path} has shape {image.shape} but {paths[0].name} has "
-                f"{volume.shape[1:]}; all slices of a volume must have the same size")
+                f"slice {path} has shape {image.shape} of {image.dtype} but {paths[0].name} has "
+                f"{volume.shape[1:]} of {volume.dtype}; all slices of a volume must have one size, mode and "
+                f"sample type: move the odd one out of the folder, or convert it")
         volume[z] = image
     return volume
 

@@ -1,19 +1,15 @@
-"""TIFF stacks (multi-page ``.tif``/``.tiff``) and folders of 2-D TIFF slices through tifffile."""
+"""TIFF stacks (multi-page ``.tif``/``.tiff``) and TIFF slices (of a folder, ``slices``) through tifffile."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_whole, folder_files, log, note, read_slices
+from .shared import check_whole, log, note
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
 OME_MICROMETRES = {"pm": 1e-6, "Å": 1e-4, "nm": 1e-3, "µm": 1.0, "um": 1.0, "mm": 1e3, "cm": 1e4, "m": 1e6}
-
-
-def tiff_files(folder):
-    return [p for p in folder_files(folder) if p.suffix.lower() in TIFF_SUFFIXES]
 
 
 def read_tiff(path, fits=None, stack=True):
@@ -113,14 +109,3 @@ def _imagej_spacing(tif, path):
              f" is not positive and finite; taken as 1 there: give spacing= (--spacing DZ,DY,DX) for the true one")
     return tuple(1.0 if a in bad else d for a, d in zip("zyx", spacing))
 
-
-def read_tiff_folder(folder, progress_bar, fits=None):
-    """One 2-D TIFF per slice, stacked along z in natural name order."""
-    def read_slice(path):
-        pages = read_tiff(path, stack=False)[0]
-        if len(pages) != 1:
-            raise FileFormatError(f"{path} holds {len(pages)} pages, but a folder of TIFF "
-                                  "slices needs one 2-D image per file")
-        return pages[0]
-
-    return read_slices(tiff_files(folder), read_slice, "reading TIFF slices", progress_bar, fits)

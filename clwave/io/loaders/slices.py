@@ -1,0 +1,62 @@
+"""Folders of 2-D slices, one file a slice (TIFF, PNG or JPEG: e.g. a cryosection's photographs), stacked along z
+in natural name order (docs/coordinates.md §1)."""
+
+from __future__ import annotations
+
+from ...errors import FileFormatError
+from .shared import check_whole, folder_files, read_slices
+from .tiff import TIFF_SUFFIXES, read_tiff
+
+#: the slice formats a folder may hold (one of them), by file name suffix
+SLICE_SUFFIXES = {"TIFF": TIFF_SUFFIXES, "PNG": (".png",), "JPEG": (".jpg", ".jpeg")}
+#: Pillow's modes of the images read as they are: grey (1, 8 or 16 bit), grey + alpha, a palette (read as RGB or
+#: RGBA), RGB and RGBA; others (CMYK, YCbCr, 32-bit) hold no colour clwave models as it is stored
+_IMAGE_MODES = ("1", "L", "LA", "I;16", "I;16B", "P", "RGB", "RGBA")
+#: PNG colour types with an alpha or colour sample, which Pillow reads as 8 bits even where the file stores 16
+_PNG_COLOUR_TYPES = {2: "RGB", 4: "grey + alpha", 6: "RGBA"}
+
+
+def slice_files(folder):
+    """``(format, files)`` of a folder of slices in natural name order (``slice2`` before ``slice10``), or
+    ``(None, [])`` where it holds none; a folder of slices in several formats is refused."""
+    found = {name: [p for p in folder_files(folder) if p.suffix.lower() in suffixes]
+             for name, suffixes in SLICE_SUFFIXES.items()}
+    found = {name: files for name, files in found.items() if files}
+    if len(found) > 1:
+        raise FileFormatError(f"folder {folder} mixes slices of {' and '.join(found)} "
+                              f"(e.g. {', '.join(files[0].name for files in found.values())}); a volume's slices are "
+                              f"of one format: move the others out of the folder")
+    return next(iter(found.items()), (None, []))
+
+
+def read_slice_folder(folder, progress_bar, fits=None):
+    """One 2-D image per file, stacked along z in natural name order; all of one size, mode and sample type."""
+    kind, files = slice_files(folder)
+    read_slice = _tiff_slice if kind == "TIFF" else _image_slice
+    return read_slices(files, read_slice, f"reading {kind} slices", progress_bar, fits)
+
+
+def _tiff_slice(path):
+    pages = read_tiff(path, stack=False)[0]
+    if len(pages) != 1:
+        raise FileFormatError(f"{path} holds {len(pages)} pages, but a folder of TIFF "
+                              "slices needs one 2-D image per file")
+    return pages[0]
+
+
+def _image_slice(path):
+    """A PNG or JPEG slice through imageio (Pillow), its declared size weighed before it is decoded."""
+    import imageio.v3 as iio
+
+    mode = iio.immeta(path).get("mode")
+    if mode not in _IMAGE_MODES:
+        raise FileFormatError(f"{path} is a {mode} image; clwave reads grey, RGB and RGBA slices: convert it, e.g. "
+                              f"PIL.Image.open(path).convert('RGB').save(path)")
+    with open(path, "rb") as fh:
+        head = fh.read(26)
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[24] == 16 and head[25] in _PNG_COLOUR_TYPES:
+        raise FileFormatError(f"{path} is a 16-bit {_PNG_COLOUR_TYPES[head[25]]} PNG, which Pillow reads as 8 bits; "
+                              f"save the slices as 16-bit TIFF (tifffile.imwrite(path, image)) to keep all 16")
+    props = iio.improps(path)
+    check_whole(path, (1,) + props.shape, props.dtype)
+    return iio.imread(path)
