@@ -172,3 +172,18 @@ def test_slices_read_as_photographed_from_minus_z(tmp_path, capsys):
                             ("turned", letter[::-1, ::-1]))}
     assert max(seen[-90], key=seen[-90].get) == "as drawn", seen
     assert max(seen[90], key=seen[90].get) == "upside down", seen
+
+
+def test_a_dicom_series_with_a_preview_jpeg_is_read_as_the_series(tmp_path, rng):
+    """A DICOM series exported with its previews (a JPEG or PNG beside the slices, named or not as .dcm) is read as
+    the series, as before PNG and JPEG folders were read: the images are its previews, not the volume."""
+    from pydicom.uid import generate_uid
+
+    from test_loaders import axial, write_series
+
+    for names in (["s1.dcm", "s2.dcm", "s3.dcm"], ["IM1", "IM2", "IM3"]):
+        folder = tmp_path / names[0]
+        folder.mkdir()
+        stored = write_series(folder, rng, axial(0.0, 2.5, 5.0), generate_uid(), names)
+        iio.imwrite(folder / "preview.jpg", np.zeros((16, 16, 3), np.uint8))
+        assert load(folder, progress_bar=False).shape == stored.shape

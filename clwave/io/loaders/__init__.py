@@ -22,7 +22,7 @@ import numpy as np
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, slices, tiff, zarr
-from .shared import SUPPORTED, Declared, check_chunks, not_a_file, reading, to_float32
+from .shared import SUPPORTED, Declared, check_chunks, folder_files, not_a_file, reading, to_float32
 
 __all__ = ["load", "describe", "SUPPORTED"]
 
@@ -246,7 +246,9 @@ def _kind(path: Path) -> str:
         if zarr_named:
             raise FileFormatError(f"{path} is not a Zarr store: it has no {', '.join(zarr.ZARR_METADATA)}; name the "
                                   "store's top folder (or one array or group folder inside it)")
-        slice_format = slices.slice_files(path)[0]
+        slice_format, files = slices.slice_files(path)
+        if slice_format in ("PNG", "JPEG") and _holds_dicom(path, files):  # a series with its previews
+            return "dicom"
         return f"{slice_format.lower()}-folder" if slice_format else "dicom"
     name = path.name.lower()
     suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
@@ -267,6 +269,13 @@ def _kind(path: Path) -> str:
         raise FileFormatError(f"unknown file type {suffix or '(no extension)'!r} of {path}; "
                               f"supported inputs: {SUPPORTED}")
     return _FILE_KINDS[suffix]
+
+
+def _holds_dicom(folder, images, looked_at=3) -> bool:
+    """Whether a folder of PNG or JPEG files holds DICOM files too (a series exported with its previews), by the
+    first few of its other files."""
+    others = [p for p in folder_files(folder) if p not in set(images)][:looked_at]
+    return any(p.suffix.lower() in (".dcm", ".ima") or _is_dicom(p) for p in others)
 
 
 def _is_dicom(path) -> bool:
