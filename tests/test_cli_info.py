@@ -136,6 +136,30 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
                                     "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10 (RAS+ mm, as loaded)"]
 
 
+def test_info_of_an_ome_or_imagej_tiff_gives_its_spacing_without_a_voxel(tmp_path, capsys, monkeypatch):
+    """A microscopist checks the micrometres read (trial21: info said the spacing "comes with the voxels"): an
+    OME-TIFF's PhysicalSize and an ImageJ stack's spacing and resolution are its metadata, given as load() gives them,
+    with no pixel read (tifffile's reads fail here)."""
+    import tifffile
+
+    data = (np.arange(6 * 8 * 10).reshape(6, 8, 10) % 7).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "o.ome.tif", data, ome=True,
+                     metadata={"axes": "ZYX", "PhysicalSizeX": 0.5, "PhysicalSizeY": 0.25, "PhysicalSizeZ": 5.0})
+    tifffile.imwrite(tmp_path / "ij.tif", data, imagej=True, resolution=(2.0, 4.0),
+                     metadata={"spacing": 3.0, "unit": "um", "axes": "ZYX"})
+    loaded = {name: clwave.load(tmp_path / name) for name in ("o.ome.tif", "ij.tif")}
+    monkeypatch.setattr(tifffile.TiffFile, "asarray", lambda *a, **k: pytest.fail("a TIFF pixel was read"))
+    monkeypatch.setattr(tifffile.TiffPageSeries, "asarray", lambda *a, **k: pytest.fail("a TIFF pixel was read"))
+    for name, vol in loaded.items():
+        code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
+        facts = json.loads(out)
+        assert code == 0 and (tuple(facts["spacing"]), tuple(facts["origin"])) == (vol.spacing, vol.origin), name
+    assert loaded["o.ome.tif"].spacing == (5.0, 0.25, 0.5) and loaded["ij.tif"].spacing == (3.0, 0.25, 0.5)
+    code, out, _ = run(capsys, "info", str(tmp_path / "o.ome.tif"))
+    assert out.splitlines()[2] == ("spacing    0.5, 0.25, 5 (x, y, z), origin 0, 0, 0 (µm for an OME-TIFF, an ImageJ "
+                                   "stack's unit; as loaded)")
+
+
 def test_a_header_declared_passes_every_handler_of_read_errors(tmp_path):
     """describe's stop before the voxels (shared.Declared) is no error: a loader's ``except Exception`` (reading(),
     which turns a library's error into a FileFormatError) lets it through, its shape and type with it."""

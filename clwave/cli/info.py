@@ -114,8 +114,9 @@ def _volume_lines(f) -> list:
                                 f"{resampled}, before the loader orders them"
                                 f"{'' if placed else ' (its axes and spacing come with the voxels)'}"))
         if placed:
-            lines.append(("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z), origin {_xyz(f['origin'])} (RAS+ mm, "
-                                     f"as loaded)"))
+            units = "µm for an OME-TIFF, an ImageJ stack's unit; as loaded" if f["format"] == "tiff" else \
+                "RAS+ mm, as loaded"
+            lines.append(("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z), origin {_xyz(f['origin'])} ({units})"))
         if f.get("rescale"):
             (slope, intercept), more = f["rescale"][0], len(f["rescale"]) - 1
             lines.append(("rescale", f"slope {slope:g}, intercept {intercept:g}"

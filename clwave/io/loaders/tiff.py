@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_whole, log, note
+from .shared import Declared, check_whole, log, note
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
@@ -57,9 +57,14 @@ def read_tiff(path, fits=None, stack=True):
             raise FileFormatError(f"{path} holds one 2-D image ({' x '.join(map(str, series.shape))}, axes "
                                   f"{series.axes!r}), not a stack of slices; write a volume one page a slice, e.g. "
                                   f"tifffile.imwrite(path, volume, photometric='minisblack')")
-        check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
+        spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)  # from the metadata alone
+        try:
+            check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
+        except Declared as declared:  # describe's (clwave info): the spacing is the header's, no orientation
+            if spacing is not None:
+                declared.placed = (spacing, (0.0, 0.0, 0.0), 0.0)
+            raise
         data = tif.asarray(key=range(len(tif.pages))) if pages else series.asarray()
-        spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)
     if channel:
         data = np.moveaxis(data, axes.index(channel), -1)
     return (data if len(spatial) == 3 else data[np.newaxis]), spacing
