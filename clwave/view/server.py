@@ -324,7 +324,8 @@ class ViewServer:
         if shaded is not None:
             shaded.stop()
         self.pool.shutdown(wait=False, cancel_futures=True)
-        # the shaded views' set-up under way stops at its next slab (ShadedSource.stop): waited for, as the reader is
+        # the shaded views' set-up under way stops at its next slab (the build thread's stop_on event, set above, and
+        # ShadedSource.stop for a file's full stage): waited for, as the reader is
         self.builder.shutdown(wait=True, cancel_futures=True)
         self.sources = {}  # their renderers' memory let go with the last frame under way
 

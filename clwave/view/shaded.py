@@ -61,7 +61,6 @@ class ShadedSource(Source):
         self.device_memory = device_memory
         self.path, self.whole, self.staged, self.upgraded, self._watch = path, whole, None, upgraded, None
         self.coarse = coarse
-        self._abandon = threading.Event()  # set by stop()
         self.scalar = wv.channels == 1
         self.steps = [(s, d) for s, d in DRAG_STEPS if d <= wv.levels]
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
@@ -106,16 +105,16 @@ class ShadedSource(Source):
         elif self.path is None and self.tracer is None:
             if self.whole is not None:  # a part of a file (keep=): the tracer waits for all of that part
                 self.wv = self.whole()
-            # a model held in memory: the build stops at its next slab once the viewer stops (:meth:`stop`)
-            tracer = RayTracer(self.wv, device=self.device, device_memory=self.device_memory, lod=True,
-                               abandon=self._abandon)
+            # a model held in memory: the build stops at its next slab once the viewer stops (the build thread's
+            # threads.stop_on event, set by the server's stop)
+            tracer = RayTracer(self.wv, device=self.device, device_memory=self.device_memory, lod=True)
             tracer.render(Camera(30.0, 20.0, 16), tolerance=self.tolerance * LOOSEN, **warm)
             self.tracer = tracer
 
     def stop(self):
-        """The viewer stopping: the tracer of a model held in memory, or a file's full stage, still being set up is
-        given up (its thread stops after the read, or the slab or band of its set-up under way)."""
-        self._abandon.set()
+        """The viewer stopping: a file's full stage still being set up, on its own thread, is given up (it stops after
+        the read, or at the slab or band of its set-up under way); a tracer of a model held in memory, built on the
+        server's build thread, stops by that thread's stop (:func:`clwave.threads.stop_on`)."""
         if self.staged is not None:
             self.staged.abandon()
 
