@@ -188,7 +188,8 @@ def describe(path, *, series=None, level=None) -> dict:
     ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
     rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's straight
     stack, wider by its shifts), and the ``spacing``, ``origin`` and ``obliquity`` ``load`` gives where its header
-    places the volume (``.nii.gz``, DICOM; NRRD and TIFF give none, their loaders finding them with the voxels); a
+    places the volume (``.nii.gz``, DICOM, an OME-TIFF or ImageJ stack; NRRD and other TIFFs give none, their
+    loaders finding them with the voxels); a
     DICOM series also its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
     (stored values, or None).  A ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
@@ -274,7 +275,8 @@ def _kind(path: Path) -> str:
 def _holds_dicom(folder, images, looked_at=3) -> bool:
     """Whether a folder of PNG or JPEG files holds DICOM files too (a series exported with its previews), by the
     first few of its other files."""
-    others = [p for p in folder_files(folder) if p not in set(images)][:looked_at]
+    images = set(images)
+    others = [p for p in folder_files(folder) if p not in images][:looked_at]
     return any(p.suffix.lower() in (".dcm", ".ima") or _is_dicom(p) for p in others)
 
 

@@ -27,6 +27,7 @@ def note(text: str):
     it, and the command line prints it as ``clwave: warning: ...``."""
     warn_outside(ClwaveWarning(text))
 
+
 SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page), a folder of 2-D TIFF, PNG or JPEG "
              "slices, a folder of DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a "
              "Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset)")
@@ -114,7 +115,7 @@ def to_float32(block, path, mu_water, background, nan=None, copy=True):
     if block.dtype.kind == "f" and block.dtype.itemsize > 4 and block.size:
         check_float32_range(largest_finite(block), path)
     data = np.array(block, np.float32, order="C") if copy else np.ascontiguousarray(block, np.float32)
-    if nan is not None and data.dtype.kind == "f":
+    if nan is not None:
         data[np.isnan(data)] = nan
     if mu_water is not None:
         data += 1000.0
