@@ -12,6 +12,7 @@ from .options import add_command, build_model, check_outputs, file_size, kept_wo
 
 def run(args):
     out, = check_outputs(args.force, (args.output, "-o", (".clw",)))
+    from ..frames import root_mean_square
     from ..io.clw import check_quantise, read_clw
 
     quantise = args.quantise
@@ -38,9 +39,7 @@ def run(args):
     if reference is not None:
         stored = wv if quantise is None else read_clw(out)  # the rounded values, as the file holds them
         peak = float(np.max(np.abs(reference.data)))
-        # relative to the peak before it is squared: the squares of values up to 1.8e19 (check_coefficients) sum
-        # within float32
-        error = np.sqrt(np.mean(np.square((stored.reconstruct().data - reference.data) / (peak or 1.0))))
+        error = root_mean_square(stored.reconstruct().data - reference.data) / (peak or 1.0)  # squares in float64
         if peak == 0:  # no relative error, no PSNR
             print(f"error                 RMS over the voxels {error:.2e}: the volume is zero everywhere")
         else:
