@@ -401,6 +401,11 @@ class WaveletVolume:
         self._shared.clear()
         self._fine.clear()
 
+    def __getstate__(self):
+        """Pickled (for a Dask worker process, ``copy.deepcopy``) without what :meth:`release` drops: renderers
+        hold this process's OpenCL objects, which do not pickle; the copy makes its own when it renders."""
+        return dict(self.__dict__, _shared={}, _fine={})
+
     # ------------------------------------------------------------- files
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Write a ``.clw`` file (docs/model.md §6, :mod:`clwave.io.clw`); refuses to replace an

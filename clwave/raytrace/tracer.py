@@ -10,6 +10,7 @@ docs/raytracing.md §4) and its bounds for empty-space skipping;
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -37,6 +38,7 @@ from .shading import Phong, light_directions
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume, check_model
+from ..threads import one_at_a_time
 
 
 FIELDS = ("bspline", "wavelet")
@@ -131,6 +133,7 @@ class RayTracer:
         self.lod = self.details != (0,)
         self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
         self._told = set()  # the tolerances and bounds warned about (bounds.warn_below_tolerance)
+        self.lock = threading.RLock()  # one render at a time (threads.one_at_a_time)
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
         self.orders = [g.wavelet.order for g in wv.groups]
@@ -228,6 +231,7 @@ class RayTracer:
         eps = np.finfo(np.float64 if precision == "double" else np.float32).eps
         return GRAD_NOISE * eps * (self.q_bound if q_bound is None else q_bound) / min(self.wv.spacing)
 
+    @one_at_a_time
     def render(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True,
                precision="single", trace=0, detail=None, transfer_function=None) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.

@@ -10,6 +10,7 @@ ranges in importance order.  The image is the line integral of each channel in w
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -31,6 +32,7 @@ from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
+from ..threads import one_at_a_time
 
 COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
 SPLAT_BYTES = 32  # per splat of a pass: centre float2, pixel box int4, texture int, tile count uint
@@ -109,6 +111,7 @@ class SplatRenderer:
         self._spectra_work = {}  # their footprint spectra's arrays, written over by the next view's
         self._grown = False  # extend() gave more coefficients than the device arrays hold
         self.groups = ranked_groups(wv)
+        self.lock = threading.RLock()  # one view at a time (threads.one_at_a_time): the buffers above are shared
 
     def extend(self, wv: WaveletVolume, groups: list):
         """``wv`` in place of the model, and its :func:`ranked_groups` ``groups``, whose tables begin with this
@@ -151,6 +154,7 @@ class SplatRenderer:
             self.compile_seconds += time.perf_counter() - start
         return self.stages[(channels, perspective)]
 
+    @one_at_a_time
     def begin(self, camera, upto=None):
         """Start an image of a :class:`Camera` or :class:`ConeBeam`: resolve the view, make footprints, zero
         the framebuffers (an :class:`Accumulator`).  ``upto``: the image splats only the first ``upto``
@@ -294,6 +298,7 @@ class Accumulator:
 
     def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list, upto=None):
         self.r, self.view, self.layers, self.tables, self.upto = renderer, view, layers, tables, upto
+        self.lock = renderer.lock  # its passes use the renderer's buffers
         cc = renderer.cc
         pools = renderer.texel_pools(tables)
         self.device_tables = [{name: pool if name == "texels" else cc.upload(getattr(t, name)) for name in t.names}
@@ -308,6 +313,7 @@ class Accumulator:
     def footprint_seconds(self) -> float:
         return sum(t.footprint_seconds for t in self.tables)
 
+    @one_at_a_time
     def splat(self, first: int, count: int):
         """Add coefficients ``first .. first + count`` (importance order) of every group."""
         if self.upto is not None and first + count > self.upto:
@@ -338,6 +344,7 @@ class Accumulator:
             self.stats["chunks"] += 1
             yield coef, values, 0, m
 
+    @one_at_a_time
     def splat_dropping(self):
         """Add every coefficient of a perspective view, less the wavelet splats of the image's framebuffer whose
         bounds, summed over any pixel, stay within :attr:`drop_share` of the image maximum (docs/splatting.md §8
@@ -515,11 +522,12 @@ def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="aut
 def _splat_range(r: SplatRenderer, camera, first: int, stop: int) -> tuple:
     """``(image, meta)`` of coefficients ``first .. stop`` of each group, in importance order."""
     start = time.perf_counter()
-    acc = r.begin(camera)
-    if any(acc.drop_share) and r.chunk is None and (first, stop) == (0, r.count):
-        acc.splat_dropping()
-    else:
-        acc.splat(first, stop - first)
+    with r.lock:  # the image's begin and its passes together: another thread's begin may change the chunking
+        acc = r.begin(camera)
+        if any(acc.drop_share) and r.chunk is None and (first, stop) == (0, r.count):
+            acc.splat_dropping()
+        else:
+            acc.splat(first, stop - first)
     image = acc.image()
     return image, acc.meta(time.perf_counter() - start)
 
