@@ -38,9 +38,9 @@ def checkpoint(abandon=None) -> None:
 
 
 def one_at_a_time(method):
-    """``method`` run under its object's ``lock`` (a ``threading.RLock``): a renderer used from several threads at
-    once renders one view at a time, each call waiting for the one under way, since its device buffers are its own
-    (two threads' views through one ``SplatRenderer`` gave a wrong image until api22; docs/coordinates.md §4)."""
+    """``method`` run under its object's ``lock``, a renderer's device's (``ComputeContext.lock``): renderers used
+    from several threads at once render one view at a time on a device, each call waiting for the one under way
+    (their kernels and a renderer's buffers are shared; docs/coordinates.md §4)."""
     @wraps(method)
     def locked(self, *args, **kwargs):
         with self.lock:

@@ -23,16 +23,17 @@ def rgba_model():
 CAMERAS = (clwave.Camera(30, 20, size=40), clwave.Camera(100, -10, size=(24, 36)))
 
 
-def _in_two_threads(render):
-    """Each of two threads renders both cameras three times, alternately; the images, per camera."""
+def _in_two_threads(render, other=None):
+    """Two threads render both cameras three times each, alternately, the first by ``render``, the second by
+    ``other`` (default ``render``); the images, per camera."""
     images = {0: [], 1: []}
 
-    def work(first):
+    def work(first, draw):
         for k in range(6):
             which = (first + k) % 2
-            images[which].append(render(CAMERAS[which]))
+            images[which].append(draw(CAMERAS[which]))
 
-    threads = [threading.Thread(target=work, args=(first,)) for first in (0, 1)]
+    threads = [threading.Thread(target=work, args=(first, draw)) for first, draw in ((0, render), (1, other or render))]
     interval = sys.getswitchinterval()
     sys.setswitchinterval(1e-5)  # the threads take turns often: what a race there is shows in a few views
     try:
@@ -45,19 +46,25 @@ def _in_two_threads(render):
     return images
 
 
-@pytest.mark.parametrize("kind", ["splat", "raytrace"])
-def test_one_renderer_shared_by_two_threads_renders_each_view_as_alone(rgba_model, kind):
-    """Two threads rendering through one renderer at once: each image is bit for bit the one the same renderer
-    gives a view alone (a SplatRenderer's views shared its device buffers: one of eight images came out wrong by
-    up to 4e32 before api22; renders now take their turn, threads.one_at_a_time)."""
+def _renderer(model, kind):
+    """A new renderer's ``camera -> image``."""
     if kind == "splat":
-        renderer = clwave.SplatRenderer(rgba_model)
-        render = lambda camera: renderer.render(camera).image  # noqa: E731
-    else:
-        renderer = clwave.RayTracer(rgba_model)
-        render = lambda camera: renderer.render(camera, tolerance=1e-2).image  # noqa: E731
+        renderer = clwave.SplatRenderer(model)
+        return lambda camera: renderer.render(camera).image
+    tracer = clwave.RayTracer(model)
+    return lambda camera: tracer.render(camera, tolerance=1e-2).image
+
+
+@pytest.mark.parametrize("kind", ["splat", "raytrace"])
+@pytest.mark.parametrize("renderers", ["one", "two"])
+def test_renderers_used_by_two_threads_render_each_view_as_alone(rgba_model, kind, renderers):
+    """Two threads rendering at once, through one renderer or one each: every image is bit for bit the one a
+    renderer gives the view alone.  Until api22 a SplatRenderer's views shared its buffers, and every renderer of a
+    device its kernels, whose arguments another thread's launch overwrote: NaN or wrong images (up to 4e32), or a
+    segmentation fault; renders on a device now take their turn (threads.one_at_a_time)."""
+    render = _renderer(rgba_model, kind)
     alone = [render(camera) for camera in CAMERAS]
-    images = _in_two_threads(render)
+    images = _in_two_threads(render, None if renderers == "one" else _renderer(rgba_model, kind))
     for which, expected in enumerate(alone):
         assert len(images[which]) == 6
         for image in images[which]:
@@ -70,3 +77,59 @@ def test_one_shot_splats_from_two_threads_share_the_models_renderer_safely(rgba_
     for which, expected in enumerate(alone):
         for image in images[which]:
             np.testing.assert_array_equal(image, expected)
+
+
+def test_a_rendered_model_pickles_and_renders_the_same(rgba_model):
+    """A model that one-shot calls have rendered keeps their renderers (OpenCL objects, which do not pickle): it
+    pickles and deep-copies without them, as a Dask worker process receives it ("cannot pickle 'Device' object"
+    before api22), and the copy renders the same image."""
+    expected = clwave.splat(rgba_model, CAMERAS[0]).image  # rgba_model now holds its shared renderer
+    for twin in (pickle.loads(pickle.dumps(rgba_model)), copy.deepcopy(rgba_model)):
+        assert twin._shared == {} and rgba_model._shared
+        np.testing.assert_array_equal(clwave.splat(twin, CAMERAS[0]).image, expected)
+
+
+def _coefficients(data):
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet="linear", levels=1)
+    return np.concatenate([g.values.ravel() for g in wv.groups])
+
+
+def test_masked_voxels_are_refused_not_rendered_with_their_stored_values():
+    """numpy.asarray of a masked array keeps the masked voxels' stored values (a fill of 1e20, or whatever was
+    there): the model was made of them, silently, before api22."""
+    data = np.random.default_rng(1).random((6, 7, 8))
+    stored = data.copy()
+    stored[data > 0.9] = 7.0
+    with pytest.raises(clwave.InputError, match=r"masked array with \d+ masked voxel.*data\.filled\(0\)"):
+        clwave.Volume(np.ma.masked_array(stored, mask=data > 0.9))
+    unmasked = np.ma.masked_array(data, mask=False)  # a mask that masks nothing is the data
+    np.testing.assert_array_equal(_coefficients(unmasked), _coefficients(data))
+
+
+@pytest.mark.parametrize("layout", ["fortran", "strided", "reversed", ">f4", ">i2", "read-only", "memmap", "float16",
+                                    "bool", "int64", "list"])
+def test_any_array_layout_gives_the_model_of_its_values_and_is_left_as_it_was(layout, tmp_path):
+    """The model of every layout and type equals that of the same values as a C-ordered float64 array, and the
+    caller's array is unchanged (it is converted to float32 once, docs/coordinates.md §1)."""
+    values = np.random.default_rng(2).random((12, 7, 16))
+    data = {"fortran": lambda: np.asfortranarray(values[:6]), "strided": lambda: values[::2, :, ::2],
+            "reversed": lambda: values[::-1], ">f4": lambda: values[:6].astype(">f4"),
+            ">i2": lambda: (values[:6] * 1000).astype(">i2"), "read-only": lambda: _read_only(values[:6]),
+            "memmap": lambda: _memmap(values[:6], tmp_path), "float16": lambda: values[:6].astype(np.float16),
+            "bool": lambda: values[:6] > 0.5, "int64": lambda: (values[:6] * 2**40).astype(np.int64),
+            "list": lambda: values[:6].tolist()}[layout]()
+    before = np.array(data, copy=True)
+    expected = _coefficients(np.ascontiguousarray(np.asarray(data, dtype=np.float64)))
+    np.testing.assert_array_equal(_coefficients(data), expected)
+    np.testing.assert_array_equal(np.asarray(data), before)
+
+
+def _read_only(a):
+    a = a.copy()
+    a.flags.writeable = False
+    return a
+
+
+def _memmap(a, folder):
+    np.save(folder / "v.npy", a.astype(np.float32))
+    return np.load(folder / "v.npy", mmap_mode="r")

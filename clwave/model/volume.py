@@ -28,8 +28,9 @@ class Volume:
     Parameters
     ----------
     data : array_like, shape (nz, ny, nx) or (nz, ny, nx, c)
-        Voxel values; converted to float32 once, here.  ``c`` is 1 to 4
-        (scalar, RGB, RGBA or classified ``(q_R, q_G, q_B, alpha)``).
+        Voxel values; converted to float32 once, here (a float32 C-ordered array is kept as it is, not copied).
+        ``c`` is 1 to 4 (scalar, RGB, RGBA or classified ``(q_R, q_G, q_B, alpha)``).  A masked array with masked
+        voxels is refused: give them a value first (``data.filled(0)``).
     spacing : float or 3 floats
         Voxel size ``(dz, dy, dx)`` in world units (default 1.0).
     origin : 3 floats
@@ -52,6 +53,9 @@ class Volume:
 
     def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), offset=0.0, obliquity=0.0):
         lazy = is_dask(data)
+        if np.ma.is_masked(data):  # numpy.asarray would take the masked voxels' values as they are
+            raise InputError(f"volume data is a masked array with {np.ma.count_masked(data)} masked voxel(s), whose "
+                             f"stored values would be rendered; give them a value first, e.g. data.filled(0)")
         try:
             arr = data if lazy else np.asarray(data)
         except (ValueError, TypeError) as exc:  # e.g. a ragged nested list

@@ -10,7 +10,6 @@ docs/raytracing.md §4) and its bounds for empty-space skipping;
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -133,8 +132,8 @@ class RayTracer:
         self.lod = self.details != (0,)
         self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
         self._told = set()  # the tolerances and bounds warned about (bounds.warn_below_tolerance)
-        self.lock = threading.RLock()  # one render at a time (threads.one_at_a_time)
         self.cc = ComputeContext.get(device)
+        self.lock = self.cc.lock  # one render at a time on the device (threads.one_at_a_time)
         self.budget = device_budget(self.cc, device_memory)
         self.orders = [g.wavelet.order for g in wv.groups]
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)

@@ -10,7 +10,6 @@ ranges in importance order.  The image is the line integral of each channel in w
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -111,7 +110,7 @@ class SplatRenderer:
         self._spectra_work = {}  # their footprint spectra's arrays, written over by the next view's
         self._grown = False  # extend() gave more coefficients than the device arrays hold
         self.groups = ranked_groups(wv)
-        self.lock = threading.RLock()  # one view at a time (threads.one_at_a_time): the buffers above are shared
+        self.lock = self.cc.lock  # one view at a time on the device (threads.one_at_a_time)
 
     def extend(self, wv: WaveletVolume, groups: list):
         """``wv`` in place of the model, and its :func:`ranked_groups` ``groups``, whose tables begin with this
