@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError, finite_number
+from ..errors import InputError, finite_number, reals
 from .geometry import fine_to_world, world_to_fine
 
 MAX_CHANNELS = 4
@@ -91,7 +91,7 @@ class Volume:
         self.spacing = _triple(spacing, "spacing")
         if min(self.spacing) <= 0:
             raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
-        origin = tuple(float(o) for o in np.broadcast_to(np.asarray(origin, float), (3,)))
+        origin = tuple(float(o) for o in reals(origin, "origin", 3, "one number or three (x, y, z)", one=True))
         problem = frame_problem(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
         if problem:
             raise InputError(f"{problem}; give spacing= in other units",
@@ -208,10 +208,7 @@ def frame_problem(shape, spacing, origin) -> str | None:
 
 
 def _triple(value, name) -> tuple:
-    try:
-        arr = np.broadcast_to(np.asarray(value, dtype=float), (3,))
-    except (ValueError, TypeError):
-        raise InputError(f"{name} must be one number or three (dz, dy, dx), got {value!r}") from None
+    arr = reals(value, name, 3, "one number or three (dz, dy, dx)", one=True)
     if not np.all(np.isfinite(arr)):
         raise InputError(f"{name} ({', '.join(f'{a:g}' for a in arr)}) must be finite")
     return tuple(float(a) for a in arr)

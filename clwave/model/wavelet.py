@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, finite_number, warn_outside
+from ..errors import ClwaveWarning, InputError, finite_number, flag, warn_outside
 from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import kept_count, warn_short_budget, warn_stored
@@ -178,6 +178,7 @@ class WaveletVolume:
         """
         if not isinstance(volume, Volume):
             volume = Volume(volume)
+        interpolate = flag(interpolate, "interpolate")
         if scheduler is not None and not volume.chunked:
             raise InputError("scheduler= applies to a chunked volume (a Dask array, e.g. clwave.load of a Zarr or "
                              "HDF5 store, or chunks='auto'); this one is in memory",

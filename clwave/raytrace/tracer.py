@@ -23,7 +23,7 @@ from ..model.geometry import world_to_fine_affine
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..device.context import ComputeContext
-from ..errors import DeviceMemoryError, InputError, finite_number
+from ..errors import DeviceMemoryError, InputError, finite_number, flag
 from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
 from .bounds import warn_below_tolerance
 from .bricks import ABSENT, BRICK, build, group_defines, plan
@@ -116,8 +116,7 @@ class RayTracer:
             raise InputError(f"abandon={abandon!r} must be a threading.Event (set to give the set-up up) or None")
         if not content_clamp and wv.content_mask is not None:
             wv = wv.unmasked()
-        if field not in FIELDS:
-            raise InputError(f"ray tracing field must be one of {', '.join(FIELDS)}, got {field!r}")
+        check_field(field)
         if wv.channels > 4:
             raise InputError(f"ray tracing takes at most 4 channels, the volume has {wv.channels}")
         if int(active) != active or active < 1:
@@ -244,6 +243,7 @@ class RayTracer:
         """
         wv, cc = self.wv, self.cc
         tol = _checked_view(camera, tolerance)
+        absorption = flag(absorption, "absorption")
         if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
         if transfer_function is not None:
@@ -520,9 +520,16 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
                          precision=precision, transfer_function=transfer_function)
 
 
+def check_field(field):
+    """``field`` one of :data:`FIELDS`, checked before a one-shot call's tracer is looked up by it."""
+    if not isinstance(field, str) or field not in FIELDS:
+        raise InputError(f"ray tracing field must be one of {', '.join(FIELDS)}, got {field!r}")
+
+
 def shared_tracer(wv, device=None, field="bspline", device_memory=None) -> RayTracer:
     """The full-detail tracer of ``wv`` that :func:`raytrace` and :func:`clwave.progressive` calls on the same model,
     device, field and memory cap share (made by the first)."""
+    check_field(field)
     cc, cap = ComputeContext.get(device), parse_cap(device_memory)
     return wv.shared(("raytrace", cc.info.id, field, cap),
                      lambda: RayTracer(wv, device=cc, field=field, device_memory=cap))

@@ -31,6 +31,7 @@ from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
+from .textures import check_sampling
 from ..threads import one_at_a_time
 
 COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
@@ -79,10 +80,7 @@ class SplatRenderer:
         check_model(wv, "splatting")
         if wv.levels >= MAX_LEVELS:
             raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
-        if omega_s is not None and not finite_number(omega_s, "omega_s") > 0:
-            raise InputError(f"omega_s={omega_s!r} must be a positive band (e.g. 14, paper eq. 35)")
-        if coarse is not None and not (isinstance(coarse, (int, float)) and 0 < coarse < 1):
-            raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
+        omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)
         self.wv, self.omega_s, self.sampling, self.coarse = wv, omega_s, sampling, coarse
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
@@ -559,9 +557,21 @@ def _splat_share(renderer_of, share, device, options, camera) -> tuple:
     return _splat_range(r, camera, r.count * i // n, r.count * (i + 1) // n)
 
 
+def splat_options(omega_s, sampling, coarse) -> tuple:
+    """``(omega_s, sampling, coarse)`` of :class:`SplatRenderer` checked, the numbers as floats (a NumPy scalar is
+    one; a bool is not): one line naming the argument, before a one-shot call's renderer is looked up by them."""
+    if omega_s is not None and not finite_number(omega_s, "omega_s") > 0:
+        raise InputError(f"omega_s={omega_s!r} must be a positive band (e.g. 14, paper eq. 35)")
+    check_sampling(sampling)
+    if coarse is not None and not 0 < finite_number(coarse, "coarse") < 1:
+        raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
+    return (None if omega_s is None else float(omega_s)), sampling, (None if coarse is None else float(coarse))
+
+
 def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device_memory=None) -> SplatRenderer:
     """The :class:`SplatRenderer` that one-shot calls on ``wv`` with these options share."""
     check_model(wv, "splatting")
+    omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)
     cc = ComputeContext.get(device)
     cap = parse_cap(device_memory)
     return wv.shared(("splat", cc.info.id, omega_s, sampling, coarse, cap),
