@@ -130,7 +130,7 @@ def reals(value, name, count, what, one=False) -> np.ndarray:
     items = np.asarray(value, dtype=object)
     if (items.ndim > 1 or items.size not in ((1, count) if one else (count,)) or items.ndim < (0 if one else 1)
             or not all(isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_)) for x in items.ravel())):
-        raise InputError(f"{name} must be {what}, got {value!r}")
+        raise InputError(f"{name}={value!r} must be {what}")
     return np.broadcast_to(items.astype(float).ravel(), (count,)).copy()
 
 

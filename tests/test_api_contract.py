@@ -133,3 +133,68 @@ def _read_only(a):
 def _memmap(a, folder):
     np.save(folder / "v.npy", a.astype(np.float32))
     return np.load(folder / "v.npy", mmap_mode="r")
+
+
+_VOLUME = np.ones((4, 5, 6))
+WRONG_ARGUMENTS = {  # each was taken, silently, as another value (or raised a TypeError of numpy's) before api22
+    "interpolate='False'": (lambda wv: clwave.WaveletVolume.from_volume(clwave.Volume(_VOLUME), levels=1,
+                                                                        interpolate="False"), r"interpolate='False'"),
+    "absorption=None": (lambda wv: clwave.raytrace(wv, CAMERAS[0], absorption=None), r"absorption=None"),
+    "perspective='no'": (lambda wv: clwave.Camera(perspective="no"), r"perspective='no'"),
+    "size=True": (lambda wv: clwave.Camera(size=True), r"image size True"),
+    "size=(True, 3)": (lambda wv: clwave.Camera(size=(True, 3)), r"image size \(True, 3\)"),
+    "azimuth=True": (lambda wv: clwave.Camera(azimuth=True), r"azimuth must be one number"),
+    "tolerance=True": (lambda wv: clwave.raytrace(wv, CAMERAS[0], tolerance=True), r"tolerance must be one number"),
+    "keep=True": (lambda wv: wv.threshold(keep=True), r"keep must be one number"),
+    "keep=[0.5]": (lambda wv: wv.threshold(keep=np.array([0.5])), r"keep must be one number"),
+    "spacing='0.5'": (lambda wv: clwave.Volume(_VOLUME, spacing="0.5"), r"spacing='0.5' must be one number or three"),
+    "spacing=True": (lambda wv: clwave.Volume(_VOLUME, spacing=True), r"spacing=True must be one number or three"),
+    "origin=(1, 2)": (lambda wv: clwave.Volume(_VOLUME, origin=(1, 2)), r"origin=\(1, 2\) must be one number or three"),
+    "pixel='1'": (lambda wv: clwave.ConeBeam(100, 150, 8, pixel="1"), r"pixel='1' must be a positive detector spacing"),
+    "target=('1', '2', '3')": (lambda wv: clwave.Camera(target=("1", "2", "3")), r"target=\('1', .* must be three"),
+    "coarse=[0.1]": (lambda wv: clwave.splat(wv, CAMERAS[0], coarse=[0.1]), r"coarse must be one number"),
+    "omega_s=array": (lambda wv: clwave.splat(wv, CAMERAS[0], omega_s=np.array([14.0])), r"omega_s must be one"),
+    "sampling=['fft']": (lambda wv: clwave.splat(wv, CAMERAS[0], sampling=["fft"]), r"sampling must be one of"),
+    "field=['wavelet']": (lambda wv: clwave.raytrace(wv, CAMERAS[0], field=["wavelet"]), r"field must be one of"),
+    "budget='1'": (lambda wv: next(clwave.progressive(wv, CAMERAS[0], budget="1")), r"budget must be a number"),
+    "budget=[1, 2]": (lambda wv: next(clwave.progressive(wv, CAMERAS[0], budget=[1, 2], method="raytrace")),
+                      r"budget must be one number"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(WRONG_ARGUMENTS))
+def test_a_wrong_argument_is_one_line_naming_it(rgba_model, case):
+    call, named = WRONG_ARGUMENTS[case]
+    with pytest.raises(clwave.InputError, match=named) as caught:
+        call(rgba_model)
+    assert "\n" not in str(caught.value)
+
+
+def test_numpy_scalars_are_numbers(rgba_model):
+    """np.float32(0.5) where a float goes gives what the float gives (coarse= refused NumPy's float32 before
+    api22); a 0-d array too."""
+    camera = clwave.Camera(np.float32(30), np.float64(20), size=np.int64(40), extent=np.array(30.0))
+    plain = clwave.Camera(30, 20, size=40, extent=30.0)
+    expected = clwave.SplatRenderer(rgba_model, coarse=0.25).render(plain).image
+    np.testing.assert_array_equal(clwave.SplatRenderer(rgba_model, coarse=np.float32(0.25)).render(camera).image,
+                                  expected)
+    assert clwave.Volume(_VOLUME, spacing=np.float32(0.5), origin=np.zeros(3)).spacing == (0.5, 0.5, 0.5)
+
+
+def test_a_returned_image_is_the_callers_and_an_abandoned_refinement_leaves_nothing(rgba_model):
+    """Writing into a returned image, or leaving a progressive generator after its first frame, changes no later
+    image: the next render is the one a fresh renderer gives."""
+    splatter, tracer = clwave.SplatRenderer(rgba_model), clwave.RayTracer(rgba_model, lod=True)
+    fresh_splat = clwave.SplatRenderer(rgba_model).render(CAMERAS[0]).image
+    fresh_trace = clwave.RayTracer(rgba_model, lod=True).render(CAMERAS[0], tolerance=1e-2).image
+    splatter.render(CAMERAS[0]).image[:] = 7
+    splatter.render_many(CAMERAS[:1])[:] = 7
+    frames = clwave.progressive(rgba_model, CAMERAS[0], steps=4, renderer=splatter)
+    next(frames).image[:] = 7
+    frames.close()
+    tracer.render(CAMERAS[0], tolerance=1e-2).image[:] = 7
+    refining = tracer.refine(CAMERAS[0], tolerance=1e-2)
+    next(refining).image[:] = 7
+    refining.close()
+    np.testing.assert_array_equal(splatter.render(CAMERAS[0]).image, fresh_splat)
+    np.testing.assert_array_equal(tracer.render(CAMERAS[0], tolerance=1e-2).image, fresh_trace)

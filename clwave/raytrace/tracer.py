@@ -87,7 +87,8 @@ FAST_MATH = ("-cl-unsafe-math-optimizations", "-cl-denorms-are-zero")
 
 
 class RayTracer:
-    """A wavelet volume prepared for ray tracing on one device; render many views with it.
+    """A wavelet volume prepared for ray tracing on one device; render many views with it, from several threads at
+    once if need be (renders on a device take their turn, docs/coordinates.md §4).
 
     ``field`` chooses how the field is evaluated: ``"bspline"`` (bricks, fast) or ``"wavelet"`` (active lists over
     the kept coefficients, the paper's reference, unclamped: docs/raytracing.md §4); see the module

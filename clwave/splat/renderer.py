@@ -48,7 +48,8 @@ PASS_ROWS = 1 << 20
 
 class SplatRenderer:
     """Splats any view of a wavelet volume: its ranked coefficients stay on the device, or stream there in
-    chunks in importance order where they and the view's working set exceed the device budget.
+    chunks in importance order where they and the view's working set exceed the device budget.  Several threads may
+    render through one at once: views on a device take their turn (docs/coordinates.md §4).
 
     Parameters
     ----------
