@@ -128,8 +128,9 @@ def reals(value, name, count, what, one=False) -> np.ndarray:
     "``name`` must be ``what``" when it is anything else: strings and bools included, which ``numpy.asarray(value,
     float)`` takes as numbers ("0.5", True as 1)."""
     items = np.asarray(value, dtype=object)
-    if (items.ndim > 1 or items.size not in ((1, count) if one else (count,)) or items.ndim < (0 if one else 1)
-            or not all(isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_)) for x in items.ravel())):
+    shape_ok = (one and items.size == 1) or items.shape == (count,)  # one number: 0.5, [0.5] or [[0.5]]
+    if not shape_ok or not all(isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+                               for x in items.ravel()):
         raise InputError(f"{name}={value!r} must be {what}")
     return np.broadcast_to(items.astype(float).ravel(), (count,)).copy()
 
