@@ -407,6 +407,13 @@ class WaveletVolume:
         hold this process's OpenCL objects, which do not pickle; the copy makes its own when it renders."""
         return dict(self.__dict__, _shared={}, _fine={})
 
+    def __copy__(self):
+        """A shallow copy shares everything, kept renderers and regions included (:meth:`unmasked` keeps the fine
+        regions, which ignore the mask), as it did before :meth:`__getstate__`, which ``copy.copy`` would use."""
+        out = object.__new__(type(self))
+        out.__dict__.update(self.__dict__)
+        return out
+
     # ------------------------------------------------------------- files
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Write a ``.clw`` file (docs/model.md §6, :mod:`clwave.io.clw`); refuses to replace an
