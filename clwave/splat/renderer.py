@@ -510,6 +510,7 @@ def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="aut
     equal share of its coefficients, and the image is the sum of theirs (docs/splatting.md §7).
     """
     if scheduler is not None:
+        omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)  # before any worker starts
         return _splat_on_cluster(wv, camera, scheduler, device, dict(
             omega_s=omega_s, sampling=sampling, coarse=coarse,
             device_memory=parse_cap(device_memory)))
