@@ -104,6 +104,11 @@ def test_masked_voxels_are_refused_not_rendered_with_their_stored_values():
         clwave.Volume(np.ma.masked_array(stored, mask=data > 0.9))
     unmasked = np.ma.masked_array(data, mask=False)  # a mask that masks nothing is the data
     np.testing.assert_array_equal(_coefficients(unmasked), _coefficients(data))
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet="linear", levels=1)
+    points = np.ma.masked_array(np.zeros((4, 3)), mask=[[0, 0, 0], [1, 0, 0], [0, 0, 0], [0, 0, 0]])
+    for method in (wv.evaluate, wv.gradient):
+        with pytest.raises(clwave.InputError, match=r"points is a masked array with 1 masked value"):
+            method(points)
 
 
 @pytest.mark.parametrize("layout", ["fortran", "strided", "reversed", ">f4", ">i2", "read-only", "memmap", "float16",
