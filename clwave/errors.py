@@ -6,10 +6,13 @@ any :class:`ClwaveError`; library users can catch the specific subclasses.
 
 from __future__ import annotations
 
+import numbers
 import os
 import sys
 import warnings
 from dataclasses import asdict, dataclass
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -105,9 +108,12 @@ class DeviceMemoryError(ClwaveError, MemoryError):
 
 
 def finite_number(value, name) -> float:
-    """``float(value)``, or an :class:`InputError` naming ``name`` when it is not a finite number."""
+    """``float(value)``, or an :class:`InputError` naming ``name`` when it is not one finite number (NumPy's scalars
+    and 0-d arrays are numbers; a bool is not, though ``float(True)`` is 1)."""
     if isinstance(value, (str, bytes)):  # float("30") would pass: the API takes numbers
         raise InputError(f"{name} must be a number, got the string {value!r}")
+    if isinstance(value, (bool, np.bool_)) or np.ndim(value) != 0:
+        raise InputError(f"{name} must be one number, got {value!r}")
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -117,9 +123,29 @@ def finite_number(value, name) -> float:
     return number
 
 
+def reals(value, name, count, what, one=False) -> np.ndarray:
+    """``value`` as ``count`` floats (``one``: a single number stands for all ``count``), or an :class:`InputError`
+    "``name`` must be ``what``" when it is anything else: strings and bools included, which ``numpy.asarray(value,
+    float)`` takes as numbers ("0.5", True as 1)."""
+    items = np.asarray(value, dtype=object)
+    shape_ok = (one and items.size == 1) or items.shape == (count,)  # one number: 0.5, [0.5] or [[0.5]]
+    if not shape_ok or not all(isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+                               for x in items.ravel()):
+        raise InputError(f"{name}={value!r} must be {what}")
+    return np.broadcast_to(items.astype(float).ravel(), (count,)).copy()
+
+
+def flag(value, name) -> bool:
+    """``value`` as a bool, or an :class:`InputError` naming ``name`` when it is not True or False (``bool("False")``
+    is True: a string, a number or None given for a switch would have turned it on or off silently)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name}={value!r} must be True or False")
+    return bool(value)
+
+
 def whole_number(value) -> bool:
     """Whether ``value`` is a whole number: an int, or a finite real without a fraction (not a bool or a string)."""
-    if isinstance(value, (bool, str, bytes)):
+    if isinstance(value, (bool, np.bool_, str, bytes)):
         return False
     try:
         return float(value).is_integer()

@@ -129,6 +129,13 @@ def check_error(error):
                          cli=f"--error {error} must be a relative error between 0 and 1")
 
 
+def check_budget(budget):
+    """``budget`` (None, or seconds > 0) checked before any work."""
+    if budget is not None and not finite_number(budget, "budget") > 0:
+        raise InputError(f"budget={budget!r} must be a positive number of seconds",
+                         cli=f"--budget {budget:g} must be a positive number of seconds")
+
+
 def reached(frame: Frame, error) -> bool:
     """Whether ``frame`` is good enough for ``error=``: its estimated relative RMS error is at most that."""
     return error is not None and frame.estimated_relative_rms_error <= error

@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
-from functools import lru_cache
+from functools import lru_cache, wraps
 
 
 class Abandoned(Exception):
@@ -35,6 +35,17 @@ def checkpoint(abandon=None) -> None:
     for event in (abandon, getattr(_thread, "stop", None)):
         if event is not None and event.is_set():
             raise Abandoned("given up from another thread between two units of work")
+
+
+def one_at_a_time(method):
+    """``method`` run under its object's ``lock``, a renderer's device's (``ComputeContext.lock``): renderers used
+    from several threads at once render one view at a time on a device, each call waiting for the one under way
+    (their kernels and a renderer's buffers are shared; docs/coordinates.md §4)."""
+    @wraps(method)
+    def locked(self, *args, **kwargs):
+        with self.lock:
+            return method(self, *args, **kwargs)
+    return locked
 
 
 def cores() -> int:

@@ -170,6 +170,10 @@ class ComputeContext:
         self.ctx = cl.Context([self.device])
         self.queue = cl.CommandQueue(self.ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self.programs: dict = {}
+        # held by a render on this device (threads.one_at_a_time): its kernels are fetched once and shared by every
+        # renderer, and a pyopencl kernel takes its arguments one call at a time, which another thread's launch
+        # can overwrite before the enqueue (two renderers in two threads crashed or gave wrong images until api22)
+        self.lock = threading.RLock()
 
     @classmethod
     def get(cls, device=None) -> "ComputeContext":

@@ -15,7 +15,7 @@ from itertools import product
 
 import numpy as np
 
-from ..errors import InputError, finite_number
+from ..errors import InputError, finite_number, flag, reals, whole_number
 from .geometry import view_frame
 
 FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
@@ -124,7 +124,7 @@ class Camera:
             raise InputError(f"extent={extent!r} must be a positive world width",
                              cli=f"--extent {extent} must be a positive world width")
         self.extent = None if extent is None else float(extent)
-        self.perspective = bool(perspective)
+        self.perspective = flag(perspective, "perspective")
         if distance is not None and not finite_number(distance, "distance") > 0:
             raise InputError(f"distance={distance!r} must be a positive world distance",
                              cli=f"--distance {distance} must be a positive world distance")
@@ -197,20 +197,17 @@ class Camera:
 
 
 def _size(size) -> tuple:
-    try:
-        hw = np.atleast_1d(np.asarray(size, dtype=float))
-    except (TypeError, ValueError):
-        hw = np.zeros(0)
-    if hw.shape == (1,):
-        hw = np.repeat(hw, 2)
-    if hw.shape != (2,) or not np.all(np.isfinite(hw)) or np.any(hw < 1) or np.any(hw != np.round(hw)):
+    hw = list(size) if isinstance(size, (tuple, list)) else list(np.ravel(size))  # a bool or a string is no size
+    if len(hw) == 1:
+        hw *= 2
+    if len(hw) != 2 or not all(whole_number(n) and n >= 1 for n in hw):
         raise InputError(f"image size {size!r} must be a positive whole number or (H, W)")
     return int(hw[0]), int(hw[1])
 
 
 def _vector(value, name) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+    arr = reals(value, name, 3, "three finite numbers (x, y, z)")
+    if not np.all(np.isfinite(arr)):
         raise InputError(f"{name}={value!r} must be three finite numbers (x, y, z)")
     return arr
 

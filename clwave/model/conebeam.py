@@ -22,7 +22,7 @@ from functools import partial
 import numpy as np
 import scipy.linalg
 
-from ..errors import ClwaveWarning, InputError, finite_number, warn_outside
+from ..errors import ClwaveWarning, InputError, finite_number, reals, warn_outside
 from .camera import Camera, View, _content_box, _size, _vector
 from .geometry import view_frame
 
@@ -67,11 +67,12 @@ class ConeBeam:
         if not dsd > 0:
             raise InputError(f"dsd={dsd!r}: the detector is behind the source; give a positive source-to-detector "
                              "distance")
-        spacing = np.resize(np.asarray(pixel, float), 2) if np.size(pixel) == 1 else np.asarray(pixel, float)
-        if spacing.shape != (2,) or not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
-            raise InputError(f"pixel={pixel!r} must be a positive detector spacing, or (row, column) spacings")
-        shift = np.asarray(offset, float)
-        if shift.shape != (2,) or not np.all(np.isfinite(shift)):
+        what = "a positive detector spacing, or (row, column) spacings"
+        spacing = reals(pixel, "pixel", 2, what, one=True)
+        if not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
+            raise InputError(f"pixel={pixel!r} must be {what}")
+        shift = reals(offset, "offset", 2, "two finite numbers (along u, along v)")
+        if not np.all(np.isfinite(shift)):
             raise InputError(f"offset={offset!r} must be two finite numbers (along u, along v)")
         n, u, v = view_frame(finite_number(azimuth, "azimuth"), finite_number(elevation, "elevation"))
         r = np.radians(finite_number(roll, "roll"))

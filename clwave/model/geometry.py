@@ -55,7 +55,10 @@ def fine_to_world(fine_zyx, order: int, shape, spacing, origin) -> np.ndarray:
 
 def world_points(points) -> np.ndarray:
     """World points (N, 3) as (x, y, z), float64 (one point may be given as 3 numbers); one InputError for another
-    shape, or for values that are not numbers or not finite."""
+    shape, or for values that are not numbers or not finite (or masked: their stored values would be taken)."""
+    if np.ma.is_masked(points):
+        raise InputError(f"points is a masked array with {np.ma.count_masked(points)} masked value(s); give the "
+                         f"points to evaluate alone, e.g. points[~points.mask.any(axis=1)]")
     try:
         pts = np.atleast_2d(np.asarray(points))
     except ValueError:  # a ragged list

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError, finite_number
+from ..errors import InputError, finite_number, reals
 from .geometry import fine_to_world, world_to_fine
 
 MAX_CHANNELS = 4
@@ -28,8 +28,9 @@ class Volume:
     Parameters
     ----------
     data : array_like, shape (nz, ny, nx) or (nz, ny, nx, c)
-        Voxel values; converted to float32 once, here.  ``c`` is 1 to 4
-        (scalar, RGB, RGBA or classified ``(q_R, q_G, q_B, alpha)``).
+        Voxel values; converted to float32 once, here (a float32 C-ordered array is kept as it is, not copied).
+        ``c`` is 1 to 4 (scalar, RGB, RGBA or classified ``(q_R, q_G, q_B, alpha)``).  A masked array with masked
+        voxels is refused: give them a value first (``data.filled(0)``).
     spacing : float or 3 floats
         Voxel size ``(dz, dy, dx)`` in world units (default 1.0).
     origin : 3 floats
@@ -52,6 +53,9 @@ class Volume:
 
     def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), offset=0.0, obliquity=0.0):
         lazy = is_dask(data)
+        if np.ma.is_masked(data):  # numpy.asarray would take the masked voxels' values as they are
+            raise InputError(f"volume data is a masked array with {np.ma.count_masked(data)} masked voxel(s), whose "
+                             f"stored values would be rendered; give them a value first, e.g. data.filled(0)")
         try:
             arr = data if lazy else np.asarray(data)
         except (ValueError, TypeError) as exc:  # e.g. a ragged nested list
@@ -87,7 +91,7 @@ class Volume:
         self.spacing = _triple(spacing, "spacing")
         if min(self.spacing) <= 0:
             raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
-        origin = tuple(float(o) for o in np.broadcast_to(np.asarray(origin, float), (3,)))
+        origin = tuple(float(o) for o in reals(origin, "origin", 3, "one number or three (x, y, z)", one=True))
         problem = frame_problem(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
         if problem:
             raise InputError(f"{problem}; give spacing= in other units",
@@ -204,10 +208,7 @@ def frame_problem(shape, spacing, origin) -> str | None:
 
 
 def _triple(value, name) -> tuple:
-    try:
-        arr = np.broadcast_to(np.asarray(value, dtype=float), (3,))
-    except (ValueError, TypeError):
-        raise InputError(f"{name} must be one number or three (dz, dy, dx), got {value!r}") from None
+    arr = reals(value, name, 3, "one number or three (dz, dy, dx)", one=True)
     if not np.all(np.isfinite(arr)):
         raise InputError(f"{name} ({', '.join(f'{a:g}' for a in arr)}) must be finite")
     return tuple(float(a) for a in arr)

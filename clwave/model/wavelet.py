@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, finite_number, warn_outside
+from ..errors import ClwaveWarning, InputError, finite_number, flag, warn_outside
 from ..threads import thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import kept_count, warn_short_budget, warn_stored
@@ -178,6 +178,7 @@ class WaveletVolume:
         """
         if not isinstance(volume, Volume):
             volume = Volume(volume)
+        interpolate = flag(interpolate, "interpolate")
         if scheduler is not None and not volume.chunked:
             raise InputError("scheduler= applies to a chunked volume (a Dask array, e.g. clwave.load of a Zarr or "
                              "HDF5 store, or chunks='auto'); this one is in memory",
@@ -400,6 +401,18 @@ class WaveletVolume:
         coefficients :meth:`evaluate` kept."""
         self._shared.clear()
         self._fine.clear()
+
+    def __getstate__(self):
+        """Pickled (for a Dask worker process, ``copy.deepcopy``) without what :meth:`release` drops: renderers
+        hold this process's OpenCL objects, which do not pickle; the copy makes its own when it renders."""
+        return dict(self.__dict__, _shared={}, _fine={})
+
+    def __copy__(self):
+        """A shallow copy shares everything, kept renderers and regions included (:meth:`unmasked` keeps the fine
+        regions, which ignore the mask), as it did before :meth:`__getstate__`, which ``copy.copy`` would use."""
+        out = object.__new__(type(self))
+        out.__dict__.update(self.__dict__)
+        return out
 
     # ------------------------------------------------------------- files
     def save(self, path, overwrite=False, quantise=None) -> Path:

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import ClwaveWarning, InputError, warn_outside, whole_number
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
-from ..frames import ErrorEstimate, FinalImage, Frame, check_error, reached
+from ..frames import ErrorEstimate, FinalImage, Frame, check_budget, check_error, reached
 
 #: the smallest reduced image side: below it a frame no longer halves the error of the one before
 #: (docs/raytracing.md §9)
@@ -85,9 +85,7 @@ def frames(tracer, camera: Camera | ConeBeam, options: dict, steps=None, budget=
     if steps is not None and (not whole_number(steps) or steps < 1):
         raise InputError(f"steps={steps!r} must be a whole number of frames, at least 1",
                          cli=f"--steps {steps} must be a whole number of frames, at least 1")
-    if budget is not None and not (np.isfinite(budget) and budget > 0):
-        raise InputError(f"budget={budget!r} must be a positive number of seconds",
-                         cli=f"--budget {budget:g} must be a positive number of seconds")
+    check_budget(budget)
     check_camera(camera)
     final = final or FinalImage(lambda: tracer.render(camera, **options).image)
     return _frames(tracer, camera, options, steps, budget, error, final, previous)

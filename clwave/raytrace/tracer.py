@@ -23,7 +23,7 @@ from ..model.geometry import world_to_fine_affine
 from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..device.context import ComputeContext
-from ..errors import DeviceMemoryError, InputError, finite_number
+from ..errors import DeviceMemoryError, InputError, finite_number, flag
 from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
 from .bounds import warn_below_tolerance
 from .bricks import ABSENT, BRICK, build, group_defines, plan
@@ -37,6 +37,7 @@ from .shading import Phong, light_directions
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume, check_model
+from ..threads import one_at_a_time
 
 
 FIELDS = ("bspline", "wavelet")
@@ -86,7 +87,8 @@ FAST_MATH = ("-cl-unsafe-math-optimizations", "-cl-denorms-are-zero")
 
 
 class RayTracer:
-    """A wavelet volume prepared for ray tracing on one device; render many views with it.
+    """A wavelet volume prepared for ray tracing on one device; render many views with it, from several threads at
+    once if need be (renders on a device take their turn, docs/coordinates.md §4).
 
     ``field`` chooses how the field is evaluated: ``"bspline"`` (bricks, fast) or ``"wavelet"`` (active lists over
     the kept coefficients, the paper's reference, unclamped: docs/raytracing.md §4); see the module
@@ -115,8 +117,7 @@ class RayTracer:
             raise InputError(f"abandon={abandon!r} must be a threading.Event (set to give the set-up up) or None")
         if not content_clamp and wv.content_mask is not None:
             wv = wv.unmasked()
-        if field not in FIELDS:
-            raise InputError(f"ray tracing field must be one of {', '.join(FIELDS)}, got {field!r}")
+        check_field(field)
         if wv.channels > 4:
             raise InputError(f"ray tracing takes at most 4 channels, the volume has {wv.channels}")
         if int(active) != active or active < 1:
@@ -132,6 +133,7 @@ class RayTracer:
         self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
         self._told = set()  # the tolerances and bounds warned about (bounds.warn_below_tolerance)
         self.cc = ComputeContext.get(device)
+        self.lock = self.cc.lock  # one render at a time on the device (threads.one_at_a_time)
         self.budget = device_budget(self.cc, device_memory)
         self.orders = [g.wavelet.order for g in wv.groups]
         self.alpha_group = next((i for i, g in enumerate(wv.groups) if 3 in g.channels), -1)
@@ -228,6 +230,7 @@ class RayTracer:
         eps = np.finfo(np.float64 if precision == "double" else np.float32).eps
         return GRAD_NOISE * eps * (self.q_bound if q_bound is None else q_bound) / min(self.wv.spacing)
 
+    @one_at_a_time
     def render(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True,
                precision="single", trace=0, detail=None, transfer_function=None) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters.
@@ -241,6 +244,7 @@ class RayTracer:
         """
         wv, cc = self.wv, self.cc
         tol = _checked_view(camera, tolerance)
+        absorption = flag(absorption, "absorption")
         if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
         if transfer_function is not None:
@@ -517,9 +521,16 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
                          precision=precision, transfer_function=transfer_function)
 
 
+def check_field(field):
+    """``field`` one of :data:`FIELDS`, checked before a one-shot call's tracer is looked up by it."""
+    if not isinstance(field, str) or field not in FIELDS:
+        raise InputError(f"ray tracing field must be one of {', '.join(FIELDS)}, got {field!r}")
+
+
 def shared_tracer(wv, device=None, field="bspline", device_memory=None) -> RayTracer:
     """The full-detail tracer of ``wv`` that :func:`raytrace` and :func:`clwave.progressive` calls on the same model,
     device, field and memory cap share (made by the first)."""
+    check_field(field)
     cc, cap = ComputeContext.get(device), parse_cap(device_memory)
     return wv.shared(("raytrace", cc.info.id, field, cap),
                      lambda: RayTracer(wv, device=cc, field=field, device_memory=cap))

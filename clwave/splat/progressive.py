@@ -15,7 +15,7 @@ import numpy as np
 
 from ..model.camera import Camera
 from ..errors import ClwaveWarning, InputError, warn_outside, whole_number
-from ..frames import FinalImage, Frame, check_error, reached
+from ..frames import FinalImage, Frame, check_budget, check_error, reached
 from .renderer import SplatRenderer, shared_renderer
 from .estimate import SplatEstimate
 from ..model.wavelet import WaveletVolume
@@ -49,9 +49,7 @@ def check_schedule(steps, budget):
     if steps is not None and (not whole_number(steps) or not 1 <= steps <= MAX_STEPS):
         raise InputError(f"steps={steps!r} must be a whole number from 1 to {MAX_STEPS} (each frame doubles "
                          f"the coefficients)", cli=f"--steps {steps} must be a whole number from 1 to {MAX_STEPS}")
-    if budget is not None and not (np.isfinite(budget) and budget > 0):
-        raise InputError(f"budget={budget!r} must be a positive number of seconds",
-                         cli=f"--budget {budget:g} must be a positive number of seconds")
+    check_budget(budget)
 
 
 def schedule(total: int, steps: int) -> list:

@@ -31,6 +31,8 @@ from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
 from .tables import MAX_LEVELS, ViewTables
+from .textures import check_sampling
+from ..threads import one_at_a_time
 
 COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
 SPLAT_BYTES = 32  # per splat of a pass: centre float2, pixel box int4, texture int, tile count uint
@@ -46,7 +48,8 @@ PASS_ROWS = 1 << 20
 
 class SplatRenderer:
     """Splats any view of a wavelet volume: its ranked coefficients stay on the device, or stream there in
-    chunks in importance order where they and the view's working set exceed the device budget.
+    chunks in importance order where they and the view's working set exceed the device budget.  Several threads may
+    render through one at once: views on a device take their turn (docs/coordinates.md §4).
 
     Parameters
     ----------
@@ -78,10 +81,7 @@ class SplatRenderer:
         check_model(wv, "splatting")
         if wv.levels >= MAX_LEVELS:
             raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
-        if omega_s is not None and not finite_number(omega_s, "omega_s") > 0:
-            raise InputError(f"omega_s={omega_s!r} must be a positive band (e.g. 14, paper eq. 35)")
-        if coarse is not None and not (isinstance(coarse, (int, float)) and 0 < coarse < 1):
-            raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
+        omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)
         self.wv, self.omega_s, self.sampling, self.coarse = wv, omega_s, sampling, coarse
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
@@ -109,6 +109,7 @@ class SplatRenderer:
         self._spectra_work = {}  # their footprint spectra's arrays, written over by the next view's
         self._grown = False  # extend() gave more coefficients than the device arrays hold
         self.groups = ranked_groups(wv)
+        self.lock = self.cc.lock  # one view at a time on the device (threads.one_at_a_time)
 
     def extend(self, wv: WaveletVolume, groups: list):
         """``wv`` in place of the model, and its :func:`ranked_groups` ``groups``, whose tables begin with this
@@ -151,6 +152,7 @@ class SplatRenderer:
             self.compile_seconds += time.perf_counter() - start
         return self.stages[(channels, perspective)]
 
+    @one_at_a_time
     def begin(self, camera, upto=None):
         """Start an image of a :class:`Camera` or :class:`ConeBeam`: resolve the view, make footprints, zero
         the framebuffers (an :class:`Accumulator`).  ``upto``: the image splats only the first ``upto``
@@ -294,6 +296,7 @@ class Accumulator:
 
     def __init__(self, renderer: SplatRenderer, view, layers: list, tables: list, upto=None):
         self.r, self.view, self.layers, self.tables, self.upto = renderer, view, layers, tables, upto
+        self.lock = renderer.lock  # its passes use the renderer's buffers
         cc = renderer.cc
         pools = renderer.texel_pools(tables)
         self.device_tables = [{name: pool if name == "texels" else cc.upload(getattr(t, name)) for name in t.names}
@@ -308,6 +311,7 @@ class Accumulator:
     def footprint_seconds(self) -> float:
         return sum(t.footprint_seconds for t in self.tables)
 
+    @one_at_a_time
     def splat(self, first: int, count: int):
         """Add coefficients ``first .. first + count`` (importance order) of every group."""
         if self.upto is not None and first + count > self.upto:
@@ -338,6 +342,7 @@ class Accumulator:
             self.stats["chunks"] += 1
             yield coef, values, 0, m
 
+    @one_at_a_time
     def splat_dropping(self):
         """Add every coefficient of a perspective view, less the wavelet splats of the image's framebuffer whose
         bounds, summed over any pixel, stay within :attr:`drop_share` of the image maximum (docs/splatting.md §8
@@ -505,6 +510,7 @@ def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="aut
     equal share of its coefficients, and the image is the sum of theirs (docs/splatting.md §7).
     """
     if scheduler is not None:
+        omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)  # before any worker starts
         return _splat_on_cluster(wv, camera, scheduler, device, dict(
             omega_s=omega_s, sampling=sampling, coarse=coarse,
             device_memory=parse_cap(device_memory)))
@@ -515,11 +521,12 @@ def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="aut
 def _splat_range(r: SplatRenderer, camera, first: int, stop: int) -> tuple:
     """``(image, meta)`` of coefficients ``first .. stop`` of each group, in importance order."""
     start = time.perf_counter()
-    acc = r.begin(camera)
-    if any(acc.drop_share) and r.chunk is None and (first, stop) == (0, r.count):
-        acc.splat_dropping()
-    else:
-        acc.splat(first, stop - first)
+    with r.lock:  # the image's begin and its passes together: another thread's begin may change the chunking
+        acc = r.begin(camera)
+        if any(acc.drop_share) and r.chunk is None and (first, stop) == (0, r.count):
+            acc.splat_dropping()
+        else:
+            acc.splat(first, stop - first)
     image = acc.image()
     return image, acc.meta(time.perf_counter() - start)
 
@@ -552,9 +559,21 @@ def _splat_share(renderer_of, share, device, options, camera) -> tuple:
     return _splat_range(r, camera, r.count * i // n, r.count * (i + 1) // n)
 
 
+def splat_options(omega_s, sampling, coarse) -> tuple:
+    """``(omega_s, sampling, coarse)`` of :class:`SplatRenderer` checked, the numbers as floats (a NumPy scalar is
+    one; a bool is not): one line naming the argument, before a one-shot call's renderer is looked up by them."""
+    if omega_s is not None and not finite_number(omega_s, "omega_s") > 0:
+        raise InputError(f"omega_s={omega_s!r} must be a positive band (e.g. 14, paper eq. 35)")
+    check_sampling(sampling)
+    if coarse is not None and not 0 < finite_number(coarse, "coarse") < 1:
+        raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
+    return (None if omega_s is None else float(omega_s)), sampling, (None if coarse is None else float(coarse))
+
+
 def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device_memory=None) -> SplatRenderer:
     """The :class:`SplatRenderer` that one-shot calls on ``wv`` with these options share."""
     check_model(wv, "splatting")
+    omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)
     cc = ComputeContext.get(device)
     cap = parse_cap(device_memory)
     return wv.shared(("splat", cc.info.id, omega_s, sampling, coarse, cap),

@@ -211,6 +211,12 @@ def check_texels(texels: int, max_texels: int | None, what: str, fix: str) -> No
                                 f"{4 * max_texels / 2**20:,.0f} MiB allowed: {fix}")
 
 
+def check_sampling(sampling):
+    """``sampling`` one of :data:`SAMPLINGS` (a string: an array or a list is named, not hashed)."""
+    if not isinstance(sampling, str) or sampling not in SAMPLINGS:
+        raise InputError(f"footprint sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
+
+
 def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omega_min=None,
                sampling: str = "auto", tol: float = 0.0, texel=None, device=None, max_texels=None) -> dict:
     """Footprint textures of the (level, key) pairs in ``bands`` for one view.
@@ -258,8 +264,7 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
     wav = wavelet_for(wavelet)
     d_xyz = spacing_xyz(spacing_zyx)
     n, u, v = orthonormal_frame(n, u, v)
-    if sampling not in SAMPLINGS:
-        raise InputError(f"footprint sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
+    check_sampling(sampling)
     if not (np.isfinite(omega_s) and omega_s > 0):
         raise InputError(f"omega_s must be a positive number, got {omega_s!r}")
     if omega_min is None:
