@@ -209,8 +209,8 @@ class StagedTracer:
         """What the coarse stage's X-ray ``image`` (H, W, C) of ``view`` (its own, reduced view; along its central
         ray) lacks, relative to the line integrals of the whole field: each part's energy in the line integrals,
         the approximation's from that image, the details' and the clamped-off field's their energy times the share
-        that white coefficients keep (the details' at the coarsest level, the approximation's B-splines';
-        :mod:`~clwave.raytrace.coarse_estimate`, docs/raytracing.md §9)."""
+        that white coefficients keep (the coarsest level's details', half of it for the finer levels', the
+        approximation's B-splines'; :mod:`~clwave.raytrace.coarse_estimate`, docs/raytracing.md §9)."""
         direction = view.n[::-1] / self._lattice  # (z, y, x) lattice units
         seen = sum(scale * line_energy(image[..., list(channels)], view, self._lattice, self.levels)
                    for _, channels, scale in self._parts)
