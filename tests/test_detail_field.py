@@ -9,7 +9,7 @@ import pytest
 
 from clwave import RayTracer, TransferFunction, WaveletVolume, phantom
 from clwave.errors import FileFormatError
-from clwave.io.summary import detail_energy, detail_field
+from clwave.io.summary import detail_energy, detail_field, detail_levels
 from clwave.model.chunked import tier_energy, tiers_of
 from clwave.model.wavelet import band_importance, importance_of
 from test_bricks import smooth_volume
@@ -94,6 +94,9 @@ def test_the_details_energy_is_the_tiers_with_the_coarsest_levels_field(saved):
     assert finer > 0
     assert 8 / 9 <= (detail_field(path) - fields) / finer <= 9 / 8
     assert detail_field(path) > detail_energy(path)
+    coarsest, rest = detail_levels(path)  # the two parts apart: the X-ray term weighs them unequally
+    assert coarsest == pytest.approx(fields, rel=1e-12) and 8 / 9 <= rest / finer <= 9 / 8
+    assert coarsest + rest == pytest.approx(detail_field(path), rel=1e-12)
 
 
 def run_table_energies(path, group) -> np.ndarray:

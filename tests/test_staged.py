@@ -548,3 +548,17 @@ def test_a_white_detail_band_keeps_the_share_its_wavelets_line_integrals_keep():
     assert white_share(wav, direction, "aaa") == pytest.approx(projected / energy, rel=5e-3)
     energy, projected = line_energies(np.ones((1, 1, 1)), [support[letter] for letter in "daa"], (1, 0, 0))
     assert projected <= 1e-6 * energy  # psi along the ray: its vanishing moment
+
+
+def test_a_finer_levels_white_band_keeps_half_the_coarsest_levels_share():
+    """A level-(L - 1) wavelet is half as long in the coarsest lattice's units (psi(2y), phi(2y)), so a white band of
+    it keeps half the share of the coarsest level's in the line integrals: the X-ray term weighs the finer levels'
+    energy by half of detail_share (docs/raytracing.md §9).  The quadrature oracle on one function per type."""
+    wav = clwave.model.bspline.SplineWavelet(4)
+    support = dict(a=(lambda y: wav.phi(2 * y), (0, 2)), d=(lambda y: wav.psi(2 * y), (0, 3.5)))
+    direction = (0.3, -0.5, 0.81)
+    shares = []
+    for key in ("aad", "ada", "daa", "add", "dad", "dda", "ddd"):
+        energy, projected = line_energies(np.ones((1, 1, 1)), [support[letter] for letter in key], direction, h=1 / 12)
+        shares.append(projected / energy)
+    assert max(shares) == pytest.approx(detail_share(wav, direction) / 2, rel=5e-3)

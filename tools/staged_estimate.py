@@ -4,7 +4,8 @@ Marschner–Lobb, a random smooth volume, the MNI152 MRI; ``model`` of tests/tes
 ``.clw``, 5 % and 0.5 % kept, two views at 128² and one at 256², shaded and X-ray, tolerance 1e-2, both coarse
 frames of each refinement (the full stage held back until they are made), each measured against the whole file's
 direct render.  ``--file PATH --size 512`` measures one file instead (hydrogen 256³ → 512²: one view, shaded).
-``--held-out`` measures the volumes held out from the estimate's choices instead (:func:`held_out`: 80 frames).
+``--held-out`` measures the volumes held out from the estimate's choices instead (:func:`held_out`: 80 frames),
+``--fresh`` a set made before the eighteenth session's changes and never tuned on (:func:`fresh`: 48 frames).
 
     PYTHONPATH=$PWD .venv/bin/python tools/staged_estimate.py [--json out.json]
 
@@ -47,6 +48,29 @@ def held_out(tmp) -> list:
                ("marschner-lobb 96", clwave.phantom("marschner-lobb", n=96), "hydrogen", 256),
                ("random 64", clwave.Volume(((noise - noise.min()) / np.ptp(noise)).astype(np.float32)), "grey", 192),
                ("mri 2³", mni152(step=2), None, 256))
+    return saved(tmp, volumes, ((30, 20), (-60, 35)))
+
+
+def fresh(tmp) -> list:
+    """A held-out set made before the eighteenth session changed the estimate, and never tuned on: 5 % and 0.5 %
+    kept, views (75°, 10°) and (−150°, −40°), none of them the protocol's or :func:`held_out`'s: a CT-like
+    Shepp–Logan 64³ in HU (background −1000, the brain's 0.2 at +40, the skull's 1 at +1500) with ``ct-bone`` at
+    256², a random smooth volume 80³ of a new seed (``grey``) at 192², hydrogen 96³ at 192²."""
+    import numpy as np
+    from scipy.ndimage import gaussian_filter
+
+    head = clwave.phantom("shepp-logan", 64).data
+    hu = np.interp(head, [0.0, 0.2, 1.0], [-1000.0, 40.0, 1500.0]).astype(np.float32)
+    noise = gaussian_filter(np.random.default_rng(2026).random((80, 80, 80)), 2.3)
+    volumes = (("ct shepp-logan 64", clwave.Volume(hu), "ct-bone", 256),
+               ("random 80", clwave.Volume(((noise - noise.min()) / np.ptp(noise)).astype(np.float32)), "grey", 192),
+               ("hydrogen 96", clwave.phantom("hydrogen", 96), "hydrogen", 192))
+    return saved(tmp, volumes, ((75, 10), (-150, -40)))
+
+
+def saved(tmp, volumes, angles) -> list:
+    """Cases (label, path, camera keywords) of ``volumes`` (name, volume, preset or None for RGBA, image side):
+    each classified, 3 cubic levels, saved at 5 % and 0.5 % kept under ``tmp``, seen from ``angles``."""
     cases = []
     for name, volume, preset, size in volumes:
         rgba = volume if preset is None else clwave.TransferFunction.preset(preset).classify(volume)
@@ -54,8 +78,7 @@ def held_out(tmp) -> list:
         for keep in KEEPS:
             path = Path(tmp) / f"{name.replace(' ', '_')}_{keep}.clw"
             full.threshold(keep=keep).save(path)
-            cases.append((f"{name} {keep:.1%}", path, [dict(azimuth=30, elevation=20, size=size),
-                                                       dict(azimuth=-60, elevation=35, size=size)]))
+            cases.append((f"{name} {keep:.1%}", path, [dict(azimuth=a, elevation=e, size=size) for a, e in angles]))
     return cases
 
 
@@ -111,6 +134,7 @@ def main():
     parser.add_argument("--file", help="one .clw file instead of the 48³ test models")
     parser.add_argument("--size", type=int, default=512, help="its image side (with --file)")
     parser.add_argument("--held-out", action="store_true", help="the held-out volumes instead (held_out)")
+    parser.add_argument("--fresh", action="store_true", help="the fresh held-out set instead (fresh)")
     parser.add_argument("--models", nargs="+", default=MODELS, choices=MODELS)
     parser.add_argument("--json", help="write the rows and the summary here")
     args = parser.parse_args()
@@ -119,6 +143,8 @@ def main():
             cases = [(Path(args.file).name, args.file, [dict(azimuth=30, elevation=20, size=args.size)])]
         elif args.held_out:
             cases = held_out(tmp)
+        elif args.fresh:
+            cases = fresh(tmp)
         else:
             cases = []
             for name in args.models:

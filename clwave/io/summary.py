@@ -34,11 +34,19 @@ def detail_field(path, tiered=None) -> float | None:
     """The energy of a ``.clw`` file's stored details as the staged tracer counts it: the tiers' importance energy
     (``tiered``, :func:`detail_energy`'s, read where not given) with the coarsest level's replaced by its field
     energy, both written with the file (:mod:`.detail_field`); None where a group lacks that figure (a file written
-    before it)."""
+    before it).  :func:`detail_levels`' two parts summed."""
+    levels = detail_levels(path, tiered)
+    return None if levels is None else sum(levels)
+
+
+def detail_levels(path, tiered=None) -> tuple | None:
+    """A ``.clw`` file's stored details' energy in two parts: the coarsest level's field energy and the finer levels'
+    importance energy (the tiers' less the coarsest level's as they count it; :func:`detail_field`); None where a
+    group lacks the figure (a file written before it)."""
     energy = detail_energy(path) if tiered is None else tiered
     # the figures count the coarsest level from the run table's own tiers (:mod:`.detail_field`): together at most
     # the table's sum, the margin for float rounding only
-    most, coarsest = energy * (1 + 1e-9), 0.0
+    most, coarsest, field = energy * (1 + 1e-9), 0.0, 0.0
     with open_clw(path) as (h5, header):
         for gi in range(len(checked_header(header)[3])):
             data = h5.get(f"g{gi}/detail_field")
@@ -49,11 +57,11 @@ def detail_field(path, tiered=None) -> float | None:
             if not np.all(np.isfinite(figure) & (figure >= 0)):
                 raise ValueError(f"member {data.name} holds {figure.tolist()}, not two finite energies >= 0")
             coarsest += figure[1]
-            energy += figure[0] - figure[1]
-            if coarsest > most or not np.isfinite(energy):
+            field += figure[0]
+            if coarsest > most or not np.isfinite(field):
                 raise ValueError(f"member {data.name} holds {figure.tolist()}, more energy than the file's tiers "
                                  f"({most:.6g})")
-    return max(float(energy), 0.0)  # the tiers' sum less the coarsest level's: not below 0 by float rounding
+    return float(field), max(float(energy - coarsest), 0.0)  # not below 0 by float rounding
 
 
 def approximation_occupancy(path) -> list:

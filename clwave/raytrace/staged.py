@@ -21,7 +21,7 @@ from ..model.camera import Camera
 from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
 from ..io.occupancy import mass_on_occupied
-from ..io.summary import approximation_occupancy, detail_energy, detail_field
+from ..io.summary import approximation_occupancy, detail_energy, detail_levels
 from ..model.wavelet import ChannelGroup, WaveletVolume, importance_of
 from .coarse_estimate import approximation_grid, detail_share, field_energy, line_energy, white_share
 from ..threads import Abandoned
@@ -54,11 +54,14 @@ class StagedTracer:
 
     def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False, whole=None, coarse=None):
         start = time.perf_counter()
-        approximation, tiered, unread, occupancy = read_coarse(path) if coarse is None else coarse
+        approximation, tiered, by_level, occupancy = read_coarse(path) if coarse is None else coarse
         self.levels = approximation.levels
         energies = [importance_of(g, None, approximation.frame).astype(np.float64) ** 2 for g in approximation.groups]
         read = sum(float(np.sum(e)) for e in energies)
-        unread = tiered if unread is None else unread  # a file written before that figure: the importance energy
+        # the coarsest level's details and the finer levels' (a file written before that figure: the importance
+        # energy, all of it counted as the coarsest level's)
+        self._unread = (tiered, 0.0) if by_level is None else by_level
+        unread = sum(self._unread)
         outside = 0.0  # the approximation's energy off its occupied blocks (a file without the occupancy: none)
         for e, g, occupied in zip(energies, approximation.groups, occupancy):
             if occupied is not None:
@@ -73,7 +76,7 @@ class StagedTracer:
             scale = float(np.sum(e)) / plain if plain > 0 else 0.0
             self._parts.append((g.wavelet, g.channels, scale))
             field += scale * field_energy(grid, g.wavelet.order)
-        self._unread, self._lattice = unread, np.asarray(approximation.spacing) * 2 ** self.levels  # z, y, x
+        self._lattice = np.asarray(approximation.spacing) * 2 ** self.levels  # z, y, x
         self.missing = float(np.sqrt(unread / (field + unread))) if field + unread > 0 else 0.0
         self.outside = float(np.sqrt(outside / (read + tiered))) if read + tiered > 0 else 0.0  # importances both
         self._off = outside
@@ -206,12 +209,13 @@ class StagedTracer:
         """What the coarse stage's X-ray ``image`` (H, W, C) of ``view`` (its own, reduced view; along its central
         ray) lacks, relative to the line integrals of the whole field: each part's energy in the line integrals,
         the approximation's from that image, the details' and the clamped-off field's their energy times the share
-        that white coefficients keep (the details' at the coarsest level, the approximation's B-splines';
-        :mod:`~clwave.raytrace.coarse_estimate`, docs/raytracing.md §9)."""
+        that white coefficients keep (the coarsest level's details', half of it for the finer levels', the
+        approximation's B-splines'; :mod:`~clwave.raytrace.coarse_estimate`, docs/raytracing.md §9)."""
         direction = view.n[::-1] / self._lattice  # (z, y, x) lattice units
         seen = sum(scale * line_energy(image[..., list(channels)], view, self._lattice, self.levels)
                    for _, channels, scale in self._parts)
-        unseen = self._unread * max(detail_share(w, direction) for w, _, _ in self._parts)
+        coarsest, finer = self._unread  # level l < L keeps 2^(l - L) of level L's share: at most half (§9)
+        unseen = (coarsest + finer / 2) * max(detail_share(w, direction) for w, _, _ in self._parts)
         off = self._off * max(white_share(w, direction, "aaa") for w, _, _ in self._parts)
         return float(np.sqrt((unseen + off) / (seen + unseen))) if seen + unseen > 0 else 0.0
 
@@ -255,12 +259,14 @@ class StagedTracer:
 def read_coarse(path) -> tuple:
     """What the coarse stage of a ``.clw`` file reads of it (:class:`StagedTracer`'s ``coarse=``, where a caller has
     read it already): its approximation (without the content mask: the coarse stage has no content clamp), the
-    details' importance energy from the tiers (nothing more is read), their energy as a field (the coarsest level's,
-    written with the file; None for a file written before it), and the file's occupancy of the approximation."""
+    details' importance energy from the tiers (nothing more is read), their energy by level (the coarsest level's
+    field energy written with the file and the finer levels' importance energy,
+    :func:`~clwave.io.summary.detail_levels`; None for a file written before it), and the file's occupancy of the
+    approximation."""
     approximation = WaveletVolume.open(path, approximation=True)
     approximation.content_mask = None
     tiered = detail_energy(path)
-    return approximation, tiered, detail_field(path, tiered), approximation_occupancy(path)
+    return approximation, tiered, detail_levels(path, tiered), approximation_occupancy(path)
 
 
 def _abandon(event, thread):
