@@ -745,7 +745,7 @@ def test_unknown_extension_names_supported_formats(tmp_path):
 
 # --------------------------------------------------------------------------- CT units
 
-def test_hu_to_mu_and_background(tmp_path):
+def test_hu_to_mu_and_subtract(tmp_path):
     hu = np.full((3, 3, 3), -1000.0, np.float32)
     hu[1, 1, 1], hu[0, 0, 0], hu[2, 2, 2] = 0.0, 1000.0, -3024.0
     np.save(tmp_path / "ct.npy", hu)
@@ -758,9 +758,9 @@ def test_hu_to_mu_and_background(tmp_path):
 
     expected_mu = np.maximum(mu_water * (1 + hu / 1000), 0)
     np.testing.assert_allclose(vol.data, expected_mu, rtol=1e-6, atol=0)
-    shifted = load(tmp_path / "ct.npy", hu_to_mu=True, mu_water=mu_water, background=0.005)
+    shifted = load(tmp_path / "ct.npy", hu_to_mu=True, mu_water=mu_water, subtract=0.005)
     np.testing.assert_allclose(shifted.data, expected_mu - 0.005, rtol=0, atol=1e-7)
-    raw = load(tmp_path / "ct.npy", background=-1000)
+    raw = load(tmp_path / "ct.npy", subtract=-1000)
     np.testing.assert_array_equal(raw.data, hu + 1000)
 
 
