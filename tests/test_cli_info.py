@@ -156,8 +156,9 @@ def test_info_of_an_ome_or_imagej_tiff_gives_its_spacing_without_a_voxel(tmp_pat
         assert code == 0 and (tuple(facts["spacing"]), tuple(facts["origin"])) == (vol.spacing, vol.origin), name
     assert loaded["o.ome.tif"].spacing == (5.0, 0.25, 0.5) and loaded["ij.tif"].spacing == (3.0, 0.25, 0.5)
     code, out, _ = run(capsys, "info", str(tmp_path / "o.ome.tif"))
-    assert out.splitlines()[2] == ("spacing    0.5, 0.25, 5 (x, y, z), origin 0, 0, 0 (µm for an OME-TIFF, an ImageJ "
-                                   "stack's unit; as loaded)")
+    # the OME-TIFF's first voxel at 0 (it gives no plane positions): its centre at half its extent
+    assert out.splitlines()[2] == ("spacing    0.5, 0.25, 5 (x, y, z), origin 2.25, 0.875, 12.5 (µm for an OME-TIFF, "
+                                   "an ImageJ stack's unit; as loaded)")
 
 
 def test_a_header_declared_passes_every_handler_of_read_errors(tmp_path):

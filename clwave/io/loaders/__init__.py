@@ -172,8 +172,7 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "tiff":
-        data, spacing = tiff.read_tiff(path, fits)
-        return data, spacing, None, 0.0
+        return (*tiff.read_tiff(path, fits), 0.0)
     if kind in _SLICE_FOLDERS:
         return slices.read_slice_folder(path, progress_bar, fits), None, None, 0.0
     if kind == "dicom-frames":
