@@ -466,6 +466,52 @@ def test_a_stop_ends_the_render_under_way_within_a_launch():
     kernels.in_bands(Queue(), lambda first, count: None, 100)  # this thread has no stop event
 
 
+def test_a_script_that_never_closes_its_viewer_ends_without_waiting_for_the_render(tmp_path):
+    """A script starts a viewer, a render of 5,000 items paced at 0.01 s each (50 s whole) on its render thread, and
+    ends without close(): the viewer is closed before the exit joins the render thread (view/main_end.py), which
+    stops at its next band; until tidy22 the exit waited for the whole render."""
+    script = tmp_path / "no_close.py"
+    script.write_text(textwrap.dedent("""
+        import time
+        import clwave
+        from clwave.device import kernels
+        from clwave.view import view
+
+        class Queue:
+            def finish(self):
+                pass
+
+        def launch(first, count):
+            launched.append(count)
+            time.sleep(0.01 * count)
+
+        wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.6)
+        v = view(wv, size=16)
+        launched = []
+        v.server.pool.submit(kernels.in_bands, Queue(), launch, 5000)
+        while not launched:
+            time.sleep(0.01)
+        print("rendering", flush=True)
+    """))
+    env = dict(os.environ, PYTHONPATH=str(Path(clwave.__file__).parents[1]))
+    p = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=env)
+    try:
+        assert "rendering" in p.stdout.readline()
+        start = time.perf_counter()
+        try:
+            p.wait(25)
+        except subprocess.TimeoutExpired:
+            pytest.fail("a script that never closed its viewer did not end within 25 s of its last line")
+        ended = time.perf_counter() - start
+    finally:
+        if p.poll() is None:
+            p.kill()
+        _, err = p.communicate()
+    assert p.returncode == 0 and "Traceback" not in err and "Exception ignored" not in err, err
+    assert ended < 25
+
+
 @pytest.mark.parametrize("from_file", [False, True])
 def test_a_shaded_source_prepared_after_the_stop_gives_up_quietly(from_file, tmp_path):
     """The build thread's stop (threads.stop_on) reaches every step of ``prepare``: a file's coarse stage and the
