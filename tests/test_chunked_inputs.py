@@ -137,9 +137,9 @@ def test_the_rule_chunked_or_whole(tmp_path, volume, monkeypatch):
     assert [axis[0] for axis in load(tmp_path / "v.h5").data.chunks] == [3, 5, 4]
 
 
-def test_hu_to_mu_and_background_apply_per_chunk(tmp_path, volume):
+def test_hu_to_mu_and_subtract_apply_per_chunk(tmp_path, volume):
     np.save(tmp_path / "ct.npy", volume)
-    options = dict(hu_to_mu=True, mu_water=0.02, background=0.001)
+    options = dict(hu_to_mu=True, mu_water=0.02, subtract=0.001)
     np.testing.assert_array_equal(load(tmp_path / "ct.npy", chunks=4, **options).data.compute(),
                                   load(tmp_path / "ct.npy", **options).data)
 

@@ -74,26 +74,26 @@ def test_info_of_a_classified_clw_names_its_transfer_function(tmp_path, capsys):
     assert "model      1 level, 4 channels in 1 group" in out  # one level, not "1 levels"
 
 
-def test_info_names_a_windowless_transfer_function_and_the_offset(tmp_path, capsys):
-    """A transfer function without a window (its points are values, model.md §5) is no "window auto"; the offset
+def test_info_names_a_windowless_transfer_function_and_the_value_subtracted(tmp_path, capsys):
+    """A transfer function without a window (its points are values, model.md §5) is no "window auto"; the value
     subtracted (--subtract) is a line of words where it is not 0, and a JSON key always (0 where none is recorded)."""
     tf = clwave.TransferFunction([[-100, 0, 0, 0, 0], [40, 1, 1, 1, 0.5], [500, 1, 1, 1, 1]], name="mine")
     vol = clwave.Volume(np.random.default_rng(2).random((8, 8, 8), np.float32) * 600 - 100)
     plain, moved = tmp_path / "plain.clw", tmp_path / "moved.clw"
     clwave.WaveletVolume.from_volume(vol, levels=1, transfer_function=tf).save(plain)
-    clwave.WaveletVolume.from_volume(clwave.Volume(vol.data + 1024, offset=-1024.0), levels=1).save(moved)
+    clwave.WaveletVolume.from_volume(clwave.Volume(vol.data + 1024, subtracted=-1024.0), levels=1).save(moved)
     code, out, _ = run(capsys, "info", str(plain))
     assert code == 0 and "transfer   mine, window none (points are values, -100 .. 500), 3 points (classified while " \
-                         "rendering)" in out and "offset" not in out, out
+                         "rendering)" in out and "subtracted" not in out, out
     code, out, _ = run(capsys, "info", str(moved))
-    assert code == 0 and "offset     -1024 subtracted from the input's values (--subtract; transfer functions in the " \
+    assert code == 0 and "subtracted -1024 from the input's values (--subtract; transfer functions in the " \
                          "input's units)" in out, out
-    for path, offset in ((plain, 0.0), (moved, -1024.0)):
+    for path, subtracted in ((plain, 0.0), (moved, -1024.0)):
         code, out, _ = run(capsys, "info", str(path), "--json")
-        assert code == 0 and json.loads(out)["offset"] == offset
+        assert code == 0 and json.loads(out)["subtracted"] == subtracted
     older = crafted(plain, tmp_path, lambda header: header.pop("offset"))  # a file of before the fifteenth session
     code, out, _ = run(capsys, "info", str(older), "--json")
-    assert code == 0 and json.loads(out)["offset"] == 0.0
+    assert code == 0 and json.loads(out)["subtracted"] == 0.0
 
 
 def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsys, monkeypatch):
@@ -156,8 +156,9 @@ def test_info_of_an_ome_or_imagej_tiff_gives_its_spacing_without_a_voxel(tmp_pat
         assert code == 0 and (tuple(facts["spacing"]), tuple(facts["origin"])) == (vol.spacing, vol.origin), name
     assert loaded["o.ome.tif"].spacing == (5.0, 0.25, 0.5) and loaded["ij.tif"].spacing == (3.0, 0.25, 0.5)
     code, out, _ = run(capsys, "info", str(tmp_path / "o.ome.tif"))
-    assert out.splitlines()[2] == ("spacing    0.5, 0.25, 5 (x, y, z), origin 0, 0, 0 (µm for an OME-TIFF, an ImageJ "
-                                   "stack's unit; as loaded)")
+    # the OME-TIFF's first voxel at 0 (it gives no plane positions): its centre at half its extent
+    assert out.splitlines()[2] == ("spacing    0.5, 0.25, 5 (x, y, z), origin 2.25, 0.875, 12.5 (µm for an OME-TIFF, "
+                                   "an ImageJ stack's unit; as loaded)")
 
 
 def test_a_header_declared_passes_every_handler_of_read_errors(tmp_path):

@@ -93,6 +93,25 @@ def test_a_pose_tables_refusal_names_the_pose_or_the_header(tmp_path, capsys, ta
     assert main(argv) == 0 and np.load(tmp_path / "d.npy").shape == (1, 8, 8)
 
 
+@pytest.mark.parametrize("method", ["splat", "raytrace"])
+def test_each_poses_view_is_resolved_once(tmp_path, monkeypatch, method):
+    """Its check before the first radiograph resolves it, and its render takes that view (until tidy22 the render
+    resolved it again); the radiographs are the renderer's of the poses themselves."""
+    resolved = []
+    monkeypatch.setattr(ConeBeam, "view", lambda self, volume, _view=ConeBeam.view: resolved.append(self) or
+                        _view(self, volume))
+    (tmp_path / "t.csv").write_text("azimuth,elevation,dso\n0,0,60\n90,10,70\n200,-20,65\n")
+    assert main(["drr", "phantom:shepp-logan:16", "--levels", "1", "--keep", "1", "--poses", str(tmp_path / "t.csv"),
+                 "--size", "8", "--pixel", "2", "--dsd", "90", "--method", method, "-o", str(tmp_path / "d.npy")]) == 0
+    assert len(resolved) == 3 and len({id(cb) for cb in resolved}) == 3
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("shepp-logan", n=16), levels=1).threshold(keep=1.0)
+    renderer = clwave.SplatRenderer(wv) if method == "splat" else clwave.RayTracer(wv, content_clamp=False)
+    options = {} if method == "splat" else dict(tolerance=1e-3, absorption=False)
+    monkeypatch.undo()
+    want = [renderer.render(cb, **options).image[..., 0] for cb in resolved]
+    np.testing.assert_array_equal(np.load(tmp_path / "d.npy"), want)
+
+
 def test_beer_lambert():
     assert clwave.transmitted is transmitted  # the API (docs/coordinates.md §5)
     assert np.allclose(transmitted([0.0, np.log(2.0), np.inf], i0=3.0), [3.0, 1.5, 0.0])

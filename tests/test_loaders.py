@@ -6,6 +6,7 @@ voxel to the grid position of its world coordinate: neither uses the loader's
 orientation code.
 """
 
+import json
 import warnings
 from pathlib import Path
 
@@ -313,6 +314,70 @@ def test_ome_tiff_spacing_is_read_in_micrometres(tmp_path, rng):
         assert load(tmp_path / "odd.ome.tif").spacing == pytest.approx((1.0, 1.0, 0.5))
     [said] = [str(w.message) for w in told]
     assert "along y" in said and "--spacing" in said and "along z" not in said
+
+
+def _ome_pair(tmp_path, arr, spacing, first=None, tiff_units=None):
+    """The same (z, y, x) volume as an OME-TIFF (tifffile: PhysicalSize, and its planes' positions of ``first``,
+    the first voxel's (x, y, z), in ``tiff_units``) and as an OME-Zarr (scale and translation, micrometres)."""
+    import zarr
+
+    planes = {}
+    if first is not None:
+        units = tiff_units or {}
+        scale = {axis: 1.0 / {"nm": 1e-3, "mm": 1e3}.get(units.get(axis), 1.0) for axis in "XYZ"}
+        planes = dict(PositionX=[first[0] * scale["X"]] * len(arr), PositionY=[first[1] * scale["Y"]] * len(arr),
+                      PositionZ=[(first[2] + spacing[0] * z) * scale["Z"] for z in range(len(arr))],
+                      **{f"Position{axis}Unit": [unit] * len(arr) for axis, unit in units.items()})
+    tifffile.imwrite(tmp_path / "v.ome.tif", arr, ome=True, metadata=dict(
+        axes="ZYX", PhysicalSizeZ=spacing[0], PhysicalSizeY=spacing[1], PhysicalSizeX=spacing[2],
+        **({"Plane": planes} if planes else {})))
+    group = zarr.open_group(tmp_path / "v.zarr", mode="w", zarr_format=2)
+    group.create_array("0", data=arr, chunks=arr.shape)
+    transforms = [{"type": "scale", "scale": list(spacing)}]
+    if first is not None:
+        transforms.append({"type": "translation", "translation": list(first[::-1])})
+    group.attrs["multiscales"] = [{"version": "0.4", "axes": [{"name": a, "type": "space", "unit": "micrometer"}
+                                                              for a in "zyx"],
+                                   "datasets": [{"path": "0", "coordinateTransformations": transforms}]}]
+    return tmp_path / "v.ome.tif", tmp_path / "v.zarr"
+
+
+@pytest.mark.parametrize("first, tiff_units", [(None, None), ((10.0, -20.0, 30.0), None),
+                                               ((10.0, -20.0, 30.0), {"X": "nm", "Z": "mm"})])
+def test_an_ome_tiff_and_an_ome_zarr_of_one_volume_are_placed_alike(tmp_path, rng, capsys, first, tiff_units):
+    """The first voxel at the OME-TIFF's plane positions (each in its unit) or the OME-Zarr's translation, 0 where
+    neither is given, and the origin the volume's centre (docs/coordinates.md §1): the same spacing and origin in
+    the API and in clwave info (until tidy22 an OME-TIFF was centred at 0 whatever its positions)."""
+    from clwave.cli import main
+
+    arr = rng.integers(0, 60000, (5, 6, 7)).astype(np.uint16)
+    spacing = (2.0, 0.25, 0.5)
+    tif, zarr_store = _ome_pair(tmp_path, arr, spacing, first, tiff_units)
+    corner = np.zeros(3) if first is None else np.array(first)
+    want = corner + (np.array([7, 6, 5]) - 1) / 2 * np.array(spacing[::-1])  # the centre, (x, y, z)
+    placed = []
+    for path in (tif, zarr_store):
+        vol = load(path)
+        np.testing.assert_array_equal(np.asarray(vol.data), arr)
+        assert vol.spacing == pytest.approx(spacing, rel=1e-12)
+        np.testing.assert_allclose(vol.origin, want, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(vol.voxel_to_world(np.zeros((1, 3)))[0], corner, atol=1e-12)
+        assert main(["info", str(path), "--json"]) == 0
+        facts = json.loads(capsys.readouterr().out)
+        placed.append((facts["spacing"], facts["origin"]))
+        np.testing.assert_allclose(facts["origin"], vol.origin, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(placed[0], placed[1], rtol=1e-12, atol=1e-12)
+
+
+def test_an_ome_tiff_position_that_is_no_length_is_0_with_a_warning(tmp_path, rng):
+    arr = rng.integers(0, 60000, (3, 4, 5)).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "odd.ome.tif", arr, ome=True, metadata=dict(
+        axes="ZYX", PhysicalSizeX=0.5, Plane=dict(PositionX=[4.0] * 3, PositionY=[8.0] * 3, PositionYUnit=["s"] * 3)))
+    with pytest.warns(ClwaveWarning) as told:
+        vol = load(tmp_path / "odd.ome.tif")
+    np.testing.assert_allclose(vol.voxel_to_world(np.zeros((1, 3)))[0], (4.0, 0.0, 0.0))
+    [said] = [str(w.message) for w in told]
+    assert "plane position along y (8.0 's')" in said and "taken as 0 there" in said, said
 
 
 def test_rgb_tiff_stack_is_4d(tmp_path, rng):
@@ -745,7 +810,7 @@ def test_unknown_extension_names_supported_formats(tmp_path):
 
 # --------------------------------------------------------------------------- CT units
 
-def test_hu_to_mu_and_background(tmp_path):
+def test_hu_to_mu_and_subtract(tmp_path):
     hu = np.full((3, 3, 3), -1000.0, np.float32)
     hu[1, 1, 1], hu[0, 0, 0], hu[2, 2, 2] = 0.0, 1000.0, -3024.0
     np.save(tmp_path / "ct.npy", hu)
@@ -758,9 +823,9 @@ def test_hu_to_mu_and_background(tmp_path):
 
     expected_mu = np.maximum(mu_water * (1 + hu / 1000), 0)
     np.testing.assert_allclose(vol.data, expected_mu, rtol=1e-6, atol=0)
-    shifted = load(tmp_path / "ct.npy", hu_to_mu=True, mu_water=mu_water, background=0.005)
+    shifted = load(tmp_path / "ct.npy", hu_to_mu=True, mu_water=mu_water, subtract=0.005)
     np.testing.assert_allclose(shifted.data, expected_mu - 0.005, rtol=0, atol=1e-7)
-    raw = load(tmp_path / "ct.npy", background=-1000)
+    raw = load(tmp_path / "ct.npy", subtract=-1000)
     np.testing.assert_array_equal(raw.data, hu + 1000)
 
 

@@ -4,6 +4,7 @@ spacing 1, one size, mode and sample type, one format (clwave/io/loaders/slices.
 import json
 import struct
 import zlib
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -77,6 +78,27 @@ def test_a_jpeg_folder_is_what_imageio_decodes(tmp_path, rng):
     volume = load(folder)
     decoded = np.stack([iio.imread(folder / f"s{z + 1}.jpg") for z in range(4)])
     np.testing.assert_array_equal(volume.data, decoded)
+
+
+@pytest.mark.parametrize("suffix", [".png", ".jpg"])
+def test_each_slice_is_opened_once(tmp_path, rng, monkeypatch, suffix):
+    """Its mode, a PNG's bit depth, its declared size and its pixels from one open file (until tidy22 imageio's meta,
+    the PNG header, its properties and its pixels opened it four times), the volume what imageio decodes."""
+    import builtins
+
+    slices = rng.integers(0, 256, (3, 5, 4, 3)).astype(np.uint8)
+    folder = write_slices(tmp_path / "s", slices, suffix)
+    opened, real_open = [], builtins.open
+
+    def counting_open(file, *args, **kwargs):
+        if str(file).startswith(str(folder)):
+            opened.append(Path(file).name)
+        return real_open(file, *args, **kwargs)
+    monkeypatch.setattr(builtins, "open", counting_open)
+    volume = load(folder)
+    monkeypatch.undo()
+    assert sorted(opened) == [f"s{z}{suffix}" for z in (1, 2, 3)], opened
+    np.testing.assert_array_equal(volume.data, [iio.imread(folder / f"s{z}{suffix}") for z in (1, 2, 3)])
 
 
 RGB = np.zeros((6, 7, 3), np.uint8)

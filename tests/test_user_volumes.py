@@ -22,15 +22,15 @@ def masked(tmp_path):
     return tmp_path, data
 
 
-def test_nan_voxels_take_the_value_given_before_the_background(masked):
+def test_nan_voxels_take_the_value_given_before_the_subtraction(masked):
     folder, data = masked
     with pytest.raises(InputError, match=r"non-finite voxel.*load\(path, nan=0.0\)"):
         clwave.load(folder / "m.npy")
-    vol = clwave.load(folder / "m.npy", nan=-5.0, background=-5.0)  # NaN -> -5 in the file's units, then +5
+    vol = clwave.load(folder / "m.npy", nan=-5.0, subtract=-5.0)  # NaN -> -5 in the file's units, then +5
     expected = np.where(np.isnan(data), -5.0, data) + 5.0
     np.testing.assert_array_equal(vol.data, expected.astype(np.float32))
-    assert vol.offset == -5.0 and np.count_nonzero(vol.data == 0) == np.count_nonzero(np.isnan(data))
-    chunked = clwave.load(folder / "m.npy", nan=-5.0, background=-5.0, chunks=5)  # the same, chunk by chunk
+    assert vol.subtracted == -5.0 and np.count_nonzero(vol.data == 0) == np.count_nonzero(np.isnan(data))
+    chunked = clwave.load(folder / "m.npy", nan=-5.0, subtract=-5.0, chunks=5)  # the same, chunk by chunk
     np.testing.assert_array_equal(np.asarray(chunked.data), vol.data)
     nifti = clwave.load(folder / "m.nii", nan=0.0)  # RAS: the ball is symmetric, x flipped or not
     assert np.isfinite(nifti.data).all() and np.count_nonzero(nifti.data) == np.count_nonzero(~np.isnan(data))

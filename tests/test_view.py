@@ -586,14 +586,14 @@ def test_a_transfer_function_that_shows_nothing_ends_blank_with_a_note():
     assert all(f["note"] == NOTHING_VISIBLE for f, _ in frames)
 
 
-def test_editor_points_the_models_offset_would_merge_are_refused_in_one_line_and_the_tab_goes_on():
-    """A scalar model stored with an offset of -1000 (values near 0 kept as 1000 + v): the editor's points 1e-14
-    apart, distinct in the input's units, would merge where the offset moves them (float64 spacing 1.1e-13 at 1000):
-    the page hears one line naming how far apart to set them, not the renderer's "not increasing", and the tab's
+def test_editor_points_the_models_subtraction_would_merge_are_refused_in_one_line_and_the_tab_goes_on():
+    """A scalar model stored with -1000 subtracted (values near 0 kept as 1000 + v): the editor's points 1e-14
+    apart, distinct in the input's units, would merge where the subtraction moves them (float64 spacing 1.1e-13 at
+    1000): the page hears one line naming how far apart to set them, not the renderer's "not increasing", and the tab's
     next view, its points apart, ends at a final frame."""
     from clwave.model.volume import Volume
 
-    vol = Volume(np.asarray(clwave.phantom("hydrogen", n=16).data) + 1000.0, offset=-1000.0)
+    vol = Volume(np.asarray(clwave.phantom("hydrogen", n=16).data) + 1000.0, subtracted=-1000.0)
     wv = clwave.WaveletVolume.from_volume(vol, levels=1).threshold(keep=0.6)
     close = [[0.0, 0.0, 0.0, 0.0, 0.0], [1e-14, 1.0, 1.0, 1.0, 0.2], [1.0, 1.0, 1.0, 1.0, 0.2]]
 
@@ -609,8 +609,8 @@ def test_editor_points_the_models_offset_would_merge_are_refused_in_one_line_and
     with view(wv, size=16) as v:
         error, frames = run(go(v))
     assert error["seq"] == 1 and error["message"] == ("transfer function values 0 and 1e-14 merge on the model's "
-                                                      "values, stored as the input's minus its offset -1000; set them "
-                                                      "at least 2.3e-13 apart")
+                                                      "values, stored as the input's minus the value subtracted, "
+                                                      "-1000; set them at least 2.3e-13 apart")
     assert frames[-1][0]["final"] and frames[-1][0]["tf_points"] == POINTS
 
 

@@ -35,6 +35,16 @@ def alive(names=THREADS) -> list:
     return sorted(t.name for t in threading.enumerate() if t.name in names)
 
 
+def seconds_to_end(p, limit, what) -> float:
+    """Seconds until the process ``p`` ends; the test fails where it has not ended within ``limit``."""
+    start = time.perf_counter()
+    try:
+        p.wait(limit)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"{what} did not end within {limit} s")
+    return time.perf_counter() - start
+
+
 def test_ctrl_c_while_the_rest_is_read_ends_the_process(clw, tmp_path):
     """``clwave view FILE.clw`` interrupted while the rest is read: the reading holds h5py's lock for 3 s (as a long
     read does); the server stops the reader and waits for it, so the process ends (a daemon reader stopped by the
@@ -67,12 +77,7 @@ def test_ctrl_c_while_the_rest_is_read_ends_the_process(clw, tmp_path):
         assert line, "clwave view ended before reading the rest"
         time.sleep(0.5)
         p.send_signal(signal.SIGINT)
-        start = time.perf_counter()
-        try:
-            p.wait(30)
-        except subprocess.TimeoutExpired:
-            pytest.fail("clwave view did not end within 30 s of Ctrl-C while the rest was read")
-        ended = time.perf_counter() - start
+        ended = seconds_to_end(p, 30, "clwave view, Ctrl-C while the rest was read,")
     finally:
         watchdog.cancel()
         if p.poll() is None:
@@ -436,6 +441,35 @@ def test_a_failing_stop_leaves_close_returning_and_the_loop_closed(monkeypatch, 
     assert any(r.getMessage() == "stopping the viewer failed" and r.exc_info for r in caplog.records)
 
 
+class NoQueue:
+    """A stand-in for a command queue: nothing to wait for."""
+
+    def finish(self):
+        pass
+
+
+def paced_render(v, items=5000):
+    """``(its Future, the counts launched)`` of a render of ``items`` launches paced at 0.01 s each on the viewer
+    ``v``'s render thread, in bands as a kernel's (``kernels.in_bands``, whose bands check the thread's stop), once
+    its first band started."""
+    from clwave.device import kernels
+
+    def launch(first, count):
+        launched.append(count)
+        time.sleep(0.01 * count)
+
+    launched = []
+    render = v.server.pool.submit(kernels.in_bands, NoQueue(), launch, items)
+    while not launched:
+        time.sleep(0.01)
+    return render, launched
+
+
+def small_viewer():
+    return view(clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.6),
+                size=16)
+
+
 def test_a_stop_ends_the_render_under_way_within_a_launch():
     """The render and build threads take no KeyboardInterrupt: a stop ends their kernel launches between two bands
     (``threads.stop_on``), so that a long stage (a shaded still frame of seconds to minutes) does not hold the exit.
@@ -444,26 +478,40 @@ def test_a_stop_ends_the_render_under_way_within_a_launch():
     from clwave.device import kernels
     from clwave.threads import Abandoned
 
-    class Queue:
-        def finish(self):
-            pass
-
-    def launch(first, count):
-        launched.append(count)
-        time.sleep(0.01 * count)
-
-    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
-    v = view(wv, size=16)
-    launched = []
-    render = v.server.pool.submit(kernels.in_bands, Queue(), launch, 5000)
-    while not launched:
-        time.sleep(0.01)
+    v = small_viewer()
+    render, launched = paced_render(v)
     start = time.monotonic()
     v.close()
     with pytest.raises(Abandoned, match="given up from another thread"):
         render.result(timeout=10)
     assert time.monotonic() - start < 10 and sum(launched) < 5000
-    kernels.in_bands(Queue(), lambda first, count: None, 100)  # this thread has no stop event
+    kernels.in_bands(NoQueue(), lambda first, count: None, 100)  # this thread has no stop event
+
+
+def test_a_script_that_never_closes_its_viewer_ends_without_waiting_for_the_render(tmp_path):
+    """A script starts a viewer, a render of 5,000 items paced at 0.01 s each (50 s whole) on its render thread, and
+    ends without close(): the viewer is closed before the exit joins the render thread (view/main_end.py), which
+    stops at its next band; until tidy22 the exit waited for the whole render."""
+    script = tmp_path / "no_close.py"
+    script.write_text(textwrap.dedent("""
+        from test_view_threads import paced_render, small_viewer
+
+        paced_render(small_viewer())
+        print("rendering", flush=True)
+    """))
+    folders = (Path(clwave.__file__).parents[1], Path(__file__).parent)  # clwave's, and this module's
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(map(str, folders)))
+    p = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=env)
+    try:
+        assert "rendering" in p.stdout.readline()
+        ended = seconds_to_end(p, 25, "a script that never closed its viewer, after its last line,")
+    finally:
+        if p.poll() is None:
+            p.kill()
+        _, err = p.communicate()
+    assert p.returncode == 0 and "Traceback" not in err and "Exception ignored" not in err, err
+    assert ended < 25
 
 
 @pytest.mark.parametrize("from_file", [False, True])

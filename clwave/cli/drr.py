@@ -109,13 +109,14 @@ def run(args):
                                  device_memory=device_memory)
         draw = renderer.render
 
+    views = []
+    for i, cb in enumerate(cameras):  # every pose's view resolved (checked) before the first is rendered
+        with pose_named(args.poses, i + 1, geometry["rows"][i]):
+            views.append(cb.view(wv))
+
     def render(i):  # pose i's radiograph
         with pose_named(args.poses, i + 1, geometry["rows"][i]):
-            return draw(cameras[i])
-
-    for i, cb in enumerate(cameras):  # every pose checked before the first is rendered
-        with pose_named(args.poses, i + 1, geometry["rows"][i]):
-            cb.view(wv)
+            return draw(views[i])
     start = time.perf_counter()
 
     blank = []  # the poses (from 1) whose detector sees nothing of the model

@@ -91,9 +91,9 @@ def _clw_lines(f) -> list:
         when = "while rendering" if f["channels"] == 1 else "before the transform"
         lines.append(("transfer", f"{tf.get('name') or 'unnamed'}, window {window}, {len(tf['points'])} points "
                                   f"(classified {when})"))
-    if f["offset"]:
-        lines.append(("offset", f"{f['offset']:g} subtracted from the input's values (--subtract; transfer functions "
-                                f"in the input's units)"))
+    if f["subtracted"]:
+        lines.append(("subtracted", f"{f['subtracted']:g} from the input's values (--subtract; transfer functions in "
+                                    f"the input's units)"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
     return lines

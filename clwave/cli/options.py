@@ -120,9 +120,9 @@ def read_volume(args):
         vol = phantom(parts[1], n=n)
         if spacing is None and not args.subtract:
             return vol
-        subtract = finite_number(args.subtract or 0.0, "--subtract")  # as load(background=) subtracts it
+        subtract = finite_number(args.subtract or 0.0, "--subtract")  # as load(subtract=) subtracts it
         data = vol.data - vol.data.dtype.type(subtract)
-        return Volume(data, spacing=vol.spacing if spacing is None else spacing, offset=subtract)
+        return Volume(data, spacing=vol.spacing if spacing is None else spacing, subtracted=subtract)
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     # weighed by the size the file declares, before its voxels are read
     fits = partial(check_model_fits, args, what="decomposing this volume",
@@ -130,7 +130,7 @@ def read_volume(args):
                         "first), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
                 series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),
-                nan=args.nan, background=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits)
+                nan=args.nan, subtract=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits)
 
 
 def check_model_fits(args, voxels, channels, what, hint):
@@ -254,7 +254,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                    f"give --hu-to-mu (padding to 0 with air)" if least < -1100 else
                    ": give --subtract -1000 (air to 0) or --hu-to-mu")
         warn(f"{args.input} looks like CT in Hounsfield units (most border voxels air, -1000, or padding below it); "
-             f"the model spends its coefficients on that offset{padding}")
+             f"the model spends its coefficients on that constant{padding}")
     post = tf is not None and args.classify == "post"
     if post and vol.channels != 1:
         raise InputError(f"--classify post keeps a scalar volume for ray tracing to classify; {args.input} has "

@@ -4,8 +4,8 @@ chunked model can write a block at a time.
 
 Layout (version 2)::
 
-    attrs           format, version, header (JSON: shape, spacing, origin, offset, obliquity, levels, channels,
-                    groups, ...),
+    attrs           format, version, header (JSON: shape, spacing, origin, offset (the model's ``subtracted``),
+                    obliquity, levels, channels, groups, ...),
                     header_crc32 (zlib's CRC-32 of the header's UTF-8 bytes)
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
     g<i>/occupancy  uint8, bits packed along x: which coarsest-approximation coefficients the content occupies
@@ -166,7 +166,7 @@ def _write(model, fh, steps):
 
     chunked = isinstance(model, ChunkedWaveletVolume)
     groups = [(w, c) for w, c in model.groups()] if chunked else [(g.wavelet, g.channels) for g in model.groups]
-    header = dict(shape=model.shape, spacing=model.spacing, origin=model.origin, offset=model.offset,
+    header = dict(shape=model.shape, spacing=model.spacing, origin=model.origin, offset=model.subtracted,
                   obliquity=model.obliquity,
                   levels=model.levels, channels=model.channels, interpolate=not chunked and model.interpolate,
                   focus=None if model.focus is None else [list(model.focus[0]), model.focus[1]],
@@ -326,7 +326,7 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
     focus = header.get("focus") if keep is None else None  # as threshold(keep=) without a focus
     try:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, channels,
-                             interpolate=header["interpolate"], offset=header.get("offset", 0.0),
+                             interpolate=header["interpolate"], subtracted=header.get("offset", 0.0),
                              obliquity=header.get("obliquity", 0.0),
                              focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
                              transfer_function=header.get("transfer_function"), content=header.get("content"),

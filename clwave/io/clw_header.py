@@ -92,9 +92,9 @@ def checked_header(header) -> tuple:
     problem = frame_problem(shape, header["spacing"], header["origin"])
     if problem:
         raise ValueError(problem)
-    offset = header.get("offset", 0.0)  # absent in older files: their values are the input's
-    if not _numbers([offset], 1):
-        raise ValueError(f"offset {offset!r} is not one finite number")
+    subtracted = header.get("offset", 0.0)  # the value subtracted (its key of old); absent in older files: none
+    if not _numbers([subtracted], 1):
+        raise ValueError(f"offset {subtracted!r} (the value subtracted) is not one finite number")
     obliquity = header.get("obliquity", 0.0)  # absent in older files: read as axis-aligned
     if not (_numbers([obliquity], 1) and 0 <= obliquity <= 90):
         raise ValueError(f"obliquity {obliquity!r} is not one number of degrees from 0 to 90")

@@ -16,7 +16,7 @@ _WAVELETS = {order: name for name, order in WAVELET_ORDERS.items()}
 
 def describe_clw(path) -> dict:
     """The header of the ``.clw`` file ``path`` (shape, spacing, origin, levels, channels, interpolation, focus,
-    content box, transfer function, the ``offset`` subtracted from the input's values and the ``obliquity`` of its
+    content box, transfer function, the value ``subtracted`` from the input's values and the ``obliquity`` of its
     axes to its scanner's: 0 where the file records none)
     with, per channel group, its wavelet, channels, the coefficients it keeps and their share of the voxels, and its
     quantisation step (None: float32 values); and the file's size.  The header is checked as a read checks it
@@ -37,4 +37,4 @@ def describe_clw(path) -> dict:
     facts = {name: header.get(name) for name in ("spacing", "origin", "interpolate", "focus", "content",
                                                  "transfer_function")}
     return dict(file=str(path), bytes=path.stat().st_size, shape=list(shape), levels=levels, channels=channels,
-                **facts, offset=header.get("offset", 0.0), obliquity=header.get("obliquity", 0.0), groups=described)
+                **facts, subtracted=header.get("offset", 0.0), obliquity=header.get("obliquity", 0.0), groups=described)

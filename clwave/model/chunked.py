@@ -143,7 +143,7 @@ class ChunkedWaveletVolume:
     shape = property(lambda self: self.volume.shape)
     spacing = property(lambda self: self.volume.spacing)
     origin = property(lambda self: self.volume.origin)
-    offset = property(lambda self: self.volume.offset)
+    subtracted = property(lambda self: self.volume.subtracted)
     obliquity = property(lambda self: self.volume.obliquity)
     channels = property(lambda self: self.volume.channels)
     n_voxels = property(lambda self: int(np.prod(self.shape)))
@@ -276,7 +276,7 @@ class ChunkedWaveletVolume:
                for gi, (wavelet, channels) in enumerate(groups)]
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
-                             content_mask=mask, offset=self.offset, obliquity=self.obliquity)
+                             content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;

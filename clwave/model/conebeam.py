@@ -259,6 +259,15 @@ def check_camera(camera, name="camera"):
         raise InputError(f"{name} must be a clwave.Camera or a clwave.ConeBeam, not {type(camera).__name__}")
 
 
+def resolve_view(camera, volume) -> View:
+    """``camera``'s :class:`View` of ``volume`` for a renderer's image: a :class:`Camera`'s or :class:`ConeBeam`'s
+    resolved now, a View as it is (resolved already: ``clwave drr`` resolves every pose's before the first image)."""
+    if isinstance(camera, View):
+        return camera
+    check_camera(camera)
+    return camera.view(volume)
+
+
 #: the columns of a pose table (:func:`poses`): ConeBeam's parameters, per row
 POSE_COLUMNS = ("azimuth", "elevation", "roll", "dso", "dsd", "offset_u", "offset_v", "isocentre_x", "isocentre_y",
                 "isocentre_z")

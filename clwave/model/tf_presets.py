@@ -1,6 +1,6 @@
 """The named transfer functions of :meth:`clwave.TransferFunction.preset` (docs/model.md §5), each a
 ``(value, r, g, b, opacity)`` table and its default window; values in the input's units (HU for CT), however
-the volume stores them (:attr:`clwave.Volume.offset`)."""
+the volume stores them (:attr:`clwave.Volume.subtracted`)."""
 
 
 def _hu(points, lo, hi):

@@ -42,10 +42,10 @@ class TransferFunction:
         a normalised axis that the window maps to data units, 0 -> lo and
         1 -> hi; ``"auto"`` takes (lo, hi) from the 0.5 and 99.5 percentiles of
         the finite values being classified.  Data units are the input's (HU
-        for CT): on a volume or model with an ``offset`` (values stored as the
-        input's minus it, ``load(background=)``) the function is applied
+        for CT): on a volume or model with a value ``subtracted`` (values stored
+        as the input's minus it, ``load(subtract=)``) the function is applied
         shifted by it (:meth:`shifted`), so the same function classifies alike
-        with or without ``background=``.
+        with or without ``subtract=``.
     name : str, optional
         A label (presets carry their name); kept by :meth:`to_dict`.
 
@@ -122,28 +122,29 @@ class TransferFunction:
         t = self._points[:, 0]
         return t.copy() if win is None else win[0] + t * (win[1] - win[0])
 
-    def shifted(self, offset) -> "TransferFunction":
-        """This function for values stored as the input's minus ``offset`` (:attr:`Volume.offset`): its window, or
-        its points where it has none, moved by -offset; a window "auto" (percentiles of the values met) stays."""
-        if not offset or self._window == "auto":
+    def shifted(self, subtracted) -> "TransferFunction":
+        """This function for values stored as the input's minus ``subtracted`` (:attr:`Volume.subtracted`): its window,
+        or its points where it has none, moved by -subtracted; a window "auto" (percentiles of the values met) stays."""
+        if not subtracted or self._window == "auto":
             return self
         given = self._points[:, 0] if self._window is None else np.array(self._window)
-        moved = given - offset
-        merged = np.flatnonzero(np.diff(moved) <= 0)  # closer than float64 tells apart where the offset moves them
+        moved = given - subtracted
+        merged = np.flatnonzero(np.diff(moved) <= 0)  # closer than float64 tells apart where the subtraction moves them
         if merged.size:
             i = int(merged[0])
             raise InputError(f"transfer function {'values' if self._window is None else 'window'} {given[i]:g} and "
-                             f"{given[i + 1]:g} merge on the model's values, stored as the input's minus its offset "
-                             f"{offset:g}; set them at least {2 * np.spacing(np.abs(moved[i:i + 2]).max()):.2g} apart")
+                             f"{given[i + 1]:g} merge on the model's values, stored as the input's minus the value "
+                             f"subtracted, {subtracted:g}; set them at least "
+                             f"{2 * np.spacing(np.abs(moved[i:i + 2]).max()):.2g} apart")
         if self._window is None:
             return TransferFunction(np.column_stack([moved, self._points[:, 1:]]), name=self.name)
         return TransferFunction(self._points, tuple(moved), self.name)
 
     def _on(self, vol, window) -> "TransferFunction":
-        """This function under ``window`` (``...``: its own) in the units of ``vol``'s data: a scalar's shifted by its
-        offset (a colour volume's points are on luminance)."""
+        """This function under ``window`` (``...``: its own) in the units of ``vol``'s data: a scalar's shifted by the
+        value subtracted from it (a colour volume's points are on luminance)."""
         tf = self if window is ... else TransferFunction(self._points, window, self.name)
-        return tf.shifted(vol.offset) if vol.channels == 1 else tf
+        return tf.shifted(vol.subtracted) if vol.channels == 1 else tf
 
     # ----------------------------------------------------------------- evaluation
     def __call__(self, values, window=...):
@@ -152,7 +153,7 @@ class TransferFunction:
         Parameters
         ----------
         values : array_like
-            Scalar data values, any shape, in the function's units (of values stored with an offset:
+            Scalar data values, any shape, in the function's units (of values stored with a value subtracted:
             :meth:`shifted`).
         window : optional
             Overrides this function's window (None, "auto" or (lo, hi)); "auto"
@@ -186,7 +187,7 @@ class TransferFunction:
 
         A chunked volume (docs/chunked.md) gives a chunked result, each chunk
         classified when it is read, bit for bit as in memory; an "auto" window
-        and the RGB scale first take one pass over the volume.  A scalar volume with an ``offset`` is
+        and the RGB scale first take one pass over the volume.  A scalar volume with a value ``subtracted`` is
         classified by this function shifted by it (:meth:`shifted`).
 
         Parameters
@@ -232,7 +233,7 @@ class TransferFunction:
         """The refusal of this function (in ``vol``'s data units: :meth:`_on`) without opacity anywhere, naming its span
         and the values it met (a colour volume's luminance), a scalar's in the input's units; its ``cli`` names
         ``--tf-window`` (docs/known-gaps.md §15)."""
-        shift = vol.offset if vol.channels == 1 else 0.0
+        shift = vol.subtracted if vol.channels == 1 else 0.0
         lo, hi = self.data_points(window)[[0, -1]] + shift
         data = vol.data.reshape(-1, vol.channels)
         if vol.channels == 1:
@@ -270,7 +271,7 @@ class TransferFunction:
         tf = self if window is ... else TransferFunction(self._points, window, self.name)
         window = tf._statistics(vol)[0]
         if tf.window == "auto" and vol.channels == 1:  # the percentiles of the stored values
-            window = tuple(w + vol.offset for w in window)
+            window = tuple(w + vol.subtracted for w in window)
         return TransferFunction(self._points, window, self.name)
 
     def _statistics(self, vol):

@@ -35,8 +35,8 @@ class Volume:
         Voxel size ``(dz, dy, dx)`` in world units (default 1.0).
     origin : 3 floats
         World position ``(x, y, z)`` of the volume centre (default 0).
-    offset : float
-        The value subtracted from the input's values to make ``data`` (``clwave.load(background=)``,
+    subtracted : float
+        The value subtracted from the input's values to make ``data`` (``clwave.load(subtract=)``,
         ``--subtract``; default 0): transfer functions are written in the input's units, and are applied to
         ``data`` shifted by it (:meth:`TransferFunction.shifted`, docs/coordinates.md §1).
     obliquity : float
@@ -51,7 +51,7 @@ class Volume:
     ((4, 5, 6), 1, (2.0, 1.0, 1.0))
     """
 
-    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), offset=0.0, obliquity=0.0):
+    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), subtracted=0.0, obliquity=0.0):
         lazy = is_dask(data)
         if np.ma.is_masked(data):  # numpy.asarray would take the masked voxels' values as they are
             raise InputError(f"volume data is a masked array with {np.ma.count_masked(data)} masked voxel(s), whose "
@@ -99,7 +99,7 @@ class Volume:
         if not np.all(np.isfinite(origin)):
             raise InputError(f"origin {origin} must be finite (x, y, z)")
         self.origin = origin
-        self.offset = finite_number(offset, "offset")
+        self.subtracted = finite_number(subtracted, "subtracted")
         self.obliquity = finite_number(obliquity, "obliquity")
         if not 0 <= self.obliquity <= 90:
             raise InputError(f"obliquity={obliquity!r} must be degrees from 0 to 90")
@@ -161,8 +161,9 @@ class Volume:
         return corners.min(axis=0), corners.max(axis=0)
 
     def __repr__(self):
+        subtracted = f", subtracted={self.subtracted:g}" if self.subtracted else ""
         return (f"Volume(shape={self.shape}, channels={self.channels}, "
-                f"spacing={self.spacing}, origin={self.origin}{f', offset={self.offset:g}' if self.offset else ''})")
+                f"spacing={self.spacing}, origin={self.origin}{subtracted})")
 
 
 def is_dask(data) -> bool:

@@ -124,11 +124,11 @@ class WaveletVolume:
     file_format = None
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
-                 focus=None, transfer_function=None, content=None, content_mask=None, offset=0.0, obliquity=0.0):
+                 focus=None, transfer_function=None, content=None, content_mask=None, subtracted=0.0, obliquity=0.0):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
-        self.offset = float(offset)  # the source volume's Volume.offset: its values are the input's minus it
+        self.subtracted = float(subtracted)  # the source volume's: its values are the input's minus it
         self.obliquity = float(obliquity)  # the source volume's Volume.obliquity: degrees off the scanner's axes
         self.levels = int(levels)
         self.groups = list(groups)
@@ -197,7 +197,7 @@ class WaveletVolume:
             groups.append(ChannelGroup(wav, chans, bands, None, values))
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
                    interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask),
-                   content_mask=None if interpolate else ContentMask.of(mask), offset=volume.offset,
+                   content_mask=None if interpolate else ContentMask.of(mask), subtracted=volume.subtracted,
                    obliquity=volume.obliquity)
 
     # ------------------------------------------------------------- properties
@@ -270,7 +270,7 @@ class WaveletVolume:
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
                             interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
-                            content_mask=self.content_mask, offset=self.offset, obliquity=self.obliquity)
+                            content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity)
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
@@ -329,7 +329,8 @@ class WaveletVolume:
     # -------------------------------------------------------- evaluation
     def evaluate(self, points, method: str = "auto") -> np.ndarray:
         """The continuous model at world points (N, 3) as (x, y, z); returns (N, C) float64, in the stored values: the
-        input's minus :attr:`offset` (a 40 HU voxel of a CT loaded with ``background=-1000`` is 1040 here, model.md §5).
+        input's minus :attr:`subtracted` (a 40 HU voxel of a CT loaded with ``subtract=-1000`` is 1040 here,
+        model.md §5).
 
         The model of every kept coefficient, the content mask's clamp not applied (the ray tracer's field is zero
         on empty voxels, docs/raytracing.md §4; :meth:`unmasked` evaluates alike).  ``method``: ``"bands"`` sums
@@ -345,7 +346,7 @@ class WaveletVolume:
 
     def gradient(self, points, method: str = "auto") -> np.ndarray:
         """Analytic gradient (paper eq. 14-16, docs/model.md §4) at world points: (N, C, 3) as d/dx, d/dy, d/dz, of the
-        stored values (the offset, a constant, moves no gradient); ``method`` and the memory kept as
+        stored values (the value subtracted, a constant, moves no gradient); ``method`` and the memory kept as
         :meth:`evaluate`'s."""
         return evaluation.evaluate(self, points, True, method)
 
@@ -377,7 +378,7 @@ class WaveletVolume:
             dense = g.dense_bands()
             for slot, channel in enumerate(g.channels):
                 data[..., channel] = reconstruct_channel(g, dense, slot, self.shape, self.levels)
-        return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.offset,
+        return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.subtracted,
                       self.obliquity)
 
     def unmasked(self) -> "WaveletVolume":

@@ -119,7 +119,7 @@ class ScalarRange:
         q = cc.queue
         self.cc, self.bricks, self.tracer = cc, f, tracer
         self.noise_floor, self.spacing = tracer.grad_floor("single"), min(tracer.wv.spacing)
-        self.offset = tracer.wv.offset  # the model's values are the input's minus it (Volume.offset)
+        self.subtracted = tracer.wv.subtracted  # the model's values are the input's minus it (Volume.subtracted)
         self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
         self.slot_range = None  # bricks in a scratch file: |s| <= the block bound
         self.sample = np.zeros(1, np.float32) if f.resident else None  # no bricks at all: s = 0 everywhere
@@ -169,18 +169,18 @@ class ScalarRange:
     def window(self, tf: TransferFunction):
         """``tf``'s window in the input's units; "auto" from the percentiles of the full-detail slots' field values at
         lattice points (docs/raytracing.md §10), the same with level of detail or without, and whatever the order, plus
-        the model's offset."""
+        the value subtracted from the model's."""
         if tf.window != "auto":
             return tf.window
         if self.sample is None:
             raise InputError('a transfer function window "auto" at render time needs the bricks on the device; '
                              "give the window (lo, hi) (--tf-window LO,HI)")
-        return tuple(w + self.offset for w in auto_window(self.sample))
+        return tuple(w + self.subtracted for w in auto_window(self.sample))
 
     def stored(self, tf: TransferFunction) -> TransferFunction:
-        """``tf`` on the model's values, the input's minus its offset (:meth:`TransferFunction.shifted`), under
-        :meth:`window`."""
-        return TransferFunction(tf.points, self.window(tf)).shifted(self.offset)
+        """``tf`` on the model's values, the input's minus the value subtracted (:meth:`TransferFunction.shifted`),
+        under :meth:`window`."""
+        return TransferFunction(tf.points, self.window(tf)).shifted(self.subtracted)
 
     def invisible(self, post: Classification) -> str | None:
         """Why ``post`` draws nothing (its transfer function gives no block of the model any opacity: most often a
@@ -191,8 +191,8 @@ class ScalarRange:
         if not np.any(post.tf.points[:, 4]):
             return f"{name} has opacity 0 at every point: give it some opacity (or another function)"
         lo, hi = post.tf.data_points(post.window)[[0, -1]]
-        values = None if self.slot_range is None else (self.slot_range[..., 0].min() + self.offset,
-                                                       self.slot_range[..., 1].max() + self.offset)
+        values = None if self.slot_range is None else (self.slot_range[..., 0].min() + self.subtracted,
+                                                       self.slot_range[..., 1].max() + self.subtracted)
         held = "" if values is None else f"; this model's values lie within {values[0]:.4g} .. {values[1]:.4g}"
         return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
                 f"a window in the input's units (--tf-window LO,HI) or another function")

@@ -297,5 +297,5 @@ def coarse_volume(approximation: WaveletVolume) -> WaveletVolume:
     groups = [ChannelGroup(g.wavelet, g.channels, bands, g.positions, g.values * np.float32(step ** -1.5))
               for g in approximation.groups]
     return WaveletVolume(shape, spacing[::-1], origin, 0, groups, wv.channels, interpolate=wv.interpolate,
-                         transfer_function=wv.transfer_function, content=content, offset=wv.offset,
+                         transfer_function=wv.transfer_function, content=content, subtracted=wv.subtracted,
                          obliquity=wv.obliquity)

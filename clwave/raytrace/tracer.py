@@ -20,8 +20,8 @@ from ..device import programs
 from ..device.constants import BLOCK, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
 from ..model.geometry import world_to_fine_affine
-from ..model.camera import Camera
-from ..model.conebeam import ConeBeam, check_camera
+from ..model.camera import Camera, View
+from ..model.conebeam import ConeBeam, check_camera, resolve_view
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number, flag
 from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
@@ -53,9 +53,8 @@ FIELD_ARGS = dict(bspline=(("coef", B), ("pages", B), ("page_origin", INT4), ("p
                   wavelet=(("coef", B), ("info", B), ("shape", B), ("band_lo", B), ("poly", B), ("trace", B)))
 
 
-def _checked_view(camera, tolerance) -> float:
-    """The tolerance of a render, with its camera checked (InputError naming the argument)."""
-    check_camera(camera)
+def _checked_tolerance(tolerance) -> float:
+    """The tolerance of a render, checked (InputError naming the argument)."""
     tol = finite_number(tolerance, "tolerance")
     if tol <= 0:
         raise InputError(f"tolerance={tolerance!r} must be a positive absolute error")
@@ -231,9 +230,10 @@ class RayTracer:
         return GRAD_NOISE * eps * (self.q_bound if q_bound is None else q_bound) / min(self.wv.spacing)
 
     @one_at_a_time
-    def render(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True,
+    def render(self, camera: Camera | ConeBeam | View, tolerance=1e-3, lights=None, shading=True, absorption=True,
                precision="single", trace=0, detail=None, transfer_function=None) -> RenderResult:
-        """One image; see :func:`raytrace` for the parameters.
+        """One image; see :func:`raytrace` for the parameters (``camera`` may also be its
+        :class:`~clwave.model.camera.View` of this model, resolved already).
 
         ``detail`` (B-spline field): a level from 0 (full detail, the default) to ``levels``, or a
         :class:`~clwave.raytrace.lod.Detail` (a level cap and/or a screen-space error in pixels); the bricks of
@@ -243,7 +243,7 @@ class RayTracer:
         segments in ``meta["active_trace"]`` (see ``cl/raytrace/field_wavelet.h``).
         """
         wv, cc = self.wv, self.cc
-        tol = _checked_view(camera, tolerance)
+        tol = _checked_tolerance(tolerance)
         absorption = flag(absorption, "absorption")
         if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
@@ -258,7 +258,7 @@ class RayTracer:
             raise InputError(f"precision={precision!r} must be 'single' or 'double'")
         if precision == "double" and not cc.queue.device.double_fp_config:
             raise InputError(f"{cc.info.name} has no float64 support; use precision='single'")
-        view = camera.view(wv)
+        view = resolve_view(camera, wv)
         H, W = view.size
         check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"a {H}x{W} image", "render a smaller image", self.budget)
         phong, shading_note = self._phong(shading, absorption)
@@ -500,6 +500,7 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
     the line integrals; ``meta`` holds the field, segment and evaluation counts, shading,
     and timings (B-spline expansion and kernel compile apart).
     """
+    check_camera(camera)
     if scheduler is not None:
         from ..schedulers import client_for
         from .regions import check_cluster_model, raytrace_on_cluster
@@ -508,7 +509,7 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
         if transfer_function is not None and getattr(transfer_function, "window", None) == "auto":
             raise InputError('a transfer function window "auto" would be resolved by each worker on its own part; '
                              "give the window (lo, hi) to render on a cluster")
-        tol, cap = _checked_view(camera, tolerance), parse_cap(device_memory)
+        tol, cap = _checked_tolerance(tolerance), parse_cap(device_memory)
         light_directions(lights, None)  # checked before any worker starts
         options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision,
                        transfer_function=transfer_function)

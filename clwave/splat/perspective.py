@@ -22,6 +22,7 @@ import scipy.fft
 from ..device.constants import TILE
 from ..errors import CommandWords, DeviceMemoryError, InputError
 from ..model.bspline import wavelet_for
+from ..model.camera import View
 from ..model.conebeam import ConeBeam
 from ..model.geometry import check_key, fine_to_world, spacing_xyz, support_centres, support_extent
 from ..threads import cores, thread_map
@@ -89,11 +90,14 @@ def grid_nodes(lo, step, count) -> np.ndarray:
 
 def camera_words(camera) -> CommandWords:
     """The fixes a cone refusal names, in the API's words for ``camera``'s own class (a :class:`ConeBeam`'s
-    detector and distances, a perspective :class:`Camera`'s field of view and distance); the command line fills
-    in its options instead (:class:`clwave.errors.CommandWords`)."""
+    detector and distances, a perspective :class:`Camera`'s field of view and distance, a resolved
+    :class:`~clwave.model.camera.View`'s size and eye); the command line fills in its options instead
+    (:class:`clwave.errors.CommandWords`)."""
     tracer = "clwave.RayTracer(wv, content_clamp=False).render(camera, absorption=False)"  # the same model
     if isinstance(camera, ConeBeam):
         return CommandWords("a smaller detector, ConeBeam size= or pixel=, or a longer dsd=", "a ConeBeam dso=", tracer)
+    if isinstance(camera, View):
+        return CommandWords("a smaller image or field of view", "an eye (source) farther away", tracer)
     return CommandWords("a smaller Camera fov=, or a less wide size=", "a Camera distance=", tracer)
 
 

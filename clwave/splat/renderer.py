@@ -23,7 +23,7 @@ from ..device.context import ComputeContext
 from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
-from ..model.conebeam import check_camera
+from ..model.conebeam import check_camera, resolve_view
 from ..model.transform import band_code
 from ..model.wavelet import WaveletVolume, check_model
 from .coarse import Layer, coarse_factor
@@ -154,11 +154,11 @@ class SplatRenderer:
 
     @one_at_a_time
     def begin(self, camera, upto=None):
-        """Start an image of a :class:`Camera` or :class:`ConeBeam`: resolve the view, make footprints, zero
-        the framebuffers (an :class:`Accumulator`).  ``upto``: the image splats only the first ``upto``
-        coefficients, so only the bands they reach get footprints (a viewer's frame while dragging)."""
-        check_camera(camera)
-        view = camera.view(self.wv)
+        """Start an image of a :class:`Camera` or :class:`ConeBeam` (or its :class:`~clwave.model.camera.View` of this
+        model, resolved already): resolve the view, make footprints, zero the framebuffers (an
+        :class:`Accumulator`).  ``upto``: the image splats only the first ``upto`` coefficients, so only the bands
+        they reach get footprints (a viewer's frame while dragging)."""
+        view = resolve_view(camera, self.wv)
         # the world width of a pixel for the coarse framebuffers' error: in perspective the widest, at the far
         # side of the volume (docs/splatting.md §8)
         pixel = max(view.slope) * depth_range(view, self.wv, 0)[1] if view.perspective else view.pixel
@@ -197,7 +197,8 @@ class SplatRenderer:
         return [t.texels if isinstance(t, ConeTables) else self.cc.upload(t.texels) for t in tables]
 
     def render(self, camera) -> RenderResult:
-        """The X-ray image of one view (a :class:`Camera` or :class:`ConeBeam`) from every coefficient."""
+        """The X-ray image of one view (a :class:`Camera` or :class:`ConeBeam`, or its view resolved already: as
+        :meth:`begin`) from every coefficient."""
         return RenderResult(*_splat_range(self, camera, 0, self.count))
 
     def views(self, cameras):
@@ -509,6 +510,7 @@ def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="aut
     ``distributed.Client``, :mod:`clwave.schedulers`): each worker opens the model's ``.clw`` file and splats an
     equal share of its coefficients, and the image is the sum of theirs (docs/splatting.md §7).
     """
+    check_camera(camera)
     if scheduler is not None:
         omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)  # before any worker starts
         return _splat_on_cluster(wv, camera, scheduler, device, dict(
@@ -536,7 +538,6 @@ def _splat_on_cluster(wv, camera, scheduler, device, options) -> RenderResult:
     from ..schedulers import client_for
 
     check_model_file(wv, "splatting")  # before any worker starts
-    check_camera(camera)
     with client_for(scheduler) as client:  # which checks the scheduler before starting anything
         shares = workers_of(client)
         results = render_parts(client, _splat_share, wv.source, [(i, shares) for i in range(shares)], device,

@@ -11,11 +11,15 @@ from ..errors import InputError, warn_outside
 
 class Viewer:
     """A running viewer: open :attr:`url` in a browser (it holds the token); in a Jupyter notebook the object
-    shows the page inline.  :meth:`close` stops the server."""
+    shows the page inline.  :meth:`close` stops the server; a viewer still open is closed at the interpreter's
+    exit (:mod:`clwave.view.main_end`), so that the exit does not wait for the render under way."""
 
     def __init__(self, background):
+        from .main_end import close_at_exit
+
         self._background = background
         self.server = background.server
+        close_at_exit(background)
 
     @property
     def url(self) -> str:

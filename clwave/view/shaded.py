@@ -189,7 +189,7 @@ class ShadedSource(Source):
             return None
         if self._histogram[0] is None or self._histogram[0]() is not stage:
             counts, edges = np.histogram(sample, bins=HISTOGRAM_BINS)
-            edges += stage.scalar.offset  # in the input's units, as the editor's window and points
+            edges += stage.scalar.subtracted  # in the input's units, as the editor's window and points
             self._histogram = (weakref.ref(stage), dict(range=[float(edges[0]), float(edges[-1])],
                                                         counts=counts.tolist()))
         return self._histogram[1]

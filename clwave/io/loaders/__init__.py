@@ -39,7 +39,7 @@ _ONLY_FOR = {"shape": ".raw files", "dtype": ".raw files", "byte_order": ".raw f
 
 
 def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
-         chunks=None, nan=None, background=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None,
+         chunks=None, nan=None, subtract=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None,
          fits=None) -> Volume:
     """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
 
@@ -78,9 +78,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     nan : float, optional
         The value of NaN voxels, in the file's units: "no data" (FSL and SPM write NaN outside their masks),
         replaced before anything else.  Without it a volume holding NaN is refused.
-    background : float
+    subtract : float
         Subtracted from every voxel (after ``hu_to_mu``), so that the data is ~0
-        outside the object; kept as the volume's ``offset``, so transfer functions
+        outside the object; kept as the volume's ``subtracted``, so transfer functions
         stay in the input's units (HU for CT, attenuation with ``hu_to_mu``).
     hu_to_mu : bool
         Convert CT Hounsfield units to linear attenuation
@@ -121,7 +121,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     if not isinstance(path, (str, os.PathLike)):
         raise InputError(f"path must be a file or folder name (str or pathlib.Path), got {type(path).__name__}")
     path = Path(path)
-    background = finite_number(background, "background")
+    subtract = finite_number(subtract, "subtract")
     nan = None if nan is None else finite_number(nan, "nan")
     mu_water = finite_number(mu_water, "mu_water")
     if hu_to_mu and mu_water <= 0:
@@ -147,12 +147,12 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
             channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
             raise InputError(f"hu_to_mu converts {channels}; leave hu_to_mu off",
                              cli=f"--hu-to-mu converts {channels}; leave --hu-to-mu out")
-        convert = partial(to_float32, path=path, mu_water=mu_water if hu_to_mu else None, background=background,
+        convert = partial(to_float32, path=path, mu_water=mu_water if hu_to_mu else None, subtract=subtract,
                           nan=nan)
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
-                  origin=origin if origin is not None else (0.0, 0.0, 0.0), offset=background, obliquity=obliquity)
+                  origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity)
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
@@ -172,8 +172,7 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "tiff":
-        data, spacing = tiff.read_tiff(path, fits)
-        return data, spacing, None, 0.0
+        return (*tiff.read_tiff(path, fits), 0.0)
     if kind in _SLICE_FOLDERS:
         return slices.read_slice_folder(path, progress_bar, fits), None, None, 0.0
     if kind == "dicom-frames":

@@ -107,10 +107,10 @@ def _corrupt(path, exc) -> str:
     return f"cannot read {path}: {reason}; the file may be truncated or corrupt"
 
 
-def to_float32(block, path, mu_water, background, nan=None, copy=True):
+def to_float32(block, path, mu_water, subtract, nan=None, copy=True):
     """``block`` (the whole volume, or one chunk as it is read) as float32: NaN -> ``nan`` when it is given (the
     file's "no data"), Hounsfield units -> attenuation when ``mu_water`` is given (clipped at 0: air, -1000 HU, is
-    exactly 0), minus ``background``; float64 values beyond float32's range are refused.  ``copy``: never write
+    exactly 0), minus ``subtract``; float64 values beyond float32's range are refused.  ``copy``: never write
     into ``block`` (a Dask chunk)."""
     if block.dtype.kind == "f" and block.dtype.itemsize > 4 and block.size:
         check_float32_range(largest_finite(block), path)
@@ -121,8 +121,8 @@ def to_float32(block, path, mu_water, background, nan=None, copy=True):
         data += 1000.0
         data *= np.float32(mu_water / 1000.0)
         np.maximum(data, 0.0, out=data)
-    if background:
-        data -= np.float32(background)
+    if subtract:
+        data -= np.float32(subtract)
     return data
 
 

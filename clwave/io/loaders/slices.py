@@ -45,18 +45,22 @@ def _tiff_slice(path):
 
 
 def _image_slice(path):
-    """A PNG or JPEG slice through imageio (Pillow), its declared size weighed before it is decoded."""
+    """A PNG or JPEG slice through imageio's Pillow plugin, the file opened once: its mode and (a PNG's) bit depth
+    checked and its declared size weighed before it is decoded."""
     import imageio.v3 as iio
 
-    mode = iio.immeta(path).get("mode")
-    if mode not in _IMAGE_MODES:
-        raise FileFormatError(f"{path} is a {mode} image; clwave reads grey, RGB and RGBA slices: convert it, e.g. "
-                              f"PIL.Image.open(path).convert('RGB').save(path)")
     with open(path, "rb") as fh:
-        head = fh.read(26)
-    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[24] == 16 and head[25] in _PNG_COLOUR_TYPES:
-        raise FileFormatError(f"{path} is a 16-bit {_PNG_COLOUR_TYPES[head[25]]} PNG, which Pillow reads as 8 bits; "
-                              f"save the slices as 16-bit TIFF (tifffile.imwrite(path, image)) to keep all 16")
-    props = iio.improps(path)
-    check_whole(path, (1,) + props.shape, props.dtype)
-    return iio.imread(path)
+        head = fh.read(26)  # a PNG's signature and IHDR chunk, whose bit depth Pillow keeps no public record of
+        fh.seek(0)
+        with iio.imopen(fh, "r", plugin="pillow") as image:
+            mode = image.metadata().get("mode")
+            if mode not in _IMAGE_MODES:
+                raise FileFormatError(f"{path} is a {mode} image; clwave reads grey, RGB and RGBA slices: convert "
+                                      f"it, e.g. PIL.Image.open(path).convert('RGB').save(path)")
+            if head[:8] == b"\x89PNG\r\n\x1a\n" and head[24] == 16 and head[25] in _PNG_COLOUR_TYPES:
+                raise FileFormatError(f"{path} is a 16-bit {_PNG_COLOUR_TYPES[head[25]]} PNG, which Pillow reads as "
+                                      f"8 bits; save the slices as 16-bit TIFF (tifffile.imwrite(path, image)) to "
+                                      f"keep all 16")
+            props = image.properties()
+            check_whole(path, (1,) + props.shape, props.dtype)
+            return image.read()

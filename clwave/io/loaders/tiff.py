@@ -13,8 +13,9 @@ OME_MICROMETRES = {"pm": 1e-6, "Å": 1e-4, "nm": 1e-3, "µm": 1.0, "um": 1.0, "m
 
 
 def read_tiff(path, fits=None, stack=True):
-    """``(data, spacing)``: a TIFF stack as ``(pages, y, x[, samples])`` and its spacing ``(dz, dy, dx)`` where
-    it is an OME-TIFF (:func:`_ome_spacing`) or an ImageJ stack (:func:`_imagej_spacing`), else None; without
+    """``(data, spacing, origin)``: a TIFF stack as ``(pages, y, x[, samples])``, its spacing ``(dz, dy, dx)`` where
+    it is an OME-TIFF (:func:`_ome_spacing`) or an ImageJ stack (:func:`_imagej_spacing`), else None, and an
+    OME-TIFF's origin (:func:`_ome_origin`; else None); without
     ``stack`` (a slice of a folder) one page gives one slice, with it one 2-D image is refused.  With ``stack``,
     one page of 3 or 4 planar samples that tifffile wrote from a 3-D array of that shape (``tifffile.imwrite`` of a
     3 or 4 x Y x X stack stores it as an RGB(A) image) is read as that many slices, with a warning: a 2-D image is
@@ -58,26 +59,60 @@ def read_tiff(path, fits=None, stack=True):
                                   f"{series.axes!r}), not a stack of slices; write a volume one page a slice, e.g. "
                                   f"tifffile.imwrite(path, volume, photometric='minisblack')")
         spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)  # from the metadata alone
+        origin = _ome_origin(tif, path, spacing, shape[:3]) if tif.is_ome and len(spatial) == 3 else None
         try:
             check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
-        except Declared as declared:  # describe's (clwave info): the spacing is the header's, no orientation
+        except Declared as declared:  # describe's (clwave info): the spacing and origin are the header's
             if spacing is not None:
-                declared.placed = (spacing, (0.0, 0.0, 0.0), 0.0)
+                declared.placed = (spacing, (0.0, 0.0, 0.0) if origin is None else origin, 0.0)
             raise
         data = tif.asarray(key=range(len(tif.pages))) if pages else series.asarray()
     if channel:
         data = np.moveaxis(data, axes.index(channel), -1)
-    return (data if len(spatial) == 3 else data[np.newaxis]), spacing
+    return (data if len(spatial) == 3 else data[np.newaxis]), spacing, origin
+
+
+def _ome_pixels(tif) -> dict:
+    """The ``Pixels`` element of an OME-TIFF's first image, as a dict."""
+    import tifffile
+
+    image = tifffile.xml2dict(tif.ome_metadata).get("OME", {}).get("Image", {})
+    return (image[0] if isinstance(image, list) else image).get("Pixels", {})
+
+
+def _ome_origin(tif, path, spacing, shape):
+    """``(x, y, z)`` in micrometres of the centre of an OME-TIFF's first image, whose first voxel sits at its first
+    plane's ``PositionX/Y`` and at the ``PositionZ`` of its plane ``TheZ`` 0, each in its own unit
+    (``Position*Unit``, micrometres where none is given), 0 where none is given: where NGFF's translation puts an
+    OME-Zarr's first voxel (docs/coordinates.md §1).  A position that is no finite length is 0 there, with a
+    warning."""
+    planes = _ome_pixels(tif).get("Plane") or []
+    planes = [p for p in (planes if isinstance(planes, list) else [planes]) if isinstance(p, dict)]
+    first = planes[0] if planes else {}
+    z0 = next((p for p in planes if p.get("TheZ", 0) == 0), first)
+    corner, bad = [], []
+    for axis, plane in (("X", first), ("Y", first), ("Z", z0)):
+        value, unit = plane.get(f"Position{axis}"), plane.get(f"Position{axis}Unit", "µm")
+        try:
+            p = float(value) * OME_MICROMETRES[unit] if value is not None else 0.0
+        except (KeyError, TypeError, ValueError):
+            p = np.nan
+        if not np.isfinite(p):
+            bad.append(f"{axis.lower()} ({value!r} {unit!r})")
+            p = 0.0
+        corner.append(p)
+    if bad:
+        note(f"{path}: its OME plane position along {', '.join(bad)} is not a finite length in "
+             f"{', '.join(OME_MICROMETRES)}; taken as 0 there")
+    half = (np.array(shape[::-1], float) - 1) / 2 * np.array(spacing[::-1], float)  # first voxel to centre, (x, y, z)
+    return tuple(float(c) for c in np.array(corner) + half)
 
 
 def _ome_spacing(tif, path):
     """``(dz, dy, dx)`` in micrometres of an OME-TIFF's first image: its ``PhysicalSizeZ/Y/X``, each in its own unit
     (``PhysicalSize*Unit``, micrometres where none is given); an axis without a size is 1 (logged), one whose
     size or unit is no length clwave knows is 1 with a warning."""
-    import tifffile
-
-    image = tifffile.xml2dict(tif.ome_metadata).get("OME", {}).get("Image", {})
-    pixels = (image[0] if isinstance(image, list) else image).get("Pixels", {})
+    pixels = _ome_pixels(tif)
     spacing, bad = [], []
     for axis in "ZYX":
         size, unit = pixels.get(f"PhysicalSize{axis}"), pixels.get(f"PhysicalSize{axis}Unit", "µm")
