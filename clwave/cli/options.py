@@ -384,6 +384,15 @@ def check_outputs(force, *outputs) -> list:
     return paths
 
 
+def finish(outputs, lines):
+    """A command's last step: its report on stdout, then its ``outputs`` (:func:`~clwave.io.files.published_together`)
+    published together; a report that cannot be written publishes nothing (docs/README.md, "Outputs")."""
+    for line in lines:
+        print(line)
+    sys.stdout.flush()
+    outputs.publish()
+
+
 def check_frames_folder(path, force) -> Path:
     """A folder for PNG frames: none yet, or an empty one (any with ``--force``), never a file."""
     path = Path(path)
