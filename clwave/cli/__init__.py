@@ -15,6 +15,7 @@ import threading
 import warnings
 from functools import partial
 
+from ..device.memory import out_of_threads
 from ..errors import ClwaveError, ClwaveWarning, InputError, OutputError
 from . import compress, drr, info, progressive, render, view
 from .checks import check_options
@@ -97,12 +98,11 @@ def _main(argv) -> int:
         print("clwave: terminated", file=sys.stderr)
         return 143
     except MemoryError as exc:
-        fix = MEMORY_FIXES.get(getattr(args, "command", None), "render fewer pixels, keep fewer coefficients or use a "
-                                                              "smaller volume")
-        print(f"clwave: error: not enough memory for this work ({exc or 'an allocation failed'}); {fix}",
-              file=sys.stderr)
-        return EXIT_USAGE
+        return _out_of_memory(args, f"not enough memory for this work ({str(exc) or 'an allocation failed'})")
     except Exception as exc:  # a bug: one line, the traceback only when asked for
+        if out_of_threads(exc):
+            return _out_of_memory(args, f"not enough memory or threads for this work ({exc}; a memory limit, ulimit "
+                                        f"-v, leaves no room for a thread's stack)")
         if isinstance(exc, BrokenPipeError) and _reader_gone():
             return EXIT_PIPE
         if debug:
@@ -144,6 +144,13 @@ class _CheckedStdout:
             _silence_stdout()
             raise OutputError(f"cannot write to standard output: {exc.strerror or exc}; nothing was published "
                               f"(point stdout at a file or a pipe that takes it)") from None
+
+
+def _out_of_memory(args, what) -> int:
+    fix = MEMORY_FIXES.get(getattr(args, "command", None), "render fewer pixels, keep fewer coefficients or use a "
+                                                          "smaller volume")
+    print(f"clwave: error: {what}; {fix}", file=sys.stderr)
+    return EXIT_USAGE
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None, *, shown, said):
