@@ -47,3 +47,21 @@ def test_an_orthographic_cameras_reduced_view_stays_orthographic():
     reduced = camera.reduced(2, camera.view(volume))
     assert not reduced.perspective and reduced.size == (4, 4) and reduced.view(volume).pixel == \
         pytest.approx(2 * camera.view(volume).pixel)
+
+
+def test_a_2d_nifti_is_told_the_voxels_an_axis_clwave_needs(tmp_path, capsys):
+    """A 64 x 64 slice: "at least 2 voxels an axis", what the transform needs (it said "one voxel")."""
+    import nibabel
+    import numpy as np
+
+    path = tmp_path / "slice.nii.gz"
+    nibabel.save(nibabel.Nifti1Image(np.ones((64, 64), np.float32), np.eye(4)), path)
+    assert main(["compress", str(path), "-o", str(tmp_path / "x.clw")]) == 2
+    err = capsys.readouterr().err
+    assert "clwave reads 3-D volumes with at least 2 voxels an axis (stack 2-D slices into one first)" in err
+
+
+def test_render_help_says_the_png_is_always_written(capsys):
+    with pytest.raises(SystemExit):
+        main(["render", "--help"])
+    assert "always written (--raw adds the float32 values beside it)" in " ".join(capsys.readouterr().out.split())

@@ -117,7 +117,8 @@ def _total_seconds(meta) -> float:
 
 def add_parser(sub):
     p = add_command(sub, "render", "render an image: wavelet splatting (X-ray) or ray tracing (shaded)", run,
-                    "output .png (or .gif with --turntable)", view=True)
+                    "output .png, always written (--raw adds the float32 values beside it); .gif with --turntable",
+                    view=True)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
                    help="splat (default): X-ray line integrals; raytrace: emission-absorption, shaded (needs a "
                         "classified model: --tf, or a .clw compressed with it; a scalar .clw takes --tf to classify "
