@@ -24,7 +24,7 @@ def run(args):
             pass  # check_quantise names it
     quantise = check_quantise(quantise)  # before any work
     wv, reference = build_model(args, gather=False)
-    with published_together() as outputs:  # the error measured before the file is published (docs/README.md)
+    with published_together() as outputs:  # the error measured before the file is published (coordinates.md §4)
         start = time.perf_counter()
         wv.save(out, overwrite=args.force, quantise=quantise)
         saved = time.perf_counter() - start

@@ -386,7 +386,7 @@ def check_outputs(force, *outputs) -> list:
 
 def finish(outputs, lines):
     """A command's last step: its report on stdout, then its ``outputs`` (:func:`~clwave.io.files.published_together`)
-    published together; a report that cannot be written publishes nothing (docs/README.md, "Outputs")."""
+    published together; a report that cannot be written publishes nothing (coordinates.md §4)."""
     for line in lines:
         print(line)
     sys.stdout.flush()

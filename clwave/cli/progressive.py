@@ -56,7 +56,7 @@ def run(args):
     if window == "auto" and frames[-1].result().is_xray:  # the final image's window for every frame
         window = resolve_window(frames[0].final_image()[..., :3], "auto")
     figures = [f.figures() for f in frames]
-    with published_together() as outputs:  # every output written, then all published (docs/README.md)
+    with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
         if as_folder:  # written beside it, renamed into place: never mixed with another run's frames
             out.parent.mkdir(parents=True, exist_ok=True)
             folder = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png")

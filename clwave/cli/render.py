@@ -71,7 +71,7 @@ def run(args):
         results = [render(cam) for cam in cameras]
     if results[0].meta.get("nothing_visible"):  # a blank image is not what was asked for (docs/raytracing.md §10)
         raise InputError(results[0].meta["nothing_visible"])
-    with published_together() as outputs:  # every output written, then all published (docs/README.md)
+    with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
         lines = []
         if args.turntable is None:
             result = results[0]

@@ -75,7 +75,7 @@ def write_atomic(path, writer, overwrite=False) -> Path:
 def published_together():
     """A command's outputs published together, after every one is written: within the ``with``, :func:`write_atomic`
     writes each to a temporary beside it, and the yielded :class:`Staging`'s ``publish()`` gives them their names at
-    once; leaving the ``with`` otherwise (an error, a signal) discards them all (docs/README.md, "Outputs")."""
+    once; leaving the ``with`` otherwise (an error, a signal) discards them all (coordinates.md §4)."""
     staging = Staging()
     token = _STAGING.set(staging)
     try:
@@ -195,8 +195,10 @@ class _Folder:
             self.renamed = True
             return
         except OSError as exc:
-            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST) or not self.force:
-                raise FileExistsError(self.path) if exc.errno in (errno.ENOTEMPTY, errno.EEXIST) else exc from None
+            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                raise
+            if not self.force:  # filled since the command checked it: another writer's
+                raise FileExistsError(self.path) from None
         names = {f.name for f in self.tmp.iterdir()}
         for name in sorted(names):
             os.replace(self.tmp / name, self.path / name)
