@@ -126,7 +126,8 @@ def test_a_frames_folder_filled_by_another_run_meanwhile_is_refused(tmp_path, ca
     code = main(["progressive", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "--steps", "2",
                  "-o", str(folder)])
     err = capsys.readouterr().err
-    assert code == 2 and err.startswith(f"clwave: error: {folder} appeared while it was being written"), err
+    assert code == 2 and err == f"clwave: error: {folder} appeared while it was being written (another writer?); " \
+                                "pass --force to replace it\n", err
     assert names(folder) == ["frame_000.png"] and (folder / "frame_000.png").read_bytes() == b"the other run's"
     assert names(tmp_path) == ["pf"]  # no temporary folder left beside it
 

@@ -135,8 +135,9 @@ def _writing(path):
     try:
         yield
     except FileExistsError:
-        raise OutputExistsError(f"{path} appeared while it was being written (another writer?); pass "
-                                f"overwrite=True (--force) to replace it") from None
+        taken = f"{path} appeared while it was being written (another writer?)"
+        raise OutputExistsError(f"{taken}; pass overwrite=True (--force) to replace it",
+                                cli=f"{taken}; pass --force to replace it") from None
     except OSError as exc:
         if isinstance(exc, ClwaveError):
             raise
