@@ -15,12 +15,16 @@ import threading
 import warnings
 from functools import partial
 
-from ..errors import ClwaveError, ClwaveWarning, InputError
+from ..device.memory import out_of_threads
+from ..errors import ClwaveError, ClwaveWarning, InputError, OutputError
 from . import compress, drr, info, progressive, render, view
 from .checks import check_options
 from .options import warn
 
 EXIT_USAGE = 2
+#: what to ask for instead when a command runs out of memory (the rendering commands: fewer pixels)
+MEMORY_FIXES = {"compress": "keep fewer coefficients (--keep), read the volume chunk by chunk (--chunks auto) or "
+                            "crop it"}
 EXIT_PIPE = 128 + signal.SIGPIPE  # stdout's reader left (`| head`): as a program the signal ended, with no message
 
 
@@ -78,7 +82,8 @@ def _main(argv) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() \
         else None
     debug = "--debug" in (sys.argv[1:] if argv is None else argv)
-    args = None
+    args, stdout = None, sys.stdout
+    sys.stdout = _CheckedStdout(stdout)
     try:
         args = make_parser().parse_args(argv)
         check_options(args)  # before the input is opened: a mistake costs no read
@@ -93,10 +98,11 @@ def _main(argv) -> int:
         print("clwave: terminated", file=sys.stderr)
         return 143
     except MemoryError as exc:
-        print(f"clwave: error: not enough memory for this work ({exc or 'an allocation failed'}); render fewer "
-              f"pixels, keep fewer coefficients or use a smaller volume", file=sys.stderr)
-        return EXIT_USAGE
+        return _out_of_memory(args, f"not enough memory for this work ({str(exc) or 'an allocation failed'})")
     except Exception as exc:  # a bug: one line, the traceback only when asked for
+        if out_of_threads(exc):
+            return _out_of_memory(args, f"not enough memory or threads for this work ({exc}; a memory limit, ulimit "
+                                        f"-v, leaves no room for a thread's stack)")
         if isinstance(exc, BrokenPipeError) and _reader_gone():
             return EXIT_PIPE
         if debug:
@@ -106,8 +112,45 @@ def _main(argv) -> int:
               f"traceback", file=sys.stderr)
         return 1
     finally:
+        sys.stdout = stdout
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+class _CheckedStdout:
+    """``sys.stdout`` while a command runs: a write it cannot make (``>/dev/full``, a full disk) is one line naming
+    stdout (exit 2, before any output is published: options.finish), stdout then pointed at /dev/null so that the
+    interpreter's last flush fails no more (its exit code would be 120); a pipe whose reader left stays a
+    BrokenPipeError (exit 141, as a program the signal ended)."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text):
+        return self._checked(self.stream.write, text)
+
+    def flush(self):
+        return self._checked(self.stream.flush)
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
+
+    def _checked(self, operation, *args):
+        try:
+            return operation(*args)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            _silence_stdout()
+            raise OutputError(f"cannot write to standard output: {exc.strerror or exc}; nothing was published "
+                              f"(point stdout at a file or a pipe that takes it)") from None
+
+
+def _out_of_memory(args, what) -> int:
+    fix = MEMORY_FIXES.get(getattr(args, "command", None), "render fewer pixels, keep fewer coefficients or use a "
+                                                          "smaller volume")
+    print(f"clwave: error: {what}; {fix}", file=sys.stderr)
+    return EXIT_USAGE
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None, *, shown, said):
@@ -133,12 +176,20 @@ def _reader_gone() -> bool:
         poll.register(fd, select.POLLOUT)
         if not any(events & select.POLLERR for _, events in poll.poll(0)):
             return False
-        null = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(null, fd)
-        os.close(null)
     except (OSError, ValueError):  # a stdout with no file descriptor (a test's capture)
         return False
+    _silence_stdout()
     return True
+
+
+def _silence_stdout():
+    """Point stdout's file descriptor at /dev/null (where it has one)."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError):  # a stdout with no file descriptor (a test's capture)
+        pass
 
 
 if __name__ == "__main__":

@@ -184,6 +184,5 @@ def check_image_size(size, device, pixel_bytes, image="a {} image"):
 def make_camera(args):
     from ..model.camera import Camera
 
-    perspective = dict(perspective=True, distance=args.distance, fov=args.fov) \
-        if getattr(args, "perspective", False) else {}
-    return Camera(args.azimuth, args.elevation, parse_size(args), extent=args.extent, fit=args.fit, **perspective)
+    return Camera(args.azimuth, args.elevation, parse_size(args), extent=args.extent, fit=args.fit,
+                  perspective=args.perspective, distance=args.distance, fov=args.fov)

@@ -2,18 +2,19 @@
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .options import add_command, build_model, check_outputs, file_size, kept_words
+from .options import add_command, build_model, check_outputs, file_size, finish, is_clw, kept_words
 
 
 def run(args):
     out, = check_outputs(args.force, (args.output, "-o", (".clw",)))
-    from ..frames import root_mean_square
-    from ..io.clw import check_quantise, read_clw
+    from ..io.clw import check_quantise
+    from ..io.files import published_together
 
     quantise = args.quantise
     if quantise not in (None, "auto"):
@@ -23,31 +24,46 @@ def run(args):
             pass  # check_quantise names it
     quantise = check_quantise(quantise)  # before any work
     wv, reference = build_model(args, gather=False)
-    start = time.perf_counter()
-    wv.save(out, overwrite=args.force, quantise=quantise)
-    saved = time.perf_counter() - start
-    size, voxels = out.stat().st_size, wv.n_voxels
-    raw = voxels * wv.channels * 4  # the volume the model approximates, as float32
-    classified = "" if not args.tf else f", classified to {wv.channels} channels (--tf {args.tf})" \
-        if args.classify == "pre" else f", the scalar kept with --tf {args.tf} to classify while ray tracing"
-    print(f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z)"
-          f"{classified}{_on_disk(args.input)}")
-    print(f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} "
-          f"level{'s' * (wv.levels != 1)}, {kept_words(wv.kept, wv.n_voxels)}")
-    print(f"file                  {out}: {file_size(size)}, {raw / size:.1f}:1 against the volume as raw float32 "
-          f"({file_size(raw)}), written in {saved:.2f} s")
-    if reference is not None:
-        stored = wv if quantise is None else read_clw(out)  # the rounded values, as the file holds them
+    with published_together() as outputs:  # the error measured before the file is published (coordinates.md §4)
+        start = time.perf_counter()
+        wv.save(out, overwrite=args.force, quantise=quantise)
+        saved = time.perf_counter() - start
+        written = outputs.readable(out)
+        size, voxels = os.stat(written).st_size, wv.n_voxels
+        raw = voxels * wv.channels * 4  # the volume the model approximates, as float32
+        classified = "" if not args.tf else f", classified to {wv.channels} channels (--tf {args.tf})" \
+            if args.classify == "pre" else f", the scalar kept with --tf {args.tf} to classify while ray tracing"
+        lines = [f"input                 {args.input}: {' x '.join(map(str, wv.shape[::-1]))} voxels (x, y, z)"
+                 f"{classified}{_on_disk(args.input)}",
+                 f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} "
+                 f"level{'s' * (wv.levels != 1)}, {kept_words(wv.kept, wv.n_voxels)}",
+                 f"file                  {out}: {file_size(size)}, {raw / size:.1f}:1 against the volume as raw "
+                 f"float32 ({file_size(raw)}), written in {saved:.2f} s",
+                 _error(args, wv, reference, None if quantise is None else written)]
+        finish(outputs, [line for line in lines if line])
+    return 0
+
+
+def _error(args, wv, reference, written) -> str | None:
+    """The report's line on the model's error against the volume it approximates (``written``: the file to read the
+    rounded values from, as it holds them, for a quantised model); None for a .clw input."""
+    from ..frames import root_mean_square
+    from ..io.clw import read_clw
+
+    if reference is None:
+        return None if is_clw(args) else ("error                 not measured: the input was read chunk by chunk (the "
+                                          "error needs it whole)")
+    try:
+        stored = wv if written is None else read_clw(written)
         peak = float(np.max(np.abs(reference.data)))
         error = root_mean_square(stored.reconstruct().data - reference.data) / (peak or 1.0)  # squares in float64
-        if peak == 0:  # no relative error, no PSNR
-            print(f"error                 RMS over the voxels {error:.2e}: the volume is zero everywhere")
-        else:
-            print(f"error                 RMS over the voxels {error:.2e} of the largest value "
-                  f"(PSNR {-20 * np.log10(max(error, 1e-30)):.1f} dB)")
-    elif not args.input.lower().endswith(".clw"):
-        print("error                 not measured: the input was read chunk by chunk (the error needs it whole)")
-    return 0
+    except MemoryError:  # the file is what was asked for; the measure needs the volume twice more
+        return ("error                 not measured: not enough memory to rebuild the volume beside it (the file "
+                "is complete)")
+    if peak == 0:  # no relative error, no PSNR
+        return f"error                 RMS over the voxels {error:.2e}: the volume is zero everywhere"
+    return (f"error                 RMS over the voxels {error:.2e} of the largest value "
+            f"(PSNR {-20 * np.log10(max(error, 1e-30)):.1f} dB)")
 
 
 def _on_disk(spec) -> str:

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import ClwaveError, CommandWords, InputError
 from .checks import parse_size, parse_window
-from .options import (add_command, add_device_options, build_model, check_outputs, kept_words, numbers,
+from .options import (add_command, add_device_options, build_model, check_outputs, finish, kept_words, numbers,
                       parse_device_memory, warn)
 
 
@@ -53,7 +53,7 @@ def _pose_row(path, line, row, columns) -> dict:
 
 
 def run(args):
-    from ..io.files import write_atomic
+    from ..io.files import published_together, write_atomic
     from ..io.result import RenderResult
     from ..model.conebeam import NOT_ATTENUATION, below_zero, poses, transmitted
     from ..raytrace.tracer import RayTracer
@@ -126,28 +126,31 @@ def run(args):
             blank.append(i + 1)
         return transmitted(res.image[..., 0]) if args.intensity else res.image[..., 0]
 
-    if out.suffix.lower() == ".png":
-        res = render(0)
-        image(0, res)
-        # an intensity is shown as radiographs are: the detector's log response, bone bright (coordinates.md §5)
-        picture = np.maximum(res.image, 0.0) if args.intensity else res.image
-        RenderResult(picture, res.meta).save(out, window=window, overwrite=args.force)
-    else:
-        def write(fh):  # the .npy header, then each radiograph as it is rendered
-            np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
-                                                          shape=(len(cameras), H, W)))
-            for i in range(len(cameras)):
-                fh.write(np.ascontiguousarray(image(i, render(i)), "<f4").tobytes())
+    with published_together() as outputs:  # written, then published after the report (coordinates.md §4)
+        if out.suffix.lower() == ".png":
+            res = render(0)
+            image(0, res)
+            # an intensity is shown as radiographs are: the detector's log response, bone bright (coordinates.md §5)
+            picture = np.maximum(res.image, 0.0) if args.intensity else res.image
+            RenderResult(picture, res.meta).save(out, window=window, overwrite=args.force)
+        else:
+            def write(fh):  # the .npy header, then each radiograph as it is rendered
+                np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
+                                                              shape=(len(cameras), H, W)))
+                for i in range(len(cameras)):
+                    fh.write(np.ascontiguousarray(image(i, render(i)), "<f4").tobytes())
 
-        write_atomic(out, write, args.force)
-    seconds = time.perf_counter() - start
-    if blank:
-        warn(f"pose(s) {', '.join(map(str, blank[:10]))}{' ...' if len(blank) > 10 else ''} see nothing of the model "
-             f"(it lies outside their cone): check --isocentre (default the volume's centre) and the pose table")
-    kind = "transmitted intensities" if args.intensity else "line integrals"
-    how = f"ray traced, tolerance {tolerance:g}" if args.method == "raytrace" else "splatted"
-    print(f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) of {kept_words(wv.kept, wv.n_voxels)} in "
-          f"{seconds:.2f} s, {seconds / len(cameras):.3f} s each, on {renderer.cc.info.name}: {out}")
+            write_atomic(out, write, args.force)
+        seconds = time.perf_counter() - start
+        if blank:
+            warn(f"pose(s) {', '.join(map(str, blank[:10]))}{' ...' if len(blank) > 10 else ''} see nothing of the "
+                 f"model (it lies outside their cone): check --isocentre (default the volume's centre) and the pose "
+                 f"table")
+        kind = "transmitted intensities" if args.intensity else "line integrals"
+        how = f"ray traced, tolerance {tolerance:g}" if args.method == "raytrace" else "splatted"
+        finish(outputs, [f"{len(cameras)} radiograph(s) of {H}x{W} ({kind}, {how}) of "
+                         f"{kept_words(wv.kept, wv.n_voxels)} in {seconds:.2f} s, {seconds / len(cameras):.3f} s each, "
+                         f"on {renderer.cc.info.name}: {out}"])
     return 0
 
 

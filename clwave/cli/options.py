@@ -384,6 +384,15 @@ def check_outputs(force, *outputs) -> list:
     return paths
 
 
+def finish(outputs, lines):
+    """A command's last step: its report on stdout, then its ``outputs`` (:func:`~clwave.io.files.published_together`)
+    published together; a report that cannot be written publishes nothing (coordinates.md §4)."""
+    for line in lines:
+        print(line)
+    sys.stdout.flush()
+    outputs.publish()
+
+
 def check_frames_folder(path, force) -> Path:
     """A folder for PNG frames: none yet, or an empty one (any with ``--force``), never a file."""
     path = Path(path)
@@ -401,10 +410,10 @@ def add_camera_options(p):
     g.add_argument("--azimuth", type=float, default=30.0, help="degrees (default 30)")
     g.add_argument("--elevation", type=float, default=20.0, help="degrees (default 20)")
     g.add_argument("--perspective", action="store_true", help="perspective camera (default orthographic)")
-    g.add_argument("--fov", type=float, default=30.0, help="perspective: vertical field of view, degrees (default 30)")
-    g.add_argument("--distance", type=float, help="perspective: eye distance from the target (world units; default "
-                   "twice the framed width, --extent or --fit's; with --fit box the least that keeps the content's box "
-                   "in view)")
+    g.add_argument("--fov", type=float, help="with --perspective: vertical field of view, degrees (default 30)")
+    g.add_argument("--distance", type=float, help="with --perspective: eye distance from the target (world units; "
+                   "default twice the framed width, --extent or --fit's; with --fit box the least that keeps the "
+                   "content's box in view)")
     g.add_argument("--size", default="512", help="image size: N or HxW, e.g. 512 or 300x400 (default 512)")
     g.add_argument("--extent", type=float, help="world width of the image (default: by --fit)")
     g.add_argument("--fit", choices=FITS, default="sphere", help="default framing: sphere (the bounding sphere of "

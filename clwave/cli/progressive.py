@@ -3,17 +3,17 @@
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 from ..errors import InputError
 from .checks import make_camera, parse_background, parse_lights, parse_window
-from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs,
+from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, finish,
                       parse_device_memory, post_transfer_function, write_gif)
 
 
 def run(args):
     from ..frames import check_error
+    from ..io.files import published_together, write_atomic
     from ..progressive import progressive
     from ..splat.progressive import check_schedule
     from ..io.result import resolve_window
@@ -55,31 +55,30 @@ def run(args):
         raise InputError(frames[-1].meta["nothing_visible"])
     if window == "auto" and frames[-1].result().is_xray:  # the final image's window for every frame
         window = resolve_window(frames[0].final_image()[..., :3], "auto")
-    pictures = [f.result().to_uint8(window, background) for f in frames]
-    if as_folder:
-        out.mkdir(parents=True, exist_ok=True)
-        names = [f"frame_{f.index:03d}.png" for f in frames]
-        for f, name in zip(frames, names):
-            f.save(out / name, window=window, background=background, overwrite=True)
-        for old in out.glob("frame_*.png"):  # an earlier run's frames (--force): the folder holds this run's alone
-            if re.fullmatch(r"frame_\d{3,}\.png", old.name) and old.name not in names:
-                old.unlink()
-    else:
-        write_gif(out, pictures, 0.5, args.force)
     figures = [f.figures() for f in frames]
-    if args.stats:
-        from ..io.files import write_atomic
-        text = json.dumps(dict(frames=figures, meta=frames[-1].meta), indent=2, default=str).encode()
-        write_atomic(args.stats, lambda fh: fh.write(text), args.force)
-    for f in figures:
-        what = (f"detail {f['detail']} on a 1/{f['reduction']} image" if raytrace else
-                f"{f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} % of those kept, "
-                f"{100 * f['voxel_fraction']:.3f} % of the voxels)")
-        print(f"frame {f['index']}: {what} at {f['seconds']:.3f} s; error against the final image: RMS "
-              f"{f['relative_rms_error']:.2e} (estimated {f['estimated_relative_rms_error']:.2e}), max "
-              f"{f['relative_max_error']:.2e} (estimated {f['estimated_relative_max_error']:.2e}) of its largest "
-              f"value")
+    with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
+        if as_folder:  # written beside it, renamed into place: never mixed with another run's frames
+            out.parent.mkdir(parents=True, exist_ok=True)
+            folder = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png")
+            for f in frames:
+                f.save(folder / f"frame_{f.index:03d}.png", window=window, background=background)
+        else:
+            write_gif(out, [f.result().to_uint8(window, background) for f in frames], 0.5, args.force)
+        if args.stats:
+            text = json.dumps(dict(frames=figures, meta=frames[-1].meta), indent=2, default=str).encode()
+            write_atomic(args.stats, lambda fh: fh.write(text), args.force)
+        finish(outputs, [_report(f, raytrace) for f in figures])
     return 0
+
+
+def _report(f, raytrace) -> str:
+    """The line of one frame's figures."""
+    what = (f"detail {f['detail']} on a 1/{f['reduction']} image" if raytrace else
+            f"{f['coefficients']:>10,} coefficients ({100 * f['fraction']:6.2f} % of those kept, "
+            f"{100 * f['voxel_fraction']:.3f} % of the voxels)")
+    return (f"frame {f['index']}: {what} at {f['seconds']:.3f} s; error against the final image: RMS "
+            f"{f['relative_rms_error']:.2e} (estimated {f['estimated_relative_rms_error']:.2e}), max "
+            f"{f['relative_max_error']:.2e} (estimated {f['estimated_relative_max_error']:.2e}) of its largest value")
 
 
 def add_parser(sub):

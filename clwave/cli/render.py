@@ -8,12 +8,13 @@ import numpy as np
 
 from ..errors import InputError
 from .checks import make_camera, parse_background, parse_lights, parse_window
-from .options import (add_command, add_raytrace_options, build_model, check_outputs, is_clw, parse_device_memory,
-                      parse_scheduler, post_transfer_function, write_gif)
+from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
+                      parse_device_memory, parse_scheduler, post_transfer_function, write_gif)
 
 
 def run(args):
     from ..raytrace.tracer import RayTracer, raytrace
+    from ..io.files import published_together
     from ..io.result import RenderResult, resolve_window
     from ..splat.renderer import SplatRenderer, splat
     from ..cluster import check_model_file
@@ -70,38 +71,44 @@ def run(args):
         results = [render(cam) for cam in cameras]
     if results[0].meta.get("nothing_visible"):  # a blank image is not what was asked for (docs/raytracing.md §10)
         raise InputError(results[0].meta["nothing_visible"])
-    if args.turntable is None:
-        result = results[0]
-        result.save(out, window=window, background=background, overwrite=args.force)
-    else:
-        if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
-            window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
-        write_gif(out, [r.to_uint8(window, background) for r in results], args.frame_time or 0.1, args.force)
-        result = results[0]
-        result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
-        seconds = result.meta["turntable_seconds"]
-        views = f"{len(results)} view{'s' if len(results) != 1 else ''}"
-        print(f"turntable of {views} at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
-              f"({np.median(seconds):.3f} s a view, median); the first view:")
-    if raw is not None:  # a turntable's views as one (N, H, W, C) array
-        images = result if args.turntable is None else RenderResult(np.stack([r.image for r in results]), result.meta)
-        images.save(raw, overwrite=args.force)
-    if stats is not None:
-        result.save(stats, overwrite=args.force)
+    with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
+        lines = []
+        if args.turntable is None:
+            result = results[0]
+            result.save(out, window=window, background=background, overwrite=args.force)
+        else:
+            if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
+                window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
+            write_gif(out, [r.to_uint8(window, background) for r in results], args.frame_time or 0.1, args.force)
+            result = results[0]
+            result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
+            seconds = result.meta["turntable_seconds"]
+            views = f"{len(results)} view{'s' if len(results) != 1 else ''}"
+            lines.append(f"turntable of {views} at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
+                         f"({np.median(seconds):.3f} s a view, median); the first view:")
+        if raw is not None:  # a turntable's views as one (N, H, W, C) array
+            images = result if args.turntable is None else \
+                RenderResult(np.stack([r.image for r in results]), result.meta)
+            images.save(raw, overwrite=args.force)
+        if stats is not None:
+            result.save(stats, overwrite=args.force)
+        finish(outputs, lines + [_report(args, camera, result.meta, out)])
+    return 0
+
+
+def _report(args, camera, m, out) -> str:
+    """The line that says what was rendered, how fast, and where to."""
     size = f"{camera.size[0]}x{camera.size[1]}"
-    m = result.meta
     if args.method == "raytrace":
         where = f"on {m['workers']} workers in {len(m['slabs'])} slabs" if "slabs" in m else \
             f"{m['rays_terminated_early']:,} rays terminated early"
-        print(f"ray traced {size} ({m['mode']}, {m['field']} field, tolerance {m['tolerance']:g}, shading "
-              f"{m['shading']}) in {m['render_seconds']:.3f} s: {m['segments']:,} segments, {where} (set-up "
-              f"{m['setup_seconds']:.2f} s and kernel build {m['compile_seconds']:.2f} s apart) -> {out}")
-    else:
-        s = m["seconds"]
-        print(f"splatted {m['coefficients']:,} coefficients at {size} in {s['total']:.3f} s (footprints "
-              f"{s['footprints']:.3f}, binning {s['binning']:.3f}, accumulation {s['accumulation']:.3f}; "
-              f"kernel build {s['compile']:.2f} s apart) -> {out}")
-    return 0
+        return (f"ray traced {size} ({m['mode']}, {m['field']} field, tolerance {m['tolerance']:g}, shading "
+                f"{m['shading']}) in {m['render_seconds']:.3f} s: {m['segments']:,} segments, {where} (set-up "
+                f"{m['setup_seconds']:.2f} s and kernel build {m['compile_seconds']:.2f} s apart) -> {out}")
+    s = m["seconds"]
+    return (f"splatted {m['coefficients']:,} coefficients at {size} in {s['total']:.3f} s (footprints "
+            f"{s['footprints']:.3f}, binning {s['binning']:.3f}, accumulation {s['accumulation']:.3f}; "
+            f"kernel build {s['compile']:.2f} s apart) -> {out}")
 
 
 def _total_seconds(meta) -> float:
@@ -110,7 +117,8 @@ def _total_seconds(meta) -> float:
 
 def add_parser(sub):
     p = add_command(sub, "render", "render an image: wavelet splatting (X-ray) or ray tracing (shaded)", run,
-                    "output .png (or .gif with --turntable)", view=True)
+                    "output .png, always written (--raw adds the float32 values beside it); .gif with --turntable",
+                    view=True)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
                    help="splat (default): X-ray line integrals; raytrace: emission-absorption, shaded (needs a "
                         "classified model: --tf, or a .clw compressed with it; a scalar .clw takes --tf to classify "

@@ -68,8 +68,24 @@ def _platforms():
     except cl.Error:
         platforms = []
     if not platforms:
-        raise DeviceNotFoundError(f"no OpenCL platform found; {INSTALL_HINT}")
+        raise _not_found("no OpenCL platform found")
     return platforms
+
+
+def _not_found(what) -> DeviceNotFoundError:
+    """No platform or no device: none installed, or, under a memory limit (``ulimit -v``), a driver that could not
+    load for memory, which the ICD loader does not tell apart (PoCL needs 500 to 700 MB of address space; known-gaps
+    §15)."""
+    import resource
+
+    from .memory import available_bytes, format_size
+
+    limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+    if limit == resource.RLIM_INFINITY:
+        return DeviceNotFoundError(f"{what}; {INSTALL_HINT}")
+    return DeviceNotFoundError(f"{what}, with this process's memory limited to {format_size(limit)} (ulimit -v; "
+                               f"{format_size(available_bytes())} of it left): an OpenCL driver that cannot load for "
+                               f"memory is not found; raise the limit, or {INSTALL_HINT}")
 
 
 def list_devices() -> list[DeviceInfo]:
@@ -89,7 +105,7 @@ def list_devices() -> list[DeviceInfo]:
                                   int(dev.local_mem_size), int(dev.max_compute_units),
                                   dev.version.strip()))
     if not out:
-        raise DeviceNotFoundError(f"OpenCL platforms exist but report no device; {INSTALL_HINT}")
+        raise _not_found("OpenCL platforms exist but report no device")
     return out
 
 

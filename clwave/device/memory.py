@@ -122,6 +122,12 @@ class HostMemoryError(ClwaveError, MemoryError):
     """Work refused before it starts: it would not fit in the host's memory."""
 
 
+def out_of_threads(exc) -> bool:
+    """Whether ``exc`` is Python's refusal to start a thread: the process has no memory left for the thread's stack
+    (``ulimit -v``) or may start no more threads (``ulimit -u``), which no input causes."""
+    return isinstance(exc, RuntimeError) and str(exc).startswith("can't start new thread")
+
+
 def available_bytes() -> int:
     """Memory this process could get now: the system's (Linux: MemAvailable, else the physical memory), no more than
     its address-space limit leaves (``ulimit -v``: the limit less what is mapped already) nor its cgroup's

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..device.memory import out_of_threads
 from ..errors import ClwaveError, FileFormatError, InputError, finite_number
 from ..model.bspline import SplineWavelet
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
@@ -366,6 +367,8 @@ def open_clw(path):
         raise InputError(f"{path} holds more than this machine's memory can take; open a part of it "
                          "(keep=, --keep: its most important coefficients)") from None
     except (OSError, ValueError, LookupError, TypeError, RuntimeError) as exc:  # JSONDecodeError: a ValueError
+        if out_of_threads(exc):  # the process's limits, not the file's fault
+            raise
         raise FileFormatError(f"cannot read {path} as a .clw file ({type(exc).__name__}: "
                               f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); "
                               "the file may be truncated or corrupt") from None

@@ -6,18 +6,29 @@ when the name exists (so of two writers racing for one new name, one wins and th
 or, with ``overwrite``, a link to a temporary name renamed over the old file.  Where unnamed files
 are not available, the file is written under a temporary name, removed on every way out Python
 sees (errors, Ctrl-C, SIGTERM through the command line).
+
+A command's several outputs (an image, its raw values, its figures; a folder of frames) are written
+first and published together at its end (:func:`published_together`): a failure or a signal before
+then leaves none of them.  A folder is written under a temporary name beside it and renamed into
+place (a process killed by SIGKILL leaves that hidden folder).
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import errno
 import io
 import os
+import re
+import shutil
 import tempfile
 from pathlib import Path
 
-from ..errors import InputError, OutputError, OutputExistsError
+from ..errors import ClwaveError, InputError, OutputError, OutputExistsError
+
+#: the outputs of the running :func:`published_together`, if any
+_STAGING = contextvars.ContextVar("clwave_staging", default=None)
 
 
 def check_suffix(path, suffixes) -> Path:
@@ -30,7 +41,8 @@ def check_suffix(path, suffixes) -> Path:
 
 
 def write_atomic(path, writer, overwrite=False) -> Path:
-    """Call ``writer(binary_file)`` on a temporary file beside ``path``, then publish it there.
+    """Call ``writer(binary_file)`` on a temporary file beside ``path``, then publish it there (within
+    :func:`published_together`: when its caller publishes every output at once).
 
     An existing ``path`` is only replaced with ``overwrite``; a failed or interrupted write leaves
     nothing behind.  Permission and disk errors are an :class:`OutputError`.
@@ -43,25 +55,164 @@ def write_atomic(path, writer, overwrite=False) -> Path:
         raise InputError(f"the folder of {path} does not exist; create it first")
     if path.is_dir():
         raise InputError(f"{path} is a folder; name a file")
-    tmp = None
+    staging, temporary = _STAGING.get(), None
     try:
-        fd, tmp = _open_unnamed(folder, path.suffix)
-        with os.fdopen(fd, "w+b") as fh:  # readable too: HDF5 reads back what it writes
-            writer(fh)
-            fh.flush()
-            if tmp is None:
-                _publish_unnamed(fh.fileno(), folder, path, overwrite)
-        if tmp is not None:
-            _publish(tmp, path, overwrite)
-    except FileExistsError:
-        raise OutputExistsError(f"{path} appeared while it was being written (another writer?); pass "
-                                f"overwrite=True (--force) to replace it") from None
-    except OSError as exc:
-        raise _cannot_write(path, exc) from None
+        with _writing(path):
+            temporary = _Temporary(path, overwrite)
+            writer(temporary.file)
+            temporary.file.flush()
+            if staging is None or staging.holds(folder):  # a staged folder's files go straight into it
+                temporary.publish()
+        if staging is not None and not staging.holds(folder):
+            staging.files[path], temporary = temporary, None
     finally:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
+        if temporary is not None:
+            temporary.close()
     return path
+
+
+@contextlib.contextmanager
+def published_together():
+    """A command's outputs published together, after every one is written: within the ``with``, :func:`write_atomic`
+    writes each to a temporary beside it, and the yielded :class:`Staging`'s ``publish()`` gives them their names at
+    once; leaving the ``with`` otherwise (an error, a signal) discards them all (coordinates.md §4)."""
+    staging = Staging()
+    token = _STAGING.set(staging)
+    try:
+        yield staging
+    finally:
+        _STAGING.reset(token)
+        staging.discard()
+
+
+class Staging:
+    """The outputs of :func:`published_together` while they are written: files (by their target path) and folders."""
+
+    def __init__(self):
+        self.files, self.folders = {}, {}
+
+    def readable(self, path) -> str:
+        """A path to read the written, unpublished file ``path`` by (e.g. to measure it before it is published)."""
+        return self.files[Path(path)].readable
+
+    def folder(self, path, force=False, replaces=None) -> Path:
+        """A temporary folder beside the folder ``path`` to write its files into (:func:`write_atomic` publishes them
+        there at once), published with the files: renamed to ``path`` where that is missing or empty, which refuses a
+        folder that another writer filled meanwhile; with ``force`` into a folder that is not empty, the files moved
+        into it one by one, and its files whose names match ``replaces`` (a regular expression) but are not among
+        them removed."""
+        path = Path(path)
+        with _writing(path):
+            self.folders[path] = _Folder(path, force, replaces)
+        return self.folders[path].tmp
+
+    def holds(self, folder) -> bool:
+        return any(Path(folder) == f.tmp for f in self.folders.values())
+
+    def publish(self):
+        """Publish every output (files first, then folders); if one fails, those published before it are removed
+        again (a file that replaced one with ``overwrite`` stays: the old one is gone)."""
+        done = []
+        try:
+            for target, item in [*self.files.items(), *self.folders.items()]:
+                with _writing(target):
+                    item.publish()
+                done.append(item)
+        except BaseException:
+            for item in reversed(done):
+                item.unpublish()
+            raise
+
+    def discard(self):
+        for item in [*self.files.values(), *self.folders.values()]:
+            item.close()
+        self.files, self.folders = {}, {}
+
+
+@contextlib.contextmanager
+def _writing(path):
+    """Writing errors as one line naming ``path``: a name taken meanwhile, permissions, a full disk."""
+    try:
+        yield
+    except FileExistsError:
+        taken = f"{path} appeared while it was being written (another writer?)"
+        raise OutputExistsError(f"{taken}; pass overwrite=True (--force) to replace it",
+                                cli=f"{taken}; pass --force to replace it") from None
+    except OSError as exc:
+        if isinstance(exc, ClwaveError):
+            raise
+        raise _cannot_write(path, exc) from None
+
+
+class _Temporary:
+    """A file written beside ``path``, unnamed (or under a temporary name) until :meth:`publish`."""
+
+    def __init__(self, path, overwrite):
+        self.path, self.overwrite = path, overwrite
+        fd, self.tmp = _open_unnamed(path.parent, path.suffix)
+        self.file = os.fdopen(fd, "w+b")  # readable too: HDF5 reads back what it writes
+
+    @property
+    def readable(self) -> str:
+        """A name to open the file by before it is published: an unnamed file is given a temporary one (HDF5 opens
+        no /proc/self/fd path), removed by :meth:`close`."""
+        if self.tmp is None:
+            tmp = Path(self.path.parent, f".{self.path.stem}.{os.getpid()}.{self.file.fileno()}{self.path.suffix}")
+            _link_unnamed(self.file.fileno(), tmp)
+            self.tmp = tmp
+        return str(self.tmp)
+
+    def publish(self):
+        if self.tmp is None:
+            _publish_unnamed(self.file.fileno(), self.path.parent, self.path, self.overwrite)
+        else:
+            _publish(self.tmp, self.path, self.overwrite)
+
+    def unpublish(self):
+        """Remove the published file where it took a new name (a file it replaced is gone)."""
+        if not self.overwrite:
+            with contextlib.suppress(OSError):
+                os.unlink(self.path)
+
+    def close(self):
+        self.file.close()
+        if self.tmp is not None and os.path.exists(self.tmp):
+            os.unlink(self.tmp)
+
+
+class _Folder:
+    """A folder of files written under a temporary name beside ``path`` (:meth:`Staging.folder`)."""
+
+    def __init__(self, path, force, replaces):
+        self.path, self.force, self.replaces, self.renamed = path, force, replaces, False
+        self.tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+
+    def publish(self):
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(self.tmp, 0o777 & ~umask)  # mkdtemp makes 0700; give the folder the usual permissions
+        try:
+            os.rename(self.tmp, self.path)  # a new name, or over an empty folder: never into a filled one
+            self.renamed = True
+            return
+        except OSError as exc:
+            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                raise
+            if not self.force:  # filled since the command checked it: another writer's
+                raise FileExistsError(self.path) from None
+        names = {f.name for f in self.tmp.iterdir()}
+        for name in sorted(names):
+            os.replace(self.tmp / name, self.path / name)
+        for old in self.path.iterdir():  # an earlier run's files of the kind written: the folder holds these alone
+            if self.replaces and re.fullmatch(self.replaces, old.name) and old.name not in names:
+                old.unlink()
+
+    def unpublish(self):
+        if self.renamed:
+            os.rename(self.path, self.tmp)
+
+    def close(self):
+        shutil.rmtree(self.tmp, ignore_errors=True)
 
 
 def check_writable(path):
@@ -100,17 +251,21 @@ def _open_unnamed(folder, suffix) -> tuple:
 
 
 def _publish_unnamed(fd, folder, path, overwrite):
-    """Give an unnamed file a name: linkat(AT_SYMLINK_FOLLOW) of /proc/self/fd/N (os.link takes that path
-    only with a dir fd), which refuses an existing name; with ``overwrite``, a temporary name renamed over
+    """Give an unnamed file a name, which refuses an existing name; with ``overwrite``, a temporary name renamed over
     the old file."""
+    target = path if not overwrite else Path(folder, f".{path.name}.{os.getpid()}.{fd}.tmp")
+    _link_unnamed(fd, target)
+    if overwrite:
+        os.replace(target, path)
+
+
+def _link_unnamed(fd, target):
+    """linkat(AT_SYMLINK_FOLLOW) of /proc/self/fd/N (os.link takes that path only with a dir fd)."""
     root = os.open("/", os.O_RDONLY)
     try:
-        target = path if not overwrite else Path(folder, f".{path.name}.{os.getpid()}.{fd}.tmp")
         os.link(f"/proc/self/fd/{fd}", target, src_dir_fd=root, follow_symlinks=True)
     finally:
         os.close(root)
-    if overwrite:
-        os.replace(target, path)
 
 
 def _publish(tmp, path, overwrite):

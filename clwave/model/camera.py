@@ -19,6 +19,7 @@ from ..errors import InputError, finite_number, flag, reals, whole_number
 from .geometry import view_frame
 
 FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
+DEFAULT_FOV = 30.0  #: a perspective camera's vertical field of view, degrees, unless given
 
 
 @dataclass(frozen=True)
@@ -106,6 +107,7 @@ class Camera:
         Perspective projection: eye at ``target + distance * n``, vertical field of view ``fov``
         degrees (a cone beam whose detector is centred on the axis; :class:`clwave.ConeBeam` for others).
         With ``fit="box"`` the default distance is the least at which the box's corners are in view.
+        ``distance`` and ``fov`` (default 30) without ``perspective`` are refused: they would change nothing.
 
     Examples
     --------
@@ -115,7 +117,7 @@ class Camera:
     """
 
     def __init__(self, azimuth=30.0, elevation=20.0, size=512, *, target=None, extent=None,
-                 perspective=False, distance=None, fov=30.0, fit="sphere"):
+                 perspective=False, distance=None, fov=None, fit="sphere"):
         self.azimuth = finite_number(azimuth, "azimuth")
         self.elevation = finite_number(elevation, "elevation")
         self.size = _size(size)
@@ -129,10 +131,18 @@ class Camera:
             raise InputError(f"distance={distance!r} must be a positive world distance",
                              cli=f"--distance {distance} must be a positive world distance")
         self.distance = None if distance is None else float(distance)
-        if not 0 < finite_number(fov, "fov") < 180:
+        if fov is not None and not 0 < finite_number(fov, "fov") < 180:
             raise InputError(f"fov={fov!r} must be between 0 and 180 degrees",
                              cli=f"--fov {fov} must be between 0 and 180 degrees")
-        self.fov = float(fov)
+        self.fov = DEFAULT_FOV if fov is None else float(fov)
+        unused = [name for name, value in (("fov", fov), ("distance", distance)) if value is not None]
+        if unused and not self.perspective:  # an orthographic view has neither: refused, never ignored
+            them = " and ".join(unused)
+            raise InputError(f"{them}= set{'s' * (len(unused) == 1)} a perspective camera's view: give "
+                             f"perspective=True too, or leave {them}= out",
+                             cli=f"{' and '.join('--' + n for n in unused)} set{'s' * (len(unused) == 1)} a "
+                                 f"perspective view: add --perspective, or leave {'them' if len(unused) > 1 else 'it'} "
+                                 f"out")
         if fit not in FITS:
             raise InputError(f"fit={fit!r} must be 'sphere' or 'box'", cli=f"--fit {fit} must be sphere or box")
         given = "distance" if perspective and distance is not None else "extent" if extent is not None else None
@@ -180,8 +190,10 @@ class Camera:
         if self.perspective:
             s = 2.0 * np.tan(np.radians(view.fov) / 2.0) / H * reduction  # image-plane units per reduced pixel
             fov = float(np.degrees(2.0 * np.arctan(s * h / 2.0)))
+        perspective = dict(perspective=True, distance=float(np.linalg.norm(view.eye - view.target)), fov=fov) \
+            if self.perspective else {}
         return Camera(self.azimuth, self.elevation, size=(h, w), target=view.target, extent=view.pixel * reduction * w,
-                      perspective=self.perspective, distance=float(np.linalg.norm(view.eye - view.target)), fov=fov)
+                      **perspective)
 
     def rotated(self, degrees) -> "Camera":
         """The same camera turned about the z axis (turntables)."""

@@ -220,7 +220,7 @@ class ChunkedWaveletVolume:
 
     def selected(self, client, *, tiers=False):
         """Yield ``(group, positions, values (C, n)[, tiers])`` of the selected coefficients, a block (or the
-        resolved candidates of a cut) at a time, in no order; ``tiers``: also the .clw tier of each."""
+        resolved candidates of a cut) at a time, in the blocks' order; ``tiers``: also the .clw tier of each."""
         counts = []
         for gi, (wavelet, channels) in enumerate(self.groups()):
             plan = self._plan(wavelet, gi, self.focus)

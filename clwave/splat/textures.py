@@ -298,10 +298,12 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
                                      for w, cell in ((u, cells[0]), (v, cells[1]))))
     texels = sum(_axis_samples(nu, cell_u) * _axis_samples(nv, cell_v)
                  for _, _, (nu, _, cell_u), (nv, _, cell_v) in jobs)
-    fix = ("the voxel spacing is very uneven or omega_s high; give a lower omega_s (--omega-s), or render with the "
-           "ray tracer (--method raytrace)")
-    check_texels(texels, max_texels, "the footprint textures of this view", fix)
-    check_fits(HOST_TEXEL_BYTES * texels, f"making the footprint textures of this view ({texels:,} texels)", fix)
+    fix = "give a lower omega_s (--omega-s), or render with the ray tracer (--method raytrace)"
+    check_texels(texels, max_texels, "the footprint textures of this view",
+                 f"the voxel spacing is very uneven or omega_s high; {fix}")
+    # the host's memory, where a limit (ulimit -v) rather than the textures may be the cause
+    check_fits(HOST_TEXEL_BYTES * texels, f"making the footprint textures of this view ({texels:,} texels)",
+               f"free memory (or raise this process's limit), {fix}")
     spectra = {}
     if sampling == "fft" and device is not None:
         # 2-D spectra on the device; at axis-aligned views (every axis along u or v) the texture

@@ -33,7 +33,7 @@ def read_nifti(path, chunks, fits=None):
                               f"image on a voxel grid)")
     if len(image.shape) < 3 or min(image.shape) < 1:
         raise FileFormatError(f"{path} holds a NIfTI image of shape {image.shape}; clwave reads 3-D volumes with at "
-                              "least one voxel an axis (stack 2-D slices into one first)")
+                              "least 2 voxels an axis (stack 2-D slices into one first)")
     if not (np.all(np.isfinite(affine)) and abs(np.linalg.det(affine[:3, :3])) > 0):
         raise FileFormatError(f"{path}: its voxel-to-world affine (sform, qform or pixdim) is not finite or not "
                               "invertible; fix the header, e.g. with nibabel's set_sform and set_qform")

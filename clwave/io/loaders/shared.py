@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...device.memory import HostMemoryError, check_fits
+from ...device.memory import HostMemoryError, check_fits, out_of_threads
 from ...errors import ClwaveError, ClwaveWarning, FileFormatError, InputError, warn_outside
 from ..progress import progress
 
@@ -80,7 +80,7 @@ def reading(path):
     except ClwaveError:
         raise
     except MemoryError as exc:  # the machine's, not the file's: a chunk read in a worker of little memory
-        raise HostMemoryError(f"reading {path} ran out of memory ({exc or 'an allocation failed'}); read it in "
+        raise HostMemoryError(f"reading {path} ran out of memory ({str(exc) or 'an allocation failed'}); read it in "
                               "smaller chunks (chunks=N, --chunks N) or where more memory is free") from exc
     except OSError as exc:
         if exc.errno is None:  # e.g. gzip.BadGzipFile, not a system error
@@ -89,6 +89,8 @@ def reading(path):
         raise FileFormatError(f"cannot read {exc.filename or path}: {exc.strerror}; check the "
                               "path and its permissions") from exc
     except Exception as exc:
+        if out_of_threads(exc):  # the process's limits, not the file's fault
+            raise
         raise FileFormatError(_corrupt(path, exc)) from exc
     finally:
         _QUIET.add(-1)
