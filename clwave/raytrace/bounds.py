@@ -154,12 +154,12 @@ def warn_below_tolerance(wv: WaveletVolume, bound: float, tol: float, told: set)
     warn_outside(ClwaveWarning(f"{why}tolerance={smaller}", cli=f"{why}--tolerance {smaller}"))
 
 
-def warn_packed(wv: WaveletVolume, step: float, tol: float, told: set):
+def warn_packed(step: float, length: float, tol: float, told: set):
     """Warn when an X-ray's absolute tolerance ``tol`` is below what a scalar model's packed pool holds its line
     integrals to: each decoded coefficient within ``step / 2`` of its float, so the field too (partition of unity),
-    and a line integral within that times the volume's diagonal (docs/raytracing.md §10, "Memory"). Once per
-    tolerance in ``told``."""
-    limit = step / 2 * float(np.linalg.norm(np.multiply(wv.shape, wv.spacing)))
+    and a line integral within that times ``length``, the diagonal of the bricks' box (docs/raytracing.md §10,
+    "Memory"). Once per tolerance in ``told``."""
+    limit = step / 2 * length
     key = ("packed", tol)
     if not tol < limit or key in told:
         return

@@ -123,6 +123,7 @@ class ScalarRange:
         self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
         self.slot_range = None  # bricks in a scratch file: |s| <= the block bound
         self.step = 0.0  # the packed pool's largest step (none in a scratch file: floats)
+        self.length = float(np.linalg.norm(np.multiply(f.shape, tracer.wv.spacing))) * BRICK  # the bricks' diagonal
         self.sample = np.zeros(1, np.float32) if f.resident else None  # no bricks at all: s = 0 everywhere
         if f.resident and len(f.levels):
             tables = tracer.field_tables

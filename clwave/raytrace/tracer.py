@@ -307,7 +307,7 @@ class RayTracer:
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
         warn_below_tolerance(wv, (post.opacity if post else at.q_bound) * shade_gain, tol, self._told)
         if not absorption and self.scalar is not None:
-            warn_packed(wv, self.scalar.step, tol, self._told)
+            warn_packed(self.scalar.step, self.scalar.length, tol, self._told)
         per_pixel = H * W * (48 + 9 * np.dtype(real).itemsize)  # image, two stats; carry, ledger, resume
         passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
         if self.field == "bspline" and self.bricks.resident:
