@@ -460,9 +460,9 @@ def test_packed_pool_within_half_a_step(monkeypatch):
 
 def test_an_xray_tolerance_below_the_packed_pool_is_told():
     """A scalar model's X-ray through its packed pool (docs/raytracing.md §10, "Memory") is within half a step times
-    the bricks' diagonal of the exact line integrals, whatever the tolerance: a tolerance below that is not met, and a render
-    at it warns once, naming the floor and the unpacked wavelet field (diff22's fuzzing found such X-rays up to 147
-    times their tolerance, silently)."""
+    the bricks' diagonal of the exact line integrals, whatever the tolerance: a tolerance below that is not met, and
+    a render at it warns once, naming the floor and the unpacked wavelet field (diff22's fuzzing found such X-rays up
+    to 147 times their tolerance, silently)."""
     from clwave.splat.reference import exact_xray
 
     data = np.random.default_rng(5).random((16, 16, 16)).astype(np.float32)
