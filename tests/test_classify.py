@@ -1,6 +1,8 @@
 """Post-classification (docs/raytracing.md §10): a scalar model ray traced through a transfer function given at
 render time, held to independent answers."""
 
+import warnings
+
 import numpy as np
 import pyopencl.array as cla
 from pyopencl import cltypes
@@ -454,6 +456,33 @@ def test_packed_pool_within_half_a_step(monkeypatch):
             lo, hi = tr.scalar.slot_range[(s, *b)]
             assert lo <= min(exact.min(), quantized.min()) and max(exact.max(), quantized.max()) <= hi
     assert widest > 0.01  # the decoded field does differ
+
+
+def test_an_xray_tolerance_below_the_packed_pool_is_told():
+    """A scalar model's X-ray through its packed pool (docs/raytracing.md §10, "Memory") is within half a step times
+    the bricks' diagonal of the exact line integrals, whatever the tolerance: a tolerance below that is not met, and
+    a render at it warns once, naming the floor and the unpacked wavelet field (diff22's fuzzing found such X-rays up
+    to 147 times their tolerance, silently)."""
+    from clwave.splat.reference import exact_xray
+
+    data = np.random.default_rng(5).random((16, 16, 16)).astype(np.float32)
+    wv = WaveletVolume.from_volume(clwave.Volume(data), wavelet="cubic", levels=0)
+    cam = clwave.Camera(20, 10, size=12)
+    exact = exact_xray(wv.reconstruct().data, 4, wv.spacing, wv.origin, cam.view(wv))
+    tr = clwave.RayTracer(wv, content_clamp=False)
+    limit = tr.scalar.step / 2 * np.linalg.norm(tr.bricks.shape) * 16  # the diagonal of the bricks' box
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        above = tr.render(cam, tolerance=10 * limit, absorption=False).image
+    with pytest.warns(clwave.ClwaveWarning, match=r"packed to 16 bits .* field='wavelet'") as told:
+        below = tr.render(cam, tolerance=limit / 100, absorption=False).image
+        tr.render(cam, tolerance=limit / 100, absorption=False)
+    assert len(told) == 1
+    assert np.abs(above - exact).max() <= 10 * limit and np.abs(below - exact).max() <= 1.01 * limit
+    assert np.abs(below - exact).max() > limit / 100  # the tolerance is indeed not met
+    exact_field = clwave.RayTracer(wv, content_clamp=False, field="wavelet").render(
+        cam, tolerance=limit / 100, absorption=False, precision="double").image
+    assert np.abs(exact_field - exact).max() <= limit / 100
 
 
 def test_scalar_pool_in_a_scratch_file(monkeypatch):

@@ -102,6 +102,27 @@ def test_box_of_ones_with_one_world_axis_in_the_image(cc, family, angles, shape,
     assert np.array_equal(clwave.splat(wv, cam, device=cc).image, result.image)  # bit-identical repeat
 
 
+@pytest.mark.parametrize("levels", [0, 1, 2])
+@pytest.mark.parametrize("angles, size", [((0, 0), 9), ((0, 0), 5), ((0, -90), 5), ((90, 0), (7, 9)),
+                                          ((180, 0), 9)])
+def test_haar_cells_count_a_pixel_on_a_voxel_face_once(cc, levels, angles, size):
+    """A Haar box of ones at axis views whose pixel centres lie on voxel faces (odd sizes: the middle pixel at the
+    content's centre, a face of the 8 voxels a side): each pixel inside the box's shadow is its chord, 8, as a
+    closed form.  Each splat placed such a pixel by its own rounded centre, so that both voxels beside a face
+    counted it (16 and 32: two and four cells) or neither (0; diff22's fuzzing)."""
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(np.ones((8, 8, 8), np.float32)), "haar", levels=levels)
+    cam = clwave.Camera(*angles, size=size)
+    result = clwave.splat(wv, cam, device=cc)
+    assert result.meta["texture_sampling"] == ["cells"]
+    view = cam.view(wv)
+    across = np.abs(np.stack([view.pixel_centres() @ view.u, view.pixel_centres() @ view.v], -1))
+    inside = np.all(across < 4 - 1e-9, axis=-1)  # strictly inside the 8 x 8 shadow; on its edge: 0 or 8
+    image = result.image[..., 0]
+    assert inside.sum() >= 9
+    np.testing.assert_allclose(image[inside], 8.0, rtol=1e-6)
+    assert np.all(np.isclose(image[~inside], 0.0, atol=1e-6) | np.isclose(image[~inside], 8.0, rtol=1e-6))
+
+
 @pytest.mark.parametrize("family", ["cubic", "linear"])
 def test_cubic_textures_are_trimmed_to_their_samples_above_the_tolerance(data, family):
     """Paper Fig. 9: a cubic texture's outer rows and columns each hold a sample above TEXTURE_TOL

@@ -96,10 +96,28 @@ inline int4 tile_layer(const int tile, const int layer_count, __global const int
     return layer;
 }
 
+/* A cell lookup's position t (texels, floor gives the cell; cells are half-open, [k, k + 1)) at s texels per
+ * pixel: within CLW_CELL_SNAP pixels of a cell edge, the edge itself.  Neighbouring Haar splats share their cells'
+ * outer edges, and each places a pixel on such an edge by its own rounded centre: unsnapped, the pixel fell in both
+ * cells (its line integral counted twice) or in neither (docs/splatting.md §1, "cells") */
+inline float cell_position(const float t, const float s)
+{
+    const float e = rint(t);
+    return fabs(t - e) <= CLW_CELL_SNAP * s ? e : t;
+}
+
+inline float16 cell_position16(const float16 t, const float s)
+{
+    const float16 e = rint(t);
+    return select(t, e, islessequal(fabs(t - e), (float16)(CLW_CELL_SNAP * s)));
+}
+
 /* Image row y of a splat: its texel row (+1: the zero margin; rows iv, iv + 1) and v weight */
 inline int splat_row(const int4 a, const float4 f, const int y, float *fv)
 {
-    const float tv = f.z + (f.y - (float)y) * f.w;  /* image rows go down, v goes up */
+    float tv = f.z + (f.y - (float)y) * f.w;  /* image rows go down, v goes up */
+    if (!(a.w & 2))
+        tv = cell_position(tv, f.w);
     const float fiv = floor(tv);
     *fv = (a.w & 2) ? tv - fiv : 0.0f;
     return ((int)fiv + 1) * a.z;

@@ -74,7 +74,8 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
                        + fv * ((1.0f - fu) * shuffle2(t10, t11, i0) + fu * shuffle2(t10, t11, i1));
             } else {  /* u cells: each lane takes its nearest column (a.y of them, a handful: 2 for
                        * footprints), by selects rather than gathers; lanes off the texture keep 0 */
-                const int16 col = convert_int16(floor(f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y));
+                const int16 col = convert_int16(floor(cell_position16(
+                    f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y, cs.y)));
                 sample = 0.0f;
                 for (int q = 0; q < a.y; ++q) {
                     const float cell = (1.0f - fv) * r00[q] + fv * r00[q + a.z];

@@ -73,7 +73,7 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
                     sample = (1.0f - fv) * ((1.0f - fu) * r00[col] + fu * r00[col + 1])
                            + fv * ((1.0f - fu) * r00[col + a.z] + fu * r00[col + 1 + a.z]);
                 } else {
-                    const int col = clamp((int)floor(f.x + ((float)x - cs.x) * cs.y), -1, a.y);
+                    const int col = clamp((int)floor(cell_position(f.x + ((float)x - cs.x) * cs.y, cs.y)), -1, a.y);
                     sample = (1.0f - fv) * r00[col] + fv * r00[col + a.z];
                 }
                 acc[x - xbase] += l_w[k] * sample;

@@ -152,3 +152,19 @@ def warn_below_tolerance(wv: WaveletVolume, bound: float, tol: float, told: set)
            f"the absolute tolerance {tol:g}, so the image may be black: give a tolerance well below it, e.g. ")
     smaller = f"{limit * 1e-3:.1g}"
     warn_outside(ClwaveWarning(f"{why}tolerance={smaller}", cli=f"{why}--tolerance {smaller}"))
+
+
+def warn_packed(step: float, length: float, tol: float, told: set):
+    """Warn when an X-ray's absolute tolerance ``tol`` is below what a scalar model's packed pool holds its line
+    integrals to: each decoded coefficient within ``step / 2`` of its float, so the field too (partition of unity),
+    and a line integral within that times ``length``, the diagonal of the bricks' box (docs/raytracing.md §10,
+    "Memory"). Once per tolerance in ``told``."""
+    limit = step / 2 * length
+    key = ("packed", tol)
+    if not tol < limit or key in told:
+        return
+    told.add(key)
+    why = (f"this scalar model's bricks are packed to 16 bits (a step of {step:.3g}), which holds its line "
+           f"integrals to within {limit:.3g}, above the absolute tolerance {tol:g}: ")
+    warn_outside(ClwaveWarning(f"{why}for closer ones trace it with field='wavelet', which is not packed",
+                               cli=f"{why}the image meets --tolerance {limit:.1g}, not {tol:g}"))

@@ -122,6 +122,8 @@ class ScalarRange:
         self.subtracted = tracer.wv.subtracted  # the model's values are the input's minus it (Volume.subtracted)
         self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
         self.slot_range = None  # bricks in a scratch file: |s| <= the block bound
+        self.step = 0.0  # the packed pool's largest step (none in a scratch file: floats)
+        self.length = float(np.linalg.norm(np.multiply(f.shape, tracer.wv.spacing))) * BRICK  # the bricks' diagonal
         self.sample = np.zeros(1, np.float32) if f.resident else None  # no bricks at all: s = 0 everywhere
         if f.resident and len(f.levels):
             tables = tracer.field_tables
@@ -142,6 +144,7 @@ class ScalarRange:
             self.sample = _sample(scalar, f.boxes[:, 0], full if full.any() else ~full, tracer.wv.groups[0].wavelet,
                                   f.levels)
             words, quant = pack(scalar, f.boxes[:, 0], full, abandon)
+            self.step = float(np.max(quant["step"]))
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half their step of the floats
             self.slot_range += (quant["step"][:, None] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]

@@ -25,7 +25,7 @@ from ..model.conebeam import ConeBeam, check_camera, resolve_view
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number, flag
 from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
-from .bounds import warn_below_tolerance
+from .bounds import warn_below_tolerance, warn_packed
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .wavelet_field import WaveletField
 from .passes import on_device, passes as region_passes
@@ -310,6 +310,8 @@ class RayTracer:
         p = phong or Phong()
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
         warn_below_tolerance(wv, (post.opacity if post else at.q_bound) * shade_gain, tol, self._told)
+        if not absorption and self.scalar is not None:
+            warn_packed(self.scalar.step, self.scalar.length, tol, self._told)
         per_pixel = H * W * (48 + 9 * np.dtype(real).itemsize)  # image, two stats; carry, ledger, resume
         passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
         if self.field == "bspline" and self.bricks.resident:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..device.constants import TILE
+from ..device.constants import CELL_SNAP, TILE
 from ..model.geometry import world_to_fine
 from .perspective import quasi_interpolant
 from .tables import GATHER_U, LINEAR_U, LINEAR_V
@@ -119,14 +119,16 @@ def _axis_lookup(pixels, centre_px, centre_tex, steps, count, linear):
 
     Linear: ``t = centre_tex + offset * steps`` in float64, clamped to the zero ring [-1, count], texels i and
     i + 1 with i = min(floor(t), count - 1), the weight of the second t - i (beyond the ring: zeros).
-    Nearest: the kernel's float32 ``(centre_tex + 1/2) + offset * steps``, floored, so a pixel
-    within rounding of a cell edge picks the same cell; weight 0 on the second."""
+    Nearest: the kernel's float32 ``(centre_tex + 1/2) + offset * steps``, within ``CELL_SNAP`` pixels of a whole
+    number that number (``cell_position`` in ``cl/splat/raster.h``), floored; weight 0 on the second."""
     f32 = np.float32
     if linear:
         t = np.clip(centre_tex + (pixels - np.float64(centre_px)) * steps, -1, count)
         i = np.minimum(np.floor(t).astype(int), count - 1)
         return i + 1, i + 2, t - i
     t = (f32(centre_tex) + f32(0.5)) + (pixels.astype(f32) - f32(centre_px)) * f32(steps)
+    edge = np.rint(t)
+    t = np.where(np.abs(t - edge) <= f32(CELL_SNAP) * f32(steps), edge, t)
     i = np.clip(np.floor(t).astype(int), -1, count) + 1
     return i, i, np.zeros(len(pixels))
 

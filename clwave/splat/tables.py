@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from ..device.constants import TILE
+from ..device.constants import CELL_SNAP, TILE
 from ..errors import DeviceMemoryError
 from ..model.geometry import fine_to_world, support_centres
 from ..model.wavelet import WaveletVolume
@@ -159,9 +159,11 @@ def set_texture_tables(tables, boxes, ints, maps, tex_layer, pool):
 
 def _axis_box(count, centre, steps, cell) -> tuple:
     """Pixel offsets from the splat centre of the first and last sample along one texture axis
-    (``steps`` texels per pixel); a cell reaches half a texel beyond its centre."""
-    reach = 0.5 if cell else 0.0
-    return -(centre + reach) / steps, (count - 1 + reach - centre) / steps
+    (``steps`` texels per pixel); a cell reaches half a texel beyond its centre, and ``CELL_SNAP`` pixels more,
+    so that a pixel on its edge is visited by the splats on either side, whose lookup picks one (cl/splat/raster.h)."""
+    if not cell:
+        return -centre / steps, (count - 1 - centre) / steps
+    return -(centre + 0.5) / steps - CELL_SNAP, (count - 0.5 - centre) / steps + CELL_SNAP
 
 
 def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
