@@ -30,13 +30,14 @@ COARSE_MARGIN = 8  # coarse pixels around the image: the prefilter's mirror ends
 ACROSS = 1e-6
 
 
-def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixel: float, d_min: float,
+def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixel: float, spacing: float,
                   tolerance: float) -> int:
-    """Framebuffer coarsening (a power of 2) of one band for a tolerance.
+    """Framebuffer coarsening (a power of 2) of one band for a tolerance, along an image axis whose footprints vary
+    on ``spacing`` (d_min, or more: :func:`footprint_scales`) and whose pixel is ``pixel`` wide.
 
     The tolerance is shared out: half to the approximation band, a quarter to the coarsest
     wavelet level, an eighth to the next, and so on, so the errors sum to less than it.  A
-    band's share e allows coarse pixels up to ``ratio (e / e_ref)^(1/4) 2^m d_min`` from
+    band's share e allows coarse pixels up to ``ratio (e / e_ref)^(1/4) 2^m spacing`` from
     :data:`COARSE_REFERENCE` (cubic B-spline interpolation errs like the fourth power of
     the spacing).  Only cubic and quintic bands are coarsened (the others have kinks; quintic bands,
     smoother, stay within the cubic budget: tests/test_splat.py).
@@ -53,7 +54,7 @@ def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixe
         return 1
     ratio, error = COARSE_REFERENCE["approximation" if approximation else "wavelet"]
     share = tolerance / 2.0 if approximation else tolerance / 2.0 ** (levels - level + 2)
-    limit = ratio * (share / error) ** 0.25 * 2.0 ** level * d_min
+    limit = ratio * (share / error) ** 0.25 * 2.0 ** level * spacing
     factor = 1
     while 2 * factor * pixel <= limit * (1 + 1e-9):
         factor *= 2
@@ -64,8 +65,8 @@ def footprint_scales(view, d_xyz) -> tuple:
     """``(c_u, c_v)``: a spacing that every footprint of ``view`` varies on along u and along v, whatever its ray's
     slope (docs/splatting.md §4 "Thick slices"): :func:`~clwave.splat.perspective.axis_scale` over the volume axes
     across the view (``|n_k|`` below :data:`ACROSS`), whose terms of a sheared axis ``u + s_u n`` no slope changes; at
-    least d_min, which voxels as thick along both image axes as across them give.  A CT's slice axis along v:
-    ``(d_x, d_z)``; a view oblique to it: ``(d_min, d_min)``."""
+    least d_min (where :data:`COARSE_REFERENCE` was measured).  A CT's slice axis along v: ``(d_x, d_z)``; a view
+    oblique to it: ``(d_min, d_min)``."""
     d = np.asarray(d_xyz, float)
     n, u, v = (np.where(np.abs(x) < ACROSS, 0.0, x) for x in (view.n, view.u, view.v))  # an axis view's round-off
     across = np.where(n == 0.0, d, 0.0)

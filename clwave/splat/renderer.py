@@ -160,8 +160,8 @@ class SplatRenderer:
         # the world width of a pixel for the coarse framebuffers' error: in perspective the widest, at the far
         # side of the volume (docs/splatting.md §8)
         pixel = max(view.slope) * depth_range(view, self.wv, 0)[1] if view.perspective else view.pixel
-        # framebuffer factor of each band that has coefficients (among the first ``upto``), per group: 1 unless
-        # drawn coarse
+        # framebuffer factors (f_u, f_v) of each band that has coefficients (among the first ``upto``), per group:
+        # (1, 1) unless drawn coarse
         reach = np.inf if upto is None else upto
         scales = footprint_scales(view, self.wv.spacing[::-1])
         factors = [{(b.level, b.key): layer_factors(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa", pixel,
