@@ -306,15 +306,15 @@ def test_upsampling_is_the_prefiltered_cubic_bspline():
     from scipy.ndimage import map_coordinates, spline_filter
 
     samples = np.random.default_rng(2).random((64, 64)).astype(np.float32)
-    for shape, factor in (((64, 61), 2), ((61, 64), 4)):
-        coarse = [-(-n // factor) + 2 * coarse_module.COARSE_MARGIN for n in shape]
+    for shape, (fu, fv) in (((64, 61), (2, 2)), ((61, 64), (4, 4)), ((61, 64), (2, 8))):
+        coarse = [-(-n // f) + 2 * coarse_module.COARSE_MARGIN for n, f in zip(shape, (fv, fu))]
         # fine pixel centres as coarse indices
-        at = [(np.arange(n) + 0.5 - n / 2) / factor + c / 2 - 0.5 for n, c in zip(shape, coarse)]
+        at = [(np.arange(n) + 0.5 - n / 2) / f + c / 2 - 0.5 for n, c, f in zip(shape, coarse, (fv, fu))]
         assert all(a.min() > 4 and a.max() < c - 5 for a, c in zip(at, coarse))  # the ends play no part
         grid = samples[: coarse[0], : coarse[1]]
         want = map_coordinates(spline_filter(grid.astype(float), mode="mirror"), np.meshgrid(*at, indexing="ij"),
                                order=3, prefilter=False, mode="mirror")
-        got = coarse_module.upsample(grid, shape, factor)
+        got = coarse_module.upsample(grid, shape, (fu, fv))
         assert got.shape == shape and np.allclose(got, want, rtol=1e-6, atol=1e-6)
 
 

@@ -10,6 +10,8 @@ import numpy as np
 import scipy.ndimage
 import scipy.sparse
 
+from .perspective import axis_scale
+
 
 #: Coarse framebuffers (docs/splatting.md §4): worst error, relative to the image maximum, of one band kind
 #: drawn at coarse pixels of ``ratio * 2^m d_min`` (level m) and upsampled with the prefiltered
@@ -22,14 +24,20 @@ COARSE_REFERENCE = dict(approximation=(np.sqrt(3) / 4, 1.0e-2), wavelet=(np.sqrt
 
 COARSE_MARGIN = 8  # coarse pixels around the image: the prefilter's mirror ends decay by 0.268^8
 
+#: a volume axis is across the view where the view direction's component along it is below this: no ray slope
+#: moves the footprint's variation along that axis (:func:`footprint_scales`, which takes the view's axes'
+#: components below it for the round-off of an axis-aligned pose, 0)
+ACROSS = 1e-6
 
-def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixel: float, d_min: float,
+
+def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixel: float, spacing: float,
                   tolerance: float) -> int:
-    """Framebuffer coarsening (a power of 2) of one band for a tolerance.
+    """Framebuffer coarsening (a power of 2) of one band for a tolerance, along an image axis whose footprints vary
+    on ``spacing`` (d_min, or more: :func:`footprint_scales`) and whose pixel is ``pixel`` wide.
 
     The tolerance is shared out: half to the approximation band, a quarter to the coarsest
     wavelet level, an eighth to the next, and so on, so the errors sum to less than it.  A
-    band's share e allows coarse pixels up to ``ratio (e / e_ref)^(1/4) 2^m d_min`` from
+    band's share e allows coarse pixels up to ``ratio (e / e_ref)^(1/4) 2^m spacing`` from
     :data:`COARSE_REFERENCE` (cubic B-spline interpolation errs like the fourth power of
     the spacing).  Only cubic and quintic bands are coarsened (the others have kinks; quintic bands,
     smoother, stay within the cubic budget: tests/test_splat.py).
@@ -46,11 +54,32 @@ def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixe
         return 1
     ratio, error = COARSE_REFERENCE["approximation" if approximation else "wavelet"]
     share = tolerance / 2.0 if approximation else tolerance / 2.0 ** (levels - level + 2)
-    limit = ratio * (share / error) ** 0.25 * 2.0 ** level * d_min
+    limit = ratio * (share / error) ** 0.25 * 2.0 ** level * spacing
     factor = 1
     while 2 * factor * pixel <= limit * (1 + 1e-9):
         factor *= 2
     return factor
+
+
+def footprint_scales(view, d_xyz) -> tuple:
+    """``(c_u, c_v)``: a spacing that every footprint of ``view`` varies on along u and along v, whatever its ray's
+    slope (docs/splatting.md §4 "Thick slices"): :func:`~clwave.splat.perspective.axis_scale` over the volume axes
+    across the view (``|n_k|`` below :data:`ACROSS`), whose terms of a sheared axis ``u + s_u n`` no slope changes; at
+    least d_min (where :data:`COARSE_REFERENCE` was measured).  A CT's slice axis along v: ``(d_x, d_z)``; a view
+    oblique to it: ``(d_min, d_min)``."""
+    d = np.asarray(d_xyz, float)
+    n, u, v = (np.where(np.abs(x) < ACROSS, 0.0, x) for x in (view.n, view.u, view.v))  # an axis view's round-off
+    across = np.where(n == 0.0, d, 0.0)
+    return tuple(max(float(d.min()), axis_scale(a, b, across)) for a, b in ((u, v), (v, u)))
+
+
+def layer_factors(order: int, level: int, levels: int, approximation: bool, pixel: float, scales,
+                  tolerance: float, square: bool) -> tuple:
+    """``(f_u, f_v)``: :func:`coarse_factor` along each image axis, from the spacing its footprints vary on there
+    (``scales``, :func:`footprint_scales`; the band's error along an axis falls with that spacing as along an
+    isotropic one of it); ``square``: the lesser along both (orthographic layers have square pixels)."""
+    fu, fv = (coarse_factor(order, level, levels, approximation, pixel, c, tolerance) for c in scales)
+    return (min(fu, fv),) * 2 if square else (fu, fv)
 
 
 def _bspline3(t) -> np.ndarray:
@@ -60,36 +89,46 @@ def _bspline3(t) -> np.ndarray:
 
 
 class Layer:
-    """One framebuffer's view: the image's pixel times ``factor`` (coarse bands are drawn there)."""
+    """One framebuffer's view: the image's pixel times ``factors`` ``(f_u, f_v)`` along u and v (coarse bands are
+    drawn there; only perspective layers, whose pixels are ray slopes per axis, have ``f_u != f_v``)."""
 
-    def __init__(self, view, factor: int):
+    def __init__(self, view, factors: tuple):
         H, W = view.size
-        if factor > 1:  # same centre, pixel (perspective: ray slope per pixel) x factor, a margin around the image
-            size = (-(-H // factor) + 2 * COARSE_MARGIN, -(-W // factor) + 2 * COARSE_MARGIN)
-            slope = None if view.slope is None else (view.slope[0] * factor, view.slope[1] * factor)
-            view = dataclasses.replace(view, size=size, pixel=view.pixel * factor, slope=slope)
-        self.view, self.fine, self.factor = view, (H, W), factor
+        fu, fv = factors
+        if factors != (1, 1):  # same centre, pixel (perspective: ray slope per pixel) x factor, a margin around it
+            size = (-(-H // fv) + 2 * COARSE_MARGIN, -(-W // fu) + 2 * COARSE_MARGIN)
+            slope = None if view.slope is None else (view.slope[0] * fu, view.slope[1] * fv)
+            view = dataclasses.replace(view, size=size, pixel=view.pixel * fu, slope=slope)
+        self.view, self.fine, self.factors = view, (H, W), tuple(factors)
+
+    @property
+    def factor(self):
+        """What ``meta["framebuffers"]`` lists of this layer: its factor, or ``[f_u, f_v]`` where they differ."""
+        fu, fv = self.factors
+        return fu if fu == fv else [fu, fv]
 
     def image(self, pixels: np.ndarray) -> np.ndarray:
         """This framebuffer's (h * w, C) pixels at the image's pixels, (H, W, C) float32."""
         img = pixels.reshape(self.view.size + pixels.shape[1:])
-        if self.factor == 1:
+        if self.factors == (1, 1):
             return img
-        return np.stack([upsample(img[..., c], self.fine, self.factor) for c in range(img.shape[2])], axis=-1)
+        return np.stack([upsample(img[..., c], self.fine, self.factors) for c in range(img.shape[2])], axis=-1)
 
 
-def upsample(samples: np.ndarray, shape: tuple, factor: int) -> np.ndarray:
+def upsample(samples: np.ndarray, shape: tuple, factors) -> np.ndarray:
     """(h, w) samples at coarse pixels -> their prefiltered cubic B-spline interpolant at the
-    fine pixel centres of ``shape`` (same centre, ``factor`` fine pixels per coarse one), float32.
+    fine pixel centres of ``shape`` (same centre, ``factors`` ``(f_u, f_v)`` fine pixels per coarse one along
+    the columns and along the rows), float32.
 
     The B-spline coefficients come from ``scipy.ndimage.spline_filter`` (mirrored ends); each
     fine pixel then sums the 4 x 4 coefficients under it, one axis at a time, as sparse products.
     (Dense matrix products did the same through BLAS, whose idle threads then spun on the cores
     the next view's kernels needed.)
     """
+    fu, fv = factors
     coeffs = scipy.ndimage.spline_filter(samples, order=3, mode="mirror", output=np.float32)
-    rows = _taps(shape[0], samples.shape[0], factor) @ coeffs  # (H, w)
-    return rows @ _taps(shape[1], samples.shape[1], factor).T  # (H, W): the sparse factor on the right
+    rows = _taps(shape[0], samples.shape[0], fv) @ coeffs  # (H, w)
+    return rows @ _taps(shape[1], samples.shape[1], fu).T  # (H, W): the sparse factor on the right
 
 
 @lru_cache(maxsize=16)

@@ -26,7 +26,7 @@ from ..io.result import RenderResult
 from ..model.conebeam import check_camera, resolve_view
 from ..model.transform import band_code
 from ..model.wavelet import WaveletVolume, check_model
-from .coarse import Layer, coarse_factor
+from .coarse import Layer, footprint_scales, layer_factors
 from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_chunks, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range, drop_share, select_drops
@@ -66,7 +66,7 @@ class SplatRenderer:
     coarse : float, optional
         Tolerance, relative to the image maximum, for drawing coarse cubic bands into
         coarser framebuffers that are upsampled with the cubic B-spline (docs/splatting.md §4;
-        see :func:`clwave.splat.coarse.coarse_factor`); in perspective views, what that leaves of it also drops
+        see :func:`clwave.splat.coarse.layer_factors`); in perspective views, what that leaves of it also drops
         wavelet splats under a bound (docs/splatting.md §8, ``meta["dropped"]``).  None (default): every band at the
         image's pixel, every splat drawn.
     device_memory : int or str, optional
@@ -162,18 +162,19 @@ class SplatRenderer:
         # the world width of a pixel for the coarse framebuffers' error: in perspective the widest, at the far
         # side of the volume (docs/splatting.md §8)
         pixel = max(view.slope) * depth_range(view, self.wv, 0)[1] if view.perspective else view.pixel
-        # framebuffer factor of each band that has coefficients (among the first ``upto``), per group: 1 unless
-        # drawn coarse
+        # framebuffer factors (f_u, f_v) of each band that has coefficients (among the first ``upto``), per group:
+        # (1, 1) unless drawn coarse
         reach = np.inf if upto is None else upto
-        factors = [{(b.level, b.key): coarse_factor(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa",
-                                                      pixel, min(self.wv.spacing), self.coarse)
-                    if self.coarse else 1 for b in g.bands if gr["present"].get((b.level, b.key), np.inf) < reach}
+        scales = footprint_scales(view, self.wv.spacing[::-1])
+        factors = [{(b.level, b.key): layer_factors(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa", pixel,
+                                                    scales, self.coarse, square=not view.perspective)
+                    if self.coarse else (1, 1) for b in g.bands if gr["present"].get((b.level, b.key), np.inf) < reach}
                    for g, gr in zip(self.wv.groups, self.groups)]
-        layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {1})]
+        layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {(1, 1)})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * FRAMEBUFFER_PIXEL_BYTES
         # the device's own limit here; a cap is held by _plan, which names the least that works
         check_buffer(self.cc, fb_bytes, "the framebuffer of a {}x{} image".format(*view.size), "render a smaller image")
-        per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factor}) for layer in layers]
+        per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factors}) for layer in layers]
                      for fg in factors]
         if view.perspective:
             for g in self.wv.groups:
