@@ -183,14 +183,15 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 def describe(path, *, series=None, level=None) -> dict:
     """What :func:`load` reads of a volume file (or folder) before its voxels (``clwave info FILE``): ``format``,
     the stored ``dtype``, ``bytes`` on disk, and ``shape`` (z, y, x[, c]), ``spacing`` (dz, dy, dx) and ``origin``
-    (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the
-    ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
-    rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's straight
-    stack, or a sheared NIfTI's straight grid, wider by its shifts), and the ``spacing``, ``origin`` and ``obliquity`` ``load`` gives where its header
-    places the volume (``.nii.gz``, DICOM, an OME-TIFF or ImageJ stack; NRRD and other TIFFs give none, their
-    loaders finding them with the voxels); a
-    DICOM series also its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
-    (stored values, or None); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
+    (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``, a sheared NIfTI) gives
+    the ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and
+    columns, rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's
+    straight stack, a sheared NIfTI's straight grid, wider by the shifts), and the ``spacing``, ``origin`` and
+    ``obliquity`` ``load`` gives where its header places the volume (``.nii.gz``, DICOM, an OME-TIFF or ImageJ
+    stack; NRRD and other TIFFs give none, their loaders finding them with the voxels); a DICOM series also its
+    ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding`` (stored values, or None); a
+    NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused
+    (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
     if kind == "raw":
