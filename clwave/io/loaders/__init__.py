@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError, InputError, finite_number
+from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import SUPPORTED, Declared, check_chunks, folder_files, not_a_file, reading, to_float32
@@ -142,6 +143,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                                                       chunks, progress_bar, fits, spacing is None)
     if not is_dask(data):
         data = np.asarray(data)
+    # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
+    labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
         if hu_to_mu and data.ndim != 3:
             channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
@@ -152,7 +155,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
-                  origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity)
+                  origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity,
+                  labels=labels)
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):

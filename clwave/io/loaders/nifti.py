@@ -84,6 +84,13 @@ def _codes(header) -> tuple:
     return int(header["sform_code"]), int(header["qform_code"])
 
 
+def label_intent(path) -> bool:
+    """Whether the file's intent is ``NIFTI_INTENT_LABEL`` (its values index labels: a segmentation)."""
+    import nibabel
+
+    return nibabel.load(path, mmap=False).header.get_intent()[0] == "label"
+
+
 def header_facts(path) -> dict:
     """What ``clwave info`` says of a NIfTI header (:func:`read_nifti` has checked it): the sform and qform codes,
     which affine is used (nibabel's choice: the sform where its code is set, else the qform, else none: nibabel's
