@@ -95,7 +95,8 @@ def test_a_label_map_given_a_wavelet_above_haar_is_warned_of_once(tmp_path):
     # float labels are not told from their values, but NIFTI_INTENT_LABEL says so
     floats = _nifti(tmp_path / "float.nii.gz", label_map((24, 24, 24), 8).astype(np.float32))
     assert not clwave.load(floats).labels
-    assert clwave.load(_nifti(tmp_path / "intent.nii.gz", label_map((24, 24, 24), 8).astype(np.float32), "label")).labels
+    intent = _nifti(tmp_path / "intent.nii.gz", label_map((24, 24, 24), 8).astype(np.float32), "label")
+    assert clwave.load(intent).labels
 
 
 @pytest.mark.parametrize("make", [

@@ -100,8 +100,9 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
 
     ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (an RGBA
     model, or a scalar one classified at render time through the page's transfer-function editor).  ``tf`` (a preset
-    name, a ``.json``/``.csv`` file's (docs/model.md §5) or a TransferFunction): a volume is classified with it before its transform (``classify="pre"``), or kept
-    scalar and classified with it while rendering (``classify="post"``); a scalar model or ``.clw`` file is
+    name, a ``.json`` or ``.csv`` file of points, docs/model.md §5, or a TransferFunction): a volume is classified
+    with it before its transform (``classify="pre"``), or kept scalar and classified with it while rendering
+    (``classify="post"``); a scalar model or ``.clw`` file is
     classified with it while rendering; the editor starts from it (else from the model's own, or grey).  A volume is
     decomposed with cubic wavelets and ``keep`` (default 0.05) of its voxels kept; a ``.clw`` file (a path) is served
     at once from its most important coefficients while the rest (its ``keep`` most important, default all) is read
