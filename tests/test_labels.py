@@ -132,6 +132,9 @@ def test_the_command_line_warns_once_and_takes_a_categorical_function_from_a_fil
                              str(tmp_path / name), "--classify", "post", "-o", str(target))
         assert code == 0 and "label map" not in err, err
         np.testing.assert_array_equal(clwave.WaveletVolume.open(target).transfer_function["points"], expected)
+    from clwave.view import as_model  # the viewer's tf= takes the files too
+    model = as_model(clwave.load(seg), tf=str(tmp_path / "seg.csv"), wavelet="haar", levels=1, classify="post")
+    np.testing.assert_array_equal(model.transfer_function["points"], expected)
     points = tmp_path / "points.csv"
     points.write_text("value,r,g,b,opacity\n0,0,0,0,0\n5,1,1,1,0.5\n")
     assert read_transfer_function(points) == clwave.TransferFunction([(0, 0, 0, 0, 0), (5, 1, 1, 1, 0.5)],

@@ -47,7 +47,8 @@ class Viewer:
 
 def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=None, classify="pre"):
     """A thresholded :class:`~clwave.WaveletVolume` from a model (as it is), a :class:`~clwave.Volume` or an
-    array ``(z, y, x[, c])``: classified with ``tf`` (a preset name or a TransferFunction) first, or with
+    array ``(z, y, x[, c])``: classified with ``tf`` (a preset name, a ``.json``/``.csv`` file or a
+    TransferFunction) first, or with
     ``classify="post"`` the scalar kept with ``tf`` as its transfer function, classified while rendering
     (docs/raytracing.md §10)."""
     from ..model.volume import Volume
