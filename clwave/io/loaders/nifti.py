@@ -44,6 +44,8 @@ def read_nifti(path, chunks, fits=None):
         note(f"{path} has no orientation (its sform_code and qform_code are 0): nibabel's fallback is assumed, "
              f"{''.join(nibabel.aff2axcodes(affine))} (its first axis to the left, as Analyze's radiological files), "
              f"centred on the origin; its left and right may be swapped: set an sform (nibabel's set_sform) if known")
+    check_declared_size(path, image.dataobj.offset,
+                        math.prod(image.shape) * image.header.get_data_dtype().itemsize, image.shape)
     grid = straight_grid(image.shape, affine)
     sheared = grid.moved > STRAY_VOXELS
     if sheared:  # resampled in memory: read whole, the straight grid weighed first
@@ -53,8 +55,6 @@ def read_nifti(path, chunks, fits=None):
         except Declared as declared:
             declared.place(grid.shape, grid.affine)
             raise
-    check_declared_size(path, image.dataobj.offset,
-                        math.prod(image.shape) * image.header.get_data_dtype().itemsize, image.shape)
     proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
     if proxy.ndim > 3:
         # NIfTI keeps time on the 4th axis and vector components on the 5th
