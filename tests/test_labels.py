@@ -124,6 +124,9 @@ def test_the_command_line_warns_once_and_takes_a_categorical_function_from_a_fil
     code, out, err = run(capsys, "compress", str(seg), "--levels", "1", "-o", str(tmp_path / "a.clw"))
     assert code == 0 and err.count("label map") == 1 and "give it --wavelet haar" in err, err
     (tmp_path / "seg.csv").write_text("# label map colours\nlabel,r,g,b,opacity\n1,1,0,0,0.4\n3,0,0,1,0.7\n")
+    code, out, err = run(capsys, "compress", str(seg), "--levels", "1", "--tf", str(tmp_path / "seg.csv"), "-o",
+                         str(tmp_path / "pre.clw"))  # classified first: its colours blurred, said once too
+    assert code == 0 and err.count("label map") == 1 and "blurs and rings its colours" in err, err
     (tmp_path / "seg.json").write_text(json.dumps({"labels": {"1": [1, 0, 0, 0.4], "3": [0, 0, 1, 0.7]}}))
     expected = clwave.TransferFunction.labels(SHOWN).points
     for name in ("seg.csv", "seg.json"):

@@ -44,17 +44,20 @@ def looks_like_labels(data) -> bool:
 
 
 def warn_blurred_labels(volume, wavelet):
-    """A :class:`ClwaveWarning` where ``volume`` is a label map (:attr:`Volume.labels`) given a scalar model of a
-    ``wavelet`` of order above 1, naming Haar and the categorical transfer function that show its labels exactly."""
+    """A :class:`ClwaveWarning` where ``volume`` is a label map or its classification (:attr:`Volume.labels`) given
+    a ``wavelet`` of order above 1 (any channel's), naming Haar and the categorical transfer function that show its
+    labels exactly."""
     from .bspline import wavelet_for
 
-    if not volume.labels or volume.channels != 1:
+    if not volume.labels:
         return
-    wav = wavelet_for(wavelet[0] if isinstance(wavelet, (list, tuple)) and wavelet else wavelet)
+    wav = max((wavelet_for(w) for w in (wavelet if isinstance(wavelet, (list, tuple)) else [wavelet])),
+              key=lambda w: w.order)
     if wav.order == 1:
         return
-    line = (f"the volume looks like a label map (a segmentation); a {wav.name} wavelet (order {wav.order}) "
-            f"interpolates between labels, so every boundary passes through the labels numbered between its two: "
+    blurs = ("interpolates between labels, so every boundary passes through the labels numbered between its two"
+             if volume.channels == 1 else "blurs and rings its colours across every boundary (its classification)")
+    line = (f"the volume looks like a label map (a segmentation); a {wav.name} wavelet (order {wav.order}) {blurs}: "
             f"give it {{}} and a categorical transfer function {{}} (docs/model.md §5)")
     warn_outside(ClwaveWarning(line.format("wavelet='haar'", "(TransferFunction.labels)"),
                                cli=line.format("--wavelet haar", "(--tf FILE.json or .csv)")))

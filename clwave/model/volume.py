@@ -45,9 +45,10 @@ class Volume:
         acquisition is kept on its voxel grid, its axes taken as the world's (docs/coordinates.md §1), so a pose
         is relative to them; a cone beam's view of it warns (:meth:`clwave.ConeBeam.view`).
     labels : bool, optional
-        Whether the values are labels (a segmentation; NIfTI's ``NIFTI_INTENT_LABEL``); None (default): told from
-        ``data`` as given (:func:`~clwave.model.labels.looks_like_labels`: few non-negative integers forming
-        regions).  A label map's model of a wavelet of order above 1 warns (docs/model.md §5).
+        Whether the values are labels (a segmentation; NIfTI's ``NIFTI_INTENT_LABEL``), or a label map's
+        classification (:meth:`TransferFunction.classify` keeps it); None (default): told from ``data`` as given
+        (:func:`~clwave.model.labels.looks_like_labels`: few non-negative integers forming regions).  Its model of a
+        wavelet of order above 1 warns (docs/model.md §5).
 
     Examples
     --------
