@@ -39,8 +39,8 @@ def looks_like_labels(data) -> bool:
     content = (right != 0) | (left != 0)
     pairs, step = int(np.count_nonzero(content)), np.abs(right - left)
     differ = int(np.count_nonzero(step))
-    return (pairs > 0 and pairs - differ >= SAME_NEIGHBOURS * pairs
-            and np.count_nonzero(step > 1) >= JUMPS * differ)
+    return bool(pairs > 0 and pairs - differ >= SAME_NEIGHBOURS * pairs
+                and np.count_nonzero(step > 1) >= JUMPS * differ)
 
 
 def warn_blurred_labels(volume, wavelet):
