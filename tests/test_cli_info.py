@@ -125,7 +125,9 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
         assert facts["bytes"] == (tmp_path / name).stat().st_size and facts["spacing_in_file"] == (name == "v.nii")
     code, out, _ = run(capsys, "info", str(tmp_path / "v.nii"))
     assert out.splitlines()[1:] == ["volume     4 x 5 x 6 voxels (x, y, z), 1 channel of int16",
-                                    "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10"]
+                                    "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10",
+                                    "orient     stored RAS, from the sform (nibabel's choice; sform_code 2, "
+                                    "qform_code 0)"]
     for name in ("v.nii.gz", "v.tif"):
         code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
         assert code == 0 and json.loads(out)["stored_shape"] == [4, 5, 6] and json.loads(out)["dtype"] == "int16"
@@ -133,7 +135,9 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
         assert placed == (None if name == "v.tif" else (nii_gz.spacing, nii_gz.origin)), name  # a TIFF: no place
     code, out, _ = run(capsys, "info", str(tmp_path / "v.nii.gz"))
     assert out.splitlines()[1:] == ["volume     4 x 5 x 6 samples of int16 as read, before the loader orders them",
-                                    "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10 (RAS+ mm, as loaded)"]
+                                    "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10 (RAS+ mm, as loaded)",
+                                    "orient     stored RAS, from the sform (nibabel's choice; sform_code 2, "
+                                    "qform_code 0)"]
 
 
 def test_info_of_an_ome_or_imagej_tiff_gives_its_spacing_without_a_voxel(tmp_path, capsys, monkeypatch):

@@ -107,7 +107,8 @@ def _oblique(degrees) -> str:
 def _volume_lines(f) -> list:
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
     if "stored_shape" in f:  # read whole: its axes and spacing come with its voxels
-        resampled = ", a gantry tilt resampled onto a straight stack wider by its shifts" if f["resampled"] else ""
+        resampled = "" if not f["resampled"] else ", its sheared grid resampled onto a straight one wider by its " \
+            "shifts" if "nifti" in f else ", a gantry tilt resampled onto a straight stack wider by its shifts"
         placed = "spacing" in f  # its header places it: spacing and origin as the loader gives them
         stored = f" (stored as {f['stored_dtype']})" if "stored_dtype" in f else ""
         lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read{stored}"
@@ -127,7 +128,7 @@ def _volume_lines(f) -> list:
                           f"the series' least other value when read"))
         if f.get("obliquity"):
             lines.append(("oblique", _oblique(f["obliquity"])))
-        return lines
+        return lines + _nifti_lines(f.get("nifti"))
     z, y, x = f["shape"][:3]
     spacing = "" if f["spacing_in_file"] else " (none in the file)"
     lines += [("volume", f"{x} x {y} x {z} voxels (x, y, z), {f['channels']} channel{'s' * (f['channels'] != 1)} of "
@@ -135,6 +136,27 @@ def _volume_lines(f) -> list:
               ("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z){spacing}, origin {_xyz(f['origin'])}")]
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
+    return lines + _nifti_lines(f.get("nifti"))
+
+
+def _nifti_lines(n) -> list:
+    """A NIfTI header's orientation, shear, scaling and intent (``loaders.nifti.header_facts``)."""
+    if n is None:
+        return []
+    codes = f"sform_code {n['sform_code']}, qform_code {n['qform_code']}"
+    if n["affine_from"] == "none":
+        where = f"none in the file ({codes}): nibabel's fallback, {n['orientation']}, assumed"
+    else:
+        differ = f"; the {'q' if n['affine_from'] == 'sform' else 's'}form differs" if n["forms_differ"] else ""
+        where = f"stored {n['orientation']}, from the {n['affine_from']} (nibabel's choice; {codes}){differ}"
+    lines = [("orient", where)]
+    if n["sheared"]:
+        lines.append(("sheared", f"{n['sheared']:.2f} degrees (its axes not at right angles, as an uncorrected gantry "
+                                 f"tilt's): resampled onto a straight grid when read, linearly"))
+    if "scl_slope" in n:
+        lines.append(("scaled", f"scl_slope {n['scl_slope']:g}, scl_inter {n['scl_inter']:g} (applied as read)"))
+    if n["intent"] == "label":
+        lines.append(("intent", "labels (NIFTI_INTENT_LABEL): compress with --wavelet haar (docs/model.md §5)"))
     return lines
 
 

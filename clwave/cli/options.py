@@ -83,8 +83,9 @@ def add_model_options(p, classify=True):
     g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
     if not classify:
         return
-    g.add_argument("--tf", help="classify with a transfer-function preset first: "
-                                + ", ".join(TransferFunction.PRESETS))
+    g.add_argument("--tf", help="classify with a transfer function first: a preset ("
+                                + ", ".join(TransferFunction.PRESETS) + ") or a FILE.json or .csv of (value, r, g, b, "
+                                "opacity) rows, or (label, r, g, b, opacity) rows for a label map (docs/model.md §5)")
     g.add_argument("--tf-window", help="transfer-function window: auto (percentiles of the values) or LO,HI in "
                    "the input's units (HU for CT, attenuation per mm with --hu-to-mu; with or without --subtract); "
                    "a colour volume's in its luminance, 0 .. 1 whatever its sample type")
@@ -314,14 +315,14 @@ def _classified(args, tf, vol, check=False):
 
 
 def preset_transfer_function(args):
-    """The transfer function of ``--tf PRESET [--tf-window auto|LO,HI]``, or None without ``--tf``."""
-    from ..model.transfer import TransferFunction
+    """The transfer function of ``--tf PRESET|FILE [--tf-window auto|LO,HI]``, or None without ``--tf``."""
+    from ..model.tf_file import named_transfer_function
 
     if not getattr(args, "tf", None):  # drr has no --tf
         if getattr(args, "tf_window", None) is not None:
             raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
         return None
-    return TransferFunction.preset(args.tf, window=None if args.tf_window is None else parse_tf_window(args.tf_window))
+    return named_transfer_function(args.tf, None if args.tf_window is None else parse_tf_window(args.tf_window))
 
 
 def post_transfer_function(args, wv):

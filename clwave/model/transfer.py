@@ -94,6 +94,39 @@ class TransferFunction:
         spec = _PRESETS[key]
         return cls(spec["points"], window=spec["window"] if window is None else window, name=key)
 
+    @classmethod
+    def labels(cls, colours, name="labels") -> "TransferFunction":
+        """A categorical function for a label map (docs/model.md §5): ``colours`` maps each shown label (a whole
+        number) to ``(r, g, b, opacity)``; a label's row holds from ``label - 0.5`` to ``label + 0.5`` (steps
+        :data:`LABEL_EDGE` wide at the halves), every other value is transparent.  A Haar model of a label map takes
+        its labels exactly; one of higher order interpolates between them, showing labels that are not there.
+
+        >>> tf = TransferFunction.labels({1: (1, 0, 0, 0.5), 3: (0, 0, 1, 2.0)})
+        >>> tf([0, 1, 2, 3, 3.4])[1].tolist()
+        [0.0, 0.5, 0.0, 2.0, 2.0]
+        """
+        if not isinstance(colours, dict) or not colours:
+            raise InputError("TransferFunction.labels takes a dict {label: (r, g, b, opacity)} of at least one label")
+        shown = {}
+        for label, colour in colours.items():
+            if not _whole(label):
+                raise InputError(f"label {label!r} is not a whole number; labels are the integers of a label map")
+            try:
+                shown[int(float(label))] = [float(c) for c in colour]
+            except (TypeError, ValueError):
+                shown[int(float(label))] = []
+            if len(shown[int(float(label))]) != 4:
+                raise InputError(f"label {label}'s colour {colour!r} must be 4 numbers (r, g, b, opacity)")
+        rows = []
+        for label in sorted(shown):
+            colour, clear = shown[label], shown[label][:3] + [0.0]
+            if label - 1 not in shown:  # transparent below the step
+                rows.append([label - 0.5 - LABEL_EDGE] + clear)
+            rows += [[label - 0.5 + LABEL_EDGE] + colour, [label + 0.5 - LABEL_EDGE] + colour]
+            if label + 1 not in shown:
+                rows.append([label + 0.5 + LABEL_EDGE] + clear)
+        return cls(rows, name=name)
+
     # ----------------------------------------------------------------- properties
     @property
     def points(self) -> np.ndarray:
@@ -227,7 +260,7 @@ class TransferFunction:
             rgba = classified(vol.data, paint, True)
             if not rgba[..., 3].any():
                 raise tf._nothing_visible(vol, window, scale)
-        return Volume(rgba, spacing=vol.spacing, origin=vol.origin, obliquity=vol.obliquity)
+        return Volume(rgba, spacing=vol.spacing, origin=vol.origin, obliquity=vol.obliquity, labels=vol.labels)
 
     def _nothing_visible(self, vol, window, scale) -> NothingVisibleError:
         """The refusal of this function (in ``vol``'s data units: :meth:`_on`) without opacity anywhere, naming its span
@@ -367,6 +400,18 @@ class TransferFunction:
 
 
 # --------------------------------------------------------------------------- helpers
+#: Half the width of a categorical function's steps (:meth:`TransferFunction.labels`): a Haar model's values are its
+#: labels to float32's rounding, far inside.
+LABEL_EDGE = 0.01
+
+
+def _whole(label) -> bool:
+    try:
+        return float(label).is_integer()
+    except (TypeError, ValueError, OverflowError):
+        return False
+
+
 class _PiecewiseLinear:
     """Vectorised np.interp for several channels sharing the same x points.
 

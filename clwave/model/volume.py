@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError, finite_number, reals
+from ..errors import InputError, finite_number, flag, reals
 from .geometry import fine_to_world, world_to_fine
+from .labels import looks_like_labels
 
 MAX_CHANNELS = 4
 #: the world lengths clwave renders: a voxel's spacing at least WORLD_RANGE[0], the volume's extent (spacing times
@@ -43,6 +44,11 @@ class Volume:
         Degrees between the volume's axes and the scanner's of the file it was read from (default 0): an oblique
         acquisition is kept on its voxel grid, its axes taken as the world's (docs/coordinates.md §1), so a pose
         is relative to them; a cone beam's view of it warns (:meth:`clwave.ConeBeam.view`).
+    labels : bool, optional
+        Whether the values are labels (a segmentation; NIfTI's ``NIFTI_INTENT_LABEL``), or a label map's
+        classification (:meth:`TransferFunction.classify` keeps it); None (default): told from ``data`` as given
+        (:func:`~clwave.model.labels.looks_like_labels`: few non-negative integers forming regions).  Its model of a
+        wavelet of order above 1 warns (docs/model.md §5).
 
     Examples
     --------
@@ -51,7 +57,7 @@ class Volume:
     ((4, 5, 6), 1, (2.0, 1.0, 1.0))
     """
 
-    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), subtracted=0.0, obliquity=0.0):
+    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), subtracted=0.0, obliquity=0.0, labels=None):
         lazy = is_dask(data)
         if np.ma.is_masked(data):  # numpy.asarray would take the masked voxels' values as they are
             raise InputError(f"volume data is a masked array with {np.ma.count_masked(data)} masked voxel(s), whose "
@@ -83,6 +89,8 @@ class Volume:
                 "every axis needs at least 2 voxels")
         if arr.ndim == 4 and arr.shape[3] == 1:
             arr = arr[..., 0]
+        # told from the values as given (integers), before they are float32; a chunked volume's are not read here
+        self.labels = (not lazy and looks_like_labels(arr)) if labels is None else flag(labels, "labels")
         if lazy:  # each chunk is converted and checked when it is read
             arr = (arr if arr.ndim == 3 else arr.rechunk({3: -1})).map_blocks(checked_float32, dtype=np.float32)
         else:

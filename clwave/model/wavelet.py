@@ -19,6 +19,7 @@ from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import kept_count, warn_short_budget, warn_stored
 from . import geometry
 from .geometry import fine_to_world
+from .labels import warn_blurred_labels
 from .mask import ContentMask
 from .ranking import RankedTable, by_importance, ranked_table
 from . import evaluation
@@ -183,6 +184,7 @@ class WaveletVolume:
             raise InputError("scheduler= applies to a chunked volume (a Dask array, e.g. clwave.load of a Zarr or "
                              "HDF5 store, or chunks='auto'); this one is in memory",
                              cli="--workers and --scheduler apply to a chunked input (Zarr, HDF5, or --chunks auto)")
+        warn_blurred_labels(volume, wavelet)
         if volume.chunked:
             return WaveletVolume.chunked_model.from_volume(volume, wavelet, levels, interpolate=interpolate,
                                                            transfer_function=transfer_function,

@@ -47,7 +47,8 @@ class Viewer:
 
 def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=None, classify="pre"):
     """A thresholded :class:`~clwave.WaveletVolume` from a model (as it is), a :class:`~clwave.Volume` or an
-    array ``(z, y, x[, c])``: classified with ``tf`` (a preset name or a TransferFunction) first, or with
+    array ``(z, y, x[, c])``: classified with ``tf`` (a preset name, a ``.json``/``.csv`` file or a
+    TransferFunction) first, or with
     ``classify="post"`` the scalar kept with ``tf`` as its transfer function, classified while rendering
     (docs/raytracing.md §10)."""
     from ..model.volume import Volume
@@ -82,12 +83,15 @@ def _check_classify(classify):
 
 
 def _transfer_function(tf):
-    """``tf`` (a preset name, a TransferFunction or None) as a TransferFunction or None."""
+    """``tf`` (a preset name, a ``.json``/``.csv`` file's, a TransferFunction or None) as a TransferFunction or
+    None."""
+    from ..model.tf_file import named_transfer_function
     from ..model.transfer import TransferFunction
 
-    tf = TransferFunction.preset(tf) if isinstance(tf, str) else tf
+    tf = named_transfer_function(tf) if isinstance(tf, str) else tf
     if tf is not None and not isinstance(tf, TransferFunction):
-        raise InputError(f"tf= must be a preset name or a clwave.TransferFunction, not {type(tf).__name__}")
+        raise InputError(f"tf= must be a preset name, a .json or .csv file or a clwave.TransferFunction, not "
+                         f"{type(tf).__name__}")
     return tf
 
 
@@ -97,8 +101,9 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
 
     ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (an RGBA
     model, or a scalar one classified at render time through the page's transfer-function editor).  ``tf`` (a preset
-    name or a TransferFunction): a volume is classified with it before its transform (``classify="pre"``), or kept
-    scalar and classified with it while rendering (``classify="post"``); a scalar model or ``.clw`` file is
+    name, a ``.json`` or ``.csv`` file of points, docs/model.md §5, or a TransferFunction): a volume is classified
+    with it before its transform (``classify="pre"``), or kept scalar and classified with it while rendering
+    (``classify="post"``); a scalar model or ``.clw`` file is
     classified with it while rendering; the editor starts from it (else from the model's own, or grey).  A volume is
     decomposed with cubic wavelets and ``keep`` (default 0.05) of its voxels kept; a ``.clw`` file (a path) is served
     at once from its most important coefficients while the rest (its ``keep`` most important, default all) is read

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError, InputError, finite_number
+from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import SUPPORTED, Declared, check_chunks, folder_files, not_a_file, reading, to_float32
@@ -142,6 +143,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                                                       chunks, progress_bar, fits, spacing is None)
     if not is_dask(data):
         data = np.asarray(data)
+    # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
+    labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
         if hu_to_mu and data.ndim != 3:
             channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
@@ -152,7 +155,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
-                  origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity)
+                  origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity,
+                  labels=labels)
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
@@ -183,14 +187,15 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 def describe(path, *, series=None, level=None) -> dict:
     """What :func:`load` reads of a volume file (or folder) before its voxels (``clwave info FILE``): ``format``,
     the stored ``dtype``, ``bytes`` on disk, and ``shape`` (z, y, x[, c]), ``spacing`` (dz, dy, dx) and ``origin``
-    (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``) gives the
-    ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and columns,
-    rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's straight
-    stack, wider by its shifts), and the ``spacing``, ``origin`` and ``obliquity`` ``load`` gives where its header
-    places the volume (``.nii.gz``, DICOM, an OME-TIFF or ImageJ stack; NRRD and other TIFFs give none, their
-    loaders finding them with the voxels); a
-    DICOM series also its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
-    (stored values, or None).  A ``.raw`` file has no header: refused (:class:`FileFormatError`)."""
+    (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``, a sheared NIfTI) gives
+    the ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and
+    columns, rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's
+    straight stack, a sheared NIfTI's straight grid, wider by the shifts), and the ``spacing``, ``origin`` and
+    ``obliquity`` ``load`` gives where its header places the volume (``.nii.gz``, DICOM, an OME-TIFF or ImageJ
+    stack; NRRD and other TIFFs give none, their loaders finding them with the voxels); a DICOM series also its
+    ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding`` (stored values, or None); a
+    NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused
+    (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
     if kind == "raw":
@@ -206,21 +211,27 @@ def describe(path, *, series=None, level=None) -> dict:
     facts = dict(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size)
     with reading(path):
         try:
+            # a lazy read never weighs (nothing is read until computed) unless it must read whole (a sheared NIfTI)
             data, spacing, origin, obliquity = _read(kind, path, inner, None, None, None, series, level,
-                                                     "auto" if lazy else False, False, None if lazy else _declared,
-                                                     False)
+                                                     "auto" if lazy else False, False, _declared, False)
         except Declared as declared:
             facts.update(stored_shape=list(declared.shape), dtype=str(declared.dtype), resampled=declared.resampled,
-                         **declared.facts)
+                         **declared.facts, **_header_facts(kind, path))
             if declared.placed is not None:
                 spacing, origin, obliquity = declared.placed
                 facts.update(spacing=[float(s) for s in spacing], origin=[float(o) for o in origin],
                              obliquity=obliquity)
             return facts
     volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))
+    facts.update(_header_facts(kind, path))
     return dict(facts, shape=list(data.shape), dtype=str(data.dtype), channels=volume.channels,
                 spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None,
                 obliquity=obliquity)
+
+
+def _header_facts(kind, path) -> dict:
+    """What a format's header says beyond the volume's place (a NIfTI's codes, orientation, shear and scaling)."""
+    return nifti.header_facts(path) if kind == "nifti" else {}
 
 
 def _declared(voxels, channels):

@@ -13,6 +13,7 @@ from ...errors import FileFormatError, InputError
 from ...model.volume import WORLD_RANGE
 from .shared import (SUPPORTED, Declared, check_float32_range, check_whole, folder_files, largest_finite, note,
                      read_slices, reading, to_canonical)
+from .shear import straight_grid, unshear
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -29,7 +30,7 @@ _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSp
 def read_dicom_folder(folder, series, progress_bar, fits=None):
     """One DICOM series: slices sorted along their normal, rescaled, in RAS; refused unless they are evenly
     spaced along it (:func:`_even_spacing`) and lie on a line (:func:`_drift`); a gantry tilt (slices shifted
-    sideways in proportion to their distance) is resampled onto a straight stack (:func:`_untilt`)."""
+    sideways in proportion to their distance) is resampled onto a straight stack (:func:`.shear.unshear`)."""
     uid, headers = _pick_series(folder, _dicom_image_series(folder), series)
     for path, h in headers:  # before counting them: one such file is a volume clwave does not read, not one slice
         if int(getattr(h, "NumberOfFrames", 1) or 1) > 1:
@@ -87,7 +88,7 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     orientation ``cosines`` (a row's direction, then a column's), ``pixel`` spacing (between rows, between columns)
     and ``size`` (rows, columns): sorted along their normal, refused unless evenly spaced along it
     (:func:`_even_spacing`) and on a line (:func:`_drift`), a gantry tilt resampled onto a straight stack
-    (:func:`_untilt`); ``read(order)`` gives their pixels (n, rows, columns) in that order, once weighed
+    (:func:`.shear.unshear`); ``read(order)`` gives their pixels (n, rows, columns) in that order, once weighed
     (``fits``, by ``path``); ``shared``: why two slices may share a position, and the fix, for the caller's kind of
     input.  In RAS+, with spacing and origin."""
     # direction along a row (column index grows), along a column (row index grows)
@@ -102,31 +103,28 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     dy, dx = pixel  # row spacing, column spacing
     drift = _drift(where, positions[order], distance[order], normal, min(dx, dy))
     dz = _even_spacing(where, distance[order])
-    # the shift of each slice from the first, in pixels (along a row, along a column) per slice
-    step = np.array([drift @ row_dir / dx, drift @ col_dir / dy]) * dz
-    shifts = np.arange(len(order))[:, None] * step
-    lo, hi = np.floor(np.minimum(shifts.min(axis=0), 0)), np.ceil(np.maximum(shifts.max(axis=0), 0))
-    tilted = bool(np.any(step))
-    # index (column, row, slice) -> LPS patient coordinates (mm); the first slice's corner moved by the margin
+    tilted = bool(np.any(drift))
+    # index (column, row, slice) -> LPS patient coordinates (mm): a tilted series' slices shift by the drift
     affine_lps = np.eye(4)
-    affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, normal * dz])
-    affine_lps[:3, 3] = positions[order[0]] + lo[0] * dx * row_dir + lo[1] * dy * col_dir
-    rows, columns = size[0] + int(hi[1] - lo[1]), size[1] + int(hi[0] - lo[0])  # the straight stack's, if tilted
+    affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, (normal + drift) * dz])
+    affine_lps[:3, 3] = positions[order[0]]
+    grid = straight_grid((size[1], size[0], len(order)), affine_lps) if tilted else None
+    straight = affine_lps if grid is None else grid.affine  # the straight stack's, wider by the shifts
     try:
-        if tilted:  # the straight stack is wider by the shifts: weighed before a slice is read
-            check_whole(path, (len(order), rows, columns), np.float32, fits, resampled=True)
+        if tilted:  # weighed before a slice is read
+            check_whole(path, grid.shape[::-1], np.float32, fits, resampled=True)
         data_zyx = read(order)
     except Declared as declared:  # describe(): its place from the headers
-        declared.place((columns, rows, len(order)), _LPS_TO_RAS @ affine_lps)
+        declared.place(grid.shape if tilted else (size[1], size[0], len(order)), _LPS_TO_RAS @ straight)
         raise
+    data_ijk = data_zyx.transpose((2, 1, 0) + tuple(range(3, data_zyx.ndim)))
     if tilted:
         depth = distance.max() - distance.min()
         note(f"{where} has a gantry tilt of {np.degrees(np.arctan(np.linalg.norm(drift))):.3g} degrees (its slices "
              f"shift {np.linalg.norm(drift) * depth:.4g} mm sideways over {depth:.4g} mm along their normal): "
              f"resampled onto a straight stack, linearly, the new margins filled with its least value")
-        data_zyx = _untilt(data_zyx, shifts - lo, (hi - lo).astype(int))
-    data_ijk = data_zyx.transpose((2, 1, 0) + tuple(range(3, data_zyx.ndim)))
-    return to_canonical(data_ijk, _LPS_TO_RAS @ affine_lps)
+        data_ijk = unshear(data_ijk, grid, data_ijk.min())
+    return to_canonical(data_ijk, _LPS_TO_RAS @ straight)
 
 
 def _header_facts(headers) -> dict:
@@ -158,22 +156,6 @@ def _drift(where, positions, distance, normal, pixel) -> np.ndarray:
             "mix series or acquisitions: move the odd slices out of it")
     scatter = np.sqrt(np.mean(off ** 2) * 3)
     return slope if shift > STRAY_PIXELS * pixel and shift > 4 * scatter else np.zeros(3)
-
-
-def _untilt(data_zyx, shifts, margin):
-    """Slices ``data_zyx[k]`` moved by ``shifts[k]`` pixels (along a row, along a column) into a stack wider by
-    ``margin`` (columns, rows): linear interpolation, which never overshoots, the margins and what no slice
-    covers filled with the least value (air in a CT)."""
-    from scipy.ndimage import shift
-
-    k, rows, columns = data_zyx.shape[:3]
-    fill = float(data_zyx.min())
-    out = np.full((k, rows + margin[1], columns + margin[0]) + data_zyx.shape[3:], fill, np.float32)
-    for z in range(k):
-        out[z, :rows, :columns] = data_zyx[z]
-        move = (shifts[z, 1], shifts[z, 0]) + (0,) * (data_zyx.ndim - 3)
-        out[z] = shift(out[z], move, order=1, mode="constant", cval=fill)
-    return out
 
 
 def _even_spacing(where, distance) -> float:

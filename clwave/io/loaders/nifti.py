@@ -9,13 +9,16 @@ import warnings
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import Declared, as_array, check_declared_size, check_float32_range, largest_finite, to_canonical
+from .shared import (Declared, as_array, check_declared_size, check_float32_range, check_whole, largest_finite, note,
+                     to_canonical)
+from .shear import STRAY_VOXELS, straight_grid, unshear
 
 
 def read_nifti(path, chunks, fits=None):
     """NIfTI-1/2 through nibabel: RGB24/RGBA32 become channels; time series are refused; a header that cannot
     describe a 3-D volume (its dimensions, a voxel-to-world affine that is not finite or not invertible, more data
-    than the file holds) is refused in one line before any voxel is read."""
+    than the file holds) is refused in one line before any voxel is read.  A file without an orientation (sform and
+    qform codes 0) is warned of; a sheared affine is resampled onto a straight grid (:mod:`.shear`), read whole."""
     import nibabel
 
     log = logging.getLogger("nibabel.global")  # nibabel's reports of the header fixes it makes: one line is ours
@@ -37,8 +40,21 @@ def read_nifti(path, chunks, fits=None):
     if not (np.all(np.isfinite(affine)) and abs(np.linalg.det(affine[:3, :3])) > 0):
         raise FileFormatError(f"{path}: its voxel-to-world affine (sform, qform or pixdim) is not finite or not "
                               "invertible; fix the header, e.g. with nibabel's set_sform and set_qform")
+    if _codes(image.header) == (0, 0):
+        note(f"{path} has no orientation (its sform_code and qform_code are 0): nibabel's fallback is assumed, "
+             f"{''.join(nibabel.aff2axcodes(affine))} (its first axis to the left, as Analyze's radiological files), "
+             f"centred on the origin; its left and right may be swapped: set an sform (nibabel's set_sform) if known")
     check_declared_size(path, image.dataobj.offset,
                         math.prod(image.shape) * image.header.get_data_dtype().itemsize, image.shape)
+    grid = straight_grid(image.shape, affine)
+    sheared = grid.moved > STRAY_VOXELS
+    if sheared:  # resampled in memory: read whole, the straight grid weighed first
+        chunks = False
+        try:
+            check_whole(path, grid.shape + image.shape[4:5], image.get_data_dtype(), fits, resampled=True)
+        except Declared as declared:
+            declared.place(grid.shape, grid.affine)
+            raise
     proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
     if proxy.ndim > 3:
         # NIfTI keeps time on the 4th axis and vector components on the 5th
@@ -56,7 +72,47 @@ def read_nifti(path, chunks, fits=None):
         raise
     if data.dtype.names:  # RGB24 / RGBA32 structured samples
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
+    if sheared:
+        note(f"{path}'s affine is sheared {grid.degrees:.3g} degrees (its axes are not at right angles: a CT's gantry "
+             f"tilt that dcm2niix left uncorrected writes one): resampled onto a straight grid, linearly, the new "
+             f"margins filled with its least value")
+        return to_canonical(unshear(data, grid, data.min()), grid.affine)
     return to_canonical(data, affine)
+
+
+def _codes(header) -> tuple:
+    return int(header["sform_code"]), int(header["qform_code"])
+
+
+def label_intent(path) -> bool:
+    """Whether the file's intent is ``NIFTI_INTENT_LABEL`` (its values index labels: a segmentation)."""
+    import nibabel
+
+    return nibabel.load(path, mmap=False).header.get_intent()[0] == "label"
+
+
+def header_facts(path) -> dict:
+    """What ``clwave info`` says of a NIfTI header (:func:`read_nifti` has checked it): the sform and qform codes,
+    which affine is used (nibabel's choice: the sform where its code is set, else the qform, else none: nibabel's
+    fallback), the stored orientation (``nibabel.aff2axcodes``), whether sform and qform both exist and differ, the
+    shear (degrees, 0 where none), the intent and ``scl_slope``/``scl_inter`` where they scale the values."""
+    import nibabel
+
+    image = nibabel.load(path, mmap=False)
+    header = image.header
+    sform, qform = _codes(header)
+    used = "sform" if sform else "qform" if qform else "none"
+    affine = header.get_best_affine()
+    grid = straight_grid(header.get_data_shape()[:3], affine)
+    facts = dict(sform_code=sform, qform_code=qform, affine_from=used,
+                 orientation="".join(nibabel.aff2axcodes(affine)),
+                 forms_differ=bool(sform and qform and not np.allclose(header.get_sform(), header.get_qform(),
+                                                                       atol=1e-3)),
+                 sheared=grid.degrees if grid.moved > STRAY_VOXELS else 0.0, intent=header.get_intent()[0])
+    slope, inter = float(image.dataobj.slope), float(image.dataobj.inter)  # nibabel moves them from the header
+    if (slope, inter) != (1.0, 0.0):
+        facts.update(scl_slope=slope, scl_inter=inter)
+    return dict(nifti=facts)
 
 
 class _ScaledToFloat32:

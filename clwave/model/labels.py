@@ -1,0 +1,63 @@
+"""Label maps (segmentations: an integer per voxel naming a region): what tells one, and the warning that a wavelet
+of order above 1 blurs it (docs/model.md §5).  B-splines of order 2 and up interpolate between the labels on either
+side of every boundary, so a boundary between labels 1 and 5 passes through 2, 3 and 4, which a transfer function
+then shows; Haar's (order 1) model is piecewise constant on the voxels, every label exact."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ClwaveWarning, warn_outside
+
+#: At most this many distinct values (labels, the background included), numbered densely: the largest label under
+#: DENSE times their count (0 .. 40 of 30 labels is; 0, 26, 51, .. 255, a piecewise-constant phantom's 8-bit
+#: intensities, 6 values, is not).
+MAX_LABELS, DENSE = 64, 16
+#: Regions, not noise: at least this share of the voxel pairs along x outside the background hold one value; and
+#: boundaries, not a smooth intensity quantised coarsely: at least JUMPS of the pairs that differ jump by more than 1
+#: (0.47 for nested shells numbered outwards 1 .. 4 in 0; 0.01 for hydrogen's density quantised to 0 .. 10).
+SAME_NEIGHBOURS, JUMPS = 0.75, 0.25
+#: The distinct values are counted on an even sample of at most this many voxels.
+SAMPLE = 1 << 20
+
+
+def looks_like_labels(data) -> bool:
+    """Whether ``data`` (an in-memory array as stored, before float32) looks like a label map: integers (or
+    booleans), none negative, 2 to :data:`MAX_LABELS` distinct values numbered densely (:data:`DENSE`), forming
+    regions with boundaries (:data:`SAME_NEIGHBOURS`, :data:`JUMPS`).  A CT in HU (negative, thousands of values) or
+    an MRI (hundreds of values, noise between neighbours) is not; a float volume is never looked at.  Cost: a min and
+    a max over an integer volume, then only where they pass a sort of :data:`SAMPLE` voxels and one pass over
+    neighbours (int16 copies: 4 bytes a voxel)."""
+    if getattr(data, "dtype", None) is None or data.dtype.kind not in "biu" or data.ndim != 3 or not data.size:
+        return False
+    if int(data.min()) < 0 or int(data.max()) >= DENSE * MAX_LABELS:
+        return False
+    count = len(np.unique(data.reshape(-1)[::max(1, data.size // SAMPLE)]))
+    if not 2 <= count <= MAX_LABELS or int(data.max()) >= DENSE * count:
+        return False
+    right, left = data[..., 1:].astype(np.int16), data[..., :-1].astype(np.int16)  # under DENSE * MAX_LABELS
+    content = (right != 0) | (left != 0)
+    pairs, step = int(np.count_nonzero(content)), np.abs(right - left)
+    differ = int(np.count_nonzero(step))
+    return bool(pairs > 0 and pairs - differ >= SAME_NEIGHBOURS * pairs
+                and np.count_nonzero(step > 1) >= JUMPS * differ)
+
+
+def warn_blurred_labels(volume, wavelet):
+    """A :class:`ClwaveWarning` where ``volume`` is a label map or its classification (:attr:`Volume.labels`) given
+    a ``wavelet`` of order above 1 (any channel's), naming Haar and the categorical transfer function that show its
+    labels exactly."""
+    from .bspline import wavelet_for
+
+    if not volume.labels:
+        return
+    wav = max((wavelet_for(w) for w in (wavelet if isinstance(wavelet, (list, tuple)) else [wavelet])),
+              key=lambda w: w.order)
+    if wav.order == 1:
+        return
+    blurs = ("interpolates between labels, so every boundary passes through the labels numbered between its two"
+             if volume.channels == 1 else "blurs and rings its colours across every boundary (its classification)")
+    line = (f"the volume looks like a label map (a segmentation); a {wav.name} wavelet (order {wav.order}) {blurs}: "
+            f"give it {{}} and a categorical transfer function {{}} (docs/model.md §5)")
+    warn_outside(ClwaveWarning(line.format("wavelet='haar'", "(TransferFunction.labels)"),
+                               cli=line.format("--wavelet haar", "(--tf FILE.json or .csv)")))

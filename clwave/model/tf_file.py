@@ -1,0 +1,92 @@
+"""Transfer functions named by the command line (``--tf``) and the viewer (``tf=``): a preset, or a file of points
+(docs/model.md §5).
+
+* ``.json``: what :meth:`TransferFunction.to_dict` writes (``points``, maybe ``window`` and ``name``), a bare list
+  of ``(value, r, g, b, opacity)`` rows, or ``{"labels": {"1": [r, g, b, opacity], ...}}`` (a categorical function,
+  :meth:`TransferFunction.labels`);
+* ``.csv``: rows ``value, r, g, b, opacity``; ``#`` lines are comments, a first row of words a header; a header
+  whose first column is ``label`` makes the rows ``label, r, g, b, opacity``, a categorical function.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+from ..errors import InputError
+from .transfer import TransferFunction
+
+#: Suffixes read as files of points (anything else names a preset).
+SUFFIXES = (".json", ".csv")
+#: A transfer function's file is small (a few points a line): larger ones are refused before they are read.
+MAX_BYTES = 1 << 20
+
+
+def named_transfer_function(text, window=None) -> TransferFunction:
+    """The preset named ``text``, or the file it names (a :data:`SUFFIXES` name); ``window`` (None: the preset's or
+    the file's own) as :meth:`TransferFunction.preset` takes it."""
+    if not str(text).lower().endswith(SUFFIXES):
+        return TransferFunction.preset(text, window=window)
+    tf = read_transfer_function(text)
+    return tf if window is None else TransferFunction(tf.points, window=window, name=tf.name)
+
+
+def read_transfer_function(path) -> TransferFunction:
+    """The transfer function in a ``.json`` or ``.csv`` file (module docstring); a file that is not one is refused
+    in one line naming it and what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"transfer function file {path} does not exist (or is not a file); give a .json or .csv "
+                         f"file of (value, r, g, b, opacity) rows, or a preset: {', '.join(TransferFunction.PRESETS)}")
+    if path.stat().st_size > MAX_BYTES:
+        raise InputError(f"transfer function file {path} has {path.stat().st_size:,} bytes, more than a function of "
+                         f"points takes ({MAX_BYTES:,} at most)")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read transfer function file {path}: {exc}") from None
+    try:
+        return _from_json(path, text) if path.suffix.lower() == ".json" else _from_csv(path, text)
+    except InputError as exc:
+        raise InputError(f"{path}: {exc}") from None
+
+
+def _from_json(path, text) -> TransferFunction:
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise InputError(f"not JSON ({exc})") from None
+    if isinstance(data, dict) and set(data) == {"labels"}:
+        return TransferFunction.labels(data["labels"], name=path.stem)
+    if isinstance(data, list):
+        return TransferFunction(data, name=path.stem)
+    if isinstance(data, dict) and "points" in data:
+        return TransferFunction.from_dict(dict(data, name=data.get("name", path.stem)))
+    raise InputError('give a list of (value, r, g, b, opacity) rows, {"points": rows, "window": [lo, hi]} (as '
+                     'TransferFunction.to_dict writes) or {"labels": {"1": [r, g, b, opacity], ...}}')
+
+
+def _from_csv(path, text) -> TransferFunction:
+    rows = [row for row in csv.reader(io.StringIO(text)) if row and not row[0].lstrip().startswith("#")]
+    header = rows and not _numbers(rows[0])
+    labels = header and rows[0][0].strip().lower() == "label"
+    body = rows[1:] if header else rows
+    values = []
+    for n, row in enumerate(body, 2 if header else 1):
+        if len(row) != 5 or not _numbers(row):
+            raise InputError(f"row {n} {','.join(row)!r} is not 5 numbers ({'label' if labels else 'value'}, r, g, b, "
+                             f"opacity)")
+        values.append([float(v) for v in row])
+    if labels:
+        return TransferFunction.labels({row[0]: row[1:] for row in values}, name=path.stem)
+    return TransferFunction(values, name=path.stem)
+
+
+def _numbers(row) -> bool:
+    try:
+        [float(v) for v in row]
+    except ValueError:
+        return False
+    return True

@@ -1,0 +1,165 @@
+"""Label maps (segmentations), as a neuroimaging user renders them (trial22, docs/model.md §5): a Haar model and a
+categorical transfer function show exactly the labels each ray meets; a label map given a wavelet of higher order
+is warned of, a CT or MRI is not; the command line takes a transfer function's points from a file."""
+
+import json
+import warnings
+
+import nibabel as nib
+import numpy as np
+import pytest
+
+import clwave
+from clwave.errors import ClwaveWarning, InputError
+from clwave.model.labels import looks_like_labels
+from clwave.model.tf_file import read_transfer_function
+from test_classify import ct_phantom
+from test_cli import run
+
+SHOWN = {1: (1.0, 0.0, 0.0, 0.4), 3: (0.0, 0.0, 1.0, 0.7)}  # labels 0, 2, 4 and 5 hidden
+
+
+def label_map(shape=(6, 8, 8), block=2, seed=3):
+    """Cubes of ``block`` voxels of labels 0 .. 5 at random: every boundary between labels."""
+    rng = np.random.default_rng(seed)
+    cubes = rng.integers(0, 6, tuple(n // block for n in shape))
+    return np.kron(cubes, np.ones((block,) * 3, int)).astype(np.uint8)
+
+
+def test_a_categorical_function_steps_at_the_halves_between_labels():
+    tf = clwave.TransferFunction.labels(SHOWN)
+    rgb, alpha = tf([0, 0.6, 1, 1.4, 1.6, 2, 2.4, 2.6, 3, 3.4, 3.6, 5])
+    assert alpha.tolist() == [0, 0.4, 0.4, 0.4, 0, 0, 0, 0.7, 0.7, 0.7, 0, 0]
+    assert rgb[2].tolist() == [1, 0, 0] and rgb[8].tolist() == [0, 0, 1]
+    adjacent = clwave.TransferFunction.labels({1: (1, 0, 0, 1), 2: (0, 1, 0, 2)})  # one step from 1's row to 2's
+    assert adjacent([1.4, 1.6])[1].tolist() == [1, 2]
+
+
+@pytest.mark.parametrize("bad, words", [({}, "at least one label"), ({1.5: (1, 0, 0, 1)}, "1.5 is not a whole"),
+                                        ({1: (1, 0, 0)}, "must be 4 numbers"), ({1: (2, 0, 0, 1)}, "outside [0, 1]")])
+def test_a_categorical_function_refuses_what_is_no_label_colour(bad, words):
+    with pytest.raises(InputError, match=words.replace("[", r"\[")):
+        clwave.TransferFunction.labels(bad)
+
+
+def test_haar_and_a_categorical_function_show_exactly_the_labels_each_ray_meets():
+    """Looking down z (orthographic), a pixel's ray crosses one column of voxels: a Haar model's values there are
+    its labels, so its opacity is 1 - exp(-sum of the shown labels' opacities x dz) (a closed form), red where the
+    column holds label 1, blue where it holds 3, never green, and nothing where it holds neither.  A cubic model of
+    every coefficient shows labels that are not there (every boundary 0 | 5 passes through 1 and 3)."""
+    labels = label_map()
+    vol = clwave.Volume(labels, spacing=(1.5, 1.0, 1.0))
+    cam = clwave.Camera(azimuth=0, elevation=90, size=40, target=(0, 0, 0), extent=10.0)
+    view = cam.view(vol)
+    index = vol.world_to_voxel(view.pixel_centres().reshape(-1, 3))  # (i, j, k) of each pixel's column
+    inside = np.all((index[:, 1:] > -0.5) & (index[:, 1:] < np.array(labels.shape[1:]) - 0.5), axis=1)
+    clear = np.all(np.abs(index[:, 1:] - np.rint(index[:, 1:])) < 0.45, axis=1)  # not on a cell's edge
+    j, k = np.rint(index[:, 1:]).astype(int).clip(0, 7).T
+    columns = labels[:, j, k].T  # each pixel's labels along its ray
+    depth = {label: (columns == label).sum(axis=1) * 1.5 for label in SHOWN}
+    alpha = 1 - np.exp(-sum(SHOWN[label][3] * depth[label] for label in SHOWN))
+    tf = clwave.TransferFunction.labels(SHOWN)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ClwaveWarning)  # the cubic model's label warning, and Haar's no shading
+        images = {wav: clwave.raytrace(clwave.WaveletVolume.from_volume(vol, wavelet=wav, levels=1).threshold(keep=1.0),
+                                       cam, transfer_function=tf, tolerance=1e-4).image.reshape(-1, 4)
+                  for wav in ("haar", "cubic")}
+    image, sure = images["haar"], inside & clear
+    assert sure.sum() > 600 and (sure & (alpha == 0)).sum() > 40
+    np.testing.assert_allclose(image[sure, 3], np.where(inside, alpha, 0)[sure], atol=1e-3)
+    assert np.all((image[sure, 0] > 1e-3) == (depth[1][sure] > 0))
+    assert np.all((image[sure, 2] > 1e-3) == (depth[3][sure] > 0))
+    assert np.abs(image[:, 1]).max() < 1e-6
+    false = sure & (alpha == 0) & (images["cubic"][:, 3] > 0.05)
+    assert false.sum() > 10  # what the recipe avoids
+
+
+def _nifti(path, data, intent=None):
+    image = nib.Nifti1Image(data, np.eye(4))
+    if intent:
+        image.header.set_intent(intent)
+    nib.save(image, path)
+    return path
+
+
+def test_a_label_map_given_a_wavelet_above_haar_is_warned_of_once(tmp_path):
+    path = _nifti(tmp_path / "seg.nii.gz", label_map((24, 24, 24), 8))
+    vol = clwave.load(path)
+    assert vol.labels
+    with pytest.warns(ClwaveWarning, match="looks like a label map.*cubic wavelet .order 4.*wavelet='haar'") as seen:
+        clwave.WaveletVolume.from_volume(vol, levels=1)
+    assert sum("label map" in str(w.message) for w in seen) == 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ClwaveWarning)
+        clwave.WaveletVolume.from_volume(vol, wavelet="haar", levels=1)  # no warning
+    # float labels are not told from their values, but NIFTI_INTENT_LABEL says so
+    floats = _nifti(tmp_path / "float.nii.gz", label_map((24, 24, 24), 8).astype(np.float32))
+    assert not clwave.load(floats).labels
+    intent = _nifti(tmp_path / "intent.nii.gz", label_map((24, 24, 24), 8).astype(np.float32), "label")
+    assert clwave.load(intent).labels
+
+
+@pytest.mark.parametrize("make", [
+    lambda: np.rint(clwave.phantom("hydrogen", 48).data * 255).astype(np.uint8),          # MRI-like, 8 bit
+    lambda: np.rint(clwave.phantom("hydrogen", 48).data * 4095).astype(np.uint16),        # 12 bit
+    lambda: np.rint(clwave.phantom("marschner-lobb", 48).data * 255).astype(np.uint8),
+    lambda: np.rint(clwave.phantom("shepp-logan", 48).data * 255).astype(np.uint8),       # 6 values 0 .. 255
+    lambda: np.rint(clwave.phantom("hydrogen", 64).data * 10).astype(np.uint8),           # 0 .. 10, smooth
+    lambda: np.interp(clwave.phantom("shepp-logan", 48).data, [0, 0.1, 0.5, 1],
+                      [-1000, 0, 60, 1200]).astype(np.int16),                                # CT in HU
+    lambda: (np.interp(clwave.phantom("shepp-logan", 48).data, [0, 0.1, 0.5, 1],
+                       [-1000, 0, 60, 1200]) + 1024).astype(np.uint16),                     # CT stored unsigned
+    lambda: ct_phantom(24).data.astype(np.int16),
+    lambda: np.random.default_rng(0).normal(100, 20, (32, 32, 32)).clip(0, 255).astype(np.uint8)])  # noise
+def test_ct_and_mri_integer_volumes_are_no_label_maps(make):
+    data = make()
+    assert data.dtype.kind in "iu" and not looks_like_labels(data)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ClwaveWarning)
+        clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
+
+
+def test_the_command_line_warns_once_and_takes_a_categorical_function_from_a_file(tmp_path, capsys):
+    seg = _nifti(tmp_path / "seg.nii.gz", label_map((24, 24, 24), 8))
+    code, out, err = run(capsys, "compress", str(seg), "--levels", "1", "-o", str(tmp_path / "a.clw"))
+    assert code == 0 and err.count("label map") == 1 and "give it --wavelet haar" in err, err
+    (tmp_path / "seg.csv").write_text("# label map colours\nlabel,r,g,b,opacity\n1,1,0,0,0.4\n3,0,0,1,0.7\n")
+    code, out, err = run(capsys, "compress", str(seg), "--levels", "1", "--tf", str(tmp_path / "seg.csv"), "-o",
+                         str(tmp_path / "pre.clw"))  # classified first: its colours blurred, said once too
+    assert code == 0 and err.count("label map") == 1 and "blurs and rings its colours" in err, err
+    (tmp_path / "seg.json").write_text(json.dumps({"labels": {"1": [1, 0, 0, 0.4], "3": [0, 0, 1, 0.7]}}))
+    expected = clwave.TransferFunction.labels(SHOWN).points
+    for name in ("seg.csv", "seg.json"):
+        target = tmp_path / f"{name}.clw"
+        code, out, err = run(capsys, "compress", str(seg), "--levels", "1", "--wavelet", "haar", "--tf",
+                             str(tmp_path / name), "--classify", "post", "-o", str(target))
+        assert code == 0 and "label map" not in err, err
+        np.testing.assert_array_equal(clwave.WaveletVolume.open(target).transfer_function["points"], expected)
+    from clwave.view import as_model  # the viewer's tf= takes the files too
+    model = as_model(clwave.load(seg), tf=str(tmp_path / "seg.csv"), wavelet="haar", levels=1, classify="post")
+    np.testing.assert_array_equal(model.transfer_function["points"], expected)
+    points = tmp_path / "points.csv"
+    points.write_text("value,r,g,b,opacity\n0,0,0,0,0\n5,1,1,1,0.5\n")
+    assert read_transfer_function(points) == clwave.TransferFunction([(0, 0, 0, 0, 0), (5, 1, 1, 1, 0.5)],
+                                                                      name="points")
+    dumped = tmp_path / "dumped.json"
+    dumped.write_text(json.dumps(clwave.TransferFunction.preset("ct-bone").to_dict()))
+    assert read_transfer_function(dumped) == clwave.TransferFunction.preset("ct-bone")
+
+
+@pytest.mark.parametrize("name, text, words", [
+    ("missing.csv", None, "missing.csv does not exist"),
+    ("bad.json", "{not json", "bad.json: not JSON"),
+    ("dict.json", '{"colours": 1}', 'dict.json: give a list of'),
+    ("short.csv", "0,0,0,0\n1,1,1,1\n", "short.csv: row 1 '0,0,0,0' is not 5 numbers"),
+    ("words.csv", "value,r,g,b,opacity\n0,0,0,0,x\n", "row 2 '0,0,0,0,x' is not 5 numbers"),
+    ("half.csv", "label,r,g,b,opacity\n1.5,1,0,0,1\n", "label 1.5 is not a whole number"),
+    ("bright.json", "[[0, 0, 0, 0, 0], [1, 2, 0, 0, 1]]", "colour [2.0, 0.0, 0.0] of point 1 is outside"),
+    ("big.csv", "0,0,0,0,0\n" * 120000, "more than a function of points takes")])
+def test_a_bad_transfer_function_file_is_refused_in_one_line(tmp_path, capsys, name, text, words):
+    if text is not None:
+        (tmp_path / name).write_text(text)
+    code, out, err = run(capsys, "compress", "phantom:hydrogen:16", "--tf", str(tmp_path / name), "-o",
+                         str(tmp_path / "x.clw"))
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "x.clw").exists()
