@@ -185,7 +185,9 @@ def add_parser(sub):
                                            "coefficients or voxels")
     p.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     p.add_argument("--check", action="store_true", help="also build and run a self-test kernel")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--json", action="store_true", help="print JSON (with FILE: the same keys for every volume "
+                                                       "format, null where a format does not give the fact; "
+                                                       "docs/coordinates.md §4)")
     p.add_argument("--series", help="FILE a DICOM folder with several series: UID or 0-based index")
     p.add_argument("--level", type=int, help="FILE an OME-Zarr image: the multiscale level (default 0)")
     p.set_defaults(run=run)
