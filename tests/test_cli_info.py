@@ -2,6 +2,7 @@
 what the commands report (kept coefficients, levels, warnings)."""
 
 import json
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -236,3 +237,113 @@ def test_the_commands_words(tmp_path, capsys):
     np.save(tmp_path / "v.npy", np.zeros((4, 4, 4), np.float32))
     code, _, err = run(capsys, "compress", str(tmp_path / "v.npy"), "--level", "1", "-o", str(tmp_path / "v.clw"))
     assert code == 2 and "--level only applies to OME-Zarr images; leave it out for a npy input" in err
+
+
+def test_info_of_a_time_series_describes_it_and_names_the_refusal(tmp_path, capsys, monkeypatch):
+    """trial22: `info fmri4d.nii.gz` was refused, exit 2.  A 4-D NIfTI (.nii, .nii.gz), an ImageJ hyperstack and an
+    OME-Zarr image of 3 time points are described from their headers (exit 0, no voxel read): the stored shape with
+    its time axis, one volume's shape, spacing and origin as load() places a volume, the time step and its unit, and
+    the one line load() refuses the file with."""
+    import nibabel
+    import tifffile
+    import zarr
+
+    affine = np.diag([2.0, 3.0, 4.0, 1.0])
+    affine[:3, 3] = (5.0, 6.0, 7.0)
+    series = nibabel.Nifti1Image(np.zeros((4, 5, 6, 3), np.int16), affine)
+    series.header.set_xyzt_units("mm", "sec")
+    series.header["pixdim"][4] = 2.5
+    for name in ("f.nii", "f.nii.gz"):
+        nibabel.save(series, tmp_path / name)
+    tifffile.imwrite(tmp_path / "t.tif", np.zeros((3, 4, 5, 6), np.uint8), imagej=True, resolution=(2.0, 4.0),
+                     metadata={"axes": "TZYX", "finterval": 1.5, "spacing": 3.0, "unit": "um"})
+    group = zarr.open_group(tmp_path / "t.zarr", mode="w", zarr_format=2)
+    group.create_array("0", data=np.zeros((3, 4, 5, 6), np.uint8))
+    group.attrs["multiscales"] = [{"axes": [{"name": "t", "unit": "second"}] + [{"name": a} for a in "zyx"],
+                                   "datasets": [{"path": "0", "coordinateTransformations": [
+                                       {"type": "scale", "scale": [0.5, 3.0, 0.25, 0.5]}]}]}]
+    # RAS+ (z, y, x): the NIfTI's k, j, i; its centre (x, y, z) = offset + diag * (n - 1) / 2
+    nifti = ([4, 5, 6, 3], [6, 5, 4], [4.0, 3.0, 2.0], [5 + 2 * 1.5, 6 + 3 * 2.0, 7 + 4 * 2.5], 2.5, "sec")
+    expected = {"f.nii": nifti, "f.nii.gz": nifti,
+                # an ImageJ stack: its axes as stored, z spacing 3, y and x the inverse resolution, origin 0
+                "t.tif": ([3, 4, 5, 6], [4, 5, 6], [3.0, 0.25, 0.5], [0.0, 0.0, 0.0], 1.5, "sec"),
+                # NGFF: the first voxel at 0, the centre at scale * (n - 1) / 2
+                "t.zarr": ([3, 4, 5, 6], [4, 5, 6], [3.0, 0.25, 0.5], [1.25, 0.5, 4.5], 0.5, "second")}
+    refusals = {}
+    for name in expected:
+        with pytest.raises(clwave.FileFormatError) as refused:
+            clwave.load(tmp_path / name)
+        refusals[name] = str(refused.value)
+    monkeypatch.setattr(nibabel.arrayproxy.ArrayProxy, "__getitem__", lambda *a: pytest.fail("a NIfTI voxel read"))
+    monkeypatch.setattr(tifffile.TiffFile, "asarray", lambda *a, **k: pytest.fail("a TIFF pixel was read"))
+    monkeypatch.setattr(tifffile.TiffPageSeries, "asarray", lambda *a, **k: pytest.fail("a TIFF pixel was read"))
+    for name, (stored, shape, spacing, origin, step, unit) in expected.items():
+        code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
+        assert code == 0, err
+        facts = json.loads(out)
+        assert (facts["stored_shape"], facts["shape"], facts["spacing"], facts["origin"], facts["channels"]) == \
+            (stored, shape, spacing, origin, 1), name
+        assert facts["time"] == dict(points=3, step=step, unit=unit) and facts["refused"] == refusals[name], name
+    code, out, err = run(capsys, "info", str(tmp_path / "f.nii.gz"))
+    lines = dict(line.split(None, 1) for line in out.splitlines())
+    assert code == 0 and lines["volume"] == "4 x 5 x 6 x 3 samples of int16, a time series, as stored", out
+    assert lines["spacing"] == "2, 3, 4 (x, y, z), origin 8, 12, 17 (RAS+ mm, as loaded)"
+    assert lines["time"] == "3 time points, 2.5 sec apart"
+    assert lines["refused"].endswith("extract one volume first, e.g. with nibabel.funcs.four_to_three")
+
+
+def test_every_formats_description_has_the_same_keys(tmp_path, capsys):
+    """trial22: .nii gave `shape`, `channels`, `spacing_in_file`, .nii.gz `stored_shape`, `resampled` instead.  One
+    volume as .nii, .nii.gz, .nrrd, .npy, .tif, .zarr and a DICOM folder: the same JSON keys (loaders.DESCRIBED), a
+    fact a format does not give as null; a .clw shares file, format, bytes, shape, channels, spacing, origin and
+    obliquity, with its model's own besides."""
+    import nibabel
+    import nrrd
+    import tifffile
+    import zarr
+    from pydicom.uid import generate_uid
+
+    from test_loaders import axial, write_series
+
+    data = (np.arange(4 * 5 * 6).reshape(4, 5, 6) % 7).astype(np.int16)
+    for name in ("v.nii", "v.nii.gz"):
+        nibabel.save(nibabel.Nifti1Image(data, np.eye(4)), tmp_path / name)
+    nrrd.write(str(tmp_path / "v.nrrd"), data)
+    np.save(tmp_path / "v.npy", data)
+    tifffile.imwrite(tmp_path / "v.tif", data, photometric="minisblack")
+    zarr.open_group(tmp_path / "v.zarr", mode="w", zarr_format=2).create_array("v", data=data)
+    (tmp_path / "dicom").mkdir()
+    write_series(tmp_path / "dicom", np.random.default_rng(3), axial(0.0, 2.0, 4.0), generate_uid(),
+                 ["a.dcm", "b.dcm", "c.dcm"])
+    clwave.WaveletVolume.from_volume(clwave.Volume(data.astype(np.float32)), levels=1).save(tmp_path / "v.clw")
+    keys = {}
+    for name in ("v.nii", "v.nii.gz", "v.nrrd", "v.npy", "v.tif", "v.zarr", "dicom", "v.clw"):
+        code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
+        assert code == 0, err
+        keys[name] = list(json.loads(out))
+    clw = set(keys.pop("v.clw"))
+    assert len({tuple(k) for k in keys.values()}) == 1, keys
+    from clwave.io.loaders import DESCRIBED
+
+    assert keys["v.nii"] == list(DESCRIBED)
+    assert set(DESCRIBED) & clw == {"file", "format", "bytes", "shape", "channels", "spacing", "origin", "obliquity"}
+    docs = (Path(__file__).parents[1] / "docs" / "coordinates.md").read_text()
+    assert all(f"`{key}`" in docs for key in DESCRIBED)  # the keys are listed where `info` is documented
+
+
+def test_info_prints_world_lengths_without_float_noise(tmp_path, capsys):
+    """trial22: an oblique NIfTI's origin printed as `-9.53674e-07, 2.6226e-06, 0` (float32 affine noise).  Text
+    rounds world lengths to a millionth of the volume's extent (0 here, 8 voxels of 2 mm rotated 20 degrees about
+    z, centred on 0); the JSON keeps the numbers as loaded."""
+    import nibabel
+
+    turn = np.radians(20)
+    rotation = np.array([[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]]) * 2.0
+    affine = np.eye(4)
+    affine[:3, :3], affine[:3, 3] = rotation, -rotation @ [3.5, 3.5, 3.5]
+    nibabel.save(nibabel.Nifti1Image(np.zeros((8, 8, 8), np.float32), affine), tmp_path / "o.nii")
+    code, out, _ = run(capsys, "info", str(tmp_path / "o.nii"), "--json")
+    origin = json.loads(out)["origin"]
+    assert code == 0 and 0 < max(map(abs, origin)) < 1e-6 * 16, origin  # the noise is there, below 16 mm / 1e6
+    code, out, _ = run(capsys, "info", str(tmp_path / "o.nii"))
+    assert code == 0 and "spacing    2, 2, 2 (x, y, z), origin 0, 0, 0\n" in out, out

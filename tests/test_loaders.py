@@ -669,7 +669,7 @@ def test_dicom_gantry_tilt_resampled_onto_a_straight_stack(tmp_path, monkeypatch
     facts = describe(tmp_path)
     assert facts["stored_shape"] == list(shape) and facts["resampled"] and facts["dtype"] == "float32"
     assert facts["spacing"] == pytest.approx(vol.spacing) and facts["origin"] == pytest.approx(vol.origin)
-    assert (facts["stored_dtype"], facts["rescale"], facts["padding"]) == ("uint16", [[2.0, -1024.0]], None)
+    assert (facts["stored_dtype"], facts["rescale"], facts["padding"]) == ("uint16", [[2.0, -1024.0]], [])
 
 
 def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsys):

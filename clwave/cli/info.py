@@ -4,6 +4,7 @@ header holds, or what a volume file's header declares, without reading a coeffic
 from __future__ import annotations
 
 import json
+import math
 
 from ..errors import InputError
 from .options import file_size, kept_words, parse_series
@@ -69,9 +70,10 @@ def describe(args):
 
 def _clw_lines(f) -> list:
     z, y, x = f["shape"]
+    extent = _extent(f["shape"], f["spacing"])
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, a wavelet model (.clw)"),
-             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_xyz(f['spacing'][::-1])} (x, y, z), origin "
-                        f"{_xyz(f['origin'])}"),
+             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_lengths(f['spacing'][::-1], extent)} (x, y, z), "
+                        f"origin {_lengths(f['origin'], extent)}"),
              ("model", f"{f['levels']} level{'s' * (f['levels'] != 1)}, {f['channels']} channel"
                        f"{'s' * (f['channels'] != 1)} in {len(f['groups'])} group{'s' * (len(f['groups']) != 1)}"
                        f"{', interpolating' if f['interpolate'] else ''}")]
@@ -81,7 +83,7 @@ def _clw_lines(f) -> list:
         lines.append((f"group {gi}", f"{which}: {g['wavelet']} wavelet (order {g['order']}), keeps "
                                      f"{kept_words(g['kept'], x * y * z)}, {values}"))
     if f["focus"] is not None:
-        lines.append(("focus", f"centre {_xyz(f['focus'][0])}, sigma {f['focus'][1]:g}"))
+        lines.append(("focus", f"centre {_lengths(f['focus'][0], extent)}, sigma {f['focus'][1]:g}"))
     tf = f["transfer_function"]
     if tf is not None:
         window = tf.get("window")
@@ -106,37 +108,41 @@ def _oblique(degrees) -> str:
 
 def _volume_lines(f) -> list:
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
-    if "stored_shape" in f:  # read whole: its axes and spacing come with its voxels
+    if f["stored_shape"] is not None:  # read whole: weighed as read, before the loader orders the axes
         resampled = "" if not f["resampled"] else ", its sheared grid resampled onto a straight one wider by its " \
-            "shifts" if "nifti" in f else ", a gantry tilt resampled onto a straight stack wider by its shifts"
-        placed = "spacing" in f  # its header places it: spacing and origin as the loader gives them
-        stored = f" (stored as {f['stored_dtype']})" if "stored_dtype" in f else ""
-        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']} as read{stored}"
-                                f"{resampled}, before the loader orders them"
-                                f"{'' if placed else ' (its axes and spacing come with the voxels)'}"))
-        if placed:
-            units = "µm for an OME-TIFF, an ImageJ stack's unit; as loaded" if f["format"] == "tiff" else \
-                "RAS+ mm, as loaded"
-            lines.append(("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z), origin {_xyz(f['origin'])} ({units})"))
-        if f.get("rescale"):
-            (slope, intercept), more = f["rescale"][0], len(f["rescale"]) - 1
-            lines.append(("rescale", f"slope {slope:g}, intercept {intercept:g}"
-                                     f"{f' ({more + 1} different pairs across its slices)' if more else ''}"))
-        if "padding" in f:
-            lines.append(("padding", "none" if f["padding"] is None else
-                          f"stored {' .. '.join(map(str, dict.fromkeys(f['padding'])))} (outside the patient): set to "
-                          f"the series' least other value when read"))
-        if f.get("obliquity"):
-            lines.append(("oblique", _oblique(f["obliquity"])))
-        return lines + _nifti_lines(f.get("nifti"))
-    z, y, x = f["shape"][:3]
-    spacing = "" if f["spacing_in_file"] else " (none in the file)"
-    lines += [("volume", f"{x} x {y} x {z} voxels (x, y, z), {f['channels']} channel{'s' * (f['channels'] != 1)} of "
-                         f"{f['dtype']}"),
-              ("spacing", f"{_xyz(f['spacing'][::-1])} (x, y, z){spacing}, origin {_xyz(f['origin'])}")]
+            "shifts" if f["nifti"] else ", a gantry tilt resampled onto a straight stack wider by its shifts"
+        stored = f" (stored as {f['stored_dtype']})" if f["stored_dtype"] else ""
+        read = ", a time series, as stored" if f["time"] else f" as read{stored}{resampled}, before the loader " \
+            f"orders them{'' if f['spacing'] else ' (its axes and spacing come with the voxels)'}"
+        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']}{read}"))
+    else:
+        z, y, x = f["shape"][:3]
+        lines.append(("volume", f"{x} x {y} x {z} voxels (x, y, z), {f['channels']} channel"
+                                f"{'s' * (f['channels'] != 1)} of {f['dtype']}"))
+    if f["spacing"] is not None:
+        extent = _extent(f["shape"], f["spacing"])
+        unset = "" if f["spacing_in_file"] else " (none in the file)"
+        place = f"{_lengths(f['spacing'][::-1], extent)} (x, y, z){unset}, origin {_lengths(f['origin'], extent)}"
+        if f["stored_shape"] is not None:
+            place += " (µm for an OME-TIFF, an ImageJ stack's unit; as loaded)" if f["format"] == "tiff" else \
+                " (RAS+ mm, as loaded)"
+        lines.append(("spacing", place))
+    if f["time"]:
+        t = f["time"]
+        step = "" if t["step"] is None else f", {t['step']:g} {t['unit'] or '(no unit)'} apart"
+        lines += [("time", f"{t['points']} time points{step}"),
+                  ("refused", f"when read (compress, render, drr, view): {f['refused']}")]
+    if f["rescale"]:
+        (slope, intercept), more = f["rescale"][0], len(f["rescale"]) - 1
+        lines.append(("rescale", f"slope {slope:g}, intercept {intercept:g}"
+                                 f"{f' ({more + 1} different pairs across its slices)' if more else ''}"))
+    if f["padding"] is not None:
+        lines.append(("padding", "none" if not f["padding"] else
+                      f"stored {' .. '.join(map(str, dict.fromkeys(f['padding'])))} (outside the patient): set to "
+                      f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f.get("nifti"))
+    return lines + _nifti_lines(f["nifti"])
 
 
 def _nifti_lines(n) -> list:
@@ -160,8 +166,16 @@ def _nifti_lines(n) -> list:
     return lines
 
 
-def _xyz(values) -> str:
-    return ", ".join(f"{v:g}" for v in values)
+def _extent(shape, spacing) -> float:
+    """The volume's largest length in world units: what :func:`_lengths` rounds to."""
+    return max(n * abs(d) for n, d in zip(shape[:3], spacing))
+
+
+def _lengths(values, extent) -> str:
+    """World lengths rounded to a millionth of the volume's ``extent`` (a float32 affine's noise, -9.5e-07 for 0,
+    is below it), so that no sign of nothing is printed; the JSON keeps the numbers as they are."""
+    decimals = -math.floor(math.log10(extent * 1e-6)) if extent > 0 else 6
+    return ", ".join(f"{round(v, decimals) + 0.0:g}" for v in values)
 
 
 def add_parser(sub):
@@ -171,7 +185,9 @@ def add_parser(sub):
                                            "coefficients or voxels")
     p.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     p.add_argument("--check", action="store_true", help="also build and run a self-test kernel")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--json", action="store_true", help="print JSON (with FILE: the same keys for every volume "
+                                                       "format, null where a format does not give the fact; "
+                                                       "docs/coordinates.md §4)")
     p.add_argument("--series", help="FILE a DICOM folder with several series: UID or 0-based index")
     p.add_argument("--level", type=int, help="FILE an OME-Zarr image: the multiscale level (default 0)")
     p.set_defaults(run=run)

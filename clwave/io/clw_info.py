@@ -15,13 +15,14 @@ _WAVELETS = {order: name for name, order in WAVELET_ORDERS.items()}
 
 
 def describe_clw(path) -> dict:
-    """The header of the ``.clw`` file ``path`` (shape, spacing, origin, levels, channels, interpolation, focus,
-    content box, transfer function, the value ``subtracted`` from the input's values and the ``obliquity`` of its
-    axes to its scanner's: 0 where the file records none)
-    with, per channel group, its wavelet, channels, the coefficients it keeps and their share of the voxels, and its
-    quantisation step (None: float32 values); and the file's size.  The header is checked as a read checks it
-    (:func:`~clwave.io.clw_header.checked_header`); a member that does not match it is refused
-    (:class:`~clwave.errors.FileFormatError`, from :func:`~clwave.io.clw.open_clw`)."""
+    """The header of the ``.clw`` file ``path`` (``format`` "clw", shape, spacing, origin, levels, channels,
+    interpolation, focus, content box, transfer function, the value ``subtracted`` from the input's values and the
+    ``obliquity`` of its axes to its scanner's: 0 where the file records none) with, per channel group, its wavelet,
+    channels, the coefficients it keeps and their share of the voxels, and its quantisation step (None: float32
+    values); and the file's size.  ``file``, ``format``, ``bytes``, ``shape``, ``channels``, ``spacing``, ``origin``
+    and ``obliquity`` are keys of a volume file's description too (:data:`~clwave.io.loaders.DESCRIBED`).  The header
+    is checked as a read checks it (:func:`~clwave.io.clw_header.checked_header`); a member that does not match it is
+    refused (:class:`~clwave.errors.FileFormatError`, from :func:`~clwave.io.clw.open_clw`)."""
     path = Path(path)
     with open_clw(path) as (h5, header):
         shape, levels, channels, groups = checked_header(header)
@@ -36,5 +37,6 @@ def describe_clw(path) -> dict:
                                   kept=kept, share=kept / voxels, quantisation=step))
     facts = {name: header.get(name) for name in ("spacing", "origin", "interpolate", "focus", "content",
                                                  "transfer_function")}
-    return dict(file=str(path), bytes=path.stat().st_size, shape=list(shape), levels=levels, channels=channels,
-                **facts, subtracted=header.get("offset", 0.0), obliquity=header.get("obliquity", 0.0), groups=described)
+    return dict(file=str(path), format="clw", bytes=path.stat().st_size, shape=list(shape), levels=levels,
+                channels=channels, **facts, subtracted=header.get("offset", 0.0),
+                obliquity=header.get("obliquity", 0.0), groups=described)

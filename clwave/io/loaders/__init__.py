@@ -23,9 +23,9 @@ from ...errors import FileFormatError, InputError, finite_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, slices, tiff, zarr
-from .shared import SUPPORTED, Declared, check_chunks, folder_files, not_a_file, reading, to_float32
+from .shared import SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading, to_float32
 
-__all__ = ["load", "describe", "SUPPORTED"]
+__all__ = ["load", "describe", "DESCRIBED", "SUPPORTED"]
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
@@ -184,17 +184,26 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     return dicom.read_dicom_folder(path, series, progress_bar, fits)
 
 
+#: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
+DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",
+             "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti")
+
+
 def describe(path, *, series=None, level=None) -> dict:
-    """What :func:`load` reads of a volume file (or folder) before its voxels (``clwave info FILE``): ``format``,
-    the stored ``dtype``, ``bytes`` on disk, and ``shape`` (z, y, x[, c]), ``spacing`` (dz, dy, dx) and ``origin``
-    (x, y, z) as ``load`` gives them.  A format read whole (NRRD, TIFF, DICOM, ``.nii.gz``, a sheared NIfTI) gives
-    the ``stored_shape`` and ``dtype`` its loader weighs before reading (a DICOM series: its slices, rows and
-    columns, rescaled to float32), whether that is a resampling of the stored samples (``resampled``: a gantry tilt's
-    straight stack, a sheared NIfTI's straight grid, wider by the shifts), and the ``spacing``, ``origin`` and
-    ``obliquity`` ``load`` gives where its header places the volume (``.nii.gz``, DICOM, an OME-TIFF or ImageJ
-    stack; NRRD and other TIFFs give none, their loaders finding them with the voxels); a DICOM series also its
-    ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding`` (stored values, or None); a
-    NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused
+    """What :func:`load` reads of a volume file (or folder) before its voxels (``clwave info FILE``), with the keys
+    :data:`DESCRIBED` whatever the format (None: a fact the header does not give, or not before the voxels):
+
+    ``file``, ``format``, ``bytes`` on disk; ``shape`` (z, y, x[, c]) as ``load`` gives it, ``channels``, and the
+    ``dtype`` of the samples as read; a format read whole (NRRD, TIFF, DICOM, ``.nii.gz``, a sheared NIfTI, a time
+    series) the ``stored_shape`` its loader weighs before reading, before it orders the axes (a DICOM series: its
+    slices, rows and columns, rescaled to float32; a time series: time axis included), and whether that is a
+    resampling of the stored samples (``resampled``: a gantry tilt's straight stack, a sheared NIfTI's straight
+    grid, wider by the shifts); ``spacing`` (dz, dy, dx), ``origin`` (x, y, z) and ``obliquity`` as ``load`` gives
+    them, where the header places the volume (NRRD and plain TIFFs: their loaders find them with the voxels), and
+    ``spacing_in_file``; a time series (refused by ``load``) its ``time`` (``points``, ``step`` and ``unit``: None
+    where the header gives none) and ``refused`` (the one line ``load`` refuses it with); a DICOM series its
+    ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding`` (stored values, [] where
+    none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused
     (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
@@ -208,22 +217,30 @@ def describe(path, *, series=None, level=None) -> dict:
         _reject_unused(kind, level=level)
     lazy = check_chunks(None, kind, path) is not False  # a Dask array over the file: nothing read until computed
     size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) if path.is_dir() else path.stat().st_size
-    facts = dict(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size)
+    facts = dict.fromkeys(DESCRIBED)
+    facts.update(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size, resampled=False,
+                 **_header_facts(kind, path))
     with reading(path):
         try:
             # a lazy read never weighs (nothing is read until computed) unless it must read whole (a sheared NIfTI)
             data, spacing, origin, obliquity = _read(kind, path, inner, None, None, None, series, level,
                                                      "auto" if lazy else False, False, _declared, False)
-        except Declared as declared:
-            facts.update(stored_shape=list(declared.shape), dtype=str(declared.dtype), resampled=declared.resampled,
-                         **declared.facts, **_header_facts(kind, path))
+        except (Declared, TimeSeries) as declared:
+            channels = declared.channels
+            facts.update(stored_shape=list(declared.shape), dtype=str(declared.dtype), channels=channels)
+            if isinstance(declared, Declared):
+                facts.update(resampled=declared.resampled, **declared.facts)
+            else:
+                facts.update(time=dict(points=declared.points, step=declared.step, unit=declared.unit),
+                             refused=str(declared))
+            if declared.loaded is not None:
+                facts["shape"] = list(declared.loaded) + [channels] * (channels > 1)
             if declared.placed is not None:
                 spacing, origin, obliquity = declared.placed
                 facts.update(spacing=[float(s) for s in spacing], origin=[float(o) for o in origin],
-                             obliquity=obliquity)
+                             obliquity=obliquity, spacing_in_file=True)
             return facts
     volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))
-    facts.update(_header_facts(kind, path))
     return dict(facts, shape=list(data.shape), dtype=str(data.dtype), channels=volume.channels,
                 spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None,
                 obliquity=obliquity)

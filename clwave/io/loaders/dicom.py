@@ -135,7 +135,7 @@ def _header_facts(headers) -> dict:
     rescales = [(float(getattr(h, "RescaleSlope", 1.0)), float(getattr(h, "RescaleIntercept", 0.0))) for h in headers]
     marks = padding(headers[0])
     return dict(stored_dtype=str(pixel_dtype(headers[0])), rescale=[list(r) for r in dict.fromkeys(rescales)],
-                padding=None if marks is None else list(marks))
+                padding=[] if marks is None else list(marks))
 
 
 def _drift(where, positions, distance, normal, pixel) -> np.ndarray:

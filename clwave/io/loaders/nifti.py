@@ -9,8 +9,8 @@ import warnings
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import (Declared, as_array, check_declared_size, check_float32_range, check_whole, largest_finite, note,
-                     to_canonical)
+from .shared import (Declared, TimeSeries, as_array, check_declared_size, check_float32_range, check_whole,
+                     largest_finite, note, to_canonical)
 from .shear import STRAY_VOXELS, straight_grid, unshear
 
 
@@ -46,6 +46,17 @@ def read_nifti(path, chunks, fits=None):
              f"centred on the origin; its left and right may be swapped: set an sform (nibabel's set_sform) if known")
     check_declared_size(path, image.dataobj.offset,
                         math.prod(image.shape) * image.header.get_data_dtype().itemsize, image.shape)
+    proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
+    # NIfTI keeps time on the 4th axis and vector components on the 5th
+    if proxy.ndim > 3 and (proxy.shape[3] != 1 or any(n != 1 for n in proxy.shape[5:])):
+        refused = TimeSeries(f"{path} holds a NIfTI image of shape {proxy.shape}; clwave reads one 3-D volume (vector "
+                             "components on the 5th axis become channels): extract one volume first, e.g. with "
+                             "nibabel.funcs.four_to_three", proxy.shape, proxy.dtype, proxy.shape[3],
+                             *_time_step(image.header), math.prod(proxy.shape[4:]))
+        refused.place(proxy.shape[:3], affine)
+        raise refused
+    if proxy.ndim > 3:
+        proxy = proxy.reshape(proxy.shape[:3] + proxy.shape[4:5])
     grid = straight_grid(image.shape, affine)
     sheared = grid.moved > STRAY_VOXELS
     if sheared:  # resampled in memory: read whole, the straight grid weighed first
@@ -55,15 +66,6 @@ def read_nifti(path, chunks, fits=None):
         except Declared as declared:
             declared.place(grid.shape, grid.affine)
             raise
-    proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
-    if proxy.ndim > 3:
-        # NIfTI keeps time on the 4th axis and vector components on the 5th
-        if proxy.shape[3] != 1 or any(n != 1 for n in proxy.shape[5:]):
-            raise FileFormatError(
-                f"{path} holds a NIfTI image of shape {proxy.shape}; clwave reads one 3-D "
-                "volume (vector components on the 5th axis become channels): extract one "
-                "volume first, e.g. with nibabel.funcs.four_to_three")
-        proxy = proxy.reshape(proxy.shape[:3] + proxy.shape[4:5])
     scaled = proxy.dtype.kind in "iu" and (float(proxy.slope), float(proxy.inter)) != (1.0, 0.0)
     try:
         data = as_array(_ScaledToFloat32(proxy, path) if scaled else proxy, chunks, fits=fits, path=path)
@@ -82,6 +84,13 @@ def read_nifti(path, chunks, fits=None):
 
 def _codes(header) -> tuple:
     return int(header["sform_code"]), int(header["qform_code"])
+
+
+def _time_step(header) -> tuple:
+    """``(step, unit)`` between a time series' volumes: its pixdim[4] and xyzt_units' time unit, ``(None, None)``
+    where the header gives no step (0)."""
+    step, unit = float(header["pixdim"][4]), header.get_xyzt_units()[1]
+    return (step, None if unit == "unknown" else unit) if step > 0 else (None, None)
 
 
 def label_intent(path) -> bool:

@@ -180,17 +180,33 @@ def check_chunks(chunks, kind, path):
 
 class Declared(BaseException):
     """Raised by a ``fits`` given to a loader to stop before any voxel is read (``loaders.describe``);
-    :func:`check_whole` gives it the ``shape`` and ``dtype`` the header declares, and whether they are a resampling of
-    what is stored.  A BaseException, as KeyboardInterrupt is: no ``except Exception`` on its way (:func:`reading`'s)
-    takes it for a failure to read.  A loader that knows the volume's place from its header alone gives it too
-    (:meth:`place`), and may add ``facts`` of its own (a DICOM series' stored type, rescale and padding)."""
+    :func:`check_whole` gives it the ``shape`` and ``dtype`` the header declares, its ``channels``, and whether they
+    are a resampling of what is stored.  A BaseException, as KeyboardInterrupt is: no ``except Exception`` on its way
+    (:func:`reading`'s) takes it for a failure to read.  A loader that knows the volume's place from its header alone
+    gives it too (:meth:`place`; ``loaded``: the spatial shape ``load`` gives), and may add ``facts`` of its own (a
+    DICOM series' stored type, rescale and padding)."""
 
-    shape, dtype, resampled, placed, facts = None, None, False, None, {}
+    shape, dtype, channels, resampled, placed, loaded, facts = None, None, 1, False, None, None, {}
 
     def place(self, shape_ijk, affine_ras):
         """``placed``: the ``(spacing, origin, obliquity)`` :func:`to_canonical` gives a volume of ``shape_ijk`` with
-        that affine, from a stand-in of that shape that holds no voxel."""
-        self.placed = to_canonical(np.broadcast_to(np.float32(0), tuple(shape_ijk)), affine_ras)[1:]
+        that affine, and ``loaded`` its shape, from a stand-in of that shape that holds no voxel."""
+        stand_in, *self.placed = to_canonical(np.broadcast_to(np.float32(0), tuple(shape_ijk)), affine_ras)
+        self.loaded = stand_in.shape
+
+
+class TimeSeries(FileFormatError):
+    """A loader's refusal of a time series (clwave reads one volume), with what its header says for ``clwave info``:
+    the stored ``shape`` (time axis included) and ``dtype``, the time ``points``, the ``step`` between them and its
+    ``unit`` (None where the header gives none), and, as :class:`Declared` has them, ``channels``, ``placed`` and
+    ``loaded`` (one volume's)."""
+
+    def __init__(self, message, shape, dtype, points, step=None, unit=None, channels=1):
+        super().__init__(message)
+        self.shape, self.dtype, self.points, self.step, self.unit = tuple(shape), np.dtype(dtype), points, step, unit
+        self.channels, self.placed, self.loaded = channels, None, None
+
+    place = Declared.place
 
 
 class OnDemand:
@@ -219,7 +235,8 @@ def check_whole(path, shape, dtype, fits=None, streamed=False, resampled=False):
         try:
             fits(voxels, channels)
         except Declared as declared:  # describe(): what the header declares, and no voxel read
-            declared.shape, declared.dtype, declared.resampled = tuple(shape), dtype, resampled
+            declared.shape, declared.dtype, declared.channels, declared.resampled = tuple(shape), dtype, channels, \
+                resampled
             raise
     stored = 0 if streamed else samples * dtype.itemsize
     converted = 0 if dtype == np.float32 and not streamed else 4 * channels  # float32 samples used as they are read

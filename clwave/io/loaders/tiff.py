@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import Declared, check_whole, log, note
+from .shared import Declared, TimeSeries, check_whole, log, note
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
@@ -48,6 +50,8 @@ def read_tiff(path, fits=None, stack=True):
         if channel:
             shape = tuple(n for n, a in zip(shape, axes) if a != channel) + (shape[axes.index(channel)],)
         spatial = axes.replace(channel or "S", "")
+        if len(spatial) == 4 and spatial[0] == "T" and spatial.endswith("YX"):  # an ImageJ hyperstack's, an OME-TIFF's
+            raise _time_series(tif, path, shape)
         if len(spatial) > 3 or not spatial.endswith("YX"):
             raise FileFormatError(
                 f"{path} holds a TIFF series with axes {series.axes!r} and shape {series.shape}; "
@@ -62,7 +66,8 @@ def read_tiff(path, fits=None, stack=True):
         origin = _ome_origin(tif, path, spacing, shape[:3]) if tif.is_ome and len(spatial) == 3 else None
         try:
             check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
-        except Declared as declared:  # describe's (clwave info): the spacing and origin are the header's
+        except Declared as declared:  # describe's (clwave info): the axes as stored, spacing and origin the header's
+            declared.loaded = declared.shape[:3]
             if spacing is not None:
                 declared.placed = (spacing, (0.0, 0.0, 0.0) if origin is None else origin, 0.0)
             raise
@@ -70,6 +75,32 @@ def read_tiff(path, fits=None, stack=True):
     if channel:
         data = np.moveaxis(data, axes.index(channel), -1)
     return (data if len(spatial) == 3 else data[np.newaxis]), spacing, origin
+
+
+def _time_series(tif, path, shape) -> TimeSeries:
+    """The refusal of a TIFF series whose first axis (``shape``: its axes in the volume's order, channels last) is
+    time, with its spacing and origin from its metadata and its time step: an OME-TIFF's ``TimeIncrement`` (in its
+    ``TimeIncrementUnit``, s where none is given), an ImageJ hyperstack's ``finterval`` (in its ``tunit``, sec)."""
+    series = tif.series[0]
+    first = f"[{':, ' * series.axes.index('T')}0]"  # the first time point of what imread returns
+    if tif.is_ome:
+        pixels = _ome_pixels(tif)
+        step, unit = pixels.get("TimeIncrement"), pixels.get("TimeIncrementUnit", "s")
+    else:
+        meta = tif.imagej_metadata or {}
+        step, unit = meta.get("finterval"), meta.get("tunit", "sec")
+    refused = TimeSeries(f"{path} holds a TIFF series with axes {series.axes!r} and shape {series.shape}: "
+                         f"{shape[0]} time points (axis T); clwave reads one volume: write one time point to a TIFF "
+                         f"of its own, e.g. tifffile.imwrite('one.tif', tifffile.imread({str(path)!r}){first}, "
+                         "photometric='minisblack')",
+                         series.shape, series.dtype, shape[0], None if step is None else float(step),
+                         None if step is None else unit, math.prod(shape[4:]))
+    spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)
+    if spacing is not None:
+        origin = _ome_origin(tif, path, spacing, shape[1:4]) if tif.is_ome else (0.0, 0.0, 0.0)
+        refused.placed = (spacing, origin, 0.0)
+    refused.loaded = shape[1:4]
+    return refused
 
 
 def _ome_pixels(tif) -> dict:

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import as_array, not_a_file, pick_array
+from .shared import TimeSeries, as_array, not_a_file, pick_array
 
 ZARR_METADATA = ("zarr.json", ".zarray", ".zgroup")  # v3, v2 array, v2 group
 
@@ -113,9 +113,6 @@ def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
     array = group[path]
     if len(array.shape) != len(names):
         raise bad(f"names {len(names)} axes {names}, but level {level} ({path}) has shape {array.shape}")
-    if "t" in names and array.shape[names.index("t")] != 1:
-        raise FileFormatError(f"{where} holds {array.shape[names.index('t')]} time points (axis t); clwave reads "
-                              "one volume: write one time point to a store of its own")
 
     scale, translation = np.ones(len(names)), np.zeros(len(names))
     for transforms in (datasets[level].get("coordinateTransformations") or [],
@@ -143,12 +140,18 @@ def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
         factor = np.array([float(_METRES[u] / _METRES[units[2]]) for u in units])
         scale[zyx], translation[zyx] = scale[zyx] * factor, translation[zyx] * factor
 
+    shape = np.array([array.shape[i] for i in zyx])
+    spacing = tuple(float(d) for d in scale[zyx])
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: infinite, Volume names the scale
+        origin = tuple(float(o) for o in (translation[zyx] + scale[zyx] * (shape - 1) / 2)[::-1])  # its centre, x y z
+    if "t" in names and array.shape[names.index("t")] != 1:
+        t = names.index("t")
+        refused = TimeSeries(f"{where} holds {array.shape[t]} time points (axis t); clwave reads one volume: write "
+                             "one time point to a store of its own", array.shape, array.dtype, array.shape[t],
+                             float(scale[t]), axes[t].get("unit"), array.shape[names.index("c")] if "c" in names else 1)
+        refused.placed, refused.loaded = (spacing, origin, 0.0), tuple(int(n) for n in shape)
+        raise refused
     data = as_array(array, chunks, "".join(_NGFF_ROLES[n] for n in names), fits, where)
     data = data[tuple(0 if n == "t" else slice(None) for n in names)]
     names = [n for n in names if n != "t"]
-    data = data.transpose([names.index(a) for a in "zyxc" if a in names])
-    shape = np.array(data.shape[:3])
-    spacing = tuple(float(d) for d in scale[zyx])
-    with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: infinite, Volume names the scale
-        origin = translation[zyx] + scale[zyx] * (shape - 1) / 2  # the volume's centre, (z, y, x)
-    return data, spacing, tuple(float(o) for o in origin[::-1])
+    return data.transpose([names.index(a) for a in "zyxc" if a in names]), spacing, origin
