@@ -92,6 +92,16 @@ def test_info_tells_a_shear_apart_from_obliquity(tmp_path, capsys):
     assert code == 0 and "sheared" not in lines and "17.19 degrees" in lines["oblique"], out
 
 
+def test_info_of_a_singular_affine_is_the_readers_one_line(tmp_path, capsys):
+    singular = np.eye(4)
+    singular[:3, 2] = singular[:3, 0]  # two axes along one direction: no place for the voxels
+    path = _save(tmp_path / "singular.nii", np.ones((5, 4, 6), np.float32), singular)
+    for command in ("info", "render"):
+        code, out, err = run(capsys, command, str(path), *(("-o", str(tmp_path / "x.png")) if command == "render"
+                                                            else ()))
+        assert code == 2 and "not finite or not invertible" in err and len(err.strip().splitlines()) == 1, err
+
+
 def test_a_file_without_orientation_is_warned_of_and_info_says_what_was_assumed(tmp_path, capsys):
     path = _save(tmp_path / "none.nii", np.ones((4, 3, 2), np.float32), np.diag([2.0, 2, 2, 1]), sform=0)
     with pytest.warns(ClwaveWarning, match="has no orientation .*sform_code and qform_code are 0.*LAS") as seen:

@@ -37,7 +37,7 @@ def read_nifti(path, chunks, fits=None):
     if len(image.shape) < 3 or min(image.shape) < 1:
         raise FileFormatError(f"{path} holds a NIfTI image of shape {image.shape}; clwave reads 3-D volumes with at "
                               "least 2 voxels an axis (stack 2-D slices into one first)")
-    if not (np.all(np.isfinite(affine)) and abs(np.linalg.det(affine[:3, :3])) > 0):
+    if not _placeable(affine):
         raise FileFormatError(f"{path}: its voxel-to-world affine (sform, qform or pixdim) is not finite or not "
                               "invertible; fix the header, e.g. with nibabel's set_sform and set_qform")
     if _codes(image.header) == (0, 0):
@@ -100,6 +100,11 @@ def label_intent(path) -> bool:
     return nibabel.load(path, mmap=False).header.get_intent()[0] == "label"
 
 
+def _placeable(affine) -> bool:
+    """Whether a voxel-to-world ``affine`` places voxels: finite and invertible."""
+    return bool(np.all(np.isfinite(affine)) and abs(np.linalg.det(affine[:3, :3])) > 0)
+
+
 def header_facts(path) -> dict:
     """What ``clwave info`` says of a NIfTI header (:func:`read_nifti` has checked it): the sform and qform codes,
     which affine is used (nibabel's choice: the sform where its code is set, else the qform, else none: nibabel's
@@ -112,12 +117,14 @@ def header_facts(path) -> dict:
     sform, qform = _codes(header)
     used = "sform" if sform else "qform" if qform else "none"
     affine = header.get_best_affine()
-    grid = straight_grid(header.get_data_shape()[:3], affine)
+    placed = _placeable(affine)  # else the read that follows refuses the file in one line
+    grid = straight_grid(header.get_data_shape()[:3], affine) if placed else None
     facts = dict(sform_code=sform, qform_code=qform, affine_from=used,
-                 orientation="".join(nibabel.aff2axcodes(affine)),
+                 orientation="".join(nibabel.aff2axcodes(affine)) if placed else None,
                  forms_differ=bool(sform and qform and not np.allclose(header.get_sform(), header.get_qform(),
                                                                        atol=1e-3)),
-                 sheared=grid.degrees if grid.moved > STRAY_VOXELS else 0.0, intent=header.get_intent()[0])
+                 sheared=None if grid is None else grid.degrees if grid.moved > STRAY_VOXELS else 0.0,
+                 intent=header.get_intent()[0])
     slope, inter = float(image.dataobj.slope), float(image.dataobj.inter)  # nibabel moves them from the header
     if (slope, inter) != (1.0, 0.0):
         facts.update(scl_slope=slope, scl_inter=inter)
