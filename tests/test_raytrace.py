@@ -268,6 +268,25 @@ def test_zero_lights_leave_the_ambient_term(small_rgba):
     assert not np.allclose(ambient_only, tracer.render(cam).image)
 
 
+def test_lights_without_shading_are_refused(small_rgba, tmp_path, capsys):
+    """Lights change nothing on an unshaded image or an X-ray: given there, they are refused in one line, not
+    ignored (the API, and the command line before any set-up)."""
+    from test_cli import run
+
+    _, tracer = small_rgba
+    cam = clwave.Camera(30, 20, size=4)
+    for kwargs in (dict(shading=False), dict(absorption=False)):
+        with pytest.raises(clwave.InputError, match="light a shaded image"):
+            tracer.render(cam, lights=[(90, 0)], **kwargs)
+        assert tracer.render(cam, lights=[], **kwargs).image.shape[:2] == (4, 4)  # none: nothing to refuse
+    path = tmp_path / "v.npy"
+    np.save(path, np.random.default_rng(0).random((6, 6, 6)).astype(np.float32))
+    code, out, err = run(capsys, "render", str(path), "--method", "raytrace", "--tf", "grey", "--no-shading",
+                         "--light", "90,0", "-o", str(tmp_path / "x.png"))
+    assert code == 2 and "--light lights a shaded image" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "x.png").exists()
+
+
 def test_simpson_stops_at_its_depth_limit_on_a_shading_jump():
     """Along +x through a ridge of alpha, the headlight's diffuse term drops from lit to dark where the
     gradient turns (mid-segment): no panel size meets 1e-6 there, so refinement must stop at

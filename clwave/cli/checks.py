@@ -111,6 +111,9 @@ def _method_options(args):
         verb, it = ("are", "them") if len(shaded) > 1 else ("is", "it")
         raise InputError(f"{', '.join(shaded)} {verb} for a shaded volume; an X-ray (--xray) is line integrals, shown "
                          f"through --window: leave {it} out")
+    if getattr(args, "no_shading", False) and getattr(args, "light", None):
+        raise InputError("--light lights a shaded image; an unshaded image (--no-shading) has none, so it changes "
+                         "nothing: leave it out")
     if getattr(args, "display_window", "auto") != "auto" and args.method != "splat" and not getattr(args, "xray", 0):
         raise InputError(f"--window {args.display_window} windows an X-ray's line integrals; a shaded image is "
                          f"written as its colours: add --xray, or leave --window out")

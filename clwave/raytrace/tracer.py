@@ -261,8 +261,8 @@ class RayTracer:
         view = resolve_view(camera, wv)
         H, W = view.size
         check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"a {H}x{W} image", "render a smaller image", self.budget)
-        phong, shading_note = self._phong(shading, absorption)
         light_dirs = light_directions(lights, view.n)
+        phong, shading_note = self._phong(shading, absorption, lights)
 
         nodes, weights = sample_tables(3 * (max(self.orders) - 1))
         n_samples = len(weights)
@@ -424,12 +424,17 @@ class RayTracer:
                        transfer_function=transfer_function)
         return frames(self, camera, options, steps, budget, error)
 
-    def _phong(self, shading, absorption):
-        """(Phong or None, what the meta says about shading)."""
-        if not absorption:
-            return None, "off: X-ray mode"
-        if shading is False or shading is None:
-            return None, "off"
+    def _phong(self, shading, absorption, lights):
+        """(Phong or None, what the meta says about shading); ``lights`` given to an image without shading, which
+        they would not change, refused."""
+        if not absorption or shading is False or shading is None:
+            if lights:
+                unlit, given = ("an X-ray", "absorption=False") if not absorption else ("an unshaded image",
+                                                                                      "shading=False")
+                raise InputError(f"lights={lights!r} light a shaded image; {unlit} ({given}) has none, so they change "
+                                 f"nothing: leave them out", cli=f"--light lights a shaded image; {unlit} has none, "
+                                 f"so it changes nothing: leave it out")
+            return None, "off: X-ray mode" if not absorption else "off"
         phong = shading if isinstance(shading, Phong) else Phong() if shading is True else None
         if phong is None:
             raise InputError("shading must be True, False or a clwave.Phong(...)")
