@@ -42,10 +42,11 @@ def source_hash(folder: Path) -> str:
 
 
 class KernelSet:
-    """A built program and its kernels, each fetched once: ``ks["name"]`` or ``ks.name``."""
+    """A built program and its kernels, each fetched once: ``ks["name"]`` or ``ks.name``; ``lock``: its device's,
+    which a launch holds (:class:`~clwave.device.kernels.Kernel`)."""
 
-    def __init__(self, program, build_seconds: float, options: list):
-        self.program = program
+    def __init__(self, program, build_seconds: float, options: list, lock):
+        self.program, self.lock = program, lock
         self.build_seconds = build_seconds
         self.options = options
         self.kernels = {k.function_name: k for k in program.all_kernels()}
@@ -63,13 +64,15 @@ class KernelSet:
 def build(cc: ComputeContext, files, defines=None, options=()) -> KernelSet:
     """Build (or reuse) the program made of ``files`` (paths below ``cl/``) with ``-D`` ``defines``
     and the shared constants (:func:`clwave.device.constants.defines`), and compiler ``options``."""
-    import pyopencl as cl
-
     files, options = tuple(files), tuple(options)
     defines = tuple(sorted({**constants.defines(), **(defines or {})}.items()))
-    key = (files, defines, options)
-    if key in cc.programs:
-        return cc.programs[key]
+    # one build per program: a thread that asks for one another thread is building waits for it
+    return cc.programs.get((files, defines, options), lambda: _build(cc, files, defines, options))
+
+
+def _build(cc: ComputeContext, files, defines, options) -> KernelSet:
+    import pyopencl as cl
+
     folder = cl_dir()
     source = "\n".join(f'#include "{name}"' for name in files) + "\n"
     # -w: PoCL prints ABI notes about float16 vectors straight to stderr otherwise
@@ -87,9 +90,7 @@ def build(cc: ComputeContext, files, defines=None, options=()) -> KernelSet:
         raise KernelBuildError(
             f"OpenCL build of {', '.join(files)} failed on {cc.info.name} ({first}); "
             f"if the driver is broken, {INSTALL_HINT}", log=log) from None
-    ks = KernelSet(program, time.perf_counter() - start, options)
-    cc.programs[key] = ks
-    return ks
+    return KernelSet(program, time.perf_counter() - start, options, cc.lock)
 
 
 SELFTEST = Kernel("selftest_axpy", ("alpha", "float32"), ("a", BUFFER), ("b", BUFFER), ("out", BUFFER))
