@@ -188,11 +188,14 @@ class ComputeContext:
         self.ctx = cl.Context([self.device])
         self.queue = cl.CommandQueue(self.ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self.programs = MadeOnce()
-        # held by a render on this device (threads.one_at_a_time) and by each kernel launch (kernels.Kernel): its
-        # kernels are fetched once and shared by every renderer, and a pyopencl kernel takes its arguments one call
-        # at a time, which another thread's launch can overwrite before the enqueue (two renderers in two threads
-        # crashed or gave wrong images until api22, two ray tracers' set-ups until thread22)
+        # held by a render on this device (threads.one_at_a_time): its kernels and a renderer's buffers are shared
+        # by every view (two renderers in two threads crashed or gave wrong images until api22)
         self.lock = threading.RLock()
+        # held by each kernel launch (kernels.Kernel, generated): a pyopencl kernel takes its arguments one call at
+        # a time, which another thread's launch could overwrite before the enqueue (two ray tracers' set-ups gave
+        # wrong bricks until thread22); apart from ``lock``, so that a set-up on another thread (the viewer's build
+        # thread) launches between a render's launches, not after its view (docs/coordinates.md §4)
+        self.launch_lock = threading.RLock()
 
     @classmethod
     def get(cls, device=None) -> "ComputeContext":
@@ -207,8 +210,8 @@ class ComputeContext:
     def generated(self, name: str, make):
         """One of pyopencl's generated kernels (element-wise, reduction, scan), made by ``make()`` the first
         time ``name`` is asked for in this context and reused after: making one builds a program each time.  Each
-        call holds :attr:`lock`, as a launch of a :class:`~clwave.device.kernels.Kernel` does."""
-        return self.programs.get(name, lambda: Locked(make(), self.lock))
+        call holds :attr:`launch_lock`, as a launch of a :class:`~clwave.device.kernels.Kernel` does."""
+        return self.programs.get(name, lambda: Locked(make(), self.launch_lock))
 
     def upload(self, host):
         """A read-only device buffer holding a copy of a (non-empty) host array, in one call

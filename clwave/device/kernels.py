@@ -8,7 +8,7 @@ renderer and the kernel's test call the same declaration and an argument cannot 
 Constants that both sides use come from :mod:`clwave.device.constants` as build defines.
 
 A device's kernel objects are shared by every renderer and thread (:func:`clwave.device.programs.build`), and a
-launch sets their arguments and then enqueues: each launch holds the device's lock (``ComputeContext.lock``) for
+launch sets their arguments and then enqueues: each launch holds the device's ``ComputeContext.launch_lock`` for
 both steps, so that another thread's launch cannot set its arguments in between (docs/coordinates.md §4).
 """
 
@@ -66,7 +66,7 @@ class Kernel:
     def __call__(self, kernels, queue, global_size, local_size, tables: Mapping | None = None, real_type=np.float32,
                  global_offset=None, **values):
         """Launch the kernel of this name from ``kernels`` (a :class:`~clwave.device.programs.KernelSet`), under
-        its device's lock."""
+        its device's launch lock."""
         args = self.arguments(tables, real_type, **values)
         with kernels.lock:
             return kernels[self.name](queue, global_size, local_size, *args, global_offset=global_offset)
@@ -74,7 +74,7 @@ class Kernel:
 
 class Locked:
     """One of pyopencl's generated kernels (element-wise, reduction, scan: ``ComputeContext.generated``), each call
-    under the device's ``lock`` as :class:`Kernel`'s launches."""
+    under the device's ``launch_lock`` as :class:`Kernel`'s launches."""
 
     def __init__(self, kernel, lock):
         self.kernel, self.lock = kernel, lock

@@ -42,8 +42,8 @@ def source_hash(folder: Path) -> str:
 
 
 class KernelSet:
-    """A built program and its kernels, each fetched once: ``ks["name"]`` or ``ks.name``; ``lock``: its device's,
-    which a launch holds (:class:`~clwave.device.kernels.Kernel`)."""
+    """A built program and its kernels, each fetched once: ``ks["name"]`` or ``ks.name``; ``lock``: its device's
+    ``launch_lock``, which a launch holds (:class:`~clwave.device.kernels.Kernel`)."""
 
     def __init__(self, program, build_seconds: float, options: list, lock):
         self.program, self.lock = program, lock
@@ -90,7 +90,7 @@ def _build(cc: ComputeContext, files, defines, options) -> KernelSet:
         raise KernelBuildError(
             f"OpenCL build of {', '.join(files)} failed on {cc.info.name} ({first}); "
             f"if the driver is broken, {INSTALL_HINT}", log=log) from None
-    return KernelSet(program, time.perf_counter() - start, options, cc.lock)
+    return KernelSet(program, time.perf_counter() - start, options, cc.launch_lock)
 
 
 SELFTEST = Kernel("selftest_axpy", ("alpha", "float32"), ("a", BUFFER), ("b", BUFFER), ("out", BUFFER))

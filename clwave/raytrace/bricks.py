@@ -410,7 +410,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     # the others of full detail: fine segments (docs/raytracing.md §3); the coarser details' keep their level's, alpha
     # clamped at the samples (§8, "Alpha at coarser details")
     lattices[below[~np.isin(below, alt) & ~coarse[below]]] = level_lattices[0]
-    mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill, cc.lock, abandon)
+    mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill, cc.launch_lock, abandon)
     bounds = bounds.get()[:n]
     cut = np.flatnonzero(clamped & (lay["levels"] == wv.levels))  # the coarsest detail's (docs/raytracing.md §8)
     if len(cut) and (reached := reached_blocks(wv, lay["bricks"][cut])) is not None:

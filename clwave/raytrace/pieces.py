@@ -109,7 +109,7 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill, lock, abandon=None)
 
     ``lay``: :func:`clwave.raytrace.bricks.layout`; ``lattices``: per level its knot lattice; ``alpha``: the
     group holding alpha (None: none); the pool on the device, or the scratch file (:class:`~.passes.Spill`);
-    ``lock``: the pool's device's (``ComputeContext.lock``), held by the gather (pyopencl's take kernel).
+    ``lock``: the pool's device's ``ComputeContext.launch_lock``, held by the gather (pyopencl's take kernel).
     Counted a brick layer at a time (the content mask read a layer of bricks' cells at once), given up between two
     (``abandon``, :func:`~clwave.threads.checkpoint`).
     """
