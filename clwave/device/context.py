@@ -191,10 +191,10 @@ class ComputeContext:
         # held by a render on this device (threads.one_at_a_time): its kernels and a renderer's buffers are shared
         # by every view (two renderers in two threads crashed or gave wrong images until api22)
         self.lock = threading.RLock()
-        # held by each kernel launch (kernels.Kernel, generated): a pyopencl kernel takes its arguments one call at
-        # a time, which another thread's launch could overwrite before the enqueue (two ray tracers' set-ups gave
-        # wrong bricks until thread22); apart from ``lock``, so that a set-up on another thread (the viewer's build
-        # thread) launches between a render's launches, not after its view (docs/coordinates.md §4)
+        # held by each call of a generated kernel (generated) and pyopencl's take: their kernel objects are shared by
+        # every thread, and a launch sets the arguments one call at a time, which another thread's launch could
+        # overwrite before the enqueue (two ray tracers' set-ups gave wrong bricks until thread22); apart from
+        # ``lock``, so that a set-up on another thread (the viewer's build thread) need not wait for a render's view
         self.launch_lock = threading.RLock()
 
     @classmethod
@@ -210,7 +210,7 @@ class ComputeContext:
     def generated(self, name: str, make):
         """One of pyopencl's generated kernels (element-wise, reduction, scan), made by ``make()`` the first
         time ``name`` is asked for in this context and reused after: making one builds a program each time.  Each
-        call holds :attr:`launch_lock`, as a launch of a :class:`~clwave.device.kernels.Kernel` does."""
+        call holds :attr:`launch_lock` (its kernel object is every thread's)."""
         return self.programs.get(name, lambda: Locked(make(), self.launch_lock))
 
     def upload(self, host):

@@ -7,9 +7,9 @@ Launches name every argument (``KERNEL(ks, queue, (n,), None, n=n, first=0, ...)
 renderer and the kernel's test call the same declaration and an argument cannot slip position.
 Constants that both sides use come from :mod:`clwave.device.constants` as build defines.
 
-A device's kernel objects are shared by every renderer and thread (:func:`clwave.device.programs.build`), and a
-launch sets their arguments and then enqueues: each launch holds the device's ``ComputeContext.launch_lock`` for
-both steps, so that another thread's launch cannot set its arguments in between (docs/coordinates.md §4).
+A device's programs are shared by every renderer and thread; a launch sets its kernel's arguments and then enqueues,
+so each thread launches kernel objects of its own (:class:`~clwave.device.programs.KernelSet`), and pyopencl's
+generated kernels, which hold one, under the device's ``launch_lock`` (:class:`Locked`; docs/coordinates.md §4).
 """
 
 from __future__ import annotations
@@ -65,16 +65,15 @@ class Kernel:
 
     def __call__(self, kernels, queue, global_size, local_size, tables: Mapping | None = None, real_type=np.float32,
                  global_offset=None, **values):
-        """Launch the kernel of this name from ``kernels`` (a :class:`~clwave.device.programs.KernelSet`), under
-        its device's launch lock."""
+        """Launch the kernel of this name from ``kernels`` (a :class:`~clwave.device.programs.KernelSet`: this
+        thread's kernel object)."""
         args = self.arguments(tables, real_type, **values)
-        with kernels.lock:
-            return kernels[self.name](queue, global_size, local_size, *args, global_offset=global_offset)
+        return kernels[self.name](queue, global_size, local_size, *args, global_offset=global_offset)
 
 
 class Locked:
-    """One of pyopencl's generated kernels (element-wise, reduction, scan: ``ComputeContext.generated``), each call
-    under the device's ``launch_lock`` as :class:`Kernel`'s launches."""
+    """One of pyopencl's generated kernels (element-wise, reduction, scan: ``ComputeContext.generated``), which
+    holds one kernel object for every thread: each call under the device's ``launch_lock``."""
 
     def __init__(self, kernel, lock):
         self.kernel, self.lock = kernel, lock

@@ -1,16 +1,17 @@
-"""Build OpenCL programs from ``cl/`` and hand out each kernel object once.
+"""Build OpenCL programs from ``cl/`` and hand out each kernel object once per thread.
 
 Sources live in ``cl/`` by pipeline stage (``common/``, ``splat/``, ``raytrace/``,
 ``device/``) and are named, and ``#include``-d, by their path below ``cl/``: they are
 compiled with ``-I <cl dir>`` and ``-DCLW_SRC_HASH=<sha1 of every cl/ file>``, so an
 edited header invalidates both pyopencl's and PoCL's binary caches.  ``prg.kernel_name``
 creates a new Kernel on every access (pyopencl#830); :class:`KernelSet`
-fetches each one once.
+fetches each one once for each thread that launches it (a launch sets its arguments, then enqueues).
 """
 
 from __future__ import annotations
 
 import hashlib
+import threading
 import time
 import warnings
 from functools import lru_cache
@@ -42,21 +43,28 @@ def source_hash(folder: Path) -> str:
 
 
 class KernelSet:
-    """A built program and its kernels, each fetched once: ``ks["name"]`` or ``ks.name``; ``lock``: its device's
-    ``launch_lock``, which a launch holds (:class:`~clwave.device.kernels.Kernel`)."""
+    """A built program and its kernels: ``ks["name"]`` or ``ks.name``, each thread's own, fetched once per thread.  A
+    launch sets a kernel's arguments one call at a time and then enqueues it: two threads launching one kernel object
+    could each enqueue the other's arguments (two ray tracers set up at once gave wrong bricks until thread22), and a
+    lock around each launch held the viewer's build thread up behind its render thread (docs/coordinates.md §4)."""
 
-    def __init__(self, program, build_seconds: float, options: list, lock):
-        self.program, self.lock = program, lock
+    def __init__(self, program, build_seconds: float, options: list):
+        self.program = program
         self.build_seconds = build_seconds
         self.options = options
-        self.kernels = {k.function_name: k for k in program.all_kernels()}
+        self._mine = threading.local()
 
     def __getitem__(self, name):
-        return self.kernels[name]
+        kernels = getattr(self._mine, "kernels", None)
+        if kernels is None:
+            kernels = self._mine.kernels = {k.function_name: k for k in self.program.all_kernels()}
+        return kernels[name]
 
     def __getattr__(self, name):
+        if name.startswith("_"):  # not a kernel's: self._mine before __init__ has set it (copy, pickle)
+            raise AttributeError(name)
         try:
-            return self.__dict__["kernels"][name]
+            return self[name]
         except KeyError:
             raise AttributeError(name) from None
 
@@ -90,7 +98,7 @@ def _build(cc: ComputeContext, files, defines, options) -> KernelSet:
         raise KernelBuildError(
             f"OpenCL build of {', '.join(files)} failed on {cc.info.name} ({first}); "
             f"if the driver is broken, {INSTALL_HINT}", log=log) from None
-    return KernelSet(program, time.perf_counter() - start, options, cc.launch_lock)
+    return KernelSet(program, time.perf_counter() - start, options)
 
 
 SELFTEST = Kernel("selftest_axpy", ("alpha", "float32"), ("a", BUFFER), ("b", BUFFER), ("out", BUFFER))
