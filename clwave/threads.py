@@ -48,6 +48,32 @@ def one_at_a_time(method):
     return locked
 
 
+class MadeOnce:
+    """Objects made once each, by key: the first thread to ask for a key makes it (``make()``) while any other that
+    asks for that key waits for it, not for the making of other keys (a viewer's render thread takes a model's
+    splat renderer while its build thread makes the ray tracer).  Pickles empty: what it holds is this process's."""
+
+    def __init__(self):
+        self.made, self._locks, self._lock = {}, {}, threading.Lock()
+
+    def get(self, key, make):
+        with self._lock:  # held a moment: the key's own lock, made on first use
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            if key not in self.made:
+                self.made[key] = make()
+            return self.made[key]
+
+    def clear(self):
+        self.made.clear()
+
+    def __len__(self):
+        return len(self.made)
+
+    def __reduce__(self):
+        return MadeOnce, ()
+
+
 def cores() -> int:
     """Cores this process may run on."""
     try:

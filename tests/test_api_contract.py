@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import clwave
+from clwave.splat.stages import Stages
 
 
 @pytest.fixture(scope="module")
@@ -23,6 +24,21 @@ def rgba_model():
 CAMERAS = (clwave.Camera(30, 20, size=40), clwave.Camera(100, -10, size=(24, 36)))
 
 
+def _together(*works):
+    """Each of ``works`` run in a thread of its own, all at once, the threads taking turns often: what a race there
+    is shows in a few views."""
+    threads = [threading.Thread(target=work) for work in works]
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-5)
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+
+
 def _in_two_threads(render, other=None):
     """Two threads render both cameras three times each, alternately, the first by ``render``, the second by
     ``other`` (default ``render``); the images, per camera."""
@@ -33,16 +49,7 @@ def _in_two_threads(render, other=None):
             which = (first + k) % 2
             images[which].append(draw(CAMERAS[which]))
 
-    threads = [threading.Thread(target=work, args=(first, draw)) for first, draw in ((0, render), (1, other or render))]
-    interval = sys.getswitchinterval()
-    sys.setswitchinterval(1e-5)  # the threads take turns often: what a race there is shows in a few views
-    try:
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-    finally:
-        sys.setswitchinterval(interval)
+    _together(lambda: work(0, render), lambda: work(1, other or render))
     return images
 
 
@@ -79,13 +86,83 @@ def test_one_shot_splats_from_two_threads_share_the_models_renderer_safely(rgba_
             np.testing.assert_array_equal(image, expected)
 
 
+@pytest.fixture(scope="module")
+def dense_model():
+    """Every coefficient of noise kept: a ray tracer's set-up launches many kernels."""
+    data = np.random.default_rng(1).random((24, 24, 24, 4)).astype(np.float32) * 0.2
+    return clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2)
+
+
+def test_ray_tracers_set_up_in_two_threads_at_once_hold_the_bricks_of_one_alone(dense_model):
+    """Set-ups share the device's kernels: until thread22 their launches (and pyopencl's fill kernel) took another
+    thread's arguments, so that bricks were wrong (by up to 0.18, or 8e33) or PoCL aborted the process."""
+    alone = clwave.RayTracer(dense_model).bricks.pool.get()
+    pools = _in_two_threads(lambda camera: clwave.RayTracer(dense_model).bricks.pool.get())
+    assert len(pools[0]) == len(pools[1]) == 6
+    for pool in pools[0] + pools[1]:
+        np.testing.assert_array_equal(pool, alone)
+
+
+def test_one_shot_ray_traces_from_two_threads_on_a_fresh_model_build_one_tracer(dense_model, monkeypatch):
+    """Until thread22 both threads built the model's tracer (``WaveletVolume.shared`` had no lock), at once."""
+    made = []
+    init = clwave.RayTracer.__init__
+    monkeypatch.setattr(clwave.RayTracer, "__init__", lambda self, *a, **k: made.append(init(self, *a, **k)))
+    alone = clwave.raytrace(copy.deepcopy(dense_model), CAMERAS[0], tolerance=1e-2).image
+    for k in range(1, 4):
+        fresh, images = copy.deepcopy(dense_model), []  # keeps no tracer
+        _together(*[lambda: images.append(clwave.raytrace(fresh, CAMERAS[0], tolerance=1e-2).image)] * 2)
+        assert len(made) == 1 + k and len(images) == 2
+        for image in images:
+            np.testing.assert_array_equal(image, alone)
+
+
+def test_a_progressive_view_splats_with_its_own_buffers_while_another_thread_renders(monkeypatch):
+    """Another thread's view begun between two frames of a progressive one replaces the renderer's per-splat buffers:
+    until thread22 the perspective view's later passes wrote float4 centres into the orthographic view's float2 buffer
+    (past its end).  Each pass is checked to get buffers of its own view's shape, and every image to be as alone."""
+    data = np.random.default_rng(3).random((16, 16, 16)).astype(np.float32)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "cubic", levels=2)
+    r = clwave.SplatRenderer(wv)
+    perspective, ortho = clwave.Camera(30, 20, size=24, perspective=True), clwave.Camera(60, 10, size=24)
+    alone = [frame.image for frame in clwave.progressive(wv, perspective, steps=4, renderer=r)]
+    alone_ortho = r.render(ortho).image
+    project, wrong = Stages.project, []
+
+    def checked(self, n, first, coef, tables, centre, *rest):
+        if centre.shape[0] < n or centre.shape[1] != (4 if self.perspective else 2):
+            wrong.append((self.perspective, centre.shape))
+        return project(self, n, first, coef, tables, centre, *rest)
+
+    monkeypatch.setattr(Stages, "project", checked)
+    views, orthos, done = [], [], threading.Event()
+
+    def progressive():
+        for _ in range(4):
+            views.append([frame.image for frame in clwave.progressive(wv, perspective, steps=4, renderer=r)])
+        done.set()
+
+    def other():
+        while not done.is_set():
+            orthos.append(r.render(ortho).image)
+
+    _together(progressive, other)
+    assert wrong == [] and len(views) == 4 and orthos
+    for frames in views:
+        assert len(frames) == len(alone)
+        for frame, expected in zip(frames, alone):
+            np.testing.assert_array_equal(frame, expected)
+    for image in orthos:
+        np.testing.assert_array_equal(image, alone_ortho)
+
+
 def test_a_rendered_model_pickles_and_renders_the_same(rgba_model):
     """A model that one-shot calls have rendered keeps their renderers (OpenCL objects, which do not pickle): it
     pickles and deep-copies without them, as a Dask worker process receives it ("cannot pickle 'Device' object"
     before api22), and the copy renders the same image."""
     expected = clwave.splat(rgba_model, CAMERAS[0]).image  # rgba_model now holds its shared renderer
     for twin in (pickle.loads(pickle.dumps(rgba_model)), copy.deepcopy(rgba_model)):
-        assert twin._shared == {} and rgba_model._shared
+        assert len(twin._shared) == 0 and len(rgba_model._shared)
         np.testing.assert_array_equal(clwave.splat(twin, CAMERAS[0]).image, expected)
 
 

@@ -518,12 +518,12 @@ def test_transfer_function_change_rebuilds_nothing(hydrogen, monkeypatch):
     calls = []
     monkeypatch.setattr(tracer, "build", lambda *a, **k: calls.append("build"))
     monkeypatch.setattr(classified.ScalarRange, "__init__", lambda *a, **k: calls.append("range"))
-    programs_before = dict(tr.cc.programs)
+    programs_before = dict(tr.cc.programs.made)
     for tf in (clwave.TransferFunction.preset("hydrogen", window=(0.1, 0.9)), clwave.TransferFunction.preset("grey"),
                clwave.TransferFunction.preset("ct-bone", window=(0.0, 1.0))):
         res = tr.render(cam, tolerance=1e-2, transfer_function=tf)
         assert res.meta["transfer_function"] == tf.to_dict() and res.meta["classify_seconds"] > 0
-    assert calls == [] and dict(tr.cc.programs) == programs_before
+    assert calls == [] and dict(tr.cc.programs.made) == programs_before
     again = tr.render(cam, tolerance=1e-2, transfer_function=clwave.TransferFunction.preset("ct-bone", window=(0, 1)))
     assert again.meta["classify_seconds"] == 0.0  # the same function: reused, nothing paid
 

@@ -392,7 +392,7 @@ def test_dropped_splats_stay_within_their_bound():
 def test_dropping_projects_each_group_once_for_its_plan_and_first_draw(monkeypatch):
     # splat_dropping's first draw of a group takes the projection its plan made; the image is the one made by
     # projecting again for that draw, bit for bit
-    from clwave.splat.renderer import Accumulator
+    from clwave.splat.accumulator import Accumulator
     from clwave.splat.stages import Stages
 
     data = scipy.ndimage.gaussian_filter(np.random.default_rng(2).random((12, 12, 12)), 2.0).astype(np.float32)

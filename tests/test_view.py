@@ -322,12 +322,12 @@ def test_the_editors_points_classify_the_shaded_view_and_rebuild_nothing(monkeyp
             tracer = v.server.sources["shaded"].tracer
             monkeypatch.setattr(traced, "build", lambda *a, **k: calls.append("build"))
             monkeypatch.setattr(classified.ScalarRange, "__init__", lambda *a, **k: calls.append("range"))
-            programs, metas[:] = dict(tracer.cc.programs), []
+            programs, metas[:] = dict(tracer.cc.programs.made), []
             await ws.send_str(json.dumps(dict(BASE, seq=2, mode="shaded", tf=dict(points=POINTS), moving=True)))
             frames = await frames_until_final(ws, 2, until_seq=True)
             await ws.send_str(json.dumps(dict(BASE, seq=3, mode="shaded", tf=dict(points=moved), azimuth=50.0)))
             frames += await frames_until_final(ws, 3, texts=texts)
-            assert calls == [] and dict(tracer.cc.programs) == programs and tracer.expansions == 1
+            assert calls == [] and dict(tracer.cc.programs.made) == programs and tracer.expansions == 1
             return texts, frames, tracer.scalar.sample
     with view(wv, size=32, tolerance=2e-2) as v:
         texts, frames, sample = run(go(v))

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DeviceNotFoundError, InputError
+from ..threads import MadeOnce
+from .kernels import Locked
 
 INSTALL_HINT = ("install an OpenCL driver, e.g. Debian's `apt-get install pocl-opencl-icd`, "
                 "or run tools/setup.sh")
@@ -185,11 +187,15 @@ class ComputeContext:
         self.device = platform.get_devices()[info.device_index]
         self.ctx = cl.Context([self.device])
         self.queue = cl.CommandQueue(self.ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
-        self.programs: dict = {}
-        # held by a render on this device (threads.one_at_a_time): its kernels are fetched once and shared by every
-        # renderer, and a pyopencl kernel takes its arguments one call at a time, which another thread's launch
-        # can overwrite before the enqueue (two renderers in two threads crashed or gave wrong images until api22)
+        self.programs = MadeOnce()
+        # held by a render on this device (threads.one_at_a_time): its kernels and a renderer's buffers are shared
+        # by every view (two renderers in two threads crashed or gave wrong images until api22)
         self.lock = threading.RLock()
+        # held by each call of a generated kernel (generated) and pyopencl's take: their kernel objects are shared by
+        # every thread, and a launch sets the arguments one call at a time, which another thread's launch could
+        # overwrite before the enqueue (two ray tracers' set-ups gave wrong bricks until thread22); apart from
+        # ``lock``, so that a set-up on another thread (the viewer's build thread) need not wait for a render's view
+        self.launch_lock = threading.RLock()
 
     @classmethod
     def get(cls, device=None) -> "ComputeContext":
@@ -203,10 +209,9 @@ class ComputeContext:
 
     def generated(self, name: str, make):
         """One of pyopencl's generated kernels (element-wise, reduction, scan), made by ``make()`` the first
-        time ``name`` is asked for in this context and reused after: making one builds a program each time."""
-        if name not in self.programs:
-            self.programs[name] = make()
-        return self.programs[name]
+        time ``name`` is asked for in this context and reused after: making one builds a program each time.  Each
+        call holds :attr:`launch_lock` (its kernel object is every thread's)."""
+        return self.programs.get(name, lambda: Locked(make(), self.launch_lock))
 
     def upload(self, host):
         """A read-only device buffer holding a copy of a (non-empty) host array, in one call

@@ -6,10 +6,15 @@ its length, zero-padded), :data:`BUFFER`, or :data:`REAL` (the build's precision
 Launches name every argument (``KERNEL(ks, queue, (n,), None, n=n, first=0, ...)``), so a
 renderer and the kernel's test call the same declaration and an argument cannot slip position.
 Constants that both sides use come from :mod:`clwave.device.constants` as build defines.
+
+A device's programs are shared by every renderer and thread; a launch sets its kernel's arguments and then enqueues,
+so each thread launches kernel objects of its own (:class:`~clwave.device.programs.KernelSet`), and pyopencl's
+generated kernels, which hold one, under the device's ``launch_lock`` (:class:`Locked`; docs/coordinates.md §4).
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping
 
@@ -60,9 +65,35 @@ class Kernel:
 
     def __call__(self, kernels, queue, global_size, local_size, tables: Mapping | None = None, real_type=np.float32,
                  global_offset=None, **values):
-        """Launch the kernel of this name from ``kernels`` (a :class:`~clwave.device.programs.KernelSet`)."""
+        """Launch the kernel of this name from ``kernels`` (a :class:`~clwave.device.programs.KernelSet`: this
+        thread's kernel object)."""
         args = self.arguments(tables, real_type, **values)
         return kernels[self.name](queue, global_size, local_size, *args, global_offset=global_offset)
+
+
+class Locked:
+    """One of pyopencl's generated kernels (element-wise, reduction, scan: ``ComputeContext.generated``), which
+    holds one kernel object for every thread: each call under the device's ``launch_lock``."""
+
+    def __init__(self, kernel, lock):
+        self.kernel, self.lock = kernel, lock
+
+    def __call__(self, *args, **kwargs):
+        with self.lock:
+            return self.kernel(*args, **kwargs)
+
+
+def zeros(queue, shape, dtype, allocator=None):
+    """``pyopencl.array.zeros``, filled by the queue (``enqueue_fill_buffer``) rather than by pyopencl's fill
+    kernel, which every thread of the context shares without a lock."""
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    out = cla.empty(queue, shape, dtype, allocator=allocator)
+    if out.nbytes:
+        pattern = np.zeros(math.gcd(16, out.offset, out.nbytes), np.uint8)  # the widest pattern that tiles it
+        cl.enqueue_fill_buffer(queue, out.base_data, pattern, out.offset, out.nbytes)
+    return out
 
 
 LAUNCH_SECONDS = 0.2  #: what one launch of a long kernel aims at: Ctrl-C waits for the launch running

@@ -1,16 +1,17 @@
-"""Build OpenCL programs from ``cl/`` and hand out each kernel object once.
+"""Build OpenCL programs from ``cl/`` and hand out each kernel object once per thread.
 
 Sources live in ``cl/`` by pipeline stage (``common/``, ``splat/``, ``raytrace/``,
 ``device/``) and are named, and ``#include``-d, by their path below ``cl/``: they are
 compiled with ``-I <cl dir>`` and ``-DCLW_SRC_HASH=<sha1 of every cl/ file>``, so an
 edited header invalidates both pyopencl's and PoCL's binary caches.  ``prg.kernel_name``
 creates a new Kernel on every access (pyopencl#830); :class:`KernelSet`
-fetches each one once.
+fetches each one once for each thread that launches it (a launch sets its arguments, then enqueues).
 """
 
 from __future__ import annotations
 
 import hashlib
+import threading
 import time
 import warnings
 from functools import lru_cache
@@ -42,20 +43,28 @@ def source_hash(folder: Path) -> str:
 
 
 class KernelSet:
-    """A built program and its kernels, each fetched once: ``ks["name"]`` or ``ks.name``."""
+    """A built program and its kernels: ``ks["name"]`` or ``ks.name``, each thread's own, fetched once per thread.  A
+    launch sets a kernel's arguments one call at a time and then enqueues it: two threads launching one kernel object
+    could each enqueue the other's arguments (two ray tracers set up at once gave wrong bricks until thread22), and a
+    lock around each launch held the viewer's build thread up behind its render thread (docs/coordinates.md §4)."""
 
     def __init__(self, program, build_seconds: float, options: list):
         self.program = program
         self.build_seconds = build_seconds
         self.options = options
-        self.kernels = {k.function_name: k for k in program.all_kernels()}
+        self._mine = threading.local()
 
     def __getitem__(self, name):
-        return self.kernels[name]
+        kernels = getattr(self._mine, "kernels", None)
+        if kernels is None:
+            kernels = self._mine.kernels = {k.function_name: k for k in self.program.all_kernels()}
+        return kernels[name]
 
     def __getattr__(self, name):
+        if name.startswith("_"):  # not a kernel's: self._mine before __init__ has set it (copy, pickle)
+            raise AttributeError(name)
         try:
-            return self.__dict__["kernels"][name]
+            return self[name]
         except KeyError:
             raise AttributeError(name) from None
 
@@ -63,13 +72,15 @@ class KernelSet:
 def build(cc: ComputeContext, files, defines=None, options=()) -> KernelSet:
     """Build (or reuse) the program made of ``files`` (paths below ``cl/``) with ``-D`` ``defines``
     and the shared constants (:func:`clwave.device.constants.defines`), and compiler ``options``."""
-    import pyopencl as cl
-
     files, options = tuple(files), tuple(options)
     defines = tuple(sorted({**constants.defines(), **(defines or {})}.items()))
-    key = (files, defines, options)
-    if key in cc.programs:
-        return cc.programs[key]
+    # one build per program: a thread that asks for one another thread is building waits for it
+    return cc.programs.get((files, defines, options), lambda: _build(cc, files, defines, options))
+
+
+def _build(cc: ComputeContext, files, defines, options) -> KernelSet:
+    import pyopencl as cl
+
     folder = cl_dir()
     source = "\n".join(f'#include "{name}"' for name in files) + "\n"
     # -w: PoCL prints ABI notes about float16 vectors straight to stderr otherwise
@@ -87,9 +98,7 @@ def build(cc: ComputeContext, files, defines=None, options=()) -> KernelSet:
         raise KernelBuildError(
             f"OpenCL build of {', '.join(files)} failed on {cc.info.name} ({first}); "
             f"if the driver is broken, {INSTALL_HINT}", log=log) from None
-    ks = KernelSet(program, time.perf_counter() - start, options)
-    cc.programs[key] = ks
-    return ks
+    return KernelSet(program, time.perf_counter() - start, options)
 
 
 SELFTEST = Kernel("selftest_axpy", ("alpha", "float32"), ("a", BUFFER), ("b", BUFFER), ("out", BUFFER))

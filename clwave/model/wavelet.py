@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ClwaveWarning, InputError, finite_number, flag, warn_outside
-from ..threads import thread_map
+from ..threads import MadeOnce, thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import kept_count, warn_short_budget, warn_stored
 from . import geometry
@@ -143,7 +143,7 @@ class WaveletVolume:
         # every coefficient is zero (docs/raytracing.md §4); None where not known
         self.content_mask = content_mask
         self.source = None  # (path, keep) of the .clw file this model was opened from
-        self._shared = {}  # renderers of one-shot calls (shared)
+        self._shared = MadeOnce()  # renderers of one-shot calls (shared)
         self._fine = {}  # group number -> (coefficients, start): the fine region evaluate made last (evaluation.py)
 
     # ------------------------------------------------------------------ build
@@ -387,17 +387,17 @@ class WaveletVolume:
         """The same coefficients without the content mask (nothing clamped, docs/raytracing.md §4), keeping no
         renderer of this model's (they may depend on the mask)."""
         out = copy.copy(self)
-        out.content_mask, out._shared = None, {}
+        out.content_mask, out._shared = None, MadeOnce()
         return out
 
     # ----------------------------------------------------------- renderers
     def shared(self, key, make):
         """The object ``make()`` builds for ``key``, made once and kept with this model, so that one-shot
         calls (``clwave.splat``, ``raytrace``, ``progressive``) on the same model and device reuse what a
-        renderer uploads and builds; released with the model (or by :meth:`release`)."""
-        if key not in self._shared:
-            self._shared[key] = make()
-        return self._shared[key]
+        renderer uploads and builds; released with the model (or by :meth:`release`).  Threads that ask for one key
+        at once get one object: the others wait for the first's ``make()`` (two tracers built at once, sharing the
+        device's kernels, gave wrong bricks until thread22)."""
+        return self._shared.get(key, make)
 
     def release(self):
         """Drop the renderers one-shot calls have kept (their device memory goes with them) and the fine
@@ -408,7 +408,7 @@ class WaveletVolume:
     def __getstate__(self):
         """Pickled (for a Dask worker process, ``copy.deepcopy``) without what :meth:`release` drops: renderers
         hold this process's OpenCL objects, which do not pickle; the copy makes its own when it renders."""
-        return dict(self.__dict__, _shared={}, _fine={})
+        return dict(self.__dict__, _shared=MadeOnce(), _fine={})
 
     def __copy__(self):
         """A shallow copy shares everything, kept renderers and regions included (:meth:`unmasked` keeps the fine

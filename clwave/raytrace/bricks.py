@@ -25,7 +25,7 @@ from pyopencl.elementwise import ElementwiseKernel
 from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.context import ComputeContext
-from ..device.kernels import BUFFER, Kernel
+from ..device.kernels import BUFFER, Kernel, zeros
 from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
@@ -357,7 +357,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     level_lattices = lattice_of_levels(wv)
     lattices = level_lattices[lay["levels"]]
     alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
-    bounds = cla.zeros(q, (max(n, 1), SUPER, SUPER, SUPER), np.float32)
+    bounds = zeros(q, (max(n, 1), SUPER, SUPER, SUPER), np.float32)
     pool = cla.empty(q, (_pool_elements(lay),) + (() if scalar else (4,)), np.float32) if resident else None
     spill = None if resident else Spill(lay["total"])
     clamp = cc.generated("clamp_to_content", lambda: ElementwiseKernel(
@@ -410,7 +410,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     # the others of full detail: fine segments (docs/raytracing.md §3); the coarser details' keep their level's, alpha
     # clamped at the samples (§8, "Alpha at coarser details")
     lattices[below[~np.isin(below, alt) & ~coarse[below]]] = level_lattices[0]
-    mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill, abandon)
+    mixes, pieces = mixed_pieces(wv, lay, alt, level_lattices, alpha, pool, spill, cc.launch_lock, abandon)
     bounds = bounds.get()[:n]
     cut = np.flatnonzero(clamped & (lay["levels"] == wv.levels))  # the coarsest detail's (docs/raytracing.md §8)
     if len(cut) and (reached := reached_blocks(wv, lay["bricks"][cut])) is not None:
@@ -484,7 +484,7 @@ def _band_part(cc, kernels, g, band_no: int, band_slice: slice, lo, hi, hold) ->
     i, k = np.searchsorted(positions, band.start + np.array([a[0], b[0]]) * plane)
     if k == i:
         return None
-    out = cla.zeros(q, (*(int(n) for n in shape), n_lanes), np.float32)
+    out = zeros(q, (*(int(n) for n in shape), n_lanes), np.float32)
     slots = np.full(4, -1)
     slots[:len(g.channels)] = g.channels if n_lanes == 4 else 0
     _SCATTER(kernels, q, (int(-(-(k - i) // 64) * 64),), (64,), out=out, out_start=lo[::-1], out_shape=shape[::-1],
@@ -536,7 +536,7 @@ def _expand_slab(wv, gi, lay, slots, clamped, cc, synth, kernels, pool, base, cl
                 boxes=_send(q, boxes, hold), depth=int(n[2]), scale=2.0 ** (-1.5 * level),
                 lane=-1 if lanes(g) == 4 else g.channels[0])
 
-    approx = part(0, need[wv.levels]) or Part(cla.zeros(q, (1, 1, 1, lanes(g)), np.float32), need[wv.levels][0],
+    approx = part(0, need[wv.levels]) or Part(zeros(q, (1, 1, 1, lanes(g)), np.float32), need[wv.levels][0],
                                                 np.ones(3, np.int64))
     if wv.levels in own:
         gather(wv.levels, approx)

@@ -99,7 +99,7 @@ def _cell_floors(cells, m) -> np.ndarray:
     return x.reshape(len(cells), len(m) ** 3, -1).min(axis=2)
 
 
-def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill, abandon=None) -> tuple:
+def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill, lock, abandon=None) -> tuple:
     """Per slot (int32 (slots, 4)): its coarse slot, the first of its pieces' flags, the pieces per axis and a
     piece's side in fine cells (-1, 0, 0, 0 where the slot is not a mixed brick's fine slot), and the flags (uint8,
     1: the piece is marched on the coarse slot; 2: no content voxel reaches it, so that the clamped field is 0 there
@@ -108,7 +108,8 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill, abandon=None) -> tu
     hold its cells, from the first of those coarse cells.
 
     ``lay``: :func:`clwave.raytrace.bricks.layout`; ``lattices``: per level its knot lattice; ``alpha``: the
-    group holding alpha (None: none); the pool on the device, or the scratch file (:class:`~.passes.Spill`).
+    group holding alpha (None: none); the pool on the device, or the scratch file (:class:`~.passes.Spill`);
+    ``lock``: the pool's device's ``ComputeContext.launch_lock``, held by the gather (pyopencl's take kernel).
     Counted a brick layer at a time (the content mask read a layer of bricks' cells at once), given up between two
     (``abandon``, :func:`~clwave.threads.checkpoint`).
     """
@@ -147,7 +148,7 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill, abandon=None) -> tu
     if alpha is not None:  # and where alpha's Bernstein coefficients are >= 0: the alpha boxes read at once
         need = [i for i, f in enumerate(flags) if f.any()]
         shapes = [lay["count"][coarse[i], alpha] for i in need]
-        boxes = _alpha_boxes(pool, spill, [int(lay["offset"][coarse[i], alpha]) for i in need],
+        boxes = _alpha_boxes(pool, spill, lock, [int(lay["offset"][coarse[i], alpha]) for i in need],
                              [int(np.prod(shape)) for shape in shapes])
         wavelet = wv.groups[alpha].wavelet
         for shape in {tuple(shape) for shape in shapes}:  # the boxes of one shape at once
@@ -185,7 +186,7 @@ def _piece_flags(clamped, inner, reach, at, lead: int, side: int, k: int) -> tup
         ~any_blocks(~unreached.reshape(m * n, n, n), side).reshape(m, k, k, k) & crossed
 
 
-def _alpha_boxes(pool, spill, starts, sizes) -> list:
+def _alpha_boxes(pool, spill, lock, starts, sizes) -> list:
     """The alpha lane of the pool elements ``start .. start + size`` per box: from the device in one gather and one
     copy (a copy per box waited on the queue each time), or from the scratch file."""
     if not starts:
@@ -199,5 +200,7 @@ def _alpha_boxes(pool, spill, starts, sizes) -> list:
         return out
     index = np.concatenate([4 * (start + np.arange(size)) + 3 for start, size in zip(starts, sizes)])
     flat = pool.reshape(-1)
-    values = cla.take(flat, cla.to_device(pool.queue, index.astype(np.int64))).get()
+    with lock:  # the context's take kernel is shared by its threads: its arguments set and enqueued at once
+        values = cla.take(flat, cla.to_device(pool.queue, index.astype(np.int64)))
+    values = values.get()
     return np.split(values, np.cumsum(sizes)[:-1])

@@ -18,7 +18,7 @@ from pyopencl import cltypes
 
 from ..device import programs
 from ..device.constants import BLOCK, SUPER
-from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands
+from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands, zeros
 from ..model.geometry import world_to_fine_affine
 from ..model.camera import Camera, View
 from ..model.conebeam import ConeBeam, check_camera, resolve_view
@@ -164,7 +164,7 @@ class RayTracer:
         # arrays at once, which overflowed its threads' stacks
         self.local_size = (8, 8)
         self.defines = group_defines(self.orders)
-        self.quant = cla.zeros(self.cc.queue, 1, QUANT)  # a packed scalar pool's Quant per slot (classified.pack)
+        self.quant = zeros(self.cc.queue, 1, QUANT)  # a packed scalar pool's Quant per slot (classified.pack)
 
     def _wavelet(self, abandon):
         """Wavelet field: the dense bands' tables, bounds, content cells and build options
@@ -328,10 +328,10 @@ class RayTracer:
             f = self.bricks
             lo = np.append(self.region[0], f.origin[1:]) * BRICK
             passes = [(None, lo[::-1], np.append(self.region[1], f.origin[1:] + f.shape[1:])[::-1] * BRICK)]
-        image = cla.empty(q, (H, W, 4), np.float32) if passes is None else cla.zeros(q, (H, W, 4), np.float32)
-        stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
-        lattice_stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else cla.zeros(q, (H, W, 4), np.int32)
-        carry, ledger, resume = cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, REAL4[real]), cla.zeros(q, 1, real)
+        image = cla.empty(q, (H, W, 4), np.float32) if passes is None else zeros(q, (H, W, 4), np.float32)
+        stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else zeros(q, (H, W, 4), np.int32)
+        lattice_stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else zeros(q, (H, W, 4), np.int32)
+        carry, ledger, resume = zeros(q, 1, REAL4[real]), zeros(q, 1, REAL4[real]), zeros(q, 1, real)
         if passes is not None:  # docs/raytracing.md §6: what each ray carries from one pass to the next
             ledger_start = (tol / 2, 0, 0, 0) if not absorption else (tol / 4, tol * 3 / 8, 0, 0)
             carry = cla.to_device(q, np.tile(np.array((0, 0, 0, 0 if not absorption else 1), real), (H, W, 1)))
@@ -339,7 +339,7 @@ class RayTracer:
             resume = cla.to_device(q, np.full((H, W), -np.inf, real))
         traced = None
         if self.field == "wavelet":
-            traced = cla.zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
+            traced = zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
             field_tables = dict(self.field_tables, poly=cla.to_device(q, self.poly.astype(real)), trace=traced)
         skip = dict(bound=at.block_bound, super_bound=at.super_bound, super_origin=at.super_origin[::-1],
                     super_shape=at.super_bound.shape[::-1], box_lo=at.box[0], box_hi=at.box[1])

@@ -10,10 +10,9 @@ from types import SimpleNamespace
 
 import numpy as np
 import pyopencl as cl
-import pyopencl.array as cla
 
 from ..device import programs
-from ..device.kernels import BUFFER, Kernel
+from ..device.kernels import BUFFER, Kernel, zeros
 from ..errors import DeviceMemoryError
 from ..threads import thread_map
 from .spectral import WORK_ROOM
@@ -95,7 +94,7 @@ def slope_cells(cc, packed: dict, count, quasi: bool, pool=None) -> tuple:
     used = packed["nodes"][:packed["node_floats"]]
     nodes = (cl.Buffer(cc.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=used)
              if cc.info.kind == "CPU" else cc.upload(used))
-    peaks = cla.zeros(cc.queue, packed["peak_count"], np.uint32)
+    peaks = zeros(cc.queue, packed["peak_count"], np.uint32)
     _CELLS(programs.build(cc, ["splat/cone_cells.cl"]), cc.queue, groups(packed["rows"]), (GROUP,),
            textures=T, grid_u=ku, grid_v=kv, quasi=int(quasi), tex_int=cc.upload(packed["tex_int"]),
            tex_nodes=cc.upload(packed["tex_nodes"]), nodes=nodes, texels=pool, peaks=peaks)
