@@ -47,6 +47,17 @@ def test_a_turntable_records_each_view_and_its_one_window(tmp_path, capsys):
     assert meta["window"] == list(resolve_window(np.load(raw), "auto"))  # one window for the whole turn
 
 
+def test_progressive_stats_record_the_final_images_window(tmp_path, capsys):
+    stats = tmp_path / "p.json"
+    run(capsys, "progressive", "phantom:shepp-logan:16", "--levels", "1", "--keep", "0.2", "--size", "12",
+        "--steps", "2", "-o", str(tmp_path / "p.gif"), "--stats", str(stats))
+    meta = json.loads(stats.read_text())["meta"]
+    wv = WaveletVolume.from_volume(clwave.phantom("shepp-logan", 16), levels=1).threshold(keep=0.2)
+    # every frame's window is the final image's: the last frame's (the sum in its order, not a fresh render's)
+    final = list(clwave.progressive(wv, Camera.from_dict(meta["camera"]), steps=2))[-1].image
+    assert meta["window"] == list(resolve_window(final, "auto"))
+
+
 def test_shaded_stats_record_a_perspective_camera_and_no_window(tmp_path, capsys):
     stats = tmp_path / "r.json"
     run(capsys, "render", "phantom:hydrogen:16", "--tf", "hydrogen", "--levels", "1", "--method", "raytrace",
