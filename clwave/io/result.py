@@ -22,7 +22,9 @@ from ..model.transfer import check_window
 
 @dataclass
 class RenderResult:
-    """``image`` float32 (H, W, C); ``meta``: method, device, counts, timings in seconds."""
+    """``image`` float32 (H, W, C); ``meta``: method, device, counts, timings in seconds, and the view: ``camera``
+    (the camera given, its ``to_dict()``) and ``pixel`` (world width of a pixel at the target; docs/coordinates.md
+    §3)."""
 
     image: np.ndarray
     meta: dict = field(default_factory=dict)

@@ -228,7 +228,7 @@ def given_fields(d, kind, fields, name) -> dict:
         found = d.get("kind") if isinstance(d, dict) else type(d).__name__
         raise InputError(f"a {name} description must be a dict of kind {kind!r} as {name}.to_dict() writes, "
                          f"not {found!r}")
-    unknown = sorted(set(d) - set(fields))
+    unknown = sorted(set(d) - set(fields), key=str)
     if unknown:
         raise InputError(f"a {name} description has unknown field(s) {', '.join(map(str, unknown))}; "
                          f"it takes {', '.join(k for k in fields if k != 'kind')}")
