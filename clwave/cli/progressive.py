@@ -65,7 +65,8 @@ def run(args):
         else:
             write_gif(out, [f.result().to_uint8(window, background) for f in frames], 0.5, args.force)
         if args.stats:
-            text = json.dumps(dict(frames=figures, meta=frames[-1].meta), indent=2, default=str).encode()
+            meta = dict(frames[-1].meta, window=frames[-1].result().display_window(window))  # as render's (§4)
+            text = json.dumps(dict(frames=figures, meta=meta), indent=2, default=str).encode()
             write_atomic(args.stats, lambda fh: fh.write(text), args.force)
         finish(outputs, [_report(f, raytrace) for f in figures])
     return 0

@@ -82,10 +82,12 @@ def run(args):
             write_gif(out, [r.to_uint8(window, background) for r in results], args.frame_time or 0.1, args.force)
             result = results[0]
             result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
+            result.meta["turntable_views"] = [dict(camera=r.meta["camera"], pixel=r.meta["pixel"]) for r in results]
             seconds = result.meta["turntable_seconds"]
             views = f"{len(results)} view{'s' if len(results) != 1 else ''}"
             lines.append(f"turntable of {views} at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
                          f"({np.median(seconds):.3f} s a view, median); the first view:")
+        result.meta["window"] = result.display_window(window)  # the picture's, for --stats (coordinates.md §4)
         if raw is not None:  # a turntable's views as one (N, H, W, C) array
             images = result if args.turntable is None else \
                 RenderResult(np.stack([r.image for r in results]), result.meta)

@@ -22,7 +22,9 @@ from ..model.transfer import check_window
 
 @dataclass
 class RenderResult:
-    """``image`` float32 (H, W, C); ``meta``: method, device, counts, timings in seconds."""
+    """``image`` float32 (H, W, C); ``meta``: method, device, counts, timings in seconds, and the view: ``camera``
+    (the camera given, its ``to_dict()``) and ``pixel`` (world width of a pixel at the target; docs/coordinates.md
+    §3)."""
 
     image: np.ndarray
     meta: dict = field(default_factory=dict)
@@ -40,7 +42,7 @@ class RenderResult:
                              f"(its line integrals are shown through window=): leave it out")
         background = check_background((0.0, 0.0, 0.0) if background is None else background)
         if self.is_xray:
-            picture = self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
+            picture = self._picture()
             lo, hi = resolve_window(picture, window)
             scaled = np.clip((picture - lo) / (hi - lo), 0.0, 1.0)
             if self.image.shape[-1] == 2:  # a pair colour-blind eyes tell apart too
@@ -50,6 +52,15 @@ class RenderResult:
             scaled = np.clip(rgb + (1.0 - alpha) * np.asarray(background, np.float32), 0.0, 1.0)
             scaled = np.where(scaled <= 0.0031308, 12.92 * scaled, 1.055 * scaled ** (1 / 2.4) - 0.055)
         return np.round(255.0 * scaled).astype(np.uint8)
+
+    def display_window(self, window="auto"):
+        """The ``(lo, hi)`` an X-ray picture (:meth:`to_uint8`) is shown through for ``window`` ("auto" resolved from
+        this image); None for a shaded image, which has no window."""
+        return resolve_window(self._picture(), window) if self.is_xray else None
+
+    def _picture(self) -> np.ndarray:
+        """The X-ray values shown: one channel's, or the first three's."""
+        return self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
 
     def save(self, path, *, window="auto", background=None, overwrite=False) -> Path:
         """Write ``.png`` (windowed, or composited over ``background``: :meth:`to_uint8`), ``.npy`` (raw float32)

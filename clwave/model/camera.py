@@ -202,10 +202,44 @@ class Camera:
         cam.azimuth = self.azimuth + float(degrees)
         return cam
 
+    def to_dict(self) -> dict:
+        """JSON-safe description of the camera as given (what it leaves to the volume stays None);
+        ``Camera.from_dict(to_dict())`` re-makes it exactly."""
+        return dict(kind="camera", azimuth=self.azimuth, elevation=self.elevation, size=list(self.size),
+                    target=None if self.target is None else [float(x) for x in self.target], extent=self.extent,
+                    perspective=self.perspective, distance=self.distance, fov=self.fov if self.perspective else None,
+                    fit=self.fit)
+
+    @classmethod
+    def from_dict(cls, d) -> "Camera":
+        """Inverse of :meth:`to_dict` (a render's ``meta["camera"]``, docs/coordinates.md §4); absent fields take
+        their defaults."""
+        return cls(**given_fields(d, "camera", cls.to_dict(cls()), "Camera"))
+
     def __repr__(self):
-        kind = f", perspective fov={self.fov}" if self.perspective else ""
-        fit = f", fit={self.fit!r}" if self.fit != "sphere" else ""
-        return f"Camera(azimuth={self.azimuth}, elevation={self.elevation}, size={self.size}{kind}{fit})"
+        """Valid Python that makes this camera: every field that is not its default."""
+        return f"Camera({arguments(self.to_dict(), Camera().to_dict(), first=('azimuth', 'elevation', 'size'))})"
+
+
+def given_fields(d, kind, fields, name) -> dict:
+    """The arguments in ``d``, a ``to_dict()`` of a camera of this ``kind`` (``name``'s, of ``fields``), checked
+    against the fields it may hold: one line naming what is wrong (a file's camera is untrusted)."""
+    if not isinstance(d, dict) or d.get("kind", kind) != kind:
+        found = d.get("kind") if isinstance(d, dict) else type(d).__name__
+        raise InputError(f"a {name} description must be a dict of kind {kind!r} as {name}.to_dict() writes, "
+                         f"not {found!r}")
+    unknown = sorted(set(d) - set(fields), key=str)
+    if unknown:
+        raise InputError(f"a {name} description has unknown field(s) {', '.join(map(str, unknown))}; "
+                         f"it takes {', '.join(k for k in fields if k != 'kind')}")
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items() if k != "kind"}
+
+
+def arguments(fields: dict, defaults: dict, first=()) -> str:
+    """``name=value, ...`` of the ``fields`` (a ``to_dict()``) that differ from ``defaults``, and of ``first``
+    always: a repr's arguments, lists as tuples."""
+    shown = [k for k in fields if k != "kind" and (k in first or fields[k] != defaults.get(k))]
+    return ", ".join(f"{k}={tuple(fields[k]) if isinstance(fields[k], list) else fields[k]!r}" for k in shown)
 
 
 def _size(size) -> tuple:

@@ -17,13 +17,14 @@ detector's matrix is that of a source facing away: :meth:`ConeBeam.view` names i
 
 from __future__ import annotations
 
+import copy
 from functools import partial
 
 import numpy as np
 import scipy.linalg
 
-from ..errors import ClwaveWarning, InputError, finite_number, reals, warn_outside
-from .camera import Camera, View, _content_box, _size, _vector
+from ..errors import ClwaveWarning, InputError, finite_number, reals, warn_outside, whole_number
+from .camera import Camera, View, _content_box, _size, _vector, arguments, given_fields
 from .geometry import view_frame
 
 
@@ -82,6 +83,9 @@ class ConeBeam:
         self._set(n, u, v, iso + dso * n, _size(size), (spacing[1] / dsd, spacing[0] / dsd),
                   (shift[0] / dsd, shift[1] / dsd), iso)
         self.dso, self.dsd, self.pixel, self.offset = dso, dsd, (float(spacing[0]), float(spacing[1])), tuple(shift)
+        self._given = dict(kind="cone_beam", dso=dso, dsd=dsd, size=list(self.size), pixel=list(self.pixel),
+                           offset=[float(x) for x in shift], azimuth=float(azimuth), elevation=float(elevation),
+                           roll=float(roll), isocentre=[float(x) for x in iso])
 
     def _set(self, n, u, v, source, size, slope, principal, isocentre):
         self.n, self.u, self.v, self.source = n, u, v, np.asarray(source, float)
@@ -118,11 +122,14 @@ class ConeBeam:
         u, v, n = R[0], -R[1], -R[2]
         slope = (1.0 / K[0, 0], 1.0 / K[1, 1])
         principal = ((W / 2.0 - 0.5 - K[0, 2]) * slope[0], (K[1, 2] - H / 2.0 + 0.5) * slope[1])
+        given = dict(kind="cone_beam", matrix=np.asarray(matrix, float).tolist(), size=[H, W],
+                     isocentre=None if isocentre is None else _vector(isocentre, "isocentre").tolist())
         if isocentre is None:
             isocentre = source - n * float(np.dot(source, n))  # the principal ray's point nearest the origin
         cb = cls.__new__(cls)
         cb._set(n, u, v, source, (H, W), slope, principal, _vector(isocentre, "isocentre"))
         cb._from_matrix = True
+        cb._given = given
         cb.dso = float(np.linalg.norm(cb.source - cb.isocentre))
         if not cb.dso > 0:
             raise InputError("the isocentre must not be the source")
@@ -245,11 +252,41 @@ class ConeBeam:
                 (self.slope[0] * reduction, self.slope[1] * reduction), self.principal, self.isocentre)
         cb.dso, cb.dsd, cb.offset, cb._from_matrix = self.dso, self.dsd, self.offset, self._from_matrix
         cb.pixel = (self.pixel[0] * reduction, self.pixel[1] * reduction)
+        cb._given = dict(self._given, reduced=self._given.get("reduced", []) + [int(reduction)])
+        return cb
+
+    def to_dict(self) -> dict:
+        """JSON-safe description of the cone beam as made: its parameters, or the projection matrix it was made from
+        (:meth:`from_matrix`), and the reductions applied since (``reduced``); ``ConeBeam.from_dict(to_dict())``
+        re-makes it exactly."""
+        return copy.deepcopy(self._given)
+
+    @classmethod
+    def from_dict(cls, d) -> "ConeBeam":
+        """Inverse of :meth:`to_dict` (a radiograph's ``meta["camera"]``, docs/coordinates.md §4)."""
+        fields = dict(ConeBeam(1.0, 1.0, 1).to_dict(), matrix=None, reduced=None)
+        given = given_fields(d, "cone_beam", fields, "ConeBeam")
+        reductions = given.pop("reduced", ())
+        required = ("matrix", "size") if "matrix" in given else ("dso", "dsd", "size")
+        missing = [k for k in required if k not in given]
+        if missing or ("matrix" in given and set(given) - {"matrix", "size", "isocentre"}):
+            raise InputError(f"a ConeBeam description needs {', '.join(required)}"
+                             f"{' (and isocentre alone besides)' * ('matrix' in given)}; it has "
+                             f"{', '.join(given) or 'nothing'}")
+        cb = cls.from_matrix(**given) if "matrix" in given else cls(**given)
+        for reduction in reductions:
+            if not whole_number(reduction) or reduction < 1:
+                raise InputError(f"a ConeBeam description's reduced={list(reductions)!r} must be whole numbers >= 1")
+            cb = cb.reduced(int(reduction))
         return cb
 
     def __repr__(self):
-        return (f"ConeBeam(dso={self.dso:g}, dsd={self.dsd:g}, size={self.size}, pixel={self.pixel}, "
-                f"offset={self.offset})")
+        """Valid Python that makes this cone beam: every parameter that is not its default."""
+        d = self.to_dict()
+        reduced = "".join(f".reduced({r})" for r in d.pop("reduced", ()))
+        if "matrix" in d:
+            return f"ConeBeam.from_matrix({arguments(d, dict(isocentre=None), first=('matrix', 'size'))}){reduced}"
+        return f"ConeBeam({arguments(d, ConeBeam(1.0, 1.0, 1).to_dict(), first=('dso', 'dsd', 'size'))}){reduced}"
 
 
 def check_camera(camera, name="camera"):
@@ -257,6 +294,13 @@ def check_camera(camera, name="camera"):
     :class:`ConeBeam`."""
     if not isinstance(camera, (Camera, ConeBeam)):
         raise InputError(f"{name} must be a clwave.Camera or a clwave.ConeBeam, not {type(camera).__name__}")
+
+
+def view_record(camera, view: View) -> dict:
+    """What a render's ``meta`` records of its view (docs/coordinates.md §4): ``camera``, the camera as given (its
+    ``to_dict()``; none where a resolved :class:`View` was given), and ``pixel``, the world width of a pixel of
+    ``view`` at its target (in perspective at the target, or a cone beam's isocentre, along the rows)."""
+    return dict(({} if isinstance(camera, View) else dict(camera=camera.to_dict())), pixel=float(view.pixel))
 
 
 def resolve_view(camera, volume) -> View:

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import ClwaveWarning, InputError, warn_outside, whole_number
 from ..model.camera import Camera
-from ..model.conebeam import ConeBeam, check_camera
+from ..model.conebeam import ConeBeam, check_camera, view_record
 from ..frames import ErrorEstimate, FinalImage, Frame, check_budget, check_error, reached
 
 #: the smallest reduced image side: below it a frame no longer halves the error of the one before
@@ -104,7 +104,8 @@ def _frames(tracer, camera, options, steps, budget, error, final, shown):
     def render(detail, reduction):  # the tracer's render of an image reduction times smaller per side
         res = tracer.render(camera if reduction == 1 else camera.reduced(reduction, view), detail=detail,
                             **options)
-        return upsample(res.image, view.size, reduction), res.meta
+        # the meta of the camera given, whose image the frame is (upsampled), not of the reduced one
+        return upsample(res.image, view.size, reduction), dict(res.meta, **view_record(camera, view))
 
     for index, (detail, reduction) in enumerate(plan):
         if budget is not None and last is not None:

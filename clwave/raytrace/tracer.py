@@ -21,7 +21,7 @@ from ..device.constants import BLOCK, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands, zeros
 from ..model.geometry import world_to_fine_affine
 from ..model.camera import Camera, View
-from ..model.conebeam import ConeBeam, check_camera, resolve_view
+from ..model.conebeam import ConeBeam, check_camera, resolve_view, view_record
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number, flag
 from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
@@ -390,6 +390,7 @@ class RayTracer:
             passes=1 if passes is None else len(passes), device_budget=self.budget.total,
             segments_by_lattice=dict(zip(("1", "2", "4", "8+"),
                                          lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())))
+        meta.update(view_record(camera, view))
         if post is not None:
             meta.update(classification="post", transfer_function=post.tf.to_dict(),
                         tf_window=None if post.window is None else list(post.window),

@@ -28,8 +28,9 @@ class Accumulator:
     """One image being accumulated: splat coefficient ranges in importance order into the
     framebuffers (layers) of each channel group, all layers in one pass."""
 
-    def __init__(self, renderer, view, layers: list, tables: list, upto=None):
+    def __init__(self, renderer, view, layers: list, tables: list, upto=None, record=None):
         self.r, self.view, self.layers, self.tables, self.upto = renderer, view, layers, tables, upto
+        self.record = record or {}  # what meta records of the view: conebeam.view_record's
         self.lock = renderer.lock  # its passes use the renderer's buffers, a pass at a time
         # the coefficients and per-splat buffers its view was begun with (SplatRenderer._prepare): another view begun
         # between two of its passes (another thread's) may replace the renderer's with others of other shapes
@@ -214,7 +215,7 @@ class Accumulator:
                                  binning=self.stats["bin_seconds"], accumulation=self.stats["accumulate_seconds"],
                                  upload=self.stats["upload_seconds"], upsampling=self.stats["upsample_seconds"],
                                  compile=r.compile_seconds),
-                    **({} if self.dropped is None else dict(dropped=self.dropped)))
+                    **self.record, **({} if self.dropped is None else dict(dropped=self.dropped)))
 
     def image(self) -> np.ndarray:
         """The image so far as (H, W, C) float32: the framebuffers summed at the image's pixels."""

@@ -23,7 +23,7 @@ from ..device.context import ComputeContext
 from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
-from ..model.conebeam import check_camera, resolve_view
+from ..model.conebeam import check_camera, resolve_view, view_record
 from ..model.wavelet import WaveletVolume, check_model
 from .accumulator import PASS_ROWS, Accumulator
 from .coarse import Layer, footprint_scales, layer_factors
@@ -183,7 +183,7 @@ class SplatRenderer:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
                                  max_texels=self.cc.info.max_alloc // 4) for gi, ls in enumerate(per_layer)]
         self._prepare(tables, view.size)
-        acc = Accumulator(self, view, layers, tables, upto)
+        acc = Accumulator(self, view, layers, tables, upto, view_record(camera, view))
         if view.perspective and self.coarse:  # what coarsening leaves of the tolerance (docs/splatting.md §8)
             acc.drop_share = [drop_share(fg, self.wv.levels, self.coarse) for fg in factors]
         return acc
