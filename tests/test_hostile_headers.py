@@ -338,3 +338,19 @@ def test_dicom_pixel_data_without_a_decoder_here_names_the_packages_that_decode_
     refused(lambda: load(tmp_path, progress_bar=False), FileFormatError,
             "holds pixel data in transfer syntax 1.2.840.10008.1.2.4.80 (JPEG-LS Lossless Image Compression), which no "
             "decoder installed here reads (gdcm - requires gdcm")
+
+
+@pytest.mark.parametrize("offset, value, needle", [
+    (40, [1, 10], "NIfTI image of shape (10,); clwave reads 3-D volumes"),  # dim[0] 1
+    (70, [4096], "data code 4096 not recognized")])  # datatype
+def test_describe_of_a_broken_nifti_header_is_the_readers_one_line(tmp_path, offset, value, needle):
+    """describe read the header's facts (nibabel's orientation, shear, intent) before the read checked the header:
+    a NIfTI-1 header of 1 dimension, or of an unknown datatype, was an internal error of ``clwave info`` (refuzz22)."""
+    import nibabel
+
+    nibabel.save(nibabel.Nifti1Image(VOLUME, np.eye(4)), tmp_path / "v.nii")
+    data = bytearray((tmp_path / "v.nii").read_bytes())
+    data[offset:offset + 2 * len(value)] = np.array(value, "<i2").tobytes()
+    (tmp_path / "v.nii").write_bytes(bytes(data))
+    for call in (load, describe):
+        refused(lambda: call(tmp_path / "v.nii"), FileFormatError, needle)

@@ -106,7 +106,7 @@ def _placeable(affine) -> bool:
 
 
 def header_facts(path) -> dict:
-    """What ``clwave info`` says of a NIfTI header (:func:`read_nifti` has checked it): the sform and qform codes,
+    """What ``clwave info`` says of a NIfTI header that :func:`read_nifti` has read or weighed (so checked): the sform and qform codes,
     which affine is used (nibabel's choice: the sform where its code is set, else the qform, else none: nibabel's
     fallback), the stored orientation (``nibabel.aff2axcodes``), whether sform and qform both exist and differ, the
     shear (degrees, 0 where none), the intent and ``scl_slope``/``scl_inter`` where they scale the values."""
@@ -117,13 +117,11 @@ def header_facts(path) -> dict:
     sform, qform = _codes(header)
     used = "sform" if sform else "qform" if qform else "none"
     affine = header.get_best_affine()
-    placed = _placeable(affine)  # else the read that follows refuses the file in one line
-    grid = straight_grid(header.get_data_shape()[:3], affine) if placed else None
-    facts = dict(sform_code=sform, qform_code=qform, affine_from=used,
-                 orientation="".join(nibabel.aff2axcodes(affine)) if placed else None,
+    grid = straight_grid(header.get_data_shape()[:3], affine)
+    facts = dict(sform_code=sform, qform_code=qform, affine_from=used, orientation="".join(nibabel.aff2axcodes(affine)),
                  forms_differ=bool(sform and qform and not np.allclose(header.get_sform(), header.get_qform(),
                                                                        atol=1e-3)),
-                 sheared=None if grid is None else grid.degrees if grid.moved > STRAY_VOXELS else 0.0,
+                 sheared=grid.degrees if grid.moved > STRAY_VOXELS else 0.0,
                  intent=header.get_intent()[0])
     slope, inter = float(image.dataobj.slope), float(image.dataobj.inter)  # nibabel moves them from the header
     if (slope, inter) != (1.0, 0.0):
