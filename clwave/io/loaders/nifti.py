@@ -108,8 +108,9 @@ def _placeable(affine) -> bool:
 def header_facts(path) -> dict:
     """What ``clwave info`` says of a NIfTI header that :func:`read_nifti` has read or weighed (so checked): the sform
     and qform codes, which affine is used (nibabel's choice: the sform where its code is set, else the qform, else
-    none: nibabel's fallback), the stored orientation (``nibabel.aff2axcodes``), whether sform and qform both exist and differ, the
-    shear (degrees, 0 where none), the intent and ``scl_slope``/``scl_inter`` where they scale the values."""
+    none: nibabel's fallback), the stored orientation (``nibabel.aff2axcodes``), whether sform and qform both exist
+    and differ, the shear (degrees, 0 where none), the intent and ``scl_slope``/``scl_inter`` where they scale the
+    values."""
     import nibabel
 
     image = nibabel.load(path, mmap=False)
