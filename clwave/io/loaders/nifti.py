@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 
+from ...device.memory import HostMemoryError
 from ...errors import FileFormatError
 from .shared import (Declared, TimeSeries, as_array, check_declared_size, check_float32_range, check_whole,
                      largest_finite, note, to_canonical)
@@ -61,11 +62,19 @@ def read_nifti(path, chunks, fits=None):
     sheared = grid.moved > STRAY_VOXELS
     if sheared:  # resampled in memory: read whole, the straight grid weighed first
         chunks = False
+        straight = f"{path}'s affine is sheared {grid.degrees:.3g} degrees: the straight grid that holds it is " \
+                   f"{' x '.join(map(str, grid.shape))} voxels (i, j, k: the file's axes)"
+        fix = "fix the affine where its shear is the header's error, or crop the volume"
+        if math.prod(grid.shape) > np.iinfo(np.intp).max // 4:  # past any array: not weighed, nor placed by describe
+            raise FileFormatError(f"{straight}, more than an array holds; {fix}")
         try:
             check_whole(path, grid.shape + image.shape[4:5], image.get_data_dtype(), fits, resampled=True)
         except Declared as declared:
             declared.place(grid.shape, grid.affine)
             raise
+        except HostMemoryError as exc:  # its own fix (chunks, a subsample) is no fix here: the grid is read whole
+            raise HostMemoryError(f"{straight}, which needs {str(exc).split(';')[0].split(' needs ', 1)[-1]}; {fix}") \
+                from None
     scaled = proxy.dtype.kind in "iu" and (float(proxy.slope), float(proxy.inter)) != (1.0, 0.0)
     try:
         data = as_array(_ScaledToFloat32(proxy, path) if scaled else proxy, chunks, fits=fits, path=path)
