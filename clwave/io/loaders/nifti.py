@@ -97,9 +97,14 @@ def _codes(header) -> tuple:
 
 def _time_step(header) -> tuple:
     """``(step, unit)`` between a time series' volumes: its pixdim[4] and xyzt_units' time unit, ``(None, None)``
-    where the header gives no step (0)."""
-    step, unit = float(header["pixdim"][4]), header.get_xyzt_units()[1]
-    return (step, None if unit == "unknown" else unit) if step > 0 else (None, None)
+    where the header gives no step (0, or no positive finite number); the unit None where the code is none NIfTI
+    defines (nibabel's KeyError)."""
+    step = float(header["pixdim"][4])
+    try:
+        unit = header.get_xyzt_units()[1]
+    except KeyError:
+        unit = "unknown"
+    return (step, None if unit == "unknown" else unit) if 0 < step < math.inf else (None, None)
 
 
 def label_intent(path) -> bool:
