@@ -201,9 +201,9 @@ def describe(path, *, series=None, level=None) -> dict:
     grid, wider by the shifts); ``spacing`` (dz, dy, dx), ``origin`` (x, y, z) and ``obliquity`` as ``load`` gives
     them, where the header places the volume (NRRD and plain TIFFs: their loaders find them with the voxels), and
     ``spacing_in_file``; a time series (refused by ``load``) its ``time`` (``points``, ``step`` and ``unit``: None
-    where the header gives none, or no positive finite step) and ``refused`` (the one line ``load`` refuses it with); a DICOM series its
-    ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding`` (stored values, [] where
-    none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused
+    where the header gives none, or no positive finite step) and ``refused`` (the one line ``load`` refuses it
+    with); a DICOM series its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
+    (stored values, [] where none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused
     (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
