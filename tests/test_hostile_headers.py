@@ -375,3 +375,17 @@ def test_a_time_series_step_or_unit_no_header_means_is_none(tmp_path, capsys, st
     assert describe(tmp_path / "v.nii")["time"] == expect
     code, out, err = run(capsys, "info", "--json", str(tmp_path / "v.nii"))
     assert code == 0 and json.loads(out, parse_constant=lambda name: pytest.fail(name))["time"] == expect, err
+
+
+def test_info_of_a_nifti_that_nibabel_fixes_says_nothing_of_the_fix(tmp_path, capsys):
+    """A vox_offset of 353 (not a multiple of 16, the data there): nibabel logs a line on every load, which the
+    reader quiets, but info's header facts loaded the file again and printed it twice (refuzz22)."""
+    import nibabel
+    from test_cli import run
+
+    nibabel.save(nibabel.Nifti1Image(VOLUME, np.eye(4)), tmp_path / "v.nii")
+    data = bytearray((tmp_path / "v.nii").read_bytes())
+    data[108:112] = np.float32(353).tobytes()  # vox_offset
+    (tmp_path / "v.nii").write_bytes(bytes(data[:352] + b"\0" + data[352:]))
+    code, out, err = run(capsys, "info", str(tmp_path / "v.nii"))
+    assert code == 0 and "8 x 9 x 10 voxels" in out and err == "", err

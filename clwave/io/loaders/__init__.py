@@ -203,8 +203,8 @@ def describe(path, *, series=None, level=None) -> dict:
     ``spacing_in_file``; a time series (refused by ``load``) its ``time`` (``points``, ``step`` and ``unit``: None
     where the header gives none, or no positive finite step) and ``refused`` (the one line ``load`` refuses it
     with); a DICOM series its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
-    (stored values, [] where none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused
-    (:class:`FileFormatError`)."""
+    (stored values, [] where none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no
+    header: refused (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
     if kind == "raw":

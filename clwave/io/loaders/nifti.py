@@ -22,15 +22,8 @@ def read_nifti(path, chunks, fits=None):
     qform codes 0) is warned of; a sheared affine is resampled onto a straight grid (:mod:`.shear`), read whole."""
     import nibabel
 
-    log = logging.getLogger("nibabel.global")  # nibabel's reports of the header fixes it makes: one line is ours
-    disabled, log.disabled = log.disabled, True
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            image = nibabel.load(path, mmap=False)
-            affine = getattr(image, "affine", None)
-    finally:
-        log.disabled = disabled
+    image = _load(path)
+    affine = getattr(image, "affine", None)
     if affine is None:  # e.g. CIFTI-2: data on surfaces and grayordinates, with no voxel grid
         kind = type(image).__name__.removesuffix("Image").replace("Cifti2", "CIFTI-2")
         raise FileFormatError(f"{path} is a {kind} file of shape {image.shape}, not a volume clwave reads (a NIfTI-1/2 "
@@ -91,6 +84,21 @@ def read_nifti(path, chunks, fits=None):
     return to_canonical(data, affine)
 
 
+def _load(path):
+    """``nibabel.load`` without its reports of the header fixes it makes (a log line, a RuntimeWarning): the one line
+    that refuses a header is ours."""
+    import nibabel
+
+    log = logging.getLogger("nibabel.global")
+    disabled, log.disabled = log.disabled, True
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return nibabel.load(path, mmap=False)
+    finally:
+        log.disabled = disabled
+
+
 def _codes(header) -> tuple:
     return int(header["sform_code"]), int(header["qform_code"])
 
@@ -109,9 +117,7 @@ def _time_step(header) -> tuple:
 
 def label_intent(path) -> bool:
     """Whether the file's intent is ``NIFTI_INTENT_LABEL`` (its values index labels: a segmentation)."""
-    import nibabel
-
-    return nibabel.load(path, mmap=False).header.get_intent()[0] == "label"
+    return _load(path).header.get_intent()[0] == "label"
 
 
 def _placeable(affine) -> bool:
@@ -127,7 +133,7 @@ def header_facts(path) -> dict:
     values."""
     import nibabel
 
-    image = nibabel.load(path, mmap=False)
+    image = _load(path)
     header = image.header
     sform, qform = _codes(header)
     used = "sform" if sform else "qform" if qform else "none"
