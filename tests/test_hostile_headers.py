@@ -338,3 +338,54 @@ def test_dicom_pixel_data_without_a_decoder_here_names_the_packages_that_decode_
     refused(lambda: load(tmp_path, progress_bar=False), FileFormatError,
             "holds pixel data in transfer syntax 1.2.840.10008.1.2.4.80 (JPEG-LS Lossless Image Compression), which no "
             "decoder installed here reads (gdcm - requires gdcm")
+
+
+@pytest.mark.parametrize("offset, value, needle", [
+    (40, [1, 10], "NIfTI image of shape (10,); clwave reads 3-D volumes"),  # dim[0] 1
+    (70, [4096], "data code 4096 not recognized")])  # datatype
+def test_describe_of_a_broken_nifti_header_is_the_readers_one_line(tmp_path, offset, value, needle):
+    """describe read the header's facts (nibabel's orientation, shear, intent) before the read checked the header:
+    a NIfTI-1 header of 1 dimension, or of an unknown datatype, was an internal error of ``clwave info`` (refuzz22)."""
+    import nibabel
+
+    nibabel.save(nibabel.Nifti1Image(VOLUME, np.eye(4)), tmp_path / "v.nii")
+    data = bytearray((tmp_path / "v.nii").read_bytes())
+    data[offset:offset + 2 * len(value)] = np.array(value, "<i2").tobytes()
+    (tmp_path / "v.nii").write_bytes(bytes(data))
+    for call in (load, describe):
+        refused(lambda: call(tmp_path / "v.nii"), FileFormatError, needle)
+
+
+@pytest.mark.parametrize("step, units, expect", [
+    (np.inf, 10, dict(points=2, step=None, unit=None)),  # was "step": Infinity, which no strict JSON parser reads
+    (2.0, 0xff, dict(points=2, step=2.0, unit=None)),  # unit codes NIfTI does not define: was "KeyError: 7"
+    (2.0, 10, dict(points=2, step=2.0, unit="sec"))])  # 2 (mm) + 8 (s): the control
+def test_a_time_series_step_or_unit_no_header_means_is_none(tmp_path, capsys, step, units, expect):
+    """pixdim[4] infinite, or xyzt_units' time code past NIfTI's, of a 4-D NIfTI: described without a step or a
+    unit, ``info --json`` strict JSON (refuzz22)."""
+    import json
+
+    import nibabel
+    from test_cli import run
+
+    nibabel.save(nibabel.Nifti1Image(np.stack([VOLUME, VOLUME], axis=-1), np.eye(4)), tmp_path / "v.nii")
+    data = bytearray((tmp_path / "v.nii").read_bytes())
+    data[92:96], data[123] = np.float32(step).tobytes(), units  # pixdim[4], xyzt_units
+    (tmp_path / "v.nii").write_bytes(bytes(data))
+    assert describe(tmp_path / "v.nii")["time"] == expect
+    code, out, err = run(capsys, "info", "--json", str(tmp_path / "v.nii"))
+    assert code == 0 and json.loads(out, parse_constant=lambda name: pytest.fail(name))["time"] == expect, err
+
+
+def test_info_of_a_nifti_that_nibabel_fixes_says_nothing_of_the_fix(tmp_path, capsys):
+    """A vox_offset of 353 (not a multiple of 16, the data there): nibabel logs a line on every load, which the
+    reader quiets, but info's header facts loaded the file again and printed it twice (refuzz22)."""
+    import nibabel
+    from test_cli import run
+
+    nibabel.save(nibabel.Nifti1Image(VOLUME, np.eye(4)), tmp_path / "v.nii")
+    data = bytearray((tmp_path / "v.nii").read_bytes())
+    data[108:112] = np.float32(353).tobytes()  # vox_offset
+    (tmp_path / "v.nii").write_bytes(bytes(data[:352] + b"\0" + data[352:]))
+    code, out, err = run(capsys, "info", str(tmp_path / "v.nii"))
+    assert code == 0 and "8 x 9 x 10 voxels" in out and err == "", err

@@ -155,7 +155,15 @@ def test_the_command_line_warns_once_and_takes_a_categorical_function_from_a_fil
     ("words.csv", "value,r,g,b,opacity\n0,0,0,0,x\n", "row 2 '0,0,0,0,x' is not 5 numbers"),
     ("half.csv", "label,r,g,b,opacity\n1.5,1,0,0,1\n", "label 1.5 is not a whole number"),
     ("bright.json", "[[0, 0, 0, 0, 0], [1, 2, 0, 0, 1]]", "colour [2.0, 0.0, 0.0] of point 1 is outside"),
-    ("big.csv", "0,0,0,0,0\n" * 120000, "more than a function of points takes")])
+    ("big.csv", "0,0,0,0,0\n" * 120000, "more than a function of points takes"),
+    # found by refuzz22 (each was an internal error): a parser's recursion, integers past float, the csv field limit
+    ("deep.json", "[" * 100000 + "]" * 100000, "deep.json: its JSON is nested deeper than"),
+    ("huge.json", f"[[1{'0' * 400}, 0, 0, 0, 0], [1, 1, 1, 1, 1]]", "rows of 5 numbers (value, r, g, b, opacity) "
+                                                                     "within float's range"),
+    ("colour.json", f'{{"labels": {{"1": [1{"0" * 400}, 0, 0, 1]}}}}', "must be 4 numbers (r, g, b, opacity)"),
+    ("window.json", f'{{"points": [[0, 0, 0, 0, 0], [1, 1, 1, 1, 1]], "window": [0, 1{"0" * 400}]}}',
+     "window must be None, 'auto' or (lo, hi)"),
+    ("field.csv", "0,0,0,0," + "1" * 200000 + "\n", "field.csv: not CSV (field larger than field limit")])
 def test_a_bad_transfer_function_file_is_refused_in_one_line(tmp_path, capsys, name, text, words):
     if text is not None:
         (tmp_path / name).write_text(text)

@@ -102,6 +102,28 @@ def test_info_of_a_singular_affine_is_the_readers_one_line(tmp_path, capsys):
         assert code == 2 and "not finite or not invertible" in err and len(err.strip().splitlines()) == 1, err
 
 
+@pytest.mark.parametrize("shear, words", [
+    (1e5, "the straight grid that holds it is 300005 x 4 x 6 voxels (i, j, k: the file's axes), which needs about"),
+    (1e18, "voxels (i, j, k: the file's axes), more than an array holds")])
+def test_a_shear_whose_straight_grid_does_not_fit_is_named_as_the_shear(tmp_path, capsys, monkeypatch, shear, words):
+    """A shear of 1e5 voxels a voxel makes a straight grid of 300005 x 4 x 6 voxels: refused naming the shear, not
+    with the hint of reading in chunks (a sheared file is read whole); one of 1e18 a grid past any array, which
+    ``info`` described as a corrupt file (numpy's 'iterator is too large' from the stand-in it placed) (refuzz22).
+    1e18, not 1e12: a float32 sform keeps it (as srow_x's 1e12 of two axes in the fuzz case)."""
+    import clwave.device.memory as memory
+
+    monkeypatch.setattr(memory, "available_bytes", lambda: 1 << 24)  # 16 MiB: the grid of 1e5 needs more
+    affine = np.eye(4)
+    affine[0, 1] = shear
+    path = _save(tmp_path / "sheared.nii", np.ones((5, 4, 6), np.float32), affine)
+    for command in ("info", "compress")[shear < 1e6:]:  # info describes a grid that an array holds
+        code, out, err = run(capsys, command, str(path), *(("-o", str(tmp_path / "x.clw")) if command == "compress"
+                                                            else ()))
+        assert code == 2 and "sheared.nii's affine is sheared 90 degrees: " in err and words in err, err
+        assert "fix the affine" in err and "chunk" not in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "x.clw").exists()
+
+
 def test_a_file_without_orientation_is_warned_of_and_info_says_what_was_assumed(tmp_path, capsys):
     path = _save(tmp_path / "none.nii", np.ones((4, 3, 2), np.float32), np.diag([2.0, 2, 2, 1]), sform=0)
     with pytest.warns(ClwaveWarning, match="has no orientation .*sform_code and qform_code are 0.*LAS") as seen:

@@ -58,6 +58,8 @@ def _from_json(path, text) -> TransferFunction:
         data = json.loads(text)
     except ValueError as exc:
         raise InputError(f"not JSON ({exc})") from None
+    except RecursionError:  # Python's parser recurses once a level
+        raise InputError("its JSON is nested deeper than Python's parser reaches; a function of points is 3 deep")
     if isinstance(data, dict) and set(data) == {"labels"}:
         return TransferFunction.labels(data["labels"], name=path.stem)
     if isinstance(data, list):
@@ -69,7 +71,10 @@ def _from_json(path, text) -> TransferFunction:
 
 
 def _from_csv(path, text) -> TransferFunction:
-    rows = [row for row in csv.reader(io.StringIO(text)) if row and not row[0].lstrip().startswith("#")]
+    try:
+        rows = [row for row in csv.reader(io.StringIO(text)) if row and not row[0].lstrip().startswith("#")]
+    except csv.Error as exc:  # e.g. a field past the csv module's limit (131,072 characters)
+        raise InputError(f"not CSV ({exc})") from None
     header = rows and not _numbers(rows[0])
     labels = header and rows[0][0].strip().lower() == "label"
     body = rows[1:] if header else rows

@@ -113,7 +113,7 @@ class TransferFunction:
                 raise InputError(f"label {label!r} is not a whole number; labels are the integers of a label map")
             try:
                 shown[int(float(label))] = [float(c) for c in colour]
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):  # OverflowError: an integer past float's range
                 shown[int(float(label))] = []
             if len(shown[int(float(label))]) != 4:
                 raise InputError(f"label {label}'s colour {colour!r} must be 4 numbers (r, g, b, opacity)")
@@ -488,9 +488,9 @@ def _luminance(rgb):
 def _check_points(points) -> np.ndarray:
     try:
         p = np.array(points, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer past float's range
         raise InputError("transfer function points must be rows of 5 numbers "
-                         "(value, r, g, b, opacity)") from None
+                         "(value, r, g, b, opacity) within float's range") from None
     if p.ndim != 2 or p.shape[1] != 5:
         raise InputError(f"transfer function points must be rows (value, r, g, b, opacity), "
                          f"got an array of shape {p.shape}")
@@ -530,7 +530,7 @@ def check_window(window, option=None):
         raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}")
     try:
         lo, hi = (float(w) for w in window)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}") from None
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise InputError(f"window ({lo:g}, {hi:g}) must be two finite numbers (lo, hi) with lo < hi",

@@ -201,10 +201,10 @@ def describe(path, *, series=None, level=None) -> dict:
     grid, wider by the shifts); ``spacing`` (dz, dy, dx), ``origin`` (x, y, z) and ``obliquity`` as ``load`` gives
     them, where the header places the volume (NRRD and plain TIFFs: their loaders find them with the voxels), and
     ``spacing_in_file``; a time series (refused by ``load``) its ``time`` (``points``, ``step`` and ``unit``: None
-    where the header gives none) and ``refused`` (the one line ``load`` refuses it with); a DICOM series its
-    ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding`` (stored values, [] where
-    none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no header: refused
-    (:class:`FileFormatError`)."""
+    where the header gives none, or no positive finite step) and ``refused`` (the one line ``load`` refuses it
+    with); a DICOM series its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
+    (stored values, [] where none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no
+    header: refused (:class:`FileFormatError`)."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
     if kind == "raw":
@@ -218,14 +218,14 @@ def describe(path, *, series=None, level=None) -> dict:
     lazy = check_chunks(None, kind, path) is not False  # a Dask array over the file: nothing read until computed
     size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) if path.is_dir() else path.stat().st_size
     facts = dict.fromkeys(DESCRIBED)
-    facts.update(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size, resampled=False,
-                 **_header_facts(kind, path))
+    facts.update(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size, resampled=False)
     with reading(path):
         try:
             # a lazy read never weighs (nothing is read until computed) unless it must read whole (a sheared NIfTI)
             data, spacing, origin, obliquity = _read(kind, path, inner, None, None, None, series, level,
                                                      "auto" if lazy else False, False, _declared, False)
         except (Declared, TimeSeries) as declared:
+            facts.update(_header_facts(kind, path))  # the header as the read has checked it
             channels = declared.channels
             facts.update(stored_shape=list(declared.shape), dtype=str(declared.dtype), channels=channels)
             if isinstance(declared, Declared):
@@ -240,6 +240,7 @@ def describe(path, *, series=None, level=None) -> dict:
                 facts.update(spacing=[float(s) for s in spacing], origin=[float(o) for o in origin],
                              obliquity=obliquity, spacing_in_file=True)
             return facts
+        facts.update(_header_facts(kind, path))
     volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))
     return dict(facts, shape=list(data.shape), dtype=str(data.dtype), channels=volume.channels,
                 spacing=list(volume.spacing), origin=list(volume.origin), spacing_in_file=spacing is not None,

@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 
+from ...device.memory import HostMemoryError
 from ...errors import FileFormatError
 from .shared import (Declared, TimeSeries, as_array, check_declared_size, check_float32_range, check_whole,
                      largest_finite, note, to_canonical)
@@ -21,15 +22,8 @@ def read_nifti(path, chunks, fits=None):
     qform codes 0) is warned of; a sheared affine is resampled onto a straight grid (:mod:`.shear`), read whole."""
     import nibabel
 
-    log = logging.getLogger("nibabel.global")  # nibabel's reports of the header fixes it makes: one line is ours
-    disabled, log.disabled = log.disabled, True
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            image = nibabel.load(path, mmap=False)
-            affine = getattr(image, "affine", None)
-    finally:
-        log.disabled = disabled
+    image = _load(path)
+    affine = getattr(image, "affine", None)
     if affine is None:  # e.g. CIFTI-2: data on surfaces and grayordinates, with no voxel grid
         kind = type(image).__name__.removesuffix("Image").replace("Cifti2", "CIFTI-2")
         raise FileFormatError(f"{path} is a {kind} file of shape {image.shape}, not a volume clwave reads (a NIfTI-1/2 "
@@ -61,11 +55,19 @@ def read_nifti(path, chunks, fits=None):
     sheared = grid.moved > STRAY_VOXELS
     if sheared:  # resampled in memory: read whole, the straight grid weighed first
         chunks = False
+        straight = f"{path}'s affine is sheared {grid.degrees:.3g} degrees: the straight grid that holds it is " \
+                   f"{' x '.join(map(str, grid.shape))} voxels (i, j, k: the file's axes)"
+        fix = "fix the affine where its shear is the header's error, or crop the volume"
+        if math.prod(grid.shape) > np.iinfo(np.intp).max // 4:  # past any array: not weighed, nor placed by describe
+            raise FileFormatError(f"{straight}, more than an array holds; {fix}")
         try:
             check_whole(path, grid.shape + image.shape[4:5], image.get_data_dtype(), fits, resampled=True)
         except Declared as declared:
             declared.place(grid.shape, grid.affine)
             raise
+        except HostMemoryError as exc:  # its own fix (chunks, a subsample) is no fix here: the grid is read whole
+            raise HostMemoryError(f"{straight}, which needs {str(exc).split(';')[0].split(' needs ', 1)[-1]}; {fix}") \
+                from None
     scaled = proxy.dtype.kind in "iu" and (float(proxy.slope), float(proxy.inter)) != (1.0, 0.0)
     try:
         data = as_array(_ScaledToFloat32(proxy, path) if scaled else proxy, chunks, fits=fits, path=path)
@@ -82,22 +84,40 @@ def read_nifti(path, chunks, fits=None):
     return to_canonical(data, affine)
 
 
+def _load(path):
+    """``nibabel.load`` without its reports of the header fixes it makes (a log line, a RuntimeWarning): the one line
+    that refuses a header is ours."""
+    import nibabel
+
+    log = logging.getLogger("nibabel.global")
+    disabled, log.disabled = log.disabled, True
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return nibabel.load(path, mmap=False)
+    finally:
+        log.disabled = disabled
+
+
 def _codes(header) -> tuple:
     return int(header["sform_code"]), int(header["qform_code"])
 
 
 def _time_step(header) -> tuple:
     """``(step, unit)`` between a time series' volumes: its pixdim[4] and xyzt_units' time unit, ``(None, None)``
-    where the header gives no step (0)."""
-    step, unit = float(header["pixdim"][4]), header.get_xyzt_units()[1]
-    return (step, None if unit == "unknown" else unit) if step > 0 else (None, None)
+    where the header gives no step (0, or no positive finite number); the unit None where the code is none NIfTI
+    defines (nibabel's KeyError)."""
+    step = float(header["pixdim"][4])
+    try:
+        unit = header.get_xyzt_units()[1]
+    except KeyError:
+        unit = "unknown"
+    return (step, None if unit == "unknown" else unit) if 0 < step < math.inf else (None, None)
 
 
 def label_intent(path) -> bool:
     """Whether the file's intent is ``NIFTI_INTENT_LABEL`` (its values index labels: a segmentation)."""
-    import nibabel
-
-    return nibabel.load(path, mmap=False).header.get_intent()[0] == "label"
+    return _load(path).header.get_intent()[0] == "label"
 
 
 def _placeable(affine) -> bool:
@@ -106,24 +126,23 @@ def _placeable(affine) -> bool:
 
 
 def header_facts(path) -> dict:
-    """What ``clwave info`` says of a NIfTI header (:func:`read_nifti` has checked it): the sform and qform codes,
-    which affine is used (nibabel's choice: the sform where its code is set, else the qform, else none: nibabel's
-    fallback), the stored orientation (``nibabel.aff2axcodes``), whether sform and qform both exist and differ, the
-    shear (degrees, 0 where none), the intent and ``scl_slope``/``scl_inter`` where they scale the values."""
+    """What ``clwave info`` says of a NIfTI header that :func:`read_nifti` has read or weighed (so checked): the sform
+    and qform codes, which affine is used (nibabel's choice: the sform where its code is set, else the qform, else
+    none: nibabel's fallback), the stored orientation (``nibabel.aff2axcodes``), whether sform and qform both exist
+    and differ, the shear (degrees, 0 where none), the intent and ``scl_slope``/``scl_inter`` where they scale the
+    values."""
     import nibabel
 
-    image = nibabel.load(path, mmap=False)
+    image = _load(path)
     header = image.header
     sform, qform = _codes(header)
     used = "sform" if sform else "qform" if qform else "none"
     affine = header.get_best_affine()
-    placed = _placeable(affine)  # else the read that follows refuses the file in one line
-    grid = straight_grid(header.get_data_shape()[:3], affine) if placed else None
-    facts = dict(sform_code=sform, qform_code=qform, affine_from=used,
-                 orientation="".join(nibabel.aff2axcodes(affine)) if placed else None,
+    grid = straight_grid(header.get_data_shape()[:3], affine)
+    facts = dict(sform_code=sform, qform_code=qform, affine_from=used, orientation="".join(nibabel.aff2axcodes(affine)),
                  forms_differ=bool(sform and qform and not np.allclose(header.get_sform(), header.get_qform(),
                                                                        atol=1e-3)),
-                 sheared=None if grid is None else grid.degrees if grid.moved > STRAY_VOXELS else 0.0,
+                 sheared=grid.degrees if grid.moved > STRAY_VOXELS else 0.0,
                  intent=header.get_intent()[0])
     slope, inter = float(image.dataobj.slope), float(image.dataobj.inter)  # nibabel moves them from the header
     if (slope, inter) != (1.0, 0.0):
