@@ -1,4 +1,4 @@
-"""A command's outputs: all published together at its end, after its report, or none (coordinates.md §4)."""
+"""A command's outputs: all published together at its end, before its report, or none (coordinates.md §4)."""
 
 import errno
 import importlib
