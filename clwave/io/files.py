@@ -104,10 +104,10 @@ class Staging:
 
     def folder(self, path, force=False, replaces=None) -> Path:
         """A temporary folder beside the folder ``path`` to write its files into (:func:`write_atomic` publishes them
-        there at once), published with the files: renamed to ``path`` where that is missing or empty, which refuses a
-        folder that another writer filled meanwhile; with ``force`` into a folder that is not empty, the files moved
-        into it one by one, and its files whose names match ``replaces`` (a regular expression) but are not among
-        them removed."""
+        there at once), published with the files: renamed to ``path`` where nothing is there, else its files moved
+        into the folder there (``path`` may be a symbolic link to it), which must be empty: one that another writer
+        filled meanwhile is refused; with ``force`` into a folder that is not empty, its files whose names match
+        ``replaces`` (a regular expression) but are not among those moved in removed."""
         path = Path(path)
         with _writing(path):
             self.folders[path] = _Folder(path, force, replaces)
@@ -216,7 +216,12 @@ class _Folder:
             umask = os.umask(0)
             os.umask(umask)
             os.chmod(self.tmp, 0o777 & ~umask)  # mkdtemp makes 0700; give the folder the usual permissions
-            os.rename(self.tmp, target)  # fails if another writer made the folder meanwhile
+            try:
+                os.rename(self.tmp, target)
+            except OSError as exc:
+                if exc.errno in (errno.ENOTEMPTY, errno.EEXIST):  # made and filled meanwhile: another writer's
+                    raise FileExistsError(self.path) from None
+                raise
             self.renamed = target
             return
         if not target.is_dir():
