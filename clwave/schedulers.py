@@ -1,5 +1,5 @@
 """Dask as the engine of chunked work (docs/chunked.md §5): the scheduler a user names, and the results of
-many block tasks streamed back in their order, with a bounded number held before their turn.  The model and the
+many block tasks streamed back in their order.  The model and the
 file format build on this module; rendering on a cluster is :mod:`clwave.cluster`.
 
 ``scheduler`` everywhere takes: None (threads of this process: a ``distributed.LocalCluster`` without
@@ -104,42 +104,19 @@ def _is_client(scheduler) -> bool:
     return type(scheduler).__name__ == "Client" and type(scheduler).__module__.startswith("distributed")
 
 
-def stream(client, tasks, *, desc, progress_bar=None, ahead=None):
+def stream(client, tasks, *, desc, progress_bar=None):
     """Yield the results of ``tasks`` (``dask.delayed`` objects of one graph) in their order, each released once
     yielded; a bar counts them.  In order, not as they finish: a .clw file written from them is the same byte for byte
     at every run (docs/chunked.md §5).  They are submitted together, so that what they share (a chunk read once,
-    feeding its neighbours' halos) is computed once; the scheduler's root-task queuing runs them about in their order.
-    Results that finished before their turn are held up to ``ahead`` (default four per worker thread): past that, the
-    last of them are let go and computed again when their turn nears, so that a slow early block (or one run again
-    after its worker died) does not hold every later result."""
-    from distributed import as_completed
-
-    tasks = list(tasks)
+    feeding its neighbours' halos) is computed once; results that finish before their turn wait for it, unbounded:
+    Dask runs a transform's wavefront of halos some slabs ahead, and a slow early block (or one run again after its
+    worker died) holds every later result (known-gaps.md)."""
     with warnings.catch_warnings():  # a volume of thousands of blocks makes a graph of some MB: expected
         warnings.filterwarnings("ignore", message="Sending large graph")
-        futures = client.compute(tasks)
-    ahead = ahead or 4 * max(sum(client.nthreads().values()), 1)
-    turn, early = 0, {}  # the next result to yield, and the results finished before their turn (index: future)
-    where = {id(f): (i, f) for i, f in enumerate(futures)}
-    arrivals = as_completed(futures)
+        futures = client.compute(list(tasks))
     with progress(total=len(futures), desc=desc, enabled=progress_bar) as bar:
-        for future in arrivals:
-            i = where.pop(id(future))[0]
-            if future.status != "finished":
-                future.result()  # its error (a task's exception, KilledWorker) raised now
-            early[i] = future
-            while turn in early:
-                future = early.pop(turn)
-                result = future.result()
-                future.release()
-                turn += 1
-                bar.update(1)
-                yield result
-                again = [j for j in range(turn, min(turn + ahead, len(tasks))) if futures[j] is None]
-                for j, f in zip(again, client.compute([tasks[j] for j in again])):  # let go: their turn nears
-                    futures[j], where[id(f)] = f, (j, f)
-                    arrivals.add(f)
-            while len(early) > ahead:  # held too far ahead of their turn: the last let go
-                j = max(early)
-                early.pop(j).release()
-                futures[j] = None
+        for future in futures:
+            result = future.result()
+            future.release()
+            bar.update(1)
+            yield result

@@ -481,29 +481,3 @@ def test_a_scheduler_address_without_workers_is_one_line_then_with_one_the_in_me
         cluster.scale(1)
         model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=address).threshold(keep=0.05)
         assert_same(clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.05), model.compute())
-
-
-def test_stream_yields_in_order_and_holds_few_results_behind_a_slow_block():
-    """schedulers.stream: 40 results of 8 MB, the first block's task slow: in order, each result right, and at most
-    ``ahead`` (four per worker thread) held before their turn at any yield, the others let go and computed again
-    as their turn nears (it was: 39 of 40 held when block 0 came; a KilledWorker's rerun puts a block last so)."""
-    import dask
-    from distributed import Client, LocalCluster, get_task_stream
-
-    from clwave.schedulers import stream
-
-    @dask.delayed(pure=True)
-    def block(i):
-        if i == 0:
-            time.sleep(2)
-        return np.full(1_000_000, i, np.float64)
-
-    with LocalCluster(processes=False, n_workers=1, threads_per_worker=2, dashboard_address=":0") as cluster, \
-            Client(cluster) as client, get_task_stream(client) as runs:
-        held = []
-        for k, result in enumerate(stream(client, [block(i) for i in range(40)], desc="blocks", progress_bar=False)):
-            assert result.shape == (1_000_000,) and np.all(result == k)
-            held.append(sum(t.state == "memory" for t in cluster.scheduler.tasks.values()))
-    # the bound, plus the result just yielded (its release reaches the scheduler a moment later) and one a thread
-    # finished that the stream has not heard of yet
-    assert max(held) <= 4 * 2 + 2 and len(runs.data) > 40  # some computed again
