@@ -1,5 +1,5 @@
 """Dask as the engine of chunked work (docs/chunked.md §5): the scheduler a user names, and the results of
-many block tasks streamed back as they finish, so that only a few are held at a time.  The model and the
+many block tasks streamed back in their order.  The model and the
 file format build on this module; rendering on a cluster is :mod:`clwave.cluster`.
 
 ``scheduler`` everywhere takes: None (threads of this process: a ``distributed.LocalCluster`` without
@@ -106,10 +106,11 @@ def _is_client(scheduler) -> bool:
 
 def stream(client, tasks, *, desc, progress_bar=None):
     """Yield the results of ``tasks`` (``dask.delayed`` objects of one graph) in their order, each released once
-    yielded; a bar counts them.  They are submitted together, so that what they share (a chunk read once, feeding its
-    neighbours' halos) is computed once; the scheduler's root-task queuing keeps the chunks in memory to a few per
-    worker thread, and runs them about in their order, so that few results wait for an earlier one.  In order, not as
-    they finish: a .clw file written from them is the same byte for byte at every run (docs/chunked.md §4)."""
+    yielded; a bar counts them.  In order, not as they finish: a .clw file written from them is the same byte for byte
+    at every run (docs/chunked.md §5).  They are submitted together, so that what they share (a chunk read once,
+    feeding its neighbours' halos) is computed once; results that finish before their turn wait for it, unbounded:
+    Dask runs a transform's wavefront of halos some slabs ahead, and a slow early block (or one run again after its
+    worker died) holds every later result (known-gaps.md)."""
     with warnings.catch_warnings():  # a volume of thousands of blocks makes a graph of some MB: expected
         warnings.filterwarnings("ignore", message="Sending large graph")
         futures = client.compute(list(tasks))

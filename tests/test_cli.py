@@ -3,12 +3,15 @@
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from clwave.cli import main
 from clwave.model.wavelet import WaveletVolume
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def run(capsys, *argv):
@@ -134,7 +137,8 @@ def test_console_entry_point_has_no_traceback(tmp_path):
                                                           "--size", "16", "--steps", "3"]])
 def test_a_reader_that_leaves_ends_the_command_quietly(tmp_path, argv):
     """``clwave ... | head -1``: stdout's reader closes the pipe before the command writes; the command ends as one
-    the SIGPIPE signal ended (exit 141), with nothing on stderr (Python docs, "Note on SIGPIPE")."""
+    the SIGPIPE signal ended (exit 141), with nothing on stderr (Python docs, "Note on SIGPIPE"), and nothing
+    published (progressive's first line comes before its frames)."""
     extra = ["-o", str(tmp_path / "p.gif")] if argv[0] == "progressive" else []
     read, write = os.pipe()
     os.close(read)  # the reader gone before the command starts: every write to its stdout fails
@@ -145,6 +149,65 @@ def test_a_reader_that_leaves_ends_the_command_quietly(tmp_path, argv):
         os.close(write)
     assert proc.returncode == 141 and proc.stderr.count("clwave:") == 0 and "Traceback" not in proc.stderr, \
         proc.stderr
+    assert not (tmp_path / "p.gif").exists()
+
+
+def test_a_reader_that_leaves_during_the_report_finds_the_outputs_published(tmp_path, capsys, monkeypatch):
+    """``clwave render ... | head -1`` on a report longer than the pipe holds: the outputs are published before the
+    report, so the reader leaving during it ends the command quietly, exit 0, the image in place (it was: exit 141,
+    nothing published)."""
+
+    class LeavesAtTheReport:
+        def write(self, text):
+            if "splatted" in text:
+                raise BrokenPipeError(32, "Broken pipe")
+            return len(text)
+
+        def flush(self):
+            pass
+
+    monkeypatch.setattr(sys, "stdout", LeavesAtTheReport())
+    code = main(["render", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "-o", str(tmp_path / "a.png")])
+    assert code == 0 and capsys.readouterr().err == "" and (tmp_path / "a.png").is_file()
+
+
+def test_a_closed_stdout_is_no_error(tmp_path):
+    """``clwave info >&-``: Python's ``sys.stdout`` is None, which print ignores, and so does the command line (it
+    was: "internal error (AttributeError ...)", exit 1, from wrapping None)."""
+    proc = subprocess.run(f"{sys.executable} -m clwave info --json >&-", shell=True, stderr=subprocess.PIPE,
+                          text=True, cwd=tmp_path, timeout=120, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+def test_runs_of_main_that_overlap_in_threads_leave_stdout_as_it_was(capsys, monkeypatch):
+    """Two threads' runs of main, the first to start ending first: stdout is the checked one while either runs and
+    the process's own after both (it was left the first run's wrapper: each run put back what it found)."""
+    import threading
+
+    from clwave.cli import info
+
+    before, entered, release = sys.stdout, [threading.Event(), threading.Event()], [threading.Event(),
+                                                                                    threading.Event()]
+    seen, runs = [], iter(range(2))
+
+    def waiting(args):
+        i = next(runs)  # the threads enter one after the other
+        entered[i].set()
+        release[i].wait(30)
+        seen.append(type(sys.stdout).__name__)
+        return 0
+
+    monkeypatch.setattr(info, "run", waiting)
+    threads = [threading.Thread(target=main, args=(["info"],)) for _ in range(2)]
+    threads[0].start()
+    assert entered[0].wait(30)
+    threads[1].start()
+    assert entered[1].wait(30)
+    release[0].set()
+    threads[0].join(30)
+    release[1].set()
+    threads[1].join(30)
+    assert seen == ["_CheckedStdout", "_CheckedStdout"] and sys.stdout is before
 
 
 def test_a_broken_pipe_elsewhere_stays_an_internal_error(capsys, monkeypatch):

@@ -18,7 +18,7 @@ from clwave import WaveletVolume
 from clwave.device import memory
 from clwave.io.clw import MASK_CHUNK
 from clwave.io.occupancy import OccupancyGrid, mass_on_occupied
-from clwave.io.summary import approximation_occupancy, detail_energy, detail_field
+from clwave.io.summary import approximation_occupancy, detail_energy, detail_levels
 from clwave.model.wavelet import importance_of
 from clwave.raytrace import bricks, passes
 from clwave.raytrace.coarse_estimate import approximation_grid, detail_share, field_energy, line_energy, white_share
@@ -91,7 +91,7 @@ def test_the_energy_of_the_details_is_read_from_the_tiers_alone(model_file):
         importances = np.sum(importance_of(g, None, approximation.frame).astype(np.float64) ** 2)
         coefficients = np.sum(g.values.astype(np.float64) ** 2) * g.wavelet.norm_phi ** 6
         field += np.sum(voxels[:, list(g.channels)] ** 2) * step ** 3 * importances / coefficients
-    missing, unread = RayTracer.open(model_file).missing, detail_field(model_file)
+    missing, unread = RayTracer.open(model_file).missing, sum(detail_levels(model_file))
     assert abs(missing ** 2 - unread / (unread + field)) <= 0.02 * missing ** 2
 
 
@@ -284,10 +284,11 @@ def test_a_file_without_the_details_field_energy_opens_and_renders_as_before(tmp
     shutil.copy(path, old)
     with h5py.File(old, "r+") as h5:
         del h5["g0/detail_field"]
-    assert detail_field(old) is None and detail_field(path) < detail_energy(path)
+    assert detail_levels(old) is None and sum(detail_levels(path)) < detail_energy(path)
     staged = RayTracer.open(old)
     field = (1 - staged.missing ** 2) / staged.missing ** 2 * detail_energy(old)  # from missing, as it was made
-    assert RayTracer.open(path).missing ** 2 == pytest.approx(detail_field(path) / (field + detail_field(path)))
+    unread = sum(detail_levels(path))
+    assert RayTracer.open(path).missing ** 2 == pytest.approx(unread / (field + unread))
     cam = clwave.Camera(30, 20, size=64)
     for n, o in zip(coarse_figures(path, cam, monkeypatch), coarse_figures(old, cam, monkeypatch), strict=True):
         assert n["relative_rms_error"] == o["relative_rms_error"]  # the same image

@@ -514,6 +514,32 @@ def test_a_script_that_never_closes_its_viewer_ends_without_waiting_for_the_rend
     assert ended < 25
 
 
+def test_a_viewer_that_fails_to_close_at_exit_is_logged_and_the_others_closed(caplog):
+    """The exit hook closes every open viewer though one's close raises: it is logged, and the exception does not
+    leave the hook (``threading._shutdown`` catches none: it skipped the thread pools' join; review22)."""
+    from clwave.view import main_end
+
+    class Server:
+        def __init__(self, fails):
+            self.fails, self.closed = fails, False
+
+        def close(self):
+            self.closed = True
+            if self.fails:
+                raise RuntimeError("its loop is gone")
+
+    servers = [Server(True), Server(False)]
+    for server in servers:
+        main_end._open.add(server)
+    try:
+        main_end._close_open()
+    finally:
+        for server in servers:
+            main_end._open.discard(server)
+    assert all(server.closed for server in servers)
+    assert "closing the viewer" in caplog.text and "its loop is gone" in caplog.text
+
+
 @pytest.mark.parametrize("from_file", [False, True])
 def test_a_shaded_source_prepared_after_the_stop_gives_up_quietly(from_file, tmp_path):
     """The build thread's stop (threads.stop_on) reaches every step of ``prepare``: a file's coarse stage and the

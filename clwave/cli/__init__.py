@@ -7,7 +7,7 @@ code 2; an existing output file is never replaced without ``--force``.
 from __future__ import annotations
 
 import argparse
-import os
+import contextlib
 import re
 import signal
 import sys
@@ -19,7 +19,7 @@ from ..device.memory import out_of_threads
 from ..errors import ClwaveError, ClwaveWarning, InputError, OutputError
 from . import compress, drr, info, progressive, render, view
 from .checks import check_options
-from .options import warn
+from .options import silence_stdout, warn
 
 EXIT_USAGE = 2
 #: what to ask for instead when a command runs out of memory (the rendering commands: fewer pixels)
@@ -72,18 +72,46 @@ def _terminate(signum, frame):
 
 
 def main(argv=None) -> int:
-    with warnings.catch_warnings():  # clwave's warnings each one line, once a run; Python's settings restored
-        warnings.simplefilter("always", ClwaveWarning)
-        warnings.showwarning = partial(_show_warning, shown=warnings.showwarning, said=set())
+    """Run the command line ``argv`` (default ``sys.argv[1:]``); its exit code.  Threads may each run one at once
+    (:func:`_running`)."""
+    with _running():
         return _main(argv)
+
+
+_lock = threading.Lock()
+_runs = {"count": 0, "stdout": None, "warnings": None}  # the runs of main under way, and what they found
+
+
+@contextlib.contextmanager
+def _running():
+    """While a run of :func:`main` is under way in any thread: ``sys.stdout`` a :class:`_CheckedStdout` (none where
+    stdout is closed: ``>&-`` leaves ``sys.stdout`` None, which ``print`` ignores) and clwave's warnings one line
+    each, once a run; both put back when the last run ends, so that runs that overlap in threads leave neither
+    swapped (a swap a run undid itself left the other's in place)."""
+    with _lock:
+        if _runs["count"] == 0:
+            _runs["stdout"], _runs["warnings"] = sys.stdout, warnings.catch_warnings()
+            _runs["warnings"].__enter__()
+            warnings.simplefilter("always", ClwaveWarning)
+            warnings.showwarning = partial(_show_warning, shown=warnings.showwarning, said=set())
+            if sys.stdout is not None:
+                sys.stdout = _CheckedStdout(sys.stdout)
+        _runs["count"] += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            _runs["count"] -= 1
+            if _runs["count"] == 0:
+                sys.stdout = _runs["stdout"]
+                _runs["warnings"].__exit__(None, None, None)
 
 
 def _main(argv) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() \
         else None
     debug = "--debug" in (sys.argv[1:] if argv is None else argv)
-    args, stdout = None, sys.stdout
-    sys.stdout = _CheckedStdout(stdout)
+    args = None
     try:
         args = make_parser().parse_args(argv)
         check_options(args)  # before the input is opened: a mistake costs no read
@@ -112,15 +140,14 @@ def _main(argv) -> int:
               f"traceback", file=sys.stderr)
         return 1
     finally:
-        sys.stdout = stdout
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
 
 class _CheckedStdout:
     """``sys.stdout`` while a command runs: a write it cannot make (``>/dev/full``, a full disk) is one line naming
-    stdout (exit 2, before any output is published: options.finish), stdout then pointed at /dev/null so that the
-    interpreter's last flush fails no more (its exit code would be 120); a pipe whose reader left stays a
+    stdout (exit 2; a warning after the outputs are published: options.finish), stdout then pointed at /dev/null so
+    that the interpreter's last flush fails no more (its exit code would be 120); a pipe whose reader left stays a
     BrokenPipeError (exit 141, as a program the signal ended)."""
 
     def __init__(self, stream):
@@ -141,9 +168,9 @@ class _CheckedStdout:
         except BrokenPipeError:
             raise
         except OSError as exc:
-            _silence_stdout()
-            raise OutputError(f"cannot write to standard output: {exc.strerror or exc}; nothing was published "
-                              f"(point stdout at a file or a pipe that takes it)") from None
+            silence_stdout()
+            raise OutputError(f"cannot write to standard output: {exc.strerror or exc}; point stdout at a file or a "
+                              f"pipe that takes it") from None
 
 
 def _out_of_memory(args, what) -> int:
@@ -178,18 +205,8 @@ def _reader_gone() -> bool:
             return False
     except (OSError, ValueError):  # a stdout with no file descriptor (a test's capture)
         return False
-    _silence_stdout()
+    silence_stdout()
     return True
-
-
-def _silence_stdout():
-    """Point stdout's file descriptor at /dev/null (where it has one)."""
-    try:
-        null = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(null, sys.stdout.fileno())
-        os.close(null)
-    except (OSError, ValueError):  # a stdout with no file descriptor (a test's capture)
-        pass
 
 
 if __name__ == "__main__":

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -28,8 +27,7 @@ def run(args):
         start = time.perf_counter()
         wv.save(out, overwrite=args.force, quantise=quantise)
         saved = time.perf_counter() - start
-        written = outputs.readable(out)
-        size, voxels = os.stat(written).st_size, wv.n_voxels
+        size, voxels = outputs.size(out), wv.n_voxels
         raw = voxels * wv.channels * 4  # the volume the model approximates, as float32
         classified = "" if not args.tf else f", classified to {wv.channels} channels (--tf {args.tf})" \
             if args.classify == "pre" else f", the scalar kept with --tf {args.tf} to classify while ray tracing"
@@ -39,14 +37,15 @@ def run(args):
                  f"level{'s' * (wv.levels != 1)}, {kept_words(wv.kept, wv.n_voxels)}",
                  f"file                  {out}: {file_size(size)}, {raw / size:.1f}:1 against the volume as raw "
                  f"float32 ({file_size(raw)}), written in {saved:.2f} s",
-                 _error(args, wv, reference, None if quantise is None else written)]
+                 _error(args, wv, reference, None if quantise is None else outputs, out)]
         finish(outputs, [line for line in lines if line])
     return 0
 
 
-def _error(args, wv, reference, written) -> str | None:
-    """The report's line on the model's error against the volume it approximates (``written``: the file to read the
-    rounded values from, as it holds them, for a quantised model); None for a .clw input."""
+def _error(args, wv, reference, outputs, out) -> str | None:
+    """The report's line on the model's error against the volume it approximates (``outputs``: the staged outputs to
+    read the written file ``out`` back from, for a quantised model's rounded values as it holds them); None for a
+    .clw input."""
     from ..frames import root_mean_square
     from ..io.clw import read_clw
 
@@ -54,7 +53,7 @@ def _error(args, wv, reference, written) -> str | None:
         return None if is_clw(args) else ("error                 not measured: the input was read chunk by chunk (the "
                                           "error needs it whole)")
     try:
-        stored = wv if written is None else read_clw(written)
+        stored = wv if outputs is None else read_clw(outputs.readable(out))  # read by name: h5py and FileMask
         peak = float(np.max(np.abs(reference.data)))
         error = root_mean_square(stored.reconstruct().data - reference.data) / (peak or 1.0)  # squares in float64
     except MemoryError:  # the file is what was asked for; the measure needs the volume twice more

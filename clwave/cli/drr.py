@@ -126,7 +126,7 @@ def run(args):
             blank.append(i + 1)
         return transmitted(res.image[..., 0]) if args.intensity else res.image[..., 0]
 
-    with published_together() as outputs:  # written, then published after the report (coordinates.md §4)
+    with published_together() as outputs:  # written, then published before the report (coordinates.md §4)
         if out.suffix.lower() == ".png":
             res = render(0)
             image(0, res)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, CommandWords, InputError, OutputExistsError, finite_number
+from ..errors import ClwaveWarning, CommandWords, InputError, OutputError, OutputExistsError, finite_number
 from ..device.memory import check_fits
 from ..io.files import check_writable
 from ..model.wavelet import DEFAULT_LEVELS
@@ -386,12 +386,31 @@ def check_outputs(force, *outputs) -> list:
 
 
 def finish(outputs, lines):
-    """A command's last step: its report on stdout, then its ``outputs`` (:func:`~clwave.io.files.published_together`)
-    published together; a report that cannot be written publishes nothing (coordinates.md §4)."""
-    for line in lines:
-        print(line)
-    sys.stdout.flush()
+    """A command's last step: its ``outputs`` (:func:`~clwave.io.files.published_together`) published together, then
+    its report on stdout, which names only what is in place: exit 0 with the outputs published even where stdout takes
+    nothing (a full disk: a warning; a reader that left, ``| head -1``: quietly, as it chose) (coordinates.md §4)."""
     outputs.publish()
+    try:
+        for line in lines:
+            print(line)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        silence_stdout()
+    except OSError as exc:  # the OutputError of the command line's checked stdout too
+        silence_stdout()
+        why = str(exc) if isinstance(exc, OutputError) else f"cannot write to standard output: {exc.strerror or exc}"
+        warn(f"{why}; the outputs are published, the report lost")
+
+
+def silence_stdout():
+    """Point stdout's file descriptor at /dev/null (where it has one), so that the interpreter's last flush of what
+    stdout could not take fails no more (its exit code would be 120)."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError, AttributeError):  # a stdout with no file descriptor (a test's capture), or none
+        pass
 
 
 def check_frames_folder(path, force) -> Path:

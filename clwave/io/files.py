@@ -9,8 +9,10 @@ sees (errors, Ctrl-C, SIGTERM through the command line).
 
 A command's several outputs (an image, its raw values, its figures; a folder of frames) are written
 first and published together at its end (:func:`published_together`): a failure or a signal before
-then leaves none of them.  A folder is written under a temporary name beside it and renamed into
-place (a process killed by SIGKILL leaves that hidden folder).
+then leaves none of them, and a failure while they are published restores what was there (a file
+replaced with ``overwrite`` is kept under a hidden link until every output is published).  A folder is
+written under a temporary name beside it and renamed into place, or its files moved into the empty
+folder there (a process killed by SIGKILL leaves that hidden folder).
 """
 
 from __future__ import annotations
@@ -91,16 +93,21 @@ class Staging:
     def __init__(self):
         self.files, self.folders = {}, {}
 
+    def size(self, path) -> int:
+        """The size in bytes of the written, unpublished file ``path``."""
+        return os.fstat(self.files[Path(path)].file.fileno()).st_size
+
     def readable(self, path) -> str:
-        """A path to read the written, unpublished file ``path`` by (e.g. to measure it before it is published)."""
+        """A path to read the written, unpublished file ``path`` by: an unnamed file is given a hidden name for it
+        (which a process killed by SIGKILL leaves behind: only where a re-read by name cannot be avoided)."""
         return self.files[Path(path)].readable
 
     def folder(self, path, force=False, replaces=None) -> Path:
         """A temporary folder beside the folder ``path`` to write its files into (:func:`write_atomic` publishes them
-        there at once), published with the files: renamed to ``path`` where that is missing or empty, which refuses a
-        folder that another writer filled meanwhile; with ``force`` into a folder that is not empty, the files moved
-        into it one by one, and its files whose names match ``replaces`` (a regular expression) but are not among
-        them removed."""
+        there at once), published with the files: renamed to ``path`` where nothing is there, else its files moved
+        into the folder there (``path`` may be a symbolic link to it), which must be empty: one that another writer
+        filled meanwhile is refused; with ``force`` into a folder that is not empty, its files whose names match
+        ``replaces`` (a regular expression) but are not among those moved in removed."""
         path = Path(path)
         with _writing(path):
             self.folders[path] = _Folder(path, force, replaces)
@@ -110,18 +117,21 @@ class Staging:
         return any(Path(folder) == f.tmp for f in self.folders.values())
 
     def publish(self):
-        """Publish every output (files first, then folders); if one fails, those published before it are removed
-        again (a file that replaced one with ``overwrite`` stays: the old one is gone)."""
+        """Publish every output (files first, then folders); if one fails, those published before it are undone: a
+        new name removed, a file replaced with ``overwrite`` put back (files moved with ``force`` into a folder that
+        was not empty stay)."""
         done = []
         try:
             for target, item in [*self.files.items(), *self.folders.items()]:
                 with _writing(target):
-                    item.publish()
+                    item.publish(keep_old=True)
                 done.append(item)
         except BaseException:
             for item in reversed(done):
                 item.unpublish()
             raise
+        for item in done:
+            item.close()  # the replaced files' links go
 
     def discard(self):
         for item in [*self.files.values(), *self.folders.values()]:
@@ -148,7 +158,7 @@ class _Temporary:
     """A file written beside ``path``, unnamed (or under a temporary name) until :meth:`publish`."""
 
     def __init__(self, path, overwrite):
-        self.path, self.overwrite = path, overwrite
+        self.path, self.overwrite, self.old, self.replaces = path, overwrite, None, False
         fd, self.tmp = _open_unnamed(path.parent, path.suffix)
         self.file = os.fdopen(fd, "w+b")  # readable too: HDF5 reads back what it writes
 
@@ -162,54 +172,77 @@ class _Temporary:
             self.tmp = tmp
         return str(self.tmp)
 
-    def publish(self):
+    def publish(self, keep_old=False):
+        """Give the file its name; ``keep_old``: a file it replaces kept under a hidden link, for :meth:`unpublish`
+        to put back (removed by :meth:`close`)."""
+        self.replaces = self.overwrite and os.path.lexists(self.path)
+        if keep_old and self.replaces:
+            self.old = _linked_aside(self.path, f".{self.path.name}.{os.getpid()}.{self.file.fileno()}.old")
         if self.tmp is None:
             _publish_unnamed(self.file.fileno(), self.path.parent, self.path, self.overwrite)
         else:
             _publish(self.tmp, self.path, self.overwrite)
 
     def unpublish(self):
-        """Remove the published file where it took a new name (a file it replaced is gone)."""
-        if not self.overwrite:
-            with contextlib.suppress(OSError):
+        """Undo :meth:`publish`: the file it replaced put back, or the name it took removed (a file replaced on a
+        filesystem without hard links is gone: the new one stays)."""
+        with contextlib.suppress(OSError):
+            if self.old is not None:
+                os.replace(self.old, self.path)
+                self.old = None
+            elif not self.replaces:
                 os.unlink(self.path)
 
     def close(self):
         self.file.close()
-        if self.tmp is not None and os.path.exists(self.tmp):
-            os.unlink(self.tmp)
+        for name in (self.tmp, self.old):
+            if name is not None and os.path.lexists(name):
+                os.unlink(name)
+        self.old = None
 
 
 class _Folder:
     """A folder of files written under a temporary name beside ``path`` (:meth:`Staging.folder`)."""
 
     def __init__(self, path, force, replaces):
-        self.path, self.force, self.replaces, self.renamed = path, force, replaces, False
+        self.path, self.force, self.replaces, self.renamed, self.moved = path, force, replaces, None, []
         self.tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
 
-    def publish(self):
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(self.tmp, 0o777 & ~umask)  # mkdtemp makes 0700; give the folder the usual permissions
-        try:
-            os.rename(self.tmp, self.path)  # a new name, or over an empty folder: never into a filled one
-            self.renamed = True
-            return
-        except OSError as exc:
-            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+    def publish(self, keep_old=False):
+        """Rename the folder to its path where nothing is there; else move its files into the folder there (its
+        owner, mode and ACL kept; ``path`` a symbolic link to it too), which must be empty without ``force``."""
+        target = Path(os.path.realpath(self.path))
+        if not os.path.lexists(target):
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(self.tmp, 0o777 & ~umask)  # mkdtemp makes 0700; give the folder the usual permissions
+            try:
+                os.rename(self.tmp, target)
+            except OSError as exc:
+                if exc.errno in (errno.ENOTEMPTY, errno.EEXIST):  # made and filled meanwhile: another writer's
+                    raise FileExistsError(self.path) from None
                 raise
-            if not self.force:  # filled since the command checked it: another writer's
-                raise FileExistsError(self.path) from None
+            self.renamed = target
+            return
+        if not target.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))
+        if not self.force and any(target.iterdir()):  # filled since the command checked it: another writer's
+            raise FileExistsError(self.path)
         names = {f.name for f in self.tmp.iterdir()}
         for name in sorted(names):
-            os.replace(self.tmp / name, self.path / name)
-        for old in self.path.iterdir():  # an earlier run's files of the kind written: the folder holds these alone
+            _publish(self.tmp / name, target / name, self.force)  # without force, a name taken meanwhile refused
+            self.moved.append(target / name)
+        for old in target.iterdir():  # an earlier run's files of the kind written: the folder holds these alone
             if self.replaces and re.fullmatch(self.replaces, old.name) and old.name not in names:
                 old.unlink()
 
     def unpublish(self):
-        if self.renamed:
-            os.rename(self.path, self.tmp)
+        if self.renamed is not None:
+            os.rename(self.renamed, self.tmp)
+        elif not self.force:
+            for path in self.moved:
+                with contextlib.suppress(OSError):
+                    os.unlink(path)
 
     def close(self):
         shutil.rmtree(self.tmp, ignore_errors=True)
@@ -256,7 +289,27 @@ def _publish_unnamed(fd, folder, path, overwrite):
     target = path if not overwrite else Path(folder, f".{path.name}.{os.getpid()}.{fd}.tmp")
     _link_unnamed(fd, target)
     if overwrite:
-        os.replace(target, path)
+        try:
+            os.replace(target, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(target)
+            raise
+
+
+def _linked_aside(path, name) -> Path | None:
+    """A hard link ``name`` beside ``path`` to the file (or symbolic link) there, to put it back by; None where
+    there is none, or the filesystem has no hard links."""
+    aside = path.parent / name
+    try:
+        os.link(path, aside, follow_symlinks=False)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        if exc.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOSYS):
+            raise
+        return None
+    return aside
 
 
 def _link_unnamed(fd, target):

@@ -30,18 +30,9 @@ def detail_energy(path) -> float:
     return energy
 
 
-def detail_field(path, tiered=None) -> float | None:
-    """The energy of a ``.clw`` file's stored details as the staged tracer counts it: the tiers' importance energy
-    (``tiered``, :func:`detail_energy`'s, read where not given) with the coarsest level's replaced by its field
-    energy, both written with the file (:mod:`.detail_field`); None where a group lacks that figure (a file written
-    before it).  :func:`detail_levels`' two parts summed."""
-    levels = detail_levels(path, tiered)
-    return None if levels is None else sum(levels)
-
-
 def detail_levels(path, tiered=None) -> tuple | None:
     """A ``.clw`` file's stored details' energy in two parts: the coarsest level's field energy and the finer levels'
-    importance energy (the tiers' less the coarsest level's as they count it; :func:`detail_field`); None where a
+    importance energy (the tiers' less the coarsest level's as they count it); None where a
     group lacks the figure (a file written before it)."""
     energy = detail_energy(path) if tiered is None else tiered
     # the figures count the coarsest level from the run table's own tiers (:mod:`.detail_field`): together at most

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import atexit
 import concurrent.futures.thread  # noqa: F401  (its join registered before the close below, which then runs first)
+import logging
 import threading
 import weakref
 
@@ -34,5 +35,10 @@ def close_at_exit(server) -> None:
 
 
 def _close_open() -> None:
+    """Close each open viewer; one that fails to close is logged and the others closed: an exception here would end
+    ``threading._shutdown``, which catches none, before its join of the thread pools."""
     for server in list(_open):
-        server.close()
+        try:
+            server.close()
+        except Exception:
+            logging.getLogger(__name__).exception("clwave: closing the viewer %r at exit failed", server)

