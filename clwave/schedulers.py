@@ -110,13 +110,23 @@ def stream(client, tasks, *, desc, progress_bar=None):
     at every run (docs/chunked.md §5).  They are submitted together, so that what they share (a chunk read once,
     feeding its neighbours' halos) is computed once; results that finish before their turn wait for it, unbounded:
     Dask runs a transform's wavefront of halos some slabs ahead, and a slow early block (or one run again after its
-    worker died) holds every later result (known-gaps.md)."""
+    worker died) holds every later result (known-gaps.md).  A failed task is raised as soon as it fails."""
     with warnings.catch_warnings():  # a volume of thousands of blocks makes a graph of some MB: expected
         warnings.filterwarnings("ignore", message="Sending large graph")
         futures = client.compute(list(tasks))
+    from distributed import as_completed
+
+    places = {}  # a task's key -> its places in ``tasks`` (one graph may name a task twice)
+    for i, future in enumerate(futures):
+        places.setdefault(future.key, []).append(i)
+    held, turn = {}, 0
     with progress(total=len(futures), desc=desc, enabled=progress_bar) as bar:
-        for future in futures:
-            result = future.result()
+        # taken as they finish, so that a failed task (KilledWorker: every worker died) is raised at once; waiting
+        # on the next in order instead could wait for ever on a task no worker is left to run
+        for future, result in as_completed(futures, with_results=True):
+            held.update((i, result) for i in places[future.key])
             future.release()
-            bar.update(1)
-            yield result
+            while turn in held:
+                bar.update(1)
+                yield held.pop(turn)
+                turn += 1

@@ -419,7 +419,8 @@ class _DiesInAWorker:
 def test_workers_that_die_end_the_work_in_one_line(rng, tmp_path, capfd):
     """Every worker that takes a task dies (Dask gives up after four): a WorkerLostError line naming fewer workers
     and smaller chunks, the command line's words too, and no .clw (was: distributed's KilledWorker, which the command
-    line called an internal error, a bug of clwave)."""
+    line called an internal error, a bug of clwave; then, results waited for in block order, a wait for ever on a
+    block no worker was left to run, two runs in three)."""
     from clwave.errors import WorkerLostError
 
     data = da.from_array(_DiesInAWorker(rng.random((16, 18, 20), dtype=np.float32)), chunks=8,
