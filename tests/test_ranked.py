@@ -13,7 +13,7 @@ import scipy.ndimage
 import clwave
 from clwave.model import ranking
 from clwave.model.ranking import by_importance
-from clwave.splat import ranked, renderer
+from clwave.splat import accumulator, ranked
 from clwave.splat.ranked import ENERGY_STEP, on_device, ranked_groups
 from clwave.view.prefix import prefix_first
 
@@ -114,7 +114,7 @@ def test_a_renderers_passes_hold_at_most_pass_rows(cc, wv, monkeypatch):
     cases = [(wv, clwave.Camera(30, 20, 32), None), (smooth, cone, 2e-2)]
     for model, camera, coarse in cases:
         one = clwave.SplatRenderer(model, device=cc, coarse=coarse).render(camera)
-        monkeypatch.setattr(renderer, "PASS_ROWS", 1000)
+        monkeypatch.setattr(accumulator, "PASS_ROWS", 1000)  # the passes' and their buffers' one home
         r = clwave.SplatRenderer(model, device=cc, coarse=coarse)
         passes = r.render(camera)
         monkeypatch.undo()

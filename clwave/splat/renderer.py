@@ -25,7 +25,8 @@ from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera, resolve_view, view_record
 from ..model.wavelet import WaveletVolume, check_model
-from .accumulator import PASS_ROWS, Accumulator
+from . import accumulator
+from .accumulator import Accumulator
 from .coarse import Layer, footprint_scales, layer_factors
 from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_table_bytes, tile_list_bytes
@@ -249,7 +250,7 @@ class SplatRenderer:
         if chunk is None and self._resident is None:
             self._resident = [on_device(self.cc, g["table"]) for g in self.groups]
         if self._work is None:
-            n = max(chunk or min(max(g["count"] for g in self.groups), PASS_ROWS), 1)
+            n = max(chunk or min(max(g["count"] for g in self.groups), accumulator.PASS_ROWS), 1)
             self._work = dict(centre=cla.empty(q, (n, centre), np.float32), bbox=cla.empty(q, (n, 4), np.int32),
                               stex=cla.empty(q, (n,), np.int32), counts=cla.empty(q, (n,), np.uint32))
             if chunk is not None:
@@ -268,7 +269,8 @@ class SplatRenderer:
                     for t in tables)
         free = b.total - fixed - tile_list_bytes(b) - bin_table_bytes(runs, b)
         splat_bytes = CONE_SPLAT_BYTES if isinstance(tables[0], ConeTables) else SPLAT_BYTES
-        if COEFFICIENT_BYTES * sum(counts) + splat_bytes * min(most, PASS_ROWS) <= free and 16 * most <= b.max_alloc:
+        rows = min(most, accumulator.PASS_ROWS)
+        if COEFFICIENT_BYTES * sum(counts) + splat_bytes * rows <= free and 16 * most <= b.max_alloc:
             return None
         chunk = min(free // (COEFFICIENT_BYTES + splat_bytes), b.max_alloc // 16, most)
         if chunk >= least and tile_list_bytes(b) >= one_splat:
