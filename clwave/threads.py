@@ -40,7 +40,7 @@ def checkpoint(abandon=None) -> None:
 def one_at_a_time(method):
     """``method`` run under its object's ``lock``, a renderer's device's (``ComputeContext.lock``): renderers used
     from several threads at once render one view at a time on a device, each call waiting for the one under way
-    (their kernels and a renderer's buffers are shared; docs/coordinates.md §4)."""
+    (a renderer's buffers and pyopencl's own array kernels are shared; docs/coordinates.md §4)."""
     @wraps(method)
     def locked(self, *args, **kwargs):
         with self.lock:

@@ -188,8 +188,9 @@ class ComputeContext:
         self.ctx = cl.Context([self.device])
         self.queue = cl.CommandQueue(self.ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self.programs = MadeOnce()
-        # held by a render on this device (threads.one_at_a_time): its kernels and a renderer's buffers are shared
-        # by every view (two renderers in two threads crashed or gave wrong images until api22)
+        # held by a render on this device (threads.one_at_a_time): a renderer's buffers are shared by its views, and
+        # pyopencl's own array kernels (a pass's sum) by every thread (two renderers in two threads crashed or gave
+        # wrong images until api22; each thread's kernels of clwave's programs are its own since thread22)
         self.lock = threading.RLock()
         # held by each call of a generated kernel (generated) and pyopencl's take: their kernel objects are shared by
         # every thread, and a launch sets the arguments one call at a time, which another thread's launch could
