@@ -63,6 +63,7 @@ class ViewState:
     # shaded.transfer_function
     tf: tuple | TransferFunction | None = None
     colour_map: str = "grey"  # X-ray, scalar model: one of colours.NAMES
+    fov: float | None = None  # a perspective camera's vertical field of view, degrees; None: orthographic
 
 
 @dataclass
@@ -111,10 +112,14 @@ class Source:
         H, W = self.size
         self.base_extent = Camera(0.0, 0.0, self.size).view(wv).pixel * W  # zoom 1: the content fills the image
 
-    def camera(self, state: ViewState, scale=1.0) -> Camera:
+    def camera(self, state: ViewState, scale=1.0, size=None) -> Camera:
+        """The camera of ``state`` at ``scale`` of the image size (or at ``size`` (H, W), the same world width): its
+        extent the content's at zoom 1 over the zoom; in perspective the eye twice that from the target (Camera's
+        default), so that the zoom moves the eye and the framing is about the orthographic one at 30 degrees."""
         H, W = self.size
-        size = (max(8, round(H * scale)), max(8, round(W * scale)))
-        return Camera(state.azimuth, state.elevation, size, extent=self.base_extent / state.zoom)
+        size = size or (max(8, round(H * scale)), max(8, round(W * scale)))
+        perspective = {} if state.fov is None else dict(perspective=True, fov=state.fov)
+        return Camera(state.azimuth, state.elevation, size, extent=self.base_extent / state.zoom, **perspective)
 
     def pacing(self):
         """A tab's pacing state of this source's frames (passed to :meth:`frames`)."""
@@ -130,7 +135,7 @@ class Source:
         data, mime = encode(picture, lossless)
         return Frame(data, mime, dict(figures, mode=self.mode, seq=state.seq, height=picture.shape[0],
                                       width=picture.shape[1], azimuth=state.azimuth, elevation=state.elevation,
-                                      extent=self.base_extent / state.zoom,
+                                      extent=self.base_extent / state.zoom, fov=state.fov,
                                       encode_seconds=time.perf_counter() - encode_start,
                                       elapsed=time.perf_counter() - start))
 
@@ -185,7 +190,7 @@ class XraySource(Source):
         total = r.count
         limit = min(total, max(1, round(state.detail * total)))  # 0 for a model without coefficients
         window = state.window or self.auto_window
-        here = (state.azimuth, state.elevation, state.zoom)
+        here = (state.azimuth, state.elevation, state.zoom, state.fov)
         # a drag frame while moving, and first for a still view the page has no drag frame of (a page's first, a
         # reset): a smaller image of a prefix, with the footprints of the bands it reaches only
         if state.moving or here != pace.dragged:
