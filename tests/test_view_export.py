@@ -4,6 +4,7 @@ are sent.  The page's buttons in a real browser: tests/test_view_browser.py."""
 
 import asyncio
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -126,7 +127,10 @@ def test_a_shaded_perspective_view_through_an_edited_function_as_a_command_and_p
         start_figures, start_frame = final_frame(v, start)
         grey_page, grey_saved = exported(v, start, (32, 40))
     command_text = page["command"]
-    assert "--perspective --fov 40.0 --distance" in command_text and "--tf view-tf.json" in command_text
+    # the lens zoomed 1.3 times: tan(fov / 2) 1.3 times less than at 40 degrees, the eye where 40 degrees frame zoom 1
+    fov = float(re.search(r"--perspective --fov (\S+) --distance", command_text).group(1))
+    assert np.tan(np.radians(fov) / 2) * 1.3 == pytest.approx(np.tan(np.radians(40.0) / 2), rel=1e-12)
+    assert "--tf view-tf.json" in command_text
     assert "--tolerance 0.02" in command_text and "--background 0.25,0.25,0.25" in command_text
     got = shell(command_text, tmp_path / "page")
     assert figures["final"] and got.std() > 5 and np.array_equal(got, frame) and np.array_equal(got, saved)
@@ -213,3 +217,22 @@ def test_the_routes_check_what_they_are_sent(monkeypatch):
         monkeypatch.setattr(export, "SAVE_PIXEL_BYTES", 1 << 50)
         status, line = post(v, "image", good)
         assert status == 507 and line.startswith(b"saving a 8x8 image needs about")
+
+
+def test_a_perspective_view_zooms_its_lens_and_keeps_its_eye():
+    """In perspective the wheel narrows the field of view (tan of its half over the zoom) and the eye stays where the
+    field of view frames the target's plane as the orthographic zoom 1 does: the target plane's pixel is the
+    orthographic one at every zoom, and the eye is never brought into the content."""
+    from clwave.view.frames import Source, ViewState
+
+    vol = clwave.phantom("hydrogen", n=16)
+    source = Source(vol, (24, 32))
+    state = ViewState(seq=1, azimuth=20.0, elevation=10.0, zoom=1.0, mode="xray", detail=1.0, window=None,
+                      moving=False, background=0.0, shading=True, fov=30.0)
+    views = {zoom: source.camera(ViewState(**dict(state.__dict__, zoom=zoom))).view(vol) for zoom in (1.0, 4.0, 50.0)}
+    flat = {zoom: source.camera(ViewState(**dict(state.__dict__, zoom=zoom, fov=None))).view(vol) for zoom in views}
+    for zoom, v in views.items():
+        assert np.array_equal(v.eye, views[1.0].eye) and v.perspective
+        assert v.slope[0] * np.linalg.norm(v.eye - v.target) == pytest.approx(flat[zoom].pixel, rel=1e-12)
+    radius = np.linalg.norm(np.array(vol.shape) * vol.spacing) / 2
+    assert np.linalg.norm(views[1.0].eye - views[1.0].target) > 3 * radius

@@ -171,8 +171,8 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
             tokens += ["--classify", "post"]
     cam = spec.camera
     tokens += [*_token("--azimuth", cam.azimuth), *_token("--elevation", cam.elevation)]
-    if cam.perspective:  # the eye at twice the extent from the target, as the viewer's camera puts it
-        tokens += ["--perspective", "--fov", _number(cam.fov), "--distance", _number(2.0 * cam.extent)]
+    if cam.perspective:
+        tokens += ["--perspective", "--fov", _number(cam.fov), "--distance", _number(cam.distance)]
     else:
         tokens += ["--extent", _number(cam.extent)]
     tokens += ["--size", f"{cam.size[0]}x{cam.size[1]}"]
@@ -198,7 +198,7 @@ def python(origin: Origin, spec: Spec, output=OUTPUT) -> str:
     ``clwave.raytrace`` with the view's arguments, and the picture saved."""
     lines = ["import clwave", ""] + _model(origin, spec)
     cam = spec.camera
-    framing = f"perspective=True, fov={_number(cam.fov)}, distance={_number(2.0 * cam.extent)}" if cam.perspective \
+    framing = f"perspective=True, fov={_number(cam.fov)}, distance={_number(cam.distance)}" if cam.perspective \
         else f"extent={_number(cam.extent)}"
     lines.append(f"camera = clwave.Camera(azimuth={_number(cam.azimuth)}, elevation={_number(cam.elevation)}, "
                  f"size={tuple(cam.size)!r}, {framing})")

@@ -10,6 +10,7 @@ and render-time transfer functions plug in: a source declares what it can act on
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -113,13 +114,18 @@ class Source:
         self.base_extent = Camera(0.0, 0.0, self.size).view(wv).pixel * W  # zoom 1: the content fills the image
 
     def camera(self, state: ViewState, scale=1.0, size=None) -> Camera:
-        """The camera of ``state`` at ``scale`` of the image size (or at ``size`` (H, W), the same world width): its
-        extent the content's at zoom 1 over the zoom; in perspective the eye twice that from the target (Camera's
-        default), so that the zoom moves the eye and the framing is about the orthographic one at 30 degrees."""
+        """The camera of ``state`` at ``scale`` of the image size (or at ``size`` (H, W), the same view): its extent
+        the content's at zoom 1 over the zoom.  In perspective the eye is where the field of view ``fov`` frames the
+        target's plane as zoom 1 does, and stays there: the zoom narrows the field of view (a lens), so the eye never
+        enters the content (splatting refuses an eye within its basis functions' reach) below about 90 degrees."""
         H, W = self.size
         size = size or (max(8, round(H * scale)), max(8, round(W * scale)))
-        perspective = {} if state.fov is None else dict(perspective=True, fov=state.fov)
-        return Camera(state.azimuth, state.elevation, size, extent=self.base_extent / state.zoom, **perspective)
+        if state.fov is None:
+            return Camera(state.azimuth, state.elevation, size, extent=self.base_extent / state.zoom)
+        half = math.tan(math.radians(state.fov) / 2.0)
+        fov = state.fov if state.zoom == 1.0 else math.degrees(2.0 * math.atan(half / state.zoom))  # 30, not 30.000…4
+        return Camera(state.azimuth, state.elevation, size, perspective=True, fov=fov,
+                      distance=self.base_extent * H / W / (2.0 * half))
 
     def pacing(self):
         """A tab's pacing state of this source's frames (passed to :meth:`frames`)."""

@@ -500,7 +500,7 @@
   });
   $("tf-colour").addEventListener("change", () => { commit(); if (tf.base.points) { state.moving = false; request(); } });
 
-  // ---------------------------------------------------------------- perspective: the eye at twice the image's width
+  // ---------------------------------------------------------------- perspective (the server places the eye, frames.py)
   function showFov() { $("fov-out").textContent = `${$("fov").value}°`; }
   $("perspective").addEventListener("change", (ev) => {
     $("fov").disabled = !ev.target.checked;
