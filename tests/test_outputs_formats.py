@@ -312,3 +312,48 @@ def test_the_api_refuses_options_a_file_does_not_hold():
         xray.save("x.png", unit="inch")
     with pytest.raises(InputError, match=r"^background='transparent' is for a shaded image"):
         xray.picture(background="transparent")
+
+
+def test_the_world_unit_of_an_input(tmp_path, nifti, rng):
+    """``loaders.world_unit``: DICOM's mm; a NIfTI's xyzt_units (unknown taken as mm, as NIfTI readers do; micron
+    um); a NRRD's space units, else mm where it names a space, else none; none for a .npy. A .clw records none: its
+    render has no pHYs (known-gaps.md §15)."""
+    import nibabel
+    import nrrd
+
+    from clwave.io.loaders import world_unit
+    from test_loaders import write_series
+
+    assert world_unit(nifti) == "mm"
+    image = nibabel.load(nifti)
+    image.header.set_xyzt_units("micron")
+    nibabel.save(image, tmp_path / "um.nii")
+    data = np.zeros((4, 5, 6), np.float32)
+    nrrd.write(str(tmp_path / "lps.nrrd"), data, {"space": "left-posterior-superior", "space directions": np.eye(3)})
+    nrrd.write(str(tmp_path / "um.nrrd"), data, {"space": "left-posterior-superior", "space directions": np.eye(3),
+                                                 "space units": ["um", "um", "um"]})
+    nrrd.write(str(tmp_path / "plain.nrrd"), data, {"spacings": [1.0, 1.0, 1.0]})
+    np.save(tmp_path / "v.npy", data)
+    (tmp_path / "ct").mkdir()
+    write_series(tmp_path / "ct", rng, [(-20.0, 30.0, z) for z in (0, 1, 2)], "1.2.3", ["a", "b", "c"])
+    assert [world_unit(tmp_path / name) for name in ("um.nii", "lps.nrrd", "um.nrrd", "plain.nrrd", "v.npy", "ct")] \
+        == ["um", "mm", "um", None, None, "mm"]
+    assert main(["compress", str(nifti), "--levels", "1", "-o", str(tmp_path / "m.clw")]) == 0
+    assert main(["render", str(tmp_path / "m.clw"), "--size", "8", "-o", str(tmp_path / "m.png")]) == 0
+    assert b"pHYs" not in chunk_types(decode_png(tmp_path / "m.png")[0])
+
+
+@pytest.mark.parametrize("channels", [2, 3, 4])
+def test_a_tiff_of_several_xray_channels(tmp_path, channels):
+    """An X-ray of 3 channels is a float RGB TIFF, of 2 or 4 grey with extra samples (not alpha): every value as
+    rendered, read back by tifffile."""
+    import tifffile
+
+    image = np.random.default_rng(channels).random((3, 5, channels)).astype(np.float32)
+    RenderResult(image, dict(mode="xray", pixel=0.5)).save(tmp_path / "x.tif")
+    with tifffile.TiffFile(tmp_path / "x.tif") as t:
+        page = t.pages[0]
+        np.testing.assert_array_equal(page.asarray(), image)
+        assert page.photometric == (tifffile.PHOTOMETRIC.RGB if channels == 3 else tifffile.PHOTOMETRIC.MINISBLACK)
+        assert page.extrasamples == (() if channels == 3 else (tifffile.EXTRASAMPLE.UNSPECIFIED,) * (channels - 1))
+        assert page.tags["XResolution"].value == (2, 1) and page.tags["ResolutionUnit"].value == 1
