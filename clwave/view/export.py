@@ -154,7 +154,9 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
                 "view of it")
     clw = origin.input.lower().endswith(".clw")
     scalar_tf = spec.mode == "shaded" and spec.tf is not None
-    before, tokens, notes = [], ["clwave", "render", origin.input], []
+    # an input whose name begins with "-" (a relative path: an absolute one begins with "/") is not an option
+    source = f"./{origin.input}" if origin.input.startswith("-") else origin.input
+    before, tokens, notes = [], ["clwave", "render", source], []
     for dest, flag, value in origin.options:
         # a scalar model's shaded view: the tab's function in place of the one given; an X-ray of a .clw: none
         if dest in TF_OPTIONS and (scalar_tf or clw):
@@ -304,7 +306,9 @@ async def serve(server, request, *, image: bool):
 
     server.check_origin(request)
     try:
-        state, size = parse_export(await request.text(), tuple(server.sources))
+        # JSON is UTF-8 (RFC 8259), whatever charset the request names: request.text() decodes by that name, and
+        # raised (500, a traceback logged) for bytes that are not in it or a charset Python does not know
+        state, size = parse_export((await request.read()).decode("utf-8", "replace"), tuple(server.sources))
     except Refused as exc:
         raise web.HTTPBadRequest(text=f"{exc}\n") from None
 
