@@ -60,12 +60,26 @@ def test_a_hostile_input_name_and_function_name_make_a_command_that_runs_as_writ
     assert got.std() > 5 and np.array_equal(decode((where / "python.png").read_bytes()), got)
 
 
-def test_a_request_body_not_in_utf8_is_one_line_and_odd_values_are_refused(caplog):
+def test_a_request_body_not_in_utf8_is_one_line_and_odd_values_are_refused(caplog, monkeypatch):
     """``POST /image`` and ``/export`` read their body as UTF-8 JSON whatever charset the request names: bytes that
     are not UTF-8, or a charset Python does not know, are a 400 of one line (until the nineteenth session a 500, its
     traceback logged, from aiohttp's ``request.text()``). Held: NaN, Infinity, a number of 3,000 digits, 2,000 nested
     arrays, a repeated key (the last one read), a forged Host or a null Origin are one line each (400 or 403), the
-    server logs no traceback and goes on serving."""
+    server logs no traceback and goes on serving. A saved picture is encoded off the event loop's thread (until the
+    nineteenth session on it: every tab's socket held while a 4096² PNG was encoded) and off the render thread."""
+    import threading
+
+    from clwave.view import frames
+
+    encoded_on = []
+
+    def encode(picture, lossless):
+        if picture.shape[:2] == (8, 24):  # the saved picture's (the server's own frames are square)
+            encoded_on.append(threading.current_thread().name)
+        return real(picture, lossless)
+
+    real = frames.encode
+    monkeypatch.setattr(frames, "encode", encode)
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.5)
     good = json.dumps(dict(view=dict(BASE, seq=1), size=[8, 8]))
     view_text = json.dumps(dict(BASE, seq=1))
@@ -88,8 +102,11 @@ def test_a_request_body_not_in_utf8_is_one_line_and_odd_values_are_refused(caplo
                         return r.status, await r.read()
             status, line = asyncio.run(go())
             assert status in (400, 403) and line.decode().count("\n") == 1, (name, status, line)
-        status, png = post(v, "image", good, {"Content-Type": "text/plain; charset=x-unknown"})
+        status, png = post(v, "image", good.replace("[8, 8]", "[8, 24]"),
+                           {"Content-Type": "text/plain; charset=x-unknown"})
         assert status == 200 and png.startswith(b"\x89PNG")
+        loop_thread = v._background.thread.name
+    assert len(encoded_on) == 1 and encoded_on[0] != loop_thread and not encoded_on[0].startswith("clwave-view")
     assert not [r for r in caplog.records if r.exc_info or r.levelno >= logging.ERROR]
 
 

@@ -297,11 +297,13 @@ async def serve(server, request, *, image: bool):
     507 too large for memory, 429 a save under way)."""
     import asyncio
     import contextlib
+    from functools import partial
 
     from aiohttp import web
 
     from ..device.memory import HostMemoryError
     from ..errors import ClwaveError, DeviceMemoryError
+    from .frames import encode
     from .protocol import Refused, parse_export
 
     server.check_origin(request)
@@ -321,9 +323,12 @@ async def serve(server, request, *, image: bool):
 
     if image and server.saving.locked():
         raise web.HTTPTooManyRequests(text="an image is being saved already: save again once it has come\n")
+    loop = asyncio.get_running_loop()
     try:
         async with server.saving if image else contextlib.nullcontext():
-            done = await asyncio.get_running_loop().run_in_executor(server.pool, work)
+            done = await loop.run_in_executor(server.pool, work)
+            if image:  # encoded off the event loop (every tab's socket: docs/viewer.md §5) and the render thread
+                done = await loop.run_in_executor(None, partial(encode, done, lossless=True))
     except Unavailable as exc:
         raise web.HTTPConflict(text=f"{exc}\n") from None
     except (HostMemoryError, DeviceMemoryError) as exc:
@@ -334,8 +339,6 @@ async def serve(server, request, *, image: bool):
         raise web.HTTPServiceUnavailable(text="the viewer is stopping\n") from None
     if not image:
         return web.json_response(done)
-    from .frames import encode
-
     H, W = size
-    return web.Response(body=encode(done, lossless=True)[0], content_type="image/png",
+    return web.Response(body=done[0], content_type="image/png",
                         headers={"Content-Disposition": f'attachment; filename="clwave-view-{H}x{W}.png"'})
