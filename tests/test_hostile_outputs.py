@@ -110,6 +110,22 @@ def test_a_request_body_not_in_utf8_is_one_line_and_odd_values_are_refused(caplo
     assert not [r for r in caplog.records if r.exc_info or r.levelno >= logging.ERROR]
 
 
+def test_a_shaded_save_asked_before_any_tab_looked_makes_its_tracer():
+    """``POST /image`` of a shaded view from a script, no tab ever having shown one: 409 while the tracer is made,
+    then the picture (until the nineteenth session nothing started the tracer but a tab: 409 for ever)."""
+    import time
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.5)
+    body = dict(view=dict(BASE, seq=1, mode="shaded"), size=[8, 8])
+    with view(wv, size=16) as v:
+        deadline, statuses = time.monotonic() + 120, []
+        while not statuses or statuses[-1] == 409 and time.monotonic() < deadline:
+            status, data = post(v, "image", body)
+            statuses.append(status)
+            time.sleep(0.2)
+    assert set(statuses[:-1]) <= {409} and statuses[-1] == 200 and decode(data).shape == (8, 8, 3)
+
+
 @pytest.mark.parametrize("pixel", [0.0, 5e-324, float("nan"), float("inf"), -1.0, 1e-30, 1e30])
 def test_a_pixel_size_that_no_tag_holds_writes_no_tag(tmp_path, pixel):
     """A pixel of 0, NaN, a denormal, infinite, negative, or too small or large for the tags' 32 bits: the picture

@@ -325,6 +325,10 @@ async def serve(server, request, *, image: bool):
         raise web.HTTPTooManyRequests(text="an image is being saved already: save again once it has come\n")
     loop = asyncio.get_running_loop()
     try:
+        if state.mode == "shaded":  # its tracer made for a request before any tab's shaded view (a script's)
+            building = server.prepared(server.sources["shaded"])
+            if building.done() and not building.cancelled() and isinstance(building.exception(), ClwaveError):
+                raise building.exception()
         async with server.saving if image else contextlib.nullcontext():
             done = await loop.run_in_executor(server.pool, work)
             if image:  # encoded off the event loop (every tab's socket: docs/viewer.md §5) and the render thread
