@@ -55,9 +55,33 @@ def test_a_hostile_input_name_and_function_name_make_a_command_that_runs_as_writ
     written = clwave.TransferFunction.from_dict(json.loads((where / "view-tf.json").read_text()))
     assert written == tf and written.name == tf.name
     monkeypatch.chdir(where)
-    code = python(origin, spec).replace("'view.png'", "'python.png'")
-    exec(compile(code, "<the viewer's Python>", "exec"), {})
+    exec(compile(python(origin, spec, output="python.png"), "<the viewer's Python>", "exec"), {})
     assert got.std() > 5 and np.array_equal(decode((where / "python.png").read_bytes()), got)
+
+
+def test_options_given_as_zero_go_into_the_command_and_the_python(tmp_path, monkeypatch):
+    """``clwave view f.nii --nan 0 --threshold 0``: both are the command's and the Python's (until the nineteenth
+    session ``Origin.of_args`` left out every option whose value was 0, for 0 == False: the command refused the
+    volume's NaN voxel, and would have kept 5 % of the coefficients), which render one picture bit for bit."""
+    import nibabel
+
+    from clwave.cli import main, make_parser
+
+    volume = np.asarray(clwave.phantom("hydrogen", n=12).data, np.float32)
+    volume[0, 0, 0] = np.nan
+    nibabel.save(nibabel.Nifti1Image(volume, np.eye(4)), tmp_path / "f.nii")
+    origin = Origin.of_args(make_parser().parse_args(["view", str(tmp_path / "f.nii"), "--nan", "0", "--threshold",
+                                                      "0", "--levels", "1"]))
+    assert {dest: value for dest, _, value in origin.options} == dict(nan=0.0, threshold=0.0, levels=1)
+    camera = clwave.Camera(30.0, 20.0, (16, 16), extent=20.0)
+    spec = Spec("xray", camera, window=(0.0, 5.0), levels=1)
+    words = shlex.split(command(origin, spec))
+    assert "--nan" in words and "--threshold" in words
+    monkeypatch.chdir(tmp_path)
+    assert main(words[1:]) == 0
+    got = decode((tmp_path / "view.png").read_bytes())
+    exec(compile(python(origin, spec, output="python.png"), "<the viewer's Python>", "exec"), {})
+    assert got.std() > 5 and np.array_equal(decode((tmp_path / "python.png").read_bytes()), got)
 
 
 def test_a_request_body_not_in_utf8_is_one_line_and_odd_values_are_refused(caplog, monkeypatch):
