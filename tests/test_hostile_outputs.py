@@ -59,6 +59,22 @@ def test_a_hostile_input_name_and_function_name_make_a_command_that_runs_as_writ
     assert got.std() > 5 and np.array_equal(decode((where / "python.png").read_bytes()), got)
 
 
+def test_an_input_name_that_is_not_utf8_is_its_bytes_in_the_command():
+    """A file name that is no UTF-8 (Python's surrogate escapes): the command is UTF-8 text, as the page and the
+    clipboard carry it, and bash reads the name's own bytes from it (``$'\\xff...'``; until the nineteenth session
+    the page's text had U+FFFD in its place, another name); the Python's ``repr`` is ASCII and names the same bytes."""
+    import os
+
+    name = os.fsdecode(b"\xff\xfe-x y\n$(touch pwned).clw")
+    spec = Spec("xray", clwave.Camera(30.0, 20.0, 16, extent=10.0), window=(0.0, 1.0))
+    line = command(Origin(name), spec)
+    line.encode("utf-8")
+    said = subprocess.run(["bash", "-c", f"set -- {line}; printf %s \"$3\""], capture_output=True, timeout=60)
+    assert said.returncode == 0 and said.stdout == os.fsencode(name)
+    code = python(Origin(name), spec)
+    assert code.isascii() and f"clwave.WaveletVolume.open({name!r})" in code
+
+
 def test_options_given_as_zero_go_into_the_command_and_the_python(tmp_path, monkeypatch):
     """``clwave view f.nii --nan 0 --threshold 0``: both are the command's and the Python's (until the nineteenth
     session ``Origin.of_args`` left out every option whose value was 0, for 0 == False: the command refused the

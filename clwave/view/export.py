@@ -12,6 +12,7 @@ viewer's :class:`~clwave.SplatRenderer`, the viewer's :class:`~clwave.RayTracer`
 from __future__ import annotations
 
 import json
+import os
 import shlex
 from dataclasses import dataclass
 
@@ -192,7 +193,17 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
         if spec.background:
             tokens += ["--background", ",".join([_number(spec.background)] * 3)]
     tokens += ["-o", output]
-    return "\n".join(notes + before + [shlex.join(tokens)])
+    return "\n".join(notes + before + [" ".join(map(_shell_word, tokens))])
+
+
+def _shell_word(text: str) -> str:
+    """``text`` as one shell word: ``shlex.quote``, or where it is no UTF-8 (a file name that is not, surrogate-escaped
+    by Python, which a page's text would carry as U+FFFD) bash's ``$'\\xHH...'`` of its bytes."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return "$'" + "".join(f"\\x{byte:02x}" for byte in os.fsencode(text)) + "'"
+    return shlex.quote(text)
 
 
 # ---------------------------------------------------------------------------------------------------- the Python
