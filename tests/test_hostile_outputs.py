@@ -190,6 +190,27 @@ def test_a_pixel_size_that_no_tag_holds_writes_no_tag(tmp_path, pixel):
         assert tif.pages[0].tags["XResolution"].value == (20, 1)
 
 
+@pytest.mark.parametrize("bits", [8, 16])
+def test_a_window_beyond_the_pictures_arithmetic_is_refused_not_drawn_black(bits):
+    """An X-ray window whose ends or width are not finite in the picture's arithmetic (float32 for 8 bits, float64 for
+    16) is one InputError (until the nineteenth session NaN levels, written as 0 with a RuntimeWarning: the window
+    (-1e39, 1e39) drew its middle black, not grey); the widest and narrowest that are hold exactly, without a warning."""
+    import warnings
+
+    from clwave.errors import InputError
+
+    result = RenderResult(np.array([-1.0, 0.0, 2.0, 0.0], np.float32).reshape(2, 2, 1))
+    top = (1 << bits) - 1
+    beyond = [(-1e308, 1e308)] + ([(-1e39, 1e39), (0.0, 5e-324)] if bits == 8 else [])
+    for window in beyond:
+        with pytest.raises(InputError, match=r"is beyond float"):
+            result.picture(window, bit_depth=bits)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert result.picture((-1e38, 1e38), bit_depth=bits).tolist() == [[(top + 1) // 2] * 2] * 2
+        assert result.picture((0.0, 1e-45), bit_depth=bits).tolist() == [[0, 0], [top, 0]]
+
+
 FULL_DISK = """
 import resource, sys
 import numpy as np
