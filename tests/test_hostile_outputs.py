@@ -194,7 +194,7 @@ def test_a_pixel_size_that_no_tag_holds_writes_no_tag(tmp_path, pixel):
 def test_a_window_beyond_the_pictures_arithmetic_is_refused_not_drawn_black(bits):
     """An X-ray window whose ends or width are not finite in the picture's arithmetic (float32 for 8 bits, float64 for
     16) is one InputError (until the nineteenth session NaN levels, written as 0 with a RuntimeWarning: the window
-    (-1e39, 1e39) drew its middle black, not grey); the widest and narrowest that are hold exactly, without a warning."""
+    (-1e39, 1e39) drew its middle black, not grey); the widest and narrowest that are hold, without a warning."""
     import warnings
 
     from clwave.errors import InputError
