@@ -150,14 +150,16 @@ def test_a_request_body_not_in_utf8_is_one_line_and_odd_values_are_refused(caplo
     assert not [r for r in caplog.records if r.exc_info or r.levelno >= logging.ERROR]
 
 
-def test_a_shaded_save_asked_before_any_tab_looked_makes_its_tracer():
-    """``POST /image`` of a shaded view from a script, no tab ever having shown one: 409 while the tracer is made,
-    then the picture (until the nineteenth session nothing started the tracer but a tab: 409 for ever)."""
+@pytest.mark.parametrize("held", [True, False])
+def test_a_shaded_save_asked_before_any_tab_looked_makes_its_tracer(tmp_path, held):
+    """``POST /image`` of a shaded view from a script, no tab ever having shown one, of a model held or of a .clw file
+    (traced in stages): 409 while the tracer (the file's full stage) is made, then the picture (until the nineteenth
+    session nothing but a tab's frames started them: 409 for ever)."""
     import time
 
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.5)
     body = dict(view=dict(BASE, seq=1, mode="shaded"), size=[8, 8])
-    with view(wv, size=16) as v:
+    with view(wv if held else str(wv.save(tmp_path / "h.clw")), size=16) as v:
         deadline, statuses = time.monotonic() + 120, []
         while not statuses or statuses[-1] == 409 and time.monotonic() < deadline:
             status, data = post(v, "image", body)

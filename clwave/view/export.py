@@ -89,6 +89,7 @@ def resolve(sources: dict, state, size=None) -> Spec:
     if state.mode == "xray":
         return Spec("xray", camera, tuple(state.window or source.auto_window),
                     state.colour_map if source.capabilities["colour_map"] else None, state.detail, levels=levels)
+    source.start_full_stage()
     if source.tracer is None:
         raise Unavailable("the shaded views' ray tracer is still being made (or the whole file read): try again once "
                           "the view has been refined")
