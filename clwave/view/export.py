@@ -55,7 +55,7 @@ class Origin:
         given = []
         for action in parser._actions:
             value = getattr(args, action.dest, action.default)
-            # not "value not in (None, False)": 0 == False, and --threshold 0 or --nan 0 were left out
+            # "is not False", for 0 == False: an option given as 0 (--threshold 0, --nan 0) is given
             if action.option_strings and value is not None and value is not False and value != action.default:
                 given.append((action.dest, action.option_strings[-1], None if value is True else value))
         return cls(args.input, tuple(given))
