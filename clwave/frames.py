@@ -118,7 +118,7 @@ class Frame:
         return RenderResult(self.image, self.meta)
 
     def save(self, path, **options) -> Path:
-        """Write the frame: ``.png``, ``.npy`` or ``.json``, options as :meth:`RenderResult.save`."""
+        """Write the frame: ``.png``, ``.tif``, ``.npy`` or ``.json``, options as :meth:`RenderResult.save`."""
         return self.result().save(path, **options)
 
 

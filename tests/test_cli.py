@@ -552,7 +552,8 @@ EARLY_MISTAKES = [
     (["render", "--method", "raytrace", "--background", "2,0,0"], "--background 2,0,0 must be a colour R,G,B with each "
                                                                    "in 0..1"),
     (["render", "--coarse", "1"], "--coarse 1 must be a tolerance between 0 and 1, e.g. 1e-2, or 0 (off)"),
-    (["render", "-o", "x.npy"], "-o x.npy must end in .png; --raw OUT.npy also writes the float32 image"),
+    (["render", "-o", "x.npy"], "-o x.npy must end in .png or .tif or .tiff; --raw OUT.npy also writes the float32 "
+                                "image"),
     (["render", "--turntable", "4", "-o", "x.png"], "-o x.png must end in .gif; --turntable writes a GIF"),
     (["render", "--turntable", "4", "--frame-time", "0"], "--frame-time 0 must be the seconds each frame is shown, "
                                                           "from 0.02 (browsers show a shorter frame for 0.1 s)"),

@@ -55,7 +55,10 @@ def test_slightly_magnified_views_read_phase_planes_within_the_exact_bound(cc, d
 def test_render_draws_8_bit_pictures_with_a_coarse_default_and_raw_values_exactly(tmp_path, capsys):
     """``clwave render`` (splat) writing an 8-bit picture only takes ``coarse=EIGHT_BIT_COARSE`` unless ``--coarse``
     is given (0: off): its PNG is the API's image at that tolerance; with ``--raw`` the float32 values (and the PNG
-    beside them) are the exact render's, and ``--coarse 0`` or a window of its own draws the PNG exactly."""
+    beside them) are the exact render's, and ``--coarse 0`` or a window of its own draws the PNG exactly; a 16-bit PNG
+    and a float TIFF are drawn exactly."""
+    import json
+
     import imageio.v3 as iio
 
     from clwave.cli import main
@@ -74,3 +77,7 @@ def test_render_draws_8_bit_pictures_with_a_coarse_default_and_raw_values_exactl
         assert main([*argv, "-o", str(png), *extra]) == 0, capsys.readouterr().err
         assert np.array_equal(iio.imread(png), want.to_uint8((0, 8) if name == "window" else "auto"))
     assert np.array_equal(np.load(tmp_path / "raw.npy"), exact.image)
+    for name, extra, want in (("8", [], EIGHT_BIT_COARSE), ("16", ["--bit-depth", "16"], None), ("tif", [], None)):
+        out = tmp_path / (f"p{name}.tif" if name == "tif" else f"p{name}.png")
+        assert main([*argv, "-o", str(out), *extra, "--stats", str(tmp_path / f"{name}.json")]) == 0
+        assert json.loads((tmp_path / f"{name}.json").read_text())["coarse"] == want, name  # 16 bits, float: exact

@@ -303,8 +303,8 @@ def test_api_arguments_are_refused_in_one_line(scalar_model, tmp_path):
     with pytest.raises(clwave.InputError, match=r"^cannot write .*x\.npy: use \.clw$"):
         scalar_model.save(tmp_path / "x.npy")  # it wrote HDF5 under a .npy name
     assert not (tmp_path / "x.npy").exists()
-    with pytest.raises(clwave.InputError, match=r"^cannot write .*r\.tif: use \.png, \.npy or \.json$"):
-        xray.save(tmp_path / "r.tif")
+    with pytest.raises(clwave.InputError, match=r"^cannot write .*r\.jpg: use \.png, \.tif, \.tiff, \.npy or \.json$"):
+        xray.save(tmp_path / "r.jpg")
 
 
 def test_opening_a_file_with_a_keep_above_what_it_stores_warns_as_the_command_line_does(tmp_path):

@@ -1,4 +1,4 @@
-"""The viewer's page in a real headless browser (Debian's chromium through Selenium; docs/viewer.md §5):
+"""The viewer's page in a real headless browser (Debian's chromium through Selenium; docs/viewer.md §6):
 first image, orbit by dragging, the final X-ray frame against clwave.splat, a wrong token, two tabs, superseded
 frames, a hostile socket beside a working page, the transfer-function editor's presets, sliders, points and undo, the
 X-ray colour bar."""
@@ -331,11 +331,12 @@ def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(
     assert status == ("disconnected: the viewer's server has stopped or cannot be reached (1001: the viewer stopped); "
                       "restart clwave view … (or clwave.view) and open the address it prints, whose token is new. "
                       "This image is the last it sent.")
-    sending = ", ".join(f"#{box} {kind}" for box in ("mode", "xray-controls", "shaded-controls")
-                        for kind in ("input", "select", "button"))
+    sending = ", ".join(f"#{box} {kind}" for box in ("mode", "camera-controls", "xray-controls", "shaded-controls",
+                                                     "export") for kind in ("input", "select", "button"))
     controls = page.execute_script(f"return Array.from(document.querySelectorAll('{sending}'))"
                                    ".map(e => e.matches(':disabled'))")
-    assert len(controls) == 16 and all(controls)  # 2 modes, 5 X-ray controls, 9 shaded ones
+    # 2 modes, 2 camera controls, 5 X-ray ones, 9 shaded ones, 4 of the export's (the size, save, two copies)
+    assert len(controls) == 22 and all(controls)
     state, shown = page.execute_script("return JSON.stringify(window.clwave.state)"), browser.shown(page)
     browser.drag(page, 30, 10, steps=3, hold=False)
     ActionChains(page).scroll_to_element(page.find_element("id", "image")).double_click(
@@ -361,3 +362,71 @@ def test_a_files_rest_that_cannot_be_read_is_said_on_the_model_line(clw, page, m
                                       "return !m.includes('reading') && m")
     assert line == ("40 × 40 × 40 voxels, 4 channel(s), cubic, 2,048 coefficients (the file's most important only: "
                     "the rest could not be read, damaged past its prefix)")
+
+
+def test_the_view_is_copied_as_a_command_and_as_python_and_saved_at_twice_its_size(page, tmp_path):
+    """A .clw file's page in perspective: "copy as command" and "copy as Python" show the server's text of the view in
+    the box, selected (headless chromium has no clipboard permission: the page says Ctrl+C copies it); "save image"
+    at 1x is the final frame (within a grey level: the page's frame is accumulated pass by pass,
+    tests/test_view_export.py) and at 2x twice its size, the server's image of that view bit for bit."""
+    import asyncio
+    import json
+
+    import aiohttp
+
+    path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.2).save(
+        tmp_path / "h.clw")
+    with view(str(path), size=SIZE) as v:
+        browser.open_viewer(page, v.url)
+        browser.wait_final(page)
+        page.find_element("id", "perspective").click()
+        browser.wait_for(page, "return window.clwave.state.fov === 30")
+        browser.wait_final(page)
+        page.find_element("id", "copy-command").click()
+        shown = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'command' && e")
+        box = page.execute_script("const b = document.getElementById('export-text'); return [b.value, "
+                                  "b.selectionStart, b.selectionEnd, "
+                                  "document.getElementById('export-note').textContent]")
+        page.find_element("id", "copy-python").click()
+        code = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'python' && e")
+        page.save_screenshot(str(tmp_path / "export.png"))
+        page.find_element("id", "save-image").click()
+        one = browser.wait_for(page, "return window.clwave.stats.saved")
+        one_png = blob(page)
+        final, frame = browser.current_frame(page)
+        page.execute_script("const s = document.getElementById('export-scale'); s.value = '2';")
+        page.execute_script("window.clwave.stats.saved = null")
+        page.find_element("id", "save-image").click()
+        two = browser.wait_for(page, "return window.clwave.stats.saved")
+        two_png = blob(page)
+        state = page.execute_script("return window.clwave.state")
+
+        async def server_image():
+            async with aiohttp.ClientSession() as s:
+                body = json.dumps(dict(view=dict(state, type="view", seq=1, moving=False), size=[128, 160]))
+                async with s.post(v.url.replace("/?", "/image?"), data=body) as r:
+                    return await r.read()
+        expect = decode(asyncio.run(server_image()))
+    text = shown["text"]
+    assert text.startswith(f"clwave render {path} --method splat --azimuth 30.0 --elevation 20.0 --perspective "
+                           f"--fov 30.0 --distance ")
+    window = ",".join(map(repr, final["window"]))  # "--window=-1.0,2.0": argparse takes "-1.0,2.0" for an option
+    assert text.endswith(f"--size 64x80 --window{'=' if window.startswith('-') else ' '}{window} -o view.png")
+    assert box[0] == text and box[1:3] == [0, len(text)]
+    assert box[3] in ("copied the command line", "the command line is selected: Ctrl+C copies it")
+    assert f"wv = clwave.WaveletVolume.open({str(path)!r})" in code["text"]
+    assert "perspective=True, fov=30.0" in code["text"]
+    assert one["size"] == [64, 80] and two["size"] == [128, 160]
+    got = decode(one_png).astype(int)
+    assert got.shape[:2] == (64, 80) and np.abs(got - decode(frame)).max() <= 1
+    assert np.array_equal(decode(two_png), expect) and expect.shape[:2] == (128, 160) and expect.std() > 5
+
+
+def blob(page) -> bytes:
+    """The bytes of the image the page saved last."""
+    import base64
+
+    url = page.execute_async_script(
+        "const done = arguments[arguments.length - 1], r = new FileReader(); r.onload = () => done(r.result);"
+        "r.readAsDataURL(window.clwave.stats.saved.blob);")
+    return base64.b64decode(url.split(",", 1)[1])

@@ -148,8 +148,39 @@ def parse_lights(args):
 
 
 def parse_background(args):
-    """The colour (R, G, B) of ``--background``, each in 0..1 (None: not given, the default black)."""
-    return None if args.background is None else check_background(numbers(args.background, "--background", (3,)))
+    """The colour (R, G, B) of ``--background``, each in 0..1, or "transparent" (None: not given, the default
+    black)."""
+    if args.background is None or args.background == "transparent":
+        return args.background
+    return check_background(numbers(args.background, "--background", (3,)))
+
+
+def picture_options(args, out) -> dict:
+    """``window``, ``background`` and ``bit_depth`` of the picture written to ``out`` (a folder: PNG frames), for
+    :meth:`~clwave.io.result.RenderResult.save`; refused in one line where ``out`` holds no such picture: a .tif's or
+    .npy's values as rendered, a GIF's 8-bit frames without partial transparency."""
+    from ..io.images import TIFF_SUFFIXES, check_bit_depth
+
+    look = dict(window=parse_window(args), background=parse_background(args) if hasattr(args, "background") else None,
+                bit_depth=args.bit_depth)
+    check_bit_depth(args.bit_depth)
+    suffix = out.suffix.lower()
+    if suffix in TIFF_SUFFIXES + (".npy",):
+        given = {"--window": look["window"] != "auto", "--background": look["background"] is not None,
+                 "--bit-depth": args.bit_depth is not None}
+        named = [name for name, there in given.items() if there]
+        what = {"--window": "grey levels", "--background": "background", "--bit-depth": "bit depth"}
+        if named:
+            raise InputError(f"{' and '.join(named)} {'sets' if len(named) == 1 else 'set'} a .png's "
+                             f"{' and '.join(what[n] for n in named)}; a {suffix} holds the values themselves: leave "
+                             f"{'it' if len(named) == 1 else 'them'} out")
+    if suffix == ".gif" and args.bit_depth is not None:
+        raise InputError(f"--bit-depth {args.bit_depth} is for PNG; a GIF holds 8 bits a sample: leave it out"
+                         + (", or write PNG frames to a folder" if args.command == "progressive" else ""))
+    if suffix == ".gif" and look["background"] == "transparent":
+        raise InputError("--background transparent is for PNG; a GIF has no partial transparency: give a colour R,G,B"
+                         + (", or write PNG frames to a folder" if args.command == "progressive" else ""))
+    return look
 
 
 def parse_window(args):

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ClwaveError, CommandWords, InputError
-from .checks import parse_size, parse_window
+from .checks import parse_size, picture_options
 from .options import (add_command, add_device_options, build_model, check_outputs, finish, kept_words, numbers,
-                      parse_device_memory, warn)
+                      parse_device_memory, warn, world_unit)
 
 
 def read_pose_table(path) -> list:
@@ -54,6 +54,7 @@ def _pose_row(path, line, row, columns) -> dict:
 
 def run(args):
     from ..io.files import published_together, write_atomic
+    from ..io.images import TIFF_SUFFIXES, pixel_size, write_tiff
     from ..io.result import RenderResult
     from ..model.conebeam import NOT_ATTENUATION, below_zero, poses, transmitted
     from ..raytrace.tracer import RayTracer
@@ -63,10 +64,9 @@ def run(args):
         raise InputError("--signed writes the line integrals of values below 0 as they are; --intensity needs "
                          "attenuation (mu >= 0): leave one out")
     tolerance = args.tolerance  # checked, and its default given, with every command's (options.check_options)
-    out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png")))
-    if args.display_window != "auto" and out.suffix.lower() == ".npy":
-        raise InputError("--window sets a .png's grey levels; a .npy holds the values themselves: leave it out")
-    window = log_window(parse_window(args)) if args.intensity else parse_window(args)
+    out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png") + TIFF_SUFFIXES))
+    look = picture_options(args, out)
+    window = log_window(look["window"]) if args.intensity else look["window"]
     H, W = parse_size(args)
     pixel, offset = numbers(args.pixel, "--pixel", (1, 2)), numbers(args.offset, "--offset", (2,))
     # in the options' words (a pose table's own columns: poses() checks them)
@@ -87,7 +87,7 @@ def run(args):
                     dso=args.dso, dsd=args.dsd, offset=offset, isocentre=isocentre)
     cameras = table_poses(geometry, args.poses)  # every pose checked before the input is read
     if out.suffix.lower() == ".png" and len(cameras) != 1:
-        raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy")
+        raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy or .tif")
     device_memory = parse_device_memory(args)
     wv, _ = build_model(args, hu_hint=False)  # a model in HU is refused below, naming --hu-to-mu
     if wv.channels != 1:
@@ -95,6 +95,7 @@ def run(args):
                          f"channels: give its attenuation as one channel")
     if centre:
         cameras = poses(**dict(geometry, isocentre=tuple(float(c) for c in wv.origin)))
+    unit = world_unit(args)
     if below_zero(wv) and not args.signed:  # refused as render refuses a blank image (docs/coordinates.md §5)
         raise InputError(NOT_ATTENUATION.format(
             what=f"the model of {args.input} is", fix="read the CT with --hu-to-mu (a .clw: compress it again with "
@@ -132,13 +133,21 @@ def run(args):
             image(0, res)
             # an intensity is shown as radiographs are: the detector's log response, bone bright (coordinates.md §5)
             picture = np.maximum(res.image, 0.0) if args.intensity else res.image
-            RenderResult(picture, res.meta).save(out, window=window, overwrite=args.force)
+            meta = dict(res.meta, camera=cameras[0].to_dict())  # its pixel size the detector's (a view has none)
+            RenderResult(picture, meta).save(out, window=window, bit_depth=look["bit_depth"], unit=unit,
+                                             overwrite=args.force)
         else:
-            def write(fh):  # the .npy header, then each radiograph as it is rendered
-                np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False,
-                                                              shape=(len(cameras), H, W)))
-                for i in range(len(cameras)):
-                    fh.write(np.ascontiguousarray(image(i, render(i)), "<f4").tobytes())
+            stack = (len(cameras), H, W)
+            radiographs = (np.asarray(image(i, render(i)), np.float32) for i in range(len(cameras)))
+            sizes = {pixel_size(dict(camera=cb.to_dict())) for cb in cameras}  # a TIFF's, where every pose's is one
+            size = sizes.pop() if len(sizes) == 1 else None
+
+            def write(fh):  # each radiograph as it is rendered: after the .npy header, or a TIFF page each
+                if out.suffix.lower() in TIFF_SUFFIXES:
+                    return write_tiff(fh, radiographs, size, unit, shape=stack)
+                np.lib.format.write_array_header_1_0(fh, dict(descr="<f4", fortran_order=False, shape=stack))
+                for radiograph in radiographs:
+                    fh.write(np.ascontiguousarray(radiograph, "<f4").tobytes())
 
             write_atomic(out, write, args.force)
         seconds = time.perf_counter() - start
@@ -204,7 +213,7 @@ def log_window(window):
 def add_parser(sub):
     # no --tf, --tf-window or --classify: a radiograph is line integrals of the scalar (or mu), never of colours
     p = add_command(sub, "drr", "digitally reconstructed radiographs: cone-beam X-rays of many poses", run,
-                    "output .npy (N, H, W) float32 stack, or .png for one pose", classify=False)
+                    "output .npy or .tif/.tiff (N, H, W) float32 stack, or .png for one pose", classify=False)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
                    help="splat (default): perspective wavelet splatting; raytrace: the ray tracer's X-ray mode, "
                         "within --tolerance of the exact line integrals (near or wide cones and Haar models, which "

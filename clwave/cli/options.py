@@ -100,6 +100,16 @@ def is_clw(args) -> bool:
     return args.input.lower().endswith(".clw")
 
 
+def world_unit(args):
+    """The input's world unit where its header gives it as a length (DICOM's mm, a NIfTI's or NRRD's own) and
+    --spacing does not replace it (:func:`clwave.io.loaders.world_unit`); None otherwise (a .clw records none)."""
+    if is_clw(args) or args.input.startswith("phantom:") or args.spacing is not None:
+        return None
+    from ..io.loaders import world_unit as file_unit
+
+    return file_unit(args.input)
+
+
 def read_volume(args):
     """The Volume named by ``args.input`` (a file, a folder or ``phantom:NAME[:N]``)."""
     from ..io.loaders import load
@@ -446,12 +456,14 @@ def add_device_options(g):
     """The display window and the device options of every rendering command (``g``: an argument group)."""
     g.add_argument("--window", dest="display_window", default="auto",
                    help="PNG window: auto (the default: from the image's values) or LO,HI")
+    g.add_argument("--bit-depth", type=int, choices=(8, 16), help="PNG: bits a sample, 8 (the default) or 16")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
     g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic and quintic bands into coarser "
                    "framebuffers within this error relative to the image maximum, and in perspective drop splats "
                    "within what is left of it (e.g. 1e-2; 0: off; default: off, but 1e-3 where render writes "
-                   "8-bit pictures only, through the automatic window: no --raw, no --window LO,HI)")
+                   "8-bit pictures only, through the automatic window: no --raw, .tif, --bit-depth 16 or "
+                   "--window LO,HI)")
     g.add_argument("--device-memory", metavar="SIZE", help="device memory to use at most, e.g. 2GiB or 512M "
                    "(default: the device's); splatting streams coefficients beyond it in chunks (docs/splatting.md "
                    "§6), ray tracing renders bricks beyond it in passes (docs/raytracing.md §6)")
@@ -465,7 +477,8 @@ def add_raytrace_options(p):
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
     g.add_argument("--background", help="PNG: colour R,G,B behind the volume, linear RGB in 0..1, composited before "
-                                        "the sRGB encoding (0.5 is shown as 188; default 0,0,0, black)")
+                                        "the sRGB encoding (0.5 is shown as 188; default 0,0,0, black), or "
+                                        "transparent (RGBA)")
     g.add_argument("--field", choices=("bspline", "wavelet"),
                    help="evaluate the field from fine B-spline grids (fast, the default) or from the wavelet "
                         "coefficients with per-ray active lists (the paper's reference, of the model without the "

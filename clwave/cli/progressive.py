@@ -6,9 +6,9 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
-from .checks import make_camera, parse_background, parse_lights, parse_window
+from .checks import make_camera, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, finish,
-                      parse_device_memory, post_transfer_function, write_gif)
+                      parse_device_memory, post_transfer_function, world_unit, write_gif)
 
 
 def run(args):
@@ -25,6 +25,7 @@ def run(args):
     if as_folder:
         check_frames_folder(out, args.force)
     check_outputs(args.force, (None if as_folder else out, "-o", (".gif",)), (args.stats, "--stats", (".json",)))
+    look = picture_options(args, out / "frame.png" if as_folder else out)
     camera = make_camera(args)
     check_error(args.error)
     raytrace = args.method == "raytrace"
@@ -40,8 +41,7 @@ def run(args):
         steps = 8 if args.steps is None and args.budget is None else args.steps
         check_schedule(steps, args.budget)
         options = dict(omega_s=args.omega_s, coarse=args.coarse or None)
-    background = parse_background(args)
-    device_memory, window = parse_device_memory(args), parse_window(args)
+    background, window, device_memory = look["background"], look["window"], parse_device_memory(args)
     wv, _ = build_model(args, rgba=raytrace and not args.xray)
     if raytrace and not args.xray:
         options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering
@@ -59,9 +59,10 @@ def run(args):
     with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
         if as_folder:  # written beside it, renamed into place: never mixed with another run's frames
             out.parent.mkdir(parents=True, exist_ok=True)
-            folder = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png")
+            folder, unit = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png"), world_unit(args)
             for f in frames:
-                f.save(folder / f"frame_{f.index:03d}.png", window=window, background=background)
+                f.save(folder / f"frame_{f.index:03d}.png", window=window, background=background,
+                       bit_depth=look["bit_depth"], unit=unit)
         else:
             write_gif(out, [f.result().to_uint8(window, background) for f in frames], 0.5, args.force)
         if args.stats:

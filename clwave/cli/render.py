@@ -7,14 +7,15 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .checks import make_camera, parse_background, parse_lights, parse_window
+from .checks import make_camera, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
-                      parse_device_memory, parse_scheduler, post_transfer_function, write_gif)
+                      parse_device_memory, parse_scheduler, post_transfer_function, world_unit, write_gif)
 
 
 def run(args):
     from ..raytrace.tracer import RayTracer, raytrace
     from ..io.files import published_together
+    from ..io.images import PNG_SUFFIXES, TIFF_SUFFIXES
     from ..io.result import RenderResult, resolve_window
     from ..splat.renderer import SplatRenderer, splat
     from ..cluster import check_model_file
@@ -22,16 +23,18 @@ def run(args):
 
     if args.turntable is not None and args.turntable < 1:
         raise InputError("--turntable N needs N >= 1")
-    picture = (".png",) if args.turntable is None else (".gif",)
+    picture = PNG_SUFFIXES + TIFF_SUFFIXES if args.turntable is None else (".gif",)
     hint = "--raw OUT.npy also writes the float32 image" if args.turntable is None else "--turntable writes a GIF"
     out, raw, stats = check_outputs(args.force, (args.output, "-o", picture, hint), (args.raw, "--raw", (".npy",)),
                                     (args.stats, "--stats", (".json",)))
-    background = parse_background(args)
+    look = picture_options(args, out)
+    window, background = look["window"], look["background"]
     camera = make_camera(args)
     device_memory = parse_device_memory(args)
-    lights, window = parse_lights(args), parse_window(args)
+    lights = parse_lights(args)
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
     wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
+    unit = world_unit(args)
     if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
         from ..raytrace.regions import check_cluster_model
 
@@ -59,8 +62,9 @@ def run(args):
                 return raytrace(wv, cam, scheduler=client, **options)
             return tracer.render(cam, detail=args.detail, **options)
     else:
+        eight_bit = out.suffix.lower() in PNG_SUFFIXES + (".gif",) and look["bit_depth"] in (None, 8)
         options = dict(device=args.device, omega_s=args.omega_s, device_memory=device_memory,
-                       coarse=splat_coarse(args.coarse, raw is None and window == "auto"))
+                       coarse=splat_coarse(args.coarse, eight_bit and raw is None and window == "auto"))
         if not on_cluster:
             options = dict(renderer=SplatRenderer(wv, **options))
 
@@ -76,7 +80,7 @@ def run(args):
         lines = []
         if args.turntable is None:
             result = results[0]
-            result.save(out, window=window, background=background, overwrite=args.force)
+            result.save(out, **look, unit=unit, overwrite=args.force)
         else:
             if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
                 window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
@@ -88,7 +92,8 @@ def run(args):
             views = f"{len(results)} view{'s' if len(results) != 1 else ''}"
             lines.append(f"turntable of {views} at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
                          f"({np.median(seconds):.3f} s a view, median); the first view:")
-        result.meta["window"] = result.display_window(window)  # the picture's, for --stats (coordinates.md §4)
+        # the picture's, for --stats (coordinates.md §4): a .tif has none
+        result.meta["window"] = None if out.suffix.lower() in TIFF_SUFFIXES else result.display_window(window)
         if raw is not None:  # a turntable's views as one (N, H, W, C) array
             images = result if args.turntable is None else \
                 RenderResult(np.stack([r.image for r in results]), result.meta)
@@ -109,7 +114,8 @@ EIGHT_BIT_COARSE = 1e-3
 def splat_coarse(coarse, eight_bit_auto: bool):
     """The splat renderer's ``coarse``: ``--coarse`` where given (0: off), else :data:`EIGHT_BIT_COARSE` where every
     image written is an 8-bit picture through the automatic window (``eight_bit_auto``), else None (every band at
-    the image's pixels: ``--raw``'s float32 values, or a window narrower than the image's values)."""
+    the image's pixels: ``--raw``'s float32 values, a .tif's, a 16-bit PNG, or a window narrower than the image's
+    values)."""
     if coarse is not None:
         return coarse or None
     return EIGHT_BIT_COARSE if eight_bit_auto else None
@@ -136,7 +142,8 @@ def _total_seconds(meta) -> float:
 
 def add_parser(sub):
     p = add_command(sub, "render", "render an image: wavelet splatting (X-ray) or ray tracing (shaded)", run,
-                    "output .png, always written (--raw adds the float32 values beside it); .gif with --turntable",
+                    "output .png, always written (--raw adds the float32 values beside it), or .tif/.tiff (the float32 "
+                    "values, no window); .gif with --turntable",
                     view=True)
     p.add_argument("--method", choices=["splat", "raytrace"], default="splat",
                    help="splat (default): X-ray line integrals; raytrace: emission-absorption, shaded (needs a "

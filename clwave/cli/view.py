@@ -18,6 +18,7 @@ def run(args):
     import asyncio
     import logging
 
+    from ..view.export import Origin
     from ..view.prefix import PrefixFirst
     from ..view.address import check_port, is_loopback
     from ..view.server import ViewServer
@@ -38,7 +39,7 @@ def run(args):
     logging.getLogger("clwave.view").addHandler(handler)
     logging.getLogger("clwave.view").setLevel(logging.INFO)
     server = ViewServer(wv, size, tolerance=args.tolerance, device=args.device, host=args.host, port=args.port,
-                        transfer_function=tf, device_memory=device_memory)
+                        transfer_function=tf, device_memory=device_memory, origin=Origin.of_args(args))
 
     async def serve():
         url = await server.start()  # or an InputError: the port in use

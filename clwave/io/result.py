@@ -2,8 +2,9 @@
 
 X-ray images (line integrals) are written to PNG through a linear window
 (``"auto"`` = the 0.5 and 99.5 percentiles, or ``(lo, hi)``); emission-absorption
-images (premultiplied RGBA) are composited over a background colour and encoded
-as 8-bit sRGB.  ``.npy`` keeps the raw float32 image.
+images (premultiplied RGBA) are composited over a background colour, or kept
+transparent (straight alpha, as PNG holds it), and encoded as sRGB; 8 or 16 bits a
+sample.  ``.tif`` and ``.npy`` keep the float32 image as rendered (:mod:`.images`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 
 from ..errors import InputError
 from .files import check_suffix, write_atomic
+from .images import PNG_SUFFIXES, TIFF_SUFFIXES, check_bit_depth, check_unit, pixel_size, write_png, write_tiff
 from ..model.tf_passes import AUTO_PERCENTILES
 from ..model.transfer import check_window
 
@@ -34,24 +36,40 @@ class RenderResult:
         return self.meta.get("mode", "xray") == "xray"
 
     def to_uint8(self, window="auto", background=None) -> np.ndarray:
-        """8-bit (H, W) grey or (H, W, 3) colour picture of the image: an X-ray of one channel grey, of two
+        """8-bit :meth:`picture`."""
+        return self.picture(window, background)
+
+    def picture(self, window="auto", background=None, bit_depth=8) -> np.ndarray:
+        """8- or 16-bit (H, W) grey or (H, W, 3) colour picture of the image: an X-ray of one channel grey, of two
         magenta (channel 0) and green (1), of three or four its first three as RGB; one window for all.  A shaded
-        image is composited over ``background`` (linear RGB in 0..1, default black) before its sRGB encoding."""
+        image is composited over ``background`` (linear RGB in 0..1, default black) before its sRGB encoding, or
+        with ``background="transparent"`` (H, W, 4): its colour unpremultiplied (clipped to 1 where light was
+        added), sRGB-encoded, and its alpha."""
         if self.is_xray and background is not None:
             raise InputError(f"background={background!r} is for a shaded image; an X-ray picture has no background "
                              f"(its line integrals are shown through window=): leave it out")
+        top = float((1 << check_bit_depth(bit_depth)) - 1)
         background = check_background((0.0, 0.0, 0.0) if background is None else background)
+        # 16 bits in float64: float32's rounding (6e-8 of the value) would move levels near their ties
+        wide = np.float32 if top < 256 else np.float64
         if self.is_xray:
-            picture = self._picture()
+            picture = self._picture().astype(wide, copy=False)
             lo, hi = resolve_window(picture, window)
             scaled = np.clip((picture - lo) / (hi - lo), 0.0, 1.0)
             if self.image.shape[-1] == 2:  # a pair colour-blind eyes tell apart too
                 scaled = scaled[..., [0, 1, 0]]
         else:
-            rgb, alpha = self.image[..., :3], self.image[..., 3:4]
-            scaled = np.clip(rgb + (1.0 - alpha) * np.asarray(background, np.float32), 0.0, 1.0)
+            image = self.image.astype(wide, copy=False)
+            rgb, alpha = image[..., :3], np.clip(image[..., 3:4], 0.0, 1.0)
+            if background == "transparent":  # PNG's alpha is straight: the colour is the premultiplied over alpha
+                rgb = np.divide(rgb, alpha, out=np.zeros_like(rgb), where=alpha > 0)
+            else:
+                rgb = rgb + (1.0 - alpha) * np.asarray(background, np.float32)
+            scaled = np.clip(rgb, 0.0, 1.0)
             scaled = np.where(scaled <= 0.0031308, 12.92 * scaled, 1.055 * scaled ** (1 / 2.4) - 0.055)
-        return np.round(255.0 * scaled).astype(np.uint8)
+            if background == "transparent":
+                scaled = np.concatenate([scaled, alpha], axis=-1)
+        return np.round(top * scaled).astype(np.uint8 if top < 256 else np.uint16)
 
     def display_window(self, window="auto"):
         """The ``(lo, hi)`` an X-ray picture (:meth:`to_uint8`) is shown through for ``window`` ("auto" resolved from
@@ -62,31 +80,47 @@ class RenderResult:
         """The X-ray values shown: one channel's, or the first three's."""
         return self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
 
-    def save(self, path, *, window="auto", background=None, overwrite=False) -> Path:
-        """Write ``.png`` (windowed, or composited over ``background``: :meth:`to_uint8`), ``.npy`` (raw float32)
-        or ``.json`` (meta).
+    def save(self, path, *, window="auto", background=None, bit_depth=None, unit=None, overwrite=False) -> Path:
+        """Write ``.png`` (windowed, or composited over ``background`` or transparent: :meth:`picture`, of
+        ``bit_depth`` 8 or 16 bits a sample), ``.tif``/``.tiff`` (float32, as rendered; a shaded image's alpha
+        associated, premultiplied), ``.npy`` (raw float32) or ``.json`` (meta).  ``unit``: the world unit where it
+        is a length ("mm", :data:`~clwave.io.images.UNIT_METRES`), else None; the size of a pixel
+        (:func:`~clwave.io.images.pixel_size`) goes into a PNG's pHYs where it is a length, into a TIFF's resolution
+        always (per world unit where it is not).
 
         An image with non-finite pixels is refused (nothing is written): it is never a picture."""
-        path = check_suffix(path, (".png", ".npy", ".json"))
+        path = check_suffix(path, PNG_SUFFIXES + TIFF_SUFFIXES + (".npy", ".json"))
         suffix = path.suffix.lower()
+        bits, unit = check_bit_depth(bit_depth), check_unit(unit)
+        given = [f"{name}=" for name, value in (("window", None if isinstance(window, str) and window == "auto" else
+                                                 window), ("background", background), ("bit_depth", bit_depth))
+                 if value is not None]
+        if given and suffix not in PNG_SUFFIXES:
+            raise InputError(f"{' and '.join(given)} {'set' if len(given) > 1 else 'sets'} a .png's picture; {path} "
+                             f"holds the image's {'figures' if suffix == '.json' else 'values'}: leave "
+                             f"{'them' if len(given) > 1 else 'it'} out")
         bad = int(np.size(self.image) - np.count_nonzero(np.isfinite(self.image)))
-        if bad and suffix in (".png", ".npy"):
+        if bad and suffix != ".json":
             raise InputError(f"the image has {bad} non-finite value(s) (NaN/Inf), so {path} was not written; "
                              f"the input holds values too large for float32, or the view is degenerate")
-        if suffix == ".png":
-            import imageio.v3 as iio
-            data = self.to_uint8(window, background)
-            return write_atomic(path, lambda fh: iio.imwrite(fh, data, extension=".png"), overwrite)
+        if suffix in PNG_SUFFIXES:
+            data = self.picture(window, background, bits)
+            return write_atomic(path, lambda fh: write_png(fh, data, pixel_size(self.meta), unit), overwrite)
+        if suffix in TIFF_SUFFIXES:
+            image = self.image[..., 0] if self.image.shape[-1] == 1 else self.image
+            return write_atomic(path, lambda fh: write_tiff(fh, image, pixel_size(self.meta), unit,
+                                                            alpha=not self.is_xray), overwrite)
         if suffix == ".npy":
             return write_atomic(path, lambda fh: np.save(fh, self.image), overwrite)
-        if suffix == ".json":
-            text = json.dumps(self.meta, indent=2, default=_jsonable).encode()
-            return write_atomic(path, lambda fh: fh.write(text), overwrite)
+        text = json.dumps(self.meta, indent=2, default=_jsonable).encode()
+        return write_atomic(path, lambda fh: fh.write(text), overwrite)
 
 
-def check_background(background) -> tuple:
-    """A background colour (R, G, B), linear light each in 0..1, as floats; one InputError (in the command line's
-    words too) otherwise."""
+def check_background(background) -> tuple | str:
+    """A background colour (R, G, B), linear light each in 0..1, as floats, or "transparent"; one InputError (in the
+    command line's words too) otherwise."""
+    if isinstance(background, str) and background == "transparent":
+        return background
     try:
         colour = tuple(float(c) for c in background)
     except (TypeError, ValueError):
@@ -94,8 +128,8 @@ def check_background(background) -> tuple:
     if isinstance(background, (str, bytes)) or len(colour) != 3 or not all(0 <= c <= 1 for c in colour):
         spec = ",".join(f"{c:g}" for c in colour) if colour else background
         raise InputError(f"background={background!r} must be a colour (R, G, B) with each in 0..1, e.g. (1, 1, 1) "
-                         f"for white", cli=f"--background {spec} must be a colour R,G,B with each in 0..1, e.g. 1,1,1 "
-                                       f"for white")
+                         f"for white, or 'transparent'", cli=f"--background {spec} must be a colour R,G,B with each in "
+                                                            f"0..1, e.g. 1,1,1 for white, or transparent")
     return colour
 
 

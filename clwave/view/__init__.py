@@ -116,6 +116,7 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     from ..model.camera import Camera
     from ..model.wavelet import WaveletVolume
     from .frames import check_tolerance
+    from .export import Origin
     from .prefix import PrefixFirst
     from .address import check_port, is_loopback
     from .server import BackgroundServer, ViewServer
@@ -138,8 +139,11 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     if not is_loopback(host):
         warn_outside(f"the viewer listens on {host}: anyone who can reach it and learns the address with its token "
                      f"can see this volume")
+    # a .clw file's path: a view's command line reads it (export.py); a model or volume given here, none does
+    origin = Origin(str(model_or_volume), () if keep is None else (("keep", "--keep", keep),)) \
+        if isinstance(wv, PrefixFirst) else None
     server = ViewServer(wv, size, tolerance=tolerance, device=device, host=host, port=port,
-                        transfer_function=None if model is None else tf, device_memory=device_memory)
+                        transfer_function=None if model is None else tf, device_memory=device_memory, origin=origin)
     viewer = Viewer(BackgroundServer(server))
     if open_browser:
         import webbrowser

@@ -10,6 +10,7 @@ and render-time transfer functions plug in: a source declares what it can act on
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -63,6 +64,7 @@ class ViewState:
     # shaded.transfer_function
     tf: tuple | TransferFunction | None = None
     colour_map: str = "grey"  # X-ray, scalar model: one of colours.NAMES
+    fov: float | None = None  # a perspective camera's vertical field of view, degrees; None: orthographic
 
 
 @dataclass
@@ -111,10 +113,19 @@ class Source:
         H, W = self.size
         self.base_extent = Camera(0.0, 0.0, self.size).view(wv).pixel * W  # zoom 1: the content fills the image
 
-    def camera(self, state: ViewState, scale=1.0) -> Camera:
+    def camera(self, state: ViewState, scale=1.0, size=None) -> Camera:
+        """The camera of ``state`` at ``scale`` of the image size (or at ``size`` (H, W), the same view): its extent
+        the content's at zoom 1 over the zoom.  In perspective the eye is where the field of view ``fov`` frames the
+        target's plane as zoom 1 does, and stays there: the zoom narrows the field of view (a lens), so the eye never
+        enters the content (splatting refuses an eye within its basis functions' reach) below about 90 degrees."""
         H, W = self.size
-        size = (max(8, round(H * scale)), max(8, round(W * scale)))
-        return Camera(state.azimuth, state.elevation, size, extent=self.base_extent / state.zoom)
+        size = size or (max(8, round(H * scale)), max(8, round(W * scale)))
+        if state.fov is None:
+            return Camera(state.azimuth, state.elevation, size, extent=self.base_extent / state.zoom)
+        half = math.tan(math.radians(state.fov) / 2.0)
+        fov = state.fov if state.zoom == 1.0 else math.degrees(2.0 * math.atan(half / state.zoom))  # 30, not 30.000…4
+        return Camera(state.azimuth, state.elevation, size, perspective=True, fov=fov,
+                      distance=self.base_extent * H / W / (2.0 * half))
 
     def pacing(self):
         """A tab's pacing state of this source's frames (passed to :meth:`frames`)."""
@@ -130,7 +141,7 @@ class Source:
         data, mime = encode(picture, lossless)
         return Frame(data, mime, dict(figures, mode=self.mode, seq=state.seq, height=picture.shape[0],
                                       width=picture.shape[1], azimuth=state.azimuth, elevation=state.elevation,
-                                      extent=self.base_extent / state.zoom,
+                                      extent=self.base_extent / state.zoom, fov=state.fov,
                                       encode_seconds=time.perf_counter() - encode_start,
                                       elapsed=time.perf_counter() - start))
 
@@ -185,7 +196,7 @@ class XraySource(Source):
         total = r.count
         limit = min(total, max(1, round(state.detail * total)))  # 0 for a model without coefficients
         window = state.window or self.auto_window
-        here = (state.azimuth, state.elevation, state.zoom)
+        here = (state.azimuth, state.elevation, state.zoom, state.fov)
         # a drag frame while moving, and first for a still view the page has no drag frame of (a page's first, a
         # reset): a smaller image of a prefix, with the footprints of the bands it reaches only
         if state.moving or here != pace.dragged:

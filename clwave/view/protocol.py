@@ -22,6 +22,10 @@ MAX_MESSAGE = 4096
 RATE, BURST = 120.0, 240
 MODES = ("xray", "shaded")
 ZOOM = (0.1, 50.0)
+#: a perspective view's vertical field of view, degrees (the page's slider's span)
+FOV = (5.0, 120.0)
+#: the sides of an image the page may ask for (docs/viewer.md §5: saved, or its command's): at most 4096 pixels
+EXPORT_SIZE = (8, 4096)
 #: close codes (RFC 6455 §7.4.1): policy violation, message too big
 POLICY, TOO_BIG = 1008, 1009
 #: a close frame's reason: at most 123 bytes of UTF-8 (RFC 6455 §5.5), or the page's browser fails the connection
@@ -56,7 +60,7 @@ def _flag(msg, name) -> bool:
 
 
 FIELDS = {"type", "seq", "azimuth", "elevation", "zoom", "mode", "detail", "window", "moving", "background",
-          "shading", "tf", "colour_map"}
+          "shading", "tf", "colour_map", "fov"}
 #: a transfer function from the page's editor: a preset, its window's centre moved by this many of its widths, its
 #: width times this, its opacity times this (clwave.view.shaded.ShadedSource.transfer_function)
 TF_RANGES = dict(centre=(-2.0, 2.0), width=(0.02, 50.0), opacity=(1e-3, 1e3))
@@ -107,16 +111,37 @@ def _points(rows):
     return tf
 
 
-def parse_view(text: str, last_seq: int, modes) -> ViewState:
-    """The :class:`ViewState` of a page's message, or :class:`Refused` naming what is wrong with it."""
+def _json(text: str):
     if len(text) > MAX_MESSAGE:
         raise Refused(f"a message of {len(text)} characters is more than {MAX_MESSAGE}", TOO_BIG)
     try:
-        msg = json.loads(text)
+        return json.loads(text)
     except ValueError:
         raise Refused("a message that is not JSON") from None
     except RecursionError:  # 4 KiB hold 2,000 nested arrays, past the interpreter's recursion limit
         raise Refused("a message nested too deep") from None
+
+
+def parse_export(text: str, modes) -> tuple:
+    """``(ViewState, (H, W))`` of a page's request for its view's command or image, ``{"view": a view message,
+    "size": [H, W]}`` (each side :data:`EXPORT_SIZE`), or :class:`Refused` naming what is wrong with it."""
+    msg = _json(text)
+    if not isinstance(msg, dict) or set(msg) != {"view", "size"}:
+        raise Refused('a request that is not {"view": {...}, "size": [H, W]}')
+    size, (least, most) = msg["size"], EXPORT_SIZE
+    if not isinstance(size, list) or len(size) != 2 or \
+            not all(isinstance(n, int) and not isinstance(n, bool) and least <= n <= most for n in size):
+        raise Refused(f"size={json.dumps(size)[:40]} must be [H, W], whole numbers of pixels from {least} to {most}")
+    return view_of(msg["view"], -1, modes), tuple(size)
+
+
+def parse_view(text: str, last_seq: int, modes) -> ViewState:
+    """The :class:`ViewState` of a page's message, or :class:`Refused` naming what is wrong with it."""
+    return view_of(_json(text), last_seq, modes)
+
+
+def view_of(msg, last_seq: int, modes) -> ViewState:
+    """The :class:`ViewState` of a page's view message, decoded, or :class:`Refused`."""
     if not isinstance(msg, dict) or msg.get("type") != "view":
         raise Refused("a message that is not {\"type\": \"view\", ...}")
     unknown = sorted(set(msg) - FIELDS)
@@ -134,13 +159,15 @@ def parse_view(text: str, last_seq: int, modes) -> ViewState:
         window = (_value(window[0], "lo", -1e30, 1e30), _value(window[1], "hi", -1e30, 1e30))
         if not window[0] < window[1]:
             raise Refused(f"window {list(window)} must have lo < hi")
+    fov = msg.get("fov")
+    fov = None if fov is None else _value(fov, "fov", *FOV)
     colour_map = msg.get("colour_map", "grey")
     if colour_map not in colours.NAMES:
         raise Refused(f"colour_map={colour_map!r} must be one of {', '.join(colours.NAMES)}")
     return ViewState(seq=seq, azimuth=_number(msg, "azimuth", -1e6, 1e6), elevation=_number(msg, "elevation", -90, 90),
                      zoom=_number(msg, "zoom", *ZOOM), mode=msg["mode"], detail=_number(msg, "detail", 1e-6, 1.0),
                      window=window, moving=_flag(msg, "moving"), background=_number(msg, "background", 0.0, 1.0),
-                     shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")), colour_map=colour_map)
+                     shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")), colour_map=colour_map, fov=fov)
 
 
 class RateLimit:

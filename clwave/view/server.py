@@ -16,6 +16,7 @@ import secrets
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
+from functools import partial
 from importlib import resources
 from urllib.parse import urlsplit
 
@@ -25,7 +26,7 @@ from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError
 from ..threads import Abandoned, stop_on
 from .address import check_port, host_name, is_loopback
-from . import colours
+from . import colours, export
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
 from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, pack_frame, parse_view
@@ -71,7 +72,8 @@ class ViewServer:
     """
 
     def __init__(self, model, size=(512, 512), tolerance=1e-2, device=None, host="127.0.0.1", port=0,
-                 transfer_function=None, device_memory=None):
+                 transfer_function=None, device_memory=None, origin=None):
+        from .export import Origin
         from .prefix import PrefixFirst
 
         opened = model if isinstance(model, PrefixFirst) else None
@@ -81,6 +83,8 @@ class ViewServer:
         self.device_memory = parse_cap(device_memory)
         self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4))
         self.token = secrets.token_urlsafe(24)
+        self.origin = origin or Origin()  # how the model was made: a view's command line reads it so (export.py)
+        self.saving = asyncio.Lock()  # one image saved at a time (export.serve)
         # set by stop() (or, for the reader, at the interpreter's exit): the reader stops between its steps, for a
         # daemon thread stopped by the interpreter inside a read would keep h5py's lock and the exit would wait for it
         # for ever; the render and build threads' launches and set-ups stop at their next checkpoint (threads.stop_on)
@@ -287,6 +291,8 @@ class ViewServer:
     def app(self) -> web.Application:
         app = web.Application(middlewares=[self._token], client_max_size=MAX_MESSAGE)
         app.router.add_get("/ws", self._socket)
+        app.router.add_post("/export", partial(export.serve, self, image=False))
+        app.router.add_post("/image", partial(export.serve, self, image=True))
         for path in STATIC:
             app.router.add_get(path, self._page)
         return app
@@ -335,11 +341,17 @@ class ViewServer:
         return f"http://{host}:{self.port}/?token={self.token}"
 
     # ------------------------------------------------------------------ sockets
-    async def _socket(self, request):
+    @staticmethod
+    def check_origin(request):
+        """403 for a socket or a POST whose Origin is another site's page, even with the token."""
         origin = request.headers.get("Origin")
-        if origin and urlsplit(origin).netloc != request.host:  # another site's page, even with the token
-            log.warning("refused a socket from %s: origin %s is not this server", request.remote, origin)
+        if origin and urlsplit(origin).netloc != request.host:
+            log.warning("refused %s %s from %s: origin %s is not this server", request.method, request.path,
+                        request.remote, origin)
             raise web.HTTPForbidden(text="403: another origin\n")
+
+    async def _socket(self, request):
+        self.check_origin(request)
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE, heartbeat=30.0)
         await ws.prepare(request)
         session = Session(self, ws, f"tab {next(self._ids)} ({request.remote})", request.transport)

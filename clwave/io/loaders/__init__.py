@@ -25,7 +25,7 @@ from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading, to_float32
 
-__all__ = ["load", "describe", "DESCRIBED", "SUPPORTED"]
+__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED"]
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
@@ -185,6 +185,17 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 
 
 #: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
+def world_unit(path) -> str | None:
+    """The world unit of a volume file where it is a length its header gives (:data:`clwave.io.images.UNIT_METRES`):
+    DICOM's millimetres, a NIfTI's or NRRD's own; None for the others (voxel units, or units clwave does not read)."""
+    path, _ = _split_inner(Path(path))
+    kind = _kind(path)
+    if kind in ("nifti", "nrrd"):
+        with reading(path):
+            return (nifti if kind == "nifti" else nrrd).world_unit(path)
+    return "mm" if kind in ("dicom", "dicom-frames") else None
+
+
 DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",
              "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti")
 

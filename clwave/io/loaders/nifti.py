@@ -115,6 +115,16 @@ def _time_step(header) -> tuple:
     return (step, None if unit == "unknown" else unit) if 0 < step < math.inf else (None, None)
 
 
+def world_unit(path) -> str | None:
+    """The header's spatial unit (xyzt_units): "mm" (unknown too, as NIfTI readers take it), "um" or "m"; None for a
+    code NIfTI does not define."""
+    try:
+        unit = _load(path).header.get_xyzt_units()[0]
+    except KeyError:
+        return None
+    return {"unknown": "mm", "mm": "mm", "micron": "um", "meter": "m"}.get(unit)
+
+
 def label_intent(path) -> bool:
     """Whether the file's intent is ``NIFTI_INTENT_LABEL`` (its values index labels: a segmentation)."""
     return _load(path).header.get_intent()[0] == "label"

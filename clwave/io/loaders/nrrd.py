@@ -69,6 +69,17 @@ def read_nrrd(path, fits=None, warn_spacing=True):
     return to_canonical(data, np.diag(signs + (1,)) @ affine)
 
 
+def world_unit(path) -> str | None:
+    """The unit of the header's ``space units`` ("mm", "um", "m"; the same on every axis), else "mm" where it names
+    a ``space`` (an anatomical one: millimetres by convention), else None."""
+    with open(path, "rb") as fh:
+        header = _read_header(path, fh)
+    units = {str(u).lower().replace("µ", "u") for u in header.get("space units", ())}
+    if units:
+        return units.pop() if len(units) == 1 and units <= {"mm", "um", "m", "cm"} else None
+    return "mm" if "space" in header else None
+
+
 def _read_header(path, fh):
     """pynrrd's header; one naming its data files line by line (``data file: LIST``) is refused by name."""
     import nrrd

@@ -6,10 +6,11 @@
   const canvas = $("image"), ctx = canvas.getContext("2d"), status = $("status");
   const HOME = { azimuth: 30, elevation: 20, zoom: 1 };
   const state = { ...HOME, mode: "xray", detail: 1, window: null, moving: false, background: 0, shading: true,
-                  tf: null, colour_map: "grey" };
+                  tf: null, colour_map: "grey", fov: null };
   let sentSeq = 0, hello = null, current = null, pending = false, idleTimer = null, closed = false;
   // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
-  const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, tfInput: null, frames: [] };
+  const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, tfInput: null, frames: [],
+                  exported: null, saved: null };
   window.clwave = { state, stats, send: () => request(), current: () => current,
                     latest: () => (pending || held ? -1 : sentSeq) };  // the view asked for last (-1: one is on its way)
 
@@ -39,7 +40,7 @@
   const REFUSED = [1008, 1009], BUSY = 1013;  // protocol.POLICY, TOO_BIG; server.MAX_TABS open (its reason says)
   function disconnected(ev) {
     closed = true;
-    for (const id of ["mode", "xray-controls", "shaded-controls"]) $(id).disabled = true;
+    for (const id of ["mode", "camera-controls", "xray-controls", "shaded-controls", "export"]) $(id).disabled = true;
     canvas.classList.add("offline");
     const why = `${ev.code}${ev.reason ? ": " + ev.reason : ""}`;
     status.textContent = ev.code === BUSY ? `not connected (${why})` : REFUSED.includes(ev.code) ?
@@ -126,7 +127,13 @@
     drawEditor();
     drawColourBar();
     syncMode();
-    showDetail(); showWindow();
+    showDetail(); showWindow(); showFov();
+    // the saved image's size: the canvas' times 1, 2, 3, 4, 6 or 8, each side at most 4096 (protocol.EXPORT_SIZE)
+    $("export-scale").replaceChildren(...[1, 2, 3, 4, 6, 8].filter((k) => k * Math.max(h, w) <= 4096).map((k) => {
+      const option = document.createElement("option");
+      option.value = k; option.textContent = `${k * w} × ${k * h}${k === 1 ? " (this view's)" : ` (${k}×)`}`;
+      return option;
+    }));
   }
 
   function showRange(w) {  // a transfer function's window in data units ("auto": the volume's percentiles)
@@ -492,6 +499,56 @@
     edited(true);
   });
   $("tf-colour").addEventListener("change", () => { commit(); if (tf.base.points) { state.moving = false; request(); } });
+
+  // ---------------------------------------------------------------- perspective (the server places the eye, frames.py)
+  function showFov() { $("fov-out").textContent = `${$("fov").value}°`; }
+  $("perspective").addEventListener("change", (ev) => {
+    $("fov").disabled = !ev.target.checked;
+    state.fov = ev.target.checked ? +$("fov").value : null; state.moving = false; request();
+  });
+  $("fov").addEventListener("input", () => { showFov(); state.fov = +$("fov").value; state.moving = true; request(); });
+  $("fov").addEventListener("change", () => { state.moving = false; request(); });
+
+  // ---------------------------------------------------------------- this view as a command, as Python, as an image
+  // The server translates the view (clwave/view/export.py, the one home of it): the page sends its view and the
+  // chosen size, and shows and copies the text, or downloads the image the server rendered at full quality.
+  function exportSize() { const k = +$("export-scale").value || 1; return [k * canvas.height, k * canvas.width]; }
+  async function exported(path) {
+    const body = JSON.stringify({ view: { type: "view", seq: sentSeq, ...state, moving: false }, size: exportSize() });
+    const r = await fetch(`/${path}?token=${encodeURIComponent(token)}`, { method: "POST", body,
+                                                                         headers: { "Content-Type": "application/json" } });
+    if (!r.ok) throw new Error((await r.text()).trim() || `the server answered ${r.status}`);
+    return r;
+  }
+  function exportNote(text, error = false) { $("export-note").textContent = text; $("export-note").classList.toggle("error", error); }
+  async function copy(kind, what) {
+    exportNote(`making the ${what}…`);
+    try {
+      const text = (await (await exported("export")).json())[kind], box = $("export-text");
+      box.value = text; box.hidden = false; box.focus(); box.select();  // copied by Ctrl+C where the clipboard is not ours
+      let copied = false;
+      if (navigator.clipboard && window.isSecureContext) {
+        try { await navigator.clipboard.writeText(text); copied = true; } catch (e) { copied = false; }
+      }
+      stats.exported = { kind, text };
+      exportNote(copied ? `copied the ${what}` : `the ${what} is selected: Ctrl+C copies it`);
+    } catch (e) { exportNote(e.message, true); }
+  }
+  $("copy-command").addEventListener("click", () => copy("command", "command line"));
+  $("copy-python").addEventListener("click", () => copy("python", "Python"));
+  $("save-image").addEventListener("click", async () => {
+    const [h, w] = exportSize();
+    exportNote(`rendering ${w} × ${h} at full quality…`);
+    try {
+      const blob = await (await exported("image")).blob(), a = document.createElement("a");
+      a.href = URL.createObjectURL(blob);
+      a.download = `clwave_${state.mode}_az${state.azimuth.toFixed(0)}_el${state.elevation.toFixed(0)}_${w}x${h}.png`;
+      a.click();
+      setTimeout(() => URL.revokeObjectURL(a.href), 1000);
+      stats.saved = { size: [h, w], blob };
+      exportNote(`saved ${w} × ${h}`);
+    } catch (e) { exportNote(e.message, true); }
+  });
 
   // ---------------------------------------------------------------- figures and saving
   const fmt = (x, d = 3) => (typeof x === "number" ? x.toPrecision(d) : String(x));

@@ -1,0 +1,337 @@
+"""A tab's view as the command line and the Python that render it, and as an image at a chosen size (docs/viewer.md
+§5): the one home of the translation from the viewer's state to ``clwave render``'s options and to ``clwave.splat`` /
+``clwave.raytrace``'s arguments; the page only shows and copies the text.
+
+A view is first resolved (:func:`resolve`, on the render thread: a scalar model's transfer function needs the tracer's
+pool for an "auto" window) into a :class:`Spec` whose every figure is explicit (the camera's extent, the X-ray window,
+the transfer function's window), so that the command renders what the server renders, not what the command's own
+defaults would choose.  :func:`picture` renders a spec with the renderers the command line calls (``splat`` with the
+viewer's :class:`~clwave.SplatRenderer`, the viewer's :class:`~clwave.RayTracer`'s ``render``), at full quality.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+from dataclasses import dataclass
+
+from ..errors import InputError
+from ..model.camera import Camera
+from ..model.transfer import TransferFunction
+from . import colours
+
+#: the files the command and the Python write
+OUTPUT, TF_FILE = "view.png", "view-tf.json"
+#: host bytes a pixel of a saved image may take at the least (the viewer's own floor, docs/viewer.md §1): a size whose
+#: image would outgrow the memory available now is refused before it is rendered
+SAVE_PIXEL_BYTES = 200
+#: the model options that name its transfer function: a scalar model's shaded view replaces them with the tab's
+TF_OPTIONS = ("tf", "tf_window")
+#: the reading options that clwave.load takes by the same name
+LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level")
+
+
+@dataclass(frozen=True)
+class Origin:
+    """How the served model was made: the ``input`` as given to ``clwave view`` (None: a model given to
+    ``clwave.view()`` in Python, which no command reads) and the reading and model ``options`` given, as
+    ``(dest, flag, value)`` (value None for a switch)."""
+
+    input: str | None = None
+    options: tuple = ()
+
+    @classmethod
+    def of_args(cls, args) -> "Origin":
+        """The input and the reading and model options of a ``clwave view`` command line that differ from their
+        defaults (the same options as ``render``'s: one parser makes both, cli/options.py)."""
+        import argparse
+
+        from ..cli.options import add_input_options, add_model_options
+
+        parser = argparse.ArgumentParser(add_help=False)
+        add_input_options(parser)
+        add_model_options(parser)
+        given = []
+        for action in parser._actions:
+            value = getattr(args, action.dest, action.default)
+            if action.option_strings and value not in (None, False) and value != action.default:
+                given.append((action.dest, action.option_strings[-1], None if value is True else value))
+        return cls(args.input, tuple(given))
+
+    def get(self, dest):
+        return next((value if value is not None else True for d, _, value in self.options if d == dest), None)
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A view with every figure explicit: ``window`` the X-ray picture's, ``tf`` a scalar model's shaded one (its
+    window in numbers), ``colour_map`` None for an RGBA model's X-ray."""
+
+    mode: str
+    camera: Camera
+    window: tuple | None = None
+    colour_map: str | None = None
+    detail: float = 1.0
+    tolerance: float | None = None
+    shading: bool = True
+    background: float = 0.0
+    tf: TransferFunction | None = None
+    levels: int = 0  # the model's (the Python of a volume decomposes it with as many)
+
+
+def resolve(sources: dict, state, size=None) -> Spec:
+    """The :class:`Spec` of a tab's ``state`` at ``size`` (H, W; None: the page's), on the render thread."""
+    source = sources[state.mode]
+    camera = source.camera(state, size=size)
+    levels = source.wv.levels
+    if state.mode == "xray":
+        return Spec("xray", camera, tuple(state.window or source.auto_window),
+                    state.colour_map if source.capabilities["colour_map"] else None, state.detail, levels=levels)
+    if source.tracer is None:
+        raise Unavailable("the shaded views' ray tracer is still being made (or the whole file read): try again once "
+                          "the view has been refined")
+    tf, window = source.transfer_function(state.tf, source.tracer)
+    if tf is not None and tf.window == "auto":  # the pool's percentiles, written as numbers
+        tf = TransferFunction(tf.points, window=tuple(window), name=tf.name)
+    return Spec("shaded", camera, tolerance=source.tolerance, shading=state.shading, background=state.background,
+                tf=tf, levels=levels)
+
+
+class Unavailable(InputError):
+    """What a view needs is not there yet (its tracer, a file's rest): asked again later, it is."""
+
+
+def picture(sources: dict, spec: Spec):
+    """The picture of ``spec`` at full quality (every kept coefficient; the tracer's full detail at its tolerance), by
+    the renderers ``clwave render`` calls: its PNG's pixels (an X-ray in the tab's colour map)."""
+    from ..splat.renderer import splat
+
+    source = sources[spec.mode]
+    if spec.mode == "xray":
+        if spec.detail < 1.0:
+            raise InputError(f"detail kept {100 * spec.detail:.3g} %: a saved image has every kept coefficient, as "
+                             f"clwave render draws them; set detail kept to 100 %")
+        if not source.complete:
+            raise Unavailable("the rest of the file is still being read: save once the model line says it is in")
+        result = splat(source.wv, spec.camera, renderer=source.r)
+        image = result.to_uint8(spec.window)
+        return colours.apply(image, spec.colour_map) if spec.colour_map else image
+    result = source.tracer.render(spec.camera, tolerance=spec.tolerance, shading=spec.shading,
+                                  **({} if spec.tf is None else dict(transfer_function=spec.tf)))
+    return result.to_uint8(background=(spec.background,) * 3)
+
+
+def check_save_size(size):
+    """Refuse, before rendering, a saved image whose pixels would outgrow the host memory available now."""
+    from ..device.memory import check_fits
+
+    H, W = size
+    check_fits(H * W * SAVE_PIXEL_BYTES, f"saving a {H}x{W} image", "choose a smaller size")
+
+
+# ---------------------------------------------------------------------------------------------------- the command
+def _number(x) -> str:
+    return repr(float(x))
+
+
+def _token(flag, value) -> list:
+    """``[flag, value]``, or ``[flag=value]`` where the value begins with "-" (argparse would take it for an option)."""
+    value = value if isinstance(value, str) else _number(value) if isinstance(value, float) else str(value)
+    return [f"{flag}={value}"] if value.startswith("-") else [flag, value]
+
+
+def _is_preset(tf: TransferFunction) -> bool:
+    """Whether ``tf`` is a preset under a window of numbers (``--tf NAME --tf-window LO,HI`` says it)."""
+    return (tf.name in TransferFunction.PRESETS and isinstance(tf.window, tuple)
+            and tf == TransferFunction.preset(tf.name, window=tf.window))
+
+
+def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
+    """The shell lines that render ``spec`` with ``clwave render``: a ``.json`` of the transfer function first where
+    no preset names it; lines beginning ``#`` say what of the view no option sets."""
+    if origin.input is None:
+        return ("# the model was given to clwave.view() in Python: no command line reads it; the Python renders this "
+                "view of it")
+    clw = origin.input.lower().endswith(".clw")
+    scalar_tf = spec.mode == "shaded" and spec.tf is not None
+    before, tokens, notes = [], ["clwave", "render", origin.input], []
+    for dest, flag, value in origin.options:
+        # a scalar model's shaded view: the tab's function in place of the one given; an X-ray of a .clw: none
+        if dest in TF_OPTIONS and (scalar_tf or clw):
+            continue
+        tokens += [flag] if value is None else _token(flag, value)
+    tokens += ["--method", "splat" if spec.mode == "xray" else "raytrace"]
+    if scalar_tf:
+        if _is_preset(spec.tf):
+            tokens += ["--tf", spec.tf.name, *_token("--tf-window", ",".join(map(_number, spec.tf.window)))]
+        else:
+            before = [f"cat > {TF_FILE} <<'EOF'", json.dumps(spec.tf.to_dict()), "EOF"]
+            tokens += ["--tf", TF_FILE]
+        if not clw and origin.get("classify") != "post":  # a volume: kept scalar, classified while rendering
+            tokens += ["--classify", "post"]
+    cam = spec.camera
+    tokens += [*_token("--azimuth", cam.azimuth), *_token("--elevation", cam.elevation)]
+    if cam.perspective:
+        tokens += ["--perspective", "--fov", _number(cam.fov), "--distance", _number(cam.distance)]
+    else:
+        tokens += ["--extent", _number(cam.extent)]
+    tokens += ["--size", f"{cam.size[0]}x{cam.size[1]}"]
+    if spec.mode == "xray":
+        tokens += _token("--window", ",".join(map(_number, spec.window)))
+        if spec.colour_map not in (None, "grey"):
+            notes.append(f"# not in this command: the colour map {spec.colour_map} (clwave render writes grey)")
+        if spec.detail < 1.0:
+            notes.append(f"# not in this command: detail kept {100 * spec.detail:.3g} % (clwave render splats every "
+                         f"kept coefficient)")
+    else:
+        tokens += ["--tolerance", _number(spec.tolerance)]
+        tokens += [] if spec.shading else ["--no-shading"]
+        if spec.background:
+            tokens += ["--background", ",".join([_number(spec.background)] * 3)]
+    tokens += ["-o", output]
+    return "\n".join(notes + before + [shlex.join(tokens)])
+
+
+# ---------------------------------------------------------------------------------------------------- the Python
+def python(origin: Origin, spec: Spec, output=OUTPUT) -> str:
+    """Python that renders ``spec``: the model read as ``clwave view`` read it, the camera, ``clwave.splat`` or
+    ``clwave.raytrace`` with the view's arguments, and the picture saved."""
+    lines = ["import clwave", ""] + _model(origin, spec)
+    cam = spec.camera
+    framing = f"perspective=True, fov={_number(cam.fov)}, distance={_number(cam.distance)}" if cam.perspective \
+        else f"extent={_number(cam.extent)}"
+    lines.append(f"camera = clwave.Camera(azimuth={_number(cam.azimuth)}, elevation={_number(cam.elevation)}, "
+                 f"size={tuple(cam.size)!r}, {framing})")
+    if spec.mode == "xray":
+        if spec.colour_map not in (None, "grey"):
+            lines.append(f"# not in this snippet: the colour map {spec.colour_map} (saved grey)")
+        if spec.detail < 1.0:
+            lines.append(f"# not in this snippet: detail kept {100 * spec.detail:.3g} % (every kept coefficient)")
+        lines += ["result = clwave.splat(wv, camera)",
+                  f"result.save({output!r}, window=({_number(spec.window[0])}, {_number(spec.window[1])}))"]
+        return "\n".join(lines) + "\n"
+    options = f", tolerance={_number(spec.tolerance)}"
+    if spec.tf is not None:
+        lines.append(f"tf = clwave.TransferFunction.preset({spec.tf.name!r}, window={spec.tf.window!r})"
+                     if _is_preset(spec.tf) else f"tf = clwave.TransferFunction.from_dict({spec.tf.to_dict()!r})")
+        options += ", transfer_function=tf"
+    options += "" if spec.shading else ", shading=False"
+    lines.append(f"result = clwave.raytrace(wv, camera{options})")
+    background = f", background={(spec.background,) * 3!r}" if spec.background else ""
+    lines.append(f"result.save({output!r}{background})")
+    return "\n".join(lines) + "\n"
+
+
+def _model(origin: Origin, spec: Spec) -> list:
+    """The lines that make ``wv`` as ``clwave view`` made it (a ``.clw`` file opened; a volume read, classified where
+    it was, decomposed with the served model's levels and thresholded); a line naming the options they leave out."""
+    if origin.input is None:
+        return ["# wv: the model given to clwave.view()"]
+    given = {dest for dest, _, _ in origin.options}
+    if origin.input.lower().endswith(".clw"):
+        keep, threshold = origin.get("keep"), origin.get("threshold")
+        lines = [f"wv = clwave.WaveletVolume.open({origin.input!r}{'' if keep is None else f', keep={keep!r}'})"]
+        lines += [] if threshold is None else [f"wv = wv.threshold(threshold={threshold!r})"]
+        left = given - {"keep", "threshold", *TF_OPTIONS}
+    else:
+        lines, left = _volume(origin, spec)
+    if left:
+        flags = ", ".join(flag for dest, flag, _ in origin.options if dest in left)
+        lines.insert(0, f"# not in this snippet: {flags} (given to clwave view; the command line has them)")
+    return lines
+
+
+def _volume(origin: Origin, spec: Spec) -> tuple:
+    """A volume input's lines, and the options they leave out."""
+    given = {dest for dest, _, _ in origin.options}
+    if origin.input.startswith("phantom:"):
+        name, _, n = origin.input[len("phantom:"):].partition(":")
+        lines = [f"vol = clwave.phantom({name!r}, n={int(n or 128)})"]
+        left = given & {"spacing", "subtract"}
+    else:
+        read = "".join(f", {dest}={_load_value(dest, origin.get(dest))!r}" for dest in LOAD_OPTIONS if dest in given)
+        lines, left = [f"vol = clwave.load({origin.input!r}{read})"], set()
+    tf, post = origin.get("tf"), origin.get("classify") == "post"
+    if tf is not None:
+        if tf not in TransferFunction.PRESETS:
+            left |= {"tf", "tf_window"}
+        else:
+            window = origin.get("tf_window")
+            window = "" if window is None else f", window={window if window == 'auto' else _floats(window)!r}"
+            lines += [f"tf = clwave.TransferFunction.preset({tf!r}{window}).resolved(vol)"]
+            lines += [] if post else ["vol = tf.classify(vol)"]
+    wavelet = origin.get("wavelet") or "cubic"
+    wavelet = wavelet.split(",") if "," in wavelet else wavelet
+    keep, threshold = origin.get("keep"), origin.get("threshold")
+    thresholding = f"threshold={threshold!r}" if threshold is not None else f"keep={0.05 if keep is None else keep!r}"
+    lines.append(f"wv = clwave.WaveletVolume.from_volume(vol, wavelet={wavelet!r}, levels={spec.levels}"
+                 f"{', interpolate=True' if origin.get('interpolate') else ''}"
+                 f"{', transfer_function=tf' if tf in TransferFunction.PRESETS else ''}).threshold({thresholding})")
+    return lines, left | (given - {*LOAD_OPTIONS, "tf", "tf_window", "classify", "wavelet", "levels", "keep",
+                                   "threshold", "interpolate"})
+
+
+def _floats(text) -> tuple:
+    return tuple(float(v) for v in str(text).split(","))
+
+
+def _load_value(dest, value):
+    """A reading option's value as ``clwave.load`` takes it (the command line's text parsed as its parser does)."""
+    if dest == "shape":
+        return tuple(int(v) for v in value.split(","))
+    if dest == "spacing":
+        spacing = _floats(value)
+        return spacing[0] if len(spacing) == 1 else spacing
+    if dest == "series" and str(value).isdigit():
+        return int(value)
+    return value
+
+
+# ---------------------------------------------------------------------------------------------------- the routes
+async def serve(server, request, *, image: bool):
+    """``POST /export`` (``image`` False: the command and the Python, JSON) or ``POST /image`` (the PNG, one at a time)
+    of a page's ``{"view", "size"}`` (:func:`~clwave.view.protocol.parse_export`), worked out on the render thread
+    between two stages; a request refused is one line of text (400, 409 while what it needs is made,
+    507 too large for memory, 429 a save under way)."""
+    import asyncio
+    import contextlib
+
+    from aiohttp import web
+
+    from ..device.memory import HostMemoryError
+    from ..errors import ClwaveError, DeviceMemoryError
+    from .protocol import Refused, parse_export
+
+    server.check_origin(request)
+    try:
+        state, size = parse_export(await request.text(), tuple(server.sources))
+    except Refused as exc:
+        raise web.HTTPBadRequest(text=f"{exc}\n") from None
+
+    def work():
+        spec = resolve(server.sources, state, size)
+        if image:
+            check_save_size(size)
+            return picture(server.sources, spec)
+        return dict(command=command(server.origin, spec), python=python(server.origin, spec), size=list(size))
+
+    if image and server.saving.locked():
+        raise web.HTTPTooManyRequests(text="an image is being saved already: save again once it has come\n")
+    try:
+        async with server.saving if image else contextlib.nullcontext():
+            done = await asyncio.get_running_loop().run_in_executor(server.pool, work)
+    except Unavailable as exc:
+        raise web.HTTPConflict(text=f"{exc}\n") from None
+    except (HostMemoryError, DeviceMemoryError) as exc:
+        raise web.HTTPInsufficientStorage(text=f"{server.explain(exc, state.mode)}\n") from None
+    except ClwaveError as exc:
+        raise web.HTTPBadRequest(text=f"{exc}\n") from None
+    except RuntimeError:  # the render thread's pool shut down: the server is stopping
+        raise web.HTTPServiceUnavailable(text="the viewer is stopping\n") from None
+    if not image:
+        return web.json_response(done)
+    from .frames import encode
+
+    H, W = size
+    return web.Response(body=encode(done, lossless=True)[0], content_type="image/png",
+                        headers={"Content-Disposition": f'attachment; filename="clwave-view-{H}x{W}.png"'})

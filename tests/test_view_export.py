@@ -1,0 +1,238 @@
+"""A tab's view as a command line, as Python and as an image saved at a chosen size (docs/viewer.md §5): the command
+run in a shell and the Python run by ``exec`` give the server's image of the same view; the routes check what they
+are sent.  The page's buttons in a real browser: tests/test_view_browser.py."""
+
+import asyncio
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import aiohttp
+import numpy as np
+import pytest
+
+import clwave
+from clwave.view import view
+from clwave.view.export import Origin, Spec, command, python
+
+from test_view import BASE, decode, frames_until_final
+
+#: the editor's preset moved, widened and made more opaque: no preset names it (a .json of points in the command)
+TF = dict(preset="hydrogen", centre=0.1, width=1.5, opacity=2.0)
+
+
+@pytest.fixture(scope="module")
+def clw(tmp_path_factory):
+    """A scalar .clw file small enough to be read whole at once (its prefix is all of it)."""
+    model = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.2)
+    return model.save(tmp_path_factory.mktemp("export") / "h.clw")
+
+
+def post(v, route, body, headers=None):
+    """``(status, bytes)`` of a POST of ``body`` (a dict, or text as it is) to ``route`` of the viewer ``v``."""
+    async def go():
+        async with aiohttp.ClientSession() as s:
+            data = body if isinstance(body, str) else json.dumps(body)
+            async with s.post(v.url.replace("/?", f"/{route}?"), data=data, headers=headers or {}) as r:
+                return r.status, await r.read()
+    return asyncio.run(go())
+
+
+def final_frame(v, msg):
+    """The figures and picture of the final frame of the view ``msg``."""
+    async def go():
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+            await ws.receive_json()
+            await ws.send_str(json.dumps(msg))
+            return (await frames_until_final(ws, msg["seq"]))[-1]
+    figures, data = asyncio.run(go())
+    return figures, decode(data)
+
+
+def exported(v, msg, size):
+    """The command and the Python of the view ``msg`` at ``size``, and the image the server saves of it."""
+    status, text = post(v, "export", dict(view=msg, size=list(size)))
+    assert status == 200, text
+    status, png = post(v, "image", dict(view=msg, size=list(size)))
+    assert status == 200, png
+    return json.loads(text), decode(png)
+
+
+def shell(text, where: Path):
+    """Run the command's text in bash in a new folder ``where``, ``clwave`` this checkout's; the picture it writes."""
+    import os
+
+    bin_dir = where / "bin"
+    bin_dir.mkdir(parents=True)
+    (bin_dir / "clwave").write_text(f'#!/bin/sh\nexec {sys.executable} -m clwave "$@"\n')
+    (bin_dir / "clwave").chmod(0o755)
+    env = dict(os.environ, PATH=f"{bin_dir}:{os.environ['PATH']}",
+               PYTHONPATH=str(Path(clwave.__file__).parents[1]))
+    done = subprocess.run(["bash", "-e", "-c", text], cwd=where, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return decode((where / "view.png").read_bytes())
+
+
+def executed(text, where: Path, monkeypatch):
+    """``exec`` the Python's text in a new folder ``where``; the picture it saves."""
+    where.mkdir()
+    monkeypatch.chdir(where)
+    exec(compile(text, "<the viewer's Python>", "exec"), {})
+    return decode((where / "view.png").read_bytes())
+
+
+def grey(picture):
+    """An X-ray picture's grey levels (a colour map's grey table repeats them in three channels)."""
+    return picture[..., 0] if picture.ndim == 3 else picture
+
+
+def test_an_xray_view_as_a_command_and_as_python_renders_the_servers_image(clw, tmp_path, monkeypatch):
+    """An X-ray view (turned, zoomed, a window of its own) at the page's size and at twice it: the command's image is
+    the saved one bit for bit, and the Python's too (all three splat every coefficient through a SplatRenderer of the
+    same model, in the same order); the final frame on the page is within one grey level of it, not bit for bit: the
+    viewer accumulates the same splats pass by pass (docs/viewer.md §2), a float32 sum in another order, which a
+    rounding to 8 bits can move by one level."""
+    with view(str(clw), size=(32, 40)) as v:
+        lo, hi = v.server.sources["xray"].auto_window
+        msg = dict(BASE, seq=1, azimuth=47.3, elevation=-12.5, zoom=1.7, window=[lo + 0.1 * (hi - lo), 0.7 * hi])
+        figures, frame = final_frame(v, msg)
+        page, saved = exported(v, msg, (32, 40))
+        page2, saved2 = exported(v, msg, (64, 80))
+    assert "--method splat" in page["command"] and "--window" in page["command"] and "--extent" in page["command"]
+    got = shell(page["command"], tmp_path / "page")
+    assert got.shape == (32, 40) and got.std() > 5 and np.array_equal(got, grey(saved))
+    assert np.abs(got.astype(int) - grey(frame)).max() <= 1 and figures["final"]
+    assert np.array_equal(executed(page["python"], tmp_path / "python", monkeypatch), got)
+    twice = shell(page2["command"], tmp_path / "twice")
+    assert twice.shape == (64, 80) and np.array_equal(twice, grey(saved2))
+
+
+def test_a_shaded_perspective_view_through_an_edited_function_as_a_command_and_python(clw, tmp_path, monkeypatch):
+    """A shaded view of a scalar model through the editor's function (a preset moved, widened and more opaque: a .json
+    of its points in the command), a perspective camera, a grey background: the command's image, the Python's, the
+    saved one and the page's final frame are one image bit for bit (the final frame is clwave.raytrace of the view,
+    docs/viewer.md §2); saved at twice the size, the command at that size again.  The starting function (grey, its
+    window "auto": the tracer's percentiles) unlit: --tf grey --tf-window of those numbers, bit for bit again."""
+    with view(str(clw), size=(32, 40), tolerance=2e-2) as v:
+        msg = dict(BASE, seq=1, mode="shaded", tf=TF, azimuth=47.3, elevation=-12.5, zoom=1.3, fov=40.0,
+                   background=0.25)
+        figures, frame = final_frame(v, msg)
+        page, saved = exported(v, msg, (32, 40))
+        page2, saved2 = exported(v, msg, (64, 80))
+        # the starting function, grey, whose window is "auto" (the tracer's pool percentiles, here from below 0), unlit
+        start = dict(BASE, seq=1, mode="shaded", azimuth=10.0, shading=False)
+        start_figures, start_frame = final_frame(v, start)
+        grey_page, grey_saved = exported(v, start, (32, 40))
+    command_text = page["command"]
+    # the lens zoomed 1.3 times: tan(fov / 2) 1.3 times less than at 40 degrees, the eye where 40 degrees frame zoom 1
+    fov = float(re.search(r"--perspective --fov (\S+) --distance", command_text).group(1))
+    assert np.tan(np.radians(fov) / 2) * 1.3 == pytest.approx(np.tan(np.radians(40.0) / 2), rel=1e-12)
+    assert "--tf view-tf.json" in command_text
+    assert "--tolerance 0.02" in command_text and "--background 0.25,0.25,0.25" in command_text
+    got = shell(command_text, tmp_path / "page")
+    assert figures["final"] and got.std() > 5 and np.array_equal(got, frame) and np.array_equal(got, saved)
+    assert np.array_equal(executed(page["python"], tmp_path / "python", monkeypatch), got)
+    twice = shell(page2["command"], tmp_path / "twice")
+    assert twice.shape == (64, 80, 3) and np.array_equal(twice, saved2)
+    lo, hi = start_figures["tf_window"]
+    assert f"--tf grey --tf-window={lo!r},{hi!r}" in grey_page["command"] and "--no-shading" in grey_page["command"]
+    got = shell(grey_page["command"], tmp_path / "grey")
+    assert got.std() > 5 and np.array_equal(got, start_frame) and np.array_equal(got, grey_saved)
+
+
+def test_a_command_line_viewers_model_options_go_into_the_command_and_the_python(tmp_path, monkeypatch):
+    """``clwave view phantom:... --keep --levels --tf P --classify post``: its reading and model options (not the
+    viewer's own) are the command's; a shaded view's function (a preset under a window of numbers: --tf P --tf-window)
+    replaces the one given, an X-ray keeps it; the command run in-process and the Python's model (a volume read and
+    decomposed as the command line does) give one image bit for bit."""
+    from clwave.cli import main, make_parser
+
+    args = make_parser().parse_args(["view", "phantom:hydrogen:20", "--keep", "0.3", "--levels", "2", "--tf",
+                                     "hydrogen", "--classify", "post", "--size", "24", "--port", "0"])
+    origin = Origin.of_args(args)
+    assert origin.input == "phantom:hydrogen:20"
+    assert [flag for _, flag, _ in origin.options] == ["--levels", "--keep", "--tf", "--classify"]
+    extent = clwave.Camera(100.0, -30.0, (24, 28)).view(clwave.phantom("hydrogen", n=20)).pixel * 28
+    camera = clwave.Camera(100.0, -30.0, (24, 28), extent=extent)
+    tf = clwave.TransferFunction.preset("hydrogen", window=(0.02, 0.3))
+    shaded = Spec("shaded", camera, tolerance=1e-2, background=0.1, tf=tf, levels=2)
+    text = command(origin, shaded)
+    assert text.count("--tf ") == 1 and "--tf hydrogen --tf-window 0.02,0.3" in text and "--classify post" in text
+    xray = command(origin, Spec("xray", camera, window=(-1.0, 2.0), levels=2))
+    assert "--tf hydrogen --classify post" in xray and "--window=-1.0,2.0" in xray
+    monkeypatch.chdir(tmp_path)
+    argv = text.split()
+    assert argv[:2] == ["clwave", "render"] and main(argv[1:]) == 0
+    got = decode((tmp_path / "view.png").read_bytes())
+    assert got.std() > 5 and np.array_equal(executed(python(origin, shaded), tmp_path / "python", monkeypatch), got)
+
+
+def test_the_routes_check_what_they_are_sent(monkeypatch):
+    """``/export`` and ``/image`` need the token and a page of this server (another Origin: 403, as the socket); a
+    request that is not ``{"view", "size"}`` with sides of 8 to 4096 pixels is one line (400), a body past 4 KiB is
+    refused unread (413); a save while one is under way is refused (429), one that would outgrow memory is said so
+    before it is rendered (507), and so is a part of the coefficients (detail kept) or a shaded view whose tracer is
+    not made yet (409).  A model given in Python has no command line, and its Python says where the model comes
+    from."""
+    from clwave.view import export
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.5)
+    good = dict(view=dict(BASE, seq=1), size=[8, 8])
+    with view(wv, size=16) as v:
+        status, text = post(v, "export", good)
+        assert status == 200
+        texts = json.loads(text)
+        assert texts["command"].startswith("# the model was given to clwave.view() in Python")
+        assert "# wv: the model given to clwave.view()" in texts["python"]
+        assert "clwave.splat(wv, camera)" in texts["python"]
+        assert post(v, "export", dict(good, view=dict(BASE, seq=1, mode="shaded")))[0] == 409
+        for size in ([0, 8], [8, 4097], [8], "x", [8.5, 8], [True, 8], None):
+            status, line = post(v, "image", dict(good, size=size))
+            assert status == 400 and line.decode().count("\n") == 1 and line.startswith(b"size="), (size, line)
+        for body in ("not json", "[]", dict(view=dict(BASE, seq=1)), dict(good, more=1),
+                     dict(good, view=dict(BASE, seq=1, zoom=500)), dict(good, view=dict(BASE, seq=1, fov=179))):
+            status, line = post(v, "export", body)
+            assert status == 400 and line.decode().count("\n") == 1, (body, line)
+        assert post(v, "image", "x" * 5000)[0] == 413
+        status, line = post(v, "image", dict(good, view=dict(BASE, seq=1, detail=0.5)))
+        assert status == 400 and b"detail kept 50 %" in line
+        assert post(v, "image", good, {"Origin": "http://evil.example"})[0] == 403
+        assert post(v, "image", good, {"Origin": v.url.split("/?")[0]})[0] == 200
+
+        async def no_token():
+            async with aiohttp.ClientSession() as s:
+                async with s.post(v.url.split("?")[0] + "image", data=json.dumps(good)) as r:
+                    return r.status
+        assert asyncio.run(no_token()) == 403
+        loop = v._background.loop
+        asyncio.run_coroutine_threadsafe(v.server.saving.acquire(), loop).result()
+        try:
+            status, line = post(v, "image", good)
+            assert status == 429 and b"being saved already" in line
+        finally:
+            loop.call_soon_threadsafe(v.server.saving.release)
+        monkeypatch.setattr(export, "SAVE_PIXEL_BYTES", 1 << 50)
+        status, line = post(v, "image", good)
+        assert status == 507 and line.startswith(b"saving a 8x8 image needs about")
+
+
+def test_a_perspective_view_zooms_its_lens_and_keeps_its_eye():
+    """In perspective the wheel narrows the field of view (tan of its half over the zoom) and the eye stays where the
+    field of view frames the target's plane as the orthographic zoom 1 does: the target plane's pixel is the
+    orthographic one at every zoom, and the eye is never brought into the content."""
+    from clwave.view.frames import Source, ViewState
+
+    vol = clwave.phantom("hydrogen", n=16)
+    source = Source(vol, (24, 32))
+    state = ViewState(seq=1, azimuth=20.0, elevation=10.0, zoom=1.0, mode="xray", detail=1.0, window=None,
+                      moving=False, background=0.0, shading=True, fov=30.0)
+    views = {zoom: source.camera(ViewState(**dict(state.__dict__, zoom=zoom))).view(vol) for zoom in (1.0, 4.0, 50.0)}
+    flat = {zoom: source.camera(ViewState(**dict(state.__dict__, zoom=zoom, fov=None))).view(vol) for zoom in views}
+    for zoom, v in views.items():
+        assert np.array_equal(v.eye, views[1.0].eye) and v.perspective
+        assert v.slope[0] * np.linalg.norm(v.eye - v.target) == pytest.approx(flat[zoom].pixel, rel=1e-12)
+    radius = np.linalg.norm(np.array(vol.shape) * vol.spacing) / 2
+    assert np.linalg.norm(views[1.0].eye - views[1.0].target) > 3 * radius
