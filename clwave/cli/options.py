@@ -461,7 +461,9 @@ def add_device_options(g):
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
     g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic and quintic bands into coarser "
                    "framebuffers within this error relative to the image maximum, and in perspective drop splats "
-                   "within what is left of it (e.g. 1e-2; default: off)")
+                   "within what is left of it (e.g. 1e-2; 0: off; default: off, but 1e-3 where render writes "
+                   "8-bit pictures only, through the automatic window: no --raw, .tif, --bit-depth 16 or "
+                   "--window LO,HI)")
     g.add_argument("--device-memory", metavar="SIZE", help="device memory to use at most, e.g. 2GiB or 512M "
                    "(default: the device's); splatting streams coefficients beyond it in chunks (docs/splatting.md "
                    "§6), ray tracing renders bricks beyond it in passes (docs/raytracing.md §6)")
