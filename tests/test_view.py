@@ -300,8 +300,9 @@ def test_the_editors_points_classify_the_shaded_view_and_rebuild_nothing(monkeyp
     """A scalar model's shaded view through the editor's own points (``tf: {"points": ...}``, data units): the tab
     hears the histogram of the values the "auto" window comes from, over the input's range, before the first shaded
     frame; every frame carries the points it was classified by and their span as its window; the final frame is
-    clwave.raytrace of the view with TransferFunction(points) bit for bit.  From a preset to points, and a point moved, no bricks, program or scalar
-    range is made (instrumented, as tests/test_classify.py): only the function's table and bounds."""
+    clwave.raytrace of the view with TransferFunction(points) bit for bit.  From a preset to points, and a point moved,
+    no bricks, program or scalar range is made (instrumented, as tests/test_classify.py): only the function's table and
+    bounds."""
     from clwave.raytrace import classified, tracer as traced
     from clwave.raytrace.tracer import RayTracer
 
