@@ -176,9 +176,9 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "tiff":
-        return (*tiff.read_tiff(path, fits), 0.0)
+        return (*tiff.read_tiff(path, fits, chunks=chunks, warn_spacing=warn_spacing), 0.0)
     if kind in _SLICE_FOLDERS:
-        return slices.read_slice_folder(path, progress_bar, fits), None, None, 0.0
+        return slices.read_slice_folder(path, progress_bar, fits, chunks, warn_spacing), None, None, 0.0
     if kind == "dicom-frames":
         return dicom_frames.read_dicom_frames(path, fits)
     return dicom.read_dicom_folder(path, series, progress_bar, fits)
@@ -226,7 +226,9 @@ def describe(path, *, series=None, level=None) -> dict:
         _reject_unused(kind, series=series)
     if kind != "zarr":
         _reject_unused(kind, level=level)
-    lazy = check_chunks(None, kind, path) is not False  # a Dask array over the file: nothing read until computed
+    # a Dask array over the file: nothing read until computed; a TIFF is described as its whole read weighs it (the
+    # axes as stored, before the loader orders them)
+    lazy = check_chunks(None, kind, path) is not False and kind not in ("tiff", "tiff-folder")
     size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) if path.is_dir() else path.stat().st_size
     facts = dict.fromkeys(DESCRIBED)
     facts.update(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size, resampled=False)
