@@ -208,3 +208,22 @@ def test_chunked_and_whole_compress_of_a_tiff_write_the_same_model(tmp_path, vol
         assert main(["compress", str(path), "--chunks", chunks, "--subtract", "100", "-o",
                      str(tmp_path / f"{chunks}.clw")]) == 0, capsys.readouterr().err
     assert (tmp_path / "6.clw").read_bytes() == (tmp_path / "off.clw").read_bytes()
+
+
+def test_pages_of_a_codec_tifffile_cannot_decode_here_are_named(tmp_path, volume):
+    """LZW (Fiji's, Pillow's) needs imagecodecs, which clwave does not install: one line naming it, whole or
+    chunked, in a file or a folder of slices (it said "truncated or corrupt")."""
+    import tifffile.tifffile as tf
+
+    if tf.COMPRESSION.LZW in tifffile.TIFF.DECOMPRESSORS:
+        pytest.skip("imagecodecs is installed here: LZW is decoded")
+    (tmp_path / "lzw").mkdir()
+    images = [Image.fromarray((page >> 8).astype(np.uint8)) for page in volume[:3]]
+    for z, image in enumerate(images):
+        image.save(tmp_path / "lzw" / f"s{z}.tif", compression="tiff_lzw")
+    images[0].save(tmp_path / "stack.tif", compression="tiff_lzw", save_all=True, append_images=images[1:])
+    for path, chunks in ((tmp_path / "lzw", False), (tmp_path / "lzw", 4), (tmp_path / "stack.tif", False),
+                        (tmp_path / "stack.tif", 4)):
+        with pytest.raises(FileFormatError, match=r"holds LZW-compressed pages, which tifffile decodes only with the "
+                                                  r"imagecodecs package: install it"):
+            load(path, chunks=chunks, spacing=1)

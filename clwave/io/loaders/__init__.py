@@ -3,7 +3,8 @@
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
 (NIfTI, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
 millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
-stores, and large .npy, .raw and .nii files, are read chunk by chunk as Dask arrays (docs/chunked.md §1).
+stores, and large .npy, .raw, .nii and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
+arrays (docs/chunked.md §1).
 
 One module per format family (``raw``: .raw and .npy; ``nifti``, ``nrrd``, ``tiff``, ``slices``: folders of TIFF,
 PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared`` holds
@@ -70,9 +71,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     chunks : None, False, "auto" or int
-        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw`` and
-        ``.nii`` too when their volume takes at least ``CHUNKED_MIN_BYTES`` (1 GiB)
-        as float32; everything else is read whole.  ``False``: read whole.
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``,
+        TIFF and folders of TIFF slices too when their volume takes at least
+        ``CHUNKED_MIN_BYTES`` (1 GiB) as float32; everything else is read whole.  ``False``: read whole.
         ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
         of the store's own.  An int: chunk by chunk, cubes of that edge in voxels.
         Chunked volumes hold a Dask array, read only when computed (docs/chunked.md).

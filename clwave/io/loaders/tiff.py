@@ -82,6 +82,8 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False):
         if chunks is not False:
             import dask.array as da
 
+            _check_decodable(series, path)
+
             roles = "".join("c" if a == channel else "s" for a in axes)
             own = (1,) + stored[1:] if pages else _store_chunks(series, path)
             source = OnDemand(partial(_read_region, str(path), pages), stored, series.dtype, own)
@@ -94,10 +96,22 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False):
             if spacing is not None:
                 declared.placed = (spacing, (0.0, 0.0, 0.0) if origin is None else origin, 0.0)
             raise
+        _check_decodable(series, path)
         data = tif.asarray(key=range(len(tif.pages))) if pages else series.asarray()
     if channel:
         data = np.moveaxis(data, axes.index(channel), -1)
     return (data if len(spatial) == 3 else data[np.newaxis]), spacing, origin
+
+
+def _check_decodable(series, path):
+    """Refuse pages compressed by a codec tifffile has no decoder for here (LZW, JPEG, ... need imagecodecs)."""
+    import tifffile
+
+    compression = series.keyframe.compression
+    if compression not in tifffile.TIFF.DECOMPRESSORS:
+        raise FileFormatError(f"{path} holds {compression.name}-compressed pages, which tifffile decodes only with the "
+                              f"imagecodecs package: install it (pip install imagecodecs), or write the stack "
+                              f"uncompressed or with compression='zlib'")
 
 
 def _store_chunks(series, path) -> tuple:
