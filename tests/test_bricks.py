@@ -210,7 +210,7 @@ def test_mixed_levels_across_brick_boundaries_trace_like_the_reference():
     oracle, which cuts every ray at every fine knot plane and sums the wavelets in closed form: X-ray segment
     integrals are exact, so they agree to rounding; at a tolerance, the kernel is within it of the converged
     oracle."""
-    rgba = smooth_rgba(n=40)
+    rgba = smooth_rgba(n=32)  # bricks of levels 0 to 3 as at 40^3; the oracle's cost grows with the knots a ray cuts
     wv = WaveletVolume.from_volume(rgba, wavelet="cubic", levels=3).threshold(keep=0.1)
     wv.content_mask = None
     tracer = RayTracer(wv)

@@ -551,7 +551,7 @@ EARLY_MISTAKES = [
      "--light, --no-shading are for a shaded volume; an X-ray (--xray) is line integrals"),
     (["render", "--method", "raytrace", "--background", "2,0,0"], "--background 2,0,0 must be a colour R,G,B with each "
                                                                    "in 0..1"),
-    (["render", "--coarse", "0"], "--coarse 0 must be"),
+    (["render", "--coarse", "1"], "--coarse 1 must be a tolerance between 0 and 1, e.g. 1e-2, or 0 (off)"),
     (["render", "-o", "x.npy"], "-o x.npy must end in .png or .tif or .tiff; --raw OUT.npy also writes the float32 "
                                 "image"),
     (["render", "--turntable", "4", "-o", "x.png"], "-o x.png must end in .gif; --turntable writes a GIF"),

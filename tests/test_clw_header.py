@@ -35,7 +35,8 @@ def other_hdf5(h5):
     (setter("shape", [-16, 16, 16]), None), (setter("groups", []), None), (setter("channels", 3), None),
     (setter("spacing", [0, 1, 1]), None), (setter("levels", 9), None), (setter("version", 99), None),
     (setter("focus", [[1, 2, 3]]), None), (setter("transfer_function", [1, 2]), None),
-    (None, flip), (None, other_hdf5)])
+    (setter("value_range", [255, 0]), None), (setter("value_range", [0, "255"]), None), (None, flip),
+    (None, other_hdf5)])
 def test_a_bad_header_is_the_error_read_clw_gives(model_file, tmp_path, edit, change):
     path = crafted(model_file, tmp_path, edit, change)
     with pytest.raises(FileFormatError) as whole:

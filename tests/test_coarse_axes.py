@@ -21,8 +21,8 @@ def _isotropic_rule(view, d_xyz):
     return (float(np.min(d_xyz)),) * 2
 
 
-def _cone(azimuth, elevation, size=48, pixel=1.05):
-    return clwave.ConeBeam(100.0, 150.0, size, pixel=pixel, azimuth=azimuth, elevation=elevation)
+def _cone(azimuth, elevation, size=48, pixel=1.05, dso=100.0):
+    return clwave.ConeBeam(dso, 1.5 * dso, size, pixel=pixel, azimuth=azimuth, elevation=elevation)
 
 
 def _volumes():
@@ -91,8 +91,12 @@ def test_thick_slices_stay_within_the_tolerance_in_perspective(cc, tolerance, vo
     single = clwave.SplatRenderer(wv, device=cc)
     coarse = clwave.SplatRenderer(wv, device=cc, coarse=tolerance)
     poses = (((0, 0), True), ((30, 0), True), ((90, 0), True), ((30, 25), False), ((60, -40), False))
-    for angles, across in poses if volume == 0 else poses[::2]:  # Shepp-Logan's sharp bands get refined tables
-        cam = _cone(*angles, size=40)  # the image's middle: coarse layers reach beyond its edges by their margins
+    for angles, across in poses:
+        # the image's middle: coarse layers reach beyond its edges by their margins. A cone of 4 degrees (rays up to
+        # 0.07 off the axis): at 8 (ConeBeam(100, 150)) the slope nodes, which grow as (depth / c)^2 with the slices
+        # oblique to the view (docs/known-gaps.md §13), took Shepp-Logan's (60, -40) to 755 M texels, more than PoCL
+        # allows on some CI machines
+        cam = _cone(*angles, size=40, dso=200.0)
         want, got = single.render(cam), coarse.render(cam)
         layers = got.meta["framebuffers"]
         assert any(isinstance(f, list) for f in layers) == across  # (f_u, f_v) layers where z is across the view

@@ -474,8 +474,8 @@ def test_a_cut_tiff_stack_is_one_line_on_the_command_line(tmp_path):
     tifffile.imwrite(tmp_path / "stack.tif", np.arange(8 * 32 * 32, dtype=np.uint16).reshape(8, 32, 32))
     data = (tmp_path / "stack.tif").read_bytes()
     (tmp_path / "cut.tif").write_bytes(data[:len(data) // 2])
-    proc = subprocess.run([sys.executable, "-m", "clwave", "compress", str(tmp_path / "cut.tif"), "-o",
-                           str(tmp_path / "c.clw")], cwd=ROOT, capture_output=True, text=True, timeout=120,
+    proc = subprocess.run([sys.executable, "-m", "clwave", "compress", str(tmp_path / "cut.tif"), "--spacing", "1",
+                           "-o", str(tmp_path / "c.clw")], cwd=ROOT, capture_output=True, text=True, timeout=120,
                           env=dict(os.environ, PYTHONPATH=str(ROOT)))  # a process of its own: no log capture
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "truncated or corrupt" in proc.stderr
 

@@ -88,12 +88,14 @@ def test_the_estimate_holds_on_cells_of_several_pixels():
 def test_the_estimate_holds_on_four_channel_cone_views():
     # the bar as above on channels of unlike detail (smooth random at four widths, the first the roughest), three
     # levels, cone beams: each channel's error has its own details' energy (docs/splatting.md §5; spread evenly over
-    # the channels, the max estimate was under the error on 10 of these 56 frames, now 1)
+    # the channels, the max estimate was under the error on 10 of the 56 frames with cones of 12 and 4.6 degrees, then
+    # 1). Cones of 6.2 and 4.6 degrees (f = 6, 8): at 12 (f = 3) the refined level 3 of the smoothest channel took
+    # 773 M texels (2.9 GiB), more than PoCL allows on some CI machines (docs/known-gaps.md §13)
     rng = np.random.default_rng(3)
     volume = clwave.Volume(np.stack([gaussian_filter(rng.standard_normal((24, 24, 24)), width)
                                      for width in (1.0, 1.5, 2.0, 3.0)], -1).astype(np.float32))
     _assert_the_bar([(volume, clwave.ConeBeam(f * 24, 1.5 * f * 24, 32, pixel=1.3 * 1.5 * 24 / 32, azimuth=azimuth,
-                                              elevation=25)) for f in (3.0, 8.0) for azimuth in (40, 130)], levels=3)
+                                              elevation=25)) for f in (6.0, 8.0) for azimuth in (40, 130)], levels=3)
 
 
 def test_the_estimate_holds_for_order_6_on_smooth_and_noisy_volumes():
@@ -116,7 +118,7 @@ def test_the_estimate_holds_for_order_6_on_piecewise_constant_volumes():
     cases = [(volume, clwave.Camera(azimuth, elevation, 32))
              for azimuth, elevation in ((30, 20), (0, 0), (75, 60), (130, -40))]
     cases += [(volume, clwave.ConeBeam(f * 32, 1.5 * f * 32, 32, pixel=1.3 * 1.5 * 32 / 32, azimuth=40, elevation=25))
-              for f in (3.0, 8.0)]
+              for f in (5.0, 8.0)]  # cones of 7.4 and 4.6 degrees: at 12 (f = 3) 357 M texels, over 1 GiB
     _assert_the_bar(cases, wavelet="quintic")
 
 

@@ -47,7 +47,7 @@ def random_scene(rng, n=400, n_tex=12, beyond=0.0):
         # pixel; along a cell axis any step with nearest lookup, the box reaching half a texel beyond the first
         # and last
         P = int(rng.integers(1, 6))
-        su = float(P) if lookup & LINEAR_U else rng.uniform(0.2, 1.99) if lookup & GATHER_U else rng.uniform(0.2, 3.0)
+        su = float(P) if lookup & LINEAR_U else rng.uniform(0.05, 0.99) if lookup & GATHER_U else rng.uniform(0.2, 3.0)
         sv = float(P) if lookup == LINEAR_U | LINEAR_V else rng.uniform(0.2, 3.0)
         planes = pack_texture(data, P if lookup & LINEAR_U else 1)
         ru, rv = (0.0 if lookup & (LINEAR_U | GATHER_U) else 0.5), (0.0 if lookup & LINEAR_V else 0.5)

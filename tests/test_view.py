@@ -298,10 +298,11 @@ def test_a_still_xray_frame_in_a_colour_map_is_the_splat_looked_up_in_its_table(
 
 def test_the_editors_points_classify_the_shaded_view_and_rebuild_nothing(monkeypatch):
     """A scalar model's shaded view through the editor's own points (``tf: {"points": ...}``, data units): the tab
-    hears the histogram of the values the "auto" window comes from before the first shaded frame; every frame carries
-    the points it was classified by and their span as its window; the final frame is clwave.raytrace of the view with
-    TransferFunction(points) bit for bit.  From a preset to points, and a point moved, no bricks, program or scalar
-    range is made (instrumented, as tests/test_classify.py): only the function's table and bounds."""
+    hears the histogram of the values the "auto" window comes from, over the input's range, before the first shaded
+    frame; every frame carries the points it was classified by and their span as its window; the final frame is
+    clwave.raytrace of the view with TransferFunction(points) bit for bit.  From a preset to points, and a point moved,
+    no bricks, program or scalar range is made (instrumented, as tests/test_classify.py): only the function's table and
+    bounds."""
     from clwave.raytrace import classified, tracer as traced
     from clwave.raytrace.tracer import RayTracer
 
@@ -334,7 +335,11 @@ def test_the_editors_points_classify_the_shaded_view_and_rebuild_nothing(monkeyp
     monkeypatch.undo()  # the one-shot renders below make their own tracers
     histogram = [t for t in texts if t["type"] == "histogram"]
     assert len(histogram) == 1 and len(histogram[0]["counts"]) == 64 and sum(histogram[0]["counts"]) == sample.size
-    assert histogram[0]["range"] == [float(sample.min()), float(sample.max())] and sample.size > 1000
+    # over the input's range, the sample clamped to it as the classification sees it (raytracing.md §10)
+    lo, hi = wv.value_range
+    assert histogram[0]["range"] == [lo, hi] and sample.size > 1000 and sample.min() < lo  # the model rings below 0
+    assert histogram[0]["counts"] == np.histogram(np.clip(sample, lo, hi), 64, range=(lo, hi))[0].tolist()
+    assert histogram[0]["field"] == [float(sample.min()), float(sample.max())] and histogram[0]["input"]
     assert [f["tf_points"] for f, _ in frames] == [POINTS] + [moved] * (len(frames) - 1)
     assert [f["tf_window"] for f, _ in frames] == [[0.1, 0.9]] * len(frames) and frames[-1][0]["final"]
     # every render classified by the points sent, a change paying its table and bounds only (0.5-0.7 ms here; the

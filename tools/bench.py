@@ -41,6 +41,10 @@ pre-classification of the same phantom, renders interleaved; transfer-function c
 Marschner-Lobb and a CT-like phantom at 128³, each with its preset, and ``pack``'s time.
 ``pools-lod``: the same for tracers of every detail (``lod=True``), hydrogen at ``--size``³: the pool with a step for
 the full-detail slots and one for the coarser details' against one step for the whole pool, and the steps.
+``splat-images`` (not in ``all``): splatting per image size (known-gaps §3): Shepp-Logan ``--size``³, cubic, 3 levels,
+5 %, (30°, 20°) (and more views of the spiral with ``--views``), at each ``--images`` size (512 1024 2048), single
+resolution and ``coarse=1e-3``; one warm-up per size, ``--repeats`` timed renders, CPU seconds of the process and
+wall seconds by stage, pixel updates and CPU ns per update.
 ``drr`` (not in ``all``): digitally reconstructed radiographs (docs/splatting.md §8): a
 Shepp-Logan phantom of ``--size``³ voxels of 300 mm / ``--size`` (a head-sized CT), cubic, 3 levels,
 5 %, through a C-arm (dso 1000 mm, dsd 1500 mm, a 400 mm detector): one renderer reused, each view
@@ -111,7 +115,8 @@ from bench_evaluate import bench_evaluate
 from bench_post import bench_pools, bench_pools_lod, bench_post
 from bench_raytrace import bench_lod, bench_raytrace, bench_refine, bench_setup
 from bench_scale import bench_first_image, bench_scale, scale_step
-from bench_splat import bench_decompose, bench_footprints, bench_orders, bench_progressive, bench_splat
+from bench_splat import (bench_decompose, bench_footprints, bench_orders, bench_progressive, bench_splat,
+                         bench_splat_images)
 from bench_view import bench_view, bench_view_file, bench_view_held
 
 
@@ -120,7 +125,7 @@ BENCHMARKS = {"decompose": bench_decompose, "footprints": bench_footprints, "spl
               "post": bench_post, "pools": bench_pools, "pools-lod": bench_pools_lod,
               "orders": bench_orders, "scale": bench_scale, "view": bench_view, "drr": bench_drr,
               "first-image": bench_first_image, "view-file": bench_view_file, "view-held": bench_view_held,
-              "refine": bench_refine, "evaluate": bench_evaluate}
+              "refine": bench_refine, "evaluate": bench_evaluate, "splat-images": bench_splat_images}
 
 
 def main(argv=None):
@@ -135,6 +140,8 @@ def main(argv=None):
     parser.add_argument("--views", type=int, default=4, help="distinct views per case")
     parser.add_argument("--keep", type=float, nargs="+", default=[0.01, 0.05, 1.0],
                         help="kept fractions to splat (1 = the full coefficient set)")
+    parser.add_argument("--images", type=int, nargs="+", default=[512, 1024, 2048],
+                        help="splat-images: image sizes (pixels a side)")
     parser.add_argument("--device-memory", nargs="+", default=[],
                         help="splat: also render 512^2 within these device-memory caps, e.g. 12MiB (streaming)")
     parser.add_argument("--progressive-keep", type=float, default=0.08,
@@ -165,7 +172,8 @@ def main(argv=None):
     parser.add_argument("--device", default="auto")
     parser.add_argument("--json", type=Path, help="write the JSON here instead of to stdout")
     args = parser.parse_args(argv)
-    names = [n for n in BENCHMARKS if n not in ("scale", "view", "drr", "first-image")] if args.benchmark == "all" \
+    names = [n for n in BENCHMARKS if n not in ("scale", "view", "drr", "first-image", "splat-images")] \
+        if args.benchmark == "all" \
         else [args.benchmark]
     names = [n for n in names if n != "view-file" or args.benchmark == n]  # view-file: not in all either
     results = {}

@@ -204,3 +204,40 @@ def bench_orders(args) -> dict:
     out["peak_resident_gib"] = peak_resident_gib()
     return dict(setting=dict(volume=f"hydrogen {args.size}^3 RGBA (preset)", levels=3, keep=0.05, image="512x512",
                              views=args.raytrace_views, tolerance=1e-2), orders=out)
+
+
+def bench_splat_images(args) -> dict:
+    """Splatting's cost per image size (known-gaps §3): Shepp-Logan ``--size``³, cubic, 3 levels, 5 %, one view
+    ((30°, 20°) unless ``--views`` asks for more of the spiral) at each ``--images`` size, a renderer reused, single
+    resolution and ``coarse=1e-3`` (the CLI's default for 8-bit pictures); per size one warm-up render (its kernel
+    builds apart), then ``--repeats`` renders timed in CPU seconds of the process (PoCL's threads included: the
+    measure on a loaded machine) and wall seconds, by stage, with the pixel updates and CPU ns per update."""
+    import resource
+
+    def cpu():
+        usage = resource.getrusage(resource.RUSAGE_SELF)
+        return usage.ru_utime + usage.ru_stime
+
+    wv = WaveletVolume.from_volume(phantom("shepp-logan", n=args.size), wavelet="cubic", levels=3).threshold(keep=0.05)
+    angles = [(30.0, 20.0)] + views(args.views)[1:]
+    cases = {}
+    for coarse in (None, 1e-3):
+        renderer = clwave.SplatRenderer(wv, device=args.device, coarse=coarse)
+        for size in args.images:
+            clwave.splat(wv, clwave.Camera(10.0, 5.0, size=size), renderer=renderer)  # warm-up
+            runs, cpus = [], []
+            for _ in range(args.repeats):
+                for az, el in angles:
+                    start = cpu()
+                    runs.append(clwave.splat(wv, clwave.Camera(az, el, size=size), renderer=renderer).meta)
+                    cpus.append(cpu() - start)
+            updates = statistics.median(m["pixel_updates"] for m in runs)
+            cases[f"{size}x{size}" + (f", coarse {coarse:g}" if coarse else "")] = dict(
+                cpu_seconds=summary(cpus), seconds={k: summary([m["seconds"][k] for m in runs])
+                                                    for k in ("total", "footprints", "binning", "accumulation",
+                                                              "upsampling")},
+                pixel_updates=updates, tile_pairs=statistics.median(m["tile_pairs"] for m in runs),
+                cpu_ns_per_update=1e9 * statistics.median(cpus) / updates, framebuffers=runs[0]["framebuffers"],
+                omega_s=runs[0]["omega_s"], compile_seconds=renderer.compile_seconds)
+    return dict(setting=dict(volume=f"shepp-logan {args.size}^3 scalar", wavelet="cubic", levels=3, keep=0.05,
+                             views=angles, repeats=args.repeats), cases=cases)

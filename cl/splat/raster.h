@@ -8,7 +8,7 @@
  * where a footprint is piecewise constant (Haar along a world axis) the texels are instead its
  * cells, looked up by nearest sample at any step (lookup bits of tex_int): cells along v pick
  * one texel row (weight 0 on the next), cells along u give each pixel its nearest column.  In a
- * magnified view, texels of more than half a pixel (s_u < 2) are interpolated linearly per pixel from
+ * magnified view, texels of more than a pixel (s_u < 1) are interpolated linearly per pixel from
  * one plane (lookup bit 2), so that textures need not grow with the magnification.
  *
  * splat_accumulate
@@ -26,7 +26,7 @@
  *                sample (along u gathered per pixel from one plane; clwave.splat.textures "cells"):
  *                exact for Haar footprints along a world axis, whose jumps lie on the cell
  *                edges, where linear interpolation would smear each jump over a texel.  Bit 2
- *                (with bit 0 clear): along u, samples of more than half a pixel (s_u < 2), gathered
+ *                (with bit 0 clear): along u, samples of more than a pixel (s_u < 1), gathered
  *                per pixel from one plane and interpolated linearly (a magnified view)
  *   tex_map  in  (T,) float4: (centre_u, centre_v) in texels of the unpadded texture, and the
  *                texel steps per pixel (s_u, s_v); s_u = P for phase planes, and s_v = P too

@@ -6,6 +6,9 @@
 #if CLW_TILE != 16
 #error "the per-tile kernel works in rows of 16 pixels"
 #endif
+/* texels a row of 16 pixels reads along u gathered (lookup bit 2, s_u < 1): columns c0 .. c0 + 15 and the last
+ * lane's second */
+#define CLW_GATHER_TEXELS 17
 __kernel void splat_accumulate(ACCUMULATE_PARAMS)
 {
     const int tile = get_global_id(0);
@@ -50,7 +53,32 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
             }
             continue;
         }
-        for (int y = y0; y <= y1; ++y) {  /* a cell axis (Haar along a world axis), or u coarser than the pixel */
+        if (a.w & 4) {
+            /* u texels of more than a pixel (s_u < 1, a magnified view): 16 lanes span under 16 texels, so a lane's
+             * sample is sum_k w_k t_k over the texels k of columns c0 .. c0 + K of a texel row (v interpolated),
+             * its weights set once per splat (the same on every row); no gather, which PoCL does lane by lane.
+             * Positions clamped to the margins [-1, a.y] first, the weight from the clamped column: beyond them a
+             * lane reads zeros, not the edge texel */
+            const float16 tu = clamp(f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y, -1.0f, (float)a.y);
+            const int16 col = min(convert_int16(floor(tu)), (int16)(a.y - 1));
+            const float16 fu = tu - convert_float16(col);
+            const int c0 = col.s0, K = min(col.sf + 1 - c0, CLW_GATHER_TEXELS - 1);
+            float16 wk[CLW_GATHER_TEXELS];
+            for (int k = 0; k <= K; ++k)
+                wk[k] = mask * (select((float16)(0.0f), 1.0f - fu, col == (int16)(c0 + k))
+                                + select((float16)(0.0f), fu, col == (int16)(c0 + k - 1)));
+            for (int y = y0; y <= y1; ++y) {
+                const int row = splat_row(a, f, y, &fv);
+                __global const float *t0 = texels + a.x + row + c0, *t1 = t0 + a.z;
+                float16 sample = 0.0f;
+                for (int k = 0; k <= K; ++k)
+                    sample = fma(wk[k], (float16)((1.0f - fv) * t0[k] + fv * t1[k]), sample);
+                for (int ch = 0; ch < CLW_CHANNELS; ++ch)
+                    acc[ch][y - ybase] = fma((float16)(c[ch]), sample, acc[ch][y - ybase]);
+            }
+            continue;
+        }
+        for (int y = y0; y <= y1; ++y) {  /* a cell axis (Haar along a world axis) */
             const int row = splat_row(a, f, y, &fv);
             __global const float *r00 = texels + a.x + row;
             float16 sample;
@@ -58,20 +86,6 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
                 __global const float *r01 = texels + a.y + row;
                 sample = (1.0f - fv) * ((1.0f - f.x) * vload16(0, r00 + xbase) + f.x * vload16(0, r01 + xbase))
                        + fv * ((1.0f - f.x) * vload16(0, r00 + xbase + a.z) + f.x * vload16(0, r01 + xbase + a.z));
-            } else if (a.w & 4) {  /* u texels of more than half a pixel (s_u < 2): 16 lanes span at most 32
-                                    * texels, so each lane's two are shuffled out of 32 consecutive ones of each
-                                    * texel row; lanes off the texture read the margin or a neighbour, masked.
-                                    * Positions clamped to the margins [-1, a.y] first, the weight from the
-                                    * clamped column: beyond them a lane reads zeros, not the edge texel */
-                const float16 tu = clamp(f.x + (((float16)((float)xbase) + lane) - cs.x) * cs.y, -1.0f, (float)a.y);
-                const int16 col = min(convert_int16(floor(tu)), (int16)(a.y - 1));
-                const float16 fu = tu - convert_float16(col);
-                const int c0 = col.s0;
-                const uint16 i0 = convert_uint16(col - c0), i1 = i0 + 1;
-                __global const float *p0 = r00 + c0, *p1 = r00 + c0 + a.z;
-                const float16 t00 = vload16(0, p0), t01 = vload16(1, p0), t10 = vload16(0, p1), t11 = vload16(1, p1);
-                sample = (1.0f - fv) * ((1.0f - fu) * shuffle2(t00, t01, i0) + fu * shuffle2(t00, t01, i1))
-                       + fv * ((1.0f - fu) * shuffle2(t10, t11, i0) + fu * shuffle2(t10, t11, i1));
             } else {  /* u cells: each lane takes its nearest column (a.y of them, a handful: 2 for
                        * footprints), by selects rather than gathers; lanes off the texture keep 0 */
                 const int16 col = convert_int16(floor(cell_position16(

@@ -72,8 +72,8 @@ def check_options(args):
         raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
     if getattr(args, "frame_time", None) is not None:
         _frame_time(args)
-    if getattr(args, "coarse", None) is not None and not 0 < args.coarse < 1:
-        raise InputError(f"--coarse {args.coarse:g} must be a tolerance between 0 and 1, e.g. 1e-2")
+    if getattr(args, "coarse", None) is not None and not 0 <= args.coarse < 1:
+        raise InputError(f"--coarse {args.coarse:g} must be a tolerance between 0 and 1, e.g. 1e-2, or 0 (off)")
     if hasattr(args, "device_memory"):
         parse_device_memory(args)
     if hasattr(args, "method"):

@@ -106,7 +106,7 @@ def run(args):
 
         draw = partial(renderer.render, tolerance=tolerance, absorption=False)
     else:
-        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse,
+        renderer = SplatRenderer(wv, device=args.device, omega_s=args.omega_s, coarse=args.coarse or None,
                                  device_memory=device_memory)
         draw = renderer.render
 

@@ -57,7 +57,7 @@ def add_input_options(p):
                    "NaN outside their masks), in the input's units, e.g. 0; without it NaN is refused")
     g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
     g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
-                                    "edge N (default: Zarr and HDF5 always, .npy/.raw/.nii from 1 GiB)")
+                                    "edge N (default: Zarr and HDF5 always, .npy/.raw/.nii/TIFF from 1 GiB)")
     c = p.add_argument_group("chunked work (a chunked input; docs/chunked.md)")
     w = c.add_mutually_exclusive_group()
     w.add_argument("--workers", type=int, help="a local Dask cluster of N worker processes (default: threads)")
@@ -137,7 +137,7 @@ def read_volume(args):
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     # weighed by the size the file declares, before its voxels are read
     fits = partial(check_model_fits, args, what="decomposing this volume",
-                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii; gunzip a .nii.gz "
+                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, TIFF; gunzip a .nii.gz "
                         "first), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
                 series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),
@@ -461,7 +461,9 @@ def add_device_options(g):
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
     g.add_argument("--coarse", type=float, help="splatting: draw coarse cubic and quintic bands into coarser "
                    "framebuffers within this error relative to the image maximum, and in perspective drop splats "
-                   "within what is left of it (e.g. 1e-2; default: off)")
+                   "within what is left of it (e.g. 1e-2; 0: off; default: off, but 1e-3 where render writes "
+                   "8-bit pictures only, through the automatic window: no --raw, .tif, --bit-depth 16 or "
+                   "--window LO,HI)")
     g.add_argument("--device-memory", metavar="SIZE", help="device memory to use at most, e.g. 2GiB or 512M "
                    "(default: the device's); splatting streams coefficients beyond it in chunks (docs/splatting.md "
                    "§6), ray tracing renders bricks beyond it in passes (docs/raytracing.md §6)")

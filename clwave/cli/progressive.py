@@ -40,7 +40,7 @@ def run(args):
     else:
         steps = 8 if args.steps is None and args.budget is None else args.steps
         check_schedule(steps, args.budget)
-        options = dict(omega_s=args.omega_s, coarse=args.coarse)
+        options = dict(omega_s=args.omega_s, coarse=args.coarse or None)
     background, window, device_memory = look["background"], look["window"], parse_device_memory(args)
     wv, _ = build_model(args, rgba=raytrace and not args.xray)
     if raytrace and not args.xray:

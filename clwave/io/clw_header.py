@@ -120,9 +120,9 @@ def checked_header(header) -> tuple:
 
 
 def check_properties(header, shape):
-    """The header's interpolation, focus, content box (inside the volume's box, as a writer finds it) and transfer
-    function, checked as the model opened from the file uses them (``clwave info`` shows them); ``shape``, spacing and
-    origin checked already: ValueError names what is wrong."""
+    """The header's interpolation, focus, content box (inside the volume's box, as a writer finds it), value range
+    and transfer function, checked as the model opened from the file uses them (``clwave info`` shows them);
+    ``shape``, spacing and origin checked already: ValueError names what is wrong."""
     interpolate, focus, content = header.get("interpolate"), header.get("focus"), header.get("content")
     if not isinstance(interpolate, bool):
         raise ValueError(f"interpolate {interpolate!r} is not true or false")
@@ -140,6 +140,9 @@ def check_properties(header, shape):
         if np.any(np.array(content[0]) < centre - half - slack) or np.any(np.array(content[1]) > centre + half + slack):
             raise ValueError(f"content {content!r} reaches outside the volume's box {(centre - half).tolist()} to "
                              f"{(centre + half).tolist()}")
+    value_range = header.get("value_range")  # absent in older files: not known (no clamp, docs/raytracing.md §10)
+    if value_range is not None and not (_numbers(value_range, 2) and value_range[0] <= value_range[1]):
+        raise ValueError(f"value_range {value_range!r} is not two finite numbers [min, max], min <= max")
     tf = header.get("transfer_function")
     if tf is not None:
         try:

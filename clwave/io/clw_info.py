@@ -36,7 +36,7 @@ def describe_clw(path) -> dict:
             described.append(dict(wavelet=_WAVELETS[g["wavelet"]], order=g["wavelet"], channels=g["channels"],
                                   kept=kept, share=kept / voxels, quantisation=step))
     facts = {name: header.get(name) for name in ("spacing", "origin", "interpolate", "focus", "content",
-                                                 "transfer_function")}
+                                                 "transfer_function", "value_range")}
     return dict(file=str(path), format="clw", bytes=path.stat().st_size, shape=list(shape), levels=levels,
                 channels=channels, **facts, subtracted=header.get("offset", 0.0),
                 obliquity=header.get("obliquity", 0.0), groups=described)

@@ -111,7 +111,7 @@ class ChunkedWaveletVolume:
     """
 
     def __init__(self, volume: Volume, wavelets, levels, *, transfer_function=None, focus=None,
-                 rules=None, content=None, scheduler=None, progress_bar=None):
+                 rules=None, content=None, scheduler=None, progress_bar=None, value_range=None):
         self.volume = volume
         self._wavelets = tuple(wavelets)
         self.levels = int(levels)
@@ -120,6 +120,7 @@ class ChunkedWaveletVolume:
         # per channel group, the (approximation, detail) rules; by default every position (no threshold)
         self.rules = tuple(rules or [(Rule(every=True), Rule(every=True))] * len(self.groups()))
         self.content = content
+        self.value_range = value_range  # the volume's (min, max), input units (Volume.value_range)
         self.scheduler = scheduler
         self.progress_bar = progress_bar
         self.kept = None  # coefficient positions kept (the largest group's count), known after a selection pass
@@ -127,7 +128,8 @@ class ChunkedWaveletVolume:
     @classmethod
     def from_volume(cls, volume: Volume, wavelet="cubic", levels=None, *, interpolate=False, transfer_function=None,
                     scheduler=None, progress_bar=None) -> "ChunkedWaveletVolume":
-        """The model of a chunked volume; reads it once, for its content (the default framing), here."""
+        """The model of a chunked volume; reads it twice here, for its content (the default framing) and its range
+        (post-classification's clamp)."""
         if interpolate:
             raise InputError("interpolate=True needs the whole volume at once (its prefilter is global); a "
                              "chunked volume takes the approximating model (interpolate=False)",
@@ -135,8 +137,9 @@ class ChunkedWaveletVolume:
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
         tf = TransferFunction.stored(transfer_function)
         with client_for(scheduler) as client, client.as_current():
-            content = volume.content_box()
+            content, value_range = volume.content_box(), volume.value_range()
         return cls(volume, wavelets, levels, transfer_function=tf, scheduler=scheduler, progress_bar=progress_bar,
+                   value_range=value_range,
                    content=None if content is None else tuple(tuple(float(c) for c in corner) for corner in content))
 
     # ------------------------------------------------------------- properties
@@ -202,7 +205,7 @@ class ChunkedWaveletVolume:
             rules = [_cut(hist, budget) for hist in hists]
         return ChunkedWaveletVolume(self.volume, self._wavelets, self.levels, transfer_function=self.transfer_function,
                                     focus=focus, rules=rules, content=self.content, scheduler=self.scheduler,
-                                    progress_bar=self.progress_bar)
+                                    progress_bar=self.progress_bar, value_range=self.value_range)
 
     def _histograms(self, focus):
         """Per group, the importance histograms (2, 2^16) of its live approximation and detail coefficients."""
@@ -276,7 +279,8 @@ class ChunkedWaveletVolume:
                for gi, (wavelet, channels) in enumerate(groups)]
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
-                             content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity)
+                             content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity,
+                             value_range=self.value_range)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;

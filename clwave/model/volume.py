@@ -168,6 +168,18 @@ class Volume:
         corners = self.voxel_to_world(np.array(ends).T)  # (2, 3): the first and the last corner
         return corners.min(axis=0), corners.max(axis=0)
 
+    def value_range(self):
+        """``(min, max)`` of a scalar volume's values in the input's units (its data plus :attr:`subtracted`), the range
+        post-classification clamps the model's field to (docs/raytracing.md §10); None for several channels."""
+        if self.channels != 1:
+            return None
+        ends = (self.data.min(), self.data.max())
+        if is_dask(self.data):
+            import dask
+
+            ends = dask.compute(*ends)
+        return tuple(float(e) + self.subtracted for e in ends)
+
     def __repr__(self):
         subtracted = f", subtracted={self.subtracted:g}" if self.subtracted else ""
         return (f"Volume(shape={self.shape}, channels={self.channels}, "

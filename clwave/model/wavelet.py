@@ -125,12 +125,16 @@ class WaveletVolume:
     file_format = None
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
-                 focus=None, transfer_function=None, content=None, content_mask=None, subtracted=0.0, obliquity=0.0):
+                 focus=None, transfer_function=None, content=None, content_mask=None, subtracted=0.0, obliquity=0.0,
+                 value_range=None):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
         self.subtracted = float(subtracted)  # the source volume's: its values are the input's minus it
         self.obliquity = float(obliquity)  # the source volume's Volume.obliquity: degrees off the scanner's axes
+        # the source volume's (min, max) in the input's units (Volume.value_range), which post-classification clamps
+        # the field to (docs/raytracing.md §10); None where not known (several channels, a .clw of before it)
+        self.value_range = None if value_range is None else tuple(float(v) for v in value_range)
         self.levels = int(levels)
         self.groups = list(groups)
         self.channels = int(channels)
@@ -200,7 +204,7 @@ class WaveletVolume:
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
                    interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask),
                    content_mask=None if interpolate else ContentMask.of(mask), subtracted=volume.subtracted,
-                   obliquity=volume.obliquity)
+                   obliquity=volume.obliquity, value_range=volume.value_range())
 
     # ------------------------------------------------------------- properties
     @property
@@ -272,7 +276,8 @@ class WaveletVolume:
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
                             interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
-                            content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity)
+                            content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity,
+                            value_range=self.value_range)
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:

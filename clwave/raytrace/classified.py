@@ -84,6 +84,23 @@ def tf_table(tf: TransferFunction, window) -> np.ndarray:
     return table
 
 
+def clamped(tf: TransferFunction, value_range) -> TransferFunction:
+    """``tf`` (points in data units) applied to the field clamped to ``value_range`` (lo, hi), the input's range in
+    the same units: TF∘clamp is again piecewise linear, constant beyond its ends, so its points inside (lo, hi) stay,
+    those outside give way to its values at lo and hi (docs/raytracing.md §10).  A function whose points all lie
+    within the range is returned as it is (the same table, bit for bit); ``value_range`` None: ``tf``."""
+    values = tf.data_points()
+    if value_range is None or (values[0] >= value_range[0] and values[-1] <= value_range[1]):
+        return tf
+    lo, hi = value_range
+    at = np.unique(np.clip(values, lo, hi))  # the points inside, and lo or hi where some lie beyond
+    if len(at) < 2:  # all on one side, or a constant input: one value's classification everywhere
+        at = np.array([lo, hi if hi > lo else lo + max(1.0, abs(lo))])
+    rows = tf.points[:, 1:5]
+    points = np.column_stack([at] + [np.interp(np.minimum(at, hi), values, rows[:, c]) for c in range(4)])
+    return TransferFunction(points, name=tf.name)
+
+
 @dataclass
 class Classification:
     """One transfer function's kernel arguments: the table and the classified bounds."""
@@ -120,6 +137,8 @@ class ScalarRange:
         self.cc, self.bricks, self.tracer = cc, f, tracer
         self.noise_floor, self.spacing = tracer.grad_floor("single"), min(tracer.wv.spacing)
         self.subtracted = tracer.wv.subtracted  # the model's values are the input's minus it (Volume.subtracted)
+        known = tracer.wv.value_range  # the input's (min, max), on the model's values: the classification's clamp
+        self.value_range = None if known is None else tuple(v - self.subtracted for v in known)
         self.kernels = programs.build(cc, ["raytrace/scalar.cl"])
         self.slot_range = None  # bricks in a scratch file: |s| <= the block bound
         self.step = 0.0  # the packed pool's largest step (none in a scratch file: floats)
@@ -194,9 +213,11 @@ class ScalarRange:
         if not np.any(post.tf.points[:, 4]):
             return f"{name} has opacity 0 at every point: give it some opacity (or another function)"
         lo, hi = post.tf.data_points(post.window)[[0, -1]]
-        values = None if self.slot_range is None else (self.slot_range[..., 0].min() + self.subtracted,
-                                                       self.slot_range[..., 1].max() + self.subtracted)
-        held = "" if values is None else f"; this model's values lie within {values[0]:.4g} .. {values[1]:.4g}"
+        whose, values = "the input's", self.tracer.wv.value_range  # what the classification sees (clamped)
+        if values is None and self.slot_range is not None:
+            whose, values = "this model's", (self.slot_range[..., 0].min() + self.subtracted,
+                                             self.slot_range[..., 1].max() + self.subtracted)
+        held = "" if values is None else f"; {whose} values lie within {values[0]:.4g} .. {values[1]:.4g}"
         return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
                 f"a window in the input's units (--tf-window LO,HI) or another function")
 
@@ -208,7 +229,7 @@ class ScalarRange:
         last, ranges = self.last, self.range(at)
         if last is not None and last.tf == tf and last.table.dtype == real and last.range is ranges:
             return replace(last, seconds=0.0)  # nothing changed: this render pays nothing for it
-        window, stored = self.window(tf), self.stored(tf)
+        window, stored = self.window(tf), clamped(self.stored(tf), self.value_range)
         table, q = tf_table(stored, stored.window), cc.queue
         bound = cla.empty(q, ranges.shape[:3], np.float32)
         super_bound = cla.empty(q, at.super_bound.shape, np.float32)

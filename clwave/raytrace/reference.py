@@ -393,7 +393,8 @@ def _simpson(f, tol, turns, segments):
 def classified_reference(wv, camera, transfer_function, lights=None, shading=True,
                          tracer: RayTracer | None = None, detail=0) -> np.ndarray:
     """(H, W, 4) float64 image of a scalar model through ``transfer_function`` (post-classification), by brute
-    force: no skipping, no early termination, no adaptivity (docs/raytracing.md §10).
+    force: no skipping, no early termination, no adaptivity (docs/raytracing.md §10), the scalar clamped to the
+    input's range where the model knows it (``np.clip``, and cuts where it meets the range's ends).
 
     On each fine knot segment the scalar and its gradient are polynomials, fitted exactly from the model at ten
     Chebyshev points, sixteen for order 6 (:meth:`WaveletVolume.evaluate` / ``gradient``, or the B-spline
@@ -413,6 +414,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
         phong = None
     light_dirs = light_directions(lights, view.n)
     values = tr.scalar.stored(transfer_function).data_points()
+    least, most = tr.scalar.value_range or (-np.inf, np.inf)  # the classification sees the field clamped to the input's
     colour, opacity = transfer_function.points[:, 1:4], transfer_function.points[:, 4]
     scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)
     n = max(10, 3 * tr.orders[0] - 2)  # degree 3 (j - 1) at most on a knot segment
@@ -440,7 +442,8 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
         T, colour_sum = 1.0, np.zeros(3)
         for k in range(len(mid)):
             cuts = [-1.0, 1.0]
-            polys = [s_series[k] - v * (np.arange(n) == 0) for v in values]
+            polys = [s_series[k] - v * (np.arange(n) == 0) for v in (*values, least, most)
+                     if np.isfinite(v)]
             if phong is not None:  # where the normal flips against a light or halfway vector, n . L jumps or kinks
                 polys += [g_series[k] @ d for d in directions]
             for poly in polys:
@@ -451,7 +454,8 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
                 # alpha(s(xi)) on the piece: a polynomial in tau = (2 xi - a - b) / (b - a), interpolated at the
                 # piece's Chebyshev points and integrated: int_a^xi alpha = (b - a) / 2 int_{-1}^tau
                 xa = (a + b) / 2 + (b - a) / 2 * cheb
-                alpha_series = to_series @ np.interp(chebyshev.chebval(xa, s_series[k]), values, opacity)
+                alpha_series = to_series @ np.interp(np.clip(chebyshev.chebval(xa, s_series[k]), least, most), values,
+                                                     opacity)
                 if not np.any(alpha_series):
                     continue
                 antiderivative = chebyshev.chebint(alpha_series, lbnd=-1) * (b - a) / 2
@@ -460,12 +464,13 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
                     return chebyshev.chebval((2 * xi - a - b) / (b - a), antiderivative)
                 edges = np.linspace(a, b, 9)
                 xs = ((edges[:-1] + edges[1:])[:, None] / 2 + np.diff(edges)[:, None] / 2 * gauss).ravel()
-                s = chebyshev.chebval(xs, s_series[k])
+                s = np.clip(chebyshev.chebval(xs, s_series[k]), least, most)
                 alpha = np.interp(s, values, opacity)
                 q = np.stack([np.interp(s, values, colour[:, i]) for i in range(3)], axis=1) * alpha[:, None]
                 if phong is not None:
-                    i = np.searchsorted(values, chebyshev.chebval((a + b) / 2, s_series[k]), side="right")
-                    slope = opacity[i] - opacity[i - 1] if 0 < i < len(values) else 0.0  # normals: alpha falls
+                    middle = chebyshev.chebval((a + b) / 2, s_series[k])
+                    i = np.searchsorted(values, middle, side="right")
+                    slope = opacity[i] - opacity[i - 1] if 0 < i < len(values) and least < middle < most else 0.0
                     grads = chebyshev.chebval(xs, g_series[k]).T * (-1.0 if slope < 0 else 1.0)
                     q = np.array([_shade(qi, ai, gi, phong, light_dirs, w, floor)
                                   for qi, ai, gi in zip(q, alpha, grads)])

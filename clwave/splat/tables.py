@@ -40,8 +40,8 @@ TEXTURE_TOL = 1e-4
 
 
 #: lookup bits of a texture (cl/splat/raster.h): u (v) samples interpolated linearly, u from P phase planes; both
-#: clear: cells, nearest sample; GATHER_U: u samples of more than half a pixel (a magnified view), interpolated linearly
-#: per pixel from one plane
+#: clear: cells, nearest sample; GATHER_U: u samples of more than a pixel (a magnified view, s < 1: phase_rate),
+#: interpolated linearly per pixel from one plane
 LINEAR_U, LINEAR_V, GATHER_U = 1, 2, 4
 
 
@@ -77,9 +77,9 @@ class ViewTables:
                 band = (b.level, b.key)
                 if band in self.layer_of or (bands is not None and band not in bands):
                     continue
-                # texels of exactly 1/P pixel, or coarser than the pixel in a magnified view (cl/splat/raster.h)
-                s = texels_per_pixel(wav.order, b.level, omega, view.pixel, min(wv.spacing),
-                                     CELL_REFINE if sampling == "cells" else 1)
+                # texels of exactly 1/P pixel, or of two pixels or more in a magnified view (cl/splat/raster.h)
+                s = phase_rate(texels_per_pixel(wav.order, b.level, omega, view.pixel, min(wv.spacing),
+                                                CELL_REFINE if sampling == "cells" else 1))
                 self.layer_of[band] = li
                 self.texels_per_pixel[band] = s
                 texel[band] = view.pixel / s
@@ -123,7 +123,8 @@ class ViewTables:
                 # (u gathered per pixel from one plane); cl/splat/raster.h
                 s = self.texels_per_pixel[(m, band.key)]
                 cell_u, cell_v = tex.cells
-                P = int(s) if s >= 2 and not cell_u else 1  # phase planes (texels_per_pixel: an integer from 2)
+                whole = s >= 1 and s == int(s)  # a whole number of texels a pixel (phase_rate), by value
+                P = int(s) if whole and not cell_u else 1
                 su, sv = (view.pixel / h if cell else float(s) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
                 pool_texels = offset + P * (tex.data.shape[0] + 3) * (-(-tex.data.shape[1] // P) + 2)
                 if max_texels is not None and pool_texels > max_texels:
@@ -134,7 +135,7 @@ class ViewTables:
                 planes = pack_texture(tex.data, P)
                 nv, nu = tex.data.shape
                 boxes.append(_axis_box(nu, tex.centre_u, su, cell_u) + _axis_box(nv, tex.centre_v, sv, cell_v))
-                lookup = (0 if cell_u else LINEAR_U if P > 1 else GATHER_U) | (0 if cell_v else LINEAR_V)
+                lookup = (0 if cell_u else LINEAR_U if whole else GATHER_U) | (0 if cell_v else LINEAR_V)
                 ints.append((offset, planes.shape[2], planes.shape[1], lookup))
                 maps.append((tex.centre_u, tex.centre_v, su, sv))
                 pool.append(planes.ravel())
@@ -184,16 +185,30 @@ def texels_per_pixel(order: int, level: int, omega: float, pixel: float, d_min: 
     eq. 36 and the least band of the level's own prototype (:data:`DEFAULT_OMEGA_MIN`), times ``refine``
     (:data:`CELL_REFINE`); Haar and linear footprints have kinks (Haar: jumps), so bilinear resampling needs
     fine texels at every level.  An integer P >= 2 (texels of exactly 1/P pixel, phase planes) where the band
-    asks for at least two texels a pixel; else, in a magnified view, the number below 2 that the band asks for,
-    read by per-pixel interpolation (rounding it up to 2 would make up to 4 times the texels), so that the
-    texture does not grow with the magnification.  The lookup follows the value (from 2: phase planes), not its
-    type."""
+    asks for at least two texels a pixel; else, in a magnified view, the number below 2 that the band asks for
+    (an orthographic view rounds it up from 1/2, :func:`phase_rate`; below, it is read by per-pixel interpolation,
+    so that the texture does not grow with the magnification)."""
     least = DEFAULT_OMEGA_MIN[order] / 2.0 ** level if order >= 3 else KINKED_OMEGA_MIN
     s = max(omega, least) * pixel / (np.pi * d_min)
     if s >= 2.0:
         return int(np.ceil(s - 1e-9)) * refine
     s *= refine
     return int(np.ceil(s - 1e-9)) if s >= 2.0 else float(s)
+
+
+#: A magnified view's textures are read from phase planes too, sampled at 1/P pixel with P = ceil(s) (1 or 2), where
+#: the band asks for more than this many texels a pixel (s): their texels then stay within a factor 2 of the band's
+#: per axis (within 4/3 of the finest a view at s >= 2 makes, pixel / 3), and a pixel update costs a fifth to a sixth
+#: of the per-pixel gather's on PoCL (docs/splatting.md §2); deeper zooms gather, so their textures stop growing (the
+#: CPU kernel gathers rates under 1 only)
+PHASE_PLANES_FROM = 0.5
+
+
+def phase_rate(s):
+    """The texels per pixel a band's texture is sampled at in an orthographic view: ``s`` (:func:`texels_per_pixel`)
+    rounded up to an integer, read from that many phase planes, from :data:`PHASE_PLANES_FROM`; below, ``s`` as it is
+    (a number under 1), gathered per pixel."""
+    return int(np.ceil(s - 1e-9)) if s > PHASE_PLANES_FROM else float(s)
 
 
 #: Texture band factor per order: order-6 wavelets (condition 34.6, docs/model.md §2) cancel more, so the

@@ -61,9 +61,10 @@ def _flag(msg, name) -> bool:
 
 FIELDS = {"type", "seq", "azimuth", "elevation", "zoom", "mode", "detail", "window", "moving", "background",
           "shading", "tf", "colour_map", "fov"}
-#: a transfer function from the page's editor: a preset, its window's centre moved by this many of its widths, its
-#: width times this, its opacity times this (clwave.view.shaded.ShadedSource.transfer_function)
-TF_RANGES = dict(centre=(-2.0, 2.0), width=(0.02, 50.0), opacity=(1e-3, 1e3))
+#: a transfer function from the page's editor: a preset, its window's centre moved by this many of its widths (the
+#: page's slider keeps the centre within the input's range, many widths of a narrow window), its width times this, its
+#: opacity times this (clwave.view.shaded.ShadedSource.transfer_function)
+TF_RANGES = dict(centre=(-1e6, 1e6), width=(0.02, 50.0), opacity=(1e-3, 1e3))
 #: or its own points: at most this many rows (value, r, g, b, opacity), each number within its span (a value in data
 #: units, an opacity per unit length: the presets' are at most 0.5)
 TF_POINTS = 32

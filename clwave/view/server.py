@@ -383,7 +383,7 @@ class ViewServer:
         wv, xray = self.wv, self.sources["xray"]
         return dict(shape=list(wv.shape), channels=wv.channels, coefficients=xray.r.count, voxels=wv.n_voxels,
                     levels=wv.levels, wavelets=sorted({g.wavelet.name for g in wv.groups}),
-                    transfer_function=(wv.transfer_function or {}).get("name"),
+                    transfer_function=(wv.transfer_function or {}).get("name"), value_range=wv.value_range,
                     reading=not xray.complete and self.failure is None, failure=self.failure)
 
 

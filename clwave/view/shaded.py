@@ -186,19 +186,25 @@ class ShadedSource(Source):
         return tracer or self.staged.coarse or self.staged.full
 
     def histogram(self) -> dict | None:
-        """The values behind the page's transfer-function editor: a histogram (:data:`HISTOGRAM_BINS`, from the least
-        value to the greatest) of the field values that the tracer rendering now takes an "auto" window from
-        (``ScalarRange.sample``, docs/raytracing.md §10; at most 2^16), made once a tracer; None for an RGBA model, or
-        bricks in a scratch file (no sample)."""
+        """The values behind the page's transfer-function editor: a histogram (:data:`HISTOGRAM_BINS`) of the field
+        values that the tracer rendering now takes an "auto" window from (``ScalarRange.sample``, docs/raytracing.md
+        §10; at most 2^16), made once a tracer: over the input's range, clamped to it as the classification sees them
+        (``input`` true), else (a .clw of before the range was kept) from the least value to the greatest; ``field``:
+        the sample's least and greatest (a model rings past its input's range).  None for an RGBA model, or bricks in a
+        scratch file (no sample)."""
         stage = self._stage(self.tracer) if self.scalar and self.ready() else None
         sample = None if stage is None else stage.scalar.sample
         if sample is None:
             return None
         if self._histogram[0] is None or self._histogram[0]() is not stage:
-            counts, edges = np.histogram(sample, bins=HISTOGRAM_BINS)
-            edges += stage.scalar.subtracted  # in the input's units, as the editor's window and points
+            known, shift = stage.scalar.value_range, stage.scalar.subtracted  # the input's range: what is classified
+            counts, edges = np.histogram(sample if known is None else np.clip(sample, *known), bins=HISTOGRAM_BINS,
+                                         range=known)
+            edges += shift  # in the input's units, as the editor's window and points
             self._histogram = (weakref.ref(stage), dict(range=[float(edges[0]), float(edges[-1])],
-                                                        counts=counts.tolist()))
+                                                        counts=counts.tolist(), input=known is not None,
+                                                        field=[float(sample.min()) + shift,
+                                                               float(sample.max()) + shift]))
         return self._histogram[1]
 
     def frames(self, state: ViewState, pace: ShadedPace):
@@ -269,7 +275,7 @@ class ShadedSource(Source):
         note = NO_COEFFICIENTS if not self.wv.kept else NOTHING_VISIBLE if result.meta.get("nothing_visible") else None
         return self._frame(state, picture, final or not state.moving,
                            dict(figures, final=final, seconds=seconds,
-                                error_kind="relative RMS, estimated from the last step",
+                                error_kind="relative RMS against the model's final image, estimated from the last step",
                                 **({} if note is None else dict(note=note))), start)
 
 

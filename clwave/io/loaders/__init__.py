@@ -3,7 +3,8 @@
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
 (NIfTI, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
 millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
-stores, and large .npy, .raw and .nii files, are read chunk by chunk as Dask arrays (docs/chunked.md §1).
+stores, and large .npy, .raw, .nii and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
+arrays (docs/chunked.md §1).
 
 One module per format family (``raw``: .raw and .npy; ``nifti``, ``nrrd``, ``tiff``, ``slices``: folders of TIFF,
 PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared`` holds
@@ -70,9 +71,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     chunks : None, False, "auto" or int
-        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw`` and
-        ``.nii`` too when their volume takes at least ``CHUNKED_MIN_BYTES`` (1 GiB)
-        as float32; everything else is read whole.  ``False``: read whole.
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``,
+        TIFF and folders of TIFF slices too when their volume takes at least
+        ``CHUNKED_MIN_BYTES`` (1 GiB) as float32; everything else is read whole.  ``False``: read whole.
         ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
         of the store's own.  An int: chunk by chunk, cubes of that edge in voxels.
         Chunked volumes hold a Dask array, read only when computed (docs/chunked.md).
@@ -176,9 +177,9 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "tiff":
-        return (*tiff.read_tiff(path, fits), 0.0)
+        return (*tiff.read_tiff(path, fits, chunks=chunks, warn_spacing=warn_spacing), 0.0)
     if kind in _SLICE_FOLDERS:
-        return slices.read_slice_folder(path, progress_bar, fits), None, None, 0.0
+        return slices.read_slice_folder(path, progress_bar, fits, chunks, warn_spacing), None, None, 0.0
     if kind == "dicom-frames":
         return dicom_frames.read_dicom_frames(path, fits)
     return dicom.read_dicom_folder(path, series, progress_bar, fits)
@@ -226,7 +227,9 @@ def describe(path, *, series=None, level=None) -> dict:
         _reject_unused(kind, series=series)
     if kind != "zarr":
         _reject_unused(kind, level=level)
-    lazy = check_chunks(None, kind, path) is not False  # a Dask array over the file: nothing read until computed
+    # a Dask array over the file: nothing read until computed; a TIFF is described as its whole read weighs it (the
+    # axes as stored, before the loader orders them)
+    lazy = check_chunks(None, kind, path) is not False and kind not in ("tiff", "tiff-folder")
     size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) if path.is_dir() else path.stat().st_size
     facts = dict.fromkeys(DESCRIBED)
     facts.update(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size, resampled=False)

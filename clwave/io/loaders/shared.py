@@ -32,8 +32,8 @@ SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page), a fold
              "slices, a folder of DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a "
              "Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset)")
 
-#: chunks=None reads .npy, .raw and .nii files whose volume takes at least this many bytes as float32 chunk
-#: by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
+#: chunks=None reads .npy, .raw, .nii and TIFF files (and folders of TIFF slices) whose volume takes at least this
+#: many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
 CHUNKED_MIN_BYTES = 1 << 30
 
 #: chunks="auto": at most this many bytes of float32 per chunk, in multiples of the store's own chunks
@@ -46,7 +46,8 @@ CHUNK_BYTES = 8 << 20
 MAX_CHUNKS = 100_000
 
 # The formats read chunk by chunk (not .nii.gz: gzip cannot seek)
-_CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti")
+_CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti", "tiff", "tiff-folder")
+_CHUNKABLE_NAMES = "Zarr, HDF5, .npy, .raw, .nii and TIFF inputs (a file or a folder of TIFF slices)"
 
 
 class _ReadsUnderWay(logging.Filter):
@@ -171,10 +172,10 @@ def check_chunks(chunks, kind, path):
     if kind not in _CHUNKABLE or path.name.lower().endswith(".gz"):
         if chunks not in (None, False):
             found = "a .nii.gz file (gzip cannot seek: gunzip it first)" if kind == "nifti" else f"a {kind} input"
-            raise InputError(f"chunks= applies to Zarr, HDF5, .npy, .raw and .nii inputs, not to {found}; leave "
-                             "it out to read the volume whole",
-                             cli=f"--chunks applies to Zarr, HDF5, .npy, .raw and .nii inputs, not to {found}; "
-                                 "leave it out to read the volume whole")
+            raise InputError(f"chunks= applies to {_CHUNKABLE_NAMES}, not to {found}; leave it out to read the "
+                             "volume whole",
+                             cli=f"--chunks applies to {_CHUNKABLE_NAMES}, not to {found}; leave it out to read "
+                                 "the volume whole")
         return False
     return "auto" if chunks is None and kind in ("zarr", "hdf5") else chunks
 
@@ -243,7 +244,20 @@ def check_whole(path, shape, dtype, fits=None, streamed=False, resampled=False):
     converted = 0 if dtype == np.float32 and not streamed else 4 * channels  # float32 samples used as they are read
     check_fits(voxels * (stored + converted), f"reading {path} whole "
                f"({' x '.join(map(str, shape))} {dtype})", "read it chunk by chunk (chunks='auto'; Zarr, HDF5, .npy, "
-               ".raw, .nii), or crop it")
+               ".raw, .nii, TIFF), or crop it")
+
+
+def by_size(chunks, shape):
+    """``chunks``, None resolved by the volume's size: "auto" from ``CHUNKED_MIN_BYTES`` as float32 on, else False."""
+    if chunks is None:
+        return "auto" if 4 * math.prod(shape) >= CHUNKED_MIN_BYTES else False
+    return chunks
+
+
+def no_spacing(path) -> None:
+    """Warn that ``path`` (a file or a folder of slices) gives no voxel size: NRRD's unknown spacing's warning."""
+    note(f"{path}: no spacing in the file{'s' if Path(path).is_dir() else ''}: 1, 1, 1 assumed; give spacing= "
+         "(--spacing DZ,DY,DX)")
 
 
 def as_array(source, chunks, roles=None, fits=None, path=None):
@@ -256,8 +270,7 @@ def as_array(source, chunks, roles=None, fits=None, path=None):
     """
     shape = tuple(int(n) for n in source.shape)
     roles = roles or "s" * min(len(shape), 3) + "c" * max(len(shape) - 3, 0)
-    if chunks is None:
-        chunks = "auto" if 4 * math.prod(shape) >= CHUNKED_MIN_BYTES else False
+    chunks = by_size(chunks, shape)
     if chunks is False:
         check_whole(path, [n for n, r in zip(shape, roles) if r == "s"] + [n for n, r in zip(shape, roles) if r != "s"],
                     source.dtype, fits)
@@ -383,13 +396,19 @@ def read_slices(paths, read_slice, desc, progress_bar, fits=None):
         if volume is None:
             check_whole(path.parent, (len(paths),) + image.shape, image.dtype, fits)
             volume = np.empty((len(paths),) + image.shape, image.dtype)
-        elif image.shape != volume.shape[1:] or image.dtype != volume.dtype:
-            raise FileFormatError(
-                f"slice {path} has shape {image.shape} of {image.dtype} but {paths[0].name} has "
-                f"{volume.shape[1:]} of {volume.dtype}; all slices of a volume must have one size, mode and "
-                f"sample type: move the odd one out of the folder, or convert it")
+        else:
+            check_slice(path, image, volume.shape[1:], volume.dtype, paths[0])
         volume[z] = image
     return volume
+
+
+def check_slice(path, image, shape, dtype, first):
+    """Refuse a slice ``image`` of ``path`` not of the ``shape`` and ``dtype`` of the ``first`` file's."""
+    if image.shape != tuple(shape) or image.dtype != dtype:
+        raise FileFormatError(
+            f"slice {path} has shape {image.shape} of {image.dtype} but {Path(first).name} has "
+            f"{tuple(shape)} of {dtype}; all slices of a volume must have one size, mode and "
+            f"sample type: move the odd one out of the folder, or convert it")
 
 
 def _natural_key(path):

@@ -3,8 +3,13 @@ in natural name order (docs/coordinates.md §1)."""
 
 from __future__ import annotations
 
+from functools import partial
+
+import numpy as np
+
 from ...errors import FileFormatError
-from .shared import check_whole, folder_files, read_slices
+from .shared import OnDemand, as_array, by_size, check_slice, check_whole, folder_files, no_spacing, read_slices, \
+    reading
 from .tiff import TIFF_SUFFIXES, read_tiff
 
 #: the slice formats a folder may hold (one of them), by file name suffix
@@ -29,11 +34,37 @@ def slice_files(folder):
     return next(iter(found.items()), (None, []))
 
 
-def read_slice_folder(folder, progress_bar, fits=None):
-    """One 2-D image per file, stacked along z in natural name order; all of one size, mode and sample type."""
+def read_slice_folder(folder, progress_bar, fits=None, chunks=False, warn_spacing=False):
+    """One 2-D image per file, stacked along z in natural name order; all of one size, mode and sample type.  Slices
+    hold no spacing: 1, 1, 1 with a warning where ``warn_spacing`` (none was given).  TIFF slices may be read chunk
+    by chunk (``chunks``, :func:`.shared.as_array`'s; None: by size): each chunk's files read by tifffile when it is
+    computed (:func:`_tiff_slices`), the stack weighed after its first slice."""
     kind, files = slice_files(folder)
-    read_slice = _tiff_slice if kind == "TIFF" else _image_slice
-    return read_slices(files, read_slice, f"reading {kind} slices", progress_bar, fits)
+    if warn_spacing:
+        no_spacing(folder)
+    if kind == "TIFF":
+        with reading(files[0]):
+            first = _tiff_slice(files[0])
+        shape = (len(files),) + first.shape
+        if by_size(chunks, shape) is not False:
+            source = OnDemand(partial(_tiff_slices, tuple(map(str, files)), first.shape, first.dtype), shape,
+                              first.dtype, (1,) + first.shape)
+            return as_array(source, chunks, path=folder)
+        return read_slices(files, lambda path: first if path == files[0] else _tiff_slice(path), "reading TIFF slices",
+                           progress_bar, fits)
+    return read_slices(files, _image_slice, f"reading {kind} slices", progress_bar, fits)
+
+
+def _tiff_slices(files, shape, dtype, index):
+    """The slices of ``index``'s z range, ``index`` of each: every one of the ``shape`` and ``dtype`` of the first,
+    as a whole read's (:func:`.shared.read_slices`)."""
+    out = []
+    for path in files[index[0]]:
+        with reading(path):
+            image = _tiff_slice(path)
+        check_slice(path, image, shape, dtype, files[0])
+        out.append(image[index[1:]])
+    return np.stack(out)
 
 
 def _tiff_slice(path):

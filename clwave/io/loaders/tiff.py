@@ -3,26 +3,31 @@
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 
+from ...device.memory import check_fits
 from ...errors import FileFormatError
-from .shared import Declared, TimeSeries, check_whole, log, note
+from .shared import Declared, OnDemand, TimeSeries, as_array, by_size, check_whole, log, no_spacing, note
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
 OME_MICROMETRES = {"pm": 1e-6, "Å": 1e-4, "nm": 1e-3, "µm": 1.0, "um": 1.0, "mm": 1e3, "cm": 1e4, "m": 1e6}
 
 
-def read_tiff(path, fits=None, stack=True):
+def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False):
     """``(data, spacing, origin)``: a TIFF stack as ``(pages, y, x[, samples])``, its spacing ``(dz, dy, dx)`` where
-    it is an OME-TIFF (:func:`_ome_spacing`) or an ImageJ stack (:func:`_imagej_spacing`), else None, and an
-    OME-TIFF's origin (:func:`_ome_origin`; else None); without
+    it is an OME-TIFF (:func:`_ome_spacing`) or an ImageJ stack (:func:`_imagej_spacing`), else None (with a warning
+    where ``warn_spacing``: none was given), and an OME-TIFF's origin (:func:`_ome_origin`; else None); without
     ``stack`` (a slice of a folder) one page gives one slice, with it one 2-D image is refused.  With ``stack``,
     one page of 3 or 4 planar samples that tifffile wrote from a 3-D array of that shape (``tifffile.imwrite`` of a
-    3 or 4 x Y x X stack stores it as an RGB(A) image) is read as that many slices, with a warning: a 2-D image is
-    no volume.
-    The series' declared size is weighed (:func:`check_whole`) before its pages are read."""
+    3 or 4 x Y x X stack stores it as an RGB(A) image) is read as that many slices, and a series of more channels
+    than clwave models and no z axis (``tifffile.imwrite`` of a 3-D array with ``imagej=True`` or ``ome=True`` and
+    no ``axes``: 'CYX') as that many slices, each with a warning: a 2-D image is no volume.
+    ``chunks`` (:func:`.shared.as_array`'s; None: by size): whole, the series' declared size weighed
+    (:func:`check_whole`) before its pages are read, or a Dask array whose chunks tifffile reads from the file
+    (:func:`_read_region`), in whole multiples of its pages (or strips, or tiles)."""
     import tifffile
 
     with tifffile.TiffFile(path) as tif:
@@ -35,6 +40,11 @@ def read_tiff(path, fits=None, stack=True):
                  f"{' x '.join(map(str, shape))} array: read as {shape[0]} slices (write a stack with "
                  f"photometric='minisblack' to say so)")
             axes = "QYX"
+        if stack and axes == "CYX" and shape[0] > 4:
+            note(f"{path} holds a TIFF series with axes 'CYX' and shape {series.shape}: {shape[0]} channels and no z "
+                 f"axis, as tifffile.imwrite writes a 3-D array with imagej=True or ome=True and no axes; read as "
+                 f"{shape[0]} slices (a Z stack): write it with metadata={{'axes': 'ZYX'}} to say so")
+            axes = "ZYX"
         pages = len(tif.pages) > 1 and len(axes.replace("S", "")) == 2  # pages written one at a time: one series each
         if pages:
             shape, axes = (len(tif.pages),) + shape, "Q" + axes
@@ -47,6 +57,7 @@ def read_tiff(path, fits=None, stack=True):
                 f"{shape[axes.index('C')]} channels, where clwave models at most 4; write the channels you want "
                 f"(up to 4) to a TIFF of their own, e.g. tifffile.imwrite('part.ome.tif', "
                 f"tifffile.imread({str(path)!r})[{first_four}], metadata={{'axes': {series.axes!r}}})")
+        stored = shape  # the axes as the file gives them, the channels where they are
         if channel:
             shape = tuple(n for n, a in zip(shape, axes) if a != channel) + (shape[axes.index(channel)],)
         spatial = axes.replace(channel or "S", "")
@@ -63,7 +74,21 @@ def read_tiff(path, fits=None, stack=True):
                                   f"{series.axes!r}), not a stack of slices; write a volume one page a slice, e.g. "
                                   f"tifffile.imwrite(path, volume, photometric='minisblack')")
         spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)  # from the metadata alone
-        origin = _ome_origin(tif, path, spacing, shape[:3]) if tif.is_ome and len(spatial) == 3 else None
+        if spacing is None and warn_spacing:
+            no_spacing(path)
+        origin = _ome_origin(tif, path, spacing or (1.0,) * 3, shape[:3]) if tif.is_ome and len(spatial) == 3 \
+            else None
+        chunks = by_size(chunks, shape) if stack else False
+        if chunks is not False:
+            import dask.array as da
+
+            _check_decodable(series, path)
+
+            roles = "".join("c" if a == channel else "s" for a in axes)
+            own = (1,) + stored[1:] if pages else _store_chunks(series, path)
+            source = OnDemand(partial(_read_region, str(path), pages), stored, series.dtype, own)
+            data = as_array(source, chunks, roles, path=path)
+            return (da.moveaxis(data, axes.index(channel), -1) if channel else data), spacing, origin
         try:
             check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
         except Declared as declared:  # describe's (clwave info): the axes as stored, spacing and origin the header's
@@ -71,10 +96,48 @@ def read_tiff(path, fits=None, stack=True):
             if spacing is not None:
                 declared.placed = (spacing, (0.0, 0.0, 0.0) if origin is None else origin, 0.0)
             raise
+        _check_decodable(series, path)
         data = tif.asarray(key=range(len(tif.pages))) if pages else series.asarray()
     if channel:
         data = np.moveaxis(data, axes.index(channel), -1)
     return (data if len(spatial) == 3 else data[np.newaxis]), spacing, origin
+
+
+def _check_decodable(series, path):
+    """Refuse pages compressed by a codec tifffile has no decoder for here (LZW, JPEG, ... need imagecodecs)."""
+    import tifffile
+
+    compression = series.keyframe.compression
+    if compression not in tifffile.TIFF.DECOMPRESSORS:
+        raise FileFormatError(f"{path} holds {compression.name}-compressed pages, which tifffile decodes only with the "
+                              f"imagecodecs package: install it (pip install imagecodecs), or write the stack "
+                              f"uncompressed or with compression='zlib'")
+
+
+def _store_chunks(series, path) -> tuple:
+    """The chunks of ``series`` as tifffile's Zarr store gives them (a page, a strip or a tile; each decoded whole
+    for any part of it), one of which must fit in memory: refused before anything is read where it does not."""
+    import zarr
+
+    with series.aszarr() as store:
+        own = zarr.open(store, mode="r").chunks
+    check_fits(math.prod(own) * series.dtype.itemsize, f"one {' x '.join(map(str, own))} {series.dtype} page, strip "
+               f"or tile of {path} (decoded whole for any part of it)", "write the TIFF in smaller strips or tiles")
+    return own
+
+
+def _read_region(path, pages, index):
+    """``index`` of a TIFF stack, the file opened anew: its first series through tifffile's Zarr store (only the
+    pages, strips or tiles that ``index`` covers are read and decoded), or of ``pages`` written one at a time (one
+    series each) those of the index's z range."""
+    import tifffile
+    import zarr
+
+    with tifffile.TiffFile(path) as tif:
+        if pages:
+            return np.stack([tif.pages[z].asarray()[index[1:]] for z in range(len(tif.pages))[index[0]]])
+        with tif.series[0].aszarr() as store:
+            return zarr.open(store, mode="r")[index]
 
 
 def _time_series(tif, path, shape) -> TimeSeries:
@@ -142,8 +205,10 @@ def _ome_origin(tif, path, spacing, shape):
 def _ome_spacing(tif, path):
     """``(dz, dy, dx)`` in micrometres of an OME-TIFF's first image: its ``PhysicalSizeZ/Y/X``, each in its own unit
     (``PhysicalSize*Unit``, micrometres where none is given); an axis without a size is 1 (logged), one whose
-    size or unit is no length clwave knows is 1 with a warning."""
+    size or unit is no length clwave knows is 1 with a warning; None where it gives no size at all."""
     pixels = _ome_pixels(tif)
+    if not any(f"PhysicalSize{axis}" in pixels for axis in "ZYX"):
+        return None
     spacing, bad = [], []
     for axis in "ZYX":
         size, unit = pixels.get(f"PhysicalSize{axis}"), pixels.get(f"PhysicalSize{axis}Unit", "µm")
@@ -167,9 +232,10 @@ def _ome_spacing(tif, path):
 def _imagej_spacing(tif, path):
     """``(dz, dy, dx)`` of an ImageJ stack in its ``unit`` (e.g. micron, no conversion): ``spacing=`` of its
     metadata along z and the inverse of its X/YResolution (pixels per unit) along x and y; None for other
-    TIFF files, whose resolution tags are print densities (dots per inch), not voxel sizes."""
+    TIFF files, whose resolution tags are print densities (dots per inch), not voxel sizes, and for an ImageJ stack
+    with no calibration (no ``spacing``, no ``unit``, a resolution of 1 pixel per unit: ImageJ's "pixel")."""
     meta = tif.imagej_metadata
-    if not meta:
+    if not meta or not ("spacing" in meta or "unit" in meta or tif.pages[0].get_resolution() != (1, 1)):
         return None
     per_unit = np.array(tif.pages[0].get_resolution()[::-1], float)  # (y, x)
     with np.errstate(divide="ignore"):

@@ -56,7 +56,7 @@
   function onText(msg) {
     if (msg.type === "hello") { hello = msg; setup(); request(); }
     else if (msg.type === "model") { hello.model = msg.model; showModel(); }  // a file's whole model is in
-    else if (msg.type === "histogram") { editor.histogram = msg; drawEditor(); }  // a scalar model's values
+    else if (msg.type === "histogram") { editor.histogram = msg; drawEditor(); showCentre(); showModel(); }
     else if (msg.type === "status" && msg.seq === sentSeq) status.textContent = msg.message;
     else if (msg.type === "error" && (msg.seq === undefined || msg.seq === sentSeq)) {  // no seq: the server's, not a view's
       status.textContent = msg.message; status.classList.add("error");
@@ -146,7 +146,15 @@
       `${m.wavelets.join(", ")}, ${m.coefficients.toLocaleString()} coefficients ` +
       (m.reading ? "(the file's most important; reading the rest…)" : m.failure ? "(the file's most important " +
        `only: the rest could not be read, ${m.failure})` : "kept") +
-      (m.transfer_function ? `, classified with ${m.transfer_function}` : "");
+      (m.transfer_function ? `, classified with ${m.transfer_function}` : "") + values(m, editor.histogram);
+  }
+  function values(m, h) {  // the input's range, the model's field against it, and the model's own error (once)
+    if (m.channels !== 1) return "";
+    const r = (v) => v.map((x) => String(+x.toPrecision(4))).join(" … ");
+    return (m.value_range ? `. Input values ${r(m.value_range)}` : ". Input values not known (a file written " +
+            "before clwave kept them: classified as the model's field)") +
+      (h && m.value_range ? `; the model's field ${r(h.field)}, classified clamped to the input's` : "") +
+      ". The model's error against the input: not known (the frames' error is against the model's final image)";
   }
 
   // ---------------------------------------------------------------- orbit, zoom, reset
@@ -245,10 +253,13 @@
   // scale together; the opacity scale multiplies their opacities. A preset base goes to the server as such (it applies
   // the sliders alike, ShadedSource.transfer_function), points go through them. Editing the points shown makes them the
   // base (through the sliders backwards: the sliders stay and go on acting); a preset replaces the base, sliders centred.
-  // A slider being moved asks for the cheap frames of a drag, its release for the refined view.
-  const TF_SLIDERS = { "tf-window": (v) => (v - 50) / 50, "tf-width": (v) => 10 ** ((v - 50) / 50),
+  // A slider being moved asks for the cheap frames of a drag, its release for the refined view. The window centre's
+  // slider is in data units over the input's range (the histogram's), kept in it; held as the shift of the base's
+  // window in its widths (as the server takes it), known once the base's window is (a preset's: its first frame).
+  const TF_SLIDERS = { "tf-window": (v) => v, "tf-width": (v) => 10 ** ((v - 50) / 50),
                        "tf-opacity": (v) => 10 ** ((v - 50) / 25) };
-  const CENTRED = { "tf-window": 50, "tf-width": 50, "tf-opacity": 50 }, MAX_OPACITY = 1000;  // protocol.POINT_RANGES
+  const CENTRED = { "tf-window": 0, "tf-width": 50, "tf-opacity": 50 }, MAX_OPACITY = 1000;  // protocol.POINT_RANGES
+  const MAX_SHIFT = 1e6;  // protocol.TF_RANGES' centre
   let tf = { base: { preset: null }, sliders: { ...CENTRED } };
   const slider = (id) => TF_SLIDERS[id](tf.sliders[id]);
   function through(points, anchor, back) {  // points seen through the sliders (back: the points seen, through them back)
@@ -271,21 +282,42 @@
                    opacity: slider("tf-opacity") };
     }
     for (const id in TF_SLIDERS) { $(id).value = tf.sliders[id]; $(id + "-out").textContent = slider(id).toPrecision(2); }
+    showCentre();
     $("tf-preset").value = base.points ? EDITED : base.preset || "";
     state.moving = moving;
     drawEditor();
     request();
   }
+  const anchorNow = () => tf.base.anchor || editor.anchor;  // the base's window in data units, or null (not yet known)
+  function showCentre() {  // the centre slider in data units: its span the input's range, its value the window's centre
+    const a = anchorNow(), el = $("tf-window"), mid = a && (a[0] + a[1]) / 2 + slider("tf-window") * (a[1] - a[0]);
+    const span = editor.histogram ? editor.histogram.range : a ? [mid - 2 * (a[1] - a[0]), mid + 2 * (a[1] - a[0])] : [0, 1];
+    el.min = span[0]; el.max = span[1] > span[0] ? span[1] : span[0] + 1; el.step = "any";
+    el.disabled = !a;
+    if (a) el.value = mid;
+    $("tf-window-out").textContent = a ? String(+mid.toPrecision(4)) : "";
+  }
+  function centreTo(value) {  // the window's centre moved to ``value`` (data units): the shift in the base's widths
+    const a = anchorNow();
+    if (!a || !(a[1] > a[0])) return false;
+    const shift = (value - (a[0] + a[1]) / 2) / (a[1] - a[0]);
+    tf.sliders["tf-window"] = Math.min(MAX_SHIFT, Math.max(-MAX_SHIFT, shift));
+    return true;
+  }
   for (const id in TF_SLIDERS) {
     $(id).addEventListener("input", (ev) => {
-      begin(); tf.sliders[id] = +ev.target.value; sendTf(true);
+      begin();
+      if (id !== "tf-window") tf.sliders[id] = +ev.target.value;
+      else if (!centreTo(+ev.target.value)) return;
+      sendTf(true);
       if (stats.tfInput === null) stats.tfInput = performance.now();
     });
     $(id).addEventListener("change", () => { commit(); state.moving = false; request(); });
   }
   $("tf-preset").addEventListener("change", (ev) => {
     if (ev.target.value === EDITED) return;  // chosen by editing only
-    begin(); tf = { base: { preset: ev.target.value || null }, sliders: { ...CENTRED } }; editor.fresh = true;
+    begin(); tf = { base: { preset: ev.target.value || null }, sliders: { ...CENTRED } };
+    Object.assign(editor, { fresh: true, anchor: null });
     sendTf(false); commit();
   });
 
@@ -296,6 +328,7 @@
   const HISTORY = 100, done = [], undone = [];
   let before = null;  // the function as a gesture under way found it
   const seen = () => ({ tf: JSON.stringify(tf), axis: editor.axis, top: editor.top, window: editor.window,
+                        anchor: editor.anchor,
                         points: editor.points && editor.points.map((p) => p.slice()) });  // (edits change them in place)
   const begin = () => { if (before === null) before = seen(); };
   function commit() {
@@ -312,7 +345,8 @@
     to.push(seen());
     const back = from.pop();
     tf = JSON.parse(back.tf);
-    Object.assign(editor, { axis: back.axis, top: back.top, window: back.window, points: back.points });
+    Object.assign(editor, { axis: back.axis, top: back.top, window: back.window, anchor: back.anchor,
+                            points: back.points });
     select(-1); sendTf(false); showHistory();
   }
   $("tf-undo").addEventListener("click", () => step(done, undone));
@@ -337,8 +371,8 @@
   // the values and the points: made anew with a preset (`fresh`), else only widened (an undo restores them).
   const EDITED = "edited", MAX_POINTS = 32, GAP = 1e-3, PAD = 5, HIT = 7;
   const tfCanvas = $("tf-editor"), tfCtx = tfCanvas.getContext("2d");
-  const editor = { points: null, window: null, axis: [0, 1], top: 1, fresh: true, selected: -1, drag: false,
-                   changed: false, histogram: null };
+  const editor = { points: null, window: null, anchor: null, axis: [0, 1], top: 1, fresh: true, selected: -1,
+                   drag: false, changed: false, histogram: null };
   const xOf = (v) => PAD + (v - editor.axis[0]) / (editor.axis[1] - editor.axis[0]) * (tfCanvas.width - 2 * PAD);
   const yOf = (a) => tfCanvas.height - PAD - a / editor.top * (tfCanvas.height - 2 * PAD);
   const valueOf = (x) => editor.axis[0] + Math.min(1, Math.max(0, (x - PAD) / (tfCanvas.width - 2 * PAD))) *
@@ -350,6 +384,10 @@
     if (editor.drag) return;
     editor.points = points.map((p) => p.slice());
     editor.window = window;
+    // a preset's window without the sliders (the frame's are the sliders now: it is the function sent last)
+    const w = (window[1] - window[0]) / slider("tf-width"), mid = (window[0] + window[1]) / 2 - slider("tf-window") * w;
+    editor.anchor = [mid - w / 2, mid + w / 2];
+    showCentre();
     fitEditor(editor.fresh);
     editor.selected = Math.min(editor.selected, points.length - 1);
     drawEditor();
@@ -402,11 +440,7 @@
   }
 
   function edited(moving) {  // the points shown, edited, are the base through the sliders backwards
-    let anchor = tf.base.anchor;
-    if (!anchor) {  // a preset's: the window its frame was classified by, without the sliders
-      const [lo, hi] = editor.window, w = (hi - lo) / slider("tf-width"), mid = (lo + hi) / 2 - slider("tf-window") * w;
-      anchor = [mid - w / 2, mid + w / 2];
-    }
+    const anchor = anchorNow();  // a preset's: the window its frame was classified by, without the sliders
     tf.base = { points: through(editor.points, anchor, true), anchor };
     if (stats.tfInput === null) stats.tfInput = performance.now();
     sendTf(moving);
@@ -561,7 +595,7 @@
     } else {
       rows.push(["tolerance", `${fmt(f.tolerance)}, detail ${f.detail}` +
                  (f.reduction > 1 ? `, 1/${f.reduction} size` : "")]);
-      if (f.error !== null) rows.push(["error estimate", `${fmt(f.error)} (${f.error_kind})`]);
+      if (f.error !== null) rows.push(["frame's error", `${fmt(f.error)} (${f.error_kind})`]);
       if (f.tf_window) $("tf-range").textContent = showRange(f.tf_window);  // the window this frame was classified by
       // the function it was classified by, where that is the function now (not one left since it was sent)
       if (f.tf_points && !tf.base.points && f.seq === sentSeq && !pending) framePoints(f.tf_points, f.tf_window);
