@@ -194,7 +194,10 @@ class _Temporary:
                 os.unlink(self.path)
 
     def close(self):
-        self.file.close()
+        # a write that failed (a full disk) leaves its bytes in the buffer, which the close tries again and raises for
+        # once more, over the one-line error: the descriptor is closed all the same, the file is dropped anyway
+        with contextlib.suppress(OSError):
+            self.file.close()
         for name in (self.tmp, self.old):
             if name is not None and os.path.lexists(name):
                 os.unlink(name)

@@ -105,8 +105,11 @@ def write_tiff(fh, image, size=None, unit=None, alpha=False, shape=None):
 
 def _per_unit(size, unit, counted_in) -> list | None:
     """Pixels per length ``counted_in`` (metres; with ``unit`` None, world units) along x and y of pixels of
-    ``size`` (x, y) in ``unit``; None where there is no size."""
+    ``size`` (x, y) in ``unit``; None where there is no size, or no positive finite count (a pixel of 0, NaN or
+    1e-320 world units: no tag rather than a wrong one)."""
     if size is None:
         return None
     length = 1.0 if unit is None else UNIT_METRES[unit]
-    return [counted_in / (s * length) for s in size]
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        per = [float(np.float64(counted_in) / (np.float64(s) * length)) for s in size]
+    return per if all(0.0 < p < np.inf for p in per) else None

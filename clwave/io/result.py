@@ -55,7 +55,14 @@ class RenderResult:
         if self.is_xray:
             picture = self._picture().astype(wide, copy=False)
             lo, hi = resolve_window(picture, window)
-            scaled = np.clip((picture - lo) / (hi - lo), 0.0, 1.0)
+            with np.errstate(over="ignore", under="ignore"):  # a narrow window's quotients past float32: clipped to 1
+                ends = np.array([lo, hi, hi - lo], wide)
+                if not (np.all(np.isfinite(ends)) and ends[2] > 0):  # else NaN levels, written as 0 with a warning
+                    why = (f"is beyond {np.dtype(wide).name}, in which the {int(top).bit_length()}-bit picture is "
+                           f"made (its ends and its width must be finite there, the width above 0): choose a window "
+                           f"nearer the image's values")
+                    raise InputError(f"window=({lo:g}, {hi:g}) {why}", cli=f"--window {lo:g},{hi:g} {why}")
+                scaled = np.clip((picture - lo) / (hi - lo), 0.0, 1.0)
             if self.image.shape[-1] == 2:  # a pair colour-blind eyes tell apart too
                 scaled = scaled[..., [0, 1, 0]]
         else:

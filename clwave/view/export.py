@@ -12,6 +12,7 @@ viewer's :class:`~clwave.SplatRenderer`, the viewer's :class:`~clwave.RayTracer`
 from __future__ import annotations
 
 import json
+import os
 import shlex
 from dataclasses import dataclass
 
@@ -54,7 +55,8 @@ class Origin:
         given = []
         for action in parser._actions:
             value = getattr(args, action.dest, action.default)
-            if action.option_strings and value not in (None, False) and value != action.default:
+            # "is not False", for 0 == False: an option given as 0 (--threshold 0, --nan 0) is given
+            if action.option_strings and value is not None and value is not False and value != action.default:
                 given.append((action.dest, action.option_strings[-1], None if value is True else value))
         return cls(args.input, tuple(given))
 
@@ -87,6 +89,7 @@ def resolve(sources: dict, state, size=None) -> Spec:
     if state.mode == "xray":
         return Spec("xray", camera, tuple(state.window or source.auto_window),
                     state.colour_map if source.capabilities["colour_map"] else None, state.detail, levels=levels)
+    source.start_full_stage()
     if source.tracer is None:
         raise Unavailable("the shaded views' ray tracer is still being made (or the whole file read): try again once "
                           "the view has been refined")
@@ -154,7 +157,9 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
                 "view of it")
     clw = origin.input.lower().endswith(".clw")
     scalar_tf = spec.mode == "shaded" and spec.tf is not None
-    before, tokens, notes = [], ["clwave", "render", origin.input], []
+    # an input whose name begins with "-" (a relative path: an absolute one begins with "/") is not an option
+    source = f"./{origin.input}" if origin.input.startswith("-") else origin.input
+    before, tokens, notes = [], ["clwave", "render", source], []
     for dest, flag, value in origin.options:
         # a scalar model's shaded view: the tab's function in place of the one given; an X-ray of a .clw: none
         if dest in TF_OPTIONS and (scalar_tf or clw):
@@ -189,7 +194,17 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
         if spec.background:
             tokens += ["--background", ",".join([_number(spec.background)] * 3)]
     tokens += ["-o", output]
-    return "\n".join(notes + before + [shlex.join(tokens)])
+    return "\n".join(notes + before + [" ".join(map(_shell_word, tokens))])
+
+
+def _shell_word(text: str) -> str:
+    """``text`` as one shell word: ``shlex.quote``, or where it is no UTF-8 (a file name that is not, surrogate-escaped
+    by Python, which a page's text would carry as U+FFFD) bash's ``$'\\xHH...'`` of its bytes."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return "$'" + "".join(f"\\x{byte:02x}" for byte in os.fsencode(text)) + "'"
+    return shlex.quote(text)
 
 
 # ---------------------------------------------------------------------------------------------------- the Python
@@ -295,16 +310,20 @@ async def serve(server, request, *, image: bool):
     507 too large for memory, 429 a save under way)."""
     import asyncio
     import contextlib
+    from functools import partial
 
     from aiohttp import web
 
     from ..device.memory import HostMemoryError
     from ..errors import ClwaveError, DeviceMemoryError
+    from .frames import encode
     from .protocol import Refused, parse_export
 
     server.check_origin(request)
     try:
-        state, size = parse_export(await request.text(), tuple(server.sources))
+        # JSON is UTF-8 (RFC 8259), whatever charset the request names: request.text() decodes by that name, and
+        # raised (500, a traceback logged) for bytes that are not in it or a charset Python does not know
+        state, size = parse_export((await request.read()).decode("utf-8", "replace"), tuple(server.sources))
     except Refused as exc:
         raise web.HTTPBadRequest(text=f"{exc}\n") from None
 
@@ -317,9 +336,16 @@ async def serve(server, request, *, image: bool):
 
     if image and server.saving.locked():
         raise web.HTTPTooManyRequests(text="an image is being saved already: save again once it has come\n")
+    loop = asyncio.get_running_loop()
     try:
+        if state.mode == "shaded":  # its tracer made for a request before any tab's shaded view (a script's)
+            building = server.prepared(server.sources["shaded"])
+            if building.done() and not building.cancelled() and isinstance(building.exception(), ClwaveError):
+                raise building.exception()
         async with server.saving if image else contextlib.nullcontext():
-            done = await asyncio.get_running_loop().run_in_executor(server.pool, work)
+            done = await loop.run_in_executor(server.pool, work)
+            if image:  # encoded off the event loop (every tab's socket: docs/viewer.md §5) and the render thread
+                done = await loop.run_in_executor(None, partial(encode, done, lossless=True))
     except Unavailable as exc:
         raise web.HTTPConflict(text=f"{exc}\n") from None
     except (HostMemoryError, DeviceMemoryError) as exc:
@@ -330,8 +356,6 @@ async def serve(server, request, *, image: bool):
         raise web.HTTPServiceUnavailable(text="the viewer is stopping\n") from None
     if not image:
         return web.json_response(done)
-    from .frames import encode
-
     H, W = size
-    return web.Response(body=encode(done, lossless=True)[0], content_type="image/png",
+    return web.Response(body=done[0], content_type="image/png",
                         headers={"Content-Disposition": f'attachment; filename="clwave-view-{H}x{W}.png"'})

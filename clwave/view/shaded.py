@@ -118,6 +118,13 @@ class ShadedSource(Source):
         if self.staged is not None:
             self.staged.abandon()
 
+    def start_full_stage(self):
+        """On the render thread: a file's full stage set up where no frame has started it (a save or a command asked
+        for before any shaded frame, export.resolve: theirs is the full stage's tracer)."""
+        if self.staged is not None and self.tracer is None:
+            self.staged.start()
+            self._watch_full_stage()
+
     def _watch_full_stage(self):
         """Once a coarse frame has started the whole file's set-up: a thread that waits for it (:meth:`_upgrade`)."""
         if self._watch.ident is None:

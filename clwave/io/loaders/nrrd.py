@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import shlex
 import warnings
 from pathlib import Path
 
@@ -74,7 +75,12 @@ def world_unit(path) -> str | None:
     a ``space`` (an anatomical one: millimetres by convention), else None."""
     with open(path, "rb") as fh:
         header = _read_header(path, fh)
-    units = {str(u).lower().replace("µ", "u") for u in header.get("space units", ())}
+        fh.seek(0)
+        line = re.search(rb"^space units: *(.*)$", fh.read(1 << 16), re.M) if "space units" in header else None
+    given = header.get("space units", ())
+    if line is not None and not line.group(1).isascii():  # pynrrd drops what is not ASCII: "µm" read as metres
+        given = shlex.split(line.group(1).decode("utf-8", "replace"))
+    units = {str(u).lower().replace("µ", "u").replace("μ", "u") for u in given}
     if units:
         return units.pop() if len(units) == 1 and units <= {"mm", "um", "m", "cm"} else None
     return "mm" if "space" in header else None
