@@ -5,7 +5,7 @@ from itertools import product
 import numpy as np
 import pytest
 
-from clwave.model.camera import Camera
+from clwave.model.camera import MAX_PIXELS_ACROSS, Camera
 from clwave.errors import InputError
 from clwave.model.volume import Volume
 
@@ -106,3 +106,16 @@ def test_a_box_fit_brings_the_content_box_to_the_image_edge(perspective):
         np.array(list(product(*zip(*slab.content_box())))))[:, 1]) for fit in ("sphere", "box")]
     assert rows[1] == pytest.approx(512) and rows[0] == pytest.approx(64 * 64 / np.sqrt(64 ** 2 + 8))
     assert Camera(0, 0, 16, fit="sphere").view(vol).pixel == Camera(0, 0, 16).view(vol).pixel  # the default
+
+
+def test_a_pixel_too_small_for_float32_positions_is_refused():
+    # an extent of 1e-40 (or a subnormal 1e-320, whose pixel underflows to 0) left the splat kernels' float32 positions
+    # meaningless (a crash, then an internal error); the bound is the most pixels across the content box's diagonal
+    volume = Volume(np.zeros((8, 8, 8), np.float32))
+    diagonal = 8.0 * np.sqrt(3.0)  # the box of 8 unit voxels a side, to within a voxel: the factors below are 2
+    for extent in (1e-40, 1e-320, 64 * diagonal / MAX_PIXELS_ACROSS / 2):
+        with pytest.raises(InputError, match="too small for the volume"):
+            Camera(size=64, extent=extent).view(volume)
+    assert Camera(size=64, extent=64 * diagonal / MAX_PIXELS_ACROSS * 2).view(volume).pixel > 0
+    with pytest.raises(InputError, match="distance=1e-300"):
+        Camera(size=64, perspective=True, distance=1e-300).view(volume)

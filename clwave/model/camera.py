@@ -18,6 +18,10 @@ import numpy as np
 from ..errors import InputError, finite_number, flag, reals, whole_number
 from .geometry import view_frame
 
+#: The most pixels across the content box's diagonal: the kernels place pixels in float32, whose 24 bits must keep a
+#: pixel's position to a quarter of a pixel (a zoom of about 1000 at 4096²).
+MAX_PIXELS_ACROSS = 1 << 22
+
 FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
 DEFAULT_FOV = 30.0  #: a perspective camera's vertical field of view, degrees, unless given
 
@@ -175,10 +179,17 @@ class Camera:
         else:  # the sphere about the target holding the content box, across the image's shorter side
             extent = self.extent or 2.0 * float(np.max(np.linalg.norm(corners, axis=1))) * W / min(H, W)
             distance = self.distance or 2.0 * extent
+        pixel = slope * distance if self.perspective else extent / W
+        if not pixel * MAX_PIXELS_ACROSS >= float(np.linalg.norm(hi - lo)):  # also a pixel of 0 or NaN
+            what = "distance" if self.perspective else "extent"
+            raise InputError(f"{what}={distance if self.perspective else extent:g} makes a pixel of {pixel:.3g} world "
+                             f"units, too small for the volume: float32 positions hold at most {MAX_PIXELS_ACROSS:,} "
+                             f"pixels across it; give a larger {what}",
+                             cli=f"--{what} makes a pixel too small for the volume (at most {MAX_PIXELS_ACROSS:,} "
+                                 f"pixels across it in float32 positions): give a larger --{what}")
         if not self.perspective:
-            return View(n, u, v, target, (H, W), extent / W, False, target + distance * n, self.fov)
-        return View(n, u, v, target, (H, W), slope * distance, True, target + distance * n, self.fov,
-                    (slope, slope), (0.0, 0.0))
+            return View(n, u, v, target, (H, W), pixel, False, target + distance * n, self.fov)
+        return View(n, u, v, target, (H, W), pixel, True, target + distance * n, self.fov, (slope, slope), (0.0, 0.0))
 
     def reduced(self, reduction: int, view: View) -> "Camera":
         """The same view with ``reduction`` times larger pixels (sides rounded up, the same centre): a progressive
