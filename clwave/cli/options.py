@@ -205,7 +205,7 @@ def _needs_rgba(name, channels, fix) -> InputError:
 
 
 def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None, post=False,
-                hu_hint=True):
+                hu_hint=True, volume=None):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
     ``post`` (implied by ``rgba``): a scalar ``.clw`` input takes ``--tf``/``--tf-window``, the transfer function
@@ -217,7 +217,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     (thresholded, not gathered).  ``cluster_render``: a ``.clw`` input takes ``--workers``/``--scheduler``
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
     instead of the model read (``clwave view`` opens it by its prefix first).  ``hu_hint``: a volume (chunked too) that
-    looks like CT in Hounsfield units gets a warning (docs/coordinates.md §1).
+    looks like CT in Hounsfield units gets a warning (docs/coordinates.md §1).  ``volume``: the input read already
+    (:func:`read_volume`), for a caller that reports on it.
     """
     from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
@@ -256,7 +257,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
             wv = wv.threshold(**thresholding)
             warn_stored(wv, args.keep, args.input)  # as WaveletVolume.open(keep=) tells it
         return wv, None
-    vol = read_volume(args)
+    vol = read_volume(args) if volume is None else volume
     tf = preset_transfer_function(args)
     hinted = hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False))
     least = air_in_hounsfield(vol.data) if hinted else None

@@ -145,6 +145,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = np.asarray(data)
     # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
     labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
+    stored = data.dtype
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
         if hu_to_mu and data.ndim != 3:
             channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
@@ -156,7 +157,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
                   origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity,
-                  labels=labels)
+                  labels=labels, stored_dtype=stored)
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
