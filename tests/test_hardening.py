@@ -69,6 +69,7 @@ def setter(key, value):
     (setter("obliquity", -1), "obliquity -1 is not one number of degrees from 0 to 90"),
     (setter("obliquity", "20"), "obliquity '20' is not"),
     (setter("obliquity", float("nan")), "obliquity nan is not"),
+    (setter("unit", "furlong"), "unit 'furlong' is not one of m, cm, mm, um"),
     # JSON numbers of the wrong kind: a float channel index passed the groups' check, and failed as an index later
     (lambda h: h["groups"][0].__setitem__("channels", [0.0]), "list of channel numbers"),
     (setter("levels", True), "levels True is not possible"),
@@ -97,6 +98,8 @@ def test_a_header_without_its_optional_properties_opens(model_file, tmp_path):
 
     wv = clwave.WaveletVolume.open(crafted(model_file, tmp_path, strip))
     assert wv.focus is None and wv.content is None and wv.transfer_function is None
+    wv = clwave.WaveletVolume.open(crafted(model_file, tmp_path, lambda header: header.pop("unit")))
+    assert wv.unit is None  # a file of before session 19 records no world unit: unknown
 
 
 def test_other_files_named_clw_are_refused(tmp_path):

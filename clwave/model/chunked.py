@@ -145,6 +145,7 @@ class ChunkedWaveletVolume:
     origin = property(lambda self: self.volume.origin)
     subtracted = property(lambda self: self.volume.subtracted)
     obliquity = property(lambda self: self.volume.obliquity)
+    unit = property(lambda self: self.volume.unit)
     channels = property(lambda self: self.volume.channels)
     n_voxels = property(lambda self: int(np.prod(self.shape)))
     frame = property(lambda self: (self.shape, self.spacing, self.origin))
@@ -276,7 +277,8 @@ class ChunkedWaveletVolume:
                for gi, (wavelet, channels) in enumerate(groups)]
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
-                             content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity)
+                             content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity,
+                             unit=self.unit)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;

@@ -125,12 +125,14 @@ class WaveletVolume:
     file_format = None
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
-                 focus=None, transfer_function=None, content=None, content_mask=None, subtracted=0.0, obliquity=0.0):
+                 focus=None, transfer_function=None, content=None, content_mask=None, subtracted=0.0, obliquity=0.0,
+                 unit=None):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
         self.subtracted = float(subtracted)  # the source volume's: its values are the input's minus it
         self.obliquity = float(obliquity)  # the source volume's Volume.obliquity: degrees off the scanner's axes
+        self.unit = unit  # the source volume's Volume.unit: the world unit ("um", "mm"...), None where unknown
         self.levels = int(levels)
         self.groups = list(groups)
         self.channels = int(channels)
@@ -200,7 +202,8 @@ class WaveletVolume:
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
                    interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask),
                    content_mask=None if interpolate else ContentMask.of(mask), subtracted=volume.subtracted,
-                   obliquity=volume.obliquity)
+                   obliquity=volume.obliquity,
+                   unit=volume.unit)
 
     # ------------------------------------------------------------- properties
     @property
@@ -272,7 +275,8 @@ class WaveletVolume:
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
                             interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
-                            content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity)
+                            content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity,
+                            unit=self.unit)
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
@@ -381,7 +385,8 @@ class WaveletVolume:
             for slot, channel in enumerate(g.channels):
                 data[..., channel] = reconstruct_channel(g, dense, slot, self.shape, self.levels)
         return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.subtracted,
-                      self.obliquity)
+                      self.obliquity,
+                      unit=self.unit)
 
     def unmasked(self) -> "WaveletVolume":
         """The same coefficients without the content mask (nothing clamped, docs/raytracing.md §4), keeping no
