@@ -357,7 +357,8 @@ def test_the_world_unit_of_an_input(tmp_path, nifti, rng, capsys):
                  str(tmp_path / "m.json")]) == 0
     stats = json.loads((tmp_path / "m.json").read_text())
     ppm = round(1e6 / stats["pixel"])  # pixels per metre of a pixel of stats["pixel"] micrometres
-    assert stats["unit"] == "um" and dict(decode_png(tmp_path / "m.png")[0])[b"pHYs"] == struct.pack(">IIB", ppm, ppm, 1)
+    assert stats["unit"] == "um"
+    assert dict(decode_png(tmp_path / "m.png")[0])[b"pHYs"] == struct.pack(">IIB", ppm, ppm, 1)
 
 
 @pytest.mark.parametrize("channels", [2, 3, 4])
