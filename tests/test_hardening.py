@@ -707,6 +707,49 @@ def test_a_buffer_over_the_limit_names_the_true_fix():
             "render a smaller image")
 
 
+def test_an_image_beyond_the_hosts_memory_is_refused_before_its_buffers(tmp_path, capsys, monkeypatch):
+    """trial24 row 15: --size 20000 ran for minutes. An image whose memory (its host copies, HOST_PIXEL_BYTES a pixel,
+    and on a CPU device its device buffer, the host's memory too) is beyond what the host has available (a tiny fake
+    figure here) is refused before a buffer is made, in one line naming the size, the bytes and the fix: exit 2 on
+    the command line, a MemoryError in the API (Camera(size=), splat, raytrace, progressive)."""
+    from math import isqrt
+
+    from clwave.cli import main
+    from clwave.device import memory
+
+    wv = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(
+        clwave.phantom("hydrogen", n=12)), levels=1)
+    splatter, tracer = clwave.SplatRenderer(wv), clwave.RayTracer(wv)  # planned with the memory there is
+    camera = clwave.Camera(size=200)
+    monkeypatch.setattr(memory, "available_bytes", lambda: 1 << 20)  # 1 MiB
+    with pytest.raises(clwave.HostMemoryError) as err:
+        clwave.Camera(size=300)  # its host copies alone: 300^2 x 20 bytes
+    assert str(err.value) == ("a 300x300 image needs about 1.8 MiB, and this machine has 1 MiB available; give a "
+                              "smaller size= (at most 228x228 here)")
+    device = 16 * 200 ** 2 if splatter.cc.info.kind == "CPU" else 0  # a framebuffer in the host's memory
+    with pytest.raises(clwave.HostMemoryError, match=r"^the framebuffer of a 200x200 image needs about "
+                       rf"{memory.format_size(20 * 200 ** 2 + device)}, and this machine has 1 MiB available; "
+                       r"render a smaller image \(at most \d+x\d+ here\)$"):
+        clwave.splat(wv, camera, renderer=splatter)
+    with pytest.raises(clwave.HostMemoryError, match=r"^a 200x200 image needs about .* 1 MiB available; render a "
+                                                     r"smaller image \(at most \d+x\d+ here\)$"):
+        tracer.render(camera)
+    for render in (clwave.splat, clwave.raytrace, lambda w, c: list(clwave.progressive(w, c, steps=2))):
+        with pytest.raises(MemoryError) as err:  # the renderer planned within the 1 MiB, or the image refused
+            render(wv, camera)
+        assert "\n" not in str(err.value)
+    (tmp_path / "v.npy").write_bytes(b"never read")
+    for method, pixel in (("splat", 16), ("raytrace", 32)):  # device/memory.py: FRAMEBUFFER_, TRACED_PIXEL_BYTES
+        assert main(["render", str(tmp_path / "v.npy"), "--size", "400", "--method", method, "-o",
+                     str(tmp_path / "a.png")]) == 2
+        per = 20 + (pixel if splatter.cc.info.kind == "CPU" else 0)  # the device buffer in the host's memory
+        most = isqrt((1 << 20) // per)
+        assert capsys.readouterr().err.splitlines() == [
+            f"clwave: error: a 400x400 image needs about {memory.format_size(400 ** 2 * per)}, and this "
+            f"machine has 1 MiB available; give a smaller --size (at most {most}x{most} here)"]
+    assert not (tmp_path / "a.png").exists()
+
+
 def test_an_image_over_the_device_memory_cap_names_a_larger_cap(tmp_path, capsys):
     from clwave.cli import main
 
