@@ -2,6 +2,7 @@
 model's, on odd shapes with chunkings that do not divide them."""
 
 import io
+import json
 import os
 import time
 
@@ -116,6 +117,25 @@ def test_classified_chunk_by_chunk_then_decomposed(tmp_path):
     assert chunked_rgba.chunked
     ref = clwave.WaveletVolume.from_volume(tf.classify(vol), "cubic", levels=2)  # (a symmetric phantom: ties)
     assert_same(ref, clwave.WaveletVolume.from_volume(chunked_rgba, "cubic", levels=2).compute())
+
+
+def test_the_world_unit_goes_through_both_writers(tmp_path):
+    """A volume's unit is the model's and its file's (the header's ``unit``) whether the file is written whole or a
+    block at a time (docs/chunked.md §4), and comes back on reading; a model of a volume without one records none."""
+    data = np.random.default_rng(5).random((12, 10, 8)).astype(np.float32)
+    for chunks in (None, (6, 5, 4)):
+        vol = clwave.Volume(data if chunks is None else da.from_array(data, chunks=chunks), unit="um")
+        wv = clwave.WaveletVolume.from_volume(vol, "linear", levels=1).threshold(keep=0.5)
+        assert wv.unit == "um" and vol.chunked == (chunks is not None)
+        wv.save(tmp_path / "u.clw", overwrite=True)
+        assert clwave.WaveletVolume.open(tmp_path / "u.clw").unit == "um"
+        with h5py.File(tmp_path / "u.clw") as fh:
+            assert json.loads(fh.attrs["header"])["unit"] == "um"
+    clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1).save(tmp_path / "none.clw")
+    assert clwave.WaveletVolume.open(tmp_path / "none.clw").unit is None
+    assert clwave.WaveletVolume.open(tmp_path / "u.clw").reconstruct().unit == "um"
+    with pytest.raises(InputError, match=r"^unit='inch' must be the world unit"):
+        clwave.Volume(data, unit="inch")
 
 
 def test_streamed_file_equals_the_in_memory_file(rng, tmp_path):

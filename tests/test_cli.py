@@ -37,10 +37,22 @@ def test_compress_phantom_report_and_file(tmp_path, capsys):
     assert "32 x 32 x 32 voxels" in lines["input"]
     assert lines["model"].endswith(f"2 levels, {wv.kept:,} coefficients (5.00 % of the voxels)")
     raw, size = 32 ** 3 * 4 * 4, target.stat().st_size  # the phantom's classified float32 RGBA
-    assert f"{raw / size:.1f}:1 against the volume as raw float32" in lines["file"]
+    assert f"{raw / size:.1f}:1 against the volume as float32" in lines["file"]
+    assert f"{32 ** 3 * 4 / size:.1f}:1 against the input's float32 values" in lines["file"]
     assert "classified to 4 channels (--tf hydrogen)" in lines["input"]
     error = float(lines["error"].split("voxels ")[1].split()[0])  # relative to the largest value
     assert 0 < error < 0.1
+
+
+def test_compress_ratio_against_the_inputs_own_size(tmp_path, capsys):
+    """A uint16 input's file is weighed against its 2 bytes a voxel first (trial24 row 6), float32 beside it."""
+    source, target = tmp_path / "v.npy", tmp_path / "v.clw"
+    np.save(source, (np.arange(16 ** 3).reshape(16, 16, 16) % 4000).astype(np.uint16))
+    code, out, err = run(capsys, "compress", str(source), "--levels", "2", "-o", str(target))
+    assert code == 0, err
+    line, size = next(li for li in out.splitlines() if li.startswith("file")), target.stat().st_size
+    assert (f"{16 ** 3 * 2 / size:.1f}:1 against the input's uint16 values (8.2 KB); "
+            f"{16 ** 3 * 4 / size:.1f}:1 against the volume as float32 (16.4 KB)") in line
 
 
 def test_compress_quintic_colour_with_haar_opacity(tmp_path, capsys):

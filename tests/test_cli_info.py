@@ -126,7 +126,8 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
         assert facts["bytes"] == (tmp_path / name).stat().st_size and facts["spacing_in_file"] == (name == "v.nii")
     code, out, _ = run(capsys, "info", str(tmp_path / "v.nii"))
     assert out.splitlines()[1:] == ["volume     4 x 5 x 6 voxels (x, y, z), 1 channel of int16",
-                                    "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10",
+                                    "spacing    2, 3, 4 mm (x, y, z), origin 3, 6, 10 (RAS+)",
+                                    "box        8, 15, 24 (x, y, z) mm",
                                     "orient     stored RAS, from the sform (nibabel's choice; sform_code 2, "
                                     "qform_code 0)"]
     for name in ("v.nii.gz", "v.tif"):
@@ -135,8 +136,10 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
         placed = (tuple(json.loads(out)["spacing"]), tuple(json.loads(out)["origin"])) if name == "v.nii.gz" else None
         assert placed == (None if name == "v.tif" else (nii_gz.spacing, nii_gz.origin)), name  # a TIFF: no place
     code, out, _ = run(capsys, "info", str(tmp_path / "v.nii.gz"))
-    assert out.splitlines()[1:] == ["volume     4 x 5 x 6 samples of int16 as read, before the loader orders them",
-                                    "spacing    2, 3, 4 (x, y, z), origin 3, 6, 10 (RAS+ mm, as loaded)",
+    assert out.splitlines()[1:] == ["stored     4 x 5 x 6 values of int16, in the file's order of axes",
+                                    "volume     4 x 5 x 6 voxels (x, y, z), 1 channel of int16",
+                                    "spacing    2, 3, 4 mm (x, y, z), origin 3, 6, 10 (RAS+)",
+                                    "box        8, 15, 24 (x, y, z) mm",
                                     "orient     stored RAS, from the sform (nibabel's choice; sform_code 2, "
                                     "qform_code 0)"]
 
@@ -162,8 +165,10 @@ def test_info_of_an_ome_or_imagej_tiff_gives_its_spacing_without_a_voxel(tmp_pat
     assert loaded["o.ome.tif"].spacing == (5.0, 0.25, 0.5) and loaded["ij.tif"].spacing == (3.0, 0.25, 0.5)
     code, out, _ = run(capsys, "info", str(tmp_path / "o.ome.tif"))
     # the OME-TIFF's first voxel at 0 (it gives no plane positions): its centre at half its extent
-    assert out.splitlines()[2] == ("spacing    0.5, 0.25, 5 (x, y, z), origin 2.25, 0.875, 12.5 (µm for an OME-TIFF, "
-                                   "an ImageJ stack's unit; as loaded)")
+    assert out.splitlines()[3:] == ["spacing    0.5, 0.25, 5 um (x, y, z), origin 2.25, 0.875, 12.5",
+                                    "box        5, 2, 30 (x, y, z) um"]
+    code, out, _ = run(capsys, "info", str(tmp_path / "ij.tif"), "--json")  # its unit, "um" as micron and µm are
+    assert json.loads(out)["unit"] == "um" and json.loads(out)["box"] == [5.0, 2.0, 18.0]
 
 
 def test_a_header_declared_passes_every_handler_of_read_errors(tmp_path):
@@ -286,8 +291,9 @@ def test_info_of_a_time_series_describes_it_and_names_the_refusal(tmp_path, caps
         assert facts["time"] == dict(points=3, step=step, unit=unit) and facts["refused"] == refusals[name], name
     code, out, err = run(capsys, "info", str(tmp_path / "f.nii.gz"))
     lines = dict(line.split(None, 1) for line in out.splitlines())
-    assert code == 0 and lines["volume"] == "4 x 5 x 6 x 3 samples of int16, a time series, as stored", out
-    assert lines["spacing"] == "2, 3, 4 (x, y, z), origin 8, 12, 17 (RAS+ mm, as loaded)"
+    assert code == 0 and lines["stored"] == "4 x 5 x 6 x 3 values of int16, in the file's order of axes, a time " \
+        "series", out
+    assert lines["spacing"] == "2, 3, 4 mm (x, y, z), origin 8, 12, 17 (RAS+)" and "volume" not in lines
     assert lines["time"] == "3 time points, 2.5 sec apart"
     assert lines["refused"].endswith("extract one volume first, e.g. with nibabel.funcs.four_to_three")
 
@@ -323,12 +329,14 @@ def test_every_formats_description_has_the_same_keys(tmp_path, capsys):
         keys[name] = list(json.loads(out))
     clw = set(keys.pop("v.clw"))
     assert len({tuple(k) for k in keys.values()}) == 1, keys
+    from clwave.cli.info import GEOMETRY
     from clwave.io.loaders import DESCRIBED
 
-    assert keys["v.nii"] == list(DESCRIBED)
-    assert set(DESCRIBED) & clw == {"file", "format", "bytes", "shape", "channels", "spacing", "origin", "obliquity"}
+    assert keys["v.nii"] == list(DESCRIBED + GEOMETRY)
+    assert set(DESCRIBED + GEOMETRY) & clw == {"file", "format", "bytes", "shape", "channels", "spacing", "origin",
+                                               "obliquity", "unit"}
     docs = (Path(__file__).parents[1] / "docs" / "coordinates.md").read_text()
-    assert all(f"`{key}`" in docs for key in DESCRIBED)  # the keys are listed where `info` is documented
+    assert all(f"`{key}`" in docs for key in DESCRIBED + GEOMETRY)  # the keys are listed where `info` is documented
 
 
 def test_info_prints_world_lengths_without_float_noise(tmp_path, capsys):
@@ -346,4 +354,38 @@ def test_info_prints_world_lengths_without_float_noise(tmp_path, capsys):
     origin = json.loads(out)["origin"]
     assert code == 0 and 0 < max(map(abs, origin)) < 1e-6 * 16, origin  # the noise is there, below 16 mm / 1e6
     code, out, _ = run(capsys, "info", str(tmp_path / "o.nii"))
-    assert code == 0 and "spacing    2, 2, 2 (x, y, z), origin 0, 0, 0\n" in out, out
+    assert code == 0 and "spacing    2, 2, 2 mm (x, y, z), origin 0, 0, 0 (RAS+)\n" in out, out
+
+
+def test_info_takes_the_reading_options_and_prints_the_geometry_they_give(tmp_path, capsys):
+    """trial24 row 19: `info FOLDER --spacing 10,5,5` was refused; the reading options of the commands (one option
+    group) give the spacing, box and unit the commands will use: a folder of slices gets 1, 1, 1 said without it, a
+    .raw is described by --shape and --dtype, a value option is named as applied when read; a .clw or no FILE refuses
+    them in one line."""
+    import tifffile
+
+    (tmp_path / "slices").mkdir()
+    for z in range(4):
+        tifffile.imwrite(tmp_path / "slices" / f"s{z}.tif", np.zeros((6, 8), np.uint16))
+    code, out, err = run(capsys, "info", str(tmp_path / "slices"), "--spacing", "10,5,5", "--subtract", "2000")
+    lines = dict(line.split(None, 1) for line in out.splitlines())
+    assert code == 0, err
+    assert lines["stored"] == "4 x 6 x 8 values of uint16, in the file's order of axes"
+    assert lines["volume"] == "8 x 6 x 4 voxels (x, y, z), 1 channel of uint16"
+    assert lines["spacing"] == "5, 5, 10 (x, y, z) (--spacing), origin 0, 0, 0"
+    assert lines["box"] == "40, 30, 40 (x, y, z) in --spacing's unit"
+    assert lines["values"] == "--subtract 2000: applied as the values are read (not read here)"
+    code, out, err = run(capsys, "info", str(tmp_path / "slices"), "--json")
+    facts = json.loads(out)
+    assert (facts["spacing"], facts["box"], facts["unit"], facts["spacing_in_file"]) == ([1.0] * 3, [8, 6, 4], None,
+                                                                                        False)
+    np.arange(2 * 3 * 4, dtype="<u2").tofile(tmp_path / "v.raw")
+    code, out, err = run(capsys, "info", str(tmp_path / "v.raw"), "--shape", "2,3,4", "--dtype", "uint16", "--json")
+    facts = json.loads(out)
+    assert code == 0 and (facts["shape"], facts["dtype"], facts["reading"]["shape"]) == ([2, 3, 4], "uint16", "2,3,4")
+    clwave.WaveletVolume.from_volume(clwave.Volume(np.ones((4, 4, 4))), levels=1).save(tmp_path / "m.clw")
+    for argv, needle in (([str(tmp_path / "m.clw"), "--spacing", "1"], "--spacing says how a volume file is read; "),
+                         (["--subtract", "1", "--nan", "0"], "--subtract, --nan say how a FILE is read: give the FILE"),
+                         ([str(tmp_path / "v.raw")], "is a .raw file: it has no header")):
+        code, out, err = run(capsys, "info", *argv)
+        assert code == 2 and out == "" and err.count("\n") == 1 and needle in err, err

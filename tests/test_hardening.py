@@ -69,6 +69,7 @@ def setter(key, value):
     (setter("obliquity", -1), "obliquity -1 is not one number of degrees from 0 to 90"),
     (setter("obliquity", "20"), "obliquity '20' is not"),
     (setter("obliquity", float("nan")), "obliquity nan is not"),
+    (setter("unit", "furlong"), "unit 'furlong' is not one of m, cm, mm, um"),
     # JSON numbers of the wrong kind: a float channel index passed the groups' check, and failed as an index later
     (lambda h: h["groups"][0].__setitem__("channels", [0.0]), "list of channel numbers"),
     (setter("levels", True), "levels True is not possible"),
@@ -97,6 +98,8 @@ def test_a_header_without_its_optional_properties_opens(model_file, tmp_path):
 
     wv = clwave.WaveletVolume.open(crafted(model_file, tmp_path, strip))
     assert wv.focus is None and wv.content is None and wv.transfer_function is None
+    wv = clwave.WaveletVolume.open(crafted(model_file, tmp_path, lambda header: header.pop("unit")))
+    assert wv.unit is None  # a file of before session 19 records no world unit: unknown
 
 
 def test_other_files_named_clw_are_refused(tmp_path):
@@ -702,6 +705,49 @@ def test_a_buffer_over_the_limit_names_the_true_fix():
         assert str(err.value) == err.value.cli_message() == (
             "a 9x9 image needs 65 MiB in one device buffer, but Dev allows 64 MiB whatever the device memory given; "
             "render a smaller image")
+
+
+def test_an_image_beyond_the_hosts_memory_is_refused_before_its_buffers(tmp_path, capsys, monkeypatch):
+    """trial24 row 15: --size 20000 ran for minutes. An image whose memory (its host copies, HOST_PIXEL_BYTES a pixel,
+    and on a CPU device its device buffer, the host's memory too) is beyond what the host has available (a tiny fake
+    figure here) is refused before a buffer is made, in one line naming the size, the bytes and the fix: exit 2 on
+    the command line, a MemoryError in the API (Camera(size=), splat, raytrace, progressive)."""
+    from math import isqrt
+
+    from clwave.cli import main
+    from clwave.device import memory
+
+    wv = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(
+        clwave.phantom("hydrogen", n=12)), levels=1)
+    splatter, tracer = clwave.SplatRenderer(wv), clwave.RayTracer(wv)  # planned with the memory there is
+    camera = clwave.Camera(size=200)
+    monkeypatch.setattr(memory, "available_bytes", lambda: 1 << 20)  # 1 MiB
+    with pytest.raises(clwave.HostMemoryError) as err:
+        clwave.Camera(size=300)  # its host copies alone: 300^2 x 20 bytes
+    assert str(err.value) == ("a 300x300 image needs about 1.8 MiB, and this machine has 1 MiB available; give a "
+                              "smaller size= (at most 228x228 here)")
+    device = 16 * 200 ** 2 if splatter.cc.info.kind == "CPU" else 0  # a framebuffer in the host's memory
+    with pytest.raises(clwave.HostMemoryError, match=r"^the framebuffer of a 200x200 image needs about "
+                       rf"{memory.format_size(20 * 200 ** 2 + device)}, and this machine has 1 MiB available; "
+                       r"render a smaller image \(at most \d+x\d+ here\)$"):
+        clwave.splat(wv, camera, renderer=splatter)
+    with pytest.raises(clwave.HostMemoryError, match=r"^a 200x200 image needs about .* 1 MiB available; render a "
+                                                     r"smaller image \(at most \d+x\d+ here\)$"):
+        tracer.render(camera)
+    for render in (clwave.splat, clwave.raytrace, lambda w, c: list(clwave.progressive(w, c, steps=2))):
+        with pytest.raises(MemoryError) as err:  # the renderer planned within the 1 MiB, or the image refused
+            render(wv, camera)
+        assert "\n" not in str(err.value)
+    (tmp_path / "v.npy").write_bytes(b"never read")
+    for method, pixel in (("splat", 16), ("raytrace", 32)):  # device/memory.py: FRAMEBUFFER_, TRACED_PIXEL_BYTES
+        assert main(["render", str(tmp_path / "v.npy"), "--size", "400", "--method", method, "-o",
+                     str(tmp_path / "a.png")]) == 2
+        per = 20 + (pixel if splatter.cc.info.kind == "CPU" else 0)  # the device buffer in the host's memory
+        most = isqrt((1 << 20) // per)
+        assert capsys.readouterr().err.splitlines() == [
+            f"clwave: error: a 400x400 image needs about {memory.format_size(400 ** 2 * per)}, and this "
+            f"machine has 1 MiB available; give a smaller --size (at most {most}x{most} here)"]
+    assert not (tmp_path / "a.png").exists()
 
 
 def test_an_image_over_the_device_memory_cap_names_a_larger_cap(tmp_path, capsys):

@@ -574,7 +574,7 @@ def test_dicom_two_series_need_series_argument(tmp_path, rng, capsys):
     assert "--series INDEX" in err and "series=" not in err and err.count("\n") == 1
     for series, slices in (("1", 3), (uid_a, 4)):  # info reads --series as compress does: an index, or a UID
         assert main(["info", str(tmp_path), "--series", series]) == 0
-        assert f"volume     {slices} x 6 x 5 samples" in capsys.readouterr().out
+        assert f"stored     {slices} x 6 x 5 values" in capsys.readouterr().out
     (tmp_path / "a1").rename(tmp_path / "a1.dcm")
     assert main(["compress", str(tmp_path / "a1.dcm"), "-o", str(tmp_path / "out.clw")]) == 2
     assert "pass the folder" in capsys.readouterr().err
@@ -683,8 +683,10 @@ def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsy
     assert main(["info", str(tmp_path)]) == 0
     # the stored type, the place load gives it (spacing, RAS origin), the rescale and the padding, from the headers
     assert capsys.readouterr().out.splitlines()[1:] == [
-        "volume     3 x 6 x 5 samples of float32 as read (stored as uint16), before the loader orders them",
-        "spacing    0.9, 0.7, 1 (x, y, z), origin 18.2, -31.75, 1 (RAS+ mm, as loaded)",
+        "stored     3 x 6 x 5 values of float32, in the file's order of axes (stored as uint16)",
+        "volume     5 x 6 x 3 voxels (x, y, z), 1 channel of float32",
+        "spacing    0.9, 0.7, 1 mm (x, y, z), origin 18.2, -31.75, 1 (RAS+)",
+        "box        4.5, 4.2, 3 (x, y, z) mm",
         "rescale    slope 2, intercept -1024",
         "padding    stored 0 (outside the patient): set to the series' least other value when read"]
     assert vol.spacing == pytest.approx((1.0, 0.7, 0.9)) and vol.origin == pytest.approx((18.2, -31.75, 1.0))

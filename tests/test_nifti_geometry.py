@@ -84,7 +84,7 @@ def test_info_tells_a_shear_apart_from_obliquity(tmp_path, capsys):
     lines = {line.split()[0]: line for line in out.splitlines()}
     assert code == 0 and "oblique" not in lines, out
     assert "45.00 degrees (its axes not at right angles" in lines["sheared"]
-    assert "sheared grid resampled onto a straight one" in lines["volume"]
+    assert "sheared grid resampled onto a straight one" in lines["stored"]
     oblique = np.eye(4)
     oblique[:3, :3] = [[np.cos(0.3), -np.sin(0.3), 0], [np.sin(0.3), np.cos(0.3), 0], [0, 0, 1]]
     code, out, err = run(capsys, "info", str(_save(tmp_path / "oblique.nii", np.ones((5, 4, 6), np.float32), oblique)))

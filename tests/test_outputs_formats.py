@@ -314,10 +314,11 @@ def test_the_api_refuses_options_a_file_does_not_hold():
         xray.picture(background="transparent")
 
 
-def test_the_world_unit_of_an_input(tmp_path, nifti, rng):
+def test_the_world_unit_of_an_input(tmp_path, nifti, rng, capsys):
     """``loaders.world_unit``: DICOM's mm; a NIfTI's xyzt_units (unknown taken as mm, as NIfTI readers do; micron
-    um); a NRRD's space units, else mm where it names a space, else none; none for a .npy. A .clw records none: its
-    render has no pHYs (known-gaps.md §15)."""
+    um); a NRRD's space units, else mm where it names a space, else none; none for a .npy; an OME-TIFF's um, an ImageJ
+    stack's unit (micron, µm, um: um).  A .clw records its input's unit (trial24 row 11): its render's pHYs and
+    --stats give it."""
     import nibabel
     import nrrd
 
@@ -338,9 +339,26 @@ def test_the_world_unit_of_an_input(tmp_path, nifti, rng):
     write_series(tmp_path / "ct", rng, [(-20.0, 30.0, z) for z in (0, 1, 2)], "1.2.3", ["a", "b", "c"])
     assert [world_unit(tmp_path / name) for name in ("um.nii", "lps.nrrd", "um.nrrd", "plain.nrrd", "v.npy", "ct")] \
         == ["um", "mm", "um", None, None, "mm"]
-    assert main(["compress", str(nifti), "--levels", "1", "-o", str(tmp_path / "m.clw")]) == 0
-    assert main(["render", str(tmp_path / "m.clw"), "--size", "8", "-o", str(tmp_path / "m.png")]) == 0
-    assert b"pHYs" not in chunk_types(decode_png(tmp_path / "m.png")[0])
+    stack = np.zeros((4, 5, 6), np.uint16)
+    tifffile.imwrite(tmp_path / "o.ome.tif", stack, ome=True, metadata={"axes": "ZYX", "PhysicalSizeX": 0.5})
+    tifffile.imwrite(tmp_path / "plain.tif", stack, photometric="minisblack")
+    units = ("micron", "\\u00B5m", "um", "mm", "pixel")  # µm as ImageJ writes it (its description is ASCII)
+    for i, unit in enumerate(units):
+        tifffile.imwrite(tmp_path / f"ij{i}.tif", stack, imagej=True, metadata={"unit": unit, "axes": "ZYX"})
+    assert [world_unit(tmp_path / f"ij{i}.tif") for i in range(len(units))] == ["um", "um", "um", "mm", None]
+    assert (world_unit(tmp_path / "o.ome.tif"), world_unit(tmp_path / "plain.tif")) == ("um", None)
+    assert main(["compress", str(tmp_path / "um.nii"), "--levels", "1", "-o", str(tmp_path / "m.clw")]) == 0
+    assert clwave.WaveletVolume.open(tmp_path / "m.clw").unit == "um"
+    capsys.readouterr()
+    assert main(["info", str(tmp_path / "m.clw")]) == 0 and " um (x, y, z), origin" in capsys.readouterr().out
+    assert main(["info", str(tmp_path / "m.clw"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["unit"] == "um"
+    assert main(["render", str(tmp_path / "m.clw"), "--size", "8", "-o", str(tmp_path / "m.png"), "--stats",
+                 str(tmp_path / "m.json")]) == 0
+    stats = json.loads((tmp_path / "m.json").read_text())
+    ppm = round(1e6 / stats["pixel"])  # pixels per metre of a pixel of stats["pixel"] micrometres
+    assert stats["unit"] == "um"
+    assert dict(decode_png(tmp_path / "m.png")[0])[b"pHYs"] == struct.pack(">IIB", ppm, ppm, 1)
 
 
 @pytest.mark.parametrize("channels", [2, 3, 4])

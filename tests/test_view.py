@@ -784,7 +784,7 @@ def test_cli_view_refuses_a_size_beyond_the_device_before_reading_the_input(caps
         err = capsys.readouterr().err.strip().splitlines()
         h, _, w = size.partition("x")
         assert len(err) == 1 and f"the viewer's {h}x{w or h} shaded image needs" in err[0] and \
-            f"give a smaller --size (at most {most}x{most} on this device)" in err[0], err
+            f"give a smaller --size (at most {most}x{most} here)" in err[0], err
     assert main(["view", str(junk), "--size", str(most)]) == 2  # within the limit: the input is read, and refused
     assert "junk.npy" in capsys.readouterr().err
 

@@ -359,7 +359,10 @@ def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(c
 
     with view(clw, size=32, tolerance=2e-2) as v:
         frames = asyncio.run(go(v))
-    assert all(not f["final"] for f in frames if f.get("prefix")) and frames[-1]["detail"] == 0
+    waiting = [f["waiting"] for f in frames if f.get("waiting")]  # the page's status line (viewer.js waitingWords)
+    assert waiting and all(not f["final"] for f in frames if f.get("waiting")) and frames[-1]["detail"] == 0
+    if prefix is None:  # the file served whole: nothing read, the wait is the whole tracer's set-up (trial24 row 5)
+        assert set(waiting) == {"set-up"}
     # the prefix, the coarse stage's approximation, and (a prefix of 2,048) the rest read once, for both modes
     assert reads == [(1.0, False), (None, True)] if prefix is None else \
         reads == [(2048 / 40 ** 3, False), (None, True), (None, False)]
@@ -428,7 +431,7 @@ def test_a_shaded_view_asked_for_while_the_rest_is_read_does_not_wait_for_it(clw
     finally:
         release.set()
     assert not waited, f"openings of the file that waited behind the rest's reading: {waited}"
-    assert frame is not None and frame["prefix"] and not frame["final"]
+    assert frame is not None and frame["waiting"] == "reading" and not frame["final"]
 
 
 def test_tabs_pace_their_drag_frames_apart(clw, monkeypatch):

@@ -229,7 +229,7 @@ def test_shaded_views_go_on_with_the_coarse_stage_after_the_full_stages_set_up_f
         "making the whole model for the X-ray", "making the whole model for the shaded"]
     assert (still_error, drag_error, xray_error) == (None, None, None)
     assert len(drag) == 1 and xray[-1]["seq"] == 4
-    assert [(f["reduction"], f["final"], f["prefix"]) for f in still] == [(4, False, False), (1, True, False)]
+    assert [(f["reduction"], f["final"], f["waiting"]) for f in still] == [(4, False, None), (1, True, None)]
     assert shaded.staged.failed and shaded.tracer is None
     camera = clwave.Camera(40.0, 20.0, 32, extent=still[-1]["extent"])
     expect = clwave.RayTracer.open(clw).render(camera, tolerance=2e-2)

@@ -200,18 +200,16 @@ def parse_size(args) -> tuple:
 def check_image_size(size, device, pixel_bytes, image="a {} image"):
     """Refuse an image of ``size`` (H, W) beyond the device's own limit on the one buffer its renderer holds for it,
     ``pixel_bytes`` a pixel (device/memory.py: splatting's framebuffer, ``FRAMEBUFFER_PIXEL_BYTES``; the ray tracer's
-    image, ``TRACED_PIXEL_BYTES``), naming the largest square that fits; ``image``: what the message calls it, "HxW"
-    in its braces.  What depends on the model is the renderer's to check: ``--coarse``'s extra framebuffers, and the
-    least ``--device-memory`` (the ray tracer's bricks with the image).  Returns the device's context, made here."""
-    from math import isqrt
-
+    image, ``TRACED_PIXEL_BYTES``), or beyond the host's memory (:func:`~clwave.device.memory.check_image`), naming
+    the largest square that fits; ``image``: what the message calls it, "HxW" in its braces.  What depends on the
+    model is the renderer's to check: ``--coarse``'s extra framebuffers, and the least ``--device-memory`` (the ray
+    tracer's bricks with the image).  Returns the device's context, made here."""
     from ..device.context import ComputeContext
-    from ..device.memory import buffer_limit, check_buffer
+    from ..device.memory import check_image
 
     (H, W), cc = size, ComputeContext.get(device)
-    most = isqrt(buffer_limit(cc) // pixel_bytes)
-    check_buffer(cc, H * W * pixel_bytes, image.format(f"{H}x{W}"),
-                 f"give a smaller --size (at most {most}x{most} on this device)")
+    check_image(cc, size, H * W * pixel_bytes, "give a smaller --size (at most {n}x{n} here)",
+                what=image.format("{}x{}"))
     return cc
 
 

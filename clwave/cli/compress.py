@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .options import add_command, build_model, check_outputs, file_size, finish, is_clw, kept_words
+from .options import add_command, build_model, check_outputs, file_size, finish, is_clw, kept_words, read_volume
 
 
 def run(args):
@@ -22,7 +23,8 @@ def run(args):
         except ValueError:
             pass  # check_quantise names it
     quantise = check_quantise(quantise)  # before any work
-    wv, reference = build_model(args, gather=False)
+    volume = None if is_clw(args) else read_volume(args)
+    wv, reference = build_model(args, gather=False, volume=volume)
     with published_together() as outputs:  # the error measured before the file is published (coordinates.md §4)
         start = time.perf_counter()
         wv.save(out, overwrite=args.force, quantise=quantise)
@@ -35,11 +37,24 @@ def run(args):
                  f"{classified}{_on_disk(args.input)}",
                  f"model                 {', '.join(dict.fromkeys(wv.wavelets))} wavelets, {wv.levels} "
                  f"level{'s' * (wv.levels != 1)}, {kept_words(wv.kept, wv.n_voxels)}",
-                 f"file                  {out}: {file_size(size)}, {raw / size:.1f}:1 against the volume as raw "
-                 f"float32 ({file_size(raw)}), written in {saved:.2f} s",
+                 f"file                  {out}: {file_size(size)}, {_ratios(size, raw, volume)}"
+                 f", written in {saved:.2f} s",
                  _error(args, wv, reference, None if quantise is None else outputs, out)]
         finish(outputs, [line for line in lines if line])
     return 0
+
+
+def _ratios(size, raw, volume) -> str:
+    """The file's ``size`` against the input's own (``volume``'s values in the dtype the file stores them in; None:
+    a .clw input), and against the volume the model approximates as float32 (``raw`` bytes) where that differs (an
+    integer input, or one classified)."""
+    against = f"{raw / size:.1f}:1 against the volume as float32 ({file_size(raw)})"
+    if volume is None:
+        return against
+    stored = volume.stored_dtype
+    own = math.prod(volume.shape) * volume.channels * stored.itemsize
+    mine = f"{own / size:.1f}:1 against the input's {stored} values ({file_size(own)})"
+    return mine if own == raw else f"{mine}; {against}"
 
 
 def _error(args, wv, reference, outputs, out) -> str | None:

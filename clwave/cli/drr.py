@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import ClwaveError, CommandWords, InputError
 from .checks import parse_size, picture_options
 from .options import (add_command, add_device_options, build_model, check_outputs, finish, kept_words, numbers,
-                      parse_device_memory, warn, world_unit)
+                      parse_device_memory, warn)
 
 
 def read_pose_table(path) -> list:
@@ -95,7 +95,7 @@ def run(args):
                          f"channels: give its attenuation as one channel")
     if centre:
         cameras = poses(**dict(geometry, isocentre=tuple(float(c) for c in wv.origin)))
-    unit = world_unit(args)
+    unit = wv.unit
     if below_zero(wv) and not args.signed:  # refused as render refuses a blank image (docs/coordinates.md §5)
         raise InputError(NOT_ATTENUATION.format(
             what=f"the model of {args.input} is", fix="read the CT with --hu-to-mu (a .clw: compress it again with "

@@ -7,15 +7,16 @@ import json
 import math
 
 from ..errors import InputError
-from .options import file_size, kept_words, parse_series
+from .options import READING, add_reading_options, file_size, flag, kept_words, numbers, parse_series
 
 
 def run(args):
     if args.file is not None:
         return describe(args)
-    if (args.series, args.level) != (None, None):
-        raise InputError("--series and --level choose what a FILE's header describes: give the FILE, or leave them "
-                         "out")
+    given = _reading(args)
+    if given:
+        raise InputError(f"{', '.join(given)} {'say' if len(given) > 1 else 'says'} how a FILE is read: give the FILE, "
+                         f"or leave {'them' if len(given) > 1 else 'it'} out")
     from ..device.context import list_devices, requested_device, select_device
     from ..device.programs import selftest
 
@@ -51,15 +52,19 @@ def describe(args):
     if args.file.lower().endswith(".clw"):
         from ..io.clw_info import describe_clw
 
-        if (args.series, args.level) != (None, None):
-            raise InputError(f"--series and --level choose within a DICOM folder or an OME-Zarr image; {args.file} "
-                             f"is a .clw file: leave them out")
+        given = _reading(args)
+        if given:
+            them = "them" if len(given) > 1 else "it"
+            raise InputError(f"{', '.join(given)} {'say' if len(given) > 1 else 'says'} how a volume file is read; "
+                             f"{args.file} is a .clw file, a model made already: leave {them} out")
         facts = describe_clw(args.file)
         lines = _clw_lines(facts)
     else:
         from ..io.loaders import describe as describe_volume
 
-        facts = describe_volume(args.file, series=parse_series(args.series), level=args.level)
+        shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
+        facts = _as_read(args, describe_volume(args.file, series=parse_series(args.series), level=args.level,
+                                               shape=shape, dtype=args.dtype, byte_order=args.byte_order))
         lines = _volume_lines(facts)
     if args.json:
         print(json.dumps(facts, indent=2))
@@ -68,12 +73,46 @@ def describe(args):
     return 0
 
 
+#: the keys ``clwave info --json`` adds to a volume file's facts (:data:`clwave.io.loaders.DESCRIBED`): its geometry as
+#: the commands read it (:func:`_as_read`)
+GEOMETRY = ("unit", "box", "reading")
+
+
+def _reading(args) -> list:
+    """The reading options given (``--spacing 10,5,5``'s ``--spacing``)."""
+    return [flag(n) for n in _given(args)]
+
+
+def _given(args) -> dict:
+    """The reading options given, by name, as given (``--nan 0`` too: 0 == False)."""
+    return {n: getattr(args, n) for n in READING if getattr(args, n) is not None and getattr(args, n) is not False}
+
+
+def _as_read(args, facts) -> dict:
+    """A volume file's facts with what the reading options make of them: ``spacing`` the one the commands will use
+    (``--spacing`` over the file's; ``spacing_in_file`` still the file's), ``unit`` the world unit (the file's length
+    unit, :func:`clwave.io.loaders.world_unit`; none once ``--spacing`` replaces its spacing), ``box`` the world size
+    (x, y, z) where the shape and spacing are known, and ``reading``: the options given, as given."""
+    from ..io.loaders import world_unit
+
+    if args.spacing is not None:
+        spacing = [float(d) for d in numbers(args.spacing, "--spacing", (1, 3))]
+        facts.update(spacing=spacing * 3 if len(spacing) == 1 else spacing)
+        if facts["origin"] is None:  # no file places it: load's origin
+            facts.update(origin=[0.0] * 3, obliquity=0.0)
+    box = None if facts["shape"] is None or facts["spacing"] is None else \
+        [n * d for n, d in zip(facts["shape"][2::-1], facts["spacing"][::-1])]
+    unit = world_unit(args.file) if args.spacing is None else None
+    return dict(facts, unit=unit, box=box, reading=_given(args))
+
+
 def _clw_lines(f) -> list:
     z, y, x = f["shape"]
     extent = _extent(f["shape"], f["spacing"])
+    unit = f" {f['unit']}" if f["unit"] else ""  # none recorded (a file of before session 19: unknown)
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, a wavelet model (.clw)"),
-             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_lengths(f['spacing'][::-1], extent)} (x, y, z), "
-                        f"origin {_lengths(f['origin'], extent)}"),
+             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_lengths(f['spacing'][::-1], extent)}{unit} "
+                        f"(x, y, z), origin {_lengths(f['origin'], extent)}"),
              ("model", f"{f['levels']} level{'s' * (f['levels'] != 1)}, {f['channels']} channel"
                        f"{'s' * (f['channels'] != 1)} in {len(f['groups'])} group{'s' * (len(f['groups']) != 1)}"
                        f"{', interpolating' if f['interpolate'] else ''}")]
@@ -108,25 +147,35 @@ def _oblique(degrees) -> str:
 
 def _volume_lines(f) -> list:
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
-    if f["stored_shape"] is not None:  # read whole: weighed as read, before the loader orders the axes
+    if f["stored_shape"] is not None:  # read whole: weighed as the file stores it, its axes in the file's order
         resampled = "" if not f["resampled"] else ", its sheared grid resampled onto a straight one wider by its " \
             "shifts" if f["nifti"] else ", a gantry tilt resampled onto a straight stack wider by its shifts"
         stored = f" (stored as {f['stored_dtype']})" if f["stored_dtype"] else ""
-        read = ", a time series, as stored" if f["time"] else f" as read{stored}{resampled}, before the loader " \
-            f"orders them{'' if f['spacing'] else ' (its axes and spacing come with the voxels)'}"
-        lines.append(("volume", f"{' x '.join(map(str, f['stored_shape']))} samples of {f['dtype']}{read}"))
-    else:
+        read = ", a time series" if f["time"] else f"{stored}{resampled}"
+        lines.append(("stored", f"{' x '.join(map(str, f['stored_shape']))} values of {f['dtype']}, in the file's "
+                                f"order of axes{read}"))
+    if f["shape"] is not None and not f["time"]:
         z, y, x = f["shape"][:3]
         lines.append(("volume", f"{x} x {y} x {z} voxels (x, y, z), {f['channels']} channel"
                                 f"{'s' * (f['channels'] != 1)} of {f['dtype']}"))
+    unit = f" {f['unit']}" if f["unit"] else ""
     if f["spacing"] is not None:
-        extent = _extent(f["shape"], f["spacing"])
-        unset = "" if f["spacing_in_file"] else " (none in the file)"
-        place = f"{_lengths(f['spacing'][::-1], extent)} (x, y, z){unset}, origin {_lengths(f['origin'], extent)}"
-        if f["stored_shape"] is not None:
-            place += " (µm for an OME-TIFF, an ImageJ stack's unit; as loaded)" if f["format"] == "tiff" else \
-                " (RAS+ mm, as loaded)"
-        lines.append(("spacing", place))
+        extent = _extent(f["shape"] or f["stored_shape"], f["spacing"])
+        given = " (--spacing)" if "spacing" in f["reading"] else "" if f["spacing_in_file"] else \
+            " (none in the file: give --spacing DZ,DY,DX)"
+        place = f"{_lengths(f['spacing'][::-1], extent)}{unit} (x, y, z){given}, origin {_lengths(f['origin'], extent)}"
+        lines.append(("spacing", place + (" (RAS+)" if f["format"] in ("nifti", "nrrd", "dicom") else "")))
+    elif not f["time"]:
+        lines.append(("spacing", "found with the voxels when the file is read (1 where it gives none): "
+                                 "--spacing DZ,DY,DX sets it"))
+    if f["box"] is not None:
+        words = unit or (" in --spacing's unit" if "spacing" in f["reading"] else
+                         " world units (no length unit in the file)")
+        lines.append(("box", f"{_lengths(f['box'], max(f['box']))} (x, y, z){words}"))
+    values = {n: v for n, v in f["reading"].items() if n in ("subtract", "hu_to_mu", "nan")}
+    if values:
+        lines.append(("values", f"{', '.join(flag(n) + ('' if v is True else f' {v:g}') for n, v in values.items())}"
+                                f": applied as the values are read (not read here)"))
     if f["time"]:
         t = f["time"]
         step = "" if t["step"] is None else f", {t['step']:g} {t['unit'] or '(no unit)'} apart"
@@ -188,6 +237,5 @@ def add_parser(sub):
     p.add_argument("--json", action="store_true", help="print JSON (with FILE: the same keys for every volume "
                                                        "format, null where a format does not give the fact; "
                                                        "docs/coordinates.md §4)")
-    p.add_argument("--series", help="FILE a DICOM folder with several series: UID or 0-based index")
-    p.add_argument("--level", type=int, help="FILE an OME-Zarr image: the multiscale level (default 0)")
+    add_reading_options(p)  # a volume FILE's geometry as the commands read it
     p.set_defaults(run=run)

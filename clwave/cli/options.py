@@ -44,6 +44,19 @@ def numbers(text, name, counts, kind=float, sep=",") -> tuple:
 
 def add_input_options(p):
     p.add_argument("input", help="volume file, DICOM folder, .clw file, or phantom:NAME[:N]")
+    add_reading_options(p)
+    c = p.add_argument_group("chunked work (a chunked input; docs/chunked.md)")
+    w = c.add_mutually_exclusive_group()
+    w.add_argument("--workers", type=int, help="a local Dask cluster of N worker processes (default: threads)")
+    w.add_argument("--scheduler", help="address tcp://HOST:PORT of a running Dask scheduler")
+
+
+#: the options of :func:`add_reading_options`, as ``args`` names them
+READING = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level", "chunks")
+
+
+def add_reading_options(p):
+    """How a volume file is read (:func:`read_volume`): the input commands' and ``clwave info FILE``'s."""
     g = p.add_argument_group("reading the input")
     g.add_argument("--shape", help=".raw only: Z,Y,X or Z,Y,X,C")
     g.add_argument("--dtype", help=".raw only: numpy dtype, e.g. uint16")
@@ -58,10 +71,6 @@ def add_input_options(p):
     g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
     g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
                                     "edge N (default: Zarr and HDF5 always, .npy/.raw/.nii/TIFF from 1 GiB)")
-    c = p.add_argument_group("chunked work (a chunked input; docs/chunked.md)")
-    w = c.add_mutually_exclusive_group()
-    w.add_argument("--workers", type=int, help="a local Dask cluster of N worker processes (default: threads)")
-    w.add_argument("--scheduler", help="address tcp://HOST:PORT of a running Dask scheduler")
 
 
 def add_model_options(p, classify=True):
@@ -100,16 +109,6 @@ def is_clw(args) -> bool:
     return args.input.lower().endswith(".clw")
 
 
-def world_unit(args):
-    """The input's world unit where its header gives it as a length (DICOM's mm, a NIfTI's or NRRD's own) and
-    --spacing does not replace it (:func:`clwave.io.loaders.world_unit`); None otherwise (a .clw records none)."""
-    if is_clw(args) or args.input.startswith("phantom:") or args.spacing is not None:
-        return None
-    from ..io.loaders import world_unit as file_unit
-
-    return file_unit(args.input)
-
-
 def read_volume(args):
     """The Volume named by ``args.input`` (a file, a folder or ``phantom:NAME[:N]``)."""
     from ..io.loaders import load
@@ -119,8 +118,8 @@ def read_volume(args):
     spec = args.input
     spacing = None if args.spacing is None else numbers(args.spacing, "--spacing", (1, 3))
     if spec.startswith("phantom:"):
-        given = [flag(n) for n in ("shape", "dtype", "byte_order", "series", "hu_to_mu", "nan", "level", "chunks")
-                 if getattr(args, n, None) is not None and getattr(args, n) is not False]
+        given = [flag(n) for n in READING if n not in ("spacing", "subtract")
+                 and getattr(args, n, None) is not None and getattr(args, n) is not False]
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {spec}: a phantom is not read from a file")
         parts = spec.split(":")
@@ -175,8 +174,7 @@ def parse_scheduler(args):
 
 
 #: options that make a model from a volume, and so cannot apply to a .clw input (a model already)
-VOLUME_ONLY = ("tf", "tf_window", "wavelet", "levels", "interpolate", "spacing", "shape", "dtype", "byte_order",
-               "series", "subtract", "hu_to_mu", "nan", "level", "chunks", "workers", "scheduler")
+VOLUME_ONLY = ("tf", "tf_window", "wavelet", "levels", "interpolate") + READING + ("workers", "scheduler")
 
 
 def flag(name: str) -> str:
@@ -205,7 +203,7 @@ def _needs_rgba(name, channels, fix) -> InputError:
 
 
 def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None, post=False,
-                hu_hint=True):
+                hu_hint=True, volume=None):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
     ``post`` (implied by ``rgba``): a scalar ``.clw`` input takes ``--tf``/``--tf-window``, the transfer function
@@ -217,7 +215,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     (thresholded, not gathered).  ``cluster_render``: a ``.clw`` input takes ``--workers``/``--scheduler``
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
     instead of the model read (``clwave view`` opens it by its prefix first).  ``hu_hint``: a volume (chunked too) that
-    looks like CT in Hounsfield units gets a warning (docs/coordinates.md §1).
+    looks like CT in Hounsfield units gets a warning (docs/coordinates.md §1).  ``volume``: the input read already
+    (:func:`read_volume`), for a caller that reports on it.
     """
     from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
@@ -256,7 +255,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
             wv = wv.threshold(**thresholding)
             warn_stored(wv, args.keep, args.input)  # as WaveletVolume.open(keep=) tells it
         return wv, None
-    vol = read_volume(args)
+    vol = read_volume(args) if volume is None else volume
     tf = preset_transfer_function(args)
     hinted = hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False))
     least = air_in_hounsfield(vol.data) if hinted else None

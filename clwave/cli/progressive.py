@@ -8,7 +8,7 @@ from pathlib import Path
 from ..errors import InputError
 from .checks import make_camera, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, finish,
-                      parse_device_memory, post_transfer_function, world_unit, write_gif)
+                      parse_device_memory, post_transfer_function, write_gif)
 
 
 def run(args):
@@ -59,7 +59,7 @@ def run(args):
     with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
         if as_folder:  # written beside it, renamed into place: never mixed with another run's frames
             out.parent.mkdir(parents=True, exist_ok=True)
-            folder, unit = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png"), world_unit(args)
+            folder, unit = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png"), wv.unit
             for f in frames:
                 f.save(folder / f"frame_{f.index:03d}.png", window=window, background=background,
                        bit_depth=look["bit_depth"], unit=unit)

@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import InputError
 from .checks import make_camera, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
-                      parse_device_memory, parse_scheduler, post_transfer_function, world_unit, write_gif)
+                      parse_device_memory, parse_scheduler, post_transfer_function, write_gif)
 
 
 def run(args):
@@ -34,7 +34,7 @@ def run(args):
     lights = parse_lights(args)
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
     wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
-    unit = world_unit(args)
+    unit = wv.unit
     if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
         from ..raytrace.regions import check_cluster_model
 
@@ -99,6 +99,7 @@ def run(args):
                 RenderResult(np.stack([r.image for r in results]), result.meta)
             images.save(raw, overwrite=args.force)
         if stats is not None:
+            result.meta["unit"] = unit  # of "pixel" (world units a pixel); None: the input gives none
             result.save(stats, overwrite=args.force)
         finish(outputs, lines + [_report(args, camera, result.meta, out)])
     return 0

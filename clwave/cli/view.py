@@ -74,14 +74,14 @@ def check_size(size, device):
     every model is held to their limit."""
     from math import isqrt
 
+    from ..device.context import ComputeContext
     from ..device.memory import TRACED_PIXEL_BYTES, available_bytes, check_fits
 
-    cc = check_image_size(size, device, TRACED_PIXEL_BYTES, "the viewer's {} shaded image")
-    if cc.info.kind != "CPU":  # a device of its own holds most of it (not measured)
-        return
-    (H, W), fits = size, isqrt(available_bytes() // VIEW_PIXEL_BYTES)
-    check_fits(H * W * VIEW_PIXEL_BYTES, f"a viewer of {H}x{W} images",
-               f"give a smaller --size (at most {fits}x{fits} here now)")
+    if ComputeContext.get(device).info.kind == "CPU":  # first: more a pixel than the one buffer's check holds
+        (H, W), fits = size, isqrt(available_bytes() // VIEW_PIXEL_BYTES)  # (a device of its own: not measured)
+        check_fits(H * W * VIEW_PIXEL_BYTES, f"a viewer of {H}x{W} images",
+                   f"give a smaller --size (at most {fits}x{fits} here now)")
+    check_image_size(size, device, TRACED_PIXEL_BYTES, "the viewer's {} shaded image")
 
 
 def add_parser(sub):

@@ -8,7 +8,7 @@ larger cap, or where the device's own limit is met whatever the cap, the caller'
 for messages.
 
 How much host memory there is to spend (:func:`available_bytes`): work that cannot fit is refused before it
-starts (:func:`check_fits`).
+starts (:func:`check_fits`).  An image, both (:func:`check_image`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from __future__ import annotations
 import ctypes
 import os
 import re
-from math import ceil
+from math import ceil, isqrt
 from dataclasses import dataclass
 
 from ..errors import ClwaveError, DeviceMemoryError, InputError
@@ -67,10 +67,14 @@ class DeviceBudget:
 
 def device_budget(cc, device_memory=None) -> DeviceBudget:
     """The budget on ``cc`` (a :class:`~clwave.device.context.ComputeContext`): its global memory and
-    allocation limit, each no more than ``device_memory`` (bytes or a size string, :func:`parse_size`)."""
+    allocation limit, each no more than ``device_memory`` (bytes or a size string, :func:`parse_size`), nor, on a CPU
+    device, whose memory is the host's, than the host has available now (:func:`available_bytes`: PoCL's global
+    memory is the machine's, whatever other processes hold)."""
     info = cc.info
     cap = parse_cap(device_memory)
     total = info.global_mem if cap is None else min(cap, info.global_mem)
+    if info.kind == "CPU":
+        total = min(total, available_bytes())
     return DeviceBudget(total, min(info.max_alloc, total), cap)
 
 
@@ -79,6 +83,9 @@ def device_budget(cc, device_memory=None) -> DeviceBudget:
 #: as it begins an image, and the viewer both before it reads its input (cli/view.py)
 FRAMEBUFFER_PIXEL_BYTES = 16
 TRACED_PIXEL_BYTES = 32
+#: bytes per pixel the host holds of a finished image: its float32 RGBA read back (RenderResult.image) and an 8-bit
+#: RGBA picture made from it
+HOST_PIXEL_BYTES = 20
 
 
 def buffer_limit(cc, share: float = 1.0) -> int:
@@ -104,6 +111,23 @@ def check_buffer(cc, nbytes: int, what: str, fix: str, budget: DeviceBudget | No
                                                  f"give --device-memory {least.replace(' ', '')} or more, or {fix}")
     raise DeviceMemoryError(f"{need}, but {cc.info.name} allows {format_size(own)} whatever the device memory given; "
                             f"{fix}")
+
+
+def check_image(cc, size, device_bytes: int, fix: str, budget: DeviceBudget | None = None, what: str = "a {}x{} image"):
+    """Refuse an image of ``size`` (H, W) before its buffers are made, in one line naming it (``what``, "HxW" in its
+    braces), the bytes it needs and ``fix`` (its ``{n}``: the largest square image that would fit): its renderer's
+    device buffer of ``device_bytes`` (:func:`check_buffer`: a :class:`DeviceMemoryError`), then its memory on the
+    host (:func:`check_fits`: a :class:`HostMemoryError`): the image read back, :data:`HOST_PIXEL_BYTES` a pixel,
+    and where ``cc``'s device is the CPU, whose memory is the host's, the device buffer too.  ``cc`` None: the host's
+    share alone (a camera's size, before any device)."""
+    pixels = size[0] * size[1]
+    image = what.format(*size)
+    on_host = HOST_PIXEL_BYTES * pixels
+    if cc is not None:
+        per_pixel = device_bytes / pixels
+        check_buffer(cc, device_bytes, image, fix.format(n=isqrt(int(buffer_limit(cc) / per_pixel))), budget)
+        on_host += device_bytes if cc.info.kind == "CPU" else 0
+    check_fits(on_host, image, fix.format(n=isqrt(int(available_bytes() * pixels / on_host))))
 
 
 def format_size(nbytes: int) -> str:

@@ -10,6 +10,7 @@ import zlib
 import numpy as np
 
 from ..errors import FileFormatError
+from .images import UNIT_METRES
 from ..model.bspline import WAVELET_ORDERS, max_levels
 from ..model.volume import frame_problem
 from ..model.transfer import TransferFunction
@@ -98,6 +99,9 @@ def checked_header(header) -> tuple:
     obliquity = header.get("obliquity", 0.0)  # absent in older files: read as axis-aligned
     if not (_numbers([obliquity], 1) and 0 <= obliquity <= 90):
         raise ValueError(f"obliquity {obliquity!r} is not one number of degrees from 0 to 90")
+    unit = header.get("unit")  # the world unit; absent in older files (and None): unknown
+    if unit is not None and unit not in UNIT_METRES:
+        raise ValueError(f"unit {unit!r} is not one of {', '.join(UNIT_METRES)}")
     levels, channels = header.get("levels"), header.get("channels")
     if not (_whole(levels) and 0 <= levels <= max_levels(shape)):
         raise ValueError(f"levels {levels!r} is not possible for shape {shape}")

@@ -17,10 +17,12 @@ _WAVELETS = {order: name for name, order in WAVELET_ORDERS.items()}
 def describe_clw(path) -> dict:
     """The header of the ``.clw`` file ``path`` (``format`` "clw", shape, spacing, origin, levels, channels,
     interpolation, focus, content box, transfer function, the value ``subtracted`` from the input's values and the
-    ``obliquity`` of its axes to its scanner's: 0 where the file records none) with, per channel group, its wavelet,
+    ``obliquity`` of its axes to its scanner's: 0 where the file records none, its world ``unit``: None where it
+    records none) with, per channel group, its wavelet,
     channels, the coefficients it keeps and their share of the voxels, and its quantisation step (None: float32
-    values); and the file's size.  ``file``, ``format``, ``bytes``, ``shape``, ``channels``, ``spacing``, ``origin``
-    and ``obliquity`` are keys of a volume file's description too (:data:`~clwave.io.loaders.DESCRIBED`).  The header
+    values); and the file's size.  ``file``, ``format``, ``bytes``, ``shape``, ``channels``, ``spacing``, ``origin``,
+    ``obliquity`` and ``unit`` are keys of a volume file's description too (:data:`~clwave.io.loaders.DESCRIBED`,
+    ``clwave info``'s ``unit``).  The header
     is checked as a read checks it (:func:`~clwave.io.clw_header.checked_header`); a member that does not match it is
     refused (:class:`~clwave.errors.FileFormatError`, from :func:`~clwave.io.clw.open_clw`)."""
     path = Path(path)
@@ -39,4 +41,6 @@ def describe_clw(path) -> dict:
                                                  "transfer_function", "value_range")}
     return dict(file=str(path), format="clw", bytes=path.stat().st_size, shape=list(shape), levels=levels,
                 channels=channels, **facts, subtracted=header.get("offset", 0.0),
-                obliquity=header.get("obliquity", 0.0), groups=described)
+                obliquity=header.get("obliquity", 0.0),
+                unit=header.get("unit"),
+                groups=described)

@@ -15,6 +15,7 @@ from itertools import product
 
 import numpy as np
 
+from ..device.memory import check_image
 from ..errors import InputError, finite_number, flag, reals, whole_number
 from .geometry import view_frame
 
@@ -259,7 +260,9 @@ def _size(size) -> tuple:
         hw *= 2
     if len(hw) != 2 or not all(whole_number(n) and n >= 1 for n in hw):
         raise InputError(f"image size {size!r} must be a positive whole number or (H, W)")
-    return int(hw[0]), int(hw[1])
+    hw = int(hw[0]), int(hw[1])
+    check_image(None, hw, 0, "give a smaller size= (at most {n}x{n} here)")  # the host's share: refused before a device
+    return hw
 
 
 def _vector(value, name) -> np.ndarray:

@@ -148,6 +148,7 @@ class ChunkedWaveletVolume:
     origin = property(lambda self: self.volume.origin)
     subtracted = property(lambda self: self.volume.subtracted)
     obliquity = property(lambda self: self.volume.obliquity)
+    unit = property(lambda self: self.volume.unit)
     channels = property(lambda self: self.volume.channels)
     n_voxels = property(lambda self: int(np.prod(self.shape)))
     frame = property(lambda self: (self.shape, self.spacing, self.origin))
@@ -280,7 +281,7 @@ class ChunkedWaveletVolume:
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
                              content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity,
-                             value_range=self.value_range)
+                             value_range=self.value_range, unit=self.unit)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;

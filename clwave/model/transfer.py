@@ -260,7 +260,8 @@ class TransferFunction:
             rgba = classified(vol.data, paint, True)
             if not rgba[..., 3].any():
                 raise tf._nothing_visible(vol, window, scale)
-        return Volume(rgba, spacing=vol.spacing, origin=vol.origin, obliquity=vol.obliquity, labels=vol.labels)
+        return Volume(rgba, spacing=vol.spacing, origin=vol.origin, obliquity=vol.obliquity, labels=vol.labels,
+                      unit=vol.unit)
 
     def _nothing_visible(self, vol, window, scale) -> NothingVisibleError:
         """The refusal of this function (in ``vol``'s data units: :meth:`_on`) without opacity anywhere, naming its span

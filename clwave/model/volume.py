@@ -49,6 +49,13 @@ class Volume:
         classification (:meth:`TransferFunction.classify` keeps it); None (default): told from ``data`` as given
         (:func:`~clwave.model.labels.looks_like_labels`: few non-negative integers forming regions).  Its model of a
         wavelet of order above 1 warns (docs/model.md §5).
+    unit : str, optional
+        The world unit, the length of ``spacing``'s 1 where it is known: "m", "cm", "mm" or "um"
+        (:data:`clwave.io.images.UNIT_METRES`; :func:`clwave.load`: the file's); None (default): unknown.  Kept by
+        the model and its ``.clw`` file, and written into a picture's resolution (pHYs, TIFF tags).
+    stored_dtype : numpy dtype, optional
+        The type of the input's values as stored (:func:`clwave.load`: the file's, before float32); None (default):
+        ``data``'s own.  ``clwave compress`` weighs its file against the input's size in it.
 
     Examples
     --------
@@ -57,7 +64,8 @@ class Volume:
     ((4, 5, 6), 1, (2.0, 1.0, 1.0))
     """
 
-    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), subtracted=0.0, obliquity=0.0, labels=None):
+    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), subtracted=0.0, obliquity=0.0, labels=None,
+                 stored_dtype=None, unit=None):
         lazy = is_dask(data)
         if np.ma.is_masked(data):  # numpy.asarray would take the masked voxels' values as they are
             raise InputError(f"volume data is a masked array with {np.ma.count_masked(data)} masked voxel(s), whose "
@@ -89,6 +97,7 @@ class Volume:
                 "every axis needs at least 2 voxels")
         if arr.ndim == 4 and arr.shape[3] == 1:
             arr = arr[..., 0]
+        self.stored_dtype = np.dtype(arr.dtype if stored_dtype is None else stored_dtype)
         # told from the values as given (integers), before they are float32; a chunked volume's are not read here
         self.labels = (not lazy and looks_like_labels(arr)) if labels is None else flag(labels, "labels")
         if lazy:  # each chunk is converted and checked when it is read
@@ -111,6 +120,9 @@ class Volume:
         self.obliquity = finite_number(obliquity, "obliquity")
         if not 0 <= self.obliquity <= 90:
             raise InputError(f"obliquity={obliquity!r} must be degrees from 0 to 90")
+        from ..io.images import check_unit
+
+        self.unit = check_unit(unit)
 
     @property
     def shape(self) -> tuple:

@@ -24,7 +24,7 @@ from ..model.camera import Camera, View
 from ..model.conebeam import ConeBeam, check_camera, resolve_view, view_record
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number, flag
-from ..device.memory import TRACED_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
+from ..device.memory import TRACED_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap
 from .bounds import warn_below_tolerance, warn_packed
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .wavelet_field import WaveletField
@@ -260,7 +260,8 @@ class RayTracer:
             raise InputError(f"{cc.info.name} has no float64 support; use precision='single'")
         view = resolve_view(camera, wv)
         H, W = view.size
-        check_buffer(cc, H * W * TRACED_PIXEL_BYTES, f"a {H}x{W} image", "render a smaller image", self.budget)
+        check_image(cc, (H, W), H * W * TRACED_PIXEL_BYTES, "render a smaller image (at most {n}x{n} here)",
+                    self.budget)
         light_dirs = light_directions(lights, view.n)
         phong, shading_note = self._phong(shading, absorption, lights)
 

@@ -20,7 +20,7 @@ from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
 from ..device.context import ComputeContext
-from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_buffer, device_budget, format_size, parse_cap
+from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap
 from ..errors import DeviceMemoryError, InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera, resolve_view, view_record
@@ -169,8 +169,9 @@ class SplatRenderer:
                    for g, gr in zip(self.wv.groups, self.groups)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {(1, 1)})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * FRAMEBUFFER_PIXEL_BYTES
-        # the device's own limit here; a cap is held by _plan, which names the least that works
-        check_buffer(self.cc, fb_bytes, "the framebuffer of a {}x{} image".format(*view.size), "render a smaller image")
+        # the device's own limit and the host's memory here; a cap is held by _plan, which names the least that works
+        check_image(self.cc, view.size, fb_bytes, "render a smaller image (at most {n}x{n} here)",
+                    what="the framebuffer of a {}x{} image")
         per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factors}) for layer in layers]
                      for fg in factors]
         if view.perspective:

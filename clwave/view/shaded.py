@@ -60,7 +60,7 @@ class ShadedSource(Source):
         self.tolerance, self.device, self.tracer = check_tolerance(tolerance), device, None
         self.device_memory = device_memory
         self.path, self.whole, self.staged, self.upgraded, self._watch = path, whole, None, upgraded, None
-        self.coarse = coarse
+        self.coarse, self.read = coarse, whole is None  # read: the whole model is in (the page's status line)
         self.scalar = wv.channels == 1
         self.steps = [(s, d) for s, d in DRAG_STEPS if d <= wv.levels]
         self.capabilities = dict(tf=self.scalar, background=True, shading=True)
@@ -94,7 +94,7 @@ class ShadedSource(Source):
         warm = dict(transfer_function=self.start_tf) if self.scalar else {}
         if self.path is not None and self.staged is None:
             staged = StagedTracer(RayTracer, self.path, device=self.device, device_memory=self.device_memory, lod=True,
-                                  whole=self.whole or (lambda: self.wv),  # the model held, not read again
+                                  whole=self._whole_model,
                                   coarse=None if self.coarse is None else self.coarse())
             # the coarse stage's kernels; the whole file's set-up starts with the page's first frame (staged.render),
             # so that its reading does not delay that frame
@@ -250,16 +250,28 @@ class ShadedSource(Source):
     def _coarse(self, state, options, classified, start):
         """A still view while a file's whole tracer is set up: its coarse stage on a quarter and on the whole
         image, neither final (the view is traced again when the whole file is in); once that set-up has failed, the
-        coarse stage is the model served from then on (as the X-ray views' prefix): the whole image final."""
+        coarse stage is the model served from then on (as the X-ray views' prefix): the whole image final.  Their
+        ``waiting`` figure says what the page waits for: "reading" the rest of the file, "set-up" of the whole
+        file's tracer, None (served)."""
         for reduction in (4, 1):
             stage = time.perf_counter()
             result = self.staged.render(self.camera(state, 1 / reduction), tolerance=self.tolerance, **options)
             self._watch_full_stage()
             served = self.staged.failed  # read after the render, which then drew the coarse stage
+            waiting = None if served else "set-up" if self.read else "reading"
             yield self._shaded(state, result, served and reduction == 1,
                                dict(tolerance=self.tolerance, detail=self.wv.levels, reduction=reduction, error=None,
-                                    prefix=not served, **classified),
+                                    waiting=waiting, **classified),
                                time.perf_counter() - stage, start)
+
+    def _whole_model(self):
+        """The whole model for the full stage's set-up (on its thread): the one held, not read again, or the rest of
+        the file read for the X-ray views, waited for."""
+        if self.whole is None:
+            return self.wv
+        wv = self.whole()
+        self.read = True
+        return wv
 
     def _pace(self, pace: ShadedPace, seconds):
         """The tab's next drag frame a step cheaper when this one took longer than :data:`DRAG_SECONDS`, a step

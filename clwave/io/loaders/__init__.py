@@ -146,6 +146,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = np.asarray(data)
     # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
     labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
+    stored = data.dtype
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
         if hu_to_mu and data.ndim != 3:
             channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
@@ -157,7 +158,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
                   origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity,
-                  labels=labels)
+                  labels=labels, stored_dtype=stored,
+                  unit=world_unit(path) if spacing is None else None)  # --spacing: in the user's unit
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
@@ -188,12 +190,13 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 #: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
 def world_unit(path) -> str | None:
     """The world unit of a volume file where it is a length its header gives (:data:`clwave.io.images.UNIT_METRES`):
-    DICOM's millimetres, a NIfTI's or NRRD's own; None for the others (voxel units, or units clwave does not read)."""
+    DICOM's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres or an ImageJ stack's unit; None for the
+    others (voxel units, or units clwave does not read)."""
     path, _ = _split_inner(Path(path))
     kind = _kind(path)
-    if kind in ("nifti", "nrrd"):
+    if kind in ("nifti", "nrrd", "tiff"):
         with reading(path):
-            return (nifti if kind == "nifti" else nrrd).world_unit(path)
+            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff)[kind].world_unit(path)
     return "mm" if kind in ("dicom", "dicom-frames") else None
 
 
@@ -201,7 +204,7 @@ DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_sh
              "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti")
 
 
-def describe(path, *, series=None, level=None) -> dict:
+def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_order=None) -> dict:
     """What :func:`load` reads of a volume file (or folder) before its voxels (``clwave info FILE``), with the keys
     :data:`DESCRIBED` whatever the format (None: a fact the header does not give, or not before the voxels):
 
@@ -216,13 +219,16 @@ def describe(path, *, series=None, level=None) -> dict:
     where the header gives none, or no positive finite step) and ``refused`` (the one line ``load`` refuses it
     with); a DICOM series its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
     (stored values, [] where none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no
-    header: refused (:class:`FileFormatError`)."""
+    header: described by its ``shape`` and ``dtype`` (and ``byte_order``) as :func:`load` takes them, refused
+    (:class:`FileFormatError`) without them."""
     path, inner = _split_inner(Path(path))
     kind = _kind(path)
-    if kind == "raw":
+    if kind == "raw" and (shape is None or dtype is None):
         raise FileFormatError(f"{path} is a .raw file: it has no header (its shape and type are given to read it, "
                               f"shape= and dtype=)", cli=f"{path} is a .raw file: it has no header (its shape and type "
                                                          f"are given to read it, --shape and --dtype)")
+    if kind != "raw":
+        _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order)
     if kind != "dicom":
         _reject_unused(kind, series=series)
     if kind != "zarr":
@@ -236,7 +242,7 @@ def describe(path, *, series=None, level=None) -> dict:
     with reading(path):
         try:
             # a lazy read never weighs (nothing is read until computed) unless it must read whole (a sheared NIfTI)
-            data, spacing, origin, obliquity = _read(kind, path, inner, None, None, None, series, level,
+            data, spacing, origin, obliquity = _read(kind, path, inner, shape, dtype, byte_order, series, level,
                                                      "auto" if lazy else False, False, _declared, False)
         except (Declared, TimeSeries) as declared:
             facts.update(_header_facts(kind, path))  # the header as the read has checked it
@@ -253,6 +259,9 @@ def describe(path, *, series=None, level=None) -> dict:
                 spacing, origin, obliquity = declared.placed
                 facts.update(spacing=[float(s) for s in spacing], origin=[float(o) for o in origin],
                              obliquity=obliquity, spacing_in_file=True)
+            elif kind in _SLICE_FOLDERS:  # stacked as stored, and no file places them: load's unit spacing
+                facts.update(shape=list(declared.shape), spacing=[1.0] * 3, origin=[0.0] * 3, obliquity=0.0,
+                             spacing_in_file=False)
             return facts
         facts.update(_header_facts(kind, path))
     volume = Volume(data, spacing=spacing or 1.0, origin=origin if origin is not None else (0.0, 0.0, 0.0))

@@ -586,6 +586,10 @@
 
   // ---------------------------------------------------------------- figures and saving
   const fmt = (x, d = 3) => (typeof x === "number" ? x.toPrecision(d) : String(x));
+  // a frame short of final: what it waits for (an X-ray's prefix, a shaded coarse frame's "reading" or "set-up")
+  const waitingWords = (f) => f.prefix ? "refined from the file's most important part; the rest is being read…"
+    : f.waiting === "reading" ? `coarse (detail ${f.detail}) while the rest of the file is read…`
+    : f.waiting === "set-up" ? `coarse (detail ${f.detail}) while the ray tracer is set up…` : "refining…";
   function showFigures(f) {
     const rows = [["view", `az ${f.azimuth.toFixed(1)}°, el ${f.elevation.toFixed(1)}°`],
                   ["image", `${f.width} × ${f.height}${f.final ? ", final" : ""}`]];
@@ -611,8 +615,7 @@
     $("save").disabled = !(f.final && f.mime === "image/png");
     if (closed) return;  // a frame decoded after the socket closed: the status line still says so
     status.classList.remove("error");
-    status.textContent = f.note ? f.note : f.final ? "refined" : state.moving ? "moving" : f.prefix ? "refined from the file's most " +
-      "important part; the rest is being read…" : "refining…";
+    status.textContent = f.note ? f.note : f.final ? "refined" : state.moving ? "moving" : waitingWords(f);
   }
   $("save").addEventListener("click", () => {
     if (!current || !current.fig.final) return;
