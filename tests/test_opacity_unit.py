@@ -157,3 +157,12 @@ def test_command_line_opacity_unit(tmp_path, capsys):
     assert "--opacity-unit -1 must be a length > 0" in err and len(err.strip().splitlines()) == 1
     assert main(["compress", "phantom:hydrogen:16", "--opacity-unit", "2", "-o", str(tmp_path / "c.clw")]) == 2
     assert "give --tf too" in capsys.readouterr().err
+
+
+def test_a_files_opacity_unit_stays_under_another_window(tmp_path):
+    from clwave.model.tf_file import named_transfer_function
+
+    path = tmp_path / "mine.json"
+    path.write_text(json.dumps(SLAB.under(opacity_unit=0.5).to_dict()))
+    assert named_transfer_function(str(path), window=(0.0, 2.0)).opacity_unit == 0.5
+    assert named_transfer_function("grey", window=(0.0, 2.0)).opacity_unit is None
