@@ -126,7 +126,7 @@ def test_segment_integral_against_fine_quadrature(precision, shading):
     fine = np.linspace(-1, 1, 201)
     for trial in range(6):
         tf = random_tf(rng, -1.0, 1.0, steps=trial % 2 == 0)
-        table = tf_table(tf, None)
+        table = tf_table(tf, None, (1.0, 1.0, 1.0))
         polys = [Polynomial(rng.normal(0, 0.6, 4 if i % 2 else 10) * 0.5 ** np.arange(4 if i % 2 else 10))
                  for i in range(10)]
         # and three gentle ones, nearly linear around a random value, rising or falling: mostly inside one interval
@@ -174,10 +174,11 @@ def test_segment_integral_against_fine_quadrature(precision, shading):
 
 def test_table_against_the_transfer_function():
     """The kernel's table evaluates to TransferFunction.__call__ (an independent np.interp-style evaluation) at
-    random values, windowed."""
+    random values, windowed, its opacity per voxel divided by the model's smallest spacing (extinction per world
+    unit, docs/model.md §5)."""
     rng = np.random.default_rng(3)
     tf = clwave.TransferFunction.preset("ct-bone", window=(-500.0, 1500.0))
-    table = tf_table(tf, tf.window)
+    table = tf_table(tf, tf.window, (0.5, 0.25, 2.0))
     scale, shift, K = table[0, :3]
     K = int(K)
     s = rng.uniform(-800, 1800, 500)
@@ -187,7 +188,7 @@ def test_table_against_the_transfer_function():
     alpha = line[:, 1] + line[:, 2] * (u - line[:, 0])
     colour = rgb[:, :3] + slope[:, :3] * (u - line[:, 0])[:, None]
     want_rgb, want_alpha = tf(s)
-    np.testing.assert_allclose(alpha, want_alpha, atol=1e-12)
+    np.testing.assert_allclose(alpha, want_alpha / 0.25, atol=1e-12)
     np.testing.assert_allclose(colour, want_rgb, atol=1e-12)
 
 
@@ -617,7 +618,9 @@ def test_command_line(tmp_path, capsys):
                          "-o", post)
     assert code == 0 and "classify while ray tracing" in out
     assert WaveletVolume.open(post).channels == 1
-    assert WaveletVolume.open(post).transfer_function == clwave.TransferFunction.preset("hydrogen").to_dict()
+    # as resolved records it: the opacity unit one voxel, the phantom's spacing 1
+    assert WaveletVolume.open(post).transfer_function == clwave.TransferFunction.preset("hydrogen",
+                                                                                       opacity_unit=1.0).to_dict()
     images = {}
     for name, argv in (("given", [scalar, "--tf", "hydrogen"]), ("default", [post]),
                        ("window", [scalar, "--tf", "hydrogen", "--tf-window", "0,0.5"]),

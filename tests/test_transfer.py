@@ -69,12 +69,13 @@ def test_classify_gives_q_equal_rgb_times_alpha(rng):
     assert out.shape == vol.shape and out.channels == 4 and out.data.dtype == np.float32
     assert out.spacing == vol.spacing and out.origin == vol.origin
     rgb, alpha = tf(vol.data)
+    alpha = alpha / 0.5  # the opacity per voxel, the smallest spacing 0.5: per world unit (docs/model.md §5)
     np.testing.assert_array_equal(out.data[..., 3], alpha.astype(np.float32))
     np.testing.assert_array_equal(out.data[..., :3], (rgb * alpha[..., None]).astype(np.float32))
     # and against a plain np.interp reference
     for c in range(3):
         ref = np.interp(vol.data, tf.points[:, 0], tf.points[:, 1 + c]) * \
-            np.interp(vol.data, tf.points[:, 0], tf.points[:, 4])
+            np.interp(vol.data, tf.points[:, 0], tf.points[:, 4]) / 0.5
         np.testing.assert_allclose(out.data[..., c], ref, rtol=1e-6, atol=1e-9)
 
 

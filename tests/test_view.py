@@ -832,7 +832,7 @@ def test_cli_view_of_a_volume_classified_post_starts_from_its_transfer_function(
     def record(model, size, **options):
         raise Served(model, options["transfer_function"])
     monkeypatch.setattr(server, "ViewServer", record)
-    tf = clwave.TransferFunction.preset("hydrogen", window=(0.1, 0.8))
+    tf = clwave.TransferFunction.preset("hydrogen", window=(0.1, 0.8), opacity_unit=1.0)  # as resolved records it
     for post, channels, given in (["--classify", "post"], 1, tf), ([], 4, None):
         with pytest.raises(Served) as served:
             main(["--debug", "view", "phantom:hydrogen:16", "--tf", "hydrogen", "--tf-window", "0.1,0.8", *post])

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.result import check_background
-from ..model.transfer import check_window
+from ..model.transfer import check_opacity_unit, check_window
 from .options import (GIF_FRAME_SECONDS, flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler,
                       parse_tf_window, parse_thresholding, preset_transfer_function)
 
@@ -50,6 +50,7 @@ def check_options(args):
     if hasattr(args, "tf"):
         if args.tf_window is not None:
             check_window(parse_tf_window(args.tf_window), "--tf-window")
+        check_opacity_unit(args.opacity_unit, "--opacity-unit")
         if args.tf or not is_clw(args):  # a .clw's own transfer function takes --tf-window alone
             preset_transfer_function(args)
         if args.classify == "post" and not args.tf and not is_clw(args):

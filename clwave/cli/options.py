@@ -98,6 +98,9 @@ def add_model_options(p, classify=True):
     g.add_argument("--tf-window", help="transfer-function window: auto (percentiles of the values) or LO,HI in "
                    "the input's units (HU for CT, attenuation per mm with --hu-to-mu; with or without --subtract); "
                    "a colour volume's in its luminance, 0 .. 1 whatever its sample type")
+    g.add_argument("--opacity-unit", type=float, metavar="LENGTH",
+                   help="the length (world units, the spacing's) that --tf's opacities are per; default one voxel "
+                        "(the smallest spacing), so a volume looks the same in um or mm (docs/model.md §5)")
     g.add_argument("--classify", choices=("pre", "post"), default="pre",
                    help="with --tf: pre (default) classifies the volume before the transform; post keeps the "
                         "scalar and the transfer function for ray tracing to classify while rendering (a .clw "
@@ -173,8 +176,10 @@ def parse_scheduler(args):
     return check_scheduler(args.workers if args.workers is not None else args.scheduler)
 
 
+#: the options of the transfer function, which a scalar .clw takes to classify while rendering
+TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
 #: options that make a model from a volume, and so cannot apply to a .clw input (a model already)
-VOLUME_ONLY = ("tf", "tf_window", "wavelet", "levels", "interpolate") + READING + ("workers", "scheduler")
+VOLUME_ONLY = (*TF_OPTIONS, "wavelet", "levels", "interpolate") + READING + ("workers", "scheduler")
 
 
 def flag(name: str) -> str:
@@ -228,14 +233,14 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     if is_clw(args):
         given = [flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
                  and not (cluster_render and name in ("workers", "scheduler"))
-                 and not ((rgba or post) and name in ("tf", "tf_window"))]  # a scalar .clw: classified while rendering
+                 and not ((rgba or post) and name in TF_OPTIONS)]  # a scalar .clw: classified while rendering
         if given:
             them = 'them' if len(given) > 1 else 'it'
-            if set(given) <= {"--tf", "--tf-window"} and getattr(args, "xray", False):
+            if set(given) <= {flag(name) for name in TF_OPTIONS} and getattr(args, "xray", False):
                 raise InputError(f"{', '.join(given)} {'classify' if len(given) > 1 else 'classifies'} a scalar .clw "
                                  f"for shaded ray tracing; --xray draws the line integrals of the model as it is: "
                                  f"leave {them} or --xray out")
-            if set(given) <= {"--tf", "--tf-window"} and hasattr(args, "xray") and args.method == "splat":
+            if set(given) <= {flag(name) for name in TF_OPTIONS} and hasattr(args, "xray") and args.method == "splat":
                 # render and progressive: a scalar .clw takes them while ray tracing
                 verb = 'classify' if len(given) > 1 else 'classifies'
                 raise InputError(f"{', '.join(given)} {verb} a scalar .clw while ray tracing: add --method raytrace "
@@ -324,14 +329,22 @@ def _classified(args, tf, vol, check=False):
 
 
 def preset_transfer_function(args):
-    """The transfer function of ``--tf PRESET|FILE [--tf-window auto|LO,HI]``, or None without ``--tf``."""
+    """The transfer function of ``--tf PRESET|FILE [--tf-window auto|LO,HI] [--opacity-unit LENGTH]``, or None
+    without ``--tf``."""
     from ..model.tf_file import named_transfer_function
 
     if not getattr(args, "tf", None):  # drr has no --tf
-        if getattr(args, "tf_window", None) is not None:
-            raise InputError("--tf-window sets the window of a --tf preset: give --tf too")
+        for name, what in (("tf_window", "window"), ("opacity_unit", "opacity unit")):
+            if getattr(args, name, None) is not None:
+                raise InputError(f"{flag(name)} sets the {what} of a --tf preset: give --tf too")
         return None
-    return named_transfer_function(args.tf, None if args.tf_window is None else parse_tf_window(args.tf_window))
+    tf = named_transfer_function(args.tf, None if args.tf_window is None else parse_tf_window(args.tf_window))
+    return _with_unit(args, tf)
+
+
+def _with_unit(args, tf):
+    """``tf`` with ``--opacity-unit``'s length where given."""
+    return tf if args.opacity_unit is None else tf.under(opacity_unit=args.opacity_unit)
 
 
 def post_transfer_function(args, wv):
@@ -342,10 +355,10 @@ def post_transfer_function(args, wv):
 
     clw = is_clw(args)
     if wv.channels != 1:
-        if clw and (args.tf or args.tf_window) and wv.channels == 4:
+        if clw and (args.tf or args.tf_window or args.opacity_unit) and wv.channels == 4:
             raise InputError(f"--tf and --tf-window classify a scalar model; {args.input} has 4 channels (classified "
                              "already): leave them out")
-        if clw and (args.tf or args.tf_window):
+        if clw and (args.tf or args.tf_window or args.opacity_unit):
             raise InputError(f"--tf and --tf-window classify a scalar model; {args.input} is a {wv.channels}-channel "
                              "model, which they do not classify and shaded ray tracing cannot draw: render its line "
                              "integrals with --xray or --method splat, or compress the original volume with --tf "
@@ -355,8 +368,8 @@ def post_transfer_function(args, wv):
         return preset_transfer_function(args)
     tf = None if wv.transfer_function is None else TransferFunction.from_dict(wv.transfer_function)
     if tf is not None and clw and args.tf_window is not None:
-        tf = TransferFunction(tf.points, window=parse_tf_window(args.tf_window), name=tf.name)
-    return tf
+        tf = tf.under(parse_tf_window(args.tf_window))
+    return tf if tf is None else _with_unit(args, tf)
 
 
 def parse_tf_window(text):

@@ -1,9 +1,9 @@
 """Transfer functions named by the command line (``--tf``) and the viewer (``tf=``): a preset, or a file of points
 (docs/model.md §5).
 
-* ``.json``: what :meth:`TransferFunction.to_dict` writes (``points``, maybe ``window`` and ``name``), a bare list
-  of ``(value, r, g, b, opacity)`` rows, or ``{"labels": {"1": [r, g, b, opacity], ...}}`` (a categorical function,
-  :meth:`TransferFunction.labels`);
+* ``.json``: what :meth:`TransferFunction.to_dict` writes (``points``, maybe ``window``, ``name`` and
+  ``opacity_unit``), a bare list of ``(value, r, g, b, opacity)`` rows, or ``{"labels": {"1": [r, g, b, opacity],
+  ...}}`` (a categorical function, :meth:`TransferFunction.labels`);
 * ``.csv``: rows ``value, r, g, b, opacity``; ``#`` lines are comments, a first row of words a header; a header
   whose first column is ``label`` makes the rows ``label, r, g, b, opacity``, a categorical function.
 """
@@ -30,7 +30,7 @@ def named_transfer_function(text, window=None) -> TransferFunction:
     if not str(text).lower().endswith(SUFFIXES):
         return TransferFunction.preset(text, window=window)
     tf = read_transfer_function(text)
-    return tf if window is None else TransferFunction(tf.points, window=window, name=tf.name)
+    return tf if window is None else tf.under(window)
 
 
 def read_transfer_function(path) -> TransferFunction:

@@ -1,7 +1,7 @@
 """The passes a transfer function makes over a volume (docs/model.md §5, docs/chunked.md §1): one read for an
 "auto" window's strided subsample (:func:`auto_window`) and a colour volume's range (:func:`rgb_scale`), each chunk of
 a chunked volume read once (:func:`scan`), and the classification itself, a block of voxels at a time over threads
-(:func:`classified`)."""
+(:func:`classified`), each piecewise-linear function of the voxels' values evaluated by :class:`PiecewiseLinear`."""
 
 from __future__ import annotations
 
@@ -121,3 +121,54 @@ def run_chunks(n, work, threads=True):
             work(s, min(s + CHUNK, n))
 
     thread_map(task, range(0, len(starts), per))
+
+
+class PiecewiseLinear:
+    """Vectorised np.interp for several channels sharing the same x points.
+
+    np.interp searches per element with branches (slow on noisy data, and once
+    per channel); here the segment k of every value is found once, branch-free
+    (a sum of comparisons for few points, searchsorted for many), and each
+    channel is ``f = fp[k] + slope[k] * (x - xp[k])`` with the distance clamped
+    at 0 below the first point and a zero slope past the last, so control points
+    and values outside the range give the end rows exactly.
+    """
+
+    _COMPARE_MAX = 8       # up to this many points, k = sum(x >= xp[j]) beats searchsorted
+
+    def __init__(self, xp, fp):
+        xp = np.asarray(xp, dtype=np.float64)
+        fp = np.asarray(fp, dtype=np.float64)
+        slope = np.zeros_like(fp)
+        dx = np.diff(xp)[:, None]
+        # a window can round two close points onto one value: that segment has no width
+        np.divide(np.diff(fp, axis=0), dx, out=slope[:-1], where=dx > 0)
+        self.xp = xp
+        self.f0 = [np.ascontiguousarray(fp[:, c]) for c in range(fp.shape[1])]
+        self.slope = [np.ascontiguousarray(slope[:, c]) for c in range(fp.shape[1])]
+
+    def segment(self, x):
+        """Segment index k (last point <= x, 0 below the first) and distance x - xp[k] >= 0."""
+        xp = self.xp
+        if len(xp) <= self._COMPARE_MAX:
+            k = np.zeros(x.shape, dtype=np.intp)
+            above = np.empty(x.shape, dtype=bool)
+            for j in range(1, len(xp)):
+                np.greater_equal(x, xp[j], out=above)
+                k += above
+        else:
+            k = np.searchsorted(xp, x, side="right")
+            k -= 1
+            np.maximum(k, 0, out=k)
+        d = x - xp.take(k)
+        np.maximum(d, 0.0, out=d)
+        return k, d
+
+    def channel(self, k, d, c):
+        f = self.slope[c].take(k)
+        f *= d
+        f += self.f0[c].take(k)
+        return f
+
+    def key(self, c):
+        return self.f0[c].tobytes()

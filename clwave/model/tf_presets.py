@@ -10,9 +10,10 @@ def _hu(points, lo, hi):
 
 # Presets: points on the normalised axis [0, 1] plus a default window (lo, hi) in
 # data units mapping 0 -> lo and 1 -> hi ("auto": 0.5/99.5 percentiles).  Opacities
-# are per world unit (mm for CT and MRI, a voxel for the phantoms).
+# are per opacity unit, one voxel unless given (the CT ones were tuned per mm on
+# ~1 mm voxels: at 0.5 mm they are twice as dense per mm, docs/model.md §5).
 PRESETS = {
-    # CT bone, Hounsfield units: transparent below +150 HU, 0.5/mm from 700 HU.
+    # CT bone, Hounsfield units: transparent below +150 HU, 0.5 a voxel from 700 HU.
     "ct-bone": dict(window=(-1000.0, 2000.0), points=_hu([
         (-1000.0, 0.85, 0.55, 0.40, 0.0),
         (150.0, 0.85, 0.55, 0.40, 0.0),
@@ -31,7 +32,7 @@ PRESETS = {
         (1000.0, 1.00, 1.00, 1.00, 0.3),
     ], -1000.0, 1000.0)),
     # MRI (arbitrary units, auto window): background noise transparent, then a
-    # warm grey ramp up to 0.06/mm at the 99.5th percentile.
+    # warm grey ramp up to 0.06 a voxel at the 99.5th percentile.
     "mri": dict(window="auto", points=(
         (0.0, 0.60, 0.45, 0.40, 0.0),
         (0.1, 0.60, 0.45, 0.40, 0.0),
@@ -40,7 +41,7 @@ PRESETS = {
         (1.0, 1.00, 1.00, 1.00, 0.06),
     )),
     # Hydrogen phantom (max 1): low density transparent, blue -> yellow -> red,
-    # up to 0.1 per world unit.  A ray through one lobe (n = 128 .. 256, spacing 1)
+    # up to 0.1 a voxel.  A ray through one lobe (n = 128 .. 256, spacing 1)
     # collects A = ∫alpha ≈ 2 .. 4; the torus (value 0.25) shows light blue.
     "hydrogen": dict(window=(0.0, 1.0), points=(
         (0.00, 0.05, 0.10, 0.60, 0.0),
@@ -49,9 +50,20 @@ PRESETS = {
         (0.55, 1.00, 0.90, 0.20, 0.05),
         (1.00, 1.00, 0.20, 0.05, 0.1),
     )),
-    # Linear grey ramp, auto window: colour and opacity (0 .. 0.05/unit) rise together.
+    # Linear grey ramp, auto window: colour and opacity (0 .. 0.05 a voxel) rise together.
     "grey": dict(window="auto", points=(
         (0.0, 0.0, 0.0, 0.0, 0.0),
         (1.0, 1.0, 1.0, 1.0, 0.05),
+    )),
+    # Bright-field (stained sections, photo stacks on white): opacity rises as the
+    # luminance falls, nothing from 0.9 of the window (the white background) up.  A
+    # colour volume keeps its own RGB (only the opacity column applies); a scalar
+    # one is drawn in greys.
+    "brightfield": dict(window="auto", points=(
+        (0.0, 0.10, 0.10, 0.10, 0.3),
+        (0.5, 0.50, 0.50, 0.50, 0.1),
+        (0.8, 0.80, 0.80, 0.80, 0.02),
+        (0.9, 0.90, 0.90, 0.90, 0.0),
+        (1.0, 1.00, 1.00, 1.00, 0.0),
     )),
 }

@@ -14,12 +14,17 @@ import math
 import numpy as np
 
 from ..errors import ClwaveWarning, InputError, NothingVisibleError, warn_outside
-from .tf_passes import auto_window, classified, rgb_scale, scan
+from .tf_passes import AUTO_SAMPLES, PiecewiseLinear, auto_window, classified, rgb_scale, scan
 from .tf_presets import PRESETS as _PRESETS
 from .volume import Volume
 
 #: Rec. 601 luma weights used for the opacity of RGB(A) volumes.
 LUMA = (0.299, 0.587, 0.114)
+#: a classification warns (nearly opaque) where the median voxel's optical depth across one voxel reaches OPAQUE_VOXEL,
+#: or the median voxel of the box's faces' across the box's thinnest side OPAQUE_BOX (transmittance e^-5, 0.7 %)
+#: (docs/model.md §5)
+OPAQUE_VOXEL = 1.0
+OPAQUE_BOX = 5.0
 
 _FORMAT = "clwave-transfer-function"
 
@@ -35,7 +40,7 @@ class TransferFunction:
     ----------
     points : sequence of (value, r, g, b, opacity)
         At least 2 rows; values finite and strictly increasing; r, g, b in
-        [0, 1]; opacity >= 0, the extinction per unit world length.  Between
+        [0, 1]; opacity >= 0, the extinction per ``opacity_unit`` of length.  Between
         points everything is interpolated linearly; outside, the end rows hold.
     window : None, "auto" or (lo, hi)
         ``None``: point values are data values.  Otherwise point values live on
@@ -48,6 +53,10 @@ class TransferFunction:
         with or without ``subtract=``.
     name : str, optional
         A label (presets carry their name); kept by :meth:`to_dict`.
+    opacity_unit : None or float
+        The length (world units) the opacities are per: the extinction per world unit is opacity / opacity_unit
+        (:meth:`extinction`).  ``None``: one voxel, the smallest spacing of the volume classified, so a volume looks
+        the same whatever its length unit (µm or mm) and one of spacing 1 as per world unit (docs/model.md §5).
 
     Examples
     --------
@@ -62,20 +71,22 @@ class TransferFunction:
     #: Names accepted by :meth:`preset`.
     PRESETS = tuple(_PRESETS)
 
-    def __init__(self, points, window=None, name=None):
+    def __init__(self, points, window=None, name=None, opacity_unit=None):
         self._points = _check_points(points)
         self._window = check_window(window)
+        self._unit = check_opacity_unit(opacity_unit)
         if name is not None and not isinstance(name, str):
             raise InputError(f"transfer function name must be a string or None, got {name!r}")
         self.name = name
 
     # ----------------------------------------------------------------- construction
     @classmethod
-    def preset(cls, name, window=None) -> "TransferFunction":
-        """A named preset; ``window`` None keeps its default, else "auto" or (lo, hi).
+    def preset(cls, name, window=None, opacity_unit=None) -> "TransferFunction":
+        """A named preset; ``window`` None keeps its default, else "auto" or (lo, hi); ``opacity_unit`` as the
+        constructor's (None: one voxel).
 
         ============== ================== ==========================================
-        name           default window     opacity (per world unit)
+        name           default window     opacity (per opacity unit: a voxel)
         ============== ================== ==========================================
         ct-bone        (-1000, 2000) HU   0 to +150 HU, 0.1 at +300, 0.5 from +700
         ct-soft-tissue (-1000, 1000) HU   0 to -200 HU, 0.01 at -100 (fat), 0.03 at +40
@@ -83,6 +94,9 @@ class TransferFunction:
         mri            auto               0 to 0.1, 0.01 / 0.03 / 0.06 at 0.3 / 0.6 / 1
         hydrogen       (0, 1)             0 to 0.05, 0.02 / 0.05 / 0.1 at 0.25 / 0.55 / 1
         grey           auto               linear 0 .. 0.05, colour black .. white
+        brightfield    auto               0.3 at 0 falling to 0 at 0.9 (white), of
+                                          the luminance of a colour volume, coloured
+                                          by its own RGB (stained sections, photos)
         ============== ================== ==========================================
         """
         key = name.strip().lower().replace("_", "-") if isinstance(name, str) else None
@@ -92,7 +106,8 @@ class TransferFunction:
             raise InputError(f"unknown transfer function preset {name!r}; "
                              f"choose one of {', '.join(cls.PRESETS)}")
         spec = _PRESETS[key]
-        return cls(spec["points"], window=spec["window"] if window is None else window, name=key)
+        return cls(spec["points"], window=spec["window"] if window is None else window, name=key,
+                   opacity_unit=opacity_unit)
 
     @classmethod
     def labels(cls, colours, name="labels") -> "TransferFunction":
@@ -138,6 +153,22 @@ class TransferFunction:
         """None, "auto" or (lo, hi)."""
         return self._window
 
+    @property
+    def opacity_unit(self):
+        """None (one voxel) or the length in world units that the opacities are per."""
+        return self._unit
+
+    def under(self, window=..., opacity_unit=...) -> "TransferFunction":
+        """This function with another ``window`` and/or ``opacity_unit`` (``...``: its own), points and name kept."""
+        return TransferFunction(self._points, self._window if window is ... else window, self.name,
+                                self._unit if opacity_unit is ... else opacity_unit)
+
+    def extinction(self, spacing) -> np.ndarray:
+        """The points' opacities as extinction per world unit on a volume or model of ``spacing``: opacity /
+        opacity_unit, the unit one voxel (the smallest spacing) where None; the one place a transfer function's
+        opacity becomes the extinction that pre- and post-classification integrate (docs/model.md §5)."""
+        return self._points[:, 4] / (float(min(spacing)) if self._unit is None else self._unit)
+
     def resolve_window(self, values=None):
         """The window in data units: None, (lo, hi), or for "auto" the percentiles of ``values``."""
         if self._window != "auto":
@@ -170,13 +201,14 @@ class TransferFunction:
                              f"subtracted, {subtracted:g}; set them at least "
                              f"{2 * np.spacing(np.abs(moved[i:i + 2]).max()):.2g} apart")
         if self._window is None:
-            return TransferFunction(np.column_stack([moved, self._points[:, 1:]]), name=self.name)
-        return TransferFunction(self._points, tuple(moved), self.name)
+            return TransferFunction(np.column_stack([moved, self._points[:, 1:]]), name=self.name,
+                                    opacity_unit=self._unit)
+        return self.under(tuple(moved))
 
     def _on(self, vol, window) -> "TransferFunction":
         """This function under ``window`` (``...``: its own) in the units of ``vol``'s data: a scalar's shifted by the
         value subtracted from it (a colour volume's points are on luminance)."""
-        tf = self if window is ... else TransferFunction(self._points, window, self.name)
+        tf = self.under(window)
         return tf.shifted(vol.subtracted) if vol.channels == 1 else tf
 
     # ----------------------------------------------------------------- evaluation
@@ -195,10 +227,10 @@ class TransferFunction:
         Returns
         -------
         rgb : ndarray (..., 3) float64, in [0, 1]
-        alpha : ndarray (...) float64, opacity per unit world length
+        alpha : ndarray (...) float64, opacity per :attr:`opacity_unit` (as the points give it)
         """
         v = np.asarray(values, dtype=np.float64)
-        pl = _PiecewiseLinear(self._xp(v, window), self._points[:, 1:5])
+        pl = PiecewiseLinear(self._xp(v, window), self._points[:, 1:5])
         k, d = pl.segment(v.reshape(-1))
         rgb = np.stack([pl.channel(k, d, c) for c in range(3)], axis=-1)
         alpha = pl.channel(k, d, 3)
@@ -207,7 +239,8 @@ class TransferFunction:
     def classify(self, vol: Volume, window=...) -> Volume:
         """Pre-classify a volume into emission and opacity ``(q_R, q_G, q_B, alpha)``.
 
-        Scalar volume: ``alpha = opacity(v)``, ``q = rgb(v) · alpha``.  RGB or
+        Scalar volume: ``alpha = opacity(v) / opacity_unit`` (per world unit: :meth:`extinction`),
+        ``q = rgb(v) · alpha``.  RGB or
         RGBA volume (photographic stacks): the colour is the voxel's own RGB
         scaled to [0, 1] (divided by 255 when the data exceed 1, by 65535 when
         they exceed 255); the opacity is this function's opacity of the
@@ -252,7 +285,7 @@ class TransferFunction:
         window, scale = tf._statistics(vol)
         if vol.channels > 1 and window is not None and window[1] - window[0] > 2:
             _warn_colour_window(window)
-        paint = tf._painter(vol.channels, window, scale)
+        paint = tf._painter(vol.channels, window, scale, vol.spacing)
         if vol.chunked:  # each chunk classified when it is read: the values classify gives in memory
             data = vol.data if vol.data.ndim == 4 else vol.data[..., None]
             rgba = data.map_blocks(classified, paint, False, chunks=data.chunks[:3] + ((4,),), dtype=np.float32)
@@ -260,6 +293,7 @@ class TransferFunction:
             rgba = classified(vol.data, paint, True)
             if not rgba[..., 3].any():
                 raise tf._nothing_visible(vol, window, scale)
+            tf._warn_opaque(vol, window, scale)
         return Volume(rgba, spacing=vol.spacing, origin=vol.origin, obliquity=vol.obliquity, labels=vol.labels,
                       unit=vol.unit)
 
@@ -282,31 +316,67 @@ class TransferFunction:
         return NothingVisibleError(f"{line} (window=(lo, hi)) or another function",
                                    cli=f"{line} (--tf-window LO,HI) or another preset")
 
+    def _warn_opaque(self, vol, window, scale):
+        """Warn, in a line naming the window in the input's units, the data's range and the fixes, where this function
+        (in ``vol``'s data units: :meth:`_on`) makes the in-memory ``vol`` nearly opaque: the median voxel's optical
+        depth across one voxel at least :data:`OPAQUE_VOXEL` (an opacity unit far below the voxel; a strided
+        subsample of the voxels), or the median voxel of the box's faces opaque across its thinnest side, depth
+        :data:`OPAQUE_BOX` (the box drawn as a solid: a window far off the data, 0 .. 1 on 16-bit values)."""
+        faces = [np.moveaxis(vol.data, a, 0)[i].reshape(-1, vol.channels) for a in range(3) for i in (0, -1)]
+        data = vol.data.reshape(-1, vol.channels)
+        data = data[::max(1, -(-len(data) // AUTO_SAMPLES))]
+        paint = self._painter(vol.channels, window, scale, vol.spacing)
+        depth = []
+        for values in (data, np.concatenate(faces)):
+            alpha = np.empty((len(values), 4), np.float32)
+            paint(values, alpha)
+            depth.append(float(np.median(alpha[:, 3])))
+        voxel, face = depth[0] * min(vol.spacing), depth[1] * min(np.multiply(vol.shape, vol.spacing))
+        if voxel < OPAQUE_VOXEL and face < OPAQUE_BOX:
+            return
+        values = data[:, 0] if vol.channels == 1 else _luminance(data[:, :3].astype(np.float64) / scale)
+        shift = vol.subtracted if vol.channels == 1 else 0.0
+        lo, hi = self.data_points(window)[[0, -1]] + shift
+        where = (f"half its voxels have an optical depth of {voxel:.3g} or more across one voxel"
+                 if voxel >= OPAQUE_VOXEL else f"half its faces' voxels have an optical depth of {face:.3g} or more "
+                                               f"across the box's thinnest side: a solid box")
+        unit = float(min(vol.spacing)) if self._unit is None else self._unit
+        line = (f"the transfer function{f' {self.name}' if self.name else ''} makes this volume nearly opaque "
+                f"({where}); its window is {lo:.4g} .. {hi:.4g}, the volume's "
+                f"{'values' if vol.channels == 1 else 'luminance'} {np.nanmin(values) + shift:.4g} .. "
+                f"{np.nanmax(values) + shift:.4g}: give a window in the input's units or auto, or a longer opacity "
+                f"unit (now {unit:g})")
+        warn_outside(ClwaveWarning(line + " (window=, opacity_unit=)",
+                                   cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))
+
     def check_visible(self, vol: Volume):
         """Raise :class:`NothingVisibleError` where this function gives no value of the scalar in-memory ``vol`` any
         opacity, as :meth:`classify` would find, without classifying it: the opacity is linear between the points,
         so it is 0 over the volume's values exactly where it is 0 at their least and largest and at every point
-        between (a scalar kept for classifying while rendering, ``classify="post"``)."""
+        between (a scalar kept for classifying while rendering, ``classify="post"``); and warn where it makes ``vol``
+        nearly opaque everywhere, as :meth:`classify` warns."""
         tf = self._on(vol, ...)
         window, scale = tf._statistics(vol)
         lo, hi = float(np.nanmin(vol.data)), float(np.nanmax(vol.data))
         at = tf.data_points(window)
         if not np.any(tf(np.concatenate([[lo, hi], at[(at > lo) & (at < hi)]]), window)[1]):
             raise tf._nothing_visible(vol, window, scale)
+        tf._warn_opaque(vol, window, scale)
 
     def resolved(self, vol: Volume, window=...) -> "TransferFunction":
         """This function with the window :meth:`classify` would use on ``vol`` made concrete.
 
         Use it to record exactly how a volume was classified (e.g. in a saved
-        file): an "auto" window becomes the (lo, hi) found in ``vol``, in the input's units as every window.
+        file): an "auto" window becomes the (lo, hi) found in ``vol``, in the input's units as every window, and an
+        opacity unit of one voxel ``vol``'s smallest spacing.
         """
         if not isinstance(vol, Volume):
             raise InputError(f"resolved needs a clwave.Volume, got {type(vol).__name__}")
-        tf = self if window is ... else TransferFunction(self._points, window, self.name)
+        tf = self.under(window)
         window = tf._statistics(vol)[0]
         if tf.window == "auto" and vol.channels == 1:  # the percentiles of the stored values
             window = tuple(w + vol.subtracted for w in window)
-        return TransferFunction(self._points, window, self.name)
+        return tf.under(window, float(min(vol.spacing)) if self._unit is None else self._unit)
 
     def _statistics(self, vol):
         """(window, RGB scale) that :meth:`classify` uses on ``vol``: an "auto" window needs the strided
@@ -319,11 +389,12 @@ class TransferFunction:
             win = auto_window(sample if c == 1 else _luminance(sample[:, :3].astype(np.float64) / scale))
         return win, scale
 
-    def _painter(self, channels, window, scale):
-        """``paint(values, out)``: the classification ``out`` (n, 4) float32 of voxels ``values`` (n, channels),
-        for whole and chunked volumes alike."""
+    def _painter(self, channels, window, scale, spacing):
+        """``paint(values, out)``: the classification ``out`` (n, 4) float32 of voxels ``values`` (n, channels) of a
+        volume of ``spacing``, for whole and chunked volumes alike."""
+        extinction = self.extinction(spacing)[:, None]
         if channels == 1:
-            pl = _PiecewiseLinear(self.data_points(window), self._points[:, 1:5])
+            pl = PiecewiseLinear(self.data_points(window), np.hstack([self._points[:, 1:4], extinction]))
 
             def paint(values, out):
                 k, d = pl.segment(values[:, 0].astype(np.float64))
@@ -336,7 +407,7 @@ class TransferFunction:
                         done[key] = pl.channel(k, d, ch)
                     out[:, ch] = done[key] * a
         else:
-            pl = _PiecewiseLinear(self.data_points(window), self._points[:, 4:5])
+            pl = PiecewiseLinear(self.data_points(window), extinction)
 
             def paint(values, out):
                 rgb = values[:, :3].astype(np.float64)
@@ -361,22 +432,27 @@ class TransferFunction:
         win = self._window
         return {
             "format": _FORMAT,
-            "version": 1,
+            "version": 2,
             "name": self.name,
             "window": list(win) if isinstance(win, tuple) else win,
+            "opacity_unit": self._unit,
             "points": [[float(x) for x in row] for row in self._points],
         }
 
     @classmethod
     def from_dict(cls, d) -> "TransferFunction":
-        """Inverse of :meth:`to_dict` (also accepts a dict with just ``points``)."""
+        """Inverse of :meth:`to_dict` (also accepts a dict with just ``points``, its ``opacity_unit`` None unless
+        given).  Version 1 (clwave before the opacity unit, its opacities per world unit) reads with opacity_unit 1, so
+        a file's stored function classifies as it did."""
         if not isinstance(d, dict) or "points" not in d:
             raise InputError("transfer function description must be a dict with 'points' "
                              "(rows value, r, g, b, opacity), as written by to_dict()")
-        if d.get("format", _FORMAT) != _FORMAT or d.get("version", 1) != 1:
+        version = d.get("version", 2)
+        if d.get("format", _FORMAT) != _FORMAT or version not in (1, 2):
             raise InputError(f"unsupported transfer function format {d.get('format')!r} "
-                             f"version {d.get('version')!r}; expected {_FORMAT!r} version 1")
-        return cls(d["points"], window=d.get("window"), name=d.get("name"))
+                             f"version {version!r}; expected {_FORMAT!r} version 1 or 2")
+        unit = 1.0 if version == 1 else d.get("opacity_unit")
+        return cls(d["points"], window=d.get("window"), name=d.get("name"), opacity_unit=unit)
 
     @classmethod
     def stored(cls, transfer_function) -> dict | None:
@@ -389,7 +465,7 @@ class TransferFunction:
     def __eq__(self, other):
         if not isinstance(other, TransferFunction):
             return NotImplemented
-        return (self.name == other.name and self._window == other._window
+        return (self.name == other.name and self._window == other._window and self._unit == other._unit
                 and np.array_equal(self._points, other._points))
 
     __hash__ = None
@@ -397,7 +473,7 @@ class TransferFunction:
     def __repr__(self):
         label = f"{self.name!r}, " if self.name else ""
         return (f"TransferFunction({label}{len(self._points)} points, "
-                f"window={self._window!r})")
+                f"window={self._window!r}, opacity_unit={self._unit!r})")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -411,57 +487,6 @@ def _whole(label) -> bool:
         return float(label).is_integer()
     except (TypeError, ValueError, OverflowError):
         return False
-
-
-class _PiecewiseLinear:
-    """Vectorised np.interp for several channels sharing the same x points.
-
-    np.interp searches per element with branches (slow on noisy data, and once
-    per channel); here the segment k of every value is found once, branch-free
-    (a sum of comparisons for few points, searchsorted for many), and each
-    channel is ``f = fp[k] + slope[k] * (x - xp[k])`` with the distance clamped
-    at 0 below the first point and a zero slope past the last, so control points
-    and values outside the range give the end rows exactly.
-    """
-
-    _COMPARE_MAX = 8       # up to this many points, k = sum(x >= xp[j]) beats searchsorted
-
-    def __init__(self, xp, fp):
-        xp = np.asarray(xp, dtype=np.float64)
-        fp = np.asarray(fp, dtype=np.float64)
-        slope = np.zeros_like(fp)
-        dx = np.diff(xp)[:, None]
-        # a window can round two close points onto one value: that segment has no width
-        np.divide(np.diff(fp, axis=0), dx, out=slope[:-1], where=dx > 0)
-        self.xp = xp
-        self.f0 = [np.ascontiguousarray(fp[:, c]) for c in range(fp.shape[1])]
-        self.slope = [np.ascontiguousarray(slope[:, c]) for c in range(fp.shape[1])]
-
-    def segment(self, x):
-        """Segment index k (last point <= x, 0 below the first) and distance x - xp[k] >= 0."""
-        xp = self.xp
-        if len(xp) <= self._COMPARE_MAX:
-            k = np.zeros(x.shape, dtype=np.intp)
-            above = np.empty(x.shape, dtype=bool)
-            for j in range(1, len(xp)):
-                np.greater_equal(x, xp[j], out=above)
-                k += above
-        else:
-            k = np.searchsorted(xp, x, side="right")
-            k -= 1
-            np.maximum(k, 0, out=k)
-        d = x - xp.take(k)
-        np.maximum(d, 0.0, out=d)
-        return k, d
-
-    def channel(self, k, d, c):
-        f = self.slope[c].take(k)
-        f *= d
-        f += self.f0[c].take(k)
-        return f
-
-    def key(self, c):
-        return self.f0[c].tobytes()
 
 
 def _channels(vol) -> int:
@@ -517,6 +542,22 @@ def _check_points(points) -> np.ndarray:
                          "opacity is an extinction per unit length, >= 0")
     p.flags.writeable = False
     return p
+
+
+def check_opacity_unit(unit, option=None):
+    """None (one voxel) or a finite length > 0 (world units), as a float; anything else an InputError, in the words
+    of the command line's ``option`` too."""
+    if unit is None:
+        return None
+    try:
+        value = float(unit)
+    except (TypeError, ValueError, OverflowError):
+        value = math.nan
+    if isinstance(unit, bool) or not (math.isfinite(value) and value > 0):
+        fix = "a length > 0 in world units (the spacing's)"
+        raise InputError(f"opacity unit {unit!r} must be {fix}, or None for one voxel (the smallest spacing)",
+                         cli=option and f"{option} {unit:g} must be {fix}; leave it out for one voxel")
+    return value
 
 
 def check_window(window, option=None):

@@ -59,8 +59,9 @@ POOL_PAD = 4
 Q_CHUNK = 1 << 20
 
 
-def tf_table(tf: TransferFunction, window) -> np.ndarray:
-    """The kernel's table of ``tf`` under ``window`` (data units), (rows, 4) float64 (``cl/raytrace/classify.h``).
+def tf_table(tf: TransferFunction, window, spacing) -> np.ndarray:
+    """The kernel's table of ``tf`` under ``window`` (data units) on a model of ``spacing`` (its opacities as extinction
+    per world unit, :meth:`~clwave.TransferFunction.extinction`), (rows, 4) float64 (``cl/raytrace/classify.h``).
 
     u = s scale + shift maps the first point to 0 and the last to 1 (values of order 1 in any data units);
     row 0 is (scale, shift, K, 0), rows 1..K the points' u, then per interval k = 0..K three rows:
@@ -69,7 +70,7 @@ def tf_table(tf: TransferFunction, window) -> np.ndarray:
     values = tf.data_points(window)
     scale = 1.0 / (values[-1] - values[0])
     u = (values - values[0]) * scale
-    K, rows = len(u), tf.points[:, 1:5]  # r, g, b, opacity
+    K, rows = len(u), np.column_stack([tf.points[:, 1:4], tf.extinction(spacing)])  # r, g, b, extinction
     table = np.zeros((1 + K + 3 * (K + 1), 4))
     table[0, :3] = scale, -values[0] * scale, K
     table[1:K + 1, 0] = u
@@ -202,7 +203,7 @@ class ScalarRange:
     def stored(self, tf: TransferFunction) -> TransferFunction:
         """``tf`` on the model's values, the input's minus the value subtracted (:meth:`TransferFunction.shifted`),
         under :meth:`window`."""
-        return TransferFunction(tf.points, self.window(tf)).shifted(self.subtracted)
+        return tf.under(self.window(tf)).shifted(self.subtracted)
 
     def invisible(self, post: Classification) -> str | None:
         """Why ``post`` draws nothing (its transfer function gives no block of the model any opacity: most often a
@@ -230,7 +231,7 @@ class ScalarRange:
         if last is not None and last.tf == tf and last.table.dtype == real and last.range is ranges:
             return replace(last, seconds=0.0)  # nothing changed: this render pays nothing for it
         window, stored = self.window(tf), clamped(self.stored(tf), self.value_range)
-        table, q = tf_table(stored, stored.window), cc.queue
+        table, q = tf_table(stored, stored.window, self.tracer.wv.spacing), cc.queue
         bound = cla.empty(q, ranges.shape[:3], np.float32)
         super_bound = cla.empty(q, at.super_bound.shape, np.float32)
         n = bound.size  # explicit work-groups: PoCL's default for this size was a tenth as fast

@@ -415,7 +415,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     light_dirs = light_directions(lights, view.n)
     values = tr.scalar.stored(transfer_function).data_points()
     least, most = tr.scalar.value_range or (-np.inf, np.inf)  # the classification sees the field clamped to the input's
-    colour, opacity = transfer_function.points[:, 1:4], transfer_function.points[:, 4]
+    colour, opacity = transfer_function.points[:, 1:4], transfer_function.extinction(wv.spacing)
     scale, offset = world_to_fine_affine(tr.orders[0], wv.shape, wv.spacing, wv.origin)
     n = max(10, 3 * tr.orders[0] - 2)  # degree 3 (j - 1) at most on a knot segment
     cheb = np.cos(np.pi * (np.arange(n) + 0.5) / n)

@@ -177,7 +177,7 @@ class ShadedSource(Source):
                     points[:, 0] = (points[:, 0] - lo) / (hi - lo)
                 points[:, 4] *= opacity
                 window = (mid - half, mid + half)
-                tf = TransferFunction(points, window=window, name=tf.name)
+                tf = TransferFunction(points, window=window, name=tf.name, opacity_unit=tf.opacity_unit)
             self._tf = (key, tf, [float(v) for v in window])
         return self._tf[1:]
 
