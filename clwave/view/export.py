@@ -95,7 +95,7 @@ def resolve(sources: dict, state, size=None) -> Spec:
                           "the view has been refined")
     tf, window = source.transfer_function(state.tf, source.tracer)
     if tf is not None and tf.window == "auto":  # the pool's percentiles, written as numbers
-        tf = TransferFunction(tf.points, window=tuple(window), name=tf.name)
+        tf = tf.under(window=tuple(window))
     return Spec("shaded", camera, tolerance=source.tolerance, shading=state.shading, background=state.background,
                 tf=tf, levels=levels)
 
