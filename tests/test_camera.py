@@ -108,9 +108,9 @@ def test_a_box_fit_brings_the_content_box_to_the_image_edge(perspective):
     assert Camera(0, 0, 16, fit="sphere").view(vol).pixel == Camera(0, 0, 16).view(vol).pixel  # the default
 
 
-def test_a_pixel_too_small_for_float32_positions_is_refused():
-    # an extent of 1e-40 (or a subnormal 1e-320, whose pixel underflows to 0) left the splat kernels' float32 positions
-    # meaningless (a crash, then an internal error); the bound is the most pixels across the content box's diagonal
+def test_a_pixel_too_small_for_the_kernels_float32_steps_is_refused():
+    # an extent of 1e-40 overflowed the splat kernels' float32 steps (a crash), a subnormal 1e-320 made a pixel of 0
+    # (an internal error); the bound is the most pixels across the content box's diagonal
     volume = Volume(np.zeros((8, 8, 8), np.float32))
     diagonal = 8.0 * np.sqrt(3.0)  # the box of 8 unit voxels a side, to within a voxel: the factors below are 2
     for extent in (1e-40, 1e-320, 64 * diagonal / MAX_PIXELS_ACROSS / 2):

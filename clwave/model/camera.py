@@ -19,9 +19,10 @@ from ..device.memory import check_image
 from ..errors import InputError, finite_number, flag, reals, whole_number
 from .geometry import view_frame
 
-#: The most pixels across the content box's diagonal: the kernels place pixels in float32, whose 24 bits must keep a
-#: pixel's position to a quarter of a pixel (a zoom of about 1000 at 4096²).
-MAX_PIXELS_ACROSS = 1 << 22
+#: The most pixels across the content box's diagonal: the splat kernels' float32 steps grow as its reciprocal (an
+#: extent of 1e-40 overflowed them and crashed; 1e-320, a pixel of 0, was an internal error), while a millionth of a
+#: voxel still renders from the band's textures (tests/test_hardening.py)
+MAX_PIXELS_ACROSS = 10**12
 
 FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
 DEFAULT_FOV = 30.0  #: a perspective camera's vertical field of view, degrees, unless given
@@ -184,10 +185,10 @@ class Camera:
         if not pixel * MAX_PIXELS_ACROSS >= float(np.linalg.norm(hi - lo)):  # also a pixel of 0 or NaN
             what = "distance" if self.perspective else "extent"
             raise InputError(f"{what}={distance if self.perspective else extent:g} makes a pixel of {pixel:.3g} world "
-                             f"units, too small for the volume: float32 positions hold at most {MAX_PIXELS_ACROSS:,} "
-                             f"pixels across it; give a larger {what}",
-                             cli=f"--{what} makes a pixel too small for the volume (at most {MAX_PIXELS_ACROSS:,} "
-                                 f"pixels across it in float32 positions): give a larger --{what}")
+                             f"units, too small for the volume (at most {MAX_PIXELS_ACROSS:.0e} pixels across it: the "
+                             f"kernels' float32 steps); give a larger {what}",
+                             cli=f"--{what} makes a pixel too small for the volume (at most {MAX_PIXELS_ACROSS:.0e} "
+                                 f"pixels across it: the kernels' float32 steps): give a larger --{what}")
         if not self.perspective:
             return View(n, u, v, target, (H, W), pixel, False, target + distance * n, self.fov)
         return View(n, u, v, target, (H, W), pixel, True, target + distance * n, self.fov, (slope, slope), (0.0, 0.0))
