@@ -529,7 +529,8 @@ def test_a_volume_too_big_for_any_chunking_names_its_bytes(tmp_path, capsys):
 
 
 def test_ctrl_c_stops_a_long_splat_within_a_second(tmp_path):
-    """A 1000^2 splat of every coefficient of 32^3 accumulates for half a minute on 2 cores; its launches
+    """A 1000^2 splat of every coefficient of 32^3 at single resolution (``--coarse 0``: an 8-bit PNG's default coarse
+    framebuffers would end it in a second) accumulates for many seconds on 2 cores; its launches
     are bounded (docs/splatting.md §6), so the command line takes Ctrl-C within a second of the signal, sent while a
     launch of the accumulation runs: one line, code 130, nothing written."""
     script = f"""
@@ -543,7 +544,7 @@ def announced(self, *args):
     accumulate(self, *args)
 stages.Stages.accumulate = announced
 sys.exit(cli.main(["render", "phantom:hydrogen:32", "--levels", "2", "--keep", "1", "--size", "1000",
-                   "-o", {str(tmp_path / 'out.png')!r}]))
+                   "--coarse", "0", "-o", {str(tmp_path / 'out.png')!r}]))
 """
     seconds, code, _, err = interrupted(script, b"clwave: interrupted")
     assert seconds < 1.0 and code == 130 and err.decode().strip() == "clwave: interrupted"
