@@ -88,8 +88,9 @@ def tf_table(tf: TransferFunction, window, spacing) -> np.ndarray:
 def clamped(tf: TransferFunction, value_range) -> TransferFunction:
     """``tf`` (points in data units) applied to the field clamped to ``value_range`` (lo, hi), the input's range in
     the same units: TF∘clamp is again piecewise linear, constant beyond its ends, so its points inside (lo, hi) stay,
-    those outside give way to its values at lo and hi (docs/raytracing.md §10).  A function whose points all lie
-    within the range is returned as it is (the same table, bit for bit); ``value_range`` None: ``tf``."""
+    those outside give way to its values at lo and hi (docs/raytracing.md §10), its opacity unit kept.  A function
+    whose points all lie within the range is returned as it is (the same table, bit for bit); ``value_range`` None:
+    ``tf``."""
     values = tf.data_points()
     if value_range is None or (values[0] >= value_range[0] and values[-1] <= value_range[1]):
         return tf
@@ -99,7 +100,7 @@ def clamped(tf: TransferFunction, value_range) -> TransferFunction:
         at = np.array([lo, hi if hi > lo else lo + max(1.0, abs(lo))])
     rows = tf.points[:, 1:5]
     points = np.column_stack([at] + [np.interp(np.minimum(at, hi), values, rows[:, c]) for c in range(4)])
-    return TransferFunction(points, name=tf.name)
+    return TransferFunction(points, name=tf.name, opacity_unit=tf.opacity_unit)
 
 
 @dataclass
