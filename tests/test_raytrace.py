@@ -216,8 +216,10 @@ def test_a_tolerance_above_every_line_integral_is_told_with_one_that_draws():
         tracer.render(camera, tolerance=1e-3, absorption=False)
         image = tracer.render(camera, tolerance=1e-8, absorption=False).image
     assert np.isclose(image.max(), 8e-6, rtol=1e-5)
-    with pytest.warns(ClwaveWarning, match="below the absolute tolerance 0.001"):  # another bound: told again
-        tracer.render(camera, tolerance=1e-3, transfer_function=clwave.TransferFunction.preset("grey"))
+    # another bound, told again: the grey preset's opacities per world unit (a micrometre here), not per voxel
+    grey_per_world_unit = clwave.TransferFunction.preset("grey", opacity_unit=1.0)
+    with pytest.warns(ClwaveWarning, match="below the absolute tolerance 0.001"):
+        tracer.render(camera, tolerance=1e-3, transfer_function=grey_per_world_unit)
 
 
 @pytest.mark.parametrize("origin", [(0, 0, 0), (-3, 5, -9)])
