@@ -128,7 +128,7 @@ class ChunkedWaveletVolume:
     @classmethod
     def from_volume(cls, volume: Volume, wavelet="cubic", levels=None, *, interpolate=False, transfer_function=None,
                     scheduler=None, progress_bar=None) -> "ChunkedWaveletVolume":
-        """The model of a chunked volume; reads it twice here, for its content (the default framing) and its range
+        """The model of a chunked volume; reads it once here, for its content (the default framing) and its range
         (post-classification's clamp)."""
         if interpolate:
             raise InputError("interpolate=True needs the whole volume at once (its prefilter is global); a "
@@ -137,7 +137,7 @@ class ChunkedWaveletVolume:
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
         tf = TransferFunction.stored(transfer_function)
         with client_for(scheduler) as client, client.as_current():
-            content, value_range = volume.content_box(), volume.value_range()
+            content, value_range = volume.content_box_and_value_range()
         return cls(volume, wavelets, levels, transfer_function=tf, scheduler=scheduler, progress_bar=progress_bar,
                    value_range=value_range,
                    content=None if content is None else tuple(tuple(float(c) for c in corner) for corner in content))

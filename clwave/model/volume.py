@@ -23,6 +23,15 @@ MAX_CHANNELS = 4
 WORLD_RANGE = (1e-18, 1e18)
 
 
+def _computed(values):
+    """``values`` (a list or tuple of arrays), Dask ones computed together in one pass."""
+    if any(is_dask(v) for v in values):
+        import dask
+
+        return list(dask.compute(*values))
+    return list(values)
+
+
 class Volume:
     """A scalar or multi-channel volume on a regular grid.
 
@@ -165,13 +174,26 @@ class Volume:
         """World (x, y, z) corners ``(lo, hi)`` of the voxels with a non-zero value, each voxel a
         box of its spacing (``None`` when every voxel is zero); ``mask``: :meth:`content_mask`, when
         the caller has it."""
-        occupied = self.content_mask() if mask is None else mask
-        ends = []
-        projections = [occupied.any(axis=tuple(a for a in range(3) if a != axis)) for axis in range(3)]
-        if is_dask(occupied):
-            import dask
+        return self._box(_computed(self._projections(mask)))
 
-            projections = dask.compute(*projections)
+    def value_range(self):
+        """``(min, max)`` of a scalar volume's values in the input's units (its data plus :attr:`subtracted`), the range
+        post-classification clamps the model's field to (docs/raytracing.md §10); None for several channels."""
+        ends = self._ends()
+        return None if ends is None else self._range(_computed(ends))
+
+    def content_box_and_value_range(self):
+        """:meth:`content_box` and :meth:`value_range` from one pass over a chunked volume's data."""
+        projections, ends = self._projections(None), self._ends() or ()
+        computed = _computed([*projections, *ends])
+        return self._box(computed[:3]), self._range(computed[3:]) if ends else None
+
+    def _projections(self, mask):
+        occupied = self.content_mask() if mask is None else mask
+        return [occupied.any(axis=tuple(a for a in range(3) if a != axis)) for axis in range(3)]
+
+    def _box(self, projections):
+        ends = []
         for axis in range(3):
             hit = np.flatnonzero(projections[axis])
             if not len(hit):
@@ -180,16 +202,10 @@ class Volume:
         corners = self.voxel_to_world(np.array(ends).T)  # (2, 3): the first and the last corner
         return corners.min(axis=0), corners.max(axis=0)
 
-    def value_range(self):
-        """``(min, max)`` of a scalar volume's values in the input's units (its data plus :attr:`subtracted`), the range
-        post-classification clamps the model's field to (docs/raytracing.md §10); None for several channels."""
-        if self.channels != 1:
-            return None
-        ends = (self.data.min(), self.data.max())
-        if is_dask(self.data):
-            import dask
+    def _ends(self):
+        return None if self.channels != 1 else (self.data.min(), self.data.max())
 
-            ends = dask.compute(*ends)
+    def _range(self, ends):
         return tuple(float(e) + self.subtracted for e in ends)
 
     def __repr__(self):
