@@ -114,7 +114,7 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
     tifffile.imwrite(tmp_path / "v.tif", data, photometric="minisblack")
     loaded = {name: clwave.load(tmp_path / name) for name in ("v.npy", "v.nii", "v.h5")}
     import clwave.io.loaders.raw as raw
-    monkeypatch.setattr(raw, "_read_memmap", lambda *a: pytest.fail("a voxel of the .npy was read"))
+    monkeypatch.setattr(raw, "read_memmap", lambda *a: pytest.fail("a voxel of the .npy was read"))
     monkeypatch.setattr(nibabel.arrayproxy.ArrayProxy, "__getitem__", lambda *a: pytest.fail("a NIfTI voxel read"))
     monkeypatch.setattr(h5py.Dataset, "__getitem__", lambda *a: pytest.fail("an HDF5 voxel read"))
     for name, vol in loaded.items():

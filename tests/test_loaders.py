@@ -852,7 +852,7 @@ def _zeros_tiff_zlib(path):
 def _zeros_npy(path):
     np.lib.format.open_memmap(path, "w+", np.uint8, (64, 64, 64)).flush()  # a sparse file
     from clwave.io.loaders import raw
-    return raw, "_read_memmap"
+    return raw, "read_memmap"
 
 
 @pytest.mark.parametrize("write, name", [(_zeros_nii_gz, "v.nii.gz"), (_zeros_nrrd_gzip, "v.nrrd"),
@@ -894,7 +894,7 @@ def test_a_raw_file_is_weighed_before_it_is_read(tmp_path, monkeypatch):
     path = tmp_path / "v.raw"
     with open(path, "wb") as fh:
         fh.truncate(64 ** 3 * 2)  # sparse
-    monkeypatch.setattr(raw, "_read_memmap", lambda *args: pytest.fail("read"))
+    monkeypatch.setattr(raw, "read_memmap", lambda *args: pytest.fail("read"))
     monkeypatch.setattr(clwave.device.memory, "available_bytes", lambda: 64 ** 3 * 6 - 1)  # int16 + float32
     with pytest.raises(HostMemoryError, match="64 x 64 x 64 int16"):
         load(path, shape=(64, 64, 64), dtype="int16")

@@ -23,14 +23,14 @@ import numpy as np
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
-from . import dicom, dicom_frames, hdf5, mgh, nifti, nrrd, raw, slices, tiff, zarr
+from . import dicom, dicom_frames, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading, to_float32
 
 __all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED"]
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
-               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"}
+               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc")
 #: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
 _SLICE_FOLDERS = tuple(f"{name.lower()}-folder" for name in slices.SLICE_SUFFIXES)
 # 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
@@ -178,6 +178,8 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
         return nifti.read_nifti(path, chunks, fits)
     if kind == "mgh":
         return mgh.read_mgh(path, chunks, fits)
+    if kind == "mrc":
+        return (*mrc.read_mrc(path, chunks, fits, warn_spacing), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "tiff":
@@ -192,13 +194,13 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 #: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
 def world_unit(path) -> str | None:
     """The world unit of a volume file where it is a length its header gives (:data:`clwave.io.images.UNIT_METRES`):
-    DICOM's and MGH's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres or an ImageJ stack's unit; None
-    for the others (voxel units, or units clwave does not read)."""
+    DICOM's and MGH's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres, an ImageJ stack's unit or an
+    MRC map's ångströms; None for the others (voxel units, or units clwave does not read)."""
     path, _ = _split_inner(Path(path))
     kind = _kind(path)
-    if kind in ("nifti", "nrrd", "tiff"):
+    if kind in ("nifti", "nrrd", "tiff", "mrc"):
         with reading(path):
-            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff)[kind].world_unit(path)
+            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff, mrc=mrc)[kind].world_unit(path)
     return "mm" if kind in ("dicom", "dicom-frames", "mgh") else None
 
 
