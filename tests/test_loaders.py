@@ -359,7 +359,7 @@ def test_an_ome_tiff_and_an_ome_zarr_of_one_volume_are_placed_alike(tmp_path, rn
     for path in (tif, zarr_store):
         vol = load(path)
         np.testing.assert_array_equal(np.asarray(vol.data), arr)
-        assert vol.spacing == pytest.approx(spacing, rel=1e-12)
+        assert vol.spacing == pytest.approx(spacing, rel=1e-12) and vol.unit == "um"
         np.testing.assert_allclose(vol.origin, want, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(vol.voxel_to_world(np.zeros((1, 3)))[0], corner, atol=1e-12)
         assert main(["info", str(path), "--json"]) == 0

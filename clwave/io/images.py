@@ -15,7 +15,7 @@ from ..errors import InputError
 #: the output suffixes of a picture (PNG) and of the float image (TIFF)
 PNG_SUFFIXES, TIFF_SUFFIXES = (".png",), (".tif", ".tiff")
 #: the world units a pixel size is written in, and their length in metres
-UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "A": 1e-10}  # A: the ångström (MRC maps)
+UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "nm": 1e-9, "A": 1e-10}  # A: the ångström
 BIT_DEPTHS = (8, 16)
 
 _SRGB = (b"sRGB", b"\x00")  # perceptual rendering intent

@@ -159,7 +159,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
                   origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity,
                   labels=labels, stored_dtype=stored,
-                  unit=world_unit(path) if spacing is None else None)  # --spacing: in the user's unit
+                  unit=_world_unit(kind, path, inner) if spacing is None else None)  # --spacing: the user's unit
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
@@ -194,12 +194,18 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 #: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
 def world_unit(path) -> str | None:
     """The world unit of a volume file where it is a length its header gives (:data:`clwave.io.images.UNIT_METRES`):
-    DICOM's and MGH's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres, an ImageJ stack's unit or an
-    MRC map's ångströms; None for the others (voxel units, or units clwave does not read)."""
-    path, _ = _split_inner(Path(path))
-    kind = _kind(path)
-    if kind in ("nifti", "nrrd", "tiff", "mrc"):
+    DICOM's and MGH's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres, an ImageJ stack's or an
+    OME-Zarr image's unit or an MRC map's ångströms; None for the others (voxel units, or units clwave does not
+    read)."""
+    path, inner = _split_inner(Path(path))
+    return _world_unit(_kind(path), path, inner)
+
+
+def _world_unit(kind, path, inner):
+    if kind in ("nifti", "nrrd", "tiff", "mrc", "zarr"):
         with reading(path):
+            if kind == "zarr":
+                return zarr.world_unit(path, inner)
             return dict(nifti=nifti, nrrd=nrrd, tiff=tiff, mrc=mrc)[kind].world_unit(path)
     return "mm" if kind in ("dicom", "dicom-frames", "mgh") else None
 
