@@ -118,8 +118,12 @@ def _header(dims=(2, 3, 4, 1), code=1, version=1):
     ("nan.mgh", _header()[:30] + struct.pack(">3f", np.nan, 1, 1) + _header()[42:] + b"\0" * 96,
      "is not finite or not invertible")])
 def test_a_truncated_or_lying_mgh_is_refused_in_one_line(tmp_path, capsys, name, content, words):
-    path = tmp_path / name
-    path.write_bytes(content)
+    (tmp_path / name).write_bytes(content)
+    assert_refused_in_one_line(capsys, tmp_path / name, words)
+
+
+def assert_refused_in_one_line(capsys, path, words):
+    """``load`` refuses ``path`` with one line matching ``words``, and ``clwave info`` with one line, exit 2."""
     with pytest.raises(FileFormatError, match=words) as excinfo:
         clwave.load(path)
     assert "\n" not in str(excinfo.value)
