@@ -33,7 +33,8 @@ def read_mgh(path, chunks, fits=None):
     affine = header.get_affine()
     if not placeable(affine):
         raise FileFormatError(f"{path}: its vox2ras (the header's delta, Mdc and Pxyz_c) is not finite or not "
-                              "invertible; fix the header's geometry, e.g. with nibabel's MGHHeader.set_zooms")
+                              "invertible; write the file again with its true geometry (e.g. nibabel's MGHImage of "
+                              "its voxels and affine)")
     if not good:
         note(f"{path} has no valid geometry (goodRASFlag 0): FreeSurfer's default is assumed, coronal LIA with 1 mm "
              "voxels centred on the origin; set it (mri_convert, or nibabel's MGHHeader) if known")

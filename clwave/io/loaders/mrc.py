@@ -23,7 +23,7 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True):
     dimensions, its axis order ``mapc``/``mapr``/``maps``, and the samples it declares against the file's size);
     the samples transposed from the file's (section, row, column) order to (z, y, x).  Spacing (Å) is the cell
     over its sampling along each axis, None where the header gives none (a warning unless ``warn_spacing`` is
-    false); the first voxel is at the header's ``origin`` where it is not 0, else at its start indices times the
+    false); the first voxel is at the header's ``origin`` where it is finite, not 0, else at its start indices times the
     spacing (as ChimeraX places a map); ``origin`` is the volume's centre.  A volume stack is refused; an image stack
     (space group 0: a tilt series, a stack of particles) is read as a volume, with a warning."""
     header, offset = _header(path)
