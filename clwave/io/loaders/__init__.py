@@ -26,11 +26,13 @@ from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading, to_float32
 
-__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED"]
+__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
                ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc")
+#: the formats put in RAS+ (their origin and spacing in scanner millimetres; the others keep their array axes)
+RAS_FORMATS = ("nifti", "mgh", "nrrd", "dicom", "dicom-frames")
 #: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
 _SLICE_FOLDERS = tuple(f"{name.lower()}-folder" for name in slices.SLICE_SUFFIXES)
 # 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
