@@ -130,7 +130,7 @@ def test_freesurfer_label_maps_numbered_sparsely_are_label_maps(table, dtype):
 def test_an_8_bit_mri_with_plateaus_is_no_label_map():
     """Hundreds of 8-bit intensities filling 0 .. 255 are an image's, however flat its regions: the MNI152 T1
     template at 8 bits, its white matter set to 110 as FreeSurfer's T1.mgz normalises it (85 % of its neighbours
-    equal, as a label map's are)."""
+    equal, as a label map's are); and so are they scaled by 4 or 16, numbered sparsely but in even steps."""
     import importlib.util
     from pathlib import Path
 
@@ -140,6 +140,7 @@ def test_an_8_bit_mri_with_plateaus_is_no_label_map():
     data = np.rint(t1 / t1.max() * 255).astype(np.uint8)
     data[white] = 110
     assert len(np.unique(data)) > 100 and not looks_like_labels(data)
+    assert not looks_like_labels(data.astype(np.uint16) * 4) and not looks_like_labels(data.astype(np.int16) * 16)
 
 
 @pytest.mark.parametrize("make", [
