@@ -284,7 +284,10 @@ def test_imagej_tiff_spacing_is_read(tmp_path, rng):
                      metadata={"axes": "ZYX", "spacing": 2.0, "unit": "um"})
     vol = load(tmp_path / "ij.tif")
     np.testing.assert_array_equal(vol.data, arr)
-    assert vol.spacing == (2.0, 0.5, 0.25)
+    assert vol.spacing == (2.0, 0.5, 0.25) and vol.unit == "um"
+    tifffile.imwrite(tmp_path / "nm.tif", arr, imagej=True, resolution=(4.0, 2.0),  # electron microscopy's unit
+                     metadata={"axes": "ZYX", "spacing": 2.0, "unit": "nm"})
+    assert load(tmp_path / "nm.tif").unit == "nm"
     assert load(tmp_path / "ij.tif", spacing=1.0).spacing == (1.0, 1.0, 1.0)
     # a plain TIFF's resolution is a print density (dots per inch), not a voxel size: spacing 1
     tifffile.imwrite(tmp_path / "plain.tif", arr, photometric="minisblack", resolution=(72.0, 72.0),
