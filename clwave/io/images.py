@@ -110,7 +110,7 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     height, width = picture.shape[:2]
     length = nice_length(width * pixel) if length is None or length is True else length
     text = length_label(length, unit)
-    font_size = max(10, round(min(height, width) / 28))
+    font_size = max(12, round(min(height, width) / 24))
     thick, rim, margin = max(2, round(font_size / 4)), max(1, round(font_size / 9)), max(4, round(font_size / 2))
     font = ImageFont.load_default(size=font_size)
     left, top, right, bottom = font.getbbox(text, stroke_width=rim)
