@@ -99,12 +99,11 @@ def length_label(length: float, unit, digits=6) -> str:
 
 
 def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
-    """``picture`` (as :func:`write_png` takes it) with a scale bar of ``length`` world units (True or None:
-    :func:`nice_length`
-    of the picture's width) burnt into its bottom-right corner: a white bar exactly ``round(length / pixel)`` pixels
-    long under its label (:func:`length_label`), both outlined in black so that they read on any background, opaque
-    in a transparent picture; ``pixel`` the world width of a pixel (an orthographic view's).  One InputError
-    where the bar is under 2 pixels or it and its label do not fit."""
+    """``picture`` (as :func:`write_png` takes it) with a scale bar of ``length`` world units (True or None: the
+    :func:`nice_length` of the picture's width) burnt into its bottom-right corner: a white bar exactly
+    ``round(length / pixel)`` pixels long under its label (:func:`length_label`), both outlined in black so that they
+    read on any background, opaque in a transparent picture; ``pixel`` the world width of a pixel (an orthographic
+    view's).  One InputError where the bar is under 2 pixels or it and its label do not fit."""
     from PIL import Image, ImageDraw, ImageFont
 
     height, width = picture.shape[:2]
@@ -128,7 +127,7 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     if right - left > width - 2 * margin or (bottom - top) + gap + thick + 2 * rim > height - 2 * margin:
         raise InputError(f"{what}: its label ({right - left}x{bottom - top} pixels) does not fit the {width}x{height} "
                          f"picture: give a larger picture size")
-    cover, white = Image.new("L", (width, height)), Image.new("L", (width, height))  # outline and fill; the fill
+    cover, white = Image.new("L", (width, height)), Image.new("L", (width, height))  # all that is drawn; its white
     box = (x1 - bar, y1 - thick, x1 - 1, y1 - 1)
     ImageDraw.Draw(cover).rectangle((box[0] - rim, box[1] - rim, box[2] + rim, box[3] + rim), fill=255)
     ImageDraw.Draw(white).rectangle(box, fill=255)
@@ -136,7 +135,10 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     at = (x - left, y1 - thick - rim - gap - bottom)
     ImageDraw.Draw(cover).text(at, text, font=font, fill=255, stroke_width=rim, stroke_fill=255)
     ImageDraw.Draw(white).text(at, text, font=font, fill=255)
-    return _over(picture, np.asarray(cover, np.float64) / 255, np.asarray(white, np.float64) / 255)
+    box = cover.getbbox()  # the corner drawn on: the rest of the picture is copied
+    corner, out = np.s_[box[1]:box[3], box[0]:box[2]], picture.copy()
+    out[corner] = _over(picture[corner], *(np.asarray(m.crop(box), np.float64) / 255 for m in (cover, white)))
+    return out
 
 
 def _over(picture, cover, white) -> np.ndarray:
