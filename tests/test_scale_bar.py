@@ -10,12 +10,14 @@ from PIL import Image
 
 from clwave.cli import main
 from clwave.errors import InputError
-from clwave.io.images import length_label, nice_length
+from clwave.io.images import draw_scale_bar, length_label, nice_length
 from clwave.io.result import RenderResult
 from clwave.model.camera import Camera
 from clwave.model.conebeam import ConeBeam
+import test_outputs_formats
 from test_outputs_formats import decode_png
 
+nifti = test_outputs_formats.nifti  # the fixture: a NIfTI of 0.5 mm voxels
 SPLAT = ["render", "phantom:hydrogen:16", "--levels", "1"]
 
 
@@ -182,6 +184,18 @@ def test_the_command_line_burns_in_the_bar_where_it_writes_pictures(tmp_path, ca
     for name in ("frame_000.png", "frame_001.png"):
         assert bar_rows(decode_png(frames / name)[1], 255)[0] == 12
     capsys.readouterr()
+
+
+def test_the_command_line_labels_in_the_inputs_unit(nifti, tmp_path):
+    """A NIfTI in millimetres: the picture with ``--scale-bar 2`` is the one without it under the bar labelled in mm
+    (not "units"), 2 mm long (the unit reaches the label; the label itself: the hand-written cases above)."""
+    view = ["render", str(nifti), "--levels", "1", "--size", "96x120", "--extent", "12"]
+    assert main(view + ["--scale-bar", "2", "-o", str(tmp_path / "a.png")]) == 0
+    assert main(view + ["-o", str(tmp_path / "b.png")]) == 0
+    (_, barred), (_, plain) = decode_png(tmp_path / "a.png"), decode_png(tmp_path / "b.png")
+    assert bar_rows(barred, 255)[0] == 20  # 2 mm at 0.1 mm a pixel
+    np.testing.assert_array_equal(barred, draw_scale_bar(plain, 0.1, "mm", 2.0))
+    assert not np.array_equal(barred, draw_scale_bar(plain, 0.1, None, 2.0))
 
 
 @pytest.mark.parametrize("argv, words", [
