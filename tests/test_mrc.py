@@ -91,6 +91,23 @@ def test_a_compressed_map_keeps_its_unit(tmp_path, capsys):
     assert clwave.WaveletVolume.open(tmp_path / "b.clw").unit == "A"
 
 
+def test_a_map_rendered_with_a_scale_bar_is_labelled_in_its_length(tmp_path):
+    """The picture with ``--scale-bar 2`` is the one without it under a bar of 2 Å (20 pixels at 0.1 Å a pixel),
+    labelled "0.2 nm" (the label itself: tests/test_scale_bar.py; its font has no Å), not in world "units"."""
+    from clwave.cli import main
+    from clwave.io.images import draw_scale_bar
+    from test_outputs_formats import decode_png
+
+    path = _write(tmp_path / "blocks.mrc", np.kron(np.arange(8, dtype=np.float32).reshape(2, 2, 2),
+                                                   np.ones((4, 4, 4), np.float32)))
+    view = ["render", str(path), "--levels", "1", "--size", "96x120", "--extent", "12"]
+    assert main(view + ["--scale-bar", "2", "-o", str(tmp_path / "a.png")]) == 0
+    assert main(view + ["-o", str(tmp_path / "b.png")]) == 0
+    (_, barred), (_, plain) = decode_png(tmp_path / "a.png"), decode_png(tmp_path / "b.png")
+    np.testing.assert_array_equal(barred, draw_scale_bar(plain, 0.1, "A", 2.0))
+    assert not np.array_equal(barred, draw_scale_bar(plain, 0.1, None, 2.0))
+
+
 def _valid(tmp_path, **fields):
     return _write(tmp_path / "v.mrc", np.zeros((3, 4, 5), np.float32), **fields).read_bytes()
 
