@@ -16,7 +16,7 @@ from ..errors import InputError
 #: the output suffixes of a picture (PNG) and of the float image (TIFF)
 PNG_SUFFIXES, TIFF_SUFFIXES = (".png",), (".tif", ".tiff")
 #: the world units a pixel size is written in, and their length in metres
-UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6}
+UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "nm": 1e-9, "A": 1e-10}  # A: the ångström
 BIT_DEPTHS = (8, 16)
 
 _SRGB = (b"sRGB", b"\x00")  # perceptual rendering intent
@@ -88,11 +88,12 @@ _LABEL_UNITS = (("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("nm", 1e-9))
 
 def length_label(length: float, unit, digits=6) -> str:
     """``length`` world units as a scale bar's label: in ``unit`` where it reads 1 to 999, else in the metre, mm, µm or
-    nm that does ("500 µm" for 0.5 mm); with ``unit`` None the number and "units"; ``digits`` significant."""
+    nm that does ("500 µm" for 0.5 mm; ångströms always in nm); with ``unit`` None the number and "units"; ``digits``
+    significant."""
     if unit is None:
         return f"{length:.{digits}g} unit{'' if length == 1 else 's'}"
     name, metres = unit.replace("um", "µm"), length * UNIT_METRES[unit]
-    if not 1 <= length < 1000:
+    if not 1 <= length < 1000 or unit == "A":  # the label's font has no Å: ångströms in nanometres
         name, per = next(((n, m) for n, m in _LABEL_UNITS if metres >= m * (1 - 1e-9)), _LABEL_UNITS[-1])
         length = metres / per
     return f"{length:.{digits}g} {name}"

@@ -1,14 +1,14 @@
 """Read volumes from files: one :func:`load` for every supported format.
 
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
-(NIfTI, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
+(NIfTI, FreeSurfer MGH, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
 millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
-stores, and large .npy, .raw, .nii and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
+stores, and large .npy, .raw, .nii, .mgh and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
 arrays (docs/chunked.md §1).
 
-One module per format family (``raw``: .raw and .npy; ``nifti``, ``nrrd``, ``tiff``, ``slices``: folders of TIFF,
-PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared`` holds
-what they share.
+One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``nrrd``, ``tiff``, ``slices``: folders of
+TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared``
+holds what they share.
 """
 
 from __future__ import annotations
@@ -23,14 +23,16 @@ import numpy as np
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
-from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, slices, tiff, zarr
+from . import dicom, dicom_frames, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading, to_float32
 
-__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED"]
+__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
 
-_FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".nrrd": "nrrd",
+_FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
-               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"}
+               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc")
+#: the formats put in RAS+ (their origin and spacing in scanner millimetres; the others keep their array axes)
+RAS_FORMATS = ("nifti", "mgh", "nrrd", "dicom", "dicom-frames")
 #: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
 _SLICE_FOLDERS = tuple(f"{name.lower()}-folder" for name in slices.SLICE_SUFFIXES)
 # 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
@@ -48,7 +50,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     Parameters
     ----------
     path : str or os.PathLike
-        ``.npy``, ``.nii``, ``.nii.gz``, ``.nrrd``, ``.nhdr``, a multi-page
+        ``.npy``, ``.nii``, ``.nii.gz``, FreeSurfer's ``.mgh``, ``.mgz``, ``.nrrd``, ``.nhdr``, a multi-page
         ``.tif``/``.tiff``, a folder of 2-D TIFF, PNG or JPEG slices of one format
         (grey, RGB or RGBA; stacked in natural name order: ``slice2`` before
         ``slice10``), a folder of DICOM files (other files in it are ignored), a
@@ -71,7 +73,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     chunks : None, False, "auto" or int
-        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``,
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``,
         TIFF and folders of TIFF slices too when their volume takes at least
         ``CHUNKED_MIN_BYTES`` (1 GiB) as float32; everything else is read whole.  ``False``: read whole.
         ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
@@ -159,7 +161,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
                   origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity,
                   labels=labels, stored_dtype=stored,
-                  unit=world_unit(path) if spacing is None else None)  # --spacing: in the user's unit
+                  unit=_world_unit(kind, path, inner) if spacing is None else None)  # --spacing: the user's unit
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
@@ -176,6 +178,10 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
         return raw.read_npy(path, chunks, fits), None, None, 0.0
     if kind == "nifti":
         return nifti.read_nifti(path, chunks, fits)
+    if kind == "mgh":
+        return mgh.read_mgh(path, chunks, fits)
+    if kind == "mrc":
+        return (*mrc.read_mrc(path, chunks, fits, warn_spacing), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "tiff":
@@ -190,14 +196,20 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 #: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
 def world_unit(path) -> str | None:
     """The world unit of a volume file where it is a length its header gives (:data:`clwave.io.images.UNIT_METRES`):
-    DICOM's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres or an ImageJ stack's unit; None for the
-    others (voxel units, or units clwave does not read)."""
-    path, _ = _split_inner(Path(path))
-    kind = _kind(path)
-    if kind in ("nifti", "nrrd", "tiff"):
+    DICOM's and MGH's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres, an ImageJ stack's or an
+    OME-Zarr image's unit or an MRC map's ångströms; None for the others (voxel units, or units clwave does not
+    read)."""
+    path, inner = _split_inner(Path(path))
+    return _world_unit(_kind(path), path, inner)
+
+
+def _world_unit(kind, path, inner):
+    if kind in ("nifti", "nrrd", "tiff", "mrc", "zarr"):
         with reading(path):
-            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff)[kind].world_unit(path)
-    return "mm" if kind in ("dicom", "dicom-frames") else None
+            if kind == "zarr":
+                return zarr.world_unit(path, inner)
+            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff, mrc=mrc)[kind].world_unit(path)
+    return "mm" if kind in ("dicom", "dicom-frames", "mgh") else None
 
 
 DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",
