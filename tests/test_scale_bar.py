@@ -215,3 +215,16 @@ def test_the_command_line_refusals_are_one_line(tmp_path, capsys, argv, words):
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_micrometre_label_is_drawn_with_glyphs_the_font_has(monkeypatch):
+    """Pillow's bundled font has no µ (it drew its missing-glyph box): a micrometre bar's label is drawn as "um"."""
+    from PIL import ImageFont
+
+    import clwave.io.images as images
+    font = ImageFont.load_default(size=20)
+    assert font.getmask("µ").getbbox() == font.getmask("\uffff").getbbox()  # no glyph of its own
+    picture = np.zeros((200, 300, 3), np.uint8)
+    drawn = draw_scale_bar(picture, 10.0, unit="um", length=500)
+    monkeypatch.setattr(images, "length_label", lambda length, unit, digits=6: "500 um")
+    assert np.array_equal(drawn, draw_scale_bar(picture, 10.0, unit="um", length=500))

@@ -113,7 +113,8 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     font_size = max(12, round(min(height, width) / 24))
     thick, rim, margin = max(2, round(font_size / 4)), max(1, round(font_size / 9)), max(4, round(font_size / 2))
     font = ImageFont.load_default(size=font_size)
-    left, top, right, bottom = font.getbbox(text, stroke_width=rim)
+    drawn = text.replace("µ", "u")  # Pillow's bundled font has no µ (it draws a box): "um", as plain text writes it
+    left, top, right, bottom = font.getbbox(drawn, stroke_width=rim)
     bar = round(length / pixel)
     what = f"a scale bar of {text} ({length / pixel:.3g} pixels at {length_label(pixel, unit, 3)} a pixel)"
     room = width - 2 * (margin + rim)
@@ -134,8 +135,8 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     ImageDraw.Draw(white).rectangle(box, fill=255)
     x = min((2 * x1 - bar - (right - left)) / 2, width - margin - right + left)  # centred on the bar, within the margin
     at = (x - left, y1 - thick - rim - gap - bottom)
-    ImageDraw.Draw(cover).text(at, text, font=font, fill=255, stroke_width=rim, stroke_fill=255)
-    ImageDraw.Draw(white).text(at, text, font=font, fill=255)
+    ImageDraw.Draw(cover).text(at, drawn, font=font, fill=255, stroke_width=rim, stroke_fill=255)
+    ImageDraw.Draw(white).text(at, drawn, font=font, fill=255)
     box = cover.getbbox()  # the corner drawn on: the rest of the picture is copied
     corner, out = np.s_[box[1]:box[3], box[0]:box[2]], picture.copy()
     out[corner] = _over(picture[corner], *(np.asarray(m.crop(box), np.float64) / 255 for m in (cover, white)))
