@@ -77,9 +77,25 @@ def world_unit(path) -> str | None:
 
 
 def _header(path):
-    """``(header, offset of the samples)``: mrcfile's header, checked as ``permissive=False`` checks it."""
+    """``(header, offset of the samples)``: mrcfile's header, checked as ``permissive=False`` checks it, its extended
+    header's length (``nsymbt``) first against the file's: mrcfile reads (allocates) all it declares."""
     import mrcfile
+    from mrcfile.dtypes import HEADER_DTYPE
+    from mrcfile.utils import byte_order_from_machine_stamp
 
+    with open(path, "rb") as fh:
+        raw = fh.read(_HEADER)
+    try:
+        order = byte_order_from_machine_stamp(raw[212:216]) if len(raw) == _HEADER else None
+    except ValueError:
+        order = None  # mrcfile names the problem
+    if order is not None:
+        extended, holds = int(np.frombuffer(raw, HEADER_DTYPE.newbyteorder(order))[0]["nsymbt"]), \
+            path.stat().st_size - _HEADER
+        if extended > holds:
+            raise FileFormatError(f"{path}: its MRC header declares an extended header of {extended:,} bytes but the "
+                                  f"file holds {holds:,} bytes after its 1,024-byte header; it is truncated or its "
+                                  "header is wrong")
     try:
         with mrcfile.open(path, header_only=True, permissive=False) as mrc:
             return mrc.header.copy(), _HEADER + int(mrc.header.nsymbt)
