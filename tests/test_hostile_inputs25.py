@@ -25,3 +25,27 @@ def test_an_mrc_extended_header_longer_than_the_file_is_refused_before_it_is_rea
     assert peak < 1 << 24, f"{peak:,} bytes allocated"
     assert_refused_in_one_line(capsys, path, r"declares an extended header of 2,147,483,647 bytes but the file holds "
                                              r"240 bytes after its 1,024-byte header")
+
+
+def test_a_scale_bar_of_more_pixels_than_a_float_holds_is_refused_in_one_line(tmp_path, capsys):
+    """--scale-bar=1e308 at 0.43 units a pixel: 2e308 pixels, infinity, which round() cannot make an int of (an
+    internal error, exit 1)."""
+    from test_cli import run
+
+    code, out, err = run(capsys, "render", "phantom:hydrogen:16", "--levels", "1", "--size", "64",
+                         "--scale-bar=1e308", "-o", str(tmp_path / "a.png"))
+    assert code == 2 and "is longer than the 50 pixels the 64-pixel-wide picture has" in err, err
+    assert err.count("\n") == 1 and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (8, 8), (500, 8)])
+def test_a_picture_too_narrow_for_any_bar_says_so(shape):
+    """An 8-pixel-wide picture has no room for a bar: the refusal advised a length "from 200 µm to -6e+05 nm"."""
+    from clwave.errors import InputError
+    from clwave.io.images import draw_scale_bar
+
+    with pytest.raises(InputError, match=rf"the {shape[1]}x{shape[0]}-pixel picture has no room for a scale bar "
+                                         r"\(it needs \d+ pixels across\): give a larger picture size, or no scale "
+                                         "bar") as caught:
+        draw_scale_bar(np.zeros(shape, np.uint8), 0.1, "mm")
+    assert "-" not in str(caught.value).replace("-pixel", "")
