@@ -49,3 +49,21 @@ def test_a_picture_too_narrow_for_any_bar_says_so(shape):
                                          "bar") as caught:
         draw_scale_bar(np.zeros(shape, np.uint8), 0.1, "mm")
     assert "-" not in str(caught.value).replace("-pixel", "")
+
+
+@pytest.mark.parametrize("unit", [["micrometer"], {"name": "micrometer"}])
+def test_an_ome_zarr_unit_that_is_no_name_is_refused_naming_it(tmp_path, unit):
+    """A unit of ["micrometer"] was "cannot read ...: TypeError: unhashable type: 'list'; the file may be truncated"."""
+    import zarr
+
+    from test_chunked_inputs import _ome
+
+    path, _ = _ome(tmp_path, fmt=3)
+    attrs = zarr.open_group(path, mode="r+").attrs
+    ome = attrs["ome"]
+    ome["multiscales"][0]["axes"][-1]["unit"] = unit
+    attrs["ome"] = ome
+    with pytest.raises(clwave.errors.FileFormatError, match=r"its OME-Zarr metadata gives the z, y, x axes the units "
+                                                            r".*; a unit is a name, e.g. 'micrometer'") as caught:
+        clwave.load(path)
+    assert "\n" not in str(caught.value) and "TypeError" not in str(caught.value)
