@@ -67,3 +67,19 @@ def test_an_ome_zarr_unit_that_is_no_name_is_refused_naming_it(tmp_path, unit):
                                                             r".*; a unit is a name, e.g. 'micrometer'") as caught:
         clwave.load(path)
     assert "\n" not in str(caught.value) and "TypeError" not in str(caught.value)
+
+
+@pytest.mark.parametrize("stamp, flags, expected", [(1146047817, 0, np.uint8), (1146047817, 1, np.int8),
+                                                    (0, 0, np.int8)], ids=["imod-unsigned", "imod-signed", "mrc2014"])
+def test_an_imod_map_of_unsigned_bytes_is_read_unsigned(tmp_path, stamp, flags, expected):
+    """Mode 0 is signed bytes in MRC2014, but IMOD marks its files (imodStamp "IMOD" at byte 152) and says in
+    imodFlags bit 0 whether their bytes are signed: unset, they are unsigned (all IMOD wrote before 4.2.23), and a
+    tomogram's 200 was read as -56, a silently wrong image."""
+    from test_mrc import _write
+
+    stored = np.arange(60, dtype=np.uint8).reshape(3, 4, 5) * 4  # 0 .. 236
+    path = _write(tmp_path / "t.rec", stored.view(np.int8))
+    content = bytearray(path.read_bytes())
+    content[152:160] = np.array([stamp, flags], "<i4").tobytes()
+    path.write_bytes(bytes(content))
+    np.testing.assert_array_equal(clwave.load(path).data, stored.view(expected).astype(np.float32))

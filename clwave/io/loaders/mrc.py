@@ -15,6 +15,7 @@ from .shared import OnDemand, as_array, check_declared_size, no_spacing, note
 MRC_SUFFIXES = (".mrc", ".map", ".ccp4", ".rec", ".st")
 _HEADER = 1024  # bytes before the extended header (nsymbt bytes), then the samples
 _COMPLEX = {3: "complex int16", 4: "complex float32"}
+_IMOD_STAMP = 1146047817  # "IMOD" (little-endian bytes)
 
 
 def read_mrc(path, chunks, fits=None, warn_spacing=True):
@@ -38,6 +39,8 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True):
     except ValueError:
         raise FileFormatError(f"{path}: its MRC header names mode {mode}, none clwave reads (0 int8, 1 int16, "
                               "2 float32, 6 uint16, 12 float16); the file is corrupt or packed (mode 101)") from None
+    if mode == 0 and _imod_unsigned(header):
+        dtype = np.dtype(np.uint8)
     stored = tuple(int(n) for n in (header.nz, header.ny, header.nx))  # sections, rows, columns
     if min(stored) < 1:
         raise FileFormatError(f"{path}: its MRC header declares {' x '.join(map(str, stored[::-1]))} columns, rows "
@@ -101,6 +104,13 @@ def _header(path):
             return mrc.header.copy(), _HEADER + int(mrc.header.nsymbt)
     except ValueError as exc:
         raise FileFormatError(f"{path} is not an MRC/CCP4 map clwave reads: {exc} (mrcfile)") from None
+
+
+def _imod_unsigned(header) -> bool:
+    """Whether mode 0's bytes are unsigned: IMOD's stamp ("IMOD" at byte 152) without its signed-bytes flag (bit 0 of
+    imodFlags at 156), as IMOD wrote every byte file before 4.2.23; MRC2014's mode 0 is signed."""
+    stamp, flags = np.frombuffer(header.tobytes(), header.nx.dtype, 2, 152)
+    return int(stamp) == _IMOD_STAMP and not int(flags) & 1
 
 
 def _spacing(header):
