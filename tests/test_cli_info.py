@@ -114,7 +114,7 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
     tifffile.imwrite(tmp_path / "v.tif", data, photometric="minisblack")
     loaded = {name: clwave.load(tmp_path / name) for name in ("v.npy", "v.nii", "v.h5")}
     import clwave.io.loaders.raw as raw
-    monkeypatch.setattr(raw, "_read_memmap", lambda *a: pytest.fail("a voxel of the .npy was read"))
+    monkeypatch.setattr(raw, "read_memmap", lambda *a: pytest.fail("a voxel of the .npy was read"))
     monkeypatch.setattr(nibabel.arrayproxy.ArrayProxy, "__getitem__", lambda *a: pytest.fail("a NIfTI voxel read"))
     monkeypatch.setattr(h5py.Dataset, "__getitem__", lambda *a: pytest.fail("an HDF5 voxel read"))
     for name, vol in loaded.items():
@@ -302,9 +302,10 @@ def test_info_of_a_time_series_describes_it_and_names_the_refusal(tmp_path, caps
 
 def test_every_formats_description_has_the_same_keys(tmp_path, capsys):
     """trial22: .nii gave `shape`, `channels`, `spacing_in_file`, .nii.gz `stored_shape`, `resampled` instead.  One
-    volume as .nii, .nii.gz, .nrrd, .npy, .tif, .zarr and a DICOM folder: the same JSON keys (loaders.DESCRIBED), a
-    fact a format does not give as null; a .clw shares file, format, bytes, shape, channels, spacing, origin and
-    obliquity, with its model's own besides."""
+    volume as .nii, .nii.gz, .mgh, .mgz, .nrrd, .npy, .tif, .zarr, .mrc and a DICOM folder: the same JSON keys
+    (loaders.DESCRIBED), a fact a format does not give as null; a .clw shares file, format, bytes, shape, channels,
+    spacing, origin and obliquity, with its model's own besides."""
+    import mrcfile
     import nibabel
     import nrrd
     import tifffile
@@ -316,6 +317,10 @@ def test_every_formats_description_has_the_same_keys(tmp_path, capsys):
     data = (np.arange(4 * 5 * 6).reshape(4, 5, 6) % 7).astype(np.int16)
     for name in ("v.nii", "v.nii.gz"):
         nibabel.save(nibabel.Nifti1Image(data, np.eye(4)), tmp_path / name)
+    for name in ("v.mgh", "v.mgz"):
+        nibabel.save(nibabel.MGHImage(data, np.eye(4)), tmp_path / name)
+    with mrcfile.new(tmp_path / "v.mrc") as mrc:
+        mrc.set_data(data)
     nrrd.write(str(tmp_path / "v.nrrd"), data)
     np.save(tmp_path / "v.npy", data)
     tifffile.imwrite(tmp_path / "v.tif", data, photometric="minisblack")
@@ -325,7 +330,8 @@ def test_every_formats_description_has_the_same_keys(tmp_path, capsys):
                  ["a.dcm", "b.dcm", "c.dcm"])
     clwave.WaveletVolume.from_volume(clwave.Volume(data.astype(np.float32)), levels=1).save(tmp_path / "v.clw")
     keys = {}
-    for name in ("v.nii", "v.nii.gz", "v.nrrd", "v.npy", "v.tif", "v.zarr", "dicom", "v.clw"):
+    for name in ("v.nii", "v.nii.gz", "v.mgh", "v.mgz", "v.nrrd", "v.npy", "v.tif", "v.zarr", "v.mrc", "dicom",
+                 "v.clw"):
         code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
         assert code == 0, err
         keys[name] = list(json.loads(out))

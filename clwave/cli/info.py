@@ -159,6 +159,8 @@ def _oblique(degrees) -> str:
 
 
 def _volume_lines(f) -> list:
+    from ..io.loaders import RAS_FORMATS
+
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
     if f["stored_shape"] is not None:  # read whole: weighed as the file stores it, its axes in the file's order
         resampled = "" if not f["resampled"] else ", its sheared grid resampled onto a straight one wider by its " \
@@ -181,7 +183,7 @@ def _volume_lines(f) -> list:
         missing = "" if given or f["spacing_in_file"] else ": none in the file, give yours"
         place = f"{_lengths(f['spacing'][::-1], extent)}{unit} (x, y, z; {f['spacing_option']}{' given' * given}" \
                 f"{turned}{missing}), origin {_lengths(f['origin'], extent)}"
-        lines.append(("spacing", place + (" (RAS+)" if f["format"] in ("nifti", "nrrd", "dicom") or stated else "")))
+        lines.append(("spacing", place + (" (RAS+)" if f["format"] in RAS_FORMATS or stated else "")))
     elif not f["time"]:
         lines.append(("spacing", "found with the voxels when the file is read (1 where it gives none): "
                                  "--spacing DZ,DY,DX sets it"))

@@ -146,8 +146,8 @@ def read_volume(args):
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     # weighed by the size the file declares, before its voxels are read
     fits = partial(check_model_fits, args, what="decomposing this volume",
-                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, TIFF; gunzip a .nii.gz "
-                        "first), or crop or subsample it")
+                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, TIFF; "
+                        "gunzip a .nii.gz first, a .mgz into a .mgh), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
                 series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),
                 nan=args.nan, subtract=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits,
@@ -469,6 +469,9 @@ def add_camera_options(p):
     g.add_argument("--fit", choices=FITS, default="sphere", help="default framing: sphere (the bounding sphere of "
                    "the non-empty voxels spans the image, the same at every view) or box (their box's projection "
                    "for this view fills the image: an elongated volume seen from its side)")
+    g.add_argument("--scale-bar", nargs="?", const=True, type=float, metavar="LENGTH",
+                   help="PNG and GIF: burn in a scale bar of LENGTH world units, labelled in the input's unit (without "
+                        "LENGTH 1, 2 or 5 times a power of ten, about a fifth of the width); orthographic only")
     add_device_options(g)
 
 
