@@ -87,7 +87,7 @@ def test_a_files_origin_turns_with_its_axes_and_origin_places_the_centre(tmp_pat
 
 
 def test_orientation_is_refused_for_oriented_files_and_bad_codes(tmp_path, rng, capsys):
-    """A DICOM, NIfTI or NRRD input carries its own orientation: orientation= is refused for it in one line, as
+    """A DICOM, NIfTI, MGH or NRRD input carries its own orientation: orientation= is refused for it in one line, as
     codes that are not one of L/R, A/P and I/S each are; the command line says the same with its flag."""
     import nibabel as nib
     import nrrd
@@ -97,7 +97,8 @@ def test_orientation_is_refused_for_oriented_files_and_bad_codes(tmp_path, rng, 
         write_dicom_slice(tmp_path / "ct" / f"s{k}.dcm", np.zeros((4, 4)), (0, 0, k), "1.2.3")
     nib.save(nib.Nifti1Image(np.zeros((3, 4, 5), np.float32), np.eye(4)), tmp_path / "v.nii")
     nrrd.write(str(tmp_path / "v.nrrd"), np.zeros((3, 4, 5), np.float32))
-    for name in ("ct", "v.nii", "v.nrrd"):
+    nib.save(nib.MGHImage(np.zeros((3, 4, 5), np.float32), np.eye(4)), tmp_path / "v.mgz")
+    for name in ("ct", "v.nii", "v.nrrd", "v.mgz"):
         with pytest.raises(InputError, match="orientation= is for inputs that carry none") as excinfo:
             load(tmp_path / name, orientation="LPS")
         assert_one_line_error(excinfo)
@@ -108,8 +109,8 @@ def test_orientation_is_refused_for_oriented_files_and_bad_codes(tmp_path, rng, 
         assert_one_line_error(e)
     code, out, err = run(capsys, "info", str(tmp_path / "v.nii"), "--orientation", "LPS")
     assert code == 2 and err.strip().endswith("--orientation is for inputs that carry none (.npy, .raw, TIFF, "
-                                              "folders of slices, Zarr, HDF5); a nifti input is put in RAS+ by its "
-                                              "own header: leave it out"), err
+                                              "folders of slices, Zarr, HDF5, MRC); a nifti input is put in RAS+ by "
+                                              "its own header: leave it out"), err
     code, out, err = run(capsys, "info", str(tmp_path / "v.npy"), "--orientation", "XYZ")
     assert code == 2 and "--orientation XYZ must be three letters" in err and len(err.splitlines()) == 1, err
 

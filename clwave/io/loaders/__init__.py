@@ -102,8 +102,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         NIfTI's (x, y, z) axes); the volume is turned into RAS+ as a medical file is (docs/coordinates.md §1).
         Refused for NIfTI, MGH, NRRD and DICOM, which carry their own.
     unit : str, optional
-        The world unit, the length of the spacing's 1 (:data:`clwave.io.images.UNIT_METRES`: "mm", "um"...); default the file's
-        (:func:`world_unit`; None where it gives none).
+        The world unit, the length of the spacing's 1 (:data:`clwave.io.images.UNIT_METRES`: "mm", "um"...);
+        default the file's (:func:`world_unit`; None where it gives none).
     origin : 3 floats, optional
         World position ``(x, y, z)`` of the volume's centre, after ``orientation=``; default the file's, else 0.
     fits : callable, optional
