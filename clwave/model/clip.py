@@ -40,7 +40,7 @@ class Clip:
         if self.lo is not None:
             lo, hi = (tuple(reals(v, name, 3, "3 finite numbers (x, y, z) in world units").tolist())
                       for v, name in ((self.lo, "lo"), (self.hi, "hi")))
-            _finite((*lo, *hi), f"the clip box {lo} .. {hi}")
+            _finite((*lo, *hi), f"the clip box's corners {lo} .. {hi}")
             if not all(a < b for a, b in zip(lo, hi)):
                 raise InputError(f"the clip box's lo {lo} must be below its hi {hi} on every axis (x, y, z)")
             object.__setattr__(self, "lo", lo)
@@ -55,7 +55,7 @@ class Clip:
                 raise InputError(f"plane {i} {plane!r} must be (point, normal), each 3 numbers (x, y, z)")
             point, normal = (tuple(reals(v, f"plane {i}'s {name}", 3, "3 finite numbers (x, y, z)").tolist())
                              for v, name in zip(plane, ("point", "normal")))
-            _finite((*point, *normal), f"plane {i}")
+            _finite((*point, *normal), f"plane {i}'s point {point} and normal {normal}")
             if not 0 < np.linalg.norm(normal) < np.inf:
                 raise InputError(f"plane {i}'s normal {normal} must be a non-zero direction (towards what is kept)")
             planes.append((point, normal))
@@ -110,7 +110,7 @@ class Clip:
 
 def _finite(values, what):
     if not np.all(np.isfinite(values)):
-        raise InputError(f"{what} must be finite numbers, got {tuple(values)}")
+        raise InputError(f"{what} must be finite numbers")
 
 
 def check_clip(clip) -> Clip | None:
