@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 import clwave
-from clwave.cli import main
 from clwave.device import programs
 from clwave.errors import InputError
 from clwave.raytrace.reference import classified_reference, raytrace_reference
 from clwave.raytrace.tracer import RayTracer
+from test_cli import run
+from test_raytrace import small_rgba  # noqa: F401  (a fixture: a random 5 x 6 x 7 RGBA model and its tracer)
 
 PLANE = clwave.Clip(planes=[((0.3, 0.2, 0.0), (1.0, 0.5, 0.2))])
 BOX_AND_PLANES = clwave.Clip(lo=(-2.0, -1.5, -1.0), hi=(3.0, 2.0, 1.5),
@@ -19,18 +20,10 @@ BOX_AND_PLANES = clwave.Clip(lo=(-2.0, -1.5, -1.0), hi=(3.0, 2.0, 1.5),
 EVERYTHING = clwave.Clip(lo=(-1e3, -1e3, -1e3), hi=(1e3, 1e3, 1e3), planes=[((-1e3, 0.0, 0.0), (1.0, 0.0, 0.0))])
 
 
-@pytest.fixture(scope="module")
-def small_rgba():
-    rng = np.random.default_rng(3)
-    data = rng.random((5, 6, 7, 4)) * np.array([1.0, 0.8, 0.6, 0.5])
-    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data.astype(np.float32), spacing=(1.0, 0.8, 1.2)),
-                                          wavelet="cubic", levels=1)
-    return wv, RayTracer(wv)
-
-
 @pytest.mark.parametrize("clip", [PLANE, BOX_AND_PLANES], ids=["plane", "box and planes"])
-@pytest.mark.parametrize("kw", [dict(absorption=False), dict(shading=False), dict()], ids=["xray", "unshaded", "shaded"])
-def test_clipped_render_equals_the_oracle_of_the_clipped_integral(small_rgba, clip, kw):
+@pytest.mark.parametrize("kw", [dict(absorption=False), dict(shading=False), dict()],
+                         ids=["xray", "unshaded", "shaded"])
+def test_clipped_render_equals_the_oracle_of_the_clipped_integral(small_rgba, clip, kw):  # noqa: F811
     """Orthographic and perspective (the eye inside the volume, in front of the plane), against raytrace_reference,
     whose intervals are cut in world coordinates; the clip changes the image."""
     wv, tracer = small_rgba
@@ -87,7 +80,7 @@ def test_a_uniform_box_cut_by_a_plane_gives_the_chord_closed_forms(field):
     assert np.abs(shaded[..., :3] - (q / alpha * exact)[..., None]).max() <= 1e-4
 
 
-def test_a_clip_around_the_whole_volume_gives_the_unclipped_image_bit_for_bit(small_rgba):
+def test_a_clip_around_the_whole_volume_gives_the_unclipped_image_bit_for_bit(small_rgba):  # noqa: F811
     wv, tracer = small_rgba
     cam = clwave.Camera(30, 20, size=(5, 6))
     for kw in (dict(), dict(shading=False), dict(absorption=False)):
@@ -116,7 +109,7 @@ def test_a_post_classified_render_is_clipped(hydrogen):
     assert np.array_equal(tracer.render(cam, tolerance=1e-3, transfer_function=tf, clip=EVERYTHING).image, whole)
 
 
-def test_a_new_clip_rebuilds_nothing_and_progressive_frames_are_clipped(small_rgba, monkeypatch):
+def test_a_new_clip_rebuilds_nothing_and_progressive_frames_are_clipped(small_rgba, monkeypatch):  # noqa: F811
     """Renders with other clips take the same kernel build (the half-spaces are arguments, not defines) and no new
     set-up; progressive ray tracing clips every frame, its last frame the clipped render bit for bit."""
     wv, tracer = small_rgba
@@ -159,19 +152,13 @@ def test_thin_but_real_clips_are_kept():
     assert PLANE.contains([(1.0, 0.2, 0.0), (-1.0, 0.2, 0.0)]).tolist() == [True, False]
 
 
-def test_a_clip_that_misses_the_volume_or_is_not_a_clip_is_refused(small_rgba):
+def test_a_clip_that_misses_the_volume_or_is_not_a_clip_is_refused(small_rgba):  # noqa: F811
     wv, tracer = small_rgba
     cam = clwave.Camera(30, 20, size=4)
     with pytest.raises(InputError, match=r"keeps nothing of the volume's content, which lies within"):
         tracer.render(cam, clip=clwave.Clip(lo=(50, 50, 50), hi=(60, 60, 60)))
     with pytest.raises(InputError, match=r"clip=.* must be a clwave.Clip"):
         clwave.raytrace(wv, cam, clip=((0, 0, 0), (1, 1, 1)))
-
-
-def run(capsys, *argv):
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_cli_clips_render_and_progressive(tmp_path, capsys):

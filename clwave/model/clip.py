@@ -1,4 +1,4 @@
-"""Clipping: the part of world space a ray-traced image keeps (docs/coordinates.md §8, docs/raytracing.md §12): an
+"""Clipping: the part of world space a ray-traced image keeps (docs/coordinates.md §6, docs/raytracing.md §12): an
 axis-aligned crop box and/or a few half-spaces, a convex region, so that a ray's interval through it is one
 interval."""
 
@@ -19,7 +19,7 @@ THIN = 1e-9
 
 @dataclass(frozen=True)
 class Clip:
-    """What a ray-traced image keeps, in world coordinates (RAS+, the volume's world units, docs/coordinates.md §8):
+    """What a ray-traced image keeps, in world coordinates (RAS+, the volume's world units, docs/coordinates.md §6):
     the box ``lo`` .. ``hi`` (x, y, z corners, ``lo < hi``; None: no box) and the half-spaces ``planes``, each
     ``(point, normal)``: the side the normal points to is kept, the plane itself included.  Validated when made
     (finite numbers, non-zero normals, at most :data:`MAX_PLANES` planes, a region with volume): one
