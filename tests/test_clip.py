@@ -10,6 +10,7 @@ import clwave
 from clwave.device import programs
 from clwave.errors import InputError
 from clwave.raytrace.reference import classified_reference, raytrace_reference
+from clwave.raytrace.regions import composite, slab_order, slabs
 from clwave.raytrace.tracer import RayTracer
 from test_cli import run
 from test_raytrace import small_rgba  # noqa: F401  (a fixture: a random 5 x 6 x 7 RGBA model and its tracer)
@@ -123,6 +124,24 @@ def test_a_new_clip_rebuilds_nothing_and_progressive_frames_are_clipped(small_rg
     frames = list(clwave.progressive(wv, cam, method="raytrace", tracer=tracer, clip=PLANE))
     assert len(frames) > 1 and np.array_equal(frames[-1].image, images[1])
     assert np.array_equal(list(tracer.refine(cam, clip=PLANE))[-1].image, images[1])
+
+
+def test_slabs_of_a_cluster_render_clip_alike():
+    """The slabs a Dask cluster renders (docs/raytracing.md §7), each clipped, composited in ray order: within the
+    tolerance of the whole clipped image, though the crop box keeps nothing of the first slab (not refused there)."""
+    vol = clwave.phantom("hydrogen", n=40)
+    wv = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(vol), wavelet="cubic",
+                                          levels=2).threshold(keep=0.2)
+    parts, whole = slabs(wv, 3), RayTracer(wv)
+    tracers = [RayTracer(wv, region=r) for r in parts]
+    clip = clwave.Clip(lo=(-100, -100, -5), hi=(100, 100, 100), planes=[((0, 0, 0), (0.3, -1, 0.2))])
+    for cam, kw in ((clwave.Camera(30, 20, size=24), {}), (clwave.Camera(-60, 35, size=24), dict(absorption=False))):
+        want = whole.render(cam, clip=clip, **kw).image
+        images = [t.render(cam, tolerance=1e-3 / len(parts), clip=clip, **kw).image for t in tracers]
+        got = composite([images[i] for i in slab_order(wv, parts, cam)], kw.get("absorption", True))
+        assert np.abs(want).max() > 0.4 and not images[0].any()
+        assert np.max(np.abs(got - want)) <= 1e-3 + np.abs(want).max() * 2.0 ** -23
+        assert np.abs(whole.render(cam, **kw).image - want).max() > 0.4
 
 
 @pytest.mark.parametrize("kw, message", [

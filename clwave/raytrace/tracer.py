@@ -350,7 +350,7 @@ class RayTracer:
         if post is not None:  # the classified opacity bounds the field (docs/raytracing.md §10)
             skip.update(bound=post.bound, super_bound=post.super_bound, super_origin=post.super_origin[::-1],
                         super_shape=post.super_bound.shape[::-1], box_lo=post.box[0], box_hi=post.box[1])
-        skip.update(_clipped(clip, skip["box_lo"], skip["box_hi"], scale, offset, q))
+        skip.update(_clipped(clip, skip["box_lo"], skip["box_hi"], scale, offset, q, self.region is None))
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         arguments = dict(
@@ -449,13 +449,13 @@ class RayTracer:
         return phong, "phong"
 
 
-def _clipped(clip, lo, hi, scale, offset, queue) -> dict:
+def _clipped(clip, lo, hi, scale, offset, queue, whole) -> dict:
     """The kernel's ``box_lo``, ``box_hi``, ``clip`` and ``nclip`` (docs/raytracing.md §12): the support box ``lo`` ..
     ``hi`` (grid-0 fine (x, y, z)) cut by the clip's box, and its half-spaces in world units; a clip that keeps
-    nothing of that box refused."""
+    nothing of that box refused where it is the ``whole`` model's (a slab on a cluster may lie outside the clip)."""
     if clip is None:
         return dict(box_lo=lo, box_hi=hi, clip=cla.zeros(queue, (1, 4), np.float32), nclip=0)
-    if not clip.keeps((lo - offset) / scale, (hi - offset) / scale):
+    if whole and not clip.keeps((lo - offset) / scale, (hi - offset) / scale):
         world = [np.round((b - offset) / scale, 6).tolist() for b in (lo, hi)]
         raise InputError(f"{clip.describe()} keeps nothing of the volume's content, which lies within {world[0]} .. "
                          f"{world[1]} (world x, y, z): move or turn it to cut through the volume")
