@@ -1,6 +1,7 @@
 """Clipping in the ray tracer (clwave.Clip, docs/raytracing.md §12): each ray's integral over its interval inside a
 crop box and half-spaces, against the NumPy oracles cut in world coordinates and closed forms; bad input."""
 
+import pickle
 import re
 
 import numpy as np
@@ -165,10 +166,12 @@ def test_bad_clips_are_refused_in_one_line(kw, message):
 
 
 def test_thin_but_real_clips_are_kept():
-    """What keeps nothing is measured against the clip's own coordinates: a micrometre slab is a region."""
+    """What keeps nothing is measured against the clip's own coordinates: a micrometre slab is a region.  A clip
+    pickles."""
     assert clwave.Clip(lo=(1e-6, 0, 0), hi=(2e-6, 1e-6, 1e-6)).keeps()
     assert clwave.Clip(planes=[((100, 0, 0), (1, 0, 0)), ((100 + 1e-6, 0, 0), (-1, 0, 0))]).keeps()
     assert PLANE.contains([(1.0, 0.2, 0.0), (-1.0, 0.2, 0.0)]).tolist() == [True, False]
+    assert pickle.loads(pickle.dumps(BOX_AND_PLANES)) == BOX_AND_PLANES  # sent to a cluster's workers
 
 
 def test_a_clip_that_misses_the_volume_or_is_not_a_clip_is_refused(small_rgba):  # noqa: F811
