@@ -499,6 +499,10 @@ def add_raytrace_options(p):
                    "'none' for ambient only (default: a headlight)")
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
+    g.add_argument("--clip-box", metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="keep only what lies in this box, world coordinates (docs/coordinates.md §6)")
+    g.add_argument("--clip-plane", action="append", metavar="PX,PY,PZ,NX,NY,NZ",
+                   help="keep only the side of the plane through point P that its normal N points to; repeatable")
     g.add_argument("--background", help="PNG: colour R,G,B behind the volume, linear RGB in 0..1, composited before "
                                         "the sRGB encoding (0.5 is shown as 188; default 0,0,0, black), or "
                                         "transparent (RGBA)")
