@@ -80,7 +80,7 @@ def test_an_image_stack_is_read_as_slices_with_a_warning(tmp_path, rng, capsys):
         vol = clwave.load(tmp_path / "tilts.st")
     np.testing.assert_array_equal(vol.data, stored)
     code, out, err = run(capsys, "info", str(tmp_path / "tilts.st"))
-    assert code == 0 and "3, 3, 3 A (x, y, z)" in out, out + err
+    assert code == 0 and "3, 3, 3 A (x, y, z; --spacing 3,3,3)" in out, out + err
 
 
 def test_a_compressed_map_keeps_its_unit(tmp_path, capsys):

@@ -29,7 +29,8 @@ SAVE_PIXEL_BYTES = 200
 #: the model options that name its transfer function: a scalar model's shaded view replaces them with the tab's
 TF_OPTIONS = ("tf", "tf_window")
 #: the reading options that clwave.load takes by the same name
-LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level")
+LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level",
+                "orientation", "unit")
 
 
 @dataclass(frozen=True)
