@@ -83,3 +83,43 @@ def test_an_imod_map_of_unsigned_bytes_is_read_unsigned(tmp_path, stamp, flags, 
     content[152:160] = np.array([stamp, flags], "<i4").tobytes()
     path.write_bytes(bytes(content))
     np.testing.assert_array_equal(clwave.load(path).data, stored.view(expected).astype(np.float32))
+
+
+@pytest.mark.parametrize("normal", [(1e200, 0, 0), (1e-200, 0, 0), (1e-170, 1e-170, 1e-170)])
+def test_a_clip_plane_normal_of_any_non_zero_length_is_a_direction(normal):
+    """The normal's length does not matter (coordinates.md §6), but 1e200 (its norm overflowed, with a
+    RuntimeWarning) and 1e-200 were refused as "must be a non-zero direction"."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        clip = clwave.Clip(planes=[((0, 0, 0), normal)])
+    np.testing.assert_allclose(clip.half_spaces(), [[*np.array(normal) / np.abs(normal).max() /
+                                                     np.sqrt(np.count_nonzero(normal)), 0.0]])
+    assert clip.contains([(1, 1, 1), (-1, -1, -1)]).tolist() == [True, False]
+
+
+@pytest.mark.parametrize("kw, volume", [
+    (dict(lo=(1e9, 0, 0), hi=(1e9 + 0.5, 1, 1)), ((1e9 - 1, -1, -1), (1e9 + 1, 2, 2))),  # a billion units away
+    (dict(lo=(0, 0, 0), hi=(1, 1, 1), planes=[((1e12, 0, 0), (-1, 0, 0))]), ((-1,) * 3, (2,) * 3)),  # a far plane
+    (dict(planes=[((1e6, 0, 0), (1, 0, 0)), ((1e6 + 1e-3, 0, 0), (-1, 0, 0))]),
+     ((1e6 - 1, -1, -1), (1e6 + 1, 1, 1))),  # a millimetre slab a kilometre away
+    (dict(lo=(-1e300, -1e300, -1e300), hi=(1e300, 1e300, 1e300)), ((-1,) * 3, (1,) * 3))])
+def test_a_clip_keeps_what_it_keeps_wherever_it_lies(kw, volume):
+    """Thinness was measured against the clip's coordinates (1e-9 of them): each of these clips keeps a region (a
+    whole unit box, with the far plane), within a ``volume`` box around it too, but was refused as keeping
+    nothing."""
+    clip = clwave.Clip(**kw)
+    assert clip.keeps() and clip.keeps(*map(np.array, volume))
+
+
+def test_a_clip_box_around_everything_renders_the_whole_volume(tmp_path, capsys):
+    """--clip-box of +-1e300 keeps all the volume: it was refused as keeping nothing of it."""
+    from test_cli import run
+
+    base = ["render", "phantom:hydrogen:16", "--levels", "1", "--size", "16", "--method", "raytrace", "--xray"]
+    code, out, err = run(capsys, *base, "--clip-box=-1e300,-1e300,-1e300,1e300,1e300,1e300",
+                         "-o", str(tmp_path / "a.png"), "--raw", str(tmp_path / "a.npy"))
+    assert code == 0, err
+    assert run(capsys, *base, "-o", str(tmp_path / "b.png"), "--raw", str(tmp_path / "b.npy"))[0] == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))
