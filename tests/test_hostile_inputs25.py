@@ -123,3 +123,22 @@ def test_a_clip_box_around_everything_renders_the_whole_volume(tmp_path, capsys)
     assert code == 0, err
     assert run(capsys, *base, "-o", str(tmp_path / "b.png"), "--raw", str(tmp_path / "b.npy"))[0] == 0
     np.testing.assert_array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))
+
+
+@pytest.mark.parametrize("clip", ["--clip-plane=1e300,0,0,-1,0,0", "--clip-box=-1.7e308,-1.7e308,-1.7e308,1.7e308,"
+                                                                   "1.7e308,1.7e308"])
+def test_a_clip_beyond_float32_keeps_all_without_a_warning(tmp_path, capsys, clip):
+    """A plane 1e300 units away (its offset overflowed float32 for the kernel: "RuntimeWarning: overflow encountered
+    in cast" printed beside the render) keeps the whole volume: the image is the unclipped one, bit for bit."""
+    import warnings
+
+    from test_cli import run
+
+    base = ["render", "phantom:hydrogen:16", "--levels", "1", "--size", "16", "--method", "raytrace", "--xray",
+            "--spacing", "0.25,0.25,0.25"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        code, out, err = run(capsys, *base, clip, "-o", str(tmp_path / "a.png"), "--raw", str(tmp_path / "a.npy"))
+    assert code == 0, err
+    assert run(capsys, *base, "-o", str(tmp_path / "b.png"), "--raw", str(tmp_path / "b.npy"))[0] == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))
