@@ -142,3 +142,16 @@ def test_a_clip_beyond_float32_keeps_all_without_a_warning(tmp_path, capsys, cli
     assert code == 0, err
     assert run(capsys, *base, "-o", str(tmp_path / "b.png"), "--raw", str(tmp_path / "b.npy"))[0] == 0
     np.testing.assert_array_equal(np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy"))
+
+
+@pytest.mark.parametrize("unit", [["um"], {"mm": 1}, np.array("mm")])
+def test_a_unit_that_is_no_name_is_an_input_error(tmp_path, unit):
+    """unit=["um"] (load's, Volume's, RenderResult.save's) was a TypeError (unhashable type), not the InputError
+    naming the world units."""
+    from clwave.errors import InputError
+
+    np.save(tmp_path / "v.npy", np.zeros((2, 3, 4), np.float32))
+    with pytest.raises(InputError, match=r"must be the world unit, one of m, cm, mm, um, nm, A, or None"):
+        clwave.load(tmp_path / "v.npy", unit=unit)
+    with pytest.raises(InputError, match=r"must be the world unit"):
+        clwave.Volume(np.zeros((2, 3, 4), np.float32), unit=unit)

@@ -34,7 +34,7 @@ def check_bit_depth(bit_depth) -> int:
 
 def check_unit(unit):
     """``unit`` (None: not a known length) as one of :data:`UNIT_METRES`; one InputError otherwise."""
-    if unit is not None and unit not in UNIT_METRES:
+    if unit is not None and not (isinstance(unit, str) and unit in UNIT_METRES):
         raise InputError(f"unit={unit!r} must be the world unit, one of {', '.join(UNIT_METRES)}, or None where it "
                          f"is not a known length")
     return unit
