@@ -155,3 +155,21 @@ def test_a_unit_that_is_no_name_is_an_input_error(tmp_path, unit):
         clwave.load(tmp_path / "v.npy", unit=unit)
     with pytest.raises(InputError, match=r"must be the world unit"):
         clwave.Volume(np.zeros((2, 3, 4), np.float32), unit=unit)
+
+
+@pytest.mark.parametrize("tail", ["padding", "members"])
+def test_a_gzip_stream_the_trailer_does_not_count_is_read(tmp_path, tail):
+    """The gzip trailer counts the last member only: a .mgz with zero padding after it (nibabel reads it) or of two
+    members was refused as truncated ("its gzip stream holds 0 bytes")."""
+    import gzip
+
+    import nibabel as nib
+    from nibabel.freesurfer.mghformat import MGHImage
+
+    data = np.arange(4 * 5 * 6, dtype=np.float32).reshape(4, 5, 6)
+    nib.save(MGHImage(data, np.eye(4)), tmp_path / "v.mgz")
+    whole = gzip.decompress((tmp_path / "v.mgz").read_bytes())
+    content = (tmp_path / "v.mgz").read_bytes() + bytes(16) if tail == "padding" else \
+        gzip.compress(whole[:300]) + gzip.compress(whole[300:])
+    (tmp_path / "w.mgz").write_bytes(content)
+    np.testing.assert_array_equal(clwave.load(tmp_path / "w.mgz").data, data.transpose(2, 1, 0))  # RAS: (k, j, i)
