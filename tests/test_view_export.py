@@ -236,3 +236,34 @@ def test_a_perspective_view_zooms_its_lens_and_keeps_its_eye():
         assert v.slope[0] * np.linalg.norm(v.eye - v.target) == pytest.approx(flat[zoom].pixel, rel=1e-12)
     radius = np.linalg.norm(np.array(vol.shape) * vol.spacing) / 2
     assert np.linalg.norm(views[1.0].eye - views[1.0].target) > 3 * radius
+
+
+def test_an_opacity_unit_goes_into_the_command_and_the_python(tmp_path, monkeypatch):
+    """``clwave view ... --tf hydrogen --opacity-unit 2``: a shaded view of the scalar kept (--classify post) through
+    the tab's function, which holds the unit, is a .json of it in the command (no --opacity-unit beside it) and
+    ``from_dict`` of it in the Python: one image bit for bit, not the image of the function per voxel; an X-ray of
+    the volume classified before the transform keeps --tf hydrogen --opacity-unit 2, and its Python the preset's
+    ``opacity_unit=2.0`` (it said the option was not in the snippet): one image again."""
+    from clwave.cli import main, make_parser
+
+    def origin_of(*more):
+        return Origin.of_args(make_parser().parse_args(["view", "phantom:hydrogen:20", "--levels", "2", "--tf",
+                                                        "hydrogen", "--opacity-unit", "2", *more]))
+    camera = clwave.Camera(100.0, -30.0, (24, 28), extent=30.0)
+    tf = clwave.TransferFunction.preset("hydrogen", window=(0.02, 0.3), opacity_unit=2.0)
+    post_origin = origin_of("--classify", "post")
+    shaded = Spec("shaded", camera, tolerance=1e-2, tf=tf, levels=2)
+    text = command(post_origin, shaded)
+    assert "--tf view-tf.json" in text and "--opacity-unit" not in text and '"opacity_unit": 2.0' in text, text
+    got = shell(text, tmp_path / "shell")
+    assert got.std() > 5
+    assert np.array_equal(executed(python(post_origin, shaded), tmp_path / "python", monkeypatch), got)
+    per_voxel = Spec("shaded", camera, tolerance=1e-2, tf=tf.under(opacity_unit=None), levels=2)
+    assert not np.array_equal(executed(python(post_origin, per_voxel), tmp_path / "voxel", monkeypatch), got)
+    pre_origin, xray = origin_of(), Spec("xray", camera, window=(0.0, 0.15), levels=2)
+    text, snippet = command(pre_origin, xray), python(pre_origin, xray)
+    assert "--tf hydrogen --opacity-unit 2.0" in text and "opacity_unit=2.0" in snippet and "not in" not in snippet
+    monkeypatch.chdir(tmp_path)
+    assert main(text.split()[1:]) == 0
+    got = decode((tmp_path / "view.png").read_bytes())
+    assert got.std() > 5 and np.array_equal(executed(snippet, tmp_path / "xray", monkeypatch), got)

@@ -26,8 +26,9 @@ OUTPUT, TF_FILE = "view.png", "view-tf.json"
 #: host bytes a pixel of a saved image may take at the least (the viewer's own floor, docs/viewer.md §1): a size whose
 #: image would outgrow the memory available now is refused before it is rendered
 SAVE_PIXEL_BYTES = 200
-#: the model options that name its transfer function: a scalar model's shaded view replaces them with the tab's
-TF_OPTIONS = ("tf", "tf_window")
+#: the model options that make its transfer function: a scalar model's shaded view replaces them with the tab's (its
+#: opacity unit in the tab's function)
+TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
 #: the reading options that clwave.load takes by the same name
 LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level")
 
@@ -269,11 +270,12 @@ def _volume(origin: Origin, spec: Spec) -> tuple:
     tf, post = origin.get("tf"), origin.get("classify") == "post"
     if tf is not None:
         if tf not in TransferFunction.PRESETS:
-            left |= {"tf", "tf_window"}
+            left |= set(TF_OPTIONS)
         else:
-            window = origin.get("tf_window")
+            window, unit = origin.get("tf_window"), origin.get("opacity_unit")
             window = "" if window is None else f", window={window if window == 'auto' else _floats(window)!r}"
-            lines += [f"tf = clwave.TransferFunction.preset({tf!r}{window}).resolved(vol)"]
+            unit = "" if unit is None else f", opacity_unit={unit!r}"
+            lines += [f"tf = clwave.TransferFunction.preset({tf!r}{window}{unit}).resolved(vol)"]
             lines += [] if post else ["vol = tf.classify(vol)"]
     wavelet = origin.get("wavelet") or "cubic"
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
@@ -282,8 +284,8 @@ def _volume(origin: Origin, spec: Spec) -> tuple:
     lines.append(f"wv = clwave.WaveletVolume.from_volume(vol, wavelet={wavelet!r}, levels={spec.levels}"
                  f"{', interpolate=True' if origin.get('interpolate') else ''}"
                  f"{', transfer_function=tf' if tf in TransferFunction.PRESETS else ''}).threshold({thresholding})")
-    return lines, left | (given - {*LOAD_OPTIONS, "tf", "tf_window", "classify", "wavelet", "levels", "keep",
-                                   "threshold", "interpolate"})
+    return lines, left | (given - {*LOAD_OPTIONS, *TF_OPTIONS, "classify", "wavelet", "levels", "keep", "threshold",
+                                   "interpolate"})
 
 
 def _floats(text) -> tuple:
