@@ -6,6 +6,7 @@ import asyncio
 import json
 import re
 import subprocess
+import time
 import sys
 from pathlib import Path
 
@@ -267,3 +268,27 @@ def test_an_opacity_unit_goes_into_the_command_and_the_python(tmp_path, monkeypa
     assert main(text.split()[1:]) == 0
     got = decode((tmp_path / "view.png").read_bytes())
     assert got.std() > 5 and np.array_equal(executed(snippet, tmp_path / "xray", monkeypatch), got)
+
+
+@pytest.mark.parametrize("failure, line", [(clwave.FileFormatError("damaged"), "(damaged)"),
+                                           (MemoryError(), "(internal error (MemoryError); see the server's log)")])
+def test_a_failed_full_stage_is_its_line_not_still_being_made(clw, monkeypatch, failure, line):
+    """A .clw whose shaded views' full stage fails to be set up (the whole model it takes raising): /export and /image
+    of a shaded view answer 409 ("still being made") while it is set up, then 500 with one line naming the failure
+    (they were 409 for ever), each time asked; an X-ray view still exports."""
+    from clwave.view.shaded import ShadedSource
+
+    monkeypatch.setattr(ShadedSource, "_whole_model", lambda self: (_ for _ in ()).throw(failure))
+    body = dict(view=dict(BASE, seq=1, mode="shaded"), size=[16, 16])
+    with view(str(clw), size=16) as v:
+        deadline = time.monotonic() + 60
+        while (answer := post(v, "export", body))[0] == 409 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        answers = [answer, post(v, "export", body), post(v, "image", body)]
+        xray = post(v, "export", dict(view=dict(BASE, seq=1), size=[16, 16]))
+    for status, text in answers:
+        text = text.decode()
+        assert status == 500 and text.count("\n") == 1, (status, text)
+        assert text == f"the shaded views' ray tracer of the whole file could not be made {line}: they show the " \
+                       f"file's coarse stage, which no saved image or command draws\n"
+    assert xray[0] == 200

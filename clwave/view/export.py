@@ -16,10 +16,11 @@ import os
 import shlex
 from dataclasses import dataclass
 
-from ..errors import InputError
+from ..errors import ClwaveError, InputError
 from ..model.camera import Camera
 from ..model.transfer import TransferFunction
 from . import colours
+from .protocol import said
 
 #: the files the command and the Python write
 OUTPUT, TF_FILE = "view.png", "view-tf.json"
@@ -92,6 +93,10 @@ def resolve(sources: dict, state, size=None) -> Spec:
                     state.colour_map if source.capabilities["colour_map"] else None, state.detail, levels=levels)
     source.start_full_stage()
     if source.tracer is None:
+        failure = None if source.staged is None else source.staged.failure
+        if failure is not None:
+            raise Failed(f"the shaded views' ray tracer of the whole file could not be made ({said(failure)}): they "
+                         f"show the file's coarse stage, which no saved image or command draws")
         raise Unavailable("the shaded views' ray tracer is still being made (or the whole file read): try again once "
                           "the view has been refined")
     tf, window = source.transfer_function(state.tf, source.tracer)
@@ -103,6 +108,10 @@ def resolve(sources: dict, state, size=None) -> Spec:
 
 class Unavailable(InputError):
     """What a view needs is not there yet (its tracer, a file's rest): asked again later, it is."""
+
+
+class Failed(ClwaveError):
+    """What a view needs could not be made (a file's full stage): asked again, it will not be."""
 
 
 def picture(sources: dict, spec: Spec):
@@ -350,6 +359,8 @@ async def serve(server, request, *, image: bool):
                 done = await loop.run_in_executor(None, partial(encode, done, lossless=True))
     except Unavailable as exc:
         raise web.HTTPConflict(text=f"{exc}\n") from None
+    except Failed as exc:
+        raise web.HTTPInternalServerError(text=f"{exc}\n") from None
     except (HostMemoryError, DeviceMemoryError) as exc:
         raise web.HTTPInsufficientStorage(text=f"{server.explain(exc, state.mode)}\n") from None
     except ClwaveError as exc:
