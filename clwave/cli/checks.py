@@ -157,20 +157,23 @@ def parse_background(args):
 
 
 def picture_options(args, out) -> dict:
-    """``window``, ``background`` and ``bit_depth`` of the picture written to ``out`` (a folder: PNG frames), for
-    :meth:`~clwave.io.result.RenderResult.save`; refused in one line where ``out`` holds no such picture: a .tif's or
-    .npy's values as rendered, a GIF's 8-bit frames without partial transparency."""
-    from ..io.images import TIFF_SUFFIXES, check_bit_depth
+    """``window``, ``background``, ``bit_depth`` and ``scale_bar`` of the picture written to ``out`` (a folder: PNG
+    frames), for :meth:`~clwave.io.result.RenderResult.save`; refused in one line where ``out`` holds no such
+    picture: a .tif's or .npy's values as rendered, a GIF's 8-bit frames without partial transparency."""
+    from ..io.images import TIFF_SUFFIXES, check_bit_depth, check_orthographic, check_scale_bar
 
     look = dict(window=parse_window(args), background=parse_background(args) if hasattr(args, "background") else None,
-                bit_depth=args.bit_depth)
+                bit_depth=args.bit_depth, scale_bar=check_scale_bar(getattr(args, "scale_bar", None)))
     check_bit_depth(args.bit_depth)
+    if look["scale_bar"] is not None:
+        check_orthographic(dict(kind="camera", perspective=args.perspective))
     suffix = out.suffix.lower()
     if suffix in TIFF_SUFFIXES + (".npy",):
         given = {"--window": look["window"] != "auto", "--background": look["background"] is not None,
-                 "--bit-depth": args.bit_depth is not None}
+                 "--bit-depth": args.bit_depth is not None, "--scale-bar": look["scale_bar"] is not None}
         named = [name for name, there in given.items() if there]
-        what = {"--window": "grey levels", "--background": "background", "--bit-depth": "bit depth"}
+        what = {"--window": "grey levels", "--background": "background", "--bit-depth": "bit depth",
+                "--scale-bar": "scale bar"}
         if named:
             raise InputError(f"{' and '.join(named)} {'sets' if len(named) == 1 else 'set'} a .png's "
                              f"{' and '.join(what[n] for n in named)}; a {suffix} holds the values themselves: leave "
@@ -182,6 +185,15 @@ def picture_options(args, out) -> dict:
         raise InputError("--background transparent is for PNG; a GIF has no partial transparency: give a colour R,G,B"
                          + (", or write PNG frames to a folder" if args.command == "progressive" else ""))
     return look
+
+
+def check_scale_bar_fits(look, camera, wv):
+    """Refuse, before the render, a ``--scale-bar`` that does not fit ``camera``'s picture of ``wv`` (as
+    :func:`~clwave.io.images.draw_scale_bar` would after it)."""
+    from ..io.images import draw_scale_bar
+
+    if look["scale_bar"] is not None:
+        draw_scale_bar(np.zeros(camera.size, np.uint8), camera.view(wv).pixel, wv.unit, look["scale_bar"])
 
 
 def parse_window(args):

@@ -461,6 +461,9 @@ def add_camera_options(p):
     g.add_argument("--fit", choices=FITS, default="sphere", help="default framing: sphere (the bounding sphere of "
                    "the non-empty voxels spans the image, the same at every view) or box (their box's projection "
                    "for this view fills the image: an elongated volume seen from its side)")
+    g.add_argument("--scale-bar", nargs="?", const=True, type=float, metavar="LENGTH",
+                   help="PNG and GIF: burn in a scale bar of LENGTH world units, labelled in the input's unit (without "
+                        "LENGTH 1, 2 or 5 times a power of ten, about a fifth of the width); orthographic only")
     add_device_options(g)
 
 
