@@ -285,7 +285,7 @@ class TransferFunction:
         window, scale = tf._statistics(vol)
         if vol.channels > 1 and window is not None and window[1] - window[0] > 2:
             _warn_colour_window(window)
-        paint = tf._painter(vol.channels, window, scale, vol.spacing)
+        paint = tf.painter(vol.channels, window, scale, vol.spacing)
         if vol.chunked:  # each chunk classified when it is read: the values classify gives in memory
             data = vol.data if vol.data.ndim == 4 else vol.data[..., None]
             rgba = data.map_blocks(classified, paint, False, chunks=data.chunks[:3] + ((4,),), dtype=np.float32)
@@ -325,7 +325,7 @@ class TransferFunction:
         data = data[::max(1, -(-len(data) // AUTO_SAMPLES))]
         values = data[:, 0] if vol.channels == 1 else _luminance(data[:, :3].astype(np.float64) / scale)
         shift = vol.subtracted if vol.channels == 1 else 0.0
-        line = self.opaque_line(self._painter(vol.channels, window, scale, vol.spacing), data, np.concatenate(faces),
+        line = self.opaque_line(self.painter(vol.channels, window, scale, vol.spacing), data, np.concatenate(faces),
                                 vol.spacing, vol.shape, window, shift, "volume",
                                 ("volume's values" if vol.channels == 1 else "volume's luminance",
                                  np.nanmin(values) + shift, np.nanmax(values) + shift))
@@ -337,7 +337,7 @@ class TransferFunction:
         """Why this function (its points under ``window``, plus ``shift``: the input's units) makes a ``thing``
         ("volume", "model") of ``spacing`` and ``shape`` nearly opaque, in a line naming ``values`` (whose values,
         least, largest, in the input's units) and the fixes; None where it does not.  ``paint`` classifies values as
-        :meth:`_painter`'s; nearly opaque: the median of ``data`` (a sample of its values at voxel centres) has an
+        :meth:`painter`'s; nearly opaque: the median of ``data`` (a sample of its values at voxel centres) has an
         optical depth across one voxel of at least :data:`OPAQUE_VOXEL` (an opacity unit far below the voxel), or the
         median of ``faces`` (its box's faces' values) across the box's thinnest side :data:`OPAQUE_BOX` (the box drawn
         as a solid: a window far off the data, 0 .. 1 on 16-bit values)."""
@@ -399,7 +399,7 @@ class TransferFunction:
             win = auto_window(sample if c == 1 else _luminance(sample[:, :3].astype(np.float64) / scale))
         return win, scale
 
-    def _painter(self, channels, window, scale, spacing):
+    def painter(self, channels, window, scale, spacing):
         """``paint(values, out)``: the classification ``out`` (n, 4) float32 of voxels ``values`` (n, channels) of a
         volume of ``spacing``, for whole and chunked volumes alike."""
         extinction = self.extinction(spacing)[:, None]

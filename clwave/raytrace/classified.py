@@ -237,14 +237,14 @@ class ScalarRange:
         wv = self.tracer.wv
         if self.faces is None:
             self.faces = face_values(wv)
-        stored = clamped(self.stored(tf), self.value_range)
-        paint = stored._painter(1, stored.window, 1.0, wv.spacing)
+        stored = self.stored(tf)
+        seen = clamped(stored, self.value_range)
+        paint = seen.painter(1, seen.window, 1.0, wv.spacing)
         known = wv.value_range
         values = ("input's values", *known) if known is not None else \
             ("model's values on its faces", self.faces.min() + self.subtracted, self.faces.max() + self.subtracted)
         data = self.faces if self.sample is None else self.sample[:, None]
-        return self.stored(tf).opaque_line(paint, data, self.faces, wv.spacing, wv.shape, ..., self.subtracted,
-                                           "model", values)
+        return stored.opaque_line(paint, data, self.faces, wv.spacing, wv.shape, ..., self.subtracted, "model", values)
 
     def classify(self, tf, cc, real, at=None) -> Classification:
         """The kernel arguments of ``tf`` at the detail of ``at`` (default full detail), reused while the transfer
