@@ -781,8 +781,9 @@ def test_cli_view_refuses_bad_options_before_any_work(capsys, tmp_path):
 
 def test_cli_view_refuses_a_device_memory_too_small_for_its_size_at_start(capsys, tmp_path):
     """``clwave view --size 2048 --device-memory 120MiB``: the X-ray views' 60 MiB hold the 128x128 auto-window image
-    and the drag frames, not the still 2048x2048 view (125 MiB, SplatRenderer's plan): refused at start-up in one line
-    in the command line's words, not on the page at every still view.  (A 256x256 view of this 16^3 model needed
+    and the drag frames, not the still 2048x2048 view (125 MiB, SplatRenderer's plan; 90 MiB before its footprints,
+    where it is refused first since the twentieth session): refused at start-up in one line in the command line's
+    words, not on the page at every still view.  (A 256x256 view of this 16^3 model needed
     187 MiB while splatting's textures grew with the magnification; now about as much as a 128x128 one.)"""
     from clwave.cli import main
 
@@ -791,7 +792,8 @@ def test_cli_view_refuses_a_device_memory_too_small_for_its_size_at_start(capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and re.fullmatch(r"clwave: error: --device-memory 120 MiB is too small for this viewer: its "
                                           r"X-ray views get 60 MiB of it \(docs/viewer.md §1\), and a 2048x2048 view "
-                                          r"needs at least 125 MiB .*; give more or a smaller --size", err[0]), err
+                                          r"needs at least 90 MiB of device memory before its footprints .*; give more "
+                                          r"or a smaller --size \(at most 16\d\dx16\d\d here\)", err[0]), err
 
 
 def test_cli_view_refuses_a_size_beyond_the_device_before_reading_the_input(capsys, tmp_path, monkeypatch):

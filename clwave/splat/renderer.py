@@ -21,8 +21,8 @@ from pyopencl.tools import ImmediateAllocator, MemoryPool
 
 from ..device.constants import TILE, record_uint4s
 from ..device.context import ComputeContext
-from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap
-from ..errors import DeviceMemoryError, InputError, finite_number
+from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap, too_little
+from ..errors import InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera, resolve_view, view_record
 from ..model.wavelet import WaveletVolume, check_model
@@ -297,13 +297,9 @@ class SplatRenderer:
             return int(chunk)
         need = self._least_budget(fixed, max(t.tiles for t in tables), runs, perspective)
         H, W = size
-        what = (f"a {H}x{W} view needs at least {format_size(need)} of device memory (framebuffers, "
-                f"footprints, tile lists and {least:,} coefficients at a time)")
-        if b.cap is not None and b.cap < self.cc.info.global_mem:
-            raise DeviceMemoryError(f"device_memory={format_size(b.cap)} is too small: {what}; give more or render "
-                                    f"a smaller image", cli=f"--device-memory {format_size(b.cap)} is too small: "
-                                                            f"{what}; give more or render a smaller image")
-        raise DeviceMemoryError(f"{self.cc.info.name} has {format_size(b.total)}, and {what}; render a smaller image")
+        too_little(self.cc, b, f"a {H}x{W} view needs at least {format_size(need)} of device memory (framebuffers, "
+                               f"footprints, tile lists and {least:,} coefficients at a time)",
+                   "render a smaller image")
 
 
 def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="auto", coarse=None,
