@@ -53,6 +53,7 @@ def test_the_nice_length_is_the_longest_1_2_5_within_a_fifth(width, want):
     (500, "um", "500 µm"), (0.5, "mm", "500 µm"), (1000, "um", "1 mm"), (10, "mm", "10 mm"), (2000, "mm", "2 m"),
     (5, "cm", "5 cm"), (0.2, "cm", "2 mm"), (0.0005, "um", "0.5 nm"), (0.002, "mm", "2 µm"), (5, None, "5 units"),
     (1, None, "1 unit"), (0.25, None, "0.25 units"), (2500, "m", "2500 m"),
+    (50, "A", "5 nm"), (2000, "A", "200 nm"), (5, "nm", "5 nm"),  # an MRC map's ångströms, an OME-Zarr's nanometres
 ])
 def test_the_label_in_the_unit_that_reads_1_to_999(length, unit, text):
     assert length_label(length, unit) == text
@@ -214,3 +215,16 @@ def test_the_command_line_refusals_are_one_line(tmp_path, capsys, argv, words):
     err = capsys.readouterr().err
     assert words in err and err.count("\n") == 1, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_micrometre_label_is_drawn_with_glyphs_the_font_has(monkeypatch):
+    """Pillow's bundled font has no µ (it drew its missing-glyph box): a micrometre bar's label is drawn as "um"."""
+    from PIL import ImageFont
+
+    import clwave.io.images as images
+    font = ImageFont.load_default(size=20)
+    assert font.getmask("µ").getbbox() == font.getmask("\uffff").getbbox()  # no glyph of its own
+    picture = np.zeros((200, 300, 3), np.uint8)
+    drawn = draw_scale_bar(picture, 10.0, unit="um", length=500)
+    monkeypatch.setattr(images, "length_label", lambda length, unit, digits=6: "500 um")
+    assert np.array_equal(drawn, draw_scale_bar(picture, 10.0, unit="um", length=500))

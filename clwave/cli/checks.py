@@ -23,9 +23,9 @@ def check_options(args):
     opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): numbers that
     are not finite, the input's spacing and chunks, the model's wavelets, levels, thresholding, transfer function and
     classification, the scheduler, and the view's device, display window, footprint band, coarse tolerance, a
-    turntable's frame time, device memory, ray tracing tolerance, lights and background, the options of the --method
-    not chosen, and the image size against the device (:func:`check_image_size`).  An option a command does not have
-    is not looked at."""
+    turntable's frame time, device memory, ray tracing tolerance, lights, clip and background, the options of the
+    --method not chosen, and the image size against the device (:func:`check_image_size`).  An option a command does
+    not have is not looked at."""
     from ..model.bspline import wavelet_for
 
     if getattr(args, "input", None) is None:  # clwave info: no input to spare
@@ -83,6 +83,7 @@ def check_options(args):
         raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
     if getattr(args, "light", None) is not None:
         parse_lights(args)
+    parse_clip(args)
     if hasattr(args, "background"):
         parse_background(args)
     if hasattr(args, "method") and not (is_clw(args) and (args.workers, args.scheduler) != (None, None)):
@@ -95,7 +96,7 @@ def check_options(args):
 #: options of one --method only, refused with the other (a command has some of them: drr has no --light);
 #: (option, what it is given when not given: None where the command leaves it None)
 RAYTRACE_ONLY = (("tolerance", 1e-3), ("light", None), ("no_shading", None), ("xray", None), ("field", "bspline"),
-                 ("background", None), ("detail", None))
+                 ("background", None), ("detail", None), ("clip_box", None), ("clip_plane", None))
 SPLAT_ONLY = ("coarse", "omega_s")
 
 
@@ -146,6 +147,23 @@ def parse_lights(args):
         if not all(np.isfinite(light)):
             raise InputError(f"--light {spec} must be two finite angles AZ,EL in degrees, e.g. 30,20")
     return lights
+
+
+def parse_clip(args):
+    """The :class:`~clwave.Clip` of ``--clip-box X0,Y0,Z0,X1,Y1,Z1`` and the ``--clip-plane PX,PY,PZ,NX,NY,NZ`` s
+    (None where neither is given, or the command has neither)."""
+    from ..model.clip import Clip
+
+    box, planes = getattr(args, "clip_box", None), getattr(args, "clip_plane", None) or []
+    if box is None and not planes:
+        return None
+    given = ([f"--clip-box {box}"] if box is not None else []) + [f"--clip-plane {p}" for p in planes]
+    corners = numbers(box, "--clip-box", (6,)) if box is not None else None
+    faces = [numbers(p, "--clip-plane", (6,)) for p in planes]
+    try:
+        return Clip(lo=corners and corners[:3], hi=corners and corners[3:], planes=[(f[:3], f[3:]) for f in faces])
+    except InputError as error:
+        raise InputError(f"{' '.join(given)}: {error}") from None
 
 
 def parse_background(args):

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
-from .checks import check_scale_bar_fits, make_camera, parse_lights, picture_options
+from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, finish,
                       parse_device_memory, post_transfer_function, write_gif)
 
@@ -36,7 +36,7 @@ def run(args):
             check_schedule(args.steps, args.budget)
         steps = args.steps
         options = dict(tolerance=args.tolerance, lights=parse_lights(args), shading=not args.no_shading,
-                       absorption=not args.xray)
+                       absorption=not args.xray, clip=parse_clip(args))
     else:
         steps = 8 if args.steps is None and args.budget is None else args.steps
         check_schedule(steps, args.budget)

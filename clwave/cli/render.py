@@ -7,7 +7,7 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .checks import check_scale_bar_fits, make_camera, parse_lights, picture_options
+from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
                       parse_device_memory, parse_scheduler, post_transfer_function, write_gif)
 
@@ -49,7 +49,7 @@ def run(args):
                          f"coarsest")
     if args.method == "raytrace":
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
-                       absorption=not args.xray,
+                       absorption=not args.xray, clip=parse_clip(args),
                        transfer_function=None if args.xray else post_transfer_function(args, wv))
         if on_cluster:
             options.update(device=args.device, field=args.field, device_memory=device_memory)

@@ -16,7 +16,7 @@ from ..errors import InputError
 #: the output suffixes of a picture (PNG) and of the float image (TIFF)
 PNG_SUFFIXES, TIFF_SUFFIXES = (".png",), (".tif", ".tiff")
 #: the world units a pixel size is written in, and their length in metres
-UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6}
+UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "nm": 1e-9, "A": 1e-10}  # A: the ångström
 BIT_DEPTHS = (8, 16)
 
 _SRGB = (b"sRGB", b"\x00")  # perceptual rendering intent
@@ -88,11 +88,12 @@ _LABEL_UNITS = (("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("nm", 1e-9))
 
 def length_label(length: float, unit, digits=6) -> str:
     """``length`` world units as a scale bar's label: in ``unit`` where it reads 1 to 999, else in the metre, mm, µm or
-    nm that does ("500 µm" for 0.5 mm); with ``unit`` None the number and "units"; ``digits`` significant."""
+    nm that does ("500 µm" for 0.5 mm; ångströms always in nm); with ``unit`` None the number and "units"; ``digits``
+    significant."""
     if unit is None:
         return f"{length:.{digits}g} unit{'' if length == 1 else 's'}"
     name, metres = unit.replace("um", "µm"), length * UNIT_METRES[unit]
-    if not 1 <= length < 1000:
+    if not 1 <= length < 1000 or unit == "A":  # the label's font has no Å: ångströms in nanometres
         name, per = next(((n, m) for n, m in _LABEL_UNITS if metres >= m * (1 - 1e-9)), _LABEL_UNITS[-1])
         length = metres / per
     return f"{length:.{digits}g} {name}"
@@ -112,7 +113,8 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     font_size = max(12, round(min(height, width) / 24))
     thick, rim, margin = max(2, round(font_size / 4)), max(1, round(font_size / 9)), max(4, round(font_size / 2))
     font = ImageFont.load_default(size=font_size)
-    left, top, right, bottom = font.getbbox(text, stroke_width=rim)
+    drawn = text.replace("µ", "u")  # Pillow's bundled font has no µ (it draws a box): "um", as plain text writes it
+    left, top, right, bottom = font.getbbox(drawn, stroke_width=rim)
     bar = round(length / pixel)
     what = f"a scale bar of {text} ({length / pixel:.3g} pixels at {length_label(pixel, unit, 3)} a pixel)"
     room = width - 2 * (margin + rim)
@@ -133,8 +135,8 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     ImageDraw.Draw(white).rectangle(box, fill=255)
     x = min((2 * x1 - bar - (right - left)) / 2, width - margin - right + left)  # centred on the bar, within the margin
     at = (x - left, y1 - thick - rim - gap - bottom)
-    ImageDraw.Draw(cover).text(at, text, font=font, fill=255, stroke_width=rim, stroke_fill=255)
-    ImageDraw.Draw(white).text(at, text, font=font, fill=255)
+    ImageDraw.Draw(cover).text(at, drawn, font=font, fill=255, stroke_width=rim, stroke_fill=255)
+    ImageDraw.Draw(white).text(at, drawn, font=font, fill=255)
     box = cover.getbbox()  # the corner drawn on: the rest of the picture is copied
     corner, out = np.s_[box[1]:box[3], box[0]:box[2]], picture.copy()
     out[corner] = _over(picture[corner], *(np.asarray(m.crop(box), np.float64) / 255 for m in (cover, white)))

@@ -9,6 +9,7 @@ sample.  ``.tif`` and ``.npy`` keep the float32 image as rendered (:mod:`.images
 
 from __future__ import annotations
 
+import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +22,10 @@ from .images import (PNG_SUFFIXES, TIFF_SUFFIXES, check_bit_depth, check_orthogr
                      draw_scale_bar, pixel_size, write_png, write_tiff)
 from ..model.tf_passes import AUTO_PERCENTILES
 from ..model.transfer import check_window
+
+#: the longest side of the picture a notebook shows of a result (:meth:`RenderResult._repr_png_`): a larger image is
+#: reduced by a whole factor, so that a notebook does not carry a full-size PNG in its file
+REPR_PNG_SIDE = 512
 
 
 @dataclass
@@ -83,6 +88,20 @@ class RenderResult:
         picture = np.round(top * scaled).astype(np.uint8 if top < 256 else np.uint16)
         return picture if scale_bar is None else \
             draw_scale_bar(picture, self.meta["pixel"], check_unit(unit), scale_bar)
+
+    def _repr_png_(self) -> bytes | None:
+        """The 8-bit PNG of :meth:`picture` with its defaults, as Jupyter shows a result: reduced by the least whole
+        factor that brings its longest side to at most :data:`REPR_PNG_SIDE` pixels (Pillow's box average); None,
+        the text, for an image with non-finite values, which is never a picture."""
+        from PIL import Image
+
+        if not np.all(np.isfinite(self.image)):
+            return None
+        picture = Image.fromarray(self.picture())
+        picture = picture.reduce(-(-max(picture.size) // REPR_PNG_SIDE))
+        buffer = io.BytesIO()
+        write_png(buffer, np.asarray(picture))
+        return buffer.getvalue()
 
     def display_window(self, window="auto"):
         """The ``(lo, hi)`` an X-ray picture (:meth:`to_uint8`) is shown through for ``window`` ("auto" resolved from
