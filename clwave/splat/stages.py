@@ -33,12 +33,12 @@ _PROJECT_CONE = Kernel("splat_project_cone", ("n", U32), ("first", U32), ("coef"
                        ("band_world", BUFFER), ("band_step", BUFFER), ("tex_box", BUFFER), ("tex_layer", BUFFER),
                        ("layers", BUFFER), ("layer_slope", BUFFER), ("cone", BUFFER), ("centre", BUFFER),
                        ("bbox", BUFFER), ("stex", BUFFER), ("count", BUFFER))
-_ACCUMULATE_CONE = Kernel("splat_accumulate_cone", ("layer_count", I32), ("layers", BUFFER), ("layer_slope", BUFFER),
-                          ("cone", BUFFER), ("ranges", BUFFER), ("records", BUFFER), ("tex_int", BUFFER),
-                          ("tex_map", BUFFER), ("texels", BUFFER), ("fb", BUFFER))
-_ACCUMULATE = Kernel("splat_accumulate", ("layer_count", I32), ("layers", BUFFER), ("ranges", BUFFER),
-                     ("records", BUFFER), ("tex_int", BUFFER), ("tex_map", BUFFER), ("texels", BUFFER),
-                     ("fb", BUFFER))
+_ACCUMULATE_CONE = Kernel("splat_accumulate_cone", ("first_tile", I32), ("layer_count", I32), ("layers", BUFFER),
+                          ("layer_slope", BUFFER), ("cone", BUFFER), ("ranges", BUFFER), ("records", BUFFER),
+                          ("tex_int", BUFFER), ("tex_map", BUFFER), ("texels", BUFFER), ("fb", BUFFER))
+_ACCUMULATE = Kernel("splat_accumulate", ("first_tile", I32), ("layer_count", I32), ("layers", BUFFER),
+                     ("ranges", BUFFER), ("records", BUFFER), ("tex_int", BUFFER), ("tex_map", BUFFER),
+                     ("texels", BUFFER), ("fb", BUFFER))
 
 
 TILE_LIST_SHARE = 0.25  # of the device budget, at most, for the tile lists of one chunk of splats
@@ -169,7 +169,7 @@ class Stages:
         r = ranges.get().reshape(-1, 2).astype(np.int64)
         work = np.concatenate([[0], np.cumsum(r[:, 1] - r[:, 0] + 1)])
         in_bands(q, lambda first, count: (_ACCUMULATE_CONE if self.perspective else _ACCUMULATE)(
-            self.kernels, q, (count * local,), (local,), tables, global_offset=(first * local,),
+            self.kernels, q, (count * local,), (local,), tables, first_tile=first,
             layer_count=layer_count, ranges=ranges, records=records, fb=fb), tiles, work=work,
             pace=self.paces["accumulate"])
 
