@@ -118,8 +118,9 @@ class Stages:
                       for k in (_PROJECT_CONE if perspective else _PROJECT, _TRANSPOSE, _TILE_RANGES, _CHUNK_TILES)}
         if cc.info.kind != "GPU":
             self.local[_CHUNK_TILES.name] = 1
-        self._scan = cc.generated("exclusive_scan_uint",
-                                  lambda: ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0"))
+        if self.variant == "gpu":
+            self._scan = cc.generated("exclusive_scan_uint",
+                                      lambda: ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0"))
         # the rates of the banded stages (in_bands), kept between passes and views
         self.paces = dict(count=Pace(), place=Pace(), accumulate=Pace())
 
@@ -149,8 +150,16 @@ class Stages:
         self._launch(_TRANSPOSE, rows * cols, rows=rows, cols=cols, src=src, dst=dst)
 
     def scan(self, counts, starts):
-        """Exclusive prefix sums (arrays of uint32)."""
-        self._scan(counts, starts)
+        """Exclusive prefix sums (arrays of uint32).  The CPU variant's are NumPy's, the device's memory being the
+        host's: PoCL takes longer to compile pyopencl's scan kernels than to build the rest of a first splat
+        (docs/benchmarks.md §19)."""
+        if self.variant == "gpu":
+            self._scan(counts, starts)
+            return
+        host = counts.get()
+        sums = np.zeros_like(host)
+        np.cumsum(host[:-1], dtype=np.uint32, out=sums[1:])
+        starts.set(sums)
 
     def ranges(self, tiles, textures, chunks, total, starts, ranges):
         """Each tile's [start, end) in the records, from the scanned run-major counts."""
