@@ -136,7 +136,7 @@ def test_a_second_renderer_builds_no_program(cc, monkeypatch):
 
 
 def test_build_log_has_a_line_a_program_built(cc, tmp_path, monkeypatch):
-    """``CLW_BUILD_LOG`` (docs/benchmarks.md §19): one JSON line for each program built, none for one reused."""
+    """``CLW_BUILD_LOG`` (docs/benchmarks.md §22): one JSON line for each program built, none for one reused."""
     log = tmp_path / "builds.jsonl"
     monkeypatch.setenv("CLW_BUILD_LOG", str(log))
     for _ in range(2):

@@ -152,7 +152,7 @@ class Stages:
     def scan(self, counts, starts):
         """Exclusive prefix sums (arrays of uint32).  The CPU variant's are NumPy's, the device's memory being the
         host's: PoCL takes longer to compile pyopencl's scan kernels than to build the rest of a first splat
-        (docs/benchmarks.md §19)."""
+        (docs/benchmarks.md §22)."""
         if self.variant == "gpu":
             self._scan(counts, starts)
             return
