@@ -30,8 +30,8 @@ from ..model.transfer import TransferFunction
 from ..model.transform import sampling_kernel
 from ..threads import checkpoint
 
-_RANGE = Kernel("scalar_range", ("out", BUFFER), ("origin", cltypes.int4), ("coef", BUFFER), ("bricks", BUFFER),
-                ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
+_RANGE = Kernel("scalar_range", ("out", BUFFER), ("first_slot", np.int32), ("origin", cltypes.int4), ("coef", BUFFER),
+                ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
 _BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf", BUFFER), ("slack", np.float32),
                  ("n", np.int32))
 _SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound", BUFFER), ("nb", cltypes.int4))
@@ -159,7 +159,7 @@ class ScalarRange:
 
             def ranges(size, first):  # in bands of slots, the set-up given up between two
                 checkpoint(abandon)
-                _RANGE(self.kernels, q, size, (SUPER ** 3, 1), global_offset=first, out=slot_range,
+                _RANGE(self.kernels, q, size, (SUPER ** 3, 1), out=slot_range, first_slot=first,
                        origin=f.origin[::-1], coef=tables["coef"], bricks=at, frames=tables["frames"],
                        boxes=tables["boxes"], order=f.orders[0])
 
