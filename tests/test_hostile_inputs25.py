@@ -173,3 +173,14 @@ def test_a_gzip_stream_the_trailer_does_not_count_is_read(tmp_path, tail):
         gzip.compress(whole[:300]) + gzip.compress(whole[300:])
     (tmp_path / "w.mgz").write_bytes(content)
     np.testing.assert_array_equal(clwave.load(tmp_path / "w.mgz").data, data.transpose(2, 1, 0))  # RAS: (k, j, i)
+
+
+@pytest.mark.parametrize("method, option", [("splat", "clip"), ("splat", "tolerance"), ("raytrace", "omega_s")])
+def test_an_option_of_the_other_method_is_an_input_error_naming_it(method, option):
+    """progressive(method="splat", clip=...) was Python's TypeError (an unexpected keyword argument 'clip')."""
+    from clwave.errors import InputError
+
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(np.zeros((4, 4, 4), np.float32)), levels=1)
+    other = {"splat": "raytrace", "raytrace": "splat"}[method]
+    with pytest.raises(InputError, match=rf"{option}= is an option of method='{other}', not of method='{method}'"):
+        clwave.progressive(wv, clwave.Camera(size=8), method=method, **{option: None})
