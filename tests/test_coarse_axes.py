@@ -79,9 +79,12 @@ def test_layer_factors_per_axis():
         fu, fv = (coarse_factor(4, level, 3, approximation, pixel, c, tol) for c in (0.7, 2.5))
         assert layer_factors(4, level, 3, approximation, pixel, (0.7, 2.5), tol, square=False) == (fu, fv)
         assert layer_factors(4, level, 3, approximation, pixel, (0.7, 2.5), tol, square=True) == (fu, fu)
-    # the limits, 2^m d ratio (share / e_ref)^(1/4): level 3's approximation 8.66 along the slices, 2.42 across
+    # the limits, 2^m c times COARSE_REFERENCE's ratio for the share: level 3's approximation (share 1e-2, ratio
+    # 0.433) 8.66 along the slices, 2.42 across; its wavelets (5e-3, 0.176) 3.52 and 0.99; level 2's (2.5e-3, 0.108)
+    # 1.08 and 0.30
     assert layer_factors(4, 3, 3, True, pixel, (0.7, 2.5), tol, square=False) == (2, 8)
-    assert layer_factors(4, 2, 3, False, pixel, (0.7, 2.5), tol, square=False) == (1, 2)  # 1.83 along v
+    assert layer_factors(4, 3, 3, False, pixel, (0.7, 2.5), tol, square=False) == (1, 4)
+    assert layer_factors(4, 2, 3, False, pixel, (0.7, 2.5), tol, square=False) == (1, 1)
 
 
 @pytest.mark.parametrize("tolerance", [2e-2, 1e-2])
