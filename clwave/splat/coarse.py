@@ -34,35 +34,46 @@ COARSE_MARGIN = 8  # coarse pixels around the image: the prefilter's mirror ends
 ACROSS = 1e-6
 
 
-def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixel: float, spacing: float,
-                  tolerance: float) -> int:
-    """Framebuffer coarsening (a power of 2) of one band for a tolerance, along an image axis whose footprints vary
-    on ``spacing`` (d_min, or more: :func:`footprint_scales`) and whose pixel is ``pixel`` wide.
+def band_factor(ratio: float, level: int, pixel: float, spacing: float) -> int:
+    """The largest power of 2 whose coarse pixel, ``factor * pixel``, is at most ``ratio 2^m spacing`` along an image
+    axis whose footprints vary on ``spacing`` (:func:`footprint_scales`); the ratios carry 4 digits."""
+    factor = 1
+    while 2 * factor * pixel <= ratio * 2.0 ** level * spacing * (1 + 1e-3):
+        factor *= 2
+    return factor
 
-    The tolerance is shared out: half to the approximation band, a quarter to the coarsest
-    wavelet level, an eighth to the next, and so on, so the errors sum to less than it.  A
-    band's share e allows coarse pixels up to ``ratio 2^m spacing``, the largest ratio of
-    :data:`COARSE_REFERENCE` whose measured error is within e (none: the image's pixels).  Only cubic and quintic
+
+def coarse_plan(order: int, kinds, pixel: float, scales, tolerance: float, square: bool) -> tuple:
+    """``(factors, left)``: the framebuffer factors ``(f_u, f_v)`` of each band kind ``(level, approximation)`` in
+    ``kinds`` for a tolerance, and what they leave of it.
+
+    The tolerance is spent band kind by band kind, the coarsest wavelet level first (seven bands of the approximation
+    band's footprint size), then the approximation band, then the finer wavelet levels: each takes the largest factor
+    along each image axis (``pixel`` wide, footprints varying on ``scales``, :func:`footprint_scales`) within the
+    largest ratio of :data:`COARSE_REFERENCE` whose error fits what is left, and spends the error tabulated at the
+    ratio it draws (the largest over the axes it coarsens), so the errors sum to at most the tolerance.
+    ``square``: the lesser factor along both axes (orthographic layers have square pixels).  Only cubic and quintic
     bands are coarsened (the others have kinks; quintic bands, smoother, stay within the cubic budget:
     tests/test_splat.py).
 
     >>> pixel = 3 ** 0.5 / 2  # 256^3 at 512^2 (the default extent)
-    >>> [coarse_factor(4, 3, 3, a, pixel, 1.0, 2e-2) for a in (True, False)]
-    [4, 1]
-    >>> [coarse_factor(4, 3, 3, a, pixel, 1.0, 1e-2) for a in (True, False)]
-    [2, 1]
-    >>> coarse_factor(2, 3, 3, True, pixel, 1.0, 1e-2)
-    1
+    >>> kinds = [(3, True), (3, False), (2, False), (1, False)]
+    >>> factors, left = coarse_plan(4, kinds, pixel, (1.0, 1.0), 2e-2, square=True)
+    >>> [factors[k][0] for k in kinds], round(left, 6)  # level 3 at 4 (5.8e-3) and 2 (6.6e-3)
+    ([4, 2, 1, 1], 0.0076)
+    >>> coarse_plan(2, kinds, pixel, (1.0, 1.0), 2e-2, square=True)[0][(3, True)]
+    (1, 1)
     """
-    if order < 4:
-        return 1
-    share = tolerance / 2.0 if approximation else tolerance / 2.0 ** (levels - level + 2)
-    limit = max((r for r, e in COARSE_REFERENCE["approximation" if approximation else "wavelet"] if e <= share),
-                default=0.0) * 2.0 ** level * spacing
-    factor = 1
-    while 2 * factor * pixel <= limit * (1 + 1e-3):  # the ratios' 4 digits
-        factor *= 2
-    return factor
+    factors, left = {}, tolerance
+    for level, approximation in sorted(kinds, key=lambda kind: (-kind[0], kind[1])):
+        table = COARSE_REFERENCE["approximation" if approximation else "wavelet"]
+        ratio = max((r for r, e in table if e <= left), default=0.0) if order >= 4 else 0.0
+        fu, fv = (band_factor(ratio, level, pixel, c) for c in scales)
+        f = factors[(level, approximation)] = (min(fu, fv),) * 2 if square else (fu, fv)
+        if f != (1, 1):  # the ratio drawn along the axes drawn coarse
+            drawn = max(fa * pixel / (2.0 ** level * c) for fa, c in zip(f, scales) if fa > 1)
+            left -= min(e for r, e in table if r * (1 + 1e-3) >= drawn)
+    return factors, max(left, 0.0)
 
 
 def footprint_scales(view, d_xyz) -> tuple:
@@ -75,15 +86,6 @@ def footprint_scales(view, d_xyz) -> tuple:
     n, u, v = (np.where(np.abs(x) < ACROSS, 0.0, x) for x in (view.n, view.u, view.v))  # an axis view's round-off
     across = np.where(n == 0.0, d, 0.0)
     return tuple(max(float(d.min()), axis_scale(a, b, across)) for a, b in ((u, v), (v, u)))
-
-
-def layer_factors(order: int, level: int, levels: int, approximation: bool, pixel: float, scales,
-                  tolerance: float, square: bool) -> tuple:
-    """``(f_u, f_v)``: :func:`coarse_factor` along each image axis, from the spacing its footprints vary on there
-    (``scales``, :func:`footprint_scales`; the band's error along an axis falls with that spacing as along an
-    isotropic one of it); ``square``: the lesser along both (orthographic layers have square pixels)."""
-    fu, fv = (coarse_factor(order, level, levels, approximation, pixel, c, tolerance) for c in scales)
-    return (min(fu, fv),) * 2 if square else (fu, fv)
 
 
 def _bspline3(t) -> np.ndarray:
