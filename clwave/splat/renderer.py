@@ -160,14 +160,15 @@ class SplatRenderer:
         # side of the volume (docs/splatting.md §8)
         pixel = max(view.slope) * depth_range(view, self.wv, 0)[1] if view.perspective else view.pixel
         # framebuffer factors (f_u, f_v) of each band that has coefficients (among the first ``upto``), per group:
-        # (1, 1) unless drawn coarse; and what they leave of the tolerance
+        # (1, 1) unless drawn coarse; and what they leave of the tolerance.  Planned over every band kind of the
+        # model, present or not, so that a prefix, or a worker's share of the coefficients, draws each band as the
+        # whole does
         reach = np.inf if upto is None else upto
         scales = footprint_scales(view, self.wv.spacing[::-1])
         bands = [[b for b in g.bands if gr["present"].get((b.level, b.key), np.inf) < reach]
                  for g, gr in zip(self.wv.groups, self.groups)]
-        plans = [coarse_plan(g.wavelet.order, {(b.level, b.key == "aaa") for b in bs}, pixel, scales, self.coarse,
-                             square=not view.perspective) if self.coarse else ({}, 0.0)
-                 for g, bs in zip(self.wv.groups, bands)]
+        plans = [coarse_plan(g.wavelet.order, {(b.level, b.key == "aaa") for b in g.bands}, pixel, scales, self.coarse,
+                             square=not view.perspective) if self.coarse else ({}, 0.0) for g in self.wv.groups]
         factors = [{(b.level, b.key): plan.get((b.level, b.key == "aaa"), (1, 1)) for b in bs}
                    for bs, (plan, _) in zip(bands, plans)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {(1, 1)})]
