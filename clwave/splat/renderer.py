@@ -28,10 +28,10 @@ from ..model.conebeam import check_camera, resolve_view, view_record
 from ..model.wavelet import WaveletVolume, check_model
 from . import accumulator
 from .accumulator import Accumulator
-from .coarse import Layer, footprint_scales, layer_factors
+from .coarse import Layer, coarse_plan, footprint_scales
 from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_table_bytes, tile_list_bytes
-from .perspective import ConeTables, camera_words, depth_range, drop_share
+from .perspective import ConeTables, camera_words, depth_range
 from .tables import MAX_LEVELS, ViewTables
 from .textures import check_sampling
 from ..threads import one_at_a_time
@@ -64,7 +64,7 @@ class SplatRenderer:
     coarse : float, optional
         Tolerance, relative to the image maximum, for drawing coarse cubic bands into
         coarser framebuffers that are upsampled with the cubic B-spline (docs/splatting.md §4;
-        see :func:`clwave.splat.coarse.layer_factors`); in perspective views, what that leaves of it also drops
+        see :func:`clwave.splat.coarse.coarse_plan`); in perspective views, what that leaves of it also drops
         wavelet splats under a bound (docs/splatting.md §8, ``meta["dropped"]``).  None (default): every band at the
         image's pixel, every splat drawn.
     device_memory : int or str, optional
@@ -161,13 +161,17 @@ class SplatRenderer:
         # side of the volume (docs/splatting.md §8)
         pixel = max(view.slope) * depth_range(view, self.wv, 0)[1] if view.perspective else view.pixel
         # framebuffer factors (f_u, f_v) of each band that has coefficients (among the first ``upto``), per group:
-        # (1, 1) unless drawn coarse
+        # (1, 1) unless drawn coarse; and what they leave of the tolerance.  Planned over every band kind of the
+        # model, present or not, so that a prefix, or a worker's share of the coefficients, draws each band as the
+        # whole does
         reach = np.inf if upto is None else upto
         scales = footprint_scales(view, self.wv.spacing[::-1])
-        factors = [{(b.level, b.key): layer_factors(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa", pixel,
-                                                    scales, self.coarse, square=not view.perspective)
-                    if self.coarse else (1, 1) for b in g.bands if gr["present"].get((b.level, b.key), np.inf) < reach}
-                   for g, gr in zip(self.wv.groups, self.groups)]
+        bands = [[b for b in g.bands if gr["present"].get((b.level, b.key), np.inf) < reach]
+                 for g, gr in zip(self.wv.groups, self.groups)]
+        plans = [coarse_plan(g.wavelet.order, {(b.level, b.key == "aaa") for b in g.bands}, pixel, scales, self.coarse,
+                             square=not view.perspective) if self.coarse else ({}, 0.0) for g in self.wv.groups]
+        factors = [{(b.level, b.key): plan.get((b.level, b.key == "aaa"), (1, 1)) for b in bs}
+                   for bs, (plan, _) in zip(bands, plans)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {(1, 1)})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * FRAMEBUFFER_PIXEL_BYTES
         tiles = sum(-(-layer.view.size[0] // TILE) * -(-layer.view.size[1] // TILE) for layer in layers)
@@ -193,7 +197,7 @@ class SplatRenderer:
         self._prepare(tables, view.size)
         acc = Accumulator(self, view, layers, tables, upto, view_record(camera, view))
         if view.perspective and self.coarse:  # what coarsening leaves of the tolerance (docs/splatting.md §8)
-            acc.drop_share = [drop_share(fg, self.wv.levels, self.coarse) for fg in factors]
+            acc.drop_share = [left for _, left in plans]
         return acc
 
     def texel_pools(self, tables: list) -> list:
