@@ -5,6 +5,8 @@ to exact (:mod:`clwave.frames`), by splatting (:mod:`clwave.splat.progressive`) 
 
 from __future__ import annotations
 
+import inspect
+
 from .errors import InputError
 from .raytrace.tracer import RayTracer, shared_tracer
 from .splat.progressive import progressive as splat_progressive
@@ -13,19 +15,23 @@ from .splat.progressive import progressive as splat_progressive
 def progressive(wv, camera, steps=None, budget=None, device=None, *, method="splat", error=None, **options):
     """Yield frames from cheap to exact: :func:`clwave.splat.progressive.progressive` (``method="splat"``,
     :class:`~clwave.splat.progressive.ProgressiveFrame` s) or :func:`raytrace_progressive`
-    (``method="raytrace"``, :class:`~clwave.raytrace.progressive.RaytraceFrame` s); ``options`` are the method's.
+    (``method="raytrace"``, :class:`~clwave.raytrace.progressive.RaytraceFrame` s); ``options`` are the method's
+    (the other's refused, naming it).
     ``steps`` (a whole number, at least 1; both stop earlier at ``budget`` seconds or at ``error``): splatting makes
     that many frames, the coefficient count doubling from one to the next (it takes ``steps`` or ``budget``, one
     of them; 8 steps with ``error`` alone); ray tracing keeps the last ``steps`` frames of its schedule, full
     detail on images halving in size down to a least side, then the full image (default: every one; an image too
     small for that many gives all it allows, with a :class:`~clwave.ClwaveWarning`).  ``error``: stop at the first
     frame whose estimated relative RMS error is at most that."""
-    if method == "splat":
-        run = splat_progressive
-    elif method == "raytrace":
-        run = raytrace_progressive
-    else:
+    runs = dict(splat=splat_progressive, raytrace=raytrace_progressive)
+    if not isinstance(method, str) or method not in runs:
         raise InputError(f"method={method!r} must be 'splat' or 'raytrace'")
+    run, other = runs[method], "raytrace" if method == "splat" else "splat"
+    for option in sorted(options.keys() - inspect.signature(run).parameters.keys()):
+        if option in inspect.signature(runs[other]).parameters:
+            raise InputError(f"{option}= is an option of method={other!r}, not of method={method!r}: give "
+                             f"method={other!r}, or leave it out")
+        raise InputError(f"{option}= is an option of neither method ('splat', 'raytrace'): leave it out")
     return run(wv, camera, steps=steps, budget=budget, device=device, error=error, **options)
 
 

@@ -166,8 +166,7 @@ def test_bad_clips_are_refused_in_one_line(kw, message):
 
 
 def test_thin_but_real_clips_are_kept():
-    """What keeps nothing is measured against the clip's own coordinates: a micrometre slab is a region.  A clip
-    pickles."""
+    """What keeps nothing is measured against the clip's own size: a micrometre slab is a region.  A clip pickles."""
     assert clwave.Clip(lo=(1e-6, 0, 0), hi=(2e-6, 1e-6, 1e-6)).keeps()
     assert clwave.Clip(planes=[((100, 0, 0), (1, 0, 0)), ((100 + 1e-6, 0, 0), (-1, 0, 0))]).keeps()
     assert PLANE.contains([(1.0, 0.2, 0.0), (-1.0, 0.2, 0.0)]).tolist() == [True, False]

@@ -34,7 +34,7 @@ def check_bit_depth(bit_depth) -> int:
 
 def check_unit(unit):
     """``unit`` (None: not a known length) as one of :data:`UNIT_METRES`; one InputError otherwise."""
-    if unit is not None and unit not in UNIT_METRES:
+    if unit is not None and not (isinstance(unit, str) and unit in UNIT_METRES):
         raise InputError(f"unit={unit!r} must be the world unit, one of {', '.join(UNIT_METRES)}, or None where it "
                          f"is not a known length")
     return unit
@@ -115,9 +115,13 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     font = ImageFont.load_default(size=font_size)
     drawn = text.replace("µ", "u")  # Pillow's bundled font has no µ (it draws a box): "um", as plain text writes it
     left, top, right, bottom = font.getbbox(drawn, stroke_width=rim)
-    bar = round(length / pixel)
-    what = f"a scale bar of {text} ({length / pixel:.3g} pixels at {length_label(pixel, unit, 3)} a pixel)"
     room = width - 2 * (margin + rim)
+    if room < 2:
+        raise InputError(f"the {width}x{height}-pixel picture has no room for a scale bar (it needs "
+                         f"{width - room + 2} pixels across): give a larger picture size, or no scale bar")
+    pixels = length / pixel
+    bar = round(pixels) if pixels <= room else room + 1  # no round() of 1e308 / 0.1, infinity
+    what = f"a scale bar of {text} ({pixels:.3g} pixels at {length_label(pixel, unit, 3)} a pixel)"
     if bar < 2 or bar > room:
         why = "is under 2 pixels" if bar < 2 else f"is longer than the {room} pixels the {width}-pixel-wide picture " \
                                                   f"has for it"

@@ -12,8 +12,8 @@ from scipy.optimize import linprog
 from ..errors import InputError, reals
 
 MAX_PLANES = 6  #: half-spaces a clip takes (with the box: at most 12 faces to cut each ray at)
-#: a region whose largest inscribed ball's radius is at most this fraction of the clip's coordinates keeps nothing
-#: (two planes with opposite normals through one point keep a plane, no volume)
+#: a region whose largest inscribed ball's radius is at most this fraction of its size (:meth:`Clip.keeps`) keeps
+#: nothing (two planes with opposite normals through one point keep a plane, no volume)
 THIN = 1e-9
 
 
@@ -56,7 +56,7 @@ class Clip:
             point, normal = (tuple(reals(v, f"plane {i}'s {name}", 3, "3 finite numbers (x, y, z)").tolist())
                              for v, name in zip(plane, ("point", "normal")))
             _finite((*point, *normal), f"plane {i}'s point {point} and normal {normal}")
-            if not 0 < np.linalg.norm(normal) < np.inf:
+            if not any(normal):
                 raise InputError(f"plane {i}'s normal {normal} must be a non-zero direction (towards what is kept)")
             planes.append((point, normal))
         object.__setattr__(self, "planes", tuple(planes))
@@ -69,27 +69,38 @@ class Clip:
     def half_spaces(self) -> np.ndarray:
         """The planes as rows ``(n_x, n_y, n_z, d)``, ``n`` a unit normal: the clip keeps ``n . x + d >= 0``
         (the box apart)."""
-        rows = [(*n, -np.dot(n, p)) for p, n in ((np.array(p), np.array(n) / np.linalg.norm(n))
-                                                 for p, n in self.planes)]
+        rows = [(*n, -np.dot(n, p)) for p, n in ((np.array(p), _unit(n)) for p, n in self.planes)]
         return np.array(rows, float).reshape(-1, 4)
 
     def keeps(self, lo=None, hi=None) -> bool:
         """Whether the clip keeps some volume (within the box ``lo`` .. ``hi`` too, world (x, y, z), where given):
-        the largest ball inside all of it, a linear program, has a radius above :data:`THIN` of its coordinates."""
-        boxes = [b for b in ((self.lo, self.hi), (lo, hi)) if b[0] is not None]
-        rows, bounds = [], []
-        for h in self.half_spaces():  # n . x + d >= r  <=>  -n . x + r <= d
-            rows.append((*-h[:3], 1.0))
-            bounds.append(h[3])
-        for b_lo, b_hi in boxes:
-            for a in range(3):
-                axis = np.eye(3)[a]
-                rows += [(*-axis, 1.0), (*axis, 1.0)]
-                bounds += [-b_lo[a], b_hi[a]]
-        size = np.abs(bounds).max() or 1.0  # the clip's coordinates, as units of "thin": solved in x / size
-        best = linprog(c=(0, 0, 0, -1), A_ub=np.array(rows, float), b_ub=np.array(bounds, float) / size,
+        the largest ball inside all of it, a linear program solved about the boxes' common part (else the first
+        plane's point), has a radius above :data:`THIN` of that part's size (else of the planes' distances from that
+        point): where the clip lies and how far its other faces are do not matter."""
+        boxes = [(np.asarray(a, float), np.asarray(b, float)) for a, b in ((self.lo, self.hi), (lo, hi))
+                 if a is not None]
+        faces = self.half_spaces()
+        if boxes:
+            b_lo, b_hi = np.max([b[0] for b in boxes], axis=0), np.min([b[1] for b in boxes], axis=0)
+            if not np.all(b_lo < b_hi):
+                return False
+            centre, half = b_lo / 2 + b_hi / 2, b_hi / 2 - b_lo / 2  # halved first: no overflow at 1e308
+        else:
+            centre, half = np.array(self.planes[0][0], float), None
+        with np.errstate(over="ignore", invalid="ignore"):
+            offsets = faces[:, 3] + faces[:, :3] @ centre  # the planes about the centre: n . x + offset >= 0
+            size = half.max() if boxes else (np.abs(offsets).max(initial=0.0) or 1.0)
+            # beyond 4 sizes from the centre a plane holds all or none of the box (its corners lie within sqrt 3)
+            offsets = np.clip(offsets / size, -4.0, 4.0) if boxes else offsets / size
+        rows = [(*-n, 1.0) for n in faces[:, :3]]  # n . x + offset >= r  <=>  -n . x + r <= offset
+        bounds = list(offsets)
+        for a in range(3 if boxes else 0):
+            axis = np.eye(3)[a]
+            rows += [(*-axis, 1.0), (*axis, 1.0)]
+            bounds += [half[a] / size] * 2
+        best = linprog(c=(0, 0, 0, -1), A_ub=np.array(rows, float), b_ub=np.array(bounds, float),
                        bounds=[(None, None)] * 3 + [(None, 1.0)], method="highs")
-        return best.status == 0 and -best.fun > THIN
+        return bool(best.status == 0 and -best.fun > THIN)
 
     def contains(self, points) -> np.ndarray:
         """Per world point (N, 3) as (x, y, z): whether the clip keeps it."""
@@ -106,6 +117,13 @@ class Clip:
         parts = [f"box {list(self.lo)} .. {list(self.hi)}"] if self.lo is not None else []
         parts += [f"plane through {list(p)} keeping normal {list(n)}" for p, n in self.planes]
         return "the clip (" + "; ".join(parts) + ")"
+
+
+def _unit(normal) -> np.ndarray:
+    """``normal`` scaled to length 1 (by its largest component first: 1e200 or 1e-200 is as good a length as 1)."""
+    n = np.array(normal, float)
+    n /= np.abs(n).max()
+    return n / np.linalg.norm(n)
 
 
 def _finite(values, what):

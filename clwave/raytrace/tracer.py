@@ -461,10 +461,13 @@ def _clipped(clip, lo, hi, scale, offset, queue, whole) -> dict:
         world = [np.round((b - offset) / scale, 6).tolist() for b in (lo, hi)]
         raise InputError(f"{clip.describe()} keeps nothing of the volume's content, which lies within {world[0]} .. "
                          f"{world[1]} (world x, y, z): move or turn it to cut through the volume")
-    if clip.lo is not None:
-        lo, hi = np.maximum(lo, np.array(clip.lo) * scale + offset), np.minimum(hi, np.array(clip.hi) * scale + offset)
-    rows = clip.half_spaces()
-    return dict(box_lo=lo, box_hi=hi, clip=cla.to_device(queue, rows.astype(np.float32)), nclip=len(rows))
+    with np.errstate(over="ignore"):  # a face beyond float32's range (1e300) is as far: what is kept is unchanged
+        if clip.lo is not None:
+            lo, hi = (np.maximum(lo, np.array(clip.lo) * scale + offset),
+                      np.minimum(hi, np.array(clip.hi) * scale + offset))
+        top = np.finfo(np.float32).max
+        rows = np.clip(clip.half_spaces(), -top, top).astype(np.float32)
+    return dict(box_lo=lo, box_hi=hi, clip=cla.to_device(queue, rows), nclip=len(rows))
 
 
 def _details(lod, levels, field) -> tuple:

@@ -8,9 +8,8 @@ import math
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import Declared, TimeSeries, as_array, check_declared_size, note, placeable, to_canonical
+from .shared import GZIP_MAGIC, Declared, TimeSeries, as_array, check_declared_size, note, placeable, to_canonical
 
-_GZIP_MAGIC = b"\x1f\x8b"
 #: FreeSurfer's geometry of a file without one (MRIallocHeader: x_r = -1, y_s = -1, z_a = 1, coronal LIA), the
 #: directions of i, j, k as rows, as MGH stores them (nibabel's default stores their transpose, LSP)
 _LIA_MDC = [[-1, 0, 0], [0, 0, -1], [0, 1, 0]]
@@ -63,7 +62,7 @@ def _check_header(path):
     zipped = path.name.lower().endswith(".mgz")
     with open(path, "rb") as fh:
         magic = fh.read(2)
-    if zipped != (magic == _GZIP_MAGIC):
+    if zipped != (magic == GZIP_MAGIC):
         raise FileFormatError(f"{path} is {'not ' if zipped else ''}gzip-compressed, and a .mgz is a gzipped MGH file, "
                               f"a .mgh a plain one: name it {path.with_suffix('.mgh' if zipped else '.mgz').name}")
     with (gzip.open if zipped else open)(path, "rb") as fh:

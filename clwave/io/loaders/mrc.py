@@ -15,6 +15,7 @@ from .shared import OnDemand, as_array, check_declared_size, no_spacing, note
 MRC_SUFFIXES = (".mrc", ".map", ".ccp4", ".rec", ".st")
 _HEADER = 1024  # bytes before the extended header (nsymbt bytes), then the samples
 _COMPLEX = {3: "complex int16", 4: "complex float32"}
+_IMOD_STAMP = 1146047817  # "IMOD" (little-endian bytes)
 
 
 def read_mrc(path, chunks, fits=None, warn_spacing=True):
@@ -38,6 +39,8 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True):
     except ValueError:
         raise FileFormatError(f"{path}: its MRC header names mode {mode}, none clwave reads (0 int8, 1 int16, "
                               "2 float32, 6 uint16, 12 float16); the file is corrupt or packed (mode 101)") from None
+    if mode == 0 and _imod_unsigned(header):
+        dtype = np.dtype(np.uint8)
     stored = tuple(int(n) for n in (header.nz, header.ny, header.nx))  # sections, rows, columns
     if min(stored) < 1:
         raise FileFormatError(f"{path}: its MRC header declares {' x '.join(map(str, stored[::-1]))} columns, rows "
@@ -77,14 +80,37 @@ def world_unit(path) -> str | None:
 
 
 def _header(path):
-    """``(header, offset of the samples)``: mrcfile's header, checked as ``permissive=False`` checks it."""
+    """``(header, offset of the samples)``: mrcfile's header, checked as ``permissive=False`` checks it, its extended
+    header's length (``nsymbt``) first against the file's: mrcfile reads (allocates) all it declares."""
     import mrcfile
+    from mrcfile.dtypes import HEADER_DTYPE
+    from mrcfile.utils import byte_order_from_machine_stamp
 
+    with open(path, "rb") as fh:
+        raw = fh.read(_HEADER)
+    try:
+        order = byte_order_from_machine_stamp(raw[212:216]) if len(raw) == _HEADER else None
+    except ValueError:
+        order = None  # mrcfile names the problem
+    if order is not None:
+        extended, holds = int(np.frombuffer(raw, HEADER_DTYPE.newbyteorder(order))[0]["nsymbt"]), \
+            path.stat().st_size - _HEADER
+        if extended > holds:
+            raise FileFormatError(f"{path}: its MRC header declares an extended header of {extended:,} bytes but the "
+                                  f"file holds {holds:,} bytes after its 1,024-byte header; it is truncated or its "
+                                  "header is wrong")
     try:
         with mrcfile.open(path, header_only=True, permissive=False) as mrc:
             return mrc.header.copy(), _HEADER + int(mrc.header.nsymbt)
     except ValueError as exc:
         raise FileFormatError(f"{path} is not an MRC/CCP4 map clwave reads: {exc} (mrcfile)") from None
+
+
+def _imod_unsigned(header) -> bool:
+    """Whether mode 0's bytes are unsigned: IMOD's stamp ("IMOD" at byte 152) without its signed-bytes flag (bit 0 of
+    imodFlags at 156), as IMOD wrote every byte file before 4.2.23; MRC2014's mode 0 is signed."""
+    stamp, flags = np.frombuffer(header.tobytes(), header.nx.dtype, 2, 152)
+    return int(stamp) == _IMOD_STAMP and not int(flags) & 1
 
 
 def _spacing(header):

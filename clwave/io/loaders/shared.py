@@ -426,6 +426,30 @@ def stated_affine(turn, shape_zyx, spacing_zyx, origin_xyz) -> np.ndarray:
     return affine
 
 
+#: the first bytes of a gzip stream
+GZIP_MAGIC = b"\x1f\x8b"
+
+
+def _gzip_length(path, most) -> int | None:
+    """The length of ``path``'s gzip stream, every member, counted a megabyte at a time (kept nowhere) up to ``most``
+    bytes; where the stream is damaged or cut short, the length read until then; None where the file does not start
+    with it (a NRRD's follows its text header)."""
+    import gzip
+    import zlib
+
+    with open(path, "rb") as fh:
+        if fh.read(2) != GZIP_MAGIC:
+            return None
+    total = 0
+    try:
+        with gzip.open(path, "rb") as fh:
+            while total < most and (chunk := fh.read(1 << 20)):
+                total += len(chunk)
+    except (OSError, EOFError, zlib.error):
+        pass
+    return total
+
+
 def read_slices(paths, read_slice, desc, progress_bar, fits=None):
     """Stack one 2-D slice per file along z, each read with its own error wrapping; the stack the first slice
     declares (as many as there are files) is weighed before the others are read (:func:`check_whole`)."""
@@ -463,7 +487,8 @@ def folder_files(folder):
 
 def check_declared_size(path, offset, nbytes, shape, gzip=None):
     """Refuse a header that declares more data than the file holds, before anything is allocated
-    (gzip, by default for a ``.gz`` name: its trailer's size of the uncompressed stream, modulo 2^32)."""
+    (gzip, by default for a ``.gz`` name: its trailer's size of the uncompressed stream, modulo 2^32; where that is
+    short, the stream counted, as the trailer counts its last member only and zero padding may follow it)."""
     path = Path(path)
     gzip = path.name.lower().endswith(".gz") if gzip is None else gzip
     if gzip:
@@ -471,6 +496,8 @@ def check_declared_size(path, offset, nbytes, shape, gzip=None):
             fh.seek(-4, os.SEEK_END)
             present = int.from_bytes(fh.read(4), "little")
         lies = (offset + nbytes) % 2 ** 32 > present  # the trailer counts the stream modulo 2^32
+        if lies and (counted := _gzip_length(path, offset + nbytes)) is not None:
+            present, lies = counted, offset + nbytes > counted
     else:
         present = path.stat().st_size
         lies = offset + nbytes > present

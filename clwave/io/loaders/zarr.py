@@ -158,6 +158,8 @@ def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
     if np.any(scale[zyx] <= 0):
         raise bad(f"scales the axes {names} by {scale.tolist()}; the z, y, x scale must be positive")
     units = [axes[i].get("unit") for i in zyx]
+    if not all(u is None or isinstance(u, str) for u in units):
+        raise bad(f"gives the z, y, x axes the units {units}; a unit is a name, e.g. 'micrometer'")
     if len(set(units)) > 1:  # convert to the x axis's unit
         if not all(u in _METRES for u in units):
             raise bad(f"gives the z, y, x axes the units {units}; clwave converts different units of length "
