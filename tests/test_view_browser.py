@@ -383,9 +383,9 @@ def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(
                                                      "export") for kind in ("input", "select", "button"))
     controls = page.execute_script(f"return Array.from(document.querySelectorAll('{sending}'))"
                                    ".map(e => e.matches(':disabled'))")
-    # 2 modes, 3 camera controls (the scale bar's too), 5 X-ray ones, 9 shaded ones, 4 of the export's (the size,
-    # save, two copies)
-    assert len(controls) == 23 and all(controls)
+    # 2 modes, 3 camera controls (the scale bar's too), 5 X-ray ones, 9 shaded ones and 10 of the clip (6 crop sliders,
+    # the plane's box, list and slider, "uncut"), 4 of the export's (the size, save, two copies)
+    assert len(controls) == 33 and all(controls)
     state, shown = page.execute_script("return JSON.stringify(window.clwave.state)"), browser.shown(page)
     browser.drag(page, 30, 10, steps=3, hold=False)
     ActionChains(page).scroll_to_element(page.find_element("id", "image")).double_click(

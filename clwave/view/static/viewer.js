@@ -50,7 +50,9 @@
       "clwave.view) and open the address it prints, whose token is new. This image is the last it sent.";
     status.classList.add("error");
   }
-  function view() { return { type: "view", seq: sentSeq, ...state, clip: state.mode === "shaded" ? clipOf() : null }; }
+  function view() {  // the message of the view now: a shaded one with its clip (X-ray frames are splatted whole)
+    return { type: "view", seq: sentSeq, ...state, clip: hello && state.mode === "shaded" ? clipOf() : null };
+  }
   function request() {  // at most one message per 16 ms: the latest state then
     if (!pending) { pending = true; setTimeout(send, 16); }
   }
