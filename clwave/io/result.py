@@ -19,7 +19,7 @@ from ..errors import InputError
 from .files import check_suffix, write_atomic
 from .images import PNG_SUFFIXES, TIFF_SUFFIXES, check_bit_depth, check_unit, pixel_size, write_png, write_tiff
 from ..model.tf_passes import AUTO_PERCENTILES
-from ..model.transfer import check_window
+from ..model.tf_checks import check_window
 
 
 @dataclass

@@ -147,6 +147,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
     labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
     stored = data.dtype
+    photo = data.ndim == 4 and stored.kind in "iu" and _photo(kind, path)
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
         if hu_to_mu and data.ndim != 3:
             channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
@@ -158,8 +159,19 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     return Volume(data,
                   spacing=spacing if spacing is not None else (file_spacing or 1.0),
                   origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity,
-                  labels=labels, stored_dtype=stored,
+                  labels=labels, stored_dtype=stored, photo=photo,
                   unit=world_unit(path) if spacing is None else None)  # --spacing: in the user's unit
+
+
+def _photo(kind, path) -> bool:
+    """Whether the colour samples of a ``kind`` input are a photo's, straight colour and alpha (:attr:`Volume.photo`):
+    PNG and JPEG slices, and TIFF colour samples (RGB, RGBA), not an OME-TIFF's channels."""
+    if kind in ("png-folder", "jpeg-folder"):
+        return True
+    if kind in ("tiff", "tiff-folder"):
+        with reading(path):
+            return tiff.colour_samples(path if kind == "tiff" else slices.slice_files(path)[1][0])
+    return False
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
@@ -317,6 +329,10 @@ def _kind(path: Path) -> str:
                 return "dicom-frames"
         raise FileFormatError(f"{path} is one DICOM slice; pass the folder that holds the whole series "
                               f"({path.parent})")
+    image = next((kind for kind in ("PNG", "JPEG") if suffix in slices.SLICE_SUFFIXES[kind]), None)
+    if image:  # a photo stack's slice, as Fiji's Image Sequence takes one
+        raise FileFormatError(f"{path} is one {image} image; clwave reads a folder of {image} slices as a stack: give "
+                              f"its folder ({path.parent})")
     if suffix not in _FILE_KINDS:
         raise FileFormatError(f"unknown file type {suffix or '(no extension)'!r} of {path}; "
                               f"supported inputs: {SUPPORTED}")
