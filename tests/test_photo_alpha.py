@@ -2,6 +2,8 @@
 alpha (Volume.photo), classified by its alpha (the photo preset), never taken as a classified model; the colour and
 the alpha each scaled by its own range."""
 
+import json
+
 import imageio.v3 as iio
 import numpy as np
 import pytest
@@ -108,6 +110,10 @@ def test_a_photo_clw_is_refused_for_shading_in_one_line(tmp_path, capsys):
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert "holds a photo's colour and alpha: compress the original volume with --tf photo" in err
     assert not (tmp_path / "r.png").exists()
+    code, out, err = run(capsys, "info", str(tmp_path / "p.clw"))
+    assert code == 0 and "a photo's colour and alpha, not classified" in out, err
+    code, out, err = run(capsys, "info", str(tmp_path / "p.clw"), "--json")
+    assert code == 0 and json.loads(out)["photo"] is True, err
 
 
 @pytest.mark.parametrize("alpha_top", [1.0, 255.0, 65535.0])
@@ -213,3 +219,16 @@ def test_the_viewer_offers_a_photo_model_x_ray_only():
 
     with view(WaveletVolume.from_volume(Volume(cut_out(), photo=True), levels=1), size=16) as v:
         assert v.server.hello()["modes"] == ["xray"]
+
+
+def test_a_chunked_photo_is_classified_as_in_memory(rng):
+    """A key "auto" and each channel's range found chunk by chunk: bit for bit the in-memory classification."""
+    import dask.array as da
+
+    data = np.concatenate([in_gel(), np.full((6, 10, 10, 1), 1, np.uint8)], -1).astype(np.float32)  # a 0/1 alpha
+    data[:, 3:7, 3:7, 3] = rng.random((6, 4, 4))
+    tf = TransferFunction.preset("photo").under(key="auto")
+    whole = tf.classify(Volume(data)).data
+    chunked = tf.classify(Volume(da.from_array(data, chunks=(3, 5, 5, 4)))).data.compute()
+    np.testing.assert_array_equal(chunked, whole)
+    assert not whole[:, :3].any() and whole[:, 3:7, 3:7, 3].max() > 0.4 * OPACITY  # the gel keyed, alpha 0 .. 1 kept
