@@ -14,6 +14,7 @@ from .io.phantoms import phantom
 from .model.transfer import TransferFunction
 from .model.wavelet import WaveletVolume
 from .model.camera import Camera
+from .model.clip import Clip
 from .model.conebeam import ConeBeam, transmitted
 from .io.result import RenderResult
 from .splat.renderer import SplatRenderer, splat
@@ -32,7 +33,8 @@ __all__ = [
     "KernelBuildError", "OutputError", "OutputExistsError", "HostMemoryError", "WorkerLostError", "Volume",
     "ComputeContext",
     "list_devices",
-    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "ConeBeam", "transmitted",
+    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "Clip", "ConeBeam",
+    "transmitted",
     "RenderResult",
     "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
     "Detail",

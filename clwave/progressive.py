@@ -31,7 +31,7 @@ def progressive(wv, camera, steps=None, budget=None, device=None, *, method="spl
 
 def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, error=None, tolerance=1e-3,
                          lights=None, shading=True, absorption=True, device_memory=None,
-                         tracer: RayTracer | None = None, transfer_function=None):
+                         tracer: RayTracer | None = None, transfer_function=None, clip=None):
     """Yield :class:`~clwave.raytrace.progressive.RaytraceFrame` s from cheap to exact; the last is bit for bit the
     image of ``RayTracer.render`` (full detail, the full image, ``tolerance``).
 
@@ -45,7 +45,7 @@ def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, er
         the first frame is always made.
     error : float in (0, 1), optional
         Stop at the first frame whose estimated relative RMS error is at most this.
-    tolerance, lights, shading, absorption, transfer_function :
+    tolerance, lights, shading, absorption, transfer_function, clip :
         As for :func:`clwave.raytrace`; every frame uses them.
     tracer : RayTracer, optional
         Without it, calls on the same model and device share one with :func:`clwave.raytrace`.
@@ -53,5 +53,5 @@ def raytrace_progressive(wv, camera, steps=None, budget=None, device=None, *, er
     if tracer is None:
         tracer = shared_tracer(wv, device, device_memory=device_memory)
     options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
-                   transfer_function=transfer_function)
+                   transfer_function=transfer_function, clip=clip)
     return tracer.refine(camera, **options, steps=steps, budget=budget, error=error)

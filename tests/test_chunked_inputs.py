@@ -3,6 +3,7 @@ read as Dask arrays equal the in-memory load; chunked classification equals the 
 bit; tools/make_zarr.py writes phantom() chunk by chunk; bad stores give one-line errors."""
 
 import importlib.util
+import json
 from pathlib import Path
 
 import dask.array as da
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 import zarr
 
+from clwave.cli import main
 from clwave.errors import ClwaveError, FileFormatError, InputError
 from clwave.io import loaders
 from clwave.io.loaders import shared
@@ -226,6 +228,23 @@ def test_ome_zarr_units_are_converted_to_the_x_axis_unit(tmp_path):
     attrs["multiscales"] = multiscales
     vol = load(path)
     assert vol.spacing == (2000.0, 0.5, 0.5) and vol.origin == (61.25, 21.0, 13000.0)
+    assert vol.unit == "nm"  # the x axis's, the spacing's (was None: no OME-Zarr had a unit)
+
+
+@pytest.mark.parametrize("unit, expected", [("millimeter", "mm"), ("angstrom", "A"), ("inch", None), (None, None)])
+def test_an_ome_zarr_world_unit_is_its_x_axis_unit_where_it_is_one(tmp_path, capsys, unit, expected):
+    """An OME-Zarr image's unit as clwave names it, said by ``clwave info``; None for a unit that is no world unit
+    (an inch), none given, or a plain Zarr array (no metadata)."""
+    path, _ = _ome(tmp_path, fmt=3)
+    attrs = zarr.open_group(path, mode="r+").attrs
+    ome = attrs["ome"]
+    for axis in ome["multiscales"][0]["axes"][2:]:
+        axis.update({} if unit is None else {"unit": unit})
+    attrs["ome"] = ome
+    zarr.create_array(tmp_path / "plain.zarr", data=np.zeros((2, 3, 4), np.float32))
+    assert load(path).unit == expected and load(tmp_path / "plain.zarr").unit is None
+    assert main(["info", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["unit"] == expected
 
 
 def _meta(tmp_path, **change):

@@ -114,7 +114,7 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
     tifffile.imwrite(tmp_path / "v.tif", data, photometric="minisblack")
     loaded = {name: clwave.load(tmp_path / name) for name in ("v.npy", "v.nii", "v.h5")}
     import clwave.io.loaders.raw as raw
-    monkeypatch.setattr(raw, "_read_memmap", lambda *a: pytest.fail("a voxel of the .npy was read"))
+    monkeypatch.setattr(raw, "read_memmap", lambda *a: pytest.fail("a voxel of the .npy was read"))
     monkeypatch.setattr(nibabel.arrayproxy.ArrayProxy, "__getitem__", lambda *a: pytest.fail("a NIfTI voxel read"))
     monkeypatch.setattr(h5py.Dataset, "__getitem__", lambda *a: pytest.fail("an HDF5 voxel read"))
     for name, vol in loaded.items():
@@ -126,7 +126,7 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
         assert facts["bytes"] == (tmp_path / name).stat().st_size and facts["spacing_in_file"] == (name == "v.nii")
     code, out, _ = run(capsys, "info", str(tmp_path / "v.nii"))
     assert out.splitlines()[1:] == ["volume     4 x 5 x 6 voxels (x, y, z), 1 channel of int16",
-                                    "spacing    2, 3, 4 mm (x, y, z), origin 3, 6, 10 (RAS+)",
+                                    "spacing    2, 3, 4 mm (x, y, z; --spacing 4,3,2), origin 3, 6, 10 (RAS+)",
                                     "box        8, 15, 24 (x, y, z) mm",
                                     "orient     stored RAS, from the sform (nibabel's choice; sform_code 2, "
                                     "qform_code 0)"]
@@ -138,7 +138,7 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
     code, out, _ = run(capsys, "info", str(tmp_path / "v.nii.gz"))
     assert out.splitlines()[1:] == ["stored     4 x 5 x 6 values of int16, in the file's order of axes",
                                     "volume     4 x 5 x 6 voxels (x, y, z), 1 channel of int16",
-                                    "spacing    2, 3, 4 mm (x, y, z), origin 3, 6, 10 (RAS+)",
+                                    "spacing    2, 3, 4 mm (x, y, z; --spacing 4,3,2), origin 3, 6, 10 (RAS+)",
                                     "box        8, 15, 24 (x, y, z) mm",
                                     "orient     stored RAS, from the sform (nibabel's choice; sform_code 2, "
                                     "qform_code 0)"]
@@ -165,7 +165,8 @@ def test_info_of_an_ome_or_imagej_tiff_gives_its_spacing_without_a_voxel(tmp_pat
     assert loaded["o.ome.tif"].spacing == (5.0, 0.25, 0.5) and loaded["ij.tif"].spacing == (3.0, 0.25, 0.5)
     code, out, _ = run(capsys, "info", str(tmp_path / "o.ome.tif"))
     # the OME-TIFF's first voxel at 0 (it gives no plane positions): its centre at half its extent
-    assert out.splitlines()[3:] == ["spacing    0.5, 0.25, 5 um (x, y, z), origin 2.25, 0.875, 12.5",
+    assert out.splitlines()[3:] == ["spacing    0.5, 0.25, 5 um (x, y, z; --spacing 5,0.25,0.5), origin 2.25, 0.875, "
+                                    "12.5",
                                     "box        5, 2, 30 (x, y, z) um"]
     code, out, _ = run(capsys, "info", str(tmp_path / "ij.tif"), "--json")  # its unit, "um" as micron and µm are
     assert json.loads(out)["unit"] == "um" and json.loads(out)["box"] == [5.0, 2.0, 18.0]
@@ -293,16 +294,18 @@ def test_info_of_a_time_series_describes_it_and_names_the_refusal(tmp_path, caps
     lines = dict(line.split(None, 1) for line in out.splitlines())
     assert code == 0 and lines["stored"] == "4 x 5 x 6 x 3 values of int16, in the file's order of axes, a time " \
         "series", out
-    assert lines["spacing"] == "2, 3, 4 mm (x, y, z), origin 8, 12, 17 (RAS+)" and "volume" not in lines
+    assert lines["spacing"] == "2, 3, 4 mm (x, y, z; --spacing 4,3,2), origin 8, 12, 17 (RAS+)"
+    assert "volume" not in lines
     assert lines["time"] == "3 time points, 2.5 sec apart"
     assert lines["refused"].endswith("extract one volume first, e.g. with nibabel.funcs.four_to_three")
 
 
 def test_every_formats_description_has_the_same_keys(tmp_path, capsys):
     """trial22: .nii gave `shape`, `channels`, `spacing_in_file`, .nii.gz `stored_shape`, `resampled` instead.  One
-    volume as .nii, .nii.gz, .nrrd, .npy, .tif, .zarr and a DICOM folder: the same JSON keys (loaders.DESCRIBED), a
-    fact a format does not give as null; a .clw shares file, format, bytes, shape, channels, spacing, origin and
-    obliquity, with its model's own besides."""
+    volume as .nii, .nii.gz, .mgh, .mgz, .nrrd, .npy, .tif, .zarr, .mrc and a DICOM folder: the same JSON keys
+    (loaders.DESCRIBED), a fact a format does not give as null; a .clw shares file, format, bytes, shape, channels,
+    spacing, origin and obliquity, with its model's own besides."""
+    import mrcfile
     import nibabel
     import nrrd
     import tifffile
@@ -314,6 +317,10 @@ def test_every_formats_description_has_the_same_keys(tmp_path, capsys):
     data = (np.arange(4 * 5 * 6).reshape(4, 5, 6) % 7).astype(np.int16)
     for name in ("v.nii", "v.nii.gz"):
         nibabel.save(nibabel.Nifti1Image(data, np.eye(4)), tmp_path / name)
+    for name in ("v.mgh", "v.mgz"):
+        nibabel.save(nibabel.MGHImage(data, np.eye(4)), tmp_path / name)
+    with mrcfile.new(tmp_path / "v.mrc") as mrc:
+        mrc.set_data(data)
     nrrd.write(str(tmp_path / "v.nrrd"), data)
     np.save(tmp_path / "v.npy", data)
     tifffile.imwrite(tmp_path / "v.tif", data, photometric="minisblack")
@@ -323,7 +330,8 @@ def test_every_formats_description_has_the_same_keys(tmp_path, capsys):
                  ["a.dcm", "b.dcm", "c.dcm"])
     clwave.WaveletVolume.from_volume(clwave.Volume(data.astype(np.float32)), levels=1).save(tmp_path / "v.clw")
     keys = {}
-    for name in ("v.nii", "v.nii.gz", "v.nrrd", "v.npy", "v.tif", "v.zarr", "dicom", "v.clw"):
+    for name in ("v.nii", "v.nii.gz", "v.mgh", "v.mgz", "v.nrrd", "v.npy", "v.tif", "v.zarr", "v.mrc", "dicom",
+                 "v.clw"):
         code, out, err = run(capsys, "info", str(tmp_path / name), "--json")
         assert code == 0, err
         keys[name] = list(json.loads(out))
@@ -354,7 +362,7 @@ def test_info_prints_world_lengths_without_float_noise(tmp_path, capsys):
     origin = json.loads(out)["origin"]
     assert code == 0 and 0 < max(map(abs, origin)) < 1e-6 * 16, origin  # the noise is there, below 16 mm / 1e6
     code, out, _ = run(capsys, "info", str(tmp_path / "o.nii"))
-    assert code == 0 and "spacing    2, 2, 2 mm (x, y, z), origin 0, 0, 0 (RAS+)\n" in out, out
+    assert code == 0 and "spacing    2, 2, 2 mm (x, y, z; --spacing 2,2,2), origin 0, 0, 0 (RAS+)\n" in out, out
 
 
 def test_info_takes_the_reading_options_and_prints_the_geometry_they_give(tmp_path, capsys):
@@ -372,7 +380,7 @@ def test_info_takes_the_reading_options_and_prints_the_geometry_they_give(tmp_pa
     assert code == 0, err
     assert lines["stored"] == "4 x 6 x 8 values of uint16, in the file's order of axes"
     assert lines["volume"] == "8 x 6 x 4 voxels (x, y, z), 1 channel of uint16"
-    assert lines["spacing"] == "5, 5, 10 (x, y, z) (--spacing), origin 0, 0, 0"
+    assert lines["spacing"] == "5, 5, 10 (x, y, z; --spacing 10,5,5 given), origin 0, 0, 0"
     assert lines["box"] == "40, 30, 40 (x, y, z) in --spacing's unit"
     assert lines["values"] == "--subtract 2000: applied as the values are read (not read here)"
     code, out, err = run(capsys, "info", str(tmp_path / "slices"), "--json")

@@ -99,6 +99,50 @@ def test_a_label_map_given_a_wavelet_above_haar_is_warned_of_once(tmp_path):
     assert clwave.load(intent).labels
 
 
+#: FreeSurfer's lookup table as its aseg and aparc+aseg use it: subcortical structures in 0 .. 255, cortical parcels
+#: at 1000 + n (left) and 2000 + n (right); some 110 labels, numbered sparsely
+ASEG = [0, 2, 4, 5, 7, 8, 10, 11, 12, 13, 14, 15, 16, 17, 18, 24, 26, 28, 30, 31, 41, 43, 44, 46, 47, 49, 50, 51, 52,
+        53, 54, 58, 60, 62, 63, 72, 77, 80, 85, 251, 252, 253, 254, 255]
+APARC_ASEG = ASEG[:-5] + [side + n for side in (1000, 2000) for n in range(1, 36) if n != 4]
+
+
+def atlas_map(table, shape=(48, 48, 48), block=6, seed=5):
+    """Cubes of ``block`` voxels, each a label of ``table`` at random (every label at least once), inside a shell of
+    background (0) one cube thick."""
+    rng = np.random.default_rng(seed)
+    cells = tuple(n // block - 2 for n in shape)
+    picks = np.concatenate([table, rng.choice(table, np.prod(cells) - len(table))])
+    rng.shuffle(picks)
+    return np.pad(np.kron(picks.reshape(cells), np.ones((block,) * 3, int)), block)
+
+
+@pytest.mark.parametrize("table, dtype", [(ASEG, np.uint8), (ASEG, np.int32), (APARC_ASEG, np.int32),
+                                          (APARC_ASEG, np.uint16)])
+def test_freesurfer_label_maps_numbered_sparsely_are_label_maps(table, dtype):
+    """An aseg (44 labels up to 255) and an aparc+aseg (108 labels up to 2035; more than 64, sparse): label maps,
+    and the model of one with a wavelet above Haar is warned of."""
+    data = atlas_map(table).astype(dtype)
+    assert len(np.unique(data)) == len(table) and looks_like_labels(data)
+    with pytest.warns(ClwaveWarning, match="looks like a label map"):
+        clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
+
+
+def test_an_8_bit_mri_with_plateaus_is_no_label_map():
+    """Hundreds of 8-bit intensities filling 0 .. 255 are an image's, however flat its regions: the MNI152 T1
+    template at 8 bits, its white matter set to 110 as FreeSurfer's T1.mgz normalises it (85 % of its neighbours
+    equal, as a label map's are); and so are they scaled by 4 or 16, numbered sparsely but in even steps."""
+    import importlib.util
+    from pathlib import Path
+
+    folder = Path(importlib.util.find_spec("nilearn").submodule_search_locations[0]) / "datasets/data"
+    t1 = np.asarray(nib.load(folder / "mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz").dataobj)
+    white = np.asarray(nib.load(folder / "mni_icbm152_wm_tal_nlin_sym_09a_converted.nii.gz").dataobj) > 0.9
+    data = np.rint(t1 / t1.max() * 255).astype(np.uint8)
+    data[white] = 110
+    assert len(np.unique(data)) > 100 and not looks_like_labels(data)
+    assert not looks_like_labels(data.astype(np.uint16) * 4) and not looks_like_labels(data.astype(np.int16) * 16)
+
+
 @pytest.mark.parametrize("make", [
     lambda: np.rint(clwave.phantom("hydrogen", 48).data * 255).astype(np.uint8),          # MRI-like, 8 bit
     lambda: np.rint(clwave.phantom("hydrogen", 48).data * 4095).astype(np.uint16),        # 12 bit

@@ -284,7 +284,10 @@ def test_imagej_tiff_spacing_is_read(tmp_path, rng):
                      metadata={"axes": "ZYX", "spacing": 2.0, "unit": "um"})
     vol = load(tmp_path / "ij.tif")
     np.testing.assert_array_equal(vol.data, arr)
-    assert vol.spacing == (2.0, 0.5, 0.25)
+    assert vol.spacing == (2.0, 0.5, 0.25) and vol.unit == "um"
+    tifffile.imwrite(tmp_path / "nm.tif", arr, imagej=True, resolution=(4.0, 2.0),  # electron microscopy's unit
+                     metadata={"axes": "ZYX", "spacing": 2.0, "unit": "nm"})
+    assert load(tmp_path / "nm.tif").unit == "nm"
     assert load(tmp_path / "ij.tif", spacing=1.0).spacing == (1.0, 1.0, 1.0)
     # a plain TIFF's resolution is a print density (dots per inch), not a voxel size: spacing 1
     tifffile.imwrite(tmp_path / "plain.tif", arr, photometric="minisblack", resolution=(72.0, 72.0),
@@ -359,7 +362,7 @@ def test_an_ome_tiff_and_an_ome_zarr_of_one_volume_are_placed_alike(tmp_path, rn
     for path in (tif, zarr_store):
         vol = load(path)
         np.testing.assert_array_equal(np.asarray(vol.data), arr)
-        assert vol.spacing == pytest.approx(spacing, rel=1e-12)
+        assert vol.spacing == pytest.approx(spacing, rel=1e-12) and vol.unit == "um"
         np.testing.assert_allclose(vol.origin, want, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(vol.voxel_to_world(np.zeros((1, 3)))[0], corner, atol=1e-12)
         assert main(["info", str(path), "--json"]) == 0
@@ -685,7 +688,7 @@ def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsy
     assert capsys.readouterr().out.splitlines()[1:] == [
         "stored     3 x 6 x 5 values of float32, in the file's order of axes (stored as uint16)",
         "volume     5 x 6 x 3 voxels (x, y, z), 1 channel of float32",
-        "spacing    0.9, 0.7, 1 mm (x, y, z), origin 18.2, -31.75, 1 (RAS+)",
+        "spacing    0.9, 0.7, 1 mm (x, y, z; --spacing 1,0.7,0.9), origin 18.2, -31.75, 1 (RAS+)",
         "box        4.5, 4.2, 3 (x, y, z) mm",
         "rescale    slope 2, intercept -1024",
         "padding    stored 0 (outside the patient): set to the series' least other value when read"]
@@ -852,7 +855,7 @@ def _zeros_tiff_zlib(path):
 def _zeros_npy(path):
     np.lib.format.open_memmap(path, "w+", np.uint8, (64, 64, 64)).flush()  # a sparse file
     from clwave.io.loaders import raw
-    return raw, "_read_memmap"
+    return raw, "read_memmap"
 
 
 @pytest.mark.parametrize("write, name", [(_zeros_nii_gz, "v.nii.gz"), (_zeros_nrrd_gzip, "v.nrrd"),
@@ -894,7 +897,7 @@ def test_a_raw_file_is_weighed_before_it_is_read(tmp_path, monkeypatch):
     path = tmp_path / "v.raw"
     with open(path, "wb") as fh:
         fh.truncate(64 ** 3 * 2)  # sparse
-    monkeypatch.setattr(raw, "_read_memmap", lambda *args: pytest.fail("read"))
+    monkeypatch.setattr(raw, "read_memmap", lambda *args: pytest.fail("read"))
     monkeypatch.setattr(clwave.device.memory, "available_bytes", lambda: 64 ** 3 * 6 - 1)  # int16 + float32
     with pytest.raises(HostMemoryError, match="64 x 64 x 64 int16"):
         load(path, shape=(64, 64, 64), dtype="int16")

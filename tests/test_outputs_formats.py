@@ -213,8 +213,13 @@ def test_millimetre_inputs_give_the_physical_pixel_size(nifti, tmp_path):
         page = t.pages[0]
         x = page.tags["XResolution"].value
         assert page.tags["ResolutionUnit"].value == 3 and x[0] / x[1] == pytest.approx(10 / pixel, rel=1e-9)
-    assert main(base + ["-o", str(tmp_path / "n.png"), "--spacing", "1"]) == 0  # units of its own: no pHYs
-    assert b"pHYs" not in chunk_types(decode_png(tmp_path / "n.png")[0])
+    # --spacing re-states the numbers in the file's unit, mm (until trial25 it dropped it: no pHYs)
+    assert main(base + ["-o", str(tmp_path / "n.png"), "--spacing", "1"]) == 0
+    ppm = round(1000 / json.loads((tmp_path / "m.json").read_text())["pixel"])
+    assert dict(decode_png(tmp_path / "n.png")[0])[b"pHYs"] == struct.pack(">IIB", ppm, ppm, 1)
+    np.save(tmp_path / "u.npy", clwave.load(nifti).data)  # units of its own: no pHYs
+    assert main(base[:1] + [str(tmp_path / "u.npy")] + base[2:] + ["-o", str(tmp_path / "u.png")]) == 0
+    assert b"pHYs" not in chunk_types(decode_png(tmp_path / "u.png")[0])
 
 
 def test_drr_as_a_float_tiff_stack_and_a_16_bit_png(nifti, tmp_path):

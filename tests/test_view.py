@@ -68,6 +68,8 @@ def test_parse_view_takes_a_whole_view():
     assert edited.tf == clwave.TransferFunction(POINTS, name="edited") and edited.tf.window is None
     assert (state.colour_map, parse_view(json.dumps(dict(BASE, seq=3, colour_map="magma")), 2, ("xray",)).colour_map
             ) == ("grey", "magma")
+    assert (state.scale_bar, parse_view(json.dumps(dict(BASE, seq=3, scale_bar=True)), 2, ("xray",)).scale_bar
+            ) == (False, True)
 
 
 @pytest.mark.parametrize("change, words", [
@@ -75,6 +77,7 @@ def test_parse_view_takes_a_whole_view():
     (dict(elevation=91), "elevation"), (dict(zoom=float("nan")), "zoom"), (dict(mode="shaded"), "mode"),
     (dict(detail=0), "detail"), (dict(window=[2, 1]), "lo < hi"), (dict(window="auto"), "window"),
     (dict(moving=1), "moving"), (dict(path="/etc/passwd"), "unknown field"), (dict(type="run"), "type"),
+    (dict(scale_bar="yes"), "scale_bar='yes' must be true or false"),
     (dict(tf=[1]), "tf must be"), (dict(tf=dict(TF, preset="/etc/passwd")), "preset"),
     (dict(tf=dict(TF, opacity=-1)), "opacity"), (dict(tf=dict(TF, code="x")), "tf must be"),
     (dict(tf=dict(points=POINTS, preset="grey")), "tf must be"), (dict(tf=dict(points=POINTS[:1])), "2 to 32 rows"),

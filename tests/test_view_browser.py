@@ -335,8 +335,9 @@ def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(
                                                      "export") for kind in ("input", "select", "button"))
     controls = page.execute_script(f"return Array.from(document.querySelectorAll('{sending}'))"
                                    ".map(e => e.matches(':disabled'))")
-    # 2 modes, 2 camera controls, 5 X-ray ones, 9 shaded ones, 4 of the export's (the size, save, two copies)
-    assert len(controls) == 22 and all(controls)
+    # 2 modes, 3 camera controls (the scale bar's too), 5 X-ray ones, 9 shaded ones, 4 of the export's (the size,
+    # save, two copies)
+    assert len(controls) == 23 and all(controls)
     state, shown = page.execute_script("return JSON.stringify(window.clwave.state)"), browser.shown(page)
     browser.drag(page, 30, 10, steps=3, hold=False)
     ActionChains(page).scroll_to_element(page.find_element("id", "image")).double_click(
@@ -430,3 +431,39 @@ def blob(page) -> bytes:
         "const done = arguments[arguments.length - 1], r = new FileReader(); r.onload = () => done(r.result);"
         "r.readAsDataURL(window.clwave.stats.saved.blob);")
     return base64.b64decode(url.split(",", 1)[1])
+
+
+def test_the_scale_bar_box_draws_the_bar_over_an_orthographic_view(viewer, page, tmp_path):
+    """Ticked, the overlay holds the frame's bar, round(length / pixel) white pixels in a row over the image's bottom
+    right, and the Python of the view says scale_bar=True; zoomed, the bar follows the new extent; in perspective the
+    box is disabled and the overlay empty."""
+    overlay = ("const o = document.getElementById('scale-bar-overlay'), d = o.getContext('2d')"
+               ".getImageData(0, 0, o.width, o.height).data; return Array.from(d)")
+
+    def longest_white():
+        rgba = np.array(page.execute_script(overlay), np.uint8).reshape(*SIZE, 4)
+        white = np.all(rgba == 255, axis=-1)
+        return max(max((len(run) for run in "".join("1" if w else "0" for w in row).split("0")), default=0)
+                   for row in white), np.argwhere(white)
+
+    browser.open_viewer(page, viewer.url)
+    browser.wait_final(page)
+    assert longest_white()[0] == 0  # unticked: nothing drawn
+    page.find_element("id", "scale-bar").click()
+    final = browser.wait_final(page)
+    length, label = final["scale_bar"]
+    run, where = longest_white()
+    assert run == round(length / (final["extent"] / SIZE[1])) and label.endswith("units")
+    assert where[:, 0].min() > SIZE[0] / 2 and where[:, 1].min() > SIZE[1] / 3
+    page.find_element("id", "copy-python").click()
+    code = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'python' && e")
+    assert "scale_bar=True, unit=wv.unit" in code["text"]
+    page.execute_script("window.clwave.state.zoom = 2.5; window.clwave.send()")
+    zoomed = browser.wait_for(page, "const c = window.clwave.current(); return c && c.fig.final && "
+                                    "c.fig.extent < " + repr(final["extent"] / 2) + " && c.fig")
+    assert longest_white()[0] == round(zoomed["scale_bar"][0] / (zoomed["extent"] / SIZE[1]))
+    page.find_element("id", "perspective").click()
+    browser.wait_for(page, "const c = window.clwave.current(); return c && c.fig.fov === 30 && c.fig")
+    assert page.execute_script("return document.getElementById('scale-bar').disabled && "
+                               "!window.clwave.state.scale_bar")
+    assert longest_white()[0] == 0

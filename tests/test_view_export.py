@@ -17,6 +17,7 @@ import clwave
 from clwave.view import view
 from clwave.view.export import Origin, Spec, command, python
 
+from test_scale_bar import bar_rows
 from test_view import BASE, decode, frames_until_final
 
 #: the editor's preset moved, widened and made more opaque: no preset names it (a .json of points in the command)
@@ -236,3 +237,25 @@ def test_a_perspective_view_zooms_its_lens_and_keeps_its_eye():
         assert v.slope[0] * np.linalg.norm(v.eye - v.target) == pytest.approx(flat[zoom].pixel, rel=1e-12)
     radius = np.linalg.norm(np.array(vol.shape) * vol.spacing) / 2
     assert np.linalg.norm(views[1.0].eye - views[1.0].target) > 3 * radius
+
+
+def test_a_view_with_its_scale_bar_as_a_command_and_as_python(clw, tmp_path, monkeypatch):
+    """The page's scale bar ticked (``scale_bar``) on an orthographic X-ray: each frame names its length and label
+    (--scale-bar's default for the view's extent), the command gets ``--scale-bar`` and the Python ``scale_bar=True``;
+    the command's image is the saved one bit for bit, the bar round(length / pixel) pixels long in it; in perspective
+    the frames name none and a save is refused in one line."""
+    with view(str(clw), size=(96, 120)) as v:
+        msg = dict(BASE, seq=1, azimuth=47.3, elevation=-12.5, zoom=1.7, scale_bar=True)
+        figures, _ = final_frame(v, msg)
+        page, saved = exported(v, msg, (96, 120))
+        perspective, _ = final_frame(v, dict(msg, fov=30.0))
+        status, line = post(v, "image", dict(view=dict(msg, fov=30.0), size=[96, 120]))
+    length, label = figures["scale_bar"]
+    assert label == f"{length:g} units" and figures["extent"] / 5 / 2.5 <= length <= figures["extent"] / 5
+    assert page["command"].endswith(" --scale-bar -o view.png") and "scale_bar=True, unit=wv.unit" in page["python"]
+    got = shell(page["command"], tmp_path / "page")
+    assert np.array_equal(got, grey(saved))
+    assert np.array_equal(executed(page["python"], tmp_path / "python", monkeypatch), got)
+    assert bar_rows(got, 255)[0] == round(length / (figures["extent"] / 120))
+    assert perspective["scale_bar"] is None
+    assert status == 400 and line.count(b"\n") == 1 and b"a scale bar needs an orthographic view" in line

@@ -44,7 +44,9 @@
  *   content, content_origin, content_shape  CLW_CONTENT builds: per grid-0 fine cell, 1 where the source
  *                volume's content reaches; the segments of other cells are empty (docs/raytracing.md §4)
  *   coarse_bound superblocks bounded by at most this are one region for skipping and R
- *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates
+ *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates (and of a clip's box)
+ *   clip, nclip                  the clip's half-spaces in world units, (n, d) keeping n . x + d >= 0
+ *                                (docs/raytracing.md §12)
  *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;
  *                                perspective p = base (the eye), w = normalize(dir + c du + r dv) (a cone beam's
  *                                principal point in dir), with c, r the pixel centre's offsets from the image centre
@@ -74,6 +76,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                        __global const float *super_bound, const int4 super_origin, const int4 super_shape,
                        __global const uchar *content, const int4 content_origin, const int4 content_shape,
                        const real coarse_bound, const float4 box_lo, const float4 box_hi,
+                       __constant const float4 *clip, const int nclip,
                        const float4 base, const float4 du, const float4 dv, const float4 dir, const int perspective,
                        const float4 to_fine_scale, const float4 to_fine_offset,
                        __constant const real *nodes, __constant const real *weights, const real tol,
@@ -114,6 +117,15 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
             t0 = fmax(t0, fmin(ta, tb));
             t1 = fmin(t1, fmax(ta, tb));
         }
+    }
+    for (int k = 0; k < nclip; k++) { /* the clip's half-spaces: the interval stays one (docs/raytracing.md §12) */
+        const real at = dot(to_real3(clip[k].xyz), p) + clip[k].w, rate = dot(to_real3(clip[k].xyz), w);
+        if (rate > 0)
+            t0 = fmax(t0, -at / rate);
+        else if (rate < 0)
+            t1 = fmin(t1, -at / rate);
+        else if (at < 0)
+            t1 = -INFINITY;
     }
     const Regions regions = {bound, super_bound, occ_origin, occ_shape, super_origin, super_shape, coarse_bound};
     const size_t pix = (size_t)row * width + col;

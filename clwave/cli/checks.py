@@ -23,9 +23,9 @@ def check_options(args):
     opened, so that a mistake costs no read (a command's own options its ``run`` checks first thing): numbers that
     are not finite, the input's spacing and chunks, the model's wavelets, levels, thresholding, transfer function and
     classification, the scheduler, and the view's device, display window, footprint band, coarse tolerance, a
-    turntable's frame time, device memory, ray tracing tolerance, lights and background, the options of the --method
-    not chosen, and the image size against the device (:func:`check_image_size`).  An option a command does not have
-    is not looked at."""
+    turntable's frame time, device memory, ray tracing tolerance, lights, clip and background, the options of the
+    --method not chosen, and the image size against the device (:func:`check_image_size`).  An option a command does
+    not have is not looked at."""
     from ..model.bspline import wavelet_for
 
     if getattr(args, "input", None) is None:  # clwave info: no input to spare
@@ -83,6 +83,7 @@ def check_options(args):
         raise InputError(f"--tolerance {args.tolerance:g} must be a positive absolute error, e.g. 1e-3")
     if getattr(args, "light", None) is not None:
         parse_lights(args)
+    parse_clip(args)
     if hasattr(args, "background"):
         parse_background(args)
     if hasattr(args, "method") and not (is_clw(args) and (args.workers, args.scheduler) != (None, None)):
@@ -95,7 +96,7 @@ def check_options(args):
 #: options of one --method only, refused with the other (a command has some of them: drr has no --light);
 #: (option, what it is given when not given: None where the command leaves it None)
 RAYTRACE_ONLY = (("tolerance", 1e-3), ("light", None), ("no_shading", None), ("xray", None), ("field", "bspline"),
-                 ("background", None), ("detail", None))
+                 ("background", None), ("detail", None), ("clip_box", None), ("clip_plane", None))
 SPLAT_ONLY = ("coarse", "omega_s")
 
 
@@ -148,6 +149,23 @@ def parse_lights(args):
     return lights
 
 
+def parse_clip(args):
+    """The :class:`~clwave.Clip` of ``--clip-box X0,Y0,Z0,X1,Y1,Z1`` and the ``--clip-plane PX,PY,PZ,NX,NY,NZ`` s
+    (None where neither is given, or the command has neither)."""
+    from ..model.clip import Clip
+
+    box, planes = getattr(args, "clip_box", None), getattr(args, "clip_plane", None) or []
+    if box is None and not planes:
+        return None
+    given = ([f"--clip-box {box}"] if box is not None else []) + [f"--clip-plane {p}" for p in planes]
+    corners = numbers(box, "--clip-box", (6,)) if box is not None else None
+    faces = [numbers(p, "--clip-plane", (6,)) for p in planes]
+    try:
+        return Clip(lo=corners and corners[:3], hi=corners and corners[3:], planes=[(f[:3], f[3:]) for f in faces])
+    except InputError as error:
+        raise InputError(f"{' '.join(given)}: {error}") from None
+
+
 def parse_background(args):
     """The colour (R, G, B) of ``--background``, each in 0..1, or "transparent" (None: not given, the default
     black)."""
@@ -157,20 +175,23 @@ def parse_background(args):
 
 
 def picture_options(args, out) -> dict:
-    """``window``, ``background`` and ``bit_depth`` of the picture written to ``out`` (a folder: PNG frames), for
-    :meth:`~clwave.io.result.RenderResult.save`; refused in one line where ``out`` holds no such picture: a .tif's or
-    .npy's values as rendered, a GIF's 8-bit frames without partial transparency."""
-    from ..io.images import TIFF_SUFFIXES, check_bit_depth
+    """``window``, ``background``, ``bit_depth`` and ``scale_bar`` of the picture written to ``out`` (a folder: PNG
+    frames), for :meth:`~clwave.io.result.RenderResult.save`; refused in one line where ``out`` holds no such
+    picture: a .tif's or .npy's values as rendered, a GIF's 8-bit frames without partial transparency."""
+    from ..io.images import TIFF_SUFFIXES, check_bit_depth, check_orthographic, check_scale_bar
 
     look = dict(window=parse_window(args), background=parse_background(args) if hasattr(args, "background") else None,
-                bit_depth=args.bit_depth)
+                bit_depth=args.bit_depth, scale_bar=check_scale_bar(getattr(args, "scale_bar", None)))
     check_bit_depth(args.bit_depth)
+    if look["scale_bar"] is not None:
+        check_orthographic(dict(kind="camera", perspective=args.perspective))
     suffix = out.suffix.lower()
     if suffix in TIFF_SUFFIXES + (".npy",):
         given = {"--window": look["window"] != "auto", "--background": look["background"] is not None,
-                 "--bit-depth": args.bit_depth is not None}
+                 "--bit-depth": args.bit_depth is not None, "--scale-bar": look["scale_bar"] is not None}
         named = [name for name, there in given.items() if there]
-        what = {"--window": "grey levels", "--background": "background", "--bit-depth": "bit depth"}
+        what = {"--window": "grey levels", "--background": "background", "--bit-depth": "bit depth",
+                "--scale-bar": "scale bar"}
         if named:
             raise InputError(f"{' and '.join(named)} {'sets' if len(named) == 1 else 'set'} a .png's "
                              f"{' and '.join(what[n] for n in named)}; a {suffix} holds the values themselves: leave "
@@ -182,6 +203,15 @@ def picture_options(args, out) -> dict:
         raise InputError("--background transparent is for PNG; a GIF has no partial transparency: give a colour R,G,B"
                          + (", or write PNG frames to a folder" if args.command == "progressive" else ""))
     return look
+
+
+def check_scale_bar_fits(look, camera, wv):
+    """Refuse, before the render, a ``--scale-bar`` that does not fit ``camera``'s picture of ``wv`` (as
+    :func:`~clwave.io.images.draw_scale_bar` would after it)."""
+    from ..io.images import draw_scale_bar
+
+    if look["scale_bar"] is not None:
+        draw_scale_bar(np.zeros(camera.size, np.uint8), camera.view(wv).pixel, wv.unit, look["scale_bar"])
 
 
 def parse_window(args):

@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
+
 from ..errors import InputError
 from .options import READING, add_reading_options, file_size, flag, kept_words, numbers, parse_series
 
@@ -75,7 +77,7 @@ def describe(args):
 
 #: the keys ``clwave info --json`` adds to a volume file's facts (:data:`clwave.io.loaders.DESCRIBED`): its geometry as
 #: the commands read it (:func:`_as_read`)
-GEOMETRY = ("unit", "box", "reading")
+GEOMETRY = ("unit", "box", "spacing_option", "reading")
 
 
 def _reading(args) -> list:
@@ -90,20 +92,31 @@ def _given(args) -> dict:
 
 def _as_read(args, facts) -> dict:
     """A volume file's facts with what the reading options make of them: ``spacing`` the one the commands will use
-    (``--spacing`` over the file's; ``spacing_in_file`` still the file's), ``unit`` the world unit (the file's length
-    unit, :func:`clwave.io.loaders.world_unit`; none once ``--spacing`` replaces its spacing), ``box`` the world size
-    (x, y, z) where the shape and spacing are known, and ``reading``: the options given, as given."""
-    from ..io.loaders import world_unit
+    (``--spacing`` over the file's; ``spacing_in_file`` still the file's), ``unit`` the world unit (``--unit``, else the
+    file's length unit, :func:`clwave.io.loaders.world_unit`), ``shape``, ``spacing`` and ``origin`` turned into RAS+
+    by ``--orientation``, ``box`` the world size (x, y, z) where the shape and spacing are known, ``spacing_option``
+    the ``--spacing`` text that gives that spacing (z first, along the axes as stored), and ``reading``: the options
+    given, as given."""
+    from ..io.loaders import check_orientation, world_unit
+    from ..io.loaders.shared import stated_affine, to_canonical
 
     if args.spacing is not None:
         spacing = [float(d) for d in numbers(args.spacing, "--spacing", (1, 3))]
         facts.update(spacing=spacing * 3 if len(spacing) == 1 else spacing)
         if facts["origin"] is None:  # no file places it: load's origin
             facts.update(origin=[0.0] * 3, obliquity=0.0)
-    box = None if facts["shape"] is None or facts["spacing"] is None else \
-        [n * d for n, d in zip(facts["shape"][2::-1], facts["spacing"][::-1])]
-    unit = world_unit(args.file) if args.spacing is None else None
-    return dict(facts, unit=unit, box=box, reading=_given(args))
+    known = facts["shape"] is not None and facts["spacing"] is not None
+    option = None if facts["spacing"] is None else "--spacing " + _lengths(
+        facts["spacing"], _extent(facts["shape"] or facts["stored_shape"], facts["spacing"]), ",")
+    turn = check_orientation(facts["format"], args.orientation)
+    if turn is not None and known:  # as load turns the volume, of a stand-in that holds no voxel
+        shape = facts["shape"][:3]
+        affine = stated_affine(turn, shape, facts["spacing"], facts["origin"] or [0.0] * 3)
+        stand_in, spacing, origin, _ = to_canonical(np.broadcast_to(np.float32(0), shape), affine)
+        facts.update(shape=list(stand_in.shape) + facts["shape"][3:], spacing=list(spacing), origin=list(origin))
+    box = None if not known else [n * d for n, d in zip(facts["shape"][2::-1], facts["spacing"][::-1])]
+    unit = args.unit or world_unit(args.file)
+    return dict(facts, unit=unit, box=box, spacing_option=option, reading=_given(args))
 
 
 def _clw_lines(f) -> list:
@@ -149,6 +162,8 @@ def _oblique(degrees) -> str:
 
 
 def _volume_lines(f) -> list:
+    from ..io.loaders import RAS_FORMATS
+
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
     if f["stored_shape"] is not None:  # read whole: weighed as the file stores it, its axes in the file's order
         resampled = "" if not f["resampled"] else ", its sheared grid resampled onto a straight one wider by its " \
@@ -164,10 +179,14 @@ def _volume_lines(f) -> list:
     unit = f" {f['unit']}" if f["unit"] else ""
     if f["spacing"] is not None:
         extent = _extent(f["shape"] or f["stored_shape"], f["spacing"])
-        given = " (--spacing)" if "spacing" in f["reading"] else "" if f["spacing_in_file"] else \
-            " (none in the file: give --spacing DZ,DY,DX)"
-        place = f"{_lengths(f['spacing'][::-1], extent)}{unit} (x, y, z){given}, origin {_lengths(f['origin'], extent)}"
-        lines.append(("spacing", place + (" (RAS+)" if f["format"] in ("nifti", "nrrd", "dicom") else "")))
+        # the --spacing that gives it, to copy (z first); before --orientation turns the axes
+        given = "spacing" in f["reading"]
+        stated = "orientation" in f["reading"]
+        turned = f", before --orientation {f['reading']['orientation']} turns it" if stated else ""
+        missing = "" if given or f["spacing_in_file"] else ": none in the file, give yours"
+        place = f"{_lengths(f['spacing'][::-1], extent)}{unit} (x, y, z; {f['spacing_option']}{' given' * given}" \
+                f"{turned}{missing}), origin {_lengths(f['origin'], extent)}"
+        lines.append(("spacing", place + (" (RAS+)" if f["format"] in RAS_FORMATS or stated else "")))
     elif not f["time"]:
         lines.append(("spacing", "found with the voxels when the file is read (1 where it gives none): "
                                  "--spacing DZ,DY,DX sets it"))
@@ -223,11 +242,11 @@ def _extent(shape, spacing) -> float:
     return max(n * abs(d) for n, d in zip(shape[:3], spacing))
 
 
-def _lengths(values, extent) -> str:
+def _lengths(values, extent, sep=", ") -> str:
     """World lengths rounded to a millionth of the volume's ``extent`` (a float32 affine's noise, -9.5e-07 for 0,
     is below it), so that no sign of nothing is printed; the JSON keeps the numbers as they are."""
     decimals = -math.floor(math.log10(extent * 1e-6)) if extent > 0 else 6
-    return ", ".join(f"{round(v, decimals) + 0.0:g}" for v in values)
+    return sep.join(f"{round(v, decimals) + 0.0:g}" for v in values)
 
 
 def add_parser(sub):

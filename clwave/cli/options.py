@@ -14,6 +14,7 @@ import numpy as np
 from ..errors import ClwaveWarning, CommandWords, InputError, OutputError, OutputExistsError, finite_number
 from ..device.memory import check_fits
 from ..io.files import check_writable
+from ..io.images import UNIT_METRES
 from ..model.wavelet import DEFAULT_LEVELS
 
 DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
@@ -52,7 +53,8 @@ def add_input_options(p):
 
 
 #: the options of :func:`add_reading_options`, as ``args`` names them
-READING = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level", "chunks")
+READING = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level", "chunks",
+           "orientation", "unit")
 
 
 def add_reading_options(p):
@@ -61,7 +63,12 @@ def add_reading_options(p):
     g.add_argument("--shape", help=".raw only: Z,Y,X or Z,Y,X,C")
     g.add_argument("--dtype", help=".raw only: numpy dtype, e.g. uint16")
     g.add_argument("--byte-order", choices=["<", ">"], help=".raw only: little (<) or big (>) endian")
-    g.add_argument("--spacing", help="voxel spacing DZ,DY,DX (or one number); overrides the file")
+    g.add_argument("--spacing", help="voxel spacing DZ,DY,DX, z first (or one number), in the file's unit (or "
+                                     "--unit's); overrides the file's; 'clwave info FILE' prints it as --spacing")
+    g.add_argument("--unit", choices=tuple(UNIT_METRES), help="the world unit, the spacing's (default the file's)")
+    g.add_argument("--orientation", metavar="CODES", help="an input with no orientation (npy, raw, TIFF, a folder of "
+                   "slices, Zarr, HDF5): where its x, y, z axes point, e.g. LPS (x left, y posterior, z superior; "
+                   "nibabel's codes), turned into RAS+ as DICOM is")
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
     g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water; CT in HU: -1000); "
                    "recorded, so --tf and --tf-window stay in the input's units")
@@ -144,11 +151,12 @@ def read_volume(args):
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     # weighed by the size the file declares, before its voxels are read
     fits = partial(check_model_fits, args, what="decomposing this volume",
-                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, TIFF; gunzip a .nii.gz "
-                        "first), or crop or subsample it")
+                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, TIFF; "
+                        "gunzip a .nii.gz first, a .mgz into a .mgh), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
                 series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),
-                nan=args.nan, subtract=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits)
+                nan=args.nan, subtract=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits,
+                orientation=args.orientation, unit=args.unit)
 
 
 def check_model_fits(args, voxels, channels, what, hint):
@@ -475,6 +483,9 @@ def add_camera_options(p):
     g.add_argument("--fit", choices=FITS, default="sphere", help="default framing: sphere (the bounding sphere of "
                    "the non-empty voxels spans the image, the same at every view) or box (their box's projection "
                    "for this view fills the image: an elongated volume seen from its side)")
+    g.add_argument("--scale-bar", nargs="?", const=True, type=float, metavar="LENGTH",
+                   help="PNG and GIF: burn in a scale bar of LENGTH world units, labelled in the input's unit (without "
+                        "LENGTH 1, 2 or 5 times a power of ten, about a fifth of the width); orthographic only")
     add_device_options(g)
 
 
@@ -502,6 +513,10 @@ def add_raytrace_options(p):
                    "'none' for ambient only (default: a headlight)")
     g.add_argument("--no-shading", action="store_true", help="unlit emission")
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
+    g.add_argument("--clip-box", metavar="X0,Y0,Z0,X1,Y1,Z1",
+                   help="keep only what lies in this box, world coordinates (docs/coordinates.md §6)")
+    g.add_argument("--clip-plane", action="append", metavar="PX,PY,PZ,NX,NY,NZ",
+                   help="keep only the side of the plane through point P that its normal N points to; repeatable")
     g.add_argument("--background", help="PNG: colour R,G,B behind the volume, linear RGB in 0..1, composited before "
                                         "the sRGB encoding (0.5 is shown as 188; default 0,0,0, black), or "
                                         "transparent (RGBA)")

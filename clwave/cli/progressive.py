@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
-from .checks import make_camera, parse_lights, picture_options
+from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, finish,
                       parse_device_memory, post_transfer_function, write_gif)
 
@@ -36,13 +36,14 @@ def run(args):
             check_schedule(args.steps, args.budget)
         steps = args.steps
         options = dict(tolerance=args.tolerance, lights=parse_lights(args), shading=not args.no_shading,
-                       absorption=not args.xray)
+                       absorption=not args.xray, clip=parse_clip(args))
     else:
         steps = 8 if args.steps is None and args.budget is None else args.steps
         check_schedule(steps, args.budget)
         options = dict(omega_s=args.omega_s, coarse=args.coarse or None)
     background, window, device_memory = look["background"], look["window"], parse_device_memory(args)
     wv, _ = build_model(args, rgba=raytrace and not args.xray)
+    check_scale_bar_fits(look, camera, wv)
     if raytrace and not args.xray:
         options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering
     elif raytrace:  # line integrals of the whole model, as splatting draws them (docs/raytracing.md §1)
@@ -62,9 +63,10 @@ def run(args):
             folder, unit = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png"), wv.unit
             for f in frames:
                 f.save(folder / f"frame_{f.index:03d}.png", window=window, background=background,
-                       bit_depth=look["bit_depth"], unit=unit)
+                       bit_depth=look["bit_depth"], unit=unit, scale_bar=look["scale_bar"])
         else:
-            write_gif(out, [f.result().to_uint8(window, background) for f in frames], 0.5, args.force)
+            write_gif(out, [f.result().picture(window, background, scale_bar=look["scale_bar"], unit=wv.unit)
+                            for f in frames], 0.5, args.force)
         if args.stats:
             meta = dict(frames[-1].meta, window=frames[-1].result().display_window(window))  # as render's (§4)
             text = json.dumps(dict(frames=figures, meta=meta), indent=2, default=str).encode()

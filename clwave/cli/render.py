@@ -7,7 +7,7 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .checks import make_camera, parse_lights, picture_options
+from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
                       parse_device_memory, parse_scheduler, post_transfer_function, write_gif)
 
@@ -35,6 +35,7 @@ def run(args):
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
     wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
     unit = wv.unit
+    check_scale_bar_fits(look, camera, wv)
     if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
         from ..raytrace.regions import check_cluster_model
 
@@ -48,7 +49,7 @@ def run(args):
                          f"coarsest")
     if args.method == "raytrace":
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
-                       absorption=not args.xray,
+                       absorption=not args.xray, clip=parse_clip(args),
                        transfer_function=None if args.xray else post_transfer_function(args, wv))
         if on_cluster:
             options.update(device=args.device, field=args.field, device_memory=device_memory)
@@ -84,7 +85,8 @@ def run(args):
         else:
             if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
                 window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
-            write_gif(out, [r.to_uint8(window, background) for r in results], args.frame_time or 0.1, args.force)
+            pictures = [r.picture(window, background, scale_bar=look["scale_bar"], unit=unit) for r in results]
+            write_gif(out, pictures, args.frame_time or 0.1, args.force)
             result = results[0]
             result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
             result.meta["turntable_views"] = [dict(camera=r.meta["camera"], pixel=r.meta["pixel"]) for r in results]

@@ -1,6 +1,7 @@
 """Writing pictures and float images (docs/coordinates.md §3): PNG of 8 bits a sample (Pillow) or 16 (pypng: Pillow
 and imageio's Pillow plugin write no 16-bit colour PNG), tagged sRGB, with the physical pixel size (pHYs) where the
-world unit is a length; TIFF of the float32 values as rendered (tifffile), its pixel size in the resolution tags.
+world unit is a length, and a scale bar burnt in on request; TIFF of the float32 values as rendered (tifffile), its
+pixel size in the resolution tags.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from ..errors import InputError
 #: the output suffixes of a picture (PNG) and of the float image (TIFF)
 PNG_SUFFIXES, TIFF_SUFFIXES = (".png",), (".tif", ".tiff")
 #: the world units a pixel size is written in, and their length in metres
-UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6}
+UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "nm": 1e-9, "A": 1e-10}  # A: the ångström
 BIT_DEPTHS = (8, 16)
 
 _SRGB = (b"sRGB", b"\x00")  # perceptual rendering intent
@@ -50,6 +51,115 @@ def pixel_size(meta) -> tuple | None:
         return float(columns), float(rows)
     pixel = meta.get("pixel")
     return None if pixel is None else (float(pixel), float(pixel))
+
+
+def check_scale_bar(scale_bar):
+    """``scale_bar`` (None or False: none; True: :func:`nice_length`; a length in world units) as None, True or a
+    positive float; one InputError otherwise."""
+    if scale_bar is None or scale_bar is False or scale_bar is True:
+        return scale_bar or None
+    if not (isinstance(scale_bar, (int, float, np.integer, np.floating)) and np.isfinite(scale_bar) and scale_bar > 0):
+        raise InputError(f"scale_bar={scale_bar!r} must be True (a length about a fifth of the width) or a positive "
+                         f"length in world units, e.g. 10", cli=f"--scale-bar {scale_bar} must be a positive length "
+                                                                f"in world units, e.g. 10, or none")
+    return float(scale_bar)
+
+
+def check_orthographic(camera: dict):
+    """Refuse a scale bar on the picture of ``camera`` (a ``to_dict()``) where it is not orthographic: a perspective
+    view or a cone beam has no single scale across the picture."""
+    if camera.get("kind") != "camera" or camera.get("perspective"):
+        raise InputError("a scale bar needs an orthographic view, of one scale across the picture: leave out "
+                         "perspective=True, or the scale bar", cli="--scale-bar needs an orthographic view, of one "
+                                                                   "scale across the picture: leave out --perspective, "
+                                                                   "or --scale-bar")
+
+
+def nice_length(width: float) -> float:
+    """The longest 1, 2 or 5 times a power of ten that is at most a fifth of ``width`` (a scale bar's default)."""
+    fifth = width / 5.0
+    power = 10.0 ** np.floor(np.log10(fifth))
+    return max(m * power for m in (1.0, 2.0, 5.0, 10.0) if m * power <= fifth * (1 + 1e-12))
+
+
+#: the units a scale bar's label is written in, with their length in metres
+_LABEL_UNITS = (("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("nm", 1e-9))
+
+
+def length_label(length: float, unit, digits=6) -> str:
+    """``length`` world units as a scale bar's label: in ``unit`` where it reads 1 to 999, else in the metre, mm, µm or
+    nm that does ("500 µm" for 0.5 mm; ångströms always in nm); with ``unit`` None the number and "units"; ``digits``
+    significant."""
+    if unit is None:
+        return f"{length:.{digits}g} unit{'' if length == 1 else 's'}"
+    name, metres = unit.replace("um", "µm"), length * UNIT_METRES[unit]
+    if not 1 <= length < 1000 or unit == "A":  # the label's font has no Å: ångströms in nanometres
+        name, per = next(((n, m) for n, m in _LABEL_UNITS if metres >= m * (1 - 1e-9)), _LABEL_UNITS[-1])
+        length = metres / per
+    return f"{length:.{digits}g} {name}"
+
+
+def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
+    """``picture`` (as :func:`write_png` takes it) with a scale bar of ``length`` world units (True or None: the
+    :func:`nice_length` of the picture's width) burnt into its bottom-right corner: a white bar exactly
+    ``round(length / pixel)`` pixels long under its label (:func:`length_label`), both outlined in black so that they
+    read on any background, opaque in a transparent picture; ``pixel`` the world width of a pixel (an orthographic
+    view's).  One InputError where the bar is under 2 pixels or it and its label do not fit."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    height, width = picture.shape[:2]
+    length = nice_length(width * pixel) if length is None or length is True else length
+    text = length_label(length, unit)
+    font_size = max(12, round(min(height, width) / 24))
+    thick, rim, margin = max(2, round(font_size / 4)), max(1, round(font_size / 9)), max(4, round(font_size / 2))
+    font = ImageFont.load_default(size=font_size)
+    drawn = text.replace("µ", "u")  # Pillow's bundled font has no µ (it draws a box): "um", as plain text writes it
+    left, top, right, bottom = font.getbbox(drawn, stroke_width=rim)
+    bar = round(length / pixel)
+    what = f"a scale bar of {text} ({length / pixel:.3g} pixels at {length_label(pixel, unit, 3)} a pixel)"
+    room = width - 2 * (margin + rim)
+    if bar < 2 or bar > room:
+        why = "is under 2 pixels" if bar < 2 else f"is longer than the {room} pixels the {width}-pixel-wide picture " \
+                                                  f"has for it"
+        raise InputError(f"{what} {why}: give a length from {length_label(2 * pixel, unit, 3)} to "
+                         f"{length_label(room * pixel, unit, 3)}, or none (a fifth of the width: "
+                         f"{length_label(nice_length(width * pixel), unit)})")
+    x1, y1 = width - margin - rim, height - margin - rim  # the white bar's right end and bottom, exclusive
+    gap = max(2, rim + 1)
+    if right - left > width - 2 * margin or (bottom - top) + gap + thick + 2 * rim > height - 2 * margin:
+        raise InputError(f"{what}: its label ({right - left}x{bottom - top} pixels) does not fit the {width}x{height} "
+                         f"picture: give a larger picture size")
+    cover, white = Image.new("L", (width, height)), Image.new("L", (width, height))  # all that is drawn; its white
+    box = (x1 - bar, y1 - thick, x1 - 1, y1 - 1)
+    ImageDraw.Draw(cover).rectangle((box[0] - rim, box[1] - rim, box[2] + rim, box[3] + rim), fill=255)
+    ImageDraw.Draw(white).rectangle(box, fill=255)
+    x = min((2 * x1 - bar - (right - left)) / 2, width - margin - right + left)  # centred on the bar, within the margin
+    at = (x - left, y1 - thick - rim - gap - bottom)
+    ImageDraw.Draw(cover).text(at, drawn, font=font, fill=255, stroke_width=rim, stroke_fill=255)
+    ImageDraw.Draw(white).text(at, drawn, font=font, fill=255)
+    box = cover.getbbox()  # the corner drawn on: the rest of the picture is copied
+    corner, out = np.s_[box[1]:box[3], box[0]:box[2]], picture.copy()
+    out[corner] = _over(picture[corner], *(np.asarray(m.crop(box), np.float64) / 255 for m in (cover, white)))
+    return out
+
+
+def _over(picture, cover, white) -> np.ndarray:
+    """``picture`` under a white-on-black overlay of coverage ``cover`` (its white part ``white``), straight alpha."""
+    top = float(np.iinfo(picture.dtype).max)
+    values = picture.astype(np.float64) / top
+    grey = values.ndim == 2
+    values = values[..., None] if grey else values
+    colour, alpha = (values[..., :3], values[..., 3:]) if values.shape[-1] == 4 else (values, None)
+    cover, white = cover[..., None], white[..., None]
+    if alpha is None:
+        colour = colour * (1 - cover) + white
+    else:  # "over" in straight alpha: the overlay opaque where it covers the pixel
+        under = alpha * (1 - cover)
+        alpha = cover + under
+        colour = np.divide(white + colour * under, alpha, out=np.zeros_like(colour), where=alpha > 0)
+        colour = np.concatenate([colour, alpha], axis=-1)
+    out = np.round(top * np.clip(colour, 0, 1)).astype(picture.dtype)
+    return out[..., 0] if grey else out
 
 
 def write_png(fh, picture, size=None, unit=None):

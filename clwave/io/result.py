@@ -9,6 +9,7 @@ sample.  ``.tif`` and ``.npy`` keep the float32 image as rendered (:mod:`.images
 
 from __future__ import annotations
 
+import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,9 +18,14 @@ import numpy as np
 
 from ..errors import InputError
 from .files import check_suffix, write_atomic
-from .images import PNG_SUFFIXES, TIFF_SUFFIXES, check_bit_depth, check_unit, pixel_size, write_png, write_tiff
+from .images import (PNG_SUFFIXES, TIFF_SUFFIXES, check_bit_depth, check_orthographic, check_scale_bar, check_unit,
+                     draw_scale_bar, pixel_size, write_png, write_tiff)
 from ..model.tf_passes import AUTO_PERCENTILES
 from ..model.tf_checks import check_window
+
+#: the longest side of the picture a notebook shows of a result (:meth:`RenderResult._repr_png_`): a larger image is
+#: reduced by a whole factor, so that a notebook does not carry a full-size PNG in its file
+REPR_PNG_SIDE = 512
 
 
 @dataclass
@@ -39,12 +45,15 @@ class RenderResult:
         """8-bit :meth:`picture`."""
         return self.picture(window, background)
 
-    def picture(self, window="auto", background=None, bit_depth=8) -> np.ndarray:
+    def picture(self, window="auto", background=None, bit_depth=8, scale_bar=None, unit=None) -> np.ndarray:
         """8- or 16-bit (H, W) grey or (H, W, 3) colour picture of the image: an X-ray of one channel grey, of two
         magenta (channel 0) and green (1), of three or four its first three as RGB; one window for all.  A shaded
         image is composited over ``background`` (linear RGB in 0..1, default black) before its sRGB encoding, or
         with ``background="transparent"`` (H, W, 4): its colour unpremultiplied (clipped to 1 where light was
-        added), sRGB-encoded, and its alpha."""
+        added), sRGB-encoded, and its alpha.  ``scale_bar`` (True, or a length in world units ``unit``) burns in a
+        scale bar (:func:`~clwave.io.images.draw_scale_bar`): an orthographic view's only."""
+        if (scale_bar := check_scale_bar(scale_bar)) is not None:
+            check_orthographic(self.meta.get("camera") or {})
         if self.is_xray and background is not None:
             raise InputError(f"background={background!r} is for a shaded image; an X-ray picture has no background "
                              f"(its line integrals are shown through window=): leave it out")
@@ -76,7 +85,23 @@ class RenderResult:
             scaled = np.where(scaled <= 0.0031308, 12.92 * scaled, 1.055 * scaled ** (1 / 2.4) - 0.055)
             if background == "transparent":
                 scaled = np.concatenate([scaled, alpha], axis=-1)
-        return np.round(top * scaled).astype(np.uint8 if top < 256 else np.uint16)
+        picture = np.round(top * scaled).astype(np.uint8 if top < 256 else np.uint16)
+        return picture if scale_bar is None else \
+            draw_scale_bar(picture, self.meta["pixel"], check_unit(unit), scale_bar)
+
+    def _repr_png_(self) -> bytes | None:
+        """The 8-bit PNG of :meth:`picture` with its defaults, as Jupyter shows a result: reduced by the least whole
+        factor that brings its longest side to at most :data:`REPR_PNG_SIDE` pixels (Pillow's box average); None,
+        the text, for an image with non-finite values, which is never a picture."""
+        from PIL import Image
+
+        if not np.all(np.isfinite(self.image)):
+            return None
+        picture = Image.fromarray(self.picture())
+        picture = picture.reduce(-(-max(picture.size) // REPR_PNG_SIDE))
+        buffer = io.BytesIO()
+        write_png(buffer, np.asarray(picture))
+        return buffer.getvalue()
 
     def display_window(self, window="auto"):
         """The ``(lo, hi)`` an X-ray picture (:meth:`to_uint8`) is shown through for ``window`` ("auto" resolved from
@@ -87,20 +112,22 @@ class RenderResult:
         """The X-ray values shown: one channel's, or the first three's."""
         return self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
 
-    def save(self, path, *, window="auto", background=None, bit_depth=None, unit=None, overwrite=False) -> Path:
+    def save(self, path, *, window="auto", background=None, bit_depth=None, unit=None, scale_bar=None,
+             overwrite=False) -> Path:
         """Write ``.png`` (windowed, or composited over ``background`` or transparent: :meth:`picture`, of
         ``bit_depth`` 8 or 16 bits a sample), ``.tif``/``.tiff`` (float32, as rendered; a shaded image's alpha
         associated, premultiplied), ``.npy`` (raw float32) or ``.json`` (meta).  ``unit``: the world unit where it
         is a length ("mm", :data:`~clwave.io.images.UNIT_METRES`), else None; the size of a pixel
         (:func:`~clwave.io.images.pixel_size`) goes into a PNG's pHYs where it is a length, into a TIFF's resolution
-        always (per world unit where it is not).
+        always (per world unit where it is not).  ``scale_bar``: a ``.png``'s scale bar (:meth:`picture`).
 
         An image with non-finite pixels is refused (nothing is written): it is never a picture."""
         path = check_suffix(path, PNG_SUFFIXES + TIFF_SUFFIXES + (".npy", ".json"))
         suffix = path.suffix.lower()
         bits, unit = check_bit_depth(bit_depth), check_unit(unit)
         given = [f"{name}=" for name, value in (("window", None if isinstance(window, str) and window == "auto" else
-                                                 window), ("background", background), ("bit_depth", bit_depth))
+                                                 window), ("background", background), ("bit_depth", bit_depth),
+                                                ("scale_bar", check_scale_bar(scale_bar)))
                  if value is not None]
         if given and suffix not in PNG_SUFFIXES:
             raise InputError(f"{' and '.join(given)} {'set' if len(given) > 1 else 'sets'} a .png's picture; {path} "
@@ -111,7 +138,7 @@ class RenderResult:
             raise InputError(f"the image has {bad} non-finite value(s) (NaN/Inf), so {path} was not written; "
                              f"the input holds values too large for float32, or the view is degenerate")
         if suffix in PNG_SUFFIXES:
-            data = self.picture(window, background, bits)
+            data = self.picture(window, background, bits, scale_bar, unit)
             return write_atomic(path, lambda fh: write_png(fh, data, pixel_size(self.meta), unit), overwrite)
         if suffix in TIFF_SUFFIXES:
             image = self.image[..., 0] if self.image.shape[-1] == 1 else self.image

@@ -9,10 +9,13 @@ import numpy as np
 
 from ..errors import ClwaveWarning, warn_outside
 
-#: At most this many distinct values (labels, the background included), numbered densely: the largest label under
+#: Up to DENSE_LABELS distinct values (labels, the background included) numbered densely: the largest label under
 #: DENSE times their count (0 .. 40 of 30 labels is; 0, 26, 51, .. 255, a piecewise-constant phantom's 8-bit
-#: intensities, 6 values, is not).
-MAX_LABELS, DENSE = 64, 16
+#: intensities, 6 values, is not); more, up to MAX_LABELS, numbered sparsely, as an atlas's table numbers them: their
+#: count at most SPARSE times the largest (FreeSurfer's aparc+aseg, some 110 labels in 0 .. 2035, is; the hundreds of
+#: intensities of an 8-bit MRI, filling 0 .. 255, are not; nor, in even steps, are they scaled by 4).  Labels below
+#: 2^15 (the neighbours' int16 copies).
+DENSE_LABELS, MAX_LABELS, DENSE, SPARSE = 64, 256, 16, 0.25
 #: Regions, not noise: at least this share of the voxel pairs along x outside the background hold one value; and
 #: boundaries, not a smooth intensity quantised coarsely: at least JUMPS of the pairs that differ jump by more than 1
 #: (0.47 for nested shells numbered outwards 1 .. 4 in 0; 0.01 for hydrogen's density quantised to 0 .. 10).
@@ -23,20 +26,25 @@ SAMPLE = 1 << 20
 
 def looks_like_labels(data) -> bool:
     """Whether ``data`` (an in-memory array as stored, before float32) looks like a label map: integers (or
-    booleans), none negative, 2 to :data:`MAX_LABELS` distinct values numbered densely (:data:`DENSE`), forming
-    regions with boundaries (:data:`SAME_NEIGHBOURS`, :data:`JUMPS`).  A CT in HU (negative, thousands of values) or
-    an MRI (hundreds of values, noise between neighbours) is not; a float volume is never looked at.  Cost: a min and
+    booleans), none negative, 2 to :data:`DENSE_LABELS` distinct values numbered densely (:data:`DENSE`) or up to
+    :data:`MAX_LABELS` numbered sparsely (:data:`SPARSE`), not in even steps, forming regions with boundaries
+    (:data:`SAME_NEIGHBOURS`, :data:`JUMPS`).  A CT in HU (negative, thousands of values) or an MRI (hundreds of
+    values filling their range, noise between neighbours) is not; a float volume is never looked at.  Cost: a min and
     a max over an integer volume, then only where they pass a sort of :data:`SAMPLE` voxels and one pass over the
     neighbours in evenly spaced z planes of at most 4 × :data:`SAMPLE` voxels (int16 copies)."""
     if getattr(data, "dtype", None) is None or data.dtype.kind not in "biu" or data.ndim != 3 or not data.size:
         return False
-    if int(data.min()) < 0 or int(data.max()) >= DENSE * MAX_LABELS:
+    top = int(data.max())
+    if int(data.min()) < 0 or top >= 1 << 15:
         return False
-    count = len(np.unique(data.flat[::max(1, data.size // SAMPLE)]))  # flat: no copy of a strided volume
-    if not 2 <= count <= MAX_LABELS or int(data.max()) >= DENSE * count:
+    values = np.unique(data.flat[::max(1, data.size // SAMPLE)]).astype(np.int64)  # flat: no copy if strided
+    count = len(values)
+    dense = 2 <= count <= DENSE_LABELS and top < DENSE * count
+    sparse = DENSE_LABELS < count <= MAX_LABELS and count <= SPARSE * top and np.gcd.reduce(np.diff(values)) == 1
+    if not (dense or sparse):
         return False
     planes = data[::max(1, data.size // (4 * SAMPLE))]  # neighbours along x in a few planes: a bounded cost
-    right, left = planes[..., 1:].astype(np.int16), planes[..., :-1].astype(np.int16)  # under DENSE * MAX_LABELS
+    right, left = planes[..., 1:].astype(np.int16), planes[..., :-1].astype(np.int16)  # under 2^15
     content = (right != 0) | (left != 0)
     pairs, step = int(np.count_nonzero(content)), np.abs(right - left)
     differ = int(np.count_nonzero(step))

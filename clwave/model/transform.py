@@ -4,7 +4,6 @@ continuous model evaluated from the closed-form bases."""
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from functools import partial
 from itertools import product
@@ -64,14 +63,11 @@ def band_key(band_id) -> str:
 
 
 def band_layout(wavelet: SplineWavelet, shape, levels) -> list:
-    """Bands of a pywt mode='zero' decomposition, coarsest approximation first."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Level value of .* is too high")
-        shapes = pywt.wavedecn_shapes(shape, wavelet.pywt, mode="zero", level=levels)
-    layout = [(levels, "aaa", tuple(shapes[0]))]
-    for i, detail in enumerate(shapes[1:]):
-        m = levels - i
-        layout += [(m, key, tuple(detail[key])) for key in KEYS[1:]]
+    """Bands of a pywt mode='zero' decomposition (:func:`wavedecn`), coarsest approximation first."""
+    sizes = [tuple(shape)]  # every band of level m has the approximation's shape after m steps
+    for _ in range(levels):
+        sizes.append(tuple(pywt.dwt_coeff_len(n, wavelet.pywt.dec_len, "zero") for n in sizes[-1]))
+    layout = [(levels, "aaa", sizes[levels])] + [(m, key, sizes[m]) for m in range(levels, 0, -1) for key in KEYS[1:]]
     bands, start = [], 0
     for m, key, shp in layout:
         bands.append(Band(m, key, shp, start))
@@ -129,6 +125,18 @@ def crop_to_grid(coeffs, start, shape) -> np.ndarray:
     return out
 
 
+def wavedecn(data, wavelet: SplineWavelet, levels) -> list:
+    """``pywt.wavedecn(data, wavelet.pywt, mode="zero", level=levels)`` without its check of the level: a level past
+    pywt's largest for the filter's length is ours to ask for (docs/model.md §2), and silencing pywt's warning with
+    ``warnings.catch_warnings`` is not thread-safe (:func:`decompose` runs a thread a channel)."""
+    details, approximation = [], data
+    for _ in range(levels):
+        detail = pywt.dwtn(approximation, wavelet.pywt, mode="zero")
+        approximation = detail.pop("aaa")
+        details.append(detail)
+    return [approximation] + details[::-1]
+
+
 def decompose(volume, wavelet, channels, levels, interpolate, progress_bar) -> tuple:
     """``(bands, values)``: the real-line transform of the volume's ``channels`` (one thread each),
     values (channels, positions) float32 in the band layout's order (docs/model.md §2-3)."""
@@ -145,9 +153,7 @@ def decompose(volume, wavelet, channels, levels, interpolate, progress_bar) -> t
         if levels == 0:
             values[slot] = data.ravel()
             return
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message="Level value of .* is too high")
-            coeffs = pywt.wavedecn(data, wavelet.pywt, mode="zero", level=levels)
+        coeffs = wavedecn(data, wavelet, levels)
         parts = [coeffs[0]] + [detail[key] for detail in coeffs[1:] for key in KEYS[1:]]
         for band, part in zip(bands, parts):
             values[slot, band.start:band.start + band.size] = part.ravel()

@@ -59,7 +59,7 @@ class Volume:
         (:func:`~clwave.model.labels.looks_like_labels`: few non-negative integers forming regions).  Its model of a
         wavelet of order above 1 warns (docs/model.md §5).
     unit : str, optional
-        The world unit, the length of ``spacing``'s 1 where it is known: "m", "cm", "mm" or "um"
+        The world unit, the length of ``spacing``'s 1 where it is known: "m", "cm", "mm", "um", "nm" or "A" (ångström)
         (:data:`clwave.io.images.UNIT_METRES`; :func:`clwave.load`: the file's); None (default): unknown.  Kept by
         the model and its ``.clw`` file, and written into a picture's resolution (pHYs, TIFF tags).
     stored_dtype : numpy dtype, optional

@@ -36,12 +36,13 @@ class Field(NamedTuple):
 
 
 def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, absorption=True,
-                       tracer: RayTracer | None = None, field: Field | None = None) -> np.ndarray:
+                       tracer: RayTracer | None = None, field: Field | None = None, clip=None) -> np.ndarray:
     """(H, W, 4) float64 image as :func:`clwave.raytrace` computes it, or (H, W, C) line integrals.
 
     ``tracer`` supplies the clip box, occupancy lattice and emission bound the kernel used.  ``field``: a
     :class:`Field` other than the model's (a coarser detail's, docs/raytracing.md §8); the tracer's bounds are not
-    its bounds, so nothing is skipped and no ray stops early.
+    its bounds, so nothing is skipped and no ray stops early.  ``clip``: a :class:`~clwave.model.clip.Clip`, each
+    ray's interval cut to it in world coordinates (:func:`_cut`).
     """
     tr = tracer or RayTracer(wv)
     view = camera.view(wv)
@@ -65,7 +66,7 @@ def raytrace_reference(wv, camera, tolerance=1e-3, lights=None, shading=True, ab
     rays = []
     for r, c in np.ndindex(H, W):
         p, w = _ray(view, r, c)
-        t0, t1 = _clip(p * scale + offset, w * scale, box, view.perspective)
+        t0, t1 = _cut(p, w, *_clip(p * scale + offset, w * scale, box, view.perspective), clip)
         if t1 > t0:
             knots = np.unique(np.concatenate([_knots(p * scale + offset, w * scale, t0, t1, *lattice)
                                               for lattice in lattices]))
@@ -244,6 +245,25 @@ def _clip(x0, d, box, perspective):
     return t0, t1
 
 
+def _cut(p, w, t0, t1, clip):
+    """[t0, t1] of the world ray p + t w cut to ``clip``'s box and half-spaces, in world coordinates (the kernel cuts
+    its box in grid-0 fine ones, its half-spaces from the unit normals of ``Clip.half_spaces``)."""
+    if clip is None:
+        return t0, t1
+    if clip.lo is not None:
+        a, b = _clip(p, w, (clip.lo, clip.hi), False)
+        t0, t1 = max(t0, a), min(t1, b)
+    for point, normal in clip.planes:
+        at, rate = np.dot(normal, p - np.asarray(point)), np.dot(normal, w)  # the side kept: n . (x - point) >= 0
+        if rate == 0:
+            t1 = t1 if at >= 0 else -np.inf
+        elif rate > 0:
+            t0 = max(t0, -at / rate)
+        else:
+            t1 = min(t1, -at / rate)
+    return t0, t1
+
+
 def _knots(x0, d, t0, t1, h, at=0.0):
     """The ray parameters in [t0, t1] of the ray x0 + t d where it meets the planes at + h k, and t0, t1."""
     ts = [np.array([t0, t1])]
@@ -391,7 +411,7 @@ def _simpson(f, tol, turns, segments):
 
 
 def classified_reference(wv, camera, transfer_function, lights=None, shading=True,
-                         tracer: RayTracer | None = None, detail=0) -> np.ndarray:
+                         tracer: RayTracer | None = None, detail=0, clip=None) -> np.ndarray:
     """(H, W, 4) float64 image of a scalar model through ``transfer_function`` (post-classification), by brute
     force: no skipping, no early termination, no adaptivity (docs/raytracing.md §10), the scalar clamped to the
     input's range where the model knows it (``np.clip``, and cuts where it meets the range's ends).
@@ -404,7 +424,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     polynomial, fitted and integrated exactly, and the emission integral is composite Gauss-Legendre (8 x 8
     nodes).  ``tracer`` supplies the clip box, the window of an "auto" transfer function and the gradient floor
     the kernel uses; ``detail``: the model without its details of levels 1 .. detail, as the B-spline field
-    holds it (docs/raytracing.md §8).
+    holds it (docs/raytracing.md §8); ``clip`` as :func:`raytrace_reference`'s.
     """
     tr = tracer or RayTracer(wv)
     view = camera.view(wv)
@@ -427,7 +447,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     for r, c in np.ndindex(H, W):
         p, w = _ray(view, r, c)
         x0, d = p * scale + offset, w * scale
-        t0, t1 = _clip(x0, d, tr.box, view.perspective)
+        t0, t1 = _cut(p, w, *_clip(x0, d, tr.box, view.perspective), clip)
         if not t1 > t0:
             continue
         directions = [*light_dirs, *((light - w) / np.linalg.norm(light - w) for light in light_dirs)] \

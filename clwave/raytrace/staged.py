@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached, root_mean_square
 from ..model.camera import Camera
+from ..model.clip import check_clip
 from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
 from ..io.occupancy import mass_on_occupied
@@ -162,7 +163,7 @@ class StagedTracer:
         return result
 
     def refine(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True, *,
-               error=None, transfer_function=None):
+               error=None, transfer_function=None, clip=None):
         """Frames of ``camera`` from cheap to exact, for a viewer that shows each as it comes (a generator it stops
         iterating when the view changes; the set-up goes on).  While the full stage is not ready: the coarse stage
         on an image ``2^levels`` times smaller per side, then (if it is still not ready) on one twice as large;
@@ -171,14 +172,14 @@ class StagedTracer:
         (waiting for it) the full stage's :meth:`RayTracer.refine`, full detail on reduced images and the last bit for
         bit its ``render``, from the image as large as the last coarse frame's (each frame at least the size and
         detail of the one before, docs/raytracing.md §8).  ``error=`` as :meth:`RayTracer.refine`;
-        ``transfer_function``: as :meth:`RayTracer.render`'s, every stage classifying a scalar model with it.
+        ``transfer_function``, ``clip``: as :meth:`RayTracer.render`'s, every stage classifying (clipping) with it.
         ``meta["stage"]`` says which stage made a frame.  The full stage's set-up failed: its error; given up
         (:meth:`abandon`): :class:`~clwave.threads.Abandoned`, where the full stage's frames would begin, as from a
         coarse frame's ``final_image()``."""
         check_error(error)
         check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
-                       transfer_function=transfer_function)
+                       transfer_function=transfer_function, clip=check_clip(clip))
         return self._frames(camera, options, error)
 
     def _frames(self, camera, options, error):

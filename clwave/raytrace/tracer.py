@@ -21,6 +21,7 @@ from ..device.constants import BLOCK, SUPER
 from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands, zeros
 from ..model.geometry import world_to_fine_affine
 from ..model.camera import Camera, View
+from ..model.clip import Clip, check_clip
 from ..model.conebeam import ConeBeam, check_camera, resolve_view, view_record
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number, flag
@@ -68,7 +69,8 @@ def raytrace_kernel(field: str) -> Kernel:
                   ("bound", B), ("occ_origin", INT4), ("occ_shape", INT4), ("super_bound", B),
                   ("super_origin", INT4), ("super_shape", INT4), ("content", B), ("content_origin", INT4),
                   ("content_shape", INT4), ("coarse_bound", REAL), ("box_lo", FLOAT4),
-                  ("box_hi", FLOAT4), ("base", FLOAT4), ("du", FLOAT4), ("dv", FLOAT4), ("dir", FLOAT4),
+                  ("box_hi", FLOAT4), ("clip", B), ("nclip", I32), ("base", FLOAT4), ("du", FLOAT4), ("dv", FLOAT4),
+                  ("dir", FLOAT4),
                   ("perspective", I32), ("to_fine_scale", FLOAT4), ("to_fine_offset", FLOAT4), ("nodes", B),
                   ("weights", B), ("tol", REAL), ("shade_gain", REAL), ("grad_floor", REAL), ("lights", B),
                   ("nlights", I32), ("phong", FLOAT4), ("tf", B), ("passes", I32), ("pass_lo", FLOAT4),
@@ -231,7 +233,7 @@ class RayTracer:
 
     @one_at_a_time
     def render(self, camera: Camera | ConeBeam | View, tolerance=1e-3, lights=None, shading=True, absorption=True,
-               precision="single", trace=0, detail=None, transfer_function=None) -> RenderResult:
+               precision="single", trace=0, detail=None, transfer_function=None, clip=None) -> RenderResult:
         """One image; see :func:`raytrace` for the parameters (``camera`` may also be its
         :class:`~clwave.model.camera.View` of this model, resolved already).
 
@@ -245,6 +247,7 @@ class RayTracer:
         wv, cc = self.wv, self.cc
         tol = _checked_tolerance(tolerance)
         absorption = flag(absorption, "absorption")
+        clip = check_clip(clip)
         if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
         if transfer_function is not None:
@@ -352,6 +355,7 @@ class RayTracer:
         if post is not None:  # the classified opacity bounds the field (docs/raytracing.md §10)
             skip.update(bound=post.bound, super_bound=post.super_bound, super_origin=post.super_origin[::-1],
                         super_shape=post.super_bound.shape[::-1], box_lo=post.box[0], box_hi=post.box[1])
+        skip.update(_clipped(clip, skip["box_lo"], skip["box_hi"], scale, offset, q, self.region is None))
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         arguments = dict(
@@ -421,14 +425,14 @@ class RayTracer:
         return StagedTracer(cls, path, device=device, device_memory=device_memory, lod=lod)
 
     def refine(self, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True, *,
-               steps=None, budget=None, error=None, transfer_function=None):
+               steps=None, budget=None, error=None, transfer_function=None, clip=None):
         """Frames of ``camera`` from cheap to exact (:mod:`clwave.raytrace.progressive`, docs/raytracing.md §9),
         for a viewer that shows each as it comes: a generator (``RaytraceFrame`` s: ``image``, ``figures()``),
         the last bit for bit :meth:`render` at full detail; stop iterating when the view changes (nothing is
         left running); any tracer refines (the frames are its own renders of reduced images).  Use it from one
-        thread at a time.  ``transfer_function``: as :meth:`render`'s, the same at every frame."""
+        thread at a time.  ``transfer_function``, ``clip``: as :meth:`render`'s, the same at every frame."""
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
-                       transfer_function=transfer_function)
+                       transfer_function=transfer_function, clip=check_clip(clip))
         return frames(self, camera, options, steps, budget, error)
 
     def _phong(self, shading, absorption, lights):
@@ -450,6 +454,22 @@ class RayTracer:
         return phong, "phong"
 
 
+def _clipped(clip, lo, hi, scale, offset, queue, whole) -> dict:
+    """The kernel's ``box_lo``, ``box_hi``, ``clip`` and ``nclip`` (docs/raytracing.md §12): the support box ``lo`` ..
+    ``hi`` (grid-0 fine (x, y, z)) cut by the clip's box, and its half-spaces in world units; a clip that keeps
+    nothing of that box refused where it is the ``whole`` model's (a slab on a cluster may lie outside the clip)."""
+    if clip is None:
+        return dict(box_lo=lo, box_hi=hi, clip=cla.zeros(queue, (1, 4), np.float32), nclip=0)
+    if whole and not clip.keeps((lo - offset) / scale, (hi - offset) / scale):
+        world = [np.round((b - offset) / scale, 6).tolist() for b in (lo, hi)]
+        raise InputError(f"{clip.describe()} keeps nothing of the volume's content, which lies within {world[0]} .. "
+                         f"{world[1]} (world x, y, z): move or turn it to cut through the volume")
+    if clip.lo is not None:
+        lo, hi = np.maximum(lo, np.array(clip.lo) * scale + offset), np.minimum(hi, np.array(clip.hi) * scale + offset)
+    rows = clip.half_spaces()
+    return dict(box_lo=lo, box_hi=hi, clip=cla.to_device(queue, rows.astype(np.float32)), nclip=len(rows))
+
+
 def _details(lod, levels, field) -> tuple:
     """The detail levels a tracer expands: ``lod`` False (full detail), True (every one) or the levels named."""
     if lod is True or lod is False:
@@ -465,7 +485,7 @@ def _details(lod, levels, field) -> tuple:
 
 def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, lights=None, shading=True, absorption=True,
              device=None, *, field="bspline", precision="single", device_memory=None, scheduler=None,
-             tracer: RayTracer | None = None, transfer_function=None) -> RenderResult:
+             tracer: RayTracer | None = None, transfer_function=None, clip: Clip | None = None) -> RenderResult:
     """Ray trace a wavelet volume (paper §3).
 
     Parameters
@@ -506,6 +526,9 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
         opacity as ``TransferFunction.classify`` gives them (docs/model.md §5), normals from the scalar's
         gradient; another transfer function or window needs no new set-up.  Default: the one a scalar model
         was made with (``WaveletVolume.from_volume(..., transfer_function=)``, kept in its ``.clw`` file).
+    clip : Clip, optional
+        Keep only what lies inside a crop box and/or half-spaces (world coordinates): each ray's integral is taken
+        over its interval inside them, exactly (docs/raytracing.md §12); a new clip rebuilds nothing.
     tracer : RayTracer, optional
         Render with this one; without it, calls on the same model, device and field share one
         (:meth:`WaveletVolume.shared`): the field is set up once.
@@ -526,14 +549,14 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
         tol, cap = _checked_tolerance(tolerance), parse_cap(device_memory)
         light_directions(lights, None)  # checked before any worker starts
         options = dict(tolerance=tol, lights=lights, shading=shading, absorption=absorption, precision=precision,
-                       transfer_function=transfer_function)
+                       transfer_function=transfer_function, clip=check_clip(clip))
         with client_for(scheduler) as client:  # which checks the scheduler before starting anything
             return raytrace_on_cluster(RayTracer, wv, camera, client, options, device, cap)
     if tracer is None:
         check_model(wv, "ray tracing")
         tracer = shared_tracer(wv, device, field, device_memory)
     return tracer.render(camera, tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
-                         precision=precision, transfer_function=transfer_function)
+                         precision=precision, transfer_function=transfer_function, clip=clip)
 
 
 def check_field(field):

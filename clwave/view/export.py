@@ -29,7 +29,8 @@ SAVE_PIXEL_BYTES = 200
 #: the model options that name its transfer function: a scalar model's shaded view replaces them with the tab's
 TF_OPTIONS = ("tf", "tf_window")
 #: the reading options that clwave.load takes by the same name
-LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level")
+LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level",
+                "orientation", "unit")
 
 
 @dataclass(frozen=True)
@@ -78,17 +79,23 @@ class Spec:
     shading: bool = True
     background: float = 0.0
     tf: TransferFunction | None = None
+    scale_bar: bool = False  # the default --scale-bar (an orthographic view's)
     levels: int = 0  # the model's (the Python of a volume decomposes it with as many)
 
 
 def resolve(sources: dict, state, size=None) -> Spec:
     """The :class:`Spec` of a tab's ``state`` at ``size`` (H, W; None: the page's), on the render thread."""
+    from ..io.images import check_orthographic
+
     source = sources[state.mode]
     camera = source.camera(state, size=size)
-    levels = source.wv.levels
+    levels, scale_bar = source.wv.levels, state.scale_bar
+    if scale_bar:
+        check_orthographic(camera.to_dict())
     if state.mode == "xray":
         return Spec("xray", camera, tuple(state.window or source.auto_window),
-                    state.colour_map if source.capabilities["colour_map"] else None, state.detail, levels=levels)
+                    state.colour_map if source.capabilities["colour_map"] else None, state.detail, scale_bar=scale_bar,
+                    levels=levels)
     source.start_full_stage()
     if source.tracer is None:
         raise Unavailable("the shaded views' ray tracer is still being made (or the whole file read): try again once "
@@ -97,7 +104,7 @@ def resolve(sources: dict, state, size=None) -> Spec:
     if tf is not None and tf.window == "auto":  # the pool's percentiles, written as numbers
         tf = tf.under(window=tuple(window))
     return Spec("shaded", camera, tolerance=source.tolerance, shading=state.shading, background=state.background,
-                tf=tf, levels=levels)
+                tf=tf, scale_bar=scale_bar, levels=levels)
 
 
 class Unavailable(InputError):
@@ -106,7 +113,9 @@ class Unavailable(InputError):
 
 def picture(sources: dict, spec: Spec):
     """The picture of ``spec`` at full quality (every kept coefficient; the tracer's full detail at its tolerance), by
-    the renderers ``clwave render`` calls: its PNG's pixels (an X-ray in the tab's colour map)."""
+    the renderers ``clwave render`` calls: its PNG's pixels (an X-ray in the tab's colour map; a scale bar over
+    it)."""
+    from ..io.images import draw_scale_bar
     from ..splat.renderer import splat
 
     source = sources[spec.mode]
@@ -118,10 +127,12 @@ def picture(sources: dict, spec: Spec):
             raise Unavailable("the rest of the file is still being read: save once the model line says it is in")
         result = splat(source.wv, spec.camera, renderer=source.r)
         image = result.to_uint8(spec.window)
-        return colours.apply(image, spec.colour_map) if spec.colour_map else image
-    result = source.tracer.render(spec.camera, tolerance=spec.tolerance, shading=spec.shading,
-                                  **({} if spec.tf is None else dict(transfer_function=spec.tf)))
-    return result.to_uint8(background=(spec.background,) * 3)
+        image = colours.apply(image, spec.colour_map) if spec.colour_map else image
+    else:
+        result = source.tracer.render(spec.camera, tolerance=spec.tolerance, shading=spec.shading,
+                                      **({} if spec.tf is None else dict(transfer_function=spec.tf)))
+        image = result.to_uint8(background=(spec.background,) * 3)
+    return draw_scale_bar(image, result.meta["pixel"], source.wv.unit) if spec.scale_bar else image
 
 
 def check_save_size(size):
@@ -193,6 +204,7 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
         tokens += [] if spec.shading else ["--no-shading"]
         if spec.background:
             tokens += ["--background", ",".join([_number(spec.background)] * 3)]
+    tokens += ["--scale-bar"] if spec.scale_bar else []
     tokens += ["-o", output]
     return "\n".join(notes + before + [" ".join(map(_shell_word, tokens))])
 
@@ -212,7 +224,7 @@ def python(origin: Origin, spec: Spec, output=OUTPUT) -> str:
     """Python that renders ``spec``: the model read as ``clwave view`` read it, the camera, ``clwave.splat`` or
     ``clwave.raytrace`` with the view's arguments, and the picture saved."""
     lines = ["import clwave", ""] + _model(origin, spec)
-    cam = spec.camera
+    cam, bar = spec.camera, ", scale_bar=True, unit=wv.unit" if spec.scale_bar else ""
     framing = f"perspective=True, fov={_number(cam.fov)}, distance={_number(cam.distance)}" if cam.perspective \
         else f"extent={_number(cam.extent)}"
     lines.append(f"camera = clwave.Camera(azimuth={_number(cam.azimuth)}, elevation={_number(cam.elevation)}, "
@@ -223,7 +235,7 @@ def python(origin: Origin, spec: Spec, output=OUTPUT) -> str:
         if spec.detail < 1.0:
             lines.append(f"# not in this snippet: detail kept {100 * spec.detail:.3g} % (every kept coefficient)")
         lines += ["result = clwave.splat(wv, camera)",
-                  f"result.save({output!r}, window=({_number(spec.window[0])}, {_number(spec.window[1])}))"]
+                  f"result.save({output!r}, window=({_number(spec.window[0])}, {_number(spec.window[1])}){bar})"]
         return "\n".join(lines) + "\n"
     options = f", tolerance={_number(spec.tolerance)}"
     if spec.tf is not None:
@@ -233,7 +245,7 @@ def python(origin: Origin, spec: Spec, output=OUTPUT) -> str:
     options += "" if spec.shading else ", shading=False"
     lines.append(f"result = clwave.raytrace(wv, camera{options})")
     background = f", background={(spec.background,) * 3!r}" if spec.background else ""
-    lines.append(f"result.save({output!r}{background})")
+    lines.append(f"result.save({output!r}{background}{bar})")
     return "\n".join(lines) + "\n"
 
 

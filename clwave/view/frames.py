@@ -65,6 +65,7 @@ class ViewState:
     tf: tuple | TransferFunction | None = None
     colour_map: str = "grey"  # X-ray, scalar model: one of colours.NAMES
     fov: float | None = None  # a perspective camera's vertical field of view, degrees; None: orthographic
+    scale_bar: bool = False  # the page's scale bar (orthographic): in the saved image and the command (export.py)
 
 
 @dataclass
@@ -127,6 +128,16 @@ class Source:
         return Camera(state.azimuth, state.elevation, size, perspective=True, fov=fov,
                       distance=self.base_extent * H / W / (2.0 * half))
 
+    def _scale_bar(self, state) -> list | None:
+        """``[length, label]`` of the scale bar the page draws over an orthographic view (as ``--scale-bar`` without
+        a length draws it, io/images.py), None in perspective."""
+        from ..io.images import length_label, nice_length
+
+        if state.fov is not None:
+            return None
+        length = nice_length(self.base_extent / state.zoom)
+        return [length, length_label(length, self.wv.unit)]
+
     def pacing(self):
         """A tab's pacing state of this source's frames (passed to :meth:`frames`)."""
 
@@ -142,6 +153,7 @@ class Source:
         return Frame(data, mime, dict(figures, mode=self.mode, seq=state.seq, height=picture.shape[0],
                                       width=picture.shape[1], azimuth=state.azimuth, elevation=state.elevation,
                                       extent=self.base_extent / state.zoom, fov=state.fov,
+                                      scale_bar=self._scale_bar(state),
                                       encode_seconds=time.perf_counter() - encode_start,
                                       elapsed=time.perf_counter() - start))
 

@@ -60,7 +60,7 @@ def _flag(msg, name) -> bool:
 
 
 FIELDS = {"type", "seq", "azimuth", "elevation", "zoom", "mode", "detail", "window", "moving", "background",
-          "shading", "tf", "colour_map", "fov"}
+          "shading", "tf", "colour_map", "fov", "scale_bar"}
 #: a transfer function from the page's editor: a preset, its window's centre moved by this many of its widths (the
 #: page's slider keeps the centre within the input's range, many widths of a narrow window), its width times this, its
 #: opacity times this (clwave.view.shaded.ShadedSource.transfer_function)
@@ -168,7 +168,8 @@ def view_of(msg, last_seq: int, modes) -> ViewState:
     return ViewState(seq=seq, azimuth=_number(msg, "azimuth", -1e6, 1e6), elevation=_number(msg, "elevation", -90, 90),
                      zoom=_number(msg, "zoom", *ZOOM), mode=msg["mode"], detail=_number(msg, "detail", 1e-6, 1.0),
                      window=window, moving=_flag(msg, "moving"), background=_number(msg, "background", 0.0, 1.0),
-                     shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")), colour_map=colour_map, fov=fov)
+                     shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")), colour_map=colour_map, fov=fov,
+                     scale_bar="scale_bar" in msg and _flag(msg, "scale_bar"))
 
 
 class RateLimit:

@@ -1,14 +1,14 @@
 """Read volumes from files: one :func:`load` for every supported format.
 
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
-(NIfTI, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
+(NIfTI, FreeSurfer MGH, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
 millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
-stores, and large .npy, .raw, .nii and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
+stores, and large .npy, .raw, .nii, .mgh and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
 arrays (docs/chunked.md §1).
 
-One module per format family (``raw``: .raw and .npy; ``nifti``, ``nrrd``, ``tiff``, ``slices``: folders of TIFF,
-PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared`` holds
-what they share.
+One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``nrrd``, ``tiff``, ``slices``: folders of
+TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared``
+holds what they share.
 """
 
 from __future__ import annotations
@@ -23,14 +23,17 @@ import numpy as np
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
-from . import dicom, dicom_frames, hdf5, nifti, nrrd, raw, slices, tiff, zarr
-from .shared import SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading, to_float32
+from . import dicom, dicom_frames, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
+from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading,
+                     axis_turn, stated_affine, to_canonical, to_float32)
 
-__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED"]
+__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
 
-_FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".nrrd": "nrrd",
+_FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
-               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"}
+               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc")
+#: the formats put in RAS+ (their origin and spacing in scanner millimetres; the others keep their array axes)
+RAS_FORMATS = ("nifti", "mgh", "nrrd", "dicom", "dicom-frames")
 #: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
 _SLICE_FOLDERS = tuple(f"{name.lower()}-folder" for name in slices.SLICE_SUFFIXES)
 # 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
@@ -42,13 +45,13 @@ _ONLY_FOR = {"shape": ".raw files", "dtype": ".raw files", "byte_order": ".raw f
 
 def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
          chunks=None, nan=None, subtract=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None,
-         fits=None) -> Volume:
+         fits=None, orientation=None, unit=None, origin=None) -> Volume:
     """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
 
     Parameters
     ----------
     path : str or os.PathLike
-        ``.npy``, ``.nii``, ``.nii.gz``, ``.nrrd``, ``.nhdr``, a multi-page
+        ``.npy``, ``.nii``, ``.nii.gz``, FreeSurfer's ``.mgh``, ``.mgz``, ``.nrrd``, ``.nhdr``, a multi-page
         ``.tif``/``.tiff``, a folder of 2-D TIFF, PNG or JPEG slices of one format
         (grey, RGB or RGBA; stacked in natural name order: ``slice2`` before
         ``slice10``), a folder of DICOM files (other files in it are ignored), a
@@ -62,7 +65,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     dtype : str or numpy.dtype, optional
         ``.raw`` only: the sample type, e.g. ``"uint16"``.
     spacing : float or 3 floats, optional
-        Voxel size ``(dz, dy, dx)``; overrides the file's spacing.
+        Voxel size ``(dz, dy, dx)``; overrides the file's spacing, in the file's unit where it has one (``unit=``
+        names another), along the array's axes as stored (before ``orientation=`` turns them).
     byte_order : {'<', '>'}, optional
         ``.raw`` only: little or big endian (default: this machine's).
     series : int or str, optional
@@ -71,7 +75,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     chunks : None, False, "auto" or int
-        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``,
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``,
         TIFF and folders of TIFF slices too when their volume takes at least
         ``CHUNKED_MIN_BYTES`` (1 GiB) as float32; everything else is read whole.  ``False``: read whole.
         ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
@@ -91,6 +95,17 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         Attenuation of water per world unit (default 0.0193 per mm, ~60 keV).
     progress_bar : bool, optional
         Show a bar while reading slices; None shows it when stderr is a terminal.
+    orientation : str, optional
+        An input that carries no orientation (``.npy``, ``.raw``, TIFF, a folder of slices, Zarr, HDF5, MRC): the
+        directions its x, y and z index axes (array axes 2, 1, 0, as stored) point to, as three of nibabel's axis
+        codes (``"LPS"``: x to the patient's left, y posterior, z superior; what ``nibabel.aff2axcodes`` says of a
+        NIfTI's (x, y, z) axes); the volume is turned into RAS+ as a medical file is (docs/coordinates.md §1).
+        Refused for NIfTI, MGH, NRRD and DICOM, which carry their own.
+    unit : str, optional
+        The world unit, the length of the spacing's 1 (:data:`clwave.io.images.UNIT_METRES`: "mm", "um"...);
+        default the file's (:func:`world_unit`; None where it gives none).
+    origin : 3 floats, optional
+        World position ``(x, y, z)`` of the volume's centre, after ``orientation=``; default the file's, else 0.
     fits : callable, optional
         ``fits(voxels, channels)``, called with the size the file's header declares before a volume read whole
         (not chunk by chunk) is read (a stack of slices: once its first slice is read), to refuse one that is too
@@ -137,11 +152,12 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         _reject_unused(kind, series=series)
     if kind != "zarr":
         _reject_unused(kind, level=level)
+    turn = check_orientation(kind, orientation)
     chunks = check_chunks(chunks, kind, path)
 
     with reading(path):
-        data, file_spacing, origin, obliquity = _read(kind, path, inner, shape, dtype, byte_order, series, level,
-                                                      chunks, progress_bar, fits, spacing is None)
+        data, file_spacing, file_origin, obliquity = _read(kind, path, inner, shape, dtype, byte_order, series,
+                                                           level, chunks, progress_bar, fits, spacing is None)
     if not is_dask(data):
         data = np.asarray(data)
     # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
@@ -156,11 +172,29 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         convert = partial(to_float32, path=path, mu_water=mu_water if hu_to_mu else None, subtract=subtract,
                           nan=nan)
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
-    return Volume(data,
-                  spacing=spacing if spacing is not None else (file_spacing or 1.0),
-                  origin=origin if origin is not None else (0.0, 0.0, 0.0), subtracted=subtract, obliquity=obliquity,
-                  labels=labels, stored_dtype=stored, photo=photo,
-                  unit=world_unit(path) if spacing is None else None)  # --spacing: in the user's unit
+    placed = origin if origin is not None else file_origin if file_origin is not None else (0.0, 0.0, 0.0)
+    volume = Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
+                    subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
+                    unit=unit if unit is not None else _world_unit(kind, path, inner))
+    if orientation is not None:  # turned into RAS+ as a medical file is, by the same code; origin= is RAS already
+        affine = stated_affine(turn, volume.shape, volume.spacing, volume.origin)
+        data, spacing, turned, _ = to_canonical(volume.data, affine)
+        volume = Volume(data, spacing, turned if origin is None else origin, subtracted=subtract,
+                        labels=volume.labels, stored_dtype=stored, unit=volume.unit, photo=photo)
+    return volume
+
+
+def check_orientation(kind, orientation):
+    """The turn into RAS+ (:func:`.shared.axis_turn`) of ``orientation=`` (None without it), refused in one line for an
+    input whose header places it in RAS+ (:data:`RAS_FORMATS`)."""
+    if orientation is None:
+        return None
+    if kind in RAS_FORMATS:
+        raise InputError(f"orientation= is for inputs that carry none (.npy, .raw, TIFF, folders of slices, Zarr, "
+                         f"HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out",
+                         cli=f"--orientation is for inputs that carry none (.npy, .raw, TIFF, folders of slices, "
+                             f"Zarr, HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out")
+    return axis_turn(orientation)
 
 
 def _photo(kind, path) -> bool:
@@ -188,6 +222,10 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
         return raw.read_npy(path, chunks, fits), None, None, 0.0
     if kind == "nifti":
         return nifti.read_nifti(path, chunks, fits)
+    if kind == "mgh":
+        return mgh.read_mgh(path, chunks, fits)
+    if kind == "mrc":
+        return (*mrc.read_mrc(path, chunks, fits, warn_spacing), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "tiff":
@@ -202,14 +240,20 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
 #: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
 def world_unit(path) -> str | None:
     """The world unit of a volume file where it is a length its header gives (:data:`clwave.io.images.UNIT_METRES`):
-    DICOM's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres or an ImageJ stack's unit; None for the
-    others (voxel units, or units clwave does not read)."""
-    path, _ = _split_inner(Path(path))
-    kind = _kind(path)
-    if kind in ("nifti", "nrrd", "tiff"):
+    DICOM's and MGH's millimetres, a NIfTI's or NRRD's own, an OME-TIFF's micrometres, an ImageJ stack's or an
+    OME-Zarr image's unit or an MRC map's ångströms; None for the others (voxel units, or units clwave does not
+    read)."""
+    path, inner = _split_inner(Path(path))
+    return _world_unit(_kind(path), path, inner)
+
+
+def _world_unit(kind, path, inner):
+    if kind in ("nifti", "nrrd", "tiff", "mrc", "zarr"):
         with reading(path):
-            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff)[kind].world_unit(path)
-    return "mm" if kind in ("dicom", "dicom-frames") else None
+            if kind == "zarr":
+                return zarr.world_unit(path, inner)
+            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff, mrc=mrc)[kind].world_unit(path)
+    return "mm" if kind in ("dicom", "dicom-frames", "mgh") else None
 
 
 DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",

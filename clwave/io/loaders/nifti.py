@@ -11,7 +11,7 @@ import numpy as np
 from ...device.memory import HostMemoryError
 from ...errors import FileFormatError
 from .shared import (Declared, TimeSeries, as_array, check_declared_size, check_float32_range, check_whole,
-                     largest_finite, note, to_canonical)
+                     largest_finite, note, placeable, to_canonical)
 from .shear import STRAY_VOXELS, straight_grid, unshear
 
 
@@ -31,7 +31,7 @@ def read_nifti(path, chunks, fits=None):
     if len(image.shape) < 3 or min(image.shape) < 1:
         raise FileFormatError(f"{path} holds a NIfTI image of shape {image.shape}; clwave reads 3-D volumes with at "
                               "least 2 voxels an axis (stack 2-D slices into one first)")
-    if not _placeable(affine):
+    if not placeable(affine):
         raise FileFormatError(f"{path}: its voxel-to-world affine (sform, qform or pixdim) is not finite or not "
                               "invertible; fix the header, e.g. with nibabel's set_sform and set_qform")
     if _codes(image.header) == (0, 0):
@@ -128,11 +128,6 @@ def world_unit(path) -> str | None:
 def label_intent(path) -> bool:
     """Whether the file's intent is ``NIFTI_INTENT_LABEL`` (its values index labels: a segmentation)."""
     return _load(path).header.get_intent()[0] == "label"
-
-
-def _placeable(affine) -> bool:
-    """Whether a voxel-to-world ``affine`` places voxels: finite and invertible."""
-    return bool(np.all(np.isfinite(affine)) and abs(np.linalg.det(affine[:3, :3])) > 0)
 
 
 def header_facts(path) -> dict:

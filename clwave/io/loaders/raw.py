@@ -40,7 +40,7 @@ def read_raw(path, shape, dtype, byte_order, chunks, fits=None):
         needs = f"{path} has {actual:,} bytes but {values} values of {dt.name} need {expected:,} bytes"
         raise FileFormatError(f"{needs}; check shape= and dtype=, or the file is truncated",
                               cli=f"{needs}; check --shape and --dtype, or the file is truncated")
-    return as_array(OnDemand(partial(_read_memmap, str(path), dt, shape, 0, "C"), shape, dt), chunks, fits=fits,
+    return as_array(OnDemand(partial(read_memmap, str(path), dt, shape, 0, "C"), shape, dt), chunks, fits=fits,
                     path=path), None, None
 
 
@@ -56,9 +56,9 @@ def read_npy(path, chunks, fits=None):
                               f"clwave reads; save it as numbers, e.g. np.save(path, volume.astype(np.float32))")
     mapped = np.load(path, mmap_mode="r", allow_pickle=False)  # reads the header only
     order = "F" if mapped.flags.f_contiguous and not mapped.flags.c_contiguous else "C"
-    return as_array(OnDemand(partial(_read_memmap, str(path), mapped.dtype, mapped.shape, mapped.offset, order),
+    return as_array(OnDemand(partial(read_memmap, str(path), mapped.dtype, mapped.shape, mapped.offset, order),
                             mapped.shape, mapped.dtype), chunks, fits=fits, path=path)
 
 
-def _read_memmap(path, dtype, shape, offset, order, index):
+def read_memmap(path, dtype, shape, offset, order, index):
     return np.array(np.memmap(path, dtype, "r", offset, shape, order)[index])

@@ -28,12 +28,13 @@ def note(text: str):
     warn_outside(ClwaveWarning(text))
 
 
-SUPPORTED = (".npy, .nii, .nii.gz, .nrrd, .nhdr, .tif/.tiff (multi-page), a folder of 2-D TIFF, PNG or JPEG "
-             "slices, a folder of DICOM files or a multi-frame DICOM file, .raw (its shape and sample type given), a "
-             "Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset)")
+SUPPORTED = (".npy, .nii, .nii.gz, .mgh, .mgz, .nrrd, .nhdr, .tif/.tiff (multi-page), a folder of 2-D TIFF, PNG or "
+             "JPEG slices, a folder of DICOM files or a multi-frame DICOM file, .raw (its shape and sample type "
+             "given), a Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset), an MRC/CCP4 map (.mrc, .map, "
+             ".ccp4, .rec, .st)")
 
-#: chunks=None reads .npy, .raw, .nii and TIFF files (and folders of TIFF slices) whose volume takes at least this
-#: many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
+#: chunks=None reads .npy, .raw, .nii, .mgh, MRC and TIFF files (and folders of TIFF slices) whose volume takes at least
+#: this many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
 CHUNKED_MIN_BYTES = 1 << 30
 
 #: chunks="auto": at most this many bytes of float32 per chunk, in multiples of the store's own chunks
@@ -45,9 +46,9 @@ CHUNK_BYTES = 8 << 20
 #: More chunks than this make Dask's task graph itself too big to handle.
 MAX_CHUNKS = 100_000
 
-# The formats read chunk by chunk (not .nii.gz: gzip cannot seek)
-_CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti", "tiff", "tiff-folder")
-_CHUNKABLE_NAMES = "Zarr, HDF5, .npy, .raw, .nii and TIFF inputs (a file or a folder of TIFF slices)"
+# The formats read chunk by chunk (not .nii.gz nor .mgz: gzip cannot seek)
+_CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti", "mgh", "mrc", "tiff", "tiff-folder")
+_CHUNKABLE_NAMES = "Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC and TIFF inputs (a file or a folder of TIFF slices)"
 
 
 class _ReadsUnderWay(logging.Filter):
@@ -169,9 +170,11 @@ def check_chunks(chunks, kind, path):
     if not (edge or chunks is None or chunks is False or chunks == "auto"):
         raise InputError(f"chunks={chunks!r} must be None, False, 'auto' or a chunk edge in voxels (an int >= 1)",
                          cli=f"--chunks {chunks} must be auto, off or a chunk edge in voxels (an int >= 1)")
-    if kind not in _CHUNKABLE or path.name.lower().endswith(".gz"):
+    if kind not in _CHUNKABLE or path.name.lower().endswith((".gz", ".mgz")):
         if chunks not in (None, False):
-            found = "a .nii.gz file (gzip cannot seek: gunzip it first)" if kind == "nifti" else f"a {kind} input"
+            zipped = dict(nifti="a .nii.gz file (gzip cannot seek: gunzip it first)",
+                          mgh="a .mgz file (gzip cannot seek: gunzip it into a .mgh first)")
+            found = zipped.get(kind, f"a {kind} input")
             raise InputError(f"chunks= applies to {_CHUNKABLE_NAMES}, not to {found}; leave it out to read the "
                              "volume whole",
                              cli=f"--chunks applies to {_CHUNKABLE_NAMES}, not to {found}; leave it out to read "
@@ -244,7 +247,7 @@ def check_whole(path, shape, dtype, fits=None, streamed=False, resampled=False):
     converted = 0 if dtype == np.float32 and not streamed else 4 * channels  # float32 samples used as they are read
     check_fits(voxels * (stored + converted), f"reading {path} whole "
                f"({' x '.join(map(str, shape))} {dtype})", "read it chunk by chunk (chunks='auto'; Zarr, HDF5, .npy, "
-               ".raw, .nii, TIFF), or crop it")
+               ".raw, .nii, .mgh, MRC, TIFF), or crop it")
 
 
 def by_size(chunks, shape):
@@ -338,6 +341,11 @@ def pick_array(arrays, name, store):
     return name, array
 
 
+def placeable(affine) -> bool:
+    """Whether a voxel-to-world ``affine`` places voxels: finite and invertible."""
+    return bool(np.all(np.isfinite(affine)) and abs(np.linalg.det(affine[:3, :3])) > 0)
+
+
 def to_canonical(array_ijk, affine_ras):
     """Reorient an array with an index -> RAS affine to ``(z, y, x)`` RAS+ axes.
 
@@ -384,6 +392,38 @@ def to_canonical(array_ijk, affine_ras):
         centre = affine_ras @ to_xyz @ np.append((np.array(array_xyz.shape[:3]) - 1) / 2, 1.0)
     array_zyx = array_xyz.transpose((2, 1, 0) + tuple(range(3, array_xyz.ndim)))
     return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3]), tilt
+
+
+def axis_turn(orientation) -> np.ndarray:
+    """The 3 x 3 signed permutation that turns a ``(z, y, x)`` array's unit steps (column ``a``: array axis ``a``'s)
+    into RAS+, of an input whose ``orientation`` is stated (one that carries none): three axis codes as nibabel
+    writes them (``"LPS"``, ``"RAS"``), the directions its x, y and z index axes (array axes 2, 1, 0) point to, as
+    ``nibabel.aff2axcodes`` gives them of a NIfTI's (x, y, z) axes; one InputError for anything else."""
+    from nibabel.orientations import axcodes2ornt
+
+    try:
+        ornt = axcodes2ornt(tuple(orientation.upper()[::-1]))
+    except (AttributeError, ValueError):
+        ornt = None
+    if ornt is None or len(ornt) != 3 or set(ornt[:, 0]) != {0, 1, 2}:
+        raise InputError(f"orientation={orientation!r} must be three axis codes, one of L/R, one of A/P and one of "
+                         f"I/S, the directions the array's x, y and z axes point to (nibabel's, e.g. 'LPS' or 'RAS')",
+                         cli=f"--orientation {orientation} must be three letters, one of L/R, one of A/P and one of "
+                             f"I/S, the directions the array's x, y and z axes point to (e.g. LPS or RAS)")
+    turn = np.zeros((3, 3))
+    turn[ornt[:, 0].astype(int), np.arange(3)] = ornt[:, 1]
+    return turn
+
+
+def stated_affine(turn, shape_zyx, spacing_zyx, origin_xyz) -> np.ndarray:
+    """The index -> RAS affine of a ``(z, y, x)`` array turned by ``turn`` (:func:`axis_turn`): its ``spacing_zyx``
+    kept, its centre at ``origin_xyz`` turned with its axes.  :func:`to_canonical` of it puts the volume in RAS+, as
+    a medical file's affine does."""
+    affine = np.eye(4)
+    affine[:3, :3] = turn * np.asarray(spacing_zyx, float)
+    # world (x, y, z) is array axes (2, 1, 0): its turn is the columns reversed
+    affine[:3, 3] = turn[:, ::-1] @ np.asarray(origin_xyz, float) - affine[:3, :3] @ (np.asarray(shape_zyx) - 1) / 2
+    return affine
 
 
 def read_slices(paths, read_slice, desc, progress_bar, fits=None):

@@ -17,7 +17,7 @@ OME_MICROMETRES = {"pm": 1e-6, "Å": 1e-4, "nm": 1e-3, "µm": 1.0, "um": 1.0, "m
 
 #: an ImageJ stack's length ``unit`` (as ImageJ and Fiji write it, lower case) as clwave names it
 IMAGEJ_UNITS = {"micron": "um", "microns": "um", "µm": "um", "μm": "um", "\\u00b5m": "um", "um": "um", "mm": "mm",
-                "cm": "cm", "m": "m", "meter": "m"}
+                "cm": "cm", "m": "m", "meter": "m", "nm": "nm", "nanometer": "nm", "nanometers": "nm"}
 
 
 def world_unit(path) -> str | None:

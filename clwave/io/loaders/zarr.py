@@ -21,6 +21,9 @@ _SI_PREFIXES = {"yocto": -24, "zepto": -21, "atto": -18, "femto": -15, "pico": -
 _METRES = {prefix + "meter": Fraction(10) ** power for prefix, power in _SI_PREFIXES.items()} | {
     "angstrom": Fraction(10) ** -10, "inch": Fraction("0.0254"), "foot": Fraction("0.3048"),
     "mile": Fraction("1609.344"), "parsec": Fraction("3.0857e16")}  # exact: 1 micrometer is 1000.0 nanometer
+#: the NGFF units of length that are world units (:data:`clwave.io.images.UNIT_METRES`), as clwave names them
+_WORLD_UNITS = {"meter": "m", "centimeter": "cm", "millimeter": "mm", "micrometer": "um", "nanometer": "nm",
+                "angstrom": "A"}
 
 
 def read_zarr(path, name, level, chunks, fits=None):
@@ -54,6 +57,28 @@ def read_zarr(path, name, level, chunks, fits=None):
                          "it out", cli=f"--level applies to OME-Zarr multiscale images, and {where} is a plain "
                                         "Zarr array; leave it out")
     return as_array(node, chunks, fits=fits, path=where), None, None
+
+
+def world_unit(path, name) -> str | None:
+    """The world unit of an OME-Zarr image: its x axis's unit (its spacing's: :func:`_read_ome_zarr` converts the z
+    and y axes' to it) where it is a world unit (:data:`_WORLD_UNITS`); None for a plain Zarr array, an x axis
+    without a unit or with another one."""
+    import zarr
+
+    node = zarr.open(str(path), mode="r")
+    node = node[name] if name is not None else node
+    attrs = node.attrs.asdict() if isinstance(node, zarr.Group) else {}
+    ome = attrs.get("ome", attrs)
+    multiscales = ome.get("multiscales") if isinstance(ome, dict) else None
+    if not multiscales:  # read as a plain array (read_zarr has checked the image's metadata otherwise)
+        return None
+    axes = _axes(multiscales[0])
+    return _WORLD_UNITS.get(next(a.get("unit") for a in axes if str(a.get("name", "")).lower() == "x"))
+
+
+def _axes(image) -> list:
+    """An OME-Zarr image's axes, each a dict (NGFF 0.3 names them alone)."""
+    return [a if isinstance(a, dict) else {"name": a} for a in image.get("axes") or []]
 
 
 def _check_store_files(store):
@@ -91,7 +116,7 @@ def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
     image = multiscales[0] if isinstance(multiscales, list) and multiscales else None
     if not isinstance(image, dict):
         raise bad(f"holds multiscales {multiscales!r}, not a list of images")
-    axes = [a if isinstance(a, dict) else {"name": a} for a in image.get("axes") or []]
+    axes = _axes(image)
     names = [str(a.get("name", "")).lower() for a in axes]
     if not {"z", "y", "x"} <= set(names) <= set(_NGFF_ROLES) or len(set(names)) < len(names):
         raise bad(f"names axes {names}; clwave reads axes z, y, x, with an optional c (channels) and t (time)")

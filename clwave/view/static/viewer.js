@@ -4,9 +4,10 @@
   const $ = (id) => document.getElementById(id);
   const token = new URLSearchParams(location.search).get("token") || "";
   const canvas = $("image"), ctx = canvas.getContext("2d"), status = $("status");
+  const overlay = $("scale-bar-overlay"), octx = overlay.getContext("2d");  // the scale bar over the image
   const HOME = { azimuth: 30, elevation: 20, zoom: 1 };
   const state = { ...HOME, mode: "xray", detail: 1, window: null, moving: false, background: 0, shading: true,
-                  tf: null, colour_map: "grey", fov: null };
+                  tf: null, colour_map: "grey", fov: null, scale_bar: false };
   let sentSeq = 0, hello = null, current = null, pending = false, idleTimer = null, closed = false;
   // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
   const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, tfInput: null, frames: [],
@@ -87,6 +88,7 @@
       if (stats.frames.length > 500) stats.frames.shift();
       current = { fig, blob };
       showFigures(fig);
+      drawScaleBar();
     });
   }
   function next(fig) {  // a drag's frame has come: its next view goes at once
@@ -95,7 +97,7 @@
 
   function setup() {
     const [h, w] = hello.size;
-    canvas.width = w; canvas.height = h;
+    canvas.width = overlay.width = w; canvas.height = overlay.height = h;
     showModel();
     const shaded = hello.modes.includes("shaded");
     document.querySelector('input[value="shaded"]').disabled = !shaded;
@@ -538,9 +540,30 @@
   // ---------------------------------------------------------------- perspective (the server places the eye, frames.py)
   function showFov() { $("fov-out").textContent = `${$("fov").value}°`; }
   $("perspective").addEventListener("change", (ev) => {
-    $("fov").disabled = !ev.target.checked;
+    $("fov").disabled = $("scale-bar").disabled = ev.target.checked;
     state.fov = ev.target.checked ? +$("fov").value : null; state.moving = false; request();
+    state.scale_bar = $("scale-bar").checked && !ev.target.checked;
   });
+
+  // ---------------------------------------------------------------- the scale bar over an orthographic view
+  // Its length and label are the server's (the frame's scale_bar: --scale-bar's default for this extent, frames.py);
+  // drawn here at the bottom right, white outlined in black as io/images.draw_scale_bar burns it into a saved image.
+  function drawScaleBar() {
+    octx.clearRect(0, 0, overlay.width, overlay.height);
+    const f = current && current.fig;
+    if (!state.scale_bar || !f || !f.scale_bar) return;
+    const [length, label] = f.scale_bar, size = Math.max(12, Math.round(Math.min(overlay.width, overlay.height) / 24));
+    const bar = Math.round(length / f.extent * overlay.width), thick = Math.max(2, Math.round(size / 4));
+    const rim = Math.max(1, Math.round(size / 9)), margin = Math.max(4, Math.round(size / 2));
+    const x1 = overlay.width - margin - rim, y1 = overlay.height - margin - rim;
+    octx.fillStyle = "#000"; octx.fillRect(x1 - bar - rim, y1 - thick - rim, bar + 2 * rim, thick + 2 * rim);
+    octx.fillStyle = "#fff"; octx.fillRect(x1 - bar, y1 - thick, bar, thick);
+    octx.font = `${size}px sans-serif`; octx.textAlign = "center"; octx.textBaseline = "bottom";
+    const x = Math.min(x1 - bar / 2, overlay.width - margin - octx.measureText(label).width / 2);
+    octx.lineWidth = 2 * rim; octx.strokeStyle = "#000"; octx.lineJoin = "round";
+    octx.strokeText(label, x, y1 - thick - rim - 2); octx.fillText(label, x, y1 - thick - rim - 2);
+  }
+  $("scale-bar").addEventListener("change", (ev) => { state.scale_bar = ev.target.checked; drawScaleBar(); });
   $("fov").addEventListener("input", () => { showFov(); state.fov = +$("fov").value; state.moving = true; request(); });
   $("fov").addEventListener("change", () => { state.moving = false; request(); });
 

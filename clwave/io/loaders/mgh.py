@@ -1,0 +1,90 @@
+"""FreeSurfer MGH files (``.mgh``, and ``.mgz``: one gzipped) through nibabel, in RAS+ as NIfTI is."""
+
+from __future__ import annotations
+
+import gzip
+import math
+
+import numpy as np
+
+from ...errors import FileFormatError
+from .shared import Declared, TimeSeries, as_array, check_declared_size, note, placeable, to_canonical
+
+_GZIP_MAGIC = b"\x1f\x8b"
+#: FreeSurfer's geometry of a file without one (MRIallocHeader: x_r = -1, y_s = -1, z_a = 1, coronal LIA), the
+#: directions of i, j, k as rows, as MGH stores them (nibabel's default stores their transpose, LSP)
+_LIA_MDC = [[-1, 0, 0], [0, 0, -1], [0, 1, 0]]
+
+
+def read_mgh(path, chunks, fits=None):
+    """An MGH/MGZ volume through nibabel's ``MGHImage``: its header (version, dimensions, sample type, the data it
+    declares against what the file or gzip stream holds) is checked before nibabel reads it, its vox2ras affine
+    placed as a NIfTI's (:func:`.shared.to_canonical`), in millimetres.  A file whose geometry is not valid
+    (``goodRASFlag`` 0) is FreeSurfer's default, coronal LIA 1 mm voxels centred on the origin, with a warning;
+    several frames (a time series) are refused."""
+    from nibabel.freesurfer.mghformat import MGHHeader, MGHImage
+    from nibabel.openers import ImageOpener
+
+    dims, frames, dtype, good = _check_header(path)
+    with ImageOpener(path, "rb") as fh:  # nibabel.load leaves its header's file open
+        header = MGHHeader.from_fileobj(fh)
+    if not good:
+        header["delta"], header["Mdc"], header["Pxyz_c"] = 1, _LIA_MDC, 0
+    affine = header.get_affine()
+    if not placeable(affine):
+        raise FileFormatError(f"{path}: its vox2ras (the header's delta, Mdc and Pxyz_c) is not finite or not "
+                              "invertible; write the file again with its true geometry (e.g. nibabel's MGHImage of "
+                              "its voxels and affine)")
+    if not good:
+        note(f"{path} has no valid geometry (goodRASFlag 0): FreeSurfer's default is assumed, coronal LIA with 1 mm "
+             "voxels centred on the origin; set it (mri_convert, or nibabel's MGHHeader) if known")
+    if frames > 1:
+        tr = float(header["tr"])
+        refused = TimeSeries(f"{path} holds {frames} frames of {' x '.join(map(str, dims))} voxels; clwave reads one "
+                             "3-D volume: extract one frame first, e.g. with FreeSurfer's mri_convert --frame N",
+                             dims + (frames,), dtype, frames, *((tr, "ms") if 0 < tr < math.inf else (None, None)))
+        refused.place(dims, affine)
+        raise refused
+    try:
+        data = as_array(MGHImage.ImageArrayProxy(str(path), header, mmap=False), chunks, fits=fits, path=path)
+    except Declared as declared:  # describe(): its place from the header (a .mgz's, read whole)
+        declared.place(dims, affine)
+        raise
+    return to_canonical(data, affine)
+
+
+def _check_header(path):
+    """``(dims, frames, dtype, goodRASFlag)`` of an MGH header, refused in one line where it is cut short, not MGH
+    (its version), names no sample type MGH has, declares an axis of no voxel, or more data than the file (a .mgz:
+    its gzip stream) holds; read here with Python's integers, since nibabel's int32 product of the dimensions wraps
+    (2^30 x 3 x 4 voxels declared 0 bytes)."""
+    from nibabel.freesurfer.mghformat import DATA_OFFSET, data_type_codes, header_dtype
+
+    zipped = path.name.lower().endswith(".mgz")
+    with open(path, "rb") as fh:
+        magic = fh.read(2)
+    if zipped != (magic == _GZIP_MAGIC):
+        raise FileFormatError(f"{path} is {'not ' if zipped else ''}gzip-compressed, and a .mgz is a gzipped MGH file, "
+                              f"a .mgh a plain one: name it {path.with_suffix('.mgh' if zipped else '.mgz').name}")
+    with (gzip.open if zipped else open)(path, "rb") as fh:
+        raw = fh.read(header_dtype.itemsize)
+    if len(raw) < header_dtype.itemsize:
+        raise FileFormatError(f"{path}: its MGH header is cut short ({len(raw)} of {header_dtype.itemsize} bytes); "
+                              "the file is truncated")
+    header = np.frombuffer(raw, header_dtype)[0]
+    if int(header["version"]) != 1:
+        raise FileFormatError(f"{path} is not an MGH file (its version field is {int(header['version'])}, MGH's is "
+                              "1)")
+    code = int(header["type"])
+    if code not in data_type_codes.value_set():
+        types = ", ".join(f"{c} {data_type_codes.label[c]}" for c in data_type_codes.value_set())
+        raise FileFormatError(f"{path}: its MGH header names the sample type {code}, none MGH has ({types}); the "
+                              "file is corrupt")
+    *dims, frames = (int(n) for n in header["dims"])
+    if min(dims + [frames]) < 1:
+        raise FileFormatError(f"{path}: its MGH header declares {' x '.join(map(str, dims))} voxels in {frames} "
+                              "frame(s); every axis needs at least one")
+    dtype = np.dtype(data_type_codes.dtype[code])
+    check_declared_size(path, DATA_OFFSET, math.prod(dims) * frames * dtype.itemsize, dims + [frames] * (frames > 1),
+                        gzip=zipped)
+    return tuple(dims), frames, dtype, bool(header["goodRASFlag"])

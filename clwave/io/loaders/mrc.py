@@ -1,0 +1,96 @@
+"""MRC and CCP4 maps (``.mrc``, ``.map``, ``.ccp4``, ``.rec``, ``.st``: cryo-EM maps, tomograms, tilt series), their
+header read by mrcfile, their samples memory-mapped, whole or chunk by chunk."""
+
+from __future__ import annotations
+
+import math
+from functools import partial
+
+import numpy as np
+
+from ...errors import FileFormatError
+from .raw import read_memmap
+from .shared import OnDemand, as_array, check_declared_size, no_spacing, note
+
+MRC_SUFFIXES = (".mrc", ".map", ".ccp4", ".rec", ".st")
+_HEADER = 1024  # bytes before the extended header (nsymbt bytes), then the samples
+_COMPLEX = {3: "complex int16", 4: "complex float32"}
+
+
+def read_mrc(path, chunks, fits=None, warn_spacing=True):
+    """``(data, spacing, origin)`` of an MRC2014 or CCP4 map as ``(z, y, x)``: the header read and checked by mrcfile
+    (``permissive=False``: its map ID and machine stamp), then here before any sample is read (its mode, its
+    dimensions, its axis order ``mapc``/``mapr``/``maps``, and the samples it declares against the file's size);
+    the samples transposed from the file's (section, row, column) order to (z, y, x).  Spacing (Å) is the cell
+    over its sampling along each axis, None where the header gives none (a warning unless ``warn_spacing`` is
+    false); the first voxel is at the header's ``origin`` where it is finite, not 0, else at its start indices times the
+    spacing (as ChimeraX places a map); ``origin`` is the volume's centre.  A volume stack is refused; an image stack
+    (space group 0: a tilt series, a stack of particles) is read as a volume, with a warning."""
+    header, offset = _header(path)
+    import mrcfile.utils
+
+    mode = int(header.mode)
+    if mode in _COMPLEX:
+        raise FileFormatError(f"{path} holds {_COMPLEX[mode]} samples (mode {mode}: a Fourier transform); clwave reads "
+                              "real maps: transform it back to real space first")
+    try:
+        dtype = mrcfile.utils.data_dtype_from_header(header)
+    except ValueError:
+        raise FileFormatError(f"{path}: its MRC header names mode {mode}, none clwave reads (0 int8, 1 int16, "
+                              "2 float32, 6 uint16, 12 float16); the file is corrupt or packed (mode 101)") from None
+    stored = tuple(int(n) for n in (header.nz, header.ny, header.nx))  # sections, rows, columns
+    if min(stored) < 1:
+        raise FileFormatError(f"{path}: its MRC header declares {' x '.join(map(str, stored[::-1]))} columns, rows "
+                              "and sections; each needs at least one")
+    ispg = int(header.ispg)
+    if mrcfile.utils.spacegroup_is_volume_stack(ispg) and stored[0] != int(header.mz):
+        raise FileFormatError(f"{path} is a stack of volumes (space group {ispg}, {stored[0]} sections of "
+                              f"{int(header.mz)}); clwave reads one volume: write one to a file of its own")
+    axes = tuple(int(a) for a in (header.maps, header.mapr, header.mapc))  # of sections, rows, columns: 1 x .. 3 z
+    if sorted(axes) != [1, 2, 3]:
+        raise FileFormatError(f"{path}: its MRC header orders the axes mapc, mapr, maps = {axes[::-1]}, not an order "
+                              "of x, y, z (1, 2, 3); the header is corrupt")
+    check_declared_size(path, offset, math.prod(stored) * dtype.itemsize, stored[::-1], gzip=False)
+    if ispg == 0 and stored[0] > 1:
+        note(f"{path} is a stack of {stored[0]} 2-D images (space group 0: a tilt series or a stack of particles): "
+             "read as the slices of a volume")
+    source = OnDemand(partial(read_memmap, str(path), dtype, stored, offset, "C"), stored, dtype)
+    data = as_array(source, chunks, fits=fits, path=path)
+    data = data.transpose([axes.index(a) for a in (3, 2, 1)])  # (z, y, x)
+    spacing = _spacing(header)
+    if spacing is None:
+        if warn_spacing:
+            no_spacing(path)
+        return data, None, None
+    start = np.zeros(3)  # x, y, z: the first voxel's index in the map's grid (nxstart: columns', ...)
+    start[[a - 1 for a in axes[::-1]]] = [float(header.nxstart), float(header.nystart), float(header.nzstart)]
+    given = np.array([float(header.origin.x), float(header.origin.y), float(header.origin.z)])
+    step = np.array(spacing[::-1])
+    first = given if np.any(given) and np.all(np.isfinite(given)) else start * step
+    centre = first + step * (np.array(data.shape[:3][::-1]) - 1) / 2
+    return data, spacing, tuple(float(c) for c in centre)
+
+
+def world_unit(path) -> str | None:
+    """"A" (ångström) where the header gives a voxel size, else None."""
+    return "A" if _spacing(_header(path)[0]) is not None else None
+
+
+def _header(path):
+    """``(header, offset of the samples)``: mrcfile's header, checked as ``permissive=False`` checks it."""
+    import mrcfile
+
+    try:
+        with mrcfile.open(path, header_only=True, permissive=False) as mrc:
+            return mrc.header.copy(), _HEADER + int(mrc.header.nsymbt)
+    except ValueError as exc:
+        raise FileFormatError(f"{path} is not an MRC/CCP4 map clwave reads: {exc} (mrcfile)") from None
+
+
+def _spacing(header):
+    """``(dz, dy, dx)`` in Å: the cell's lengths over its sampling (mx, my, mz) along x, y, z; None where any is not
+    a positive finite number (a cell of 0: no voxel size)."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        size = [float(length) / float(n) for length, n in zip(header.cella.tolist(), (header.mx, header.my, header.mz))
+                if int(n) > 0]
+    return tuple(size[::-1]) if len(size) == 3 and all(0 < s < math.inf for s in size) else None

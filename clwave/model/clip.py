@@ -1,0 +1,120 @@
+"""Clipping: the part of world space a ray-traced image keeps (docs/coordinates.md §6, docs/raytracing.md §12): an
+axis-aligned crop box and/or a few half-spaces, a convex region, so that a ray's interval through it is one
+interval."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog
+
+from ..errors import InputError, reals
+
+MAX_PLANES = 6  #: half-spaces a clip takes (with the box: at most 12 faces to cut each ray at)
+#: a region whose largest inscribed ball's radius is at most this fraction of the clip's coordinates keeps nothing
+#: (two planes with opposite normals through one point keep a plane, no volume)
+THIN = 1e-9
+
+
+@dataclass(frozen=True)
+class Clip:
+    """What a ray-traced image keeps, in world coordinates (RAS+, the volume's world units, docs/coordinates.md §6):
+    the box ``lo`` .. ``hi`` (x, y, z corners, ``lo < hi``; None: no box) and the half-spaces ``planes``, each
+    ``(point, normal)``: the side the normal points to is kept, the plane itself included.  Validated when made
+    (finite numbers, non-zero normals, at most :data:`MAX_PLANES` planes, a region with volume): one
+    :class:`~clwave.InputError` naming the problem.  Taken by :func:`clwave.raytrace`, :meth:`RayTracer.render`
+    and progressive ray tracing (``clip=``); changing it between renders rebuilds nothing.
+
+    >>> Clip(planes=[((0, 0, 0), (1, 0, 0))]).contains([(1, 0, 0), (-1, 0, 0)]).tolist()
+    [True, False]
+    """
+
+    lo: tuple | None = None
+    hi: tuple | None = None
+    planes: tuple = ()
+
+    def __post_init__(self):
+        if (self.lo is None) != (self.hi is None):
+            raise InputError("a clip box needs both corners, lo and hi (x, y, z), or neither")
+        if self.lo is not None:
+            lo, hi = (tuple(reals(v, name, 3, "3 finite numbers (x, y, z) in world units").tolist())
+                      for v, name in ((self.lo, "lo"), (self.hi, "hi")))
+            _finite((*lo, *hi), f"the clip box's corners {lo} .. {hi}")
+            if not all(a < b for a, b in zip(lo, hi)):
+                raise InputError(f"the clip box's lo {lo} must be below its hi {hi} on every axis (x, y, z)")
+            object.__setattr__(self, "lo", lo)
+            object.__setattr__(self, "hi", hi)
+        if not isinstance(self.planes, (list, tuple)):
+            raise InputError(f"planes={self.planes!r} must be a list of (point, normal), each 3 numbers (x, y, z)")
+        if len(self.planes) > MAX_PLANES:
+            raise InputError(f"a clip takes at most {MAX_PLANES} planes, got {len(self.planes)}")
+        planes = []
+        for i, plane in enumerate(self.planes):
+            if not isinstance(plane, (list, tuple)) or len(plane) != 2:
+                raise InputError(f"plane {i} {plane!r} must be (point, normal), each 3 numbers (x, y, z)")
+            point, normal = (tuple(reals(v, f"plane {i}'s {name}", 3, "3 finite numbers (x, y, z)").tolist())
+                             for v, name in zip(plane, ("point", "normal")))
+            _finite((*point, *normal), f"plane {i}'s point {point} and normal {normal}")
+            if not 0 < np.linalg.norm(normal) < np.inf:
+                raise InputError(f"plane {i}'s normal {normal} must be a non-zero direction (towards what is kept)")
+            planes.append((point, normal))
+        object.__setattr__(self, "planes", tuple(planes))
+        if not self.lo and not planes:
+            raise InputError("a clip needs a box (lo, hi) or at least one plane (point, normal)")
+        if not self.keeps():
+            raise InputError(f"{self.describe()} keeps nothing (no volume lies inside all of it): turn a plane's "
+                             f"normal, or move a plane or the box")
+
+    def half_spaces(self) -> np.ndarray:
+        """The planes as rows ``(n_x, n_y, n_z, d)``, ``n`` a unit normal: the clip keeps ``n . x + d >= 0``
+        (the box apart)."""
+        rows = [(*n, -np.dot(n, p)) for p, n in ((np.array(p), np.array(n) / np.linalg.norm(n))
+                                                 for p, n in self.planes)]
+        return np.array(rows, float).reshape(-1, 4)
+
+    def keeps(self, lo=None, hi=None) -> bool:
+        """Whether the clip keeps some volume (within the box ``lo`` .. ``hi`` too, world (x, y, z), where given):
+        the largest ball inside all of it, a linear program, has a radius above :data:`THIN` of its coordinates."""
+        boxes = [b for b in ((self.lo, self.hi), (lo, hi)) if b[0] is not None]
+        rows, bounds = [], []
+        for h in self.half_spaces():  # n . x + d >= r  <=>  -n . x + r <= d
+            rows.append((*-h[:3], 1.0))
+            bounds.append(h[3])
+        for b_lo, b_hi in boxes:
+            for a in range(3):
+                axis = np.eye(3)[a]
+                rows += [(*-axis, 1.0), (*axis, 1.0)]
+                bounds += [-b_lo[a], b_hi[a]]
+        size = np.abs(bounds).max() or 1.0  # the clip's coordinates, as units of "thin": solved in x / size
+        best = linprog(c=(0, 0, 0, -1), A_ub=np.array(rows, float), b_ub=np.array(bounds, float) / size,
+                       bounds=[(None, None)] * 3 + [(None, 1.0)], method="highs")
+        return best.status == 0 and -best.fun > THIN
+
+    def contains(self, points) -> np.ndarray:
+        """Per world point (N, 3) as (x, y, z): whether the clip keeps it."""
+        x = np.atleast_2d(np.asarray(points, float))
+        inside = np.ones(len(x), bool)
+        if self.lo is not None:
+            inside &= np.all((x >= self.lo) & (x <= self.hi), axis=1)
+        for h in self.half_spaces():
+            inside &= x @ h[:3] + h[3] >= 0
+        return inside
+
+    def describe(self) -> str:
+        """The clip in words, for messages."""
+        parts = [f"box {list(self.lo)} .. {list(self.hi)}"] if self.lo is not None else []
+        parts += [f"plane through {list(p)} keeping normal {list(n)}" for p, n in self.planes]
+        return "the clip (" + "; ".join(parts) + ")"
+
+
+def _finite(values, what):
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"{what} must be finite numbers")
+
+
+def check_clip(clip) -> Clip | None:
+    """``clip=`` of a render: None or a :class:`Clip` (InputError naming the argument otherwise)."""
+    if clip is not None and not isinstance(clip, Clip):
+        raise InputError(f"clip={clip!r} must be a clwave.Clip(lo=, hi=, planes=) or None")
+    return clip

@@ -1,0 +1,141 @@
+"""MRC and CCP4 maps (cryo-EM maps, tomograms, tilt series): written here by ``mrcfile.new``, read by clwave; the
+expected volume, spacing and world positions are worked out from the header written, by hand (docs/coordinates.md
+§1)."""
+
+import mrcfile
+import numpy as np
+import pytest
+
+import clwave
+from clwave.errors import ClwaveWarning
+from clwave.io.loaders import describe
+from test_cli import run
+from test_mgh import assert_refused_in_one_line
+
+VOXEL = (1.25, 2.0, 0.5)  # x, y, z (Å)
+
+
+def _write(path, stored, voxel=VOXEL, origin=(0.0, 0.0, 0.0), **fields):
+    """``stored`` (sections, rows, columns) as an MRC file, then header ``fields`` set as given."""
+    with mrcfile.new(path, overwrite=True) as mrc:
+        mrc.set_data(stored)
+        mrc.voxel_size = voxel
+        mrc.header.origin = origin
+        for name, value in fields.items():
+            setattr(mrc.header, name, value)
+    return path
+
+
+@pytest.mark.parametrize("dtype", [np.int8, np.int16, np.uint16, np.float32, np.float16])
+@pytest.mark.parametrize("suffix", [".mrc", ".map", ".rec"])
+def test_a_map_is_read_in_angstroms_placed_by_its_origin(tmp_path, rng, dtype, suffix):
+    stored = rng.integers(-100 if dtype != np.uint16 else 0, 100, (4, 5, 6)).astype(dtype)
+    path = _write(tmp_path / f"map{suffix}", stored, origin=(10.0, -20.0, 30.0))
+    vol = clwave.load(path)
+    np.testing.assert_array_equal(vol.data, stored.astype(np.float32))  # x fastest: (z, y, x) as stored
+    assert vol.spacing == VOXEL[::-1] and vol.unit == "A"
+    # the first voxel at the header's origin, each next one a voxel size further along its axis
+    corner = vol.voxel_to_world(np.array([[0.0, 0, 0], [3, 4, 5]]))
+    np.testing.assert_allclose(corner, [(10, -20, 30), (10 + 5 * 1.25, -20 + 4 * 2.0, 30 + 3 * 0.5)])
+    facts = describe(path)
+    assert facts["format"] == "mrc" and facts["shape"] == [4, 5, 6] and facts["spacing"] == list(VOXEL[::-1])
+
+
+def test_axes_stored_in_another_order_are_put_in_z_y_x_order(tmp_path, rng):
+    """mapc 3, mapr 1, maps 2: columns run along z, rows along x, sections along y; no origin, so the first voxel is
+    at the start indices (nxstart of the columns: z) times the voxel size."""
+    stored = rng.normal(size=(4, 5, 6)).astype(np.float32)  # (sections: y, rows: x, columns: z)
+    path = _write(tmp_path / "permuted.map", stored, mapc=3, mapr=1, maps=2, mx=5, my=4, mz=6,
+                  cella=(5 * 1.25, 4 * 2.0, 6 * 0.5), nxstart=2, nystart=-3, nzstart=7)
+    vol = clwave.load(path)
+    np.testing.assert_array_equal(vol.data, stored.transpose(2, 0, 1))  # [z, y, x] = stored[y, x, z]
+    assert vol.spacing == (0.5, 2.0, 1.25)
+    # nxstart (columns) along z, nystart (rows) along x, nzstart (sections) along y
+    np.testing.assert_allclose(vol.voxel_to_world(np.zeros((1, 3))), [(-3 * 1.25, 7 * 2.0, 2 * 0.5)])
+
+
+def test_a_map_is_read_chunk_by_chunk_as_whole(tmp_path, rng):
+    stored = rng.normal(size=(9, 10, 11)).astype(np.float32)
+    path = _write(tmp_path / "big.mrc", stored, mapc=2, mapr=1, maps=3, mx=10, my=11, mz=9)
+    chunked, whole = clwave.load(path, chunks=4), clwave.load(path, chunks=False)
+    assert hasattr(chunked.data, "dask") and isinstance(whole.data, np.ndarray)
+    np.testing.assert_array_equal(np.asarray(chunked.data), whole.data)
+    np.testing.assert_array_equal(whole.data, stored.transpose(0, 2, 1))
+
+
+def test_a_map_without_a_cell_is_in_voxels_with_a_warning(tmp_path, rng):
+    path = _write(tmp_path / "nocell.mrc", rng.normal(size=(3, 4, 5)).astype(np.float32), voxel=(0, 0, 0))
+    with pytest.warns(ClwaveWarning, match="no spacing in the file: 1, 1, 1 assumed"):
+        vol = clwave.load(path)
+    assert vol.spacing == (1.0, 1.0, 1.0) and vol.unit is None
+
+
+def test_an_image_stack_is_read_as_slices_with_a_warning(tmp_path, rng, capsys):
+    stored = rng.normal(size=(7, 5, 6)).astype(np.float32)
+    with mrcfile.new(tmp_path / "tilts.st") as mrc:
+        mrc.set_data(stored)
+        mrc.set_image_stack()
+        mrc.voxel_size = (3.0, 3.0, 3.0)
+    with pytest.warns(ClwaveWarning, match="is a stack of 7 2-D images .space group 0"):
+        vol = clwave.load(tmp_path / "tilts.st")
+    np.testing.assert_array_equal(vol.data, stored)
+    code, out, err = run(capsys, "info", str(tmp_path / "tilts.st"))
+    assert code == 0 and "3, 3, 3 A (x, y, z; --spacing 3,3,3)" in out, out + err
+
+
+def test_a_compressed_map_keeps_its_unit(tmp_path, capsys):
+    stored = np.kron(np.arange(8, dtype=np.float32).reshape(2, 2, 2), np.ones((8, 8, 8), np.float32))
+    path = _write(tmp_path / "blocks.mrc", stored)
+    code, out, err = run(capsys, "compress", str(path), "--levels", "1", "-o", str(tmp_path / "b.clw"))
+    assert code == 0, err
+    assert clwave.WaveletVolume.open(tmp_path / "b.clw").unit == "A"
+
+
+def test_a_map_rendered_with_a_scale_bar_is_labelled_in_its_length(tmp_path):
+    """The picture with ``--scale-bar 2`` is the one without it under a bar of 2 Å (20 pixels at 0.1 Å a pixel),
+    labelled "0.2 nm" (the label itself: tests/test_scale_bar.py; its font has no Å), not in world "units"."""
+    from clwave.cli import main
+    from clwave.io.images import draw_scale_bar
+    from test_outputs_formats import decode_png
+
+    path = _write(tmp_path / "blocks.mrc", np.kron(np.arange(8, dtype=np.float32).reshape(2, 2, 2),
+                                                   np.ones((4, 4, 4), np.float32)))
+    view = ["render", str(path), "--levels", "1", "--size", "96x120", "--extent", "12"]
+    assert main(view + ["--scale-bar", "2", "-o", str(tmp_path / "a.png")]) == 0
+    assert main(view + ["-o", str(tmp_path / "b.png")]) == 0
+    (_, barred), (_, plain) = decode_png(tmp_path / "a.png"), decode_png(tmp_path / "b.png")
+    np.testing.assert_array_equal(barred, draw_scale_bar(plain, 0.1, "A", 2.0))
+    assert not np.array_equal(barred, draw_scale_bar(plain, 0.1, None, 2.0))
+
+
+def _valid(tmp_path, **fields):
+    return _write(tmp_path / "v.mrc", np.zeros((3, 4, 5), np.float32), **fields).read_bytes()
+
+
+def _with(content, offset, data):
+    return content[:offset] + data + content[offset + len(data):]
+
+
+@pytest.mark.parametrize("case, words", [
+    ("cut", r"declares 5 x 4 x 3 voxels \(240 bytes\) but the file holds 100 bytes after its 1,024-byte header"),
+    ("huge", r"declares 1073741824 x 4 x 3 voxels .* it is truncated or its header is wrong"),
+    ("short", "is not an MRC/CCP4 map clwave reads: Couldn't read enough bytes for MRC header"),
+    ("not mrc", "is not an MRC/CCP4 map clwave reads: Map ID string not found"),
+    ("complex", r"holds complex float32 samples \(mode 4: a Fourier transform\)"),
+    ("mode", "names mode 7, none clwave reads"),
+    ("axes", r"orders the axes mapc, mapr, maps = \(1, 1, 3\), not an order of x, y, z"),
+    ("empty", "declares 0 x 4 x 3 columns, rows and sections; each needs at least one"),
+    ("stack", r"is a stack of volumes \(space group 401, 3 sections of 1\)")])
+def test_a_truncated_or_lying_map_is_refused_in_one_line(tmp_path, capsys, case, words):
+    content = _valid(tmp_path)
+    content = {"cut": lambda: content[:1124],
+               "huge": lambda: _with(content, 0, np.int32(1 << 30).tobytes()),
+               "short": lambda: content[:500],
+               "not mrc": lambda: _with(content, 208, b"XXXX"),
+               "complex": lambda: _with(content, 12, np.int32(4).tobytes()),
+               "mode": lambda: _with(content, 12, np.int32(7).tobytes()),
+               "axes": lambda: _with(content, 68, np.int32(1).tobytes()),
+               "empty": lambda: _with(content, 0, np.int32(0).tobytes()),
+               "stack": lambda: _with(_with(content, 88, np.int32(401).tobytes()), 36, np.int32(1).tobytes())}[case]()
+    (tmp_path / "bad.mrc").write_bytes(content)
+    assert_refused_in_one_line(capsys, tmp_path / "bad.mrc", words)
