@@ -105,6 +105,8 @@ class TransferFunction:
         brightfield    auto               0.3 at 0 falling to 0 at 0.9 (white), of
                                           the luminance of a colour volume, coloured
                                           by its own RGB (stained sections, photos)
+        photo          (0, 1)             0.5 times a colour volume's own alpha (1
+                                          without one), coloured by its own RGB
         ============== ================== ==========================================
         """
         key = name.strip().lower().replace("_", "-") if isinstance(name, str) else None
