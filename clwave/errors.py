@@ -49,9 +49,19 @@ class ClwaveWarning(UserWarning):
     """A result that is not what was asked for, said in one line, in the command line's words too (``cli``), which
     the command line prints as ``clwave: warning: ...``."""
 
+    #: what the command line says once a run (None: each line once)
+    once = None
+
     def __init__(self, message, *, cli=None):
         super().__init__(message)
         self.cli = cli or message
+
+
+class NearlyOpaqueWarning(ClwaveWarning):
+    """A transfer function that makes a volume or model nearly opaque (docs/model.md §5): said once a command, whether
+    its volume was checked (``classify``, ``check_visible``) or its model rendered (``transfer_function=``)."""
+
+    once = "nearly opaque"
 
 
 def warn_outside(warning) -> None:

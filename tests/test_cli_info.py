@@ -97,6 +97,42 @@ def test_info_names_a_windowless_transfer_function_and_the_value_subtracted(tmp_
     assert code == 0 and json.loads(out)["subtracted"] == 0.0
 
 
+def test_info_gives_a_stored_functions_opacity_unit_and_the_inputs_value_range(tmp_path, capsys):
+    """A scalar model's stored transfer function: its opacity unit (2 mm; one voxel, the smallest spacing, where None;
+    1 world unit for a version-1 function, as a read takes it) in the text and the JSON, and the input's value range
+    (its min and max, NumPy's) in both; a file of before the range was recorded says so, null in the JSON."""
+    data = np.random.default_rng(3).random((6, 8, 10), np.float32) * 600 - 100
+    vol = clwave.Volume(data, spacing=(0.5, 0.25, 0.4), unit="mm")
+    tf = clwave.TransferFunction([[-100, 0, 0, 0, 0], [500, 1, 1, 1, 1]], name="mine", opacity_unit=2)
+    files = {unit: tmp_path / f"{unit}.clw" for unit in (2.0, None)}
+    for unit, path in files.items():
+        clwave.WaveletVolume.from_volume(vol, levels=1, transfer_function=tf.under(opacity_unit=unit)).save(path)
+    code, out, _ = run(capsys, "info", str(files[2.0]))
+    assert code == 0 and "(classified while rendering), opacities per 2 mm\n" in out, out
+    assert f"values     {data.min():g} .. {data.max():g}, the input's range (a transfer function classifies the " \
+           f"field clamped to it)" in out, out
+    code, out, _ = run(capsys, "info", str(files[None]))
+    assert code == 0 and "opacities per voxel (the smallest spacing, 0.25 mm)\n" in out, out
+    for unit, path in files.items():
+        code, out, _ = run(capsys, "info", str(path), "--json")
+        facts = json.loads(out)
+        assert code == 0 and facts["transfer_function"]["opacity_unit"] == unit
+        assert facts["value_range"] == [float(data.min()), float(data.max())]
+
+    def older(header):  # version 1 (opacities per world unit) and no value range: before the nineteenth session
+        header["transfer_function"].update(version=1)
+        header["transfer_function"].pop("opacity_unit")
+        header.pop("value_range")
+    old = crafted(files[None], tmp_path, older)
+    code, out, _ = run(capsys, "info", str(old))
+    assert code == 0 and "opacities per 1 mm\n" in out and "values     the input's range not recorded" in out, out
+    code, out, _ = run(capsys, "info", str(old), "--json")
+    facts = json.loads(out)
+    assert code == 0 and facts["transfer_function"]["opacity_unit"] == 1.0 and facts["value_range"] is None
+    assert clwave.TransferFunction.from_dict(facts["transfer_function"]).opacity_unit == \
+        clwave.TransferFunction.from_dict(clwave.WaveletVolume.open(old).transfer_function).opacity_unit
+
+
 def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsys, monkeypatch):
     """.npy, .nii and HDF5: the shape, spacing and origin load() gives (its own Volume, read here first), the stored
     dtype; the voxel reads of each format fail here, so none is made.  Formats read whole: the shape as stored."""

@@ -10,7 +10,7 @@ import pytest
 
 import clwave
 from clwave.io.phantoms import phantom
-from clwave.splat.coarse import coarse_factor, footprint_scales, layer_factors
+from clwave.splat.coarse import coarse_plan, footprint_scales
 from clwave.splat.reference import exact_xray
 
 renderer_module = sys.modules["clwave.splat.renderer"]  # clwave.splat is also the function
@@ -73,15 +73,25 @@ def test_isotropic_voxels_keep_their_factors(cc):
         assert np.array_equal(got.image, before.image)
 
 
-def test_layer_factors_per_axis():
-    pixel, tol = 0.8, 2e-2
-    for level, approximation in ((3, True), (3, False), (2, False)):
-        fu, fv = (coarse_factor(4, level, 3, approximation, pixel, c, tol) for c in (0.7, 2.5))
-        assert layer_factors(4, level, 3, approximation, pixel, (0.7, 2.5), tol, square=False) == (fu, fv)
-        assert layer_factors(4, level, 3, approximation, pixel, (0.7, 2.5), tol, square=True) == (fu, fu)
-    # the limits, 2^m d ratio (share / e_ref)^(1/4): level 3's approximation 8.66 along the slices, 2.42 across
-    assert layer_factors(4, 3, 3, True, pixel, (0.7, 2.5), tol, square=False) == (2, 8)
-    assert layer_factors(4, 2, 3, False, pixel, (0.7, 2.5), tol, square=False) == (1, 2)  # 1.83 along v
+def test_coarse_plan_per_axis():
+    # COARSE_REFERENCE by hand, pixel 0.8, spacings 0.7 across the slices (u) and 2.5 along them (v), tolerance 2e-2.
+    # Level-3 wavelets first: ratio 0.2165 (6.6e-3), limits 2^3 c ratio 1.21 along u and 4.33 along v, factors (1, 4),
+    # drawn at 4 * 0.8 / 20 = 0.16 along v, the 0.176 row's 4.4e-3 spent. The approximation band: 0.433 (5.8e-3) within
+    # the 1.56e-2 left, limits 2.42 and 8.66, (2, 8), drawn at 0.286 and 0.32, 0.352's 5.1e-3. Level 2: 0.2165 within
+    # 1.05e-2, limits 0.61 and 2.17, (1, 2), drawn at 0.16 (u at its pixel spends nothing), 4.4e-3. Level 1: 0.176
+    # within 6.1e-3, limits 0.25 and 0.88: (1, 1)
+    kinds = {(3, True), (3, False), (2, False), (1, False)}
+    factors, left = coarse_plan(4, kinds, 0.8, (0.7, 2.5), 2e-2, square=False)
+    assert factors == {(3, False): (1, 4), (3, True): (2, 8), (2, False): (1, 2), (1, False): (1, 1)}
+    assert left == pytest.approx(2e-2 - 4.4e-3 - 5.1e-3 - 4.4e-3, rel=1e-12)
+    # square layers: the lesser factor along both; level-3 wavelets then stay at the image's pixels and spend nothing,
+    # the approximation band draws (2, 2) at 0.286 (0.352's 5.1e-3), the wavelets of levels 2 and 1 stay at 1
+    factors, left = coarse_plan(4, kinds, 0.8, (0.7, 2.5), 2e-2, square=True)
+    assert factors == {(3, False): (1, 1), (3, True): (2, 2), (2, False): (1, 1), (1, False): (1, 1)}
+    assert left == pytest.approx(2e-2 - 5.1e-3, rel=1e-12)
+    # kinked bands are never coarsened, and a tolerance under the tables' least errors coarsens nothing
+    for order, tol in ((2, 2e-2), (4, 1e-4)):
+        assert coarse_plan(order, kinds, 0.8, (0.7, 2.5), tol, square=False) == ({k: (1, 1) for k in kinds}, tol)
 
 
 @pytest.mark.parametrize("tolerance", [2e-2, 1e-2])

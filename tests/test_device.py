@@ -1,11 +1,14 @@
 """Device choice (no hardware needed) and the kernel build path (on the real device)."""
 
+import json
+from types import SimpleNamespace
+
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 import pytest
 
-from clwave.device import programs
+from clwave.device import kernels, programs
 from clwave.device.context import ComputeContext, DeviceInfo, select_device
 from clwave.errors import DeviceNotFoundError, InputError, KernelBuildError
 
@@ -130,3 +133,26 @@ def test_a_second_renderer_builds_no_program(cc, monkeypatch):
     assert builds == []
     for a, b in zip(first, again):
         np.testing.assert_array_equal(a, b)
+
+
+def test_build_log_has_a_line_a_program_built(cc, tmp_path, monkeypatch):
+    """``CLW_BUILD_LOG`` (docs/benchmarks.md §22): one JSON line for each program built, none for one reused."""
+    log = tmp_path / "builds.jsonl"
+    monkeypatch.setenv("CLW_BUILD_LOG", str(log))
+    for _ in range(2):
+        programs.build(cc, ["device/selftest.cl"], dict(CLW_LOGGED=1))
+    (line,) = [json.loads(text) for text in log.read_text().splitlines()]
+    assert line["files"] == ["device/selftest.cl"] and ["CLW_LOGGED", 1] in line["defines"]
+    assert line["options"] == [] and line["seconds"] >= 0
+    assert line["test"].endswith("test_device.py::test_build_log_has_a_line_a_program_built")
+
+
+def test_row_bands_cover_the_rows_once_from_first_rows_not_offsets():
+    """``in_row_bands`` launches whole work-groups of rows, each band from the row its launch is given, together
+    every row once: a row number, not a global offset, which would have PoCL compile the kernel twice."""
+    bands = []
+    kernels.in_row_bands(SimpleNamespace(finish=lambda: None), lambda size, first: bands.append((size, first)),
+                         (24, 40), (8, 8))
+    assert all(size[0] == 24 and size[1] % 8 == 0 and isinstance(first, int) for size, first in bands)
+    assert [first for _, first in bands] == list(np.cumsum([0] + [size[1] for size, _ in bands[:-1]]))
+    assert sum(size[1] for size, _ in bands) == 40

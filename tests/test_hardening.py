@@ -727,7 +727,10 @@ def test_an_image_beyond_the_hosts_memory_is_refused_before_its_buffers(tmp_path
         clwave.Camera(size=300)  # its host copies alone: 300^2 x 20 bytes
     assert str(err.value) == ("a 300x300 image needs about 1.8 MiB, and this machine has 1 MiB available; give a "
                               "smaller size= (at most 228x228 here)")
-    device = 16 * 200 ** 2 if splatter.cc.info.kind == "CPU" else 0  # a framebuffer in the host's memory
+    # on a CPU device, in the host's memory: the least the splatter needs for the view before its footprints, its
+    # framebuffer, 13 x 13 tiles' ranges and 1024 coefficients of 64 bytes over 1 - 1/4 - 1/32 of its budget
+    least = (16 * 200 ** 2 + 8 * 13 ** 2 + 64 * min(1024, splatter.count)) / (1 - 1 / 4 - 1 / 32)
+    device = int(least) + 1 if splatter.cc.info.kind == "CPU" else 0
     with pytest.raises(clwave.HostMemoryError, match=r"^the framebuffer of a 200x200 image needs about "
                        rf"{memory.format_size(20 * 200 ** 2 + device)}, and this machine has 1 MiB available; "
                        r"render a smaller image \(at most \d+x\d+ here\)$"):

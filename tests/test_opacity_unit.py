@@ -11,7 +11,7 @@ import pytest
 
 import clwave
 from clwave.cli import main
-from clwave.errors import ClwaveWarning, InputError
+from clwave.errors import ClwaveWarning, InputError, NearlyOpaqueWarning
 from clwave.model.transfer import TransferFunction
 
 SLAB = TransferFunction([(0.0, 1.0, 1.0, 1.0, 0.0), (1.0, 1.0, 1.0, 1.0, 0.1)])
@@ -187,3 +187,47 @@ def test_a_files_opacity_unit_stays_under_another_window(tmp_path):
     path.write_text(json.dumps(SLAB.under(opacity_unit=0.5).to_dict()))
     assert named_transfer_function(str(path), window=(0.0, 2.0)).opacity_unit == 0.5
     assert named_transfer_function("grey", window=(0.0, 2.0)).opacity_unit is None
+
+
+def _rendered_warnings(render):
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        render()
+    return [str(w.message) for w in seen if issubclass(w.category, NearlyOpaqueWarning)]
+
+
+def test_rendering_through_a_transfer_function_warns_where_it_is_nearly_opaque(rng):
+    """A scalar model classified while rendering is warned as its volume's classification is: ct-bone's HU window on
+    raw 16-bit values (1000 .. 60000) gives the box's faces its top opacity, 0.5 a voxel, so across the box's 16
+    voxels an optical depth of 8 >= 5, a solid box; the line names the input's values.  Once per function a tracer
+    (a second render of it says nothing), and through clwave.raytrace; grey's own auto window is not warned."""
+    data = rng.integers(1000, 60000, (N, N, N)).astype(np.uint16)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
+    tracer, cam = clwave.RayTracer(wv), clwave.Camera(30, 20, size=8)
+    bone = TransferFunction.preset("ct-bone")
+    told = _rendered_warnings(lambda: [tracer.render(cam, tolerance=1e-2, transfer_function=bone) for _ in range(2)])
+    assert len(told) == 1 and "ct-bone makes this model nearly opaque (half its faces' voxels have an optical depth " \
+                              "of 8 or more across the box's thinnest side: a solid box); its window is -1000 .. " \
+                              f"2000, the input's values {data.min():.4g} .. {data.max():.4g}" in told[0], told
+    assert not _rendered_warnings(lambda: tracer.render(cam, tolerance=1e-2, transfer_function=bone))
+    assert not _rendered_warnings(lambda: tracer.render(cam, tolerance=1e-2,
+                                                        transfer_function=TransferFunction.preset("grey")))
+    told = _rendered_warnings(lambda: clwave.raytrace(wv, cam, tolerance=1e-2, transfer_function=bone))
+    assert len(told) == 1 and "nearly opaque" in told[0]
+
+
+def test_the_command_line_says_nearly_opaque_once(tmp_path, capsys, rng):
+    """`render --classify post` checks its volume before the transform and renders its model through the function:
+    one line, not one of each; a scalar .clw rendered with --tf (no volume to check) is told by its render."""
+    path, model = tmp_path / "raw.npy", tmp_path / "raw.clw"
+    np.save(path, rng.integers(1000, 60000, (N, N, N)).astype(np.uint16))
+    common = ["--method", "raytrace", "--tolerance", "1e-2", "--size", "8", "--force"]
+    assert main(["render", str(path), "--tf", "ct-bone", "--classify", "post", "--levels", "1", "-o",
+                 str(tmp_path / "a.png"), *common]) == 0
+    err = capsys.readouterr().err
+    assert err.count("nearly opaque") == 1 and "makes this volume nearly opaque" in err, err
+    assert main(["compress", str(path), "--levels", "1", "-o", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["render", str(model), "--tf", "ct-bone", "-o", str(tmp_path / "b.png"), *common]) == 0
+    err = capsys.readouterr().err
+    assert err.count("nearly opaque") == 1 and "makes this model nearly opaque" in err and "--tf-window" in err, err

@@ -292,6 +292,20 @@ def test_coarse_framebuffers_stay_within_their_tolerance(cc, data, tolerance, vo
         assert 0 < error <= tolerance * np.abs(want.image).max()  # coarse bands drawn, within the tolerance
 
 
+def test_coarse_framebuffers_hold_a_sharp_volume_at_a_small_tolerance(cc):
+    # Shepp-Logan's edges at pixels of 0.35 voxel and coarse=1e-3 (clwave render's 8-bit default): the rule before
+    # (COARSE_REFERENCE measured at 1e-2 and scaled by the fourth power) drew framebuffers 1, 2, 4 and erred by
+    # 1.14e-3 of the image maximum at (30, 20)
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("shepp-logan", n=32), "cubic", levels=3)
+    single = clwave.SplatRenderer(wv, device=cc)
+    coarse = clwave.SplatRenderer(wv, device=cc, coarse=1e-3)
+    for angles in ((30, 20), (0, 0), (-70, -15)):
+        cam = clwave.Camera(*angles, size=128)
+        want, got = single.render(cam), coarse.render(cam)
+        assert max(got.meta["framebuffers"]) > 1
+        assert np.abs(got.image - want.image).max() <= 1e-3 * np.abs(want.image).max()
+
+
 def test_coarse_framebuffers_only_for_cubic_and_checked(cc, data):
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "linear", levels=3)
     cam = clwave.Camera(30, 20, size=32)

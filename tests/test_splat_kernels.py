@@ -4,6 +4,8 @@ from the oracle of the stages before it, so a failure names the stage that broke
 
 Integer stages must be exactly equal; the accumulation to float32 rounding."""
 
+import itertools
+
 import numpy as np
 import pyopencl.array as cla
 import pytest
@@ -166,11 +168,13 @@ def test_each_stage_launches_one_work_group_size_whatever_the_count(cc, scene, m
     assert all(len(s) == 1 for s in sizes.values()), sizes
 
 
-def test_scan(cc, rng):
+@pytest.mark.parametrize("variant", ["cpu", "gpu"])
+def test_scan(cc, rng, variant):
+    """Exclusive prefix sums: NumPy's for the CPU variant, pyopencl's scan kernel for the GPU one."""
     values = rng.integers(0, 50, 1000, dtype=np.uint32)
     d_in, d_out = cla.to_device(cc.queue, values), cla.empty(cc.queue, (1000,), np.uint32)
-    Stages(cc, 4).scan(d_in, d_out)
-    assert np.array_equal(d_out.get(), np.concatenate([[0], np.cumsum(values)[:-1]]))
+    Stages(cc, 4, variant=variant).scan(d_in, d_out)
+    assert d_out.get().tolist() == list(itertools.accumulate(values.tolist(), initial=0))[:-1]
 
 
 def test_ranges(cc, scene):

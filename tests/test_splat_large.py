@@ -65,12 +65,12 @@ def test_render_draws_8_bit_pictures_with_a_coarse_default_and_raw_values_exactl
     from clwave.cli.render import EIGHT_BIT_COARSE
 
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("shepp-logan", 32), levels=3).threshold(keep=0.1)
-    camera = clwave.Camera(30, 20, size=64)
+    camera = clwave.Camera(30, 20, size=128)
     coarse, exact = (clwave.splat(wv, camera, coarse=c) for c in (EIGHT_BIT_COARSE, None))
     assert max(coarse.meta["framebuffers"]) > 1  # the default draws coarse bands here
     assert np.abs(coarse.image - exact.image).max() <= EIGHT_BIT_COARSE * exact.image.max()
     assert np.abs(coarse.to_uint8().astype(int) - exact.to_uint8()).max() == 1  # a level at most, and not none
-    argv = ["render", "phantom:shepp-logan:32", "--levels", "3", "--keep", "0.1", "--size", "64"]
+    argv = ["render", "phantom:shepp-logan:32", "--levels", "3", "--keep", "0.1", "--size", "128"]
     for name, extra, want in (("default", [], coarse), ("raw", ["--raw", str(tmp_path / "raw.npy")], exact),
                               ("off", ["--coarse", "0"], exact), ("window", ["--window", "0,8"], exact)):
         png = tmp_path / f"{name}.png"

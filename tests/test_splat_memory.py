@@ -120,3 +120,36 @@ def test_a_renderer_moves_between_resident_and_streamed_views(cc, wv):
     again = clwave.splat(wv, small, renderer=r)
     assert first.meta["chunk_coefficients"] is None and streamed.meta["coefficient_chunks"] >= 2
     assert np.array_equal(first.image, again.image)
+
+
+def test_a_budget_below_the_views_framebuffers_and_tile_lists_is_refused_before_its_buffers(cc, wv, monkeypatch,
+                                                                                          tmp_path, capsys):
+    """A 1024^2 view at one framebuffer (16 MiB) under a 20 MiB cap: its framebuffer, tile ranges, a least chunk of
+    coefficients with their splats and the count tables and tile lists at their shares of the budget need more than
+    the cap before any footprint table or device buffer is made; one line naming the least cap, and at that cap the
+    view gets past this check (to the plan, which counts its footprints too).  The command line says it in its
+    words, exit 2."""
+    made = []
+    for name in ("ViewTables", "ConeTables"):
+        monkeypatch.setattr(renderer_module, name, lambda *a, made=made, **k: made.append(a) or 1 / 0)
+    cam = clwave.Camera(30, 20, size=1024)
+    r = clwave.SplatRenderer(wv, device=cc, device_memory="20MiB", coarse=None)
+    with pytest.raises(DeviceMemoryError) as err:
+        r.render(cam)
+    message = str(err.value)
+    assert "\n" not in message and not made and r._tile_lists is None and r._resident is None, message
+    # 16 MiB of framebuffer and 4096 tiles' ranges, 1024 coefficients of 64 bytes, over 1 - 1/4 - 1/32 of the budget
+    least = (16 * 2**20 + 8 * 64 * 64 + 64 * 1024) / (1 - 1 / 4 - 1 / 32)
+    assert message.startswith(f"device_memory=20 MiB is too small: a 1024x1024 view needs at least "
+                              f"{format_size(int(least) + 1)} of device memory before its footprints"), message
+    named = parse_size(message.split("needs at least ")[1].split(" of device")[0])
+    with pytest.raises(ZeroDivisionError):  # past the check: to the footprint tables
+        clwave.SplatRenderer(wv, device=cc, device_memory=named, coarse=None).render(cam)
+    assert made
+    np.save(tmp_path / "v.npy", np.random.default_rng(7).random((16, 16, 16)).astype(np.float32))
+    from clwave.cli import main
+    assert main(["render", str(tmp_path / "v.npy"), "--method", "splat", "--size", "1024", "--coarse", "0",
+                 "--device-memory", "20M", "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--device-memory 20 MiB is too small: a 1024x1024 view needs at least 23 MiB" in err, err
+    assert not (tmp_path / "x.png").exists()

@@ -359,6 +359,36 @@ def test_the_editors_points_classify_the_shaded_view_and_rebuild_nothing(monkeyp
     assert expect.std() > 5 and np.array_equal(got, expect) and np.abs(got.astype(int) - other).max() > 1
 
 
+def test_the_editors_points_and_presets_keep_the_starting_functions_opacity_unit():
+    """A viewer started with a function of opacity unit 2 (``--opacity-unit 2``): the editor's points and a preset
+    picked from the list are per that unit too (the page's opacities are the starting function's numbers; they were
+    per voxel): the final frames are clwave.raytrace of the view through those functions at unit 2 bit for bit, not
+    per voxel."""
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.3)
+    start = clwave.TransferFunction(POINTS, opacity_unit=2.0)
+    hydrogen = dict(preset="hydrogen", centre=0.0, width=1.0, opacity=1.0)
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            await ws.receive_json()
+            finals = []
+            for seq, tf in enumerate((dict(points=POINTS[1:]), hydrogen), 1):
+                await ws.send_str(json.dumps(dict(BASE, seq=seq, mode="shaded", tf=tf)))
+                finals.append((await frames_until_final(ws, seq))[-1])
+            return finals
+    with view(wv, size=32, tolerance=2e-2, tf=start) as v:
+        finals = run(go(v))
+    for (figures, data), tf in zip(finals, (clwave.TransferFunction(POINTS[1:]),
+                                            clwave.TransferFunction.preset("hydrogen"))):
+        camera = clwave.Camera(30.0, 20.0, 32, extent=figures["extent"])
+        expect, per_voxel = (clwave.raytrace(wv, camera, tolerance=2e-2, transfer_function=tf.under(opacity_unit=unit))
+                             .to_uint8(background=(0.0, 0.0, 0.0)) for unit in (2.0, None))
+        got = decode(data)
+        assert figures["final"] and expect.std() > 5 and np.array_equal(got, expect), tf
+        assert np.abs(got.astype(int) - per_voxel).max() > 1
+
+
 def test_a_starting_function_without_a_window_is_widened_over_its_points_span():
     """view(scalar model, tf=TransferFunction(points)) without a window (points in data units, as the editor's): the
     hello names its points' span as its window (the hello once failed on it), its frames are classified by it, and
@@ -751,8 +781,9 @@ def test_cli_view_refuses_bad_options_before_any_work(capsys, tmp_path):
 
 def test_cli_view_refuses_a_device_memory_too_small_for_its_size_at_start(capsys, tmp_path):
     """``clwave view --size 2048 --device-memory 120MiB``: the X-ray views' 60 MiB hold the 128x128 auto-window image
-    and the drag frames, not the still 2048x2048 view (125 MiB, SplatRenderer's plan): refused at start-up in one line
-    in the command line's words, not on the page at every still view.  (A 256x256 view of this 16^3 model needed
+    and the drag frames, not the still 2048x2048 view (125 MiB, SplatRenderer's plan; 90 MiB before its footprints,
+    where it is refused first since the twentieth session): refused at start-up in one line in the command line's
+    words, not on the page at every still view.  (A 256x256 view of this 16^3 model needed
     187 MiB while splatting's textures grew with the magnification; now about as much as a 128x128 one.)"""
     from clwave.cli import main
 
@@ -761,7 +792,8 @@ def test_cli_view_refuses_a_device_memory_too_small_for_its_size_at_start(capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and re.fullmatch(r"clwave: error: --device-memory 120 MiB is too small for this viewer: its "
                                           r"X-ray views get 60 MiB of it \(docs/viewer.md §1\), and a 2048x2048 view "
-                                          r"needs at least 125 MiB .*; give more or a smaller --size", err[0]), err
+                                          r"needs at least 90 MiB of device memory before its footprints .*; give more "
+                                          r"or a smaller --size \(at most 16\d\dx16\d\d here\)", err[0]), err
 
 
 def test_cli_view_refuses_a_size_beyond_the_device_before_reading_the_input(capsys, tmp_path, monkeypatch):

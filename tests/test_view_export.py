@@ -7,6 +7,7 @@ import json
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import aiohttp
@@ -259,3 +260,58 @@ def test_a_view_with_its_scale_bar_as_a_command_and_as_python(clw, tmp_path, mon
     assert bar_rows(got, 255)[0] == round(length / (figures["extent"] / 120))
     assert perspective["scale_bar"] is None
     assert status == 400 and line.count(b"\n") == 1 and b"a scale bar needs an orthographic view" in line
+
+
+def test_an_opacity_unit_goes_into_the_command_and_the_python(tmp_path, monkeypatch):
+    """``clwave view ... --tf hydrogen --opacity-unit 2``: a shaded view of the scalar kept (--classify post) through
+    the tab's function, which holds the unit, is a .json of it in the command (no --opacity-unit beside it) and
+    ``from_dict`` of it in the Python: one image bit for bit, not the image of the function per voxel; an X-ray of
+    the volume classified before the transform keeps --tf hydrogen --opacity-unit 2, and its Python the preset's
+    ``opacity_unit=2.0`` (it said the option was not in the snippet): one image again."""
+    from clwave.cli import main, make_parser
+
+    def origin_of(*more):
+        return Origin.of_args(make_parser().parse_args(["view", "phantom:hydrogen:20", "--levels", "2", "--tf",
+                                                        "hydrogen", "--opacity-unit", "2", *more]))
+    camera = clwave.Camera(100.0, -30.0, (24, 28), extent=30.0)
+    tf = clwave.TransferFunction.preset("hydrogen", window=(0.02, 0.3), opacity_unit=2.0)
+    post_origin = origin_of("--classify", "post")
+    shaded = Spec("shaded", camera, tolerance=1e-2, tf=tf, levels=2)
+    text = command(post_origin, shaded)
+    assert "--tf view-tf.json" in text and "--opacity-unit" not in text and '"opacity_unit": 2.0' in text, text
+    got = shell(text, tmp_path / "shell")
+    assert got.std() > 5
+    assert np.array_equal(executed(python(post_origin, shaded), tmp_path / "python", monkeypatch), got)
+    per_voxel = Spec("shaded", camera, tolerance=1e-2, tf=tf.under(opacity_unit=None), levels=2)
+    assert not np.array_equal(executed(python(post_origin, per_voxel), tmp_path / "voxel", monkeypatch), got)
+    pre_origin, xray = origin_of(), Spec("xray", camera, window=(0.0, 0.15), levels=2)
+    text, snippet = command(pre_origin, xray), python(pre_origin, xray)
+    assert "--tf hydrogen --opacity-unit 2.0" in text and "opacity_unit=2.0" in snippet and "not in" not in snippet
+    monkeypatch.chdir(tmp_path)
+    assert main(text.split()[1:]) == 0
+    got = decode((tmp_path / "view.png").read_bytes())
+    assert got.std() > 5 and np.array_equal(executed(snippet, tmp_path / "xray", monkeypatch), got)
+
+
+@pytest.mark.parametrize("failure, line", [(clwave.FileFormatError("damaged"), "(damaged)"),
+                                           (MemoryError(), "(internal error (MemoryError); see the server's log)")])
+def test_a_failed_full_stage_is_its_line_not_still_being_made(clw, monkeypatch, failure, line):
+    """A .clw whose shaded views' full stage fails to be set up (the whole model it takes raising): /export and /image
+    of a shaded view answer 409 ("still being made") while it is set up, then 500 with one line naming the failure
+    (they were 409 for ever), each time asked; an X-ray view still exports."""
+    from clwave.view.shaded import ShadedSource
+
+    monkeypatch.setattr(ShadedSource, "_whole_model", lambda self: (_ for _ in ()).throw(failure))
+    body = dict(view=dict(BASE, seq=1, mode="shaded"), size=[16, 16])
+    with view(str(clw), size=16) as v:
+        deadline = time.monotonic() + 60
+        while (answer := post(v, "export", body))[0] == 409 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        answers = [answer, post(v, "export", body), post(v, "image", body)]
+        xray = post(v, "export", dict(view=dict(BASE, seq=1), size=[16, 16]))
+    for status, text in answers:
+        text = text.decode()
+        assert status == 500 and text.count("\n") == 1, (status, text)
+        assert text == f"the shaded views' ray tracer of the whole file could not be made {line}: they show the " \
+                       f"file's coarse stage, which no saved image or command draws\n"
+    assert xray[0] == 200

@@ -69,9 +69,9 @@
  *                X-ray integrals), ledger (the skipping and shading budgets left, R consumed, and R of the
  *                whole ray: 0 before the first pass), resume (where the last pass stopped, -inf before the first: a
  *                coarse segment may end past a pass's box) and stats, which it updates (docs/raytracing.md §6)
- * Grid: global (W, H). */
+ * Grid: global (W, rows), rows first_row .. of a band (clwave.device.kernels.in_row_bands). */
 __kernel void raytrace(__global float4 *image, __global int4 *stats, __global int4 *lattice_stats, const int width,
-                       const int height, FIELD_PARAMS,
+                       const int height, const int first_row, FIELD_PARAMS,
                        __global const float *bound, const int4 occ_origin, const int4 occ_shape,
                        __global const float *super_bound, const int4 super_origin, const int4 super_shape,
                        __global const uchar *content, const int4 content_origin, const int4 content_shape,
@@ -85,7 +85,7 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
                        const int passes, const float4 pass_lo, const float4 pass_hi, __global real4 *carry,
                        __global real4 *ledger, __global real *resume)
 {
-    const int col = get_global_id(0), row = get_global_id(1);
+    const int col = get_global_id(0), row = first_row + get_global_id(1);
     if (col >= width || row >= height)
         return;
     const Field G = FIELD_INIT;

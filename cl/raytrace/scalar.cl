@@ -9,12 +9,12 @@
  *                brick's edge (z, y, x), as brick_bounds lays out its bounds (cl/raytrace/bricks.cl)
  *   origin, coef, bricks, frames, boxes   as brick_bounds, one group, the pool one float a coefficient
  *                (CLW_POOL_SCALAR of cl/raytrace/bricks.cl)
- * Grid: global ((CLW_SUPER_CELLS / CLW_BLOCK)^3, slots). */
-__kernel void scalar_range(__global float2 *out, const int4 origin, __global const float *coef,
+ * Grid: global ((CLW_SUPER_CELLS / CLW_BLOCK)^3, slots) from slot first_slot (a band of slots). */
+__kernel void scalar_range(__global float2 *out, const int first_slot, const int4 origin, __global const float *coef,
                            __global const int4 *bricks, __global const float4 *frames, __global const int4 *boxes,
                            const int order)
 {
-    const int per = CLW_SUPER_CELLS / CLW_BLOCK, k = get_global_id(0), slot = get_global_id(1);
+    const int per = CLW_SUPER_CELLS / CLW_BLOCK, k = get_global_id(0), slot = first_slot + get_global_id(1);
     const int4 block = bricks[slot] * per + (int4)(k % per, k / per % per, k / (per * per), 0);
     const float4 lo = convert_float4((block + origin * per) * CLW_BLOCK), hi = lo + CLW_BLOCK;
     const float4 f = frames[slot];

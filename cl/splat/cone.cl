@@ -155,18 +155,19 @@ inline float16 cone_row(__global const float *texels, const int *at, const int b
  * position is w / h = depth * sigma * (pixel - centre) / h, and it reads 2 x 2 texels of each node (the
  * cell's 4 nodes are interleaved per texel).
  * Grid, -DCLW_CONE_TILE (CPUs): a work-item per tile, a row of 16 pixels a float16 (each lane's texels
- * gathered); otherwise (GPUs): a work-group of CLW_TILE^2 items per tile, a pixel each.  Either with the global offset of a band of tiles.
+ * gathered); otherwise (GPUs): a work-group of CLW_TILE^2 items per tile, a pixel each.  Either numbered from
+ * first_tile, a band's first.
  * Assumes: every pixel owned by one work-item, splats in sorted order: bit-identical repeats. */
-__kernel void splat_accumulate_cone(const int layer_count, __global const int4 *layers,
+__kernel void splat_accumulate_cone(const int first_tile, const int layer_count, __global const int4 *layers,
                                     __global const float4 *layer_slope, __global const float4 *cone,
                                     __global const uint2 *ranges, __global const uint4 *records,
                                     __global const int4 *tex_int, __global const float4 *tex_map,
                                     __global const float *texels, __global float4 *fb)
 {
 #ifdef CLW_CONE_TILE
-    const int tile = get_global_id(0);
+    const int tile = first_tile + get_global_id(0);
 #else
-    const int tile = get_global_id(0) / (CLW_TILE * CLW_TILE);
+    const int tile = first_tile + get_global_id(0) / (CLW_TILE * CLW_TILE);
     const int lid = get_local_id(0), lx = lid % CLW_TILE, ly = lid / CLW_TILE;
 #endif
     int2 corner;

@@ -12,6 +12,7 @@
  * one plane (lookup bit 2), so that textures need not grow with the magnification.
  *
  * splat_accumulate
+ *   first_tile   the band's first tile, which the grid's work-items number from (clwave.device.kernels.in_bands)
  *   ranges   in  (tiles,) uint2: [start, end) into records
  *   records  in  (total, CLW_RECORD) uint4: splat records (cl/splat/record.h: centre, texture, the
  *                pixels in the tile, c per channel; the 2^{-m/2} is in the texture), sorted by
@@ -80,9 +81,9 @@ inline void splat_lookup(const int4 t, const float4 m, const float2 c, int4 *a, 
 }
 
 /* the arguments of both variants of splat_accumulate (see the top of the file) */
-#define ACCUMULATE_PARAMS const int layer_count, __global const int4 *layers, __global const uint2 *ranges, \
-    __global const uint4 *records, __global const int4 *tex_int, __global const float4 *tex_map,                \
-    __global const float *texels, __global float4 *fb
+#define ACCUMULATE_PARAMS const int first_tile, const int layer_count, __global const int4 *layers,                 \
+    __global const uint2 *ranges, __global const uint4 *records, __global const int4 *tex_int,                      \
+    __global const float4 *tex_map, __global const float *texels, __global float4 *fb
 
 /* The layer (width, height, first tile, first pixel) of a tile, and the tile's corner pixel in it */
 inline int4 tile_layer(const int tile, const int layer_count, __global const int4 *layers, int2 *corner)

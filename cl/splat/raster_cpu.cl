@@ -11,7 +11,7 @@
 #define CLW_GATHER_TEXELS 17
 __kernel void splat_accumulate(ACCUMULATE_PARAMS)
 {
-    const int tile = get_global_id(0);
+    const int tile = first_tile + get_global_id(0);
     int2 corner;
     const int4 layer = tile_layer(tile, layer_count, layers, &corner);
     const int width = layer.x, height = layer.y, xbase = corner.x, ybase = corner.y;

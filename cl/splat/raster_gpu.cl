@@ -18,7 +18,7 @@ __kernel void splat_accumulate(ACCUMULATE_PARAMS)
     __local float4 l_w[CLW_BATCH];
     __local float2 l_cell[CLW_BATCH];
 
-    const int tile = get_global_id(0) / get_local_size(0);  /* with the global offset of a band of tiles */
+    const int tile = first_tile + get_global_id(0) / get_local_size(0);
     const int lid = get_local_id(0);
     const int nitems = get_local_size(0);
     int2 origin;

@@ -182,10 +182,12 @@ def _out_of_memory(args, what) -> int:
 
 def _show_warning(message, category, filename, lineno, file=None, line=None, *, shown, said):
     """clwave's warnings (:class:`ClwaveWarning`) as one line in the command line's words, each line once (``said``:
-    those printed, e.g. an oblique volume's, which every pose's view gives); others as Python shows them."""
+    those printed, e.g. an oblique volume's, which every pose's view gives), or each kind once where it says so (its
+    ``once``); others as Python shows them."""
     if isinstance(message, ClwaveWarning):
-        if message.cli not in said:
-            said.add(message.cli)
+        key = message.once or message.cli
+        if key not in said:
+            said.add(key)
             warn(message.cli)
     else:
         shown(message, category, filename, lineno, file, line)

@@ -144,7 +144,14 @@ def _clw_lines(f) -> list:
                   or f"none (points are values, {min(values):g} .. {max(values):g})")
         when = "while rendering" if f["channels"] == 1 else "before the transform"
         lines.append(("transfer", f"{tf.get('name') or 'unnamed'}, window {window}, {len(tf['points'])} points "
-                                  f"(classified {when})"))
+                                  f"(classified {when}), opacities per {_opacity_unit(tf, f, unit)}"))
+    if f["value_range"] is not None:
+        lo, hi = f["value_range"]
+        lines.append(("values", f"{lo:g} .. {hi:g}, the input's range (a transfer function classifies the field "
+                                f"clamped to it)"))
+    elif f["channels"] == 1:
+        lines.append(("values", "the input's range not recorded (a file of before the nineteenth session: a transfer "
+                                "function classifies the field unclamped)"))
     if f["subtracted"]:
         lines.append(("subtracted", f"{f['subtracted']:g} from the input's values (--subtract; transfer functions in "
                                     f"the input's units)"))
@@ -154,6 +161,13 @@ def _clw_lines(f) -> list:
         lines.append(("photo", "a photo's colour and alpha, not classified: shaded ray tracing needs the original "
                                "volume compressed with --tf photo or another preset (docs/model.md §5)"))
     return lines
+
+
+def _opacity_unit(tf, f, unit) -> str:
+    """The length a stored transfer function's opacities are per, in words (docs/model.md §5)."""
+    if tf["opacity_unit"] is None:
+        return f"voxel (the smallest spacing, {_lengths([min(f['spacing'])], _extent(f['shape'], f['spacing']))}{unit})"
+    return f"{tf['opacity_unit']:g}{unit or ' world units'}"
 
 
 def _oblique(degrees) -> str:

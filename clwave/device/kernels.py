@@ -64,11 +64,11 @@ class Kernel:
         return out
 
     def __call__(self, kernels, queue, global_size, local_size, tables: Mapping | None = None, real_type=np.float32,
-                 global_offset=None, **values):
+                 **values):
         """Launch the kernel of this name from ``kernels`` (a :class:`~clwave.device.programs.KernelSet`: this
         thread's kernel object)."""
         args = self.arguments(tables, real_type, **values)
-        return kernels[self.name](queue, global_size, local_size, *args, global_offset=global_offset)
+        return kernels[self.name](queue, global_size, local_size, *args)
 
 
 class Locked:
@@ -139,9 +139,10 @@ def in_bands(queue, launch, total: int, step: int = 1, work=None, pace: Pace | N
 
 
 def in_row_bands(queue, launch, global_size, local_size):
-    """``launch(global_size, global_offset)`` of a 2-D range over :func:`in_bands` of its rows (axis 1,
-    whole work-groups of rows)."""
-    in_bands(queue, lambda row, rows: launch((global_size[0], rows), (0, row)), global_size[1], local_size[1])
+    """``launch(global_size, first_row)`` of a 2-D range over :func:`in_bands` of its rows (axis 1, whole
+    work-groups of rows).  A band's kernel adds ``first_row`` to its row itself: launched with a global offset
+    instead, PoCL would compile each kernel twice, for the first band and for the others (docs/benchmarks.md)."""
+    in_bands(queue, lambda row, rows: launch((global_size[0], rows), row), global_size[1], local_size[1])
 
 
 def _vector(kind: np.dtype, value):

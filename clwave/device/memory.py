@@ -113,21 +113,39 @@ def check_buffer(cc, nbytes: int, what: str, fix: str, budget: DeviceBudget | No
                             f"{fix}")
 
 
-def check_image(cc, size, device_bytes: int, fix: str, budget: DeviceBudget | None = None, what: str = "a {}x{} image"):
+def check_image(cc, size, device_bytes: int, fix: str, budget: DeviceBudget | None = None, what: str = "a {}x{} image",
+                least: int = 0):
     """Refuse an image of ``size`` (H, W) before its buffers are made, in one line naming it (``what``, "HxW" in its
-    braces), the bytes it needs and ``fix`` (its ``{n}``: the largest square image that would fit): its renderer's
-    device buffer of ``device_bytes`` (:func:`check_buffer`: a :class:`DeviceMemoryError`), then its memory on the
-    host (:func:`check_fits`: a :class:`HostMemoryError`): the image read back, :data:`HOST_PIXEL_BYTES` a pixel,
-    and where ``cc``'s device is the CPU, whose memory is the host's, the device buffer too.  ``cc`` None: the host's
-    share alone (a camera's size, before any device)."""
+    braces), the bytes it needs and ``fix`` (its ``{n}``: the largest square image that would fit): the least device
+    memory its renderer needs for it in all, ``least`` (the splatter's framebuffers, tile lists, count tables and a
+    least chunk of coefficients), beyond ``budget``'s total (:func:`too_little`); its renderer's device buffer of
+    ``device_bytes`` (:func:`check_buffer`); then its memory on the host (:func:`check_fits`: a
+    :class:`HostMemoryError`): the image read back, :data:`HOST_PIXEL_BYTES` a pixel, and where ``cc``'s device is
+    the CPU, whose memory is the host's, the device's share too (the larger of ``least`` and ``device_bytes``).
+    ``cc`` None: the host's share alone (a camera's size, before any device)."""
     pixels = size[0] * size[1]
     image = what.format(*size)
     on_host = HOST_PIXEL_BYTES * pixels
     if cc is not None:
+        if budget is not None and least > budget.total:
+            too_little(cc, budget, f"a {size[0]}x{size[1]} view needs at least {format_size(least)} of device memory "
+                                   f"before its footprints (framebuffers, tile lists and its first coefficients)",
+                       fix.format(n=isqrt(int(budget.total * pixels / least))))
         per_pixel = device_bytes / pixels
         check_buffer(cc, device_bytes, image, fix.format(n=isqrt(int(buffer_limit(cc) / per_pixel))), budget)
-        on_host += device_bytes if cc.info.kind == "CPU" else 0
+        on_host += max(device_bytes, least) if cc.info.kind == "CPU" else 0
     check_fits(on_host, image, fix.format(n=isqrt(int(available_bytes() * pixels / on_host))))
+
+
+def too_little(cc, budget: DeviceBudget, need: str, fix: str):
+    """Raise the :class:`DeviceMemoryError` of work that needs more device memory in all than ``budget`` holds, in
+    ``need``'s words ("a 512x512 view needs at least 53 MiB of device memory (...)"): the cap too small where the
+    user's holds it back, else the device's memory and ``fix``."""
+    if budget.cap is not None and budget.cap < cc.info.global_mem:
+        cap = format_size(budget.cap)
+        raise DeviceMemoryError(f"device_memory={cap} is too small: {need}; give more or {fix}",
+                                cli=f"--device-memory {cap} is too small: {need}; give more or {fix}")
+    raise DeviceMemoryError(f"{cc.info.name} has {format_size(budget.total)}, and {need}; {fix}")
 
 
 def format_size(nbytes: int) -> str:

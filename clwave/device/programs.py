@@ -11,6 +11,8 @@ fetches each one once for each thread that launches it (a launch sets its argume
 from __future__ import annotations
 
 import hashlib
+import json
+import os
 import threading
 import time
 import warnings
@@ -84,21 +86,26 @@ def _build(cc: ComputeContext, files, defines, options) -> KernelSet:
     folder = cl_dir()
     source = "\n".join(f'#include "{name}"' for name in files) + "\n"
     # -w: PoCL prints ABI notes about float16 vectors straight to stderr otherwise
-    options = ["-I", str(folder), f"-DCLW_SRC_HASH={source_hash(folder)}", "-w", *options]
-    options += [f"-D{k}" if v is None else f"-D{k}={v}" for k, v in defines]
+    flags = ["-I", str(folder), f"-DCLW_SRC_HASH={source_hash(folder)}", "-w", *options]
+    flags += [f"-D{k}" if v is None else f"-D{k}={v}" for k, v in defines]
     start = time.perf_counter()
     python_sigint()
     try:
         with warnings.catch_warnings():  # non-empty logs of successful builds (PoCL ABI notes) are kept, not shown
             warnings.simplefilter("ignore", cl.CompilerWarning)
-            program = cl.Program(cc.ctx, source).build(options=options)
+            program = cl.Program(cc.ctx, source).build(options=flags)
     except cl.Error as exc:
         log = str(exc)
         first = next((ln.strip() for ln in log.splitlines() if "error" in ln.lower()), log.strip()[:200])
         raise KernelBuildError(
             f"OpenCL build of {', '.join(files)} failed on {cc.info.name} ({first}); "
             f"if the driver is broken, {INSTALL_HINT}", log=log) from None
-    return KernelSet(program, time.perf_counter() - start, options)
+    seconds = time.perf_counter() - start
+    if os.environ.get("CLW_BUILD_LOG"):  # one JSON line a build, for counting builds (docs/benchmarks.md)
+        with open(os.environ["CLW_BUILD_LOG"], "a") as log:
+            log.write(json.dumps(dict(files=files, defines=defines, options=options, seconds=round(seconds, 3),
+                                      test=os.environ.get("PYTEST_CURRENT_TEST", "").split(" ")[0])) + "\n")
+    return KernelSet(program, seconds, flags)
 
 
 SELFTEST = Kernel("selftest_axpy", ("alpha", "float32"), ("a", BUFFER), ("b", BUFFER), ("out", BUFFER))

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, NothingVisibleError, warn_outside
+from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, NothingVisibleError, warn_outside
 from .colour_key import auto_key, check_key, key_weight
 from .tf_checks import check_opacity_unit, check_points, check_window
 from .tf_passes import AUTO_SAMPLES, PiecewiseLinear, auto_window, classified, rgb_scale, scan
@@ -309,7 +309,7 @@ class TransferFunction:
         window, scale = tf._statistics(vol)
         if vol.channels > 1 and window is not None and window[1] - window[0] > 2:
             _warn_colour_window(window)
-        paint = tf._painter(vol.channels, window, scale, vol.spacing)
+        paint = tf.painter(vol.channels, window, scale, vol.spacing)
         if vol.chunked:  # each chunk classified when it is read: the values classify gives in memory
             data = vol.data if vol.data.ndim == 4 else vol.data[..., None]
             rgba = data.map_blocks(classified, paint, False, chunks=data.chunks[:3] + ((4,),), dtype=np.float32)
@@ -341,46 +341,64 @@ class TransferFunction:
                                    cli=f"{line} (--tf-window LO,HI) or another preset")
 
     def _warn_opaque(self, vol, window, scale, alpha=None):
-        """Warn, in a line naming the window in the input's units, the data's range and the fixes, where this function
-        (in ``vol``'s data units: :meth:`_on`) makes the in-memory ``vol`` nearly opaque: the median voxel's optical
-        depth across one voxel at least :data:`OPAQUE_VOXEL` (an opacity unit far below the voxel; a strided
-        subsample of the voxels), or the median voxel of the box's faces opaque across its thinnest side, depth
-        :data:`OPAQUE_BOX` (the box drawn as a solid: a window far off the data, 0 .. 1 on 16-bit values); or nearly
+        """Warn where this function (in ``vol``'s data units: :meth:`_on`) makes the in-memory ``vol`` nearly opaque
+        (:meth:`opaque_line` of a strided subsample of its voxels and of its box's faces' voxels), or nearly
         transparent: no ray along the box's axes of optical depth :data:`TRANSPARENT_RAY` (through ``alpha``, the
-        classification's opacity, where given; else through a strided grid of the voxels)."""
+        classification's opacity, where given; else through a strided grid of the voxels); naming the window in the
+        input's units and the data's range (a colour volume's luminance)."""
         faces = [np.moveaxis(vol.data, a, 0)[i].reshape(-1, vol.channels) for a in range(3) for i in (0, -1)]
         data = vol.data.reshape(-1, vol.channels)
         data = data[::max(1, -(-len(data) // AUTO_SAMPLES))]
-        paint = self._painter(vol.channels, window, scale, vol.spacing)
-        depth = []
-        for values in (data, np.concatenate(faces)):
-            out = np.empty((len(values), 4), np.float32)
-            paint(values, out)
-            depth.append(float(np.median(out[:, 3])))
-        voxel, face = depth[0] * min(vol.spacing), depth[1] * min(np.multiply(vol.shape, vol.spacing))
-        opaque = voxel >= OPAQUE_VOXEL or face >= OPAQUE_BOX
-        if not opaque:
-            step = 1 if alpha is not None else max(1, round((vol.data.size / vol.channels / AUTO_SAMPLES) ** (1 / 3)))
-            if alpha is None:
-                alpha = classified(vol.data[::step, ::step, ::step], paint, False)[..., 3]
-            ray = max(float(alpha.sum(axis=a).max()) * vol.spacing[a] * step for a in range(3))
-            if ray >= TRANSPARENT_RAY:
-                return
         values = data[:, 0] if vol.channels == 1 else _luminance(data[:, :3].astype(np.float64) / scale[:3])
         shift = vol.subtracted if vol.channels == 1 else 0.0
+        paint = self.painter(vol.channels, window, scale, vol.spacing)
+        seen = ("volume's values" if vol.channels == 1 else "volume's luminance", np.nanmin(values) + shift,
+                np.nanmax(values) + shift)
+        line = self.opaque_line(paint, data, np.concatenate(faces), vol.spacing, vol.shape, window, shift, "volume",
+                                seen)
+        if line is not None:
+            warn_outside(NearlyOpaqueWarning(line + " (window=, opacity_unit=)",
+                                             cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))
+            return
+        step = 1 if alpha is not None else max(1, round((vol.data.size / vol.channels / AUTO_SAMPLES) ** (1 / 3)))
+        if alpha is None:
+            alpha = classified(vol.data[::step, ::step, ::step], paint, False)[..., 3]
+        ray = max(float(alpha.sum(axis=a).max()) * vol.spacing[a] * step for a in range(3))
+        if ray < TRANSPARENT_RAY:
+            lo, hi = self.data_points(window)[[0, -1]] + shift
+            unit = float(min(vol.spacing)) if self._unit is None else self._unit
+            line = (f"the transfer function{f' {self.name}' if self.name else ''} makes this volume nearly transparent "
+                    f"(no ray along the box's axes has an optical depth above {ray:.3g}: a faint or black picture); "
+                    f"its window is {lo:.4g} .. {hi:.4g}, the {seen[0]} {seen[1]:.4g} .. {seen[2]:.4g}: give a window "
+                    f"in the input's units or auto, or a shorter opacity unit (now {unit:g})")
+            warn_outside(ClwaveWarning(line + " (window=, opacity_unit=)",
+                                       cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))
+
+    def opaque_line(self, paint, data, faces, spacing, shape, window, shift, thing, values) -> str | None:
+        """Why this function (its points under ``window``, plus ``shift``: the input's units) makes a ``thing``
+        ("volume", "model") of ``spacing`` and ``shape`` nearly opaque, in a line naming ``values`` (whose values,
+        least, largest, in the input's units) and the fixes; None where it does not.  ``paint`` classifies values as
+        :meth:`painter`'s; nearly opaque: the median of ``data`` (a sample of its values at voxel centres) has an
+        optical depth across one voxel of at least :data:`OPAQUE_VOXEL` (an opacity unit far below the voxel), or the
+        median of ``faces`` (its box's faces' values) across the box's thinnest side :data:`OPAQUE_BOX` (the box drawn
+        as a solid: a window far off the data, 0 .. 1 on 16-bit values)."""
+        depth = []
+        for sample in (data, faces):
+            alpha = np.empty((len(sample), 4), np.float32)
+            paint(sample, alpha)
+            depth.append(float(np.median(alpha[:, 3])))
+        voxel, face = depth[0] * min(spacing), depth[1] * min(np.multiply(shape, spacing))
+        if voxel < OPAQUE_VOXEL and face < OPAQUE_BOX:
+            return None
         lo, hi = self.data_points(window)[[0, -1]] + shift
         where = (f"half its voxels have an optical depth of {voxel:.3g} or more across one voxel"
                  if voxel >= OPAQUE_VOXEL else f"half its faces' voxels have an optical depth of {face:.3g} or more "
-                                               f"across the box's thinnest side: a solid box" if opaque else
-                 f"no ray along the box's axes has an optical depth above {ray:.3g}: a faint or black picture")
-        unit = float(min(vol.spacing)) if self._unit is None else self._unit
-        line = (f"the transfer function{f' {self.name}' if self.name else ''} makes this volume nearly "
-                f"{'opaque' if opaque else 'transparent'} ({where}); its window is {lo:.4g} .. {hi:.4g}, the volume's "
-                f"{'values' if vol.channels == 1 else 'luminance'} {np.nanmin(values) + shift:.4g} .. "
-                f"{np.nanmax(values) + shift:.4g}: give a window in the input's units or auto, or a "
-                f"{'longer' if opaque else 'shorter'} opacity unit (now {unit:g})")
-        warn_outside(ClwaveWarning(line + " (window=, opacity_unit=)",
-                                   cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))
+                                               f"across the box's thinnest side: a solid box")
+        unit = float(min(spacing)) if self._unit is None else self._unit
+        what, least, largest = values
+        return (f"the transfer function{f' {self.name}' if self.name else ''} makes this {thing} nearly opaque "
+                f"({where}); its window is {lo:.4g} .. {hi:.4g}, the {what} {least:.4g} .. {largest:.4g}: "
+                f"give a window in the input's units or auto, or a longer opacity unit (now {unit:g})")
 
     def check_visible(self, vol: Volume):
         """Raise :class:`NothingVisibleError` where this function gives no value of the scalar in-memory ``vol`` any
@@ -423,7 +441,7 @@ class TransferFunction:
             win = auto_window(sample if c == 1 else _luminance(sample[:, :3].astype(np.float64) / scale[:3]))
         return win, scale
 
-    def _painter(self, channels, window, scale, spacing):
+    def painter(self, channels, window, scale, spacing):
         """``paint(values, out)``: the classification ``out`` (n, 4) float32 of voxels ``values`` (n, channels) of a
         volume of ``spacing``, for whole and chunked volumes alike."""
         extinction = self.extinction(spacing)[:, None]

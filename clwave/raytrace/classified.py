@@ -11,6 +11,8 @@ superblock maxima.  Nothing is expanded, compiled or transformed again.
 
 from __future__ import annotations
 
+import json
+import math
 import time
 from dataclasses import dataclass, replace
 
@@ -22,20 +24,22 @@ from scipy.special import comb
 from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.kernels import BUFFER, Kernel, in_row_bands
-from ..errors import InputError
+from ..errors import InputError, NearlyOpaqueWarning, warn_outside
 from ..model.tf_passes import auto_window
 from ..model.transfer import TransferFunction
 from ..model.transform import sampling_kernel
 from ..threads import checkpoint
 
-_RANGE = Kernel("scalar_range", ("out", BUFFER), ("origin", cltypes.int4), ("coef", BUFFER), ("bricks", BUFFER),
-                ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
+_RANGE = Kernel("scalar_range", ("out", BUFFER), ("first_slot", np.int32), ("origin", cltypes.int4), ("coef", BUFFER),
+                ("bricks", BUFFER), ("frames", BUFFER), ("boxes", BUFFER), ("order", np.int32))
 _BOUNDS = Kernel("classified_bounds", ("bound", BUFFER), ("range", BUFFER), ("tf", BUFFER), ("slack", np.float32),
                  ("n", np.int32))
 _SUPER = Kernel("superblock_max", ("out", BUFFER), ("ns", cltypes.int4), ("bound", BUFFER), ("nb", cltypes.int4))
 GROUP = 256  #: work-group of classified_bounds
 #: at how many voxel centres of the pool's field a window "auto" looks
 AUTO_VALUES = 1 << 16
+#: at how many voxel centres of a model's box's faces the nearly-opaque check evaluates it (ScalarRange.opaque)
+FACE_VALUES = 1 << 10
 #: a tracer keeps the ranges per block of this many details (each picks its own bricks, docs/raytracing.md §8)
 RANGES_KEPT = 8
 #: a block's range is widened by this much of the scalar's largest magnitude (the kernels' float32 rounding)
@@ -155,7 +159,7 @@ class ScalarRange:
 
             def ranges(size, first):  # in bands of slots, the set-up given up between two
                 checkpoint(abandon)
-                _RANGE(self.kernels, q, size, (SUPER ** 3, 1), global_offset=first, out=slot_range,
+                _RANGE(self.kernels, q, size, (SUPER ** 3, 1), out=slot_range, first_slot=first,
                        origin=f.origin[::-1], coef=tables["coef"], bricks=at, frames=tables["frames"],
                        boxes=tables["boxes"], order=f.orders[0])
 
@@ -174,6 +178,7 @@ class ScalarRange:
         self.slack = RANGE_SLACK * float(tracer.q_bound)
         self.ranges = {}  # per detail (its pages' bytes): the range per block on the device
         self.last = None
+        self.faces = None  # the model at voxel centres of its box's faces (face_values), when first asked
 
     def range(self, at):
         """The range per block (Z, Y, X, 2) on the device at the detail of ``at`` (a ``FieldAt``): the slots' ranges
@@ -223,6 +228,24 @@ class ScalarRange:
         return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
                 f"a window in the input's units (--tf-window LO,HI) or another function")
 
+    def opaque(self, tf: TransferFunction) -> str | None:
+        """Why ``tf`` makes this model nearly opaque (:meth:`TransferFunction.opaque_line`, as a volume's
+        classification warns, docs/model.md §5), in a line; else None.  The voxels' sample is the field's at voxel
+        centres that an "auto" window reads (:attr:`sample`: the space its full-detail bricks fill; none for bricks in a
+        scratch file: the faces alone), the faces' the model evaluated at voxel centres of its box's six faces (at
+        most :data:`FACE_VALUES`, once a tracer), both as classified: clamped to the input's range."""
+        wv = self.tracer.wv
+        if self.faces is None:
+            self.faces = face_values(wv)
+        stored = self.stored(tf)
+        seen = clamped(stored, self.value_range)
+        paint = seen.painter(1, seen.window, 1.0, wv.spacing)
+        known = wv.value_range
+        values = ("input's values", *known) if known is not None else \
+            ("model's values on its faces", self.faces.min() + self.subtracted, self.faces.max() + self.subtracted)
+        data = self.faces if self.sample is None else self.sample[:, None]
+        return stored.opaque_line(paint, data, self.faces, wv.spacing, wv.shape, ..., self.subtracted, "model", values)
+
     def classify(self, tf, cc, real, at=None) -> Classification:
         """The kernel arguments of ``tf`` at the detail of ``at`` (default full detail), reused while the transfer
         function, detail and precision stay the same (its ``seconds`` then 0: what this render paid)."""
@@ -249,6 +272,22 @@ class ScalarRange:
         q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last
+
+
+def face_values(wv) -> np.ndarray:
+    """(n, 1): the scalar model ``wv`` at most :data:`FACE_VALUES` voxel centres of its box's six faces, evenly strided
+    over each face, in its stored values (``WaveletVolume.evaluate``: the band sum, whatever the model's size)."""
+    points = []
+    for axis in range(3):  # z, y, x
+        rest = [n for a, n in enumerate(wv.shape) if a != axis]
+        stride = max(1, math.ceil(math.sqrt(rest[0] * rest[1] * 6 / FACE_VALUES)))
+        for end in (0, wv.shape[axis] - 1):
+            grid = np.stack(np.meshgrid(np.arange(0, rest[0], stride), np.arange(0, rest[1], stride), indexing="ij"),
+                            -1).reshape(-1, 2)
+            points.append(np.insert(grid, axis, end, axis=1))
+    zyx = np.concatenate(points)  # voxel i of an axis of n at origin + (i - (n - 1) / 2) spacing (coordinates.md §1)
+    world = (zyx - (np.array(wv.shape) - 1) / 2) * np.array(wv.spacing)
+    return wv.evaluate(world[:, ::-1] + np.array(wv.origin), method="bands")
 
 
 def full_detail_slots(field) -> np.ndarray:
@@ -419,3 +458,16 @@ def check_post(tracer, tf, absorption):
     if not absorption:
         raise InputError("transfer_function= is for emission-absorption images; X-ray mode (absorption=False) "
                          "integrates the scalar itself")
+
+
+def warn_opaque(scalar: ScalarRange, tf: TransferFunction, told: set):
+    """Warn where ``tf`` makes the model of ``scalar`` nearly opaque (:meth:`ScalarRange.opaque`), once per function
+    in ``told`` (a tracer's)."""
+    key = ("opaque", json.dumps(tf.to_dict()))
+    if key in told:
+        return
+    told.add(key)
+    line = scalar.opaque(tf)
+    if line is not None:
+        warn_outside(NearlyOpaqueWarning(line + " (transfer_function=TransferFunction(..., window=, opacity_unit=))",
+                                         cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))

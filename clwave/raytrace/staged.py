@@ -133,7 +133,12 @@ class StagedTracer:
     def failed(self) -> bool:
         """Whether the full stage's set-up failed: :meth:`render` goes on with the coarse stage, :meth:`wait` and
         :meth:`refine` raise its error."""
-        return self.ready and self._failure is not None
+        return self.failure is not None
+
+    @property
+    def failure(self) -> BaseException | None:
+        """The error the full stage's set-up failed with (:attr:`failed`), else None."""
+        return self._failure if self.ready else None
 
     def wait(self, timeout=None):
         """The full stage's :class:`~clwave.RayTracer`, once set up (None if ``timeout`` seconds pass first, or once

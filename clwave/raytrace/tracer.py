@@ -31,7 +31,7 @@ from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .wavelet_field import WaveletField
 from .passes import on_device, passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
-from .classified import QUANT, ScalarRange, check_post, post_nodes
+from .classified import QUANT, ScalarRange, check_post, post_nodes, warn_opaque
 from .progressive import frames
 from .quadrature import sample_tables
 from .shading import Phong, light_directions
@@ -65,7 +65,7 @@ def _checked_tolerance(tolerance) -> float:
 def raytrace_kernel(field: str) -> Kernel:
     """The arguments of ``raytrace`` (cl/raytrace/raytrace.cl) with a field backend."""
     return Kernel("raytrace", ("image", B), ("stats", B), ("lattice_stats", B), ("width", I32), ("height", I32),
-                  *FIELD_ARGS[field],
+                  ("first_row", I32), *FIELD_ARGS[field],
                   ("bound", B), ("occ_origin", INT4), ("occ_shape", INT4), ("super_bound", B),
                   ("super_origin", INT4), ("super_shape", INT4), ("content", B), ("content_origin", INT4),
                   ("content_shape", INT4), ("coarse_bound", REAL), ("box_lo", FLOAT4),
@@ -313,6 +313,8 @@ class RayTracer:
         detail_seconds = time.perf_counter() - start
         # the transfer function's table and bounds at this detail (docs/raytracing.md §10)
         post = None if transfer_function is None else self.scalar.classify(transfer_function, cc, real, at)
+        if post is not None:
+            warn_opaque(self.scalar, transfer_function, self._told)
         light_buf = np.zeros((max(1, len(light_dirs)), 4), np.float32)
         if light_dirs:
             light_buf[: len(light_dirs), :3] = light_dirs
@@ -376,7 +378,7 @@ class RayTracer:
                 field_tables = at.field_tables if slots is None else dict(self.bricks.tables(cc, None, slots),
                                                                               joins=at.joins)
             in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
-                kernels, q, size, self.local_size, field_tables, real_type=real, global_offset=first,
+                kernels, q, size, self.local_size, field_tables, real_type=real, first_row=first,
                 passes=passes is not None, pass_lo=lo, pass_hi=hi, **arguments),
                 rounded, self.local_size)  # bounded launches: Ctrl-C within a fraction of a second
         seconds = time.perf_counter() - start

@@ -13,13 +13,17 @@ import scipy.sparse
 from .perspective import axis_scale
 
 
-#: Coarse framebuffers (docs/splatting.md §4): worst error, relative to the image maximum, of one band kind
-#: drawn at coarse pixels of ``ratio * 2^m d_min`` (level m) and upsampled with the prefiltered
-#: cubic B-spline, over three views of random 32^3, Shepp-Logan 64^3 and hydrogen 64^3 volumes
-#: (cubic, 3 levels, all coefficients, pixel 0.866 voxel): the approximation band 9.9e-3 at
-#: ratio 0.433 (8.7e-4 at 0.217); level-3 wavelets 5.0e-3 at 0.217 (0.16 at 0.433); level-2
-#: wavelets 5.2e-2 at 0.433.  The error grows like ratio^4 (x11-32 per doubling).
-COARSE_REFERENCE = dict(approximation=(np.sqrt(3) / 4, 1.0e-2), wavelet=(np.sqrt(3) / 8, 5.0e-3))
+#: Coarse framebuffers (docs/splatting.md §4): per band kind, ``(ratio, error)`` points: the worst error, relative to
+#: the image maximum, of one band of that kind drawn at coarse pixels of ``ratio * 2^m c`` (level m, c the spacing its
+#: footprints vary on) or finer and upsampled, over three views at 256^2 and 512^2 of Shepp-Logan 64^3 and 128^3,
+#: hydrogen 128^3, Marschner-Lobb 64^3, a thick-slice Shepp-Logan (16 x 64 x 64 voxels of 2.5 x 0.7 x 0.7) at 5 % kept
+#: and random 32^3 and Shepp-Logan 64^3 whole (cubic, 3 levels; every wavelet level's worst).  Below a ratio of
+#: about 0.1 the error stops falling like the fourth power (the upsampled layer meets the texture's bilinear kinks).
+COARSE_REFERENCE = dict(
+    approximation=((0.05413, 1.4e-4), (0.08800, 1.4e-4), (0.1083, 2.0e-4), (0.1760, 6.1e-4), (0.2165, 1.3e-3),
+                   (0.3520, 5.1e-3), (0.4330, 5.8e-3), (0.7040, 6.0e-2)),
+    wavelet=((0.05413, 3.0e-4), (0.08800, 6.2e-4), (0.1083, 1.1e-3), (0.1760, 4.4e-3), (0.2165, 6.6e-3),
+             (0.3520, 6.2e-2), (0.4330, 9.0e-2), (0.7040, 0.39)))
 
 
 COARSE_MARGIN = 8  # coarse pixels around the image: the prefilter's mirror ends decay by 0.268^8
@@ -30,35 +34,46 @@ COARSE_MARGIN = 8  # coarse pixels around the image: the prefilter's mirror ends
 ACROSS = 1e-6
 
 
-def coarse_factor(order: int, level: int, levels: int, approximation: bool, pixel: float, spacing: float,
-                  tolerance: float) -> int:
-    """Framebuffer coarsening (a power of 2) of one band for a tolerance, along an image axis whose footprints vary
-    on ``spacing`` (d_min, or more: :func:`footprint_scales`) and whose pixel is ``pixel`` wide.
-
-    The tolerance is shared out: half to the approximation band, a quarter to the coarsest
-    wavelet level, an eighth to the next, and so on, so the errors sum to less than it.  A
-    band's share e allows coarse pixels up to ``ratio (e / e_ref)^(1/4) 2^m spacing`` from
-    :data:`COARSE_REFERENCE` (cubic B-spline interpolation errs like the fourth power of
-    the spacing).  Only cubic and quintic bands are coarsened (the others have kinks; quintic bands,
-    smoother, stay within the cubic budget: tests/test_splat.py).
-
-    >>> pixel = 3 ** 0.5 / 2  # 256^3 at 512^2 (the default extent)
-    >>> [coarse_factor(4, 3, 3, a, pixel, 1.0, 2e-2) for a in (True, False)]
-    [4, 2]
-    >>> [coarse_factor(4, 3, 3, a, pixel, 1.0, 1e-2) for a in (True, False)]
-    [2, 1]
-    >>> coarse_factor(2, 3, 3, True, pixel, 1.0, 1e-2)
-    1
-    """
-    if order < 4:
-        return 1
-    ratio, error = COARSE_REFERENCE["approximation" if approximation else "wavelet"]
-    share = tolerance / 2.0 if approximation else tolerance / 2.0 ** (levels - level + 2)
-    limit = ratio * (share / error) ** 0.25 * 2.0 ** level * spacing
+def band_factor(ratio: float, level: int, pixel: float, spacing: float) -> int:
+    """The largest power of 2 whose coarse pixel, ``factor * pixel``, is at most ``ratio 2^m spacing`` along an image
+    axis whose footprints vary on ``spacing`` (:func:`footprint_scales`); the ratios carry 4 digits."""
     factor = 1
-    while 2 * factor * pixel <= limit * (1 + 1e-9):
+    while 2 * factor * pixel <= ratio * 2.0 ** level * spacing * (1 + 1e-3):
         factor *= 2
     return factor
+
+
+def coarse_plan(order: int, kinds, pixel: float, scales, tolerance: float, square: bool) -> tuple:
+    """``(factors, left)``: the framebuffer factors ``(f_u, f_v)`` of each band kind ``(level, approximation)`` in
+    ``kinds`` for a tolerance, and what they leave of it.
+
+    The tolerance is spent band kind by band kind, the coarsest wavelet level first (seven bands of the approximation
+    band's footprint size), then the approximation band, then the finer wavelet levels: each takes the largest factor
+    along each image axis (``pixel`` wide, footprints varying on ``scales``, :func:`footprint_scales`) within the
+    largest ratio of :data:`COARSE_REFERENCE` whose error fits what is left, and spends the error tabulated at the
+    ratio it draws (the largest over the axes it coarsens), so the errors sum to at most the tolerance.
+    ``square``: the lesser factor along both axes (orthographic layers have square pixels).  Only cubic and quintic
+    bands are coarsened (the others have kinks; quintic bands, smoother, stay within the cubic budget:
+    tests/test_splat.py).
+
+    >>> pixel = 3 ** 0.5 / 2  # 256^3 at 512^2 (the default extent)
+    >>> kinds = [(3, True), (3, False), (2, False), (1, False)]
+    >>> factors, left = coarse_plan(4, kinds, pixel, (1.0, 1.0), 2e-2, square=True)
+    >>> [factors[k][0] for k in kinds], round(left, 6)  # level 3 at 4 (5.8e-3) and 2 (6.6e-3)
+    ([4, 2, 1, 1], 0.0076)
+    >>> coarse_plan(2, kinds, pixel, (1.0, 1.0), 2e-2, square=True)[0][(3, True)]
+    (1, 1)
+    """
+    factors, left = {}, tolerance
+    for level, approximation in sorted(kinds, key=lambda kind: (-kind[0], kind[1])):
+        table = COARSE_REFERENCE["approximation" if approximation else "wavelet"]
+        ratio = max((r for r, e in table if e <= left), default=0.0) if order >= 4 else 0.0
+        fu, fv = (band_factor(ratio, level, pixel, c) for c in scales)
+        f = factors[(level, approximation)] = (min(fu, fv),) * 2 if square else (fu, fv)
+        if f != (1, 1):  # the ratio drawn along the axes drawn coarse
+            drawn = max(fa * pixel / (2.0 ** level * c) for fa, c in zip(f, scales) if fa > 1)
+            left -= min(e for r, e in table if r * (1 + 1e-3) >= drawn)
+    return factors, max(left, 0.0)
 
 
 def footprint_scales(view, d_xyz) -> tuple:
@@ -71,15 +86,6 @@ def footprint_scales(view, d_xyz) -> tuple:
     n, u, v = (np.where(np.abs(x) < ACROSS, 0.0, x) for x in (view.n, view.u, view.v))  # an axis view's round-off
     across = np.where(n == 0.0, d, 0.0)
     return tuple(max(float(d.min()), axis_scale(a, b, across)) for a, b in ((u, v), (v, u)))
-
-
-def layer_factors(order: int, level: int, levels: int, approximation: bool, pixel: float, scales,
-                  tolerance: float, square: bool) -> tuple:
-    """``(f_u, f_v)``: :func:`coarse_factor` along each image axis, from the spacing its footprints vary on there
-    (``scales``, :func:`footprint_scales`; the band's error along an axis falls with that spacing as along an
-    isotropic one of it); ``square``: the lesser along both (orthographic layers have square pixels)."""
-    fu, fv = (coarse_factor(order, level, levels, approximation, pixel, c, tolerance) for c in scales)
-    return (min(fu, fv),) * 2 if square else (fu, fv)
 
 
 def _bspline3(t) -> np.ndarray:

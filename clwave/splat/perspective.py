@@ -507,20 +507,6 @@ class ConeTables:
         return np.abs(values) * self.cell_peaks[stex, v0, v1, u0, u1][:, None]
 
 
-def drop_share(factors: dict, levels: int, tolerance: float) -> float:
-    """The share of ``tolerance`` (relative to the image maximum) that dropped splats may take: the coarse
-    framebuffers' shares (:func:`clwave.splat.coarse.coarse_factor`: half for the approximation band, ``2^{m-L-2}``
-    for wavelet level m) of every band kind that ``factors`` ((level, key) -> layer factors ``(f_u, f_v)``) draws at
-    the image's pixels, where coarsening spends none of it."""
-    share = 0.0
-    for level in range(1, levels + 1):
-        for approximation, part in ((True, 0.5), (False, 2.0 ** (level - levels - 2))):
-            bands = [f for (m, key), f in factors.items() if m == level and (key == "aaa") == approximation]
-            if bands and all(f == (1, 1) for f in bands):
-                share += part
-    return tolerance * share
-
-
 def select_drops(bbox, bound, size, budget) -> tuple:
     """``(drop, most)``: a mask of the splats to drop, the longest run of them in order of increasing bound
     (relative to ``budget``, (C,); to within an eighth of an octave) whose bounds, summed over the splats covering

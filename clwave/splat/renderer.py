@@ -19,18 +19,19 @@ from pyopencl.elementwise import ElementwiseKernel
 from pyopencl.reduction import ReductionKernel
 from pyopencl.tools import ImmediateAllocator, MemoryPool
 
+from ..device.constants import TILE, record_uint4s
 from ..device.context import ComputeContext
-from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap
-from ..errors import DeviceMemoryError, InputError, finite_number
+from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap, too_little
+from ..errors import InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera, resolve_view, view_record
 from ..model.wavelet import WaveletVolume, check_model
 from . import accumulator
 from .accumulator import Accumulator
-from .coarse import Layer, footprint_scales, layer_factors
+from .coarse import Layer, coarse_plan, footprint_scales
 from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_table_bytes, tile_list_bytes
-from .perspective import ConeTables, camera_words, depth_range, drop_share
+from .perspective import ConeTables, camera_words, depth_range
 from .tables import MAX_LEVELS, ViewTables
 from .textures import check_sampling
 from ..threads import one_at_a_time
@@ -63,7 +64,7 @@ class SplatRenderer:
     coarse : float, optional
         Tolerance, relative to the image maximum, for drawing coarse cubic bands into
         coarser framebuffers that are upsampled with the cubic B-spline (docs/splatting.md §4;
-        see :func:`clwave.splat.coarse.layer_factors`); in perspective views, what that leaves of it also drops
+        see :func:`clwave.splat.coarse.coarse_plan`); in perspective views, what that leaves of it also drops
         wavelet splats under a bound (docs/splatting.md §8, ``meta["dropped"]``).  None (default): every band at the
         image's pixel, every splat drawn.
     device_memory : int or str, optional
@@ -160,18 +161,27 @@ class SplatRenderer:
         # side of the volume (docs/splatting.md §8)
         pixel = max(view.slope) * depth_range(view, self.wv, 0)[1] if view.perspective else view.pixel
         # framebuffer factors (f_u, f_v) of each band that has coefficients (among the first ``upto``), per group:
-        # (1, 1) unless drawn coarse
+        # (1, 1) unless drawn coarse; and what they leave of the tolerance.  Planned over every band kind of the
+        # model, present or not, so that a prefix, or a worker's share of the coefficients, draws each band as the
+        # whole does
         reach = np.inf if upto is None else upto
         scales = footprint_scales(view, self.wv.spacing[::-1])
-        factors = [{(b.level, b.key): layer_factors(g.wavelet.order, b.level, self.wv.levels, b.key == "aaa", pixel,
-                                                    scales, self.coarse, square=not view.perspective)
-                    if self.coarse else (1, 1) for b in g.bands if gr["present"].get((b.level, b.key), np.inf) < reach}
-                   for g, gr in zip(self.wv.groups, self.groups)]
+        bands = [[b for b in g.bands if gr["present"].get((b.level, b.key), np.inf) < reach]
+                 for g, gr in zip(self.wv.groups, self.groups)]
+        plans = [coarse_plan(g.wavelet.order, {(b.level, b.key == "aaa") for b in g.bands}, pixel, scales, self.coarse,
+                             square=not view.perspective) if self.coarse else ({}, 0.0) for g in self.wv.groups]
+        factors = [{(b.level, b.key): plan.get((b.level, b.key == "aaa"), (1, 1)) for b in bs}
+                   for bs, (plan, _) in zip(bands, plans)]
         layers = [Layer(view, F) for F in sorted({f for fg in factors for f in fg.values()} | {(1, 1)})]
         fb_bytes = sum(layer.view.size[0] * layer.view.size[1] for layer in layers) * FRAMEBUFFER_PIXEL_BYTES
-        # the device's own limit and the host's memory here; a cap is held by _plan, which names the least that works
-        check_image(self.cc, view.size, fb_bytes, "render a smaller image (at most {n}x{n} here)",
-                    what="the framebuffer of a {}x{} image")
+        tiles = sum(-(-layer.view.size[0] // TILE) * -(-layer.view.size[1] // TILE) for layer in layers)
+        # before the footprint tables: what the view needs without them (every group's framebuffers and tile
+        # ranges, tile lists, count tables, a least chunk), within the budget, and on the host; _plan, with the
+        # tables, names the least budget that works
+        check_image(self.cc, view.size, fb_bytes, "render a smaller image (at most {n}x{n} here)", self.budget,
+                    what="the framebuffer of a {}x{} image",
+                    least=self._least_budget(len(self.groups) * (fb_bytes + 8 * tiles), tiles, tiles,
+                                             view.perspective))
         per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factors}) for layer in layers]
                      for fg in factors]
         if view.perspective:
@@ -187,7 +197,7 @@ class SplatRenderer:
         self._prepare(tables, view.size)
         acc = Accumulator(self, view, layers, tables, upto, view_record(camera, view))
         if view.perspective and self.coarse:  # what coarsening leaves of the tolerance (docs/splatting.md §8)
-            acc.drop_share = [drop_share(fg, self.wv.levels, self.coarse) for fg in factors]
+            acc.drop_share = [left for _, left in plans]
         return acc
 
     def texel_pools(self, tables: list) -> list:
@@ -257,6 +267,17 @@ class SplatRenderer:
             if chunk is not None:
                 self._work.update(coef=cla.empty(q, (n, 4), np.int32), values=cla.empty(q, (n, 4), np.float32))
 
+    def _least_budget(self, fixed: int, tiles: int, runs: int, perspective: bool) -> int:
+        """The least device budget for a view whose framebuffers, footprint tables and tile ranges take ``fixed``
+        bytes (every group's), binned over ``tiles`` tiles in ``runs`` (tile, texture) runs: those, :data:`MIN_CHUNK`
+        coefficients with their splats, the count tables at their floor and tile lists for one splat over every
+        tile, within the budget's shares for them (:data:`TILE_LIST_SHARE`, :data:`BIN_TABLE_SHARE`)."""
+        least = min(MIN_CHUNK, max(g["count"] for g in self.groups))
+        base = fixed + (COEFFICIENT_BYTES + (CONE_SPLAT_BYTES if perspective else SPLAT_BYTES)) * least
+        one_splat = tiles * max(16 * record_uint4s(len(g.channels), perspective) for g in self.wv.groups)
+        return int(max(base / (1 - TILE_LIST_SHARE - BIN_TABLE_SHARE), (base + 12 * runs) / (1 - TILE_LIST_SHARE),
+                       one_splat / TILE_LIST_SHARE)) + 1
+
     def _plan(self, tables: list, size):
         """None when every group's coefficients fit on the device with this view's working set, else the
         coefficients per streamed chunk; a :class:`DeviceMemoryError` naming the least budget that would do
@@ -264,31 +285,25 @@ class SplatRenderer:
         b, counts = self.budget, [g["count"] for g in self.groups]
         most, least = max(counts), min(MIN_CHUNK, max(counts))
         runs = max(t.tiles * max(t.layer_textures, default=0) for t in tables)
-        one_splat = max(t.tiles for t in tables) * max(st.record_bytes for st in self.stages.values())
+        perspective = isinstance(tables[0], ConeTables)
+        one_splat = max(t.tiles for t in tables) * max(16 * record_uint4s(len(g.channels), perspective)
+                                                       for g in self.wv.groups)
         # framebuffers, the view's tables and texel pool, and a pass's tile ranges
         fixed = sum(16 * t.pixels + sum(_bytes(getattr(t, name)) for name in t.names) + 8 * t.tiles
                     for t in tables)
         free = b.total - fixed - tile_list_bytes(b) - bin_table_bytes(runs, b)
-        splat_bytes = CONE_SPLAT_BYTES if isinstance(tables[0], ConeTables) else SPLAT_BYTES
+        splat_bytes = CONE_SPLAT_BYTES if perspective else SPLAT_BYTES
         rows = min(most, accumulator.PASS_ROWS)
         if COEFFICIENT_BYTES * sum(counts) + splat_bytes * rows <= free and 16 * most <= b.max_alloc:
             return None
         chunk = min(free // (COEFFICIENT_BYTES + splat_bytes), b.max_alloc // 16, most)
         if chunk >= least and tile_list_bytes(b) >= one_splat:
             return int(chunk)
-        # the least total T with T (1 - shares) >= fixed + a least chunk, the count tables at their floor where
-        # that is more, and tile lists for one splat over every tile
-        base = fixed + (COEFFICIENT_BYTES + splat_bytes) * least
-        need = max(base / (1 - TILE_LIST_SHARE - BIN_TABLE_SHARE), (base + 12 * runs) / (1 - TILE_LIST_SHARE),
-                   one_splat / TILE_LIST_SHARE)
+        need = self._least_budget(fixed, max(t.tiles for t in tables), runs, perspective)
         H, W = size
-        what = (f"a {H}x{W} view needs at least {format_size(int(need) + 1)} of device memory (framebuffers, "
-                f"footprints, tile lists and {least:,} coefficients at a time)")
-        if b.cap is not None and b.cap < self.cc.info.global_mem:
-            raise DeviceMemoryError(f"device_memory={format_size(b.cap)} is too small: {what}; give more or render "
-                                    f"a smaller image", cli=f"--device-memory {format_size(b.cap)} is too small: "
-                                                            f"{what}; give more or render a smaller image")
-        raise DeviceMemoryError(f"{self.cc.info.name} has {format_size(b.total)}, and {what}; render a smaller image")
+        too_little(self.cc, b, f"a {H}x{W} view needs at least {format_size(need)} of device memory (framebuffers, "
+                               f"footprints, tile lists and {least:,} coefficients at a time)",
+                   "render a smaller image")
 
 
 def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="auto", coarse=None,

@@ -33,12 +33,12 @@ _PROJECT_CONE = Kernel("splat_project_cone", ("n", U32), ("first", U32), ("coef"
                        ("band_world", BUFFER), ("band_step", BUFFER), ("tex_box", BUFFER), ("tex_layer", BUFFER),
                        ("layers", BUFFER), ("layer_slope", BUFFER), ("cone", BUFFER), ("centre", BUFFER),
                        ("bbox", BUFFER), ("stex", BUFFER), ("count", BUFFER))
-_ACCUMULATE_CONE = Kernel("splat_accumulate_cone", ("layer_count", I32), ("layers", BUFFER), ("layer_slope", BUFFER),
-                          ("cone", BUFFER), ("ranges", BUFFER), ("records", BUFFER), ("tex_int", BUFFER),
-                          ("tex_map", BUFFER), ("texels", BUFFER), ("fb", BUFFER))
-_ACCUMULATE = Kernel("splat_accumulate", ("layer_count", I32), ("layers", BUFFER), ("ranges", BUFFER),
-                     ("records", BUFFER), ("tex_int", BUFFER), ("tex_map", BUFFER), ("texels", BUFFER),
-                     ("fb", BUFFER))
+_ACCUMULATE_CONE = Kernel("splat_accumulate_cone", ("first_tile", I32), ("layer_count", I32), ("layers", BUFFER),
+                          ("layer_slope", BUFFER), ("cone", BUFFER), ("ranges", BUFFER), ("records", BUFFER),
+                          ("tex_int", BUFFER), ("tex_map", BUFFER), ("texels", BUFFER), ("fb", BUFFER))
+_ACCUMULATE = Kernel("splat_accumulate", ("first_tile", I32), ("layer_count", I32), ("layers", BUFFER),
+                     ("ranges", BUFFER), ("records", BUFFER), ("tex_int", BUFFER), ("tex_map", BUFFER),
+                     ("texels", BUFFER), ("fb", BUFFER))
 
 
 TILE_LIST_SHARE = 0.25  # of the device budget, at most, for the tile lists of one chunk of splats
@@ -118,8 +118,9 @@ class Stages:
                       for k in (_PROJECT_CONE if perspective else _PROJECT, _TRANSPOSE, _TILE_RANGES, _CHUNK_TILES)}
         if cc.info.kind != "GPU":
             self.local[_CHUNK_TILES.name] = 1
-        self._scan = cc.generated("exclusive_scan_uint",
-                                  lambda: ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0"))
+        if self.variant == "gpu":
+            self._scan = cc.generated("exclusive_scan_uint",
+                                      lambda: ExclusiveScanKernel(cc.ctx, np.uint32, "a+b", neutral="0"))
         # the rates of the banded stages (in_bands), kept between passes and views
         self.paces = dict(count=Pace(), place=Pace(), accumulate=Pace())
 
@@ -149,8 +150,16 @@ class Stages:
         self._launch(_TRANSPOSE, rows * cols, rows=rows, cols=cols, src=src, dst=dst)
 
     def scan(self, counts, starts):
-        """Exclusive prefix sums (arrays of uint32)."""
-        self._scan(counts, starts)
+        """Exclusive prefix sums (arrays of uint32).  The CPU variant's are NumPy's, the device's memory being the
+        host's: PoCL takes longer to compile pyopencl's scan kernels than to build the rest of a first splat
+        (docs/benchmarks.md §22)."""
+        if self.variant == "gpu":
+            self._scan(counts, starts)
+            return
+        host = counts.get()
+        sums = np.zeros_like(host)
+        np.cumsum(host[:-1], dtype=np.uint32, out=sums[1:])
+        starts.set(sums)
 
     def ranges(self, tiles, textures, chunks, total, starts, ranges):
         """Each tile's [start, end) in the records, from the scanned run-major counts."""
@@ -169,7 +178,7 @@ class Stages:
         r = ranges.get().reshape(-1, 2).astype(np.int64)
         work = np.concatenate([[0], np.cumsum(r[:, 1] - r[:, 0] + 1)])
         in_bands(q, lambda first, count: (_ACCUMULATE_CONE if self.perspective else _ACCUMULATE)(
-            self.kernels, q, (count * local,), (local,), tables, global_offset=(first * local,),
+            self.kernels, q, (count * local,), (local,), tables, first_tile=first,
             layer_count=layer_count, ranges=ranges, records=records, fb=fb), tiles, work=work,
             pace=self.paces["accumulate"])
 

@@ -67,12 +67,12 @@ class ViewTables:
         image_view = layers[0][0]  # the image's view: the layers share its direction
         if sampling == "auto" and any(cell_axes(wav, image_view.u, image_view.v)):
             sampling = "cells"  # Haar with u or v along a world axis: exact cells along that axis
-        # the texture band of each layer (a layer's pixel sets its default), the image's reported
-        omegas = [omega_s if omega_s is not None else default_omega_s(view.pixel, min(wv.spacing), wav.order)
-                  for view, _ in layers]
-        self.omega_s = omegas[0]
+        # one texture band for every layer, the image pixel's: a coarse layer's own (a coarser band) erred by
+        # more than its upsampling (docs/splatting.md §4)
+        self.omega_s = omega = omega_s if omega_s is not None else default_omega_s(image_view.pixel, min(wv.spacing),
+                                                                                    wav.order)
         self.layer_of, self.texels_per_pixel, texel = {}, {}, {}
-        for li, ((view, bands), omega) in enumerate(zip(layers, omegas)):
+        for li, (view, bands) in enumerate(layers):
             for b in g.bands:
                 band = (b.level, b.key)
                 if band in self.layer_of or (bands is not None and band not in bands):

@@ -16,18 +16,20 @@ import os
 import shlex
 from dataclasses import dataclass
 
-from ..errors import InputError
+from ..errors import ClwaveError, InputError
 from ..model.camera import Camera
 from ..model.transfer import TransferFunction
 from . import colours
+from .protocol import said
 
 #: the files the command and the Python write
 OUTPUT, TF_FILE = "view.png", "view-tf.json"
 #: host bytes a pixel of a saved image may take at the least (the viewer's own floor, docs/viewer.md §1): a size whose
 #: image would outgrow the memory available now is refused before it is rendered
 SAVE_PIXEL_BYTES = 200
-#: the model options that name its transfer function: a scalar model's shaded view replaces them with the tab's
-TF_OPTIONS = ("tf", "tf_window")
+#: the model options that make its transfer function: a scalar model's shaded view replaces them with the tab's (its
+#: opacity unit in the tab's function)
+TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
 #: the reading options that clwave.load takes by the same name
 LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level",
                 "orientation", "unit")
@@ -98,6 +100,10 @@ def resolve(sources: dict, state, size=None) -> Spec:
                     levels=levels)
     source.start_full_stage()
     if source.tracer is None:
+        failure = None if source.staged is None else source.staged.failure
+        if failure is not None:
+            raise Failed(f"the shaded views' ray tracer of the whole file could not be made ({said(failure)}): they "
+                         f"show the file's coarse stage, which no saved image or command draws")
         raise Unavailable("the shaded views' ray tracer is still being made (or the whole file read): try again once "
                           "the view has been refined")
     tf, window = source.transfer_function(state.tf, source.tracer)
@@ -109,6 +115,10 @@ def resolve(sources: dict, state, size=None) -> Spec:
 
 class Unavailable(InputError):
     """What a view needs is not there yet (its tracer, a file's rest): asked again later, it is."""
+
+
+class Failed(ClwaveError):
+    """What a view needs could not be made (a file's full stage): asked again, it will not be."""
 
 
 def picture(sources: dict, spec: Spec):
@@ -281,11 +291,12 @@ def _volume(origin: Origin, spec: Spec) -> tuple:
     tf, post = origin.get("tf"), origin.get("classify") == "post"
     if tf is not None:
         if tf not in TransferFunction.PRESETS:
-            left |= {"tf", "tf_window"}
+            left |= set(TF_OPTIONS)
         else:
-            window = origin.get("tf_window")
+            window, unit = origin.get("tf_window"), origin.get("opacity_unit")
             window = "" if window is None else f", window={window if window == 'auto' else _floats(window)!r}"
-            lines += [f"tf = clwave.TransferFunction.preset({tf!r}{window}).resolved(vol)"]
+            unit = "" if unit is None else f", opacity_unit={unit!r}"
+            lines += [f"tf = clwave.TransferFunction.preset({tf!r}{window}{unit}).resolved(vol)"]
             lines += [] if post else ["vol = tf.classify(vol)"]
     wavelet = origin.get("wavelet") or "cubic"
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
@@ -294,8 +305,8 @@ def _volume(origin: Origin, spec: Spec) -> tuple:
     lines.append(f"wv = clwave.WaveletVolume.from_volume(vol, wavelet={wavelet!r}, levels={spec.levels}"
                  f"{', interpolate=True' if origin.get('interpolate') else ''}"
                  f"{', transfer_function=tf' if tf in TransferFunction.PRESETS else ''}).threshold({thresholding})")
-    return lines, left | (given - {*LOAD_OPTIONS, "tf", "tf_window", "classify", "wavelet", "levels", "keep",
-                                   "threshold", "interpolate"})
+    return lines, left | (given - {*LOAD_OPTIONS, *TF_OPTIONS, "classify", "wavelet", "levels", "keep", "threshold",
+                                   "interpolate"})
 
 
 def _floats(text) -> tuple:
@@ -360,6 +371,8 @@ async def serve(server, request, *, image: bool):
                 done = await loop.run_in_executor(None, partial(encode, done, lossless=True))
     except Unavailable as exc:
         raise web.HTTPConflict(text=f"{exc}\n") from None
+    except Failed as exc:
+        raise web.HTTPInternalServerError(text=f"{exc}\n") from None
     except (HostMemoryError, DeviceMemoryError) as exc:
         raise web.HTTPInsufficientStorage(text=f"{server.explain(exc, state.mode)}\n") from None
     except ClwaveError as exc:

@@ -188,6 +188,14 @@ class RateLimit:
         self.tokens -= 1.0
 
 
+def said(exc: BaseException) -> str:
+    """``exc`` in one line for the page: its message where it is clwave's, else an internal error (the server logs
+    it)."""
+    from ..errors import ClwaveError
+
+    return str(exc) if isinstance(exc, ClwaveError) else f"internal error ({type(exc).__name__}); see the server's log"
+
+
 def close_reason(text: str) -> bytes:
     """``text`` as a close frame's reason: its first :data:`REASON_BYTES` bytes of UTF-8, cut between characters."""
     return text.encode()[:REASON_BYTES].decode(errors="ignore").encode()

@@ -29,7 +29,7 @@ from .address import check_port, host_name, is_loopback
 from . import colours, export
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
-from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, pack_frame, parse_view
+from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, pack_frame, parse_view, said
 
 log = logging.getLogger("clwave.view")
 
@@ -227,8 +227,7 @@ class ViewServer:
             if self.stopping:
                 return
             log.error("making the whole model for %s views failed: %s", mode, failure)
-            reason = str(failure) if isinstance(failure, ClwaveError) else \
-                f"internal error ({type(failure).__name__}); see the server's log"
+            reason = said(failure)
             failure = f"making the whole model for the {'X-ray' if mode == 'xray' else mode} views failed " \
                       f"(they go on with what they have): {reason}"
             if mode == "xray":  # the prefix is the model served from now on: its still views end final
@@ -240,7 +239,7 @@ class ViewServer:
             except RuntimeError:  # the server has stopped meanwhile (its loop closed): no tab to tell
                 pass
 
-    def explain(self, exc: ClwaveError, mode: str) -> ClwaveError:
+    def explain(self, exc: BaseException, mode: str) -> BaseException:
         """``exc`` as the page (or the caller) should read it: a renderer refusing within its share of the viewer's
         device memory names the share and the viewer's cap (:func:`memory_shares`)."""
         if self.device_memory is None or not isinstance(exc, DeviceMemoryError):
@@ -456,8 +455,7 @@ class Session:
             exc = building.exception()
             if not isinstance(exc, ClwaveError):
                 log.error("%s: preparing the %s view failed", self.name, source.mode, exc_info=exc)
-            message = (str(self.server.explain(exc, source.mode)) if isinstance(exc, ClwaveError)
-                       else f"internal error ({type(exc).__name__}); see the server's log")
+            message = said(self.server.explain(exc, source.mode))
             await self.ws.send_json(dict(type="error", seq=state.seq, message=message))
             return False
         return self.state is state  # else the newer view is waiting (wake is set)

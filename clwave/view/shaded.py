@@ -158,16 +158,18 @@ class ShadedSource(Source):
         ``width`` times and moved by ``centre`` of its width; spec None, or the starting function unchanged, is the
         starting function itself (its window as given, not recomputed); an "auto" window is the pool of ``tracer``,
         the one that renders the frame (the whole file's once it is in).  A spec that is a TransferFunction (the
-        editor's points, in the input's units) is itself.  ``(None, None)`` for an RGBA model."""
+        editor's points, in the input's units) is itself.  Presets and points take the starting function's opacity
+        unit (``--opacity-unit``, a file's function's).  ``(None, None)`` for an RGBA model."""
         if not self.scalar:
             return None, None
         key = (spec, weakref.ref(tracer))  # not id(): a tracer let go may leave its id to the next
         if self._tf[0] != key:
+            unit = self.start_tf.opacity_unit  # the tab's opacities are per the starting function's unit
             if isinstance(spec, TransferFunction):  # the editor's points
-                tf, change = spec, [0.0, 1.0, 1.0]
+                tf, change = spec.under(opacity_unit=unit), [0.0, 1.0, 1.0]
             else:
                 name, *change = (None, 0.0, 1.0, 1.0) if spec is None else spec
-                tf = self.start_tf if name is None else TransferFunction.preset(name)
+                tf = self.start_tf if name is None else TransferFunction.preset(name, opacity_unit=unit)
             lo, hi = window = _span(tf, tracer.scalar.window(tf))
             if change != [0.0, 1.0, 1.0]:
                 centre, width, opacity = change
