@@ -19,6 +19,8 @@ BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", de
 TF = dict(preset="hydrogen", centre=0.1, width=2.0, opacity=2.0)
 #: the editor's own points (data units), for a scalar hydrogen model: a red shell at 0.3 and a yellow core
 POINTS = [[0.1, 0.2, 0.4, 1.0, 0.0], [0.3, 1.0, 0.1, 0.1, 0.08], [0.45, 1.0, 0.1, 0.1, 0.0], [0.9, 1.0, 0.9, 0.2, 0.2]]
+#: a crop box (world x0, y0, z0, x1, y1, z1) and a plane (point, normal) of the page's clip
+CLIP = dict(box=[-1.0, 0, 0, 1, 2, 3], planes=[[0, 0, 0, 0, 0, 1]])
 
 
 @pytest.fixture(scope="module")
@@ -70,6 +72,12 @@ def test_parse_view_takes_a_whole_view():
             ) == ("grey", "magma")
     assert (state.scale_bar, parse_view(json.dumps(dict(BASE, seq=3, scale_bar=True)), 2, ("xray",)).scale_bar
             ) == (False, True)
+    clip = parse_view(json.dumps(dict(BASE, seq=3, clip=CLIP)), 2, ("xray",))
+    assert state.clip is None and state.clipping() is None
+    assert clip.clip == ((-1.0, 0, 0, 1, 2, 3), ((0, 0, 0, 0, 0, 1),))
+    assert clip.clipping() == clwave.Clip(lo=(-1, 0, 0), hi=(1, 2, 3), planes=[((0, 0, 0), (0, 0, 1))])
+    plane = parse_view(json.dumps(dict(BASE, seq=3, clip=dict(box=None, planes=[[0, 0, 0, 1, 0, 0]]))), 2, ("xray",))
+    assert plane.clipping() == clwave.Clip(planes=[((0, 0, 0), (1, 0, 0))])
 
 
 @pytest.mark.parametrize("change, words", [
@@ -98,6 +106,14 @@ def test_parse_view_takes_a_whole_view():
     # JSON's whole numbers have no bound: 400 digits overflow a float (math.isfinite raised OverflowError)
     (dict(azimuth=10 ** 400), "azimuth=1000.* must be a number"), (dict(window=[0, -10 ** 400]), "hi="),
     (dict(tf=dict(points=[POINTS[0], [10 ** 400, 0, 0, 0, 0]])), "tf point 1 value="),
+    (dict(clip=[1, 2]), "clip must be null or"), (dict(clip=dict(box=None)), "clip must be null or"),
+    (dict(clip=dict(CLIP, code="x")), "clip must be null or"), (dict(clip=dict(CLIP, planes="x")), "clip must be"),
+    (dict(clip=dict(CLIP, planes=[[0, 0, 0, 0, 0, 1]] * 7)), "at most 6"),
+    (dict(clip=dict(CLIP, box=[0, 0, 0, 1, 1])), "clip box must be 6 numbers"),
+    (dict(clip=dict(CLIP, planes=[[0, 0, 0, 0, 0, 1], "x"])), "clip plane 1 must be 6 numbers"),
+    (dict(clip=dict(CLIP, box=[0, 0, 0, 1, 1, float("nan")])), "clip box=nan must be a number"),
+    (dict(clip=dict(CLIP, planes=[[0, 0, 0, 0, True, 1]])), "clip plane 0=True must be a number"),
+    (dict(clip=dict(CLIP, planes=[[0, 0, 10 ** 400, 0, 0, 1]])), "clip plane 0=1000.* must be a number"),
 ])
 def test_parse_view_refuses_what_is_not_a_view(change, words):
     with pytest.raises(Refused, match=words):
@@ -564,6 +580,59 @@ def test_shaded_frames_of_an_rgba_model_refine_in_detail_to_the_ray_traced_view(
     expect = clwave.raytrace(wv, clwave.Camera(10.0, 20.0, 128, extent=figures[-1]["extent"]),
                              tolerance=2e-2).to_uint8(background=(1.0, 1.0, 1.0))
     assert np.abs(decode(frames[-1][1]).astype(int) - expect).max() <= 1
+
+
+def test_a_clipped_shaded_view_rebuilds_nothing_and_a_clip_that_keeps_nothing_is_one_line(monkeypatch):
+    """The tab's clip (docs/viewer.md §4): the hello gives the content's world box (the crop sliders' span); a clipped
+    still view ends at clwave.raytrace of the view with that Clip; a clip that keeps nothing (the Clip's own refusal,
+    or one beside the content: the tracer's) is one line for its view, and the tab goes on; a new clip, dragged and
+    still, makes no bricks or programs (the half-spaces are the kernel's arguments)."""
+    from clwave.raytrace import tracer as traced
+
+    wv = clwave.WaveletVolume.from_volume(clwave.TransferFunction.preset("hydrogen").classify(
+        clwave.phantom("hydrogen", n=24)), levels=2).threshold(keep=0.3)
+    lo, hi = wv.content_box()
+    half = dict(box=[lo[0], lo[1], lo[2], hi[0], (lo[1] + hi[1]) / 2, hi[2]], planes=[])
+    cut = dict(box=None, planes=[[0.0, 0.0, 0.1, 0.3, 0.0, -1.0]])  # keeps below a tilted plane
+    nothing = dict(box=None, planes=[[0, 0, 0, 1, 0, 0], [0, 0, 0, -1, 0, 0]])
+    beside = dict(box=[hi[0] + 100, 0, 0, hi[0] + 101, 1, 1], planes=[])  # beyond the basis functions' reach
+    calls = []
+
+    async def go(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            hello = await ws.receive_json()
+            await ws.send_str(json.dumps(dict(BASE, seq=1, mode="shaded", clip=half)))
+            await frames_until_final(ws, 1)
+            tracer = v.server.sources["shaded"].tracer
+            monkeypatch.setattr(traced, "build", lambda *a, **k: calls.append("build"))
+            programs = dict(tracer.cc.programs.made)
+            errors = []
+            for seq, clip in ((2, nothing), (3, beside)):
+                await ws.send_str(json.dumps(dict(BASE, seq=seq, mode="shaded", clip=clip)))
+                while (message := await ws.receive_json(timeout=60))["type"] != "error":
+                    pass
+                errors.append(message)
+            await ws.send_str(json.dumps(dict(BASE, seq=4, mode="shaded", clip=cut, azimuth=60.0, moving=True)))
+            await frames_until_final(ws, 4, until_seq=True)
+            await ws.send_str(json.dumps(dict(BASE, seq=5, mode="shaded", clip=cut, azimuth=60.0)))
+            frames = await frames_until_final(ws, 5)
+            assert calls == [] and dict(tracer.cc.programs.made) == programs and tracer.expansions == 1
+            return hello, errors, frames
+    with view(wv, size=32, tolerance=2e-2) as v:
+        hello, errors, frames = run(go(v))
+    monkeypatch.undo()
+    assert hello["model"]["box"] == [lo.tolist(), hi.tolist()]
+    assert [e["seq"] for e in errors] == [2, 3] and "keeps nothing (no volume" in errors[0]["message"]
+    assert "keeps nothing of the volume's content" in errors[1]["message"]
+    assert all("\n" not in e["message"] for e in errors) and frames[-1][0]["final"]
+    camera = clwave.Camera(60.0, 20.0, 32, extent=frames[-1][0]["extent"])
+    clip = clwave.Clip(planes=[((0.0, 0.0, 0.1), (0.3, 0.0, -1.0))])
+    expect = clwave.raytrace(wv, camera, tolerance=2e-2, clip=clip).to_uint8(background=(0.0, 0.0, 0.0))
+    whole = clwave.raytrace(wv, camera, tolerance=2e-2).to_uint8(background=(0.0, 0.0, 0.0))
+    got = decode(frames[-1][1])
+    assert expect.std() > 5 and np.abs(got.astype(int) - expect).max() <= 1
+    assert np.abs(got.astype(int) - whole).max() > 20
 
 
 def test_a_scalar_model_is_shaded_through_the_tabs_transfer_function_built_off_the_render_thread(monkeypatch):

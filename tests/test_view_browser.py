@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import clwave
+from clwave.model.geometry import view_frame
 from clwave.view import prefix as view_prefix
 from clwave.view import view
 from clwave.view.prefix import PrefixFirst
@@ -155,6 +156,53 @@ def test_shaded_with_the_transfer_function_editor(viewer, page):
     figures, data = browser.current_frame(page)
     assert figures["tolerance"] == 1e-2 and expect.std() > 5
     assert np.abs(decode(data).astype(int) - expect).max() <= 1
+
+
+def test_a_crop_slider_clips_the_shaded_view_and_a_plane_that_keeps_nothing_is_said(viewer, page):
+    """The clip controls (a scalar model, shaded): the y crop's high slider moved shows a cheaper frame at once; let
+    go, the final frame is clwave.raytrace of the view clipped to that box (the hello's content box, its y end moved)
+    bit for bit, another image than the unclipped one, and the status line says "refined"; "copy as Python" writes
+    the box.  The plane ticked faces the camera through the box's centre (its normal the view's direction) and clips
+    the final frame as clwave.raytrace does.  A plane keeping x above the box's end keeps nothing: the Clip's line on
+    the status line, which "uncut" clears (the tab goes on, the unclipped image again)."""
+    browser.open_viewer(page, viewer.url)
+    page.execute_script('document.querySelector(\'input[value="shaded"]\').click();')
+    start = browser.wait_final(page)
+    whole = decode(browser.current_frame(page)[1])
+    page.execute_script("const e = document.getElementById('clip-y1'); e.value = 500;"
+                        "e.dispatchEvent(new Event('input'))")
+    moving = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {start['seq']} && f")
+    assert not moving["final"] and moving["width"] < SIZE[1]
+    page.execute_script("document.getElementById('clip-y1').dispatchEvent(new Event('change'))")
+    final, got = latest_final(page, moving)
+    assert page.execute_script("return document.getElementById('status').textContent") == "refined"
+    lo, hi = viewer.server.model()["box"]
+    clip = clwave.Clip(lo=lo, hi=(hi[0], lo[1] + (hi[1] - lo[1]) * 500 / 1000, hi[2]))
+    camera = clwave.Camera(final["azimuth"], final["elevation"], SIZE, extent=final["extent"])
+    expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=START, clip=clip).to_uint8(
+        background=(0.0, 0.0, 0.0))
+    assert expect.std() > 5 and np.array_equal(got, expect) and np.abs(got.astype(int) - whole).max() > 20
+    page.find_element("id", "copy-python").click()
+    text = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'python' && e.text")
+    assert f"clip = clwave.Clip(lo=({lo[0]!r}, " in text and ", clip=clip)" in text
+    page.execute_script("document.getElementById('clip-plane').click()")  # facing the camera, through the centre
+    final, got = latest_final(page, final)
+    sent = page.execute_script("return window.clwave.view().clip")
+    (plane,) = sent["planes"]
+    n, _, _ = view_frame(final["azimuth"], final["elevation"])
+    assert plane[:3] == pytest.approx((np.array(lo) + hi) / 2, abs=1e-12) and plane[3:] == pytest.approx(-n, abs=1e-12)
+    expect = clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=START, clip=clwave.Clip(
+        lo=sent["box"][:3], hi=sent["box"][3:], planes=[(plane[:3], plane[3:])])).to_uint8(background=(0.0, 0.0, 0.0))
+    assert expect.std() > 5 and np.array_equal(got, expect)
+    page.execute_script("const a = document.getElementById('clip-axis'), at = document.getElementById('clip-at');"
+                        "a.value = '+x'; at.value = 1000; a.dispatchEvent(new Event('change'))")
+    line = browser.wait_for(page, "const s = document.getElementById('status');"
+                                  "return s.classList.contains('error') && s.textContent")
+    assert "keeps nothing (no volume lies inside all of it)" in line and "\n" not in line
+    page.find_element("id", "clip-reset").click()
+    browser.wait_for(page, "const s = document.getElementById('status');"
+                           "return !s.classList.contains('error') && s.textContent === 'refined'")
+    assert np.array_equal(decode(browser.current_frame(page)[1]), whole)
 
 
 def latest_final(page, after):
@@ -335,9 +383,9 @@ def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(
                                                      "export") for kind in ("input", "select", "button"))
     controls = page.execute_script(f"return Array.from(document.querySelectorAll('{sending}'))"
                                    ".map(e => e.matches(':disabled'))")
-    # 2 modes, 3 camera controls (the scale bar's too), 5 X-ray ones, 9 shaded ones, 4 of the export's (the size,
-    # save, two copies)
-    assert len(controls) == 23 and all(controls)
+    # 2 modes, 3 camera controls (the scale bar's too), 5 X-ray ones, 9 shaded ones and 10 of the clip (6 crop sliders,
+    # the plane's box, list and slider, "uncut"), 4 of the export's (the size, save, two copies)
+    assert len(controls) == 33 and all(controls)
     state, shown = page.execute_script("return JSON.stringify(window.clwave.state)"), browser.shown(page)
     browser.drag(page, 30, 10, steps=3, hold=False)
     ActionChains(page).scroll_to_element(page.find_element("id", "image")).double_click(

@@ -240,6 +240,32 @@ def test_a_perspective_view_zooms_its_lens_and_keeps_its_eye():
     assert np.linalg.norm(views[1.0].eye - views[1.0].target) > 3 * radius
 
 
+def test_a_clipped_shaded_view_as_a_command_and_python_and_an_xray_unclipped(clw, tmp_path, monkeypatch):
+    """A shaded view through a crop box (negative corners: ``--clip-box=-...``) and a plane: the command's
+    ``--clip-box``/``--clip-plane`` and the Python's ``clwave.Clip`` render the saved image and the page's final frame
+    bit for bit, which differ from the unclipped view's; an X-ray of the same message is splatted whole (no clip in
+    its command); a clip that keeps nothing is its one line (400)."""
+    with view(str(clw), size=(32, 40), tolerance=2e-2) as v:
+        lo, hi = v.server.hello()["model"]["box"]
+        clip = dict(box=[lo[0], lo[1], lo[2] / 2, hi[0], hi[1] / 3, hi[2]], planes=[[0.0, 0.0, 0.0, 1.0, 0.2, -0.1]])
+        msg = dict(BASE, seq=1, mode="shaded", azimuth=47.3, elevation=25.0, clip=clip)
+        figures, frame = final_frame(v, msg)
+        page, saved = exported(v, msg, (32, 40))
+        _, whole = exported(v, dict(msg, clip=None), (32, 40))
+        xray, _ = exported(v, dict(msg, mode="xray"), (32, 40))
+        status, line = post(v, "image", dict(view=dict(msg, clip=dict(clip, box=[hi[0] + 100, 0, 0, hi[0] + 101, 1,
+                                                                                     1])), size=[32, 40]))
+    box = ",".join(map(repr, clip["box"]))
+    assert f"--clip-box={box} --clip-plane 0.0,0.0,0.0,1.0,0.2,-0.1 " in page["command"]
+    assert f"clip = clwave.Clip(lo=({', '.join(map(repr, clip['box'][:3]))})" in page["python"]
+    assert "clip" not in xray["command"] and "clip" not in xray["python"]
+    got = shell(page["command"], tmp_path / "page")
+    assert figures["final"] and got.std() > 5 and np.array_equal(got, frame) and np.array_equal(got, saved)
+    assert np.array_equal(executed(page["python"], tmp_path / "python", monkeypatch), got)
+    assert np.abs(got.astype(int) - whole).max() > 20
+    assert status == 400 and line.count(b"\n") == 1 and b"keeps nothing of the volume's content" in line
+
+
 def test_a_view_with_its_scale_bar_as_a_command_and_as_python(clw, tmp_path, monkeypatch):
     """The page's scale bar ticked (``scale_bar``) on an orthographic X-ray: each frame names its length and label
     (--scale-bar's default for the view's extent), the command gets ``--scale-bar`` and the Python ``scale_bar=True``;

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 from ..errors import ClwaveError, InputError
 from ..model.camera import Camera
+from ..model.clip import Clip
 from ..model.transfer import TransferFunction
 from . import colours
 from .protocol import said
@@ -82,6 +83,7 @@ class Spec:
     background: float = 0.0
     tf: TransferFunction | None = None
     scale_bar: bool = False  # the default --scale-bar (an orthographic view's)
+    clip: Clip | None = None  # a shaded view's (an X-ray is splatted: never clipped)
     levels: int = 0  # the model's (the Python of a volume decomposes it with as many)
 
 
@@ -110,7 +112,7 @@ def resolve(sources: dict, state, size=None) -> Spec:
     if tf is not None and tf.window == "auto":  # the pool's percentiles, written as numbers
         tf = tf.under(window=tuple(window))
     return Spec("shaded", camera, tolerance=source.tolerance, shading=state.shading, background=state.background,
-                tf=tf, scale_bar=scale_bar, levels=levels)
+                tf=tf, scale_bar=scale_bar, levels=levels, clip=state.clipping())
 
 
 class Unavailable(InputError):
@@ -139,7 +141,7 @@ def picture(sources: dict, spec: Spec):
         image = result.to_uint8(spec.window)
         image = colours.apply(image, spec.colour_map) if spec.colour_map else image
     else:
-        result = source.tracer.render(spec.camera, tolerance=spec.tolerance, shading=spec.shading,
+        result = source.tracer.render(spec.camera, tolerance=spec.tolerance, shading=spec.shading, clip=spec.clip,
                                       **({} if spec.tf is None else dict(transfer_function=spec.tf)))
         image = result.to_uint8(background=(spec.background,) * 3)
     return draw_scale_bar(image, result.meta["pixel"], source.wv.unit) if spec.scale_bar else image
@@ -214,6 +216,11 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
         tokens += [] if spec.shading else ["--no-shading"]
         if spec.background:
             tokens += ["--background", ",".join([_number(spec.background)] * 3)]
+        if spec.clip is not None:
+            if spec.clip.lo is not None:
+                tokens += _token("--clip-box", ",".join(map(_number, (*spec.clip.lo, *spec.clip.hi))))
+            for point, normal in spec.clip.planes:
+                tokens += _token("--clip-plane", ",".join(map(_number, (*point, *normal))))
     tokens += ["--scale-bar"] if spec.scale_bar else []
     tokens += ["-o", output]
     return "\n".join(notes + before + [" ".join(map(_shell_word, tokens))])
@@ -253,10 +260,19 @@ def python(origin: Origin, spec: Spec, output=OUTPUT) -> str:
                      if _is_preset(spec.tf) else f"tf = clwave.TransferFunction.from_dict({spec.tf.to_dict()!r})")
         options += ", transfer_function=tf"
     options += "" if spec.shading else ", shading=False"
+    if spec.clip is not None:
+        box = "" if spec.clip.lo is None else f"lo={_numbers(spec.clip.lo)}, hi={_numbers(spec.clip.hi)}, "
+        planes = ", ".join(f"({_numbers(p)}, {_numbers(n)})" for p, n in spec.clip.planes)
+        lines.append(f"clip = clwave.Clip({box}planes=[{planes}])")
+        options += ", clip=clip"
     lines.append(f"result = clwave.raytrace(wv, camera{options})")
     background = f", background={(spec.background,) * 3!r}" if spec.background else ""
     lines.append(f"result.save({output!r}{background}{bar})")
     return "\n".join(lines) + "\n"
+
+
+def _numbers(values) -> str:
+    return f"({', '.join(map(_number, values))})"
 
 
 def _model(origin: Origin, spec: Spec) -> list:

@@ -19,6 +19,7 @@ import numpy as np
 from ..errors import InputError, finite_number
 from ..io.result import RenderResult, resolve_window
 from ..model.camera import Camera
+from ..model.clip import Clip
 from ..model.transfer import TransferFunction
 from ..splat.renderer import SplatRenderer
 from . import colours
@@ -66,6 +67,16 @@ class ViewState:
     colour_map: str = "grey"  # X-ray, scalar model: one of colours.NAMES
     fov: float | None = None  # a perspective camera's vertical field of view, degrees; None: orthographic
     scale_bar: bool = False  # the page's scale bar (orthographic): in the saved image and the command (export.py)
+    # shaded: (box (x0, y0, z0, x1, y1, z1) or None, planes ((px, py, pz, nx, ny, nz), ...)) in world units; None: none
+    clip: tuple | None = None
+
+    def clipping(self) -> Clip | None:
+        """The shaded view's :class:`~clwave.Clip` (None: none), made here, not in the protocol: one that keeps
+        nothing is the Clip's one line on the tab's status line (an InputError of its frames), not a refused socket."""
+        if self.clip is None:
+            return None
+        box, planes = self.clip
+        return Clip(lo=box and box[:3], hi=box and box[3:], planes=[(p[:3], p[3:]) for p in planes])
 
 
 @dataclass

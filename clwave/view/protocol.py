@@ -12,6 +12,7 @@ import json
 import struct
 import time
 
+from ..model.clip import MAX_PLANES
 from . import colours
 from .frames import ViewState
 
@@ -60,7 +61,7 @@ def _flag(msg, name) -> bool:
 
 
 FIELDS = {"type", "seq", "azimuth", "elevation", "zoom", "mode", "detail", "window", "moving", "background",
-          "shading", "tf", "colour_map", "fov", "scale_bar"}
+          "shading", "tf", "colour_map", "fov", "scale_bar", "clip"}
 #: a transfer function from the page's editor: a preset, its window's centre moved by this many of its widths (the
 #: page's slider keeps the centre within the input's range, many widths of a narrow window), its width times this, its
 #: opacity times this (clwave.view.shaded.ShadedSource.transfer_function)
@@ -110,6 +111,29 @@ def _points(rows):
     if not span >= 1e-30:
         raise Refused(f"tf points span {span:g}: at least 1e-30, for the renderer's float32 table")
     return tf
+
+
+#: a clip's corners and planes' points and normals: world units, within this span
+CLIP_SPAN = (-1e30, 1e30)
+
+
+def _clip(value):
+    """``(box, planes)`` of a page's ``clip`` field, in world units (box: 6 numbers x0, y0, z0, x1, y1, z1, or None;
+    planes: rows px, py, pz, nx, ny, nz), or None (no clip).  Only its form is checked here: what it keeps is the
+    :class:`~clwave.Clip`'s to say, on the tab's status line (:meth:`ViewState.clipping`)."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != {"box", "planes"} or not isinstance(value["planes"], list) \
+            or len(value["planes"]) > MAX_PLANES:
+        raise Refused(f'clip must be null or {{"box": null or [x0, y0, z0, x1, y1, z1], "planes": at most {MAX_PLANES} '
+                      f'[px, py, pz, nx, ny, nz]}}')
+    rows = ([] if value["box"] is None else [("clip box", value["box"])]) + \
+        [(f"clip plane {i}", row) for i, row in enumerate(value["planes"])]
+    for name, row in rows:
+        if not isinstance(row, list) or len(row) != 6:
+            raise Refused(f"{name} must be 6 numbers")
+    rows = [tuple(_value(x, name, *CLIP_SPAN) for x in row) for name, row in rows]
+    return (rows.pop(0) if value["box"] is not None else None), tuple(rows)
 
 
 def _json(text: str):
@@ -169,7 +193,7 @@ def view_of(msg, last_seq: int, modes) -> ViewState:
                      zoom=_number(msg, "zoom", *ZOOM), mode=msg["mode"], detail=_number(msg, "detail", 1e-6, 1.0),
                      window=window, moving=_flag(msg, "moving"), background=_number(msg, "background", 0.0, 1.0),
                      shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")), colour_map=colour_map, fov=fov,
-                     scale_bar="scale_bar" in msg and _flag(msg, "scale_bar"))
+                     scale_bar="scale_bar" in msg and _flag(msg, "scale_bar"), clip=_clip(msg.get("clip")))
 
 
 class RateLimit:

@@ -378,9 +378,13 @@ class ViewServer:
 
     def model(self) -> dict:
         """The model's figures for the page; ``reading``: a file's prefix, the rest being read; ``failure``: why the
-        rest's reading failed (None: it did not)."""
+        rest's reading failed (None: it did not); ``box``: the world box of its content, the span of the crop
+        sliders."""
+        from ..model.camera import _content_box
+
         wv, xray = self.wv, self.sources["xray"]
         return dict(shape=list(wv.shape), channels=wv.channels, coefficients=xray.r.count, voxels=wv.n_voxels,
+                    box=[[float(c) for c in corner] for corner in _content_box(wv)],
                     levels=wv.levels, wavelets=sorted({g.wavelet.name for g in wv.groups}),
                     transfer_function=(wv.transfer_function or {}).get("name"), value_range=wv.value_range,
                     reading=not xray.complete and self.failure is None, failure=self.failure)

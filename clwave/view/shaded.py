@@ -214,7 +214,7 @@ class ShadedSource(Source):
         tracer = self.tracer  # None while a file's whole tracer is being set up: its coarse stage
         # a scalar model's: its window and points in the input's units, figures of each frame (the page's editor
         # draws them)
-        options, classified = dict(shading=state.shading), {}
+        options, classified = dict(shading=state.shading, clip=state.clipping()), {}
         if self.scalar:
             # the tracer read once: another thread sets self.tracer when the whole file's is ready
             tf, window = self.transfer_function(state.tf, self._stage(tracer))

@@ -12,7 +12,7 @@
   // what the tests and tools/bench.py read: frames received, shown, dropped as superseded; times in ms
   const stats = { received: 0, shown: 0, dropped: 0, firstImage: null, released: null, tfInput: null, frames: [],
                   exported: null, saved: null };
-  window.clwave = { state, stats, send: () => request(), current: () => current,
+  window.clwave = { state, stats, send: () => request(), current: () => current, view: () => view(),
                     latest: () => (pending || held ? -1 : sentSeq) };  // the view asked for last (-1: one is on its way)
 
   const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws?token=` +
@@ -33,7 +33,7 @@
     sentSeq += 1;
     awaiting = state.moving ? sentSeq : 0;
     since = performance.now();
-    ws.send(JSON.stringify({ type: "view", seq: sentSeq, ...state }));
+    ws.send(JSON.stringify(view()));
   }
   // The socket closed: the server refused a message of this page (policy, size: the page may be reloaded) or this
   // tab (as many are open as it serves), or it stopped or cannot be reached. Nothing answers any more: every control that sends is disabled (greyed), the last
@@ -49,6 +49,9 @@
       `disconnected: the viewer's server has stopped or cannot be reached (${why}); restart clwave view … (or ` +
       "clwave.view) and open the address it prints, whose token is new. This image is the last it sent.";
     status.classList.add("error");
+  }
+  function view() {  // the message of the view now: a shaded one with its clip (X-ray frames are splatted whole)
+    return { type: "view", seq: sentSeq, ...state, clip: hello && state.mode === "shaded" ? clipOf() : null };
   }
   function request() {  // at most one message per 16 ms: the latest state then
     if (!pending) { pending = true; setTimeout(send, 16); }
@@ -130,7 +133,7 @@
     drawEditor();
     drawColourBar();
     syncMode();
-    showDetail(); showWindow(); showFov();
+    showDetail(); showWindow(); showFov(); showClip();
     // the saved image's size: the canvas' times 1, 2, 3, 4, 6 or 8, each side at most 4096 (protocol.EXPORT_SIZE)
     $("export-scale").replaceChildren(...[1, 2, 3, 4, 6, 8].filter((k) => k * Math.max(h, w) <= 4096).map((k) => {
       const option = document.createElement("option");
@@ -537,6 +540,59 @@
   });
   $("tf-colour").addEventListener("change", () => { commit(); if (tf.base.points) { state.moving = false; request(); } });
 
+  // ---------------------------------------------------------------- the clip of a shaded view (world units)
+  // Sent with every shaded view (X-ray frames are splatted whole: none): a crop box of the content's world box (the
+  // hello's), its sliders at their ends no box, and a plane: normal to an axis, or facing the camera (its normal the
+  // view's direction, recomputed as the view turns), placed by its slider across the box (the view's: across its
+  // bounding sphere). The server makes the clwave.Clip; one that keeps nothing is its line on the status line.
+  const AXES = ["x", "y", "z"], STEPS = 1000;
+  function clipOf() {
+    const [lo, hi] = hello.model.box, at = (i, v) => lo[i] + (hi[i] - lo[i]) * v / STEPS;
+    const ends = AXES.map((a, i) => [at(i, +$(`clip-${a}0`).value), at(i, +$(`clip-${a}1`).value)]);
+    const cropped = AXES.some((a) => +$(`clip-${a}0`).value > 0 || +$(`clip-${a}1`).value < STEPS);
+    const box = cropped ? [...ends.map((e) => e[0]), ...ends.map((e) => e[1])] : null;
+    const planes = $("clip-plane").checked ? [plane(lo, hi, +$("clip-at").value / STEPS)] : [];
+    return box || planes.length ? { box, planes } : null;
+  }
+  function plane(lo, hi, t) {  // [point, normal]: the normal towards what is kept
+    const axis = $("clip-axis").value, centre = lo.map((l, i) => (l + hi[i]) / 2);
+    if (axis !== "view") {
+      const i = AXES.indexOf(axis[1]), point = centre.slice(), normal = [0, 0, 0];
+      point[i] = lo[i] + (hi[i] - lo[i]) * t; normal[i] = axis[0] === "+" ? 1 : -1;
+      return [...point, ...normal];
+    }
+    // away from the camera: view_frame's n (clwave/model/geometry.py) points towards it
+    const a = state.azimuth * Math.PI / 180, b = state.elevation * Math.PI / 180;
+    const away = [-Math.cos(a) * Math.cos(b), -Math.sin(a) * Math.cos(b), -Math.sin(b)];
+    const r = Math.hypot(...lo.map((l, i) => hi[i] - l)) / 2;
+    return [...centre.map((c, i) => c + away[i] * r * (2 * t - 1)), ...away];
+  }
+  function showClip() {
+    const [lo, hi] = hello.model.box, f = (x) => String(+x.toPrecision(3));
+    AXES.forEach((a, i) => {
+      const at = (v) => lo[i] + (hi[i] - lo[i]) * v / STEPS;
+      $(`clip-${a}-out`).textContent = `${f(at(+$(`clip-${a}0`).value))} … ${f(at(+$(`clip-${a}1`).value))}`;
+    });
+    $("clip-at").disabled = !$("clip-plane").checked;
+    $("clip-at-out").textContent = `${(100 * $("clip-at").value / STEPS).toFixed(0)} %`;
+  }
+  AXES.forEach((a) => [0, 1].forEach((end) => {
+    const slider = $(`clip-${a}${end}`), other = $(`clip-${a}${1 - end}`);
+    slider.addEventListener("input", () => {  // the low end stays below the high one
+      if (+$(`clip-${a}0`).value >= +$(`clip-${a}1`).value) slider.value = +other.value + (end ? 1 : -1);
+      showClip(); state.moving = true; request();
+    });
+    slider.addEventListener("change", () => { state.moving = false; request(); });
+  }));
+  $("clip-at").addEventListener("input", () => { showClip(); state.moving = true; request(); });
+  for (const id of ["clip-at", "clip-plane", "clip-axis"]) {
+    $(id).addEventListener("change", () => { showClip(); state.moving = false; request(); });
+  }
+  $("clip-reset").addEventListener("click", () => {
+    AXES.forEach((a) => { $(`clip-${a}0`).value = 0; $(`clip-${a}1`).value = STEPS; });
+    $("clip-plane").checked = false; showClip(); state.moving = false; request();
+  });
+
   // ---------------------------------------------------------------- perspective (the server places the eye, frames.py)
   function showFov() { $("fov-out").textContent = `${$("fov").value}°`; }
   $("perspective").addEventListener("change", (ev) => {
@@ -572,7 +628,7 @@
   // chosen size, and shows and copies the text, or downloads the image the server rendered at full quality.
   function exportSize() { const k = +$("export-scale").value || 1; return [k * canvas.height, k * canvas.width]; }
   async function exported(path) {
-    const body = JSON.stringify({ view: { type: "view", seq: sentSeq, ...state, moving: false }, size: exportSize() });
+    const body = JSON.stringify({ view: { ...view(), moving: false }, size: exportSize() });
     const r = await fetch(`/${path}?token=${encodeURIComponent(token)}`, { method: "POST", body,
                                                                          headers: { "Content-Type": "application/json" } });
     if (!r.ok) throw new Error((await r.text()).trim() || `the server answered ${r.status}`);
