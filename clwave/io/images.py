@@ -61,7 +61,8 @@ def check_scale_bar(scale_bar):
     if not (isinstance(scale_bar, (int, float, np.integer, np.floating)) and np.isfinite(scale_bar) and scale_bar > 0):
         raise InputError(f"scale_bar={scale_bar!r} must be True (a length about a fifth of the width) or a positive "
                          f"length in world units, e.g. 10", cli=f"--scale-bar {scale_bar} must be a positive length "
-                                                                f"in world units, e.g. 10, or none")
+                                                                f"in world units, e.g. 10, or left out (a fifth of the "
+                                                                f"width)")
     return float(scale_bar)
 
 
