@@ -119,6 +119,26 @@ def test_nearly_opaque_everywhere_is_warned(rng):
     assert not _warned(TransferFunction.preset("grey"), vol)
 
 
+def test_nearly_transparent_everywhere_is_warned():
+    """A constant opacity k a voxel over a 16 x 20 x 24 box: the longest ray along its axes has optical depth 24 k, so
+    k = 0.01 (0.24, 79 % through) is warned naming the window and the fixes, by classify and by the check of a scalar
+    kept for classifying while rendering (through a strided grid: the same, the volume uniform); k = 0.011 (0.264)
+    is not."""
+    vol = clwave.Volume(np.ones((16, 20, 24)), spacing=(3.0, 2.0, 2.0))
+    for k, seen in ((0.01, True), (0.011, False)):
+        tf = TransferFunction([(0, 1, 1, 1, k), (2, 1, 1, 1, k)], name="faint")
+        told = _warned(tf, vol)
+        assert bool(told) == seen, told
+        with warnings.catch_warnings(record=True) as checked:
+            warnings.simplefilter("always")
+            tf.check_visible(vol)
+        assert [str(w.message) for w in checked] == told
+    assert len(told := _warned(TransferFunction([(0, 1, 1, 1, 0.01), (2, 1, 1, 1, 0.01)], name="faint"), vol)) == 1
+    assert ("the transfer function faint makes this volume nearly transparent (no ray along the box's axes has an "
+            "optical depth above 0.24: a faint or black picture); its window is 0 .. 2") in told[0]
+    assert "a shorter opacity unit (now 2)" in told[0]
+
+
 @pytest.mark.parametrize("preset, spacing", [("ct-bone", 0.5), ("ct-soft-tissue", 0.5), ("ct-soft-tissue", 1.0)])
 def test_normal_presets_are_not_warned(preset, spacing):
     vol = clwave.Volume(_ct_head(), spacing=spacing)
@@ -151,6 +171,7 @@ def test_command_line_opacity_unit(tmp_path, capsys):
                  "-o", str(out)]) == 0
     wv = clwave.WaveletVolume.open(out)
     assert wv.transfer_function["opacity_unit"] == 2.0
+    assert "nearly transparent" in capsys.readouterr().err  # half as dense on 16 voxels: the densest ray 0.24
     assert main(["compress", "phantom:hydrogen:16", "--tf", "hydrogen", "--opacity-unit", "-1", "-o",
                  str(tmp_path / "b.clw")]) == 2
     err = capsys.readouterr().err

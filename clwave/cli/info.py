@@ -157,6 +157,9 @@ def _clw_lines(f) -> list:
                                     f"the input's units)"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
+    if f["photo"]:
+        lines.append(("photo", "a photo's colour and alpha, not classified: shaded ray tracing needs the original "
+                               "volume compressed with --tf photo or another preset (docs/model.md §5)"))
     return lines
 
 

@@ -108,6 +108,11 @@ def add_model_options(p, classify=True):
     g.add_argument("--opacity-unit", type=float, metavar="LENGTH",
                    help="the length (world units, the spacing's) that --tf's opacities are per; default one voxel "
                         "(the smallest spacing), so a volume looks the same in um or mm (docs/model.md §5)")
+    g.add_argument("--key", metavar="R,G,B[,TOL]|auto",
+                   help="with --tf, a colour volume's background colour made transparent (a gel, ice): R,G,B in its "
+                        "sample units (0 .. 255 for 8 bits), transparent within TOL of it (default 0.1 of the range) "
+                        "and fully opaque from twice TOL; auto: the median colour of the box's edges (docs/model.md "
+                        "§5)")
     g.add_argument("--classify", choices=("pre", "post"), default="pre",
                    help="with --tf: pre (default) classifies the volume before the transform; post keeps the "
                         "scalar and the transfer function for ray tracing to classify while rendering (a .clw "
@@ -187,7 +192,7 @@ def parse_scheduler(args):
 #: the options of the transfer function, which a scalar .clw takes to classify while rendering
 TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
 #: options that make a model from a volume, and so cannot apply to a .clw input (a model already)
-VOLUME_ONLY = (*TF_OPTIONS, "wavelet", "levels", "interpolate") + READING + ("workers", "scheduler")
+VOLUME_ONLY = (*TF_OPTIONS, "key", "wavelet", "levels", "interpolate") + READING + ("workers", "scheduler")
 
 
 def flag(name: str) -> str:
@@ -259,6 +264,10 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         if opener is not None and args.threshold is None and args.focus is None:
             return opener(args.input, args.keep), None
         wv = WaveletVolume.open(args.input, keep=args.keep if args.focus is None else None)
+        if rgba and wv.photo:
+            raise InputError(f"shaded ray tracing needs a classified model; {args.input} holds a photo's colour and "
+                             f"alpha: compress the original volume with --tf photo (opacity its alpha) or another "
+                             f"--tf PRESET, or render line integrals with --xray")
         if rgba and wv.channels != 4 and post_transfer_function(args, wv) is None:
             raise _needs_rgba(args.input, wv.channels, "give --tf PRESET to classify it while rendering, or "
                                                        "compress the volume with --tf PRESET" if wv.channels == 1 else
@@ -270,6 +279,9 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         return wv, None
     vol = read_volume(args) if volume is None else volume
     tf = preset_transfer_function(args)
+    if tf is None and vol.photo and vol.channels == 4:  # straight colour and alpha, as the best tools read it
+        args.tf, tf = "photo", TransferFunction.preset("photo")  # as if given: so reported, and copied by the viewer
+        log(f"{args.input}: a photo's colour and alpha, classified by its alpha (--tf photo; --tf PRESET for another)")
     hinted = hu_hint and not (tf or args.subtract or getattr(args, "hu_to_mu", False))
     least = air_in_hounsfield(vol.data) if hinted else None
     if least is not None:  # padding below air stays negative with --subtract -1000; --hu-to-mu clips it to air
@@ -337,17 +349,19 @@ def _classified(args, tf, vol, check=False):
 
 
 def preset_transfer_function(args):
-    """The transfer function of ``--tf PRESET|FILE [--tf-window auto|LO,HI] [--opacity-unit LENGTH]``, or None
-    without ``--tf``."""
+    """The transfer function of ``--tf PRESET|FILE [--tf-window auto|LO,HI] [--opacity-unit LENGTH] [--key
+    R,G,B[,TOL]|auto]``, or None without ``--tf``."""
+    from ..model.colour_key import check_key
     from ..model.tf_file import named_transfer_function
 
     if not getattr(args, "tf", None):  # drr has no --tf
-        for name, what in (("tf_window", "window"), ("opacity_unit", "opacity unit")):
+        for name, what in (("tf_window", "window"), ("opacity_unit", "opacity unit"), ("key", "colour key")):
             if getattr(args, name, None) is not None:
                 raise InputError(f"{flag(name)} sets the {what} of a --tf preset: give --tf too")
         return None
     tf = named_transfer_function(args.tf, None if args.tf_window is None else parse_tf_window(args.tf_window))
-    return _with_unit(args, tf)
+    key = getattr(args, "key", None)  # view's and compress's, render's, progressive's
+    return _with_unit(args, tf if key is None else tf.under(key=check_key(key, "--key")))
 
 
 def _with_unit(args, tf):

@@ -6,7 +6,8 @@ Layout (version 2)::
 
     attrs           format, version, header (JSON: shape, spacing, origin, offset (the model's ``subtracted``),
                     obliquity, value_range (the input's [min, max]; absent in older files), unit (the world unit,
-                    absent: unknown), levels, channels, groups, ...),
+                    absent: unknown), photo (true: a photo's colour and alpha, not classified; absent: false),
+                    levels, channels, groups, ...),
                     header_crc32 (zlib's CRC-32 of the header's UTF-8 bytes)
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
     g<i>/occupancy  uint8, bits packed along x: which coarsest-approximation coefficients the content occupies
@@ -169,7 +170,7 @@ def _write(model, fh, steps):
     chunked = isinstance(model, ChunkedWaveletVolume)
     groups = [(w, c) for w, c in model.groups()] if chunked else [(g.wavelet, g.channels) for g in model.groups]
     header = dict(shape=model.shape, spacing=model.spacing, origin=model.origin, offset=model.subtracted,
-                  obliquity=model.obliquity, value_range=model.value_range, unit=model.unit,
+                  obliquity=model.obliquity, value_range=model.value_range, unit=model.unit, photo=model.photo,
                   levels=model.levels, channels=model.channels, interpolate=not chunked and model.interpolate,
                   focus=None if model.focus is None else [list(model.focus[0]), model.focus[1]],
                   transfer_function=model.transfer_function, content=model.content,
@@ -330,7 +331,7 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
         return WaveletVolume(shape, header["spacing"], header["origin"], levels, groups, channels,
                              interpolate=header["interpolate"], subtracted=header.get("offset", 0.0),
                              obliquity=header.get("obliquity", 0.0), value_range=header.get("value_range"),
-                             unit=header.get("unit"),
+                             unit=header.get("unit"), photo=header.get("photo", False),
                              focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
                              transfer_function=header.get("transfer_function"), content=header.get("content"),
                              content_mask=mask)

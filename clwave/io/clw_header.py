@@ -102,6 +102,8 @@ def checked_header(header) -> tuple:
     unit = header.get("unit")  # the world unit; absent in older files (and None): unknown
     if unit is not None and unit not in UNIT_METRES:
         raise ValueError(f"unit {unit!r} is not one of {', '.join(UNIT_METRES)}")
+    if header.get("photo", False) not in (False, True):  # absent in older files: classified where RGBA
+        raise ValueError(f"photo {header['photo']!r} is not true or false")
     levels, channels = header.get("levels"), header.get("channels")
     if not (_whole(levels) and 0 <= levels <= max_levels(shape)):
         raise ValueError(f"levels {levels!r} is not possible for shape {shape}")

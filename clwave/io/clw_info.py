@@ -21,7 +21,7 @@ def describe_clw(path) -> dict:
     none), the input's ``value_range`` (None: a classified model's, or not recorded), the value ``subtracted`` from
     the input's values and the
     ``obliquity`` of its axes to its scanner's: 0 where the file records none, its world ``unit``: None where it
-    records none) with, per channel group, its wavelet,
+    records none, whether it holds a ``photo``'s colour and alpha, not classified) with, per channel group, its wavelet,
     channels, the coefficients it keeps and their share of the voxels, and its quantisation step (None: float32
     values); and the file's size.  ``file``, ``format``, ``bytes``, ``shape``, ``channels``, ``spacing``, ``origin``,
     ``obliquity`` and ``unit`` are keys of a volume file's description too (:data:`~clwave.io.loaders.DESCRIBED`,
@@ -46,5 +46,5 @@ def describe_clw(path) -> dict:
     return dict(file=str(path), format="clw", bytes=path.stat().st_size, shape=list(shape), levels=levels,
                 channels=channels, **facts, subtracted=header.get("offset", 0.0),
                 obliquity=header.get("obliquity", 0.0),
-                unit=header.get("unit"),
+                unit=header.get("unit"), photo=header.get("photo", False),
                 groups=described)

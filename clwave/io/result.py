@@ -21,7 +21,7 @@ from .files import check_suffix, write_atomic
 from .images import (PNG_SUFFIXES, TIFF_SUFFIXES, check_bit_depth, check_orthographic, check_scale_bar, check_unit,
                      draw_scale_bar, pixel_size, write_png, write_tiff)
 from ..model.tf_passes import AUTO_PERCENTILES
-from ..model.transfer import check_window
+from ..model.tf_checks import check_window
 
 #: the longest side of the picture a notebook shows of a result (:meth:`RenderResult._repr_png_`): a larger image is
 #: reduced by a whole factor, so that a notebook does not carry a full-size PNG in its file

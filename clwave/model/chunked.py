@@ -149,6 +149,7 @@ class ChunkedWaveletVolume:
     subtracted = property(lambda self: self.volume.subtracted)
     obliquity = property(lambda self: self.volume.obliquity)
     unit = property(lambda self: self.volume.unit)
+    photo = property(lambda self: self.volume.photo)
     channels = property(lambda self: self.volume.channels)
     n_voxels = property(lambda self: int(np.prod(self.shape)))
     frame = property(lambda self: (self.shape, self.spacing, self.origin))
@@ -281,7 +282,7 @@ class ChunkedWaveletVolume:
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
                              content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity,
-                             value_range=self.value_range, unit=self.unit)
+                             value_range=self.value_range, unit=self.unit, photo=self.photo)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;

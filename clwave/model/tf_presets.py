@@ -66,4 +66,11 @@ PRESETS = {
         (0.9, 0.90, 0.90, 0.90, 0.0),
         (1.0, 1.00, 1.00, 1.00, 0.0),
     )),
+    # A photo's own colour and alpha (an RGBA cut-out as PNG or TIFF store it, straight): opacity 0.5 a voxel times
+    # its alpha (1 without one), colour its own RGB; what a 4-channel photo is classified by unless --tf names
+    # another (docs/model.md §5).  A scalar volume is drawn as a white solid.
+    "photo": dict(window=(0.0, 1.0), points=(
+        (0.0, 1.0, 1.0, 1.0, 0.5),
+        (1.0, 1.0, 1.0, 1.0, 0.5),
+    )),
 }

@@ -9,11 +9,11 @@ wavelet transform (paper §2.2, docs/model.md §5), so a new transfer function m
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, NothingVisibleError, warn_outside
+from .colour_key import auto_key, check_key, key_weight
+from .tf_checks import check_opacity_unit, check_points, check_window
 from .tf_passes import AUTO_SAMPLES, PiecewiseLinear, auto_window, classified, rgb_scale, scan
 from .tf_presets import PRESETS as _PRESETS
 from .volume import Volume
@@ -25,6 +25,9 @@ LUMA = (0.299, 0.587, 0.114)
 #: (docs/model.md §5)
 OPAQUE_VOXEL = 1.0
 OPAQUE_BOX = 5.0
+#: and nearly transparent where no ray along the box's axes reaches an optical depth of TRANSPARENT_RAY (78 % of the
+#: light through every one: a faint or black picture, docs/model.md §5)
+TRANSPARENT_RAY = 0.25
 
 _FORMAT = "clwave-transfer-function"
 
@@ -57,6 +60,10 @@ class TransferFunction:
         The length (world units) the opacities are per: the extinction per world unit is opacity / opacity_unit
         (:meth:`extinction`).  ``None``: one voxel, the smallest spacing of the volume classified, so a volume looks
         the same whatever its length unit (µm or mm) and one of spacing 1 as per world unit (docs/model.md §5).
+    key : None, "auto", (r, g, b) or (r, g, b, tolerance)
+        A colour volume's background colour, in its sample units (0 .. 255 for 8 bits): a voxel within the tolerance
+        of it (default 0.1 of the colour's range) gets no opacity, one beyond twice it all its opacity, linearly between
+        (:func:`~clwave.model.colour_key.key_weight`); "auto": the median colour of the box's edges.  None: no key.
 
     Examples
     --------
@@ -71,8 +78,9 @@ class TransferFunction:
     #: Names accepted by :meth:`preset`.
     PRESETS = tuple(_PRESETS)
 
-    def __init__(self, points, window=None, name=None, opacity_unit=None):
-        self._points = _check_points(points)
+    def __init__(self, points, window=None, name=None, opacity_unit=None, key=None):
+        self._points = check_points(points)
+        self._key = check_key(key)
         self._window = check_window(window)
         self._unit = check_opacity_unit(opacity_unit)
         if name is not None and not isinstance(name, str):
@@ -97,6 +105,8 @@ class TransferFunction:
         brightfield    auto               0.3 at 0 falling to 0 at 0.9 (white), of
                                           the luminance of a colour volume, coloured
                                           by its own RGB (stained sections, photos)
+        photo          (0, 1)             0.5 times a colour volume's own alpha (1
+                                          without one), coloured by its own RGB
         ============== ================== ==========================================
         """
         key = name.strip().lower().replace("_", "-") if isinstance(name, str) else None
@@ -158,10 +168,16 @@ class TransferFunction:
         """None (one voxel) or the length in world units that the opacities are per."""
         return self._unit
 
-    def under(self, window=..., opacity_unit=...) -> "TransferFunction":
-        """This function with another ``window`` and/or ``opacity_unit`` (``...``: its own), points and name kept."""
+    @property
+    def key(self):
+        """None, "auto" or the colour key (r, g, b, tolerance or None), in the volume's sample units."""
+        return self._key
+
+    def under(self, window=..., opacity_unit=..., key=...) -> "TransferFunction":
+        """This function with another ``window``, ``opacity_unit`` and/or ``key`` (``...``: its own), points and name
+        kept."""
         return TransferFunction(self._points, self._window if window is ... else window, self.name,
-                                self._unit if opacity_unit is ... else opacity_unit)
+                                self._unit if opacity_unit is ... else opacity_unit, self._key if key is ... else key)
 
     def extinction(self, spacing) -> np.ndarray:
         """The points' opacities as extinction per world unit on a volume or model of ``spacing``: opacity /
@@ -202,14 +218,21 @@ class TransferFunction:
                              f"{2 * np.spacing(np.abs(moved[i:i + 2]).max()):.2g} apart")
         if self._window is None:
             return TransferFunction(np.column_stack([moved, self._points[:, 1:]]), name=self.name,
-                                    opacity_unit=self._unit)
+                                    opacity_unit=self._unit, key=self._key)
         return self.under(tuple(moved))
 
     def _on(self, vol, window) -> "TransferFunction":
         """This function under ``window`` (``...``: its own) in the units of ``vol``'s data: a scalar's shifted by the
         value subtracted from it (a colour volume's points are on luminance)."""
-        tf = self.under(window)
+        tf = self.under(window)._keyed(vol)
         return tf.shifted(vol.subtracted) if vol.channels == 1 else tf
+
+    def _keyed(self, vol) -> "TransferFunction":
+        """This function with a key "auto" found in ``vol``; a key on a scalar volume refused."""
+        if self._key is not None and vol.channels == 1:
+            raise InputError("a colour key applies to a colour (RGB or RGBA) volume; this one is scalar: leave it out",
+                             cli="--key applies to a colour (RGB or RGBA) input; this one is scalar: leave it out")
+        return self.under(key=auto_key(vol.data)) if self._key == "auto" else self
 
     # ----------------------------------------------------------------- evaluation
     def __call__(self, values, window=...):
@@ -242,11 +265,12 @@ class TransferFunction:
         Scalar volume: ``alpha = opacity(v) / opacity_unit`` (per world unit: :meth:`extinction`),
         ``q = rgb(v) · alpha``.  RGB or
         RGBA volume (photographic stacks): the colour is the voxel's own RGB
-        scaled to [0, 1] (divided by 255 when the data exceed 1, by 65535 when
-        they exceed 255); the opacity is this function's opacity of the
-        luminance ``0.299 R + 0.587 G + 0.114 B`` on that [0, 1] scale, times
-        A for RGBA.  A 4-channel volume is always read as RGBA: an already
-        classified volume cannot be told apart, so do not classify twice.
+        scaled to [0, 1] (divided by 255 when the colour exceeds 1, by 65535 when
+        it exceeds 255; an alpha by its own range, so a 0 .. 1 mask stays one); the opacity is this function's
+        opacity of the luminance ``0.299 R + 0.587 G + 0.114 B`` on that [0, 1] scale, times
+        A for RGBA (straight alpha, as image files store it; the ``photo`` preset: A alone).  A 4-channel volume is
+        always read as RGBA: an already classified array cannot be told apart (an image file's can:
+        :attr:`Volume.photo`), so do not classify twice.
 
         Changing the transfer function means a new classification and a new
         wavelet transform (pre-classification, paper §2.2).
@@ -293,7 +317,7 @@ class TransferFunction:
             rgba = classified(vol.data, paint, True)
             if not rgba[..., 3].any():
                 raise tf._nothing_visible(vol, window, scale)
-            tf._warn_opaque(vol, window, scale)
+            tf._warn_opaque(vol, window, scale, rgba[..., 3])
         return Volume(rgba, spacing=vol.spacing, origin=vol.origin, obliquity=vol.obliquity, labels=vol.labels,
                       unit=vol.unit)
 
@@ -307,7 +331,7 @@ class TransferFunction:
         if vol.channels == 1:
             what, values, units = "values", data[:, 0] + shift, "the input's units"
         else:
-            what, values = "luminance (0 .. 1)", _luminance(data[:, :3].astype(np.float64) / scale)
+            what, values = "luminance (0 .. 1)", _luminance(data[:, :3].astype(np.float64) / scale[:3])
             units = "its luminance, 0 .. 1 whatever the sample type"
         name = f" {self.name}" if self.name else ""
         line = (f"the transfer function{name} gives no voxel of this volume any opacity: its points span "
@@ -316,22 +340,39 @@ class TransferFunction:
         return NothingVisibleError(f"{line} (window=(lo, hi)) or another function",
                                    cli=f"{line} (--tf-window LO,HI) or another preset")
 
-    def _warn_opaque(self, vol, window, scale):
+    def _warn_opaque(self, vol, window, scale, alpha=None):
         """Warn where this function (in ``vol``'s data units: :meth:`_on`) makes the in-memory ``vol`` nearly opaque
-        (:meth:`opaque_line` of a strided subsample of its voxels and of its box's faces' voxels), naming the window in
-        the input's units and the data's range (a colour volume's luminance)."""
+        (:meth:`opaque_line` of a strided subsample of its voxels and of its box's faces' voxels), or nearly
+        transparent: no ray along the box's axes of optical depth :data:`TRANSPARENT_RAY` (through ``alpha``, the
+        classification's opacity, where given; else through a strided grid of the voxels); naming the window in the
+        input's units and the data's range (a colour volume's luminance)."""
         faces = [np.moveaxis(vol.data, a, 0)[i].reshape(-1, vol.channels) for a in range(3) for i in (0, -1)]
         data = vol.data.reshape(-1, vol.channels)
         data = data[::max(1, -(-len(data) // AUTO_SAMPLES))]
-        values = data[:, 0] if vol.channels == 1 else _luminance(data[:, :3].astype(np.float64) / scale)
+        values = data[:, 0] if vol.channels == 1 else _luminance(data[:, :3].astype(np.float64) / scale[:3])
         shift = vol.subtracted if vol.channels == 1 else 0.0
-        line = self.opaque_line(self.painter(vol.channels, window, scale, vol.spacing), data, np.concatenate(faces),
-                                vol.spacing, vol.shape, window, shift, "volume",
-                                ("volume's values" if vol.channels == 1 else "volume's luminance",
-                                 np.nanmin(values) + shift, np.nanmax(values) + shift))
+        paint = self.painter(vol.channels, window, scale, vol.spacing)
+        seen = ("volume's values" if vol.channels == 1 else "volume's luminance", np.nanmin(values) + shift,
+                np.nanmax(values) + shift)
+        line = self.opaque_line(paint, data, np.concatenate(faces), vol.spacing, vol.shape, window, shift, "volume",
+                                seen)
         if line is not None:
             warn_outside(NearlyOpaqueWarning(line + " (window=, opacity_unit=)",
                                              cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))
+            return
+        step = 1 if alpha is not None else max(1, round((vol.data.size / vol.channels / AUTO_SAMPLES) ** (1 / 3)))
+        if alpha is None:
+            alpha = classified(vol.data[::step, ::step, ::step], paint, False)[..., 3]
+        ray = max(float(alpha.sum(axis=a).max()) * vol.spacing[a] * step for a in range(3))
+        if ray < TRANSPARENT_RAY:
+            lo, hi = self.data_points(window)[[0, -1]] + shift
+            unit = float(min(vol.spacing)) if self._unit is None else self._unit
+            line = (f"the transfer function{f' {self.name}' if self.name else ''} makes this volume nearly transparent "
+                    f"(no ray along the box's axes has an optical depth above {ray:.3g}: a faint or black picture); "
+                    f"its window is {lo:.4g} .. {hi:.4g}, the {seen[0]} {seen[1]:.4g} .. {seen[2]:.4g}: give a window "
+                    f"in the input's units or auto, or a shorter opacity unit (now {unit:g})")
+            warn_outside(ClwaveWarning(line + " (window=, opacity_unit=)",
+                                       cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))
 
     def opaque_line(self, paint, data, faces, spacing, shape, window, shift, thing, values) -> str | None:
         """Why this function (its points under ``window``, plus ``shift``: the input's units) makes a ``thing``
@@ -377,26 +418,27 @@ class TransferFunction:
         """This function with the window :meth:`classify` would use on ``vol`` made concrete.
 
         Use it to record exactly how a volume was classified (e.g. in a saved
-        file): an "auto" window becomes the (lo, hi) found in ``vol``, in the input's units as every window, and an
-        opacity unit of one voxel ``vol``'s smallest spacing.
+        file): an "auto" window becomes the (lo, hi) found in ``vol``, in the input's units as every window, an
+        opacity unit of one voxel ``vol``'s smallest spacing, and a key "auto" the colour of ``vol``'s box edges.
         """
         if not isinstance(vol, Volume):
             raise InputError(f"resolved needs a clwave.Volume, got {type(vol).__name__}")
-        tf = self.under(window)
+        tf = self.under(window)._keyed(vol)
         window = tf._statistics(vol)[0]
         if tf.window == "auto" and vol.channels == 1:  # the percentiles of the stored values
             window = tuple(w + vol.subtracted for w in window)
         return tf.under(window, float(min(vol.spacing)) if self._unit is None else self._unit)
 
     def _statistics(self, vol):
-        """(window, RGB scale) that :meth:`classify` uses on ``vol``: an "auto" window needs the strided
-        subsample, RGB(A) the minimum and maximum, both found in one pass over a chunked volume."""
+        """(window, the range of each channel: :func:`rgb_scale`) that :meth:`classify` uses on ``vol``: an "auto"
+        window needs the strided subsample, RGB(A) each channel's minimum and maximum, found in one pass over a chunked
+        volume."""
         c = _channels(vol)
         win = self._window
         sample, lo, hi = scan(vol.data, win == "auto", c > 1)
-        scale = 1.0 if c == 1 else rgb_scale(lo, hi)
+        scale = np.ones(1) if c == 1 else rgb_scale(lo, hi)
         if win == "auto":
-            win = auto_window(sample if c == 1 else _luminance(sample[:, :3].astype(np.float64) / scale))
+            win = auto_window(sample if c == 1 else _luminance(sample[:, :3].astype(np.float64) / scale[:3]))
         return win, scale
 
     def painter(self, channels, window, scale, spacing):
@@ -418,13 +460,16 @@ class TransferFunction:
                     out[:, ch] = done[key] * a
         else:
             pl = PiecewiseLinear(self.data_points(window), extinction)
+            key, colour_scale, alpha_scale = self._key, float(scale[0]), float(scale[-1])
 
             def paint(values, out):
                 rgb = values[:, :3].astype(np.float64)
-                rgb /= scale
+                rgb /= colour_scale
                 a = pl.channel(*pl.segment(_luminance(rgb)), 0)
                 if channels == 4:
-                    a *= values[:, 3].astype(np.float64) / scale
+                    a *= values[:, 3].astype(np.float64) / alpha_scale
+                if key is not None:
+                    a *= key_weight(rgb, key, colour_scale)
                 out[:, 3] = a
                 rgb *= a[:, None]
                 out[:, :3] = rgb
@@ -446,6 +491,7 @@ class TransferFunction:
             "name": self.name,
             "window": list(win) if isinstance(win, tuple) else win,
             "opacity_unit": self._unit,
+            "key": list(self._key) if isinstance(self._key, tuple) else self._key,
             "points": [[float(x) for x in row] for row in self._points],
         }
 
@@ -462,7 +508,7 @@ class TransferFunction:
             raise InputError(f"unsupported transfer function format {d.get('format')!r} "
                              f"version {version!r}; expected {_FORMAT!r} version 1 or 2")
         unit = 1.0 if version == 1 else d.get("opacity_unit")
-        return cls(d["points"], window=d.get("window"), name=d.get("name"), opacity_unit=unit)
+        return cls(d["points"], window=d.get("window"), name=d.get("name"), opacity_unit=unit, key=d.get("key"))
 
     @classmethod
     def stored(cls, transfer_function) -> dict | None:
@@ -476,14 +522,14 @@ class TransferFunction:
         if not isinstance(other, TransferFunction):
             return NotImplemented
         return (self.name == other.name and self._window == other._window and self._unit == other._unit
-                and np.array_equal(self._points, other._points))
+                and self._key == other._key and np.array_equal(self._points, other._points))
 
     __hash__ = None
 
     def __repr__(self):
         label = f"{self.name!r}, " if self.name else ""
         return (f"TransferFunction({label}{len(self._points)} points, "
-                f"window={self._window!r}, opacity_unit={self._unit!r})")
+                f"window={self._window!r}, opacity_unit={self._unit!r}{f', key={self._key!r}' if self._key else ''})")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -519,72 +565,3 @@ def _warn_colour_window(window):
 
 def _luminance(rgb):
     return rgb[:, 0] * LUMA[0] + rgb[:, 1] * LUMA[1] + rgb[:, 2] * LUMA[2]
-
-
-def _check_points(points) -> np.ndarray:
-    try:
-        p = np.array(points, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer past float's range
-        raise InputError("transfer function points must be rows of 5 numbers "
-                         "(value, r, g, b, opacity) within float's range") from None
-    if p.ndim != 2 or p.shape[1] != 5:
-        raise InputError(f"transfer function points must be rows (value, r, g, b, opacity), "
-                         f"got an array of shape {p.shape}")
-    if p.shape[0] < 2:
-        raise InputError(f"transfer function needs at least 2 points, got {p.shape[0]}")
-    if not np.all(np.isfinite(p)):
-        row = int(np.nonzero(~np.all(np.isfinite(p), axis=1))[0][0])
-        raise InputError(f"transfer function point {row} {p[row].tolist()} is not finite "
-                         "(NaN or Inf); give finite numbers")
-    bad = np.nonzero(np.diff(p[:, 0]) <= 0)[0]
-    if bad.size:
-        i = int(bad[0])
-        raise InputError(f"transfer function values must be strictly increasing: point {i + 1} "
-                         f"({p[i + 1, 0]:g}) does not exceed point {i} ({p[i, 0]:g})")
-    col = p[:, 1:4]
-    if np.any((col < 0) | (col > 1)):
-        row = int(np.nonzero(np.any((col < 0) | (col > 1), axis=1))[0][0])
-        raise InputError(f"transfer function colour {col[row].tolist()} of point {row} is "
-                         "outside [0, 1]; give r, g, b in [0, 1]")
-    if np.any(p[:, 4] < 0):
-        row = int(np.nonzero(p[:, 4] < 0)[0][0])
-        raise InputError(f"transfer function opacity {p[row, 4]:g} of point {row} is negative; "
-                         "opacity is an extinction per unit length, >= 0")
-    p.flags.writeable = False
-    return p
-
-
-def check_opacity_unit(unit, option=None):
-    """None (one voxel) or a finite length > 0 (world units), as a float; anything else an InputError, in the words
-    of the command line's ``option`` too."""
-    if unit is None:
-        return None
-    try:
-        value = float(unit)
-    except (TypeError, ValueError, OverflowError):
-        value = math.nan
-    if isinstance(unit, bool) or not (math.isfinite(value) and value > 0):
-        fix = "a length > 0 in world units (the spacing's)"
-        raise InputError(f"opacity unit {unit!r} must be {fix}, or None for one voxel (the smallest spacing)",
-                         cli=option and f"{option} {unit:g} must be {fix}; leave it out for one voxel")
-    return value
-
-
-def check_window(window, option=None):
-    """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError, in the words of the
-    command line's ``option`` too (e.g. "--tf-window", whose text gave the window): the one home of the check of
-    every window, transfer functions' and displays'."""
-    if window is None:
-        return None
-    if isinstance(window, str):
-        if window.strip().lower() == "auto":
-            return "auto"
-        raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}")
-    try:
-        lo, hi = (float(w) for w in window)
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-        raise InputError(f"window ({lo:g}, {hi:g}) must be two finite numbers (lo, hi) with lo < hi",
-                         cli=option and f"{option} {lo:g},{hi:g} must be two finite numbers LO,HI with LO < HI")
-    return (lo, hi)

@@ -74,7 +74,7 @@ class Volume:
     """
 
     def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), subtracted=0.0, obliquity=0.0, labels=None,
-                 stored_dtype=None, unit=None):
+                 stored_dtype=None, unit=None, photo=False):
         lazy = is_dask(data)
         if np.ma.is_masked(data):  # numpy.asarray would take the masked voxels' values as they are
             raise InputError(f"volume data is a masked array with {np.ma.count_masked(data)} masked voxel(s), whose "
@@ -132,6 +132,7 @@ class Volume:
         from ..io.images import check_unit
 
         self.unit = check_unit(unit)
+        self.photo = flag(photo, "photo") and self.channels > 1
 
     @property
     def shape(self) -> tuple:

@@ -126,7 +126,7 @@ class WaveletVolume:
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
                  focus=None, transfer_function=None, content=None, content_mask=None, subtracted=0.0, obliquity=0.0,
-                 value_range=None, unit=None):
+                 value_range=None, unit=None, photo=False):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
@@ -136,6 +136,7 @@ class WaveletVolume:
         # the field to (docs/raytracing.md §10); None where not known (several channels, a .clw of before it)
         self.value_range = None if value_range is None else tuple(float(v) for v in value_range)
         self.unit = unit  # the source volume's Volume.unit: the world unit ("um", "mm"...), None where unknown
+        self.photo = bool(photo)  # the source volume's Volume.photo: a photo's colour and alpha, not classified
         self.levels = int(levels)
         self.groups = list(groups)
         self.channels = int(channels)
@@ -205,7 +206,7 @@ class WaveletVolume:
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels,
                    interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask),
                    content_mask=None if interpolate else ContentMask.of(mask), subtracted=volume.subtracted,
-                   obliquity=volume.obliquity, value_range=volume.value_range(), unit=volume.unit)
+                   obliquity=volume.obliquity, value_range=volume.value_range(), unit=volume.unit, photo=volume.photo)
 
     # ------------------------------------------------------------- properties
     @property
@@ -234,6 +235,12 @@ class WaveletVolume:
         extension, docs/model.md §3), so its compression is slightly negative.
         """
         return 1.0 - float(np.mean([g.kept for g in self.groups])) / self.n_voxels
+
+    @property
+    def classified(self) -> bool:
+        """Whether this is a classified model ``(q_R, q_G, q_B, alpha)``, which ray tracing shades as it is: 4 channels,
+        not a photo's colour and alpha (:attr:`Volume.photo`, docs/model.md §5)."""
+        return self.channels == 4 and not self.photo
 
     def __repr__(self):
         return (f"WaveletVolume(shape={self.shape}, wavelets={self.wavelets}, levels={self.levels}, "
@@ -278,7 +285,7 @@ class WaveletVolume:
                             interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
                             content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity,
-                            value_range=self.value_range, unit=self.unit)
+                            value_range=self.value_range, unit=self.unit, photo=self.photo)
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
@@ -387,8 +394,7 @@ class WaveletVolume:
             for slot, channel in enumerate(g.channels):
                 data[..., channel] = reconstruct_channel(g, dense, slot, self.shape, self.levels)
         return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.subtracted,
-                      self.obliquity,
-                      unit=self.unit)
+                      self.obliquity, unit=self.unit, photo=self.photo)
 
     def unmasked(self) -> "WaveletVolume":
         """The same coefficients without the content mask (nothing clamped, docs/raytracing.md §4), keeping no

@@ -450,6 +450,9 @@ def check_post(tracer, tf, absorption):
     if tracer.wv.channels != 1:
         raise InputError(f"transfer_function= classifies a scalar model while rendering; this one has "
                          f"{tracer.wv.channels} channels (already classified: render it without one)")
+    if tf.key is not None:  # a scalar's colour is the function's: no key to take out
+        raise InputError("a transfer function with a colour key classifies a colour volume before the transform; a "
+                         "scalar model is classified while rendering without one: leave the key out")
     if tracer.scalar is None:
         raise InputError("transfer_function= needs field='bspline' (--field bspline)")
     if not absorption:

@@ -304,4 +304,4 @@ def coarse_volume(approximation: WaveletVolume) -> WaveletVolume:
               for g in approximation.groups]
     return WaveletVolume(shape, spacing[::-1], origin, 0, groups, wv.channels, interpolate=wv.interpolate,
                          transfer_function=wv.transfer_function, content=content, subtracted=wv.subtracted,
-                         obliquity=wv.obliquity, value_range=wv.value_range)
+                         obliquity=wv.obliquity, value_range=wv.value_range, photo=wv.photo)

@@ -252,6 +252,11 @@ class RayTracer:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
         if transfer_function is not None:
             check_post(self, transfer_function, absorption)
+        elif absorption and wv.photo:
+            raise InputError("emission-absorption ray tracing needs a classified model; this one holds a photo's "
+                             "colour and alpha (an RGBA image file): classify the volume first, e.g. "
+                             "TransferFunction.preset('photo').classify(volume) (opacity its alpha, colour its RGB), "
+                             "or pass absorption=False for line integrals")
         elif absorption and wv.channels != 4:
             raise InputError(f"emission-absorption ray tracing needs an RGBA volume (4 channels), this one has "
                              f"{wv.channels}; classify it first (TransferFunction.classify), give a scalar one a "

@@ -81,7 +81,7 @@ class ViewServer:
         self.host, self.port, self.device = host, check_port(port), device
         self.local = is_loopback(host)  # then a request's Host must name this machine too (DNS rebinding)
         self.device_memory = parse_cap(device_memory)
-        self.shares = memory_shares(device_memory, shaded=self.wv.channels in (1, 4))
+        self.shares = memory_shares(device_memory, shaded=self.wv.channels == 1 or self.wv.classified)
         self.token = secrets.token_urlsafe(24)
         self.origin = origin or Origin()  # how the model was made: a view's command line reads it so (export.py)
         self.saving = asyncio.Lock()  # one image saved at a time (export.serve)
@@ -129,7 +129,7 @@ class ViewServer:
         # on the page (the 128x128 auto-window image is checked as XraySource makes it)
         xray.r.begin(xray.camera(self.initial_view(xray)))
         sources = dict(xray=xray)
-        if wv.channels in (1, 4):  # a scalar model through a transfer function at render time, or RGBA
+        if wv.channels == 1 or wv.classified:  # a scalar model through a transfer function at render time, or RGBA
             # a whole file (not a part of it, keep=) is traced in stages: its coarse stage at once, read from the file;
             # the full one from the model held (the prefix, where it is all of the file) or read for the X-ray views
             path = opened.path if opened is not None and opened.keep is None else None

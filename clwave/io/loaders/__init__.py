@@ -163,6 +163,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
     labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
     stored = data.dtype
+    photo = data.ndim == 4 and stored.kind in "iu" and _photo(kind, path)
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
         if hu_to_mu and data.ndim != 3:
             channels = f"scalar CT volumes, but this one has {data.shape[3]} channels"
@@ -173,13 +174,13 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     placed = origin if origin is not None else file_origin if file_origin is not None else (0.0, 0.0, 0.0)
     volume = Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
-                    subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored,
+                    subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
                     unit=unit if unit is not None else _world_unit(kind, path, inner))
     if orientation is not None:  # turned into RAS+ as a medical file is, by the same code; origin= is RAS already
         affine = stated_affine(turn, volume.shape, volume.spacing, volume.origin)
         data, spacing, turned, _ = to_canonical(volume.data, affine)
         volume = Volume(data, spacing, turned if origin is None else origin, subtracted=subtract,
-                        labels=volume.labels, stored_dtype=stored, unit=volume.unit)
+                        labels=volume.labels, stored_dtype=stored, unit=volume.unit, photo=photo)
     return volume
 
 
@@ -194,6 +195,17 @@ def check_orientation(kind, orientation):
                          cli=f"--orientation is for inputs that carry none (.npy, .raw, TIFF, folders of slices, "
                              f"Zarr, HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out")
     return axis_turn(orientation)
+
+
+def _photo(kind, path) -> bool:
+    """Whether the colour samples of a ``kind`` input are a photo's, straight colour and alpha (:attr:`Volume.photo`):
+    PNG and JPEG slices, and TIFF colour samples (RGB, RGBA), not an OME-TIFF's channels."""
+    if kind in ("png-folder", "jpeg-folder"):
+        return True
+    if kind in ("tiff", "tiff-folder"):
+        with reading(path):
+            return tiff.colour_samples(path if kind == "tiff" else slices.slice_files(path)[1][0])
+    return False
 
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
@@ -361,6 +373,10 @@ def _kind(path: Path) -> str:
                 return "dicom-frames"
         raise FileFormatError(f"{path} is one DICOM slice; pass the folder that holds the whole series "
                               f"({path.parent})")
+    image = next((kind for kind in ("PNG", "JPEG") if suffix in slices.SLICE_SUFFIXES[kind]), None)
+    if image:  # a photo stack's slice, as Fiji's Image Sequence takes one
+        raise FileFormatError(f"{path} is one {image} image; clwave reads a folder of {image} slices as a stack: give "
+                              f"its folder ({path.parent})")
     if suffix not in _FILE_KINDS:
         raise FileFormatError(f"unknown file type {suffix or '(no extension)'!r} of {path}; "
                               f"supported inputs: {SUPPORTED}")

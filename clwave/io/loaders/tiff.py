@@ -32,6 +32,14 @@ def world_unit(path) -> str | None:
     return IMAGEJ_UNITS.get(str(unit).strip().lower())
 
 
+def colour_samples(path) -> bool:
+    """Whether a TIFF's first series holds colour samples (RGB, RGBA: its axes' S), not an OME-TIFF's channels."""
+    import tifffile
+
+    with tifffile.TiffFile(path) as tif:
+        return "S" in tif.series[0].axes
+
+
 def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False):
     """``(data, spacing, origin)``: a TIFF stack as ``(pages, y, x[, samples])``, its spacing ``(dz, dy, dx)`` where
     it is an OME-TIFF (:func:`_ome_spacing`) or an ImageJ stack (:func:`_imagej_spacing`), else None (with a warning

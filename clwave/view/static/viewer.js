@@ -101,7 +101,8 @@
     showModel();
     const shaded = hello.modes.includes("shaded");
     document.querySelector('input[value="shaded"]').disabled = !shaded;
-    $("shaded-note").textContent = shaded ? "" : "shaded needs a scalar or a classified (RGBA) model";
+    $("shaded-note").textContent = shaded ? "" : "shaded needs a scalar or a classified (RGBA) model: " +
+      "classify a colour one first (--tf brightfield: stained, on white; --tf photo: by its own alpha)";
     // the first entry is the transfer function the server starts from (given with --tf/--tf-window, the model's
     // own, or grey; preset null), then the presets with their own windows
     const start = hello.tf || { name: "grey", window: "auto" };

@@ -1,0 +1,79 @@
+"""The checks of a transfer function's parts (:class:`clwave.TransferFunction`): its points, window and opacity unit,
+each a standard exception in one line naming the problem and the fix."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import InputError
+
+
+def check_points(points) -> np.ndarray:
+    try:
+        p = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer past float's range
+        raise InputError("transfer function points must be rows of 5 numbers "
+                         "(value, r, g, b, opacity) within float's range") from None
+    if p.ndim != 2 or p.shape[1] != 5:
+        raise InputError(f"transfer function points must be rows (value, r, g, b, opacity), "
+                         f"got an array of shape {p.shape}")
+    if p.shape[0] < 2:
+        raise InputError(f"transfer function needs at least 2 points, got {p.shape[0]}")
+    if not np.all(np.isfinite(p)):
+        row = int(np.nonzero(~np.all(np.isfinite(p), axis=1))[0][0])
+        raise InputError(f"transfer function point {row} {p[row].tolist()} is not finite "
+                         "(NaN or Inf); give finite numbers")
+    bad = np.nonzero(np.diff(p[:, 0]) <= 0)[0]
+    if bad.size:
+        i = int(bad[0])
+        raise InputError(f"transfer function values must be strictly increasing: point {i + 1} "
+                         f"({p[i + 1, 0]:g}) does not exceed point {i} ({p[i, 0]:g})")
+    col = p[:, 1:4]
+    if np.any((col < 0) | (col > 1)):
+        row = int(np.nonzero(np.any((col < 0) | (col > 1), axis=1))[0][0])
+        raise InputError(f"transfer function colour {col[row].tolist()} of point {row} is "
+                         "outside [0, 1]; give r, g, b in [0, 1]")
+    if np.any(p[:, 4] < 0):
+        row = int(np.nonzero(p[:, 4] < 0)[0][0])
+        raise InputError(f"transfer function opacity {p[row, 4]:g} of point {row} is negative; "
+                         "opacity is an extinction per unit length, >= 0")
+    p.flags.writeable = False
+    return p
+
+
+def check_opacity_unit(unit, option=None):
+    """None (one voxel) or a finite length > 0 (world units), as a float; anything else an InputError, in the words
+    of the command line's ``option`` too."""
+    if unit is None:
+        return None
+    try:
+        value = float(unit)
+    except (TypeError, ValueError, OverflowError):
+        value = math.nan
+    if isinstance(unit, bool) or not (math.isfinite(value) and value > 0):
+        fix = "a length > 0 in world units (the spacing's)"
+        raise InputError(f"opacity unit {unit!r} must be {fix}, or None for one voxel (the smallest spacing)",
+                         cli=option and f"{option} {unit:g} must be {fix}; leave it out for one voxel")
+    return value
+
+
+def check_window(window, option=None):
+    """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError, in the words of the
+    command line's ``option`` too (e.g. "--tf-window", whose text gave the window): the one home of the check of
+    every window, transfer functions' and displays'."""
+    if window is None:
+        return None
+    if isinstance(window, str):
+        if window.strip().lower() == "auto":
+            return "auto"
+        raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}")
+    try:
+        lo, hi = (float(w) for w in window)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise InputError(f"window ({lo:g}, {hi:g}) must be two finite numbers (lo, hi) with lo < hi",
+                         cli=option and f"{option} {lo:g},{hi:g} must be two finite numbers LO,HI with LO < HI")
+    return (lo, hi)
