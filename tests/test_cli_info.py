@@ -113,6 +113,12 @@ def test_info_gives_a_stored_functions_opacity_unit_and_the_inputs_value_range(t
            f"field clamped to it)" in out, out
     code, out, _ = run(capsys, "info", str(files[None]))
     assert code == 0 and "opacities per voxel (the smallest spacing, 0.25 mm)\n" in out, out
+    for length, words in ((1.0, "1 world unit"), (3.0, "3 world units")):  # no length unit recorded
+        path = tmp_path / f"plain{length:g}.clw"
+        plain = clwave.Volume(data, spacing=(0.5, 0.25, 0.4))
+        clwave.WaveletVolume.from_volume(plain, levels=1, transfer_function=tf.under(opacity_unit=length)).save(path)
+        code, out, _ = run(capsys, "info", str(path))
+        assert code == 0 and f"opacities per {words}\n" in out, out
     for unit, path in files.items():
         code, out, _ = run(capsys, "info", str(path), "--json")
         facts = json.loads(out)

@@ -123,6 +123,7 @@ def _with(content, offset, data):
     ("not mrc", "is not an MRC/CCP4 map clwave reads: Map ID string not found"),
     ("complex", r"holds complex float32 samples \(mode 4: a Fourier transform\)"),
     ("mode", "names mode 7, none clwave reads"),
+    ("extended", r"declares an extended header of -100 bytes \(nsymbt\); the header is corrupt"),
     ("axes", r"orders the axes mapc, mapr, maps = \(1, 1, 3\), not an order of x, y, z"),
     ("empty", "declares 0 x 4 x 3 columns, rows and sections; each needs at least one"),
     ("stack", r"is a stack of volumes \(space group 401, 3 sections of 1\)")])
@@ -134,6 +135,7 @@ def test_a_truncated_or_lying_map_is_refused_in_one_line(tmp_path, capsys, case,
                "not mrc": lambda: _with(content, 208, b"XXXX"),
                "complex": lambda: _with(content, 12, np.int32(4).tobytes()),
                "mode": lambda: _with(content, 12, np.int32(7).tobytes()),
+               "extended": lambda: _with(content, 92, np.int32(-100).tobytes()),
                "axes": lambda: _with(content, 68, np.int32(1).tobytes()),
                "empty": lambda: _with(content, 0, np.int32(0).tobytes()),
                "stack": lambda: _with(_with(content, 88, np.int32(401).tobytes()), 36, np.int32(1).tobytes())}[case]()

@@ -202,11 +202,13 @@ def test_the_command_line_labels_in_the_inputs_unit(nifti, tmp_path):
 @pytest.mark.parametrize("argv, words", [
     (SPLAT + ["--scale-bar", "--perspective", "-o", "{}/a.png"], "--scale-bar needs an orthographic view"),
     (SPLAT + ["--scale-bar", "-o", "{}/a.tif"], "--scale-bar sets a .png's scale bar; a .tif holds the values"),
-    (SPLAT + ["--scale-bar", "0", "-o", "{}/a.png"], "--scale-bar 0.0 must be a positive length"),
+    (SPLAT + ["--scale-bar", "0", "-o", "{}/a.png"],
+     "--scale-bar 0.0 must be a positive length in world units, e.g. 10, or left out (a fifth of the width)"),
     (SPLAT + ["--scale-bar", "inf", "-o", "{}/a.png"], "--scale-bar inf must be a positive length"),
     (SPLAT + ["--scale-bar", "100", "--extent", "48", "--size", "96", "-o", "{}/a.png"],
      "a scale bar of 100 units (200 pixels at 0.5 units a pixel) is longer than the"),
-    (SPLAT + ["--scale-bar", "0.5", "--extent", "48", "--size", "96", "-o", "{}/a.png"], "is under 2 pixels"),
+    (SPLAT + ["--scale-bar", "0.5", "--extent", "48", "--size", "96", "-o", "{}/a.png"],  # 48 units over 96 pixels
+     "is under 2 pixels: give a length from 1 unit to 41 units, or no length (a fifth of the width: 5 units)"),
     (["progressive", *SPLAT[1:], "--scale-bar", "-o", "{}/a.gif", "--perspective"], "needs an orthographic view"),
 ])
 def test_the_command_line_refusals_are_one_line(tmp_path, capsys, argv, words):

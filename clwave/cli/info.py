@@ -167,7 +167,8 @@ def _opacity_unit(tf, f, unit) -> str:
     """The length a stored transfer function's opacities are per, in words (docs/model.md §5)."""
     if tf["opacity_unit"] is None:
         return f"voxel (the smallest spacing, {_lengths([min(f['spacing'])], _extent(f['shape'], f['spacing']))}{unit})"
-    return f"{tf['opacity_unit']:g}{unit or ' world units'}"
+    length = tf["opacity_unit"]
+    return f"{length:g}{unit or (' world unit' if length == 1 else ' world units')}"
 
 
 def _oblique(degrees) -> str:

@@ -67,7 +67,7 @@ def add_reading_options(p):
                                      "--unit's); overrides the file's; 'clwave info FILE' prints it as --spacing")
     g.add_argument("--unit", choices=tuple(UNIT_METRES), help="the world unit, the spacing's (default the file's)")
     g.add_argument("--orientation", metavar="CODES", help="an input with no orientation (npy, raw, TIFF, a folder of "
-                   "slices, Zarr, HDF5): where its x, y, z axes point, e.g. LPS (x left, y posterior, z superior; "
+                   "slices, Zarr, HDF5, MRC): where its x, y, z axes point, e.g. LPS (x left, y posterior, z superior; "
                    "nibabel's codes), turned into RAS+ as DICOM is")
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
     g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water; CT in HU: -1000); "

@@ -101,7 +101,7 @@ def _build(cc: ComputeContext, files, defines, options) -> KernelSet:
             f"OpenCL build of {', '.join(files)} failed on {cc.info.name} ({first}); "
             f"if the driver is broken, {INSTALL_HINT}", log=log) from None
     seconds = time.perf_counter() - start
-    if os.environ.get("CLW_BUILD_LOG"):  # one JSON line a build, for counting builds (docs/benchmarks.md)
+    if os.environ.get("CLW_BUILD_LOG"):  # one JSON line a build, for counting builds (docs/benchmarks.md §22)
         with open(os.environ["CLW_BUILD_LOG"], "a") as log:
             log.write(json.dumps(dict(files=files, defines=defines, options=options, seconds=round(seconds, 3),
                                       test=os.environ.get("PYTEST_CURRENT_TEST", "").split(" ")[0])) + "\n")

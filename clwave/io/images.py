@@ -61,7 +61,8 @@ def check_scale_bar(scale_bar):
     if not (isinstance(scale_bar, (int, float, np.integer, np.floating)) and np.isfinite(scale_bar) and scale_bar > 0):
         raise InputError(f"scale_bar={scale_bar!r} must be True (a length about a fifth of the width) or a positive "
                          f"length in world units, e.g. 10", cli=f"--scale-bar {scale_bar} must be a positive length "
-                                                                f"in world units, e.g. 10, or none")
+                                                                f"in world units, e.g. 10, or left out (a fifth of the "
+                                                                f"width)")
     return float(scale_bar)
 
 
@@ -126,7 +127,7 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
         why = "is under 2 pixels" if bar < 2 else f"is longer than the {room} pixels the {width}-pixel-wide picture " \
                                                   f"has for it"
         raise InputError(f"{what} {why}: give a length from {length_label(2 * pixel, unit, 3)} to "
-                         f"{length_label(room * pixel, unit, 3)}, or none (a fifth of the width: "
+                         f"{length_label(room * pixel, unit, 3)}, or no length (a fifth of the width: "
                          f"{length_label(nice_length(width * pixel), unit)})")
     x1, y1 = width - margin - rim, height - margin - rim  # the white bar's right end and bottom, exclusive
     gap = max(2, rim + 1)

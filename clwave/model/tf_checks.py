@@ -11,6 +11,8 @@ from ..errors import InputError
 
 
 def check_points(points) -> np.ndarray:
+    """``points`` as a read-only (n, 5) float64 array of rows (value, r, g, b, opacity): at least 2, finite, values
+    strictly increasing, colours in [0, 1], opacities >= 0; anything else an InputError naming the first bad row."""
     try:
         p = np.array(points, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):  # OverflowError: an integer past float's range

@@ -21,7 +21,6 @@ MAX_MESSAGE = 4096
 #: messages per second a page may send on average, and in a burst (the page sends at most one per
 #: animation frame, 60 a second)
 RATE, BURST = 120.0, 240
-MODES = ("xray", "shaded")
 ZOOM = (0.1, 50.0)
 #: a perspective view's vertical field of view, degrees (the page's slider's span)
 FOV = (5.0, 120.0)

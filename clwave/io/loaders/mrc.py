@@ -81,7 +81,8 @@ def world_unit(path) -> str | None:
 
 def _header(path):
     """``(header, offset of the samples)``: mrcfile's header, checked as ``permissive=False`` checks it, its extended
-    header's length (``nsymbt``) first against the file's: mrcfile reads (allocates) all it declares."""
+    header's length (``nsymbt``) first, not negative and against the file's: mrcfile reads (allocates) all it
+    declares."""
     import mrcfile
     from mrcfile.dtypes import HEADER_DTYPE
     from mrcfile.utils import byte_order_from_machine_stamp
@@ -95,6 +96,9 @@ def _header(path):
     if order is not None:
         extended, holds = int(np.frombuffer(raw, HEADER_DTYPE.newbyteorder(order))[0]["nsymbt"]), \
             path.stat().st_size - _HEADER
+        if extended < 0:
+            raise FileFormatError(f"{path}: its MRC header declares an extended header of {extended:,} bytes (nsymbt); "
+                                  "the header is corrupt")
         if extended > holds:
             raise FileFormatError(f"{path}: its MRC header declares an extended header of {extended:,} bytes but the "
                                   f"file holds {holds:,} bytes after its 1,024-byte header; it is truncated or its "
