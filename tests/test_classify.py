@@ -248,12 +248,9 @@ def crop_camera(model, azimuth, elevation, size, rows, cols):
 
 def mni152(step=6) -> clwave.Volume:
     """The MNI152 T1 MRI template inside the nilearn wheel, averaged over step^3 boxes."""
-    import importlib.util
-    from pathlib import Path
+    from test_progressive_raytrace import NILEARN_T1, nilearn_file
 
-    path = Path(importlib.util.find_spec("nilearn").submodule_search_locations[0]) / \
-        "datasets/data/mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz"
-    vol = clwave.load(path)
+    vol = clwave.load(nilearn_file(NILEARN_T1))
     n = [s // step for s in vol.shape]
     boxes = vol.data[:n[0] * step, :n[1] * step, :n[2] * step].reshape(n[0], step, n[1], step, n[2], step)
     return clwave.Volume(boxes.mean(axis=(1, 3, 5)), spacing=tuple(step * np.asarray(vol.spacing)))

@@ -131,12 +131,10 @@ def test_an_8_bit_mri_with_plateaus_is_no_label_map():
     """Hundreds of 8-bit intensities filling 0 .. 255 are an image's, however flat its regions: the MNI152 T1
     template at 8 bits, its white matter set to 110 as FreeSurfer's T1.mgz normalises it (85 % of its neighbours
     equal, as a label map's are); and so are they scaled by 4 or 16, numbered sparsely but in even steps."""
-    import importlib.util
-    from pathlib import Path
+    from test_progressive_raytrace import NILEARN_T1, nilearn_file
 
-    folder = Path(importlib.util.find_spec("nilearn").submodule_search_locations[0]) / "datasets/data"
-    t1 = np.asarray(nib.load(folder / "mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz").dataobj)
-    white = np.asarray(nib.load(folder / "mni_icbm152_wm_tal_nlin_sym_09a_converted.nii.gz").dataobj) > 0.9
+    t1 = np.asarray(nib.load(nilearn_file(NILEARN_T1)).dataobj)
+    white = np.asarray(nib.load(nilearn_file("mni_icbm152_wm_tal_nlin_sym_09a_converted.nii.gz")).dataobj) > 0.9
     data = np.rint(t1 / t1.max() * 255).astype(np.uint8)
     data[white] = 110
     assert len(np.unique(data)) > 100 and not looks_like_labels(data)

@@ -24,14 +24,18 @@ from clwave.raytrace.progressive import schedule
 from clwave.raytrace.tracer import RayTracer
 
 pytestmark = pytest.mark.opencl
-NILEARN_T1 = "datasets/data/mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz"
+NILEARN_T1 = "mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz"
+
+
+def nilearn_file(name) -> Path:
+    """A file of the nilearn wheel's datasets/data (the test extra): the MNI152 templates."""
+    return Path(importlib.util.find_spec("nilearn").submodule_search_locations[0]) / "datasets/data" / name
 
 
 def mni152(step=4) -> clwave.Volume:
     """The MNI152 T1 template of the nilearn wheel (the test extra), block-averaged step^3, classified with the mri
     preset from its 0.5th percentile to its maximum (as tools/figures.py)."""
-    path = Path(importlib.util.find_spec("nilearn").submodule_search_locations[0]) / NILEARN_T1
-    vol = clwave.load(path)
+    vol = clwave.load(nilearn_file(NILEARN_T1))
     nz, ny, nx = (s // step * step for s in vol.shape)
     data = vol.data[:nz, :ny, :nx].reshape(nz // step, step, ny // step, step, nx // step, step).mean((1, 3, 5))
     vol = clwave.Volume(data.astype(np.float32), spacing=tuple(step * s for s in vol.spacing), origin=vol.origin)
