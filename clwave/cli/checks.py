@@ -8,7 +8,8 @@ import numpy as np
 from ..errors import InputError
 from ..io.result import check_background
 from ..model.tf_checks import check_opacity_unit, check_window
-from .options import (GIF_FRAME_SECONDS, flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler,
+from ..io.images import GIF_FRAME_SECONDS
+from .options import (flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler,
                       parse_tf_window, parse_thresholding, preset_transfer_function)
 
 
