@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, finite_number
+from .errors import InputError
 from .io.files import check_suffix, write_atomic
-from .io.images import GIF_FRAME_SECONDS, write_gif
+from .io.images import check_frame_time, write_gif
 from .io.result import RenderResult, resolve_window
 from .model.camera import Camera
 
@@ -73,10 +73,7 @@ class Turntable:
         if given and path.suffix.lower() != ".gif":
             raise InputError(f"{' and '.join(given)} set a .gif's pictures; {path} holds the views' values or "
                              f"figures: leave {'them' if len(given) > 1 else 'it'} out")
-        lo, hi = GIF_FRAME_SECONDS
-        if not lo <= finite_number(frame_time, "frame_time") <= hi:
-            raise InputError(f"frame_time={frame_time!r} must be the seconds each frame is shown, from {lo:g} "
-                             f"(browsers show a shorter frame for 0.1 s) to {hi:g} (a GIF's longest), e.g. 0.1")
+        frame_time = check_frame_time(frame_time)
         if path.suffix.lower() == ".gif":
             return write_gif(path, self.pictures(window, background, scale_bar, unit), frame_time, overwrite)
         images = self.images

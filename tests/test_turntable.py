@@ -92,6 +92,9 @@ def test_bad_saves_are_refused_and_write_nothing(tmp_path, capsys, hydrogen):
     turn = clwave.turntable(hydrogen, 2, clwave.Camera(size=8))
     for path, options, message in [
         ("t.gif", dict(frame_time=0), "frame_time=0 must be the seconds each frame is shown, from 0.02"),
+        ("t.gif", dict(frame_time=float("nan")), "frame_time=nan must be the seconds each frame is shown"),
+        ("t.gif", dict(frame_time="0.1"), "frame_time='0.1' must be the seconds each frame is shown"),
+        ("t.gif", dict(frame_time=700), "to 655.35 (a GIF's longest)"),
         ("t.png", {}, "t.png: use .gif, .npy or .json"),
         ("t.npy", dict(window=(0, 1)), "window= set a .gif's pictures; "),
     ]:

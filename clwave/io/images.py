@@ -237,6 +237,19 @@ def _per_unit(size, unit, counted_in) -> list | None:
 GIF_FRAME_SECONDS = (0.02, 655.35)
 
 
+def check_frame_time(seconds) -> float:
+    """A GIF frame's seconds (``frame_time=``, ``--frame-time``) within :data:`GIF_FRAME_SECONDS` (NaN fails), as a
+    float; one InputError otherwise."""
+    lo, hi = GIF_FRAME_SECONDS
+    number = isinstance(seconds, (int, float, np.integer, np.floating)) and not isinstance(seconds, (bool, np.bool_))
+    if not (number and lo <= seconds <= hi):
+        why = (f"must be the seconds each frame is shown, from {lo:g} (browsers show a shorter frame for 0.1 s) to "
+               f"{hi:g} (a GIF's longest), e.g. 0.1")
+        shown = f"{seconds:g}" if number else repr(seconds)
+        raise InputError(f"frame_time={seconds!r} {why}", cli=f"--frame-time {shown} {why}")
+    return float(seconds)
+
+
 def write_gif(path, pictures, seconds_per_frame, force) -> Path:
     """A looping GIF of ``pictures``, each shown ``seconds_per_frame`` (to the hundredth, the format's unit)."""
     from PIL import Image
