@@ -36,6 +36,8 @@ class Turntable:
 
     def __init__(self, results):
         self.results = list(results)
+        if not self.results:  # no view has an image size or a first view's meta
+            raise InputError("a Turntable needs at least one view: give clwave.turntable n >= 1")
         first = self.results[0].meta
         self.meta = dict(first, turntable_seconds=[_seconds(r.meta) for r in self.results],
                          turntable_views=[dict(camera=r.meta["camera"], pixel=r.meta["pixel"]) for r in self.results])

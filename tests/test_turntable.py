@@ -102,5 +102,7 @@ def test_bad_saves_are_refused_and_write_nothing(tmp_path, capsys, hydrogen):
             turn.save(tmp_path / path, **options)
         assert message in str(e.value)
     assert list(tmp_path.iterdir()) == []
+    with pytest.raises(clwave.InputError, match="a Turntable needs at least one view"):
+        clwave.Turntable([])
     code, _, err = cli(capsys, "render", "phantom:hydrogen:16", "--turntable", "0", "-o", str(tmp_path / "z.gif"))
     assert code == 2 and err.count("\n") == 1 and "--turntable 0 needs N >= 1" in err
