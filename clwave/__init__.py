@@ -19,6 +19,7 @@ from .model.conebeam import ConeBeam, transmitted
 from .io.result import RenderResult
 from .splat.renderer import SplatRenderer, splat
 from .progressive import progressive
+from .turntable import Turntable, turntable
 from .raytrace.shading import Phong
 from .raytrace.tracer import RayTracer, raytrace
 from .raytrace.lod import Detail
@@ -36,7 +37,7 @@ __all__ = [
     "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "Clip", "ConeBeam",
     "transmitted",
     "RenderResult",
-    "SplatRenderer", "splat", "progressive", "Phong", "RayTracer", "raytrace", "__version__",
+    "SplatRenderer", "splat", "progressive", "Turntable", "turntable", "Phong", "RayTracer", "raytrace", "__version__",
     "Detail",
     "ChunkedWaveletVolume",
     "Viewer", "view",

@@ -870,7 +870,7 @@ def test_gif_frames_are_written_in_one_mode_and_read_back_exactly(tmp_path):
     from P to L"): every frame is written RGB; grey and colour turntables read back as what was written."""
     import imageio.v3 as iio
 
-    from clwave.cli.options import write_gif
+    from clwave.io.images import write_gif
 
     ramp = np.tile(np.arange(256, dtype=np.uint8), (4, 1))
     grey = [ramp, ramp[:, ::-1], ramp // 3]  # a first frame of 256 levels, then one of fewer: "P to L"
@@ -937,7 +937,7 @@ def test_a_gif_interrupted_while_written_leaves_nothing_and_no_late_error(tmp_pa
 
     from PIL import Image
 
-    from clwave.cli.options import write_gif
+    from clwave.io.images import write_gif
 
     def interrupted(self, fp, *args, **kwargs):
         fp.write(b"GIF89a")  # a frame begun

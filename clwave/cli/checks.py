@@ -8,7 +8,8 @@ import numpy as np
 from ..errors import InputError
 from ..io.result import check_background
 from ..model.tf_checks import check_opacity_unit, check_window
-from .options import (GIF_FRAME_SECONDS, flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler,
+from ..io.images import check_frame_time
+from .options import (flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler,
                       parse_tf_window, parse_thresholding, preset_transfer_function)
 
 
@@ -129,10 +130,7 @@ def _method_options(args):
 
 def _frame_time(args):
     """``--frame-time SECONDS``: a turntable GIF's, within what a GIF holds and browsers show (NaN fails both)."""
-    lo, hi = GIF_FRAME_SECONDS
-    if not lo <= args.frame_time <= hi:
-        raise InputError(f"--frame-time {args.frame_time:g} must be the seconds each frame is shown, from {lo:g} "
-                         f"(browsers show a shorter frame for 0.1 s) to {hi:g} (a GIF's longest), e.g. 0.1")
+    check_frame_time(args.frame_time)
     if args.turntable is None:
         raise InputError("--frame-time is for a --turntable GIF: add --turntable N, or leave it out")
 

@@ -9,8 +9,6 @@ import warnings
 from functools import partial
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import ClwaveWarning, CommandWords, InputError, OutputError, OutputExistsError, finite_number
 from ..device.memory import check_fits
 from ..io.files import check_writable
@@ -531,28 +529,6 @@ def parse_device_memory(args):
     from ..device.memory import parse_cap
 
     return parse_cap(args.device_memory)
-
-
-#: the seconds a GIF frame may be shown: stored in hundredths of a second, 16 bits (655.35 s at most); browsers show
-#: a frame of less than 0.02 s for 0.1 s
-GIF_FRAME_SECONDS = (0.02, 655.35)
-
-
-def write_gif(path, pictures, seconds_per_frame, force):
-    """A looping GIF of ``pictures``, each shown ``seconds_per_frame`` (to the hundredth, the format's unit)."""
-    from PIL import Image
-
-    from ..io.files import write_atomic
-    frames = np.stack(pictures)  # every frame RGB: grey frames were written in modes some readers cannot read back
-    frames = np.repeat(frames[..., None], 3, axis=-1) if frames.ndim == 3 else frames
-    # whole milliseconds, which Pillow truncates to hundredths: int(1000 * 2.01) is 2009, stored as 2 s
-    duration = 10 * round(100 * seconds_per_frame)
-
-    def write(fh):  # by Pillow itself: imageio's writer, interrupted, wrote to the closed file from its __del__
-        first, *rest = (Image.fromarray(frame) for frame in frames)
-        first.save(fh, format="GIF", save_all=True, append_images=rest, duration=duration, loop=0)
-
-    write_atomic(path, write, force)
 
 
 def add_command(sub, name, help, run, output_help, view=False, classify=True):

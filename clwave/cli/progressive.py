@@ -6,9 +6,10 @@ import json
 from pathlib import Path
 
 from ..errors import InputError
+from ..io.images import write_gif
 from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, finish,
-                      parse_device_memory, post_transfer_function, write_gif)
+                      parse_device_memory, post_transfer_function)
 
 
 def run(args):

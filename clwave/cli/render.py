@@ -9,20 +9,19 @@ import numpy as np
 from ..errors import InputError
 from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
-                      parse_device_memory, parse_scheduler, post_transfer_function, write_gif)
+                      parse_device_memory, parse_scheduler, post_transfer_function)
 
 
 def run(args):
     from ..raytrace.tracer import RayTracer, raytrace
     from ..io.files import published_together
     from ..io.images import PNG_SUFFIXES, TIFF_SUFFIXES
-    from ..io.result import RenderResult, resolve_window
+    from ..io.result import RenderResult
     from ..splat.renderer import SplatRenderer, splat
     from ..cluster import check_model_file
     from ..schedulers import client_for as cluster_client
+    from ..turntable import Turntable, turntable_cameras
 
-    if args.turntable is not None and args.turntable < 1:
-        raise InputError("--turntable N needs N >= 1")
     picture = PNG_SUFFIXES + TIFF_SUFFIXES if args.turntable is None else (".gif",)
     hint = "--raw OUT.npy also writes the float32 image" if args.turntable is None else "--turntable writes a GIF"
     out, raw, stats = check_outputs(args.force, (args.output, "-o", picture, hint), (args.raw, "--raw", (".npy",)),
@@ -30,6 +29,7 @@ def run(args):
     look = picture_options(args, out)
     window, background = look["window"], look["background"]
     camera = make_camera(args)
+    cameras = [camera] if args.turntable is None else turntable_cameras(camera, args.turntable)
     device_memory = parse_device_memory(args)
     lights = parse_lights(args)
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
@@ -71,35 +71,28 @@ def run(args):
 
         def render(cam):
             return splat(wv, cam, scheduler=client, **options)
-    cameras = [camera] if args.turntable is None else \
-        [camera.rotated(360.0 * i / args.turntable) for i in range(args.turntable)]
     with cluster as client:
-        results = [render(cam) for cam in cameras]
-    if results[0].meta.get("nothing_visible"):  # a blank image is not what was asked for (docs/raytracing.md §10)
-        raise InputError(results[0].meta["nothing_visible"])
+        turn = Turntable(render(cam) for cam in cameras)
+    if turn[0].meta.get("nothing_visible"):  # a blank image is not what was asked for (docs/raytracing.md §10)
+        raise InputError(turn[0].meta["nothing_visible"])
     with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
         lines = []
         if args.turntable is None:
-            result = results[0]
+            result = turn[0]
             result.save(out, **look, unit=unit, overwrite=args.force)
         else:
-            if window == "auto" and results[0].is_xray:  # one window for the whole turn: no flicker
-                window = resolve_window(np.stack([r.image[..., :3] for r in results]), "auto")
-            pictures = [r.picture(window, background, scale_bar=look["scale_bar"], unit=unit) for r in results]
-            write_gif(out, pictures, args.frame_time or 0.1, args.force)
-            result = results[0]
-            result.meta["turntable_seconds"] = [_total_seconds(r.meta) for r in results]
-            result.meta["turntable_views"] = [dict(camera=r.meta["camera"], pixel=r.meta["pixel"]) for r in results]
+            turn.save(out, window=window, background=background, scale_bar=look["scale_bar"], unit=unit,
+                      frame_time=args.frame_time or 0.1, overwrite=args.force)
+            window = turn.window(window) or window  # the one the pictures were shown through
+            result = RenderResult(turn[0].image, turn.meta)
             seconds = result.meta["turntable_seconds"]
-            views = f"{len(results)} view{'s' if len(results) != 1 else ''}"
+            views = f"{len(turn)} view{'s' if len(turn) != 1 else ''}"
             lines.append(f"turntable of {views} at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
                          f"({np.median(seconds):.3f} s a view, median); the first view:")
         # the picture's, for --stats (coordinates.md §4): a .tif has none
         result.meta["window"] = None if out.suffix.lower() in TIFF_SUFFIXES else result.display_window(window)
         if raw is not None:  # a turntable's views as one (N, H, W, C) array
-            images = result if args.turntable is None else \
-                RenderResult(np.stack([r.image for r in results]), result.meta)
-            images.save(raw, overwrite=args.force)
+            (result if args.turntable is None else turn).save(raw, overwrite=args.force)
         if stats is not None:
             result.meta["unit"] = unit  # of "pixel" (world units a pixel); None: the input gives none
             result.save(stats, overwrite=args.force)
@@ -137,10 +130,6 @@ def _report(args, camera, m, out) -> str:
     return (f"splatted {m['coefficients']:,} coefficients at {size} in {s['total']:.3f} s (footprints "
             f"{s['footprints']:.3f}, binning {s['binning']:.3f}, accumulation {s['accumulation']:.3f}; "
             f"kernel build {s['compile']:.2f} s apart) -> {out}")
-
-
-def _total_seconds(meta) -> float:
-    return meta["render_seconds"] if meta["method"] == "raytrace" else meta["seconds"]["total"]
 
 
 def add_parser(sub):

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import io
 from fractions import Fraction
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from .files import write_atomic
 
 #: the output suffixes of a picture (PNG) and of the float image (TIFF)
 PNG_SUFFIXES, TIFF_SUFFIXES = (".png",), (".tif", ".tiff")
@@ -228,3 +230,37 @@ def _per_unit(size, unit, counted_in) -> list | None:
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         per = [float(np.float64(counted_in) / (np.float64(s) * length)) for s in size]
     return per if all(0.0 < p < np.inf for p in per) else None
+
+
+#: the seconds a GIF frame may be shown: stored in hundredths of a second, 16 bits (655.35 s at most); browsers show
+#: a frame of less than 0.02 s for 0.1 s
+GIF_FRAME_SECONDS = (0.02, 655.35)
+
+
+def check_frame_time(seconds) -> float:
+    """A GIF frame's seconds (``frame_time=``, ``--frame-time``) within :data:`GIF_FRAME_SECONDS` (NaN fails), as a
+    float; one InputError otherwise."""
+    lo, hi = GIF_FRAME_SECONDS
+    number = isinstance(seconds, (int, float, np.integer, np.floating)) and not isinstance(seconds, (bool, np.bool_))
+    if not (number and lo <= seconds <= hi):
+        why = (f"must be the seconds each frame is shown, from {lo:g} (browsers show a shorter frame for 0.1 s) to "
+               f"{hi:g} (a GIF's longest), e.g. 0.1")
+        shown = f"{seconds:g}" if number else repr(seconds)
+        raise InputError(f"frame_time={seconds!r} {why}", cli=f"--frame-time {shown} {why}")
+    return float(seconds)
+
+
+def write_gif(path, pictures, seconds_per_frame, force) -> Path:
+    """A looping GIF of ``pictures``, each shown ``seconds_per_frame`` (to the hundredth, the format's unit)."""
+    from PIL import Image
+
+    frames = np.stack(pictures)  # every frame RGB: grey frames were written in modes some readers cannot read back
+    frames = np.repeat(frames[..., None], 3, axis=-1) if frames.ndim == 3 else frames
+    # whole milliseconds, which Pillow truncates to hundredths: int(1000 * 2.01) is 2009, stored as 2 s
+    duration = 10 * round(100 * seconds_per_frame)
+
+    def write(fh):  # by Pillow itself: imageio's writer, interrupted, wrote to the closed file from its __del__
+        first, *rest = (Image.fromarray(frame) for frame in frames)
+        first.save(fh, format="GIF", save_all=True, append_images=rest, duration=duration, loop=0)
+
+    return write_atomic(path, write, force)

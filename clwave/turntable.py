@@ -1,0 +1,108 @@
+"""Turntables (docs/coordinates.md §4): ``n`` views of one camera turned through 360 degrees about the world's z
+axis, the elevation kept, and their pictures through one window, so that an X-ray turntable does not flicker.
+:func:`turntable` and ``clwave render --turntable`` alike."""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+from .io.files import check_suffix, write_atomic
+from .io.images import check_frame_time, write_gif
+from .io.result import RenderResult, resolve_window
+from .model.camera import Camera
+
+METHODS = ("splat", "raytrace")
+
+
+def turntable_cameras(camera, n) -> list:
+    """``camera`` turned by ``360 i / n`` degrees for i in 0 .. n-1; ``n`` checked (a whole number >= 1)."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise InputError(f"n={n!r} must be the number of views, a whole number >= 1 (e.g. 24)",
+                         cli=f"--turntable {n} needs N >= 1")
+    if not isinstance(camera, Camera):
+        raise InputError(f"camera={type(camera).__name__} must be a clwave.Camera (a turntable turns it about the "
+                         f"z axis), or None for the default")
+    return [camera.rotated(360.0 * i / n) for i in range(int(n))]
+
+
+class Turntable:
+    """The views of a turntable: ``results`` (a :class:`RenderResult` each), ``images`` (their (N, H, W, C)
+    float32 stack) and ``meta`` (the first view's, with ``turntable_seconds``, each view's render time, and
+    ``turntable_views``, each view's ``camera`` and ``pixel``)."""
+
+    def __init__(self, results):
+        self.results = list(results)
+        if not self.results:  # no view has an image size or a first view's meta
+            raise InputError("a Turntable needs at least one view: give clwave.turntable n >= 1")
+        first = self.results[0].meta
+        self.meta = dict(first, turntable_seconds=[_seconds(r.meta) for r in self.results],
+                         turntable_views=[dict(camera=r.meta["camera"], pixel=r.meta["pixel"]) for r in self.results])
+
+    def __len__(self) -> int:
+        return len(self.results)
+
+    def __getitem__(self, i) -> RenderResult:
+        return self.results[i]
+
+    @property
+    def images(self) -> np.ndarray:
+        return np.stack([r.image for r in self.results])
+
+    def window(self, window="auto"):
+        """The ``(lo, hi)`` every X-ray view is shown through: ``"auto"`` resolved from all the views together (one
+        window for the whole turn: no flicker); None for shaded views, which have none."""
+        if not self.results[0].is_xray:
+            return None
+        return resolve_window(np.stack([r.image[..., :3] for r in self.results]), window)
+
+    def pictures(self, window="auto", background=None, scale_bar=None, unit=None) -> list:
+        """Each view's 8-bit picture (:meth:`RenderResult.picture`), X-rays through the one :meth:`window`."""
+        shared = self.window(window) if self.results[0].is_xray else window
+        return [r.picture(shared, background, scale_bar=scale_bar, unit=unit) for r in self.results]
+
+    def save(self, path, *, window="auto", background=None, scale_bar=None, unit=None, frame_time=0.1,
+             overwrite=False) -> Path:
+        """Write ``.gif`` (the :meth:`pictures`, looping, each shown ``frame_time`` seconds, to the hundredth),
+        ``.npy`` (the (N, H, W, C) float32 :attr:`images`) or ``.json`` (:attr:`meta`)."""
+        path = check_suffix(path, (".gif", ".npy", ".json"))
+        given = [f"{name}=" for name, value in (("window", None if isinstance(window, str) and window == "auto" else
+                                                 window), ("background", background), ("scale_bar", scale_bar))
+                 if value is not None]
+        if given and path.suffix.lower() != ".gif":
+            raise InputError(f"{' and '.join(given)} set a .gif's pictures; {path} holds the views' values or "
+                             f"figures: leave {'them' if len(given) > 1 else 'it'} out")
+        frame_time = check_frame_time(frame_time)
+        if path.suffix.lower() == ".gif":
+            return write_gif(path, self.pictures(window, background, scale_bar, unit), frame_time, overwrite)
+        images = self.images
+        if path.suffix.lower() == ".npy":
+            if images.size != np.count_nonzero(np.isfinite(images)):
+                raise InputError(f"the views have non-finite values (NaN/Inf), so {path} was not written")
+            return write_atomic(path, lambda fh: np.save(fh, images), overwrite)
+        return RenderResult(self.results[0].image, self.meta).save(path, overwrite=overwrite)
+
+
+def turntable(wv, n, camera=None, method="splat", **options) -> Turntable:
+    """``n`` views of ``wv`` through ``camera`` (default ``Camera()``) turned through 360 degrees about the z axis
+    (:func:`turntable_cameras`), by ``method`` "splat" (:func:`clwave.splat`) or "raytrace" (:func:`clwave.raytrace`)
+    with its ``options``; ``.save("turn.gif")`` writes them as ``clwave render --turntable`` does."""
+    from .raytrace.tracer import raytrace
+    from .splat.renderer import splat
+
+    if not isinstance(method, str) or method not in METHODS:
+        raise InputError(f"method={method!r} must be one of {', '.join(map(repr, METHODS))}")
+    draw = splat if method == "splat" else raytrace
+    cameras = turntable_cameras(Camera() if camera is None else camera, n)
+    try:  # an option the method has not, named before the first view
+        inspect.signature(draw).bind(wv, cameras[0], **options)
+    except TypeError as e:
+        raise InputError(f"{method} takes no such option ({e}): see help(clwave.{method})") from None
+    return Turntable(draw(wv, cam, **options) for cam in cameras)
+
+
+def _seconds(meta) -> float:
+    return meta["render_seconds"] if meta["method"] == "raytrace" else meta["seconds"]["total"]
