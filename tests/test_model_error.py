@@ -3,6 +3,8 @@ docs/chunked.md §4) and shown by ``clwave info`` and the viewer's model line (d
 
 import asyncio
 import json
+import sys
+from pathlib import Path
 
 import aiohttp
 import h5py
@@ -14,6 +16,9 @@ from clwave.cli import main
 from clwave.errors import FileFormatError
 from clwave.view import view
 from test_hardening import crafted, setter
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+import browser  # noqa: E402  (tools/browser.py)
 
 SHAPE = (14, 16, 18)
 
@@ -125,3 +130,20 @@ def test_the_viewers_hello_carries_the_files_error(tmp_path, capsys, data):
     old = crafted(path, tmp_path, lambda header: header.pop("model_error"))
     assert hello_of(old)["model"]["error"] == dict(rms=None, whole=True)
     assert hello_of(clwave.WaveletVolume.open(path))["model"]["error"] is None
+
+
+@pytest.mark.skipif(browser.executables() is None, reason=browser.SETUP)
+def test_the_pages_model_line_gives_the_files_error(tmp_path, capsys, data):
+    """In a headless browser: the whole file's error and PSNR as compress printed them (3 significant digits); a view
+    keeping fewer of its coefficients says the error is the whole file's."""
+    path = compress(tmp_path, data)
+    printed = capsys.readouterr().out
+    error = recorded(path)
+    words = f"RMS {error:.3g} of the largest value (PSNR {-20 * np.log10(error):.1f} dB)"
+    assert f"(PSNR {-20 * np.log10(error):.1f} dB)" in printed
+    script = "const t = document.getElementById('model').textContent; return t.includes('error against') && t"
+    for keep, tail in ((None, "; the frames' error"), (0.1, ", the whole file's; the frames' error")):
+        with view(path, size=(24, 24), keep=keep) as v, browser.chromium() as page:
+            browser.open_viewer(page, v.url)
+            line = browser.wait_for(page, script)
+        assert f". The model's error against the input: {words}{tail}" in line, line

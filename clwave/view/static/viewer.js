@@ -169,7 +169,7 @@
       `value (PSNR ${(-20 * Math.log10(Math.max(e, 1e-30))).toFixed(1)} dB)` + (part ? ", the whole file's" : "") :
       m.error ? "not recorded in the file (clwave compress records it where it reads the input whole)" :
       "not known (a model made here, not read from a .clw)") +
-      " (the frames' error is against the model's final image)";
+      "; the frames' error is against the model's final image";
   }
 
   // ---------------------------------------------------------------- orbit, zoom, reset
