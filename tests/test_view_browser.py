@@ -410,7 +410,9 @@ def test_a_files_rest_that_cannot_be_read_is_said_on_the_model_line(clw, page, m
         line = browser.wait_for(page, "const m = document.getElementById('model').textContent; "
                                       "return !m.includes('reading') && m")
     assert line == ("40 × 40 × 40 voxels, 4 channel(s), cubic, 2,048 coefficients (the file's most important only: "
-                    "the rest could not be read, damaged past its prefix)")
+                    "the rest could not be read, damaged past its prefix). The model's error against the input: not "
+                    "recorded in the file (clwave compress records it where it reads the input whole); the frames' "
+                    "error is against the model's final image")
 
 
 def test_the_view_is_copied_as_a_command_and_as_python_and_saved_at_twice_its_size(page, tmp_path):

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .options import add_command, build_model, check_outputs, file_size, finish, is_clw, kept_words, read_volume
+from .options import (add_command, build_model, check_outputs, error_words, file_size, finish, is_clw, kept_words,
+                      read_volume)
 
 
 def run(args):
@@ -29,6 +30,7 @@ def run(args):
         start = time.perf_counter()
         wv.save(out, overwrite=args.force, quantise=quantise)
         saved = time.perf_counter() - start
+        error = _error(args, wv, reference, outputs, out, quantise is not None)  # recorded in the file: its size after
         size, voxels = outputs.size(out), wv.n_voxels
         raw = voxels * wv.channels * 4  # the volume the model approximates, as float32
         classified = "" if not args.tf else f", classified to {wv.channels} channels (--tf {args.tf})" \
@@ -39,7 +41,7 @@ def run(args):
                  f"level{'s' * (wv.levels != 1)}, {kept_words(wv.kept, wv.n_voxels)}",
                  f"file                  {out}: {file_size(size)}, {_ratios(size, raw, volume)}"
                  f", written in {saved:.2f} s",
-                 _error(args, wv, reference, None if quantise is None else outputs, out)]
+                 error]
         finish(outputs, [line for line in lines if line])
     return 0
 
@@ -57,27 +59,27 @@ def _ratios(size, raw, volume) -> str:
     return mine if own == raw else f"{mine}; {against}"
 
 
-def _error(args, wv, reference, outputs, out) -> str | None:
-    """The report's line on the model's error against the volume it approximates (``outputs``: the staged outputs to
-    read the written file ``out`` back from, for a quantised model's rounded values as it holds them); None for a
-    .clw input."""
+def _error(args, wv, reference, outputs, out, quantised) -> str | None:
+    """The report's line on the model's error against the volume it approximates, recorded in the header of the
+    written file ``out`` (``outputs``: the staged outputs; ``quantised``: the file read back from them, for the
+    rounded values it holds); None for a .clw input."""
     from ..frames import root_mean_square
-    from ..io.clw import read_clw
+    from ..io.clw import read_clw, record_error
 
     if reference is None:
         return None if is_clw(args) else ("error                 not measured: the input was read chunk by chunk (the "
                                           "error needs it whole)")
     try:
-        stored = wv if outputs is None else read_clw(outputs.readable(out))  # read by name: h5py and FileMask
+        stored = read_clw(outputs.readable(out)) if quantised else wv  # read by name: h5py and FileMask
         peak = float(np.max(np.abs(reference.data)))
         error = root_mean_square(stored.reconstruct().data - reference.data) / (peak or 1.0)  # squares in float64
     except MemoryError:  # the file is what was asked for; the measure needs the volume twice more
         return ("error                 not measured: not enough memory to rebuild the volume beside it (the file "
                 "is complete)")
+    outputs.update(out, lambda fh: record_error(fh, error))
     if peak == 0:  # no relative error, no PSNR
         return f"error                 RMS over the voxels {error:.2e}: the volume is zero everywhere"
-    return (f"error                 RMS over the voxels {error:.2e} of the largest value "
-            f"(PSNR {-20 * np.log10(max(error, 1e-30)):.1f} dB)")
+    return f"error                 {error_words(error)}"
 
 
 def _on_disk(spec) -> str:

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .options import READING, add_reading_options, file_size, flag, kept_words, numbers, parse_series
+from .options import READING, add_reading_options, error_words, file_size, flag, kept_words, numbers, parse_series
 
 
 def run(args):
@@ -152,6 +152,10 @@ def _clw_lines(f) -> list:
     elif f["channels"] == 1:
         lines.append(("values", "the input's range not recorded (a file of before the nineteenth session: a transfer "
                                 "function classifies the field unclamped)"))
+    lines.append(("error", f"{error_words(f['model_error'])}: the whole file's model against its input (measured by "
+                           f"clwave compress)" if f["model_error"] is not None else "the model's error against its "
+                           "input not recorded (clwave compress records it where it reads the input whole, since the "
+                           "twentieth session)"))
     if f["subtracted"]:
         lines.append(("subtracted", f"{f['subtracted']:g} from the input's values (--subtract; transfer functions in "
                                     f"the input's units)"))

@@ -551,6 +551,12 @@ def kept_words(kept, voxels) -> str:
     return f"{kept:,} coefficients ({100 * kept / voxels:.2f} % of the voxels)"
 
 
+def error_words(error) -> str:
+    """A model's RMS error over the voxels relative to its input's largest |value| (a .clw's ``model_error``), as
+    the commands report it."""
+    return f"RMS over the voxels {error:.2e} of the largest value (PSNR {-20 * np.log10(max(error, 1e-30)):.1f} dB)"
+
+
 def file_size(n) -> str:
     """A file's size in decimal units, as the commands report it ("13.1 KB")."""
     for unit in ("bytes", "KB", "MB", "GB"):

@@ -5,9 +5,11 @@ chunked model can write a block at a time.
 Layout (version 2)::
 
     attrs           format, version, header (JSON: shape, spacing, origin, offset (the model's ``subtracted``),
-                    obliquity, value_range (the input's [min, max]; absent in older files), unit (the world unit,
-                    absent: unknown), photo (true: a photo's colour and alpha, not classified; absent: false),
-                    levels, channels, groups, ...),
+                    obliquity, value_range (the input's [min, max]; absent in older files), model_error (the
+                    whole file's model's RMS error against its input, relative to its largest |value|, where
+                    ``clwave compress`` measured it: :func:`record_error`), unit (the world unit, absent: unknown),
+                    photo (true: a photo's colour and alpha, not classified; absent: false), levels, channels,
+                    groups, ...),
                     header_crc32 (zlib's CRC-32 of the header's UTF-8 bytes)
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
     g<i>/occupancy  uint8, bits packed along x: which coarsest-approximation coefficients the content occupies
@@ -81,6 +83,21 @@ def write_clw(model, path, overwrite=False, quantise=None) -> Path:
     the change of any voxel of :meth:`~WaveletVolume.reconstruct`, or "auto" (:func:`quantisation_steps`)."""
     steps = quantisation_steps(model, quantise)
     return write_atomic(check_suffix(path, (".clw",)), lambda fh: _write(model, fh, steps), overwrite)
+
+
+def record_error(fh, error):
+    """Write ``model_error`` (the RMS over the voxels of the model's difference from its input, relative to the
+    input's largest |value|; docs/chunked.md §4) into the header of the ``.clw`` written into ``fh``: it is measured
+    from the file as written (a quantised model's rounded values), so it is added before the file is published
+    (``Staging.update``).  A model read from the file and thresholded again is another model: its file records
+    none."""
+    import h5py
+
+    with hdf5_target(fh) as target, h5py.File(target, "r+") as h5:
+        header = json.loads(h5.attrs["header"])
+        header["model_error"] = float(error)
+        text = json.dumps(header)
+        h5.attrs.update(header=text, header_crc32=zlib.crc32(text.encode()))
 
 
 def check_quantise(quantise):

@@ -126,8 +126,8 @@ def checked_header(header) -> tuple:
 
 
 def check_properties(header, shape):
-    """The header's interpolation, focus, content box (inside the volume's box, as a writer finds it), value range
-    and transfer function, checked as the model opened from the file uses them (``clwave info`` shows them);
+    """The header's interpolation, focus, content box (inside the volume's box, as a writer finds it), value range,
+    model error and transfer function, checked as the model opened from the file uses them (``clwave info`` shows them);
     ``shape``, spacing and origin checked already: ValueError names what is wrong."""
     interpolate, focus, content = header.get("interpolate"), header.get("focus"), header.get("content")
     if not isinstance(interpolate, bool):
@@ -149,6 +149,9 @@ def check_properties(header, shape):
     value_range = header.get("value_range")  # absent in older files: not known (no clamp, docs/raytracing.md §10)
     if value_range is not None and not (_numbers(value_range, 2) and value_range[0] <= value_range[1]):
         raise ValueError(f"value_range {value_range!r} is not two finite numbers [min, max], min <= max")
+    error = header.get("model_error")  # absent: not recorded (a file of before session 20, or not measured)
+    if error is not None and not (_numbers([error], 1) and error >= 0):
+        raise ValueError(f"model_error {error!r} is not a finite number >= 0")
     tf = header.get("transfer_function")
     if tf is not None:
         try:

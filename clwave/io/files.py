@@ -102,6 +102,12 @@ class Staging:
         (which a process killed by SIGKILL leaves behind: only where a re-read by name cannot be avoided)."""
         return self.files[Path(path)].readable
 
+    def update(self, path, writer):
+        """Call ``writer(binary_file)`` on the written, unpublished file ``path`` again: what is measured from it as
+        written, added to it before it is published (``clwave compress``'s model error)."""
+        with _writing(path):
+            writer(self.files[Path(path)].file)
+
     def folder(self, path, force=False, replaces=None) -> Path:
         """A temporary folder beside the folder ``path`` to write its files into (:func:`write_atomic` publishes them
         there at once), published with the files: renamed to ``path`` where nothing is there, else its files moved

@@ -31,11 +31,13 @@ PREFIX = 1 << 20
 class PrefixFirst:
     """A ``.clw`` file's ``keep`` most important coefficients (None: all it holds), of which :attr:`prefix` (the
     first :data:`PREFIX`) is read on construction and :meth:`whole` reads them all.  :attr:`complete`: the prefix
-    is all of them already."""
+    is all of them already; :attr:`model_error`: the header's, of the whole file's model (docs/chunked.md §4)."""
 
     def __init__(self, path, keep=None):
         self.path, self.keep = Path(path), None if keep is None else check_thresholding(keep, None, None)[0]
-        n = int(np.prod(read_header(path)["shape"]))  # the voxels, from the header alone
+        header = read_header(path)
+        n = int(np.prod(header["shape"]))  # the voxels, from the header alone
+        self.model_error = header.get("model_error")  # the whole file's, against its input (None: not recorded)
         share = min(1.0, PREFIX / n)
         with warnings.catch_warnings():  # what the file stores is told of `keep`, not of the prefix's share
             warnings.simplefilter("ignore", ClwaveWarning)

@@ -78,6 +78,8 @@ class ViewServer:
 
         opened = model if isinstance(model, PrefixFirst) else None
         self.wv = opened.prefix if opened else model
+        # a file's recorded error against its input is its whole model's, not that of a view keeping fewer (--keep)
+        self.model_error = None if opened is None else dict(rms=opened.model_error, whole=opened.keep is None)
         self.host, self.port, self.device = host, check_port(port), device
         self.local = is_loopback(host)  # then a request's Host must name this machine too (DNS rebinding)
         self.device_memory = parse_cap(device_memory)
@@ -379,7 +381,8 @@ class ViewServer:
     def model(self) -> dict:
         """The model's figures for the page; ``reading``: a file's prefix, the rest being read; ``failure``: why the
         rest's reading failed (None: it did not); ``box``: the world box of its content, the span of the crop
-        sliders."""
+        sliders; ``error``: a file's ``rms`` error against its input (None: not recorded) and whether the view
+        holds the ``whole`` file (None: no file)."""
         from ..model.camera import _content_box
 
         wv, xray = self.wv, self.sources["xray"]
@@ -387,7 +390,7 @@ class ViewServer:
                     box=[[float(c) for c in corner] for corner in _content_box(wv)],
                     levels=wv.levels, wavelets=sorted({g.wavelet.name for g in wv.groups}),
                     transfer_function=(wv.transfer_function or {}).get("name"), value_range=wv.value_range,
-                    reading=not xray.complete and self.failure is None, failure=self.failure)
+                    reading=not xray.complete and self.failure is None, failure=self.failure, error=self.model_error)
 
 
 class Session:

@@ -152,15 +152,24 @@
       `${m.wavelets.join(", ")}, ${m.coefficients.toLocaleString()} coefficients ` +
       (m.reading ? "(the file's most important; reading the rest…)" : m.failure ? "(the file's most important " +
        `only: the rest could not be read, ${m.failure})` : "kept") +
-      (m.transfer_function ? `, classified with ${m.transfer_function}` : "") + values(m, editor.histogram);
+      (m.transfer_function ? `, classified with ${m.transfer_function}` : "") + values(m, editor.histogram) +
+      modelError(m);
   }
-  function values(m, h) {  // the input's range, the model's field against it, and the model's own error (once)
+  function values(m, h) {  // the input's range and the model's field against it (once)
     if (m.channels !== 1) return "";
     const r = (v) => v.map((x) => String(+x.toPrecision(4))).join(" … ");
     return (m.value_range ? `. Input values ${r(m.value_range)}` : ". Input values not known (a file written " +
             "before clwave kept them: classified as the model's field)") +
-      (h && m.value_range ? `; the model's field ${r(h.field)}, classified clamped to the input's` : "") +
-      ". The model's error against the input: not known (the frames' error is against the model's final image)";
+      (h && m.value_range ? `; the model's field ${r(h.field)}, classified clamped to the input's` : "");
+  }
+  function modelError(m) {  // a file's recorded error against its input (viewer.md §4), not the frames' error
+    const e = m.error ? m.error.rms : null;
+    const part = m.error && (!m.error.whole || m.reading || m.failure);  // the view holds fewer than the file's
+    return ". The model's error against the input: " + (e !== null ? `RMS ${e.toPrecision(3)} of the largest ` +
+      `value (PSNR ${(-20 * Math.log10(Math.max(e, 1e-30))).toFixed(1)} dB)` + (part ? ", the whole file's" : "") :
+      m.error ? "not recorded in the file (clwave compress records it where it reads the input whole)" :
+      "not known (a model made here, not read from a .clw)") +
+      "; the frames' error is against the model's final image";
   }
 
   // ---------------------------------------------------------------- orbit, zoom, reset
