@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -554,7 +555,7 @@ def kept_words(kept, voxels) -> str:
 def error_words(error) -> str:
     """A model's RMS error over the voxels relative to its input's largest |value| (a .clw's ``model_error``), as
     the commands report it."""
-    return f"RMS over the voxels {error:.2e} of the largest value (PSNR {-20 * np.log10(max(error, 1e-30)):.1f} dB)"
+    return f"RMS over the voxels {error:.2e} of the largest value (PSNR {-20 * math.log10(max(error, 1e-30)):.1f} dB)"
 
 
 def file_size(n) -> str:
