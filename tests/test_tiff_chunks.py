@@ -203,10 +203,18 @@ def test_a_3d_stack_written_without_axes_is_read_as_slices(tmp_path, volume, opt
 
 
 def test_chunked_and_whole_compress_of_a_tiff_write_the_same_model(tmp_path, volume, capsys):
+    """The same file, but for the model's error, which only a whole read measures (and records): given it, the
+    chunked file is the whole one byte for byte."""
+    from clwave.io.clw import read_header, record_error
+
     path, _ = _imagej(tmp_path, volume)
     for chunks in ("off", "6"):
         assert main(["compress", str(path), "--chunks", chunks, "--subtract", "100", "-o",
                      str(tmp_path / f"{chunks}.clw")]) == 0, capsys.readouterr().err
+    error = read_header(tmp_path / "off.clw")["model_error"]
+    assert "model_error" not in read_header(tmp_path / "6.clw")
+    with open(tmp_path / "6.clw", "r+b") as fh:
+        record_error(fh, error)
     assert (tmp_path / "6.clw").read_bytes() == (tmp_path / "off.clw").read_bytes()
 
 
