@@ -81,9 +81,9 @@ def run(args):
             result = turn[0]
             result.save(out, **look, unit=unit, overwrite=args.force)
         else:
+            window = turn.window(window) or window  # resolved once: the pictures' and --stats' window
             turn.save(out, window=window, background=background, scale_bar=look["scale_bar"], unit=unit,
                       frame_time=args.frame_time or 0.1, overwrite=args.force)
-            window = turn.window(window) or window  # the one the pictures were shown through
             result = RenderResult(turn[0].image, turn.meta)
             seconds = result.meta["turntable_seconds"]
             views = f"{len(turn)} view{'s' if len(turn) != 1 else ''}"
