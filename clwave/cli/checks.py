@@ -159,7 +159,7 @@ def parse_clip(args):
     corners = numbers(box, "--clip-box", (6,)) if box is not None else None
     faces = [numbers(p, "--clip-plane", (6,)) for p in planes]
     try:
-        return Clip(lo=corners and corners[:3], hi=corners and corners[3:], planes=[(f[:3], f[3:]) for f in faces])
+        return Clip.of_rows(corners, faces)
     except InputError as error:
         raise InputError(f"{' '.join(given)}: {error}") from None
 

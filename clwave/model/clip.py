@@ -66,6 +66,12 @@ class Clip:
             raise InputError(f"{self.describe()} keeps nothing (no volume lies inside all of it): turn a plane's "
                              f"normal, or move a plane or the box")
 
+    @classmethod
+    def of_rows(cls, box, planes) -> "Clip":
+        """The clip of rows of six numbers, as ``--clip-box`` / ``--clip-plane`` and the viewer's page give them:
+        ``box`` x0, y0, z0, x1, y1, z1 (or None) and ``planes`` each px, py, pz, nx, ny, nz."""
+        return cls(lo=box and box[:3], hi=box and box[3:], planes=[(p[:3], p[3:]) for p in planes])
+
     def half_spaces(self) -> np.ndarray:
         """The planes as rows ``(n_x, n_y, n_z, d)``, ``n`` a unit normal: the clip keeps ``n . x + d >= 0``
         (the box apart)."""

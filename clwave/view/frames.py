@@ -75,8 +75,7 @@ class ViewState:
         nothing is the Clip's one line on the tab's status line (an InputError of its frames), not a refused socket."""
         if self.clip is None:
             return None
-        box, planes = self.clip
-        return Clip(lo=box and box[:3], hi=box and box[3:], planes=[(p[:3], p[3:]) for p in planes])
+        return Clip.of_rows(*self.clip)
 
 
 @dataclass
