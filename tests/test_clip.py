@@ -173,6 +173,23 @@ def test_thin_but_real_clips_are_kept():
     assert pickle.loads(pickle.dumps(BOX_AND_PLANES)) == BOX_AND_PLANES  # sent to a cluster's workers
 
 
+@pytest.mark.parametrize("kw, kept", [
+    (dict(lo=(-1e10, -1e10, 0), hi=(1e10, 1e10, 5)), True),  # a slab 5 thick: "everything between z = 0 and 5"
+    (dict(lo=(-1e4, -1e4, 0), hi=(1e4, 1e4, 1e-5)), True),
+    (dict(lo=(-1e10, -1e10, 0), hi=(1e10, 1e10, 5), planes=[((0, 0, 2.5), (0.0, 1e-3, 1.0))]), True),  # half of it
+    (dict(lo=(-1e10, -1e10, 0), hi=(1e10, 1e10, 5), planes=[((0, 0, 6), (0, 0, 1))]), False),  # beyond its top
+    (dict(lo=(-1e10, -1e10, 0), hi=(1e10, 1e10, 5), planes=[((0, 0, 2), (0, 0, 1)), ((0, 0, 2), (0, 0, -1))]), False),
+])
+def test_a_slab_box_keeps_what_its_thickness_holds(kw, kept):
+    """Thinness is measured along each axis of the box, not against its widest side: a box 5 thick and 2e10 wide was
+    refused as keeping nothing (its inscribed ball 2.5e-10 of its half-width)."""
+    if kept:
+        assert clwave.Clip(**kw).keeps()
+    else:
+        with pytest.raises(InputError, match="keeps nothing"):
+            clwave.Clip(**kw)
+
+
 def test_a_clip_that_misses_the_volume_or_is_not_a_clip_is_refused(small_rgba):  # noqa: F811
     wv, tracer = small_rgba
     cam = clwave.Camera(30, 20, size=4)
