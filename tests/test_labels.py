@@ -368,3 +368,46 @@ def test_an_image_of_many_values_is_no_label_map(name):
     data = IMAGES[name]()
     assert data.dtype.kind in "iu" and not looks_like_labels(data)
 
+
+def test_labels_says_what_the_guess_cannot_know_both_ways(tmp_path, capsys):
+    """``load(labels=)`` and ``--labels``/``--no-labels`` override the guess (and a NIfTI's intent): an image taken
+    for labels (an 8-bit T1 upsampled by nearest neighbour, each value a 2-voxel run: abrupt boundaries) is given
+    ``labels=False``, a map of few labels numbered thinly (no voxel pair equal) ``labels=True``."""
+    upsampled = _t1(8, 0.02, step=4).repeat(2, 0).repeat(2, 1).repeat(2, 2)
+    np.save(tmp_path / "t1.npy", upsampled)
+    np.save(tmp_path / "thin.npy", np.indices((8, 8, 8)).sum(0).astype(np.uint8) % 2 * 7)  # 0 and 7 alternating
+    intent = _nifti(tmp_path / "intent.nii.gz", label_map((24, 24, 24), 8).astype(np.float32), "label")
+    assert looks_like_labels(upsampled) and clwave.load(tmp_path / "t1.npy").labels  # what the guess cannot tell
+    assert not clwave.load(tmp_path / "t1.npy", labels=False).labels
+    assert not clwave.load(tmp_path / "thin.npy").labels and clwave.load(tmp_path / "thin.npy", labels=True).labels
+    assert not clwave.load(intent, labels=False).labels
+    assert clwave.load(tmp_path / "t1.npy", chunks=8, labels=True).labels  # a chunked volume's values are not read
+    with pytest.raises(InputError, match="labels='yes' must be True or False"):
+        clwave.load(tmp_path / "t1.npy", labels="yes")
+    for option, warned in (("--no-labels", 0), ("--labels", 1)):
+        for path in ("t1.npy", "thin.npy"):
+            code, out, err = run(capsys, "compress", str(tmp_path / path), "--levels", "1", option, "-o",
+                                 str(tmp_path / "m.clw"), "--force")
+            assert code == 0 and err.count("looks like a label map") == warned, err
+    code, out, err = run(capsys, "info", str(tmp_path / "t1.npy"), "--no-labels", "--json")
+    assert code == 0 and json.loads(out)["reading"]["labels"] is False
+    code, out, err = run(capsys, "info", str(tmp_path / "t1.npy"), "--labels")
+    assert code == 0 and "labels     a label map (--labels)" in out, out
+    for option in ("--labels", "--no-labels"):
+        code, out, err = run(capsys, "compress", "phantom:hydrogen:16", option, "-o", str(tmp_path / "p.clw"))
+        assert code == 2 and f"{option} cannot apply to phantom:hydrogen:16" in err, err
+        code, out, err = run(capsys, "render", str(tmp_path / "m.clw"), option, "-o", str(tmp_path / "p.png"))
+        assert code == 2 and option in err and ".clw" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_viewer_exports_labels_as_given(tmp_path):
+    """A view's command line and Python keep ``--no-labels`` (a switch whose False is given) and ``--hu-to-mu``."""
+    from clwave.cli import make_parser
+    from clwave.view.export import Origin, Spec, command, python
+
+    args = make_parser().parse_args(["view", str(tmp_path / "ct.nii"), "--no-labels", "--hu-to-mu", "--levels", "1"])
+    origin = Origin.of_args(args)
+    assert origin.get("labels") is False and origin.get("hu_to_mu") is True
+    spec = Spec("xray", clwave.Camera(size=16, extent=10.0), window=(0.0, 1.0), levels=1)
+    assert "--no-labels --hu-to-mu" in command(origin, spec) and "--labels " not in command(origin, spec)
+    assert "hu_to_mu=True" in python(origin, spec) and "labels=False" in python(origin, spec)
