@@ -23,7 +23,7 @@ SAME_NEIGHBOURS, JUMPS = 0.75, 0.25
 #: More than DENSE_LABELS numbered densely (a parcellation of hundreds, a cell mask of thousands), as an 8-bit image's
 #: values are: boundaries between regions, not edges blurred through the values between nor noise: at least ABRUPT of
 #: the pairs along x that differ jump by more than 1 between two pairs that do not (a a | b b); 0.68 to 1 for the
-#: label maps of tests/test_labels.py's corpus, at most 0.09 for its images (docs/model.md §5).
+#: label maps of tests/test_labels.py's corpus, at most 0.02 for its images (0.09: an 8-bit T1 with plateaus).
 ABRUPT = 0.5
 #: The distinct values are counted on an even sample of at most this many voxels.
 SAMPLE = 1 << 20
@@ -46,24 +46,24 @@ def looks_like_labels(data) -> bool:
     values = np.unique(data.flat[::max(1, data.size // SAMPLE)]).astype(np.int64)  # flat: no copy if strided
     count = len(values)
     dense = count >= 2 and top < DENSE * count
-    few = dense and count <= DENSE_LABELS
     sparse = DENSE_LABELS < count <= MAX_LABELS and count <= SPARSE * top and np.gcd.reduce(np.diff(values)) == 1
-    many = dense and not few
-    if not (few or sparse or many):
+    if not (dense or sparse):
         return False
+    many = dense and count > DENSE_LABELS
     planes = data[::max(1, data.size // (4 * SAMPLE))].astype(np.min_scalar_type(-top - 1))  # a bounded cost
     right, left = planes[..., 1:], planes[..., :-1]  # neighbours along x
     step = np.abs(right - left)
     differ, jumps = step != 0, step > 1
-    if few or sparse:
+    if not many or sparse:
         content = (right != 0) | (left != 0)
         pairs, differing = int(np.count_nonzero(content)), int(np.count_nonzero(differ))
         if pairs > 0 and pairs - differing >= SAME_NEIGHBOURS * pairs and \
                 np.count_nonzero(jumps) >= JUMPS * differing:
             return True
-    inner = differ[..., 1:-1]  # a pair with a pair on either side
-    abrupt = jumps[..., 1:-1] & ~differ[..., :-2] & ~differ[..., 2:]
-    return bool(many and np.count_nonzero(abrupt) >= ABRUPT * max(1, np.count_nonzero(inner)))
+        if not many:
+            return False
+    abrupt = jumps[..., 1:-1] & ~differ[..., :-2] & ~differ[..., 2:]  # of the pairs with a pair on either side
+    return bool(np.count_nonzero(abrupt) >= ABRUPT * max(1, np.count_nonzero(differ[..., 1:-1])))
 
 
 def warn_blurred_labels(volume, wavelet):

@@ -49,7 +49,6 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):
         samples = _bytes_as(path, mode, dtype)
     elif mode == 0 and _imod_unsigned(header):
         samples = np.dtype(np.uint8)
-    dtype = samples
     stored = tuple(int(n) for n in (header.nz, header.ny, header.nx))  # sections, rows, columns
     if min(stored) < 1:
         raise FileFormatError(f"{path}: its MRC header declares {' x '.join(map(str, stored[::-1]))} columns, rows "
@@ -62,8 +61,8 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):
     if sorted(axes) != [1, 2, 3]:
         raise FileFormatError(f"{path}: its MRC header orders the axes mapc, mapr, maps = {axes[::-1]}, not an order "
                               "of x, y, z (1, 2, 3); the header is corrupt")
-    check_declared_size(path, offset, math.prod(stored) * dtype.itemsize, stored[::-1], gzip=False)
-    if not given and dtype == np.int8 and _wrapped(path, stored, offset):
+    check_declared_size(path, offset, math.prod(stored) * samples.itemsize, stored[::-1], gzip=False)
+    if not given and samples == np.int8 and _wrapped(path, stored, offset):
         words = (f"{path}: its bytes (mode 0) are read signed, as MRC2014 says, but look wrapped (jumps of more than "
                  "128 between neighbours, as 127 next to -128, more than twice as many as read unsigned: an unsigned "
                  "8-bit map without IMOD's stamp): give ")
@@ -72,7 +71,7 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):
     if ispg == 0 and stored[0] > 1:
         note(f"{path} is a stack of {stored[0]} 2-D images (space group 0: a tilt series or a stack of particles): "
              "read as the slices of a volume")
-    source = OnDemand(partial(read_memmap, str(path), dtype, stored, offset, "C"), stored, dtype)
+    source = OnDemand(partial(read_memmap, str(path), samples, stored, offset, "C"), stored, samples)
     data = as_array(source, chunks, fits=fits, path=path)
     data = data.transpose([axes.index(a) for a in (3, 2, 1)])  # (z, y, x)
     spacing = _spacing(header)
