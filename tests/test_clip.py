@@ -158,6 +158,8 @@ def test_slabs_of_a_cluster_render_clip_alike():
     (dict(planes=[((0, 0, 0), (1, 0, 0))] * 7), "at most 6 planes"),
     (dict(planes=((0, 0, 0), (1, 0, 0))), "plane 0 .* must be \\(point, normal\\)"),
     (dict(planes="x"), "must be a list of \\(point, normal\\)"),
+    (dict(lo=np.zeros((3, 3)), hi=(1, 1, 1)), r"lo=array\(\[\[0., 0., 0.\], \[0., 0., 0.\], .* must be 3 finite"),  # 1 line
+    (dict(planes=[np.eye(3)]), r"plane 0 array\(\[\[1., 0., 0.\], \[0., 1., 0.\], .* must be \(point, normal\)"),
 ])
 def test_bad_clips_are_refused_in_one_line(kw, message):
     with pytest.raises(InputError, match=message) as caught:
