@@ -158,13 +158,23 @@ def test_slabs_of_a_cluster_render_clip_alike():
     (dict(planes=[((0, 0, 0), (1, 0, 0))] * 7), "at most 6 planes"),
     (dict(planes=((0, 0, 0), (1, 0, 0))), "plane 0 .* must be \\(point, normal\\)"),
     (dict(planes="x"), "must be a list of \\(point, normal\\)"),
-    (dict(lo=np.zeros((3, 3)), hi=(1, 1, 1)), r"lo=array\(\[\[0., 0., 0.\], \[0., 0., 0.\], .* must be 3 finite"),  # 1 line
+    (dict(lo=np.zeros((3, 3)), hi=(1, 1, 1)), r"lo=array\(\[\[0., 0., 0.\], \[0., 0., 0.\], .* must be 3 finite"),
     (dict(planes=[np.eye(3)]), r"plane 0 array\(\[\[1., 0., 0.\], \[0., 1., 0.\], .* must be \(point, normal\)"),
 ])
 def test_bad_clips_are_refused_in_one_line(kw, message):
     with pytest.raises(InputError, match=message) as caught:
         clwave.Clip(**kw)
     assert "\n" not in str(caught.value)
+
+
+def test_planes_given_as_an_array_are_the_planes_given_as_a_list():
+    rows = [((0, 0, 0), (1, 0, 0)), ((0, 1, 0), (0, -1, 1))]
+    assert clwave.Clip(planes=np.array(rows, float)) == clwave.Clip(planes=rows)
+    assert clwave.Clip(planes=[np.array(r, float) for r in rows]) == clwave.Clip(planes=rows)
+    for bad in (np.zeros((2, 3)), [np.array(1.0)]):
+        with pytest.raises(InputError, match="must be") as caught:
+            clwave.Clip(planes=bad)
+        assert "\n" not in str(caught.value)
 
 
 def test_thin_but_real_clips_are_kept():

@@ -21,7 +21,8 @@ THIN = 1e-9
 class Clip:
     """What a ray-traced image keeps, in world coordinates (RAS+, the volume's world units, docs/coordinates.md §6):
     the box ``lo`` .. ``hi`` (x, y, z corners, ``lo < hi``; None: no box) and the half-spaces ``planes``, each
-    ``(point, normal)``: the side the normal points to is kept, the plane itself included.  Validated when made
+    ``(point, normal)`` (a list, or an (n, 2, 3) array): the side the normal points to is kept, the plane itself
+    included.  Validated when made
     (finite numbers, non-zero normals, at most :data:`MAX_PLANES` planes, a region with volume): one
     :class:`~clwave.InputError` naming the problem.  Taken by :func:`clwave.raytrace`, :meth:`RayTracer.render`
     and progressive ray tracing (``clip=``); changing it between renders rebuilds nothing.
@@ -45,13 +46,17 @@ class Clip:
                 raise InputError(f"the clip box's lo {lo} must be below its hi {hi} on every axis (x, y, z)")
             object.__setattr__(self, "lo", lo)
             object.__setattr__(self, "hi", hi)
-        if not isinstance(self.planes, (list, tuple)):
-            raise InputError(f"planes={self.planes!r} must be a list of (point, normal), each 3 numbers (x, y, z)")
-        if len(self.planes) > MAX_PLANES:
-            raise InputError(f"a clip takes at most {MAX_PLANES} planes, got {len(self.planes)}")
+        given = self.planes
+        if isinstance(given, np.ndarray) and given.ndim == 3:  # (n, 2, 3): rows of (point, normal)
+            given = list(given)
+        if not isinstance(given, (list, tuple)):
+            raise InputError(f"planes={given!r} must be a list of (point, normal), each 3 numbers (x, y, z)")
+        if len(given) > MAX_PLANES:
+            raise InputError(f"a clip takes at most {MAX_PLANES} planes, got {len(given)}")
         planes = []
-        for i, plane in enumerate(self.planes):
-            if not isinstance(plane, (list, tuple)) or len(plane) != 2:
+        for i, plane in enumerate(given):
+            if not (isinstance(plane, (list, tuple)) or isinstance(plane, np.ndarray) and plane.ndim) \
+                    or len(plane) != 2:
                 raise InputError(f"plane {i} {plane!r} must be (point, normal), each 3 numbers (x, y, z)")
             point, normal = (tuple(reals(v, f"plane {i}'s {name}", 3, "3 finite numbers (x, y, z)").tolist())
                              for v, name in zip(plane, ("point", "normal")))
