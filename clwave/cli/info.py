@@ -232,7 +232,7 @@ def _volume_lines(f) -> list:
                       f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f["nifti"])
+    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"])
 
 
 def _nifti_lines(n) -> list:
@@ -254,6 +254,24 @@ def _nifti_lines(n) -> list:
     if n["intent"] == "label":
         lines.append(("intent", "labels (NIFTI_INTENT_LABEL): compress with --wavelet haar (docs/model.md §5)"))
     return lines
+
+
+def _fits_lines(c) -> list:
+    """A FITS cube's HDU, values and axes (``loaders.fits.header_facts``)."""
+    if c is None:
+        return []
+    scaling = ", ".join(f"{k} {v:g}" for k, v in c["scaling"].items())
+    axes = []
+    for n, a in enumerate(c["axes"], 1):
+        step = "" if a["step"] is None else f", {a['step']:g}{' ' + a['unit'] if a['unit'] else ''} a pixel"
+        becomes = "dropped" if a["axis"] is None else f"-> {a['axis']}{' reversed' * bool(a['flipped'])}"
+        axes.append(f"{n} {a['type'] or '(no CTYPE)'} ({a['length']}{step}) {becomes}")
+    name = f" ({c['name']})" if c["name"] else ""
+    scaled = f" ({scaling}, applied as read)" if scaling else ""
+    unit = c["unit"] or "no unit (no BUNIT)"
+    return [("cube", f"HDU {c['hdu']}{name}, values in {unit}{scaled}; NaN (and BLANK) are no data: --nan VALUE gives "
+                     "them a value"),
+            ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1)")]
 
 
 def _extent(shape, spacing) -> float:

@@ -23,7 +23,7 @@ import numpy as np
 from ...errors import FileFormatError, InputError, finite_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
-from . import dicom, dicom_frames, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
+from . import dicom, dicom_frames, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading,
                      axis_turn, stated_affine, to_canonical, to_float32)
 
@@ -31,7 +31,8 @@ __all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORM
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
-               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc")
+               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc") \
+    | dict.fromkeys(fits_cube.FITS_SUFFIXES, "fits")
 #: the formats put in RAS+ (their origin and spacing in scanner millimetres; the others keep their array axes)
 RAS_FORMATS = ("nifti", "mgh", "nrrd", "dicom", "dicom-frames")
 #: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
@@ -186,14 +187,15 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
 
 def check_orientation(kind, orientation):
     """The turn into RAS+ (:func:`.shared.axis_turn`) of ``orientation=`` (None without it), refused in one line for an
-    input whose header places it in RAS+ (:data:`RAS_FORMATS`)."""
+    input whose header places it in RAS+ (:data:`RAS_FORMATS`), or on the sky (FITS)."""
     if orientation is None:
         return None
-    if kind in RAS_FORMATS:
+    if kind in RAS_FORMATS + ("fits",):
+        placed = "on the sky, north up and east left," if kind == "fits" else "in RAS+"
         raise InputError(f"orientation= is for inputs that carry none (.npy, .raw, TIFF, folders of slices, Zarr, "
-                         f"HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out",
+                         f"HDF5, MRC); a {kind} input is put {placed} by its own header: leave it out",
                          cli=f"--orientation is for inputs that carry none (.npy, .raw, TIFF, folders of slices, "
-                             f"Zarr, HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out")
+                             f"Zarr, HDF5, MRC); a {kind} input is put {placed} by its own header: leave it out")
     return axis_turn(orientation)
 
 
@@ -228,6 +230,8 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
         return (*mrc.read_mrc(path, chunks, fits, warn_spacing), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
+    if kind == "fits":
+        return (*fits_cube.read_fits(path, chunks, fits), 0.0)
     if kind == "tiff":
         return (*tiff.read_tiff(path, fits, chunks=chunks, warn_spacing=warn_spacing), 0.0)
     if kind in _SLICE_FOLDERS:
@@ -257,7 +261,8 @@ def _world_unit(kind, path, inner):
 
 
 DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",
-             "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti")
+             "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti",
+             "fits")
 
 
 def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_order=None) -> dict:
@@ -328,7 +333,7 @@ def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_orde
 
 def _header_facts(kind, path) -> dict:
     """What a format's header says beyond the volume's place (a NIfTI's codes, orientation, shear and scaling)."""
-    return nifti.header_facts(path) if kind == "nifti" else {}
+    return nifti.header_facts(path) if kind == "nifti" else fits_cube.header_facts(path) if kind == "fits" else {}
 
 
 def _declared(voxels, channels):
@@ -359,7 +364,7 @@ def _kind(path: Path) -> str:
             return "dicom"
         return f"{slice_format.lower()}-folder" if slice_format else "dicom"
     name = path.name.lower()
-    suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
+    suffix = next((s for s in (".nii.gz",) + fits_cube.FITS_SUFFIXES if name.endswith(s)), path.suffix.lower())
     if not path.exists():
         raise FileFormatError(f"no file or folder at {path}; supported inputs: {SUPPORTED}")
     if not path.is_file():  # a reader of a FIFO waits for a writer, of a device for ever
