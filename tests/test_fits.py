@@ -237,9 +237,10 @@ def _good(tmp_path):
     return fits_bytes(np.zeros((3, 4, 5), np.int16), 16, SKY)
 
 
-def _edit(content, key, value):
+def _edit(content, key, value=None, card=None):
+    """``content`` with the card of ``key`` given another ``value``, or replaced by another ``card``."""
     at = content.index(f"{key:<8}=".encode())
-    return content[:at] + _card(key, value).encode() + content[at + 80:]
+    return content[:at] + (card or _card(key, value)).ljust(80).encode() + content[at + 80:]
 
 
 @pytest.mark.parametrize("case, words", [
@@ -249,6 +250,9 @@ def _edit(content, key, value):
     ("bitpix", r"has BITPIX = 12, none FITS has"),
     ("naxis", r"has NAXIS = 1000, FITS allows 0 to 999"),
     ("text", r"has NAXIS2 = 'four', not an integer"),
+    ("float", r"has BITPIX = 16.0, none FITS has"),
+    ("missing", r"its HDU 0 has no NAXIS3; the header is corrupt"),
+    ("groups", r"has GCOUNT = 1, PCOUNT = -5760; a count cannot be negative"),
     ("cut", r"declares 5 x 4 x 3 voxels \(120 bytes\) but the file holds 100 bytes"),
     ("not fits", r"is not a FITS file \(it does not begin with SIMPLE = T\)"),
     ("image", r"holds no image of 3 or more axes \(its HDUs: 0: a 2-D image\); clwave reads data cubes"),
@@ -262,6 +266,9 @@ def test_a_lying_or_truncated_header_is_refused_in_one_line(tmp_path, capsys, ca
                "bitpix": lambda: _edit(content, "BITPIX", 12),
                "naxis": lambda: _edit(content, "NAXIS", 1000),
                "text": lambda: _edit(content, "NAXIS2", "four"),
+               "float": lambda: _edit(content, "BITPIX", 16.0),
+               "missing": lambda: _edit(content, "NAXIS3", card="COMMENT"),
+               "groups": lambda: _edit(content, "CRPIX3", card=_card("PCOUNT", -5760)),
                "cut": lambda: content[:2880 + 100],
                "not fits": lambda: b"\x89PNG" + content[4:],
                "image": lambda: fits_bytes(np.zeros((4, 5), np.int16), 16),

@@ -6,6 +6,7 @@ elevation 0) shows the sky as an astronomer sees it: north up, east left (docs/c
 from __future__ import annotations
 
 import gzip
+import itertools
 import math
 import warnings
 from contextlib import contextmanager
@@ -17,7 +18,7 @@ from ...errors import FileFormatError
 from .shared import GZIP_MAGIC, Declared, OnDemand, as_array, check_declared_size, note
 
 FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fz", ".fits.gz", ".fit.gz", ".fts.gz")
-_BLOCK = 2880  # FITS files are read and written in blocks of 2880 bytes
+_BLOCK = 2880  # FITS's block: each header and each HDU's data is padded to a multiple
 _BITPIX = (8, 16, 32, 64, -32, -64)
 _VOLUME_AXES = "zyx"
 
@@ -63,15 +64,19 @@ def find_cube(path):
     with (gzip.open if zipped else open)(path, "rb") as fh:
         if not fh.read(80).startswith(b"SIMPLE  =                    T"):
             raise FileFormatError(f"{path} is not a FITS file (it does not begin with SIMPLE = T)")
-        for index in range(_BLOCK):
+        for index in itertools.count():
             fh.seek(offset)
-            if index and not fh.read(1):
+            try:
+                header = fits.Header.fromfile(fh)
+            except EOFError:  # the end of the file, where the next HDU would begin
                 break
-            fh.seek(offset)
-            header = fits.Header.fromfile(fh)
             start = fh.tell()
             bitpix, axes = _checked(path, index, header, "")
-            nbytes = abs(bitpix) // 8 * _whole(header, "GCOUNT", 1) * (_whole(header, "PCOUNT", 0) + math.prod(axes))
+            groups, heap = _whole(path, index, header, "GCOUNT", 1), _whole(path, index, header, "PCOUNT", 0)
+            if min(groups, heap) < 0:
+                raise FileFormatError(f"{path}: its HDU {index} has GCOUNT = {groups}, PCOUNT = {heap}; a count cannot "
+                                      "be negative: the header is corrupt")
+            nbytes = abs(bitpix) // 8 * groups * (heap + math.prod(axes))
             check_declared_size(path, start, nbytes * bool(axes), axes, gzip=zipped)
             tiled = header.get("ZIMAGE") is True
             if index == 0 or header.get("XTENSION") == "IMAGE" or tiled:
@@ -119,27 +124,27 @@ def _checked(path, index, header, prefix):
     """``(BITPIX, [NAXIS1, ...])`` of an HDU's header (``prefix`` "Z": a tile-compressed image's ZBITPIX, ZNAXIS...),
     refused in one line where one is missing or not what FITS allows."""
     bitpix = header.get(prefix + "BITPIX")
-    if bitpix not in _BITPIX or isinstance(bitpix, bool):
+    if type(bitpix) is not int or bitpix not in _BITPIX:
         raise FileFormatError(f"{path}: its HDU {index} has {prefix}BITPIX = {bitpix!r}, none FITS has "
                               f"({', '.join(map(str, _BITPIX))}); the header is corrupt")
-    naxis = _whole(header, prefix + "NAXIS", None, path, index)
+    naxis = _whole(path, index, header, prefix + "NAXIS")
     if not 0 <= naxis <= 999:
         raise FileFormatError(f"{path}: its HDU {index} has {prefix}NAXIS = {naxis}, FITS allows 0 to 999; the header "
                               "is corrupt")
-    axes = [_whole(header, f"{prefix}NAXIS{n}", None, path, index) for n in range(1, naxis + 1)]
+    axes = [_whole(path, index, header, f"{prefix}NAXIS{n}") for n in range(1, naxis + 1)]
     if axes and min(axes) < 0:
         raise FileFormatError(f"{path}: its HDU {index} declares {' x '.join(map(str, axes))} pixels "
                               f"({prefix}NAXISn); a length cannot be negative: the header is corrupt")
     return bitpix, axes
 
 
-def _whole(header, key, default, path=None, index=None):
+def _whole(path, index, header, key, default=None):
     """An integer keyword of ``header`` (``default`` where it is missing; None: required)."""
     value = header.get(key, default)
-    if not isinstance(value, int) or isinstance(value, bool):
-        raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, not an integer; the header is "
-                              "corrupt" if value is not None else f"{path}: its HDU {index} has no {key}; the header "
-                              "is corrupt")
+    if value is None:
+        raise FileFormatError(f"{path}: its HDU {index} has no {key}; the header is corrupt")
+    if type(value) is not int:
+        raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, not an integer; the header is corrupt")
     return value
 
 
@@ -160,7 +165,7 @@ def sky_axes(header, kept, path=None):
     of the axis that becomes volume axis ``v`` (z, y, x); ``flips[v]`` whether it is reversed; ``spacing`` (dz, dy, dx)
     in pixels, the latitude's pixel over the longitude's along z.  By its WCS's celestial axes (astropy.wcs): latitude
     to z increasing north, longitude to y increasing west, the third axis to x; without them (or a WCS astropy cannot
-    read, with a warning) axis 2 to z, 1 to y, 3 to x, unflipped."""
+    read, with a warning naming ``path`` where it is given) axis 2 to z, 1 to y, 3 to x, unflipped."""
     from astropy.wcs import WCS, FITSFixedWarning
 
     plain = ((1, 0, 2), (False, False, False), (1.0, 1.0, 1.0))
@@ -169,8 +174,9 @@ def sky_axes(header, kept, path=None):
             warnings.simplefilter("ignore", FITSFixedWarning)
             wcs = WCS(header)
     except Exception as exc:  # noqa: BLE001 - any WCS astropy cannot read: the pixel grid, with a warning
-        note(f"{path}: its WCS is not read ({type(exc).__name__}: {str(exc).strip().splitlines()[-1][:120]}); its "
-             "planes are shown as stored, axis 1 to the right and 2 up")
+        if path is not None:
+            note(f"{path}: its WCS is not read ({type(exc).__name__}: {str(exc).strip().splitlines()[-1][:120]}); its "
+                 "planes are shown as stored, axis 1 to the right and 2 up")
         return plain
     lng, lat = wcs.wcs.lng, wcs.wcs.lat
     if lng < 0 or lat < 0:
@@ -235,6 +241,7 @@ def _read(path, index, naxis, kept, key):
     full = [slice(0, 1)] * naxis
     for k, a in zip(key, kept[::-1]):
         full[naxis - 1 - a] = k
+    full[-1] = slice(None)  # whole rows, cut after: astropy reads a block of them at once, a part of a row at a time
     with _opened(path) as hdul:
         data = np.asarray(hdul[index].section[tuple(full)])
-    return data.reshape([n for i, n in enumerate(data.shape) if naxis - 1 - i in kept])
+    return data.reshape([n for i, n in enumerate(data.shape) if naxis - 1 - i in kept])[..., key[-1]]
