@@ -2,13 +2,13 @@
 
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
 (NIfTI, FreeSurfer MGH, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
-millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
-stores, and large .npy, .raw, .nii, .mgh and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
-arrays (docs/chunked.md §1).
+millimetres, FITS cubes on the sky (north up, east left, in pixels), the others keep their array axes
+(docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5 stores, and large .npy, .raw, .nii, .mgh, MRC, FITS and TIFF files
+(and folders of TIFF slices), are read chunk by chunk as Dask arrays (docs/chunked.md §1).
 
-One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``nrrd``, ``tiff``, ``slices``: folders of
-TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared``
-holds what they share.
+One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``mrc``, ``fits``, ``nrrd``, ``tiff``,
+``slices``: folders of TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its
+``read_*``; ``shared`` holds what they share.
 """
 
 from __future__ import annotations
@@ -58,8 +58,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         ``slice10``), a folder of DICOM files (other files in it are ignored), a
         multi-frame DICOM file whose frames carry positions
         (enhanced CT/MR, RT Dose), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
-        or an HDF5 file ``.h5``/``.hdf5``/``.hdf``.  ``file.h5:/name`` and
-        ``store.zarr:/name`` name an array inside; without a name the store's only
+        an HDF5 file ``.h5``/``.hdf5``/``.hdf``, an MRC/CCP4 map, or a FITS cube (``.fits``, ``.fit``, ``.fts``,
+        ``.fits.gz``, ``.fz``: north up, east left seen from +x, in pixels; docs/coordinates.md §1).
+        ``file.h5:/name`` and ``store.zarr:/name`` name an array inside; without a name the store's only
         3-D/4-D array is read (an OME-Zarr image: its ``level``).
     shape : tuple of int, optional
         ``.raw`` only: ``(Z, Y, X)`` or ``(Z, Y, X, C)``, C-ordered (x fastest).
@@ -76,7 +77,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     chunks : None, False, "auto" or int
-        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``,
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``, MRC, FITS,
         TIFF and folders of TIFF slices too when their volume takes at least
         ``CHUNKED_MIN_BYTES`` (1 GiB) as float32; everything else is read whole.  ``False``: read whole.
         ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
@@ -101,7 +102,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         directions its x, y and z index axes (array axes 2, 1, 0, as stored) point to, as three of nibabel's axis
         codes (``"LPS"``: x to the patient's left, y posterior, z superior; what ``nibabel.aff2axcodes`` says of a
         NIfTI's (x, y, z) axes); the volume is turned into RAS+ as a medical file is (docs/coordinates.md §1).
-        Refused for NIfTI, MGH, NRRD and DICOM, which carry their own.
+        Refused for NIfTI, MGH, NRRD, DICOM and FITS, which carry their own.
     unit : str, optional
         The world unit, the length of the spacing's 1 (:data:`clwave.io.images.UNIT_METRES`: "mm", "um"...);
         default the file's (:func:`world_unit`; None where it gives none).

@@ -33,8 +33,8 @@ SUPPORTED = (".npy, .nii, .nii.gz, .mgh, .mgz, .nrrd, .nhdr, .tif/.tiff (multi-p
              "given), a Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset), an MRC/CCP4 map (.mrc, .map, "
              ".ccp4, .rec, .st), a FITS cube (.fits, .fit, .fts, .fits.gz, .fz)")
 
-#: chunks=None reads .npy, .raw, .nii, .mgh, MRC and TIFF files (and folders of TIFF slices) whose volume takes at least
-#: this many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
+#: chunks=None reads .npy, .raw, .nii, .mgh, MRC, FITS and TIFF files (and folders of TIFF slices) whose volume takes at
+#: least this many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
 CHUNKED_MIN_BYTES = 1 << 30
 
 #: chunks="auto": at most this many bytes of float32 per chunk, in multiples of the store's own chunks
@@ -248,7 +248,7 @@ def check_whole(path, shape, dtype, fits=None, streamed=False, resampled=False):
     converted = 0 if dtype == np.float32 and not streamed else 4 * channels  # float32 samples used as they are read
     check_fits(voxels * (stored + converted), f"reading {path} whole "
                f"({' x '.join(map(str, shape))} {dtype})", "read it chunk by chunk (chunks='auto'; Zarr, HDF5, .npy, "
-               ".raw, .nii, .mgh, MRC, TIFF), or crop it")
+               ".raw, .nii, .mgh, MRC, FITS, TIFF), or crop it")
 
 
 def by_size(chunks, shape):
