@@ -236,12 +236,14 @@ def _opened(path):
 
 def _read(path, index, naxis, kept, key):
     """``key`` (of the kept axes, in numpy order) of a cube, read anew (the file opened for each chunk) by astropy's
-    section, scaled (BSCALE, BZERO; BLANK as NaN); the dropped axes of length 1 read and taken away."""
+    section, scaled (BSCALE, BZERO; BLANK as NaN), in this machine's byte order; the dropped axes of length 1 read and
+    taken away."""
     key = key if isinstance(key, tuple) and Ellipsis not in key else (slice(None),) * 3
     full = [slice(0, 1)] * naxis
     for k, a in zip(key, kept[::-1]):
         full[naxis - 1 - a] = k
     full[-1] = slice(None)  # whole rows, cut after: astropy reads a block of them at once, a part of a row at a time
     with _opened(path) as hdul:
-        data = np.asarray(hdul[index].section[tuple(full)])
-    return data.reshape([n for i, n in enumerate(data.shape) if naxis - 1 - i in kept])[..., key[-1]]
+        data = np.asarray(hdul[index].section[tuple(full)])  # big-endian as stored, unless scaled
+    data = data.reshape([n for i, n in enumerate(data.shape) if naxis - 1 - i in kept])[..., key[-1]]
+    return data.astype(data.dtype.newbyteorder("="), copy=False)  # as samples() says: a .clw records "float32"
