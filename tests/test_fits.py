@@ -203,7 +203,8 @@ def test_info_names_the_axes_and_what_they_become(tmp_path, capsys):
     assert "volume     4 x 8 x 6 voxels (x, y, z)" in out
     assert "cube       HDU 0 (PRIMARY), values in Jy/beam; NaN (and BLANK) are no data" in out
     assert ("axes       1 RA---SIN (8, 0.001 deg a pixel) -> y reversed; 2 DEC--SIN (6, 0.001 deg a pixel) -> z; "
-            "3 VRAD (4, 5000 m/s a pixel) -> x; in pixels") in out
+            "3 VRAD (4, 5000 m/s a pixel) -> x; in pixels, north up and east left seen from +x (docs/coordinates.md "
+            "§1); --spacing 1,1,2 makes the spectral axis as deep as the sky is wide") in out
     code, out, err = run(capsys, "info", str(path), "--json")
     facts = json.loads(out)
     assert facts["format"] == "fits" and facts["shape"] == [6, 8, 4] and facts["unit"] is None

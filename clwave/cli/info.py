@@ -232,7 +232,7 @@ def _volume_lines(f) -> list:
                       f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"])
+    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"])
 
 
 def _nifti_lines(n) -> list:
@@ -256,8 +256,9 @@ def _nifti_lines(n) -> list:
     return lines
 
 
-def _fits_lines(c) -> list:
-    """A FITS cube's HDU, values and axes (``loaders.fits.header_facts``)."""
+def _fits_lines(c, shape) -> list:
+    """A FITS cube's HDU, values and axes (``loaders.fits.header_facts``), and the ``--spacing`` that makes its
+    spectral axis (x) as deep as its ``shape``'s sky is wide (yt's ``spectral_factor="auto"``)."""
     if c is None:
         return []
     scaling = ", ".join(f"{k} {v:g}" for k, v in c["scaling"].items())
@@ -271,7 +272,9 @@ def _fits_lines(c) -> list:
     unit = c["unit"] or "no unit (no BUNIT)"
     return [("cube", f"HDU {c['hdu']}{name}, values in {unit}{scaled}; NaN (and BLANK) are no data: --nan VALUE gives "
                      "them a value"),
-            ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1)")]
+            ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1); "
+                     f"--spacing 1,1,{max(shape[:2]) / shape[2]:.4g} makes the spectral axis as deep as the sky is "
+                     "wide")]
 
 
 def _extent(shape, spacing) -> float:
