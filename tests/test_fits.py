@@ -226,6 +226,16 @@ def test_compress_and_render_a_cube_through_the_command_line(tmp_path, capsys, r
     assert code == 0, err
 
 
+def test_a_grid_turned_on_the_sky_goes_by_its_nearest_axes_with_a_warning(tmp_path, rng):
+    """PC matrix of a 20 degree turn (CROTA2 20): north is nearest pixel axis 2, as without the turn."""
+    cube = rng.normal(size=(3, 4, 5)).astype(np.float32)
+    c, s = float(np.cos(np.radians(20))), float(np.sin(np.radians(20)))
+    path = write(tmp_path / "t.fits", cube, -32, SKY | dict(PC1_1=c, PC1_2=-s, PC2_1=s, PC2_2=c))
+    with pytest.warns(ClwaveWarning, match="its sky is turned 20.00 degrees on its pixel grid"):
+        vol = clwave.load(path)
+    np.testing.assert_array_equal(vol.data, as_seen(cube))
+
+
 def test_an_unreadable_wcs_is_the_pixel_grid_with_a_warning(tmp_path, rng):
     cube = rng.normal(size=(3, 4, 5)).astype(np.float32)
     path = write(tmp_path / "w.fits", cube, -32, SKY | dict(CTYPE1="RA---XXX"))

@@ -164,8 +164,9 @@ def sky_axes(header, kept, path=None):
     """``(order, flips, spacing)`` of a cube whose FITS axes ``kept`` are read: ``order[v]``, the position in ``kept``
     of the axis that becomes volume axis ``v`` (z, y, x); ``flips[v]`` whether it is reversed; ``spacing`` (dz, dy, dx)
     in pixels, the latitude's pixel over the longitude's along z.  By its WCS's celestial axes (astropy.wcs): latitude
-    to z increasing north, longitude to y increasing west, the third axis to x; without them (or a WCS astropy cannot
-    read, with a warning naming ``path`` where it is given) axis 2 to z, 1 to y, 3 to x, unflipped."""
+    to z increasing north, longitude to y increasing west, the third axis to x (a grid turned on the sky by the pixel
+    axes nearest, with a warning naming ``path`` where it is given); without them (or a WCS astropy cannot read, with
+    that warning) axis 2 to z, 1 to y, 3 to x, unflipped."""
     from astropy.wcs import WCS, FITSFixedWarning
 
     plain = ((1, 0, 2), (False, False, False), (1.0, 1.0, 1.0))
@@ -187,6 +188,10 @@ def sky_axes(header, kept, path=None):
         return plain
     third = ({0, 1, 2} - set(along.values())).pop()
     east, north = steps[lng, along[lng]], steps[lat, along[lat]]
+    turned = float(np.degrees(np.arctan2(abs(steps[lat, along[lng]]), abs(north))))
+    if turned > 0.01 and path is not None:
+        note(f"{path}: its sky is turned {turned:.2f} degrees on its pixel grid (CROTA2, or its PC/CD matrix): shown "
+             "on that grid, north along the pixel axis nearest to it")
     aspect = abs(north / east) if east and north and math.isfinite(north / east) else 1.0
     return (along[lat], along[lng], third), (bool(north < 0), bool(east > 0), False), (aspect, 1.0, 1.0)
 
