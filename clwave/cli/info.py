@@ -9,7 +9,8 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .options import READING, add_reading_options, error_words, file_size, flag, kept_words, numbers, parse_series
+from .options import (READING, add_reading_options, error_words, file_size, flag, is_given, kept_words, numbers, option,
+                      parse_series)
 
 
 def run(args):
@@ -82,12 +83,12 @@ GEOMETRY = ("unit", "box", "spacing_option", "reading")
 
 def _reading(args) -> list:
     """The reading options given (``--spacing 10,5,5``'s ``--spacing``)."""
-    return [flag(n) for n in _given(args)]
+    return [option(args, n) for n in _given(args)]
 
 
 def _given(args) -> dict:
     """The reading options given, by name, as given (``--nan 0`` too: 0 == False)."""
-    return {n: getattr(args, n) for n in READING if getattr(args, n) is not None and getattr(args, n) is not False}
+    return {n: getattr(args, n) for n in READING if is_given(args, n)}
 
 
 def _as_read(args, facts) -> dict:
@@ -217,6 +218,9 @@ def _volume_lines(f) -> list:
     if values:
         lines.append(("values", f"{', '.join(flag(n) + ('' if v is True else f' {v:g}') for n, v in values.items())}"
                                 f": applied as the values are read (not read here)"))
+    if "labels" in f["reading"]:
+        lines.append(("labels", "a label map (--labels): a wavelet above Haar is warned of (docs/model.md §5)"
+                      if f["reading"]["labels"] else "no label map (--no-labels), whatever its values look like"))
     if f["time"]:
         t = f["time"]
         step = "" if t["step"] is None else f", {t['step']:g} {t['unit'] or '(no unit)'} apart"

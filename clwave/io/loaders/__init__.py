@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import FileFormatError, InputError, finite_number
+from ...errors import FileFormatError, InputError, finite_number, flag
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
@@ -39,14 +39,15 @@ RAS_FORMATS = ("nifti", "mgh", "nrrd", "dicom", "dicom-frames")
 _SLICE_FOLDERS = tuple(f"{name.lower()}-folder" for name in slices.SLICE_SUFFIXES)
 # 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
 _INNER_PATH = re.compile(r"(.*\.(?:h5|hdf5|hdf|zarr)):(.*)", re.IGNORECASE | re.DOTALL)
-# Options that apply to one kind of input only
-_ONLY_FOR = {"shape": ".raw files", "dtype": ".raw files", "byte_order": ".raw files", "series": "DICOM folders",
-             "level": "OME-Zarr images"}
+# Options that apply to some kinds of input only: those kinds, in words
+_ONLY_FOR = {"shape": (("raw",), ".raw files"), "dtype": (("raw", "mrc"), ".raw files and MRC maps of bytes"),
+             "byte_order": (("raw",), ".raw files"), "series": (("dicom",), "DICOM folders"),
+             "level": (("zarr",), "OME-Zarr images")}
 
 
 def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
          chunks=None, nan=None, subtract=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None,
-         fits=None, orientation=None, unit=None, origin=None) -> Volume:
+         fits=None, orientation=None, unit=None, origin=None, labels=None) -> Volume:
     """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
 
     Parameters
@@ -65,7 +66,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     shape : tuple of int, optional
         ``.raw`` only: ``(Z, Y, X)`` or ``(Z, Y, X, C)``, C-ordered (x fastest).
     dtype : str or numpy.dtype, optional
-        ``.raw`` only: the sample type, e.g. ``"uint16"``.
+        ``.raw``: the sample type, e.g. ``"uint16"``; an MRC map of bytes (mode 0): ``"uint8"`` or ``"int8"``, how its
+        bytes are read (MRC2014's are signed, IMOD's stamp may say unsigned; a signed reading that looks wrapped is
+        warned of).
     spacing : float or 3 floats, optional
         Voxel size ``(dz, dy, dx)``; overrides the file's spacing, in the file's unit where it has one (``unit=``
         names another), along the array's axes as stored (before ``orientation=`` turns them).
@@ -108,6 +111,10 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         default the file's (:func:`world_unit`; None where it gives none).
     origin : 3 floats, optional
         World position ``(x, y, z)`` of the volume's centre, after ``orientation=``; default the file's, else 0.
+    labels : bool, optional
+        Whether the volume is a label map (a segmentation, :attr:`Volume.labels`), where you know better than the
+        guess: by default a NIfTI's intent ``NIFTI_INTENT_LABEL``, else its values as stored
+        (:func:`~clwave.model.labels.looks_like_labels`; a chunked volume's are not looked at) (docs/model.md §5).
     fits : callable, optional
         ``fits(voxels, channels)``, called with the size the file's header declares before a volume read whole
         (not chunk by chunk) is read (a stack of slices: once its first slice is read), to refuse one that is too
@@ -143,17 +150,13 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     subtract = finite_number(subtract, "subtract")
     nan = None if nan is None else finite_number(nan, "nan")
     mu_water = finite_number(mu_water, "mu_water")
+    labels = None if labels is None else flag(labels, "labels")
     if hu_to_mu and mu_water <= 0:
         raise InputError(f"mu_water={mu_water} must be positive (attenuation of water per "
                          "world unit)")
     path, inner = _split_inner(path)
     kind = _kind(path)
-    if kind != "raw":
-        _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order)
-    if kind != "dicom":
-        _reject_unused(kind, series=series)
-    if kind != "zarr":
-        _reject_unused(kind, level=level)
+    _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order, series=series, level=level)
     turn = check_orientation(kind, orientation)
     chunks = check_chunks(chunks, kind, path)
 
@@ -162,8 +165,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                                                            level, chunks, progress_bar, fits, spacing is None)
     if not is_dask(data):
         data = np.asarray(data)
-    # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
-    labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
+    if labels is None:  # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
+        labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
     stored = data.dtype
     photo = data.ndim == 4 and stored.kind in "iu" and _photo(kind, path)
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
@@ -228,7 +231,7 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     if kind == "mgh":
         return mgh.read_mgh(path, chunks, fits)
     if kind == "mrc":
-        return (*mrc.read_mrc(path, chunks, fits, warn_spacing), 0.0)
+        return (*mrc.read_mrc(path, chunks, fits, warn_spacing, dtype), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "fits":
@@ -289,12 +292,7 @@ def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_orde
         raise FileFormatError(f"{path} is a .raw file: it has no header (its shape and type are given to read it, "
                               f"shape= and dtype=)", cli=f"{path} is a .raw file: it has no header (its shape and type "
                                                          f"are given to read it, --shape and --dtype)")
-    if kind != "raw":
-        _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order)
-    if kind != "dicom":
-        _reject_unused(kind, series=series)
-    if kind != "zarr":
-        _reject_unused(kind, level=level)
+    _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order, series=series, level=level)
     # a Dask array over the file: nothing read until computed; a TIFF is described as its whole read weighs it (the
     # axes as stored, before the loader orders them)
     lazy = check_chunks(None, kind, path) is not False and kind not in ("tiff", "tiff-folder")
@@ -407,9 +405,10 @@ def _is_dicom(path) -> bool:
 
 def _reject_unused(kind, **options):
     """Refuse options the format ignores, so a mistaken call is not silently accepted."""
-    given = [name for name, value in options.items() if value is not None]
+    given = [name for name, value in options.items() if value is not None and kind not in _ONLY_FOR[name][0]]
+    given = [name for name in given if _ONLY_FOR[name] == _ONLY_FOR[given[0]]]  # those of the first's kinds
     if given:
-        needs, one = _ONLY_FOR[given[0]], len(given) == 1
+        needs, one = _ONLY_FOR[given[0]][1], len(given) == 1
         verb, them = ("applies", "it") if one else ("apply", "them")
         raise InputError(f"{'=, '.join(given)}= only {verb} to {needs}; leave {them} out for a {kind} input",
                          cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only {verb} to {needs}; "
