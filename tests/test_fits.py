@@ -53,11 +53,19 @@ def as_seen(stored_spec_dec_ra):
     return np.transpose(stored_spec_dec_ra, (1, 2, 0))
 
 
-def test_scaled_int16_with_blank_is_read_as_its_values(tmp_path, capsys, rng):
+@pytest.mark.parametrize("writer", ["by hand", "astropy"])
+def test_scaled_int16_with_blank_is_read_as_its_values(tmp_path, capsys, rng, writer):
     """BSCALE and BZERO applied, BLANK is no data: refused (NaN) until nan= gives it a value."""
     stored = rng.integers(-3000, 3000, (4, 5, 6)).astype(np.int16)
     stored[1, 2, 3] = -32768
-    path = write(tmp_path / "scaled.fits", stored, 16, SKY | dict(BSCALE=0.5, BZERO=100.0, BLANK=-32768))
+    scaling = dict(BSCALE=0.5, BZERO=100.0, BLANK=-32768)
+    path = tmp_path / "scaled.fits"
+    if writer == "astropy":  # the integers written as they are, the keywords set after (as a survey's pipeline does)
+        hdu = fits.PrimaryHDU(stored, fits.Header(SKY))
+        hdu.header.update(scaling)
+        hdu.writeto(path)
+    else:
+        write(path, stored, 16, SKY | scaling)
     with pytest.raises(InputError, match="non-finite voxel"):
         clwave.load(path)
     code, _, err = run(capsys, "info", str(path))
@@ -224,6 +232,14 @@ def test_compress_and_render_a_cube_through_the_command_line(tmp_path, capsys, r
     assert model.shape == (12, 16, 8) and model.spacing == (1.0, 1.0, 0.5)  # the spectral axis (x) halved
     code, _, err = run(capsys, "render", str(tmp_path / "hi.clw"), "--size", "16", "-o", str(tmp_path / "hi.png"))
     assert code == 0, err
+
+
+def test_oblong_sky_pixels_keep_their_aspect(tmp_path, rng):
+    """Dec pixels twice the RA pixels' size: z spaced 2, the rest 1 (pixels); info names it as the file's."""
+    cube = rng.normal(size=(3, 4, 5)).astype(np.float32)
+    path = write(tmp_path / "o.fits", cube, -32, SKY | dict(CDELT2=0.002))
+    assert clwave.load(path).spacing == (2.0, 1.0, 1.0)
+    assert describe(path)["spacing"] == [2.0, 1.0, 1.0]
 
 
 def test_a_grid_turned_on_the_sky_goes_by_its_nearest_axes_with_a_warning(tmp_path, rng):
