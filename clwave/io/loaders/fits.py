@@ -61,7 +61,7 @@ def find_cube(path):
         raise FileFormatError(f"{path} is not gzip-compressed, but its name ends in .gz: name it {path.name[:-3]}"
                               if zipped else f"{path} is gzip-compressed: name it {path.name}.gz")
     seen, offset = [], 0
-    with (gzip.open if zipped else open)(path, "rb") as fh:
+    with (gzip.open if zipped else open)(path, "rb") as fh, _quiet():
         if not fh.read(80).startswith(b"SIMPLE  =                    T"):
             raise FileFormatError(f"{path} is not a FITS file (it does not begin with SIMPLE = T)")
         for index in itertools.count():
@@ -167,12 +167,11 @@ def sky_axes(header, kept, path=None):
     to z increasing north, longitude to y increasing west, the third axis to x (a grid turned on the sky by the pixel
     axes nearest, with a warning naming ``path`` where it is given); without them (or a WCS astropy cannot read, with
     that warning) axis 2 to z, 1 to y, 3 to x, unflipped."""
-    from astropy.wcs import WCS, FITSFixedWarning
+    from astropy.wcs import WCS
 
     plain = ((1, 0, 2), (False, False, False), (1.0, 1.0, 1.0))
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", FITSFixedWarning)
+        with _quiet():
             wcs = WCS(header)
     except Exception as exc:  # noqa: BLE001 - any WCS astropy cannot read: the pixel grid, with a warning
         if path is not None:
@@ -226,17 +225,24 @@ def _number(header, key):
 
 
 @contextmanager
-def _opened(path):
-    """astropy's HDU list of ``path``, its warnings on keywords it ignores (a BLANK of a float cube) kept quiet: the
-    header has been checked, and what is read is said by clwave (a chunk's reading too: the filter, shared by threads,
-    at worst stays)."""
-    from astropy.io import fits
+def _quiet():
+    """astropy's warnings kept quiet (a card it fixes, a BLANK of a float cube it ignores, a WCS keyword it corrects):
+    the header is checked here, and what is read said by clwave (a chunk's reading too: the filter, shared by
+    threads, at worst stays)."""
     from astropy.utils.exceptions import AstropyWarning
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", AstropyWarning)
-        with fits.open(path, lazy_load_hdus=True) as hdul:
-            yield hdul
+        yield
+
+
+@contextmanager
+def _opened(path):
+    """astropy's HDU list of ``path``, quiet (:func:`_quiet`)."""
+    from astropy.io import fits
+
+    with _quiet(), fits.open(path, lazy_load_hdus=True) as hdul:
+        yield hdul
 
 
 def _read(path, index, naxis, kept, key):
