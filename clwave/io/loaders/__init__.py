@@ -71,7 +71,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         warned of).
     spacing : float or 3 floats, optional
         Voxel size ``(dz, dy, dx)``; overrides the file's spacing, in the file's unit where it has one (``unit=``
-        names another), along the array's axes as stored (before ``orientation=`` turns them).
+        names another), along the array's axes as stored (before ``orientation=`` turns them); a FITS cube's along
+        its axes as loaded (Dec, RA, spectral: ``(1, 1, 0.25)`` flattens the spectral axis four times).
     byte_order : {'<', '>'}, optional
         ``.raw`` only: little or big endian (default: this machine's).
     series : int or str, optional
