@@ -22,23 +22,25 @@ SKY = dict(CTYPE1="RA---SIN", CTYPE2="DEC--SIN", CTYPE3="VRAD", CUNIT1="deg", CU
 
 
 def _card(key, value=None):
+    """One 80-character header card: ``key`` alone (END, COMMENT), or ``key = value`` in FITS's fixed format."""
     if value is None:
         return f"{key:<80}"
-    text = ("T" if value else "F") if isinstance(value, bool) else f"'{value:<8}'" if isinstance(value, str) else \
-        repr(value)
-    return f"{key:<8}= {text:>20}"[:80].ljust(80) if not isinstance(value, str) else f"{key:<8}= {text}".ljust(80)
+    if isinstance(value, str):
+        return f"{key:<8}= '{value:<8}'".ljust(80)
+    text = ("T" if value else "F") if isinstance(value, bool) else repr(value)
+    return f"{key:<8}= {text:>20}".ljust(80)
 
 
-def fits_bytes(samples, bitpix, cards=(), naxes=None, data=None):
+def fits_bytes(samples, bitpix, cards=(), naxes=None):
     """A FITS file's bytes written by hand: its primary header (``naxes``: NAXIS1 first, default the ``samples``'
-    shape reversed) and ``samples`` big-endian (``data``: those bytes given as they are), each padded to 2880."""
+    shape reversed) and ``samples`` big-endian, each padded to 2880."""
     naxes = list(samples.shape[::-1]) if naxes is None else naxes
     head = [_card("SIMPLE", True), _card("BITPIX", bitpix), _card("NAXIS", len(naxes))]
     head += [_card(f"NAXIS{n}", length) for n, length in enumerate(naxes, 1)]
     head += [_card(k, v) for k, v in dict(cards).items()] + [_card("END")]
     header = "".join(head).encode("ascii")
     header += b" " * (-len(header) % 2880)
-    body = samples.astype(samples.dtype.newbyteorder(">")).tobytes() if data is None else data
+    body = samples.astype(samples.dtype.newbyteorder(">")).tobytes()
     return header + body + b"\0" * (-len(body) % 2880)
 
 
