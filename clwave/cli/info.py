@@ -236,7 +236,7 @@ def _volume_lines(f) -> list:
                       f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f["nifti"])
+    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"])
 
 
 def _nifti_lines(n) -> list:
@@ -258,6 +258,27 @@ def _nifti_lines(n) -> list:
     if n["intent"] == "label":
         lines.append(("intent", "labels (NIFTI_INTENT_LABEL): compress with --wavelet haar (docs/model.md §5)"))
     return lines
+
+
+def _fits_lines(c, shape) -> list:
+    """A FITS cube's HDU, values and axes (``loaders.fits.header_facts``), and the ``--spacing`` that makes its
+    spectral axis (x) as deep as its ``shape``'s sky is wide (yt's ``spectral_factor="auto"``)."""
+    if c is None:
+        return []
+    scaling = ", ".join(f"{k} {v:g}" for k, v in c["scaling"].items())
+    axes = []
+    for n, a in enumerate(c["axes"], 1):
+        step = "" if a["step"] is None else f", {a['step']:g}{' ' + a['unit'] if a['unit'] else ''} a pixel"
+        becomes = "dropped" if a["axis"] is None else f"-> {a['axis']}{' reversed' * bool(a['flipped'])}"
+        axes.append(f"{n} {a['type'] or '(no CTYPE)'} ({a['length']}{step}) {becomes}")
+    name = f" ({c['name']})" if c["name"] else ""
+    scaled = f" ({scaling}, applied as read)" if scaling else ""
+    unit = c["unit"] or "no unit (no BUNIT)"
+    return [("cube", f"HDU {c['hdu']}{name}, values in {unit}{scaled}; NaN (and BLANK) are no data: --nan VALUE gives "
+                     "them a value"),
+            ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1); "
+                     f"--spacing 1,1,{max(shape[:2]) / shape[2]:.4g} makes the spectral axis as deep as the sky is "
+                     "wide")]
 
 
 def _extent(shape, spacing) -> float:

@@ -156,7 +156,7 @@ def read_volume(args):
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     # weighed by the size the file declares, before its voxels are read
     fits = partial(check_model_fits, args, what="decomposing this volume",
-                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, TIFF; "
+                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, FITS, TIFF; "
                         "gunzip a .nii.gz first, a .mgz into a .mgh), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
                 series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),

@@ -2,13 +2,13 @@
 
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
 (NIfTI, FreeSurfer MGH, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
-millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
-stores, and large .npy, .raw, .nii, .mgh and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
-arrays (docs/chunked.md §1).
+millimetres, FITS cubes on the sky (north up, east left, in pixels), the others keep their array axes
+(docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5 stores, and large .npy, .raw, .nii, .mgh, MRC, FITS and TIFF files
+(and folders of TIFF slices), are read chunk by chunk as Dask arrays (docs/chunked.md §1).
 
-One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``nrrd``, ``tiff``, ``slices``: folders of
-TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared``
-holds what they share.
+One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``mrc``, ``fits``, ``nrrd``, ``tiff``,
+``slices``: folders of TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its
+``read_*``; ``shared`` holds what they share.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 from ...errors import FileFormatError, InputError, finite_number, flag
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
-from . import dicom, dicom_frames, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
+from . import dicom, dicom_frames, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading,
                      axis_turn, stated_affine, to_canonical, to_float32)
 
@@ -31,7 +31,8 @@ __all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORM
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
-               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc")
+               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc") \
+    | dict.fromkeys(fits_cube.FITS_SUFFIXES, "fits")
 #: the formats put in RAS+ (their origin and spacing in scanner millimetres; the others keep their array axes)
 RAS_FORMATS = ("nifti", "mgh", "nrrd", "dicom", "dicom-frames")
 #: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
@@ -58,8 +59,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         ``slice10``), a folder of DICOM files (other files in it are ignored), a
         multi-frame DICOM file whose frames carry positions
         (enhanced CT/MR, RT Dose), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
-        or an HDF5 file ``.h5``/``.hdf5``/``.hdf``.  ``file.h5:/name`` and
-        ``store.zarr:/name`` name an array inside; without a name the store's only
+        an HDF5 file ``.h5``/``.hdf5``/``.hdf``, an MRC/CCP4 map, or a FITS cube (``.fits``, ``.fit``, ``.fts``,
+        ``.fits.gz``, ``.fz``: north up, east left seen from +x, in pixels; docs/coordinates.md §1).
+        ``file.h5:/name`` and ``store.zarr:/name`` name an array inside; without a name the store's only
         3-D/4-D array is read (an OME-Zarr image: its ``level``).
     shape : tuple of int, optional
         ``.raw`` only: ``(Z, Y, X)`` or ``(Z, Y, X, C)``, C-ordered (x fastest).
@@ -69,7 +71,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         warned of).
     spacing : float or 3 floats, optional
         Voxel size ``(dz, dy, dx)``; overrides the file's spacing, in the file's unit where it has one (``unit=``
-        names another), along the array's axes as stored (before ``orientation=`` turns them).
+        names another), along the array's axes as stored (before ``orientation=`` turns them); a FITS cube's along
+        its axes as loaded (Dec, RA, spectral: ``(1, 1, 0.25)`` flattens the spectral axis four times).
     byte_order : {'<', '>'}, optional
         ``.raw`` only: little or big endian (default: this machine's).
     series : int or str, optional
@@ -78,7 +81,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     chunks : None, False, "auto" or int
-        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``,
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``, MRC, FITS,
         TIFF and folders of TIFF slices too when their volume takes at least
         ``CHUNKED_MIN_BYTES`` (1 GiB) as float32; everything else is read whole.  ``False``: read whole.
         ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
@@ -103,7 +106,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         directions its x, y and z index axes (array axes 2, 1, 0, as stored) point to, as three of nibabel's axis
         codes (``"LPS"``: x to the patient's left, y posterior, z superior; what ``nibabel.aff2axcodes`` says of a
         NIfTI's (x, y, z) axes); the volume is turned into RAS+ as a medical file is (docs/coordinates.md §1).
-        Refused for NIfTI, MGH, NRRD and DICOM, which carry their own.
+        Refused for NIfTI, MGH, NRRD, DICOM and FITS, which carry their own.
     unit : str, optional
         The world unit, the length of the spacing's 1 (:data:`clwave.io.images.UNIT_METRES`: "mm", "um"...);
         default the file's (:func:`world_unit`; None where it gives none).
@@ -189,14 +192,15 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
 
 def check_orientation(kind, orientation):
     """The turn into RAS+ (:func:`.shared.axis_turn`) of ``orientation=`` (None without it), refused in one line for an
-    input whose header places it in RAS+ (:data:`RAS_FORMATS`)."""
+    input whose header places it in RAS+ (:data:`RAS_FORMATS`), or on the sky (FITS)."""
     if orientation is None:
         return None
-    if kind in RAS_FORMATS:
+    if kind in RAS_FORMATS + ("fits",):
+        placed = "on the sky, north up and east left," if kind == "fits" else "in RAS+"
         raise InputError(f"orientation= is for inputs that carry none (.npy, .raw, TIFF, folders of slices, Zarr, "
-                         f"HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out",
+                         f"HDF5, MRC); a {kind} input is put {placed} by its own header: leave it out",
                          cli=f"--orientation is for inputs that carry none (.npy, .raw, TIFF, folders of slices, "
-                             f"Zarr, HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out")
+                             f"Zarr, HDF5, MRC); a {kind} input is put {placed} by its own header: leave it out")
     return axis_turn(orientation)
 
 
@@ -231,6 +235,8 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
         return (*mrc.read_mrc(path, chunks, fits, warn_spacing, dtype), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
+    if kind == "fits":
+        return (*fits_cube.read_fits(path, chunks, fits), 0.0)
     if kind == "tiff":
         return (*tiff.read_tiff(path, fits, chunks=chunks, warn_spacing=warn_spacing), 0.0)
     if kind in _SLICE_FOLDERS:
@@ -260,7 +266,8 @@ def _world_unit(kind, path, inner):
 
 
 DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",
-             "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti")
+             "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti",
+             "fits")
 
 
 def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_order=None) -> dict:
@@ -326,7 +333,7 @@ def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_orde
 
 def _header_facts(kind, path) -> dict:
     """What a format's header says beyond the volume's place (a NIfTI's codes, orientation, shear and scaling)."""
-    return nifti.header_facts(path) if kind == "nifti" else {}
+    return nifti.header_facts(path) if kind == "nifti" else fits_cube.header_facts(path) if kind == "fits" else {}
 
 
 def _declared(voxels, channels):
@@ -357,7 +364,7 @@ def _kind(path: Path) -> str:
             return "dicom"
         return f"{slice_format.lower()}-folder" if slice_format else "dicom"
     name = path.name.lower()
-    suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
+    suffix = next((s for s in (".nii.gz",) + fits_cube.FITS_SUFFIXES if name.endswith(s)), path.suffix.lower())
     if not path.exists():
         raise FileFormatError(f"no file or folder at {path}; supported inputs: {SUPPORTED}")
     if not path.is_file():  # a reader of a FIFO waits for a writer, of a device for ever
