@@ -190,7 +190,7 @@ class Accumulator:
         tiles = tables.tiles
         ranges = zeros(q, (tiles, 2), np.uint32, allocator=r.scratch)
         nbytes = max(total, 1) * st.record_bytes
-        records = r.scratch.allocate(nbytes) if own else r.tile_lists(nbytes)
+        records = cl.Buffer(r.cc.ctx, cl.mem_flags.READ_WRITE, nbytes) if own else r.tile_lists(nbytes)
         if total:
             textures = max(tables.layer_textures)
             chunks = bin_chunks(n, tiles * textures, r.cc.info, r.budget)
