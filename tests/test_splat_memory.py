@@ -155,6 +155,19 @@ def test_a_budget_below_the_views_framebuffers_and_tile_lists_is_refused_before_
     assert not (tmp_path / "x.png").exists()
 
 
+def turns_with(stages, other) -> tuple:
+    """What the generator of stages ``stages`` returns, ``other(i)`` run between its stages i and i + 1; and how many
+    times it ran."""
+    between = 0
+    while True:
+        try:
+            next(stages)
+        except StopIteration as end:
+            return end.value, between
+        other(between)
+        between += 1
+
+
 @pytest.mark.parametrize("cap, pairs", [(None, None), (CAP, None), (None, 3000)])
 def test_an_image_in_turns_is_the_splat_whatever_the_renderer_splats_between_its_stages(cc, wv, monkeypatch, cap,
                                                                                        pairs):
@@ -170,15 +183,8 @@ def test_an_image_in_turns_is_the_splat_whatever_the_renderer_splats_between_its
     cam = clwave.Camera(30, 20, size=32)
     expect = clwave.splat(wv, cam, renderer=clwave.SplatRenderer(wv, device=cc, device_memory=cap))
     r = clwave.SplatRenderer(wv, device=cc, device_memory=cap)
-    turns, between = splat_in_turns(r, cam), 0
-    while True:
-        try:
-            next(turns)
-        except StopIteration as end:
-            got = end.value
-            break
-        clwave.splat(wv, clwave.Camera(40 * between, -10, size=(16 + between % 3, 24)), renderer=r)
-        between += 1
+    got, between = turns_with(splat_in_turns(r, cam), lambda i: clwave.splat(
+        wv, clwave.Camera(40 * i, -10, size=(16 + i % 3, 24)), renderer=r))
     assert between >= 1 + max(1, expect.meta["coefficient_chunks"]) and np.array_equal(got.image, expect.image)
     assert got.meta["coefficient_chunks"] == expect.meta["coefficient_chunks"] and (cap is None) == (
         got.meta["coefficient_chunks"] == 0)

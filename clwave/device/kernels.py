@@ -150,7 +150,12 @@ def in_row_bands(queue, launch, global_size, local_size):
     """``launch(global_size, first_row)`` of a 2-D range over :func:`in_bands` of its rows (axis 1, whole
     work-groups of rows).  A band's kernel adds ``first_row`` to its row itself: launched with a global offset
     instead, PoCL would compile each kernel twice, for the first band and for the others (docs/benchmarks.md §22)."""
-    in_bands(queue, lambda row, rows: launch((global_size[0], rows), row), global_size[1], local_size[1])
+    drain(row_bands(queue, launch, global_size, local_size))
+
+
+def row_bands(queue, launch, global_size, local_size):
+    """:func:`in_row_bands` as a generator yielding between two bands (:func:`bands`)."""
+    return bands(queue, lambda row, rows: launch((global_size[0], rows), row), global_size[1], local_size[1])
 
 
 def _vector(kind: np.dtype, value):

@@ -126,10 +126,11 @@ class Failed(ClwaveError):
 def picture(sources: dict, spec: Spec):
     """The picture of ``spec`` at full quality (every kept coefficient; the tracer's full detail at its tolerance), by
     the renderers ``clwave render`` calls, as a generator of the render thread's stages that returns its PNG's pixels
-    (an X-ray in the tab's colour map; a scale bar over it): an X-ray splatted in turns (``splat_in_turns``: the tabs'
-    frames go between two of its stages), a shaded picture in one stage (docs/known-gaps.md §12)."""
+    (an X-ray in the tab's colour map; a scale bar over it): splatted or traced in turns (``splat_in_turns``,
+    ``RayTracer.rendering``: the tabs' frames go between two of its stages, docs/viewer.md §5)."""
     from ..io.images import draw_scale_bar
     from ..splat.renderer import splat_in_turns
+    from ..threads import in_turns
 
     source = sources[spec.mode]
     if spec.mode == "xray":
@@ -142,8 +143,10 @@ def picture(sources: dict, spec: Spec):
         image = result.to_uint8(spec.window)
         image = colours.apply(image, spec.colour_map) if spec.colour_map else image
     else:
-        result = source.tracer.render(spec.camera, tolerance=spec.tolerance, shading=spec.shading, clip=spec.clip,
-                                      **({} if spec.tf is None else dict(transfer_function=spec.tf)))
+        tracer = source.tracer
+        result = yield from in_turns(tracer.lock, tracer.rendering(
+            spec.camera, tolerance=spec.tolerance, shading=spec.shading, clip=spec.clip,
+            **({} if spec.tf is None else dict(transfer_function=spec.tf))))
         image = result.to_uint8(background=(spec.background,) * 3)
     return draw_scale_bar(image, result.meta["pixel"], source.wv.unit) if spec.scale_bar else image
 

@@ -623,6 +623,7 @@
                  colour_map: (x) => typeof x === "string" && Object.hasOwn(hello.colour_maps, x),
                  window: (x) => x === null || (Array.isArray(x) && x.length === 2 && x.every(finite) && x[0] < x[1]) };
   function keep() {
+    if (!hello) return;  // nothing shown yet
     const look = {}, clip = {};
     for (const key in LOOK) look[key] = state[key];
     for (const id of CLIP_INPUTS) clip[id] = $(id).type === "checkbox" ? $(id).checked : +$(id).value;
