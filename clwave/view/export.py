@@ -128,10 +128,12 @@ class Failed(ClwaveError):
 
 def picture(sources: dict, spec: Spec):
     """The picture of ``spec`` at full quality (every kept coefficient; the tracer's full detail at its tolerance), by
-    the renderers ``clwave render`` calls: its PNG's pixels (an X-ray in the tab's colour map; a scale bar over
-    it)."""
+    the renderers ``clwave render`` calls, as a generator of the render thread's stages that returns its PNG's pixels
+    (an X-ray in the tab's colour map; a scale bar over it): splatted or traced in turns (``splat_in_turns``,
+    ``RayTracer.rendering``: the tabs' frames go between two of its stages, docs/viewer.md §5)."""
     from ..io.images import draw_scale_bar
-    from ..splat.renderer import splat
+    from ..splat.renderer import splat_in_turns
+    from ..threads import in_turns
 
     source = sources[spec.mode]
     if spec.mode == "xray":
@@ -140,12 +142,14 @@ def picture(sources: dict, spec: Spec):
                              f"clwave render draws them; set detail kept to 100 %")
         if not source.complete:
             raise Unavailable("the rest of the file is still being read: save once the model line says it is in")
-        result = splat(source.wv, spec.camera, renderer=source.r)
+        result = yield from splat_in_turns(source.r, spec.camera)
         image = result.to_uint8(spec.window)
         image = colours.apply(image, spec.colour_map) if spec.colour_map else image
     else:
-        result = source.tracer.render(spec.camera, tolerance=spec.tolerance, shading=spec.shading, clip=spec.clip,
-                                      **({} if spec.tf is None else dict(transfer_function=spec.tf)))
+        tracer = source.tracer
+        result = yield from in_turns(tracer.lock, tracer.rendering(
+            spec.camera, tolerance=spec.tolerance, shading=spec.shading, clip=spec.clip,
+            **({} if spec.tf is None else dict(transfer_function=spec.tf))))
         image = result.to_uint8(background=(spec.background,) * 3)
     return draw_scale_bar(image, result.meta["pixel"], source.wv.unit) if spec.scale_bar else image
 
@@ -345,6 +349,22 @@ def _load_value(dest, value):
 
 
 # ---------------------------------------------------------------------------------------------------- the routes
+async def stage_by_stage(loop, pool, stages):
+    """What the generator ``stages`` returns, each of its stages a job of its own on ``pool`` (the render thread), so
+    that the jobs queued meanwhile (the tabs' frames) go between two."""
+    def step():
+        try:
+            next(stages)
+        except StopIteration as end:  # raised into a Future, it could not be told from the others
+            return True, end.value
+        return False, None
+
+    while True:
+        done, value = await loop.run_in_executor(pool, step)
+        if done:
+            return value
+
+
 async def serve(server, request, *, image: bool):
     """``POST /export`` (``image`` False: the command and the Python, JSON) or ``POST /image`` (the PNG, one at a time)
     of a page's ``{"view", "size"}`` (:func:`~clwave.view.protocol.parse_export`), worked out on the render thread
@@ -386,7 +406,8 @@ async def serve(server, request, *, image: bool):
                 raise building.exception()
         async with server.saving if image else contextlib.nullcontext():
             done = await loop.run_in_executor(server.pool, work)
-            if image:  # encoded off the event loop (every tab's socket: docs/viewer.md §5) and the render thread
+            if image:  # its stages in turn with the tabs' frames; encoded off the event loop (every tab's socket:
+                done = await stage_by_stage(loop, server.pool, done)  # docs/viewer.md §5) and the render thread
                 done = await loop.run_in_executor(None, partial(encode, done, lossless=True))
     except Unavailable as exc:
         raise web.HTTPConflict(text=f"{exc}\n") from None
