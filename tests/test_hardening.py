@@ -566,13 +566,20 @@ def launched(queue, launch, *args, **kwargs):
 """
 
 
+def sigint_default():
+    """A child's SIGINT as a terminal's Ctrl-C finds it: a suite run as a background job (``pytest &`` in a script)
+    hands its children SIGINT ignored, and Python then installs no KeyboardInterrupt handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def interrupted(script: str, stopped: bytes) -> tuple:
     """Run ``script`` in a Python process of its own, send SIGINT as soon as it prints "launched" (a launch of its
     long work running, LAUNCHED), and return (seconds from the signal to the line holding ``stopped`` on its stderr:
     the work given up, not counting the interpreter's own exit, which load stretches; exit code, stdout, stderr).
-    Its stderr is read on a thread of its own from the start, so that neither pipe can fill and block the other."""
+    Its stderr is read on a thread of its own from the start, so that neither pipe can fill and block the other.
+    SIGINT is given its default disposition first (:func:`sigint_default`)."""
     with subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                          env=dict(os.environ, PYTHONPATH=str(ROOT))) as proc:
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)), preexec_fn=sigint_default) as proc:
         err, seen = [], threading.Event()
 
         def read_stderr():

@@ -974,6 +974,8 @@ def test_cli_view_serves_a_scalar_file_classified_by_tf_until_interrupted(tmp_pa
     import urllib.error
     import urllib.request
 
+    from test_hardening import sigint_default
+
     path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.2).save(
         tmp_path / "h.clw")
     start = dict(preset=None, centre=0.0, width=1.0, opacity=1.0)  # the page's editor at its start
@@ -986,7 +988,7 @@ def test_cli_view_serves_a_scalar_file_classified_by_tf_until_interrupted(tmp_pa
             return hello, await frames_until_final(ws, 1)
     with subprocess.Popen([sys.executable, "-m", "clwave", "view", str(path), "--size", "32", "--tf", "hydrogen",
                            "--tf-window", "0.1,0.8"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                          text=True) as proc:
+                          text=True, preexec_fn=sigint_default) as proc:
         try:
             line = proc.stdout.readline()
             assert line.startswith("clwave view: open http://127.0.0.1:"), line
