@@ -139,6 +139,24 @@ def test_rate_limit_allows_a_burst_then_the_rate():
 
 
 # ---------------------------------------------------------------------------- the server
+def test_a_model_id_names_the_models_grid_and_values_not_how_many_coefficients_it_keeps():
+    """The page applies a view it kept to a model of the same id only (docs/viewer.md §4): kept more or fewer of, a
+    model is the same; another volume, spacing, number of levels or classification is not."""
+    from clwave.view.protocol import model_id
+
+    def model(volume, levels=2):
+        return clwave.WaveletVolume.from_volume(volume, levels=levels)
+
+    hydrogen = clwave.phantom("hydrogen", n=16)
+    wv = model(hydrogen)
+    same = model_id(wv)
+    assert model_id(wv.threshold(keep=0.5)) == model_id(wv.threshold(keep=0.9)) == same and len(same) == 16
+    others = [model(clwave.phantom("marschner-lobb", n=16)), model(hydrogen, levels=1),
+              model(clwave.Volume(hydrogen.data, spacing=(2.0, 1.0, 1.0))),
+              model(clwave.TransferFunction.preset("hydrogen").classify(hydrogen))]
+    assert len({same, *map(model_id, others)}) == 5
+
+
 def test_every_route_needs_the_token(viewer):
     async def go():
         async with aiohttp.ClientSession() as s:
@@ -956,6 +974,8 @@ def test_cli_view_serves_a_scalar_file_classified_by_tf_until_interrupted(tmp_pa
     import urllib.error
     import urllib.request
 
+    from test_hardening import sigint_default
+
     path = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.2).save(
         tmp_path / "h.clw")
     start = dict(preset=None, centre=0.0, width=1.0, opacity=1.0)  # the page's editor at its start
@@ -968,7 +988,7 @@ def test_cli_view_serves_a_scalar_file_classified_by_tf_until_interrupted(tmp_pa
             return hello, await frames_until_final(ws, 1)
     with subprocess.Popen([sys.executable, "-m", "clwave", "view", str(path), "--size", "32", "--tf", "hydrogen",
                            "--tf-window", "0.1,0.8"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                          text=True) as proc:
+                          text=True, preexec_fn=sigint_default) as proc:
         try:
             line = proc.stdout.readline()
             assert line.startswith("clwave view: open http://127.0.0.1:"), line
