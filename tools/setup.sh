@@ -75,8 +75,8 @@ case "$mode" in
             apt_install clang || echo "clwave setup: without clang the kernels' portability tests are skipped" >&2
         fi
         say "running the tests"
-        # two workers, each given whole files (their module fixtures built once): kernel builds, NumPy oracles and
-        # the interpreter are one thread each, so the second core is otherwise idle much of the time
+        # two workers, each given whole files (their module fixtures built once): one process's main thread does
+        # three quarters of its CPU (kernel builds, NumPy oracles), so a second core is otherwise idle much of the time
         "$VENV/bin/python" -m pytest -q -n 2 --dist loadfile
         ;;
     --peers)
