@@ -205,7 +205,7 @@ def flag(name: str) -> str:
 def parse_thresholding(args) -> dict:
     """``threshold()`` arguments from ``--keep``, ``--threshold``, ``--noise``, ``--focus``/``--sigma``, checked before
     any work."""
-    from ..model.wavelet import check_thresholding
+    from ..model.budget import check_thresholding
 
     focus = None
     if args.focus is not None or args.sigma is not None:

@@ -46,8 +46,8 @@ from ..model.bspline import SplineWavelet
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
-from ..model.budget import kept_count
-from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
+from ..model.budget import check_thresholding, kept_count
+from ..model.wavelet import ChannelGroup, WaveletVolume, _top, importance_of
 from ..threads import background
 from .clw_header import (FILE_FORMAT, FILE_VERSION, MAX_HEADER, check_dataset, checked_header, checked_values,
                          parsed_header)

@@ -26,11 +26,10 @@ from .transform import KEYS, band_layout, check_coefficients
 from .transfer import TransferFunction
 from .volume import Volume, content_of
 from .mask import ContentMask
-from .budget import kept_count, warn_short_budget
+from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget
 from . import noise
 from .noise import check_noise_known, warn_noise_gain
-from .wavelet import (ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_one_rule,
-                      check_thresholding)
+from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
 MAX_BLOCKS = 4096           # and into at most this many blocks a level

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, finite_number, flag, warn_outside
+from ..errors import ClwaveWarning, InputError, flag, warn_outside
 from ..threads import MadeOnce, thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
-from .budget import kept_count, warn_short_budget, warn_stored
+from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget, warn_stored
 from . import geometry
 from .geometry import fine_to_world
 from .labels import warn_blurred_labels
@@ -527,45 +527,6 @@ def _check_levels(levels, shape) -> int:
         why = f"is not possible for shape {shape}: use an integer from 0 to {top} (floor(log2(shortest axis)) - 1)"
         raise InputError(f"levels={levels!r} {why}", cli=f"--levels {levels} {why}")
     return int(levels)
-
-
-def check_one_rule(keep, threshold, noise):
-    """Refuse all but exactly one of :meth:`WaveletVolume.threshold`'s rules."""
-    if sum(x is not None for x in (keep, threshold, noise)) != 1:
-        raise InputError("give exactly one of keep= (fraction of voxels), threshold= (importance) or noise= (times "
-                         "the noise level of each band)")
-
-
-def check_thresholding(keep, threshold, focus, noise=None) -> tuple:
-    """``(keep, threshold, focus, noise)`` of :meth:`WaveletVolume.threshold`, checked before any work (each
-    message also in the command line's words)."""
-    if keep is not None:
-        keep = finite_number(keep, "keep")
-        if not 0 < keep <= 1:
-            raise InputError(f"keep={keep} must be a fraction of the voxels in (0, 1]",
-                             cli=f"--keep {keep:g} must be a fraction of the voxels in (0, 1], e.g. 0.05 for 5 %")
-    if threshold is not None:
-        threshold = finite_number(threshold, "threshold")
-        if threshold < 0:
-            raise InputError(f"threshold={threshold} must be an importance >= 0",
-                             cli=f"--threshold {threshold:g} must be an importance >= 0")
-    if noise is not None:
-        noise = finite_number(noise, "noise")
-        if noise < 0:
-            raise InputError(f"noise={noise} must be a multiple >= 0 of each band's noise level, e.g. 3",
-                             cli=f"--noise {noise:g} must be a multiple >= 0 of each band's noise level, e.g. 3")
-    if focus is not None:
-        try:
-            centre, sigma = focus
-            centre = tuple(float(c) for c in centre)
-            sigma = float(sigma)
-        except (TypeError, ValueError):
-            raise InputError("focus must be ((x, y, z), sigma) in world units") from None
-        if len(centre) != 3 or not np.all(np.isfinite(centre)) or not (np.isfinite(sigma) and sigma > 0):
-            raise InputError(f"focus {focus!r} needs a finite (x, y, z) centre and sigma > 0",
-                             cli="--focus X,Y,Z needs a finite centre and --sigma a positive world length")
-        focus = (centre, sigma)
-    return keep, threshold, focus, noise
 
 
 def importance_of(group: ChannelGroup, focus, frame, noise=None) -> np.ndarray:
