@@ -341,3 +341,24 @@ def test_a_failed_full_stage_is_its_line_not_still_being_made(clw, monkeypatch, 
         assert text == f"the shaded views' ray tracer of the whole file could not be made {line}: they show the " \
                        f"file's coarse stage, which no saved image or command draws\n"
     assert xray[0] == 200
+
+
+def test_a_viewers_noise_rule_goes_into_the_command_and_the_python(tmp_path, monkeypatch):
+    """``clwave view NOISY.npy --wavelet linear --noise 3``: the command keeps ``--noise 3`` and the Python thresholds
+    with ``noise=3.0``; the two give one image bit for bit."""
+    from clwave.cli import main, make_parser
+
+    z, y, x = np.mgrid[:20, :20, :20] / 20
+    noisy = 10 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) / 0.04)
+    noisy += np.random.default_rng(2).normal(0, 0.5, noisy.shape)
+    np.save(tmp_path / "noisy.npy", noisy.astype(np.float32))
+    args = make_parser().parse_args(["view", str(tmp_path / "noisy.npy"), "--wavelet", "linear", "--levels", "2",
+                                     "--noise", "3", "--size", "24", "--port", "0"])
+    origin = Origin.of_args(args)
+    xray = Spec("xray", clwave.Camera(30.0, 20.0, 24, extent=30.0), window=(0.0, 200.0), levels=2)
+    text, code = command(origin, xray), python(origin, xray)
+    assert "--noise 3" in text and "threshold(noise=3.0)" in code and "not in this snippet" not in code
+    monkeypatch.chdir(tmp_path)
+    assert main(text.split()[1:]) == 0
+    got = decode((tmp_path / "view.png").read_bytes())
+    assert got.std() > 5 and np.array_equal(executed(code, tmp_path / "python", monkeypatch), got)
