@@ -9,7 +9,7 @@ import pywt
 
 import clwave
 from clwave.cli import main
-from clwave.errors import ClwaveWarning, InputError
+from clwave.errors import ClwaveWarning, FileFormatError, InputError
 from clwave.model import chunked
 from clwave.model.bspline import wavelet_for
 from clwave.model.noise import noise_gain
@@ -227,3 +227,19 @@ def test_command_line_noise_compress_report_and_info(tmp_path, capsys):
     assert main(["compress", str(tmp_path / "noisy.npy"), "--noise", "3", "--keep", "0.1", "-o",
                  str(tmp_path / "x.clw")]) == 2
     assert "argument --keep: not allowed with argument --noise" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", [[-0.1], [float("nan")], ["0.1"], [True], 0.1, [0.1, 0.2], None])
+def test_a_hostile_noise_level_is_refused_in_one_line(tmp_path, value):
+    """A header's noise_sigma: a number >= 0 or null per channel (null: not recorded, as absent)."""
+    from test_hardening import crafted, setter
+
+    path = tmp_path / "m.clw"
+    clwave.WaveletVolume.from_volume(clwave.Volume(blob(16)), levels=1).threshold(keep=0.3).save(path)
+    path = crafted(path, tmp_path, setter("noise_sigma", value))
+    if value is None:
+        assert clwave.WaveletVolume.open(path).noise_sigma is None
+        return
+    with pytest.raises(FileFormatError) as exc:
+        clwave.WaveletVolume.open(path)
+    assert "noise_sigma" in str(exc.value) and "\n" not in str(exc.value)
