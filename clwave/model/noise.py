@@ -81,8 +81,10 @@ def sigma_of(hist, median, wavelet):
 
 def measure_noise(wv):
     """Per channel of the model ``wv``, the noise deviation sigma of its voxels (stored units, None where its band
-    does not look like noise) from its finest diagonal band; None where the model has no detail band (0 levels) or
-    holds only part of it (thresholded)."""
+    does not look like noise) from its finest diagonal band; None where the model has no detail band (0 levels),
+    holds only part of it (thresholded), or interpolates (its prefilter colours the noise)."""
+    if wv.interpolate:
+        return None
     sigmas = [None] * wv.channels
     for g in wv.groups:
         band, sl = g.bands[-1], g.band_slices()[-1]
