@@ -9,7 +9,7 @@ from ..errors import InputError
 from ..io.result import check_background
 from ..model.tf_checks import check_opacity_unit, check_window
 from ..io.images import check_frame_time
-from .options import (flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler,
+from .options import (flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler, parse_spacing,
                       parse_tf_window, parse_thresholding, preset_transfer_function)
 
 
@@ -36,9 +36,7 @@ def check_options(args):
         if value is not None and not np.isfinite(value):
             raise InputError(f"{flag(name)} {value:g} must be a finite number")
     if getattr(args, "spacing", None) is not None:
-        spacing = numbers(args.spacing, "--spacing", (1, 3))
-        if not all(np.isfinite(spacing)) or min(spacing) <= 0:
-            raise InputError(f"--spacing {args.spacing} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
+        parse_spacing(args.spacing)
     if getattr(args, "chunks", None) is not None:
         parse_chunks(args.chunks)
     if getattr(args, "wavelet", None) is not None:
