@@ -454,7 +454,8 @@ def test_info_echoes_a_spacing_that_pastes_back_and_refuses_what_render_refuses(
     code, out, err = run(capsys, "info", str(tmp_path / "c.npy"), "--spacing", "1.5", "--json")
     assert json.loads(out)["spacing_option"] == "--spacing 1.5,1.5,1.5"
     refusals = []
-    for command in (["info", str(tmp_path / "c.npy")], ["render", str(tmp_path / "c.npy"), "-o", str(tmp_path / "a.png")]):
+    for command in (["info", str(tmp_path / "c.npy")],
+                    ["render", str(tmp_path / "c.npy"), "-o", str(tmp_path / "a.png")]):
         code, out, err = run(capsys, *command, "--spacing", "5000,0.0013888889,-0.0013888889")
         assert code == 2 and out == "" and err.count("\n") == 1, err
         refusals.append(err)

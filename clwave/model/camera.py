@@ -16,7 +16,7 @@ from itertools import product
 import numpy as np
 
 from ..device.memory import check_image
-from ..errors import InputError, finite_number, flag, reals, whole_number
+from ..errors import ClwaveWarning, InputError, finite_number, flag, reals, warn_outside, whole_number
 from .geometry import view_frame
 
 #: The most pixels across the content box's diagonal: the splat kernels' float32 steps grow as its reciprocal (an
@@ -26,6 +26,9 @@ MAX_PIXELS_ACROSS = 10**12
 
 FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
 DEFAULT_FOV = 30.0  #: a perspective camera's vertical field of view, degrees, unless given
+#: how many times longer than its two shorter sides a content box is at most before a view of it warns: a needle
+#: that every view shows as a line a few pixels wide, or nothing (axes in different units, trial26)
+NEEDLE = 100.0
 
 
 @dataclass(frozen=True)
@@ -168,6 +171,7 @@ class Camera:
         n, u, v = self.basis()
         H, W = self.size
         lo, hi = _content_box(volume)
+        _warn_needle(hi - lo)
         target = (lo + hi) / 2.0 if self.target is None else np.asarray(self.target)
         corners = np.array(list(product(*zip(lo, hi)))) - target
         slope = 2.0 * np.tan(np.radians(self.fov) / 2.0) / H  # perspective: square pixels, the centre on the axis
@@ -271,6 +275,19 @@ def _vector(value, name) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise InputError(f"{name}={value!r} must be three finite numbers (x, y, z)")
     return arr
+
+
+def _warn_needle(sides) -> None:
+    """A :class:`ClwaveWarning` where the content box's ``sides`` (x, y, z) are a needle (:data:`NEEDLE`), naming the
+    spacing: every view of it is a line or a dot, with no hint where its axes' spacings are in different units."""
+    short, middle, long = sorted(sides)
+    if not middle * NEEDLE < long:
+        return
+    line = (f"the content's box is {' x '.join(f'{s:.3g}' for s in sides)} (x, y, z), {long / middle:.3g} times longer "
+            f"than wide: an image of it is a line a few pixels wide, or nothing; if its axes are in different units "
+            f"(e.g. m/s against degrees), give ")
+    warn_outside(ClwaveWarning(line + "the volume a spacing= in one unit (e.g. spacing=1)",
+                               cli=line + "--spacing in one unit (e.g. --spacing 1; a .clw: compress it again so)"))
 
 
 def _content_box(volume) -> tuple:
