@@ -117,6 +117,10 @@ class Camera:
         degrees (a cone beam whose detector is centred on the axis; :class:`clwave.ConeBeam` for others).
         With ``fit="box"`` the default distance is the least at which the box's corners are in view.
         ``distance`` and ``fov`` (default 30) without ``perspective`` are refused: they would change nothing.
+    roll : float
+        Degrees the camera turns about its view axis (default 0): u and v turned by ``roll`` towards each other, the
+        picture so turned clockwise; with the angles, any orientation (a turntable about another axis than z,
+        :meth:`rotated`).
 
     Examples
     --------
@@ -126,9 +130,10 @@ class Camera:
     """
 
     def __init__(self, azimuth=30.0, elevation=20.0, size=512, *, target=None, extent=None,
-                 perspective=False, distance=None, fov=None, fit="sphere"):
+                 perspective=False, distance=None, fov=None, fit="sphere", roll=0.0):
         self.azimuth = finite_number(azimuth, "azimuth")
         self.elevation = finite_number(elevation, "elevation")
+        self.roll = finite_number(roll, "roll")
         self.size = _size(size)
         self.target = None if target is None else _vector(target, "target")
         if extent is not None and not finite_number(extent, "extent") > 0:
@@ -163,6 +168,9 @@ class Camera:
     def basis(self):
         """``(n, u, v)`` of paper eq. 31 as float64 arrays."""
         n, u, v = view_frame(self.azimuth, self.elevation)
+        if self.roll:
+            c, s = np.cos(np.radians(self.roll)), np.sin(np.radians(self.roll))
+            u, v = c * u + s * v, c * v - s * u
         # exact zeros keep axis-aligned views exact (cos 90 deg is 6e-17)
         return tuple(np.where(np.abs(x) < 1e-15, 0.0, x) for x in (n, u, v))
 
@@ -210,13 +218,23 @@ class Camera:
         perspective = dict(perspective=True, distance=float(np.linalg.norm(view.eye - view.target)), fov=fov) \
             if self.perspective else {}
         return Camera(self.azimuth, self.elevation, size=(h, w), target=view.target, extent=view.pixel * reduction * w,
-                      **perspective)
+                      roll=self.roll, **perspective)
 
-    def rotated(self, degrees) -> "Camera":
-        """The same camera turned about the z axis (turntables)."""
+    def rotated(self, degrees, axis=None) -> "Camera":
+        """The same camera turned by ``degrees`` about ``axis`` (turntables), right-handed: a unit (x, y, z) vector,
+        None for z (the azimuth turned, the elevation and roll kept); another axis gives the angles and roll of the
+        turned frame (n, u, v)."""
         cam = Camera.__new__(Camera)
         cam.__dict__.update(self.__dict__)
-        cam.azimuth = self.azimuth + float(degrees)
+        if axis is None:
+            cam.azimuth = self.azimuth + float(degrees)
+            return cam
+        k, t = np.asarray(axis, float), np.radians(float(degrees))  # Rodrigues' formula of the turned n and u
+        n, u = ((x * np.cos(t) + np.cross(k, x) * np.sin(t) + k * (k @ x) * (1 - np.cos(t))) for x in self.basis()[:2])
+        cam.azimuth = float(np.degrees(np.arctan2(n[1], n[0])))
+        cam.elevation = float(np.degrees(np.arcsin(np.clip(n[2], -1.0, 1.0))))
+        _, u0, v0 = view_frame(cam.azimuth, cam.elevation)
+        cam.roll = float(np.degrees(np.arctan2(u @ v0, u @ u0)))
         return cam
 
     def to_dict(self) -> dict:
@@ -225,7 +243,7 @@ class Camera:
         return dict(kind="camera", azimuth=self.azimuth, elevation=self.elevation, size=list(self.size),
                     target=None if self.target is None else [float(x) for x in self.target], extent=self.extent,
                     perspective=self.perspective, distance=self.distance, fov=self.fov if self.perspective else None,
-                    fit=self.fit)
+                    fit=self.fit, roll=self.roll)
 
     @classmethod
     def from_dict(cls, d) -> "Camera":
