@@ -541,12 +541,12 @@ def test_ctrl_c_stops_a_long_splat_within_a_second(tmp_path):
 import sys
 from clwave import cli
 from clwave.splat import stages
-{LAUNCHED.format(module="stages", bands="in_bands")}
-accumulate = stages.Stages.accumulate
+{LAUNCHED.format(module="stages", bands="bands")}
+accumulating = stages.Stages.accumulating
 def announced(self, *args):
-    stages.in_bands = launched  # the accumulation's bands, not those placing the splats
-    accumulate(self, *args)
-stages.Stages.accumulate = announced
+    stages.bands = launched  # the accumulation's bands, not those placing the splats
+    return accumulating(self, *args)
+stages.Stages.accumulating = announced
 sys.exit(cli.main(["render", "phantom:hydrogen:32", "--levels", "2", "--keep", "1", "--size", "1000",
                    "--coarse", "0", "-o", {str(tmp_path / 'out.png')!r}]))
 """
@@ -555,7 +555,7 @@ sys.exit(cli.main(["render", "phantom:hydrogen:32", "--levels", "2", "--keep", "
     assert not list(tmp_path.iterdir())
 
 
-#: a ``launched`` wrapper of ``{module}.{bands}`` (kernels.in_bands or in_row_bands as a module imported it) that
+#: a ``launched`` wrapper of ``{module}.{bands}`` (kernels.bands, in_bands or in_row_bands as a module imported it) that
 #: prints "launched" as it launches each band from half a second into its first call: bands grown to their pace
 LAUNCHED = """
 import time
@@ -566,7 +566,7 @@ def launched(queue, launch, *args, **kwargs):
         launch(*band)
         if time.perf_counter() - _begun[0] > 0.5:
             print("launched", flush=True)
-    _bands(queue, announced, *args, **kwargs)
+    return _bands(queue, announced, *args, **kwargs)
 """
 
 

@@ -16,6 +16,7 @@ from clwave.raytrace.shading import Phong
 from clwave.raytrace.tracer import RayTracer
 from clwave.splat.reference import exact_xray
 from test_hardening import LAUNCHED, interrupted
+from test_splat_memory import turns_with
 
 TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
 
@@ -240,6 +241,21 @@ def test_repeat_renders_are_bit_identical(small_rgba):
     _, tracer = small_rgba
     cam = clwave.Camera(10, 50, size=8)
     assert np.array_equal(tracer.render(cam).image, tracer.render(cam).image)
+
+
+def test_a_render_in_turns_is_the_render_whatever_is_rendered_between_its_bands():
+    """``RayTracer.rendering`` (a viewer's saved image, docs/viewer.md §5), another render of the same tracer between
+    every two of its bands of rows, each of another view, size, transfer function, detail and clip: bit for bit
+    ``render`` of the view (a ray is one work-item's; the classification and detail's tables of a render its own)."""
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.3)
+    tracer = RayTracer(wv, lod=True)
+    cam, tf = clwave.Camera(35, 25, size=(72, 40)), clwave.TransferFunction.preset("hydrogen", window=(0.05, 0.7))
+    expect = tracer.render(cam, tolerance=1e-3, transfer_function=tf).image
+    got, between = turns_with(tracer.rendering(cam, tolerance=1e-3, transfer_function=tf), lambda i: tracer.render(
+        clwave.Camera(-40 * i, 10, size=17 + i), tolerance=1e-2, detail=(i + 1) % 3,
+        transfer_function=clwave.TransferFunction.preset("hydrogen", window=(0.1 * (i + 1), 0.9)),
+        clip=clwave.Clip(planes=[((0, 0, 0), (1, 0, 0))])))
+    assert between >= 1 and np.abs(expect).max() > 0.1 and np.array_equal(got.image, expect)
 
 
 def test_big_image_equals_its_centre_crop(small_rgba):
@@ -570,7 +586,7 @@ def test_bands_of_rows_give_the_image_of_one_launch(small_rgba, monkeypatch):
 
 
 def test_ctrl_c_stops_a_long_ray_trace_within_a_second():
-    """A 1024^2 trace at tolerance 1e-6 takes many seconds on a CPU; its launches are bands of rows (in_row_bands), so
+    """A 1024^2 trace at tolerance 1e-6 takes many seconds on a CPU; its launches are bands of rows (row_bands), so
     Ctrl-C, sent while one runs, stops it within a second of the signal."""
     script = f"""
 import sys
@@ -580,8 +596,8 @@ rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydro
 wv = clwave.WaveletVolume.from_volume(rgba, "cubic", levels=2).threshold(keep=0.2)
 tracer = clwave.RayTracer(wv)
 tracer.render(clwave.Camera(30, 20, size=16), tolerance=1e-2)  # set-up and kernel build before the signal
-{LAUNCHED.format(module="tracing", bands="in_row_bands")}
-tracing.in_row_bands = launched
+{LAUNCHED.format(module="tracing", bands="row_bands")}
+tracing.row_bands = launched
 try:
     tracer.render(clwave.Camera(30, 20, size=1024), tolerance=1e-6)  # many seconds on a CPU
 except KeyboardInterrupt:

@@ -139,6 +139,24 @@ def test_rate_limit_allows_a_burst_then_the_rate():
 
 
 # ---------------------------------------------------------------------------- the server
+def test_a_model_id_names_the_models_grid_and_values_not_how_many_coefficients_it_keeps():
+    """The page applies a view it kept to a model of the same id only (docs/viewer.md §4): kept more or fewer of, a
+    model is the same; another volume, spacing, number of levels or classification is not."""
+    from clwave.view.protocol import model_id
+
+    def model(volume, levels=2):
+        return clwave.WaveletVolume.from_volume(volume, levels=levels)
+
+    hydrogen = clwave.phantom("hydrogen", n=16)
+    wv = model(hydrogen)
+    same = model_id(wv)
+    assert model_id(wv.threshold(keep=0.5)) == model_id(wv.threshold(keep=0.9)) == same and len(same) == 16
+    others = [model(clwave.phantom("marschner-lobb", n=16)), model(hydrogen, levels=1),
+              model(clwave.Volume(hydrogen.data, spacing=(2.0, 1.0, 1.0))),
+              model(clwave.TransferFunction.preset("hydrogen").classify(hydrogen))]
+    assert len({same, *map(model_id, others)}) == 5
+
+
 def test_every_route_needs_the_token(viewer):
     async def go():
         async with aiohttp.ClientSession() as s:

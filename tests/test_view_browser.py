@@ -542,3 +542,61 @@ def test_the_scale_bar_box_draws_the_bar_over_an_orthographic_view(viewer, page,
     assert page.execute_script("return document.getElementById('scale-bar').disabled && "
                                "!window.clwave.state.scale_bar")
     assert longest_white()[0] == 0
+
+
+def test_the_pages_state_and_edit_history_survive_a_reload_for_the_same_model_only(viewer, page):
+    """The page keeps its view in the address's hash and its edit history in sessionStorage (docs/viewer.md §4): an
+    X-ray view turned and zoomed in inferno under a window of its own, then shaded through the start function widened
+    and a point added on the editor's canvas; reloaded, the page shows the same view: the shaded final frame the same
+    pixels (clwave.raytrace of the page's points), the X-ray one the same window and map, and the undo button takes
+    back the point's drag (the frame before it, pixel for pixel).  The same address on another model's viewer applies
+    none of it and says so."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    browser.open_viewer(page, viewer.url)
+    start = browser.wait_final(page)
+    page.execute_script("Object.assign(window.clwave.state, {azimuth: 75, elevation: -35, zoom: 1.4});"
+                        "const m = document.getElementById('colour-map'); m.value = 'inferno';"
+                        "m.dispatchEvent(new Event('change'));"
+                        "const e = document.getElementById('hi'); e.value = 300; e.dispatchEvent(new Event('input'));")
+    xray, _ = latest_final(page, start)
+    assert xray["colour_map"] == "inferno" and xray["azimuth"] == 75
+    page.execute_script('document.querySelector(\'input[value="shaded"]\').click();')
+    shaded, _ = latest_final(page, xray)
+    page.execute_script("const e = document.getElementById('tf-width'); e.value = 70; e.dispatchEvent(new "
+                        "Event('input')); e.dispatchEvent(new Event('change'))")
+    wide, before = latest_final(page, shaded)
+    editor = page.find_element("id", "tf-editor")
+    page.execute_script("arguments[0].scrollIntoView({block: 'center'})", editor)
+    ActionChains(page, duration=0).move_to_element_with_offset(editor, 30, -25).click_and_hold().move_by_offset(
+        8, -4).release().perform()
+    edited, picture = latest_final(page, wide)
+    points = page.execute_script("return window.clwave.state.tf.points")
+    assert len(points) == len(START.points) + 1 and edited["tf_points"] == points
+    assert np.abs(picture.astype(int) - before).max() > 1
+    kept = page.execute_script("return [location.hash, window.clwave.state]")
+
+    page.refresh()
+    browser.wait_for(page, "return window.clwave && window.clwave.stats.firstImage")
+    again = browser.wait_final(page)
+    assert page.execute_script("return window.clwave.stats.restored") == "applied"
+    assert page.execute_script("return [location.hash, window.clwave.state]") == kept
+    assert again["mode"] == "shaded" and again["tf_points"] == points and again["azimuth"] == 75
+    assert np.array_equal(decode(browser.current_frame(page)[1]), picture)
+    camera = clwave.Camera(75, -35, SIZE, extent=again["extent"])
+    assert np.array_equal(picture, clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=(
+        clwave.TransferFunction(points))).to_uint8(background=(0.0, 0.0, 0.0)))
+    page.find_element("id", "tf-undo").click()  # the history came back with the view: the point's drag undone
+    undone, back = latest_final(page, again)
+    assert len(undone["tf_points"]) == len(START.points) and np.array_equal(back, before)
+    page.execute_script('document.querySelector(\'input[value="xray"]\').click();')
+    shown, _ = latest_final(page, undone)
+    assert [shown[k] for k in ("colour_map", "window", "extent", "azimuth")] == [
+        xray[k] for k in ("colour_map", "window", "extent", "azimuth")]
+
+    with view(clwave.phantom("hydrogen", n=32), size=SIZE, keep=0.2) as other:  # another model: nothing applied
+        page.get(other.url + page.execute_script("return location.hash"))
+        browser.wait_for(page, "return window.clwave && window.clwave.stats.firstImage")
+        fresh = browser.wait_final(page)
+        assert page.execute_script("return window.clwave.stats.restored") == "another model"
+        assert (fresh["mode"], fresh["azimuth"], fresh["colour_map"]) == ("xray", 30, "grey")

@@ -145,8 +145,8 @@ def add_parser(sub):
     add_raytrace_options(p)
     p.add_argument("--detail", type=int, help="ray tracing: the level of detail, 0 (full, the default) up to the "
                                               "model's levels (the coarsest: its approximation alone, fastest)")
-    p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF: the camera turned through 360 "
-                                                 "degrees about --turntable-axis")
+    p.add_argument("--turntable", type=int, metavar="N", help="write an N-frame rotation GIF: the camera turned "
+                                                              "through 360 degrees about --turntable-axis")
     p.add_argument("--turntable-axis", metavar="x|y|z|AX,AY,AZ",
                    help="with --turntable: the world axis turned about, right-handed (default z: the azimuth turned, "
                         "the elevation kept), or a direction")

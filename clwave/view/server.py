@@ -29,7 +29,8 @@ from .address import check_port, host_name, is_loopback
 from . import colours, export
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
-from .protocol import MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, pack_frame, parse_view, said
+from .protocol import (MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, model_id, pack_frame, parse_view,
+                       said)
 
 log = logging.getLogger("clwave.view")
 
@@ -377,7 +378,8 @@ class ViewServer:
                     size=list(xray.size), window=list(xray.auto_window),
                     presets=list(TransferFunction.PRESETS), colour_maps=colours.page_tables(),
                     tf=shaded.start_figures() if shaded else None,
-                    capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model())
+                    capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model(),
+                    model_id=model_id(self.wv))
 
     def model(self) -> dict:
         """The model's figures for the page; ``reading``: a file's prefix, the rest being read; ``failure``: why the
