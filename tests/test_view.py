@@ -1022,3 +1022,24 @@ def test_loopback_names():
                                      "localhost.example.org")))
     assert [host_name(h) for h in ("localhost.:8080", "[::ffff:127.0.0.1]:80", "LOCALHOST")] == \
         ["localhost.", "::ffff:127.0.0.1", "localhost"]
+
+
+def test_a_transfer_function_chosen_opens_the_page_in_the_shaded_mode(viewer):
+    """trial26 finding 11: `clwave view X --tf F` opened in X-ray mode, where a user who gave a transfer function
+    expects its shaded view (docs/viewer.md: "shaded through ct-bone from the first frame").  The hello's ``mode``, the
+    mode the page opens in: shaded where a transfer function was chosen (given, tf=; or the model's own: a volume
+    classified with it, pre or post), X-ray otherwise (grey is no one's choice)."""
+    async def hello_of(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            return await ws.receive_json()
+
+    assert run(hello_of(viewer))["mode"] == "xray"
+    vol = clwave.phantom("hydrogen", n=16)
+    scalar = clwave.WaveletVolume.from_volume(vol, levels=1).threshold(keep=0.2)
+    for model, options in ((scalar, dict(tf="hydrogen")), (vol, dict(tf="hydrogen")),
+                           (vol, dict(tf="hydrogen", classify="post")), (scalar, {}),
+                           (np.stack([vol.data] * 4, axis=-1), {})):
+        with view(model, size=16, keep=0.2, **options) as v:
+            hello = run(hello_of(v))
+        assert hello["mode"] == ("shaded" if options else "xray") and hello["mode"] in hello["modes"], options

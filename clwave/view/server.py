@@ -374,7 +374,8 @@ class ViewServer:
         from ..model.transfer import TransferFunction
 
         shaded = self.sources.get("shaded")
-        return dict(type="hello", modes=list(self.sources), size=list(xray.size), window=list(xray.auto_window),
+        return dict(type="hello", modes=list(self.sources), mode="shaded" if shaded and shaded.chosen else "xray",
+                    size=list(xray.size), window=list(xray.auto_window),
                     presets=list(TransferFunction.PRESETS), colour_maps=colours.page_tables(),
                     tf=shaded.start_figures() if shaded else None,
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model(),

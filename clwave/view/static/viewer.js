@@ -106,6 +106,8 @@
     showModel();
     const shaded = hello.modes.includes("shaded");
     document.querySelector('input[value="shaded"]').disabled = !shaded;
+    state.mode = hello.mode;  // shaded where a transfer function was chosen (given, or the model's own)
+    document.querySelector(`input[value="${hello.mode}"]`).checked = true;
     $("shaded-note").textContent = shaded ? "" : "shaded needs a scalar or a classified (RGBA) model: " +
       "classify a colour one first (--tf brightfield: stained, on white; --tf photo: by its own alpha)";
     // the first entry is the transfer function the server starts from (given with --tf/--tf-window, the model's
@@ -429,6 +431,7 @@
       c.fillText("the points come with the first shaded frame", PAD, H / 2);
       return;
     }
+    $("tf-axis").textContent = showRange(editor.axis);  // what the canvas spans: the input's range and the points
     const hist = editor.histogram;
     if (hist) {
       const [lo, hi] = hist.range, n = hist.counts.length, most = Math.log1p(Math.max(...hist.counts)) || 1;
