@@ -553,7 +553,7 @@ def test_the_pages_state_and_edit_history_survive_a_reload_for_the_same_model_on
     none of it and says so."""
     from selenium.webdriver.common.action_chains import ActionChains
 
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     start = browser.wait_final(page)
     page.execute_script("Object.assign(window.clwave.state, {azimuth: 75, elevation: -35, zoom: 1.4});"
                         "const m = document.getElementById('colour-map'); m.value = 'inferno';"
