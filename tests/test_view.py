@@ -187,7 +187,7 @@ def test_the_page_loads_every_script_served_in_order_each_with_the_headers(viewe
             served = {}
             for name in SCRIPTS:
                 r = await s.get(viewer.url.replace("/?", f"/{name}?"))
-                served[name] = r.status, r.headers["Content-Type"], r.headers, await r.text()
+                served[name] = r.status, r.content_type, r.headers, await r.text()
             return page, served
     page, served = run(go())
     assert re.findall(r'<script src="([\w-]+\.js)\?token=([\w-]+)"></script>', page) == [

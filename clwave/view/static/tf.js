@@ -1,6 +1,6 @@
 // The transfer function of a shaded view: its sliders and presets, their undo and redo, the editor of its points.
 "use strict";
-// transfer function (a scalar model, classified while rendering): a base, a preset (null: the starting function,
+// A scalar model's, classified while rendering: a base, a preset (null: the starting function,
 // whose window the server holds) or the editor's points (data units, with the window `anchor` they are scaled about),
 // seen through the sliders: the window centre and width move and widen the base's window, so its points move and
 // scale together; the opacity scale multiplies their opacities. A preset base goes to the server as such (it applies
