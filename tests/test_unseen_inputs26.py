@@ -31,3 +31,13 @@ def test_a_scalar_of_tiny_values_is_shaded(scale):
     same = clwave.raytrace(unit, cam, tolerance=1e-3,
                            transfer_function=clwave.TransferFunction([(0.0, 1, 1, 1, 0.0), (1.0, 1, 0.5, 0, 0.3)]))
     assert np.abs(image - same.image).max() <= 1e-4 and image[..., 3].max() > 0.5
+
+
+def test_a_detail_beyond_the_levels_is_named_as_given():
+    # detail=2 on a one-level model was refused as "detail=Detail(level=2, pixels=None) must be ...": not what was given
+    vol = clwave.Volume(_smooth((9, 7, 8)).astype(np.float32))
+    tracer = clwave.RayTracer(clwave.WaveletVolume.from_volume(vol, levels=1), lod=True)
+    with pytest.raises(clwave.InputError, match=r"^detail=2 must be a level from 0 \(full detail\) to 1 "):
+        tracer.render(clwave.Camera(20, 30, (4, 4)), detail=2, absorption=False)
+    with pytest.raises(clwave.InputError, match=r"^detail=Detail\(level=-1, pixels=None\) must be a level"):
+        tracer.render(clwave.Camera(20, 30, (4, 4)), detail=clwave.Detail(-1), absorption=False)
