@@ -16,16 +16,25 @@ from .io.result import RenderResult, resolve_window
 from .model.camera import Camera
 
 METHODS = ("splat", "raytrace")
+#: host memory a turntable holds per pixel of a view, at the most: its float32 image of up to 4 channels, their stack
+#: for the one window or the .npy (the colour channels) and its 8-bit picture
+VIEW_PIXEL_BYTES = 4 * 4 + 4 * 3 + 4
 
 
 def turntable_cameras(camera, n) -> list:
-    """``camera`` turned by ``360 i / n`` degrees for i in 0 .. n-1; ``n`` checked (a whole number >= 1)."""
+    """``camera`` turned by ``360 i / n`` degrees for i in 0 .. n-1; ``n`` checked (a whole number >= 1), and the
+    views' images against the host memory available (:data:`VIEW_PIXEL_BYTES`), before any is rendered."""
+    from .device.memory import check_fits
+
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"n={n!r} must be the number of views, a whole number >= 1 (e.g. 24)",
                          cli=f"--turntable {n} needs N >= 1")
     if not isinstance(camera, Camera):
         raise InputError(f"camera={type(camera).__name__} must be a clwave.Camera (a turntable turns it about the "
                          f"z axis), or None for the default")
+    H, W = camera.size
+    check_fits(int(n) * H * W * VIEW_PIXEL_BYTES, f"a turntable of {n} {H}x{W} views",
+               "give fewer views (--turntable N, n=) or a smaller size")
     return [camera.rotated(360.0 * i / n) for i in range(int(n))]
 
 

@@ -88,6 +88,27 @@ def test_bad_turntables_are_refused_in_one_line_before_any_view(hydrogen, call, 
     assert message in str(e.value) and "\n" not in str(e.value)
 
 
+def test_a_turntable_beyond_the_host_memory_is_refused_before_any_view(tmp_path, capsys, hydrogen, monkeypatch):
+    """100 views of 8 x 8 hold 100 x 64 x 32 bytes (images, their stack, pictures): refused where 1 byte less is
+    available, before a view is made (--turntable 100000000 ran for minutes towards an exhausted memory)."""
+    from clwave.device import memory
+    from clwave.turntable import VIEW_PIXEL_BYTES, turntable_cameras
+
+    assert VIEW_PIXEL_BYTES == 4 * 4 + 4 * 3 + 4  # float32 RGBA, their colour channels stacked, an 8-bit picture
+    camera = clwave.Camera(size=8)
+    monkeypatch.setattr(memory, "available_bytes", lambda: 100 * 64 * 32)
+    assert len(turntable_cameras(camera, 100)) == 100  # just fits
+    monkeypatch.setattr(memory, "available_bytes", lambda: 100 * 64 * 32 - 1)
+    monkeypatch.setattr(clwave.Camera, "rotated", lambda *a: pytest.fail("a view was made"))
+    with pytest.raises(memory.HostMemoryError, match=r"^a turntable of 100 8x8 views needs about 200 KiB, .*; give "
+                                                     r"fewer views"):
+        clwave.turntable(hydrogen, 100, camera)
+    code, _, err = cli(capsys, "render", "phantom:hydrogen:16", "--size", "8", "--turntable", "100", "-o",
+                       str(tmp_path / "t.gif"))
+    assert code == 2 and err.count("\n") == 1 and "a turntable of 100 8x8 views needs about 200 KiB" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_bad_saves_are_refused_and_write_nothing(tmp_path, capsys, hydrogen):
     turn = clwave.turntable(hydrogen, 2, clwave.Camera(size=8))
     for path, options, message in [

@@ -9,7 +9,8 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .options import READING, add_reading_options, error_words, file_size, flag, kept_words, numbers, parse_series
+from .options import (READING, add_reading_options, error_words, file_size, flag, is_given, kept_words, numbers, option,
+                      parse_series)
 
 
 def run(args):
@@ -82,12 +83,12 @@ GEOMETRY = ("unit", "box", "spacing_option", "reading")
 
 def _reading(args) -> list:
     """The reading options given (``--spacing 10,5,5``'s ``--spacing``)."""
-    return [flag(n) for n in _given(args)]
+    return [option(args, n) for n in _given(args)]
 
 
 def _given(args) -> dict:
     """The reading options given, by name, as given (``--nan 0`` too: 0 == False)."""
-    return {n: getattr(args, n) for n in READING if getattr(args, n) is not None and getattr(args, n) is not False}
+    return {n: getattr(args, n) for n in READING if is_given(args, n)}
 
 
 def _as_read(args, facts) -> dict:
@@ -217,6 +218,9 @@ def _volume_lines(f) -> list:
     if values:
         lines.append(("values", f"{', '.join(flag(n) + ('' if v is True else f' {v:g}') for n, v in values.items())}"
                                 f": applied as the values are read (not read here)"))
+    if "labels" in f["reading"]:
+        lines.append(("labels", "a label map (--labels): a wavelet above Haar is warned of (docs/model.md §5)"
+                      if f["reading"]["labels"] else "no label map (--no-labels), whatever its values look like"))
     if f["time"]:
         t = f["time"]
         step = "" if t["step"] is None else f", {t['step']:g} {t['unit'] or '(no unit)'} apart"
@@ -232,7 +236,7 @@ def _volume_lines(f) -> list:
                       f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f["nifti"])
+    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"])
 
 
 def _nifti_lines(n) -> list:
@@ -254,6 +258,27 @@ def _nifti_lines(n) -> list:
     if n["intent"] == "label":
         lines.append(("intent", "labels (NIFTI_INTENT_LABEL): compress with --wavelet haar (docs/model.md §5)"))
     return lines
+
+
+def _fits_lines(c, shape) -> list:
+    """A FITS cube's HDU, values and axes (``loaders.fits.header_facts``), and the ``--spacing`` that makes its
+    spectral axis (x) as deep as its ``shape``'s sky is wide (yt's ``spectral_factor="auto"``)."""
+    if c is None:
+        return []
+    scaling = ", ".join(f"{k} {v:g}" for k, v in c["scaling"].items())
+    axes = []
+    for n, a in enumerate(c["axes"], 1):
+        step = "" if a["step"] is None else f", {a['step']:g}{' ' + a['unit'] if a['unit'] else ''} a pixel"
+        becomes = "dropped" if a["axis"] is None else f"-> {a['axis']}{' reversed' * bool(a['flipped'])}"
+        axes.append(f"{n} {a['type'] or '(no CTYPE)'} ({a['length']}{step}) {becomes}")
+    name = f" ({c['name']})" if c["name"] else ""
+    scaled = f" ({scaling}, applied as read)" if scaling else ""
+    unit = c["unit"] or "no unit (no BUNIT)"
+    return [("cube", f"HDU {c['hdu']}{name}, values in {unit}{scaled}; NaN (and BLANK) are no data: --nan VALUE gives "
+                     "them a value"),
+            ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1); "
+                     f"--spacing 1,1,{max(shape[:2]) / shape[2]:.4g} makes the spectral axis as deep as the sky is "
+                     "wide")]
 
 
 def _extent(shape, spacing) -> float:

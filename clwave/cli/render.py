@@ -144,8 +144,9 @@ def add_parser(sub):
     add_raytrace_options(p)
     p.add_argument("--detail", type=int, help="ray tracing: the level of detail, 0 (full, the default) up to the "
                                               "model's levels (the coarsest: its approximation alone, fastest)")
-    p.add_argument("--turntable", type=int, help="write an N-frame rotation GIF: the azimuth turned through 360 "
-                                                 "degrees about the world's z axis, the elevation kept")
+    p.add_argument("--turntable", type=int, metavar="N", help="write an N-frame rotation GIF: the azimuth turned "
+                                                              "through 360 degrees about the world's z axis, the "
+                                                              "elevation kept")
     p.add_argument("--frame-time", type=float, metavar="SECONDS",
                    help="with --turntable: the seconds each frame is shown, 0.02 to 655.35, to the hundredth "
                         "(default 0.1)")

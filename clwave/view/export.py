@@ -33,14 +33,14 @@ SAVE_PIXEL_BYTES = 200
 TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
 #: the reading options that clwave.load takes by the same name
 LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level",
-                "orientation", "unit")
+                "orientation", "unit", "labels")
 
 
 @dataclass(frozen=True)
 class Origin:
     """How the served model was made: the ``input`` as given to ``clwave view`` (None: a model given to
     ``clwave.view()`` in Python, which no command reads) and the reading and model ``options`` given, as
-    ``(dest, flag, value)`` (value None for a switch)."""
+    ``(dest, flag, value)`` (a switch's value True, or False for ``--no-labels``)."""
 
     input: str | None = None
     options: tuple = ()
@@ -59,13 +59,16 @@ class Origin:
         given = []
         for action in parser._actions:
             value = getattr(args, action.dest, action.default)
+            if isinstance(action, argparse._StoreConstAction):  # a switch: --hu-to-mu, --labels, --no-labels
+                if value is action.const and value is not action.default:
+                    given.append((action.dest, action.option_strings[-1], value))
             # "is not False", for 0 == False: an option given as 0 (--threshold 0, --nan 0) is given
-            if action.option_strings and value is not None and value is not False and value != action.default:
-                given.append((action.dest, action.option_strings[-1], None if value is True else value))
+            elif action.option_strings and value is not None and value is not False and value != action.default:
+                given.append((action.dest, action.option_strings[-1], value))
         return cls(args.input, tuple(given))
 
     def get(self, dest):
-        return next((value if value is not None else True for d, _, value in self.options if d == dest), None)
+        return next((value for d, _, value in self.options if d == dest), None)
 
 
 @dataclass(frozen=True)
@@ -187,7 +190,7 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
         # a scalar model's shaded view: the tab's function in place of the one given; an X-ray of a .clw: none
         if dest in TF_OPTIONS and (scalar_tf or clw):
             continue
-        tokens += [flag] if value is None else _token(flag, value)
+        tokens += [flag] if isinstance(value, bool) else _token(flag, value)
     tokens += ["--method", "splat" if spec.mode == "xray" else "raytrace"]
     if scalar_tf:
         if _is_preset(spec.tf):
