@@ -42,6 +42,15 @@ def numbers(text, name, counts, kind=float, sep=",") -> tuple:
     return values
 
 
+def parse_spacing(text) -> tuple:
+    """``--spacing DZ,DY,DX`` (or one number for all three) as three positive voxel sizes, or the one line that
+    refuses it: the one check of every command's ``--spacing``, ``clwave info FILE``'s too."""
+    spacing = numbers(text, "--spacing", (1, 3))
+    if not all(map(math.isfinite, spacing)) or min(spacing) <= 0:
+        raise InputError(f"--spacing {text} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
+    return spacing * 3 if len(spacing) == 1 else spacing
+
+
 def add_input_options(p):
     p.add_argument("input", help="volume file, DICOM folder, .clw file, or phantom:NAME[:N]")
     add_reading_options(p)
@@ -137,7 +146,7 @@ def read_volume(args):
     from ..model.volume import Volume
 
     spec = args.input
-    spacing = None if args.spacing is None else numbers(args.spacing, "--spacing", (1, 3))
+    spacing = None if args.spacing is None else parse_spacing(args.spacing)
     if spec.startswith("phantom:"):
         given = [option(args, n) for n in READING if n not in ("spacing", "subtract") and is_given(args, n)]
         if given:
