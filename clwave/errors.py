@@ -36,13 +36,19 @@ class ClwaveError(Exception):
     """
 
     def __init__(self, message, *, cli=None, worded=False):
-        super().__init__(message)
-        self.cli, self.worded = cli, worded
+        super().__init__(one_line(message))
+        self.cli, self.worded = one_line(cli), worded
 
     def cli_message(self, words: CommandWords | None = None) -> str:
         if self.worded:
             return self.cli.format_map(asdict(words)) if words else str(self)
         return self.cli or str(self)
+
+
+def one_line(text):
+    """``text`` with its line breaks, and the spaces around them, made one space: a message that shows a value's
+    ``repr`` (a 2-D NumPy array's spans lines) stays one line; anything but a string as given."""
+    return " ".join(text.split()) if isinstance(text, str) and "\n" in text else text
 
 
 class ClwaveWarning(UserWarning):
@@ -53,8 +59,8 @@ class ClwaveWarning(UserWarning):
     once = None
 
     def __init__(self, message, *, cli=None):
-        super().__init__(message)
-        self.cli = cli or message
+        super().__init__(one_line(message))
+        self.cli = one_line(cli or message)
 
 
 class NearlyOpaqueWarning(ClwaveWarning):

@@ -37,6 +37,28 @@ def checkpoint(abandon=None) -> None:
             raise Abandoned("given up from another thread between two units of work")
 
 
+def drain(stages):
+    """Run a generator of stages (one that yields between units of work another may take turns with) to its end;
+    what it returns."""
+    while True:
+        try:
+            next(stages)
+        except StopIteration as end:
+            return end.value
+
+
+def in_turns(lock, stages):
+    """A generator of ``stages``' stages with ``lock`` held for each, not between two (where others take their
+    turns); returns what ``stages`` returns."""
+    while True:
+        with lock:
+            try:
+                next(stages)
+            except StopIteration as end:
+                return end.value
+        yield
+
+
 def one_at_a_time(method):
     """``method`` run under its object's ``lock``, a renderer's device's (``ComputeContext.lock``): renderers used
     from several threads at once render one view at a time on a device, each call waiting for the one under way

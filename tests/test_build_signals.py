@@ -7,7 +7,7 @@ import signal
 import subprocess
 import sys
 
-from test_hardening import ROOT, interrupted
+from test_hardening import ROOT, interrupted, sigint_default
 
 #: the C-level SIGINT handler seen by each real build (the script's ``pyopencl.Program.build`` wrapped), against
 #: Python's own at the start: the address of ``sigaction``'s handler, its first field on Linux
@@ -49,7 +49,8 @@ def test_a_build_runs_under_pythons_own_sigint_handling():
     for ignored in (False, True):
         proc = subprocess.run([sys.executable, "-c", SEEN_BY_BUILDS], cwd=ROOT, capture_output=True, text=True,
                               timeout=300, env=dict(os.environ, PYTHONPATH=str(ROOT)),
-                              preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignored else None)
+                              preexec_fn=(lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignored
+                              else sigint_default)
         assert proc.returncode == 0, proc.stderr[-2000:]
         # the context's handler is not Python's (else this test tests nothing), no build ran under it, and a
         # context made by ``ComputeContext.get`` leaves Python's in place

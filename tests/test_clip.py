@@ -158,11 +158,23 @@ def test_slabs_of_a_cluster_render_clip_alike():
     (dict(planes=[((0, 0, 0), (1, 0, 0))] * 7), "at most 6 planes"),
     (dict(planes=((0, 0, 0), (1, 0, 0))), "plane 0 .* must be \\(point, normal\\)"),
     (dict(planes="x"), "must be a list of \\(point, normal\\)"),
+    (dict(lo=np.zeros((3, 3)), hi=(1, 1, 1)), r"lo=array\(\[\[0., 0., 0.\], \[0., 0., 0.\], .* must be 3 finite"),
+    (dict(planes=[np.eye(3)]), r"plane 0 array\(\[\[1., 0., 0.\], \[0., 1., 0.\], .* must be \(point, normal\)"),
 ])
 def test_bad_clips_are_refused_in_one_line(kw, message):
     with pytest.raises(InputError, match=message) as caught:
         clwave.Clip(**kw)
     assert "\n" not in str(caught.value)
+
+
+def test_planes_given_as_an_array_are_the_planes_given_as_a_list():
+    rows = [((0, 0, 0), (1, 0, 0)), ((0, 1, 0), (0, -1, 1))]
+    assert clwave.Clip(planes=np.array(rows, float)) == clwave.Clip(planes=rows)
+    assert clwave.Clip(planes=[np.array(r, float) for r in rows]) == clwave.Clip(planes=rows)
+    for bad in (np.zeros((2, 3)), [np.array(1.0)]):
+        with pytest.raises(InputError, match="must be") as caught:
+            clwave.Clip(planes=bad)
+        assert "\n" not in str(caught.value)
 
 
 def test_thin_but_real_clips_are_kept():
@@ -171,6 +183,23 @@ def test_thin_but_real_clips_are_kept():
     assert clwave.Clip(planes=[((100, 0, 0), (1, 0, 0)), ((100 + 1e-6, 0, 0), (-1, 0, 0))]).keeps()
     assert PLANE.contains([(1.0, 0.2, 0.0), (-1.0, 0.2, 0.0)]).tolist() == [True, False]
     assert pickle.loads(pickle.dumps(BOX_AND_PLANES)) == BOX_AND_PLANES  # sent to a cluster's workers
+
+
+@pytest.mark.parametrize("kw, kept", [
+    (dict(lo=(-1e10, -1e10, 0), hi=(1e10, 1e10, 5)), True),  # a slab 5 thick: "everything between z = 0 and 5"
+    (dict(lo=(-1e4, -1e4, 0), hi=(1e4, 1e4, 1e-5)), True),
+    (dict(lo=(-1e10, -1e10, 0), hi=(1e10, 1e10, 5), planes=[((0, 0, 2.5), (0.0, 1e-3, 1.0))]), True),  # half of it
+    (dict(lo=(-1e10, -1e10, 0), hi=(1e10, 1e10, 5), planes=[((0, 0, 6), (0, 0, 1))]), False),  # beyond its top
+    (dict(lo=(-1e10, -1e10, 0), hi=(1e10, 1e10, 5), planes=[((0, 0, 2), (0, 0, 1)), ((0, 0, 2), (0, 0, -1))]), False),
+])
+def test_a_slab_box_keeps_what_its_thickness_holds(kw, kept):
+    """Thinness is measured along each axis of the box, not against its widest side: a box 5 thick and 2e10 wide was
+    refused as keeping nothing (its inscribed ball 2.5e-10 of its half-width)."""
+    if kept:
+        assert clwave.Clip(**kw).keeps()
+    else:
+        with pytest.raises(InputError, match="keeps nothing"):
+            clwave.Clip(**kw)
 
 
 def test_a_clip_that_misses_the_volume_or_is_not_a_clip_is_refused(small_rgba):  # noqa: F811

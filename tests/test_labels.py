@@ -213,3 +213,201 @@ def test_a_bad_transfer_function_file_is_refused_in_one_line(tmp_path, capsys, n
                          str(tmp_path / "x.clw"))
     assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "x.clw").exists()
+
+
+# ---- dense maps of many labels, and the images they are told from: a corpus of both (docs/model.md §5)
+
+def _voronoi(shape, n, seed, inside=None, by_place=False):
+    """``n`` regions (the voxels nearest each of ``n`` seeds inside the mask ``inside``, 0 outside it), numbered
+    1 .. n at random or, ``by_place``, in the seeds' raster order (as a segmentation tool numbers cells)."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(seed)
+    inside = np.ones(shape, bool) if inside is None else inside
+    where = np.argwhere(inside)
+    seeds = where[rng.choice(len(where), n, replace=False)] + rng.random((n, 3)) - 0.5
+    seeds = seeds[np.lexsort(seeds.T[::-1])] if by_place else seeds
+    out = np.zeros(shape, np.uint16)
+    out[inside] = (np.arange(n) if by_place else rng.permutation(n))[cKDTree(seeds).query(where)[1]] + 1
+    return out
+
+
+def _ball(n):
+    z, y, x = np.indices((n, n, n)) - (n - 1) / 2
+    return x ** 2 + y ** 2 + z ** 2 < (0.45 * n) ** 2
+
+
+def _cells(n, count, radius, seed):
+    """``count`` cells (balls of random radius in ``radius``, each voxel its nearest centre's) in a background of 0,
+    numbered in raster order of their centres, as Cellpose or StarDist number theirs."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(seed)
+    centres = rng.random((count, 3)) * n
+    centres = centres[np.lexsort(centres.T[::-1])]
+    distance, nearest = cKDTree(centres).query(np.argwhere(np.ones((n, n, n), bool)))
+    return np.where(distance < rng.uniform(*radius, count)[nearest], nearest + 1, 0).reshape(n, n, n).astype(np.uint16)
+
+
+def _shells(n, rings, sectors):
+    """Nested shells, each cut into sectors about z: rings x sectors labels, numbered outwards."""
+    z, y, x = np.indices((n, n, n)) - (n - 1) / 2
+    ring = (np.sqrt(x ** 2 + y ** 2 + z ** 2) / (n / 2) * rings).astype(int)
+    sector = ((np.arctan2(y, x) + np.pi) / (2 * np.pi) * sectors).astype(int) % sectors
+    return np.where(ring < rings, ring * sectors + sector + 1, 0).astype(np.uint16)
+
+
+def _mni(name, step=1):
+    """An MNI152 template of the nilearn wheel as (z, y, x), every ``step``-th voxel."""
+    from test_progressive_raytrace import nilearn_file
+
+    return np.asarray(nib.load(nilearn_file(name)).dataobj)[::step, ::step, ::step].transpose(2, 1, 0)
+
+
+def _parcellation(n, step, seed):
+    """A cortical parcellation as Schaefer's, Brainnetome's or Harvard-Oxford's: the MNI152 grey matter (over 0.5),
+    ``step`` mm a voxel, cut into ``n`` parcels around seeds in it, numbered left hemisphere first, back to front."""
+    from scipy.spatial import cKDTree
+
+    grey = _mni("mni_icbm152_gm_tal_nlin_sym_09a_converted.nii.gz", step) > 0.5
+    where = np.argwhere(grey)
+    seeds = where[np.random.default_rng(seed).choice(len(where), n, replace=False)]
+    seeds = seeds[np.lexsort((seeds[:, 1], seeds[:, 2] > grey.shape[2] / 2))]  # left (x) first, then by y
+    out = np.zeros(grey.shape, np.int16)
+    out[grey] = cKDTree(seeds).query(where)[1] + 1
+    return out
+
+
+def _blocks(edge, block, dtype):
+    """edge^3 cells of ``block`` voxels (z, y, x), labels 1 .. edge^3 at random: 39,304 for 34, above int16's 2^15."""
+    cells = np.random.default_rng(6).permutation(edge ** 3).reshape(edge, edge, edge) + 1
+    return np.kron(cells, np.ones(block, int)).astype(dtype)
+
+
+def _quantised(values, top, dtype):
+    values = np.asarray(values, float)
+    return np.rint((values - values.min()) / (values.max() - values.min()) * top).astype(dtype)
+
+
+def _blurred_regions(n, regions, sigma, top=255, dtype=np.uint8, noise=0.0):
+    """A piecewise-constant phantom: regions of random intensities in a ball, their edges blurred (a Gaussian of
+    ``sigma`` voxels) as a scanner's point spread blurs them, with Gaussian noise of ``noise`` (of the range)."""
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(regions)
+    values = np.concatenate([[0], rng.uniform(0.2, 1, regions)])[_voronoi((n,) * 3, regions, 0, _ball(n))]
+    return _quantised(gaussian_filter(values, sigma) + rng.normal(0, noise, values.shape), top, dtype)
+
+
+def _microscopy(n, photons):
+    """Cells of random brightness, blurred as a microscope's point spread blurs them, as photon counts (Poisson)
+    over a camera's offset of 100: a uint16 fluorescence stack."""
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(photons)
+    bright = np.concatenate([[0.05], rng.uniform(0.3, 1, 200)])[_cells(n, 200, (3, 8), 4)]
+    return (rng.poisson(gaussian_filter(bright, 1.5) * photons) + 100).astype(np.uint16)
+
+
+def _t1(bits, noise=0.0, step=1):
+    """The MNI152 T1 template as an ``bits``-bit MRI, with Rician-like noise of ``noise`` (of its largest value)."""
+    from test_progressive_raytrace import NILEARN_T1
+
+    t1 = _mni(NILEARN_T1, step).astype(float)
+    t1 = np.abs(t1 + np.random.default_rng(bits).normal(0, noise * t1.max(), t1.shape))
+    return _quantised(t1, (1 << bits) - 1, np.uint8 if bits <= 8 else np.uint16)
+
+
+MANY_LABELS = {  # more than 64 labels numbered densely, no NIfTI intent
+    "voronoi 200 in a ball, at random": lambda: _voronoi((48,) * 3, 200, 1, _ball(48)),
+    "voronoi 1000, by place": lambda: _voronoi((64,) * 3, 1000, 2, by_place=True),
+    "grains 5000": lambda: _voronoi((96,) * 3, 5000, 3),
+    "cells 300": lambda: _cells(64, 300, (3, 8), 4),
+    "cells 3000, 2-5 voxels": lambda: _cells(96, 3000, (2, 5), 5),
+    "shells 20 x 8 sectors": lambda: _shells(64, 20, 8),
+    "cells 39304 uint16": lambda: _blocks(34, (2, 2, 8), np.uint16),
+    "cells 39304 int32": lambda: _blocks(34, (2, 2, 8), np.int32),
+    "parcels 200 1 mm": lambda: _parcellation(200, 1, 0),
+    "parcels 400 2 mm": lambda: _parcellation(400, 2, 1),
+    "parcels 96 2 mm": lambda: _parcellation(96, 2, 7),
+    "parcels 300 3 mm": lambda: _parcellation(300, 3, 8)}
+IMAGES = {  # integer images of more than 64 values (or masks), none a label map
+    "T1 8 bit": lambda: _t1(8),
+    "T1 8 bit, noise": lambda: _t1(8, 0.02),
+    "T1 12 bit, noise": lambda: _t1(12, 0.02),
+    "T1 8 bit 2 mm": lambda: _t1(8, step=2),
+    "hydrogen 8 bit 128": lambda: _quantised(clwave.phantom("hydrogen", 128).data, 255, np.uint8),
+    "hydrogen 12 bit": lambda: _quantised(clwave.phantom("hydrogen", 64).data, 4095, np.uint16),
+    "marschner-lobb 8 bit": lambda: _quantised(clwave.phantom("marschner-lobb", 64).data, 255, np.uint8),
+    "regions blurred 0.5": lambda: _blurred_regions(64, 100, 0.5),
+    "regions blurred 1": lambda: _blurred_regions(64, 100, 1.0),
+    "regions blurred 2": lambda: _blurred_regions(64, 30, 2.0),
+    "regions blurred 1, 12 bit": lambda: _blurred_regions(64, 300, 1.0, 4095, np.uint16),
+    "regions blurred 1, noise": lambda: _blurred_regions(64, 100, 1.0, noise=0.01),
+    "microscopy 100 photons": lambda: _microscopy(64, 100),
+    "microscopy 2000 photons": lambda: _microscopy(64, 2000),
+    "CT uint16, noise": lambda: (np.interp(clwave.phantom("shepp-logan", 64).data, [0, 0.1, 0.5, 1],
+                                           [-1000, 0, 60, 1200]) + 1024 + np.random.default_rng(0).normal(
+                                           0, 20, (64,) * 3)).clip(0, 4095).astype(np.uint16),
+    "mask 0/1": lambda: _ball(64).astype(np.uint8),
+    "mask 0/255": lambda: _ball(64).astype(np.uint8) * 255}
+
+
+@pytest.mark.parametrize("name", MANY_LABELS)
+def test_a_dense_map_of_many_labels_is_a_label_map(name):
+    """Parcellations (hundreds of parcels in the grey matter's ribbon, at 1 to 3 mm), cell masks (thousands, labels
+    past int16's 2^15 in uint16 and int32), grains and shells: more than 64 labels, their boundaries abrupt."""
+    data = MANY_LABELS[name]()
+    assert len(np.unique(data)) > 65 and looks_like_labels(data)
+
+
+@pytest.mark.parametrize("name", IMAGES)
+def test_an_image_of_many_values_is_no_label_map(name):
+    """MRI, CT, microscopy and phantoms of hundreds or thousands of values, their regions' edges blurred or noisy,
+    and binary masks (a smooth 0 .. 1 step, no labels between), are no label maps."""
+    data = IMAGES[name]()
+    assert data.dtype.kind in "iu" and not looks_like_labels(data)
+
+
+def test_labels_says_what_the_guess_cannot_know_both_ways(tmp_path, capsys):
+    """``load(labels=)`` and ``--labels``/``--no-labels`` override the guess (and a NIfTI's intent): an image taken
+    for labels (an 8-bit T1 upsampled by nearest neighbour, each value a 2-voxel run: abrupt boundaries) is given
+    ``labels=False``, a map of few labels numbered thinly (no voxel pair equal) ``labels=True``."""
+    upsampled = _t1(8, 0.02, step=4).repeat(2, 0).repeat(2, 1).repeat(2, 2)
+    np.save(tmp_path / "t1.npy", upsampled)
+    np.save(tmp_path / "thin.npy", np.indices((8, 8, 8)).sum(0).astype(np.uint8) % 2 * 7)  # 0 and 7 alternating
+    intent = _nifti(tmp_path / "intent.nii.gz", label_map((24, 24, 24), 8).astype(np.float32), "label")
+    assert looks_like_labels(upsampled) and clwave.load(tmp_path / "t1.npy").labels  # what the guess cannot tell
+    assert not clwave.load(tmp_path / "t1.npy", labels=False).labels
+    assert not clwave.load(tmp_path / "thin.npy").labels and clwave.load(tmp_path / "thin.npy", labels=True).labels
+    assert not clwave.load(intent, labels=False).labels
+    assert clwave.load(tmp_path / "t1.npy", chunks=8, labels=True).labels  # a chunked volume's values are not read
+    with pytest.raises(InputError, match="labels='yes' must be True or False"):
+        clwave.load(tmp_path / "t1.npy", labels="yes")
+    for option, warned in (("--no-labels", 0), ("--labels", 1)):
+        for path in ("t1.npy", "thin.npy"):
+            code, out, err = run(capsys, "compress", str(tmp_path / path), "--levels", "1", option, "-o",
+                                 str(tmp_path / "m.clw"), "--force")
+            assert code == 0 and err.count("looks like a label map") == warned, err
+    code, out, err = run(capsys, "info", str(tmp_path / "t1.npy"), "--no-labels", "--json")
+    assert code == 0 and json.loads(out)["reading"]["labels"] is False
+    code, out, err = run(capsys, "info", str(tmp_path / "t1.npy"), "--labels")
+    assert code == 0 and "labels     a label map (--labels)" in out, out
+    for option in ("--labels", "--no-labels"):
+        code, out, err = run(capsys, "compress", "phantom:hydrogen:16", option, "-o", str(tmp_path / "p.clw"))
+        assert code == 2 and f"{option} cannot apply to phantom:hydrogen:16" in err, err
+        code, out, err = run(capsys, "render", str(tmp_path / "m.clw"), option, "-o", str(tmp_path / "p.png"))
+        assert code == 2 and option in err and ".clw" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_the_viewer_exports_labels_as_given(tmp_path):
+    """A view's command line and Python keep ``--no-labels`` (a switch whose False is given) and ``--hu-to-mu``."""
+    from clwave.cli import make_parser
+    from clwave.view.export import Origin, Spec, command, python
+
+    args = make_parser().parse_args(["view", str(tmp_path / "ct.nii"), "--no-labels", "--hu-to-mu", "--levels", "1"])
+    origin = Origin.of_args(args)
+    assert origin.get("labels") is False and origin.get("hu_to_mu") is True
+    spec = Spec("xray", clwave.Camera(size=16, extent=10.0), window=(0.0, 1.0), levels=1)
+    assert "--no-labels --hu-to-mu" in command(origin, spec) and "--labels " not in command(origin, spec)
+    assert "hu_to_mu=True" in python(origin, spec) and "labels=False" in python(origin, spec)

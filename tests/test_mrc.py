@@ -2,6 +2,8 @@
 expected volume, spacing and world positions are worked out from the header written, by hand (docs/coordinates.md
 §1)."""
 
+import warnings
+
 import mrcfile
 import numpy as np
 import pytest
@@ -141,3 +143,66 @@ def test_a_truncated_or_lying_map_is_refused_in_one_line(tmp_path, capsys, case,
                "stack": lambda: _with(_with(content, 88, np.int32(401).tobytes()), 36, np.int32(1).tobytes())}[case]()
     (tmp_path / "bad.mrc").write_bytes(content)
     assert_refused_in_one_line(capsys, tmp_path / "bad.mrc", words)
+
+
+def _smooth(lo, hi):
+    """A smooth random field (noise blurred) from ``lo`` to ``hi``, whole numbers."""
+    from scipy.ndimage import gaussian_filter
+
+    field = gaussian_filter(np.random.default_rng(3).normal(size=(6, 24, 24)), 3)
+    return np.rint(lo + (field - field.min()) / (field.max() - field.min()) * (hi - lo))
+
+
+def _bytes(tmp_path, name, values):
+    """``values`` (0 .. 255 or -128 .. 127) as the bytes of a mode-0 map without IMOD's stamp."""
+    return _write(tmp_path / name, np.asarray(values).astype(np.uint8).view(np.int8))
+
+
+@pytest.mark.parametrize("make", [
+    lambda: np.rint(clwave.phantom("hydrogen", 24).data * 255),  # 88 voxels above 127 in its core
+    lambda: np.rint(np.random.default_rng(1).normal(128, 20, (6, 16, 16))).clip(0, 255),  # noise about 128
+    lambda: _smooth(20, 235)])
+def test_unsigned_bytes_without_imods_stamp_are_warned_of_and_read_unsigned_when_said(tmp_path, capsys, make):
+    """MRC2014's mode 0 is signed bytes: an unsigned 8-bit map without IMOD's stamp, read so, wraps above 127
+    (200 is -56).  Its jumps of more than 128 between neighbours (127 next to -128) say so: a warning naming
+    dtype='uint8' (--dtype uint8), which reads it as written, and dtype='int8', which keeps it signed, silently."""
+    values = make()
+    path = _bytes(tmp_path, "u.mrc", values)
+    with pytest.warns(ClwaveWarning, match=r"u.mrc: its bytes \(mode 0\) are read signed, as MRC2014 says, but look "
+                                           r"wrapped .* give dtype='uint8' to read them unsigned, dtype='int8'"):
+        wrapped = clwave.load(path)
+    np.testing.assert_array_equal(wrapped.data, values.astype(np.uint8).view(np.int8))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ClwaveWarning)
+        np.testing.assert_array_equal(clwave.load(path, dtype="uint8").data, values)
+        np.testing.assert_array_equal(clwave.load(path, dtype=np.int8).data, wrapped.data)
+    code, out, err = run(capsys, "compress", str(path), "--levels", "1", "-o", str(tmp_path / "u.clw"))
+    assert code == 0 and err.count("look wrapped") == 1 and "give --dtype uint8 to read them unsigned" in err, err
+    code, out, err = run(capsys, "compress", str(path), "--levels", "1", "--dtype", "uint8", "-o",
+                         str(tmp_path / "u8.clw"))
+    assert code == 0 and "wrapped" not in err, err
+    assert clwave.WaveletVolume.open(tmp_path / "u8.clw").reconstruct().data.max() > 127
+
+
+@pytest.mark.parametrize("make", [
+    lambda: np.rint(clwave.phantom("hydrogen", 24).data * 254 - 127),  # a density over the whole signed range
+    lambda: np.rint(np.random.default_rng(2).normal(0, 20, (6, 16, 16))).clip(-128, 127),  # noise about 0: -1 next to 1
+    lambda: _smooth(-120, 120)])
+def test_signed_bytes_are_read_signed_without_a_warning(tmp_path, make):
+    values = make()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ClwaveWarning)
+        np.testing.assert_array_equal(clwave.load(_bytes(tmp_path, "s.mrc", values)).data, values)
+
+
+@pytest.mark.parametrize("stored, dtype, words", [
+    (np.zeros((3, 4, 5), np.float32), "uint8", "dtype= says how an MRC map's bytes .mode 0. are read; .* holds "
+                                               "mode 2: leave it out"),
+    (np.zeros((3, 4, 5), np.int8), "uint16", "dtype='uint16' of an MRC map of bytes must be 'uint8' .unsigned. or "
+                                             "'int8' .signed.")])
+def test_a_map_given_another_dtype_is_refused_in_one_line(tmp_path, capsys, stored, dtype, words):
+    path = _write(tmp_path / "m.mrc", stored)
+    with pytest.raises(clwave.errors.InputError, match=words):
+        clwave.load(path, dtype=dtype)
+    code, out, err = run(capsys, "info", str(path), "--dtype", dtype)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--dtype" in err, err

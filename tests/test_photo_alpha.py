@@ -12,7 +12,7 @@ import tifffile
 import clwave
 from clwave import Camera, TransferFunction, Volume, WaveletVolume
 from clwave.cli import main
-from clwave.errors import InputError
+from clwave.errors import InputError, NothingVisibleError
 
 COLOUR = np.array([200.0, 120.0, 40.0])
 OPACITY = 0.5  # the photo preset's, a voxel at alpha 1
@@ -162,6 +162,21 @@ def test_a_colour_keys_edge_is_linear_from_the_tolerance_to_twice_it():
     data = np.repeat(steps[:, None, None, None], 3, axis=3) * np.ones((6, 2, 2, 3))
     alpha = TransferFunction.preset("photo").under(key=(0, 0, 0)).classify(Volume(data)).data[:, 0, 0, 3]
     np.testing.assert_allclose(alpha, OPACITY * np.array([0, 0, 0, 0.5, 1, 1]), atol=1e-6)
+
+
+def test_a_key_that_takes_all_the_opacity_is_named_as_the_cause(tmp_path, capsys):
+    """A tolerance of 200 (of 255) around the gel's colour reaches the muscle too (its distance 151): the function
+    alone gives every voxel opacity, so the refusal names the key and a smaller tolerance, not a window."""
+    assert np.linalg.norm(np.subtract(GEL, MUSCLE)) < 200
+    with pytest.raises(NothingVisibleError, match=r"the colour key \(55, 85, 150\), tolerance 200, makes transparent "
+                                                  r"every voxel .*: give a smaller tolerance") as caught:
+        TransferFunction.preset("photo").under(key=(*GEL, 200)).classify(Volume(in_gel()))
+    assert "window" not in str(caught.value)
+    folder = write_folder(tmp_path / "png", in_gel())
+    code, _, err = run(capsys, "render", str(folder), "--tf", "photo", "--key", "55,85,150,200", "-o",
+                       str(tmp_path / "r.png"))
+    error = [line for line in err.splitlines() if line.startswith("clwave: error:")]
+    assert code == 2 and len(error) == 1 and "give a smaller TOL (--key R,G,B,TOL) or another colour" in error[0], err
 
 
 @pytest.mark.parametrize("argv, words", [

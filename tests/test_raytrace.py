@@ -16,6 +16,7 @@ from clwave.raytrace.shading import Phong
 from clwave.raytrace.tracer import RayTracer
 from clwave.splat.reference import exact_xray
 from test_hardening import LAUNCHED, interrupted
+from test_splat_memory import turns_with
 
 TOLERANCES = [1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
 
@@ -240,6 +241,21 @@ def test_repeat_renders_are_bit_identical(small_rgba):
     _, tracer = small_rgba
     cam = clwave.Camera(10, 50, size=8)
     assert np.array_equal(tracer.render(cam).image, tracer.render(cam).image)
+
+
+def test_a_render_in_turns_is_the_render_whatever_is_rendered_between_its_bands():
+    """``RayTracer.rendering`` (a viewer's saved image, docs/viewer.md §5), another render of the same tracer between
+    every two of its bands of rows, each of another view, size, transfer function, detail and clip: bit for bit
+    ``render`` of the view (a ray is one work-item's; the classification and detail's tables of a render its own)."""
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=24), levels=2).threshold(keep=0.3)
+    tracer = RayTracer(wv, lod=True)
+    cam, tf = clwave.Camera(35, 25, size=(72, 40)), clwave.TransferFunction.preset("hydrogen", window=(0.05, 0.7))
+    expect = tracer.render(cam, tolerance=1e-3, transfer_function=tf).image
+    got, between = turns_with(tracer.rendering(cam, tolerance=1e-3, transfer_function=tf), lambda i: tracer.render(
+        clwave.Camera(-40 * i, 10, size=17 + i), tolerance=1e-2, detail=(i + 1) % 3,
+        transfer_function=clwave.TransferFunction.preset("hydrogen", window=(0.1 * (i + 1), 0.9)),
+        clip=clwave.Clip(planes=[((0, 0, 0), (1, 0, 0))])))
+    assert between >= 1 and np.abs(expect).max() > 0.1 and np.array_equal(got.image, expect)
 
 
 def test_big_image_equals_its_centre_crop(small_rgba):
@@ -570,7 +586,7 @@ def test_bands_of_rows_give_the_image_of_one_launch(small_rgba, monkeypatch):
 
 
 def test_ctrl_c_stops_a_long_ray_trace_within_a_second():
-    """A 1024^2 trace at tolerance 1e-6 takes many seconds on a CPU; its launches are bands of rows (in_row_bands), so
+    """A 1024^2 trace at tolerance 1e-6 takes many seconds on a CPU; its launches are bands of rows (row_bands), so
     Ctrl-C, sent while one runs, stops it within a second of the signal."""
     script = f"""
 import sys
@@ -580,8 +596,8 @@ rgba = clwave.TransferFunction.preset("hydrogen").classify(clwave.phantom("hydro
 wv = clwave.WaveletVolume.from_volume(rgba, "cubic", levels=2).threshold(keep=0.2)
 tracer = clwave.RayTracer(wv)
 tracer.render(clwave.Camera(30, 20, size=16), tolerance=1e-2)  # set-up and kernel build before the signal
-{LAUNCHED.format(module="tracing", bands="in_row_bands")}
-tracing.in_row_bands = launched
+{LAUNCHED.format(module="tracing", bands="row_bands")}
+tracing.row_bands = launched
 try:
     tracer.render(clwave.Camera(30, 20, size=1024), tolerance=1e-6)  # many seconds on a CPU
 except KeyboardInterrupt:
@@ -607,3 +623,20 @@ def test_coarse_lattices_stay_within_tolerance_of_float64():
         assert res.meta["segments_by_lattice"]["4"] == res.meta["segments"] > 0
         assert res.meta["rays_terminated_early"] > 0
         assert np.max(np.abs(res.image - exact)) <= tol
+
+
+def test_an_image_no_ray_drew_warns_saying_why():
+    """trial26 finding 4: a ray-traced image of nothing ("0 segments": an all-black picture) ended with exit 0 and no
+    word.  A render in which no ray met the model's content warns in one line naming the causes (the camera looking
+    past it, a clip, a needle of a box, the tolerance); a render that drew something does not."""
+    import warnings
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", clwave.ClwaveWarning)
+        seen = clwave.raytrace(wv, clwave.Camera(size=12), shading=False, absorption=False, tolerance=1e-2)
+    assert seen.meta["segments"] > 0
+    with pytest.warns(clwave.ClwaveWarning, match=r"no ray met the model's content \(0 segments\).*camera") as caught:
+        past = clwave.raytrace(wv, clwave.Camera(size=12, target=(500.0, 0.0, 0.0), extent=10.0), shading=False,
+                               absorption=False, tolerance=1e-2)
+    assert past.meta["segments"] == 0 and not past.image.any() and "\n" not in str(caught[0].message)

@@ -151,6 +151,15 @@ def test_a_bar_that_does_not_fit_or_is_no_length_is_refused(tmp_path, scale_bar,
     assert not path.exists()
 
 
+def test_a_default_bar_that_does_not_fit_asks_for_a_larger_picture():
+    """The default length (a fifth of the width) in a 16-pixel picture at 1.73 units a pixel: 2.89 pixels where the
+    margins leave 2.  The fix is a larger picture; "or no length" was offered, though no length was what was given."""
+    with pytest.raises(InputError, match=r"is longer than the 2 pixels .*: give a larger picture size, or no scale "
+                                         r"bar$") as caught:
+        flat(0.5, shape=(16, 16), pixel=1.73).picture(scale_bar=True)
+    assert "no length" not in str(caught.value)
+
+
 def test_a_label_that_does_not_fit_and_a_file_of_values_are_refused(tmp_path):
     with pytest.raises(InputError, match="its label .* does not fit the 20x20 picture"):
         flat(0.5, shape=(20, 20)).picture(scale_bar=True)

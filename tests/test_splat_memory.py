@@ -153,3 +153,38 @@ def test_a_budget_below_the_views_framebuffers_and_tile_lists_is_refused_before_
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "--device-memory 20 MiB is too small: a 1024x1024 view needs at least 23 MiB" in err, err
     assert not (tmp_path / "x.png").exists()
+
+
+def turns_with(stages, other) -> tuple:
+    """What the generator of stages ``stages`` returns, ``other(i)`` run between its stages i and i + 1; and how many
+    times it ran."""
+    between = 0
+    while True:
+        try:
+            next(stages)
+        except StopIteration as end:
+            return end.value, between
+        other(between)
+        between += 1
+
+
+@pytest.mark.parametrize("cap, pairs", [(None, None), (CAP, None), (None, 3000)])
+def test_an_image_in_turns_is_the_splat_whatever_the_renderer_splats_between_its_stages(cc, wv, monkeypatch, cap,
+                                                                                       pairs):
+    """``splat_in_turns`` (a viewer's save, docs/viewer.md §5) with another image of the same renderer, of another size
+    each time, splatted between every two of its stages: every coefficient on the device, streamed (a cap), or passes
+    split in halves (a pair budget of 3000): bit for bit ``clwave.splat`` with a renderer of its own (the same passes;
+    the tile lists and chunks of the image in turns its own, which the images between would write over)."""
+    from clwave.splat import stages
+    from clwave.splat.renderer import splat_in_turns
+
+    if pairs:
+        monkeypatch.setattr(stages.Stages, "pair_budget", lambda self, budget: pairs)
+    cam = clwave.Camera(30, 20, size=32)
+    expect = clwave.splat(wv, cam, renderer=clwave.SplatRenderer(wv, device=cc, device_memory=cap))
+    r = clwave.SplatRenderer(wv, device=cc, device_memory=cap)
+    got, between = turns_with(splat_in_turns(r, cam), lambda i: clwave.splat(
+        wv, clwave.Camera(40 * i, -10, size=(16 + i % 3, 24)), renderer=r))
+    assert between >= 1 + max(1, expect.meta["coefficient_chunks"]) and np.array_equal(got.image, expect.image)
+    assert got.meta["coefficient_chunks"] == expect.meta["coefficient_chunks"] and (cap is None) == (
+        got.meta["coefficient_chunks"] == 0)

@@ -167,7 +167,7 @@ def test_vtk_finer_volume_is_the_cubic_model():
 def test_the_view_bench_drags_on_small_images():
     """tools/bench.py view's drag (bench_view.drag_path) on the viewer's page in headless chromium: pressed where the
     page's status line is not (at 48² it covered the image's centre, where the drag once pressed) and staying in the
-    image, it orbits by 0.4° a pixel (viewer.js) as far as it moved; 240 x 60 pixels in 60 moves at 512²."""
+    image, it orbits by 0.4° a pixel (static/controls.js) as far as it moved; 240 x 60 pixels in 60 moves at 512²."""
     sys.path.insert(0, str(ROOT / "tools"))
     import browser
     from bench_view import _view_drag, drag_path

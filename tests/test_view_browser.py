@@ -46,8 +46,15 @@ def decode(data):
     return iio.imread(io.BytesIO(data))
 
 
+def open_xray(page, url):
+    """The page of the module's viewer, which opens shaded (its model has a transfer function), in the X-ray mode."""
+    browser.open_viewer(page, url)
+    page.execute_script('document.querySelector(\'input[value="xray"]\').click();')
+    browser.wait_for(page, "const c = window.clwave.current(); return c.fig.mode === 'xray' && c.fig")
+
+
 def test_drag_orbits_and_the_still_view_refines_to_the_splat(viewer, page):
-    assert browser.open_viewer(page, viewer.url) > 0
+    open_xray(page, viewer.url)
     browser.wait_final(page)
     start, data0 = browser.current_frame(page)
     browser.drag(page, 60, 24, steps=8, pause=0.05)  # held: the frames while moving
@@ -77,10 +84,10 @@ def test_a_wrong_token_gets_403(viewer, page):
 
 
 def test_two_tabs_orbit_independently(viewer, page):
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     first = page.current_window_handle
     page.switch_to.new_window("tab")
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     second = page.current_window_handle
     browser.drag(page, -40, 0, steps=4, hold=False)
     turned = browser.wait_final(page)
@@ -98,7 +105,7 @@ def test_two_tabs_orbit_independently(viewer, page):
 def test_superseded_frames_are_dropped(viewer, page):
     """Views sent faster than they render: the page shows only frames of its latest view, and the server
     abandons the others (fewer frames arrive than views were sent)."""
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     page.execute_script("const c = window.clwave; for (let i = 1; i <= 20; i++) "
                         "setTimeout(() => { c.state.azimuth = 30 + 3 * i; c.send(); }, 5 * i);")
     final = browser.wait_for(page, "const c = window.clwave.current(); return c && c.fig.final && "
@@ -111,7 +118,7 @@ def test_superseded_frames_are_dropped(viewer, page):
 
 
 def test_a_hostile_socket_closes_and_the_page_keeps_working(viewer, page):
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     code = page.execute_async_script(
         "const done = arguments[arguments.length - 1];"
         "const ws = new WebSocket(`ws://${location.host}/ws${location.search}`);"
@@ -121,6 +128,24 @@ def test_a_hostile_socket_closes_and_the_page_keeps_working(viewer, page):
     before = browser.shown(page)
     browser.drag(page, 30, 0, steps=3, hold=False)
     assert browser.wait_final(page)["azimuth"] != 30 and browser.shown(page) > before
+
+
+def test_a_given_transfer_function_opens_shaded_with_the_editor_over_the_values_whole_range(viewer, page):
+    """trial26 finding 11: `clwave view X --tf F` opened in X-ray mode, and the editor's histogram looked like the
+    window's alone (a window that nearly spans the data).  Given a transfer function, the page opens shaded (its radio
+    checked, the shaded controls enabled, the first final frame shaded), and the editor names the values its canvas
+    spans: the input's whole range (the model's value_range, wider than the window 0.1 … 0.8), histogram behind."""
+    browser.open_viewer(page, viewer.url)
+    first = browser.wait_final(page)
+    checked, xray_off, shaded_off = page.execute_script(
+        'return [document.querySelector(\'input[value="shaded"]\').checked, '
+        'document.getElementById("xray-controls").disabled, document.getElementById("shaded-controls").disabled]')
+    assert first["mode"] == "shaded" and checked and xray_off and not shaded_off
+    lo, hi = viewer.server.wv.value_range
+    axis = browser.wait_for(page, 'const t = document.getElementById("tf-axis").textContent; '
+                                  'return t.includes("…") && t')
+    np.testing.assert_allclose([float(x) for x in axis.split(" … ")], [lo, hi], rtol=1e-3)
+    assert lo < 0.1 and hi > 0.8
 
 
 def test_shaded_with_the_transfer_function_editor(viewer, page):
@@ -296,7 +321,7 @@ def test_the_colour_bar_shows_the_map_over_the_window(viewer, page):
     middle and high values (three digits), which follow the window's sliders and the auto window."""
     from clwave.view.colours import table
 
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     page.execute_script("const m = document.getElementById('colour-map'); m.value = 'inferno';"
                         "m.dispatchEvent(new Event('change'));"
                         "const e = document.getElementById('hi'); e.value = 300; e.dispatchEvent(new Event('input'));")
@@ -517,3 +542,61 @@ def test_the_scale_bar_box_draws_the_bar_over_an_orthographic_view(viewer, page,
     assert page.execute_script("return document.getElementById('scale-bar').disabled && "
                                "!window.clwave.state.scale_bar")
     assert longest_white()[0] == 0
+
+
+def test_the_pages_state_and_edit_history_survive_a_reload_for_the_same_model_only(viewer, page):
+    """The page keeps its view in the address's hash and its edit history in sessionStorage (docs/viewer.md §4): an
+    X-ray view turned and zoomed in inferno under a window of its own, then shaded through the start function widened
+    and a point added on the editor's canvas; reloaded, the page shows the same view: the shaded final frame the same
+    pixels (clwave.raytrace of the page's points), the X-ray one the same window and map, and the undo button takes
+    back the point's drag (the frame before it, pixel for pixel).  The same address on another model's viewer applies
+    none of it and says so."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    open_xray(page, viewer.url)
+    start = browser.wait_final(page)
+    page.execute_script("Object.assign(window.clwave.state, {azimuth: 75, elevation: -35, zoom: 1.4});"
+                        "const m = document.getElementById('colour-map'); m.value = 'inferno';"
+                        "m.dispatchEvent(new Event('change'));"
+                        "const e = document.getElementById('hi'); e.value = 300; e.dispatchEvent(new Event('input'));")
+    xray, _ = latest_final(page, start)
+    assert xray["colour_map"] == "inferno" and xray["azimuth"] == 75
+    page.execute_script('document.querySelector(\'input[value="shaded"]\').click();')
+    shaded, _ = latest_final(page, xray)
+    page.execute_script("const e = document.getElementById('tf-width'); e.value = 70; e.dispatchEvent(new "
+                        "Event('input')); e.dispatchEvent(new Event('change'))")
+    wide, before = latest_final(page, shaded)
+    editor = page.find_element("id", "tf-editor")
+    page.execute_script("arguments[0].scrollIntoView({block: 'center'})", editor)
+    ActionChains(page, duration=0).move_to_element_with_offset(editor, 30, -25).click_and_hold().move_by_offset(
+        8, -4).release().perform()
+    edited, picture = latest_final(page, wide)
+    points = page.execute_script("return window.clwave.state.tf.points")
+    assert len(points) == len(START.points) + 1 and edited["tf_points"] == points
+    assert np.abs(picture.astype(int) - before).max() > 1
+    kept = page.execute_script("return [location.hash, window.clwave.state]")
+
+    page.refresh()
+    browser.wait_for(page, "return window.clwave && window.clwave.stats.firstImage")
+    again = browser.wait_final(page)
+    assert page.execute_script("return window.clwave.stats.restored") == "applied"
+    assert page.execute_script("return [location.hash, window.clwave.state]") == kept
+    assert again["mode"] == "shaded" and again["tf_points"] == points and again["azimuth"] == 75
+    assert np.array_equal(decode(browser.current_frame(page)[1]), picture)
+    camera = clwave.Camera(75, -35, SIZE, extent=again["extent"])
+    assert np.array_equal(picture, clwave.raytrace(viewer.server.wv, camera, tolerance=1e-2, transfer_function=(
+        clwave.TransferFunction(points))).to_uint8(background=(0.0, 0.0, 0.0)))
+    page.find_element("id", "tf-undo").click()  # the history came back with the view: the point's drag undone
+    undone, back = latest_final(page, again)
+    assert len(undone["tf_points"]) == len(START.points) and np.array_equal(back, before)
+    page.execute_script('document.querySelector(\'input[value="xray"]\').click();')
+    shown, _ = latest_final(page, undone)
+    assert [shown[k] for k in ("colour_map", "window", "extent", "azimuth")] == [
+        xray[k] for k in ("colour_map", "window", "extent", "azimuth")]
+
+    with view(clwave.phantom("hydrogen", n=32), size=SIZE, keep=0.2) as other:  # another model: nothing applied
+        page.get(other.url + page.execute_script("return location.hash"))
+        browser.wait_for(page, "return window.clwave && window.clwave.stats.firstImage")
+        fresh = browser.wait_final(page)
+        assert page.execute_script("return window.clwave.stats.restored") == "another model"
+        assert (fresh["mode"], fresh["azimuth"], fresh["colour_map"]) == ("xray", 30, "grey")

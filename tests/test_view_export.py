@@ -343,6 +343,83 @@ def test_a_failed_full_stage_is_its_line_not_still_being_made(clw, monkeypatch, 
     assert xray[0] == 200
 
 
+@pytest.mark.parametrize("mode, size", [("xray", (1024, 1024)), ("shaded", (512, 512))])
+def test_a_save_takes_turns_with_another_tabs_still_frames(clw, monkeypatch, mode, size):
+    """A save is stages of the render thread taken in turn with the tabs' frames (docs/viewer.md §5): a tab's still
+    view sent while a 1024^2 X-ray (a 512^2 shaded) save is under way has frames rendered between two of the save's
+    stages (the render thread's log; the save's first stage waits until that tab's job has been queued, so the order
+    does not depend on timing), and the image saved so is the one saved with nothing between its stages bit for bit,
+    an X-ray the one a fresh renderer splats (clwave render's; a shaded one is the command's in the tests above).
+    Until the twenty-first session a save was one stage, and a tab's 0.31 s still view waited 27.6 s behind a 2048^2
+    X-ray one."""
+    import threading
+
+    from clwave.view import export
+
+    log, save_began, tab_began = [], threading.Event(), threading.Event()
+    picture = export.picture
+
+    def gated(sources, spec):  # the save's stages, logged; after its first, waits for the tab's still view queued
+        stages, first = picture(sources, spec), True
+        while True:
+            try:
+                next(stages)
+            except StopIteration as end:
+                log.append("saved")
+                return end.value
+            log.append("save")
+            if first:
+                save_began.set()
+                tab_began.wait(60)
+                first = False
+            yield
+
+    with view(str(clw), size=(32, 40)) as v:
+        source = v.server.sources[mode]
+        frames = source.frames
+
+        def logged(state, pace):  # made on the event loop, which queues its first stage at once (no await between)
+            if state.seq == 2:
+                tab_began.set()
+            return (log.append(("tab", state.seq, frame.figures["final"])) or frame for frame in frames(state, pace))
+
+        monkeypatch.setattr(source, "frames", logged)
+        msg = dict(BASE, seq=1, mode=mode, azimuth=47.3, elevation=-12.5, zoom=1.7,
+                   **(dict(window=list(v.server.sources["xray"].auto_window)) if mode == "xray" else dict(tf=TF)))
+
+        async def go():
+            loop = asyncio.get_running_loop()
+            async with aiohttp.ClientSession() as s:
+                ws = await s.ws_connect(v.url.replace("/?", "/ws?"))
+                await ws.receive_json()
+                await ws.send_str(json.dumps(msg))  # refined once (the whole file's tracer made), then again: the
+                await frames_until_final(ws, 1)    # tab's still frames come at once, with no drag frame first
+                monkeypatch.setattr(export, "picture", gated)
+                saving = asyncio.ensure_future(s.post(v.url.replace("/?", "/image?"),
+                                                      data=json.dumps(dict(view=msg, size=list(size)))))
+                assert await loop.run_in_executor(None, save_began.wait, 60), "the save did not begin"
+                await ws.send_str(json.dumps(dict(msg, seq=2)))
+                still = await frames_until_final(ws, 2)
+                async with await saving as answer:
+                    assert answer.status == 200, await answer.text()
+                    return still, await answer.read()
+
+        still, png = asyncio.run(go())
+        monkeypatch.setattr(export, "picture", picture)
+        again = post(v, "image", dict(view=msg, size=list(size)))
+    tab = [i for i, entry in enumerate(log) if entry[0] == "tab" and entry[1] == 2]
+    assert tab and log[: tab[0]].count("save") == 1, log  # the tab's first still frame after the save's first stage
+    assert "save" in log[tab[0]:] and log[-1] == "saved", log  # ... and before the save's next
+    assert still[-1][0]["final"]
+    saved = decode(png)
+    assert again[0] == 200 and np.array_equal(saved, decode(again[1])) and saved.std() > 5
+    if mode == "xray":
+        camera = clwave.Camera(47.3, -12.5, size, extent=still[-1][0]["extent"])
+        wv = clwave.WaveletVolume.open(clw)
+        fresh = clwave.splat(wv, camera, renderer=clwave.SplatRenderer(wv)).to_uint8(tuple(msg["window"]))
+        assert np.array_equal(grey(saved), fresh)
+
+
 def test_a_viewers_noise_rule_goes_into_the_command_and_the_python(tmp_path, monkeypatch):
     """``clwave view NOISY.npy --wavelet linear --noise 3``: the command keeps ``--noise 3`` and the Python thresholds
     with ``noise=3.0``; the two give one image bit for bit."""

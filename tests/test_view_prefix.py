@@ -23,7 +23,7 @@ from clwave.view import prefix as view_prefix
 from clwave.view import view
 from clwave.view.frames import XraySource
 from clwave.view.prefix import PrefixFirst, prefix_first
-from clwave.view.protocol import unpack_frame
+from clwave.view.protocol import model_id, unpack_frame
 
 PASS = 4096  # coefficients a still pass adds in the test of a swap under way
 BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
@@ -84,6 +84,7 @@ def test_a_clw_file_is_served_from_its_prefix_then_refined_to_the_whole_models_s
         hello, before, model_message, after = asyncio.run(go(v))
         assert v.server.wv.kept == model.kept
     assert hello["model"]["reading"] and hello["model"]["coefficients"] == 2048
+    assert hello["model_id"] == model_id(model)  # the page's kept view is the file's, prefix or whole (viewer.md §4)
     assert all(f["prefix"] and not f["final"] for f in before)
     assert not model_message["model"]["reading"] and model_message["model"]["coefficients"] == model.kept
     assert [f["seq"] for f in after] == [1] * len(after) and after[0]["coefficients"] >= 2048
@@ -359,7 +360,7 @@ def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(c
 
     with view(clw, size=32, tolerance=2e-2) as v:
         frames = asyncio.run(go(v))
-    waiting = [f["waiting"] for f in frames if f.get("waiting")]  # the page's status line (viewer.js waitingWords)
+    waiting = [f["waiting"] for f in frames if f.get("waiting")]  # the page's status line (frames.js waitingWords)
     assert waiting and all(not f["final"] for f in frames if f.get("waiting")) and frames[-1]["detail"] == 0
     if prefix is None:  # the file served whole: nothing read, the wait is the whole tracer's set-up (trial24 row 5)
         assert set(waiting) == {"set-up"}

@@ -24,6 +24,7 @@ from clwave.view import prefix as view_prefix
 from clwave.view import view
 from clwave.view.prefix import PrefixFirst
 import test_view_prefix
+from test_hardening import sigint_default
 
 BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
             background=0.0, shading=True)
@@ -68,7 +69,7 @@ def test_ctrl_c_while_the_rest_is_read_ends_the_process(clw, tmp_path):
     """))
     env = dict(os.environ, PYTHONPATH=str(Path(clwave.__file__).parents[1]))
     p = subprocess.Popen([sys.executable, str(script), str(clw)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True, env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                         text=True, env=env, preexec_fn=sigint_default)
     watchdog = threading.Timer(120, p.kill)  # a line never printed: killed, the test fails below
     watchdog.start()
     try:

@@ -9,7 +9,8 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .options import READING, add_reading_options, error_words, file_size, flag, kept_words, numbers, parse_series
+from .options import (READING, add_reading_options, error_words, file_size, flag, is_given, kept_words, numbers, option,
+                      parse_series, parse_spacing)
 
 
 def run(args):
@@ -82,12 +83,12 @@ GEOMETRY = ("unit", "box", "spacing_option", "reading")
 
 def _reading(args) -> list:
     """The reading options given (``--spacing 10,5,5``'s ``--spacing``)."""
-    return [flag(n) for n in _given(args)]
+    return [option(args, n) for n in _given(args)]
 
 
 def _given(args) -> dict:
     """The reading options given, by name, as given (``--nan 0`` too: 0 == False)."""
-    return {n: getattr(args, n) for n in READING if getattr(args, n) is not None and getattr(args, n) is not False}
+    return {n: getattr(args, n) for n in READING if is_given(args, n)}
 
 
 def _as_read(args, facts) -> dict:
@@ -101,13 +102,11 @@ def _as_read(args, facts) -> dict:
     from ..io.loaders.shared import stated_affine, to_canonical
 
     if args.spacing is not None:
-        spacing = [float(d) for d in numbers(args.spacing, "--spacing", (1, 3))]
-        facts.update(spacing=spacing * 3 if len(spacing) == 1 else spacing)
+        facts.update(spacing=[float(d) for d in parse_spacing(args.spacing)])
         if facts["origin"] is None:  # no file places it: load's origin
             facts.update(origin=[0.0] * 3, obliquity=0.0)
     known = facts["shape"] is not None and facts["spacing"] is not None
-    option = None if facts["spacing"] is None else "--spacing " + _lengths(
-        facts["spacing"], _extent(facts["shape"] or facts["stored_shape"], facts["spacing"]), ",")
+    option = None if facts["spacing"] is None else "--spacing " + _digits(facts["spacing"], ",")
     turn = check_orientation(facts["format"], args.orientation)
     if turn is not None and known:  # as load turns the volume, of a stand-in that holds no voxel
         shape = facts["shape"][:3]
@@ -124,7 +123,7 @@ def _clw_lines(f) -> list:
     extent = _extent(f["shape"], f["spacing"])
     unit = f" {f['unit']}" if f["unit"] else ""  # none recorded (a file of before session 19: unknown)
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, a wavelet model (.clw)"),
-             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_lengths(f['spacing'][::-1], extent)}{unit} "
+             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_digits(f['spacing'][::-1])}{unit} "
                         f"(x, y, z), origin {_lengths(f['origin'], extent)}"),
              ("model", f"{f['levels']} level{'s' * (f['levels'] != 1)}, {f['channels']} channel"
                        f"{'s' * (f['channels'] != 1)} in {len(f['groups'])} group{'s' * (len(f['groups']) != 1)}"
@@ -214,7 +213,7 @@ def _volume_lines(f) -> list:
         stated = "orientation" in f["reading"]
         turned = f", before --orientation {f['reading']['orientation']} turns it" if stated else ""
         missing = "" if given or f["spacing_in_file"] else ": none in the file, give yours"
-        place = f"{_lengths(f['spacing'][::-1], extent)}{unit} (x, y, z; {f['spacing_option']}{' given' * given}" \
+        place = f"{_digits(f['spacing'][::-1])}{unit} (x, y, z; {f['spacing_option']}{' given' * given}" \
                 f"{turned}{missing}), origin {_lengths(f['origin'], extent)}"
         lines.append(("spacing", place + (" (RAS+)" if f["format"] in RAS_FORMATS or stated else "")))
     elif not f["time"]:
@@ -223,11 +222,14 @@ def _volume_lines(f) -> list:
     if f["box"] is not None:
         words = unit or (" in --spacing's unit" if "spacing" in f["reading"] else
                          " world units (no length unit in the file)")
-        lines.append(("box", f"{_lengths(f['box'], max(f['box']))} (x, y, z){words}"))
+        lines.append(("box", f"{_digits(f['box'])} (x, y, z){words}"))
     values = {n: v for n, v in f["reading"].items() if n in ("subtract", "hu_to_mu", "nan")}
     if values:
         lines.append(("values", f"{', '.join(flag(n) + ('' if v is True else f' {v:g}') for n, v in values.items())}"
                                 f": applied as the values are read (not read here)"))
+    if "labels" in f["reading"]:
+        lines.append(("labels", "a label map (--labels): a wavelet above Haar is warned of (docs/model.md §5)"
+                      if f["reading"]["labels"] else "no label map (--no-labels), whatever its values look like"))
     if f["time"]:
         t = f["time"]
         step = "" if t["step"] is None else f", {t['step']:g} {t['unit'] or '(no unit)'} apart"
@@ -243,7 +245,7 @@ def _volume_lines(f) -> list:
                       f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f["nifti"])
+    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"])
 
 
 def _nifti_lines(n) -> list:
@@ -267,6 +269,27 @@ def _nifti_lines(n) -> list:
     return lines
 
 
+def _fits_lines(c, shape) -> list:
+    """A FITS cube's HDU, values and axes (``loaders.fits.header_facts``), and the ``--spacing`` that makes its
+    spectral axis (x) as deep as its ``shape``'s sky is wide (yt's ``spectral_factor="auto"``)."""
+    if c is None:
+        return []
+    scaling = ", ".join(f"{k} {v:g}" for k, v in c["scaling"].items())
+    axes = []
+    for n, a in enumerate(c["axes"], 1):
+        step = "" if a["step"] is None else f", {a['step']:g}{' ' + a['unit'] if a['unit'] else ''} a pixel"
+        becomes = "dropped" if a["axis"] is None else f"-> {a['axis']}{' reversed' * bool(a['flipped'])}"
+        axes.append(f"{n} {a['type'] or '(no CTYPE)'} ({a['length']}{step}) {becomes}")
+    name = f" ({c['name']})" if c["name"] else ""
+    scaled = f" ({scaling}, applied as read)" if scaling else ""
+    unit = c["unit"] or "no unit (no BUNIT)"
+    return [("cube", f"HDU {c['hdu']}{name}, values in {unit}{scaled}; NaN (and BLANK) are no data: --nan VALUE gives "
+                     "them a value"),
+            ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1); "
+                     f"--spacing 1,1,{max(shape[:2]) / shape[2]:.4g} makes the spectral axis as deep as the sky is "
+                     "wide")]
+
+
 def _extent(shape, spacing) -> float:
     """The volume's largest length in world units: what :func:`_lengths` rounds to."""
     return max(n * abs(d) for n, d in zip(shape[:3], spacing))
@@ -277,6 +300,13 @@ def _lengths(values, extent, sep=", ") -> str:
     is below it), so that no sign of nothing is printed; the JSON keeps the numbers as they are."""
     decimals = -math.floor(math.log10(extent * 1e-6)) if extent > 0 else 6
     return sep.join(f"{round(v, decimals) + 0.0:g}" for v in values)
+
+
+def _digits(values, sep=", ") -> str:
+    """Lengths each with the fewest significant digits that give its float32 (what the renderers compute in) back
+    (NumPy's shortest repr): a spacing or box of very different magnitudes (5000 : 0.0014) printed whole, and an
+    echoed ``--spacing`` that, pasted back, gives the same geometry."""
+    return sep.join(text[:-2] if (text := str(np.float32(v))).endswith(".0") else text for v in values)
 
 
 def add_parser(sub):

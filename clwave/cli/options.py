@@ -42,6 +42,15 @@ def numbers(text, name, counts, kind=float, sep=",") -> tuple:
     return values
 
 
+def parse_spacing(text) -> tuple:
+    """``--spacing DZ,DY,DX`` (or one number for all three) as three positive voxel sizes, or the one line that
+    refuses it: the one check of every command's ``--spacing``, ``clwave info FILE``'s too."""
+    spacing = numbers(text, "--spacing", (1, 3))
+    if not all(map(math.isfinite, spacing)) or min(spacing) <= 0:
+        raise InputError(f"--spacing {text} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
+    return spacing * 3 if len(spacing) == 1 else spacing
+
+
 def add_input_options(p):
     p.add_argument("input", help="volume file, DICOM folder, .clw file, or phantom:NAME[:N]")
     add_reading_options(p)
@@ -53,14 +62,15 @@ def add_input_options(p):
 
 #: the options of :func:`add_reading_options`, as ``args`` names them
 READING = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level", "chunks",
-           "orientation", "unit")
+           "orientation", "unit", "labels")
 
 
 def add_reading_options(p):
     """How a volume file is read (:func:`read_volume`): the input commands' and ``clwave info FILE``'s."""
     g = p.add_argument_group("reading the input")
     g.add_argument("--shape", help=".raw only: Z,Y,X or Z,Y,X,C")
-    g.add_argument("--dtype", help=".raw only: numpy dtype, e.g. uint16")
+    g.add_argument("--dtype", help=".raw: numpy dtype, e.g. uint16; an MRC map of bytes (mode 0): uint8 or int8, "
+                                   "read unsigned or signed (default signed, as MRC2014 says, unless IMOD's stamp)")
     g.add_argument("--byte-order", choices=["<", ">"], help=".raw only: little (<) or big (>) endian")
     g.add_argument("--spacing", help="voxel spacing DZ,DY,DX, z first (or one number), in the file's unit (or "
                                      "--unit's); overrides the file's; 'clwave info FILE' prints it as --spacing")
@@ -69,6 +79,12 @@ def add_reading_options(p):
                    "slices, Zarr, HDF5, MRC): where its x, y, z axes point, e.g. LPS (x left, y posterior, z superior; "
                    "nibabel's codes), turned into RAS+ as DICOM is")
     g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
+    labels = g.add_mutually_exclusive_group()
+    labels.add_argument("--labels", action="store_const", const=True, help="the input is a label map (a "
+                        "segmentation), whatever its values look like (default: a NIfTI's intent, else a guess from "
+                        "the values; docs/model.md §5)")
+    labels.add_argument("--no-labels", dest="labels", action="store_const", const=False,
+                        help="the input is no label map, whatever its values look like")
     g.add_argument("--subtract", type=float, help="value subtracted so outside is ~0 (air, water; CT in HU: -1000); "
                    "recorded, so --tf and --tf-window stay in the input's units")
     g.add_argument("--hu-to-mu", action="store_true", help="CT: Hounsfield units to attenuation per mm")
@@ -133,10 +149,9 @@ def read_volume(args):
     from ..model.volume import Volume
 
     spec = args.input
-    spacing = None if args.spacing is None else numbers(args.spacing, "--spacing", (1, 3))
+    spacing = None if args.spacing is None else parse_spacing(args.spacing)
     if spec.startswith("phantom:"):
-        given = [flag(n) for n in READING if n not in ("spacing", "subtract")
-                 and getattr(args, n, None) is not None and getattr(args, n) is not False]
+        given = [option(args, n) for n in READING if n not in ("spacing", "subtract") and is_given(args, n)]
         if given:
             raise InputError(f"{', '.join(given)} cannot apply to {spec}: a phantom is not read from a file")
         parts = spec.split(":")
@@ -153,12 +168,12 @@ def read_volume(args):
     shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
     # weighed by the size the file declares, before its voxels are read
     fits = partial(check_model_fits, args, what="decomposing this volume",
-                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, TIFF; "
+                   hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, FITS, TIFF; "
                         "gunzip a .nii.gz first, a .mgz into a .mgh), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
                 series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),
                 nan=args.nan, subtract=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits,
-                orientation=args.orientation, unit=args.unit)
+                orientation=args.orientation, unit=args.unit, labels=args.labels)
 
 
 def check_model_fits(args, voxels, channels, what, hint):
@@ -200,6 +215,18 @@ VOLUME_ONLY = (*TF_OPTIONS, "key", "wavelet", "levels", "interpolate") + READING
 def flag(name: str) -> str:
     """The command line's option of an ``args`` attribute: ``hu_to_mu`` -> ``--hu-to-mu``."""
     return "--" + name.replace("_", "-")
+
+
+def is_given(args, name) -> bool:
+    """Whether the option of ``args.name`` was given: a value (``--nan 0`` too: 0 == False) but no switch's off
+    (``--hu-to-mu``'s False), or ``--no-labels`` (False; None where neither it nor ``--labels`` is given)."""
+    value = getattr(args, name, None)
+    return value is not None and (value is not False or name == "labels")
+
+
+def option(args, name) -> str:
+    """The option that gave ``args.name`` (:func:`flag`; ``--no-labels`` for ``labels`` False)."""
+    return "--no-labels" if name == "labels" and getattr(args, name) is False else flag(name)
 
 
 def parse_thresholding(args) -> dict:
@@ -247,7 +274,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     thresholding = parse_thresholding(args)
     scheduler = parse_scheduler(args)
     if is_clw(args):
-        given = [flag(name) for name in VOLUME_ONLY if getattr(args, name, None) not in (None, False)
+        given = [option(args, name) for name in VOLUME_ONLY if is_given(args, name)
                  and not (cluster_render and name in ("workers", "scheduler"))
                  and not ((rgba or post) and name in TF_OPTIONS)]  # a scalar .clw: classified while rendering
         if given:

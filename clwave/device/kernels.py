@@ -20,7 +20,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..threads import checkpoint
+from ..threads import checkpoint, drain
 
 BUFFER = "buffer"  #: a ``pyopencl`` buffer, or an array whose ``.data`` is one
 REAL = "real"      #: the kernel's ``real``: float32 or float64 by the build (``real_type=`` at launch)
@@ -111,10 +111,16 @@ class Pace:
 def in_bands(queue, launch, total: int, step: int = 1, work=None, pace: Pace | None = None):
     """``launch(first, count)`` over consecutive bands of the items ``0 .. total``, the queue finished after
     each, so that Python takes a KeyboardInterrupt within about :data:`LAUNCH_SECONDS` however long the
-    whole is.  Bands are whole multiples of ``step`` items (the last may be short), each sized from the
-    rate of the last, at most twice its work (light items say little of the next ones); the first from
-    ``pace`` (the rate of the last call) for half of :data:`LAUNCH_SECONDS` (other work, a weaker guide),
-    or one step.  ``work`` is the cost of the items: a number per item, or their cumulative cost
+    whole is (:func:`bands`, run to its end)."""
+    drain(bands(queue, launch, total, step, work, pace))
+
+
+def bands(queue, launch, total: int, step: int = 1, work=None, pace: Pace | None = None):
+    """A generator of :func:`in_bands`' launches, yielding between two bands (a viewer's saved image takes turns
+    with its tabs' frames there, docs/viewer.md §5).  Bands are whole multiples of ``step`` items (the last may be
+    short), each sized from the rate of the last, at most twice its work (light items say little of the next ones);
+    the first from ``pace`` (the rate of the last call) for half of :data:`LAUNCH_SECONDS` (other work, a weaker
+    guide), or one step.  ``work`` is the cost of the items: a number per item, or their cumulative cost
     (``total + 1`` non-decreasing numbers from 0) where it varies (a tile's records); default 1 each."""
     uniform = work is None or np.isscalar(work)
 
@@ -136,13 +142,20 @@ def in_bands(queue, launch, total: int, step: int = 1, work=None, pace: Pace | N
             pace.rate = rate
         done += count
         items = fit(done, min(2 * spent, rate * LAUNCH_SECONDS)) if done < total else 0
+        if done < total:
+            yield
 
 
 def in_row_bands(queue, launch, global_size, local_size):
     """``launch(global_size, first_row)`` of a 2-D range over :func:`in_bands` of its rows (axis 1, whole
     work-groups of rows).  A band's kernel adds ``first_row`` to its row itself: launched with a global offset
     instead, PoCL would compile each kernel twice, for the first band and for the others (docs/benchmarks.md §22)."""
-    in_bands(queue, lambda row, rows: launch((global_size[0], rows), row), global_size[1], local_size[1])
+    drain(row_bands(queue, launch, global_size, local_size))
+
+
+def row_bands(queue, launch, global_size, local_size):
+    """:func:`in_row_bands` as a generator yielding between two bands (:func:`bands`)."""
+    return bands(queue, lambda row, rows: launch((global_size[0], rows), row), global_size[1], local_size[1])
 
 
 def _vector(kind: np.dtype, value):

@@ -111,7 +111,8 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     from PIL import Image, ImageDraw, ImageFont
 
     height, width = picture.shape[:2]
-    length = nice_length(width * pixel) if length is None or length is True else length
+    chosen = length is None or length is True  # the default: no other length to suggest
+    length = nice_length(width * pixel) if chosen else length
     text = length_label(length, unit)
     font_size = max(12, round(min(height, width) / 24))
     thick, rim, margin = max(2, round(font_size / 4)), max(1, round(font_size / 9)), max(4, round(font_size / 2))
@@ -128,6 +129,8 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     if bar < 2 or bar > room:
         why = "is under 2 pixels" if bar < 2 else f"is longer than the {room} pixels the {width}-pixel-wide picture " \
                                                   f"has for it"
+        if chosen:
+            raise InputError(f"{what} {why}: give a larger picture size, or no scale bar")
         raise InputError(f"{what} {why}: give a length from {length_label(2 * pixel, unit, 3)} to "
                          f"{length_label(room * pixel, unit, 3)}, or no length (a fifth of the width: "
                          f"{length_label(nice_length(width * pixel), unit)})")

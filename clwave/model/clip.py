@@ -12,8 +12,8 @@ from scipy.optimize import linprog
 from ..errors import InputError, reals
 
 MAX_PLANES = 6  #: half-spaces a clip takes (with the box: at most 12 faces to cut each ray at)
-#: a region whose largest inscribed ball's radius is at most this fraction of its size (:meth:`Clip.keeps`) keeps
-#: nothing (two planes with opposite normals through one point keep a plane, no volume)
+#: a region whose largest inscribed ball's radius is at most this fraction of its box's half-width along each axis
+#: (:meth:`Clip.keeps`) keeps nothing (two planes with opposite normals through one point keep a plane, no volume)
 THIN = 1e-9
 
 
@@ -21,7 +21,8 @@ THIN = 1e-9
 class Clip:
     """What a ray-traced image keeps, in world coordinates (RAS+, the volume's world units, docs/coordinates.md §6):
     the box ``lo`` .. ``hi`` (x, y, z corners, ``lo < hi``; None: no box) and the half-spaces ``planes``, each
-    ``(point, normal)``: the side the normal points to is kept, the plane itself included.  Validated when made
+    ``(point, normal)`` (a list, or an (n, 2, 3) array): the side the normal points to is kept, the plane itself
+    included.  Validated when made
     (finite numbers, non-zero normals, at most :data:`MAX_PLANES` planes, a region with volume): one
     :class:`~clwave.InputError` naming the problem.  Taken by :func:`clwave.raytrace`, :meth:`RayTracer.render`
     and progressive ray tracing (``clip=``); changing it between renders rebuilds nothing.
@@ -45,13 +46,17 @@ class Clip:
                 raise InputError(f"the clip box's lo {lo} must be below its hi {hi} on every axis (x, y, z)")
             object.__setattr__(self, "lo", lo)
             object.__setattr__(self, "hi", hi)
-        if not isinstance(self.planes, (list, tuple)):
-            raise InputError(f"planes={self.planes!r} must be a list of (point, normal), each 3 numbers (x, y, z)")
-        if len(self.planes) > MAX_PLANES:
-            raise InputError(f"a clip takes at most {MAX_PLANES} planes, got {len(self.planes)}")
+        given = self.planes
+        if isinstance(given, np.ndarray) and given.ndim == 3:  # (n, 2, 3): rows of (point, normal)
+            given = list(given)
+        if not isinstance(given, (list, tuple)):
+            raise InputError(f"planes={given!r} must be a list of (point, normal), each 3 numbers (x, y, z)")
+        if len(given) > MAX_PLANES:
+            raise InputError(f"a clip takes at most {MAX_PLANES} planes, got {len(given)}")
         planes = []
-        for i, plane in enumerate(self.planes):
-            if not isinstance(plane, (list, tuple)) or len(plane) != 2:
+        for i, plane in enumerate(given):
+            if not (isinstance(plane, (list, tuple)) or isinstance(plane, np.ndarray) and plane.ndim) \
+                    or len(plane) != 2:
                 raise InputError(f"plane {i} {plane!r} must be (point, normal), each 3 numbers (x, y, z)")
             point, normal = (tuple(reals(v, f"plane {i}'s {name}", 3, "3 finite numbers (x, y, z)").tolist())
                              for v, name in zip(plane, ("point", "normal")))
@@ -80,31 +85,38 @@ class Clip:
 
     def keeps(self, lo=None, hi=None) -> bool:
         """Whether the clip keeps some volume (within the box ``lo`` .. ``hi`` too, world (x, y, z), where given):
-        the largest ball inside all of it, a linear program solved about the boxes' common part (else the first
-        plane's point), has a radius above :data:`THIN` of that part's size (else of the planes' distances from that
-        point): where the clip lies and how far its other faces are do not matter."""
+        the largest ball inside all of it, a linear program, has a radius above :data:`THIN`, in the coordinates that
+        map the boxes' common part onto the cube [-1, 1]³ (else about the first plane's point, in units of the planes'
+        largest distance from it): where the clip lies, how far its other faces are and how long the box is along
+        its other axes (a slab) do not matter."""
         boxes = [(np.asarray(a, float), np.asarray(b, float)) for a, b in ((self.lo, self.hi), (lo, hi))
                  if a is not None]
         faces = self.half_spaces()
-        if boxes:
-            b_lo, b_hi = np.max([b[0] for b in boxes], axis=0), np.min([b[1] for b in boxes], axis=0)
-            if not np.all(b_lo < b_hi):
-                return False
-            centre, half = b_lo / 2 + b_hi / 2, b_hi / 2 - b_lo / 2  # halved first: no overflow at 1e308
-        else:
-            centre, half = np.array(self.planes[0][0], float), None
+        normals = faces[:, :3]
         with np.errstate(over="ignore", invalid="ignore"):
-            offsets = faces[:, 3] + faces[:, :3] @ centre  # the planes about the centre: n . x + offset >= 0
-            size = half.max() if boxes else (np.abs(offsets).max(initial=0.0) or 1.0)
-            # beyond 4 sizes from the centre a plane holds all or none of the box (its corners lie within sqrt 3)
-            offsets = np.clip(offsets / size, -4.0, 4.0) if boxes else offsets / size
-        rows = [(*-n, 1.0) for n in faces[:, :3]]  # n . x + offset >= r  <=>  -n . x + r <= offset
+            if boxes:
+                b_lo, b_hi = np.max([b[0] for b in boxes], axis=0), np.min([b[1] for b in boxes], axis=0)
+                centre, half = b_lo / 2 + b_hi / 2, b_hi / 2 - b_lo / 2  # halved first: no overflow at 1e308
+                if not np.all(half > 0):
+                    return False
+                offsets = faces[:, 3] + normals @ centre  # the planes about the centre: n . x + offset >= 0
+                normals = normals * half  # in the cube's coordinates (x - centre) / half; unit length below
+                largest = np.abs(normals).max(axis=1, keepdims=True)  # divided by first: no overflow at 1e308
+                normals = normals / largest
+                length = np.linalg.norm(normals, axis=1, keepdims=True)
+                normals = normals / length
+                # beyond 4 from the centre a plane holds all or none of the cube (its corners lie within sqrt 3)
+                offsets = np.clip(offsets / largest[:, 0] / length[:, 0], -4.0, 4.0)
+            else:
+                offsets = faces[:, 3] + normals @ np.array(self.planes[0][0], float)
+                offsets = offsets / (np.abs(offsets).max(initial=0.0) or 1.0)
+        rows = [(*-n, 1.0) for n in normals]  # n . x + offset >= r  <=>  -n . x + r <= offset
         bounds = list(offsets)
         for a in range(3 if boxes else 0):
             axis = np.eye(3)[a]
             rows += [(*-axis, 1.0), (*axis, 1.0)]
-            bounds += [half[a] / size] * 2
-        best = linprog(c=(0, 0, 0, -1), A_ub=np.array(rows, float), b_ub=np.array(bounds, float),
+            bounds += [1.0, 1.0]
+        best = linprog(c=(0, 0, 0, -1), A_ub=np.array(rows, float).reshape(-1, 4), b_ub=np.array(bounds, float),
                        bounds=[(None, None)] * 3 + [(None, 1.0)], method="highs")
         return bool(best.status == 0 and -best.fun > THIN)
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, NothingVisibleError, warn_outside
-from .colour_key import auto_key, check_key, key_weight
+from .colour_key import DEFAULT_TOLERANCE, auto_key, check_key, key_weight
 from .tf_checks import check_opacity_unit, check_points, check_window
 from .tf_passes import AUTO_SAMPLES, PiecewiseLinear, auto_window, classified, rgb_scale, scan
 from .tf_presets import PRESETS as _PRESETS
@@ -324,7 +324,17 @@ class TransferFunction:
     def _nothing_visible(self, vol, window, scale) -> NothingVisibleError:
         """The refusal of this function (in ``vol``'s data units: :meth:`_on`) without opacity anywhere, naming its span
         and the values it met (a colour volume's luminance), a scalar's in the input's units; its ``cli`` names
-        ``--tf-window`` (docs/known-gaps.md §15)."""
+        ``--tf-window`` (docs/known-gaps.md §15).  Where the function alone gives some voxel opacity, the colour key
+        took it all: the refusal names the key instead."""
+        name = f" {self.name}" if self.name else ""
+        if self._key is not None and classified(vol.data, self.under(key=None).painter(
+                vol.channels, window, scale, vol.spacing), False)[..., 3].any():  # the key took all the opacity
+            r, g, b, tolerance = self._key
+            tolerance = DEFAULT_TOLERANCE * float(scale[0]) if tolerance is None else tolerance
+            line = (f"the colour key ({r:g}, {g:g}, {b:g}), tolerance {tolerance:g}, makes transparent every voxel "
+                    f"to which the transfer function{name} gives opacity")
+            return NothingVisibleError(f"{line}: give a smaller tolerance, key=(r, g, b, tolerance), or another colour",
+                                       cli=f"{line}: give a smaller TOL (--key R,G,B,TOL) or another colour")
         shift = vol.subtracted if vol.channels == 1 else 0.0
         lo, hi = self.data_points(window)[[0, -1]] + shift
         data = vol.data.reshape(-1, vol.channels)
@@ -333,7 +343,6 @@ class TransferFunction:
         else:
             what, values = "luminance (0 .. 1)", _luminance(data[:, :3].astype(np.float64) / scale[:3])
             units = "its luminance, 0 .. 1 whatever the sample type"
-        name = f" {self.name}" if self.name else ""
         line = (f"the transfer function{name} gives no voxel of this volume any opacity: its points span "
                 f"{lo:.4g} .. {hi:.4g} and the volume's {what} lie within {np.nanmin(values):.4g} .. "
                 f"{np.nanmax(values):.4g}; give a window in {units}")

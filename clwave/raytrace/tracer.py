@@ -18,7 +18,7 @@ from pyopencl import cltypes
 
 from ..device import programs
 from ..device.constants import BLOCK, SUPER
-from ..device.kernels import BUFFER, REAL, Kernel, in_row_bands, zeros
+from ..device.kernels import BUFFER, REAL, Kernel, row_bands, zeros
 from ..model.geometry import world_to_fine_affine
 from ..model.camera import Camera, View
 from ..model.clip import Clip, check_clip
@@ -26,7 +26,7 @@ from ..model.conebeam import ConeBeam, check_camera, resolve_view, view_record
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number, flag
 from ..device.memory import TRACED_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap
-from .bounds import warn_below_tolerance, warn_packed
+from .bounds import warn_below_tolerance, warn_empty, warn_packed
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .wavelet_field import WaveletField
 from .passes import on_device, passes as region_passes
@@ -38,7 +38,7 @@ from .shading import Phong, light_directions
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume, check_model
-from ..threads import one_at_a_time
+from ..threads import drain, one_at_a_time
 
 
 FIELDS = ("bspline", "wavelet")
@@ -244,6 +244,16 @@ class RayTracer:
         ``trace`` (wavelet field, tests): record each ray's active set on its first ``trace``
         segments in ``meta["active_trace"]`` (see ``cl/raytrace/field_wavelet.h``).
         """
+        return drain(self.rendering(camera, tolerance, lights, shading, absorption, precision, trace, detail,
+                                    transfer_function, clip))
+
+    def rendering(self, camera, tolerance=1e-3, lights=None, shading=True, absorption=True, precision="single",
+                  trace=0, detail=None, transfer_function=None, clip=None):
+        """:meth:`render` as a generator yielding between its bands of rows, returning its result (a viewer's saved
+        image takes turns with the tabs' frames there, docs/viewer.md §5; the caller holds :attr:`lock` for each
+        stage): a ray is one work-item's whatever the bands, and what the bands read is the render's own (its image,
+        classification and detail's tables: another render between two stages makes others), so the image is
+        :meth:`render`'s bit for bit.  Bricks in a scratch file, traced in passes through one pool, are one stage."""
         wv, cc = self.wv, self.cc
         tol = _checked_tolerance(tolerance)
         absorption = flag(absorption, "absorption")
@@ -377,15 +387,22 @@ class RayTracer:
                 field_tables = None  # the last region's pool goes before the next one comes
                 field_tables = at.field_tables if slots is None else dict(self.bricks.tables(cc, None, slots),
                                                                               joins=at.joins)
-            in_row_bands(q, lambda size, first: raytrace_kernel(self.field)(
+            stages = row_bands(q, lambda size, first: raytrace_kernel(self.field)(
                 kernels, q, size, self.local_size, field_tables, real_type=real, first_row=first,
                 passes=passes is not None, pass_lo=lo, pass_hi=hi, **arguments),
                 rounded, self.local_size)  # bounded launches: Ctrl-C within a fraction of a second
+            if passes is None:
+                yield from stages
+            else:  # the next pass's bricks go into the pool this one's read
+                drain(stages)
         seconds = time.perf_counter() - start
         img = image.get()
         counts = stats.get().reshape(-1, 4).astype(np.int64)
         if not absorption:
             img = img[..., : wv.channels]
+        nothing_visible = None if post is None else self.scalar.invisible(post)
+        if self.region is None and not nothing_visible:  # a cluster's part may miss; an invisible function is said
+            warn_empty(int(counts[:, 0].sum()), self._told)  # where it is found
         meta = dict(
             method="raytrace", mode="emission-absorption" if absorption else "xray", field=self.field,
             device=cc.describe(), coefficients=wv.kept, tolerance=tol, precision=precision,
@@ -406,7 +423,7 @@ class RayTracer:
         if post is not None:
             meta.update(classification="post", transfer_function=post.tf.to_dict(),
                         tf_window=None if post.window is None else list(post.window),
-                        classify_seconds=post.seconds, nothing_visible=self.scalar.invisible(post))
+                        classify_seconds=post.seconds, nothing_visible=nothing_visible)
         if self.field == "bspline":
             meta.update(bricks=len(at.slots), brick_levels=np.bincount(self.bricks.levels[at.slots]).tolist(),
                         brick_slots=len(self.bricks.levels), brick_pool_bytes=self.bricks.pool_bytes,

@@ -14,7 +14,7 @@ import pyopencl.array as cla
 from ..device.kernels import zeros
 from ..errors import DeviceMemoryError
 from ..model.transform import band_code
-from ..threads import one_at_a_time
+from ..threads import drain, one_at_a_time
 from .perspective import select_drops
 from .stages import bin_chunks
 
@@ -53,24 +53,35 @@ class Accumulator:
     @one_at_a_time
     def splat(self, first: int, count: int):
         """Add coefficients ``first .. first + count`` (importance order) of every group."""
+        drain(self.passes(first, count))
+
+    def passes(self, first: int, count: int, own=False):
+        """:meth:`splat` as a generator yielding between its stages: after each pass's binning, and between the
+        bands of its accumulation (a viewer's saved image takes turns with the tabs' frames there, docs/viewer.md
+        §5); the caller holds the renderer's lock for each stage.  ``own``: the passes' tile lists and streamed
+        chunks are in buffers of this image's own, which another image splatted by the renderer between two stages
+        does not write over (the same passes, so the same image bit for bit)."""
         if self.upto is not None and first + count > self.upto:
             raise ValueError(f"this image was begun for the first {self.upto} coefficients only")
         for gi, g in enumerate(self.groups):
             n = max(0, min(count, g["count"] - first))
-            for coef, values, offset, m in self._chunks(gi, first, n):
-                self._splat_group(gi, coef, values, offset, m)
+            for coef, values, offset, m in self._chunks(gi, first, n, own):
+                yield from self._splat_group(gi, coef, values, offset, m, own=own)
             self.stats["splats"] += n
 
-    def _chunks(self, gi, first, n):
+    def _chunks(self, gi, first, n, own=False):
         """``(coef, values, offset, count)`` on the device for coefficients ``first .. first + n`` of group
         ``gi``, a pass each: where they are all on the device, that range of them, :data:`PASS_ROWS` at a time;
-        else chunk after chunk, each copied in turn into the one chunk buffer (docs/splatting.md §6)."""
+        else chunk after chunk, each copied in turn into the one chunk buffer (docs/splatting.md §6; ``own``: a
+        buffer of this image's, as :meth:`passes`)."""
         r = self.r
         if self.chunk is None:
             for lo in range(first, first + n, PASS_ROWS):
                 yield (*self.resident[gi], lo, min(PASS_ROWS, first + n - lo))
             return
         coef, values = self.work["coef"], self.work["values"]
+        if own:
+            coef, values = cla.empty_like(coef), cla.empty_like(values)
         table = self.groups[gi]["table"]
         for lo in range(first, first + n, self.chunk):
             m = min(self.chunk, first + n - lo)
@@ -147,12 +158,14 @@ class Accumulator:
         keep[where] = value
         for coef, values, lo, m in self._chunks(gi, 0, n):
             if keep[lo:lo + m].any():
-                self._splat_group(gi, coef, values, lo, m, keep=keep[lo:lo + m], projected=projected)
+                drain(self._splat_group(gi, coef, values, lo, m, keep=keep[lo:lo + m], projected=projected))
 
-    def _splat_group(self, gi, coef, values, first, n, keep=None, projected=False):
-        """Splat coefficients ``first .. first + n`` of the device arrays ``coef``, ``values`` of group ``gi``;
-        ``keep``: a mask of those to splat (the others' boxes are emptied after projection); ``projected``: the
-        work arrays hold these coefficients' projection, unmasked (``splat_dropping``'s first draw of a group)."""
+    def _splat_group(self, gi, coef, values, first, n, keep=None, projected=False, own=False):
+        """Splat coefficients ``first .. first + n`` of the device arrays ``coef``, ``values`` of group ``gi``,
+        yielding between the stages of :meth:`passes` (``own`` as there); ``keep``: a mask of those to splat (the
+        others' boxes are emptied after projection); ``projected``: the work arrays hold these coefficients'
+        projection, unmasked (``splat_dropping``'s first draw of a group).  The per-splat work arrays are the
+        renderer's, used within the binning's stage only."""
         r, q = self.r, self.r.cc.queue
         g, t, tables, w = self.groups[gi], self.device_tables[gi], self.tables[gi], self.work
         st = r.stage(g["channels"], self.view.perspective)
@@ -167,15 +180,17 @@ class Accumulator:
         if total > budget and n > 1:  # too many tile pairs for the device: split the chunk
             half = n // 2
             self.stats["bin_seconds"] += time.perf_counter() - start
-            self._splat_group(gi, coef, values, first, half, None if keep is None else keep[:half])
-            self._splat_group(gi, coef, values, first + half, n - half, None if keep is None else keep[half:])
+            yield from self._splat_group(gi, coef, values, first, half, None if keep is None else keep[:half], own=own)
+            yield from self._splat_group(gi, coef, values, first + half, n - half,
+                                         None if keep is None else keep[half:], own=own)
             return
         if total > budget:
             raise DeviceMemoryError(f"one splat needs {total * st.record_bytes} bytes of tile lists, more "
                                     f"than {r.cc.info.name} can hold; render a smaller image")
         tiles = tables.tiles
         ranges = zeros(q, (tiles, 2), np.uint32, allocator=r.scratch)
-        records = r.tile_lists(max(total, 1) * st.record_bytes)
+        nbytes = max(total, 1) * st.record_bytes
+        records = cl.Buffer(r.cc.ctx, cl.mem_flags.READ_WRITE, nbytes) if own else r.tile_lists(nbytes)
         if total:
             textures = max(tables.layer_textures)
             chunks = bin_chunks(n, tiles * textures, r.cc.info, r.budget)
@@ -192,13 +207,17 @@ class Accumulator:
             st.transpose(runs, chunks, starts, table)
             st.place(*splats, table, records, pairs=total)
         q.finish()
-        mid = time.perf_counter()
-        st.accumulate(tiles, len(tables.layers), t, ranges, records, self.fbs[gi])
-        q.finish()
-        self.stats["bin_seconds"] += mid - start
-        self.stats["accumulate_seconds"] += time.perf_counter() - mid
+        self.stats["bin_seconds"] += time.perf_counter() - start
         self.stats["pairs"] += total
         self.stats["pixel_updates"] += int(r.pixel_updates(bbox, range=slice(0, n), queue=q).get())
+        yield  # the accumulation needs the records, ranges, tables and framebuffers only, none of them the work arrays
+        mid = time.perf_counter()
+        for _ in st.accumulating(tiles, len(tables.layers), t, ranges, records, self.fbs[gi]):
+            self.stats["accumulate_seconds"] += time.perf_counter() - mid
+            yield
+            mid = time.perf_counter()
+        q.finish()
+        self.stats["accumulate_seconds"] += time.perf_counter() - mid
 
     def meta(self, seconds: float) -> dict:
         """What :class:`~clwave.RenderResult` reports of this image after ``seconds``."""

@@ -34,7 +34,7 @@ from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_table_bytes, t
 from .perspective import ConeTables, camera_words, depth_range
 from .tables import MAX_LEVELS, ViewTables
 from .textures import check_sampling
-from ..threads import one_at_a_time
+from ..threads import drain, in_turns, one_at_a_time
 
 COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
 SPLAT_BYTES = 32  # per splat of a pass: centre float2, pixel box int4, texture int, tile count uint
@@ -333,13 +333,30 @@ def splat(wv: WaveletVolume, camera, device=None, *, omega_s=None, sampling="aut
 
 def _splat_range(r: SplatRenderer, camera, first: int, stop: int) -> tuple:
     """``(image, meta)`` of coefficients ``first .. stop`` of each group, in importance order."""
-    start = time.perf_counter()
     with r.lock:  # the image's begin and its passes together: another thread's begin may change the chunking
-        acc = r.begin(camera)
-        if any(acc.drop_share) and r.chunk is None and (first, stop) == (0, r.count):
-            acc.splat_dropping()
-        else:
-            acc.splat(first, stop - first)
+        return drain(_splatting(r, camera, first, stop))
+
+
+def splat_in_turns(r: SplatRenderer, camera):
+    """:func:`splat` of every coefficient with ``r`` as a generator of stages, each under ``r.lock`` and none
+    between two (its view's set-up, then ``Accumulator.passes``' binnings and bands of accumulation), that returns
+    the :class:`RenderResult`: the same image bit for bit, whatever ``r`` splats between two stages (a viewer's
+    saved image taking turns with its tabs' frames, docs/viewer.md §5; its passes' buffers its own).  A
+    perspective view that drops splats (``splat_dropping``) is one stage after its set-up: its drops are chosen
+    from the whole image."""
+    check_camera(camera)
+    return RenderResult(*(yield from in_turns(r.lock, _splatting(r, camera, 0, r.count, own=True))))
+
+
+def _splatting(r: SplatRenderer, camera, first: int, stop: int, own=False):
+    """:func:`_splat_range` as a generator yielding between its stages (``own`` as ``Accumulator.passes``)."""
+    start = time.perf_counter()
+    acc = r.begin(camera)
+    if any(acc.drop_share) and r.chunk is None and (first, stop) == (0, r.count):
+        acc.splat_dropping()
+    else:
+        yield
+        yield from acc.passes(first, stop - first, own)
     image = acc.image()
     return image, acc.meta(time.perf_counter() - start)
 

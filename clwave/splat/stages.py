@@ -14,7 +14,8 @@ from pyopencl.scan import ExclusiveScanKernel
 
 from ..device import programs
 from ..device.constants import TILE, record_uint4s
-from ..device.kernels import BUFFER, Kernel, Pace, in_bands
+from ..device.kernels import BUFFER, Kernel, Pace, bands, in_bands
+from ..threads import drain
 
 GPU_PIXELS = 1  # pixels per work-item of raster_gpu.cl (CLW_PX)
 U32, I32 = np.uint32, np.int32
@@ -174,10 +175,15 @@ class Stages:
     def accumulate(self, tiles, layer_count, tables, ranges, records, fb):
         """Add every tile's records to the framebuffers ``fb`` of the view's ``layer_count`` layers, in
         bands of tiles of about equal work (a tile's records, and one for its pixels; ``in_bands``)."""
+        drain(self.accumulating(tiles, layer_count, tables, ranges, records, fb))
+
+    def accumulating(self, tiles, layer_count, tables, ranges, records, fb):
+        """:meth:`accumulate` as a generator yielding between its bands (``kernels.bands``): a tile's sum is one
+        work-item's whatever the bands, so the image does not depend on where they fall."""
         local, q = self.accumulate_local, self.cc.queue
         r = ranges.get().reshape(-1, 2).astype(np.int64)
         work = np.concatenate([[0], np.cumsum(r[:, 1] - r[:, 0] + 1)])
-        in_bands(q, lambda first, count: (_ACCUMULATE_CONE if self.perspective else _ACCUMULATE)(
+        yield from bands(q, lambda first, count: (_ACCUMULATE_CONE if self.perspective else _ACCUMULATE)(
             self.kernels, q, (count * local,), (local,), tables, first_tile=first,
             layer_count=layer_count, ranges=ranges, records=records, fb=fb), tiles, work=work,
             pace=self.paces["accumulate"])

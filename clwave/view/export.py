@@ -33,14 +33,14 @@ SAVE_PIXEL_BYTES = 200
 TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
 #: the reading options that clwave.load takes by the same name
 LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level",
-                "orientation", "unit")
+                "orientation", "unit", "labels")
 
 
 @dataclass(frozen=True)
 class Origin:
     """How the served model was made: the ``input`` as given to ``clwave view`` (None: a model given to
     ``clwave.view()`` in Python, which no command reads) and the reading and model ``options`` given, as
-    ``(dest, flag, value)`` (value None for a switch)."""
+    ``(dest, flag, value)`` (a switch's value True, or False for ``--no-labels``)."""
 
     input: str | None = None
     options: tuple = ()
@@ -59,13 +59,16 @@ class Origin:
         given = []
         for action in parser._actions:
             value = getattr(args, action.dest, action.default)
+            if isinstance(action, argparse._StoreConstAction):  # a switch: --hu-to-mu, --labels, --no-labels
+                if value is action.const and value is not action.default:
+                    given.append((action.dest, action.option_strings[-1], value))
             # "is not False", for 0 == False: an option given as 0 (--threshold 0, --nan 0) is given
-            if action.option_strings and value is not None and value is not False and value != action.default:
-                given.append((action.dest, action.option_strings[-1], None if value is True else value))
+            elif action.option_strings and value is not None and value is not False and value != action.default:
+                given.append((action.dest, action.option_strings[-1], value))
         return cls(args.input, tuple(given))
 
     def get(self, dest):
-        return next((value if value is not None else True for d, _, value in self.options if d == dest), None)
+        return next((value for d, _, value in self.options if d == dest), None)
 
 
 @dataclass(frozen=True)
@@ -125,10 +128,12 @@ class Failed(ClwaveError):
 
 def picture(sources: dict, spec: Spec):
     """The picture of ``spec`` at full quality (every kept coefficient; the tracer's full detail at its tolerance), by
-    the renderers ``clwave render`` calls: its PNG's pixels (an X-ray in the tab's colour map; a scale bar over
-    it)."""
+    the renderers ``clwave render`` calls, as a generator of the render thread's stages that returns its PNG's pixels
+    (an X-ray in the tab's colour map; a scale bar over it): splatted or traced in turns (``splat_in_turns``,
+    ``RayTracer.rendering``: the tabs' frames go between two of its stages, docs/viewer.md §5)."""
     from ..io.images import draw_scale_bar
-    from ..splat.renderer import splat
+    from ..splat.renderer import splat_in_turns
+    from ..threads import in_turns
 
     source = sources[spec.mode]
     if spec.mode == "xray":
@@ -137,12 +142,14 @@ def picture(sources: dict, spec: Spec):
                              f"clwave render draws them; set detail kept to 100 %")
         if not source.complete:
             raise Unavailable("the rest of the file is still being read: save once the model line says it is in")
-        result = splat(source.wv, spec.camera, renderer=source.r)
+        result = yield from splat_in_turns(source.r, spec.camera)
         image = result.to_uint8(spec.window)
         image = colours.apply(image, spec.colour_map) if spec.colour_map else image
     else:
-        result = source.tracer.render(spec.camera, tolerance=spec.tolerance, shading=spec.shading, clip=spec.clip,
-                                      **({} if spec.tf is None else dict(transfer_function=spec.tf)))
+        tracer = source.tracer
+        result = yield from in_turns(tracer.lock, tracer.rendering(
+            spec.camera, tolerance=spec.tolerance, shading=spec.shading, clip=spec.clip,
+            **({} if spec.tf is None else dict(transfer_function=spec.tf))))
         image = result.to_uint8(background=(spec.background,) * 3)
     return draw_scale_bar(image, result.meta["pixel"], source.wv.unit) if spec.scale_bar else image
 
@@ -187,7 +194,7 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
         # a scalar model's shaded view: the tab's function in place of the one given; an X-ray of a .clw: none
         if dest in TF_OPTIONS and (scalar_tf or clw):
             continue
-        tokens += [flag] if value is None else _token(flag, value)
+        tokens += [flag] if isinstance(value, bool) else _token(flag, value)
     tokens += ["--method", "splat" if spec.mode == "xray" else "raytrace"]
     if scalar_tf:
         if _is_preset(spec.tf):
@@ -350,6 +357,22 @@ def _load_value(dest, value):
 
 
 # ---------------------------------------------------------------------------------------------------- the routes
+async def stage_by_stage(loop, pool, stages):
+    """What the generator ``stages`` returns, each of its stages a job of its own on ``pool`` (the render thread), so
+    that the jobs queued meanwhile (the tabs' frames) go between two."""
+    def step():
+        try:
+            next(stages)
+        except StopIteration as end:  # raised into a Future, it could not be told from the others
+            return True, end.value
+        return False, None
+
+    while True:
+        done, value = await loop.run_in_executor(pool, step)
+        if done:
+            return value
+
+
 async def serve(server, request, *, image: bool):
     """``POST /export`` (``image`` False: the command and the Python, JSON) or ``POST /image`` (the PNG, one at a time)
     of a page's ``{"view", "size"}`` (:func:`~clwave.view.protocol.parse_export`), worked out on the render thread
@@ -391,7 +414,8 @@ async def serve(server, request, *, image: bool):
                 raise building.exception()
         async with server.saving if image else contextlib.nullcontext():
             done = await loop.run_in_executor(server.pool, work)
-            if image:  # encoded off the event loop (every tab's socket: docs/viewer.md §5) and the render thread
+            if image:  # its stages in turn with the tabs' frames; encoded off the event loop (every tab's socket:
+                done = await stage_by_stage(loop, server.pool, done)  # docs/viewer.md §5) and the render thread
                 done = await loop.run_in_executor(None, partial(encode, done, lossless=True))
     except Unavailable as exc:
         raise web.HTTPConflict(text=f"{exc}\n") from None

@@ -219,6 +219,17 @@ def said(exc: BaseException) -> str:
     return str(exc) if isinstance(exc, ClwaveError) else f"internal error ({type(exc).__name__}); see the server's log"
 
 
+def model_id(wv) -> str:
+    """A digest of what makes the served model the one it is (its grid, channels, spacing, wavelets, levels, input's
+    value range and classification; not its coefficients, a file's prefix's until its rest is read): a page keeps its
+    view with it and applies a kept view to a model of the same id only (docs/viewer.md §4)."""
+    import hashlib
+
+    figures = [list(wv.shape), wv.channels, list(wv.spacing), wv.levels, sorted({g.wavelet.name for g in wv.groups}),
+               wv.value_range, (wv.transfer_function or {}).get("name")]
+    return hashlib.sha256(json.dumps(figures, default=float).encode()).hexdigest()[:16]
+
+
 def close_reason(text: str) -> bytes:
     """``text`` as a close frame's reason: its first :data:`REASON_BYTES` bytes of UTF-8, cut between characters."""
     return text.encode()[:REASON_BYTES].decode(errors="ignore").encode()

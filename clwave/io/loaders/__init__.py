@@ -2,13 +2,13 @@
 
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
 (NIfTI, FreeSurfer MGH, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
-millimetres, the others keep their array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5
-stores, and large .npy, .raw, .nii, .mgh and TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask
-arrays (docs/chunked.md §1).
+millimetres, FITS cubes on the sky (north up, east left, in pixels), the others keep their array axes
+(docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5 stores, and large .npy, .raw, .nii, .mgh, MRC, FITS and TIFF files
+(and folders of TIFF slices), are read chunk by chunk as Dask arrays (docs/chunked.md §1).
 
-One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``nrrd``, ``tiff``, ``slices``: folders of
-TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its ``read_*``; ``shared``
-holds what they share.
+One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``mrc``, ``fits``, ``nrrd``, ``tiff``,
+``slices``: folders of TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its
+``read_*``; ``shared`` holds what they share.
 """
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import FileFormatError, InputError, finite_number
+from ...errors import FileFormatError, InputError, finite_number, flag
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
-from . import dicom, dicom_frames, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
+from . import dicom, dicom_frames, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading,
                      axis_turn, stated_affine, to_canonical, to_float32)
 
@@ -31,21 +31,23 @@ __all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORM
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
-               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc")
+               ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc") \
+    | dict.fromkeys(fits_cube.FITS_SUFFIXES, "fits")
 #: the formats put in RAS+ (their origin and spacing in scanner millimetres; the others keep their array axes)
 RAS_FORMATS = ("nifti", "mgh", "nrrd", "dicom", "dicom-frames")
 #: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
 _SLICE_FOLDERS = tuple(f"{name.lower()}-folder" for name in slices.SLICE_SUFFIXES)
 # 'file.h5:/path/in/file' or 'store.zarr:/path': the last ':' after such a suffix
 _INNER_PATH = re.compile(r"(.*\.(?:h5|hdf5|hdf|zarr)):(.*)", re.IGNORECASE | re.DOTALL)
-# Options that apply to one kind of input only
-_ONLY_FOR = {"shape": ".raw files", "dtype": ".raw files", "byte_order": ".raw files", "series": "DICOM folders",
-             "level": "OME-Zarr images"}
+# Options that apply to some kinds of input only: those kinds, in words
+_ONLY_FOR = {"shape": (("raw",), ".raw files"), "dtype": (("raw", "mrc"), ".raw files and MRC maps of bytes"),
+             "byte_order": (("raw",), ".raw files"), "series": (("dicom",), "DICOM folders"),
+             "level": (("zarr",), "OME-Zarr images")}
 
 
 def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
          chunks=None, nan=None, subtract=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None,
-         fits=None, orientation=None, unit=None, origin=None) -> Volume:
+         fits=None, orientation=None, unit=None, origin=None, labels=None) -> Volume:
     """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
 
     Parameters
@@ -57,16 +59,20 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         ``slice10``), a folder of DICOM files (other files in it are ignored), a
         multi-frame DICOM file whose frames carry positions
         (enhanced CT/MR, RT Dose), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
-        or an HDF5 file ``.h5``/``.hdf5``/``.hdf``.  ``file.h5:/name`` and
-        ``store.zarr:/name`` name an array inside; without a name the store's only
+        an HDF5 file ``.h5``/``.hdf5``/``.hdf``, an MRC/CCP4 map, or a FITS cube (``.fits``, ``.fit``, ``.fts``,
+        ``.fits.gz``, ``.fz``: north up, east left seen from +x, in pixels; docs/coordinates.md §1).
+        ``file.h5:/name`` and ``store.zarr:/name`` name an array inside; without a name the store's only
         3-D/4-D array is read (an OME-Zarr image: its ``level``).
     shape : tuple of int, optional
         ``.raw`` only: ``(Z, Y, X)`` or ``(Z, Y, X, C)``, C-ordered (x fastest).
     dtype : str or numpy.dtype, optional
-        ``.raw`` only: the sample type, e.g. ``"uint16"``.
+        ``.raw``: the sample type, e.g. ``"uint16"``; an MRC map of bytes (mode 0): ``"uint8"`` or ``"int8"``, how its
+        bytes are read (MRC2014's are signed, IMOD's stamp may say unsigned; a signed reading that looks wrapped is
+        warned of).
     spacing : float or 3 floats, optional
         Voxel size ``(dz, dy, dx)``; overrides the file's spacing, in the file's unit where it has one (``unit=``
-        names another), along the array's axes as stored (before ``orientation=`` turns them).
+        names another), along the array's axes as stored (before ``orientation=`` turns them); a FITS cube's along
+        its axes as loaded (Dec, RA, spectral: ``(1, 1, 0.25)`` flattens the spectral axis four times).
     byte_order : {'<', '>'}, optional
         ``.raw`` only: little or big endian (default: this machine's).
     series : int or str, optional
@@ -75,7 +81,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     chunks : None, False, "auto" or int
-        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``,
+        ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``, MRC, FITS,
         TIFF and folders of TIFF slices too when their volume takes at least
         ``CHUNKED_MIN_BYTES`` (1 GiB) as float32; everything else is read whole.  ``False``: read whole.
         ``"auto"``: chunk by chunk, chunks of at most ``CHUNK_BYTES`` in multiples
@@ -100,12 +106,16 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         directions its x, y and z index axes (array axes 2, 1, 0, as stored) point to, as three of nibabel's axis
         codes (``"LPS"``: x to the patient's left, y posterior, z superior; what ``nibabel.aff2axcodes`` says of a
         NIfTI's (x, y, z) axes); the volume is turned into RAS+ as a medical file is (docs/coordinates.md §1).
-        Refused for NIfTI, MGH, NRRD and DICOM, which carry their own.
+        Refused for NIfTI, MGH, NRRD, DICOM and FITS, which carry their own.
     unit : str, optional
         The world unit, the length of the spacing's 1 (:data:`clwave.io.images.UNIT_METRES`: "mm", "um"...);
         default the file's (:func:`world_unit`; None where it gives none).
     origin : 3 floats, optional
         World position ``(x, y, z)`` of the volume's centre, after ``orientation=``; default the file's, else 0.
+    labels : bool, optional
+        Whether the volume is a label map (a segmentation, :attr:`Volume.labels`), where you know better than the
+        guess: by default a NIfTI's intent ``NIFTI_INTENT_LABEL``, else its values as stored
+        (:func:`~clwave.model.labels.looks_like_labels`; a chunked volume's are not looked at) (docs/model.md §5).
     fits : callable, optional
         ``fits(voxels, channels)``, called with the size the file's header declares before a volume read whole
         (not chunk by chunk) is read (a stack of slices: once its first slice is read), to refuse one that is too
@@ -141,17 +151,13 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     subtract = finite_number(subtract, "subtract")
     nan = None if nan is None else finite_number(nan, "nan")
     mu_water = finite_number(mu_water, "mu_water")
+    labels = None if labels is None else flag(labels, "labels")
     if hu_to_mu and mu_water <= 0:
         raise InputError(f"mu_water={mu_water} must be positive (attenuation of water per "
                          "world unit)")
     path, inner = _split_inner(path)
     kind = _kind(path)
-    if kind != "raw":
-        _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order)
-    if kind != "dicom":
-        _reject_unused(kind, series=series)
-    if kind != "zarr":
-        _reject_unused(kind, level=level)
+    _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order, series=series, level=level)
     turn = check_orientation(kind, orientation)
     chunks = check_chunks(chunks, kind, path)
 
@@ -160,8 +166,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                                                            level, chunks, progress_bar, fits, spacing is None)
     if not is_dask(data):
         data = np.asarray(data)
-    # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
-    labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
+    if labels is None:  # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
+        labels = (kind == "nifti" and nifti.label_intent(path)) or (not is_dask(data) and looks_like_labels(data))
     stored = data.dtype
     photo = data.ndim == 4 and stored.kind in "iu" and _photo(kind, path)
     if data.dtype.kind in "biuf":  # anything else: Volume explains the dtype problem
@@ -186,14 +192,15 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
 
 def check_orientation(kind, orientation):
     """The turn into RAS+ (:func:`.shared.axis_turn`) of ``orientation=`` (None without it), refused in one line for an
-    input whose header places it in RAS+ (:data:`RAS_FORMATS`)."""
+    input whose header places it in RAS+ (:data:`RAS_FORMATS`), or on the sky (FITS)."""
     if orientation is None:
         return None
-    if kind in RAS_FORMATS:
+    if kind in RAS_FORMATS + ("fits",):
+        placed = "on the sky, north up and east left," if kind == "fits" else "in RAS+"
         raise InputError(f"orientation= is for inputs that carry none (.npy, .raw, TIFF, folders of slices, Zarr, "
-                         f"HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out",
+                         f"HDF5, MRC); a {kind} input is put {placed} by its own header: leave it out",
                          cli=f"--orientation is for inputs that carry none (.npy, .raw, TIFF, folders of slices, "
-                             f"Zarr, HDF5, MRC); a {kind} input is put in RAS+ by its own header: leave it out")
+                             f"Zarr, HDF5, MRC); a {kind} input is put {placed} by its own header: leave it out")
     return axis_turn(orientation)
 
 
@@ -225,9 +232,11 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     if kind == "mgh":
         return mgh.read_mgh(path, chunks, fits)
     if kind == "mrc":
-        return (*mrc.read_mrc(path, chunks, fits, warn_spacing), 0.0)
+        return (*mrc.read_mrc(path, chunks, fits, warn_spacing, dtype), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
+    if kind == "fits":
+        return (*fits_cube.read_fits(path, chunks, fits), 0.0)
     if kind == "tiff":
         return (*tiff.read_tiff(path, fits, chunks=chunks, warn_spacing=warn_spacing), 0.0)
     if kind in _SLICE_FOLDERS:
@@ -257,7 +266,8 @@ def _world_unit(kind, path, inner):
 
 
 DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",
-             "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti")
+             "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti",
+             "fits")
 
 
 def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_order=None) -> dict:
@@ -283,12 +293,7 @@ def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_orde
         raise FileFormatError(f"{path} is a .raw file: it has no header (its shape and type are given to read it, "
                               f"shape= and dtype=)", cli=f"{path} is a .raw file: it has no header (its shape and type "
                                                          f"are given to read it, --shape and --dtype)")
-    if kind != "raw":
-        _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order)
-    if kind != "dicom":
-        _reject_unused(kind, series=series)
-    if kind != "zarr":
-        _reject_unused(kind, level=level)
+    _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order, series=series, level=level)
     # a Dask array over the file: nothing read until computed; a TIFF is described as its whole read weighs it (the
     # axes as stored, before the loader orders them)
     lazy = check_chunks(None, kind, path) is not False and kind not in ("tiff", "tiff-folder")
@@ -328,7 +333,7 @@ def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_orde
 
 def _header_facts(kind, path) -> dict:
     """What a format's header says beyond the volume's place (a NIfTI's codes, orientation, shear and scaling)."""
-    return nifti.header_facts(path) if kind == "nifti" else {}
+    return nifti.header_facts(path) if kind == "nifti" else fits_cube.header_facts(path) if kind == "fits" else {}
 
 
 def _declared(voxels, channels):
@@ -359,7 +364,7 @@ def _kind(path: Path) -> str:
             return "dicom"
         return f"{slice_format.lower()}-folder" if slice_format else "dicom"
     name = path.name.lower()
-    suffix = ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
+    suffix = next((s for s in (".nii.gz",) + fits_cube.FITS_SUFFIXES if name.endswith(s)), path.suffix.lower())
     if not path.exists():
         raise FileFormatError(f"no file or folder at {path}; supported inputs: {SUPPORTED}")
     if not path.is_file():  # a reader of a FIFO waits for a writer, of a device for ever
@@ -401,9 +406,10 @@ def _is_dicom(path) -> bool:
 
 def _reject_unused(kind, **options):
     """Refuse options the format ignores, so a mistaken call is not silently accepted."""
-    given = [name for name, value in options.items() if value is not None]
+    given = [name for name, value in options.items() if value is not None and kind not in _ONLY_FOR[name][0]]
+    given = [name for name in given if _ONLY_FOR[name] == _ONLY_FOR[given[0]]]  # those of the first's kinds
     if given:
-        needs, one = _ONLY_FOR[given[0]], len(given) == 1
+        needs, one = _ONLY_FOR[given[0]][1], len(given) == 1
         verb, them = ("applies", "it") if one else ("apply", "them")
         raise InputError(f"{'=, '.join(given)}= only {verb} to {needs}; leave {them} out for a {kind} input",
                          cli=f"{', '.join('--' + n.replace('_', '-') for n in given)} only {verb} to {needs}; "

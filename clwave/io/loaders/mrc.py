@@ -8,7 +8,7 @@ from functools import partial
 
 import numpy as np
 
-from ...errors import FileFormatError
+from ...errors import ClwaveWarning, FileFormatError, InputError, warn_outside
 from .raw import read_memmap
 from .shared import OnDemand, as_array, check_declared_size, no_spacing, note
 
@@ -16,9 +16,12 @@ MRC_SUFFIXES = (".mrc", ".map", ".ccp4", ".rec", ".st")
 _HEADER = 1024  # bytes before the extended header (nsymbt bytes), then the samples
 _COMPLEX = {3: "complex int16", 4: "complex float32"}
 _IMOD_STAMP = 1146047817  # "IMOD" (little-endian bytes)
+#: Signed bytes (mode 0, MRC2014) whose steps of more than 128 between neighbours would be under WRAPPED as many read
+#: unsigned: an unsigned 8-bit map, its values above 127 wrapped (sections evenly spaced, at most WRAP_SAMPLE bytes)
+WRAPPED, WRAP_SAMPLE = 0.5, 1 << 22
 
 
-def read_mrc(path, chunks, fits=None, warn_spacing=True):
+def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):
     """``(data, spacing, origin)`` of an MRC2014 or CCP4 map as ``(z, y, x)``: the header read and checked by mrcfile
     (``permissive=False``: its map ID and machine stamp), then here before any sample is read (its mode, its
     dimensions, its axis order ``mapc``/``mapr``/``maps``, and the samples it declares against the file's size);
@@ -26,7 +29,9 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True):
     over its sampling along each axis, None where the header gives none (a warning unless ``warn_spacing`` is
     false); the first voxel is at the header's ``origin`` where it is finite, not 0, else at its start indices times the
     spacing (as ChimeraX places a map); ``origin`` is the volume's centre.  A volume stack is refused; an image stack
-    (space group 0: a tilt series, a stack of particles) is read as a volume, with a warning."""
+    (space group 0: a tilt series, a stack of particles) is read as a volume, with a warning.  Mode 0's bytes are
+    signed (MRC2014) unless IMOD's stamp says they are not, or ``dtype`` (uint8 or int8) says how to read them; read
+    signed, they are warned of where they look wrapped (:data:`WRAPPED`)."""
     header, offset = _header(path)
     import mrcfile.utils
 
@@ -35,12 +40,15 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True):
         raise FileFormatError(f"{path} holds {_COMPLEX[mode]} samples (mode {mode}: a Fourier transform); clwave reads "
                               "real maps: transform it back to real space first")
     try:
-        dtype = mrcfile.utils.data_dtype_from_header(header)
+        samples = mrcfile.utils.data_dtype_from_header(header)
     except ValueError:
         raise FileFormatError(f"{path}: its MRC header names mode {mode}, none clwave reads (0 int8, 1 int16, "
                               "2 float32, 6 uint16, 12 float16); the file is corrupt or packed (mode 101)") from None
-    if mode == 0 and _imod_unsigned(header):
-        dtype = np.dtype(np.uint8)
+    given = dtype is not None
+    if given:
+        samples = _bytes_as(path, mode, dtype)
+    elif mode == 0 and _imod_unsigned(header):
+        samples = np.dtype(np.uint8)
     stored = tuple(int(n) for n in (header.nz, header.ny, header.nx))  # sections, rows, columns
     if min(stored) < 1:
         raise FileFormatError(f"{path}: its MRC header declares {' x '.join(map(str, stored[::-1]))} columns, rows "
@@ -53,11 +61,17 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True):
     if sorted(axes) != [1, 2, 3]:
         raise FileFormatError(f"{path}: its MRC header orders the axes mapc, mapr, maps = {axes[::-1]}, not an order "
                               "of x, y, z (1, 2, 3); the header is corrupt")
-    check_declared_size(path, offset, math.prod(stored) * dtype.itemsize, stored[::-1], gzip=False)
+    check_declared_size(path, offset, math.prod(stored) * samples.itemsize, stored[::-1], gzip=False)
+    if not given and samples == np.int8 and _wrapped(path, stored, offset):
+        words = (f"{path}: its bytes (mode 0) are read signed, as MRC2014 says, but look wrapped (jumps of more than "
+                 "128 between neighbours, as 127 next to -128, more than twice as many as read unsigned: an unsigned "
+                 "8-bit map without IMOD's stamp): give ")
+        warn_outside(ClwaveWarning(words + "dtype='uint8' to read them unsigned, dtype='int8' to keep them signed",
+                                   cli=words + "--dtype uint8 to read them unsigned, --dtype int8 to keep them signed"))
     if ispg == 0 and stored[0] > 1:
         note(f"{path} is a stack of {stored[0]} 2-D images (space group 0: a tilt series or a stack of particles): "
              "read as the slices of a volume")
-    source = OnDemand(partial(read_memmap, str(path), dtype, stored, offset, "C"), stored, dtype)
+    source = OnDemand(partial(read_memmap, str(path), samples, stored, offset, "C"), stored, samples)
     data = as_array(source, chunks, fits=fits, path=path)
     data = data.transpose([axes.index(a) for a in (3, 2, 1)])  # (z, y, x)
     spacing = _spacing(header)
@@ -115,6 +129,31 @@ def _imod_unsigned(header) -> bool:
     imodFlags at 156), as IMOD wrote every byte file before 4.2.23; MRC2014's mode 0 is signed."""
     stamp, flags = np.frombuffer(header.tobytes(), header.nx.dtype, 2, 152)
     return int(stamp) == _IMOD_STAMP and not int(flags) & 1
+
+
+def _bytes_as(path, mode, given):
+    """``dtype=`` of a map: uint8 or int8, how mode 0's bytes are read; refused for another mode or type."""
+    if mode != 0:
+        words = f"says how an MRC map's bytes (mode 0) are read; {path} holds mode {mode}: leave it out"
+        raise InputError(f"dtype= {words}", cli=f"--dtype {words}")
+    try:
+        dtype = np.dtype(given)
+    except TypeError:
+        dtype = None
+    if dtype not in (np.uint8, np.int8):
+        raise InputError(f"dtype={given!r} of an MRC map of bytes must be 'uint8' (unsigned) or 'int8' (signed)",
+                         cli=f"--dtype {given} of an MRC map of bytes must be uint8 (unsigned) or int8 (signed)")
+    return dtype
+
+
+def _wrapped(path, stored, offset) -> bool:
+    """Whether a mode-0 map's bytes read signed look wrapped: steps of more than 128 between neighbours along its rows
+    (127 next to -128 where unsigned it is 127 next to 128) more than 1 / :data:`WRAPPED` times as many as read
+    unsigned (where a signed map's -1 next to 0 is 255 next to 0), on evenly spaced sections of at most
+    :data:`WRAP_SAMPLE` bytes."""
+    rows = np.memmap(path, np.int8, "r", offset, stored)[::max(1, math.prod(stored) // WRAP_SAMPLE)].astype(np.int16)
+    signed = np.count_nonzero(np.abs(np.diff(rows)) > 128)
+    return np.count_nonzero(np.abs(np.diff(rows & 0xFF)) > 128) < WRAPPED * signed
 
 
 def _spacing(header):

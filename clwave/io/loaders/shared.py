@@ -31,10 +31,10 @@ def note(text: str):
 SUPPORTED = (".npy, .nii, .nii.gz, .mgh, .mgz, .nrrd, .nhdr, .tif/.tiff (multi-page), a folder of 2-D TIFF, PNG or "
              "JPEG slices, a folder of DICOM files or a multi-frame DICOM file, .raw (its shape and sample type "
              "given), a Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset), an MRC/CCP4 map (.mrc, .map, "
-             ".ccp4, .rec, .st)")
+             ".ccp4, .rec, .st), a FITS cube (.fits, .fit, .fts, .fits.gz, .fz)")
 
-#: chunks=None reads .npy, .raw, .nii, .mgh, MRC and TIFF files (and folders of TIFF slices) whose volume takes at least
-#: this many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
+#: chunks=None reads .npy, .raw, .nii, .mgh, MRC, FITS and TIFF files (and folders of TIFF slices) whose volume takes at
+#: least this many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
 CHUNKED_MIN_BYTES = 1 << 30
 
 #: chunks="auto": at most this many bytes of float32 per chunk, in multiples of the store's own chunks
@@ -47,8 +47,8 @@ CHUNK_BYTES = 8 << 20
 MAX_CHUNKS = 100_000
 
 # The formats read chunk by chunk (not .nii.gz nor .mgz: gzip cannot seek)
-_CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti", "mgh", "mrc", "tiff", "tiff-folder")
-_CHUNKABLE_NAMES = "Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC and TIFF inputs (a file or a folder of TIFF slices)"
+_CHUNKABLE = ("zarr", "hdf5", "npy", "raw", "nifti", "mgh", "mrc", "fits", "tiff", "tiff-folder")
+_CHUNKABLE_NAMES = "Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, FITS and TIFF inputs (a file or a folder of TIFF slices)"
 
 
 class _ReadsUnderWay(logging.Filter):
@@ -170,10 +170,11 @@ def check_chunks(chunks, kind, path):
     if not (edge or chunks is None or chunks is False or chunks == "auto"):
         raise InputError(f"chunks={chunks!r} must be None, False, 'auto' or a chunk edge in voxels (an int >= 1)",
                          cli=f"--chunks {chunks} must be auto, off or a chunk edge in voxels (an int >= 1)")
-    if kind not in _CHUNKABLE or path.name.lower().endswith((".gz", ".mgz")):
+    if kind not in _CHUNKABLE or path.name.lower().endswith((".gz", ".mgz", ".fz")):
         if chunks not in (None, False):
             zipped = dict(nifti="a .nii.gz file (gzip cannot seek: gunzip it first)",
-                          mgh="a .mgz file (gzip cannot seek: gunzip it into a .mgh first)")
+                          mgh="a .mgz file (gzip cannot seek: gunzip it into a .mgh first)",
+                          fits="a compressed FITS file (gunzip a .fits.gz, funpack a .fz first)")
             found = zipped.get(kind, f"a {kind} input")
             raise InputError(f"chunks= applies to {_CHUNKABLE_NAMES}, not to {found}; leave it out to read the "
                              "volume whole",
@@ -247,7 +248,7 @@ def check_whole(path, shape, dtype, fits=None, streamed=False, resampled=False):
     converted = 0 if dtype == np.float32 and not streamed else 4 * channels  # float32 samples used as they are read
     check_fits(voxels * (stored + converted), f"reading {path} whole "
                f"({' x '.join(map(str, shape))} {dtype})", "read it chunk by chunk (chunks='auto'; Zarr, HDF5, .npy, "
-               ".raw, .nii, .mgh, MRC, TIFF), or crop it")
+               ".raw, .nii, .mgh, MRC, FITS, TIFF), or crop it")
 
 
 def by_size(chunks, shape):
