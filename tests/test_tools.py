@@ -211,3 +211,16 @@ def test_staged_estimate_reports_each_frames_terms(tmp_path):
         assert (r["missing"], r["outside"]) == (tracer.missing, tracer.outside) and tracer.outside > 0
         assert r["rms_ratio"] == r["rms_estimate"] / r["rms_error"] > 0
     assert rows[0]["reduction"] == 2 * rows[1]["reduction"]  # both coarse frames, the smaller first
+
+
+def test_noise_table_rows(tmp_path):
+    """tools/noise_table.py on a noisy blob: a row per wavelet, the noise rule's error below keep=0.05's for linear."""
+    z, y, x = np.mgrid[:32, :32, :32] / 32
+    clean = (10 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) / 0.04)).astype(np.float32)
+    np.save(tmp_path / "clean.npy", clean)
+    np.save(tmp_path / "noisy.npy", clean + np.random.default_rng(1).normal(0, 1, clean.shape).astype(np.float32))
+    out = run_tool("noise_table.py", tmp_path / "noisy.npy", tmp_path / "clean.npy", "--sigma", 1, "--levels", 2)
+    rows = {line.split(" | ")[0].strip("| "): line for line in out.splitlines()[2:]}
+    assert set(rows) == {"haar", "linear", "quadratic", "cubic"}
+    linear = [float(cell.split(" σ")[0]) for cell in rows["linear"].split(" | ")[1:]]
+    assert linear[1] < linear[0]

@@ -15,8 +15,8 @@ from .options import (flag, is_clw, numbers, parse_chunks, parse_device_memory, 
 
 #: the options given as one number (argparse's ``type=float``) whose own checks (below, or in the model's API words)
 #: do not refuse what is not finite (argparse takes "nan" and "inf")
-NUMBERS = ("azimuth", "elevation", "fov", "distance", "extent", "keep", "threshold", "sigma", "subtract", "nan", "dso",
-           "dsd", "error")
+NUMBERS = ("azimuth", "elevation", "fov", "distance", "extent", "keep", "threshold", "noise", "sigma", "subtract",
+           "nan", "dso", "dsd", "error")
 
 
 def check_options(args):

@@ -155,6 +155,8 @@ def _clw_lines(f) -> list:
                            f"clwave compress)" if f["model_error"] is not None else "the model's error against its "
                            "input not recorded (clwave compress records it where it reads the input whole, since the "
                            "twentieth session)"))
+    if f["noise_sigma"] is not None:
+        lines.append(("noise", _noise(f["noise_sigma"])))
     if f["subtracted"]:
         lines.append(("subtracted", f"{f['subtracted']:g} from the input's values (--subtract; transfer functions in "
                                     f"the input's units)"))
@@ -164,6 +166,15 @@ def _clw_lines(f) -> list:
         lines.append(("photo", "a photo's colour and alpha, not classified: shaded ray tracing needs the original "
                                "volume compressed with --tf photo or another preset (docs/model.md §5)"))
     return lines
+
+
+def _noise(sigmas) -> str:
+    """The input's noise level recorded in a .clw, in words (docs/model.md §2)."""
+    if all(s is None for s in sigmas):
+        return "none measured: the finest band of the input does not look like noise (a clean or sharp volume)"
+    said = ", ".join("not noise-like" if s is None else f"sigma {s:.3g}" for s in sigmas)
+    return (f"{said}{' per channel' if len(sigmas) > 1 else ''}, the input's, in its units, measured in the finest "
+            f"band (--noise K keeps the details above K times their band's)")
 
 
 def _opacity_unit(tf, f, unit) -> str:
