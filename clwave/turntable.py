@@ -1,6 +1,6 @@
-"""Turntables (docs/coordinates.md §4): ``n`` views of one camera turned through 360 degrees about the world's z
-axis, the elevation kept, and their pictures through one window, so that an X-ray turntable does not flicker.
-:func:`turntable` and ``clwave render --turntable`` alike."""
+"""Turntables (docs/coordinates.md §4): ``n`` views of one camera turned through 360 degrees about an axis (the
+world's z, the elevation kept, unless another is given), and their pictures through one window, so that an X-ray
+turntable does not flicker.  :func:`turntable` and ``clwave render --turntable`` alike."""
 
 from __future__ import annotations
 
@@ -9,33 +9,56 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, reals
 from .io.files import check_suffix, write_atomic
 from .io.images import check_frame_time, write_gif
 from .io.result import RenderResult, resolve_window
 from .model.camera import Camera
 
 METHODS = ("splat", "raytrace")
+#: the axes a turntable names: z turns the azimuth (:meth:`Camera.rotated`'s None)
+AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": None}
+
+
+def turntable_axis(axis):
+    """A turntable's ``axis`` as :meth:`Camera.rotated` takes it: "x", "y" or "z" (None), or a direction (x, y, z)
+    as a unit vector; anything else refused in one line."""
+    if isinstance(axis, str) and axis in AXES:
+        return AXES[axis]
+    what = "'x', 'y', 'z' or a direction (x, y, z)"
+    if isinstance(axis, str):
+        raise InputError(f"axis={axis!r} must be {what}")
+    k = reals(axis, "axis", 3, what)
+    length = float(np.linalg.norm(k))
+    if not 0 < length < float("inf"):
+        raise InputError(f"axis={axis!r} must be a direction (x, y, z): finite, not all zero",
+                         cli=f"--turntable-axis {','.join(f'{x:g}' for x in k)} must be a direction: finite, not "
+                             f"all zero")
+    return tuple(k / length)
+
+
 #: host memory a turntable holds per pixel of a view, at the most: its float32 image of up to 4 channels, their stack
 #: for the one window or the .npy (the colour channels) and its 8-bit picture
 VIEW_PIXEL_BYTES = 4 * 4 + 4 * 3 + 4
 
 
-def turntable_cameras(camera, n) -> list:
-    """``camera`` turned by ``360 i / n`` degrees for i in 0 .. n-1; ``n`` checked (a whole number >= 1), and the
-    views' images against the host memory available (:data:`VIEW_PIXEL_BYTES`), before any is rendered."""
+def turntable_cameras(camera, n, axis="z") -> list:
+    """``camera`` turned by ``360 i / n`` degrees about ``axis`` (:func:`turntable_axis`) for i in 0 .. n-1; ``n``
+    checked (a whole number >= 1), and the views' images against the host memory available
+    (:data:`VIEW_PIXEL_BYTES`), before any is rendered."""
     from .device.memory import check_fits
 
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"n={n!r} must be the number of views, a whole number >= 1 (e.g. 24)",
                          cli=f"--turntable {n} needs N >= 1")
     if not isinstance(camera, Camera):
-        raise InputError(f"camera={type(camera).__name__} must be a clwave.Camera (a turntable turns it about the "
-                         f"z axis), or None for the default")
+        raise InputError(f"camera={type(camera).__name__} must be a clwave.Camera (a turntable turns it about an "
+                         f"axis), or None for the default")
+    axis = turntable_axis(axis)
     H, W = camera.size
     check_fits(int(n) * H * W * VIEW_PIXEL_BYTES, f"a turntable of {n} {H}x{W} views",
                "give fewer views (--turntable N, n=) or a smaller size")
-    return [camera.rotated(360.0 * i / n) for i in range(int(n))]
+    return [camera.rotated(360.0 * i / n, axis) for i in range(int(n))]
 
 
 class Turntable:
@@ -95,9 +118,10 @@ class Turntable:
         return RenderResult(self.results[0].image, self.meta).save(path, overwrite=overwrite)
 
 
-def turntable(wv, n, camera=None, method="splat", **options) -> Turntable:
-    """``n`` views of ``wv`` through ``camera`` (default ``Camera()``) turned through 360 degrees about the z axis
-    (:func:`turntable_cameras`), by ``method`` "splat" (:func:`clwave.splat`) or "raytrace" (:func:`clwave.raytrace`)
+def turntable(wv, n, camera=None, method="splat", axis="z", **options) -> Turntable:
+    """``n`` views of ``wv`` through ``camera`` (default ``Camera()``) turned through 360 degrees about ``axis``: "z"
+    (default; the azimuth turned), "x", "y" or a direction (x, y, z), right-handed (:func:`turntable_cameras`), by
+    ``method`` "splat" (:func:`clwave.splat`) or "raytrace" (:func:`clwave.raytrace`)
     with its ``options``; ``.save("turn.gif")`` writes them as ``clwave render --turntable`` does."""
     from .raytrace.tracer import raytrace
     from .splat.renderer import splat
@@ -105,7 +129,7 @@ def turntable(wv, n, camera=None, method="splat", **options) -> Turntable:
     if not isinstance(method, str) or method not in METHODS:
         raise InputError(f"method={method!r} must be one of {', '.join(map(repr, METHODS))}")
     draw = splat if method == "splat" else raytrace
-    cameras = turntable_cameras(Camera() if camera is None else camera, n)
+    cameras = turntable_cameras(Camera() if camera is None else camera, n, axis)
     try:  # an option the method has not, named before the first view
         inspect.signature(draw).bind(wv, cameras[0], **options)
     except TypeError as e:

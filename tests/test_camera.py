@@ -1,5 +1,6 @@
 """Camera conventions (docs/coordinates.md §2) and bad views."""
 
+import warnings
 from itertools import product
 
 import numpy as np
@@ -119,3 +120,30 @@ def test_a_pixel_too_small_for_the_kernels_float32_steps_is_refused():
     assert Camera(size=64, extent=64 * diagonal / MAX_PIXELS_ACROSS * 2).view(volume).pixel > 0
     with pytest.raises(InputError, match="distance=1e-300"):
         Camera(size=64, perspective=True, distance=1e-300).view(volume)
+
+
+def test_a_needle_of_a_box_warns_naming_the_spacing(tmp_path, capsys):
+    """trial26 finding 4: a spacing of axes in different units (5000 m/s against 0.0014 degrees, 3.6e6 : 1) made an
+    all-black ray-traced image with exit 0, and 1000 : 5 : 5 a one-pixel line, with no hint.  A content box whose two
+    shorter sides are both over 100 times shorter than its longest, which no view shows as more than a line or a dot,
+    warns once, naming spacing= (--spacing on the command line); a slab (one short side, seen face on) and 100 : 1 do
+    not."""
+    from clwave.cli import main
+    from clwave.errors import ClwaveWarning
+
+    data = np.zeros((8, 8, 8), np.float32)
+    data[2:6, 2:6, 2:6] = 1.0
+    for spacing in ((5000, 0.0013888889, 0.0013888889), (1000, 5, 5), (1, 1, 101)):
+        with pytest.warns(ClwaveWarning, match=r"times longer than .* spacing= in one unit") as caught:
+            Camera().view(Volume(data, spacing=spacing))
+        assert len(caught) == 1 and "\n" not in str(caught[0].message)
+    for spacing in ((1, 1, 1), (100, 1, 1), (1, 200, 200), (0.01, 1, 1)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", ClwaveWarning)
+            Camera().view(Volume(data, spacing=spacing))
+    np.save(tmp_path / "cube.npy", data)
+    code = main(["render", str(tmp_path / "cube.npy"), "--spacing", "5000,0.0013888889,0.0013888889", "--method",
+                 "raytrace", "--xray", "--turntable", "3", "--size", "16", "-o", str(tmp_path / "t.gif")])
+    err = capsys.readouterr().err
+    assert code == 0 and err.count("times longer than") == 1, err
+    assert "--spacing in one unit" in err and "spacing=" not in err

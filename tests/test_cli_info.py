@@ -439,3 +439,25 @@ def test_info_takes_the_reading_options_and_prints_the_geometry_they_give(tmp_pa
                          ([str(tmp_path / "v.raw")], "is a .raw file: it has no header")):
         code, out, err = run(capsys, "info", *argv)
         assert code == 2 and out == "" and err.count("\n") == 1 and needle in err, err
+
+
+def test_info_echoes_a_spacing_that_pastes_back_and_refuses_what_render_refuses(tmp_path, capsys):
+    """trial26 finding 10: `info --spacing 5000,0.0013888889,0.0013888889` echoed `--spacing 5000,0,0`, and took a
+    negative spacing that render refuses.  The echoed option, pasted back, gives the same float32 spacing; a
+    non-positive spacing is the one line render gives."""
+    np.save(tmp_path / "c.npy", np.zeros((4, 5, 6), np.float32))
+    given = "5000,0.0013888889,0.0013888889"
+    code, out, err = run(capsys, "info", str(tmp_path / "c.npy"), "--spacing", given)
+    lines = dict(line.split(None, 1) for line in out.splitlines())
+    assert code == 0, err
+    assert lines["spacing"].startswith(f"0.0013888889, 0.0013888889, 5000 (x, y, z; --spacing {given} given)"), out
+    code, out, err = run(capsys, "info", str(tmp_path / "c.npy"), "--spacing", "1.5", "--json")
+    assert json.loads(out)["spacing_option"] == "--spacing 1.5,1.5,1.5"
+    refusals = []
+    for command in (["info", str(tmp_path / "c.npy")],
+                    ["render", str(tmp_path / "c.npy"), "-o", str(tmp_path / "a.png")]):
+        code, out, err = run(capsys, *command, "--spacing", "5000,0.0013888889,-0.0013888889")
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        refusals.append(err)
+    assert refusals[0] == refusals[1] and "must be positive" in refusals[0]
+    assert not (tmp_path / "a.png").exists()

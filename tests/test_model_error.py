@@ -62,7 +62,8 @@ def test_compress_records_the_error_of_the_file_as_written(tmp_path, capsys, dat
     error = recorded(path)
     assert 1e-4 < expect < 0.5 and error == pytest.approx(expect, rel=1e-6)
     words = f"RMS over the voxels {expect:.2e} of the largest value (PSNR {-20 * np.log10(expect):.1f} dB)"
-    assert f"error                 {words}\n" in printed, printed
+    # the data's noise (deviation 0.05) measured, and the error said in its units too (docs/model.md §2, noise)
+    assert f"error                 {words}; " in printed and "times the input's noise (sigma 0.05" in printed, printed
     code, out, err = info(capsys, path)
     assert code == 0 and err == "" and f"error      {words}: the whole file's model against its input" in out, out
     code, out, _ = info(capsys, path, "--json")

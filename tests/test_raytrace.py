@@ -623,3 +623,20 @@ def test_coarse_lattices_stay_within_tolerance_of_float64():
         assert res.meta["segments_by_lattice"]["4"] == res.meta["segments"] > 0
         assert res.meta["rays_terminated_early"] > 0
         assert np.max(np.abs(res.image - exact)) <= tol
+
+
+def test_an_image_no_ray_drew_warns_saying_why():
+    """trial26 finding 4: a ray-traced image of nothing ("0 segments": an all-black picture) ended with exit 0 and no
+    word.  A render in which no ray met the model's content warns in one line naming the causes (the camera looking
+    past it, a clip, a needle of a box, the tolerance); a render that drew something does not."""
+    import warnings
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", clwave.ClwaveWarning)
+        seen = clwave.raytrace(wv, clwave.Camera(size=12), shading=False, absorption=False, tolerance=1e-2)
+    assert seen.meta["segments"] > 0
+    with pytest.warns(clwave.ClwaveWarning, match=r"no ray met the model's content \(0 segments\).*camera") as caught:
+        past = clwave.raytrace(wv, clwave.Camera(size=12, target=(500.0, 0.0, 0.0), extent=10.0), shading=False,
+                               absorption=False, tolerance=1e-2)
+    assert past.meta["segments"] == 0 and not past.image.any() and "\n" not in str(caught[0].message)

@@ -167,7 +167,7 @@ def test_vtk_finer_volume_is_the_cubic_model():
 def test_the_view_bench_drags_on_small_images():
     """tools/bench.py view's drag (bench_view.drag_path) on the viewer's page in headless chromium: pressed where the
     page's status line is not (at 48² it covered the image's centre, where the drag once pressed) and staying in the
-    image, it orbits by 0.4° a pixel (viewer.js) as far as it moved; 240 x 60 pixels in 60 moves at 512²."""
+    image, it orbits by 0.4° a pixel (static/controls.js) as far as it moved; 240 x 60 pixels in 60 moves at 512²."""
     sys.path.insert(0, str(ROOT / "tools"))
     import browser
     from bench_view import _view_drag, drag_path
@@ -211,3 +211,16 @@ def test_staged_estimate_reports_each_frames_terms(tmp_path):
         assert (r["missing"], r["outside"]) == (tracer.missing, tracer.outside) and tracer.outside > 0
         assert r["rms_ratio"] == r["rms_estimate"] / r["rms_error"] > 0
     assert rows[0]["reduction"] == 2 * rows[1]["reduction"]  # both coarse frames, the smaller first
+
+
+def test_noise_table_rows(tmp_path):
+    """tools/noise_table.py on a noisy blob: a row per wavelet, the noise rule's error below keep=0.05's for linear."""
+    z, y, x = np.mgrid[:32, :32, :32] / 32
+    clean = (10 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) / 0.04)).astype(np.float32)
+    np.save(tmp_path / "clean.npy", clean)
+    np.save(tmp_path / "noisy.npy", clean + np.random.default_rng(1).normal(0, 1, clean.shape).astype(np.float32))
+    out = run_tool("noise_table.py", tmp_path / "noisy.npy", tmp_path / "clean.npy", "--sigma", 1, "--levels", 2)
+    rows = {line.split(" | ")[0].strip("| "): line for line in out.splitlines()[2:]}
+    assert set(rows) == {"haar", "linear", "quadratic", "cubic"}
+    linear = [float(cell.split(" σ")[0]) for cell in rows["linear"].split(" | ")[1:]]
+    assert linear[1] < linear[0]

@@ -2,6 +2,8 @@
 ``load(path, nan=VALUE)`` and ``--nan VALUE`` give a value in the file's units before anything else
 (docs/coordinates.md §1), else refused in one line naming the option; a time series told as one."""
 
+import re
+
 import nibabel as nib
 import numpy as np
 import pytest
@@ -64,3 +66,23 @@ def test_a_time_series_is_told_as_one(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["compress", "ts.npy", "-o", "ts.clw"]) == 2
     assert "one time point at a time: write one to a file (or dataset) of its own" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("shape, drop, index", [((1, 6, 8, 8), 0, "data[0]"), ((6, 1, 8, 8), 1, "data[:, 0]"),
+                                                ((6, 8, 1, 8), 2, "data[:, :, 0]")])
+def test_a_length_1_axis_of_a_4d_array_is_named_not_squeezed(tmp_path, capsys, monkeypatch, shape, drop, index):
+    """trial26 finding 9: a radio cube as astropy gives it, (1, 96, 128, 128) with its degenerate Stokes axis first,
+    was refused as "128 channels" with a time series' hint.  A 4-D array whose last axis is no channel count and that
+    has a length-1 axis elsewhere names that axis and how to drop it (never squeezed silently: which axis is z is the
+    user's to say); the command line names numpy.squeeze on the array written."""
+    with pytest.raises(InputError, match=rf"shape {re.escape(str(shape))} has a length-1 axis {drop} .*drop it: "
+                                         rf"{re.escape(index)} \(numpy.squeeze\(data, axis={drop}\)\)") as e:
+        clwave.Volume(np.zeros(shape, np.float32))
+    assert "\n" not in str(e.value) and "time series" not in str(e.value)
+    np.save(tmp_path / "s.npy", np.zeros(shape, ">f4"))
+    monkeypatch.chdir(tmp_path)
+    for command in (["info", "s.npy"], ["compress", "s.npy", "-o", "s.clw"]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"length-1 axis {drop}" in err and "numpy.squeeze(data, axis=" in err, err
+    assert not (tmp_path / "s.clw").exists()

@@ -13,6 +13,7 @@ import pytest
 import clwave
 from clwave.view import view
 from clwave.view.protocol import BURST, MAX_MESSAGE, RateLimit, Refused, parse_view, unpack_frame
+from clwave.view.server import HEADERS, SCRIPTS, STATIC
 
 BASE = dict(type="view", azimuth=30.0, elevation=20.0, zoom=1.0, mode="xray", detail=1.0, window=None, moving=False,
             background=0.0, shading=True)
@@ -160,7 +161,7 @@ def test_a_model_id_names_the_models_grid_and_values_not_how_many_coefficients_i
 def test_every_route_needs_the_token(viewer):
     async def go():
         async with aiohttp.ClientSession() as s:
-            for path in ("/", "/viewer.js", "/viewer.css", "/ws"):
+            for path in (*STATIC, "/ws"):
                 for query in ("", "?token=wrong", "?token=" + viewer.server.token[:-1]):
                     r = await s.get(viewer.url.split("/?")[0] + path + query)
                     assert r.status == 403, (path, query)
@@ -175,6 +176,27 @@ def test_every_route_needs_the_token(viewer):
     with pytest.raises(aiohttp.WSServerHandshakeError) as exc:
         run(go())
     assert exc.value.status == 403
+
+
+def test_the_page_loads_every_script_served_in_order_each_with_the_headers(viewer):
+    """index.html's <script> tags name server.SCRIPTS in their order (viewer.js, which opens the socket, last), and
+    each comes back as JavaScript with the page's headers (the CSP among them); no script is served unloaded."""
+    async def go():
+        async with aiohttp.ClientSession() as s:
+            page = await (await s.get(viewer.url)).text()
+            served = {}
+            for name in SCRIPTS:
+                r = await s.get(viewer.url.replace("/?", f"/{name}?"))
+                served[name] = r.status, r.content_type, r.headers, await r.text()
+            return page, served
+    page, served = run(go())
+    assert re.findall(r'<script src="([\w-]+\.js)\?token=([\w-]+)"></script>', page) == [
+        (name, viewer.server.token) for name in SCRIPTS]
+    assert SCRIPTS[-1] == "viewer.js" and "new WebSocket(" in served["viewer.js"][3]
+    for name, (status, mime, headers, text) in served.items():
+        assert status == 200 and mime == "text/javascript" and text.startswith("// "), name
+        assert all(headers[k] == v for k, v in HEADERS.items()), name
+    assert {path for path, (_, mime) in STATIC.items() if mime == "text/javascript"} == {f"/{n}" for n in SCRIPTS}
 
 
 def test_binds_loopback_only_by_default(viewer):
@@ -1022,3 +1044,24 @@ def test_loopback_names():
                                      "localhost.example.org")))
     assert [host_name(h) for h in ("localhost.:8080", "[::ffff:127.0.0.1]:80", "LOCALHOST")] == \
         ["localhost.", "::ffff:127.0.0.1", "localhost"]
+
+
+def test_a_transfer_function_chosen_opens_the_page_in_the_shaded_mode(viewer):
+    """trial26 finding 11: `clwave view X --tf F` opened in X-ray mode, where a user who gave a transfer function
+    expects its shaded view (docs/viewer.md: "shaded through ct-bone from the first frame").  The hello's ``mode``, the
+    mode the page opens in: shaded where a transfer function was chosen (given, tf=; or the model's own: a volume
+    classified with it, pre or post), X-ray otherwise (grey is no one's choice)."""
+    async def hello_of(v):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            return await ws.receive_json()
+
+    assert run(hello_of(viewer))["mode"] == "xray"
+    vol = clwave.phantom("hydrogen", n=16)
+    scalar = clwave.WaveletVolume.from_volume(vol, levels=1).threshold(keep=0.2)
+    for model, options in ((scalar, dict(tf="hydrogen")), (vol, dict(tf="hydrogen")),
+                           (vol, dict(tf="hydrogen", classify="post")), (scalar, {}),
+                           (np.stack([vol.data] * 4, axis=-1), {})):
+        with view(model, size=16, keep=0.2, **options) as v:
+            hello = run(hello_of(v))
+        assert hello["mode"] == ("shaded" if options else "xray") and hello["mode"] in hello["modes"], options

@@ -46,8 +46,15 @@ def decode(data):
     return iio.imread(io.BytesIO(data))
 
 
+def open_xray(page, url):
+    """The page of the module's viewer, which opens shaded (its model has a transfer function), in the X-ray mode."""
+    browser.open_viewer(page, url)
+    page.execute_script('document.querySelector(\'input[value="xray"]\').click();')
+    browser.wait_for(page, "const c = window.clwave.current(); return c.fig.mode === 'xray' && c.fig")
+
+
 def test_drag_orbits_and_the_still_view_refines_to_the_splat(viewer, page):
-    assert browser.open_viewer(page, viewer.url) > 0
+    open_xray(page, viewer.url)
     browser.wait_final(page)
     start, data0 = browser.current_frame(page)
     browser.drag(page, 60, 24, steps=8, pause=0.05)  # held: the frames while moving
@@ -77,10 +84,10 @@ def test_a_wrong_token_gets_403(viewer, page):
 
 
 def test_two_tabs_orbit_independently(viewer, page):
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     first = page.current_window_handle
     page.switch_to.new_window("tab")
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     second = page.current_window_handle
     browser.drag(page, -40, 0, steps=4, hold=False)
     turned = browser.wait_final(page)
@@ -98,7 +105,7 @@ def test_two_tabs_orbit_independently(viewer, page):
 def test_superseded_frames_are_dropped(viewer, page):
     """Views sent faster than they render: the page shows only frames of its latest view, and the server
     abandons the others (fewer frames arrive than views were sent)."""
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     page.execute_script("const c = window.clwave; for (let i = 1; i <= 20; i++) "
                         "setTimeout(() => { c.state.azimuth = 30 + 3 * i; c.send(); }, 5 * i);")
     final = browser.wait_for(page, "const c = window.clwave.current(); return c && c.fig.final && "
@@ -111,7 +118,7 @@ def test_superseded_frames_are_dropped(viewer, page):
 
 
 def test_a_hostile_socket_closes_and_the_page_keeps_working(viewer, page):
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     code = page.execute_async_script(
         "const done = arguments[arguments.length - 1];"
         "const ws = new WebSocket(`ws://${location.host}/ws${location.search}`);"
@@ -121,6 +128,24 @@ def test_a_hostile_socket_closes_and_the_page_keeps_working(viewer, page):
     before = browser.shown(page)
     browser.drag(page, 30, 0, steps=3, hold=False)
     assert browser.wait_final(page)["azimuth"] != 30 and browser.shown(page) > before
+
+
+def test_a_given_transfer_function_opens_shaded_with_the_editor_over_the_values_whole_range(viewer, page):
+    """trial26 finding 11: `clwave view X --tf F` opened in X-ray mode, and the editor's histogram looked like the
+    window's alone (a window that nearly spans the data).  Given a transfer function, the page opens shaded (its radio
+    checked, the shaded controls enabled, the first final frame shaded), and the editor names the values its canvas
+    spans: the input's whole range (the model's value_range, wider than the window 0.1 … 0.8), histogram behind."""
+    browser.open_viewer(page, viewer.url)
+    first = browser.wait_final(page)
+    checked, xray_off, shaded_off = page.execute_script(
+        'return [document.querySelector(\'input[value="shaded"]\').checked, '
+        'document.getElementById("xray-controls").disabled, document.getElementById("shaded-controls").disabled]')
+    assert first["mode"] == "shaded" and checked and xray_off and not shaded_off
+    lo, hi = viewer.server.wv.value_range
+    axis = browser.wait_for(page, 'const t = document.getElementById("tf-axis").textContent; '
+                                  'return t.includes("…") && t')
+    np.testing.assert_allclose([float(x) for x in axis.split(" … ")], [lo, hi], rtol=1e-3)
+    assert lo < 0.1 and hi > 0.8
 
 
 def test_shaded_with_the_transfer_function_editor(viewer, page):
@@ -296,7 +321,7 @@ def test_the_colour_bar_shows_the_map_over_the_window(viewer, page):
     middle and high values (three digits), which follow the window's sliders and the auto window."""
     from clwave.view.colours import table
 
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     page.execute_script("const m = document.getElementById('colour-map'); m.value = 'inferno';"
                         "m.dispatchEvent(new Event('change'));"
                         "const e = document.getElementById('hi'); e.value = 300; e.dispatchEvent(new Event('input'));")
@@ -528,7 +553,7 @@ def test_the_pages_state_and_edit_history_survive_a_reload_for_the_same_model_on
     none of it and says so."""
     from selenium.webdriver.common.action_chains import ActionChains
 
-    browser.open_viewer(page, viewer.url)
+    open_xray(page, viewer.url)
     start = browser.wait_final(page)
     page.execute_script("Object.assign(window.clwave.state, {azimuth: 75, elevation: -35, zoom: 1.4});"
                         "const m = document.getElementById('colour-map'); m.value = 'inferno';"

@@ -86,6 +86,17 @@ def executed(text, where: Path, monkeypatch):
     return decode((where / "view.png").read_bytes())
 
 
+def ran_alike(text, snippet, where: Path, monkeypatch):
+    """Run the command's text in-process in ``where`` and ``exec`` the Python in a folder of it: one picture, not blank,
+    bit for bit."""
+    from clwave.cli import main
+
+    monkeypatch.chdir(where)
+    assert main(text.split()[1:]) == 0
+    got = decode((where / "view.png").read_bytes())
+    assert got.std() > 5 and np.array_equal(executed(snippet, where / "alike", monkeypatch), got)
+
+
 def grey(picture):
     """An X-ray picture's grey levels (a colour map's grey table repeats them in three channels)."""
     return picture[..., 0] if picture.ndim == 3 else picture
@@ -294,7 +305,7 @@ def test_an_opacity_unit_goes_into_the_command_and_the_python(tmp_path, monkeypa
     ``from_dict`` of it in the Python: one image bit for bit, not the image of the function per voxel; an X-ray of
     the volume classified before the transform keeps --tf hydrogen --opacity-unit 2, and its Python the preset's
     ``opacity_unit=2.0`` (it said the option was not in the snippet): one image again."""
-    from clwave.cli import main, make_parser
+    from clwave.cli import make_parser
 
     def origin_of(*more):
         return Origin.of_args(make_parser().parse_args(["view", "phantom:hydrogen:20", "--levels", "2", "--tf",
@@ -313,10 +324,7 @@ def test_an_opacity_unit_goes_into_the_command_and_the_python(tmp_path, monkeypa
     pre_origin, xray = origin_of(), Spec("xray", camera, window=(0.0, 0.15), levels=2)
     text, snippet = command(pre_origin, xray), python(pre_origin, xray)
     assert "--tf hydrogen --opacity-unit 2.0" in text and "opacity_unit=2.0" in snippet and "not in" not in snippet
-    monkeypatch.chdir(tmp_path)
-    assert main(text.split()[1:]) == 0
-    got = decode((tmp_path / "view.png").read_bytes())
-    assert got.std() > 5 and np.array_equal(executed(snippet, tmp_path / "xray", monkeypatch), got)
+    ran_alike(text, snippet, tmp_path, monkeypatch)
 
 
 @pytest.mark.parametrize("failure, line", [(clwave.FileFormatError("damaged"), "(damaged)"),
@@ -418,3 +426,21 @@ def test_a_save_takes_turns_with_another_tabs_still_frames(clw, monkeypatch, mod
         wv = clwave.WaveletVolume.open(clw)
         fresh = clwave.splat(wv, camera, renderer=clwave.SplatRenderer(wv)).to_uint8(tuple(msg["window"]))
         assert np.array_equal(grey(saved), fresh)
+
+
+def test_a_viewers_noise_rule_goes_into_the_command_and_the_python(tmp_path, monkeypatch):
+    """``clwave view NOISY.npy --wavelet linear --noise 3``: the command keeps ``--noise 3`` and the Python thresholds
+    with ``noise=3.0``; the two give one image bit for bit."""
+    from clwave.cli import make_parser
+
+    z, y, x = np.mgrid[:20, :20, :20] / 20
+    noisy = 10 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) / 0.04)
+    noisy += np.random.default_rng(2).normal(0, 0.5, noisy.shape)
+    np.save(tmp_path / "noisy.npy", noisy.astype(np.float32))
+    args = make_parser().parse_args(["view", str(tmp_path / "noisy.npy"), "--wavelet", "linear", "--levels", "2",
+                                     "--noise", "3", "--size", "24", "--port", "0"])
+    origin = Origin.of_args(args)
+    xray = Spec("xray", clwave.Camera(30.0, 20.0, 24, extent=30.0), window=(0.0, 200.0), levels=2)
+    text, code = command(origin, xray), python(origin, xray)
+    assert "--noise 3" in text and "threshold(noise=3.0)" in code and "not in this snippet" not in code
+    ran_alike(text, code, tmp_path, monkeypatch)

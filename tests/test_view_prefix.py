@@ -360,7 +360,7 @@ def test_the_shaded_mode_of_a_clw_file_ends_at_the_ray_trace_of_the_whole_file(c
 
     with view(clw, size=32, tolerance=2e-2) as v:
         frames = asyncio.run(go(v))
-    waiting = [f["waiting"] for f in frames if f.get("waiting")]  # the page's status line (viewer.js waitingWords)
+    waiting = [f["waiting"] for f in frames if f.get("waiting")]  # the page's status line (frames.js waitingWords)
     assert waiting and all(not f["final"] for f in frames if f.get("waiting")) and frames[-1]["detail"] == 0
     if prefix is None:  # the file served whole: nothing read, the wait is the whole tracer's set-up (trial24 row 5)
         assert set(waiting) == {"set-up"}

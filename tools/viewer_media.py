@@ -23,7 +23,7 @@ import browser  # noqa: E402  (tools/browser.py)
 import clwave  # noqa: E402
 from clwave.view import view  # noqa: E402
 
-#: degrees of azimuth per pixel dragged (clwave/view/static/viewer.js)
+#: degrees of azimuth per pixel dragged (clwave/view/static/controls.js)
 DEGREES_PER_PIXEL = 0.4
 
 

@@ -169,9 +169,12 @@ __kernel void raytrace(__global float4 *image, __global int4 *stats, __global in
     P.ka = phong.x; P.kd = phong.y; P.ks = phong.z; P.shininess = phong.w;
     P.whole = phong.w == floor(phong.w) && phong.w <= 64; /* powers by squaring (quadrature.h) */
     P.exponent = (int)phong.w;
-    P.grad_floor = grad_floor;
+    /* world gradients in units of the floor, a power of two (the same normals, bit for bit): their squares stay
+     * normal numbers at any data scale (a scalar of 1e-20 squared them to 0, flat everywhere) */
+    const real unit = grad_floor > 0 ? ldexp((real)(1), -ilogb((real)(grad_floor))) : (real)(1);
+    P.grad_floor = grad_floor * unit;
     P.nlights = min(nlights, CLW_MAX_LIGHTS);
-    P.scale = scale;
+    P.scale = scale * unit;
     for (int i = 0; i < P.nlights; i++) {
         P.light[i] = to_real3(lights[i].xyz);
         P.halfway[i] = normalize(P.light[i] - w); /* halfway between the light and the viewer */

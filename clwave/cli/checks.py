@@ -9,14 +9,14 @@ from ..errors import InputError
 from ..io.result import check_background
 from ..model.tf_checks import check_opacity_unit, check_window
 from ..io.images import check_frame_time
-from .options import (flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler,
+from .options import (flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler, parse_spacing,
                       parse_tf_window, parse_thresholding, preset_transfer_function)
 
 
 #: the options given as one number (argparse's ``type=float``) whose own checks (below, or in the model's API words)
 #: do not refuse what is not finite (argparse takes "nan" and "inf")
-NUMBERS = ("azimuth", "elevation", "fov", "distance", "extent", "keep", "threshold", "sigma", "subtract", "nan", "dso",
-           "dsd", "error")
+NUMBERS = ("azimuth", "elevation", "fov", "distance", "extent", "keep", "threshold", "noise", "sigma", "subtract",
+           "nan", "dso", "dsd", "error")
 
 
 def check_options(args):
@@ -36,9 +36,7 @@ def check_options(args):
         if value is not None and not np.isfinite(value):
             raise InputError(f"{flag(name)} {value:g} must be a finite number")
     if getattr(args, "spacing", None) is not None:
-        spacing = numbers(args.spacing, "--spacing", (1, 3))
-        if not all(np.isfinite(spacing)) or min(spacing) <= 0:
-            raise InputError(f"--spacing {args.spacing} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
+        parse_spacing(args.spacing)
     if getattr(args, "chunks", None) is not None:
         parse_chunks(args.chunks)
     if getattr(args, "wavelet", None) is not None:
@@ -74,6 +72,8 @@ def check_options(args):
         raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
     if getattr(args, "frame_time", None) is not None:
         _frame_time(args)
+    if hasattr(args, "turntable_axis"):
+        parse_turntable_axis(args)
     if getattr(args, "coarse", None) is not None and not 0 <= args.coarse < 1:
         raise InputError(f"--coarse {args.coarse:g} must be a tolerance between 0 and 1, e.g. 1e-2, or 0 (off)")
     if hasattr(args, "device_memory"):
@@ -126,6 +126,25 @@ def _method_options(args):
     for name, default in RAYTRACE_ONLY:  # those the command has (add_raytrace_options, drr's --tolerance)
         if hasattr(args, name) and getattr(args, name) is None:
             setattr(args, name, default)
+
+
+def parse_turntable_axis(args):
+    """``--turntable-axis x|y|z|AX,AY,AZ`` as :func:`clwave.turntable` takes ``axis`` ("z" when not given)."""
+    from ..turntable import AXES, turntable_axis
+
+    text = args.turntable_axis
+    if text is None:
+        return "z"
+    if args.turntable is None:
+        raise InputError("--turntable-axis is for a --turntable: add --turntable N, or leave it out")
+    if text in AXES:
+        return text
+    try:
+        direction = numbers(text, "--turntable-axis", (3,))
+    except InputError:
+        raise InputError(f"--turntable-axis {text} must be x, y, z or three numbers AX,AY,AZ") from None
+    turntable_axis(direction)  # a direction: not all zero
+    return direction
 
 
 def _frame_time(args):

@@ -79,7 +79,17 @@ def _error(args, wv, reference, outputs, out, quantised) -> str | None:
     outputs.update(out, lambda fh: record_error(fh, error))
     if peak == 0:  # no relative error, no PSNR
         return f"error                 RMS over the voxels {error:.2e}: the volume is zero everywhere"
-    return f"error                 {error_words(error)}"
+    return f"error                 {error_words(error)}{_in_noise(wv.noise_sigma, error * peak)}"
+
+
+def _in_noise(sigmas, rms) -> str:
+    """The error ``rms`` (absolute) in units of the input's noise where every channel measured one (docs/model.md §2):
+    removed noise is no loss of the model's."""
+    if not sigmas or None in sigmas:
+        return ""
+    sigma = math.sqrt(sum(s * s for s in sigmas) / len(sigmas))
+    return (f"; {rms / sigma:.2f} times the input's noise (sigma {sigma:.3g}, measured in the finest band: an error "
+            f"near 1 is mostly noise removed)")
 
 
 def _on_disk(spec) -> str:

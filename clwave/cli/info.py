@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import InputError
 from .options import (READING, add_reading_options, error_words, file_size, flag, is_given, kept_words, numbers, option,
-                      parse_series)
+                      parse_series, parse_spacing)
 
 
 def run(args):
@@ -102,13 +102,11 @@ def _as_read(args, facts) -> dict:
     from ..io.loaders.shared import stated_affine, to_canonical
 
     if args.spacing is not None:
-        spacing = [float(d) for d in numbers(args.spacing, "--spacing", (1, 3))]
-        facts.update(spacing=spacing * 3 if len(spacing) == 1 else spacing)
+        facts.update(spacing=[float(d) for d in parse_spacing(args.spacing)])
         if facts["origin"] is None:  # no file places it: load's origin
             facts.update(origin=[0.0] * 3, obliquity=0.0)
     known = facts["shape"] is not None and facts["spacing"] is not None
-    option = None if facts["spacing"] is None else "--spacing " + _lengths(
-        facts["spacing"], _extent(facts["shape"] or facts["stored_shape"], facts["spacing"]), ",")
+    option = None if facts["spacing"] is None else "--spacing " + _digits(facts["spacing"], ",")
     turn = check_orientation(facts["format"], args.orientation)
     if turn is not None and known:  # as load turns the volume, of a stand-in that holds no voxel
         shape = facts["shape"][:3]
@@ -125,7 +123,7 @@ def _clw_lines(f) -> list:
     extent = _extent(f["shape"], f["spacing"])
     unit = f" {f['unit']}" if f["unit"] else ""  # none recorded (a file of before session 19: unknown)
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, a wavelet model (.clw)"),
-             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_lengths(f['spacing'][::-1], extent)}{unit} "
+             ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_digits(f['spacing'][::-1])}{unit} "
                         f"(x, y, z), origin {_lengths(f['origin'], extent)}"),
              ("model", f"{f['levels']} level{'s' * (f['levels'] != 1)}, {f['channels']} channel"
                        f"{'s' * (f['channels'] != 1)} in {len(f['groups'])} group{'s' * (len(f['groups']) != 1)}"
@@ -157,6 +155,8 @@ def _clw_lines(f) -> list:
                            f"clwave compress)" if f["model_error"] is not None else "the model's error against its "
                            "input not recorded (clwave compress records it where it reads the input whole, since the "
                            "twentieth session)"))
+    if f["noise_sigma"] is not None:
+        lines.append(("noise", _noise(f["noise_sigma"])))
     if f["subtracted"]:
         lines.append(("subtracted", f"{f['subtracted']:g} from the input's values (--subtract; transfer functions in "
                                     f"the input's units)"))
@@ -166,6 +166,15 @@ def _clw_lines(f) -> list:
         lines.append(("photo", "a photo's colour and alpha, not classified: shaded ray tracing needs the original "
                                "volume compressed with --tf photo or another preset (docs/model.md §5)"))
     return lines
+
+
+def _noise(sigmas) -> str:
+    """The input's noise level recorded in a .clw, in words (docs/model.md §2)."""
+    if all(s is None for s in sigmas):
+        return "none measured: the finest band of the input does not look like noise (a clean or sharp volume)"
+    said = ", ".join("not noise-like" if s is None else f"sigma {s:.3g}" for s in sigmas)
+    return (f"{said}{' per channel' if len(sigmas) > 1 else ''}, the input's, in its units, measured in the finest "
+            f"band (--noise K keeps the details above K times their band's)")
 
 
 def _opacity_unit(tf, f, unit) -> str:
@@ -204,7 +213,7 @@ def _volume_lines(f) -> list:
         stated = "orientation" in f["reading"]
         turned = f", before --orientation {f['reading']['orientation']} turns it" if stated else ""
         missing = "" if given or f["spacing_in_file"] else ": none in the file, give yours"
-        place = f"{_lengths(f['spacing'][::-1], extent)}{unit} (x, y, z; {f['spacing_option']}{' given' * given}" \
+        place = f"{_digits(f['spacing'][::-1])}{unit} (x, y, z; {f['spacing_option']}{' given' * given}" \
                 f"{turned}{missing}), origin {_lengths(f['origin'], extent)}"
         lines.append(("spacing", place + (" (RAS+)" if f["format"] in RAS_FORMATS or stated else "")))
     elif not f["time"]:
@@ -213,7 +222,7 @@ def _volume_lines(f) -> list:
     if f["box"] is not None:
         words = unit or (" in --spacing's unit" if "spacing" in f["reading"] else
                          " world units (no length unit in the file)")
-        lines.append(("box", f"{_lengths(f['box'], max(f['box']))} (x, y, z){words}"))
+        lines.append(("box", f"{_digits(f['box'])} (x, y, z){words}"))
     values = {n: v for n, v in f["reading"].items() if n in ("subtract", "hu_to_mu", "nan")}
     if values:
         lines.append(("values", f"{', '.join(flag(n) + ('' if v is True else f' {v:g}') for n, v in values.items())}"
@@ -291,6 +300,13 @@ def _lengths(values, extent, sep=", ") -> str:
     is below it), so that no sign of nothing is printed; the JSON keeps the numbers as they are."""
     decimals = -math.floor(math.log10(extent * 1e-6)) if extent > 0 else 6
     return sep.join(f"{round(v, decimals) + 0.0:g}" for v in values)
+
+
+def _digits(values, sep=", ") -> str:
+    """Lengths each with the fewest significant digits that give its float32 (what the renderers compute in) back
+    (NumPy's shortest repr): a spacing or box of very different magnitudes (5000 : 0.0014) printed whole, and an
+    echoed ``--spacing`` that, pasted back, gives the same geometry."""
+    return sep.join(text[:-2] if (text := str(np.float32(v))).endswith(".0") else text for v in values)
 
 
 def add_parser(sub):

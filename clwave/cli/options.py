@@ -42,6 +42,15 @@ def numbers(text, name, counts, kind=float, sep=",") -> tuple:
     return values
 
 
+def parse_spacing(text) -> tuple:
+    """``--spacing DZ,DY,DX`` (or one number for all three) as three positive voxel sizes, or the one line that
+    refuses it: the one check of every command's ``--spacing``, ``clwave info FILE``'s too."""
+    spacing = numbers(text, "--spacing", (1, 3))
+    if not all(map(math.isfinite, spacing)) or min(spacing) <= 0:
+        raise InputError(f"--spacing {text} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
+    return spacing * 3 if len(spacing) == 1 else spacing
+
+
 def add_input_options(p):
     p.add_argument("input", help="volume file, DICOM folder, .clw file, or phantom:NAME[:N]")
     add_reading_options(p)
@@ -100,6 +109,9 @@ def add_model_options(p, classify=True):
     k.add_argument("--keep", type=float, help=f"fraction of voxels kept as coefficients, (0, 1] (default "
                                               f"{DEFAULT_KEEP} for a volume; 1 keeps every coefficient)")
     k.add_argument("--threshold", type=float, help="keep coefficients above this importance")
+    k.add_argument("--noise", type=float, help="keep each detail above this many times the noise of its band, the "
+                                               "noise measured in the finest band (e.g. 3 on a noisy volume; "
+                                               "docs/model.md §2)")
     g.add_argument("--focus", help="local level of detail: world centre X,Y,Z (needs --sigma)")
     g.add_argument("--sigma", type=float, help="local level of detail: Gaussian width (world units)")
     g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
@@ -137,7 +149,7 @@ def read_volume(args):
     from ..model.volume import Volume
 
     spec = args.input
-    spacing = None if args.spacing is None else numbers(args.spacing, "--spacing", (1, 3))
+    spacing = None if args.spacing is None else parse_spacing(args.spacing)
     if spec.startswith("phantom:"):
         given = [option(args, n) for n in READING if n not in ("spacing", "subtract") and is_given(args, n)]
         if given:
@@ -218,18 +230,19 @@ def option(args, name) -> str:
 
 
 def parse_thresholding(args) -> dict:
-    """``threshold()`` arguments from ``--keep``, ``--threshold``, ``--focus``/``--sigma``, checked before any work."""
-    from ..model.wavelet import check_thresholding
+    """``threshold()`` arguments from ``--keep``, ``--threshold``, ``--noise``, ``--focus``/``--sigma``, checked before
+    any work."""
+    from ..model.budget import check_thresholding
 
     focus = None
     if args.focus is not None or args.sigma is not None:
         if args.focus is None or args.sigma is None:
             raise InputError("--focus X,Y,Z and --sigma S go together")
-        if args.keep is None and args.threshold is None and is_clw(args):
-            raise InputError("--focus selects where detail is kept: give --keep or --threshold too")
+        if args.keep is None and args.threshold is None and args.noise is None and is_clw(args):
+            raise InputError("--focus selects where detail is kept: give --keep, --threshold or --noise too")
         focus = (numbers(args.focus, "--focus", (3,)), args.sigma)
-    keep, threshold, focus = check_thresholding(args.keep, args.threshold, focus)
-    return dict(keep=keep, threshold=threshold, focus=focus)
+    keep, threshold, focus, noise = check_thresholding(args.keep, args.threshold, focus, args.noise)
+    return dict(keep=keep, threshold=threshold, focus=focus, noise=noise)
 
 
 def _needs_rgba(name, channels, fix) -> InputError:
@@ -278,9 +291,9 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                                  f"volume with {them}")
             raise InputError(f"{', '.join(given)} cannot apply to {args.input}: a .clw file is a wavelet model "
                              f"already; compress the original volume with {them}")
-        if opener is not None and args.threshold is None and args.focus is None:
+        if opener is not None and args.threshold is None and args.noise is None and args.focus is None:
             return opener(args.input, args.keep), None
-        wv = WaveletVolume.open(args.input, keep=args.keep if args.focus is None else None)
+        wv = WaveletVolume.open(args.input, keep=args.keep if args.focus is None and args.noise is None else None)
         if rgba and wv.photo:
             raise InputError(f"shaded ray tracing needs a classified model; {args.input} holds a photo's colour and "
                              f"alpha: compress the original volume with --tf photo (opacity its alpha) or another "
@@ -290,7 +303,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
                                                        "compress the volume with --tf PRESET" if wv.channels == 1 else
                               "compress the original volume with --tf PRESET (its colours kept, the preset's "
                               "opacity of their luminance)")
-        if args.threshold is not None or args.focus is not None:  # --keep alone: a prefix of the file
+        if args.threshold is not None or args.noise is not None or args.focus is not None:  # --keep alone: a prefix
             wv = wv.threshold(**thresholding)
             warn_stored(wv, args.keep, args.input)  # as WaveletVolume.open(keep=) tells it
         return wv, None
@@ -340,7 +353,9 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         why = (f"the transfer function{f' {tf.name}' if tf.name else ''} gives no voxel of this volume (read chunk by "
                f"chunk) any opacity; give a window in the input's units (--tf-window LO,HI) or another preset")
         raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
-    default = args.keep is None and args.threshold is None
+    if not vol.chunked:  # measured before thresholding (a partial sort): the file records it, compress reports by it
+        wv.measure_noise()
+    default = args.keep is None and args.threshold is None and args.noise is None
     with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
         if default and args.focus is None:
             warnings.simplefilter("ignore", ClwaveWarning)

@@ -7,7 +7,7 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
+from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, parse_turntable_axis, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
                       parse_device_memory, parse_scheduler, post_transfer_function)
 
@@ -29,7 +29,8 @@ def run(args):
     look = picture_options(args, out)
     window, background = look["window"], look["background"]
     camera = make_camera(args)
-    cameras = [camera] if args.turntable is None else turntable_cameras(camera, args.turntable)
+    cameras = [camera] if args.turntable is None else turntable_cameras(camera, args.turntable,
+                                                                        parse_turntable_axis(args))
     device_memory = parse_device_memory(args)
     lights = parse_lights(args)
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
@@ -144,9 +145,11 @@ def add_parser(sub):
     add_raytrace_options(p)
     p.add_argument("--detail", type=int, help="ray tracing: the level of detail, 0 (full, the default) up to the "
                                               "model's levels (the coarsest: its approximation alone, fastest)")
-    p.add_argument("--turntable", type=int, metavar="N", help="write an N-frame rotation GIF: the azimuth turned "
-                                                              "through 360 degrees about the world's z axis, the "
-                                                              "elevation kept")
+    p.add_argument("--turntable", type=int, metavar="N", help="write an N-frame rotation GIF: the camera turned "
+                                                              "through 360 degrees about --turntable-axis")
+    p.add_argument("--turntable-axis", metavar="x|y|z|AX,AY,AZ",
+                   help="with --turntable: the world axis turned about, right-handed (default z: the azimuth turned, "
+                        "the elevation kept), or a direction")
     p.add_argument("--frame-time", type=float, metavar="SECONDS",
                    help="with --turntable: the seconds each frame is shown, 0.02 to 655.35, to the hundredth "
                         "(default 0.1)")

@@ -8,8 +8,9 @@ Layout (version 2)::
                     obliquity, value_range (the input's [min, max]; absent in older files), model_error (the
                     whole file's model's RMS error against its input, relative to its largest |value|, where
                     ``clwave compress`` measured it: :func:`record_error`), unit (the world unit, absent: unknown),
-                    photo (true: a photo's colour and alpha, not classified; absent: false), levels, channels,
-                    groups, ...),
+                    photo (true: a photo's colour and alpha, not classified; absent: false), noise_sigma (per
+                    channel the voxels' noise deviation, null where not noise-like; absent: not recorded), levels,
+                    channels, groups, ...),
                     header_crc32 (zlib's CRC-32 of the header's UTF-8 bytes)
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
     g<i>/occupancy  uint8, bits packed along x: which coarsest-approximation coefficients the content occupies
@@ -45,8 +46,8 @@ from ..model.bspline import SplineWavelet
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
 from ..model.transform import band_layout
-from ..model.budget import kept_count
-from ..model.wavelet import ChannelGroup, WaveletVolume, _top, check_thresholding, importance_of
+from ..model.budget import check_thresholding, kept_count
+from ..model.wavelet import ChannelGroup, WaveletVolume, _top, importance_of
 from ..threads import background
 from .clw_header import (FILE_FORMAT, FILE_VERSION, MAX_HEADER, check_dataset, checked_header, checked_values,
                          parsed_header)
@@ -190,7 +191,7 @@ def _write(model, fh, steps):
                   obliquity=model.obliquity, value_range=model.value_range, unit=model.unit, photo=model.photo,
                   levels=model.levels, channels=model.channels, interpolate=not chunked and model.interpolate,
                   focus=None if model.focus is None else [list(model.focus[0]), model.focus[1]],
-                  transfer_function=model.transfer_function, content=model.content,
+                  transfer_function=model.transfer_function, content=model.content, noise_sigma=model.noise_sigma,
                   groups=[dict(wavelet=w.order, channels=list(c)) for w, c in groups])
     with hdf5_target(fh) as target, h5py.File(target, "w", libver="latest", meta_block_size=512) as h5:
         text = json.dumps(header)
@@ -351,7 +352,7 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
                              unit=header.get("unit"), photo=header.get("photo", False),
                              focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
                              transfer_function=header.get("transfer_function"), content=header.get("content"),
-                             content_mask=mask)
+                             content_mask=mask, noise_sigma=header.get("noise_sigma"))
     except (LookupError, ValueError, TypeError) as exc:  # a backstop: checked_header checked what is used here
         raise FileFormatError(f"{path} is inconsistent ({exc}); the file may be corrupt") from None
 

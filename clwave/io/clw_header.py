@@ -127,8 +127,8 @@ def checked_header(header) -> tuple:
 
 def check_properties(header, shape):
     """The header's interpolation, focus, content box (inside the volume's box, as a writer finds it), value range,
-    model error and transfer function, checked as the model opened from the file uses them (``clwave info`` shows them);
-    ``shape``, spacing and origin checked already: ValueError names what is wrong."""
+    model error, noise level and transfer function, checked as the model opened from the file uses them (``clwave
+    info`` shows them); ``shape``, spacing and origin checked already: ValueError names what is wrong."""
     interpolate, focus, content = header.get("interpolate"), header.get("focus"), header.get("content")
     if not isinstance(interpolate, bool):
         raise ValueError(f"interpolate {interpolate!r} is not true or false")
@@ -152,6 +152,10 @@ def check_properties(header, shape):
     error = header.get("model_error")  # absent: not recorded (a file of before session 20, or not measured)
     if error is not None and not (_numbers([error], 1) and error >= 0):
         raise ValueError(f"model_error {error!r} is not a finite number >= 0")
+    sigma = header.get("noise_sigma")  # absent: not recorded (before the twenty-first session, or not measured)
+    if sigma is not None and not (isinstance(sigma, list) and len(sigma) == header["channels"] and all(
+            s is None or (_numbers([s], 1) and s >= 0) for s in sigma)):
+        raise ValueError(f"noise_sigma {sigma!r} is not a number >= 0 (or null) per channel")
     tf = header.get("transfer_function")
     if tf is not None:
         try:

@@ -19,7 +19,8 @@ def describe_clw(path) -> dict:
     """The header of the ``.clw`` file ``path`` (``format`` "clw", shape, spacing, origin, levels, channels,
     interpolation, focus, content box, transfer function (as read: its ``opacity_unit`` 1 where a version 1 stored
     none), the input's ``value_range`` (None: a classified model's, or not recorded), the whole file's ``model_error``
-    against its input (None: not recorded; :func:`~clwave.io.clw.record_error`), the value ``subtracted`` from
+    against its input (None: not recorded; :func:`~clwave.io.clw.record_error`), the input's ``noise_sigma`` per
+    channel (:attr:`~clwave.WaveletVolume.noise_sigma`; None: not recorded), the value ``subtracted`` from
     the input's values and the
     ``obliquity`` of its axes to its scanner's: 0 where the file records none, its world ``unit``: None where it
     records none, whether it holds a ``photo``'s colour and alpha, not classified) with, per channel group, its wavelet,
@@ -42,7 +43,7 @@ def describe_clw(path) -> dict:
             described.append(dict(wavelet=_WAVELETS[g["wavelet"]], order=g["wavelet"], channels=g["channels"],
                                   kept=kept, share=kept / voxels, quantisation=step))
     facts = {name: header.get(name) for name in ("spacing", "origin", "interpolate", "focus", "content", "value_range",
-                                                 "model_error")}
+                                                 "model_error", "noise_sigma")}
     tf = header.get("transfer_function")  # as read: a version 1's opacity unit 1 (TransferFunction.from_dict)
     facts["transfer_function"] = None if tf is None else TransferFunction.from_dict(tf).to_dict()
     return dict(file=str(path), format="clw", bytes=path.stat().st_size, shape=list(shape), levels=levels,

@@ -171,6 +171,20 @@ class SplineWavelet:
     def norm(self, letter: str) -> float:
         return self.norm_phi if letter == "a" else self.norm_psi
 
+    @lru_cache(maxsize=None)
+    def analysis_norm(self, letter: str, level: int) -> float:
+        """``||f||_2`` of the filter that gives a level-``level`` coefficient of part ``letter`` from the voxels along
+        one axis: ``dec_lo`` cascaded ``level - 1`` times (each upsampled by 2 more), then ``dec_lo`` or ``dec_hi``.
+        White noise of deviation sigma gives a band's coefficients the deviation sigma times the product over its
+        three axes (docs/model.md §2, noise); the B-spline banks are not orthonormal, so these differ by band."""
+        taps = np.ones(1)
+        for step in range(level):
+            last = self.bank["dec_hi" if letter == "d" and step == level - 1 else "dec_lo"]
+            spread = np.zeros((len(last) - 1) * 2 ** step + 1)
+            spread[::2 ** step] = last
+            taps = np.convolve(taps, spread)
+        return float(np.linalg.norm(taps))
+
     # --- Fourier transforms (docs/splatting.md §1), F(w) = int f e^{-iwx} dx ---------
     def fourier_phi(self, w) -> np.ndarray:
         w = np.asarray(w, float)

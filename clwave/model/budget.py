@@ -1,11 +1,12 @@
-"""How many coefficients ``keep=`` keeps, and the warnings where a model cannot give that many (docs/model.md §2):
-one home for the API and the command line, which prints them in its own words (:class:`ClwaveWarning`'s ``cli``)."""
+"""The thresholding rules' arguments checked (``keep=``, ``threshold=``, ``noise=``, ``focus=``), how many coefficients
+``keep=`` keeps, and the warnings where a model cannot give that many (docs/model.md §2): one home for the API and the
+command line, which prints them in its own words (:class:`ClwaveWarning`'s ``cli``)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ClwaveWarning, warn_outside
+from ..errors import ClwaveWarning, InputError, finite_number, warn_outside
 
 
 def kept_count(keep, n_voxels) -> int | None:
@@ -43,3 +44,42 @@ def warn_stored(wv, keep, source):
             f"coefficients, so it may hold fewer than its own {{}}; if it was compressed with a smaller {{}}, "
             f"compress again with a larger one for more detail)")
     warn_outside(ClwaveWarning(said.format("keep=", "keep", "keep"), cli=said.format("--keep ", "--keep", "--keep")))
+
+
+def check_one_rule(keep, threshold, noise):
+    """Refuse all but exactly one of :meth:`WaveletVolume.threshold`'s rules."""
+    if sum(x is not None for x in (keep, threshold, noise)) != 1:
+        raise InputError("give exactly one of keep= (fraction of voxels), threshold= (importance) or noise= (times "
+                         "the noise level of each band)")
+
+
+def check_thresholding(keep, threshold, focus, noise=None) -> tuple:
+    """``(keep, threshold, focus, noise)`` of :meth:`WaveletVolume.threshold`, checked before any work (each
+    message also in the command line's words)."""
+    if keep is not None:
+        keep = finite_number(keep, "keep")
+        if not 0 < keep <= 1:
+            raise InputError(f"keep={keep} must be a fraction of the voxels in (0, 1]",
+                             cli=f"--keep {keep:g} must be a fraction of the voxels in (0, 1], e.g. 0.05 for 5 %")
+    if threshold is not None:
+        threshold = finite_number(threshold, "threshold")
+        if threshold < 0:
+            raise InputError(f"threshold={threshold} must be an importance >= 0",
+                             cli=f"--threshold {threshold:g} must be an importance >= 0")
+    if noise is not None:
+        noise = finite_number(noise, "noise")
+        if noise < 0:
+            raise InputError(f"noise={noise} must be a multiple >= 0 of each band's noise level, e.g. 3",
+                             cli=f"--noise {noise:g} must be a multiple >= 0 of each band's noise level, e.g. 3")
+    if focus is not None:
+        try:
+            centre, sigma = focus
+            centre = tuple(float(c) for c in centre)
+            sigma = float(sigma)
+        except (TypeError, ValueError):
+            raise InputError("focus must be ((x, y, z), sigma) in world units") from None
+        if len(centre) != 3 or not np.all(np.isfinite(centre)) or not (np.isfinite(sigma) and sigma > 0):
+            raise InputError(f"focus {focus!r} needs a finite (x, y, z) centre and sigma > 0",
+                             cli="--focus X,Y,Z needs a finite centre and --sigma a positive world length")
+        focus = (centre, sigma)
+    return keep, threshold, focus, noise

@@ -16,7 +16,7 @@ from itertools import product
 import numpy as np
 
 from ..device.memory import check_image
-from ..errors import InputError, finite_number, flag, reals, whole_number
+from ..errors import ClwaveWarning, InputError, finite_number, flag, reals, warn_outside, whole_number
 from .geometry import view_frame
 
 #: The most pixels across the content box's diagonal: the splat kernels' float32 steps grow as its reciprocal (an
@@ -26,6 +26,9 @@ MAX_PIXELS_ACROSS = 10**12
 
 FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
 DEFAULT_FOV = 30.0  #: a perspective camera's vertical field of view, degrees, unless given
+#: how many times longer than its two shorter sides a content box is at most before a view of it warns: a needle
+#: that every view shows as a line a few pixels wide, or nothing (axes in different units, trial26)
+NEEDLE = 100.0
 
 
 @dataclass(frozen=True)
@@ -114,6 +117,10 @@ class Camera:
         degrees (a cone beam whose detector is centred on the axis; :class:`clwave.ConeBeam` for others).
         With ``fit="box"`` the default distance is the least at which the box's corners are in view.
         ``distance`` and ``fov`` (default 30) without ``perspective`` are refused: they would change nothing.
+    roll : float
+        Degrees the camera turns about its view axis (default 0): u and v turned by ``roll`` towards each other, the
+        picture so turned clockwise; with the angles, any orientation (a turntable about another axis than z,
+        :meth:`rotated`).
 
     Examples
     --------
@@ -123,9 +130,10 @@ class Camera:
     """
 
     def __init__(self, azimuth=30.0, elevation=20.0, size=512, *, target=None, extent=None,
-                 perspective=False, distance=None, fov=None, fit="sphere"):
+                 perspective=False, distance=None, fov=None, fit="sphere", roll=0.0):
         self.azimuth = finite_number(azimuth, "azimuth")
         self.elevation = finite_number(elevation, "elevation")
+        self.roll = finite_number(roll, "roll")
         self.size = _size(size)
         self.target = None if target is None else _vector(target, "target")
         if extent is not None and not finite_number(extent, "extent") > 0:
@@ -160,6 +168,9 @@ class Camera:
     def basis(self):
         """``(n, u, v)`` of paper eq. 31 as float64 arrays."""
         n, u, v = view_frame(self.azimuth, self.elevation)
+        if self.roll:
+            c, s = np.cos(np.radians(self.roll)), np.sin(np.radians(self.roll))
+            u, v = c * u + s * v, c * v - s * u
         # exact zeros keep axis-aligned views exact (cos 90 deg is 6e-17)
         return tuple(np.where(np.abs(x) < 1e-15, 0.0, x) for x in (n, u, v))
 
@@ -168,6 +179,7 @@ class Camera:
         n, u, v = self.basis()
         H, W = self.size
         lo, hi = _content_box(volume)
+        _warn_needle(hi - lo)
         target = (lo + hi) / 2.0 if self.target is None else np.asarray(self.target)
         corners = np.array(list(product(*zip(lo, hi)))) - target
         slope = 2.0 * np.tan(np.radians(self.fov) / 2.0) / H  # perspective: square pixels, the centre on the axis
@@ -206,13 +218,23 @@ class Camera:
         perspective = dict(perspective=True, distance=float(np.linalg.norm(view.eye - view.target)), fov=fov) \
             if self.perspective else {}
         return Camera(self.azimuth, self.elevation, size=(h, w), target=view.target, extent=view.pixel * reduction * w,
-                      **perspective)
+                      roll=self.roll, **perspective)
 
-    def rotated(self, degrees) -> "Camera":
-        """The same camera turned about the z axis (turntables)."""
+    def rotated(self, degrees, axis=None) -> "Camera":
+        """The same camera turned by ``degrees`` about ``axis`` (turntables), right-handed: a unit (x, y, z) vector,
+        None for z (the azimuth turned, the elevation and roll kept); another axis gives the angles and roll of the
+        turned frame (n, u, v)."""
         cam = Camera.__new__(Camera)
         cam.__dict__.update(self.__dict__)
-        cam.azimuth = self.azimuth + float(degrees)
+        if axis is None:
+            cam.azimuth = self.azimuth + float(degrees)
+            return cam
+        k, t = np.asarray(axis, float), np.radians(float(degrees))  # Rodrigues' formula of the turned n and u
+        n, u = ((x * np.cos(t) + np.cross(k, x) * np.sin(t) + k * (k @ x) * (1 - np.cos(t))) for x in self.basis()[:2])
+        cam.azimuth = float(np.degrees(np.arctan2(n[1], n[0])))
+        cam.elevation = float(np.degrees(np.arcsin(np.clip(n[2], -1.0, 1.0))))
+        _, u0, v0 = view_frame(cam.azimuth, cam.elevation)
+        cam.roll = float(np.degrees(np.arctan2(u @ v0, u @ u0)))
         return cam
 
     def to_dict(self) -> dict:
@@ -221,7 +243,7 @@ class Camera:
         return dict(kind="camera", azimuth=self.azimuth, elevation=self.elevation, size=list(self.size),
                     target=None if self.target is None else [float(x) for x in self.target], extent=self.extent,
                     perspective=self.perspective, distance=self.distance, fov=self.fov if self.perspective else None,
-                    fit=self.fit)
+                    fit=self.fit, roll=self.roll)
 
     @classmethod
     def from_dict(cls, d) -> "Camera":
@@ -271,6 +293,19 @@ def _vector(value, name) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise InputError(f"{name}={value!r} must be three finite numbers (x, y, z)")
     return arr
+
+
+def _warn_needle(sides) -> None:
+    """A :class:`ClwaveWarning` where the content box's ``sides`` (x, y, z) are a needle (:data:`NEEDLE`), naming the
+    spacing: every view of it is a line or a dot, with no hint where its axes' spacings are in different units."""
+    short, middle, long = sorted(sides)
+    if not middle * NEEDLE < long:
+        return
+    line = (f"the content's box is {' x '.join(f'{s:.3g}' for s in sides)} (x, y, z), {long / middle:.3g} times longer "
+            f"than wide: an image of it is a line a few pixels wide, or nothing; if its axes are in different units "
+            f"(e.g. m/s against degrees), give ")
+    warn_outside(ClwaveWarning(line + "the volume a spacing= in one unit (e.g. spacing=1)",
+                               cli=line + "--spacing in one unit (e.g. --spacing 1; a .clw: compress it again so)"))
 
 
 def _content_box(volume) -> tuple:

@@ -12,6 +12,7 @@ histograms, from which ``keep=`` finds its exact cut, or the selected coefficien
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from itertools import product
 from pathlib import Path
 
@@ -25,8 +26,10 @@ from .transform import KEYS, band_layout, check_coefficients
 from .transfer import TransferFunction
 from .volume import Volume, content_of
 from .mask import ContentMask
-from .budget import kept_count, warn_short_budget
-from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition, check_thresholding
+from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget
+from . import noise
+from .noise import check_noise_known, warn_noise_gain
+from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
 MAX_BLOCKS = 4096           # and into at most this many blocks a level
@@ -89,6 +92,7 @@ class Plan:
     frame: tuple
     focus: tuple | None
     rules: tuple = (Rule(), Rule())
+    noise: tuple | None = None  # per channel of the group: importances in units of each band's noise (noise=)
 
     @property
     def wavelet(self) -> SplineWavelet:
@@ -111,7 +115,8 @@ class ChunkedWaveletVolume:
     """
 
     def __init__(self, volume: Volume, wavelets, levels, *, transfer_function=None, focus=None,
-                 rules=None, content=None, scheduler=None, progress_bar=None, value_range=None):
+                 rules=None, content=None, scheduler=None, progress_bar=None, value_range=None, noise_sigma=None,
+                 by_noise=False):
         self.volume = volume
         self._wavelets = tuple(wavelets)
         self.levels = int(levels)
@@ -124,6 +129,8 @@ class ChunkedWaveletVolume:
         self.scheduler = scheduler
         self.progress_bar = progress_bar
         self.kept = None  # coefficient positions kept (the largest group's count), known after a selection pass
+        self.noise_sigma = noise_sigma  # per channel, as WaveletVolume.noise_sigma; measured by threshold(noise=)
+        self.by_noise = by_noise  # the details are kept by their importance in units of their band's noise
 
     @classmethod
     def from_volume(cls, volume: Volume, wavelet="cubic", levels=None, *, interpolate=False, transfer_function=None,
@@ -170,11 +177,13 @@ class ChunkedWaveletVolume:
 
     # ------------------------------------------------------------- passes
     def _plan(self, wavelet, gi, focus=None):
+        sigmas = tuple(noise.band_noise([self.noise_sigma[c] for c in self.groups()[gi][1]])) if self.by_noise else None
         return Plan(wavelet.order, tuple(band_layout(wavelet, self.shape, self.levels)), self.levels, self.frame,
-                    focus, self.rules[gi])
+                    focus, self.rules[gi], sigmas)
 
-    def _tasks(self, fn, wavelet, channels, plan):
-        """One delayed ``fn(subbands, level, band offsets, plan)`` per block of every level."""
+    def _tasks(self, fn, wavelet, channels, plan, finest=False):
+        """One delayed ``fn(subbands, level, band offsets, plan)`` per block of every level (of level 1 alone with
+        ``finest``)."""
         import dask
 
         source = self.volume.data if self.volume.data.ndim == 4 else self.volume.data[..., None]
@@ -184,21 +193,30 @@ class ChunkedWaveletVolume:
             for index, block in np.ndenumerate(stack.to_delayed()[0, ..., 0]):
                 offsets = tuple(int(s[i]) for s, i in zip(starts, index))
                 tasks.append(dask.delayed(fn)(block, level, offsets, plan))
+            if finest:
+                break
         return tasks
 
-    def threshold(self, keep=None, threshold=None, focus=None) -> "ChunkedWaveletVolume":
+    def threshold(self, keep=None, threshold=None, focus=None, noise=None) -> "ChunkedWaveletVolume":
         """Select the coefficients :meth:`WaveletVolume.threshold` keeps (the same arguments), without
         holding them: ``threshold=`` is a rule; ``keep=`` runs one pass of importance histograms here to
-        find its exact cut (docs/chunked.md §3).  Returns a new chunked model; nothing is gathered."""
-        if (keep is None) == (threshold is None):
-            raise InputError("give exactly one of keep= (fraction of voxels) or threshold= (importance)")
-        keep, threshold, focus = check_thresholding(keep, threshold, focus)
+        find its exact cut (docs/chunked.md §3); ``noise=`` two passes over the finest level here to measure the
+        noise (:meth:`measure_noise`).  Returns a new chunked model; nothing is gathered."""
+        check_one_rule(keep, threshold, noise)
+        keep, threshold, focus, noise = check_thresholding(keep, threshold, focus, noise)
         if not all(_keeps_every(rules) for rules in self.rules):
             raise InputError("this chunked model is thresholded already: threshold the model from_volume gave, or "
                              "compute() this one and threshold that")
+        if noise is not None:  # refused or told before the passes
+            if self.levels == 0:
+                check_noise_known(None, 0)
+            warn_noise_gain([(w, band_layout(w, self.shape, self.levels)) for w, _ in self.groups()], self.levels)
+        sigma = self.noise_sigma if noise is None else self.measure_noise()
+        if noise is not None:
+            check_noise_known(sigma, self.levels)
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         if budget is None:  # a threshold, or keep=1: every live coefficient
-            rules = [(Rule(), Rule(above=threshold))] * len(self.groups())
+            rules = [(Rule(), Rule(above=threshold if noise is None else noise))] * len(self.groups())
         else:
             hists = self._histograms(focus)
             short = max((n for n in (int(h[APPROX].sum()) for h in hists) if budget < n), default=0)
@@ -207,7 +225,37 @@ class ChunkedWaveletVolume:
             rules = [_cut(hist, budget) for hist in hists]
         return ChunkedWaveletVolume(self.volume, self._wavelets, self.levels, transfer_function=self.transfer_function,
                                     focus=focus, rules=rules, content=self.content, scheduler=self.scheduler,
-                                    progress_bar=self.progress_bar, value_range=self.value_range)
+                                    progress_bar=self.progress_bar, value_range=self.value_range, noise_sigma=sigma,
+                                    by_noise=noise is not None)
+
+    def measure_noise(self) -> tuple:
+        """Per channel, the voxels' noise deviation as :attr:`WaveletVolume.noise_sigma` gives it, bit for bit
+        (:mod:`~clwave.model.noise`): from a histogram of the finest diagonal band's non-zero interior |d|, then the
+        values of the bin that holds their lower median, in two passes over the first level; recorded in the models
+        :meth:`threshold` makes (and their files), as the in-memory model records it once measured."""
+        if self.noise_sigma is not None:
+            return self.noise_sigma
+        sigmas = [None] * self.channels
+        with client_for(self.scheduler) as client:
+            for gi, (wavelet, channels) in enumerate(self.groups()):
+                plan = self._plan(wavelet, gi)
+                hist = np.zeros((len(channels), 1 << (32 - noise.BIN_SHIFT)), dtype=np.int64)
+                tasks = self._tasks(_finest_block, wavelet, channels, plan, finest=True)
+                for per_channel in stream(client, tasks, desc="noise histogram", progress_bar=self.progress_bar):
+                    hist += per_channel
+                medians = [noise.median_rank(h) for h in hist]
+                within = [[] for _ in channels]
+                bins = [b for _, b, _ in medians]
+                tasks = self._tasks(partial(_finest_block, bins=bins), wavelet, channels, plan, finest=True)
+                for per_channel in stream(client, tasks, desc="noise median", progress_bar=self.progress_bar):
+                    for c, values in enumerate(per_channel):
+                        within[c].append(values)
+                for c, (channel, (rank, _, below)) in enumerate(zip(channels, medians)):
+                    values = np.concatenate(within[c])
+                    median = float(np.partition(values, rank - below)[rank - below]) if len(values) else 0.0
+                    sigmas[channel] = noise.sigma_of(hist[c], median, wavelet)
+        self.noise_sigma = tuple(sigmas)
+        return self.noise_sigma
 
     def _histograms(self, focus):
         """Per group, the importance histograms (2, 2^16) of its live approximation and detail coefficients."""
@@ -282,7 +330,8 @@ class ChunkedWaveletVolume:
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
                              content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity,
-                             value_range=self.value_range, unit=self.unit, photo=self.photo)
+                             value_range=self.value_range, unit=self.unit, photo=self.photo,
+                             noise_sigma=self.noise_sigma)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;
@@ -413,7 +462,8 @@ class _Entries:
         self.flat = np.flatnonzero(np.any(values != 0, axis=0)) if live_only else np.arange(values.shape[1])
         self.values = values[:, self.flat] if live_only else values
         index = None if plan.focus is None else self.index(slice(None))
-        self.importance = band_importance(plan.wavelet, self.band, self.values, index, plan.focus, plan.frame)
+        self.importance = band_importance(plan.wavelet, self.band, self.values, index, plan.focus, plan.frame,
+                                          plan.noise)
 
     def index(self, sel):
         """Band indices (n, 3) of the coefficients ``sel`` selects."""
@@ -423,8 +473,8 @@ class _Entries:
         return self.band.start + np.ravel_multi_index(self.index(sel).T, self.band.shape).astype(np.int64)
 
     def tiers(self, sel):
-        """The .clw tiers, by the importance without a focus (docs/chunked.md §4)."""
-        if self.plan.focus is None:
+        """The .clw tiers, by the importance without a focus or noise (docs/chunked.md §4)."""
+        if self.plan.focus is None and self.plan.noise is None:
             return tiers_of(self.importance[sel])
         values = self.values[:, sel]
         return tiers_of(band_importance(self.plan.wavelet, self.band, values, None, None, self.plan.frame))
@@ -434,6 +484,22 @@ def _entries(stack, level, offsets, plan, live_only=True):
     """:class:`_Entries` of each subband present in a block of ``level``."""
     keys = ["aaa"] if level == 0 else KEYS if level == plan.levels else KEYS[1:]
     return (_Entries(stack, level, key, offsets, plan, live_only) for key in keys)
+
+
+def _finest_block(stack, level, offsets, plan, bins=None):
+    """Per channel, the histogram of the non-zero |d| of the block's part of the interior of the finest diagonal
+    band (:mod:`~clwave.model.noise`), (C, 2^16); with ``bins``, those |d| in each channel's bin."""
+    band, inside = plan.band(1, "ddd"), noise.interior(plan.wavelet, plan.frame[0])
+    box = []
+    for axis, cut in enumerate(inside):
+        start, stop, _ = cut.indices(band.shape[axis])
+        n = stack.shape[1 + axis]
+        box.append(slice(min(n, max(0, start - offsets[axis])), max(0, min(n, stop - offsets[axis]))))
+    values = stack[KEYS.index("ddd")][tuple(box)]
+    mags = [noise.magnitudes(values[..., c]) for c in range(values.shape[-1])]
+    if bins is None:
+        return np.stack([noise.histogram(m) for m in mags])
+    return [m[noise.bins_of(m) == b] for m, b in zip(mags, bins)]
 
 
 def _histogram_block(stack, level, offsets, plan):

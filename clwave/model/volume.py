@@ -93,6 +93,13 @@ class Volume:
         if arr.ndim not in (3, 4):
             raise InputError(
                 f"volume must be 3-D (z, y, x) or 4-D (z, y, x, c), got shape {arr.shape}")
+        if arr.ndim == 4 and not 1 <= arr.shape[3] <= MAX_CHANNELS and 1 in arr.shape[:3]:
+            axis = arr.shape.index(1)  # never squeezed here: which axes are z, y, x is the user's to say
+            what = (f"volume data of shape {tuple(arr.shape)} has a length-1 axis {axis} (e.g. a FITS cube's "
+                    f"degenerate Stokes axis), and {arr.shape[3]} values in its last, which (z, y, x, c) reads as "
+                    f"channels (1 to {MAX_CHANNELS}); drop it: data[{':, ' * axis}0] (numpy.squeeze(data, "
+                    f"axis={axis}))")
+            raise InputError(what, cli=f"{what}, written to a file of its own")
         if arr.ndim == 4 and not 1 <= arr.shape[3] <= MAX_CHANNELS:
             what = (f"volume has {arr.shape[3]} channels in its last axis; 1 to {MAX_CHANNELS} are supported (scalar, "
                     f"RGB, RGBA); axis order is (z, y, x, c), and a time series (t, z, y, x) is rendered one time "

@@ -13,14 +13,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, finite_number, flag, warn_outside
+from ..errors import ClwaveWarning, InputError, flag, warn_outside
 from ..threads import MadeOnce, thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
-from .budget import kept_count, warn_short_budget, warn_stored
+from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget, warn_stored
 from . import geometry
 from .geometry import fine_to_world
 from .labels import warn_blurred_labels
 from .mask import ContentMask
+from .noise import band_noise, check_noise_known, measure_noise, warn_noise_gain
 from .ranking import RankedTable, by_importance, ranked_table
 from . import evaluation
 from .transform import apply_sampling_filter, crop_to_grid, decompose, reconstruct_channel, synthesize
@@ -126,7 +127,7 @@ class WaveletVolume:
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
                  focus=None, transfer_function=None, content=None, content_mask=None, subtracted=0.0, obliquity=0.0,
-                 value_range=None, unit=None, photo=False):
+                 value_range=None, unit=None, photo=False, noise_sigma=None):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
@@ -137,6 +138,8 @@ class WaveletVolume:
         self.value_range = None if value_range is None else tuple(float(v) for v in value_range)
         self.unit = unit  # the source volume's Volume.unit: the world unit ("um", "mm"...), None where unknown
         self.photo = bool(photo)  # the source volume's Volume.photo: a photo's colour and alpha, not classified
+        # per channel the source volume's noise deviation where measured (measure_noise), else None
+        self.noise_sigma = None if noise_sigma is None else tuple(None if s is None else float(s) for s in noise_sigma)
         self.levels = int(levels)
         self.groups = list(groups)
         self.channels = int(channels)
@@ -246,6 +249,16 @@ class WaveletVolume:
         return (f"WaveletVolume(shape={self.shape}, wavelets={self.wavelets}, levels={self.levels}, "
                 f"kept={self.kept}, compression={self.compression:.4f})")
 
+    def measure_noise(self):
+        """Per channel, the noise deviation of the source volume's voxels (in the stored values' units), estimated
+        from the finest diagonal band (:mod:`clwave.model.noise`, docs/model.md §2) and recorded as
+        :attr:`noise_sigma`, which the models :meth:`threshold` makes and ``.clw`` files keep; None for a channel
+        whose band does not look like noise (a clean volume); None where it cannot be measured (0 levels, a thresholded
+        model that records none)."""
+        if self.noise_sigma is None:
+            self.noise_sigma = measure_noise(self)
+        return self.noise_sigma
+
     def content_box(self):
         """World (x, y, z) corners ``(lo, hi)`` of the non-zero voxels of the volume the model was made
         from (:meth:`Volume.content_box`), or None where that is not known."""
@@ -262,7 +275,7 @@ class WaveletVolume:
         return importance_of(group, self.focus, self.frame)
 
     # ------------------------------------------------------------- threshold
-    def threshold(self, keep=None, threshold=None, focus=None) -> "WaveletVolume":
+    def threshold(self, keep=None, threshold=None, focus=None, noise=None) -> "WaveletVolume":
         """Keep the most important coefficient positions (docs/model.md §2).
 
         Parameters
@@ -277,20 +290,33 @@ class WaveletVolume:
             Local level of detail (paper Fig. 12/13): importance is weighted by
             ``exp(-d^2 / 2 sigma^2)``, d the world distance from the focus to the
             centre of the basis support, so detail survives near the focus.
+        noise : float >= 0
+            Keep the approximation band and every detail above ``noise`` times the noise level of its band: the
+            voxels' noise deviation, estimated from the finest band (:meth:`measure_noise`), times the band's
+            analysis norm (wavelet shrinkage, docs/model.md §2); e.g. 3 on a noisy volume.
         """
-        if (keep is None) == (threshold is None):
-            raise InputError("give exactly one of keep= (fraction of voxels) or threshold= (importance)")
-        keep, threshold, focus = check_thresholding(keep, threshold, focus)
+        check_one_rule(keep, threshold, noise)
+        keep, threshold, focus, noise = check_thresholding(keep, threshold, focus, noise)
+        if noise is not None:
+            if self.interpolate:
+                raise InputError("noise= needs the approximating model (interpolate=False): the interpolating "
+                                 "prefilter colours the noise, whose level in each band assumes it white",
+                                 cli="--noise cannot go with --interpolate: the prefilter colours the noise")
+            check_noise_known(self.measure_noise(), self.levels)
+            warn_noise_gain([(g.wavelet, g.bands) for g in self.groups], self.levels)
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
                             interpolate=self.interpolate, focus=focus,
                             transfer_function=self.transfer_function, content=self.content,
                             content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity,
-                            value_range=self.value_range, unit=self.unit, photo=self.photo)
+                            value_range=self.value_range, unit=self.unit, photo=self.photo,
+                            noise_sigma=self.noise_sigma)  # where measured: a chunked model's file records the same
         budget = None if keep is None else kept_count(keep, self.n_voxels)
+        threshold = threshold if noise is None else noise
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
             # one float32 per position, no index array of them all (the peak of compressing, docs/benchmarks.md §2)
-            imp = out.importance(g)
+            imp = out.importance(g) if noise is None else \
+                importance_of(g, focus, self.frame, band_noise([self.noise_sigma[c] for c in g.channels]))
             zero = g.values[0] == 0
             for row in g.values[1:]:
                 zero &= row == 0
@@ -503,53 +529,33 @@ def _check_levels(levels, shape) -> int:
     return int(levels)
 
 
-def check_thresholding(keep, threshold, focus) -> tuple:
-    """``(keep, threshold, focus)`` of :meth:`WaveletVolume.threshold`, checked before any work (each
-    message also in the command line's words)."""
-    if keep is not None:
-        keep = finite_number(keep, "keep")
-        if not 0 < keep <= 1:
-            raise InputError(f"keep={keep} must be a fraction of the voxels in (0, 1]",
-                             cli=f"--keep {keep:g} must be a fraction of the voxels in (0, 1], e.g. 0.05 for 5 %")
-    if threshold is not None:
-        threshold = finite_number(threshold, "threshold")
-        if threshold < 0:
-            raise InputError(f"threshold={threshold} must be an importance >= 0",
-                             cli=f"--threshold {threshold:g} must be an importance >= 0")
-    if focus is not None:
-        try:
-            centre, sigma = focus
-            centre = tuple(float(c) for c in centre)
-            sigma = float(sigma)
-        except (TypeError, ValueError):
-            raise InputError("focus must be ((x, y, z), sigma) in world units") from None
-        if len(centre) != 3 or not np.all(np.isfinite(centre)) or not (np.isfinite(sigma) and sigma > 0):
-            raise InputError(f"focus {focus!r} needs a finite (x, y, z) centre and sigma > 0",
-                             cli="--focus X,Y,Z needs a finite centre and --sigma a positive world length")
-        focus = (centre, sigma)
-    return keep, threshold, focus
-
-
-def importance_of(group: ChannelGroup, focus, frame) -> np.ndarray:
+def importance_of(group: ChannelGroup, focus, frame, noise=None) -> np.ndarray:
     """:func:`band_importance` of each kept position of ``group``, in its (ascending) position order."""
     imp = np.empty(group.kept, dtype=np.float32)
     positions = group.all_positions()
     for band, sl in zip(group.bands, group.band_slices()):
         index = None if focus is None else np.column_stack(np.unravel_index(positions[sl] - band.start, band.shape))
-        imp[sl] = band_importance(group.wavelet, band, group.values[:, sl], index, focus, frame)
+        imp[sl] = band_importance(group.wavelet, band, group.values[:, sl], index, focus, frame, noise)
     return imp
 
 
-def band_importance(wavelet, band, values, index, focus, frame) -> np.ndarray:
+def band_importance(wavelet, band, values, index, focus, frame, noise=None) -> np.ndarray:
     """Importance of coefficients of one band: ``|c| * ||basis||`` (max over channels), float32, times the
     focus weight ``exp(-d^2 / 2 sigma^2)`` (d: world distance from the focus to the centre of the basis
     support) when ``focus`` is given; ``values`` (C, n), ``index`` (n, 3) their (k_z, k_y, k_x) (used only
-    with focus), ``frame`` :attr:`WaveletVolume.frame`.  The one definition thresholding, ``.clw`` tiers
-    and chunked passes share (docs/model.md §2)."""
+    with focus), ``frame`` :attr:`WaveletVolume.frame`.  With ``noise`` (the voxels' noise deviation per channel,
+    :mod:`~clwave.model.noise`), ``|c|`` in units of the noise of its band instead, ``|c| / (noise * ||analysis||)``
+    (``inf`` where a channel measured no noise).  The one definition thresholding, ``.clw`` tiers and chunked passes
+    share (docs/model.md §2)."""
     if values.shape[1] == 0:
         return np.zeros(0, dtype=np.float32)
-    imp = np.abs(values).max(axis=0)
-    imp *= np.prod([wavelet.norm(letter) for letter in band.key])
+    if noise is None:
+        imp = np.abs(values).max(axis=0)
+        imp *= np.prod([wavelet.norm(letter) for letter in band.key])
+    else:
+        level = np.prod([wavelet.analysis_norm(letter, band.level) for letter in band.key]) * np.asarray(noise)
+        with np.errstate(divide="ignore", invalid="ignore"):  # no noise: a live coefficient is inf, a zero nan
+            imp = np.nan_to_num(np.abs(values) / level[:, None], nan=0.0, posinf=np.inf).max(axis=0).astype(np.float32)
     if focus is not None:
         centre, sigma = focus
         fine = geometry.support_centres(wavelet, band.key, band.level, index)

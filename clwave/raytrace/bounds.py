@@ -168,3 +168,16 @@ def warn_packed(step: float, length: float, tol: float, told: set):
            f"integrals to within {limit:.3g}, above the absolute tolerance {tol:g}: ")
     warn_outside(ClwaveWarning(f"{why}for closer ones trace it with field='wavelet', which is not packed",
                                cli=f"{why}the image meets --tolerance {limit:.1g}, not {tol:g}"))
+
+
+def warn_empty(segments: int, told: set):
+    """Warn when no ray of a render met the model's content (``segments`` 0: a black or transparent image that
+    reports nothing wrong, trial26), naming what makes one.  Once a tracer (``told``)."""
+    if segments or "empty" in told:
+        return
+    told.add("empty")
+    line = ("no ray met the model's content (0 segments), so the image is empty: the camera looks past it (target, "
+            "extent), a clip cuts it away, it is a needle thinner than a pixel from here (axes in different units), "
+            "or it is fainter than the tolerance")
+    warn_outside(ClwaveWarning(line + " (target=, extent=, clip=, spacing=, tolerance=)",
+                               cli=line + " (--extent, --clip-box/--clip-plane, --spacing, --tolerance)"))

@@ -105,11 +105,12 @@ class Detail:
         """``detail`` as a Detail: None (full), a whole level, or a Detail; InputError naming the range."""
         if detail is None:
             return cls()
+        given = detail  # named as the caller wrote it: detail=3, not Detail(level=3, pixels=None)
         if isinstance(detail, (int, np.integer)) and not isinstance(detail, bool):
             detail = cls(int(detail))
         if not isinstance(detail, Detail) or not isinstance(detail.level, (int, np.integer)) \
                 or not 0 <= detail.level <= levels:
-            raise InputError(f"detail={detail!r} must be a level from 0 (full detail) to {levels} (the "
+            raise InputError(f"detail={given!r} must be a level from 0 (full detail) to {levels} (the "
                              f"approximation alone), or clwave.Detail(level=, pixels=)")
         if detail.pixels is not None and not finite_number(detail.pixels, "detail pixels") > 0:
             raise InputError(f"Detail pixels={detail.pixels!r} must be a positive screen-space error")

@@ -26,7 +26,7 @@ from ..model.conebeam import ConeBeam, check_camera, resolve_view, view_record
 from ..device.context import ComputeContext
 from ..errors import DeviceMemoryError, InputError, finite_number, flag
 from ..device.memory import TRACED_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap
-from .bounds import warn_below_tolerance, warn_packed
+from .bounds import warn_below_tolerance, warn_empty, warn_packed
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .wavelet_field import WaveletField
 from .passes import on_device, passes as region_passes
@@ -400,6 +400,9 @@ class RayTracer:
         counts = stats.get().reshape(-1, 4).astype(np.int64)
         if not absorption:
             img = img[..., : wv.channels]
+        nothing_visible = None if post is None else self.scalar.invisible(post)
+        if self.region is None and not nothing_visible:  # a cluster's part may miss; an invisible function is said
+            warn_empty(int(counts[:, 0].sum()), self._told)  # where it is found
         meta = dict(
             method="raytrace", mode="emission-absorption" if absorption else "xray", field=self.field,
             device=cc.describe(), coefficients=wv.kept, tolerance=tol, precision=precision,
@@ -420,7 +423,7 @@ class RayTracer:
         if post is not None:
             meta.update(classification="post", transfer_function=post.tf.to_dict(),
                         tf_window=None if post.window is None else list(post.window),
-                        classify_seconds=post.seconds, nothing_visible=self.scalar.invisible(post))
+                        classify_seconds=post.seconds, nothing_visible=nothing_visible)
         if self.field == "bspline":
             meta.update(bricks=len(at.slots), brick_levels=np.bincount(self.bricks.levels[at.slots]).tolist(),
                         brick_slots=len(self.bricks.levels), brick_pool_bytes=self.bricks.pool_bytes,

@@ -289,10 +289,10 @@ def _model(origin: Origin, spec: Spec) -> list:
         return ["# wv: the model given to clwave.view()"]
     given = {dest for dest, _, _ in origin.options}
     if origin.input.lower().endswith(".clw"):
-        keep, threshold = origin.get("keep"), origin.get("threshold")
+        keep, rule = origin.get("keep"), _rule(origin)
         lines = [f"wv = clwave.WaveletVolume.open({origin.input!r}{'' if keep is None else f', keep={keep!r}'})"]
-        lines += [] if threshold is None else [f"wv = wv.threshold(threshold={threshold!r})"]
-        left = given - {"keep", "threshold", *TF_OPTIONS}
+        lines += [] if rule is None else [f"wv = wv.threshold({rule})"]
+        left = given - {"keep", "threshold", "noise", *TF_OPTIONS}
     else:
         lines, left = _volume(origin, spec)
     if left:
@@ -323,13 +323,21 @@ def _volume(origin: Origin, spec: Spec) -> tuple:
             lines += [] if post else ["vol = tf.classify(vol)"]
     wavelet = origin.get("wavelet") or "cubic"
     wavelet = wavelet.split(",") if "," in wavelet else wavelet
-    keep, threshold = origin.get("keep"), origin.get("threshold")
-    thresholding = f"threshold={threshold!r}" if threshold is not None else f"keep={0.05 if keep is None else keep!r}"
+    keep = origin.get("keep")
+    thresholding = _rule(origin) or f"keep={0.05 if keep is None else keep!r}"
     lines.append(f"wv = clwave.WaveletVolume.from_volume(vol, wavelet={wavelet!r}, levels={spec.levels}"
                  f"{', interpolate=True' if origin.get('interpolate') else ''}"
                  f"{', transfer_function=tf' if tf in TransferFunction.PRESETS else ''}).threshold({thresholding})")
     return lines, left | (given - {*LOAD_OPTIONS, *TF_OPTIONS, "classify", "wavelet", "levels", "keep", "threshold",
-                                   "interpolate"})
+                                   "noise", "interpolate"})
+
+
+def _rule(origin: Origin):
+    """``threshold=T`` or ``noise=K`` as given to ``clwave view`` (None: neither)."""
+    for name in ("threshold", "noise"):
+        if origin.get(name) is not None:
+            return f"{name}={origin.get(name)!r}"
+    return None
 
 
 def _floats(text) -> tuple:

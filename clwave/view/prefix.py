@@ -17,9 +17,9 @@ import numpy as np
 
 from ..errors import ClwaveError, ClwaveWarning, FileFormatError
 from ..io.clw import read_header
-from ..model.budget import kept_count, warn_stored
+from ..model.budget import check_thresholding, kept_count, warn_stored
 from ..model.ranking import by_importance
-from ..model.wavelet import WaveletVolume, check_thresholding
+from ..model.wavelet import WaveletVolume
 from ..raytrace.staged import read_coarse
 from ..threads import Abandoned
 

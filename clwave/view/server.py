@@ -34,9 +34,11 @@ from .protocol import (MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, m
 
 log = logging.getLogger("clwave.view")
 
+#: the page's scripts (index.html loads them in this order, docs/viewer.md §4)
+SCRIPTS = ("page.js", "frames.js", "controls.js", "tf.js", "clip.js", "kept.js", "export.js", "viewer.js")
 #: the page's files, the only ones served (read once from the package)
-STATIC = {"/": ("index.html", "text/html"), "/viewer.js": ("viewer.js", "text/javascript"),
-          "/viewer.css": ("viewer.css", "text/css")}
+STATIC = {"/": ("index.html", "text/html"), "/viewer.css": ("viewer.css", "text/css"),
+          **{f"/{name}": (name, "text/javascript") for name in SCRIPTS}}
 #: a file's rest is read from the first frame sent (its reading shares the cores and the interpreter with that
 #: frame), or this many seconds after the server starts, whichever is first
 READ_AFTER = 5.0
@@ -321,7 +323,7 @@ class ViewServer:
         waited for), and give up the set-up of a file's full stage, so that no thread of the server outlives it by
         more than the step under way."""
         self.stopping = True
-        # the page says the server is gone (viewer.js, disconnected); all at once, each within CLOSE_SECONDS
+        # the page says the server is gone (static/viewer.js, disconnected); all at once, each within CLOSE_SECONDS
         await asyncio.gather(*(session.close(WSCloseCode.GOING_AWAY, "the viewer stopped")
                                for session in list(self.sessions.values())))
         if self._runner is not None:
@@ -374,7 +376,8 @@ class ViewServer:
         from ..model.transfer import TransferFunction
 
         shaded = self.sources.get("shaded")
-        return dict(type="hello", modes=list(self.sources), size=list(xray.size), window=list(xray.auto_window),
+        return dict(type="hello", modes=list(self.sources), mode="shaded" if shaded and shaded.chosen else "xray",
+                    size=list(xray.size), window=list(xray.auto_window),
                     presets=list(TransferFunction.PRESETS), colour_maps=colours.page_tables(),
                     tf=shaded.start_figures() if shaded else None,
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model(),

@@ -68,6 +68,9 @@ class ShadedSource(Source):
         own = wv.transfer_function
         self.start_tf = None if not self.scalar else transfer_function or (
             TransferFunction.from_dict(own) if own else TransferFunction.preset("grey"))
+        #: a transfer function was chosen (given, or the model's own: a volume classified with it): the page opens in
+        #: this mode, where the user's function shows (docs/viewer.md §3)
+        self.chosen = transfer_function is not None or bool(own)
         self._tf = (None, None, None)  # the last (key, transfer function, window): the tracer reuses its table
         self._histogram = (None, None)  # (the tracer's weak reference, its histogram)
 

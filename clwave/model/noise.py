@@ -1,0 +1,145 @@
+"""The noise level of a volume, estimated from its wavelet transform (docs/model.md §2, noise).
+
+Donoho & Johnstone (1994): in the finest diagonal band ('ddd' of level 1) a smooth signal leaves almost nothing and
+white noise of deviation sigma leaves coefficients of deviation ``sigma * a``, ``a`` the band's analysis norm
+(:meth:`~clwave.model.bspline.SplineWavelet.analysis_norm`, cubed: one per axis), so ``sigma = median(|d|) / 0.6745
+/ a``, the median robust to the few large coefficients edges leave.  Two kinds of coefficients are left out, as
+they have less noise: those whose filter reaches past the volume's faces (its zero extension; most of the band of a
+small volume), and the zeros (an empty part of the volume, such as the outside of a field of view, has no noise to
+measure).  A band that does not look like noise (edges or rounding rather than noise: fewer than
+:data:`NOISE_LIKE` of its |d| within three deviations, against 99.7 % for Gaussian noise) gives no estimate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ClwaveWarning, InputError, warn_outside
+
+#: the median of |x| for x standard normal (Phi^-1(3/4))
+MAD_NORMAL = 0.6744897501960817
+#: the least share of the band's |d| within three estimated deviations for the band to count as noise
+NOISE_LIKE = 0.95
+#: the largest noise gain (:func:`noise_gain`) at which ``noise=`` still removes most of the noise (docs/model.md §2)
+GAIN_LIMIT = 4.0
+#: the histogram of |d|: the top 16 bits of a float32 (8 of exponent, 7 of mantissa: bins 0.8 % wide)
+BIN_SHIFT = 16
+
+
+def finest_norm(wavelet) -> float:
+    """The analysis norm of the finest diagonal band: the deviation of its coefficients for unit white noise."""
+    return wavelet.analysis_norm("d", 1) ** 3
+
+
+def interior(wavelet, shape) -> tuple:
+    """The slices (z, y, x) of the finest band of a volume of ``shape`` whose coefficients read voxels alone: k reads
+    the voxels 2k + 2 - L to 2k + 1 (L the filter's length, docs/chunked.md §2).  An axis too short to have
+    any is taken whole."""
+    lo, out = (wavelet.pywt.dec_len - 1) // 2, []
+    for n in shape[:3]:
+        out.append(slice(lo, n // 2) if n // 2 > lo else slice(None))
+    return tuple(out)
+
+
+def magnitudes(values) -> np.ndarray:
+    """The non-zero |d| of some of the band's coefficients (float32)."""
+    values = np.abs(np.asarray(values, np.float32))
+    return values[values != 0]
+
+
+def bins_of(magnitudes) -> np.ndarray:
+    """The histogram bin of each magnitude (float32 >= 0: its bits order as its values)."""
+    return np.ascontiguousarray(magnitudes, np.float32).view(np.uint32) >> BIN_SHIFT
+
+
+def histogram(magnitudes) -> np.ndarray:
+    """int64 (2^16,): the count of ``magnitudes`` in each bin."""
+    return np.bincount(bins_of(magnitudes), minlength=1 << (32 - BIN_SHIFT)).astype(np.int64)
+
+
+def median_rank(hist) -> tuple:
+    """``(rank, bin, below)``: the rank of the lower median, ``(n - 1) // 2``, the bin that holds it, and the count
+    of the bins before that one; the median is the value of rank ``rank - below`` in its bin (a chunked pass reads
+    only those values)."""
+    rank = (int(hist.sum()) - 1) // 2
+    cumulative = np.cumsum(hist)
+    b = int(np.searchsorted(cumulative, rank, side="right"))
+    return rank, b, int(cumulative[b - 1]) if b else 0
+
+
+def sigma_of(hist, median, wavelet):
+    """The voxels' noise deviation from the histogram and lower median of the band's non-zero interior |d|; None
+    where there are none, or they do not look like noise (fewer than :data:`NOISE_LIKE` within 3 deviations,
+    counted by whole bins: a chunked pass finds the same)."""
+    n = int(hist.sum())
+    if n == 0:
+        return None
+    deviation = median / MAD_NORMAL
+    within = hist[:int(bins_of(np.float32([3 * deviation]))[0]) + 1].sum()
+    return deviation / finest_norm(wavelet) if within >= NOISE_LIKE * n else None
+
+
+def measure_noise(wv):
+    """Per channel of the model ``wv``, the noise deviation sigma of its voxels (stored units, None where its band
+    does not look like noise) from its finest diagonal band; None where the model has no detail band (0 levels),
+    holds only part of it (thresholded), or interpolates (its prefilter colours the noise)."""
+    if wv.interpolate:
+        return None
+    sigmas = [None] * wv.channels
+    for g in wv.groups:
+        band, sl = g.bands[-1], g.band_slices()[-1]
+        if wv.levels == 0 or sl.stop - sl.start != band.size:
+            return None
+        inside = (slice(None),) + interior(g.wavelet, wv.shape)
+        for channel, values in zip(g.channels, g.values[:, sl].reshape((-1,) + band.shape)[inside]):
+            mags = magnitudes(values)
+            hist = histogram(mags)
+            rank = median_rank(hist)[0]
+            median = float(np.partition(mags, rank)[rank]) if len(mags) else 0.0
+            sigmas[channel] = sigma_of(hist, median, g.wavelet)
+    return tuple(sigmas)
+
+
+def check_noise_known(sigmas, levels):
+    """Refuse ``noise=`` where the model knows no noise level: ``sigmas`` None (0 levels, or a thresholded model that
+    records none) or None for every channel (no noise measured); one line naming why and the fix."""
+    if levels == 0:
+        raise InputError("noise= needs a model of at least 1 level: the noise is measured in its finest detail band",
+                         cli="--noise needs --levels 1 or more: the noise is measured in the finest detail band")
+    if sigmas is None:
+        raise InputError("noise= needs the model's finest band whole: threshold the model from_volume gave (or open a "
+                         ".clw file that records its noise level)",
+                         cli="--noise needs the volume, or a .clw file that records its noise level (info shows it)")
+    if all(s is None for s in sigmas):
+        said = (f"{{}} found no noise: the finest detail band does not look like noise (fewer than "
+                f"{NOISE_LIKE:.0%} of its coefficients within 3 deviations; Gaussian noise has 99.7 %), as on a "
+                f"clean or sharp volume; use {{}}")
+        raise InputError(said.format("noise=", "keep= or threshold="),
+                         cli=said.format("--noise", "--keep or --threshold"))
+
+
+def band_noise(sigmas) -> np.ndarray:
+    """The deviations ``noise=`` divides a group's channels by: 0 for a channel with no noise measured (its live
+    details are all kept)."""
+    return np.array([0.0 if s is None else s for s in sigmas])
+
+
+def noise_gain(wavelet, band) -> float:
+    """The deviation that white noise of deviation 1 gives a coefficient of ``band`` times the norm of its basis
+    function: 1 in every band of an orthonormal wavelet (Haar); the B-spline wavelets' analysis filters amplify
+    noise in their coarse bands (cubic: 24 at level 3), whose kept coefficients then bring that much noise back."""
+    return float(np.prod([wavelet.analysis_norm(letter, band.level) * wavelet.norm(letter) for letter in band.key]))
+
+
+def warn_noise_gain(groups, levels):
+    """Warn that ``noise=`` removes little noise where a band's :func:`noise_gain` passes :data:`GAIN_LIMIT` (the
+    approximation band, kept whole, holds that much of it): ``groups`` ``(wavelet, bands)`` of a model."""
+    gains = {w.name: max(noise_gain(w, b) for b in bands) for w, bands in groups}
+    name, gain = max(gains.items(), key=lambda item: item[1])
+    if gain <= GAIN_LIMIT:
+        return
+    said = (f"{{}} on {name} wavelets at {levels} levels removes little noise: their coarse bands bring up to "
+            f"{gain:.3g} times the voxels' noise into the model, the approximation band's kept whole; {{}} "
+            f"(docs/model.md §2)")
+    warn_outside(ClwaveWarning(said.format("noise=", "wavelet='linear' or 'haar' (or fewer levels) denoise"),
+                               cli=said.format("--noise", "--wavelet linear or haar (or fewer --levels) denoise")))
