@@ -2,6 +2,7 @@
 footprints vary on, layers of (f_u, f_v), their images against the single-resolution sum and the exact perspective
 line integrals, and isotropic voxels' framebuffers unchanged."""
 
+import functools
 import sys
 from types import SimpleNamespace
 
@@ -94,20 +95,35 @@ def test_coarse_plan_per_axis():
         assert coarse_plan(order, kinds, 0.8, (0.7, 2.5), tol, square=False) == ({k: (1, 1) for k in kinds}, tol)
 
 
+POSES = (((0, 0), True), ((30, 0), True), ((90, 0), True), ((30, 25), False), ((60, -40), False))
+
+
+def _thick_camera(azimuth, elevation):
+    """The image's middle: coarse layers reach beyond its edges by their margins. A cone of 4 degrees (rays up to
+    0.07 off the axis): at 8 (ConeBeam(100, 150)) the slope nodes, which grow as (depth / c)^2 with the slices
+    oblique to the view (docs/known-gaps.md §13), took Shepp-Logan's (60, -40) to 755 M texels, more than PoCL
+    allows on some CI machines."""
+    return _cone(azimuth, elevation, size=40, dso=200.0)
+
+
+@pytest.fixture(scope="module")
+def thick_models(cc):
+    """Each volume's model and its single-resolution images of POSES, made once for both tolerances."""
+    @functools.cache
+    def made(volume):
+        wv = clwave.WaveletVolume.from_volume(_volumes()[volume], "cubic", levels=3)
+        single = clwave.SplatRenderer(wv, device=cc)
+        return wv, [single.render(_thick_camera(*angles)) for angles, _ in POSES]
+    return made
+
+
 @pytest.mark.parametrize("tolerance", [2e-2, 1e-2])
 @pytest.mark.parametrize("volume", [0, 1], ids=["random", "shepp-logan"])
-def test_thick_slices_stay_within_the_tolerance_in_perspective(cc, tolerance, volume):
-    wv = clwave.WaveletVolume.from_volume(_volumes()[volume], "cubic", levels=3)
-    single = clwave.SplatRenderer(wv, device=cc)
+def test_thick_slices_stay_within_the_tolerance_in_perspective(cc, thick_models, tolerance, volume):
+    wv, singles = thick_models(volume)
     coarse = clwave.SplatRenderer(wv, device=cc, coarse=tolerance)
-    poses = (((0, 0), True), ((30, 0), True), ((90, 0), True), ((30, 25), False), ((60, -40), False))
-    for angles, across in poses:
-        # the image's middle: coarse layers reach beyond its edges by their margins. A cone of 4 degrees (rays up to
-        # 0.07 off the axis): at 8 (ConeBeam(100, 150)) the slope nodes, which grow as (depth / c)^2 with the slices
-        # oblique to the view (docs/known-gaps.md §13), took Shepp-Logan's (60, -40) to 755 M texels, more than PoCL
-        # allows on some CI machines
-        cam = _cone(*angles, size=40, dso=200.0)
-        want, got = single.render(cam), coarse.render(cam)
+    for (angles, across), want in zip(POSES, singles):
+        got = coarse.render(_thick_camera(*angles))
         layers = got.meta["framebuffers"]
         assert any(isinstance(f, list) for f in layers) == across  # (f_u, f_v) layers where z is across the view
         assert all(f[1] > f[0] for f in layers if isinstance(f, list))  # coarser along the slices (v)

@@ -4,6 +4,7 @@
 nodes 2 and 3 times closer (refined bands, docs/splatting.md §8); each stage gets its inputs from the oracles of the
 stages before it, as tests/test_splat_kernels.py does for orthographic views."""
 
+import functools
 from types import SimpleNamespace
 
 import numpy as np
@@ -68,9 +69,10 @@ def cone_scene(rng, n=300):
                 n=n, first=7, textures=textures)
 
 
-@pytest.fixture
-def scene(rng):
-    s = cone_scene(rng)
+@pytest.fixture(scope="module")
+def scene():
+    """The scene, shared by the module's tests (they only read it)."""
+    s = cone_scene(np.random.default_rng(12345))
     s["centre"], s["bbox"], s["stex"], s["count"], s["slack"] = reference.project_cone(
         s["coef"], s["first"], s["band_tex"], s["band_world"], s["band_step"], s["tex_box"], s["tex_layer"],
         s["layers"], s["layer_slope"], s["cone"], s["n"])
@@ -123,8 +125,27 @@ def test_place_cone_records(cc, scene):
     assert np.array_equal(records.get(), expected)
 
 
+@pytest.fixture(scope="module")
+def accumulated(scene):
+    """The oracle's framebuffer (splats over 0.5) for a number of channels: made once for both work-group layouts,
+    which must give the same sums (about 13 CPU s each)."""
+    @functools.cache
+    def expected(channels):
+        fb = 0.5
+        for r in set(REFINE):  # each refinement's own slope grid (r times the nodes), the others' textures 0
+            cone = scene["cone"].copy()
+            cone[5] = (*(r * cone[5, :2]), *((cone[5, 2:] - 1) * r + 1))
+            textures = [t if own == r else (np.zeros((int(cone[5, 2] * cone[5, 3]), 1, 1)), 0, 0, 1, 1)
+                        for t, own in zip(scene["textures"], REFINE)]
+            fb = fb + reference.accumulate_cone(
+                scene["ranges"], scene["vals"], scene["first"], scene["centre"], scene["bbox"], scene["stex"],
+                scene["values"], textures, scene["layers"], scene["layer_slope"], cone, channels)
+        return fb
+    return expected
+
+
 @pytest.mark.parametrize("variant, channels", [("cpu", 4), ("cpu", 1), ("gpu", 4), ("gpu", 1)])
-def test_accumulate_cone(cc, scene, variant, channels):
+def test_accumulate_cone(cc, scene, accumulated, variant, channels):
     st, q = Stages(cc, channels, variant, perspective=True), cc.queue
     d = upload(q, scene)
     records = cla.to_device(q, reference.records(scene["ranges"], scene["vals"], scene["first"], scene["centre"],
@@ -132,15 +153,7 @@ def test_accumulate_cone(cc, scene, variant, channels):
                                                  channels))
     fb = cla.to_device(q, np.full((PIXELS, 4), 0.5, np.float32))
     st.accumulate(TILES, len(LAYERS), d, cla.to_device(q, scene["ranges"]), records, fb)
-    expected = 0.5
-    for r in set(REFINE):  # the oracle's slope grid is each refinement's (r times the nodes), the others' textures 0
-        cone = scene["cone"].copy()
-        cone[5] = (*(r * cone[5, :2]), *((cone[5, 2:] - 1) * r + 1))
-        textures = [t if own == r else (np.zeros((int(cone[5, 2] * cone[5, 3]), 1, 1)), 0, 0, 1, 1)
-                    for t, own in zip(scene["textures"], REFINE)]
-        expected = expected + reference.accumulate_cone(
-            scene["ranges"], scene["vals"], scene["first"], scene["centre"], scene["bbox"], scene["stex"],
-            scene["values"], textures, scene["layers"], scene["layer_slope"], cone, channels)
+    expected = accumulated(channels)
     assert np.abs(expected - 0.5).max() > 1  # splats did land
     got = fb.get()
     assert np.abs(got - expected).max() <= 1e-5 * np.abs(expected).max()

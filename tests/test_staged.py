@@ -488,11 +488,14 @@ def line_energies(coefficients, prototypes, direction, h=1 / 6) -> tuple:
 
     def field(points):  # (..., 3), a slab of points at a time: sum_k c_k prod_a f_a(p_a - k_a), axis by axis
         flat, out = points.reshape(-1, 3), np.empty(points.shape[:-1]).reshape(-1)
+        ni, nj, nk = coefficients.shape
         for lo_ in range(0, len(flat), 2 ** 14):
             p = flat[lo_:lo_ + 2 ** 14]
-            factors = [f(p[:, a, None] - np.arange(n)) for a, ((f, _), n) in enumerate(zip(prototypes,
-                                                                                           coefficients.shape))]
-            out[lo_:lo_ + 2 ** 14] = np.einsum("ijk,pi,pj,pk->p", coefficients, *factors, optimize=True)
+            fi, fj, fk = (f(p[:, a, None] - np.arange(n)) for a, ((f, _), n) in enumerate(zip(prototypes,
+                                                                                           coefficients.shape)))
+            # the last axis summed first, one matrix product (einsum over all three at once: 4/5 of the test's time)
+            inner = (fk @ coefficients.reshape(ni * nj, nk).T).reshape(-1, ni, nj)
+            out[lo_:lo_ + 2 ** 14] = np.einsum("pij,pi,pj->p", inner, fi, fj)
         return out.reshape(points.shape[:-1])
 
     axes = [np.arange(a + h / 2, b, h) for a, b in zip(lo, hi)]

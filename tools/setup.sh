@@ -75,7 +75,9 @@ case "$mode" in
             apt_install clang || echo "clwave setup: without clang the kernels' portability tests are skipped" >&2
         fi
         say "running the tests"
-        "$VENV/bin/python" -m pytest -q
+        # two workers, each given whole files (their module fixtures built once): one process's main thread does
+        # three quarters of its CPU (kernel builds, NumPy oracles), so a second core is otherwise idle much of the time
+        "$VENV/bin/python" -m pytest -q -n 2 --dist loadfile
         ;;
     --peers)
         say "installing the peers and figures extras (VTK, matplotlib, nilearn) into $VENV"
