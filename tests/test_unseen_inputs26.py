@@ -79,3 +79,32 @@ def test_a_cone_beam_drr_of_hounsfield_units_on_thick_slices_against_a_dense_mar
     assert not values.reshape(len(t), -1)[[0, -1]].any()  # the model is zero at both ends of every ray
     image = clwave.splat(wv, cb).image[..., 0]
     assert exact.max() > 0.3 and np.abs(image - exact).max() <= 1e-2 * exact.max()
+
+
+def test_a_function_that_shows_the_outside_value_is_warned_of(tmp_path):
+    # attack26's shell: data of -900 .. -800 under opacity rising from -900, the model 0 beyond the faces (clamped to
+    # -800 as classified): an opaque box; the same data with subtract=-1000 and a function transparent there: none
+    data = (100 * _smooth((13, 11, 17)) - 900).astype(np.float32)
+    tf = clwave.TransferFunction([(-900, .9, .5, .2, 0.0), (-800, .9, .5, .2, 0.4)])
+    cam = clwave.Camera(30, 20, 16)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
+    with pytest.warns(clwave.ClwaveWarning, match=r"^the transfer function gives -800, the value the model takes "
+                                                  r"beyond the volume's faces .* opacity of 0\.4: .* subtract="):
+        clwave.raytrace(wv, cam, transfer_function=tf, shading=False)
+    # the box it warns of: its silhouette's corner pixels are nearly opaque, as the pre-classified model's are not
+    post = clwave.raytrace(wv, cam, transfer_function=tf, shading=False).image[..., 3]
+    pre = clwave.raytrace(clwave.WaveletVolume.from_volume(tf.classify(clwave.Volume(data)), levels=1), cam,
+                          shading=False).image[..., 3]
+    assert np.abs(post - pre).max() > 0.5
+    shifted = clwave.WaveletVolume.from_volume(clwave.load(_npy(tmp_path, data), subtract=-1000), levels=1)
+    clear = clwave.TransferFunction([(-850, .9, .5, .2, 0.0), (-800, .9, .5, .2, 0.4)])  # 0 at -1000 (the outside)
+    import warnings
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        clwave.raytrace(shifted, cam, transfer_function=clear, shading=False)
+    assert not [w for w in seen if "beyond the volume's faces" in str(w.message)]
+
+
+def _npy(tmp_path, data):
+    np.save(tmp_path / "v.npy", data)
+    return tmp_path / "v.npy"

@@ -24,7 +24,7 @@ from scipy.special import comb
 from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.kernels import BUFFER, Kernel, in_row_bands
-from ..errors import InputError, NearlyOpaqueWarning, warn_outside
+from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, warn_outside
 from ..model.tf_passes import auto_window
 from ..model.transfer import TransferFunction
 from ..model.transform import sampling_kernel
@@ -471,3 +471,30 @@ def warn_opaque(scalar: ScalarRange, tf: TransferFunction, told: set):
     if line is not None:
         warn_outside(NearlyOpaqueWarning(line + " (transfer_function=TransferFunction(..., window=, opacity_unit=))",
                                          cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))
+
+
+#: the least opacity (per opacity unit) at the model's outside value that :func:`warn_outside_value` tells
+OUTSIDE_OPACITY = 1 / 255
+
+
+def warn_outside_value(scalar: ScalarRange, tf: TransferFunction, told: set):
+    """Warn where ``tf`` gives the value the model takes beyond its voxels and on its empty ones an opacity of at
+    least :data:`OUTSIDE_OPACITY`: the model is 0 there (docs/model.md §3, docs/raytracing.md §4), the input's
+    ``subtracted`` as classified (clamped to the input's range, §10), so the box's faces render as a shell and empty
+    space as fog (docs/known-gaps.md §15).  Once per function in ``told`` (a tracer's)."""
+    key = ("outside", json.dumps(tf.to_dict()))
+    if key in told:
+        return
+    told.add(key)
+    seen = clamped(scalar.stored(tf), scalar.value_range)
+    alpha = float(seen(np.zeros(1))[1][0])
+    if alpha >= OUTSIDE_OPACITY:
+        outside = scalar.subtracted if scalar.value_range is None else \
+            min(max(scalar.subtracted, scalar.value_range[0] + scalar.subtracted),
+                scalar.value_range[1] + scalar.subtracted)
+        line = (f"the transfer function gives {outside:.6g}, the value the model takes beyond the volume's faces and "
+                f"on its empty voxels, an opacity of {alpha:.3g}: the faces render as a shell and empty space as fog")
+        warn_outside(ClwaveWarning(
+            line + "; make the model with subtract= a value the function leaves transparent (CT in HU: -1000)",
+            cli=line + "; compress or render with --subtract VALUE, one the function leaves transparent (CT in HU: "
+                       "--subtract -1000)"))
