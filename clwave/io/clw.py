@@ -9,8 +9,8 @@ Layout (version 2)::
                     whole file's model's RMS error against its input, relative to its largest |value|, where
                     ``clwave compress`` measured it: :func:`record_error`), unit (the world unit, absent: unknown),
                     photo (true: a photo's colour and alpha, not classified; absent: false), noise_sigma (per
-                    channel the voxels' noise deviation, null where not noise-like; null or absent: not recorded), levels,
-                    channels, groups, ...),
+                    channel the voxels' noise deviation, null where not noise-like; null or absent: not recorded),
+                    levels, channels, groups, ...),
                     header_crc32 (zlib's CRC-32 of the header's UTF-8 bytes)
     content_mask    uint8 (nz, ny, nx): the source volume's non-zero voxels (optional)
     g<i>/occupancy  uint8, bits packed along x: which coarsest-approximation coefficients the content occupies
