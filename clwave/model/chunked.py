@@ -207,12 +207,12 @@ class ChunkedWaveletVolume:
         if not all(_keeps_every(rules) for rules in self.rules):
             raise InputError("this chunked model is thresholded already: threshold the model from_volume gave, or "
                              "compute() this one and threshold that")
-        if noise is not None:  # refused or told before the passes
-            if self.levels == 0:
+        sigma = self.noise_sigma
+        if noise is not None:
+            if self.levels == 0:  # refused, and the gain told, before the passes
                 check_noise_known(None, 0)
             warn_noise_gain([(w, band_layout(w, self.shape, self.levels)) for w, _ in self.groups()], self.levels)
-        sigma = self.noise_sigma if noise is None else self.measure_noise()
-        if noise is not None:
+            sigma = self.measure_noise()
             check_noise_known(sigma, self.levels)
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         if budget is None:  # a threshold, or keep=1: every live coefficient

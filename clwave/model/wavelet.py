@@ -315,8 +315,8 @@ class WaveletVolume:
         short = 0  # the most approximation coefficients of a group the budget cannot hold
         for g in self.groups:
             # one float32 per position, no index array of them all (the peak of compressing, docs/benchmarks.md §2)
-            imp = out.importance(g) if noise is None else \
-                importance_of(g, focus, self.frame, band_noise([self.noise_sigma[c] for c in g.channels]))
+            imp = importance_of(g, focus, self.frame,
+                                None if noise is None else band_noise([self.noise_sigma[c] for c in g.channels]))
             zero = g.values[0] == 0
             for row in g.values[1:]:
                 zero &= row == 0
