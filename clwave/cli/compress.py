@@ -25,7 +25,7 @@ def run(args):
             pass  # check_quantise names it
     quantise = check_quantise(quantise)  # before any work
     volume = None if is_clw(args) else read_volume(args)
-    wv, reference = build_model(args, gather=False, volume=volume)
+    wv, reference = build_model(args, gather=False, volume=volume, noise=True)
     with published_together() as outputs:  # the error measured before the file is published (coordinates.md §4)
         start = time.perf_counter()
         wv.save(out, overwrite=args.force, quantise=quantise)

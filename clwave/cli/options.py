@@ -251,7 +251,7 @@ def _needs_rgba(name, channels, fix) -> InputError:
 
 
 def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, opener=None, post=False,
-                hu_hint=True, volume=None):
+                hu_hint=True, volume=None, noise=False):
     """Read, classify (``--tf``), decompose and threshold as the options say; every option is
     checked before the work starts.  ``rgba``: the caller needs 4 channels (shaded ray tracing).
     ``post`` (implied by ``rgba``): a scalar ``.clw`` input takes ``--tf``/``--tf-window``, the transfer function
@@ -264,8 +264,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     (the render runs there).  ``opener``: a ``.clw`` input with ``--keep`` alone (or none) is ``opener(path, keep)``
     instead of the model read (``clwave view`` opens it by its prefix first).  ``hu_hint``: a volume (chunked too) that
     looks like CT in Hounsfield units gets a warning (docs/coordinates.md §1).  ``volume``: the input read already
-    (:func:`read_volume`), for a caller that reports on it.
-    """
+    (:func:`read_volume`), for a caller that reports on it.  ``noise``: a volume read whole has its noise measured
+    (:meth:`~clwave.WaveletVolume.measure_noise`, before thresholding), for a caller that records it."""
     from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
     from ..model.budget import warn_stored
@@ -353,7 +353,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
         why = (f"the transfer function{f' {tf.name}' if tf.name else ''} gives no voxel of this volume (read chunk by "
                f"chunk) any opacity; give a window in the input's units (--tf-window LO,HI) or another preset")
         raise NothingVisibleError(why + (" (--hu-to-mu turned HU into attenuation per mm)" if args.hu_to_mu else ""))
-    if not vol.chunked:  # measured before thresholding (a partial sort): the file records it, compress reports by it
+    if noise and not vol.chunked:  # before thresholding (a partial sort): compress records it and reports by it
         wv.measure_noise()
     default = args.keep is None and args.threshold is None and args.noise is None
     with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
