@@ -34,10 +34,11 @@ def render_parts(client, task, source, parts, *args) -> list:
     the renderer ``make(model, cap)`` builds for this file, part, device, cap and ``key`` (the other options it
     depends on), kept there for later views; ``cap`` is its share of the device (:func:`worker_cap`) among the
     parts on that worker's machine."""
-    info = client.scheduler_info().get("workers", {})
-    workers = sorted(info)
+    from distributed.comm import get_address_host
+
+    workers = sorted(client.nthreads())
     chosen = [workers[i % len(workers)] if workers else None for i in range(len(parts))]
-    hosts = [info[w].get("host") if w else None for w in chosen]
+    hosts = [get_address_host(w) if w else None for w in chosen]
     futures = [client.submit(_run_part, task, source, part, hosts.count(host), args, pure=False,
                              workers=None if worker is None else [worker])
                for part, worker, host in zip(parts, chosen, hosts)]
@@ -57,8 +58,9 @@ def worker_cap(device, device_memory, sharing: int):
 
 
 def workers_of(client) -> int:
-    """How many workers the cluster has (at least 1)."""
-    return max(1, len(client.scheduler_info().get("workers", {})))
+    """How many workers the cluster has (at least 1), asked of the scheduler: ``client.scheduler_info()`` may
+    answer with the client's periodic refresh, which lists no workers (distributed 2026.8)."""
+    return max(1, len(client.nthreads()))
 
 
 def _run_part(task, source, part, sharing, args):
