@@ -236,12 +236,18 @@ def test_compress_and_render_a_cube_through_the_command_line(tmp_path, capsys, r
     assert code == 0, err
 
 
-def test_oblong_sky_pixels_keep_their_aspect(tmp_path, rng):
-    """Dec pixels twice the RA pixels' size: z spaced 2, the rest 1 (pixels); info names it as the file's."""
+def test_oblong_sky_pixels_keep_their_aspect(tmp_path, rng, capsys):
+    """Dec pixels twice the RA pixels' size: z spaced 2, the rest 1 (pixels); info names it as the file's, and the
+    --spacing it prints keeps that aspect and makes the 3 channels as deep as the 4 Dec pixels of 2 are tall (8)."""
     cube = rng.normal(size=(3, 4, 5)).astype(np.float32)
     path = write(tmp_path / "o.fits", cube, -32, SKY | dict(CDELT2=0.002))
     assert clwave.load(path).spacing == (2.0, 1.0, 1.0)
     assert describe(path)["spacing"] == [2.0, 1.0, 1.0]
+    code, out, err = run(capsys, "info", str(path))
+    assert code == 0, err
+    assert "--spacing 2,1,2.6666667 makes the spectral axis as deep as the sky is wide" in out
+    vol = clwave.load(path, spacing=(2.0, 1.0, 2.6666667))
+    assert vol.data.shape[2] * vol.spacing[2] == pytest.approx(vol.data.shape[0] * vol.spacing[0], rel=1e-6)
 
 
 def test_a_grid_turned_on_the_sky_goes_by_its_nearest_axes_with_a_warning(tmp_path, rng):
