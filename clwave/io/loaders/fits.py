@@ -113,11 +113,16 @@ def samples(header) -> np.dtype:
 
 def _image_header(path, index, header):
     """The header of a cube's image: its own, or a tile-compressed image's as astropy makes it of its table's (ZBITPIX,
-    ZNAXISn...; opening it reads no pixel)."""
-    if header.get("ZIMAGE") is not True:
-        return header
-    with _opened(path) as hdul:
-        return hdul[index].header
+    ZNAXISn...; opening it reads no pixel); its scaling (BSCALE, BZERO) refused in one line where it is no number."""
+    if header.get("ZIMAGE") is True:
+        with _opened(path) as hdul:
+            header = hdul[index].header
+    for key in ("BSCALE", "BZERO"):
+        value = header.get(key)
+        if value is not None and (type(value) not in (int, float) or not math.isfinite(value)):
+            raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, not a finite number; the header is "
+                                  "corrupt")
+    return header
 
 
 def _checked(path, index, header, prefix):
