@@ -9,8 +9,8 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .options import (READING, add_reading_options, error_words, file_size, flag, is_given, kept_words, numbers, option,
-                      parse_series, parse_spacing)
+from .options import error_words, file_size, kept_words
+from .reading import READING, add_reading_options, flag, is_given, numbers, option, parse_series, parse_spacing
 
 
 def run(args):
