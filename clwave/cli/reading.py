@@ -47,8 +47,8 @@ def add_input_options(p):
 
 
 #: the options of :func:`add_reading_options`, as ``args`` names them
-READING = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level", "chunks",
-           "orientation", "unit", "labels")
+READING = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level", "frame",
+           "chunks", "orientation", "unit", "labels")
 
 
 def add_reading_options(p):
@@ -77,6 +77,9 @@ def add_reading_options(p):
     g.add_argument("--nan", type=float, metavar="VALUE", help="the value of NaN voxels (no data: FSL and SPM write "
                    "NaN outside their masks), in the input's units, e.g. 0; without it NaN is refused")
     g.add_argument("--level", type=int, help="OME-Zarr: the multiscale level to read (default 0, the finest)")
+    g.add_argument("--frame", type=int, metavar="K", help="a time series (a 4-D NIfTI, MGH frames, a TIFF's axis T, "
+                   "an OME-Zarr's axis t, a FITS cube's planes, Stokes I/Q/U/V): the 0-based time point to read, "
+                   "negative from the end (-1: the last); 'clwave info FILE' lists them")
     g.add_argument("--chunks", help="read chunk by chunk, never whole (docs/chunked.md): auto, off, or a chunk "
                                     "edge N (default: Zarr and HDF5 always, .npy/.raw/.nii/TIFF from 1 GiB)")
 
@@ -110,7 +113,8 @@ def read_volume(args):
                    hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, FITS, TIFF; "
                         "gunzip a .nii.gz first, a .mgz into a .mgh), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
-                series=parse_series(args.series), level=args.level, chunks=parse_chunks(args.chunks),
+                series=parse_series(args.series), level=args.level, frame=args.frame,
+                chunks=parse_chunks(args.chunks),
                 nan=args.nan, subtract=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits,
                 orientation=args.orientation, unit=args.unit, labels=args.labels)
 

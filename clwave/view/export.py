@@ -32,7 +32,7 @@ SAVE_PIXEL_BYTES = 200
 #: opacity unit in the tab's function)
 TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
 #: the reading options that clwave.load takes by the same name
-LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level",
+LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level", "frame",
                 "orientation", "unit", "labels")
 
 
