@@ -281,10 +281,11 @@ class ScalarRange:
 def data_box(shape, order) -> tuple:
     """(lo, hi), (x, y, z) grid-0 fine coordinates: the box of the outermost voxel centres of a volume of ``shape``
     (z, y, x) modelled at ``order``, the bounds of VTK's image data, beyond which post-classification sees nothing
-    (docs/raytracing.md §10); an axis of one voxel keeps that voxel's thickness."""
+    (docs/raytracing.md §10); a Haar model's (the voxels themselves, boxes) and an axis of one voxel keep the
+    outermost voxels' whole thickness."""
     n = np.array(shape[::-1], float)
-    thin = (n == 1) * 0.5
-    return order / 2.0 - thin, n - 1 + order / 2.0 + thin
+    whole = 0.5 * ((n == 1) | (order == 1))
+    return order / 2.0 - whole, n - 1 + order / 2.0 + whole
 
 
 def face_values(wv) -> np.ndarray:

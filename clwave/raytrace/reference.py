@@ -445,9 +445,9 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     evaluate = _content_field(wv, detail) if wv.content_mask is not None or detail else _model_field(wv)
     out = np.zeros((H, W, 4))
     floor = tr.scalar.classify(transfer_function, tr.cc, np.float64).grad_floor  # the kernel's flat gradients
-    # the data's bounds: its outermost voxel centres in world units (an axis of one voxel keeps its thickness)
+    # the data's bounds: its outermost voxel centres in world units (Haar's voxels and an axis of one voxel whole)
     extent = np.array(wv.shape[::-1], float) - 1
-    extent[extent == 0] = 1.0
+    extent[(extent == 0) | (tr.orders[0] == 1)] += 1
     data = [np.asarray(wv.origin) + sign * extent / 2 * np.array(wv.spacing[::-1]) for sign in (-1, 1)]
     for r, c in np.ndindex(H, W):
         p, w = _ray(view, r, c)
