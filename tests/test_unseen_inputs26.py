@@ -143,3 +143,27 @@ def test_hounsfield_units_render_without_subtract(tmp_path, preset):
 def _npy(tmp_path, data):
     np.save(tmp_path / "v.npy", data)
     return tmp_path / "v.npy"
+
+
+def test_fog_in_passes_reaches_regions_without_bricks(monkeypatch):
+    """Bricks in a scratch file are traced in passes over regions of bricks; a function that shows the field's 0 is
+    seen where no brick lies too, so the passes take the regions of the data's box without bricks as well: random
+    content in one half of a long volume, zeros in the other, the same image as the bricks on the device, and the
+    zeros' fog 1 - exp(-0.02 * 23) across the 23 voxel lengths between the outermost centres."""
+    from clwave.raytrace import bricks
+
+    fits = bricks._check_fits
+    monkeypatch.setattr(bricks, "_check_fits", lambda *args: fits(*args) and None)  # never on the device
+    shape = (2048, 24, 24)
+    data = np.random.default_rng(1).random(shape).astype(np.float32)
+    data[shape[0] // 2:] = 0
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
+    tf = clwave.TransferFunction([(0, 1, 1, 1, 0.02), (1, 1, 0.5, 0, 0.3)])
+    cam = clwave.Camera(90, 0, (64, 5), extent=2100)
+    parts = clwave.RayTracer(wv, device_memory="8MiB").render(cam, tolerance=1e-3, transfer_function=tf,
+                                                               shading=False)
+    monkeypatch.setattr(bricks, "_check_fits", fits)
+    whole = clwave.RayTracer(wv).render(cam, tolerance=1e-3, transfer_function=tf, shading=False)
+    assert parts.meta["pool"] == "scratch file" and parts.meta["passes"] > 1 and whole.meta["pool"] == "device"
+    assert np.abs(parts.image - whole.image).max() <= 1e-3
+    assert np.any(np.abs(parts.image[..., 3] - (1 - np.exp(-0.02 * 23))) <= 1e-3)

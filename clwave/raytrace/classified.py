@@ -122,6 +122,7 @@ class Classification:
     seconds: float          # what the change of transfer function cost
     range: cla.Array        # the detail's range per block that the bounds come from
     opacity: float          # the largest opacity it gives any block: 0, nothing to see
+    shows_zero: bool        # it gives the field's 0 (where no brick lies) an opacity: the box is the data's
 
 
 class ScalarRange:
@@ -268,11 +269,12 @@ class ScalarRange:
         values = stored.data_points()
         floor = max(self.noise_floor, FLAT * (values[-1] - values[0]) / self.spacing)
         lo, hi = self.data_box  # where the field is 0 (no brick) the function sees 0: visible only if it shows 0
-        if not stored(np.zeros(1))[1][0]:
+        shows_zero = bool(stored(np.zeros(1))[1][0])
+        if not shows_zero:
             lo, hi = np.maximum(lo, at.box[0]), np.minimum(hi, at.box[1])
         self.last = Classification(tf, window, cla.to_device(q, table.astype(real)), bound, super_bound,
                                    at.super_origin, (lo, hi), floor, 0.0, ranges,
-                                   float(super_bound.get().max(initial=0.0)))
+                                   float(super_bound.get().max(initial=0.0)), shows_zero)
         q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last

@@ -415,7 +415,8 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     """(H, W, 4) float64 image of a scalar model through ``transfer_function`` (post-classification), by brute
     force: no skipping, no early termination, no adaptivity (docs/raytracing.md §10), the scalar clamped to the
     input's range where the model knows it (``np.clip``, and cuts where it meets the range's ends), each ray
-    integrated over the data's bounds only: the box of its outermost voxel centres in world units.
+    integrated over the data's bounds only: the box of its outermost voxel centres in world units (a Haar model's
+    voxels, and an axis of one voxel, whole).
 
     On each fine knot segment the scalar and its gradient are polynomials, fitted exactly from the model at ten
     Chebyshev points, sixteen for order 6 (:meth:`WaveletVolume.evaluate` / ``gradient``, or the B-spline

@@ -344,7 +344,7 @@ class RayTracer:
                     f"{format_size(self.budget.total)} are allowed; render a smaller image, or make the tracer with "
                     f"a smaller device_memory= (--device-memory) so that its bricks render in passes")
         if self.field == "bspline" and not self.bricks.resident:
-            passes = region_passes(self, view, scale, offset, per_pixel, at)
+            passes = region_passes(self, view, scale, offset, per_pixel, at, post is not None and post.shows_zero)
         elif self.region is not None:
             f = self.bricks
             lo = np.append(self.region[0], f.origin[1:]) * BRICK
