@@ -85,6 +85,7 @@ def find_cube(path):
                     if min(dims) < 1:
                         raise FileFormatError(f"{path}: its HDU {index} declares {' x '.join(map(str, dims))} "
                                               "pixels; each axis needs at least one")
+                    _check_scaling(path, index, header, len(dims) if tiled else 0)
                     return index, header, dims
                 seen.append(f"{index}: a {len(dims)}-D image" if dims else f"{index}: no data")
             else:
@@ -136,6 +137,30 @@ def _checked(path, index, header, prefix):
         raise FileFormatError(f"{path}: its HDU {index} declares {' x '.join(map(str, axes))} pixels "
                               f"({prefix}NAXISn); a length cannot be negative: the header is corrupt")
     return bitpix, axes
+
+
+def _check_scaling(path, index, header, tiled):
+    """Refuse a cube's BSCALE or BZERO that is no number, beyond float32's range (its voxels would be) or, BSCALE, 0
+    (every pixel BZERO), and a tile-compressed image's ZTILEn below 1 (``tiled``: its number of axes, else 0), in
+    one line before astropy scales or tiles with them."""
+    top = float(np.finfo(np.float32).max)
+    for key in ("BSCALE", "BZERO"):
+        value = header.get(key)
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            problem = "not a number"
+        elif not abs(value) <= top:  # NaN too
+            problem = "beyond float32's range (3.4e38), which clwave computes in"
+        elif key == "BSCALE" and value == 0:
+            problem = "which maps every pixel to BZERO"
+        else:
+            continue
+        raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, {problem}; the header is corrupt")
+    for n in range(1, tiled + 1):
+        if (tile := _whole(path, index, header, f"ZTILE{n}", 1)) < 1:
+            raise FileFormatError(f"{path}: its HDU {index} has ZTILE{n} = {tile}; a tile needs at least one pixel: "
+                                  "the header is corrupt")
 
 
 def _whole(path, index, header, key, default=None):
@@ -254,7 +279,7 @@ def _read(path, index, naxis, kept, key):
     for k, a in zip(key, kept[::-1]):
         full[naxis - 1 - a] = k
     full[-1] = slice(None)  # whole rows, cut after: astropy reads a block of them at once, a part of a row at a time
-    with _opened(path) as hdul:
+    with _opened(path) as hdul, np.errstate(over="ignore", invalid="ignore"):  # past float32: Volume names it
         data = np.asarray(hdul[index].section[tuple(full)])  # big-endian as stored, unless scaled
     data = data.reshape([n for i, n in enumerate(data.shape) if naxis - 1 - i in kept])[..., key[-1]]
     return data.astype(data.dtype.newbyteorder("="), copy=False)  # as samples() says: a .clw records "float32"
