@@ -137,3 +137,20 @@ def test_a_nifti_whose_voxels_start_inside_its_header_is_refused(tmp_path, capsy
     assert_refused_in_one_line(capsys, tmp_path / f"w{suffix}", r"its vox_offset 0 puts its voxels inside its 352-byte "
                                                                 r"header")
     np.testing.assert_array_equal(clwave.load(tmp_path / "v.nii").data.shape, (6, 5, 4))  # as written: read
+
+
+def test_an_hdf5_volume_of_tiny_chunks_is_refused_before_it_is_read(tmp_path, capsys):
+    """A 64³ uint8 volume (256 KiB) stored in 1-voxel chunks: HDF5 keeps about 4 KB for each chunk a read spans, and
+    its 262,144 took the render past 3.3 GB, refused as "truncated or corrupt" ("memory allocation failed for
+    chunk") under a 4 GiB address-space limit. 40³ in 1-voxel chunks (64,000) is refused; in 4³ chunks, read."""
+    import h5py
+
+    data = np.arange(40 ** 3, dtype=np.uint32).reshape(40, 40, 40).astype(np.uint8)
+    for edge in (1, 4):
+        with h5py.File(tmp_path / f"c{edge}.h5", "w") as fh:
+            fh.create_dataset("vol", data=data, chunks=(edge,) * 3)
+    with pytest.raises(FileFormatError, match=r"its chunks of 1 x 1 x 1 voxels, 64,000 of them, are too small"):
+        clwave.load(tmp_path / "c1.h5")
+    code, out, err = run(capsys, "info", str(tmp_path / "c1.h5"))
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "h5repack" in err, err
+    np.testing.assert_array_equal(clwave.load(tmp_path / "c4.h5", chunks=False).data, data)
