@@ -236,12 +236,18 @@ def test_compress_and_render_a_cube_through_the_command_line(tmp_path, capsys, r
     assert code == 0, err
 
 
-def test_oblong_sky_pixels_keep_their_aspect(tmp_path, rng):
-    """Dec pixels twice the RA pixels' size: z spaced 2, the rest 1 (pixels); info names it as the file's."""
+def test_oblong_sky_pixels_keep_their_aspect(tmp_path, rng, capsys):
+    """Dec pixels twice the RA pixels' size: z spaced 2, the rest 1 (pixels); info names it as the file's, and the
+    --spacing it prints keeps that aspect and makes the 3 channels as deep as the 4 Dec pixels of 2 are tall (8)."""
     cube = rng.normal(size=(3, 4, 5)).astype(np.float32)
     path = write(tmp_path / "o.fits", cube, -32, SKY | dict(CDELT2=0.002))
     assert clwave.load(path).spacing == (2.0, 1.0, 1.0)
     assert describe(path)["spacing"] == [2.0, 1.0, 1.0]
+    code, out, err = run(capsys, "info", str(path))
+    assert code == 0, err
+    assert "--spacing 2,1,2.6666667 makes the spectral axis as deep as the sky is wide" in out
+    vol = clwave.load(path, spacing=(2.0, 1.0, 2.6666667))
+    assert vol.data.shape[2] * vol.spacing[2] == pytest.approx(vol.data.shape[0] * vol.spacing[0], rel=1e-6)
 
 
 def test_a_grid_turned_on_the_sky_goes_by_its_nearest_axes_with_a_warning(tmp_path, rng):
@@ -282,6 +288,8 @@ def _edit(content, key, value=None, card=None):
     ("float", r"has BITPIX = 16.0, none FITS has"),
     ("missing", r"its HDU 0 has no NAXIS3; the header is corrupt"),
     ("groups", r"has GCOUNT = 1, PCOUNT = -5760; a count cannot be negative"),
+    ("scale", r"has BSCALE = 'abc', not a finite number; the header is corrupt"),
+    ("offset", r"has BZERO = True, not a finite number; the header is corrupt"),
     ("cut", r"declares 5 x 4 x 3 voxels \(120 bytes\) but the file holds 100 bytes"),
     ("not fits", r"is not a FITS file \(it does not begin with SIMPLE = T\)"),
     ("image", r"holds no image of 3 or more axes \(its HDUs: 0: a 2-D image\); clwave reads data cubes"),
@@ -298,6 +306,8 @@ def test_a_lying_or_truncated_header_is_refused_in_one_line(tmp_path, capsys, ca
                "float": lambda: _edit(content, "BITPIX", 16.0),
                "missing": lambda: _edit(content, "NAXIS3", card="COMMENT"),
                "groups": lambda: _edit(content, "CRPIX3", card=_card("PCOUNT", -5760)),
+               "scale": lambda: _edit(content, "CRPIX3", card=_card("BSCALE", "abc")),
+               "offset": lambda: _edit(content, "CRPIX3", card=_card("BZERO", True)),
                "cut": lambda: content[:2880 + 100],
                "not fits": lambda: b"\x89PNG" + content[4:],
                "image": lambda: fits_bytes(np.zeros((4, 5), np.int16), 16),

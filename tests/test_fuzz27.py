@@ -20,12 +20,10 @@ from test_mgh import assert_refused_in_one_line
     ({"BSCALE": 0.0}, r"BSCALE = 0\.0, which maps every pixel to BZERO"),
     ({"BSCALE": 1e308}, r"BSCALE = 1e\+308, beyond float32's range"),
     ({"BZERO": -1e308}, r"BZERO = -1e\+308, beyond float32's range"),
-    ({"BSCALE": "x"}, r"BSCALE = 'x', not a number"),
 ])
 def test_a_fits_scaling_no_float32_cube_holds_is_refused_by_name(tmp_path, capsys, cards, words):
     """BSCALE 0 rendered a blank image (every pixel BZERO); BSCALE or BZERO beyond float32's range gave NumPy's
-    overflow warnings (four lines) before the non-finite voxels' line; a BSCALE that is no number was astropy's
-    "UFuncTypeError ... the file may be truncated or corrupt"."""
+    overflow warnings (four lines) before the non-finite voxels' line."""
     path = write_fits(tmp_path / "c.fits", np.arange(24, dtype=np.int16).reshape(2, 3, 4), 16, cards)
     assert_refused_in_one_line(capsys, path, words)
 

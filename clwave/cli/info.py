@@ -245,7 +245,7 @@ def _volume_lines(f) -> list:
                       f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"])
+    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"], f["spacing"])
 
 
 def _nifti_lines(n) -> list:
@@ -269,9 +269,10 @@ def _nifti_lines(n) -> list:
     return lines
 
 
-def _fits_lines(c, shape) -> list:
+def _fits_lines(c, shape, spacing) -> list:
     """A FITS cube's HDU, values and axes (``loaders.fits.header_facts``), and the ``--spacing`` that makes its
-    spectral axis (x) as deep as its ``shape``'s sky is wide (yt's ``spectral_factor="auto"``)."""
+    spectral axis (x) as deep as its sky (``shape`` and ``spacing``, dz the celestial pixels' aspect) is wide (yt's
+    ``spectral_factor="auto"``)."""
     if c is None:
         return []
     scaling = ", ".join(f"{k} {v:g}" for k, v in c["scaling"].items())
@@ -283,11 +284,12 @@ def _fits_lines(c, shape) -> list:
     name = f" ({c['name']})" if c["name"] else ""
     scaled = f" ({scaling}, applied as read)" if scaling else ""
     unit = c["unit"] or "no unit (no BUNIT)"
+    dz, dy = spacing[:2]
+    deep = _digits((dz, dy, max(shape[0] * dz, shape[1] * dy) / shape[2]), ",")
     return [("cube", f"HDU {c['hdu']}{name}, values in {unit}{scaled}; NaN (and BLANK) are no data: --nan VALUE gives "
                      "them a value"),
             ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1); "
-                     f"--spacing 1,1,{max(shape[:2]) / shape[2]:.4g} makes the spectral axis as deep as the sky is "
-                     "wide")]
+                     f"--spacing {deep} makes the spectral axis as deep as the sky is wide")]
 
 
 def _extent(shape, spacing) -> float:

@@ -85,7 +85,7 @@ def find_cube(path):
                     if min(dims) < 1:
                         raise FileFormatError(f"{path}: its HDU {index} declares {' x '.join(map(str, dims))} "
                                               "pixels; each axis needs at least one")
-                    _check_scaling(path, index, header, len(dims) if tiled else 0)
+                    _check_tiles(path, index, header, len(dims) if tiled else 0)
                     return index, header, dims
                 seen.append(f"{index}: a {len(dims)}-D image" if dims else f"{index}: no data")
             else:
@@ -114,11 +114,25 @@ def samples(header) -> np.dtype:
 
 def _image_header(path, index, header):
     """The header of a cube's image: its own, or a tile-compressed image's as astropy makes it of its table's (ZBITPIX,
-    ZNAXISn...; opening it reads no pixel)."""
-    if header.get("ZIMAGE") is not True:
-        return header
-    with _opened(path) as hdul:
-        return hdul[index].header
+    ZNAXISn...; opening it reads no pixel); its scaling (BSCALE, BZERO) refused in one line where it is no finite
+    number, beyond float32's range (its voxels would be) or, BSCALE, 0 (every pixel BZERO)."""
+    if header.get("ZIMAGE") is True:
+        with _opened(path) as hdul:
+            header = hdul[index].header
+    for key in ("BSCALE", "BZERO"):
+        value = header.get(key)
+        if value is None:
+            continue
+        if type(value) not in (int, float) or not math.isfinite(value):
+            problem = "not a finite number"
+        elif abs(value) > float(np.finfo(np.float32).max):  # a Python float: no cast of value to float32
+            problem = "beyond float32's range (3.4e38), which clwave computes in"
+        elif key == "BSCALE" and value == 0:
+            problem = "which maps every pixel to BZERO"
+        else:
+            continue
+        raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, {problem}; the header is corrupt")
+    return header
 
 
 def _checked(path, index, header, prefix):
@@ -139,25 +153,10 @@ def _checked(path, index, header, prefix):
     return bitpix, axes
 
 
-def _check_scaling(path, index, header, tiled):
-    """Refuse a cube's BSCALE or BZERO that is no number, beyond float32's range (its voxels would be) or, BSCALE, 0
-    (every pixel BZERO), and a tile-compressed image's ZTILEn below 1 (``tiled``: its number of axes, else 0), in
-    one line before astropy scales or tiles with them."""
-    top = float(np.finfo(np.float32).max)
-    for key in ("BSCALE", "BZERO"):
-        value = header.get(key)
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            problem = "not a number"
-        elif not abs(value) <= top:  # NaN too
-            problem = "beyond float32's range (3.4e38), which clwave computes in"
-        elif key == "BSCALE" and value == 0:
-            problem = "which maps every pixel to BZERO"
-        else:
-            continue
-        raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, {problem}; the header is corrupt")
-    for n in range(1, tiled + 1):
+def _check_tiles(path, index, header, naxis):
+    """Refuse a tile-compressed image's ZTILEn below 1 (of its ``naxis`` axes) in one line, before astropy divides
+    by it."""
+    for n in range(1, naxis + 1):
         if (tile := _whole(path, index, header, f"ZTILE{n}", 1)) < 1:
             raise FileFormatError(f"{path}: its HDU {index} has ZTILE{n} = {tile}; a tile needs at least one pixel: "
                                   "the header is corrupt")
