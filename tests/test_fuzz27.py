@@ -152,3 +152,13 @@ def test_an_hdf5_volume_of_tiny_chunks_is_refused_before_it_is_read(tmp_path, ca
     code, out, err = run(capsys, "info", str(tmp_path / "c1.h5"))
     assert code == 2 and len(err.strip().splitlines()) == 1 and "h5repack" in err, err
     np.testing.assert_array_equal(clwave.load(tmp_path / "c4.h5", chunks=False).data, data)
+
+
+def test_a_zarr_store_whose_metadata_is_no_node_is_one_line(tmp_path, capsys):
+    """A v3 array whose zarr.json is a JSON object of no Zarr node: zarr takes the store for an implicit group and
+    warned (ZarrUserWarning, two lines) that its chunk folder is no node, before clwave's one line."""
+    import zarr
+
+    zarr.create_array(tmp_path / "v.zarr", data=np.ones((4, 5, 6), np.float32), chunks=(2, 5, 6), zarr_format=3)
+    (tmp_path / "v.zarr" / "zarr.json").write_text('{"attributes": {}}')
+    assert_refused_in_one_line(capsys, tmp_path / "v.zarr", r"holds no 3-D/4-D arrays \(its arrays: none\)")
