@@ -11,7 +11,7 @@ import pytest
 from astropy.io import fits
 
 import clwave
-from clwave.errors import ClwaveWarning, InputError
+from clwave.errors import ClwaveWarning, FileFormatError, InputError
 from clwave.io.loaders import describe
 from test_cli import run
 from test_mgh import assert_refused_in_one_line
@@ -133,11 +133,19 @@ def test_a_degenerate_stokes_axis_is_dropped(tmp_path, rng, layout):
     assert describe(path)["shape"] == [5, 6, 4]
 
 
-def test_several_stokes_planes_are_refused_in_one_line(tmp_path, capsys):
+def test_several_stokes_planes_without_frame_are_refused_in_one_line(tmp_path, capsys):
+    """Read without frame= (tests/test_frames.py reads one); planes along two axes are refused even with it."""
     path = write(tmp_path / "iquv.fits", np.zeros((4, 3, 5, 6), np.float32), -32,
                  SKY | dict(CTYPE4="STOKES", CDELT4=1.0, CRVAL4=1.0, CRPIX4=1.0))
-    assert_refused_in_one_line(capsys, path, r"holds 4 planes along its axis 4 \(NAXIS4, e.g. Stokes parameters\) "
-                                             "beside its cube; clwave reads one cube")
+    with pytest.raises(FileFormatError, match=r"holds 4 planes along its axis 4 \(STOKES\) beside its cube; clwave "
+                                              r"reads one volume: pick one, frame=K for K in 0 .. 3 \(or -4 .. -1"):
+        clwave.load(path)
+    path = write(tmp_path / "two.fits", np.zeros((2, 4, 3, 5, 6), np.float32), -32,
+                 SKY | dict(CTYPE4="STOKES", CTYPE5="TIME"))
+    with pytest.raises(FileFormatError, match=r"holds planes along its axes 4 \(4\) and 5 \(2\) beside its cube; "
+                                              "clwave reads one cube, picking a plane along one axis only"):
+        clwave.load(path, frame=0)
+    assert_refused_in_one_line(capsys, path, "picking a plane along one axis only")
 
 
 @pytest.mark.parametrize("name", ["c.fits.gz", "c.fit", "c.fts", "c.fits.fz", "c.FITS"])
