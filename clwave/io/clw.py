@@ -50,7 +50,7 @@ from ..model.budget import check_thresholding, kept_count
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, importance_of
 from ..threads import background
 from .clw_header import (FILE_FORMAT, FILE_VERSION, MAX_HEADER, check_dataset, checked_header, checked_values,
-                         parsed_header)
+                         parsed_header, member_rows)
 from .detail_field import DetailField
 from .files import check_suffix, hdf5_target, write_atomic
 from .hdf5_safety import check_self_contained
@@ -455,8 +455,8 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
     bands = band_layout(wav, shape, levels)
     total, n_approx, c = bands[-1].start + bands[-1].size, bands[0].size, len(gh["channels"])
     runs, stored, stored_values = (h5.get(f"g{gi}/{name}") for name in ("runs", "positions", "values"))
-    check_dataset(runs, (runs.shape[0] if runs is not None else -1, 3), np.int64)
-    n = stored.shape[0] if stored is not None else -1
+    check_dataset(runs, (member_rows(runs, 2), 3), np.int64)
+    n = member_rows(stored, 1)
     check_dataset(stored, (n,), np.int64)
     step = checked_values(stored_values, (n, c))
     runs = runs[...]

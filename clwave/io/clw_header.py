@@ -58,6 +58,14 @@ def checked_values(dataset, shape):
     return float(step)
 
 
+def member_rows(member, ndim) -> int:
+    """The length of a member's first axis where it is a dataset of ``ndim`` axes, else -1 (a missing member, a group,
+    another shape: :func:`check_dataset` then refuses it by name)."""
+    import h5py
+
+    return member.shape[0] if isinstance(member, h5py.Dataset) and member.ndim == ndim else -1
+
+
 def check_dataset(dataset, shape, dtype):
     """Refuse a member that is missing, of another shape or type, or chunked oddly (a decompression bomb
     cannot hide in a chunk larger than the file allows)."""
@@ -140,12 +148,19 @@ def check_properties(header, shape):
                                     and np.all(np.less(*content))):  # whole voxels: never empty
         raise ValueError(f"content {content!r} is not two corners [x, y, z] of finite numbers, low below high")
     if content is not None:  # the volume's box: its voxels' boxes about their centres (Volume.content_box)
-        half = np.array(shape[::-1]) * np.array(header["spacing"][::-1]) / 2
-        slack = np.array(header["spacing"][::-1]) / 2  # rounding: half a voxel, far above it
+        spacing = np.array(header["spacing"][::-1], float)
+        half = np.array(shape[::-1]) * spacing / 2
+        slack = spacing / 2  # rounding: half a voxel, far above it
         centre = np.array(header["origin"])
         if np.any(np.array(content[0]) < centre - half - slack) or np.any(np.array(content[1]) > centre + half + slack):
             raise ValueError(f"content {content!r} reaches outside the volume's box {(centre - half).tolist()} to "
                              f"{(centre + half).tolist()}")
+        # whole voxels: a header whose spacing changed alone has the renderers fit a box of other voxels
+        faces = (np.array(content) - (centre - half)) / spacing
+        rounding = 1e-3 + 16 * np.finfo(float).eps * (np.abs(content) + np.abs(centre) + half).max() / spacing
+        if np.any(np.abs(faces - np.round(faces)) > rounding) or np.any(faces[1] - faces[0] < 1 - rounding):
+            raise ValueError(f"content {content!r} does not lie on the faces of the volume's voxels (spacing "
+                             f"{spacing.tolist()} about {centre.tolist()})")
     value_range = header.get("value_range")  # absent in older files: not known (no clamp, docs/raytracing.md §10)
     if value_range is not None and not (_numbers(value_range, 2) and value_range[0] <= value_range[1]):
         raise ValueError(f"value_range {value_range!r} is not two finite numbers [min, max], min <= max")

@@ -10,7 +10,7 @@ import numpy as np
 from ..model.bspline import WAVELET_ORDERS
 from ..model.transfer import TransferFunction
 from .clw import open_clw
-from .clw_header import check_dataset, checked_header, checked_values
+from .clw_header import check_dataset, checked_header, checked_values, member_rows
 
 _WAVELETS = {order: name for name, order in WAVELET_ORDERS.items()}
 
@@ -37,7 +37,7 @@ def describe_clw(path) -> dict:
         described = []
         for gi, g in enumerate(groups):
             positions, values = h5.get(f"g{gi}/positions"), h5.get(f"g{gi}/values")
-            kept = positions.shape[0] if positions is not None and positions.ndim == 1 else -1
+            kept = member_rows(positions, 1)
             check_dataset(positions, (kept,), np.int64)
             step = checked_values(values, (kept, len(g["channels"])))
             described.append(dict(wavelet=_WAVELETS[g["wavelet"]], order=g["wavelet"], channels=g["channels"],

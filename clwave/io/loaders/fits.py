@@ -97,6 +97,7 @@ def find_cube(path):
                     if min(dims) < 1:
                         raise FileFormatError(f"{path}: its HDU {index} declares {' x '.join(map(str, dims))} "
                                               "pixels; each axis needs at least one")
+                    _check_tiles(path, index, header, len(dims) if tiled else 0)
                     return index, header, dims
                 seen.append(f"{index}: a {len(dims)}-D image" if dims else f"{index}: no data")
             else:
@@ -125,15 +126,24 @@ def samples(header) -> np.dtype:
 
 def _image_header(path, index, header):
     """The header of a cube's image: its own, or a tile-compressed image's as astropy makes it of its table's (ZBITPIX,
-    ZNAXISn...; opening it reads no pixel); its scaling (BSCALE, BZERO) refused in one line where it is no number."""
+    ZNAXISn...; opening it reads no pixel); its scaling (BSCALE, BZERO) refused in one line where it is no finite
+    number, beyond float32's range (its voxels would be) or, BSCALE, 0 (every pixel BZERO)."""
     if header.get("ZIMAGE") is True:
         with _opened(path) as hdul:
             header = hdul[index].header
     for key in ("BSCALE", "BZERO"):
         value = header.get(key)
-        if value is not None and (type(value) not in (int, float) or not math.isfinite(value)):
-            raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, not a finite number; the header is "
-                                  "corrupt")
+        if value is None:
+            continue
+        if type(value) not in (int, float) or not math.isfinite(value):
+            problem = "not a finite number"
+        elif abs(value) > float(np.finfo(np.float32).max):  # a Python float: no cast of value to float32
+            problem = "beyond float32's range (3.4e38), which clwave computes in"
+        elif key == "BSCALE" and value == 0:
+            problem = "which maps every pixel to BZERO"
+        else:
+            continue
+        raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, {problem}; the header is corrupt")
     return header
 
 
@@ -153,6 +163,15 @@ def _checked(path, index, header, prefix):
         raise FileFormatError(f"{path}: its HDU {index} declares {' x '.join(map(str, axes))} pixels "
                               f"({prefix}NAXISn); a length cannot be negative: the header is corrupt")
     return bitpix, axes
+
+
+def _check_tiles(path, index, header, naxis):
+    """Refuse a tile-compressed image's ZTILEn below 1 (of its ``naxis`` axes) in one line, before astropy divides
+    by it."""
+    for n in range(1, naxis + 1):
+        if (tile := _whole(path, index, header, f"ZTILE{n}", 1)) < 1:
+            raise FileFormatError(f"{path}: its HDU {index} has ZTILE{n} = {tile}; a tile needs at least one pixel: "
+                                  "the header is corrupt")
 
 
 def _whole(path, index, header, key, default=None):
@@ -275,7 +294,7 @@ def _read(path, index, naxis, kept, picked, key):
     for k, a in zip(key, kept[::-1]):
         full[naxis - 1 - a] = k
     full[-1] = slice(None)  # whole rows, cut after: astropy reads a block of them at once, a part of a row at a time
-    with _opened(path) as hdul:
+    with _opened(path) as hdul, np.errstate(over="ignore", invalid="ignore"):  # past float32: Volume names it
         data = np.asarray(hdul[index].section[tuple(full)])  # big-endian as stored, unless scaled
     data = data.reshape([n for i, n in enumerate(data.shape) if naxis - 1 - i in kept])[..., key[-1]]
     return data.astype(data.dtype.newbyteorder("="), copy=False)  # as samples() says: a .clw records "float32"

@@ -30,7 +30,8 @@ def read_mgh(path, chunks, fits=None, frame=None):
         header = MGHHeader.from_fileobj(fh)
     if not good:
         header["delta"], header["Mdc"], header["Pxyz_c"] = 1, _LIA_MDC, 0
-    affine = header.get_affine()
+    with np.errstate(over="ignore", invalid="ignore"):  # a delta or Mdc past float range: placeable() refuses it
+        affine = header.get_affine()
     if not placeable(affine):
         raise FileFormatError(f"{path}: its vox2ras (the header's delta, Mdc and Pxyz_c) is not finite or not "
                               "invertible; write the file again with its true geometry (e.g. nibabel's MGHImage of "

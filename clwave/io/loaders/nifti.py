@@ -39,6 +39,10 @@ def read_nifti(path, chunks, fits=None, frame=None):
         note(f"{path} has no orientation (its sform_code and qform_code are 0): nibabel's fallback is assumed, "
              f"{''.join(nibabel.aff2axcodes(affine))} (its first axis to the left, as Analyze's radiological files), "
              f"centred on the origin; its left and right may be swapped: set an sform (nibabel's set_sform) if known")
+    least = image.header.single_vox_offset  # the header and its extension flag: 352 bytes (NIfTI-2: 544)
+    if image.dataobj.offset < least:  # nibabel takes 0 as it is, and reads the header as voxels
+        raise FileFormatError(f"{path}: its vox_offset {image.dataobj.offset} puts its voxels inside its {least}-byte "
+                              f"header (a .nii's start at byte {least} or after); correct vox_offset in the header")
     check_declared_size(path, image.dataobj.offset,
                         math.prod(image.shape) * image.header.get_data_dtype().itemsize, image.shape)
     proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter

@@ -175,4 +175,4 @@ def _check_nrrd_size(path, header, offset):
                               "least one voxel")
     nbytes = math.prod(sizes) * nrrd.reader._determine_datatype(header).itemsize
     skip = max(int(header.get("byte skip", 0) or 0), 0)
-    check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=encoding != "raw")
+    check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=encoding != "raw", longer=True)

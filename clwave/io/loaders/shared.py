@@ -549,12 +549,16 @@ def folder_files(folder):
                   key=_natural_key)
 
 
-def check_declared_size(path, offset, nbytes, shape, gzip=None):
+def check_declared_size(path, offset, nbytes, shape, gzip=None, longer=False):
     """Refuse a header that declares more data than the file holds, before anything is allocated
     (gzip, by default for a ``.gz`` name: its trailer's size of the uncompressed stream, modulo 2^32; where that is
-    short, the stream counted, as the trailer counts its last member only and zero padding may follow it)."""
+    short, the stream counted, as the trailer counts its last member only and zero padding may follow it).
+    ``longer``: a gzip stream that holds more than declared is refused too, for a reader that decompresses the whole
+    stream before it compares (pynrrd): by its trailer, counted up to one byte past the declared end where the file is
+    a gzip stream alone."""
     path = Path(path)
     gzip = path.name.lower().endswith(".gz") if gzip is None else gzip
+    more = False
     if gzip:
         with open(path, "rb") as fh:
             fh.seek(-4, os.SEEK_END)
@@ -562,9 +566,16 @@ def check_declared_size(path, offset, nbytes, shape, gzip=None):
         lies = (offset + nbytes) % 2 ** 32 > present  # the trailer counts the stream modulo 2^32
         if lies and (counted := _gzip_length(path, offset + nbytes)) is not None:
             present, lies = counted, offset + nbytes > counted
+        more = longer and (offset + nbytes) % 2 ** 32 < present
+        if more and (counted := _gzip_length(path, offset + nbytes + 1)) is not None:
+            present, more = counted, offset + nbytes < counted
     else:
         present = path.stat().st_size
         lies = offset + nbytes > present
+    if more:
+        raise FileFormatError(f"{path}: its gzip stream holds {present:,} bytes or more, more than the "
+                              f"{offset + nbytes:,} bytes its header declares ({' x '.join(map(str, shape))} voxels); "
+                              "its header is wrong or the file is not what it says")
     if lies:
         holds = "its gzip stream holds" if gzip else "the file holds"
         after = f" after its {offset:,}-byte header" if offset else ""

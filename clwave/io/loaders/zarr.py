@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from fractions import Fraction
 from pathlib import Path
 
@@ -32,8 +33,11 @@ def read_zarr(path, name, level, chunks, fits=None, frame=None):
     import zarr
 
     def arrays(group, prefix=""):
-        """{name from the store's top: array} of the arrays in ``group`` (at ``prefix``), at any depth."""
-        return {prefix + n: a for n, a in group.members(max_depth=None) if isinstance(a, zarr.Array)}
+        """{name from the store's top: array} of the arrays in ``group`` (at ``prefix``), at any depth; a folder that
+        is no node (an array's chunks, where its metadata is no node's) passed over without zarr's warning."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", zarr.errors.ZarrUserWarning)
+            return {prefix + n: a for n, a in group.members(max_depth=None) if isinstance(a, zarr.Array)}
 
     _check_store_files(path)
     node = zarr.open(str(path), mode="r")
