@@ -90,7 +90,8 @@ class Turntable:
         once) as :meth:`RenderResult._repr_png_` reduces a picture, in an ``<img>``."""
         buffer = io.BytesIO()
         gif_to(buffer, [reduced(p) for p in self.pictures()], FRAME_TIME)
-        return f'<img src="data:image/gif;base64,{base64.b64encode(buffer.getvalue()).decode()}" alt="{html.escape(repr(self))}"/>'
+        gif = base64.b64encode(buffer.getvalue()).decode()
+        return f'<img src="data:image/gif;base64,{gif}" alt="{html.escape(repr(self))}"/>'
 
     def __getitem__(self, i) -> RenderResult:
         return self.results[i]

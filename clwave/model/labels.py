@@ -35,14 +35,15 @@ SAMPLE = 1 << 20
 
 
 def looks_like_labels(data) -> bool:
-    """Whether ``data`` (an in-memory array as stored, before float32) looks like a label map: integers (or
-    booleans), none negative, 2 to :data:`DENSE_LABELS` distinct values numbered densely (:data:`DENSE`) or up to
+    """Whether ``data`` (an in-memory array as stored, before float32) looks like a label map: integers (or booleans),
+    none negative, 2 to :data:`DENSE_LABELS` distinct values numbered densely (:data:`DENSE`) or up to
     :data:`MAX_LABELS` numbered sparsely (:data:`SPARSE`), not in even steps, forming regions with boundaries
-    (:data:`SAME_NEIGHBOURS`, :data:`JUMPS`; :data:`FEW_LABELS` need no jumps); or more numbered densely, their boundaries abrupt (:data:`ABRUPT`).  A
-    CT in HU (negative, thousands of values) or an MRI (hundreds of values, noise between neighbours, edges blurred)
-    is not; a float volume is never looked at.  Cost: a min and a max over an integer volume, then only where they
-    pass a sort of :data:`SAMPLE` voxels and, where its values pass, one pass over the neighbours in evenly spaced z
-    planes of at most 4 × :data:`SAMPLE` voxels (copies in the least signed type that holds their differences)."""
+    (:data:`SAME_NEIGHBOURS`, :data:`JUMPS`; :data:`FEW_LABELS` need no jumps); or more numbered densely, their
+    boundaries abrupt (:data:`ABRUPT`).  A CT in HU (negative, thousands of values) or an MRI (hundreds of values, noise
+    between neighbours, edges blurred) is not; a float volume is never looked at.  Cost: a min and a max over an integer
+    volume, then only where they pass a sort of :data:`SAMPLE` voxels and, where its values pass, one pass over the
+    neighbours in evenly spaced z planes of at most 4 × :data:`SAMPLE` voxels (copies in the least signed type that
+    holds their differences)."""
     if getattr(data, "dtype", None) is None or data.dtype.kind not in "biu" or data.ndim != 3 or not data.size:
         return False
     top = int(data.max())
