@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError, finite_number
-from .io.result import RenderResult
+from .io.result import RenderResult, summary
 
 
 def root_mean_square(image) -> float:
@@ -59,7 +59,7 @@ class FinalImage:
         return self.image
 
 
-@dataclass
+@dataclass(repr=False)  # subclasses too: not the whole image as text
 class Frame:
     """One refinement step: ``image`` (H, W, C) at the full size, after ``seconds``; its estimated error against
     the final image (``estimated_relative_rms_error``, ``estimated_relative_max_error``: relative to the largest
@@ -118,6 +118,15 @@ class Frame:
     def result(self) -> RenderResult:
         """The frame as a :class:`~clwave.RenderResult` (its image and meta)."""
         return RenderResult(self.image, self.meta)
+
+    def __repr__(self) -> str:
+        own = "".join(f", {k} {v:.3g}" if isinstance(v, float) else f", {k} {v}" for k, v in self.own_figures().items())
+        return (f"{type(self).__name__}({self.index}: {summary(self.image, self.meta)}{own}, {self.seconds:.3g} s, "
+                f"estimated relative RMS error {self.estimated_relative_rms_error:.2g})")
+
+    def _repr_png_(self) -> bytes | None:
+        """The frame's picture in a notebook, as a result's (:meth:`RenderResult._repr_png_`)."""
+        return self.result()._repr_png_()
 
     def save(self, path, **options) -> Path:
         """Write the frame: ``.png``, ``.tif``, ``.npy`` or ``.json``, options as :meth:`RenderResult.save`."""

@@ -4,20 +4,25 @@ turntable does not flicker.  :func:`turntable` and ``clwave render --turntable``
 
 from __future__ import annotations
 
+import base64
+import html
 import inspect
+import io
 from pathlib import Path
 
 import numpy as np
 
 from .errors import InputError, reals
 from .io.files import check_suffix, write_atomic
-from .io.images import check_frame_time, write_gif
-from .io.result import RenderResult, resolve_window
+from .io.images import check_frame_time, gif_to, write_gif
+from .io.result import RenderResult, reduced, resolve_window, summary
 from .model.camera import Camera
 
 METHODS = ("splat", "raytrace")
 #: the axes a turntable names: z turns the azimuth (:meth:`Camera.rotated`'s None)
 AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": None}
+#: seconds a view is shown in a turntable's GIF (:meth:`Turntable.save`'s default, and a notebook's)
+FRAME_TIME = 0.1
 
 
 def turntable_axis(axis):
@@ -72,11 +77,22 @@ class Turntable:
         if not self.results:  # no view has an image size or a first view's meta
             raise InputError("a Turntable needs at least one view: give clwave.turntable n >= 1")
         first = self.results[0].meta
-        self.meta = dict(first, turntable_seconds=[_seconds(r.meta) for r in self.results],
+        self.meta = dict(first, turntable_seconds=[r.seconds for r in self.results],
                          turntable_views=[dict(camera=r.meta["camera"], pixel=r.meta["pixel"]) for r in self.results])
 
     def __len__(self) -> int:
         return len(self.results)
+
+    def __repr__(self) -> str:
+        return f"Turntable({summary(self.images, self.meta)}, {sum(self.meta['turntable_seconds']):.3g} s)"
+
+    def _repr_html_(self) -> str:
+        """The turn as a notebook shows it: its :meth:`save`'s GIF, made in memory from the views' images (rendered
+        once) as :meth:`RenderResult._repr_png_` reduces a picture, in an ``<img>``."""
+        buffer = io.BytesIO()
+        gif_to(buffer, [reduced(p) for p in self.pictures()], FRAME_TIME)
+        gif = base64.b64encode(buffer.getvalue()).decode()
+        return f'<img src="data:image/gif;base64,{gif}" alt="{html.escape(repr(self))}"/>'
 
     def __getitem__(self, i) -> RenderResult:
         return self.results[i]
@@ -97,7 +113,7 @@ class Turntable:
         shared = self.window(window) if self.results[0].is_xray else window
         return [r.picture(shared, background, scale_bar=scale_bar, unit=unit) for r in self.results]
 
-    def save(self, path, *, window="auto", background=None, scale_bar=None, unit=None, frame_time=0.1,
+    def save(self, path, *, window="auto", background=None, scale_bar=None, unit=None, frame_time=FRAME_TIME,
              overwrite=False) -> Path:
         """Write ``.gif`` (the :meth:`pictures`, looping, each shown ``frame_time`` seconds, to the hundredth),
         ``.npy`` (the (N, H, W, C) float32 :attr:`images`) or ``.json`` (:attr:`meta`)."""
@@ -136,7 +152,3 @@ def turntable(wv, n, camera=None, method="splat", axis="z", **options) -> Turnta
     except TypeError as e:
         raise InputError(f"{method} takes no such option ({e}): see help(clwave.{method})") from None
     return Turntable(draw(wv, cam, **options) for cam in cameras)
-
-
-def _seconds(meta) -> float:
-    return meta["render_seconds"] if meta["method"] == "raytrace" else meta["seconds"]["total"]

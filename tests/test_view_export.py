@@ -135,7 +135,8 @@ def test_a_shaded_perspective_view_through_an_edited_function_as_a_command_and_p
         figures, frame = final_frame(v, msg)
         page, saved = exported(v, msg, (32, 40))
         page2, saved2 = exported(v, msg, (64, 80))
-        # the starting function, grey, whose window is "auto" (the tracer's pool percentiles, here from below 0), unlit
+        # the starting function, grey, whose window is "auto" (the tracer's pool percentiles, within the input's range:
+        # from its least value, 0), unlit
         start = dict(BASE, seq=1, mode="shaded", azimuth=10.0, shading=False)
         start_figures, start_frame = final_frame(v, start)
         grey_page, grey_saved = exported(v, start, (32, 40))
@@ -151,7 +152,8 @@ def test_a_shaded_perspective_view_through_an_edited_function_as_a_command_and_p
     twice = shell(page2["command"], tmp_path / "twice")
     assert twice.shape == (64, 80, 3) and np.array_equal(twice, saved2)
     lo, hi = start_figures["tf_window"]
-    assert f"--tf grey --tf-window={lo!r},{hi!r}" in grey_page["command"] and "--no-shading" in grey_page["command"]
+    assert lo == 0.0 and f"--tf grey --tf-window {lo!r},{hi!r}" in grey_page["command"]
+    assert "--no-shading" in grey_page["command"]
     got = shell(grey_page["command"], tmp_path / "grey")
     assert got.std() > 5 and np.array_equal(got, start_frame) and np.array_equal(got, grey_saved)
 

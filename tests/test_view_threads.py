@@ -533,7 +533,7 @@ def test_a_viewer_that_fails_to_close_at_exit_is_logged_and_the_others_closed(ca
     for server in servers:
         main_end._open.add(server)
     try:
-        main_end._close_open()
+        main_end.close_all()
     finally:
         for server in servers:
             main_end._open.discard(server)

@@ -254,16 +254,19 @@ def check_frame_time(seconds) -> float:
 
 
 def write_gif(path, pictures, seconds_per_frame, force) -> Path:
-    """A looping GIF of ``pictures``, each shown ``seconds_per_frame`` (to the hundredth, the format's unit)."""
+    """A looping GIF of ``pictures`` at ``path`` (:func:`gif_to`)."""
+    return write_atomic(path, lambda fh: gif_to(fh, pictures, seconds_per_frame), force)
+
+
+def gif_to(fh, pictures, seconds_per_frame):
+    """Write a looping GIF of ``pictures`` to the binary file ``fh``, each shown ``seconds_per_frame`` (to the
+    hundredth, the format's unit)."""
     from PIL import Image
 
     frames = np.stack(pictures)  # every frame RGB: grey frames were written in modes some readers cannot read back
     frames = np.repeat(frames[..., None], 3, axis=-1) if frames.ndim == 3 else frames
     # whole milliseconds, which Pillow truncates to hundredths: int(1000 * 2.01) is 2009, stored as 2 s
     duration = 10 * round(100 * seconds_per_frame)
-
-    def write(fh):  # by Pillow itself: imageio's writer, interrupted, wrote to the closed file from its __del__
-        first, *rest = (Image.fromarray(frame) for frame in frames)
-        first.save(fh, format="GIF", save_all=True, append_images=rest, duration=duration, loop=0)
-
-    return write_atomic(path, write, force)
+    # by Pillow itself: imageio's writer, interrupted, wrote to the closed file from its __del__
+    first, *rest = (Image.fromarray(frame) for frame in frames)
+    first.save(fh, format="GIF", save_all=True, append_images=rest, duration=duration, loop=0)

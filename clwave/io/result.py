@@ -28,7 +28,7 @@ from ..model.tf_checks import check_window
 REPR_PNG_SIDE = 512
 
 
-@dataclass
+@dataclass(repr=False)  # not the whole array: a text front-end or nbconvert shows the repr
 class RenderResult:
     """``image`` float32 (H, W, C); ``meta``: method, device, counts, timings in seconds, and the view: ``camera``
     (the camera given, its ``to_dict()``) and ``pixel`` (world width of a pixel at the target; docs/coordinates.md
@@ -89,18 +89,23 @@ class RenderResult:
         return picture if scale_bar is None else \
             draw_scale_bar(picture, self.meta["pixel"], check_unit(unit), scale_bar)
 
-    def _repr_png_(self) -> bytes | None:
-        """The 8-bit PNG of :meth:`picture` with its defaults, as Jupyter shows a result: reduced by the least whole
-        factor that brings its longest side to at most :data:`REPR_PNG_SIDE` pixels (Pillow's box average); None,
-        the text, for an image with non-finite values, which is never a picture."""
-        from PIL import Image
+    @property
+    def seconds(self) -> float | None:
+        """The render's time (a ray trace's without its set-up, a splat's in all); None where ``meta`` has none."""
+        seconds = self.meta.get("render_seconds", self.meta.get("seconds"))
+        return seconds["total"] if isinstance(seconds, dict) else seconds
 
+    def __repr__(self) -> str:
+        seconds = "" if self.seconds is None else f", {self.seconds:.3g} s"
+        return f"RenderResult({summary(self.image, self.meta)}{seconds})"
+
+    def _repr_png_(self) -> bytes | None:
+        """The 8-bit PNG of :meth:`picture` with its defaults, as Jupyter shows a result: :func:`reduced` for a
+        notebook; None, the text, for an image with non-finite values, which is never a picture."""
         if not np.all(np.isfinite(self.image)):
             return None
-        picture = Image.fromarray(self.picture())
-        picture = picture.reduce(-(-max(picture.size) // REPR_PNG_SIDE))
         buffer = io.BytesIO()
-        write_png(buffer, np.asarray(picture))
+        write_png(buffer, reduced(self.picture()))
         return buffer.getvalue()
 
     def display_window(self, window="auto"):
@@ -148,6 +153,27 @@ class RenderResult:
             return write_atomic(path, lambda fh: np.save(fh, self.image), overwrite)
         text = json.dumps(self.meta, indent=2, default=_jsonable).encode()
         return write_atomic(path, lambda fh: fh.write(text), overwrite)
+
+
+def summary(image, meta) -> str:
+    """A result's image in a few words: its method and mode, shape, type and range (a shaded image's alpha's)."""
+    shaded = meta.get("mode", "xray") != "xray"
+    values = image[..., 3] if shaded else image
+    finite = values[np.isfinite(values)]
+    span = f"{float(finite.min()):.3g} .. {float(finite.max()):.3g}" if finite.size else "no finite value"
+    bad = "" if finite.size == values.size else f", {values.size - finite.size} non-finite"
+    method = f"{meta['method']} " if meta.get("method") else ""
+    return (f"{method}{'shaded RGBA' if shaded else 'X-ray'}, {'x'.join(map(str, image.shape))} "
+            f"{image.dtype}, {'alpha' if shaded else 'values'} {span}{bad}")
+
+
+def reduced(picture: np.ndarray) -> np.ndarray:
+    """``picture`` (H, W[, C]) reduced by the least whole factor that brings its longest side to at most
+    :data:`REPR_PNG_SIDE` pixels (Pillow's box average), as a notebook shows it."""
+    from PIL import Image
+
+    image = Image.fromarray(picture)
+    return np.asarray(image.reduce(-(-max(image.size) // REPR_PNG_SIDE)))
 
 
 def check_background(background) -> tuple | str:

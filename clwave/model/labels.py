@@ -20,6 +20,11 @@ DENSE_LABELS, MAX_LABELS, DENSE, SPARSE = 64, 256, 16, 0.25
 #: boundaries, not a smooth intensity quantised coarsely: at least JUMPS of the pairs that differ jump by more than 1
 #: (0.47 for nested shells numbered outwards 1 .. 4 in 0; 0.01 for hydrogen's density quantised to 0 .. 10).
 SAME_NEIGHBOURS, JUMPS = 0.75, 0.25
+#: 3 to FEW_LABELS values numbered densely, forming regions, are labels whatever their jumps: nested regions
+#: thresholded from a smooth field (a tumour's core in its oedema; trial27's 0 .. 5, 0.004 % of its steps jump) step
+#: by 1 as a smooth image quantised coarsely does, and an image of 8 levels or fewer (3 bits) is a rarity (hydrogen's
+#: density quantised to 0 .. 10 is not taken); a 0/1 mask (2 values) is no label map.
+FEW_LABELS = 8
 #: More than DENSE_LABELS numbered densely (a parcellation of hundreds, a cell mask of thousands), as an 8-bit image's
 #: values are: boundaries between regions, not edges blurred through the values between nor noise: at least ABRUPT of
 #: the pairs along x that differ jump by more than 1 between two pairs that do not (a a | b b); 0.68 to 1 for the
@@ -30,14 +35,15 @@ SAMPLE = 1 << 20
 
 
 def looks_like_labels(data) -> bool:
-    """Whether ``data`` (an in-memory array as stored, before float32) looks like a label map: integers (or
-    booleans), none negative, 2 to :data:`DENSE_LABELS` distinct values numbered densely (:data:`DENSE`) or up to
+    """Whether ``data`` (an in-memory array as stored, before float32) looks like a label map: integers (or booleans),
+    none negative, 2 to :data:`DENSE_LABELS` distinct values numbered densely (:data:`DENSE`) or up to
     :data:`MAX_LABELS` numbered sparsely (:data:`SPARSE`), not in even steps, forming regions with boundaries
-    (:data:`SAME_NEIGHBOURS`, :data:`JUMPS`); or more numbered densely, their boundaries abrupt (:data:`ABRUPT`).  A
-    CT in HU (negative, thousands of values) or an MRI (hundreds of values, noise between neighbours, edges blurred)
-    is not; a float volume is never looked at.  Cost: a min and a max over an integer volume, then only where they
-    pass a sort of :data:`SAMPLE` voxels and, where its values pass, one pass over the neighbours in evenly spaced z
-    planes of at most 4 × :data:`SAMPLE` voxels (copies in the least signed type that holds their differences)."""
+    (:data:`SAME_NEIGHBOURS`, :data:`JUMPS`; :data:`FEW_LABELS` need no jumps); or more numbered densely, their
+    boundaries abrupt (:data:`ABRUPT`).  A CT in HU (negative, thousands of values) or an MRI (hundreds of values, noise
+    between neighbours, edges blurred) is not; a float volume is never looked at.  Cost: a min and a max over an integer
+    volume, then only where they pass a sort of :data:`SAMPLE` voxels and, where its values pass, one pass over the
+    neighbours in evenly spaced z planes of at most 4 × :data:`SAMPLE` voxels (copies in the least signed type that
+    holds their differences)."""
     if getattr(data, "dtype", None) is None or data.dtype.kind not in "biu" or data.ndim != 3 or not data.size:
         return False
     top = int(data.max())
@@ -58,7 +64,7 @@ def looks_like_labels(data) -> bool:
         content = (right != 0) | (left != 0)
         pairs, differing = int(np.count_nonzero(content)), int(np.count_nonzero(differ))
         if pairs > 0 and pairs - differing >= SAME_NEIGHBOURS * pairs and \
-                np.count_nonzero(jumps) >= JUMPS * differing:
+                (3 <= count <= FEW_LABELS or np.count_nonzero(jumps) >= JUMPS * differing):
             return True
         if not many:
             return False

@@ -26,7 +26,7 @@ from .ranking import RankedTable, by_importance, ranked_table
 from . import evaluation
 from .transform import apply_sampling_filter, crop_to_grid, decompose, reconstruct_channel, synthesize
 from .transfer import TransferFunction
-from .volume import Volume
+from .volume import Volume, warn_straight_colour
 
 
 class ChannelGroup:
@@ -194,6 +194,7 @@ class WaveletVolume:
                              "HDF5 store, or chunks='auto'); this one is in memory",
                              cli="--workers and --scheduler apply to a chunked input (Zarr, HDF5, or --chunks auto)")
         warn_blurred_labels(volume, wavelet)
+        warn_straight_colour(volume)
         if volume.chunked:
             return WaveletVolume.chunked_model.from_volume(volume, wavelet, levels, interpolate=interpolate,
                                                            transfer_function=transfer_function,

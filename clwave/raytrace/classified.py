@@ -181,6 +181,7 @@ class ScalarRange:
         self.ranges = {}  # per detail (its pages' bytes): the range per block on the device
         self.last = None
         self.faces = None  # the model at voxel centres of its box's faces (face_values), when first asked
+        self.auto = None  # window "auto" resolved from the sample (window), when first asked
 
     def range(self, at):
         """The range per block (Z, Y, X, 2) on the device at the detail of ``at`` (a ``FieldAt``): the slots' ranges
@@ -200,13 +201,19 @@ class ScalarRange:
     def window(self, tf: TransferFunction):
         """``tf``'s window in the input's units; "auto" from the percentiles of the full-detail slots' field values at
         lattice points (docs/raytracing.md §10), the same with level of detail or without, and whatever the order, plus
-        the value subtracted from the model's."""
+        the value subtracted from the model's, within the input's range where it is known; resolved once a tracer."""
         if tf.window != "auto":
             return tf.window
         if self.sample is None:
             raise InputError('a transfer function window "auto" at render time needs the bricks on the device; '
                              "give the window (lo, hi) (--tf-window LO,HI)")
-        return tuple(w + self.subtracted for w in auto_window(self.sample))
+        if self.auto is None:  # the sample is the model's, fixed: resolved once, whatever the function
+            lo, hi = (w + self.subtracted for w in auto_window(self.sample))
+            known = self.tracer.wv.value_range  # the field is classified clamped to it: a window beyond its ends
+            if known is not None and max(lo, known[0]) < min(hi, known[1]):  # gave its least value some opacity
+                lo, hi = max(lo, known[0]), min(hi, known[1])
+            self.auto = (lo, hi)
+        return self.auto
 
     def stored(self, tf: TransferFunction) -> TransferFunction:
         """``tf`` on the model's values, the input's minus the value subtracted (:meth:`TransferFunction.shifted`),

@@ -31,7 +31,7 @@ MAX_MARGIN = 1.5
 LAST_REDUCTION = 4
 
 
-@dataclass(kw_only=True)
+@dataclass(kw_only=True, repr=False)
 class RaytraceFrame(Frame):
     """One step of progressive ray tracing: ``image`` (H, W, C) at the full size, rendered at ``detail`` on an
     image ``reduction`` times smaller per side (then interpolated); errors as :class:`~clwave.frames.Frame`

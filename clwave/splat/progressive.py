@@ -21,7 +21,7 @@ from .estimate import SplatEstimate
 from ..model.wavelet import WaveletVolume
 
 
-@dataclass(kw_only=True)
+@dataclass(kw_only=True, repr=False)
 class ProgressiveFrame(Frame):
     """One refinement step: ``image`` (H, W, C) after ``coefficients`` splats, ``fraction`` of the
     model's kept coefficients and ``voxel_fraction`` of its voxels; errors as :class:`~clwave.frames.Frame`

@@ -11,8 +11,9 @@ from ..errors import InputError, warn_outside
 
 class Viewer:
     """A running viewer: open :attr:`url` in a browser (it holds the token); in a Jupyter notebook the object
-    shows the page inline.  :meth:`close` stops the server; a viewer still open is closed at the interpreter's
-    exit (:mod:`clwave.view.main_end`), so that the exit does not wait for the render under way."""
+    shows the page inline.  :meth:`close` stops the server, :meth:`close_all` every viewer still open (a notebook's
+    cell run again makes a new one beside the old, docs/viewer.md §1); a viewer still open is closed at the
+    interpreter's exit (:mod:`clwave.view.main_end`), so that the exit does not wait for the render under way."""
 
     def __init__(self, background):
         from .main_end import close_at_exit
@@ -26,7 +27,18 @@ class Viewer:
         return self.server.url
 
     def close(self):
+        from .main_end import closed
+
         self._background.close()
+        closed(self._background)
+
+    @staticmethod
+    def close_all() -> int:
+        """Close every viewer still open (as napari's ``Viewer.close_all``): their ports freed and their threads
+        ended; returns how many were open."""
+        from .main_end import close_all
+
+        return close_all()
 
     def __enter__(self):
         return self

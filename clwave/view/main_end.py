@@ -30,15 +30,26 @@ def close_at_exit(server) -> None:
     with _lock:
         _open.add(server)
         if not _registered:  # without threading's hook (a later Python): atexit's, after the join
-            getattr(threading, "_register_atexit", atexit.register)(_close_open)
+            getattr(threading, "_register_atexit", atexit.register)(close_all)
             _registered = True
 
 
-def _close_open() -> None:
-    """Close each open viewer; one that fails to close is logged and the others closed: an exception here would end
-    ``threading._shutdown``, which catches none, before its join of the thread pools."""
-    for server in list(_open):
+def closed(server) -> None:
+    """Forget ``server``, closed by its viewer."""
+    with _lock:
+        _open.discard(server)
+
+
+def close_all() -> int:
+    """Close each open viewer (:meth:`clwave.Viewer.close_all`, and at the exit), returning how many were open; one
+    that fails to close is logged and the others closed: an exception here would end ``threading._shutdown``, which
+    catches none, before its join of the thread pools."""
+    with _lock:
+        servers = list(_open)
+    for server in servers:
         try:
             server.close()
         except Exception:
-            logging.getLogger(__name__).exception("clwave: closing the viewer %r at exit failed", server)
+            logging.getLogger(__name__).exception("clwave: closing the viewer %r failed", server)
+        closed(server)
+    return len(servers)
