@@ -25,7 +25,7 @@ from .noise import band_noise, check_noise_known, measure_noise, warn_noise_gain
 from .ranking import RankedTable, by_importance, ranked_table
 from . import evaluation
 from .transform import apply_sampling_filter, crop_to_grid, decompose, reconstruct_channel, synthesize
-from .transfer import TransferFunction
+from .tf_file import stored_transfer_function
 from .volume import Volume
 
 
@@ -173,10 +173,11 @@ class WaveletVolume:
             False (default): the samples are the B-spline coefficients (paper eq. 8,
             approximating, mass preserving).  True: prefilter so the model passes
             through the samples (docs/model.md §1).
-        transfer_function : TransferFunction or dict, optional
+        transfer_function : TransferFunction, optional
             Stored with the volume (and in ``.clw`` files): for a classified volume, how it was classified;
             for a scalar one, the transfer function ray tracing classifies it with by default
-            (post-classification, docs/raytracing.md §10).
+            (post-classification, docs/raytracing.md §10).  Or a preset name, a ``.json``/``.csv`` file, a matplotlib
+            colormap, a :meth:`TransferFunction.to_dict` (:func:`~clwave.model.tf_file.as_transfer_function`).
         scheduler : optional
             Chunked volumes only: the Dask scheduler of the passes (:mod:`clwave.schedulers`).
 
@@ -199,7 +200,7 @@ class WaveletVolume:
                                                            transfer_function=transfer_function,
                                                            scheduler=scheduler, progress_bar=progress_bar)
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
-        tf = TransferFunction.stored(transfer_function)
+        tf = stored_transfer_function(transfer_function)
         mask = volume.content_mask()
         groups = []
         for wav in dict.fromkeys(wavelets):
