@@ -14,9 +14,8 @@ from ..errors import ClwaveWarning, CommandWords, InputError, OutputError, Outpu
 from ..device.memory import check_fits
 from ..io.files import check_writable
 from ..io.images import UNIT_METRES
-from ..model.wavelet import DEFAULT_LEVELS
+from ..model.wavelet import DEFAULT_KEEP, DEFAULT_LEVELS
 
-DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET = "cubic"
 #: host bytes per float32 value of the volume below which decomposing and thresholding it cannot run: the
 #: in-memory model peaks at 3 (RGBA) to 9 (scalar) times the volume; work beyond 4 times what is available
