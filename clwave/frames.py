@@ -36,12 +36,14 @@ class ErrorEstimate:
 
     def add(self, image: np.ndarray) -> tuple:
         """(relative RMS, relative max) estimated for ``image``, the next frame; (nan, nan) for a first frame
-        with nothing before it."""
+        with nothing before it, (1, 1) for an empty one (the whole final image may be missing)."""
         last, self.last = self.last, image
         if last is None:
             return float("nan"), float("nan")
+        peak = float(np.max(np.abs(image), initial=0.0))
+        if peak == 0:  # a frame that sees nothing: its error is the final image itself (relative max 1, RMS at most 1)
+            return 1.0, 1.0
         step = image - last
-        peak = max(float(np.max(np.abs(image), initial=0.0)), np.finfo(np.float32).tiny)
         return root_mean_square(step) / peak, float(np.max(np.abs(step), initial=0.0)) / peak
 
 

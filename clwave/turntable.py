@@ -29,12 +29,13 @@ def turntable_axis(axis):
     if isinstance(axis, str):
         raise InputError(f"axis={axis!r} must be {what}")
     k = reals(axis, "axis", 3, what)
-    length = float(np.linalg.norm(k))
-    if not 0 < length < float("inf"):
+    largest = float(np.max(np.abs(k)))  # divided by first: the norm of (1e308, 1e308, 0) would overflow
+    if not 0 < largest < float("inf"):
         raise InputError(f"axis={axis!r} must be a direction (x, y, z): finite, not all zero",
                          cli=f"--turntable-axis {','.join(f'{x:g}' for x in k)} must be a direction: finite, not "
                              f"all zero")
-    return tuple(k / length)
+    k = k / largest
+    return tuple(k / np.linalg.norm(k))
 
 
 #: host memory a turntable holds per pixel of a view, at the most: its float32 image of up to 4 channels, their stack

@@ -331,15 +331,18 @@ def test_info_of_a_time_series_describes_it_and_names_the_refusal(tmp_path, caps
         facts = json.loads(out)
         assert (facts["stored_shape"], facts["shape"], facts["spacing"], facts["origin"], facts["channels"]) == \
             (stored, shape, spacing, origin, 1), name
-        assert facts["time"] == dict(points=3, step=step, unit=unit) and facts["refused"] == refusals[name], name
+        assert facts["time"] == dict(points=3, step=step, unit=unit, along="time", frame=None), name
+        assert facts["refused"] == refusals[name], name
     code, out, err = run(capsys, "info", str(tmp_path / "f.nii.gz"))
     lines = dict(line.split(None, 1) for line in out.splitlines())
     assert code == 0 and lines["stored"] == "4 x 5 x 6 x 3 values of int16, in the file's order of axes, a time " \
         "series", out
     assert lines["spacing"] == "2, 3, 4 mm (x, y, z; --spacing 4,3,2), origin 8, 12, 17 (RAS+)"
     assert "volume" not in lines
-    assert lines["time"] == "3 time points, 2.5 sec apart"
-    assert lines["refused"].endswith("extract one volume first, e.g. with nibabel.funcs.four_to_three")
+    assert lines["time"] == "3 time points, 2.5 sec apart: --frame K picks one, 0 .. 2 (or -3 .. -1 from the end); " \
+        "without it compress, render, progressive, drr and view refuse the file"
+    assert refusals["f.nii.gz"].endswith("; clwave reads one volume: pick one, frame=K for K in 0 .. 2 (or -3 .. -1 "
+                                         "from the end)")
 
 
 def test_every_formats_description_has_the_same_keys(tmp_path, capsys):

@@ -11,7 +11,7 @@ import pytest
 from astropy.io import fits
 
 import clwave
-from clwave.errors import ClwaveWarning, InputError
+from clwave.errors import ClwaveWarning, FileFormatError, InputError
 from clwave.io.loaders import describe
 from test_cli import run
 from test_mgh import assert_refused_in_one_line
@@ -133,11 +133,19 @@ def test_a_degenerate_stokes_axis_is_dropped(tmp_path, rng, layout):
     assert describe(path)["shape"] == [5, 6, 4]
 
 
-def test_several_stokes_planes_are_refused_in_one_line(tmp_path, capsys):
+def test_several_stokes_planes_without_frame_are_refused_in_one_line(tmp_path, capsys):
+    """Read without frame= (tests/test_frames.py reads one); planes along two axes are refused even with it."""
     path = write(tmp_path / "iquv.fits", np.zeros((4, 3, 5, 6), np.float32), -32,
                  SKY | dict(CTYPE4="STOKES", CDELT4=1.0, CRVAL4=1.0, CRPIX4=1.0))
-    assert_refused_in_one_line(capsys, path, r"holds 4 planes along its axis 4 \(NAXIS4, e.g. Stokes parameters\) "
-                                             "beside its cube; clwave reads one cube")
+    with pytest.raises(FileFormatError, match=r"holds 4 planes along its axis 4 \(STOKES\) beside its cube; clwave "
+                                              r"reads one volume: pick one, frame=K for K in 0 .. 3 \(or -4 .. -1"):
+        clwave.load(path)
+    path = write(tmp_path / "two.fits", np.zeros((2, 4, 3, 5, 6), np.float32), -32,
+                 SKY | dict(CTYPE4="STOKES", CTYPE5="TIME"))
+    with pytest.raises(FileFormatError, match=r"holds planes along its axes 4 \(4\) and 5 \(2\) beside its cube; "
+                                              "clwave reads one cube, picking a plane along one axis only"):
+        clwave.load(path, frame=0)
+    assert_refused_in_one_line(capsys, path, "picking a plane along one axis only")
 
 
 @pytest.mark.parametrize("name", ["c.fits.gz", "c.fit", "c.fts", "c.fits.fz", "c.FITS"])
@@ -236,12 +244,18 @@ def test_compress_and_render_a_cube_through_the_command_line(tmp_path, capsys, r
     assert code == 0, err
 
 
-def test_oblong_sky_pixels_keep_their_aspect(tmp_path, rng):
-    """Dec pixels twice the RA pixels' size: z spaced 2, the rest 1 (pixels); info names it as the file's."""
+def test_oblong_sky_pixels_keep_their_aspect(tmp_path, rng, capsys):
+    """Dec pixels twice the RA pixels' size: z spaced 2, the rest 1 (pixels); info names it as the file's, and the
+    --spacing it prints keeps that aspect and makes the 3 channels as deep as the 4 Dec pixels of 2 are tall (8)."""
     cube = rng.normal(size=(3, 4, 5)).astype(np.float32)
     path = write(tmp_path / "o.fits", cube, -32, SKY | dict(CDELT2=0.002))
     assert clwave.load(path).spacing == (2.0, 1.0, 1.0)
     assert describe(path)["spacing"] == [2.0, 1.0, 1.0]
+    code, out, err = run(capsys, "info", str(path))
+    assert code == 0, err
+    assert "--spacing 2,1,2.6666667 makes the spectral axis as deep as the sky is wide" in out
+    vol = clwave.load(path, spacing=(2.0, 1.0, 2.6666667))
+    assert vol.data.shape[2] * vol.spacing[2] == pytest.approx(vol.data.shape[0] * vol.spacing[0], rel=1e-6)
 
 
 def test_a_grid_turned_on_the_sky_goes_by_its_nearest_axes_with_a_warning(tmp_path, rng):
@@ -282,6 +296,8 @@ def _edit(content, key, value=None, card=None):
     ("float", r"has BITPIX = 16.0, none FITS has"),
     ("missing", r"its HDU 0 has no NAXIS3; the header is corrupt"),
     ("groups", r"has GCOUNT = 1, PCOUNT = -5760; a count cannot be negative"),
+    ("scale", r"has BSCALE = 'abc', not a finite number; the header is corrupt"),
+    ("offset", r"has BZERO = True, not a finite number; the header is corrupt"),
     ("cut", r"declares 5 x 4 x 3 voxels \(120 bytes\) but the file holds 100 bytes"),
     ("not fits", r"is not a FITS file \(it does not begin with SIMPLE = T\)"),
     ("image", r"holds no image of 3 or more axes \(its HDUs: 0: a 2-D image\); clwave reads data cubes"),
@@ -298,6 +314,8 @@ def test_a_lying_or_truncated_header_is_refused_in_one_line(tmp_path, capsys, ca
                "float": lambda: _edit(content, "BITPIX", 16.0),
                "missing": lambda: _edit(content, "NAXIS3", card="COMMENT"),
                "groups": lambda: _edit(content, "CRPIX3", card=_card("PCOUNT", -5760)),
+               "scale": lambda: _edit(content, "CRPIX3", card=_card("BSCALE", "abc")),
+               "offset": lambda: _edit(content, "CRPIX3", card=_card("BZERO", True)),
                "cut": lambda: content[:2880 + 100],
                "not fits": lambda: b"\x89PNG" + content[4:],
                "image": lambda: fits_bytes(np.zeros((4, 5), np.int16), 16),

@@ -357,9 +357,9 @@ def test_describe_of_a_broken_nifti_header_is_the_readers_one_line(tmp_path, off
 
 
 @pytest.mark.parametrize("step, units, expect", [
-    (np.inf, 10, dict(points=2, step=None, unit=None)),  # was "step": Infinity, which no strict JSON parser reads
-    (2.0, 0xff, dict(points=2, step=2.0, unit=None)),  # unit codes NIfTI does not define: was "KeyError: 7"
-    (2.0, 10, dict(points=2, step=2.0, unit="sec"))])  # 2 (mm) + 8 (s): the control
+    (np.inf, 10, dict(step=None, unit=None)),  # was "step": Infinity, which no strict JSON parser reads
+    (2.0, 0xff, dict(step=2.0, unit=None)),  # unit codes NIfTI does not define: was "KeyError: 7"
+    (2.0, 10, dict(step=2.0, unit="sec"))])  # 2 (mm) + 8 (s): the control
 def test_a_time_series_step_or_unit_no_header_means_is_none(tmp_path, capsys, step, units, expect):
     """pixdim[4] infinite, or xyzt_units' time code past NIfTI's, of a 4-D NIfTI: described without a step or a
     unit, ``info --json`` strict JSON (refuzz22)."""
@@ -372,6 +372,7 @@ def test_a_time_series_step_or_unit_no_header_means_is_none(tmp_path, capsys, st
     data = bytearray((tmp_path / "v.nii").read_bytes())
     data[92:96], data[123] = np.float32(step).tobytes(), units  # pixdim[4], xyzt_units
     (tmp_path / "v.nii").write_bytes(bytes(data))
+    expect = dict(expect, points=2, along="time", frame=None)
     assert describe(tmp_path / "v.nii")["time"] == expect
     code, out, err = run(capsys, "info", "--json", str(tmp_path / "v.nii"))
     assert code == 0 and json.loads(out, parse_constant=lambda name: pytest.fail(name))["time"] == expect, err

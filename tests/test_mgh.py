@@ -88,10 +88,12 @@ def test_frames_are_refused_as_a_time_series_and_described(tmp_path, rng, capsys
     image = MGHImage(data, LIA)
     image.header["tr"] = 2000.0
     nib.save(image, tmp_path / "bold.mgz")
-    with pytest.raises(FileFormatError, match="holds 3 frames of 4 x 5 x 6 voxels; .* mri_convert --frame"):
+    with pytest.raises(FileFormatError, match="holds 3 frames of 4 x 5 x 6 voxels; .* pick one, frame=K for K in 0 "
+                                              r"\.\. 2"):
         clwave.load(tmp_path / "bold.mgz")
     facts = describe(tmp_path / "bold.mgz")
-    assert facts["time"] == dict(points=3, step=2000.0, unit="ms") and facts["shape"] == [5, 6, 4]  # z: j, y: k, x: i
+    assert facts["time"] == dict(points=3, step=2000.0, unit="ms", along="time", frame=None)
+    assert facts["shape"] == [5, 6, 4]  # z: j, y: k, x: i
 
 
 def _header(dims=(2, 3, 4, 1), code=1, version=1):

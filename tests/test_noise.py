@@ -229,6 +229,20 @@ def test_command_line_noise_compress_report_and_info(tmp_path, capsys):
     assert "argument --keep: not allowed with argument --noise" in capsys.readouterr().err
 
 
+def test_a_clean_chunked_volume_is_refused_in_one_line_as_an_in_memory_one(tmp_path, capsys, recwarn):
+    """noise= on a clean volume read chunk by chunk, cubic at 3 levels: the refusal alone, as in memory, not the noise
+    gain's warning before it (a second line of a command that does nothing)."""
+    np.save(tmp_path / "clean.npy", blob())
+    model = clwave.WaveletVolume.from_volume(clwave.Volume(da.from_array(blob(), chunks=16)), "cubic", levels=3)
+    with pytest.raises(InputError, match="found no noise"):
+        model.threshold(noise=3)
+    assert not [w for w in recwarn if issubclass(w.category, ClwaveWarning)]
+    assert main(["compress", str(tmp_path / "clean.npy"), "--chunks", "16", "--noise", "3", "-o",
+                 str(tmp_path / "x.clw")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--noise found no noise" in err and not (tmp_path / "x.clw").exists(), err
+
+
 @pytest.mark.parametrize("value", [[-0.1], [float("nan")], ["0.1"], [True], 0.1, [0.1, 0.2], None])
 def test_a_hostile_noise_level_is_refused_in_one_line(tmp_path, value):
     """A header's noise_sigma: a number >= 0 or null per channel (null: not recorded, as absent)."""

@@ -114,6 +114,24 @@ def test_the_estimate_bounds_the_error_within_4x():
     assert len(ratios) == 28 and np.mean((ratios >= 1) & (ratios <= 4)) >= 0.95, np.round(ratios, 2)
 
 
+def test_a_frame_that_sees_nothing_estimates_the_whole_final_image():
+    """One voxel seen from afar (extent 80: under two pixels of 128) is missed by the rays of the first frame (32^2)
+    and of its pilot (16^2): that frame is empty, so its error is the final image itself (relative max exactly 1);
+    its estimates are at least its measured error, and error= goes on to the final image (an estimate of 0 stopped
+    there)."""
+    data = np.zeros((40, 40, 40), np.float32)
+    data[20, 20, 20] = 1
+    rgba = TransferFunction.preset("hydrogen").classify(clwave.Volume(data))
+    wv = WaveletVolume.from_volume(rgba, wavelet="linear", levels=1)
+    frames = list(clwave.progressive(wv, clwave.Camera(30, 20, size=128, extent=80.0), method="raytrace",
+                                     tolerance=1e-2, error=0.5))
+    first = frames[0].figures()
+    assert not frames[0].image.any() and frames[-1].image.any() and first["relative_max_error"] == 1
+    for n in ("rms", "max"):
+        assert first[f"estimated_relative_{n}_error"] >= first[f"relative_{n}_error"], first
+    assert [f.reduction for f in frames] == [4, 1]
+
+
 def test_small_images_show_the_coarser_details_that_halve_the_error():
     """An image too small to reduce (48^2, 32^2) on a lod=True tracer: the coarser details on the full image,
     coarsest first, each measured against the final image (its estimate its error) and shown only where it halves

@@ -213,6 +213,24 @@ def test_staged_estimate_reports_each_frames_terms(tmp_path):
     assert rows[0]["reduction"] == 2 * rows[1]["reduction"]  # both coarse frames, the smaller first
 
 
+def test_estimate_sweep_splits_its_frames_by_seed(tmp_path):
+    """tools/estimate_sweep.py on a tuning and a held-out seed (one-level X-ray cases): every frame before the last,
+    direct and staged, its ratios the estimate over the measured error, summed per half and kind."""
+    run_tool("estimate_sweep.py", "--seeds", "23,42", "--json", tmp_path / "out.json")
+    out = json.loads((tmp_path / "out.json").read_text())
+    rows, summary = out["rows"], out["summary"]
+    assert {r["seed"] for r in rows} == {23, 42} and {r["kind"] for r in rows} == {"direct", "staged 1"}
+    for r in rows:
+        for n in ("rms", "max"):
+            assert r[f"{n}_ratio"] == r[f"{n}_estimate"] / r[f"{n}_error"] > 0
+    for half, parity in (("tuning", 0), ("held-out", 1)):
+        for kind in ("direct", "staged 1"):
+            mine = [r for r in rows if r["seed"] % 2 == parity and r["kind"] == kind]
+            assert summary[f"{half} {kind}"]["frames"] == len(mine) > 0
+            assert summary[f"{half} {kind}"]["both_within_1_4"] == sum(
+                all(1 <= r[f"{n}_ratio"] <= 4 for n in ("rms", "max")) for r in mine)
+
+
 def test_noise_table_rows(tmp_path):
     """tools/noise_table.py on a noisy blob: a row per wavelet, the noise rule's error below keep=0.05's for linear."""
     z, y, x = np.mgrid[:32, :32, :32] / 32

@@ -159,6 +159,16 @@ def test_a_turntable_about_any_axis_turns_the_camera_by_a_rotation_matrix(axis):
     assert [c.azimuth for c in z] == [-20, 52, 124, 196, 268] and all(c.roll == 0 for c in z)
 
 
+@pytest.mark.parametrize("axis, unit", [((1e308, 1e308, 0), (0.5 ** 0.5, 0.5 ** 0.5, 0)), ((0, -1e-200, 0), (0, -1, 0)),
+                                        ((3, 0, 4), (0.6, 0, 0.8))])
+def test_a_direction_of_any_finite_length_is_its_unit_vector(axis, unit):
+    """A finite direction whose squares overflow or underflow float64 is a direction still (no overflow warning,
+    filterwarnings=error), not refused as all zero or infinite."""
+    from clwave.turntable import turntable_axis
+
+    assert np.allclose(turntable_axis(axis), unit, rtol=0, atol=1e-15)
+
+
 def test_a_turntable_about_the_view_axis_turns_the_image(tmp_path, capsys):
     """Seen along x (azimuth 0, elevation 0), a turn of 90 degrees about x turns the image a quarter clockwise
     (u = y to z, v = z to -y): each ray-traced X-ray view is the first one turned by numpy.rot90, for a volume

@@ -8,6 +8,7 @@ import pytest
 
 import clwave
 from clwave.cli import main
+from clwave.raytrace.reference import classified_reference
 
 
 @pytest.fixture(scope="module")
@@ -90,8 +91,11 @@ def test_an_all_zero_scalar_model_takes_an_auto_window():
     # with no bricks at all, window "auto" was refused as if the bricks were in a scratch file
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(np.zeros((6, 7, 8), np.float32)), levels=1)
     tf = clwave.TransferFunction([(0.0, 0.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0, 1.0, 1.0)], window="auto")
-    res = clwave.raytrace(wv, clwave.Camera(20, 30, (4, 5)), transfer_function=tf)
-    assert res.image.shape == (4, 5, 4) and not res.image.any()  # no content, no bricks: nothing to render
+    tracer, cam = clwave.RayTracer(wv), clwave.Camera(20, 30, (4, 5))
+    res = tracer.render(cam, transfer_function=tf)
+    # no bricks: the field is 0 over the data's box, which the window (-0.5, 0.5) gives opacity 0.5 (raytracing.md §10)
+    assert res.meta["tf_window"] == [-0.5, 0.5] and res.image[..., 3].max() > 0.5
+    assert np.abs(res.image - classified_reference(wv, cam, tf, tracer=tracer)).max() <= 1e-3
 
 
 def test_a_staged_scalar_file_refines_with_a_transfer_function(scalar_model, tmp_path):

@@ -81,30 +81,89 @@ def test_a_cone_beam_drr_of_hounsfield_units_on_thick_slices_against_a_dense_mar
     assert exact.max() > 0.3 and np.abs(image - exact).max() <= 1e-2 * exact.max()
 
 
-def test_a_function_that_shows_the_outside_value_is_warned_of(tmp_path):
-    # attack26's shell: data of -900 .. -800 under opacity rising from -900, the model 0 beyond the faces (clamped to
-    # -800 as classified): an opaque box; the same data with subtract=-1000 and a function transparent there: none
+def test_post_classification_sees_only_the_data_within_its_voxel_centres():
+    """attack26's shell: data of -900 .. -800 under opacity rising from -900, the model falling to 0 beyond the
+    faces through values the data never has (clamped to -800 as classified).  Rays see the data's box only (its
+    outermost voxel centres, docs/raytracing.md §10): the box is no longer opaque where the pre-classified model is
+    clear, and the kernel agrees with the oracle, which cuts its rays to that box in world units on its own."""
     data = (100 * _smooth((13, 11, 17)) - 900).astype(np.float32)
     tf = clwave.TransferFunction([(-900, .9, .5, .2, 0.0), (-800, .9, .5, .2, 0.4)])
     cam = clwave.Camera(30, 20, 16)
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
-    with pytest.warns(clwave.ClwaveWarning, match=r"^the transfer function gives -800, the value the model takes "
-                                                  r"beyond the volume's faces .* opacity of 0\.4: .* subtract="):
-        clwave.raytrace(wv, cam, transfer_function=tf, shading=False)
-    # the box it warns of: its silhouette's corner pixels are nearly opaque, as the pre-classified model's are not
-    post = clwave.raytrace(wv, cam, transfer_function=tf, shading=False).image[..., 3]
+    tracer = clwave.RayTracer(wv)
+    post = tracer.render(cam, transfer_function=tf, shading=False, tolerance=1e-3).image
+    assert np.abs(post - classified_reference(wv, cam, tf, shading=False, tracer=tracer)).max() <= 1e-3
     pre = clwave.raytrace(clwave.WaveletVolume.from_volume(tf.classify(clwave.Volume(data)), levels=1), cam,
                           shading=False).image[..., 3]
-    assert np.abs(post - pre).max() > 0.5
-    shifted = clwave.WaveletVolume.from_volume(clwave.load(_npy(tmp_path, data), subtract=-1000), levels=1)
-    clear = clwave.TransferFunction([(-850, .9, .5, .2, 0.0), (-800, .9, .5, .2, 0.4)])  # 0 at -1000 (the outside)
-    import warnings
-    with warnings.catch_warnings(record=True) as seen:
-        warnings.simplefilter("always")
-        clwave.raytrace(shifted, cam, transfer_function=clear, shading=False)
-    assert not [w for w in seen if "beyond the volume's faces" in str(w.message)]
+    assert post[..., 3].max() > 0.9 and np.abs(post[..., 3] - pre).max() < 0.4  # the shell was 0.93 apart
+
+
+@pytest.mark.parametrize("background", [0.0, 1e-6])
+def test_a_function_that_shows_zero_fogs_the_data_box_whatever_the_bricks(background):
+    """attack26's fog: zeros around a 2^3 block of 1 under opacity 0.2 everywhere.  The fog filled the content's
+    support box for exact zeros (no bricks where no content reaches) and the model's for 1e-6.  Now both fill the
+    data's box and nothing beyond: a ray missing the block crosses the 11 voxel lengths between the outermost centres
+    at extinction 0.2 a voxel, 1 - exp(-2.2) of opacity, and the oracle agrees everywhere."""
+    data = np.full((12, 12, 12), background, np.float32)
+    data[5:7, 5:7, 5:7] = 1
+    tf = clwave.TransferFunction([(0, 1, 1, 1, 0.2), (1, 1, 1, 1, 0.2)])
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
+    tracer = clwave.RayTracer(wv)
+    cam = clwave.Camera(0, 0, 24, extent=20)  # along x: a pixel 20/24 voxel lengths, the centres 5.5 either side
+    image = tracer.render(cam, transfer_function=tf, shading=False, tolerance=1e-3).image
+    assert np.abs(image - classified_reference(wv, cam, tf, shading=False, tracer=tracer)).max() <= 1e-3
+    alpha, inside = image[..., 3], np.abs(np.arange(24) + 0.5 - 12) * 20 / 24 < 5.5
+    fog = alpha[np.ix_(inside, inside)]
+    assert np.abs(fog[[0, -1]] - (1 - np.exp(-2.2))).max() <= 1e-3 and np.all(fog >= 1 - np.exp(-2.2) - 1e-3)
+    assert not alpha[~inside].any() and not alpha[:, ~inside].any()
+
+
+@pytest.mark.parametrize("preset", ["ct-bone", "ct-soft-tissue"])
+def test_hounsfield_units_render_without_subtract(tmp_path, preset):
+    """A CT as scanners write it (int16 HU, air -1000 at every face, soft tissue, fat, bone; 2.5 x 0.8 x 0.8 mm),
+    post-classified without subtract=: within the tolerance of the oracle, and, no shell at the faces any more, of
+    the same CT read with subtract=-1000 (the model the same plus 1000 wherever the faces' zero padding does not
+    reach, which the function leaves transparent)."""
+    shape = (12, 22, 20)
+    z, y, x = np.meshgrid(*[np.arange(n) - (n - 1) / 2 for n in shape], indexing="ij")
+    r = (x * 0.8 / 6) ** 2 + (y * 0.8 / 7) ** 2 + (z * 2.5 / 11) ** 2
+    hu = np.select([r < 0.7, r < 1], [40, -100], -1000).astype(np.int16)
+    hu[(r < 0.7) & ((x * 0.8 - 1) ** 2 + (y * 0.8 + 1.5) ** 2 < 4)] = 1100  # a bone
+    path = _npy(tmp_path, hu)
+    tf, cam = clwave.TransferFunction.preset(preset), clwave.Camera(35, 25, 16, extent=36)  # both models at one scale
+    wv = clwave.WaveletVolume.from_volume(clwave.load(path, spacing=(2.5, 0.8, 0.8)), levels=1)
+    tracer = clwave.RayTracer(wv)
+    image = tracer.render(cam, transfer_function=tf, tolerance=1e-3).image
+    assert image[..., 3].max() > 0.3
+    assert np.abs(image - classified_reference(wv, cam, tf, tracer=tracer)).max() <= 1e-3
+    shifted = clwave.WaveletVolume.from_volume(clwave.load(path, spacing=(2.5, 0.8, 0.8), subtract=-1000), levels=1)
+    assert np.abs(image - clwave.raytrace(shifted, cam, transfer_function=tf, tolerance=1e-3).image).max() <= 2e-3
 
 
 def _npy(tmp_path, data):
     np.save(tmp_path / "v.npy", data)
     return tmp_path / "v.npy"
+
+
+def test_fog_in_passes_reaches_regions_without_bricks(monkeypatch):
+    """Bricks in a scratch file are traced in passes over regions of bricks; a function that shows the field's 0 is
+    seen where no brick lies too, so the passes take the regions of the data's box without bricks as well: random
+    content in one half of a long volume, zeros in the other, the same image as the bricks on the device, and the
+    zeros' fog 1 - exp(-0.02 * 23) across the 23 voxel lengths between the outermost centres."""
+    from clwave.raytrace import bricks
+
+    fits = bricks._check_fits
+    monkeypatch.setattr(bricks, "_check_fits", lambda *args: fits(*args) and None)  # never on the device
+    shape = (2048, 24, 24)
+    data = np.random.default_rng(1).random(shape).astype(np.float32)
+    data[shape[0] // 2:] = 0
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), levels=1)
+    tf = clwave.TransferFunction([(0, 1, 1, 1, 0.02), (1, 1, 0.5, 0, 0.3)])
+    cam = clwave.Camera(90, 0, (64, 5), extent=2100)
+    parts = clwave.RayTracer(wv, device_memory="8MiB").render(cam, tolerance=1e-3, transfer_function=tf,
+                                                               shading=False)
+    monkeypatch.setattr(bricks, "_check_fits", fits)
+    whole = clwave.RayTracer(wv).render(cam, tolerance=1e-3, transfer_function=tf, shading=False)
+    assert parts.meta["pool"] == "scratch file" and parts.meta["passes"] > 1 and whole.meta["pool"] == "device"
+    assert np.abs(parts.image - whole.image).max() <= 1e-3
+    assert np.any(np.abs(parts.image[..., 3] - (1 - np.exp(-0.02 * 23))) <= 1e-3)

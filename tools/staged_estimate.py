@@ -82,14 +82,15 @@ def saved(tmp, volumes, angles) -> list:
     return cases
 
 
-def coarse_frames(path, camera, absorption) -> list:
-    """The figures of both coarse frames of ``camera`` (the full stage reported not ready until they are made)."""
+def coarse_frames(path, camera, tolerance=1e-2, **options) -> list:
+    """The figures of both coarse frames of ``camera`` (the full stage reported not ready until they are made);
+    ``options`` as ``refine``'s."""
     ready = StagedTracer.ready
     StagedTracer.ready = property(lambda self: False)
     try:
         tracer = clwave.RayTracer.open(path)
         return [dict(f.figures(), reduction=f.reduction, missing=tracer.missing, outside=tracer.outside)
-                for f in tracer.refine(camera, tolerance=1e-2, absorption=absorption) if f.meta["stage"] == "coarse"]
+                for f in tracer.refine(camera, tolerance=tolerance, **options) if f.meta["stage"] == "coarse"]
     finally:
         StagedTracer.ready = ready
 
@@ -101,7 +102,7 @@ def rows(cases) -> list:
     for label, path, views in cases:
         for view in views:
             for absorption in (True, False):
-                for f in coarse_frames(path, clwave.Camera(**view), absorption):
+                for f in coarse_frames(path, clwave.Camera(**view), absorption=absorption):
                     row = dict(case=label, mode="shaded" if absorption else "xray", view=view,
                                reduction=f["reduction"], missing=f["missing"], outside=f["outside"])
                     for n in ("rms", "max"):

@@ -9,8 +9,9 @@ from ..errors import InputError
 from ..io.result import check_background
 from ..model.tf_checks import check_opacity_unit, check_window
 from ..io.images import check_frame_time
-from .options import (flag, is_clw, numbers, parse_chunks, parse_device_memory, parse_scheduler, parse_spacing,
-                      parse_tf_window, parse_thresholding, preset_transfer_function)
+from .options import (is_clw, parse_device_memory, parse_scheduler, parse_tf_window, parse_thresholding,
+                      preset_transfer_function)
+from .reading import flag, numbers, parse_chunks, parse_spacing
 
 
 #: the options given as one number (argparse's ``type=float``) whose own checks (below, or in the model's API words)

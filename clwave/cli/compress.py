@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .options import (add_command, build_model, check_outputs, error_words, file_size, finish, is_clw, kept_words,
-                      read_volume)
+from .options import add_command, build_model, check_outputs, error_words, file_size, finish, is_clw, kept_words
+from .reading import read_volume
 
 
 def run(args):

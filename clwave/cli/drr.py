@@ -14,8 +14,9 @@ import numpy as np
 
 from ..errors import ClwaveError, CommandWords, InputError
 from .checks import parse_size, picture_options
-from .options import (add_command, add_device_options, build_model, check_outputs, finish, kept_words, numbers,
+from .options import (add_command, add_device_options, build_model, check_outputs, finish, kept_words,
                       parse_device_memory, warn)
+from .reading import numbers
 
 
 def read_pose_table(path) -> list:

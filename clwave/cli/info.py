@@ -9,8 +9,8 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .options import (READING, add_reading_options, error_words, file_size, flag, is_given, kept_words, numbers, option,
-                      parse_series, parse_spacing)
+from .options import error_words, file_size, kept_words
+from .reading import READING, add_reading_options, flag, is_given, numbers, option, parse_series, parse_spacing
 
 
 def run(args):
@@ -67,7 +67,8 @@ def describe(args):
 
         shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
         facts = _as_read(args, describe_volume(args.file, series=parse_series(args.series), level=args.level,
-                                               shape=shape, dtype=args.dtype, byte_order=args.byte_order))
+                                               frame=args.frame, shape=shape, dtype=args.dtype,
+                                               byte_order=args.byte_order))
         lines = _volume_lines(facts)
     if args.json:
         print(json.dumps(facts, indent=2))
@@ -201,7 +202,7 @@ def _volume_lines(f) -> list:
         read = ", a time series" if f["time"] else f"{stored}{resampled}"
         lines.append(("stored", f"{' x '.join(map(str, f['stored_shape']))} values of {f['dtype']}, in the file's "
                                 f"order of axes{read}"))
-    if f["shape"] is not None and not f["time"]:
+    if f["shape"] is not None and not f["refused"]:  # a time series: one volume's, where --frame picks it
         z, y, x = f["shape"][:3]
         lines.append(("volume", f"{x} x {y} x {z} voxels (x, y, z), {f['channels']} channel"
                                 f"{'s' * (f['channels'] != 1)} of {f['dtype']}"))
@@ -233,8 +234,12 @@ def _volume_lines(f) -> list:
     if f["time"]:
         t = f["time"]
         step = "" if t["step"] is None else f", {t['step']:g} {t['unit'] or '(no unit)'} apart"
-        lines += [("time", f"{t['points']} time points{step}"),
-                  ("refused", f"when read (compress, render, drr, view): {f['refused']}")]
+        points = "time points" if t["along"] == "time" else f"planes along {t['along']}"
+        last = t["points"] - 1
+        picked = f"--frame {t['frame']} read" if t["frame"] is not None else \
+            f"--frame K picks one, 0 .. {last} (or -{last + 1} .. -1 from the end); without it compress, render, " \
+            "progressive, drr and view refuse the file"
+        lines.append(("time", f"{t['points']} {points}{step}: {picked}"))
     if f["rescale"]:
         (slope, intercept), more = f["rescale"][0], len(f["rescale"]) - 1
         lines.append(("rescale", f"slope {slope:g}, intercept {intercept:g}"
@@ -245,7 +250,7 @@ def _volume_lines(f) -> list:
                       f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"])
+    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"], f["spacing"])
 
 
 def _nifti_lines(n) -> list:
@@ -269,25 +274,28 @@ def _nifti_lines(n) -> list:
     return lines
 
 
-def _fits_lines(c, shape) -> list:
+def _fits_lines(c, shape, spacing) -> list:
     """A FITS cube's HDU, values and axes (``loaders.fits.header_facts``), and the ``--spacing`` that makes its
-    spectral axis (x) as deep as its ``shape``'s sky is wide (yt's ``spectral_factor="auto"``)."""
+    spectral axis (x) as deep as its sky (``shape`` and ``spacing``, dz the celestial pixels' aspect) is wide (yt's
+    ``spectral_factor="auto"``)."""
     if c is None:
         return []
     scaling = ", ".join(f"{k} {v:g}" for k, v in c["scaling"].items())
     axes = []
     for n, a in enumerate(c["axes"], 1):
         step = "" if a["step"] is None else f", {a['step']:g}{' ' + a['unit'] if a['unit'] else ''} a pixel"
-        becomes = "dropped" if a["axis"] is None else f"-> {a['axis']}{' reversed' * bool(a['flipped'])}"
+        becomes = f"-> {a['axis']}{' reversed' * bool(a['flipped'])}" if a["axis"] is not None else \
+            "one plane (--frame)" if a["length"] > 1 else "dropped"
         axes.append(f"{n} {a['type'] or '(no CTYPE)'} ({a['length']}{step}) {becomes}")
     name = f" ({c['name']})" if c["name"] else ""
     scaled = f" ({scaling}, applied as read)" if scaling else ""
     unit = c["unit"] or "no unit (no BUNIT)"
+    dz, dy = spacing[:2]
+    deep = _digits((dz, dy, max(shape[0] * dz, shape[1] * dy) / shape[2]), ",")
     return [("cube", f"HDU {c['hdu']}{name}, values in {unit}{scaled}; NaN (and BLANK) are no data: --nan VALUE gives "
                      "them a value"),
             ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1); "
-                     f"--spacing 1,1,{max(shape[:2]) / shape[2]:.4g} makes the spectral axis as deep as the sky is "
-                     "wide")]
+                     f"--spacing {deep} makes the spectral axis as deep as the sky is wide")]
 
 
 def _extent(shape, spacing) -> float:

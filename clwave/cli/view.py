@@ -5,8 +5,8 @@ from __future__ import annotations
 import sys
 
 from .checks import check_image_size, parse_size
-from .options import (add_input_options, add_model_options, build_model, parse_device_memory,
-                      post_transfer_function, warn)
+from .options import add_model_options, build_model, parse_device_memory, post_transfer_function, warn
+from .reading import add_input_options
 
 
 #: host memory the viewer holds a pixel of its --size on a CPU device at the least (its X-ray and shaded images, their

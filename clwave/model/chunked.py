@@ -209,11 +209,11 @@ class ChunkedWaveletVolume:
                              "compute() this one and threshold that")
         sigma = self.noise_sigma
         if noise is not None:
-            if self.levels == 0:  # refused, and the gain told, before the passes
+            if self.levels == 0:  # refused before the passes
                 check_noise_known(None, 0)
-            warn_noise_gain([(w, band_layout(w, self.shape, self.levels)) for w, _ in self.groups()], self.levels)
             sigma = self.measure_noise()
-            check_noise_known(sigma, self.levels)
+            check_noise_known(sigma, self.levels)  # then the gain told, as the in-memory model tells it
+            warn_noise_gain([(w, band_layout(w, self.shape, self.levels)) for w, _ in self.groups()], self.levels)
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         if budget is None:  # a threshold, or keep=1: every live coefficient
             rules = [(Rule(), Rule(above=threshold if noise is None else noise))] * len(self.groups())

@@ -245,7 +245,8 @@ class BrickField:
         try:
             breaks = np.flatnonzero(starts[1:] != starts[:-1] + sizes[:-1]) + 1
             for a, b in zip(np.concatenate([[0], breaks]), np.concatenate([breaks, [len(slots)]])):
-                self.spill.read_into(int(starts[a]), mapped[at[a]:at[b]])
+                if b > a:  # (a region of no bricks, which a transfer function showing 0 marches: none)
+                    self.spill.read_into(int(starts[a]), mapped[at[a]:at[b]])
             mapped[at[-1]:] = 0
         finally:
             mapped.base.release(q)

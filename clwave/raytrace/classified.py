@@ -24,7 +24,7 @@ from scipy.special import comb
 from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.kernels import BUFFER, Kernel, in_row_bands
-from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, warn_outside
+from ..errors import InputError, NearlyOpaqueWarning, warn_outside
 from ..model.tf_passes import auto_window
 from ..model.transfer import TransferFunction
 from ..model.transform import sampling_kernel
@@ -117,11 +117,12 @@ class Classification:
     bound: cla.Array        # per block: the largest opacity
     super_bound: cla.Array  # per superblock
     super_origin: np.ndarray
-    box: tuple              # clip box (x, y, z): the model's
+    box: tuple              # clip box (x, y, z): the data's box (data_box) where the function sees anything
     grad_floor: float       # world gradients of the scalar this short are flat
     seconds: float          # what the change of transfer function cost
     range: cla.Array        # the detail's range per block that the bounds come from
     opacity: float          # the largest opacity it gives any block: 0, nothing to see
+    shows_zero: bool        # it gives the field's 0 (where no brick lies) an opacity: the box is the data's
 
 
 class ScalarRange:
@@ -149,6 +150,7 @@ class ScalarRange:
         self.slot_range = None  # bricks in a scratch file: |s| <= the block bound
         self.step = 0.0  # the packed pool's largest step (none in a scratch file: floats)
         self.length = float(np.linalg.norm(np.multiply(f.shape, tracer.wv.spacing))) * BRICK  # the bricks' diagonal
+        self.data_box = data_box(tracer.wv.shape, tracer.orders[0])
         self.sample = np.zeros(1, np.float32) if f.resident else None  # no bricks at all: s = 0 everywhere
         if f.resident and len(f.levels):
             tables = tracer.field_tables
@@ -266,12 +268,26 @@ class ScalarRange:
         # flat: below FLAT of the span per unit length, or the float32 field's rounding noise, in both precisions
         values = stored.data_points()
         floor = max(self.noise_floor, FLAT * (values[-1] - values[0]) / self.spacing)
+        lo, hi = self.data_box  # where the field is 0 (no brick) the function sees 0: visible only if it shows 0
+        shows_zero = bool(stored(np.zeros(1))[1][0])
+        if not shows_zero:
+            lo, hi = np.maximum(lo, at.box[0]), np.minimum(hi, at.box[1])
         self.last = Classification(tf, window, cla.to_device(q, table.astype(real)), bound, super_bound,
-                                   at.super_origin, at.box, floor, 0.0, ranges,
-                                   float(super_bound.get().max(initial=0.0)))
+                                   at.super_origin, (lo, hi), floor, 0.0, ranges,
+                                   float(super_bound.get().max(initial=0.0)), shows_zero)
         q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last
+
+
+def data_box(shape, order) -> tuple:
+    """(lo, hi), (x, y, z) grid-0 fine coordinates: the box of the outermost voxel centres of a volume of ``shape``
+    (z, y, x) modelled at ``order``, the bounds of VTK's image data, beyond which post-classification sees nothing
+    (docs/raytracing.md §10); a Haar model's (the voxels themselves, boxes) and an axis of one voxel keep the
+    outermost voxels' whole thickness."""
+    n = np.array(shape[::-1], float)
+    whole = 0.5 * ((n == 1) | (order == 1))
+    return order / 2.0 - whole, n - 1 + order / 2.0 + whole
 
 
 def face_values(wv) -> np.ndarray:
@@ -469,30 +485,3 @@ def warn_opaque(scalar: ScalarRange, tf: TransferFunction, told: set):
     if line is not None:
         warn_outside(NearlyOpaqueWarning(line + " (transfer_function=TransferFunction(..., window=, opacity_unit=))",
                                          cli=line + " (--tf-window LO,HI or auto, --opacity-unit LENGTH)"))
-
-
-#: the least opacity (per opacity unit) at the model's outside value that :func:`warn_outside_value` tells
-OUTSIDE_OPACITY = 1 / 255
-
-
-def warn_outside_value(scalar: ScalarRange, tf: TransferFunction, told: set):
-    """Warn where ``tf`` gives the value the model takes beyond its voxels and on its empty ones an opacity of at
-    least :data:`OUTSIDE_OPACITY`: the model is 0 there (docs/model.md §3, docs/raytracing.md §4), the input's
-    ``subtracted`` as classified (clamped to the input's range, §10), so the box's faces render as a shell and empty
-    space as fog (docs/known-gaps.md §15).  Once per function in ``told`` (a tracer's)."""
-    key = ("outside", json.dumps(tf.to_dict()))
-    if key in told:
-        return
-    told.add(key)
-    seen = clamped(scalar.stored(tf), scalar.value_range)
-    alpha = float(seen(np.zeros(1))[1][0])
-    if alpha >= OUTSIDE_OPACITY:
-        outside = scalar.subtracted if scalar.value_range is None else \
-            min(max(scalar.subtracted, scalar.value_range[0] + scalar.subtracted),
-                scalar.value_range[1] + scalar.subtracted)
-        line = (f"the transfer function gives {outside:.6g}, the value the model takes beyond the volume's faces and "
-                f"on its empty voxels, an opacity of {alpha:.3g}: the faces render as a shell and empty space as fog")
-        warn_outside(ClwaveWarning(
-            line + "; make the model with subtract= a value the function leaves transparent (CT in HU: -1000)",
-            cli=line + "; compress or render with --subtract VALUE, one the function leaves transparent (CT in HU: "
-                       "--subtract -1000)"))

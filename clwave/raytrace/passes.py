@@ -78,9 +78,10 @@ def on_device(pool_bytes: int, per_image: int, at) -> int:
     return pool_bytes + 2 * at.block_bound.nbytes + per_image
 
 
-def passes(tracer, view, scale, offset, per_image, at) -> list:
+def passes(tracer, view, scale, offset, per_image, at, every=False) -> list:
     """The bricks of ``tracer`` in the scratch file as regions of c^3 bricks that fit the device one at a time, in
-    an order every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z).
+    an order every ray meets them in: ``[(slots, lo, hi)]`` with the region's box in grid-0 fine coordinates (x, y, z);
+    ``every``: regions without bricks too (a transfer function that shows the field's 0 there, docs/raytracing.md §10).
 
     Along every ray the distance of its region index from the eye's (perspective), or the index times the
     direction's sign (orthographic), never decreases per axis, so sorting regions by those keys
@@ -109,7 +110,7 @@ def passes(tracer, view, scale, offset, per_image, at) -> list:
     eye, direction = view_in_fine(view, scale, offset)
     eye_region = np.floor((eye / BRICK - f.origin) / c)
     regions = []
-    for r in np.argwhere(sums > 0):
+    for r in np.argwhere((sums > 0) | every):
         inside = np.all(((f.bricks[at.slots] - f.origin) // c) == r, axis=1)
         lo = (f.origin + r * c) * BRICK
         regions.append((ray_order(r, eye_region, direction, view.perspective), at.slots[inside],

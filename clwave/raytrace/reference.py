@@ -414,7 +414,9 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
                          tracer: RayTracer | None = None, detail=0, clip=None) -> np.ndarray:
     """(H, W, 4) float64 image of a scalar model through ``transfer_function`` (post-classification), by brute
     force: no skipping, no early termination, no adaptivity (docs/raytracing.md §10), the scalar clamped to the
-    input's range where the model knows it (``np.clip``, and cuts where it meets the range's ends).
+    input's range where the model knows it (``np.clip``, and cuts where it meets the range's ends), each ray
+    integrated over the data's bounds only: the box of its outermost voxel centres in world units (a Haar model's
+    voxels, and an axis of one voxel, whole).
 
     On each fine knot segment the scalar and its gradient are polynomials, fitted exactly from the model at ten
     Chebyshev points, sixteen for order 6 (:meth:`WaveletVolume.evaluate` / ``gradient``, or the B-spline
@@ -422,7 +424,7 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     value v (NumPy's companion-matrix roots), and where shading, at every real root of ``grad s . L`` for each
     light L and halfway vector (the normal flips there); on each piece the opacity ``np.interp(s)`` is a
     polynomial, fitted and integrated exactly, and the emission integral is composite Gauss-Legendre (8 x 8
-    nodes).  ``tracer`` supplies the clip box, the window of an "auto" transfer function and the gradient floor
+    nodes).  ``tracer`` supplies the window of an "auto" transfer function and the gradient floor
     the kernel uses; ``detail``: the model without its details of levels 1 .. detail, as the B-spline field
     holds it (docs/raytracing.md §8); ``clip`` as :func:`raytrace_reference`'s.
     """
@@ -444,10 +446,14 @@ def classified_reference(wv, camera, transfer_function, lights=None, shading=Tru
     evaluate = _content_field(wv, detail) if wv.content_mask is not None or detail else _model_field(wv)
     out = np.zeros((H, W, 4))
     floor = tr.scalar.classify(transfer_function, tr.cc, np.float64).grad_floor  # the kernel's flat gradients
+    # the data's bounds: its outermost voxel centres in world units (Haar's voxels and an axis of one voxel whole)
+    extent = np.array(wv.shape[::-1], float) - 1
+    extent[(extent == 0) | (tr.orders[0] == 1)] += 1
+    data = [np.asarray(wv.origin) + sign * extent / 2 * np.array(wv.spacing[::-1]) for sign in (-1, 1)]
     for r, c in np.ndindex(H, W):
         p, w = _ray(view, r, c)
         x0, d = p * scale + offset, w * scale
-        t0, t1 = _cut(p, w, *_clip(x0, d, tr.box, view.perspective), clip)
+        t0, t1 = _cut(p, w, *_clip(p, w, data, view.perspective), clip)
         if not t1 > t0:
             continue
         directions = [*light_dirs, *((light - w) / np.linalg.norm(light - w) for light in light_dirs)] \

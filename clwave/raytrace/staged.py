@@ -255,6 +255,8 @@ class StagedTracer:
             else:  # an X-ray frame's from its own image
                 lacks = self.lacks_in_line_integrals(res.image, cam.view(coarse.wv))
                 top += lacks
+                if reduction == 1 and lacks > 0:  # the full image: its size misses nothing, and the term is its
+                    rms = 0.0  # own line energies (§9); the max keeps the step, shaded frames both (measured)
             rms += lacks * root_mean_square(image) / peak
             self.start()
             yield RaytraceFrame(index=0, image=image, seconds=time.perf_counter() - start,

@@ -31,7 +31,7 @@ from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .wavelet_field import WaveletField
 from .passes import on_device, passes as region_passes
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
-from .classified import QUANT, ScalarRange, check_post, post_nodes, warn_opaque, warn_outside_value
+from .classified import QUANT, ScalarRange, check_post, post_nodes, warn_opaque
 from .progressive import frames
 from .quadrature import sample_tables
 from .shading import Phong, light_directions
@@ -326,7 +326,6 @@ class RayTracer:
         post = None if transfer_function is None else self.scalar.classify(transfer_function, cc, real, at)
         if post is not None:
             warn_opaque(self.scalar, transfer_function, self._told)
-            warn_outside_value(self.scalar, transfer_function, self._told)
         light_buf = np.zeros((max(1, len(light_dirs)), 4), np.float32)
         if light_dirs:
             light_buf[: len(light_dirs), :3] = light_dirs
@@ -346,7 +345,7 @@ class RayTracer:
                     f"{format_size(self.budget.total)} are allowed; render a smaller image, or make the tracer with "
                     f"a smaller device_memory= (--device-memory) so that its bricks render in passes")
         if self.field == "bspline" and not self.bricks.resident:
-            passes = region_passes(self, view, scale, offset, per_pixel, at)
+            passes = region_passes(self, view, scale, offset, per_pixel, at, post is not None and post.shows_zero)
         elif self.region is not None:
             f = self.bricks
             lo = np.append(self.region[0], f.origin[1:]) * BRICK

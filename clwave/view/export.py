@@ -32,7 +32,7 @@ SAVE_PIXEL_BYTES = 200
 #: opacity unit in the tab's function)
 TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
 #: the reading options that clwave.load takes by the same name
-LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level",
+LOAD_OPTIONS = ("shape", "dtype", "byte_order", "spacing", "series", "subtract", "hu_to_mu", "nan", "level", "frame",
                 "orientation", "unit", "labels")
 
 
@@ -48,10 +48,12 @@ class Origin:
     @classmethod
     def of_args(cls, args) -> "Origin":
         """The input and the reading and model options of a ``clwave view`` command line that differ from their
-        defaults (the same options as ``render``'s: one parser makes both, cli/options.py)."""
+        defaults (the same options as ``render``'s: one parser makes both, cli/options.py and
+        cli/reading.py)."""
         import argparse
 
-        from ..cli.options import add_input_options, add_model_options
+        from ..cli.options import add_model_options
+        from ..cli.reading import add_input_options
 
         parser = argparse.ArgumentParser(add_help=False)
         add_input_options(parser)

@@ -24,8 +24,8 @@ from ...errors import FileFormatError, InputError, finite_number, flag
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
-from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, folder_files, not_a_file, reading,
-                     axis_turn, stated_affine, to_canonical, to_float32)
+from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
+                     reading, axis_turn, stated_affine, to_canonical, to_float32)
 
 __all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
 
@@ -42,10 +42,12 @@ _INNER_PATH = re.compile(r"(.*\.(?:h5|hdf5|hdf|zarr)):(.*)", re.IGNORECASE | re.
 # Options that apply to some kinds of input only: those kinds, in words
 _ONLY_FOR = {"shape": (("raw",), ".raw files"), "dtype": (("raw", "mrc"), ".raw files and MRC maps of bytes"),
              "byte_order": (("raw",), ".raw files"), "series": (("dicom",), "DICOM folders"),
-             "level": (("zarr",), "OME-Zarr images")}
+             "level": (("zarr",), "OME-Zarr images"),
+             "frame": (("nifti", "mgh", "tiff", "zarr", "fits"), "time series (NIfTI, MGH, TIFF, OME-Zarr and FITS "
+                                                                 "files)")}
 
 
-def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None,
+def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=None, level=None, frame=None,
          chunks=None, nan=None, subtract=0.0, hu_to_mu=False, mu_water=0.0193, progress_bar=None,
          fits=None, orientation=None, unit=None, origin=None, labels=None) -> Volume:
     """Load a volume file or folder as a :class:`Volume` (RAS+ for medical data).
@@ -80,6 +82,11 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         when the folder holds several.
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
+    frame : int, optional
+        A time series only (a 4-D NIfTI, an MGH file of several frames, an ImageJ hyperstack or OME-TIFF with a T axis,
+        an OME-Zarr image with a t axis, a FITS cube with several planes along a 4th axis, Stokes I/Q/U/V): the 0-based
+        time point (plane) to read, negative from the end as Python counts; only its samples are read, and it is
+        placed as a 3-D file of that one volume is.  A series read without it is refused, naming how many there are.
     chunks : None, False, "auto" or int
         ``None``: Zarr and HDF5 are read chunk by chunk, ``.npy``, ``.raw``, ``.nii``, ``.mgh``, MRC, FITS,
         TIFF and folders of TIFF slices too when their volume takes at least
@@ -132,8 +139,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     FileFormatError
         Missing, unknown, truncated or corrupt input.
     InputError
-        Bad arguments, several DICOM series without ``series=``, or data that is
-        not a volume (see :class:`Volume`).
+        Bad arguments (``frame=`` out of range, or for an input of one volume), several DICOM series without
+        ``series=``, or data that is not a volume (see :class:`Volume`).
     clwave.device.memory.HostMemoryError
         A volume read whole that would not fit in memory (a ``MemoryError``).
 
@@ -157,13 +164,14 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                          "world unit)")
     path, inner = _split_inner(path)
     kind = _kind(path)
-    _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order, series=series, level=level)
+    frame = check_frame(frame)
+    _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order, series=series, level=level, frame=frame)
     turn = check_orientation(kind, orientation)
     chunks = check_chunks(chunks, kind, path)
 
     with reading(path):
         data, file_spacing, file_origin, obliquity = _read(kind, path, inner, shape, dtype, byte_order, series,
-                                                           level, chunks, progress_bar, fits, spacing is None)
+                                                           level, chunks, progress_bar, fits, spacing is None, frame)
     if not is_dask(data):
         data = np.asarray(data)
     if labels is None:  # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
@@ -215,12 +223,13 @@ def _photo(kind, path) -> bool:
     return False
 
 
-def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing):
+def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing,
+          frame=None):
     """``(data, spacing or None, origin or None, obliquity)`` of a ``kind`` input as its loader reads it (not yet
-    float32); the obliquity (degrees off the scanner's axes, :func:`.shared.to_canonical`) is 0 but for medical
-    formats."""
+    float32; of a time series its time point ``frame``); the obliquity (degrees off the scanner's axes,
+    :func:`.shared.to_canonical`) is 0 but for medical formats."""
     if kind == "zarr":
-        return (*zarr.read_zarr(path, inner, level, chunks, fits), 0.0)
+        return (*zarr.read_zarr(path, inner, level, chunks, fits, frame), 0.0)
     if kind == "hdf5":
         return (*hdf5.read_hdf5(path, inner, chunks, fits), 0.0)
     if kind == "raw":
@@ -228,17 +237,17 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
     if kind == "npy":
         return raw.read_npy(path, chunks, fits), None, None, 0.0
     if kind == "nifti":
-        return nifti.read_nifti(path, chunks, fits)
+        return nifti.read_nifti(path, chunks, fits, frame)
     if kind == "mgh":
-        return mgh.read_mgh(path, chunks, fits)
+        return mgh.read_mgh(path, chunks, fits, frame)
     if kind == "mrc":
         return (*mrc.read_mrc(path, chunks, fits, warn_spacing, dtype), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
     if kind == "fits":
-        return (*fits_cube.read_fits(path, chunks, fits), 0.0)
+        return (*fits_cube.read_fits(path, chunks, fits, frame), 0.0)
     if kind == "tiff":
-        return (*tiff.read_tiff(path, fits, chunks=chunks, warn_spacing=warn_spacing), 0.0)
+        return (*tiff.read_tiff(path, fits, chunks=chunks, warn_spacing=warn_spacing, frame=frame), 0.0)
     if kind in _SLICE_FOLDERS:
         return slices.read_slice_folder(path, progress_bar, fits, chunks, warn_spacing), None, None, 0.0
     if kind == "dicom-frames":
@@ -270,7 +279,7 @@ DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_sh
              "fits")
 
 
-def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_order=None) -> dict:
+def describe(path, *, series=None, level=None, frame=None, shape=None, dtype=None, byte_order=None) -> dict:
     """What :func:`load` reads of a volume file (or folder) before its voxels (``clwave info FILE``), with the keys
     :data:`DESCRIBED` whatever the format (None: a fact the header does not give, or not before the voxels):
 
@@ -281,10 +290,12 @@ def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_orde
     resampling of the stored samples (``resampled``: a gantry tilt's straight stack, a sheared NIfTI's straight
     grid, wider by the shifts); ``spacing`` (dz, dy, dx), ``origin`` (x, y, z) and ``obliquity`` as ``load`` gives
     them, where the header places the volume (NRRD and plain TIFFs: their loaders find them with the voxels), and
-    ``spacing_in_file``; a time series (refused by ``load``) its ``time`` (``points``, ``step`` and ``unit``: None
-    where the header gives none, or no positive finite step) and ``refused`` (the one line ``load`` refuses it
-    with); a DICOM series its ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding``
-    (stored values, [] where none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no
+    ``spacing_in_file``; a time series its ``time`` (``points``, ``step`` and ``unit``: None where the header gives
+    none, or no positive finite step; ``along``: "time", or a FITS cube's axis, "STOKES"; ``frame``: the one
+    ``frame=`` picks, as ``load`` checks it, else None) and without ``frame=`` ``refused`` (the one line ``load``
+    refuses it with); ``frame=`` of an input of one volume is refused as ``load`` refuses it; a DICOM series its
+    ``stored_dtype``, ``rescale`` (each distinct ``[slope, intercept]``) and ``padding`` (stored values, [] where
+    none); a NIfTI file ``nifti`` (:func:`.nifti.header_facts`).  A ``.raw`` file has no
     header: described by its ``shape`` and ``dtype`` (and ``byte_order``) as :func:`load` takes them, refused
     (:class:`FileFormatError`) without them."""
     path, inner = _split_inner(Path(path))
@@ -293,18 +304,33 @@ def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_orde
         raise FileFormatError(f"{path} is a .raw file: it has no header (its shape and type are given to read it, "
                               f"shape= and dtype=)", cli=f"{path} is a .raw file: it has no header (its shape and type "
                                                          f"are given to read it, --shape and --dtype)")
-    _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order, series=series, level=level)
+    frame = check_frame(frame)
+    _reject_unused(kind, shape=shape, dtype=dtype, byte_order=byte_order, series=series, level=level, frame=frame)
     # a Dask array over the file: nothing read until computed; a TIFF is described as its whole read weighs it (the
     # axes as stored, before the loader orders them)
     lazy = check_chunks(None, kind, path) is not False and kind not in ("tiff", "tiff-folder")
     size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file()) if path.is_dir() else path.stat().st_size
     facts = dict.fromkeys(DESCRIBED)
     facts.update(file=str(path) + (f":/{inner}" if inner else ""), format=kind, bytes=size, resampled=False)
+    def read(k):  # a lazy read never weighs (nothing is read until computed) unless it must read whole (sheared)
+        return _read(kind, path, inner, shape, dtype, byte_order, series, level, "auto" if lazy else False, False,
+                     _declared, False, k)
+
     with reading(path):
         try:
-            # a lazy read never weighs (nothing is read until computed) unless it must read whole (a sheared NIfTI)
-            data, spacing, origin, obliquity = _read(kind, path, inner, shape, dtype, byte_order, series, level,
-                                                     "auto" if lazy else False, False, _declared, False)
+            try:
+                data, spacing, origin, obliquity = read(None)
+                one_volume(frame, facts["file"])  # an input of one volume: frame= refused as load refuses it
+            except Declared:
+                one_volume(frame, facts["file"])
+                raise
+            except TimeSeries as points:
+                if frame is None:
+                    raise
+                picked = points.pick(frame, facts["file"])
+                facts.update(time=dict(points=points.points, step=points.step, unit=points.unit, along=points.along,
+                                       frame=picked))
+                data, spacing, origin, obliquity = read(picked)  # that volume, as load reads it
         except (Declared, TimeSeries) as declared:
             facts.update(_header_facts(kind, path))  # the header as the read has checked it
             channels = declared.channels
@@ -312,8 +338,8 @@ def describe(path, *, series=None, level=None, shape=None, dtype=None, byte_orde
             if isinstance(declared, Declared):
                 facts.update(resampled=declared.resampled, **declared.facts)
             else:
-                facts.update(time=dict(points=declared.points, step=declared.step, unit=declared.unit),
-                             refused=str(declared))
+                facts.update(time=dict(points=declared.points, step=declared.step, unit=declared.unit,
+                                       along=declared.along, frame=None), refused=str(declared))
             if declared.loaded is not None:
                 facts["shape"] = list(declared.loaded) + [channels] * (channels > 1)
             if declared.placed is not None:

@@ -15,7 +15,7 @@ from functools import partial
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import GZIP_MAGIC, Declared, OnDemand, as_array, check_declared_size, note
+from .shared import GZIP_MAGIC, Declared, OnDemand, TimeSeries, as_array, check_declared_size, note, one_volume
 
 FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fz", ".fits.gz", ".fit.gz", ".fts.gz")
 _BLOCK = 2880  # FITS's block: each header and each HDU's data is padded to a multiple
@@ -23,24 +23,36 @@ _BITPIX = (8, 16, 32, 64, -32, -64)
 _VOLUME_AXES = "zyx"
 
 
-def read_fits(path, chunks, fits=None):
+def read_fits(path, chunks, fits=None, frame=None):
     """``(data, spacing, None)`` of a FITS file's cube, the first image HDU of 3 or more axes (a tile-compressed one
     too), as ``(z, y, x)``: latitude (Dec: north up, +z), longitude (RA: west, +y, so east is on the left as the sky is
     seen, facing -x) and the third axis (spectral, +x), by the celestial axes its WCS names; without them its axes 2,
-    1 and 3 (pixel (1, 1) at the bottom left, as ds9 shows a plane).  A 4th axis of length 1 (Stokes) is dropped,
-    more planes refused.  Spacing is in pixels: 1, but the celestial pixels' aspect (Dec over RA) along z."""
+    1 and 3 (pixel (1, 1) at the bottom left, as ds9 shows a plane).  A 4th axis of length 1 (Stokes) is dropped;
+    of several planes (Stokes I, Q, U, V) the one ``frame`` picks (:meth:`.shared.TimeSeries.pick`), alone read.
+    Spacing is in pixels: 1, but the celestial pixels' aspect (Dec over RA) along z."""
     index, header, dims = find_cube(path)
-    kept = _kept_axes(path, dims)
+    kept, planes = _kept_axes(path, dims)
     header = _image_header(path, index, header)
     order, flips, aspect = sky_axes(header, kept, path)
     stored = tuple(dims[a] for a in kept[::-1])  # numpy order: the kept FITS axes, the last first
-    source = OnDemand(partial(_read, str(path), index, len(dims), kept), stored, samples(header),
+    loaded, placed = tuple(stored[2 - a] for a in order), (aspect, (0.0, 0.0, 0.0), 0.0)
+    picked = {}
+    if planes is not None:  # the FITS axis of several planes: one read, as a file of that cube alone gives it
+        name, step = _text(header, f"CTYPE{planes + 1}") or f"NAXIS{planes + 1}", _number(header, f"CDELT{planes + 1}")
+        step = step if step is not None and 0 < step < math.inf else None
+        series = TimeSeries(f"{path} holds {dims[planes]} planes along its axis {planes + 1} ({name}) beside its cube",
+                            dims[::-1], samples(header), dims[planes], step,
+                            _text(header, f"CUNIT{planes + 1}") if step else None, along=name)
+        series.placed, series.loaded = placed, loaded
+        picked = {planes: series.pick(frame, path)}
+    else:
+        one_volume(frame, path)
+    source = OnDemand(partial(_read, str(path), index, len(dims), kept, picked), stored, samples(header),
                       chunks=(1,) + stored[1:])  # a plane is contiguous in the file
     try:
         data = as_array(source, chunks, fits=fits, path=path)  # a compressed file: whole (loaders.check_chunks)
     except Declared as declared:  # describe(): the volume's shape and pixel spacing, with no voxel read
-        declared.loaded = tuple(stored[2 - a] for a in order)
-        declared.placed = (aspect, (0.0, 0.0, 0.0), 0.0)
+        declared.loaded, declared.placed = loaded, placed
         raise
     data = data.transpose(tuple(2 - a for a in order))
     return data[tuple(slice(None, None, -1) if f else slice(None) for f in flips)], aspect, None
@@ -113,11 +125,16 @@ def samples(header) -> np.dtype:
 
 def _image_header(path, index, header):
     """The header of a cube's image: its own, or a tile-compressed image's as astropy makes it of its table's (ZBITPIX,
-    ZNAXISn...; opening it reads no pixel)."""
-    if header.get("ZIMAGE") is not True:
-        return header
-    with _opened(path) as hdul:
-        return hdul[index].header
+    ZNAXISn...; opening it reads no pixel); its scaling (BSCALE, BZERO) refused in one line where it is no number."""
+    if header.get("ZIMAGE") is True:
+        with _opened(path) as hdul:
+            header = hdul[index].header
+    for key in ("BSCALE", "BZERO"):
+        value = header.get(key)
+        if value is not None and (type(value) not in (int, float) or not math.isfinite(value)):
+            raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, not a finite number; the header is "
+                                  "corrupt")
+    return header
 
 
 def _checked(path, index, header, prefix):
@@ -149,15 +166,17 @@ def _whole(path, index, header, key, default=None):
 
 
 def _kept_axes(path, dims):
-    """The FITS axes (0-based) read as the volume's three: 1 and 2, and the first after them longer than 1 (else 3);
-    every other is of length 1 (a Stokes axis of one plane), else the cube is refused."""
+    """``(kept, planes)``: the FITS axes (0-based) read as the volume's three, 1 and 2 and the first after them longer
+    than 1 (else 3), and the one other axis longer than 1 whose planes ``frame=`` picks from (Stokes I, Q, U, V), or
+    None; every other is of length 1 (a Stokes axis of one plane), else the cube is refused."""
     third = next((a for a in range(2, len(dims)) if dims[a] > 1), 2)
     many = [a for a in range(2, len(dims)) if a != third and dims[a] > 1]
-    if many:
-        raise FileFormatError(f"{path} holds {dims[many[0]]} planes along its axis {many[0] + 1} (NAXIS{many[0] + 1}, "
-                              "e.g. Stokes parameters) beside its cube; clwave reads one cube: write the plane you "
-                              "want to a file of its own first (e.g. CASA's imsubimage)")
-    return 0, 1, third
+    if len(many) > 1:
+        axes = " and ".join(f"{a + 1} ({dims[a]})" for a in many)
+        raise FileFormatError(f"{path} holds planes along its axes {axes} beside its cube; clwave reads one cube, "
+                              "picking a plane along one axis only: write the planes you want to a file of their own "
+                              "first (e.g. CASA's imsubimage)")
+    return (0, 1, third), (many[0] if many else None)
 
 
 def sky_axes(header, kept, path=None):
@@ -199,7 +218,7 @@ def header_facts(path) -> dict:
     """``{"fits": ...}``, what ``clwave info`` says of a FITS cube beyond its volume: its HDU, its values' unit
     (``BUNIT``) and scaling, and each axis: its type, unit, length, step, and the volume axis it becomes."""
     index, header, dims = find_cube(path)
-    kept = _kept_axes(path, dims)
+    kept, _ = _kept_axes(path, dims)
     header = _image_header(path, index, header)
     order, flips, _ = sky_axes(header, kept)
     axes = []
@@ -245,12 +264,14 @@ def _opened(path):
         yield hdul
 
 
-def _read(path, index, naxis, kept, key):
+def _read(path, index, naxis, kept, picked, key):
     """``key`` (of the kept axes, in numpy order) of a cube, read anew (the file opened for each chunk) by astropy's
-    section, scaled (BSCALE, BZERO; BLANK as NaN), in this machine's byte order; the dropped axes of length 1 read and
-    taken away."""
+    section, scaled (BSCALE, BZERO; BLANK as NaN), in this machine's byte order; the other axes' one plane (of length
+    1, or ``picked``'s, {axis: plane}) read and taken away."""
     key = key if isinstance(key, tuple) and Ellipsis not in key else (slice(None),) * 3
     full = [slice(0, 1)] * naxis
+    for a, k in picked.items():
+        full[naxis - 1 - a] = slice(k, k + 1)
     for k, a in zip(key, kept[::-1]):
         full[naxis - 1 - a] = k
     full[-1] = slice(None)  # whole rows, cut after: astropy reads a block of them at once, a part of a row at a time

@@ -8,19 +8,20 @@ import math
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import GZIP_MAGIC, Declared, TimeSeries, as_array, check_declared_size, note, placeable, to_canonical
+from .shared import (GZIP_MAGIC, Declared, TimeSeries, as_array, check_declared_size, note, one_volume, placeable,
+                     proxy_frame, to_canonical)
 
 #: FreeSurfer's geometry of a file without one (MRIallocHeader: x_r = -1, y_s = -1, z_a = 1, coronal LIA), the
 #: directions of i, j, k as rows, as MGH stores them (nibabel's default stores their transpose, LSP)
 _LIA_MDC = [[-1, 0, 0], [0, 0, -1], [0, 1, 0]]
 
 
-def read_mgh(path, chunks, fits=None):
+def read_mgh(path, chunks, fits=None, frame=None):
     """An MGH/MGZ volume through nibabel's ``MGHImage``: its header (version, dimensions, sample type, the data it
     declares against what the file or gzip stream holds) is checked before nibabel reads it, its vox2ras affine
     placed as a NIfTI's (:func:`.shared.to_canonical`), in millimetres.  A file whose geometry is not valid
     (``goodRASFlag`` 0) is FreeSurfer's default, coronal LIA 1 mm voxels centred on the origin, with a warning;
-    several frames (a time series) are refused."""
+    of several frames (a time series) the one ``frame`` picks (:meth:`.shared.TimeSeries.pick`), read alone."""
     from nibabel.freesurfer.mghformat import MGHHeader, MGHImage
     from nibabel.openers import ImageOpener
 
@@ -37,15 +38,17 @@ def read_mgh(path, chunks, fits=None):
     if not good:
         note(f"{path} has no valid geometry (goodRASFlag 0): FreeSurfer's default is assumed, coronal LIA with 1 mm "
              "voxels centred on the origin; set it (mri_convert, or nibabel's MGHHeader) if known")
+    proxy = MGHImage.ImageArrayProxy(str(path), header, mmap=False)
     if frames > 1:
         tr = float(header["tr"])
-        refused = TimeSeries(f"{path} holds {frames} frames of {' x '.join(map(str, dims))} voxels; clwave reads one "
-                             "3-D volume: extract one frame first, e.g. with FreeSurfer's mri_convert --frame N",
-                             dims + (frames,), dtype, frames, *((tr, "ms") if 0 < tr < math.inf else (None, None)))
-        refused.place(dims, affine)
-        raise refused
+        series = TimeSeries(f"{path} holds {frames} frames of {' x '.join(map(str, dims))} voxels", dims + (frames,),
+                            dtype, frames, *((tr, "ms") if 0 < tr < math.inf else (None, None)))
+        series.place(dims, affine)
+        proxy = proxy_frame(proxy, series.pick(frame, path))
+    else:
+        one_volume(frame, path)
     try:
-        data = as_array(MGHImage.ImageArrayProxy(str(path), header, mmap=False), chunks, fits=fits, path=path)
+        data = as_array(proxy, chunks, fits=fits, path=path)
     except Declared as declared:  # describe(): its place from the header (a .mgz's, read whole)
         declared.place(dims, affine)
         raise

@@ -11,12 +11,13 @@ import numpy as np
 from ...device.memory import HostMemoryError
 from ...errors import FileFormatError
 from .shared import (Declared, TimeSeries, as_array, check_declared_size, check_float32_range, check_whole,
-                     largest_finite, note, placeable, to_canonical)
+                     largest_finite, note, one_volume, placeable, proxy_frame, to_canonical)
 from .shear import STRAY_VOXELS, straight_grid, unshear
 
 
-def read_nifti(path, chunks, fits=None):
-    """NIfTI-1/2 through nibabel: RGB24/RGBA32 become channels; time series are refused; a header that cannot
+def read_nifti(path, chunks, fits=None, frame=None):
+    """NIfTI-1/2 through nibabel: RGB24/RGBA32 become channels; of a time series the time point ``frame``
+    (:meth:`.shared.TimeSeries.pick`: refused without it), its samples alone read; a header that cannot
     describe a 3-D volume (its dimensions, a voxel-to-world affine that is not finite or not invertible, more data
     than the file holds) is refused in one line before any voxel is read.  A file without an orientation (sform and
     qform codes 0) is warned of; a sheared affine is resampled onto a straight grid (:mod:`.shear`), read whole."""
@@ -43,14 +44,21 @@ def read_nifti(path, chunks, fits=None):
     proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
     # NIfTI keeps time on the 4th axis and vector components on the 5th
     if proxy.ndim > 3 and (proxy.shape[3] != 1 or any(n != 1 for n in proxy.shape[5:])):
-        refused = TimeSeries(f"{path} holds a NIfTI image of shape {proxy.shape}; clwave reads one 3-D volume (vector "
-                             "components on the 5th axis become channels): extract one volume first, e.g. with "
-                             "nibabel.funcs.four_to_three", proxy.shape, proxy.dtype, proxy.shape[3],
-                             *_time_step(image.header), math.prod(proxy.shape[4:]))
-        refused.place(proxy.shape[:3], affine)
-        raise refused
-    if proxy.ndim > 3:
-        proxy = proxy.reshape(proxy.shape[:3] + proxy.shape[4:5])
+        series = TimeSeries(f"{path} holds a NIfTI image of shape {proxy.shape}, {proxy.shape[3]} time points on its "
+                            "4th axis", proxy.shape, proxy.dtype, proxy.shape[3], *_time_step(image.header),
+                            math.prod(proxy.shape[4:]))
+        series.place(proxy.shape[:3], affine)
+        k = series.pick(frame, path)
+        if math.prod(proxy.shape[4:]) > 1:
+            raise FileFormatError(f"{path} holds a NIfTI image of shape {proxy.shape}, a time series of "
+                                  f"{math.prod(proxy.shape[4:])} components a voxel, whose time points clwave does "
+                                  "not pick (a scalar series' only); write the one you want to a file of its own "
+                                  "first (nibabel's dataobj[:, :, :, K])")
+        proxy = proxy_frame(proxy, k)
+    else:
+        one_volume(frame, path)
+        if proxy.ndim > 3:
+            proxy = proxy.reshape(proxy.shape[:3] + proxy.shape[4:5])
     grid = straight_grid(image.shape, affine)
     sheared = grid.moved > STRAY_VOXELS
     if sheared:  # resampled in memory: read whole, the straight grid weighed first

@@ -202,17 +202,80 @@ class Declared(BaseException):
 
 
 class TimeSeries(FileFormatError):
-    """A loader's refusal of a time series (clwave reads one volume), with what its header says for ``clwave info``:
-    the stored ``shape`` (time axis included) and ``dtype``, the time ``points``, the ``step`` between them and its
-    ``unit`` (None where the header gives none), and, as :class:`Declared` has them, ``channels``, ``placed`` and
-    ``loaded`` (one volume's)."""
+    """A loader's refusal of a time series read without ``frame=`` (clwave reads one volume), with what its header says
+    for ``clwave info``: the stored ``shape`` (time axis included) and ``dtype``, the time ``points``, the ``step``
+    between them and its ``unit`` (None where the header gives none), the axis they lie ``along`` ("time", or a FITS
+    cube's CTYPE, "STOKES"), and, as :class:`Declared` has them, ``channels``, ``placed`` and ``loaded`` (one
+    volume's).  ``message`` says what the file holds; the refusal adds how to pick one (:meth:`pick`)."""
 
-    def __init__(self, message, shape, dtype, points, step=None, unit=None, channels=1):
-        super().__init__(message)
+    def __init__(self, message, shape, dtype, points, step=None, unit=None, channels=1, along="time"):
+        last = f"{points - 1} (or -{points} .. -1 from the end)"
+        super().__init__(f"{message}; clwave reads one volume: pick one, frame=K for K in 0 .. {last}",
+                         cli=f"{message}; clwave reads one volume: pick one, --frame K for K in 0 .. {last}")
         self.shape, self.dtype, self.points, self.step, self.unit = tuple(shape), np.dtype(dtype), points, step, unit
-        self.channels, self.placed, self.loaded = channels, None, None
+        self.channels, self.placed, self.loaded, self.along = channels, None, None, along
 
     place = Declared.place
+
+    def pick(self, frame, path) -> int:
+        """The 0-based index of ``frame`` (negative: from the end, as Python's) among the points of ``path``'s series;
+        without ``frame`` this refusal, out of their range one line naming it."""
+        if frame is None:
+            raise self
+        if not -self.points <= frame < self.points:
+            points = "time points" if self.along == "time" else f"planes along {self.along}"
+            where = f"{path} holds {self.points} {points}, 0 .. {self.points - 1} (or -{self.points} .. -1 from the " \
+                    "end)"
+            raise InputError(f"frame={frame} is out of range: {where}", cli=f"--frame {frame} is out of range: {where}")
+        return frame % self.points
+
+
+def check_frame(frame):
+    """``frame`` as ``load`` takes it: None, or a whole number (an int, negative from the end); one line otherwise."""
+    if frame is None or (isinstance(frame, (int, np.integer)) and not isinstance(frame, (bool, np.bool_))):
+        return None if frame is None else int(frame)
+    raise InputError(f"frame={frame!r} must be a whole number, the 0-based index of a time point (negative from "
+                     "the end)")
+
+
+def one_volume(frame, path):
+    """Refuse ``frame`` (given: not None) for ``path``, which holds one volume: no time axis of several points."""
+    if frame is not None:
+        why = (f"picks one volume of a time series; {path} holds one volume (no time axis of several points): leave "
+               "it out")
+        raise InputError(f"frame={frame} {why}", cli=f"--frame {frame} {why}")
+
+
+def proxy_frame(proxy, k):
+    """Time point ``k`` of a nibabel proxy of a series stored as NIfTI and MGH store one, x fastest and time after the
+    three spatial axes (and nothing after it): a proxy of that one volume, read as a 3-D file of it is, since its
+    samples follow one another in the file, and their scaling is the series' own."""
+    from nibabel.arrayproxy import ArrayProxy
+
+    shape = tuple(int(n) for n in proxy.shape[:3])
+    offset = proxy.offset + k * math.prod(shape) * proxy.dtype.itemsize
+    return ArrayProxy(proxy.file_like, (shape, proxy.dtype, offset, proxy.slope, proxy.inter), mmap=False)
+
+
+class FrameOf:
+    """Index ``k`` of ``axis`` of an array read on demand (``shape``, ``dtype``, ``source[index]``, maybe the store's
+    ``chunks``): one time point of a series, itself an array read on demand without that axis, whose every read
+    (whole, or a chunk) reads that time point's part alone."""
+
+    def __init__(self, source, axis, k):
+        self.source, self.axis, self.k = source, axis, k
+        self.shape = tuple(source.shape[:axis]) + tuple(source.shape[axis + 1:])
+        self.dtype, self.ndim = np.dtype(source.dtype), len(self.shape)
+        own = getattr(source, "chunks", None)
+        self.chunks = None if own is None else tuple(own[:axis]) + tuple(own[axis + 1:])
+
+    def __getitem__(self, index):
+        index = index if isinstance(index, tuple) else (index,)
+        if Ellipsis in index:
+            at = index.index(Ellipsis)
+            index = index[:at] + (slice(None),) * (self.ndim - len(index) + 1) + index[at + 1:]
+        index = index + (slice(None),) * (self.ndim - len(index))
+        return self.source[index[:self.axis] + (self.k,) + index[self.axis:]]
 
 
 class OnDemand:
@@ -269,8 +332,8 @@ def as_array(source, chunks, roles=None, fits=None, path=None):
     read whole, or as a Dask array that reads each chunk when it is computed (docs/chunked.md §1).
 
     ``chunks``: False, None (whole below ``CHUNKED_MIN_BYTES`` as float32), "auto" or a cube edge.  ``roles``
-    names each axis: 's' spatial (chunked), 't' time (one per chunk), 'c' channel (whole); default: 3
-    spatial axes, then channels.  A whole read of ``path`` is weighed first (:func:`check_whole`, ``fits``).
+    names each axis: 's' spatial (chunked), 'c' channel (whole); default: 3 spatial axes, then channels (a time
+    point of a series: :class:`FrameOf`).  A whole read of ``path`` is weighed first (:func:`check_whole`, ``fits``).
     """
     shape = tuple(int(n) for n in source.shape)
     roles = roles or "s" * min(len(shape), 3) + "c" * max(len(shape) - 3, 0)
@@ -286,7 +349,7 @@ def as_array(source, chunks, roles=None, fits=None, path=None):
     edges = [chunks] * len(roles)
     if chunks == "auto" and 4 * math.prod(n for n, r in zip(own, roles) if r == "s") >= CHUNK_BYTES:
         edges = own  # the store's chunks are big already: one each (a Zarr chunk is decoded whole)
-    edges = tuple({"t": 1, "c": -1}.get(r, edge) for r, edge in zip(roles, edges))
+    edges = tuple(-1 if r == "c" else edge for r, edge in zip(roles, edges))
     # the fewest chunks these edges cut the volume into, before Dask lists every chunk's size (a header of 2^40
     # voxels an axis filled the memory with those lists)
     count = math.prod(1 if edge in (-1, "auto") else -(-n // edge) for n, edge in zip(shape, edges))

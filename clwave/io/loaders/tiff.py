@@ -9,7 +9,8 @@ import numpy as np
 
 from ...device.memory import check_fits
 from ...errors import FileFormatError
-from .shared import Declared, OnDemand, TimeSeries, as_array, by_size, check_whole, log, no_spacing, note
+from .shared import (Declared, FrameOf, OnDemand, TimeSeries, as_array, by_size, check_whole, log, no_spacing, note,
+                     one_volume)
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
@@ -40,7 +41,7 @@ def colour_samples(path) -> bool:
         return "S" in tif.series[0].axes
 
 
-def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False):
+def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False, frame=None):
     """``(data, spacing, origin)``: a TIFF stack as ``(pages, y, x[, samples])``, its spacing ``(dz, dy, dx)`` where
     it is an OME-TIFF (:func:`_ome_spacing`) or an ImageJ stack (:func:`_imagej_spacing`), else None (with a warning
     where ``warn_spacing``: none was given), and an OME-TIFF's origin (:func:`_ome_origin`; else None); without
@@ -51,7 +52,9 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False):
     no ``axes``: 'CYX') as that many slices, each with a warning: a 2-D image is no volume.
     ``chunks`` (:func:`.shared.as_array`'s; None: by size): whole, the series' declared size weighed
     (:func:`check_whole`) before its pages are read, or a Dask array whose chunks tifffile reads from the file
-    (:func:`_read_region`), in whole multiples of its pages (or strips, or tiles)."""
+    (:func:`_read_region`), in whole multiples of its pages (or strips, or tiles).  Of a series with a time axis T
+    (an ImageJ hyperstack, an OME-TIFF) the time point ``frame`` (:meth:`.shared.TimeSeries.pick`), its own pages
+    alone read, whole or chunk by chunk."""
     import tifffile
 
     with tifffile.TiffFile(path) as tif:
@@ -85,8 +88,12 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False):
         if channel:
             shape = tuple(n for n, a in zip(shape, axes) if a != channel) + (shape[axes.index(channel)],)
         spatial = axes.replace(channel or "S", "")
-        if len(spatial) == 4 and spatial[0] == "T" and spatial.endswith("YX"):  # an ImageJ hyperstack's, an OME-TIFF's
-            raise _time_series(tif, path, shape)
+        timed = len(spatial) == 4 and spatial[0] == "T" and spatial.endswith("YX")  # an ImageJ hyperstack, an OME-TIFF
+        if timed:  # one time point read, from its own pages: the series as if it were that one volume
+            k = _time_series(tif, path, shape).pick(frame, path)
+            spatial, shape = spatial[1:], shape[1:]
+        else:
+            one_volume(frame, path)
         if len(spatial) > 3 or not spatial.endswith("YX"):
             raise FileFormatError(
                 f"{path} holds a TIFF series with axes {series.axes!r} and shape {series.shape}; "
@@ -100,20 +107,20 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False):
         spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)  # from the metadata alone
         if spacing is None and warn_spacing:
             no_spacing(path)
-        origin = _ome_origin(tif, path, spacing or (1.0,) * 3, shape[:3]) if tif.is_ome and len(spatial) == 3 \
-            else None
+        origin = _ome_origin(tif, path, spacing or (1.0,) * 3, shape[:3], k if timed else 0) \
+            if tif.is_ome and len(spatial) == 3 else None
         chunks = by_size(chunks, shape) if stack else False
-        if chunks is not False:
-            import dask.array as da
-
-            _check_decodable(series, path)
-
-            roles = "".join("c" if a == channel else "s" for a in axes)
-            own = (1,) + stored[1:] if pages else _store_chunks(series, path)
-            source = OnDemand(partial(_read_region, str(path), pages), stored, series.dtype, own)
-            data = as_array(source, chunks, roles, path=path)
-            return (da.moveaxis(data, axes.index(channel), -1) if channel else data), spacing, origin
         try:
+            if chunks is not False or timed:  # through tifffile's Zarr store: a time point's pages alone, or chunks
+                _check_decodable(series, path)
+                roles = "".join("c" if a == channel else "s" for a in axes)
+                own = (1,) + stored[1:] if pages else _store_chunks(series, path)
+                source = OnDemand(partial(_read_region, str(path), pages), stored, series.dtype, own)
+                if timed:
+                    t = axes.index("T")
+                    source, roles, axes = FrameOf(source, t, k), roles[:t] + roles[t + 1:], axes[:t] + axes[t + 1:]
+                data = as_array(source, chunks, roles, fits=fits, path=path)
+                return (np.moveaxis(data, axes.index(channel), -1) if channel else data), spacing, origin
             check_whole(path, shape if len(spatial) == 3 else (1,) + shape, series.dtype, fits)
         except Declared as declared:  # describe's (clwave info): the axes as stored, spacing and origin the header's
             declared.loaded = declared.shape[:3]
@@ -166,10 +173,10 @@ def _read_region(path, pages, index):
 
 def _time_series(tif, path, shape) -> TimeSeries:
     """The refusal of a TIFF series whose first axis (``shape``: its axes in the volume's order, channels last) is
-    time, with its spacing and origin from its metadata and its time step: an OME-TIFF's ``TimeIncrement`` (in its
-    ``TimeIncrementUnit``, s where none is given), an ImageJ hyperstack's ``finterval`` (in its ``tunit``, sec)."""
+    time, read without ``frame``, with its spacing and origin from its metadata and its time step: an OME-TIFF's
+    ``TimeIncrement`` (in its ``TimeIncrementUnit``, s where none is given), an ImageJ hyperstack's ``finterval`` (in
+    its ``tunit``, sec)."""
     series = tif.series[0]
-    first = f"[{':, ' * series.axes.index('T')}0]"  # the first time point of what imread returns
     if tif.is_ome:
         pixels = _ome_pixels(tif)
         step, unit = pixels.get("TimeIncrement"), pixels.get("TimeIncrementUnit", "s")
@@ -177,11 +184,8 @@ def _time_series(tif, path, shape) -> TimeSeries:
         meta = tif.imagej_metadata or {}
         step, unit = meta.get("finterval"), meta.get("tunit", "sec")
     refused = TimeSeries(f"{path} holds a TIFF series with axes {series.axes!r} and shape {series.shape}: "
-                         f"{shape[0]} time points (axis T); clwave reads one volume: write one time point to a TIFF "
-                         f"of its own, e.g. tifffile.imwrite('one.tif', tifffile.imread({str(path)!r}){first}, "
-                         "photometric='minisblack')",
-                         series.shape, series.dtype, shape[0], None if step is None else float(step),
-                         None if step is None else unit, math.prod(shape[4:]))
+                         f"{shape[0]} time points (axis T)", series.shape, series.dtype, shape[0],
+                         None if step is None else float(step), None if step is None else unit, math.prod(shape[4:]))
     spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)
     if spacing is not None:
         origin = _ome_origin(tif, path, spacing, shape[1:4]) if tif.is_ome else (0.0, 0.0, 0.0)
@@ -198,14 +202,15 @@ def _ome_pixels(tif) -> dict:
     return (image[0] if isinstance(image, list) else image).get("Pixels", {})
 
 
-def _ome_origin(tif, path, spacing, shape):
+def _ome_origin(tif, path, spacing, shape, t=0):
     """``(x, y, z)`` in micrometres of the centre of an OME-TIFF's first image, whose first voxel sits at its first
     plane's ``PositionX/Y`` and at the ``PositionZ`` of its plane ``TheZ`` 0, each in its own unit
     (``Position*Unit``, micrometres where none is given), 0 where none is given: where NGFF's translation puts an
-    OME-Zarr's first voxel (docs/coordinates.md §1).  A position that is no finite length is 0 there, with a
-    warning."""
+    OME-Zarr's first voxel (docs/coordinates.md §1); of a time series, of the planes of its time point ``t`` (``TheT``,
+    where they give it).  A position that is no finite length is 0 there, with a warning."""
     planes = _ome_pixels(tif).get("Plane") or []
     planes = [p for p in (planes if isinstance(planes, list) else [planes]) if isinstance(p, dict)]
+    planes = [p for p in planes if p.get("TheT", 0) == t] or planes
     first = planes[0] if planes else {}
     z0 = next((p for p in planes if p.get("TheZ", 0) == 0), first)
     corner, bad = [], []

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError, InputError
-from .shared import TimeSeries, as_array, not_a_file, pick_array
+from .shared import FrameOf, TimeSeries, as_array, not_a_file, one_volume, pick_array
 
 ZARR_METADATA = ("zarr.json", ".zarray", ".zgroup")  # v3, v2 array, v2 group
 
 # NGFF axis name -> its role in as_array; units of length in metres (the NGFF list: UDUNITS-2 names)
-_NGFF_ROLES = {"z": "s", "y": "s", "x": "s", "c": "c", "t": "t"}
+_NGFF_ROLES = {"z": "s", "y": "s", "x": "s", "c": "c", "t": None}  # t: one time point read (shared.FrameOf)
 _SI_PREFIXES = {"yocto": -24, "zepto": -21, "atto": -18, "femto": -15, "pico": -12, "nano": -9, "micro": -6,
                 "milli": -3, "centi": -2, "deci": -1, "": 0, "hecto": 2, "kilo": 3, "mega": 6, "giga": 9,
                 "tera": 12, "peta": 15, "exa": 18, "zetta": 21, "yotta": 24}
@@ -26,8 +26,9 @@ _WORLD_UNITS = {"meter": "m", "centimeter": "cm", "millimeter": "mm", "micromete
                 "angstrom": "A"}
 
 
-def read_zarr(path, name, level, chunks, fits=None):
-    """A Zarr array (v2 or v3), or one level of an OME-Zarr multiscale image with its spacing and origin."""
+def read_zarr(path, name, level, chunks, fits=None, frame=None):
+    """A Zarr array (v2 or v3), or one level of an OME-Zarr multiscale image with its spacing and origin (of a time
+    series the time point ``frame``)."""
     import zarr
 
     def arrays(group, prefix=""):
@@ -47,7 +48,7 @@ def read_zarr(path, name, level, chunks, fits=None):
         attrs = node.attrs.asdict()
         ome = attrs.get("ome", attrs)  # NGFF 0.5 keeps its metadata under "ome"
         if "multiscales" in ome:
-            return _read_ome_zarr(node, ome["multiscales"], where, level, chunks, fits)
+            return _read_ome_zarr(node, ome["multiscales"], where, level, chunks, fits, frame)
         node = pick_array(arrays(node, f"{name}/" if name else ""), None, path)[1]
     elif len(node.shape) not in (3, 4):
         raise FileFormatError(f"{where} holds an array of shape {node.shape}; clwave reads a 3-D (z, y, x) or "
@@ -56,6 +57,7 @@ def read_zarr(path, name, level, chunks, fits=None):
         raise InputError(f"level= applies to OME-Zarr multiscale images, and {where} is a plain Zarr array; leave "
                          "it out", cli=f"--level applies to OME-Zarr multiscale images, and {where} is a plain "
                                         "Zarr array; leave it out")
+    one_volume(frame, where)  # a plain array's axes have no names: (z, y, x[, c])
     return as_array(node, chunks, fits=fits, path=where), None, None
 
 
@@ -105,9 +107,10 @@ def _check_store_files(store):
                     raise not_a_file(Path(entry.path))
 
 
-def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
+def _read_ome_zarr(group, multiscales, where, level, chunks, fits, frame):
     """Level ``level`` (default 0) of the first OME-Zarr (NGFF 0.4/0.5) multiscale image in ``group``: axes named
-    z, y, x, an optional c (channels, moved last) and t (length 1, dropped); spacing and origin from the scale
+    z, y, x, an optional c (channels, moved last) and t (its time point ``frame``, :meth:`.shared.TimeSeries.pick`,
+    alone read; of one time point that one); spacing and origin from the scale
     and translation of the level and of the whole image (NGFF puts voxel centres at integer indices, so the
     translation is the first voxel's centre)."""
     def bad(problem):
@@ -171,14 +174,18 @@ def _read_ome_zarr(group, multiscales, where, level, chunks, fits):
     spacing = tuple(float(d) for d in scale[zyx])
     with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: infinite, Volume names the scale
         origin = tuple(float(o) for o in (translation[zyx] + scale[zyx] * (shape - 1) / 2)[::-1])  # its centre, x y z
-    if "t" in names and array.shape[names.index("t")] != 1:
+    points = array.shape[names.index("t")] if "t" in names else 1
+    if points > 1:
         t = names.index("t")
-        refused = TimeSeries(f"{where} holds {array.shape[t]} time points (axis t); clwave reads one volume: write "
-                             "one time point to a store of its own", array.shape, array.dtype, array.shape[t],
-                             float(scale[t]), axes[t].get("unit"), array.shape[names.index("c")] if "c" in names else 1)
-        refused.placed, refused.loaded = (spacing, origin, 0.0), tuple(int(n) for n in shape)
-        raise refused
-    data = as_array(array, chunks, "".join(_NGFF_ROLES[n] for n in names), fits, where)
-    data = data[tuple(0 if n == "t" else slice(None) for n in names)]
+        series = TimeSeries(f"{where} holds {points} time points (axis t)", array.shape, array.dtype, points,
+                            float(scale[t]), axes[t].get("unit"), array.shape[names.index("c")] if "c" in names else 1)
+        series.placed, series.loaded = (spacing, origin, 0.0), tuple(int(n) for n in shape)
+        k = series.pick(frame, where)
+    else:
+        one_volume(frame, where)
+        k = 0
+    # one time point, alone read: frame's, or the only one
+    source = FrameOf(array, names.index("t"), k) if "t" in names else array
     names = [n for n in names if n != "t"]
+    data = as_array(source, chunks, "".join(_NGFF_ROLES[n] for n in names), fits, where)
     return data.transpose([names.index(a) for a in "zyxc" if a in names]), spacing, origin
