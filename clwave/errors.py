@@ -159,6 +159,15 @@ def flag(value, name) -> bool:
     return bool(value)
 
 
+def type_name(value) -> str:
+    """The full name of ``value``'s type, as a message names it: ``numpy.ndarray``, ``dask.array.core.Array``,
+    ``clwave.Volume`` (clwave's by the name it exports), ``list`` (a builtin's bare)."""
+    kind, module = type(value), type(value).__module__
+    if module.startswith("clwave.") and getattr(sys.modules.get("clwave"), kind.__name__, None) is kind:
+        module = "clwave"
+    return kind.__qualname__ if module == "builtins" else f"{module}.{kind.__qualname__}"
+
+
 def whole_number(value) -> bool:
     """Whether ``value`` is a whole number: an int, or a finite real without a fraction (not a bool or a string)."""
     if isinstance(value, (bool, np.bool_, str, bytes)):

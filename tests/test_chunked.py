@@ -364,7 +364,8 @@ def test_a_chunked_model_given_to_a_renderer_is_told_to_be_saved_and_opened():
     assert isinstance(wv, ChunkedWaveletVolume)
     for render in (clwave.splat, clwave.raytrace):
         for cluster in ({}, {"scheduler": "tcp://127.0.0.1:1"}):  # refused before any cluster is reached, too
-            with pytest.raises(InputError, match=r"not a ChunkedWaveletVolume: save it .*WaveletVolume.open") as err:
+            refusal = r"got clwave.ChunkedWaveletVolume: save it .*WaveletVolume.open"
+            with pytest.raises(InputError, match=refusal) as err:
                 render(wv, clwave.Camera(), **cluster)
             assert "\n" not in str(err.value)
 

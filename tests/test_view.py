@@ -811,7 +811,8 @@ def test_a_volume_classified_post_stays_scalar_with_its_transfer_function():
 def test_view_refuses_what_it_cannot_show():
     with pytest.raises(clwave.InputError, match=r"volume file first .*clwave.view\(clwave.load\('volume.npy'\)\)"):
         view("volume.npy")
-    with pytest.raises(clwave.InputError, match="WaveletVolume, a clwave.Volume, an array or a .clw"):
+    with pytest.raises(clwave.InputError, match=r"WaveletVolume, a clwave.Volume, an array \(NumPy, Dask or an xarray "
+                                                r"DataArray\) or a .clw file, got list"):
         view([1, 2])
     with pytest.raises(clwave.InputError, match=r"no voxel of this volume any opacity.*\(window=\(lo, hi\)\)"):
         view(np.full((8, 8, 8), 0.02, np.float32), tf="ct-bone")  # attenuation under a HU preset: nothing to see

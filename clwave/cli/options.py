@@ -12,10 +12,9 @@ from pathlib import Path
 
 from ..errors import ClwaveWarning, CommandWords, InputError, OutputError, OutputExistsError
 from ..io.files import check_writable
-from ..model.wavelet import DEFAULT_LEVELS
+from ..model.wavelet import DEFAULT_KEEP, DEFAULT_LEVELS
 from .reading import READING, add_input_options, flag, is_given, numbers, option, read_volume
 
-DEFAULT_KEEP = 0.05  # fraction of voxels kept when a volume is compressed without --keep or --threshold
 DEFAULT_WAVELET = "cubic"
 
 

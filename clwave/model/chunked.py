@@ -23,7 +23,7 @@ from ..schedulers import client_for, stream
 from ..errors import InputError
 from .bspline import SplineWavelet
 from .transform import KEYS, band_layout, check_coefficients
-from .transfer import TransferFunction
+from .tf_file import stored_transfer_function
 from .volume import Volume, content_of
 from .mask import ContentMask
 from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget
@@ -142,7 +142,7 @@ class ChunkedWaveletVolume:
                              "chunked volume takes the approximating model (interpolate=False)",
                              cli="--interpolate needs the whole volume in memory; leave it out for a chunked input")
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
-        tf = TransferFunction.stored(transfer_function)
+        tf = stored_transfer_function(transfer_function)
         with client_for(scheduler) as client, client.as_current():
             content, value_range = volume.content_box_and_value_range()
         return cls(volume, wavelets, levels, transfer_function=tf, scheduler=scheduler, progress_bar=progress_bar,

@@ -1,5 +1,6 @@
-"""Transfer functions named by the command line (``--tf``) and the viewer (``tf=``): a preset, or a file of points
-(docs/model.md §5).
+"""Transfer functions given otherwise than as a :class:`TransferFunction` (docs/model.md §5): named by the command line
+(``--tf``) and every argument that takes one (``transfer_function=``, ``tf=``, :func:`as_transfer_function`), a preset
+or a file of points, or given as a matplotlib colormap.
 
 * ``.json``: what :meth:`TransferFunction.to_dict` writes (``points``, maybe ``window``, ``name`` and
   ``opacity_unit``), a bare list of ``(value, r, g, b, opacity)`` rows, or ``{"labels": {"1": [r, g, b, opacity],
@@ -13,15 +14,45 @@ from __future__ import annotations
 import csv
 import io
 import json
+import sys
+from os import PathLike
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import InputError, type_name
 from .transfer import TransferFunction
 
 #: Suffixes read as files of points (anything else names a preset).
 SUFFIXES = (".json", ".csv")
 #: A transfer function's file is small (a few points a line): larger ones are refused before they are read.
 MAX_BYTES = 1 << 20
+
+
+def as_transfer_function(tf, argument="transfer_function") -> TransferFunction | None:
+    """``tf`` as a TransferFunction (None as None), however an ``argument`` gives it: a TransferFunction, a preset name
+    or a ``.json``/``.csv`` file (:func:`named_transfer_function`), a matplotlib ``Colormap``
+    (:meth:`TransferFunction.from_colormap`) or the dict of :meth:`TransferFunction.to_dict`; anything else an
+    InputError naming the constructors."""
+    if tf is None or isinstance(tf, TransferFunction):
+        return tf
+    if isinstance(tf, (str, PathLike)):
+        return named_transfer_function(tf)
+    colors = sys.modules.get("matplotlib.colors")  # a colormap's module is loaded already
+    if colors is not None and isinstance(tf, colors.Colormap):
+        return TransferFunction.from_colormap(tf)
+    if isinstance(tf, dict) and "points" in tf:
+        return TransferFunction.from_dict(tf)
+    presets = ", ".join(TransferFunction.PRESETS)
+    raise InputError(f"{argument}= takes a clwave.TransferFunction, a preset name ({presets}), a .json or .csv file "
+                     f"or a matplotlib colormap, got {type_name(tf)}: make one with "
+                     f"TransferFunction([(value, r, g, b, opacity), ...]), .preset(name), .labels({{label: (r, g, b, "
+                     f"opacity)}}) or .from_colormap(cmap)")
+
+
+def stored_transfer_function(tf) -> dict | None:
+    """``tf`` (as :func:`as_transfer_function` takes it, or None) as a model stores it, :meth:`TransferFunction.to_dict`
+    (a dict given checked as a file's reader checks it, io/clw_header.py, so that every model saved can be read)."""
+    tf = as_transfer_function(tf)
+    return None if tf is None else tf.to_dict()
 
 
 def named_transfer_function(text, window=None) -> TransferFunction:

@@ -1,6 +1,11 @@
 """The named transfer functions of :meth:`clwave.TransferFunction.preset` (docs/model.md §5), each a
 ``(value, r, g, b, opacity)`` table and its default window; values in the input's units (HU for CT), however
-the volume stores them (:attr:`clwave.Volume.subtracted`)."""
+the volume stores them (:attr:`clwave.Volume.subtracted`); and the rows of a matplotlib colormap
+(:func:`colormap_points`)."""
+
+import numpy as np
+
+from ..errors import InputError, reals
 
 
 def _hu(points, lo, hi):
@@ -74,3 +79,24 @@ PRESETS = {
         (1.0, 1.0, 1.0, 1.0, 0.5),
     )),
 }
+
+
+def colormap_points(cmap, opacity) -> tuple:
+    """``(points, name)`` of :meth:`clwave.TransferFunction.from_colormap`: the rows ``(t, r, g, b, opacity)`` of a
+    matplotlib colormap (a ``Colormap`` or its name, looked up in ``matplotlib.colormaps``) at its ``N`` colours, t from
+    0 to 1, the opacity rising from ``opacity[0]`` to ``opacity[1]`` times the colour's alpha."""
+    if isinstance(cmap, str):
+        try:
+            import matplotlib
+        except ImportError:
+            raise InputError("a colormap's name needs matplotlib (pip install matplotlib); or give the "
+                             "Colormap itself") from None
+        if cmap not in matplotlib.colormaps:
+            raise InputError(f"{cmap!r} is no matplotlib colormap (e.g. 'viridis', 'magma', 'gray')")
+        cmap = matplotlib.colormaps[cmap]
+    if not callable(cmap) or not hasattr(cmap, "N"):
+        raise InputError(f"from_colormap takes a matplotlib Colormap or its name, got {cmap!r}")
+    lo, hi = reals(opacity, "opacity", 2, "two opacities (at the window's start, at its end), each >= 0")
+    t = np.linspace(0.0, 1.0, max(int(cmap.N), 2))
+    rgba = np.asarray(cmap(t), dtype=np.float64)
+    return np.column_stack([t, rgba[:, :3], (lo + (hi - lo) * t) * rgba[:, 3]]), str(getattr(cmap, "name", "colormap"))

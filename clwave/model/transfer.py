@@ -15,7 +15,7 @@ from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, NothingVisi
 from .colour_key import DEFAULT_TOLERANCE, auto_key, check_key, key_weight
 from .tf_checks import check_opacity_unit, check_points, check_window
 from .tf_passes import AUTO_SAMPLES, PiecewiseLinear, auto_window, classified, rgb_scale, scan
-from .tf_presets import PRESETS as _PRESETS
+from .tf_presets import PRESETS as _PRESETS, colormap_points
 from .volume import Volume
 
 #: Rec. 601 luma weights used for the opacity of RGB(A) volumes.
@@ -113,11 +113,26 @@ class TransferFunction:
         if key == "gray":
             key = "grey"
         if key not in _PRESETS:
-            raise InputError(f"unknown transfer function preset {name!r}; "
-                             f"choose one of {', '.join(cls.PRESETS)}")
+            what = f"unknown transfer function preset {name!r}; choose one of {', '.join(cls.PRESETS)}"
+            raise InputError(f"{what} (a matplotlib colormap: TransferFunction.from_colormap({name!r}))", cli=what)
         spec = _PRESETS[key]
         return cls(spec["points"], window=spec["window"] if window is None else window, name=key,
                    opacity_unit=opacity_unit)
+
+    @classmethod
+    def from_colormap(cls, cmap, opacity=(0.0, 0.05), window="auto", opacity_unit=None) -> "TransferFunction":
+        """A matplotlib colormap (a ``Colormap``, or its name) as a function: the colormap's colours over the window
+        ("auto", or (lo, hi) as the constructor's), the opacity rising linearly from ``opacity[0]`` to ``opacity[1]``
+        across it (per opacity unit; the default as the grey preset's) times the colormap's own alpha.
+
+        >>> import matplotlib
+        >>> tf = TransferFunction.from_colormap(matplotlib.colormaps["gray"], window=(0, 10))
+        >>> rgb, alpha = tf([5.0])
+        >>> rgb.round(2).tolist(), alpha.round(3).tolist()
+        ([[0.5, 0.5, 0.5]], [0.025])
+        """
+        points, name = colormap_points(cmap, opacity)
+        return cls(points, window=window, name=name, opacity_unit=opacity_unit)
 
     @classmethod
     def labels(cls, colours, name="labels") -> "TransferFunction":
@@ -518,14 +533,6 @@ class TransferFunction:
                              f"version {version!r}; expected {_FORMAT!r} version 1 or 2")
         unit = 1.0 if version == 1 else d.get("opacity_unit")
         return cls(d["points"], window=d.get("window"), name=d.get("name"), opacity_unit=unit, key=d.get("key"))
-
-    @classmethod
-    def stored(cls, transfer_function) -> dict | None:
-        """``transfer_function`` (a :class:`TransferFunction`, a dict of :meth:`to_dict`, or None) as a model stores
-        it: checked here as a file's reader checks it (io/clw_header.py), so that every model saved can be read."""
-        if transfer_function is None:
-            return None
-        return (transfer_function if isinstance(transfer_function, cls) else cls.from_dict(transfer_function)).to_dict()
 
     def __eq__(self, other):
         if not isinstance(other, TransferFunction):

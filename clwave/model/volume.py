@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ClwaveWarning, InputError, finite_number, flag, reals, warn_outside
+from .dataarray import from_data_array, is_data_array, is_dataset
 from .geometry import fine_to_world, world_to_fine
 from .labels import looks_like_labels
 
@@ -46,11 +47,16 @@ class Volume:
     data : array_like, shape (nz, ny, nx) or (nz, ny, nx, c)
         Voxel values; converted to float32 once, here (a float32 C-ordered array is kept as it is, not copied).
         ``c`` is 1 to 4 (scalar, RGB, RGBA or classified ``(q_R, q_G, q_B, alpha)``).  A masked array with masked
-        voxels is refused: give them a value first (``data.filled(0)``).
+        voxels is refused: give them a value first (``data.filled(0)``).  A Dask array is kept lazy (docs/chunked.md).
+        An xarray DataArray is read by its dims' names, not their order (z, y, x and a channel dim; CF names such as
+        lat, lon, depth; :mod:`clwave.model.dataarray`), its data kept as it is (over Dask, lazy); its axes whose
+        coordinates decrease are reversed, and its evenly spaced coordinates give ``spacing``, ``origin`` and
+        ``unit`` where those are not given (docs/coordinates.md §1).
     spacing : float or 3 floats
-        Voxel size ``(dz, dy, dx)`` in world units (default 1.0).
+        Voxel size ``(dz, dy, dx)`` in world units (default 1.0, or a DataArray's coordinates'; given, it wins over
+        them, with a warning where they differ, and their origin and unit are not used either).
     origin : 3 floats
-        World position ``(x, y, z)`` of the volume centre (default 0).
+        World position ``(x, y, z)`` of the volume centre (default 0, or a DataArray's coordinates' centre).
     subtracted : float
         The value subtracted from the input's values to make ``data`` (``clwave.load(subtract=)``,
         ``--subtract``; default 0): transfer functions are written in the input's units, and are applied to
@@ -74,7 +80,8 @@ class Volume:
     unit : str, optional
         The world unit, the length of ``spacing``'s 1 where it is known: "m", "cm", "mm", "um", "nm" or "A" (ångström)
         (:data:`clwave.io.images.UNIT_METRES`; :func:`clwave.load`: the file's); None (default): unknown.  Kept by
-        the model and its ``.clw`` file, and written into a picture's resolution (pHYs, TIFF tags).
+        the model and its ``.clw`` file, and written into a picture's resolution (pHYs, TIFF tags).  A DataArray's:
+        its coordinates' ``units`` where they name one.
     stored_dtype : numpy dtype, optional
         The type of the input's values as stored (:func:`clwave.load`: the file's, before float32); None (default):
         ``data``'s own.  ``clwave compress`` weighs its file against the input's size in it.
@@ -86,8 +93,13 @@ class Volume:
     ((4, 5, 6), 1, (2.0, 1.0, 1.0))
     """
 
-    def __init__(self, data, spacing=1.0, origin=(0.0, 0.0, 0.0), subtracted=0.0, obliquity=0.0, labels=None,
+    def __init__(self, data, spacing=None, origin=None, subtracted=0.0, obliquity=0.0, labels=None,
                  stored_dtype=None, unit=None, photo=False):
+        if is_dataset(data):
+            raise InputError(f"volume data is an xarray Dataset of the variables {', '.join(map(str, data.data_vars))}"
+                             f"; give one of them, a DataArray: Volume(ds[name])")
+        if is_data_array(data):
+            data, spacing, origin, unit = from_data_array(data, spacing, origin, unit)
         lazy = is_dask(data)
         if np.ma.is_masked(data):  # numpy.asarray would take the masked voxels' values as they are
             raise InputError(f"volume data is a masked array with {np.ma.count_masked(data)} masked voxel(s), whose "
@@ -134,10 +146,11 @@ class Volume:
         else:
             arr = checked_float32(arr)
         self.data = arr
-        self.spacing = _triple(spacing, "spacing")
+        self.spacing = _triple(1.0 if spacing is None else spacing, "spacing")
         if min(self.spacing) <= 0:
             raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
-        origin = tuple(float(o) for o in reals(origin, "origin", 3, "one number or three (x, y, z)", one=True))
+        origin = tuple(float(o) for o in reals(0.0 if origin is None else origin, "origin", 3,
+                                               "one number or three (x, y, z)", one=True))
         problem = frame_problem(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
         if problem:
             raise InputError(f"{problem}; give spacing= in other units",

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, flag, warn_outside
+from ..errors import ClwaveWarning, InputError, flag, type_name, warn_outside
 from ..threads import MadeOnce, thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget, warn_stored
@@ -25,7 +25,7 @@ from .noise import band_noise, check_noise_known, measure_noise, warn_noise_gain
 from .ranking import RankedTable, by_importance, ranked_table
 from . import evaluation
 from .transform import apply_sampling_filter, crop_to_grid, decompose, reconstruct_channel, synthesize
-from .transfer import TransferFunction
+from .tf_file import stored_transfer_function
 from .volume import Volume, warn_straight_colour
 
 
@@ -173,10 +173,11 @@ class WaveletVolume:
             False (default): the samples are the B-spline coefficients (paper eq. 8,
             approximating, mass preserving).  True: prefilter so the model passes
             through the samples (docs/model.md §1).
-        transfer_function : TransferFunction or dict, optional
+        transfer_function : TransferFunction, optional
             Stored with the volume (and in ``.clw`` files): for a classified volume, how it was classified;
             for a scalar one, the transfer function ray tracing classifies it with by default
-            (post-classification, docs/raytracing.md §10).
+            (post-classification, docs/raytracing.md §10).  Or a preset name, a ``.json``/``.csv`` file, a matplotlib
+            colormap, a :meth:`TransferFunction.to_dict` (:func:`~clwave.model.tf_file.as_transfer_function`).
         scheduler : optional
             Chunked volumes only: the Dask scheduler of the passes (:mod:`clwave.schedulers`).
 
@@ -200,7 +201,7 @@ class WaveletVolume:
                                                            transfer_function=transfer_function,
                                                            scheduler=scheduler, progress_bar=progress_bar)
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
-        tf = TransferFunction.stored(transfer_function)
+        tf = stored_transfer_function(transfer_function)
         mask = volume.content_mask()
         groups = []
         for wav in dict.fromkeys(wavelets):
@@ -482,6 +483,8 @@ class WaveletVolume:
 
 #: decomposition levels of a model made without ``levels`` (fewer where the volume's shortest axis allows fewer)
 DEFAULT_LEVELS = 3
+#: the share of coefficients kept where nothing says (clwave compress, view): a model for a first look
+DEFAULT_KEEP = 0.05
 
 
 def check_decomposition(shape, channels, wavelet, levels) -> tuple:
@@ -583,9 +586,12 @@ def _top(importance, count) -> np.ndarray:
 
 def check_model(wv, work: str):
     """An InputError naming ``work`` ("splatting") where ``wv`` is no :class:`WaveletVolume`: a chunked model (of a
-    Dask array) is written to a file and opened first (docs/chunked.md)."""
+    Dask array) is written to a file and opened first (docs/chunked.md); an array or a Volume is made a model with the
+    defaults :func:`clwave.view` uses."""
     if not isinstance(wv, WaveletVolume):
         chunked = WaveletVolume.chunked_model is not None and isinstance(wv, WaveletVolume.chunked_model)
+        volume = "volume" if isinstance(wv, Volume) else "clwave.Volume(data)"
         fix = ("save it (.save('x.clw')) and render WaveletVolume.open('x.clw')" if chunked else
-               "make one with WaveletVolume.from_volume(...)")
-        raise InputError(f"{work} needs a clwave.WaveletVolume, not a {type(wv).__name__}: {fix}")
+               f"make one, clwave.WaveletVolume.from_volume({volume}).threshold(keep={DEFAULT_KEEP}), and render it "
+               f"(or look at it in one call: clwave.view({'volume' if isinstance(wv, Volume) else 'data'}))")
+        raise InputError(f"{work} needs a clwave.WaveletVolume (a model), got {type_name(wv)}: {fix}")

@@ -466,10 +466,8 @@ def bernstein_matrix(xi) -> np.ndarray:
 
 
 def check_post(tracer, tf, absorption):
-    """Refuse what a transfer function at render time cannot take: it needs a scalar model, the B-spline field
-    and absorption."""
-    if not isinstance(tf, TransferFunction):
-        raise InputError("transfer_function must be a clwave.TransferFunction")
+    """Refuse what a transfer function at render time (a TransferFunction, :func:`as_transfer_function` made it)
+    cannot take: it needs a scalar model, the B-spline field and absorption."""
     if tracer.wv.channels != 1:
         raise InputError(f"transfer_function= classifies a scalar model while rendering; this one has "
                          f"{tracer.wv.channels} channels (already classified: render it without one)")

@@ -19,6 +19,7 @@ from ..errors import InputError
 from ..frames import ErrorEstimate, FinalImage, check_error, reached, root_mean_square
 from ..model.camera import Camera
 from ..model.clip import check_clip
+from ..model.tf_file import as_transfer_function
 from ..model.conebeam import ConeBeam, check_camera
 from ..model.transform import band_layout
 from ..io.occupancy import mass_on_occupied
@@ -184,7 +185,7 @@ class StagedTracer:
         check_error(error)
         check_camera(camera)
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
-                       transfer_function=transfer_function, clip=check_clip(clip))
+                       transfer_function=as_transfer_function(transfer_function), clip=check_clip(clip))
         return self._frames(camera, options, error)
 
     def _frames(self, camera, options, error):

@@ -36,6 +36,7 @@ from .progressive import frames
 from .quadrature import sample_tables
 from .shading import Phong, light_directions
 from ..io.result import RenderResult
+from ..model.tf_file import as_transfer_function
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume, check_model
 from ..threads import drain, one_at_a_time
@@ -257,7 +258,7 @@ class RayTracer:
         wv, cc = self.wv, self.cc
         tol = _checked_tolerance(tolerance)
         absorption = flag(absorption, "absorption")
-        clip = check_clip(clip)
+        clip, transfer_function = check_clip(clip), as_transfer_function(transfer_function)
         if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default
         if transfer_function is not None:
@@ -451,7 +452,7 @@ class RayTracer:
         left running); any tracer refines (the frames are its own renders of reduced images).  Use it from one
         thread at a time.  ``transfer_function``, ``clip``: as :meth:`render`'s, the same at every frame."""
         options = dict(tolerance=tolerance, lights=lights, shading=shading, absorption=absorption,
-                       transfer_function=transfer_function, clip=check_clip(clip))
+                       transfer_function=as_transfer_function(transfer_function), clip=check_clip(clip))
         return frames(self, camera, options, steps, budget, error)
 
     def _phong(self, shading, absorption, lights):
@@ -544,10 +545,10 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
         ``distributed.Client``): each worker traces the rays through its slab of bricks, opening the model's
         ``.clw`` file itself (docs/raytracing.md §7).
     transfer_function : TransferFunction, optional
-        Classify a scalar model while rendering (post-classification, docs/raytracing.md §10): colour and
-        opacity as ``TransferFunction.classify`` gives them (docs/model.md §5), normals from the scalar's
-        gradient; another transfer function or window needs no new set-up.  Default: the one a scalar model
-        was made with (``WaveletVolume.from_volume(..., transfer_function=)``, kept in its ``.clw`` file).
+        Classify a scalar model while rendering (post-classification, docs/raytracing.md §10): colour and opacity as
+        ``TransferFunction.classify`` gives them (docs/model.md §5), normals from the scalar's gradient; another
+        function or window needs no new set-up.  Or a preset name, a ``.json``/``.csv`` file, a matplotlib colormap
+        (``tf_file.as_transfer_function``).  Default: the model's (``from_volume(transfer_function=)``, its ``.clw``'s).
     clip : Clip, optional
         Keep only what lies inside a crop box and/or half-spaces (world coordinates): each ray's integral is taken
         over its interval inside them, exactly (docs/raytracing.md §12); a new clip rebuilds nothing.
@@ -560,6 +561,7 @@ def raytrace(wv: WaveletVolume, camera: Camera | ConeBeam, tolerance=1e-3, light
     and timings (B-spline expansion and kernel compile apart).
     """
     check_camera(camera)
+    transfer_function = as_transfer_function(transfer_function)
     if scheduler is not None:
         from ..schedulers import client_for
         from .regions import check_cluster_model, raytrace_on_cluster

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from os import PathLike
 
-import numpy as np
-
-from ..errors import InputError, warn_outside
+from ..errors import InputError, type_name, warn_outside
+from ..model.tf_file import as_transfer_function
+from ..model.wavelet import DEFAULT_KEEP, WaveletVolume
 
 
 class Viewer:
@@ -57,27 +57,26 @@ class Viewer:
                 f'style="border: 0"></iframe>')
 
 
-def as_model(model_or_volume, keep=0.05, tf=None, wavelet="cubic", levels=None, classify="pre"):
+def as_model(model_or_volume, keep=DEFAULT_KEEP, tf=None, wavelet="cubic", levels=None, classify="pre"):
     """A thresholded :class:`~clwave.WaveletVolume` from a model (as it is), a :class:`~clwave.Volume` or an
-    array ``(z, y, x[, c])``: classified with ``tf`` (a preset name, a ``.json``/``.csv`` file or a
-    TransferFunction) first, or with
+    array ``(z, y, x[, c])`` (NumPy, Dask or an xarray DataArray, as :class:`~clwave.Volume` takes it): classified
+    with ``tf`` (as :func:`~clwave.model.tf_file.as_transfer_function` takes it) first, or with
     ``classify="post"`` the scalar kept with ``tf`` as its transfer function, classified while rendering
     (docs/raytracing.md §10)."""
-    from ..model.volume import Volume
-    from ..model.wavelet import WaveletVolume
+    from ..model.volume import Volume, is_dask
 
     if isinstance(model_or_volume, WaveletVolume):
         return model_or_volume
-    if isinstance(model_or_volume, np.ndarray):
-        model_or_volume = Volume(model_or_volume)
     if isinstance(model_or_volume, (str, PathLike)):  # a path other than a .clw file's: a volume file
         raise InputError(f"view() reads a .clw file by its path; read a volume file first (its options, e.g. "
                          f"spacing= or hu_to_mu=, are load's): clwave.view(clwave.load({str(model_or_volume)!r}))")
+    if hasattr(model_or_volume, "__array__") or is_dask(model_or_volume):  # NumPy, Dask, a DataArray
+        model_or_volume = Volume(model_or_volume)
     if not isinstance(model_or_volume, Volume):
-        raise InputError(f"view() takes a clwave.WaveletVolume, a clwave.Volume, an array or a .clw file, not "
-                         f"{type(model_or_volume).__name__}")
+        raise InputError(f"view() takes a clwave.WaveletVolume, a clwave.Volume, an array (NumPy, Dask or an xarray "
+                         f"DataArray) or a .clw file, got {type_name(model_or_volume)}")
     _check_classify(classify)
-    vol, tf = model_or_volume, _transfer_function(tf)
+    vol, tf = model_or_volume, as_transfer_function(tf, "tf")
     if tf is not None:
         if classify == "post" and vol.channels != 1:
             raise InputError(f'classify="post" keeps a scalar volume for ray tracing to classify; this volume has '
@@ -94,30 +93,18 @@ def _check_classify(classify):
                          f"(while rendering)")
 
 
-def _transfer_function(tf):
-    """``tf`` (a preset name, a ``.json``/``.csv`` file's, a TransferFunction or None) as a TransferFunction or
-    None."""
-    from ..model.tf_file import named_transfer_function
-    from ..model.transfer import TransferFunction
-
-    tf = named_transfer_function(tf) if isinstance(tf, str) else tf
-    if tf is not None and not isinstance(tf, TransferFunction):
-        raise InputError(f"tf= must be a preset name, a .json or .csv file or a clwave.TransferFunction, not "
-                         f"{type(tf).__name__}")
-    return tf
-
-
 def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, classify="pre", device=None,
          device_memory=None, host="127.0.0.1", port=0, open_browser=False) -> Viewer:
-    """Serve a progressive view of a model, a volume or a ``.clw`` file in the browser; returns a :class:`Viewer`.
+    """Serve a progressive view of a model, a volume (a :class:`~clwave.Volume`, or an array as it takes one: NumPy,
+    Dask, an xarray DataArray) or a ``.clw`` file in the browser; returns a :class:`Viewer`.
 
     ``size`` (N or (H, W)) is the full image; ``tolerance`` the shaded mode's when the view is still (an RGBA
     model, or a scalar one classified at render time through the page's transfer-function editor).  ``tf`` (a preset
-    name, a ``.json`` or ``.csv`` file of points, docs/model.md §5, or a TransferFunction): a volume is classified
-    with it before its transform (``classify="pre"``), or kept scalar and classified with it while rendering
-    (``classify="post"``); a scalar model or ``.clw`` file is
-    classified with it while rendering; the editor starts from it (else from the model's own, or grey).  A volume is
-    decomposed with cubic wavelets and ``keep`` (default 0.05) of its voxels kept; a ``.clw`` file (a path) is served
+    name, a ``.json`` or ``.csv`` file of points, docs/model.md §5, a matplotlib colormap or a TransferFunction): a
+    volume is classified with it before its transform (``classify="pre"``), or kept scalar and classified with it
+    while rendering (``classify="post"``); a scalar model or ``.clw`` file is classified with it while rendering; the
+    editor starts from it (else from the model's own, or grey).  A volume is decomposed with cubic wavelets and
+    ``keep`` (default 0.05) of its voxels kept; a ``.clw`` file (a path) is served
     at once from its most important coefficients while the rest (its ``keep`` most important, default all) is read
     (docs/viewer.md §2).  ``device_memory`` (bytes or a size such as "2GiB"; default the device's) caps the device
     memory of the viewer's renderers together (docs/viewer.md §1).  The server binds ``host`` (loopback unless
@@ -126,7 +113,6 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     """
     from ..device.memory import parse_cap
     from ..model.camera import Camera
-    from ..model.wavelet import WaveletVolume
     from .frames import check_tolerance
     from .export import Origin
     from .prefix import PrefixFirst
@@ -138,13 +124,13 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     check_tolerance(tolerance)
     _check_classify(classify)
     parse_cap(device_memory)
-    tf = _transfer_function(tf)
+    tf = as_transfer_function(tf, "tf")
     if isinstance(model_or_volume, (str, PathLike)) and str(model_or_volume).lower().endswith(".clw"):
         wv = PrefixFirst(model_or_volume, keep=keep)
         model = wv.prefix
     else:
         model = model_or_volume if isinstance(model_or_volume, WaveletVolume) else None  # else a volume's tf is its own
-        wv = as_model(model_or_volume, keep=0.05 if keep is None else keep, tf=tf, classify=classify)
+        wv = as_model(model_or_volume, keep=DEFAULT_KEEP if keep is None else keep, tf=tf, classify=classify)
     if model is not None and tf is not None and model.channels != 1:  # a model: classified while rendering
         raise InputError(f"tf= classifies a scalar model while rendering; this model has {model.channels} channels "
                          f"(classified already): leave tf out")
