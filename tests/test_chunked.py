@@ -502,5 +502,6 @@ def test_a_scheduler_address_without_workers_is_one_line_then_with_one_the_in_me
             clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=address)
         assert time.perf_counter() - start < 10
         cluster.scale(1)
+        cluster.wait_for_workers(1, timeout=60)  # scale() only asks for it: joined, not left to the 1 s timeout
         model = clwave.WaveletVolume.from_volume(dvol, "cubic", levels=2, scheduler=address).threshold(keep=0.05)
         assert_same(clwave.WaveletVolume.from_volume(vol, "cubic", levels=2).threshold(keep=0.05), model.compute())

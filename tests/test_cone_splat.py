@@ -485,11 +485,11 @@ def test_too_wide_a_cone_is_refused_at_once(camera, own, foreign):
 
     wv = _model((8, 8, 8), (1.0, 1.0, 1.0), levels=1)
     r = clwave.SplatRenderer(wv)
-    start = time.perf_counter()
+    start = time.process_time()  # the work before the refusal, whatever the machine's load
     with pytest.raises(clwave.DeviceMemoryError,
                        match=r"too wide .* narrow the cone .*clwave\.RayTracer\(wv, content_clamp=False\)") as err:
         r.render(camera)
-    assert time.perf_counter() - start < 0.5 and "\n" not in str(err.value)
+    assert time.process_time() - start < 0.5 and "\n" not in str(err.value)
     # in the camera's own terms (known-gaps §15), the ray tracer beside them
     assert own in str(err.value) and not any(word in str(err.value) for word in foreign)
     assert str(err.value).endswith(

@@ -82,11 +82,11 @@ def setter(key, value):
 ])
 def test_crafted_clw_headers_are_refused_before_anything_is_allocated(model_file, tmp_path, edit, needle):
     path = crafted(model_file, tmp_path, edit)
-    start = time.perf_counter()
+    start = time.process_time()  # CPU seconds: the work before the refusal, whatever the load (wall-clock ones failed)
     with pytest.raises(FileFormatError) as err:
         clwave.WaveletVolume.open(path)
     assert needle in str(err.value) and "\n" not in str(err.value)
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
 
 
 def test_a_header_without_its_optional_properties_opens(model_file, tmp_path):
@@ -351,10 +351,10 @@ def test_a_member_declaring_more_than_the_header_allows_is_not_decompressed(mode
                           compression="gzip")
     path = crafted(model_file, tmp_path, change=bomb)
     assert path.stat().st_size < 1_000_000
-    start = time.perf_counter()
+    start = time.process_time()
     with pytest.raises(FileFormatError, match="expected"):
         clwave.WaveletVolume.open(path)
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
 
 
 @pytest.mark.parametrize("suffix", [".nii", ".nii.gz"])
@@ -368,10 +368,10 @@ def test_a_nifti_header_that_lies_about_its_size_is_refused_before_reading(tmp_p
     raw[42:48] = np.array([1200, 1200, 1200], "<i2").tobytes()  # dim[1..3] of the NIfTI-1 header
     liar = tmp_path / ("liar" + suffix)
     liar.write_bytes(gzip.compress(bytes(raw)) if suffix == ".nii.gz" else bytes(raw))
-    start = time.perf_counter()
+    start = time.process_time()
     with pytest.raises(FileFormatError, match="1200 x 1200 x 1200 voxels"):
         clwave.load(liar)
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
 
 
 @pytest.mark.parametrize("call, name", [
@@ -412,6 +412,15 @@ def test_options_that_do_not_apply_to_a_phantom_are_errors(tmp_path, capsys):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.fixture(scope="module")
+def splat_kernels(tmp_path_factory):
+    """The splatting kernels built in this process: with an empty PoCL cache (CI's) their first build is seconds, tens
+    on a loaded machine, and a refusal made after it (the texel pool's) would be timed with it."""
+    from clwave.cli import main
+    assert main(["render", "phantom:hydrogen:16", "--levels", "1", "--size", "8", "-o",
+                 str(tmp_path_factory.mktemp("kernels") / "x.png")]) == 0
+
+
 @pytest.mark.parametrize("option, needle", [
     (["--extent", "1e12"], "texel pool"),
     (["--omega-s", "nan"], "--omega-s"),
@@ -419,7 +428,7 @@ def test_options_that_do_not_apply_to_a_phantom_are_errors(tmp_path, capsys):
     (["--spacing", "1e-6,1,1e6"], "footprint textures"),
     (["--extent", "-1"], "--extent"),
 ])
-def test_extreme_geometry_is_one_line_before_any_texture_is_made(tmp_path, capsys, option, needle):
+def test_extreme_geometry_is_one_line_before_any_texture_is_made(splat_kernels, tmp_path, capsys, option, needle):
     """One error line; a spacing that makes a needle of the box (1.6e7 x 16 x 1.6e-5) has the needle's warning
     before it, naming --spacing (trial26)."""
     from clwave.cli import main
@@ -460,10 +469,10 @@ def test_an_extreme_zoom_renders_from_textures_of_the_band(tmp_path):
 def test_absurd_work_is_refused_up_front(tmp_path, capsys, argv, needle):
     from clwave.cli import main
     out = tmp_path / ("x.gif" if argv[0] == "progressive" else "x.clw")
-    start = time.perf_counter()
+    start = time.process_time()
     assert main([*argv, "-o", str(out)]) == 2
     err = capsys.readouterr().err
-    assert needle in err and err.count("\n") == 1 and time.perf_counter() - start < 5
+    assert needle in err and err.count("\n") == 1 and time.process_time() - start < 5
     with pytest.raises(MemoryError, match="choose a smaller n"):  # the API too, before allocating
         clwave.phantom("hydrogen", 100000)
 
@@ -495,10 +504,10 @@ def test_a_nrrd_header_declaring_more_than_its_data_is_refused_before_reading(tm
     nrrd.write(str(path), np.zeros((4, 4, 4), np.float32), {"encoding": encoding})
     text = path.read_bytes()
     path.write_bytes(text.replace(b"sizes: 4 4 4", b"sizes: 4000 4000 4000"))  # 256 GB declared
-    start = time.perf_counter()
+    start = time.process_time()
     with pytest.raises(FileFormatError, match="declares 4000 x 4000 x 4000 voxels") as exc:
         clwave.load(path)
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
     # the bytes it holds: a gzip stream's uncompressed length (its header is outside it), else after the header
     held = "its gzip stream holds 256 bytes;" if encoding == "gzip" else "the file holds 256 bytes after its"
     assert held in str(exc.value) and ("byte header" in str(exc.value)) == (encoding == "raw")

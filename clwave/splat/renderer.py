@@ -185,12 +185,12 @@ class SplatRenderer:
         per_layer = [[(layer.view, {band for band, f in fg.items() if f == layer.factors}) for layer in layers]
                      for fg in factors]
         if view.perspective:
-            for g in self.wv.groups:
-                self.stage(len(g.channels), True)
             tables = [ConeTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
                                  max_texels=self.cc.info.max_alloc // 4, cache=self._cone_footprints,
                                  work=self._spectra_work, words=camera_words(camera))
                       for gi, ls in enumerate(per_layer)]
+            for g in self.wv.groups:  # after the tables, which refuse a cone too wide before any kernel is built
+                self.stage(len(g.channels), True)
         else:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
                                  max_texels=self.cc.info.max_alloc // 4) for gi, ls in enumerate(per_layer)]
