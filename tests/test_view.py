@@ -38,13 +38,16 @@ def run(coroutine):
     return asyncio.run(coroutine)
 
 
-async def frames_until_final(ws, seq, until_seq=False, texts=None):
+async def frames_until_final(ws, seq, until_seq=False, texts=None, most=None):
     """The frames of view ``seq`` up to its final one (others are dropped as a page drops them); ``until_seq``:
     its first frame only (a view while moving has no final one).  A status message (what is being made) and the
-    histogram of a scalar model's values are passed over (into the list ``texts`` where given)."""
+    histogram of a scalar model's values are passed over (into the list ``texts`` where given).  ``most``: at most
+    that many frames before the final one (a bound in frames, not seconds: a first kernel build on an empty cache
+    takes minutes of wall time on a loaded machine)."""
     out = []
     while True:
-        msg = await ws.receive(timeout=60)
+        assert most is None or len(out) < most, f"view {seq}: {most} frames and none final"
+        msg = await ws.receive(timeout=300)
         if msg.type == aiohttp.WSMsgType.TEXT and json.loads(msg.data)["type"] in ("status", "histogram"):
             if texts is not None:
                 texts.append(json.loads(msg.data))
@@ -557,10 +560,10 @@ def test_still_frames_double_the_coefficients_and_end_at_the_kept_set(viewer):
         xray.rate = rate
 
 
-def test_a_model_without_coefficients_has_one_blank_final_frame_a_view():
-    """An all-zero volume (no coefficients): each still view ends in a final frame, blank, with a note for the
-    status line, after a bounded number of frames (it once spun without end, a thousand frames a second); the shaded
-    view of it ends too."""
+def test_a_model_without_coefficients_has_one_final_frame_a_view():
+    """An all-zero volume (no coefficients): each still view ends in a final frame, with a note for the status line,
+    after a bounded number of frames (it once spun without end, a thousand frames a second); the X-ray views are
+    blank, the shaded view of it ends too."""
     from clwave.view.frames import NO_COEFFICIENTS
 
     async def go(v):
@@ -570,7 +573,7 @@ def test_a_model_without_coefficients_has_one_blank_final_frame_a_view():
             views = []
             for seq, change in enumerate((dict(), dict(azimuth=90.0), dict(mode="shaded")), 1):
                 await ws.send_str(json.dumps(dict(BASE, seq=seq, **change)))
-                views.append(await asyncio.wait_for(frames_until_final(ws, seq), 60))  # else it spins without end
+                views.append(await frames_until_final(ws, seq, most=8))  # it once spun without end
             return hello, views
     with view(np.zeros((16, 16, 16), np.float32), size=32) as v:
         hello, views = run(go(v))
@@ -578,7 +581,10 @@ def test_a_model_without_coefficients_has_one_blank_final_frame_a_view():
     assert [len(frames) for frames in views[:2]] == [2, 2]  # a view without a drag frame: one, then the final one
     assert len(views[2]) <= 8  # shaded: its details, coarse to full
     for frames in views:
-        assert frames[-1][0]["final"] and decode(frames[-1][1]).max() == 0
+        assert frames[-1][0]["final"]
+    # X-ray: the line integrals of 0; shaded, the auto window (-0.5, 0.5) gives the data's 0 an opacity, which fogs
+    # the data's box (docs/raytracing.md §10, pinned against the oracle in test_unseen_inputs.py)
+    assert all(decode(frames[-1][1]).max() == 0 for frames in views[:2]) and decode(views[2][-1][1]).max() > 0
     assert all(f["note"] == NO_COEFFICIENTS and f["coefficients"] == 0 for frames in views[:2] for f, _ in frames)
     assert all(f["note"] == NO_COEFFICIENTS for f, _ in views[2])
 
