@@ -113,13 +113,19 @@ def _line(da, dim, needed):
     return -values.astype(np.float64) if positive == "down" else values.astype(np.float64)
 
 
+def _even_step(line) -> tuple:
+    """``(step, even)``: the step of ``line`` from its first coordinate to its last, and whether every coordinate lies
+    within :data:`EVEN` of a step of its place on that line."""
+    step = float(line[-1] - line[0]) / max(len(line) - 1, 1)
+    return step, bool(np.abs(line - (line[0] + step * np.arange(len(line)))).max() <= EVEN * step)
+
+
 def _step(line, name) -> float:
     """The step of an evenly spaced (:data:`EVEN`), increasing ``line``; an InputError otherwise."""
     if len(line) < 2:
         return 1.0  # one voxel: Volume refuses its shape
-    step = float(line[-1] - line[0]) / (len(line) - 1)
-    off = np.abs(line - (line[0] + step * np.arange(len(line))))
-    if not step > 0 or off.max() > EVEN * step:
+    step, even = _even_step(line)
+    if not step > 0 or not even:
         steps = np.diff(line)
         raise InputError(f"the DataArray's {name} coordinate is not evenly spaced (steps from {steps.min():.6g} to "
                          f"{steps.max():.6g}) and clwave renders a regular grid: resample it (e.g. "
@@ -141,8 +147,8 @@ def _unit(da, names):
 def _warn_other_spacing(spacing, lines, names):
     """Warn where ``spacing`` (given) is not the step of the coordinates ``lines`` (z, y, x)."""
     given = reals(spacing, "spacing", 3, "one number or three (dz, dy, dx)", one=True)
-    steps = np.array([(line[-1] - line[0]) / max(len(line) - 1, 1) for line in lines])
-    even = all(np.abs(line - (line[0] + s * np.arange(len(line)))).max() <= EVEN * s for line, s in zip(lines, steps))
+    steps, evens = zip(*map(_even_step, lines))
+    steps, even = np.array(steps), all(evens)
     if not even or not np.allclose(given, steps, rtol=EVEN, atol=0):
         coords = f"steps {tuple(float(f'{s:.6g}') for s in steps)}" if even else "uneven steps"
         warn_outside(ClwaveWarning(f"spacing={tuple(float(g) for g in given)} given places the DataArray's voxels, "
