@@ -586,12 +586,13 @@ def _top(importance, count) -> np.ndarray:
 
 def check_model(wv, work: str):
     """An InputError naming ``work`` ("splatting") where ``wv`` is no :class:`WaveletVolume`: a chunked model (of a
-    Dask array) is written to a file and opened first (docs/chunked.md); an array or a Volume is made a model with the
-    defaults :func:`clwave.view` uses."""
+    Dask array) is written to a file and opened first (docs/chunked.md); for an array or a Volume the line names the
+    calls that make a model of it and :func:`clwave.view`, which looks at it in one."""
     if not isinstance(wv, WaveletVolume):
         chunked = WaveletVolume.chunked_model is not None and isinstance(wv, WaveletVolume.chunked_model)
-        volume = "volume" if isinstance(wv, Volume) else "clwave.Volume(data)"
+        given = "volume" if isinstance(wv, Volume) else "data"
+        volume = given if isinstance(wv, Volume) else f"clwave.Volume({given})"
         fix = ("save it (.save('x.clw')) and render WaveletVolume.open('x.clw')" if chunked else
                f"make one, clwave.WaveletVolume.from_volume({volume}).threshold(keep={DEFAULT_KEEP}), and render it "
-               f"(or look at it in one call: clwave.view({'volume' if isinstance(wv, Volume) else 'data'}))")
+               f"(or look at it in one call: clwave.view({given}))")
         raise InputError(f"{work} needs a clwave.WaveletVolume (a model), got {type_name(wv)}: {fix}")
