@@ -582,9 +582,10 @@ def test_a_model_without_coefficients_has_one_final_frame_a_view():
     assert len(views[2]) <= 8  # shaded: its details, coarse to full
     for frames in views:
         assert frames[-1][0]["final"]
-    # X-ray: the line integrals of 0; shaded, the auto window (-0.5, 0.5) gives the data's 0 an opacity, which fogs
-    # the data's box (docs/raytracing.md §10, pinned against the oracle in test_unseen_inputs.py)
-    assert all(decode(frames[-1][1]).max() == 0 for frames in views[:2]) and decode(views[2][-1][1]).max() > 0
+    # X-ray: the line integrals of 0. Shaded: not pinned here, its final image is fog or blank by when the tracer's
+    # build ends (docs/known-gaps.md §15); the fog of a direct render is pinned against the oracle in
+    # test_unseen_inputs.py
+    assert all(decode(frames[-1][1]).max() == 0 for frames in views[:2])
     assert all(f["note"] == NO_COEFFICIENTS and f["coefficients"] == 0 for frames in views[:2] for f, _ in frames)
     assert all(f["note"] == NO_COEFFICIENTS for f, _ in views[2])
 
