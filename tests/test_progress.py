@@ -106,6 +106,21 @@ def test_dask_blocks_are_counted_in_their_order(monkeypatch, every_update):
     assert counts(sys.stderr.getvalue(), "blocks") == [0, 1, 2, 3, 4, 5]
 
 
+def test_the_auto_windows_pass_over_a_chunked_volume_shows_dasks_bar(monkeypatch):
+    """The pass runs on Dask's local threads (no distributed client): Dask's own ProgressBar, on stderr."""
+    import dask.array as da
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    volume = Volume(da.from_array(clwave.phantom("hydrogen", 16).data, chunks=8))
+    hydrogen = clwave.TransferFunction.preset("hydrogen")
+    with show_progress(True):
+        shown = hydrogen.resolved(volume, "auto")
+    assert "100% Completed" in sys.stderr.getvalue()
+    sys.stderr.truncate(0)
+    assert hydrogen.resolved(volume, "auto").window == shown.window  # a pipe: the same window, no bar
+    assert sys.stderr.getvalue() == ""
+
+
 def test_a_turntable_counts_its_views(monkeypatch, every_update):
     monkeypatch.setattr(sys, "stderr", io.StringIO())
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1)

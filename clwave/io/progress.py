@@ -4,6 +4,7 @@ unless asked."""
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import sys
 
@@ -56,3 +57,13 @@ def progress(iterable=None, *, total=None, desc=None, enabled=None):
         from tqdm.std import tqdm
     return tqdm(iterable, total=total, desc=desc, disable=not shown, leave=False, file=sys.stderr,
                 dynamic_ncols=True)
+
+
+def dask_progress(enabled=None):
+    """Dask's own bar (``dask.diagnostics.ProgressBar``, on stderr) over a computation on Dask's local schedulers,
+    where :func:`showing` says so; work on a ``distributed`` client is counted by :func:`clwave.schedulers.stream`."""
+    if not showing(enabled):
+        return contextlib.nullcontext()
+    from dask.diagnostics import ProgressBar
+
+    return ProgressBar(out=sys.stderr)
