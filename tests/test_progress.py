@@ -92,7 +92,7 @@ def test_the_transform_counts_its_channels(monkeypatch, every_update):
     rgba = Volume(np.random.default_rng(1).random((8, 8, 8, 4), np.float32))
     clwave.WaveletVolume.from_volume(rgba, "linear", levels=1, progress_bar=True)
     assert counts(sys.stderr.getvalue(), "linear transform")[-1] == 4
-    sys.stderr.truncate(0)
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
     clwave.WaveletVolume.from_volume(rgba, "linear", levels=1)  # a pipe: nothing
     assert sys.stderr.getvalue() == ""
 
@@ -116,7 +116,7 @@ def test_the_auto_windows_pass_over_a_chunked_volume_shows_dasks_bar(monkeypatch
     with show_progress(True):
         shown = hydrogen.resolved(volume, "auto")
     assert "100% Completed" in sys.stderr.getvalue()
-    sys.stderr.truncate(0)
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
     assert hydrogen.resolved(volume, "auto").window == shown.window  # a pipe: the same window, no bar
     assert sys.stderr.getvalue() == ""
 
@@ -157,3 +157,16 @@ def test_the_command_line_shows_progress_as_told(tmp_path, monkeypatch, every_up
     assert "transform" not in compress()  # a pipe
     monkeypatch.setattr(sys, "stderr", Terminal())
     assert showing()
+
+
+def test_progressive_counts_its_frames_and_drr_its_radiographs(tmp_path, monkeypatch, every_update):
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert main(["progressive", "phantom:hydrogen:16", "--levels", "1", "--steps", "3", "--size", "8", "--progress",
+                 "-o", str(tmp_path / "p.gif")]) == 0, sys.stderr.getvalue()
+    assert counts(sys.stderr.getvalue(), "progressive frames") == [0, 1, 2, 3]
+    (tmp_path / "t.csv").write_text("azimuth,elevation,dso\n0,0,60\n90,10,70\n")
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert main(["drr", "phantom:shepp-logan:16", "--levels", "1", "--poses", str(tmp_path / "t.csv"), "--size", "8",
+                 "--pixel", "2", "--dsd", "90", "--progress", "-o", str(tmp_path / "d.npy")]) == 0, \
+        sys.stderr.getvalue()
+    assert counts(sys.stderr.getvalue(), "radiographs") == [0, 1, 2]
