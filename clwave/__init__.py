@@ -17,6 +17,7 @@ from .model.camera import Camera
 from .model.clip import Clip
 from .model.conebeam import ConeBeam, transmitted
 from .io.result import RenderResult
+from .io.progress import show_progress
 from .splat.renderer import SplatRenderer, splat
 from .progressive import progressive
 from .turntable import Turntable, turntable
@@ -40,5 +41,5 @@ __all__ = [
     "SplatRenderer", "splat", "progressive", "Turntable", "turntable", "Phong", "RayTracer", "raytrace", "__version__",
     "Detail",
     "ChunkedWaveletVolume",
-    "Viewer", "view",
+    "Viewer", "view", "show_progress",
 ]

@@ -15,6 +15,7 @@ import numpy as np
 from .errors import InputError, reals
 from .io.files import check_suffix, write_atomic
 from .io.images import check_frame_time, gif_to, write_gif
+from .io.progress import progress
 from .io.result import RenderResult, reduced, resolve_window, summary
 from .model.camera import Camera
 
@@ -79,6 +80,12 @@ class Turntable:
         first = self.results[0].meta
         self.meta = dict(first, turntable_seconds=[r.seconds for r in self.results],
                          turntable_views=[dict(camera=r.meta["camera"], pixel=r.meta["pixel"]) for r in self.results])
+
+    @classmethod
+    def rendered(cls, render, cameras) -> "Turntable":
+        """The views ``render(camera)`` of ``cameras``, in order, a bar counting them where there are several."""
+        shown = None if len(cameras) > 1 else False  # one view is a render, no turn to count
+        return cls(render(cam) for cam in progress(cameras, desc="turntable views", enabled=shown))
 
     def __len__(self) -> int:
         return len(self.results)
@@ -151,4 +158,4 @@ def turntable(wv, n, camera=None, method="splat", axis="z", **options) -> Turnta
         inspect.signature(draw).bind(wv, cameras[0], **options)
     except TypeError as e:
         raise InputError(f"{method} takes no such option ({e}): see help(clwave.{method})") from None
-    return Turntable(draw(wv, cam, **options) for cam in cameras)
+    return Turntable.rendered(lambda cam: draw(wv, cam, **options), cameras)

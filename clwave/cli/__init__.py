@@ -17,6 +17,7 @@ from functools import partial
 
 from ..device.memory import out_of_threads
 from ..errors import ClwaveError, ClwaveWarning, InputError, OutputError
+from ..io.progress import show_progress
 from . import compress, drr, info, progressive, render, view
 from .checks import check_options
 from .options import silence_stdout, warn
@@ -115,7 +116,9 @@ def _main(argv) -> int:
     try:
         args = make_parser().parse_args(argv)
         check_options(args)  # before the input is opened: a mistake costs no read
-        return args.run(args)
+        given = getattr(args, "progress", None)  # the input commands' --progress/--no-progress
+        with contextlib.nullcontext() if given is None else show_progress(given):
+            return args.run(args)
     except ClwaveError as exc:  # in the running command's own options (its ``words``, errors.CommandWords)
         print(f"clwave: error: {exc.cli_message(getattr(args, 'words', None))}", file=sys.stderr)
         return EXIT_USAGE

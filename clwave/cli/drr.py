@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ClwaveError, CommandWords, InputError
+from ..io.progress import progress
 from .checks import parse_size, picture_options
 from .options import (add_command, add_device_options, build_model, check_outputs, finish, kept_words,
                       parse_device_memory, warn)
@@ -139,7 +140,8 @@ def run(args):
                                              overwrite=args.force)
         else:
             stack = (len(cameras), H, W)
-            radiographs = (np.asarray(image(i, render(i)), np.float32) for i in range(len(cameras)))
+            poses = progress(range(len(cameras)), desc="radiographs")
+            radiographs = (np.asarray(image(i, render(i)), np.float32) for i in poses)
             sizes = {pixel_size(dict(camera=cb.to_dict())) for cb in cameras}  # a TIFF's, where every pose's is one
             size = sizes.pop() if len(sizes) == 1 else None
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..io.images import write_gif
+from ..io.progress import progress
 from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, finish,
                       parse_device_memory, post_transfer_function)
@@ -51,8 +52,9 @@ def run(args):
         from ..raytrace.tracer import RayTracer
 
         options["tracer"] = RayTracer(wv, device=args.device, device_memory=device_memory, content_clamp=False)
-    frames = list(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device, method=args.method,
-                              error=args.error, device_memory=device_memory, **options))
+    frames = list(progress(progressive(wv, camera, steps=steps, budget=args.budget, device=args.device,
+                                       method=args.method, error=args.error, device_memory=device_memory, **options),
+                           total=steps, desc="progressive frames"))
     if frames[-1].meta.get("nothing_visible"):  # every frame blank: not what was asked for (docs/raytracing.md §10)
         raise InputError(frames[-1].meta["nothing_visible"])
     if window == "auto" and frames[-1].result().is_xray:  # the final image's window for every frame

@@ -3,6 +3,7 @@ their texts parsed and checked, the names ``args`` gives them, and the volume th
 
 from __future__ import annotations
 
+import argparse
 import math
 from functools import partial
 
@@ -39,6 +40,9 @@ def parse_spacing(text) -> tuple:
 
 def add_input_options(p):
     p.add_argument("input", help="volume file, DICOM folder, .clw file, or phantom:NAME[:N]")
+    p.add_argument("--progress", action=argparse.BooleanOptionalAction,
+                   help="show the progress of long steps on stderr, a log's too (default: on a terminal only); "
+                        "--no-progress: never")
     add_reading_options(p)
     c = p.add_argument_group("chunked work (a chunked input; docs/chunked.md)")
     w = c.add_mutually_exclusive_group()

@@ -73,7 +73,7 @@ def run(args):
         def render(cam):
             return splat(wv, cam, scheduler=client, **options)
     with cluster as client:
-        turn = Turntable(render(cam) for cam in cameras)
+        turn = Turntable.rendered(render, cameras)
     if turn[0].meta.get("nothing_visible"):  # a blank image is not what was asked for (docs/raytracing.md §10)
         raise InputError(turn[0].meta["nothing_visible"])
     with published_together() as outputs:  # every output written, then all published (coordinates.md §4)

@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
+from ..io.progress import dask_progress
 from ..threads import cores, thread_map
 from .volume import is_dask
 
@@ -89,8 +90,9 @@ def scan(data, sample, extrema):
         import dask
 
         starts = itertools.product(*(np.cumsum((0,) + c[:-1]) for c in data.chunks[:3]))
-        found = dask.compute(*(dask.delayed(of_block)(block, start)
-                               for block, start in zip(data.to_delayed().ravel(), starts)))
+        with dask_progress():
+            found = dask.compute(*(dask.delayed(of_block)(block, start)
+                                   for block, start in zip(data.to_delayed().ravel(), starts)))
     else:
         found = [of_block(data, (0, 0, 0))]
     samples, lows, highs = zip(*found)

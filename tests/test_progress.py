@@ -1,0 +1,172 @@
+"""Progress of long steps: whether it shows (a terminal, a Jupyter kernel, a pipe; forced on or off by a call, by
+clwave.show_progress or by the command line's --progress/--no-progress), and that long steps count their work."""
+
+import io
+import sys
+import types
+from functools import partialmethod
+
+import dask
+import numpy as np
+import pytest
+import tqdm.std
+
+import clwave
+from clwave.cli import main, make_parser
+from clwave.errors import InputError
+from clwave.io.progress import progress, show_progress, showing
+from clwave.model.volume import Volume
+from clwave.schedulers import client_for, stream
+
+
+class Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+@pytest.fixture
+def every_update(monkeypatch):
+    """Every update drawn (tqdm draws at most one a 0.1 s by default), so that the stream counts them."""
+    monkeypatch.setattr(tqdm.std.tqdm, "__init__", partialmethod(tqdm.std.tqdm.__init__, mininterval=0, miniters=1))
+
+
+def kernel(monkeypatch, has_kernel=True):
+    """This process as a Jupyter kernel's (IPython's shell with a kernel), or a plain IPython shell's."""
+    shell = types.SimpleNamespace(kernel=object()) if has_kernel else types.SimpleNamespace()
+    monkeypatch.setitem(sys.modules, "IPython", types.SimpleNamespace(get_ipython=lambda: shell))
+
+
+def counts(text, desc):
+    """The counts ``desc``'s bar drew, in order."""
+    return [int(frame.split("|")[2].split("/")[0]) for frame in text.split("\r") if frame.startswith(desc + ":")]
+
+
+def test_a_bar_shows_on_a_terminal_and_in_a_kernel_not_in_a_pipe(monkeypatch):
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    assert showing()
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # a pipe, a file, CI's log
+    assert not showing()
+    kernel(monkeypatch, has_kernel=False)  # IPython in a terminal: its stderr decides
+    assert not showing()
+    kernel(monkeypatch)  # Jupyter: stderr is the kernel's stream, no terminal
+    assert showing()
+
+
+def test_forced_on_and_off_by_the_call_or_the_setting(monkeypatch):
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert showing(True) and not showing(False)
+    with show_progress(True):
+        assert showing() and not showing(False)  # a call's own progress_bar= first
+        with show_progress(False):
+            assert not showing()
+            monkeypatch.setattr(sys, "stderr", Terminal())
+            assert not showing() and showing(True)
+        assert showing()
+    assert showing()  # on the terminal again, by itself
+    try:
+        show_progress(False)  # a call sets it for the session
+        assert not showing()
+    finally:
+        show_progress(None)
+    assert showing()
+
+
+def test_a_setting_other_than_true_false_or_none_is_one_line():
+    with pytest.raises(InputError, match=r"^show_progress='no' must be True or False$"):
+        show_progress("no")
+    assert clwave.show_progress is show_progress
+
+
+def test_a_kernel_without_ipywidgets_gets_the_text_bar_on_stderr(monkeypatch, every_update):
+    """No widget to draw: tqdm's text bar (Jupyter draws its carriage returns in place), and no warning."""
+    kernel(monkeypatch)
+    monkeypatch.setitem(sys.modules, "ipywidgets", None)
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    for _ in progress(range(3), desc="work"):
+        pass
+    assert counts(sys.stderr.getvalue(), "work") == [0, 1, 2, 3]
+
+
+def test_the_transform_counts_its_channels(monkeypatch, every_update):
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    rgba = Volume(np.random.default_rng(1).random((8, 8, 8, 4), np.float32))
+    clwave.WaveletVolume.from_volume(rgba, "linear", levels=1, progress_bar=True)
+    assert counts(sys.stderr.getvalue(), "linear transform")[-1] == 4
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    clwave.WaveletVolume.from_volume(rgba, "linear", levels=1)  # a pipe: nothing
+    assert sys.stderr.getvalue() == ""
+
+
+def test_dask_blocks_are_counted_in_their_order(monkeypatch, every_update):
+    """The bar of a chunked pass counts the block results handed on (docs/chunked.md §5)."""
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    tasks = [dask.delayed(int)(i) for i in range(5)]
+    with client_for(None) as client:
+        assert list(stream(client, tasks, desc="blocks", progress_bar=True)) == list(range(5))
+    assert counts(sys.stderr.getvalue(), "blocks") == [0, 1, 2, 3, 4, 5]
+
+
+def test_the_auto_windows_pass_over_a_chunked_volume_shows_dasks_bar(monkeypatch):
+    """The pass runs on Dask's local threads (no distributed client): Dask's own ProgressBar, on stderr."""
+    import dask.array as da
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    volume = Volume(da.from_array(clwave.phantom("hydrogen", 16).data, chunks=8))
+    hydrogen = clwave.TransferFunction.preset("hydrogen")
+    with show_progress(True):
+        shown = hydrogen.resolved(volume, "auto")
+    assert "100% Completed" in sys.stderr.getvalue()
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert hydrogen.resolved(volume, "auto").window == shown.window  # a pipe: the same window, no bar
+    assert sys.stderr.getvalue() == ""
+
+
+def test_a_turntable_counts_its_views(monkeypatch, every_update):
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1)
+    with show_progress(True):
+        turn = clwave.turntable(wv, 3, clwave.Camera(size=(8, 8)))
+        one = clwave.turntable(wv, 1, clwave.Camera(size=(8, 8)))  # one view: no bar
+    assert len(turn) == 3 and len(one) == 1
+    assert counts(sys.stderr.getvalue(), "turntable views") == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("command", ["compress", "render", "progressive", "drr", "view"])
+def test_every_input_command_takes_progress_and_no_progress(command, capsys):
+    with pytest.raises(SystemExit):
+        make_parser().parse_args([command, "--help"])
+    assert "--progress, --no-progress" in capsys.readouterr().out
+    rest = {"drr": ["--poses", "p.csv", "-o", "x.npy"], "view": []}.get(command, ["-o", "x.png"])
+    for given, value in ((["--progress"], True), (["--no-progress"], False), ([], None)):
+        args = make_parser().parse_args([command, "phantom:hydrogen:16", *rest, *given])
+        assert args.progress is value
+
+
+def test_the_command_line_shows_progress_as_told(tmp_path, monkeypatch, every_update):
+    """--progress shows it in a log (a pipe), --no-progress hides it on a terminal; the setting is put back."""
+    def compress(*given):
+        stderr = Terminal() if "--no-progress" in given else io.StringIO()
+        monkeypatch.setattr(sys, "stderr", stderr)
+        code = main(["compress", "phantom:hydrogen:16", "--levels", "1", "--tf", "hydrogen", "--force",
+                     "-o", str(tmp_path / "h.clw"), *given])
+        assert code == 0, stderr.getvalue()
+        return stderr.getvalue()
+
+    assert counts(compress("--progress"), "cubic transform") == [0, 1, 2, 3, 4]
+    assert "transform" not in compress("--no-progress")
+    assert "transform" not in compress()  # a pipe
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    assert showing()
+
+
+def test_progressive_counts_its_frames_and_drr_its_radiographs(tmp_path, monkeypatch, every_update):
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert main(["progressive", "phantom:hydrogen:16", "--levels", "1", "--steps", "3", "--size", "8", "--progress",
+                 "-o", str(tmp_path / "p.gif")]) == 0, sys.stderr.getvalue()
+    assert counts(sys.stderr.getvalue(), "progressive frames") == [0, 1, 2, 3]
+    (tmp_path / "t.csv").write_text("azimuth,elevation,dso\n0,0,60\n90,10,70\n")
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert main(["drr", "phantom:shepp-logan:16", "--levels", "1", "--poses", str(tmp_path / "t.csv"), "--size", "8",
+                 "--pixel", "2", "--dsd", "90", "--progress", "-o", str(tmp_path / "d.npy")]) == 0, \
+        sys.stderr.getvalue()
+    assert counts(sys.stderr.getvalue(), "radiographs") == [0, 1, 2]
