@@ -201,3 +201,11 @@ def test_a_preset_name_and_a_colormap_are_taken_wherever_a_transfer_function_is(
     with pytest.raises(clwave.InputError) as err:
         clwave.raytrace(model, camera, transfer_function={0.0: (0, 0, 0, 0), 1.0: (1, 1, 1, 1)})
     assert "got dict: make one with TransferFunction([(value, r, g, b, opacity), ...]), .preset(name)" in str(err.value)
+
+
+@pytest.mark.parametrize("opacity", [(0.0, -1.0), (-0.1, 0.05), (0.0, float("nan")), (0.0, float("inf"))])
+def test_from_colormap_refuses_an_opacity_by_its_argument(opacity):
+    """(0, -1) was refused as "opacity -0.00392157 of point 1 is negative", a row the caller never wrote (review28)."""
+    with pytest.raises(clwave.InputError) as err:
+        clwave.TransferFunction.from_colormap("gray", opacity=opacity)
+    assert str(err.value).startswith(f"opacity={opacity!r} must be two opacities") and "point" not in str(err.value)

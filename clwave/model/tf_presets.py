@@ -96,7 +96,10 @@ def colormap_points(cmap, opacity) -> tuple:
         cmap = matplotlib.colormaps[cmap]
     if not callable(cmap) or not hasattr(cmap, "N"):
         raise InputError(f"from_colormap takes a matplotlib Colormap or its name, got {cmap!r}")
-    lo, hi = reals(opacity, "opacity", 2, "two opacities (at the window's start, at its end), each >= 0")
+    what = "two opacities (at the window's start, at its end), each >= 0"
+    lo, hi = reals(opacity, "opacity", 2, what)
+    if not (0 <= lo < np.inf and 0 <= hi < np.inf):  # else refused as a row of the table, which the caller never gave
+        raise InputError(f"opacity={opacity!r} must be {what}, finite")
     t = np.linspace(0.0, 1.0, max(int(cmap.N), 2))
     rgba = np.asarray(cmap(t), dtype=np.float64)
     return np.column_stack([t, rgba[:, :3], (lo + (hi - lo) * t) * rgba[:, 3]]), str(getattr(cmap, "name", "colormap"))
