@@ -200,7 +200,10 @@ def test_a_preset_name_and_a_colormap_are_taken_wherever_a_transfer_function_is(
     assert as_model(data, keep=0.5, tf=cmap).transfer_function["name"] == "magma"
     with pytest.raises(clwave.InputError) as err:
         clwave.raytrace(model, camera, transfer_function={0.0: (0, 0, 0, 0), 1.0: (1, 1, 1, 1)})
-    assert "got dict: make one with TransferFunction([(value, r, g, b, opacity), ...]), .preset(name)" in str(err.value)
+    assert "or the dict of TransferFunction.to_dict(), got a dict without 'points': make one with " \
+           "TransferFunction([(value, r, g, b, opacity), ...]), .preset(name)" in str(err.value)  # review28
+    with pytest.raises(clwave.InputError, match=r"got numpy\.ndarray: make one with"):
+        clwave.raytrace(model, camera, transfer_function=np.zeros((2, 5)))
 
 
 @pytest.mark.parametrize("opacity", [(0.0, -1.0), (-0.1, 0.05), (0.0, float("nan")), (0.0, float("inf"))])

@@ -42,8 +42,9 @@ def as_transfer_function(tf, argument="transfer_function") -> TransferFunction |
     if isinstance(tf, dict) and "points" in tf:
         return TransferFunction.from_dict(tf)
     presets = ", ".join(TransferFunction.PRESETS)
-    raise InputError(f"{argument}= takes a clwave.TransferFunction, a preset name ({presets}), a .json or .csv file "
-                     f"or a matplotlib colormap, got {type_name(tf)}: make one with "
+    got = "a dict without 'points'" if isinstance(tf, dict) else type_name(tf)
+    raise InputError(f"{argument}= takes a clwave.TransferFunction, a preset name ({presets}), a .json or .csv file, "
+                     f"a matplotlib colormap or the dict of TransferFunction.to_dict(), got {got}: make one with "
                      f"TransferFunction([(value, r, g, b, opacity), ...]), .preset(name), .labels({{label: (r, g, b, "
                      f"opacity)}}) or .from_colormap(cmap)")
 
