@@ -140,6 +140,8 @@ def test_spacing_given_wins_and_says_so_where_the_coordinates_differ(zyx):
     (lambda d, c: xr.DataArray(d, dims=("y", "x", "c")), "name no z axis"),
     (lambda d, c: xr.DataArray(d, dims=("z", "y", "x"), coords=dict(c, x=c["x"] ** 2)),
      "x coordinate is not evenly spaced"),
+    (lambda d, c: xr.DataArray(d, dims=("z", "y", "x"), coords=dict(c, y=np.full(7, 2.5))),
+     "y coordinate has one value at every voxel, no step: give spacing="),  # review28: "steps from 0 to 0"
     (lambda d, c: xr.DataArray(d, dims=("z", "y", "x"), coords={"z": c["z"], "y": c["y"]}),
      "coordinates on some of its axes but not on x"),
     (lambda d, c: xr.DataArray(d, dims=("z", "y", "x"), coords=c).assign_coords(
