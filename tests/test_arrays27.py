@@ -214,3 +214,16 @@ def test_from_colormap_refuses_an_opacity_by_its_argument(opacity):
     with pytest.raises(clwave.InputError) as err:
         clwave.TransferFunction.from_colormap("gray", opacity=opacity)
     assert str(err.value).startswith(f"opacity={opacity!r} must be two opacities") and "point" not in str(err.value)
+
+
+def test_from_colormap_refuses_what_is_no_colormap_of_one_variable_in_one_line():
+    """A bivariate colormap came out of matplotlib as "ValueError: For a `BivarColormap` the data must have a first
+    dimension 2, not 256"; a Normalize as its repr (review28)."""
+    cases = [(matplotlib.colors.Normalize(), "matplotlib.colors.Normalize")]
+    if hasattr(matplotlib, "bivar_colormaps"):  # matplotlib 3.10 on
+        cases += [(matplotlib.bivar_colormaps["BiPeak"], "matplotlib.colors.SegmentedBivarColormap"),
+                  (matplotlib.multivar_colormaps["2VarAddA"], "matplotlib.colors.MultivarColormap")]
+    for given, name in cases:
+        with pytest.raises(clwave.InputError) as err:
+            clwave.TransferFunction.from_colormap(given)
+        assert str(err.value) == f"from_colormap takes a matplotlib Colormap (of one variable) or its name, got {name}"

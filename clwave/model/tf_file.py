@@ -14,11 +14,11 @@ from __future__ import annotations
 import csv
 import io
 import json
-import sys
 from os import PathLike
 from pathlib import Path
 
 from ..errors import InputError, type_name
+from .tf_presets import is_colormap
 from .transfer import TransferFunction
 
 #: Suffixes read as files of points (anything else names a preset).
@@ -36,8 +36,7 @@ def as_transfer_function(tf, argument="transfer_function") -> TransferFunction |
         return tf
     if isinstance(tf, (str, PathLike)):
         return named_transfer_function(tf)
-    colors = sys.modules.get("matplotlib.colors")  # a colormap's module is loaded already
-    if colors is not None and isinstance(tf, colors.Colormap):
+    if is_colormap(tf):
         return TransferFunction.from_colormap(tf)
     if isinstance(tf, dict) and "points" in tf:
         return TransferFunction.from_dict(tf)

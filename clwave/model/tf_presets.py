@@ -3,9 +3,11 @@
 the volume stores them (:attr:`clwave.Volume.subtracted`); and the rows of a matplotlib colormap
 (:func:`colormap_points`)."""
 
+import sys
+
 import numpy as np
 
-from ..errors import InputError, reals
+from ..errors import InputError, reals, type_name
 
 
 def _hu(points, lo, hi):
@@ -81,6 +83,13 @@ PRESETS = {
 }
 
 
+def is_colormap(value) -> bool:
+    """Whether ``value`` is a matplotlib ``Colormap`` of one variable (its module loaded already: one given is; never
+    imported here), not a bivariate or multivariate one, which maps pairs or tuples of values."""
+    colors = sys.modules.get("matplotlib.colors")
+    return colors is not None and isinstance(value, colors.Colormap)
+
+
 def colormap_points(cmap, opacity) -> tuple:
     """``(points, name)`` of :meth:`clwave.TransferFunction.from_colormap`: the rows ``(t, r, g, b, opacity)`` of a
     matplotlib colormap (a ``Colormap`` or its name, looked up in ``matplotlib.colormaps``) at its ``N`` colours, t from
@@ -94,8 +103,9 @@ def colormap_points(cmap, opacity) -> tuple:
         if cmap not in matplotlib.colormaps:
             raise InputError(f"{cmap!r} is no matplotlib colormap (e.g. 'viridis', 'magma', 'gray')")
         cmap = matplotlib.colormaps[cmap]
-    if not callable(cmap) or not hasattr(cmap, "N"):
-        raise InputError(f"from_colormap takes a matplotlib Colormap or its name, got {cmap!r}")
+    if not is_colormap(cmap):  # a bivariate one's ValueError came out of matplotlib
+        raise InputError(f"from_colormap takes a matplotlib Colormap (of one variable) or its name, got "
+                         f"{type_name(cmap)}")
     what = "two opacities (at the window's start, at its end), each >= 0"
     lo, hi = reals(opacity, "opacity", 2, what)
     if not (0 <= lo < np.inf and 0 <= hi < np.inf):  # else refused as a row of the table, which the caller never gave
