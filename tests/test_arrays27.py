@@ -183,6 +183,11 @@ def test_from_colormap_takes_matplotlibs_colours_and_the_grey_ramp():
     assert clwave.TransferFunction.from_colormap("viridis") == clwave.TransferFunction.from_colormap(cmap)
     with pytest.raises(clwave.InputError, match=r"TransferFunction.from_colormap\('viridis'\)"):
         clwave.TransferFunction.preset("viridis")
+    with pytest.raises(clwave.InputError) as err:  # a typo is no colormap: no from_colormap named (review28)
+        clwave.TransferFunction.preset("ct-bones")
+    assert str(err.value).endswith("choose one of ct-bone, ct-soft-tissue, mri, hydrogen, grey, brightfield, photo")
+    with pytest.raises(clwave.InputError, match=r"^'ct-bones' is no matplotlib colormap"):
+        clwave.TransferFunction.from_colormap("ct-bones")
 
 
 @pytest.mark.opencl

@@ -3,6 +3,7 @@
 the volume stores them (:attr:`clwave.Volume.subtracted`); and the rows of a matplotlib colormap
 (:func:`colormap_points`)."""
 
+import importlib.util
 import sys
 
 import numpy as np
@@ -90,18 +91,26 @@ def is_colormap(value) -> bool:
     return colors is not None and isinstance(value, colors.Colormap)
 
 
+def colormap_named(name) -> bool:
+    """Whether ``name`` is a matplotlib colormap's name (False without matplotlib)."""
+    try:
+        import matplotlib
+    except ImportError:
+        return False
+    return isinstance(name, str) and name in matplotlib.colormaps
+
+
 def colormap_points(cmap, opacity) -> tuple:
     """``(points, name)`` of :meth:`clwave.TransferFunction.from_colormap`: the rows ``(t, r, g, b, opacity)`` of a
     matplotlib colormap (a ``Colormap`` or its name, looked up in ``matplotlib.colormaps``) at its ``N`` colours, t from
     0 to 1, the opacity rising from ``opacity[0]`` to ``opacity[1]`` times the colour's alpha."""
     if isinstance(cmap, str):
-        try:
-            import matplotlib
-        except ImportError:
-            raise InputError("a colormap's name needs matplotlib (pip install matplotlib); or give the "
-                             "Colormap itself") from None
-        if cmap not in matplotlib.colormaps:
-            raise InputError(f"{cmap!r} is no matplotlib colormap (e.g. 'viridis', 'magma', 'gray')")
+        if not colormap_named(cmap):
+            raise InputError(f"{cmap!r} is no matplotlib colormap (e.g. 'viridis', 'magma', 'gray')"
+                             if importlib.util.find_spec("matplotlib") else "a colormap's name needs matplotlib (pip "
+                             "install matplotlib); or give the Colormap itself")
+        import matplotlib
+
         cmap = matplotlib.colormaps[cmap]
     if not is_colormap(cmap):  # a bivariate one's ValueError came out of matplotlib
         raise InputError(f"from_colormap takes a matplotlib Colormap (of one variable) or its name, got "
