@@ -140,6 +140,8 @@ def test_spacing_given_wins_and_says_so_where_the_coordinates_differ(zyx):
     (lambda d, c: xr.DataArray(d, dims=("y", "x", "c")), "name no z axis"),
     (lambda d, c: xr.DataArray(d, dims=("z", "y", "x"), coords=dict(c, x=c["x"] ** 2)),
      "x coordinate is not evenly spaced"),
+    (lambda d, c: xr.DataArray(d, dims=("z", "y", "x"), coords=dict(c, y=np.full(7, 2.5))),
+     "y coordinate has one value at every voxel, no step: give spacing="),  # review28: "steps from 0 to 0"
     (lambda d, c: xr.DataArray(d, dims=("z", "y", "x"), coords={"z": c["z"], "y": c["y"]}),
      "coordinates on some of its axes but not on x"),
     (lambda d, c: xr.DataArray(d, dims=("z", "y", "x"), coords=c).assign_coords(
@@ -181,6 +183,11 @@ def test_from_colormap_takes_matplotlibs_colours_and_the_grey_ramp():
     assert clwave.TransferFunction.from_colormap("viridis") == clwave.TransferFunction.from_colormap(cmap)
     with pytest.raises(clwave.InputError, match=r"TransferFunction.from_colormap\('viridis'\)"):
         clwave.TransferFunction.preset("viridis")
+    with pytest.raises(clwave.InputError) as err:  # a typo is no colormap: no from_colormap named (review28)
+        clwave.TransferFunction.preset("ct-bones")
+    assert str(err.value).endswith("choose one of ct-bone, ct-soft-tissue, mri, hydrogen, grey, brightfield, photo")
+    with pytest.raises(clwave.InputError, match=r"^'ct-bones' is no matplotlib colormap"):
+        clwave.TransferFunction.from_colormap("ct-bones")
 
 
 @pytest.mark.opencl
@@ -200,4 +207,28 @@ def test_a_preset_name_and_a_colormap_are_taken_wherever_a_transfer_function_is(
     assert as_model(data, keep=0.5, tf=cmap).transfer_function["name"] == "magma"
     with pytest.raises(clwave.InputError) as err:
         clwave.raytrace(model, camera, transfer_function={0.0: (0, 0, 0, 0), 1.0: (1, 1, 1, 1)})
-    assert "got dict: make one with TransferFunction([(value, r, g, b, opacity), ...]), .preset(name)" in str(err.value)
+    assert "or the dict of TransferFunction.to_dict(), got a dict without 'points': make one with " \
+           "TransferFunction([(value, r, g, b, opacity), ...]), .preset(name)" in str(err.value)  # review28
+    with pytest.raises(clwave.InputError, match=r"got numpy\.ndarray: make one with"):
+        clwave.raytrace(model, camera, transfer_function=np.zeros((2, 5)))
+
+
+@pytest.mark.parametrize("opacity", [(0.0, -1.0), (-0.1, 0.05), (0.0, float("nan")), (0.0, float("inf"))])
+def test_from_colormap_refuses_an_opacity_by_its_argument(opacity):
+    """(0, -1) was refused as "opacity -0.00392157 of point 1 is negative", a row the caller never wrote (review28)."""
+    with pytest.raises(clwave.InputError) as err:
+        clwave.TransferFunction.from_colormap("gray", opacity=opacity)
+    assert str(err.value).startswith(f"opacity={opacity!r} must be two opacities") and "point" not in str(err.value)
+
+
+def test_from_colormap_refuses_what_is_no_colormap_of_one_variable_in_one_line():
+    """A bivariate colormap came out of matplotlib as "ValueError: For a `BivarColormap` the data must have a first
+    dimension 2, not 256"; a Normalize as its repr (review28)."""
+    cases = [(matplotlib.colors.Normalize(), "matplotlib.colors.Normalize")]
+    if hasattr(matplotlib, "bivar_colormaps"):  # matplotlib 3.10 on
+        cases += [(matplotlib.bivar_colormaps["BiPeak"], "matplotlib.colors.SegmentedBivarColormap"),
+                  (matplotlib.multivar_colormaps["2VarAddA"], "matplotlib.colors.MultivarColormap")]
+    for given, name in cases:
+        with pytest.raises(clwave.InputError) as err:
+            clwave.TransferFunction.from_colormap(given)
+        assert str(err.value) == f"from_colormap takes a matplotlib Colormap (of one variable) or its name, got {name}"

@@ -70,7 +70,6 @@ def is_clw(args) -> bool:
     return args.input.lower().endswith(".clw")
 
 
-
 def parse_scheduler(args):
     """The Dask scheduler of chunked work: ``--workers N``, ``--scheduler ADDRESS`` or threads (None)."""
     from ..schedulers import check_scheduler

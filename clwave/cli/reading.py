@@ -16,6 +16,7 @@ from ..io.images import UNIT_METRES
 #: is refused before it starts
 MODEL_BYTES_PER_VALUE = 16
 
+
 def numbers(text, name, counts, kind=float, sep=",") -> tuple:
     """Numbers separated by ``sep``, e.g. ``--spacing 2,1,1``; ``counts`` lists the lengths allowed."""
     try:

@@ -126,11 +126,12 @@ def _step(line, name) -> float:
         return 1.0  # one voxel: Volume refuses its shape
     step, even = _even_step(line)
     if not step > 0 or not even:
-        steps = np.diff(line)
+        steps, fix = np.diff(line), "give spacing=(dz, dy, dx) to place its voxels evenly"
+        if not steps.any():  # one value: no length to take, nothing to resample
+            raise InputError(f"the DataArray's {name} coordinate has one value at every voxel, no step: {fix}")
         raise InputError(f"the DataArray's {name} coordinate is not evenly spaced (steps from {steps.min():.6g} to "
                          f"{steps.max():.6g}) and clwave renders a regular grid: resample it (e.g. "
-                         f"da.interp({name}=numpy.linspace(...))), or give spacing=(dz, dy, dx) to place its voxels "
-                         f"evenly")
+                         f"da.interp({name}=numpy.linspace(...))), or {fix}")
     return step
 
 

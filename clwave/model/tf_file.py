@@ -14,11 +14,11 @@ from __future__ import annotations
 import csv
 import io
 import json
-import sys
 from os import PathLike
 from pathlib import Path
 
 from ..errors import InputError, type_name
+from .tf_presets import is_colormap
 from .transfer import TransferFunction
 
 #: Suffixes read as files of points (anything else names a preset).
@@ -36,14 +36,14 @@ def as_transfer_function(tf, argument="transfer_function") -> TransferFunction |
         return tf
     if isinstance(tf, (str, PathLike)):
         return named_transfer_function(tf)
-    colors = sys.modules.get("matplotlib.colors")  # a colormap's module is loaded already
-    if colors is not None and isinstance(tf, colors.Colormap):
+    if is_colormap(tf):
         return TransferFunction.from_colormap(tf)
     if isinstance(tf, dict) and "points" in tf:
         return TransferFunction.from_dict(tf)
     presets = ", ".join(TransferFunction.PRESETS)
-    raise InputError(f"{argument}= takes a clwave.TransferFunction, a preset name ({presets}), a .json or .csv file "
-                     f"or a matplotlib colormap, got {type_name(tf)}: make one with "
+    got = "a dict without 'points'" if isinstance(tf, dict) else type_name(tf)
+    raise InputError(f"{argument}= takes a clwave.TransferFunction, a preset name ({presets}), a .json or .csv file, "
+                     f"a matplotlib colormap or the dict of TransferFunction.to_dict(), got {got}: make one with "
                      f"TransferFunction([(value, r, g, b, opacity), ...]), .preset(name), .labels({{label: (r, g, b, "
                      f"opacity)}}) or .from_colormap(cmap)")
 

@@ -3,9 +3,12 @@
 the volume stores them (:attr:`clwave.Volume.subtracted`); and the rows of a matplotlib colormap
 (:func:`colormap_points`)."""
 
+import importlib.util
+import sys
+
 import numpy as np
 
-from ..errors import InputError, reals
+from ..errors import InputError, reals, type_name
 
 
 def _hu(points, lo, hi):
@@ -81,22 +84,41 @@ PRESETS = {
 }
 
 
+def is_colormap(value) -> bool:
+    """Whether ``value`` is a matplotlib ``Colormap`` of one variable (its module loaded already: one given is; never
+    imported here), not a bivariate or multivariate one, which maps pairs or tuples of values."""
+    colors = sys.modules.get("matplotlib.colors")
+    return colors is not None and isinstance(value, colors.Colormap)
+
+
+def colormap_named(name) -> bool:
+    """Whether ``name`` is a matplotlib colormap's name (False without matplotlib)."""
+    try:
+        import matplotlib
+    except ImportError:
+        return False
+    return isinstance(name, str) and name in matplotlib.colormaps
+
+
 def colormap_points(cmap, opacity) -> tuple:
     """``(points, name)`` of :meth:`clwave.TransferFunction.from_colormap`: the rows ``(t, r, g, b, opacity)`` of a
     matplotlib colormap (a ``Colormap`` or its name, looked up in ``matplotlib.colormaps``) at its ``N`` colours, t from
     0 to 1, the opacity rising from ``opacity[0]`` to ``opacity[1]`` times the colour's alpha."""
     if isinstance(cmap, str):
-        try:
-            import matplotlib
-        except ImportError:
-            raise InputError("a colormap's name needs matplotlib (pip install matplotlib); or give the "
-                             "Colormap itself") from None
-        if cmap not in matplotlib.colormaps:
-            raise InputError(f"{cmap!r} is no matplotlib colormap (e.g. 'viridis', 'magma', 'gray')")
+        if not colormap_named(cmap):
+            raise InputError(f"{cmap!r} is no matplotlib colormap (e.g. 'viridis', 'magma', 'gray')"
+                             if importlib.util.find_spec("matplotlib") else "a colormap's name needs matplotlib (pip "
+                             "install matplotlib); or give the Colormap itself")
+        import matplotlib
+
         cmap = matplotlib.colormaps[cmap]
-    if not callable(cmap) or not hasattr(cmap, "N"):
-        raise InputError(f"from_colormap takes a matplotlib Colormap or its name, got {cmap!r}")
-    lo, hi = reals(opacity, "opacity", 2, "two opacities (at the window's start, at its end), each >= 0")
+    if not is_colormap(cmap):  # a bivariate one's ValueError came out of matplotlib
+        raise InputError(f"from_colormap takes a matplotlib Colormap (of one variable) or its name, got "
+                         f"{type_name(cmap)}")
+    what = "two opacities (at the window's start, at its end), each >= 0"
+    lo, hi = reals(opacity, "opacity", 2, what)
+    if not (0 <= lo < np.inf and 0 <= hi < np.inf):  # else refused as a row of the table, which the caller never gave
+        raise InputError(f"opacity={opacity!r} must be {what}, finite")
     t = np.linspace(0.0, 1.0, max(int(cmap.N), 2))
     rgba = np.asarray(cmap(t), dtype=np.float64)
     return np.column_stack([t, rgba[:, :3], (lo + (hi - lo) * t) * rgba[:, 3]]), str(getattr(cmap, "name", "colormap"))

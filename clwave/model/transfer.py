@@ -15,7 +15,7 @@ from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, NothingVisi
 from .colour_key import DEFAULT_TOLERANCE, auto_key, check_key, key_weight
 from .tf_checks import check_opacity_unit, check_points, check_window
 from .tf_passes import AUTO_SAMPLES, PiecewiseLinear, auto_window, classified, rgb_scale, scan
-from .tf_presets import PRESETS as _PRESETS, colormap_points
+from .tf_presets import PRESETS as _PRESETS, colormap_named, colormap_points
 from .volume import Volume
 
 #: Rec. 601 luma weights used for the opacity of RGB(A) volumes.
@@ -114,7 +114,8 @@ class TransferFunction:
             key = "grey"
         if key not in _PRESETS:
             what = f"unknown transfer function preset {name!r}; choose one of {', '.join(cls.PRESETS)}"
-            raise InputError(f"{what} (a matplotlib colormap: TransferFunction.from_colormap({name!r}))", cli=what)
+            hint = f" (a matplotlib colormap: TransferFunction.from_colormap({name!r}))" if colormap_named(name) else ""
+            raise InputError(what + hint, cli=what)
         spec = _PRESETS[key]
         return cls(spec["points"], window=spec["window"] if window is None else window, name=key,
                    opacity_unit=opacity_unit)
