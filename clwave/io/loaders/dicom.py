@@ -122,7 +122,8 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
         depth = distance.max() - distance.min()
         note(f"{where} has a gantry tilt of {np.degrees(np.arctan(np.linalg.norm(drift))):.3g} degrees (its slices "
              f"shift {np.linalg.norm(drift) * depth:.4g} mm sideways over {depth:.4g} mm along their normal): "
-             f"resampled onto a straight stack, linearly, the new margins filled with its least value")
+             f"resampled straight onto the closest patient (RAS) axes, linearly, the new margins filled with its least "
+             f"value")
         data_ijk = unshear(data_ijk, grid, data_ijk.min())
     return to_canonical(data_ijk, _LPS_TO_RAS @ straight)
 
