@@ -117,7 +117,8 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     from .export import Origin
     from .prefix import PrefixFirst
     from .address import check_port, is_loopback
-    from .server import BackgroundServer, ViewServer
+    from .background import BackgroundServer
+    from .server import ViewServer
 
     size = Camera(size=size).size
     check_port(port)
