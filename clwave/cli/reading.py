@@ -4,7 +4,6 @@ their texts parsed and checked, the names ``args`` gives them, and the volume th
 from __future__ import annotations
 
 import argparse
-import math
 from functools import partial
 
 from ..device.memory import check_fits
@@ -33,9 +32,13 @@ def numbers(text, name, counts, kind=float, sep=",") -> tuple:
 def parse_spacing(text) -> tuple:
     """``--spacing DZ,DY,DX`` (or one number for all three) as three positive voxel sizes, or the one line that
     refuses it: the one check of every command's ``--spacing``, ``clwave info FILE``'s too."""
-    spacing = numbers(text, "--spacing", (1, 3))
-    if not all(map(math.isfinite, spacing)) or min(spacing) <= 0:
-        raise InputError(f"--spacing {text} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
+    from ..model.geometry import WORLD_RANGE
+
+    spacing, (low, high) = numbers(text, "--spacing", (1, 3)), WORLD_RANGE
+    # within the world lengths clwave renders (a voxel of 1e308 or 1e-320 was info's internal error)
+    if not all(low <= d <= high for d in spacing):
+        raise InputError(f"--spacing {text} must be positive voxel sizes DZ,DY,DX (or one) from {low:g} to {high:g}, "
+                         f"e.g. 1,0.5,0.5")
     return spacing * 3 if len(spacing) == 1 else spacing
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import FileFormatError, InputError, finite_number, flag
+from ...errors import FileFormatError, InputError, finite_number, flag, float32_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
 from . import dicom, dicom_frames, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
@@ -154,9 +154,12 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     """
     if not isinstance(path, (str, os.PathLike)):
         raise InputError(f"path must be a file or folder name (str or pathlib.Path), got {type(path).__name__}")
+    if not os.fspath(path):  # Path("") is ".": the current folder was read as a folder of slices
+        raise InputError("path '' names no file or folder; give the volume's",
+                         cli="the input '' names no file or folder; give the volume's")
     path = Path(path)
-    subtract = finite_number(subtract, "subtract")
-    nan = None if nan is None else finite_number(nan, "nan")
+    subtract = float32_number(subtract, "subtract")
+    nan = None if nan is None else float32_number(nan, "nan")
     mu_water = finite_number(mu_water, "mu_water")
     labels = None if labels is None else flag(labels, "labels")
     if hu_to_mu and mu_water <= 0:
