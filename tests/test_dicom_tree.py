@@ -94,7 +94,14 @@ def test_a_cd_its_study_folder_and_its_dicomdir_are_read_as_their_one_image_seri
     with pytest.warns(ClwaveWarning, match="holds 3 DICOM series: reading its image series, series 2"):
         vol = load(tmp_path / "export" / "DICOMDIR")
     np.testing.assert_array_equal(vol.data, hu(stored))
-    assert len(list((tmp_path / "export").rglob("*"))) > 8  # FileSet's own tree: PT000000/ST000000/SE000000/...
+    files = [p for p in sorted((tmp_path / "export").rglob("*")) if p.is_file() and p.name != "DICOMDIR"]
+    assert len(files) == 7 and files[0].parent != tmp_path / "export"  # FileSet's own tree: PT000000/ST000000/...
+    files[3].unlink()  # a CD copied short: the DICOMDIR names what is missing
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path / "export" / "DICOMDIR")
+    assert_one_line_error(excinfo)
+    assert str(excinfo.value) == f"{tmp_path / 'export' / 'DICOMDIR'} refers to 1 missing file (e.g. {files[3]}); " \
+                                 "give the folder the series are in"
 
 
 def test_non_image_series_are_named_for_what_they_are(tmp_path, rng, capsys):

@@ -15,7 +15,8 @@ from ...errors import FileFormatError, InputError
 from . import dicom, dicom_frames
 from .shared import SUPPORTED, folder_files, note, reading
 
-#: the most files a tree walk reads headers of (about 0.4 ms each): past it, the folder is not one CD or study
+#: the most files a tree walk reads headers of (about 0.9 ms each, docs/benchmarks.md §24): past it, the folder is not
+#: one CD or study
 MAX_FILES = 20_000
 # what a series without pixel data is, by its Modality
 _NON_IMAGE = {"SR": "a structured report", "PR": "a presentation state", "KO": "a key object selection",
@@ -39,12 +40,10 @@ class Series:
 
     def shown(self, uid=False) -> str:
         """How a listing shows it: name, then modality, slices or frames and image size, or what it is."""
-        if self.size is not None:
+        facts = [self.modality]
+        if self.size is not None:  # width x height, as viewers give an image's size
             unit = "frames" if self.frames > len(self.files) else "slices" if self.frames > 1 else "slice"
-            facts = [self.modality, f"{self.frames} {unit}" + (f" of {self.size[1]} x {self.size[0]}" if self.size
-                                                                else "")]
-        else:
-            facts = [self.modality]
+            facts.append(f"{self.frames} {unit} of {self.size[1]} x {self.size[0]}")
         what = "" if self.kind is None else f": {self.kind}"
         return f"{self.name} ({', '.join(f for f in facts if f)}{what}{', ' + self.uid if uid else ''})"
 
@@ -173,8 +172,8 @@ def _dicomdir_files(path):
     files = [path.parent.joinpath(*([i] if isinstance(i, str) else i)) for i in ids]
     missing = [f for f in files if not f.is_file()]
     if missing:
-        raise FileFormatError(f"{path} lists {len(missing)} files that are not there (e.g. {missing[0]}); give the "
-                              f"folder the series are in")
+        raise FileFormatError(f"{path} refers to {len(missing)} missing file{'s' * (len(missing) > 1)} (e.g. "
+                              f"{missing[0]}); give the folder the series are in")
     return files
 
 
