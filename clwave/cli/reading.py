@@ -72,7 +72,8 @@ def add_reading_options(p):
     g.add_argument("--orientation", metavar="CODES", help="an input with no orientation (npy, raw, TIFF, a folder of "
                    "slices, Zarr, HDF5, MRC): where its x, y, z axes point, e.g. LPS (x left, y posterior, z superior; "
                    "nibabel's codes), turned into RAS+ as DICOM is")
-    g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
+    g.add_argument("--series", metavar="NUMBER", help="DICOM folder, tree or DICOMDIR with several series: the "
+                   "SeriesNumber its listing shows, or the description or SeriesInstanceUID")
     labels = g.add_mutually_exclusive_group()
     labels.add_argument("--labels", action="store_const", const=True, help="the input is a label map (a "
                         "segmentation), whatever its values look like (default: a NIfTI's intent, else a guess from "
@@ -121,7 +122,7 @@ def read_volume(args):
                    hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, FITS, TIFF; "
                         "gunzip a .nii.gz first, a .mgz into a .mgh), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
-                series=parse_series(args.series), level=args.level, frame=args.frame,
+                series=args.series, level=args.level, frame=args.frame,
                 chunks=parse_chunks(args.chunks),
                 nan=args.nan, subtract=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits,
                 orientation=args.orientation, unit=args.unit, labels=args.labels)
@@ -143,11 +144,6 @@ def parse_chunks(text):
     if not text.isdigit() or int(text) < 2:
         raise InputError(f"--chunks {text} must be auto, off or a chunk edge N >= 2 (voxels)")
     return int(text)
-
-
-def parse_series(text):
-    """``load``'s ``series=`` from ``--series UID|INDEX``: a 0-based index where all digits, else a UID (or None)."""
-    return int(text) if text is not None and text.isdigit() else text
 
 
 def flag(name: str) -> str:
