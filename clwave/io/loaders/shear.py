@@ -34,8 +34,9 @@ def straight_grid(shape, affine) -> Straight:
     right-angled axes closest to the world's: the affine's 3 x 3 part, its columns in each of their 6 orders, is
     factored as Q R (QR, R's diagonal positive), whose Q keeps the first column's direction and the plane of the
     first two (a tilted series' rows and columns, or its rows and its stack along the table); the Q least oblique to
-    the world's axes (the first of equals) is the straight grid's axes, R's diagonal its spacing (each axis's part
-    of its column: a voxel keeps its volume) and the rest the shear and rotation undone; wider by the shifts."""
+    the world's axes (the first of equals) is the straight grid's axes (in the file's order: axis i made from column
+    i), R's diagonal its spacing (each axis's part of its column: a voxel keeps its volume) and the rest the shear
+    and rotation undone; wider by the shifts."""
     m = affine[:3, :3]
     frames = []
     for order in itertools.permutations(range(3)):
@@ -45,17 +46,18 @@ def straight_grid(shape, affine) -> Straight:
         oblique = float(np.arccos(np.clip(np.abs(q).max(axis=0), -1.0, 1.0)).max())
         frames.append((round(oblique, 9), order, q, r))
     _, order, q, r = min(frames, key=lambda f: f[0])
-    spacing = np.diag(r)
-    shear = (r / spacing[:, None])[:, np.argsort(order)]  # sheared index (the file's order) -> straight index
+    back = np.argsort(order)  # the straight axes in the file's order: axis i the one made from column i
+    q, spacing = q[:, back], np.diag(r)[back]
+    shear = (r / np.diag(r)[:, None])[np.ix_(back, back)]  # sheared index -> straight index, both in the file's order
     far = np.array(shape[:3], float) - 1
     corners = shear @ np.array(np.meshgrid(*[(0.0, n) for n in far], indexing="ij")).reshape(3, -1)
     low, high = np.floor(corners.min(axis=1)), np.ceil(corners.max(axis=1))
     straight = np.eye(4)
     straight[:3, :3] = q * spacing
     straight[:3, 3] = affine[:3, 3] + straight[:3, :3] @ low
-    lengths = np.linalg.norm(m[:, order], axis=0)
+    lengths = np.linalg.norm(m, axis=0)
     degrees = float(np.degrees(np.arccos(np.clip(spacing / lengths, -1.0, 1.0))).max())
-    moved = float((np.abs(np.triu(r / spacing[:, None], 1)) @ far[list(order)]).max())
+    moved = float((np.abs(np.triu(r / np.diag(r)[:, None], 1)) @ far[list(order)]).max())
     return Straight(tuple(int(n) for n in high - low + 1), straight, shear, low, moved, degrees)
 
 
