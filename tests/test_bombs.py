@@ -92,3 +92,37 @@ def test_a_compressed_nrrd_is_read_to_its_declared_size_and_no_further(tmp_path,
     (tmp_path / "short.nrrd").write_bytes(HEAD % (encoding.encode(), b"") + _compressed(encoding, body[:-1]))
     with pytest.raises(FileFormatError, match=r"declares 6 x 10 x 8 voxels \(960 bytes\) but its .* 959 bytes"):
         clwave.load(tmp_path / "short.nrrd")
+
+
+@pytest.fixture(scope="module")
+def nifti_bomb(tmp_path_factory):
+    """A ``.nii.gz`` of 8^3 voxels whose extension flag is set and whose ``vox_offset`` puts them past an extension
+    of ``BOMB`` bytes of zeros (a 512 KiB file): nibabel reads every extension whole before clwave sees the header."""
+    import struct
+
+    import nibabel as nib
+
+    folder = tmp_path_factory.mktemp("nifti")
+    nib.save(nib.Nifti1Image(np.arange(512, dtype=np.uint8).reshape(8, 8, 8), np.eye(4)), folder / "s.nii")
+    raw = (folder / "s.nii").read_bytes()
+    header = bytearray(raw[:348])
+    struct.pack_into("<f", header, 108, 352 + BOMB + 32)  # a float32 exactly
+    extension = b"\1\0\0\0" + struct.pack("<ii", BOMB + 32, 0) + bytes(BOMB + 24)
+    (folder / "ext.nii.gz").write_bytes(gzip.compress(bytes(header) + extension + raw[352:], 1))
+    return folder / "ext.nii.gz"
+
+
+def test_a_nifti_extension_past_what_clwave_weighs_is_refused_before_nibabel_reads_it(nifti_bomb, tmp_path):
+    """Before: 1.2 GB peak for a 1 GiB extension (nibabel's warning, then "read length must be non-negative"); now
+    refused by its header, and a file with a small extension is read."""
+    import nibabel as nib
+
+    assert load_bounded(nifti_bomb) == (
+        f"FileFormatError {nifti_bomb}: its vox_offset {352 + BOMB + 32:,} declares {BOMB + 32:,} bytes of "
+        "NIfTI extensions, more than the 67,108,864 clwave lets nibabel read (it reads them whole, and clwave uses "
+        "none): remove them (nibabel: image.header.extensions.clear(), then save)")
+    image = nib.Nifti1Image(np.arange(512, dtype=np.int16).reshape(8, 8, 8), np.eye(4))
+    image.header.extensions.append(nib.nifti1.Nifti1Extension("comment", b"a small one"))
+    nib.save(image, tmp_path / "small.nii.gz")
+    np.testing.assert_array_equal(clwave.load(tmp_path / "small.nii.gz", orientation=None).data,
+                                  np.arange(512).reshape(8, 8, 8).transpose(2, 1, 0))
