@@ -126,3 +126,51 @@ def test_a_nifti_extension_past_what_clwave_weighs_is_refused_before_nibabel_rea
     nib.save(image, tmp_path / "small.nii.gz")
     np.testing.assert_array_equal(clwave.load(tmp_path / "small.nii.gz", orientation=None).data,
                                   np.arange(512).reshape(8, 8, 8).transpose(2, 1, 0))
+
+
+def _deflated(ds, tail=b"", zeros=0) -> bytes:
+    """``ds`` as a deflated DICOM file, its dataset followed by ``tail`` and ``zeros`` zero bytes in the stream."""
+    import io
+    import zlib
+
+    import pydicom
+    from pydicom.uid import DeflatedExplicitVRLittleEndian
+
+    body = pydicom.filebase.DicomBytesIO()
+    body.is_little_endian, body.is_implicit_VR = True, False
+    pydicom.filewriter.write_dataset(body, ds)
+    deflater = zlib.compressobj(9, zlib.DEFLATED, -zlib.MAX_WBITS)
+    stream = deflater.compress(body.getvalue() + tail)
+    stream += b"".join(deflater.compress(bytes(1 << 24)) for _ in range(zeros >> 24)) + deflater.flush()
+    ds.file_meta.TransferSyntaxUID = DeflatedExplicitVRLittleEndian
+    head = io.BytesIO(b"\0" * 128 + b"DICM")
+    head.seek(132)
+    pydicom.filewriter.write_file_meta_info(head, ds.file_meta)
+    return head.getvalue() + stream
+
+
+def test_a_deflated_dicom_slice_inflating_past_its_pixel_data_is_refused_before_pydicom_inflates_it(tmp_path, rng):
+    """A series of deflated slices is read as written; one whose stream goes on past its pixel data with a 512 MiB
+    element (a 512 KiB file) is refused before pydicom inflates it whole (before: 2.2 GB peak for 1 GiB, then "has
+    no SeriesInstanceUID")."""
+    import struct
+
+    import pydicom
+    from pydicom.uid import generate_uid
+    from test_loaders import axial, write_series
+
+    z = [15.0, 10.0, 12.5]
+    stored = write_series(tmp_path, rng, axial(*z), generate_uid(), ["a", "b", "c"])
+    for name in "abc":
+        (tmp_path / name).write_bytes(_deflated(pydicom.dcmread(tmp_path / name)))
+    assert pydicom.dcmread(tmp_path / "a").file_meta.TransferSyntaxUID == "1.2.840.10008.1.2.1.99"
+    np.testing.assert_array_equal(clwave.load(tmp_path, progress_bar=False).data,
+                                  (stored[np.argsort(z)] * 2.0 - 1024)[:, ::-1, ::-1])
+    element = struct.pack("<HH", 0x7FE1, 0x0010) + b"OB\0\0" + struct.pack("<I", BOMB)  # after the pixel data
+    ds = pydicom.dcmread(tmp_path / "c")
+    ds.file_meta.TransferSyntaxUID = pydicom.uid.ExplicitVRLittleEndian
+    (tmp_path / "c").write_bytes(_deflated(ds, element, BOMB))
+    assert load_bounded(tmp_path) == (
+        f"FileFormatError DICOM file {tmp_path / 'c'}: its deflated dataset inflates past 16,777,276 bytes, the 60 of "
+        "pixel data its attributes declare and 16,777,216 of others; it is not what it says (a decompression bomb): "
+        "move it out of the folder")

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError
+from .inflate import decompressed
 from .shared import GZIP_MAGIC, check_declared_size, check_whole, not_a_file, note, to_canonical
 
 _NRRD_SPACE_SIGNS = {
@@ -27,8 +28,9 @@ _NRRD_SPACE_SIGNS = {
 
 
 def read_nrrd(path, fits=None, warn_spacing=True):
-    """NRRD/NHDR through pynrrd: ``space directions`` and ``space`` give the RAS affine; the header is checked
-    (its declared size against the data and :func:`check_whole`) before the data is read.  An unknown spacing
+    """NRRD/NHDR through pynrrd (gzip and bzip2 data through :func:`_inflated`): ``space directions`` and ``space``
+    give the RAS affine; the header is checked (its declared size against the data and :func:`check_whole`) before
+    the data is read.  An unknown spacing
     (``spacings: nan``) is taken as 1, with a warning unless ``warn_spacing`` is false (one was given)."""
     import nrrd
 
@@ -191,9 +193,6 @@ _DECOMPRESSORS = {"gzip": (lambda: zlib.decompressobj(zlib.MAX_WBITS | 16), GZIP
                   "bzip2": (bz2.BZ2Decompressor, b"BZh")}
 _DECOMPRESSORS.update(gz=_DECOMPRESSORS["gzip"], bz2=_DECOMPRESSORS["bzip2"])
 
-#: compressed bytes read, and decompressed bytes made, at a time
-_PIECE = 1 << 20
-
 
 def _inflated(path, header, fh, dtype, sizes) -> np.ndarray:
     """A gzip or bzip2 NRRD's data (after the header read from ``fh``, or in its detached data file), every gzip
@@ -217,7 +216,7 @@ def _inflated(path, header, fh, dtype, sizes) -> np.ndarray:
         source = files.enter_context(open(detached, "rb")) if detached is not None else fh
         for _ in range(lines):
             source.readline()
-        for piece in _decompressed(source, *_DECOMPRESSORS[encoding], skip + nbytes + 1):
+        for piece in decompressed(source, *_DECOMPRESSORS[encoding], skip + nbytes + 1):
             held += len(piece)
             if held > skip + nbytes:
                 raise FileFormatError(f"{path}: its {encoding} stream holds more than the {skip + nbytes:,} bytes its "
@@ -229,27 +228,3 @@ def _inflated(path, header, fh, dtype, sizes) -> np.ndarray:
         raise FileFormatError(f"{path}: its header declares {voxels} voxels ({nbytes:,} bytes) but its {encoding} "
                               f"stream holds {max(held - skip, 0):,} bytes; it is truncated or its header is wrong")
     return buffer.view(dtype).reshape(sizes[::-1]).T
-
-
-def _decompressed(source, new, magic, most):
-    """The stream read from ``source``, decompressed a piece at a time, ``most`` bytes at the most: one member
-    after another while the bytes after one start another (others, as zero padding, end it, where pynrrd stops
-    after the first); it ends where the file does (a stream cut short: the caller weighs what came)."""
-    decompressor, data = new(), source.read(_PIECE)
-    while most > 0:
-        room = min(most, _PIECE)
-        piece = decompressor.decompress(data, room)
-        most -= len(piece)
-        if piece:
-            yield piece
-        if decompressor.eof:
-            data = decompressor.unused_data
-            if len(data) < len(magic):
-                data += source.read(_PIECE)
-            if not data.startswith(magic):
-                return
-            decompressor = new()
-            continue
-        data = getattr(decompressor, "unconsumed_tail", b"")  # bzip2 keeps its own
-        if not data and len(piece) < room and not (data := source.read(_PIECE)):
-            return
