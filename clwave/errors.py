@@ -139,6 +139,16 @@ def finite_number(value, name) -> float:
     return number
 
 
+def float32_number(value, name) -> float:
+    """:func:`finite_number`, and within float32's range, in which clwave computes a volume's values (a value of
+    1e308 subtracted made every voxel infinite); ``name`` is the command line's option too (``--name``)."""
+    number, top = finite_number(value, name), float(np.finfo(np.float32).max)
+    if abs(number) > top:
+        why = f"must be within float32's range (+-{top:.3g}), in which clwave computes the values"
+        raise InputError(f"{name}={number:g} {why}", cli=f"--{name} {number:g} {why}")
+    return number
+
+
 def reals(value, name, count, what, one=False) -> np.ndarray:
     """``value`` as ``count`` floats (``one``: a single number stands for all ``count``), or an :class:`InputError`
     "``name`` must be ``what``" when it is anything else: strings and bools included, which ``numpy.asarray(value,

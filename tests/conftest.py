@@ -32,3 +32,24 @@ def model_file(tmp_path_factory):
     path = tmp_path_factory.mktemp("clw") / "m.clw"
     clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), "cubic", levels=1).threshold(keep=0.2).save(path)
     return path
+
+
+@pytest.fixture
+def dirty_memory(monkeypatch):
+    """Every uninitialised device array (``pyopencl.array.empty``) has every bit set (NaN in floats), in it and for
+    4 KiB past its end: what a buffer may hold in a process whose heap has been used (PoCL allocates from it; a fresh
+    kernel build dirties it), where a test process most often gets fresh zero pages.  A render that reads what it never
+    wrote then shows it."""
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    empty = cla.empty
+
+    def dirty(queue, shape, dtype, *args, **kw):
+        shape = (int(shape),) if np.ndim(shape) == 0 else tuple(int(n) for n in shape)
+        size, dtype = int(np.prod(shape)), np.dtype(dtype)
+        out = empty(queue, size + 4096 // dtype.itemsize, dtype, *args, **kw)
+        cl.enqueue_fill_buffer(queue, out.base_data, np.full(1, 255, np.uint8), 0, out.nbytes)
+        return out[:size].reshape(shape)
+
+    monkeypatch.setattr(cla, "empty", dirty)

@@ -80,7 +80,9 @@ def test_an_enhanced_ct_file_is_its_frames_sorted_rescaled_and_placed(tmp_path, 
     assert main(["compress", str(path), "--levels", "1", "--keep", "1", "-o", str(tmp_path / "ct.clw")]) == 0
     capsys.readouterr()
     assert main(["info", str(path)]) == 0
-    assert "4 x 6 x 5 values of int16, in the file's order of axes" in capsys.readouterr().out
+    out = capsys.readouterr().out  # the frames as load gives them: rescaled, float32, by 4 rescales
+    assert "4 x 6 x 5 values of float32, in the file's order of axes (stored as int16)" in out
+    assert "1 channel of float32" in out and "rescale    slope 3, intercept -1024 (4 different pairs" in out
 
 
 def test_an_enhanced_ct_file_s_padding_is_its_least_other_value(tmp_path):
@@ -215,7 +217,7 @@ def test_dicom_files_without_an_extension_are_known_by_their_preamble(tmp_path, 
     with pytest.raises(FileFormatError, match=r"unknown file type '\(no extension\)'"):
         clwave.load(tmp_path / "notes")
     assert main(["info", str(tmp_path / "IM0001")]) == 0
-    assert "values of uint32, in the file's order of axes" in capsys.readouterr().out
+    assert "values of float32, in the file's order of axes (stored as uint32)" in capsys.readouterr().out
 
 
 def test_a_file_holding_fewer_frames_than_it_declares_is_refused(tmp_path, capsys):

@@ -510,7 +510,7 @@ def test_dicom_padding_is_the_series_least_other_value(tmp_path, rng, capsys, at
     with pytest.raises(InputError):  # two series now: the second named
         load(tmp_path)
     with pytest.raises(FileFormatError, match="marks every pixel as padding") as excinfo:
-        load(tmp_path, series=1, progress_bar=False)
+        load(tmp_path, series=2, progress_bar=False)  # its SeriesNumber
     assert_one_line_error(excinfo)
 
 
@@ -551,6 +551,8 @@ def test_dicom_sagittal_series_lands_in_ras(tmp_path, rng):
 
 
 def test_dicom_two_series_need_series_argument(tmp_path, rng, capsys):
+    """Several series are listed as PACS viewers list them (number, description, modality, slices, size), and
+    series= picks one by what the listing shows: its SeriesNumber, its description (case aside) or its UID."""
     uid_a, uid_b = generate_uid(), generate_uid()
     stored_a = write_series(tmp_path, rng, axial(0.0, 1.0, 2.0, 3.0), uid_a,
                             ["a1", "a2", "a3", "a4"], description="soft tissue", number=1)
@@ -559,23 +561,24 @@ def test_dicom_two_series_need_series_argument(tmp_path, rng, capsys):
     with pytest.raises(InputError) as excinfo:
         load(tmp_path)
     assert_one_line_error(excinfo)
-    message = str(excinfo.value)
-    assert uid_a in message and uid_b in message and "series=" in message
-    assert "4 slices" in message and "3 slices" in message and "bone" in message
+    assert str(excinfo.value) == f"{tmp_path} holds 2 DICOM series: series 1 'soft tissue' (CT, 4 slices of 5 x 6); " \
+        "series 2 'bone' (CT, 3 slices of 5 x 6); pick one with series=NUMBER as listed (or its description, or its " \
+        "SeriesInstanceUID)"
 
-    by_index = load(tmp_path, series=1)
-    np.testing.assert_array_equal(by_index.data, (stored_b * 2.0 - 1024)[:, ::-1, ::-1])
-    assert by_index.spacing[0] == pytest.approx(2.0)
+    for series in (2, "2", "BONE", uid_b):
+        picked = load(tmp_path, series=series)
+        np.testing.assert_array_equal(picked.data, (stored_b * 2.0 - 1024)[:, ::-1, ::-1])
+        assert picked.spacing[0] == pytest.approx(2.0)
     by_uid = load(tmp_path, series=uid_a)
     np.testing.assert_array_equal(by_uid.data, (stored_a * 2.0 - 1024)[:, ::-1, ::-1])
-    with pytest.raises(InputError):
-        load(tmp_path, series=2)
+    with pytest.raises(InputError, match="series=0 matches none of the 2 DICOM series"):
+        load(tmp_path, series=0)  # no longer a 0-based index
     # the command line says it with its own flag, and one slice file points to the series' folder
     from clwave.cli import main
     assert main(["compress", str(tmp_path), "-o", str(tmp_path / "out.clw")]) == 2
     err = capsys.readouterr().err
-    assert "--series INDEX" in err and "series=" not in err and err.count("\n") == 1
-    for series, slices in (("1", 3), (uid_a, 4)):  # info reads --series as compress does: an index, or a UID
+    assert "--series NUMBER" in err and "series=" not in err and err.count("\n") == 1
+    for series, slices in (("2", 3), (uid_a, 4), ("soft tissue", 4)):  # info reads --series as compress does
         assert main(["info", str(tmp_path), "--series", series]) == 0
         assert f"stored     {slices} x 6 x 5 values" in capsys.readouterr().out
     (tmp_path / "a1").rename(tmp_path / "a1.dcm")
@@ -593,19 +596,17 @@ def test_dicom_duplicate_positions_refused(tmp_path, rng):
                                        "times): split them into separate folders")
 
 
-def test_dicom_multi_frame_file_named_as_such(tmp_path, rng):
-    """A multi-frame DICOM file (pydicom's rtdose.dcm, 15 frames) alone in a folder is named for what it is, not a
-    series of 1 slice."""
+def test_dicom_multi_frame_file_alone_in_a_folder_is_its_series(tmp_path):
+    """A multi-frame DICOM file (pydicom's rtdose.dcm, 15 frames) alone in a folder is read as its series, as the file
+    itself is, not refused as a series of 1 slice."""
     import shutil
 
     from pydicom.data import get_testdata_file
 
     shutil.copy(get_testdata_file("rtdose.dcm"), tmp_path / "rtdose.dcm")
-    with pytest.raises(FileFormatError) as excinfo:
-        load(tmp_path)
-    assert_one_line_error(excinfo)
-    assert "rtdose.dcm is a multi-frame DICOM file; clwave reads a folder of single-frame slices, or a multi-frame " \
-           f"file named itself: give {tmp_path / 'rtdose.dcm'}" in str(excinfo.value)
+    folder, file = load(tmp_path), load(tmp_path / "rtdose.dcm")
+    np.testing.assert_array_equal(folder.data, file.data)
+    assert folder.data.shape[0] == 15 and folder.spacing == file.spacing and folder.origin == file.origin
 
 
 @pytest.mark.parametrize("kwargs, needle", [
@@ -680,12 +681,16 @@ def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsy
     from clwave.cli import main
     from clwave.io.loaders import dicom
 
-    write_series(tmp_path, rng, axial(0.0, 1.0, 2.0), generate_uid(), ["s1", "s2", "s3"], PixelPaddingValue=0)
+    uid = generate_uid()
+    write_series(tmp_path, rng, axial(0.0, 1.0, 2.0), uid, ["s1", "s2", "s3"], PixelPaddingValue=0, number=4,
+                 description="Thorax 1.0")
     vol = load(tmp_path)
     monkeypatch.setattr(dicom, "_dicom_pixels", lambda path: pytest.fail(f"{path}'s pixels were read"))
     assert main(["info", str(tmp_path)]) == 0
-    # the stored type, the place load gives it (spacing, RAS origin), the rescale and the padding, from the headers
+    # the series, the stored type, the place load gives it (spacing, RAS origin), the rescale and the padding, from
+    # the headers
     assert capsys.readouterr().out.splitlines()[1:] == [
+        f"series     series 4 'Thorax 1.0', CT, {uid}",
         "stored     3 x 6 x 5 values of float32, in the file's order of axes (stored as uint16)",
         "volume     5 x 6 x 3 voxels (x, y, z), 1 channel of float32",
         "spacing    0.9, 0.7, 1 mm (x, y, z; --spacing 1,0.7,0.9), origin 18.2, -31.75, 1 (RAS+)",

@@ -98,6 +98,19 @@ def test_an_all_zero_scalar_model_takes_an_auto_window():
     assert np.abs(res.image - classified_reference(wv, cam, tf, tracer=tracer)).max() <= 1e-3
 
 
+@pytest.mark.parametrize("wavelet", ["cubic", "quintic"])
+def test_a_model_without_bricks_fogs_its_data_box_whatever_the_device_memory_held(dirty_memory, wavelet):
+    # a segment in no brick reads the pool's first j^3 coefficients (times weights 0), and a model without bricks had a
+    # pool of 4^3 never written: NaN there made the image blank (the viewer's fog or blank by what the heap held,
+    # known-gaps §15), and order 6 read past the pool's end
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(np.zeros((8, 9, 10), np.float32)), wavelet, levels=1)
+    tf = clwave.TransferFunction([(0.0, 0.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0, 1.0, 1.0)], window="auto")
+    tracer, cam = clwave.RayTracer(wv), clwave.Camera(20, 30, (4, 5))
+    res = tracer.render(cam, transfer_function=tf)
+    assert res.image[..., 3].max() > 0.5
+    assert np.abs(res.image - classified_reference(wv, cam, tf, tracer=tracer)).max() <= 1e-3
+
+
 def test_a_staged_scalar_file_refines_with_a_transfer_function(scalar_model, tmp_path):
     # RayTracer.open(scalar.clw).refine(camera) took no transfer_function=: a scalar file had no shaded frames
     path = tmp_path / "s.clw"

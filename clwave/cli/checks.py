@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, float32_number
 from ..io.result import check_background
 from ..model.tf_checks import check_opacity_unit, check_window
 from ..io.images import check_frame_time
@@ -30,16 +30,21 @@ def check_options(args):
     not have is not looked at."""
     from ..model.bspline import wavelet_for
 
-    if getattr(args, "input", None) is None:  # clwave info: no input to spare
+    if getattr(args, "input", getattr(args, "file", None)) is None:  # clwave info without FILE: no input to spare
         return
     for name in NUMBERS:
         value = getattr(args, name, None)
         if value is not None and not np.isfinite(value):
             raise InputError(f"{flag(name)} {value:g} must be a finite number")
+    for name in ("subtract", "nan"):  # applied to the float32 values as they are read
+        if getattr(args, name, None) is not None:
+            float32_number(getattr(args, name), name)
     if getattr(args, "spacing", None) is not None:
         parse_spacing(args.spacing)
     if getattr(args, "chunks", None) is not None:
         parse_chunks(args.chunks)
+    if not hasattr(args, "input"):  # clwave info FILE: its reading options alone (it echoes them)
+        return
     if getattr(args, "wavelet", None) is not None:
         for name in args.wavelet.split(","):
             wavelet_for(name)
@@ -69,8 +74,11 @@ def check_options(args):
         if args.detail and (args.field == "wavelet" or (args.workers, args.scheduler) != (None, None)):
             raise InputError("--detail renders with the B-spline field on one machine: leave out --field wavelet "
                              "and --workers/--scheduler, or --detail")
-    if getattr(args, "omega_s", None) is not None and not (np.isfinite(args.omega_s) and args.omega_s > 0):
-        raise InputError(f"--omega-s {args.omega_s:g} must be a positive band, e.g. 14")
+    if getattr(args, "omega_s", None) is not None:
+        from ..splat.textures import OMEGA_S_MAX
+
+        if not (np.isfinite(args.omega_s) and 0 < args.omega_s <= OMEGA_S_MAX):
+            raise InputError(f"--omega-s {args.omega_s:g} must be a positive band up to {OMEGA_S_MAX:g}, e.g. 14")
     if getattr(args, "frame_time", None) is not None:
         _frame_time(args)
     if hasattr(args, "turntable_axis"):

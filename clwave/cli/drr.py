@@ -27,7 +27,8 @@ def read_pose_table(path) -> list:
 
     path = Path(path)
     if not path.is_file():
-        raise InputError(f"pose table {path} does not exist")
+        raise InputError(f"pose table {path} does not exist or is not a regular file (a folder, a FIFO, a device): "
+                         f"give a CSV file")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:  # -sig: a spreadsheet's byte-order mark
             numbers = [n for n, line in enumerate(fh, 1) if not line.lstrip().startswith("#")]  # the file's lines

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..errors import InputError
 from .options import error_words, file_size, kept_words
-from .reading import READING, add_reading_options, flag, is_given, numbers, option, parse_series, parse_spacing
+from .reading import READING, add_reading_options, flag, is_given, numbers, option, parse_spacing
 
 
 def run(args):
@@ -66,7 +66,7 @@ def describe(args):
         from ..io.loaders import describe as describe_volume
 
         shape = None if args.shape is None else numbers(args.shape, "--shape", (3, 4), int)
-        facts = _as_read(args, describe_volume(args.file, series=parse_series(args.series), level=args.level,
+        facts = _as_read(args, describe_volume(args.file, series=args.series, level=args.level,
                                                frame=args.frame, shape=shape, dtype=args.dtype,
                                                byte_order=args.byte_order))
         lines = _volume_lines(facts)
@@ -195,6 +195,12 @@ def _volume_lines(f) -> list:
     from ..io.loaders import RAS_FORMATS
 
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, {f['format']}")]
+    if f["series"]:  # a DICOM series: what a PACS viewer lists it by
+        from ..io.loaders.dicom import series_name
+
+        name = series_name(f["series"])
+        said = [name, f["series"]["modality"], f["series"]["uid"] if f["series"]["uid"] not in name else ""]
+        lines.append(("series", ", ".join(s for s in said if s)))
     if f["stored_shape"] is not None:  # read whole: weighed as the file stores it, its axes in the file's order
         resampled = "" if not f["resampled"] else ", its sheared grid resampled onto a straight one wider by its " \
             "shifts" if f["nifti"] else ", a gantry tilt resampled onto a straight stack wider by its shifts"

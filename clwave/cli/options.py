@@ -295,6 +295,8 @@ def check_outputs(force, *outputs) -> list:
         if path is None:
             paths.append(None)
             continue
+        if not str(path):  # Path("") is "."
+            raise InputError(f"{opt} '' names no file; name one")
         if str(path).endswith(("/", os.sep)):  # Path() drops it: "a.png/" would write a.png
             raise InputError(f"{opt} {path} ends in a slash, naming a folder; name a file")
         path = Path(path)
@@ -343,9 +345,16 @@ def silence_stdout():
         pass
 
 
-def check_frames_folder(path, force) -> Path:
-    """A folder for PNG frames: none yet, or an empty one (any with ``--force``), never a file."""
+def check_frames_output(path, force) -> Path:
+    """``-o`` of progressive frames: a .gif (checked with the other outputs), or a folder for PNG frames: none yet, or
+    an empty one (any with ``--force``), never a file."""
+    if not str(path):  # Path("") is ".": the frames were written into the current folder
+        raise InputError("-o '' names no folder; name one for the PNG frames, or a .gif")
     path = Path(path)
+    if path.suffix:
+        if path.suffix.lower() != ".gif":
+            raise InputError(f"output {path} must end in .gif, or be a folder name for PNG frames")
+        return path
     if path.exists() and not path.is_dir():
         raise InputError(f"-o {path} is a file; name a folder for the PNG frames, or a .gif")
     if path.is_dir() and any(path.iterdir()) and not force:

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 from ..errors import InputError
 from ..io.images import write_gif
 from ..io.progress import progress
 from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
-from .options import (add_command, add_raytrace_options, build_model, check_frames_folder, check_outputs, finish,
+from .options import (add_command, add_raytrace_options, build_model, check_frames_output, check_outputs, finish,
                       parse_device_memory, post_transfer_function)
 
 
@@ -20,12 +19,8 @@ def run(args):
     from ..splat.progressive import check_schedule
     from ..io.result import resolve_window
 
-    out = Path(args.output)
+    out = check_frames_output(args.output, args.force)
     as_folder = out.suffix == ""
-    if not as_folder and out.suffix.lower() != ".gif":
-        raise InputError(f"output {out} must end in .gif, or be a folder name for PNG frames")
-    if as_folder:
-        check_frames_folder(out, args.force)
     check_outputs(args.force, (None if as_folder else out, "-o", (".gif",)), (args.stats, "--stats", (".json",)))
     look = picture_options(args, out / "frame.png" if as_folder else out)
     camera = make_camera(args)

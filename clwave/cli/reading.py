@@ -4,7 +4,6 @@ their texts parsed and checked, the names ``args`` gives them, and the volume th
 from __future__ import annotations
 
 import argparse
-import math
 from functools import partial
 
 from ..device.memory import check_fits
@@ -33,9 +32,13 @@ def numbers(text, name, counts, kind=float, sep=",") -> tuple:
 def parse_spacing(text) -> tuple:
     """``--spacing DZ,DY,DX`` (or one number for all three) as three positive voxel sizes, or the one line that
     refuses it: the one check of every command's ``--spacing``, ``clwave info FILE``'s too."""
-    spacing = numbers(text, "--spacing", (1, 3))
-    if not all(map(math.isfinite, spacing)) or min(spacing) <= 0:
-        raise InputError(f"--spacing {text} must be positive voxel sizes DZ,DY,DX (or one), e.g. 1,0.5,0.5")
+    from ..model.geometry import WORLD_RANGE
+
+    spacing, (low, high) = numbers(text, "--spacing", (1, 3)), WORLD_RANGE
+    # within the world lengths clwave renders (a voxel of 1e308 or 1e-320 was info's internal error)
+    if not all(low <= d <= high for d in spacing):
+        raise InputError(f"--spacing {text} must be positive voxel sizes DZ,DY,DX (or one) from {low:g} to {high:g}, "
+                         f"e.g. 1,0.5,0.5")
     return spacing * 3 if len(spacing) == 1 else spacing
 
 
@@ -69,7 +72,8 @@ def add_reading_options(p):
     g.add_argument("--orientation", metavar="CODES", help="an input with no orientation (npy, raw, TIFF, a folder of "
                    "slices, Zarr, HDF5, MRC): where its x, y, z axes point, e.g. LPS (x left, y posterior, z superior; "
                    "nibabel's codes), turned into RAS+ as DICOM is")
-    g.add_argument("--series", help="DICOM folder with several series: UID or 0-based index")
+    g.add_argument("--series", metavar="NUMBER", help="DICOM folder, tree or DICOMDIR with several series: the "
+                   "SeriesNumber its listing shows, or the description or SeriesInstanceUID")
     labels = g.add_mutually_exclusive_group()
     labels.add_argument("--labels", action="store_const", const=True, help="the input is a label map (a "
                         "segmentation), whatever its values look like (default: a NIfTI's intent, else a guess from "
@@ -118,7 +122,7 @@ def read_volume(args):
                    hint="read it chunk by chunk (--chunks auto: Zarr, HDF5, .npy, .raw, .nii, .mgh, MRC, FITS, TIFF; "
                         "gunzip a .nii.gz first, a .mgz into a .mgh), or crop or subsample it")
     return load(spec, shape=shape, dtype=args.dtype, spacing=spacing, byte_order=args.byte_order,
-                series=parse_series(args.series), level=args.level, frame=args.frame,
+                series=args.series, level=args.level, frame=args.frame,
                 chunks=parse_chunks(args.chunks),
                 nan=args.nan, subtract=args.subtract or 0.0, hu_to_mu=args.hu_to_mu, fits=fits,
                 orientation=args.orientation, unit=args.unit, labels=args.labels)
@@ -140,11 +144,6 @@ def parse_chunks(text):
     if not text.isdigit() or int(text) < 2:
         raise InputError(f"--chunks {text} must be auto, off or a chunk edge N >= 2 (voxels)")
     return int(text)
-
-
-def parse_series(text):
-    """``load``'s ``series=`` from ``--series UID|INDEX``: a 0-based index where all digits, else a UID (or None)."""
-    return int(text) if text is not None and text.isdigit() else text
 
 
 def flag(name: str) -> str:

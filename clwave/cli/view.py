@@ -20,12 +20,13 @@ def run(args):
 
     from ..view.export import Origin
     from ..view.prefix import PrefixFirst
-    from ..view.address import check_port, is_loopback
+    from ..view.address import check_host, check_port, is_loopback
     from ..view.server import ViewServer
 
     size = tuple(parse_size(args))
     check_size(size, args.device)
     device_memory = parse_device_memory(args)
+    check_host(args.host)
     check_port(args.port)
     # a .clw file: its prefix now, the rest read while serving; a scalar model's shaded views are classified while
     # rendering by --tf [--tf-window] (a .clw input; a volume's with --classify post), checked as `render` checks them

@@ -84,12 +84,17 @@ class Locked:
 
 
 def zeros(queue, shape, dtype, allocator=None):
-    """``pyopencl.array.zeros``, filled by the queue (``enqueue_fill_buffer``) rather than by pyopencl's fill
-    kernel, which every thread of the context shares without a lock."""
-    import pyopencl as cl
+    """``pyopencl.array.zeros``, filled by the queue (:func:`zero`)."""
     import pyopencl.array as cla
 
-    out = cla.empty(queue, shape, dtype, allocator=allocator)
+    return zero(queue, cla.empty(queue, shape, dtype, allocator=allocator))
+
+
+def zero(queue, out):
+    """``out`` (an array, or a slice of one) set to 0 by the queue (``enqueue_fill_buffer``) rather than by pyopencl's
+    fill kernel, which every thread of the context shares without a lock; returns ``out``."""
+    import pyopencl as cl
+
     if out.nbytes:
         pattern = np.zeros(math.gcd(16, out.offset, out.nbytes), np.uint8)  # the widest pattern that tiles it
         cl.enqueue_fill_buffer(queue, out.base_data, pattern, out.offset, out.nbytes)

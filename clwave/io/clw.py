@@ -142,6 +142,10 @@ def quantisation_steps(model, quantise) -> list | None:
         return steps
     wavelets = [w for w, _ in model.groups()] if chunked else [g.wavelet for g in model.groups]
     steps = [2.0 * quantise / synthesis_bound(w, model.levels) for w in wavelets]
+    if not np.all(np.isfinite(steps)):  # 1e308: a step of inf written, then refused by the file's own read
+        raise InputError(f"quantise={quantise:g} is too large: its rounding step overflows; give a bound within the "
+                         f"volume's values", cli=f"--quantise {quantise:g} is too large: its rounding step overflows; "
+                                                 f"give a bound within the volume's values")
     if not chunked:
         for g, step in zip(model.groups, steps):
             _check_range(g.values, step)

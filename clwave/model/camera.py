@@ -17,12 +17,14 @@ import numpy as np
 
 from ..device.memory import check_image
 from ..errors import ClwaveWarning, InputError, finite_number, flag, reals, warn_outside, whole_number
-from .geometry import view_frame
+from .geometry import WORLD_RANGE, view_frame
 
 #: The most pixels across the content box's diagonal: the splat kernels' float32 steps grow as its reciprocal (an
 #: extent of 1e-40 overflowed them and crashed; 1e-320, a pixel of 0, was an internal error), while a millionth of a
 #: voxel still renders from the band's textures (tests/test_hardening.py)
 MAX_PIXELS_ACROSS = 10**12
+#: the largest extent and distance (world units): the world lengths clwave renders
+FARTHEST = WORLD_RANGE[1]
 
 FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
 DEFAULT_FOV = 30.0  #: a perspective camera's vertical field of view, degrees, unless given
@@ -136,14 +138,15 @@ class Camera:
         self.roll = finite_number(roll, "roll")
         self.size = _size(size)
         self.target = None if target is None else _vector(target, "target")
-        if extent is not None and not finite_number(extent, "extent") > 0:
-            raise InputError(f"extent={extent!r} must be a positive world width",
-                             cli=f"--extent {extent} must be a positive world width")
+        # at most the world lengths clwave renders (geometry.WORLD_RANGE): an eye 1e308 away hung the ray tracer
+        if extent is not None and not 0 < finite_number(extent, "extent") <= FARTHEST:
+            raise InputError(f"extent={extent!r} must be a positive world width up to {FARTHEST:g}",
+                             cli=f"--extent {extent} must be a positive world width up to {FARTHEST:g}")
         self.extent = None if extent is None else float(extent)
         self.perspective = flag(perspective, "perspective")
-        if distance is not None and not finite_number(distance, "distance") > 0:
-            raise InputError(f"distance={distance!r} must be a positive world distance",
-                             cli=f"--distance {distance} must be a positive world distance")
+        if distance is not None and not 0 < finite_number(distance, "distance") <= FARTHEST:
+            raise InputError(f"distance={distance!r} must be a positive world distance up to {FARTHEST:g}",
+                             cli=f"--distance {distance} must be a positive world distance up to {FARTHEST:g}")
         self.distance = None if distance is None else float(distance)
         if fov is not None and not 0 < finite_number(fov, "fov") < 180:
             raise InputError(f"fov={fov!r} must be between 0 and 180 degrees",

@@ -10,6 +10,12 @@ import numpy as np
 from ..errors import InputError
 from .bspline import SplineWavelet, wavelet_for
 
+#: the world lengths clwave renders: a voxel's spacing at least WORLD_RANGE[0], the volume's extent (spacing times
+#: voxels) and its origin's coordinates at most WORLD_RANGE[1] in magnitude, so that lengths and their squares are
+#: normal float32 numbers in the renderers' arithmetic (1e-18 and 1e17 render as 1 does, scaled: docs/coordinates.md
+#: §1; 1e-308 divided by zero)
+WORLD_RANGE = (1e-18, 1e18)
+
 
 # ----------------------------------------------------------------------------- the view frame
 def view_frame(azimuth: float, elevation: float) -> tuple:

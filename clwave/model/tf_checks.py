@@ -54,8 +54,11 @@ def check_opacity_unit(unit, option=None):
         value = float(unit)
     except (TypeError, ValueError, OverflowError):
         value = math.nan
-    if isinstance(unit, bool) or not (math.isfinite(value) and value > 0):
-        fix = "a length > 0 in world units (the spacing's)"
+    from .geometry import WORLD_RANGE
+
+    low, high = WORLD_RANGE  # the lengths clwave renders: 1e-320 made every opacity infinite
+    if isinstance(unit, bool) or not low <= value <= high:
+        fix = f"a length > 0 in world units (the spacing's), from {low:g} to {high:g}"
         raise InputError(f"opacity unit {unit!r} must be {fix}, or None for one voxel (the smallest spacing)",
                          cli=option and f"{option} {unit:g} must be {fix}; leave it out for one voxel")
     return value

@@ -124,7 +124,9 @@ class TransferFunction:
     def from_colormap(cls, cmap, opacity=(0.0, 0.05), window="auto", opacity_unit=None) -> "TransferFunction":
         """A matplotlib colormap (a ``Colormap``, or its name) as a function: the colormap's colours over the window
         ("auto", or (lo, hi) as the constructor's), the opacity rising linearly from ``opacity[0]`` to ``opacity[1]``
-        across it (per opacity unit; the default as the grey preset's) times the colormap's own alpha.
+        across it (per opacity unit; the default as the grey preset's) times the colormap's own alpha.  The ``N``
+        colours are points evenly spread over the window, linear between: a colormap of few colours (``tab10``)
+        blends its neighbours where matplotlib shows each in its own bin; for categories use :meth:`labels`.
 
         >>> import matplotlib
         >>> tf = TransferFunction.from_colormap(matplotlib.colormaps["gray"], window=(0, 10))

@@ -13,15 +13,10 @@ import numpy as np
 
 from ..errors import ClwaveWarning, InputError, finite_number, flag, reals, warn_outside
 from .dataarray import from_data_array, is_data_array, is_dataset
-from .geometry import fine_to_world, world_to_fine
+from .geometry import WORLD_RANGE, fine_to_world, world_to_fine
 from .labels import looks_like_labels
 
 MAX_CHANNELS = 4
-#: the world lengths clwave renders: a voxel's spacing at least WORLD_RANGE[0], the volume's extent (spacing times
-#: voxels) and its origin's coordinates at most WORLD_RANGE[1] in magnitude, so that lengths and their squares are
-#: normal float32 numbers in the renderers' arithmetic (1e-18 and 1e17 render as 1 does, scaled: docs/coordinates.md
-#: §1; 1e-308 divided by zero)
-WORLD_RANGE = (1e-18, 1e18)
 #: A classified volume's premultiplied colour never exceeds its alpha: :func:`warn_straight_colour` tells one whose
 #: colour does by more than STRAIGHT_MARGIN of its largest value in more than STRAIGHT_SHARE of its voxels above that
 #: margin in some channel (on an even sample of at most STRAIGHT_SAMPLE): a photo's straight colour and alpha given as

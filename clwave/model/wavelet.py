@@ -327,7 +327,8 @@ class WaveletVolume:
             stop = g.band_slices()[0].stop  # the approximation band ranks first
             approx, detail = np.flatnonzero(imp[:stop] >= 0), imp[stop:]
             if budget is None:  # a threshold, or keep=1: every live coefficient (importance >= 0)
-                chosen = np.concatenate([approx, stop + np.flatnonzero(detail > threshold if keep is None
+                # compared in float64: a threshold past float32 (1e308) cast to it was NumPy's overflow warning
+                chosen = np.concatenate([approx, stop + np.flatnonzero(detail > np.float64(threshold) if keep is None
                                                                        else detail >= 0)])
             elif budget <= len(approx):
                 chosen = approx[_top(imp[approx], budget)]

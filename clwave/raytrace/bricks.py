@@ -25,7 +25,7 @@ from pyopencl.elementwise import ElementwiseKernel
 from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.context import ComputeContext
-from ..device.kernels import BUFFER, Kernel, zeros
+from ..device.kernels import BUFFER, Kernel, zero, zeros
 from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError
 from ..model.geometry import band_lattice
@@ -237,7 +237,7 @@ class BrickField:
         slots = np.union1d(slots, self.mixes[slots, 0][self.mixes[slots, 0] >= 0])  # and its mixed bricks' coarse
         starts, sizes = self.boxes[slots, 0, 3].astype(np.int64), self.slot_bytes()[slots] // 16
         at = np.concatenate([[0], np.cumsum(sizes)])  # where each brick goes in the region's pool
-        pool = cla.empty(q, (int(at[-1]) + 64, 4), np.float32)  # 64: as build()'s
+        pool = cla.empty(q, (_pool_elements(at[-1], self.orders), 4), np.float32)
         # read straight into the mapped buffer (no host copy), a run of bricks that follow each other in the
         # file at a time
         mapped, _ = cl.enqueue_map_buffer(q, pool.data, cl.map_flags.WRITE_INVALIDATE_REGION, 0, pool.shape,
@@ -359,8 +359,12 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
     lattices = level_lattices[lay["levels"]]
     alpha = next((gi for gi, g in enumerate(wv.groups) if 3 in g.channels), None)
     bounds = zeros(q, (max(n, 1), SUPER, SUPER, SUPER), np.float32)
-    pool = cla.empty(q, (_pool_elements(lay),) + (() if scalar else (4,)), np.float32) if resident else None
-    spill = None if resident else Spill(lay["total"])
+    pool = spill = None
+    if resident:
+        pool = cla.empty(q, (_pool_elements(lay["total"], orders),) + (() if scalar else (4,)), np.float32)
+        zero(q, pool[lay["total"]:])  # what no brick writes
+    else:
+        spill = Spill(lay["total"])
     clamp = cc.generated("clamp_to_content", lambda: ElementwiseKernel(
         cc.ctx, "float *grid, const uchar *keep, const int lanes", "if (!keep[i / lanes]) grid[i] = 0.0f",
         "clamp_to_content"))
@@ -418,13 +422,14 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
         bounds[cut] *= reached
     return BrickField(p.origin, p.level.shape[1:], lay["bricks"], lay["levels"], clamped, pages, frames, boxes,
                       lattices, bounds, orders, time.perf_counter() - start, mixes, pieces, pool, spill,
-                      device_from=device_from, device_pool_bytes=4 * pool_lanes * _pool_elements(lay))
+                      device_from=device_from, device_pool_bytes=4 * pool_lanes * _pool_elements(lay["total"], orders))
 
 
-def _pool_elements(lay) -> int:
-    """The pool's coefficients on the device: 64 = 4^3 more at least, so that the reads of a segment in no brick
-    (weights 0; the march never samples one) stay inside."""
-    return max(lay["total"], 64)
+def _pool_elements(total, orders) -> int:
+    """The pool's coefficients (``total``: its bricks'), at least the j^3 that a segment in no brick reads from its
+    start, times weights 0 (a transfer function that shows the field's 0 marches the data's box where no brick lies,
+    docs/raytracing.md §10): zero where no brick writes them, as 0 times what a buffer held may be NaN."""
+    return max(int(total), max(orders) ** 3)
 
 
 def _check_fits(wv, cc, p: Plan, lay, budget, pool_lanes=4) -> int | None:
@@ -433,7 +438,7 @@ def _check_fits(wv, cc, p: Plan, lay, budget, pool_lanes=4) -> int | None:
     bounds and the work alone do not fit ``budget``.  A slab's synthesis holds about three boxes of its finest
     level's float4 coefficients at once (the parts, the pairs of one axis step, the output), and two slabs can be
     under way (build's overlap), with their pools when the pool goes to host memory."""
-    pool = 4 * pool_lanes * _pool_elements(lay)
+    pool = 4 * pool_lanes * _pool_elements(lay["total"], [g.wavelet.order for g in wv.groups])
     bounds = 4 * SUPER ** 3 * (len(lay["levels"]) + int(np.prod(p.level.shape[1:])))  # per slot, and a grid
     halo = 2 * max(g.wavelet.order for g in wv.groups)
     slab, slab_pool, ends = 0, 0, lay["ends"]

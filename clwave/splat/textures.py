@@ -44,6 +44,9 @@ from .spectral import device_spectra, fft_texture, slice_plan
 #: only sets the texel spacing, so they keep the paper's omega_s alone.  Quintic (C^4, its spectrum
 #: falls like w^-6): 1.2e-3 at 16, 9.5e-5 at 24, 1.6e-5 at 32 (oblique 3.8e-4, 6.1e-7, 1.9e-7).
 DEFAULT_OMEGA_MIN = {1: 0.0, 2: 0.0, 3: 96.0, 4: 48.0, 6: 24.0}
+#: the largest footprint band omega_s (the defaults reach 100): at 1e4 one cubic band of level 0 is 38,590 samples a
+#: side (6 GB of float32), past any view's texture cap, and 1e308 overflowed the sample count (an internal error)
+OMEGA_S_MAX = 1e4
 
 SAMPLINGS = ("auto", "fft", "spatial", "cells")
 
@@ -265,8 +268,8 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
     d_xyz = spacing_xyz(spacing_zyx)
     n, u, v = orthonormal_frame(n, u, v)
     check_sampling(sampling)
-    if not (np.isfinite(omega_s) and omega_s > 0):
-        raise InputError(f"omega_s must be a positive number, got {omega_s!r}")
+    if not (np.isfinite(omega_s) and 0 < omega_s <= OMEGA_S_MAX):
+        raise InputError(f"omega_s must be a positive number up to {OMEGA_S_MAX:g}, got {omega_s!r}")
     if omega_min is None:
         omega_min = DEFAULT_OMEGA_MIN.get(wav.order, 64.0)
     if not (np.isfinite(omega_min) and omega_min >= 0):

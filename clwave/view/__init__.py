@@ -116,10 +116,12 @@ def view(model_or_volume, *, size=512, tolerance=1e-2, keep=None, tf=None, class
     from .frames import check_tolerance
     from .export import Origin
     from .prefix import PrefixFirst
-    from .address import check_port, is_loopback
-    from .server import BackgroundServer, ViewServer
+    from .address import check_host, check_port, is_loopback
+    from .background import BackgroundServer
+    from .server import ViewServer
 
     size = Camera(size=size).size
+    check_host(host)
     check_port(port)
     check_tolerance(tolerance)
     _check_classify(classify)

@@ -17,6 +17,15 @@ def check_port(port) -> int:
     return int(port)
 
 
+def check_host(host) -> str:
+    """``host``, or an :class:`InputError` unless it is the name or address of an interface: "" bound every
+    interface, as 0.0.0.0 does, and printed an address with no host in it."""
+    if not isinstance(host, str) or not host.strip():
+        fix = "must name an interface: 127.0.0.1 (this machine only, the default) or one that others reach"
+        raise InputError(f"host={host!r} {fix}", cli=f"--host {host!r} {fix}")
+    return host
+
+
 def is_loopback(host: str) -> bool:
     """Whether ``host`` names this machine's loopback: ``localhost`` (with DNS's trailing dot or not), 127.0.0.0/8,
     ``::1``, or 127.x written as an IPv4-mapped IPv6 address (``::ffff:127.0.0.1``)."""

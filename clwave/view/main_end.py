@@ -24,7 +24,7 @@ _registered = False
 
 
 def close_at_exit(server) -> None:
-    """Close ``server`` (a :class:`~clwave.view.server.BackgroundServer`) at the interpreter's exit if it is open
+    """Close ``server`` (a :class:`~clwave.view.background.BackgroundServer`) at the interpreter's exit if it is open
     then, before the exit joins its render and build threads."""
     global _registered
     with _lock:

@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import asyncio
 import atexit
+import errno
 import itertools
 import logging
 import secrets
+import socket
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -25,7 +27,7 @@ from aiohttp import WSCloseCode, WSMsgType, web
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError
 from ..threads import Abandoned, stop_on
-from .address import check_port, host_name, is_loopback
+from .address import check_host, check_port, host_name, is_loopback
 from . import colours, export
 from .frames import ViewState, XraySource
 from .shaded import ShadedSource
@@ -51,6 +53,10 @@ CLOSE_SECONDS = 2.0
 HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Content-Type-Options": "nosniff",
            "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
                                       "object-src 'none'; base-uri 'none'; form-action 'none'"}
+
+
+async def _headers(request, response):
+    response.headers.update(HEADERS)
 
 
 def memory_shares(device_memory, shaded: bool) -> dict:
@@ -83,7 +89,7 @@ class ViewServer:
         self.wv = opened.prefix if opened else model
         # a file's recorded error against its input is its whole model's, not that of a view keeping fewer (--keep)
         self.model_error = None if opened is None else dict(rms=opened.model_error, whole=opened.keep is None)
-        self.host, self.port, self.device = host, check_port(port), device
+        self.host, self.port, self.device = check_host(host), check_port(port), device
         self.local = is_loopback(host)  # then a request's Host must name this machine too (DNS rebinding)
         self.device_memory = parse_cap(device_memory)
         self.shares = memory_shares(device_memory, shaded=self.wv.channels == 1 or self.wv.classified)
@@ -284,9 +290,7 @@ class ViewServer:
             log.warning("refused %s %s from %s: Host %r is not this machine", request.method, request.path,
                         request.remote, request.host)
             raise web.HTTPForbidden(text="403: open the address clwave printed (127.0.0.1, ::1 or localhost)\n")
-        response = await handler(request)
-        response.headers.update(HEADERS)
-        return response
+        return await handler(request)
 
     async def _page(self, request):
         text, mime = self.pages[request.path]
@@ -294,6 +298,7 @@ class ViewServer:
 
     def app(self) -> web.Application:
         app = web.Application(middlewares=[self._token], client_max_size=MAX_MESSAGE)
+        app.on_response_prepare.append(_headers)  # on every response, a refusal's too (403, 404, 413)
         app.router.add_get("/ws", self._socket)
         app.router.add_post("/export", partial(export.serve, self, image=False))
         app.router.add_post("/image", partial(export.serve, self, image=True))
@@ -311,10 +316,12 @@ class ViewServer:
         try:
             await site.start()
         except OSError as exc:  # a port in use, a host not of this machine
-            raise InputError(f"cannot listen on {self.host}:{self.port} ({exc.strerror or exc}); choose another port=, "
-                             f"or port=0 for a free one",
-                             cli=f"cannot listen on {self.host}:{self.port} ({exc.strerror or exc}); choose another "
-                                 f"--port, or leave it out for a free one") from None
+            why = f"cannot listen on {self.host}:{self.port} ({exc.strerror or exc})"
+            if isinstance(exc, socket.gaierror) or exc.errno == errno.EADDRNOTAVAIL:  # the host's, not the port's
+                fix = "name an interface of this machine: 127.0.0.1 (the default) or one that others reach"
+                raise InputError(f"{why}; host= must {fix}", cli=f"{why}; --host must {fix}") from None
+            raise InputError(f"{why}; choose another port=, or port=0 for a free one",
+                             cli=f"{why}; choose another --port, or leave it out for a free one") from None
         self.port = self._runner.addresses[0][1]
         return self.url
 
@@ -541,43 +548,3 @@ class Session:
                                              f"({type(exc).__name__}); this is a bug in clwave, see the server's log"))
             finally:
                 await asyncio.shield(loop.run_in_executor(pool, frames.close))
-
-
-class BackgroundServer:
-    """A :class:`ViewServer` on an event loop of its own thread (for scripts and notebooks)."""
-
-    def __init__(self, server: ViewServer):
-        self.server = server
-        self.loop = asyncio.new_event_loop()
-        started = threading.Event()
-        self.thread = threading.Thread(target=self._run, args=(started,), name="clwave-view-server", daemon=True)
-        self.thread.start()
-        started.wait()
-        if self._error is not None:
-            raise self._error
-
-    def _run(self, started):
-        asyncio.set_event_loop(self.loop)
-        self._error = None
-        try:
-            self.loop.run_until_complete(self.server.start())
-        except Exception as exc:  # any failure to start reaches the caller, which waits on `started`
-            self._error = exc
-            self.loop.run_until_complete(self.server.stop())
-            self.loop.close()
-            return
-        finally:
-            started.set()
-        self.loop.run_forever()
-
-    def close(self):
-        if self.thread.is_alive():
-            # no time limit: the stop waits for the reading step under way (bounded, docs/viewer.md §1)
-            try:
-                asyncio.run_coroutine_threadsafe(self.server.stop(), self.loop).result()
-            except Exception:  # noqa: BLE001  (a bug in the stop: logged, and the loop stopped and closed all the same)
-                log.exception("stopping the viewer failed")
-            self.loop.call_soon_threadsafe(self.loop.stop)
-            self.thread.join(timeout=10)
-        if not self.thread.is_alive() and not self.loop.is_closed():
-            self.loop.close()

@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import FileFormatError, InputError, finite_number, flag
+from ...errors import FileFormatError, InputError, finite_number, flag, float32_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
-from . import dicom, dicom_frames, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
+from . import dicom, dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
                      reading, axis_turn, stated_affine, to_canonical, to_float32)
 
@@ -58,7 +58,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         ``.npy``, ``.nii``, ``.nii.gz``, FreeSurfer's ``.mgh``, ``.mgz``, ``.nrrd``, ``.nhdr``, a multi-page
         ``.tif``/``.tiff``, a folder of 2-D TIFF, PNG or JPEG slices of one format
         (grey, RGB or RGBA; stacked in natural name order: ``slice2`` before
-        ``slice10``), a folder of DICOM files (other files in it are ignored), a
+        ``slice10``), a folder of DICOM files (other files in it are ignored), a folder of
+        folders of them (a CD's top, a study) or a ``DICOMDIR``, a
         multi-frame DICOM file whose frames carry positions
         (enhanced CT/MR, RT Dose), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
         an HDF5 file ``.h5``/``.hdf5``/``.hdf``, an MRC/CCP4 map, or a FITS cube (``.fits``, ``.fit``, ``.fts``,
@@ -78,8 +79,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     byte_order : {'<', '>'}, optional
         ``.raw`` only: little or big endian (default: this machine's).
     series : int or str, optional
-        DICOM only: 0-based index or ``SeriesInstanceUID`` of the series to load
-        when the folder holds several.
+        DICOM only: the series to load where the input holds several image series, as
+        their listing shows it: its SeriesNumber, description (case aside) or
+        ``SeriesInstanceUID``; a value that names several is refused, naming them.
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     frame : int, optional
@@ -154,9 +156,12 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     """
     if not isinstance(path, (str, os.PathLike)):
         raise InputError(f"path must be a file or folder name (str or pathlib.Path), got {type(path).__name__}")
+    if not os.fspath(path):  # Path("") is ".": the current folder was read as a folder of slices
+        raise InputError("path '' names no file or folder; give the volume's",
+                         cli="the input '' names no file or folder; give the volume's")
     path = Path(path)
-    subtract = finite_number(subtract, "subtract")
-    nan = None if nan is None else finite_number(nan, "nan")
+    subtract = float32_number(subtract, "subtract")
+    nan = None if nan is None else float32_number(nan, "nan")
     mu_water = finite_number(mu_water, "mu_water")
     labels = None if labels is None else flag(labels, "labels")
     if hu_to_mu and mu_water <= 0:
@@ -252,7 +257,7 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
         return slices.read_slice_folder(path, progress_bar, fits, chunks, warn_spacing), None, None, 0.0
     if kind == "dicom-frames":
         return dicom_frames.read_dicom_frames(path, fits)
-    return dicom.read_dicom_folder(path, series, progress_bar, fits)
+    return dicom_tree.read_dicom(path, series, progress_bar, fits)
 
 
 #: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
@@ -276,7 +281,7 @@ def _world_unit(kind, path, inner):
 
 DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",
              "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti",
-             "fits")
+             "fits", "series")
 
 
 def describe(path, *, series=None, level=None, frame=None, shape=None, dtype=None, byte_order=None) -> dict:
@@ -378,6 +383,8 @@ def _split_inner(path):
 
 def _kind(path: Path) -> str:
     """Format of ``path`` from its extension, or the content of a folder."""
+    from pydicom.uid import MediaStorageDirectoryStorage
+
     zarr_named = path.suffix.lower() == ".zarr"
     if path.is_dir():
         if any((path / name).is_file() for name in zarr.ZARR_METADATA):
@@ -400,10 +407,13 @@ def _kind(path: Path) -> str:
                               "(unzip a zipped store first)")
     if suffix in (".dcm", ".ima") or suffix not in _FILE_KINDS and _is_dicom(path):  # IM0001, 1.2.840....
         with reading(path):
-            if dicom_frames.frame_count(path) > 1:
-                return "dicom-frames"
-        raise FileFormatError(f"{path} is one DICOM slice; pass the folder that holds the whole series "
-                              f"({path.parent})")
+            header = dicom.dcmread(path, defer_size=1024)  # its PixelData noted, not read
+        if header.file_meta.get("MediaStorageSOPClassUID") == MediaStorageDirectoryStorage:
+            return "dicom"  # a DICOMDIR: the series it lists
+        if int(header.get("NumberOfFrames") or 1) > 1:
+            return "dicom-frames"
+        raise FileFormatError(dicom_tree.describe_file(path, header) or f"{path} is one DICOM slice; pass the folder "
+                              f"that holds the whole series ({path.parent})")
     image = next((kind for kind in ("PNG", "JPEG") if suffix in slices.SLICE_SUFFIXES[kind]), None)
     if image:  # a photo stack's slice, as Fiji's Image Sequence takes one
         raise FileFormatError(f"{path} is one {image} image; clwave reads a folder of {image} slices as a stack: give "

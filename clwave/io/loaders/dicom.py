@@ -6,18 +6,18 @@ from __future__ import annotations
 import io
 import math
 import os
+import re
 import warnings
 import zlib
-from collections import defaultdict
 
 import numpy as np
 
 from ...device.memory import check_fits
-from ...errors import FileFormatError, InputError
+from ...errors import FileFormatError
 from ...model.volume import WORLD_RANGE
 from .inflate import decompressed
-from .shared import (SUPPORTED, Declared, check_float32_range, check_whole, folder_files, largest_finite, note,
-                     read_slices, reading, to_canonical)
+from .shared import (Declared, check_float32_range, check_whole, largest_finite, note, read_slices, reading,
+                     to_canonical)
 from .shear import straight_grid, unshear
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
@@ -32,45 +32,52 @@ _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSp
                      "Rows", "Columns", "PixelData")
 
 
-def read_dicom_folder(folder, series, progress_bar, fits=None):
-    """One DICOM series: slices sorted along their normal, rescaled, in RAS; refused unless they are evenly
-    spaced along it (:func:`_even_spacing`) and lie on a line (:func:`_drift`); a gantry tilt (slices shifted
-    sideways in proportion to their distance) is resampled onto a straight stack (:func:`.shear.unshear`)."""
-    uid, headers = _pick_series(folder, _dicom_image_series(folder), series)
-    for path, h in headers:  # before counting them: one such file is a volume clwave does not read, not one slice
-        if int(getattr(h, "NumberOfFrames", 1) or 1) > 1:
-            raise FileFormatError(f"{path} is a multi-frame DICOM file; clwave reads a folder of single-frame slices, "
-                                  f"or a multi-frame file named itself: give {path}")
+def read_dicom_folder(where, path, headers, progress_bar, fits=None):
+    """The series ``where`` names (in messages), its single-frame files ``[(path, header)]`` under ``path`` (a
+    folder, a tree, a DICOMDIR: :mod:`.dicom_tree` found them): slices sorted along their normal, rescaled, in RAS;
+    refused unless they are evenly spaced along it (:func:`_even_spacing`) and lie on a line (:func:`_drift`); a
+    gantry tilt (slices shifted sideways in proportion to their distance) is resampled onto a straight stack
+    (:func:`.shear.unshear`)."""
     if len(headers) < 2:
-        raise FileFormatError(f"DICOM series {uid} in {folder} has 1 slice; a volume needs "
-                              "at least 2")
-    for path, h in headers:
-        check_pixel_data(path, h)
+        raise FileFormatError(f"{where} has 1 slice; a volume needs at least 2")
+    for file, header in headers:
+        missing = [tag for tag in _DICOM_SLICE_TAGS if tag not in header]
+        if missing:
+            raise FileFormatError(f"DICOM file {file} of {where} lacks {', '.join(missing)}; it may be truncated or "
+                                  "corrupt, or not a slice: move it out of the folder")
+    for file, h in headers:
+        check_pixel_data(file, h)
     for tag in ("ImageOrientationPatient", "ImagePositionPatient", "PixelSpacing"):
-        for path, h in headers:
-            check_attribute(path, tag, np.array(h.get(tag), float))
+        for file, h in headers:
+            check_attribute(file, tag, np.array(h.get(tag), float))
     cosines = np.array([h.ImageOrientationPatient for _, h in headers], float)
-    if not np.allclose(cosines, cosines[0], atol=1e-4):
-        raise FileFormatError(f"DICOM series {uid} in {folder} mixes slice orientations "
-                              "(e.g. a localizer); move the odd slices out of the folder")
-    _one_spacing(f"DICOM series {uid} in {folder}", headers)
+    kinds, counts = np.unique(np.round(cosines, 4), axis=0, return_counts=True)
+    common = kinds[np.argmax(counts)]
+    odd = np.flatnonzero(~np.all(np.isclose(cosines, common, atol=1e-4), axis=1))
+    if odd.size:
+        shown = [", ".join(f"{v:g}" for v in c) for c in (cosines[odd[0]], common)]
+        raise FileFormatError(f"{where} mixes slice orientations: {headers[odd[0]][0].name} has "
+                              f"ImageOrientationPatient {shown[0]} where {counts.max()} of its {len(headers)} slices "
+                              f"have {shown[1]} (a localizer?); move the odd slices out of the folder")
+    _one_spacing(where, headers)
     positions = np.array([h.ImagePositionPatient for _, h in headers], float)
     first = headers[0][1]
     size = (int(first.Rows), int(first.Columns))
 
     def read(order):  # weighed from the headers, before a pixel is read (the slices rescaled to float32)
-        check_whole(folder, (len(order), *size), np.float32, fits)
+        check_whole(path, (len(order), *size), np.float32, fits)
         data = read_slices([headers[i][0] for i in order], _dicom_pixels, "reading DICOM slices", progress_bar)
-        return fill_padding(data, f"DICOM series {uid} in {folder}")
+        return fill_padding(data, where)
 
     try:
-        return place_slices(f"DICOM series {uid} in {folder}", folder, positions, cosines[0],
+        return place_slices(where, path, positions, cosines[0],
                             tuple(float(s) for s in first.PixelSpacing), size,
-                            [f"slice {path.name}" for path, _ in headers], read, fits,
+                            [f"slice {file.name}" for file, _ in headers], read, fits,
                             "the series may hold several acquisitions (echoes, phases, times): split them into "
                             "separate folders")
     except Declared as declared:  # describe(): what the headers say of the samples too
-        declared.facts = _header_facts([h for _, h in headers])
+        declared.facts = dict(header_facts(first, [(h.get("RescaleSlope", 1.0), h.get("RescaleIntercept", 0.0))
+                                                   for _, h in headers]), series=series_facts(first))
         raise
 
 
@@ -132,15 +139,38 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
     return to_canonical(data_ijk, _LPS_TO_RAS @ straight)
 
 
-def _header_facts(headers) -> dict:
-    """What ``clwave info`` says of a series' samples from their headers: the type stored, the rescales (slope,
-    intercept; each distinct pair, in slice order) and the padding range (:func:`padding`, stored values)."""
+def header_facts(first, rescales) -> dict:
+    """What ``clwave info`` says of a series' samples from its ``first`` header: the type stored, the ``rescales``
+    (each distinct ``(slope, intercept)``, in slice or frame order) and the padding range (:func:`padding`, stored
+    values)."""
     from pydicom.pixels.utils import pixel_dtype
 
-    rescales = [(float(getattr(h, "RescaleSlope", 1.0)), float(getattr(h, "RescaleIntercept", 0.0))) for h in headers]
-    marks = padding(headers[0])
-    return dict(stored_dtype=str(pixel_dtype(headers[0])), rescale=[list(r) for r in dict.fromkeys(rescales)],
+    marks = padding(first)
+    return dict(stored_dtype=str(pixel_dtype(first)),
+                rescale=[list(r) for r in dict.fromkeys((float(a), float(b)) for a, b in rescales)],
                 padding=[] if marks is None else list(marks))
+
+
+def series_number(header):
+    """A header's SeriesNumber as an int, or None where it has none (it may be empty)."""
+    try:
+        return int(header.get("SeriesNumber"))
+    except (TypeError, ValueError):
+        return None
+
+
+def series_facts(header) -> dict:
+    """``clwave info``'s ``series`` from a header of it: its number, description, modality and UID."""
+    return dict(number=series_number(header), description=str(header.get("SeriesDescription") or ""),
+                modality=str(header.get("Modality") or ""), uid=str(header.get("SeriesInstanceUID") or ""))
+
+
+def series_name(facts) -> str:
+    """A series as PACS viewers name it, from :func:`series_facts`: "series 2 'Thorax 1.0'" (its UID where it has
+    neither number nor description)."""
+    said = [] if facts["number"] is None else [str(facts["number"])]
+    said += [f"'{facts['description']}'"] if facts["description"] else [] if said else [facts["uid"]]
+    return " ".join(["series", *said])
 
 
 def _drift(where, positions, distance, normal, pixel) -> np.ndarray:
@@ -179,65 +209,6 @@ def _even_spacing(where, distance) -> float:
             f"where the median gap is {median:.4g} mm (a missing slice?); supply the complete series, or resample "
             "it onto even slices first (e.g. with 3D Slicer)")
     return float(dz)
-
-
-def _dicom_image_series(folder):
-    """Headers of the DICOM image series in ``folder``: ``{uid: [(path, header), ...]}``.
-
-    Non-DICOM files are skipped, and so are series without any image slice
-    (DICOMDIR, reports, presentation states).  A file of an image series that
-    lacks a slice attribute is an error rather than a silently missing slice.
-    """
-    from pydicom.misc import is_dicom
-    from pydicom.uid import MediaStorageDirectoryStorage
-
-    groups = defaultdict(list)
-    for path in folder_files(folder):
-        with reading(path):
-            if not is_dicom(path):
-                continue
-            # defer_size: PixelData is noted but not read
-            header = dcmread(path, defer_size=1024)
-        if "SeriesInstanceUID" in header:
-            groups[str(header.SeriesInstanceUID)].append((path, header))
-        elif header.file_meta.get("MediaStorageSOPClassUID") != MediaStorageDirectoryStorage:
-            # every DICOM object but a DICOMDIR has one: the file was cut before it
-            raise FileFormatError(f"DICOM file {path} has no SeriesInstanceUID; it may be "
-                                  "truncated or corrupt: move it out of the folder")
-    images = {uid: files for uid, files in groups.items()
-              if any(all(tag in h for tag in _DICOM_SLICE_TAGS) for _, h in files)}
-    if not images:
-        raise FileFormatError(
-            f"folder {folder} holds no TIFF, PNG or JPEG slices and no DICOM image slices (files with "
-            f"{', '.join(_DICOM_SLICE_TAGS)}); supported inputs: {SUPPORTED}")
-    for uid, files in images.items():
-        for path, header in files:
-            missing = [tag for tag in _DICOM_SLICE_TAGS if tag not in header]
-            if missing:
-                raise FileFormatError(
-                    f"DICOM file {path} of image series {uid} lacks {', '.join(missing)}; it may "
-                    "be truncated or corrupt, or not a slice: move it out of the folder")
-    return images
-
-
-def _pick_series(folder, groups, series):
-    """``(uid, [(path, header), ...])`` of the series chosen by ``series=`` (index or UID)."""
-    uids = sorted(groups, key=lambda u: (int(getattr(groups[u][0][1], "SeriesNumber", 0) or 0), u))
-    if series is None and len(uids) == 1:
-        return uids[0], groups[uids[0]]
-    listing = "; ".join(
-        f"[{i}] {u} '{getattr(groups[u][0][1], 'SeriesDescription', '')}' "
-        f"({len(groups[u])} slice{'s' if len(groups[u]) != 1 else ''})" for i, u in enumerate(uids))
-    if series is None:
-        found = f"{folder} holds {len(uids)} DICOM series: {listing}; pick one with "
-        raise InputError(found + "series=<index or SeriesInstanceUID>",
-                         cli=found + "--series INDEX or --series SERIES_INSTANCE_UID")
-    if isinstance(series, (int, np.integer)) and 0 <= series < len(uids):
-        return uids[series], groups[uids[series]]
-    if str(series) in groups:
-        return str(series), groups[str(series)]
-    raise InputError(f"series={series!r} matches none of the DICOM series in {folder}: {listing}",
-                     cli=f"--series {series} matches none of the DICOM series in {folder}: {listing}")
 
 
 def padding(ds):
@@ -370,9 +341,12 @@ def check_pixel_data(path, ds):
     except NotImplementedError:  # a private or unknown syntax
         decoder = None
     if decoder is None or not decoder.is_available:
-        needs = "; ".join(decoder.missing_dependencies) if decoder is not None else "a decoder pydicom does not know"
+        needs = decoder.missing_dependencies if decoder is not None else ["a decoder pydicom does not know"]
+        pip = next((" ".join(re.split("[<>=]", p)[0] for p in plugin.split(" - requires ")[1].split(" and "))
+                    for plugin in needs if plugin.startswith("pylibjpeg - requires ")), None)
+        install = f"install one (pip install {pip}, into clwave's environment)" if pip else "install one"
         raise FileFormatError(f"DICOM file {path} holds pixel data in transfer syntax {syntax} ({syntax.name}), which "
-                              f"no decoder installed here reads ({needs}): install one (pip), or convert the series "
+                              f"no decoder installed here reads ({'; '.join(needs)}): {install}, or convert the series "
                               f"with dcm2niix (dcm2niix -o OUT_FOLDER FOLDER) and read the .nii")
     if syntax.is_encapsulated:
         return  # compressed frames: their decoder says what they hold

@@ -7,18 +7,12 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .dicom import (check_attribute, check_pixel_data, dcmread, fill_padding, mark_padding, padding, place_slices,
-                    rescaled)
-from .shared import check_whole
+from .dicom import (check_attribute, check_pixel_data, dcmread, fill_padding, header_facts, mark_padding, padding,
+                    place_slices, rescaled, series_facts)
+from .shared import Declared, check_whole
 
 #: what converts a multi-frame file clwave cannot place into a volume it reads
 CONVERTER = "convert it with dcm2niix (dcm2niix -o OUT_FOLDER FILE) and read the .nii"
-
-
-def frame_count(path) -> int:
-    """The frames of the DICOM file ``path`` (1 for a single-frame file), from its header."""
-
-    return int(dcmread(path, stop_before_pixels=True).get("NumberOfFrames") or 1)
 
 
 def read_dicom_frames(path, fits=None):
@@ -67,10 +61,15 @@ def read_dicom_frames(path, fits=None):
                                   f"(NumberOfFrames); the file is truncated or corrupt")
         return fill_padding(data, f"multi-frame DICOM file {path}")
 
-    return place_slices(f"multi-frame DICOM file {path}", path, positions, cosines[0], tuple(pixel), size,
-                        [f"frame {k + 1}" for k in range(frames)], read, fits,
-                        f"the file may hold several acquisitions (echoes, phases, times), which dcm2niix separates: "
-                        f"{CONVERTER.replace('FILE', str(path))}")
+    try:
+        return place_slices(f"multi-frame DICOM file {path}", path, positions, cosines[0], tuple(pixel), size,
+                            [f"frame {k + 1}" for k in range(frames)], read, fits,
+                            f"the file may hold several acquisitions (echoes, phases, times), which dcm2niix "
+                            f"separates: {CONVERTER.replace('FILE', str(path))}")
+    except Declared as declared:  # describe(): what the headers say of the samples, and the series
+        declared.dtype = np.dtype(np.float32)  # the frames as read: rescaled
+        declared.facts = dict(header_facts(ds, zip(slopes, intercepts)), series=series_facts(ds))
+        raise
 
 
 def _enhanced(path, ds, frames):
