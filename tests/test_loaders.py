@@ -852,7 +852,8 @@ def _zeros_nii_gz(path):
 
 def _zeros_nrrd_gzip(path):
     nrrd.write(str(path), np.zeros((64, 64, 64), np.uint8), {"encoding": "gzip"})
-    return nrrd, "read_data"
+    from clwave.io.loaders import nrrd as reader
+    return reader, "_inflated"
 
 
 def _zeros_tiff_zlib(path):

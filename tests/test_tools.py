@@ -215,10 +215,12 @@ def test_staged_estimate_reports_each_frames_terms(tmp_path):
 
 def test_estimate_sweep_splits_its_frames_by_seed(tmp_path):
     """tools/estimate_sweep.py on a tuning and a held-out seed (one-level X-ray cases): every frame before the last,
-    direct and staged, its ratios the estimate over the measured error, summed per half and kind."""
-    run_tool("estimate_sweep.py", "--seeds", "23,42", "--json", tmp_path / "out.json")
+    direct and staged, its ratios the estimate over the measured error, summed per half and kind; seed 24, whose
+    final image sees nothing (a post-classified `ct-bone` case), left out: no relative error to estimate."""
+    printed = run_tool("estimate_sweep.py", "--seeds", "23,24,42", "--json", tmp_path / "out.json")
     out = json.loads((tmp_path / "out.json").read_text())
     rows, summary = out["rows"], out["summary"]
+    assert " 24 the final image sees nothing: left out" in printed
     assert {r["seed"] for r in rows} == {23, 42} and {r["kind"] for r in rows} == {"direct", "staged 1"}
     for r in rows:
         for n in ("rms", "max"):

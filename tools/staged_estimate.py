@@ -21,6 +21,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # run from a checkout: the tests' models
 
@@ -39,7 +41,6 @@ def held_out(tmp) -> list:
     and (−60°, 35°): Shepp–Logan 64³ (``grey``) and hydrogen 128³ at 256² (thirteenth session), Marschner–Lobb 96³
     (``hydrogen``) and the MNI152 MRI averaged over 2³ voxels (``mri``) at 256², and a random smooth volume 64³
     (``grey``) at 192² (fourteenth session)."""
-    import numpy as np
     from scipy.ndimage import gaussian_filter
 
     noise = gaussian_filter(np.random.default_rng(7).random((64, 64, 64)), 2.7)
@@ -56,7 +57,6 @@ def fresh(tmp) -> list:
     kept, views (75°, 10°) and (−150°, −40°), none of them the protocol's or :func:`held_out`'s: a CT-like
     Shepp–Logan 64³ in HU (background −1000, the brain's 0.2 at +40, the skull's 1 at +1500) with ``ct-bone`` at
     256², a random smooth volume 80³ of a new seed (``grey``) at 192², hydrogen 96³ at 192²."""
-    import numpy as np
     from scipy.ndimage import gaussian_filter
 
     head = clwave.phantom("shepp-logan", 64).data
@@ -83,13 +83,14 @@ def saved(tmp, volumes, angles) -> list:
 
 
 def coarse_frames(path, camera, tolerance=1e-2, **options) -> list:
-    """The figures of both coarse frames of ``camera`` (the full stage reported not ready until they are made);
-    ``options`` as ``refine``'s."""
+    """The figures of both coarse frames of ``camera`` (the full stage reported not ready until they are made) and
+    the final image's largest magnitude (``final_peak``); ``options`` as ``refine``'s."""
     ready = StagedTracer.ready
     StagedTracer.ready = property(lambda self: False)
     try:
         tracer = clwave.RayTracer.open(path)
-        return [dict(f.figures(), reduction=f.reduction, missing=tracer.missing, outside=tracer.outside)
+        return [dict(f.figures(), reduction=f.reduction, missing=tracer.missing, outside=tracer.outside,
+                     final_peak=float(np.max(np.abs(f.final_image()))))
                 for f in tracer.refine(camera, tolerance=tolerance, **options) if f.meta["stage"] == "coarse"]
     finally:
         StagedTracer.ready = ready

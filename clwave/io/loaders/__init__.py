@@ -23,7 +23,7 @@ import numpy as np
 from ...errors import FileFormatError, InputError, finite_number, flag, float32_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, is_dask
-from . import dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
+from . import dicom, dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
                      reading, axis_turn, stated_affine, to_canonical, to_float32)
 
@@ -383,7 +383,6 @@ def _split_inner(path):
 
 def _kind(path: Path) -> str:
     """Format of ``path`` from its extension, or the content of a folder."""
-    import pydicom
     from pydicom.uid import MediaStorageDirectoryStorage
 
     zarr_named = path.suffix.lower() == ".zarr"
@@ -408,7 +407,7 @@ def _kind(path: Path) -> str:
                               "(unzip a zipped store first)")
     if suffix in (".dcm", ".ima") or suffix not in _FILE_KINDS and _is_dicom(path):  # IM0001, 1.2.840....
         with reading(path):
-            header = pydicom.dcmread(path, defer_size=1024)  # its PixelData noted, not read
+            header = dicom.dcmread(path, defer_size=1024)  # its PixelData noted, not read
         if header.file_meta.get("MediaStorageSOPClassUID") == MediaStorageDirectoryStorage:
             return "dicom"  # a DICOMDIR: the series it lists
         if int(header.get("NumberOfFrames") or 1) > 1:

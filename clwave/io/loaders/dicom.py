@@ -3,14 +3,19 @@ gantry tilt resampled onto a straight one), rescaled, in RAS+."""
 
 from __future__ import annotations
 
+import io
+import math
 import os
 import re
 import warnings
+import zlib
 
 import numpy as np
 
+from ...device.memory import check_fits
 from ...errors import FileFormatError
 from ...model.volume import WORLD_RANGE
+from .inflate import decompressed
 from .shared import (Declared, check_float32_range, check_whole, largest_finite, note, read_slices, reading,
                      to_canonical)
 from .shear import straight_grid, unshear
@@ -273,12 +278,64 @@ def fill_padding(data, where):
     return data
 
 
+#: a deflated dataset may inflate to the pixel data its attributes declare and this many bytes besides
+MAX_ATTRIBUTES = 16 << 20
+
+
+def dcmread(path, **options):
+    """``pydicom.dcmread(path, **options)``, a deflated dataset weighed first (:func:`check_deflated`)."""
+    import pydicom
+
+    check_deflated(path)
+    return pydicom.dcmread(path, **options)
+
+
+def check_deflated(path):
+    """Refuse a deflated dataset (transfer syntax 1.2.840.10008.1.2.1.99) that inflates past the pixel data its
+    attributes declare (Rows, Columns, SamplesPerPixel, BitsAllocated, NumberOfFrames, read from its first
+    :data:`MAX_ATTRIBUTES` bytes) and :data:`MAX_ATTRIBUTES` bytes besides: pydicom inflates all of it into memory
+    before it reads one attribute (a 1 MB file held 1 GiB).  Inflated a megabyte at a time, its first
+    :data:`MAX_ATTRIBUTES` bytes kept, the rest counted."""
+    from pydicom.filereader import _read_file_meta_info, read_dataset, read_preamble
+    from pydicom.uid import DeflatedExplicitVRLittleEndian
+
+    with open(path, "rb") as fh:
+        try:
+            read_preamble(fh, False)
+            syntax = _read_file_meta_info(fh).get("TransferSyntaxUID")
+        except Exception:  # not a file of DICOM's format: pydicom's to name
+            return
+        if syntax != DeflatedExplicitVRLittleEndian:
+            return
+        pieces = decompressed(fh, lambda: zlib.decompressobj(-zlib.MAX_WBITS), b"", math.inf)
+        head = bytearray()
+        for piece in pieces:
+            head += piece
+            if len(head) >= MAX_ATTRIBUTES:
+                break
+        try:
+            ds = read_dataset(io.BytesIO(head), False, True, stop_when=lambda tag, vr, length: tag == 0x7FE00010)
+            pixels = math.prod(int(ds.get(name) or 1) for name in ("Rows", "Columns", "SamplesPerPixel",
+                                                                    "NumberOfFrames")) * -(-int(ds.BitsAllocated) // 8)
+        except Exception:  # attributes cut short in the first bytes, or no image: the bound without pixel data
+            pixels = 0
+        most, held = pixels + MAX_ATTRIBUTES, len(head)
+        check_fits(most, f"inflating {path}, a deflated DICOM dataset that pydicom holds whole,",
+                   "write it uncompressed first (DCMTK: dcmconv +te)")  # pixel data declared past the memory
+        for piece in pieces:  # the rest of the stream, counted and dropped
+            held += len(piece)
+            if held > most:
+                raise FileFormatError(f"DICOM file {path}: its deflated dataset inflates past {most:,} bytes, the "
+                                      f"{pixels:,} of pixel data its attributes declare and {MAX_ATTRIBUTES:,} of "
+                                      "others; it is not what it says (a decompression bomb): move it out of the "
+                                      "folder")
+
+
 def _dicom_pixels(path):
     """One slice's pixels (a single-frame file, read_dicom_folder checked) as float32 with RescaleSlope/RescaleIntercept
     applied, its padding NaN (:func:`mark_padding`)."""
-    import pydicom
 
-    ds = pydicom.dcmread(path)
+    ds = dcmread(path)
     slope = float(getattr(ds, "RescaleSlope", 1.0))
     intercept = float(getattr(ds, "RescaleIntercept", 0.0))
     check_attribute(path, "RescaleSlope", slope)

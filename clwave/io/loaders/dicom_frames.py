@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FileFormatError
-from .dicom import (check_attribute, check_pixel_data, fill_padding, header_facts, mark_padding, padding, place_slices,
-                    rescaled, series_facts)
+from .dicom import (check_attribute, check_pixel_data, dcmread, fill_padding, header_facts, mark_padding, padding,
+                    place_slices, rescaled, series_facts)
 from .shared import Declared, check_whole
 
 #: what converts a multi-frame file clwave cannot place into a volume it reads
@@ -19,11 +19,10 @@ def read_dicom_frames(path, fits=None):
     """A multi-frame DICOM file's frames as slices, rescaled, its padding filled (:func:`.dicom.fill_padding`), in
     RAS (``(data, spacing, origin)``); refused (naming dcm2niix) where its frames carry no positions, or several
     orientations."""
-    import pydicom
     from pydicom.pixels import iter_pixels
     from pydicom.pixels.utils import pixel_dtype
 
-    ds = pydicom.dcmread(path, defer_size=1024)  # the pixels stay in the file: read by iter_pixels
+    ds = dcmread(path, defer_size=1024)  # the pixels stay in the file: read by iter_pixels
     frames, kind = int(ds.NumberOfFrames), getattr(ds.get("SOPClassUID"), "name", "DICOM")
     if "PerFrameFunctionalGroupsSequence" in ds:
         geometry = _enhanced(path, ds, frames)

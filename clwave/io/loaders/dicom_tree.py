@@ -131,7 +131,6 @@ def find_series(path):
 def _headers(paths):
     """``[(path, header)]`` of the DICOM files among ``paths`` that belong to a series (a DICOMDIR does not), read
     without their pixel data; a DICOM file of no series is cut before it (refused)."""
-    import pydicom
     from pydicom.misc import is_dicom
     from pydicom.uid import MediaStorageDirectoryStorage
 
@@ -140,7 +139,7 @@ def _headers(paths):
         with reading(path):
             if not is_dicom(path):
                 continue
-            header = pydicom.dcmread(path, defer_size=1024)  # PixelData noted (its length), not read
+            header = dicom.dcmread(path, defer_size=1024)  # PixelData noted (its length), not read
         if "SeriesInstanceUID" in header:
             found.append((path, header))
         elif header.file_meta.get("MediaStorageSOPClassUID") != MediaStorageDirectoryStorage:
@@ -164,10 +163,8 @@ def _walk(top):
 def _dicomdir_files(path):
     """The files a DICOMDIR's records refer to (ReferencedFileID, relative to its folder), each checked to exist.  Read
     from its records: pydicom's FileSet stages a temporary folder, left to its finalizer."""
-    import pydicom
-
     with reading(path):
-        records = pydicom.dcmread(path).get("DirectoryRecordSequence") or []
+        records = dicom.dcmread(path).get("DirectoryRecordSequence") or []
     ids = [r.ReferencedFileID for r in records if r.get("ReferencedFileID")]
     files = [path.parent.joinpath(*([i] if isinstance(i, str) else i)) for i in ids]
     missing = [f for f in files if not f.is_file()]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 import logging
 import math
 import warnings
@@ -96,11 +97,16 @@ def read_nifti(path, chunks, fits=None, frame=None):
     return to_canonical(data, affine)
 
 
+#: the most bytes of NIfTI extensions nibabel may read (it reads every one whole; clwave uses none)
+MAX_EXTENSIONS = 64 << 20
+
+
 def _load(path):
     """``nibabel.load`` without its reports of the header fixes it makes (a log line, a RuntimeWarning): the one line
-    that refuses a header is ours."""
+    that refuses a header is ours; extensions past :data:`MAX_EXTENSIONS` are refused first."""
     import nibabel
 
+    _check_extensions(path)
     log = logging.getLogger("nibabel.global")
     disabled, log.disabled = log.disabled, True
     try:
@@ -109,6 +115,30 @@ def _load(path):
             return nibabel.load(path, mmap=False)
     finally:
         log.disabled = disabled
+
+
+def _check_extensions(path):
+    """Refuse a header whose extension flag is set and whose ``vox_offset`` leaves more than
+    :data:`MAX_EXTENSIONS` bytes for extensions: nibabel reads them all into memory, and in a ``.nii.gz`` a few
+    kilobytes inflate to gigabytes of them.  The header's first bytes alone are read (a header nibabel does not
+    take is left to it)."""
+    with (gzip.open if str(path).lower().endswith(".gz") else open)(path, "rb") as fh:
+        head = fh.read(_NIFTI2 + 4)
+    for order in "<>":
+        size = int(np.frombuffer(head[:4], order + "i4")[0]) if len(head) >= 4 else 0
+        if size in _VOX_OFFSET and len(head) >= size + 4:
+            offset = float(np.frombuffer(head, order + _VOX_OFFSET[size][0], 1, _VOX_OFFSET[size][1])[0])
+            room = offset - size - 4
+            if head[size] and room > MAX_EXTENSIONS:
+                raise FileFormatError(f"{path}: its vox_offset {offset:,.0f} declares {room:,.0f} bytes of "
+                                      f"NIfTI extensions, more than the {MAX_EXTENSIONS:,} clwave lets nibabel read "
+                                      "(it reads them whole, and clwave uses none): remove them (nibabel: "
+                                      "image.header.extensions.clear(), then save)")
+
+
+_NIFTI2 = 540
+#: by sizeof_hdr (NIfTI-1, NIfTI-2), vox_offset's type and place
+_VOX_OFFSET = {348: ("f4", 108), _NIFTI2: ("i8", 168)}
 
 
 def _codes(header) -> tuple:

@@ -2,16 +2,20 @@
 
 from __future__ import annotations
 
+import bz2
 import math
 import re
 import shlex
 import warnings
+import zlib
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_declared_size, check_whole, not_a_file, note, to_canonical
+from .inflate import decompressed
+from .shared import GZIP_MAGIC, check_declared_size, check_whole, not_a_file, note, to_canonical
 
 _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
@@ -24,8 +28,9 @@ _NRRD_SPACE_SIGNS = {
 
 
 def read_nrrd(path, fits=None, warn_spacing=True):
-    """NRRD/NHDR through pynrrd: ``space directions`` and ``space`` give the RAS affine; the header is checked
-    (its declared size against the data and :func:`check_whole`) before the data is read.  An unknown spacing
+    """NRRD/NHDR through pynrrd (gzip and bzip2 data through :func:`_inflated`): ``space directions`` and ``space``
+    give the RAS affine; the header is checked (its declared size against the data and :func:`check_whole`) before
+    the data is read.  An unknown spacing
     (``spacings: nan``) is taken as 1, with a warning unless ``warn_spacing`` is false (one was given)."""
     import nrrd
 
@@ -51,8 +56,12 @@ def read_nrrd(path, fits=None, warn_spacing=True):
         if directions is not None and _singular(directions[spatial]):
             raise FileFormatError(f"{path}: its space directions {_rows(directions[spatial])} are singular (a zero or "
                                   "repeated direction) and span no 3-D grid; correct the header's space directions")
-        check_whole(path, [sizes[a] for a in spatial + others], nrrd.reader._determine_datatype(header), fits)
-        data = nrrd.read_data(header, fh, str(path))  # index_order 'F': axes in file order, fastest first
+        dtype = nrrd.reader._determine_datatype(header)
+        check_whole(path, [sizes[a] for a in spatial + others], dtype, fits)
+        if str(header.get("encoding", "raw")).lower() in _DECOMPRESSORS:
+            data = _inflated(path, header, fh, dtype, sizes)
+        else:
+            data = nrrd.read_data(header, fh, str(path))  # index_order 'F': axes in file order, fastest first
     data = np.moveaxis(data, others, list(range(3, data.ndim)))
 
     affine = np.eye(4)
@@ -157,8 +166,8 @@ def _data_file(path, header):
 
 def _check_nrrd_size(path, header, offset):
     """A NRRD header that declares more voxels than its raw or gzip data holds (attached data starting at
-    ``offset``) is refused before pynrrd allocates them (other encodings, and a missing detached data file, are
-    left to pynrrd)."""
+    ``offset``; a gzip stream by its trailer) is refused before they are allocated (other encodings, and a missing
+    detached data file, are left to the read)."""
     import nrrd
 
     encoding = str(header.get("encoding", "raw")).lower()
@@ -167,12 +176,55 @@ def _check_nrrd_size(path, header, offset):
         path, offset = detached, 0
     if encoding not in ("raw", "gzip", "gz") or not Path(path).is_file():
         return
-    if encoding != "raw":  # the gzip stream starts after the header; its trailer counts the stream alone
-        offset = 0
     sizes = [int(n) for n in header["sizes"]]
     if min(sizes) < 1:
         raise FileFormatError(f"{path}: its header declares sizes {' '.join(map(str, sizes))}; every axis needs at "
                               "least one voxel")
     nbytes = math.prod(sizes) * nrrd.reader._determine_datatype(header).itemsize
     skip = max(int(header.get("byte skip", 0) or 0), 0)
-    check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=encoding != "raw", longer=True)
+    if encoding == "raw":
+        check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=False)
+    else:  # the byte skip counts bytes of the stream, which starts after the header
+        check_declared_size(path, skip, nbytes, sizes[::-1], gzip=True, start=offset, longer=True)
+
+
+#: each compressed encoding's decompressor (a new one for each gzip member or bzip2 stream) and the first bytes of one
+_DECOMPRESSORS = {"gzip": (lambda: zlib.decompressobj(zlib.MAX_WBITS | 16), GZIP_MAGIC),
+                  "bzip2": (bz2.BZ2Decompressor, b"BZh")}
+_DECOMPRESSORS.update(gz=_DECOMPRESSORS["gzip"], bz2=_DECOMPRESSORS["bzip2"])
+
+
+def _inflated(path, header, fh, dtype, sizes) -> np.ndarray:
+    """A gzip or bzip2 NRRD's data (after the header read from ``fh``, or in its detached data file), every gzip
+    member or bzip2 stream, decompressed into its array as pynrrd's ``read_data`` lays it out, never one byte past
+    the ``byte skip`` and voxels its header declares: a gzip trailer counts its member alone, modulo 2^32, and
+    pynrrd inflates all of the first member before it compares.  ``line skip`` counts lines of the file before the
+    stream, ``byte skip`` bytes of the stream, as Teem reads them (pynrrd skips the bytes in both)."""
+    lines = int(header.get("line skip", header.get("lineskip", 0)) or 0)
+    skip = int(header.get("byte skip", header.get("byteskip", 0)) or 0)
+    encoding = str(header["encoding"]).lower()
+    if lines < 0 or skip < 0:
+        raise FileFormatError(f"{path}: its line skip {lines} or byte skip {skip} is negative; a {encoding} stream is "
+                              "read from its start (Teem reads no byte skip of -1 in one): give the count of lines "
+                              "or bytes to skip")
+    nbytes = math.prod(sizes) * dtype.itemsize
+    voxels = " x ".join(map(str, sizes[::-1]))
+    buffer = np.empty(nbytes, np.uint8)
+    held = 0  # bytes of the stream decompressed
+    with ExitStack() as files:
+        detached = _data_file(path, header)
+        source = files.enter_context(open(detached, "rb")) if detached is not None else fh
+        for _ in range(lines):
+            source.readline()
+        for piece in decompressed(source, *_DECOMPRESSORS[encoding], skip + nbytes + 1):
+            held += len(piece)
+            if held > skip + nbytes:
+                raise FileFormatError(f"{path}: its {encoding} stream holds more than the {skip + nbytes:,} bytes its "
+                                      f"header declares ({voxels} voxels); its header is wrong or the file is not "
+                                      "what it says")
+            used = piece[max(skip - held + len(piece), 0):]
+            buffer[held - skip - len(used):held - skip] = np.frombuffer(used, np.uint8)
+    if held < skip + nbytes:
+        raise FileFormatError(f"{path}: its header declares {voxels} voxels ({nbytes:,} bytes) but its {encoding} "
+                              f"stream holds {max(held - skip, 0):,} bytes; it is truncated or its header is wrong")
+    return buffer.view(dtype).reshape(sizes[::-1]).T

@@ -494,23 +494,25 @@ def stated_affine(turn, shape_zyx, spacing_zyx, origin_xyz) -> np.ndarray:
 GZIP_MAGIC = b"\x1f\x8b"
 
 
-def _gzip_length(path, most) -> int | None:
-    """The length of ``path``'s gzip stream, every member, counted a megabyte at a time (kept nowhere) up to ``most``
-    bytes; where the stream is damaged or cut short, the length read until then; None where the file does not start
-    with it (a NRRD's follows its text header)."""
+def _gzip_length(path, most, start=0) -> int | None:
+    """The length of ``path``'s gzip stream from byte ``start`` on, every member, counted a megabyte at a time (kept
+    nowhere) up to ``most`` bytes; where the stream is damaged or cut short, the length read until then; None where
+    no gzip stream starts there."""
     import gzip
     import zlib
 
     with open(path, "rb") as fh:
+        fh.seek(start)
         if fh.read(2) != GZIP_MAGIC:
             return None
-    total = 0
-    try:
-        with gzip.open(path, "rb") as fh:
-            while total < most and (chunk := fh.read(1 << 20)):
-                total += len(chunk)
-    except (OSError, EOFError, zlib.error):
-        pass
+        fh.seek(start)
+        total = 0
+        try:
+            with gzip.GzipFile(fileobj=fh, mode="rb") as stream:
+                while total < most and (chunk := stream.read(1 << 20)):
+                    total += len(chunk)
+        except (OSError, EOFError, zlib.error):
+            pass
     return total
 
 
@@ -549,29 +551,26 @@ def folder_files(folder):
                   key=_natural_key)
 
 
-def check_declared_size(path, offset, nbytes, shape, gzip=None, longer=False):
+def check_declared_size(path, offset, nbytes, shape, gzip=None, start=0, longer=False):
     """Refuse a header that declares more data than the file holds, before anything is allocated
     (gzip, by default for a ``.gz`` name: its trailer's size of the uncompressed stream, modulo 2^32; where that is
-    short, the stream counted, as the trailer counts its last member only and zero padding may follow it).
-    ``longer``: a gzip stream that holds more than declared is refused too, for a reader that decompresses the whole
-    stream before it compares (pynrrd): by its trailer, counted up to one byte past the declared end where the file is
-    a gzip stream alone."""
+    short, the stream from byte ``start`` of the file counted, as the trailer counts its last member only and zero
+    padding may follow it).  ``longer``: a gzip stream whose trailer counts more than a declared size below 2^32 is
+    refused too (its last member alone holds more); any other stream longer than declared is its reader's to
+    bound (``nrrd._inflated``)."""
     path = Path(path)
     gzip = path.name.lower().endswith(".gz") if gzip is None else gzip
-    more = False
     if gzip:
         with open(path, "rb") as fh:
             fh.seek(-4, os.SEEK_END)
             present = int.from_bytes(fh.read(4), "little")
         lies = (offset + nbytes) % 2 ** 32 > present  # the trailer counts the stream modulo 2^32
-        if lies and (counted := _gzip_length(path, offset + nbytes)) is not None:
+        if lies and (counted := _gzip_length(path, offset + nbytes, start)) is not None:
             present, lies = counted, offset + nbytes > counted
-        more = longer and (offset + nbytes) % 2 ** 32 < present
-        if more and (counted := _gzip_length(path, offset + nbytes + 1)) is not None:
-            present, more = counted, offset + nbytes < counted
+        more = longer and offset + nbytes < present  # never where the size declared is 2^32 or more
     else:
         present = path.stat().st_size
-        lies = offset + nbytes > present
+        lies, more = offset + nbytes > present, False
     if more:
         raise FileFormatError(f"{path}: its gzip stream holds {present:,} bytes or more, more than the "
                               f"{offset + nbytes:,} bytes its header declares ({' x '.join(map(str, shape))} voxels); "
