@@ -14,6 +14,7 @@ from .io.phantoms import phantom
 from .model.transfer import TransferFunction
 from .model.wavelet import WaveletVolume
 from .model.camera import Camera
+from .model.geometry import named_view
 from .model.clip import Clip
 from .model.conebeam import ConeBeam, transmitted
 from .io.result import RenderResult
@@ -35,7 +36,7 @@ __all__ = [
     "KernelBuildError", "OutputError", "OutputExistsError", "HostMemoryError", "WorkerLostError", "Volume",
     "ComputeContext",
     "list_devices",
-    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "Clip", "ConeBeam",
+    "select_device", "load", "phantom", "TransferFunction", "WaveletVolume", "Camera", "named_view", "Clip", "ConeBeam",
     "transmitted",
     "RenderResult",
     "SplatRenderer", "splat", "progressive", "Turntable", "turntable", "Phong", "RayTracer", "raytrace", "__version__",

@@ -112,8 +112,9 @@ def test_nearly_opaque_everywhere_is_warned(rng):
     told = _warned(TransferFunction.preset("hydrogen"), vol)
     assert len(told) == 1 and "nearly opaque" in told[0] and "its window is 0 .. 1, the volume's values 10" in told[0]
     assert "6.4 or more across the box's thinnest side: a solid box" in told[0] and "opacity_unit=" in told[0]
-    told = _warned(TransferFunction.preset("ct-bone"), vol)
-    assert len(told) == 1 and "32 or more across the box's thinnest side" in told[0], told
+    told = _warned(TransferFunction.preset("ct-bone"), vol)  # its values no HU either (no air): said first
+    assert len(told) == 2 and "is for CT in Hounsfield units" in told[0], told
+    assert "32 or more across the box's thinnest side" in told[1], told
     told = _warned(TransferFunction.preset("grey", opacity_unit=0.05), vol)
     assert len(told) == 1 and "or more across one voxel" in told[0], told
     assert not _warned(TransferFunction.preset("grey"), vol)

@@ -339,3 +339,52 @@ def test_a_colour_volumes_window_in_sample_units_is_warned():
         warnings.simplefilter("error")
         for window in ((0, 0.4), "auto", (-0.5, 1.2)):
             TransferFunction.preset("grey", window=window).classify(rgb)
+
+
+def _ellipsoid_volume(inside, outside, n=24):
+    """An ellipsoid of value ``inside`` in ``outside`` (1 mm voxels): an MRI's body in its noise, or a CT's in air."""
+    z, y, x = np.mgrid[:n, :n, :n] - (n - 1) / 2
+    body = (x / 10) ** 2 + (y / 8) ** 2 + (z / 11) ** 2 <= 1
+    return Volume(np.where(body, inside, outside).astype(np.float32))
+
+
+@pytest.mark.parametrize("name, window, inside, outside, warned", [
+    ("ct-bone", None, 600.0, 20.0, True),          # trial28's M4: a T1 MRI (fat 600, noise 20) under a CT preset
+    ("ct-soft-tissue", None, 600.0, 20.0, True),
+    ("ct-bone", (0.0, 800.0), 600.0, 20.0, False),  # a window moved off air: the user's, in its units
+    ("mri", None, 600.0, 20.0, False),
+    ("ct-bone", None, 1000.0, -1000.0, False),      # a CT in HU: air about it
+    ("ct-bone", None, 1000.0, -600.0, False),       # lung, no air: a CT cropped inside the chest
+    ("ct-bone", None, 1000.0, -400.0, True),        # nothing at or below -500
+])
+def test_a_ct_preset_on_values_that_are_no_hu_is_warned(name, window, inside, outside, warned):
+    """A CT preset whose window reaches air (-1000 HU) on a scalar volume with no value at or below -500 (no air, no
+    lung: an MRI's or a PET's values) warns in one line naming the mri and grey presets and a window; a window the
+    user moved, another preset, or a CT does not."""
+    import warnings
+
+    from clwave.errors import ClwaveWarning
+
+    vol = _ellipsoid_volume(inside, outside)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        TransferFunction.preset(name, window=window).classify(vol)
+    lines = [str(w.message) for w in seen if "Hounsfield" in str(w.message)]
+    assert len(lines) == warned and all(isinstance(w.message, ClwaveWarning) for w in seen)
+    if warned:
+        assert lines[0].startswith(f"the transfer function {name} is for CT in Hounsfield units, and this volume's "
+                                   f"least value is {outside:g}, with no air")
+        assert "preset('mri') or 'grey', or window= in its units" in lines[0] and "\n" not in lines[0]
+
+
+def test_a_ct_preset_on_an_mri_warns_on_the_command_line(tmp_path, capsys):
+    """The command line's words: --tf mri, --tf grey, --tf-window (trial28's `render SE7 --tf ct-bone`)."""
+    from test_cli import run
+
+    np.save(tmp_path / "mri.npy", _ellipsoid_volume(600.0, 20.0).data)
+    code, out, err = run(capsys, "compress", str(tmp_path / "mri.npy"), "--tf", "ct-bone", "-o",
+                         str(tmp_path / "m.clw"))
+    assert code == 0
+    assert "clwave: warning: the transfer function ct-bone is for CT in Hounsfield units, and this volume's least " \
+           "value is 20, with no air (-1000) or lung (below -500): it may be no CT (an MRI: --tf mri or --tf grey, " \
+           "or --tf-window LO,HI in its units)" in err

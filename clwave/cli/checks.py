@@ -273,5 +273,20 @@ def check_image_size(size, device, pixel_bytes, image="a {} image"):
 def make_camera(args):
     from ..model.camera import Camera
 
-    return Camera(args.azimuth, args.elevation, parse_size(args), extent=args.extent, fit=args.fit,
+    return Camera(**view_angles(args), size=parse_size(args), extent=args.extent, fit=args.fit,
                   perspective=args.perspective, distance=args.distance, fov=args.fov)
+
+
+def view_angles(args, default=(30.0, 20.0)) -> dict:
+    """``dict(azimuth=, elevation=)`` of ``--view NAME`` (:func:`~clwave.model.geometry.named_view`), or of
+    ``--azimuth`` and ``--elevation`` (each ``default`` where not given); both kinds refused in one line."""
+    from ..model.geometry import named_view
+
+    given = [f"--{name}" for name in ("azimuth", "elevation") if getattr(args, name, None) is not None]
+    if args.view is None:
+        return dict(azimuth=default[0] if args.azimuth is None else args.azimuth,
+                    elevation=default[1] if args.elevation is None else args.elevation)
+    if given:
+        raise InputError(f"--view {args.view} sets the azimuth and elevation that {' and '.join(given)} "
+                         f"set{'s' * (len(given) == 1)}: give one or the other")
+    return named_view(args.view)

@@ -60,6 +60,7 @@ def run(args):
     from ..io.images import TIFF_SUFFIXES, pixel_size, write_tiff
     from ..io.result import RenderResult
     from ..model.conebeam import NOT_ATTENUATION, below_zero, poses, transmitted
+    from ..model.geometry import named_view
     from ..raytrace.tracer import RayTracer
     from ..splat.renderer import SplatRenderer
 
@@ -86,11 +87,16 @@ def run(args):
     isocentre = (0.0, 0.0, 0.0) if centre else numbers(args.isocentre, "--isocentre", (3,))
     if not all(np.isfinite(isocentre)):
         raise InputError(f"--isocentre {args.isocentre} must be three finite numbers X,Y,Z")
-    geometry = dict(rows=read_pose_table(args.poses), size=(H, W), pixel=pixel if len(pixel) == 2 else pixel[0],
+    if (args.poses is None) == (args.view is None):
+        raise InputError("give --poses TABLE (a pose a row) or --view NAME (one pose from that side of the patient), "
+                         "one of them")
+    table = args.poses if args.view is None else f"--view {args.view}"
+    rows = read_pose_table(args.poses) if args.view is None else [named_view(args.view)]
+    geometry = dict(rows=rows, size=(H, W), pixel=pixel if len(pixel) == 2 else pixel[0],
                     dso=args.dso, dsd=args.dsd, offset=offset, isocentre=isocentre)
-    cameras = table_poses(geometry, args.poses)  # every pose checked before the input is read
+    cameras = table_poses(geometry, table)  # every pose checked before the input is read
     if out.suffix.lower() == ".png" and len(cameras) != 1:
-        raise InputError(f"a .png holds one radiograph; {args.poses} has {len(cameras)} poses: write .npy or .tif")
+        raise InputError(f"a .png holds one radiograph; {table} has {len(cameras)} poses: write .npy or .tif")
     device_memory = parse_device_memory(args)
     wv, _ = build_model(args, hu_hint=False)  # a model in HU is refused below, naming --hu-to-mu
     if wv.channels != 1:
@@ -115,11 +121,11 @@ def run(args):
 
     views = []
     for i, cb in enumerate(cameras):  # every pose's view resolved (checked) before the first is rendered
-        with pose_named(args.poses, i + 1, geometry["rows"][i]):
+        with pose_named(table, i + 1, geometry["rows"][i]):
             views.append(cb.view(wv))
 
     def render(i):  # pose i's radiograph
-        with pose_named(args.poses, i + 1, geometry["rows"][i]):
+        with pose_named(table, i + 1, geometry["rows"][i]):
             return draw(views[i])
     start = time.perf_counter()
 
@@ -215,6 +221,8 @@ def log_window(window):
 
 
 def add_parser(sub):
+    from ..model.geometry import VIEWS
+
     # no --tf, --tf-window or --classify: a radiograph is line integrals of the scalar (or mu), never of colours
     p = add_command(sub, "drr", "digitally reconstructed radiographs: cone-beam X-rays of many poses", run,
                     "output .npy or .tif/.tiff (N, H, W) float32 stack, or .png for one pose", classify=False)
@@ -224,7 +232,10 @@ def add_parser(sub):
                         "splatting refuses; on CPUs often as fast: docs/known-gaps.md §13)")
     p.add_argument("--tolerance", type=float, help="--method raytrace: absolute error per line integral "
                    "(default 1e-3)")
-    p.add_argument("--poses", required=True, help="CSV pose table: a header line naming columns among azimuth, "
+    p.add_argument("--view", choices=VIEWS, help="one pose from a RAS volume's side instead of --poses: anterior "
+                   "(AP: the patient's left on the image's right), posterior, left, right, inferior, superior "
+                   "(docs/coordinates.md §2)")
+    p.add_argument("--poses", help="CSV pose table: a header line naming columns among azimuth, "
                    "elevation, roll, dso, dsd, offset_u, offset_v, isocentre_x/_y/_z (degrees, world units), or "
                    "p00..p23 (a 3x4 projection matrix), then one pose a line; # starts a comment line "
                    "(docs/coordinates.md §5)")

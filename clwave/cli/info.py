@@ -203,7 +203,7 @@ def _volume_lines(f) -> list:
         lines.append(("series", ", ".join(s for s in said if s)))
     if f["stored_shape"] is not None:  # read whole: weighed as the file stores it, its axes in the file's order
         resampled = "" if not f["resampled"] else ", its sheared grid resampled onto a straight one wider by its " \
-            "shifts" if f["nifti"] else ", a gantry tilt resampled onto a straight stack wider by its shifts"
+            "shifts" if f["nifti"] else ", resampled onto an even, straight stack (a gantry tilt, uneven slices)"
         stored = f" (stored as {f['stored_dtype']})" if f["stored_dtype"] else ""
         read = ", a time series" if f["time"] else f"{stored}{resampled}"
         lines.append(("stored", f"{' x '.join(map(str, f['stored_shape']))} values of {f['dtype']}, in the file's "

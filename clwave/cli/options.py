@@ -364,10 +364,14 @@ def check_frames_output(path, force) -> Path:
 
 def add_camera_options(p):
     from ..model.camera import FITS
+    from ..model.geometry import VIEWS
 
     g = p.add_argument_group("view")
-    g.add_argument("--azimuth", type=float, default=30.0, help="degrees (default 30)")
-    g.add_argument("--elevation", type=float, default=20.0, help="degrees (default 20)")
+    g.add_argument("--azimuth", type=float, help="degrees (default 30)")
+    g.add_argument("--elevation", type=float, help="degrees (default 20)")
+    g.add_argument("--view", choices=VIEWS, help="a RAS volume's side, drawn as radiographs are: anterior (AP: the "
+                   "patient's left on the image's right), posterior, left, right (laterals), inferior (as CT slices), "
+                   "superior; instead of --azimuth and --elevation")
     g.add_argument("--perspective", action="store_true", help="perspective camera (default orthographic)")
     g.add_argument("--fov", type=float, help="with --perspective: vertical field of view, degrees (default 30)")
     g.add_argument("--distance", type=float, help="with --perspective: eye distance from the target (world units; "

@@ -33,6 +33,29 @@ def view_frame(azimuth: float, elevation: float) -> tuple:
     return n, u, v
 
 
+#: The anatomical views of a RAS+ volume (x the patient's right, y anterior, z superior; docs/coordinates.md §2): the
+#: (azimuth, elevation) of a camera or X-ray source on that side of the patient, each drawn as radiographs and CT
+#: slices are shown: anterior is the AP view (the patient's left on the image's right, head up), posterior the PA
+#: (their right on the right), left and right the laterals (a left lateral: anterior on the image's left), inferior
+#: an axial view as CT slices are shown (from the feet: anterior up, the patient's left on the right), superior
+#: from above the head (anterior up, their right on the right).
+VIEWS = {"anterior": (90.0, 0.0), "posterior": (-90.0, 0.0), "left": (180.0, 0.0), "right": (0.0, 0.0),
+         "superior": (-90.0, 90.0), "inferior": (90.0, -90.0)}
+
+
+def named_view(name) -> dict:
+    """``dict(azimuth=, elevation=)`` of the anatomical view ``name`` (:data:`VIEWS`), for :class:`~clwave.Camera`
+    and :class:`~clwave.ConeBeam`: ``Camera(**named_view("anterior"), size=256)``.
+
+    >>> named_view("anterior")
+    {'azimuth': 90.0, 'elevation': 0.0}
+    """
+    key = name.strip().lower() if isinstance(name, str) else None
+    if key not in VIEWS:
+        raise InputError(f"unknown view {name!r}; choose one of {', '.join(VIEWS)} (a RAS+ volume's sides)")
+    return dict(zip(("azimuth", "elevation"), VIEWS[key]))
+
+
 def orthonormal_frame(n, u, v) -> tuple:
     """Validate an orthonormal frame; components below 1e-13 (cos 90 deg) are snapped to 0."""
     vecs = []

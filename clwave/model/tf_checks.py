@@ -82,3 +82,18 @@ def check_window(window, option=None):
         raise InputError(f"window ({lo:g}, {hi:g}) must be two finite numbers (lo, hi) with lo < hi",
                          cli=option and f"{option} {lo:g},{hi:g} must be two finite numbers LO,HI with LO < HI")
     return (lo, hi)
+
+
+#: A CT of a patient holds air (-1000 HU) and lung (-850 .. -500 HU) about or in it: a volume whose least value is
+#: above this holds neither, and is no CT in Hounsfield units (an MRI's, a PET's values are 0 or more).
+AIR_HU = -500.0
+
+
+def not_hounsfield(name, lo, least) -> str | None:
+    """Why the CT preset ``name``, its window from ``lo`` (the input's units), does not fit a volume whose least value
+    is ``least``: the preset's window reaches air (a window moved above it is the user's) and the volume's values
+    do not (docs/model.md §5); None where it fits, or is no CT preset."""
+    if not str(name).startswith("ct-") or lo > AIR_HU or least <= AIR_HU:
+        return None
+    return (f"the transfer function {name} is for CT in Hounsfield units, and this volume's least value is "
+            f"{least:.4g}, with no air (-1000) or lung (below {AIR_HU:g}): it may be no CT (an MRI")

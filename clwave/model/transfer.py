@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, NothingVisibleError, warn_outside
 from .colour_key import DEFAULT_TOLERANCE, auto_key, check_key, key_weight
-from .tf_checks import check_opacity_unit, check_points, check_window
+from .tf_checks import check_opacity_unit, check_points, check_window, not_hounsfield
 from .tf_passes import AUTO_SAMPLES, PiecewiseLinear, auto_window, classified, rgb_scale, scan
 from .tf_presets import PRESETS as _PRESETS, colormap_named, colormap_points
 from .volume import Volume
@@ -368,7 +368,8 @@ class TransferFunction:
                                    cli=f"{line} (--tf-window LO,HI) or another preset")
 
     def _warn_opaque(self, vol, window, scale, alpha=None):
-        """Warn where this function (in ``vol``'s data units: :meth:`_on`) makes the in-memory ``vol`` nearly opaque
+        """Warn where this function (in ``vol``'s data units: :meth:`_on`) is a CT preset on a scalar volume that is no
+        CT in Hounsfield units (:func:`~.tf_checks.not_hounsfield`); where it makes the in-memory ``vol`` nearly opaque
         (:meth:`opaque_line` of a strided subsample of its voxels and of its box's faces' voxels), or nearly
         transparent: no ray along the box's axes of optical depth :data:`TRANSPARENT_RAY` (through ``alpha``, the
         classification's opacity, where given; else through a strided grid of the voxels); naming the window in the
@@ -381,6 +382,10 @@ class TransferFunction:
         paint = self.painter(vol.channels, window, scale, vol.spacing)
         seen = ("volume's values" if vol.channels == 1 else "volume's luminance", np.nanmin(values) + shift,
                 np.nanmax(values) + shift)
+        line = vol.channels == 1 and not_hounsfield(self.name, self.data_points(window)[0] + shift, seen[1])
+        if line:
+            warn_outside(ClwaveWarning(line + ": TransferFunction.preset('mri') or 'grey', or window= in its units)",
+                                       cli=line + ": --tf mri or --tf grey, or --tf-window LO,HI in its units)"))
         line = self.opaque_line(paint, data, np.concatenate(faces), vol.spacing, vol.shape, window, shift, "volume",
                                 seen)
         if line is not None:

@@ -23,10 +23,12 @@ from .shear import straight_grid, unshear
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 # A series whose slices drift sideways along the normal by more than STRAY_PIXELS of a pixel is tilted (resampled),
-# and one whose slices stray from an even spacing by more than STRAY_SLICES of a gap misses a slice (refused); below
-# them the strays are rounding in the files' decimal positions, and the volume is misplaced by less than a tenth of
-# a voxel.  Slices that scatter about their drift by more than SCATTER_PIXELS of a pixel lie on no line: refused.
-STRAY_PIXELS, STRAY_SLICES, SCATTER_PIXELS = 0.1, 0.1, 0.5
+# and one whose slices stray from an even spacing by more than STRAY_SLICES of a gap is uneven (a missing slice, two
+# spacings: resampled); below them the strays are rounding in the files' decimal positions, and the volume is
+# misplaced by less than a tenth of a voxel.  Slices that scatter about their drift by more than SCATTER_PIXELS of a
+# pixel lie on no line, and a gap of more than MISSING times the smallest is no missing slice (MISSING - 1 of them in
+# a row at most) but another acquisition: refused.
+STRAY_PIXELS, STRAY_SLICES, SCATTER_PIXELS, MISSING = 0.1, 0.1, 0.5, 4
 # Attributes every slice of a DICOM image series needs
 _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSpacing",
                      "Rows", "Columns", "PixelData")
@@ -35,9 +37,9 @@ _DICOM_SLICE_TAGS = ("ImagePositionPatient", "ImageOrientationPatient", "PixelSp
 def read_dicom_folder(where, path, headers, progress_bar, fits=None):
     """The series ``where`` names (in messages), its single-frame files ``[(path, header)]`` under ``path`` (a
     folder, a tree, a DICOMDIR: :mod:`.dicom_tree` found them): slices sorted along their normal, rescaled, in RAS;
-    refused unless they are evenly spaced along it (:func:`_even_spacing`) and lie on a line (:func:`_drift`); a
-    gantry tilt (slices shifted sideways in proportion to their distance) is resampled onto a straight stack
-    (:func:`.shear.unshear`)."""
+    resampled onto even slices along it where uneven (:func:`_even_slices`), refused unless they lie on a line
+    (:func:`_drift`); a gantry tilt (slices shifted sideways in proportion to their distance) is resampled onto a
+    straight stack (:func:`.shear.unshear`)."""
     if len(headers) < 2:
         raise FileFormatError(f"{where} has 1 slice; a volume needs at least 2")
     for file, header in headers:
@@ -98,8 +100,8 @@ def _one_spacing(where, headers):
 def place_slices(where, path, positions, cosines, pixel, size, names, read, fits, shared):
     """The volume of slices at ``positions`` (n x 3, LPS mm; ``names[i]`` names slice i in messages) with the
     orientation ``cosines`` (a row's direction, then a column's), ``pixel`` spacing (between rows, between columns)
-    and ``size`` (rows, columns): sorted along their normal, refused unless evenly spaced along it
-    (:func:`_even_spacing`) and on a line (:func:`_drift`), a gantry tilt resampled onto a straight stack
+    and ``size`` (rows, columns): sorted along their normal, resampled onto even slices where uneven
+    (:func:`_even_slices`), refused unless on a line (:func:`_drift`), a gantry tilt resampled onto a straight stack
     (:func:`.shear.unshear`); ``read(order)`` gives their pixels (n, rows, columns) in that order, once weighed
     (``fits``, by ``path``); ``shared``: why two slices may share a position, and the fix, for the caller's kind of
     input.  In RAS+, with spacing and origin."""
@@ -114,27 +116,31 @@ def place_slices(where, path, positions, cosines, pixel, size, names, read, fits
         raise FileFormatError(f"{first} and {second} of {where} share one position; {shared}")
     dy, dx = pixel  # row spacing, column spacing
     drift = _drift(where, positions[order], distance[order], normal, min(dx, dy))
-    dz = _even_spacing(where, distance[order])
+    dz, even = _even_slices(where, distance[order])
     tilted = bool(np.any(drift))
+    count = len(order) if even is None else len(even)
     # index (column, row, slice) -> LPS patient coordinates (mm): a tilted series' slices shift by the drift
     affine_lps = np.eye(4)
     affine_lps[:3, :3] = np.column_stack([row_dir * dx, col_dir * dy, (normal + drift) * dz])
     affine_lps[:3, 3] = positions[order[0]]
-    grid = straight_grid((size[1], size[0], len(order)), affine_lps) if tilted else None
+    grid = straight_grid((size[1], size[0], count), affine_lps) if tilted else None
     straight = affine_lps if grid is None else grid.affine  # the straight stack's, wider by the shifts
     try:
-        if tilted:  # weighed before a slice is read
-            check_whole(path, grid.shape[::-1], np.float32, fits, resampled=True)
+        if tilted or even is not None:  # weighed before a slice is read
+            check_whole(path, grid.shape[::-1] if tilted else (count, *size), np.float32, fits, resampled=True)
         data_zyx = read(order)
     except Declared as declared:  # describe(): its place from the headers
-        declared.place(grid.shape if tilted else (size[1], size[0], len(order)), _LPS_TO_RAS @ straight)
+        declared.place(grid.shape if tilted else (size[1], size[0], count), _LPS_TO_RAS @ straight)
         raise
+    if even is not None:
+        data_zyx = _resample_along(data_zyx, distance[order], even)
     data_ijk = data_zyx.transpose((2, 1, 0) + tuple(range(3, data_zyx.ndim)))
     if tilted:
         depth = distance.max() - distance.min()
         note(f"{where} has a gantry tilt of {np.degrees(np.arctan(np.linalg.norm(drift))):.3g} degrees (its slices "
              f"shift {np.linalg.norm(drift) * depth:.4g} mm sideways over {depth:.4g} mm along their normal): "
-             f"resampled onto a straight stack, linearly, the new margins filled with its least value")
+             f"resampled straight onto the closest patient (RAS) axes, linearly, the new margins filled with its least "
+             f"value")
         data_ijk = unshear(data_ijk, grid, data_ijk.min())
     return to_canonical(data_ijk, _LPS_TO_RAS @ straight)
 
@@ -193,22 +199,46 @@ def _drift(where, positions, distance, normal, pixel) -> np.ndarray:
     return slope if shift > STRAY_PIXELS * pixel and shift > 4 * scatter else np.zeros(3)
 
 
-def _even_spacing(where, distance) -> float:
-    """The slice gap of slices at ``distance`` (sorted) along the normal, refused unless every slice lies
-    within :data:`STRAY_SLICES` of a gap of the evenly spaced grid fitted to them (least squares)."""
+def _even_slices(where, distance):
+    """``(dz, even)``: the slice gap of slices at ``distance`` (sorted) along the normal, and None where every slice
+    lies within :data:`STRAY_SLICES` of a gap of the evenly spaced grid fitted to them (least squares); else (a
+    missing slice, two spacings) the positions of the even slices that :func:`_resample_along` makes, their gap the
+    smallest that divides the span nearest the smallest gap, with a warning naming the gaps and where.  Refused
+    where a gap exceeds :data:`MISSING` times the smallest."""
     k = np.arange(len(distance)) - (len(distance) - 1) / 2  # the grid fitted, the files' rounding about it
     dz = float(k @ (distance - distance.mean()) / (k @ k))
-    stray = np.abs(distance - distance.mean() - dz * k).max() / dz
-    if stray > STRAY_SLICES:
-        gaps = np.diff(distance)
-        median = float(np.median(gaps))
-        i = int(np.argmax(np.abs(gaps - median)))
+    if np.abs(distance - distance.mean() - dz * k).max() / dz <= STRAY_SLICES:
+        return dz, None
+    gaps = np.diff(distance)
+    smallest, i = float(gaps.min()), int(np.argmax(gaps))
+    if gaps[i] > MISSING * smallest:
         raise FileFormatError(
-            f"{where} is not evenly spaced: its slice gaps range from {gaps.min():.4g} to {gaps.max():.4g} mm, the "
-            f"slices at {distance[i]:.4g} and {distance[i + 1]:.4g} mm along the normal are {gaps[i]:.4g} mm apart "
-            f"where the median gap is {median:.4g} mm (a missing slice?); supply the complete series, or resample "
-            "it onto even slices first (e.g. with 3D Slicer)")
-    return float(dz)
+            f"{where} is not one evenly spaced acquisition: the slices at {distance[i]:.4g} and {distance[i + 1]:.4g} "
+            f"mm along the normal are {gaps[i]:.4g} mm apart, more than {MISSING} times its smallest gap "
+            f"({smallest:.4g} mm), more than {MISSING - 1} missing slices; supply the complete series, or split its "
+            "acquisitions into separate folders")
+    span = float(distance[-1] - distance[0])
+    count = int(round(span / smallest)) + 1
+    # runs of one gap (to a tenth of the smallest): where the spacing changes, or a slice is missing
+    starts = [0] + [n for n in range(1, len(gaps)) if abs(gaps[n] - gaps[n - 1]) > STRAY_SLICES * smallest]
+    runs = [f"{np.mean(gaps[a:b]):.4g} mm from {distance[a]:.4g} to {distance[b]:.4g} mm"
+            for a, b in zip(starts, starts[1:] + [len(gaps)])]
+    shown = ", ".join(runs[:6]) + (f" and {len(runs) - 6} more changes" if len(runs) > 6 else "")
+    note(f"{where} is not evenly spaced: its slice gaps are {shown} along the normal; resampled onto {count} even "
+         f"slices {span / (count - 1):.4g} mm apart, linearly between the slices it has")
+    return span / (count - 1), distance[0] + span * np.arange(count) / (count - 1)
+
+
+def _resample_along(data_zyx, distance, even):
+    """Slices ``data_zyx`` at ``distance`` (sorted, along the normal) linearly interpolated at the positions
+    ``even`` (within their range: nothing extrapolated), float32: a slice at a position that exists is kept."""
+    upper = np.clip(np.searchsorted(distance, even, side="right"), 1, len(distance) - 1)
+    lower = upper - 1
+    weight = np.clip((even - distance[lower]) / (distance[upper] - distance[lower]), 0.0, 1.0)
+    out = np.empty((len(even),) + data_zyx.shape[1:], np.float32)
+    for n, (a, b, w) in enumerate(zip(lower, upper, weight)):
+        out[n] = data_zyx[a] if w == 0 else data_zyx[b] if w == 1 else (1 - w) * data_zyx[a] + w * data_zyx[b]
+    return out
 
 
 def padding(ds):

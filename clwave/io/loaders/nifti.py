@@ -91,8 +91,8 @@ def read_nifti(path, chunks, fits=None, frame=None):
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
     if sheared:
         note(f"{path}'s affine is sheared {grid.degrees:.3g} degrees (its axes are not at right angles: a CT's gantry "
-             f"tilt that dcm2niix left uncorrected writes one): resampled onto a straight grid, linearly, the new "
-             f"margins filled with its least value")
+             f"tilt that dcm2niix left uncorrected writes one): resampled onto a straight grid on the closest RAS "
+             f"axes, linearly, the new margins filled with its least value")
         return to_canonical(unshear(data, grid, data.min()), grid.affine)
     return to_canonical(data, affine)
 

@@ -4,6 +4,7 @@ straight grid, which is what the renderers draw: the one home of that resampling
 
 from __future__ import annotations
 
+import itertools
 from typing import NamedTuple
 
 import numpy as np
@@ -16,9 +17,9 @@ STRAY_VOXELS = 0.1
 
 class Straight(NamedTuple):
     """The straight grid that holds a sheared one: its ``shape`` (ni, nj, nk) and index -> world ``affine``;
-    ``shear`` (3 x 3, unit upper triangular) and ``low`` (3) map a sheared index p to the straight one
-    ``shear @ p - low``; ``moved``: how far the shear moves the sheared grid's far corner (voxels, the largest along
-    an axis); ``degrees``: the largest angle of a sheared axis from its straight one."""
+    ``shear`` (3 x 3) and ``low`` (3) map a sheared index p to the straight one ``shear @ p - low``; ``moved``: how
+    far the shear moves the sheared grid's far corner (voxels, the largest along an axis); ``degrees``: the largest
+    angle of a sheared axis from its straight one."""
 
     shape: tuple
     affine: np.ndarray
@@ -29,24 +30,34 @@ class Straight(NamedTuple):
 
 
 def straight_grid(shape, affine) -> Straight:
-    """The straight grid of ``affine`` (4 x 4, index -> world) over a grid of ``shape`` (its first 3 axes): the
-    affine's 3 x 3 part factored as Q R (QR, R's diagonal positive), Q D the straight grid's axes (D = R's diagonal:
-    its first axis the sheared grid's, its second in the plane of the first two, as a tilted series' rows and
-    columns stay in their slices) and D⁻¹ R the shear within it; wider by the shifts, as a tilted stack is."""
-    q, r = np.linalg.qr(affine[:3, :3])
-    sign = np.where(np.diag(r) < 0, -1.0, 1.0)
-    q, r = q * sign, r * sign[:, None]
-    spacing = np.diag(r)
-    shear = r / spacing[:, None]
+    """The straight grid of ``affine`` (4 x 4, index -> world) over a grid of ``shape`` (its first 3 axes), on the
+    right-angled axes closest to the world's: the affine's 3 x 3 part, its columns in each of their 6 orders, is
+    factored as Q R (QR, R's diagonal positive), whose Q keeps the first column's direction and the plane of the
+    first two (a tilted series' rows and columns, or its rows and its stack along the table); the Q least oblique to
+    the world's axes (the first of equals) is the straight grid's axes (in the file's order: axis i made from column
+    i), R's diagonal its spacing (each axis's part of its column: a voxel keeps its volume) and the rest the shear
+    and rotation undone; wider by the shifts."""
+    m = affine[:3, :3]
+    frames = []
+    for order in itertools.permutations(range(3)):
+        q, r = np.linalg.qr(m[:, order])
+        sign = np.where(np.diag(r) < 0, -1.0, 1.0)
+        q, r = q * sign, r * sign[:, None]
+        oblique = float(np.arccos(np.clip(np.abs(q).max(axis=0), -1.0, 1.0)).max())
+        frames.append((round(oblique, 9), order, q, r))
+    _, order, q, r = min(frames, key=lambda f: f[0])
+    back = np.argsort(order)  # the straight axes in the file's order: axis i the one made from column i
+    q, spacing = q[:, back], np.diag(r)[back]
+    shear = (r / np.diag(r)[:, None])[np.ix_(back, back)]  # sheared index -> straight index, both in the file's order
     far = np.array(shape[:3], float) - 1
     corners = shear @ np.array(np.meshgrid(*[(0.0, n) for n in far], indexing="ij")).reshape(3, -1)
     low, high = np.floor(corners.min(axis=1)), np.ceil(corners.max(axis=1))
     straight = np.eye(4)
     straight[:3, :3] = q * spacing
     straight[:3, 3] = affine[:3, 3] + straight[:3, :3] @ low
-    lengths = np.linalg.norm(affine[:3, :3], axis=0)
+    lengths = np.linalg.norm(m, axis=0)
     degrees = float(np.degrees(np.arccos(np.clip(spacing / lengths, -1.0, 1.0))).max())
-    moved = float((np.abs(np.triu(shear, 1)) @ far).max())
+    moved = float((np.abs(np.triu(r / np.diag(r)[:, None], 1)) @ far[list(order)]).max())
     return Straight(tuple(int(n) for n in high - low + 1), straight, shear, low, moved, degrees)
 
 
