@@ -794,7 +794,8 @@ def test_a_views_renderer_warnings_are_its_frames_note_once_a_view_and_one_log_l
     clip; the same clip turned says it again (a tracer warns once; a view is told each time), a nearly opaque
     function's view its own warning, not the last view's, a plain view none; each line logged once whatever the views
     and frames, and none through Python's warnings (whose filters are the process's, not the render thread's).  The
-    X-ray views of a needle (110 times longer than wide): the camera's warning, each view."""
+    X-ray views of a needle (110 times longer than wide): the camera's warning, each view, and once to the caller of
+    view() (the viewer's making, on its render thread)."""
     import warnings
 
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.6)
@@ -821,6 +822,8 @@ def test_a_views_renderer_warnings_are_its_frames_note_once_a_view_and_one_log_l
         assert not [w for w in raised if issubclass(w.category, clwave.ClwaveWarning)]
         with view(needle, size=48) as v:
             xray = run(go(v, [dict(), dict(colour_map="magma")]))
+    # the viewer's making (on its render thread) warns its caller, at the caller's line (once a line where not "always")
+    assert {w.filename for w in raised if "times longer than wide" in str(w.message)} == {__file__}
     logged = [r.getMessage() for r in caplog.records]
     for frames in shaded[:2]:
         assert frames[-1][0]["final"] and decode(frames[-1][1]).max() == 0

@@ -25,7 +25,7 @@ from urllib.parse import urlsplit
 from aiohttp import WSCloseCode, WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
-from ..errors import ClwaveError, DeviceMemoryError, InputError, caught_warnings
+from ..errors import ClwaveError, DeviceMemoryError, InputError, caught_warnings, warn_outside
 from ..threads import Abandoned, stop_on
 from .address import check_host, check_port, host_name, is_loopback
 from . import colours, export
@@ -130,9 +130,12 @@ class ViewServer:
         self.failure = None  # why the rest of a file could not be served (the page's model figures say it)
         self.warned = set()  # the renderers' warnings logged so far (each once a server: a drag repeats them)
         try:
-            self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened, transfer_function).result()
+            self.sources, caught = self.pool.submit(_caught, self._prepare, self.wv, size, tolerance, opened,
+                                                    transfer_function).result()
         except DeviceMemoryError as exc:
             raise self.explain(exc, "xray") from None
+        for warning in caught:  # the caller's, as if it were made here
+            warn_outside(warning)
         self.pages = {path: (resources.files(__package__).joinpath("static", name).read_text(), mime)
                       for path, (name, mime) in STATIC.items()}
 
@@ -284,10 +287,17 @@ class ViewServer:
                 log.warning("%s: %s", name, line)
         return lines
 
+    def logged(self, call, *args):
+        """``call(*args)``, a job of the render or build thread that is no tab's frame (a save, a tracer's build),
+        its clwave warnings logged once each."""
+        value, caught = _caught(call, *args)
+        self.warnings(caught, "the viewer")
+        return value
+
     def prepared(self, source):
         """The Future of ``source.prepare()`` on the build thread (started on first call)."""
         if source.mode not in self._builds:
-            self._builds[source.mode] = asyncio.wrap_future(self.builder.submit(source.prepare))
+            self._builds[source.mode] = asyncio.wrap_future(self.builder.submit(self.logged, source.prepare))
         return self._builds[source.mode]
 
     @staticmethod
