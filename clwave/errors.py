@@ -6,9 +6,11 @@ any :class:`ClwaveError`; library users can catch the specific subclasses.
 
 from __future__ import annotations
 
+import contextlib
 import numbers
 import os
 import sys
+import threading
 import warnings
 from dataclasses import asdict, dataclass
 
@@ -70,11 +72,33 @@ class NearlyOpaqueWarning(ClwaveWarning):
     once = "nearly opaque"
 
 
+#: this thread's list of the warnings :func:`caught_warnings` takes (an attribute ``sink``; none: not catching)
+_catching = threading.local()
+
+
+@contextlib.contextmanager
+def caught_warnings():
+    """clwave's warnings (:func:`warn_outside`) given on this thread meanwhile, into the list it yields instead of to
+    :mod:`warnings`, whose filters and ``catch_warnings`` are the whole process's (not thread-safe: a viewer's render
+    thread beside its build thread and the user's own code, docs/viewer.md §2).  Others' warnings (NumPy's) go on to
+    :mod:`warnings`."""
+    outer = getattr(_catching, "sink", None)
+    _catching.sink = sink = []
+    try:
+        yield sink
+    finally:
+        _catching.sink = outer
+
+
 def warn_outside(warning) -> None:
     """Warn with ``warning`` (a :class:`ClwaveWarning`, or any warning or message) attributed to the first caller
     outside the clwave package: the user's line, however deep inside clwave the warning is given (a fixed
     ``stacklevel`` points inside clwave where the call comes through another of its functions).  What Python 3.12's
-    ``skip_file_prefixes`` does, by hand for 3.11."""
+    ``skip_file_prefixes`` does, by hand for 3.11.  Within :func:`caught_warnings` on this thread: into its list."""
+    sink = getattr(_catching, "sink", None)
+    if sink is not None:
+        sink.append(warning if isinstance(warning, Warning) else UserWarning(warning))
+        return
     package = os.path.dirname(__file__) + os.sep  # the form every module of the package has as co_filename
     frame, level = sys._getframe(1), 2  # level 2: warn_outside's caller
     while frame is not None and frame.f_code.co_filename.startswith(package):

@@ -564,14 +564,17 @@ def test_a_model_without_coefficients_has_one_final_frame_a_view():
     """An all-zero volume (no coefficients): each still view ends in a final frame, with a note for the status line,
     after a bounded number of frames (it once spun without end, a thousand frames a second); the X-ray views are
     blank, the shaded view of it ends too."""
-    from clwave.view.frames import NO_COEFFICIENTS
+    from clwave.view.frames import NO_COEFFICIENTS, ZERO_FOG
+
+    dark = dict(points=[[0.5, 1, 1, 1, 0], [1, 1, 1, 1, 1]])  # gives 0 no opacity
 
     async def go(v):
         async with aiohttp.ClientSession() as s:
             ws = await s.ws_connect(socket_url(v))
             hello = await ws.receive_json()
             views = []
-            for seq, change in enumerate((dict(), dict(azimuth=90.0), dict(mode="shaded")), 1):
+            for seq, change in enumerate((dict(), dict(azimuth=90.0), dict(mode="shaded"),
+                                          dict(mode="shaded", tf=dark)), 1):
                 await ws.send_str(json.dumps(dict(BASE, seq=seq, **change)))
                 views.append(await frames_until_final(ws, seq, most=8))  # it once spun without end
             return hello, views
@@ -584,10 +587,13 @@ def test_a_model_without_coefficients_has_one_final_frame_a_view():
         assert frames[-1][0]["final"]
     # X-ray: the line integrals of 0; shaded, the auto window (-0.5, 0.5) gives the data's 0 an opacity, which fogs
     # the data's box (docs/raytracing.md §10; against the direct render and the oracle in
-    # test_a_still_shaded_view_ends_at_the_direct_render_whichever_view_came_first)
+    # test_a_still_shaded_view_ends_at_the_direct_render_whichever_view_came_first); a function that gives 0 none
     assert all(decode(frames[-1][1]).max() == 0 for frames in views[:2]) and decode(views[2][-1][1]).max() > 0
+    assert decode(views[3][-1][1]).max() == 0
     assert all(f["note"] == NO_COEFFICIENTS and f["coefficients"] == 0 for frames in views[:2] for f, _ in frames)
-    assert all(f["note"] == NO_COEFFICIENTS for f, _ in views[2])
+    # the fog is not "nothing to show" (until notes28 it said so): the note says what the image is; blank, why
+    assert all(f["note"] == ZERO_FOG for f, _ in views[2]) and "nothing to show" not in ZERO_FOG
+    assert all(f["note"] == NO_COEFFICIENTS for f, _ in views[3])
 
 
 #: volumes 16^3 of one value (None: the hydrogen phantom)
@@ -779,6 +785,55 @@ def test_a_transfer_function_that_shows_nothing_ends_blank_with_a_note():
         frames = run(go(v))
     assert frames[-1][0]["final"] and decode(frames[-1][1]).max() == 0
     assert all(f["note"] == NOTHING_VISIBLE for f, _ in frames)
+
+
+def test_a_views_renderer_warnings_are_its_frames_note_once_a_view_and_one_log_line(caplog):
+    """The renderer's warnings reach the page (until notes28 they went to the server's stderr, attributed to
+    concurrent/futures/thread.py, and the page showed a blank final frame and "refined"): a shaded view through a
+    clip box thinner than a pixel round the content's centre meets nothing, and every frame of it says so, naming the
+    clip; the same clip turned says it again (a tracer warns once; a view is told each time), a nearly opaque
+    function's view its own warning, not the last view's, a plain view none; each line logged once whatever the views
+    and frames, and none through Python's warnings (whose filters are the process's, not the render thread's).  The
+    X-ray views of a needle (110 times longer than wide): the camera's warning, each view, and once to the caller of
+    view() (the viewer's making, on its render thread)."""
+    import warnings
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.6)
+    lo, hi = (np.asarray(c) for c in clwave.model.camera._content_box(wv))
+    tiny = dict(box=[*((lo + hi) / 2 - 1e-3), *((lo + hi) / 2 + 1e-3)], planes=[])
+    opaque = dict(points=[[-1, 1, 1, 1, 1000], [2, 1, 1, 1, 1000]])
+    needle = clwave.WaveletVolume.from_volume(
+        clwave.Volume(clwave.phantom("hydrogen", n=16).data, spacing=(1, 1, 110)), levels=1).threshold(keep=0.6)
+
+    async def go(v, changes):
+        async with aiohttp.ClientSession() as s:
+            ws = await s.ws_connect(socket_url(v))
+            await ws.receive_json()
+            views = []
+            for seq, change in enumerate(changes, 1):
+                await ws.send_str(json.dumps(dict(BASE, seq=seq, **change)))
+                views.append(await asyncio.wait_for(frames_until_final(ws, seq), 120))
+            return views
+    with warnings.catch_warnings(record=True) as raised, caplog.at_level("WARNING", logger="clwave.view"):
+        warnings.simplefilter("always")
+        with view(wv, size=16) as v:
+            shaded = run(go(v, [dict(mode="shaded", clip=tiny), dict(mode="shaded", clip=tiny, azimuth=60.0),
+                                dict(mode="shaded", tf=opaque), dict(mode="shaded")]))
+        assert not [w for w in raised if issubclass(w.category, clwave.ClwaveWarning)]
+        with view(needle, size=48) as v:
+            xray = run(go(v, [dict(), dict(colour_map="magma")]))
+    # the viewer's making (on its render thread) warns its caller, at the caller's line (once a line where not "always")
+    assert {w.filename for w in raised if "times longer than wide" in str(w.message)} == {__file__}
+    logged = [r.getMessage() for r in caplog.records]
+    for frames in shaded[:2]:
+        assert frames[-1][0]["final"] and decode(frames[-1][1]).max() == 0
+        assert all("no ray met the model's content" in f["note"] and "a clip cuts it away" in f["note"]
+                   for f, _ in frames)
+    assert all("nearly opaque" in f["note"] and "no ray met" not in f["note"] for f, _ in shaded[2])
+    assert all("note" not in f for f, _ in shaded[3])
+    assert all("times longer than wide" in f["note"] for frames in xray for f, _ in frames)
+    for words in ("no ray met", "nearly opaque", "times longer than wide"):
+        assert len([m for m in logged if words in m]) == 1, (words, logged)
 
 
 def test_editor_points_the_models_subtraction_would_merge_are_refused_in_one_line_and_the_tab_goes_on():

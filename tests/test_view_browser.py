@@ -189,7 +189,8 @@ def test_a_crop_slider_clips_the_shaded_view_and_a_plane_that_keeps_nothing_is_s
     bit for bit, another image than the unclipped one, and the status line says "refined"; "copy as Python" writes
     the box.  The plane ticked faces the camera through the box's centre (its normal the view's direction) and clips
     the final frame as clwave.raytrace does.  A plane keeping x above the box's end keeps nothing: the Clip's line on
-    the status line, which "uncut" clears (the tab goes on, the unclipped image again)."""
+    the status line, which "uncut" clears (the tab goes on, the unclipped image again).  A box thinner than a pixel:
+    the renderer's warning that no ray meets the content on the status line."""
     browser.open_viewer(page, viewer.url)
     page.execute_script('document.querySelector(\'input[value="shaded"]\').click();')
     start = browser.wait_final(page)
@@ -228,6 +229,16 @@ def test_a_crop_slider_clips_the_shaded_view_and_a_plane_that_keeps_nothing_is_s
     browser.wait_for(page, "const s = document.getElementById('status');"
                            "return !s.classList.contains('error') && s.textContent === 'refined'")
     assert np.array_equal(decode(browser.current_frame(page)[1]), whole)
+    # a box thinner than a pixel round the centre: no ray meets the content, and the status line says the renderer's
+    # warning over the blank final frame (until notes28 "refined", the warning on the server's stderr)
+    seq = page.execute_script("return window.clwave.current().fig.seq")
+    page.execute_script("for (const a of ['x', 'y', 'z']) { document.getElementById(`clip-${a}1`).value = 501;"
+                        "document.getElementById(`clip-${a}0`).value = 500; }"
+                        "document.getElementById('clip-z0').dispatchEvent(new Event('change'))")
+    line = browser.wait_for(page, f"const f = window.clwave.current().fig; return f.seq > {seq} && f.final && "
+                                  "!window.clwave.state.moving && document.getElementById('status').textContent")
+    assert "no ray met the model's content" in line and "a clip cuts it away" in line
+    assert not decode(browser.current_frame(page)[1]).any()
 
 
 def latest_final(page, after):

@@ -41,3 +41,35 @@ def test_the_default_levels_note_names_the_line_that_models_in_memory_and_chunke
     for volume in (clwave.Volume(x), clwave.Volume(da.from_array(x, chunks=8))):
         got, want, model = where_warned(clwave.WaveletVolume.from_volume, volume)
         assert got == want and model.levels == 2 and isinstance(model, ChunkedWaveletVolume) == volume.chunked
+
+
+def test_caught_warnings_takes_this_threads_warnings_only_and_nests():
+    """errors.caught_warnings (the viewer's render jobs, docs/viewer.md §2): a thread's own warnings into its list,
+    not Python's; another thread's, given meanwhile, not (they go to Python's, at their caller's line); an inner
+    catch holds its own, the outer one its own again after it."""
+    import threading
+
+    from clwave.errors import caught_warnings, warn_outside
+
+    inside, outside = threading.Event(), threading.Event()
+
+    def other():
+        inside.wait(10)
+        warn_outside(ClwaveWarning("the other thread's"))
+        outside.set()
+
+    thread = threading.Thread(target=other)
+    with warnings.catch_warnings(record=True) as python:
+        warnings.simplefilter("always")
+        thread.start()
+        with caught_warnings() as outer:
+            inside.set()
+            assert outside.wait(10)
+            warn_outside(ClwaveWarning("first"))
+            with caught_warnings() as inner:
+                warn_outside("second")
+            warn_outside(ClwaveWarning("third"))
+        thread.join()
+    assert [str(w) for w in outer] == ["first", "third"] and [str(w) for w in inner] == ["second"]
+    assert isinstance(inner[0], UserWarning)
+    assert [(str(w.message), w.filename) for w in python] == [("the other thread's", __file__)]

@@ -359,9 +359,9 @@ def _load_value(dest, value):
 
 
 # ---------------------------------------------------------------------------------------------------- the routes
-async def stage_by_stage(loop, pool, stages):
-    """What the generator ``stages`` returns, each of its stages a job of its own on ``pool`` (the render thread), so
-    that the jobs queued meanwhile (the tabs' frames) go between two."""
+async def stage_by_stage(loop, server, stages):
+    """What the generator ``stages`` returns, each of its stages a job of its own on the ``server``'s render thread
+    (its warnings logged, ``server.logged``), so that the jobs queued meanwhile (the tabs' frames) go between two."""
     def step():
         try:
             next(stages)
@@ -370,7 +370,7 @@ async def stage_by_stage(loop, pool, stages):
         return False, None
 
     while True:
-        done, value = await loop.run_in_executor(pool, step)
+        done, value = await loop.run_in_executor(server.pool, server.logged, step)
         if done:
             return value
 
@@ -415,9 +415,9 @@ async def serve(server, request, *, image: bool):
             if building.done() and not building.cancelled() and isinstance(building.exception(), ClwaveError):
                 raise building.exception()
         async with server.saving if image else contextlib.nullcontext():
-            done = await loop.run_in_executor(server.pool, work)
+            done = await loop.run_in_executor(server.pool, server.logged, work)
             if image:  # its stages in turn with the tabs' frames; encoded off the event loop (every tab's socket:
-                done = await stage_by_stage(loop, server.pool, done)  # docs/viewer.md §5) and the render thread
+                done = await stage_by_stage(loop, server, done)  # docs/viewer.md §5) and the render thread
                 done = await loop.run_in_executor(None, partial(encode, done, lossless=True))
     except Unavailable as exc:
         raise web.HTTPConflict(text=f"{exc}\n") from None

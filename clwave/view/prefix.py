@@ -10,12 +10,11 @@ ranked with the prefix's coefficients first (:func:`prefix_first`), so that the 
 from __future__ import annotations
 
 import threading
-import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveError, ClwaveWarning, FileFormatError
+from ..errors import ClwaveError, FileFormatError, caught_warnings
 from ..io.clw import read_header
 from ..model.budget import check_thresholding, kept_count, warn_stored
 from ..model.ranking import by_importance
@@ -39,8 +38,9 @@ class PrefixFirst:
         n = int(np.prod(header["shape"]))  # the voxels, from the header alone
         self.model_error = header.get("model_error")  # the whole file's, against its input (None: not recorded)
         share = min(1.0, PREFIX / n)
-        with warnings.catch_warnings():  # what the file stores is told of `keep`, not of the prefix's share
-            warnings.simplefilter("ignore", ClwaveWarning)
+        # what the file stores is told of `keep`, not of the prefix's share (this thread's: a notebook's other viewers
+        # render meanwhile)
+        with caught_warnings():
             self.prefix = WaveletVolume.open(path, keep=share if self.keep is None else min(self.keep, share))
         budget = kept_count(share, n)  # the prefix's coefficients a group, as the file is read (None: all of them)
         # every tier was read where a group holds fewer than the budget

@@ -25,7 +25,7 @@ from urllib.parse import urlsplit
 from aiohttp import WSCloseCode, WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
-from ..errors import ClwaveError, DeviceMemoryError, InputError
+from ..errors import ClwaveError, DeviceMemoryError, InputError, caught_warnings, warn_outside
 from ..threads import Abandoned, stop_on
 from .address import check_host, check_port, host_name, is_loopback
 from . import colours, export
@@ -57,6 +57,13 @@ HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer", "X-Con
 
 async def _headers(request, response):
     response.headers.update(HEADERS)
+
+
+def _caught(call, *args):
+    """``(call(*args), the clwave warnings it gave)``, caught on the thread that runs it (render jobs run on threads,
+    where ``warnings.catch_warnings`` would catch the other threads' too: :func:`~clwave.errors.caught_warnings`)."""
+    with caught_warnings() as caught:
+        return call(*args), caught
 
 
 def memory_shares(device_memory, shaded: bool) -> dict:
@@ -121,10 +128,14 @@ class ViewServer:
         self._in_file = threading.Event()  # set from the reader's start until it has done with the file (h5py)
         self.coarse_first = False  # set by _prepare
         self.failure = None  # why the rest of a file could not be served (the page's model figures say it)
+        self.warned = set()  # the renderers' warnings logged so far (each once a server: a drag repeats them)
         try:
-            self.sources = self.pool.submit(self._prepare, self.wv, size, tolerance, opened, transfer_function).result()
+            self.sources, caught = self.pool.submit(_caught, self._prepare, self.wv, size, tolerance, opened,
+                                                    transfer_function).result()
         except DeviceMemoryError as exc:
             raise self.explain(exc, "xray") from None
+        for warning in caught:  # the caller's, as if it were made here
+            warn_outside(warning)
         self.pages = {path: (resources.files(__package__).joinpath("static", name).read_text(), mime)
                       for path, (name, mime) in STATIC.items()}
 
@@ -267,10 +278,26 @@ class ViewServer:
         return DeviceMemoryError(f"{exc} (within {share}: device_memory={total})",
                                  cli=f"{exc.cli_message()} (within {share}: --device-memory {total})")
 
+    def warnings(self, caught, name) -> list:
+        """The lines of ``caught``, clwave's warnings of one render job for ``name`` (a tab), each logged once."""
+        lines = [str(w) for w in caught]
+        for line in lines:
+            if line not in self.warned:
+                self.warned.add(line)
+                log.warning("%s: %s", name, line)
+        return lines
+
+    def logged(self, call, *args):
+        """``call(*args)``, a job of the render or build thread that is no tab's frame (a save, a tracer's build),
+        its clwave warnings logged once each."""
+        value, caught = _caught(call, *args)
+        self.warnings(caught, "the viewer")
+        return value
+
     def prepared(self, source):
         """The Future of ``source.prepare()`` on the build thread (started on first call)."""
         if source.mode not in self._builds:
-            self._builds[source.mode] = asyncio.wrap_future(self.builder.submit(source.prepare))
+            self._builds[source.mode] = asyncio.wrap_future(self.builder.submit(self.logged, source.prepare))
         return self._builds[source.mode]
 
     @staticmethod
@@ -508,6 +535,7 @@ class Session:
             if state is None or state is self.rendered and (self.final or state.mode not in news):
                 continue
             self.rendered, self.final = state, False
+            notes = []  # the renderer's warnings of this view so far: every later frame of it carries them
             source = self.server.sources[state.mode]
             waited = 0.0  # seconds the view waited for its source's build (the shaded tracer's bricks)
             if not source.ready():
@@ -524,7 +552,8 @@ class Session:
             frames = source.frames(state, self.paces[state.mode])
             try:
                 while self.state is state:
-                    frame = await loop.run_in_executor(pool, next, frames, None)
+                    frame, caught = await loop.run_in_executor(pool, _caught, next, frames, None)
+                    notes += [line for line in self.server.warnings(caught, self.name) if line not in notes]
                     if frame is None:
                         break
                     if self.state is not state:  # the tab has moved on while this stage rendered
@@ -532,6 +561,8 @@ class Session:
                         break
                     # the time since the view counts the build it waited for, said apart (build_seconds)
                     figures = dict(frame.figures, elapsed=frame.figures["elapsed"] + waited, build_seconds=waited)
+                    if notes:  # the status line's note: the source's own (why an image is blank), then the warnings
+                        figures["note"] = " · ".join(filter(None, [figures.get("note"), *notes]))
                     await self.ws.send_bytes(pack_frame(figures, frame.data, frame.mime))
                     self.sent += 1
                     self.final = frame.figures["final"]

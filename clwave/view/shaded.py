@@ -21,7 +21,7 @@ import numpy as np
 from ..io.result import RenderResult
 from ..model.transfer import TransferFunction
 from ..threads import Abandoned
-from .frames import NO_COEFFICIENTS, NOTHING_VISIBLE, Frame, Source, ViewState, check_tolerance
+from .frames import NO_COEFFICIENTS, NOTHING_VISIBLE, ZERO_FOG, Frame, Source, ViewState, check_tolerance
 
 #: shaded frames while dragging aim at this many seconds of ray tracing (5 frames a second with the round trip)
 DRAG_SECONDS = 0.12
@@ -215,6 +215,9 @@ class ShadedSource(Source):
     def frames(self, state: ViewState, pace: ShadedPace):
         start = time.perf_counter()
         tracer = self.tracer  # None while a file's whole tracer is being set up: its coarse stage
+        # a tracer warns once about each thing (a script's many renders); here each view is told (the page's note)
+        for t in {t for t in (tracer, self.staged and self.staged.coarse, self.staged and self.staged.full) if t}:
+            t._told.clear()
         # a scalar model's: its window and points in the input's units, figures of each frame (the page's editor
         # draws them)
         options, classified = dict(shading=state.shading, clip=state.clipping()), {}
@@ -288,8 +291,11 @@ class ShadedSource(Source):
 
     def _shaded(self, state, result: RenderResult, final, figures, seconds, start) -> Frame:
         picture = result.to_uint8(background=(state.background,) * 3)
-        # the page's status line says why an image is blank
-        note = NO_COEFFICIENTS if not self.wv.kept else NOTHING_VISIBLE if result.meta.get("nothing_visible") else None
+        # the page's status line says why an image is blank, or what it shows of a model without coefficients
+        if not self.wv.kept:
+            note = ZERO_FOG if result.image[..., 3].any() else NO_COEFFICIENTS
+        else:
+            note = NOTHING_VISIBLE if result.meta.get("nothing_visible") else None
         return self._frame(state, picture, final or not state.moving,
                            dict(figures, final=final, seconds=seconds,
                                 error_kind="relative RMS against the model's final image, estimated from the last step",
