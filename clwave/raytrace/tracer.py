@@ -133,7 +133,7 @@ class RayTracer:
         self.wv, self.field, self.active, self.region = wv, field, int(active), region
         self.lod = self.details != (0,)
         self.expansions, self._at = 0, {}  # B-spline expansions so far; FieldAt per detail asked for
-        self._told = set()  # the tolerances and bounds warned about (bounds.warn_below_tolerance)
+        self.told = set()  # warnings given, each once a tracer (bounds.warn_below_tolerance); a viewer clears it a view
         self.cc = ComputeContext.get(device)
         self.lock = self.cc.lock  # one render at a time on the device (threads.one_at_a_time)
         self.budget = device_budget(self.cc, device_memory)
@@ -325,15 +325,15 @@ class RayTracer:
         # the transfer function's table and bounds at this detail (docs/raytracing.md §10)
         post = None if transfer_function is None else self.scalar.classify(transfer_function, cc, real, at)
         if post is not None:
-            warn_opaque(self.scalar, transfer_function, self._told)
+            warn_opaque(self.scalar, transfer_function, self.told)
         light_buf = np.zeros((max(1, len(light_dirs)), 4), np.float32)
         if light_dirs:
             light_buf[: len(light_dirs), :3] = light_dirs
         p = phong or Phong()
         shade_gain = (p.ambient + (p.diffuse + p.specular) * len(light_dirs)) if phong else 1.0
-        warn_below_tolerance(wv, (post.opacity if post else at.q_bound) * shade_gain, tol, self._told)
+        warn_below_tolerance(wv, (post.opacity if post else at.q_bound) * shade_gain, tol, self.told)
         if not absorption and self.scalar is not None:
-            warn_packed(self.scalar.step, self.scalar.length, tol, self._told)
+            warn_packed(self.scalar.step, self.scalar.length, tol, self.told)
         per_pixel = H * W * (48 + 9 * np.dtype(real).itemsize)  # image, two stats; carry, ledger, resume
         passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
         if self.field == "bspline" and self.bricks.resident:
@@ -403,7 +403,7 @@ class RayTracer:
             img = img[..., : wv.channels]
         nothing_visible = None if post is None else self.scalar.invisible(post)
         if self.region is None and not nothing_visible:  # a cluster's part may miss; an invisible function is said
-            warn_empty(int(counts[:, 0].sum()), self._told)  # where it is found
+            warn_empty(int(counts[:, 0].sum()), self.told)  # where it is found
         meta = dict(
             method="raytrace", mode="emission-absorption" if absorption else "xray", field=self.field,
             device=cc.describe(), coefficients=wv.kept, tolerance=tol, precision=precision,

@@ -217,7 +217,7 @@ class ShadedSource(Source):
         tracer = self.tracer  # None while a file's whole tracer is being set up: its coarse stage
         # a tracer warns once about each thing (a script's many renders); here each view is told (the page's note)
         for t in {t for t in (tracer, self.staged and self.staged.coarse, self.staged and self.staged.full) if t}:
-            t._told.clear()
+            t.told.clear()
         # a scalar model's: its window and points in the input's units, figures of each frame (the page's editor
         # draws them)
         options, classified = dict(shading=state.shading, clip=state.clipping()), {}
