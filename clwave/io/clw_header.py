@@ -100,7 +100,7 @@ def checked_header(header) -> tuple:
             raise ValueError(f"{name} {value!r} is not three finite{' positive' if positive else ''} numbers")
     problem = frame_problem(shape, header["spacing"], header["origin"])
     if problem:
-        raise ValueError(problem)
+        raise ValueError(problem[0])
     subtracted = header.get("offset", 0.0)  # the value subtracted (its key of old); absent in older files: none
     if not _numbers([subtracted], 1):
         raise ValueError(f"offset {subtracted!r} (the value subtracted) is not one finite number")

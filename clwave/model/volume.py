@@ -22,6 +22,9 @@ MAX_CHANNELS = 4
 #: normal float32 numbers in the renderers' arithmetic (1e-18 and 1e17 render as 1 does, scaled: docs/coordinates.md
 #: §1; 1e-308 divided by zero)
 WORLD_RANGE = (1e-18, 1e18)
+#: the most voxels (of the smallest spacing) an origin's coordinates lie from 0: float64 places the volume's corners
+#: within 1e-4 of a voxel there (2⁻⁵³ of 1e12); at 1e16 voxels they round to other voxels (a content box of one point)
+ORIGIN_VOXELS = 1e12
 #: A classified volume's premultiplied colour never exceeds its alpha: :func:`warn_straight_colour` tells one whose
 #: colour does by more than STRAIGHT_MARGIN of its largest value in more than STRAIGHT_SHARE of its voxels above that
 #: margin in some channel (on an even sample of at most STRAIGHT_SAMPLE): a photo's straight colour and alpha given as
@@ -152,9 +155,13 @@ class Volume:
         origin = tuple(float(o) for o in reals(0.0 if origin is None else origin, "origin", 3,
                                                "one number or three (x, y, z)", one=True))
         problem = frame_problem(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
+        if problem and problem[1] == "origin":
+            raise InputError(f"{problem[0]}; give origin= nearer its voxels (the volume's centre; 0 centres it)",
+                             cli=f"{problem[0]}; write the file with an origin nearer its voxels, or read it in "
+                                 f"Python with clwave.load(path, origin=(0, 0, 0))")
         if problem:
-            raise InputError(f"{problem}; give spacing= in other units",
-                             cli=f"{problem}; give --spacing in other units")
+            raise InputError(f"{problem[0]}; give spacing= in other units",
+                             cli=f"{problem[0]}; give --spacing in other units")
         if not np.all(np.isfinite(origin)):
             raise InputError(f"origin {origin} must be finite (x, y, z)")
         self.origin = origin
@@ -302,14 +309,19 @@ def content_of(data):
     return (data != 0).any(axis=3) if data.ndim == 4 else data != 0
 
 
-def frame_problem(shape, spacing, origin) -> str | None:
+def frame_problem(shape, spacing, origin) -> tuple[str, str] | None:
     """What is wrong with a ``spacing`` (dz, dy, dx; positive) and ``origin`` (x, y, z; finite) of a ``shape``
-    (z, y, x) volume outside :data:`WORLD_RANGE`, or None."""
+    (z, y, x) volume outside :data:`WORLD_RANGE`, or with an origin more than :data:`ORIGIN_VOXELS` voxels from 0,
+    and the argument to change ("spacing" or "origin"), or None."""
     low, high = WORLD_RANGE
     if min(spacing) < low or max(float(d) * n for d, n in zip(spacing, shape)) > high or max(map(abs, origin)) > high:
         return (f"spacing {tuple(spacing)} (dz, dy, dx) and origin {tuple(origin)} (x, y, z) of a "
                 f"{' x '.join(map(str, shape))} volume lie outside the world lengths clwave renders (a voxel at least "
-                f"{low:g}, the volume's extent and its origin at most {high:g})")
+                f"{low:g}, the volume's extent and its origin at most {high:g})", "spacing")
+    if max(map(abs, origin)) > ORIGIN_VOXELS * min(spacing):
+        return (f"origin {tuple(origin)} (x, y, z) lies more than {ORIGIN_VOXELS:g} voxels from 0 (spacing "
+                f"{tuple(spacing)}, dz, dy, dx), where float64 rounds its voxels' positions (to whole voxels at "
+                f"1e16)", "origin")
     return None
 
 
