@@ -1,6 +1,8 @@
 """Defects left by the twenty-second session's fuzzing and review (mend28; docs/known-gaps.md §15): each pinned by a
 test that failed before its fix."""
 
+import re
+import struct
 import warnings
 
 import numpy as np
@@ -11,6 +13,7 @@ from clwave.errors import FileFormatError, InputError
 from clwave.model.volume import ORIGIN_VOXELS
 from test_cli import run
 from test_hardening import crafted
+from test_loaders import write_series
 
 
 def _blob(n=12):
@@ -65,7 +68,7 @@ def test_an_origin_past_the_voxels_float64_places_is_refused_naming_origin(tmp_p
             with pytest.raises(InputError, match=r"more than 1e\+12 voxels from 0") as caught:
                 clwave.load(tmp_path / name)
         assert "\n" not in str(caught.value)
-        for argv in (["info"], ["render", "-o", str(tmp_path / "a.png")])[name == "far.nrrd":]:
+        for argv in (["info"], ["render", "-o", str(tmp_path / "a.png")]):
             code, out, err = run(capsys, *argv[:1], str(tmp_path / name), *argv[1:])
             assert code == 2 and len(err.strip().splitlines()) == 1 and "clwave.load(path, origin=" in err, err
         assert not (tmp_path / "a.png").exists()
@@ -75,3 +78,74 @@ def test_an_origin_past_the_voxels_float64_places_is_refused_naming_origin(tmp_p
 
     with pytest.raises(FileFormatError, match=r"more than 1e\+12 voxels from 0"):
         clwave.WaveletVolume.open(crafted(tmp_path / "edge.clw", tmp_path, moved))
+
+
+NRRD_HEAD = {"type": "short", "dimension": "3", "sizes": "8 7 6", "encoding": "raw", "endian": "little",
+             "space": "left-posterior-superior", "space directions": "(1,0,0) (0,1,0) (0,0,1)"}
+
+
+@pytest.mark.parametrize("fields, words", [
+    ({"dimension": "0"}, r"its header's dimension 0 is not the number of its sizes"),
+    ({"encoding": "zstd"}, r"its encoding zstd is not one the NRRD reader \(pynrrd\) reads"),
+    ({"type": "block"}, r"its type block is not one the NRRD reader"),
+    ({"sizes": "8 7 1"}, r"declares 1 x 7 x 8 voxels \(112 bytes\) but the file holds 672 bytes"),
+    ({"line skip": "2"}, r"declares 6 x 7 x 8 voxels \(672 bytes\) but the file holds 670 bytes"),
+    ({"data file": "v.raw"}, r"names the data file v.raw, which is not beside it"),
+    ({"space origin": "(1e17,0,0)"}, r"lies more than 1e\+12 voxels from 0"),
+])
+def test_info_refuses_the_nrrd_headers_a_read_refuses(tmp_path, capsys, fields, words):
+    """NRRD headers that `clwave info` described (exit 0, its spacing "found with the voxels") and `load` refused
+    (pynrrd's errors, or the volume's place): found by mutating one field (fuzz27, mend28's rerun); both refuse them
+    now by the same check, before a voxel is read."""
+    header = NRRD_HEAD | fields
+    body = np.arange(336, dtype="<i2").tobytes()
+    (tmp_path / "v.nrrd").write_bytes(("NRRD0004\n" + "".join(f"{k}: {v}\n" for k, v in header.items()) + "\n")
+                                      .encode() + (b"\n" * 30 + body[30:] if "line skip" in fields else body))
+    _refused_alike(capsys, tmp_path / "v.nrrd", words)
+
+
+def _refused_alike(capsys, path, words):
+    """``load`` and ``clwave info`` refuse ``path`` in one line matching ``words``, and ``clwave render`` too."""
+    with pytest.raises((FileFormatError, InputError), match=words) as caught:
+        clwave.load(path, progress_bar=False)
+    assert "\n" not in str(caught.value)
+    for argv in (["info"], ["render", "-o", str(path.parent / "a.png")]):
+        code, out, err = run(capsys, *argv[:1], str(path), *argv[1:])
+        assert code == 2 and len(err.strip().splitlines()) == 1 and not out, err
+        assert re.search(words, err), err
+
+
+@pytest.mark.parametrize("tag, value, words", [
+    (259, 50000, r"tifffile cannot decode its pages \(ZSTD compression, 16-bit samples\)"),
+    (258, 12, r"tifffile cannot decode its pages \(NONE compression, 12-bit samples\)"),
+])
+def test_info_refuses_the_tiff_pages_a_read_cannot_decode(tmp_path, capsys, tag, value, words):
+    """A stack whose compression (ZSTD: Python's own module, absent before 3.14) or sample size (12 bits) tifffile
+    cannot decode without imagecodecs: `clwave info` described it and a read failed on the voxels ("No module named
+    'compression'", "packints_decode ... requires imagecodecs"); both refuse it by a trial decode of its first
+    strip."""
+    import importlib.util
+    import tifffile
+
+    if importlib.util.find_spec("imagecodecs") is not None:
+        pytest.skip("imagecodecs decodes these pages here")  # not a kernel test: the refusal needs a missing codec
+    tifffile.imwrite(tmp_path / "v.tif", np.arange(336, dtype=np.uint16).reshape(6, 7, 8))
+    with tifffile.TiffFile(tmp_path / "v.tif") as tif:
+        where = tif.pages[0].tags[tag].valueoffset
+    content = bytearray((tmp_path / "v.tif").read_bytes())
+    struct.pack_into("<H", content, where, value)
+    (tmp_path / "w.tif").write_bytes(bytes(content))
+    _refused_alike(capsys, tmp_path / "w.tif", words)
+
+
+@pytest.mark.parametrize("attributes, words", [
+    (dict(Rows=0), r"declares Rows 0, Columns 5, BitsAllocated 16 and BitsStored 16, which no image has"),
+    (dict(BitsStored=20), r"declares Rows 6, Columns 5, BitsAllocated 16 and BitsStored 20, which no image has"),
+    (dict(rescale=(0, 0)), r"has RescaleSlope 0, which maps every pixel to the intercept"),
+])
+def test_info_refuses_the_dicom_headers_a_read_refuses(tmp_path, capsys, rng, attributes, words):
+    """A slice of Rows 0 or BitsStored past BitsAllocated (pydicom's refusals when it decodes), or of RescaleSlope 0
+    (clwave's, as each slice was read): `clwave info` described the series; both refuse it from the headers now."""
+    write_series(tmp_path, rng, [(0.0, 0.0, float(z)) for z in range(3)], "1.2.3", ["a", "b", "c"])
+    write_series(tmp_path, rng, [(0.0, 0.0, 1.0)], "1.2.3", ["b"], **attributes)
+    _refused_alike(capsys, tmp_path, words)

@@ -154,14 +154,7 @@ class Volume:
             raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
         origin = tuple(float(o) for o in reals(0.0 if origin is None else origin, "origin", 3,
                                                "one number or three (x, y, z)", one=True))
-        problem = frame_problem(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
-        if problem and problem[1] == "origin":
-            raise InputError(f"{problem[0]}; give origin= nearer its voxels (the volume's centre; 0 centres it)",
-                             cli=f"{problem[0]}; write the file with an origin nearer its voxels, or read it in "
-                                 f"Python with clwave.load(path, origin=(0, 0, 0))")
-        if problem:
-            raise InputError(f"{problem[0]}; give spacing= in other units",
-                             cli=f"{problem[0]}; give --spacing in other units")
+        check_placement(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
         if not np.all(np.isfinite(origin)):
             raise InputError(f"origin {origin} must be finite (x, y, z)")
         self.origin = origin
@@ -323,6 +316,19 @@ def frame_problem(shape, spacing, origin) -> tuple[str, str] | None:
                 f"{tuple(spacing)}, dz, dy, dx), where float64 rounds its voxels' positions (to whole voxels at "
                 f"1e16)", "origin")
     return None
+
+
+def check_placement(shape, spacing, origin):
+    """Refuse a ``spacing`` and ``origin`` of a ``shape`` volume that :func:`frame_problem` refuses, naming the
+    argument to change (``Volume``'s, and ``clwave info``'s of a header that places the volume)."""
+    problem = frame_problem(shape, spacing, origin)
+    if problem and problem[1] == "origin":
+        raise InputError(f"{problem[0]}; give origin= nearer its voxels (the volume's centre; 0 centres it)",
+                         cli=f"{problem[0]}; write the file with an origin nearer its voxels, or read it in Python "
+                             f"with clwave.load(path, origin=(0, 0, 0))")
+    if problem:
+        raise InputError(f"{problem[0]}; give spacing= in other units", cli=f"{problem[0]}; give --spacing in other "
+                                                                            f"units")
 
 
 def _triple(value, name) -> tuple:

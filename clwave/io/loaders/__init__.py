@@ -22,7 +22,7 @@ import numpy as np
 
 from ...errors import FileFormatError, InputError, finite_number, flag
 from ...model.labels import looks_like_labels
-from ...model.volume import Volume, is_dask
+from ...model.volume import Volume, check_placement, is_dask
 from . import dicom, dicom_frames, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
                      reading, axis_turn, stated_affine, to_canonical, to_float32)
@@ -344,6 +344,7 @@ def describe(path, *, series=None, level=None, frame=None, shape=None, dtype=Non
                 facts["shape"] = list(declared.loaded) + [channels] * (channels > 1)
             if declared.placed is not None:
                 spacing, origin, obliquity = declared.placed
+                check_placement(declared.loaded, spacing, origin)  # as the read's Volume refuses it
                 facts.update(spacing=[float(s) for s in spacing], origin=[float(o) for o in origin],
                              obliquity=obliquity, spacing_in_file=True)
             elif kind in _SLICE_FOLDERS:  # stacked as stored, and no file places them: load's unit spacing

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import check_declared_size, check_whole, not_a_file, note, to_canonical
+from .shared import Declared, check_declared_size, check_whole, not_a_file, note, to_canonical
 
 _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
@@ -21,6 +21,9 @@ _NRRD_SPACE_SIGNS = {
     # left-handed screen frame, z into the screen, becomes OpenGL's right-handed one): x and y kept
     "3d-left-handed": (1, 1, -1),
 }
+
+#: the encodings pynrrd reads
+_ENCODINGS = ("raw", "gzip", "gz", "bzip2", "bz2", "ascii", "text", "txt")
 
 
 def read_nrrd(path, fits=None, warn_spacing=True):
@@ -51,23 +54,25 @@ def read_nrrd(path, fits=None, warn_spacing=True):
         if directions is not None and _singular(directions[spatial]):
             raise FileFormatError(f"{path}: its space directions {_rows(directions[spatial])} are singular (a zero or "
                                   "repeated direction) and span no 3-D grid; correct the header's space directions")
-        check_whole(path, [sizes[a] for a in spatial + others], nrrd.reader._determine_datatype(header), fits)
+        affine = np.eye(4)
+        if directions is not None:
+            affine[:3, :3] = directions[spatial].T
+            affine[:3, 3] = header.get("space origin", np.zeros(3))
+        else:
+            spacings = np.asarray(header.get("spacings", np.ones(len(sizes))), float)[spatial]
+            if warn_spacing and not np.all(np.isfinite(spacings)):
+                note(f"{path}: its spacing (dz, dy, dx) {', '.join(map(str, spacings[::-1]))} is unknown (nan) on "
+                     f"some axes; taken as 1 there: give spacing= (--spacing DZ,DY,DX) for the true one")
+            affine[:3, :3] = np.diag(np.where(np.isfinite(spacings), spacings, 1.0))
+        # other spaces (scanner-xyz, 3D-right-handed, none) are right-handed: taken as RAS
+        affine = np.diag(_NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1)) + (1,)) @ affine
+        try:
+            check_whole(path, [sizes[a] for a in spatial + others], nrrd.reader._determine_datatype(header), fits)
+        except Declared as declared:  # describe(): its place from the header
+            declared.place([sizes[a] for a in spatial], affine)
+            raise
         data = nrrd.read_data(header, fh, str(path))  # index_order 'F': axes in file order, fastest first
-    data = np.moveaxis(data, others, list(range(3, data.ndim)))
-
-    affine = np.eye(4)
-    if directions is not None:
-        affine[:3, :3] = directions[spatial].T
-        affine[:3, 3] = header.get("space origin", np.zeros(3))
-    else:
-        spacings = np.asarray(header.get("spacings", np.ones(len(sizes))), float)[spatial]
-        if warn_spacing and not np.all(np.isfinite(spacings)):
-            note(f"{path}: its spacing (dz, dy, dx) {', '.join(map(str, spacings[::-1]))} is unknown (nan) on some "
-                 f"axes; taken as 1 there: give spacing= (--spacing DZ,DY,DX) for the true one")
-        affine[:3, :3] = np.diag(np.where(np.isfinite(spacings), spacings, 1.0))
-    # other spaces (scanner-xyz, 3D-right-handed, none) are right-handed: taken as RAS
-    signs = _NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1))
-    return to_canonical(data, np.diag(signs + (1,)) @ affine)
+    return to_canonical(np.moveaxis(data, others, list(range(3, data.ndim))), affine)
 
 
 def world_unit(path) -> str | None:
@@ -156,23 +161,47 @@ def _data_file(path, header):
 
 
 def _check_nrrd_size(path, header, offset):
-    """A NRRD header that declares more voxels than its raw or gzip data holds (attached data starting at
-    ``offset``) is refused before pynrrd allocates them (other encodings, and a missing detached data file, are
-    left to pynrrd)."""
+    """What pynrrd's read refuses, refused from the header (so ``clwave info`` refuses it too): a ``dimension`` not
+    the number of ``sizes``, an encoding or a ``type`` it does not read, a line or byte skip it does not take, a
+    missing detached data file; and a header that declares more voxels than its raw or gzip data holds (attached
+    data starting at ``offset``) before pynrrd allocates them, or fewer than its raw data holds (pynrrd reads all of
+    it).  A corrupt compressed stream is found by the read alone."""
     import nrrd
 
     encoding = str(header.get("encoding", "raw")).lower()
+    sizes = [int(n) for n in header["sizes"]]
+    if header.get("dimension") != len(sizes):
+        raise FileFormatError(f"{path}: its header's dimension {header.get('dimension')} is not the number of its "
+                              f"sizes ({' '.join(map(str, sizes))}); correct the header")
+    if encoding not in _ENCODINGS or str(header.get("type")).lower() == "block":
+        found = f"type {header['type']}" if encoding in _ENCODINGS else f"encoding {header['encoding']}"
+        raise FileFormatError(f"{path}: its {found} is not one the NRRD reader (pynrrd) reads; write it as raw, gzip, "
+                              f"bzip2 or text voxels of a number type")
+    lines, skip = (int(header.get(k, header.get(k.replace(" ", ""), 0)) or 0) for k in ("line skip", "byte skip"))
+    if lines < 0 or skip < -1:
+        raise FileFormatError(f"{path}: its line skip {lines} or byte skip {skip} is negative (a byte skip may be -1: "
+                              f"the data at the end); correct the header")
     detached = _data_file(path, header)
     if detached is not None:  # a detached header: the data is a file of its own
+        if not detached.is_file():
+            raise FileFormatError(f"{path} names the data file {detached.name}, which is not beside it; put it there")
         path, offset = detached, 0
-    if encoding not in ("raw", "gzip", "gz") or not Path(path).is_file():
-        return
-    if encoding != "raw":  # the gzip stream starts after the header; its trailer counts the stream alone
-        offset = 0
-    sizes = [int(n) for n in header["sizes"]]
     if min(sizes) < 1:
         raise FileFormatError(f"{path}: its header declares sizes {' '.join(map(str, sizes))}; every axis needs at "
                               "least one voxel")
+    if encoding not in ("raw", "gzip", "gz") or skip == -1:
+        return
+    if encoding != "raw":  # the gzip stream starts after the header; its trailer counts the stream alone
+        offset = 0
+    elif lines:  # the lines pynrrd skips before the data
+        with open(path, "rb") as fh:
+            fh.seek(offset)
+            for _ in range(lines):
+                fh.readline()
+            offset = fh.tell()
     nbytes = math.prod(sizes) * nrrd.reader._determine_datatype(header).itemsize
-    skip = max(int(header.get("byte skip", 0) or 0), 0)
     check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=encoding != "raw", longer=True)
+    if encoding == "raw" and Path(path).stat().st_size > offset + skip + nbytes:
+        raise FileFormatError(f"{path}: its header declares {' x '.join(map(str, sizes[::-1]))} voxels "
+                              f"({nbytes:,} bytes) but the file holds {Path(path).stat().st_size - offset - skip:,} "
+                              f"bytes after its header; its header is wrong or the file is not what it says")
