@@ -149,3 +149,17 @@ def test_info_refuses_the_dicom_headers_a_read_refuses(tmp_path, capsys, rng, at
     write_series(tmp_path, rng, [(0.0, 0.0, float(z)) for z in range(3)], "1.2.3", ["a", "b", "c"])
     write_series(tmp_path, rng, [(0.0, 0.0, 1.0)], "1.2.3", ["b"], **attributes)
     _refused_alike(capsys, tmp_path, words)
+
+
+def test_an_mrc_sampling_of_needle_voxels_is_refused_naming_its_cell_and_sampling(tmp_path, capsys):
+    """An mx of 2^31 - 1 (fuzz27): voxels of 4.7e-9 by 2 by 0.5 Å, described by `clwave info` and refused by the
+    footprint textures' size naming --omega-s, an option that has nothing to do with it. The header's cell and
+    sampling are named, by load, info and render alike; a map 100 times uneven is read."""
+    from test_mrc import _write
+
+    stored = np.random.default_rng(0).random((6, 7, 8)).astype(np.float32)
+    path = _write(tmp_path / "m.mrc", stored, mx=2 ** 31 - 1)
+    _refused_alike(capsys, path, r"its cell \(10, 14, 3 Å\) over its sampling \(mx, my, mz = 2147483647, 7, 6\) gives "
+                                 r"voxels of 4\.66e-09 x 2 x 0\.5 Å \(x, y, z\), more than 10000 times longer")
+    uneven = clwave.load(_write(tmp_path / "n.mrc", stored, mx=800), progress_bar=False)
+    assert uneven.spacing == pytest.approx((0.5, 2.0, 10 / 800))
