@@ -163,3 +163,22 @@ def test_an_mrc_sampling_of_needle_voxels_is_refused_naming_its_cell_and_samplin
                                  r"voxels of 4\.66e-09 x 2 x 0\.5 Å \(x, y, z\), more than 10000 times longer")
     uneven = clwave.load(_write(tmp_path / "n.mrc", stored, mx=800), progress_bar=False)
     assert uneven.spacing == pytest.approx((0.5, 2.0, 10 / 800))
+
+
+def test_a_post_classified_scalar_of_values_about_1e_36_renders_as_at_1():
+    """A scalar of values about 1e-36 under an auto window rendered empty, without a warning: its packed pool's step
+    (range / 65535, about 1e-41) is subnormal, 0 in the kernels' fast float32 arithmetic. The step is at least
+    float32's least normal number: unshaded, the image is the one at scale 1 within the packing's and the tolerance's
+    error; the coarser packing (7 bits) is warned of, naming the fix, as its shading is off by up to 0.13."""
+    data = 0.2 + _blob(16)  # float32's normal numbers at 1e-36 too (its tails subnormal would be other data)
+    camera = clwave.Camera(30, 20, size=24)
+    images = []
+    for scale in (1.0, 1e-36):
+        model = clwave.WaveletVolume.from_volume(clwave.Volume(data * np.float32(scale)), levels=2)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            images.append(clwave.raytrace(model, camera, transfer_function="grey", tolerance=1e-3, shading=False).image)
+        small = [w for w in caught if "pack them in fewer than 16 bits" in str(w.message)]
+        assert len(small) == (scale < 1) and (scale == 1 or "multiply the volume's values" in str(small[0].message))
+    assert images[0][..., 3].max() > 0.2
+    np.testing.assert_allclose(images[1], images[0], atol=2e-3)
