@@ -182,3 +182,20 @@ def test_a_post_classified_scalar_of_values_about_1e_36_renders_as_at_1():
         assert len(small) == (scale < 1) and (scale == 1 or "multiply the volume's values" in str(small[0].message))
     assert images[0][..., 3].max() > 0.2
     np.testing.assert_allclose(images[1], images[0], atol=2e-3)
+
+
+def test_a_needle_models_texel_pool_is_weighed_before_its_textures_are_made(monkeypatch):
+    """Spacing 1000:1:1 (review27): each footprint's pool holds a phase plane per texel a pixel spans (3,820 here, at
+    32 pixels), and the splatter made 9 GB of textures in 31 s CPU before its pool was refused. The pool is weighed
+    with the textures, before one is made, naming the options that bound it (more pixels: at 512 the same model is
+    splatted, 6 GB; the ray tracer)."""
+    from clwave.errors import DeviceMemoryError
+    from clwave.splat import textures
+
+    volume = clwave.Volume(_blob(16), spacing=(1000.0, 1.0, 1.0))
+    model = clwave.WaveletVolume.from_volume(volume, levels=2)
+    monkeypatch.setattr(textures, "thread_map", lambda *a: pytest.fail("the textures were made before the refusal"))
+    with pytest.raises(DeviceMemoryError, match=r"phase planes of this view's footprint textures need [\d,]+ texels "
+                                                r".* a pixel spans up to 3,820 texels .* render more pixels"):
+        clwave.splat(model, clwave.Camera(30, 20, size=32))
+
