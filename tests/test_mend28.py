@@ -199,3 +199,19 @@ def test_a_needle_models_texel_pool_is_weighed_before_its_textures_are_made(monk
                                                 r".* a pixel spans up to 3,820 texels .* render more pixels"):
         clwave.splat(model, clwave.Camera(30, 20, size=32))
 
+
+def test_every_reader_names_units_by_one_table(tmp_path):
+    """xarray's coordinates, an ImageJ stack and an OME-Zarr image each had their own table of unit names (an ImageJ
+    "micrometre" or an xarray "nanometers" was no known unit): `io.images.UNIT_NAMES` is the one table now."""
+    import tifffile
+    import xarray as xr
+
+    data = np.zeros((3, 4, 5), np.float32)
+    tifffile.imwrite(tmp_path / "s.tif", data, imagej=True, resolution=(2.0, 2.0),
+                     metadata={"unit": "micrometre", "spacing": 0.5, "axes": "ZYX"})
+    assert clwave.load(tmp_path / "s.tif").unit == "um"
+    coords = {d: np.arange(n) * 0.5 for d, n in zip("zyx", data.shape)}
+    array = xr.DataArray(data, dims=("z", "y", "x"), coords=coords)
+    for d in "zyx":
+        array[d].attrs["units"] = "nanometers"
+    assert clwave.Volume(array).unit == "nm"

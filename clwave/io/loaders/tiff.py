@@ -9,6 +9,7 @@ import numpy as np
 
 from ...device.memory import check_fits
 from ...errors import FileFormatError
+from ..images import unit_named
 from .shared import (Declared, FrameOf, OnDemand, TimeSeries, as_array, by_size, check_whole, log, no_spacing, note,
                      one_volume)
 
@@ -16,25 +17,21 @@ TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
 OME_MICROMETRES = {"pm": 1e-6, "Å": 1e-4, "nm": 1e-3, "µm": 1.0, "um": 1.0, "mm": 1e3, "cm": 1e4, "m": 1e6}
 
-#: an ImageJ stack's length ``unit`` (as ImageJ and Fiji write it, lower case) as clwave names it
-IMAGEJ_UNITS = {"micron": "um", "microns": "um", "µm": "um", "μm": "um", "\\u00b5m": "um", "um": "um", "mm": "mm",
-                "cm": "cm", "m": "m", "meter": "m", "nm": "nm", "nanometer": "nm", "nanometers": "nm"}
-
-
 #: the most bytes of a TIFF's first strip or tile decoded to try its codec before a read (:func:`_check_decodable`)
 DECODE_TRIAL = 1 << 24
 
 
 def world_unit(path) -> str | None:
     """The unit of a TIFF stack's spacing: "um" for an OME-TIFF (:func:`_ome_spacing` converts to micrometres), an
-    ImageJ stack's own ``unit`` where it is a length (:data:`IMAGEJ_UNITS`), None otherwise (no spacing in the file)."""
+    ImageJ stack's own ``unit`` where it is a length (:func:`~clwave.io.images.unit_named`), None otherwise (no
+    spacing in the file)."""
     import tifffile
 
     with tifffile.TiffFile(path) as tif:
         if tif.is_ome:
             return "um"
         unit = (tif.imagej_metadata or {}).get("unit")
-    return IMAGEJ_UNITS.get(str(unit).strip().lower())
+    return unit_named(unit)
 
 
 def colour_samples(path) -> bool:
