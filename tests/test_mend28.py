@@ -195,8 +195,9 @@ def test_a_needle_models_texel_pool_is_weighed_before_its_textures_are_made(monk
     volume = clwave.Volume(_blob(16), spacing=(1000.0, 1.0, 1.0))
     model = clwave.WaveletVolume.from_volume(volume, levels=2)
     monkeypatch.setattr(textures, "thread_map", lambda *a: pytest.fail("the textures were made before the refusal"))
-    with pytest.raises(DeviceMemoryError, match=r"phase planes of this view's footprint textures need [\d,]+ texels "
-                                                r".* a pixel spans up to 3,820 texels .* render more pixels"):
+    with pytest.raises(DeviceMemoryError, match=r"texel pool \(phase planes\) of this view's footprint textures need "
+                                                r"[\d,]+ texels .* a pixel spans up to 3,820 texels .* render more "
+                                                r"pixels"):
         clwave.splat(model, clwave.Camera(30, 20, size=32))
 
 
@@ -215,3 +216,4 @@ def test_every_reader_names_units_by_one_table(tmp_path):
     for d in "zyx":
         array[d].attrs["units"] = "nanometers"
     assert clwave.Volume(array).unit == "nm"
+

@@ -318,10 +318,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         pool = sum(prod(plane_shape(_axis_samples(nv, cell_v), _axis_samples(nu, cell_u),
                                     1 if cell_u else phases.get((m, key), 1)))
                    for m, key, (nu, _, cell_u), (nv, _, cell_v) in jobs)
-        check_texels(pool, max_texels, "the phase planes of this view's footprint textures",
+        check_texels(pool, max_texels, "the texel pool (phase planes) of this view's footprint textures",
                      f"a pixel spans up to {max(phases.values(), default=1):,} texels of the volume's thinnest voxels "
-                     f"(its spacing is very uneven); render more pixels (a camera's size, --size) or with the ray "
-                     f"tracer (--method raytrace)")
+                     f"(a very uneven spacing, or a wide extent); render more pixels (a camera's size, --size), a "
+                     f"smaller extent, or with the ray tracer (--method raytrace)")
     # the host's memory, where a limit (ulimit -v) rather than the textures may be the cause
     check_fits(HOST_TEXEL_BYTES * texels, f"making the footprint textures of this view ({texels:,} texels)",
                f"free memory (or raise this process's limit), {fix}")
