@@ -217,3 +217,26 @@ def test_every_reader_names_units_by_one_table(tmp_path):
         array[d].attrs["units"] = "nanometers"
     assert clwave.Volume(array).unit == "nm"
 
+
+@pytest.mark.parametrize("chunks", [False, 4])
+def test_a_clw_records_the_file_and_frame_it_was_made_from(tmp_path, capsys, chunks):
+    """A .clw did not say which file, nor which time point of a series (load(frame=K)), it was made from: both
+    writers (a model in memory, a chunked one) record the provenance the loader gives, `clwave info` shows it, and a
+    file of before (no key) opens as of no known provenance; a header's that is not a file and frame is refused."""
+    import nibabel as nib
+
+    series = np.random.default_rng(1).random((6, 7, 8, 3)).astype(np.float32)
+    nib.save(nib.Nifti1Image(series, np.eye(4)), tmp_path / "s.nii")
+    volume = clwave.load(tmp_path / "s.nii", frame=1, chunks=chunks)
+    assert volume.provenance == {"file": str(tmp_path / "s.nii"), "frame": 1}
+    clwave.WaveletVolume.from_volume(volume, levels=1).save(tmp_path / "m.clw")
+    assert clwave.WaveletVolume.open(tmp_path / "m.clw").provenance == volume.provenance
+    code, out, err = run(capsys, "info", str(tmp_path / "m.clw"))
+    assert code == 0 and f"from       {tmp_path / 's.nii'}, frame 1 (--frame)\n" in out, out
+    old = crafted(tmp_path / "m.clw", tmp_path, lambda header: header.pop("provenance"))
+    assert clwave.WaveletVolume.open(old).provenance is None
+    code, out, err = run(capsys, "info", str(old))
+    assert code == 0 and "\nfrom " not in out
+    with pytest.raises(FileFormatError, match=r"provenance \{'file': 3, 'frame': 1\} is not"):
+        clwave.WaveletVolume.open(crafted(tmp_path / "m.clw", tmp_path, lambda header: header.update(
+            provenance={"file": 3, "frame": 1})))

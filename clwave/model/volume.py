@@ -88,6 +88,10 @@ class Volume:
     stored_dtype : numpy dtype, optional
         The type of the input's values as stored (:func:`clwave.load`: the file's, before float32); None (default):
         ``data``'s own.  ``clwave compress`` weighs its file against the input's size in it.
+    provenance : dict, optional
+        Where the values were read from, ``{"file": path, "frame": K or None}`` (:func:`clwave.load` sets it: the
+        file and the time point ``frame=`` picked); None (default): not read from a file.  Kept by the model and its
+        ``.clw`` file, and shown by ``clwave info`` (docs/chunked.md §4).
 
     Examples
     --------
@@ -97,7 +101,7 @@ class Volume:
     """
 
     def __init__(self, data, spacing=None, origin=None, subtracted=0.0, obliquity=0.0, labels=None,
-                 stored_dtype=None, unit=None, photo=False):
+                 stored_dtype=None, unit=None, photo=False, provenance=None):
         if is_dataset(data):
             raise InputError(f"volume data is an xarray Dataset of the variables {', '.join(map(str, data.data_vars))}"
                              f"; give one of them, a DataArray: Volume(ds[name])")
@@ -166,6 +170,7 @@ class Volume:
 
         self.unit = check_unit(unit)
         self.photo = flag(photo, "photo") and self.channels > 1
+        self.provenance = check_provenance(provenance)
 
     @property
     def shape(self) -> tuple:
@@ -329,6 +334,18 @@ def check_placement(shape, spacing, origin):
     if problem:
         raise InputError(f"{problem[0]}; give spacing= in other units", cli=f"{problem[0]}; give --spacing in other "
                                                                             f"units")
+
+
+def check_provenance(source) -> dict | None:
+    """``provenance`` (:class:`Volume`'s) as ``{"file": str, "frame": a whole number (as ``load`` took it: -1 the last)
+    or None}``, or None; InputError (a ValueError) otherwise: a ``.clw`` header's is said as the file's fault."""
+    if source is None:
+        return None
+    frame = source.get("frame") if isinstance(source, dict) else None
+    if not (isinstance(source, dict) and set(source) == {"file", "frame"} and isinstance(source["file"], str)
+            and (frame is None or (isinstance(frame, int) and not isinstance(frame, bool)))):
+        raise InputError(f"provenance {source!r} is not {{'file': path, 'frame': a whole number or None}}")
+    return dict(file=source["file"], frame=frame)
 
 
 def _triple(value, name) -> tuple:

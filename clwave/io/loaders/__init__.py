@@ -187,14 +187,15 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                           nan=nan)
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     placed = origin if origin is not None else file_origin if file_origin is not None else (0.0, 0.0, 0.0)
+    provenance = dict(file=str(path) + (f":/{inner}" if inner else ""), frame=frame)
     volume = Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
                     subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
-                    unit=unit if unit is not None else _world_unit(kind, path, inner))
+                    unit=unit if unit is not None else _world_unit(kind, path, inner), provenance=provenance)
     if orientation is not None:  # turned into RAS+ as a medical file is, by the same code; origin= is RAS already
         affine = stated_affine(turn, volume.shape, volume.spacing, volume.origin)
         data, spacing, turned, _ = to_canonical(volume.data, affine)
         volume = Volume(data, spacing, turned if origin is None else origin, subtracted=subtract,
-                        labels=volume.labels, stored_dtype=stored, unit=volume.unit, photo=photo)
+                        labels=volume.labels, stored_dtype=stored, unit=volume.unit, photo=photo, provenance=provenance)
     return volume
 
 
