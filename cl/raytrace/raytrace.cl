@@ -45,9 +45,10 @@
  *                volume's content reaches; the segments of other cells are empty (docs/raytracing.md §4)
  *   coarse_bound superblocks bounded by at most this are one region for skipping and R
  *   box_lo, box_hi               clip box of the model's support, grid-0 fine coordinates (and of a clip's box)
- *   clip, nclip                  the clip's half-spaces in world units, (n, d) keeping n . x + d >= 0
+ *   clip, nclip                  the clip's half-spaces in the kernel's world, (n, d) keeping n . x + d >= 0
  *                                (docs/raytracing.md §12)
- *   base, du, dv, dir            rays in world units: orthographic p = base + c du + r dv, w = dir;
+ *   base, du, dv, dir            rays in the kernel's world: world units about the volume's centre (world - origin,
+ *                                docs/coordinates.md §1); orthographic p = base + c du + r dv, w = dir;
  *                                perspective p = base (the eye), w = normalize(dir + c du + r dv) (a cone beam's
  *                                principal point in dir), with c, r the pixel centre's offsets from the image centre
  *   to_fine_scale, to_fine_offset  grid-0 fine coordinates = world * scale + offset

@@ -166,6 +166,9 @@ def _clw_lines(f) -> list:
     if f["photo"]:
         lines.append(("photo", "a photo's colour and alpha, not classified: shaded ray tracing needs the original "
                                "volume compressed with --tf photo or another preset (docs/model.md §5)"))
+    if f["provenance"]:  # absent before the twenty-third session, and for a model of no file (a phantom, an array)
+        frame = f["provenance"]["frame"]
+        lines.append(("from", f["provenance"]["file"] + ("" if frame is None else f", frame {frame} (--frame)")))
     return lines
 
 

@@ -9,10 +9,10 @@ import zlib
 
 import numpy as np
 
-from ..errors import FileFormatError
+from ..errors import FileFormatError, InputError
 from .images import UNIT_METRES
 from ..model.bspline import WAVELET_ORDERS, max_levels
-from ..model.volume import frame_problem
+from ..model.volume import check_provenance, frame_problem
 from ..model.transfer import TransferFunction
 
 FILE_FORMAT = "clwave-wavelet-volume"
@@ -100,7 +100,7 @@ def checked_header(header) -> tuple:
             raise ValueError(f"{name} {value!r} is not three finite{' positive' if positive else ''} numbers")
     problem = frame_problem(shape, header["spacing"], header["origin"])
     if problem:
-        raise ValueError(problem)
+        raise ValueError(problem[0])
     subtracted = header.get("offset", 0.0)  # the value subtracted (its key of old); absent in older files: none
     if not _numbers([subtracted], 1):
         raise ValueError(f"offset {subtracted!r} (the value subtracted) is not one finite number")
@@ -112,6 +112,10 @@ def checked_header(header) -> tuple:
         raise ValueError(f"unit {unit!r} is not one of {', '.join(UNIT_METRES)}")
     if header.get("photo", False) not in (False, True):  # absent in older files: classified where RGBA
         raise ValueError(f"photo {header['photo']!r} is not true or false")
+    try:  # absent in older files (and None): not known
+        check_provenance(header.get("provenance"))
+    except InputError as exc:  # said as the file's fault
+        raise ValueError(str(exc)) from None
     levels, channels = header.get("levels"), header.get("channels")
     if not (_whole(levels) and 0 <= levels <= max_levels(shape)):
         raise ValueError(f"levels {levels!r} is not possible for shape {shape}")

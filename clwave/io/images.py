@@ -19,6 +19,13 @@ from .files import write_atomic
 PNG_SUFFIXES, TIFF_SUFFIXES = (".png",), (".tif", ".tiff")
 #: the world units a pixel size is written in, and their length in metres
 UNIT_METRES = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "nm": 1e-9, "A": 1e-10}  # A: the ångström
+#: the names of those units as inputs write them (lower case: xarray's and CF's units, NGFF's, ImageJ's), as clwave
+#: names them (:func:`unit_named`, one table for every reader)
+UNIT_NAMES = {"m": "m", "meter": "m", "metre": "m", "meters": "m", "metres": "m", "cm": "cm", "centimeter": "cm",
+              "centimetre": "cm", "mm": "mm", "millimeter": "mm", "millimetre": "mm", "um": "um", "µm": "um",
+              "μm": "um", "\\u00b5m": "um", "micrometer": "um", "micrometre": "um", "micron": "um", "microns": "um",
+              "nm": "nm", "nanometer": "nm", "nanometre": "nm", "nanometers": "nm", "a": "A", "å": "A",
+              "angstrom": "A"}
 BIT_DEPTHS = (8, 16)
 
 _SRGB = (b"sRGB", b"\x00")  # perceptual rendering intent
@@ -32,6 +39,11 @@ def check_bit_depth(bit_depth) -> int:
         raise InputError(f"bit_depth={bit_depth!r} must be 8 or 16 (bits a sample of a PNG)",
                          cli=f"--bit-depth {bit_depth} must be 8 or 16")
     return int(bit_depth)
+
+
+def unit_named(name) -> str | None:
+    """The world unit (:data:`UNIT_METRES`) an input's unit ``name`` is (:data:`UNIT_NAMES`, any case), or None."""
+    return UNIT_NAMES.get(str(name).strip().lower())
 
 
 def check_unit(unit):

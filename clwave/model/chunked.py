@@ -157,6 +157,7 @@ class ChunkedWaveletVolume:
     obliquity = property(lambda self: self.volume.obliquity)
     unit = property(lambda self: self.volume.unit)
     photo = property(lambda self: self.volume.photo)
+    provenance = property(lambda self: self.volume.provenance)
     channels = property(lambda self: self.volume.channels)
     n_voxels = property(lambda self: int(np.prod(self.shape)))
     frame = property(lambda self: (self.shape, self.spacing, self.origin))
@@ -330,7 +331,7 @@ class ChunkedWaveletVolume:
         return WaveletVolume(self.shape, self.spacing, self.origin, self.levels, out, self.channels,
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
                              content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity,
-                             value_range=self.value_range, unit=self.unit, photo=self.photo,
+                             value_range=self.value_range, unit=self.unit, photo=self.photo, provenance=self.provenance,
                              noise_sigma=self.noise_sigma)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:

@@ -12,11 +12,6 @@ from ..errors import ClwaveWarning, InputError, reals, warn_outside
 AXIS_NAMES = {"z": ("z", "depth", "height", "altitude"), "y": ("y", "lat", "latitude"),
               "x": ("x", "lon", "longitude"), "c": ("c", "channel", "channels", "band", "bands", "rgb", "rgba",
                                                     "colour", "color")}
-#: a coordinate's ``units`` (lower case, UDUNITS' names too) that are a world unit, as clwave names it
-UNIT_NAMES = {"m": "m", "meter": "m", "metre": "m", "meters": "m", "metres": "m", "cm": "cm", "centimeter": "cm",
-              "centimetre": "cm", "mm": "mm", "millimeter": "mm", "millimetre": "mm", "um": "um", "µm": "um",
-              "micrometer": "um", "micrometre": "um", "micron": "um", "microns": "um", "nm": "nm", "nanometer": "nm",
-              "nanometre": "nm", "a": "A", "å": "A", "angstrom": "A"}
 #: evenly spaced: every coordinate within this share of a step of its place on the line from the first to the last
 EVEN = 1e-3
 
@@ -142,7 +137,9 @@ def _unit(da, names):
     if len(set(map(str, units))) > 1:
         raise InputError(f"the DataArray's z, y, x coordinates ({', '.join(names)}) are in different units "
                          f"({', '.join(map(repr, units))}): give spacing=(dz, dy, dx) in one unit, and unit=")
-    return UNIT_NAMES.get(str(units[0]).strip().lower()) if units[0] is not None else None
+    from ..io.images import unit_named
+
+    return unit_named(units[0]) if units[0] is not None else None
 
 
 def _warn_other_spacing(spacing, lines, names):

@@ -337,7 +337,7 @@ class TransferFunction:
                 raise tf._nothing_visible(vol, window, scale)
             tf._warn_opaque(vol, window, scale, rgba[..., 3])
         return Volume(rgba, spacing=vol.spacing, origin=vol.origin, obliquity=vol.obliquity, labels=vol.labels,
-                      unit=vol.unit)
+                      unit=vol.unit, provenance=vol.provenance)
 
     def _nothing_visible(self, vol, window, scale) -> NothingVisibleError:
         """The refusal of this function (in ``vol``'s data units: :meth:`_on`) without opacity anywhere, naming its span

@@ -17,6 +17,9 @@ from .geometry import WORLD_RANGE, fine_to_world, world_to_fine
 from .labels import looks_like_labels
 
 MAX_CHANNELS = 4
+#: the most voxels (of the smallest spacing) an origin's coordinates lie from 0: float64 places the volume's corners
+#: within 1e-4 of a voxel there (2⁻⁵³ of 1e12); at 1e16 voxels they round to other voxels (a content box of one point)
+ORIGIN_VOXELS = 1e12
 #: A classified volume's premultiplied colour never exceeds its alpha: :func:`warn_straight_colour` tells one whose
 #: colour does by more than STRAIGHT_MARGIN of its largest value in more than STRAIGHT_SHARE of its voxels above that
 #: margin in some channel (on an even sample of at most STRAIGHT_SAMPLE): a photo's straight colour and alpha given as
@@ -80,6 +83,10 @@ class Volume:
     stored_dtype : numpy dtype, optional
         The type of the input's values as stored (:func:`clwave.load`: the file's, before float32); None (default):
         ``data``'s own.  ``clwave compress`` weighs its file against the input's size in it.
+    provenance : dict, optional
+        Where the values were read from, ``{"file": path, "frame": K or None}`` (:func:`clwave.load` sets it: the
+        file and the time point ``frame=`` picked); None (default): not read from a file.  Kept by the model and its
+        ``.clw`` file, and shown by ``clwave info`` (docs/chunked.md §4).
 
     Examples
     --------
@@ -89,7 +96,7 @@ class Volume:
     """
 
     def __init__(self, data, spacing=None, origin=None, subtracted=0.0, obliquity=0.0, labels=None,
-                 stored_dtype=None, unit=None, photo=False):
+                 stored_dtype=None, unit=None, photo=False, provenance=None):
         if is_dataset(data):
             raise InputError(f"volume data is an xarray Dataset of the variables {', '.join(map(str, data.data_vars))}"
                              f"; give one of them, a DataArray: Volume(ds[name])")
@@ -146,10 +153,7 @@ class Volume:
             raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
         origin = tuple(float(o) for o in reals(0.0 if origin is None else origin, "origin", 3,
                                                "one number or three (x, y, z)", one=True))
-        problem = frame_problem(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
-        if problem:
-            raise InputError(f"{problem}; give spacing= in other units",
-                             cli=f"{problem}; give --spacing in other units")
+        check_placement(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin
         if not np.all(np.isfinite(origin)):
             raise InputError(f"origin {origin} must be finite (x, y, z)")
         self.origin = origin
@@ -161,6 +165,7 @@ class Volume:
 
         self.unit = check_unit(unit)
         self.photo = flag(photo, "photo") and self.channels > 1
+        self.provenance = check_provenance(provenance)
 
     @property
     def shape(self) -> tuple:
@@ -297,15 +302,45 @@ def content_of(data):
     return (data != 0).any(axis=3) if data.ndim == 4 else data != 0
 
 
-def frame_problem(shape, spacing, origin) -> str | None:
+def frame_problem(shape, spacing, origin) -> tuple[str, str] | None:
     """What is wrong with a ``spacing`` (dz, dy, dx; positive) and ``origin`` (x, y, z; finite) of a ``shape``
-    (z, y, x) volume outside :data:`WORLD_RANGE`, or None."""
+    (z, y, x) volume outside :data:`WORLD_RANGE`, or with an origin more than :data:`ORIGIN_VOXELS` voxels from 0,
+    and the argument to change ("spacing" or "origin"), or None."""
     low, high = WORLD_RANGE
     if min(spacing) < low or max(float(d) * n for d, n in zip(spacing, shape)) > high or max(map(abs, origin)) > high:
         return (f"spacing {tuple(spacing)} (dz, dy, dx) and origin {tuple(origin)} (x, y, z) of a "
                 f"{' x '.join(map(str, shape))} volume lie outside the world lengths clwave renders (a voxel at least "
-                f"{low:g}, the volume's extent and its origin at most {high:g})")
+                f"{low:g}, the volume's extent and its origin at most {high:g})", "spacing")
+    if max(map(abs, origin)) > ORIGIN_VOXELS * min(spacing):
+        return (f"origin {tuple(origin)} (x, y, z) lies more than {ORIGIN_VOXELS:g} voxels from 0 (spacing "
+                f"{tuple(spacing)}, dz, dy, dx), where float64 rounds its voxels' positions (to whole voxels at "
+                f"1e16)", "origin")
     return None
+
+
+def check_placement(shape, spacing, origin):
+    """Refuse a ``spacing`` and ``origin`` of a ``shape`` volume that :func:`frame_problem` refuses, naming the
+    argument to change (``Volume``'s, and ``clwave info``'s of a header that places the volume)."""
+    problem = frame_problem(shape, spacing, origin)
+    if problem and problem[1] == "origin":
+        raise InputError(f"{problem[0]}; give origin= nearer its voxels (the volume's centre; 0 centres it)",
+                         cli=f"{problem[0]}; write the file with an origin nearer its voxels, or read it in Python "
+                             f"with clwave.load(path, origin=(0, 0, 0))")
+    if problem:
+        raise InputError(f"{problem[0]}; give spacing= in other units", cli=f"{problem[0]}; give --spacing in other "
+                                                                            f"units")
+
+
+def check_provenance(source) -> dict | None:
+    """``provenance`` (:class:`Volume`'s) as ``{"file": str, "frame": a whole number (as ``load`` took it: -1 the last)
+    or None}``, or None; InputError (a ValueError) otherwise: a ``.clw`` header's is said as the file's fault."""
+    if source is None:
+        return None
+    frame = source.get("frame") if isinstance(source, dict) else None
+    if not (isinstance(source, dict) and set(source) == {"file", "frame"} and isinstance(source["file"], str)
+            and (frame is None or (isinstance(frame, int) and not isinstance(frame, bool)))):
+        raise InputError(f"provenance {source!r} is not {{'file': path, 'frame': a whole number or None}}")
+    return dict(file=source["file"], frame=frame)
 
 
 def _triple(value, name) -> tuple:

@@ -24,7 +24,7 @@ from scipy.special import comb
 from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.kernels import BUFFER, Kernel, in_row_bands
-from ..errors import InputError, NearlyOpaqueWarning, warn_outside
+from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, warn_outside
 from ..model.tf_passes import auto_window
 from ..model.transfer import TransferFunction
 from ..model.transform import sampling_kernel
@@ -172,6 +172,12 @@ class ScalarRange:
                                   f.levels)
             words, quant = pack(scalar, f.boxes[:, 0], full, abandon)
             self.step = float(np.max(quant["step"]))
+            if self.step <= np.finfo(np.float32).tiny:  # the step floored (_step): fewer than Q_BITS of the range
+                warn_outside(ClwaveWarning(
+                    f"this scalar model's values are so small (their range under {Q_MAX} times float32's least normal "
+                    f"number, {np.finfo(np.float32).tiny:.3g}) that its bricks pack them in fewer than {Q_BITS} bits: "
+                    f"its shading is coarser than the tolerance; multiply the volume's values (by 1e30, say) before "
+                    f"making the model"))
             del scalar
             self.slot_range = slot_range.get()  # the decoded coefficients lie within half their step of the floats
             self.slot_range += (quant["step"][:, None] / 2 * np.array([-1, 1], np.float32))[:, None, None, None, :]
@@ -404,8 +410,10 @@ def pack(scalar, boxes, full=None, abandon=None) -> tuple:
 
 
 def _step(span) -> np.float32:
-    """The step of slots whose widest range is ``span``: span / Q_MAX rounded up in float32."""
-    step = np.float32(span / Q_MAX)
+    """The step of slots whose widest range is ``span``: span / Q_MAX rounded up in float32, at least float32's least
+    normal number (a subnormal step is 0 in the kernels' fast arithmetic: a scalar of about 1e-36 rendered empty; its
+    q then stay below Q_MAX)."""
+    step = np.float32(max(span / Q_MAX, np.finfo(np.float32).tiny))
     return np.nextafter(step, np.float32(np.inf)) if float(step) * Q_MAX < span else step
 
 

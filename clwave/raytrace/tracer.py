@@ -368,15 +368,16 @@ class RayTracer:
         if post is not None:  # the classified opacity bounds the field (docs/raytracing.md §10)
             skip.update(bound=post.bound, super_bound=post.super_bound, super_origin=post.super_origin[::-1],
                         super_shape=post.super_bound.shape[::-1], box_lo=post.box[0], box_hi=post.box[1])
-        skip.update(_clipped(clip, skip["box_lo"], skip["box_hi"], scale, offset, q, self.region is None))
+        skip.update(_clipped(clip, skip["box_lo"], skip["box_hi"], scale, offset, q, self.region is None, wv.origin))
         start = time.perf_counter()
         rounded = tuple(-(-n // m) * m for n, m in zip((W, H), self.local_size))  # whole work-groups
         arguments = dict(
             image=image, stats=stats, lattice_stats=lattice_stats, width=W, height=H, **skip,
             occ_origin=self.occ_origin[::-1], occ_shape=at.block_bound.shape[::-1], content=self.content,
             content_origin=self.content_origin[::-1], content_shape=self.content_shape[::-1],
-            coarse_bound=self.coarse_bound(tol), base=base, du=du, dv=dv, dir=direction, perspective=view.perspective,
-            to_fine_scale=scale, to_fine_offset=offset, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
+            coarse_bound=self.coarse_bound(tol), du=du, dv=dv, dir=direction, perspective=view.perspective,
+            base=base - wv.origin, to_fine_offset=offset + scale * wv.origin,  # about the centre: coordinates.md §1
+            to_fine_scale=scale, nodes=nodes, weights=weights, tol=tol, shade_gain=shade_gain,
             grad_floor=post.grad_floor if post else self.grad_floor(precision, at.q_bound),
             lights=cla.to_device(q, light_buf), nlights=len(light_dirs),
             phong=[p.ambient, p.diffuse, p.specular, p.shininess], carry=carry, ledger=ledger, resume=resume,
@@ -474,10 +475,10 @@ class RayTracer:
         return phong, "phong"
 
 
-def _clipped(clip, lo, hi, scale, offset, queue, whole) -> dict:
+def _clipped(clip, lo, hi, scale, offset, queue, whole, shift) -> dict:
     """The kernel's ``box_lo``, ``box_hi``, ``clip`` and ``nclip`` (docs/raytracing.md §12): the support box ``lo`` ..
-    ``hi`` (grid-0 fine (x, y, z)) cut by the clip's box, and its half-spaces in world units; a clip that keeps
-    nothing of that box refused where it is the ``whole`` model's (a slab on a cluster may lie outside the clip)."""
+    ``hi`` (grid-0 fine (x, y, z)) cut by the clip's box, and its half-spaces in the kernel's world (less ``shift``);
+    a clip keeping nothing of that box refused where it is the ``whole`` model's (a cluster's slab may miss it)."""
     if clip is None:
         return dict(box_lo=lo, box_hi=hi, clip=cla.zeros(queue, (1, 4), np.float32), nclip=0)
     if whole and not clip.keeps((lo - offset) / scale, (hi - offset) / scale):
@@ -488,8 +489,8 @@ def _clipped(clip, lo, hi, scale, offset, queue, whole) -> dict:
         if clip.lo is not None:
             lo, hi = (np.maximum(lo, np.array(clip.lo) * scale + offset),
                       np.minimum(hi, np.array(clip.hi) * scale + offset))
-        top = np.finfo(np.float32).max
-        rows = np.clip(clip.half_spaces(), -top, top).astype(np.float32)
+        rows, top = clip.half_spaces(), np.finfo(np.float32).max
+        rows = np.clip(rows + np.outer(rows[:, :3] @ np.array(shift), [0, 0, 0, 1]), -top, top).astype(np.float32)
     return dict(box_lo=lo, box_hi=hi, clip=cla.to_device(queue, rows), nclip=len(rows))
 
 

@@ -4,6 +4,7 @@ framebuffers (layers) the bands are drawn into."""
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -12,7 +13,7 @@ from ..device.constants import CELL_SNAP, TILE
 from ..errors import DeviceMemoryError
 from ..model.geometry import fine_to_world, support_centres
 from ..model.wavelet import WaveletVolume
-from .textures import DEFAULT_OMEGA_MIN, cell_axes, footprints
+from .textures import DEFAULT_OMEGA_MIN, cell_axes, footprints, plane_shape
 
 
 KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
@@ -71,7 +72,7 @@ class ViewTables:
         # more than its upsampling (docs/splatting.md §4)
         self.omega_s = omega = omega_s if omega_s is not None else default_omega_s(image_view.pixel, min(wv.spacing),
                                                                                     wav.order)
-        self.layer_of, self.texels_per_pixel, texel = {}, {}, {}
+        self.layer_of, self.texels_per_pixel, texel, phases = {}, {}, {}, {}
         for li, (view, bands) in enumerate(layers):
             for b in g.bands:
                 band = (b.level, b.key)
@@ -83,10 +84,11 @@ class ViewTables:
                 self.layer_of[band] = li
                 self.texels_per_pixel[band] = s
                 texel[band] = view.pixel / s
+                phases[band] = int(s) if s >= 1 and s == int(s) else 1  # the pool's phase planes (P below)
         start = time.perf_counter()
         self.textures = footprints(wav, wv.spacing, image_view.n, image_view.u, image_view.v, list(self.layer_of),
                                    omega_s=self.omega_s, sampling=sampling, tol=TEXTURE_TOL if wav.order >= 4 else 0.0,
-                                   texel=texel, device=device, max_texels=max_texels)
+                                   texel=texel, device=device, max_texels=max_texels, phases=phases)
         self.footprint_seconds = time.perf_counter() - start
         self.samplings = sorted({t.sampling for t in self.textures.values() if t is not None})
 
@@ -124,9 +126,9 @@ class ViewTables:
                 s = self.texels_per_pixel[(m, band.key)]
                 cell_u, cell_v = tex.cells
                 whole = s >= 1 and s == int(s)  # a whole number of texels a pixel (phase_rate), by value
-                P = int(s) if whole and not cell_u else 1
+                P = 1 if cell_u else phases[(m, band.key)]
                 su, sv = (view.pixel / h if cell else float(s) for h, cell in ((tex.h_u, cell_u), (tex.h_v, cell_v)))
-                pool_texels = offset + P * (tex.data.shape[0] + 3) * (-(-tex.data.shape[1] // P) + 2)
+                pool_texels = offset + math.prod(plane_shape(*tex.data.shape, P))
                 if max_texels is not None and pool_texels > max_texels:
                     raise DeviceMemoryError(
                         f"the texel pool of this view needs more than {4 * max_texels / 2**20:,.0f} MiB: a pixel "
@@ -174,7 +176,7 @@ def pack_texture(data: np.ndarray, P: int) -> np.ndarray:
     reads contiguous memory.  Zero margins: a column either side, a row above and two below.
     """
     nv, nu = data.shape
-    cols = -(-nu // P) + 2
+    cols = plane_shape(nv, nu, P)[2]
     rows = np.zeros((nv + 3, cols * P), np.float32)
     rows[1:nv + 1, P:P + nu] = data  # texel iu at P + iu: column (iu // P) + 1 of plane iu % P
     return np.ascontiguousarray(rows.reshape(nv + 3, cols, P).transpose(2, 0, 1))

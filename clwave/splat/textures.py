@@ -20,7 +20,7 @@ True
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import ceil
+from math import ceil, prod
 
 import numpy as np
 import scipy.fft
@@ -199,6 +199,12 @@ def _axis_samples(count, cell) -> int:
     return 2 if cell else count + 1
 
 
+def plane_shape(nv: int, nu: int, P: int) -> tuple:
+    """The shape of a texture of ``nv`` x ``nu`` samples in the texel pool, as P phase planes along u
+    (:func:`~clwave.splat.tables.pack_texture`): (P, nv + 3, ceil(nu / P) + 2)."""
+    return P, nv + 3, -(-nu // P) + 2
+
+
 #: Host bytes a texel takes at the peak of making an orthographic view's textures (a perspective view's are made on
 #: the device, docs/splatting.md §8): its half-spectrum (complex128, 8 bytes a
 #: texel), the inverse FFT's float64 period (8), the centred and trimmed float32 copies (8) and the packed pool
@@ -221,7 +227,8 @@ def check_sampling(sampling):
 
 
 def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omega_min=None,
-               sampling: str = "auto", tol: float = 0.0, texel=None, device=None, max_texels=None) -> dict:
+               sampling: str = "auto", tol: float = 0.0, texel=None, device=None, max_texels=None,
+               phases=None) -> dict:
     """Footprint textures of the (level, key) pairs in ``bands`` for one view.
 
     Parameters
@@ -254,6 +261,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
     max_texels : int, optional
         Refuse (:class:`DeviceMemoryError`) a view whose textures would hold more texels, before
         any is made.
+    phases : dict, optional
+        The phase planes P each band's texture takes in the renderer's texel pool (a pixel's
+        whole number of texels, :func:`plane_shape`): the pool is refused past ``max_texels``
+        too, before any texture is made.
     device : ComputeContext, optional
         Sample the FFT sampling's spectra there (:func:`device_spectra`, float32), all
         textures in one launch, instead of with NumPy (float64); the inverse FFTs stay on
@@ -304,6 +315,16 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
     fix = "give a lower omega_s (--omega-s), or render with the ray tracer (--method raytrace)"
     check_texels(texels, max_texels, "the footprint textures of this view",
                  f"the voxel spacing is very uneven or omega_s high; {fix}")
+    # their pool, P phase planes each where a pixel spans P texels (a needle's thin axis sets the texel, its long one
+    # the pixel): weighed before a texture is made (a 1000:1 spacing made 9 GB of textures first)
+    if phases is not None:  # the renderer's (ViewTables'): P a band
+        pool = sum(prod(plane_shape(_axis_samples(nv, cell_v), _axis_samples(nu, cell_u),
+                                    1 if cell_u else phases.get((m, key), 1)))
+                   for m, key, (nu, _, cell_u), (nv, _, cell_v) in jobs)
+        check_texels(pool, max_texels, "the texel pool (phase planes) of this view's footprint textures",
+                     f"a pixel spans up to {max(phases.values(), default=1):,} texels of the volume's thinnest voxels "
+                     f"(a very uneven spacing, or a wide extent); render more pixels (a camera's size, --size), a "
+                     f"smaller extent, or with the ray tracer (--method raytrace)")
     # the host's memory, where a limit (ulimit -v) rather than the textures may be the cause
     check_fits(HOST_TEXEL_BYTES * texels, f"making the footprint textures of this view ({texels:,} texels)",
                f"free memory (or raise this process's limit), {fix}")

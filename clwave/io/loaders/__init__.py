@@ -22,7 +22,7 @@ import numpy as np
 
 from ...errors import FileFormatError, InputError, finite_number, flag, float32_number
 from ...model.labels import looks_like_labels
-from ...model.volume import Volume, is_dask
+from ...model.volume import Volume, check_placement, is_dask
 from . import dicom, dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
                      reading, axis_turn, stated_affine, to_canonical, to_float32)
@@ -192,14 +192,15 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
                           nan=nan)
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     placed = origin if origin is not None else file_origin if file_origin is not None else (0.0, 0.0, 0.0)
+    provenance = dict(file=str(path) + (f":/{inner}" if inner else ""), frame=frame)
     volume = Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
                     subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
-                    unit=unit if unit is not None else _world_unit(kind, path, inner))
+                    unit=unit if unit is not None else _world_unit(kind, path, inner), provenance=provenance)
     if orientation is not None:  # turned into RAS+ as a medical file is, by the same code; origin= is RAS already
         affine = stated_affine(turn, volume.shape, volume.spacing, volume.origin)
         data, spacing, turned, _ = to_canonical(volume.data, affine)
         volume = Volume(data, spacing, turned if origin is None else origin, subtracted=subtract,
-                        labels=volume.labels, stored_dtype=stored, unit=volume.unit, photo=photo)
+                        labels=volume.labels, stored_dtype=stored, unit=volume.unit, photo=photo, provenance=provenance)
     return volume
 
 
@@ -349,6 +350,7 @@ def describe(path, *, series=None, level=None, frame=None, shape=None, dtype=Non
                 facts["shape"] = list(declared.loaded) + [channels] * (channels > 1)
             if declared.placed is not None:
                 spacing, origin, obliquity = declared.placed
+                check_placement(declared.loaded, spacing, origin)  # as the read's Volume refuses it
                 facts.update(spacing=[float(s) for s in spacing], origin=[float(o) for o in origin],
                              obliquity=obliquity, spacing_in_file=True)
             elif kind in _SLICE_FOLDERS:  # stacked as stored, and no file places them: load's unit spacing

@@ -52,6 +52,9 @@ def read_dicom_folder(where, path, headers, progress_bar, fits=None):
     for tag in ("ImageOrientationPatient", "ImagePositionPatient", "PixelSpacing"):
         for file, h in headers:
             check_attribute(file, tag, np.array(h.get(tag), float))
+    for file, h in headers:
+        check_attribute(file, "RescaleSlope", float(getattr(h, "RescaleSlope", 1.0)))
+        check_attribute(file, "RescaleIntercept", float(getattr(h, "RescaleIntercept", 0.0)))
     cosines = np.array([h.ImageOrientationPatient for _, h in headers], float)
     kinds, counts = np.unique(np.round(cosines, 4), axis=0, return_counts=True)
     common = kinds[np.argmax(counts)]
@@ -336,10 +339,7 @@ def _dicom_pixels(path):
     applied, its padding NaN (:func:`mark_padding`)."""
 
     ds = dcmread(path)
-    slope = float(getattr(ds, "RescaleSlope", 1.0))
-    intercept = float(getattr(ds, "RescaleIntercept", 0.0))
-    check_attribute(path, "RescaleSlope", slope)
-    check_attribute(path, "RescaleIntercept", intercept)
+    slope, intercept = float(getattr(ds, "RescaleSlope", 1.0)), float(getattr(ds, "RescaleIntercept", 0.0))
     ds.pixel_array_options(allow_excess_frames=False)  # the one frame its header declares (checked: a single frame)
     with warnings.catch_warnings():  # pydicom's 2 lines on the bytes past it: the header's frame is what is read
         warnings.filterwarnings("ignore", "The pixel data is .* bytes long, which indicates it contains .* excess")
@@ -378,6 +378,13 @@ def check_pixel_data(path, ds):
         raise FileFormatError(f"DICOM file {path} holds pixel data in transfer syntax {syntax} ({syntax.name}), which "
                               f"no decoder installed here reads ({'; '.join(needs)}): {install}, or convert the series "
                               f"with dcm2niix (dcm2niix -o OUT_FOLDER FOLDER) and read the .nii")
+    rows, columns, allocated = (int(ds.get(k) or 0) for k in ("Rows", "Columns", "BitsAllocated"))
+    stored = int(ds.get("BitsStored") or allocated)
+    if min(rows, columns) < 1 or not 1 <= stored <= allocated:  # pydicom's refusals when it decodes, from the header
+        raise FileFormatError(f"DICOM file {path} declares Rows {rows}, Columns {columns}, BitsAllocated {allocated} "
+                              f"and BitsStored {stored}, which no image has (at least one row and column, at most "
+                              f"BitsAllocated bits stored); the file is corrupt: correct its header or move it out of "
+                              f"the folder")
     if syntax.is_encapsulated:
         return  # compressed frames: their decoder says what they hold
     with reading(path):

@@ -19,6 +19,10 @@ _IMOD_STAMP = 1146047817  # "IMOD" (little-endian bytes)
 #: Signed bytes (mode 0, MRC2014) whose steps of more than 128 between neighbours would be under WRAPPED as many read
 #: unsigned: an unsigned 8-bit map, its values above 127 wrapped (sections evenly spaced, at most WRAP_SAMPLE bytes)
 WRAPPED, WRAP_SAMPLE = 0.5, 1 << 22
+#: the most a map's voxel size (its cell over its sampling) along one axis may exceed another's: maps' voxels are near
+#: cubes (cryo-EM, tomograms, crystallographic cells); past it the header's cell or sampling is wrong (fuzz27: an mx
+#: of 2^31 - 1, voxels of 4.7e-9 by 2 Å, refused by the footprint textures' size, naming --omega-s)
+UNEVEN = 1e4
 
 
 def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):
@@ -71,10 +75,17 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):
     if ispg == 0 and stored[0] > 1:
         note(f"{path} is a stack of {stored[0]} 2-D images (space group 0: a tilt series or a stack of particles): "
              "read as the slices of a volume")
+    spacing = _spacing(header)
+    if spacing is not None and max(spacing) > UNEVEN * min(spacing):
+        cell, sampling = header.cella.tolist(), (int(header.mx), int(header.my), int(header.mz))
+        raise FileFormatError(f"{path}: its cell ({', '.join(f'{c:g}' for c in cell)} Å) over its sampling (mx, my, "
+                              f"mz = {', '.join(map(str, sampling))}) gives voxels of "
+                              f"{' x '.join(f'{d:.3g}' for d in spacing[::-1])} Å (x, y, z), more than {UNEVEN:g} "
+                              f"times longer along one axis than another; the header is wrong: correct its cell or "
+                              f"its mx, my, mz")
     source = OnDemand(partial(read_memmap, str(path), samples, stored, offset, "C"), stored, samples)
     data = as_array(source, chunks, fits=fits, path=path)
     data = data.transpose([axes.index(a) for a in (3, 2, 1)])  # (z, y, x)
-    spacing = _spacing(header)
     if spacing is None:
         if warn_spacing:
             no_spacing(path)

@@ -15,7 +15,7 @@ import numpy as np
 
 from ...errors import FileFormatError
 from .inflate import decompressed
-from .shared import GZIP_MAGIC, check_declared_size, check_whole, not_a_file, note, to_canonical
+from .shared import GZIP_MAGIC, Declared, check_declared_size, check_whole, not_a_file, note, to_canonical
 
 _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
@@ -25,6 +25,9 @@ _NRRD_SPACE_SIGNS = {
     # left-handed screen frame, z into the screen, becomes OpenGL's right-handed one): x and y kept
     "3d-left-handed": (1, 1, -1),
 }
+
+#: the encodings pynrrd reads
+_ENCODINGS = ("raw", "gzip", "gz", "bzip2", "bz2", "ascii", "text", "txt")
 
 
 def read_nrrd(path, fits=None, warn_spacing=True):
@@ -56,27 +59,29 @@ def read_nrrd(path, fits=None, warn_spacing=True):
         if directions is not None and _singular(directions[spatial]):
             raise FileFormatError(f"{path}: its space directions {_rows(directions[spatial])} are singular (a zero or "
                                   "repeated direction) and span no 3-D grid; correct the header's space directions")
+        affine = np.eye(4)
+        if directions is not None:
+            affine[:3, :3] = directions[spatial].T
+            affine[:3, 3] = header.get("space origin", np.zeros(3))
+        else:
+            spacings = np.asarray(header.get("spacings", np.ones(len(sizes))), float)[spatial]
+            if warn_spacing and not np.all(np.isfinite(spacings)):
+                note(f"{path}: its spacing (dz, dy, dx) {', '.join(map(str, spacings[::-1]))} is unknown (nan) on "
+                     f"some axes; taken as 1 there: give spacing= (--spacing DZ,DY,DX) for the true one")
+            affine[:3, :3] = np.diag(np.where(np.isfinite(spacings), spacings, 1.0))
+        # other spaces (scanner-xyz, 3D-right-handed, none) are right-handed: taken as RAS
+        affine = np.diag(_NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1)) + (1,)) @ affine
         dtype = nrrd.reader._determine_datatype(header)
-        check_whole(path, [sizes[a] for a in spatial + others], dtype, fits)
+        try:
+            check_whole(path, [sizes[a] for a in spatial + others], dtype, fits)
+        except Declared as declared:  # describe(): its place from the header
+            declared.place([sizes[a] for a in spatial], affine)
+            raise
         if str(header.get("encoding", "raw")).lower() in _DECOMPRESSORS:
             data = _inflated(path, header, fh, dtype, sizes)
         else:
             data = nrrd.read_data(header, fh, str(path))  # index_order 'F': axes in file order, fastest first
-    data = np.moveaxis(data, others, list(range(3, data.ndim)))
-
-    affine = np.eye(4)
-    if directions is not None:
-        affine[:3, :3] = directions[spatial].T
-        affine[:3, 3] = header.get("space origin", np.zeros(3))
-    else:
-        spacings = np.asarray(header.get("spacings", np.ones(len(sizes))), float)[spatial]
-        if warn_spacing and not np.all(np.isfinite(spacings)):
-            note(f"{path}: its spacing (dz, dy, dx) {', '.join(map(str, spacings[::-1]))} is unknown (nan) on some "
-                 f"axes; taken as 1 there: give spacing= (--spacing DZ,DY,DX) for the true one")
-        affine[:3, :3] = np.diag(np.where(np.isfinite(spacings), spacings, 1.0))
-    # other spaces (scanner-xyz, 3D-right-handed, none) are right-handed: taken as RAS
-    signs = _NRRD_SPACE_SIGNS.get(str(header.get("space", "")).lower(), (1, 1, 1))
-    return to_canonical(data, np.diag(signs + (1,)) @ affine)
+    return to_canonical(np.moveaxis(data, others, list(range(3, data.ndim))), affine)
 
 
 def world_unit(path) -> str | None:
@@ -165,27 +170,54 @@ def _data_file(path, header):
 
 
 def _check_nrrd_size(path, header, offset):
-    """A NRRD header that declares more voxels than its raw or gzip data holds (attached data starting at
-    ``offset``; a gzip stream by its trailer) is refused before they are allocated (other encodings, and a missing
-    detached data file, are left to the read)."""
+    """What pynrrd's read refuses, refused from the header (so ``clwave info`` refuses it too): a ``dimension`` not
+    the number of ``sizes``, an encoding or a ``type`` it does not read, a line or byte skip it does not take, a
+    missing detached data file; and a header that declares more voxels than its raw or gzip data holds (attached
+    data starting at ``offset``) before pynrrd allocates them, or fewer than its raw data holds (pynrrd reads all of
+    it).  A corrupt compressed stream is found by the read alone."""
     import nrrd
 
     encoding = str(header.get("encoding", "raw")).lower()
+    sizes = [int(n) for n in header["sizes"]]
+    if header.get("dimension") != len(sizes):
+        raise FileFormatError(f"{path}: its header's dimension {header.get('dimension')} is not the number of its "
+                              f"sizes ({' '.join(map(str, sizes))}); correct the header")
+    if encoding not in _ENCODINGS or str(header.get("type")).lower() == "block":
+        found = f"type {header['type']}" if encoding in _ENCODINGS else f"encoding {header['encoding']}"
+        raise FileFormatError(f"{path}: its {found} is not one the NRRD reader (pynrrd) reads; write it as raw, gzip, "
+                              f"bzip2 or text voxels of a number type")
+    lines, skip = (int(header.get(k, header.get(k.replace(" ", ""), 0)) or 0) for k in ("line skip", "byte skip"))
+    if lines < 0 or skip < -1:
+        raise FileFormatError(f"{path}: its line skip {lines} or byte skip {skip} is negative (a byte skip may be -1: "
+                              f"the data at the end); correct the header")
+    if skip < 0 and encoding in _DECOMPRESSORS:
+        raise FileFormatError(f"{path}: its byte skip {skip} is negative; a {encoding} stream is read from its start "
+                              "(Teem reads no byte skip of -1 in one): give the count of bytes to skip")
     detached = _data_file(path, header)
     if detached is not None:  # a detached header: the data is a file of its own
+        if not detached.is_file():
+            raise FileFormatError(f"{path} names the data file {detached.name}, which is not beside it; put it there")
         path, offset = detached, 0
-    if encoding not in ("raw", "gzip", "gz") or not Path(path).is_file():
-        return
-    sizes = [int(n) for n in header["sizes"]]
     if min(sizes) < 1:
         raise FileFormatError(f"{path}: its header declares sizes {' '.join(map(str, sizes))}; every axis needs at "
                               "least one voxel")
+    if encoding not in ("raw", "gzip", "gz") or skip == -1:
+        return
+    if lines:  # the lines skipped before the data (raw) or the stream (gzip)
+        with open(path, "rb") as fh:
+            fh.seek(offset)
+            for _ in range(lines):
+                fh.readline()
+            offset = fh.tell()
     nbytes = math.prod(sizes) * nrrd.reader._determine_datatype(header).itemsize
-    skip = max(int(header.get("byte skip", 0) or 0), 0)
-    if encoding == "raw":
-        check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=False)
-    else:  # the byte skip counts bytes of the stream, which starts after the header
+    if encoding != "raw":  # the byte skip counts bytes of the stream, which starts after the header
         check_declared_size(path, skip, nbytes, sizes[::-1], gzip=True, start=offset, longer=True)
+        return
+    check_declared_size(path, offset + skip, nbytes, sizes[::-1], gzip=False)
+    if Path(path).stat().st_size > offset + skip + nbytes:
+        raise FileFormatError(f"{path}: its header declares {' x '.join(map(str, sizes[::-1]))} voxels "
+                              f"({nbytes:,} bytes) but the file holds {Path(path).stat().st_size - offset - skip:,} "
+                              f"bytes after its header; its header is wrong or the file is not what it says")
 
 
 #: each compressed encoding's decompressor (a new one for each gzip member or bzip2 stream) and the first bytes of one
@@ -203,10 +235,6 @@ def _inflated(path, header, fh, dtype, sizes) -> np.ndarray:
     lines = int(header.get("line skip", header.get("lineskip", 0)) or 0)
     skip = int(header.get("byte skip", header.get("byteskip", 0)) or 0)
     encoding = str(header["encoding"]).lower()
-    if lines < 0 or skip < 0:
-        raise FileFormatError(f"{path}: its line skip {lines} or byte skip {skip} is negative; a {encoding} stream is "
-                              "read from its start (Teem reads no byte skip of -1 in one): give the count of lines "
-                              "or bytes to skip")
     nbytes = math.prod(sizes) * dtype.itemsize
     voxels = " x ".join(map(str, sizes[::-1]))
     buffer = np.empty(nbytes, np.uint8)

@@ -9,6 +9,7 @@ import numpy as np
 
 from ...device.memory import check_fits
 from ...errors import FileFormatError
+from ..images import unit_named
 from .shared import (Declared, FrameOf, OnDemand, TimeSeries, as_array, by_size, check_whole, log, no_spacing, note,
                      one_volume)
 
@@ -16,21 +17,21 @@ TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
 OME_MICROMETRES = {"pm": 1e-6, "Å": 1e-4, "nm": 1e-3, "µm": 1.0, "um": 1.0, "mm": 1e3, "cm": 1e4, "m": 1e6}
 
-#: an ImageJ stack's length ``unit`` (as ImageJ and Fiji write it, lower case) as clwave names it
-IMAGEJ_UNITS = {"micron": "um", "microns": "um", "µm": "um", "μm": "um", "\\u00b5m": "um", "um": "um", "mm": "mm",
-                "cm": "cm", "m": "m", "meter": "m", "nm": "nm", "nanometer": "nm", "nanometers": "nm"}
+#: the most bytes of a TIFF's first strip or tile decoded to try its codec before a read (:func:`_check_decodable`)
+DECODE_TRIAL = 1 << 24
 
 
 def world_unit(path) -> str | None:
     """The unit of a TIFF stack's spacing: "um" for an OME-TIFF (:func:`_ome_spacing` converts to micrometres), an
-    ImageJ stack's own ``unit`` where it is a length (:data:`IMAGEJ_UNITS`), None otherwise (no spacing in the file)."""
+    ImageJ stack's own ``unit`` where it is a length (:func:`~clwave.io.images.unit_named`), None otherwise (no
+    spacing in the file)."""
     import tifffile
 
     with tifffile.TiffFile(path) as tif:
         if tif.is_ome:
             return "um"
         unit = (tif.imagej_metadata or {}).get("unit")
-    return IMAGEJ_UNITS.get(str(unit).strip().lower())
+    return unit_named(unit)
 
 
 def colour_samples(path) -> bool:
@@ -104,6 +105,7 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False, fra
             raise FileFormatError(f"{path} holds one 2-D image ({' x '.join(map(str, series.shape))}, axes "
                                   f"{series.axes!r}), not a stack of slices; write a volume one page a slice, e.g. "
                                   f"tifffile.imwrite(path, volume, photometric='minisblack')")
+        _check_decodable(series, path)
         spacing = _ome_spacing(tif, path) if tif.is_ome else _imagej_spacing(tif, path)  # from the metadata alone
         if spacing is None and warn_spacing:
             no_spacing(path)
@@ -112,7 +114,6 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False, fra
         chunks = by_size(chunks, shape) if stack else False
         try:
             if chunks is not False or timed:  # through tifffile's Zarr store: a time point's pages alone, or chunks
-                _check_decodable(series, path)
                 roles = "".join("c" if a == channel else "s" for a in axes)
                 own = (1,) + stored[1:] if pages else _store_chunks(series, path)
                 source = OnDemand(partial(_read_region, str(path), pages), stored, series.dtype, own)
@@ -127,7 +128,6 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False, fra
             if spacing is not None:
                 declared.placed = (spacing, (0.0, 0.0, 0.0) if origin is None else origin, 0.0)
             raise
-        _check_decodable(series, path)
         data = tif.asarray(key=range(len(tif.pages))) if pages else series.asarray()
     if channel:
         data = np.moveaxis(data, axes.index(channel), -1)
@@ -135,14 +135,26 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False, fra
 
 
 def _check_decodable(series, path):
-    """Refuse pages compressed by a codec tifffile has no decoder for here (LZW, JPEG, ... need imagecodecs)."""
+    """Refuse pages compressed by a codec tifffile has no decoder for here (LZW, JPEG, ... need imagecodecs), and
+    pages whose first strip or tile (of at most DECODE_TRIAL bytes, stored and decoded) it cannot decode (other
+    codecs, samples of 12 bits), before anything else is read: ``clwave info`` refuses them as a read does."""
     import tifffile
 
-    compression = series.keyframe.compression
-    if compression not in tifffile.TIFF.DECOMPRESSORS:
-        raise FileFormatError(f"{path} holds {compression.name}-compressed pages, which tifffile decodes only with the "
-                              f"imagecodecs package: install it (pip install imagecodecs), or write the stack "
+    page = series.keyframe
+    if page.compression not in tifffile.TIFF.DECOMPRESSORS:
+        raise FileFormatError(f"{path} holds {page.compression.name}-compressed pages, which tifffile decodes only "
+                              f"with the imagecodecs package: install it (pip install imagecodecs), or write the stack "
                               f"uncompressed or with compression='zlib'")
+    decoded = math.prod(page.chunks) * page.samplesperpixel * (page.dtype.itemsize if page.dtype else 8)
+    if page.databytecounts and 0 < page.databytecounts[0] <= DECODE_TRIAL and decoded <= DECODE_TRIAL:
+        page.parent.filehandle.seek(page.dataoffsets[0])
+        try:
+            page.decode(page.parent.filehandle.read(page.databytecounts[0]), 0)
+        except (ImportError, NotImplementedError) as exc:
+            raise FileFormatError(f"{path}: tifffile cannot decode its pages ({page.compression.name} compression, "
+                                  f"{page.bitspersample}-bit samples) here: {exc}; install imagecodecs (pip install "
+                                  f"imagecodecs), or write the stack uncompressed with samples of 8, 16 or 32 bits") \
+                from None
 
 
 def _store_chunks(series, path) -> tuple:

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import FileFormatError, InputError
+from ..images import unit_named
 from .shared import FrameOf, TimeSeries, as_array, not_a_file, one_volume, pick_array
 
 ZARR_METADATA = ("zarr.json", ".zarray", ".zgroup")  # v3, v2 array, v2 group
@@ -22,11 +23,6 @@ _SI_PREFIXES = {"yocto": -24, "zepto": -21, "atto": -18, "femto": -15, "pico": -
 _METRES = {prefix + "meter": Fraction(10) ** power for prefix, power in _SI_PREFIXES.items()} | {
     "angstrom": Fraction(10) ** -10, "inch": Fraction("0.0254"), "foot": Fraction("0.3048"),
     "mile": Fraction("1609.344"), "parsec": Fraction("3.0857e16")}  # exact: 1 micrometer is 1000.0 nanometer
-#: the NGFF units of length that are world units (:data:`clwave.io.images.UNIT_METRES`), as clwave names them
-_WORLD_UNITS = {"meter": "m", "centimeter": "cm", "millimeter": "mm", "micrometer": "um", "nanometer": "nm",
-                "angstrom": "A"}
-
-
 def read_zarr(path, name, level, chunks, fits=None, frame=None):
     """A Zarr array (v2 or v3), or one level of an OME-Zarr multiscale image with its spacing and origin (of a time
     series the time point ``frame``)."""
@@ -67,8 +63,8 @@ def read_zarr(path, name, level, chunks, fits=None, frame=None):
 
 def world_unit(path, name) -> str | None:
     """The world unit of an OME-Zarr image: its x axis's unit (its spacing's: :func:`_read_ome_zarr` converts the z
-    and y axes' to it) where it is a world unit (:data:`_WORLD_UNITS`); None for a plain Zarr array, an x axis
-    without a unit or with another one."""
+    and y axes' to it) where it is a world unit (:func:`~clwave.io.images.unit_named`); None for a plain Zarr array,
+    an x axis without a unit or with another one."""
     import zarr
 
     node = zarr.open(str(path), mode="r")
@@ -79,7 +75,7 @@ def world_unit(path, name) -> str | None:
     if not multiscales:  # read as a plain array (read_zarr has checked the image's metadata otherwise)
         return None
     axes = _axes(multiscales[0])
-    return _WORLD_UNITS.get(next(a.get("unit") for a in axes if str(a.get("name", "")).lower() == "x"))
+    return unit_named(next(a.get("unit") for a in axes if str(a.get("name", "")).lower() == "x"))
 
 
 def _axes(image) -> list:
