@@ -87,11 +87,18 @@ def test_a_kernel_without_ipywidgets_gets_the_text_bar_on_stderr(monkeypatch, ev
     assert counts(sys.stderr.getvalue(), "work") == [0, 1, 2, 3]
 
 
-def test_the_transform_counts_its_channels(monkeypatch, every_update):
+def test_the_transform_counts_each_channels_levels_and_axes(monkeypatch, every_update):
     monkeypatch.setattr(sys, "stderr", io.StringIO())
     rgba = Volume(np.random.default_rng(1).random((8, 8, 8, 4), np.float32))
     clwave.WaveletVolume.from_volume(rgba, "linear", levels=1, progress_bar=True)
-    assert counts(sys.stderr.getvalue(), "linear transform")[-1] == 4
+    assert counts(sys.stderr.getvalue(), "linear transform")[-1] == 4 * 3
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    scalar = Volume(rgba.data[..., 0])
+    clwave.WaveletVolume.from_volume(scalar, "linear", levels=2, progress_bar=True)  # a scalar's bar moves too
+    assert counts(sys.stderr.getvalue(), "linear transform") == list(range(7))
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    clwave.WaveletVolume.from_volume(scalar, "linear", levels=0, progress_bar=True)
+    assert counts(sys.stderr.getvalue(), "linear transform") == [0, 1]
     monkeypatch.setattr(sys, "stderr", io.StringIO())
     clwave.WaveletVolume.from_volume(rgba, "linear", levels=1)  # a pipe: nothing
     assert sys.stderr.getvalue() == ""
@@ -104,6 +111,73 @@ def test_dask_blocks_are_counted_in_their_order(monkeypatch, every_update):
     with client_for(None) as client:
         assert list(stream(client, tasks, desc="blocks", progress_bar=True)) == list(range(5))
     assert counts(sys.stderr.getvalue(), "blocks") == [0, 1, 2, 3, 4, 5]
+
+
+def test_a_chunked_models_content_pass_counts_its_blocks(monkeypatch, every_update):
+    """A task a block through schedulers.stream: the box and range of the volume in memory, 2 x 2 x 2 blocks counted."""
+    import dask.array as da
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    data = np.zeros((16, 16, 16), np.float32)
+    data[3:9, 5:6, 2:14] = np.linspace(-2, 7, 12, dtype=np.float32)
+    volume = Volume(data, spacing=(1, 2, 0.5))
+    model = clwave.ChunkedWaveletVolume.from_volume(Volume(da.from_array(data, chunks=8), spacing=(1, 2, 0.5)),
+                                                    levels=1, progress_bar=True)
+    assert counts(sys.stderr.getvalue(), "content") == list(range(9))
+    assert model.value_range == (-2.0, 7.0) == volume.value_range()
+    assert np.array_equal(model.content, np.array(volume.content_box()))
+
+
+def test_the_ray_tracers_set_up_counts_its_brick_layers(monkeypatch, every_update):
+    """The bricks and a scalar's pool (a chunk of slots a step), each layer of bricks along z a step."""
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 48), levels=2).threshold(keep=0.2)
+    with show_progress(True):
+        tracer = clwave.RayTracer(wv)
+    layers = len(np.unique(tracer.bricks.bricks[:, 0]))
+    assert layers > 1
+    assert counts(sys.stderr.getvalue(), "ray tracer bricks") == list(range(layers + 1))
+    assert counts(sys.stderr.getvalue(), "scalar pool")[-1] >= 1
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    clwave.RayTracer(wv)  # a pipe: nothing
+    assert sys.stderr.getvalue() == ""
+
+
+def test_opening_a_file_counts_its_reads(tmp_path, monkeypatch, every_update):
+    """The reads cut at multiples of READ_ROWS rows, each a step; the same model as one read each."""
+    from clwave.io import clw
+
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1).threshold(keep=0.3)
+    wv.save(tmp_path / "h.clw")
+    whole = clwave.WaveletVolume.open(tmp_path / "h.clw")
+    monkeypatch.setattr(clw, "READ_ROWS", 500)
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with show_progress(True):
+        cut = clwave.WaveletVolume.open(tmp_path / "h.clw")
+    rows = wv.groups[0].kept
+    for dataset in ("positions", "values"):
+        assert counts(sys.stderr.getvalue(), f"reading g0/{dataset}") == list(range(-(-rows // 500) + 1))
+    assert np.array_equal(cut.groups[0].all_positions(), whole.groups[0].all_positions())
+    assert np.array_equal(cut.groups[0].values, whole.groups[0].values)
+
+
+def test_thresholding_counts_the_bands_it_weighs(monkeypatch, every_update):
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=2)
+    with show_progress(True):
+        wv.threshold(keep=0.1)
+    assert counts(sys.stderr.getvalue(), "importance") == list(range(1 + 7 * 2 + 1))
+
+
+def test_the_splat_renderers_set_up_counts_its_ranked_blocks(monkeypatch, every_update):
+    from clwave.model import ranking
+
+    monkeypatch.setattr(ranking, "RANK_ROWS", 1024)
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=1)
+    with show_progress(True):
+        clwave.SplatRenderer(wv)
+    assert counts(sys.stderr.getvalue(), "ranked table") == list(range(-(-wv.groups[0].kept // 1024) + 1))
 
 
 def test_the_auto_windows_pass_over_a_chunked_volume_shows_dasks_bar(monkeypatch):
@@ -152,7 +226,7 @@ def test_the_command_line_shows_progress_as_told(tmp_path, monkeypatch, every_up
         assert code == 0, stderr.getvalue()
         return stderr.getvalue()
 
-    assert counts(compress("--progress"), "cubic transform") == [0, 1, 2, 3, 4]
+    assert counts(compress("--progress"), "cubic transform") == list(range(4 * 3 + 1))  # channels x axes
     assert "transform" not in compress("--no-progress")
     assert "transform" not in compress()  # a pipe
     monkeypatch.setattr(sys, "stderr", Terminal())

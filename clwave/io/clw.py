@@ -55,8 +55,10 @@ from .detail_field import DetailField
 from .files import check_suffix, hdf5_target, write_atomic
 from .hdf5_safety import check_self_contained
 from .occupancy import OccupancyGrid
+from .progress import progress
 
 ROWS = 1 << 14               # coefficients a dataset chunk holds, and a tier's buffer before it is written
+READ_ROWS = 256 * ROWS       # coefficients a read of a file takes at most (whole chunks): a step of its bar
 MASK_CHUNK = (64, 64, 64)
 FILTERS = dict(compression="gzip", compression_opts=4, shuffle=True, fletcher32=True)
 ZSTD_LEVEL = 19              # quantised files: Zstandard's strongest ordinary level (docs/codecs.md §2)
@@ -507,14 +509,19 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
 
 def _read_rows(dataset, spans, out):
     """Rows ``spans`` ((start, count) per run, in file order, none empty) of a group's dataset into ``out``:
-    adjacent runs in one read, so a chunk two runs share is inflated once."""
+    adjacent runs in one read, so a chunk two runs share is inflated once, cut at multiples of :data:`READ_ROWS`
+    (whole chunks), which a bar counts."""
     if not len(spans):
         return out
     ends = spans[:, 0] + spans[:, 1]
     breaks = np.flatnonzero(spans[1:, 0] != ends[:-1]) + 1
-    done = 0
+    reads = []
     for first, last in zip(np.append(0, breaks), np.append(breaks, len(spans))):
         a, b = int(spans[first, 0]), int(ends[last - 1])
+        cuts = [a, *range((a // READ_ROWS + 1) * READ_ROWS, b, READ_ROWS), b]
+        reads += zip(cuts[:-1], cuts[1:])
+    done = 0
+    for a, b in progress(reads, desc=f"reading {dataset.name.lstrip('/')}"):
         dataset.read_direct(out, np.s_[a:b], np.s_[done:done + b - a])
         done += b - a
     return out

@@ -143,8 +143,8 @@ class ChunkedWaveletVolume:
                              cli="--interpolate needs the whole volume in memory; leave it out for a chunked input")
         wavelets, levels = check_decomposition(volume.shape, volume.channels, wavelet, levels)
         tf = stored_transfer_function(transfer_function)
-        with client_for(scheduler) as client, client.as_current():
-            content, value_range = volume.content_box_and_value_range()
+        with client_for(scheduler) as client:
+            content, value_range = volume.content_box_and_value_range(client, progress_bar)
         return cls(volume, wavelets, levels, transfer_function=tf, scheduler=scheduler, progress_bar=progress_bar,
                    value_range=value_range,
                    content=None if content is None else tuple(tuple(float(c) for c in corner) for corner in content))

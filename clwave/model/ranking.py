@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..io.progress import progress
 
 
 @dataclass
@@ -83,7 +84,7 @@ def ranked_table(group, order, importance=None, each_block=None) -> RankedTable:
     table = RankedTable(np.empty((n, 4), np.int32), np.zeros((n, 4), np.float32), channels,
                         None if importance is None else np.take(importance, order).astype(np.float32, copy=False))
     positions = group.all_positions()
-    for lo in range(0, n, RANK_ROWS):
+    for lo in progress(range(0, n, RANK_ROWS), desc="ranked table"):
         hi = min(n, lo + RANK_ROWS)
         band_no, index = group.locate(positions[order[lo:hi]])
         table.coef[lo:hi, :3], table.coef[lo:hi, 3] = index[:, ::-1], ids[band_no]

@@ -125,13 +125,18 @@ def crop_to_grid(coeffs, start, shape) -> np.ndarray:
     return out
 
 
-def wavedecn(data, wavelet: SplineWavelet, levels) -> list:
+def wavedecn(data, wavelet: SplineWavelet, levels, step=lambda: None) -> list:
     """``pywt.wavedecn(data, wavelet.pywt, mode="zero", level=levels)`` without its check of the level: a level past
     pywt's largest for the filter's length is ours to ask for (docs/model.md §2), and silencing pywt's warning with
-    ``warnings.catch_warnings`` is not thread-safe (:func:`decompose` runs a thread a channel)."""
+    ``warnings.catch_warnings`` is not thread-safe (:func:`decompose` runs a thread a channel).  An axis at a time, as
+    ``pywt.dwtn`` does, calling ``step`` after each (a bar's update)."""
     details, approximation = [], data
     for _ in range(levels):
-        detail = pywt.dwtn(approximation, wavelet.pywt, mode="zero")
+        detail = {"": approximation}
+        for axis in range(3):
+            detail = {key + letter: part for key, halves in detail.items()
+                      for letter, part in zip("ad", pywt.dwt(halves, wavelet.pywt, mode="zero", axis=axis))}
+            step()
         approximation = detail.pop("aaa")
         details.append(detail)
     return [approximation] + details[::-1]
@@ -152,16 +157,18 @@ def decompose(volume, wavelet, channels, levels, interpolate, progress_bar) -> t
         check_coefficients(data, (volume.shape, volume.spacing))  # the voxels' B-spline coefficients
         if levels == 0:
             values[slot] = data.ravel()
+            bar.update(1)
             return
-        coeffs = wavedecn(data, wavelet, levels)
+        coeffs = wavedecn(data, wavelet, levels, lambda: bar.update(1))
         parts = [coeffs[0]] + [detail[key] for detail in coeffs[1:] for key in KEYS[1:]]
         for band, part in zip(bands, parts):
             values[slot, band.start:band.start + band.size] = part.ravel()
         check_coefficients(values[slot])
 
-    jobs = list(enumerate(channels))
-    with progress(total=len(jobs), desc=f"{wavelet.name} transform", enabled=progress_bar) as bar:
-        thread_map(lambda job: (one(job), bar.update(1)), jobs)
+    # the bar counts each channel's passes along an axis of a level (a channel at 0 levels): a scalar's moves too
+    with progress(total=len(channels) * max(3 * levels, 1), desc=f"{wavelet.name} transform",
+                  enabled=progress_bar) as bar:
+        thread_map(one, list(enumerate(channels)))
     return bands, values
 
 

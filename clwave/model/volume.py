@@ -216,11 +216,25 @@ class Volume:
         ends = self._ends()
         return None if ends is None else self._range(_computed(ends))
 
-    def content_box_and_value_range(self):
-        """:meth:`content_box` and :meth:`value_range` from one pass over a chunked volume's data."""
-        projections, ends = self._projections(None), self._ends() or ()
-        computed = _computed([*projections, *ends])
-        return self._box(computed[:3]), self._range(computed[3:]) if ends else None
+    def content_box_and_value_range(self, client, progress_bar=None):
+        """:meth:`content_box` and :meth:`value_range` from one pass over a chunked volume's data on ``client``, a
+        task a block, which its bar counts (docs/chunked.md §5)."""
+        import dask
+
+        from ..schedulers import stream
+
+        blocks = self.data.to_delayed()
+        corners = np.stack(np.meshgrid(*(np.cumsum((0,) + c[:-1]) for c in self.data.chunks), indexing="ij"), -1)
+        projections = [np.zeros(n, bool) for n in self.shape]
+        scalar, ends = self.channels == 1, []
+        tasks = (dask.delayed(_block_pass)(block, scalar) for block in blocks.ravel())
+        found = stream(client, tasks, desc="content", progress_bar=progress_bar)
+        for corner, (hits, block_ends) in zip(corners.reshape(-1, self.data.ndim), found):
+            for axis, hit in enumerate(hits):
+                projections[axis][corner[axis]:corner[axis] + len(hit)] |= hit
+            ends.append(block_ends)
+        value_range = self._range((min(lo for lo, _ in ends), max(hi for _, hi in ends))) if scalar else None
+        return self._box(projections), value_range
 
     def _projections(self, mask):
         occupied = self.content_mask() if mask is None else mask
@@ -295,6 +309,14 @@ def checked_block(block: np.ndarray) -> np.ndarray:
                          cli=f"{what}; give NaN voxels a value with --nan VALUE (no data, e.g. 0), and write Inf or "
                              f"values out of float32's range again")
     return block
+
+
+def _block_pass(block, scalar):
+    """A block's content projected on each axis, and a scalar's ``(min, max)``: a task of
+    :meth:`Volume.content_box_and_value_range`."""
+    occupied = content_of(block)
+    return ([occupied.any(axis=tuple(a for a in range(3) if a != axis)) for axis in range(3)],
+            (block.min(), block.max()) if scalar else None)
 
 
 def content_of(data):

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ClwaveWarning, InputError, flag, type_name, warn_outside
+from ..io.progress import progress
 from ..threads import MadeOnce, thread_map
 from .bspline import SplineWavelet, max_levels, wavelet_for
 from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget, warn_stored
 from . import geometry
-from .geometry import fine_to_world
 from .labels import warn_blurred_labels
 from .mask import ContentMask
 from .noise import band_noise, check_noise_known, measure_noise, warn_noise_gain
@@ -536,10 +536,10 @@ def _check_levels(levels, shape) -> int:
 
 
 def importance_of(group: ChannelGroup, focus, frame, noise=None) -> np.ndarray:
-    """:func:`band_importance` of each kept position of ``group``, in its (ascending) position order."""
+    """:func:`band_importance` of each kept position of ``group``, in position order (a bar counts its bands)."""
     imp = np.empty(group.kept, dtype=np.float32)
     positions = group.all_positions()
-    for band, sl in zip(group.bands, group.band_slices()):
+    for band, sl in progress(list(zip(group.bands, group.band_slices())), desc="importance"):
         index = None if focus is None else np.column_stack(np.unravel_index(positions[sl] - band.start, band.shape))
         imp[sl] = band_importance(group.wavelet, band, group.values[:, sl], index, focus, frame, noise)
     return imp
@@ -565,7 +565,7 @@ def band_importance(wavelet, band, values, index, focus, frame, noise=None) -> n
     if focus is not None:
         centre, sigma = focus
         fine = geometry.support_centres(wavelet, band.key, band.level, index)
-        world = fine_to_world(fine, wavelet.order, *frame)
+        world = geometry.fine_to_world(fine, wavelet.order, *frame)
         with np.errstate(over="ignore"):  # d / sigma beyond float range: a weight of 0 (any finite sigma > 0)
             imp *= np.exp(-0.5 * np.sum(((world - np.asarray(centre)) / sigma) ** 2, axis=1))
     return imp

@@ -28,6 +28,7 @@ from ..device.context import ComputeContext
 from ..device.kernels import BUFFER, Kernel, zero, zeros
 from ..device.memory import DeviceBudget, format_size
 from ..errors import DeviceMemoryError
+from ..io.progress import progress
 from ..model.geometry import band_lattice
 from ..threads import checkpoint
 from .bounds import reached_blocks
@@ -109,7 +110,8 @@ def plan(wv, details=None, abandon=None) -> Plan:
     origin = np.min([[lo[0] for lo, _ in axes] for *_, axes in bands], axis=0)
     shape = tuple(np.max([[hi[-1] for _, hi in axes] for *_, axes in bands], axis=0) - origin + 1)
     reach_by = {}  # per band level (levels + 1: the approximation) the bricks its kept supports reach
-    for g, band, sl, axes in bands:  # one band at a time: no per-coefficient array of the whole model
+    # one band at a time: no per-coefficient array of the whole model
+    for g, band, sl, axes in progress(bands, desc="ray tracer plan"):
         checkpoint(abandon)
         positions = g.all_positions()[sl] - band.start
         if not len(positions):
@@ -378,7 +380,7 @@ def build(wv, cc: ComputeContext, budget: DeviceBudget, p: Plan | None = None, s
         if staged is not None:
             spill.write(*staged)
 
-    for bz in np.unique(slabs):
+    for bz in progress(np.unique(slabs), desc="ray tracer bricks"):  # slabs: brick layers along z
         checkpoint(abandon)
         slots, hold = np.flatnonzero(slabs == bz), []
         first, last = int(lay["ends"][slots[0]]), int(lay["ends"][slots[-1] + 1])

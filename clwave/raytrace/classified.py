@@ -25,6 +25,7 @@ from ..device import programs
 from ..device.constants import BRICK, SUPER
 from ..device.kernels import BUFFER, Kernel, in_row_bands
 from ..errors import ClwaveWarning, InputError, NearlyOpaqueWarning, warn_outside
+from ..io.progress import progress
 from ..model.tf_passes import auto_window
 from ..model.transfer import TransferFunction
 from ..model.transform import sampling_kernel
@@ -394,18 +395,17 @@ def pack(scalar, boxes, full=None, abandon=None) -> tuple:
             quant["step"][part] = _step(span[part].max())
     inverse = np.divide(1.0, quant["step"].astype(np.float64), out=np.zeros(len(quant)), where=quant["step"] > 0)
     quant["offset"] = lo
-    out, at = [], 0
+    out, at, chunks = [], 0, []
     for shape in np.unique(boxes[:, :3], axis=0):  # the slots of one box shape, about Q_CHUNK coefficients at a time
         slots = np.flatnonzero(np.all(boxes[:, :3] == shape, axis=1))
         per = max(Q_CHUNK // int(np.prod(shape)), 1)
-        for k in range(0, len(slots), per):
-            checkpoint(abandon)
-            chunk = slots[k:k + per]
-            words, start = _pack_slots(scalar, shape, starts[chunk], lo[chunk].astype(np.float64), inverse[chunk],
-                                        at)
-            quant["word"][chunk], quant["tiles_y"][chunk] = start, -(-shape[1] // TILE)
-            out.append(words)
-            at += len(words)
+        chunks += [(shape, slots[k:k + per]) for k in range(0, len(slots), per)]
+    for shape, chunk in progress(chunks, desc="scalar pool"):
+        checkpoint(abandon)
+        words, start = _pack_slots(scalar, shape, starts[chunk], lo[chunk].astype(np.float64), inverse[chunk], at)
+        quant["word"][chunk], quant["tiles_y"][chunk] = start, -(-shape[1] // TILE)
+        out.append(words)
+        at += len(words)
     return np.concatenate(out + [np.zeros(POOL_PAD, np.uint32)]), quant
 
 

@@ -19,6 +19,7 @@ import pyopencl.array as cla
 from ..device.constants import BRICK, SUPER
 from ..errors import InputError, finite_number
 from ..io.occupancy import any_blocks, central_start
+from ..io.progress import progress
 from ..threads import checkpoint
 from .bounds import clip_box, superblocks
 
@@ -60,7 +61,7 @@ def content_windows(wv, level: int, origin, shape, abandon=None) -> tuple:
             windows.append((lo, hi))
         (zlo, zhi), (ylo, yhi), (xlo, xhi) = windows
         rows_any, rows_all = [], []
-        for bz in range(shape[0]):  # a brick row at a time: its layers of the level's occupancy
+        for bz in progress(range(shape[0]), desc="content windows"):  # a brick row at a time: the level's occupancy
             checkpoint(abandon)
             occ = occupancy(mask, wav, level, (zlo[bz], ylo[0], xlo[0]), (zhi[bz] - zlo[bz], yhi[-1] - ylo[0],
                                                                           xhi[-1] - xlo[0]))

@@ -21,6 +21,7 @@ import numpy as np
 import pyopencl.array as cla
 
 from ..device.constants import BRICK
+from ..io.progress import progress
 from ..model.bspline import bspline
 from ..threads import checkpoint
 from .bounds import content_cells
@@ -128,7 +129,8 @@ def mixed_pieces(wv, lay, alt, lattices, alpha, pool, spill, lock, abandon=None)
     k = -(-(lead + BRICK) // step) * step // side
     mixes[fine] = np.stack([coarse, np.cumsum(k ** 3) - k ** 3, k, side], axis=1)
     flags, empty = [None] * len(fine), [None] * len(fine)
-    for bz in np.unique(bricks[fine, 0]):  # a brick layer at a time: the content mask read for its cells at once
+    # a brick layer at a time: the content mask read for its cells at once
+    for bz in progress(np.unique(bricks[fine, 0]), desc="mixed bricks"):
         checkpoint(abandon)
         layer = np.flatnonzero(bricks[fine, 0] == bz)
         lo = bricks[fine[layer]].min(axis=0)
