@@ -218,11 +218,8 @@ class WaveletVolume:
     @property
     def wavelets(self) -> tuple:
         """Wavelet name of each channel."""
-        names = [None] * self.channels
-        for g in self.groups:
-            for c in g.channels:
-                names[c] = g.wavelet.name
-        return tuple(names)
+        names = {c: g.wavelet.name for g in self.groups for c in g.channels}
+        return tuple(names.get(c) for c in range(self.channels))
 
     @property
     def n_voxels(self) -> int:
