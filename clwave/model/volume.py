@@ -237,8 +237,7 @@ class Volume:
         return self._box(projections), value_range
 
     def _projections(self, mask):
-        occupied = self.content_mask() if mask is None else mask
-        return [occupied.any(axis=tuple(a for a in range(3) if a != axis)) for axis in range(3)]
+        return projected(self.content_mask() if mask is None else mask)
 
     def _box(self, projections):
         ends = []
@@ -314,9 +313,12 @@ def checked_block(block: np.ndarray) -> np.ndarray:
 def _block_pass(block, scalar):
     """A block's content projected on each axis, and a scalar's ``(min, max)``: a task of
     :meth:`Volume.content_box_and_value_range`."""
-    occupied = content_of(block)
-    return ([occupied.any(axis=tuple(a for a in range(3) if a != axis)) for axis in range(3)],
-            (block.min(), block.max()) if scalar else None)
+    return projected(content_of(block)), (block.min(), block.max()) if scalar else None
+
+
+def projected(occupied):
+    """Each axis' projection of a (nz, ny, nx) bool ``occupied``: where along it some voxel is."""
+    return [occupied.any(axis=tuple(a for a in range(3) if a != axis)) for axis in range(3)]
 
 
 def content_of(data):
