@@ -4,8 +4,14 @@ not after they are held (docs/coordinates.md §4, untrusted input)."""
 
 from __future__ import annotations
 
+import zlib
+
 #: compressed bytes read, and decompressed bytes made, at a time
 PIECE = 1 << 20
+#: the first bytes of a gzip stream (of each of its members)
+GZIP_MAGIC = b"\x1f\x8b"
+#: :func:`decompressed`'s ``new`` and ``magic`` for a gzip stream: a decompressor a member
+GZIP = (lambda: zlib.decompressobj(zlib.MAX_WBITS | 16), GZIP_MAGIC)
 
 
 def decompressed(source, new, magic, most):

@@ -7,15 +7,14 @@ import math
 import re
 import shlex
 import warnings
-import zlib
 from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import FileFormatError
-from .inflate import decompressed
-from .shared import GZIP_MAGIC, Declared, check_declared_size, check_whole, not_a_file, note, to_canonical
+from .inflate import GZIP, decompressed
+from .shared import Declared, check_declared_size, check_whole, not_a_file, note, to_canonical
 
 _NRRD_SPACE_SIGNS = {
     "right-anterior-superior": (1, 1, 1), "ras": (1, 1, 1),
@@ -186,7 +185,7 @@ def _check_nrrd_size(path, header, offset):
         found = f"type {header['type']}" if encoding in _ENCODINGS else f"encoding {header['encoding']}"
         raise FileFormatError(f"{path}: its {found} is not one the NRRD reader (pynrrd) reads; write it as raw, gzip, "
                               f"bzip2 or text voxels of a number type")
-    lines, skip = (int(header.get(k, header.get(k.replace(" ", ""), 0)) or 0) for k in ("line skip", "byte skip"))
+    lines, skip = _skips(header)
     if lines < 0 or skip < -1:
         raise FileFormatError(f"{path}: its line skip {lines} or byte skip {skip} is negative (a byte skip may be -1: "
                               f"the data at the end); correct the header")
@@ -220,9 +219,13 @@ def _check_nrrd_size(path, header, offset):
                               f"bytes after its header; its header is wrong or the file is not what it says")
 
 
+def _skips(header) -> tuple:
+    """The header's ``(line skip, byte skip)``, 0 where not given (each key with or without its space, as pynrrd)."""
+    return tuple(int(header.get(k, header.get(k.replace(" ", ""), 0)) or 0) for k in ("line skip", "byte skip"))
+
+
 #: each compressed encoding's decompressor (a new one for each gzip member or bzip2 stream) and the first bytes of one
-_DECOMPRESSORS = {"gzip": (lambda: zlib.decompressobj(zlib.MAX_WBITS | 16), GZIP_MAGIC),
-                  "bzip2": (bz2.BZ2Decompressor, b"BZh")}
+_DECOMPRESSORS = {"gzip": GZIP, "bzip2": (bz2.BZ2Decompressor, b"BZh")}
 _DECOMPRESSORS.update(gz=_DECOMPRESSORS["gzip"], bz2=_DECOMPRESSORS["bzip2"])
 
 
@@ -232,8 +235,7 @@ def _inflated(path, header, fh, dtype, sizes) -> np.ndarray:
     the ``byte skip`` and voxels its header declares: a gzip trailer counts its member alone, modulo 2^32, and
     pynrrd inflates all of the first member before it compares.  ``line skip`` counts lines of the file before the
     stream, ``byte skip`` bytes of the stream, as Teem reads them (pynrrd skips the bytes in both)."""
-    lines = int(header.get("line skip", header.get("lineskip", 0)) or 0)
-    skip = int(header.get("byte skip", header.get("byteskip", 0)) or 0)
+    lines, skip = _skips(header)  # checked by _check_nrrd_size
     encoding = str(header["encoding"]).lower()
     nbytes = math.prod(sizes) * dtype.itemsize
     voxels = " x ".join(map(str, sizes[::-1]))

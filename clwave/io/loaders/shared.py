@@ -17,6 +17,7 @@ import numpy as np
 from ...device.memory import HostMemoryError, check_fits, out_of_threads
 from ...errors import ClwaveError, ClwaveWarning, FileFormatError, InputError, warn_outside
 from ..progress import progress
+from .inflate import GZIP, GZIP_MAGIC, decompressed
 
 log = logging.getLogger(__name__)  # notes below a warning (an OME size not given: 1 micrometre, as OME says)
 
@@ -490,15 +491,10 @@ def stated_affine(turn, shape_zyx, spacing_zyx, origin_xyz) -> np.ndarray:
     return affine
 
 
-#: the first bytes of a gzip stream
-GZIP_MAGIC = b"\x1f\x8b"
-
-
 def _gzip_length(path, most, start=0) -> int | None:
     """The length of ``path``'s gzip stream from byte ``start`` on, every member, counted a megabyte at a time (kept
-    nowhere) up to ``most`` bytes; where the stream is damaged or cut short, the length read until then; None where
-    no gzip stream starts there."""
-    import gzip
+    nowhere, :func:`.inflate.decompressed`) up to ``most`` bytes; where the stream is damaged or cut short, the length
+    read until then; None where no gzip stream starts there."""
     import zlib
 
     with open(path, "rb") as fh:
@@ -508,10 +504,9 @@ def _gzip_length(path, most, start=0) -> int | None:
         fh.seek(start)
         total = 0
         try:
-            with gzip.GzipFile(fileobj=fh, mode="rb") as stream:
-                while total < most and (chunk := stream.read(1 << 20)):
-                    total += len(chunk)
-        except (OSError, EOFError, zlib.error):
+            for piece in decompressed(fh, *GZIP, most):
+                total += len(piece)
+        except zlib.error:
             pass
     return total
 
