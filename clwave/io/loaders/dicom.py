@@ -336,9 +336,11 @@ def check_deflated(path):
 
 def _dicom_pixels(path):
     """One slice's pixels (a single-frame file, read_dicom_folder checked) as float32 with RescaleSlope/RescaleIntercept
-    applied, its padding NaN (:func:`mark_padding`)."""
+    applied, its padding NaN (:func:`mark_padding`).  Its header was read through :func:`dcmread` (the series'
+    discovery, :mod:`.dicom_tree`), which weighed a deflated dataset: not again for each slice."""
+    import pydicom
 
-    ds = dcmread(path)
+    ds = pydicom.dcmread(path)
     slope, intercept = float(getattr(ds, "RescaleSlope", 1.0)), float(getattr(ds, "RescaleIntercept", 0.0))
     ds.pixel_array_options(allow_excess_frames=False)  # the one frame its header declares (checked: a single frame)
     with warnings.catch_warnings():  # pydicom's 2 lines on the bytes past it: the header's frame is what is read
