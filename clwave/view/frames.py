@@ -42,11 +42,11 @@ WINDOW_COEFFICIENTS = 1 << 18
 #: a model without coefficients (an all-zero volume) has one
 #: blank final frame a view, and says so
 NO_COEFFICIENTS = "nothing to show: the model has no coefficients (the volume is zero everywhere)"
-#: a scalar model's shaded frame through a transfer function that gives no part of it any opacity
 #: a shaded frame of a model without coefficients through a transfer function that gives 0 an opacity: the data's box
 #: fogged (docs/raytracing.md §10)
 ZERO_FOG = ("the model has no coefficients (the volume is zero everywhere): the image is the value 0 as the transfer "
             "function classifies it, over the data's box")
+#: a scalar model's shaded frame through a transfer function that gives no part of it any opacity
 NOTHING_VISIBLE = ("nothing to show: the transfer function gives no part of the model any opacity (move or widen its "
                    "window, or raise its opacity)")
 
