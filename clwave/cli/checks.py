@@ -75,10 +75,9 @@ def check_options(args):
             raise InputError("--detail renders with the B-spline field on one machine: leave out --field wavelet "
                              "and --workers/--scheduler, or --detail")
     if getattr(args, "omega_s", None) is not None:
-        from ..splat.textures import OMEGA_S_MAX
+        from ..splat.textures import check_omega_s
 
-        if not (np.isfinite(args.omega_s) and 0 < args.omega_s <= OMEGA_S_MAX):
-            raise InputError(f"--omega-s {args.omega_s:g} must be a positive band up to {OMEGA_S_MAX:g}, e.g. 14")
+        check_omega_s(args.omega_s)
     if getattr(args, "frame_time", None) is not None:
         _frame_time(args)
     if hasattr(args, "turntable_axis"):

@@ -33,7 +33,7 @@ from .ranked import CumulativeEnergy, on_device, ranked_groups
 from .stages import BIN_TABLE_SHARE, TILE_LIST_SHARE, Stages, bin_table_bytes, tile_list_bytes
 from .perspective import ConeTables, camera_words, depth_range
 from .tables import MAX_LEVELS, ViewTables
-from .textures import OMEGA_S_MAX, check_sampling
+from .textures import check_omega_s, check_sampling
 from ..threads import drain, in_turns, one_at_a_time
 
 COEFFICIENT_BYTES = 32  # on the device: int4 (k_x, k_y, k_z, band) and float4 values (cl/splat/bin.cl)
@@ -391,12 +391,11 @@ def _splat_share(renderer_of, share, device, options, camera) -> tuple:
 def splat_options(omega_s, sampling, coarse) -> tuple:
     """``(omega_s, sampling, coarse)`` of :class:`SplatRenderer` checked, the numbers as floats (a NumPy scalar is
     one; a bool is not): one line naming the argument, before a one-shot call's renderer is looked up by them."""
-    if omega_s is not None and not 0 < finite_number(omega_s, "omega_s") <= OMEGA_S_MAX:
-        raise InputError(f"omega_s={omega_s!r} must be a positive band up to {OMEGA_S_MAX:g} (e.g. 14, paper eq. 35)")
+    omega_s = None if omega_s is None else check_omega_s(omega_s)
     check_sampling(sampling)
     if coarse is not None and not 0 < finite_number(coarse, "coarse") < 1:
         raise InputError(f"coarse={coarse!r} must be a tolerance between 0 and 1 (e.g. 1e-2), or None")
-    return (None if omega_s is None else float(omega_s)), sampling, (None if coarse is None else float(coarse))
+    return omega_s, sampling, (None if coarse is None else float(coarse))
 
 
 def shared_renderer(wv: WaveletVolume, device, omega_s, sampling, coarse, device_memory=None) -> SplatRenderer:

@@ -26,7 +26,7 @@ import numpy as np
 import scipy.fft
 
 from ..device.memory import check_fits
-from ..errors import DeviceMemoryError, InputError
+from ..errors import DeviceMemoryError, InputError, finite_number
 from ..threads import cores, thread_map
 from ..model.bspline import wavelet_for
 from ..model.geometry import check_key, footprint_vanishes, orthonormal_frame, spacing_xyz, support_extent
@@ -226,6 +226,16 @@ def check_sampling(sampling):
         raise InputError(f"footprint sampling must be one of {', '.join(SAMPLINGS)}, got {sampling!r}")
 
 
+def check_omega_s(omega_s) -> float:
+    """The footprint band ``omega_s`` (paper eq. 35) as a float in (0, :data:`OMEGA_S_MAX`], or the one line that
+    refuses it (``--omega-s``'s words too)."""
+    value = omega_s if isinstance(omega_s, float) else finite_number(omega_s, "omega_s")  # NaN fails the range
+    if not 0 < value <= OMEGA_S_MAX:
+        why = f"must be a positive band up to {OMEGA_S_MAX:g} (e.g. 14, paper eq. 35)"
+        raise InputError(f"omega_s={omega_s!r} {why}", cli=f"--omega-s {value:g} {why}")
+    return float(value)
+
+
 def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omega_min=None,
                sampling: str = "auto", tol: float = 0.0, texel=None, device=None, max_texels=None,
                phases=None) -> dict:
@@ -279,8 +289,7 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
     d_xyz = spacing_xyz(spacing_zyx)
     n, u, v = orthonormal_frame(n, u, v)
     check_sampling(sampling)
-    if not (np.isfinite(omega_s) and 0 < omega_s <= OMEGA_S_MAX):
-        raise InputError(f"omega_s must be a positive number up to {OMEGA_S_MAX:g}, got {omega_s!r}")
+    omega_s = check_omega_s(omega_s)
     if omega_min is None:
         omega_min = DEFAULT_OMEGA_MIN.get(wav.order, 64.0)
     if not (np.isfinite(omega_min) and omega_min >= 0):
