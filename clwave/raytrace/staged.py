@@ -55,7 +55,6 @@ class StagedTracer:
     """
 
     def __init__(self, tracer_class, path, device=None, device_memory=None, lod=False, whole=None, coarse=None):
-        start = time.perf_counter()
         approximation, tiered, by_level, occupancy = read_coarse(path) if coarse is None else coarse
         self.levels = approximation.levels
         energies = [importance_of(g, None, approximation.frame).astype(np.float64) ** 2 for g in approximation.groups]
@@ -89,7 +88,6 @@ class StagedTracer:
                                        lod=(approximation.levels,))
         # the ``detail=`` of the coarse stage's renders (None: its only one)
         self.coarse_detail = None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
-        self.coarse_seconds = time.perf_counter() - start
         self.full, self.full_seconds, self._failure, self._abandon = None, None, None, threading.Event()
         # the stages share the device-memory budget: the full stage's bricks beyond what the coarse one leaves go
         # to its scratch file (docs/raytracing.md §6)
