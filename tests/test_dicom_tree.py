@@ -269,3 +269,45 @@ def test_jpeg_lossless_series_are_decoded(tmp_path, rng, syntax):
         assert pydicom.dcmread(tmp_path / f"IM{k}").file_meta.TransferSyntaxUID == \
             (JPEGLosslessSV1 if syntax.endswith("_1") else JPEGLossless)
     np.testing.assert_array_equal(load(tmp_path).data, hu(stored))
+
+
+def test_odd_series_values_are_refused_as_values_not_as_the_files(tmp_path, rng):
+    """A value that is no number (non-ASCII digits, a sign twice, a bool) names no series: refused as the option's
+    value, listing the series, never blamed on the folder's files (``int("²")`` raised ValueError)."""
+    for name in "ab":
+        (tmp_path / name).mkdir()
+    write_series(tmp_path / "a", rng, axial(0.0, 1.0), generate_uid(), ["1", "2"], number=2, description="Bone")
+    write_series(tmp_path / "b", rng, axial(0.0, 1.0), generate_uid(), ["1", "2"], number=3, description="Soft")
+    for series in ("--5", "²", "٣", True):
+        with pytest.raises(InputError) as excinfo:
+            load(tmp_path, series=series)
+        assert_one_line_error(excinfo)
+        assert str(excinfo.value).startswith(f"series={series!r} matches none of the 2 DICOM series in {tmp_path}: ")
+
+
+def test_a_dicomdir_naming_files_outside_its_folder_is_refused(tmp_path, rng):
+    """PS3.10's file IDs are components below the DICOMDIR's folder: a record that climbs out of it ("..") is
+    refused before any file it names is opened."""
+    from pydicom.fileset import FileSet
+
+    write_cd(tmp_path / "cd", rng)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ResourceWarning)
+        fileset = FileSet()
+        for path in sorted((tmp_path / "cd").rglob("IM*")):
+            fileset.add(path)
+        fileset.write(tmp_path / "export")
+        del fileset
+        gc.collect()
+    dicomdir = tmp_path / "export" / "DICOMDIR"
+    ds = pydicom.dcmread(dicomdir)
+    record = next(r for r in ds.DirectoryRecordSequence if r.get("ReferencedFileID"))
+    with warnings.catch_warnings():  # pydicom: ".." is no valid CS value, which is the point
+        warnings.simplefilter("ignore", UserWarning)
+        record.ReferencedFileID = ["..", "cd", "DICOM", "PAT1", "ST1", "SE2", "IM1"]
+        ds.save_as(dicomdir)
+    with pytest.raises(FileFormatError) as excinfo:
+        load(dicomdir)
+    assert_one_line_error(excinfo)
+    assert str(excinfo.value) == f"{dicomdir} refers to a file outside its folder ('../cd/DICOM/PAT1/ST1/SE2/IM1'); " \
+                                 "it may be corrupt or crafted: give the folder the series are in"

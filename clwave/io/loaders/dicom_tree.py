@@ -211,8 +211,17 @@ def _dicomdir_files(path):
     from its records: pydicom's FileSet stages a temporary folder, left to its finalizer."""
     with reading(path):
         records = dicom.dcmread(path).get("DirectoryRecordSequence") or []
-    ids = [r.ReferencedFileID for r in records if r.get("ReferencedFileID")]
-    files = [path.parent.joinpath(*([i] if isinstance(i, str) else i)) for i in ids]
+    ids = [[i] if isinstance(i, str) else list(i) for i in (r.ReferencedFileID for r in records
+                                                              if r.get("ReferencedFileID"))]
+    if len(ids) > MAX_FILES:
+        raise FileFormatError(f"{path} refers to {len(ids):,} files, more than {MAX_FILES:,}; give the folder of one "
+                              "study or series")
+    # PS3.10 §8.2: a file ID is up to 8 components of its folder's tree, never a way out of it
+    outside = next((i for i in ids if any(not c or c in (".", "..") or any(ch in c for ch in "/\\:") for c in i)), None)
+    if outside is not None:
+        raise FileFormatError(f"{path} refers to a file outside its folder ({'/'.join(outside)!r}); it may be corrupt "
+                              "or crafted: give the folder the series are in")
+    files = [path.parent.joinpath(*i) for i in ids]
     missing = [f for f in files if not f.is_file()]
     if missing:
         raise FileFormatError(f"{path} refers to {len(missing)} missing file{'s' * (len(missing) > 1)} (e.g. "
@@ -260,7 +269,7 @@ def _matching(found, text):
     """The series ``text`` names: as a whole (number, description, UID), else split at a "/" into a study (its date,
     as listed or as stored, accession number, StudyID, description or UID) and a series in it."""
     def names(s, said):
-        number = int(said) if said.lstrip("-").isdigit() else None
+        number = int(said) if re.fullmatch(r"-?[0-9]+", said) else None  # ASCII digits: "²".isdigit() is True
         return number is not None and s.number == number or s.description.casefold() == said.casefold() or \
             s.uid == said
 
