@@ -30,6 +30,7 @@ from ..threads import Abandoned, stop_on
 from .address import check_host, check_port, host_name, is_loopback
 from . import colours, export
 from .frames import ViewState, XraySource
+from .orientation import patient_world, views
 from .shaded import ShadedSource
 from .protocol import (MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, model_id, pack_frame, parse_view,
                        said)
@@ -136,6 +137,9 @@ class ViewServer:
             raise self.explain(exc, "xray") from None
         for warning in caught:  # the caller's, as if it were made here
             warn_outside(warning)
+        self.patient = patient_world(self.wv, self.origin)
+        for source in self.sources.values():  # its frames' edges are labelled R, A, S... or +x, +y, +z (orientation.py)
+            source.patient = self.patient
         self.pages = {path: (resources.files(__package__).joinpath("static", name).read_text(), mime)
                       for path, (name, mime) in STATIC.items()}
 
@@ -415,7 +419,7 @@ class ViewServer:
                     presets=list(TransferFunction.PRESETS), colour_maps=colours.page_tables(),
                     tf=shaded.start_figures() if shaded else None,
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model(),
-                    model_id=model_id(self.wv))
+                    model_id=model_id(self.wv), views=views(self.patient), patient=self.patient)
 
     def model(self) -> dict:
         """The model's figures for the page; ``reading``: a file's prefix, the rest being read; ``failure``: why the
