@@ -27,7 +27,7 @@ from aiohttp import WSCloseCode, WSMsgType, web
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError, caught_warnings, warn_outside
 from ..threads import Abandoned, stop_on
-from .address import check_host, check_port, host_name, is_loopback
+from .address import check_host, check_port, host_name, host_refused, is_loopback
 from . import colours, export
 from .frames import ViewState, XraySource
 from .orientation import patient_world, views
@@ -349,8 +349,7 @@ class ViewServer:
         except OSError as exc:  # a port in use, a host not of this machine
             why = f"cannot listen on {self.host}:{self.port} ({exc.strerror or exc})"
             if isinstance(exc, socket.gaierror) or exc.errno == errno.EADDRNOTAVAIL:  # the host's, not the port's
-                fix = "name an interface of this machine: 127.0.0.1 (the default) or one that others reach"
-                raise InputError(f"{why}; host= must {fix}", cli=f"{why}; --host must {fix}") from None
+                raise host_refused(why) from None  # (check_host found it bound before: it is not any more)
             raise InputError(f"{why}; choose another port=, or port=0 for a free one",
                              cli=f"{why}; choose another --port, or leave it out for a free one") from None
         self.port = self._runner.addresses[0][1]
