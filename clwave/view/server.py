@@ -291,11 +291,13 @@ class ViewServer:
                 log.warning("%s: %s", name, line)
         return lines
 
-    def logged(self, call, *args):
+    def logged(self, call, *args, notes=None):
         """``call(*args)``, a job of the render or build thread that is no tab's frame (a save, a tracer's build),
-        its clwave warnings logged once each."""
+        its clwave warnings logged once each, and added to the list ``notes`` where one is given (a save's)."""
         value, caught = _caught(call, *args)
-        self.warnings(caught, "the viewer")
+        lines = self.warnings(caught, "the viewer")
+        if notes is not None:
+            notes += [line for line in lines if line not in notes]
         return value
 
     def prepared(self, source):
