@@ -20,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import FileFormatError, InputError, finite_number, flag, float32_number
+from ...errors import ClwaveError, FileFormatError, InputError, finite_number, flag, float32_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, check_placement, is_dask
 from . import dicom, dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
                      reading, axis_turn, stated_affine, to_canonical, to_float32)
 
-__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
+__all__ = ["load", "describe", "world_unit", "in_ras", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
@@ -222,6 +222,15 @@ def check_orientation(kind, orientation):
                          cli=f"--orientation is for inputs that carry none (.npy, .raw, TIFF, folders of slices, "
                              f"Zarr, HDF5, MRC); a {kind} input is put {placed} by its own header: leave it out")
     return axis_turn(orientation)
+
+
+def in_ras(path) -> bool:
+    """Whether :func:`load` places the input at ``path`` in RAS+ by its own header (:data:`RAS_FORMATS`: a patient's
+    axes); False where its format cannot be told (a file no longer there)."""
+    try:
+        return _kind(_split_inner(path)[0]) in RAS_FORMATS
+    except (ClwaveError, OSError):
+        return False
 
 
 def _photo(kind, path) -> bool:
