@@ -244,3 +244,50 @@ def test_progressive_counts_its_frames_and_drr_its_radiographs(tmp_path, monkeyp
                  "--pixel", "2", "--dsd", "90", "--progress", "-o", str(tmp_path / "d.npy")]) == 0, \
         sys.stderr.getvalue()
     assert counts(sys.stderr.getvalue(), "radiographs") == [0, 1, 2]
+
+
+def test_a_status_shows_once_its_block_has_lasted_and_goes_when_it_ends(monkeypatch):
+    from clwave.io.progress import status
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with status("waiting", after=3600, enabled=True):  # a quick block: its timer never fires
+        pass
+    assert sys.stderr.getvalue() == ""
+    with status("waiting", after=0, enabled=True) as timer:
+        timer.join()  # the block outlasts ``after``
+        assert "waiting" in sys.stderr.getvalue()
+    assert sys.stderr.getvalue().endswith("\r")  # cleared, as a bar is
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with status("waiting", after=0) as timer:  # a pipe: no thread, nothing
+        assert timer is None
+    assert sys.stderr.getvalue() == ""
+
+
+def test_a_kernel_build_that_lasts_says_so_unless_told_not_to(cc, monkeypatch):
+    """A slow build (every build here, with no wait) shows one status line; a quiet setting starts no timer."""
+    import threading
+
+    import pyopencl as cl
+
+    from clwave.device import programs
+
+    built = cl.Program.build
+
+    def build_outlasting_the_wait(self, *args, **kwargs):
+        program = built(self, *args, **kwargs)
+        for thread in threading.enumerate():
+            if isinstance(thread, threading.Timer):
+                thread.join()
+        return program
+
+    monkeypatch.setattr(programs, "BUILD_QUIET_SECONDS", 0)
+    monkeypatch.setattr(cl.Program, "build", build_outlasting_the_wait)
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with show_progress(True):
+        programs.build(cc, ["device/selftest.cl"], {"CLW_PROGRESS_TEST": 1})
+    assert "building OpenCL kernels (once per machine)" in sys.stderr.getvalue()
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    monkeypatch.setattr(threading.Timer, "start", lambda timer: pytest.fail("a timer under show_progress(False)"))
+    with show_progress(False):
+        programs.build(cc, ["device/selftest.cl"], {"CLW_PROGRESS_TEST": 2})
+    assert sys.stderr.getvalue() == ""
