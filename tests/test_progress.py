@@ -143,6 +143,23 @@ def test_the_ray_tracers_set_up_counts_its_brick_layers(monkeypatch, every_updat
     assert sys.stderr.getvalue() == ""
 
 
+def test_a_render_in_passes_counts_them_and_one_pass_shows_no_bar(monkeypatch, every_update):
+    from test_bricks import out_of_core_model
+
+    wv, camera = out_of_core_model(), clwave.Camera(30, 20, size=16)
+    parts = clwave.RayTracer(wv, device_memory="14MiB")
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with show_progress(True):
+        several = parts.render(camera, tolerance=1e-2).meta["passes"]
+    assert several > 1 and counts(sys.stderr.getvalue(), "ray-tracing passes") == list(range(several + 1))
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    parts.render(camera, tolerance=1e-2)  # a pipe: nothing
+    whole = clwave.RayTracer(wv)
+    with show_progress(True):
+        assert whole.render(camera, tolerance=1e-2).meta["passes"] == 1
+    assert "ray-tracing passes" not in sys.stderr.getvalue()
+
+
 def test_opening_a_file_counts_its_reads(tmp_path, monkeypatch, every_update):
     """The reads cut at multiples of READ_ROWS rows, each a step; the same model as one read each."""
     from clwave.io import clw

@@ -39,6 +39,7 @@ from ..io.result import RenderResult
 from ..model.tf_file import as_transfer_function
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume, check_model
+from ..io.progress import progress
 from ..threads import drain, one_at_a_time
 
 
@@ -364,7 +365,9 @@ class RayTracer:
             tf=post.table if post is not None else carry)
         if self.field == "bspline":
             arguments["quant"] = self.quant
-        for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
+        several = passes is not None and len(passes) > 1  # a bar over the scratch file's regions
+        for slots, lo, hi in progress(passes or [(None, np.zeros(3), np.zeros(3))], desc="ray-tracing passes",
+                                      enabled=None if several else False):
             if self.field == "bspline":
                 field_tables = None  # the last region's pool goes before the next one comes
                 field_tables = at.field_tables if slots is None else dict(self.bricks.tables(cc, None, slots),
