@@ -178,12 +178,14 @@ def test_opening_a_file_counts_its_reads(tmp_path, monkeypatch, every_update):
     assert np.array_equal(cut.groups[0].values, whole.groups[0].values)
 
 
-def test_thresholding_counts_the_bands_it_weighs(monkeypatch, every_update):
+def test_thresholding_counts_the_coefficients_it_weighs_a_band_at_a_time(monkeypatch, every_update):
     monkeypatch.setattr(sys, "stderr", io.StringIO())
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=2)
     with show_progress(True):
         wv.threshold(keep=0.1)
-    assert counts(sys.stderr.getvalue(), "importance") == list(range(1 + 7 * 2 + 1))
+    ends = [0] + [sl.stop for sl in wv.groups[0].band_slices()]  # every band holds coefficients here
+    assert len(ends) == 1 + 7 * 2 + 1 and ends[-1] == wv.groups[0].kept
+    assert counts(sys.stderr.getvalue(), "importance") == ends
 
 
 def test_the_splat_renderers_set_up_counts_its_ranked_blocks(monkeypatch, every_update):
