@@ -537,12 +537,14 @@ def _check_levels(levels, shape) -> int:
 
 
 def importance_of(group: ChannelGroup, focus, frame, noise=None) -> np.ndarray:
-    """:func:`band_importance` of each kept position of ``group``, in position order (a bar counts its bands)."""
-    imp = np.empty(group.kept, dtype=np.float32)
-    positions = group.all_positions()
-    for band, sl in progress(list(zip(group.bands, group.band_slices())), desc="importance"):
-        index = None if focus is None else np.column_stack(np.unravel_index(positions[sl] - band.start, band.shape))
-        imp[sl] = band_importance(group.wavelet, band, group.values[:, sl], index, focus, frame, noise)
+    """:func:`band_importance` of each kept position of ``group``, in position order (a bar counts its coefficients,
+    a band at a time: the finest level's hold about 7/8 of them)."""
+    imp, positions = np.empty(group.kept, dtype=np.float32), group.all_positions()
+    with progress(total=group.kept, desc="importance") as bar:
+        for band, sl in zip(group.bands, group.band_slices()):
+            index = None if focus is None else np.column_stack(np.unravel_index(positions[sl] - band.start, band.shape))
+            imp[sl] = band_importance(group.wavelet, band, group.values[:, sl], index, focus, frame, noise)
+            bar.update(sl.stop - sl.start)
     return imp
 
 
