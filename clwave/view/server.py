@@ -211,7 +211,7 @@ class ViewServer:
         start = time.perf_counter()
         try:
             try:
-                wv = opened.whole(coarse_first=self.coarse_first, stop=self._stop)
+                wv = self.logged(lambda: opened.whole(coarse_first=self.coarse_first, stop=self._stop))
             finally:
                 self._in_file.clear()  # nothing after this reads the file
             step()
