@@ -1,6 +1,7 @@
 """Hostile files by mutation, again (fuzz29: each format's valid files with one header field, card, line or stream
-changed; docs/known-gaps.md §15): each class refused in one line naming the problem, with no warning of NumPy's on
-the way (pyproject's filterwarnings make one an error here)."""
+changed, and the transfer-function and pose-table files the command line reads; docs/known-gaps.md §15): each class
+refused in one line naming the problem, with no warning of NumPy's on the way (pyproject's filterwarnings make one an
+error here)."""
 
 import struct
 
@@ -9,6 +10,7 @@ import pytest
 
 import clwave
 from clwave.errors import InputError
+from clwave.model.tf_file import named_transfer_function
 from test_cli import run
 from test_fits import SKY
 from test_fits import write as write_fits
@@ -86,3 +88,61 @@ def test_a_fits_card_clwave_reads_that_astropy_cannot_or_given_twice_is_refused(
         start = content.index(card[:8].encode())
         path.write_bytes(content[:start] + image + content[start + 80:])
     assert_refused_in_one_line(capsys, path, words)
+
+
+def test_a_projection_matrix_past_float_range_is_refused_without_a_warning(tmp_path, capsys):
+    """A pose table's p22 of 1e308: NumPy's "overflow encountered in det" and "in dot" (four lines) before the
+    singular matrix's line; a matrix is homogeneous, weighed at its own scale."""
+    rows = "p00,p01,p02,p03,p10,p11,p12,p13,p20,p21,p22,p23\n150,0,16,0,0,150,16,0,0,0,1e308,100\n"
+    (tmp_path / "p.csv").write_text(rows)
+    with pytest.raises(InputError, match="singular"):
+        clwave.ConeBeam.from_matrix([[150, 0, 16, 0], [0, 150, 16, 0], [0, 0, 1e308, 100]], 32)
+    np.save(tmp_path / "v.npy", np.ones((6, 7, 8), np.float32))
+    code, out, err = run(capsys, "drr", str(tmp_path / "v.npy"), "--poses", str(tmp_path / "p.csv"), "--size", "16",
+                         "-o", str(tmp_path / "d.png"), "--levels", "1")
+    assert code == 2 and err.strip().splitlines() == [
+        f"clwave: error: pose table {tmp_path / 'p.csv'}, pose 1: the projection matrix is singular: its left 3 x 3 "
+        "block must be invertible"], err
+
+
+def test_a_refusal_quoting_a_files_control_characters_stays_one_line(tmp_path, capsys):
+    """A pose table's header of a flipped bit, "elevation\\froll": its refusal quoted the form feed, which breaks
+    the line it is printed on (as a vertical tab or a file separator, \\x1c, would)."""
+    (tmp_path / "p.csv").write_text("azimuth,elevation\froll,\x1cdso\x1cx\n0,0,100\n")
+    np.save(tmp_path / "v.npy", np.ones((6, 7, 8), np.float32))
+    code, out, err = run(capsys, "drr", str(tmp_path / "v.npy"), "--poses", str(tmp_path / "p.csv"), "--size", "16",
+                         "-o", str(tmp_path / "d.png"), "--levels", "1")
+    assert code == 2 and len(err.splitlines()) == 1 and "unknown column(s) dso x, elevation roll;" in err, err
+
+
+def test_a_projection_matrix_at_any_scale_is_the_same_geometry():
+    """Scaled by 1e-300 or 1e300 a matrix is the same projection (the check against overflow divides by its largest
+    entry): its source, pixel and axes as at scale 1."""
+    P = np.array([[150.0, 0, 16, 5], [0, 150, 16, 0], [0, 0, 1, 100]])
+    one = clwave.ConeBeam.from_matrix(P, 32)
+    for scale in (1e-300, 1e300):
+        other = clwave.ConeBeam.from_matrix(P * scale, 32)
+        np.testing.assert_allclose(other.source, one.source, rtol=1e-12)
+        np.testing.assert_allclose(other.slope, one.slope, rtol=1e-12)
+        np.testing.assert_allclose(other.n, one.n, atol=1e-15)
+
+
+@pytest.mark.parametrize("points, words", [
+    ([(0, 0, 0, 0, 0), (1, 1, 0, 0, 1e308)], r"point 1 .* beyond float32's range"),  # "overflow encountered in cast"
+    ([(-1e308, 0, 0, 0, 0), (1e308, 1, 0, 0, 1)], r"point 0 .* beyond float32's range"),  # "in subtract"
+])
+def test_transfer_function_numbers_past_float32_are_refused(points, words):
+    """An opacity or value of 1e308 (a mutated .json): NumPy's overflow warnings (two to eight lines) while the volume
+    was classified, then the non-finite voxels' line."""
+    with pytest.raises(InputError, match=words):
+        clwave.TransferFunction(points)
+    with pytest.raises(InputError, match=r"point 1 .* beyond float32's range"):
+        clwave.TransferFunction.labels({1: (1, 0, 0, 1e308), 2: (0, 1, 0, 0.5)})
+
+
+def test_a_transfer_function_row_is_quoted_short(tmp_path, capsys):
+    """A .csv row of 500 NUL bytes was quoted whole in its refusal (a line of 2,600 characters)."""
+    (tmp_path / "tf.csv").write_bytes(b"value,r,g,b,opacity\n0,0,0,0,0\n1,1,1,1,1\n" + bytes(500))
+    with pytest.raises(InputError, match=r"row 4 .* is not 5 numbers") as excinfo:
+        named_transfer_function(str(tmp_path / "tf.csv"))
+    assert len(str(excinfo.value)) < 300, str(excinfo.value)
