@@ -48,9 +48,10 @@ class ClwaveError(Exception):
 
 
 def one_line(text):
-    """``text`` with its line breaks, and the spaces around them, made one space: a message that shows a value's
-    ``repr`` (a 2-D NumPy array's spans lines) stays one line; anything but a string as given."""
-    return " ".join(text.split()) if isinstance(text, str) and "\n" in text else text
+    """``text`` with its line breaks (any that ``str.splitlines`` breaks at: a form feed or a file separator from a
+    file's words too), and the spaces around them, made one space: a message that shows a value's ``repr`` (a 2-D
+    NumPy array's spans lines) stays one line; anything but a string as given."""
+    return " ".join(text.split()) if isinstance(text, str) and text.splitlines() != [text] else text
 
 
 class ClwaveWarning(UserWarning):

@@ -107,6 +107,9 @@ class ConeBeam:
         P = np.asarray(matrix, float) if np.ndim(matrix) == 2 else np.zeros(0)
         if P.shape != (3, 4) or not np.all(np.isfinite(P)):
             raise InputError("a projection matrix must be 3 x 4 finite numbers")
+        # homogeneous: the same projection at any scale, weighed at one near 1 (an entry of 1e308 overflowed the
+        # determinant) by a power of two, which rounds nothing
+        P = np.ldexp(P, -np.frexp(np.abs(P).max())[1])
         M = P[:, :3]
         if not abs(np.linalg.det(M)) > 1e-12 * np.linalg.norm(M) ** 3:
             raise InputError("the projection matrix is singular: its left 3 x 3 block must be invertible")

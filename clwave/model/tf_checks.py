@@ -9,6 +9,8 @@ import numpy as np
 
 from ..errors import InputError
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
 
 def check_points(points) -> np.ndarray:
     """``points`` as a read-only (n, 5) float64 array of rows (value, r, g, b, opacity): at least 2, finite, values
@@ -27,6 +29,10 @@ def check_points(points) -> np.ndarray:
         row = int(np.nonzero(~np.all(np.isfinite(p), axis=1))[0][0])
         raise InputError(f"transfer function point {row} {p[row].tolist()} is not finite "
                          "(NaN or Inf); give finite numbers")
+    if np.any(np.abs(p[:, [0, 4]]) > FLOAT32_MAX):  # the values and opacities clwave classifies in float32
+        row = int(np.nonzero(np.any(np.abs(p[:, [0, 4]]) > FLOAT32_MAX, axis=1))[0][0])
+        raise InputError(f"transfer function point {row} {p[row].tolist()} is beyond float32's range (+-3.4e38), "
+                         "in which clwave classifies: give smaller values and opacities (or a longer opacity unit)")
     bad = np.nonzero(np.diff(p[:, 0]) <= 0)[0]
     if bad.size:
         i = int(bad[0])

@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import reprlib
 from os import PathLike
 from pathlib import Path
 
@@ -112,8 +113,8 @@ def _from_csv(path, text) -> TransferFunction:
     values = []
     for n, row in enumerate(body, 2 if header else 1):
         if len(row) != 5 or not _numbers(row):
-            raise InputError(f"row {n} {','.join(row)!r} is not 5 numbers ({'label' if labels else 'value'}, r, g, b, "
-                             f"opacity)")
+            raise InputError(f"row {n} {reprlib.repr(','.join(row))} is not 5 numbers "
+                             f"({'label' if labels else 'value'}, r, g, b, opacity)")
         values.append([float(v) for v in row])
     if labels:
         return TransferFunction.labels({row[0]: row[1:] for row in values}, name=path.stem)

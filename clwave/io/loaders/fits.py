@@ -8,6 +8,7 @@ from __future__ import annotations
 import gzip
 import itertools
 import math
+import re
 import warnings
 from contextlib import contextmanager
 from functools import partial
@@ -98,6 +99,7 @@ def find_cube(path):
                         raise FileFormatError(f"{path}: its HDU {index} declares {' x '.join(map(str, dims))} "
                                               "pixels; each axis needs at least one")
                     _check_tiles(path, index, header, len(dims) if tiled else 0)
+                    _check_cards(path, index, header)
                     return index, header, dims
                 seen.append(f"{index}: a {len(dims)}-D image" if dims else f"{index}: no data")
             else:
@@ -172,6 +174,31 @@ def _check_tiles(path, index, header, naxis):
         if (tile := _whole(path, index, header, f"ZTILE{n}", 1)) < 1:
             raise FileFormatError(f"{path}: its HDU {index} has ZTILE{n} = {tile}; a tile needs at least one pixel: "
                                   "the header is corrupt")
+
+
+#: the keywords of a cube's header that clwave, astropy's reading or its WCS read (astropy.wcs leaves a card it cannot
+#: parse out without a word: an unparsable CDELT2 read as 1 degree, 1000 times CDELT1's 0.001)
+_READ = re.compile(r"(Z?BITPIX|Z?NAXIS\d*|BSCALE|BZERO|BLANK|WCSAXES|C(TYPE|DELT|RPIX|RVAL|UNIT|ROTA)\d+|"
+                   r"(PC|CD|PV|PS)\d+_\d+|LONPOLE|LATPOLE|RESTFRE?Q|EQUINOX|EPOCH|RADESYS|SPECSYS)")
+
+
+def _check_cards(path, index, header):
+    """Refuse a card of ``header`` (HDU ``index``) that clwave reads (:data:`_READ`) where astropy cannot parse it or
+    where it is given twice with different values (``header.get`` took the first, astropy's section another)."""
+    from astropy.io.fits.verify import VerifyError
+
+    values = {}
+    for card in header.cards:
+        if not _READ.fullmatch(card.keyword):
+            continue
+        try:
+            value = card.value
+        except VerifyError:
+            raise FileFormatError(f"{path}: its HDU {index}'s card {card.keyword} cannot be parsed (FITS's fixed "
+                                  "format); the header is corrupt: correct the card") from None
+        if values.setdefault(card.keyword, value) != value:
+            raise FileFormatError(f"{path}: its HDU {index} has {card.keyword} twice, {values[card.keyword]!r} and "
+                                  f"{value!r}; the header is corrupt: keep the true one")
 
 
 def _whole(path, index, header, key, default=None):

@@ -8,12 +8,15 @@ import math
 import numpy as np
 
 from ...errors import FileFormatError
-from .shared import (GZIP_MAGIC, Declared, TimeSeries, as_array, check_declared_size, note, one_volume, placeable,
-                     proxy_frame, to_canonical)
+from .shared import (GZIP_MAGIC, UNEVEN, Declared, TimeSeries, as_array, check_declared_size, note, one_volume,
+                     placeable, proxy_frame, to_canonical)
 
 #: FreeSurfer's geometry of a file without one (MRIallocHeader: x_r = -1, y_s = -1, z_a = 1, coronal LIA), the
 #: directions of i, j, k as rows, as MGH stores them (nibabel's default stores their transpose, LSP)
 _LIA_MDC = [[-1, 0, 0], [0, 0, -1], [0, 1, 0]]
+#: how far from 1 an Mdc row's length may be: float32 rounding, a writer's few digits; past it the header is wrong
+#: (fuzz29: a row of length 699 made 839 mm voxels beside 1 mm, 89.9 degrees oblique)
+MDC_ROUNDING = 1e-3
 
 
 def read_mgh(path, chunks, fits=None, frame=None):
@@ -32,10 +35,15 @@ def read_mgh(path, chunks, fits=None, frame=None):
         header["delta"], header["Mdc"], header["Pxyz_c"] = 1, _LIA_MDC, 0
     with np.errstate(over="ignore", invalid="ignore"):  # a delta or Mdc past float range: placeable() refuses it
         affine = header.get_affine()
+    fix = "write the file again with its true geometry (e.g. nibabel's MGHImage of its voxels and affine)"
     if not placeable(affine):
         raise FileFormatError(f"{path}: its vox2ras (the header's delta, Mdc and Pxyz_c) is not finite or not "
-                              "invertible; write the file again with its true geometry (e.g. nibabel's MGHImage of "
-                              "its voxels and affine)")
+                              f"invertible, or its voxels are more than {UNEVEN:g} times longer along one axis than "
+                              f"another; {fix}")
+    lengths = np.linalg.norm(np.asarray(header["Mdc"], float), axis=1)  # each row an axis's direction
+    if np.any(np.abs(lengths - 1) > MDC_ROUNDING):
+        raise FileFormatError(f"{path}: its Mdc (the axes' direction cosines) has rows of length "
+                              f"{', '.join(f'{n:.3g}' for n in lengths)}, not 1 (delta is the voxel's size); {fix}")
     if not good:
         note(f"{path} has no valid geometry (goodRASFlag 0): FreeSurfer's default is assumed, coronal LIA with 1 mm "
              "voxels centred on the origin; set it (mri_convert, or nibabel's MGHHeader) if known")

@@ -10,7 +10,7 @@ import numpy as np
 
 from ...errors import ClwaveWarning, FileFormatError, InputError, warn_outside
 from .raw import read_memmap
-from .shared import OnDemand, as_array, check_declared_size, no_spacing, note
+from .shared import UNEVEN, OnDemand, as_array, check_declared_size, no_spacing, note
 
 MRC_SUFFIXES = (".mrc", ".map", ".ccp4", ".rec", ".st")
 _HEADER = 1024  # bytes before the extended header (nsymbt bytes), then the samples
@@ -19,10 +19,6 @@ _IMOD_STAMP = 1146047817  # "IMOD" (little-endian bytes)
 #: Signed bytes (mode 0, MRC2014) whose steps of more than 128 between neighbours would be under WRAPPED as many read
 #: unsigned: an unsigned 8-bit map, its values above 127 wrapped (sections evenly spaced, at most WRAP_SAMPLE bytes)
 WRAPPED, WRAP_SAMPLE = 0.5, 1 << 22
-#: the most a map's voxel size (its cell over its sampling) along one axis may exceed another's: maps' voxels are near
-#: cubes (cryo-EM, tomograms, crystallographic cells); past it the header's cell or sampling is wrong (fuzz27: an mx
-#: of 2^31 - 1, voxels of 4.7e-9 by 2 Å, refused by the footprint textures' size, naming --omega-s)
-UNEVEN = 1e4
 
 
 def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):

@@ -11,7 +11,7 @@ import numpy as np
 
 from ...device.memory import HostMemoryError
 from ...errors import FileFormatError
-from .shared import (Declared, TimeSeries, as_array, check_declared_size, check_float32_range, check_whole,
+from .shared import (UNEVEN, Declared, TimeSeries, as_array, check_declared_size, check_float32_range, check_whole,
                      largest_finite, note, one_volume, placeable, proxy_frame, to_canonical)
 from .shear import STRAY_VOXELS, straight_grid, unshear
 
@@ -35,7 +35,8 @@ def read_nifti(path, chunks, fits=None, frame=None):
                               "least 2 voxels an axis (stack 2-D slices into one first)")
     if not placeable(affine):
         raise FileFormatError(f"{path}: its voxel-to-world affine (sform, qform or pixdim) is not finite or not "
-                              "invertible; fix the header, e.g. with nibabel's set_sform and set_qform")
+                              f"invertible, or its voxels are more than {UNEVEN:g} times longer along one axis than "
+                              "another; fix the header, e.g. with nibabel's set_sform and set_qform")
     if _codes(image.header) == (0, 0):
         note(f"{path} has no orientation (its sform_code and qform_code are 0): nibabel's fallback is assumed, "
              f"{''.join(nibabel.aff2axcodes(affine))} (its first axis to the left, as Analyze's radiological files), "
@@ -90,6 +91,7 @@ def read_nifti(path, chunks, fits=None, frame=None):
     if data.dtype.names:  # RGB24 / RGBA32 structured samples
         data = np.stack([data[name] for name in data.dtype.names], axis=-1)
     if sheared:
+        check_float32_range(largest_finite(data), path)  # resampled into float32 (a float file's scl_slope of 3e38)
         note(f"{path}'s affine is sheared {grid.degrees:.3g} degrees (its axes are not at right angles: a CT's gantry "
              f"tilt that dcm2niix left uncorrected writes one): resampled onto a straight grid on the closest RAS "
              f"axes, linearly, the new margins filled with its least value")

@@ -18,6 +18,7 @@ from ...device.memory import HostMemoryError, check_fits, out_of_threads
 from ...errors import ClwaveError, ClwaveWarning, FileFormatError, InputError, warn_outside
 from ..progress import progress
 from .inflate import GZIP, GZIP_MAGIC, decompressed
+from .shear import closest_axes
 
 log = logging.getLogger(__name__)  # notes below a warning (an OME size not given: 1 micrometre, as OME says)
 
@@ -406,9 +407,24 @@ def pick_array(arrays, name, store):
     return name, array
 
 
+#: the most a voxel may be longer along one axis than another (on the straight grid, :mod:`.shear`): scanners' and maps'
+#: voxels are near cubes; past it a header's geometry is wrong (fuzz27: an MRC's voxels of 4.7e-9 by 2 Å; fuzz29: a
+#: NIfTI sform entry of 1e20 beside 1, whose straight grid divided by 0)
+UNEVEN = 1e4
+
+
 def placeable(affine) -> bool:
-    """Whether a voxel-to-world ``affine`` places voxels: finite and invertible."""
-    return bool(np.all(np.isfinite(affine)) and abs(np.linalg.det(affine[:3, :3])) > 0)
+    """Whether a voxel-to-world ``affine`` places voxels: finite, invertible, and its voxels (their sizes along the
+    closest right-angled axes, :func:`.shear.closest_axes`) no more than :data:`UNEVEN` times longer one way than
+    another."""
+    if not np.all(np.isfinite(affine)):
+        return False
+    m = np.asarray(affine, float)[:3, :3]
+    with np.errstate(all="ignore"):  # entries of 1e308: the determinant overflows, and the test fails
+        if not abs(np.linalg.det(m)) > 0:
+            return False
+        size = np.diag(closest_axes(m)[2])
+        return bool(np.all(np.isfinite(size)) and size.max() <= UNEVEN * size.min())
 
 
 def to_canonical(array_ijk, affine_ras):

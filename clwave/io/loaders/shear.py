@@ -38,14 +38,7 @@ def straight_grid(shape, affine) -> Straight:
     i), R's diagonal its spacing (each axis's part of its column: a voxel keeps its volume) and the rest the shear
     and rotation undone; wider by the shifts."""
     m = affine[:3, :3]
-    frames = []
-    for order in itertools.permutations(range(3)):
-        q, r = np.linalg.qr(m[:, order])
-        sign = np.where(np.diag(r) < 0, -1.0, 1.0)
-        q, r = q * sign, r * sign[:, None]
-        oblique = float(np.arccos(np.clip(np.abs(q).max(axis=0), -1.0, 1.0)).max())
-        frames.append((round(oblique, 9), order, q, r))
-    _, order, q, r = min(frames, key=lambda f: f[0])
+    order, q, r = closest_axes(m)
     back = np.argsort(order)  # the straight axes in the file's order: axis i the one made from column i
     q, spacing = q[:, back], np.diag(r)[back]
     shear = (r / np.diag(r)[:, None])[np.ix_(back, back)]  # sheared index -> straight index, both in the file's order
@@ -59,6 +52,19 @@ def straight_grid(shape, affine) -> Straight:
     degrees = float(np.degrees(np.arccos(np.clip(spacing / lengths, -1.0, 1.0))).max())
     moved = float((np.abs(np.triu(r / np.diag(r)[:, None], 1)) @ far[list(order)]).max())
     return Straight(tuple(int(n) for n in high - low + 1), straight, shear, low, moved, degrees)
+
+
+def closest_axes(m) -> tuple:
+    """``(order, q, r)``: the 3 x 3 matrix ``m``'s columns in the ``order`` whose Q R factors (R's diagonal positive)
+    have the Q least oblique to the world's axes (the first of equals); R's diagonal is a voxel's size along them."""
+    frames = []
+    for order in itertools.permutations(range(3)):
+        q, r = np.linalg.qr(m[:, order])
+        sign = np.where(np.diag(r) < 0, -1.0, 1.0)
+        q, r = q * sign, r * sign[:, None]
+        oblique = float(np.arccos(np.clip(np.abs(q).max(axis=0), -1.0, 1.0)).max())
+        frames.append((round(oblique, 9), order, q, r))
+    return min(frames, key=lambda f: f[0])[1:]
 
 
 def unshear(data_ijk, grid: Straight, fill) -> np.ndarray:
