@@ -3,8 +3,9 @@
 HDF5 can point outside the file (external raw storage, external links, virtual datasets), alias or loop
 (soft links, several hard links to one object), run code that is not HDF5's (a filter loaded as a plugin),
 and hold data whose reading allocates far more than the file's size (variable-length and reference types,
-attributes read whole).  :func:`check_self_contained` walks every member through HDF5's low-level calls,
-which read object headers only, and refuses anything a clwave writer does not make.
+attributes read whole, a chunk that inflates far past its size: :func:`check_chunks`).
+:func:`check_self_contained` walks every member through HDF5's low-level calls, which read object headers (and
+compressed chunks, never decoded whole) only, and refuses anything a clwave writer does not make.
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ MAX_MEMBERS = 4096           # objects in a file (a .clw has 3 per channel group
 MAX_DEPTH = 4                # groups within groups (a .clw nests one deep)
 MAX_ATTRIBUTES = 16          # per object
 MIN_CHUNK = 64               # elements a chunk holds at least (or the whole dataset); a writer's hold 256 or more
+#: filters whose chunk states its decoded size in its header (hdf5plugin's, which allocate that size)
+STATED = {32015: "zstd", 32001: "blosc"}
+DEFLATE, FLETCHER32 = 1, 3
 #: bytes of metadata (object headers, chunk indexes, attribute heaps) a file may hold beyond its datasets' data:
 #: fixed, per object and per chunk, on top of the attributes' bound (a written .clw holds ~10 KB)
 METADATA_BYTES, OBJECT_BYTES, CHUNK_BYTES = 1 << 16, 1 << 12, 64
@@ -50,7 +54,7 @@ def check_self_contained(h5, path, max_attribute) -> None:
                     raise ValueError(f"member {member} nests groups deeper than {MAX_DEPTH}")
                 pending.append((obj, member, depth + 1))
             elif info.type == h5o.TYPE_DATASET:
-                stored, n_chunks = _check_dataset_storage(obj, member)
+                stored, n_chunks = _check_dataset_storage(obj, member, path)
                 data_bytes, chunks = data_bytes + stored, chunks + n_chunks
             else:
                 raise ValueError(f"member {member} is a named datatype, not a group or dataset")
@@ -77,7 +81,7 @@ def _link_names(group, name) -> list:
     return names
 
 
-def _check_dataset_storage(dataset, member) -> tuple:
+def _check_dataset_storage(dataset, member, path) -> tuple:
     """``(bytes stored, chunks)`` of a dataset, refused unless stored inside the file, contiguous or in chunks
     of at least :data:`MIN_CHUNK` elements, through the writer's filters only, of integer or float elements
     in an array of at most 3 dimensions."""
@@ -105,7 +109,50 @@ def _check_dataset_storage(dataset, member) -> tuple:
     elements, per_chunk = _product(shape), _product(chunk)
     if per_chunk < min(elements, MIN_CHUNK):
         raise ValueError(f"member {member} has chunks of {chunk}, smaller than a .clw writes")
+    check_chunks(dataset, path, member)
     return dataset.get_storage_size(), _product(-(-n // c) for n, c in zip(shape, chunk))
+
+
+def check_chunks(dataset, path, member, offsets=None) -> None:
+    """Refuse (``ValueError``) a chunk of a chunked ``dataset`` (its low-level id) in the file at ``path``, of those
+    at ``offsets`` (each chunk's first element; None: every chunk), that its compressing filter would decode past
+    the chunk's bytes: HDF5's deflate filter grows its buffer as far as the stream goes (its stream decompressed
+    here to the chunk's bytes and no further, kept nowhere: :func:`.loaders.inflate.inflated`), hdf5plugin's
+    Zstandard and Blosc allocate what their header states (:func:`.loaders.inflate.check_stated`)."""
+    import zlib
+
+    from .loaders.inflate import HEADER, check_stated, inflated
+
+    plist = dataset.get_create_plist()
+    codes = [plist.get_filter(i)[0] for i in range(plist.get_nfilters())]
+    if not {DEFLATE, *STATED} & set(codes):
+        return
+    most = _product(plist.get_chunk()) * dataset.get_type().get_size()
+    stored = []
+    if offsets is None:
+        dataset.chunk_iter(stored.append)
+    else:
+        stored = [dataset.get_chunk_info_by_coord(tuple(offset)) for offset in offsets]
+    with open(path, "rb") as fh:
+        for info in stored:
+            if info.byte_offset is None:  # not written: the fill value
+                continue
+            size = info.size
+            for i in reversed(range(len(codes))):  # the filters in the order they decode
+                if info.filter_mask >> i & 1:  # skipped for this chunk
+                    continue
+                if codes[i] == FLETCHER32:  # its checksum, the last 4 bytes, checked by HDF5
+                    size -= 4
+                    continue
+                fh.seek(info.byte_offset)
+                try:
+                    if codes[i] == DEFLATE:
+                        inflated(fh.read(size), zlib.decompressobj, None, most, "a deflate chunk")
+                    elif codes[i] in STATED:
+                        check_stated(STATED[codes[i]], fh.read(min(size, HEADER)), most)
+                except (ValueError, zlib.error) as exc:
+                    raise ValueError(f"member {member}, its chunk at {info.chunk_offset}: {exc}") from None
+                break
 
 
 def check_stored_inside(dataset, member) -> int:

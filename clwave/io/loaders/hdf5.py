@@ -3,11 +3,12 @@ in another file (external storage, a virtual dataset, an external or soft link).
 
 from __future__ import annotations
 
+import itertools
 import math
 from functools import partial
 
 from ...errors import FileFormatError
-from ..hdf5_safety import check_filters_available, check_stored_inside
+from ..hdf5_safety import check_chunks, check_filters_available, check_stored_inside
 from .shared import OnDemand, as_array, pick_array
 
 
@@ -57,8 +58,22 @@ def _check_chunk_size(dataset, where):
 
 
 def _read_dataset(path, name, index):
+    """``index`` (slices) of the dataset, its chunks there checked first (:func:`.hdf5_safety.check_chunks`: none
+    decodes past its size)."""
     import h5py
     import hdf5plugin  # noqa: F401  (its filters, in a worker process too)
 
     with h5py.File(path, "r") as fh:
-        return fh[name][index]
+        dataset = fh[name]
+        if dataset.chunks is not None:
+            check_chunks(dataset.id, path, f"/{name}", _covered(index, dataset.shape, dataset.chunks))
+        return dataset[index]
+
+
+def _covered(index, shape, chunks):
+    """The first element of each chunk that ``index`` (a tuple of slices) covers; None (every chunk) for another."""
+    if not (isinstance(index, tuple) and all(isinstance(s, slice) for s in index)):
+        return None
+    index += (slice(None),) * (len(shape) - len(index))
+    spans = [range(*s.indices(n)[:2]) for s, n in zip(index, shape)]
+    return itertools.product(*(range(r.start // c * c, r.stop, c) for r, c in zip(spans, chunks)))

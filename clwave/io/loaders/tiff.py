@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import lzma
 import math
+import zlib
 from functools import partial
 
 import numpy as np
@@ -10,12 +12,19 @@ import numpy as np
 from ...device.memory import check_fits
 from ...errors import FileFormatError
 from ..images import unit_named
+from .inflate import inflated
 from .shared import (Declared, FrameOf, OnDemand, TimeSeries, as_array, by_size, check_whole, log, no_spacing, note,
                      one_volume)
 
 TIFF_SUFFIXES = (".tif", ".tiff")
 #: micrometres per unit of an OME-TIFF's PhysicalSize (OME's UnitsLength; its default is the micrometre)
 OME_MICROMETRES = {"pm": 1e-6, "Å": 1e-4, "nm": 1e-3, "µm": 1.0, "um": 1.0, "mm": 1e3, "cm": 1e4, "m": 1e6}
+
+#: the decompressors of tifffile's own decoders (its fallbacks where imagecodecs is not installed), which decompress a
+#: strip or tile whole whatever its size (a few kilobytes that inflate to gigabytes): :func:`_bound_decoders`
+UNBOUNDED = {"zlib_decode": zlib.decompressobj, "lzma_decode": lzma.LZMADecompressor}
+#: the codes of TIFF's compressions that tifffile decodes so: zlib (Adobe, PKZIP, PixTIFF), LZMA
+BOUNDED_CODES = (8, 32946, 50013, 34925)
 
 #: the most bytes of a TIFF's first strip or tile decoded to try its codec before a read (:func:`_check_decodable`)
 DECODE_TRIAL = 1 << 24
@@ -58,6 +67,7 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False, fra
     alone read, whole or chunk by chunk."""
     import tifffile
 
+    _bound_decoders()
     with tifffile.TiffFile(path) as tif:
         series = tif.series[0]
         shape, axes = tuple(series.shape), series.axes
@@ -134,6 +144,24 @@ def read_tiff(path, fits=None, stack=True, chunks=False, warn_spacing=False, fra
     return (data if len(spatial) == 3 else data[np.newaxis]), spacing, origin
 
 
+def _bound_decoders():
+    """Replace, in tifffile's table of decoders, each of its own decoders that ignores the size of the strip or tile
+    it is given (:data:`UNBOUNDED`) by one that decompresses that many bytes and refuses the byte past them
+    (:func:`.inflate.inflated`); imagecodecs' decoders, where installed, decode into that size themselves."""
+    import tifffile
+
+    table = tifffile.TIFF.DECOMPRESSORS
+    for code in BOUNDED_CODES:
+        decode = table[code] if code in table else None
+        if getattr(decode, "__module__", None) == "tifffile._imagecodecs" and decode.__name__ in UNBOUNDED:
+            table._codecs[code] = partial(_decode_bounded, UNBOUNDED[decode.__name__])  # the table's cache
+
+
+def _decode_bounded(new, data, out):
+    """tifffile's decoder: a strip or tile ``data`` of ``out`` bytes decoded, decompressed by ``new``'s."""
+    return inflated(data, new, None, out, "a compressed strip or tile")
+
+
 def _check_decodable(series, path):
     """Refuse pages compressed by a codec tifffile has no decoder for here (LZW, JPEG, ... need imagecodecs), and
     pages whose first strip or tile (of at most DECODE_TRIAL bytes, stored and decoded) it cannot decode (other
@@ -176,6 +204,7 @@ def _read_region(path, pages, index):
     import tifffile
     import zarr
 
+    _bound_decoders()  # in a worker process too
     with tifffile.TiffFile(path) as tif:
         if pages:
             return np.stack([tif.pages[z].asarray()[index[1:]] for z in range(len(tif.pages))[index[0]]])

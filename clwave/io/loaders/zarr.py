@@ -25,7 +25,14 @@ _METRES = {prefix + "meter": Fraction(10) ** power for prefix, power in _SI_PREF
     "mile": Fraction("1609.344"), "parsec": Fraction("3.0857e16")}  # exact: 1 micrometer is 1000.0 nanometer
 def read_zarr(path, name, level, chunks, fits=None, frame=None):
     """A Zarr array (v2 or v3), or one level of an OME-Zarr multiscale image with its spacing and origin (of a time
-    series the time point ``frame``)."""
+    series the time point ``frame``); its chunks decompressed to their size at the most (:mod:`.zarr_bounds`)."""
+    from .zarr_bounds import bounded
+
+    with bounded():
+        return _read_zarr(path, name, level, chunks, fits, frame)
+
+
+def _read_zarr(path, name, level, chunks, fits, frame):
     import zarr
 
     def arrays(group, prefix=""):
