@@ -21,6 +21,8 @@ MIN_CHUNK = 64               # elements a chunk holds at least (or the whole dat
 #: filters whose chunk states its decoded size in its header (hdf5plugin's, which allocate that size)
 STATED = {32015: "zstd", 32001: "blosc"}
 DEFLATE, FLETCHER32 = 1, 3
+#: zlib's deflateBound: a stream of n bytes stored is at most n + n >> 12 + n >> 14 + ... + 13 (its wrapper's 6 more)
+DEFLATE_SLACK = 11
 #: bytes of metadata (object headers, chunk indexes, attribute heaps) a file may hold beyond its datasets' data:
 #: fixed, per object and per chunk, on top of the attributes' bound (a written .clw holds ~10 KB)
 METADATA_BYTES, OBJECT_BYTES, CHUNK_BYTES = 1 << 16, 1 << 12, 64
@@ -109,16 +111,20 @@ def _check_dataset_storage(dataset, member, path) -> tuple:
     elements, per_chunk = _product(shape), _product(chunk)
     if per_chunk < min(elements, MIN_CHUNK):
         raise ValueError(f"member {member} has chunks of {chunk}, smaller than a .clw writes")
-    check_chunks(dataset, path, member)
+    check_chunks(dataset, path, member, inflate=False)
     return dataset.get_storage_size(), _product(-(-n // c) for n, c in zip(shape, chunk))
 
 
-def check_chunks(dataset, path, member, offsets=None) -> None:
+def check_chunks(dataset, path, member, offsets=None, inflate=True) -> None:
     """Refuse (``ValueError``) a chunk of a chunked ``dataset`` (its low-level id) in the file at ``path``, of those
     at ``offsets`` (each chunk's first element; None: every chunk), that its compressing filter would decode past
     the chunk's bytes: HDF5's deflate filter grows its buffer as far as the stream goes (its stream decompressed
     here to the chunk's bytes and no further, kept nowhere: :func:`.loaders.inflate.inflated`), hdf5plugin's
-    Zstandard and Blosc allocate what their header states (:func:`.loaders.inflate.check_stated`)."""
+    Zstandard and Blosc allocate what their header states (:func:`.loaders.inflate.check_stated`).  Without
+    ``inflate`` (a ``.clw`` opened: its prefix reads must not pay for the whole file) a deflate chunk is weighed by its
+    stored size alone: more than zlib's bound for the chunk's bytes (:data:`DEFLATE_SLACK`) is no stream a writer
+    makes, and a stream within it inflates at most 1032 times (deflate's largest ratio), a few hundred MB for a
+    ``.clw``'s largest chunks (docs/known-gaps.md §15, bomb29)."""
     import zlib
 
     from .loaders.inflate import HEADER, check_stated, inflated
@@ -146,7 +152,11 @@ def check_chunks(dataset, path, member, offsets=None) -> None:
                     continue
                 fh.seek(info.byte_offset)
                 try:
-                    if codes[i] == DEFLATE:
+                    if codes[i] == DEFLATE and not inflate:
+                        if size > most + (most >> DEFLATE_SLACK) + 64:
+                            raise ValueError(f"a deflate chunk is stored in {size:,} bytes, more than the {most:,} "
+                                             "bytes it holds take compressed")
+                    elif codes[i] == DEFLATE:
                         inflated(fh.read(size), zlib.decompressobj, None, most, "a deflate chunk")
                     elif codes[i] in STATED:
                         check_stated(STATED[codes[i]], fh.read(min(size, HEADER)), most)
