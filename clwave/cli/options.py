@@ -10,7 +10,7 @@ import time
 import warnings
 from pathlib import Path
 
-from ..errors import ClwaveWarning, CommandWords, InputError, OutputError, OutputExistsError
+from ..errors import ClwaveWarning, CommandWords, InputError, NoisyModelWarning, OutputError, OutputExistsError
 from ..io.files import check_writable
 from ..model.wavelet import DEFAULT_KEEP, DEFAULT_LEVELS
 from .reading import READING, add_input_options, flag, is_given, numbers, option, read_volume
@@ -213,6 +213,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
         if default and args.focus is None:
             warnings.simplefilter("ignore", ClwaveWarning)
+            warnings.simplefilter("always", NoisyModelWarning)  # a default model of noise is told
         wv = wv.threshold(**dict(thresholding, keep=DEFAULT_KEEP) if default else thresholding)
     if not vol.chunked:
         return wv, vol
