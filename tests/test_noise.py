@@ -320,3 +320,17 @@ def test_command_line_warns_on_a_default_model_of_noise_and_reports_its_distance
     bound = float(said.split("so the model is at least ")[1].split(" sigma")[0])
     model = clwave.WaveletVolume.open(tmp_path / "n.clw").reconstruct().data.reshape(truth.shape)
     assert np.sqrt(np.mean((model - truth) ** 2)) / 0.5 >= bound > 0.5
+
+
+def test_noise_with_a_transfer_function_needs_post_classification(tmp_path, capsys):
+    """--noise measures the values' noise: with --tf it is refused under --classify pre (the trial's "found no noise"
+    on the classified RGBA) in one line naming --classify post, which works."""
+    truth = balls()
+    np.save(tmp_path / "noisy.npy", truth + np.random.default_rng(7).normal(0, 0.5, truth.shape).astype(np.float32))
+    argv = ["compress", str(tmp_path / "noisy.npy"), "--wavelet", "linear", "--noise", "3", "--tf", "grey"]
+    assert main(argv + ["-o", str(tmp_path / "pre.clw")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--noise measures the noise" in err and "give --classify post" in err
+    assert not (tmp_path / "pre.clw").exists()
+    assert main(argv + ["--classify", "post", "-o", str(tmp_path / "post.clw")]) == 0
+    assert clwave.WaveletVolume.open(tmp_path / "post.clw").channels == 1

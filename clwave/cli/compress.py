@@ -95,7 +95,7 @@ def _in_noise(sigmas, rms) -> str:
         return said + ": an error near 1 is mostly noise removed)"
     least = math.sqrt((rms / sigma) ** 2 - 1)
     return (said + f": removing the noise alone gives 1, so the model is at least {least:.2f} sigma from the "
-                   f"noise-free volume, where the input is 1; noisy volume is denoised by --wavelet linear --noise 3)")
+                   f"noise-free volume, where the input is 1; --wavelet linear --noise 3 removes noise)")
 
 
 def _on_disk(spec) -> str:
