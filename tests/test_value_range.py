@@ -2,6 +2,7 @@
 [min, max] (docs/raytracing.md §10), the range a model keeps from its volume and its .clw file."""
 
 import json
+import re
 import warnings
 import zlib
 
@@ -118,3 +119,23 @@ def test_the_range_round_trips_through_clw_files(tmp_path):
         h5.attrs["header"] = json.dumps(header)
         h5.attrs["header_crc32"] = zlib.crc32(h5.attrs["header"].encode())
     assert clwave.WaveletVolume.open(tmp_path / "m.clw").value_range is None
+
+
+def test_a_nearly_empty_image_is_told_with_the_window_that_shows_the_model():
+    """A blob of peak 10 under grey opaque from 9.5 up (the values its model barely reaches, as the trial's dark
+    function on a denoised tomogram): no pixel hides 5 % of the background, and the warning says so, naming the
+    values the model holds; the window it names draws the blob (checked on the image)."""
+    z, y, x = np.mgrid[:32, :32, :32] / 32.0
+    vol = clwave.Volume((10 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) * 20)).astype(np.float32))
+    tracer, cam = clwave.RayTracer(clwave.WaveletVolume.from_volume(vol, levels=2)), clwave.Camera(30, 20, size=32)
+    with pytest.warns(clwave.ClwaveWarning, match=r"nearly empty: its most opaque pixel hides 0.0095 % of the "
+                                                  r"background \(0 of 255 levels.*grey is opaque between 9.5 and "
+                                                  r"100, and this model's values lie within") as told:
+        faint = tracer.render(cam, transfer_function=clwave.TransferFunction.preset("grey", window=(9.5, 100)))
+    assert faint.image[..., 3].max() < 0.05 and not faint.meta["nothing_visible"]
+    window = tuple(map(float, re.search(r"window=\(([^,]+), ([^)]+)\)", str(told[0].message)).groups()))
+    assert window[0] < 0.01 and 9.99 < window[1] <= 10
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", clwave.ClwaveWarning)
+        shown = tracer.render(cam, transfer_function=clwave.TransferFunction.preset("grey", window=window))
+    assert shown.image[..., 3].max() > 0.3

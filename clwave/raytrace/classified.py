@@ -108,6 +108,11 @@ def clamped(tf: TransferFunction, value_range) -> TransferFunction:
     return TransferFunction(points, name=tf.name, opacity_unit=tf.opacity_unit)
 
 
+#: an image whose most opaque pixel hides less than this share of the background is nearly empty: 13 of the 255 levels
+#: of an 8-bit picture at most (:meth:`ScalarRange.faint`)
+NEARLY_EMPTY = 0.05
+
+
 @dataclass
 class Classification:
     """One transfer function's kernel arguments: the table and the classified bounds."""
@@ -227,10 +232,13 @@ class ScalarRange:
         under :meth:`window`."""
         return tf.under(self.window(tf)).shifted(self.subtracted)
 
-    def invisible(self, post: Classification) -> str | None:
+    def invisible(self, post: Classification, image=None) -> str | None:
         """Why ``post`` draws nothing (its transfer function gives no block of the model any opacity: most often a
-        window in other units than the model's, HU on a model of attenuation), in a line naming the fix; else None."""
+        window in other units than the model's, HU on a model of attenuation), in a line naming the fix; else None,
+        and a warning where ``image`` (premultiplied RGBA, given for a whole image) is nearly empty (:meth:`faint`)."""
         if post.opacity > 0:
+            if image is not None:
+                self.faint(post, float(np.max(image[..., 3], initial=0.0)))
             return None
         name = f"the transfer function{f' {post.tf.name}' if post.tf.name else ''}"
         if not np.any(post.tf.points[:, 4]):
@@ -243,6 +251,28 @@ class ScalarRange:
         held = "" if values is None else f"; {whose} values lie within {values[0]:.4g} .. {values[1]:.4g}"
         return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
                 f"a window in the input's units (--tf-window LO,HI) or another function")
+
+    def faint(self, post: Classification, peak: float):
+        """Warn where the image's most opaque pixel, ``peak``, hides less than :data:`NEARLY_EMPTY` of the background:
+        the transfer function's opacity lies at values the model barely reaches.  Names where its opacity lies and the
+        values the model's bricks hold (their ranges bound the field), the window that shows them."""
+        if peak >= NEARLY_EMPTY:
+            return
+        name = f"the transfer function{f' {post.tf.name}' if post.tf.name else ''}"
+        points = post.tf.data_points(post.window)
+        live = post.tf.points[:, 4] > 0
+        live = np.flatnonzero(live | np.r_[live[1:], False] | np.r_[False, live[:-1]])  # and its ramps' feet
+        held = [-np.inf, np.inf] if self.tracer.wv.value_range is None else list(self.tracer.wv.value_range)
+        if self.slot_range is not None:  # classified clamped to the input's range (docs/raytracing.md §10)
+            held = [max(held[0], self.slot_range[..., 0].min() + self.subtracted),
+                    min(held[1], self.slot_range[..., 1].max() + self.subtracted)]
+        line = (f"the image is nearly empty: its most opaque pixel hides {100 * peak:.2g} % of the background "
+                f"({round(255 * peak)} of 255 levels of an 8-bit picture); {name} is opaque between "
+                f"{points[live[0]]:.4g} and {points[live[-1]]:.4g}, and this model's values lie within ")
+        warn_outside(ClwaveWarning(line + f"{held[0]:.4g} .. {held[1]:.4g}: put its opacity there (a preset: "
+                                          f"window=({held[0]:.4g}, {held[1]:.4g}))",
+                                   cli=line + f"{held[0]:.4g} .. {held[1]:.4g}: put its opacity there (a preset: "
+                                              f"--tf-window {held[0]:.4g},{held[1]:.4g}; a file: its values)"))
 
     def opaque(self, tf: TransferFunction) -> str | None:
         """Why ``tf`` makes this model nearly opaque (:meth:`TransferFunction.opaque_line`, as a volume's

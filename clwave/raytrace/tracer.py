@@ -402,7 +402,7 @@ class RayTracer:
         counts = stats.get().reshape(-1, 4).astype(np.int64)
         if not absorption:
             img = img[..., : wv.channels]
-        nothing_visible = None if post is None else self.scalar.invisible(post)
+        nothing_visible = None if post is None else self.scalar.invisible(post, None if self.region else img)
         if self.region is None and not nothing_visible:  # a cluster's part may miss; an invisible function is said
             warn_empty(int(counts[:, 0].sum()), self.told)  # where it is found
         meta = dict(
