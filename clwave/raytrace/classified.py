@@ -108,9 +108,11 @@ def clamped(tf: TransferFunction, value_range) -> TransferFunction:
     return TransferFunction(points, name=tf.name, opacity_unit=tf.opacity_unit)
 
 
-#: an image whose most opaque pixel hides less than this share of the background is nearly empty: 13 of the 255 levels
-#: of an 8-bit picture at most (:meth:`ScalarRange.faint`)
-NEARLY_EMPTY = 0.05
+#: the opacity a pixel needs to show: 13 of the 255 levels of an 8-bit picture from the background
+#: (:meth:`ScalarRange.faint`)
+SHOWS = 0.05
+#: an image fewer of whose pixels show (:data:`SHOWS`) is nearly empty: 1 in 100 pixels, a few specks
+NEARLY_EMPTY = 0.01
 
 
 @dataclass
@@ -238,7 +240,7 @@ class ScalarRange:
         and a warning where ``image`` (premultiplied RGBA, given for a whole image) is nearly empty (:meth:`faint`)."""
         if post.opacity > 0:
             if image is not None:
-                self.faint(post, float(np.max(image[..., 3], initial=0.0)))
+                self.faint(post, float(np.mean(image[..., 3] >= SHOWS)))
             return None
         name = f"the transfer function{f' {post.tf.name}' if post.tf.name else ''}"
         if not np.any(post.tf.points[:, 4]):
@@ -252,12 +254,15 @@ class ScalarRange:
         return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
                 f"a window in the input's units (--tf-window LO,HI) or another function")
 
-    def faint(self, post: Classification, peak: float):
-        """Warn where the image's most opaque pixel, ``peak``, hides less than :data:`NEARLY_EMPTY` of the background:
-        the transfer function's opacity lies at values the model barely reaches.  Names where its opacity lies and the
-        values the model's bricks hold (their ranges bound the field), the window that shows them."""
-        if peak >= NEARLY_EMPTY:
+    def faint(self, post: Classification, shown: float):
+        """Warn where the share ``shown`` of the image's pixels that show (:data:`SHOWS`) is below
+        :data:`NEARLY_EMPTY`: the transfer function's opacity lies at values the model barely reaches.  Names where
+        its opacity lies and the values the model's bricks hold (their ranges bound the field), the window that shows
+        them.  Once a function and window (a viewer's frames, a turntable's views)."""
+        key = ("faint", json.dumps(post.tf.to_dict()), post.window)
+        if shown >= NEARLY_EMPTY or key in self.tracer.told:
             return
+        self.tracer.told.add(key)
         name = f"the transfer function{f' {post.tf.name}' if post.tf.name else ''}"
         points = post.tf.data_points(post.window)
         live = post.tf.points[:, 4] > 0
@@ -266,9 +271,9 @@ class ScalarRange:
         if self.slot_range is not None:  # classified clamped to the input's range (docs/raytracing.md §10)
             held = [max(held[0], self.slot_range[..., 0].min() + self.subtracted),
                     min(held[1], self.slot_range[..., 1].max() + self.subtracted)]
-        line = (f"the image is nearly empty: its most opaque pixel hides {100 * peak:.2g} % of the background "
-                f"({round(255 * peak)} of 255 levels of an 8-bit picture); {name} is opaque between "
-                f"{points[live[0]]:.4g} and {points[live[-1]]:.4g}, and this model's values lie within ")
+        line = (f"the image is nearly empty: {100 * shown:.2g} % of its pixels hide {100 * SHOWS:g} % of the "
+                f"background or more ({round(255 * SHOWS)} of 255 levels of an 8-bit picture); {name} is opaque "
+                f"between {points[live[0]]:.4g} and {points[live[-1]]:.4g}, and this model's values lie within ")
         warn_outside(ClwaveWarning(line + f"{held[0]:.4g} .. {held[1]:.4g}: put its opacity there (a preset: "
                                           f"window=({held[0]:.4g}, {held[1]:.4g}))",
                                    cli=line + f"{held[0]:.4g} .. {held[1]:.4g}: put its opacity there (a preset: "
