@@ -124,7 +124,7 @@ def test_the_range_round_trips_through_clw_files(tmp_path):
 def test_a_nearly_empty_image_is_told_with_the_window_that_shows_the_model():
     """A blob of peak 10 under grey opaque from 9.5 up (the values its model barely reaches, as the trial's dark
     function on a denoised tomogram): no pixel hides 5 % of the background, and the warning says so, naming the
-    values the model holds; the window it names draws the blob (checked on the image: over a tenth of its pixels show)."""
+    values the model holds; the window it names draws the blob (checked on the image: over a tenth of the pixels)."""
     z, y, x = np.mgrid[:32, :32, :32] / 32.0
     vol = clwave.Volume((10 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) * 20)).astype(np.float32))
     tracer, cam = clwave.RayTracer(clwave.WaveletVolume.from_volume(vol, levels=2)), clwave.Camera(30, 20, size=32)
@@ -139,3 +139,9 @@ def test_a_nearly_empty_image_is_told_with_the_window_that_shows_the_model():
         warnings.simplefilter("error", clwave.ClwaveWarning)
         shown = tracer.render(cam, transfer_function=clwave.TransferFunction.preset("grey", window=window))
     assert np.mean(shown.image[..., 3] >= 0.05) > 0.1  # measured 0.13: the blob
+    centre = np.mean(tracer.wv.content_box(), axis=0)
+    with warnings.catch_warnings():  # a clip that leaves little is what was asked for: not told
+        warnings.simplefilter("error", clwave.ClwaveWarning)
+        little = tracer.render(cam, transfer_function=clwave.TransferFunction.preset("grey", window=window),
+                               clip=clwave.Clip(lo=centre - 1, hi=centre + 1)).image
+    assert np.mean(little[..., 3] >= 0.05) < 0.01  # nearly empty, as asked
