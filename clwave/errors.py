@@ -73,6 +73,11 @@ class NearlyOpaqueWarning(ClwaveWarning):
     once = "nearly opaque"
 
 
+class NoisyModelWarning(ClwaveWarning):
+    """A ``keep=`` or ``threshold=`` model of a noisy volume that keeps mostly noise (docs/model.md §2): said even where
+    the command line's default ``--keep`` silences its budget warnings."""
+
+
 #: this thread's list of the warnings :func:`caught_warnings` takes (an attribute ``sink``; none: not catching)
 _catching = threading.local()
 

@@ -1,6 +1,7 @@
 """Post-classification (docs/raytracing.md §10): a scalar model ray traced through a transfer function given at
 render time, held to independent answers."""
 
+import re
 import warnings
 
 import numpy as np
@@ -475,7 +476,9 @@ def test_an_xray_tolerance_below_the_packed_pool_is_told():
     with pytest.warns(clwave.ClwaveWarning, match=r"packed to 16 bits .* field='wavelet'") as told:
         below = tr.render(cam, tolerance=limit / 100, absorption=False).image
         tr.render(cam, tolerance=limit / 100, absorption=False)
-    assert len(told) == 1
+    assert len(told) == 1 and re.search(r"pixels may be off by up to .* more than the tolerance .* add --field "
+                                        r"wavelet, which is not packed \(--tolerance is .* unless given\)",
+                                        told[0].message.cli)
     assert np.abs(above - exact).max() <= 10 * limit and np.abs(below - exact).max() <= 1.01 * limit
     assert np.abs(below - exact).max() > limit / 100  # the tolerance is indeed not met
     exact_field = clwave.RayTracer(wv, content_clamp=False, field="wavelet").render(

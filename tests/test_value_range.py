@@ -2,6 +2,7 @@
 [min, max] (docs/raytracing.md §10), the range a model keeps from its volume and its .clw file."""
 
 import json
+import re
 import warnings
 import zlib
 
@@ -118,3 +119,29 @@ def test_the_range_round_trips_through_clw_files(tmp_path):
         h5.attrs["header"] = json.dumps(header)
         h5.attrs["header_crc32"] = zlib.crc32(h5.attrs["header"].encode())
     assert clwave.WaveletVolume.open(tmp_path / "m.clw").value_range is None
+
+
+def test_a_nearly_empty_image_is_told_with_the_window_that_shows_the_model():
+    """A blob of peak 10 under grey opaque from 9.5 up (the values its model barely reaches, as the trial's dark
+    function on a denoised tomogram): no pixel hides 5 % of the background, and the warning says so, naming the
+    values the model holds; the window it names draws the blob (checked on the image: over a tenth of the pixels)."""
+    z, y, x = np.mgrid[:32, :32, :32] / 32.0
+    vol = clwave.Volume((10 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) * 20)).astype(np.float32))
+    tracer, cam = clwave.RayTracer(clwave.WaveletVolume.from_volume(vol, levels=2)), clwave.Camera(30, 20, size=32)
+    with pytest.warns(clwave.ClwaveWarning, match=r"nearly empty: 0 % of its pixels hide 5 % of the background or "
+                                                  r"more \(13 of 255 levels.*grey is opaque between 9.5 and 100, and "
+                                                  r"this model's values lie within") as told:
+        faint = tracer.render(cam, transfer_function=clwave.TransferFunction.preset("grey", window=(9.5, 100)))
+    assert faint.image[..., 3].max() < 0.05 and not faint.meta["nothing_visible"]
+    window = tuple(map(float, re.search(r"window=\(([^,]+), ([^)]+)\)", str(told[0].message)).groups()))
+    assert window[0] < 0.01 and 9.99 < window[1] <= 10
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", clwave.ClwaveWarning)
+        shown = tracer.render(cam, transfer_function=clwave.TransferFunction.preset("grey", window=window))
+    assert np.mean(shown.image[..., 3] >= 0.05) > 0.1  # measured 0.13: the blob
+    centre = np.mean(tracer.wv.content_box(), axis=0)
+    with warnings.catch_warnings():  # a clip that leaves little is what was asked for: not told
+        warnings.simplefilter("error", clwave.ClwaveWarning)
+        little = tracer.render(cam, transfer_function=clwave.TransferFunction.preset("grey", window=window),
+                               clip=clwave.Clip(lo=centre - 1, hi=centre + 1)).image
+    assert np.mean(little[..., 3] >= 0.05) < 0.01  # nearly empty, as asked

@@ -84,12 +84,18 @@ def _error(args, wv, reference, outputs, out, quantised) -> str | None:
 
 def _in_noise(sigmas, rms) -> str:
     """The error ``rms`` (absolute) in units of the input's noise where every channel measured one (docs/model.md §2):
-    removed noise is no loss of the model's."""
+    removing the noise alone gives 1.  Above 1 (r), input = truth + noise and model = truth + e + a * noise (``a`` in
+    [0, 1] the share of the noise kept, ``e`` independent of it) give |model - truth| = sqrt(r^2 - 1 + 2a) sigma, at
+    least sqrt(r^2 - 1) sigma, where the input is 1 sigma from the truth."""
     if not sigmas or None in sigmas:
         return ""
     sigma = math.sqrt(sum(s * s for s in sigmas) / len(sigmas))
-    return (f"; {rms / sigma:.2f} times the input's noise (sigma {sigma:.3g}, measured in the finest band: an error "
-            f"near 1 is mostly noise removed)")
+    said = f"; {rms / sigma:.2f} times the input's noise (sigma {sigma:.3g}, measured in the finest band"
+    if rms <= sigma:
+        return said + ": an error near 1 is mostly noise removed)"
+    least = math.sqrt((rms / sigma) ** 2 - 1)
+    return (said + f": removing the noise alone gives 1, so the model is at least {least:.2f} sigma from the "
+                   f"noise-free volume, where the input is 1; --wavelet linear --noise 3 removes noise)")
 
 
 def _on_disk(spec) -> str:

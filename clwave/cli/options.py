@@ -10,7 +10,7 @@ import time
 import warnings
 from pathlib import Path
 
-from ..errors import ClwaveWarning, CommandWords, InputError, OutputError, OutputExistsError
+from ..errors import ClwaveWarning, CommandWords, InputError, NoisyModelWarning, OutputError, OutputExistsError
 from ..io.files import check_writable
 from ..model.wavelet import DEFAULT_KEEP, DEFAULT_LEVELS
 from .reading import READING, add_input_options, flag, is_given, numbers, option, read_volume
@@ -161,6 +161,10 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
             wv = wv.threshold(**thresholding)
             warn_stored(wv, args.keep, args.input)  # as WaveletVolume.open(keep=) tells it
         return wv, None
+    if getattr(args, "tf", None) and args.noise is not None and args.classify == "pre":  # RGBA noise is not the values'
+        raise InputError(f"--noise measures the noise of {args.input}'s values, and --tf classifies them first "
+                         f"(--classify pre): give --classify post, which keeps the values to threshold and classifies "
+                         f"them while ray tracing (docs/model.md §2)")
     vol = read_volume(args) if volume is None else volume
     tf = preset_transfer_function(args)
     if tf is None and vol.photo and vol.channels == 4:  # straight colour and alpha, as the best tools read it
@@ -213,6 +217,7 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     with warnings.catch_warnings():  # a budget below the approximation band is told where --keep or --focus chose it
         if default and args.focus is None:
             warnings.simplefilter("ignore", ClwaveWarning)
+            warnings.simplefilter("always", NoisyModelWarning)  # a default model of noise is told
         wv = wv.threshold(**dict(thresholding, keep=DEFAULT_KEEP) if default else thresholding)
     if not vol.chunked:
         return wv, vol

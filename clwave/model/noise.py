@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, warn_outside
+from ..errors import ClwaveWarning, InputError, NoisyModelWarning, warn_outside
 
 #: the median of |x| for x standard normal (Phi^-1(3/4))
 MAD_NORMAL = 0.6744897501960817
@@ -22,6 +22,11 @@ MAD_NORMAL = 0.6744897501960817
 NOISE_LIKE = 0.95
 #: the largest noise gain (:func:`noise_gain`) at which ``noise=`` still removes most of the noise (docs/model.md §2)
 GAIN_LIMIT = 4.0
+#: a detail within this many times its band's noise is taken for noise: what ``noise=3``, the docs' advice, drops
+NOISE_K = 3.0
+#: "mostly": the share of a ``keep=``/``threshold=`` model's kept details within :data:`NOISE_K` noise levels, and of
+#: the finest band's interior coefficients non-zero, past which it is a model of noise (:func:`warn_kept_noise`)
+MOSTLY = 0.5
 #: the histogram of |d|: the top 16 bits of a float32 (8 of exponent, 7 of mantissa: bins 0.8 % wide)
 BIN_SHIFT = 16
 
@@ -143,3 +148,42 @@ def warn_noise_gain(groups, levels):
             f"(docs/model.md §2)")
     warn_outside(ClwaveWarning(said.format("noise=", "wavelet='linear' or 'haar' (or fewer levels) denoise"),
                                cli=said.format("--noise", "--wavelet linear or haar (or fewer --levels) denoise")))
+
+
+def warn_kept_noise(wv, model, keep, threshold):
+    """Warn that ``model``, ``wv`` thresholded by ``keep=`` or ``threshold=`` (the one not None; neither: ``noise=``),
+    keeps mostly noise: every channel's noise measured (:func:`measure_noise`), noise filling the finest band (more
+    than :data:`MOSTLY` of its interior coefficients non-zero: white noise makes each non-zero, a clean
+    piecewise-constant volume leaves them zero away from its edges, whose few large ones can look like noise), and
+    more than :data:`MOSTLY` of the kept details within :data:`NOISE_K` times their band's noise (docs/model.md §2)."""
+    from .wavelet import importance_of
+
+    if keep == 1 or (keep is None and threshold is None):  # every coefficient (the volume itself), or noise=
+        return
+    sigmas = wv.measure_noise()
+    if not sigmas or None in sigmas or any(g.band_slices()[-1].stop - g.band_slices()[-1].start != g.bands[-1].size
+                                           for g in wv.groups):  # a model read from a file: no whole finest band
+        return
+    filled = kept = noisy = 0
+    for g, out in zip(wv.groups, model.groups):
+        band, sl = g.bands[-1], g.band_slices()[-1]
+        finest = g.values[:, sl].reshape((-1,) + band.shape)[(slice(None),) + interior(g.wavelet, wv.shape)]
+        filled = max(filled, np.count_nonzero(finest) / max(finest.size, 1))
+        imp = importance_of(out, None, model.frame, band_noise([sigmas[c] for c in g.channels]))
+        detail = imp[out.band_slices()[0].stop:]
+        kept, noisy = kept + detail.size, noisy + np.count_nonzero(detail <= NOISE_K)
+    if filled <= MOSTLY or noisy <= MOSTLY * kept:
+        return
+    lo, hi = wv.value_range if wv.value_range is not None else (None, None)
+    spread = ("" if lo is None or hi <= lo else
+              f" ({100 * max(sigmas) / (hi - lo):.2g} % of its value range {lo:.3g} to {hi:.3g})")
+    amplify = ("" if max(noise_gain(g.wavelet, b) for g in wv.groups for b in g.bands) <= GAIN_LIMIT else
+               ", whose coarse bands amplify noise: the model can be farther from the noise-free volume than the input")
+    said = (f"this volume looks noisy: its voxels' noise deviation is {', '.join(f'{s:.3g}' for s in sigmas)}{spread}, "
+            f"measured in the finest band, and {100 * noisy / kept:.0f} % of the details {{}} keeps are within "
+            f"{NOISE_K:g} times their band's noise: most of the model's detail is noise "
+            f"({'/'.join(dict.fromkeys(g.wavelet.name for g in wv.groups))} wavelets{amplify}); to denoise, {{}} "
+            f"(docs/model.md §2)")
+    rule = f"keep={keep:g}" if threshold is None else f"threshold={threshold:g}"
+    warn_outside(NoisyModelWarning(said.format(rule, "use wavelet='linear' and threshold(noise=3)"),
+                                   cli=said.format("--" + rule.replace("=", " "), "use --wavelet linear --noise 3")))

@@ -21,7 +21,7 @@ from .budget import check_one_rule, check_thresholding, kept_count, warn_short_b
 from . import geometry
 from .labels import warn_blurred_labels
 from .mask import ContentMask
-from .noise import band_noise, check_noise_known, measure_noise, warn_noise_gain
+from .noise import band_noise, check_noise_known, measure_noise, warn_kept_noise, warn_noise_gain
 from .ranking import RankedTable, by_importance, ranked_table
 from . import evaluation
 from .transform import apply_sampling_filter, crop_to_grid, decompose, reconstruct_channel, synthesize
@@ -345,6 +345,7 @@ class WaveletVolume:
                                            np.ascontiguousarray(g.values[:, chosen])))
         if short:  # the approximation band ranks first: no detail, and part of it dropped
             warn_short_budget(keep, budget, short, self.n_voxels)
+        warn_kept_noise(self, out, keep, threshold)
         return out
 
     # ------------------------------------------------------- upload views

@@ -164,10 +164,12 @@ def warn_packed(step: float, length: float, tol: float, told: set):
     if not tol < limit or key in told:
         return
     told.add(key)
-    why = (f"this scalar model's bricks are packed to 16 bits (a step of {step:.3g}), which holds its line "
-           f"integrals to within {limit:.3g}, above the absolute tolerance {tol:g}: ")
-    warn_outside(ClwaveWarning(f"{why}for closer ones trace it with field='wavelet', which is not packed",
-                               cli=f"{why}the image meets --tolerance {limit:.1g}, not {tol:g}"))
+    why = (f"this X-ray's pixels may be off by up to {limit:.3g} (its units: value times length), more than the "
+           f"tolerance {tol:g}: its model's bricks are packed to 16 bits (a step of {step:.3g}), and a line integral "
+           f"sums that rounding along the ray; ")
+    warn_outside(ClwaveWarning(f"{why}for closer pixels trace it with field='wavelet', which is not packed",
+                               cli=f"{why}for closer pixels add --field wavelet, which is not packed (--tolerance is "
+                                   f"{tol:g} unless given)"))
 
 
 def warn_empty(segments: int, told: set):

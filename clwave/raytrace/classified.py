@@ -108,6 +108,13 @@ def clamped(tf: TransferFunction, value_range) -> TransferFunction:
     return TransferFunction(points, name=tf.name, opacity_unit=tf.opacity_unit)
 
 
+#: the opacity a pixel needs to show: 13 of the 255 levels of an 8-bit picture from the background
+#: (:meth:`ScalarRange.faint`)
+SHOWS = 0.05
+#: an image fewer of whose pixels show (:data:`SHOWS`) is nearly empty: 1 in 100 pixels, a few specks
+NEARLY_EMPTY = 0.01
+
+
 @dataclass
 class Classification:
     """One transfer function's kernel arguments: the table and the classified bounds."""
@@ -227,10 +234,13 @@ class ScalarRange:
         under :meth:`window`."""
         return tf.under(self.window(tf)).shifted(self.subtracted)
 
-    def invisible(self, post: Classification) -> str | None:
+    def invisible(self, post: Classification, image=None) -> str | None:
         """Why ``post`` draws nothing (its transfer function gives no block of the model any opacity: most often a
-        window in other units than the model's, HU on a model of attenuation), in a line naming the fix; else None."""
+        window in other units than the model's, HU on a model of attenuation), in a line naming the fix; else None,
+        and a warning where ``image`` (premultiplied RGBA, given for a whole image) is nearly empty (:meth:`faint`)."""
         if post.opacity > 0:
+            if image is not None:
+                self.faint(post, float(np.mean(image[..., 3] >= SHOWS)))
             return None
         name = f"the transfer function{f' {post.tf.name}' if post.tf.name else ''}"
         if not np.any(post.tf.points[:, 4]):
@@ -243,6 +253,31 @@ class ScalarRange:
         held = "" if values is None else f"; {whose} values lie within {values[0]:.4g} .. {values[1]:.4g}"
         return (f"{name} gives no value of this model any opacity (its points span {lo:.4g} .. {hi:.4g}{held}): give "
                 f"a window in the input's units (--tf-window LO,HI) or another function")
+
+    def faint(self, post: Classification, shown: float):
+        """Warn where the share ``shown`` of the image's pixels that show (:data:`SHOWS`) is below
+        :data:`NEARLY_EMPTY`: the transfer function's opacity lies at values the model barely reaches.  Names where
+        its opacity lies and the values the model's bricks hold (their ranges bound the field), the window that shows
+        them.  Once a function and window (a viewer's frames, a turntable's views)."""
+        key = ("faint", json.dumps(post.tf.to_dict()), post.window)
+        if shown >= NEARLY_EMPTY or key in self.tracer.told:
+            return
+        self.tracer.told.add(key)
+        name = f"the transfer function{f' {post.tf.name}' if post.tf.name else ''}"
+        points = post.tf.data_points(post.window)
+        live = post.tf.points[:, 4] > 0
+        live = np.flatnonzero(live | np.r_[live[1:], False] | np.r_[False, live[:-1]])  # and its ramps' feet
+        held = [-np.inf, np.inf] if self.tracer.wv.value_range is None else list(self.tracer.wv.value_range)
+        if self.slot_range is not None:  # classified clamped to the input's range (docs/raytracing.md §10)
+            held = [max(held[0], self.slot_range[..., 0].min() + self.subtracted),
+                    min(held[1], self.slot_range[..., 1].max() + self.subtracted)]
+        line = (f"the image is nearly empty: {100 * shown:.2g} % of its pixels hide {100 * SHOWS:g} % of the "
+                f"background or more ({round(255 * SHOWS)} of 255 levels of an 8-bit picture); {name} is opaque "
+                f"between {points[live[0]]:.4g} and {points[live[-1]]:.4g}, and this model's values lie within ")
+        warn_outside(ClwaveWarning(line + f"{held[0]:.4g} .. {held[1]:.4g}: put its opacity there (a preset: "
+                                          f"window=({held[0]:.4g}, {held[1]:.4g}))",
+                                   cli=line + f"{held[0]:.4g} .. {held[1]:.4g}: put its opacity there (a preset: "
+                                              f"--tf-window {held[0]:.4g},{held[1]:.4g}; a file: its values)"))
 
     def opaque(self, tf: TransferFunction) -> str | None:
         """Why ``tf`` makes this model nearly opaque (:meth:`TransferFunction.opaque_line`, as a volume's

@@ -383,9 +383,9 @@ class RayTracer:
         seconds = time.perf_counter() - start
         img = image.get()
         counts = stats.get().reshape(-1, 4).astype(np.int64)
-        if not absorption:
-            img = img[..., : wv.channels]
-        nothing_visible = None if post is None else self.scalar.invisible(post)
+        img = img if absorption else img[..., : wv.channels]
+        whole = None if self.region or clip is not None or not counts[:, 0].any() else img  # not a part, clip, miss
+        nothing_visible = None if post is None else self.scalar.invisible(post, whole)
         if self.region is None and not nothing_visible:  # a cluster's part may miss; an invisible function is said
             warn_empty(int(counts[:, 0].sum()), self.told)  # where it is found
         meta = dict(
