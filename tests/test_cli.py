@@ -819,7 +819,7 @@ def test_compress_of_an_all_zero_volume_gives_no_psnr(tmp_path, capsys):
 
 
 def test_a_thin_volume_is_told_its_levels_and_what_keep_then_drops(tmp_path, capsys):
-    """Without --levels a thin volume's shortest axis caps the levels (wavelet.default_levels): one warning line,
+    """Without --levels a thin volume's shortest axis caps the levels (transform.default_levels): one warning line,
     at 0 levels saying that --keep drops voxels; none with --levels or --keep 1."""
     np.save(tmp_path / "thin3.npy", np.ones((3, 16, 16), np.float32))
     np.save(tmp_path / "thin4.npy", np.ones((4, 16, 16), np.float32))

@@ -173,7 +173,7 @@ def test_threshold_keeps_exact_count_and_approximation_first(keep, rng):
 
 
 def test_default_levels_capped_by_the_shortest_axis_and_said():
-    from clwave.model.wavelet import default_levels
+    from clwave.model.transform import default_levels
 
     assert default_levels((96, 96, 96)) == (3, None) and default_levels((8, 9, 10), levels=2) == (2, None)
     levels, note = default_levels((96, 4, 96, 3))

@@ -12,7 +12,8 @@ from pathlib import Path
 
 from ..errors import ClwaveWarning, CommandWords, InputError, NoisyModelWarning, OutputError, OutputExistsError
 from ..io.files import check_writable
-from ..model.wavelet import DEFAULT_KEEP, DEFAULT_LEVELS
+from ..model.transform import DEFAULT_LEVELS
+from ..model.wavelet import DEFAULT_KEEP
 from .reading import READING, add_input_options, flag, is_given, numbers, option, read_volume
 
 DEFAULT_WAVELET = "cubic"
@@ -123,7 +124,8 @@ def build_model(args, log=print, rgba=False, gather=True, cluster_render=False, 
     from ..io.loaders.shared import air_in_hounsfield
     from ..model.transfer import TransferFunction
     from ..model.budget import warn_stored
-    from ..model.wavelet import WaveletVolume, check_decomposition, default_levels
+    from ..model.transform import check_decomposition, default_levels
+    from ..model.wavelet import WaveletVolume
 
     thresholding = parse_thresholding(args)
     scheduler = parse_scheduler(args)

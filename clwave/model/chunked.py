@@ -22,14 +22,14 @@ import pywt
 from ..schedulers import client_for, stream
 from ..errors import InputError
 from .bspline import SplineWavelet
-from .transform import KEYS, band_layout, check_coefficients
+from .transform import KEYS, band_layout, check_coefficients, check_decomposition
 from .tf_file import stored_transfer_function
 from .volume import Volume, content_of
 from .mask import ContentMask
 from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget
 from . import noise
 from .noise import check_noise_known, warn_noise_gain
-from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance, check_decomposition
+from .wavelet import ChannelGroup, WaveletVolume, _top, band_importance
 
 MIN_BLOCK_VOXELS = 1 << 21  # smaller chunks are merged into blocks of at least this many voxels (task overhead)
 MAX_BLOCKS = 4096           # and into at most this many blocks a level

@@ -13,10 +13,10 @@ import pywt
 from scipy.linalg import solve_banded
 from scipy.ndimage import correlate1d
 
-from ..errors import InputError
+from ..errors import ClwaveWarning, InputError, warn_outside
 from ..io.progress import progress
 from ..threads import thread_map
-from .bspline import SplineWavelet
+from .bspline import SplineWavelet, max_levels, wavelet_for
 
 
 KEYS = ["".join(k) for k in product("ad", repeat=3)]  # 'aaa', 'aad', ... in array-axis order
@@ -351,3 +351,53 @@ def _detail_levels(bands) -> list:
 def _dense_box(dense, number, lo, hi) -> np.ndarray:
     """Band ``number`` of the dense arrays on the index box [lo, hi), zeros beyond it."""
     return crop_to_grid(dense[number], tuple(-np.asarray(lo)), tuple(np.asarray(hi) - lo))
+
+
+#: decomposition levels of a model made without ``levels`` (fewer where the volume's shortest axis allows fewer)
+DEFAULT_LEVELS = 3
+
+
+def check_decomposition(shape, channels, wavelet, levels) -> tuple:
+    """``(wavelet of each channel, levels)``, checked for a volume of ``shape`` and ``channels``
+    before any work (:meth:`WaveletVolume.from_volume` takes the same arguments); ``levels`` None is the
+    default, lowered with a :class:`ClwaveWarning` where the shape allows fewer (:func:`default_levels`)."""
+    if levels is None:
+        levels, note = default_levels(shape, thresholded=False)
+        if note:
+            warn_outside(ClwaveWarning(note))
+    return _channel_wavelets(wavelet, channels), _check_levels(levels, shape)
+
+
+def _channel_wavelets(wavelet, channels) -> list:
+    if isinstance(wavelet, (list, tuple)):
+        if len(wavelet) != channels:
+            raise InputError(f"{len(wavelet)} wavelets given for {channels} channel(s); give one, "
+                             "or one per channel")
+        return [wavelet_for(w) for w in wavelet]
+    return [wavelet_for(wavelet)] * channels
+
+
+def default_levels(shape, levels=DEFAULT_LEVELS, thresholded=True) -> tuple:
+    """``(levels, note)`` for a volume of ``shape`` (z, y, x[, c]) given no levels: ``levels``, or as many as its
+    shortest axis allows (:func:`max_levels`: every level halves every axis), with a one-line note in the
+    command line's words when the axis caps them (None otherwise).  At 0 levels the model is the voxels
+    themselves, so a ``thresholded`` one (``--keep`` below 1) drops voxels: the note says so, and what helps."""
+    spatial = tuple(shape[:3])
+    top = max(0, max_levels(spatial))  # an axis of 1 voxel (max_levels -1) allows no level either
+    if top >= levels:
+        return levels, None
+    axis = int(np.argmin(spatial))
+    note = (f"{top} decomposition level{'s' if top != 1 else ''} instead of the default {levels}: the "
+            f"{'zyx'[axis]} axis of {spatial[axis]} voxels allows no more (every level halves every axis)")
+    if top == 0 and thresholded:
+        note += ("; with no levels the model is the voxels themselves, and --keep drops voxels: give --keep 1, or "
+                 "a volume at least 4 voxels thick for 1 level")
+    return top, note
+
+
+def _check_levels(levels, shape) -> int:
+    top = max_levels(shape)
+    if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or not 0 <= levels <= top:
+        why = f"is not possible for shape {shape}: use an integer from 0 to {top} (floor(log2(shortest axis)) - 1)"
+        raise InputError(f"levels={levels!r} {why}", cli=f"--levels {levels} {why}")
+    return int(levels)

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ClwaveWarning, InputError, flag, type_name, warn_outside
+from ..errors import InputError, flag, type_name
 from ..io.progress import progress
 from ..threads import MadeOnce, thread_map
-from .bspline import SplineWavelet, max_levels, wavelet_for
+from .bspline import SplineWavelet
 from .budget import check_one_rule, check_thresholding, kept_count, warn_short_budget, warn_stored
 from . import geometry
 from .labels import warn_blurred_labels
@@ -24,7 +24,8 @@ from .mask import ContentMask
 from .noise import band_noise, check_noise_known, measure_noise, warn_kept_noise, warn_noise_gain
 from .ranking import RankedTable, by_importance, ranked_table
 from . import evaluation
-from .transform import apply_sampling_filter, crop_to_grid, decompose, reconstruct_channel, synthesize
+from .transform import (apply_sampling_filter, check_decomposition, crop_to_grid, decompose, reconstruct_channel,
+                        synthesize)
 from .tf_file import stored_transfer_function
 from .volume import Volume, warn_straight_colour
 
@@ -307,11 +308,10 @@ class WaveletVolume:
             check_noise_known(self.measure_noise(), self.levels)
             warn_noise_gain([(g.wavelet, g.bands) for g in self.groups], self.levels)
         out = WaveletVolume(self.shape, self.spacing, self.origin, self.levels, [], self.channels,
-                            interpolate=self.interpolate, focus=focus,
-                            transfer_function=self.transfer_function, content=self.content,
-                            content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity,
-                            value_range=self.value_range, unit=self.unit, photo=self.photo, provenance=self.provenance,
-                            modality=self.modality,
+                            interpolate=self.interpolate, focus=focus, transfer_function=self.transfer_function,
+                            content=self.content, content_mask=self.content_mask, subtracted=self.subtracted,
+                            obliquity=self.obliquity, value_range=self.value_range, unit=self.unit, photo=self.photo,
+                            provenance=self.provenance, modality=self.modality,
                             noise_sigma=self.noise_sigma)  # where measured: a chunked model's file records the same
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         threshold = threshold if noise is None else noise
@@ -485,56 +485,8 @@ class WaveletVolume:
 # ---------------------------------------------------------------- helpers
 
 
-#: decomposition levels of a model made without ``levels`` (fewer where the volume's shortest axis allows fewer)
-DEFAULT_LEVELS = 3
 #: the share of coefficients kept where nothing says (clwave compress, view): a model for a first look
 DEFAULT_KEEP = 0.05
-
-
-def check_decomposition(shape, channels, wavelet, levels) -> tuple:
-    """``(wavelet of each channel, levels)``, checked for a volume of ``shape`` and ``channels``
-    before any work (:meth:`WaveletVolume.from_volume` takes the same arguments); ``levels`` None is the
-    default, lowered with a :class:`ClwaveWarning` where the shape allows fewer (:func:`default_levels`)."""
-    if levels is None:
-        levels, note = default_levels(shape, thresholded=False)
-        if note:
-            warn_outside(ClwaveWarning(note))
-    return _channel_wavelets(wavelet, channels), _check_levels(levels, shape)
-
-
-def _channel_wavelets(wavelet, channels) -> list:
-    if isinstance(wavelet, (list, tuple)):
-        if len(wavelet) != channels:
-            raise InputError(f"{len(wavelet)} wavelets given for {channels} channel(s); give one, "
-                             "or one per channel")
-        return [wavelet_for(w) for w in wavelet]
-    return [wavelet_for(wavelet)] * channels
-
-
-def default_levels(shape, levels=DEFAULT_LEVELS, thresholded=True) -> tuple:
-    """``(levels, note)`` for a volume of ``shape`` (z, y, x[, c]) given no levels: ``levels``, or as many as its
-    shortest axis allows (:func:`max_levels`: every level halves every axis), with a one-line note in the
-    command line's words when the axis caps them (None otherwise).  At 0 levels the model is the voxels
-    themselves, so a ``thresholded`` one (``--keep`` below 1) drops voxels: the note says so, and what helps."""
-    spatial = tuple(shape[:3])
-    top = max(0, max_levels(spatial))  # an axis of 1 voxel (max_levels -1) allows no level either
-    if top >= levels:
-        return levels, None
-    axis = int(np.argmin(spatial))
-    note = (f"{top} decomposition level{'s' if top != 1 else ''} instead of the default {levels}: the "
-            f"{'zyx'[axis]} axis of {spatial[axis]} voxels allows no more (every level halves every axis)")
-    if top == 0 and thresholded:
-        note += ("; with no levels the model is the voxels themselves, and --keep drops voxels: give --keep 1, or "
-                 "a volume at least 4 voxels thick for 1 level")
-    return top, note
-
-
-def _check_levels(levels, shape) -> int:
-    top = max_levels(shape)
-    if isinstance(levels, bool) or not isinstance(levels, (int, np.integer)) or not 0 <= levels <= top:
-        why = f"is not possible for shape {shape}: use an integer from 0 to {top} (floor(log2(shortest axis)) - 1)"
-        raise InputError(f"levels={levels!r} {why}", cli=f"--levels {levels} {why}")
-    return int(levels)
 
 
 def importance_of(group: ChannelGroup, focus, frame, noise=None) -> np.ndarray:
