@@ -65,6 +65,21 @@ def write_cd(top, rng):
     return stored
 
 
+def write_dicomdir(source, export):
+    """The CD below ``source`` written again as pydicom's FileSet writes one: a DICOMDIR at ``export`` and the files
+    in its own tree (PT000000/ST000000/...)."""
+    from pydicom.fileset import FileSet
+
+    with warnings.catch_warnings():  # pydicom's staging folder, left to its finalizer
+        warnings.simplefilter("ignore", ResourceWarning)
+        fileset = FileSet()
+        for path in sorted(source.rglob("IM*")):
+            fileset.add(path)
+        fileset.write(export)
+        del fileset
+        gc.collect()
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(28)
@@ -74,8 +89,6 @@ def test_a_cd_its_study_folder_and_its_dicomdir_are_read_as_their_one_image_seri
     """The CD's top and its study folder hold no slices of their own: the series below them are found, and the one
     image series among them (the others a scout and a dose report) is loaded, named in a warning.  A DICOMDIR
     (written by pydicom's FileSet, which lays the files out its own way) is read as the series it lists."""
-    from pydicom.fileset import FileSet
-
     stored = write_cd(tmp_path / "cd", rng)
     for given in (tmp_path / "cd", tmp_path / "cd" / "DICOM" / "PAT1" / "ST1"):
         with pytest.warns(ClwaveWarning, match=rf"{given} holds 3 DICOM series: reading its image series, series 2 "
@@ -83,14 +96,7 @@ def test_a_cd_its_study_folder_and_its_dicomdir_are_read_as_their_one_image_seri
             vol = load(given)
         np.testing.assert_array_equal(vol.data, hu(stored))
         assert vol.spacing == pytest.approx((2.0, 0.7, 0.9))
-    with warnings.catch_warnings():  # pydicom's staging folder, left to its finalizer
-        warnings.simplefilter("ignore", ResourceWarning)
-        fileset = FileSet()
-        for path in sorted((tmp_path / "cd").rglob("IM*")):
-            fileset.add(path)
-        fileset.write(tmp_path / "export")
-        del fileset
-        gc.collect()
+    write_dicomdir(tmp_path / "cd", tmp_path / "export")
     with pytest.warns(ClwaveWarning, match="holds 3 DICOM series: reading its image series, series 2"):
         vol = load(tmp_path / "export" / "DICOMDIR")
     np.testing.assert_array_equal(vol.data, hu(stored))
@@ -288,17 +294,8 @@ def test_odd_series_values_are_refused_as_values_not_as_the_files(tmp_path, rng)
 def test_a_dicomdir_naming_files_outside_its_folder_is_refused(tmp_path, rng):
     """PS3.10's file IDs are components below the DICOMDIR's folder: a record that climbs out of it ("..") is
     refused before any file it names is opened."""
-    from pydicom.fileset import FileSet
-
     write_cd(tmp_path / "cd", rng)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ResourceWarning)
-        fileset = FileSet()
-        for path in sorted((tmp_path / "cd").rglob("IM*")):
-            fileset.add(path)
-        fileset.write(tmp_path / "export")
-        del fileset
-        gc.collect()
+    write_dicomdir(tmp_path / "cd", tmp_path / "export")
     dicomdir = tmp_path / "export" / "DICOMDIR"
     ds = pydicom.dcmread(dicomdir)
     record = next(r for r in ds.DirectoryRecordSequence if r.get("ReferencedFileID"))
