@@ -117,11 +117,15 @@ def test_a_threshold_past_float32_keeps_the_approximation_without_numpys_warning
 
 def test_a_host_that_names_no_interface_is_refused_naming_the_host(capsys):
     """--host '' bound every interface and printed "http://:PORT/?token=..."; a name that does not resolve was told to
-    choose another --port."""
+    choose another --port, and (orient29) only once the volume was read and transformed: now before any work (a
+    missing input is not reached), and so is an address of another machine (TEST-NET-1)."""
     refused(capsys, ["view", MISSING, "--host", ""], "--host '' must name an interface")
-    with pytest.warns(UserWarning, match="listens on nan"), \
-            pytest.raises(clwave.InputError, match=r"cannot listen on nan:0 \(.+\); host= must name an interface"):
-        view(clwave.phantom("hydrogen", n=8), size=16, host="nan").close()
+    for host in ("nan", "192.0.2.1"):
+        refused(capsys, ["view", MISSING, "--host", host], f"cannot listen on {host} (")
+        line = rf"^cannot listen on {host} \(.+\); host= must name an interface of this machine: 127.0.0.1 \(the " \
+            r"default\) or one that others reach$"
+        with pytest.raises(clwave.InputError, match=line):
+            view(clwave.phantom("hydrogen", n=8), size=16, host=host).close()
 
 
 def test_an_empty_path_is_refused_not_read_or_written_as_the_current_folder(capsys, tmp_path, monkeypatch):

@@ -4,6 +4,7 @@ RT Dose's grid frame offsets) read as slices; others refused naming dcm2niix."""
 import numpy as np
 import pytest
 from pydicom.data import get_testdata_file
+from test_loaders import assert_one_line_error
 
 import clwave
 from clwave.errors import FileFormatError
@@ -26,10 +27,11 @@ def test_an_rt_dose_file_is_its_frames_placed_by_their_offsets():
     np.testing.assert_allclose(vol.origin, (-x - 45.0, -y - 45.0, z + 35.0))
 
 
-def enhanced_ct(path, order, rescale=True, size=(6, 5)):
+def enhanced_ct(path, order, rescale=True, size=(6, 5), series=None, orientation=(1, 0, 0, 0, 1, 0)):
     """An Enhanced CT file of 4 frames of 6 x 5 (rows x columns; ``size``), axial, 2 mm apart, written in ``order`` of
     their positions (frame k holds the value 100 k + pixel index); per-frame rescale slope k + 1 and intercept -1024,
-    the orientation and the pixel spacing (0.5, 0.75) in the shared groups."""
+    the orientation and the pixel spacing (0.5, 0.75) in the shared groups; of the series UID ``series`` (default a
+    new one)."""
     from pydicom.dataset import Dataset, FileMetaDataset
     from pydicom.sequence import Sequence
     from pydicom.uid import EnhancedCTImageStorage, ExplicitVRLittleEndian, generate_uid
@@ -45,12 +47,12 @@ def enhanced_ct(path, order, rescale=True, size=(6, 5)):
     ds.file_meta.TransferSyntaxUID, ds.file_meta.MediaStorageSOPClassUID = ExplicitVRLittleEndian, \
         EnhancedCTImageStorage
     ds.file_meta.MediaStorageSOPInstanceUID = ds.SOPInstanceUID = generate_uid()
-    ds.SOPClassUID, ds.SeriesInstanceUID, ds.Modality = EnhancedCTImageStorage, generate_uid(), "CT"
+    ds.SOPClassUID, ds.SeriesInstanceUID, ds.Modality = EnhancedCTImageStorage, series or generate_uid(), "CT"
     ds.Rows, ds.Columns, ds.NumberOfFrames, ds.SamplesPerPixel = *size, len(order), 1
     ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 1
     ds.PhotometricInterpretation = "MONOCHROME2"
     ds.SharedFunctionalGroupsSequence = Sequence([item(
-        PlaneOrientationSequence=Sequence([item(ImageOrientationPatient=[1, 0, 0, 0, 1, 0])]),
+        PlaneOrientationSequence=Sequence([item(ImageOrientationPatient=list(orientation))]),
         PixelMeasuresSequence=Sequence([item(PixelSpacing=[0.5, 0.75], SliceThickness=2.0)]))])
     frames = []
     for k in order:
@@ -116,12 +118,12 @@ def test_the_frames_are_read_into_one_float32_volume_as_weighed(tmp_path, monkey
 
     path, order = tmp_path / "ct.dcm", np.random.default_rng(3).permutation(32)
     enhanced_ct(path, order, size=(128, 128))
-    read_dicom_frames(path)  # the imports it makes, once
+    read_dicom_frames([path])  # the imports it makes, once
     weighed, check_fits = [], shared.check_fits
     monkeypatch.setattr(shared, "check_fits", lambda nbytes, *a: (weighed.append(nbytes), check_fits(nbytes, *a)))
     tracemalloc.start()
     try:
-        data = read_dicom_frames(path)[0]
+        data = read_dicom_frames([path])[0]
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -163,11 +165,12 @@ def _offsets_short(ds):
 
 
 @pytest.mark.parametrize("source, change, needle", [
-    ("enhanced", _groups_short, "is a multi-frame DICOM file of 4 frames with 3 per-frame functional groups; the file "
-                                "is corrupt"),
-    ("enhanced", _spacings_differ, "is a multi-frame DICOM file whose frames have several pixel spacings; convert it "
-                                   "with dcm2niix"),
-    ("rtdose.dcm", _offsets_short, "is an RT Dose file of 15 frames with 13 grid frame offsets; the file is corrupt")])
+    ("enhanced", _groups_short, "{path} is a multi-frame DICOM file of 4 frames with 3 per-frame functional groups; "
+                                "the file is corrupt"),
+    ("enhanced", _spacings_differ, "multi-frame DICOM file {path}: its frames have several pixel spacings or image "
+                                   "sizes; convert it with dcm2niix"),
+    ("rtdose.dcm", _offsets_short, "{path} is an RT Dose file of 15 frames with 13 grid frame offsets; the file is "
+                                   "corrupt")])
 def test_frames_at_odds_with_their_geometry_are_named_with_the_file(tmp_path, capsys, source, change, needle):
     """Functional groups or grid offsets that do not match the frames: one line naming the file, not the ValueError
     of a reader's internals."""
@@ -183,7 +186,7 @@ def test_frames_at_odds_with_their_geometry_are_named_with_the_file(tmp_path, ca
     ds.save_as(path)
     with pytest.raises(FileFormatError) as err:
         clwave.load(path)
-    assert str(err.value).startswith(f"{path} {needle}"), str(err.value)
+    assert str(err.value).startswith(needle.format(path=path)), str(err.value)
     assert main(["compress", str(path), "-o", str(tmp_path / "o.clw")]) == 2
     assert capsys.readouterr().err == f"clwave: error: {err.value}\n"
 
@@ -238,3 +241,34 @@ def test_a_file_holding_fewer_frames_than_it_declares_is_refused(tmp_path, capsy
     assert main(["render", str(path), "-o", str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "truncated or corrupt" in err and not (tmp_path / "x.png").exists()
+
+
+def test_a_series_of_several_enhanced_files_is_one_volume_when_their_frames_form_one_stack(tmp_path):
+    """A scanner's file per stack (an enhanced CT split in two files of one series): their frames, sorted along the
+    normal across the files, each rescaled by its own slope, are one volume, as one file of them all would be; files
+    whose frames share positions (two phases) or orientations differ are refused in one line naming why."""
+    import pydicom
+
+    uid = pydicom.uid.generate_uid()
+    enhanced_ct(tmp_path / "IM1", [2, 0, 3, 1], series=uid)
+    enhanced_ct(tmp_path / "IM2", [5, 7, 4, 6], series=uid)
+    vol = clwave.load(tmp_path)
+    k = np.arange(8)[:, None, None]
+    np.testing.assert_array_equal(vol.data, ((k + 1) * (100 * k + np.arange(30).reshape(6, 5)) - 1024.0)[:, ::-1, ::-1])
+    assert vol.spacing == (2.0, 0.5, 0.75) and vol.modality == dict(name="CT", units="HU")
+    assert clwave.load(tmp_path, hu_to_mu=True).modality == dict(name="CT", units=None)  # attenuation, not HU
+    np.testing.assert_allclose(vol.origin, (-10.0 - 2 * 0.75, -20.0 - 2.5 * 0.5, 30.0 + 7.0))
+    enhanced_ct(tmp_path / "IM2", [1, 0, 3, 2], series=uid)  # a second phase at the same positions
+    with pytest.raises(FileFormatError) as err:
+        clwave.load(tmp_path)
+    assert_one_line_error(err)
+    assert str(err.value).startswith("frame 2 of IM1 and frame 2 of IM2 of DICOM series ")
+    assert str(err.value).endswith(f"share one position; the series may hold several acquisitions (echoes, phases, "
+                                   f"times), which dcm2niix separates: convert it with dcm2niix (dcm2niix -o "
+                                   f"OUT_FOLDER {tmp_path}) and read the .nii")
+    enhanced_ct(tmp_path / "IM2", [5, 7, 4, 6], series=uid, orientation=(1, 0, 0, 0, 0, -1))
+    with pytest.raises(FileFormatError) as err:
+        clwave.load(tmp_path)
+    assert_one_line_error(err)
+    assert str(err.value) == (f"DICOM series {uid} in {tmp_path}: its frames lie in several orientations; convert it "
+                              f"with dcm2niix (dcm2niix -o OUT_FOLDER {tmp_path}) and read the .nii")

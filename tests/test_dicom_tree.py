@@ -196,7 +196,9 @@ def test_an_enhanced_multi_frame_file_is_listed_and_loaded_as_a_series(tmp_path,
     uid = str(pydicom.dcmread(tmp_path / "SE10" / "IM1").SeriesInstanceUID)
     np.testing.assert_array_equal(load(tmp_path, series=uid).data, file.data)
     facts = describe(tmp_path, series=uid)  # info: the series, and the frames as read (float32, rescaled)
-    assert facts["series"] == dict(number=None, description="", modality="CT", uid=uid)
+    assert facts["series"] == dict(number=None, description="", modality="CT", uid=uid, units="HU",
+                                   study=dict.fromkeys(("date", "time", "description", "accession", "id", "uid"), ""),
+                                   patient=dict(name="", id=""))
     assert facts["dtype"] == "float32" and facts["stored_dtype"] == "int16" and len(facts["rescale"]) == 4
 
 
@@ -218,13 +220,17 @@ def test_the_walk_reads_headers_only_and_is_bounded(tmp_path, rng, monkeypatch):
 
 
 def test_a_compressed_syntax_without_its_decoder_names_the_pip_command(tmp_path, rng, monkeypatch):
-    """JPEG Lossless (the commonest syntax on PACS CDs) without pylibjpeg: the refusal gives the command that installs
-    it, as README's install would need it."""
+    """JPEG Lossless (the commonest syntax on PACS CDs) where no decoder is installed (clwave depends on python-gdcm,
+    which decodes it: an install without it): the refusal gives the command that installs it, as README's install
+    would need it."""
     from pydicom.encaps import encapsulate
     from pydicom.pixels import get_decoder
     from pydicom.uid import JPEGLosslessSV1
 
-    monkeypatch.setattr(type(get_decoder(JPEGLosslessSV1)), "is_available", property(lambda self: False))
+    decoder = type(get_decoder(JPEGLosslessSV1))
+    monkeypatch.setattr(decoder, "is_available", property(lambda self: False))
+    monkeypatch.setattr(decoder, "missing_dependencies", property(lambda self: [  # pydicom's words, none installed
+        "gdcm - requires gdcm>=3.0.10", "pylibjpeg - requires pylibjpeg>=2.0 and pylibjpeg-libjpeg>=2.1"]))
     uid = generate_uid()
     for k, position in enumerate(axial(0.0, 1.0)):
         write_dicom_slice(tmp_path / f"IM{k}", rng.integers(0, 9, (6, 5)), position, uid)
@@ -236,4 +242,72 @@ def test_a_compressed_syntax_without_its_decoder_names_the_pip_command(tmp_path,
     with pytest.raises(FileFormatError) as excinfo:
         load(tmp_path)
     assert_one_line_error(excinfo)
-    assert "install one (pip install pylibjpeg pylibjpeg-libjpeg, into clwave's environment)" in str(excinfo.value)
+    assert "install one: pip install python-gdcm in clwave's environment (a clone set up by tools/setup.sh: " \
+           ".venv/bin/pip install python-gdcm), or convert the series with dcm2niix" in str(excinfo.value)
+
+
+@pytest.mark.parametrize("syntax", ["JPEGLosslessProcess14_1", "JPEGLosslessProcess14"])
+def test_jpeg_lossless_series_are_decoded(tmp_path, rng, syntax):
+    """A series in JPEG Lossless (1.2.840.10008.1.2.4.70 and .57; compressed by GDCM here, pydicom has no encoder for
+    it) reads as the stored pixels it was made from, through python-gdcm, a dependency of clwave."""
+    import gdcm
+    from pydicom.uid import JPEGLossless, JPEGLosslessSV1
+
+    uid, stored = generate_uid(), rng.integers(0, 4000, (3, 6, 5))
+    for k, (pixels, position) in enumerate(zip(stored, axial(0.0, 1.0, 2.0))):
+        write_dicom_slice(tmp_path / f"IM{k}", pixels, position, uid)
+        reader, change, writer = gdcm.ImageReader(), gdcm.ImageChangeTransferSyntax(), gdcm.ImageWriter()
+        reader.SetFileName(str(tmp_path / f"IM{k}"))
+        assert reader.Read()
+        change.SetTransferSyntax(gdcm.TransferSyntax(getattr(gdcm.TransferSyntax, syntax)))
+        change.SetInput(reader.GetImage())
+        assert change.Change()
+        writer.SetFileName(str(tmp_path / f"IM{k}"))
+        writer.SetFile(reader.GetFile())
+        writer.SetImage(change.GetOutput())
+        assert writer.Write()
+        assert pydicom.dcmread(tmp_path / f"IM{k}").file_meta.TransferSyntaxUID == \
+            (JPEGLosslessSV1 if syntax.endswith("_1") else JPEGLossless)
+    np.testing.assert_array_equal(load(tmp_path).data, hu(stored))
+
+
+def test_odd_series_values_are_refused_as_values_not_as_the_files(tmp_path, rng):
+    """A value that is no number (non-ASCII digits, a sign twice, a bool) names no series: refused as the option's
+    value, listing the series, never blamed on the folder's files (``int("²")`` raised ValueError)."""
+    for name in "ab":
+        (tmp_path / name).mkdir()
+    write_series(tmp_path / "a", rng, axial(0.0, 1.0), generate_uid(), ["1", "2"], number=2, description="Bone")
+    write_series(tmp_path / "b", rng, axial(0.0, 1.0), generate_uid(), ["1", "2"], number=3, description="Soft")
+    for series in ("--5", "²", "٣", True):
+        with pytest.raises(InputError) as excinfo:
+            load(tmp_path, series=series)
+        assert_one_line_error(excinfo)
+        assert str(excinfo.value).startswith(f"series={series!r} matches none of the 2 DICOM series in {tmp_path}: ")
+
+
+def test_a_dicomdir_naming_files_outside_its_folder_is_refused(tmp_path, rng):
+    """PS3.10's file IDs are components below the DICOMDIR's folder: a record that climbs out of it ("..") is
+    refused before any file it names is opened."""
+    from pydicom.fileset import FileSet
+
+    write_cd(tmp_path / "cd", rng)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ResourceWarning)
+        fileset = FileSet()
+        for path in sorted((tmp_path / "cd").rglob("IM*")):
+            fileset.add(path)
+        fileset.write(tmp_path / "export")
+        del fileset
+        gc.collect()
+    dicomdir = tmp_path / "export" / "DICOMDIR"
+    ds = pydicom.dcmread(dicomdir)
+    record = next(r for r in ds.DirectoryRecordSequence if r.get("ReferencedFileID"))
+    with warnings.catch_warnings():  # pydicom: ".." is no valid CS value, which is the point
+        warnings.simplefilter("ignore", UserWarning)
+        record.ReferencedFileID = ["..", "cd", "DICOM", "PAT1", "ST1", "SE2", "IM1"]
+        ds.save_as(dicomdir)
+    with pytest.raises(FileFormatError) as excinfo:
+        load(dicomdir)
+    assert_one_line_error(excinfo)
+    assert str(excinfo.value) == f"{dicomdir} refers to a file outside its folder ('../cd/DICOM/PAT1/ST1/SE2/IM1'); " \
+                                 "it may be corrupt or crafted: give the folder the series are in"

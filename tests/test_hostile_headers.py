@@ -319,16 +319,20 @@ def test_a_zarr_store_reads_no_file_outside_it(tmp_path, plant):
 
 
 def test_dicom_pixel_data_without_a_decoder_here_names_the_packages_that_decode_it(tmp_path, rng, monkeypatch):
-    """A series in JPEG-LS (pydicom decodes it with pylibjpeg or GDCM, neither installed here; taken as absent where
-    one is): it was 'Unable to decompress ... because all plugins are missing dependencies; the file may be truncated
-    or corrupt', read after the volume was weighed."""
+    """A series in JPEG-LS (pydicom decodes it with GDCM, a dependency of clwave, pylibjpeg or pyjpegls; taken as
+    absent, as pydicom says of them where none is installed): it was 'Unable to decompress ... because all plugins are
+    missing dependencies; the file may be truncated or corrupt', read after the volume was weighed."""
     import pydicom
     from pydicom.encaps import encapsulate
     from pydicom.pixels import get_decoder
     from pydicom.uid import JPEGLSLossless
     from test_loaders import write_series
 
-    monkeypatch.setattr(type(get_decoder(JPEGLSLossless)), "is_available", property(lambda decoder: False))
+    decoder = type(get_decoder(JPEGLSLossless))
+    monkeypatch.setattr(decoder, "is_available", property(lambda decoder: False))
+    monkeypatch.setattr(decoder, "missing_dependencies", property(lambda decoder: [
+        "gdcm - requires gdcm>=3.0.10", "pylibjpeg - requires pylibjpeg>=2.0 and pylibjpeg-libjpeg>=2.1",
+        "pyjpegls - requires numpy and pyjpegls>=1.2"]))
     write_series(tmp_path, rng, [(0.0, 0.0, float(z)) for z in range(3)], "1.2.3", ["a", "b", "c"])
     for name in "abc":
         ds = pydicom.dcmread(tmp_path / name)

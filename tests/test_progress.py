@@ -143,6 +143,23 @@ def test_the_ray_tracers_set_up_counts_its_brick_layers(monkeypatch, every_updat
     assert sys.stderr.getvalue() == ""
 
 
+def test_a_render_in_passes_counts_them_and_one_pass_shows_no_bar(monkeypatch, every_update):
+    from test_bricks import out_of_core_model
+
+    wv, camera = out_of_core_model(), clwave.Camera(30, 20, size=16)
+    parts = clwave.RayTracer(wv, device_memory="14MiB")
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with show_progress(True):
+        several = parts.render(camera, tolerance=1e-2).meta["passes"]
+    assert several > 1 and counts(sys.stderr.getvalue(), "ray-tracing passes") == list(range(several + 1))
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    parts.render(camera, tolerance=1e-2)  # a pipe: nothing
+    whole = clwave.RayTracer(wv)
+    with show_progress(True):
+        assert whole.render(camera, tolerance=1e-2).meta["passes"] == 1
+    assert "ray-tracing passes" not in sys.stderr.getvalue()
+
+
 def test_opening_a_file_counts_its_reads(tmp_path, monkeypatch, every_update):
     """The reads cut at multiples of READ_ROWS rows, each a step; the same model as one read each."""
     from clwave.io import clw
@@ -161,12 +178,14 @@ def test_opening_a_file_counts_its_reads(tmp_path, monkeypatch, every_update):
     assert np.array_equal(cut.groups[0].values, whole.groups[0].values)
 
 
-def test_thresholding_counts_the_bands_it_weighs(monkeypatch, every_update):
+def test_thresholding_counts_the_coefficients_it_weighs_a_band_at_a_time(monkeypatch, every_update):
     monkeypatch.setattr(sys, "stderr", io.StringIO())
     wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", 16), levels=2)
     with show_progress(True):
         wv.threshold(keep=0.1)
-    assert counts(sys.stderr.getvalue(), "importance") == list(range(1 + 7 * 2 + 1))
+    ends = [0] + [sl.stop for sl in wv.groups[0].band_slices()]  # every band holds coefficients here
+    assert len(ends) == 1 + 7 * 2 + 1 and ends[-1] == wv.groups[0].kept
+    assert counts(sys.stderr.getvalue(), "importance") == ends
 
 
 def test_the_splat_renderers_set_up_counts_its_ranked_blocks(monkeypatch, every_update):
@@ -244,3 +263,50 @@ def test_progressive_counts_its_frames_and_drr_its_radiographs(tmp_path, monkeyp
                  "--pixel", "2", "--dsd", "90", "--progress", "-o", str(tmp_path / "d.npy")]) == 0, \
         sys.stderr.getvalue()
     assert counts(sys.stderr.getvalue(), "radiographs") == [0, 1, 2]
+
+
+def test_a_status_shows_once_its_block_has_lasted_and_goes_when_it_ends(monkeypatch):
+    from clwave.io.progress import status
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with status("waiting", after=3600, enabled=True):  # a quick block: its timer never fires
+        pass
+    assert sys.stderr.getvalue() == ""
+    with status("waiting", after=0, enabled=True) as timer:
+        timer.join()  # the block outlasts ``after``
+        assert "waiting" in sys.stderr.getvalue()
+    assert sys.stderr.getvalue().endswith("\r")  # cleared, as a bar is
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with status("waiting", after=0) as timer:  # a pipe: no thread, nothing
+        assert timer is None
+    assert sys.stderr.getvalue() == ""
+
+
+def test_a_kernel_build_that_lasts_says_so_unless_told_not_to(cc, monkeypatch):
+    """A slow build (every build here, with no wait) shows one status line; a quiet setting starts no timer."""
+    import threading
+
+    import pyopencl as cl
+
+    from clwave.device import programs
+
+    built = cl.Program.build
+
+    def build_outlasting_the_wait(self, *args, **kwargs):
+        program = built(self, *args, **kwargs)
+        for thread in threading.enumerate():
+            if isinstance(thread, threading.Timer):
+                thread.join()
+        return program
+
+    monkeypatch.setattr(programs, "BUILD_QUIET_SECONDS", 0)
+    monkeypatch.setattr(cl.Program, "build", build_outlasting_the_wait)
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    with show_progress(True):
+        programs.build(cc, ["device/selftest.cl"], {"CLW_PROGRESS_TEST": 1})
+    assert "building OpenCL kernels (once per machine)" in sys.stderr.getvalue()
+    monkeypatch.setattr(sys, "stderr", Terminal())
+    monkeypatch.setattr(threading.Timer, "start", lambda timer: pytest.fail("a timer under show_progress(False)"))
+    with show_progress(False):
+        programs.build(cc, ["device/selftest.cl"], {"CLW_PROGRESS_TEST": 2})
+    assert sys.stderr.getvalue() == ""

@@ -566,3 +566,27 @@ def test_a_finer_levels_white_band_keeps_half_the_coarsest_levels_share():
         energy, projected = line_energies(np.ones((1, 1, 1)), [support[letter] for letter in key], direction, h=1 / 12)
         shares.append(projected / energy)
     assert max(shares) == pytest.approx(detail_share(wav, direction) / 2, rel=5e-3)
+
+
+class WarningTracer(RayTracer):
+    """A ray tracer whose full stage's set-up (given ``abandon=``: the staged tracer's thread) warns."""
+
+    def __init__(self, wv, **options):
+        super().__init__(wv, **options)
+        if options.get("abandon") is not None:
+            clwave.errors.warn_outside(clwave.ClwaveWarning("the full stage's set-up warned"))
+
+
+@pytest.mark.parametrize("model_file", ["cubic"], indirect=True)
+def test_the_full_stages_set_up_warnings_reach_the_caller_once(model_file):
+    """Warnings given on the set-up's thread went to Python's warnings from that thread, outside the caller's
+    ``caught_warnings`` (a viewer's frame notes); they are given again, once, on the thread that takes the full
+    stage."""
+    staged = StagedTracer(WarningTracer, model_file)
+    with clwave.errors.caught_warnings() as caught:
+        assert staged.wait() is not None
+    assert [str(w) for w in caught] == ["the full stage's set-up warned"]
+    with clwave.errors.caught_warnings() as caught:  # once: not again
+        staged.wait()
+        staged.render(clwave.Camera(30, 20, size=16))
+    assert caught == []

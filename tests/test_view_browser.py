@@ -419,9 +419,9 @@ def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(
                                                      "export") for kind in ("input", "select", "button"))
     controls = page.execute_script(f"return Array.from(document.querySelectorAll('{sending}'))"
                                    ".map(e => e.matches(':disabled'))")
-    # 2 modes, 3 camera controls (the scale bar's too), 5 X-ray ones, 9 shaded ones and 10 of the clip (6 crop sliders,
-    # the plane's box, list and slider, "uncut"), 4 of the export's (the size, save, two copies)
-    assert len(controls) == 33 and all(controls)
+    # 2 modes, 9 camera controls (six standard views, the scale bar's too), 5 X-ray ones, 9 shaded ones and 10 of the
+    # clip (6 crop sliders, the plane's box, list and slider, "uncut"), 4 of the export's (the size, save, two copies)
+    assert len(controls) == 39 and all(controls)
     state, shown = page.execute_script("return JSON.stringify(window.clwave.state)"), browser.shown(page)
     browser.drag(page, 30, 10, steps=3, hold=False)
     ActionChains(page).scroll_to_element(page.find_element("id", "image")).double_click(
@@ -611,3 +611,37 @@ def test_the_pages_state_and_edit_history_survive_a_reload_for_the_same_model_on
         fresh = browser.wait_final(page)
         assert page.execute_script("return window.clwave.stats.restored") == "another model"
         assert (fresh["mode"], fresh["azimuth"], fresh["colour_map"]) == ("xray", 30, "grey")
+
+
+def test_the_edges_say_which_way_the_patient_faces_and_the_view_buttons_and_keys_turn_to_a_side(page, tmp_path):
+    """A .clw of a NIfTI stored PSL: the image's edge labels are the frame's (its camera's, orientation.py) and, at the
+    page's start (azimuth 30, elevation 20), "PR", "AL", "S", "I"; zoomed and in perspective, the anterior view's
+    button and then the key "l" turn the camera to geometry.VIEWS' angles keeping the zoom and the field of view, the
+    edges then the radiological table's; "copy as command" writes that view's angles."""
+    from test_view_orientation import NAMED, nifti
+
+    edges = "return ['left', 'right', 'top', 'bottom'].map(e => document.getElementById('edge-' + e).textContent)"
+    path = clwave.WaveletVolume.from_volume(clwave.load(nifti(tmp_path / "a.nii", "A")), levels=1).save(
+        tmp_path / "a.clw")
+    with view(str(path), size=SIZE) as v:
+        browser.open_viewer(page, v.url)
+        first = browser.wait_final(page)
+        assert page.execute_script(edges) == ["PR", "AL", "S", "I"] == [first["orientation"][e] for e in NAMED["left"]]
+        assert page.find_element("id", "view-anterior").text == "A"
+        page.execute_script("document.getElementById('image').dispatchEvent(new WheelEvent('wheel', {deltaY: -300}))")
+        page.find_element("id", "perspective").click()
+        browser.wait_for(page, "return window.clwave.state.fov === 30 && !window.clwave.state.moving")
+        zoom = page.execute_script("return window.clwave.state.zoom")
+        page.find_element("id", "view-anterior").click()
+        front = browser.wait_final(page)
+        assert (front["azimuth"], front["elevation"], front["fov"]) == (90, 0, 30) and zoom > 1.2
+        assert page.execute_script(edges) == list(NAMED["anterior"].values())
+        page.find_element("tag name", "body").send_keys("l")
+        side = browser.wait_for(page, "const c = window.clwave.current(); return c.fig.final && c.fig.azimuth === 180 "
+                                      "&& c.fig.seq === window.clwave.latest() && c.fig")
+        assert page.execute_script(edges) == list(NAMED["left"].values())
+        assert page.execute_script("return window.clwave.state.zoom") == zoom and side["fov"] == 30
+        page.find_element("id", "copy-command").click()
+        text = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'command' && "
+                                      "e.text")
+    assert " --azimuth 180.0 --elevation 0.0 --perspective " in text

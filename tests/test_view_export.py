@@ -460,3 +460,36 @@ def test_a_viewers_noise_rule_goes_into_the_command_and_the_python(tmp_path, mon
     text, code = command(origin, xray), python(origin, xray)
     assert "--noise 3" in text and "threshold(noise=3.0)" in code and "not in this snippet" not in code
     ran_alike(text, code, tmp_path, monkeypatch)
+
+
+def test_a_saved_images_renderer_warnings_come_with_it():
+    """A saved image whose render warned (notes28 put such lines in a frame's note; a save kept them in the server's
+    log) carries them in its response's X-Clwave-Note (JSON, which the page shows beside "saved"): a needle's X-ray
+    names the needle, as its frames' note does; a shaded view through a clip box thinner than a pixel names the clip;
+    a plain shaded view, none."""
+    wv = clwave.WaveletVolume.from_volume(clwave.phantom("hydrogen", n=16), levels=1).threshold(keep=0.6)
+    lo, hi = (np.asarray(c) for c in clwave.model.camera._content_box(wv))
+    tiny = dict(box=[*((lo + hi) / 2 - 1e-3), *((lo + hi) / 2 + 1e-3)], planes=[])
+    rod = np.zeros((4, 4, 440), np.float32)
+    rod[1:3, 1:3, 2:-2] = 1.0
+    needle = clwave.WaveletVolume.from_volume(clwave.Volume(rod), levels=1)  # 218 times longer than wide
+
+    def saved(v, msg):
+        async def go():
+            async with aiohttp.ClientSession() as s:
+                body = json.dumps(dict(view=msg, size=[16, 16]))
+                async with s.post(v.url.replace("/?", "/image?"), data=body) as r:
+                    assert r.status == 200, await r.text()
+                    note = r.headers.get("X-Clwave-Note")
+                    return None if note is None else json.loads(note)
+        return asyncio.run(go())
+
+    with pytest.warns(clwave.ClwaveWarning, match="times longer than wide"), view(needle, size=16) as v:
+        figures, _ = final_frame(v, dict(BASE, seq=1))
+        note = saved(v, dict(BASE, seq=1))
+    assert "times longer than wide" in note and note == figures["note"]
+    with view(wv, size=16) as v:
+        final_frame(v, dict(BASE, seq=1, mode="shaded"))  # its tracer made
+        clipped = saved(v, dict(BASE, seq=1, mode="shaded", clip=tiny))
+        plain = saved(v, dict(BASE, seq=1, mode="shaded"))
+    assert "no ray met the model's content" in clipped and "a clip cuts it away" in clipped and plain is None

@@ -169,6 +169,9 @@ def _clw_lines(f) -> list:
     if f["provenance"]:  # absent before the twenty-third session, and for a model of no file (a phantom, an array)
         frame = f["provenance"]["frame"]
         lines.append(("from", f["provenance"]["file"] + ("" if frame is None else f", frame {frame} (--frame)")))
+    if f["modality"]:  # a DICOM series', since the twenty-fourth session
+        units = f["modality"]["units"]
+        lines.append(("modality", f["modality"]["name"] + (f", values in {units}" if units else "")))
     return lines
 
 
@@ -201,9 +204,18 @@ def _volume_lines(f) -> list:
     if f["series"]:  # a DICOM series: what a PACS viewer lists it by
         from ..io.loaders.dicom import series_name
 
-        name = series_name(f["series"])
-        said = [name, f["series"]["modality"], f["series"]["uid"] if f["series"]["uid"] not in name else ""]
+        series, study, patient = f["series"], f["series"]["study"], f["series"]["patient"]
+        name = series_name(series)
+        units = f"values in {series['units']}" if series["units"] else ""
+        said = [name, series["modality"], units, series["uid"] if series["uid"] not in name else ""]
         lines.append(("series", ", ".join(s for s in said if s)))
+        said = [study["date"], study["description"] and f"'{study['description']}'",
+                study["accession"] and f"accession {study['accession']}", study["id"] and f"ID {study['id']}"]
+        if any(said):
+            lines.append(("study", ", ".join(s for s in said if s)))
+        if patient["name"] or patient["id"]:  # PHI: here, on the user's terminal, as DICOM viewers show it; never
+            said = [patient["name"], patient["id"] and f"ID {patient['id']}"]  # in a file clwave writes
+            lines.append(("patient", ", ".join(s for s in said if s)))
     if f["stored_shape"] is not None:  # read whole: weighed as the file stores it, its axes in the file's order
         resampled = "" if not f["resampled"] else ", its sheared grid resampled onto a straight one wider by its " \
             "shifts" if f["nifti"] else ", resampled onto an even, straight stack (a gantry tilt, uneven slices)"

@@ -23,6 +23,9 @@ from . import constants
 from .kernels import BUFFER, Kernel
 from .context import INSTALL_HINT, ComputeContext, python_sigint
 from ..errors import KernelBuildError
+from ..io.progress import status
+
+BUILD_QUIET_SECONDS = 1.0  # a build shows its status after this long: a cached one takes 0.2 s (known-gaps.md §17)
 
 
 def cl_dir() -> Path:
@@ -93,7 +96,8 @@ def _build(cc: ComputeContext, files, defines, options) -> KernelSet:
     try:
         with warnings.catch_warnings():  # non-empty logs of successful builds (PoCL ABI notes) are kept, not shown
             warnings.simplefilter("ignore", cl.CompilerWarning)
-            program = cl.Program(cc.ctx, source).build(options=flags)
+            with status("building OpenCL kernels (once per machine)…", BUILD_QUIET_SECONDS):
+                program = cl.Program(cc.ctx, source).build(options=flags)
     except cl.Error as exc:
         log = str(exc)
         first = next((ln.strip() for ln in log.splitlines() if "error" in ln.lower()), log.strip()[:200])

@@ -195,7 +195,7 @@ def _write(model, fh, steps):
     groups = [(w, c) for w, c in model.groups()] if chunked else [(g.wavelet, g.channels) for g in model.groups]
     header = dict(shape=model.shape, spacing=model.spacing, origin=model.origin, offset=model.subtracted,
                   obliquity=model.obliquity, value_range=model.value_range, unit=model.unit, photo=model.photo,
-                  provenance=model.provenance,
+                  provenance=model.provenance, modality=model.modality,
                   levels=model.levels, channels=model.channels, interpolate=not chunked and model.interpolate,
                   focus=None if model.focus is None else [list(model.focus[0]), model.focus[1]],
                   transfer_function=model.transfer_function, content=model.content, noise_sigma=model.noise_sigma,
@@ -357,7 +357,7 @@ def read_clw(path, keep=None, approximation=False) -> WaveletVolume:
                              interpolate=header["interpolate"], subtracted=header.get("offset", 0.0),
                              obliquity=header.get("obliquity", 0.0), value_range=header.get("value_range"),
                              unit=header.get("unit"), photo=header.get("photo", False),
-                             provenance=header.get("provenance"),
+                             provenance=header.get("provenance"), modality=header.get("modality"),
                              focus=None if focus is None else (tuple(focus[0]), float(focus[1])),
                              transfer_function=header.get("transfer_function"), content=header.get("content"),
                              content_mask=mask, noise_sigma=header.get("noise_sigma"))

@@ -12,7 +12,7 @@ import numpy as np
 from ..errors import FileFormatError, InputError
 from .images import UNIT_METRES
 from ..model.bspline import WAVELET_ORDERS, max_levels
-from ..model.volume import check_provenance, frame_problem
+from ..model.volume import check_modality, check_provenance, frame_problem
 from ..model.transfer import TransferFunction
 
 FILE_FORMAT = "clwave-wavelet-volume"
@@ -114,6 +114,7 @@ def checked_header(header) -> tuple:
         raise ValueError(f"photo {header['photo']!r} is not true or false")
     try:  # absent in older files (and None): not known
         check_provenance(header.get("provenance"))
+        check_modality(header.get("modality"))
     except InputError as exc:  # said as the file's fault
         raise ValueError(str(exc)) from None
     levels, channels = header.get("levels"), header.get("channels")

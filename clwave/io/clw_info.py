@@ -24,7 +24,8 @@ def describe_clw(path) -> dict:
     the input's values and the
     ``obliquity`` of its axes to its scanner's: 0 where the file records none, its world ``unit``: None where it
     records none, whether it holds a ``photo``'s colour and alpha, not classified, the ``provenance``, the file and
-    frame it was read from: None where it records none) with, per channel group, its wavelet, channels, the
+    frame it was read from, and the ``modality`` of the source (:attr:`~clwave.Volume.modality`): None where it
+    records none) with, per channel group, its wavelet, channels, the
     coefficients it keeps and their share of the voxels, and its quantisation step (None: float32
     values); and the file's size.  ``file``, ``format``, ``bytes``, ``shape``, ``channels``, ``spacing``, ``origin``,
     ``obliquity`` and ``unit`` are keys of a volume file's description too (:data:`~clwave.io.loaders.DESCRIBED`,
@@ -51,5 +52,5 @@ def describe_clw(path) -> dict:
                 channels=channels, **facts, subtracted=header.get("offset", 0.0),
                 obliquity=header.get("obliquity", 0.0),
                 unit=header.get("unit"), photo=header.get("photo", False),
-                provenance=header.get("provenance"),
+                provenance=header.get("provenance"), modality=header.get("modality"),
                 groups=described)

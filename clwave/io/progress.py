@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import sys
+import threading
 
 from ..errors import flag
 
@@ -48,7 +49,7 @@ def showing(enabled=None) -> bool:
     return bool(enabled)
 
 
-def progress(iterable=None, *, total=None, desc=None, enabled=None):
+def progress(iterable=None, *, total=None, desc=None, enabled=None, bar_format=None):
     """``iterable`` (or a bar to ``update``) in a tqdm bar where :func:`showing` says so, gone when done."""
     shown = showing(enabled)
     if shown and in_notebook() and importlib.util.find_spec("ipywidgets") is not None:
@@ -56,7 +57,35 @@ def progress(iterable=None, *, total=None, desc=None, enabled=None):
     else:  # imported here: tqdm.auto's import in a kernel without ipywidgets warns
         from tqdm.std import tqdm
     return tqdm(iterable, total=total, desc=desc, disable=not shown, leave=False, file=sys.stderr,
-                dynamic_ncols=True)
+                dynamic_ncols=True, bar_format=bar_format)
+
+
+@contextlib.contextmanager
+def status(desc, after=1.0, enabled=None):
+    """A one-line status ``desc`` over a block that is usually quick (a cached kernel build), shown where
+    :func:`showing` says so once the block has lasted ``after`` seconds, gone when it ends.  Yields the timer that
+    shows it (``None`` where nothing would show: no thread then)."""
+    if not showing(enabled):
+        yield None
+        return
+    lock, shown = threading.Lock(), {"done": False, "bar": None}
+
+    def show():
+        with lock:
+            if not shown["done"]:
+                shown["bar"] = progress(desc=desc, enabled=True, bar_format="{desc}")
+
+    timer = threading.Timer(after, show)
+    timer.daemon = True
+    timer.start()
+    try:
+        yield timer
+    finally:
+        timer.cancel()
+        with lock:
+            shown["done"] = True
+            if shown["bar"] is not None:
+                shown["bar"].close()
 
 
 def dask_progress(enabled=None):

@@ -158,6 +158,7 @@ class ChunkedWaveletVolume:
     unit = property(lambda self: self.volume.unit)
     photo = property(lambda self: self.volume.photo)
     provenance = property(lambda self: self.volume.provenance)
+    modality = property(lambda self: self.volume.modality)
     channels = property(lambda self: self.volume.channels)
     n_voxels = property(lambda self: int(np.prod(self.shape)))
     frame = property(lambda self: (self.shape, self.spacing, self.origin))
@@ -332,7 +333,7 @@ class ChunkedWaveletVolume:
                              focus=self.focus, transfer_function=self.transfer_function, content=self.content,
                              content_mask=mask, subtracted=self.subtracted, obliquity=self.obliquity,
                              value_range=self.value_range, unit=self.unit, photo=self.photo, provenance=self.provenance,
-                             noise_sigma=self.noise_sigma)
+                             modality=self.modality, noise_sigma=self.noise_sigma)
 
     def save(self, path, overwrite=False, quantise=None) -> Path:
         """Stream the selected coefficients into a ``.clw`` file (docs/chunked.md §4), in bounded memory;

@@ -91,11 +91,18 @@ def check_window(window, option=None):
 AIR_HU = -500.0
 
 
-def not_hounsfield(name, lo, least) -> str | None:
+def not_hounsfield(name, lo, least, modality=None) -> str | None:
     """Why the CT preset ``name``, its window from ``lo`` (the input's units), does not fit a volume whose least value
-    is ``least``: the preset's window reaches air (a window moved above it is the user's) and the volume's values
-    do not (docs/model.md §5); None where it fits, or is no CT preset."""
-    if not str(name).startswith("ct-") or lo > AIR_HU or least <= AIR_HU:
+    is ``least`` and whose ``modality`` (:attr:`~clwave.Volume.modality`) is known: of another modality than CT
+    (a DICOM series' Modality says so); else (CT, or not known) where the preset's window reaches air (a window
+    moved above it is the user's) and the volume's values do not (docs/model.md §5); None where it fits, or is no
+    CT preset."""
+    if not str(name).startswith("ct-"):
+        return None
+    if modality is not None and modality["name"] != "CT":
+        return (f"the transfer function {name} is for CT in Hounsfield units, and this volume's modality is "
+                f"{modality['name']} (its DICOM Modality), not CT (for it")
+    if lo > AIR_HU or least <= AIR_HU:
         return None
     return (f"the transfer function {name} is for CT in Hounsfield units, and this volume's least value is "
             f"{least:.4g}, with no air (-1000) or lung (below {AIR_HU:g}): it may be no CT (an MRI")

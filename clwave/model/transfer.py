@@ -337,7 +337,7 @@ class TransferFunction:
                 raise tf._nothing_visible(vol, window, scale)
             tf._warn_opaque(vol, window, scale, rgba[..., 3])
         return Volume(rgba, spacing=vol.spacing, origin=vol.origin, obliquity=vol.obliquity, labels=vol.labels,
-                      unit=vol.unit, provenance=vol.provenance)
+                      unit=vol.unit, provenance=vol.provenance, modality=vol.modality)
 
     def _nothing_visible(self, vol, window, scale) -> NothingVisibleError:
         """The refusal of this function (in ``vol``'s data units: :meth:`_on`) without opacity anywhere, naming its span
@@ -382,7 +382,8 @@ class TransferFunction:
         paint = self.painter(vol.channels, window, scale, vol.spacing)
         seen = ("volume's values" if vol.channels == 1 else "volume's luminance", np.nanmin(values) + shift,
                 np.nanmax(values) + shift)
-        line = vol.channels == 1 and not_hounsfield(self.name, self.data_points(window)[0] + shift, seen[1])
+        line = vol.channels == 1 and not_hounsfield(self.name, self.data_points(window)[0] + shift, seen[1],
+                                                    vol.modality)
         if line:
             warn_outside(ClwaveWarning(line + ": TransferFunction.preset('mri') or 'grey', or window= in its units)",
                                        cli=line + ": --tf mri or --tf grey, or --tf-window LO,HI in its units)"))

@@ -87,6 +87,11 @@ class Volume:
         Where the values were read from, ``{"file": path, "frame": K or None}`` (:func:`clwave.load` sets it: the
         file and the time point ``frame=`` picked); None (default): not read from a file.  Kept by the model and its
         ``.clw`` file, and shown by ``clwave info`` (docs/chunked.md §4).
+    modality : str or dict, optional
+        What acquired the values, ``{"name": DICOM Modality ("CT", "MR", "PT"...), "units": their units (RescaleType
+        "HU", a PET's Units "BQML") or None}``, or its name alone (:func:`clwave.load` sets it from a DICOM series);
+        None (default): not known.  Kept by the model and its ``.clw`` file, shown by ``clwave info``; a CT preset
+        on a volume of another modality warns (docs/model.md §5).
 
     Examples
     --------
@@ -96,7 +101,7 @@ class Volume:
     """
 
     def __init__(self, data, spacing=None, origin=None, subtracted=0.0, obliquity=0.0, labels=None,
-                 stored_dtype=None, unit=None, photo=False, provenance=None):
+                 stored_dtype=None, unit=None, photo=False, provenance=None, modality=None):
         if is_dataset(data):
             raise InputError(f"volume data is an xarray Dataset of the variables {', '.join(map(str, data.data_vars))}"
                              f"; give one of them, a DataArray: Volume(ds[name])")
@@ -166,6 +171,7 @@ class Volume:
         self.unit = check_unit(unit)
         self.photo = flag(photo, "photo") and self.channels > 1
         self.provenance = check_provenance(provenance)
+        self.modality = check_modality(modality)
 
     @property
     def shape(self) -> tuple:
@@ -365,6 +371,18 @@ def check_provenance(source) -> dict | None:
             and (frame is None or (isinstance(frame, int) and not isinstance(frame, bool)))):
         raise InputError(f"provenance {source!r} is not {{'file': path, 'frame': a whole number or None}}")
     return dict(file=source["file"], frame=frame)
+
+
+def check_modality(modality) -> dict | None:
+    """``modality`` (:class:`Volume`'s) as ``{"name": str, "units": str or None}`` (a name alone: no units), or None;
+    InputError (a ValueError) otherwise: a ``.clw`` header's is said as the file's fault."""
+    if modality is None or isinstance(modality, dict) and set(modality) == {"name", "units"} and \
+            isinstance(modality["name"], str) and modality["name"] and isinstance(modality["units"], (str, type(None))):
+        return None if modality is None else dict(modality)
+    if isinstance(modality, str) and modality:
+        return dict(name=modality, units=None)
+    raise InputError(f"modality {modality!r} is not a DICOM Modality ('CT', 'MR'...) or {{'name': it, 'units': str "
+                     f"or None}}")
 
 
 def _triple(value, name) -> tuple:

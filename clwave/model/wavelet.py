@@ -127,7 +127,7 @@ class WaveletVolume:
 
     def __init__(self, shape, spacing, origin, levels, groups, channels, *, interpolate=False,
                  focus=None, transfer_function=None, content=None, content_mask=None, subtracted=0.0, obliquity=0.0,
-                 value_range=None, unit=None, photo=False, noise_sigma=None, provenance=None):
+                 value_range=None, unit=None, photo=False, noise_sigma=None, provenance=None, modality=None):
         self.shape = tuple(int(s) for s in shape)
         self.spacing = tuple(float(s) for s in spacing)
         self.origin = tuple(float(o) for o in origin)
@@ -139,6 +139,7 @@ class WaveletVolume:
         self.unit = unit  # the source volume's Volume.unit: the world unit ("um", "mm"...), None where unknown
         self.photo = bool(photo)  # the source volume's Volume.photo: a photo's colour and alpha, not classified
         self.provenance = provenance  # the source volume's Volume.provenance: the file and frame read, or None
+        self.modality = modality  # the source volume's Volume.modality: a DICOM series' Modality and units, or None
         # per channel the source volume's noise deviation where measured (measure_noise), else None
         self.noise_sigma = None if noise_sigma is None else tuple(None if s is None else float(s) for s in noise_sigma)
         self.levels = int(levels)
@@ -212,7 +213,8 @@ class WaveletVolume:
         return cls(volume.shape, volume.spacing, volume.origin, levels, groups, volume.channels, photo=volume.photo,
                    interpolate=interpolate, transfer_function=tf, content=volume.content_box(mask), unit=volume.unit,
                    content_mask=None if interpolate else ContentMask.of(mask), subtracted=volume.subtracted,
-                   obliquity=volume.obliquity, value_range=volume.value_range(), provenance=volume.provenance)
+                   obliquity=volume.obliquity, value_range=volume.value_range(), provenance=volume.provenance,
+                   modality=volume.modality)
 
     # ------------------------------------------------------------- properties
     @property
@@ -309,6 +311,7 @@ class WaveletVolume:
                             transfer_function=self.transfer_function, content=self.content,
                             content_mask=self.content_mask, subtracted=self.subtracted, obliquity=self.obliquity,
                             value_range=self.value_range, unit=self.unit, photo=self.photo, provenance=self.provenance,
+                            modality=self.modality,
                             noise_sigma=self.noise_sigma)  # where measured: a chunked model's file records the same
         budget = None if keep is None else kept_count(keep, self.n_voxels)
         threshold = threshold if noise is None else noise
@@ -421,7 +424,8 @@ class WaveletVolume:
             for slot, channel in enumerate(g.channels):
                 data[..., channel] = reconstruct_channel(g, dense, slot, self.shape, self.levels)
         return Volume(data if self.channels > 1 else data[..., 0], self.spacing, self.origin, self.subtracted,
-                      self.obliquity, unit=self.unit, photo=self.photo, provenance=self.provenance)
+                      self.obliquity, unit=self.unit, photo=self.photo, provenance=self.provenance,
+                      modality=self.modality)
 
     def unmasked(self) -> "WaveletVolume":
         """The same coefficients without the content mask (nothing clamped, docs/raytracing.md §4), keeping no
@@ -533,12 +537,14 @@ def _check_levels(levels, shape) -> int:
 
 
 def importance_of(group: ChannelGroup, focus, frame, noise=None) -> np.ndarray:
-    """:func:`band_importance` of each kept position of ``group``, in position order (a bar counts its bands)."""
-    imp = np.empty(group.kept, dtype=np.float32)
-    positions = group.all_positions()
-    for band, sl in progress(list(zip(group.bands, group.band_slices())), desc="importance"):
-        index = None if focus is None else np.column_stack(np.unravel_index(positions[sl] - band.start, band.shape))
-        imp[sl] = band_importance(group.wavelet, band, group.values[:, sl], index, focus, frame, noise)
+    """:func:`band_importance` of each kept position of ``group``, in position order (a bar counts its coefficients,
+    a band at a time: the finest level's hold about 7/8 of them)."""
+    imp, positions = np.empty(group.kept, dtype=np.float32), group.all_positions()
+    with progress(total=group.kept, desc="importance") as bar:
+        for band, sl in zip(group.bands, group.band_slices()):
+            index = None if focus is None else np.column_stack(np.unravel_index(positions[sl] - band.start, band.shape))
+            imp[sl] = band_importance(group.wavelet, band, group.values[:, sl], index, focus, frame, noise)
+            bar.update(sl.stop - sl.start)
     return imp
 
 

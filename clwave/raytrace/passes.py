@@ -1,6 +1,7 @@
 """Bigger than the device (docs/raytracing.md §6): the bricks beyond the device in a scratch file
-(:class:`Spill`), and the regions of bricks a render uploads one at a time, in the order every ray meets them
-(:func:`passes`, :func:`ray_order`)."""
+(:class:`Spill`), the regions of bricks a render uploads one at a time, in the order every ray meets them
+(:func:`planned`, :func:`passes`, :func:`ray_order`), and what each ray carries from one to the next
+(:func:`carried`)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,11 @@ import tempfile
 import weakref
 
 import numpy as np
+import pyopencl.array as cla
+from pyopencl import cltypes
 
 from ..device.constants import BRICK
+from ..device.kernels import zeros
 from ..device.memory import format_size, parse_size, return_freed
 from ..errors import DeviceMemoryError, OutputError
 from ..model.geometry import view_in_fine
@@ -117,3 +121,41 @@ def passes(tracer, view, scale, offset, per_image, at, every=False) -> list:
                         lo[::-1], (lo + c * BRICK)[::-1]))
     regions.sort(key=lambda item: item[0])
     return [(slots, lo, hi) for _, slots, lo, hi in regions]
+
+
+def planned(tracer, view, scale, offset, per_image, at, every=False) -> list | None:
+    """A render's passes: ``None`` for one over whole rays (raising :class:`DeviceMemoryError` where the image's
+    buffers, ``per_image``, do not fit beside a pool on the device), else ``[(slots or None for all, lo, hi)]``
+    (x, y, z): the scratch file's regions (:func:`passes`), or a cluster part's region as one pass."""
+    if tracer.field != "bspline":  # the wavelet field's tables are on the device whole
+        return None
+    f = tracer.bricks
+    if not f.resident:
+        return passes(tracer, view, scale, offset, per_image, at, every)
+    need = on_device(f.pool_bytes, per_image, at)
+    if need > tracer.budget.total:
+        H, W = view.size
+        raise DeviceMemoryError(
+            f"a {H}x{W} ray-traced image needs {format_size(per_image)} of device memory beside the "
+            f"{format_size(f.pool_bytes)} of bricks, {format_size(need)} in all, but "
+            f"{format_size(tracer.budget.total)} are allowed; render a smaller image, or make the tracer with "
+            f"a smaller device_memory= (--device-memory) so that its bricks render in passes")
+    if tracer.region is None:
+        return None
+    lo = np.append(tracer.region[0], f.origin[1:]) * BRICK
+    return [(None, lo[::-1], np.append(tracer.region[1], f.origin[1:] + f.shape[1:])[::-1] * BRICK)]
+
+
+REAL4 = {np.float32: cltypes.float4, np.float64: cltypes.double4}
+
+
+def carried(q, shape, real, tol, absorption, several) -> tuple:
+    """What each ray of a ``shape`` (H, W) image carries from one pass to the next where there are ``several``
+    (docs/raytracing.md §6): its colour and transmittance, the error budgets left, where it resumes; else
+    one-element placeholders."""
+    if not several:
+        return zeros(q, 1, REAL4[real]), zeros(q, 1, REAL4[real]), zeros(q, 1, real)
+    ledger_start = (tol / 2, 0, 0, 0) if not absorption else (tol / 4, tol * 3 / 8, 0, 0)
+    carry = cla.to_device(q, np.tile(np.array((0, 0, 0, 0 if not absorption else 1), real), (*shape, 1)))
+    ledger = cla.to_device(q, np.tile(np.array(ledger_start, real), (*shape, 1)))
+    return carry, ledger, cla.to_device(q, np.full(shape, -np.inf, real))

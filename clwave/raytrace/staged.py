@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, caught_warnings, warn_outside
 from ..frames import ErrorEstimate, FinalImage, check_error, reached, root_mean_square
 from ..model.camera import Camera
 from ..model.clip import check_clip
@@ -89,6 +89,7 @@ class StagedTracer:
         # the ``detail=`` of the coarse stage's renders (None: its only one)
         self.coarse_detail = None if self.coarse.wv.levels == 0 else self.coarse.wv.levels
         self.full, self.full_seconds, self._failure, self._abandon = None, None, None, threading.Event()
+        self._told = []  # the full stage's set-up's warnings not yet given (wait())
         # the stages share the device-memory budget: the full stage's bricks beyond what the coarse one leaves go
         # to its scratch file (docs/raytracing.md §6)
         left = self.coarse.budget.total - self.coarse.bricks.pool_bytes - 2 * self.coarse.block_bound.nbytes
@@ -98,8 +99,9 @@ class StagedTracer:
     def _set_up(self, tracer_class, path, device_memory, lod, whole):
         start, cc = time.perf_counter(), self.coarse.cc
         try:
-            wv = WaveletVolume.open(path) if whole is None else whole()
-            full = tracer_class(wv, device=cc, device_memory=device_memory, lod=lod, abandon=self._abandon)
+            with caught_warnings() as self._told:  # given again on the thread that takes the stage: wait()
+                wv = WaveletVolume.open(path) if whole is None else whole()
+                full = tracer_class(wv, device=cc, device_memory=device_memory, lod=lod, abandon=self._abandon)
         except Abandoned:
             return
         except BaseException as exc:  # raised again where the caller waits for the full stage
@@ -148,6 +150,9 @@ class StagedTracer:
             raise self._failure
         if self.full is not None:
             self.coarse = None
+            told, self._told = self._told, []  # the set-up's warnings, once, to the caller (or a viewer's notes)
+            for warning in told:
+                warn_outside(warning)
         return self.full
 
     def render(self, camera: Camera | ConeBeam, **options):

@@ -24,12 +24,12 @@ from ..model.camera import Camera, View
 from ..model.clip import Clip, check_clip
 from ..model.conebeam import ConeBeam, check_camera, resolve_view, view_record
 from ..device.context import ComputeContext
-from ..errors import DeviceMemoryError, InputError, finite_number, flag
-from ..device.memory import TRACED_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap
+from ..errors import InputError, finite_number, flag
+from ..device.memory import TRACED_PIXEL_BYTES, check_image, device_budget, parse_cap
 from .bounds import warn_below_tolerance, warn_empty, warn_packed
 from .bricks import ABSENT, BRICK, build, group_defines, plan
 from .wavelet_field import WaveletField
-from .passes import on_device, passes as region_passes
+from .passes import carried, planned
 from .lod import Detail, FieldAt, brick_caps, field_at, pick
 from .classified import QUANT, ScalarRange, check_post, post_nodes, warn_opaque
 from .progressive import frames
@@ -39,6 +39,7 @@ from ..io.result import RenderResult
 from ..model.tf_file import as_transfer_function
 from ..model.transfer import TransferFunction
 from ..model.wavelet import WaveletVolume, check_model
+from ..io.progress import progress
 from ..threads import drain, one_at_a_time
 
 
@@ -78,7 +79,6 @@ def raytrace_kernel(field: str) -> Kernel:
                   ("pass_hi", FLOAT4), ("carry", B), ("ledger", B), ("resume", B))
 
 
-REAL4 = {np.float32: cltypes.float4, np.float64: cltypes.double4}
 GRAD_NOISE = 16  # alpha gradients below this many rounding units of the field bound per spacing: unlit
 SIMPSON_DEPTH = 16  # adaptive Simpson halves a segment at most this often (flagged when it must stop)
 ACTIVE = 1024    # entries of a ray's active list (wavelet field); more fall back to visiting every index
@@ -335,30 +335,11 @@ class RayTracer:
         if not absorption and self.scalar is not None:
             warn_packed(self.scalar.step, self.scalar.length, tol, self.told)
         per_pixel = H * W * (48 + 9 * np.dtype(real).itemsize)  # image, two stats; carry, ledger, resume
-        passes = None  # one pass over whole rays, else [(slots or None for all, box lo, box hi)] (x, y, z)
-        if self.field == "bspline" and self.bricks.resident:
-            need = on_device(self.bricks.pool_bytes, per_pixel, at)
-            if need > self.budget.total:
-                raise DeviceMemoryError(
-                    f"a {H}x{W} ray-traced image needs {format_size(per_pixel)} of device memory beside the "
-                    f"{format_size(self.bricks.pool_bytes)} of bricks, {format_size(need)} in all, but "
-                    f"{format_size(self.budget.total)} are allowed; render a smaller image, or make the tracer with "
-                    f"a smaller device_memory= (--device-memory) so that its bricks render in passes")
-        if self.field == "bspline" and not self.bricks.resident:
-            passes = region_passes(self, view, scale, offset, per_pixel, at, post is not None and post.shows_zero)
-        elif self.region is not None:
-            f = self.bricks
-            lo = np.append(self.region[0], f.origin[1:]) * BRICK
-            passes = [(None, lo[::-1], np.append(self.region[1], f.origin[1:] + f.shape[1:])[::-1] * BRICK)]
+        passes = planned(self, view, scale, offset, per_pixel, at, post is not None and post.shows_zero)
         image = cla.empty(q, (H, W, 4), np.float32) if passes is None else zeros(q, (H, W, 4), np.float32)
         stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else zeros(q, (H, W, 4), np.int32)
         lattice_stats = cla.empty(q, (H, W, 4), np.int32) if passes is None else zeros(q, (H, W, 4), np.int32)
-        carry, ledger, resume = zeros(q, 1, REAL4[real]), zeros(q, 1, REAL4[real]), zeros(q, 1, real)
-        if passes is not None:  # docs/raytracing.md §6: what each ray carries from one pass to the next
-            ledger_start = (tol / 2, 0, 0, 0) if not absorption else (tol / 4, tol * 3 / 8, 0, 0)
-            carry = cla.to_device(q, np.tile(np.array((0, 0, 0, 0 if not absorption else 1), real), (H, W, 1)))
-            ledger = cla.to_device(q, np.tile(np.array(ledger_start, real), (H, W, 1)))
-            resume = cla.to_device(q, np.full((H, W), -np.inf, real))
+        carry, ledger, resume = carried(q, (H, W), real, tol, absorption, passes is not None)
         traced = None
         if self.field == "wavelet":
             traced = zeros(q, (H, W, max(1, int(trace)), 4), np.int32)
@@ -384,7 +365,9 @@ class RayTracer:
             tf=post.table if post is not None else carry)
         if self.field == "bspline":
             arguments["quant"] = self.quant
-        for slots, lo, hi in passes or [(None, np.zeros(3), np.zeros(3))]:
+        several = passes is not None and len(passes) > 1  # a bar over the scratch file's regions
+        for slots, lo, hi in progress(passes or [(None, np.zeros(3), np.zeros(3))], desc="ray-tracing passes",
+                                      enabled=None if several else False):
             if self.field == "bspline":
                 field_tables = None  # the last region's pool goes before the next one comes
                 field_tables = at.field_tables if slots is None else dict(self.bricks.tables(cc, None, slots),

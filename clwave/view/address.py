@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ipaddress
 import re
+import socket
 
 from ..errors import InputError, whole_number
 
@@ -18,12 +19,30 @@ def check_port(port) -> int:
 
 
 def check_host(host) -> str:
-    """``host``, or an :class:`InputError` unless it is the name or address of an interface: "" bound every
-    interface, as 0.0.0.0 does, and printed an address with no host in it."""
+    """``host``, or an :class:`InputError` unless it is the name or address of an interface of this machine, checked
+    before any work: "" bound every interface, as 0.0.0.0 does, and printed an address with no host in it; a name
+    that does not resolve, or an address of another machine, was refused only once the server started, after the
+    volume's reading and transform.  Each of its addresses is bound as the server binds them (asyncio's
+    ``create_server``: IPv6 only on IPv6), at a free port, and let go."""
     if not isinstance(host, str) or not host.strip():
         fix = "must name an interface: 127.0.0.1 (this machine only, the default) or one that others reach"
         raise InputError(f"host={host!r} {fix}", cli=f"--host {host!r} {fix}")
+    try:
+        for family, kind, protocol, _, address in socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM,
+                                                                      flags=socket.AI_PASSIVE):
+            with socket.socket(family, kind, protocol) as probe:
+                if family == socket.AF_INET6:
+                    probe.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, True)
+                probe.bind(address)
+    except (OSError, UnicodeError) as exc:  # gaierror; EADDRNOTAVAIL; a name IDNA cannot encode
+        raise host_refused(f"cannot listen on {host} ({getattr(exc, 'strerror', None) or exc})") from None
     return host
+
+
+def host_refused(why: str) -> InputError:
+    """The one line that refuses a host not of this machine: ``why``, then the fix."""
+    fix = "name an interface of this machine: 127.0.0.1 (the default) or one that others reach"
+    return InputError(f"{why}; host= must {fix}", cli=f"{why}; --host must {fix}")
 
 
 def is_loopback(host: str) -> bool:

@@ -15,6 +15,7 @@ import json
 import os
 import shlex
 from dataclasses import dataclass
+from functools import partial
 
 from ..errors import ClwaveError, InputError
 from ..model.camera import Camera
@@ -28,6 +29,8 @@ OUTPUT, TF_FILE = "view.png", "view-tf.json"
 #: host bytes a pixel of a saved image may take at the least (the viewer's own floor, docs/viewer.md §1): a size whose
 #: image would outgrow the memory available now is refused before it is rendered
 SAVE_PIXEL_BYTES = 200
+#: the header of a saved image's response that holds, as a JSON string, the renderer's warnings of it (the page's note)
+NOTE_HEADER = "X-Clwave-Note"
 #: the model options that make its transfer function: a scalar model's shaded view replaces them with the tab's (its
 #: opacity unit in the tab's function)
 TF_OPTIONS = ("tf", "tf_window", "opacity_unit")
@@ -357,9 +360,10 @@ def _load_value(dest, value):
 
 
 # ---------------------------------------------------------------------------------------------------- the routes
-async def stage_by_stage(loop, server, stages):
+async def stage_by_stage(loop, server, stages, notes):
     """What the generator ``stages`` returns, each of its stages a job of its own on the ``server``'s render thread
-    (its warnings logged, ``server.logged``), so that the jobs queued meanwhile (the tabs' frames) go between two."""
+    (its warnings logged and added to ``notes``, ``server.logged``), so that the jobs queued meanwhile (the tabs'
+    frames) go between two."""
     def step():
         try:
             next(stages)
@@ -368,7 +372,7 @@ async def stage_by_stage(loop, server, stages):
         return False, None
 
     while True:
-        done, value = await loop.run_in_executor(server.pool, server.logged, step)
+        done, value = await loop.run_in_executor(server.pool, partial(server.logged, step, notes=notes))
         if done:
             return value
 
@@ -377,10 +381,11 @@ async def serve(server, request, *, image: bool):
     """``POST /export`` (``image`` False: the command and the Python, JSON) or ``POST /image`` (the PNG, one at a time)
     of a page's ``{"view", "size"}`` (:func:`~clwave.view.protocol.parse_export`), worked out on the render thread
     between two stages; a request refused is one line of text (400, 409 while what it needs is made,
-    507 too large for memory, 429 a save under way)."""
+    507 too large for memory, 429 a save under way).  The renderer's warnings of a saved image (a frame's note, for
+    the same view) come with it, JSON in the header :data:`NOTE_HEADER` (HTTP's headers are Latin-1: JSON's escapes
+    keep any line's characters)."""
     import asyncio
     import contextlib
-    from functools import partial
 
     from aiohttp import web
 
@@ -407,15 +412,16 @@ async def serve(server, request, *, image: bool):
     if image and server.saving.locked():
         raise web.HTTPTooManyRequests(text="an image is being saved already: save again once it has come\n")
     loop = asyncio.get_running_loop()
+    notes = []
     try:
         if state.mode == "shaded":  # its tracer made for a request before any tab's shaded view (a script's)
             building = server.prepared(server.sources["shaded"])
             if building.done() and not building.cancelled() and isinstance(building.exception(), ClwaveError):
                 raise building.exception()
         async with server.saving if image else contextlib.nullcontext():
-            done = await loop.run_in_executor(server.pool, server.logged, work)
+            done = await loop.run_in_executor(server.pool, partial(server.logged, work, notes=notes))
             if image:  # its stages in turn with the tabs' frames; encoded off the event loop (every tab's socket:
-                done = await stage_by_stage(loop, server, done)  # docs/viewer.md §5) and the render thread
+                done = await stage_by_stage(loop, server, done, notes)  # docs/viewer.md §5) and the render thread
                 done = await loop.run_in_executor(None, partial(encode, done, lossless=True))
     except Unavailable as exc:
         raise web.HTTPConflict(text=f"{exc}\n") from None
@@ -431,4 +437,5 @@ async def serve(server, request, *, image: bool):
         return web.json_response(done)
     H, W = size
     return web.Response(body=done[0], content_type="image/png",
-                        headers={"Content-Disposition": f'attachment; filename="clwave-view-{H}x{W}.png"'})
+                        headers={"Content-Disposition": f'attachment; filename="clwave-view-{H}x{W}.png"',
+                                 **({NOTE_HEADER: json.dumps(" · ".join(notes))} if notes else {})})

@@ -22,7 +22,7 @@ from ..model.camera import Camera
 from ..model.clip import Clip
 from ..model.transfer import TransferFunction
 from ..splat.renderer import SplatRenderer
-from . import colours
+from . import colours, orientation
 
 #: X-ray frames while dragging aim at this many seconds of rendering: the coefficient prefix adapts to the measured
 #: time, and below DRAG_LEAST coefficients the image shrinks instead, through DRAG_SCALES of the full size
@@ -116,6 +116,7 @@ class Source:
 
     mode = ""
     capabilities: dict = {}
+    patient = False  # the model's world is a patient's RAS+ (orientation.patient_world): the edges' letters R, A, S...
 
     def ready(self) -> bool:
         return True
@@ -168,6 +169,7 @@ class Source:
                                       width=picture.shape[1], azimuth=state.azimuth, elevation=state.elevation,
                                       extent=self.base_extent / state.zoom, fov=state.fov,
                                       scale_bar=self._scale_bar(state),
+                                      orientation=orientation.edges(self.camera(state), self.patient),
                                       encode_seconds=time.perf_counter() - encode_start,
                                       elapsed=time.perf_counter() - start))
 

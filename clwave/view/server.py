@@ -27,9 +27,10 @@ from aiohttp import WSCloseCode, WSMsgType, web
 from ..device.memory import format_size, parse_cap
 from ..errors import ClwaveError, DeviceMemoryError, InputError, caught_warnings, warn_outside
 from ..threads import Abandoned, stop_on
-from .address import check_host, check_port, host_name, is_loopback
+from .address import check_host, check_port, host_name, host_refused, is_loopback
 from . import colours, export
 from .frames import ViewState, XraySource
+from .orientation import patient_world, views
 from .shaded import ShadedSource
 from .protocol import (MAX_MESSAGE, TOO_BIG, RateLimit, Refused, close_reason, model_id, pack_frame, parse_view,
                        said)
@@ -136,6 +137,9 @@ class ViewServer:
             raise self.explain(exc, "xray") from None
         for warning in caught:  # the caller's, as if it were made here
             warn_outside(warning)
+        self.patient = patient_world(self.wv, self.origin)
+        for source in self.sources.values():  # its frames' edges are labelled R, A, S... or +x, +y, +z (orientation.py)
+            source.patient = self.patient
         self.pages = {path: (resources.files(__package__).joinpath("static", name).read_text(), mime)
                       for path, (name, mime) in STATIC.items()}
 
@@ -207,7 +211,7 @@ class ViewServer:
         start = time.perf_counter()
         try:
             try:
-                wv = opened.whole(coarse_first=self.coarse_first, stop=self._stop)
+                wv = self.logged(lambda: opened.whole(coarse_first=self.coarse_first, stop=self._stop))
             finally:
                 self._in_file.clear()  # nothing after this reads the file
             step()
@@ -287,11 +291,13 @@ class ViewServer:
                 log.warning("%s: %s", name, line)
         return lines
 
-    def logged(self, call, *args):
+    def logged(self, call, *args, notes=None):
         """``call(*args)``, a job of the render or build thread that is no tab's frame (a save, a tracer's build),
-        its clwave warnings logged once each."""
+        its clwave warnings logged once each, and added to the list ``notes`` where one is given (a save's)."""
         value, caught = _caught(call, *args)
-        self.warnings(caught, "the viewer")
+        lines = self.warnings(caught, "the viewer")
+        if notes is not None:
+            notes += [line for line in lines if line not in notes]
         return value
 
     def prepared(self, source):
@@ -345,8 +351,7 @@ class ViewServer:
         except OSError as exc:  # a port in use, a host not of this machine
             why = f"cannot listen on {self.host}:{self.port} ({exc.strerror or exc})"
             if isinstance(exc, socket.gaierror) or exc.errno == errno.EADDRNOTAVAIL:  # the host's, not the port's
-                fix = "name an interface of this machine: 127.0.0.1 (the default) or one that others reach"
-                raise InputError(f"{why}; host= must {fix}", cli=f"{why}; --host must {fix}") from None
+                raise host_refused(why) from None  # (check_host found it bound before: it is not any more)
             raise InputError(f"{why}; choose another port=, or port=0 for a free one",
                              cli=f"{why}; choose another --port, or leave it out for a free one") from None
         self.port = self._runner.addresses[0][1]
@@ -415,7 +420,7 @@ class ViewServer:
                     presets=list(TransferFunction.PRESETS), colour_maps=colours.page_tables(),
                     tf=shaded.start_figures() if shaded else None,
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model(),
-                    model_id=model_id(self.wv))
+                    model_id=model_id(self.wv), views=views(self.patient), patient=self.patient)
 
     def model(self) -> dict:
         """The model's figures for the page; ``reading``: a file's prefix, the rest being read; ``failure``: why the

@@ -20,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import FileFormatError, InputError, finite_number, flag, float32_number
+from ...errors import ClwaveError, FileFormatError, InputError, finite_number, flag, float32_number
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, check_placement, is_dask
 from . import dicom, dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
                      reading, axis_turn, stated_affine, to_canonical, to_float32)
 
-__all__ = ["load", "describe", "world_unit", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
+__all__ = ["load", "describe", "world_unit", "in_ras", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
@@ -81,7 +81,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     series : int or str, optional
         DICOM only: the series to load where the input holds several image series, as
         their listing shows it: its SeriesNumber, description (case aside) or
-        ``SeriesInstanceUID``; a value that names several is refused, naming them.
+        ``SeriesInstanceUID``; of a CD of several studies ``"STUDY/SERIES"``, the study by its date (as the listing
+        heads it, ``"2026-11-29/2"``, or as stored), accession number, StudyID, description or UID; a value that
+        names several is refused, naming them.
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).
     frame : int, optional
@@ -175,8 +177,9 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     chunks = check_chunks(chunks, kind, path)
 
     with reading(path):
-        data, file_spacing, file_origin, obliquity = _read(kind, path, inner, shape, dtype, byte_order, series,
-                                                           level, chunks, progress_bar, fits, spacing is None, frame)
+        data, file_spacing, file_origin, obliquity, modality = _read(kind, path, inner, shape, dtype, byte_order,
+                                                                     series, level, chunks, progress_bar, fits,
+                                                                     spacing is None, frame)
     if not is_dask(data):
         data = np.asarray(data)
     if labels is None:  # a label map: told by a NIfTI's intent, or by its values as stored (integers, before float32)
@@ -193,9 +196,12 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         data = data.map_blocks(convert, dtype=np.float32) if is_dask(data) else convert(data, copy=False)
     placed = origin if origin is not None else file_origin if file_origin is not None else (0.0, 0.0, 0.0)
     provenance = dict(file=str(path) + (f":/{inner}" if inner else ""), frame=frame)
+    if hu_to_mu and modality is not None:  # attenuation now, not the series' units
+        modality = dict(modality, units=None)
     volume = Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
                     subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
-                    unit=unit if unit is not None else _world_unit(kind, path, inner), provenance=provenance)
+                    unit=unit if unit is not None else _world_unit(kind, path, inner), provenance=provenance,
+                    modality=modality)
     if orientation is not None:  # turned into RAS+ as a medical file is, by the same code; origin= is RAS already
         affine = stated_affine(turn, volume.shape, volume.spacing, volume.origin)
         data, spacing, turned, _ = to_canonical(volume.data, affine)
@@ -218,6 +224,15 @@ def check_orientation(kind, orientation):
     return axis_turn(orientation)
 
 
+def in_ras(path) -> bool:
+    """Whether :func:`load` places the input at ``path`` in RAS+ by its own header (:data:`RAS_FORMATS`: a patient's
+    axes); False where its format cannot be told (a file no longer there)."""
+    try:
+        return _kind(_split_inner(path)[0]) in RAS_FORMATS
+    except (ClwaveError, OSError):
+        return False
+
+
 def _photo(kind, path) -> bool:
     """Whether the colour samples of a ``kind`` input are a photo's, straight colour and alpha (:attr:`Volume.photo`):
     PNG and JPEG slices, and TIFF colour samples (RGB, RGBA), not an OME-TIFF's channels."""
@@ -231,9 +246,20 @@ def _photo(kind, path) -> bool:
 
 def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, progress_bar, fits, warn_spacing,
           frame=None):
-    """``(data, spacing or None, origin or None, obliquity)`` of a ``kind`` input as its loader reads it (not yet
-    float32; of a time series its time point ``frame``); the obliquity (degrees off the scanner's axes,
-    :func:`.shared.to_canonical`) is 0 but for medical formats."""
+    """``(data, spacing or None, origin or None, obliquity, modality)`` of a ``kind`` input as its loader reads it
+    (not yet float32; of a time series its time point ``frame``); the obliquity (degrees off the scanner's axes,
+    :func:`.shared.to_canonical`) is 0 but for medical formats, the modality (:attr:`Volume.modality`) None but for
+    DICOM."""
+    if kind == "dicom-frames":
+        return dicom_frames.read_dicom_frames([path], fits)
+    if kind == "dicom":
+        return dicom_tree.read_dicom(path, series, progress_bar, fits)
+    return (*_read_placed(kind, path, inner, shape, dtype, byte_order, level, chunks, progress_bar, fits,
+                          warn_spacing, frame), None)
+
+
+def _read_placed(kind, path, inner, shape, dtype, byte_order, level, chunks, progress_bar, fits, warn_spacing, frame):
+    """:func:`_read`'s first four of the formats other than DICOM."""
     if kind == "zarr":
         return (*zarr.read_zarr(path, inner, level, chunks, fits, frame), 0.0)
     if kind == "hdf5":
@@ -254,11 +280,7 @@ def _read(kind, path, inner, shape, dtype, byte_order, series, level, chunks, pr
         return (*fits_cube.read_fits(path, chunks, fits, frame), 0.0)
     if kind == "tiff":
         return (*tiff.read_tiff(path, fits, chunks=chunks, warn_spacing=warn_spacing, frame=frame), 0.0)
-    if kind in _SLICE_FOLDERS:
-        return slices.read_slice_folder(path, progress_bar, fits, chunks, warn_spacing), None, None, 0.0
-    if kind == "dicom-frames":
-        return dicom_frames.read_dicom_frames(path, fits)
-    return dicom_tree.read_dicom(path, series, progress_bar, fits)
+    return slices.read_slice_folder(path, progress_bar, fits, chunks, warn_spacing), None, None, 0.0
 
 
 #: The keys of :func:`describe`'s facts, the same for every format: a fact the header does not give is None
@@ -325,7 +347,7 @@ def describe(path, *, series=None, level=None, frame=None, shape=None, dtype=Non
     with reading(path):
         try:
             try:
-                data, spacing, origin, obliquity = read(None)
+                data, spacing, origin, obliquity, _ = read(None)
                 one_volume(frame, facts["file"])  # an input of one volume: frame= refused as load refuses it
             except Declared:
                 one_volume(frame, facts["file"])
@@ -336,7 +358,7 @@ def describe(path, *, series=None, level=None, frame=None, shape=None, dtype=Non
                 picked = points.pick(frame, facts["file"])
                 facts.update(time=dict(points=points.points, step=points.step, unit=points.unit, along=points.along,
                                        frame=picked))
-                data, spacing, origin, obliquity = read(picked)  # that volume, as load reads it
+                data, spacing, origin, obliquity, _ = read(picked)  # that volume, as load reads it
         except (Declared, TimeSeries) as declared:
             facts.update(_header_facts(kind, path))  # the header as the read has checked it
             channels = declared.channels

@@ -169,9 +169,33 @@ def series_number(header):
 
 
 def series_facts(header) -> dict:
-    """``clwave info``'s ``series`` from a header of it: its number, description, modality and UID."""
-    return dict(number=series_number(header), description=str(header.get("SeriesDescription") or ""),
-                modality=str(header.get("Modality") or ""), uid=str(header.get("SeriesInstanceUID") or ""))
+    """``clwave info``'s ``series`` from a header of it: its number, description, modality and UID, the ``study`` it
+    belongs to (:func:`study_facts`), its ``patient`` (name and ID: PHI, which ``info`` shows on the user's terminal
+    as DICOM viewers do, and nothing writes into an output, docs/coordinates.md §1) and the ``units`` of its values
+    (RescaleType, else a PET's Units; "" where neither)."""
+    return dict(number=series_number(header), description=_text(header, "SeriesDescription"),
+                modality=_text(header, "Modality"), uid=_text(header, "SeriesInstanceUID"), study=study_facts(header),
+                patient=dict(name=_text(header, "PatientName"), id=_text(header, "PatientID")),
+                units=_text(header, "RescaleType") or _text(header, "Units"))
+
+
+def modality_of(facts) -> dict | None:
+    """:attr:`~clwave.Volume.modality` from :func:`series_facts`: None where the series has no Modality."""
+    return dict(name=facts["modality"], units=facts["units"] or None) if facts["modality"] else None
+
+
+def study_facts(header) -> dict:
+    """The study a header's series belongs to, as PACS viewers list it: its ``date`` (YYYY-MM-DD, "" where none),
+    ``time``, ``description``, ``accession`` number, ``id`` (StudyID) and ``uid``."""
+    date = _text(header, "StudyDate")
+    return dict(date=f"{date[:4]}-{date[4:6]}-{date[6:8]}" if re.fullmatch(r"\d{8}", date) else date,
+                time=_text(header, "StudyTime"), description=_text(header, "StudyDescription"),
+                accession=_text(header, "AccessionNumber"), id=_text(header, "StudyID"),
+                uid=_text(header, "StudyInstanceUID"))
+
+
+def _text(header, tag) -> str:
+    return str(header.get(tag) or "").strip()
 
 
 def series_name(facts) -> str:
@@ -357,6 +381,10 @@ def rescaled(path, pixels, slope, intercept):
     return values.astype(np.float32)
 
 
+# pip's names of the packages pydicom names a decoder's requirements by (their import names)
+_PIP_NAMES = {"gdcm": "python-gdcm"}
+
+
 def check_pixel_data(path, ds):
     """Refuse a DICOM file ``ds`` (read with its pixel data deferred) whose pixel data no decoder here reads (a
     compressed transfer syntax without its plugin: named, with the packages that decode it), or, uncompressed, is
@@ -374,9 +402,11 @@ def check_pixel_data(path, ds):
         decoder = None
     if decoder is None or not decoder.is_available:
         needs = decoder.missing_dependencies if decoder is not None else ["a decoder pydicom does not know"]
-        pip = next((" ".join(re.split("[<>=]", p)[0] for p in plugin.split(" - requires ")[1].split(" and "))
-                    for plugin in needs if plugin.startswith("pylibjpeg - requires ")), None)
-        install = f"install one (pip install {pip}, into clwave's environment)" if pip else "install one"
+        pip = next((" ".join(_PIP_NAMES.get(name, name) for name in names if name != "numpy")
+                    for names in ([re.split("[<>=]", p)[0] for p in plugin.split(" - requires ")[1].split(" and ")]
+                                  for plugin in needs if " - requires " in plugin)), None)
+        install = f"install one: pip install {pip} in clwave's environment (a clone set up by tools/setup.sh: " \
+                  f".venv/bin/pip install {pip})" if pip else "install one"
         raise FileFormatError(f"DICOM file {path} holds pixel data in transfer syntax {syntax} ({syntax.name}), which "
                               f"no decoder installed here reads ({'; '.join(needs)}): {install}, or convert the series "
                               f"with dcm2niix (dcm2niix -o OUT_FOLDER FOLDER) and read the .nii")

@@ -6,6 +6,7 @@ localizer, a secondary capture, a structured report...) named for what they are 
 from __future__ import annotations
 
 import os
+import re
 from collections import defaultdict
 from pathlib import Path
 
@@ -21,18 +22,22 @@ MAX_FILES = 20_000
 # what a series without pixel data is, by its Modality
 _NON_IMAGE = {"SR": "a structured report", "PR": "a presentation state", "KO": "a key object selection",
               "RTSTRUCT": "an RT structure set", "RTPLAN": "an RT plan", "DOC": "an encapsulated document"}
+# the words scanners mark a scout with (Siemens' topogram, Canon's scanogram, Philips' surview and survey, GE's scout)
+_SCOUT_WORDS = re.compile(r"\b(LOCALI[SZ]ER|SCOUT|TOPOGRAM|SCANOGRAM|SURVIEW|SURVEY)\b", re.IGNORECASE)
 _CLI_PICK = "--series NUMBER as listed (or its description, or its SeriesInstanceUID)"
 _API_PICK = "series=NUMBER as listed (or its description, or its SeriesInstanceUID)"
 
 
 class Series:
     """One series' files ``[(path, header)]`` (headers read without pixel data), and what it is: ``kind`` None for a
-    volume (slices, or one multi-frame file), else the words for what it is instead."""
+    volume (slices, or one multi-frame file), else the words for what it is instead; ``study`` its study's facts
+    (:func:`.dicom.study_facts`), ``key`` what names that study in ``series=STUDY/SERIES`` (:func:`_study_keys`)."""
 
     def __init__(self, uid, files):
         self.uid, self.files = uid, files
         self.facts = dicom.series_facts(next((h for _, h in files if not _scout(h)), files[0][1]))
         self.number, self.description, self.modality = (self.facts[k] for k in ("number", "description", "modality"))
+        self.study, self.key = self.facts["study"], None
         self.name = dicom.series_name(self.facts)
         self.frames = sum(int(h.get("NumberOfFrames") or 1) for _, h in files)
         self.size = next(((int(h.Rows), int(h.Columns)) for _, h in files if "Rows" in h and "Columns" in h), None)
@@ -47,6 +52,16 @@ class Series:
         what = "" if self.kind is None else f": {self.kind}"
         return f"{self.name} ({', '.join(f for f in facts if f)}{what}{', ' + self.uid if uid else ''})"
 
+    def study_shown(self) -> str:
+        """Its study as a listing heads its series: "study 2026-11-29 'CT Thorax' (accession A1, ID 7)", its key
+        first; never the patient (PHI)."""
+        study = self.study
+        said = [study["date"], study["accession"] and f"accession {study['accession']}",
+                study["id"] and f"ID {study['id']}"]
+        said = [s for s in said if s and s.split()[-1] != self.key]  # the key said once, first
+        described = f" '{study['description']}'" if study["description"] else ""
+        return f"study {self.key}{described}{' (' + ', '.join(said) + ')' if said else ''}"
+
 
 def _kind_of(files, modality):
     """None for a series that is a volume, else what it is, in words."""
@@ -59,14 +74,29 @@ def _kind_of(files, modality):
         return "a secondary capture (a picture of a screen or document)"
     if all(_scout(h) for h in headers):
         return "a localizer (scout)"
-    if any(int(h.get("NumberOfFrames") or 1) > 1 for h in headers):
-        return None if len(files) == 1 else f"{len(files)} multi-frame files (give one of them, e.g. {files[0][0]})"
+    if any(int(h.get("NumberOfFrames") or 1) > 1 for h in headers):  # its files' frames are placed together
+        return None if all(int(h.get("NumberOfFrames") or 1) > 1 for h in headers) else \
+            f"{len(files)} files, some single images and some of several frames (give one multi-frame file of them, " \
+            f"e.g. {next(f for f, h in files if int(h.get('NumberOfFrames') or 1) > 1)})"
     if len(files) == 1:
-        return "one 2-D image"
+        return "a localizer (scout)" if _projection(headers[0], modality) else "one 2-D image"
     # 2 or 3 views, each its own orientation (an AP and a lateral): a scout without ImageType LOCALIZER
     cosines = [np.array(h.get("ImageOrientationPatient") or [np.nan], float) for h in headers]
     views = {tuple(np.round(c, 3)) for c in cosines if c.shape == (6,) and np.all(np.abs(c) <= 1.001)}
     return "a localizer (scout)" if len(files) <= 3 and len(views) == len(files) else None
+
+
+def _projection(header, modality) -> bool:
+    """Whether a lone image is a projection (a scout) though its ImageType says no LOCALIZER: its ImageType,
+    ScanOptions or description names one as scanners do (SCOUT, TOPOGRAM, SCANOGRAM, SURVIEW, SURVEY), or it is a
+    CT image across the table's axis (a lateral or AP view: a CT scanner's slices are axial, tilted 30 degrees at
+    most)."""
+    said = [*(header.get("ImageType") or []), header.get("ScanOptions") or "", header.get("SeriesDescription") or ""]
+    if _SCOUT_WORDS.search(" ".join(map(str, said))):
+        return True
+    cosines = np.array(header.get("ImageOrientationPatient") or [np.nan] * 6, float)
+    normal = np.cross(cosines[:3], cosines[3:]) if cosines.shape == (6,) else np.full(3, np.nan)
+    return modality == "CT" and bool(abs(normal[2]) < np.cos(np.radians(60)))
 
 
 def describe_file(path, header) -> str | None:
@@ -87,10 +117,12 @@ def read_dicom(path, series, progress_bar, fits=None):
         others = [s.shown() for s in found if s.kind is None]
         listed = f"; its image series: {'; '.join(others)}" if others else "; it holds no image series"
         raise FileFormatError(f"{chosen.name} in {path} is {chosen.kind}, not an image volume{listed}")
+    where = f"DICOM {chosen.name} in {path}"
     if chosen.frames > len(chosen.files):
-        return dicom_frames.read_dicom_frames(chosen.files[0][0], fits)
-    return dicom.read_dicom_folder(f"DICOM {chosen.name} in {path}", path, _without_localizers(chosen), progress_bar,
-                                   fits)
+        files = [file for file, _ in chosen.files]
+        return dicom_frames.read_dicom_frames(files, fits, where if len(files) > 1 else None)
+    return (*dicom.read_dicom_folder(where, path, _without_localizers(chosen), progress_bar, fits),
+            dicom.modality_of(chosen.facts))
 
 
 def _without_localizers(series):
@@ -125,7 +157,21 @@ def find_series(path):
     for file, header in found:
         groups[str(header.SeriesInstanceUID)].append((file, header))
     listed = [Series(uid, files) for uid, files in groups.items()]
-    return tree, sorted(listed, key=lambda s: (s.number is None, s.number or 0, s.description, s.uid))
+    _study_keys(listed)
+    return tree, sorted(listed, key=lambda s: (s.study["date"], s.study["time"], s.study["uid"], s.number is None,
+                                               s.number or 0, s.description, s.uid))
+
+
+def _study_keys(listed):
+    """Give each series its study's ``key``: the first of its date, accession number, StudyID and StudyInstanceUID
+    that tells the studies found apart (a CD of a CT and its follow-up: their dates)."""
+    studies = {s.study["uid"]: s.study for s in listed}
+    for field in ("date", "accession", "id", "uid"):
+        values = [study[field] for study in studies.values()]
+        if all(values) and len(set(values)) == len(values):
+            break
+    for s in listed:
+        s.key = s.study[field] or "(none)"
 
 
 def _headers(paths):
@@ -165,8 +211,17 @@ def _dicomdir_files(path):
     from its records: pydicom's FileSet stages a temporary folder, left to its finalizer."""
     with reading(path):
         records = dicom.dcmread(path).get("DirectoryRecordSequence") or []
-    ids = [r.ReferencedFileID for r in records if r.get("ReferencedFileID")]
-    files = [path.parent.joinpath(*([i] if isinstance(i, str) else i)) for i in ids]
+    ids = [[i] if isinstance(i, str) else list(i) for i in (r.ReferencedFileID for r in records
+                                                              if r.get("ReferencedFileID"))]
+    if len(ids) > MAX_FILES:
+        raise FileFormatError(f"{path} refers to {len(ids):,} files, more than {MAX_FILES:,}; give the folder of one "
+                              "study or series")
+    # PS3.10 §8.2: a file ID is up to 8 components of its folder's tree, never a way out of it
+    outside = next((i for i in ids if any(not c or c in (".", "..") or any(ch in c for ch in "/\\:") for c in i)), None)
+    if outside is not None:
+        raise FileFormatError(f"{path} refers to a file outside its folder ({'/'.join(outside)!r}); it may be corrupt "
+                              "or crafted: give the folder the series are in")
+    files = [path.parent.joinpath(*i) for i in ids]
     missing = [f for f in files if not f.is_file()]
     if missing:
         raise FileFormatError(f"{path} refers to {len(missing)} missing file{'s' * (len(missing) > 1)} (e.g. "
@@ -175,26 +230,33 @@ def _dicomdir_files(path):
 
 
 def pick(path, found, series, tree):
-    """The series ``series=`` names (SeriesNumber, description without regard to case, or SeriesInstanceUID), or
-    without it the only image series (named in a warning when the input held others, or was a tree); a value that
-    names several is refused, naming them."""
+    """The series ``series=`` names (SeriesNumber, description without regard to case, or SeriesInstanceUID; where
+    the input holds several studies, ``STUDY/SERIES`` with STUDY its date, accession number, StudyID, description or
+    UID), or without it the only image series (named in a warning when the input held others, or was a tree); a
+    value that names several is refused, naming them and how to tell them apart."""
     images = [s for s in found if s.kind is None]
     if series is None:
         if len(images) == 1:
             if tree or len(found) > 1:
-                note(f"{path} holds {_count(found)}: reading its image series, {images[0].shown()}")
+                note(f"{path} holds {_count(found)}: reading its image series, {_named(found, images[0])}")
             return images[0]
         held = f"{path} holds {_count(found)}: {_listing(found)}; "
         if not images:
             raise FileFormatError(held + "none is an image volume")
-        raise InputError(held + "pick one with " + _API_PICK, cli=held + "pick one with " + _CLI_PICK)
+        studies = "; STUDY/NUMBER, as a study is listed, where two studies have the number)" \
+            if len({s.study["uid"] for s in found}) > 1 else ")"
+        raise InputError(held + "pick one with " + _API_PICK[:-1] + studies,
+                         cli=held + "pick one with " + _CLI_PICK[:-1] + studies)
     text = str(series).strip()
-    number = int(text) if isinstance(series, (int, np.integer)) or text.lstrip("-").isdigit() else None
-    matches = [s for s in found if number is not None and s.number == number
-               or s.description.casefold() == text.casefold() or s.uid == text]
+    matches = _matching(found, text)
     if len(matches) == 1:
         return matches[0]
     api, cli = f"series={series!r}", f"--series {text}"
+    if len({s.study["uid"] for s in matches}) == len(matches) > 1:  # one a study: told apart by STUDY/SERIES
+        told = [f"{s.key}/{text.rpartition('/')[2]}" for s in matches]
+        how = f"matches {len(matches)} series in {path}, one in each of {len(matches)} studies: {_listing(matches)}"
+        raise InputError(f"{api} {how}; give series={told[0]!r} (STUDY/SERIES) or another",
+                         cli=f"{cli} {how}; give --series {told[0]} (STUDY/SERIES) or another")
     if matches:
         how = f"matches {len(matches)} series in {path}: {'; '.join(s.shown(uid=True) for s in matches)}; give " \
               f"its SeriesInstanceUID"
@@ -203,9 +265,42 @@ def pick(path, found, series, tree):
     raise InputError(f"{api} {how}", cli=f"{cli} {how}")
 
 
+def _matching(found, text):
+    """The series ``text`` names: as a whole (number, description, UID), else split at a "/" into a study (its date,
+    as listed or as stored, accession number, StudyID, description or UID) and a series in it."""
+    def names(s, said):
+        number = int(said) if re.fullmatch(r"-?[0-9]+", said) else None  # ASCII digits: "²".isdigit() is True
+        return number is not None and s.number == number or s.description.casefold() == said.casefold() or \
+            s.uid == said
+
+    def studied(s, said):
+        study = s.study
+        return said.casefold() in {str(v).casefold() for v in (s.key, study["date"], study["date"].replace("-", ""),
+                                                               study["accession"], study["id"], study["description"],
+                                                               study["uid"]) if v}
+
+    matches = [s for s in found if names(s, text)]
+    cuts = [i for i, c in enumerate(text) if c == "/"]
+    return matches or [s for s in found if any(studied(s, text[:i].strip()) and names(s, text[i + 1:].strip())
+                                               for i in cuts)]
+
+
 def _count(found):
     return f"{len(found)} DICOM series" if len(found) > 1 else "1 DICOM series"
 
 
 def _listing(found):
-    return "; ".join(s.shown() for s in found)
+    """The series listed, grouped by study where they come from several (as PACS viewers list them)."""
+    if len({s.study["uid"] for s in found}) < 2:
+        return "; ".join(s.shown() for s in found)
+    studies = defaultdict(list)
+    for s in found:
+        studies[s.study["uid"]].append(s)
+    return " | ".join(f"{group[0].study_shown()}: {'; '.join(s.shown() for s in group)}"
+                      for group in studies.values())
+
+
+def _named(found, series):
+    """A series as a warning names it: with its study where the input holds several."""
+    several = len({s.study["uid"] for s in found}) > 1
+    return f"{series.shown()} of {series.study_shown()}" if several else series.shown()

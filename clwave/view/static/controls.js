@@ -1,5 +1,5 @@
-// The view's controls: orbit, zoom and reset on the image; the mode, the X-ray's detail, window and colour map; the
-// lighting and background; the perspective and the scale bar.
+// The view's controls: orbit, zoom and reset on the image; the standard views; the mode, the X-ray's detail, window
+// and colour map; the lighting and background; the perspective and the scale bar.
 "use strict";
 // ---------------------------------------------------------------- orbit, zoom, reset
 let drag = null, idleTimer = null;
@@ -40,6 +40,35 @@ canvas.addEventListener("wheel", (ev) => {
   idleTimer = setTimeout(() => { state.moving = false; request(); }, 200);
 }, { passive: false });
 canvas.addEventListener("dblclick", () => { if (!closed) { Object.assign(state, HOME, { moving: false }); request(); } });
+
+// ---------------------------------------------------------------- standard views
+// The hello's views (the server's table, geometry.VIEWS, each with the label of its side, orientation.py): a button
+// each, and its name's initial as a key, set the camera's angles, keeping the zoom and the perspective.
+const lookFrom = (name) => {
+  if (closed || !hello) return;
+  const { azimuth, elevation } = hello.views[name];
+  Object.assign(state, { azimuth, elevation, moving: false });
+  request();
+};
+const setupViews = () => {
+  $("views").replaceChildren("from ", ...Object.entries(hello.views).map(([name, v]) => {
+    const button = document.createElement("button");
+    button.type = "button"; button.id = `view-${name}`; button.textContent = v.side;
+    button.title = `the ${name} view: from the ${v.side} side (azimuth ${v.azimuth}°, elevation ${v.elevation}°; ` +
+      `the key ${name[0]})`;
+    button.addEventListener("click", () => lookFrom(name));
+    return button;
+  }));
+};
+document.addEventListener("keydown", (ev) => {
+  if (ev.ctrlKey || ev.metaKey || ev.altKey || !hello || ev.target.closest("input, select, textarea")) return;
+  const name = Object.keys(hello.views).find((n) => n[0] === ev.key.toLowerCase());
+  if (name) { lookFrom(name); ev.preventDefault(); }
+});
+// the edges' labels of the frame drawn (its figures' orientation, made with its camera on the server)
+const showEdges = (f) => {
+  for (const edge of ["left", "right", "top", "bottom"]) $(`edge-${edge}`).textContent = f.orientation[edge];
+};
 
 // ---------------------------------------------------------------- controls
 const syncMode = () => {

@@ -32,12 +32,13 @@ $("save-image").addEventListener("click", async () => {
   const [h, w] = exportSize();
   exportNote(`rendering ${w} × ${h} at full quality…`);
   try {
-    const blob = await (await exported("image")).blob(), a = document.createElement("a");
+    const r = await exported("image"), blob = await r.blob(), a = document.createElement("a");
+    const header = r.headers.get("X-Clwave-Note"), note = header && JSON.parse(header);  // the renderer's warnings
     a.href = URL.createObjectURL(blob);
     a.download = `clwave_${state.mode}_az${state.azimuth.toFixed(0)}_el${state.elevation.toFixed(0)}_${w}x${h}.png`;
     a.click();
     setTimeout(() => URL.revokeObjectURL(a.href), 1000);
-    stats.saved = { size: [h, w], blob };
-    exportNote(`saved ${w} × ${h}`);
+    stats.saved = { size: [h, w], blob, note };
+    exportNote(`saved ${w} × ${h}` + (note ? `; the renderer warned: ${note}` : ""), !!note);
   } catch (e) { exportNote(e.message, true); }
 });

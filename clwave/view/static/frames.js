@@ -24,6 +24,7 @@ const onFrame = (buffer) => {
     if (stats.frames.length > 500) stats.frames.shift();
     current = { fig, blob };
     showFigures(fig);
+    showEdges(fig);
     drawScaleBar();
   });
 };

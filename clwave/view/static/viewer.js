@@ -62,6 +62,7 @@ const setup = () => {
   const [h, w] = hello.size;
   canvas.width = overlay.width = w; canvas.height = overlay.height = h;
   showModel();
+  setupViews();
   const shaded = hello.modes.includes("shaded");
   document.querySelector('input[value="shaded"]').disabled = !shaded;
   state.mode = hello.mode;  // shaded where a transfer function was chosen (given, or the model's own)
