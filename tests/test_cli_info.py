@@ -58,8 +58,8 @@ def test_info_of_a_clw_is_its_header_and_kept_coefficients(tmp_path, capsys, unr
         assert all(0 < g["quantisation"] <= quantise for g in facts["groups"])
     code, out, _ = run(capsys, "info", str(path))
     lines = dict(line.split(None, 1) for line in out.splitlines() if not line.startswith("group"))
-    assert code == 0 and lines["volume"] == "16 x 14 x 12 voxels (x, y, z), spacing 0.5, 1, 2 (x, y, z), origin 1, " \
-                                            "-2, 3"
+    assert code == 0 and lines["volume"] == "16 x 14 x 12 voxels (x, y, z), spacing 0.5, 1, 2 (x, y, z), centre 1, " \
+                                            "-2, 3, corner voxel (least x, y, z) -2.75, -8.5, -8"
     assert lines["model"] == "2 levels, 4 channels in 2 groups"
     kept = stored.groups[1].kept
     assert f"group 1    channel 3: linear wavelet (order 2), keeps {kept:,} coefficients " \
@@ -168,7 +168,8 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
         assert facts["bytes"] == (tmp_path / name).stat().st_size and facts["spacing_in_file"] == (name == "v.nii")
     code, out, _ = run(capsys, "info", str(tmp_path / "v.nii"))
     assert out.splitlines()[1:] == ["volume     4 x 5 x 6 voxels (x, y, z), 1 channel of int16",
-                                    "spacing    2, 3, 4 mm (x, y, z; --spacing 4,3,2), origin 3, 6, 10 (RAS+)",
+                                    "spacing    2, 3, 4 mm (x, y, z; --spacing 4,3,2), centre 3, 6, 10, corner voxel "
+                                    "(least x, y, z) 0, 0, 0 (RAS+)",
                                     "box        8, 15, 24 (x, y, z) mm",
                                     "orient     stored RAS, from the sform (nibabel's choice; sform_code 2, "
                                     "qform_code 0)"]
@@ -180,7 +181,8 @@ def test_info_of_volume_files_is_what_load_reads_without_a_voxel(tmp_path, capsy
     code, out, _ = run(capsys, "info", str(tmp_path / "v.nii.gz"))
     assert out.splitlines()[1:] == ["stored     4 x 5 x 6 values of int16, in the file's order of axes",
                                     "volume     4 x 5 x 6 voxels (x, y, z), 1 channel of int16",
-                                    "spacing    2, 3, 4 mm (x, y, z; --spacing 4,3,2), origin 3, 6, 10 (RAS+)",
+                                    "spacing    2, 3, 4 mm (x, y, z; --spacing 4,3,2), centre 3, 6, 10, corner voxel "
+                                    "(least x, y, z) 0, 0, 0 (RAS+)",
                                     "box        8, 15, 24 (x, y, z) mm",
                                     "orient     stored RAS, from the sform (nibabel's choice; sform_code 2, "
                                     "qform_code 0)"]
@@ -207,8 +209,8 @@ def test_info_of_an_ome_or_imagej_tiff_gives_its_spacing_without_a_voxel(tmp_pat
     assert loaded["o.ome.tif"].spacing == (5.0, 0.25, 0.5) and loaded["ij.tif"].spacing == (3.0, 0.25, 0.5)
     code, out, _ = run(capsys, "info", str(tmp_path / "o.ome.tif"))
     # the OME-TIFF's first voxel at 0 (it gives no plane positions): its centre at half its extent
-    assert out.splitlines()[3:] == ["spacing    0.5, 0.25, 5 um (x, y, z; --spacing 5,0.25,0.5), origin 2.25, 0.875, "
-                                    "12.5",
+    assert out.splitlines()[3:] == ["spacing    0.5, 0.25, 5 um (x, y, z; --spacing 5,0.25,0.5), centre 2.25, 0.875, "
+                                    "12.5, corner voxel (least x, y, z) 0, 0, 0",
                                     "box        5, 2, 30 (x, y, z) um"]
     code, out, _ = run(capsys, "info", str(tmp_path / "ij.tif"), "--json")  # its unit, "um" as micron and µm are
     assert json.loads(out)["unit"] == "um" and json.loads(out)["box"] == [5.0, 2.0, 18.0]
@@ -337,7 +339,8 @@ def test_info_of_a_time_series_describes_it_and_names_the_refusal(tmp_path, caps
     lines = dict(line.split(None, 1) for line in out.splitlines())
     assert code == 0 and lines["stored"] == "4 x 5 x 6 x 3 values of int16, in the file's order of axes, a time " \
         "series", out
-    assert lines["spacing"] == "2, 3, 4 mm (x, y, z; --spacing 4,3,2), origin 8, 12, 17 (RAS+)"
+    assert lines["spacing"] == "2, 3, 4 mm (x, y, z; --spacing 4,3,2), centre 8, 12, 17, corner voxel " \
+                               "(least x, y, z) 5, 6, 7 (RAS+)"
     assert "volume" not in lines
     assert lines["time"] == "3 time points, 2.5 sec apart: --frame K picks one, 0 .. 2 (or -3 .. -1 from the end); " \
         "without it compress, render, progressive, drr and view refuse the file"
@@ -407,7 +410,8 @@ def test_info_prints_world_lengths_without_float_noise(tmp_path, capsys):
     origin = json.loads(out)["origin"]
     assert code == 0 and 0 < max(map(abs, origin)) < 1e-6 * 16, origin  # the noise is there, below 16 mm / 1e6
     code, out, _ = run(capsys, "info", str(tmp_path / "o.nii"))
-    assert code == 0 and "spacing    2, 2, 2 mm (x, y, z; --spacing 2,2,2), origin 0, 0, 0 (RAS+)\n" in out, out
+    assert code == 0 and "spacing    2, 2, 2 mm (x, y, z; --spacing 2,2,2), centre 0, 0, 0, corner voxel " \
+                             "(least x, y, z) -7, -7, -7 (RAS+)\n" in out, out
 
 
 def test_info_takes_the_reading_options_and_prints_the_geometry_they_give(tmp_path, capsys):
@@ -425,7 +429,8 @@ def test_info_takes_the_reading_options_and_prints_the_geometry_they_give(tmp_pa
     assert code == 0, err
     assert lines["stored"] == "4 x 6 x 8 values of uint16, in the file's order of axes"
     assert lines["volume"] == "8 x 6 x 4 voxels (x, y, z), 1 channel of uint16"
-    assert lines["spacing"] == "5, 5, 10 (x, y, z; --spacing 10,5,5 given), origin 0, 0, 0"
+    assert lines["spacing"] == "5, 5, 10 (x, y, z; --spacing 10,5,5 given), centre 0, 0, 0, corner voxel " \
+                               "(least x, y, z) -17.5, -12.5, -15"
     assert lines["box"] == "40, 30, 40 (x, y, z) in --spacing's unit"
     assert lines["values"] == "--subtract 2000: applied as the values are read (not read here)"
     code, out, err = run(capsys, "info", str(tmp_path / "slices"), "--json")

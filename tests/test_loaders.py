@@ -693,7 +693,8 @@ def test_info_of_a_dicom_folder_reads_no_pixel(tmp_path, rng, monkeypatch, capsy
         f"series     series 4 'Thorax 1.0', CT, {uid}",
         "stored     3 x 6 x 5 values of float32, in the file's order of axes (stored as uint16)",
         "volume     5 x 6 x 3 voxels (x, y, z), 1 channel of float32",
-        "spacing    0.9, 0.7, 1 mm (x, y, z; --spacing 1,0.7,0.9), origin 18.2, -31.75, 1 (RAS+)",
+        "spacing    0.9, 0.7, 1 mm (x, y, z; --spacing 1,0.7,0.9), centre 18.2, -31.75, 1, corner voxel (least x, y, "
+        "z) 16.4, -33.5, 0 (RAS+)",
         "box        4.5, 4.2, 3 (x, y, z) mm",
         "rescale    slope 2, intercept -1024",
         "padding    stored 0 (outside the patient): set to the series' least other value when read"]

@@ -64,7 +64,7 @@ def test_a_large_mgh_is_read_chunk_by_chunk_as_whole_and_a_mgz_is_not(tmp_path, 
     with pytest.raises(InputError, match=r"not to a \.mgz file \(gzip cannot seek: gunzip it into a \.mgh first\)"):
         clwave.load(zipped, chunks=4)
     code, out, err = run(capsys, "info", str(zipped))
-    assert code == 0 and "mgh" in out and "mm (x, y, z; --spacing 3,2,4), origin" in out and "(RAS+)" in out, err
+    assert code == 0 and "mgh" in out and "mm (x, y, z; --spacing 3,2,4), centre" in out and "(RAS+)" in out, err
 
 
 def test_an_mgh_without_geometry_is_freesurfers_default_with_a_warning(tmp_path, rng):

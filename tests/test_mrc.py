@@ -206,3 +206,51 @@ def test_a_map_given_another_dtype_is_refused_in_one_line(tmp_path, capsys, stor
         clwave.load(path, dtype=dtype)
     code, out, err = run(capsys, "info", str(path), "--dtype", dtype)
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--dtype" in err, err
+
+
+def test_info_says_the_centre_and_the_first_voxel_and_the_spacing_as_written(tmp_path, capsys):
+    """M3, P5 (trial29): a tomogram at 13.48 Å, origin 0.  Its cell, 464 × 13.48 = 6254.72 Å, is a float32 in the
+    header (6254.7202...), over 464 13.4800005: read as the float32's shortest decimal, 13.48 (within 1e-15 of it:
+    float64's own rounding of 647.04 / 48).  info names clwave's origin the centre, (n − 1) / 2 voxels from the
+    first, and prints the first voxel where ChimeraX and mrcfile place it, the header's origin, 0."""
+    path = _write(tmp_path / "tomo.rec", np.zeros((10, 48, 464), np.float32), voxel=13.48)
+    assert mrcfile.open(path).voxel_size.x == np.float32(13.4800005)  # the noise, as mrcfile reads it
+    vol = clwave.load(path)
+    assert vol.spacing == pytest.approx((13.48,) * 3, rel=1e-15, abs=0)
+    assert vol.origin == pytest.approx((463 * 13.48 / 2, 47 * 13.48 / 2, 9 * 13.48 / 2), rel=1e-12)
+    code, out, err = run(capsys, "info", str(path))
+    assert code == 0, err
+    assert out.splitlines()[2] == ("spacing    13.48, 13.48, 13.48 A (x, y, z; --spacing 13.48,13.48,13.48), centre "
+                                   "3120.62, 316.78, 60.66, corner voxel (least x, y, z) 0, 0, 0")
+
+
+def _stamped(path):
+    """``path`` with IMOD's stamp ("IMOD" at byte 152) written into its header."""
+    content = bytearray(path.read_bytes())
+    content[152:156] = np.array([1146047817], "<i4").tobytes()
+    path.write_bytes(bytes(content))
+    return path
+
+
+def test_an_imod_crop_lies_on_its_parent(tmp_path, rng):
+    """M4 (trial29): IMOD's origin is that of the coordinate system relative to the first pixel ("a subvolume should
+    have negative origin values", its mrc_format.txt): a crop of voxels from (x 4, y 3, z 2) of a parent at origin 0,
+    written as IMOD writes it (its stamp, origin -start * voxel), has its first voxel at +start * voxel, so every voxel
+    of it lies where the parent's same voxel lies; the same crop without the stamp (ChimeraX's reading: the origin is
+    the first voxel) placed by origin +start * voxel lands there too, and a stamped map of origin 0 at 0."""
+    parent = rng.normal(size=(9, 8, 10)).astype(np.float32)
+    start = np.array([4, 3, 2])  # x, y, z
+    crop = parent[2:7, 3:7, 4:9]
+    step = np.array(VOXEL)  # x, y, z
+    whole = clwave.load(_stamped(_write(tmp_path / "parent.rec", parent)))
+    imod = clwave.load(_stamped(_write(tmp_path / "imod.mrc", crop, origin=tuple(-start * step))))
+    chimerax = clwave.load(_write(tmp_path / "chimerax.mrc", crop, origin=tuple(start * step)))
+
+    def position(vol, index):  # world (x, y, z) of voxel index (x, y, z): the centre less half the box
+        return np.array(vol.origin) + step * (np.asarray(index) - (np.array(vol.data.shape[::-1]) - 1) / 2)
+
+    np.testing.assert_allclose(position(whole, [0, 0, 0]), [0, 0, 0], atol=1e-12)
+    for vol in (imod, chimerax):
+        np.testing.assert_array_equal(vol.data, crop)
+        for index in ([0, 0, 0], [4, 3, 4], [2, 1, 3]):  # the crop's voxel and the parent's at index + start
+            np.testing.assert_allclose(position(vol, index), position(whole, np.add(index, start)), atol=1e-9)

@@ -144,7 +144,8 @@ def test_info_prints_the_spacing_option_that_gives_its_spacing(tmp_path, capsys)
     np.save(tmp_path / "v.npy", np.zeros((3, 4, 5), np.int16))
     code, out, err = run(capsys, "info", str(tmp_path / "v.npy"), "--spacing", "1,0.33,0.25")
     lines = dict(line.split(None, 1) for line in out.splitlines())
-    assert code == 0 and lines["spacing"] == "0.25, 0.33, 1 (x, y, z; --spacing 1,0.33,0.25 given), origin 0, 0, 0"
+    assert code == 0 and lines["spacing"] == "0.25, 0.33, 1 (x, y, z; --spacing 1,0.33,0.25 given), centre 0, 0, " \
+        "0, corner voxel (least x, y, z) -0.5, -0.495, -1"
     code, out, err = run(capsys, "info", str(tmp_path / "v.npy"), "--spacing", "1,0.33,0.25", "--orientation", "PIR",
                          "--json")
     facts = json.loads(out)
@@ -155,4 +156,5 @@ def test_info_prints_the_spacing_option_that_gives_its_spacing(tmp_path, capsys)
     code, out, err = run(capsys, "info", str(tmp_path / "v.npy"), "--orientation", "PIR")
     lines = dict(line.split(None, 1) for line in out.splitlines())
     assert lines["spacing"] == "1, 1, 1 (x, y, z; --spacing 1,1,1, before --orientation PIR turns it: none in the " \
-                               "file, give yours), origin 0, 0, 0 (RAS+)", out
+                               "file, give yours), centre 0, 0, 0, corner voxel (least x, y, z) -1, -2, -1.5 " \
+                               "(RAS+)", out  # the turned shape: 3 x 5 x 4 (x, y, z)

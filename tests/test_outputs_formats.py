@@ -355,7 +355,7 @@ def test_the_world_unit_of_an_input(tmp_path, nifti, rng, capsys):
     assert main(["compress", str(tmp_path / "um.nii"), "--levels", "1", "-o", str(tmp_path / "m.clw")]) == 0
     assert clwave.WaveletVolume.open(tmp_path / "m.clw").unit == "um"
     capsys.readouterr()
-    assert main(["info", str(tmp_path / "m.clw")]) == 0 and " um (x, y, z), origin" in capsys.readouterr().out
+    assert main(["info", str(tmp_path / "m.clw")]) == 0 and " um (x, y, z), centre" in capsys.readouterr().out
     assert main(["info", str(tmp_path / "m.clw"), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["unit"] == "um"
     assert main(["render", str(tmp_path / "m.clw"), "--size", "8", "-o", str(tmp_path / "m.png"), "--stats",

@@ -239,3 +239,46 @@ def test_micrometre_label_is_drawn_with_glyphs_the_font_has(monkeypatch):
     drawn = draw_scale_bar(picture, 10.0, unit="um", length=500)
     monkeypatch.setattr(images, "length_label", lambda length, unit, digits=6: "500 um")
     assert np.array_equal(drawn, draw_scale_bar(picture, 10.0, unit="um", length=500))
+
+
+def test_a_result_in_angstroms_converts_to_the_unit_asked(tmp_path):
+    """W2 (trial29): a result whose meta says Å, 5 Å a pixel.  ``unit="nm"``: a 10 nm bar is 20 pixels (10 nm over
+    0.5 nm, not 10 "nm" over 5), pHYs 2e9 pixels a metre; no ``unit``: the result's own, the same pHYs and a default
+    bar of a nice length in Å (200 Å of a 1500 Å wide picture: 40 pixels); on a result of no unit, ``unit=``
+    declares the world unit, as before (50 nm: 10 pixels of 5 nm)."""
+    import struct
+
+    def angstroms():  # a splat of an MRC map (test_every_render_records_the_models_unit)
+        result = flat(0.5, pixel=5.0)
+        result.meta["unit"] = "A"
+        return result
+
+    ppm = struct.pack(">IIB", 2_000_000_000, 2_000_000_000, 1)
+    angstroms().save(tmp_path / "nm.png", window=(0, 1), scale_bar=10.0, unit="nm")
+    chunks, picture = decode_png(tmp_path / "nm.png")
+    assert bar_rows(picture, 255)[0] == 20 and dict(chunks)[b"pHYs"] == ppm
+    angstroms().save(tmp_path / "own.png", window=(0, 1), scale_bar=True)
+    chunks, picture = decode_png(tmp_path / "own.png")
+    assert bar_rows(picture, 255)[0] == 40 and dict(chunks)[b"pHYs"] == ppm
+    np.testing.assert_array_equal(picture, flat(0.5, pixel=0.5).picture(window=(0, 1), scale_bar=20.0, unit="nm"))
+    flat(0.5, pixel=5.0).save(tmp_path / "declared.png", window=(0, 1), scale_bar=50.0, unit="nm")
+    chunks, picture = decode_png(tmp_path / "declared.png")
+    assert bar_rows(picture, 255)[0] == 10 and dict(chunks)[b"pHYs"] == struct.pack(">IIB", 200_000_000,
+                                                                                     200_000_000, 1)
+    with pytest.raises(InputError, match="unit='nanometre' must be the world unit"):
+        angstroms().picture(scale_bar=True, unit="nanometre")
+
+
+def test_every_render_records_the_models_unit():
+    """W2 (trial29): splat, raytrace, progressive and turntable results carry the model's unit (their scale bar's
+    and pHYs' own), a model of no unit None."""
+    import clwave
+
+    data = np.zeros((8, 8, 8), np.float32)
+    data[2:6, 2:6, 2:6] = 1.0
+    camera = Camera(30, 20, (16, 16))
+    for unit in ("A", None):
+        wv = clwave.WaveletVolume.from_volume(clwave.Volume(data, spacing=(2.0,) * 3, unit=unit), levels=1)
+        results = [clwave.splat(wv, camera), clwave.raytrace(wv, camera, absorption=False, tolerance=1e-2),
+                   *clwave.progressive(wv, camera, steps=2), clwave.turntable(wv, 2, camera)]
+        assert [r.meta["unit"] for r in results] == [unit] * len(results)

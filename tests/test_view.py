@@ -311,8 +311,9 @@ def test_the_largest_zoom_is_drawn_and_a_view_refused_is_told_on_the_page(viewer
 
 
 def test_colour_maps_are_matplotlibs_tables_and_colour_the_grey_levels():
-    """The stored tables are matplotlib's sampled at their 256 entries, rounded to 8 bits; a grey ramp comes out as
-    the table, row for row; the page gets the same rows."""
+    """The stored tables are matplotlib's sampled at their 256 entries, rounded to 8 bits, and each ``_r`` the same
+    sampled from the top down (within one level of matplotlib's own ``_r``, which re-samples a segmented map such as
+    bone's); a grey ramp comes out as the table, row for row; the page gets the same rows."""
     import base64
 
     import matplotlib
@@ -321,14 +322,22 @@ def test_colour_maps_are_matplotlibs_tables_and_colour_the_grey_levels():
 
     ramp = np.arange(256, dtype=np.uint8).reshape(16, 16)
     assert colours.NAMES[0] == "grey" and colours.apply(ramp, "grey") is ramp
+    assert colours.NAMES[5:] == ("grey_r", "bone_r", "viridis_r", "inferno_r", "magma_r")
+    np.testing.assert_array_equal(colours.apply(ramp, "grey_r"), 255 - ramp)
     for name in colours.NAMES[1:]:
-        expect = np.round(255 * matplotlib.colormaps[name](np.arange(256))[:, :3]).astype(np.uint8)
+        mpl = name.replace("grey", "gray")
+        order = np.arange(256)[::-1] if name.endswith("_r") else np.arange(256)
+        expect = np.round(255 * matplotlib.colormaps[mpl.removesuffix("_r")](order)[:, :3]).astype(np.uint8)
         np.testing.assert_array_equal(colours.table(name), expect)
-        np.testing.assert_array_equal(colours.apply(ramp, name).reshape(256, 3), expect)
+        if name != "grey_r":  # which stays grey: above
+            np.testing.assert_array_equal(colours.apply(ramp, name).reshape(256, 3), expect)
+        own = np.round(255 * matplotlib.colormaps[mpl](np.arange(256))[:, :3])
+        assert np.abs(colours.table(name) - own).max() <= 1
     tables = colours.page_tables()  # what the page draws its colour bar from: the same rows, grey's the ramp
     assert list(tables) == list(colours.NAMES)
     for name, rows in tables.items():
-        expect = np.column_stack([ramp.ravel()] * 3) if name == "grey" else colours.table(name)
+        expect = np.column_stack([ramp.ravel()] * 3) if name.startswith("grey") else colours.table(name)
+        expect = 255 - expect if name == "grey_r" else expect
         np.testing.assert_array_equal(np.frombuffer(base64.b64decode(rows), np.uint8).reshape(256, 3), expect)
 
 
@@ -344,7 +353,8 @@ def test_a_still_xray_frame_in_a_colour_map_is_the_splat_looked_up_in_its_table(
             await ws.send_str(json.dumps(dict(BASE, seq=1, azimuth=60.0, window=[0.0, 0.4], colour_map="inferno")))
             return hello, await frames_until_final(ws, 1)
     hello, frames = run(go())
-    assert list(hello["colour_maps"]) == ["grey", "bone", "viridis", "inferno", "magma"]
+    assert list(hello["colour_maps"]) == ["grey", "bone", "viridis", "inferno", "magma", "grey_r", "bone_r",
+                                          "viridis_r", "inferno_r", "magma_r"]  # each reversed too (trial29 M1)
     assert hello["capabilities"]["xray"]["colour_map"] is True
     final, data = frames[-1]
     assert all(f["colour_map"] == "inferno" for f, _ in frames)

@@ -123,6 +123,20 @@ def test_an_xray_view_as_a_command_and_as_python_renders_the_servers_image(clw, 
     assert twice.shape == (64, 80) and np.array_equal(twice, grey(saved2))
 
 
+def test_an_xray_view_in_a_reversed_colour_map_as_a_command_and_as_python(clw, tmp_path, monkeypatch):
+    """A view in inferno_r (M1, trial29): the command gets ``--colour-map inferno_r`` and the Python
+    ``colour_map='inferno_r'``, no "not in this command" line; both pictures are the saved one bit for bit, in
+    colour."""
+    with view(str(clw), size=(32, 40)) as v:
+        msg = dict(BASE, seq=1, azimuth=47.3, elevation=-12.5, colour_map="inferno_r")
+        page, saved = exported(v, msg, (32, 40))
+    assert "--colour-map inferno_r" in page["command"] and "#" not in page["command"]
+    assert "colour_map='inferno_r'" in page["python"] and "not in this snippet" not in page["python"]
+    got = shell(page["command"], tmp_path / "page")
+    assert got.shape == (32, 40, 3) and np.array_equal(got, saved)
+    assert np.array_equal(executed(page["python"], tmp_path / "python", monkeypatch), got)
+
+
 def test_a_shaded_perspective_view_through_an_edited_function_as_a_command_and_python(clw, tmp_path, monkeypatch):
     """A shaded view of a scalar model through the editor's function (a preset moved, widened and more opaque: a .json
     of its points in the command), a perspective camera, a grey background: the command's image, the Python's, the
@@ -292,7 +306,7 @@ def test_a_view_with_its_scale_bar_as_a_command_and_as_python(clw, tmp_path, mon
         status, line = post(v, "image", dict(view=dict(msg, fov=30.0), size=[96, 120]))
     length, label = figures["scale_bar"]
     assert label == f"{length:g} units" and figures["extent"] / 5 / 2.5 <= length <= figures["extent"] / 5
-    assert page["command"].endswith(" --scale-bar -o view.png") and "scale_bar=True, unit=wv.unit" in page["python"]
+    assert page["command"].endswith(" --scale-bar -o view.png") and "scale_bar=True)" in page["python"]
     got = shell(page["command"], tmp_path / "page")
     assert np.array_equal(got, grey(saved))
     assert np.array_equal(executed(page["python"], tmp_path / "python", monkeypatch), got)

@@ -200,23 +200,26 @@ def parse_background(args):
 
 
 def picture_options(args, out) -> dict:
-    """``window``, ``background``, ``bit_depth`` and ``scale_bar`` of the picture written to ``out`` (a folder: PNG
-    frames), for :meth:`~clwave.io.result.RenderResult.save`; refused in one line where ``out`` holds no such
-    picture: a .tif's or .npy's values as rendered, a GIF's 8-bit frames without partial transparency."""
+    """``window``, ``background``, ``bit_depth``, ``scale_bar`` and ``colour_map`` of the picture written to ``out``
+    (a folder: PNG frames), for :meth:`~clwave.io.result.RenderResult.save`; refused in one line where ``out`` holds
+    no such picture: a .tif's or .npy's values as rendered, a GIF's 8-bit frames without partial transparency."""
     from ..io.images import TIFF_SUFFIXES, check_bit_depth, check_orthographic, check_scale_bar
+    from ..view.colours import check_colour_map
 
     look = dict(window=parse_window(args), background=parse_background(args) if hasattr(args, "background") else None,
-                bit_depth=args.bit_depth, scale_bar=check_scale_bar(getattr(args, "scale_bar", None)))
+                bit_depth=args.bit_depth, scale_bar=check_scale_bar(getattr(args, "scale_bar", None)),
+                colour_map=check_colour_map(args.colour_map))
     check_bit_depth(args.bit_depth)
     if look["scale_bar"] is not None:
         check_orthographic(dict(kind="camera", perspective=args.perspective))
     suffix = out.suffix.lower()
     if suffix in TIFF_SUFFIXES + (".npy",):
         given = {"--window": look["window"] != "auto", "--background": look["background"] is not None,
-                 "--bit-depth": args.bit_depth is not None, "--scale-bar": look["scale_bar"] is not None}
+                 "--bit-depth": args.bit_depth is not None, "--scale-bar": look["scale_bar"] is not None,
+                 "--colour-map": look["colour_map"] is not None}
         named = [name for name, there in given.items() if there]
         what = {"--window": "grey levels", "--background": "background", "--bit-depth": "bit depth",
-                "--scale-bar": "scale bar"}
+                "--scale-bar": "scale bar", "--colour-map": "colours"}
         if named:
             raise InputError(f"{' and '.join(named)} {'sets' if len(named) == 1 else 'set'} a .png's "
                              f"{' and '.join(what[n] for n in named)}; a {suffix} holds the values themselves: leave "
@@ -230,11 +233,17 @@ def picture_options(args, out) -> dict:
     return look
 
 
-def check_scale_bar_fits(look, camera, wv):
+def check_picture_fits(look, camera, wv, xray):
     """Refuse, before the render, a ``--scale-bar`` that does not fit ``camera``'s picture of ``wv`` (as
-    :func:`~clwave.io.images.draw_scale_bar` would after it)."""
+    :func:`~clwave.io.images.draw_scale_bar` would after it), and a ``--colour-map`` for a picture it does not colour
+    (an ``xray`` of ``wv``'s channels or a shaded one: :func:`~clwave.io.result.check_colour_mapped`)."""
     from ..io.images import draw_scale_bar
+    from ..io.result import RenderResult, check_colour_mapped
 
+    if look["colour_map"] is not None:
+        image = RenderResult(np.zeros((1, 1, wv.channels if xray else 4), np.float32),
+                             dict(mode="xray" if xray else "emission-absorption"))
+        check_colour_mapped(image, look["colour_map"], look["bit_depth"])
     if look["scale_bar"] is not None:
         draw_scale_bar(np.zeros(camera.size, np.uint8), camera.view(wv).pixel, wv.unit, look["scale_bar"])
 

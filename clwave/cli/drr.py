@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import ClwaveError, CommandWords, InputError
 from ..io.progress import progress
-from .checks import parse_size, picture_options
+from .checks import check_picture_fits, parse_size, picture_options
 from .options import (add_command, add_device_options, build_model, check_outputs, finish, kept_words,
                       parse_device_memory, warn)
 from .reading import numbers
@@ -102,6 +102,7 @@ def run(args):
     if wv.channels != 1:
         raise InputError(f"radiographs need a one-channel (attenuation) volume; {args.input} has {wv.channels} "
                          f"channels: give its attenuation as one channel")
+    check_picture_fits(look, None, wv, xray=True)  # a --colour-map, before the render (drr has no scale bar)
     if centre:
         cameras = poses(**dict(geometry, isocentre=tuple(float(c) for c in wv.origin)))
     unit = wv.unit
@@ -143,8 +144,8 @@ def run(args):
             # an intensity is shown as radiographs are: the detector's log response, bone bright (coordinates.md §5)
             picture = np.maximum(res.image, 0.0) if args.intensity else res.image
             meta = dict(res.meta, camera=cameras[0].to_dict())  # its pixel size the detector's (a view has none)
-            RenderResult(picture, meta).save(out, window=window, bit_depth=look["bit_depth"], unit=unit,
-                                             overwrite=args.force)
+            RenderResult(picture, meta).save(out, window=window, bit_depth=look["bit_depth"],
+                                             colour_map=look["colour_map"], overwrite=args.force)
         else:
             stack = (len(cameras), H, W)
             poses = progress(range(len(cameras)), desc="radiographs")

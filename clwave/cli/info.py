@@ -125,7 +125,7 @@ def _clw_lines(f) -> list:
     unit = f" {f['unit']}" if f["unit"] else ""  # none recorded (a file of before session 19: unknown)
     lines = [("file", f"{f['file']}: {file_size(f['bytes'])}, a wavelet model (.clw)"),
              ("volume", f"{x} x {y} x {z} voxels (x, y, z), spacing {_digits(f['spacing'][::-1])}{unit} "
-                        f"(x, y, z), origin {_lengths(f['origin'], extent)}"),
+                        f"(x, y, z), {_placed(f['origin'], f['shape'], f['spacing'], extent)}"),
              ("model", f"{f['levels']} level{'s' * (f['levels'] != 1)}, {f['channels']} channel"
                        f"{'s' * (f['channels'] != 1)} in {len(f['groups'])} group{'s' * (len(f['groups']) != 1)}"
                        f"{', interpolating' if f['interpolate'] else ''}")]
@@ -236,7 +236,7 @@ def _volume_lines(f) -> list:
         turned = f", before --orientation {f['reading']['orientation']} turns it" if stated else ""
         missing = "" if given or f["spacing_in_file"] else ": none in the file, give yours"
         place = f"{_digits(f['spacing'][::-1])}{unit} (x, y, z; {f['spacing_option']}{' given' * given}" \
-                f"{turned}{missing}), origin {_lengths(f['origin'], extent)}"
+                f"{turned}{missing}), {_placed(f['origin'], f['shape'], f['spacing'], extent)}"
         lines.append(("spacing", place + (" (RAS+)" if f["format"] in RAS_FORMATS or stated else "")))
     elif not f["time"]:
         lines.append(("spacing", "found with the voxels when the file is read (1 where it gives none): "
@@ -322,6 +322,17 @@ def _fits_lines(c, shape, spacing) -> list:
 def _extent(shape, spacing) -> float:
     """The volume's largest length in world units: what :func:`_lengths` rounds to."""
     return max(n * abs(d) for n, d in zip(shape[:3], spacing))
+
+
+def _placed(origin, shape, spacing, extent) -> str:
+    """Where a volume of ``shape`` (z, y, x, ...; None: unknown) and ``spacing`` lies, in words a user of any format
+    reads right: clwave's ``origin`` (x, y, z) is its centre (docs/coordinates.md §1; "origin" in a file is often its
+    first voxel), and the voxel of least x, y, z (an MRC map's first voxel, at its header's origin as ChimeraX reads
+    it) is half the box less a voxel from it (until trial29 the centre alone, printed as "origin")."""
+    if shape is None:  # not known before the voxels are read: no corner
+        return f"centre {_lengths(origin, extent)}"
+    corner = np.asarray(origin, float) - np.abs(spacing[::-1]) * (np.array(shape[2::-1]) - 1) / 2
+    return f"centre {_lengths(origin, extent)}, corner voxel (least x, y, z) {_lengths(corner, extent)}"
 
 
 def _lengths(values, extent, sep=", ") -> str:

@@ -7,7 +7,7 @@ import json
 from ..errors import InputError
 from ..io.images import write_gif
 from ..io.progress import progress
-from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, picture_options
+from .checks import check_picture_fits, make_camera, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_frames_output, check_outputs, finish,
                       parse_device_memory, post_transfer_function)
 
@@ -40,7 +40,7 @@ def run(args):
         options = dict(omega_s=args.omega_s, coarse=args.coarse or None)
     background, window, device_memory = look["background"], look["window"], parse_device_memory(args)
     wv, _ = build_model(args, rgba=raytrace and not args.xray)
-    check_scale_bar_fits(look, camera, wv)
+    check_picture_fits(look, camera, wv, xray=not raytrace or args.xray)
     if raytrace and not args.xray:
         options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering
     elif raytrace:  # line integrals of the whole model, as splatting draws them (docs/raytracing.md §1)
@@ -58,12 +58,13 @@ def run(args):
     with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
         if as_folder:  # written beside it, renamed into place: never mixed with another run's frames
             out.parent.mkdir(parents=True, exist_ok=True)
-            folder, unit = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png"), wv.unit
+            folder = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png")
             for f in frames:
                 f.save(folder / f"frame_{f.index:03d}.png", window=window, background=background,
-                       bit_depth=look["bit_depth"], unit=unit, scale_bar=look["scale_bar"])
+                       bit_depth=look["bit_depth"], scale_bar=look["scale_bar"], colour_map=look["colour_map"])
         else:
-            write_gif(out, [f.result().picture(window, background, scale_bar=look["scale_bar"], unit=wv.unit)
+            write_gif(out, [f.result().picture(window, background, scale_bar=look["scale_bar"],
+                                               colour_map=look["colour_map"])
                             for f in frames], 0.5, args.force)
         if args.stats:
             meta = dict(frames[-1].meta, window=frames[-1].result().display_window(window))  # as render's (§4)

@@ -7,7 +7,7 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .checks import check_scale_bar_fits, make_camera, parse_clip, parse_lights, parse_turntable_axis, picture_options
+from .checks import check_picture_fits, make_camera, parse_clip, parse_lights, parse_turntable_axis, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
                       parse_device_memory, parse_scheduler, post_transfer_function)
 
@@ -35,8 +35,7 @@ def run(args):
     lights = parse_lights(args)
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
     wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
-    unit = wv.unit
-    check_scale_bar_fits(look, camera, wv)
+    check_picture_fits(look, camera, wv, xray=args.method != "raytrace" or args.xray)
     if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
         from ..raytrace.regions import check_cluster_model
 
@@ -80,11 +79,11 @@ def run(args):
         lines = []
         if args.turntable is None:
             result = turn[0]
-            result.save(out, **look, unit=unit, overwrite=args.force)
+            result.save(out, **look, overwrite=args.force)
         else:
             window = turn.window(window) or window  # resolved once: the pictures' and --stats' window
-            turn.save(out, window=window, background=background, scale_bar=look["scale_bar"], unit=unit,
-                      frame_time=args.frame_time or 0.1, overwrite=args.force)
+            turn.save(out, window=window, background=background, scale_bar=look["scale_bar"],
+                      colour_map=look["colour_map"], frame_time=args.frame_time or 0.1, overwrite=args.force)
             result = RenderResult(turn[0].image, turn.meta)
             seconds = result.meta["turntable_seconds"]
             views = f"{len(turn)} view{'s' if len(turn) != 1 else ''}"
@@ -95,7 +94,6 @@ def run(args):
         if raw is not None:  # a turntable's views as one (N, H, W, C) array
             (result if args.turntable is None else turn).save(raw, overwrite=args.force)
         if stats is not None:
-            result.meta["unit"] = unit  # of "pixel" (world units a pixel); None: the input gives none
             result.save(stats, overwrite=args.force)
         finish(outputs, lines + [_report(args, camera, result.meta, out)])
     return 0

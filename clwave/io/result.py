@@ -18,8 +18,8 @@ import numpy as np
 
 from ..errors import InputError
 from .files import check_suffix, write_atomic
-from .images import (PNG_SUFFIXES, TIFF_SUFFIXES, check_bit_depth, check_orthographic, check_scale_bar, check_unit,
-                     draw_scale_bar, pixel_size, write_png, write_tiff)
+from .images import (PNG_SUFFIXES, TIFF_SUFFIXES, UNIT_METRES, check_bit_depth, check_orthographic, check_scale_bar,
+                     check_unit, draw_scale_bar, pixel_size, write_png, write_tiff)
 from ..model.tf_passes import AUTO_PERCENTILES
 from ..model.tf_checks import check_window
 
@@ -31,8 +31,8 @@ REPR_PNG_SIDE = 512
 @dataclass(repr=False)  # not the whole array: a text front-end or nbconvert shows the repr
 class RenderResult:
     """``image`` float32 (H, W, C); ``meta``: method, device, counts, timings in seconds, and the view: ``camera``
-    (the camera given, its ``to_dict()``) and ``pixel`` (world width of a pixel at the target; docs/coordinates.md
-    §3)."""
+    (the camera given, its ``to_dict()``), ``pixel`` (world width of a pixel at the target; docs/coordinates.md
+    §3) and ``unit`` (the model's world unit, "A", "nm", ... ; None where the input gave none)."""
 
     image: np.ndarray
     meta: dict = field(default_factory=dict)
@@ -45,13 +45,23 @@ class RenderResult:
         """8-bit :meth:`picture`."""
         return self.picture(window, background)
 
-    def picture(self, window="auto", background=None, bit_depth=8, scale_bar=None, unit=None) -> np.ndarray:
+    def picture(self, window="auto", background=None, bit_depth=8, scale_bar=None, unit=None,
+                colour_map=None) -> np.ndarray:
         """8- or 16-bit (H, W) grey or (H, W, 3) colour picture of the image: an X-ray of one channel grey, of two
         magenta (channel 0) and green (1), of three or four its first three as RGB; one window for all.  A shaded
         image is composited over ``background`` (linear RGB in 0..1, default black) before its sRGB encoding, or
         with ``background="transparent"`` (H, W, 4): its colour unpremultiplied (clipped to 1 where light was
-        added), sRGB-encoded, and its alpha.  ``scale_bar`` (True, or a length in world units ``unit``) burns in a
-        scale bar (:func:`~clwave.io.images.draw_scale_bar`): an orthographic view's only."""
+        added), sRGB-encoded, and its alpha.  ``scale_bar`` (True, or a length in ``unit``) burns in a scale bar
+        (:func:`~clwave.io.images.draw_scale_bar`): an orthographic view's only.  ``unit`` (:meth:`in_unit`): the
+        bar's unit, converted from the result's own (``meta["unit"]``, the default); where that is None, the
+        world unit it declares.  ``colour_map``: a one-channel X-ray's grey levels in the colours of a map
+        (:data:`clwave.view.colours.NAMES`, the viewer's: "grey_r" shows dark bright, at 8 or 16 bits; "viridis",
+        "magma_r", ... 8 bits only)."""
+        from ..view.colours import apply, check_colour_map
+
+        colour_map = check_colour_map(colour_map)
+        if colour_map is not None:
+            check_colour_mapped(self, colour_map, bit_depth)
         if (scale_bar := check_scale_bar(scale_bar)) is not None:
             check_orthographic(self.meta.get("camera") or {})
         if self.is_xray and background is not None:
@@ -86,8 +96,26 @@ class RenderResult:
             if background == "transparent":
                 scaled = np.concatenate([scaled, alpha], axis=-1)
         picture = np.round(top * scaled).astype(np.uint8 if top < 256 else np.uint16)
-        return picture if scale_bar is None else \
-            draw_scale_bar(picture, self.meta["pixel"], check_unit(unit), scale_bar)
+        if colour_map is not None:
+            picture = apply(picture, colour_map, int(top))
+        if scale_bar is None:
+            return picture
+        factor, unit = self.in_unit(unit)
+        return draw_scale_bar(picture, self.meta["pixel"] * factor, unit, scale_bar)
+
+    def in_unit(self, unit=None) -> tuple:
+        """``(factor, unit)``: the length unit a picture's scale bar and pixel size are written in (``unit``, or
+        ``meta["unit"]`` where it is None) and the factor that converts world units into it; where ``meta`` has no
+        unit, a given ``unit`` declares the world unit (factor 1).  One InputError for an unknown ``unit``."""
+        unit, own = check_unit(unit), self.meta.get("unit")
+        if unit is None or own is None or unit == own:
+            return 1.0, unit or own
+        return UNIT_METRES[own] / UNIT_METRES[unit], unit
+
+    def _pixel_size(self, factor) -> tuple | None:
+        """:func:`~clwave.io.images.pixel_size` times ``factor`` (:meth:`in_unit`'s)."""
+        size = pixel_size(self.meta)
+        return None if size is None else tuple(factor * s for s in size)
 
     @property
     def seconds(self) -> float | None:
@@ -118,21 +146,23 @@ class RenderResult:
         return self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
 
     def save(self, path, *, window="auto", background=None, bit_depth=None, unit=None, scale_bar=None,
-             overwrite=False) -> Path:
+             colour_map=None, overwrite=False) -> Path:
         """Write ``.png`` (windowed, or composited over ``background`` or transparent: :meth:`picture`, of
         ``bit_depth`` 8 or 16 bits a sample), ``.tif``/``.tiff`` (float32, as rendered; a shaded image's alpha
-        associated, premultiplied), ``.npy`` (raw float32) or ``.json`` (meta).  ``unit``: the world unit where it
-        is a length ("mm", :data:`~clwave.io.images.UNIT_METRES`), else None; the size of a pixel
-        (:func:`~clwave.io.images.pixel_size`) goes into a PNG's pHYs where it is a length, into a TIFF's resolution
-        always (per world unit where it is not).  ``scale_bar``: a ``.png``'s scale bar (:meth:`picture`).
+        associated, premultiplied), ``.npy`` (raw float32) or ``.json`` (meta).  ``unit`` (:meth:`in_unit`): the
+        unit ("nm", :data:`~clwave.io.images.UNIT_METRES`) the pixel size and scale bar are written in, converted
+        from the result's own world unit (``meta["unit"]``, the default); where that is None, the world unit it
+        declares.  The size of a pixel (:func:`~clwave.io.images.pixel_size`) goes into a PNG's pHYs where its unit
+        is known, into a TIFF's resolution always (per world unit where it is not).  ``scale_bar``: a ``.png``'s
+        scale bar, ``colour_map`` an X-ray's colours (:meth:`picture`).
 
         An image with non-finite pixels is refused (nothing is written): it is never a picture."""
         path = check_suffix(path, PNG_SUFFIXES + TIFF_SUFFIXES + (".npy", ".json"))
         suffix = path.suffix.lower()
-        bits, unit = check_bit_depth(bit_depth), check_unit(unit)
+        bits, (factor, known) = check_bit_depth(bit_depth), self.in_unit(unit)
         given = [f"{name}=" for name, value in (("window", None if isinstance(window, str) and window == "auto" else
                                                  window), ("background", background), ("bit_depth", bit_depth),
-                                                ("scale_bar", check_scale_bar(scale_bar)))
+                                                ("scale_bar", check_scale_bar(scale_bar)), ("colour_map", colour_map))
                  if value is not None]
         if given and suffix not in PNG_SUFFIXES:
             raise InputError(f"{' and '.join(given)} {'set' if len(given) > 1 else 'sets'} a .png's picture; {path} "
@@ -143,16 +173,32 @@ class RenderResult:
             raise InputError(f"the image has {bad} non-finite value(s) (NaN/Inf), so {path} was not written; "
                              f"the input holds values too large for float32, or the view is degenerate")
         if suffix in PNG_SUFFIXES:
-            data = self.picture(window, background, bits, scale_bar, unit)
-            return write_atomic(path, lambda fh: write_png(fh, data, pixel_size(self.meta), unit), overwrite)
+            data = self.picture(window, background, bits, scale_bar, unit, colour_map)
+            return write_atomic(path, lambda fh: write_png(fh, data, self._pixel_size(factor), known), overwrite)
         if suffix in TIFF_SUFFIXES:
             image = self.image[..., 0] if self.image.shape[-1] == 1 else self.image
-            return write_atomic(path, lambda fh: write_tiff(fh, image, pixel_size(self.meta), unit,
+            return write_atomic(path, lambda fh: write_tiff(fh, image, self._pixel_size(factor), known,
                                                             alpha=not self.is_xray), overwrite)
         if suffix == ".npy":
             return write_atomic(path, lambda fh: np.save(fh, self.image), overwrite)
         text = json.dumps(self.meta, indent=2, default=_jsonable).encode()
         return write_atomic(path, lambda fh: fh.write(text), overwrite)
+
+
+def check_colour_mapped(result, name, bit_depth):
+    """Refuse (one line) the colour map ``name`` for a ``result`` it does not colour: a shaded image (its transfer
+    function's colours), an X-ray of several channels (shown in their own), a map of colours at 16 bits (its table
+    has 256)."""
+    channels = result.image.shape[-1]
+    if not result.is_xray or channels > 1:
+        what = "a shaded image has its transfer function's colours" if not result.is_xray else \
+            f"this X-ray has {channels} channels, shown in colours of their own"
+        raise InputError(f"colour_map={name!r} colours a one-channel X-ray's grey levels; {what}: leave it out",
+                         cli=f"--colour-map {name} colours a one-channel X-ray's grey levels; {what}: leave it out")
+    if not name.startswith("grey") and bit_depth == 16:
+        raise InputError(f"colour_map={name!r} has 256 colours, for an 8-bit picture: leave out bit_depth=16, or "
+                         f"use grey or grey_r", cli=f"--colour-map {name} has 256 colours, for an 8-bit picture: "
+                                                    f"leave out --bit-depth 16, or use grey or grey_r")
 
 
 def summary(image, meta) -> str:

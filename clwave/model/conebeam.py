@@ -299,11 +299,13 @@ def check_camera(camera, name="camera"):
         raise InputError(f"{name} must be a clwave.Camera or a clwave.ConeBeam, not {type(camera).__name__}")
 
 
-def view_record(camera, view: View) -> dict:
+def view_record(camera, view: View, unit=None) -> dict:
     """What a render's ``meta`` records of its view (docs/coordinates.md §4): ``camera``, the camera as given (its
-    ``to_dict()``; none where a resolved :class:`View` was given), and ``pixel``, the world width of a pixel of
-    ``view`` at its target (in perspective at the target, or a cone beam's isocentre, along the rows)."""
-    return dict(({} if isinstance(camera, View) else dict(camera=camera.to_dict())), pixel=float(view.pixel))
+    ``to_dict()``; none where a resolved :class:`View` was given), ``pixel``, the world width of a pixel of
+    ``view`` at its target (in perspective at the target, or a cone beam's isocentre, along the rows), and ``unit``,
+    the model's world unit (``Volume.unit``; None where it is not known), which a picture's scale bar is in."""
+    return dict(({} if isinstance(camera, View) else dict(camera=camera.to_dict())), pixel=float(view.pixel),
+                unit=unit)
 
 
 def resolve_view(camera, volume) -> View:

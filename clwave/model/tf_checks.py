@@ -85,8 +85,10 @@ def check_window(window, option=None):
     except (TypeError, ValueError, OverflowError):
         raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}") from None
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        inverted = " (inverted contrast: --colour-map grey_r)" if option == "--window" and lo > hi else ""
         raise InputError(f"window ({lo:g}, {hi:g}) must be two finite numbers (lo, hi) with lo < hi",
-                         cli=option and f"{option} {lo:g},{hi:g} must be two finite numbers LO,HI with LO < HI")
+                         cli=option and f"{option} {lo:g},{hi:g} must be two finite numbers LO,HI with LO < HI"
+                                        f"{inverted}")
     return (lo, hi)
 
 

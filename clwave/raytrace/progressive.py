@@ -105,7 +105,7 @@ def _frames(tracer, camera, options, steps, budget, error, final, shown):
         res = tracer.render(camera if reduction == 1 else camera.reduced(reduction, view), detail=detail,
                             **options)
         # the meta of the camera given, whose image the frame is (upsampled), not of the reduced one
-        return upsample(res.image, view.size, reduction), dict(res.meta, **view_record(camera, view))
+        return upsample(res.image, view.size, reduction), dict(res.meta, **view_record(camera, view, tracer.wv.unit))
 
     for index, (detail, reduction) in enumerate(plan):
         if budget is not None and last is not None:

@@ -404,7 +404,7 @@ class RayTracer:
             passes=1 if passes is None else len(passes), device_budget=self.budget.total,
             segments_by_lattice=dict(zip(("1", "2", "4", "8+"),
                                          lattice_stats.get().reshape(-1, 4).sum(axis=0).tolist())))
-        meta.update(view_record(camera, view))
+        meta.update(view_record(camera, view, wv.unit))
         if post is not None:
             meta.update(classification="post", transfer_function=post.tf.to_dict(),
                         tf_window=None if post.window is None else list(post.window),

@@ -195,7 +195,7 @@ class SplatRenderer:
             tables = [ViewTables(self.wv, gi, ls, self.omega_s, self.sampling, device=self.cc,
                                  max_texels=self.cc.info.max_alloc // 4) for gi, ls in enumerate(per_layer)]
         self._prepare(tables, view.size)
-        acc = Accumulator(self, view, layers, tables, upto, view_record(camera, view))
+        acc = Accumulator(self, view, layers, tables, upto, view_record(camera, view, self.wv.unit))
         if view.perspective and self.coarse:  # what coarsening leaves of the tolerance (docs/splatting.md §8)
             acc.drop_share = [left for _, left in plans]
         return acc

@@ -5,7 +5,9 @@ windowed line integrals (:func:`apply`).
 and Smith, CC0; bone after MATLAB's), sampled once at their 256 entries and rounded to 8 bits,
 ``np.round(255 * matplotlib.colormaps[name](np.arange(256))[:, :3])``, stored here as base64 of the (256, 3) uint8
 rows (the page's colour bar gets them so, :func:`page_tables`): matplotlib is no dependency of clwave
-(tests/test_view.py compares them with it where it is installed).
+(tests/test_view.py compares them with it where it is installed).  Each also reversed, named as matplotlib and napari
+name it, ``_r`` after its name (``grey_r``: dark bright, as a cryo-EM map's protein is shown): one rule, its table
+upside down.  The viewer's X-ray views and the pictures of :meth:`clwave.RenderResult.picture` use them.
 """
 
 from __future__ import annotations
@@ -14,6 +16,8 @@ import base64
 from functools import cache
 
 import numpy as np
+
+from ..errors import InputError
 
 _TABLES = {
     "bone": (
@@ -69,22 +73,39 @@ _TABLES = {
         "/PS2/Pa4/Pe5/Pm7/Pu9/P2/"
     ),
 }
-#: the names a page may choose, grey first (the default)
-NAMES = ("grey", *_TABLES)
+#: the names a page may choose, grey first (the default), then each reversed (``_r``)
+_FORWARD = ("grey", *_TABLES)
+NAMES = (*_FORWARD, *(f"{name}_r" for name in _FORWARD))
 
 
 @cache
 def table(name: str) -> np.ndarray:
-    """The (256, 3) uint8 colours of ``name`` (one of :data:`NAMES` but grey), read-only."""
-    return np.frombuffer(base64.b64decode(_TABLES[name]), np.uint8).reshape(256, 3)
+    """The (256, 3) uint8 colours of ``name`` (one of :data:`NAMES`), read-only."""
+    base = name.removesuffix("_r")
+    rows = np.repeat(np.arange(256, dtype=np.uint8), 3).reshape(256, 3) if base == "grey" else \
+        np.frombuffer(base64.b64decode(_TABLES[base]), np.uint8).reshape(256, 3)
+    return rows[::-1] if name.endswith("_r") else rows
 
 
 def page_tables() -> dict:
     """Each map's 256 colours as the page draws its colour bar from them (the hello's ``colour_maps``, docs/viewer.md
-    §3): name to base64 of the (256, 3) uint8 rows, grey first."""
-    return {"grey": base64.b64encode(np.repeat(np.arange(256, dtype=np.uint8), 3)).decode(), **_TABLES}
+    §3): name to base64 of the (256, 3) uint8 rows, in :data:`NAMES`' order."""
+    return {name: base64.b64encode(table(name).tobytes()).decode() for name in NAMES}
 
 
-def apply(picture: np.ndarray, name: str) -> np.ndarray:
-    """An 8-bit grey picture (H, W) in the colours of ``name``: (H, W, 3), or grey as it is."""
-    return picture if name == "grey" else table(name)[picture]
+def apply(picture: np.ndarray, name: str, top=255) -> np.ndarray:
+    """A grey picture (H, W) of levels 0..``top`` in the colours of ``name``: grey as it is, ``grey_r`` ``top`` less
+    each level (at any bit depth), another (8 bits only: 256 colours) (H, W, 3)."""
+    if name.removesuffix("_r") == "grey":
+        return top - picture if name.endswith("_r") else picture
+    return table(name)[picture]
+
+
+def check_colour_map(name):
+    """``name`` (None: none) as one of :data:`NAMES`, matplotlib's spelling "gray" taken as "grey"; one InputError
+    (in the command line's words too) otherwise."""
+    if name is None or isinstance(name, str) and name.replace("gray", "grey") in NAMES:
+        return None if name is None else name.replace("gray", "grey")
+    raise InputError(f"colour_map={name!r} must be one of {', '.join(NAMES)} (_r: reversed, e.g. grey_r to show "
+                     f"dark bright)", cli=f"--colour-map {name} must be one of {', '.join(NAMES)} (_r: reversed, "
+                                          f"e.g. grey_r to show dark bright)")

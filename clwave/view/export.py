@@ -218,8 +218,7 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
     tokens += ["--size", f"{cam.size[0]}x{cam.size[1]}"]
     if spec.mode == "xray":
         tokens += _token("--window", ",".join(map(_number, spec.window)))
-        if spec.colour_map not in (None, "grey"):
-            notes.append(f"# not in this command: the colour map {spec.colour_map} (clwave render writes grey)")
+        tokens += [] if spec.colour_map in (None, "grey") else ["--colour-map", spec.colour_map]
         if spec.detail < 1.0:
             notes.append(f"# not in this command: detail kept {100 * spec.detail:.3g} % (clwave render splats every "
                          f"kept coefficient)")
@@ -253,18 +252,17 @@ def python(origin: Origin, spec: Spec, output=OUTPUT) -> str:
     """Python that renders ``spec``: the model read as ``clwave view`` read it, the camera, ``clwave.splat`` or
     ``clwave.raytrace`` with the view's arguments, and the picture saved."""
     lines = ["import clwave", ""] + _model(origin, spec)
-    cam, bar = spec.camera, ", scale_bar=True, unit=wv.unit" if spec.scale_bar else ""
+    cam, bar = spec.camera, ", scale_bar=True" if spec.scale_bar else ""
     framing = f"perspective=True, fov={_number(cam.fov)}, distance={_number(cam.distance)}" if cam.perspective \
         else f"extent={_number(cam.extent)}"
     lines.append(f"camera = clwave.Camera(azimuth={_number(cam.azimuth)}, elevation={_number(cam.elevation)}, "
                  f"size={tuple(cam.size)!r}, {framing})")
     if spec.mode == "xray":
-        if spec.colour_map not in (None, "grey"):
-            lines.append(f"# not in this snippet: the colour map {spec.colour_map} (saved grey)")
         if spec.detail < 1.0:
             lines.append(f"# not in this snippet: detail kept {100 * spec.detail:.3g} % (every kept coefficient)")
         lines += ["result = clwave.splat(wv, camera)",
-                  f"result.save({output!r}, window=({_number(spec.window[0])}, {_number(spec.window[1])}){bar})"]
+                  f"result.save({output!r}, window=({_number(spec.window[0])}, {_number(spec.window[1])}){bar}"
+                  f"{'' if spec.colour_map in (None, 'grey') else f', colour_map={spec.colour_map!r}'})"]
         return "\n".join(lines) + "\n"
     options = f", tolerance={_number(spec.tolerance)}"
     if spec.tf is not None:

@@ -27,8 +27,9 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):
     dimensions, its axis order ``mapc``/``mapr``/``maps``, and the samples it declares against the file's size);
     the samples transposed from the file's (section, row, column) order to (z, y, x).  Spacing (Å) is the cell
     over its sampling along each axis, None where the header gives none (a warning unless ``warn_spacing`` is
-    false); the first voxel is at the header's ``origin`` where it is finite, not 0, else at its start indices times the
-    spacing (as ChimeraX places a map); ``origin`` is the volume's centre.  A volume stack is refused; an image stack
+    false); the first voxel is at the header's ``origin`` where it is finite, not 0 (at minus it in a file of IMOD's
+    stamp, as IMOD defines it: :func:`_imod`), else at its start indices times the spacing (as ChimeraX places a
+    map); ``origin`` is the volume's centre.  A volume stack is refused; an image stack
     (space group 0: a tilt series, a stack of particles) is read as a volume, with a warning.  Mode 0's bytes are
     signed (MRC2014) unless IMOD's stamp says they are not, or ``dtype`` (uint8 or int8) says how to read them; read
     signed, they are warned of where they look wrapped (:data:`WRAPPED`)."""
@@ -89,6 +90,7 @@ def read_mrc(path, chunks, fits=None, warn_spacing=True, dtype=None):
     start = np.zeros(3)  # x, y, z: the first voxel's index in the map's grid (nxstart: columns', ...)
     start[[a - 1 for a in axes[::-1]]] = [float(header.nxstart), float(header.nystart), float(header.nzstart)]
     given = np.array([float(header.origin.x), float(header.origin.y), float(header.origin.z)])
+    given = -given if _imod(header)[0] else given
     step = np.array(spacing[::-1])
     first = given if np.any(given) and np.all(np.isfinite(given)) else start * step
     centre = first + step * (np.array(data.shape[:3][::-1]) - 1) / 2
@@ -131,11 +133,20 @@ def _header(path):
         raise FileFormatError(f"{path} is not an MRC/CCP4 map clwave reads: {exc} (mrcfile)") from None
 
 
-def _imod_unsigned(header) -> bool:
-    """Whether mode 0's bytes are unsigned: IMOD's stamp ("IMOD" at byte 152) without its signed-bytes flag (bit 0 of
-    imodFlags at 156), as IMOD wrote every byte file before 4.2.23; MRC2014's mode 0 is signed."""
+def _imod(header) -> tuple:
+    """``(stamped, flags)``: whether IMOD wrote the file (its stamp, "IMOD" at byte 152), and its imodFlags (at 156).
+    IMOD's origin is "the origin of the coordinate system relative to the first pixel" (its mrc_format.txt; "defined
+    in the opposite way in UCSF Chimera", its alterheader's manual): the first voxel at minus it, where ChimeraX,
+    which ignores the stamp there, and mrcfile read the origin as the first voxel's place."""
     stamp, flags = np.frombuffer(header.tobytes(), header.nx.dtype, 2, 152)
-    return int(stamp) == _IMOD_STAMP and not int(flags) & 1
+    return int(stamp) == _IMOD_STAMP, int(flags)
+
+
+def _imod_unsigned(header) -> bool:
+    """Whether mode 0's bytes are unsigned: IMOD's stamp without its signed-bytes flag (bit 0 of imodFlags), as IMOD
+    wrote every byte file before 4.2.23; MRC2014's mode 0 is signed."""
+    stamped, flags = _imod(header)
+    return stamped and not flags & 1
 
 
 def _bytes_as(path, mode, given):
@@ -165,8 +176,9 @@ def _wrapped(path, stored, offset) -> bool:
 
 def _spacing(header):
     """``(dz, dy, dx)`` in Å: the cell's lengths over its sampling (mx, my, mz) along x, y, z; None where any is not
-    a positive finite number (a cell of 0: no voxel size)."""
+    a positive finite number (a cell of 0: no voxel size).  A length is its float32's shortest decimal (6254.72, not
+    6254.7202): 13.48 Å over 464 voxels, not float32's noise over them, 13.4800005."""
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        size = [float(length) / float(n) for length, n in zip(header.cella.tolist(), (header.mx, header.my, header.mz))
-                if int(n) > 0]
+        size = [float(str(np.float32(length))) / float(n)
+                for length, n in zip(header.cella.tolist(), (header.mx, header.my, header.mz)) if int(n) > 0]
     return tuple(size[::-1]) if len(size) == 3 and all(0 < s < math.inf for s in size) else None
