@@ -326,7 +326,8 @@ def test_a_replaced_file_gives_the_shaded_views_no_model(clw):
     other.groups[0].values[0, 0] += 1.0
     told = []
     state = SimpleNamespace(whole=Future(), upgraded=lambda mode, exc=None: told.append((mode, exc)),
-                            coarse_first=False, _stop=threading.Event(), _in_file=threading.Event())
+                            coarse_first=False, _stop=threading.Event(), _in_file=threading.Event(),
+                            logged=lambda call, *args: call(*args))
     ViewServer._read_whole(state, SimpleNamespace(whole=lambda **k: model, prefix=other, path=clw))
     with pytest.raises(clwave.FileFormatError, match="not a part of the whole file"):
         state.whole.result(timeout=0)

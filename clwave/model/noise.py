@@ -150,15 +150,14 @@ def warn_noise_gain(groups, levels):
                                cli=said.format("--noise", "--wavelet linear or haar (or fewer --levels) denoise")))
 
 
-def warn_kept_noise(wv, model, keep, threshold):
+def warn_kept_noise(wv, model, keep, threshold, importance_of):
     """Warn that ``model``, ``wv`` thresholded by ``keep=`` or ``threshold=`` (the one not None; neither: ``noise=``),
     keeps mostly noise: every channel's noise measured (:func:`measure_noise`), noise filling the finest band (more
     than :data:`MOSTLY` of its interior coefficients non-zero: white noise makes each non-zero, a clean
     piecewise-constant volume leaves them zero away from its edges, whose few large ones can look like noise), and
-    more than :data:`MOSTLY` of the kept details within :data:`NOISE_K` times their band's noise (docs/model.md §2)."""
-    from .wavelet import importance_of
-
-    if keep == 1 or (keep is None and threshold is None):  # every coefficient (the volume itself), or noise=
+    more than :data:`MOSTLY` of the kept details within :data:`NOISE_K` times their band's noise (docs/model.md §2),
+    their importance by ``importance_of`` (:func:`.wavelet.importance_of`, given: wavelet.py imports this module)."""
+    if keep == 1 or threshold == 0 or (keep is None and threshold is None):  # the volume itself (zeros), or noise=
         return
     sigmas = wv.measure_noise()
     if not sigmas or None in sigmas or any(g.band_slices()[-1].stop - g.band_slices()[-1].start != g.bands[-1].size

@@ -345,7 +345,7 @@ class WaveletVolume:
                                            np.ascontiguousarray(g.values[:, chosen])))
         if short:  # the approximation band ranks first: no detail, and part of it dropped
             warn_short_budget(keep, budget, short, self.n_voxels)
-        warn_kept_noise(self, out, keep, threshold)
+        warn_kept_noise(self, out, keep, threshold, importance_of)
         return out
 
     # ------------------------------------------------------- upload views
