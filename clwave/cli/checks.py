@@ -238,12 +238,10 @@ def check_picture_fits(look, camera, wv, xray):
     :func:`~clwave.io.images.draw_scale_bar` would after it), and a ``--colour-map`` for a picture it does not colour
     (an ``xray`` of ``wv``'s channels or a shaded one: :func:`~clwave.io.result.check_colour_mapped`)."""
     from ..io.images import draw_scale_bar
-    from ..io.result import RenderResult, check_colour_mapped
+    from ..io.result import check_colour_mapped
 
     if look["colour_map"] is not None:
-        image = RenderResult(np.zeros((1, 1, wv.channels if xray else 4), np.float32),
-                             dict(mode="xray" if xray else "emission-absorption"))
-        check_colour_mapped(image, look["colour_map"], look["bit_depth"])
+        check_colour_mapped(look["colour_map"], xray, wv.channels, look["bit_depth"])
     if look["scale_bar"] is not None:
         draw_scale_bar(np.zeros(camera.size, np.uint8), camera.view(wv).pixel, wv.unit, look["scale_bar"])
 

@@ -61,7 +61,7 @@ class RenderResult:
 
         colour_map = check_colour_map(colour_map)
         if colour_map is not None:
-            check_colour_mapped(self, colour_map, bit_depth)
+            check_colour_mapped(colour_map, self.is_xray, self.image.shape[-1], bit_depth)
         if (scale_bar := check_scale_bar(scale_bar)) is not None:
             check_orthographic(self.meta.get("camera") or {})
         if self.is_xray and background is not None:
@@ -185,13 +185,12 @@ class RenderResult:
         return write_atomic(path, lambda fh: fh.write(text), overwrite)
 
 
-def check_colour_mapped(result, name, bit_depth):
-    """Refuse (one line) the colour map ``name`` for a ``result`` it does not colour: a shaded image (its transfer
-    function's colours), an X-ray of several channels (shown in their own), a map of colours at 16 bits (its table
-    has 256)."""
-    channels = result.image.shape[-1]
-    if not result.is_xray or channels > 1:
-        what = "a shaded image has its transfer function's colours" if not result.is_xray else \
+def check_colour_mapped(name, xray, channels, bit_depth):
+    """Refuse (one line) the colour map ``name`` for a picture it does not colour: a shaded image (not ``xray``: its
+    transfer function's colours), an X-ray of several ``channels`` (shown in their own), a map of colours at 16 bits
+    (its table has 256)."""
+    if not xray or channels > 1:
+        what = "a shaded image has its transfer function's colours" if not xray else \
             f"this X-ray has {channels} channels, shown in colours of their own"
         raise InputError(f"colour_map={name!r} colours a one-channel X-ray's grey levels; {what}: leave it out",
                          cli=f"--colour-map {name} colours a one-channel X-ray's grey levels; {what}: leave it out")
