@@ -29,8 +29,9 @@ def check_points(points) -> np.ndarray:
         row = int(np.nonzero(~np.all(np.isfinite(p), axis=1))[0][0])
         raise InputError(f"transfer function point {row} {p[row].tolist()} is not finite "
                          "(NaN or Inf); give finite numbers")
-    if np.any(np.abs(p[:, [0, 4]]) > FLOAT32_MAX):  # the values and opacities clwave classifies in float32
-        row = int(np.nonzero(np.any(np.abs(p[:, [0, 4]]) > FLOAT32_MAX, axis=1))[0][0])
+    beyond = np.any(np.abs(p[:, [0, 4]]) > FLOAT32_MAX, axis=1)  # the values and opacities classified in float32
+    if beyond.any():
+        row = int(np.argmax(beyond))
         raise InputError(f"transfer function point {row} {p[row].tolist()} is beyond float32's range (+-3.4e38), "
                          "in which clwave classifies: give smaller values and opacities (or a longer opacity unit)")
     bad = np.nonzero(np.diff(p[:, 0]) <= 0)[0]
