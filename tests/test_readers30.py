@@ -88,3 +88,83 @@ def test_an_hdf5_lzf_volume_is_read_and_its_forged_buffer_or_chunk_refused(tmp_p
     with pytest.raises(FileFormatError, match="its lzf filter states a buffer of 2,147,483,648 bytes, more than its "
                                               "chunk's 8,192"):
         np.asarray(clwave.load(tmp_path / "forged.h5").data)
+
+
+def _nifti(path, kind, data, slope, inter=0.0):
+    import nibabel as nib
+
+    image = getattr(nib, kind)(data, np.eye(4))
+    image.header.set_slope_inter(slope, inter)
+    nib.save(image, path)
+    return path
+
+
+def test_a_nifti2_scl_slope_that_underflows_float32_is_refused_and_nifti1s_subnormal_one_read(tmp_path, capsys):
+    """NIfTI-2's float64 ``scl_slope`` of 1e-310 made every voxel 0 in float32, rendered blank unwarned; NIfTI-1's
+    float32 1e-45 (the least subnormal) keeps the stored values apart, read as they scale (the oracle: NumPy's
+    float32 of stored x 1e-45)."""
+    from test_mgh import assert_refused_in_one_line
+
+    stored = np.arange(60, dtype=np.int16).reshape(3, 4, 5)
+    path = _nifti(tmp_path / "blank.nii", "Nifti2Image", stored, 1e-310)
+    assert_refused_in_one_line(capsys, path, r"blank\.nii has scl_slope = 1e-310 and scl_inter = 0\.0, which map every "
+                                             r"int16 sample to 0 in float32 \(its volume would be one value\); the "
+                                             "header is corrupt: correct its scl_slope$")
+    kept = clwave.load(_nifti(tmp_path / "tiny.nii", "Nifti1Image", stored, 1e-45), orientation=None).data
+    got = np.asarray(kept, np.float32)
+    assert np.unique(got).size == 60 and got.max() == np.float32(59 * 1.401298464324817e-45)
+
+
+def test_a_dicom_rescale_and_a_fits_bscale_that_underflow_are_refused_by_their_header(tmp_path, capsys, rng):
+    """The same class in the other formats' scaling (one home, ``shared.check_scaling``): a RescaleSlope of 1e-320
+    (every uint16 pixel the intercept 0), a BSCALE of 1e-300 on float32 samples (every pixel 0)."""
+    from test_fits import write as write_fits
+    from test_loaders import write_series
+    from test_mend28 import _refused_alike
+
+    write_series(tmp_path, rng, [(0.0, 0.0, float(z)) for z in range(3)], "1.2.3", ["a", "b", "c"],
+                 rescale=(1e-320, 0))
+    _refused_alike(capsys, tmp_path, r"has RescaleSlope = 1e-320 and RescaleIntercept = 0\.0, which map every uint16 "
+                                     r"sample to 0 in float32")
+    path = write_fits(tmp_path / "c.fits", np.arange(24, dtype=np.float32).reshape(2, 3, 4), -32, {"BSCALE": 1e-300})
+    _refused_alike(capsys, path, r"its HDU 0 has BSCALE = 1e-300 and BZERO = 0, which map every float32 sample to 0 in "
+                                 r"float32")
+
+
+def test_info_refuses_a_fits_cube_astropy_cannot_open_and_a_slice_folder_of_another_size(tmp_path, capsys):
+    """``EXTEND = NaN`` (fuzz29: 17 mutants) passed clwave's header checks, ``clwave info`` described it and each read
+    of a chunk failed ("Empty or corrupt FITS file"); a folder of TIFF or PNG slices with one of another size was
+    described by its first slice and refused by the read: both refused by ``info``, ``load`` and ``render`` alike."""
+    import imageio.v3 as iio
+    import tifffile
+
+    from test_fits import SKY
+    from test_fits import write as write_fits
+    from test_mend28 import _refused_alike
+
+    path = write_fits(tmp_path / "c.fits", np.ones((10, 12, 14), np.float32), -32, SKY)
+    content = path.read_bytes()
+    end = content.index(b"END     ")
+    path.write_bytes(content[:end] + b"EXTEND  =                  NaN".ljust(80) + content[end:end + 80]
+                     + content[end + 160:])
+    _refused_alike(capsys, path, r"c\.fits: astropy cannot open its HDU 0 \(Empty or corrupt FITS file\); a card "
+                                 r"astropy requires is not what FITS allows \(as EXTEND = NaN\): correct the header$")
+    for suffix, write in ((".tif", tifffile.imwrite), (".png", iio.imwrite)):
+        folder = tmp_path / suffix[1:]
+        folder.mkdir()
+        for k in range(3):
+            write(folder / f"s{k}{suffix}", np.zeros((6, 7) if k != 2 else (6, 8), np.uint8))
+        _refused_alike(capsys, folder, rf"slice {folder / f's2{suffix}'} has shape \(6, 8\) of uint8 but s0{suffix} "
+                                       r"has \(6, 7\) of uint8; all slices")
+
+
+def test_a_nrrd_spacing_of_infinity_is_refused_not_taken_as_unknown(tmp_path, capsys):
+    """``spacings: inf`` was taken as 1 with the warning of an unknown (nan) spacing; NaN still is (NRRD's unknown)."""
+    from test_mgh import assert_refused_in_one_line
+
+    head = b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 3 4\nspacings: %s 1 2\nencoding: raw\n\n"
+    (tmp_path / "inf.nrrd").write_bytes(head % b"inf" + bytes(24))
+    assert_refused_in_one_line(capsys, tmp_path / "inf.nrrd", r"inf\.nrrd: its spacings \(dz, dy, dx\) 2\.0, 1\.0, inf "
+                                                              r"include an infinite one; correct the header's spacings")
+    (tmp_path / "nan.nrrd").write_bytes(head % b"nan" + bytes(24))
+    assert clwave.load(tmp_path / "nan.nrrd", spacing=(1, 1, 1)).data.shape == (4, 3, 2)
