@@ -289,6 +289,10 @@ def test_a_kept_share_of_a_noisy_volume_warns_and_is_farther_from_the_truth_than
     assert truth_correlation(fixed, truth) > truth_correlation(data, truth)
     with pytest.warns(NoisyModelWarning, match="details threshold=0.5 keeps"):
         wv.threshold(threshold=0.5)
+    linear = clwave.WaveletVolume.from_volume(clwave.Volume(data), "linear", levels=3)
+    with pytest.warns(NoisyModelWarning, match=r"of the details keep=0.05 keeps .*linear wavelets\); to denoise, use "
+                                               r"threshold\(noise=3\) \(docs"):  # already linear: the threshold alone
+        linear.threshold(keep=0.05)
 
 
 @pytest.mark.parametrize("case", ["blob", "shepp-logan linear", "ct 1 %", "mri rician 5 %", "keep 1"])
