@@ -113,9 +113,6 @@ def clamped(tf: TransferFunction, value_range) -> TransferFunction:
 SHOWS = 0.05
 #: an image fewer of whose pixels show (:data:`SHOWS`) is nearly empty: 1 in 100 pixels, a few specks
 NEARLY_EMPTY = 0.01
-#: a nearly empty image's function whose opacity the model's values reach less than this share of (at most) has its
-#: opacity at values the model barely reaches (:meth:`ScalarRange.faint`)
-REACHED = 0.5
 
 
 @dataclass
@@ -260,11 +257,11 @@ class ScalarRange:
     def faint(self, post: Classification, shown: float):
         """Warn where the share ``shown`` of the image's pixels that show (:data:`SHOWS`) is below
         :data:`NEARLY_EMPTY`, naming where the transfer function is opaque (:func:`opaque_where`) and the values the
-        model's bricks hold (their ranges bound the field).  Where those values reach under :data:`REACHED` of its
-        largest opacity, its opacity lies at values the model barely reaches: the window that shows them; else it lies
-        within them and what it makes opaque is small or thin: the picture may be right, a shorter opacity unit
-        thickens thin features, and a model that smooths its voxels (order 3 and up, not interpolating) is told how it
-        lowers thin peaks.  Once a function and window (a viewer's frames, a turntable's views)."""
+        model's bricks hold (their ranges bound the field).  Where those values do not reach its largest opacity, its
+        opacity lies at values the model barely reaches: the window that shows them; else it lies within them and what
+        it makes opaque is small or thin: the picture may be right, a shorter opacity unit thickens thin features, and
+        a model that smooths its voxels (order 3 and up, not interpolating) is told how it lowers thin peaks.  Once a
+        function and window (a viewer's frames, a turntable's views)."""
         key = ("faint", json.dumps(post.tf.to_dict()), post.window)
         if shown >= NEARLY_EMPTY or key in self.tracer.told:
             return
@@ -279,7 +276,7 @@ class ScalarRange:
                 f"background or more ({round(255 * SHOWS)} of 255 levels of an 8-bit picture); {name} is opaque "
                 f"{opaque_where(points, opacity)}, and this model's values lie within {held[0]:.4g} .. {held[1]:.4g}")
         inside = np.clip(np.concatenate([held, points]), *held)  # the held values' ends and the points between
-        if np.interp(inside, points, opacity).max() < REACHED * opacity.max():
+        if np.interp(inside, points, opacity).max() < opacity.max():
             warn_outside(ClwaveWarning(line + f": put its opacity there (a preset: window=({held[0]:.4g}, "
                                               f"{held[1]:.4g}))",
                                        cli=line + f": put its opacity there (a preset: --tf-window {held[0]:.4g},"
@@ -289,13 +286,14 @@ class ScalarRange:
         unit = float(min(wv.spacing)) if post.tf.opacity_unit is None else post.tf.opacity_unit
         line += (": its opacity lies within them, so what it makes opaque is small or thin in this model (the picture "
                  "may be right)")
-        smooths = ("; this model smooths its voxels (its value at a voxel centre is a weighted mean of the voxel and "
-                   "its neighbours), so a layer a voxel or two thick peaks below its voxels' values: ")
-        smooths = "" if wv.interpolate or self.tracer.orders[0] < 3 else smooths
-        warn_outside(ClwaveWarning(line + (smooths and smooths + "a model of interpolate=True passes through them") +
-                                   f"; a shorter opacity_unit (now {unit:g}) makes thin features more opaque",
-                                   cli=line + (smooths and smooths + "--interpolate makes the model pass through them")
-                                   + f"; a shorter --opacity-unit (now {unit:g}) makes thin features more opaque"))
+        smooths = "" if wv.interpolate or self.tracer.orders[0] < 3 else (
+            "; this model smooths its voxels (its value at a voxel centre is a weighted mean of the voxel and its "
+            "neighbours), so a layer a voxel or two thick peaks below its voxels' values: {}")
+        thin = f"; a shorter {{}} (now {unit:g}) makes thin features more opaque"
+        warn_outside(ClwaveWarning(line + smooths.format("a model of interpolate=True passes through them") +
+                                   thin.format("opacity_unit"),
+                                   cli=line + smooths.format("--interpolate makes the model pass through them") +
+                                   thin.format("--opacity-unit")))
 
     def opaque(self, tf: TransferFunction) -> str | None:
         """Why ``tf`` makes this model nearly opaque (:meth:`TransferFunction.opaque_line`, as a volume's
