@@ -126,9 +126,8 @@ def test_a_diverging_map_centres_its_auto_window_on_zero(name):
 def test_the_diverging_maps_are_white_in_the_middle_and_their_ends_as_published():
     """The ends and middle of the tables against the published colours (matplotlib's seismic: dark blue
     (0, 0, 0.3) to dark red (0.5, 0, 0) through white; ColorBrewer's RdBu: #67001f to #053061 through #f7f7f7;
-    Moreland's
-    coolwarm: (59, 76, 192) to (180, 4, 38) through (221, 221, 221)), each within one level; the rows themselves are
-    checked against matplotlib in tests/test_view.py."""
+    Moreland's coolwarm: (59, 76, 192) to (180, 4, 38) through (221, 221, 221)), each within one level; the rows
+    themselves are checked against matplotlib in tests/test_view.py."""
     published = {"seismic": ((0, 0, 76.5), (255, 255, 255), (127.5, 0, 0)),
                  "RdBu": ((0x67, 0x00, 0x1F), (0xF7, 0xF7, 0xF7), (0x05, 0x30, 0x61)),
                  "coolwarm": ((59, 76, 192), (221, 221, 221), (180, 4, 38))}
