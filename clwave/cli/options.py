@@ -404,7 +404,8 @@ def add_device_options(g):
                    help="PNG window: auto (the default: from the image's values) or LO,HI")
     g.add_argument("--colour-map", "--colormap", metavar="NAME",
                    help="PNG and GIF of a one-channel X-ray: its grey levels in a colour map, grey (the default), "
-                        "bone, viridis, inferno or magma, or one of them reversed, NAME_r: grey_r shows dark bright "
+                        "bone, viridis, inferno, magma, or the diverging seismic, RdBu or coolwarm (their auto window "
+                        "centred on 0 for signed values), or one of them reversed, NAME_r: grey_r shows dark bright "
                         "(dark protein as 3dmod's inverse contrast, napari's gray_r)")
     g.add_argument("--bit-depth", type=int, choices=(8, 16), help="PNG: bits a sample, 8 (the default) or 16")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
