@@ -47,33 +47,34 @@ def cd(tmp_path):
 
 
 def test_the_series_of_several_studies_are_listed_by_study_and_picked_by_study_and_series(cd, capsys):
-    """The listing heads each study's series with its date (what tells them apart), description, accession and ID,
-    as Horos and RadiAnt list them, and never the patient; a number both studies have is refused naming STUDY/SERIES,
-    which picks by the study's date (as listed or stored), accession, ID or description."""
+    """The listing heads each study's series with its place in date order and its description, as Horos and RadiAnt
+    list them, and never the patient, nor the study's date, accession or ID (PHI: ``info`` shows them); a number both
+    studies have is refused naming STUDY/SERIES, which picks by the study's place, date (written with dashes or as
+    stored), accession, ID or description."""
     top, stacks = cd
     with pytest.raises(InputError) as excinfo:
         load(top)
     assert_one_line_error(excinfo)
     assert str(excinfo.value) == (
-        f"{top} holds 3 DICOM series: study 2026-11-29 'CT Thorax' (accession ACC11, ID 7): series 2 'Soft' (CT, 8 "
-        f"slices of 10 x 12); series 3 'Bone' (CT, 8 slices of 10 x 12) | study 2026-12-20 'CT Thorax follow-up' "
-        f"(accession ACC22, ID 8): series 2 'Soft' (CT, 8 slices of 10 x 12); pick one with series=NUMBER as listed "
-        f"(or its description, or its SeriesInstanceUID; STUDY/NUMBER, as a study is listed, where two studies have "
-        f"the number)")
+        f"{top} holds 3 DICOM series: study 1 'CT Thorax': series 2 'Soft' (CT, 8 slices of 10 x 12); series "
+        f"3 'Bone' (CT, 8 slices of 10 x 12) | study 2 'CT Thorax follow-up': series 2 'Soft' (CT, 8 slices of 10 "
+        f"x 12); pick one with series=NUMBER as listed (or its description, or its SeriesInstanceUID; STUDY/NUMBER, "
+        f"as a study is listed, where two studies have the number)")
     with pytest.raises(InputError) as excinfo:
         load(top, series=2)
     assert_one_line_error(excinfo)
     assert str(excinfo.value) == (
-        f"series=2 matches 2 series in {top}, one in each of 2 studies: study 2026-11-29 'CT Thorax' (accession ACC11, "
-        f"ID 7): series 2 'Soft' (CT, 8 slices of 10 x 12) | study 2026-12-20 'CT Thorax follow-up' (accession ACC22, "
-        f"ID 8): series 2 'Soft' (CT, 8 slices of 10 x 12); give series='2026-11-29/2' (STUDY/SERIES) or another")
+        f"series=2 matches 2 series in {top}, one in each of 2 studies: study 1 'CT Thorax': series 2 'Soft' (CT, "
+        f"8 slices of 10 x 12) | study 2 'CT Thorax follow-up': series 2 'Soft' (CT, 8 slices of 10 x 12); give "
+        f"series='1/2' (STUDY/SERIES) or another")
     assert main(["info", str(top), "--series", "Soft"]) == 2
-    assert "give --series 2026-11-29/Soft (STUDY/SERIES) or another" in capsys.readouterr().err
-    for series, key in (("2026-11-29/2", (0, 2)), ("20261220/2", (1, 2)), ("ACC22/soft", (1, 2)), ("7/2", (0, 2)),
+    assert "give --series 1/Soft (STUDY/SERIES) or another" in capsys.readouterr().err
+    for series, key in (("1/2", (0, 2)), ("2/2", (1, 2)), ("2/soft", (1, 2)), ("2026-11-29/2", (0, 2)),
+                        ("20261220/2", (1, 2)), ("ACC22/soft", (1, 2)), ("7/2", (0, 2)),
                         ("CT Thorax follow-up / 2", (1, 2)), (3, (0, 3)), ("2026-11-29/3", (0, 3))):
         np.testing.assert_array_equal(load(top, series=series).data, stacks[key])
-    with pytest.raises(InputError, match="series='2026-11-29/4' matches none of the 3 DICOM series"):
-        load(top, series="2026-11-29/4")
+    with pytest.raises(InputError, match="series='1/4' matches none of the 3 DICOM series"):
+        load(top, series="1/4")
     with pytest.warns(ClwaveWarning) as caught:  # one study: its series listed as before, without it
         load(top / "ST2")
     assert [str(w.message) for w in caught] == [f"{top / 'ST2'} holds 1 DICOM series: reading its image series, "
@@ -81,14 +82,27 @@ def test_the_series_of_several_studies_are_listed_by_study_and_picked_by_study_a
     (top / "ST2" / "SR").mkdir()
     write_sr(top / "ST2" / "SR" / "IM1", 502, "Dose Report")  # of another study: the image series named with its own
     with pytest.warns(ClwaveWarning, match=r"holds 2 DICOM series: reading its image series, series 2 'Soft' \(CT, 8 "
-                                           r"slices of 10 x 12\) of study 2026-12-20 'CT Thorax follow-up' \(accession "
-                                           r"ACC22, ID 8\)$"):
+                                           r"slices of 10 x 12\) of study 2 'CT Thorax follow-up'$"):
         load(top / "ST2")
+
+
+def test_a_study_named_by_its_place_is_not_taken_for_another_studys_id(tmp_path):
+    """``1/2`` is the first study listed even where the second's StudyID is 1 (the place first, then what is stored),
+    and a study's ID still picks it where no place is that number."""
+    rng = np.random.default_rng(30)
+    first, second = (dict(study, StudyID=i) for study, i in zip(STUDIES, ("2", "1")))
+    stacks = [write_stack(tmp_path / "cd" / f"ST{i}", rng, 2, "Soft", study) for i, study in enumerate((first, second))]
+    for series, stack in (("1/2", stacks[0]), ("2/2", stacks[1]), ("ACC22/2", stacks[1])):
+        np.testing.assert_array_equal(load(tmp_path / "cd", series=series).data, stack)
+    third = dict(STUDIES[1], StudyInstanceUID=generate_uid(), StudyDate="20270101", StudyID="9")
+    stacks.append(write_stack(tmp_path / "cd" / "ST3", rng, 2, "Soft", third))
+    np.testing.assert_array_equal(load(tmp_path / "cd", series="9/2").data, stacks[2])
 
 
 def test_info_shows_the_patient_and_no_output_holds_them(cd, tmp_path, capsys, caplog):
     """The patient's name and ID are PHI: ``clwave info`` shows them on the user's terminal, as every DICOM viewer does;
-    the model, its ``.clw`` file, a picture, the warnings and the log hold neither (nor the accession number)."""
+    the model, its ``.clw`` file, a picture, the warnings and the log hold neither, nor the study's date or
+    accession."""
     top, _ = cd
     assert main(["info", str(top), "--series", "2026-12-20/2"]) == 0
     out = capsys.readouterr().out
@@ -105,7 +119,7 @@ def test_info_shows_the_patient_and_no_output_holds_them(cd, tmp_path, capsys, c
     with h5py.File(model) as h5:
         header = json.loads(h5.attrs["header"])
     assert header["modality"] == dict(name="CT", units=None) and header["provenance"]["file"] == str(top)
-    for secret in ("TRIAL", "CHEST", "P28X", "ACC22"):
+    for secret in ("TRIAL", "CHEST", "P28X", "ACC22", "2026-12-20", "20261220"):
         for text in (said.out, said.err, caplog.text, json.dumps(header)):
             assert secret not in text
         assert not any(secret.encode() in data for data in outputs)

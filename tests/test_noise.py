@@ -289,6 +289,10 @@ def test_a_kept_share_of_a_noisy_volume_warns_and_is_farther_from_the_truth_than
     assert truth_correlation(fixed, truth) > truth_correlation(data, truth)
     with pytest.warns(NoisyModelWarning, match="details threshold=0.5 keeps"):
         wv.threshold(threshold=0.5)
+    linear = clwave.WaveletVolume.from_volume(clwave.Volume(data), "linear", levels=3)
+    with pytest.warns(NoisyModelWarning, match=r"of the details keep=0.05 keeps .*linear wavelets\); to denoise, use "
+                                               r"threshold\(noise=3\) \(docs"):  # already linear: the threshold alone
+        linear.threshold(keep=0.05)
 
 
 @pytest.mark.parametrize("case", ["blob", "shepp-logan linear", "ct 1 %", "mri rician 5 %", "keep 1"])
@@ -334,3 +338,33 @@ def test_noise_with_a_transfer_function_needs_post_classification(tmp_path, caps
     assert not (tmp_path / "pre.clw").exists()
     assert main(argv + ["--classify", "post", "-o", str(tmp_path / "post.clw")]) == 0
     assert clwave.WaveletVolume.open(tmp_path / "post.clw").channels == 1
+
+
+@pytest.mark.parametrize("noisy_slices, warns", [(19, False), (45, True)])
+def test_the_warning_needs_noise_to_fill_more_than_half_the_finest_band(noisy_slices, warns, recwarn):
+    """Noise of a known deviation (0.5) in the first ``noisy_slices`` of 64 slices, zeros elsewhere: the finest Haar
+    band is filled in that share of the volume, 30 % or 70 % (interior: Haar reads no neighbours), and the kept
+    details are noise either way.  The noise is measured (0.5 within 5 %) in both; only the volume noise fills more
+    than half of warns."""
+    data = np.zeros((64,) * 3, np.float32)
+    data[:noisy_slices] = np.random.default_rng(3).normal(0, 0.5, (noisy_slices, 64, 64))
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "haar", levels=3)
+    assert wv.measure_noise()[0] == pytest.approx(0.5, rel=0.05)
+    wv.threshold(keep=0.05)
+    assert [w.category for w in recwarn if issubclass(w.category, ClwaveWarning)] == [NoisyModelWarning] * warns
+
+
+@pytest.mark.parametrize("spikes, warns", [(100, True), (450, False)])
+def test_the_warning_needs_more_than_half_the_kept_details_within_three_noise_levels(spikes, warns, recwarn):
+    """Noise of deviation 0.5 everywhere (the finest band full of it) and ``spikes`` single voxels of 500, one in
+    each of as many 8^3 cells: each gives 7 Haar details a level, 21 in 3 levels, all over 60 times the noise
+    (500 / 2^(3j/2) at level j).  5 % of 64^3 keeps 13,107 coefficients, 12,595 of them details; the rest of them are
+    the largest noise details, about 700 of them (0.27 % of 262,144) beyond 3 noise levels: 100 spikes' 2,100 leave
+    (12,595 - 2,100 - 700) / 12,595 = 78 % within (warns), 450 spikes' 9,450 leave 19 % (does not)."""
+    rng = np.random.default_rng(4)
+    data = rng.normal(0, 0.5, (64,) * 3).astype(np.float32)
+    cells = rng.choice(8 ** 3, spikes, replace=False)
+    data[tuple(8 * np.array(np.unravel_index(cells, (8,) * 3)))] = 500.0
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), "haar", levels=3)
+    wv.threshold(keep=0.05)
+    assert [w.category for w in recwarn if issubclass(w.category, ClwaveWarning)] == [NoisyModelWarning] * warns

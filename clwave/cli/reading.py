@@ -74,7 +74,7 @@ def add_reading_options(p):
                    "nibabel's codes), turned into RAS+ as DICOM is")
     g.add_argument("--series", metavar="NUMBER", help="DICOM folder, tree or DICOMDIR with several series: the "
                    "SeriesNumber its listing shows, or the description or SeriesInstanceUID; of several studies "
-                   "STUDY/NUMBER, the study as the listing heads it (its date, accession or ID: 2026-11-29/2)")
+                   "STUDY/NUMBER, the study as the listing heads it (1/2), or by its date, accession or ID")
     labels = g.add_mutually_exclusive_group()
     labels.add_argument("--labels", action="store_const", const=True, help="the input is a label map (a "
                         "segmentation), whatever its values look like (default: a NIfTI's intent, else a guess from "

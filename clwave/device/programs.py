@@ -25,7 +25,7 @@ from .context import INSTALL_HINT, ComputeContext, python_sigint
 from ..errors import KernelBuildError
 from ..io.progress import status
 
-BUILD_QUIET_SECONDS = 1.0  # a build shows its status after this long: a cached one takes 0.2 s (known-gaps.md §17)
+BUILD_QUIET_SECONDS = 1.0  # a build shows its status after this long, longer than a cached one (known-gaps.md §17)
 
 
 def cl_dir() -> Path:

@@ -372,14 +372,6 @@ NOT_ATTENUATION = ("{what} below 0 on the whole, which no attenuation (mu >= 0) 
                    "-1000)? {fix}")
 
 
-def below_zero(wv) -> bool:
-    """Whether a one-channel model is below 0 on the whole: the sign of its integral, which is that of its coarsest
-    approximation coefficients' sum (its details integrate to 0).  A thresholded attenuation rings below 0 near its
-    edges, never on the whole; a CT in Hounsfield units is below 0 on the whole (air is -1000)."""
-    group = wv.groups[0]
-    return float(np.sum(group.values[0, group.band_slices()[0]], dtype=np.float64)) < 0
-
-
 def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:
     """Beer-Lambert: the intensity ``i0 exp(-∫mu)`` reaching the detector from attenuation line integrals
     (``--hu-to-mu`` CTs: mu per mm, integrals over mm), ``i0`` the source's (finite, above 0).  Integrals below 0 (a

@@ -184,5 +184,8 @@ def warn_kept_noise(wv, model, keep, threshold, importance_of):
             f"({'/'.join(dict.fromkeys(g.wavelet.name for g in wv.groups))} wavelets{amplify}); to denoise, {{}} "
             f"(docs/model.md §2)")
     rule = f"keep={keep:g}" if threshold is None else f"threshold={threshold:g}"
-    warn_outside(NoisyModelWarning(said.format(rule, "use wavelet='linear' and threshold(noise=3)"),
-                                   cli=said.format("--" + rule.replace("=", " "), "use --wavelet linear --noise 3")))
+    linear = all(g.wavelet.name == "linear" for g in wv.groups)  # the advice then only the threshold
+    api, cli = ("threshold(noise=3)", "--noise 3") if linear else \
+        ("wavelet='linear' and threshold(noise=3)", "--wavelet linear --noise 3")
+    warn_outside(NoisyModelWarning(said.format(rule, "use " + api),
+                                   cli=said.format("--" + rule.replace("=", " "), "use " + cli)))

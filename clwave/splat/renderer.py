@@ -25,6 +25,7 @@ from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_image, device_budget,
 from ..errors import InputError, finite_number
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera, resolve_view, view_record
+from ..model.signs import warn_both_signs
 from ..model.wavelet import WaveletVolume, check_model
 from . import accumulator
 from .accumulator import Accumulator
@@ -80,6 +81,7 @@ class SplatRenderer:
         if wv.levels >= MAX_LEVELS:
             raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
         omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)
+        warn_both_signs(wv)  # splatting draws line integrals only
         self.wv, self.omega_s, self.sampling, self.coarse = wv, omega_s, sampling, coarse
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)

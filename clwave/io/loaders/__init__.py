@@ -81,8 +81,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     series : int or str, optional
         DICOM only: the series to load where the input holds several image series, as
         their listing shows it: its SeriesNumber, description (case aside) or
-        ``SeriesInstanceUID``; of a CD of several studies ``"STUDY/SERIES"``, the study by its date (as the listing
-        heads it, ``"2026-11-29/2"``, or as stored), accession number, StudyID, description or UID; a value that
+        ``SeriesInstanceUID``; of a CD of several studies ``"STUDY/SERIES"``, the study by its place as the listing
+        heads it (``"1/2"``), or its date, accession number, StudyID, description or UID; a value that
         names several is refused, naming them.
     level : int, optional
         OME-Zarr only: the resolution level (default 0, the finest).

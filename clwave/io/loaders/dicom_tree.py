@@ -53,14 +53,10 @@ class Series:
         return f"{self.name} ({', '.join(f for f in facts if f)}{what}{', ' + self.uid if uid else ''})"
 
     def study_shown(self) -> str:
-        """Its study as a listing heads its series: "study 2026-11-29 'CT Thorax' (accession A1, ID 7)", its key
-        first; never the patient (PHI)."""
-        study = self.study
-        said = [study["date"], study["accession"] and f"accession {study['accession']}",
-                study["id"] and f"ID {study['id']}"]
-        said = [s for s in said if s and s.split()[-1] != self.key]  # the key said once, first
-        described = f" '{study['description']}'" if study["description"] else ""
-        return f"study {self.key}{described}{' (' + ', '.join(said) + ')' if said else ''}"
+        """Its study as a listing heads its series: "study 1 'CT Thorax'", by its key and description; never its date,
+        accession number or ID, nor the patient (PHI: ``clwave info`` shows them)."""
+        described = f" '{self.study['description']}'" if self.study["description"] else ""
+        return f"study {self.key}{described}"
 
 
 def _kind_of(files, modality):
@@ -163,15 +159,12 @@ def find_series(path):
 
 
 def _study_keys(listed):
-    """Give each series its study's ``key``: the first of its date, accession number, StudyID and StudyInstanceUID
-    that tells the studies found apart (a CD of a CT and its follow-up: their dates)."""
-    studies = {s.study["uid"]: s.study for s in listed}
-    for field in ("date", "accession", "id", "uid"):
-        values = [study[field] for study in studies.values()]
-        if all(values) and len(set(values)) == len(values):
-            break
+    """Give each series its study's ``key``: the study's place, from 1, in the order of their dates (a CD of a CT and
+    its follow-up: 1 and 2), what names it in listings and in ``STUDY/SERIES`` without a patient's dates or numbers."""
+    studies = sorted({(s.study["date"], s.study["time"], s.study["uid"]) for s in listed})
+    place = {uid: str(i) for i, (_, _, uid) in enumerate(studies, 1)}
     for s in listed:
-        s.key = s.study[field] or "(none)"
+        s.key = place[s.study["uid"]]
 
 
 def _headers(paths):
@@ -231,9 +224,9 @@ def _dicomdir_files(path):
 
 def pick(path, found, series, tree):
     """The series ``series=`` names (SeriesNumber, description without regard to case, or SeriesInstanceUID; where
-    the input holds several studies, ``STUDY/SERIES`` with STUDY its date, accession number, StudyID, description or
-    UID), or without it the only image series (named in a warning when the input held others, or was a tree); a
-    value that names several is refused, naming them and how to tell them apart."""
+    the input holds several studies, ``STUDY/SERIES`` with STUDY its place as listed, date, accession number,
+    StudyID, description or UID), or without it the only image series (named in a warning when the input held others,
+    or was a tree); a value that names several is refused, naming them and how to tell them apart."""
     images = [s for s in found if s.kind is None]
     if series is None:
         if len(images) == 1:
@@ -266,23 +259,26 @@ def pick(path, found, series, tree):
 
 
 def _matching(found, text):
-    """The series ``text`` names: as a whole (number, description, UID), else split at a "/" into a study (its date,
-    as listed or as stored, accession number, StudyID, description or UID) and a series in it."""
+    """The series ``text`` names: as a whole (number, description, UID), else split at a "/" into a study (its place
+    as listed first, else its date as stored or written with dashes, accession number, StudyID, description or UID)
+    and a series in it."""
     def names(s, said):
         number = int(said) if re.fullmatch(r"-?[0-9]+", said) else None  # ASCII digits: "²".isdigit() is True
         return number is not None and s.number == number or s.description.casefold() == said.casefold() or \
             s.uid == said
 
-    def studied(s, said):
+    def stored(s):
         study = s.study
-        return said.casefold() in {str(v).casefold() for v in (s.key, study["date"], study["date"].replace("-", ""),
-                                                               study["accession"], study["id"], study["description"],
-                                                               study["uid"]) if v}
+        return (study["date"], study["date"].replace("-", ""), study["accession"], study["id"], study["description"],
+                study["uid"])
+
+    def studied(keys):
+        return [s for s in found if any(said.casefold() in {str(v).casefold() for v in keys(s) if v} and names(s, rest)
+                                        for said, rest in splits)]
 
     matches = [s for s in found if names(s, text)]
-    cuts = [i for i, c in enumerate(text) if c == "/"]
-    return matches or [s for s in found if any(studied(s, text[:i].strip()) and names(s, text[i + 1:].strip())
-                                               for i in cuts)]
+    splits = [(text[:i].strip(), text[i + 1:].strip()) for i, c in enumerate(text) if c == "/"]
+    return matches or studied(lambda s: (s.key,)) or studied(stored)
 
 
 def _count(found):
