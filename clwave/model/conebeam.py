@@ -24,7 +24,7 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import ClwaveWarning, InputError, finite_number, reals, warn_outside, whole_number
-from .camera import Camera, View, _content_box, _size, _vector, arguments, given_fields
+from .camera import FARTHEST, Camera, View, _content_box, _size, _vector, arguments, given_fields
 from .geometry import view_frame
 
 
@@ -70,8 +70,8 @@ class ConeBeam:
                              "distance")
         what = "a positive detector spacing, or (row, column) spacings"
         spacing = reals(pixel, "pixel", 2, what, one=True)
-        if not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
-            raise InputError(f"pixel={pixel!r} must be {what}")
+        if not (np.all(np.isfinite(spacing)) and np.all(spacing > 0) and np.all(spacing <= FARTHEST)):
+            raise InputError(f"pixel={pixel!r} must be {what}, up to {FARTHEST:g}")
         shift = reals(offset, "offset", 2, "two finite numbers (along u, along v)")
         if not np.all(np.isfinite(shift)):
             raise InputError(f"offset={offset!r} must be two finite numbers (along u, along v)")
