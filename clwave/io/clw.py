@@ -45,7 +45,7 @@ from ..errors import ClwaveError, FileFormatError, InputError, finite_number
 from ..model.bspline import SplineWavelet
 from ..model.chunked import ChunkedWaveletVolume, tiers_of
 from ..model.mask import ContentMask
-from ..model.transform import band_layout
+from ..model.transform import LARGEST_COEFFICIENT, band_layout
 from ..model.budget import check_thresholding, kept_count
 from ..model.wavelet import ChannelGroup, WaveletVolume, _top, importance_of
 from ..threads import background
@@ -495,6 +495,9 @@ def _read_group(h5, gi, gh, shape, levels, budget, frame, approximation=False) -
             values = (values * step).astype(np.float32)
     if not np.all(np.isfinite(values)):
         raise ValueError(f"group {gi} holds non-finite values")
+    if values.size and not np.abs(values).max() < LARGEST_COEFFICIENT:  # what no transform writes (their energies)
+        raise ValueError(f"group {gi} holds coefficients of {np.abs(values).max():.3g}, past the root of float32's "
+                         f"largest ({LARGEST_COEFFICIENT:.3g}) that every transform stays below")
     if last_cut is not None:  # the last tier read gives only its most important ``last_cut``
         last = np.repeat(run_tiers == tiers[read - 1], spans[:, 1])
         rows = np.flatnonzero(last)

@@ -176,6 +176,9 @@ def decompose(volume, wavelet, channels, levels, interpolate, progress_bar) -> t
 #: (cl/raytrace/quadrature.h: Simpson's pair, 1 + 4 + 2 + 4 + 1)
 QUADRATURE_WEIGHTS = 12.0
 
+#: no coefficient may reach it (1.8e19, the root of float32's largest): their squares are summed as energies
+LARGEST_COEFFICIENT = float(np.sqrt(np.finfo(np.float32).max))
+
 
 def check_coefficients(values, frame=None):
     """Refuse coefficients that overflowed float32 (voxels near its largest value, 3.4e38), or whose squares would:
@@ -191,7 +194,7 @@ def check_coefficients(values, frame=None):
                          "3.4e38); rescale the volume first, e.g. to [0, 1]")
     if not np.size(values):
         return
-    root, largest = float(np.sqrt(np.finfo(np.float32).max)), float(np.abs(values).max())
+    root, largest = LARGEST_COEFFICIENT, float(np.abs(values).max())
     if frame is None and not largest < root:
         raise InputError(f"the energies of this volume overflow float32 (its largest wavelet coefficient "
                          f"{largest:.3g} squared passes 3.4e38); rescale its values first, e.g. to [0, 1]")
