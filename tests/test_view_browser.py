@@ -645,3 +645,35 @@ def test_the_edges_say_which_way_the_patient_faces_and_the_view_buttons_and_keys
         text = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'command' && "
                                       "e.text")
     assert " --azimuth 180.0 --elevation 0.0 --perspective " in text
+
+
+def test_a_slab_opens_on_its_face_and_a_double_click_comes_back_to_it(page):
+    """A slab thin along z (test_framing's) opens looking down z (camera.SLAB_VIEWS, the hello's ``home``), where its
+    final X-ray frame's lit area (above a tenth of the largest grey level) is 1.4 times or more the old opening's
+    (azimuth 30, elevation 20, the slab's edge; the server's frame of that view); orbited, a double-click comes back."""
+    from clwave.model.camera import SLAB_VIEWS
+    from test_framing import slab
+
+    def lit(png):
+        grey = decode(png)[..., 0].astype(float)
+        return np.count_nonzero(grey > 0.1 * grey.max())
+
+    with view(clwave.Volume(slab(2)), size=SIZE) as v:
+        browser.open_viewer(page, v.url)
+        first = browser.wait_final(page)
+        assert (first["azimuth"], first["elevation"]) == SLAB_VIEWS[2] == tuple(v.server.hello()["home"].values())
+        face = lit(blob_of_canvas(page))
+        page.execute_script("Object.assign(window.clwave.state, {azimuth: 30, elevation: 20}); window.clwave.send()")
+        edge = browser.wait_final(page)
+        assert (edge["azimuth"], edge["elevation"]) == (30, 20)
+        assert face >= 1.4 * lit(blob_of_canvas(page))
+        page.execute_script("document.getElementById('image').dispatchEvent(new MouseEvent('dblclick'))")
+        back = browser.wait_final(page)
+        assert (back["azimuth"], back["elevation"]) == SLAB_VIEWS[2]
+
+
+def blob_of_canvas(page) -> bytes:
+    """The PNG of the page's canvas, as shown."""
+    import base64
+
+    return base64.b64decode(page.execute_script("return document.getElementById('image').toDataURL()").split(",", 1)[1])

@@ -7,7 +7,8 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .checks import check_picture_fits, make_camera, parse_clip, parse_lights, parse_turntable_axis, picture_options
+from .checks import (check_picture_fits, make_camera, opened, parse_clip, parse_lights, parse_turntable_axis,
+                     picture_options)
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
                       parse_device_memory, parse_scheduler, post_transfer_function)
 
@@ -29,12 +30,15 @@ def run(args):
     look = picture_options(args, out)
     window, background = look["window"], look["background"]
     camera = make_camera(args)
-    cameras = [camera] if args.turntable is None else turntable_cameras(camera, args.turntable,
-                                                                        parse_turntable_axis(args))
+    axis = None if args.turntable is None else parse_turntable_axis(args)
+    if axis is not None:  # their memory checked before the input is read
+        turntable_cameras(camera, args.turntable, axis)
     device_memory = parse_device_memory(args)
     lights = parse_lights(args)
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
-    wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
+    wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster, noise=True)
+    camera = opened(args, camera, wv)
+    cameras = [camera] if args.turntable is None else turntable_cameras(camera, args.turntable, axis)
     check_picture_fits(look, camera, wv, xray=args.method != "raytrace" or args.xray)
     if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
         from ..raytrace.regions import check_cluster_model
