@@ -455,7 +455,8 @@ def test_the_view_is_copied_as_a_command_and_as_python_and_saved_at_twice_its_si
     """A .clw file's page in perspective: "copy as command" and "copy as Python" show the server's text of the view in
     the box, selected (headless chromium has no clipboard permission: the page says Ctrl+C copies it); "save image"
     at 1x is the final frame (within a grey level: the page's frame is accumulated pass by pass,
-    tests/test_view_export.py) and at 2x twice its size, the server's image of that view bit for bit."""
+    tests/test_view_export.py; its orientation letters unticked: a saved image holds those shown) and at 2x twice its
+    size, the server's image of that view bit for bit."""
     import asyncio
     import json
 
@@ -467,7 +468,9 @@ def test_the_view_is_copied_as_a_command_and_as_python_and_saved_at_twice_its_si
         browser.open_viewer(page, v.url)
         browser.wait_final(page)
         page.find_element("id", "perspective").click()
-        browser.wait_for(page, "return window.clwave.state.fov === 30")
+        page.find_element("id", "edge-labels").click()
+        browser.wait_for(page, "return window.clwave.state.fov === 30 && !window.clwave.state.edge_labels && "
+                               "document.getElementById('edge-left').hidden")
         browser.wait_final(page)
         page.find_element("id", "copy-command").click()
         shown = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'command' && e")
