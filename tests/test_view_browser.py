@@ -419,9 +419,10 @@ def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(
                                                      "export") for kind in ("input", "select", "button"))
     controls = page.execute_script(f"return Array.from(document.querySelectorAll('{sending}'))"
                                    ".map(e => e.matches(':disabled'))")
-    # 2 modes, 9 camera controls (six standard views, the scale bar's too), 5 X-ray ones, 9 shaded ones and 10 of the
-    # clip (6 crop sliders, the plane's box, list and slider, "uncut"), 4 of the export's (the size, save, two copies)
-    assert len(controls) == 39 and all(controls)
+    # 2 modes, 10 camera controls (six standard views, the scale bar's and the orientation letters' too), 5 X-ray
+    # ones, 9 shaded ones and 10 of the clip (6 crop sliders, the plane's box, list and slider, "uncut"), 4 of the
+    # export's (the size, save, two copies)
+    assert len(controls) == 40 and all(controls)
     state, shown = page.execute_script("return JSON.stringify(window.clwave.state)"), browser.shown(page)
     browser.drag(page, 30, 10, steps=3, hold=False)
     ActionChains(page).scroll_to_element(page.find_element("id", "image")).double_click(
@@ -546,7 +547,7 @@ def test_the_scale_bar_box_draws_the_bar_over_an_orthographic_view(viewer, page,
     assert where[:, 0].min() > SIZE[0] / 2 and where[:, 1].min() > SIZE[1] / 3
     page.find_element("id", "copy-python").click()
     code = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'python' && e")
-    assert "scale_bar=True)" in code["text"]  # the result carries its unit (trial29 W2)
+    assert "scale_bar=True, edge_labels={" in code["text"]  # the result carries its unit (trial29 W2); the letters
     page.execute_script("window.clwave.state.zoom = 2.5; window.clwave.send()")
     zoomed = browser.wait_for(page, "const c = window.clwave.current(); return c && c.fig.final && "
                                     "c.fig.extent < " + repr(final["extent"] / 2) + " && c.fig")

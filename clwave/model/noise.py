@@ -41,6 +41,9 @@ FRAME_LEAST = 8
 #: a band keeps its noise whole where it keeps a coefficient this many times its noise deviation or smaller
 #: (:func:`signal_box`; a threshold drops the smallest first, and the zeros beyond the volume's faces)
 FRAME_WHOLE = 0.1
+#: the least deviation (in units of the measured noise's) of the coefficients below the noise for :func:`signal_box`:
+#: Gaussian noise gives 1 (less near the faces), a clean background 0
+FRAME_NOISY = 0.5
 #: the most coefficients of the approximation a level finer than the coarsest that :func:`signal_box` synthesizes
 FRAME_CELLS = 64 ** 3
 
@@ -210,7 +213,9 @@ def signal_box(wv):
     its coarsest: those of the content's sign (per channel) and above :data:`FRAME_K` times their noise deviation
     (:meth:`~clwave.WaveletVolume.measure_noise` times the level's analysis norm), weighted by that ratio; per axis,
     their mean :data:`FRAME_SPREAD` standard deviations either side (at least one coefficient's step across), within
-    the box of their steps.  None where no channel's noise is known or fewer than :data:`FRAME_LEAST` pass."""
+    the box of their steps.  None where no channel's noise is known, the coefficients below it vary less than
+    :data:`FRAME_NOISY` times it (no noise there: a clean volume, whose few edges looked like noise), or fewer than
+    :data:`FRAME_LEAST` pass."""
     from .geometry import fine_to_world, support_centres
     from .transform import synthesize
 
@@ -233,12 +238,18 @@ def signal_box(wv):
         limit = np.array([FRAME_K * (sigmas[c] or np.inf) * g.wavelet.analysis_norm("a", level) ** 3
                           for c in g.channels])
         ratio = approx / limit
+        index = np.indices(ratio.shape[:3]).reshape(3, -1).T
+        world = fine_to_world(support_centres(g.wavelet, "aaa", level, index + np.array(start)), g.wavelet.order,
+                              *wv.frame).reshape(ratio.shape[:3] + (3,))
+        inside = (np.abs(world - wv.origin) < np.array(wv.shape[2::-1]) * np.array(wv.spacing[::-1]) / 2).all(axis=3)
+        rest = ratio[inside & (np.abs(ratio) <= 1).all(axis=3)]  # (n, C): the background's, in FRAME_K deviations
+        spread = np.median(np.abs(rest - np.median(rest, axis=0)), axis=0) / MAD_NORMAL * FRAME_K if len(rest) else 0
+        if np.max(spread, initial=0.0) < FRAME_NOISY:
+            return None
         # the content's sign per channel: the filters' ringing, of the other sign about it, weighs nothing
         ratio = (ratio * np.sign(np.sum(ratio * (np.abs(ratio) > 1), axis=(0, 1, 2)))).max(axis=3)
-        index = np.argwhere(ratio > 1)
-        weights.append(ratio[tuple(index.T)])
-        fine = support_centres(g.wavelet, "aaa", level, index + np.array(start))
-        points.append(fine_to_world(fine, g.wavelet.order, *wv.frame))
+        weights.append(ratio[ratio > 1])
+        points.append(world[ratio > 1])
     points, weights = np.concatenate(points), np.concatenate(weights)
     if len(points) < FRAME_LEAST:
         return None
@@ -257,3 +268,4 @@ def _whole(group, band, kept, sigmas) -> bool:
         return False
     norm = np.prod([group.wavelet.analysis_norm(letter, band.level) for letter in band.key])
     return all(values[i].min() <= FRAME_WHOLE * sigmas[c] * norm for i, c in enumerate(group.channels) if sigmas[c])
+
