@@ -419,9 +419,10 @@ def test_a_stopped_server_disables_the_pages_controls_and_leaves_its_last_image(
                                                      "export") for kind in ("input", "select", "button"))
     controls = page.execute_script(f"return Array.from(document.querySelectorAll('{sending}'))"
                                    ".map(e => e.matches(':disabled'))")
-    # 2 modes, 9 camera controls (six standard views, the scale bar's too), 5 X-ray ones, 9 shaded ones and 10 of the
-    # clip (6 crop sliders, the plane's box, list and slider, "uncut"), 4 of the export's (the size, save, two copies)
-    assert len(controls) == 39 and all(controls)
+    # 2 modes, 10 camera controls (six standard views, the scale bar's and the orientation letters' too), 5 X-ray
+    # ones, 9 shaded ones and 10 of the clip (6 crop sliders, the plane's box, list and slider, "uncut"), 4 of the
+    # export's (the size, save, two copies)
+    assert len(controls) == 40 and all(controls)
     state, shown = page.execute_script("return JSON.stringify(window.clwave.state)"), browser.shown(page)
     browser.drag(page, 30, 10, steps=3, hold=False)
     ActionChains(page).scroll_to_element(page.find_element("id", "image")).double_click(
@@ -455,7 +456,8 @@ def test_the_view_is_copied_as_a_command_and_as_python_and_saved_at_twice_its_si
     """A .clw file's page in perspective: "copy as command" and "copy as Python" show the server's text of the view in
     the box, selected (headless chromium has no clipboard permission: the page says Ctrl+C copies it); "save image"
     at 1x is the final frame (within a grey level: the page's frame is accumulated pass by pass,
-    tests/test_view_export.py) and at 2x twice its size, the server's image of that view bit for bit."""
+    tests/test_view_export.py; its orientation letters unticked: a saved image holds those shown) and at 2x twice its
+    size, the server's image of that view bit for bit."""
     import asyncio
     import json
 
@@ -467,7 +469,9 @@ def test_the_view_is_copied_as_a_command_and_as_python_and_saved_at_twice_its_si
         browser.open_viewer(page, v.url)
         browser.wait_final(page)
         page.find_element("id", "perspective").click()
-        browser.wait_for(page, "return window.clwave.state.fov === 30")
+        page.find_element("id", "edge-labels").click()
+        browser.wait_for(page, "return window.clwave.state.fov === 30 && !window.clwave.state.edge_labels && "
+                               "document.getElementById('edge-left').hidden")
         browser.wait_final(page)
         page.find_element("id", "copy-command").click()
         shown = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'command' && e")
@@ -543,7 +547,7 @@ def test_the_scale_bar_box_draws_the_bar_over_an_orthographic_view(viewer, page,
     assert where[:, 0].min() > SIZE[0] / 2 and where[:, 1].min() > SIZE[1] / 3
     page.find_element("id", "copy-python").click()
     code = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'python' && e")
-    assert "scale_bar=True)" in code["text"]  # the result carries its unit (trial29 W2)
+    assert "scale_bar=True, edge_labels={" in code["text"]  # the result carries its unit (trial29 W2); the letters
     page.execute_script("window.clwave.state.zoom = 2.5; window.clwave.send()")
     zoomed = browser.wait_for(page, "const c = window.clwave.current(); return c && c.fig.final && "
                                     "c.fig.extent < " + repr(final["extent"] / 2) + " && c.fig")
@@ -645,3 +649,35 @@ def test_the_edges_say_which_way_the_patient_faces_and_the_view_buttons_and_keys
         text = browser.wait_for(page, "const e = window.clwave.stats.exported; return e && e.kind === 'command' && "
                                       "e.text")
     assert " --azimuth 180.0 --elevation 0.0 --perspective " in text
+
+
+def test_a_slab_opens_on_its_face_and_a_double_click_comes_back_to_it(page):
+    """A slab thin along z (test_framing's) opens looking down z (camera.SLAB_VIEWS, the hello's ``home``), where its
+    final X-ray frame's lit area (above a tenth of the largest grey level) is 1.4 times or more the old opening's
+    (azimuth 30, elevation 20, the slab's edge; the server's frame of that view); orbited, a double-click comes back."""
+    from clwave.model.camera import SLAB_VIEWS
+    from test_framing import slab
+
+    def lit(png):
+        grey = decode(png)[..., 0].astype(float)
+        return np.count_nonzero(grey > 0.1 * grey.max())
+
+    with view(clwave.Volume(slab(2)), size=SIZE) as v:
+        browser.open_viewer(page, v.url)
+        first = browser.wait_final(page)
+        assert (first["azimuth"], first["elevation"]) == SLAB_VIEWS[2] == tuple(v.server.hello()["home"].values())
+        face = lit(blob_of_canvas(page))
+        page.execute_script("Object.assign(window.clwave.state, {azimuth: 30, elevation: 20}); window.clwave.send()")
+        edge = browser.wait_final(page)
+        assert (edge["azimuth"], edge["elevation"]) == (30, 20)
+        assert face >= 1.4 * lit(blob_of_canvas(page))
+        page.execute_script("document.getElementById('image').dispatchEvent(new MouseEvent('dblclick'))")
+        back = browser.wait_final(page)
+        assert (back["azimuth"], back["elevation"]) == SLAB_VIEWS[2]
+
+
+def blob_of_canvas(page) -> bytes:
+    """The PNG of the page's canvas, as shown."""
+    import base64
+
+    return base64.b64decode(page.execute_script("return document.getElementById('image').toDataURL()").split(",", 1)[1])

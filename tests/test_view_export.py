@@ -493,3 +493,39 @@ def test_a_saved_images_renderer_warnings_come_with_it():
         clipped = saved(v, dict(BASE, seq=1, mode="shaded", clip=tiny))
         plain = saved(v, dict(BASE, seq=1, mode="shaded"))
     assert "no ray met the model's content" in clipped and "a clip cuts it away" in clipped and plain is None
+
+
+def test_the_orientation_letters_shown_are_in_the_saved_image_the_command_and_the_python(clw, tmp_path, monkeypatch):
+    """The page's orientation letters shown (``edge_labels``): the saved image holds them at its edges, white outlined
+    in black as the page draws them (a phantom: +x/−x... of the frame's camera), and is the image without them
+    elsewhere; the command gets ``--edge-labels`` and the Python the letters, each giving the saved image bit for
+    bit; unshown, the image is the plain one."""
+    with view(str(clw), size=(96, 120)) as v:
+        msg = dict(BASE, seq=1, azimuth=47.3, elevation=-12.5, edge_labels=True)
+        figures, _ = final_frame(v, msg)
+        page, saved = exported(v, msg, (96, 120))
+        _, plain = exported(v, dict(msg, edge_labels=False), (96, 120))
+    assert page["command"].endswith(" --edge-labels -o view.png")
+    assert f"edge_labels={figures['orientation']!r})" in page["python"]
+    saved, plain = grey(saved).astype(int), grey(plain).astype(int)
+    # the letters' boxes, at most two axes' ("+x−y", 12-pixel font, 2-pixel margin) about each edge's middle
+    middle = dict(left=np.s_[36:60, :40], right=np.s_[36:60, -40:], top=np.s_[:20, 40:80], bottom=np.s_[-20:, 40:80])
+    outside = np.ones(saved.shape, bool)
+    for edge, where in middle.items():
+        outside[where] = False
+        assert (saved[where] >= 200).sum() >= 6 and (saved[where] <= 5).sum() >= 6, edge  # white in black
+    assert np.array_equal(saved[outside], plain[outside]) and not np.array_equal(saved, plain)
+    got = shell(page["command"], tmp_path / "page")
+    assert np.array_equal(got, saved)
+    assert np.array_equal(executed(page["python"], tmp_path / "python", monkeypatch), got)
+
+
+@pytest.mark.parametrize("argv", [["--turntable", "3", "-o", "t.gif"], ["-o", "t.tif"]])
+def test_edge_labels_without_a_png_picture_are_refused_in_one_line(tmp_path, capsys, monkeypatch, argv):
+    from clwave.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["render", "phantom:hydrogen:16", "--size", "16", "--edge-labels", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--edge-labels writes letters into a PNG picture" in err
+    assert list(tmp_path.iterdir()) == []

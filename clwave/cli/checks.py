@@ -283,10 +283,29 @@ def make_camera(args):
                   perspective=args.perspective, distance=args.distance, fov=args.fov)
 
 
-def view_angles(args, default=(30.0, 20.0)) -> dict:
+def opened(args, camera, wv):
+    """``camera`` (:func:`make_camera`'s) turned to the model's opening view
+    (:func:`~clwave.model.camera.opening_view`: a slab's face) where none of ``--view``, ``--azimuth`` and
+    ``--elevation`` was given."""
+    import copy
+
+    from ..model.camera import opening_view
+
+    if (args.view, args.azimuth, args.elevation) != (None, None, None):
+        return camera
+    camera = copy.copy(camera)
+    camera.__dict__.update(opening_view(wv))
+    return camera
+
+
+def view_angles(args) -> dict:
     """``dict(azimuth=, elevation=)`` of ``--view NAME`` (:func:`~clwave.model.geometry.named_view`), or of
-    ``--azimuth`` and ``--elevation`` (each ``default`` where not given); both kinds refused in one line."""
+    ``--azimuth`` and ``--elevation`` (each the default, :data:`~clwave.model.camera.OPENING`, where not given); both
+    kinds refused in one line."""
+    from ..model.camera import OPENING
     from ..model.geometry import named_view
+
+    default = OPENING
 
     given = [f"--{name}" for name in ("azimuth", "elevation") if getattr(args, name, None) is not None]
     if args.view is None:

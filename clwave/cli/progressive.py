@@ -7,7 +7,7 @@ import json
 from ..errors import InputError
 from ..io.images import write_gif
 from ..io.progress import progress
-from .checks import check_picture_fits, make_camera, parse_clip, parse_lights, picture_options
+from .checks import check_picture_fits, make_camera, opened, parse_clip, parse_lights, picture_options
 from .options import (add_command, add_raytrace_options, build_model, check_frames_output, check_outputs, finish,
                       parse_device_memory, post_transfer_function)
 
@@ -39,7 +39,8 @@ def run(args):
         check_schedule(steps, args.budget)
         options = dict(omega_s=args.omega_s, coarse=args.coarse or None)
     background, window, device_memory = look["background"], look["window"], parse_device_memory(args)
-    wv, _ = build_model(args, rgba=raytrace and not args.xray)
+    wv, _ = build_model(args, rgba=raytrace and not args.xray, noise=True)
+    camera = opened(args, camera, wv)
     check_picture_fits(look, camera, wv, xray=not raytrace or args.xray)
     if raytrace and not args.xray:
         options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering

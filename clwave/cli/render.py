@@ -7,7 +7,8 @@ import contextlib
 import numpy as np
 
 from ..errors import InputError
-from .checks import check_picture_fits, make_camera, parse_clip, parse_lights, parse_turntable_axis, picture_options
+from .checks import (check_picture_fits, make_camera, opened, parse_clip, parse_lights, parse_turntable_axis,
+                     picture_options)
 from .options import (add_command, add_raytrace_options, build_model, check_outputs, finish, is_clw,
                       parse_device_memory, parse_scheduler, post_transfer_function)
 
@@ -27,14 +28,24 @@ def run(args):
     out, raw, stats = check_outputs(args.force, (args.output, "-o", picture, hint), (args.raw, "--raw", (".npy",)),
                                     (args.stats, "--stats", (".json",)))
     look = picture_options(args, out)
+    if args.edge_labels and (args.turntable is not None or out.suffix.lower() not in PNG_SUFFIXES):
+        raise InputError("--edge-labels writes letters into a PNG picture: give -o OUT.png, without --turntable")
     window, background = look["window"], look["background"]
     camera = make_camera(args)
-    cameras = [camera] if args.turntable is None else turntable_cameras(camera, args.turntable,
-                                                                        parse_turntable_axis(args))
+    axis = None if args.turntable is None else parse_turntable_axis(args)
+    if axis is not None:  # their memory checked before the input is read
+        turntable_cameras(camera, args.turntable, axis)
     device_memory = parse_device_memory(args)
     lights = parse_lights(args)
     on_cluster = is_clw(args) and (args.workers, args.scheduler) != (None, None)
-    wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster)
+    wv, _ = build_model(args, rgba=args.method == "raytrace" and not args.xray, cluster_render=on_cluster, noise=True)
+    camera = opened(args, camera, wv)
+    if args.edge_labels:  # the viewer's letters (view/orientation.py), for its view's command
+        from ..view.export import Origin
+        from ..view.orientation import edges, patient_world
+
+        look["edge_labels"] = edges(camera, patient_world(wv, Origin.of_args(args)))
+    cameras = [camera] if args.turntable is None else turntable_cameras(camera, args.turntable, axis)
     check_picture_fits(look, camera, wv, xray=args.method != "raytrace" or args.xray)
     if on_cluster:  # docs/raytracing.md §7, docs/splatting.md §7: each worker opens the file
         from ..raytrace.regions import check_cluster_model
@@ -153,6 +164,10 @@ def add_parser(sub):
     p.add_argument("--frame-time", type=float, metavar="SECONDS",
                    help="with --turntable: the seconds each frame is shown, 0.02 to 655.35, to the hundredth "
                         "(default 0.1)")
+    p.add_argument("--edge-labels", action="store_true",
+                   help="PNG: write which way the view faces at the picture's edges, as clwave view shows them and "
+                        "saves them (R/L, A/P, S/I for a patient's volume: --orientation, or DICOM, NIfTI, NRRD, MGH; "
+                        "else +x/-x, +y/-y, +z/-z)")
     p.add_argument("--raw", help="also write the float32 image as .npy (with --turntable, its N views as one "
                                  "(N, H, W, C) array)")
     p.add_argument("--stats", help="also write the figures as .json")

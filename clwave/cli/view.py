@@ -30,7 +30,7 @@ def run(args):
     check_port(args.port)
     # a .clw file: its prefix now, the rest read while serving; a scalar model's shaded views are classified while
     # rendering by --tf [--tf-window] (a .clw input; a volume's with --classify post), checked as `render` checks them
-    wv, _ = build_model(args, opener=PrefixFirst, post=True)
+    wv, _ = build_model(args, opener=PrefixFirst, post=True, noise=True)
     tf = post_transfer_function(args, wv.prefix if isinstance(wv, PrefixFirst) else wv)
     if isinstance(wv, PrefixFirst) and not wv.complete:
         print(f"clwave view: serving the {wv.prefix.kept:,} most important coefficients of {args.input} at once; "

@@ -165,6 +165,40 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     return out
 
 
+EDGES = ("left", "right", "top", "bottom")  #: the picture's edges that :func:`draw_edge_labels` writes at
+
+
+def check_edge_labels(labels) -> dict:
+    """``labels`` as :func:`draw_edge_labels` takes them: a dict of some :data:`EDGES` to short strings; one
+    InputError naming what is wrong otherwise."""
+    if not isinstance(labels, dict) or not set(labels) <= set(EDGES) or \
+            not all(isinstance(t, str) and 0 < len(t) <= 8 for t in labels.values()):
+        raise InputError(f"edge_labels={labels!r} must be a dict of some of {', '.join(EDGES)} to short strings "
+                         f"(1 to 8 characters), e.g. dict(left='R', right='L', top='S', bottom='I')")
+    return labels
+
+
+def draw_edge_labels(picture, labels: dict) -> np.ndarray:
+    """``picture`` (as :func:`write_png` takes it) with ``labels`` burnt in at the middle of its edges (keys ``left``,
+    ``right``, ``top``, ``bottom``: which way the view faces there, the viewer's orientation letters,
+    ``clwave.view.orientation.edges``), white outlined in black as the page draws them, in the scale bar's font."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    height, width = picture.shape[:2]
+    font_size = max(12, round(min(height, width) / 24))
+    rim, margin = max(1, round(font_size / 9)), max(2, round(font_size / 4))
+    font = ImageFont.load_default(size=font_size)
+    cover, white = Image.new("L", (width, height)), Image.new("L", (width, height))
+    for edge, text in labels.items():
+        drawn = text.replace("−", "-")  # the axes' minus: Pillow's bundled font has no U+2212
+        left, top, right, bottom = font.getbbox(drawn, stroke_width=rim)
+        x = dict(left=margin, right=width - margin - (right - left)).get(edge, (width - right + left) / 2)
+        y = dict(top=margin, bottom=height - margin - (bottom - top)).get(edge, (height - bottom + top) / 2)
+        ImageDraw.Draw(cover).text((x - left, y - top), drawn, font=font, fill=255, stroke_width=rim, stroke_fill=255)
+        ImageDraw.Draw(white).text((x - left, y - top), drawn, font=font, fill=255)
+    return _over(picture, *(np.asarray(m, np.float64) / 255 for m in (cover, white)))
+
+
 def _over(picture, cover, white) -> np.ndarray:
     """``picture`` under a white-on-black overlay of coverage ``cover`` (its white part ``white``), straight alpha."""
     top = float(np.iinfo(picture.dtype).max)

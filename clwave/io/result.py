@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import InputError
 from .files import check_suffix, write_atomic
 from .images import (PNG_SUFFIXES, TIFF_SUFFIXES, UNIT_METRES, check_bit_depth, check_orthographic, check_scale_bar,
-                     check_unit, draw_scale_bar, pixel_size, write_png, write_tiff)
+                     check_edge_labels, check_unit, draw_edge_labels, draw_scale_bar, pixel_size, write_png, write_tiff)
 from ..model.tf_passes import AUTO_PERCENTILES
 from ..model.tf_checks import check_window
 
@@ -46,7 +46,7 @@ class RenderResult:
         return self.picture(window, background)
 
     def picture(self, window="auto", background=None, bit_depth=8, scale_bar=None, unit=None,
-                colour_map=None) -> np.ndarray:
+                colour_map=None, edge_labels=None) -> np.ndarray:
         """8- or 16-bit (H, W) grey or (H, W, 3) colour picture of the image: an X-ray of one channel grey, of two
         magenta (channel 0) and green (1), of three or four its first three as RGB; one window for all.  A shaded
         image is composited over ``background`` (linear RGB in 0..1, default black) before its sRGB encoding, or
@@ -56,7 +56,9 @@ class RenderResult:
         bar's unit, converted from the result's own (``meta["unit"]``, the default); where that is None, the
         world unit it declares.  ``colour_map``: a one-channel X-ray's grey levels in the colours of a map
         (:data:`clwave.view.colours.NAMES`, the viewer's: "grey_r" shows dark bright, at 8 or 16 bits; "viridis",
-        "magma_r", ... 8 bits only)."""
+        "magma_r", ... 8 bits only).  ``edge_labels``: a dict of the text at the middle of the picture's ``left``,
+        ``right``, ``top`` and ``bottom`` edges (:func:`~clwave.io.images.draw_edge_labels`; the viewer's orientation
+        letters, which its saved image holds), burnt in after the scale bar."""
         from ..view.colours import apply, check_colour_map
 
         colour_map = check_colour_map(colour_map)
@@ -98,10 +100,10 @@ class RenderResult:
         picture = np.round(top * scaled).astype(np.uint8 if top < 256 else np.uint16)
         if colour_map is not None:
             picture = apply(picture, colour_map, int(top))
-        if scale_bar is None:
-            return picture
-        factor, unit = self.in_unit(unit)
-        return draw_scale_bar(picture, self.meta["pixel"] * factor, unit, scale_bar)
+        if scale_bar is not None:
+            factor, unit = self.in_unit(unit)
+            picture = draw_scale_bar(picture, self.meta["pixel"] * factor, unit, scale_bar)
+        return picture if edge_labels is None else draw_edge_labels(picture, check_edge_labels(edge_labels))
 
     def in_unit(self, unit=None) -> tuple:
         """``(factor, unit)``: the length unit a picture's scale bar and pixel size are written in (``unit``, or
@@ -146,7 +148,7 @@ class RenderResult:
         return self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
 
     def save(self, path, *, window="auto", background=None, bit_depth=None, unit=None, scale_bar=None,
-             colour_map=None, overwrite=False) -> Path:
+             colour_map=None, edge_labels=None, overwrite=False) -> Path:
         """Write ``.png`` (windowed, or composited over ``background`` or transparent: :meth:`picture`, of
         ``bit_depth`` 8 or 16 bits a sample), ``.tif``/``.tiff`` (float32, as rendered; a shaded image's alpha
         associated, premultiplied), ``.npy`` (raw float32) or ``.json`` (meta).  ``unit`` (:meth:`in_unit`): the
@@ -154,7 +156,7 @@ class RenderResult:
         from the result's own world unit (``meta["unit"]``, the default); where that is None, the world unit it
         declares.  The size of a pixel (:func:`~clwave.io.images.pixel_size`) goes into a PNG's pHYs where its unit
         is known, into a TIFF's resolution always (per world unit where it is not).  ``scale_bar``: a ``.png``'s
-        scale bar, ``colour_map`` an X-ray's colours (:meth:`picture`).
+        scale bar, ``colour_map`` an X-ray's colours, ``edge_labels`` the words at its edges (:meth:`picture`).
 
         An image with non-finite pixels is refused (nothing is written): it is never a picture."""
         path = check_suffix(path, PNG_SUFFIXES + TIFF_SUFFIXES + (".npy", ".json"))
@@ -162,7 +164,8 @@ class RenderResult:
         bits, (factor, known) = check_bit_depth(bit_depth), self.in_unit(unit)
         given = [f"{name}=" for name, value in (("window", None if isinstance(window, str) and window == "auto" else
                                                  window), ("background", background), ("bit_depth", bit_depth),
-                                                ("scale_bar", check_scale_bar(scale_bar)), ("colour_map", colour_map))
+                                                ("scale_bar", check_scale_bar(scale_bar)), ("colour_map", colour_map),
+                                                ("edge_labels", edge_labels))
                  if value is not None]
         if given and suffix not in PNG_SUFFIXES:
             raise InputError(f"{' and '.join(given)} {'set' if len(given) > 1 else 'sets'} a .png's picture; {path} "
@@ -173,7 +176,7 @@ class RenderResult:
             raise InputError(f"the image has {bad} non-finite value(s) (NaN/Inf), so {path} was not written; "
                              f"the input holds values too large for float32, or the view is degenerate")
         if suffix in PNG_SUFFIXES:
-            data = self.picture(window, background, bits, scale_bar, unit, colour_map)
+            data = self.picture(window, background, bits, scale_bar, unit, colour_map, edge_labels)
             return write_atomic(path, lambda fh: write_png(fh, data, self._pixel_size(factor), known), overwrite)
         if suffix in TIFF_SUFFIXES:
             image = self.image[..., 0] if self.image.shape[-1] == 1 else self.image

@@ -27,6 +27,12 @@ MAX_PIXELS_ACROSS = 10**12
 FARTHEST = WORLD_RANGE[1]
 
 FITS = ("sphere", "box")  #: a camera's default framings of the content (Camera's ``fit``)
+OPENING = (30.0, 20.0)  #: the default (azimuth, elevation), degrees
+#: a content box whose shortest side is under 1 / SLAB of its middle one is a slab, which opens showing its face
+SLAB = 3.0
+#: the opening (azimuth, elevation) of a slab thin along x, y or z: looking down that axis, 20 degrees off it so that
+#: it reads as a solid, with x to the right where the axis is y or z (z: y up, as IMOD's 3dmod and ChimeraX show it)
+SLAB_VIEWS = ((20.0, 20.0), (-70.0, 20.0), (-70.0, 70.0))
 DEFAULT_FOV = 30.0  #: a perspective camera's vertical field of view, degrees, unless given
 #: how many times longer than its two shorter sides a content box is at most before a view of it warns: a needle
 #: that every view shows as a line a few pixels wide, or nothing (axes in different units, trial26)
@@ -131,7 +137,7 @@ class Camera:
     [1.0, 0.0, 0.0]
     """
 
-    def __init__(self, azimuth=30.0, elevation=20.0, size=512, *, target=None, extent=None,
+    def __init__(self, azimuth=OPENING[0], elevation=OPENING[1], size=512, *, target=None, extent=None,
                  perspective=False, distance=None, fov=None, fit="sphere", roll=0.0):
         self.azimuth = finite_number(azimuth, "azimuth")
         self.elevation = finite_number(elevation, "elevation")
@@ -181,7 +187,7 @@ class Camera:
         """Resolve against a volume-like object (``shape``, ``spacing``, ``origin``)."""
         n, u, v = self.basis()
         H, W = self.size
-        lo, hi = _content_box(volume)
+        lo, hi = framed_box(volume)
         _warn_needle(hi - lo)
         target = (lo + hi) / 2.0 if self.target is None else np.asarray(self.target)
         corners = np.array(list(product(*zip(lo, hi)))) - target
@@ -309,6 +315,31 @@ def _warn_needle(sides) -> None:
             f"(e.g. m/s against degrees), give ")
     warn_outside(ClwaveWarning(line + "the volume a spacing= in one unit (e.g. spacing=1)",
                                cli=line + "--spacing in one unit (e.g. --spacing 1; a .clw: compress it again so)"))
+
+
+def framed_box(volume) -> tuple:
+    """World ``(lo, hi)`` of what a camera frames by default: a model's content (:func:`_content_box`) cut to where its
+    coarsest approximation stands above the noise (:func:`~clwave.model.noise.signal_box`), so that the noise of an
+    empty part of the box is not framed (docs/coordinates.md §2)."""
+    from .noise import signal_box
+
+    lo, hi = _content_box(volume)
+    signal = signal_box(volume) if hasattr(volume, "measure_noise") else None
+    if signal is None:
+        return lo, hi
+    cut_lo, cut_hi = np.maximum(lo, signal[0]), np.minimum(hi, signal[1])
+    return (cut_lo, cut_hi) if np.all(cut_lo < cut_hi) else (lo, hi)
+
+
+def opening_view(volume) -> dict:
+    """``dict(azimuth=, elevation=)`` a volume opens at where no view is given: a slab's face where the shortest side of
+    its :func:`framed_box` is under 1 / :data:`SLAB` of the middle one (a tomogram, a section stack, seen down its
+    thin axis as IMOD and napari open it), else :data:`OPENING`."""
+    lo, hi = framed_box(volume)
+    sides = hi - lo
+    thin = int(np.argmin(sides))
+    azimuth, elevation = SLAB_VIEWS[thin] if sides[thin] * SLAB < np.sort(sides)[1] else OPENING
+    return dict(azimuth=azimuth, elevation=elevation)
 
 
 def _content_box(volume) -> tuple:

@@ -29,6 +29,23 @@ NOISE_K = 3.0
 MOSTLY = 0.5
 #: the histogram of |d|: the top 16 bits of a float32 (8 of exponent, 7 of mantissa: bins 0.8 % wide)
 BIN_SHIFT = 16
+#: a coarsest approximation coefficient is content beyond this many times its noise deviation (:func:`signal_box`):
+#: Gaussian noise alone passes it once in 1.7 million coefficients
+FRAME_K = 5.0
+#: a noisy model's content spans this many standard deviations of its coarse coefficients' positions either side of
+#: their mean (:func:`signal_box`): all of a box of uniform content (1.73), and a ball framed whole
+FRAME_SPREAD = 2.0
+#: the fewest coefficients above the noise that :func:`signal_box` frames: Gaussian noise alone gives
+#: fewer than one in :data:`FRAME_CELLS` (a lone one is noise, or a model whose coarse bands amplify it, as cubic's do)
+FRAME_LEAST = 8
+#: a band keeps its noise whole where it keeps a coefficient this many times its noise deviation or smaller
+#: (:func:`signal_box`; a threshold drops the smallest first, and the zeros beyond the volume's faces)
+FRAME_WHOLE = 0.1
+#: the least deviation (in units of the measured noise's) of the coefficients below the noise for :func:`signal_box`:
+#: Gaussian noise gives 1 (less near the faces), a clean background 0
+FRAME_NOISY = 0.5
+#: the most coefficients of the approximation a level finer than the coarsest that :func:`signal_box` synthesizes
+FRAME_CELLS = 64 ** 3
 
 
 def finest_norm(wavelet) -> float:
@@ -189,3 +206,69 @@ def warn_kept_noise(wv, model, keep, threshold, importance_of):
         ("wavelet='linear' and threshold(noise=3)", "--wavelet linear --noise 3")
     warn_outside(NoisyModelWarning(said.format(rule, "use " + api),
                                    cli=said.format("--" + rule.replace("=", " "), "use " + cli)))
+
+
+def signal_box(wv):
+    """World (x, y, z) corners ``(lo, hi)`` of the content of a noisy model, what a camera frames (docs/coordinates.md
+    §2), as every voxel of a noisy volume is non-zero; 0 is the background, as for :meth:`Volume.content_box`.  Its
+    approximation a level finer than its coarsest where it keeps its coarsest details whole (:func:`_whole`; a part
+    kept would be their largest, noisier than measured) and that has at most :data:`FRAME_CELLS` coefficients, else at
+    its coarsest: those of the content's sign (per channel) and above :data:`FRAME_K` times their noise deviation
+    (:meth:`~clwave.WaveletVolume.measure_noise` times the level's analysis norm), weighted by that ratio; per axis,
+    their mean :data:`FRAME_SPREAD` standard deviations either side (at least one coefficient's step across), within
+    the box of their steps.  None where no channel's noise is known, the coefficients below it vary less than
+    :data:`FRAME_NOISY` times it (no noise there: a clean volume, whose few edges looked like noise), or fewer than
+    :data:`FRAME_LEAST` pass."""
+    from .geometry import fine_to_world, support_centres
+    from .transform import synthesize
+
+    sigmas = wv.measure_noise() or ()
+    if not any(sigmas):
+        return None
+    whole = all(_whole(g, band, sl, sigmas) for g in wv.groups for band, sl in zip(g.bands, g.band_slices())
+                if band.level == wv.levels and band.key != "aaa")
+    finer = wv.levels - 1 if whole and np.prod(wv.shape[:3]) >> 3 * (wv.levels - 1) <= FRAME_CELLS else wv.levels
+    level = max(finer, 0)
+    points, weights = [], []
+    for g in wv.groups:
+        bands = [(number, b) for number, b in enumerate(g.bands) if b.level > level or b.key == "aaa"]
+        dense = []
+        for number, b in bands:
+            flat, sl = np.zeros((b.size, len(g.channels))), g.band_slices()[number]
+            flat[np.arange(b.size) if g.positions is None else g.positions[sl] - b.start] = g.values[:, sl].T
+            dense.append(flat.reshape(*b.shape, -1))
+        approx, start = synthesize(g.wavelet, [b for _, b in bands], dense)
+        limit = np.array([FRAME_K * (sigmas[c] or np.inf) * g.wavelet.analysis_norm("a", level) ** 3
+                          for c in g.channels])
+        ratio = approx / limit
+        index = np.indices(ratio.shape[:3]).reshape(3, -1).T
+        world = fine_to_world(support_centres(g.wavelet, "aaa", level, index + np.array(start)), g.wavelet.order,
+                              *wv.frame).reshape(ratio.shape[:3] + (3,))
+        inside = (np.abs(world - wv.origin) < np.array(wv.shape[2::-1]) * np.array(wv.spacing[::-1]) / 2).all(axis=3)
+        rest = ratio[inside & (np.abs(ratio) <= 1).all(axis=3)]  # (n, C): the background's, in FRAME_K deviations
+        spread = np.median(np.abs(rest - np.median(rest, axis=0)), axis=0) / MAD_NORMAL * FRAME_K if len(rest) else 0
+        if np.max(spread, initial=0.0) < FRAME_NOISY:
+            return None
+        # the content's sign per channel: the filters' ringing, of the other sign about it, weighs nothing
+        ratio = (ratio * np.sign(np.sum(ratio * (np.abs(ratio) > 1), axis=(0, 1, 2)))).max(axis=3)
+        weights.append(ratio[ratio > 1])
+        points.append(world[ratio > 1])
+    points, weights = np.concatenate(points), np.concatenate(weights)
+    if len(points) < FRAME_LEAST:
+        return None
+    step = 2.0 ** level * np.array(wv.spacing[::-1], float)
+    mean = weights @ points / weights.sum()
+    half = np.maximum(FRAME_SPREAD * np.sqrt(weights @ (points - mean) ** 2 / weights.sum()), step / 2)
+    lo, hi = points.min(axis=0) - step / 2, points.max(axis=0) + step / 2
+    return np.maximum(mean - half, lo), np.minimum(mean + half, hi)
+
+
+def _whole(group, band, kept, sigmas) -> bool:
+    """Whether ``group`` keeps ``band``'s noise whole, its slice ``kept`` holding a coefficient of at most
+    :data:`FRAME_WHOLE` times the band's noise deviation in every channel whose noise ``sigmas`` are known."""
+    values = np.abs(group.values[:, kept])
+    if not values.shape[1]:
+        return False
+    norm = np.prod([group.wavelet.analysis_norm(letter, band.level) for letter in band.key])
+    return all(values[i].min() <= FRAME_WHOLE * sigmas[c] * norm for i, c in enumerate(group.channels) if sigmas[c])
+

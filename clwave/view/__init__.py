@@ -83,7 +83,10 @@ def as_model(model_or_volume, keep=DEFAULT_KEEP, tf=None, wavelet="cubic", level
                              f'{vol.channels} channels: leave classify out')
         tf = tf.resolved(vol)
         vol = tf.classify(vol) if classify == "pre" else vol
-    wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, transfer_function=tf).threshold(keep=keep)
+    wv = WaveletVolume.from_volume(vol, wavelet=wavelet, levels=levels, transfer_function=tf)
+    if not vol.chunked:  # recorded in the model: the frame of a noisy volume's content (camera.framed_box)
+        wv.measure_noise()
+    wv = wv.threshold(keep=keep)
     return wv.compute() if vol.chunked else wv  # a chunked volume's model, gathered
 
 

@@ -21,7 +21,7 @@ from ..errors import ClwaveError, InputError
 from ..model.camera import Camera
 from ..model.clip import Clip
 from ..model.transfer import TransferFunction
-from . import colours
+from . import colours, orientation
 from .protocol import said
 
 #: the files the command and the Python write
@@ -91,6 +91,7 @@ class Spec:
     background: float = 0.0
     tf: TransferFunction | None = None
     scale_bar: bool = False  # the default --scale-bar (an orthographic view's)
+    edge_labels: dict | None = None  # the orientation letters at the image's edges (orientation.edges; --edge-labels)
     clip: Clip | None = None  # a shaded view's (an X-ray is splatted: never clipped)
     levels: int = 0  # the model's (the Python of a volume decomposes it with as many)
 
@@ -102,12 +103,13 @@ def resolve(sources: dict, state, size=None) -> Spec:
     source = sources[state.mode]
     camera = source.camera(state, size=size)
     levels, scale_bar = source.wv.levels, state.scale_bar
+    labels = dict(edge_labels=orientation.edges(camera, source.patient) if state.edge_labels else None)
     if scale_bar:
         check_orthographic(camera.to_dict())
     if state.mode == "xray":
         return Spec("xray", camera, tuple(state.window or colours.centred(source.auto_window, state.colour_map)),
                     state.colour_map if source.capabilities["colour_map"] else None, state.detail, scale_bar=scale_bar,
-                    levels=levels)
+                    levels=levels, **labels)
     source.start_full_stage()
     if source.tracer is None:
         failure = None if source.staged is None else source.staged.failure
@@ -120,7 +122,7 @@ def resolve(sources: dict, state, size=None) -> Spec:
     if tf is not None and tf.window == "auto":  # the pool's percentiles, written as numbers
         tf = tf.under(window=tuple(window))
     return Spec("shaded", camera, tolerance=source.tolerance, shading=state.shading, background=state.background,
-                tf=tf, scale_bar=scale_bar, levels=levels, clip=state.clipping())
+                tf=tf, scale_bar=scale_bar, levels=levels, clip=state.clipping(), **labels)
 
 
 class Unavailable(InputError):
@@ -136,7 +138,7 @@ def picture(sources: dict, spec: Spec):
     the renderers ``clwave render`` calls, as a generator of the render thread's stages that returns its PNG's pixels
     (an X-ray in the tab's colour map; a scale bar over it): splatted or traced in turns (``splat_in_turns``,
     ``RayTracer.rendering``: the tabs' frames go between two of its stages, docs/viewer.md §5)."""
-    from ..io.images import draw_scale_bar
+    from ..io.images import draw_edge_labels, draw_scale_bar
     from ..splat.renderer import splat_in_turns
     from ..threads import in_turns
 
@@ -156,7 +158,8 @@ def picture(sources: dict, spec: Spec):
             spec.camera, tolerance=spec.tolerance, shading=spec.shading, clip=spec.clip,
             **({} if spec.tf is None else dict(transfer_function=spec.tf))))
         image = result.to_uint8(background=(spec.background,) * 3)
-    return draw_scale_bar(image, result.meta["pixel"], source.wv.unit) if spec.scale_bar else image
+    image = draw_scale_bar(image, result.meta["pixel"], source.wv.unit) if spec.scale_bar else image
+    return image if spec.edge_labels is None else draw_edge_labels(image, spec.edge_labels)
 
 
 def check_save_size(size):
@@ -233,6 +236,7 @@ def command(origin: Origin, spec: Spec, output=OUTPUT) -> str:
             for point, normal in spec.clip.planes:
                 tokens += _token("--clip-plane", ",".join(map(_number, (*point, *normal))))
     tokens += ["--scale-bar"] if spec.scale_bar else []
+    tokens += ["--edge-labels"] if spec.edge_labels else []
     tokens += ["-o", output]
     return "\n".join(notes + before + [" ".join(map(_shell_word, tokens))])
 
@@ -253,6 +257,7 @@ def python(origin: Origin, spec: Spec, output=OUTPUT) -> str:
     ``clwave.raytrace`` with the view's arguments, and the picture saved."""
     lines = ["import clwave", ""] + _model(origin, spec)
     cam, bar = spec.camera, ", scale_bar=True" if spec.scale_bar else ""
+    bar += "" if spec.edge_labels is None else f", edge_labels={spec.edge_labels!r}"
     framing = f"perspective=True, fov={_number(cam.fov)}, distance={_number(cam.distance)}" if cam.perspective \
         else f"extent={_number(cam.extent)}"
     lines.append(f"camera = clwave.Camera(azimuth={_number(cam.azimuth)}, elevation={_number(cam.elevation)}, "

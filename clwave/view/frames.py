@@ -71,6 +71,7 @@ class ViewState:
     colour_map: str = "grey"  # X-ray, scalar model: one of colours.NAMES
     fov: float | None = None  # a perspective camera's vertical field of view, degrees; None: orthographic
     scale_bar: bool = False  # the page's scale bar (orthographic): in the saved image and the command (export.py)
+    edge_labels: bool = False  # the page's orientation letters shown: in the saved image and the command too
     # shaded: (box (x0, y0, z0, x1, y1, z1) or None, planes ((px, py, pz, nx, ny, nz), ...)) in world units; None: none
     clip: tuple | None = None
 

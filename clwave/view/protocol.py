@@ -60,7 +60,7 @@ def _flag(msg, name) -> bool:
 
 
 FIELDS = {"type", "seq", "azimuth", "elevation", "zoom", "mode", "detail", "window", "moving", "background",
-          "shading", "tf", "colour_map", "fov", "scale_bar", "clip"}
+          "shading", "tf", "colour_map", "fov", "scale_bar", "edge_labels", "clip"}
 #: a transfer function from the page's editor: a preset, its window's centre moved by this many of its widths (the
 #: page's slider keeps the centre within the input's range, many widths of a narrow window), its width times this, its
 #: opacity times this (clwave.view.shaded.ShadedSource.transfer_function)
@@ -192,7 +192,8 @@ def view_of(msg, last_seq: int, modes) -> ViewState:
                      zoom=_number(msg, "zoom", *ZOOM), mode=msg["mode"], detail=_number(msg, "detail", 1e-6, 1.0),
                      window=window, moving=_flag(msg, "moving"), background=_number(msg, "background", 0.0, 1.0),
                      shading=_flag(msg, "shading"), tf=_tf(msg.get("tf")), colour_map=colour_map, fov=fov,
-                     scale_bar="scale_bar" in msg and _flag(msg, "scale_bar"), clip=_clip(msg.get("clip")))
+                     scale_bar="scale_bar" in msg and _flag(msg, "scale_bar"),
+                     edge_labels="edge_labels" in msg and _flag(msg, "edge_labels"), clip=_clip(msg.get("clip")))
 
 
 class RateLimit:

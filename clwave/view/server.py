@@ -25,6 +25,7 @@ from urllib.parse import urlsplit
 from aiohttp import WSCloseCode, WSMsgType, web
 
 from ..device.memory import format_size, parse_cap
+from ..model.camera import opening_view
 from ..errors import ClwaveError, DeviceMemoryError, InputError, caught_warnings, warn_outside
 from ..threads import Abandoned, stop_on
 from .address import check_host, check_port, host_name, host_refused, is_loopback
@@ -95,6 +96,7 @@ class ViewServer:
 
         opened = model if isinstance(model, PrefixFirst) else None
         self.wv = opened.prefix if opened else model
+        self.home = opening_view(self.wv)  # the page's first view and its "fit" (a double click)
         # a file's recorded error against its input is its whole model's, not that of a view keeping fewer (--keep)
         self.model_error = None if opened is None else dict(rms=opened.model_error, whole=opened.keep is None)
         self.host, self.port, self.device = check_host(host), check_port(port), device
@@ -306,10 +308,9 @@ class ViewServer:
             self._builds[source.mode] = asyncio.wrap_future(self.builder.submit(self.logged, source.prepare))
         return self._builds[source.mode]
 
-    @staticmethod
-    def initial_view(source, moving=False) -> ViewState:
-        return ViewState(seq=0, azimuth=30.0, elevation=20.0, zoom=1.0, mode=source.mode, detail=1.0, window=None,
-                         moving=moving, background=0.0, shading=True)
+    def initial_view(self, source, moving=False) -> ViewState:
+        return ViewState(seq=0, **self.home, zoom=1.0, mode=source.mode, detail=1.0, window=None, moving=moving,
+                         background=0.0, shading=True)
 
     # ------------------------------------------------------------------ HTTP
     @web.middleware
@@ -420,7 +421,7 @@ class ViewServer:
                     presets=list(TransferFunction.PRESETS), colour_maps=colours.page_tables(),
                     tf=shaded.start_figures() if shaded else None,
                     capabilities={mode: s.capabilities for mode, s in self.sources.items()}, model=self.model(),
-                    model_id=model_id(self.wv), views=views(self.patient), patient=self.patient)
+                    model_id=model_id(self.wv), views=views(self.patient), patient=self.patient, home=self.home)
 
     def model(self) -> dict:
         """The model's figures for the page; ``reading``: a file's prefix, the rest being read; ``failure``: why the

@@ -67,8 +67,16 @@ document.addEventListener("keydown", (ev) => {
 });
 // the edges' labels of the frame drawn (its figures' orientation, made with its camera on the server)
 const showEdges = (f) => {
-  for (const edge of ["left", "right", "top", "bottom"]) $(`edge-${edge}`).textContent = f.orientation[edge];
+  for (const edge of ["left", "right", "top", "bottom"]) {
+    $(`edge-${edge}`).textContent = f.orientation[edge];
+    $(`edge-${edge}`).hidden = !state.edge_labels;
+  }
 };
+$("edge-labels").addEventListener("change", (ev) => {
+  state.edge_labels = ev.target.checked;
+  for (const edge of ["left", "right", "top", "bottom"]) $(`edge-${edge}`).hidden = !state.edge_labels;
+  keep();
+});
 
 // ---------------------------------------------------------------- controls
 const syncMode = () => {

@@ -12,7 +12,7 @@ const finite = (x) => typeof x === "number" && Number.isFinite(x);
 const within = (lo, hi) => (x) => finite(x) && x >= lo && x <= hi;
 const flag = (x) => typeof x === "boolean";
 const LOOK = { azimuth: within(-1e6, 1e6), elevation: within(-90, 90), zoom: within(0.1, 50),
-               detail: within(1e-3, 1), background: within(0, 1), shading: flag, scale_bar: flag,
+               detail: within(1e-3, 1), background: within(0, 1), shading: flag, scale_bar: flag, edge_labels: flag,
                fov: (x) => x === null || within(5, 120)(x), mode: (x) => hello.modes.includes(x),
                colour_map: (x) => typeof x === "string" && Object.hasOwn(hello.colour_maps, x),
                window: (x) => x === null || (Array.isArray(x) && x.length === 2 && x.every(finite) && x[0] < x[1]) };
@@ -72,6 +72,7 @@ const restore = (editable) => {  // in setup: the kept view, where it is this mo
   $("fov").disabled = state.fov === null;
   if (state.fov !== null) $("fov").value = state.fov;
   $("scale-bar").checked = state.scale_bar;
+  $("edge-labels").checked = state.edge_labels;
   if (clipKept(kept.clip)) {
     for (const id of CLIP_INPUTS) $(id)[$(id).type === "checkbox" ? "checked" : "value"] = kept.clip[id];
   }

@@ -61,6 +61,7 @@ const next = (fig) => {  // a drag's frame has come: its next view goes at once
 const setup = () => {
   const [h, w] = hello.size;
   canvas.width = overlay.width = w; canvas.height = overlay.height = h;
+  Object.assign(state, Object.assign(HOME, hello.home));  // the model's opening view: a slab's face
   showModel();
   setupViews();
   const shaded = hello.modes.includes("shaded");
