@@ -21,11 +21,12 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import ClwaveError, FileFormatError, InputError, finite_number, flag, float32_number
+from ...model.geometry import axis_turn
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, check_placement, is_dask
 from . import dicom, dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
-                     reading, axis_turn, stated_affine, to_canonical, to_float32)
+                     reading, to_float32)
 
 __all__ = ["load", "describe", "world_unit", "in_ras", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
 
@@ -198,21 +199,17 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     provenance = dict(file=str(path) + (f":/{inner}" if inner else ""), frame=frame)
     if hu_to_mu and modality is not None:  # attenuation now, not the series' units
         modality = dict(modality, units=None)
-    volume = Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
-                    subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
-                    unit=unit if unit is not None else _world_unit(kind, path, inner), provenance=provenance,
-                    modality=modality)
-    if orientation is not None:  # turned into RAS+ as a medical file is, by the same code; origin= is RAS already
-        affine = stated_affine(turn, volume.shape, volume.spacing, volume.origin)
-        data, spacing, turned, _ = to_canonical(volume.data, affine)
-        volume = Volume(data, spacing, turned if origin is None else origin, subtracted=subtract,
-                        labels=volume.labels, stored_dtype=stored, unit=volume.unit, photo=photo, provenance=provenance)
-    return volume
+    if turn is not None and origin is None:  # the file's origin turned with its axes; origin= is RAS already
+        placed = tuple(turn[:, ::-1] @ np.asarray(placed, float))
+    return Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
+                  subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
+                  unit=unit if unit is not None else _world_unit(kind, path, inner), provenance=provenance,
+                  modality=modality, orientation=orientation)
 
 
 def check_orientation(kind, orientation):
-    """The turn into RAS+ (:func:`.shared.axis_turn`) of ``orientation=`` (None without it), refused in one line for an
-    input whose header places it in RAS+ (:data:`RAS_FORMATS`), or on the sky (FITS)."""
+    """The turn into RAS+ (:func:`.geometry.axis_turn`) of ``orientation=`` (None without it), refused in one line for
+    an input whose header places it in RAS+ (:data:`RAS_FORMATS`), or on the sky (FITS)."""
     if orientation is None:
         return None
     if kind in RAS_FORMATS + ("fits",):
