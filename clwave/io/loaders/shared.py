@@ -33,7 +33,7 @@ def note(text: str):
 SUPPORTED = (".npy, .nii, .nii.gz, .mgh, .mgz, .nrrd, .nhdr, .tif/.tiff (multi-page), a folder of 2-D TIFF, PNG or "
              "JPEG slices, a folder of DICOM files or a multi-frame DICOM file, .raw (its shape and sample type "
              "given), a Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset), an MRC/CCP4 map (.mrc, .map, "
-             ".ccp4, .rec, .st), a FITS cube (.fits, .fit, .fts, .fits.gz, .fz)")
+             ".ccp4, .rec, .st), a FITS cube (.fits, .fit, .fts, .fits.gz, .fz), a post-stack SEG-Y cube (.sgy, .segy)")
 
 #: chunks=None reads .npy, .raw, .nii, .mgh, MRC, FITS and TIFF files (and folders of TIFF slices) whose volume takes at
 #: least this many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
