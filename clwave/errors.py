@@ -199,6 +199,13 @@ def flag(value, name) -> bool:
     return bool(value)
 
 
+def file_name(path) -> str:
+    """``path`` as ``os.fspath`` gives it (a str or bytes), or InputError where it is no file or folder name."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputError(f"path must be a file or folder name (str or pathlib.Path), got {type(path).__name__}")
+    return os.fspath(path)
+
+
 def type_name(value) -> str:
     """The full name of ``value``'s type, as a message names it: ``numpy.ndarray``, ``dask.array.core.Array``,
     ``clwave.Volume`` (clwave's by the name it exports), ``list`` (a builtin's bare)."""

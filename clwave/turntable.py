@@ -108,16 +108,16 @@ class Turntable:
     def images(self) -> np.ndarray:
         return np.stack([r.image for r in self.results])
 
-    def window(self, window="auto"):
-        """The ``(lo, hi)`` every X-ray view is shown through: ``"auto"`` resolved from all the views together (one
-        window for the whole turn: no flicker); None for shaded views, which have none."""
+    def window(self, window="auto", colour_map=None):
+        """The ``(lo, hi)`` every X-ray view in ``colour_map`` is shown through: ``"auto"`` resolved from all the views
+        together (one window for the whole turn: no flicker); None for shaded views, which have none."""
         if not self.results[0].is_xray:
             return None
-        return resolve_window(np.stack([r.image[..., :3] for r in self.results]), window)
+        return resolve_window(np.stack([r.image[..., :3] for r in self.results]), window, colour_map)
 
     def pictures(self, window="auto", background=None, scale_bar=None, unit=None, colour_map=None) -> list:
         """Each view's 8-bit picture (:meth:`RenderResult.picture`), X-rays through the one :meth:`window`."""
-        shared = self.window(window) if self.results[0].is_xray else window
+        shared = self.window(window, colour_map) if self.results[0].is_xray else window
         return [r.picture(shared, background, scale_bar=scale_bar, unit=unit, colour_map=colour_map)
                 for r in self.results]
 

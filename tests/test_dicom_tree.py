@@ -3,6 +3,7 @@ picked by what the listing shows (SeriesNumber, description, UID), non-image ser
 localizer among a stack's slices left out, an enhanced multi-frame file listed and loaded as a series."""
 
 import gc
+import re
 import warnings
 
 import numpy as np
@@ -252,29 +253,54 @@ def test_a_compressed_syntax_without_its_decoder_names_the_pip_command(tmp_path,
            ".venv/bin/pip install python-gdcm), or convert the series with dcm2niix" in str(excinfo.value)
 
 
-@pytest.mark.parametrize("syntax", ["JPEGLosslessProcess14_1", "JPEGLosslessProcess14"])
-def test_jpeg_lossless_series_are_decoded(tmp_path, rng, syntax):
-    """A series in JPEG Lossless (1.2.840.10008.1.2.4.70 and .57; compressed by GDCM here, pydicom has no encoder for
-    it) reads as the stored pixels it was made from, through python-gdcm, a dependency of clwave."""
+def write_jpeg_lossless_series(folder, rng, syntax="JPEGLosslessProcess14_1"):
+    """Three slices compressed in JPEG Lossless by GDCM (pydicom has no encoder for it); returns their stored values."""
     import gdcm
-    from pydicom.uid import JPEGLossless, JPEGLosslessSV1
 
     uid, stored = generate_uid(), rng.integers(0, 4000, (3, 6, 5))
     for k, (pixels, position) in enumerate(zip(stored, axial(0.0, 1.0, 2.0))):
-        write_dicom_slice(tmp_path / f"IM{k}", pixels, position, uid)
+        write_dicom_slice(folder / f"IM{k}", pixels, position, uid)
         reader, change, writer = gdcm.ImageReader(), gdcm.ImageChangeTransferSyntax(), gdcm.ImageWriter()
-        reader.SetFileName(str(tmp_path / f"IM{k}"))
+        reader.SetFileName(str(folder / f"IM{k}"))
         assert reader.Read()
         change.SetTransferSyntax(gdcm.TransferSyntax(getattr(gdcm.TransferSyntax, syntax)))
         change.SetInput(reader.GetImage())
         assert change.Change()
-        writer.SetFileName(str(tmp_path / f"IM{k}"))
+        writer.SetFileName(str(folder / f"IM{k}"))
         writer.SetFile(reader.GetFile())
         writer.SetImage(change.GetOutput())
         assert writer.Write()
+    return stored
+
+
+@pytest.mark.parametrize("syntax", ["JPEGLosslessProcess14_1", "JPEGLosslessProcess14"])
+def test_jpeg_lossless_series_are_decoded(tmp_path, rng, syntax):
+    """A series in JPEG Lossless (1.2.840.10008.1.2.4.70 and .57) reads as the stored pixels it was made from,
+    through python-gdcm, a dependency of clwave."""
+    from pydicom.uid import JPEGLossless, JPEGLosslessSV1
+
+    stored = write_jpeg_lossless_series(tmp_path, rng, syntax)
+    for k in range(3):
         assert pydicom.dcmread(tmp_path / f"IM{k}").file_meta.TransferSyntaxUID == \
             (JPEGLosslessSV1 if syntax.endswith("_1") else JPEGLossless)
     np.testing.assert_array_equal(load(tmp_path).data, hu(stored))
+
+
+def test_a_corrupt_jpeg_lossless_slice_is_refused_with_the_decoders_reason(tmp_path, rng):
+    """A slice whose Huffman table is overwritten: one line naming the file and what the decoder said (pydicom puts
+    its plugins' reasons on the lines after "raised by all available plugins:"; only the first was kept)."""
+    write_jpeg_lossless_series(tmp_path, rng)
+    ds = pydicom.dcmread(tmp_path / "IM1")
+    stream = bytearray(ds.PixelData)
+    table = stream.find(b"\xff\xc4")  # DHT
+    stream[table + 5:table + 25] = b"\xff" * 20
+    ds.PixelData = bytes(stream)
+    ds.save_as(tmp_path / "IM1")
+    with pytest.raises(FileFormatError) as excinfo:
+        load(tmp_path)
+    assert_one_line_error(excinfo)
+    assert re.fullmatch(rf"cannot read {re.escape(str(tmp_path / 'IM1'))}: RuntimeError: Unable to decode .* plugins: "
+                        r"gdcm: \S.*; the file may be truncated or corrupt", str(excinfo.value))
 
 
 def test_odd_series_values_are_refused_as_values_not_as_the_files(tmp_path, rng):

@@ -299,7 +299,7 @@ def test_an_intensity_png_is_shown_as_radiographs_are(hounsfield, tmp_path, caps
 def test_below_zero_is_the_sign_of_the_models_integral(hounsfield, wavelet):
     """below_zero (the sign of the approximation's sum) against the mean of the reconstructed model's samples, on the
     HU phantom, its attenuation, and a thresholded Shepp-Logan that rings below 0 near its edges."""
-    from clwave.model.conebeam import below_zero
+    from clwave.model.signs import below_zero
 
     folder, _ = hounsfield
     hu = np.load(folder / "ct.npy").astype(np.float32)

@@ -17,7 +17,7 @@ from test_mgh import assert_refused_in_one_line
 
 
 @pytest.mark.parametrize("cards, words", [
-    ({"BSCALE": 0.0}, r"BSCALE = 0\.0, which maps every pixel to BZERO"),
+    ({"BSCALE": 0.0}, r"BSCALE = 0\.0 and BZERO = 0, which map every int16 sample to 0 in float32"),
     ({"BSCALE": 1e308}, r"BSCALE = 1e\+308, beyond float32's range"),
     ({"BZERO": -1e308}, r"BZERO = -1e\+308, beyond float32's range"),
 ])

@@ -610,7 +610,8 @@ def test_dicom_multi_frame_file_alone_in_a_folder_is_its_series(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs, needle", [
-    (dict(rescale=(0, -1024)), "RescaleSlope 0"),
+    (dict(rescale=(0, -1024)), "RescaleSlope = 0.0 and RescaleIntercept = -1024.0, which map every uint16 sample to "
+                               "-1024"),
     (dict(rescale=(float("nan"), 0)), "non-finite RescaleSlope"),
     (dict(rescale=(1, float("inf"))), "non-finite RescaleIntercept"),
     (dict(pixel_spacing=(float("nan"), 1.0)), "non-finite PixelSpacing"),

@@ -141,7 +141,8 @@ def test_info_refuses_the_tiff_pages_a_read_cannot_decode(tmp_path, capsys, tag,
 @pytest.mark.parametrize("attributes, words", [
     (dict(Rows=0), r"declares Rows 0, Columns 5, BitsAllocated 16 and BitsStored 16, which no image has"),
     (dict(BitsStored=20), r"declares Rows 6, Columns 5, BitsAllocated 16 and BitsStored 20, which no image has"),
-    (dict(rescale=(0, 0)), r"has RescaleSlope 0, which maps every pixel to the intercept"),
+    (dict(rescale=(0, 0)), r"has RescaleSlope = 0\.0 and RescaleIntercept = 0\.0, which map every uint16 sample "
+                             r"to 0 in float32"),
 ])
 def test_info_refuses_the_dicom_headers_a_read_refuses(tmp_path, capsys, rng, attributes, words):
     """A slice of Rows 0 or BitsStored past BitsAllocated (pydicom's refusals when it decodes), or of RescaleSlope 0

@@ -282,3 +282,15 @@ def test_every_render_records_the_models_unit():
         results = [clwave.splat(wv, camera), clwave.raytrace(wv, camera, absorption=False, tolerance=1e-2),
                    *clwave.progressive(wv, camera, steps=2), clwave.turntable(wv, 2, camera)]
         assert [r.meta["unit"] for r in results] == [unit] * len(results)
+
+
+def test_a_scale_bar_without_roll_lies_along_x_and_y_only():
+    """signed30 (trial30's finding 10): a vertical exaggeration is an exaggerated z spacing, and the bar stays true
+    because an orbit camera's horizontal u has no z part at any azimuth and elevation without a roll; a roll tilts it
+    into z (docs/coordinates.md §3)."""
+    rng = np.random.default_rng(30)
+    for azimuth, elevation in [(0, 0), (30, 20), (0, 90), (123, -60), *rng.uniform((-360, -90), (360, 90), (20, 2))]:
+        _, u, _ = Camera(azimuth, elevation, size=8).basis()
+        assert u[2] == 0 and np.hypot(u[0], u[1]) == pytest.approx(1, abs=1e-12)
+    _, u, _ = Camera(30, 20, size=8, roll=30).basis()
+    assert abs(u[2]) == pytest.approx(np.sin(np.radians(30)) * np.cos(np.radians(20)), abs=1e-12)

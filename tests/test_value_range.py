@@ -129,7 +129,7 @@ def test_a_nearly_empty_image_is_told_with_the_window_that_shows_the_model():
     vol = clwave.Volume((10 * np.exp(-((x - .5) ** 2 + (y - .5) ** 2 + (z - .5) ** 2) * 20)).astype(np.float32))
     tracer, cam = clwave.RayTracer(clwave.WaveletVolume.from_volume(vol, levels=2)), clwave.Camera(30, 20, size=32)
     with pytest.warns(clwave.ClwaveWarning, match=r"nearly empty: 0 % of its pixels hide 5 % of the background or "
-                                                  r"more \(13 of 255 levels.*grey is opaque between 9.5 and 100, and "
+                                                  r"more \(13 of 255 levels.*grey is opaque above 9.5, and "
                                                   r"this model's values lie within") as told:
         faint = tracer.render(cam, transfer_function=clwave.TransferFunction.preset("grey", window=(9.5, 100)))
     assert faint.image[..., 3].max() < 0.05 and not faint.meta["nothing_visible"]

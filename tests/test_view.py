@@ -322,7 +322,8 @@ def test_colour_maps_are_matplotlibs_tables_and_colour_the_grey_levels():
 
     ramp = np.arange(256, dtype=np.uint8).reshape(16, 16)
     assert colours.NAMES[0] == "grey" and colours.apply(ramp, "grey") is ramp
-    assert colours.NAMES[5:] == ("grey_r", "bone_r", "viridis_r", "inferno_r", "magma_r")
+    assert colours.NAMES[8:] == ("grey_r", "bone_r", "viridis_r", "inferno_r", "magma_r", "seismic_r", "RdBu_r",
+                                 "coolwarm_r")
     np.testing.assert_array_equal(colours.apply(ramp, "grey_r"), 255 - ramp)
     for name in colours.NAMES[1:]:
         mpl = name.replace("grey", "gray")
@@ -353,8 +354,9 @@ def test_a_still_xray_frame_in_a_colour_map_is_the_splat_looked_up_in_its_table(
             await ws.send_str(json.dumps(dict(BASE, seq=1, azimuth=60.0, window=[0.0, 0.4], colour_map="inferno")))
             return hello, await frames_until_final(ws, 1)
     hello, frames = run(go())
-    assert list(hello["colour_maps"]) == ["grey", "bone", "viridis", "inferno", "magma", "grey_r", "bone_r",
-                                          "viridis_r", "inferno_r", "magma_r"]  # each reversed too (trial29 M1)
+    assert list(hello["colour_maps"]) == ["grey", "bone", "viridis", "inferno", "magma", "seismic", "RdBu", "coolwarm",
+                                          "grey_r", "bone_r", "viridis_r", "inferno_r", "magma_r", "seismic_r",
+                                          "RdBu_r", "coolwarm_r"]  # reversed too (trial29 M1); diverging (signed30)
     assert hello["capabilities"]["xray"]["colour_map"] is True
     final, data = frames[-1]
     assert all(f["colour_map"] == "inferno" for f, _ in frames)

@@ -59,7 +59,8 @@ def run(args):
     from ..io.files import published_together, write_atomic
     from ..io.images import TIFF_SUFFIXES, pixel_size, write_tiff
     from ..io.result import RenderResult
-    from ..model.conebeam import NOT_ATTENUATION, below_zero, poses, transmitted
+    from ..model.conebeam import NOT_ATTENUATION, poses, transmitted
+    from ..model.signs import below_zero
     from ..model.geometry import named_view
     from ..raytrace.tracer import RayTracer
     from ..splat.renderer import SplatRenderer

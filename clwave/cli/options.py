@@ -43,7 +43,8 @@ def add_model_options(p, classify=True):
                                                "docs/model.md §2)")
     g.add_argument("--focus", help="local level of detail: world centre X,Y,Z (needs --sigma)")
     g.add_argument("--sigma", type=float, help="local level of detail: Gaussian width (world units)")
-    g.add_argument("--interpolate", action="store_true", help="interpolating instead of approximating model")
+    g.add_argument("--interpolate", action="store_true",
+                   help="interpolating instead of approximating model: through the voxels' values (it rings at edges)")
     if not classify:
         return
     g.add_argument("--tf", help="classify with a transfer function first: a preset ("
@@ -62,8 +63,10 @@ def add_model_options(p, classify=True):
                         "§5)")
     g.add_argument("--classify", choices=("pre", "post"), default="pre",
                    help="with --tf: pre (default) classifies the volume before the transform; post keeps the "
-                        "scalar and the transfer function for ray tracing to classify while rendering (a .clw "
-                        "input: --tf always classifies while rendering)")
+                        "scalar and the transfer function for ray tracing to classify while rendering: the model's "
+                        "values, which average each voxel with its neighbours, so a layer a voxel or two thick may "
+                        "peak below a threshold its voxels pass (--interpolate: the model through the voxels; "
+                        "docs/model.md §5) (a .clw input: --tf always classifies while rendering)")
 
 
 def is_clw(args) -> bool:
@@ -401,7 +404,8 @@ def add_device_options(g):
                    help="PNG window: auto (the default: from the image's values) or LO,HI")
     g.add_argument("--colour-map", "--colormap", metavar="NAME",
                    help="PNG and GIF of a one-channel X-ray: its grey levels in a colour map, grey (the default), "
-                        "bone, viridis, inferno or magma, or one of them reversed, NAME_r: grey_r shows dark bright "
+                        "bone, viridis, inferno, magma, or the diverging seismic, RdBu or coolwarm (their auto window "
+                        "centred on 0 for signed values), or one of them reversed, NAME_r: grey_r shows dark bright "
                         "(dark protein as 3dmod's inverse contrast, napari's gray_r)")
     g.add_argument("--bit-depth", type=int, choices=(8, 16), help="PNG: bits a sample, 8 (the default) or 16")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")

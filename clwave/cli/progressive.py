@@ -53,7 +53,7 @@ def run(args):
     if frames[-1].meta.get("nothing_visible"):  # every frame blank: not what was asked for (docs/raytracing.md §10)
         raise InputError(frames[-1].meta["nothing_visible"])
     if window == "auto" and frames[-1].result().is_xray:  # the final image's window for every frame
-        window = resolve_window(frames[0].final_image()[..., :3], "auto")
+        window = resolve_window(frames[0].final_image()[..., :3], "auto", look["colour_map"])
     figures = [f.figures() for f in frames]
     with published_together() as outputs:  # every output written, then all published (coordinates.md §4)
         if as_folder:  # written beside it, renamed into place: never mixed with another run's frames

@@ -81,7 +81,8 @@ def run(args):
             result = turn[0]
             result.save(out, **look, overwrite=args.force)
         else:
-            window = turn.window(window) or window  # resolved once: the pictures' and --stats' window
+            # resolved once: the pictures' and --stats' window
+            window = turn.window(window, look["colour_map"]) or window
             turn.save(out, window=window, background=background, scale_bar=look["scale_bar"],
                       colour_map=look["colour_map"], frame_time=args.frame_time or 0.1, overwrite=args.force)
             result = RenderResult(turn[0].image, turn.meta)
@@ -90,7 +91,8 @@ def run(args):
             lines.append(f"turntable of {views} at {camera.size[0]}x{camera.size[1]} in {sum(seconds):.3f} s "
                          f"({np.median(seconds):.3f} s a view, median); the first view:")
         # the picture's, for --stats (coordinates.md §4): a .tif has none
-        result.meta["window"] = None if out.suffix.lower() in TIFF_SUFFIXES else result.display_window(window)
+        result.meta["window"] = None if out.suffix.lower() in TIFF_SUFFIXES else \
+            result.display_window(window, look["colour_map"])
         if raw is not None:  # a turntable's views as one (N, H, W, C) array
             (result if args.turntable is None else turn).save(raw, overwrite=args.force)
         if stats is not None:

@@ -114,7 +114,7 @@ def checked_header(header) -> tuple:
         raise ValueError(f"photo {header['photo']!r} is not true or false")
     try:  # absent in older files (and None): not known
         check_provenance(header.get("provenance"))
-        check_modality(header.get("modality"))
+        header["modality"] = check_modality(header.get("modality"))  # a name alone ("CT") as a Volume holds it
     except InputError as exc:  # said as the file's fault
         raise ValueError(str(exc)) from None
     levels, channels = header.get("levels"), header.get("channels")

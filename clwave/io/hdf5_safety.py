@@ -18,9 +18,13 @@ MAX_MEMBERS = 4096           # objects in a file (a .clw has 3 per channel group
 MAX_DEPTH = 4                # groups within groups (a .clw nests one deep)
 MAX_ATTRIBUTES = 16          # per object
 MIN_CHUNK = 64               # elements a chunk holds at least (or the whole dataset); a writer's hold 256 or more
-#: filters whose chunk states its decoded size in its header (hdf5plugin's, which allocate that size)
-STATED = {32015: "zstd", 32001: "blosc"}
-DEFLATE, FLETCHER32 = 1, 3
+#: filters whose chunk states its decoded size in its header (HDF5's szip, hdf5plugin's: they allocate that size)
+STATED = {32015: "zstd", 32001: "blosc", 4: "szip"}
+DEFLATE, SHUFFLE, FLETCHER32, LZF = 1, 2, 3, 32000
+#: filters whose chunks a volume's read weighs before they are decoded (:func:`check_chunks`); shuffle and Fletcher-32
+#: keep a chunk's size, lzf's decoder grows its buffer to at most 88 times a chunk's stored bytes (its longest match,
+#: 264 bytes, takes 3), which a chunk stored in no more than its bytes bounds
+BOUNDED = {DEFLATE: "deflate", SHUFFLE: "shuffle", FLETCHER32: "fletcher32", LZF: "lzf", **STATED}
 #: zlib's deflateBound: a stream of n bytes stored is at most n + n >> 12 + n >> 14 + ... + 13 (its wrapper's 6 more)
 DEFLATE_SLACK = 11
 #: bytes of metadata (object headers, chunk indexes, attribute heaps) a file may hold beyond its datasets' data:
@@ -131,9 +135,13 @@ def check_chunks(dataset, path, member, offsets=None, inflate=True) -> None:
 
     plist = dataset.get_create_plist()
     codes = [plist.get_filter(i)[0] for i in range(plist.get_nfilters())]
-    if not {DEFLATE, *STATED} & set(codes):
+    if not {DEFLATE, LZF, *STATED} & set(codes):
         return
     most = _product(plist.get_chunk()) * dataset.get_type().get_size()
+    buffer = plist.get_filter_by_id(LZF)[1][2:3] if LZF in codes else ()
+    if buffer and buffer[0] > most:  # h5py's lzf decoder allocates it first (0: the stored size)
+        raise ValueError(f"member {member}: its lzf filter states a buffer of {buffer[0]:,} bytes, more than its "
+                         f"chunk's {most:,}")
     stored = []
     if offsets is None:
         dataset.chunk_iter(stored.append)
@@ -158,6 +166,9 @@ def check_chunks(dataset, path, member, offsets=None, inflate=True) -> None:
                                              "bytes it holds take compressed")
                     elif codes[i] == DEFLATE:
                         inflated(fh.read(size), zlib.decompressobj, None, most, "a deflate chunk")
+                    elif codes[i] == LZF and size > most:
+                        raise ValueError(f"an lzf chunk is stored in {size:,} bytes, more than the {most:,} bytes it "
+                                         "holds (lzf stores no chunk that it does not shrink)")
                     elif codes[i] in STATED:
                         check_stated(STATED[codes[i]], fh.read(min(size, HEADER)), most)
                 except (ValueError, zlib.error) as exc:
@@ -180,19 +191,24 @@ def check_stored_inside(dataset, member) -> int:
 
 
 def check_filters_available(dataset, member) -> None:
-    """Refuse (``ValueError``) a dataset (its low-level id) filtered by an HDF5 filter that neither HDF5 nor
-    hdf5plugin (Blosc, Zstandard, LZ4, bitshuffle, ...) decodes here: its chunks would fail one by one as they are
-    read, HDF5 looking for a plugin in its plugin folder for each (hdf5plugin's filters are optional ones: a writer
-    that had them filtered every chunk)."""
+    """Refuse (``ValueError``) a dataset (its low-level id) filtered by an HDF5 filter whose chunks
+    :func:`check_chunks` cannot weigh before they are decoded (not in :data:`BOUNDED`: scale-offset and N-bit allocate
+    what their parameters say, hdf5plugin's LZ4, bitshuffle, bzip2, ... what their stream holds), or one that neither
+    HDF5 nor hdf5plugin decodes here: its chunks would fail one by one as they are read, HDF5 looking for a plugin in
+    its plugin folder for each."""
     import hdf5plugin  # noqa: F401  (registers its filters with HDF5)
     from h5py import h5z
 
     plist = dataset.get_create_plist()
     for i in range(plist.get_nfilters()):
         code, _, _, label = plist.get_filter(i)
+        label = label.decode(errors="replace") or BOUNDED.get(code, "unnamed")
+        if code not in BOUNDED:
+            raise ValueError(f"member {member} is filtered by {label!r} (id {code}), whose chunks clwave cannot "
+                             "weigh before they are decoded")
         if not h5z.filter_avail(code):
-            raise ValueError(f"member {member} is filtered by {label.decode(errors='replace')!r} (id {code}), "
-                             "which neither HDF5 nor hdf5plugin decodes here")
+            raise ValueError(f"member {member} is filtered by {label!r} (id {code}), which neither HDF5 nor "
+                             "hdf5plugin decodes here")
 
 
 def _check_attributes(obj, member, max_bytes):

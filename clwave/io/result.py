@@ -73,7 +73,7 @@ class RenderResult:
         wide = np.float32 if top < 256 else np.float64
         if self.is_xray:
             picture = self._picture().astype(wide, copy=False)
-            lo, hi = resolve_window(picture, window)
+            lo, hi = resolve_window(picture, window, colour_map)
             with np.errstate(over="ignore", under="ignore"):  # a narrow window's quotients past float32: clipped to 1
                 ends = np.array([lo, hi, hi - lo], wide)
                 if not (np.all(np.isfinite(ends)) and ends[2] > 0):  # else NaN levels, written as 0 with a warning
@@ -136,10 +136,10 @@ class RenderResult:
         write_png(buffer, reduced(self.picture()))
         return buffer.getvalue()
 
-    def display_window(self, window="auto"):
-        """The ``(lo, hi)`` an X-ray picture (:meth:`to_uint8`) is shown through for ``window`` ("auto" resolved from
-        this image); None for a shaded image, which has no window."""
-        return resolve_window(self._picture(), window) if self.is_xray else None
+    def display_window(self, window="auto", colour_map=None):
+        """The ``(lo, hi)`` an X-ray picture (:meth:`picture`) in ``colour_map`` is shown through for ``window``
+        ("auto" resolved from this image); None for a shaded image, which has no window."""
+        return resolve_window(self._picture(), window, colour_map) if self.is_xray else None
 
     def _picture(self) -> np.ndarray:
         """The X-ray values shown: one channel's, or the first three's."""
@@ -238,8 +238,11 @@ def check_background(background) -> tuple | str:
     return colour
 
 
-def resolve_window(values, window="auto") -> tuple:
-    """``(lo, hi)`` of a display window: "auto" (percentiles of the finite values) or given."""
+def resolve_window(values, window="auto", colour_map=None) -> tuple:
+    """``(lo, hi)`` of a display window: "auto" (percentiles of the finite values; centred on 0 for a diverging
+    ``colour_map``, :func:`~clwave.view.colours.centred`) or given."""
+    from ..view.colours import centred
+
     checked = check_window(window)
     if checked is None:
         raise InputError("a display window must be 'auto' or (lo, hi)")
@@ -249,7 +252,7 @@ def resolve_window(values, window="auto") -> tuple:
     lo, hi = (float(p) for p in np.percentile(finite, AUTO_PERCENTILES)) if finite.size else (0.0, 1.0)
     if hi <= lo:
         hi = lo + 1.0  # a flat image (a view that misses the volume) shows black
-    return lo, hi
+    return centred((lo, hi), colour_map)
 
 
 def _jsonable(obj):

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.linalg
 
 from ..errors import ClwaveWarning, InputError, finite_number, reals, warn_outside, whole_number
-from .camera import Camera, View, _content_box, _size, _vector, arguments, given_fields
+from .camera import FARTHEST, Camera, View, _content_box, _size, _vector, arguments, given_fields
 from .geometry import view_frame
 
 
@@ -70,8 +70,8 @@ class ConeBeam:
                              "distance")
         what = "a positive detector spacing, or (row, column) spacings"
         spacing = reals(pixel, "pixel", 2, what, one=True)
-        if not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
-            raise InputError(f"pixel={pixel!r} must be {what}")
+        if not (np.all(np.isfinite(spacing)) and np.all(spacing > 0) and np.all(spacing <= FARTHEST)):
+            raise InputError(f"pixel={pixel!r} must be {what}, up to {FARTHEST:g}")
         shift = reals(offset, "offset", 2, "two finite numbers (along u, along v)")
         if not np.all(np.isfinite(shift)):
             raise InputError(f"offset={offset!r} must be two finite numbers (along u, along v)")
@@ -370,14 +370,6 @@ def matrix_columns(names, where: str) -> bool:
 #: why a radiograph of values below 0 on the whole is wrong: Beer-Lambert needs mu >= 0 (``{what}``, ``{fix}``)
 NOT_ATTENUATION = ("{what} below 0 on the whole, which no attenuation (mu >= 0) is: a CT in Hounsfield units (air at "
                    "-1000)? {fix}")
-
-
-def below_zero(wv) -> bool:
-    """Whether a one-channel model is below 0 on the whole: the sign of its integral, which is that of its coarsest
-    approximation coefficients' sum (its details integrate to 0).  A thresholded attenuation rings below 0 near its
-    edges, never on the whole; a CT in Hounsfield units is below 0 on the whole (air is -1000)."""
-    group = wv.groups[0]
-    return float(np.sum(group.values[0, group.band_slices()[0]], dtype=np.float64)) < 0
 
 
 def transmitted(line_integrals, i0: float = 1.0) -> np.ndarray:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError, flag, type_name
+from ..errors import InputError, file_name, flag, type_name
 from ..io.progress import progress
 from ..threads import MadeOnce, thread_map
 from .bspline import SplineWavelet
@@ -475,7 +475,7 @@ class WaveletVolume:
         reading about that fraction of the file: the same model as ``open(path).threshold(keep=keep)``
         (docs/chunked.md §4); with ``approximation``, the coarsest approximation alone (a first image at once,
         docs/raytracing.md §8).  The content mask is read when first used, a part at a time."""
-        wv = WaveletVolume.file_format[0](path, keep, approximation)
+        wv = WaveletVolume.file_format[0](file_name(path), keep, approximation)
         if not approximation:
             wv.source = (str(Path(path).resolve()), keep)  # workers of a Dask cluster open it themselves
             warn_stored(wv, keep, path)

@@ -256,28 +256,44 @@ class ScalarRange:
 
     def faint(self, post: Classification, shown: float):
         """Warn where the share ``shown`` of the image's pixels that show (:data:`SHOWS`) is below
-        :data:`NEARLY_EMPTY`: the transfer function's opacity lies at values the model barely reaches.  Names where
-        its opacity lies and the values the model's bricks hold (their ranges bound the field), the window that shows
-        them.  Once a function and window (a viewer's frames, a turntable's views)."""
+        :data:`NEARLY_EMPTY`, naming where the transfer function is opaque (:func:`opaque_where`) and the values the
+        model's bricks hold (their ranges bound the field).  Where those values do not reach its largest opacity, its
+        opacity lies at values the model barely reaches: the window that shows them; else it lies within them and what
+        it makes opaque is small or thin: the picture may be right, a shorter opacity unit thickens thin features, and
+        a model that smooths its voxels (order 3 and up, not interpolating) is told how it lowers thin peaks.  Once a
+        function and window (a viewer's frames, a turntable's views)."""
         key = ("faint", json.dumps(post.tf.to_dict()), post.window)
         if shown >= NEARLY_EMPTY or key in self.tracer.told:
             return
         self.tracer.told.add(key)
         name = f"the transfer function{f' {post.tf.name}' if post.tf.name else ''}"
-        points = post.tf.data_points(post.window)
-        live = post.tf.points[:, 4] > 0
-        live = np.flatnonzero(live | np.r_[live[1:], False] | np.r_[False, live[:-1]])  # and its ramps' feet
+        points, opacity = post.tf.data_points(post.window), post.tf.points[:, 4]
         held = [-np.inf, np.inf] if self.tracer.wv.value_range is None else list(self.tracer.wv.value_range)
         if self.slot_range is not None:  # classified clamped to the input's range (docs/raytracing.md §10)
             held = [max(held[0], self.slot_range[..., 0].min() + self.subtracted),
                     min(held[1], self.slot_range[..., 1].max() + self.subtracted)]
         line = (f"the image is nearly empty: {100 * shown:.2g} % of its pixels hide {100 * SHOWS:g} % of the "
                 f"background or more ({round(255 * SHOWS)} of 255 levels of an 8-bit picture); {name} is opaque "
-                f"between {points[live[0]]:.4g} and {points[live[-1]]:.4g}, and this model's values lie within ")
-        warn_outside(ClwaveWarning(line + f"{held[0]:.4g} .. {held[1]:.4g}: put its opacity there (a preset: "
-                                          f"window=({held[0]:.4g}, {held[1]:.4g}))",
-                                   cli=line + f"{held[0]:.4g} .. {held[1]:.4g}: put its opacity there (a preset: "
-                                              f"--tf-window {held[0]:.4g},{held[1]:.4g}; a file: its values)"))
+                f"{opaque_where(points, opacity)}, and this model's values lie within {held[0]:.4g} .. {held[1]:.4g}")
+        inside = np.clip(np.concatenate([held, points]), *held)  # the held values' ends and the points between
+        if np.interp(inside, points, opacity).max() < opacity.max():
+            warn_outside(ClwaveWarning(line + f": put its opacity there (a preset: window=({held[0]:.4g}, "
+                                              f"{held[1]:.4g}))",
+                                       cli=line + f": put its opacity there (a preset: --tf-window {held[0]:.4g},"
+                                                  f"{held[1]:.4g}; a file: its values)"))
+            return
+        wv = self.tracer.wv
+        unit = float(min(wv.spacing)) if post.tf.opacity_unit is None else post.tf.opacity_unit
+        line += (": its opacity lies within them, so what it makes opaque is small or thin in this model (the picture "
+                 "may be right)")
+        smooths = "" if wv.interpolate or self.tracer.orders[0] < 3 else (
+            "; this model smooths its voxels (its value at a voxel centre is a weighted mean of the voxel and its "
+            "neighbours), so a layer a voxel or two thick peaks below its voxels' values: {}")
+        thin = f"; a shorter {{}} (now {unit:g}) makes thin features more opaque"
+        warn_outside(ClwaveWarning(line + smooths.format("a model of interpolate=True passes through them") +
+                                   thin.format("opacity_unit"),
+                                   cli=line + smooths.format("--interpolate makes the model pass through them") +
+                                   thin.format("--opacity-unit")))
 
     def opaque(self, tf: TransferFunction) -> str | None:
         """Why ``tf`` makes this model nearly opaque (:meth:`TransferFunction.opaque_line`, as a volume's
@@ -327,6 +343,20 @@ class ScalarRange:
         q.finish()
         self.last.seconds = time.perf_counter() - start
         return self.last
+
+
+def opaque_where(values, opacity) -> str:
+    """Where a transfer function of points at ``values`` (ascending) with ``opacity`` there (linear between, the end
+    points' held beyond) gives opacity, in words: its intervals, each "below a", "from a to b" or "above b"."""
+    live = opacity > 0
+    spans = np.r_[live[0], live[:-1] | live[1:], live[-1]]  # (-inf, v0], each [v_i, v_i+1], [v_last, inf)
+    ends = np.r_[-np.inf, values, np.inf]  # span k is ends[k] .. ends[k + 1]
+    first = np.flatnonzero(spans & ~np.r_[False, spans[:-1]])
+    last = np.flatnonzero(spans & ~np.r_[spans[1:], False])
+    words = [("everywhere" if np.isinf(lo) and np.isinf(hi) else f"below {hi:.4g}" if np.isinf(lo) else
+              f"above {lo:.4g}" if np.isinf(hi) else f"from {lo:.4g} to {hi:.4g}")
+             for lo, hi in zip(ends[first], ends[last + 1])]
+    return " and ".join([", ".join(words[:-1]), words[-1]] if len(words) > 1 else words)
 
 
 def data_box(shape, order) -> tuple:

@@ -23,6 +23,7 @@ from ..model.geometry import world_to_fine_affine
 from ..model.camera import Camera, View
 from ..model.clip import Clip, check_clip
 from ..model.conebeam import ConeBeam, check_camera, resolve_view, view_record
+from ..model.signs import warn_both_signs
 from ..device.context import ComputeContext
 from ..errors import InputError, finite_number, flag
 from ..device.memory import TRACED_PIXEL_BYTES, check_image, device_budget, parse_cap
@@ -258,6 +259,8 @@ class RayTracer:
         wv, cc = self.wv, self.cc
         tol = _checked_tolerance(tolerance)
         absorption = flag(absorption, "absorption")
+        if not absorption:
+            warn_both_signs(wv)
         clip, transfer_function = check_clip(clip), as_transfer_function(transfer_function)
         if transfer_function is None and absorption and wv.channels == 1 and wv.transfer_function is not None:
             transfer_function = TransferFunction.from_dict(wv.transfer_function)  # the model's default

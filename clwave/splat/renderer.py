@@ -22,9 +22,10 @@ from pyopencl.tools import ImmediateAllocator, MemoryPool
 from ..device.constants import TILE, record_uint4s
 from ..device.context import ComputeContext
 from ..device.memory import FRAMEBUFFER_PIXEL_BYTES, check_image, device_budget, format_size, parse_cap, too_little
-from ..errors import InputError, finite_number
+from ..errors import InputError, finite_number, type_name
 from ..io.result import RenderResult
 from ..model.conebeam import check_camera, resolve_view, view_record
+from ..model.signs import warn_both_signs
 from ..model.wavelet import WaveletVolume, check_model
 from . import accumulator
 from .accumulator import Accumulator
@@ -80,6 +81,7 @@ class SplatRenderer:
         if wv.levels >= MAX_LEVELS:
             raise InputError(f"splatting supports up to {MAX_LEVELS - 1} levels, the volume has {wv.levels}")
         omega_s, sampling, coarse = splat_options(omega_s, sampling, coarse)
+        warn_both_signs(wv)  # splatting draws line integrals only
         self.wv, self.omega_s, self.sampling, self.coarse = wv, omega_s, sampling, coarse
         self.cc = ComputeContext.get(device)
         self.budget = device_budget(self.cc, device_memory)
@@ -233,8 +235,9 @@ class SplatRenderer:
         shape = (len(cameras),) + sizes[0] + (self.wv.channels,)
         if out is None:
             out = np.empty(shape, np.float32)
-        elif out.shape != shape or out.dtype != np.float32:
-            raise InputError(f"out is a {out.dtype} array of shape {out.shape}; the views need float32 {shape}")
+        elif not isinstance(out, np.ndarray) or out.shape != shape or out.dtype != np.float32:
+            got = f"{out.dtype} array of shape {out.shape}" if isinstance(out, np.ndarray) else type_name(out)
+            raise InputError(f"out is a {got}; the views need float32 {shape}")
         elif not out.flags.writeable:  # else numpy's "assignment destination is read-only" after the first view
             raise InputError("out is read-only (a memmap opened with mode 'r'?): give a writable array, e.g. "
                              "numpy.lib.format.open_memmap(path, mode='w+', dtype=numpy.float32, shape=...)")

@@ -105,7 +105,7 @@ def resolve(sources: dict, state, size=None) -> Spec:
     if scale_bar:
         check_orthographic(camera.to_dict())
     if state.mode == "xray":
-        return Spec("xray", camera, tuple(state.window or source.auto_window),
+        return Spec("xray", camera, tuple(state.window or colours.centred(source.auto_window, state.colour_map)),
                     state.colour_map if source.capabilities["colour_map"] else None, state.detail, scale_bar=scale_bar,
                     levels=levels)
     source.start_full_stage()

@@ -223,7 +223,7 @@ class XraySource(Source):
         r, complete, energy = self.r, self.complete, self.r.energy
         total = r.count
         limit = min(total, max(1, round(state.detail * total)))  # 0 for a model without coefficients
-        window = state.window or self.auto_window
+        window = state.window or colours.centred(self.auto_window, state.colour_map)
         here = (state.azimuth, state.elevation, state.zoom, state.fov)
         # a drag frame while moving, and first for a still view the page has no drag frame of (a page's first, a
         # reset): a smaller image of a prefix, with the footprints of the bands it reaches only

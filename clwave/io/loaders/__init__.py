@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import ClwaveError, FileFormatError, InputError, finite_number, flag, float32_number
+from ...errors import ClwaveError, FileFormatError, InputError, file_name, finite_number, flag, float32_number
 from ...model.geometry import axis_turn
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, check_placement, is_dask
@@ -159,9 +159,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     >>> load(f, spacing=(2.0, 1.0, 1.0))
     Volume(shape=(4, 5, 6), channels=1, spacing=(2.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0))
     """
-    if not isinstance(path, (str, os.PathLike)):
-        raise InputError(f"path must be a file or folder name (str or pathlib.Path), got {type(path).__name__}")
-    if not os.fspath(path):  # Path("") is ".": the current folder was read as a folder of slices
+    if not file_name(path):  # Path("") is ".": the current folder was read as a folder of slices
         raise InputError("path '' names no file or folder; give the volume's",
                          cli="the input '' names no file or folder; give the volume's")
     path = Path(path)

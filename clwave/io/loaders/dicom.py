@@ -16,8 +16,9 @@ from ...device.memory import check_fits
 from ...errors import FileFormatError
 from ...model.volume import WORLD_RANGE
 from .inflate import decompressed
-from .shared import (Declared, check_float32_range, check_whole, largest_finite, note, read_slices, reading,
-                     to_canonical)
+from .scaling import check_scaling
+from .shared import (Declared, check_float32_range, check_whole, largest_finite, note, read_slices,
+                     reading, to_canonical)
 from .shear import straight_grid, unshear
 
 # Sign of each world axis when converting to RAS; LPS is DICOM's patient space.
@@ -53,8 +54,7 @@ def read_dicom_folder(where, path, headers, progress_bar, fits=None):
         for file, h in headers:
             check_attribute(file, tag, np.array(h.get(tag), float))
     for file, h in headers:
-        check_attribute(file, "RescaleSlope", float(getattr(h, "RescaleSlope", 1.0)))
-        check_attribute(file, "RescaleIntercept", float(getattr(h, "RescaleIntercept", 0.0)))
+        check_rescale(file, h, float(getattr(h, "RescaleSlope", 1.0)), float(getattr(h, "RescaleIntercept", 0.0)))
     cosines = np.array([h.ImageOrientationPatient for _, h in headers], float)
     kinds, counts = np.unique(np.round(cosines, 4), axis=0, return_counts=True)
     common = kinds[np.argmax(counts)]
@@ -433,11 +433,23 @@ def check_pixel_data(path, ds):
                               f"truncated or its header is wrong")
 
 
+def check_rescale(path, ds, slopes, intercepts):
+    """Refuse a DICOM file ``ds`` whose RescaleSlope or RescaleIntercept (each one, or one a frame) is not finite,
+    beyond float32's range, or maps every value its pixels can hold to one (:func:`.scaling.check_scaling`)."""
+    from pydicom.pixels.utils import pixel_dtype
+
+    check_attribute(path, "RescaleSlope", slopes)
+    check_attribute(path, "RescaleIntercept", intercepts)
+    stored = pixel_dtype(ds)
+    for slope, intercept in dict.fromkeys(zip(np.atleast_1d(slopes).tolist(), np.atleast_1d(intercepts).tolist())):
+        check_scaling(f"DICOM file {path}", ("RescaleSlope", "RescaleIntercept"), slope, intercept, stored)
+
+
 def check_attribute(path, tag, values):
     """Refuse a DICOM attribute no volume can be placed or scaled by: nan or inf; an ImageOrientationPatient that is
     not two perpendicular unit vectors (a slice's row and column directions); a PixelSpacing or ImagePositionPatient
     beyond the world lengths clwave renders (:data:`~clwave.model.volume.WORLD_RANGE`: the slices' gaps and drift
-    overflowed); a RescaleSlope or RescaleIntercept beyond float32's range, or a RescaleSlope of 0."""
+    overflowed); a RescaleSlope or RescaleIntercept beyond float32's range."""
     values = np.atleast_1d(np.asarray(values, float))
     shown, low, high = ", ".join(map(str, values[:12])), *WORLD_RANGE
     count = {"ImageOrientationPatient": 6, "ImagePositionPatient": 3, "PixelSpacing": 2}.get(tag, 1)
@@ -454,8 +466,6 @@ def check_attribute(path, tag, values):
     elif tag in ("PixelSpacing", "ImagePositionPatient"):
         inside = (values.min() >= low if tag == "PixelSpacing" else True) and np.abs(values).max() <= high
         problem = None if inside else f"{tag} ({shown}) beyond the world lengths clwave renders ({low:g} to {high:g})"
-    elif tag == "RescaleSlope" and not np.all(values):
-        problem = "RescaleSlope 0, which maps every pixel to the intercept"
     else:
         inside = np.abs(values).max() <= np.finfo(np.float32).max
         problem = None if inside else f"{tag} ({shown}) beyond float32's range"

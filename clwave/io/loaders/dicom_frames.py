@@ -9,7 +9,7 @@ import os
 import numpy as np
 
 from ...errors import FileFormatError
-from .dicom import (check_attribute, check_pixel_data, dcmread, fill_padding, header_facts, mark_padding,
+from .dicom import (check_attribute, check_pixel_data, check_rescale, dcmread, fill_padding, header_facts, mark_padding,
                     modality_of, padding, place_slices, rescaled, series_facts)
 from .shared import Declared, check_whole
 
@@ -89,9 +89,9 @@ def _frames_of(path):
                               f"clwave places; {CONVERTER.replace('FILE', str(path))}")
     check_pixel_data(path, ds)
     *geometry, units = geometry
-    for tag, values in zip(("ImagePositionPatient", "ImageOrientationPatient", "PixelSpacing", "RescaleSlope",
-                            "RescaleIntercept"), geometry):
+    for tag, values in zip(("ImagePositionPatient", "ImageOrientationPatient", "PixelSpacing"), geometry):
         check_attribute(path, tag, values)
+    check_rescale(path, ds, *geometry[3:])
     return ds, geometry, units
 
 

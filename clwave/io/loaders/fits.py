@@ -16,11 +16,14 @@ from functools import partial
 import numpy as np
 
 from ...errors import FileFormatError
+from .scaling import check_scaling
 from .shared import GZIP_MAGIC, Declared, OnDemand, TimeSeries, as_array, check_declared_size, note, one_volume
 
 FITS_SUFFIXES = (".fits", ".fit", ".fts", ".fz", ".fits.gz", ".fit.gz", ".fts.gz")
 _BLOCK = 2880  # FITS's block: each header and each HDU's data is padded to a multiple
-_BITPIX = (8, 16, 32, 64, -32, -64)
+#: each BITPIX's stored type
+_STORED = {8: "u1", 16: "i2", 32: "i4", 64: "i8", -32: "f4", -64: "f8"}
+_BITPIX = tuple(_STORED)
 _VOLUME_AXES = "zyx"
 
 
@@ -32,6 +35,8 @@ def read_fits(path, chunks, fits=None, frame=None):
     of several planes (Stokes I, Q, U, V) the one ``frame`` picks (:meth:`.shared.TimeSeries.pick`), alone read.
     Spacing is in pixels: 1, but the celestial pixels' aspect (Dec over RA) along z."""
     index, header, dims = find_cube(path)
+    if not path.name.lower().endswith(".gz"):  # astropy opens a gzip stream by reading it all: weighed first, below
+        _check_opens(path, index)
     kept, planes = _kept_axes(path, dims)
     header = _image_header(path, index, header)
     order, flips, aspect = sky_axes(header, kept, path)
@@ -115,7 +120,7 @@ def samples(header) -> np.dtype:
     and 64), but where BZERO only makes it unsigned (BSCALE 1, BZERO 2^15 on 16 bits; astropy 8.0 fails on the signed
     bytes of BZERO -128, known-gaps §15)."""
     bitpix = header["BITPIX"]
-    stored = np.dtype({8: "u1", 16: "i2", 32: "i4", 64: "i8", -32: "f4", -64: "f8"}[bitpix])
+    stored = np.dtype(_STORED[bitpix])
     if bitpix < 0:
         return stored
     bscale, bzero = header.get("BSCALE", 1), header.get("BZERO", 0)
@@ -129,7 +134,8 @@ def samples(header) -> np.dtype:
 def _image_header(path, index, header):
     """The header of a cube's image: its own, or a tile-compressed image's as astropy makes it of its table's (ZBITPIX,
     ZNAXISn...; opening it reads no pixel); its scaling (BSCALE, BZERO) refused in one line where it is no finite
-    number, beyond float32's range (its voxels would be) or, BSCALE, 0 (every pixel BZERO)."""
+    number, beyond float32's range (its voxels would be), or mapping every pixel to one value
+    (:func:`.scaling.check_scaling`: a BSCALE of 0)."""
     if header.get("ZIMAGE") is True:
         with _opened(path) as hdul:
             header = hdul[index].header
@@ -141,11 +147,13 @@ def _image_header(path, index, header):
             problem = "not a finite number"
         elif abs(value) > float(np.finfo(np.float32).max):  # a Python float: no cast of value to float32
             problem = "beyond float32's range (3.4e38), which clwave computes in"
-        elif key == "BSCALE" and value == 0:
-            problem = "which maps every pixel to BZERO"
         else:
             continue
         raise FileFormatError(f"{path}: its HDU {index} has {key} = {value!r}, {problem}; the header is corrupt")
+    stored = _STORED.get(header.get("BITPIX"))
+    if stored and ("BSCALE" in header or "BZERO" in header):
+        check_scaling(f"{path}: its HDU {index}", ("BSCALE", "BZERO"), header.get("BSCALE", 1), header.get("BZERO", 0),
+                      stored, samples(header))
     return header
 
 
@@ -308,6 +316,18 @@ def _opened(path):
 
     with _quiet(), fits.open(path, lazy_load_hdus=True) as hdul:
         yield hdul
+
+
+def _check_opens(path, index):
+    """Refuse (one line) a file whose HDU ``index`` astropy cannot open, which each read of a chunk would, where
+    ``clwave info`` reads no pixel: a card astropy requires that is not what FITS allows (``EXTEND = NaN``: "Empty or
+    corrupt FITS file").  astropy reads the headers up to it alone."""
+    try:
+        with _opened(path) as hdul:
+            hdul[index].header  # read: the HDU opened
+    except (OSError, ValueError, TypeError, KeyError, IndexError) as exc:
+        raise FileFormatError(f"{path}: astropy cannot open its HDU {index} ({exc}); a card astropy requires is not "
+                              "what FITS allows (as EXTEND = NaN): correct the header") from None
 
 
 def _read(path, index, naxis, kept, picked, key):

@@ -11,8 +11,9 @@ import numpy as np
 
 from ...device.memory import HostMemoryError
 from ...errors import FileFormatError
-from .shared import (UNEVEN, Declared, TimeSeries, as_array, check_declared_size, check_float32_range, check_whole,
-                     largest_finite, note, one_volume, placeable, proxy_frame, to_canonical)
+from .scaling import check_scaling
+from .shared import (UNEVEN, Declared, TimeSeries, as_array, check_declared_size, check_float32_range,
+                     check_whole, largest_finite, note, one_volume, placeable, proxy_frame, to_canonical)
 from .shear import STRAY_VOXELS, straight_grid, unshear
 
 
@@ -48,6 +49,7 @@ def read_nifti(path, chunks, fits=None, frame=None):
     check_declared_size(path, image.dataobj.offset,
                         math.prod(image.shape) * image.header.get_data_dtype().itemsize, image.shape)
     proxy = image.dataobj  # reads on demand, applying scl_slope / scl_inter
+    check_scaling(path, ("scl_slope", "scl_inter"), proxy.slope, proxy.inter, image.get_data_dtype())
     # NIfTI keeps time on the 4th axis and vector components on the 5th
     if proxy.ndim > 3 and (proxy.shape[3] != 1 or any(n != 1 for n in proxy.shape[5:])):
         series = TimeSeries(f"{path} holds a NIfTI image of shape {proxy.shape}, {proxy.shape[3]} time points on its "

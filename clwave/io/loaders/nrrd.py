@@ -64,6 +64,9 @@ def read_nrrd(path, fits=None, warn_spacing=True):
             affine[:3, 3] = header.get("space origin", np.zeros(3))
         else:
             spacings = np.asarray(header.get("spacings", np.ones(len(sizes))), float)[spatial]
+            if np.isinf(spacings).any():  # NaN is NRRD's unknown spacing; infinity none
+                raise FileFormatError(f"{path}: its spacings (dz, dy, dx) {', '.join(map(str, spacings[::-1]))} "
+                                      "include an infinite one; correct the header's spacings (nan where unknown)")
             if warn_spacing and not np.all(np.isfinite(spacings)):
                 note(f"{path}: its spacing (dz, dy, dx) {', '.join(map(str, spacings[::-1]))} is unknown (nan) on "
                      f"some axes; taken as 1 there: give spacing= (--spacing DZ,DY,DX) for the true one")
@@ -73,8 +76,10 @@ def read_nrrd(path, fits=None, warn_spacing=True):
         dtype = nrrd.reader._determine_datatype(header)
         try:
             check_whole(path, [sizes[a] for a in spatial + others], dtype, fits)
-        except Declared as declared:  # describe(): its place from the header
+        except Declared as declared:  # describe(): its place from the header, its stream as the read weighs it
             declared.place([sizes[a] for a in spatial], affine)
+            if str(header.get("encoding", "raw")).lower() in _DECOMPRESSORS:
+                _inflated(path, header, fh, dtype, sizes, keep=False)
             raise
         if str(header.get("encoding", "raw")).lower() in _DECOMPRESSORS:
             data = _inflated(path, header, fh, dtype, sizes)
@@ -229,17 +234,18 @@ _DECOMPRESSORS = {"gzip": GZIP, "bzip2": (bz2.BZ2Decompressor, b"BZh")}
 _DECOMPRESSORS.update(gz=_DECOMPRESSORS["gzip"], bz2=_DECOMPRESSORS["bzip2"])
 
 
-def _inflated(path, header, fh, dtype, sizes) -> np.ndarray:
+def _inflated(path, header, fh, dtype, sizes, keep=True) -> np.ndarray | None:
     """A gzip or bzip2 NRRD's data (after the header read from ``fh``, or in its detached data file), every gzip
     member or bzip2 stream, decompressed into its array as pynrrd's ``read_data`` lays it out, never one byte past
     the ``byte skip`` and voxels its header declares: a gzip trailer counts its member alone, modulo 2^32, and
     pynrrd inflates all of the first member before it compares.  ``line skip`` counts lines of the file before the
-    stream, ``byte skip`` bytes of the stream, as Teem reads them (pynrrd skips the bytes in both)."""
+    stream, ``byte skip`` bytes of the stream, as Teem reads them (pynrrd skips the bytes in both).  Without ``keep``
+    (``clwave info``) the stream is decompressed and weighed alike, kept nowhere: None."""
     lines, skip = _skips(header)  # checked by _check_nrrd_size
     encoding = str(header["encoding"]).lower()
     nbytes = math.prod(sizes) * dtype.itemsize
     voxels = " x ".join(map(str, sizes[::-1]))
-    buffer = np.empty(nbytes, np.uint8)
+    buffer = np.empty(nbytes, np.uint8) if keep else None
     held = 0  # bytes of the stream decompressed
     with ExitStack() as files:
         detached = _data_file(path, header)
@@ -252,9 +258,10 @@ def _inflated(path, header, fh, dtype, sizes) -> np.ndarray:
                 raise FileFormatError(f"{path}: its {encoding} stream holds more than the {skip + nbytes:,} bytes its "
                                       f"header declares ({voxels} voxels); its header is wrong or the file is not "
                                       "what it says")
-            used = piece[max(skip - held + len(piece), 0):]
-            buffer[held - skip - len(used):held - skip] = np.frombuffer(used, np.uint8)
+            if keep:
+                used = piece[max(skip - held + len(piece), 0):]
+                buffer[held - skip - len(used):held - skip] = np.frombuffer(used, np.uint8)
     if held < skip + nbytes:
         raise FileFormatError(f"{path}: its header declares {voxels} voxels ({nbytes:,} bytes) but its {encoding} "
                               f"stream holds {max(held - skip, 0):,} bytes; it is truncated or its header is wrong")
-    return buffer.view(dtype).reshape(sizes[::-1]).T
+    return buffer.view(dtype).reshape(sizes[::-1]).T if keep else None

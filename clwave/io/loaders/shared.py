@@ -108,8 +108,8 @@ def not_a_file(path) -> FileFormatError:
 
 
 def _corrupt(path, exc) -> str:
-    lines = str(exc).strip().splitlines()
-    reason = type(exc).__name__ + (f": {lines[0][:200]}" if lines else "")
+    said = " ".join(str(exc).split())  # all its lines: pydicom's reasons follow "raised by all available plugins:"
+    reason = type(exc).__name__ + (f": {said[:300].rstrip(':')}" if said else "")
     return f"cannot read {path}: {reason}; the file may be truncated or corrupt"
 
 

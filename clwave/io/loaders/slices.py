@@ -40,6 +40,7 @@ def read_slice_folder(folder, progress_bar, fits=None, chunks=False, warn_spacin
     by chunk (``chunks``, :func:`.shared.as_array`'s; None: by size): each chunk's files read by tifffile when it is
     computed (:func:`_tiff_slices`), the stack weighed after its first slice."""
     kind, files = slice_files(folder)
+    _check_headers(files, kind)
     if warn_spacing:
         no_spacing(folder)
     if kind == "TIFF":
@@ -53,6 +54,27 @@ def read_slice_folder(folder, progress_bar, fits=None, chunks=False, warn_spacin
         return read_slices(files, lambda path: first if path == files[0] else _tiff_slice(path), "reading TIFF slices",
                            progress_bar, fits)
     return read_slices(files, _image_slice, f"reading {kind} slices", progress_bar, fits)
+
+
+def _check_headers(files, kind):
+    """Refuse a folder whose slices' headers do not all declare the first's shape and sample type
+    (:func:`.shared.check_slice`), read by their headers alone: ``clwave info``, which decodes the first slice only,
+    refuses the folder the read would, and the read before it reads the slices."""
+    import imageio.v3 as iio
+    from tifffile import TiffFile
+
+    first = None
+    for path in files:
+        with reading(path):
+            if kind == "TIFF":
+                with TiffFile(path) as tif:
+                    head = tif.pages.first
+            else:
+                head = iio.improps(path, plugin="pillow")
+        if first is None:
+            first = head
+        else:
+            check_slice(path, head, first.shape, first.dtype, files[0])
 
 
 def _tiff_slices(files, shape, dtype, index):
