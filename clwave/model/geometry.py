@@ -179,3 +179,32 @@ def check_key(key) -> str:
     if not isinstance(key, str) or len(key) != 3 or set(key) - {"a", "d"}:
         raise InputError(f"subband key must be 3 letters of 'a'/'d' in (z, y, x) order, got {key!r}")
     return key
+
+
+def axis_turn(orientation) -> np.ndarray:
+    """The 3 x 3 signed permutation that turns a ``(z, y, x)`` array's unit steps (column ``a``: array axis ``a``'s)
+    into RAS+, of an input whose ``orientation`` is stated (one that carries none): three axis codes as nibabel
+    writes them (``"LPS"``, ``"RAS"``), the directions its x, y and z index axes (array axes 2, 1, 0) point to, as
+    ``nibabel.aff2axcodes`` gives them of a NIfTI's (x, y, z) axes; one InputError for anything else."""
+    from nibabel.orientations import axcodes2ornt
+
+    try:
+        ornt = axcodes2ornt(tuple(orientation.upper()[::-1]))
+    except (AttributeError, ValueError):
+        ornt = None
+    if ornt is None or len(ornt) != 3 or set(ornt[:, 0]) != {0, 1, 2}:
+        raise InputError(f"orientation={orientation!r} must be three axis codes, one of L/R, one of A/P and one of "
+                         f"I/S, the directions the array's x, y and z axes point to (nibabel's, e.g. 'LPS' or 'RAS')",
+                         cli=f"--orientation {orientation} must be three letters, one of L/R, one of A/P and one of "
+                             f"I/S, the directions the array's x, y and z axes point to (e.g. LPS or RAS)")
+    turn = np.zeros((3, 3))
+    turn[ornt[:, 0].astype(int), np.arange(3)] = ornt[:, 1]
+    return turn
+
+
+def turned(data, spacing_zyx, turn):
+    """``(data, spacing_zyx)`` of a ``(z, y, x[, c])`` array turned into RAS+ by ``turn`` (:func:`axis_turn`): its
+    axes permuted and flipped (a view; a Dask array stays lazy), the spacing with them; its centre stays put."""
+    source = [int(np.flatnonzero(turn[r])[0]) for r in (2, 1, 0)]  # the array axis that becomes z, y, x
+    flips = tuple(slice(None, None, -1) if turn[r, a] < 0 else slice(None) for r, a in zip((2, 1, 0), source))
+    return data.transpose(source + list(range(3, data.ndim)))[flips], tuple(spacing_zyx[a] for a in source)
