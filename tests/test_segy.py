@@ -11,14 +11,13 @@ import time
 
 import numpy as np
 import pytest
+import segyio
 
 from clwave.cli import main
 from clwave.device.memory import HostMemoryError
 from clwave.errors import ClwaveWarning, FileFormatError, InputError
 from clwave.io.loaders import describe, load
 from test_loaders import assert_one_line_error
-
-segyio = pytest.importorskip("segyio", reason="segyio is in the test extra (pip install .[test])")
 
 IEEE, IBM = 5, 1
 
