@@ -118,7 +118,8 @@ def test_a_colour_bar_that_keys_nothing_is_refused(result, options, words):
 
 def test_the_command_line_draws_it_and_refuses_it_before_a_render_where_it_keys_nothing(tmp_path, capsys):
     """``--colour-bar`` (``--colorbar``) on a splat: the PNG differs from the one without it in its top-right corner
-    alone; a shaded render, a .tif refused in one line (exit 2) before any render, nothing written."""
+    alone; a shaded render, a .tif, a picture too small for it refused in one line (exit 2) before any render (no
+    render's report on stdout), nothing written."""
     render = ["render", "phantom:hydrogen:16", "--levels", "1", "--size", "200x240"]
     assert main(render + ["--colour-map", "seismic", "-o", str(tmp_path / "plain.png")]) == 0
     assert main(render + ["--colour-map", "seismic", "--colorbar", "-o", str(tmp_path / "bar.png")]) == 0
@@ -131,8 +132,10 @@ def test_the_command_line_draws_it_and_refuses_it_before_a_render_where_it_keys_
     for argv, words in [(shaded + ["-o", str(tmp_path / "s.png")], "--colour-bar a shaded image's colours are its "
                                                                     "transfer function's"),
                         (render + ["--colour-bar", "-o", str(tmp_path / "v.tif")], "--colour-bar sets a .png's "
-                                                                                   "colour bar")]:
+                                                                                   "colour bar"),
+                        (render + ["--colour-bar", "--size", "30", "-o", str(tmp_path / "small.png")],
+                         "the 30x30-pixel picture has no room for a colour bar")]:
         assert main(argv) == 2
-        err = capsys.readouterr().err
-        assert words in err and err.count("\n") == 1 and "Traceback" not in err
+        out, err = capsys.readouterr()
+        assert words in err and err.count("\n") == 1 and "Traceback" not in err and "splatted" not in out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bar.png", "plain.png"]

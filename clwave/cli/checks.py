@@ -249,14 +249,16 @@ def check_picture_fits(look, camera, wv, xray):
     """Refuse, before the render, a ``--scale-bar`` that does not fit ``camera``'s picture of ``wv`` (as
     :func:`~clwave.io.images.draw_scale_bar` would after it), a ``--colour-map`` for a picture it does not colour
     (an ``xray`` of ``wv``'s channels or a shaded one: :func:`~clwave.io.result.check_colour_mapped`), and a
-    ``--colour-bar`` where it keys nothing (:func:`~clwave.io.result.check_colour_barred`)."""
-    from ..io.images import draw_scale_bar
+    ``--colour-bar`` where it keys nothing (:func:`~clwave.io.result.check_colour_barred`) or has no room."""
+    from ..io.images import draw_colour_bar, draw_scale_bar
     from ..io.result import check_colour_barred, check_colour_mapped
 
     if look["colour_map"] is not None:
         check_colour_mapped(look["colour_map"], xray, wv.channels, look["bit_depth"])
     if look["colour_bar"]:
         check_colour_barred(xray, wv.channels)
+        if camera is not None:  # a picture too small for it with the shortest labels (the window is the image's)
+            draw_colour_bar(np.zeros(camera.size, np.uint8), lambda f: np.zeros(f.shape, np.uint8), (0, 1))
     if look["scale_bar"] is not None:
         draw_scale_bar(np.zeros(camera.size, np.uint8), camera.view(wv).pixel, wv.unit, look["scale_bar"])
 
