@@ -377,8 +377,9 @@ def add_camera_options(p):
     from ..model.geometry import VIEWS
 
     g = p.add_argument_group("view")
-    g.add_argument("--azimuth", type=float, help="degrees (default 30)")
-    g.add_argument("--elevation", type=float, help="degrees (default 20)")
+    g.add_argument("--azimuth", type=float, help="degrees (default 30; with neither angle nor --view, a slab opens "
+                                                 "showing its face: docs/coordinates.md §2)")
+    g.add_argument("--elevation", type=float, help="degrees (default 20; a slab: its face)")
     g.add_argument("--view", choices=VIEWS, help="a RAS volume's side, drawn as radiographs are: anterior (AP: the "
                    "patient's left on the image's right), posterior, left, right (laterals), inferior (as CT slices), "
                    "superior; instead of --azimuth and --elevation")
