@@ -115,28 +115,30 @@ class Turntable:
             return None
         return resolve_window(np.stack([r.image[..., :3] for r in self.results]), window, colour_map)
 
-    def pictures(self, window="auto", background=None, scale_bar=None, unit=None, colour_map=None) -> list:
+    def pictures(self, window="auto", background=None, scale_bar=None, unit=None, colour_map=None,
+                 colour_bar=False) -> list:
         """Each view's 8-bit picture (:meth:`RenderResult.picture`), X-rays through the one :meth:`window`."""
         shared = self.window(window, colour_map) if self.results[0].is_xray else window
-        return [r.picture(shared, background, scale_bar=scale_bar, unit=unit, colour_map=colour_map)
+        return [r.picture(shared, background, scale_bar=scale_bar, unit=unit, colour_map=colour_map,
+                          colour_bar=colour_bar)
                 for r in self.results]
 
     def save(self, path, *, window="auto", background=None, scale_bar=None, unit=None, colour_map=None,
-             frame_time=FRAME_TIME, overwrite=False) -> Path:
+             colour_bar=False, frame_time=FRAME_TIME, overwrite=False) -> Path:
         """Write ``.gif`` (the :meth:`pictures`, looping, each shown ``frame_time`` seconds, to the hundredth),
         ``.npy`` (the (N, H, W, C) float32 :attr:`images`) or ``.json`` (:attr:`meta`)."""
         path = check_suffix(path, (".gif", ".npy", ".json"))
         given = [f"{name}=" for name, value in (("window", None if isinstance(window, str) and window == "auto" else
                                                  window), ("background", background), ("scale_bar", scale_bar),
-                                                ("colour_map", colour_map))
+                                                ("colour_map", colour_map), ("colour_bar", colour_bar or None))
                  if value is not None]
         if given and path.suffix.lower() != ".gif":
             raise InputError(f"{' and '.join(given)} set a .gif's pictures; {path} holds the views' values or "
                              f"figures: leave {'them' if len(given) > 1 else 'it'} out")
         frame_time = check_frame_time(frame_time)
         if path.suffix.lower() == ".gif":
-            return write_gif(path, self.pictures(window, background, scale_bar, unit, colour_map), frame_time,
-                             overwrite)
+            return write_gif(path, self.pictures(window, background, scale_bar, unit, colour_map, colour_bar),
+                             frame_time, overwrite)
         images = self.images
         if path.suffix.lower() == ".npy":
             if images.size != np.count_nonzero(np.isfinite(images)):

@@ -111,3 +111,26 @@ def test_a_clean_model_frames_its_content_box():
     wv.measure_noise()
     lo, hi = framed_box(wv.threshold(keep=0.05))
     assert np.allclose(lo, wv.content_box()[0]) and np.allclose(hi, wv.content_box()[1])
+
+
+def test_a_photo_stack_opens_with_its_top_row_at_the_top_and_its_left_column_at_the_left(tmp_path, capsys):
+    """A folder of 4 RGB photos, a slab thin along z, opens from -z with y down (camera.PHOTO_SLAB_VIEW) as image
+    viewers show a photo: the red band of each photo's first rows lies in the image's upper half and the green band of
+    its first columns in the left half (from +z, as a grey tomogram opens, it read upside down)."""
+    from PIL import Image
+
+    from clwave.model.camera import PHOTO_SLAB_VIEW
+
+    (tmp_path / "s").mkdir()
+    for k in range(4):
+        photo = np.full((24, 32, 3), 60, np.uint8)
+        photo[:6], photo[:, :5] = (255, 0, 0), (0, 255, 0)  # the top rows red, the left columns green
+        Image.fromarray(photo).save(tmp_path / "s" / f"s{k}.png")
+    assert main(["render", str(tmp_path / "s"), "--size", "48", "--raw", str(tmp_path / "r.npy"), "-o",
+                 str(tmp_path / "r.png"), "--stats", str(tmp_path / "r.json")]) == 0, capsys.readouterr().err
+    camera = json.loads((tmp_path / "r.json").read_text())["camera"]
+    assert (camera["azimuth"], camera["elevation"]) == PHOTO_SLAB_VIEW
+    image = np.load(tmp_path / "r.npy")
+    rows, columns = np.mgrid[:48, :48]
+    red, green = (np.clip(image[..., c] - image[..., 2], 0, None) for c in (0, 1))  # beyond the grey
+    assert np.average(rows, weights=red) < 20 and np.average(columns, weights=green) < 20

@@ -8,12 +8,14 @@ orientation code under test."""
 import json
 
 import imageio.v3 as iio
+import dask.array as da
 import numpy as np
 import pytest
 
 from clwave.cli import main
 from clwave.errors import InputError
 from clwave.io.loaders import load
+from clwave.model.volume import Volume
 from test_loaders import assert_one_line_error, place_in_ras, write_dicom_slice
 
 
@@ -56,7 +58,8 @@ def test_a_stack_given_the_dicom_series_orientation_loads_as_the_series(tmp_path
 @pytest.mark.parametrize("codes", ["RAS", "LPS", "PIR", "SLA", "IRP"])
 def test_orientation_places_each_voxel_where_its_codes_point(tmp_path, rng, codes):
     """Each voxel of a (z, y, x) .npy lands where the codes say its x, y, z index axes point (nibabel's
-    aff2axcodes of the (x, y, z) array), its spacing with it; the origin, the centre's place, stays 0."""
+    aff2axcodes of the (x, y, z) array), its spacing with it; the origin, the centre's place, stays 0.  Volume takes
+    orientation= as load does (trial30: a raw TypeError), its origin= after the turn, a Dask array kept lazy."""
     data = rng.integers(0, 1000, (3, 4, 5)).astype(np.int16)
     np.save(tmp_path / "v.npy", data)
     spacing_zyx = (3.0, 2.0, 0.5)
@@ -68,6 +71,13 @@ def test_orientation_places_each_voxel_where_its_codes_point(tmp_path, rng, code
     ras_axis = [int(np.flatnonzero(unit[c])[0]) for c in codes]  # the RAS axis of x, y, z
     expected = {ras_axis[a]: spacing_zyx[2 - a] for a in range(3)}  # RAS axis -> spacing
     assert vol.spacing == (expected[2], expected[1], expected[0]) and vol.origin == (0.0, 0.0, 0.0)
+    api = Volume(data, spacing=spacing_zyx, orientation=codes, origin=(1, 2, 3))
+    np.testing.assert_array_equal(api.data, place_in_ras(data.transpose(2, 1, 0), affine))
+    assert api.spacing == vol.spacing and api.origin == (1.0, 2.0, 3.0) and type(api.spacing[0]) is float
+    assert api.data.flags.c_contiguous and api.data.dtype == np.float32  # what the renderers take
+    lazy = Volume(da.from_array(data, chunks=2), spacing=spacing_zyx, orientation=codes)
+    assert lazy.chunked and lazy.spacing == vol.spacing
+    np.testing.assert_array_equal(lazy.data.compute(), vol.data)
 
 
 def test_a_files_origin_turns_with_its_axes_and_origin_places_the_centre(tmp_path):
@@ -106,6 +116,9 @@ def test_orientation_is_refused_for_oriented_files_and_bad_codes(tmp_path, rng, 
     for codes in ("LPX", "LLS", "LP", "LPSA", "", 3):
         with pytest.raises(InputError, match="must be three axis codes, one of L/R, one of A/P and one of I/S") as e:
             load(tmp_path / "v.npy", orientation=codes)
+        assert_one_line_error(e)
+        with pytest.raises(InputError, match="must be three axis codes, one of L/R, one of A/P and one of I/S") as e:
+            Volume(np.zeros((3, 4, 5)), orientation=codes)
         assert_one_line_error(e)
     code, out, err = run(capsys, "info", str(tmp_path / "v.nii"), "--orientation", "LPS")
     assert code == 2 and err.strip().endswith("--orientation is for inputs that carry none (.npy, .raw, TIFF, "

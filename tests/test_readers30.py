@@ -116,7 +116,7 @@ def test_a_nifti2_scl_slope_that_underflows_float32_is_refused_and_nifti1s_subno
 
 
 def test_a_dicom_rescale_and_a_fits_bscale_that_underflow_are_refused_by_their_header(tmp_path, capsys, rng):
-    """The same class in the other formats' scaling (one home, ``shared.check_scaling``): a RescaleSlope of 1e-320
+    """The same class in the other formats' scaling (one home, ``scaling.check_scaling``): a RescaleSlope of 1e-320
     (every uint16 pixel the intercept 0), a BSCALE of 1e-300 on float32 samples (every pixel 0)."""
     from test_fits import write as write_fits
     from test_loaders import write_series
@@ -129,6 +129,24 @@ def test_a_dicom_rescale_and_a_fits_bscale_that_underflow_are_refused_by_their_h
     path = write_fits(tmp_path / "c.fits", np.arange(24, dtype=np.float32).reshape(2, 3, 4), -32, {"BSCALE": 1e-300})
     _refused_alike(capsys, path, r"its HDU 0 has BSCALE = 1e-300 and BZERO = 0, which map every float32 sample to 0 in "
                                  r"float32")
+
+
+@pytest.mark.parametrize("stored, slope, inter, refused", [
+    ("int16", 2.0 ** -149 / 2 ** 17, 0.0, True),  # -32768 and 32767 times it under half the least subnormal: both 0
+    ("int16", 2.0 ** -149, 0.0, False),  # each end a multiple of the least subnormal: apart
+    ("int8", 1.0, 2.0 ** 40, True),  # -128 .. 127 about 2^40, where float32's step is 2^17: one value
+    ("int8", 1.0, 2.0 ** 20, False),  # where its step is 2^-3: apart
+    ("uint8", 0.0, 5.0, True), ("float32", 1.0, 0.0, False)])
+def test_check_scaling_refuses_a_scaling_on_the_far_side_of_its_edge_only(stored, slope, inter, refused):
+    """Both sides of the edge where a scaling maps the stored type's whole range to one float32 (the oracle: float32's
+    least subnormal 2^-149 and its step 2^(e - 23) at 2^e, by hand)."""
+    from clwave.io.loaders.scaling import check_scaling
+
+    if refused:
+        with pytest.raises(FileFormatError, match=rf"^f has S = .* which map every {stored} sample to .* in float32"):
+            check_scaling("f", ("S", "I"), slope, inter, stored)
+    else:
+        assert check_scaling("f", ("S", "I"), slope, inter, stored) is None
 
 
 def test_info_refuses_a_fits_cube_astropy_cannot_open_and_a_slice_folder_of_another_size(tmp_path, capsys):

@@ -105,7 +105,8 @@ def check_options(args):
 #: options of one --method only, refused with the other (a command has some of them: drr has no --light);
 #: (option, what it is given when not given: None where the command leaves it None)
 RAYTRACE_ONLY = (("tolerance", 1e-3), ("light", None), ("no_shading", None), ("xray", None), ("field", "bspline"),
-                 ("background", None), ("detail", None), ("clip_box", None), ("clip_plane", None))
+                 ("background", None), ("detail", None), ("clip_box", None), ("clip_voxels", None),
+                 ("clip_plane", None))
 SPLAT_ONLY = ("coarse", "omega_s")
 
 
@@ -174,19 +175,29 @@ def parse_lights(args):
     return lights
 
 
-def parse_clip(args):
-    """The :class:`~clwave.Clip` of ``--clip-box X0,Y0,Z0,X1,Y1,Z1`` and the ``--clip-plane PX,PY,PZ,NX,NY,NZ`` s
-    (None where neither is given, or the command has neither)."""
+def parse_clip(args, wv=None):
+    """The :class:`~clwave.Clip` of ``--clip-box X0,Y0,Z0,X1,Y1,Z1`` or ``--clip-voxels Z0:Z1,Y0:Y1,X0:X1`` (of the
+    model ``wv``'s input array: :meth:`~clwave.Clip.of_voxels`; without ``wv``, before it is made, only read) and the
+    ``--clip-plane PX,PY,PZ,NX,NY,NZ`` s (None where none is given, or the command has none)."""
     from ..model.clip import Clip
+    from ..model.geometry import voxel_ranges
 
-    box, planes = getattr(args, "clip_box", None), getattr(args, "clip_plane", None) or []
-    if box is None and not planes:
+    box, voxels = getattr(args, "clip_box", None), getattr(args, "clip_voxels", None)
+    planes = getattr(args, "clip_plane", None) or []
+    if box is None and voxels is None and not planes:
         return None
-    given = ([f"--clip-box {box}"] if box is not None else []) + [f"--clip-plane {p}" for p in planes]
+    if box is not None and voxels is not None:
+        raise InputError(f"--clip-box {box} and --clip-voxels {voxels} each give the box: give one of them")
+    given = ([f"--clip-box {box}"] if box is not None else []) + \
+        ([f"--clip-voxels {voxels}"] if voxels is not None else []) + [f"--clip-plane {p}" for p in planes]
     corners = numbers(box, "--clip-box", (6,)) if box is not None else None
     faces = [numbers(p, "--clip-plane", (6,)) for p in planes]
     try:
-        return Clip.of_rows(corners, faces)
+        if voxels is None:
+            return Clip.of_rows(corners, faces)
+        if wv is None:
+            return voxel_ranges(voxels)
+        return Clip.of_voxels(wv, voxels, getattr(args, "orientation", None), [(p[:3], p[3:]) for p in faces])
     except InputError as error:
         raise InputError(f"{' '.join(given)}: {error}") from None
 
@@ -200,15 +211,16 @@ def parse_background(args):
 
 
 def picture_options(args, out) -> dict:
-    """``window``, ``background``, ``bit_depth``, ``scale_bar`` and ``colour_map`` of the picture written to ``out``
-    (a folder: PNG frames), for :meth:`~clwave.io.result.RenderResult.save`; refused in one line where ``out`` holds
-    no such picture: a .tif's or .npy's values as rendered, a GIF's 8-bit frames without partial transparency."""
+    """``window``, ``background``, ``bit_depth``, ``scale_bar``, ``colour_map`` and ``colour_bar`` of the picture
+    written to ``out`` (a folder: PNG frames), for :meth:`~clwave.io.result.RenderResult.save`; refused in one line
+    where ``out`` holds no such picture: a .tif's or .npy's values as rendered, a GIF's 8-bit frames without partial
+    transparency."""
     from ..io.images import TIFF_SUFFIXES, check_bit_depth, check_orthographic, check_scale_bar
     from ..view.colours import check_colour_map
 
     look = dict(window=parse_window(args), background=parse_background(args) if hasattr(args, "background") else None,
                 bit_depth=args.bit_depth, scale_bar=check_scale_bar(getattr(args, "scale_bar", None)),
-                colour_map=check_colour_map(args.colour_map))
+                colour_map=check_colour_map(args.colour_map), colour_bar=args.colour_bar)
     check_bit_depth(args.bit_depth)
     if look["scale_bar"] is not None:
         check_orthographic(dict(kind="camera", perspective=args.perspective))
@@ -216,10 +228,10 @@ def picture_options(args, out) -> dict:
     if suffix in TIFF_SUFFIXES + (".npy",):
         given = {"--window": look["window"] != "auto", "--background": look["background"] is not None,
                  "--bit-depth": args.bit_depth is not None, "--scale-bar": look["scale_bar"] is not None,
-                 "--colour-map": look["colour_map"] is not None}
+                 "--colour-map": look["colour_map"] is not None, "--colour-bar": look["colour_bar"]}
         named = [name for name, there in given.items() if there]
         what = {"--window": "grey levels", "--background": "background", "--bit-depth": "bit depth",
-                "--scale-bar": "scale bar", "--colour-map": "colours"}
+                "--scale-bar": "scale bar", "--colour-map": "colours", "--colour-bar": "colour bar"}
         if named:
             raise InputError(f"{' and '.join(named)} {'sets' if len(named) == 1 else 'set'} a .png's "
                              f"{' and '.join(what[n] for n in named)}; a {suffix} holds the values themselves: leave "
@@ -235,13 +247,18 @@ def picture_options(args, out) -> dict:
 
 def check_picture_fits(look, camera, wv, xray):
     """Refuse, before the render, a ``--scale-bar`` that does not fit ``camera``'s picture of ``wv`` (as
-    :func:`~clwave.io.images.draw_scale_bar` would after it), and a ``--colour-map`` for a picture it does not colour
-    (an ``xray`` of ``wv``'s channels or a shaded one: :func:`~clwave.io.result.check_colour_mapped`)."""
-    from ..io.images import draw_scale_bar
-    from ..io.result import check_colour_mapped
+    :func:`~clwave.io.images.draw_scale_bar` would after it), a ``--colour-map`` for a picture it does not colour
+    (an ``xray`` of ``wv``'s channels or a shaded one: :func:`~clwave.io.result.check_colour_mapped`), and a
+    ``--colour-bar`` where it keys nothing (:func:`~clwave.io.result.check_colour_barred`) or has no room."""
+    from ..io.images import draw_colour_bar, draw_scale_bar
+    from ..io.result import check_colour_barred, check_colour_mapped
 
     if look["colour_map"] is not None:
         check_colour_mapped(look["colour_map"], xray, wv.channels, look["bit_depth"])
+    if look["colour_bar"]:
+        check_colour_barred(xray, wv.channels)
+        if camera is not None:  # a picture too small for it with the shortest labels (the window is the image's)
+            draw_colour_bar(np.zeros(camera.size, np.uint8), lambda f: np.zeros(f.shape, np.uint8), (0, 1))
     if look["scale_bar"] is not None:
         draw_scale_bar(np.zeros(camera.size, np.uint8), camera.view(wv).pixel, wv.unit, look["scale_bar"])
 

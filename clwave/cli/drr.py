@@ -72,6 +72,9 @@ def run(args):
     out, = check_outputs(args.force, (args.output, "-o", (".npy", ".png") + TIFF_SUFFIXES))
     look = picture_options(args, out)
     window = log_window(look["window"]) if args.intensity else look["window"]
+    if args.intensity and look["colour_bar"]:
+        raise InputError("--colour-bar labels line integrals; an --intensity radiograph shows intensities, on a log "
+                         "scale: leave out one of them")
     H, W = parse_size(args)
     pixel, offset = numbers(args.pixel, "--pixel", (1, 2)), numbers(args.offset, "--offset", (2,))
     # in the options' words (a pose table's own columns: poses() checks them)
@@ -146,7 +149,8 @@ def run(args):
             picture = np.maximum(res.image, 0.0) if args.intensity else res.image
             meta = dict(res.meta, camera=cameras[0].to_dict())  # its pixel size the detector's (a view has none)
             RenderResult(picture, meta).save(out, window=window, bit_depth=look["bit_depth"],
-                                             colour_map=look["colour_map"], overwrite=args.force)
+                                             colour_map=look["colour_map"], colour_bar=look["colour_bar"],
+                                             overwrite=args.force)
         else:
             stack = (len(cameras), H, W)
             poses = progress(range(len(cameras)), desc="radiographs")

@@ -271,7 +271,7 @@ def _volume_lines(f) -> list:
                       f"the series' least other value when read"))
     if f["obliquity"]:
         lines.append(("oblique", _oblique(f["obliquity"])))
-    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"], f["spacing"])
+    return lines + _nifti_lines(f["nifti"]) + _fits_lines(f["fits"], f["shape"], f["spacing"]) + _segy_lines(f["segy"])
 
 
 def _nifti_lines(n) -> list:
@@ -317,6 +317,20 @@ def _fits_lines(c, shape, spacing) -> list:
                      "them a value"),
             ("axes", "; ".join(axes) + "; in pixels, north up and east left seen from +x (docs/coordinates.md §1); "
                      f"--spacing {deep} makes the spectral axis as deep as the sky is wide")]
+
+
+def _segy_lines(s) -> list:
+    """A SEG-Y survey's lines, samples and coordinates (``loaders.segy.header_facts``)."""
+    if s is None:
+        return []
+    lines = [f"{first}..{last} (step {step})" for first, last, step in (s["inlines"], s["crosslines"])]
+    bins = f"from its {s['coordinates']} coordinates (scalar {s['scalar']})" if s["coordinates"] else \
+        "taken as 1: no CDP or source coordinates in its trace headers"
+    mirrored = ", along -y: inlines, crosslines and up are left-handed on the map" if s["mirrored"] else ""
+    return [("survey", f"inlines {lines[0]} along x, crosslines {lines[1]} along y{mirrored}, {s['samples']} samples "
+                       f"a trace, down along -z; format {s['format']} ({s['format_name']}), {s['sorting']}-sorted"),
+            ("bins", f"{_digits(s['spacing'][:0:-1])} (inline, crossline) {bins}"),
+            ("z", s["z"])]
 
 
 def _extent(shape, spacing) -> float:

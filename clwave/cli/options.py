@@ -377,8 +377,9 @@ def add_camera_options(p):
     from ..model.geometry import VIEWS
 
     g = p.add_argument_group("view")
-    g.add_argument("--azimuth", type=float, help="degrees (default 30)")
-    g.add_argument("--elevation", type=float, help="degrees (default 20)")
+    g.add_argument("--azimuth", type=float, help="degrees (default 30; with neither angle nor --view, a slab opens "
+                                                 "showing its face: docs/coordinates.md §2)")
+    g.add_argument("--elevation", type=float, help="degrees (default 20; a slab: its face)")
     g.add_argument("--view", choices=VIEWS, help="a RAS volume's side, drawn as radiographs are: anterior (AP: the "
                    "patient's left on the image's right), posterior, left, right (laterals), inferior (as CT slices), "
                    "superior; instead of --azimuth and --elevation")
@@ -407,6 +408,9 @@ def add_device_options(g):
                         "bone, viridis, inferno, magma, or the diverging seismic, RdBu or coolwarm (their auto window "
                         "centred on 0 for signed values), or one of them reversed, NAME_r: grey_r shows dark bright "
                         "(dark protein as 3dmod's inverse contrast, napari's gray_r)")
+    g.add_argument("--colour-bar", "--colorbar", action="store_true",
+                   help="PNG and GIF of a one-channel X-ray: burn in a colour bar, the map's colours from the window's "
+                        "low end to its high end, labelled with both and 0 between them (top right)")
     g.add_argument("--bit-depth", type=int, choices=(8, 16), help="PNG: bits a sample, 8 (the default) or 16")
     g.add_argument("--device", default=None, help="auto, cpu, gpu, P:D or a name substring")
     g.add_argument("--omega-s", type=float, help="footprint band (paper eq. 35; default from the pixel size)")
@@ -429,6 +433,10 @@ def add_raytrace_options(p):
     g.add_argument("--xray", action="store_true", help="line integrals without absorption, as splatting")
     g.add_argument("--clip-box", metavar="X0,Y0,Z0,X1,Y1,Z1",
                    help="keep only what lies in this box, world coordinates (docs/coordinates.md §6)")
+    g.add_argument("--clip-voxels", metavar="Z0:Z1,Y0:Y1,X0:X1",
+                   help="keep only these voxels of the input array, indices in its axis order as clwave info prints "
+                        "its shape (before --orientation turns it), Z1 excluded, an end left out the array's "
+                        "(e.g. 300:400,50:100,:); instead of --clip-box")
     g.add_argument("--clip-plane", action="append", metavar="PX,PY,PZ,NX,NY,NZ",
                    help="keep only the side of the plane through point P that its normal N points to; repeatable")
     g.add_argument("--background", help="PNG: colour R,G,B behind the volume, linear RGB in 0..1, composited before "

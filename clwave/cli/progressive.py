@@ -33,7 +33,7 @@ def run(args):
             check_schedule(args.steps, args.budget)
         steps = args.steps
         options = dict(tolerance=args.tolerance, lights=parse_lights(args), shading=not args.no_shading,
-                       absorption=not args.xray, clip=parse_clip(args))
+                       absorption=not args.xray)
     else:
         steps = 8 if args.steps is None and args.budget is None else args.steps
         check_schedule(steps, args.budget)
@@ -42,6 +42,8 @@ def run(args):
     wv, _ = build_model(args, rgba=raytrace and not args.xray, noise=True)
     camera = opened(args, camera, wv)
     check_picture_fits(look, camera, wv, xray=not raytrace or args.xray)
+    if raytrace:
+        options["clip"] = parse_clip(args, wv)  # --clip-voxels: in the model's geometry
     if raytrace and not args.xray:
         options["transfer_function"] = post_transfer_function(args, wv)  # a scalar model: classified while rendering
     elif raytrace:  # line integrals of the whole model, as splatting draws them (docs/raytracing.md §1)
@@ -62,10 +64,11 @@ def run(args):
             folder = outputs.folder(out, args.force, replaces=r"frame_\d{3,}\.png")
             for f in frames:
                 f.save(folder / f"frame_{f.index:03d}.png", window=window, background=background,
-                       bit_depth=look["bit_depth"], scale_bar=look["scale_bar"], colour_map=look["colour_map"])
+                       bit_depth=look["bit_depth"], scale_bar=look["scale_bar"], colour_map=look["colour_map"],
+                       colour_bar=look["colour_bar"])
         else:
             write_gif(out, [f.result().picture(window, background, scale_bar=look["scale_bar"],
-                                               colour_map=look["colour_map"])
+                                               colour_map=look["colour_map"], colour_bar=look["colour_bar"])
                             for f in frames], 0.5, args.force)
         if args.stats:
             meta = dict(frames[-1].meta, window=frames[-1].result().display_window(window))  # as render's (§4)

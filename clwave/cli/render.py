@@ -60,7 +60,7 @@ def run(args):
                          f"coarsest")
     if args.method == "raytrace":
         options = dict(tolerance=args.tolerance, lights=lights, shading=not args.no_shading,
-                       absorption=not args.xray, clip=parse_clip(args),
+                       absorption=not args.xray, clip=parse_clip(args, wv),
                        transfer_function=None if args.xray else post_transfer_function(args, wv))
         if on_cluster:
             options.update(device=args.device, field=args.field, device_memory=device_memory)
@@ -95,7 +95,8 @@ def run(args):
             # resolved once: the pictures' and --stats' window
             window = turn.window(window, look["colour_map"]) or window
             turn.save(out, window=window, background=background, scale_bar=look["scale_bar"],
-                      colour_map=look["colour_map"], frame_time=args.frame_time or 0.1, overwrite=args.force)
+                      colour_map=look["colour_map"], colour_bar=look["colour_bar"],
+                      frame_time=args.frame_time or 0.1, overwrite=args.force)
             result = RenderResult(turn[0].image, turn.meta)
             seconds = result.meta["turntable_seconds"]
             views = f"{len(turn)} view{'s' if len(turn) != 1 else ''}"

@@ -120,15 +120,14 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     ``round(length / pixel)`` pixels long under its label (:func:`length_label`), both outlined in black so that they
     read on any background, opaque in a transparent picture; ``pixel`` the world width of a pixel (an orthographic
     view's).  One InputError where the bar is under 2 pixels or it and its label do not fit."""
-    from PIL import Image, ImageDraw, ImageFont
+    from PIL import Image, ImageDraw
 
     height, width = picture.shape[:2]
     chosen = length is None or length is True  # the default: no other length to suggest
     length = nice_length(width * pixel) if chosen else length
     text = length_label(length, unit)
-    font_size = max(12, round(min(height, width) / 24))
-    thick, rim, margin = max(2, round(font_size / 4)), max(1, round(font_size / 9)), max(4, round(font_size / 2))
-    font = ImageFont.load_default(size=font_size)
+    font, font_size, rim, margin = _annotation_font(height, width)
+    thick = max(2, round(font_size / 4))
     drawn = text.replace("µ", "u")  # Pillow's bundled font has no µ (it draws a box): "um", as plain text writes it
     left, top, right, bottom = font.getbbox(drawn, stroke_width=rim)
     room = width - 2 * (margin + rim)
@@ -159,7 +158,23 @@ def draw_scale_bar(picture, pixel: float, unit=None, length=None) -> np.ndarray:
     at = (x - left, y1 - thick - rim - gap - bottom)
     ImageDraw.Draw(cover).text(at, drawn, font=font, fill=255, stroke_width=rim, stroke_fill=255)
     ImageDraw.Draw(white).text(at, drawn, font=font, fill=255)
-    box = cover.getbbox()  # the corner drawn on: the rest of the picture is copied
+    return _drawn(picture, cover, white)
+
+
+def _annotation_font(height, width) -> tuple:
+    """``(font, size, rim, margin)`` of the annotations drawn into a ``height`` x ``width`` picture (a scale bar's, a
+    colour bar's): Pillow's bundled font at a 24th of the picture's shorter side (12 pixels at least), the black rim
+    that outlines what is drawn and the margin kept from the picture's edges, in pixels."""
+    from PIL import ImageFont
+
+    size = max(12, round(min(height, width) / 24))
+    return ImageFont.load_default(size=size), size, max(1, round(size / 9)), max(4, round(size / 2))
+
+
+def _drawn(picture, cover, white) -> np.ndarray:
+    """``picture`` under the overlay of masks ``cover`` (all that is drawn) and ``white`` (its white), Pillow "L"
+    images of its size: the part they cover is composited (:func:`_over`), the rest of the picture copied."""
+    box = cover.getbbox()
     corner, out = np.s_[box[1]:box[3], box[0]:box[2]], picture.copy()
     out[corner] = _over(picture[corner], *(np.asarray(m.crop(box), np.float64) / 255 for m in (cover, white)))
     return out
@@ -182,12 +197,11 @@ def draw_edge_labels(picture, labels: dict) -> np.ndarray:
     """``picture`` (as :func:`write_png` takes it) with ``labels`` burnt in at the middle of its edges (keys ``left``,
     ``right``, ``top``, ``bottom``: which way the view faces there, the viewer's orientation letters,
     ``clwave.view.orientation.edges``), white outlined in black as the page draws them, in the scale bar's font."""
-    from PIL import Image, ImageDraw, ImageFont
+    from PIL import Image, ImageDraw
 
     height, width = picture.shape[:2]
-    font_size = max(12, round(min(height, width) / 24))
-    rim, margin = max(1, round(font_size / 9)), max(2, round(font_size / 4))
-    font = ImageFont.load_default(size=font_size)
+    font, font_size, rim, _ = _annotation_font(height, width)
+    margin = max(2, round(font_size / 4))  # nearer the edges than the bars: the page's letters
     cover, white = Image.new("L", (width, height)), Image.new("L", (width, height))
     for edge, text in labels.items():
         drawn = text.replace("−", "-")  # the axes' minus: Pillow's bundled font has no U+2212
@@ -197,6 +211,44 @@ def draw_edge_labels(picture, labels: dict) -> np.ndarray:
         ImageDraw.Draw(cover).text((x - left, y - top), drawn, font=font, fill=255, stroke_width=rim, stroke_fill=255)
         ImageDraw.Draw(white).text((x - left, y - top), drawn, font=font, fill=255)
     return _over(picture, *(np.asarray(m, np.float64) / 255 for m in (cover, white)))
+
+
+def draw_colour_bar(picture, shade, window) -> np.ndarray:
+    """``picture`` (an X-ray's, grey (H, W) or colour (H, W, 3)) with a vertical colour bar burnt into its top-right
+    corner, two fifths of its height long: its rows ``shade``'s pixel values (of fractions of the window, 1 its high
+    end at the top, 0 its low end at the bottom; (L,) grey or (L, 3)), outlined in black; left of it the window's
+    ``(lo, hi)`` at its ends and 0 where it lies between them (clear of them), white outlined in black as the scale
+    bar's label (:func:`draw_scale_bar`, bottom-right: the two never meet).  One InputError where they do not fit."""
+    from PIL import Image, ImageDraw
+
+    height, width = picture.shape[:2]
+    font, font_size, rim, margin = _annotation_font(height, width)
+    lo, hi = window
+    length = round(0.4 * height)
+    ticks = [(0, f"{hi:.3g}"), (length - 1, f"{lo:.3g}")]
+    boxes = [font.getbbox(text, stroke_width=rim) for _, text in ticks]
+    tall = max(b[3] - b[1] for b in boxes)
+    if lo < 0 < hi:
+        row = round((length - 1) * hi / (hi - lo))
+        if tall < row < length - 1 - tall:  # else its label would cover an end's
+            ticks.append((row, "0"))
+            boxes.append(font.getbbox("0", stroke_width=rim))
+    gap = max(2, rim + 1)
+    x1 = width - margin - rim  # the bar's right end, exclusive
+    x0, y0 = x1 - font_size, margin + rim + tall // 2 + 1
+    wide = max(b[2] - b[0] for b in boxes)
+    if length < 16 or x0 - rim - gap - wide < margin or y0 + length + tall // 2 + rim > height - margin:
+        raise InputError(f"the {width}x{height}-pixel picture has no room for a colour bar and its labels "
+                         f"({wide} pixels wide): give a larger picture size, or no colour bar")
+    cover, white = Image.new("L", (width, height)), Image.new("L", (width, height))
+    ImageDraw.Draw(cover).rectangle((x0 - rim, y0 - rim, x1 - 1 + rim, y0 + length - 1 + rim), fill=255)
+    for (row, text), (left, top, right, bottom) in zip(ticks, boxes):  # right-aligned, centred on their rows
+        at = (x0 - rim - gap - right, y0 + row - (top + bottom) / 2)
+        ImageDraw.Draw(cover).text(at, text, font=font, fill=255, stroke_width=rim, stroke_fill=255)
+        ImageDraw.Draw(white).text(at, text, font=font, fill=255)
+    out = _drawn(picture, cover, white)
+    out[y0:y0 + length, x0:x1] = np.asarray(shade(np.linspace(1.0, 0.0, length)))[:, None]
+    return out
 
 
 def _over(picture, cover, white) -> np.ndarray:

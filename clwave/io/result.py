@@ -19,7 +19,8 @@ import numpy as np
 from ..errors import InputError
 from .files import check_suffix, write_atomic
 from .images import (PNG_SUFFIXES, TIFF_SUFFIXES, UNIT_METRES, check_bit_depth, check_orthographic, check_scale_bar,
-                     check_edge_labels, check_unit, draw_edge_labels, draw_scale_bar, pixel_size, write_png, write_tiff)
+                     check_edge_labels, check_unit, draw_colour_bar, draw_edge_labels, draw_scale_bar, pixel_size,
+                     write_png, write_tiff)
 from ..model.tf_passes import AUTO_PERCENTILES
 from ..model.tf_checks import check_window
 
@@ -46,7 +47,7 @@ class RenderResult:
         return self.picture(window, background)
 
     def picture(self, window="auto", background=None, bit_depth=8, scale_bar=None, unit=None,
-                colour_map=None, edge_labels=None) -> np.ndarray:
+                colour_map=None, colour_bar=False, edge_labels=None) -> np.ndarray:
         """8- or 16-bit (H, W) grey or (H, W, 3) colour picture of the image: an X-ray of one channel grey, of two
         magenta (channel 0) and green (1), of three or four its first three as RGB; one window for all.  A shaded
         image is composited over ``background`` (linear RGB in 0..1, default black) before its sRGB encoding, or
@@ -56,12 +57,16 @@ class RenderResult:
         bar's unit, converted from the result's own (``meta["unit"]``, the default); where that is None, the
         world unit it declares.  ``colour_map``: a one-channel X-ray's grey levels in the colours of a map
         (:data:`clwave.view.colours.NAMES`, the viewer's: "grey_r" shows dark bright, at 8 or 16 bits; "viridis",
-        "magma_r", ... 8 bits only).  ``edge_labels``: a dict of the text at the middle of the picture's ``left``,
-        ``right``, ``top`` and ``bottom`` edges (:func:`~clwave.io.images.draw_edge_labels`; the viewer's orientation
-        letters, which its saved image holds), burnt in after the scale bar."""
+        "magma_r", ... 8 bits only).  ``colour_bar``: a one-channel X-ray's colour bar, its colours from the window's
+        low end to its high end, labelled with both and 0 between them (:func:`~clwave.io.images.draw_colour_bar`).
+        ``edge_labels``: a dict of the text at the middle of the picture's ``left``, ``right``, ``top`` and ``bottom``
+        edges (:func:`~clwave.io.images.draw_edge_labels`; the viewer's orientation letters, which its saved image
+        holds), burnt in after the bars."""
         from ..view.colours import apply, check_colour_map
 
         colour_map = check_colour_map(colour_map)
+        if check_colour_bar(colour_bar):
+            check_colour_barred(self.is_xray, self.image.shape[-1])
         if colour_map is not None:
             check_colour_mapped(colour_map, self.is_xray, self.image.shape[-1], bit_depth)
         if (scale_bar := check_scale_bar(scale_bar)) is not None:
@@ -100,6 +105,9 @@ class RenderResult:
         picture = np.round(top * scaled).astype(np.uint8 if top < 256 else np.uint16)
         if colour_map is not None:
             picture = apply(picture, colour_map, int(top))
+        if colour_bar:
+            picture = draw_colour_bar(picture, lambda f: apply(np.round(top * f).astype(picture.dtype),
+                                                               colour_map or "grey", int(top)), (lo, hi))
         if scale_bar is not None:
             factor, unit = self.in_unit(unit)
             picture = draw_scale_bar(picture, self.meta["pixel"] * factor, unit, scale_bar)
@@ -148,7 +156,7 @@ class RenderResult:
         return self.image[..., :3] if self.image.shape[-1] > 1 else self.image[..., 0]
 
     def save(self, path, *, window="auto", background=None, bit_depth=None, unit=None, scale_bar=None,
-             colour_map=None, edge_labels=None, overwrite=False) -> Path:
+             colour_map=None, colour_bar=False, edge_labels=None, overwrite=False) -> Path:
         """Write ``.png`` (windowed, or composited over ``background`` or transparent: :meth:`picture`, of
         ``bit_depth`` 8 or 16 bits a sample), ``.tif``/``.tiff`` (float32, as rendered; a shaded image's alpha
         associated, premultiplied), ``.npy`` (raw float32) or ``.json`` (meta).  ``unit`` (:meth:`in_unit`): the
@@ -156,7 +164,8 @@ class RenderResult:
         from the result's own world unit (``meta["unit"]``, the default); where that is None, the world unit it
         declares.  The size of a pixel (:func:`~clwave.io.images.pixel_size`) goes into a PNG's pHYs where its unit
         is known, into a TIFF's resolution always (per world unit where it is not).  ``scale_bar``: a ``.png``'s
-        scale bar, ``colour_map`` an X-ray's colours, ``edge_labels`` the words at its edges (:meth:`picture`).
+        scale bar, ``colour_map`` an X-ray's colours, ``colour_bar`` its colour bar and ``edge_labels`` the words at
+        its edges (:meth:`picture`).
 
         An image with non-finite pixels is refused (nothing is written): it is never a picture."""
         path = check_suffix(path, PNG_SUFFIXES + TIFF_SUFFIXES + (".npy", ".json"))
@@ -165,6 +174,7 @@ class RenderResult:
         given = [f"{name}=" for name, value in (("window", None if isinstance(window, str) and window == "auto" else
                                                  window), ("background", background), ("bit_depth", bit_depth),
                                                 ("scale_bar", check_scale_bar(scale_bar)), ("colour_map", colour_map),
+                                                ("colour_bar", check_colour_bar(colour_bar) or None),
                                                 ("edge_labels", edge_labels))
                  if value is not None]
         if given and suffix not in PNG_SUFFIXES:
@@ -176,7 +186,7 @@ class RenderResult:
             raise InputError(f"the image has {bad} non-finite value(s) (NaN/Inf), so {path} was not written; "
                              f"the input holds values too large for float32, or the view is degenerate")
         if suffix in PNG_SUFFIXES:
-            data = self.picture(window, background, bits, scale_bar, unit, colour_map, edge_labels)
+            data = self.picture(window, background, bits, scale_bar, unit, colour_map, colour_bar, edge_labels)
             return write_atomic(path, lambda fh: write_png(fh, data, self._pixel_size(factor), known), overwrite)
         if suffix in TIFF_SUFFIXES:
             image = self.image[..., 0] if self.image.shape[-1] == 1 else self.image
@@ -201,6 +211,28 @@ def check_colour_mapped(name, xray, channels, bit_depth):
         raise InputError(f"colour_map={name!r} has 256 colours, for an 8-bit picture: leave out bit_depth=16, or "
                          f"use grey or grey_r", cli=f"--colour-map {name} has 256 colours, for an 8-bit picture: "
                                                     f"leave out --bit-depth 16, or use grey or grey_r")
+
+
+def check_colour_bar(colour_bar) -> bool:
+    """``colour_bar`` (None, False or True) as a bool; one InputError otherwise."""
+    if colour_bar is None or isinstance(colour_bar, (bool, np.bool_)):
+        return bool(colour_bar)
+    raise InputError(f"colour_bar={colour_bar!r} must be True (a colour bar) or False")
+
+
+def check_colour_barred(xray, channels):
+    """Refuse (one line) a colour bar where no one scale of values gives the picture's colours: a shaded image (not
+    ``xray``: its transfer function's colours and opacity, composited), an X-ray of several ``channels``."""
+    if not xray:
+        what = ("a shaded image's colours are its transfer function's, composited along each ray, with no one "
+                "window of values: render an X-ray for a colour bar (splatting, or ray tracing with {xray}), or show "
+                "the transfer function beside the picture")
+        raise InputError(f"colour_bar=True {what.format(xray='absorption=False')}",
+                         cli=f"--colour-bar {what.format(xray='--xray')}")
+    if channels > 1:
+        what = f"this X-ray has {channels} channels, shown in colours of their own, not one scale"
+        raise InputError(f"colour_bar=True keys a one-channel X-ray's values; {what}: leave it out",
+                         cli=f"--colour-bar keys a one-channel X-ray's values; {what}: leave it out")
 
 
 def summary(image, meta) -> str:

@@ -33,6 +33,9 @@ SLAB = 3.0
 #: the opening (azimuth, elevation) of a slab thin along x, y or z: looking down that axis, 20 degrees off it so that
 #: it reads as a solid, with x to the right where the axis is y or z (z: y up, as IMOD's 3dmod and ChimeraX show it)
 SLAB_VIEWS = ((20.0, 20.0), (-70.0, 20.0), (-70.0, 70.0))
+#: a photo stack's slab thin along z opens from -z, y down: its row 0 at the top, as image viewers show a photo
+#: (docs/coordinates.md §1, "Which view shows a slice as photographed"; from +z it reads upside down)
+PHOTO_SLAB_VIEW = (-70.0, -70.0)
 DEFAULT_FOV = 30.0  #: a perspective camera's vertical field of view, degrees, unless given
 #: how many times longer than its two shorter sides a content box is at most before a view of it warns: a needle
 #: that every view shows as a line a few pixels wide, or nothing (axes in different units, trial26)
@@ -334,11 +337,15 @@ def framed_box(volume) -> tuple:
 def opening_view(volume) -> dict:
     """``dict(azimuth=, elevation=)`` a volume opens at where no view is given: a slab's face where the shortest side of
     its :func:`framed_box` is under 1 / :data:`SLAB` of the middle one (a tomogram, a section stack, seen down its
-    thin axis as IMOD and napari open it), else :data:`OPENING`."""
+    thin axis as IMOD opens it; a photo stack's as image viewers show it, :data:`PHOTO_SLAB_VIEW`), else
+    :data:`OPENING`."""
     lo, hi = framed_box(volume)
     sides = hi - lo
     thin = int(np.argmin(sides))
-    azimuth, elevation = SLAB_VIEWS[thin] if sides[thin] * SLAB < np.sort(sides)[1] else OPENING
+    if sides[thin] * SLAB >= np.sort(sides)[1]:
+        azimuth, elevation = OPENING
+    else:
+        azimuth, elevation = PHOTO_SLAB_VIEW if thin == 2 and getattr(volume, "photo", False) else SLAB_VIEWS[thin]
     return dict(azimuth=azimuth, elevation=elevation)
 
 

@@ -10,6 +10,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from ..errors import InputError, reals
+from .geometry import voxel_box
 
 MAX_PLANES = 6  #: half-spaces a clip takes (with the box: at most 12 faces to cut each ray at)
 #: a region whose largest inscribed ball's radius is at most this fraction of its box's half-width along each axis
@@ -76,6 +77,25 @@ class Clip:
         """The clip of rows of six numbers, as ``--clip-box`` / ``--clip-plane`` and the viewer's page give them:
         ``box`` x0, y0, z0, x1, y1, z1 (or None) and ``planes`` each px, py, pz, nx, ny, nz."""
         return cls(lo=box and box[:3], hi=box and box[3:], planes=[(p[:3], p[3:]) for p in planes])
+
+    @classmethod
+    def of_voxels(cls, model, voxels, orientation=None, planes=()) -> "Clip":
+        """The clip of a box of voxels, in indices of the input array ``model`` (a :class:`~clwave.Volume` or
+        :class:`~clwave.WaveletVolume`) was made of, as ``clwave info`` prints its shape: ``voxels`` three ranges in
+        the array's axis order (z, y, x), "300:400,50:100,:" or ``[(300, 400), (50, 100), None]`` (STOP excluded, an
+        end left out the array's); ``orientation`` the codes the input was loaded with (``clwave.load``'s, "RAI"),
+        which turned its axes; ``planes`` as :class:`Clip`'s.  The box is the voxels' outer faces in world
+        coordinates (:func:`~clwave.model.geometry.voxel_box`).  A model of a file placed in RAS+ by its header (NIfTI,
+        DICOM, NRRD, MGH), whose array's axes were turned by it, is refused in one line."""
+        from ..io.loaders import in_ras
+
+        source = (getattr(model, "provenance", None) or {}).get("file")
+        if source and in_ras(source):
+            raise InputError(f"voxel ranges count the voxels of an input that carries no orientation (or the model's "
+                             f"own array's); {source} was turned into RAS+ by its header, so its array's axes are not "
+                             f"the model's: give a box in world coordinates (lo=, hi=; --clip-box)")
+        lo, hi = voxel_box(voxels, model.shape[:3], model.spacing, model.origin, orientation)
+        return cls(lo=lo, hi=hi, planes=planes)
 
     def half_spaces(self) -> np.ndarray:
         """The planes as rows ``(n_x, n_y, n_z, d)``, ``n`` a unit normal: the clip keeps ``n . x + d >= 0``

@@ -179,3 +179,80 @@ def check_key(key) -> str:
     if not isinstance(key, str) or len(key) != 3 or set(key) - {"a", "d"}:
         raise InputError(f"subband key must be 3 letters of 'a'/'d' in (z, y, x) order, got {key!r}")
     return key
+
+
+def axis_turn(orientation) -> np.ndarray:
+    """The 3 x 3 signed permutation that turns a ``(z, y, x)`` array's unit steps (column ``a``: array axis ``a``'s)
+    into RAS+, of an input whose ``orientation`` is stated (one that carries none): three axis codes as nibabel
+    writes them (``"LPS"``, ``"RAS"``), the directions its x, y and z index axes (array axes 2, 1, 0) point to, as
+    ``nibabel.aff2axcodes`` gives them of a NIfTI's (x, y, z) axes; one InputError for anything else."""
+    from nibabel.orientations import axcodes2ornt
+
+    try:
+        ornt = axcodes2ornt(tuple(orientation.upper()[::-1]))
+    except (AttributeError, ValueError):
+        ornt = None
+    if ornt is None or len(ornt) != 3 or set(ornt[:, 0]) != {0, 1, 2}:
+        raise InputError(f"orientation={orientation!r} must be three axis codes, one of L/R, one of A/P and one of "
+                         f"I/S, the directions the array's x, y and z axes point to (nibabel's, e.g. 'LPS' or 'RAS')",
+                         cli=f"--orientation {orientation} must be three letters, one of L/R, one of A/P and one of "
+                             f"I/S, the directions the array's x, y and z axes point to (e.g. LPS or RAS)")
+    turn = np.zeros((3, 3))
+    turn[ornt[:, 0].astype(int), np.arange(3)] = ornt[:, 1]
+    return turn
+
+
+def turned(data, spacing_zyx, turn):
+    """``(data, spacing_zyx)`` of a ``(z, y, x[, c])`` array turned into RAS+ by ``turn`` (:func:`axis_turn`): its
+    axes permuted and flipped (a view; a Dask array stays lazy), the spacing with them; its centre stays put."""
+    source = [int(np.flatnonzero(turn[r])[0]) for r in (2, 1, 0)]  # the array axis that becomes z, y, x
+    flips = tuple(slice(None, None, -1) if turn[r, a] < 0 else slice(None) for r, a in zip((2, 1, 0), source))
+    return data.transpose(source + list(range(3, data.ndim)))[flips], tuple(spacing_zyx[a] for a in source)
+
+
+# ----------------------------------------------------------------------------- voxel ranges
+def voxel_ranges(voxels) -> list:
+    """``[(start, stop), ...]`` of three ranges of voxel indices, one an array axis (z, y, x), ``stop`` exclusive as
+    Python's slices, either end None where left open: ``voxels`` a text "Z0:Z1,Y0:Y1,X0:X1" (an end left out:
+    ``300:400,50:,:``) or three slices or pairs (an axis whole: None); one InputError otherwise."""
+    texts = voxels.split(",") if isinstance(voxels, str) else None
+    items = texts if texts is not None else list(voxels) if isinstance(voxels, (list, tuple)) else []
+    ranges = []
+    for item in items if len(items) == 3 else ():
+        if isinstance(item, str):
+            ends = [e.strip() for e in item.split(":")] if ":" in item else None
+            ends = None if ends is None or len(ends) != 2 else [int(e) if e.lstrip("-").isdigit() else e or None
+                                                                  for e in ends]
+        elif isinstance(item, slice) and item.step in (None, 1):
+            ends = [item.start, item.stop]
+        else:
+            ends = [None, None] if item is None else list(item) if isinstance(item, (list, tuple)) else None
+        if ends is None or len(ends) != 2 or \
+                not all(e is None or isinstance(e, (int, np.integer)) and not isinstance(e, bool) for e in ends):
+            break
+        ranges.append(tuple(None if e is None else int(e) for e in ends))
+    if len(ranges) != 3:
+        raise InputError(f"voxels {voxels!r} must be three ranges of whole voxel indices START:STOP (STOP excluded; an "
+                         f"end left out: the array's) in the array's axis order, z, y, x, e.g. '300:400,50:100,:'")
+    return ranges
+
+
+def voxel_box(voxels, shape, spacing, origin, orientation=None) -> tuple:
+    """``(lo, hi)``, world (x, y, z), of the box the voxels ``voxels`` (:func:`voxel_ranges`) of an input array take,
+    their outer faces (a voxel the cell of its spacing about its centre), in the geometry of the model made of it:
+    ``shape``, ``spacing`` (z, y, x) and ``origin`` (x, y, z) the model's, ``orientation`` the codes the input was
+    turned into RAS+ by (:func:`clwave.load`'s ``orientation=``; None: none, its axes the model's).  One InputError
+    for a range beyond the array or empty."""
+    ranges = voxel_ranges(voxels)
+    turn = np.eye(3)[::-1] if orientation is None else axis_turn(orientation)  # array axis a -> world axis
+    lo, hi = np.empty(3), np.empty(3)
+    for a, ((start, stop), name) in enumerate(zip(ranges, "zyx")):
+        r = int(np.argmax(np.abs(turn[:, a])))  # the world axis (x, y, z) it lies along, the model's axis 2 - r
+        n, step = shape[2 - r], float(spacing[2 - r])
+        start, stop = 0 if start is None else start, n if stop is None else stop
+        if not 0 <= start < stop <= n:
+            raise InputError(f"voxels {start}:{stop} along the array's axis {a} ({name}) must lie in 0:{n}, the start "
+                             f"below the stop")
+        k0, k1 = (start, stop) if turn[r, a] > 0 else (n - stop, n - start)  # a flipped axis counts from the end
+        lo[r], hi[r] = ((k - n / 2.0) * step + float(origin[r]) for k in (k0, k1))
+    return tuple(lo.tolist()), tuple(hi.tolist())

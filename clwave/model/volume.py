@@ -13,7 +13,7 @@ import numpy as np
 
 from ..errors import ClwaveWarning, InputError, finite_number, flag, reals, warn_outside
 from .dataarray import from_data_array, is_data_array, is_dataset
-from .geometry import WORLD_RANGE, fine_to_world, world_to_fine
+from .geometry import WORLD_RANGE, axis_turn, fine_to_world, turned, world_to_fine
 from .labels import looks_like_labels
 
 MAX_CHANNELS = 4
@@ -54,7 +54,13 @@ class Volume:
         Voxel size ``(dz, dy, dx)`` in world units (default 1.0, or a DataArray's coordinates'; given, it wins over
         them, with a warning where they differ, and their origin and unit are not used either).
     origin : 3 floats
-        World position ``(x, y, z)`` of the volume centre (default 0, or a DataArray's coordinates' centre).
+        World position ``(x, y, z)`` of the volume centre (default 0, or a DataArray's coordinates' centre), after
+        ``orientation=`` turns the axes.
+    orientation : str, optional
+        The directions ``data``'s x, y and z index axes (array axes 2, 1, 0) point to, three of nibabel's axis codes
+        (``"LPS"``; ``"RAI"``: z down, a seismic cube's time axis), as :func:`clwave.load` takes them: the volume is
+        turned into RAS+ (its axes flipped and permuted, ``spacing`` with them), as a medical file is
+        (docs/coordinates.md §1).  None (default): the array's axes are the world's.
     subtracted : float
         The value subtracted from the input's values to make ``data`` (``clwave.load(subtract=)``,
         ``--subtract``; default 0): transfer functions are written in the input's units, and are applied to
@@ -101,7 +107,7 @@ class Volume:
     """
 
     def __init__(self, data, spacing=None, origin=None, subtracted=0.0, obliquity=0.0, labels=None,
-                 stored_dtype=None, unit=None, photo=False, provenance=None, modality=None):
+                 stored_dtype=None, unit=None, photo=False, provenance=None, modality=None, orientation=None):
         if is_dataset(data):
             raise InputError(f"volume data is an xarray Dataset of the variables {', '.join(map(str, data.data_vars))}"
                              f"; give one of them, a DataArray: Volume(ds[name])")
@@ -145,6 +151,12 @@ class Volume:
                 "every axis needs at least 2 voxels")
         if arr.ndim == 4 and arr.shape[3] == 1:
             arr = arr[..., 0]
+        self.spacing = _triple(1.0 if spacing is None else spacing, "spacing")
+        if min(self.spacing) <= 0:
+            raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
+        if orientation is not None:  # turned into RAS+ as load(orientation=) turns a file, before the C-ordered copy
+            arr, self.spacing = turned(arr, self.spacing, axis_turn(orientation))
+            shape = arr.shape[:3]
         self.stored_dtype = np.dtype(arr.dtype if stored_dtype is None else stored_dtype)
         # told from the values as given (integers), before they are float32; a chunked volume's are not read here
         self.labels = (not lazy and looks_like_labels(arr)) if labels is None else flag(labels, "labels")
@@ -153,9 +165,6 @@ class Volume:
         else:
             arr = checked_float32(arr)
         self.data = arr
-        self.spacing = _triple(1.0 if spacing is None else spacing, "spacing")
-        if min(self.spacing) <= 0:
-            raise InputError(f"spacing {self.spacing} must be positive (dz, dy, dx)")
         origin = tuple(float(o) for o in reals(0.0 if origin is None else origin, "origin", 3,
                                                "one number or three (x, y, z)", one=True))
         check_placement(shape, self.spacing, origin)  # first: a huge spacing makes an infinite origin

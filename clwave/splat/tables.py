@@ -13,7 +13,7 @@ from ..device.constants import CELL_SNAP, TILE
 from ..errors import DeviceMemoryError
 from ..model.geometry import fine_to_world, support_centres
 from ..model.wavelet import WaveletVolume
-from .textures import DEFAULT_OMEGA_MIN, cell_axes, footprints, plane_shape
+from .textures import DEFAULT_OMEGA_MIN, FILTER_BELOW, cell_axes, footprints, plane_shape
 
 
 KINKED_OMEGA_MIN = 56.0  # texel band for order <= 2 at every level (about pixel / 16 at 512^2 of 256^3)
@@ -66,13 +66,18 @@ class ViewTables:
         wav = g.wavelet
         spacing = np.array(wv.spacing[::-1], float)  # (dx, dy, dz)
         image_view = layers[0][0]  # the image's view: the layers share its direction
-        if sampling == "auto" and any(cell_axes(wav, image_view.u, image_view.v)):
-            sampling = "cells"  # Haar with u or v along a world axis: exact cells along that axis
+        cells = cell_axes(wav, image_view.u, image_view.v)
+        # Haar with u or v along a world axis: exact cells along that axis, where its voxels are a pixel wide or more
+        # (narrower, the pixel filter needs samples: textures.FILTER_BELOW)
+        if sampling == "auto" and any(cells) and min(
+                spacing @ np.abs(w) for w, cell in zip((image_view.u, image_view.v), cells) if cell) \
+                >= FILTER_BELOW * min(view.pixel for view, _ in layers):
+            sampling = "cells"
         # one texture band for every layer, the image pixel's: a coarse layer's own (a coarser band) erred by
         # more than its upsampling (docs/splatting.md §4)
         self.omega_s = omega = omega_s if omega_s is not None else default_omega_s(image_view.pixel, min(wv.spacing),
                                                                                     wav.order)
-        self.layer_of, self.texels_per_pixel, texel, phases = {}, {}, {}, {}
+        self.layer_of, self.texels_per_pixel, texel, phases, pixel = {}, {}, {}, {}, {}
         for li, (view, bands) in enumerate(layers):
             for b in g.bands:
                 band = (b.level, b.key)
@@ -84,11 +89,13 @@ class ViewTables:
                 self.layer_of[band] = li
                 self.texels_per_pixel[band] = s
                 texel[band] = view.pixel / s
+                pixel[band] = view.pixel
                 phases[band] = int(s) if s >= 1 and s == int(s) else 1  # the pool's phase planes (P below)
         start = time.perf_counter()
         self.textures = footprints(wav, wv.spacing, image_view.n, image_view.u, image_view.v, list(self.layer_of),
                                    omega_s=self.omega_s, sampling=sampling, tol=TEXTURE_TOL if wav.order >= 4 else 0.0,
-                                   texel=texel, device=device, max_texels=max_texels, phases=phases)
+                                   texel=texel, device=device, max_texels=max_texels, phases=phases,
+                                   pixel=pixel)
         self.footprint_seconds = time.perf_counter() - start
         self.samplings = sorted({t.sampling for t in self.textures.values() if t is not None})
 

@@ -50,6 +50,15 @@ OMEGA_S_MAX = 1e4
 
 SAMPLINGS = ("auto", "fft", "spatial", "cells")
 
+#: Footprints of a level whose voxels project narrower than this many pixels along an image axis are box-filtered
+#: there by one pixel (EWA's pixel low-pass, Zwicker et al. 2001; docs/splatting.md §1 "Pixel filter"): point samples
+#: of footprints under a pixel miss them or hit their peaks, so a needle or a small image of a big volume lost or
+#: gained most of its mass.  A pixel's value is then the mean of the line integrals over its square, and the image's
+#: sum times the pixel area the footprints' integral.  Levels of wider voxels (footprints of 2 to 7 voxels: about a
+#: pixel or more) keep their point samples, and their images do not change (linear voxels of 0.43 pixel along u,
+#: tests/test_splat.py's mixed views, would: pixel means there, against the tests' point samples).
+FILTER_BELOW = 1.0 / 3.0
+
 
 @dataclass
 class Texture:
@@ -171,6 +180,29 @@ def _trim(data, centre_u, centre_v, tol):
     return data[r0:r1, c0:c1], centre_u - c0, centre_v - r0
 
 
+def pixel_filter(data: np.ndarray, centre: float, r: float, axis: int) -> tuple:
+    """The texture ``data`` box-filtered along ``axis`` by ``r`` texels (a pixel), and its centre's new sample
+    coordinate: at every sample, the mean over ``[x - r/2, x + r/2]`` of the samples' linear interpolant with zeros
+    beyond (what the kernels' bilinear lookup reads), integrated exactly.  The support grows by ``r/2`` either side;
+    where ``r`` is whole, the filtered samples at any phase, P apart, sum to the samples' sum over ``r``, so the
+    image keeps the footprint's integral."""
+    x = np.moveaxis(np.asarray(data, np.float64), axis, -1)
+    n, grow = x.shape[-1], int(np.ceil(r / 2.0)) + 1
+    y = np.concatenate([np.zeros(x.shape[:-1] + (1,)), x, np.zeros(x.shape[:-1] + (1,))], axis=-1)  # nodes -1 .. n
+    F = np.concatenate([np.zeros(x.shape[:-1] + (1,)), np.cumsum((y[..., 1:] + y[..., :-1]) / 2.0, axis=-1)], axis=-1)
+
+    def integral(t):  # of the interpolant from node -1 to t (texel coordinates), t clamped to [-1, n]
+        t = np.clip(t, -1.0, float(n)) + 1.0
+        k = np.minimum(np.floor(t).astype(int), n)
+        f = t - k
+        y0, y1 = y[..., k], y[..., np.minimum(k + 1, n + 1)]
+        return F[..., k] + y0 * f + (y1 - y0) * f * f / 2.0
+
+    at = np.arange(-grow, n + grow, dtype=np.float64)
+    out = (integral(at + r / 2.0) - integral(at - r / 2.0)) / r
+    return np.moveaxis(out, -1, axis).astype(data.dtype), centre + grow
+
+
 def _axis_sampling(width, cell, omega, d_min, texel) -> tuple:
     """``(N, h, cell)`` of one texture axis whose support is ``width`` wide (world units).
 
@@ -184,6 +216,18 @@ def _axis_sampling(width, cell, omega, d_min, texel) -> tuple:
         count = _fast_even(ceil(2.0 * omega * width / (2.0 * np.pi * d_min) + 1.0))
         return count, width / count, False
     return _fast_even(ceil(width / texel)), float(texel), False
+
+
+def _filter_width(voxel, cell, pixel, texel) -> float:
+    """The pixel filter's width in texels along a texture axis where the level's voxels project ``voxel`` wide (world
+    units): the pixel where that is under :data:`FILTER_BELOW` pixels and the axis not cells, else 0 (no filter)."""
+    return 0.0 if cell or pixel is None or texel is None or voxel >= FILTER_BELOW * pixel else pixel / texel
+
+
+def _filtered_samples(count, h, cell, r) -> int:
+    """The samples of one texture axis (:func:`_axis_sampling`'s ``count, h, cell``) after a pixel filter of ``r``
+    texels (0: none; :func:`pixel_filter` grows the support)."""
+    return _axis_samples(count, cell) + (2 * (int(np.ceil(r / 2.0)) + 1) if r else 0)
 
 
 def _axis_points(count, h, cell) -> tuple:
@@ -238,7 +282,7 @@ def check_omega_s(omega_s) -> float:
 
 def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omega_min=None,
                sampling: str = "auto", tol: float = 0.0, texel=None, device=None, max_texels=None,
-               phases=None) -> dict:
+               phases=None, pixel=None) -> dict:
     """Footprint textures of the (level, key) pairs in ``bands`` for one view.
 
     Parameters
@@ -279,6 +323,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         Sample the FFT sampling's spectra there (:func:`device_spectra`, float32), all
         textures in one launch, instead of with NumPy (float64); the inverse FFTs stay on
         the host.
+    pixel : float or dict, optional
+        The image's pixel (world units; or per band, ``{(m, key): pixel}``): box-filter each texture by it along an
+        axis where the level's voxels project narrower than :data:`FILTER_BELOW` pixels and the axis is not cells
+        (:func:`pixel_filter`).
 
     Returns
     -------
@@ -317,19 +365,21 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         omega = max(float(omega_s), float(omega_min) / 2.0 ** m)
         out[(m, key)] = None
         h = texel.get((m, key)) if isinstance(texel, dict) else texel
+        p = pixel.get((m, key)) if isinstance(pixel, dict) else pixel
+        # per axis (count, texel, cell, the pixel filter's width in texels)
         jobs.append((m, key) + tuple(_axis_sampling(float(np.abs(w) @ extent), cell, omega, d_min, h)
+                                     + (_filter_width(2.0 ** m * float(np.abs(w) @ d_xyz), cell, p, h),)
                                      for w, cell in ((u, cells[0]), (v, cells[1]))))
-    texels = sum(_axis_samples(nu, cell_u) * _axis_samples(nv, cell_v)
-                 for _, _, (nu, _, cell_u), (nv, _, cell_v) in jobs)
+    texels = sum(_filtered_samples(*ju) * _filtered_samples(*jv) for _, _, ju, jv in jobs)
     fix = "give a lower omega_s (--omega-s), or render with the ray tracer (--method raytrace)"
     check_texels(texels, max_texels, "the footprint textures of this view",
                  f"the voxel spacing is very uneven or omega_s high; {fix}")
     # their pool, P phase planes each where a pixel spans P texels (a needle's thin axis sets the texel, its long one
     # the pixel): weighed before a texture is made (a 1000:1 spacing made 9 GB of textures first)
     if phases is not None:  # the renderer's (ViewTables'): P a band
-        pool = sum(prod(plane_shape(_axis_samples(nv, cell_v), _axis_samples(nu, cell_u),
-                                    1 if cell_u else phases.get((m, key), 1)))
-                   for m, key, (nu, _, cell_u), (nv, _, cell_v) in jobs)
+        pool = sum(prod(plane_shape(_filtered_samples(*jv), _filtered_samples(*ju),
+                                    1 if ju[2] else phases.get((m, key), 1)))
+                   for m, key, ju, jv in jobs)
         check_texels(pool, max_texels, "the texel pool (phase planes) of this view's footprint textures",
                      f"a pixel spans up to {max(phases.values(), default=1):,} texels of the volume's thinnest voxels "
                      f"(a very uneven spacing, or a wide extent); render more pixels (a camera's size, --size), a "
@@ -342,14 +392,14 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
         # 2-D spectra on the device; at axis-aligned views (every axis along u or v) the texture
         # is separable and its two 1-D transforms on the host are cheaper
         plans = {}
-        for m, key, (nu, h_u, _), (nv, h_v, _) in jobs:
+        for m, key, (nu, h_u, _, _), (nv, h_v, _, _) in jobs:
             scale, axes = slice_plan(wav, key, m, d_xyz, u, v, nu * h_u, nv * h_v)
             if any(alpha and beta for _, alpha, beta in axes):
                 plans[(m, key)] = (scale, axes, nu, nv)
         spectra = dict(zip(plans, device_spectra(device, wav.order, list(plans.values()))))
 
     def make(job):
-        m, key, (nu, h_u, cell_u), (nv, h_v, cell_v) = job
+        m, key, (nu, h_u, cell_u, r_u), (nv, h_v, cell_v, r_v) = job
         if sampling == "fft":
             if (m, key) in spectra:
                 period = scipy.fft.irfft2(spectra[(m, key)], s=(nv, nu), workers=workers, overwrite_x=True)
@@ -365,6 +415,10 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
                                        np.broadcast_to(bb[:, None], shape).reshape(-1))
             data = data.reshape(shape).astype(np.float32)
         data, cu, cv = _trim(data, cu, cv, float(tol))
+        if r_u:
+            data, cu = pixel_filter(data, cu, r_u, axis=1)
+        if r_v:
+            data, cv = pixel_filter(data, cv, r_v, axis=0)
         return Texture(np.ascontiguousarray(data), h_u, h_v, cu, cv, name, m, key)
 
     # numpy and pocketfft release the GIL: textures in parallel, largest first, where the

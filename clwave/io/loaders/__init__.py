@@ -2,13 +2,13 @@
 
 The result is a (z, y, x[, c]) float32 :class:`~clwave.model.volume.Volume`; medical formats
 (NIfTI, FreeSurfer MGH, NRRD, DICOM) are put in the canonical RAS+ orientation with spacing and origin in scanner
-millimetres, FITS cubes on the sky (north up, east left, in pixels), the others keep their array axes
-(docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5 stores, and large .npy, .raw, .nii, .mgh, MRC, FITS and TIFF files
-(and folders of TIFF slices), are read chunk by chunk as Dask arrays (docs/chunked.md §1).
+millimetres, FITS cubes on the sky (north up, east left, in pixels), SEG-Y cubes time down, the others keep their
+array axes (docs/coordinates.md §1).  Zarr, OME-Zarr and HDF5 stores, and large .npy, .raw, .nii, .mgh, MRC, FITS and
+TIFF files (and folders of TIFF slices), are read chunk by chunk as Dask arrays (docs/chunked.md §1).
 
 One module per format family (``raw``: .raw and .npy; ``nifti``, ``mgh``, ``mrc``, ``fits``, ``nrrd``, ``tiff``,
-``slices``: folders of TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr), each with its
-``read_*``; ``shared`` holds what they share.
+``slices``: folders of TIFF, PNG or JPEG slices, ``dicom``, ``hdf5``, ``zarr``: Zarr and OME-Zarr, ``segy``), each
+with its ``read_*``; ``shared`` holds what they share.
 """
 
 from __future__ import annotations
@@ -21,18 +21,20 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import ClwaveError, FileFormatError, InputError, file_name, finite_number, flag, float32_number
+from ...model.geometry import axis_turn
 from ...model.labels import looks_like_labels
 from ...model.volume import Volume, check_placement, is_dask
-from . import dicom, dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, slices, tiff, zarr
+from . import (dicom, dicom_frames, dicom_tree, fits as fits_cube, hdf5, mgh, mrc, nifti, nrrd, raw, segy, slices, tiff,
+               zarr)
 from .shared import (SUPPORTED, Declared, TimeSeries, check_chunks, check_frame, folder_files, not_a_file, one_volume,
-                     reading, axis_turn, stated_affine, to_canonical, to_float32)
+                     reading, to_float32)
 
 __all__ = ["load", "describe", "world_unit", "in_ras", "DESCRIBED", "SUPPORTED", "RAS_FORMATS"]
 
 _FILE_KINDS = {".npy": "npy", ".nii": "nifti", ".nii.gz": "nifti", ".mgh": "mgh", ".mgz": "mgh", ".nrrd": "nrrd",
                ".nhdr": "nrrd", ".tif": "tiff", ".tiff": "tiff", ".raw": "raw",
                ".h5": "hdf5", ".hdf5": "hdf5", ".hdf": "hdf5"} | dict.fromkeys(mrc.MRC_SUFFIXES, "mrc") \
-    | dict.fromkeys(fits_cube.FITS_SUFFIXES, "fits")
+    | dict.fromkeys(fits_cube.FITS_SUFFIXES, "fits") | dict.fromkeys(segy.SEGY_SUFFIXES, "segy")
 #: the formats put in RAS+ (their origin and spacing in scanner millimetres; the others keep their array axes)
 RAS_FORMATS = ("nifti", "mgh", "nrrd", "dicom", "dicom-frames")
 #: a folder of slices, one file a slice: its kind by their format (docs/coordinates.md §1)
@@ -63,7 +65,8 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         multi-frame DICOM file whose frames carry positions
         (enhanced CT/MR, RT Dose), ``.raw``, a Zarr (v2 or v3) or OME-Zarr store (a folder),
         an HDF5 file ``.h5``/``.hdf5``/``.hdf``, an MRC/CCP4 map, or a FITS cube (``.fits``, ``.fit``, ``.fts``,
-        ``.fits.gz``, ``.fz``: north up, east left seen from +x, in pixels; docs/coordinates.md §1).
+        ``.fits.gz``, ``.fz``: north up, east left seen from +x, in pixels; docs/coordinates.md §1), or a post-stack
+        SEG-Y cube (``.sgy``, ``.segy``, through segyio: time down, inlines along x).
         ``file.h5:/name`` and ``store.zarr:/name`` name an array inside; without a name the store's only
         3-D/4-D array is read (an OME-Zarr image: its ``level``).
     shape : tuple of int, optional
@@ -117,7 +120,7 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
         directions its x, y and z index axes (array axes 2, 1, 0, as stored) point to, as three of nibabel's axis
         codes (``"LPS"``: x to the patient's left, y posterior, z superior; what ``nibabel.aff2axcodes`` says of a
         NIfTI's (x, y, z) axes); the volume is turned into RAS+ as a medical file is (docs/coordinates.md §1).
-        Refused for NIfTI, MGH, NRRD, DICOM and FITS, which carry their own.
+        Refused for NIfTI, MGH, NRRD, DICOM, FITS and SEG-Y, which carry their own.
     unit : str, optional
         The world unit, the length of the spacing's 1 (:data:`clwave.io.images.UNIT_METRES`: "mm", "um"...);
         default the file's (:func:`world_unit`; None where it gives none).
@@ -196,25 +199,22 @@ def load(path, *, shape=None, dtype=None, spacing=None, byte_order=None, series=
     provenance = dict(file=str(path) + (f":/{inner}" if inner else ""), frame=frame)
     if hu_to_mu and modality is not None:  # attenuation now, not the series' units
         modality = dict(modality, units=None)
-    volume = Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
-                    subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
-                    unit=unit if unit is not None else _world_unit(kind, path, inner), provenance=provenance,
-                    modality=modality)
-    if orientation is not None:  # turned into RAS+ as a medical file is, by the same code; origin= is RAS already
-        affine = stated_affine(turn, volume.shape, volume.spacing, volume.origin)
-        data, spacing, turned, _ = to_canonical(volume.data, affine)
-        volume = Volume(data, spacing, turned if origin is None else origin, subtracted=subtract,
-                        labels=volume.labels, stored_dtype=stored, unit=volume.unit, photo=photo, provenance=provenance)
-    return volume
+    if turn is not None and origin is None:  # the file's origin turned with its axes; origin= is RAS already
+        placed = tuple(turn[:, ::-1] @ np.asarray(placed, float))
+    return Volume(data, spacing=spacing if spacing is not None else (file_spacing or 1.0), origin=placed,
+                  subtracted=subtract, obliquity=obliquity, labels=labels, stored_dtype=stored, photo=photo,
+                  unit=unit if unit is not None else _world_unit(kind, path, inner), provenance=provenance,
+                  modality=modality, orientation=orientation)
 
 
 def check_orientation(kind, orientation):
-    """The turn into RAS+ (:func:`.shared.axis_turn`) of ``orientation=`` (None without it), refused in one line for an
-    input whose header places it in RAS+ (:data:`RAS_FORMATS`), or on the sky (FITS)."""
+    """The turn into RAS+ (:func:`.geometry.axis_turn`) of ``orientation=`` (None without it), refused in one line for
+    an input whose header places it in RAS+ (:data:`RAS_FORMATS`), on the sky (FITS) or time down (SEG-Y)."""
     if orientation is None:
         return None
-    if kind in RAS_FORMATS + ("fits",):
-        placed = "on the sky, north up and east left," if kind == "fits" else "in RAS+"
+    if kind in RAS_FORMATS + ("fits", "segy"):
+        placed = dict(fits="on the sky, north up and east left,", segy="time (or depth) down, inlines along x,")
+        placed = placed.get(kind, "in RAS+")
         raise InputError(f"orientation= is for inputs that carry none (.npy, .raw, TIFF, folders of slices, Zarr, "
                          f"HDF5, MRC); a {kind} input is put {placed} by its own header: leave it out",
                          cli=f"--orientation is for inputs that carry none (.npy, .raw, TIFF, folders of slices, "
@@ -274,6 +274,8 @@ def _read_placed(kind, path, inner, shape, dtype, byte_order, level, chunks, pro
         return (*mrc.read_mrc(path, chunks, fits, warn_spacing, dtype), 0.0)
     if kind == "nrrd":
         return nrrd.read_nrrd(path, fits, warn_spacing)
+    if kind == "segy":
+        return (*segy.read_segy(path, fits, warn_spacing), 0.0)
     if kind == "fits":
         return (*fits_cube.read_fits(path, chunks, fits, frame), 0.0)
     if kind == "tiff":
@@ -292,17 +294,17 @@ def world_unit(path) -> str | None:
 
 
 def _world_unit(kind, path, inner):
-    if kind in ("nifti", "nrrd", "tiff", "mrc", "zarr"):
+    if kind in ("nifti", "nrrd", "tiff", "mrc", "zarr", "segy"):
         with reading(path):
             if kind == "zarr":
                 return zarr.world_unit(path, inner)
-            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff, mrc=mrc)[kind].world_unit(path)
+            return dict(nifti=nifti, nrrd=nrrd, tiff=tiff, mrc=mrc, segy=segy)[kind].world_unit(path)
     return "mm" if kind in ("dicom", "dicom-frames", "mgh") else None
 
 
 DESCRIBED = ("file", "format", "bytes", "shape", "channels", "dtype", "stored_shape", "stored_dtype", "resampled",
              "spacing", "origin", "spacing_in_file", "obliquity", "time", "refused", "rescale", "padding", "nifti",
-             "fits", "series")
+             "fits", "segy", "series")
 
 
 def describe(path, *, series=None, level=None, frame=None, shape=None, dtype=None, byte_order=None) -> dict:
@@ -386,7 +388,8 @@ def describe(path, *, series=None, level=None, frame=None, shape=None, dtype=Non
 
 def _header_facts(kind, path) -> dict:
     """What a format's header says beyond the volume's place (a NIfTI's codes, orientation, shear and scaling)."""
-    return nifti.header_facts(path) if kind == "nifti" else fits_cube.header_facts(path) if kind == "fits" else {}
+    facts = dict(nifti=nifti, fits=fits_cube, segy=segy)
+    return facts[kind].header_facts(path) if kind in facts else {}
 
 
 def _declared(voxels, channels):

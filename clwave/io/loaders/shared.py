@@ -33,7 +33,7 @@ def note(text: str):
 SUPPORTED = (".npy, .nii, .nii.gz, .mgh, .mgz, .nrrd, .nhdr, .tif/.tiff (multi-page), a folder of 2-D TIFF, PNG or "
              "JPEG slices, a folder of DICOM files or a multi-frame DICOM file, .raw (its shape and sample type "
              "given), a Zarr or OME-Zarr store (folder), .h5/.hdf5 (file.h5:/dataset), an MRC/CCP4 map (.mrc, .map, "
-             ".ccp4, .rec, .st), a FITS cube (.fits, .fit, .fts, .fits.gz, .fz)")
+             ".ccp4, .rec, .st), a FITS cube (.fits, .fit, .fts, .fits.gz, .fz), a post-stack SEG-Y cube (.sgy, .segy)")
 
 #: chunks=None reads .npy, .raw, .nii, .mgh, MRC, FITS and TIFF files (and folders of TIFF slices) whose volume takes at
 #: least this many bytes as float32 chunk by chunk (Zarr and HDF5 always), smaller ones whole (docs/chunked.md §1).
@@ -475,31 +475,10 @@ def to_canonical(array_ijk, affine_ras):
     return array_zyx, tuple(spacing_xyz[::-1]), tuple(centre[:3]), tilt
 
 
-def axis_turn(orientation) -> np.ndarray:
-    """The 3 x 3 signed permutation that turns a ``(z, y, x)`` array's unit steps (column ``a``: array axis ``a``'s)
-    into RAS+, of an input whose ``orientation`` is stated (one that carries none): three axis codes as nibabel
-    writes them (``"LPS"``, ``"RAS"``), the directions its x, y and z index axes (array axes 2, 1, 0) point to, as
-    ``nibabel.aff2axcodes`` gives them of a NIfTI's (x, y, z) axes; one InputError for anything else."""
-    from nibabel.orientations import axcodes2ornt
-
-    try:
-        ornt = axcodes2ornt(tuple(orientation.upper()[::-1]))
-    except (AttributeError, ValueError):
-        ornt = None
-    if ornt is None or len(ornt) != 3 or set(ornt[:, 0]) != {0, 1, 2}:
-        raise InputError(f"orientation={orientation!r} must be three axis codes, one of L/R, one of A/P and one of "
-                         f"I/S, the directions the array's x, y and z axes point to (nibabel's, e.g. 'LPS' or 'RAS')",
-                         cli=f"--orientation {orientation} must be three letters, one of L/R, one of A/P and one of "
-                             f"I/S, the directions the array's x, y and z axes point to (e.g. LPS or RAS)")
-    turn = np.zeros((3, 3))
-    turn[ornt[:, 0].astype(int), np.arange(3)] = ornt[:, 1]
-    return turn
-
-
 def stated_affine(turn, shape_zyx, spacing_zyx, origin_xyz) -> np.ndarray:
-    """The index -> RAS affine of a ``(z, y, x)`` array turned by ``turn`` (:func:`axis_turn`): its ``spacing_zyx``
-    kept, its centre at ``origin_xyz`` turned with its axes.  :func:`to_canonical` of it puts the volume in RAS+, as
-    a medical file's affine does."""
+    """The index -> RAS affine of a ``(z, y, x)`` array turned by ``turn`` (:func:`.geometry.axis_turn`): its
+    ``spacing_zyx`` kept, its centre at ``origin_xyz`` turned with its axes.  :func:`to_canonical` of it puts the
+    volume in RAS+, as a medical file's affine does."""
     affine = np.eye(4)
     affine[:3, :3] = turn * np.asarray(spacing_zyx, float)
     # world (x, y, z) is array axes (2, 1, 0): its turn is the columns reversed
