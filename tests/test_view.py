@@ -806,7 +806,8 @@ def test_a_views_renderer_warnings_are_its_frames_note_once_a_view_and_one_log_l
     clip; the same clip turned says it again (a tracer warns once; a view is told each time), a nearly opaque
     function's view its own warning, not the last view's, a plain view none; each line logged once whatever the views
     and frames, and none through Python's warnings (whose filters are the process's, not the render thread's).  The
-    X-ray views of a needle (110 times longer than wide): the camera's warning, each view, and once to the caller of
+    X-ray views of a needle (4 x 4 x 448 voxels, 112 times longer than wide: the content box's shape warns, not how
+    it was made, and a spacing's needle splats slowly): the camera's warning, each view, and once to the caller of
     view() (the viewer's making, on its render thread)."""
     import warnings
 
@@ -814,8 +815,7 @@ def test_a_views_renderer_warnings_are_its_frames_note_once_a_view_and_one_log_l
     lo, hi = (np.asarray(c) for c in clwave.model.camera._content_box(wv))
     tiny = dict(box=[*((lo + hi) / 2 - 1e-3), *((lo + hi) / 2 + 1e-3)], planes=[])
     opaque = dict(points=[[-1, 1, 1, 1, 1000], [2, 1, 1, 1, 1000]])
-    needle = clwave.WaveletVolume.from_volume(
-        clwave.Volume(clwave.phantom("hydrogen", n=16).data, spacing=(1, 1, 110)), levels=1).threshold(keep=0.6)
+    needle = clwave.WaveletVolume.from_volume(clwave.Volume(np.ones((448, 4, 4), np.float32)), levels=1)
 
     async def go(v, changes):
         async with aiohttp.ClientSession() as s:
