@@ -72,7 +72,7 @@ def test_an_unknown_map_and_a_file_of_values_are_refused(tmp_path):
 def test_the_command_line_reverses_a_render_and_refuses_a_shaded_one_before_it(tmp_path, capsys):
     """``--colour-map grey_r``: the PNG is the grey one's levels reversed; ``--colormap`` the same option; a shaded
     render, a .tif or an unknown map refused in one line (exit 2) before any render, nothing written, and a reversed
-    window names the colour map."""
+    window names the colour map given, reversed (grey_r where none is)."""
     assert main(RENDER + ["-o", str(tmp_path / "grey.png")]) == 0
     assert main(RENDER + ["--colour-map", "grey_r", "-o", str(tmp_path / "r.png")]) == 0
     assert main(RENDER + ["--colormap", "gray_r", "-o", str(tmp_path / "g.png")]) == 0
@@ -89,7 +89,11 @@ def test_the_command_line_reverses_a_render_and_refuses_a_shaded_one_before_it(t
                          "--colour-map jet must be one of grey"),
                         (RENDER + ["--window", "1,-1", "-o", str(tmp_path / "w.png")],  # what trial29 tried
                          "--window 1,-1 must be two finite numbers LO,HI with LO < HI (inverted contrast: "
-                         "--colour-map grey_r)")]:
+                         "--colour-map grey_r)"),
+                        (RENDER + ["--window", "1,-1", "--colour-map", "seismic", "-o", str(tmp_path / "w.png")],
+                         "(inverted contrast: --colour-map seismic_r)"),  # the map given, reversed
+                        (RENDER + ["--window", "1,-1", "--colour-map", "magma_r", "-o", str(tmp_path / "w.png")],
+                         "(inverted contrast: --colour-map magma)")]:
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert words in err and err.count("\n") == 1 and "Traceback" not in err

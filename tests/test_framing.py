@@ -70,14 +70,20 @@ def noisy_ball(n=64, radius=6, sigma=0.03, seed=29):
     return data, centre - (n - 1) / 2.0
 
 
-@pytest.mark.parametrize("wavelet, rule, least", [("linear", dict(noise=3), 0.45), ("haar", dict(keep=0.05), 0.45),
-                                                  ("cubic", dict(keep=1), 0.45), ("cubic", dict(keep=0.05), 0.3)])
-def test_a_small_object_in_a_noisy_box_fills_the_frame(wavelet, rule, least):
+def content_voxels(data, n=64):
+    """World (x, y, z) centres of the voxels of the objects (of 1) in ``data`` (noise of deviation 0.03): above 0.5."""
+    return np.argwhere(data > 0.5)[:, ::-1] - (n - 1) / 2.0
+
+
+MODELS = [("linear", dict(noise=3)), ("haar", dict(keep=0.05)), ("cubic", dict(keep=1)), ("cubic", dict(keep=0.05))]
+
+
+@pytest.mark.parametrize("wavelet, rule", MODELS)
+def test_a_small_object_in_a_noisy_box_fills_the_frame(wavelet, rule):
     """Every voxel of a noisy box is non-zero, so the content box is the whole box (the ball of 12 voxels across a
-    64^3 box: 11 % of the default frame's width); the frame holds the content above the noise instead: the ball whole,
-    and at least ``least`` of the frame's width (58 % where its box is the ball's: the frame holds the box's sphere).
-    The cubic model keeping 5 %, whose coarsest details are not whole, is framed at its coarsest level (8 voxels a
-    coefficient)."""
+    64^3 box: 11 % of the default frame's width); the frame holds the content above the noise instead: every voxel of
+    the ball inside the framed box (so ``fit="box"`` crops none of it), and the ball at least 45 % of the frame's width
+    (58 % where the box is the ball's: the frame holds the box's sphere)."""
     data, centre = noisy_ball()
     wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet=wavelet)
     wv.measure_noise()
@@ -86,8 +92,26 @@ def test_a_small_object_in_a_noisy_box_fills_the_frame(wavelet, rule, least):
     view = clwave.Camera(size=32).view(model)
     width = view.pixel * 32
     assert 12.0 / (whole.pixel * 32) < 0.12
-    assert 12.0 / width >= least
-    assert np.linalg.norm(view.target - centre) + 6.0 <= width / 2  # the ball whole in the frame
+    assert 12.0 / width >= 0.45
+    lo, hi = framed_box(model)
+    voxels = content_voxels(data)
+    assert len(voxels) > 500 and ((voxels >= lo) & (voxels <= hi)).all()  # the ball, 4/3 pi 6^3 = 905 voxels
+
+
+@pytest.mark.parametrize("wavelet, rule", MODELS)
+def test_two_objects_apart_in_a_noisy_box_are_both_framed(wavelet, rule):
+    """Two balls of radius 5 at opposite corners of a 64^3 box of noise: every voxel of both inside the framed box,
+    which is within 4 voxels (two cells of level 1) of their voxels' box on every side."""
+    z, y, x = np.mgrid[:64, :64, :64]
+    data = np.random.default_rng(7).normal(0, 0.03, (64,) * 3).astype(np.float32)
+    for cx, cy, cz in ((16, 18, 20), (46, 44, 40)):
+        data += ((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2 < 25).astype(np.float32)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet=wavelet)
+    wv.measure_noise()
+    lo, hi = framed_box(wv.threshold(**rule))
+    voxels = content_voxels(data)
+    assert ((voxels >= lo) & (voxels <= hi)).all()
+    assert (lo >= voxels.min(axis=0) - 4).all() and (hi <= voxels.max(axis=0) + 4).all()
 
 
 def test_the_turntable_frames_a_noisy_objects_content(tmp_path, capsys):

@@ -266,7 +266,7 @@ def check_picture_fits(look, camera, wv, xray):
 def parse_window(args):
     """``--window auto|LO,HI``: "auto", or two finite numbers LO < HI (checked before any work)."""
     return check_window(args.display_window if args.display_window == "auto" else
-                        numbers(args.display_window, "--window", (2,)), "--window")
+                        numbers(args.display_window, "--window", (2,)), "--window", getattr(args, "colour_map", None))
 
 
 def parse_size(args) -> tuple:

@@ -322,12 +322,10 @@ def _warn_needle(sides) -> None:
 
 def framed_box(volume) -> tuple:
     """World ``(lo, hi)`` of what a camera frames by default: a model's content (:func:`_content_box`) cut to where its
-    coarsest approximation stands above the noise (:func:`~clwave.model.noise.signal_box`), so that the noise of an
-    empty part of the box is not framed (docs/coordinates.md §2)."""
-    from .noise import signal_box
-
+    approximation stands above the noise (:attr:`~clwave.WaveletVolume.signal_box`), so that the noise of an empty part
+    of the box is not framed (docs/coordinates.md §2)."""
     lo, hi = _content_box(volume)
-    signal = signal_box(volume) if hasattr(volume, "measure_noise") else None
+    signal = getattr(volume, "signal_box", None)
     if signal is None:
         return lo, hi
     cut_lo, cut_hi = np.maximum(lo, signal[0]), np.minimum(hi, signal[1])

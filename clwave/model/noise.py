@@ -29,23 +29,16 @@ NOISE_K = 3.0
 MOSTLY = 0.5
 #: the histogram of |d|: the top 16 bits of a float32 (8 of exponent, 7 of mantissa: bins 0.8 % wide)
 BIN_SHIFT = 16
-#: a coarsest approximation coefficient is content beyond this many times its noise deviation (:func:`signal_box`):
-#: Gaussian noise alone passes it once in 1.7 million coefficients
+#: an approximation coefficient is content beyond this many times its noise deviation (:func:`signal_box`): Gaussian
+#: noise alone passes it once in 1.7 million coefficients, and with a neighbour that passes it too far less often
 FRAME_K = 5.0
-#: a noisy model's content spans this many standard deviations of its coarse coefficients' positions either side of
-#: their mean (:func:`signal_box`): all of a box of uniform content (1.73), and a ball framed whole
-FRAME_SPREAD = 2.0
-#: the fewest coefficients above the noise that :func:`signal_box` frames: Gaussian noise alone gives
-#: fewer than one in :data:`FRAME_CELLS` (a lone one is noise, or a model whose coarse bands amplify it, as cubic's do)
+#: the fewest fine coefficients above the noise that :func:`signal_box` frames
 FRAME_LEAST = 8
-#: a band keeps its noise whole where it keeps a coefficient this many times its noise deviation or smaller
-#: (:func:`signal_box`; a threshold drops the smallest first, and the zeros beyond the volume's faces)
-FRAME_WHOLE = 0.1
 #: the least deviation (in units of the measured noise's) of the coefficients below the noise for :func:`signal_box`:
 #: Gaussian noise gives 1 (less near the faces), a clean background 0
 FRAME_NOISY = 0.5
-#: the most coefficients of the approximation a level finer than the coarsest that :func:`signal_box` synthesizes
-FRAME_CELLS = 64 ** 3
+#: the most coefficients of the approximation finer than the coarsest that :func:`signal_box` synthesizes
+FRAME_CELLS = 128 ** 3
 
 
 def finest_norm(wavelet) -> float:
@@ -211,64 +204,105 @@ def warn_kept_noise(wv, model, keep, threshold, importance_of):
 def signal_box(wv):
     """World (x, y, z) corners ``(lo, hi)`` of the content of a noisy model, what a camera frames (docs/coordinates.md
     §2), as every voxel of a noisy volume is non-zero; 0 is the background, as for :meth:`Volume.content_box`.  Its
-    approximation a level finer than its coarsest where it keeps its coarsest details whole (:func:`_whole`; a part
-    kept would be their largest, noisier than measured) and that has at most :data:`FRAME_CELLS` coefficients, else at
-    its coarsest: those of the content's sign (per channel) and above :data:`FRAME_K` times their noise deviation
-    (:meth:`~clwave.WaveletVolume.measure_noise` times the level's analysis norm), weighted by that ratio; per axis,
-    their mean :data:`FRAME_SPREAD` standard deviations either side (at least one coefficient's step across), within
-    the box of their steps.  None where no channel's noise is known, the coefficients below it vary less than
-    :data:`FRAME_NOISY` times it (no noise there: a clean volume, whose few edges looked like noise), or fewer than
-    :data:`FRAME_LEAST` pass."""
-    from .geometry import fine_to_world, support_centres
-    from .transform import synthesize
-
+    content: the coefficients of an approximation of the content's sign (per channel) above :data:`FRAME_K` times
+    their noise deviation (:meth:`~clwave.WaveletVolume.measure_noise` times the level's analysis norm) that have such
+    a neighbour (a lone one is noise); found at the coarsest level, whose noise is whole (the approximation band is
+    kept whole), then at the finest level of at most :data:`FRAME_CELLS` coefficients, as the clusters there that
+    reach a coarse cell found (where a threshold kept part of the details, their largest noise makes clusters of its
+    own): the box of their cells.  None where no channel's noise is known, the coarsest coefficients below it vary
+    less than :data:`FRAME_NOISY` times it (no noise there: a clean volume, whose few edges looked like noise), or
+    fewer than :data:`FRAME_LEAST` pass."""
     sigmas = wv.measure_noise() or ()
     if not any(sigmas):
         return None
-    whole = all(_whole(g, band, sl, sigmas) for g in wv.groups for band, sl in zip(g.bands, g.band_slices())
-                if band.level == wv.levels and band.key != "aaa")
-    finer = wv.levels - 1 if whole and np.prod(wv.shape[:3]) >> 3 * (wv.levels - 1) <= FRAME_CELLS else wv.levels
-    level = max(finer, 0)
-    points, weights = [], []
+    half = np.array(wv.shape[:3]) * np.array(wv.spacing) / 2  # (z, y, x)
+    coarse, signs = [], []  # per group: (the coarse coefficients found, their centres), the content's signs
     for g in wv.groups:
-        bands = [(number, b) for number, b in enumerate(g.bands) if b.level > level or b.key == "aaa"]
-        dense = []
-        for number, b in bands:
-            flat, sl = np.zeros((b.size, len(g.channels))), g.band_slices()[number]
-            flat[np.arange(b.size) if g.positions is None else g.positions[sl] - b.start] = g.values[:, sl].T
-            dense.append(flat.reshape(*b.shape, -1))
-        approx, start = synthesize(g.wavelet, [b for _, b in bands], dense)
-        limit = np.array([FRAME_K * (sigmas[c] or np.inf) * g.wavelet.analysis_norm("a", level) ** 3
-                          for c in g.channels])
-        ratio = approx / limit
-        index = np.indices(ratio.shape[:3]).reshape(3, -1).T
-        world = fine_to_world(support_centres(g.wavelet, "aaa", level, index + np.array(start)), g.wavelet.order,
-                              *wv.frame).reshape(ratio.shape[:3] + (3,))
-        inside = (np.abs(world - wv.origin) < np.array(wv.shape[2::-1]) * np.array(wv.spacing[::-1]) / 2).all(axis=3)
-        rest = ratio[inside & (np.abs(ratio) <= 1).all(axis=3)]  # (n, C): the background's, in FRAME_K deviations
+        ratio, axes = _ratios(wv, g, wv.levels, sigmas)
+        inside = ratio[np.ix_(*(np.abs(a - o) < h for a, o, h in zip(axes, wv.origin[::-1], half)))].reshape(
+            -1, ratio.shape[3])
+        rest = inside[(np.abs(inside) <= 1).all(axis=1)]  # (n, C): the background's, in FRAME_K deviations
         spread = np.median(np.abs(rest - np.median(rest, axis=0)), axis=0) / MAD_NORMAL * FRAME_K if len(rest) else 0
         if np.max(spread, initial=0.0) < FRAME_NOISY:
             return None
         # the content's sign per channel: the filters' ringing, of the other sign about it, weighs nothing
-        ratio = (ratio * np.sign(np.sum(ratio * (np.abs(ratio) > 1), axis=(0, 1, 2)))).max(axis=3)
-        weights.append(ratio[ratio > 1])
-        points.append(world[ratio > 1])
-    points, weights = np.concatenate(points), np.concatenate(weights)
-    if len(points) < FRAME_LEAST:
+        signs.append(np.sign(np.sum(ratio * (np.abs(ratio) > 1), axis=(0, 1, 2))))
+        coarse.append((_clustered(ratio, signs[-1]), axes))
+    box = _union([_cells_box(found, axes, wv.levels, wv.spacing) for found, axes in coarse])
+    fine = next((level for level in range(1, wv.levels) if np.prod(wv.shape[:3]) >> 3 * level <= FRAME_CELLS), None)
+    if box is None or fine is None:
+        return box if box is not None and box[2] >= FRAME_LEAST else None
+    boxes = []
+    for g, sign, seeds in zip(wv.groups, signs, coarse):
+        ratio, axes = _ratios(wv, g, fine, sigmas)
+        boxes.append(_cells_box(_grown(_clustered(ratio, sign), axes, *seeds, wv.levels, wv.spacing), axes, fine,
+                                wv.spacing))
+    box = _union(boxes)
+    return box[:2] if box is not None and box[2] >= FRAME_LEAST else None
+
+
+def _ratios(wv, group, level, sigmas) -> tuple:
+    """The group's approximation at ``level`` over :data:`FRAME_K` times its noise deviation, float32 (Z, Y, X, C),
+    and the world coordinates of its coefficients' centres along z, y and x (three 1-D arrays)."""
+    from .geometry import fine_to_world, support_centres
+    from .transform import synthesize
+
+    bands = [(number, b) for number, b in enumerate(group.bands) if b.level > level or b.key == "aaa"]
+    dense = []
+    for number, b in bands:
+        flat, sl = np.zeros((b.size, len(group.channels)), np.float32), group.band_slices()[number]
+        flat[np.arange(b.size) if group.positions is None else group.positions[sl] - b.start] = group.values[:, sl].T
+        dense.append(flat.reshape(*b.shape, -1))
+    approx, start = synthesize(group.wavelet, [b for _, b in bands], dense)
+    limit = [FRAME_K * (sigmas[c] or np.inf) * group.wavelet.analysis_norm("a", level) ** 3 for c in group.channels]
+    ratio = approx.astype(np.float32, copy=False) / np.float32(limit)
+    index = np.arange(max(ratio.shape[:3]))[:, None] + np.array(start)  # (n, 3): the index along each axis
+    world = fine_to_world(support_centres(group.wavelet, "aaa", level, index), group.wavelet.order, *wv.frame)
+    return ratio, [world[:n, 2 - axis] for axis, n in enumerate(ratio.shape[:3])]
+
+
+#: the 26 neighbours of a coefficient
+NEIGHBOURS = np.ones((3, 3, 3), bool)
+NEIGHBOURS[1, 1, 1] = False
+
+
+def _clustered(ratio, sign) -> np.ndarray:
+    """(Z, Y, X) bool: the coefficients of ``ratio`` (:func:`_ratios`) above the noise in a channel with the content's
+    ``sign`` that have such a neighbour."""
+    from scipy.ndimage import binary_dilation
+
+    above = (ratio * sign).max(axis=3) > 1
+    return above & binary_dilation(above, NEIGHBOURS)
+
+
+def _grown(found, axes, seeds, seed_axes, seed_level, spacing) -> np.ndarray:
+    """The clusters (26-connected) of the fine coefficients ``found`` centred at ``axes`` that reach a coarse cell
+    (``2^seed_level`` voxels a side) of the coefficients ``seeds`` centred at ``seed_axes`` (:func:`_ratios`)."""
+    from scipy.ndimage import label
+
+    cell = [np.round((a - s[0]) / (2.0 ** seed_level * d)).astype(int) for a, s, d in zip(axes, seed_axes, spacing)]
+    inside = np.ix_(*((c >= 0) & (c < n) for c, n in zip(cell, seeds.shape)))
+    seeded = np.zeros(found.shape, bool)
+    seeded[inside] = seeds[np.ix_(*(c[(c >= 0) & (c < n)] for c, n in zip(cell, seeds.shape)))]
+    labels = label(found, np.ones((3, 3, 3)))[0]
+    return np.isin(labels, np.unique(labels[found & seeded]))
+
+
+def _cells_box(found, axes, level, spacing):
+    """``(lo, hi, count)``: the world (x, y, z) box of the cells (``2^level`` voxels a side) of the coefficients
+    ``found`` (:func:`_clustered`) centred at ``axes`` (:func:`_ratios`), and their count; None where none is."""
+    if not found.any():
         return None
-    step = 2.0 ** level * np.array(wv.spacing[::-1], float)
-    mean = weights @ points / weights.sum()
-    half = np.maximum(FRAME_SPREAD * np.sqrt(weights @ (points - mean) ** 2 / weights.sum()), step / 2)
-    lo, hi = points.min(axis=0) - step / 2, points.max(axis=0) + step / 2
-    return np.maximum(mean - half, lo), np.minimum(mean + half, hi)
+    half = 2.0 ** level * np.array(spacing) / 2
+    ends = [a[found.any(axis=tuple(o for o in range(3) if o != axis))] for axis, a in enumerate(axes)]
+    lo = np.array([e.min() for e in ends]) - half
+    hi = np.array([e.max() for e in ends]) + half
+    return lo[::-1], hi[::-1], int(found.sum())
 
 
-def _whole(group, band, kept, sigmas) -> bool:
-    """Whether ``group`` keeps ``band``'s noise whole, its slice ``kept`` holding a coefficient of at most
-    :data:`FRAME_WHOLE` times the band's noise deviation in every channel whose noise ``sigmas`` are known."""
-    values = np.abs(group.values[:, kept])
-    if not values.shape[1]:
-        return False
-    norm = np.prod([group.wavelet.analysis_norm(letter, band.level) for letter in band.key])
-    return all(values[i].min() <= FRAME_WHOLE * sigmas[c] * norm for i, c in enumerate(group.channels) if sigmas[c])
-
+def _union(boxes):
+    """The box of the groups' :func:`_cells_box` es (None where none found any), their counts added."""
+    boxes = [b for b in boxes if b is not None]
+    if not boxes:
+        return None
+    return (np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0), sum(b[2] for b in boxes))

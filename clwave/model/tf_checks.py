@@ -71,10 +71,11 @@ def check_opacity_unit(unit, option=None):
     return value
 
 
-def check_window(window, option=None):
+def check_window(window, option=None, colour_map=None):
     """None, "auto" or a validated finite (lo, hi) with lo < hi; anything else is an InputError, in the words of the
     command line's ``option`` too (e.g. "--tf-window", whose text gave the window): the one home of the check of
-    every window, transfer functions' and displays'."""
+    every window, transfer functions' and displays'.  An inverted ``--window`` is told to reverse the ``colour_map``
+    given (grey where none is) instead."""
     if window is None:
         return None
     if isinstance(window, str):
@@ -86,7 +87,9 @@ def check_window(window, option=None):
     except (TypeError, ValueError, OverflowError):
         raise InputError(f"window must be None, 'auto' or (lo, hi), got {window!r}") from None
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-        inverted = " (inverted contrast: --colour-map grey_r)" if option == "--window" and lo > hi else ""
+        name = colour_map or "grey"
+        reverse = name[:-2] if name.endswith("_r") else name + "_r"
+        inverted = f" (inverted contrast: --colour-map {reverse})" if option == "--window" and lo > hi else ""
         raise InputError(f"window ({lo:g}, {hi:g}) must be two finite numbers (lo, hi) with lo < hi",
                          cli=option and f"{option} {lo:g},{hi:g} must be two finite numbers LO,HI with LO < HI"
                                         f"{inverted}")

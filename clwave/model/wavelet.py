@@ -21,7 +21,7 @@ from .budget import check_one_rule, check_thresholding, kept_count, warn_short_b
 from . import geometry
 from .labels import warn_blurred_labels
 from .mask import ContentMask
-from .noise import band_noise, check_noise_known, measure_noise, warn_kept_noise, warn_noise_gain
+from .noise import band_noise, check_noise_known, measure_noise, signal_box, warn_kept_noise, warn_noise_gain
 from .ranking import RankedTable, by_importance, ranked_table
 from . import evaluation
 from .transform import (apply_sampling_filter, check_decomposition, crop_to_grid, decompose, reconstruct_channel,
@@ -261,6 +261,12 @@ class WaveletVolume:
         if self.noise_sigma is None:
             self.noise_sigma = measure_noise(self)
         return self.noise_sigma
+
+    @cached_property
+    def signal_box(self):
+        """World (x, y, z) ``(lo, hi)`` of a noisy model's content above its noise (:func:`.noise.signal_box`), or None:
+        found once per model (it is immutable; its noise measured then, if it can be), as every view frames it."""
+        return signal_box(self)
 
     def content_box(self):
         """World (x, y, z) corners ``(lo, hi)`` of the non-zero voxels of the volume the model was made
