@@ -31,7 +31,8 @@ from .cone_cells import idle_pool, pack_nodes, slope_cells
 from .spatial import exact_samples
 from .spectral import SPECTRUM_BLOCK, WORK_ROOM, device_spectra, fft_texture, slice_plan
 from .tables import MAX_LEVELS, default_omega_s, texels_per_pixel
-from .textures import DEFAULT_OMEGA_MIN, Texture, _axis_points, check_texels, _axis_sampling, _centred, _fast_even
+from .textures import (DEFAULT_OMEGA_MIN, FILTER_BELOW, Texture, _axis_points, check_texels, _axis_sampling, _centred,
+                       _fast_even, pixel_filter)
 
 #: Spacing of the slope grid (docs/splatting.md §8): bilinear interpolation between nodes errs by at most
 #: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
@@ -138,7 +139,7 @@ def quasi_interpolant(x: np.ndarray, axes=None) -> np.ndarray:
 
 
 def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="fft", tol=0.0, device=None,
-                       max_texels=None, quasi=False, work=None) -> dict:
+                       max_texels=None, quasi=False, work=None, pixel=None) -> dict:
     """A :class:`~clwave.splat.textures.Texture` of each band whose ``data[node, iv, iu]`` holds its footprint
     at each of the (K, 2) ``slopes``: the line integrals of its basis
     function along ``n - s_u u - s_v v`` (per unit of depth) through the points ``a u + b v`` from its
@@ -152,6 +153,9 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     (fresh memory costs its first touch, docs/splatting.md §8): the device spectra's
     (:func:`~clwave.splat.spectral.device_spectra`) and the samples', so the textures returned are then views valid
     until the next call with it.
+    ``pixel``: ``{(m, key): (p_u, p_v)}``, a detector pixel at the band's depth (world units) along u and v, or 0,
+    by which its textures are box-filtered along that axis (:func:`~clwave.splat.textures.pixel_filter`; bands not in
+    it keep their samples).
     A coarser band is made from the finest of its type in ``bands``: a scaled copy where its texels are that one's
     dilated too, else (``"fft"``, ``tol`` > 0) an FFT of the period that the box its trimming keeps needs
     (docs/splatting.md §8 "Periods from the trimmed box")."""
@@ -169,7 +173,14 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
         (nu, h_u, _), (nv, h_v, _) = (_axis_sampling(w, False, 0.0, 1.0, h)
                                       for w, h in zip(widths[(m, key)], np.broadcast_to(texel, 2)))
         grids[(m, key)] = (nu, h_u, nv, h_v)
-    check_texels(sum(4 * len(slopes) * (nu + 2) * (nv + 2) for nu, _, nv, _ in grids.values()),  # the cells
+    pixel = pixel or {}
+
+    def grown(band, axis):  # the samples a pixel filter adds along axis 0 (u) or 1 (v)
+        r = pixel.get(band, (0.0, 0.0))[axis] / grids[band][1 + 2 * axis]
+        return 2 * (int(np.ceil(r / 2.0)) + 1) if r else 0
+
+    check_texels(sum(4 * len(slopes) * (nu + 2 + grown(band, 0)) * (nv + 2 + grown(band, 1))
+                     for band, (nu, _, nv, _) in grids.items()),  # the cells
                  max_texels, f"the footprints of this perspective view ({len(slopes)} ray slopes a band)",
                  "render fewer pixels, a narrower cone or a lower omega_s")
     data, profiles = {}, {}
@@ -282,6 +293,11 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
             rows, cols = np.flatnonzero(rows > tol * rows.max()), np.flatnonzero(cols > tol * rows.max())
             x = x[:, rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
             cu, cv = cu - cols[0], cv - rows[0]
+        p_u, p_v = pixel.get(band, (0.0, 0.0))
+        if p_u:
+            x, cu = pixel_filter(x, cu, p_u / h_u, axis=2)
+        if p_v:
+            x, cv = pixel_filter(x, cv, p_v / h_v, axis=1)
         out[band] = Texture(x, h_u, h_v, cu, cv, sampling, *band)
     if store is not None and store[2] > store[0].size:  # room for the next call, which then writes over it
         store[0] = np.empty(int(WORK_ROOM * store[2]), np.float32)
@@ -421,16 +437,21 @@ class ConeTables:
         self.cone[5] = (*(1.0 / step), *count)
         scale = texel_scale(view0.u + nodes[:, :1] * view0.n, view0.v + nodes[:, 1:] * view0.n, d_xyz)
         # each band in the first layer that draws it, with texels of 1/P of its nearest pixel
-        texels, layer_of, self.omega_s = {}, {}, None
+        texels, layer_of, pixel, self.omega_s = {}, {}, {}, None
         for li, (view, bands) in enumerate(layers):
             for b in g.bands:
                 band = (b.level, b.key)
                 if band in layer_of or (bands is not None and band not in bands):
                     continue
-                near = depth_range(view, wv, support_extent(wav, b.key, b.level, d_xyz))[0]
+                near, far = depth_range(view, wv, support_extent(wav, b.key, b.level, d_xyz))
                 if not near > 0:
                     _too_near(view, wv, wav, d_xyz, b.level, drawn, words)
                 layer_of[band] = li
+                # footprints under FILTER_BELOW of the nearest pixel, filtered by the pixel at the middle depth
+                voxel, slope = 2.0 ** b.level * np.abs([view.u, view.v]) @ d_xyz, np.array(view.slope)
+                p = np.where(voxel < FILTER_BELOW * slope * near, slope * (near + far) / 2.0, 0.0)
+                if p.any():
+                    pixel[band] = tuple(p.tolist())
                 texels[band], omega = band_texel(wav.order, b.level, omega_s, min(view.slope) * near, d_xyz, scale)
                 self.omega_s = self.omega_s or omega
         # bands whose images are large get closer slope nodes and finer texels (docs/splatting.md §8 "Refined bands")
@@ -456,6 +477,7 @@ class ConeTables:
                     support_centres(wav, b.key, b.level, (0, 0, 0)), wav.order, wv.shape, wv.spacing, wv.origin)
                 self.band_step[b.id, :3] = 2.0 ** b.level * d_xyz
         key = (group, sampling, max_texels, tuple(sorted(layer_of.items())), tuple(sorted(refine.items())),
+               tuple(sorted(pixel.items())),
                tuple(sorted((band, tuple(np.broadcast_to(h, 2).tolist())) for band, h in texels.items())),
                *(np.asarray(x, np.float64).tobytes() for x in (view0.n, view0.u, view0.v, nodes)))
         start = time.perf_counter()
@@ -470,7 +492,8 @@ class ConeTables:
                         wav, wv.spacing, view0.n, view0.u, view0.v, chosen,
                         grid_nodes(lo, step / r, (count - 1) * r + 1), sampling,
                         TEXTURE_TOL if wav.order == 4 else 0.0, device, max_texels, quasi=wav.order >= 3,
-                        work=None if work is None else work.setdefault(r, {})))
+                        work=None if work is None else work.setdefault(r, {}),
+                        pixel={band: p for band, p in pixel.items() if band in chosen}))
                 spare = None  # the nodes' array of the view that leaves the cache, to write over
                 while cache is not None and len(cache) >= FOOTPRINT_CACHE:
                     spare = cache.pop(next(iter(cache)))["nodes"]
