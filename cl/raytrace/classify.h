@@ -14,14 +14,12 @@
  * shaded by the ambient term alone where s falls along the ray away from a headlight (interval_unlit), or takes the
  * midpoint shading (neither needs the gradient), or Simpson on its samples where the shading does not turn on it.
  *
- * The table `tf` (real4 rows, clwave/raytrace/classified.py): row 0 (scale, shift, K, 0); rows
- * 1..K the breakpoints u_i (x); then per interval k = 0..K (u below u_0, between u_{k-1} and u_k,
- * above u_{K-1}) three rows (u_ref, alpha_ref, alpha_slope, 0), (rgb_ref, 0), (rgb_slope, 0).
- * Build: CLW_POST; nodes as bernstein.h says. */
+ * The table `tf` and its searches: tf_table.h.  Build: CLW_POST; nodes as bernstein.h says. */
 #ifndef CLW_CLASSIFY_H
 #define CLW_CLASSIFY_H
 #include "raytrace/quadrature.h"
 #include "raytrace/bernstein.h"
+#include "raytrace/tf_table.h"
 
 #define POST_DEPTH 16 /* spans are cut at most this often; a span still straddling is flagged */
 
@@ -35,15 +33,6 @@ typedef struct {
     real4 line;              /* (u_ref, alpha_ref, alpha_slope, normal sign) */
     real3 rgb, rgb_slope;    /* colour at u_ref and per unit u */
 } Piece;
-
-/* the interval of u: how many breakpoints are <= u */
-inline int tf_interval(__global const real4 *tf, const int K, const real u)
-{
-    int k = 0;
-    for (int i = 1; i <= K; i++)
-        k += tf[i].x <= u;
-    return k;
-}
 
 /* int alpha dxi from the piece's start to xi (exact: alpha is linear in u there), for e^{-A} inside the piece */
 inline real piece_depth(const Piece *C, const real xi)
@@ -190,13 +179,6 @@ inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, 
     C->depth_a += piece_total(C, a, b);
 }
 
-/* the transfer function's opacity at u */
-inline real tf_alpha(__global const real4 *tf, const int K, const real u)
-{
-    const real4 line = tf[1 + K + 3 * tf_interval(tf, K, u)];
-    return fmax(line.y + line.z * (u - line.x), (real)0);
-}
-
 /* A segment's scalar as the classification needs it, from s at the samples (lane order of fq): u there and its
  * Bernstein coefficients c on [-1, 1].  Returns whether the transfer function is opaque anywhere in the
  * coefficients' hull: a segment where it is not adds nothing, and needs no gradient. */
@@ -217,11 +199,7 @@ inline bool segment_scalar(const real *s, __constant const real *nodes, __global
         lo = fmin(lo, c[i]);
         hi = fmax(hi, c[i]);
     }
-    real m = fmax(tf_alpha(tf, K, lo), tf_alpha(tf, K, hi));
-    for (int p = 1; p <= K; p++) /* point p - 1: the opacity at the start of interval p */
-        if (lo <= tf[p].x && tf[p].x <= hi)
-            m = fmax(m, tf[1 + K + 3 * p].y);
-    return m > 0;
+    return tf_peak(tf, K, lo, hi) > 0;
 }
 
 /* How many breakpoints lie inside the hull of the Bernstein coefficients c by more than u is known to (the
@@ -235,17 +213,12 @@ inline int breakpoints_inside(__global const real4 *tf, const int K, const real 
         hi = fmax(hi, c[i]);
     }
     const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
-    int inside = 0;
+    const int first = tf_count(tf, K, lo + eps, true), end = tf_count(tf, K, hi - eps, false);
     *cross = 0;
-    for (int i = 1; i <= K; i++) {
-        const real v = tf[i].x;
-        if (v > lo + eps && v < hi - eps) {
-            inside += 1;
-            if (!*cross && one_crossing(c, v, eps))
-                *cross = i;
-        }
-    }
-    return inside;
+    for (int i = first + 1; i <= end && !*cross; i++) /* those inside, in order, up to the first crossed once */
+        if (one_crossing(c, tf[i].x, eps))
+            *cross = i;
+    return max(end - first, 0);
 }
 
 /* A segment inside one interval of the transfer function: the interval's line, alpha at the samples and the
