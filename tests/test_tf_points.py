@@ -57,8 +57,9 @@ def test_the_bounds_are_the_largest_opacity_over_each_range():
 @pytest.mark.parametrize("shading", [False, True])
 def test_segments_through_thousands_of_labels_against_fine_quadrature(shading):
     """A post-classified segment through the categorical function of 2,000 labels (8,000 points) on cubics crossing
-    a few of its steps anywhere along it, shaded or not: the optical depth exact and the emission within the
-    tolerance of test_classify's exact_segment (scipy's quad cut at every root), as for a function of a few points."""
+    a few of its steps anywhere along it, and quadratics crossing 100 to 240 (each cut, none left unresolved), shaded
+    or not: the optical depth exact and the emission within the tolerance of test_classify's exact_segment (scipy's
+    quad cut at every root), as for a function of a few points."""
     cc = ComputeContext.get()
     if not cc.queue.device.double_fp_config:
         pytest.skip("no float64 on this device")
@@ -74,6 +75,7 @@ def test_segments_through_thousands_of_labels_against_fine_quadrature(shading):
     table = tf_table(tf, None, (1.0, 1.0, 1.0))
     polys = [Polynomial([rng.uniform(0, 2 * LABELS + 2), rng.uniform(-2.0, 2.0), rng.normal(0, 0.3),
                          rng.normal(0, 0.1)]) for _ in range(24)]
+    polys += [Polynomial([rng.uniform(100, 2 * LABELS - 100), slope, rng.normal(0, 1.0)]) for slope in (-40, 25, 60)]
     grads = [[Polynomial(rng.normal(0, 1, 9) * 0.5 ** np.arange(9)) for _ in range(3)] for _ in polys]
     light = np.array([0.6, 0.0, 0.8])
     halfway = (light + [0.0, 0.0, 1.0]) / np.linalg.norm(light + [0.0, 0.0, 1.0])

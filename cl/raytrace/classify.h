@@ -21,7 +21,8 @@
 #include "raytrace/bernstein.h"
 #include "raytrace/tf_table.h"
 
-#define POST_DEPTH 16 /* spans are cut at most this often; a span still straddling is flagged */
+#define POST_DEPTH 16 /* spans are halved at most this often; a span still straddling is flagged */
+#define POST_CUTS 4096 /* and a segment cut at most this often (a crossing each, the function's points permitting) */
 
 /* One piece of a segment: u's series, its antiderivative, the gradient series of s (shading) and the
  * transfer function's linear interval on the piece */
@@ -204,7 +205,8 @@ inline bool segment_scalar(const real *s, __constant const real *nodes, __global
 
 /* How many breakpoints lie inside the hull of the Bernstein coefficients c by more than u is known to (the
  * samples' rounding times the interpolation's Lebesgue constant, about 30 for these points: a crossing by less
- * moves nothing measurable); *cross: the first of them that u crosses exactly once, 0 for none */
+ * moves nothing measurable); *cross: of those u crosses exactly once, the nearest u's start (the lowest where u
+ * rises, the highest where it falls), 0 for none: cut there first, a segment crossing many is cut at each in turn */
 inline int breakpoints_inside(__global const real4 *tf, const int K, const real *c, int *cross)
 {
     real lo = c[0], hi = c[0];
@@ -214,8 +216,9 @@ inline int breakpoints_inside(__global const real4 *tf, const int K, const real 
     }
     const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
     const int first = tf_count(tf, K, lo + eps, true), end = tf_count(tf, K, hi - eps, false);
+    const bool falls = c[NS - 1] < c[0]; /* those inside from u's start, up to the first crossed once */
     *cross = 0;
-    for (int i = first + 1; i <= end && !*cross; i++) /* those inside, in order, up to the first crossed once */
+    for (int i = falls ? end : first + 1; (falls ? i > first : i <= end) && !*cross; i += falls ? -1 : 1)
         if (one_crossing(c, tf[i].x, eps))
             *cross = i;
     return max(end - first, 0);
@@ -431,14 +434,14 @@ inline real4 classified_segment(real *c, const real *u, const real *gx, const re
         add_segment(&C, &O, P, nodes, gx, gy, gz, tol, &emission, evals, flags);
         return (real4)(emission, C.depth_a);
     }
-    /* spans left to right: the right parts wait on a stack, one per depth at most */
+    /* spans left to right: the right parts wait on a stack */
     real stack_c[POST_DEPTH][NS], stack_ab[POST_DEPTH][2];
-    int stack_depth[POST_DEPTH], top = 0, depth = 0;
+    int stack_depth[POST_DEPTH], top = 0, depth = 0, cut = 0;
     real a = -1, b = 1;
     while (true) {
         int cross;
         const int inside = breakpoints_inside(tf, K, c, &cross);
-        if (inside == 0 || depth >= POST_DEPTH) { /* one interval (or unresolved: flagged) */
+        if (inside == 0 || depth >= POST_DEPTH || cut >= POST_CUTS) { /* one interval (or unresolved: flagged) */
             if (inside)
                 *flags |= 2;
             add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
@@ -471,7 +474,11 @@ inline real4 classified_segment(real *c, const real *u, const real *gx, const re
             left[NS - 1] = stack_c[top][0] = v;
         stack_ab[top][0] = x;
         stack_ab[top][1] = b;
-        stack_depth[top++] = ++depth;
+        /* a crossing's right part holds fewer points inside: it keeps its span's depth, so that a segment crossing
+         * many points is cut at each (POST_CUTS at most); the stack never holds more parts than the depth */
+        stack_depth[top++] = cross ? depth : depth + 1;
+        depth += 1;
+        cut += 1;
         for (int i = 0; i < NS; i++)
             c[i] = left[i];
         b = x;
