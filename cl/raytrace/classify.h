@@ -160,18 +160,26 @@ inline real3 cut_simpson(Piece *C, const Shading *P, __constant const real *node
 }
 
 /* The piece [a, b] of the segment, lying in the transfer function's interval k: its emission added to
- * *emission and its int alpha dxi to C->depth_a */
+ * *emission and its int alpha dxi to C->depth_a.  `unresolved`: a span still straddling points, classified as at
+ * its midpoint all along (the interval's line beyond its interval could make the optical depth negative) */
 inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, __global const real4 *tf,
-                      const int K, const real a, const real b, const real tol, real3 *emission, int *evals,
-                      int *flags)
+                      const int K, const real a, const real b, const real tol, const bool unresolved,
+                      real3 *emission, int *evals, int *flags)
 {
-    const int k = tf_interval(tf, K, cheb1(C->us, NS, (a + b) / 2));
-    const real4 line = tf[1 + K + 3 * k];
-    if (line.y == 0 && line.z == 0) /* transparent: nothing emitted, nothing absorbed */
-        return;
-    C->line = (real4)(line.xyz, line.z < 0 ? -1 : 1); /* normals face where alpha decreases */
+    const real um = cheb1(C->us, NS, (a + b) / 2);
+    const int k = tf_interval(tf, K, um);
+    real4 line = tf[1 + K + 3 * k];
     C->rgb = tf[2 + K + 3 * k].xyz;
     C->rgb_slope = tf[3 + K + 3 * k].xyz;
+    const real sign = line.z < 0 ? -1 : 1; /* normals face where alpha decreases */
+    if (unresolved) {
+        C->rgb += C->rgb_slope * (um - line.x);
+        C->rgb_slope = 0;
+        line = (real4)(um, fmax(line.y + line.z * (um - line.x), (real)0), 0, 0);
+    }
+    if (line.y == 0 && line.z == 0) /* transparent: nothing emitted, nothing absorbed */
+        return;
+    C->line = (real4)(line.xyz, sign);
     C->a = a;
     C->ui_a = cheb1(C->ui, NS + 1, a);
     real cuts[SHADE_CUTS];
@@ -444,7 +452,7 @@ inline real4 classified_segment(real *c, const real *u, const real *gx, const re
         if (inside == 0 || depth >= POST_DEPTH || cut >= POST_CUTS) { /* one interval (or unresolved: flagged) */
             if (inside)
                 *flags |= 2;
-            add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
+            add_piece(&C, P, nodes, tf, K, a, b, tol, inside != 0, &emission, evals, flags);
             if (top == 0)
                 break;
             top -= 1;
