@@ -14,16 +14,15 @@
  * shaded by the ambient term alone where s falls along the ray away from a headlight (interval_unlit), or takes the
  * midpoint shading (neither needs the gradient), or Simpson on its samples where the shading does not turn on it.
  *
- * The table `tf` (real4 rows, clwave/raytrace/classified.py): row 0 (scale, shift, K, 0); rows
- * 1..K the breakpoints u_i (x); then per interval k = 0..K (u below u_0, between u_{k-1} and u_k,
- * above u_{K-1}) three rows (u_ref, alpha_ref, alpha_slope, 0), (rgb_ref, 0), (rgb_slope, 0).
- * Build: CLW_POST; nodes as bernstein.h says. */
+ * The table `tf` and its searches: tf_table.h.  Build: CLW_POST; nodes as bernstein.h says. */
 #ifndef CLW_CLASSIFY_H
 #define CLW_CLASSIFY_H
 #include "raytrace/quadrature.h"
 #include "raytrace/bernstein.h"
+#include "raytrace/tf_table.h"
 
-#define POST_DEPTH 16 /* spans are cut at most this often; a span still straddling is flagged */
+#define POST_DEPTH 16 /* spans are halved at most this often; a span still straddling is flagged */
+#define POST_CUTS 4096 /* and a segment cut at most this often (a crossing each, the function's points permitting) */
 
 /* One piece of a segment: u's series, its antiderivative, the gradient series of s (shading) and the
  * transfer function's linear interval on the piece */
@@ -35,15 +34,6 @@ typedef struct {
     real4 line;              /* (u_ref, alpha_ref, alpha_slope, normal sign) */
     real3 rgb, rgb_slope;    /* colour at u_ref and per unit u */
 } Piece;
-
-/* the interval of u: how many breakpoints are <= u */
-inline int tf_interval(__global const real4 *tf, const int K, const real u)
-{
-    int k = 0;
-    for (int i = 1; i <= K; i++)
-        k += tf[i].x <= u;
-    return k;
-}
 
 /* int alpha dxi from the piece's start to xi (exact: alpha is linear in u there), for e^{-A} inside the piece */
 inline real piece_depth(const Piece *C, const real xi)
@@ -170,31 +160,32 @@ inline real3 cut_simpson(Piece *C, const Shading *P, __constant const real *node
 }
 
 /* The piece [a, b] of the segment, lying in the transfer function's interval k: its emission added to
- * *emission and its int alpha dxi to C->depth_a */
+ * *emission and its int alpha dxi to C->depth_a.  `unresolved`: a span still straddling points, classified as at
+ * its midpoint all along (the interval's line beyond its interval could make the optical depth negative) */
 inline void add_piece(Piece *C, const Shading *P, __constant const real *nodes, __global const real4 *tf,
-                      const int K, const real a, const real b, const real tol, real3 *emission, int *evals,
-                      int *flags)
+                      const int K, const real a, const real b, const real tol, const bool unresolved,
+                      real3 *emission, int *evals, int *flags)
 {
-    const int k = tf_interval(tf, K, cheb1(C->us, NS, (a + b) / 2));
-    const real4 line = tf[1 + K + 3 * k];
-    if (line.y == 0 && line.z == 0) /* transparent: nothing emitted, nothing absorbed */
-        return;
-    C->line = (real4)(line.xyz, line.z < 0 ? -1 : 1); /* normals face where alpha decreases */
+    const real um = cheb1(C->us, NS, (a + b) / 2);
+    const int k = tf_interval(tf, K, um);
+    real4 line = tf[1 + K + 3 * k];
     C->rgb = tf[2 + K + 3 * k].xyz;
     C->rgb_slope = tf[3 + K + 3 * k].xyz;
+    const real sign = line.z < 0 ? -1 : 1; /* normals face where alpha decreases */
+    if (unresolved) {
+        C->rgb += C->rgb_slope * (um - line.x);
+        C->rgb_slope = 0;
+        line = (real4)(um, fmax(line.y + line.z * (um - line.x), (real)0), 0, 0);
+    }
+    if (line.y == 0 && line.z == 0) /* transparent: nothing emitted, nothing absorbed */
+        return;
+    C->line = (real4)(line.xyz, sign);
     C->a = a;
     C->ui_a = cheb1(C->ui, NS + 1, a);
     real cuts[SHADE_CUTS];
     const int n = shading_cuts(C, P, nodes, false, 0, 0, 0, a, b, cuts);
     *emission += cut_simpson(C, P, nodes, 0, cuts, n, a, b, tol * (b - a) / 2, evals, flags);
     C->depth_a += piece_total(C, a, b);
-}
-
-/* the transfer function's opacity at u */
-inline real tf_alpha(__global const real4 *tf, const int K, const real u)
-{
-    const real4 line = tf[1 + K + 3 * tf_interval(tf, K, u)];
-    return fmax(line.y + line.z * (u - line.x), (real)0);
 }
 
 /* A segment's scalar as the classification needs it, from s at the samples (lane order of fq): u there and its
@@ -217,16 +208,13 @@ inline bool segment_scalar(const real *s, __constant const real *nodes, __global
         lo = fmin(lo, c[i]);
         hi = fmax(hi, c[i]);
     }
-    real m = fmax(tf_alpha(tf, K, lo), tf_alpha(tf, K, hi));
-    for (int p = 1; p <= K; p++) /* point p - 1: the opacity at the start of interval p */
-        if (lo <= tf[p].x && tf[p].x <= hi)
-            m = fmax(m, tf[1 + K + 3 * p].y);
-    return m > 0;
+    return tf_peak(tf, K, lo, hi) > 0;
 }
 
 /* How many breakpoints lie inside the hull of the Bernstein coefficients c by more than u is known to (the
  * samples' rounding times the interpolation's Lebesgue constant, about 30 for these points: a crossing by less
- * moves nothing measurable); *cross: the first of them that u crosses exactly once, 0 for none */
+ * moves nothing measurable); *cross: of those u crosses exactly once, the nearest u's start (the lowest where u
+ * rises, the highest where it falls), 0 for none: cut there first, a segment crossing many is cut at each in turn */
 inline int breakpoints_inside(__global const real4 *tf, const int K, const real *c, int *cross)
 {
     real lo = c[0], hi = c[0];
@@ -235,17 +223,13 @@ inline int breakpoints_inside(__global const real4 *tf, const int K, const real 
         hi = fmax(hi, c[i]);
     }
     const real eps = 64 * REAL_EPSILON * (1 + fmax(fabs(lo), fabs(hi)));
-    int inside = 0;
+    const int first = tf_count(tf, K, lo + eps, true), end = tf_count(tf, K, hi - eps, false);
+    const bool falls = c[NS - 1] < c[0]; /* those inside from u's start, up to the first crossed once */
     *cross = 0;
-    for (int i = 1; i <= K; i++) {
-        const real v = tf[i].x;
-        if (v > lo + eps && v < hi - eps) {
-            inside += 1;
-            if (!*cross && one_crossing(c, v, eps))
-                *cross = i;
-        }
-    }
-    return inside;
+    for (int i = falls ? end : first + 1; (falls ? i > first : i <= end) && !*cross; i += falls ? -1 : 1)
+        if (one_crossing(c, tf[i].x, eps))
+            *cross = i;
+    return max(end - first, 0);
 }
 
 /* A segment inside one interval of the transfer function: the interval's line, alpha at the samples and the
@@ -458,17 +442,17 @@ inline real4 classified_segment(real *c, const real *u, const real *gx, const re
         add_segment(&C, &O, P, nodes, gx, gy, gz, tol, &emission, evals, flags);
         return (real4)(emission, C.depth_a);
     }
-    /* spans left to right: the right parts wait on a stack, one per depth at most */
+    /* spans left to right: the right parts wait on a stack */
     real stack_c[POST_DEPTH][NS], stack_ab[POST_DEPTH][2];
-    int stack_depth[POST_DEPTH], top = 0, depth = 0;
+    int stack_depth[POST_DEPTH], top = 0, depth = 0, cut = 0;
     real a = -1, b = 1;
     while (true) {
         int cross;
         const int inside = breakpoints_inside(tf, K, c, &cross);
-        if (inside == 0 || depth >= POST_DEPTH) { /* one interval (or unresolved: flagged) */
+        if (inside == 0 || depth >= POST_DEPTH || cut >= POST_CUTS) { /* one interval (or unresolved: flagged) */
             if (inside)
                 *flags |= 2;
-            add_piece(&C, P, nodes, tf, K, a, b, tol, &emission, evals, flags);
+            add_piece(&C, P, nodes, tf, K, a, b, tol, inside != 0, &emission, evals, flags);
             if (top == 0)
                 break;
             top -= 1;
@@ -498,7 +482,11 @@ inline real4 classified_segment(real *c, const real *u, const real *gx, const re
             left[NS - 1] = stack_c[top][0] = v;
         stack_ab[top][0] = x;
         stack_ab[top][1] = b;
-        stack_depth[top++] = ++depth;
+        /* a crossing's right part holds fewer points inside: it keeps its span's depth, so that a segment crossing
+         * many points is cut at each (POST_CUTS at most); the stack never holds more parts than the depth */
+        stack_depth[top++] = cross ? depth : depth + 1;
+        depth += 1;
+        cut += 1;
         for (int i = 0; i < NS; i++)
             c[i] = left[i];
         b = x;

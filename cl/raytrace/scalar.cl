@@ -1,6 +1,9 @@
 /* scalar.cl: what post-classification needs of a scalar model's brick pool (clwave/raytrace/classified.py,
  * docs/raytracing.md §10): the range of the scalar per block. */
 #include "common/clw_common.h"
+typedef float real; /* the table's precision here (tf_table.h) */
+typedef float4 real4;
+#include "raytrace/tf_table.h"
 
 /* scalar_range: per block of CLW_BLOCK^3 grid-0 fine cells of every brick slot (whatever detail it serves), the
  * least and largest coefficient whose B-spline reaches it: the B-splines are non-negative and sum to 1, so the
@@ -31,34 +34,18 @@ __kernel void scalar_range(__global float2 *out, const int first_slot, const int
     out[(size_t)slot * per * per * per + k] = m;
 }
 
-/* the opacity of the transfer function's table (cl/raytrace/classify.h) at u */
-inline float table_alpha(__constant const float4 *tf, const int K, const float u)
-{
-    int k = 0;
-    for (int i = 1; i <= K; i++)
-        k += tf[i].x <= u;
-    const float4 line = tf[1 + K + 3 * k];
-    return fmax(line.y + line.z * (u - line.x), 0.0f);
-}
-
 /* classified_bounds: per block the largest opacity of the transfer function over the block's range
- * [min - slack, max + slack]: at its ends or at a point inside (the function is piecewise linear).
- *   bound   out (n,) float; range (n,) float2 from scalar_range; tf the table (float)
+ * [min - slack, max + slack] (tf_peak).
+ *   bound   out (n,) float; range (n,) float2 from scalar_range; tf the table (float, tf_table.h)
  * Grid: global (n). */
-__kernel void classified_bounds(__global float *bound, __global const float2 *range, __constant const float4 *tf,
+__kernel void classified_bounds(__global float *bound, __global const float2 *range, __global const float4 *tf,
                                 const float slack, const int n)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
     const float4 head = tf[0];
-    const int K = (int)head.z;
-    const float lo = (range[i].x - slack) * head.x + head.y, hi = (range[i].y + slack) * head.x + head.y;
-    float m = fmax(table_alpha(tf, K, lo), table_alpha(tf, K, hi));
-    for (int p = 1; p <= K; p++) /* point p - 1: the opacity at the start of interval p */
-        if (lo <= tf[p].x && tf[p].x <= hi)
-            m = fmax(m, tf[1 + K + 3 * p].y);
-    bound[i] = m;
+    bound[i] = tf_peak(tf, (int)head.z, (range[i].x - slack) * head.x + head.y, (range[i].y + slack) * head.x + head.y);
 }
 
 /* superblock_max: per superblock of CLW_SUPER_CELLS / CLW_BLOCK blocks a side, the largest block bound (the

@@ -525,7 +525,7 @@ class TransferFunction:
             "window": list(win) if isinstance(win, tuple) else win,
             "opacity_unit": self._unit,
             "key": list(self._key) if isinstance(self._key, tuple) else self._key,
-            "points": [[float(x) for x in row] for row in self._points],
+            "points": self._points.tolist(),
         }
 
     @classmethod

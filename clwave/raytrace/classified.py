@@ -11,7 +11,6 @@ superblock maxima.  Nothing is expanded, compiled or transformed again.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, replace
@@ -66,11 +65,11 @@ Q_CHUNK = 1 << 20
 
 def tf_table(tf: TransferFunction, window, spacing) -> np.ndarray:
     """The kernel's table of ``tf`` under ``window`` (data units) on a model of ``spacing`` (its opacities as extinction
-    per world unit, :meth:`~clwave.TransferFunction.extinction`), (rows, 4) float64 (``cl/raytrace/classify.h``).
+    per world unit, :meth:`~clwave.TransferFunction.extinction`), (rows, 4) float64 (``cl/raytrace/tf_table.h``).
 
     u = s scale + shift maps the first point to 0 and the last to 1 (values of order 1 in any data units);
-    row 0 is (scale, shift, K, 0), rows 1..K the points' u, then per interval k = 0..K three rows:
-    (u_ref, alpha_ref, alpha_slope, 0), (rgb_ref, 0), (rgb_slope, 0); outside the points the end rows hold.
+    row 0 is (scale, shift, K, 0), rows 1..K the points' (u, opacity, max tree node, 0), then per interval k = 0..K
+    three rows: (u_ref, alpha_ref, alpha_slope, 0), (rgb_ref, 0), (rgb_slope, 0); outside the points the end rows hold.
     """
     values = tf.data_points(window)
     scale = 1.0 / (values[-1] - values[0])
@@ -78,15 +77,23 @@ def tf_table(tf: TransferFunction, window, spacing) -> np.ndarray:
     K, rows = len(u), np.column_stack([tf.points[:, 1:4], tf.extinction(spacing)])  # r, g, b, extinction
     table = np.zeros((1 + K + 3 * (K + 1), 4))
     table[0, :3] = scale, -values[0] * scale, K
-    table[1:K + 1, 0] = u
-    for k in range(K + 1):
-        i = min(max(k - 1, 0), K - 1)  # the interval's first point
-        du = u[k] - u[i] if 0 < k < K else 0.0
-        slope = (rows[k] - rows[i]) / du if du > 0 else np.zeros(4)
-        at = 1 + K + 3 * k
-        table[at, :3] = u[i], rows[i, 3], slope[3]
-        table[at + 1, :3] = rows[i, :3]
-        table[at + 2, :3] = slope[:3]
+    table[1:K + 1, :2] = np.column_stack([u, rows[:, 3]])
+    tree = np.concatenate([np.zeros(K), rows[:, 3]])  # nodes 1..K-1 the larger of their two children, leaves K..2K-1
+    hi = K
+    while hi > 1:  # nodes [lo, hi) from their children, all at hi or above
+        lo = (hi + 1) // 2
+        tree[lo:hi] = np.maximum(tree[2 * lo:2 * hi:2], tree[2 * lo + 1:2 * hi:2])
+        hi = lo
+    table[1:K, 2] = tree[1:K]
+    k = np.arange(K + 1)
+    first, du = np.clip(k - 1, 0, K - 1), np.zeros(K + 1)  # each interval's first point, and its width in u
+    du[1:K] = np.diff(u)
+    slope = np.zeros((K + 1, 4))
+    np.divide(rows[np.minimum(k, K - 1)] - rows[first], du[:, None], out=slope, where=du[:, None] > 0)
+    at = 1 + K + 3 * k
+    table[at, :3] = np.column_stack([u[first], rows[first, 3], slope[:, 3]])
+    table[at + 1, :3] = rows[first, :3]
+    table[at + 2, :3] = slope[:, :3]
     return table
 
 
@@ -262,7 +269,7 @@ class ScalarRange:
         it makes opaque is small or thin: the picture may be right, a shorter opacity unit thickens thin features, and
         a model that smooths its voxels (order 3 and up, not interpolating) is told how it lowers thin peaks.  Once a
         function and window (a viewer's frames, a turntable's views)."""
-        key = ("faint", json.dumps(post.tf.to_dict()), post.window)
+        key = ("faint", told_key(post.tf), post.window)
         if shown >= NEARLY_EMPTY or key in self.tracer.told:
             return
         self.tracer.told.add(key)
@@ -554,10 +561,16 @@ def check_post(tracer, tf, absorption):
                          "integrates the scalar itself")
 
 
+def told_key(tf: TransferFunction) -> tuple:
+    """``tf`` as a key of what a tracer has told, as ``==`` compares it (its points as bytes: their JSON took 3.7 s a
+    render at 10⁶ points, docs/benchmarks.md §26)."""
+    return tf.name, tf.window, tf.opacity_unit, tf.key, tf.points.tobytes()
+
+
 def warn_opaque(scalar: ScalarRange, tf: TransferFunction, told: set):
     """Warn where ``tf`` makes the model of ``scalar`` nearly opaque (:meth:`ScalarRange.opaque`), once per function
     in ``told`` (a tracer's)."""
-    key = ("opaque", json.dumps(tf.to_dict()))
+    key = ("opaque", told_key(tf))
     if key in told:
         return
     told.add(key)
