@@ -422,7 +422,7 @@ def splat_kernels(tmp_path_factory):
 
 
 @pytest.mark.parametrize("option, needle", [
-    (["--extent", "1e12"], "texel pool"),
+    (["--extent", "1e12"], "render more pixels (--size)"),  # textures filtered by a pixel of 1e11 voxels
     (["--omega-s", "nan"], "--omega-s"),
     (["--omega-s", "1e4"], "footprint textures"),  # the largest band taken (1e9: refused as past it, test_attack28)
     (["--spacing", "1e-6,1,1e6"], "footprint textures"),

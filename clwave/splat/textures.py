@@ -372,6 +372,8 @@ def footprints(wavelet, spacing_zyx, n, u, v, bands, omega_s: float = 14.0, omeg
                                      for w, cell in ((u, cells[0]), (v, cells[1]))))
     texels = sum(_filtered_samples(*ju) * _filtered_samples(*jv) for _, _, ju, jv in jobs)
     fix = "give a lower omega_s (--omega-s), or render with the ray tracer (--method raytrace)"
+    if any(ju[3] or jv[3] for _, _, ju, jv in jobs):  # filtered by a pixel many texels wide: more pixels, less filter
+        fix = "render more pixels (--size), or " + fix
     check_texels(texels, max_texels, "the footprint textures of this view",
                  f"the voxel spacing is very uneven or omega_s high; {fix}")
     # their pool, P phase planes each where a pixel spans P texels (a needle's thin axis sets the texel, its long one
