@@ -158,3 +158,17 @@ def test_a_photo_stack_opens_with_its_top_row_at_the_top_and_its_left_column_at_
     rows, columns = np.mgrid[:48, :48]
     red, green = (np.clip(image[..., c] - image[..., 2], 0, None) for c in (0, 1))  # beyond the grey
     assert np.average(rows, weights=red) < 20 and np.average(columns, weights=green) < 20
+
+
+def test_a_noisy_volume_of_both_signs_frames_its_box():
+    """A crop of a CT in Hounsfield units (tissue at 40 across its border, a lung at -1000 and a bone at 700 inside,
+    noise 15): its tissue is content, not background, so it frames its whole box; cut to the lung and the bone (the
+    values above the noise about 0) it cropped the tissue (test_subtract's CT framed two ways)."""
+    data = np.full((24, 24, 24), 40.0, np.float32)
+    data[6:10, 6:10, 6:10], data[13:17, 13:17, 13:17] = -1000.0, 700.0
+    data += np.random.default_rng(30).normal(0, 15, data.shape).astype(np.float32)
+    wv = clwave.WaveletVolume.from_volume(clwave.Volume(data), wavelet="linear", levels=2)
+    assert wv.measure_noise()[0] == pytest.approx(15, rel=0.2)
+    lo, hi = framed_box(wv)
+    np.testing.assert_array_equal(lo, [-12.0] * 3)
+    np.testing.assert_array_equal(hi, [12.0] * 3)

@@ -32,6 +32,10 @@ BIN_SHIFT = 16
 #: an approximation coefficient is content beyond this many times its noise deviation (:func:`signal_box`): Gaussian
 #: noise alone passes it once in 1.7 million coefficients, and with a neighbour that passes it too far less often
 FRAME_K = 5.0
+#: a model frames its content above the noise only where its values reach below 0 by at most this many times
+#: FRAME_K noise deviations (:func:`signal_box`): content on a background of 0, as noise leaves it; values of both
+#: signs (a CT in Hounsfield units, whose tissue at a crop's border would be taken for background) frame their box
+FRAME_BELOW = 2.0
 #: the fewest fine coefficients above the noise that :func:`signal_box` frames
 FRAME_LEAST = 8
 #: the least deviation (in units of the measured noise's) of the coefficients below the noise for :func:`signal_box`:
@@ -209,11 +213,14 @@ def signal_box(wv):
     a neighbour (a lone one is noise); found at the coarsest level, whose noise is whole (the approximation band is
     kept whole), then at the finest level of at most :data:`FRAME_CELLS` coefficients, as the clusters there that
     reach a coarse cell found (where a threshold kept part of the details, their largest noise makes clusters of its
-    own): the box of their cells.  None where no channel's noise is known, the coarsest coefficients below it vary
+    own): the box of their cells.  None where no channel's noise is known, the values reach below 0 by more than
+    :data:`FRAME_BELOW` times :data:`FRAME_K` deviations (not content on a background of 0), the coarsest coefficients
+    below it vary
     less than :data:`FRAME_NOISY` times it (no noise there: a clean volume, whose few edges looked like noise), or
     fewer than :data:`FRAME_LEAST` pass."""
     sigmas = wv.measure_noise() or ()
-    if not any(sigmas):
+    if not any(sigmas) or wv.value_range is None or \
+            wv.value_range[0] < -FRAME_BELOW * FRAME_K * max(s or 0.0 for s in sigmas):
         return None
     half = np.array(wv.shape[:3]) * np.array(wv.spacing) / 2  # (z, y, x)
     coarse, signs = [], []  # per group: (the coarse coefficients found, their centres), the content's signs
