@@ -219,7 +219,7 @@ def signal_box(wv):
     less than :data:`FRAME_NOISY` times it (no noise there: a clean volume, whose few edges looked like noise), or
     fewer than :data:`FRAME_LEAST` pass."""
     sigmas = wv.measure_noise() or ()
-    if not any(sigmas) or wv.value_range is None or \
+    if not any(sigmas) or wv.value_range is not None and \
             wv.value_range[0] < -FRAME_BELOW * FRAME_K * max(s or 0.0 for s in sigmas):
         return None
     half = np.array(wv.shape[:3]) * np.array(wv.spacing) / 2  # (z, y, x)
@@ -238,7 +238,7 @@ def signal_box(wv):
     box = _union([_cells_box(found, axes, wv.levels, wv.spacing) for found, axes in coarse])
     fine = next((level for level in range(1, wv.levels) if np.prod(wv.shape[:3]) >> 3 * level <= FRAME_CELLS), None)
     if box is None or fine is None:
-        return box if box is not None and box[2] >= FRAME_LEAST else None
+        return box[:2] if box is not None and box[2] >= FRAME_LEAST else None
     boxes = []
     for g, sign, seeds in zip(wv.groups, signs, coarse):
         ratio, axes = _ratios(wv, g, fine, sigmas)
