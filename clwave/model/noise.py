@@ -215,9 +215,8 @@ def signal_box(wv):
     reach a coarse cell found (where a threshold kept part of the details, their largest noise makes clusters of its
     own): the box of their cells.  None where no channel's noise is known, the values reach below 0 by more than
     :data:`FRAME_BELOW` times :data:`FRAME_K` deviations (not content on a background of 0), the coarsest coefficients
-    below it vary
-    less than :data:`FRAME_NOISY` times it (no noise there: a clean volume, whose few edges looked like noise), or
-    fewer than :data:`FRAME_LEAST` pass."""
+    below it vary less than :data:`FRAME_NOISY` times it (no noise there: a clean volume, whose few edges looked like
+    noise), or fewer than :data:`FRAME_LEAST` pass."""
     sigmas = wv.measure_noise() or ()
     if not any(sigmas) or wv.value_range is not None and \
             wv.value_range[0] < -FRAME_BELOW * FRAME_K * max(s or 0.0 for s in sigmas):
