@@ -236,14 +236,13 @@ def signal_box(wv):
         coarse.append((_clustered(ratio, signs[-1]), axes))
     box = _union([_cells_box(found, axes, wv.levels, wv.spacing) for found, axes in coarse])
     fine = next((level for level in range(1, wv.levels) if np.prod(wv.shape[:3]) >> 3 * level <= FRAME_CELLS), None)
-    if box is None or fine is None:
-        return box[:2] if box is not None and box[2] >= FRAME_LEAST else None
-    boxes = []
-    for g, sign, seeds in zip(wv.groups, signs, coarse):
-        ratio, axes = _ratios(wv, g, fine, sigmas)
-        boxes.append(_cells_box(_grown(_clustered(ratio, sign), axes, *seeds, wv.levels, wv.spacing), axes, fine,
-                                wv.spacing))
-    box = _union(boxes)
+    if box is not None and fine is not None:  # the clusters at the finer level that reach a coarse cell found
+        boxes = []
+        for g, sign, seeds in zip(wv.groups, signs, coarse):
+            ratio, axes = _ratios(wv, g, fine, sigmas)
+            boxes.append(_cells_box(_grown(_clustered(ratio, sign), axes, *seeds, wv.levels, wv.spacing), axes, fine,
+                                    wv.spacing))
+        box = _union(boxes)
     return box[:2] if box is not None and box[2] >= FRAME_LEAST else None
 
 
