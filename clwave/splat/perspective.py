@@ -32,7 +32,7 @@ from .spatial import exact_samples
 from .spectral import SPECTRUM_BLOCK, WORK_ROOM, device_spectra, fft_texture, slice_plan
 from .tables import MAX_LEVELS, default_omega_s, texels_per_pixel
 from .textures import (DEFAULT_OMEGA_MIN, FILTER_BELOW, Texture, _axis_points, check_texels, _axis_sampling, _centred,
-                       _fast_even, pixel_filter)
+                       _fast_even, filter_growth, pixel_filter)
 
 #: Spacing of the slope grid (docs/splatting.md §8): bilinear interpolation between nodes errs by at most
 #: ``SLOPE_STEP^2 / 8 (|d2G/ds_u2| + |d2G/ds_v2|)``; measured, about 1.1e-3 of the peak of a cubic
@@ -176,8 +176,7 @@ def sheared_footprints(wavelet, spacing_zyx, n, u, v, bands, slopes, sampling="f
     pixel = pixel or {}
 
     def grown(band, axis):  # the samples a pixel filter adds along axis 0 (u) or 1 (v)
-        r = pixel.get(band, (0.0, 0.0))[axis] / grids[band][1 + 2 * axis]
-        return 2 * (int(np.ceil(r / 2.0)) + 1) if r else 0
+        return filter_growth(pixel.get(band, (0.0, 0.0))[axis] / grids[band][1 + 2 * axis])
 
     check_texels(sum(4 * len(slopes) * (nu + 2 + grown(band, 0)) * (nv + 2 + grown(band, 1))
                      for band, (nu, _, nv, _) in grids.items()),  # the cells

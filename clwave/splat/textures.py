@@ -180,6 +180,11 @@ def _trim(data, centre_u, centre_v, tol):
     return data[r0:r1, c0:c1], centre_u - c0, centre_v - r0
 
 
+def filter_growth(r: float) -> int:
+    """The samples :func:`pixel_filter` of ``r`` texels adds to a texture axis (0 for none): ceil(r/2) + 1 a side."""
+    return 2 * (int(np.ceil(r / 2.0)) + 1) if r else 0
+
+
 def pixel_filter(data: np.ndarray, centre: float, r: float, axis: int) -> tuple:
     """The texture ``data`` box-filtered along ``axis`` by ``r`` texels (a pixel), and its centre's new sample
     coordinate: at every sample, the mean over ``[x - r/2, x + r/2]`` of the samples' linear interpolant with zeros
@@ -187,7 +192,7 @@ def pixel_filter(data: np.ndarray, centre: float, r: float, axis: int) -> tuple:
     where ``r`` is whole, the filtered samples at any phase, P apart, sum to the samples' sum over ``r``, so the
     image keeps the footprint's integral."""
     x = np.moveaxis(np.asarray(data, np.float64), axis, -1)
-    n, grow = x.shape[-1], int(np.ceil(r / 2.0)) + 1
+    n, grow = x.shape[-1], filter_growth(r) // 2
     y = np.concatenate([np.zeros(x.shape[:-1] + (1,)), x, np.zeros(x.shape[:-1] + (1,))], axis=-1)  # nodes -1 .. n
     F = np.concatenate([np.zeros(x.shape[:-1] + (1,)), np.cumsum((y[..., 1:] + y[..., :-1]) / 2.0, axis=-1)], axis=-1)
 
@@ -227,7 +232,7 @@ def _filter_width(voxel, cell, pixel, texel) -> float:
 def _filtered_samples(count, h, cell, r) -> int:
     """The samples of one texture axis (:func:`_axis_sampling`'s ``count, h, cell``) after a pixel filter of ``r``
     texels (0: none; :func:`pixel_filter` grows the support)."""
-    return _axis_samples(count, cell) + (2 * (int(np.ceil(r / 2.0)) + 1) if r else 0)
+    return _axis_samples(count, cell) + filter_growth(r)
 
 
 def _axis_points(count, h, cell) -> tuple:
